@@ -1,0 +1,5 @@
+import sys
+
+from asset2sim.cli import main
+
+sys.exit(main())

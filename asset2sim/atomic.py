@@ -1,0 +1,124 @@
+"""Atomic file output and content hashing.
+
+Every output file of asset2sim is written through :func:`write_bytes` /
+:func:`write_text` / :func:`write_json` / :func:`copy_file`: a temporary file
+in the same folder, ``fsync``, then ``os.replace`` (atomic on POSIX), then an
+``fsync`` of the folder. A run killed at any moment leaves each output file
+either absent or complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(str(folder), os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_bytes(path: Path | str, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (parents created). Returns the path.
+
+    Raises:
+        OSError: the folder cannot be written.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    _fsync_dir(path.parent)
+    return path
+
+
+def write_text(path: Path | str, text: str) -> Path:
+    """Write UTF-8 ``text`` atomically."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def _check_finite(obj: Any, where: str = "$") -> None:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        raise ValueError(f"non-finite number at {where} cannot be written as JSON")
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            _check_finite(v, f"{where}.{k}")
+    elif isinstance(obj, (list, tuple)):
+        for i, v in enumerate(obj):
+            _check_finite(v, f"{where}[{i}]")
+
+
+def write_json(path: Path | str, obj: Any, indent: int = 2) -> Path:
+    """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError) atomically."""
+    _check_finite(obj)
+    return write_text(path, json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n")
+
+
+def copy_file(src: Path | str, dst: Path | str) -> Path:
+    """Copy ``src`` to ``dst`` atomically (contents only, no metadata)."""
+    return write_bytes(dst, Path(src).read_bytes())
+
+
+def sha256_file(path: Path | str, chunk: int = 1 << 20) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(chunk)
+            if not block:
+                break
+            h.update(block)
+    return h.hexdigest()
+
+
+def sha256_files(paths: Iterable[Path | str], root: Path | str | None = None) -> str:
+    """Hex sha256 over several files: their names (relative to ``root`` when
+    given) and contents, in sorted order, so the hash does not depend on the
+    order given."""
+    h = hashlib.sha256()
+    items = []
+    for p in paths:
+        p = Path(p)
+        name = str(p.relative_to(root)) if root is not None else str(p)
+        items.append((name, p))
+    for name, p in sorted(set(items)):
+        h.update(name.encode())
+        h.update(b"\0")
+        h.update(sha256_file(p).encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def tree_hashes(root: Path | str) -> dict[str, str]:
+    """sha256 of every regular file under ``root`` keyed by relative path
+    (used by tests to prove an input tree was not written)."""
+    root = Path(root)
+    out = {}
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and not p.is_symlink():
+            out[str(p.relative_to(root))] = sha256_file(p)
+    return out

@@ -1,0 +1,179 @@
+"""Structured description of an input asset (the output of the extraction stage).
+
+Everything here is in the asset's own units and frames, *before* any scale is
+applied: lengths in the file's units (PartNet-Mobility: roughly unit-size,
+metres nominally), angles in radians. Poses follow URDF: ``xyz`` (3,) in
+metres and ``rpy`` (3,) roll-pitch-yaw in radians, fixed-axis X-Y-Z.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Vec3 = tuple[float, float, float]
+
+JointType = Literal["revolute", "continuous", "prismatic", "fixed", "floating", "planar"]
+GeometryKind = Literal["mesh", "box", "cylinder", "sphere"]
+
+
+class Origin(BaseModel):
+    """A URDF ``<origin>``: translation ``xyz`` (m) and rotation ``rpy`` (rad)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    xyz: Vec3 = (0.0, 0.0, 0.0)
+    rpy: Vec3 = (0.0, 0.0, 0.0)
+
+
+class GeometryRef(BaseModel):
+    """One ``<visual>`` or ``<collision>`` element of a link.
+
+    For ``kind == "mesh"``: ``filename`` is the string written in the URDF,
+    ``path`` the resolved file (absolute), ``scale`` the URDF mesh scale (3,).
+    For primitives: ``size`` (box, (3,) m), ``radius`` and ``length`` (m).
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    role: Literal["visual", "collision"]
+    kind: GeometryKind
+    name: str | None = None
+    origin: Origin = Origin()
+    filename: str | None = None
+    path: Path | None = None
+    scale: Vec3 = (1.0, 1.0, 1.0)
+    size: Vec3 | None = None
+    radius: float | None = None
+    length: float | None = None
+
+
+class GivenInertial(BaseModel):
+    """An ``<inertial>`` present in the input file (kept for reporting/validation).
+
+    ``mass`` in kg; ``inertia`` (3, 3) in kg*m^2 about the COM in the frame of
+    ``origin``.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    mass: float
+    origin: Origin = Origin()
+    inertia: tuple[Vec3, Vec3, Vec3]
+
+
+class LinkDesc(BaseModel):
+    """A link: its geometry and (PartNet-Mobility) semantics."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    visuals: list[GeometryRef] = Field(default_factory=list)
+    collisions: list[GeometryRef] = Field(default_factory=list)
+    semantic_label: str | None = None
+    """Part label from ``semantics.txt`` (e.g. ``lid``, ``drawer``, ``door``)."""
+    semantic_joint: str | None = None
+    """Joint kind from ``semantics.txt``: hinge, slider, free, heavy, static, junk."""
+    given_inertial: GivenInertial | None = None
+
+    @property
+    def has_geometry(self) -> bool:
+        return bool(self.visuals or self.collisions)
+
+
+class JointDesc(BaseModel):
+    """A joint. ``lower``/``upper`` in rad (revolute) or m (prismatic), ``None``
+    when absent (continuous, fixed). ``axis`` (3,) unit vector in the joint frame.
+    ``effort`` N or N*m, ``velocity`` rad/s or m/s, ``damping``/``friction`` as
+    given in the file (SI units of the joint type), ``None`` when absent.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    type: JointType
+    parent: str
+    child: str
+    origin: Origin = Origin()
+    axis: Vec3 = (1.0, 0.0, 0.0)
+    lower: float | None = None
+    upper: float | None = None
+    effort: float | None = None
+    velocity: float | None = None
+    damping: float | None = None
+    friction: float | None = None
+
+    @property
+    def is_movable(self) -> bool:
+        return self.type in ("revolute", "continuous", "prismatic")
+
+    @property
+    def is_angular(self) -> bool:
+        return self.type in ("revolute", "continuous")
+
+
+class AssetDescription(BaseModel):
+    """Everything the extraction stage knows about one input asset."""
+
+    model_config = ConfigDict(extra="forbid")
+    asset_id: str
+    source_dir: Path
+    urdf_path: Path
+    robot_name: str
+    links: list[LinkDesc]
+    joints: list[JointDesc]
+    root_link: str
+    category: str | None = None
+    """Category as given by the asset (``meta.json`` ``model_cat``) or the manifest."""
+    input_hash: str = ""
+    """sha256 over the URDF and every file it references (hex)."""
+
+    def link(self, name: str) -> LinkDesc:
+        for link in self.links:
+            if link.name == name:
+                return link
+        raise KeyError(f"no link named {name!r} in {self.urdf_path}")
+
+    def joint(self, name: str) -> JointDesc:
+        for joint in self.joints:
+            if joint.name == name:
+                return joint
+        raise KeyError(f"no joint named {name!r} in {self.urdf_path}")
+
+    def movable_joints(self) -> list[JointDesc]:
+        return [j for j in self.joints if j.is_movable]
+
+    def parent_joint(self, link_name: str) -> JointDesc | None:
+        for joint in self.joints:
+            if joint.child == link_name:
+                return joint
+        return None
+
+
+class LinkGeometry(BaseModel):
+    """Mesh analysis of one link at scale 1, in the link frame.
+
+    ``volume`` m^3 (enclosed volume: exact for watertight meshes, otherwise the
+    robust estimate named by ``volume_method``), ``area`` m^2 (total surface
+    area), ``bbox_min``/``bbox_max`` (3,) m, ``com`` (3,) m (of the enclosed
+    solid), ``inertia_solid`` and ``inertia_shell`` (3, 3) kg*m^2 per kg of mass
+    about ``com`` for a uniformly filled solid and for a thin uniform shell.
+    Scaling by a uniform factor s multiplies lengths by s, ``area`` by s^2,
+    ``volume`` by s^3 and the per-kg inertias by s^2.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    link: str
+    volume: float
+    volume_method: str
+    watertight: bool
+    area: float
+    bbox_min: Vec3
+    bbox_max: Vec3
+    com: Vec3
+    inertia_solid: tuple[Vec3, Vec3, Vec3]
+    inertia_shell: tuple[Vec3, Vec3, Vec3]
+    n_meshes: int = 0
+    n_faces: int = 0
+    notes: list[str] = Field(default_factory=list)
+
+    @property
+    def extents(self) -> Vec3:
+        return tuple(b - a for a, b in zip(self.bbox_min, self.bbox_max))  # type: ignore[return-value]

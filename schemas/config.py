@@ -1,0 +1,68 @@
+"""Configuration classes, with units on every field.
+
+:class:`SimConventions` are the SPEC's measurement conventions ("How quality is
+measured"); :class:`RefineConfig` the knobs of the refine pipeline. Both hash
+stably (:meth:`RefineConfig.config_hash`) so converters can skip unchanged work.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class SimConventions(BaseModel):
+    """SPEC conventions for every simulator measurement."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    timestep: float = 1.0 / 240.0
+    """s"""
+    gravity: float = -9.81
+    """m/s^2 along z"""
+    settle_time: float = 1.0
+    """T_set, s"""
+    test_time: float = 2.0
+    """T_test, s"""
+    stability_pos_tol: float = 1e-3
+    """D_pos pass threshold, m"""
+    stability_ori_tol: float = 1e-2
+    """D_ori pass threshold, rad"""
+    oscillation_sign_changes: int = 3
+    """a joint fails with at least this many sign changes of its step-to-step motion ..."""
+    oscillation_amp_revolute: float = 0.05
+    """... and amplitude above this, rad"""
+    oscillation_amp_prismatic: float = 0.005
+    """... or above this for prismatic joints, m"""
+
+
+class RefineConfig(BaseModel):
+    """Knobs of the refine pipeline (units on every field)."""
+
+    model_config = ConfigDict(extra="forbid")
+    estimator: str = "offline"
+    model: str | None = None
+    sim: SimConventions = Field(default_factory=SimConventions)
+    penetration_tolerance: float = 1e-3
+    """Phi below which the state is accepted, m (sum over contact points)."""
+    state_lambda: float = 0.05
+    """lambda in Phi(q) + lambda*||q - q_request||^2, m per rad^2 (or per m^2)."""
+    max_state_evaluations: int = 4000
+    """Budget of contact queries during state refinement (count)."""
+    max_escalation_rounds: int = 3
+    """Post-check rounds raising damping/friction (count)."""
+    escalation_factor: float = 3.0
+    """Multiplier on damping/friction per escalation round (dimensionless)."""
+    sag_tolerance_revolute: float = 0.02
+    """Largest drift of a requested joint state during the rest test, rad."""
+    sag_tolerance_prismatic: float = 0.002
+    """Largest drift of a requested joint state during the rest test, m."""
+    convex_decomposition: bool = True
+    """Allow CoACD decomposition of collision meshes whose hulls always overlap."""
+    seed: int = 0
+
+    def config_hash(self) -> str:
+        """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""
+        blob = json.dumps(self.model_dump(mode="json"), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]

@@ -1,0 +1,173 @@
+"""The physics overlay: the only thing an estimator may produce (SPEC, stage 2).
+
+All values refer to the *output* asset, i.e. after the uniform scale ``scale``
+is baked in. Units (SI, radians):
+
+- mass kg; inertia kg*m^2 about the link's center of mass, axes of the link
+  frame; center of mass m in the link frame.
+- revolute / continuous joints: damping N*m*s/rad, friction N*m, stiffness
+  N*m/rad, spring reference rad.
+- prismatic joints: damping N*s/m, friction N, stiffness N/m, spring
+  reference m.
+- initial joint positions rad (revolute) or m (prismatic).
+
+The JSON schema of :class:`Overlay` (``Overlay.model_json_schema()``) is also
+what model backends are asked to answer in.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+SCHEMA_VERSION = "1.0"
+
+Vec3 = tuple[float, float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class Inertia(_Strict):
+    """Inertia tensor (kg*m^2) as the six URDF values, about the COM."""
+
+    ixx: float
+    ixy: float = 0.0
+    ixz: float = 0.0
+    iyy: float
+    iyz: float = 0.0
+    izz: float
+
+    def matrix(self) -> np.ndarray:
+        """The tensor as a (3, 3) float array."""
+        return np.array(
+            [
+                [self.ixx, self.ixy, self.ixz],
+                [self.ixy, self.iyy, self.iyz],
+                [self.ixz, self.iyz, self.izz],
+            ],
+            dtype=float,
+        )
+
+    @classmethod
+    def from_matrix(cls, m: np.ndarray) -> "Inertia":
+        """Build from a (3, 3) array; the upper triangle is used (symmetrized)."""
+        m = np.asarray(m, dtype=float)
+        s = 0.5 * (m + m.T)
+        return cls(
+            ixx=float(s[0, 0]),
+            ixy=float(s[0, 1]),
+            ixz=float(s[0, 2]),
+            iyy=float(s[1, 1]),
+            iyz=float(s[1, 2]),
+            izz=float(s[2, 2]),
+        )
+
+
+class ContactMaterial(_Strict):
+    """Optional contact material: Coulomb friction coefficient (dimensionless)
+    and restitution (dimensionless, 0..1)."""
+
+    lateral_friction: float = Field(ge=0.0)
+    restitution: float = Field(default=0.0, ge=0.0, le=1.0)
+    note: str = ""
+
+
+class LinkPhysics(_Strict):
+    """Physical properties of one link of the output asset."""
+
+    mass: float
+    """kg"""
+    inertia: Inertia
+    """kg*m^2 about the COM, link-frame axes."""
+    com: Vec3
+    """m, in the link frame of the output (scaled) asset."""
+    material: str = ""
+    """Material note, e.g. ``ABS plastic`` or ``steel sheet``."""
+    density: float | None = None
+    """kg/m^3 of the material, when mass came from geometry."""
+    hollow_fraction: float | None = None
+    """eta in m = v * rho * s^3 * eta (1 = solid)."""
+    source: str = ""
+    """Where the values came from: ``geometry``, ``estimator``, ``default`` ..."""
+
+
+class JointDynamics(_Strict):
+    """Passive dynamics of one non-fixed joint (units: see module docstring)."""
+
+    damping: float
+    friction: float
+    stiffness: float = 0.0
+    spring_reference: float | None = None
+    """Rest position q_s of the spring (rad or m); required when stiffness > 0."""
+    source: str = ""
+
+
+class EstimatorInfo(_Strict):
+    """Which estimator produced the overlay."""
+
+    name: str
+    model: str | None = None
+    version: str = ""
+    queries: int = 0
+    """Number of model calls made for this overlay (0 for offline)."""
+
+
+class ValidationNotes(_Strict):
+    """Reasoning notes required by the SPEC (free text)."""
+
+    size: str = ""
+    material: str = ""
+    mass_arithmetic: str = ""
+    units: str = "SI units; angles in radians; prismatic values in metres after scaling."
+    other: list[str] = Field(default_factory=list)
+
+
+class Overlay(_Strict):
+    """The full physics overlay of one asset."""
+
+    schema_version: str = SCHEMA_VERSION
+    estimator: EstimatorInfo
+    scale: float
+    """Uniform scale factor s applied to the input asset (dimensionless)."""
+    category: str | None = None
+    contact_material: ContactMaterial | None = None
+    links: dict[str, LinkPhysics] = Field(default_factory=dict)
+    joints: dict[str, JointDynamics] = Field(default_factory=dict)
+    initial_joint_positions: dict[str, float] | None = None
+    """Only when the request asks for a state (output units: rad or m)."""
+    notes: ValidationNotes = Field(default_factory=ValidationNotes)
+
+    @field_validator("scale")
+    @classmethod
+    def _finite_scale(cls, v: float) -> float:
+        if not math.isfinite(v):
+            raise ValueError("scale must be finite")
+        return v
+
+    def total_mass(self) -> float:
+        """Sum of link masses, kg."""
+        return float(sum(lp.mass for lp in self.links.values()))
+
+
+Severity = Literal["error", "warning", "info"]
+
+
+class ValidationIssue(_Strict):
+    """One finding of a validator.
+
+    ``code`` is a stable identifier (e.g. ``OVL_MASS_NONPOSITIVE``), ``where``
+    names the link, joint or ``global``, ``severity`` is the validator's
+    default, which a policy may override.
+    """
+
+    code: str
+    severity: Severity
+    where: str
+    message: str
+    fixed: bool = False
+    """True when the validator replaced the offending value (see ``message``)."""

@@ -1,0 +1,100 @@
+"""Machine-readable results: metric values, refine reports, failure modes."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+#: Fixed vocabulary of per-asset failure modes (pipeline catalog, reports).
+FailureMode = Literal[
+    "none",
+    "invalid_input",
+    "estimator_failure",
+    "invalid_overlay",
+    "unresolved_penetration",
+    "unstable",
+    "oscillating",
+    "timeout",
+    "crash",
+]
+FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
+
+
+class MetricResult(BaseModel):
+    """One measured metric.
+
+    ``value`` in ``unit``; ``passed`` is None when the metric has no threshold;
+    ``threshold`` human-readable; ``details`` metric-specific (JSON-able).
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    name: str
+    value: float | None
+    unit: str
+    passed: bool | None = None
+    threshold: str = ""
+    details: dict[str, Any] = Field(default_factory=dict)
+    engine: str = "pybullet"
+
+
+class EscalationRound(BaseModel):
+    """One post-check round: what was measured and what was changed."""
+
+    model_config = ConfigDict(extra="forbid")
+    round: int
+    metrics: list[MetricResult]
+    changes: dict[str, dict[str, float]] = Field(default_factory=dict)
+    """joint -> {parameter: new value}"""
+    reason: str = ""
+
+
+class StateRefinement(BaseModel):
+    """What state refinement did (penetrations in m, states rad/m)."""
+
+    model_config = ConfigDict(extra="forbid")
+    requested: dict[str, float]
+    result: dict[str, float]
+    phi_requested: float
+    phi_result: float
+    evaluations: int
+    method: str
+    worst_pairs: list[dict[str, Any]] = Field(default_factory=list)
+    collision_changes: list[str] = Field(default_factory=list)
+    seconds: float = 0.0
+
+
+class RefineReport(BaseModel):
+    """Contents of ``report.json``."""
+
+    model_config = ConfigDict(extra="forbid")
+    asset_id: str
+    source: str
+    prompt: str
+    category: str | None
+    version: str
+    input_hash: str
+    config_hash: str
+    estimator: str
+    model: str | None = None
+    model_queries: int = 0
+    scale: float
+    total_mass: float
+    """kg"""
+    initial_joint_positions: dict[str, float]
+    closed_positions: dict[str, float] = Field(default_factory=dict)
+    """Geometric closed end of each movable joint (rad/m, output units)."""
+    requested_bands: dict[str, str] = Field(default_factory=dict)
+    state: StateRefinement | None = None
+    metrics: list[MetricResult] = Field(default_factory=list)
+    escalation: list[EscalationRound] = Field(default_factory=list)
+    validation: list[dict[str, Any]] = Field(default_factory=list)
+    failure_mode: str = "none"
+    stage_seconds: dict[str, float] = Field(default_factory=dict)
+    notes: list[str] = Field(default_factory=list)
+
+    def metric(self, name: str) -> MetricResult | None:
+        for m in self.metrics:
+            if m.name == name:
+                return m
+        return None
