@@ -78,6 +78,36 @@ def write_json(path: Path | str, obj: Any, indent: int = 2) -> Path:
     return write_text(path, json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n")
 
 
+def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
+    """Copy many files atomically each: every destination is first written as a
+    temporary file beside it, then one ``os.sync()`` flushes them all, then each
+    is renamed into place. A kill at any moment leaves every destination absent
+    or complete (one sync instead of one fsync per file: meshes come by the
+    hundred)."""
+    staged: list[tuple[str, Path]] = []
+    try:
+        for src, dst in pairs:
+            dst = Path(dst)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".tmp", dir=str(dst.parent))
+            staged.append((tmp, dst))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(Path(src).read_bytes())
+        os.sync()
+        for tmp, dst in staged:
+            os.replace(tmp, dst)
+        for folder in {dst.parent for _, dst in staged}:
+            _fsync_dir(folder)
+    except BaseException:
+        for tmp, _ in staged:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        raise
+    return [dst for _, dst in staged]
+
+
 def copy_file(src: Path | str, dst: Path | str) -> Path:
     """Copy ``src`` to ``dst`` atomically (contents only, no metadata)."""
     return write_bytes(dst, Path(src).read_bytes())

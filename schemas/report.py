@@ -85,6 +85,9 @@ class RefineReport(BaseModel):
     closed_positions: dict[str, float] = Field(default_factory=dict)
     """Geometric closed end of each movable joint (rad/m, output units)."""
     requested_bands: dict[str, str] = Field(default_factory=dict)
+    opening_fractions: dict[str, float] = Field(default_factory=dict)
+    """|q - q_closed| / largest opening the range allows from q_closed, per joint,
+    at the written initial state (the measure the state bands use)."""
     state: StateRefinement | None = None
     metrics: list[MetricResult] = Field(default_factory=list)
     escalation: list[EscalationRound] = Field(default_factory=list)

@@ -1,0 +1,41 @@
+# asset2sim — see README.md
+PYTHON ?= python3.11
+VENV ?= .venv
+PY := $(VENV)/bin/python
+CATALOG ?= catalog.yaml
+DATASET ?=
+WORKERS ?= 2
+RUN ?=
+
+.PHONY: setup demo test test-all flow serve failures bench clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
+
+setup: $(PY)  ## install asset2sim with every extra into .venv
+	$(PY) -m pip install --quiet -e ".[all]"
+
+demo: ## refine the built-in demo asset (no data needed)
+	$(VENV)/bin/asset2sim demo --out out/demo
+
+test: ## the test suite CI runs (slow end-to-end runs excluded)
+	$(PY) -m pytest -m "not slow" -q
+
+test-all: ## every test, slow ones included
+	$(PY) -m pytest -q
+
+flow: ## refine the dataset catalog.yaml names (DATASET=..., WORKERS=...)
+	$(VENV)/bin/asset2sim flow --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET)) --workers $(WORKERS)
+
+serve: ## register and serve the nightly deployment
+	$(VENV)/bin/asset2sim serve --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET))
+
+failures: ## failure-mode breakdown of the latest run from the Parquet catalog
+	$(VENV)/bin/asset2sim failures --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET)) $(if $(RUN),--run $(RUN))
+
+bench: ## per-stage wall time of refine over the dev dataset
+	$(PY) benchmarks/bench_refine.py
+
+clean:
+	rm -rf out bench data/refined/* .pytest_cache

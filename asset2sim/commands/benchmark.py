@@ -1,0 +1,164 @@
+"""``asset2sim benchmark manifest.csv``: run methods on every manifest row,
+evaluate each result, and write the thesis table (CSV + JSON + HTML), a
+per-object index page and a Parquet file of all records (method a column).
+
+Prints the table for the thesis set (first 9 rows) and for all rows, the
+SPEC's research numbers, and the median evaluation time per asset (the
+evaluation alone: no method run, no report writing, no interpreter start-up).
+``--compare previous/results.json`` checks that a second run gave the same
+numbers (timings excluded). Exit code 0, or 1 when ``--compare`` finds a
+difference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+NAME = "benchmark"
+HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
+
+#: Record fields excluded from the reproducibility comparison (wall times).
+TIMING_FIELDS = ("seconds", "method_seconds")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("manifest", type=Path, help="manifest.csv (id, category, prompt, ..., reference_scale)")
+    p.add_argument("--methods", default="defaults,human,direct,asset2sim", help="comma-separated methods")
+    p.add_argument("--out", type=Path, default=Path("bench"), help="output folder (default bench/)")
+    p.add_argument("--ids", default=None, help="comma-separated manifest ids to run (default all)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--engines", default="pybullet", help="comma-separated evaluation engines")
+    p.add_argument("--no-reports", action="store_true", help="skip the per-asset report.html files")
+    p.add_argument("--compare", type=Path, default=None, help="results.json of an earlier run to check reproducibility against")
+
+
+def _clean(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def compare_records(a: list[dict], b: list[dict], rel: float = 1e-9) -> list[str]:
+    """Differences between two runs' records, timings excluded (strings)."""
+    key = lambda r: (r["method"], r["id"])  # noqa: E731
+    ia, ib = {key(r): r for r in a}, {key(r): r for r in b}
+    diffs = []
+    for k in sorted(set(ia) | set(ib)):
+        if k not in ia or k not in ib:
+            diffs.append(f"{k}: only in one run")
+            continue
+        for f in sorted(set(ia[k]) | set(ib[k])):
+            if f in TIMING_FIELDS:
+                continue
+            x, y = ia[k].get(f), ib[k].get(f)
+            if isinstance(x, float) and isinstance(y, float):
+                if not math.isclose(x, y, rel_tol=rel, abs_tol=1e-12):
+                    diffs.append(f"{k} {f}: {x!r} vs {y!r}")
+            elif x != y:
+                diffs.append(f"{k} {f}: {x!r} vs {y!r}")
+    return diffs
+
+
+def _print_table(console, title: str, summary: dict) -> None:
+    from rich.table import Table
+
+    t = Table(title=title)
+    for c in ("method", "pen. mm (toilet+stapler)", "pen. mm (all)", "rest pass", "osc. pass", "probes pass",
+              "scale dev. %", "init. dev.", "prompt", "all pass", "median eval s", "failed"):
+        t.add_column(c)
+
+    def pm(m, s):
+        return "-" if m is None else f"{m:.3g} +- {s:.3g}"
+
+    def pct(x):
+        return "-" if x is None else f"{100 * x:.1f}%"
+
+    for method, r in summary.items():
+        t.add_row(method, pm(r["pen_ts_mean"], r["pen_ts_sd"]), pm(r["pen_mean"], r["pen_sd"]),
+                  f"{pct(r['rest_stability_pass'])} ({r['rest_n']})", f"{pct(r['oscillation_pass'])} ({r['osc_n']})",
+                  f"{pct(r['probes_pass'])} ({r['probes_n']})", pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
+                  pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",
+                  str(r["errors"]))
+    console.print(t)
+
+
+def run(args: argparse.Namespace) -> int:
+    import pandas as pd
+    from rich.console import Console
+    from rich.table import Table
+
+    from asset2sim.atomic import write_bytes, write_json, write_text
+    from asset2sim.tasks.baselines import RESEARCH_NUMBERS, run_benchmark, summarize
+    from asset2sim.tasks.plots import plot_method_summary
+    from asset2sim.tasks.report_html import render_benchmark_index, render_benchmark_summary
+
+    console = Console(width=max(Console().width, 180))
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    ids = [i.strip() for i in args.ids.split(",")] if args.ids else None
+    engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
+    out = args.out
+
+    def progress(method: str, rid: str, msg: str) -> None:
+        console.print(f"[bold]{method}[/bold] {rid}: {msg}")
+
+    try:
+        records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
+                                reports=not args.no_reports, progress=progress)
+    except (KeyError, FileNotFoundError, ValueError) as exc:
+        console.print(f"[red]benchmark cannot run: {exc}[/red]")
+        return 2
+    records = _clean(records)
+    tables = {
+        "thesis set (first 9 manifest rows)": summarize([r for r in records if r.get("thesis_set")], methods),
+        "all rows": summarize(records, methods),
+    }
+    meta = {"manifest": str(args.manifest), "methods": methods, "seed": args.seed, "rows": len({r["id"] for r in records}),
+            "engines": list(engines)}
+    write_json(out / "results.json", {"meta": meta, "records": records})
+    write_json(out / "summary.json", {"meta": meta, "tables": _clean(tables), "research": RESEARCH_NUMBERS})
+    df = pd.DataFrame(records)
+    write_text(out / "results.csv", df.to_csv(index=False))
+    try:
+        import io
+
+        buf = io.BytesIO()
+        df.astype({c: "string" for c in ("failures", "error") if c in df}).to_parquet(buf, index=False)
+        write_bytes(out / "results.parquet", buf.getvalue())
+    except Exception as exc:  # parquet is a convenience; CSV/JSON are the record
+        console.print(f"[yellow]results.parquet not written: {exc}[/yellow]")
+    flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
+    write_text(out / "summary.csv", pd.DataFrame(flat).to_csv(index=False))
+    chart = plot_method_summary(tables["all rows"])
+    write_text(out / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
+    write_text(out / "index.html", render_benchmark_index(records, meta))
+    for title, summary in tables.items():
+        _print_table(console, title, summary)
+    rt = Table(title="research numbers (SPEC, thesis 9-object set, Isaac Sim)")
+    for c in RESEARCH_NUMBERS[0]:
+        rt.add_column(c)
+    for r in RESEARCH_NUMBERS:
+        rt.add_row(*r.values())
+    console.print(rt)
+    secs = sorted(r["seconds"] for r in records if not r.get("error") and r.get("seconds") is not None)
+    if secs:
+        med = secs[len(secs) // 2] if len(secs) % 2 else 0.5 * (secs[len(secs) // 2 - 1] + secs[len(secs) // 2])
+        console.print(f"median evaluation time per asset: {med:.2f} s over {len(secs)} evaluations (goal <= 1.5 s; "
+                      f"method runs, report writing and start-up excluded)")
+    console.print(f"wrote {out / 'summary.html'}, {out / 'index.html'}, results.csv/json/parquet, summary.csv/json")
+    if args.compare is not None:
+        prev = json.loads(Path(args.compare).read_text())["records"]
+        diffs = compare_records(prev, records)
+        if diffs:
+            console.print(f"[red]{len(diffs)} differences from {args.compare}:[/red]")
+            for d in diffs[:50]:
+                console.print(f"  {d}")
+            return 1
+        console.print(f"[green]same results as {args.compare} (timings excluded)[/green]")
+    return 0

@@ -1,0 +1,85 @@
+"""``asset2sim refine ASSET --prompt P --out OUT``: refine one asset."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+NAME = "refine"
+HELP = "Refine one asset for a natural-language request into an interaction-ready asset (output folder of the SPEC's contract)."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
+    parser.add_argument("--prompt", "-p", default="", help='the request, e.g. "I want a slightly open stapler."')
+    parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
+    parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")
+    parser.add_argument("--estimator", default="offline", help="overlay estimator: offline (default) or a model backend")
+    parser.add_argument("--model", default=None, help="model name for model-backed estimators")
+    parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible server (model backends)")
+    parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
+    parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print only the summary")
+
+
+def summary_lines(result) -> list[str]:
+    """Human-readable summary of a RefineResult."""
+    r = result.report
+    pen = r.metric("penetration")
+    stab = r.metric("rest_stability")
+    osc = r.metric("oscillation")
+    state = ", ".join(f"{k}={v:.4g}" for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
+    lines = [
+        f"asset        {r.asset_id} ({r.category})",
+        f"output       {result.out_dir}",
+        f"scale        {r.scale:.4g}",
+        f"total mass   {r.total_mass:.4g} kg",
+        f"initial state {state}  (rad / m)",
+        f"penetration  {pen.value:.3f} mm" if pen and pen.value is not None else "penetration  n/a",
+        (
+            f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad)"
+            if stab
+            else "stability    n/a"
+        ),
+        f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
+        f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}",
+        f"wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
+    ]
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    from asset2sim.schemas.config import RefineConfig
+    from asset2sim.tasks.refine import RefineError, refine_asset
+
+    t0 = time.perf_counter()
+
+    def progress(stage: str, message: str) -> None:
+        if not args.quiet:
+            print(f"[{time.perf_counter() - t0:6.2f}s] {stage:<12} {message}", flush=True)
+
+    estimator = args.estimator
+    config = RefineConfig(estimator=estimator, model=args.model)
+    if args.base_url:
+        import os
+
+        os.environ.setdefault("ASSET2SIM_BASE_URL", args.base_url)
+    try:
+        result = refine_asset(
+            args.asset,
+            args.prompt,
+            args.out,
+            config,
+            category=args.category,
+            progress=progress,
+            skip_if_complete=not args.force,
+            extras=not args.no_extras,
+        )
+    except RefineError as exc:
+        print(f"asset2sim refine: {exc.failure_mode}: {exc}", file=sys.stderr)
+        return 2
+    for line in summary_lines(result):
+        print(line)
+    return 0

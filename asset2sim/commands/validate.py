@@ -1,0 +1,62 @@
+"""``asset2sim validate ASSET``: every finding about an input asset, then a verdict.
+
+Prints one line per finding (severity, code, file:line, link or joint,
+message), then a summary. Exit status: 0 when no finding is an error, 1 when
+the asset is refused, 2 for usage errors (argparse).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+NAME = "validate"
+HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh paths and contents); exit 1 on errors."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
+    parser.add_argument("--json", action="store_true", help="print the findings as a JSON list instead of text")
+    parser.add_argument("--strict", action="store_true", help="treat warnings as errors")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (no info)")
+    parser.add_argument("--paths-only", action="store_true", help="check mesh paths but do not read mesh contents (faster)")
+    parser.add_argument(
+        "--error",
+        metavar="CODE",
+        action="append",
+        default=[],
+        help="make this code an error (repeatable), e.g. --error JOINT_LIMIT_EQUAL",
+    )
+    parser.add_argument(
+        "--allow",
+        metavar="CODE",
+        action="append",
+        default=[],
+        help="downgrade this code to a warning (repeatable)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from asset2sim.tasks.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
+
+    unknown = [c for c in args.error + args.allow if c not in CODES]
+    if unknown:
+        print(f"asset2sim validate: unknown code(s): {', '.join(unknown)}", file=sys.stderr)
+        return 2
+    overrides = {c: "error" for c in args.error}
+    overrides.update({c: "warning" for c in args.allow})
+    policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
+    findings = validate_asset(args.asset, policy)
+    shown = [f for f in findings if not (args.quiet and f.severity == "info")]
+    if args.json:
+        print(json.dumps([f.model_dump(mode="json") for f in shown], indent=2))
+    else:
+        for f in shown:
+            loc = f"{f.file}:{f.line}" if f.line else f.file
+            print(f"{f.severity:<7} {f.code:<32} {loc}  {f.where}: {f.message}")
+        n = {s: sum(1 for f in findings if f.severity == s) for s in ("error", "warning", "info")}
+        verdict = "REFUSED" if has_errors(findings) else "OK"
+        print(f"{args.asset}: {verdict} ({n['error']} error(s), {n['warning']} warning(s), {n['info']} info)")
+    return 1 if has_errors(findings) else 0

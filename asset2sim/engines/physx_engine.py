@@ -1,0 +1,397 @@
+"""PhysX engine (SAPIEN 3 on the CPU, physics only) under the SPEC's conventions.
+
+The articulation is built from the same reading of the URDF as the MuJoCo
+engine (:func:`asset2sim.engines.fake.read_urdf`): the same inertials (a link
+without ``<inertial>`` gets PyBullet's 1 kg and unit inertia, as in the
+reference engine), the same joint frames, and the same convex collision pieces
+(one hull per OBJ group, as PyBullet builds them). No render system is created
+and no visual shape is loaded (SAPIEN's renderer needs a Vulkan GPU).
+
+Conventions and how PhysX is made to follow them (``docs/simulators.md`` lists
+what stays different):
+
+- timestep 1/240 s, gravity -9.81 m/s^2 along z, a static plane at z = 0;
+- self-collision on; PhysX never collides a link with its parent (the same
+  rule as ``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``);
+- the root free, placed so the lowest point of its cooked hulls touches z = 0;
+- passive joints: one zero-target-velocity joint drive per joint, stiff
+  (damping :data:`FRICTION_DRIVE_DAMPING`) and force-limited to
+  ``friction + damping * |qdot|`` (re-set before every step). It stops the
+  joint when it can, so it never pushes it backwards: Coulomb friction
+  ``<dynamics friction>`` plus viscous damping ``<dynamics damping>`` that stays
+  stable however large the damping is relative to the inertia (an explicit
+  torque -c*qdot diverges once c*dt/I > 2). PhysX's own joint "friction" is a
+  coefficient on the joint's constraint force and is set to 0;
+- springs -k (q - q_s) as explicit joint forces each step (what PyBullet does);
+- contact friction 0.25 for every pair (PyBullet multiplies the link's 0.5 by
+  the plane's 0.5), restitution 0; link velocity damping 0.04 (Bullet's
+  default); no sleeping.
+
+sapien is imported only here; without it the registry reports the engine as
+unavailable.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+import sapien  # noqa: F401  - an ImportError here marks the engine unavailable
+from sapien import physx
+
+from asset2sim.engines.base import ContactPair, SessionOptions, register_engine
+from asset2sim.engines.fake import (
+    BULLET_DEFAULT_FRICTION,
+    BULLET_DEFAULT_INERTIA,
+    BULLET_DEFAULT_MASS,
+    BULLET_PLANE_FRICTION,
+    matrix_quat_wxyz,
+    collision_pieces,
+    read_urdf,
+)
+
+#: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive that carries the
+#: passive joint forces: large enough that the drive acts as a velocity
+#: constraint clamped at its force limit (friction + damping * |qdot|).
+FRICTION_DRIVE_DAMPING = 1.0e6
+#: Bullet's default linear and angular velocity damping of multibody links (1/s).
+BULLET_LINK_DAMPING = 0.04
+
+
+class PhysXError(RuntimeError):
+    """SAPIEN/PhysX cannot build the asset (names the file and the part)."""
+
+
+def _pose(t: np.ndarray) -> "sapien.Pose":
+    t = np.asarray(t, float)
+    return sapien.Pose(p=t[:3, 3].astype(np.float32), q=matrix_quat_wxyz(t[:3, :3]).astype(np.float32))
+
+
+def _axis_frame(axis: np.ndarray) -> np.ndarray:
+    """(4, 4) rotation whose x axis is ``axis`` (PhysX joints move along/about x)."""
+    a = np.asarray(axis, float)
+    a = a / np.linalg.norm(a)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(a[0]) > 0.9 else np.array([1.0, 0.0, 0.0])
+    b = np.cross(a, ref)
+    b /= np.linalg.norm(b)
+    c = np.cross(a, b)
+    t = np.eye(4)
+    t[:3, 0], t[:3, 1], t[:3, 2] = a, b, c
+    return t
+
+
+def _principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal moments (3,) and a proper rotation (3, 3) whose columns are the axes."""
+    w, v = np.linalg.eigh(0.5 * (inertia + inertia.T))
+    if np.linalg.det(v) < 0:
+        v[:, 2] = -v[:, 2]
+    return w, v
+
+
+class PhysXSession:
+    """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3.
+
+    ``notes``: what had to change for this asset (flat hulls, missing
+    inertials, shapes PhysX could not cook).
+
+    Raises (constructor):
+        UrdfError: the URDF cannot be read.
+        PhysXError: an inertia tensor is not positive definite or a link
+            ends up without any shape PhysX can cook while it has collisions.
+    """
+
+    engine = "physx"
+
+    def __init__(self, urdf_path: Path, options: SessionOptions, missing_inertial: str = "bullet"):
+        self.options = options
+        conv = options.conventions
+        self.dt = conv.timestep
+        self.urdf = read_urdf(urdf_path)
+        pieces, notes = collision_pieces(self.urdf)
+        self.notes = list(notes)
+
+        old = physx.get_scene_config()
+        cfg = physx.PhysxSceneConfig()
+        cfg.gravity = np.array([0.0, 0.0, conv.gravity if options.gravity else 0.0], np.float32)
+        physx.set_scene_config(cfg)
+        try:
+            self.system = physx.PhysxCpuSystem()
+        finally:
+            physx.set_scene_config(old)
+        self.scene = sapien.Scene([self.system])
+        self.scene.set_timestep(self.dt)
+        mu = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
+
+        self.ground = None
+        if options.ground:
+            ent = sapien.Entity()
+            ent.name = "ground"
+            comp = physx.PhysxRigidStaticComponent()
+            plane = physx.PhysxCollisionShapePlane(physx.PhysxMaterial(mu, mu, 0.0))
+            # PhysX planes face +x; turn the normal to +z.
+            plane.local_pose = sapien.Pose(q=[math.sqrt(0.5), 0.0, -math.sqrt(0.5), 0.0])
+            comp.attach(plane)
+            ent.add_component(comp)
+            self.scene.add_entity(ent)
+            self.ground = comp
+
+        builder = self.scene.create_articulation_builder()
+        link_builders = {}
+        order = self.urdf.tree_order()
+        for name in order:
+            link = self.urdf.links[name]
+            pj = self.urdf.parent_joint(name)
+            lb = builder.create_link_builder(link_builders[pj.parent] if pj else None)
+            link_builders[name] = lb
+            lb.set_name(name)
+            lb.set_joint_name(pj.name if pj else "")
+            if pj is None:
+                lb.set_joint_properties("fixed" if options.fixed_base else "undefined", [], sapien.Pose(), sapien.Pose())
+            else:
+                ax = _axis_frame(pj.axis)
+                kind = {"revolute": "revolute_unwrapped", "continuous": "revolute", "prismatic": "prismatic", "fixed": "fixed"}[pj.type]
+                limits = [] if pj.type == "fixed" else [[pj.lower, pj.upper]]
+                lb.set_joint_properties(kind, limits, _pose(pj.origin @ ax), _pose(ax), 0.0, 0.0)
+            ine = link.inertial
+            if ine is None:
+                if missing_inertial == "bullet":
+                    mass, com_pose, moments = BULLET_DEFAULT_MASS, sapien.Pose(), np.array(BULLET_DEFAULT_INERTIA)
+                    self.notes.append(f"link {name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
+                else:
+                    raise PhysXError(f"{urdf_path}: link {name!r} has no <inertial> (PhysX needs a mass)")
+            else:
+                moments, axes = _principal(ine.inertia_in_link_axes())
+                if ine.mass <= 0 or moments.min() <= 0:
+                    raise PhysXError(f"{urdf_path}: link {name!r} has mass {ine.mass} and principal moments {moments}: not positive")
+                t = np.eye(4)
+                t[:3, :3] = axes
+                t[:3, 3] = ine.com()
+                mass, com_pose = ine.mass, _pose(t)
+            lb.set_mass_and_inertia(float(mass), com_pose, np.asarray(moments, np.float32))
+
+        entities = builder.build_entities(fix_root_link=options.fixed_base)
+        self.links = {}
+        self._shape_points: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for ent in entities:
+            comp = ent.find_component_by_type(physx.PhysxArticulationLinkComponent)
+            name = comp.name
+            self.links[name] = comp
+            lat = self.urdf.links[name].lateral_friction
+            lmu = (BULLET_DEFAULT_FRICTION if lat is None else lat) * BULLET_PLANE_FRICTION
+            mat = physx.PhysxMaterial(lmu, lmu, 0.0)
+            cooked = 0
+            for p in pieces[name]:
+                try:
+                    if p.kind == "hull":
+                        shape = physx.PhysxCollisionShapeConvexMesh(
+                            np.asarray(p.points, np.float32), np.ones(3, np.float32), mat
+                        )
+                        local = p.origin
+                    elif p.kind == "box":
+                        shape = physx.PhysxCollisionShapeBox(np.asarray(p.size, np.float32) / 2, mat)
+                        local = p.origin
+                    elif p.kind == "sphere":
+                        shape = physx.PhysxCollisionShapeSphere(float(p.radius), mat)
+                        local = p.origin
+                    else:  # cylinder: URDF axis z, PhysX axis x
+                        shape = physx.PhysxCollisionShapeCylinder(float(p.radius), float(p.length) / 2, mat)
+                        local = p.origin @ _axis_frame(np.array([0.0, 0.0, 1.0]))
+                except RuntimeError as exc:  # PhysX could not cook the hull
+                    self.notes.append(f"link {name!r} collision {p.collision} group {p.group}: PhysX could not cook it ({exc}); skipped")
+                    continue
+                shape.local_pose = _pose(local)
+                shape.set_collision_groups([1, 1, 0, 0])
+                shape.set_rest_offset(0.0)
+                comp.attach(shape)
+                cooked += 1
+            if pieces[name] and not cooked:
+                raise PhysXError(f"{urdf_path}: no collision shape of link {name!r} could be cooked by PhysX")
+            comp.set_linear_damping(BULLET_LINK_DAMPING)
+            comp.set_angular_damping(BULLET_LINK_DAMPING)
+        for ent in entities:
+            self.scene.add_entity(ent)
+        self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
+        self.art.set_sleep_threshold(0.0)
+
+        self.joint_names = [j.name for j in self.urdf.movable_joints]
+        self.joint_types = {j.name: j.type for j in self.urdf.movable_joints}
+        self.joint_limits = {j.name: (j.lower, j.upper) for j in self.urdf.movable_joints}
+        active = [j.name for j in self.art.active_joints]
+        if sorted(active) != sorted(self.joint_names):
+            raise PhysXError(f"{urdf_path}: PhysX built joints {active}, the URDF has {self.joint_names}")
+        self._index = {n: i for i, n in enumerate(active)}
+        self._joints = list(self.art.active_joints)
+        self._friction = np.zeros(len(active))
+        self._damping = np.zeros(len(active))
+        self._stiffness = np.zeros(len(active))
+        self._reference = np.zeros(len(active))
+        for pj in self.urdf.movable_joints:
+            i = self._index[pj.name]
+            self._damping[i] = pj.damping
+            self._friction[i] = pj.friction
+            joint = self._joints[i]
+            joint.set_friction(0.0)
+            joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(pj.friction), "force")
+            joint.set_drive_target(0.0)
+            joint.set_drive_velocity_target(0.0)
+            sp = options.springs.get(pj.name)
+            if sp is not None:
+                self._stiffness[i] = sp.stiffness
+                self._reference[i] = sp.reference
+        self.set_joint_positions(options.initial_state)
+        if options.ground and not options.fixed_base:
+            self.place_on_ground()
+
+    # ------------------------------------------------------------------ state
+    def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
+        qpos = np.asarray(self.art.get_qpos(), np.float32).copy()
+        qvel = np.asarray(self.art.get_qvel(), np.float32).copy()
+        for name, v in q.items():
+            i = self._index.get(name)
+            if i is None:
+                continue
+            qpos[i] = float(v)
+            if zero_velocity:
+                qvel[i] = 0.0
+        self.art.set_qpos(qpos)
+        self.art.set_qvel(qvel)
+
+    def joint_positions(self) -> dict[str, float]:
+        qpos = self.art.get_qpos()
+        return {n: float(qpos[i]) for n, i in self._index.items()}
+
+    def joint_velocities(self) -> dict[str, float]:
+        qvel = self.art.get_qvel()
+        return {n: float(qvel[i]) for n, i in self._index.items()}
+
+    def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        pose = self.art.get_root_pose()
+        w, x, y, z = (float(v) for v in pose.q)
+        return np.array(pose.p, float), np.array([x, y, z, w], float)
+
+    def set_root_pose(self, pos, orn_xyzw) -> None:
+        x, y, z, w = (float(v) for v in orn_xyzw)
+        self.art.set_root_pose(sapien.Pose(p=np.asarray(pos, np.float32), q=[w, x, y, z]))
+        self.art.set_root_linear_velocity(np.zeros(3, np.float32))
+        self.art.set_root_angular_velocity(np.zeros(3, np.float32))
+
+    def lowest_point(self) -> float:
+        """Lowest z (m) of the articulation's cooked collision shapes (+inf if none)."""
+        low = math.inf
+        for comp in self.links.values():
+            link_pose = comp.get_pose().to_transformation_matrix()
+            for shape in comp.get_collision_shapes():
+                t = link_pose @ shape.get_local_pose().to_transformation_matrix()
+                if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
+                    v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
+                    low = min(low, float((v @ t[:3, :3].T + t[:3, 3])[:, 2].min()))
+                else:
+                    aabb = comp.compute_global_aabb_tight()
+                    low = min(low, float(aabb[0][2]))
+        return low
+
+    def place_on_ground(self) -> float:
+        """Translate the root so the lowest collision point touches z = 0; returns the shift (m)."""
+        low = self.lowest_point()
+        if not math.isfinite(low):
+            return 0.0
+        pos, orn = self.root_pose()
+        self.set_root_pose(pos + np.array([0.0, 0.0, -low]), orn)
+        return float(-low)
+
+    # ---------------------------------------------------------------- contact
+    def _probe_contacts(self):
+        """Contacts PhysX generates at the current state, without changing it:
+        PhysX reports contacts only from a simulation step, and generates them
+        from the poses at the start of the step, so the state is saved, one
+        step is taken, the contacts read and the state restored."""
+        pose = self.art.get_root_pose()
+        lin = np.asarray(self.art.get_root_linear_velocity(), np.float32).copy()
+        ang = np.asarray(self.art.get_root_angular_velocity(), np.float32).copy()
+        qpos = np.asarray(self.art.get_qpos(), np.float32).copy()
+        qvel = np.asarray(self.art.get_qvel(), np.float32).copy()
+        qf = np.asarray(self.art.get_qf(), np.float32).copy()
+        self.art.set_qf(np.zeros(len(qpos), np.float32))
+        self.scene.step()
+        contacts = self.system.get_contacts()
+        self.art.set_root_pose(pose)
+        self.art.set_root_linear_velocity(lin)
+        self.art.set_root_angular_velocity(ang)
+        self.art.set_qpos(qpos)
+        self.art.set_qvel(qvel)
+        self.art.set_qf(qf)
+        return contacts
+
+    def _link_name(self, comp) -> str | None:
+        for name, c in self.links.items():
+            if c is comp:
+                return name
+        return None
+
+    def self_penetration(self) -> tuple[float, list[ContactPair]]:
+        pairs: dict[tuple[str, str], ContactPair] = {}
+        total = 0.0
+        for c in self._probe_contacts():
+            a, b = self._link_name(c.bodies[0]), self._link_name(c.bodies[1])
+            if a is None or b is None:
+                continue  # the ground or another object
+            key = (a, b) if a <= b else (b, a)
+            for pt in c.points:
+                sep = float(pt.separation)
+                if sep >= 0.0:
+                    continue
+                cp = pairs.get(key)
+                if cp is None:
+                    cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
+                cp.depth += -sep
+                cp.max_depth = max(cp.max_depth, -sep)
+                cp.points += 1
+                total += -sep
+        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+
+    def ground_penetration(self) -> float:
+        """Deepest point (m) of the cooked collision shapes below z = 0, from
+        the geometry itself (exact for hulls on a plane; no simulation step)."""
+        if self.ground is None:
+            return 0.0
+        low = self.lowest_point()
+        return max(0.0, -low) if math.isfinite(low) else 0.0
+
+    # --------------------------------------------------------------- dynamics
+    def step(self, n: int = 1) -> None:
+        """Advance n steps: before each, the passive drives' force limits
+        (friction + damping * |qdot|) and the spring forces are set."""
+        springs = bool(np.any(self._stiffness))
+        viscous = bool(np.any(self._damping))
+        for _ in range(int(n)):
+            if viscous:
+                qd = np.abs(np.asarray(self.art.get_qvel(), float))
+                for i, joint in enumerate(self._joints):
+                    if self._damping[i] > 0:
+                        joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self._friction[i] + self._damping[i] * qd[i]), "force")
+            if springs:
+                q = np.asarray(self.art.get_qpos(), float)
+                self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))
+            self.scene.step()
+
+    def close(self) -> None:
+        if getattr(self, "scene", None) is not None:
+            self.scene = None
+            self.system = None
+            self.art = None
+            self.links = {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _open(urdf_path: Path, options: SessionOptions) -> PhysXSession:
+    return PhysXSession(urdf_path, options)
+
+
+register_engine("physx", _open)

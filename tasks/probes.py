@@ -1,0 +1,408 @@
+"""Passive behaviour probes: a scripted pusher tries to close / open a joint.
+
+The cheap stand-in for the thesis's policies (SPEC, "Behavioral fidelity"). A
+probe runs in PyBullet under the SPEC's conventions (root free on the ground,
+gravity, passive joints) and applies an *external* force on the moving link,
+as a finger would, so the whole object feels the reaction: a joint that resists
+more than the ground friction can hold makes the object slide or tip instead.
+
+Definitions (re-derivable; see ``docs/metrics.md``):
+
+- Push point c: centre of the moving link's collision AABB (world, m). For a
+  revolute joint with axis a (unit, world) through the link frame origin o, the
+  lever r = (c - o) - ((c - o).a) a; the push direction is +-(a x r)/|a x r|
+  and the generalised torque is F |r|. For a prismatic joint the direction is
+  +-a. The sign points from the current position towards the target.
+- Force law (a velocity-limited pusher): F_{k+1} = clip(F_k + g (v_des - v) dt,
+  0, F_max), v the speed of the push point along the direction (m/s), v_des =
+  ``push_speed``, g = F_max / (v_des * ramp_time). A stuck joint sees the force
+  ramp to F_max in ``ramp_time``; a free one is pushed at about v_des.
+- F_max = max(``min_force``, ``force_factor`` * m_total * g) (N).
+- Targets as opening fractions f (0 closed, 1 fully open, from the geometric
+  closed end): close -> f = 0.05, reached at f <= 0.10; open -> f = 0.6,
+  reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55).
+- The object first settles freely for ``settle_time`` s; the push starts from
+  there (root pose and joint position at that moment are the references).
+- Push for at most ``push_time`` s (the pusher stops early once the object
+  slid or tipped), then release (no force) for
+  ``release_time`` s.
+- Object moved: during the push the root moved > ``slide_tol`` (m, slid) or
+  rotated > ``tip_tol`` (rad, tipped).
+- Rebound: after release the fraction moved back towards the start by > 0.05;
+  kept moving: moved on beyond the target by > 0.05 or ends with |q_dot| >
+  0.05 rad/s (0.005 m/s).
+- A probe succeeds iff the target is reached without the object moving and, for
+  a close probe, without rebound (a drawer that springs back). An open probe's
+  rebound (a lid that falls shut) fails only when the request asks the joint
+  to hold its position.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import quat_angle
+from asset2sim.schemas.report import MetricResult
+
+CLOSE_TARGET, CLOSE_REACHED = 0.05, 0.10
+OPEN_TARGET, OPEN_REACHED = 0.6, 0.55
+OPEN_FAR_TARGET, OPEN_FAR_REACHED = 0.9, 0.85
+REBOUND_FRACTION = 0.05
+
+
+@dataclass
+class ProbeConfig:
+    """Probe knobs (units on every field)."""
+
+    settle_time: float = 0.25
+    """free settling before the push, s"""
+    push_time: float = 2.0
+    """longest push, s"""
+    release_time: float = 0.75
+    """observation after release, s"""
+    push_speed: float = 0.25
+    """desired speed of the push point, m/s"""
+    ramp_time: float = 1.0
+    """time for a stuck pusher to reach F_max, s"""
+    force_factor: float = 2.0
+    """F_max = force_factor * total weight (dimensionless) ..."""
+    min_force: float = 5.0
+    """... but at least this, N"""
+    slide_tol: float = 0.005
+    """root displacement that counts as the object sliding, m"""
+    tip_tol: float = 0.05
+    """root rotation that counts as tipping, rad"""
+    settle_velocity_revolute: float = 0.05
+    """|q_dot| after release that counts as still moving, rad/s"""
+    settle_velocity_prismatic: float = 0.005
+    """... for prismatic joints, m/s"""
+
+
+@dataclass
+class ProbeResult:
+    """Outcome of one probe. Angles rad, lengths m, forces N, torques N*m."""
+
+    joint: str
+    joint_type: str
+    action: str
+    start: float
+    target: float
+    start_fraction: float
+    target_fraction: float
+    reached: bool
+    time_to_reach: float | None
+    peak_force: float
+    peak_effort: float
+    """peak generalised force: N*m (revolute, F*|r|) or N (prismatic)"""
+    lever_arm: float | None
+    max_force: float
+    root_displacement: float
+    root_rotation: float
+    slid: bool
+    tipped: bool
+    release_fraction: float
+    final_fraction: float
+    rebound: bool
+    kept_moving: bool
+    success: bool
+    failure: str = ""
+    notes: list[str] = field(default_factory=list)
+    trace: dict[str, list[float]] = field(default_factory=dict, repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able dict without the trace."""
+        d = {k: v for k, v in self.__dict__.items() if k != "trace"}
+        return d
+
+
+def _link_world_frame(session, link_idx: int) -> tuple[np.ndarray, np.ndarray]:
+    p = session._p
+    if link_idx < 0:
+        pos, orn = p.getBasePositionAndOrientation(session.body, physicsClientId=session.cid)
+    else:
+        st = p.getLinkState(session.body, link_idx, computeForwardKinematics=True, physicsClientId=session.cid)
+        pos, orn = st[4], st[5]
+    R = np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+    return np.array(pos, float), R
+
+
+def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | None]:
+    """Push point (3,) m, unit direction (3,) that increases q, lever (m) or None."""
+    p = session._p
+    j = session._index[joint]
+    info = p.getJointInfo(session.body, j, physicsClientId=session.cid)
+    axis_local = np.array(info[13], float)
+    o, R = _link_world_frame(session, j)
+    a = R @ axis_local
+    a /= max(np.linalg.norm(a), 1e-12)
+    lo, hi = p.getAABB(session.body, j, physicsClientId=session.cid)
+    c = 0.5 * (np.array(lo, float) + np.array(hi, float))
+    if session.joint_types[joint] == "prismatic":
+        return c, a, None
+    r = (c - o) - np.dot(c - o, a) * a
+    lever = float(np.linalg.norm(r))
+    if lever < 1e-4:
+        # The AABB centre lies on the axis (a symmetric knob): push at the far corner.
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        rr = (corners - o) - np.outer((corners - o) @ a, a)
+        k = int(np.argmax(np.linalg.norm(rr, axis=1)))
+        c, r = corners[k], rr[k]
+        lever = float(np.linalg.norm(r))
+    t = np.cross(a, r)
+    t /= max(np.linalg.norm(t), 1e-12)
+    return c, t, max(lever, 1e-4)
+
+
+def total_mass(session) -> float:
+    """Sum of the masses PyBullet uses for every link of the body, kg."""
+    p = session._p
+    return float(sum(p.getDynamicsInfo(session.body, i, physicsClientId=session.cid)[0] for i in session.link_names))
+
+
+def probe_joint(
+    session,
+    joint: str,
+    *,
+    closed: float,
+    direction: float,
+    open_range: float,
+    action: str,
+    config: ProbeConfig | None = None,
+    holds_position: bool = False,
+) -> ProbeResult:
+    """Run one probe on ``joint`` of a PyBullet session from its current state.
+
+    Args:
+        session: :class:`asset2sim.engines.pybullet_engine.PyBulletSession`
+            (root free, on the ground); it is stepped in place.
+        joint: movable joint name.
+        closed: q_closed, rad or m; ``direction`` +1/-1 the opening direction;
+            ``open_range`` > 0 the largest opening from q_closed (rad or m).
+        action: ``close`` or ``open``.
+        config: probe knobs.
+        holds_position: the request asks the joint to hold its position (an
+            open probe that falls back then fails).
+
+    Raises:
+        ValueError: unknown action or non-positive ``open_range``.
+        KeyError: unknown joint.
+    """
+    if action not in ("close", "open"):
+        raise ValueError(f"probe action must be 'close' or 'open', got {action!r}")
+    if not open_range > 0:
+        raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
+    cfg = config or ProbeConfig()
+    p = session._p
+    j = session._index[joint]
+    dt = session.options.conventions.timestep
+    jtype = session.joint_types[joint]
+    prismatic = jtype == "prismatic"
+
+    def frac(q: float) -> float:
+        return float(direction * (q - closed) / open_range)
+
+    def qpos() -> tuple[float, float]:
+        s = p.getJointState(session.body, j, physicsClientId=session.cid)
+        return float(s[0]), float(s[1])
+
+    # Let the object come to rest on the ground first, so drift of an object
+    # that is unstable by itself is not taken for the push moving it.
+    for _ in range(int(round(cfg.settle_time / dt))):
+        session.step(1)
+    q0, _ = qpos()
+    f0 = frac(q0)
+    if action == "close":
+        f_target, reached_if = CLOSE_TARGET, (lambda f: f <= CLOSE_REACHED)
+    elif f0 < OPEN_REACHED:
+        f_target, reached_if = OPEN_TARGET, (lambda f: f >= OPEN_REACHED)
+    else:
+        f_target, reached_if = OPEN_FAR_TARGET, (lambda f: f >= OPEN_FAR_REACHED)
+    q_target = closed + direction * f_target * open_range
+    # +1 when the target needs q to increase.
+    sign = 1.0 if q_target >= q0 else -1.0
+    weight = total_mass(session) * abs(session.options.conventions.gravity)
+    f_max = max(cfg.min_force, cfg.force_factor * weight)
+    gain = f_max / (cfg.push_speed * cfg.ramp_time)
+    root_p0, root_q0 = session.root_pose()
+    n_push = int(round(cfg.push_time / dt))
+    n_rel = int(round(cfg.release_time / dt))
+    tr: dict[str, list[float]] = {"t": [], "q": [], "force": [], "root_disp": [], "phase": []}
+    force = 0.0
+    peak_force = peak_effort = 0.0
+    lever_used: float | None = None
+    reached = reached_if(f0)
+    t_reach = 0.0 if reached else None
+    max_disp = max_rot = 0.0
+    k = 0
+    while not reached and k < n_push:
+        c, t_dir, lever = _push_geometry(session, joint)
+        d = sign * t_dir
+        q, qd = qpos()
+        # speed of the push point along d
+        v = sign * qd * (lever if lever is not None else 1.0)
+        force = float(np.clip(force + gain * (cfg.push_speed - v) * dt, 0.0, f_max))
+        p.applyExternalForce(session.body, j, (force * d).tolist(), c.tolist(), p.WORLD_FRAME, physicsClientId=session.cid)
+        session.step(1)
+        k += 1
+        peak_force = max(peak_force, force)
+        eff = force * (lever if lever is not None else 1.0)
+        if eff >= peak_effort:
+            peak_effort, lever_used = eff, lever
+        q, qd = qpos()
+        rp, rq = session.root_pose()
+        disp = float(np.linalg.norm(rp - root_p0))
+        rot = quat_angle(root_q0, rq)
+        max_disp, max_rot = max(max_disp, disp), max(max_rot, rot)
+        tr["t"].append(k * dt)
+        tr["q"].append(q)
+        tr["force"].append(force)
+        tr["root_disp"].append(disp)
+        tr["phase"].append(0.0)
+        if not np.isfinite(q):
+            break
+        if reached_if(frac(q)):
+            reached, t_reach = True, k * dt
+        elif max_disp > cfg.slide_tol or max_rot > cfg.tip_tol:
+            break  # the object moves instead of the joint: the pusher stops
+    q_rel, _ = qpos()
+    f_rel = frac(q_rel)
+    f_min = f_maxv = f_rel
+    for i in range(n_rel):
+        session.step(1)
+        q, qd = qpos()
+        f = frac(q)
+        f_min, f_maxv = min(f_min, f), max(f_maxv, f)
+        rp, _ = session.root_pose()
+        tr["t"].append((k + i + 1) * dt)
+        tr["q"].append(q)
+        tr["force"].append(0.0)
+        tr["root_disp"].append(float(np.linalg.norm(rp - root_p0)))
+        tr["phase"].append(1.0)
+    q_end, qd_end = qpos()
+    f_end = frac(q_end)
+    # "towards the start": for close the start is more open (larger f).
+    if action == "close":
+        rebound = f_maxv - f_rel > REBOUND_FRACTION
+        kept = f_rel - f_min > REBOUND_FRACTION
+    else:
+        rebound = f_rel - f_min > REBOUND_FRACTION
+        kept = f_maxv - f_rel > REBOUND_FRACTION
+    vlim = cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute
+    if abs(qd_end) > vlim:
+        kept = True
+    slid = max_disp > cfg.slide_tol
+    tipped = max_rot > cfg.tip_tol
+    failure = ""
+    if not np.isfinite(q_end):
+        failure = "diverged"
+    elif not reached:
+        failure = "target not reached" + (" (the object moved instead)" if slid or tipped else "")
+    elif slid or tipped:
+        failure = "the object " + ("slid" if slid else "tipped") + " instead of the joint moving"
+    elif action == "close" and rebound:
+        failure = "springs back after release"
+    elif action == "open" and rebound and holds_position:
+        failure = "does not hold the open position after release"
+    notes = []
+    if action == "open" and rebound and not holds_position:
+        notes.append("falls back after release (allowed: the request does not ask it to hold)")
+    if kept:
+        notes.append("keeps moving after release")
+    return ProbeResult(
+        joint=joint,
+        joint_type=jtype,
+        action=action,
+        start=q0,
+        target=float(q_target),
+        start_fraction=f0,
+        target_fraction=f_target,
+        reached=bool(reached),
+        time_to_reach=t_reach,
+        peak_force=float(peak_force),
+        peak_effort=float(peak_effort),
+        lever_arm=lever_used,
+        max_force=float(f_max),
+        root_displacement=float(max_disp),
+        root_rotation=float(max_rot),
+        slid=bool(slid),
+        tipped=bool(tipped),
+        release_fraction=float(f_rel),
+        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"),
+        rebound=bool(rebound),
+        kept_moving=bool(kept),
+        success=not failure,
+        failure=failure,
+        notes=notes,
+        trace=tr,
+    )
+
+
+def run_probes(
+    session,
+    joints: dict[str, tuple[float, float, float]],
+    *,
+    actions: tuple[str, ...] = ("close", "open"),
+    config: ProbeConfig | None = None,
+    holds_position: bool = False,
+) -> list[ProbeResult]:
+    """Probe every joint of ``joints`` with every action, each from the
+    session's state at call time (saved and restored with PyBullet's
+    ``saveState``/``restoreState``).
+
+    Args:
+        session: PyBullet session at the initial state on the ground.
+        joints: joint -> (q_closed, direction, open_range).
+        actions: which probes.
+        config, holds_position: see :func:`probe_joint`.
+
+    Returns:
+        One :class:`ProbeResult` per joint and action, in order. The session is
+        left at the saved state.
+    """
+    p = session._p
+    sid = p.saveState(physicsClientId=session.cid)
+    out = []
+    try:
+        for name, (closed, direction, rng) in joints.items():
+            for action in actions:
+                p.restoreState(stateId=sid, physicsClientId=session.cid)
+                out.append(
+                    probe_joint(
+                        session,
+                        name,
+                        closed=closed,
+                        direction=direction,
+                        open_range=rng,
+                        action=action,
+                        config=config,
+                        holds_position=holds_position,
+                    )
+                )
+        p.restoreState(stateId=sid, physicsClientId=session.cid)
+    finally:
+        p.removeState(sid, physicsClientId=session.cid)
+    return out
+
+
+def probes_metric(results: list[ProbeResult], *, engine: str = "pybullet") -> MetricResult:
+    """Aggregate probes: value = number of failed probes; passes iff none failed.
+
+    ``passed`` is None when there was nothing to probe.
+    """
+    failed = [r for r in results if not r.success]
+    return MetricResult(
+        name="probes",
+        value=float(len(failed)),
+        unit="failed probes",
+        passed=(not failed) if results else None,
+        threshold="every close/open probe reaches its target without the object sliding (> 5 mm) or tipping "
+        "(> 0.05 rad) and a closed joint does not spring back",
+        details={
+            "probes": [r.summary() for r in results],
+            "failures": [f"{r.joint} {r.action}: {r.failure}" for r in failed],
+        },
+        engine=engine,
+    )

@@ -1,0 +1,304 @@
+"""Mechanical validation of an overlay (SPEC stage 2, whatever produced it).
+
+:func:`validate_overlay` checks every rule of the SPEC and returns a corrected
+copy plus the list of named :class:`~asset2sim.schemas.overlay.ValidationIssue`;
+a :class:`ValidationPolicy` decides which issues make the overlay unusable.
+
+Rules (codes):
+
+- ``OVL_SCALE_INVALID``: scale not finite or outside [1e-4, 1e4] (error).
+- ``OVL_UNKNOWN_LINK`` / ``OVL_UNKNOWN_JOINT``: names not in the asset (error; dropped).
+- ``OVL_LINK_MISSING``: a link with geometry has no entry; filled conservatively
+  from the geometry (plastic density 1000 kg/m^3 on the geometry's volume,
+  inertia from the scaled geometry) or, without geometry, 0.1% of the total
+  mass with a small isotropic inertia (warning, fixed).
+- ``OVL_MASS_INVALID``: mass not finite or <= 0 (error unless geometry allows a fill).
+- ``OVL_INERTIA_INVALID``: inertia not finite, not positive definite, or its
+  principal moments violate the triangle inequality I1 + I2 >= I3 (with
+  relative tolerance 1e-9); replaced by the inertia of the scaled geometry at
+  the link's mass when geometry exists (warning, fixed), else error. Never
+  silently "balanced".
+- ``OVL_COM_OUTSIDE``: COM not finite or farther than 10% of the link's
+  diagonal outside its scaled bounding box; replaced by the geometry's COM.
+- ``OVL_JOINT_MISSING``: a movable joint without dynamics; filled with
+  conservative values (warning, fixed) — see :func:`conservative_dynamics`.
+- ``OVL_DYNAMICS_NEGATIVE``: damping, friction or stiffness < 0 or not finite (error).
+- ``OVL_SPRING_REFERENCE``: stiffness > 0 without a spring reference inside the
+  (scaled) limits; set to the initial state or the closed end (warning, fixed).
+- ``OVL_STATE_UNKNOWN_JOINT``, ``OVL_STATE_OUT_OF_LIMITS``: initial state names a
+  joint that is not movable (dropped, warning) or lies outside the scaled limits
+  (projected onto them, warning). Prismatic limits and positions are compared
+  in output units (input limits x scale).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from asset2sim.schemas.asset import AssetDescription, LinkGeometry
+from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics, Overlay, ValidationIssue
+
+TRIANGLE_RTOL = 1e-9
+
+
+class OverlayInvalid(ValueError):
+    """The overlay has issues the policy treats as fatal; ``issues`` lists all."""
+
+    def __init__(self, issues: list[ValidationIssue]):
+        self.issues = issues
+        fatal = [i for i in issues if i.severity == "error" and not i.fixed]
+        super().__init__("invalid overlay: " + "; ".join(f"{i.code} at {i.where}: {i.message}" for i in fatal))
+
+
+@dataclass
+class ValidationPolicy:
+    """Which issues are fatal: any unfixed issue whose severity is in
+    ``fatal_severities`` or whose code is in ``fatal_codes``."""
+
+    fatal_severities: set[str] = field(default_factory=lambda: {"error"})
+    fatal_codes: set[str] = field(default_factory=set)
+
+    def is_fatal(self, issue: ValidationIssue) -> bool:
+        if issue.fixed:
+            return False
+        return issue.severity in self.fatal_severities or issue.code in self.fatal_codes
+
+    def check(self, issues: list[ValidationIssue]) -> None:
+        """Raise :class:`OverlayInvalid` when any issue is fatal."""
+        if any(self.is_fatal(i) for i in issues):
+            raise OverlayInvalid(issues)
+
+
+def inertia_problems(m: np.ndarray) -> str | None:
+    """Why a (3, 3) inertia tensor (kg*m^2) is not physically valid, or None.
+
+    Checks finiteness, symmetry, positive definiteness and the triangle
+    inequality of principal moments (each <= sum of the other two), e.g.
+    Featherstone, Rigid Body Dynamics Algorithms (2008), sec. 2.13.
+    """
+    m = np.asarray(m, float)
+    if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+        return "not a finite 3x3 tensor"
+    if not np.allclose(m, m.T, rtol=1e-9, atol=1e-15):
+        return "not symmetric"
+    ev = np.linalg.eigvalsh(m)
+    if ev[0] <= 0:
+        return f"not positive definite (principal moments {ev.tolist()})"
+    if ev[0] + ev[1] < ev[2] * (1.0 - TRIANGLE_RTOL):
+        return f"principal moments {ev.tolist()} violate the triangle inequality"
+    return None
+
+
+def geometry_inertia(geom: LinkGeometry, mass: float, scale: float, hollow: bool) -> np.ndarray:
+    """Inertia (3, 3) kg*m^2 about the COM of a link of ``mass`` kg whose
+    geometry is scaled by ``scale``: per-kg tensor x mass x scale^2 (shell tensor
+    when ``hollow``), made valid by a tiny isotropic term if degenerate."""
+    per_kg = np.asarray(geom.inertia_shell if hollow else geom.inertia_solid, float)
+    m = per_kg * mass * scale**2
+    m = 0.5 * (m + m.T)
+    if inertia_problems(m) is not None:
+        ext = np.asarray(geom.extents, float) * scale
+        iso = mass * max(float(np.max(ext)), 1e-6) ** 2 / 12.0 * 1e-3
+        m = m + np.eye(3) * iso
+        if inertia_problems(m) is not None:  # fall back to the bounding box
+            m = box_inertia(mass, np.maximum(ext, 1e-6))
+    return m
+
+
+def box_inertia(mass: float, extents: np.ndarray) -> np.ndarray:
+    """Inertia (3, 3) of a solid box of ``mass`` kg and ``extents`` (3,) m
+    about its center (standard formula, I_xx = m (y^2 + z^2) / 12)."""
+    x, y, z = np.asarray(extents, float)
+    return np.diag([mass * (y * y + z * z), mass * (x * x + z * z), mass * (x * x + y * y)]) / 12.0
+
+
+def conservative_dynamics(joint_type: str) -> JointDynamics:
+    """Dynamics for a joint the overlay misses: moderate damping and a small
+    friction (revolute: 0.05 N*m*s/rad, 0.02 N*m; prismatic: 1 N*s/m, 0.5 N),
+    values that keep small household parts from ringing without locking them."""
+    if joint_type == "prismatic":
+        return JointDynamics(damping=1.0, friction=0.5, stiffness=0.0, source="conservative default")
+    return JointDynamics(damping=0.05, friction=0.02, stiffness=0.0, source="conservative default")
+
+
+def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[float, float]]:
+    """Limits of movable joints in output units (prismatic x scale); continuous
+    joints get (-inf, inf)."""
+    out = {}
+    for j in asset.movable_joints():
+        if j.type == "continuous" or j.lower is None or j.upper is None:
+            out[j.name] = (-math.inf, math.inf)
+        elif j.type == "prismatic":
+            out[j.name] = (j.lower * scale, j.upper * scale)
+        else:
+            out[j.name] = (j.lower, j.upper)
+    return out
+
+
+def validate_overlay(
+    overlay: Overlay,
+    asset: AssetDescription,
+    geometry: dict[str, LinkGeometry] | None = None,
+    *,
+    policy: ValidationPolicy | None = None,
+    fill_missing: bool = True,
+) -> tuple[Overlay, list[ValidationIssue]]:
+    """Check ``overlay`` against the SPEC rules for ``asset``.
+
+    Args:
+        overlay: candidate overlay (not modified).
+        asset: the extracted asset.
+        geometry: link -> LinkGeometry at scale 1 (enables fills and fixes).
+        policy: decides which unfixed issues are fatal (default: errors).
+        fill_missing: fill links/joints the overlay misses.
+
+    Returns:
+        (corrected overlay, issues). Corrections are listed as issues with
+        ``fixed=True``.
+
+    Raises:
+        OverlayInvalid: when the policy finds a fatal issue.
+    """
+    geometry = geometry or {}
+    policy = policy or ValidationPolicy()
+    issues: list[ValidationIssue] = []
+    ov = overlay.model_copy(deep=True)
+
+    def add(code, severity, where, message, fixed=False):
+        issues.append(ValidationIssue(code=code, severity=severity, where=where, message=message, fixed=fixed))
+
+    s = ov.scale
+    if not (math.isfinite(s) and 1e-4 <= s <= 1e4):
+        add("OVL_SCALE_INVALID", "error", "global", f"scale {s!r} is not a finite value in [1e-4, 1e4]")
+        policy.check(issues)
+        return ov, issues
+
+    link_names = {ln.name for ln in asset.links}
+    for name in list(ov.links):
+        if name not in link_names:
+            add("OVL_UNKNOWN_LINK", "error", name, f"overlay names link {name!r}, which {asset.urdf_path.name} does not have")
+            del ov.links[name]
+    movable = {j.name: j for j in asset.movable_joints()}
+    for name in list(ov.joints):
+        if name not in movable:
+            sev = "warning" if any(j.name == name for j in asset.joints) else "error"
+            add("OVL_UNKNOWN_JOINT", sev, name, f"overlay gives dynamics for {name!r}, which is not a movable joint; dropped", fixed=sev == "warning")
+            del ov.joints[name]
+
+    # ---- links
+    total_known = sum(lp.mass for lp in ov.links.values() if math.isfinite(lp.mass) and lp.mass > 0)
+    for ln in asset.links:
+        geom = geometry.get(ln.name)
+        lp = ov.links.get(ln.name)
+        if lp is None:
+            if not fill_missing:
+                if ln.has_geometry:
+                    add("OVL_LINK_MISSING", "error", ln.name, "link has geometry but no mass/inertia in the overlay")
+                continue
+            if geom is not None:
+                density = 1000.0
+                mass = max(geom.volume * s**3 * density, 1e-6)
+                inertia = geometry_inertia(geom, mass, s, hollow=False)
+                ov.links[ln.name] = LinkPhysics(
+                    mass=mass,
+                    inertia=Inertia.from_matrix(inertia),
+                    com=tuple(c * s for c in geom.com),
+                    material="unknown (conservative fill: 1000 kg/m^3 solid)",
+                    density=density,
+                    hollow_fraction=1.0,
+                    source="validator fill from geometry",
+                )
+                if ln.has_geometry:
+                    add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry; filled from geometry: {mass:.4g} kg", fixed=True)
+            else:
+                mass = max(1e-3 * total_known, 1e-4)
+                i = mass * 1e-4 * s**2
+                ov.links[ln.name] = LinkPhysics(
+                    mass=mass,
+                    inertia=Inertia(ixx=i, iyy=i, izz=i),
+                    com=(0.0, 0.0, 0.0),
+                    material="none (link without geometry)",
+                    source="validator placeholder for a link without geometry",
+                )
+                if ln.has_geometry:
+                    add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry and no geometry analysis; placeholder {mass:.3g} kg", fixed=True)
+            continue
+        # mass
+        if not (math.isfinite(lp.mass) and lp.mass > 0):
+            if geom is not None:
+                mass = max(geom.volume * s**3 * 1000.0, 1e-6)
+                add("OVL_MASS_INVALID", "warning", ln.name, f"mass {lp.mass!r} is not > 0; replaced by {mass:.4g} kg from geometry", fixed=True)
+                lp = lp.model_copy(update={"mass": mass, "source": lp.source + "; mass fixed by validator"})
+            else:
+                add("OVL_MASS_INVALID", "error", ln.name, f"mass {lp.mass!r} is not a finite value > 0")
+                continue
+        # inertia
+        prob = inertia_problems(lp.inertia.matrix())
+        if prob is not None:
+            ev = np.linalg.eigvalsh(np.nan_to_num(0.5 * (lp.inertia.matrix() + lp.inertia.matrix().T))).tolist()
+            if geom is not None:
+                hollow = (lp.hollow_fraction or 1.0) < 1.0
+                new = geometry_inertia(geom, lp.mass, s, hollow)
+                add("OVL_INERTIA_INVALID", "warning", ln.name, f"inertia {prob} (eigenvalues {ev}); replaced by the scaled geometry's inertia", fixed=True)
+                lp = lp.model_copy(update={"inertia": Inertia.from_matrix(new), "source": lp.source + "; inertia fixed by validator"})
+            else:
+                add("OVL_INERTIA_INVALID", "error", ln.name, f"inertia {prob} (eigenvalues {ev})")
+        # com
+        com = np.asarray(lp.com, float)
+        if geom is not None:
+            lo = np.asarray(geom.bbox_min) * s
+            hi = np.asarray(geom.bbox_max) * s
+            slack = 0.1 * float(np.linalg.norm(hi - lo))
+            if not np.all(np.isfinite(com)) or np.any(com < lo - slack) or np.any(com > hi + slack):
+                add("OVL_COM_OUTSIDE", "warning", ln.name, f"center of mass {com.tolist()} m lies outside the link's scaled bounding box; replaced by the geometry's", fixed=True)
+                lp = lp.model_copy(update={"com": tuple(c * s for c in geom.com)})
+        elif not np.all(np.isfinite(com)):
+            add("OVL_COM_OUTSIDE", "error", ln.name, "center of mass is not finite")
+        ov.links[ln.name] = lp
+
+    # ---- joints
+    limits = scaled_limits(asset, s)
+    state = dict(ov.initial_joint_positions or {})
+    for name, jd in movable.items():
+        dyn = ov.joints.get(name)
+        if dyn is None:
+            if fill_missing:
+                ov.joints[name] = conservative_dynamics(jd.type)
+                add("OVL_JOINT_MISSING", "warning", name, "no dynamics in the overlay; conservative values filled", fixed=True)
+            else:
+                add("OVL_JOINT_MISSING", "error", name, "movable joint without dynamics")
+            continue
+        bad = [k for k in ("damping", "friction", "stiffness") if not (math.isfinite(getattr(dyn, k)) and getattr(dyn, k) >= 0)]
+        if bad:
+            add("OVL_DYNAMICS_NEGATIVE", "error", name, f"{', '.join(bad)} must be finite and >= 0 (got " + ", ".join(f"{k}={getattr(dyn, k)!r}" for k in bad) + ")")
+            continue
+        if dyn.stiffness > 0:
+            lo, hi = limits[name]
+            ref = dyn.spring_reference
+            if ref is None or not math.isfinite(ref) or not (lo <= ref <= hi):
+                new_ref = state.get(name, float(np.clip(0.0, lo, hi)))
+                add("OVL_SPRING_REFERENCE", "warning", name, f"spring reference {ref!r} missing or outside limits [{lo}, {hi}]; set to {new_ref}", fixed=True)
+                ov.joints[name] = dyn.model_copy(update={"spring_reference": new_ref})
+
+    if ov.initial_joint_positions is not None:
+        fixed_state = {}
+        for name, q in ov.initial_joint_positions.items():
+            if name not in movable:
+                add("OVL_STATE_UNKNOWN_JOINT", "warning", name, "initial state for a joint that is not movable; dropped", fixed=True)
+                continue
+            if not math.isfinite(q):
+                add("OVL_STATE_OUT_OF_LIMITS", "error", name, f"initial position {q!r} is not finite")
+                continue
+            lo, hi = limits[name]
+            if q < lo or q > hi:
+                qn = float(np.clip(q, lo, hi))
+                unit = "m" if movable[name].type == "prismatic" else "rad"
+                add("OVL_STATE_OUT_OF_LIMITS", "warning", name, f"initial position {q} {unit} outside limits [{lo}, {hi}] (output units); projected to {qn}", fixed=True)
+                q = qn
+            fixed_state[name] = q
+        ov.initial_joint_positions = fixed_state
+    policy.check(issues)
+    return ov, issues
