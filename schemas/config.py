@@ -42,7 +42,11 @@ class RefineConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     estimator: str = "offline"
+    """Registered estimator name (``offline``, ``llm``, ``openai`` ...)."""
     model: str | None = None
+    """Model string for model-backed estimators (litellm form, e.g. ``gemini/gemini-2.5-flash``)."""
+    base_url: str | None = None
+    """Base URL of an OpenAI-compatible server for model-backed estimators."""
     sim: SimConventions = Field(default_factory=SimConventions)
     penetration_tolerance: float = 1e-3
     """Phi below which the state is accepted, m (sum over contact points)."""
@@ -60,6 +64,8 @@ class RefineConfig(BaseModel):
     """Largest drift of a requested joint state during the rest test, m."""
     convex_decomposition: bool = True
     """Allow CoACD decomposition of collision meshes whose hulls always overlap."""
+    decomposition_budget: float = 60.0
+    """Wall time allowed for convex decomposition per asset, s."""
     seed: int = 0
 
     def config_hash(self) -> str:

@@ -115,6 +115,12 @@ class EstimatorInfo(_Strict):
     version: str = ""
     queries: int = 0
     """Number of model calls made for this overlay (0 for offline)."""
+    tokens: int = 0
+    """Total tokens (prompt + completion) reported by the API, 0 when unknown."""
+    cost_usd: float | None = None
+    """Cost in US dollars when the provider library knows it."""
+    seconds: float = 0.0
+    """Wall time spent in model calls, s."""
 
 
 class ValidationNotes(_Strict):

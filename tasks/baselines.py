@@ -689,11 +689,10 @@ def run_benchmark(
                 say(method, row.id, f"method failed: {rec['error']}")
                 continue
             try:
+                # ev.seconds is measured before evaluation.json / report.html are written
                 ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
-                                    seed=seed, category=row.category or None, method=method)
-                from asset2sim.tasks.evaluate import write_evaluation
-
-                write_evaluation(ev, folder, report=reports)
+                                    seed=seed, category=row.category or None, method=method,
+                                    out_dir=folder, write_report=reports)
             except Exception as exc:
                 rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
                 records.append(rec)
@@ -707,3 +706,64 @@ def run_benchmark(
             records.append(rec)
             say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
     return records
+
+
+def benchmark_tables(records: list[dict[str, Any]], methods: list[str]) -> dict[str, dict[str, dict[str, Any]]]:
+    """The thesis tables: {"thesis set (first 9 manifest rows)": ..., "all rows": ...}
+    (:func:`summarize` of each subset)."""
+    return {
+        "thesis set (first 9 manifest rows)": summarize([r for r in records if r.get("thesis_set")], methods),
+        "all rows": summarize(records, methods),
+    }
+
+
+def _json_clean(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_clean(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_json_clean(v) for v in obj]
+    return obj
+
+
+def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], out_dir: Path | str,
+                            meta: dict[str, Any]) -> dict[str, Path]:
+    """Write the benchmark's files into ``out_dir`` atomically:
+    ``results.json``/``.csv``/``.parquet`` (one record per object and method,
+    ``method`` a column), ``summary.json``/``.csv``/``.html`` (the thesis
+    tables beside :data:`RESEARCH_NUMBERS`) and ``index.html`` (one
+    colour-coded row per object and method).
+
+    Returns:
+        name -> path of every file written (``results.parquet`` is skipped,
+        with ``meta['parquet_error']`` set, when pyarrow cannot write it).
+    """
+    import io
+
+    import pandas as pd
+
+    from asset2sim.atomic import write_bytes
+    from asset2sim.tasks.plots import plot_method_summary
+    from asset2sim.tasks.report_html import render_benchmark_index, render_benchmark_summary
+
+    out_dir = Path(out_dir)
+    records = _json_clean(records)
+    tables = _json_clean(benchmark_tables(records, methods))
+    paths: dict[str, Path] = {}
+    paths["results.json"] = write_json(out_dir / "results.json", {"meta": meta, "records": records})
+    paths["summary.json"] = write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})
+    df = pd.DataFrame(records)
+    paths["results.csv"] = write_text(out_dir / "results.csv", df.to_csv(index=False))
+    try:
+        buf = io.BytesIO()
+        df.astype({c: "string" for c in ("failures", "error", "report") if c in df}).to_parquet(buf, index=False)
+        paths["results.parquet"] = write_bytes(out_dir / "results.parquet", buf.getvalue())
+    except Exception as exc:  # CSV/JSON are the record; parquet is for the catalog
+        meta["parquet_error"] = f"{type(exc).__name__}: {exc}"
+    flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
+    paths["summary.csv"] = write_text(out_dir / "summary.csv", pd.DataFrame(flat).to_csv(index=False))
+    chart = plot_method_summary(tables["all rows"])
+    paths["summary.html"] = write_text(out_dir / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
+    paths["index.html"] = write_text(out_dir / "index.html", render_benchmark_index(records, meta))
+    return paths

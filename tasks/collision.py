@@ -115,24 +115,130 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     return pieces
 
 
-def decompose_links(asset: AssetDescription, links: list[str], out_dir: Path) -> dict[str, list[CollisionPiece]]:
-    """Decompose the collision meshes of ``links`` and write the pieces to
-    ``out_dir/collision/<link>_<k>_<i>.obj``.
+def _piece_points(g: GeometryRef, cache) -> np.ndarray | None:
+    from scipy.spatial import ConvexHull, QhullError
 
-    Returns link -> pieces (to pass to the writer as collision overrides);
-    primitives are kept as they are. Raises as :func:`decompose_mesh`.
-    """
-    out: dict[str, list[CollisionPiece]] = {}
-    for name in links:
-        link = asset.link(name)
-        pieces: list[CollisionPiece] = []
-        for k, g in enumerate(link.collisions):
+    from asset2sim.tasks.analyze import rpy_matrix
+
+    try:
+        v = np.asarray(cache.get(g.path)[0], float)
+    except Exception:
+        return None
+    v = v[np.all(np.isfinite(v), axis=1)] * np.asarray(g.scale, float)
+    if len(v) < 4:
+        return None
+    try:
+        v = v[ConvexHull(v).vertices]
+    except (QhullError, ValueError):
+        pass
+    return v @ rpy_matrix(g.origin.rpy).T + np.asarray(g.origin.xyz, float)
+
+
+def convexity_ratio(path: Path, cache=None) -> float:
+    """Surface area of the mesh over the area of its convex hull (>= ~1 for
+    concave closed surfaces, ~1 for convex ones; open surfaces can be < 1)."""
+    import trimesh
+
+    from asset2sim.tasks.analyze import MeshCache
+
+    cache = cache or MeshCache()
+    v, f, _ = cache.get(path)
+    m = trimesh.Trimesh(np.asarray(v, float), np.asarray(f, int), process=False)
+    try:
+        hull_area = float(m.convex_hull.area)
+    except Exception:
+        return 1.0
+    return float(m.area / hull_area) if hull_area > 0 else 1.0
+
+
+def colliding_pieces(session, asset: AssetDescription, pairs: list[tuple[str, str]], scale: float, cache=None) -> set[tuple[str, int]]:
+    """(link, collision index) of the mesh collisions whose scaled, posed hull
+    bounding box overlaps a collision piece of the other link of a pair, at
+    the session's current state (``session``: PyBullet session of the scaled
+    output; ``asset``: the input description)."""
+    from asset2sim.tasks.analyze import MeshCache
+    from asset2sim.tasks.closed_state import _link_pose
+
+    cache = cache or MeshCache()
+    boxes: dict[str, list[tuple[int, np.ndarray, np.ndarray]]] = {}
+    for link in {ln for pair in pairs for ln in pair}:
+        pos, R = _link_pose(session, session.link_index(link))
+        items = []
+        for k, g in enumerate(asset.link(link).collisions):
             if g.kind != "mesh" or g.path is None:
                 continue
-            for i, (v, f) in enumerate(decompose_mesh(g.path)):
-                rel = f"collision/{name}_{k}_{i}.obj"
-                atomic.write_text(out_dir / rel, _obj_text(v, f))
-                pieces.append(CollisionPiece(filename=rel, source=g))
-        if pieces:
-            out[name] = pieces
+            pts = _piece_points(g, cache)
+            if pts is None:
+                continue
+            w = (pts * scale) @ R.T + pos
+            items.append((k, w.min(axis=0), w.max(axis=0)))
+        boxes[link] = items
+    out: set[tuple[str, int]] = set()
+    for a, b in pairs:
+        for ka, alo, ahi in boxes.get(a, []):
+            for kb, blo, bhi in boxes.get(b, []):
+                if np.all(alo <= bhi) and np.all(blo <= ahi):
+                    out.add((a, ka))
+                    out.add((b, kb))
     return out
+
+
+def decompose_links(
+    asset: AssetDescription,
+    links: list[str],
+    out_dir: Path,
+    *,
+    only: set[tuple[str, int]] | None = None,
+    budget_s: float = 60.0,
+    min_concavity: float = 1.05,
+    cache=None,
+) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+    """Decompose collision meshes of ``links`` and write the pieces to
+    ``out_dir/collision/<link>_<k>_<i>.obj``.
+
+    Only meshes in ``only`` (when given) whose surface is concave enough
+    (:func:`convexity_ratio` >= ``min_concavity``) are decomposed, largest
+    first, until ``budget_s`` seconds of decomposition are spent; every other
+    collision of those links is kept as it is.
+
+    Returns (link -> pieces for the writer's collision overrides, notes).
+    Raises as :func:`decompose_mesh`.
+    """
+    import time
+
+    from asset2sim.tasks.analyze import MeshCache
+
+    cache = cache or MeshCache()
+    notes: list[str] = []
+    candidates = []
+    for name in links:
+        for k, g in enumerate(asset.link(name).collisions):
+            if g.kind != "mesh" or g.path is None or (only is not None and (name, k) not in only):
+                continue
+            ratio = convexity_ratio(g.path, cache)
+            if ratio < min_concavity:
+                continue
+            candidates.append((len(cache.get(g.path)[1]), name, k, g))
+    candidates.sort(key=lambda c: -c[0])
+    t0 = time.perf_counter()
+    done: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]]] = {}
+    for _, name, k, g in candidates:
+        if time.perf_counter() - t0 > budget_s:
+            notes.append(f"decomposition budget {budget_s:g} s spent; {name} collision {k} kept as its hull")
+            continue
+        done[(name, k)] = decompose_mesh(g.path)
+    out: dict[str, list[CollisionPiece]] = {}
+    for name in links:
+        if not any(key[0] == name for key in done):
+            continue
+        pieces: list[CollisionPiece] = []
+        for k, g in enumerate(asset.link(name).collisions):
+            if (name, k) in done:
+                for i, (v, f) in enumerate(done[(name, k)]):
+                    rel = f"collision/{name}_{k}_{i}.obj"
+                    atomic.write_text(out_dir / rel, _obj_text(v, f))
+                    pieces.append(CollisionPiece(filename=rel, source=g))
+            elif g.kind == "mesh" and g.filename:
+                pieces.append(CollisionPiece(filename=g.filename, source=g))
+        out[name] = pieces
+    return out, notes

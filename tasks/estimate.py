@@ -52,6 +52,8 @@ class EstimationContext:
     """joint -> links moved by it."""
     joint_heights: dict[str, float] = field(default_factory=dict)
     """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
+    root_rotation: Any = None
+    """(3, 3) resting-pose rotation the output will carry (``tasks.pose``), or None."""
     settings: dict[str, Any] = field(default_factory=dict)
 
 
@@ -263,7 +265,7 @@ class OfflineEstimator:
         bands, band_notes = requested_bands(ctx)
         state = state_from_bands(ctx.closed, bands, s, prismatic)
         # ---- dynamics
-        loads = physics.joint_loads(ctx.session, ctx.asset, links, state, s, ctx.subtrees)
+        loads = physics.joint_loads(ctx.session, ctx.asset, links, state, s, ctx.subtrees, root_rotation=ctx.root_rotation)
         relevant = set(task_relevant_joints(ctx))
         joints: dict[str, JointDynamics] = {}
         for j in ctx.asset.movable_joints():
@@ -280,7 +282,7 @@ class OfflineEstimator:
             hold = 0.0
             for f in fr:
                 st = {**state, name: cs.position(float(f)) * unit}
-                ld = physics.joint_loads(ctx.session, ctx.asset, links, st, s, {name: ctx.subtrees[name]}, dq=None)
+                ld = physics.joint_loads(ctx.session, ctx.asset, links, st, s, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)
                 hold = max(hold, abs(ld[name].gravity_load))
             label = ctx.asset.link(j.child).semantic_label
             wants_spring = name in relevant and (ctx.request.spring or priors.spring_expected(ctx.category, label))

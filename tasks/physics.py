@@ -62,9 +62,19 @@ class MaterialChoice:
     source: str = ""
 
 
-def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) -> float:
+def is_open_shell(geom: LinkGeometry) -> bool:
+    """True when the link's surface encloses (almost) no volume (an open bin,
+    a lone plate): its material volume is area x wall thickness whatever the
+    material (see ``tasks.analyze``: ``volume_method`` ends in ``open_shell``)."""
+    return "open_shell" in geom.volume_method or geom.volume <= 0.0
+
+
+def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) -> float | None:
     """eta in m = v rho s^3 eta: 1 for solid parts, min(1, A s^2 t / (v s^3))
-    for shell parts (dimensionless, in (0, 1])."""
+    for shell parts (dimensionless, in (0, 1]); None for an open shell (no
+    enclosed volume: m = A s^2 t rho)."""
+    if is_open_shell(geom):
+        return None
     if not material.shell:
         return 1.0
     v = max(geom.volume * scale**3, 1e-12)
@@ -76,20 +86,29 @@ def link_physics(geom: LinkGeometry, scale: float, material: MaterialChoice, sou
     """Mass (kg), inertia (kg*m^2 about the COM) and COM (m, link frame) of a
     link from its scale-1 geometry, the scale and its material.
 
+    Closed surfaces: m = v rho s^3 eta (SPEC), eta from :func:`hollow_fraction`.
+    Open surfaces (no enclosed volume): m = A s^2 t rho, the thin-shell mass.
+    Shell parts use the thin-shell inertia, solid parts the filled-solid one.
+
     Raises:
-        ValueError: non-positive volume/area and density.
+        ValueError: non-positive density, or no volume and no area.
     """
     if material.density <= 0:
         raise ValueError(f"link {geom.link!r}: density must be > 0, got {material.density}")
     eta = hollow_fraction(geom, scale, material)
-    vol = geom.volume * scale**3
-    if vol <= 0 and material.shell:
+    if eta is None:
         mass = geom.area * scale**2 * material.wall_thickness * material.density
+        formula = (
+            f"open surface: m = A*s^2*t*rho = {geom.area:.4g} m^2 * {scale:.4g}^2 * {material.wall_thickness:g} m"
+            f" * {material.density:g} kg/m^3"
+        )
+        hollow = True
     else:
-        mass = vol * material.density * eta
+        mass = geom.volume * scale**3 * material.density * eta
+        formula = f"m = v*rho*s^3*eta = {geom.volume:.4g} m^3 * {material.density:g} kg/m^3 * {scale:.4g}^3 * {eta:.3g}"
+        hollow = eta < 0.999
     if not (mass > 0):
         raise ValueError(f"link {geom.link!r}: zero volume and area; cannot compute a mass")
-    hollow = eta < 0.999
     from asset2sim.tasks.validate_overlay import geometry_inertia
 
     inertia = geometry_inertia(geom, mass, scale, hollow)
@@ -99,8 +118,8 @@ def link_physics(geom: LinkGeometry, scale: float, material: MaterialChoice, sou
         com=tuple(float(c) * scale for c in geom.com),
         material=material.name,
         density=float(material.density),
-        hollow_fraction=float(eta),
-        source=f"{source}: m = v*rho*s^3*eta = {geom.volume:.4g} m^3 * {material.density:g} kg/m^3 * {scale:.4g}^3 * {eta:.3g}",
+        hollow_fraction=None if eta is None else float(eta),
+        source=f"{source}: {formula}",
     )
 
 
@@ -142,6 +161,7 @@ def joint_loads(
     *,
     gravity: float = -G,
     dq: float | None = None,
+    root_rotation: np.ndarray | None = None,
 ) -> dict[str, JointLoad]:
     """Gravity load, gravity stiffness and inertia about the axis of every
     movable joint at ``state`` (output units: prismatic positions in metres).
@@ -149,9 +169,13 @@ def joint_loads(
     ``session`` is a fixed-base PyBullet session of the *unscaled* input asset
     (root at the origin, z up); its kinematics are scaled by ``scale`` here.
     ``links`` holds the scaled physics (COM in the scaled link frame).
+    ``root_rotation`` (3, 3): the resting-pose rotation the output will carry
+    (gravity is expressed in the input's root frame as R^T g).
     """
     p = session._p
     gvec = np.array([0.0, 0.0, gravity])
+    if root_rotation is not None:
+        gvec = np.asarray(root_rotation, float).T @ gvec
     out: dict[str, JointLoad] = {}
 
     def to_input(st: dict[str, float]) -> dict[str, float]:

@@ -202,6 +202,18 @@ def refine_asset(
         extents = object_extents(kin, closed_state, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
         heights = {n: _subtree_height(kin, links, hull) for n, links in subtrees.items()}
+        root_rotation = None
+        pose_note = ""
+        if spec.pose_hint in ("lying_flat", "sideways"):
+            from asset2sim.tasks import pose
+
+            probe = estimate.EstimationContext(
+                asset=asset, geometry=geometry, request=spec, category=cat_name, category_reason="",
+                closed=closed, closed_extents=extents, session=kin, subtrees=subtrees, joint_heights=heights,
+            )
+            moving = sorted({ln for j in estimate.task_relevant_joints(probe) for ln in subtrees[j]})
+            root_rotation, pose_note = pose.resting_rotation(kin, asset, closed_state, hull, moving)
+            say("request", f"pose '{spec.pose_hint}': {pose_note}")
         say("request", f"category {cat_name}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
         lap("closed_state")
 
@@ -217,9 +229,11 @@ def refine_asset(
             session=kin,
             subtrees=subtrees,
             joint_heights=heights,
+            root_rotation=root_rotation,
         )
         try:
-            est = estimate.get_estimator(config.estimator, **({"model": config.model} if config.model else {}))
+            settings = {k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v}
+            est = estimate.get_estimator(config.estimator, **settings)
             overlay = est.estimate(ctx)
         except Exception as exc:
             raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure") from exc
@@ -240,7 +254,7 @@ def refine_asset(
     lap("validate")
 
     # 5. write a first version (meshes copied once)
-    paths = write.write_output(asset, overlay, out_dir, requested)
+    paths = write.write_output(asset, overlay, out_dir, requested, root_rotation=root_rotation)
     lap("write")
 
     # 6. state refinement on the written (scaled) asset
@@ -268,23 +282,47 @@ def refine_asset(
     if st.phi_result > config.penetration_tolerance and config.convex_decomposition:
         from asset2sim.tasks import collision
 
-        deep = [p_ for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
-        links = sorted({p_["link_a"] for p_ in deep} | {p_["link_b"] for p_ in deep})
+        deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
+        links = sorted({ln for pair in deep for ln in pair})
+        sess = open_session("pybullet", paths.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
         try:
-            overrides = collision.decompose_links(asset, links, out_dir)
+            only = collision.colliding_pieces(sess, asset, deep, s, cache=mesh_cache)
+        finally:
+            sess.close()
+        dnotes: list[str] = []
+        try:
+            overrides, dnotes = collision.decompose_links(
+                asset, links, out_dir, only=only, budget_s=config.decomposition_budget, cache=mesh_cache
+            )
         except (collision.DecompositionUnavailable, ValueError) as exc:
             say("refine_state", f"convex decomposition skipped: {exc}")
         if overrides:
             before = st
-            write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides)
+            write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
             st = refine_on_written(requested)
             st.evaluations += before.evaluations
             st.phi_requested = before.phi_requested
+        if overrides and st.phi_result >= before.phi_result:
+            # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
+            for pcs in overrides.values():
+                for p_ in pcs:
+                    if p_.filename.startswith("collision/"):
+                        (out_dir / p_.filename).unlink(missing_ok=True)
+            overrides = {}
+            write.write_output(asset, overlay, out_dir, requested, copy=False, root_rotation=root_rotation)
+            before.evaluations = st.evaluations
+            before.collision_changes = [
+                f"convex decomposition tried for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
+                f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
+            ] + dnotes
+            st = before
+        elif overrides:
             st.collision_changes = [
-                f"{ln}: {sum(1 for _ in pcs)} convex pieces (CoACD) replace its collision meshes, because their hulls kept "
+                f"{ln}: collision meshes overlapping {', '.join(sorted({b if a == ln else a for a, b in deep if ln in (a, b)}))} "
+                f"replaced by {sum(1 for p_ in pcs if p_.filename.startswith('collision/'))} convex pieces (CoACD), because their hulls kept "
                 f"penetrating ({before.phi_result * 1000:.3g} mm after state search)"
                 for ln, pcs in overrides.items()
-            ]
+            ] + dnotes
             st.method = before.method + " | convex decomposition -> " + st.method
     state = dict(st.result)
     say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
@@ -294,7 +332,7 @@ def refine_asset(
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
-    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides)
+    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
     check = postcheck.run_post_check(paths.urdf, state, overlay, config)
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     n = 0
@@ -303,7 +341,7 @@ def refine_asset(
         overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor)
         if not changes:
             break
-        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides)
+        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
         check = postcheck.run_post_check(paths.urdf, state, overlay, config)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
     pen = check.metric("penetration")
@@ -343,7 +381,7 @@ def refine_asset(
         validation=[i.model_dump() for i in issues],
         failure_mode=failure,
         stage_seconds=times,
-        notes=list(overlay.notes.other),
+        notes=list(overlay.notes.other) + ([f"resting pose ({spec.pose_hint}): {pose_note}"] if pose_note else []),
     )
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
     extra_paths: dict[str, str] = {}

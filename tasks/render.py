@@ -56,7 +56,9 @@ import json
 import math
 import os
 import shutil
+import sys
 import tempfile
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -128,28 +130,41 @@ class RenderError(RuntimeError):
 
 
 # ------------------------------------------------------------------ utilities
+_QUIET_LOCK = threading.Lock()
+
+
 @contextmanager
 def _quiet_fds():
-    """Silence Bullet's C-level prints (build time, b3Warning) on fd 1 and 2."""
-    saved = []
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-    except OSError:  # pragma: no cover
-        yield
-        return
-    try:
-        for fd in (1, 2):
+    """Silence Bullet's C-level prints (build time, b3Warning) on fd 1 and 2.
+
+    Process-wide (file descriptors), so serialized by a lock: two threads
+    swapping fd 1 at once could otherwise leave stdout pointing at /dev/null.
+    """
+    with _QUIET_LOCK:
+        for stream in (sys.stdout, sys.stderr):  # what Python buffered goes out first
             try:
-                saved.append((fd, os.dup(fd)))
-                os.dup2(devnull, fd)
-            except OSError:
+                stream.flush()
+            except Exception:
                 pass
-        yield
-    finally:
-        for fd, dup in saved:
-            os.dup2(dup, fd)
-            os.close(dup)
-        os.close(devnull)
+        saved = []
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+        except OSError:  # pragma: no cover
+            yield
+            return
+        try:
+            for fd in (1, 2):
+                try:
+                    saved.append((fd, os.dup(fd)))
+                    os.dup2(devnull, fd)
+                except OSError:
+                    pass
+            yield
+        finally:
+            for fd, dup in saved:
+                os.dup2(dup, fd)
+                os.close(dup)
+            os.close(devnull)
 
 
 def resolve_urdf(asset: Path | str) -> Path:

@@ -9,7 +9,8 @@ Rules (codes):
 - ``OVL_SCALE_INVALID``: scale not finite or outside [1e-4, 1e4] (error).
 - ``OVL_UNKNOWN_LINK`` / ``OVL_UNKNOWN_JOINT``: names not in the asset (error; dropped).
 - ``OVL_LINK_MISSING``: a link with geometry has no entry; filled conservatively
-  from the geometry (plastic density 1000 kg/m^3 on the geometry's volume,
+  from the geometry (density 1000 kg/m^3 on the enclosed volume or a 3 mm shell
+  over the surface, whichever is larger;
   inertia from the scaled geometry) or, without geometry, 0.1% of the total
   mass with a small isotropic inertia (warning, fixed).
 - ``OVL_MASS_INVALID``: mass not finite or <= 0 (error unless geometry allows a fill).
@@ -115,6 +116,12 @@ def box_inertia(mass: float, extents: np.ndarray) -> np.ndarray:
     return np.diag([mass * (y * y + z * z), mass * (x * x + z * z), mass * (x * x + y * y)]) / 12.0
 
 
+def _conservative_volume(geom: LinkGeometry, s: float) -> float:
+    """Material volume (m^3) for fills: the enclosed volume, or a 3 mm shell
+    over the surface when that is larger (open surfaces enclose nothing)."""
+    return max(geom.volume * s**3, geom.area * s**2 * 0.003)
+
+
 def conservative_dynamics(joint_type: str) -> JointDynamics:
     """Dynamics for a joint the overlay misses: moderate damping and a small
     friction (revolute: 0.05 N*m*s/rad, 0.02 N*m; prismatic: 1 N*s/m, 0.5 N),
@@ -200,7 +207,7 @@ def validate_overlay(
                 continue
             if geom is not None:
                 density = 1000.0
-                mass = max(geom.volume * s**3 * density, 1e-6)
+                mass = max(_conservative_volume(geom, s) * density, 1e-6)
                 inertia = geometry_inertia(geom, mass, s, hollow=False)
                 ov.links[ln.name] = LinkPhysics(
                     mass=mass,
@@ -229,7 +236,7 @@ def validate_overlay(
         # mass
         if not (math.isfinite(lp.mass) and lp.mass > 0):
             if geom is not None:
-                mass = max(geom.volume * s**3 * 1000.0, 1e-6)
+                mass = max(_conservative_volume(geom, s) * 1000.0, 1e-6)
                 add("OVL_MASS_INVALID", "warning", ln.name, f"mass {lp.mass!r} is not > 0; replaced by {mass:.4g} kg from geometry", fixed=True)
                 lp = lp.model_copy(update={"mass": mass, "source": lp.source + "; mass fixed by validator"})
             else:

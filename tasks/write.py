@@ -143,12 +143,19 @@ def _origin_matrix(origin) -> np.ndarray:
     return m
 
 
-def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: dict | None = None) -> bytes:
+def build_urdf(
+    asset: AssetDescription,
+    overlay: Overlay,
+    collision_overrides: dict | None = None,
+    root_rotation: np.ndarray | None = None,
+) -> bytes:
     """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``.
 
     ``collision_overrides``: link -> list of
     :class:`asset2sim.tasks.collision.CollisionPiece` replacing the link's
     mesh collisions (convex decomposition), paths relative to the output.
+    ``root_rotation``: (3, 3) rotation baked into the root link's geometry and
+    the joints that hang from it (a requested resting pose, ``tasks.pose``).
 
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
@@ -206,6 +213,19 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         link.inertial = yourdfpy.Inertial(
             origin=_origin_xyz(lp.com), mass=float(lp.mass), inertia=lp.inertia.matrix()
         )
+    if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
+        T = np.eye(4)
+        T[:3, :3] = np.asarray(root_rotation, float)
+        root_name = asset.root_link
+        for joint in robot.joints:
+            if joint.parent == root_name:
+                joint.origin = T @ (np.eye(4) if joint.origin is None else np.asarray(joint.origin, float))
+        for link in robot.links:
+            if link.name == root_name:
+                for elem in list(link.visuals) + list(link.collisions):
+                    elem.origin = T @ (np.eye(4) if elem.origin is None else np.asarray(elem.origin, float))
+                if link.inertial is not None:
+                    link.inertial.origin = T @ (np.eye(4) if link.inertial.origin is None else np.asarray(link.inertial.origin, float))
     for joint in robot.joints:
         joint.origin = _scale_origin(joint.origin, s)
         if joint.type == "prismatic" and joint.limit is not None:
@@ -247,6 +267,7 @@ def write_output(
     *,
     copy: bool = True,
     collision_overrides: dict | None = None,
+    root_rotation: np.ndarray | None = None,
 ) -> OutputPaths:
     """Write (or rewrite) the output folder: meshes, ``mobility.urdf``,
     ``initial_state.json`` and ``overlay.json``. Atomic per file.
@@ -254,7 +275,7 @@ def write_output(
     Args:
         initial_state: joint -> position in output units (rad or m).
         copy: copy the meshes (skip when only dynamics changed).
-        collision_overrides: see :func:`build_urdf`.
+        collision_overrides, root_rotation: see :func:`build_urdf`.
 
     Raises:
         OutputError: output folder inside the input, or an incomplete overlay.
@@ -263,7 +284,7 @@ def write_output(
     out.mkdir(parents=True, exist_ok=True)
     if copy:
         copy_meshes(asset, out)
-    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides))
+    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation))
     state = atomic.write_json(out / STATE_NAME, {"initial_joint_positions": {k: float(v) for k, v in initial_state.items()}})
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
     return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl)

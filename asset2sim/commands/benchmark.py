@@ -90,14 +90,10 @@ def _print_table(console, title: str, summary: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import pandas as pd
     from rich.console import Console
     from rich.table import Table
 
-    from asset2sim.atomic import write_bytes, write_json, write_text
-    from asset2sim.tasks.baselines import RESEARCH_NUMBERS, run_benchmark, summarize
-    from asset2sim.tasks.plots import plot_method_summary
-    from asset2sim.tasks.report_html import render_benchmark_index, render_benchmark_summary
+    from asset2sim.tasks.baselines import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 
     console = Console(width=max(Console().width, 180))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -115,29 +111,12 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"[red]benchmark cannot run: {exc}[/red]")
         return 2
     records = _clean(records)
-    tables = {
-        "thesis set (first 9 manifest rows)": summarize([r for r in records if r.get("thesis_set")], methods),
-        "all rows": summarize(records, methods),
-    }
+    tables = benchmark_tables(records, methods)
     meta = {"manifest": str(args.manifest), "methods": methods, "seed": args.seed, "rows": len({r["id"] for r in records}),
             "engines": list(engines)}
-    write_json(out / "results.json", {"meta": meta, "records": records})
-    write_json(out / "summary.json", {"meta": meta, "tables": _clean(tables), "research": RESEARCH_NUMBERS})
-    df = pd.DataFrame(records)
-    write_text(out / "results.csv", df.to_csv(index=False))
-    try:
-        import io
-
-        buf = io.BytesIO()
-        df.astype({c: "string" for c in ("failures", "error") if c in df}).to_parquet(buf, index=False)
-        write_bytes(out / "results.parquet", buf.getvalue())
-    except Exception as exc:  # parquet is a convenience; CSV/JSON are the record
-        console.print(f"[yellow]results.parquet not written: {exc}[/yellow]")
-    flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
-    write_text(out / "summary.csv", pd.DataFrame(flat).to_csv(index=False))
-    chart = plot_method_summary(tables["all rows"])
-    write_text(out / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
-    write_text(out / "index.html", render_benchmark_index(records, meta))
+    write_benchmark_outputs(records, methods, out, meta)
+    if meta.get("parquet_error"):
+        console.print(f"[yellow]results.parquet not written: {meta['parquet_error']}[/yellow]")
     for title, summary in tables.items():
         _print_table(console, title, summary)
     rt = Table(title="research numbers (SPEC, thesis 9-object set, Isaac Sim)")

@@ -60,12 +60,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{time.perf_counter() - t0:6.2f}s] {stage:<12} {message}", flush=True)
 
-    estimator = args.estimator
-    config = RefineConfig(estimator=estimator, model=args.model)
-    if args.base_url:
-        import os
-
-        os.environ.setdefault("ASSET2SIM_BASE_URL", args.base_url)
+    config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url)
     try:
         result = refine_asset(
             args.asset,

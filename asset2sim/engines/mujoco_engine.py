@@ -495,9 +495,9 @@ def urdf_to_mjcf(
     if set(names_in_qpos) != set(movable):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
 
-    # ---- self-collision pairs PyBullet has and MuJoCo's weld/parent filter drops
+    # ---- self-collision: exactly PyBullet's pairs
     contact = etree.Element("contact")
-    pairs = _restore_pairs(model, pieces)
+    pairs, excludes = contact_policy(model, pieces, free=not fixed_base)
     for a, b in pairs:
         for pa in pieces[a]:
             for pb in pieces[b]:
@@ -507,11 +507,15 @@ def urdf_to_mjcf(
                 pe.set("condim", "3")
                 f = max(_link_friction(model, a), _link_friction(model, b))
                 pe.set("friction", f"{_f(f)} {_f(f)} 0.005 0.0001 0.0001")
-    if len(contact):
+    for a, b in excludes:
+        etree.SubElement(contact, "exclude", body1=a, body2=b)
+    if pairs:
         notes.append(
             "MuJoCo filters contacts between bodies welded by fixed joints and their parents; "
-            f"explicit pairs restore PyBullet's pairs {[f'{a}/{b}' for a, b in pairs]}"
+            f"explicit <pair>s restore PyBullet's pairs {[f'{a}/{b}' for a, b in pairs]}"
         )
+    if excludes:
+        notes.append(f"<exclude>s remove parent/child pairs MuJoCo would collide: {[f'{a}/{b}' for a, b in excludes]}")
     for old in root.findall("contact"):
         root.remove(old)
     if len(contact):
@@ -650,29 +654,50 @@ def _add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dic
             g.set("size", f"{_f(v.radius)} {_f(v.length / 2)}")
 
 
-def _restore_pairs(model: UrdfModel, pieces: dict[str, list[CollisionPiece]]) -> list[tuple[str, str]]:
-    """Link pairs PyBullet collides (not parent and child, both with shapes)
-    that MuJoCo's filter drops: same weld group, or weld group and its parent's."""
+def contact_policy(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], free: bool) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
+    """Make MuJoCo collide exactly the link pairs PyBullet collides (every
+    pair of links with shapes except a link and its parent).
+
+    MuJoCo's own filter (``filterBodyPair`` in its collision driver) drops a
+    pair when both bodies are welded together (fixed joints, or both welded to
+    the world when the root is not free) or, unless one of them is welded to
+    the world, when one's weld group is the parent of the other's. Returns
+    (pairs PyBullet collides that MuJoCo drops: restored with ``<pair>``,
+    pairs MuJoCo collides that PyBullet does not: removed with ``<exclude>``).
+    """
+    world = ""
     weld: dict[str, str] = {}
     for name in model.tree_order():
         pj = model.parent_joint(name)
-        weld[name] = weld[pj.parent] if pj is not None and pj.type == "fixed" else name
+        if pj is None:
+            weld[name] = name if free else world
+        else:
+            weld[name] = weld[pj.parent] if pj.type == "fixed" else name
 
-    def weld_parent(w: str) -> str | None:
+    def weld_parent(w: str) -> str:
+        if w == world:
+            return world
         pj = model.parent_joint(w)
-        return None if pj is None else weld[pj.parent]
+        return world if pj is None else weld[pj.parent]
+
+    def mujoco_filters(a: str, b: str) -> bool:
+        wa, wb = weld[a], weld[b]
+        if wa == wb:
+            return True
+        return wa != world and wb != world and (wa == weld_parent(wb) or wb == weld_parent(wa))
 
     adjacent = model.adjacent_pairs()
     names = [n for n in model.tree_order() if pieces.get(n)]
-    out = []
+    restore, exclude = [], []
     for i, a in enumerate(names):
         for b in names[i + 1:]:
-            if frozenset((a, b)) in adjacent:
-                continue
-            wa, wb = weld[a], weld[b]
-            if wa == wb or wa == weld_parent(wb) or wb == weld_parent(wa):
-                out.append((a, b))
-    return out
+            bullet = frozenset((a, b)) not in adjacent
+            filtered = mujoco_filters(a, b)
+            if bullet and filtered:
+                restore.append((a, b))
+            elif not bullet and not filtered:
+                exclude.append((a, b))
+    return restore, exclude
 
 
 def lowest_point(m, d) -> float:

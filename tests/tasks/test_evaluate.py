@@ -309,3 +309,65 @@ def test_bad_inputs_raise_clear_errors(tmp_path):
         evaluate_asset(_slab(tmp_path / "s", False), write_report=True)
     with pytest.raises(EvaluationError, match="reference"):
         evaluate_asset(_slab(tmp_path / "s2", False), reference=tmp_path / "nope")
+
+
+# ------------------------------------------------------------------ independent re-implementation
+
+
+def _independent():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_evaluate.py"
+    spec = importlib.util.spec_from_file_location("bench_evaluate", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("case", ["spheres", "rolling", "resting", "ringing", "damped", "soft", "spring"])
+def test_independent_reimplementation_agrees(tmp_path, case):
+    """docs/metrics.md re-implemented with plain pybullet calls gives the same
+    numbers and verdicts as evaluate_asset (pass and fail cases)."""
+    bench = _independent()
+    springs = None
+    if case == "spheres":
+        f = write_asset(tmp_path / "a", [
+            link("base", inertial(5) + geom(box(0.4, 0.2, 0.05))),
+            link("a", inertial(0.5) + geom(sphere(0.05))),
+            link("b", inertial(0.5) + geom(sphere(0.05))),
+            joint("ja", "fixed", "base", "a", xyz=(-0.05, 0, 0.2)),
+            joint("jb", "fixed", "base", "b", xyz=(0.04, 0, 0.2)),
+        ])
+    elif case == "rolling":
+        f = _cylinder(tmp_path / "a", (0.06, 0, 0))
+    elif case == "resting":
+        f = _cylinder(tmp_path / "a", (0, 0, -0.06))
+    elif case == "ringing":
+        f = _pendulum(tmp_path / "a", 0.3, 0.0)
+    elif case == "damped":
+        f = _pendulum(tmp_path / "a", 0.3, 5.0)
+    elif case == "soft":
+        f = _slab(tmp_path / "a", True)
+    else:
+        f = write_asset(tmp_path / "a", [
+            link("base", inertial(3) + geom(box(0.3, 0.3, 0.1))),
+            link("lid", inertial(0.2, (0.15, 0, 0), (1e-3, 1e-3, 1e-3)) + geom(box(0.3, 0.3, 0.01), xyz=(0.15, 0, 0.006))),
+            joint("hinge", "revolute", "base", "lid", xyz=(-0.15, 0, 0.05), axis=(0, -1, 0), lower=0, upper=2.0, damping=0.01),
+        ], state={"hinge": 0.5}, overlay=spring_overlay("hinge", 2.0, 1.2))
+        springs = {"hinge": (2.0, 1.2)}
+    ev = evaluate(f)
+    state = json.loads((f / "initial_state.json").read_text())["initial_joint_positions"] if (f / "initial_state.json").exists() else {}
+    ref = bench.independent_measure(f / "mobility.urdf", state, springs)
+    assert bench.compare(ev, ref) == []
+
+
+def test_independent_comparison_reports_disagreements(tmp_path):
+    bench = _independent()
+    f = _pendulum(tmp_path / "a", 0.3, 0.0)
+    ev = evaluate(f)
+    ref = bench.independent_measure(f / "mobility.urdf", {"hinge": 0.3})
+    assert bench.compare(ev, ref) == []
+    assert bench.compare(ev, dict(ref, phi_mm=ref["phi_mm"] + 1.0))[0].startswith("Phi")
+    assert any("oscillation verdict" in d for d in bench.compare(ev, dict(ref, osc_pass=not ref["osc_pass"])))
+    # a different initial state is a different measurement
+    assert bench.compare(ev, bench.independent_measure(f / "mobility.urdf", {"hinge": 0.0}))

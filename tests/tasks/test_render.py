@@ -1,8 +1,9 @@
 """Renders: real image content on generated assets and on real objects.
 
-The generated asset is a box (OBJ with four materials: a checker-textured
-front face at -x, a blue top, a brown right side at +y, grey elsewhere) with a lid hinged on its back top
-edge (an OBJ without a material, coloured green by the URDF's <material>).
+The generated asset is a box (one OBJ with four materials: a checker-textured
+front face at -x, a blue top, a brown right side at +y, grey elsewhere) with a
+lid hinged on its back top edge (an OBJ without a material, coloured green by
+the URDF's <material>). Real objects come from ../shared (skipped if absent).
 """
 
 from __future__ import annotations
@@ -251,6 +252,17 @@ def test_scene_renderer_reuses_one_load(box):
         assert r.timings.load > 0 and len(r.timings.views["front"]) == 3
     assert np.abs(a.astype(int) - b.astype(int)).mean() > 5
     assert np.array_equal(a, c)
+
+
+def test_renders_in_threads_match_sequential(box):
+    from concurrent.futures import ThreadPoolExecutor
+
+    states = [{"lid_hinge": q} for q in (0.0, 0.7, 1.4)]
+    seq = [R.render_views(box, q, views=("perspective",), size=SMALL)["perspective"] for q in states]
+    with ThreadPoolExecutor(3) as pool:
+        par = list(pool.map(lambda q: R.render_views(box, q, views=("perspective",), size=SMALL)["perspective"], states))
+    for a, b in zip(seq, par):
+        assert np.array_equal(a, b)
 
 
 def test_bad_inputs_raise_clear_errors(box, tmp_path):

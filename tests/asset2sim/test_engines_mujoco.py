@@ -1,0 +1,161 @@
+"""MuJoCo engine and URDF -> MJCF conversion specifics."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from asset2sim.engines.base import SessionOptions, Spring, available_engines, open_session
+from asset2sim.engines.fake import BULLET_DEFAULT_MASS, read_urdf, write_contract_asset
+
+pytestmark = pytest.mark.mujoco
+mujoco = pytest.importorskip("mujoco")
+
+from asset2sim.engines.mujoco_engine import (  # noqa: E402
+    FREE_JOINT,
+    KEYFRAME,
+    contact_policy,
+    urdf_to_mjcf,
+)
+from asset2sim.engines.fake import collision_pieces  # noqa: E402
+
+
+def _compile(build):
+    return mujoco.MjModel.from_xml_string(build.xml, assets=build.assets())
+
+
+def test_registered():
+    assert "mujoco" in available_engines()
+
+
+def test_conversion_keeps_the_file_values_at_full_precision(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.3, post_height=0.02, base_inertial=False)
+    b = urdf_to_mjcf(a.urdf, initial_state=a.initial_state, springs={"lid_hinge": Spring(0.7, 0.123456789012345)})
+    from lxml import etree
+
+    root = etree.fromstring(b.xml.encode())
+    comp = root.find("compiler")
+    assert comp.get("inertiafromgeom") == "false" and comp.get("balanceinertia") == "false"
+    assert comp.get("fusestatic") == "false"
+    hinge = root.find(".//joint[@name='lid_hinge']")
+    assert hinge.get("springref") == "0.123456789012345" and hinge.get("stiffness") == "0.7"
+    assert hinge.get("damping") == "0.02" and hinge.get("frictionloss") == "0.02"
+    assert root.find(".//body[@name='lid']").get("pos") == "0 0.1 0.12"
+    assert root.find(".//body[@name='base']/freejoint").get("name") == FREE_JOINT
+    assert root.find(".//geom[@name='ground']").get("type") == "plane"
+    assert root.find(".//body[@name='base']/inertial") is None  # massless, as in the file
+    m = _compile(b)
+    assert m.opt.timestep == pytest.approx(1 / 240) and m.opt.gravity == pytest.approx([0, 0, -9.81])
+    kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
+    assert m.key_qpos[kid] == pytest.approx(b.initial_qpos)
+    assert b.joint_names == ["lid_hinge", "post_slide"]
+    # the body's bottom is at z = 0 of the root: lifted by nothing
+    assert b.root_height == pytest.approx(0.0, abs=1e-12)
+
+
+def test_multi_group_obj_becomes_pieces_and_single_group_stays_the_file(tmp_path):
+    a = write_contract_asset(tmp_path)
+    b = urdf_to_mjcf(a.urdf)
+    assert sorted(b.derived_meshes) == [f"mjcf/meshes/body__c0_g{g}.obj" for g in range(5)]
+    assert sorted(b.mesh_files) == ["textured_objs/lid.obj", "textured_objs/post.obj"]
+    m = _compile(b)
+    geoms = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in range(m.ngeom)]
+    assert sum(1 for g in geoms if g and g.startswith("body__")) == 5
+
+
+def test_scaled_meshes_keep_their_scale(tmp_path):
+    a = write_contract_asset(tmp_path)
+    a.urdf.write_text(a.urdf.read_text().replace('filename="textured_objs/post.obj" scale="1 1 1"', 'filename="textured_objs/post.obj" scale="0.5 0.5 2.0"'))
+    b = urdf_to_mjcf(a.urdf)
+    assert 'scale="0.5 0.5 2.0"' in b.xml
+    m = _compile(b)
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "post__c0_g0")
+    mid = m.geom_dataid[g]
+    v = m.mesh_vert[m.mesh_vertadr[mid]: m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
+    ext = v.max(axis=0) - v.min(axis=0)
+    assert sorted(ext) == pytest.approx(sorted([0.01, 0.01, 0.2]), abs=1e-6)
+
+
+def test_missing_inertial_policies(tmp_path):
+    a = write_contract_asset(tmp_path, base_inertial=False)
+    massless = _compile(urdf_to_mjcf(a.urdf))
+    bullet = _compile(urdf_to_mjcf(a.urdf, missing_inertial="bullet"))
+    bid = mujoco.mj_name2id(massless, mujoco.mjtObj.mjOBJ_BODY, "base")
+    assert massless.body_mass[bid] == 0.0
+    assert bullet.body_mass[bid] == BULLET_DEFAULT_MASS
+    with pytest.raises(ValueError, match="missing_inertial"):
+        urdf_to_mjcf(a.urdf, missing_inertial="guess")
+    with pytest.raises(ValueError, match="not movable joints"):
+        urdf_to_mjcf(a.urdf, initial_state={"no_such_joint": 0.1})
+
+
+def test_contact_policy_matches_pybullet_pairs(tmp_path):
+    a = write_contract_asset(tmp_path)
+    model = read_urdf(a.urdf)
+    pieces, _ = collision_pieces(model)
+    # base has no shapes here: nothing to restore; body/lid and body/post are parent-child
+    assert contact_policy(model, pieces, free=True) == ([], [])
+    # fixed to the world, body is welded to the world and MuJoCo's parent filter
+    # no longer applies to it: its children must be excluded explicitly
+    assert contact_policy(model, pieces, free=False) == ([], [("body", "lid"), ("body", "post")])
+    pieces["base"] = pieces["body"][:1]  # a shape on the root: base/lid and base/post are PyBullet pairs
+    restore, exclude = contact_policy(model, pieces, free=True)
+    assert restore == [("base", "lid"), ("base", "post")] and exclude == []
+
+
+def test_session_masses_and_no_mujoco_log_file(tmp_path, monkeypatch):
+    """MuJoCo's default warning handler appends to MUJOCO_LOG.TXT in the
+    working directory; the engine collects the warnings instead."""
+    a = write_contract_asset(tmp_path / "asset")
+    obj = a.root / "textured_objs" / "lid.obj"
+    text = obj.read_text().replace("f 1 2 4", "vt 0 0\nf 1/1 2 4", 1)  # a face with partial texture coordinates
+    obj.write_text(text)
+    work = tmp_path / "cwd"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    s = open_session("mujoco", a.urdf, SessionOptions(initial_state=a.initial_state))
+    try:
+        model = read_urdf(a.urdf)
+        for name, link in model.links.items():
+            bid = mujoco.mj_name2id(s.m, mujoco.mjtObj.mjOBJ_BODY, name)
+            assert s.m.body_mass[bid] == pytest.approx(link.inertial.mass, rel=1e-12)
+    finally:
+        s.close()
+    assert not (work / "MUJOCO_LOG.TXT").exists()
+    assert os.listdir(work) == []
+
+
+def test_frictionloss_holds_without_creep(tmp_path):
+    """MuJoCo's soft friction would let a held lid creep (0.2 rad in 3 s);
+    the no-slip pass keeps it where Coulomb friction holds it."""
+    a = write_contract_asset(tmp_path, lid_angle=0.6, lid_friction=0.5, lid_damping=0.0)
+    s = open_session("mujoco", a.urdf, SessionOptions(initial_state=a.initial_state))
+    try:
+        s.step(720)
+        assert s.joint_positions()["lid_hinge"] == pytest.approx(0.6, abs=1e-4)
+    finally:
+        s.close()
+
+
+def test_keyframe_places_the_object_on_the_ground(tmp_path):
+    """Open the lid past vertical so nothing changes at the bottom, then sink
+    the body's collision 3 cm below the root frame: the root is lifted 3 cm."""
+    a = write_contract_asset(tmp_path, lid_angle=1.9)
+    text = a.urdf.read_text()
+    head, sep, tail = text.partition('<link name="body">')
+    tail = tail.replace('<collision><origin xyz="0 0 0"/>', '<collision><origin xyz="0 0 -0.03"/>', 1)
+    a.urdf.write_text(head + sep + tail)
+    b = urdf_to_mjcf(a.urdf, initial_state=a.initial_state)
+    assert b.root_height == pytest.approx(0.03, abs=1e-9)
+    assert b.initial_qpos[:3] == pytest.approx([0, 0, 0.03])
+    assert b.initial_qpos[7] == pytest.approx(1.9)
+    m = _compile(b)
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    mujoco.mj_forward(m, d)
+    assert all(d.contact[i].dist > -1e-9 for i in range(d.ncon))
+    assert np.isfinite(d.qacc).all()
