@@ -115,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
             ours_s = time.perf_counter() - t
             hit = [f for f in findings if f.code == case.code]
             ours = "rejects" if vi.has_errors(findings) else "accepts"
-            sev = hit[0].severity if hit else "MISSING"
+            order = {"error": 0, "warning": 1, "info": 2}
+            sev = min((f.severity for f in hit), key=order.__getitem__) if hit else "MISSING"
             row = {"case": case.name, "topic": case.topic, "code": case.code, "severity": sev, "ours": ours, "ours_s": ours_s}
             urdf = urdf_of(folder)
             for name in LOADERS:

@@ -458,6 +458,25 @@ def _many_faces_obj(n: int) -> str:
     return "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n" + "f 1 2 3\n" * n
 
 
+def _add_sheet_piece(m: Model) -> None:
+    m.link("lid").collisions.append(Geom(filename="meshes/sheet.obj"))
+
+
+def _empty_geometry(m: Model) -> None:
+    m.link("handle").visuals[0].kind = "capsule"  # not a URDF shape: <geometry> ends up empty
+
+
+def _extra_fifo(folder: Path) -> None:
+    os.unlink(folder / "semantics.txt")
+    os.mkfifo(folder / "semantics.txt")
+
+
+def _remove_folder(folder: Path) -> None:
+    import shutil
+
+    shutil.rmtree(folder)
+
+
 def _flat_link(m: Model) -> None:
     ln = m.link("lid")
     ln.visuals[0].filename = "meshes/sheet.obj"
@@ -499,6 +518,13 @@ def _cases() -> list[Case]:
     add(C("files_urdf_is_fifo", "files", "URDF_NOT_REGULAR_FILE", _files_case(_urdf_fifo)))
     add(C("files_urdf_symlink_outside", "files", "URDF_OUTSIDE_ASSET", _files_case(_urdf_symlink_out)))
     add(C("files_semantics_bad_line", "files", "SEMANTICS_MALFORMED_LINE", _files_case(_write("semantics.txt", "base static body\nlid\n"))))
+    add(C("files_semantics_is_fifo", "files", "ASSET_FILE_NOT_REGULAR", _files_case(_extra_fifo)))
+    add(C("files_asset_missing", "files", "ASSET_NOT_FOUND", _files_case(_remove_folder)))
+    add(C("files_meta_not_json", "files", "META_UNREADABLE", _files_case(_write("meta.json", "{model_cat: Box")), refused=False))
+    add(C("files_semantics_unknown_link", "files", "SEMANTICS_UNKNOWN_LINK",
+          _files_case(_write("semantics.txt", "base static body\nghost hinge door\n")), refused=False))
+    add(C("files_semantics_unknown_kind", "files", "SEMANTICS_UNKNOWN_KIND",
+          _files_case(_write("semantics.txt", "lid rotating lid\n")), refused=False))
     # --- structure
     def two_roots(m: Model) -> None:
         m.links.append(Link("island"))
@@ -535,6 +561,10 @@ def _cases() -> list[Case]:
     add(C("structure_no_links", "structure", "URDF_NO_LINKS", _raw_urdf(b'<robot name="empty"></robot>')))
     add(C("structure_mimic_unknown", "structure", "JOINT_MIMIC_UNKNOWN", _model_case(_attr("joint", "lid_hinge", mimic="ghost"))))
     add(C("structure_limit_missing", "structure", "JOINT_LIMIT_MISSING", _model_case(_attr("joint", "lid_hinge", with_limit=False))))
+    add(C("structure_limit_incomplete", "structure", "JOINT_LIMIT_INCOMPLETE", _model_case(_attr("joint", "lid_hinge", lower=None)), refused=False))
+    add(C("structure_robot_name_missing", "structure", "URDF_ROBOT_NAME_MISSING", _model_case(lambda m: setattr(m, "name", None)), refused=False))
+    add(C("structure_geometry_missing", "structure", "GEOMETRY_MISSING", _model_case(_empty_geometry)))
+    add(C("structure_axis_not_unit", "structure", "JOINT_AXIS_NOT_UNIT", _model_case(_attr("joint", "lid_hinge", axis="2 0 0")), refused=False))
     # --- numbers
     add(C("numbers_nan_origin", "numbers", "NUMBER_NAN", _model_case(_attr("joint", "lid_hinge", xyz="0 nan 0.5"))))
     add(C("numbers_inf_axis", "numbers", "NUMBER_INF", _model_case(_attr("joint", "lid_hinge", axis="inf 0 0"))))
@@ -569,6 +599,11 @@ def _cases() -> list[Case]:
         m.link("lid").collisions[0].scale = "1 1 0"
 
     add(C("numbers_mesh_scale_zero", "numbers", "MESH_SCALE_ZERO", _model_case(zero_scale)))
+
+    def mirror_scale(m: Model) -> None:
+        m.link("lid").visuals[0].scale = "-1 1 1"
+
+    add(C("numbers_mesh_scale_negative", "numbers", "MESH_SCALE_NEGATIVE", _model_case(mirror_scale), refused=False))
     # --- inertials (reported and replaced by an estimate: warnings, not refusals)
     add(C("inertial_mass_zero_moving", "inertials", "INERTIAL_MASS_NONPOSITIVE", _model_case(_attr("inertial", "lid", mass="0")), refused=False))
     add(C("inertial_mass_negative", "inertials", "INERTIAL_MASS_NONPOSITIVE", _model_case(_attr("inertial", "drawer", mass="-0.5")), refused=False))
@@ -582,6 +617,8 @@ def _cases() -> list[Case]:
           _model_case(_attr("inertial", "lid", ixx="0.01", iyy="0.01", izz="0.03")), refused=False))
     add(C("inertial_mass_missing", "inertials", "INERTIAL_MASS_MISSING", _model_case(_attr("inertial", "lid", with_mass=False)), refused=False))
     add(C("inertial_inertia_missing", "inertials", "INERTIA_MISSING", _model_case(_attr("inertial", "drawer", with_inertia=False)), refused=False))
+    add(C("inertial_static_mass_zero", "inertials", "INERTIAL_MASS_ZERO_STATIC",
+          _model_case(_attr("inertial", "base", mass="0", ixx="0", iyy="0", izz="0")), refused=False))
     # --- mesh paths
     add(C("path_absolute_etc_passwd", "mesh_paths", "MESH_PATH_ABSOLUTE", _model_case(_mesh("lid", "/etc/passwd"))))
 
@@ -614,6 +651,8 @@ def _cases() -> list[Case]:
     add(C("path_empty_filename", "mesh_paths", "MESH_FILENAME_EMPTY", _model_case(_mesh("lid", ""))))
     add(C("path_control_char", "mesh_paths", "MESH_PATH_CONTROL_CHAR", _model_case(_mesh("lid", "meshes/li\td.obj"))))
     add(C("path_too_large", "mesh_paths", "MESH_TOO_LARGE", build_valid, policy={"max_mesh_bytes": 256}))
+    add(C("path_mtllib_missing", "mesh_paths", "MESH_MATERIAL_MISSING",
+          _files_case(_write("meshes/lid.obj", box_obj(0, 1, -1, 0, 0, 0.05, mtllib="nowhere.mtl"))), refused=False))
     add(C("path_mtllib_escapes", "mesh_paths", "MESH_MATERIAL_OUTSIDE",
           _files_case(_write("meshes/lid.obj", box_obj(0, 1, -1, 0, 0, 0.05, mtllib="../../../etc/passwd"))), refused=False))
     # --- mesh contents
@@ -632,6 +671,9 @@ def _cases() -> list[Case]:
           _files_case(_write("meshes/lid.obj", "v 0.5 0.5 0.5\n" * 8 + CUBE_F))))
     add(C("mesh_collinear", "mesh_contents", "MESH_ZERO_AREA",
           _files_case(_write("meshes/lid.obj", "".join(f"v {i} {i} {i}\n" for i in range(8)) + CUBE_F))))
+    add(C("mesh_flat_piece", "mesh_contents", "MESH_ZERO_VOLUME",
+          _files_case(_write("meshes/sheet.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n"), _add_sheet_piece),
+          refused=False, note="a flat piece among volumetric ones (PartNet-Mobility has many)"))
     add(C("mesh_flat_link", "mesh_contents", "LINK_ZERO_VOLUME",
           _files_case(_write("meshes/sheet.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n"), _flat_link), refused=False))
     add(C("mesh_binary_garbage_obj", "mesh_contents", "MESH_MALFORMED", _files_case(_write("meshes/lid.obj", bytes(range(256)) * 16))))

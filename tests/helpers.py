@@ -57,3 +57,27 @@ def write_slider(folder: Path, *, axis: str = "1 0 0", lower: float = 0.0, upper
 """
     )
     return folder
+
+
+def write_arm_through_post(folder: Path) -> Path:
+    """A body cube with a fixed post and an arm on a vertical hinge; at q = 0
+    the arm passes through the post (sibling links, so the SPEC's
+    self-collision counts it); rotating the arm by ~0.18 rad clears it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        """<?xml version="1.0"?>
+<robot name="arm_post">
+  <link name="base"/>
+  <link name="body"><collision><origin xyz="0 0 0.1"/><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
+  <joint name="fix" type="fixed"><parent link="base"/><child link="body"/></joint>
+  <link name="post"><collision><geometry><box size="0.05 0.05 0.3"/></geometry></collision></link>
+  <joint name="post_fix" type="fixed"><parent link="body"/><child link="post"/><origin xyz="0.25 0 0.15"/></joint>
+  <link name="arm"><collision><origin xyz="0.2 0 0"/><geometry><box size="0.4 0.04 0.04"/></geometry></collision></link>
+  <joint name="hinge" type="revolute">
+    <parent link="body"/><child link="arm"/><origin xyz="0 0 0.25"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="10" velocity="10"/>
+  </joint>
+</robot>
+"""
+    )
+    return folder

@@ -371,3 +371,18 @@ def test_independent_comparison_reports_disagreements(tmp_path):
     assert any("oscillation verdict" in d for d in bench.compare(ev, dict(ref, osc_pass=not ref["osc_pass"])))
     # a different initial state is a different measurement
     assert bench.compare(ev, bench.independent_measure(f / "mobility.urdf", {"hinge": 0.0}))
+
+
+def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
+    from asset2sim.cli import main
+
+    good = _slab(tmp_path / "good", False)
+    assert main(["evaluate", str(good), "--out", str(tmp_path / "o1"), "--no-probes"]) == 0
+    assert (tmp_path / "o1" / "evaluation.json").is_file() and (tmp_path / "o1" / "report.html").is_file()
+    out = capsys.readouterr().out
+    assert "READY" in out and "rest_stability" in out
+    bad = _slab(tmp_path / "bad", True)
+    assert main(["evaluate", str(bad), "--out", str(tmp_path / "o2"), "--no-probes", "--no-report"]) == 1
+    assert not (tmp_path / "o2" / "report.html").exists()
+    assert "ground_penetration" in capsys.readouterr().out
+    assert main(["evaluate", str(tmp_path / "missing")]) == 2

@@ -125,3 +125,16 @@ def test_benchmark_pages(tmp_path):
 
     page = render_benchmark_summary(tables, RESEARCH_NUMBERS, {"manifest": "m.csv", "methods": ["human"], "seed": 0, "rows": 9})
     assert "15 &plusmn; 2" in page and "88.9%" in page and "Human (GenSim2)" in page and "thesis method" in page
+
+
+def test_write_refine_report_evaluates_the_output_folder(tmp_path):
+    from types import SimpleNamespace
+
+    from asset2sim.tasks.report_html import write_refine_report
+
+    f = _drawer(tmp_path / "cab", True)
+    path = write_refine_report(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture"))
+    assert path == f / "report.html" and path.is_file()
+    data = json.loads((f / "evaluation.json").read_text())
+    assert data["method"] == "asset2sim" and data["prompt"] == "a cabinet with its drawer closed"
+    assert "asset2sim evaluation" in path.read_text()

@@ -1,0 +1,219 @@
+"""What a model backend must answer: the reply schema (SPEC stage 2).
+
+A model's reply is a *prior*, not the overlay itself: the asset2sim estimator
+(:mod:`asset2sim.tasks.llm_estimator`) turns the per-link material choice into
+mass through the geometry (m = v * rho * s^3 * eta), computes inertia from the
+scaled geometry, derives joint dynamics from physics using the model's
+qualitative choices (damping level, holds position, spring, stiff, free
+moving) and the state from the model's band per joint through the geometric
+closed ends. The numeric estimates with standard deviations (link mass,
+damping, friction, stiffness, joint position) are what the ``direct`` and
+``ivw`` baselines apply (IVW fuses them by inverse-variance weighting).
+
+Kept consistent with :mod:`asset2sim.schemas.overlay` (same units, same
+field names where the meaning is the same; lists of named entries instead of
+dicts so that the JSON schema is accepted by structured-output APIs, which
+need a fixed set of properties). :func:`reply_json_schema` is the schema sent
+as the structured-output constraint (``response_format`` ``json_schema``);
+parsing a reply with :class:`ModelReply` enforces the same rules plus the
+ones a JSON schema cannot say (finite numbers, bounded text lengths).
+
+Units (SI, radians; values refer to the *output* asset, scale applied):
+scale dimensionless; density kg/m^3; wall thickness m; mass kg; revolute
+damping N*m*s/rad, friction N*m, stiffness N*m/rad, position rad; prismatic
+damping N*s/m, friction N, stiffness N/m, position m.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from asset2sim.schemas.request import DampingLevel, StateBand
+
+REPLY_SCHEMA_NAME = "asset2sim_overlay_reply"
+REPLY_SCHEMA_VERSION = "1.0"
+
+#: Longest free-text field accepted (characters); longer replies are rejected.
+MAX_TEXT = 2000
+#: Longest name field accepted (characters).
+MAX_NAME = 200
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True)
+
+
+def _short(v: str, limit: int) -> str:
+    if len(v) > limit:
+        raise ValueError(f"text of {len(v)} characters; at most {limit} allowed")
+    return v
+
+
+class Estimate(_Strict):
+    """A numeric estimate with its uncertainty: ``value`` and one standard
+    deviation ``std`` (> 0), both in the unit of the field that holds it."""
+
+    value: float
+    std: float = Field(gt=0.0, le=1e9)
+
+
+class LinkReply(_Strict):
+    """The model's choice for one link."""
+
+    link: str
+    """Link name exactly as in the description."""
+    material: str
+    """Material note, e.g. ``ABS plastic``, ``painted steel sheet``."""
+    density: float = Field(ge=10.0, le=25000.0)
+    """kg/m^3 of the material."""
+    shell: bool
+    """True for a hollow molded / sheet / panel part (mass = area * wall * density)."""
+    wall_thickness: float = Field(gt=0.0, le=0.1)
+    """m; real-world wall thickness of shell parts (typical smallest section otherwise)."""
+    mass: Estimate
+    """kg; the model's own estimate of this link's mass at the requested size (mass.value > 0)."""
+
+    @field_validator("link")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return _short(v, MAX_NAME)
+
+    @field_validator("material")
+    @classmethod
+    def _mat(cls, v: str) -> str:
+        return _short(v, MAX_NAME)
+
+    @field_validator("mass")
+    @classmethod
+    def _mass(cls, v: Estimate) -> Estimate:
+        if not (0.0 < v.value <= 1e4):
+            raise ValueError(f"mass.value {v.value} kg must be in (0, 10000]")
+        return v
+
+
+class JointReply(_Strict):
+    """The model's choice for one movable joint."""
+
+    joint: str
+    """Joint name exactly as in the description."""
+    band: StateBand
+    """Requested opening band (fraction of the opening range from the closed end)."""
+    position: Estimate
+    """Initial joint position, rad (revolute) or m (prismatic, output scale)."""
+    damping_level: DampingLevel
+    holds_position: bool
+    """Friction must hold the state against gravity."""
+    spring: bool
+    """A return spring is intended (stiffness > 0)."""
+    stiff: bool
+    """A stiff / heavy joint is asked for."""
+    free_moving: bool
+    """The joint should move freely (low friction)."""
+    damping: Estimate
+    """N*m*s/rad or N*s/m, value >= 0."""
+    friction: Estimate
+    """N*m or N, value >= 0."""
+    stiffness: Estimate
+    """N*m/rad or N/m, value >= 0."""
+
+    @field_validator("joint")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return _short(v, MAX_NAME)
+
+    @field_validator("damping", "friction", "stiffness")
+    @classmethod
+    def _non_negative(cls, v: Estimate, info) -> Estimate:
+        if not (0.0 <= v.value <= 1e6):
+            raise ValueError(f"{info.field_name}.value {v.value} must be in [0, 1e6]")
+        return v
+
+
+class ReplyNotes(_Strict):
+    """Reasoning notes (free text; the SPEC's validation notes)."""
+
+    size: str
+    material: str
+    mass_arithmetic: str
+
+    @field_validator("size", "material", "mass_arithmetic")
+    @classmethod
+    def _text(cls, v: str) -> str:
+        return _short(v, MAX_TEXT)
+
+
+class ModelReply(_Strict):
+    """A model's answer for one asset (see the module docstring for units)."""
+
+    category: str
+    """Object category as the model sees it (e.g. ``Stapler``)."""
+    scale: Estimate
+    """Uniform scale s (dimensionless, value in [0.001, 1000])."""
+    lateral_friction: float = Field(ge=0.0, le=2.0)
+    """Coulomb friction coefficient of the object's contacts (dimensionless)."""
+    restitution: float = Field(ge=0.0, le=1.0)
+    links: list[LinkReply] = Field(max_length=500)
+    joints: list[JointReply] = Field(max_length=500)
+    notes: ReplyNotes
+
+    @field_validator("category")
+    @classmethod
+    def _cat(cls, v: str) -> str:
+        return _short(v, MAX_NAME)
+
+    @field_validator("scale")
+    @classmethod
+    def _scale(cls, v: Estimate) -> Estimate:
+        if not (1e-3 <= v.value <= 1e3):
+            raise ValueError(f"scale.value {v.value} must be in [0.001, 1000]")
+        return v
+
+
+#: JSON-schema keywords kept in the schema sent to APIs (the subset that
+#: OpenAI strict structured outputs and Gemini's response schema accept;
+#: everything else is checked when the reply is parsed).
+_KEEP = {
+    "type", "properties", "required", "additionalProperties", "items", "enum", "description",
+    "$defs", "$ref", "anyOf", "minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum", "maxItems",
+}
+
+
+def _prune(node: Any) -> Any:
+    if isinstance(node, dict):
+        out = {}
+        for k, v in node.items():
+            if k not in _KEEP:
+                continue
+            if k in ("properties", "$defs"):
+                out[k] = {name: _prune(sub) for name, sub in v.items()}
+            else:
+                out[k] = _prune(v)
+        return out
+    if isinstance(node, list):
+        return [_prune(x) for x in node]
+    return node
+
+
+def reply_json_schema() -> dict[str, Any]:
+    """The JSON schema of :class:`ModelReply` as sent to model APIs: every
+    property required, no additional properties, only keywords structured-output
+    APIs accept (titles and defaults dropped). Pure; returns a fresh dict."""
+    schema = _prune(copy.deepcopy(ModelReply.model_json_schema()))
+
+    def close(node: Any) -> None:
+        if isinstance(node, dict):
+            if node.get("type") == "object" and "properties" in node:
+                node["required"] = list(node["properties"])
+                node["additionalProperties"] = False
+            for v in node.values():
+                close(v)
+        elif isinstance(node, list):
+            for v in node:
+                close(v)
+
+    close(schema)
+    return schema
+
