@@ -15,9 +15,11 @@ StateBand = Literal["closed", "slightly_open", "quarter", "halfway", "mostly", "
 DampingLevel = Literal["low", "moderate", "high"]
 
 #: Target opening fraction per band: |q - q_closed| / (largest opening from q_closed).
+#: "slightly open" aims low in its band (a slightly open stapler or laptop is a
+#: few tens of degrees open, not a third of a 200-degree range).
 BAND_TARGET: dict[str, float] = {
     "closed": 0.0,
-    "slightly_open": 0.2,
+    "slightly_open": 0.12,
     "quarter": 0.25,
     "halfway": 0.5,
     "mostly": 0.75,

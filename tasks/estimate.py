@@ -249,7 +249,8 @@ class OfflineEstimator:
         mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
         lo, hi = priors.target_size(ctx.category, ctx.request).mass_range
         if total > 0 and (total < lo or total > hi):
-            target = lo if total < lo else hi
+            # into the plausible range, a margin inside its ends (10 %)
+            target = lo * 1.1 if total < lo else hi * 0.9
             f = target / total
             for name, lp in list(links.items()):
                 links[name] = lp.model_copy(
@@ -291,10 +292,8 @@ class OfflineEstimator:
                 load = loads[name]
                 k_min = 3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6)
                 k = max(k_min, loads[name].gravity_stiffness * 2.0)
-                # reference beyond the state on the opening side so that the
-                # spring torque at the state balances gravity
-                delta = abs(load.gravity_load) / k
-                ref = state[name] + cs.direction * delta
+                # equilibrium at the state: -k (q - ref) + tau_g = 0  ->  ref = q - tau_g / k
+                ref = state[name] - load.gravity_load / k
                 lo_l, hi_l = cs.lower * unit, cs.upper * unit
                 ref = float(np.clip(ref, lo_l, hi_l))
                 spring = (k, ref)

@@ -158,9 +158,12 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
 
 def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
     """The verdict over every engine that ran (skipped engines ignored):
-    penetration = the largest Phi; rest stability and oscillation pass only if
-    they pass in every engine (an engine error fails). ``details.per_engine``
-    keeps each engine's value and verdict; ``engine`` is ``"worst"``.
+    penetration = the largest Phi (mm); rest stability and oscillation pass
+    only if they pass in every engine (an engine error fails).
+    ``details.per_engine`` keeps each engine's value and verdict, and for
+    penetration the deepest point (``max_depth_mm``), the number to compare
+    across engines (Phi counts a different number of points per engine);
+    ``engine`` is ``"worst"``.
     """
     out = []
     for name in METRICS:
@@ -170,6 +173,8 @@ def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
             if m is None or "skipped" in m.details:
                 continue
             per[engine] = {"value": m.value, "passed": m.passed, "error": m.details.get("error")}
+            if name == "penetration" and m.value is not None:
+                per[engine]["max_depth_mm"] = max((p["max_depth_mm"] for p in m.details.get("pairs", [])), default=0.0)
         if not per:
             out.append(MetricResult(name=name, value=None, unit=_UNITS[name], passed=None, details={"skipped": "no engine ran"}, engine="worst"))
             continue

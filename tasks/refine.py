@@ -155,6 +155,11 @@ def refine_asset(
     config = config or RefineConfig()
     say = progress or (lambda stage, msg: None)
     out_dir = Path(out_dir)
+    # the estimator first: a model backend without its key fails before any work
+    try:
+        est = estimate.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
+    except Exception as exc:
+        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure") from exc
     times: dict[str, float] = {}
     t = time.perf_counter()
 
@@ -193,7 +198,6 @@ def refine_asset(
     labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
     match = priors.recognize_category(category or asset.category, labels, prompt)
     cat_name = getattr(match, "name", None) or str(match)
-    prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
     kin = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim))
     try:
         hull = link_hull_points(asset, cache=mesh_cache)
@@ -202,22 +206,6 @@ def refine_asset(
         extents = object_extents(kin, closed_state, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
         heights = {n: _subtree_height(kin, links, hull) for n, links in subtrees.items()}
-        root_rotation = None
-        pose_note = ""
-        if spec.pose_hint in ("lying_flat", "sideways"):
-            from asset2sim.tasks import pose
-
-            probe = estimate.EstimationContext(
-                asset=asset, geometry=geometry, request=spec, category=cat_name, category_reason="",
-                closed=closed, closed_extents=extents, session=kin, subtrees=subtrees, joint_heights=heights,
-            )
-            moving = sorted({ln for j in estimate.task_relevant_joints(probe) for ln in subtrees[j]})
-            root_rotation, pose_note = pose.resting_rotation(kin, asset, closed_state, hull, moving)
-            say("request", f"pose '{spec.pose_hint}': {pose_note}")
-        say("request", f"category {cat_name}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
-        lap("closed_state")
-
-        # 4. synthesize + validate
         ctx = estimate.EstimationContext(
             asset=asset,
             geometry=geometry,
@@ -229,126 +217,47 @@ def refine_asset(
             session=kin,
             subtrees=subtrees,
             joint_heights=heights,
-            root_rotation=root_rotation,
         )
-        try:
-            settings = {k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v}
-            est = estimate.get_estimator(config.estimator, **settings)
-            overlay = est.estimate(ctx)
-        except Exception as exc:
-            raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure") from exc
-        bands, _ = estimate.requested_bands(ctx)
+        moving = sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in subtrees[j]})
+        pose_note = ""
+        if spec.pose_hint in ("lying_flat", "sideways"):
+            from asset2sim.tasks import pose
+
+            ctx.root_rotation, pose_note = pose.resting_rotation(kin, asset, closed_state, hull, moving)
+            say("request", f"pose '{spec.pose_hint}': {pose_note}")
+        say("request", f"category {cat_name}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
+        lap("closed_state")
+
+        att = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
+        if not att.check.metric("rest_stability").passed and spec.pose_hint is None:
+            # the object tips or slides as modelled: try resting it on its stablest face
+            from asset2sim.tasks import pose
+
+            state_in = estimate.state_from_bands(closed, att.bands, 1.0, att.prismatic)
+            R, note = pose.most_stable_rotation(kin, asset, att.overlay.links, state_in, att.overlay.scale, hull, moving, exclude_modelled=True)
+            if R is not None:
+                say("post_check", f"unstable as modelled; {note}")
+                ctx.root_rotation = R
+                second = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
+                d1 = att.check.metric("rest_stability").value
+                d2 = second.check.metric("rest_stability").value
+                if second.check.metric("rest_stability").passed or (d2 is not None and (d1 is None or d2 < d1)):
+                    att, pose_note = second, note
+                else:
+                    ctx.root_rotation = None
+                    att.rewrite(out_dir)  # the first attempt stays the result
+                    pose_note = f"{note}; not better in simulation, kept as modelled"
     finally:
         kin.close()
-    lap("synthesize")
-    try:
-        overlay, issues = validate_overlay.validate_overlay(overlay, asset, geometry)
-    except validate_overlay.OverlayInvalid as exc:
-        raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
+    overlay, st, check, rounds, issues, bands, state, closed_out = (
+        att.overlay, att.st, att.check, att.rounds, att.issues, att.bands, att.state, att.closed_out
+    )
     s = overlay.scale
-    closed_out = _scaled_closed(closed, s, prismatic)
-    requested = estimate.state_from_bands(closed, bands, s, prismatic)
-    if overlay.initial_joint_positions:
-        requested.update(overlay.initial_joint_positions)
-    say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")
-    lap("validate")
-
-    # 5. write a first version (meshes copied once)
-    paths = write.write_output(asset, overlay, out_dir, requested, root_rotation=root_rotation)
-    lap("write")
-
-    # 6. state refinement on the written (scaled) asset
-    fractions = estimate.band_intervals(bands)
-
-    def refine_on_written(start: dict[str, float]):
-        sess = open_session("pybullet", paths.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim))
-        try:
-            return refine_state.refine_initial_state(
-                sess,
-                asset,
-                closed_out,
-                start,
-                fractions,
-                tolerance=config.penetration_tolerance,
-                lam=config.state_lambda,
-                max_evaluations=config.max_state_evaluations,
-                seed=config.seed,
-            )
-        finally:
-            sess.close()
-
-    st = refine_on_written(requested)
-    overrides: dict = {}
-    if st.phi_result > config.penetration_tolerance and config.convex_decomposition:
-        from asset2sim.tasks import collision
-
-        deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
-        links = sorted({ln for pair in deep for ln in pair})
-        sess = open_session("pybullet", paths.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
-        try:
-            only = collision.colliding_pieces(sess, asset, deep, s, cache=mesh_cache)
-        finally:
-            sess.close()
-        dnotes: list[str] = []
-        try:
-            overrides, dnotes = collision.decompose_links(
-                asset, links, out_dir, only=only, budget_s=config.decomposition_budget, cache=mesh_cache
-            )
-        except (collision.DecompositionUnavailable, ValueError) as exc:
-            say("refine_state", f"convex decomposition skipped: {exc}")
-        if overrides:
-            before = st
-            write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-            st = refine_on_written(requested)
-            st.evaluations += before.evaluations
-            st.phi_requested = before.phi_requested
-        if overrides and st.phi_result >= before.phi_result:
-            # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
-            for pcs in overrides.values():
-                for p_ in pcs:
-                    if p_.filename.startswith("collision/"):
-                        (out_dir / p_.filename).unlink(missing_ok=True)
-            overrides = {}
-            write.write_output(asset, overlay, out_dir, requested, copy=False, root_rotation=root_rotation)
-            before.evaluations = st.evaluations
-            before.collision_changes = [
-                f"convex decomposition tried for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
-                f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
-            ] + dnotes
-            st = before
-        elif overrides:
-            st.collision_changes = [
-                f"{ln}: collision meshes overlapping {', '.join(sorted({b if a == ln else a for a, b in deep if ln in (a, b)}))} "
-                f"replaced by {sum(1 for p_ in pcs if p_.filename.startswith('collision/'))} convex pieces (CoACD), because their hulls kept "
-                f"penetrating ({before.phi_result * 1000:.3g} mm after state search)"
-                for ln, pcs in overrides.items()
-            ] + dnotes
-            st.method = before.method + " | convex decomposition -> " + st.method
-    state = dict(st.result)
-    say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
-    lap("refine_state")
-
-    # 7. post-check and escalation
-    if overlay.initial_joint_positions is not None:
-        overlay = overlay.model_copy(update={"initial_joint_positions": state})
-    rounds: list[EscalationRound] = []
-    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-    check = postcheck.run_post_check(paths.urdf, state, overlay, config)
-    rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
-    n = 0
-    while not check.passed and n < config.max_escalation_rounds:
-        n += 1
-        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor)
-        if not changes:
-            break
-        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-        check = postcheck.run_post_check(paths.urdf, state, overlay, config)
-        rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
+    _remove_stale_collision(out_dir, att.overrides)
     pen = check.metric("penetration")
     stab = check.metric("rest_stability")
     osc = check.metric("oscillation")
-    say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {n}")
-    lap("post_check")
+    say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(rounds) - 1}")
 
     if not stab.passed:
         failure = "unstable"
@@ -381,7 +290,7 @@ def refine_asset(
         validation=[i.model_dump() for i in issues],
         failure_mode=failure,
         stage_seconds=times,
-        notes=list(overlay.notes.other) + ([f"resting pose ({spec.pose_hint}): {pose_note}"] if pose_note else []),
+        notes=list(overlay.notes.other) + ([f"resting pose ({spec.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
     )
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
     extra_paths: dict[str, str] = {}
@@ -401,6 +310,171 @@ def refine_asset(
         },
     )
     return RefineResult(out_dir=out_dir, report=report, overlay=overlay, extras=extra_paths)
+
+
+
+@dataclass
+class _Attempt:
+    """One synthesize -> validate -> write -> refine state -> post-check pass."""
+
+    asset: AssetDescription
+    overlay: Overlay
+    issues: list
+    bands: dict[str, str]
+    prismatic: set[str]
+    closed_out: dict[str, ClosedState]
+    st: object
+    state: dict[str, float]
+    overrides: dict
+    root_rotation: object
+    check: object
+    rounds: list[EscalationRound]
+
+    def rewrite(self, out_dir: Path) -> None:
+        """Write this attempt's files again (after another attempt overwrote them)."""
+        from asset2sim.tasks import write
+
+        write.write_output(
+            self.asset, self.overlay, out_dir, self.state, copy=False,
+            collision_overrides=self.overrides, root_rotation=self.root_rotation,
+        )
+
+
+def _attempt(ctx, est, config: RefineConfig, out_dir: Path, mesh_cache, say: Progress, lap) -> _Attempt:
+    """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
+    from asset2sim.tasks import estimate, postcheck, validate_overlay, write
+
+    asset, geometry, closed = ctx.asset, ctx.geometry, ctx.closed
+    prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
+    root_rotation = ctx.root_rotation
+    # 4. synthesize + validate
+    try:
+        overlay = est.estimate(ctx)
+    except Exception as exc:
+        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure") from exc
+    bands, _ = estimate.requested_bands(ctx)
+    bands.update(ctx.settings.get("model_bands", {}))  # a model backend's band choice wins
+    lap("synthesize")
+    try:
+        overlay, issues = validate_overlay.validate_overlay(overlay, asset, geometry)
+    except validate_overlay.OverlayInvalid as exc:
+        raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
+    s = overlay.scale
+    closed_out = _scaled_closed(closed, s, prismatic)
+    requested = estimate.state_from_bands(closed, bands, s, prismatic)
+    if overlay.initial_joint_positions:
+        requested.update(overlay.initial_joint_positions)
+    say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")
+    lap("validate")
+
+    # 5. write (meshes copied once; later writes only rewrite the small files)
+    paths = write.write_output(asset, overlay, out_dir, requested, root_rotation=root_rotation)
+    lap("write")
+
+    # 6. state refinement on the written (scaled) asset
+    st, overrides = _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, paths.urdf, root_rotation, config, out_dir, mesh_cache, say)
+    state = dict(st.result)
+    say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
+    lap("refine_state")
+
+    # 7. post-check and escalation
+    if overlay.initial_joint_positions is not None:
+        overlay = overlay.model_copy(update={"initial_joint_positions": state})
+    rounds: list[EscalationRound] = []
+    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+    check = postcheck.run_post_check(paths.urdf, state, overlay, config)
+    rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
+    n = 0
+    while not check.passed and n < config.max_escalation_rounds:
+        n += 1
+        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor)
+        if not changes:
+            break
+        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+        check = postcheck.run_post_check(paths.urdf, state, overlay, config)
+        rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
+    lap("post_check")
+    return _Attempt(
+        asset=asset, overlay=overlay, issues=issues, bands=bands, prismatic=prismatic, closed_out=closed_out,
+        st=st, state=state, overrides=overrides, root_rotation=root_rotation, check=check, rounds=rounds,
+    )
+
+
+def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say):
+    """State refinement; when hull overlaps keep Phi above tolerance, CoACD
+    decomposition of the colliding pieces and a second search (kept only if
+    it lowers Phi). Returns (StateRefinement, collision overrides)."""
+    from asset2sim.tasks import estimate, refine_state, write
+
+    fractions = estimate.band_intervals(bands)
+    s = overlay.scale
+
+    def search(start: dict[str, float]):
+        sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim))
+        try:
+            return refine_state.refine_initial_state(
+                sess, asset, closed_out, start, fractions,
+                tolerance=config.penetration_tolerance, lam=config.state_lambda,
+                max_evaluations=config.max_state_evaluations, seed=config.seed,
+            )
+        finally:
+            sess.close()
+
+    st = search(requested)
+    if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
+        return st, {}
+    from asset2sim.tasks import collision
+
+    deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
+    links = sorted({ln for pair in deep for ln in pair})
+    sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
+    try:
+        only = collision.colliding_pieces(sess, asset, deep, s, cache=mesh_cache)
+    finally:
+        sess.close()
+    try:
+        overrides, dnotes = collision.decompose_links(asset, links, out_dir, only=only, budget_s=config.decomposition_budget, cache=mesh_cache)
+    except (collision.DecompositionUnavailable, ValueError) as exc:
+        say("refine_state", f"convex decomposition skipped: {exc}")
+        st.collision_changes = [f"convex decomposition skipped: {exc}"]
+        return st, {}
+    if not overrides:
+        st.collision_changes = dnotes
+        return st, {}
+    before = st
+    write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+    st = search(requested)
+    st.evaluations += before.evaluations
+    st.phi_requested = before.phi_requested
+    if st.phi_result >= before.phi_result:
+        # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
+        write.write_output(asset, overlay, out_dir, requested, copy=False, root_rotation=root_rotation)
+        before.evaluations = st.evaluations
+        before.collision_changes = [
+            f"convex decomposition tried for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
+            f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
+        ] + dnotes
+        return before, {}
+    st.collision_changes = [
+        f"{ln}: collision meshes overlapping {', '.join(sorted({b if a == ln else a for a, b in deep if ln in (a, b)}))} "
+        f"replaced by {sum(1 for p_ in pcs if p_.filename.startswith('collision/'))} convex pieces (CoACD), because their hulls kept "
+        f"penetrating ({before.phi_result * 1000:.3g} mm after state search)"
+        for ln, pcs in overrides.items()
+    ] + dnotes
+    st.method = before.method + " | convex decomposition -> " + st.method
+    return st, overrides
+
+
+def _remove_stale_collision(out_dir: Path, overrides: dict) -> None:
+    """Delete ``collision/`` pieces the final URDF does not reference."""
+    used = {p_.filename for pcs in overrides.values() for p_ in pcs}
+    folder = out_dir / "collision"
+    if folder.is_dir():
+        for f in folder.iterdir():
+            if f"collision/{f.name}" not in used:
+                f.unlink(missing_ok=True)
+        if not any(folder.iterdir()):
+            folder.rmdir()
 
 
 def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> dict[str, str]:

@@ -16,9 +16,12 @@ fix is listed in ``docs/simulators.md``:
   (MuJoCo would make one hull of the whole file); coplanar groups become
   2 mm slabs (MuJoCo refuses flat hulls);
 - fixed joints: ``fusestatic="false"`` keeps every URDF link a body;
-- self-collision: MuJoCo also filters pairs welded together by fixed joints
-  (and their parents); explicit ``<pair>`` elements restore the pairs PyBullet
-  collides;
+- self-collision: MuJoCo's filter works on groups of bodies welded by fixed
+  joints (and on nothing welded to the world); explicit ``<pair>`` and
+  ``<exclude>`` elements make the colliding pairs exactly PyBullet's
+  (:func:`contact_policy`);
+- friction: MuJoCo's soft friction would let held joints creep; the no-slip
+  pass (with elliptic cones, so resting bodies do not walk) makes it hold;
 - a free joint on the root, a ground plane, joint springs (``stiffness`` /
   ``springref``) from the overlay, contact friction as PyBullet combines it,
   the SPEC's timestep and gravity, and a keyframe ``initial`` with the
@@ -67,6 +70,12 @@ GROUND = "ground"
 #: PhysX (a lid held by 0.5 N*m against 0.16 N*m of gravity creeps 0.2 rad in
 #: 3 s without it, 0 with it).
 NOSLIP_ITERATIONS = 10
+#: Friction cones: elliptic with impratio 10 (MuJoCo's advice for resting and
+#: manipulated objects). With the default pyramidal cones, the no-slip pass
+#: made the refined laptop 9748 walk 1 mm and the faucet 148 rock 2.3 mm
+#: during the rest test (both still in PyBullet and PhysX); elliptic cones
+#: keep them still (3e-9 m, 2e-6 m).
+IMPRATIO = 10.0
 
 
 class MjcfError(RuntimeError):
@@ -377,6 +386,8 @@ def urdf_to_mjcf(
     opt.set("gravity", f"0 0 {_f(conv.gravity if gravity else 0.0)}")
     opt.set("integrator", "implicitfast")
     opt.set("noslip_iterations", str(NOSLIP_ITERATIONS))
+    opt.set("cone", "elliptic")  # with pyramidal cones the no-slip pass makes resting bodies walk
+    opt.set("impratio", _f(IMPRATIO))
     for old in root.findall("option"):
         root.remove(old)
     root.insert(1, opt)

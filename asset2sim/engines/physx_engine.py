@@ -58,6 +58,12 @@ from asset2sim.engines.fake import (
 FRICTION_DRIVE_DAMPING = 1.0e6
 #: Bullet's default linear and angular velocity damping of multibody links (1/s).
 BULLET_LINK_DAMPING = 0.04
+#: PhysX solver. SAPIEN's default, TGS, lets joints held by a force-limited
+#: drive creep under load when the root is free (a lid held by 0.5 N*m against
+#: 0.16 N*m: 2.6e-3 rad in 3 s; the lid of the refined suitcase 103755, held by
+#: 78 N*m: 0.08 rad in 3 s, so the case slides); PGS holds them, as Bullet's
+#: motors do.
+ENABLE_TGS = False
 
 
 class PhysXError(RuntimeError):
@@ -115,6 +121,7 @@ class PhysXSession:
         old = physx.get_scene_config()
         cfg = physx.PhysxSceneConfig()
         cfg.gravity = np.array([0.0, 0.0, conv.gravity if options.gravity else 0.0], np.float32)
+        cfg.enable_tgs = ENABLE_TGS
         physx.set_scene_config(cfg)
         try:
             self.system = physx.PhysxCpuSystem()

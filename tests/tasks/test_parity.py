@@ -80,6 +80,8 @@ def test_worst_case_over_engines(tmp_path, monkeypatch):
     res = evaluate_engines(tmp_path, ["calm", "shaky"])
     worst = _by_name(worst_case(res))
     assert worst["penetration"].value == pytest.approx(4.0)
+    per = worst["penetration"].details["per_engine"]
+    assert per["calm"]["max_depth_mm"] == pytest.approx(1.0) and per["shaky"]["max_depth_mm"] == pytest.approx(4.0)
     assert worst["rest_stability"].passed is False
     assert worst["rest_stability"].details["per_engine"]["calm"]["passed"] is True
     assert worst["oscillation"].passed is True
@@ -105,3 +107,41 @@ def test_three_engines_agree_on_a_resting_asset_and_on_a_swinging_one(tmp_path):
     write_contract_asset(tmp_path / "swing", lid_angle=1.2, lid_friction=0.0, lid_damping=0.0, lid_stiffness=1.0, lid_spring_reference=0.8)
     rows = parity_table(evaluate_engines(tmp_path / "swing", engines))
     assert all(r["oscillation"] is False and r["failing_joints"] == ["lid_hinge"] for r in rows), rows
+
+
+def test_without_the_optional_packages_the_pipeline_says_what_it_skipped(tmp_path):
+    """In a fresh interpreter where sapien and mujoco cannot be imported: the
+    registry leaves them out, parity names them skipped with the reason, the
+    MJCF export raises ImportError (refine turns that into a note) and the
+    export command exits 2 with the install hint."""
+    import subprocess
+    import sys
+
+    write_contract_asset(tmp_path)
+    code = f"""
+import sys
+sys.modules['sapien'] = None
+sys.modules['mujoco'] = None
+from pathlib import Path
+from asset2sim.engines.base import available_engines
+from asset2sim.tasks.parity import evaluate_engines, parity_table
+assert 'physx' not in available_engines() and 'mujoco' not in available_engines(), available_engines()
+rows = {{r['engine']: r for r in parity_table(evaluate_engines(Path({str(tmp_path)!r}), ['pybullet', 'physx', 'mujoco']))}}
+assert rows['pybullet']['status'] == 'ok' and rows['pybullet']['rest_stability'] is True, rows['pybullet']
+for e, module in (('physx', 'sapien'), ('mujoco', 'mujoco')):
+    assert rows[e]['status'] == 'skipped' and module in rows[e]['reason'], rows[e]
+from asset2sim.tasks.export_mjcf import export_mjcf
+try:
+    export_mjcf(Path({str(tmp_path)!r}))
+except ImportError:
+    pass
+else:
+    raise AssertionError('export without mujoco')
+from asset2sim.cli import main
+assert main(['export', {str(tmp_path)!r}]) == 2
+print('OK')
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip().endswith("OK")
+    assert "pip install 'asset2sim[mujoco]'" in res.stderr
