@@ -101,7 +101,7 @@ VOXELS_PER_AXIS = 128
 #: plus a few temporary arrays of the same size).
 MAX_VOXELS = 3_000_000
 #: Default gap closing, as a fraction of the link's longest extent.
-CLOSE_GAPS = 0.01
+CLOSE_GAPS = 0.02
 #: Weight of an exposed voxel face in the surface-layer correction (see module doc).
 LAYER_CORRECTION = 0.5
 #: Surface sampling spacing, in voxel pitches.
@@ -628,9 +628,10 @@ def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
 
     Triangles whose edges are all <= spacing give their vertices. Larger ones
     are sampled in rows parallel to their longest edge: k2 = ceil(height /
-    spacing) rows from the base to the apex, each row split into segments
-    <= spacing. The count is ~ area / spacing^2 even for slivers. Yielded in
-    batches of about ``_CHUNK_POINTS`` points.
+    spacing) + 1 rows from the base to the apex, each row split into
+    segments <= spacing. The count is ~ area / spacing^2 even for slivers.
+    Yielded in batches of about ``_CHUNK_POINTS`` points, in the dtype of
+    ``tri``.
     """
     edges = np.stack(
         [
@@ -653,7 +654,7 @@ def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
     height = np.linalg.norm(np.cross(b_pt - a_pt, c_pt - a_pt), axis=1) / base
     k1 = np.ceil(base / spacing).astype(np.int64)
     k2 = np.maximum(1, np.ceil(height / spacing)).astype(np.int64)
-    est = np.cumsum((k1 + 1) * (k2 + 1) // 2 + k2 + 1)
+    est = np.cumsum((k1 + 2) * (k2 + 1) // 2 + k2 + 1)
     start = 0
     while start < len(big):
         stop = int(np.searchsorted(est, (est[start - 1] if start else 0) + _CHUNK_POINTS, side="right"))
@@ -662,22 +663,23 @@ def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
         rows = k2[sl] + 1
         row_tri = np.repeat(np.arange(stop - start), rows)
         row_j = np.arange(rows.sum()) - np.repeat(np.cumsum(rows) - rows, rows)
-        v = row_j / k2[sl][row_tri]
-        m = np.ceil(base[sl][row_tri] * (1.0 - v) / spacing).astype(np.int64) + 1
-        pt_row = np.repeat(np.arange(m.size), m)
-        idx = np.arange(pt_row.size) - np.repeat(np.cumsum(m) - m, m)
-        u = idx / np.maximum(m - 1, 1)[pt_row]
-        t = row_tri[pt_row]
-        vv = v[pt_row][:, None]
-        a_t = a_pt[sl][t]
-        s_pt = b_pt[sl][t]
-        s_pt += vv * (a_t - s_pt)
-        e_pt = c_pt[sl][t]
-        e_pt += vv * (a_t - e_pt)
-        e_pt -= s_pt
-        e_pt *= u[:, None]
-        e_pt += s_pt
-        yield e_pt
+        v = (row_j / k2[sl][row_tri])[:, None]
+        apex_r = a_pt[sl][row_tri]
+        row_start = b_pt[sl][row_tri]
+        row_start += v * (apex_r - row_start)
+        row_dir = c_pt[sl][row_tri]
+        row_dir += v * (apex_r - row_dir)
+        row_dir -= row_start
+        m = np.ceil(base[sl][row_tri] * (1.0 - v[:, 0]) / spacing).astype(np.int64) + 1
+        step = 1.0 / np.maximum(m - 1, 1)
+        offsets = np.cumsum(m) - m
+        u = np.arange(int(m.sum()), dtype=tri.dtype)
+        u -= np.repeat(offsets, m)
+        u *= np.repeat(step, m)
+        pts = np.repeat(row_dir, m, axis=0)
+        pts *= u[:, None]
+        pts += np.repeat(row_start, m, axis=0)
+        yield pts
         start = stop
 
 
@@ -758,13 +760,13 @@ def voxelize(
     origin = lo - (pad + 0.5 - _GRID_SHIFT) * h
     grid = np.zeros(int(np.prod(dims)), bool)
     s0, s1 = int(dims[1] * dims[2]), int(dims[2])
-    inv_h = 1.0 / h
     for s in range(0, len(faces), _CHUNK_FACES):
-        tri = vertices[faces[s : s + _CHUNK_FACES]]
-        for pts in _surface_points(tri, sample_spacing * h):
+        # in voxel units: cell (i, j, k) is [i, i+1) x [j, j+1) x [k, k+1)
+        tri = ((vertices[faces[s : s + _CHUNK_FACES]] - origin) / h).astype(np.float32)
+        for pts in _surface_points(tri, sample_spacing):
             # points are convex combinations of vertices, so inside the padded grid
-            ijk = ((pts - origin) * inv_h).astype(np.int64)
-            grid[ijk[:, 0] * s0 + ijk[:, 1] * s1 + ijk[:, 2]] = True
+            ijk = pts.astype(np.int32)
+            grid[ijk[:, 0].astype(np.int64) * s0 + ijk[:, 1] * s1 + ijk[:, 2]] = True
     surf = grid.reshape(tuple(dims))
     closed = _dilate(surf, iters)
     closed = _erode(closed, iters)

@@ -15,10 +15,12 @@ saying how it was made (``method``, ``scale``, rules used, notes).
   the simulator loads). With no reference scale the raw scale 1.0 is used.
 - ``human``: ``reference_gensim2.urdf`` (GenSim2's hand-curated copy, every joint
   but the task's frozen) at ``reference_gensim2.json``'s ``scale`` (1.0 when
-  absent, SAPIEN's default) and, when given, ``joint_position_range`` as the
-  task joint's limits (prismatic values times the scale). Initial state: the
-  lower end of ``joint_position_range`` (prismatic times the scale), else 0,
-  clipped to the limits (see ``docs/metrics.md`` for why).
+  absent, SAPIEN's default) and, when given, ``joint_position_range``
+  intersected with the file's limits as the task joint's limits (prismatic
+  values times the scale). Initial state: the lower end of
+  ``joint_position_range`` (prismatic times the scale), else 0, clipped to the
+  limits, which is exactly the reference state the evaluation compares
+  against (see ``docs/metrics.md`` for why).
 - ``direct``: one estimator call applied as is (no validation, no state
   refinement, no post-check), via the estimator registry
   ``asset2sim.tasks.estimate`` when it exists.
@@ -380,7 +382,15 @@ def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
         scale = 1.0
         notes.append("reference_gensim2.json has no scale: 1.0 (SAPIEN's default)")
     rng = ref["joint_position_range"]
-    limits = {j: rng for j in ref["task_joints"]} if rng is not None else None
+    limits = None
+    if rng is not None:
+        # GenSim2's range, within the file's own limits (an empty intersection keeps the range)
+        file_joints = urdf_joints(ref["urdf"])
+        limits = {}
+        for j in ref["task_joints"]:
+            lo = max(rng[0], file_joints[j]["lower"]) if file_joints[j]["lower"] is not None else rng[0]
+            hi = min(rng[1], file_joints[j]["upper"]) if file_joints[j]["upper"] is not None else rng[1]
+            limits[j] = (lo, hi) if lo <= hi else rng
     urdf = scale_urdf(
         ref["urdf"], out_dir / "mobility.urdf", scale, joint_limits=limits,
         header=f"asset2sim baseline 'human' (GenSim2 reference) of {row.id} at scale {scale}",

@@ -548,6 +548,7 @@ def requested_joints(spec, joints: dict[str, JointInfo], semantics: dict[str, tu
 
 
 def _closed_fallback(j: JointInfo) -> ClosedEnd:
+    """Closed end without geometry: the limit nearest 0 (continuous: 0, range pi)."""
     lo, hi = j.lower, j.upper
     if j.type == "continuous" or lo is None or hi is None or lo > hi:
         return ClosedEnd(0.0, 1.0, math.pi, "fallback: continuous joint, 0 taken as closed")
@@ -557,14 +558,23 @@ def _closed_fallback(j: JointInfo) -> ClosedEnd:
 
 
 def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
-                   session=None, extents_out: list | None = None) -> tuple[dict[str, ClosedEnd], list[str]]:
-    """Closed end of each joint in ``names``.
+                   extents_out: list | None = None) -> tuple[dict[str, ClosedEnd], list[str]]:
+    """Closed end of each joint in ``names`` (rad or m, the URDF's units).
 
     Source: :func:`asset2sim.tasks.closed_state.closed_positions` (geometric,
-    computed here for every method alike, so no method grades itself), else
-    the limit nearest 0. ``session``: a PyBullet session of ``urdf`` to reuse
-    (it must not have been stepped; its state is saved and restored), else a
-    fixed-base one is opened.
+    computed here for every method alike, so no method grades itself) in a
+    fresh fixed-base, gravity-free PyBullet session; else (module missing or
+    failing) the limit nearest 0, opening towards the other limit.
+
+    Args:
+        urdf: the evaluated URDF.
+        joints: its joints (:func:`parse_urdf`).
+        names: joints to report.
+        extents_out: when given, the (3,) m AABB extents of the object with
+            every joint at its closed end are appended to it.
+
+    Returns:
+        (joint -> :class:`ClosedEnd`, notes).
     """
     notes: list[str] = []
     out: dict[str, ClosedEnd] = {}
@@ -578,21 +588,13 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
         return {n: _closed_fallback(joints[n]) for n in names}, notes
     try:
         desc = extract_asset(urdf)
-        if session is not None:
-            sid = session._p.saveState(physicsClientId=session.cid)
-            try:
-                cs = closed_positions(session, desc)
-            finally:
-                session._p.restoreState(stateId=sid, physicsClientId=session.cid)
-                session._p.removeState(sid, physicsClientId=session.cid)
-        else:
-            s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
-            try:
-                cs = closed_positions(s, desc)  # leaves the session at the closed state
-                if extents_out is not None:
-                    extents_out.append(_extents(s))
-            finally:
-                s.close()
+        s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
+        try:
+            cs = closed_positions(s, desc)  # leaves the session at the closed state
+            if extents_out is not None:
+                extents_out.append(_extents(s))
+        finally:
+            s.close()
         for n in names:
             c = cs.get(n)
             if c is None or not c.open_range > 0:

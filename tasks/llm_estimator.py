@@ -500,38 +500,63 @@ class LLMEstimator:
 
     name = "llm"
 
+    #: Replies remembered per asset and request (bounded), so that a second
+    #: ``estimate`` of the same context (the refine stage retries with another
+    #: resting pose) rebuilds the overlay from the same reply without a call.
+    MEMO_SIZE = 16
+
     def __init__(self, model: str | None = None, base_url: str | None = None, *, client: LLMClient | None = None, max_reasks: int = 2, **settings):
         self.client = client or make_client(self.name, model, base_url)
         self.max_reasks = max_reasks
         self.settings = settings
+        self._memo: dict[tuple, tuple[ModelReply, Usage, list[list[str]], list[str]]] = {}
+
+    @staticmethod
+    def _memo_key(ctx: estimate.EstimationContext) -> tuple:
+        return (ctx.asset.asset_id, ctx.asset.input_hash, str(ctx.asset.urdf_path), ctx.request.text, ctx.category)
 
     def estimate(self, ctx: estimate.EstimationContext) -> Overlay:
-        """Ask the model and build the overlay.
+        """Ask the model (once per asset and request) and build the overlay.
+
+        A repeated call for the same asset and request reuses the remembered
+        reply (the physics is recomputed for the context, e.g. another resting
+        pose); its ``estimator`` info repeats the calls the reply cost.
 
         Raises:
             ModelCallError: the network failed after the retries.
             ReplyError: no usable reply after the re-asks.
+            ReplyInvalid: a remembered reply no longer validates for this context.
         """
         cfg = self.client.config
-        schema = reply_json_schema()
-        desc = describe(ctx)
-        images, render_notes = render_closed_views(ctx, VIEWS, cfg.render_size)
-        messages = build_messages(desc, images, schema)
-        answer = self.client.ask(
-            messages,
-            ModelReply,
-            schema=schema,
-            schema_name=REPLY_SCHEMA_NAME,
-            accept=lambda r: overlay_from_reply(ctx, r, name=self.name, model=cfg.model),
-            max_reasks=self.max_reasks,
-        )
-        overlay, bands, _ = answer.value
+        key = self._memo_key(ctx)
+        memo = self._memo.get(key)
+        if memo is None:
+            schema = reply_json_schema()
+            desc = describe(ctx)
+            images, render_notes = render_closed_views(ctx, VIEWS, cfg.render_size)
+            messages = build_messages(desc, images, schema)
+            answer = self.client.ask(
+                messages,
+                ModelReply,
+                schema=schema,
+                schema_name=REPLY_SCHEMA_NAME,
+                accept=lambda r: overlay_from_reply(ctx, r, name=self.name, model=cfg.model),
+                max_reasks=self.max_reasks,
+            )
+            overlay, bands, _ = answer.value
+            memo = (answer.reply, answer.usage, answer.history, render_notes)
+            while len(self._memo) >= self.MEMO_SIZE:
+                self._memo.pop(next(iter(self._memo)))
+            self._memo[key] = memo
+        else:
+            overlay, bands, _ = overlay_from_reply(ctx, memo[0], name=self.name, model=cfg.model)
+        reply, usage, history, render_notes = memo
         ctx.settings["model_bands"] = dict(bands)
         other = list(overlay.notes.other) + render_notes
-        other.append(f"model {cfg.model}: {answer.usage.summary()}")
-        for i, errs in enumerate(answer.history):
+        other.append(f"model {cfg.model}: {usage.summary()}")
+        for i, errs in enumerate(history):
             other.append(f"model reply {i + 1} rejected and re-asked: " + "; ".join(errs[:5]))
-        return overlay.model_copy(update={"estimator": _info(self.name, cfg.model, answer.usage), "notes": overlay.notes.model_copy(update={"other": other})})
+        return overlay.model_copy(update={"estimator": _info(self.name, cfg.model, usage), "notes": overlay.notes.model_copy(update={"other": other})})
 
 
 class OpenAICompatibleEstimator(LLMEstimator):

@@ -157,9 +157,10 @@ def most_stable_rotation(
     *,
     exclude_modelled: bool = False,
 ) -> tuple[np.ndarray | None, str]:
-    """The axis-aligned resting orientation with the largest static margin at
-    ``state`` (ties: moving parts up), when it clearly stands (margin >
-    ``MIN_MARGIN_FRACTION`` x size). With ``exclude_modelled`` the modelled
+    """The axis-aligned resting orientation that clearly stands at ``state``
+    (margin >
+    ``MIN_MARGIN_FRACTION`` x size), preferring those that keep the moving
+    parts up, then the largest margin. With ``exclude_modelled`` the modelled
     orientation is not a candidate (the simulator already saw it fail).
     Returns (rotation, note) or (None, reason) when no candidate qualifies or
     the best is the modelled orientation."""
@@ -179,7 +180,8 @@ def most_stable_rotation(
             continue
         R = _rot(axis, angle)
         margin, _ = static_margin(session, asset, links, state, scale, hull_points, R)
-        key = (round(margin / size, 3), float((R @ up)[2]))
+        # clearly standing first, then moving parts up, then the widest margin
+        key = (margin >= MIN_MARGIN_FRACTION * size, float((R @ up)[2]) > 1e-9, round(margin / size, 3))
         if best is None or key > best[0]:
             best = (key, R, label, margin)
     _, R, label, margin = best

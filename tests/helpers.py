@@ -81,3 +81,22 @@ def write_arm_through_post(folder: Path) -> Path:
 """
     )
     return folder
+
+
+def write_standing_slab_with_arm(folder: Path, arm_len: float = 0.3) -> Path:
+    """A thin slab (0.04 x 0.4 x 0.6 m) standing on its 0.04 m edge with an
+    arm on a hinge at its top, sticking out along +x (so the object tips)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        f"""<?xml version="1.0"?>
+<robot name="slab">
+  <link name="base"/>
+  <link name="slab"><collision><origin xyz="0 0 0.3"/><geometry><box size="0.04 0.4 0.6"/></geometry></collision></link>
+  <joint name="fix" type="fixed"><parent link="base"/><child link="slab"/></joint>
+  <link name="arm"><collision><origin xyz="{arm_len / 2} 0 0"/><geometry><box size="{arm_len} 0.3 0.02"/></geometry></collision></link>
+  <joint name="hinge" type="revolute"><parent link="slab"/><child link="arm"/><origin xyz="0.03 0 0.6"/>
+    <axis xyz="0 1 0"/><limit lower="-1.5" upper="1.5" effort="10" velocity="10"/></joint>
+</robot>
+"""
+    )
+    return folder

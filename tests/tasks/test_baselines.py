@@ -217,3 +217,16 @@ def test_human_baseline_stability_on_the_thesis_set(shared_dataset, tmp_path):
         verdicts[row.id] = ev.metric("rest_stability").passed
     assert sum(verdicts.values()) == 7
     assert {k for k, v in verdicts.items() if not v} == {"103275", "103755"}
+
+
+def test_human_range_is_intersected_with_the_file_limits_and_matches_the_reference_state(dataset, tmp_path):
+    (dataset / "1001" / "reference_gensim2.json").write_text(json.dumps({"scale": 0.5, "joint_position_range": [-1.0, 0.6]}))
+    (row,) = bl.read_manifest(dataset / "manifest.csv")
+    res = bl.make_human(row, tmp_path / "h")
+    joints = bl.urdf_joints(tmp_path / "h" / "mobility.urdf")
+    assert (joints["joint_lid"]["lower"], joints["joint_lid"]["upper"]) == (pytest.approx(-0.5), pytest.approx(0.6))
+    assert res.initial_state == {"joint_lid": pytest.approx(-0.5)}
+    from asset2sim.tasks.evaluate import evaluate_asset
+
+    ev = evaluate_asset(tmp_path / "h", reference=dataset / "1001", probes=False)
+    assert ev.metric("initial_joint_deviation").value == pytest.approx(0.0)

@@ -367,3 +367,21 @@ def test_ivw_skips_unusable_replies_and_fails_when_none(server, plate):
         server.push(*[fake.text_reply("prose")] * 2)
         with pytest.raises(ReplyError, match="no usable reply"):
             le.ivw_overlay(ctx, client, n_views=2, n_calls=1)
+
+
+def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monkeypatch):
+    """The refine stage may estimate twice (another resting pose): one model call."""
+    from asset2sim.tasks import estimate
+
+    monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", "off")  # the memo, not the disk cache
+    est = estimate.get_estimator("openai", model="m", base_url=server.url)
+    with _ctx(plate) as ctx:
+        a = est.estimate(ctx)
+        ctx.root_rotation = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # lying on its side
+        b = est.estimate(ctx)
+    assert server.n_chat == 1
+    assert a.estimator.queries == b.estimator.queries == 1
+    assert b.links["plate"].mass == a.links["plate"].mass
+    with _ctx(plate, "A box with its lid fully open.") as ctx2:
+        est.estimate(ctx2)
+    assert server.n_chat == 2

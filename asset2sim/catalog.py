@@ -1,0 +1,465 @@
+"""The pipeline's two catalogs: ``catalog.yaml`` (what to refine) and the
+Parquet result catalog (what came out).
+
+``catalog.yaml`` (:class:`CatalogConfig`) declares datasets (where the raw
+assets are, the manifest of requests, whether the project generates them), the
+estimator and its settings, run settings (workers, per-asset time limit,
+isolation), the schedule of the nightly run, the tracking store and where
+results go. Relative paths are relative to the folder of ``catalog.yaml`` (the
+*project root*).
+
+The result catalog (:class:`ResultCatalog`) is a folder of Parquet files
+partitioned Hive-style by dataset and run::
+
+    <catalog_root>/dataset=<name>/run=<run_id>/<asset_id>.parquet   one row each
+    <catalog_root>/dataset=<name>/run=<run_id>/_run.json            run metadata
+
+Each row file is written atomically (:mod:`asset2sim.atomic`: temporary file,
+fsync, rename), so appending a row never leaves a half-written file and
+concurrent readers see either the old or the new state. Readers
+(:meth:`ResultCatalog.read`) use :mod:`pyarrow.dataset`, which ignores the
+``_``/``.``-prefixed files. The row schema is :data:`ROW_SCHEMA`; units are in
+the column names (``_mm``, ``_m``, ``_rad``, ``_kg``, ``_seconds``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from asset2sim import atomic
+
+# --------------------------------------------------------------------------- config
+
+
+class CatalogError(ValueError):
+    """``catalog.yaml`` or a manifest is missing or invalid; the message names the file."""
+
+
+class DatasetConfig(BaseModel):
+    """One dataset of ``catalog.yaml``.
+
+    ``root``: folder holding one sub-folder per asset (relative to the project
+    root). ``manifest``: CSV with columns ``id`` and ``prompt`` (required),
+    ``category``, ``reference_scale`` (optional); default ``<root>/manifest.csv``.
+    ``generate``: ``demo`` builds the project's own demo assets into ``root``
+    on first use (:mod:`asset2sim.demo_assets`). ``reference``: measure the
+    reference metrics (scale deviation) against ``reference_gensim2.json`` in
+    the asset folders when present.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    root: str
+    manifest: str | None = None
+    generate: Literal["demo"] | None = None
+    reference: bool = False
+    description: str = ""
+
+
+class EstimatorSettings(BaseModel):
+    """Estimator and its settings; ``retries``/``retry_delay_seconds`` apply to
+    model calls only (a failing offline estimator is not retried)."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = "offline"
+    model: str | None = None
+    retries: int = Field(default=2, ge=0)
+    retry_delay_seconds: float = Field(default=10.0, ge=0.0)
+
+
+class RunSettings(BaseModel):
+    """How a flow run executes.
+
+    ``workers``: Dask workers of the local cluster (count; None = CPU count).
+    ``time_limit_seconds``: wall-time limit per asset (s), over all its stages.
+    ``isolation``: ``process`` runs each asset's stages in a child process that
+    is killed at the time limit (a crash or hang costs only that asset);
+    ``none`` runs them in the Dask worker (Prefect's timeout, which cannot
+    interrupt a long native call). ``evaluate``: run the metrics stage
+    (``tasks.evaluate``: penetration, rest stability, oscillation, prompt
+    alignment, scale deviation) on each output. ``probes``: include the
+    scripted probes in it. ``refine_function``: ``module:function`` with the
+    signature of :func:`asset2sim.tasks.refine.refine_asset`.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    workers: int | None = Field(default=2, ge=1)
+    time_limit_seconds: float = Field(default=1800.0, gt=0.0)
+    isolation: Literal["process", "none"] = "process"
+    evaluate: bool = True
+    probes: bool = False
+    refine_function: str = "asset2sim.tasks.refine:refine_asset"
+
+
+class ScheduleSettings(BaseModel):
+    """The nightly deployment: cron expression, IANA time zone, dataset."""
+
+    model_config = ConfigDict(extra="forbid")
+    cron: str = "0 2 * * *"
+    timezone: str = "UTC"
+    dataset: str | None = None
+    deployment_name: str = "nightly"
+
+
+class TrackingSettings(BaseModel):
+    """MLflow: ``uri`` (None = ``MLFLOW_TRACKING_URI`` or ``sqlite:///<project>/mlflow.db``),
+    ``experiment`` name, ``artifact_root`` for new experiments (relative to
+    the project root), ``enabled``."""
+
+    model_config = ConfigDict(extra="forbid")
+    enabled: bool = True
+    uri: str | None = None
+    experiment: str = "asset2sim"
+    artifact_root: str = "mlruns"
+
+
+class CatalogConfig(BaseModel):
+    """Contents of ``catalog.yaml``."""
+
+    model_config = ConfigDict(extra="forbid")
+    version: int = 1
+    default_dataset: str
+    output_root: str = "data/refined"
+    catalog_root: str = "data/catalog"
+    datasets: dict[str, DatasetConfig]
+    estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
+    refine: dict[str, Any] = Field(default_factory=dict)
+    """Overrides of :class:`asset2sim.schemas.config.RefineConfig` fields."""
+    run: RunSettings = Field(default_factory=RunSettings)
+    schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
+    tracking: TrackingSettings = Field(default_factory=TrackingSettings)
+
+
+@dataclass(frozen=True)
+class Catalog:
+    """A loaded ``catalog.yaml``: the validated config and the project root."""
+
+    path: Path
+    config: CatalogConfig
+
+    @property
+    def project_root(self) -> Path:
+        return self.path.parent
+
+    def resolve(self, rel: str | Path) -> Path:
+        """A path of the catalog, absolute (relative ones are relative to the project root)."""
+        p = Path(rel).expanduser()
+        return p if p.is_absolute() else (self.project_root / p).resolve()
+
+    def dataset(self, name: str | None = None) -> tuple[str, DatasetConfig]:
+        """``(name, config)`` of dataset ``name`` (default: ``default_dataset``).
+
+        Raises:
+            CatalogError: no such dataset.
+        """
+        name = name or self.config.default_dataset
+        if name not in self.config.datasets:
+            raise CatalogError(f"{self.path}: no dataset {name!r}; known: {sorted(self.config.datasets)}")
+        return name, self.config.datasets[name]
+
+    def dataset_root(self, name: str | None = None) -> Path:
+        return self.resolve(self.dataset(name)[1].root)
+
+    def manifest_path(self, name: str | None = None) -> Path:
+        ds = self.dataset(name)[1]
+        return self.resolve(ds.manifest) if ds.manifest else self.resolve(ds.root) / "manifest.csv"
+
+    @property
+    def output_root(self) -> Path:
+        return self.resolve(self.config.output_root)
+
+    @property
+    def catalog_root(self) -> Path:
+        return self.resolve(self.config.catalog_root)
+
+    def refine_config(self):
+        """The :class:`~asset2sim.schemas.config.RefineConfig` of this catalog
+        (estimator and model from ``estimator``, other fields from ``refine``).
+
+        Raises:
+            CatalogError: an unknown or invalid ``refine`` field.
+        """
+        from asset2sim.schemas.config import RefineConfig
+
+        fields = dict(self.config.refine)
+        fields.setdefault("estimator", self.config.estimator.name)
+        fields.setdefault("model", self.config.estimator.model)
+        try:
+            return RefineConfig(**fields)
+        except ValidationError as exc:
+            raise CatalogError(f"{self.path}: invalid 'refine' settings: {exc}") from exc
+
+
+def load_catalog(path: Path | str) -> Catalog:
+    """Read and validate ``catalog.yaml``.
+
+    Raises:
+        CatalogError: the file is missing, not YAML, or does not match
+            :class:`CatalogConfig` (the message names the field).
+    """
+    path = Path(path).expanduser().resolve()
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise CatalogError(f"{path}: cannot read the catalog: {exc}") from exc
+    except yaml.YAMLError as exc:
+        raise CatalogError(f"{path}: not valid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise CatalogError(f"{path}: expected a mapping at the top level")
+    try:
+        config = CatalogConfig.model_validate(data)
+    except ValidationError as exc:
+        raise CatalogError(f"{path}: {exc}") from exc
+    if config.default_dataset not in config.datasets:
+        raise CatalogError(f"{path}: default_dataset {config.default_dataset!r} is not among the datasets")
+    return Catalog(path=path, config=config)
+
+
+@dataclass(frozen=True)
+class ManifestEntry:
+    """One request of a manifest: asset id, prompt, optional category and
+    reference scale (dimensionless), and the asset folder."""
+
+    asset_id: str
+    prompt: str
+    asset_dir: Path
+    category: str | None = None
+    reference_scale: float | None = None
+
+
+_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+
+
+def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
+    """Entries of a manifest CSV (columns ``id``, ``prompt``; optional
+    ``category``, ``reference_scale``), asset folders under ``root``.
+
+    Raises:
+        CatalogError: missing file or columns, an empty/duplicate/unsafe id
+            (ids name folders and files: letters, digits, ``_.-``), or a bad
+            ``reference_scale``.
+    """
+    manifest, root = Path(manifest), Path(root)
+    try:
+        text = manifest.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
+    reader = csv.DictReader(io.StringIO(text))
+    cols = set(reader.fieldnames or [])
+    missing = {"id", "prompt"} - cols
+    if missing:
+        raise CatalogError(f"{manifest}: missing column(s) {sorted(missing)}")
+    out: list[ManifestEntry] = []
+    seen: set[str] = set()
+    for line, row in enumerate(reader, start=2):
+        aid = (row.get("id") or "").strip()
+        if not aid or not _ID_RE.match(aid):
+            raise CatalogError(f"{manifest}:{line}: invalid asset id {aid!r}")
+        if aid in seen:
+            raise CatalogError(f"{manifest}:{line}: duplicate asset id {aid!r}")
+        seen.add(aid)
+        ref = (row.get("reference_scale") or "").strip()
+        try:
+            ref_scale = float(ref) if ref else None
+        except ValueError as exc:
+            raise CatalogError(f"{manifest}:{line}: reference_scale {ref!r} is not a number") from exc
+        if ref_scale is not None and not (math.isfinite(ref_scale) and ref_scale > 0):
+            raise CatalogError(f"{manifest}:{line}: reference_scale must be a positive number")
+        out.append(
+            ManifestEntry(
+                asset_id=aid,
+                prompt=(row.get("prompt") or "").strip(),
+                asset_dir=root / aid,
+                category=(row.get("category") or "").strip() or None,
+                reference_scale=ref_scale,
+            )
+        )
+    return out
+
+
+# ----------------------------------------------------------------------- Parquet rows
+
+
+def _schema():
+    import pyarrow as pa
+
+    return pa.schema(
+        [
+            ("asset_id", pa.string()),
+            ("category", pa.string()),
+            ("prompt", pa.string()),
+            ("status", pa.string()),  # done | skipped | failed
+            ("failure_mode", pa.string()),  # schemas.report.FAILURE_MODES
+            ("error", pa.string()),
+            ("estimator", pa.string()),
+            ("model", pa.string()),
+            ("scale", pa.float64()),
+            ("reference_scale", pa.float64()),
+            ("scale_deviation_pct", pa.float64()),
+            ("total_mass_kg", pa.float64()),
+            ("initial_state", pa.string()),  # JSON {joint: rad or m}
+            ("penetration_mm", pa.float64()),
+            ("rest_stable", pa.bool_()),
+            ("d_pos_m", pa.float64()),
+            ("d_ori_rad", pa.float64()),
+            ("oscillation_pass", pa.bool_()),
+            ("prompt_alignment", pa.float64()),
+            ("model_queries", pa.int64()),
+            ("tokens", pa.int64()),
+            ("wall_seconds", pa.float64()),
+            ("stage_seconds", pa.string()),  # JSON {stage: s}
+            ("input_hash", pa.string()),
+            ("config_hash", pa.string()),
+            ("refine_config_hash", pa.string()),
+            ("code_version", pa.string()),
+            ("out_dir", pa.string()),
+            ("source_run", pa.string()),  # run that produced the output (differs when skipped)
+            ("flow_run_id", pa.string()),
+            ("worker", pa.string()),
+            ("started_at", pa.timestamp("us", tz="UTC")),
+            ("finished_at", pa.timestamp("us", tz="UTC")),
+        ]
+    )
+
+
+#: Column names of a catalog row, in order (partition columns ``dataset`` and
+#: ``run`` come from the folder names).
+ROW_COLUMNS: tuple[str, ...] = (
+    "asset_id", "category", "prompt", "status", "failure_mode", "error", "estimator", "model",
+    "scale", "reference_scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
+    "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
+    "model_queries", "tokens", "wall_seconds", "stage_seconds", "input_hash", "config_hash",
+    "refine_config_hash", "code_version", "out_dir", "source_run", "flow_run_id", "worker",
+    "started_at", "finished_at",
+)  # fmt: skip
+
+ROW_STATUSES = ("done", "skipped", "failed")
+
+_PART_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+
+
+def _check_part(kind: str, value: str) -> str:
+    if not _PART_RE.match(value or ""):
+        raise ValueError(f"invalid {kind} name {value!r} (letters, digits, '_.-' only)")
+    return value
+
+
+class ResultCatalog:
+    """The Parquet result catalog under ``root`` (see the module docstring)."""
+
+    def __init__(self, root: Path | str):
+        self.root = Path(root)
+
+    def run_dir(self, dataset: str, run: str) -> Path:
+        return self.root / f"dataset={_check_part('dataset', dataset)}" / f"run={_check_part('run', run)}"
+
+    def append_row(self, dataset: str, run: str, row: dict[str, Any]) -> Path:
+        """Write one row (a dict with the :data:`ROW_COLUMNS` keys; missing keys
+        are null) atomically as ``<asset_id>.parquet`` of the run's partition.
+
+        Writing the same asset again in the same run replaces its row.
+
+        Raises:
+            ValueError: unknown columns, a bad status, an invalid id/name, or a
+                value of the wrong type.
+        """
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        extra = set(row) - set(ROW_COLUMNS)
+        if extra:
+            raise ValueError(f"unknown catalog column(s): {sorted(extra)}")
+        if row.get("status") not in ROW_STATUSES:
+            raise ValueError(f"status must be one of {ROW_STATUSES}, got {row.get('status')!r}")
+        aid = _check_part("asset", str(row.get("asset_id") or ""))
+        schema = _schema()
+        values = {}
+        for name in ROW_COLUMNS:
+            v = row.get(name)
+            if isinstance(v, float) and not math.isfinite(v):
+                v = None
+            values[name] = [v]
+        table = pa.Table.from_pydict(values, schema=schema)
+        buf = pa.BufferOutputStream()
+        pq.write_table(table, buf, compression="zstd")
+        return atomic.write_bytes(self.run_dir(dataset, run) / f"{aid}.parquet", buf.getvalue().to_pybytes())
+
+    def write_run_info(self, dataset: str, run: str, info: dict[str, Any]) -> Path:
+        """Write the run's metadata ``_run.json`` atomically (replacing it)."""
+        return atomic.write_json(self.run_dir(dataset, run) / "_run.json", info)
+
+    def run_info(self, dataset: str, run: str) -> dict[str, Any] | None:
+        p = self.run_dir(dataset, run) / "_run.json"
+        try:
+            return json.loads(p.read_text())
+        except (OSError, ValueError):
+            return None
+
+    def runs(self, dataset: str | None = None) -> list[tuple[str, str]]:
+        """``(dataset, run)`` partitions present, sorted by dataset then run id
+        (run ids start with a UTC time stamp, so this is chronological)."""
+        out = []
+        if not self.root.is_dir():
+            return out
+        for d in sorted(self.root.glob("dataset=*")):
+            name = d.name.split("=", 1)[1]
+            if dataset is not None and name != dataset:
+                continue
+            for r in sorted(d.glob("run=*")):
+                out.append((name, r.name.split("=", 1)[1]))
+        return out
+
+    def read(self, dataset: str | None = None, run: str | None = None, columns: Iterable[str] | None = None):
+        """All rows (optionally of one dataset / run) as a pandas DataFrame with
+        the partition columns ``dataset`` and ``run``; empty (with every column)
+        when there are none."""
+        import pandas as pd
+        import pyarrow as pa
+        import pyarrow.dataset as pads
+
+        part_schema = pa.schema([("dataset", pa.string()), ("run", pa.string())])
+        full = pa.unify_schemas([_schema(), part_schema])
+        files = []
+        for ds_name, run_id in self.runs(dataset):
+            if run is not None and run_id != run:
+                continue
+            files += sorted(str(p) for p in self.run_dir(ds_name, run_id).glob("*.parquet"))
+        if not files:
+            return pd.DataFrame({n: pd.Series(dtype="object") for n in list(full.names)})
+        dset = pads.dataset(
+            files,
+            schema=full,
+            format="parquet",
+            partitioning=pads.partitioning(part_schema, flavor="hive"),
+            partition_base_dir=str(self.root),
+        )
+        cols = None if columns is None else list(dict.fromkeys([*columns, "dataset", "run"]))
+        df = dset.to_table(columns=cols).to_pandas()
+        return df.sort_values(["dataset", "run", "asset_id"]).reset_index(drop=True)
+
+    def finished(self, dataset: str) -> dict[str, dict[str, Any]]:
+        """Latest finished result per ``asset_id|input_hash|config_hash`` key of
+        ``dataset``: the row (dict) of the most recent run in which the asset
+        was done (or skipped, pointing at an earlier output)."""
+        df = self.read(dataset)
+        out: dict[str, dict[str, Any]] = {}
+        if df.empty:
+            return out
+        df = df[df["status"].isin(["done", "skipped"])]
+        for rec in df.sort_values("run").to_dict("records"):
+            out[result_key(rec["asset_id"], rec["input_hash"], rec["config_hash"])] = rec
+        return out
+
+
+def result_key(asset_id: str, input_hash: str | None, config_hash: str | None) -> str:
+    """Key identifying a result: the same asset, input and configuration."""
+    return f"{asset_id}|{input_hash or ''}|{config_hash or ''}"
