@@ -87,7 +87,8 @@ class RunSettings(BaseModel):
     interrupt a long native call). ``evaluate``: run the metrics stage
     (``tasks.evaluate``: penetration, rest stability, oscillation, prompt
     alignment, scale deviation) on each output. ``probes``: include the
-    scripted probes in it. ``refine_function``: ``module:function`` with the
+    scripted probes in it. ``extras``: write the MJCF export, renders and
+    HTML report of each asset (SPEC output). ``refine_function``: ``module:function`` with the
     signature of :func:`asset2sim.tasks.refine.refine_asset`.
     """
 
@@ -97,6 +98,7 @@ class RunSettings(BaseModel):
     isolation: Literal["process", "none"] = "process"
     evaluate: bool = True
     probes: bool = False
+    extras: bool = True
     refine_function: str = "asset2sim.tasks.refine:refine_asset"
 
 
@@ -456,8 +458,28 @@ class ResultCatalog:
             return out
         df = df[df["status"].isin(["done", "skipped"])]
         for rec in df.sort_values("run").to_dict("records"):
+            rec = {k: _plain(v) for k, v in rec.items()}
             out[result_key(rec["asset_id"], rec["input_hash"], rec["config_hash"])] = rec
         return out
+
+
+def _plain(v: Any) -> Any:
+    """A catalog value as plain JSON-able Python (NaN/NaT -> None, numpy
+    scalars -> Python, timestamps -> ISO text)."""
+    import pandas as pd
+
+    if v is None:
+        return None
+    if isinstance(v, pd.Timestamp):
+        return None if pd.isna(v) else v.isoformat()
+    try:
+        if pd.isna(v):
+            return None
+    except (TypeError, ValueError):
+        pass
+    if hasattr(v, "item"):
+        return v.item()
+    return v
 
 
 def result_key(asset_id: str, input_hash: str | None, config_hash: str | None) -> str:

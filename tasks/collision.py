@@ -2,14 +2,17 @@
 
 Simulators collide each mesh through its convex hull (PyBullet, PhysX and
 MuJoCo all do for moving bodies). Two parts whose hulls always overlap — a
-stapler's curved arm over its base — make zero penetration impossible in any
-joint state, and the depenetration impulses then shake the object. When state
-refinement cannot bring the penetration score below tolerance, the collision
-meshes of the links in the worst pairs are replaced by a CoACD decomposition
-(Wei et al., "Approximate Convex Decomposition for 3D Meshes with
-Collision-Aware Concavity and Tree Search", SIGGRAPH 2022; the ``coacd``
-package), written as separate OBJ files under ``collision/`` in the output
-folder. Visual meshes are untouched; the report lists every change.
+stapler's arm sitting in the hinge tower of its base, a hinge pin through
+both — make zero penetration impossible in any joint state, and the
+depenetration impulses then shake the object. When state refinement cannot
+bring the penetration score below tolerance, :func:`improve_collisions` works
+piece by piece on the links of the worst pairs: small overlapping pieces
+(hinge hardware) lose their collision, concave ones are replaced by a CoACD
+decomposition (Wei et al., "Approximate Convex Decomposition for 3D Meshes
+with Collision-Aware Concavity and Tree Search", SIGGRAPH 2022; the ``coacd``
+package) written under ``collision/`` in the output folder, each change kept
+only if it lowers the overlap. Visual meshes are untouched; the report lists
+every change.
 
 Decompositions are cached on disk by the sha256 of the mesh file and the
 settings (``ASSET2SIM_CACHE`` or ``~/.cache/asset2sim``), so reruns are fast.
@@ -32,13 +35,19 @@ from asset2sim.schemas.asset import AssetDescription, GeometryRef
 #: size), at most this many hulls per mesh, and reduced search effort (the
 #: library's defaults take minutes per mesh on 2 cores).
 COACD_SETTINGS = {
-    "threshold": 0.08,
-    "max_convex_hull": 8,
-    "preprocess_resolution": 30,
+    "threshold": 0.05,
+    "max_convex_hull": 16,
+    "preprocess_resolution": 50,
     "resolution": 1000,
     "mcts_iterations": 60,
     "mcts_max_depth": 2,
 }
+
+
+#: A collision piece smaller than this fraction of its link's collision surface
+#: that overlaps another link is treated as hinge hardware (a pin through the
+#: other part) and loses its collision (its visual stays).
+PIN_AREA_FRACTION = 0.05
 
 
 class DecompositionUnavailable(RuntimeError):
@@ -65,8 +74,8 @@ def cache_dir() -> Path:
 
 
 def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in np.asarray(vertices, float)]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(faces, int)]
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in np.asarray(vertices, float)]
+    lines += [f"f {int(a) + 1} {int(b) + 1} {int(c) + 1}" for a, b, c in np.asarray(faces, int)]
     return "\n".join(lines) + "\n"
 
 
@@ -115,25 +124,6 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     return pieces
 
 
-def _piece_points(g: GeometryRef, cache) -> np.ndarray | None:
-    from scipy.spatial import ConvexHull, QhullError
-
-    from asset2sim.tasks.analyze import rpy_matrix
-
-    try:
-        v = np.asarray(cache.get(g.path)[0], float)
-    except Exception:
-        return None
-    v = v[np.all(np.isfinite(v), axis=1)] * np.asarray(g.scale, float)
-    if len(v) < 4:
-        return None
-    try:
-        v = v[ConvexHull(v).vertices]
-    except (QhullError, ValueError):
-        pass
-    return v @ rpy_matrix(g.origin.rpy).T + np.asarray(g.origin.xyz, float)
-
-
 def convexity_ratio(path: Path, cache=None) -> float:
     """Surface area of the mesh over the area of its convex hull (>= ~1 for
     concave closed surfaces, ~1 for convex ones; open surfaces can be < 1)."""
@@ -151,94 +141,193 @@ def convexity_ratio(path: Path, cache=None) -> float:
     return float(m.area / hull_area) if hull_area > 0 else 1.0
 
 
-def colliding_pieces(session, asset: AssetDescription, pairs: list[tuple[str, str]], scale: float, cache=None) -> set[tuple[str, int]]:
-    """(link, collision index) of the mesh collisions whose scaled, posed hull
-    bounding box overlaps a collision piece of the other link of a pair, at
-    the session's current state (``session``: PyBullet session of the scaled
-    output; ``asset``: the input description)."""
-    from asset2sim.tasks.analyze import MeshCache
-    from asset2sim.tasks.closed_state import _link_pose
+class _PieceWorld:
+    """Every collision piece of some links as a separate static body in a
+    private PyBullet world, posed as in ``session`` (scaled output), so the
+    penetration between two links can be measured piece by piece."""
 
-    cache = cache or MeshCache()
-    boxes: dict[str, list[tuple[int, np.ndarray, np.ndarray]]] = {}
-    for link in {ln for pair in pairs for ln in pair}:
-        pos, R = _link_pose(session, session.link_index(link))
-        items = []
-        for k, g in enumerate(asset.link(link).collisions):
-            if g.kind != "mesh" or g.path is None:
+    def __init__(self, session, asset: AssetDescription, links: list[str], scale: float, cache):
+        import pybullet as p
+        from scipy.spatial.transform import Rotation
+
+        from asset2sim.tasks.analyze import rpy_matrix
+        from asset2sim.tasks.closed_state import _link_pose
+
+        self.p = p
+        self.cid = p.connect(p.DIRECT)
+        self.scale = scale
+        self.poses = {}
+        self.bodies: dict[tuple[str, int], list[int]] = {}
+        self.refs: dict[tuple[str, int], GeometryRef] = {}
+        self._rot = Rotation
+        for ln in links:
+            pos, R = _link_pose(session, session.link_index(ln))
+            for k, g in enumerate(asset.link(ln).collisions):
+                if g.kind != "mesh" or g.path is None:
+                    continue
+                Rw = R @ rpy_matrix(g.origin.rpy)
+                tw = pos + R @ (np.asarray(g.origin.xyz, float) * scale)
+                self.poses[(ln, k)] = (Rw, tw)
+                self.refs[(ln, k)] = g
+                v = np.asarray(cache.get(g.path)[0], float)
+                self.bodies[(ln, k)] = [self._body(v[np.all(np.isfinite(v), axis=1)], g)]
+
+    def _body(self, vertices: np.ndarray, g: GeometryRef) -> int:
+        p = self.p
+        Rw, tw = self.poses[next(key for key, ref in self.refs.items() if ref is g)]
+        shape = p.createCollisionShape(
+            p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
+            meshScale=(np.asarray(g.scale, float) * self.scale).tolist(), physicsClientId=self.cid,
+        )
+        return p.createMultiBody(0, shape, basePosition=tw.tolist(), baseOrientation=self._rot.from_matrix(Rw).as_quat().tolist(), physicsClientId=self.cid)
+
+    def replace(self, key: tuple[str, int], pieces: list[np.ndarray]) -> list[int]:
+        """Swap the bodies of ``key`` for ``pieces`` (vertex arrays); returns the old ids."""
+        old = self.bodies[key]
+        for b in old:
+            self.p.resetBasePositionAndOrientation(b, [1e3, 1e3, 1e3], [0, 0, 0, 1], physicsClientId=self.cid)
+        self.bodies[key] = [self._body(v, self.refs[key]) for v in pieces]
+        return old
+
+    def restore(self, key: tuple[str, int], old: list[int]) -> None:
+        for b in self.bodies[key]:
+            self.p.resetBasePositionAndOrientation(b, [1e3, 1e3, 1e3], [0, 0, 0, 1], physicsClientId=self.cid)
+        Rw, tw = self.poses[key]
+        for b in old:
+            self.p.resetBasePositionAndOrientation(b, tw.tolist(), self._rot.from_matrix(Rw).as_quat().tolist(), physicsClientId=self.cid)
+        self.bodies[key] = old
+
+    def penetration(self, a: str, b: str) -> float:
+        """Sum over piece pairs of the deepest penetration, m."""
+        p = self.p
+        total = 0.0
+        for (la, _), ids_a in self.bodies.items():
+            if la != a:
                 continue
-            pts = _piece_points(g, cache)
-            if pts is None:
+            for (lb, _), ids_b in self.bodies.items():
+                if lb != b:
+                    continue
+                for ia in ids_a:
+                    for ib in ids_b:
+                        d = [pt[8] for pt in p.getClosestPoints(ia, ib, 0.0, physicsClientId=self.cid) if pt[8] < 0]
+                        if d:
+                            total += -min(d)
+        return total
+
+    def overlapping(self, key: tuple[str, int], other: str) -> float:
+        p = self.p
+        worst = 0.0
+        for (lb, _), ids_b in self.bodies.items():
+            if lb != other:
                 continue
-            w = (pts * scale) @ R.T + pos
-            items.append((k, w.min(axis=0), w.max(axis=0)))
-        boxes[link] = items
-    out: set[tuple[str, int]] = set()
-    for a, b in pairs:
-        for ka, alo, ahi in boxes.get(a, []):
-            for kb, blo, bhi in boxes.get(b, []):
-                if np.all(alo <= bhi) and np.all(blo <= ahi):
-                    out.add((a, ka))
-                    out.add((b, kb))
-    return out
+            for ia in self.bodies[key]:
+                for ib in ids_b:
+                    for pt in p.getClosestPoints(ia, ib, 0.0, physicsClientId=self.cid):
+                        worst = max(worst, -pt[8])
+        return worst
+
+    def close(self) -> None:
+        self.p.disconnect(self.cid)
 
 
-def decompose_links(
+def improve_collisions(
+    session,
     asset: AssetDescription,
-    links: list[str],
+    pairs: list[tuple[str, str]],
+    scale: float,
     out_dir: Path,
     *,
-    only: set[tuple[str, int]] | None = None,
-    budget_s: float = 60.0,
-    min_concavity: float = 1.05,
     cache=None,
+    budget_s: float = 60.0,
 ) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
-    """Decompose collision meshes of ``links`` and write the pieces to
-    ``out_dir/collision/<link>_<k>_<i>.obj``.
+    """Greedy, piece by piece, for link pairs whose hulls keep penetrating:
 
-    Only meshes in ``only`` (when given) whose surface is concave enough
-    (:func:`convexity_ratio` >= ``min_concavity``) are decomposed, largest
-    first, until ``budget_s`` seconds of decomposition are spent; every other
-    collision of those links is kept as it is.
+    - a small piece (< ``PIN_AREA_FRACTION`` of its link's collision surface,
+      e.g. a hinge pin) that overlaps the other link loses its collision;
+    - a larger, concave piece (:func:`convexity_ratio` >= 1.05) is replaced by
+      its CoACD decomposition;
 
-    Returns (link -> pieces for the writer's collision overrides, notes).
-    Raises as :func:`decompose_mesh`.
+    each change is kept only if it lowers the pair's piece-wise penetration
+    (sum over piece pairs of the deepest point). ``session``: PyBullet session
+    of the scaled output at the refined state. Returns (collision overrides
+    for the writer, notes).
     """
     import time
 
     from asset2sim.tasks.analyze import MeshCache
 
     cache = cache or MeshCache()
+    links = sorted({ln for pair in pairs for ln in pair})
+    world = _PieceWorld(session, asset, links, scale, cache)
     notes: list[str] = []
-    candidates = []
-    for name in links:
-        for k, g in enumerate(asset.link(name).collisions):
-            if g.kind != "mesh" or g.path is None or (only is not None and (name, k) not in only):
-                continue
-            ratio = convexity_ratio(g.path, cache)
-            if ratio < min_concavity:
-                continue
-            candidates.append((len(cache.get(g.path)[1]), name, k, g))
-    candidates.sort(key=lambda c: -c[0])
+    changed: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]] | None] = {}
+    tried: set[tuple[str, int]] = set()
     t0 = time.perf_counter()
-    done: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]]] = {}
-    for _, name, k, g in candidates:
-        if time.perf_counter() - t0 > budget_s:
-            notes.append(f"decomposition budget {budget_s:g} s spent; {name} collision {k} kept as its hull")
-            continue
-        done[(name, k)] = decompose_mesh(g.path)
+    try:
+        area = {}
+        for (ln, k), g in world.refs.items():
+            v, f, _ = cache.get(g.path)
+            tri = np.asarray(v, float)[np.asarray(f, int)] * np.asarray(g.scale, float)
+            area[(ln, k)] = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+        link_area = {ln: sum(a for (l2, _), a in area.items() if l2 == ln) for ln in links}
+        passes = [pairs, pairs]  # a second pass: a change on one side can make another one useful
+        for n_pass, (a, b) in ((n, pr) for n, prs in enumerate(passes) for pr in prs):
+            if n_pass != getattr(world, "_pass", -1):
+                world._pass = n_pass
+                tried.clear()
+            before = world.penetration(a, b)
+            cands = []
+            for ln, other in ((a, b), (b, a)):
+                for key in [k for k in world.refs if k[0] == ln]:
+                    depth = world.overlapping(key, other)
+                    if depth > 0:
+                        cands.append((depth, key, other))
+            cands.sort(key=lambda c: -c[0])
+            for _, key, other in cands:
+                if key in changed or key in tried:
+                    continue
+                tried.add(key)
+                ln = key[0]
+                g = world.refs[key]
+                n_link = sum(1 for k2 in world.refs if k2[0] == ln and changed.get(k2, 0) is not None)
+                if area[key] < PIN_AREA_FRACTION * max(link_area[ln], 1e-12) and n_link > 1:
+                    old = world.replace(key, [])
+                    after = world.penetration(a, b)
+                    if after < before:
+                        changed[key] = None
+                        notes.append(f"{ln}: collision of {g.filename} (hinge hardware, {100 * area[key] / link_area[ln]:.1f} % of the link's surface) removed: it overlapped {other} ({before * 1000:.3g} -> {after * 1000:.3g} mm)")
+                        before = after
+                    else:
+                        world.restore(key, old)
+                    continue
+                if time.perf_counter() - t0 > budget_s:
+                    notes.append(f"decomposition budget {budget_s:g} s spent; {g.filename} of {ln} kept as its hull")
+                    continue
+                if convexity_ratio(g.path, cache) < 1.05:
+                    continue
+                pieces = decompose_mesh(g.path)
+                old = world.replace(key, [pv for pv, _ in pieces])
+                after = world.penetration(a, b)
+                if after < before:
+                    changed[key] = pieces
+                    notes.append(f"{ln}: {g.filename} replaced by {len(pieces)} convex pieces (CoACD): overlap with {other} {before * 1000:.3g} -> {after * 1000:.3g} mm")
+                    before = after
+                else:
+                    world.restore(key, old)
+    finally:
+        world.close()
     out: dict[str, list[CollisionPiece]] = {}
-    for name in links:
-        if not any(key[0] == name for key in done):
-            continue
-        pieces: list[CollisionPiece] = []
-        for k, g in enumerate(asset.link(name).collisions):
-            if (name, k) in done:
-                for i, (v, f) in enumerate(done[(name, k)]):
-                    rel = f"collision/{name}_{k}_{i}.obj"
+    for ln in sorted({k[0] for k in changed}):
+        pieces_out: list[CollisionPiece] = []
+        for k, g in enumerate(asset.link(ln).collisions):
+            if (ln, k) in changed:
+                if changed[(ln, k)] is None:
+                    continue
+                for i, (v, f) in enumerate(changed[(ln, k)]):
+                    rel = f"collision/{ln}_{k}_{i}.obj"
                     atomic.write_text(out_dir / rel, _obj_text(v, f))
-                    pieces.append(CollisionPiece(filename=rel, source=g))
+                    pieces_out.append(CollisionPiece(filename=rel, source=g))
             elif g.kind == "mesh" and g.filename:
-                pieces.append(CollisionPiece(filename=g.filename, source=g))
-        out[name] = pieces
+                pieces_out.append(CollisionPiece(filename=g.filename, source=g))
+        out[ln] = pieces_out
     return out, notes

@@ -504,21 +504,40 @@ def _task_joints(ctx_joints: dict[str, JointInfo], reference_dir: Path | None, r
     return movable, "every movable joint"
 
 
-def _match_label(label: str | None, wanted: str | None) -> bool:
+def _match_label(label: str | None, wanted: str | None, category: str | None = None) -> bool:
+    """Whether the request's part word ``wanted`` names a link labelled
+    ``label``: :func:`asset2sim.tasks.priors.request_label_matches` (canonical
+    labels and the category's synonyms, e.g. a laptop's "lid" is its
+    ``screen``); without the priors, equal labels or ``wanted`` as one of the
+    ``_``-separated words of ``label``."""
     if not label or not wanted:
         return False
+    try:
+        from asset2sim.tasks.priors import request_label_matches
+    except ImportError:
+        request_label_matches = None
+    if request_label_matches is not None:
+        try:
+            return bool(request_label_matches(category or "Generic", wanted, label))
+        except Exception:
+            pass
     label, wanted = label.lower(), wanted.lower()
-    return wanted == label or wanted in label.replace("_", " ").split() or wanted in label
+    return wanted == label or wanted in label.split("_")
 
 
 def requested_joints(spec, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
-                     centres: dict[str, np.ndarray], task_joints: list[str]) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
+                     centres: dict[str, np.ndarray], task_joints: list[str],
+                     category: str | None = None) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
     """Map a RequestSpec's joint states to joints.
 
     ``selector == "all"``: every task-relevant joint. ``label``: movable joints
-    whose child link's semantic label matches (exact, a word of it, or a
-    substring), ordered top-to-bottom by the child link's AABB centre height
-    (then front-to-back by -y... x), ``ordinal`` picks one.
+    whose child link's semantic label the request's word names
+    (:func:`_match_label`), ordered top to bottom by the height of the child
+    link's AABB centre (then by x); ``ordinal`` picks one. A label that names
+    no part falls back to the task-relevant joints (the pipeline's convention,
+    :func:`asset2sim.tasks.priors.request_label_matches`); a phrase that still
+    maps to nothing is returned as unmatched. A later phrase overrides an
+    earlier one for the same joint.
 
     Returns:
         ([(joint, band, label, phrase)], [phrases that matched no joint]).
@@ -527,20 +546,21 @@ def requested_joints(spec, joints: dict[str, JointInfo], semantics: dict[str, tu
     if spec is None:
         return out, unmatched
     movable = [n for n, j in joints.items() if j.type in _MOVABLE]
+    zero = np.zeros(3)
     for js in spec.joint_states:
         if js.selector == "all":
             names = list(task_joints)
         else:
-            names = [n for n in movable if _match_label(semantics.get(joints[n].child, (None, None))[1], js.label)]
-            names.sort(key=lambda n: (-float(centres.get(joints[n].child, np.zeros(3))[2]),
-                                      float(centres.get(joints[n].child, np.zeros(3))[0])))
+            names = [n for n in movable if _match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
+            if not names:
+                names = [n for n in task_joints if n in movable]
+            names.sort(key=lambda n: (-float(centres.get(joints[n].child, zero)[2]), float(centres.get(joints[n].child, zero)[0])))
             if js.ordinal is not None:
                 names = [names[js.ordinal]] if 0 <= js.ordinal < len(names) else []
         if not names:
             unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
         for n in names:
             out.append((n, js.band, semantics.get(joints[n].child, (None, None))[1], js.phrase))
-    # A later, more specific phrase overrides an earlier one for the same joint.
     dedup: dict[str, tuple[str, str, str | None, str]] = {}
     for item in out:
         dedup[item[0]] = item
@@ -1110,7 +1130,7 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     r = _first_run(runs)
     centres = r.link_centres if r is not None else {}
     largest, where = _largest_extent(ctx, runs)
-    req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, centres, ctx.task_joints)
+    req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, centres, ctx.task_joints, ctx.category)
     checks = []
     for name, band, label, phrase in req:
         c = ctx.closed.get(name)
@@ -1203,7 +1223,7 @@ def evaluate_asset(
     if ctx.request is not None:
         for js in ctx.request.joint_states:
             if js.selector == "label":
-                pre_req += [n for n in ctx.movable if _match_label(ctx.semantics.get(ctx.joints[n].child, (None, None))[1], js.label)]
+                pre_req += [n for n in ctx.movable if _match_label(ctx.semantics.get(ctx.joints[n].child, (None, None))[1], js.label, ctx.category)]
     ctx.task_joints, tj_rule = _task_joints(ctx.joints, ctx.reference_dir, pre_req)
     ctx.notes.append(f"task-relevant joints: {', '.join(ctx.task_joints) or 'none'} ({tj_rule})")
     need_closed = list(dict.fromkeys(ctx.task_joints + pre_req))

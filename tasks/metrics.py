@@ -55,6 +55,10 @@ class RestTrace:
     settle_joints: dict[str, np.ndarray] = field(default_factory=dict)
     initial_joints: dict[str, float] = field(default_factory=dict)
     diverged: bool = False
+    initial_root_pos: np.ndarray | None = None
+    """Root position (3,) m as placed, before settling."""
+    initial_root_quat: np.ndarray | None = None
+    """Root orientation (4,) xyzw as placed, before settling."""
 
 
 def penetration(session: SimSession) -> MetricResult:
@@ -92,6 +96,7 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
     n_test = int(round(conv.test_time / conv.timestep))
     names = list(session.joint_names)
     initial = session.joint_positions()
+    r0_pos, r0_quat = session.root_pose()
     settle = {n: np.empty(n_set) for n in names}
     diverged = False
     for i in range(n_set):
@@ -130,6 +135,8 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
         settle_joints=settle,
         initial_joints=initial,
         diverged=diverged or not (np.all(np.isfinite(p0)) and np.all(np.isfinite(q0))),
+        initial_root_pos=np.asarray(r0_pos, float),
+        initial_root_quat=np.asarray(r0_quat, float),
     )
 
 
@@ -156,6 +163,31 @@ def rest_stability(trace: RestTrace, conventions: SimConventions | None = None, 
         passed=passed,
         threshold=f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad",
         details={"D_pos_m": d_pos, "D_ori_rad": d_ori, "diverged": False},
+        engine=engine,
+    )
+
+
+#: Largest root rotation during settling, rad, before the object counts as
+#: having fallen over (not a SPEC metric: the SPEC measures after settling,
+#: which misses an object that topples in its first second).
+SETTLE_TILT_LIMIT = 0.05
+
+
+def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
+    """Root rotation (rad) between placement and the end of settling; fails
+    above :data:`SETTLE_TILT_LIMIT` (the object fell over while settling)."""
+    if trace.initial_root_quat is None or trace.diverged:
+        return MetricResult(name="settle_tilt", value=None, unit="rad", passed=not trace.diverged, engine=engine,
+                            threshold=f"<= {SETTLE_TILT_LIMIT} rad", details={"diverged": trace.diverged})
+    tilt = quat_angle(trace.initial_root_quat, trace.q0)
+    drop = float(np.linalg.norm(trace.p0 - trace.initial_root_pos))
+    return MetricResult(
+        name="settle_tilt",
+        value=tilt,
+        unit="rad",
+        passed=tilt <= SETTLE_TILT_LIMIT,
+        threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (asset2sim check, not SPEC)",
+        details={"tilt_rad": tilt, "displacement_m": drop},
         engine=engine,
     )
 

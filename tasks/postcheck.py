@@ -35,8 +35,13 @@ class PostCheck:
         return next(m for m in self.metrics if m.name == name)
 
     @property
+    def stable(self) -> bool:
+        """SPEC rest stability and no toppling while settling."""
+        return bool(self.metric("rest_stability").passed and self.metric("settle_tilt").passed)
+
+    @property
     def passed(self) -> bool:
-        return bool(self.metric("rest_stability").passed and self.metric("oscillation").passed and not self.sagging)
+        return bool(self.stable and self.metric("oscillation").passed and not self.sagging)
 
 
 def springs_of(overlay: Overlay) -> dict[str, Spring]:
@@ -85,7 +90,8 @@ def run_post_check(
         details={"drift": drift, "sagging": sagging},
         engine=engine,
     )
-    return PostCheck(metrics=[pen, stab, osc, sag_metric], trace=trace, sag=drift, sagging=sagging)
+    tilt = metrics.settle_tilt(trace, engine=engine)
+    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt], trace=trace, sag=drift, sagging=sagging)
 
 
 def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay, dict[str, dict[str, float]], str]:
@@ -101,7 +107,7 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
         reason.append(f"oscillating: {', '.join(osc)}")
     if check.sagging:
         reason.append(f"sagging: {', '.join(check.sagging)}")
-    if not targets and not check.metric("rest_stability").passed:
+    if not targets and not check.stable:
         targets = list(overlay.joints)
         reason.append("root unstable: damping all joints")
     ov = overlay.model_copy(deep=True)

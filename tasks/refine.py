@@ -229,7 +229,7 @@ def refine_asset(
         lap("closed_state")
 
         att = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
-        if not att.check.metric("rest_stability").passed and spec.pose_hint is None:
+        if not att.check.stable and spec.pose_hint is None:
             # the object tips or slides as modelled: try resting it on its stablest face
             from asset2sim.tasks import pose
 
@@ -239,9 +239,7 @@ def refine_asset(
                 say("post_check", f"unstable as modelled; {note}")
                 ctx.root_rotation = R
                 second = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
-                d1 = att.check.metric("rest_stability").value
-                d2 = second.check.metric("rest_stability").value
-                if second.check.metric("rest_stability").passed or (d2 is not None and (d1 is None or d2 < d1)):
+                if second.check.stable and (second.check.passed or not att.check.passed):
                     att, pose_note = second, note
                 else:
                     ctx.root_rotation = None
@@ -259,7 +257,7 @@ def refine_asset(
     osc = check.metric("oscillation")
     say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(rounds) - 1}")
 
-    if not stab.passed:
+    if not check.stable:
         failure = "unstable"
     elif not osc.passed:
         failure = "oscillating"
@@ -429,17 +427,17 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     links = sorted({ln for pair in deep for ln in pair})
     sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
     try:
-        only = collision.colliding_pieces(sess, asset, deep, s, cache=mesh_cache)
+        overrides, dnotes = collision.improve_collisions(
+            sess, asset, deep, s, out_dir, cache=mesh_cache, budget_s=config.decomposition_budget
+        )
+    except (collision.DecompositionUnavailable, ValueError) as exc:
+        say("refine_state", f"collision improvement skipped: {exc}")
+        st.collision_changes = [f"collision improvement skipped: {exc}"]
+        return st, {}
     finally:
         sess.close()
-    try:
-        overrides, dnotes = collision.decompose_links(asset, links, out_dir, only=only, budget_s=config.decomposition_budget, cache=mesh_cache)
-    except (collision.DecompositionUnavailable, ValueError) as exc:
-        say("refine_state", f"convex decomposition skipped: {exc}")
-        st.collision_changes = [f"convex decomposition skipped: {exc}"]
-        return st, {}
     if not overrides:
-        st.collision_changes = dnotes
+        st.collision_changes = dnotes or [f"no collision piece change lowered the overlap of {', '.join(links)}"]
         return st, {}
     before = st
     write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
@@ -451,17 +449,12 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
         write.write_output(asset, overlay, out_dir, requested, copy=False, root_rotation=root_rotation)
         before.evaluations = st.evaluations
         before.collision_changes = [
-            f"convex decomposition tried for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
+            f"collision pieces changed for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
             f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
         ] + dnotes
         return before, {}
-    st.collision_changes = [
-        f"{ln}: collision meshes overlapping {', '.join(sorted({b if a == ln else a for a, b in deep if ln in (a, b)}))} "
-        f"replaced by {sum(1 for p_ in pcs if p_.filename.startswith('collision/'))} convex pieces (CoACD), because their hulls kept "
-        f"penetrating ({before.phi_result * 1000:.3g} mm after state search)"
-        for ln, pcs in overrides.items()
-    ] + dnotes
-    st.method = before.method + " | convex decomposition -> " + st.method
+    st.collision_changes = dnotes
+    st.method = before.method + " | collision pieces improved -> " + st.method
     return st, overrides
 
 

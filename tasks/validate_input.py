@@ -127,7 +127,7 @@ CODES: dict[str, CodeInfo] = {
     "XML_MALFORMED": _c("error", "xml", "not well-formed XML (incl. undefined entities, NUL characters)"),
     "XML_NOT_A_FILE": _c("error", "xml", "the XML source is not a readable regular file"),
     "URDF_ROOT_NOT_ROBOT": _c("error", "structure", "the root element is not <robot>"),
-    "URDF_ROBOT_NAME_MISSING": _c("warning", "structure", "<robot> has no name attribute"),
+    "URDF_ROBOT_NAME_MISSING": _c("error", "structure", "<robot> has no name attribute (required by URDF; yourdfpy fails on it)"),
     "URDF_NO_LINKS": _c("error", "structure", "the robot has no <link>"),
     # numbers
     "NUMBER_NAN": _c("error", "numbers", "a NaN where a number is required"),
@@ -199,6 +199,8 @@ CODES: dict[str, CodeInfo] = {
     "LINK_ZERO_VOLUME": _c("warning", "mesh_contents", "a link's whole mass geometry is flat: mass must come from area"),
     "MESH_MATERIAL_OUTSIDE": _c("warning", "mesh_paths", "an mtllib/texture path leaving the folder (not used, not copied)"),
     "MESH_MATERIAL_MISSING": _c("info", "mesh_paths", "an mtllib/texture file that does not exist"),
+    "TEXTURE_PATH_REFUSED": _c("error", "mesh_paths", "a URDF <texture filename> that is absolute, a URI, escapes the folder or is not an image file"),
+    "TEXTURE_NOT_FOUND": _c("warning", "mesh_paths", "a URDF <texture filename> that does not exist"),
     # extras
     "SEMANTICS_MALFORMED_LINE": _c("error", "extras", "a semantics.txt line that is not 'link joint_kind label'"),
     "SEMANTICS_UNKNOWN_LINK": _c("info", "extras", "semantics.txt names a link the URDF does not have"),
@@ -213,6 +215,7 @@ MESH_USE_DEPENDENT = frozenset(
 )
 
 MESH_EXTENSIONS = frozenset({".obj", ".stl", ".ply", ".off", ".glb", ".gltf", ".dae"})
+IMAGE_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tga", ".tif", ".tiff", ".gif"})
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 MOVABLE_TYPES = frozenset({"revolute", "continuous", "prismatic", "floating", "planar"})
 SEMANTIC_KINDS = frozenset({"hinge", "slider", "free", "heavy", "static", "junk"})
@@ -1042,11 +1045,27 @@ class _Validator:
             self.add("URDF_ROBOT_NAME_MISSING", "<robot> has no name", line=root.sourceline)
         links = [self.parse_link(el) for el in root.findall("link")]
         joints = [self.parse_joint(el) for el in root.findall("joint")]
-        for el in root.iter("material"):
-            c = el.find("color")
-            if c is not None:
-                self.nums(c, "rgba", 4)
+        for el in root.findall("material"):
+            self.material(el, None)
         return links, joints
+
+    def material(self, el, link: str | None) -> None:
+        """A <material>: finite rgba, and a <texture filename> that is a safe
+        relative path to an image inside the folder."""
+        c = el.find("color")
+        if c is not None:
+            self.nums(c, "rgba", 4, link=link)
+        for tex in el.findall("texture"):
+            fname = tex.get("filename")
+            if fname is None:
+                continue
+            assert self.folder is not None
+            ref = resolve_mesh_reference(self.folder, fname, extensions=IMAGE_EXTENSIONS, max_bytes=self.policy.max_mesh_bytes)
+            if ref.code == "MESH_NOT_FOUND":
+                self.add("TEXTURE_NOT_FOUND", f"<texture filename={fname!r}> does not exist", line=tex.sourceline, link=link)
+            elif ref.code is not None:
+                self.add("TEXTURE_PATH_REFUSED", f"<texture filename={fname!r}>: {ref.message} ({ref.code})", line=tex.sourceline,
+                         link=link, reason=ref.code)
 
     def parse_link(self, el) -> _Link:
         name = el.get("name")
@@ -1056,6 +1075,9 @@ class _Validator:
         for role in ("visual", "collision"):
             for g in el.findall(role):
                 ln.geoms.append(self.parse_geom(g, role, name))
+        for vis in el.findall("visual"):
+            for mat in vis.findall("material"):
+                self.material(mat, name)
         inert = el.find("inertial")
         if inert is not None:
             ln.has_inertial = True

@@ -458,6 +458,16 @@ def _many_faces_obj(n: int) -> str:
     return "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n" + "f 1 2 3\n" * n
 
 
+def _texture(filename: str) -> Callable[[str], str]:
+    """Give the base link's visual a <material> with a texture."""
+
+    def fn(text: str) -> str:
+        mat = f'<material name="skin"><color rgba="1 1 1 1" /><texture filename="{filename}" /></material></visual>'
+        return text.replace("</visual>", mat, 1)
+
+    return fn
+
+
 def _add_sheet_piece(m: Model) -> None:
     m.link("lid").collisions.append(Geom(filename="meshes/sheet.obj"))
 
@@ -562,7 +572,7 @@ def _cases() -> list[Case]:
     add(C("structure_mimic_unknown", "structure", "JOINT_MIMIC_UNKNOWN", _model_case(_attr("joint", "lid_hinge", mimic="ghost"))))
     add(C("structure_limit_missing", "structure", "JOINT_LIMIT_MISSING", _model_case(_attr("joint", "lid_hinge", with_limit=False))))
     add(C("structure_limit_incomplete", "structure", "JOINT_LIMIT_INCOMPLETE", _model_case(_attr("joint", "lid_hinge", lower=None)), refused=False))
-    add(C("structure_robot_name_missing", "structure", "URDF_ROBOT_NAME_MISSING", _model_case(lambda m: setattr(m, "name", None)), refused=False))
+    add(C("structure_robot_name_missing", "structure", "URDF_ROBOT_NAME_MISSING", _model_case(lambda m: setattr(m, "name", None))))
     add(C("structure_geometry_missing", "structure", "GEOMETRY_MISSING", _model_case(_empty_geometry)))
     add(C("structure_axis_not_unit", "structure", "JOINT_AXIS_NOT_UNIT", _model_case(_attr("joint", "lid_hinge", axis="2 0 0")), refused=False))
     # --- numbers
@@ -651,6 +661,9 @@ def _cases() -> list[Case]:
     add(C("path_empty_filename", "mesh_paths", "MESH_FILENAME_EMPTY", _model_case(_mesh("lid", ""))))
     add(C("path_control_char", "mesh_paths", "MESH_PATH_CONTROL_CHAR", _model_case(_mesh("lid", "meshes/li\td.obj"))))
     add(C("path_too_large", "mesh_paths", "MESH_TOO_LARGE", build_valid, policy={"max_mesh_bytes": 256}))
+    add(C("path_texture_absolute", "mesh_paths", "TEXTURE_PATH_REFUSED", _text_case(_texture("/etc/passwd"))))
+    add(C("path_texture_escapes", "mesh_paths", "TEXTURE_PATH_REFUSED", _text_case(_texture("../../secret.png"))))
+    add(C("path_texture_missing", "mesh_paths", "TEXTURE_NOT_FOUND", _text_case(_texture("images/none.png")), refused=False))
     add(C("path_mtllib_missing", "mesh_paths", "MESH_MATERIAL_MISSING",
           _files_case(_write("meshes/lid.obj", box_obj(0, 1, -1, 0, 0, 0.05, mtllib="nowhere.mtl"))), refused=False))
     add(C("path_mtllib_escapes", "mesh_paths", "MESH_MATERIAL_OUTSIDE",

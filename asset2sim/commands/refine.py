@@ -16,9 +16,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prompt", "-p", default="", help='the request, e.g. "I want a slightly open stapler."')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
     parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")
-    parser.add_argument("--estimator", default="offline", help="overlay estimator: offline (default) or a model backend")
-    parser.add_argument("--model", default=None, help="model name for model-backed estimators")
-    parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible server (model backends)")
+    parser.add_argument(
+        "--estimator",
+        default="offline",
+        help="overlay estimator: offline (default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
+        "key from the provider's environment variable); openai (an OpenAI-compatible server: --base-url URL --model M). "
+        "See docs/model_backends.md",
+    )
+    parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
+    parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
     parser.add_argument("--quiet", "-q", action="store_true", help="print only the summary")

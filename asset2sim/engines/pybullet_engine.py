@@ -160,10 +160,12 @@ class PyBulletSession:
         pos, orn = self.root_pose()
         shift = -lo
         self.set_root_pose(pos + np.array([0.0, 0.0, shift]), orn)
-        # Refine with exact signed distances to the plane (AABBs carry a margin).
+        # Refine with exact signed distances to the plane: Bullet's AABBs of
+        # rotated hulls are loose (up to tens of cm above the true lowest point).
         if self.plane is not None:
             p.performCollisionDetection(physicsClientId=self.cid)
-            pts = p.getClosestPoints(self.body, self.plane, 0.05, physicsClientId=self.cid)
+            hi = max(p.getAABB(self.body, link, physicsClientId=self.cid)[1][2] for link in self.link_names)
+            pts = p.getClosestPoints(self.body, self.plane, max(hi, 0.0) + 0.05, physicsClientId=self.cid)
             if pts:
                 dmin = min(pt[8] for pt in pts)
                 pos, orn = self.root_pose()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring, open_session

@@ -104,10 +104,24 @@ def test_requested_joints_orders_drawers_top_to_bottom():
         JointStateRequest(selector="label", label="lid", band="halfway"),
         JointStateRequest(selector="label", label="door", band="fully", phrase="door fully open"),
     ])
-    req, unmatched = requested_joints(spec, joints, sem_, centres, ["j_lid"])
+    req, unmatched = requested_joints(spec, joints, sem_, centres, [])
     got = {j: band for j, band, _, _ in req}
     assert got == {"j_high": "closed", "j_low": "slightly_open", "j_lid": "halfway"}
     assert unmatched == ["door fully open"]
+    # a part word that names nothing falls back to the task-relevant joints
+    req, unmatched = requested_joints(spec, joints, sem_, centres, ["j_lid"])
+    assert {j: band for j, band, _, _ in req}["j_lid"] == "fully" and unmatched == []
+
+
+def test_label_matching_does_not_confuse_a_pump_lid_with_the_lid():
+    joints = {
+        "j_lid": JointInfo("j_lid", "revolute", "body", "lid", 0, 1.7, None, None),
+        "j_pump": JointInfo("j_pump", "prismatic", "body", "pump", 0, 0.01, None, None),
+    }
+    sem_ = {"lid": ("hinge", "lid"), "pump": ("slider", "pump_lid")}
+    spec = RequestSpec(joint_states=[JointStateRequest(selector="label", label="lid", band="fully")])
+    req, _ = requested_joints(spec, joints, sem_, {}, ["j_lid"], "Toilet")
+    assert [j for j, *_ in req] == ["j_lid"]
 
 
 # ------------------------------------------------------------------ end to end

@@ -258,3 +258,38 @@ def test_demo_assets_validate_without_errors(demo_root):
     for folder in folders:
         findings = vi.validate_asset(folder)
         assert [f.describe() for f in findings if f.severity != "info"] == [], folder.name
+
+
+# ----------------------------------------------------------------------------- other formats, textures
+
+
+def test_scan_other_formats(tmp_path):
+    import trimesh
+
+    box = trimesh.creation.box((1, 2, 3))
+    ply = tmp_path / "box.ply"
+    ply.write_bytes(trimesh.exchange.ply.export_ply(box))
+    scan = vi.scan_mesh_file(ply)
+    assert scan.defects == {} and scan.n_faces == 12 and scan.area == pytest.approx(22.0)
+    ascii_stl = tmp_path / "box.stl"
+    ascii_stl.write_text(trimesh.exchange.stl.export_stl_ascii(box))
+    assert vi.scan_mesh_file(ascii_stl).defects == {}
+    dae = tmp_path / "evil.dae"
+    dae.write_bytes(b'<!DOCTYPE c [<!ENTITY x SYSTEM "file:///etc/passwd">]><COLLADA>&x;</COLLADA>')
+    assert "XML_EXTERNAL_REFERENCE_FORBIDDEN" in vi.scan_mesh_file(dae).defects["MESH_MALFORMED"]
+    obj = tmp_path / "quads.obj"  # polygons, comments, negative indices: the general reader
+    obj.write_text(cb.CUBE_V + "# quads\nf 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf -6 -2 -1 -5\nf 1 5 7 3\nf 2 4 8 6\n")
+    scan = vi.scan_mesh_file(obj)
+    assert scan.defects == {} and scan.n_faces == 12 and scan.area == pytest.approx(6.0)
+    big = tmp_path / "big.obj"
+    big.write_text(cb.CUBE_V + cb.CUBE_F * 10)
+    assert "MESH_TOO_MANY_FACES" in vi.scan_mesh_file(big, max_faces=100).defects
+
+
+def test_valid_texture_is_accepted(tmp_path):
+    m = cb.valid_model()
+    text = cb.render_urdf(m).replace(
+        "</visual>", '<material name="skin"><texture filename="images/tex.png" /></material></visual>', 1
+    )
+    asset = cb.write_asset(tmp_path / "a", urdf_text=text)
+    assert [f.describe() for f in vi.validate_asset(asset) if f.severity != "info"] == []

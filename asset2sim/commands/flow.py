@@ -1,0 +1,140 @@
+"""``asset2sim flow``: refine a dataset of ``catalog.yaml`` with the Prefect flow
+(``make flow``), or register and serve the nightly deployment (``--serve``,
+``make serve``)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+NAME = "flow"
+HELP = (
+    "Refine a dataset declared in catalog.yaml (Prefect flow, Dask fan-out, Parquet catalog, MLflow); "
+    "--serve registers and serves the nightly deployment."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+    parser.add_argument("--dataset", default=None, help="dataset of the catalog (default: its default_dataset)")
+    parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
+    parser.add_argument(
+        "--dask-address",
+        default=None,
+        help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_ADDRESS, else a local cluster)",
+    )
+    parser.add_argument("--ids", default=None, help="comma-separated asset ids to run (default: all)")
+    parser.add_argument("--limit", type=int, default=None, help="run at most this many assets")
+    parser.add_argument("--force", action="store_true", help="redo assets even when a finished result exists")
+    parser.add_argument("--serve", action="store_true", help="register the nightly deployment and serve it")
+    parser.add_argument("--cron", default=None, help="with --serve: cron expression (default: catalog schedule.cron)")
+    parser.add_argument("--timezone", default=None, help="with --serve: IANA time zone (default: catalog schedule.timezone)")
+    parser.add_argument("--register-only", action="store_true", help="with --serve: register the deployment and exit")
+
+
+def _fmt(v, pct: bool = False) -> str:
+    if v is None:
+        return "n/a"
+    return f"{100 * v:.1f}%" if pct else (f"{v:.3g}" if isinstance(v, float) else str(v))
+
+
+def run(args: argparse.Namespace) -> int:
+    t0 = time.perf_counter()
+    from asset2sim.catalog import CatalogError, load_catalog
+    from asset2sim.flows.refine_flow import prepare_prefect_environment
+
+    try:
+        cat = load_catalog(args.catalog)
+    except CatalogError as exc:
+        print(f"error: {exc}")
+        return 2
+    prepare_prefect_environment(cat.project_root)  # before Prefect is imported
+    if args.serve:
+        return _serve(args, cat)
+    from asset2sim.flows.refine_flow import run_refine_flow
+
+    ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
+    try:
+        summary = run_refine_flow(
+            cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force
+        )
+    except CatalogError as exc:
+        print(f"error: {exc}")
+        return 2
+    total = time.perf_counter() - t0
+    body = float(summary.get("flow_body_seconds") or 0.0)
+    assets_s = float(summary.get("assets_seconds") or 0.0)
+    worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
+    print(f"run {summary['run']} of dataset {summary['dataset']}: {summary['assets']} assets "
+          f"({summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed)")
+    print(f"  all checks passed: {_fmt(summary.get('pass_rate_all'), True)}; rest stability "
+          f"{_fmt(summary.get('stability_pass_rate'), True)}; oscillation {_fmt(summary.get('oscillation_pass_rate'), True)}; "
+          f"penetration {_fmt(summary.get('penetration_mm_mean'))} mm (mean); "
+          f"queries/asset {_fmt(summary.get('queries_per_asset'))}")
+    modes = {k: v for k, v in (summary.get("failure_modes") or {}).items() if v}
+    print("  failure modes: " + (", ".join(f"{k} {v}" for k, v in modes.items()) or "none"))
+    print(f"  wall time {total:.1f} s: start-up and tear-down (Prefect + Dask + tracking) "
+          f"{max(0.0, total - assets_s):.1f} s, assets {assets_s:.1f} s"
+          + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else ""))
+    print(f"  outputs  {summary['output_dir']}")
+    print(f"  catalog  {summary['catalog_root']}")
+    if summary.get("mlflow_run_id"):
+        from asset2sim.tracking import resolve_tracking_uri
+
+        print(f"  MLflow   run {summary['mlflow_run_id']} in {resolve_tracking_uri(cat.project_root, cat.config.tracking.uri)}")
+    elif summary.get("tracking_error"):
+        print(f"  MLflow   not logged: {summary['tracking_error']}")
+    return 0
+
+
+def _serve(args: argparse.Namespace, cat) -> int:
+    from asset2sim.flows import nightly
+
+    try:
+        sched = nightly.nightly_schedule(cat.path, cron=args.cron, timezone=args.timezone)
+    except ValueError as exc:
+        print(f"error: {exc}")
+        return 2
+    server = None
+    if not os.environ.get("PREFECT_API_URL"):
+        # schedules need a server's scheduler; start one before Prefect reads its settings
+        print("starting a local Prefect server (PREFECT_API_URL is not set) ...")
+        try:
+            server, url = nightly.start_local_server(cat.project_root)
+        except RuntimeError as exc:
+            print(f"error: {exc}")
+            return 1
+        os.environ["PREFECT_API_URL"] = url
+        print(f"Prefect server at {url} (UI: {url[:-4]}); log in {cat.project_root / '.prefect' / 'server.log'}")
+    try:
+        deployment = nightly.build_nightly_deployment(
+            cat.path,
+            dataset=args.dataset,
+            workers=args.workers,
+            dask_address=args.dask_address,
+            cron=sched.cron,
+            timezone=sched.timezone,
+        )
+        from prefect.settings import PREFECT_API_URL, temporary_settings
+
+        with temporary_settings({PREFECT_API_URL: os.environ["PREFECT_API_URL"]}):
+            dep_id = nightly.register_nightly(deployment)
+            print(f"registered deployment {nightly.deployment_full_name(deployment)} ({dep_id}): "
+                  f"cron '{sched.cron}' in {sched.timezone}, parameters {deployment.parameters}")
+            if args.register_only:
+                return 0
+            print("serving; scheduled runs execute here (Ctrl-C to stop)")
+            try:
+                nightly.serve_nightly(deployment)
+            except KeyboardInterrupt:
+                pass
+    finally:
+        if server is not None:
+            server.terminate()
+            try:
+                server.wait(timeout=20)
+            except Exception:
+                server.kill()
+    return 0

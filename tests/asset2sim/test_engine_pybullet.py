@@ -1,0 +1,103 @@
+"""The PyBullet engine follows the SPEC's conventions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from asset2sim.engines.base import SessionOptions, Spring, open_session
+from tests.helpers import write_hinged_plate
+
+
+def _urdf_with_dynamics(folder, damping, friction, rpy="0 0 0"):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        f"""<?xml version="1.0"?>
+<robot name="pend">
+  <link name="base"><inertial><mass value="5"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+    <collision><origin xyz="0 0 0.05" rpy="{rpy}"/><geometry><box size="0.6 0.6 0.1"/></geometry></collision></link>
+  <link name="arm"><inertial><origin xyz="0 0 0.2"/><mass value="0.2"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial>
+    <collision><origin xyz="0 0 0.2"/><geometry><box size="0.02 0.02 0.4"/></geometry></collision></link>
+  <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 0.15"/><axis xyz="1 0 0"/>
+    <limit lower="-2" upper="2" effort="10" velocity="10"/><dynamics damping="{damping}" friction="{friction}"/></joint>
+</robot>
+"""
+    )
+    return folder / "mobility.urdf"
+
+
+def test_placed_on_ground_even_when_rotated(tmp_path):
+    # a box rotated 45 degrees about z: Bullet's AABB of the rotated hull is loose
+    urdf = _urdf_with_dynamics(tmp_path / "r", 0.1, 0.1, rpy="0 0.7 0.785")
+    s = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.0}))
+    try:
+        p = s._p
+        pts = p.getClosestPoints(s.body, s.plane, 1.0, physicsClientId=s.cid)
+        assert min(pt[8] for pt in pts) == pytest.approx(0.0, abs=1e-4)
+    finally:
+        s.close()
+
+
+def test_friction_holds_a_joint_that_gravity_cannot_move(tmp_path):
+    # gravity torque at q = 0.5: 0.2 kg * 9.81 * 0.2 m * sin(0.5) = 0.188 N m
+    urdf = _urdf_with_dynamics(tmp_path / "f", 0.0, 0.5)
+    s = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.5}))
+    try:
+        s.step(240)
+        assert s.joint_positions()["j"] == pytest.approx(0.5, abs=1e-3)
+    finally:
+        s.close()
+    urdf = _urdf_with_dynamics(tmp_path / "g", 0.0, 0.05)
+    s = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.5}))
+    try:
+        s.step(240)
+        assert abs(s.joint_positions()["j"] - 0.5) > 0.1
+    finally:
+        s.close()
+
+
+def test_damping_from_the_file_slows_the_joint(tmp_path):
+    speeds = []
+    for damping in (0.0, 0.5):
+        urdf = _urdf_with_dynamics(tmp_path / f"d{damping}", damping, 0.0)
+        s = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 1.0}))
+        try:
+            s.step(24)
+            speeds.append(abs(s.joint_velocities()["j"]))
+        finally:
+            s.close()
+    assert speeds[1] < 0.5 * speeds[0]
+
+
+def test_spring_holds_its_reference(tmp_path):
+    urdf = _urdf_with_dynamics(tmp_path / "s", 0.05, 0.0)
+    # spring about 0 strong against gravity: settles near 0 from 0.8
+    s = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.8}, springs={"j": Spring(stiffness=5.0, reference=0.0)}))
+    try:
+        s.step(720)
+        assert abs(s.joint_positions()["j"]) < 0.05
+    finally:
+        s.close()
+
+
+def test_parent_child_pairs_excluded_siblings_counted(tmp_path):
+    from tests.helpers import write_arm_through_post
+
+    folder = write_arm_through_post(tmp_path / "a")
+    s = open_session("pybullet", folder / "mobility.urdf", SessionOptions(fixed_base=True, ground=False, gravity=False))
+    try:
+        phi, pairs = s.self_penetration()
+        assert phi > 0 and {(c.link_a, c.link_b) for c in pairs} == {("arm", "post")}
+        s.set_joint_positions({"hinge": 0.5})
+        assert s.self_penetration()[0] == 0.0
+    finally:
+        s.close()
+    folder = write_hinged_plate(tmp_path / "p")  # the plate touches its parent: excluded
+    s = open_session("pybullet", folder / "mobility.urdf", SessionOptions(fixed_base=True, ground=False, gravity=False, initial_state={"hinge": -0.5}))
+    try:
+        assert s.self_penetration()[0] == 0.0
+        assert not math.isnan(float(np.sum(s.root_pose()[0])))
+    finally:
+        s.close()
