@@ -78,6 +78,11 @@ class RefineReport(BaseModel):
     estimator: str
     model: str | None = None
     model_queries: int = 0
+    model_tokens: int = 0
+    """Tokens reported by the model API (0 when unknown or offline)."""
+    model_cost_usd: float | None = None
+    model_seconds: float = 0.0
+    """Wall time in model calls, s."""
     scale: float
     total_mass: float
     """kg"""
