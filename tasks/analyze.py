@@ -24,36 +24,43 @@ How (details and measured accuracy in ``docs/mesh_analysis.md``)
       (second moment of a triangle, e.g. Eberly, "Polyhedral Mass
       Properties", 2002; the 2-D analogue of Tonon, J. Math. Stat. 1(1), 2004).
     * Watertight (every edge shared by exactly two faces with opposite
-      orientation, vertices merged at 1e-9 of the link size): volume, center
-      of mass and solid inertia are exact, by the divergence theorem over
-      signed tetrahedra (Tonon 2004: integral of x x^T dV =
-      V/20 (sum_i p_i p_i^T + s s^T) over a tetrahedron with one vertex at the
-      reference point). Closed parts whose bounding boxes overlap are checked
-      against the voxel union so overlapping convex pieces are not counted
-      twice (``voxel_union``).
-    * Otherwise (polygon soup: every PartNet-Mobility link): voxelization. The
-      surface is sampled on a barycentric lattice of spacing <= pitch/2 and
-      marked on an isotropic grid whose pitch is the link's longest extent /
-      ``voxels_per_axis`` (coarser if the grid would exceed ``max_voxels``);
-      gaps of up to ``close_gaps`` x the link size are closed
-      morphologically (3x3x3 closing); everything not connected to the
-      outside (6-connectivity) is filled. The marked surface layer straddles
-      the true surface, so each filled voxel is weighted
-      w = max(0, 1 - c * e) with e its number of faces exposed to the outside
-      and c = ``layer_correction`` (0.5: on average half of a surface voxel
-      lies outside the surface, for any surface orientation, because the
-      exposed-face count per area is (|n_x| + |n_y| + |n_z|) / pitch^2).
+      orientation, as indexed or with vertices merged at 1e-9 of the link
+      size): volume, center of mass and solid inertia are exact, by the
+      divergence theorem over signed tetrahedra (Tonon 2004: integral of
+      x x^T dV = V/20 (sum_i p_i p_i^T + s s^T) over a tetrahedron with one
+      vertex at the reference point). Closed parts whose bounding boxes
+      overlap are checked against the voxel union so overlapping convex
+      pieces are not counted twice (``voxel_union``).
+    * Otherwise (polygon soup: every PartNet-Mobility visual mesh):
+      voxelization. The link's length scale is the geometric mean of its
+      extents (each at least 1/16 of the longest, :func:`mean_size`); the
+      pitch is that / ``voxels_per_axis`` (coarser if the grid would exceed
+      ``max_voxels`` cells). The surface is sampled with spacing <= pitch/2
+      and the cells holding samples are marked; gaps up to ``close_gaps`` x
+      the length scale are closed (3x3x3 morphological closing, at least
+      once); every cell not connected to the outside (6-connectivity) is
+      filled. The marked surface layer straddles the true surface, so each
+      filled cell counts w = 1 - sum over its faces exposed to the outside
+      of the part of the cell beyond the surface along that axis, taken from
+      the mean position of the cell's surface samples (``subvoxel``; for an
+      axis-aligned face this is exact). Without sub-voxel positions the part
+      is 1/2 per exposed face (``layer_correction``), which is right on
+      average for any orientation, since a surface with unit normal n
+      exposes (|n_x| + |n_y| + |n_z|) / pitch^2 cell faces per area and
+      leaves the same fraction of a cell outside on average.
       Volume = sum(w) * pitch^3; center of mass and solid inertia are the
-      weighted voxel moments (each voxel a uniform cube, + pitch^2/12 per
+      w-weighted cell moments (each cell a uniform cube, + pitch^2/12 per
       axis).
     * A single primitive (box, cylinder, sphere) is analytic.
 
     When the enclosed volume is negligible (< 0.1 x area x pitch: a surface
-    that encloses nothing, such as a lone quad or an open tube), ``com`` is
+    that encloses nothing, such as a lone quad, an open tube or a door whose
+    back is missing), ``volume_method`` ends in ``+open_shell``, ``com`` is
     the surface centroid and ``inertia_solid`` equals ``inertia_shell``; the
-    note says so. ``inertia_shell`` is always about ``com`` (parallel-axis
-    theorem from the surface centroid), so both tensors refer to the same
-    point, as :class:`LinkGeometry` documents.
+    mass of such a link must come from area x wall thickness.
+    ``inertia_shell`` is always about ``com`` (parallel-axis theorem from the
+    surface centroid), so both tensors refer to the same point, as
+    :class:`LinkGeometry` documents.
 
 Inertia tensors are symmetrized; when a principal moment is ~0 or the triangle
 inequality of principal moments is tight (flat or line-like geometry), an
@@ -67,7 +74,6 @@ meshes are cached by path within an :func:`analyze_asset` call.
 from __future__ import annotations
 
 import math
-import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,6 +94,8 @@ __all__ = [
     "voxel_properties",
     "voxelize",
     "VoxelGrid",
+    "SolidMoments",
+    "mean_size",
     "rpy_matrix",
     "inertia_from_second_moment",
     "regularize_inertia",
@@ -95,14 +103,14 @@ __all__ = [
     "analyze_asset",
 ]
 
-#: Default number of voxels along the longest extent of a link.
+#: Default number of voxels along the link's length scale (:func:`mean_size`).
 VOXELS_PER_AXIS = 96
-#: Default cap on the total number of grid cells (bounds memory: 1 byte each,
-#: plus a few temporary arrays of the same size).
+#: Default cap on the total number of grid cells (bounds memory: about 20
+#: bytes per cell at the peak, plus 7 bytes per surface sample).
 MAX_VOXELS = 3_000_000
-#: Default gap closing, as a fraction of the link's longest extent.
+#: Default gap closing, as a fraction of the link's length scale (:func:`mean_size`).
 CLOSE_GAPS = 0.02
-#: Weight of an exposed voxel face in the surface-layer correction (see module doc).
+#: Outside part of a cell per exposed face when sub-voxel positions are off (see module doc).
 LAYER_CORRECTION = 0.5
 #: Surface sampling spacing, in voxel pitches.
 SAMPLE_SPACING = 0.5
@@ -459,9 +467,10 @@ def regularize_inertia(inertia: np.ndarray, scale_m2: float, rel: float = REGULA
 
     When the smallest principal moment is below ``rel`` x the largest, or the
     triangle inequality I_a + I_b >= I_c holds with a margin below ``rel`` x the
-    largest (flat or line-like geometry), an isotropic term
-    ``rel * max(trace, scale_m2)`` is added (``scale_m2`` m^2, e.g. the squared
-    link size, used when the trace is ~0). Returns ``(inertia, changed)``.
+    largest (flat or line-like geometry), an isotropic term ``rel * trace``
+    is added (``rel * scale_m2`` when the trace is below ``rel * scale_m2``;
+    ``scale_m2`` m^2, e.g. the squared link size). Returns
+    ``(inertia, changed)``.
     """
     i = 0.5 * (inertia + inertia.T)
     ev = np.linalg.eigvalsh(i)
@@ -469,7 +478,8 @@ def regularize_inertia(inertia: np.ndarray, scale_m2: float, rel: float = REGULA
     margin = float(ev[0] + ev[1] - ev[2])
     if ev[0] > rel * top and margin > rel * top and top > 0:
         return i, False
-    eps = rel * max(float(np.trace(i)), float(scale_m2), 1e-300)
+    tr = float(np.trace(i))
+    eps = rel * (tr if tr > rel * scale_m2 else max(float(scale_m2), 1e-300))
     return i + eps * np.eye(3), True
 
 
@@ -695,11 +705,17 @@ def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
         start = stop
 
 
+def mean_size(ext: np.ndarray) -> float:
+    """The length scale of a link for voxelization (m): the geometric mean of
+    its bounding-box extents (3,), each taken at least 1/16 of the longest,
+    so elongated and flat links get finer voxels than a cube of the same
+    longest extent."""
+    size = float(np.max(ext))
+    return float(np.prod(np.maximum(ext, size / 16.0))) ** (1.0 / 3.0)
+
+
 def _grid_pitch(ext: np.ndarray, voxels_per_axis: int, max_voxels: int, pad: int) -> float:
-    size = float(ext.max())
-    # geometric mean of the extents, each at least size/16: elongated and
-    # flat links get finer voxels than size / voxels_per_axis
-    h = float(np.prod(np.maximum(ext, size / 16.0))) ** (1.0 / 3.0) / voxels_per_axis
+    h = mean_size(ext) / voxels_per_axis
     for _ in range(60):
         cells = np.prod(np.ceil(ext / h) + 2 * pad + 2)
         if cells <= max_voxels:
@@ -712,17 +728,24 @@ def _grid_pitch(ext: np.ndarray, voxels_per_axis: int, max_voxels: int, pad: int
 class VoxelGrid:
     """A voxelized link: ``surface`` and ``filled`` boolean grids (nx, ny, nz),
     cell (i, j, k) spanning ``origin + pitch * [i, i+1) x ...`` (m);
-    ``closing`` the number of 3x3x3 closing iterations applied;
-    ``position`` (3, nx, ny, nz) float32, the mean position of the surface
-    samples inside each cell in cell units (0..1 per axis; 0.5 where a cell
-    has no sample), or ``None`` when not recorded."""
+    ``closing`` the number of 3x3x3 closing iterations applied.
+
+    With sub-voxel statistics (``None`` otherwise), for the S cells holding
+    surface samples: ``cells`` (S,) their flat indices (sorted), ``mean``
+    (S, 3) the mean in-cell position of their samples (cell units, 0..1),
+    ``thickness`` (S, 3) the spread of the samples along each axis that the
+    other two axes do not explain, 2 sqrt(var(x_k | x_i, x_j)) (cell units:
+    ~0 for one plane of any orientation, the distance between two parallel
+    surfaces crossing the cell)."""
 
     surface: np.ndarray
     filled: np.ndarray
     origin: np.ndarray
     pitch: float
     closing: int
-    position: np.ndarray | None = None
+    cells: np.ndarray | None = None
+    mean: np.ndarray | None = None
+    thickness: np.ndarray | None = None
 
 
 def voxelize(
@@ -742,16 +765,16 @@ def voxelize(
         vertices: (N, 3) m. faces: (M, 3) int, valid.
         voxels_per_axis: voxels along the longest extent (pitch = size / this,
             coarser when the grid would exceed ``max_voxels`` cells).
-        close_gaps: gaps up to this fraction of the longest extent are closed
-            (morphological closing with a 3x3x3 cube, at least one iteration,
-            one per 2 voxels of gap).
+        close_gaps: gaps up to this fraction of the link's length scale
+            (:func:`mean_size`) are closed (morphological closing with a
+            3x3x3 cube, one iteration per 2 voxels of gap, at least one).
         sample_spacing: surface sampling distance in pitches (<= 0.5 keeps
             the marked surface free of 6-connected holes before closing).
         grid_shift: (3,) shift of the grid against the geometry, in pitches,
             each in [0, 1) (for robustness studies; results should not depend
             on it beyond the method's noise).
-        subvoxel: record the mean in-cell position of the surface samples
-            (``VoxelGrid.position``).
+        subvoxel: record per-cell sample statistics (``VoxelGrid.cells``,
+            ``mean``, ``thickness``).
 
     Returns:
         :class:`VoxelGrid`; the surface is padded by closing + 2 empty cells
@@ -769,7 +792,7 @@ def voxelize(
         raise ValueError("all vertices coincide: nothing to voxelize")
     # pitch first with a provisional pad, then the closing iterations it implies
     h = _grid_pitch(ext, voxels_per_axis, max_voxels, 3)
-    iters = max(1, int(math.ceil(close_gaps * size / (2.0 * h))))
+    iters = max(1, int(math.ceil(close_gaps * mean_size(ext) / (2.0 * h) - 1e-9)))
     pad = iters + 2
     h = _grid_pitch(ext, voxels_per_axis, max_voxels, pad)
     # faces at the extremes of the bounding box sit on voxel centers, so
@@ -778,8 +801,8 @@ def voxelize(
     origin = lo - (pad + 0.5 - np.asarray(grid_shift, np.float64)) * h
     ncell = int(np.prod(dims))
     s0, s1 = int(dims[1] * dims[2]), int(dims[2])
-    count = np.zeros(ncell, np.float32)
-    acc = np.zeros((3, ncell), np.float32) if subvoxel else None
+    grid = np.zeros(ncell, bool)
+    samples: list[tuple[np.ndarray, np.ndarray]] = []  # (cell (P,) int32, in-cell position (P, 3) uint8)
     for s in range(0, len(faces), _CHUNK_FACES):
         # in voxel units: cell (i, j, k) is [i, i+1) x [j, j+1) x [k, k+1)
         tri = ((vertices[faces[s : s + _CHUNK_FACES]] - origin) / h).astype(np.float32)
@@ -787,26 +810,63 @@ def voxelize(
             # points are convex combinations of vertices, so inside the padded grid
             ijk = pts.astype(np.int32)
             flat = ijk[:, 0].astype(np.int64) * s0 + ijk[:, 1] * s1 + ijk[:, 2]
-            if acc is None:
-                count[flat] = 1.0
-                continue
-            count += np.bincount(flat, minlength=ncell)
-            pts -= ijk
-            for k in range(3):
-                acc[k] += np.bincount(flat, weights=pts[:, k], minlength=ncell)
-    surf = (count > 0).reshape(tuple(dims))
-    position = None
-    if acc is not None:
-        np.divide(acc, count, out=acc, where=count > 0)
-        acc[:, count == 0] = 0.5
-        position = acc.reshape((3, *dims))
-    del count
+            grid[flat] = True
+            if subvoxel:
+                pts -= ijk
+                pts *= 255.0
+                samples.append((flat.astype(np.int32), (pts + 0.5).astype(np.uint8)))
+    surf = grid.reshape(tuple(dims))
+    stats: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
+    if subvoxel:
+        stats = _cell_statistics(grid, samples)
+        del samples
     closed = _dilate(surf, iters)
     closed = _erode(closed, iters)
     closed |= surf
     labels, _ = ndi.label(~closed)  # 6-connectivity for the outside
     filled = labels != labels[0, 0, 0]
-    return VoxelGrid(surf, filled, origin, h, iters, position)
+    return VoxelGrid(surf, filled, origin, h, iters, *stats)
+
+
+def _cell_statistics(
+    grid: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per surface cell: flat index (S,), mean in-cell sample position (S, 3)
+    and unexplained spread along each axis (S, 3), see :class:`VoxelGrid`.
+    ``samples``: (cell (P,) int32, in-cell position * 255 (P, 3) uint8)."""
+    cells = np.flatnonzero(grid)
+    n = cells.size
+    cell_id = np.cumsum(grid, dtype=np.int32) - 1
+    count = np.zeros(n)
+    first = np.zeros((3, n))
+    second = np.zeros((6, n))
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    for flat, frac in samples:
+        ids = cell_id[flat]
+        pos = frac.astype(np.float32) / 255.0
+        count += np.bincount(ids, minlength=n)
+        for k in range(3):
+            first[k] += np.bincount(ids, weights=pos[:, k], minlength=n)
+        for m, (a, b) in enumerate(pairs):
+            second[m] += np.bincount(ids, weights=pos[:, a] * pos[:, b], minlength=n)
+    del cell_id
+    mean = first / count
+    cov = np.empty((3, 3, n))
+    for m, (a, b) in enumerate(pairs):
+        cov[a, b] = cov[b, a] = second[m] / count - mean[a] * mean[b]
+    det = (
+        cov[0, 0] * (cov[1, 1] * cov[2, 2] - cov[1, 2] ** 2)
+        - cov[0, 1] * (cov[0, 1] * cov[2, 2] - cov[1, 2] * cov[0, 2])
+        + cov[0, 2] * (cov[0, 1] * cov[1, 2] - cov[1, 1] * cov[0, 2])
+    )
+    thickness = np.zeros((3, n))
+    for k in range(3):
+        i, j = [a for a in range(3) if a != k]
+        minor = cov[i, i] * cov[j, j] - cov[i, j] ** 2  # det of the other two axes
+        ok = (minor > 1e-6) & (count >= 4)
+        resid = np.where(ok, det / np.where(ok, minor, 1.0), 0.0)  # Schur complement
+        thickness[k] = np.clip(2.0 * np.sqrt(np.maximum(resid, 0.0)), 0.0, 1.0)
+    return cells, mean.T.astype(np.float32), thickness.T.astype(np.float32)
 
 
 def voxel_properties(
@@ -827,12 +887,15 @@ def voxel_properties(
         vertices: (N, 3) m. faces: (M, 3) int, valid.
         voxels_per_axis, max_voxels, close_gaps, sample_spacing, grid_shift:
             see :func:`voxelize`.
-        layer_correction: weight c of an exposed voxel face; each filled voxel
-            counts w = max(0, 1 - c * exposed_faces) (see module doc).
+        subvoxel: weight the cells at the surface by the mean position of
+            their surface samples (default); else each filled cell counts
+            w = 1 - layer_correction * exposed_faces (see module doc).
+        layer_correction: outside part of a cell per exposed face when
+            ``subvoxel`` is False.
 
     Returns:
-        ``SolidMoments`` (method ``voxel_fill``, ``pitch`` m). Volume is
-        sum(w) * pitch^3; com and second moment are weighted voxel moments,
+        ``SolidMoments`` (method ``voxel_fill``, ``pitch`` m). Cell weights
+        are clipped to [0, 1]. Volume is sum(w) * pitch^3; com and second moment are weighted voxel moments,
         each voxel a uniform cube (pitch^2/12 per axis). Volume 0 when
         nothing is enclosed (then com is the bounding-box center).
 
@@ -854,22 +917,35 @@ def voxel_properties(
     # weight of every cell: 0 outside; inside, 1 minus the part of the cell
     # beyond the surface on each exposed face (see module doc)
     weight = np.ones(filled.shape, np.float32)
+    flat_weight = weight.reshape(-1)
     for ax in range(3):
         lo_sl = [slice(None)] * 3
         hi_sl = [slice(None)] * 3
         lo_sl[ax] = slice(0, -1)
         hi_sl[ax] = slice(1, None)
         lo_sl, hi_sl = tuple(lo_sl), tuple(hi_sl)
-        a, b = filled[lo_sl], filled[hi_sl]
-        up = a & ~b  # cell exposed towards +ax
-        down = b & ~a  # cell exposed towards -ax
-        if vg.position is None:
-            weight[lo_sl] -= layer_correction * up
-            weight[hi_sl] -= layer_correction * down
-        else:
-            pos = vg.position[ax]
-            weight[lo_sl] -= up * (1.0 - pos[lo_sl])
-            weight[hi_sl] -= down * pos[hi_sl]
+        up = np.zeros(filled.shape, bool)  # cell exposed towards +ax
+        down = np.zeros(filled.shape, bool)  # cell exposed towards -ax
+        up[lo_sl] = filled[lo_sl] & ~filled[hi_sl]
+        down[hi_sl] = filled[hi_sl] & ~filled[lo_sl]
+        if vg.cells is None:
+            weight -= layer_correction * up
+            weight -= layer_correction * down
+            continue
+        both = up & down  # one cell thick along ax: the surfaces' separation is inside
+        for mask, kind in ((up & ~both, "up"), (down & ~both, "down"), (both, "both")):
+            idx = np.flatnonzero(mask)
+            if idx.size == 0:
+                continue
+            at = np.minimum(np.searchsorted(vg.cells, idx), vg.cells.size - 1)
+            known = vg.cells[at] == idx  # cells added by the closing have no samples
+            if kind == "up":
+                outside = np.where(known, 1.0 - vg.mean[at, ax], 0.5)
+            elif kind == "down":
+                outside = np.where(known, vg.mean[at, ax], 0.5)
+            else:
+                outside = np.where(known, 1.0 - vg.thickness[at, ax], 1.0)
+            flat_weight[idx] -= outside.astype(np.float32)
     np.clip(weight, 0.0, 1.0, out=weight)
     weight *= filled
     notes = [f"voxel pitch {h:.4g} m ({int(dims[0])}x{int(dims[1])}x{int(dims[2])} grid), gap closing {iters} voxel(s)"]
@@ -993,6 +1069,7 @@ def analyze_link(
     max_voxels: int = MAX_VOXELS,
     close_gaps: float = CLOSE_GAPS,
     layer_correction: float = LAYER_CORRECTION,
+    subvoxel: bool = True,
     cache: MeshCache | None = None,
 ) -> LinkGeometry | None:
     """Mesh analysis of one link at scale 1 in the link frame.
@@ -1000,8 +1077,8 @@ def analyze_link(
     Args:
         link: the link; its collision geometry is used when it has any, else
             its visual geometry (``prefer="visual"`` swaps the order).
-        voxels_per_axis, max_voxels, close_gaps, layer_correction: the
-            voxel estimate's parameters (see :func:`voxel_properties`).
+        voxels_per_axis, max_voxels, close_gaps, layer_correction, subvoxel:
+            the voxel estimate's parameters (see :func:`voxel_properties`).
         cache: meshes already read (shared across links by
             :func:`analyze_asset`).
 
@@ -1032,7 +1109,11 @@ def analyze_link(
         raise MeshAnalysisError(f"{where}: degenerate geometry (surface area {area:g} m^2, size {size:g} m)")
 
     vox_kw = dict(
-        voxels_per_axis=voxels_per_axis, max_voxels=max_voxels, close_gaps=close_gaps, layer_correction=layer_correction
+        voxels_per_axis=voxels_per_axis,
+        max_voxels=max_voxels,
+        close_gaps=close_gaps,
+        layer_correction=layer_correction,
+        subvoxel=subvoxel,
     )
     watertight = False
     solid: SolidMoments | None = None

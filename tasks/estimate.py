@@ -222,6 +222,76 @@ def _material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoi
     )
 
 
+@dataclass
+class JointChoice:
+    """Qualitative dynamics choices for one joint (from request words, priors
+    or a model reply); :func:`joint_dynamics_for` turns them into numbers."""
+
+    damping_level: str = "moderate"
+    holds_position: bool = False
+    spring: bool = False
+    stiff: bool = False
+    free_moving: bool = False
+
+
+def joint_dynamics_for(
+    ctx: EstimationContext,
+    links: dict[str, LinkPhysics],
+    state: dict[str, float],
+    scale: float,
+    choices: dict[str, JointChoice],
+    *,
+    source: str,
+) -> dict[str, JointDynamics]:
+    """Damping, friction and stiffness of every movable joint from the scaled
+    masses and the kinematics at ``state`` (output units), shaped by the
+    qualitative ``choices`` (see ``docs/refine.md``, "Joint dynamics").
+
+    Friction holds the largest gravity load within 5 % of the range around the
+    state, or over the whole range when the joint must hold its position; a
+    spring gets k = max(3 x 1.5 x hold / range, 2 k_g) and the reference
+    q_s = q - tau_g / k so that it holds the state (equilibrium of
+    -k (q - q_s) + tau_g = 0), friction then only 10 % of the load.
+    """
+    prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
+    rot = ctx.root_rotation
+    loads = physics.joint_loads(ctx.session, ctx.asset, links, state, scale, ctx.subtrees, root_rotation=rot)
+    out: dict[str, JointDynamics] = {}
+    for j in ctx.asset.movable_joints():
+        name = j.name
+        ch = choices.get(name, JointChoice())
+        cs = ctx.closed[name]
+        unit = scale if name in prismatic else 1.0
+        if ch.holds_position:
+            fr = np.linspace(0.0, 1.0, 11)
+        else:
+            f0 = cs.fraction(state[name] / unit)
+            fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
+        hold = 0.0
+        for f in fr:
+            st = {**state, name: cs.position(float(f)) * unit}
+            ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            hold = max(hold, abs(ld[name].gravity_load))
+        spring = None
+        if ch.spring:
+            load = loads[name]
+            k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)
+            ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
+            spring = (k, ref)
+            hold = 0.1 * hold  # the spring carries the load; friction only adds feel
+        out[name] = physics.joint_dynamics(
+            loads[name],
+            hold,
+            prismatic=name in prismatic,
+            damping_level=ch.damping_level,
+            stiff=ch.stiff,
+            free_moving=ch.free_moving,
+            spring=spring,
+            source=source,
+        )
+    return out
+
+
 # ------------------------------------------------------------ offline estimator
 class OfflineEstimator:
     """Physical priors (data with sources) + geometry + kinematics; no network."""
@@ -266,48 +336,19 @@ class OfflineEstimator:
         bands, band_notes = requested_bands(ctx)
         state = state_from_bands(ctx.closed, bands, s, prismatic)
         # ---- dynamics
-        loads = physics.joint_loads(ctx.session, ctx.asset, links, state, s, ctx.subtrees, root_rotation=ctx.root_rotation)
         relevant = set(task_relevant_joints(ctx))
-        joints: dict[str, JointDynamics] = {}
+        choices = {}
         for j in ctx.asset.movable_joints():
-            name = j.name
-            cs = ctx.closed[name]
-            is_pr = name in prismatic
-            unit = 1.0 if not is_pr else s
-            # hold load: around the state, or over the whole range when asked to hold anywhere
-            if ctx.request.holds_position and name in relevant:
-                fr = np.linspace(0.0, 1.0, 11)
-            else:
-                f0 = cs.fraction(state[name] / unit)
-                fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
-            hold = 0.0
-            for f in fr:
-                st = {**state, name: cs.position(float(f)) * unit}
-                ld = physics.joint_loads(ctx.session, ctx.asset, links, st, s, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)
-                hold = max(hold, abs(ld[name].gravity_load))
+            rel = j.name in relevant
             label = ctx.asset.link(j.child).semantic_label
-            wants_spring = name in relevant and (ctx.request.spring or priors.spring_expected(ctx.category, label))
-            spring = None
-            if wants_spring:
-                load = loads[name]
-                k_min = 3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6)
-                k = max(k_min, loads[name].gravity_stiffness * 2.0)
-                # equilibrium at the state: -k (q - ref) + tau_g = 0  ->  ref = q - tau_g / k
-                ref = state[name] - load.gravity_load / k
-                lo_l, hi_l = cs.lower * unit, cs.upper * unit
-                ref = float(np.clip(ref, lo_l, hi_l))
-                spring = (k, ref)
-                hold = 0.1 * hold  # the spring carries the load; friction only adds feel
-            joints[name] = physics.joint_dynamics(
-                loads[name],
-                hold,
-                prismatic=is_pr,
-                damping_level=ctx.request.damping if name in relevant else "moderate",
-                stiff=ctx.request.stiff and name in relevant,
-                free_moving=ctx.request.free_moving and name in relevant,
-                spring=spring,
-                source="offline physics",
+            choices[j.name] = JointChoice(
+                damping_level=ctx.request.damping if rel else "moderate",
+                holds_position=ctx.request.holds_position and rel,
+                spring=rel and (ctx.request.spring or priors.spring_expected(ctx.category, label)),
+                stiff=ctx.request.stiff and rel,
+                free_moving=ctx.request.free_moving and rel,
             )
+        joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
         body_prior = priors.material_for(ctx.category, None, _variant(ctx))
         body_mat = _material(ctx, None)
         friction_coeff = float(body_prior.lateral_friction)
@@ -329,7 +370,7 @@ class OfflineEstimator:
                 material="; ".join(mat_notes),
                 mass_arithmetic=mass_note,
                 other=[f"category: {ctx.category} ({ctx.category_reason})"]
-                + [f"requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
+                + ["requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
                 + band_notes
                 + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),
             ),

@@ -456,9 +456,11 @@ def infer_scale_from_geometry(urdf: Path, raw_urdf: Path) -> float | None:
     """Uniform scale of ``urdf`` relative to ``raw_urdf`` from geometry.
 
     Both are loaded in PyBullet (fixed base, no gravity, joints at 0 clipped to
-    their limits); s = largest extent of the evaluated asset's AABB / that of the
-    raw asset. Used only when no ``overlay.json`` or ``baseline.json`` states
-    the scale. Returns None when either cannot be measured.
+    their limits); s = largest extent of the box bounding the evaluated
+    asset's collision hull vertices / that of the raw asset
+    (:func:`_geometry_extents`). Used only when no ``overlay.json``,
+    ``report.json`` or ``baseline.json`` states the scale. Returns None when
+    either cannot be measured.
     """
     exts = []
     for path in (urdf, raw_urdf):
@@ -467,16 +469,53 @@ def infer_scale_from_geometry(urdf: Path, raw_urdf: Path) -> float | None:
         except Exception:
             return None
         try:
+            try:
+                from asset2sim.tasks.extract import extract_asset
+
+                desc = extract_asset(path)
+                hull = _hull_points(desc)
+            except Exception:
+                desc, hull = None, None
             q0 = {n: _clip(0.0, *s.joint_limits[n]) for n in s.joint_names}
-            s.set_joint_positions(q0)
-            exts.append(_extents(s))
+            exts.append(_geometry_extents(s, desc, q0, hull))
         finally:
             s.close()
     a, b = float(np.max(exts[0])), float(np.max(exts[1]))
     return a / b if a > 0 and b > 0 else None
 
 
+def _hull_points(desc) -> dict[str, np.ndarray] | None:
+    """Convex-hull vertices per link (link frame) via
+    :func:`asset2sim.tasks.closed_state.link_hull_points`, or None."""
+    try:
+        from asset2sim.tasks.closed_state import link_hull_points
+
+        return link_hull_points(desc)
+    except Exception:
+        return None
+
+
+def _geometry_extents(session, desc, state: dict[str, float], hull: dict[str, np.ndarray] | None) -> np.ndarray:
+    """Extents (3,) m of the box bounding the links' collision hull vertices at
+    ``state`` (:func:`asset2sim.tasks.closed_state.object_extents`). Bullet's
+    own AABBs are loose for a link whose inertia tensor has off-diagonal terms
+    (the shape sits rotated in the principal-axes frame and its box is
+    re-bounded: 0.67 m instead of 0.39 m for a refined toilet), so they are
+    only the fallback."""
+    try:
+        from asset2sim.tasks.closed_state import object_extents
+
+        if hull is not None:
+            return np.asarray(object_extents(session, state, desc, hull), float)
+    except Exception:
+        pass
+    session.set_joint_positions(state)
+    return _extents(session)
+
+
 def _extents(session) -> np.ndarray:
+    """Extents (3,) m of the union of Bullet's link AABBs (loose; see
+    :func:`_geometry_extents`)."""
     p = session._p
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for idx in session.link_names:
@@ -610,9 +649,10 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
         desc = extract_asset(urdf)
         s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
         try:
-            cs = closed_positions(s, desc)  # leaves the session at the closed state
+            hull = _hull_points(desc)
+            cs = closed_positions(s, desc, **({"hull_points": hull} if hull is not None else {}))
             if extents_out is not None:
-                extents_out.append(_extents(s))
+                extents_out.append(_geometry_extents(s, desc, {n: c.q_closed for n, c in cs.items()}, hull))
         finally:
             s.close()
         for n in names:

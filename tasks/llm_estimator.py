@@ -374,49 +374,22 @@ def overlay_from_reply(ctx: estimate.EstimationContext, reply: ModelReply, *, na
     state = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
     # ---- dynamics from the loads, with the model's qualitative choices
     relevant = set(estimate.task_relevant_joints(ctx))
-    rot = getattr(ctx, "root_rotation", None)
-    loads = physics.joint_loads(ctx.session, ctx.asset, links, state, s, ctx.subtrees, root_rotation=rot)
-    joints: dict[str, JointDynamics] = {}
+    choices: dict[str, estimate.JointChoice] = {}
     for j in movable:
         jr = by_joint.get(j.name)
         rq = ctx.request
         is_rel = j.name in relevant
         if jr is not None:
-            level, holds, spring_on, stiff, free = jr.damping_level, jr.holds_position, jr.spring, jr.stiff, jr.free_moving
+            choices[j.name] = estimate.JointChoice(jr.damping_level, jr.holds_position, jr.spring, jr.stiff, jr.free_moving)
         else:
-            level = rq.damping if is_rel else "moderate"
-            holds, spring_on, stiff, free = rq.holds_position and is_rel, rq.spring and is_rel, rq.stiff and is_rel, rq.free_moving and is_rel
-        cs = ctx.closed[j.name]
-        unit = s if j.name in prismatic else 1.0
-        if holds:
-            fr = np.linspace(0.0, 1.0, 11)
-        else:
-            f0 = cs.fraction(state[j.name] / unit)
-            fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
-        hold = 0.0
-        for f in fr:
-            st = {**state, j.name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(ctx.session, ctx.asset, links, st, s, {j.name: ctx.subtrees[j.name]}, root_rotation=rot)
-            hold = max(hold, abs(ld[j.name].gravity_load))
-        spring = None
-        if spring_on:
-            load = loads[j.name]
-            k_min = 3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6)
-            k = max(k_min, load.gravity_stiffness * 2.0)
-            # equilibrium at the state: -k (q - ref) + tau_g = 0  ->  ref = q - tau_g / k
-            ref = float(np.clip(state[j.name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
-            spring = (k, ref)
-            hold = 0.1 * hold  # the spring carries the load
-        joints[j.name] = physics.joint_dynamics(
-            loads[j.name],
-            hold,
-            prismatic=j.name in prismatic,
-            damping_level=level,
-            stiff=stiff,
-            free_moving=free,
-            spring=spring,
-            source=f"{name} physics (model: damping {level}" + (", holds" if holds else "") + (", spring" if spring_on else "") + (", stiff" if stiff else "") + (", free" if free else "") + ")",
-        )
+            choices[j.name] = estimate.JointChoice(
+                rq.damping if is_rel else "moderate",
+                rq.holds_position and is_rel,
+                rq.spring and is_rel,
+                rq.stiff and is_rel,
+                rq.free_moving and is_rel,
+            )
+    joints = estimate.joint_dynamics_for(ctx, links, state, s, choices, source=f"{name} physics (model choices)")
     asked_state = bool(ctx.request.joint_states) or any(b != "closed" for b in bands.values())
     if reply.category.strip().lower() != str(ctx.category).lower():
         notes.append(f"the model calls it {reply.category!r}; the pipeline's category {ctx.category!r} is kept")

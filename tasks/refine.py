@@ -150,7 +150,7 @@ def refine_asset(
             (``failure_mode`` says which); nothing but partial-free atomic files
             are left in ``out_dir``.
     """
-    from asset2sim.tasks import analyze, estimate, extract, postcheck, priors, refine_state, request, validate_overlay, write
+    from asset2sim.tasks import analyze, estimate, extract, priors, request, write
 
     config = config or RefineConfig()
     say = progress or (lambda stage, msg: None)

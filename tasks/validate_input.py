@@ -172,7 +172,7 @@ CODES: dict[str, CodeInfo] = {
     "INERTIA_NOT_POSITIVE_DEFINITE": _c("warning", "inertials", "an eigenvalue <= 0; replaced by an estimate"),
     "INERTIA_TRIANGLE_INEQUALITY": _c("warning", "inertials", "principal moments violate I1 <= I2 + I3; replaced by an estimate"),
     # geometry and mesh references
-    "GEOMETRY_MISSING": _c("error", "geometry", "<visual>/<collision> without one <box|cylinder|sphere|mesh>"),
+    "GEOMETRY_MISSING": _c("error", "geometry", "<visual>/<collision> whose <geometry> is not exactly one <box|cylinder|sphere|mesh>"),
     "GEOMETRY_SIZE_NONPOSITIVE": _c("error", "geometry", "box size, radius or length <= 0"),
     "MESH_SCALE_ZERO": _c("error", "geometry", "a mesh scale component of 0"),
     "MESH_SCALE_NEGATIVE": _c("warning", "geometry", "a negative mesh scale (mirrored mesh)"),
@@ -1082,7 +1082,7 @@ class _Validator:
         if inert is not None:
             ln.has_inertial = True
             ln.inertial_line = inert.sourceline
-            _, _, _ok = self.origin(inert, link=name)
+            self.origin(inert, link=name)
             m = inert.find("mass")
             if m is None or m.get("value") is None:
                 self.add("INERTIAL_MASS_MISSING", "<inertial> has no <mass value=...>; an estimate replaces it",
@@ -1107,10 +1107,10 @@ class _Validator:
         xyz, rpy, ok = self.origin(el, link=link)
         g = _Geom(role=role, kind=None, line=el.sourceline, xyz=xyz, rpy=rpy, ok=ok)
         geo = el.find("geometry")
-        shapes = [c for c in geo] if geo is not None else []
-        shapes = [c for c in shapes if c.tag in ("box", "cylinder", "sphere", "mesh")]
-        if len(shapes) != 1:
-            self.add("GEOMETRY_MISSING", f"<{role}> needs exactly one of box, cylinder, sphere, mesh in <geometry> (found {len(shapes)})",
+        shapes = list(geo) if geo is not None else []
+        if len(shapes) != 1 or shapes[0].tag not in ("box", "cylinder", "sphere", "mesh"):
+            found = ", ".join(f"<{c.tag}>" for c in shapes) or "nothing"
+            self.add("GEOMETRY_MISSING", f"<{role}> needs exactly one of box, cylinder, sphere, mesh in <geometry> (found {found})",
                      line=el.sourceline, link=link)
             g.ok = False
             return g
@@ -1166,9 +1166,8 @@ class _Validator:
             j.axis = ax
             if ax is not None:
                 norm = math.sqrt(sum(x * x for x in ax))
-                if norm == 0.0 or norm < 1e-12:
-                    code_sev_movable = jtype in MOVABLE_TYPES
-                    if code_sev_movable:
+                if norm < 1e-12:
+                    if jtype in MOVABLE_TYPES:  # ignored by simulators on fixed joints
                         self.add("JOINT_AXIS_ZERO", f"axis {a.get('xyz')!r} has zero length", line=a.sourceline, joint=name)
                 elif abs(norm - 1.0) > 1e-6:
                     self.add("JOINT_AXIS_NOT_UNIT", f"axis {a.get('xyz')!r} has length {norm:.6g}", line=a.sourceline, joint=name, norm=norm)

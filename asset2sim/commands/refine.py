@@ -51,7 +51,7 @@ def summary_lines(result) -> list[str]:
         ),
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}",
-        f"wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
+        "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
     return lines
 
