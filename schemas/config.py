@@ -64,6 +64,9 @@ class RefineConfig(BaseModel):
     """Largest drift of a requested joint state during the rest test, m."""
     convex_decomposition: bool = True
     """Allow CoACD decomposition of collision meshes whose hulls always overlap."""
+    engines: list[str] = Field(default_factory=lambda: ["pybullet"])
+    """Engines the post-check must pass in (worst case over them); PyBullet is
+    always first (state refinement and escalation run there)."""
     decomposition_budget: float = 60.0
     """Wall time allowed for convex decomposition per asset, s."""
     seed: int = 0

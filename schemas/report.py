@@ -95,6 +95,8 @@ class RefineReport(BaseModel):
     at the written initial state (the measure the state bands use)."""
     state: StateRefinement | None = None
     metrics: list[MetricResult] = Field(default_factory=list)
+    parity: list[dict[str, Any]] = Field(default_factory=list)
+    """One row per engine of ``--engines`` (``tasks.parity.parity_table``)."""
     escalation: list[EscalationRound] = Field(default_factory=list)
     validation: list[dict[str, Any]] = Field(default_factory=list)
     failure_mode: str = "none"

@@ -30,18 +30,32 @@ class PostCheck:
     sag: dict[str, float]
     """joint -> largest |q - q_initial| (rad or m)"""
     sagging: list[str] = field(default_factory=list)
+    engine_results: dict[str, list[MetricResult]] = field(default_factory=dict)
+    """Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation]."""
+
+    def engine_failures(self) -> tuple[bool, list[str]]:
+        """(any other engine unstable, joints oscillating in another engine);
+        skipped engines are ignored."""
+        unstable, joints = False, []
+        for res in self.engine_results.values():
+            for m in res:
+                if m.name == "rest_stability" and m.passed is False:
+                    unstable = True
+                if m.name == "oscillation" and m.passed is False:
+                    joints.extend(m.details.get("failing", []))
+        return unstable, list(dict.fromkeys(joints))
 
     def metric(self, name: str) -> MetricResult:
         return next(m for m in self.metrics if m.name == name)
 
     @property
     def stable(self) -> bool:
-        """SPEC rest stability and no toppling while settling."""
-        return bool(self.metric("rest_stability").passed and self.metric("settle_tilt").passed)
+        """SPEC rest stability (in every engine) and no toppling while settling."""
+        return bool(self.metric("rest_stability").passed and self.metric("settle_tilt").passed and not self.engine_failures()[0])
 
     @property
     def passed(self) -> bool:
-        return bool(self.stable and self.metric("oscillation").passed and not self.sagging)
+        return bool(self.stable and self.metric("oscillation").passed and not self.sagging and not self.engine_failures()[1])
 
 
 def springs_of(overlay: Overlay) -> dict[str, Spring]:
@@ -61,7 +75,8 @@ def run_post_check(
     engine: str = "pybullet",
 ) -> PostCheck:
     """Measure penetration, rest stability, oscillation and sag of the written
-    asset in ``engine`` (SPEC conventions)."""
+    asset in ``engine`` (SPEC conventions), and the SPEC metrics in every other
+    engine of ``config.engines`` (``tasks.parity``; missing engines skipped)."""
     conv = config.sim
     session = open_session(
         engine,
@@ -91,7 +106,13 @@ def run_post_check(
         engine=engine,
     )
     tilt = metrics.settle_tilt(trace, engine=engine)
-    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt], trace=trace, sag=drift, sagging=sagging)
+    others = [e for e in dict.fromkeys(config.engines) if e != engine]
+    engine_results = {}
+    if others:
+        from asset2sim.tasks import parity
+
+        engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
+    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results)
 
 
 def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay, dict[str, dict[str, float]], str]:
@@ -100,7 +121,8 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
 
     Returns (new overlay, changes joint -> {parameter: new value}, reason).
     """
-    osc = check.metric("oscillation").details.get("failing", [])
+    other_unstable, other_osc = check.engine_failures()
+    osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
     targets = list(dict.fromkeys(list(osc) + list(check.sagging)))
     reason = []
     if osc:

@@ -286,7 +286,8 @@ def refine_asset(
         requested_bands=bands,
         opening_fractions={n_: abs(c.fraction(state[n_])) for n_, c in closed_out.items() if n_ in state},
         state=st,
-        metrics=check.metrics,
+        metrics=check.metrics + [m for res in check.engine_results.values() for m in res],
+        parity=_parity_rows(check),
         escalation=rounds,
         validation=[i.model_dump() for i in issues],
         failure_mode=failure,
@@ -459,6 +460,16 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     st.collision_changes = dnotes
     st.method = before.method + " | collision pieces improved -> " + st.method
     return st, overrides
+
+
+def _parity_rows(check) -> list[dict]:
+    """Side-by-side engine rows for the report (PyBullet first)."""
+    if not check.engine_results:
+        return []
+    from asset2sim.tasks import parity
+
+    base = [m for m in check.metrics if m.name in parity.METRICS]
+    return parity.parity_table({"pybullet": base, **check.engine_results})
 
 
 def _remove_stale_collision(out_dir: Path, overrides: dict) -> None:

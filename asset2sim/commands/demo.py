@@ -34,5 +34,6 @@ def run(args: argparse.Namespace) -> int:
             force=True,
             no_extras=args.no_extras,
             quiet=False,
+            engines="pybullet",
         )
         return refine_cmd.run(ns)

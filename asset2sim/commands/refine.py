@@ -25,6 +25,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
     parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
+    parser.add_argument(
+        "--engines",
+        default="pybullet",
+        help="comma-separated engines the asset must pass in (pybullet,physx,mujoco); missing ones are skipped and reported",
+    )
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
     parser.add_argument("--quiet", "-q", action="store_true", help="print only the summary")
@@ -51,6 +56,11 @@ def summary_lines(result) -> list[str]:
         ),
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}",
+    ] + [
+        f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
+        + (f" ({row['reason']})" if row['reason'] else "")
+        for row in r.parity
+    ] + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
     return lines
@@ -66,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"[{time.perf_counter() - t0:6.2f}s] {stage:<12} {message}", flush=True)
 
-    config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url)
+    engines = ["pybullet"] + [e.strip() for e in getattr(args, "engines", "pybullet").split(",") if e.strip() and e.strip() != "pybullet"]
+    config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url, engines=engines)
     try:
         result = refine_asset(
             args.asset,
