@@ -50,7 +50,8 @@ class DatasetConfig(BaseModel):
 
     ``root``: folder holding one sub-folder per asset (relative to the project
     root). ``manifest``: CSV with columns ``id`` and ``prompt`` (required),
-    ``category``, ``reference_scale`` (optional); default ``<root>/manifest.csv``.
+    ``category``, ``reference_scale``, ``time_limit_seconds`` (optional, the
+    last overrides the run's per-asset limit); default ``<root>/manifest.csv``.
     ``generate``: ``demo`` builds the project's own demo assets into ``root``
     on first use (:mod:`asset2sim.demo_assets`). ``reference``: measure the
     reference metrics (scale deviation) against ``reference_gensim2.json`` in
@@ -228,27 +229,42 @@ def load_catalog(path: Path | str) -> Catalog:
 
 @dataclass(frozen=True)
 class ManifestEntry:
-    """One request of a manifest: asset id, prompt, optional category and
-    reference scale (dimensionless), and the asset folder."""
+    """One request of a manifest: asset id, prompt, the asset folder, optional
+    category, reference scale (dimensionless) and time limit (s)."""
 
     asset_id: str
     prompt: str
     asset_dir: Path
     category: str | None = None
     reference_scale: float | None = None
+    time_limit_seconds: float | None = None
 
 
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 
 
+def _positive(manifest: Path, line: int, row: dict, column: str) -> float | None:
+    text = (row.get(column) or "").strip()
+    if not text:
+        return None
+    try:
+        value = float(text)
+    except ValueError as exc:
+        raise CatalogError(f"{manifest}:{line}: {column} {text!r} is not a number") from exc
+    if not (math.isfinite(value) and value > 0):
+        raise CatalogError(f"{manifest}:{line}: {column} must be a positive number")
+    return value
+
+
 def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
     """Entries of a manifest CSV (columns ``id``, ``prompt``; optional
-    ``category``, ``reference_scale``), asset folders under ``root``.
+    ``category``, ``reference_scale``, ``time_limit_seconds``), asset folders
+    under ``root``.
 
     Raises:
         CatalogError: missing file or columns, an empty/duplicate/unsafe id
-            (ids name folders and files: letters, digits, ``_.-``), or a bad
-            ``reference_scale``.
+            (ids name folders and files: letters, digits, ``_.-``), or a
+            ``reference_scale`` / ``time_limit_seconds`` that is not a positive number.
     """
     manifest, root = Path(manifest), Path(root)
     try:
@@ -269,20 +285,14 @@ def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]
         if aid in seen:
             raise CatalogError(f"{manifest}:{line}: duplicate asset id {aid!r}")
         seen.add(aid)
-        ref = (row.get("reference_scale") or "").strip()
-        try:
-            ref_scale = float(ref) if ref else None
-        except ValueError as exc:
-            raise CatalogError(f"{manifest}:{line}: reference_scale {ref!r} is not a number") from exc
-        if ref_scale is not None and not (math.isfinite(ref_scale) and ref_scale > 0):
-            raise CatalogError(f"{manifest}:{line}: reference_scale must be a positive number")
         out.append(
             ManifestEntry(
                 asset_id=aid,
                 prompt=(row.get("prompt") or "").strip(),
                 asset_dir=root / aid,
                 category=(row.get("category") or "").strip() or None,
-                reference_scale=ref_scale,
+                reference_scale=_positive(manifest, line, row, "reference_scale"),
+                time_limit_seconds=_positive(manifest, line, row, "time_limit_seconds"),
             )
         )
     return out

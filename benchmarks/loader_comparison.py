@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     refused = [r for r in rows if r["ours"] == "rejects"]
     print()
     print(f"Corpus: {len(rows)} assets; asset2sim rejects {len(refused)}, accepts {len(rows) - len(refused)} "
-          f"(with a warning that names the problem). Slowest asset2sim validation: {max(r['ours_s'] for r in rows):.2f} s.")
+          f"(each with a warning or info finding that names the problem). Slowest asset2sim validation: {max(r['ours_s'] for r in rows):.2f} s.")
     print()
     print("| loader | accepts what asset2sim rejects | rejects | hangs | crashes | n/a |")
     print("|---|---|---|---|---|---|")

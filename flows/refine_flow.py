@@ -189,7 +189,7 @@ def plan_jobs(
                 probes=settings.probes,
                 extras=settings.extras,
                 isolation=settings.isolation,
-                time_limit_seconds=settings.time_limit_seconds,
+                time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
             )
         )
@@ -342,18 +342,21 @@ def stage_refine(
 
 
 def _tokens(report: dict[str, Any], out_dir: Path) -> int | None:
-    """Model tokens used: the report's or overlay's count when recorded, 0 when
-    no model was queried, else None (unknown)."""
-    for src in (report, report.get("estimator_info") or {}):
-        if isinstance(src, dict) and isinstance(src.get("tokens"), (int, float)):
-            return int(src["tokens"])
+    """Model tokens used: 0 when no model was queried, else the report's
+    ``model_tokens`` (or the overlay's estimator ``tokens``) when positive,
+    else None (the model API did not say)."""
+    if int(report.get("model_queries") or 0) == 0:
+        return 0
+    for value in (report.get("model_tokens"), report.get("tokens")):
+        if isinstance(value, (int, float)) and value > 0:
+            return int(value)
     try:
         est = json.loads((out_dir / "overlay.json").read_text()).get("estimator", {})
-        if isinstance(est.get("tokens"), (int, float)):
+        if isinstance(est.get("tokens"), (int, float)) and est["tokens"] > 0:
             return int(est["tokens"])
     except (OSError, ValueError, AttributeError):
         pass
-    return 0 if int(report.get("model_queries") or 0) == 0 else None
+    return None
 
 
 def stage_metrics(

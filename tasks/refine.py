@@ -43,11 +43,13 @@ Progress = Callable[[str, str], None]
 
 
 class RefineError(RuntimeError):
-    """A refine run failed; ``failure_mode`` is from the fixed vocabulary."""
+    """A refine run failed; ``failure_mode`` is from the fixed vocabulary;
+    ``codes`` the validation codes when the input was refused."""
 
-    def __init__(self, message: str, failure_mode: str):
+    def __init__(self, message: str, failure_mode: str, codes: list[str] | None = None):
         super().__init__(message)
         self.failure_mode = failure_mode
+        self.codes = list(codes or [])
 
 
 @dataclass
@@ -171,17 +173,21 @@ def refine_asset(
 
     # 1. extract
     try:
-        asset = extract.extract_asset(asset_dir, asset_id=asset_id, category=category)
+        asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
         write.check_output_folder(asset, out_dir)
     except (extract.AssetError, write.OutputError) as exc:
-        raise RefineError(str(exc), "invalid_input") from exc
+        err = RefineError(str(exc), "invalid_input")
+        err.codes = list(getattr(exc, "codes", []) or [])
+        raise err from exc
     chash = run_hash(asset.input_hash, config, prompt, category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         report = RefineReport.model_validate_json((out_dir / REPORT_NAME).read_text())
         overlay = Overlay.model_validate_json((out_dir / write.OVERLAY_NAME).read_text())
         say("skip", f"{out_dir} is complete for this input and configuration")
         return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
-    say("extract", f"{asset.urdf_path}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, category {asset.category}")
+    _start_output(out_dir)
+    say("extract", f"{asset.urdf_path}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, category {asset.category}"
+        + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
     lap("extract")
 
     # 2. analyze
@@ -289,7 +295,7 @@ def refine_asset(
         metrics=check.metrics + [m for res in check.engine_results.values() for m in res],
         parity=_parity_rows(check),
         escalation=rounds,
-        validation=[i.model_dump() for i in issues],
+        validation=[_finding_dict(f) for f in findings] + [i.model_dump() for i in issues],
         failure_mode=failure,
         stage_seconds=times,
         notes=list(overlay.notes.other) + ([f"resting pose ({spec.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
@@ -301,7 +307,10 @@ def refine_asset(
         lap("extras")
         report.stage_seconds = times
         atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-    files = [write.URDF_NAME, write.STATE_NAME, write.OVERLAY_NAME, REPORT_NAME]
+    files = sorted(
+        str(p_.relative_to(out_dir)) for p_ in out_dir.rglob("*")
+        if p_.is_file() and p_.name != MARKER_NAME and not p_.name.endswith(".tmp")
+    )
     atomic.write_json(
         out_dir / MARKER_NAME,
         {
@@ -460,6 +469,28 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     st.collision_changes = dnotes
     st.method = before.method + " | collision pieces improved -> " + st.method
     return st, overrides
+
+
+def _start_output(out_dir: Path) -> None:
+    """Before (re)writing an output folder: drop its completion marker (the
+    folder is not complete until the run finishes) and temporary files a
+    killed run left behind."""
+    (out_dir / MARKER_NAME).unlink(missing_ok=True)
+    if out_dir.is_dir():
+        for tmp in out_dir.rglob(".*.tmp"):
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+
+
+def _finding_dict(f) -> dict:
+    """A validation finding of the extraction stage as a JSON-able dict."""
+    if hasattr(f, "to_issue"):
+        return f.to_issue().model_dump()
+    if hasattr(f, "model_dump"):
+        return f.model_dump(mode="json")
+    return dict(vars(f))
 
 
 def _parity_rows(check) -> list[dict]:

@@ -164,9 +164,13 @@ def build_urdf(
     import yourdfpy
     from lxml import etree
 
+    from asset2sim import safexml
+
     s = float(overlay.scale)
+    data = asset.urdf_path.read_bytes()
+    safexml.parse_xml_bytes(data, source=str(asset.urdf_path))  # the hardened parser sees it first, every time
     model = yourdfpy.URDF.load(
-        io.BytesIO(asset.urdf_path.read_bytes()),
+        io.BytesIO(data),
         build_scene_graph=False,
         load_meshes=False,
         build_collision_scene_graph=False,

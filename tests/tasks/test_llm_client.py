@@ -4,6 +4,7 @@ connections, strict parsing, re-asks, the reply cache, accounting, credentials."
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("litellm")
+if importlib.util.find_spec("litellm") is None:  # not imported here: the client imports it quietly
+    pytest.skip("model backends need litellm (pip install 'asset2sim[llm]')", allow_module_level=True)
 
 from asset2sim.schemas.model_reply import ModelReply, reply_json_schema  # noqa: E402
 from asset2sim.tasks import llm_client as lc  # noqa: E402
@@ -379,3 +381,12 @@ def test_package_imports_without_litellm():
         "assert 'litellm' not in sys.modules, 'litellm imported at package import'\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, timeout=120)
+
+
+def test_forbidden_litellm_version_is_refused(monkeypatch):
+    import importlib.metadata
+
+    real = importlib.metadata.version
+    monkeypatch.setattr(importlib.metadata, "version", lambda name: "1.107.0" if name == "litellm" else real(name))
+    with pytest.raises(lc.LLMUnavailable, match="1.107.0"):
+        lc.import_litellm()

@@ -7,6 +7,7 @@ the direct / IVW baselines."""
 
 from __future__ import annotations
 
+import importlib.util
 import base64
 import io
 import json
@@ -18,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("litellm")
+if importlib.util.find_spec("litellm") is None:  # not imported here: the client imports it quietly
+    pytest.skip("model backends need litellm (pip install 'asset2sim[llm]')", allow_module_level=True)
 
 from asset2sim import safexml  # noqa: E402
 from asset2sim.schemas.config import RefineConfig  # noqa: E402
@@ -293,11 +295,34 @@ def test_openai_estimator_prefixes_the_model_and_registers():
 
 
 # ------------------------------------------------------ real objects, the CLI
-REAL = [("103275", "I want a slightly open stapler."), ("100221", "A very small jewelry box or treasure chest with a slightly open rotational lid. Low damping for smooth hinge behavior.")]
+REAL = [
+    ("7236", "I want a microwave with its door halfway open. Low damping for hinge-like behavior."),
+    ("100221", "A very small jewelry box or treasure chest with a slightly open rotational lid. Low damping for smooth hinge behavior."),
+]
 
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason=f"dev dataset not found at {SHARED}")
+def test_cli_refine_real_objects_in_process(server, tmp_path, capsys):
+    """``asset2sim refine ... --estimator openai`` (the CLI entry point, in this
+    process; exports, renders and the HTML report skipped) on two real objects."""
+    from asset2sim.cli import main
+
+    for oid, prompt in REAL:
+        out = tmp_path / f"out_{oid}"
+        rc = main(["refine", str(SHARED / oid), "--prompt", prompt, "--estimator", "openai", "--base-url", server.url,
+                   "--model", "m", "--out", str(out), "-q", "--no-extras"])
+        assert rc == 0, capsys.readouterr().err[-3000:]
+        assert "verdict" in capsys.readouterr().out
+        ov = assert_valid_output(out)
+        report = json.loads((out / "report.json").read_text())
+        assert report["estimator"] == "openai" and report["model_queries"] == 1 and ov.estimator.queries == 1
+    assert server.n_chat == len(REAL)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHARED.is_dir(), reason=f"dev dataset not found at {SHARED}")
 def test_cli_refine_real_objects_with_the_fake_server(server, tmp_path):
+    """The literal command in a subprocess, the first object with every extra."""
     env = dict(os.environ)
     for i, (oid, prompt) in enumerate(REAL):
         out = tmp_path / f"out_{oid}"
@@ -318,11 +343,15 @@ def test_cli_refine_real_objects_with_the_fake_server(server, tmp_path):
 
 
 # ------------------------------------------------------------------ baselines
-def test_direct_baseline_is_one_call_applied_as_is(server, plate):
+def test_direct_baseline_is_one_call_applied_as_is(server, plate, tmp_path):
+    from asset2sim.tasks import write
+
     server.default = fake.valid_reply(lambda d: d["joints"][0]["damping"].update(value=7.5))
     with _ctx(plate) as ctx:
         client = le.make_client("openai", "m", server.url)
         ov = le.direct_overlay(ctx, client)
+        write.write_output(ctx.asset, ov, tmp_path / "direct", ov.initial_joint_positions)  # what make_direct does
+    assert (tmp_path / "direct" / "mobility.urdf").is_file()
     assert server.n_chat == 1 and ov.estimator.name == "direct" and ov.estimator.queries == 1
     assert len(server.requests[0].image_urls()) == 5
     assert ov.joints["hinge"].damping == 7.5  # the model's number, no physics
@@ -342,12 +371,15 @@ def _varying(server_state: dict):
     return fake.valid_reply(mutate)
 
 
-def test_ivw_baseline_is_25_calls_fused_by_inverse_variance(server, plate):
+def test_ivw_baseline_is_25_calls_fused_by_inverse_variance(server, plate, tmp_path):
+    from asset2sim.tasks import write
+
     st: dict = {}
     server.default = _varying(st)
     with _ctx(plate) as ctx:
         client = le.make_client("openai", "m", server.url)
         ov = le.ivw_overlay(ctx, client)
+        write.write_output(ctx.asset, ov, tmp_path / "ivw", ov.initial_joint_positions)
     assert server.n_chat == 25 and ov.estimator.queries == 25 and ov.estimator.name == "ivw"
     per_view = [r.image_urls() for r in server.requests]
     assert all(len(u) == 1 for u in per_view)

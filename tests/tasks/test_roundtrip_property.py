@@ -407,6 +407,9 @@ def test_single_field_corruption_is_rejected(model, which, data):
     with tempfile.TemporaryDirectory() as tmp:
         src = _write(Path(tmp) / "src", model)
         findings = vi.validate_asset(src)
+        if not vi.has_errors(findings):
+            desc = extract_asset(src)  # what validation lets through, extraction must read
+            assert not any(ln.given_inertial for ln in desc.links if ln.name in {f.link for f in findings if f.action})
     codes = {f.code: f for f in findings}
     if code is None:
         hit = codes.get("NUMBER_COUNT") or codes.get("NUMBER_MALFORMED")
