@@ -186,6 +186,24 @@ def _accuracy(data: Path, ids: list[str], voxels_per_axis: int) -> None:
               f"p90 {100 * np.percentile(cvs, 90):.2f}%  max {100 * cvs.max():.2f}%; com spread max "
               f"{100 * coms.max():.2f}% of size")
 
+    fine = 2 * voxels_per_axis
+    print(f"\nreal non-watertight links: voxels_per_axis={voxels_per_axis} vs {fine} (links enclosing volume)")
+    devs, names = [], []
+    for oid, name, surf in links:
+        if an.watertight_properties(surf.vertices, surf.faces) is not None:
+            continue
+        area = an.surface_properties(surf.vertices, surf.faces)[0]
+        hi = an.voxel_properties(surf.vertices, surf.faces, voxels_per_axis=fine, max_voxels=40_000_000)
+        if hi.volume < an.OPEN_SHELL_FRACTION * area * hi.pitch:
+            continue
+        lo = an.voxel_properties(surf.vertices, surf.faces, voxels_per_axis=voxels_per_axis)
+        devs.append(lo.volume / hi.volume - 1)
+        names.append(f"{oid}/{name}")
+    devs = np.abs(np.array(devs))
+    worst = np.argsort(devs)[::-1][:3]
+    print(f"  links {len(devs)}: |V/V_fine - 1| median {100 * np.median(devs):.2f}%  p90 {100 * np.percentile(devs, 90):.2f}%  "
+          f"max {100 * devs.max():.2f}% (worst: {', '.join(f'{names[i]} {100 * devs[i]:.1f}%' for i in worst)})")
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

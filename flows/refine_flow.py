@@ -102,6 +102,31 @@ class AssetJob:
     isolation: str = "process"
     time_limit_seconds: float = 1800.0
     finished: dict[str, dict[str, Any]] = field(default_factory=dict)
+    code_version: str = __version__
+
+
+def code_version() -> str:
+    """The code that produced a result: the package version, plus the git
+    commit of the source tree (``+g<sha>``, ``.dirty`` with uncommitted
+    changes to tracked files) when the package runs from a git checkout."""
+    import subprocess
+
+    src = Path(__file__).resolve().parent.parent
+    try:
+        sha = subprocess.run(
+            ["git", "-C", str(src), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        )
+        if sha.returncode != 0 or not sha.stdout.strip():
+            return __version__
+        dirty = subprocess.run(
+            ["git", "-C", str(src), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    return f"{__version__}+g{sha.stdout.strip()}" + (".dirty" if dirty.stdout.strip() else "")
 
 
 def make_run_id(now: datetime | None = None) -> str:
@@ -166,6 +191,7 @@ def plan_jobs(
     config = cat.refine_config().model_dump(mode="json")
     finished = {} if force else ResultCatalog(cat.catalog_root).finished(name)
     run_out = cat.output_root / name / run_id
+    version = code_version()
     jobs = []
     for e in entries:
         ref_dir = None
@@ -191,6 +217,7 @@ def plan_jobs(
                 isolation=settings.isolation,
                 time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
+                code_version=version,
             )
         )
     return jobs
@@ -544,7 +571,7 @@ def build_row(
         "input_hash": prepared.get("input_hash"),
         "config_hash": prepared.get("config_hash"),
         "refine_config_hash": prepared.get("refine_config_hash"),
-        "code_version": __version__,
+        "code_version": job.code_version,
         "flow_run_id": flow_run_id,
         "worker": refined.get("worker") or prepared.get("worker"),
         "started_at": _utc(started_at or now),
@@ -897,7 +924,7 @@ def _refine_dataset_body(
         "refine_config_hash": cat.refine_config().config_hash(),
         "workers": None if address else n_workers,
         "dask_address": address,
-        "code_version": __version__,
+        "code_version": jobs[0].code_version if jobs else code_version(),
     }
     store.write_run_info(name, run_id, info)
     log.info(
@@ -953,7 +980,7 @@ def _refine_dataset_body(
                     "config_hash": info["refine_config_hash"],
                     "workers": n_workers if not address else "",
                     "dask_address": address or "",
-                    "code_version": __version__,
+                    "code_version": info["code_version"],
                     "assets": len(jobs),
                 },
                 artifacts=artifacts,

@@ -43,11 +43,15 @@ How (details and measured accuracy in ``docs/mesh_analysis.md``)
       filled cell counts w = 1 - sum over its faces exposed to the outside
       of the part of the cell beyond the surface along that axis, taken from
       the mean position of the cell's surface samples (``subvoxel``; for an
-      axis-aligned face this is exact). Without sub-voxel positions the part
-      is 1/2 per exposed face (``layer_correction``), which is right on
-      average for any orientation, since a surface with unit normal n
-      exposes (|n_x| + |n_y| + |n_z|) / pitch^2 cell faces per area and
-      leaves the same fraction of a cell outside on average.
+      axis-aligned face this is exact). A cell exposed on both sides of an
+      axis (a wall thinner than a cell) keeps, along that axis, the
+      separation of its two surfaces: 2 sqrt(var(x_k | x_i, x_j)) of its
+      samples (the spread that the in-plane coordinates do not explain: 0
+      for a single plane of any tilt). Without sub-voxel statistics the
+      part is 1/2 per exposed face (``layer_correction``), right on average
+      for any orientation, since a surface with unit normal n exposes
+      (|n_x| + |n_y| + |n_z|) / pitch^2 cell faces per area and leaves the
+      same fraction of a cell outside on average, but noisy (docs).
       Volume = sum(w) * pitch^3; center of mass and solid inertia are the
       w-weighted cell moments (each cell a uniform cube, + pitch^2/12 per
       axis).
@@ -550,6 +554,9 @@ class SolidMoments:
     method: str
     notes: list[str] = field(default_factory=list)
     pitch: float = 0.0
+    overlap_candidates: bool = False
+    """Closed components with positive volume whose bounding boxes overlap:
+    their union may be smaller than the sum of their volumes."""
 
 
 def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: float | None = None) -> SolidMoments | None:
@@ -563,14 +570,15 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: fl
         ``SolidMoments`` (method ``watertight_exact``) when the surface has
         every edge in exactly two faces with opposite orientation, either as
         indexed or with coincident vertices merged (faces that collapse in
-        the merge are ignored for the test); ``None`` otherwise. Per connected component the signed
-        volume is integrated over tetrahedra (reference point, v0, v1, v2)
+        the merge are ignored for the test); ``None`` otherwise. Per
+        connected component the signed volume is integrated over tetrahedra
+        (reference point, v0, v1, v2)
         (Tonon 2004: integral of x x^T dV = V/20 (sum_i p_i p_i^T + s s^T));
         a component with negative volume that is not inside another
-        component's bounding box is inside-out and is flipped (noted). The
-        ``notes`` record ``overlap-candidates`` when closed components with
-        positive volume have overlapping bounding boxes (their union may be
-        smaller than the sum; :func:`analyze_link` checks it).
+        component's bounding box is inside-out and is flipped (noted).
+        ``overlap_candidates`` is set when closed components with positive
+        volume have overlapping bounding boxes (their union may be smaller
+        than the sum; :func:`analyze_link` checks it).
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -619,11 +627,11 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: fl
         np.maximum.at(bmax[:, k], fcomp, corners[:, k])
     sign = np.ones(ncomp)
     tol_vol = 1e-12 * size**3
+    positive = vol > tol_vol
     for i in np.flatnonzero(vol < -tol_vol):
-        inside = [
-            j for j in range(ncomp) if j != i and vol[j] > 0 and np.all(bmin[j] <= bmin[i]) and np.all(bmax[i] <= bmax[j])
-        ]
-        if not inside:
+        # a cavity lies inside a positive component; otherwise it is inside-out
+        inside = positive & np.all(bmin <= bmin[i], axis=1) & np.all(bmax[i] <= bmax, axis=1)
+        if not inside.any():
             sign[i] = -1.0
     if np.any(sign < 0):
         notes.append(f"{int((sign < 0).sum())} closed component(s) were inside-out (inward normals) and were flipped")
@@ -635,14 +643,14 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: fl
     com = fst / vol_t
     cov = snd / vol_t - np.outer(com, com)
     pos = np.flatnonzero(sign * vol > tol_vol)
-    for ii, i in enumerate(pos):
-        for j in pos[ii + 1 :]:
-            if np.all(np.minimum(bmax[i], bmax[j]) - np.maximum(bmin[i], bmin[j]) > 1e-9 * size):
-                notes.append("overlap-candidates")
-                break
-        if notes and notes[-1] == "overlap-candidates":
+    overlap = False
+    for n_i, i in enumerate(pos[:-1]):
+        others = pos[n_i + 1 :]
+        gap = np.minimum(bmax[i], bmax[others]) - np.maximum(bmin[i], bmin[others])
+        if np.any(np.all(gap > 1e-9 * size, axis=1)):
+            overlap = True
             break
-    return SolidMoments(vol_t, com + ref, 0.5 * (cov + cov.T), "watertight_exact", notes)
+    return SolidMoments(vol_t, com + ref, 0.5 * (cov + cov.T), "watertight_exact", notes, overlap_candidates=overlap)
 
 
 def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
@@ -803,69 +811,117 @@ def voxelize(
     s0, s1 = int(dims[1] * dims[2]), int(dims[2])
     grid = np.zeros(ncell, bool)
     samples: list[tuple[np.ndarray, np.ndarray]] = []  # (cell (P,) int32, in-cell position (P, 3) uint8)
-    for s in range(0, len(faces), _CHUNK_FACES):
-        # in voxel units: cell (i, j, k) is [i, i+1) x [j, j+1) x [k, k+1)
-        tri = ((vertices[faces[s : s + _CHUNK_FACES]] - origin) / h).astype(np.float32)
-        for pts in _surface_points(tri, sample_spacing):
-            # points are convex combinations of vertices, so inside the padded grid
-            ijk = pts.astype(np.int32)
-            flat = ijk[:, 0].astype(np.int64) * s0 + ijk[:, 1] * s1 + ijk[:, 2]
-            grid[flat] = True
-            if subvoxel:
-                pts -= ijk
-                pts *= 255.0
-                samples.append((flat.astype(np.int32), (pts + 0.5).astype(np.uint8)))
+    # in voxel units: cell (i, j, k) is [i, i+1) x [j, j+1) x [k, k+1)
+    vox = ((vertices - origin) / h).astype(np.float32)
+
+    def batches() -> Iterable[np.ndarray]:
+        for s in range(0, len(faces), _CHUNK_FACES):
+            fc = faces[s : s + _CHUNK_FACES]
+            tri = vox[fc]
+            edge = np.max(np.abs(tri - tri[:, [1, 2, 0]]).sum(axis=2), axis=1)  # >= longest edge
+            small = edge <= sample_spacing
+            if small.any():  # triangles smaller than the spacing: their vertices, once each
+                yield vox[np.unique(fc[small])]
+            if not small.all():
+                yield from _surface_points(tri[~small], sample_spacing)
+
+    for pts in batches():
+        # points are convex combinations of vertices, so inside the padded grid
+        ijk = pts.astype(np.int32)
+        flat = ijk[:, 0].astype(np.int64) * s0 + ijk[:, 1] * s1 + ijk[:, 2]
+        grid[flat] = True
+        if subvoxel:
+            pts -= ijk
+            pts *= 255.0
+            samples.append((flat.astype(np.int32), (pts + 0.5).astype(np.uint8)))
     surf = grid.reshape(tuple(dims))
-    stats: tuple[np.ndarray, np.ndarray, np.ndarray] | tuple[None, None, None] = (None, None, None)
-    if subvoxel:
-        stats = _cell_statistics(grid, samples)
-        del samples
     closed = _dilate(surf, iters)
     closed = _erode(closed, iters)
     closed |= surf
     labels, _ = ndi.label(~closed)  # 6-connectivity for the outside
     filled = labels != labels[0, 0, 0]
+    del labels, closed
+    stats: tuple = (None, None, None)
+    if subvoxel:
+        # statistics only where the weights need them: cells with an exposed
+        # face (mean position), cells exposed on both sides of an axis (spread)
+        exposed = np.zeros(filled.shape, bool)
+        thin = np.zeros(filled.shape, bool)
+        for up, down in _exposures(filled):
+            exposed |= up | down
+            thin |= up & down
+        stats = _cell_statistics(grid & exposed.reshape(-1), thin.reshape(-1), samples)
+        del samples
     return VoxelGrid(surf, filled, origin, h, iters, *stats)
 
 
+def _exposures(filled: np.ndarray) -> Iterable[tuple[np.ndarray, np.ndarray]]:
+    """Per axis, (up, down): filled cells whose +axis / -axis neighbour is
+    empty (boolean grids of the shape of ``filled``; the grid is padded, so
+    border cells are empty)."""
+    for ax in range(3):
+        lo_sl = [slice(None)] * 3
+        hi_sl = [slice(None)] * 3
+        lo_sl[ax] = slice(0, -1)
+        hi_sl[ax] = slice(1, None)
+        lo_sl, hi_sl = tuple(lo_sl), tuple(hi_sl)
+        up = np.zeros(filled.shape, bool)
+        down = np.zeros(filled.shape, bool)
+        up[lo_sl] = filled[lo_sl] & ~filled[hi_sl]
+        down[hi_sl] = filled[hi_sl] & ~filled[lo_sl]
+        yield up, down
+
+
 def _cell_statistics(
-    grid: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]]
+    wanted: np.ndarray, thin: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per surface cell: flat index (S,), mean in-cell sample position (S, 3)
-    and unexplained spread along each axis (S, 3), see :class:`VoxelGrid`.
-    ``samples``: (cell (P,) int32, in-cell position * 255 (P, 3) uint8)."""
-    cells = np.flatnonzero(grid)
+    """Per wanted surface cell (flat mask ``wanted``): flat index (S,), mean
+    in-cell sample position (S, 3) and, for cells also in ``thin``, the
+    unexplained spread along each axis (S, 3; 0 elsewhere), see
+    :class:`VoxelGrid`. ``samples``: (cell (P,) int32, in-cell position *
+    255 (P, 3) uint8)."""
+    cells = np.flatnonzero(wanted)
     n = cells.size
-    cell_id = np.cumsum(grid, dtype=np.int32) - 1
+    cell_id = np.cumsum(wanted, dtype=np.int32) - 1
+    need_cov = thin & wanted
     count = np.zeros(n)
     first = np.zeros((3, n))
     second = np.zeros((6, n))
     pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
     for flat, frac in samples:
-        ids = cell_id[flat]
-        pos = frac.astype(np.float32) / 255.0
+        sel = wanted[flat]
+        ids = cell_id[flat[sel]]
+        pos = frac[sel].astype(np.float64) / 255.0
         count += np.bincount(ids, minlength=n)
         for k in range(3):
             first[k] += np.bincount(ids, weights=pos[:, k], minlength=n)
-        for m, (a, b) in enumerate(pairs):
-            second[m] += np.bincount(ids, weights=pos[:, a] * pos[:, b], minlength=n)
+        sel2 = need_cov[flat[sel]]
+        if sel2.any():
+            ids2, pos2 = ids[sel2], pos[sel2]
+            for m, (a, b) in enumerate(pairs):
+                second[m] += np.bincount(ids2, weights=pos2[:, a] * pos2[:, b], minlength=n)
     del cell_id
+    count = np.maximum(count, 1.0)
     mean = first / count
-    cov = np.empty((3, 3, n))
-    for m, (a, b) in enumerate(pairs):
-        cov[a, b] = cov[b, a] = second[m] / count - mean[a] * mean[b]
-    det = (
-        cov[0, 0] * (cov[1, 1] * cov[2, 2] - cov[1, 2] ** 2)
-        - cov[0, 1] * (cov[0, 1] * cov[2, 2] - cov[1, 2] * cov[0, 2])
-        + cov[0, 2] * (cov[0, 1] * cov[1, 2] - cov[1, 1] * cov[0, 2])
-    )
     thickness = np.zeros((3, n))
-    for k in range(3):
-        i, j = [a for a in range(3) if a != k]
-        minor = cov[i, i] * cov[j, j] - cov[i, j] ** 2  # det of the other two axes
-        ok = (minor > 1e-6) & (count >= 4)
-        resid = np.where(ok, det / np.where(ok, minor, 1.0), 0.0)  # Schur complement
-        thickness[k] = np.clip(2.0 * np.sqrt(np.maximum(resid, 0.0)), 0.0, 1.0)
+    rows = np.flatnonzero(need_cov[cells])
+    if rows.size:
+        c = count[rows]
+        m = mean[:, rows]
+        cov = np.empty((3, 3, rows.size))
+        for q, (a, b) in enumerate(pairs):
+            cov[a, b] = cov[b, a] = second[q, rows] / c - m[a] * m[b]
+        det = (
+            cov[0, 0] * (cov[1, 1] * cov[2, 2] - cov[1, 2] ** 2)
+            - cov[0, 1] * (cov[0, 1] * cov[2, 2] - cov[1, 2] * cov[0, 2])
+            + cov[0, 2] * (cov[0, 1] * cov[1, 2] - cov[1, 1] * cov[0, 2])
+        )
+        for k in range(3):
+            i, j = [a for a in range(3) if a != k]
+            minor = cov[i, i] * cov[j, j] - cov[i, j] ** 2  # det of the other two axes
+            ok = (minor > 1e-6) & (c >= 4)
+            resid = np.where(ok, det / np.where(ok, minor, 1.0), 0.0)  # Schur complement
+            thickness[k, rows] = np.clip(2.0 * np.sqrt(np.maximum(resid, 0.0)), 0.0, 1.0)
     return cells, mean.T.astype(np.float32), thickness.T.astype(np.float32)
 
 
@@ -918,16 +974,7 @@ def voxel_properties(
     # beyond the surface on each exposed face (see module doc)
     weight = np.ones(filled.shape, np.float32)
     flat_weight = weight.reshape(-1)
-    for ax in range(3):
-        lo_sl = [slice(None)] * 3
-        hi_sl = [slice(None)] * 3
-        lo_sl[ax] = slice(0, -1)
-        hi_sl[ax] = slice(1, None)
-        lo_sl, hi_sl = tuple(lo_sl), tuple(hi_sl)
-        up = np.zeros(filled.shape, bool)  # cell exposed towards +ax
-        down = np.zeros(filled.shape, bool)  # cell exposed towards -ax
-        up[lo_sl] = filled[lo_sl] & ~filled[hi_sl]
-        down[hi_sl] = filled[hi_sl] & ~filled[lo_sl]
+    for ax, (up, down) in enumerate(_exposures(filled)):
         if vg.cells is None:
             weight -= layer_correction * up
             weight -= layer_correction * down
@@ -937,15 +984,15 @@ def voxel_properties(
             idx = np.flatnonzero(mask)
             if idx.size == 0:
                 continue
-            at = np.minimum(np.searchsorted(vg.cells, idx), vg.cells.size - 1)
-            known = vg.cells[at] == idx  # cells added by the closing have no samples
-            if kind == "up":
-                outside = np.where(known, 1.0 - vg.mean[at, ax], 0.5)
+            at = np.minimum(np.searchsorted(vg.cells, idx), max(vg.cells.size - 1, 0))
+            known = vg.cells[at] == idx if vg.cells.size else np.zeros(idx.size, bool)
+            if kind == "up":  # cells added by the closing have no samples: half a cell
+                outside = np.where(known, 1.0 - vg.mean[at, ax], 0.5) if vg.cells.size else 0.5
             elif kind == "down":
-                outside = np.where(known, vg.mean[at, ax], 0.5)
+                outside = np.where(known, vg.mean[at, ax], 0.5) if vg.cells.size else 0.5
             else:
-                outside = np.where(known, 1.0 - vg.thickness[at, ax], 1.0)
-            flat_weight[idx] -= outside.astype(np.float32)
+                outside = np.where(known, 1.0 - vg.thickness[at, ax], 1.0) if vg.cells.size else 1.0
+            flat_weight[idx] -= np.asarray(outside, np.float32)
     np.clip(weight, 0.0, 1.0, out=weight)
     weight *= filled
     notes = [f"voxel pitch {h:.4g} m ({int(dims[0])}x{int(dims[1])}x{int(dims[2])} grid), gap closing {iters} voxel(s)"]
@@ -1087,8 +1134,10 @@ def analyze_link(
         m^2 about ``com``), or ``None`` for a link without geometry.
         ``volume_method`` is one of ``analytic_primitive``,
         ``watertight_exact``, ``voxel_union`` (closed parts that overlap),
-        ``voxel_fill`` (polygon soup); ``open shell`` is appended when the
-        surface encloses (almost) nothing.
+        ``voxel_fill`` (polygon soup), with ``+open_shell`` appended when
+        the surface encloses (almost) nothing (then ``com`` is the surface
+        centroid and ``inertia_solid`` equals ``inertia_shell``). ``notes``
+        say which geometry was used and what was dropped or regularised.
 
     Raises:
         MeshAnalysisError: no usable geometry (unreadable or degenerate
@@ -1136,8 +1185,7 @@ def analyze_link(
         solid = watertight_properties(v, f)
         if solid is not None:
             watertight = True
-            if "overlap-candidates" in solid.notes:
-                solid.notes.remove("overlap-candidates")
+            if solid.overlap_candidates:
                 union = voxel_properties(v, f, **vox_kw)
                 # the voxel estimate's error is ~1-3% (docs/mesh_analysis.md)
                 if union.volume < 0.95 * solid.volume:

@@ -20,8 +20,8 @@ from pathlib import Path
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
 
-#: Record fields excluded from the reproducibility comparison (wall times).
-TIMING_FIELDS = ("seconds", "method_seconds")
+#: Record fields excluded from the reproducibility comparison (wall times; the report link, absent with --no-reports).
+TIMING_FIELDS = ("seconds", "method_seconds", "report")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

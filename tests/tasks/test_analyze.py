@@ -227,6 +227,30 @@ def test_open_box_five_walls_solid(tmp_path):
     assert rel(np.trace(sm.second) * np.eye(3) - sm.second, inertia) < 0.05
 
 
+def test_voxel_estimate_of_walls_thinner_than_a_voxel():
+    # open box with 2 mm walls: 0.7 voxel at the default resolution; the two
+    # faces of a wall often fall in the same cell (their separation is kept)
+    A, B, C, t = 0.4, 0.3, 0.2, 0.002
+    xs, ys, zs = [0, t, A - t, A], [0, t, B - t, B], [0, t, C]
+    occ = np.ones((3, 3, 2), bool)
+    occ[1, 1, 1] = False
+    v, f = grid_solid(xs, ys, zs, occ)
+    vol, com, _ = boxes_moments(cell_boxes(xs, ys, zs, occ))
+    vols = [an.voxel_properties(v, f, grid_shift=s).volume for s in [(0, 0, 0), (0.3, 0.6, 0.9), (0.5, 0.5, 0.5)]]
+    assert np.mean(vols) == pytest.approx(vol, rel=0.08)
+    assert all(x == pytest.approx(vol, rel=0.15) for x in vols)
+
+
+def test_tilted_zero_thickness_sheet_encloses_nothing(tmp_path):
+    a = 0.5
+    quad = np.array([[0, 0, 0], [a, 0, 0], [a, a, 0], [0, a, 0]], float)
+    path = write_obj(tmp_path / "sheet.obj", quad, [[0, 1, 2], [0, 2, 3]])
+    g = analyze_link(link_of([mesh_ref(path, rpy=(0.3, 0.5, 0.2))]))
+    assert g.volume_method == "voxel_fill+open_shell"
+    assert g.volume < 0.02 * a * a * a / 96
+    assert g.area == pytest.approx(a * a, rel=1e-12)
+
+
 def test_thin_watertight_slab_solid_values(tmp_path):
     a, b, t = 0.5, 0.3, 0.004
     path = write_obj(tmp_path / "slab.obj", *box_mesh(a, b, t))
@@ -338,6 +362,8 @@ def test_voxel_estimate_independent_of_grid_offset_and_accurate_for_sphere():
         inertia = np.trace(sm.second) * np.eye(3) - sm.second
         assert rel(inertia, np.eye(3) * 0.4 * 0.04 * (sph.volume / (4 / 3 * math.pi * 0.008)) ** (2 / 3)) < 0.02
     assert np.allclose(vols, sph.volume, rtol=0.01)
+    half = an.voxel_properties(v, f, subvoxel=False, grid_shift=(0.2, 0.4, 0.6))  # the half-cell rule
+    assert half.volume == pytest.approx(sph.volume, rel=0.01)
 
 
 def test_overlapping_closed_parts_use_voxel_union(tmp_path):
