@@ -86,6 +86,9 @@ def failure_mode_figure(df, title: str = ""):
         bottom = [b + v for b, v in zip(bottom, vals)]
     ax.set_xticks(x)
     ax.set_xticklabels([str(i) for i in table.index], rotation=30, ha="right", fontsize=8)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("assets")
     ax.set_title(title or "failure modes by category")
     if modes:

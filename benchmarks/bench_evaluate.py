@@ -17,8 +17,10 @@ any disagreement (exit code 1 when there is one).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import statistics
 import sys
 import tempfile
@@ -27,6 +29,21 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "manifest.csv"
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Silence Bullet's C-level prints on fd 1 (argv[0]=, b3Warning)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
 
 
 def independent_measure(urdf: str | Path, initial_state: dict[str, float], springs: dict[str, tuple[float, float]] | None = None) -> dict:
@@ -45,13 +62,15 @@ def independent_measure(urdf: str | Path, initial_state: dict[str, float], sprin
     import pybullet as pb
     from pybullet_utils import bullet_client
 
-    c = bullet_client.BulletClient(connection_mode=pb.DIRECT)
+    with _quiet():
+        c = bullet_client.BulletClient(connection_mode=pb.DIRECT)
     try:
         c.setTimeStep(1.0 / 240.0)
         c.setGravity(0, 0, -9.81)
         plane = c.createMultiBody(0, c.createCollisionShape(pb.GEOM_PLANE))
-        body = c.loadURDF(str(urdf), useFixedBase=False, flags=pb.URDF_USE_SELF_COLLISION
-                          | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | pb.URDF_USE_INERTIA_FROM_FILE)
+        with _quiet():
+            body = c.loadURDF(str(urdf), useFixedBase=False, flags=pb.URDF_USE_SELF_COLLISION
+                              | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | pb.URDF_USE_INERTIA_FROM_FILE)
         movable = {}
         for j in range(c.getNumJoints(body)):
             info = c.getJointInfo(body, j)
@@ -66,7 +85,9 @@ def independent_measure(urdf: str | Path, initial_state: dict[str, float], sprin
         pos, orn = c.getBasePositionAndOrientation(body)
         c.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - low], orn)
         c.performCollisionDetection()
-        pts = c.getClosestPoints(body, plane, 0.05)
+        # search up to the top of the object + 5 cm: Bullet's AABBs of rotated hulls are loose
+        top = max(c.getAABB(body, i)[1][2] for i in range(-1, c.getNumJoints(body)))
+        pts = c.getClosestPoints(body, plane, max(top, 0.0) + 0.05)
         if pts:
             pos, orn = c.getBasePositionAndOrientation(body)
             c.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - min(p[8] for p in pts)], orn)

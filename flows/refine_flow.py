@@ -58,6 +58,9 @@ from asset2sim.catalog import Catalog, ManifestEntry, ResultCatalog, load_catalo
 
 FLOW_NAME = "refine-dataset"
 SUBFLOW_NAME = "refine-assets"
+#: Per run, ``<output_root>/<dataset>/<run>/_metrics/<asset id>/evaluation.json``
+#: holds the metrics stage's measurement (beside, not inside, the refined folder).
+METRICS_DIRNAME = "_metrics"
 DEFAULT_REFINE_FUNCTION = "asset2sim.tasks.refine:refine_asset"
 
 #: Failure modes a retry cannot fix are recorded at once; this one is retried
@@ -78,7 +81,8 @@ class ModelCallFailure(RuntimeError):
 class AssetJob:
     """Everything one asset's task chain needs (JSON-able, shipped to workers).
 
-    Paths absolute; ``time_limit_seconds`` s over all stages of the asset;
+    Paths absolute (``out_dir`` the refined folder, ``metrics_dir`` the metrics
+    stage's ``evaluation.json``, ``work_dir`` scratch of isolated stages); ``time_limit_seconds`` s over all stages of the asset;
     ``config`` the :class:`~asset2sim.schemas.config.RefineConfig` as a dict;
     ``finished`` the catalog rows of earlier finished runs keyed by
     :func:`asset2sim.catalog.result_key` for this asset (empty when forced).
@@ -91,6 +95,7 @@ class AssetJob:
     asset_dir: str
     out_dir: str
     work_dir: str
+    metrics_dir: str
     category: str | None = None
     reference_scale: float | None = None
     reference_dir: str | None = None
@@ -206,6 +211,7 @@ def plan_jobs(
                 asset_dir=str(e.asset_dir),
                 out_dir=str(run_out / e.asset_id),
                 work_dir=str(run_out / ".work" / e.asset_id),
+                metrics_dir=str(run_out / METRICS_DIRNAME / e.asset_id),
                 category=e.category,
                 reference_scale=e.reference_scale,
                 reference_dir=ref_dir,
@@ -392,9 +398,12 @@ def stage_metrics(
     category: str | None,
     reference_dir: str | None = None,
     probes: bool = False,
+    metrics_dir: str | None = None,
 ) -> dict[str, Any]:
     """Stability metrics of a refined asset (``asset2sim.tasks.evaluate``,
-    PyBullet, SPEC conventions); writes ``evaluation.json`` into ``out_dir``.
+    PyBullet, SPEC conventions); writes ``evaluation.json`` into
+    ``metrics_dir`` when given. The refined folder itself is never touched
+    (its completion marker covers every file in it).
 
     Returns ``penetration_mm`` (mm), ``rest_stable``, ``d_pos_m`` (m),
     ``d_ori_rad`` (rad), ``oscillation_pass``, ``prompt_alignment`` (0..1 or
@@ -411,7 +420,7 @@ def stage_metrics(
         prompt=prompt,
         engines=("pybullet",),
         category=category,
-        out_dir=Path(out_dir),
+        out_dir=Path(metrics_dir) if metrics_dir else None,
         write_report=False,
         probes=probes,
     )
@@ -508,6 +517,7 @@ def metrics_stage(job: AssetJob, prepared: dict[str, Any], refined: dict[str, An
             "category": category,
             "reference_dir": job.reference_dir,
             "probes": job.probes,
+            "metrics_dir": job.metrics_dir,
         },
         budget,
     )
@@ -615,6 +625,8 @@ def build_row(
         row["total_mass_kg"] = _num(report.get("total_mass"))
         row["initial_state"] = json.dumps(report.get("initial_joint_positions") or {}, sort_keys=True)
         row["model_queries"] = int(report.get("model_queries") or 0)
+        # the hash the refine function wrote into its completion marker
+        row["refine_config_hash"] = report.get("config_hash") or row["refine_config_hash"]
         row["tokens"] = value.get("tokens")
         row["estimator"] = report.get("estimator") or row["estimator"]
         row["model"] = report.get("model") or row["model"]
@@ -758,7 +770,7 @@ def __getattr__(name: str):
 
 def _dask_task_runner(workers: int | None, address: str | None):
     """A DaskTaskRunner: the scheduler at ``address``, else a local cluster of
-    ``workers`` single-threaded worker processes (no dashboard) that report to
+    ``workers`` single-threaded worker processes (dashboard on a free port) that report to
     this process's Prefect API."""
     from prefect_dask import DaskTaskRunner
 
@@ -774,7 +786,7 @@ def _dask_task_runner(workers: int | None, address: str | None):
             "n_workers": n,
             "threads_per_worker": 1,
             "processes": True,
-            "dashboard_address": None,
+            "dashboard_address": ":0",  # a free port: several clusters may run on one machine
             "env": env,
         }
     )

@@ -104,6 +104,9 @@ class JointDynamics(_Strict):
     stiffness: float = 0.0
     spring_reference: float | None = None
     """Rest position q_s of the spring (rad or m); required when stiffness > 0."""
+    inertia_axis: float | None = None
+    """Inertia of the moving subtree about / along the axis (kg*m^2 or kg), when
+    known: bounds the damping a simulator integrates stably (c <= I / dt)."""
     source: str = ""
 
 

@@ -202,6 +202,23 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     return s, note
 
 
+def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, float]:
+    """Plausible total mass (kg) for the object *as sized*: the category's (or
+    the named variant's) regular mass range scaled to the actual size factor
+    f = geometric mean of (scaled closed extents / regular dims) over the two
+    largest dimensions (``priors.scale_mass_range``: f^2..f^3)."""
+    from asset2sim.tasks import priors
+
+    target = priors.target_size(ctx.category, ctx.request)
+    cat = priors.category_prior(ctx.category)
+    var = cat.variant(target.variant) if target.variant else None
+    base_lo, base_hi = var.mass_range if var is not None else cat.mass_range
+    base = np.sort(np.asarray(target.base_dims, float))[::-1]
+    actual = np.sort(np.asarray(ctx.closed_extents, float) * scale)[::-1]
+    f = float(np.exp(np.mean(np.log(np.maximum(actual[:2], 1e-9) / base[:2]))))
+    return priors.scale_mass_range(base_lo, base_hi, f)
+
+
 def _variant(ctx: EstimationContext) -> str | None:
     from asset2sim.tasks import priors
 
@@ -317,7 +334,7 @@ class OfflineEstimator:
             mat_notes.append(f"{ln.name} ({ln.semantic_label or 'unlabelled'}): {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
         total = sum(lp.mass for lp in links.values())
         mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
-        lo, hi = priors.target_size(ctx.category, ctx.request).mass_range
+        lo, hi = plausible_mass_range(ctx, s)
         if total > 0 and (total < lo or total > hi):
             # into the plausible range, a margin inside its ends (10 %)
             target = lo * 1.1 if total < lo else hi * 0.9

@@ -415,18 +415,21 @@ def category_prior(category: str | None, spec=None) -> dict[str, Any]:
     }
 
 
-def scaled_mass_range(prior: dict[str, Any], largest_extent: float | None) -> tuple[tuple[float, float] | None, float]:
-    """Plausible mass range (kg) for an object of the prior's category whose
-    largest extent is ``largest_extent`` (m): the base range scaled by
-    :func:`asset2sim.tasks.priors.scale_mass_range` with f = largest_extent /
-    largest base dimension (solid f^3 to thin-walled f^2). Returns (range or
-    None, f)."""
+def scaled_mass_range(prior: dict[str, Any], extents: Any) -> tuple[tuple[float, float] | None, float]:
+    """Plausible mass range (kg) for an object of the prior's category with
+    closed-state ``extents`` (3,) m: the base range scaled by
+    :func:`asset2sim.tasks.priors.scale_mass_range` (solid f^3 to thin-walled
+    f^2) with f the geometric mean of (extent / base dimension) over the two
+    largest dimensions, both sorted — the same size factor the refine stage
+    uses (``tasks.estimate.plausible_mass_range``). Returns (range or None, f)."""
     if not prior or not prior.get("base_mass_range"):
         return None, 1.0
     lo, hi = prior["base_mass_range"]
     f = 1.0
-    if largest_extent and prior.get("base_dims"):
-        f = float(largest_extent) / float(prior["base_dims"][0])
+    ext = None if extents is None else np.sort(np.asarray(extents, float).ravel())[::-1]
+    if ext is not None and len(ext) >= 2 and prior.get("base_dims") and float(ext[0]) > 0:
+        base = np.sort(np.asarray(prior["base_dims"], float))[::-1]
+        f = float(np.exp(np.mean(np.log(np.maximum(ext[:2], 1e-9) / base[:2]))))
     try:
         from asset2sim.tasks.priors import scale_mass_range
 
@@ -1150,7 +1153,9 @@ def _m_mass(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         total = sum(v["mass"] for v in r.masses.values())
         per = r.masses
     largest, where = _largest_extent(ctx, runs)
-    rng, f = scaled_mass_range(ctx.prior, largest)
+    rfirst = _first_run(runs)
+    extents = ctx.closed_extents if ctx.closed_extents is not None else (rfirst.extents if rfirst is not None else None)
+    rng, f = scaled_mass_range(ctx.prior, extents)
     m = sem.mass_plausibility(total, rng, per_link=per, category=ctx.category)
     m.details.update({"size_factor_vs_prior": f, "largest_extent_m": largest, "extent_state": where,
                       "base_mass_range_kg": ctx.prior.get("base_mass_range"), "prior_source": ctx.prior.get("source")})

@@ -237,6 +237,18 @@ def joint_loads(
     return out
 
 
+#: Simulator timestep the damping bound is computed for, s (SPEC: 1/240 s).
+TIMESTEP = 1.0 / 240.0
+
+
+def max_stable_damping(inertia_axis: float, timestep: float = TIMESTEP) -> float:
+    """Largest viscous damping (N*m*s/rad or N*s/m) a semi-implicit integrator
+    takes without overshooting in one step: c dt / I <= 1, i.e. c <= I / dt
+    (the velocity decay factor of one step stays in [0, 1]). Higher values
+    make light parts explode in PyBullet."""
+    return float(max(inertia_axis, 0.0) / timestep)
+
+
 def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: float = FLOOR_FREQUENCY_HZ) -> float:
     """Viscous damping c = 2 zeta sqrt(I k_eff) (N*m*s/rad or N*s/m), with
     k_eff = max(gravity stiffness, spring stiffness, I (2 pi f0)^2)."""
@@ -275,6 +287,7 @@ def joint_dynamics(
     zeta = DAMPING_RATIO.get(damping_level, DAMPING_RATIO["moderate"])
     k = spring[0] if spring else 0.0
     c = damping_for(load_at_state, zeta, k)
+    c_max = max_stable_damping(load_at_state.inertia_axis)
     weight = load_at_state.mass * G
     floor = 0.05 * weight if prismatic else 0.05 * weight * 0.01
     if free_moving:
@@ -283,11 +296,13 @@ def joint_dynamics(
     if stiff:
         friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor)
         c *= 2.0
+    c = min(c, c_max)
     return JointDynamics(
         damping=float(c),
         friction=float(friction),
         stiffness=float(k),
         spring_reference=float(spring[1]) if spring else None,
+        inertia_axis=float(load_at_state.inertia_axis),
         source=(
             f"{source}: zeta={zeta} ({damping_level}), I_axis={load_at_state.inertia_axis:.4g}, "
             f"k_g={load_at_state.gravity_stiffness:.4g}, hold load={abs(hold_load):.4g}"

@@ -138,9 +138,14 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
         d = ov.joints.get(name)
         if d is None:
             continue
+        damping = max(d.damping * factor, 1e-4)
+        if d.inertia_axis:
+            from asset2sim.tasks.physics import max_stable_damping
+
+            damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
         new = d.model_copy(
             update={
-                "damping": max(d.damping * factor, 1e-4),
+                "damping": damping,
                 "friction": max(d.friction * factor, 1e-3),
                 "source": d.source + f"; escalated x{factor:g}",
             }

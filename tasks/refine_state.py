@@ -5,7 +5,9 @@ Solves, within each joint's allowed interval,
     min_q  Phi(q) + lambda * sum_j ((q_j - q_req_j) / R_j)^2
 
 where Phi(q) (m) is the self-penetration score of the SPEC measured in
-PyBullet (sum over self-contact points of max(0, -separation)), q_req the
+PyBullet (sum over self-contact points of max(0, -separation); queried per link pair
+with ``getClosestPoints`` so that no value depends on contact points Bullet
+cached at earlier states of the session), q_req the
 requested state projected onto the intervals, R_j the joint's opening range
 (so deviations are measured as fractions of the range) and lambda (m) the
 trade-off (``RefineConfig.state_lambda``). The allowed interval of a joint is
@@ -124,11 +126,13 @@ def refine_initial_state(
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
     evals = 0
 
+    penetration = getattr(session, "self_penetration_fresh", session.self_penetration)
+
     def objective(q: dict[str, float]) -> tuple[float, float]:
         nonlocal evals
         evals += 1
         session.set_joint_positions(q)
-        phi, _ = session.self_penetration()
+        phi, _ = penetration()
         reg = sum(((q[n] - q_req[n]) / scale[n]) ** 2 for n in names)
         return phi + lam * reg, phi
 
@@ -137,7 +141,7 @@ def refine_initial_state(
     phi_req = best_phi
     method = ["requested state"]
     session.set_joint_positions(best_q)
-    _, pairs0 = session.self_penetration()
+    _, pairs0 = penetration()
     worst = [
         {"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
         for c in pairs0[:5]
@@ -145,7 +149,7 @@ def refine_initial_state(
 
     def focus_joints() -> list[str]:
         session.set_joint_positions(best_q)
-        _, pairs = session.self_penetration()
+        _, pairs = penetration()
         out: list[str] = []
         for c in pairs[:3]:
             for j in path_joints(asset, c.link_a, c.link_b):

@@ -195,6 +195,43 @@ class PyBulletSession:
             total += -d
         return total, sorted(pairs.values(), key=lambda c: -c.depth)
 
+    def self_penetration_fresh(self) -> tuple[float, list[ContactPair]]:
+        """Phi (m) like :meth:`self_penetration`, but from ``getClosestPoints``
+        per link pair (parent-child pairs excluded, as the SPEC's flags do), so
+        the value cannot depend on contact points Bullet cached at earlier
+        states of the same session (its persistent manifolds do). Equal to
+        :meth:`self_penetration` in a fresh session; used by searches that
+        query many states in one session."""
+        p = self._p
+        cache = self.__dict__.setdefault("_pairs_cache", None)
+        if cache is None:
+            with_shape = [i for i in self.link_names if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
+            parent = {j: p.getJointInfo(self.body, j, physicsClientId=self.cid)[16] for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))}
+            cache = [
+                (a, b)
+                for a in with_shape
+                for b in with_shape
+                if a < b and parent.get(b) != a and parent.get(a) != b
+            ]
+            self._pairs_cache = cache
+        pairs: dict[tuple[str, str], ContactPair] = {}
+        total = 0.0
+        for a, b in cache:
+            for pt in p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid):
+                d = pt[8]
+                if d >= 0.0:
+                    continue
+                na, nb = self.link_names[a], self.link_names[b]
+                key = (na, nb) if na <= nb else (nb, na)
+                cp = pairs.get(key)
+                if cp is None:
+                    cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
+                cp.depth += -d
+                cp.max_depth = max(cp.max_depth, -d)
+                cp.points += 1
+                total += -d
+        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+
     def ground_penetration(self) -> float:
         if self.plane is None:
             return 0.0

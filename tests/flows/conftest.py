@@ -53,7 +53,7 @@ def dask_address(prefect_server):
         n_workers=2,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",
         env={"PREFECT_API_URL": prefect_server},
     )
     try:

@@ -110,7 +110,8 @@ def refine_fake(asset_dir, prompt, out_dir, config=None, *, category=None, asset
         stage_seconds={"extract": time.perf_counter() - t0, "write": 0.01},
     )
     atomic.write_json(out_dir / "report.json", report.model_dump(mode="json"))
-    files = ["mobility.urdf", "initial_state.json", "overlay.json", "report.json"]
+    # like the real refine: the marker covers every file of the folder
+    files = sorted(str(f.relative_to(out_dir)) for f in out_dir.rglob("*") if f.is_file() and f.name != MARKER_NAME)
     atomic.write_json(
         out_dir / MARKER_NAME,
         {

@@ -117,3 +117,59 @@ def test_a_scheduled_flow_run_executes_through_the_runner(tmp_path, prefect_serv
     assert state.is_completed(), state
     df = ResultCatalog(load_catalog(catalog).catalog_root).read("gen")
     assert list(df["asset_id"]) == ["box_lid"] and df["status"].iloc[0] == "done"
+
+
+def test_serve_command_is_flow_serve(monkeypatch):
+    """`asset2sim serve` (make serve) is `asset2sim flow --serve` with the same options."""
+    from unittest import mock
+
+    from asset2sim import cli
+    from asset2sim.commands import flow as flow_cmd
+
+    seen = {}
+
+    def fake_serve(args, cat):
+        seen.update(vars(args))
+        return 0
+
+    with mock.patch.object(flow_cmd, "_serve", fake_serve):
+        rc = cli.main(["serve", "--catalog", str(REPO / "catalog.yaml"), "--timezone", "Europe/Berlin", "--register-only"])
+    assert rc == 0 and seen["serve"] and seen["timezone"] == "Europe/Berlin" and seen["register_only"]
+
+
+@pytest.mark.slow
+def test_the_server_scheduler_creates_runs_of_the_nightly_deployment(tmp_path, monkeypatch):
+    """Against a real `prefect server` (what `make serve` starts), the cron
+    schedule produces scheduled flow runs. (Fails with SQLAlchemy 2.1, whose
+    bulk-insert rules break Prefect 3.8's scheduler: pin sqlalchemy<2.1.)"""
+    import time
+
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import DeploymentFilter, DeploymentFilterId
+    from prefect.settings import PREFECT_API_URL, temporary_settings
+
+    from asset2sim.flows import nightly
+
+    catalog = make_project(tmp_path, {"box_lid": "box_lid"}, catalog_extra={"tracking": {"enabled": False}})
+    monkeypatch.setenv("PREFECT_SERVER_SERVICES_SCHEDULER_LOOP_SECONDS", "5")
+    monkeypatch.setenv("PREFECT_HOME", str(tmp_path / ".prefect"))
+    proc, url = nightly.start_local_server(tmp_path)
+    try:
+        with temporary_settings({PREFECT_API_URL: url}):
+            dep = nightly.build_nightly_deployment(catalog, cron="* * * * *", timezone="Europe/Berlin")
+            dep_id = nightly.register_nightly(dep)
+            deadline = time.monotonic() + 150
+            runs = []
+            with get_client(sync_client=True) as client:
+                while time.monotonic() < deadline and not runs:
+                    runs = client.read_flow_runs(
+                        deployment_filter=DeploymentFilter(id=DeploymentFilterId(any_=[dep_id]))
+                    )
+                    if not runs:
+                        time.sleep(3)
+        assert runs, f"no scheduled run appeared; see {tmp_path / '.prefect' / 'server.log'}"
+        assert all(r.state.is_scheduled() for r in runs)
+        assert runs[0].parameters == nightly.nightly_parameters(catalog)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

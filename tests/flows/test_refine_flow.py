@@ -72,10 +72,10 @@ def test_flow_refines_generated_assets_and_records_every_failure(first_run):
         assert r["status"] == "done", r["error"]
         out = Path(r["out_dir"])
         assert out == load_catalog(catalog).output_root / "gen" / summary["run"] / aid
-        for f in ("mobility.urdf", "report.json", "initial_state.json", "overlay.json", "evaluation.json"):
+        for f in ("mobility.urdf", "report.json", "initial_state.json", "overlay.json"):
             assert (out / f).is_file(), f
         # the metrics stage's numbers are the ones in the row ...
-        ev = json.loads((out / "evaluation.json").read_text())
+        ev = json.loads((out.parent / "_metrics" / aid / "evaluation.json").read_text())
         pen = [m for m in ev["metrics"] if m["name"] == "penetration" and m["engine"] == "pybullet"][0]
         assert r["penetration_mm"] == pytest.approx(pen["value"])
         # ... and the verdict follows them

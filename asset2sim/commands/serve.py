@@ -1,0 +1,29 @@
+"""``asset2sim serve``: register the nightly deployment of the refine flow and
+serve it (``make serve``); same as ``asset2sim flow --serve``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "serve"
+HELP = "Register the nightly deployment (cron schedule from catalog.yaml) with Prefect and serve it until interrupted."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
+    parser.add_argument("--dataset", default=None, help="dataset to refine nightly (default: catalog schedule.dataset)")
+    parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
+    parser.add_argument("--dask-address", default=None, help="existing Dask scheduler (default: $DASK_ADDRESS at run time)")
+    parser.add_argument("--cron", default=None, help="cron expression (default: $ASSET2SIM_CRON, else catalog schedule.cron)")
+    parser.add_argument(
+        "--timezone", default=None, help="IANA time zone (default: $ASSET2SIM_TIMEZONE, else catalog schedule.timezone)"
+    )
+    parser.add_argument("--register-only", action="store_true", help="register the deployment and exit")
+
+
+def run(args: argparse.Namespace) -> int:
+    from asset2sim.commands import flow
+
+    ns = argparse.Namespace(**vars(args), serve=True, ids=None, limit=None, force=False)
+    return flow.run(ns)
