@@ -222,7 +222,7 @@ def log_flow_run(
             params=[Param(k, str(v)[:500]) for k, v in params.items() if v is not None],
             tags=[RunTag("failure_modes", json.dumps(summary.get("failure_modes", {}), sort_keys=True))],
         )
-        for name, path in artifacts.items():
+        for path in artifacts.values():
             client.log_artifact(rid, str(path))
         if nested and not df.empty:
             for row in df.to_dict("records"):

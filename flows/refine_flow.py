@@ -726,9 +726,10 @@ def _prefect_objects() -> dict[str, Any]:
         retries: int = 0,
         retry_delay_seconds: float = 10.0,
         parent_flow_run_id: str | None = None,
-    ) -> list[dict[str, Any]]:
+    ) -> dict[str, Any]:
         """Fan out one task chain per asset on the flow's task runner and append
-        each asset's catalog row (under ``catalog_root``) as soon as its chain ends."""
+        each asset's catalog row (under ``catalog_root``) as soon as its chain
+        ends; returns the rows and the body's start time and duration."""
         return _refine_assets_body(
             [AssetJob(**j) for j in jobs], Path(catalog_root), retries, retry_delay_seconds, parent_flow_run_id
         )
@@ -807,13 +808,15 @@ def _refine_assets_body(
     retries: int,
     retry_delay_seconds: float,
     parent_flow_run_id: str | None = None,
-) -> list[dict[str, Any]]:
+) -> dict[str, Any]:
+    """Returns ``{"rows": [...], "body_started": epoch s, "body_seconds": s}``."""
     from prefect import get_run_logger
     from prefect.futures import as_completed
 
     objs = _prefect_objects()
     log = get_run_logger()
     flow_run_id = parent_flow_run_id or _current_flow_run_id()
+    body_started = time.time()  # the Dask cluster is up once the body runs
     rows: list[dict[str, Any]] = []
     store = ResultCatalog(catalog_root)
 
@@ -876,7 +879,7 @@ def _refine_assets_body(
         refined, exc_r = outcome(rf)
         measured, exc_m = outcome(mf) if exc_r is None else (None, None)
         record(job, prepared, refined, measured, exc_r or exc_m)
-    return rows
+    return {"rows": rows, "body_started": body_started, "body_seconds": time.time() - body_started}
 
 
 def _prefect_api_url() -> str | None:
@@ -915,6 +918,7 @@ def _refine_dataset_body(
 
     log = get_run_logger()
     t0 = time.perf_counter()
+    body_started_epoch = time.time()
     started = datetime.now(timezone.utc)
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
@@ -946,17 +950,22 @@ def _refine_dataset_body(
         name,
         address or f"a local Dask cluster ({n_workers} workers)",
     )
-    t_fan = time.perf_counter()
+    t_fan, t_fan_epoch = time.perf_counter(), time.time()
+    timing = {"dask_startup_seconds": 0.0, "assets_seconds": 0.0, "dask_teardown_seconds": 0.0}
     if jobs:
         sub = _prefect_objects()["refine_assets"].with_options(task_runner=_dask_task_runner(n_workers, address))
-        sub(
+        out = sub(
             [asdict(j) for j in jobs],
             str(cat.catalog_root),
             retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
             retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
             parent_flow_run_id=info["flow_run_id"],
         )
-    t_assets = time.perf_counter() - t_fan
+        fan_seconds = time.perf_counter() - t_fan
+        timing["dask_startup_seconds"] = max(0.0, out["body_started"] - t_fan_epoch)
+        timing["assets_seconds"] = out["body_seconds"]
+        timing["dask_teardown_seconds"] = max(0.0, fan_seconds - timing["dask_startup_seconds"] - out["body_seconds"])
+    t_track = time.perf_counter()
 
     from asset2sim import queries
 
@@ -968,7 +977,7 @@ def _refine_dataset_body(
         run=run_id,
         catalog_root=str(cat.catalog_root),
         output_dir=str(run_out),
-        assets_seconds=t_assets,
+        **timing,
     )
     artifacts: dict[str, Path] = {}
     if not df.empty:
@@ -1004,7 +1013,14 @@ def _refine_dataset_body(
             tracking_error = f"{type(exc).__name__}: {exc}"
             log.warning("MLflow tracking failed: %s", tracking_error)
     body_seconds = time.perf_counter() - t0
-    summary.update(mlflow_run_id=mlflow_run_id, tracking_error=tracking_error, flow_body_seconds=body_seconds, artifacts={k: str(v) for k, v in artifacts.items()})
+    summary.update(
+        mlflow_run_id=mlflow_run_id,
+        tracking_error=tracking_error,
+        tracking_seconds=time.perf_counter() - t_track,
+        flow_body_seconds=body_seconds,
+        flow_started_epoch=body_started_epoch,
+        artifacts={k: str(v) for k, v in artifacts.items()},
+    )
     info.update(
         status="finished",
         finished_at=datetime.now(timezone.utc).isoformat(),
@@ -1031,7 +1047,10 @@ def run_refine_flow(
     """Run :data:`refine_dataset` in this process (what ``make flow`` does).
 
     Returns the run summary (counts, pass rates, failure modes, paths, MLflow
-    run id, ``flow_body_seconds``). Call from a ``__main__``-guarded program:
+    run id, timings in s: ``dask_startup_seconds``, ``assets_seconds`` (the
+    fan-out with the cluster up), ``dask_teardown_seconds``,
+    ``tracking_seconds`` (summary, plot, MLflow), ``flow_body_seconds``, and
+    ``flow_started_epoch``). Call from a ``__main__``-guarded program:
     the local Dask cluster starts worker processes.
 
     Raises:
