@@ -7,7 +7,9 @@ DATASET ?=
 WORKERS ?= 2
 RUN ?=
 
-.PHONY: setup demo test test-all flow serve failures bench clean
+TIMEZONE ?=
+
+.PHONY: setup demo test test-all flow serve failures bench bench-eval clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -29,13 +31,16 @@ flow: ## refine the dataset catalog.yaml names (DATASET=..., WORKERS=...)
 	$(VENV)/bin/asset2sim flow --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET)) --workers $(WORKERS)
 
 serve: ## register and serve the nightly deployment
-	$(VENV)/bin/asset2sim serve --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET))
+	$(VENV)/bin/asset2sim serve --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET)) $(if $(TIMEZONE),--timezone $(TIMEZONE))
 
 failures: ## failure-mode breakdown of the latest run from the Parquet catalog
 	$(VENV)/bin/asset2sim failures --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET)) $(if $(RUN),--run $(RUN))
 
 bench: ## per-stage wall time of refine over the dev dataset
 	$(PY) benchmarks/bench_refine.py
+
+bench-eval: ## evaluation time per asset and the independent re-implementation check
+	$(PY) benchmarks/bench_evaluate.py --check
 
 clean:
 	rm -rf out bench data/refined/* .pytest_cache
