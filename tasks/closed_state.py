@@ -28,7 +28,8 @@ asset, other joints at their reference state):
 4. Refine with ``fine`` samples between the neighbouring coarse samples.
 
 The opening direction is towards the farther limit from q_closed, and the
-opening range is that distance (pi for continuous joints). The measure used by
+opening range is that distance. Continuous joints have no stops and so no
+closed end: their modelled pose 0 is kept (opening range pi for the measure). The measure used by
 the state bands is f(q) = direction * (q - q_closed) / range, in [0, 1] inside
 the range on the opening side.
 """
@@ -239,7 +240,13 @@ def closed_positions(
             lo, hi = session.joint_limits[name]
             continuous = not (np.isfinite(lo) and np.isfinite(hi))
             if continuous:
-                lo, hi = -np.pi, np.pi
+                # no stops, so no closed end: keep the modelled pose (0)
+                result[name] = ClosedState(
+                    joint=name, q_closed=0.0, direction=1.0, open_range=float(np.pi),
+                    lower=-np.inf, upper=np.inf, notes=["continuous joint: no closed end; the modelled pose 0 is used"],
+                )
+                state[name] = 0.0
+                continue
             sub = subtree_links(asset, jd.child)
             subset = set(sub)
             union_links = [jd.parent] + sub
@@ -274,11 +281,8 @@ def closed_positions(
             qf = np.linspace(a, b, fine)
             vf = np.array([measure(q) for q in qf])
             q_closed = float(qf[pick(qf, vf, tie_tol, q_open)])
-            if continuous:
-                direction, rng = 1.0, float(np.pi)
-            else:
-                up, down = hi - q_closed, q_closed - lo
-                direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
+            up, down = hi - q_closed, q_closed - lo
+            direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
             notes = []
             ratio = float(c.max() / max(cmin, 1e-12))
             if ratio < 1.0 + tie_tol:

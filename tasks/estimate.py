@@ -138,7 +138,8 @@ def requested_bands(ctx: EstimationContext) -> tuple[dict[str, str], list[str]]:
     bands: dict[str, str] = {}
     for jr in ctx.request.joint_states:
         if jr.selector == "all" or not jr.label:
-            targets = list(relevant)
+            # continuous joints (wheels, knobs without stops) have no open/closed
+            targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
         else:
             targets = [
                 j.name
@@ -146,7 +147,7 @@ def requested_bands(ctx: EstimationContext) -> tuple[dict[str, str], list[str]]:
                 if _label_matches(ctx, jr.label, ctx.asset.link(j.child).semantic_label)
             ]
             if not targets:
-                targets = list(relevant)
+                targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
                 notes.append(
                     f"request names '{jr.label}' but no part has that label; applied '{jr.band}' to the task-relevant joints {targets}"
                 )

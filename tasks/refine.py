@@ -303,7 +303,10 @@ def refine_asset(
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
     extra_paths: dict[str, str] = {}
     if extras:
-        extra_paths = _write_extras(out_dir, report, check, say)
+        from asset2sim.engines.pybullet_engine import _quiet_stdout
+
+        with _quiet_stdout():  # engines and renderers print from C; the library must not
+            extra_paths = _write_extras(out_dir, report, check, say)
         lap("extras")
         report.stage_seconds = times
         atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))

@@ -100,3 +100,28 @@ def write_standing_slab_with_arm(folder: Path, arm_len: float = 0.3) -> Path:
 """
     )
     return folder
+
+
+def write_cupboard_without_extras(folder: Path) -> Path:
+    """A plain URDF (no semantics.txt, no meta.json, primitives only): a body
+    that is itself the root, a door on a vertical hinge closed at its upper
+    limit 0 (range [-2, 0]) and a wheel on a continuous joint."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        """<?xml version="1.0"?>
+<robot name="cupboard">
+  <link name="body">
+    <visual><origin xyz="0 0 0.3"/><geometry><box size="0.4 0.4 0.6"/></geometry></visual>
+    <collision><origin xyz="0 0 0.3"/><geometry><box size="0.4 0.4 0.6"/></geometry></collision>
+  </link>
+  <link name="door"><collision><origin xyz="0 0.2 0"/><geometry><box size="0.02 0.4 0.56"/></geometry></collision></link>
+  <joint name="door_hinge" type="revolute">
+    <parent link="body"/><child link="door"/><origin xyz="0.215 -0.2 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="-2.0" upper="0" effort="5" velocity="2"/>
+  </joint>
+  <link name="wheel"><collision><geometry><cylinder radius="0.03" length="0.02"/></geometry></collision></link>
+  <joint name="wheel_j" type="continuous"><parent link="body"/><child link="wheel"/><origin xyz="0 0.22 0.05"/><axis xyz="0 1 0"/></joint>
+</robot>
+"""
+    )
+    return folder

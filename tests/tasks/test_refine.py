@@ -163,3 +163,20 @@ def test_thesis_set_meets_the_refine_issue_targets(tmp_path):
         if ref.get("scale"):
             devs.append(abs(r.scale - ref["scale"]) / ref["scale"])
     assert statistics.median(devs) <= 0.25
+
+
+def test_plain_urdf_without_partnet_extras(tmp_path):
+    """Any URDF works: no semantics or meta, primitives, a root with geometry,
+    a continuous joint (kept at its modelled pose)."""
+    from tests.helpers import write_cupboard_without_extras
+
+    src = write_cupboard_without_extras(tmp_path / "cupboard")
+    res = refine_asset(src, "a cupboard with its door halfway open", tmp_path / "out", extras=False)
+    r = res.report
+    check_output_contract(res.out_dir, r)
+    assert r.failure_mode == "none"
+    assert r.closed_positions["door_hinge"] == pytest.approx(0.0, abs=0.05)
+    assert r.requested_bands["door_hinge"] == "halfway"
+    lo, hi = BAND_INTERVAL["halfway"]
+    assert lo <= r.opening_fractions["door_hinge"] <= hi
+    assert r.initial_joint_positions["wheel_j"] == 0.0
