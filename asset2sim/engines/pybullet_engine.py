@@ -177,10 +177,14 @@ class PyBulletSession:
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         p = self._p
         p.performCollisionDetection(physicsClientId=self.cid)
-        pts = p.getContactPoints(self.body, self.body, physicsClientId=self.cid)
+        return self._penetration_of(p.getContactPoints(self.body, self.body, physicsClientId=self.cid))
+
+    def _penetration_of(self, points) -> tuple[float, list[ContactPair]]:
+        """Phi (m) and per-pair sums of Bullet contact/closest points (fields 3/4:
+        link indices, 8: signed distance)."""
         pairs: dict[tuple[str, str], ContactPair] = {}
         total = 0.0
-        for pt in pts:
+        for pt in points:
             d = pt[8]
             if d >= 0.0:
                 continue
@@ -214,23 +218,10 @@ class PyBulletSession:
                 if a < b and parent.get(b) != a and parent.get(a) != b
             ]
             self._pairs_cache = cache
-        pairs: dict[tuple[str, str], ContactPair] = {}
-        total = 0.0
+        points = []
         for a, b in cache:
-            for pt in p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid):
-                d = pt[8]
-                if d >= 0.0:
-                    continue
-                na, nb = self.link_names[a], self.link_names[b]
-                key = (na, nb) if na <= nb else (nb, na)
-                cp = pairs.get(key)
-                if cp is None:
-                    cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
-                cp.depth += -d
-                cp.max_depth = max(cp.max_depth, -d)
-                cp.points += 1
-                total += -d
-        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+            points.extend(p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid))
+        return self._penetration_of(points)
 
     def ground_penetration(self) -> float:
         if self.plane is None:
