@@ -245,25 +245,20 @@ def metric_names() -> list[str]:
 
 # ------------------------------------------------------------------ reading
 def find_urdf(path: Path | str) -> Path:
-    """The URDF of ``path``: the file itself, else ``mobility.urdf`` in the
-    folder, else the only ``*.urdf`` not named ``reference_*``.
+    """The URDF of ``path`` (:func:`asset2sim.tasks.extract.find_urdf`: the file
+    itself, else ``mobility.urdf``, else the only ``*.urdf`` not named
+    ``reference_*``).
 
     Raises:
         EvaluationError: nothing (or several candidates) found.
     """
-    path = Path(path)
-    if path.is_file():
-        return path
-    if not path.is_dir():
-        raise EvaluationError(f"{path}: no such file or folder")
-    if (path / "mobility.urdf").is_file():
-        return path / "mobility.urdf"
-    cands = sorted(p for p in path.glob("*.urdf") if not p.name.startswith("reference_"))
-    if len(cands) == 1:
-        return cands[0]
-    if not cands:
-        raise EvaluationError(f"{path}: no mobility.urdf or other *.urdf file")
-    raise EvaluationError(f"{path}: several URDF files ({', '.join(p.name for p in cands)}); pass one")
+    from asset2sim.tasks.extract import AssetError
+    from asset2sim.tasks.extract import find_urdf as _find
+
+    try:
+        return _find(path)
+    except AssetError as exc:
+        raise EvaluationError(str(exc)) from exc
 
 
 def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
@@ -327,25 +322,20 @@ def _read_json(path: Path) -> dict[str, Any] | None:
 
 
 def _read_semantics(folder: Path) -> dict[str, tuple[str, str]]:
-    path = folder / "semantics.txt"
-    out: dict[str, tuple[str, str]] = {}
-    if path.is_file():
-        for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
-            parts = line.split()
-            if len(parts) >= 3:
-                out[parts[0]] = (parts[1], " ".join(parts[2:]))
-    return out
+    """``semantics.txt`` via the extraction stage; malformed files read as empty
+    (evaluation works on any URDF)."""
+    from asset2sim.tasks.extract import AssetError, read_semantics
+
+    try:
+        return read_semantics(folder)
+    except AssetError:
+        return {}
 
 
 def _read_category(folder: Path) -> str | None:
-    meta = folder / "meta.json"
-    if meta.is_file():
-        try:
-            cat = json.loads(meta.read_text(encoding="utf-8")).get("model_cat")
-            return str(cat) if cat else None
-        except (ValueError, OSError, AttributeError):
-            return None
-    return None
+    from asset2sim.tasks.extract import read_category
+
+    return read_category(folder)
 
 
 def _clip(q: float, lo: float | None, hi: float | None) -> float:
