@@ -197,11 +197,37 @@ def _prune(node: Any) -> Any:
     return node
 
 
-def reply_json_schema() -> dict[str, Any]:
-    """The JSON schema of :class:`ModelReply` as sent to model APIs: every
-    property required, no additional properties, only keywords structured-output
-    APIs accept (titles and defaults dropped). Pure; returns a fresh dict."""
-    schema = _prune(copy.deepcopy(ModelReply.model_json_schema()))
+PROPOSAL_SCHEMA_NAME = "asset2sim_joint_proposals"
+
+
+class JointValue(_Strict):
+    """One joint position of a proposed state (rad or m, output units)."""
+
+    name: str = Field(max_length=MAX_NAME)
+    value: float
+
+
+class ProposedState(_Strict):
+    """A candidate initial state: positions of some joints (the others stay)."""
+
+    joints: list[JointValue] = Field(max_length=64)
+    reason: str = Field(default="", max_length=MAX_TEXT)
+
+
+class JointProposalReply(_Strict):
+    """A model's answer when the state search stalls: a few candidate states
+    that might remove the remaining self-penetration. The simulator accepts a
+    candidate only if it lowers the search objective."""
+
+    proposals: list[ProposedState] = Field(max_length=8)
+
+
+def reply_json_schema(model: type[BaseModel] | None = None) -> dict[str, Any]:
+    """The JSON schema of ``model`` (default :class:`ModelReply`) as sent to
+    model APIs: every property required, no additional properties, only
+    keywords structured-output APIs accept (titles and defaults dropped).
+    Pure; returns a fresh dict."""
+    schema = _prune(copy.deepcopy((model or ModelReply).model_json_schema()))
 
     def close(node: Any) -> None:
         if isinstance(node, dict):

@@ -62,6 +62,8 @@ class StateRefinement(BaseModel):
     worst_pairs: list[dict[str, Any]] = Field(default_factory=list)
     collision_changes: list[str] = Field(default_factory=list)
     seconds: float = 0.0
+    model_queries: int = 0
+    """Model calls made by the state search (joint proposals when it stalled)."""
 
 
 class RefineReport(BaseModel):

@@ -52,7 +52,13 @@ from typing import Any, Iterator
 import numpy as np
 
 from asset2sim import __version__
-from asset2sim.schemas.model_reply import REPLY_SCHEMA_NAME, ModelReply, reply_json_schema
+from asset2sim.schemas.model_reply import (
+    PROPOSAL_SCHEMA_NAME,
+    REPLY_SCHEMA_NAME,
+    JointProposalReply,
+    ModelReply,
+    reply_json_schema,
+)
 from asset2sim.schemas.overlay import (
     ContactMaterial,
     EstimatorInfo,
@@ -64,9 +70,11 @@ from asset2sim.schemas.overlay import (
 )
 from asset2sim.schemas.request import BAND_TARGET
 from asset2sim.tasks import estimate, physics
-from asset2sim.tasks.llm_client import ClientConfig, LLMClient, ReplyInvalid, Usage
+from asset2sim.tasks.llm_client import ClientConfig, LLMClient, ModelCallError, ReplyError, ReplyInvalid, Usage
 
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
+PROPOSAL_MARK = "STALLED STATE SEARCH (JSON):"
+"""Line that precedes the state-search summary in a joint-proposal request."""
 """Line preceding the structured description in the user message."""
 
 VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
@@ -487,6 +495,61 @@ class LLMEstimator:
     @staticmethod
     def _memo_key(ctx: estimate.EstimationContext) -> tuple:
         return (ctx.asset.asset_id, ctx.asset.input_hash, str(ctx.asset.urdf_path), ctx.request.text, ctx.category)
+
+    def joint_proposer(self, ctx: estimate.EstimationContext):
+        """A proposer for :func:`asset2sim.tasks.refine_state.refine_initial_state`:
+        when the simulator's local search stalls, the model sees the current
+        state, the allowed interval of every joint and the worst colliding link
+        pairs, and proposes up to a few candidate states (one call, re-asked at
+        most twice on malformed replies). The simulator keeps a candidate only
+        if it lowers the objective. Returns ``proposer(state, pairs, intervals)
+        -> (list of {joint: value}, model calls)``."""
+        client = self.client
+        labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
+        types = {j.name: j.type for j in ctx.asset.movable_joints()}
+
+        def propose(state, pairs, intervals):
+            schema = reply_json_schema(JointProposalReply)
+            text = (
+                "The physics simulator could not remove all self-penetration of this articulated object "
+                "by searching joint positions near the requested state. Propose up to 4 alternative "
+                "initial states (joint positions; radians for revolute, metres for prismatic; each inside "
+                "its allowed interval) that might separate the colliding parts. Reply with JSON only, "
+                "following this schema:\n" + json.dumps(schema)
+            )
+            info = {
+                "category": ctx.category,
+                "request": ctx.request.text,
+                "joints": [
+                    {"name": n, "type": types.get(n), "part": labels.get(n), "current": round(float(q), 6),
+                     "allowed": [round(float(intervals[n][0]), 6), round(float(intervals[n][1]), 6)]}
+                    for n, q in state.items() if n in intervals
+                ],
+                "colliding_link_pairs": [
+                    {"link_a": p_["link_a"], "link_b": p_["link_b"], "penetration_m": round(float(p_["depth_m"]), 6)}
+                    for p_ in pairs
+                ],
+            }
+            messages = [
+                {"role": "system", "content": text},
+                {"role": "user", "content": f"{PROPOSAL_MARK}\n{json.dumps(info, separators=(',', ':'))}"},
+            ]
+
+            def accept(reply: JointProposalReply):
+                unknown = sorted({jv.name for p_ in reply.proposals for jv in p_.joints} - set(intervals))
+                if unknown:
+                    raise ReplyInvalid([f"unknown joint names {unknown}; use only {sorted(intervals)}"])
+                return [{jv.name: jv.value for jv in p_.joints} for p_ in reply.proposals]
+
+            try:
+                answer = client.ask(messages, JointProposalReply, schema=schema, schema_name=PROPOSAL_SCHEMA_NAME, accept=accept, max_reasks=2)
+            except ReplyError as exc:  # unusable replies: no proposals, but the calls were made
+                return [], len(exc.history)
+            except ModelCallError:
+                return [], 0
+            return answer.value, answer.usage.calls
+
+        return propose
 
     def estimate(self, ctx: estimate.EstimationContext) -> Overlay:
         """Ask the model (once per asset and request) and build the overlay.

@@ -281,7 +281,7 @@ def refine_asset(
         config_hash=chash,
         estimator=overlay.estimator.name,
         model=overlay.estimator.model,
-        model_queries=overlay.estimator.queries,
+        model_queries=overlay.estimator.queries + (st.model_queries if st is not None else 0),
         model_tokens=overlay.estimator.tokens,
         model_cost_usd=overlay.estimator.cost_usd,
         model_seconds=overlay.estimator.seconds,
@@ -386,7 +386,10 @@ def _attempt(ctx, est, config: RefineConfig, out_dir: Path, mesh_cache, say: Pro
     lap("write")
 
     # 6. state refinement on the written (scaled) asset
-    st, overrides = _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, paths.urdf, root_rotation, config, out_dir, mesh_cache, say)
+    proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
+    st, overrides = _refine_state_with_decomposition(
+        asset, overlay, closed_out, bands, requested, paths.urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=proposer
+    )
     state = dict(st.result)
     say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     lap("refine_state")
@@ -414,7 +417,7 @@ def _attempt(ctx, est, config: RefineConfig, out_dir: Path, mesh_cache, say: Pro
     )
 
 
-def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say):
+def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None):
     """State refinement; when hull overlaps keep Phi above tolerance, CoACD
     decomposition of the colliding pieces and a second search (kept only if
     it lowers Phi). Returns (StateRefinement, collision overrides)."""
@@ -430,6 +433,7 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
                 sess, asset, closed_out, start, fractions,
                 tolerance=config.penetration_tolerance, lam=config.state_lambda,
                 max_evaluations=config.max_state_evaluations, seed=config.seed,
+                proposer=proposer,
             )
         finally:
             sess.close()
@@ -459,11 +463,13 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
     st = search(requested)
     st.evaluations += before.evaluations
+    st.model_queries += before.model_queries
     st.phi_requested = before.phi_requested
     if st.phi_result >= before.phi_result:
         # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
         write.write_output(asset, overlay, out_dir, requested, copy=False, root_rotation=root_rotation)
         before.evaluations = st.evaluations
+        before.model_queries = st.model_queries
         before.collision_changes = [
             f"collision pieces changed for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
             f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"

@@ -101,6 +101,7 @@ def refine_initial_state(
     lam: float = 0.05,
     max_evaluations: int = 4000,
     seed: int = 0,
+    proposer=None,
 ) -> StateRefinement:
     """Lowest-objective state near ``requested`` (see module docstring).
 
@@ -114,6 +115,11 @@ def refine_initial_state(
         lam: lambda (m per squared fraction of range).
         max_evaluations: budget of contact queries.
         seed: random seed of the perturbation phase.
+        proposer: optional ``proposer(state, worst_pairs, intervals) ->
+            (list of {joint: value}, queries)`` asked once when the local search
+            stalls above ``tolerance`` (a model backend); each proposal is
+            clipped to the intervals and accepted only if it lowers the
+            objective.
 
     Returns:
         :class:`~asset2sim.schemas.report.StateRefinement` (Phi in m).
@@ -218,6 +224,27 @@ def refine_initial_state(
                 steps = {n: v * 0.5 for n, v in steps.items()}
         if improved_any:
             method.append("local pattern search")
+    # 4. when the search stalls: ask the proposer (a model), accept only improvements
+    model_queries = 0
+    if proposer is not None and best_phi > tolerance:
+        session.set_joint_positions(best_q)
+        _, pairs = penetration()
+        worst_now = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth} for c in pairs[:5]]
+        try:
+            proposals, model_queries = proposer(dict(best_q), worst_now, {n: (box[n].lo, box[n].hi) for n in names})
+        except Exception as exc:  # a failed model call must not lose the search result
+            proposals, method = [], method + [f"model proposals failed: {type(exc).__name__}"]
+        accepted = 0
+        for prop in proposals:
+            cand = dict(best_q)
+            for n, v in prop.items():
+                if n in box:
+                    cand[n] = box[n].clip(float(v))
+            f, phi = objective(cand)
+            if f < best_f - 1e-12:
+                best_q, best_f, best_phi = cand, f, phi
+                accepted += 1
+        method.append(f"model proposals ({len(proposals)} asked, {accepted} accepted)")
     session.set_joint_positions(best_q)
     return StateRefinement(
         requested={k: float(v) for k, v in q_req.items()},
@@ -228,4 +255,5 @@ def refine_initial_state(
         method=" -> ".join(method),
         worst_pairs=worst,
         seconds=time.perf_counter() - t0,
+        model_queries=model_queries,
     )

@@ -32,6 +32,10 @@ from typing import Any, Callable
 
 Behaviour = Callable[["FakeOpenAIServer", "Request"], None]
 
+PROPOSAL_MARK = "STALLED STATE SEARCH (JSON):"
+"""Line that precedes the state-search summary of a joint-proposal request
+(``asset2sim.tasks.llm_estimator.PROPOSAL_MARK``)."""
+
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 """Line that precedes the structured description in the user message (see
 ``asset2sim.tasks.llm_estimator.DESCRIPTION_MARK``)."""
@@ -70,6 +74,14 @@ class Request:
                         iu = p["image_url"]
                         out.append(iu["url"] if isinstance(iu, dict) else iu)
         return out
+
+    def stalled_search(self) -> dict[str, Any] | None:
+        """The state-search summary of a joint-proposal request, or None."""
+        for t in self.texts():
+            i = t.find(PROPOSAL_MARK)
+            if i >= 0:
+                return json.JSONDecoder().raw_decode(t[i + len(PROPOSAL_MARK):].strip())[0]
+        return None
 
     def description(self) -> dict[str, Any] | None:
         """The structured asset description sent after :data:`DESCRIPTION_MARK`."""
@@ -311,6 +323,11 @@ def valid_reply(mutate: Callable[[dict[str, Any]], Any] | None = None, **kw) -> 
     ``mutate(content_dict)`` may alter it first (for out-of-range tests)."""
 
     def b(server: FakeOpenAIServer, req: Request) -> None:
+        stalled = req.stalled_search()
+        if stalled is not None:  # a joint-proposal request: open every joint to the top of its interval
+            joints = [{"name": j["name"], "value": float(j["allowed"][1])} for j in stalled.get("joints", [])]
+            reply(json.dumps({"proposals": [{"joints": joints, "reason": "fake: widest allowed opening"}]}))(server, req)
+            return
         desc = req.description()
         if desc is None:
             status(400, {"error": {"message": "fake server: no asset description in the request"}})(server, req)

@@ -417,3 +417,39 @@ def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monke
     with _ctx(plate, "A box with its lid fully open.") as ctx2:
         est.estimate(ctx2)
     assert server.n_chat == 2
+
+
+def test_stalled_state_search_asks_the_model_and_keeps_only_improvements(tmp_path):
+    """The arm passes through the post whatever the allowed (closed) band: the
+    search stalls, the model is asked once for joint proposals, and a proposal
+    is applied only if it lowers the objective (it never leaves the band)."""
+    from asset2sim.engines.base import SessionOptions, open_session
+    from asset2sim.schemas.request import BAND_INTERVAL
+    from asset2sim.tasks import llm_estimator as le
+    from asset2sim.tasks.closed_state import ClosedState
+    from asset2sim.tasks.extract import extract_asset
+    from asset2sim.tasks.refine_state import refine_initial_state
+    from tests.fake_openai_server import FakeOpenAIServer
+    from tests.helpers import write_arm_through_post
+
+    asset = extract_asset(write_arm_through_post(tmp_path / "arm"))
+    closed = {"hinge": ClosedState(joint="hinge", q_closed=0.0, direction=1.0, open_range=1.0, lower=-1.0, upper=1.0)}
+    with FakeOpenAIServer() as server:
+        est = le.LLMEstimator(model="m", base_url=server.url, client=le.make_client("openai", "m", server.url, cache_dir=tmp_path / "cache"))
+
+        class Ctx:  # the proposer needs only these
+            category = "Generic"
+            request = type("R", (), {"text": "a closed thing"})()
+
+        Ctx.asset = asset
+        proposer = est.joint_proposer(Ctx)
+        s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+        try:
+            band = BAND_INTERVAL["closed"]
+            st = refine_initial_state(s, asset, closed, {"hinge": 0.0}, {"hinge": band}, tolerance=1e-6, proposer=proposer)
+        finally:
+            s.close()
+        assert st.model_queries == 1 and len(server.requests) == 1
+        assert "model proposals (1 asked" in st.method
+        assert band[0] <= st.result["hinge"] <= band[1]  # the proposal was clipped into the band
+        assert st.phi_result <= st.phi_requested
