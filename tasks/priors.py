@@ -29,10 +29,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from asset2sim.schemas.request import SizeClass
 
@@ -150,6 +150,12 @@ def _check_mass(v: tuple[float, float]) -> tuple[float, float]:
     return v
 
 
+#: Dimensions (m, sorted longest first) and a mass range (kg) as read from the
+#: yaml tables, checked on load.
+CheckedDims = Annotated[Dims, AfterValidator(_check_dims)]
+MassRange = Annotated[tuple[float, float], AfterValidator(_check_mass)]
+
+
 class VariantPrior(_Model):
     """A sub-type of a category named by request words (e.g. ``mini fridge``).
 
@@ -160,22 +166,12 @@ class VariantPrior(_Model):
 
     name: str = Field(min_length=1)
     phrases: list[str] = Field(min_length=1)
-    dims: Dims
+    dims: CheckedDims
     size_class: SizeClass = "regular"
-    mass_range: tuple[float, float]
+    mass_range: MassRange
     body_material: str | None = None
     part_materials: dict[str, str] = Field(default_factory=dict)
     source: str = Field(min_length=10)
-
-    @field_validator("dims")
-    @classmethod
-    def _dims_ok(cls, v: Dims) -> Dims:
-        return _check_dims(v)
-
-    @field_validator("mass_range")
-    @classmethod
-    def _mass_ok(cls, v: tuple[float, float]) -> tuple[float, float]:
-        return _check_mass(v)
 
 
 class CategoryPrior(_Model):
@@ -189,10 +185,10 @@ class CategoryPrior(_Model):
     synonyms: list[str] = Field(default_factory=list)
     model_cats: list[str] = Field(default_factory=list)
     label_tokens: list[str] = Field(default_factory=list)
-    dims: Dims
+    dims: CheckedDims
     dims_source: str = Field(min_length=10)
     handheld: bool = False
-    mass_range: tuple[float, float]
+    mass_range: MassRange
     mass_source: str = Field(min_length=10)
     body_material: str
     part_materials: dict[str, str] = Field(default_factory=dict)
@@ -205,16 +201,6 @@ class CategoryPrior(_Model):
     part_evidence: dict[str, float] = Field(default_factory=dict)
     variants: list[VariantPrior] = Field(default_factory=list)
     notes: str = ""
-
-    @field_validator("dims")
-    @classmethod
-    def _dims_ok(cls, v: Dims) -> Dims:
-        return _check_dims(v)
-
-    @field_validator("mass_range")
-    @classmethod
-    def _mass_ok(cls, v: tuple[float, float]) -> tuple[float, float]:
-        return _check_mass(v)
 
     @model_validator(mode="after")
     def _consistency(self) -> "CategoryPrior":
