@@ -1,5 +1,5 @@
 """Time (and check the accuracy of) the mesh-analysis stage,
-``asset2sim.tasks.analyze``, on every object of the dataset.
+``asset2sim.tasks.geometry.analyze``, on every object of the dataset.
 
 Usage::
 
@@ -39,8 +39,8 @@ DEFAULT_DATA = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
 def _timings(data: Path, ids: list[str], repeat: int, options: dict, show_links: bool) -> None:
     import numpy as np
 
-    from asset2sim.tasks.analyze import analyze_asset
-    from asset2sim.tasks.extract import extract_asset
+    from asset2sim.tasks.geometry.analyze import analyze_asset
+    from asset2sim.tasks.ingest.extract import extract_asset
 
     analyze_asset(extract_asset(data / ids[0]), **options)  # warm-up: imports
     firsts, bests, cpus = [], [], []
@@ -123,8 +123,8 @@ def _accuracy(data: Path, ids: list[str], voxels_per_axis: int) -> None:
     import numpy as np
     import trimesh
 
-    from asset2sim.tasks import analyze as an
-    from asset2sim.tasks.extract import extract_asset
+    from asset2sim.tasks.geometry import analyze as an
+    from asset2sim.tasks.ingest.extract import extract_asset
 
     rng = np.random.default_rng(0)
     print(f"analytic shapes, voxel estimate vs exact (voxels_per_axis={voxels_per_axis}), 8 random grid shifts each:")
@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--accuracy", action="store_true")
     args = parser.parse_args(argv)
 
-    from asset2sim.tasks.analyze import VOXELS_PER_AXIS
+    from asset2sim.tasks.geometry.analyze import VOXELS_PER_AXIS
 
     if not args.data.is_dir():
         print(f"dataset folder not found: {args.data}", file=sys.stderr)

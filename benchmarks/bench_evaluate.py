@@ -3,14 +3,14 @@
     python benchmarks/bench_evaluate.py [--manifest M] [--methods human,defaults] [--ids a,b] [--check] [--no-probes]
 
 Builds the cheap baselines (``human``, ``defaults``) of the manifest rows in a
-temporary folder, evaluates each with :func:`asset2sim.tasks.evaluate.evaluate_asset`
+temporary folder, evaluates each with :func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`
 and prints the evaluation time per asset and the median (the goal: <= 1.5 s
 per asset without the pipeline's start-up).
 
 ``--check`` also recomputes Phi, D_pos, D_ori, the rest-stability and
 oscillation verdicts and the ground penetration with :func:`independent_measure`:
 plain ``pybullet`` calls written from docs/metrics.md sections 2-3, sharing
-no code with ``asset2sim.engines`` or ``asset2sim.tasks.metrics``, and prints
+no code with ``asset2sim.engines`` or ``asset2sim.tasks.check.metrics``, and prints
 any disagreement (exit code 1 when there is one).
 """
 
@@ -177,8 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-probes", action="store_true")
     args = ap.parse_args(argv)
 
-    from asset2sim.tasks.baselines import read_manifest, run_method
-    from asset2sim.tasks.evaluate import evaluate_asset
+    from asset2sim.tasks.evaluation.baselines import read_manifest, run_method
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 
     rows = read_manifest(args.manifest)
     if args.ids:

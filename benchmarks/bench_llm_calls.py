@@ -8,8 +8,8 @@ local fake OpenAI-compatible server that answers validly (no network).
   ``--estimator openai``; extras off), calls counted at the server and from
   ``report.model_queries``; ``--estimator-only`` stops after the estimator
   (same calls, much faster).
-- ``direct``: :func:`asset2sim.tasks.llm_estimator.direct_overlay` (1 call).
-- ``ivw``: :func:`asset2sim.tasks.llm_estimator.ivw_overlay` (5 views x 5 calls).
+- ``direct``: :func:`asset2sim.tasks.synthesize.llm_estimator.direct_overlay` (1 call).
+- ``ivw``: :func:`asset2sim.tasks.synthesize.llm_estimator.ivw_overlay` (5 views x 5 calls).
 
 Every method starts with an empty reply cache, so every call is counted.
 Prints a line per object and method, then mean +- std (min..max) calls per
@@ -48,9 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     from tests.fake_openai_server import FakeOpenAIServer
 
     from asset2sim.schemas.config import RefineConfig
-    from asset2sim.tasks import estimate
-    from asset2sim.tasks import llm_estimator as le
-    from asset2sim.tasks.llm_client import LLMError
+    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.synthesize import llm_estimator as le
+    from asset2sim.tasks.synthesize.llm_client import LLMError
     from asset2sim.tasks.refine import RefineError, refine_asset
 
     rows = list(csv.DictReader(args.manifest.open()))

@@ -23,8 +23,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--engines", default="pybullet,physx,mujoco")
     args = ap.parse_args(argv)
 
-    from asset2sim.tasks.export_mjcf import export_mjcf
-    from asset2sim.tasks.parity import evaluate_engines, parity_table
+    from asset2sim.tasks.publish.export_mjcf import export_mjcf
+    from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 
     engines = args.engines.split(",")
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))

@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from asset2sim.schemas.request import BAND_INTERVAL
     from asset2sim.tasks.refine import RefineError, refine_asset
-    from asset2sim.tasks.validate_overlay import inertia_problems
+    from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
 
     rows = list(csv.DictReader(args.manifest.open()))
     if args.ids:

@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, default=None, help="also write the raw results as JSON here")
     args = ap.parse_args(argv)
 
-    from asset2sim.tasks import validate_input as vi
+    from asset2sim.tasks.ingest import validate_input as vi
 
     cases = [c for c in cb.CASES if args.only is None or c.name in args.only]
     rows = []

@@ -10,7 +10,7 @@ Shape (DEVELOPERS.md, "Shape of the product")::
              prepare  (extract: validate + input hash; skip when finished)
              refine   (synthesize -> refine state -> write -> post-check:
                        ``refine_asset`` of ``asset2sim.tasks.refine``)
-             metrics  (stability metrics: ``asset2sim.tasks.evaluate``:
+             metrics  (stability metrics: ``asset2sim.tasks.evaluation.evaluate``:
                        penetration, rest stability, oscillation,
                        prompt alignment, scale deviation)
            each finished chain -> one catalog row, appended atomically
@@ -291,7 +291,7 @@ def prepare_asset(job: AssetJob) -> dict[str, Any]:
     t0 = time.perf_counter()
     rec: dict[str, Any] = {"ok": False, "skip": None, "worker": _worker_name()}
     try:
-        from asset2sim.tasks.extract import extract_asset
+        from asset2sim.tasks.ingest.extract import extract_asset
 
         asset = extract_asset(Path(job.asset_dir), asset_id=job.asset_id, category=job.category)
     except Exception as exc:  # any reading problem is the input's
@@ -400,7 +400,7 @@ def stage_metrics(
     probes: bool = False,
     metrics_dir: str | None = None,
 ) -> dict[str, Any]:
-    """Stability metrics of a refined asset (``asset2sim.tasks.evaluate``,
+    """Stability metrics of a refined asset (``asset2sim.tasks.evaluation.evaluate``,
     PyBullet, SPEC conventions); writes ``evaluation.json`` into
     ``metrics_dir`` when given. The refined folder itself is never touched
     (its completion marker covers every file in it).
@@ -412,7 +412,7 @@ def stage_metrics(
     Raises:
         EvaluationError: the output cannot be read.
     """
-    from asset2sim.tasks.evaluate import evaluate_asset
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 
     ev = evaluate_asset(
         Path(out_dir),

@@ -1,7 +1,7 @@
 """What a model backend must answer: the reply schema (SPEC stage 2).
 
 A model's reply is a *prior*, not the overlay itself: the asset2sim estimator
-(:mod:`asset2sim.tasks.llm_estimator`) turns the per-link material choice into
+(:mod:`asset2sim.tasks.synthesize.llm_estimator`) turns the per-link material choice into
 mass through the geometry (m = v * rho * s^3 * eta), computes inertia from the
 scaled geometry, derives joint dynamics from physics using the model's
 qualitative choices (damping level, holds position, spring, stiff, free

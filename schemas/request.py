@@ -1,6 +1,6 @@
 """A natural-language request, parsed into what the estimator needs.
 
-Produced by :func:`asset2sim.tasks.request.parse_request`. Nothing here is
+Produced by :func:`asset2sim.tasks.interpret.request.parse_request`. Nothing here is
 object-specific: size words, state words, dynamics words and per-joint phrases.
 """
 

@@ -33,7 +33,7 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport
-from asset2sim.tasks.closed_state import ClosedState, closed_positions, link_hull_points, object_extents, subtree_links
+from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents, subtree_links
 
 MARKER_NAME = ".asset2sim-complete.json"
 REPORT_NAME = "report.json"
@@ -109,7 +109,7 @@ def _scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[
 
 
 def _subtree_height(session, links: list[str], hull: dict[str, np.ndarray]) -> float:
-    from asset2sim.tasks.closed_state import _aabb
+    from asset2sim.tasks.geometry.closed_state import _aabb
 
     box = _aabb(session, links, hull)
     return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
@@ -152,7 +152,12 @@ def refine_asset(
             (``failure_mode`` says which); nothing but partial-free atomic files
             are left in ``out_dir``.
     """
-    from asset2sim.tasks import analyze, estimate, extract, priors, request, write
+    from asset2sim.tasks.geometry import analyze
+    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.ingest import extract
+    from asset2sim.tasks.interpret import priors
+    from asset2sim.tasks.interpret import request
+    from asset2sim.tasks.publish import write
 
     config = config or RefineConfig()
     say = progress or (lambda stage, msg: None)
@@ -227,7 +232,7 @@ def refine_asset(
         moving = sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in subtrees[j]})
         pose_note = ""
         if spec.pose_hint in ("lying_flat", "sideways"):
-            from asset2sim.tasks import pose
+            from asset2sim.tasks.state import pose
 
             ctx.root_rotation, pose_note = pose.resting_rotation(kin, asset, closed_state, hull, moving)
             say("request", f"pose '{spec.pose_hint}': {pose_note}")
@@ -237,7 +242,7 @@ def refine_asset(
         att = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
         if not att.check.stable and spec.pose_hint is None:
             # the object tips or slides as modelled: try resting it on its stablest face
-            from asset2sim.tasks import pose
+            from asset2sim.tasks.state import pose
 
             state_in = estimate.state_from_bands(closed, att.bands, 1.0, att.prismatic)
             R, note = pose.most_stable_rotation(kin, asset, att.overlay.links, state_in, att.overlay.scale, hull, moving, exclude_modelled=True)
@@ -346,7 +351,7 @@ class _Attempt:
 
     def rewrite(self, out_dir: Path) -> None:
         """Write this attempt's files again (after another attempt overwrote them)."""
-        from asset2sim.tasks import write
+        from asset2sim.tasks.publish import write
 
         write.write_output(
             self.asset, self.overlay, out_dir, self.state, copy=False,
@@ -356,7 +361,10 @@ class _Attempt:
 
 def _attempt(ctx, est, config: RefineConfig, out_dir: Path, mesh_cache, say: Progress, lap) -> _Attempt:
     """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
-    from asset2sim.tasks import estimate, postcheck, validate_overlay, write
+    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.check import postcheck
+    from asset2sim.tasks.synthesize import validate_overlay
+    from asset2sim.tasks.publish import write
 
     asset, geometry, closed = ctx.asset, ctx.geometry, ctx.closed
     prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
@@ -421,7 +429,9 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     """State refinement; when hull overlaps keep Phi above tolerance, CoACD
     decomposition of the colliding pieces and a second search (kept only if
     it lowers Phi). Returns (StateRefinement, collision overrides)."""
-    from asset2sim.tasks import estimate, refine_state, write
+    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.state import refine_state
+    from asset2sim.tasks.publish import write
 
     fractions = estimate.band_intervals(bands)
     s = overlay.scale
@@ -441,7 +451,7 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     st = search(requested)
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
         return st, {}
-    from asset2sim.tasks import collision
+    from asset2sim.tasks.state import collision
 
     deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
     links = sorted({ln for pair in deep for ln in pair})
@@ -506,7 +516,7 @@ def _parity_rows(check) -> list[dict]:
     """Side-by-side engine rows for the report (PyBullet first)."""
     if not check.engine_results:
         return []
-    from asset2sim.tasks import parity
+    from asset2sim.tasks.check import parity
 
     base = [m for m in check.metrics if m.name in parity.METRICS]
     return parity.parity_table({"pybullet": base, **check.engine_results})
@@ -529,7 +539,7 @@ def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> 
     (with a note in the report) when its module or engine is unavailable."""
     out: dict[str, str] = {}
     try:
-        from asset2sim.tasks import export_mjcf
+        from asset2sim.tasks.publish import export_mjcf
     except ImportError:
         export_mjcf = None
     if export_mjcf is not None:
@@ -540,7 +550,7 @@ def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> 
         except Exception as exc:  # export must not lose the refined asset
             report.notes.append(f"MJCF export failed: {exc}")
     try:
-        from asset2sim.tasks import render
+        from asset2sim.tasks.publish import render
     except ImportError:
         render = None
     if render is not None:
@@ -550,7 +560,7 @@ def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> 
         except Exception as exc:
             report.notes.append(f"renders failed: {exc}")
     try:
-        from asset2sim.tasks import report_html
+        from asset2sim.tasks.publish import report_html
     except ImportError:
         report_html = None
     if report_html is not None and hasattr(report_html, "write_refine_report"):

@@ -34,11 +34,11 @@ Behaviour = Callable[["FakeOpenAIServer", "Request"], None]
 
 PROPOSAL_MARK = "STALLED STATE SEARCH (JSON):"
 """Line that precedes the state-search summary of a joint-proposal request
-(``asset2sim.tasks.llm_estimator.PROPOSAL_MARK``)."""
+(``asset2sim.tasks.synthesize.llm_estimator.PROPOSAL_MARK``)."""
 
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 """Line that precedes the structured description in the user message (see
-``asset2sim.tasks.llm_estimator.DESCRIPTION_MARK``)."""
+``asset2sim.tasks.synthesize.llm_estimator.DESCRIPTION_MARK``)."""
 
 
 @dataclass

@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from asset2sim.tasks.baselines import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
+    from asset2sim.tasks.evaluation.baselines import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 
     console = Console(width=max(Console().width, 180))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]

@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from asset2sim.tasks.evaluate import EvaluationError, evaluate_asset
+    from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
 
     console = Console(width=max(Console().width, 180))
     out = args.out or (args.asset if args.asset.is_dir() else args.asset.parent)

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from asset2sim.engines.fake import UrdfError
     from asset2sim.engines.mujoco_engine import MjcfError
-    from asset2sim.tasks.export_mjcf import ExportError, check_mjcf, export_mjcf
+    from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
 
     try:
         path = export_mjcf(out, visuals=not args.no_visuals, check=False)
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"keyframe    'initial': {state}")
     status = 0
     if args.parity:
-        from asset2sim.tasks.parity import evaluate_engines, parity_table
+        from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 
         engines = [e.strip() for e in args.parity.split(",") if e.strip()]
         rows = parity_table(evaluate_engines(out, engines))

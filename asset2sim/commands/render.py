@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from asset2sim.tasks.render import (
+    from asset2sim.tasks.publish.render import (
         RenderError,
         VIEWS,
         SceneRenderer,

@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asset2sim.tasks.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
+    from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
 
     unknown = [c for c in args.error + args.allow if c not in CODES]
     if unknown:

@@ -12,7 +12,7 @@ conventions ("How quality is measured"):
   force is ``<dynamics friction>``, viscous damping ``<dynamics damping>``, and a
   spring torque -k (q - q_s) applied each step where the overlay has one.
 
-Metrics (``asset2sim.tasks.metrics``) only use this protocol, so the same
+Metrics (``asset2sim.tasks.check.metrics``) only use this protocol, so the same
 definitions run in every engine. Engines register with :func:`register_engine`;
 heavy engines are imported lazily by name.
 """

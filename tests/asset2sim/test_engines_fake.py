@@ -27,7 +27,7 @@ from asset2sim.engines.fake import (
     write_contract_asset,
 )
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks import metrics
+from asset2sim.tasks.check import metrics
 
 
 # ----------------------------------------------------------------- the model

@@ -15,7 +15,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring, open_session
 from asset2sim.engines.fake import write_contract_asset
-from asset2sim.tasks import metrics
+from asset2sim.tasks.check import metrics
 
 ENGINES = [
     pytest.param("pybullet", id="pybullet"),

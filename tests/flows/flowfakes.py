@@ -60,7 +60,7 @@ class FakeResult:
 def refine_fake(asset_dir, prompt, out_dir, config=None, *, category=None, asset_id=None, progress=None, extras=True):
     """Same signature and output contract as ``asset2sim.tasks.refine.refine_asset``."""
     from asset2sim.schemas.report import MetricResult, RefineReport
-    from asset2sim.tasks.extract import extract_asset
+    from asset2sim.tasks.ingest.extract import extract_asset
     from asset2sim.tasks.refine import MARKER_NAME, run_hash
 
     t0 = time.perf_counter()

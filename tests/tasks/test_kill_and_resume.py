@@ -27,7 +27,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim import atomic, safexml
-from asset2sim.tasks import validate_input as vi
+from asset2sim.tasks.ingest import validate_input as vi
 from tests import corpus_builder as cb
 
 refine = pytest.importorskip("asset2sim.tasks.refine")
@@ -154,7 +154,7 @@ def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
         counts = check_output_complete(outs[k], a)
         assert counts.get("marker_valid") == 1, counts
         m = json.loads((outs[k] / refine.MARKER_NAME).read_text())
-        from asset2sim.tasks.extract import extract_asset
+        from asset2sim.tasks.ingest.extract import extract_asset
 
         assert m["input_hash"] == extract_asset(a).input_hash
         assert atomic.tree_hashes(a) == before[k]

@@ -12,7 +12,7 @@ from asset2sim import atomic, demo_assets
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
-from asset2sim.tasks.validate_overlay import inertia_problems
+from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
 from tests.conftest import SHARED, needs_shared
 
 
@@ -65,7 +65,7 @@ def test_demo_objects_refine_to_interaction_ready(entry, demo_root, tmp_path):
     for joint, band in r.requested_bands.items():
         lo, hi = BAND_INTERVAL[band]
         assert lo - 1e-9 <= r.opening_fractions[joint] <= hi + 1e-9, (joint, band, r.opening_fractions[joint])
-    from asset2sim.tasks.extract import extract_asset
+    from asset2sim.tasks.ingest.extract import extract_asset
 
     asset = extract_asset(src)
     for joint, truth in entry.closed_positions.items():

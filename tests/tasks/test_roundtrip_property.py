@@ -5,7 +5,7 @@ Round trip: generate a valid model -> write it -> ``extract_asset`` (A) ->
 write it again with a writer -> ``extract_asset`` (B); A and B must describe
 the same model (names, tree, joint types, origins as transforms, axes, limits,
 effort, velocity, dynamics, geometry, inertials). Writers: yourdfpy's
-``write_xml_file`` and the pipeline's own ``asset2sim.tasks.write.build_urdf``
+``write_xml_file`` and the pipeline's own ``asset2sim.tasks.publish.write.build_urdf``
 (at scale 1, with an overlay carrying the given inertials).
 """
 
@@ -22,8 +22,8 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from asset2sim.schemas.asset import AssetDescription, Origin
-from asset2sim.tasks import validate_input as vi
-from asset2sim.tasks.extract import extract_asset
+from asset2sim.tasks.ingest import validate_input as vi
+from asset2sim.tasks.ingest.extract import extract_asset
 from tests import corpus_builder as cb
 
 MESHES = {
@@ -215,7 +215,7 @@ def test_roundtrip_through_yourdfpy_writer(model):
 def test_roundtrip_through_pipeline_writer(model):
     """``tasks.write.build_urdf`` at scale 1: the kinematic tree and geometry
     are unchanged; inertials and dynamics are the overlay's."""
-    write = pytest.importorskip("asset2sim.tasks.write")
+    write = pytest.importorskip("asset2sim.tasks.publish.write")
     from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -1,0 +1,1 @@
+"""Stage package ``check`` of the refine data flow (see DEVELOPERS.md)."""

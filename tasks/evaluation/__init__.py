@@ -1,0 +1,1 @@
+"""Stage package ``evaluation`` of the refine data flow (see DEVELOPERS.md)."""

@@ -1,0 +1,784 @@
+"""Baseline methods for the benchmark (SPEC, "Baselines the product can reproduce").
+
+Each method turns one manifest row (a PartNet-Mobility folder, its request and
+GenSim2's reference) into an asset folder that :func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`
+can evaluate: ``mobility.urdf``, ``initial_state.json`` and a ``baseline.json``
+saying how it was made (``method``, ``scale``, rules used, notes).
+
+- ``defaults``: the raw ``mobility.urdf`` at the reference scale with the
+  simulator's defaults for what the file lacks. Nothing physical is added: in
+  PyBullet a link without ``<inertial>`` gets mass 1 kg, an inertia diagonal of
+  (1, 1, 1) kg*m^2 and its COM at the link frame (Bullet's URDF importer,
+  ``BulletUrdfImporter.cpp``), and ``URDF_USE_INERTIA_FROM_FILE`` keeps those
+  defaults since the file has none; a joint without ``<dynamics>`` has zero
+  damping and friction. Initial state: 0 clipped to each joint's limits (what
+  the simulator loads). With no reference scale the raw scale 1.0 is used.
+- ``human``: ``reference_gensim2.urdf`` (GenSim2's hand-curated copy, every joint
+  but the task's frozen) at ``reference_gensim2.json``'s ``scale`` (1.0 when
+  absent, SAPIEN's default) and, when given, ``joint_position_range``
+  intersected with the file's limits as the task joint's limits (prismatic
+  values times the scale). Initial state: the lower end of
+  ``joint_position_range`` (prismatic times the scale), else 0, clipped to the
+  limits, which is exactly the reference state the evaluation compares
+  against (see ``docs/metrics.md`` for why).
+- ``direct``: one estimator call applied as is (no validation, no state
+  refinement, no post-check), via the estimator registry
+  ``asset2sim.tasks.synthesize.estimate`` when it exists.
+- ``asset2sim``: the full pipeline, :func:`asset2sim.tasks.refine.refine_asset`.
+
+Scaling bakes a uniform factor s into a URDF copy: mesh ``scale`` attributes,
+primitive sizes, every ``<origin xyz>`` (visual, collision, inertial, joint),
+prismatic limits; inertia tensors are multiplied by s^2 with masses kept
+(SAPIEN's loader scale does the same to geometry and keeps masses). Mesh paths
+inside the source folder are copied (with their MTL files and textures) so a
+baseline folder is self-contained, as the SPEC's output contract asks.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from asset2sim.atomic import copy_file, sha256_file, write_json, write_text
+
+METHODS = ("defaults", "human", "direct", "asset2sim")
+
+
+class BaselineError(RuntimeError):
+    """A baseline could not be produced (message names the asset and why)."""
+
+
+@dataclass
+class ManifestRow:
+    """One row of ``manifest.csv``. ``reference_scale`` dimensionless or None;
+    ``reference_joint_range`` (lo, hi) in the file's units or None."""
+
+    id: str
+    category: str
+    prompt: str
+    task: str = ""
+    gensim2_task: str = ""
+    reference_scale: float | None = None
+    reference_joint_range: tuple[float, float] | None = None
+    folder: Path = Path(".")
+
+
+def read_manifest(path: Path | str) -> list[ManifestRow]:
+    """Rows of a benchmark manifest (columns id, category, prompt, task,
+    gensim2_task, reference_scale, reference_joint_range); ``folder`` is
+    ``<manifest dir>/<id>``.
+
+    Raises:
+        FileNotFoundError: no such manifest.
+        ValueError: a row without id, or an unreadable scale/range (names the row).
+    """
+    path = Path(path)
+    rows = []
+    with open(path, newline="", encoding="utf-8") as fh:
+        for i, rec in enumerate(csv.DictReader(fh), 2):
+            rid = (rec.get("id") or "").strip()
+            if not rid:
+                raise ValueError(f"{path}:{i}: row without id")
+            scale_s = (rec.get("reference_scale") or "").strip()
+            rng_s = (rec.get("reference_joint_range") or "").strip().strip('"')
+            try:
+                scale = float(scale_s) if scale_s else None
+                rng = None
+                if rng_s:
+                    vals = json.loads(rng_s)
+                    rng = (float(vals[0]), float(vals[1]))
+            except (ValueError, TypeError, IndexError) as exc:
+                raise ValueError(f"{path}:{i} (id {rid}): bad reference_scale/range: {exc}") from exc
+            rows.append(
+                ManifestRow(
+                    id=rid,
+                    category=(rec.get("category") or "").strip(),
+                    prompt=(rec.get("prompt") or "").strip(),
+                    task=(rec.get("task") or "").strip(),
+                    gensim2_task=(rec.get("gensim2_task") or "").strip(),
+                    reference_scale=scale,
+                    reference_joint_range=rng,
+                    folder=path.parent / rid,
+                )
+            )
+    return rows
+
+
+@dataclass
+class BaselineResult:
+    """What a method produced for one asset."""
+
+    method: str
+    asset_id: str
+    out_dir: Path
+    scale: float | None
+    initial_state: dict[str, float] = field(default_factory=dict)
+    seconds: float = 0.0
+    model_queries: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------- URDF scaling
+def _inside(path: Path, root: Path) -> bool:
+    try:
+        path.resolve().relative_to(root.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _scale_xyz(elem: ET.Element, attr: str, s: float) -> None:
+    val = elem.get(attr)
+    if val is None:
+        return
+    parts = [float(x) for x in val.split()]
+    elem.set(attr, " ".join(_fmt(x * s) for x in parts))
+
+
+def scale_urdf(
+    src: Path | str,
+    dst: Path | str,
+    scale: float,
+    *,
+    joint_limits: dict[str, tuple[float, float]] | None = None,
+    header: str = "",
+    copy_meshes: bool = True,
+) -> Path:
+    """Write a copy of URDF ``src`` with the uniform scale ``scale`` baked in.
+
+    Args:
+        src: input URDF; relative mesh paths are resolved against its folder.
+        dst: output URDF path (written atomically).
+        scale: s > 0, dimensionless.
+        joint_limits: joint -> (lower, upper) in the *input* units, replacing
+            the file's limits (prismatic values are then scaled).
+        header: a comment placed after the XML declaration.
+        copy_meshes: copy every mesh inside ``src``'s folder (with its MTL and
+            textures) to the same relative path beside ``dst`` and keep the
+            path relative (a self-contained folder); else write absolute paths.
+
+    Returns:
+        ``dst``.
+
+    Raises:
+        ValueError: s <= 0 or not finite; ``package://`` mesh paths; a joint
+            of ``joint_limits`` not in the file.
+    """
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"scale must be a finite number > 0, got {scale}")
+    src = Path(src).resolve()
+    import defusedxml.ElementTree as DET
+
+    root = DET.parse(str(src)).getroot()
+    s = float(scale)
+    to_copy: set[Path] = set()
+    for link in root.iter("link"):
+        for part in list(link.iter("visual")) + list(link.iter("collision")):
+            for origin in part.iter("origin"):
+                _scale_xyz(origin, "xyz", s)
+            for mesh in part.iter("mesh"):
+                fname = mesh.get("filename", "")
+                if fname.startswith("package://"):
+                    raise ValueError(f"{src}: link {link.get('name')!r}: package:// mesh paths are not supported")
+                if fname.startswith("file://"):
+                    fname = fname[len("file://") :]
+                mesh_src = (src.parent / fname).resolve()
+                if copy_meshes and _inside(mesh_src, src.parent):
+                    rel = mesh_src.relative_to(src.parent)
+                    to_copy.add(mesh_src)
+                    mesh.set("filename", rel.as_posix())
+                else:
+                    mesh.set("filename", str(mesh_src))
+                sc = [float(x) for x in mesh.get("scale", "1 1 1").split()]
+                mesh.set("scale", " ".join(_fmt(x * s) for x in sc))
+            for box in part.iter("box"):
+                _scale_xyz(box, "size", s)
+            for cyl in part.iter("cylinder"):
+                for a in ("radius", "length"):
+                    if cyl.get(a) is not None:
+                        cyl.set(a, _fmt(float(cyl.get(a)) * s))
+            for sph in part.iter("sphere"):
+                if sph.get("radius") is not None:
+                    sph.set("radius", _fmt(float(sph.get("radius")) * s))
+        for inertial in link.iter("inertial"):
+            for origin in inertial.iter("origin"):
+                _scale_xyz(origin, "xyz", s)
+            for inertia in inertial.iter("inertia"):
+                for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+                    if inertia.get(a) is not None:
+                        inertia.set(a, _fmt(float(inertia.get(a)) * s * s))
+    seen = set()
+    dst_dir = Path(dst).parent
+    for mesh_src in sorted(to_copy):
+        files = [mesh_src]
+        try:
+            from asset2sim.tasks.publish.write import mesh_dependencies
+
+            files += mesh_dependencies(mesh_src, src.parent)
+        except ImportError:
+            pass
+        for f in files:
+            out = dst_dir / f.relative_to(src.parent)
+            if not (out.is_file() and sha256_file(out) == sha256_file(f)):
+                copy_file(f, out)
+    for joint in root.iter("joint"):
+        name = joint.get("name")
+        for origin in joint.findall("origin"):
+            _scale_xyz(origin, "xyz", s)
+        lim = joint.find("limit")
+        if joint_limits and name in joint_limits:
+            seen.add(name)
+            if lim is None:
+                lim = ET.SubElement(joint, "limit")
+            lim.set("lower", _fmt(joint_limits[name][0]))
+            lim.set("upper", _fmt(joint_limits[name][1]))
+        if joint.get("type") == "prismatic" and lim is not None:
+            for a in ("lower", "upper"):
+                if lim.get(a) is not None:
+                    lim.set(a, _fmt(float(lim.get(a)) * s))
+    missing = set(joint_limits or {}) - seen
+    if missing:
+        raise ValueError(f"{src}: joints {sorted(missing)} not found")
+    body = ET.tostring(root, encoding="unicode")
+    text = '<?xml version="1.0" ?>\n' + (f"<!-- {header} -->\n" if header else "") + body + "\n"
+    write_text(Path(dst), text)
+    return Path(dst)
+
+
+def urdf_joints(urdf: Path | str) -> dict[str, dict[str, Any]]:
+    """Joint name -> {type, lower, upper} (limits None when absent) of a URDF."""
+    import defusedxml.ElementTree as DET
+
+    out = {}
+    for joint in DET.parse(str(urdf)).getroot().iter("joint"):
+        lim = joint.find("limit")
+        lo = hi = None
+        if lim is not None:
+            lo = float(lim.get("lower")) if lim.get("lower") is not None else None
+            hi = float(lim.get("upper")) if lim.get("upper") is not None else None
+        out[joint.get("name")] = {"type": joint.get("type"), "lower": lo, "upper": hi}
+    return out
+
+
+def _clip(q: float, lo: float | None, hi: float | None) -> float:
+    if lo is not None:
+        q = max(q, lo)
+    if hi is not None:
+        q = min(q, hi)
+    return float(q)
+
+
+def reference_info(folder: Path | str) -> dict[str, Any]:
+    """GenSim2 reference of a PartNet-Mobility folder.
+
+    Returns:
+        {scale (float | None), joint_position_range ((lo, hi) | None),
+        task_joints (movable joints of reference_gensim2.urdf), urdf (Path | None)}.
+    """
+    folder = Path(folder)
+    info: dict[str, Any] = {"scale": None, "joint_position_range": None, "task_joints": [], "urdf": None}
+    js = folder / "reference_gensim2.json"
+    if js.is_file():
+        data = json.loads(js.read_text(encoding="utf-8"))
+        if isinstance(data.get("scale"), (int, float)):
+            info["scale"] = float(data["scale"])
+        rng = data.get("joint_position_range")
+        if isinstance(rng, list) and len(rng) == 2:
+            info["joint_position_range"] = (float(rng[0]), float(rng[1]))
+    ru = folder / "reference_gensim2.urdf"
+    if ru.is_file():
+        info["urdf"] = ru
+        info["task_joints"] = [
+            n for n, j in urdf_joints(ru).items() if j["type"] in ("revolute", "continuous", "prismatic")
+        ]
+    return info
+
+
+def human_initial_state(
+    joints: dict[str, dict[str, Any]], task_joints: list[str], rng: tuple[float, float] | None, scale: float
+) -> dict[str, float]:
+    """The human baseline's initial state (output units).
+
+    The task joint(s) start at the lower end of ``rng`` (file units; prismatic
+    times ``scale``), other joints at 0; all clipped to their limits (output
+    units).
+    """
+    out = {}
+    for name, j in joints.items():
+        if j["type"] not in ("revolute", "continuous", "prismatic"):
+            continue
+        q = 0.0
+        if rng is not None and name in task_joints:
+            q = rng[0] * (scale if j["type"] == "prismatic" else 1.0)
+        out[name] = _clip(q, j["lower"], j["upper"])
+    return out
+
+
+def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
+    """``defaults`` baseline for one manifest row (module docstring).
+
+    Raises:
+        BaselineError: no ``mobility.urdf`` in the row's folder.
+    """
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    src = row.folder / "mobility.urdf"
+    if not src.is_file():
+        raise BaselineError(f"{row.id}: no mobility.urdf in {row.folder}")
+    ref = reference_info(row.folder)
+    scale = ref["scale"] if ref["scale"] is not None else row.reference_scale
+    notes = []
+    if scale is None:
+        scale = 1.0
+        notes.append("no reference scale: raw scale 1.0")
+    urdf = scale_urdf(src, out_dir / "mobility.urdf", scale, header=f"asset2sim baseline 'defaults' of {row.id} at scale {scale}")
+    joints = urdf_joints(urdf)
+    state = {
+        n: _clip(0.0, j["lower"], j["upper"])
+        for n, j in joints.items()
+        if j["type"] in ("revolute", "continuous", "prismatic")
+    }
+    write_json(out_dir / "initial_state.json", {"initial_joint_positions": state})
+    notes.append("no <inertial>: PyBullet uses 1 kg and inertia diag(1,1,1) kg*m^2 per link; no <dynamics>: zero damping and friction")
+    write_json(
+        out_dir / "baseline.json",
+        {
+            "method": "defaults",
+            "asset_id": row.id,
+            "source": str(src),
+            "scale": scale,
+            "category": row.category,
+            "initial_state_rule": "0 clipped to the joint limits",
+            "notes": notes,
+        },
+    )
+    return BaselineResult("defaults", row.id, out_dir, scale, state, time.perf_counter() - t0, 0, notes)
+
+
+def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
+    """``human`` baseline (GenSim2's reference) for one manifest row.
+
+    Raises:
+        BaselineError: no ``reference_gensim2.urdf`` in the row's folder.
+    """
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    ref = reference_info(row.folder)
+    if ref["urdf"] is None:
+        raise BaselineError(f"{row.id}: no reference_gensim2.urdf in {row.folder}")
+    notes = []
+    scale = ref["scale"]
+    if scale is None:
+        scale = 1.0
+        notes.append("reference_gensim2.json has no scale: 1.0 (SAPIEN's default)")
+    rng = ref["joint_position_range"]
+    limits = None
+    if rng is not None:
+        # GenSim2's range, within the file's own limits (an empty intersection keeps the range)
+        file_joints = urdf_joints(ref["urdf"])
+        limits = {}
+        for j in ref["task_joints"]:
+            lo = max(rng[0], file_joints[j]["lower"]) if file_joints[j]["lower"] is not None else rng[0]
+            hi = min(rng[1], file_joints[j]["upper"]) if file_joints[j]["upper"] is not None else rng[1]
+            limits[j] = (lo, hi) if lo <= hi else rng
+    urdf = scale_urdf(
+        ref["urdf"], out_dir / "mobility.urdf", scale, joint_limits=limits,
+        header=f"asset2sim baseline 'human' (GenSim2 reference) of {row.id} at scale {scale}",
+    )
+    joints = urdf_joints(urdf)
+    state = human_initial_state(joints, ref["task_joints"], rng, scale)
+    write_json(out_dir / "initial_state.json", {"initial_joint_positions": state})
+    write_json(
+        out_dir / "baseline.json",
+        {
+            "method": "human",
+            "asset_id": row.id,
+            "source": str(ref["urdf"]),
+            "scale": scale,
+            "category": row.category,
+            "joint_position_range": list(rng) if rng else None,
+            "task_joints": ref["task_joints"],
+            "initial_state_rule": "lower end of joint_position_range (else 0) clipped to the limits",
+            "notes": notes,
+        },
+    )
+    return BaselineResult("human", row.id, out_dir, scale, state, time.perf_counter() - t0, 0, notes)
+
+
+def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimator: str = "offline") -> BaselineResult:
+    """``direct`` baseline: one estimator call, its overlay written as is.
+
+    The same stages as :func:`asset2sim.tasks.refine.refine_asset` up to the
+    estimator (extract, analyze, request, category, closed ends), then one
+    ``estimate`` call of the registered ``estimator``
+    (:func:`asset2sim.tasks.synthesize.estimate.get_estimator`) and
+    :func:`asset2sim.tasks.publish.write.write_output` with the state the estimator's
+    bands imply; no overlay validation, no state refinement, no post-check or
+    escalation.
+
+    Raises:
+        BaselineError: a pipeline module is missing, or a stage failed (the
+            message names it; an overlay the writer cannot write counts as the
+            method failing on this asset).
+    """
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    try:
+        from asset2sim.engines.base import SessionOptions, open_session
+        from asset2sim.tasks.geometry import analyze
+        from asset2sim.tasks.synthesize import estimate
+        from asset2sim.tasks.ingest import extract
+        from asset2sim.tasks.interpret import priors
+        from asset2sim.tasks.interpret import request
+        from asset2sim.tasks.publish import write
+        from asset2sim.tasks.geometry.closed_state import closed_positions, link_hull_points, object_extents, subtree_links
+    except ImportError as exc:
+        raise BaselineError(f"{row.id}: the 'direct' method needs the pipeline modules ({exc})") from exc
+    try:
+        asset = extract.extract_asset(row.folder, asset_id=row.id, category=row.category or None)
+        geometry = analyze.analyze_asset(asset)
+        spec = request.parse_request(row.prompt)
+        labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
+        match = priors.recognize_category(row.category or asset.category, labels, row.prompt)
+        cat = getattr(match, "name", None) or str(match)
+        kin = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+        try:
+            hull = link_hull_points(asset)
+            closed = closed_positions(kin, asset, hull_points=hull)
+            extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
+            subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
+            ctx = estimate.EstimationContext(
+                asset=asset, geometry=geometry, request=spec, category=cat,
+                category_reason=getattr(match, "reason", ""), closed=closed, closed_extents=extents,
+                session=kin, subtrees=subtrees, settings={"seed": seed},
+            )
+            overlay = estimate.get_estimator(estimator).estimate(ctx)
+            bands, _ = estimate.requested_bands(ctx)
+        finally:
+            kin.close()
+        prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
+        state = estimate.state_from_bands(closed, bands, overlay.scale, prismatic)
+        if overlay.initial_joint_positions:
+            state.update(overlay.initial_joint_positions)
+        write.write_output(asset, overlay, out_dir, state)
+    except BaselineError:
+        raise
+    except Exception as exc:
+        raise BaselineError(f"{row.id}: direct ({estimator}) failed: {type(exc).__name__}: {exc}") from exc
+    write_json(
+        out_dir / "baseline.json",
+        {
+            "method": "direct",
+            "asset_id": row.id,
+            "source": str(row.folder),
+            "scale": overlay.scale,
+            "category": cat,
+            "estimator": overlay.estimator.name,
+            "initial_state_rule": "the estimator's requested bands, unrefined",
+            "notes": ["one estimator call; no validation, no state refinement, no post-check"],
+        },
+    )
+    return BaselineResult("direct", row.id, out_dir, overlay.scale, state, time.perf_counter() - t0,
+                          int(overlay.estimator.queries or (0 if estimator == "offline" else 1)))
+
+
+def make_asset2sim(row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> BaselineResult:
+    """``asset2sim``: the full pipeline (:func:`asset2sim.tasks.refine.refine_asset`).
+
+    Raises:
+        BaselineError: the refine pipeline is not available or failed.
+    """
+    t0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    try:
+        from asset2sim.tasks.refine import refine_asset
+    except ImportError as exc:
+        raise BaselineError(f"{row.id}: asset2sim.tasks.refine is not available ({exc})") from exc
+    config = None
+    try:
+        from asset2sim.schemas.config import RefineConfig
+
+        config = RefineConfig(seed=seed)
+    except Exception:  # pragma: no cover - schema always present
+        config = None
+    kwargs: dict[str, Any] = {"category": row.category or None}
+    try:
+        import inspect
+
+        params = inspect.signature(refine_asset).parameters
+        if "extras" in params:
+            kwargs["extras"] = False  # the benchmark writes its own report
+        if "asset_id" in params:
+            kwargs["asset_id"] = row.id
+    except (TypeError, ValueError):
+        pass
+    try:
+        res = refine_asset(row.folder, row.prompt, out_dir, config, **kwargs)
+    except Exception as exc:
+        raise BaselineError(f"{row.id}: refine_asset failed: {type(exc).__name__}: {exc}") from exc
+    report = getattr(res, "report", None)
+    scale = getattr(report, "scale", None)
+    state = dict(getattr(report, "initial_joint_positions", {}) or {})
+    queries = int(getattr(report, "model_queries", 0) or 0)
+    return BaselineResult("asset2sim", row.id, out_dir, scale, state, time.perf_counter() - t0, queries)
+
+
+MethodFn = Callable[..., BaselineResult]
+
+_REGISTRY: dict[str, MethodFn] = {
+    "defaults": lambda row, out_dir, seed=0: make_defaults(row, out_dir),
+    "human": lambda row, out_dir, seed=0: make_human(row, out_dir),
+    "direct": make_direct,
+    "asset2sim": make_asset2sim,
+}
+
+
+def register_method(name: str, fn: MethodFn) -> None:
+    """Register ``fn(row, out_dir, seed=0) -> BaselineResult`` as a method
+    (e.g. ``ivw`` when model backends exist)."""
+    _REGISTRY[name] = fn
+
+
+def available_methods() -> list[str]:
+    """Registered method names."""
+    return list(_REGISTRY)
+
+
+def run_method(method: str, row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> BaselineResult:
+    """Produce ``method``'s asset for ``row`` in ``out_dir``.
+
+    Raises:
+        KeyError: unknown method.
+        BaselineError: the method could not produce the asset.
+    """
+    if method not in _REGISTRY:
+        raise KeyError(f"unknown method {method!r}; known: {sorted(_REGISTRY)}")
+    return _REGISTRY[method](row, Path(out_dir), seed=seed)
+
+
+# ---------------------------------------------------------------- benchmark
+#: The SPEC's "Numbers to beat" (thesis results, 9-object set, Isaac Sim).
+RESEARCH_NUMBERS: list[dict[str, str]] = [
+    {"method": "Human (GenSim2)", "penetration (mm, toilet+stapler)": "15.95 +- 22.55", "rest-stability pass": "88.9%",
+     "oscillation pass": "100%", "scale dev. vs GenSim2": "reference", "init. joint dev. (rad)": "reference", "prompt alignment": "manual"},
+    {"method": "VLM-IVW (25 queries)", "penetration (mm, toilet+stapler)": "13.62 +- 19.26", "rest-stability pass": "77.8%",
+     "oscillation pass": "77.8%", "scale dev. vs GenSim2": "38.35 +- 31.35%", "init. joint dev. (rad)": "0.42 +- 0.41", "prompt alignment": "82.2%"},
+    {"method": "Direct VLM (1 query)", "penetration (mm, toilet+stapler)": "61.77 +- 70.76", "rest-stability pass": "66.7%",
+     "oscillation pass": "77.8%", "scale dev. vs GenSim2": "35.02 +- 37.58%", "init. joint dev. (rad)": "0.50 +- 0.48", "prompt alignment": "86.1%"},
+    {"method": "thesis method", "penetration (mm, toilet+stapler)": "12.83 +- 18.14", "rest-stability pass": "100%",
+     "oscillation pass": "100%", "scale dev. vs GenSim2": "32.73 +- 16.51%", "init. joint dev. (rad)": "0.40 +- 0.48", "prompt alignment": "97.2%"},
+]
+
+#: Metrics flattened into one benchmark record: name -> column prefix.
+RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "joint_hold",
+                  "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes")
+
+
+def evaluation_record(ev, row: ManifestRow, method: str, *, engine: str = "pybullet") -> dict[str, Any]:
+    """One flat benchmark record (JSON/CSV-able) of an evaluation: for each
+    metric of :data:`RECORD_METRICS` its value (``<name>``) and verdict
+    (``<name>_pass``, None without threshold), plus D_pos/D_ori, all_pass and
+    the evaluation time (s)."""
+    rec: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "error": None}
+    for name in RECORD_METRICS:
+        m = ev.metric(name, engine)
+        rec[name] = None if m is None else m.value
+        rec[f"{name}_pass"] = None if m is None else m.passed
+    rs = ev.metric("rest_stability", engine)
+    rec["D_pos_m"] = rs.details.get("D_pos_m") if rs else None
+    rec["D_ori_rad"] = rs.details.get("D_ori_rad") if rs else None
+    rec["scale"] = ev.scale
+    rec["all_pass"] = bool(ev.passed)
+    rec["failures"] = ";".join(ev.failures)
+    rec["seconds"] = ev.seconds
+    return rec
+
+
+def _mean_sd(vals: list[float]) -> tuple[float | None, float | None]:
+    v = [float(x) for x in vals if x is not None and math.isfinite(float(x))]
+    if not v:
+        return None, None
+    mean = sum(v) / len(v)
+    sd = math.sqrt(sum((x - mean) ** 2 for x in v) / (len(v) - 1)) if len(v) > 1 else 0.0
+    return mean, sd
+
+
+def _rate(vals: list[Any]) -> tuple[float | None, int]:
+    v = [bool(x) for x in vals if x is not None]
+    return (sum(v) / len(v) if v else None), len(v)
+
+
+def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, dict[str, Any]]:
+    """The thesis table for a set of records: per method mean and sample sd
+    (ddof = 1) of penetration (mm; all rows and Toilet+Stapler rows), scale
+    deviation (%), initial joint deviation; pass rates (fraction) of rest
+    stability, oscillation, probes and all checks over the assets with a
+    verdict; mean prompt alignment; median evaluation time (s); count of
+    assets the method failed to produce (``errors``)."""
+    out: dict[str, dict[str, Any]] = {}
+    for m in methods:
+        rs = [r for r in records if r["method"] == m]
+        ok = [r for r in rs if not r.get("error")]
+        ts = [r for r in ok if (r.get("category") or "").lower() in ("toilet", "stapler")]
+        row: dict[str, Any] = {"n": len(rs), "errors": len(rs) - len(ok)}
+        row["pen_mean"], row["pen_sd"] = _mean_sd([r["penetration"] for r in ok])
+        row["pen_ts_mean"], row["pen_ts_sd"] = _mean_sd([r["penetration"] for r in ts])
+        row["scale_mean"], row["scale_sd"] = _mean_sd([r["scale_deviation"] for r in ok])
+        row["init_mean"], row["init_sd"] = _mean_sd([r["initial_joint_deviation"] for r in ok])
+        row["prompt_mean"], _ = _mean_sd([r["prompt_alignment"] for r in ok])
+        row["rest_stability_pass"], row["rest_n"] = _rate([r["rest_stability_pass"] for r in ok])
+        row["oscillation_pass"], row["osc_n"] = _rate([r["oscillation_pass"] for r in ok])
+        row["probes_pass"], row["probes_n"] = _rate([r["probes_pass"] for r in ok])
+        row["all_pass"], _ = _rate([r["all_pass"] for r in ok])
+        secs = sorted(r["seconds"] for r in ok if r.get("seconds") is not None)
+        row["median_seconds"] = (secs[len(secs) // 2] if len(secs) % 2 else 0.5 * (secs[len(secs) // 2 - 1] + secs[len(secs) // 2])) if secs else None
+        out[m] = row
+    return out
+
+
+def run_benchmark(
+    manifest: Path | str,
+    methods: list[str],
+    out_dir: Path | str,
+    *,
+    rows: list[str] | None = None,
+    seed: int = 0,
+    engines: tuple[str, ...] = ("pybullet",),
+    reports: bool = True,
+    progress: Callable[[str, str, str], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run every method on every manifest row and evaluate each result.
+
+    Layout: ``out_dir/<method>/<id>/asset/`` the method's asset,
+    ``out_dir/<method>/<id>/evaluation.json`` and ``report.html``. A row that
+    a method cannot produce, or that fails to evaluate, becomes a record with
+    ``error`` set; the others go on.
+
+    Args:
+        manifest: ``manifest.csv``.
+        methods: method names (:func:`available_methods`).
+        out_dir: benchmark folder.
+        rows: restrict to these ids (manifest order kept).
+        seed: passed to the methods and recorded.
+        engines: evaluation engines.
+        reports: write each ``report.html``.
+        progress: callback(method, id, message).
+
+    Returns:
+        The records (:func:`evaluation_record` plus ``method_seconds``,
+        ``report``, ``thesis_set``), in manifest order per method.
+
+    Raises:
+        KeyError: an unknown method.
+    """
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+
+    for m in methods:
+        if m not in _REGISTRY:
+            raise KeyError(f"unknown method {m!r}; known: {sorted(_REGISTRY)}")
+    out_dir = Path(out_dir)
+    all_rows = read_manifest(manifest)
+    thesis = {r.id for r in all_rows[:9]}
+    sel = [r for r in all_rows if rows is None or r.id in rows]
+    say = progress or (lambda m, i, msg: None)
+    records = []
+    for method in methods:
+        for row in sel:
+            folder = out_dir / method / row.id
+            base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
+            try:
+                res = run_method(method, row, folder / "asset", seed=seed)
+            except Exception as exc:
+                rec = dict(base, error=f"{type(exc).__name__}: {exc}")
+                records.append(rec)
+                say(method, row.id, f"method failed: {rec['error']}")
+                continue
+            try:
+                # ev.seconds is measured before evaluation.json / report.html are written
+                ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
+                                    seed=seed, category=row.category or None, method=method,
+                                    out_dir=folder, write_report=reports)
+            except Exception as exc:
+                rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
+                records.append(rec)
+                say(method, row.id, rec["error"])
+                continue
+            rec = evaluation_record(ev, row, method)
+            rec.update(base)
+            rec["method_seconds"] = res.seconds
+            rec["model_queries"] = res.model_queries
+            rec["report"] = f"{method}/{row.id}/report.html" if reports else None
+            records.append(rec)
+            say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
+    return records
+
+
+def benchmark_tables(records: list[dict[str, Any]], methods: list[str]) -> dict[str, dict[str, dict[str, Any]]]:
+    """The thesis tables: {"thesis set (first 9 manifest rows)": ..., "all rows": ...}
+    (:func:`summarize` of each subset)."""
+    return {
+        "thesis set (first 9 manifest rows)": summarize([r for r in records if r.get("thesis_set")], methods),
+        "all rows": summarize(records, methods),
+    }
+
+
+def _json_clean(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_clean(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_json_clean(v) for v in obj]
+    return obj
+
+
+def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], out_dir: Path | str,
+                            meta: dict[str, Any]) -> dict[str, Path]:
+    """Write the benchmark's files into ``out_dir`` atomically:
+    ``results.json``/``.csv``/``.parquet`` (one record per object and method,
+    ``method`` a column), ``summary.json``/``.csv``/``.html`` (the thesis
+    tables beside :data:`RESEARCH_NUMBERS`) and ``index.html`` (one
+    colour-coded row per object and method).
+
+    Returns:
+        name -> path of every file written (``results.parquet`` is skipped,
+        with ``meta['parquet_error']`` set, when pyarrow cannot write it).
+    """
+    import io
+
+    import pandas as pd
+
+    from asset2sim.atomic import write_bytes
+    from asset2sim.tasks.publish.plots import plot_method_summary
+    from asset2sim.tasks.publish.report_html import render_benchmark_index, render_benchmark_summary
+
+    out_dir = Path(out_dir)
+    records = _json_clean(records)
+    tables = _json_clean(benchmark_tables(records, methods))
+    paths: dict[str, Path] = {}
+    paths["results.json"] = write_json(out_dir / "results.json", {"meta": meta, "records": records})
+    paths["summary.json"] = write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})
+    df = pd.DataFrame(records)
+    paths["results.csv"] = write_text(out_dir / "results.csv", df.to_csv(index=False))
+    try:
+        buf = io.BytesIO()
+        df.astype({c: "string" for c in ("failures", "error", "report") if c in df}).to_parquet(buf, index=False)
+        paths["results.parquet"] = write_bytes(out_dir / "results.parquet", buf.getvalue())
+    except Exception as exc:  # CSV/JSON are the record; parquet is for the catalog
+        meta["parquet_error"] = f"{type(exc).__name__}: {exc}"
+    flat = [dict(subset=s, method=m, **row) for s, t in tables.items() for m, row in t.items()]
+    paths["summary.csv"] = write_text(out_dir / "summary.csv", pd.DataFrame(flat).to_csv(index=False))
+    chart = plot_method_summary(tables["all rows"])
+    paths["summary.html"] = write_text(out_dir / "summary.html", render_benchmark_summary(tables, RESEARCH_NUMBERS, meta, chart))
+    paths["index.html"] = write_text(out_dir / "index.html", render_benchmark_index(records, meta))
+    return paths

@@ -1,0 +1,308 @@
+"""Semantic-accuracy metrics: scale, initial joint state, mass, prompt alignment.
+
+Plain functions over numbers, so they can be re-derived by hand and tested
+without a simulator. Definitions (SPEC, "How quality is measured", "Semantic
+accuracy"; the exact conventions are in ``docs/metrics.md``):
+
+- **Scale deviation** |s - s_ref| / s_ref (dimensionless, reported in %), where
+  s is the uniform scale of the evaluated asset relative to the *raw* input
+  asset and s_ref GenSim2's ``scale`` (``reference_gensim2.json``). No pass
+  threshold (reported).
+- **Initial joint deviation** |q - q_ref| of the task-relevant joint(s), rad
+  (revolute) or m (prismatic); the mean over the task-relevant joints is the
+  value. No pass threshold (reported).
+- **Total mass** kg, with a plausibility verdict against the category's mass
+  range scaled to the asset's size (f = largest extent / the category's largest
+  typical dimension; range [lo f^3, hi f^2] when smaller, [lo f^2, hi f^3]
+  when larger: solid to thin-walled, ``asset2sim.tasks.interpret.priors.scale_mass_range``).
+- **Prompt alignment** in [0, 1]: half for size, half for joint state. Each half
+  scores 1 (matches), 0.5 (near miss) or 0 (miss), with a reason:
+
+  * size: ratio r = L / L_target, L the largest extent of the asset (m) and
+    L_target = size_factor(request) * largest typical dimension of the category
+    (m). |ln r| <= ln 1.5 scores 1, <= ln 2.25 scores 0.5, else 0.
+  * joint state: per requested joint, the opening fraction f = direction *
+    (q - q_closed) / open_range (measured from the geometric closed end,
+    :mod:`asset2sim.tasks.geometry.closed_state`) against the band's acceptance interval
+    (``schemas.request.BAND_INTERVAL``): inside scores 1, within 0.1 of it
+    0.5, else 0; the joint half is the mean over requested joints.
+  * When the request names no joint state, the score is the size half alone
+    (and vice versa); with neither, the metric is not applicable (value None).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from asset2sim.schemas.report import MetricResult
+from asset2sim.schemas.request import BAND_INTERVAL
+
+#: |ln(L / L_target)| bounds for a full and a half size score (dimensionless).
+SIZE_FULL_RATIO = 1.5
+SIZE_HALF_RATIO = 2.25
+#: Distance (opening fraction) outside a band's interval that still scores 0.5.
+BAND_HALF_MARGIN = 0.10
+
+
+def scale_deviation(scale: float | None, reference_scale: float | None, *, scale_source: str = "") -> MetricResult:
+    """|s - s_ref| / s_ref in percent.
+
+    Args:
+        scale: uniform scale of the evaluated asset relative to the raw input
+            (dimensionless) or None when unknown.
+        reference_scale: GenSim2's ``scale`` (dimensionless) or None.
+        scale_source: where ``scale`` came from (for the report).
+
+    Returns:
+        MetricResult ``scale_deviation`` (unit ``%``, ``passed`` None); value
+        None when either scale is missing or s_ref <= 0.
+    """
+    details: dict[str, Any] = {"scale": scale, "reference_scale": reference_scale, "scale_source": scale_source}
+    value = None
+    if scale is None:
+        details["reason"] = "scale of the evaluated asset unknown"
+    elif reference_scale is None or not reference_scale > 0:
+        details["reason"] = "the reference has no scale"
+    else:
+        value = abs(float(scale) - float(reference_scale)) / float(reference_scale) * 100.0
+    return MetricResult(
+        name="scale_deviation",
+        value=value,
+        unit="%",
+        passed=None,
+        threshold="reported: |s - s_ref| / s_ref (no SPEC threshold)",
+        details=details,
+        engine="none",
+    )
+
+
+def initial_joint_deviation(
+    state: dict[str, float],
+    reference_state: dict[str, float],
+    joints: list[str],
+    joint_types: dict[str, str],
+) -> MetricResult:
+    """Mean |q - q_ref| over the task-relevant ``joints``.
+
+    Args:
+        state: joint -> initial position of the evaluated asset (rad or m).
+        reference_state: joint -> reference position (rad or m, same units).
+        joints: task-relevant joint names; joints missing from either state are
+            skipped and listed in ``details.skipped``.
+        joint_types: joint -> ``revolute``/``continuous``/``prismatic``.
+
+    Returns:
+        MetricResult ``initial_joint_deviation``; unit ``rad`` (``m`` when every
+        compared joint is prismatic, ``mixed`` otherwise); value None when no
+        joint could be compared.
+    """
+    per = {}
+    skipped = []
+    for j in joints:
+        if j not in state or j not in reference_state:
+            skipped.append(j)
+            continue
+        per[j] = {
+            "q": float(state[j]),
+            "q_ref": float(reference_state[j]),
+            "deviation": abs(float(state[j]) - float(reference_state[j])),
+            "unit": "m" if joint_types.get(j) == "prismatic" else "rad",
+        }
+    units = {v["unit"] for v in per.values()}
+    unit = units.pop() if len(units) == 1 else ("mixed" if units else "rad")
+    value = float(np.mean([v["deviation"] for v in per.values()])) if per else None
+    return MetricResult(
+        name="initial_joint_deviation",
+        value=value,
+        unit=unit,
+        passed=None,
+        threshold="reported: |q - q_ref| of the task-relevant joint (no SPEC threshold)",
+        details={"joints": per, "skipped": skipped},
+        engine="none",
+    )
+
+
+def mass_plausibility(
+    total_mass: float,
+    mass_range: tuple[float, float] | None,
+    *,
+    per_link: dict[str, dict[str, Any]] | None = None,
+    category: str | None = None,
+) -> MetricResult:
+    """Total mass (kg) and whether it lies in the plausible range.
+
+    Args:
+        total_mass: sum of the link masses the simulator uses, kg.
+        mass_range: (low, high) kg plausible for an object of this category *at
+            the asset's size* (the caller scales the category's range, see
+            :func:`asset2sim.tasks.evaluation.evaluate.scaled_mass_range`), or None when no
+            prior exists (then ``passed`` is None).
+        per_link: link -> {mass, source} for the report.
+        category: for the report.
+
+    Raises:
+        ValueError: ``mass_range`` with low > high, or a non-finite mass.
+    """
+    if not math.isfinite(total_mass):
+        raise ValueError(f"total mass must be finite, got {total_mass}")
+    details: dict[str, Any] = {"category": category, "per_link": per_link or {}}
+    passed = None
+    if mass_range is not None:
+        lo, hi = float(mass_range[0]), float(mass_range[1])
+        if lo > hi:
+            raise ValueError(f"mass range ({lo}, {hi}) has low > high")
+        details["range_kg"] = [lo, hi]
+        passed = bool(lo <= total_mass <= hi)
+        threshold = f"{lo:.3g} kg <= m <= {hi:.3g} kg"
+    else:
+        details["reason"] = "no mass prior for the category"
+        threshold = "no prior for the category"
+    return MetricResult(
+        name="total_mass",
+        value=float(total_mass),
+        unit="kg",
+        passed=passed,
+        threshold=threshold,
+        details=details,
+        engine="none",
+    )
+
+
+def size_score(largest_extent: float, typical_largest: float, size_factor: float = 1.0) -> tuple[float, str, float]:
+    """Size half of prompt alignment.
+
+    Args:
+        largest_extent: largest side of the asset's axis-aligned bounding box at
+            its initial state, m.
+        typical_largest: largest typical dimension of the category, m.
+        size_factor: multiplier the request's size words imply (dimensionless).
+
+    Returns:
+        (score in {0, 0.5, 1}, reason, ratio L / L_target).
+
+    Raises:
+        ValueError: non-positive inputs.
+    """
+    if not (largest_extent > 0 and typical_largest > 0 and size_factor > 0):
+        raise ValueError(f"size inputs must be > 0 (got {largest_extent}, {typical_largest}, {size_factor})")
+    target = typical_largest * size_factor
+    r = largest_extent / target
+    lr = abs(math.log(r))
+    if lr <= math.log(SIZE_FULL_RATIO):
+        score, verdict = 1.0, "matches"
+    elif lr <= math.log(SIZE_HALF_RATIO):
+        score, verdict = 0.5, "near miss"
+    else:
+        score, verdict = 0.0, "miss"
+    reason = (
+        f"largest extent {largest_extent:.3f} m vs target {target:.3f} m "
+        f"(typical {typical_largest:.3f} m x {size_factor:g}): ratio {r:.2f}, {verdict}"
+    )
+    return score, reason, r
+
+
+def band_score(fraction: float, band: str) -> tuple[float, str]:
+    """Joint-state score of one joint: opening fraction vs the band's interval.
+
+    Args:
+        fraction: opening fraction f (0 closed, 1 fully open), dimensionless.
+        band: a key of ``schemas.request.BAND_INTERVAL``.
+
+    Raises:
+        KeyError: unknown band.
+    """
+    lo, hi = BAND_INTERVAL[band]
+    if lo <= fraction <= hi:
+        return 1.0, f"opening {fraction:.2f} inside {band} [{lo}, {hi}]"
+    dist = lo - fraction if fraction < lo else fraction - hi
+    if dist <= BAND_HALF_MARGIN:
+        return 0.5, f"opening {fraction:.2f} just outside {band} [{lo}, {hi}] (by {dist:.2f})"
+    return 0.0, f"opening {fraction:.2f} outside {band} [{lo}, {hi}] (by {dist:.2f})"
+
+
+@dataclass
+class JointStateCheck:
+    """One requested joint: its band and measured opening fraction."""
+
+    joint: str
+    band: str
+    fraction: float | None
+    label: str | None = None
+    phrase: str = ""
+
+
+def prompt_alignment(
+    *,
+    size_requested: bool,
+    largest_extent: float | None,
+    typical_largest: float | None,
+    size_factor: float,
+    joint_checks: list[JointStateCheck],
+    state_requested: bool,
+    unmatched_requests: list[str] | None = None,
+    text: str = "",
+) -> MetricResult:
+    """Prompt alignment in [0, 1] (module docstring for the definition).
+
+    Args:
+        size_requested: the request contained size words (or a category whose
+            typical size applies; the size half is scored whenever a typical
+            size is known).
+        largest_extent: m, or None when unknown.
+        typical_largest: the category's largest typical dimension, m, or None.
+        size_factor: the request's size multiplier.
+        joint_checks: the requested joints with their measured fractions.
+        state_requested: the request asked for a joint state.
+        unmatched_requests: joint-state phrases that matched no joint (score 0).
+        text: the request, for the report.
+    """
+    details: dict[str, Any] = {"request": text, "size": None, "joints": []}
+    halves = []
+    if typical_largest and largest_extent:
+        s, reason, ratio = size_score(largest_extent, typical_largest, size_factor)
+        details["size"] = {
+            "score": s,
+            "reason": reason,
+            "ratio": ratio,
+            "requested": size_requested,
+            "largest_extent_m": largest_extent,
+            "target_m": typical_largest * size_factor,
+        }
+        halves.append(s)
+    else:
+        details["size"] = {"score": None, "reason": "no typical size known for the category or no extent measured"}
+    if state_requested:
+        scores = []
+        for c in joint_checks:
+            if c.fraction is None:
+                scores.append(0.0)
+                details["joints"].append({"joint": c.joint, "band": c.band, "score": 0.0, "reason": "closed end unknown"})
+                continue
+            sc, reason = band_score(c.fraction, c.band)
+            scores.append(sc)
+            details["joints"].append(
+                {"joint": c.joint, "band": c.band, "label": c.label, "fraction": c.fraction, "score": sc, "reason": reason}
+            )
+        for phrase in unmatched_requests or []:
+            scores.append(0.0)
+            details["joints"].append({"joint": None, "band": None, "score": 0.0, "reason": f"no joint matches {phrase!r}"})
+        js = float(np.mean(scores)) if scores else 0.0
+        details["joint_state_score"] = js
+        halves.append(js)
+    else:
+        details["joint_state_score"] = None
+        details["joint_state_reason"] = "the request asks for no joint state"
+    value = float(np.mean(halves)) if halves else None
+    return MetricResult(
+        name="prompt_alignment",
+        value=value,
+        unit="fraction",
+        passed=None,
+        threshold="reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0",
+        details=details,
+        engine="none",
+    )

@@ -1,0 +1,1 @@
+"""Stage package ``geometry`` of the refine data flow (see DEVELOPERS.md)."""

@@ -1,0 +1,313 @@
+"""Find the geometric *closed* end of every movable joint.
+
+PartNet-Mobility's zero pose is often half open and a lid's range can extend
+both ways from closed, so "closed" is found from the geometry, never assumed
+to be 0 or the lower limit.
+
+Method (per joint j, all in a fixed-base, gravity-free PyBullet session of the
+asset, other joints at their reference state):
+
+1. Compactness c_j(q) = volume of the axis-aligned box (root frame) bounding
+   the joint's parent link and every link of its moving subtree, at q (the
+   moving part "rests against its parent" where this is small; parent +
+   subtree only, so other open parts cannot mask the change), and o_j(q) =
+   volume of the box bounding the moving subtree alone (a closed lid, door or
+   screen lies aligned with its body; a lid pushed *into* an open box is
+   compact but tilted). Score = (c_j / min c_j) x (o_j / min o_j)^w with
+   w = ``OWN_WEIGHT`` = 0.25: the parent+subtree box dominates, the subtree's
+   own box breaks near-ties (real links often carry extra pieces that make
+   their own box a poor signal on its own).
+2. Sample q over the joint range (``coarse`` samples) and keep the states
+   within ``tie_tol`` (relative) of the best score; among them drop those
+   whose penetration between the subtree and the rest (parent included, hull
+   based) exceeds the ties' least by more than ``PHI_TIE_FRACTION`` of the
+   object size (a drawer pushed through the back of its carcass is as compact
+   as a closed one, but penetrates; small differences are hull-overlap noise).
+3. Among remaining ties take the one farthest from the open end: the part
+   rests against its parent (a toilet lid on its seat, a drawer pushed home).
+4. Refine with ``fine`` samples between the neighbouring coarse samples.
+
+The opening direction is towards the farther limit from q_closed, and the
+opening range is that distance. Continuous joints have no stops and so no
+closed end: their modelled pose 0 is kept (opening range pi for the measure). The measure used by
+the state bands is f(q) = direction * (q - q_closed) / range, in [0, 1] inside
+the range on the opening side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from asset2sim.schemas.asset import AssetDescription
+
+
+OWN_WEIGHT = 0.25
+"""Exponent of the moving subtree's own-box ratio in the closed-state score."""
+
+PHI_TIE_FRACTION = 0.05
+"""Penetration (m) above the ties' least, as a fraction of the object size, that
+excludes a tie (hull overlaps make small differences meaningless)."""
+"""Exponent of the moving subtree's own-box ratio in the closed-state score."""
+
+
+@dataclass
+class ClosedState:
+    """Closed end of one joint (rad or m, in the units of the session's asset)."""
+
+    joint: str
+    q_closed: float
+    direction: float
+    """+1 when opening increases q, -1 when it decreases q."""
+    open_range: float
+    """Largest opening the range allows from q_closed (rad or m, > 0)."""
+    lower: float
+    upper: float
+    compactness_ratio: float = 1.0
+    """max/min compactness over the range (1 = the joint changes nothing)."""
+    notes: list[str] = field(default_factory=list)
+
+    def fraction(self, q: float) -> float:
+        """Opening fraction f(q) = direction * (q - q_closed) / open_range."""
+        if self.open_range <= 0:
+            return 0.0
+        return float(self.direction * (q - self.q_closed) / self.open_range)
+
+    def position(self, fraction: float) -> float:
+        """Joint position at opening fraction ``fraction``, clipped to the limits."""
+        q = self.q_closed + self.direction * fraction * self.open_range
+        return float(np.clip(q, self.lower, self.upper))
+
+
+def subtree_links(asset: AssetDescription, link: str) -> list[str]:
+    """``link`` and every link below it in the kinematic tree."""
+    children: dict[str, list[str]] = {}
+    for j in asset.joints:
+        children.setdefault(j.parent, []).append(j.child)
+    out, stack = [], [link]
+    while stack:
+        ln = stack.pop()
+        out.append(ln)
+        stack.extend(children.get(ln, []))
+    return out
+
+
+def default_reference(session) -> dict[str, float]:
+    """Reference state: 0 clipped to each joint's limits."""
+    ref = {}
+    for name in session.joint_names:
+        lo, hi = session.joint_limits[name]
+        ref[name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) else 0.0
+    return ref
+
+
+def _has_collision(session, idx: int) -> bool:
+    cache = session.__dict__.setdefault("_has_collision_cache", {})
+    if idx not in cache:
+        cache[idx] = bool(session._p.getCollisionShapeData(session.body, idx, physicsClientId=session.cid))
+    return cache[idx]
+
+
+def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarray]:
+    """Convex-hull vertices (N, 3) of every link's collision geometry (visual
+    when it has none), in the link frame at scale 1 — the points whose
+    transformed extremes give exact bounding boxes at any state (Bullet's own
+    AABBs of rotated hulls are loose). ``cache``: an
+    :class:`asset2sim.tasks.geometry.analyze.MeshCache` shared with the analysis stage."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    from asset2sim.tasks.geometry.analyze import MeshCache, rpy_matrix
+
+    cache = cache if cache is not None else MeshCache()
+    out: dict[str, np.ndarray] = {}
+    for ln in asset.links:
+        refs = ln.collisions or ln.visuals
+        pts = []
+        for g in refs:
+            if g.kind == "mesh" and g.path is not None:
+                try:
+                    v = np.asarray(cache.get(g.path)[0], float)
+                except Exception:
+                    continue
+                v = v[np.all(np.isfinite(v), axis=1)] * np.asarray(g.scale, float)
+            elif g.kind == "box" and g.size is not None:
+                h = np.asarray(g.size, float) / 2
+                v = np.array([[sx, sy, sz] for sx in (-h[0], h[0]) for sy in (-h[1], h[1]) for sz in (-h[2], h[2])])
+            elif g.kind in ("cylinder", "sphere") and g.radius is not None:
+                r = g.radius
+                hz = (g.length or 2 * r) / 2
+                v = np.array([[sx, sy, sz] for sx in (-r, r) for sy in (-r, r) for sz in (-hz, hz)])
+            else:
+                continue
+            if len(v) == 0:
+                continue
+            R = rpy_matrix(g.origin.rpy)
+            v = v @ R.T + np.asarray(g.origin.xyz, float)
+            if len(v) > 8:
+                try:
+                    v = v[ConvexHull(v).vertices]
+                except (QhullError, ValueError):
+                    pass
+            pts.append(v)
+        if pts:
+            out[ln.name] = np.concatenate(pts)
+    return out
+
+
+def _link_pose(session, idx: int) -> tuple[np.ndarray, np.ndarray]:
+    p = session._p
+    if idx == -1:
+        pos, orn = p.getBasePositionAndOrientation(session.body, physicsClientId=session.cid)
+    else:
+        st = p.getLinkState(session.body, idx, computeForwardKinematics=True, physicsClientId=session.cid)
+        pos, orn = st[4], st[5]
+    return np.asarray(pos, float), np.asarray(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+
+
+def _aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for name in names:
+        v = points.get(name)
+        if v is None:
+            continue
+        pos, R = _link_pose(session, session.link_index(name))
+        w = v @ R.T + pos
+        lo = np.minimum(lo, w.min(axis=0))
+        hi = np.maximum(hi, w.max(axis=0))
+    if not np.all(np.isfinite(lo)):
+        return None
+    return lo, hi
+
+
+def _aabb_volume(session, names: list[str], points: dict[str, np.ndarray]) -> float:
+    box = _aabb(session, names, points)
+    if box is None:
+        return 1e-27
+    return float(np.prod(np.maximum(box[1] - box[0], 1e-9)))
+
+
+def _subtree_phi(session, subset: set[str]) -> float:
+    """Penetration (m) between the moving subtree and every other link,
+    parent included (the SPEC's self-collision filter excludes parent-child
+    pairs, but a lid pushed through its own body is not closed)."""
+    p = session._p
+    sub = [i for i, n in session.link_names.items() if n in subset and _has_collision(session, i)]
+    rest = [i for i, n in session.link_names.items() if n not in subset and _has_collision(session, i)]
+    total = 0.0
+    for a in sub:
+        for b in rest:
+            for pt in p.getClosestPoints(session.body, session.body, 0.0, a, b, physicsClientId=session.cid):
+                if pt[8] < 0:
+                    total += -pt[8]
+    return total
+
+
+def closed_positions(
+    session,
+    asset: AssetDescription,
+    *,
+    reference: dict[str, float] | None = None,
+    coarse: int = 41,
+    fine: int = 21,
+    tie_tol: float = 0.03,
+    passes: int = 2,
+    hull_points: dict[str, np.ndarray] | None = None,
+) -> dict[str, ClosedState]:
+    """Closed end of every movable joint of ``session`` (a PyBullet session of
+    ``asset`` opened with ``fixed_base=True``).
+
+    Args:
+        session: :class:`asset2sim.engines.pybullet_engine.PyBulletSession`.
+        asset: the description of the same URDF (for the kinematic tree).
+        reference: starting state of the other joints (default 0 clipped).
+        coarse, fine: samples over the range and in the refinement window.
+        tie_tol: relative compactness tolerance for ties (dimensionless).
+        passes: passes over all joints; later passes hold the others closed.
+        hull_points: :func:`link_hull_points` of the asset (computed when None).
+
+    Returns:
+        joint name -> :class:`ClosedState`. The session is left at the closed state.
+    """
+    state = dict(reference or default_reference(session))
+    result: dict[str, ClosedState] = {}
+    points = link_hull_points(asset) if hull_points is None else hull_points
+    names = list(session.joint_names)
+    for _ in range(max(1, passes)):
+        for name in names:
+            jd = asset.joint(name)
+            lo, hi = session.joint_limits[name]
+            continuous = not (np.isfinite(lo) and np.isfinite(hi))
+            if continuous:
+                # no stops, so no closed end: keep the modelled pose (0)
+                result[name] = ClosedState(
+                    joint=name, q_closed=0.0, direction=1.0, open_range=float(np.pi),
+                    lower=-np.inf, upper=np.inf, notes=["continuous joint: no closed end; the modelled pose 0 is used"],
+                )
+                state[name] = 0.0
+                continue
+            sub = subtree_links(asset, jd.child)
+            subset = set(sub)
+            union_links = [jd.parent] + sub
+            session.set_joint_positions(state)
+
+            def measure(q: float) -> tuple[float, float, float]:
+                session.set_joint_positions({name: q})
+                return (
+                    _aabb_volume(session, union_links, points),
+                    _aabb_volume(session, sub, points),
+                    _subtree_phi(session, subset),
+                )
+
+            def pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
+                # score: union box / its minimum x (own box / its minimum)^OWN_WEIGHT
+                score = (vals[:, 0] / vals[:, 0].min()) * (vals[:, 1] / vals[:, 1].min()) ** OWN_WEIGHT
+                phi = vals[:, 2]
+                ties = np.flatnonzero(score <= score.min() * (1.0 + tol))
+                size = float(vals[:, 0].min()) ** (1.0 / 3.0)
+                ties = ties[phi[ties] <= phi[ties].min() + PHI_TIE_FRACTION * size]
+                # rest against the parent: the tie farthest from the open end
+                return int(ties[np.argmax(np.abs(qv[ties] - q_open))])
+
+            qs = np.linspace(lo, hi, coarse)
+            vals = np.array([measure(q) for q in qs])
+            c = vals[:, 0]
+            cmin = c.min()
+            q_open = float(qs[int(np.argmax(c))])
+            best = pick(qs, vals, tie_tol, q_open)
+            a = qs[max(best - 1, 0)]
+            b = qs[min(best + 1, coarse - 1)]
+            qf = np.linspace(a, b, fine)
+            vf = np.array([measure(q) for q in qf])
+            q_closed = float(qf[pick(qf, vf, tie_tol, q_open)])
+            up, down = hi - q_closed, q_closed - lo
+            direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
+            notes = []
+            ratio = float(c.max() / max(cmin, 1e-12))
+            if ratio < 1.0 + tie_tol:
+                notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
+            result[name] = ClosedState(
+                joint=name,
+                q_closed=q_closed,
+                direction=direction,
+                open_range=max(rng, 0.0),
+                lower=float(session.joint_limits[name][0]),
+                upper=float(session.joint_limits[name][1]),
+                compactness_ratio=ratio,
+                notes=notes,
+            )
+            state[name] = q_closed
+    session.set_joint_positions(state)
+    return result
+
+
+def object_extents(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray] | None = None) -> np.ndarray:
+    """Extents (3,) of the axis-aligned box bounding every link at ``state``
+    (root frame of a fixed-base session; the asset's units)."""
+    points = link_hull_points(asset) if hull_points is None else hull_points
+    session.set_joint_positions(state)
+    box = _aabb(session, [ln.name for ln in asset.links], points)
+    if box is None:
+        return np.zeros(3)
+    return np.maximum(box[1] - box[0], 0.0)

@@ -1,0 +1,1 @@
+"""Stage package ``ingest`` of the refine data flow (see DEVELOPERS.md)."""

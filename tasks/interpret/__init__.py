@@ -1,0 +1,1 @@
+"""Stage package ``interpret`` of the refine data flow (see DEVELOPERS.md)."""

@@ -1,0 +1,509 @@
+"""Parse a natural-language request into a :class:`RequestSpec`.
+
+``parse_request("I want a very small two-drawer cabinet with the first drawer
+closed and the second slightly open, low damping")`` recognises:
+
+- **size words** -> ``size_class`` and ``size_factor`` (linear multiplier on
+  the category's typical size; factors and their sources in
+  ``asset2sim/priors/size_classes.yaml``: tiny 0.3, very_small 0.5, small
+  0.75, regular 1.0, large 1.3, very_large 1.7). When several size words occur,
+  the most extreme one wins ("very small, personal" -> very_small).
+  Words: tiny/miniature/pocket-sized -> tiny; very small/extra small/for a
+  baby/toddler/toy -> very_small; small/mini/compact/personal/carry-on/
+  cabinet-sized/for a child/child-sized -> small; regular/standard size/normal
+  size/full-size -> regular; large/big -> large; very large/huge/giant ->
+  very_large. Ambiguous words ("little", "standard", "normal") count only right
+  before a category word ("a little box", not "a little open").
+- **state words** -> a :data:`StateBand` per joint or group of joints:
+  closed/shut/turned off/not open -> closed; slightly open/ajar/a bit open/
+  cracked open -> slightly_open; a quarter open -> quarter; halfway/half open/
+  partly open/not closed -> halfway; mostly open/almost fully open/three
+  quarters/not fully open -> mostly; fully open/all the way/wide open/turned on
+  -> fully. A bare "open" ("with its lid open") -> mostly (clearly open, not
+  necessarily at the limit); "open the door" (a verb) is not a state.
+- **per-joint phrases**: the part word a state refers to (the nearest part noun
+  before it in the same sentence, or right after it: "slightly open rotational
+  lid"), with ordinals first..fifth / 1st..5th / "drawer 2" (0-based
+  ``ordinal``), top/upper (0: the first in the refine stage's top-to-bottom
+  order) and bottom/lowest/last (-1: the last one, Python-style), quantifiers
+  every/all/each/both (no ordinal), and elided nouns ("the first drawer closed
+  and the second slightly open" -> drawer 0 closed, drawer 1 slightly_open).
+  No part word -> ``selector="all"`` (every task-relevant joint).
+- **dynamics words**: low damping/smooth/moving freely -> damping low
+  (``free_moving`` for freely/low friction); high damping/well-damped/heavy ->
+  damping high ("heavy" also ``stiff``); explicit damping phrases win over
+  cues like "smooth"/"heavy"; holds its position/stays where it is ->
+  ``holds_position``; spring/springy/spring-loaded/returns/self-closing ->
+  ``spring`` ("no spring" -> False); stiff/hard to move -> ``stiff``.
+- **pose words**: lying flat -> lying_flat; resting sideways/on its side ->
+  sideways; upright -> upright.
+- **category**: the object the request is about (first category word that is not
+  "its <part>"), canonical name from ``categories.yaml`` (e.g. "purse" -> Bag,
+  "mini fridge" -> Refrigerator).
+
+``matched`` lists every recognised phrase in text order. Pure function; never
+raises on any string input.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from dataclasses import dataclass
+
+from asset2sim.schemas.request import JointStateRequest, RequestSpec
+from asset2sim.tasks.interpret import priors as _priors
+
+_L = r"(?<![\w-])"
+_R = r"(?![\w-])"
+
+
+@dataclass(frozen=True)
+class _Hit:
+    start: int
+    end: int
+    text: str
+    value: object
+    flag: str = ""
+
+
+def _compile(table: list[tuple[str, object, str]]) -> list[tuple[re.Pattern[str], object, str]]:
+    return [(re.compile(_L + "(?:" + pat + ")" + _R), val, flag) for pat, val, flag in table]
+
+
+def _scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[_Hit]:
+    """Non-overlapping matches of a pattern table: leftmost first, then longest."""
+    hits = [
+        _Hit(m.start(), m.end(), m.group(0), val, flag)
+        for pat, val, flag in table
+        for m in pat.finditer(text)
+    ]
+    hits.sort(key=lambda h: (h.start, -(h.end - h.start)))
+    out: list[_Hit] = []
+    last = -1
+    for h in hits:
+        if h.start >= last:
+            out.append(h)
+            last = h.end
+    return out
+
+
+_OPEN = r"open(?:ed)?"
+_SZ = r"[- ]?siz(?:ed?|es)"
+
+# (regex, size class, flag) - flag "weak": only counts right before a category word.
+_SIZE_TABLE = _compile(
+    [
+        (r"tiny|teeny(?:[- ]tiny)?|miniature|minuscule|itsy[- ]bitsy", "tiny", ""),
+        (r"pocket" + _SZ, "tiny", ""),
+        (r"(?:a )?(?:quarter|third) (?:the|its|of the) (?:usual |normal |regular )?size", "tiny", ""),
+        (r"half (?:the|its|of the) (?:usual |normal |regular )?size", "very_small", ""),
+        (r"(?:twice|double|two times) (?:the|its) (?:usual |normal |regular )?size", "very_large", ""),
+        (r"(?:very|really|super|extremely|extra|quite)[- ]small", "very_small", ""),
+        (r"(?:very|really|super)[- ]little", "very_small", "weak"),
+        (r"for (?:a |the |my )?(?:bab(?:y|ies)|toddlers?|infants?|newborns?)", "very_small", ""),
+        (r"for an (?:infant|newborn)", "very_small", ""),
+        (r"bab(?:y|ies)|toddlers?|infants?|toy|doll" + r"(?:[- ]?house)?", "very_small", ""),
+        (r"small(?:er|ish)?|mini|minifridge|compact|petite|personal|carry[- ]?on", "small", ""),
+        (r"(?:cabinet|cupboard|desk|travel|child|kid|apartment)" + _SZ, "small", ""),
+        (r"for (?:a |the |my )?(?:child(?:ren)?|kids?)", "small", ""),
+        (r"little", "small", "weak"),
+        (r"regular(?:" + _SZ + r")?", "regular", ""),
+        (r"(?:standard|normal|average|medium|typical|full|mid)" + _SZ, "regular", ""),
+        (r"standard|normal|average|medium|typical|ordinary", "regular", "weak"),
+        (r"(?:very|really|super|extremely|extra)[- ](?:large|big)|huge|giant|enormous|massive|oversized?|xx?l", "very_large", ""),
+        (r"(?:large|big)(?:ger|r)?|jumbo|family" + _SZ + r"|king" + _SZ, "large", ""),
+        (r"(?:large|big)" + _SZ, "large", ""),
+    ]
+)
+
+# (regex, band, flag) - flag "bare" for a lone "open".
+_STATE_TABLE = _compile(
+    [
+        # negations first (longest match wins at a position)
+        (r"not (?:at all |even slightly |yet )?" + _OPEN, "closed", ""),
+        (r"(?:is|are|was)n'?t " + _OPEN, "closed", ""),
+        (r"not (?:quite|fully|completely|entirely) (?:closed|shut)", "slightly_open", ""),
+        (r"not (?:closed|shut)", "halfway", ""),
+        (r"not (?:fully|completely|all the way|entirely) " + _OPEN, "mostly", ""),
+        # closed
+        (r"(?:fully |completely |all the way )?(?:closed|shut)(?: all the way| completely| tight)?", "closed", ""),
+        (r"(?:turned|switched|shut) off|in the off position", "closed", ""),
+        # fully
+        (r"(?:fully|completely|totally|maximally|wide) " + _OPEN, "fully", ""),
+        (r"(?:" + _OPEN + r" )?all the way(?: " + _OPEN + r")?", "fully", ""),
+        (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
+        (r"(?:turned|switched) (?:fully )?on|in the on position|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
+        # mostly
+        (r"(?:mostly|largely|almost fully|nearly fully|almost completely|nearly completely|almost all the way|nearly all the way) " + _OPEN, "mostly", ""),
+        (r"(?:almost|nearly) (?:fully|all the way)(?: " + _OPEN + r")?", "mostly", ""),
+        (r"three[- ]quarters?(?: of the way)?(?:[- ]" + _OPEN + r")?", "mostly", ""),
+        (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
+        # halfway
+        (r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
+        (r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?", "halfway", ""),
+        (_OPEN + r" (?:half[- ]?way|half)", "halfway", ""),
+        (r"(?:partially|partly) " + _OPEN, "halfway", ""),
+        # quarter
+        (r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
+        (_OPEN + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (r"(?:a |one )?quarter of the way", "quarter", ""),
+        # slightly open
+        (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
+        (_OPEN + r" (?:slightly|a (?:little |tiny )?bit|a little|a crack|a tad|just a (?:little|bit))", "slightly_open", ""),
+        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?", "slightly_open", ""),
+        (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
+        # a lone "open"
+        (_OPEN, "mostly", "bare"),
+    ]
+)
+
+_VERB_AFTER = re.compile(r"\s+(?:the|a|an|its|their|it|them|up|and close|or close)\b")
+_VERB_BEFORE = re.compile(
+    r"(?:\bto|\bcan|\bcould|\bwill|\bwould|\bshould|\bmust|\bplease|\blet me|\band|\bor|\bto be able to)\s+$"
+)
+
+_PART_WORDS = (
+    r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
+    r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
+    r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?"
+)
+_PART_RX = re.compile(_L + r"(?:" + _PART_WORDS + r")" + _R)
+_NUM_AFTER = re.compile(
+    r"\s*(?:#|no\.?\s*|numbers?\s*)?(\d{1,2}(?:\s*(?:,\s*(?:and\s+)?|and\s+|or\s+|&\s*)\d{1,2})*)\b"
+)
+
+_ORDINALS = _compile(
+    [
+        (r"first|1st", 0, ""),
+        (r"second|2nd", 1, ""),
+        (r"third|3rd", 2, ""),
+        (r"fourth|4th", 3, ""),
+        (r"fifth|5th", 4, ""),
+        (r"top(?:most)?|upper(?:most)?|highest", 0, ""),
+        (r"bottom(?:most)?|lowest|lower|last", -1, ""),
+        (r"every|all|each|both", None, "quant"),
+    ]
+)
+
+# (regex, (kind, value), flag) - flag "strong" for explicit damping phrases.
+_DYN_TABLE = _compile(
+    [
+        (r"(?:low|little|light|minimal|minimum|reduced|small|less)[- ]damping|(?:lightly|under)[- ]?damped|(?:no|without) damping|damping[- ]free", ("damping", "low"), "strong"),
+        (r"(?:high|heavy|strong|lots of|more|significant|increased)[- ]damping|(?:well|heavily|highly|strongly|critically|over)[- ]?damped", ("damping", "high"), "strong"),
+        (r"(?:moderate|medium|normal)[- ]damping|moderately damped", ("damping", "moderate"), "strong"),
+        (r"(?:low|little|minimal|no|reduced)[- ](?:joint |hinge |sliding )?friction|frictionless", ("free", "low"), ""),
+        (r"(?:moves?|moving|swings?|swinging|spins?|spinning|rotates?|rotating|slides?|sliding|turns?|turning|hangs?|hanging) (?:freely|loosely)", ("free", "low"), ""),
+        (r"free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?", ("free", "low"), ""),
+        (r"smooth(?:ly)?|easily|effortless(?:ly)?", ("damping", "low"), ""),
+        (r"heavy|heavier", ("heavy", "high"), ""),
+        (r"slow(?:ly)?|soft[- ]clos(?:e|ing)|sluggish", ("damping", "high"), ""),
+        (r"holds? (?:its|their|the|it'?s) (?:position|state|pose|place|angle|opening)", ("hold", True), ""),
+        (r"holds? (?:position|in place|open|still|steady)", ("hold", True), ""),
+        (r"stays? (?:where (?:it|they) (?:is|are|was|were|is put|are put)|put|in place|open|there|still)", ("hold", True), ""),
+        (r"(?:keeps?|maintains?) (?:its|their) (?:position|state|place|angle|pose)", ("hold", True), ""),
+        (r"remains? (?:where (?:it|they) (?:is|are)|in place|open|still)", ("hold", True), ""),
+        (r"(?:does not|doesn't|won't|will not|should not|shouldn't|must not|never) (?:fall|sag|drop|slam|droop|drift|move|swing) (?:shut |closed |open )?(?:by itself|on its own|under (?:its own )?weight|under gravity)", ("hold", True), ""),
+        (r"spring[- ]loaded|spring[- ]return(?:ed)?|springs? back|springy|springs?|self[- ]closing|self[- ]returning|returns?(?: to)?|snaps? back|pops? back|bounces? back", ("spring", True), ""),
+        (r"stiff(?:ly|er)?|hard to (?:move|turn|open|push|rotate|pull)|(?:high|lots of|some|more) (?:joint |hinge )?friction|with resistance", ("stiff", True), ""),
+    ]
+)
+
+_POSE_TABLE = _compile(
+    [
+        (r"(?:lying|laid|lies|lay|placed|resting|rests|set|put) flat|lying down|flat on (?:its|the) (?:back|floor|ground|table|base)|lying on its back", "lying_flat", ""),
+        (r"(?:resting|lying|lies|rests|placed|laid|sitting|sits|standing|set|tipped|turned|put|lay) (?:on (?:its|their|one|a) side|sideways)|on (?:its|their) side", "sideways", ""),
+        (r"(?:standing |placed |set )?upright|standing up|right side up", "upright", ""),
+    ]
+)
+
+_NEG_BEFORE = re.compile(r"(?:\bnot|\bno|\bwithout|\bnever|n't|\bnon)(?:\s+\w+)?\s*[- ]?$")
+
+
+def _negated(text: str, start: int) -> bool:
+    """A negation word within one word before ``start``."""
+    return bool(_NEG_BEFORE.search(text[max(0, start - 24): start]))
+
+
+def _sentences(text: str) -> list[tuple[int, int]]:
+    spans = []
+    start = 0
+    for m in re.finditer(r"(?<!\d)[.!?;](?!\d)|\n", text):
+        if m.start() > start:
+            spans.append((start, m.start()))
+        start = m.end()
+    if start < len(text):
+        spans.append((start, len(text)))
+    return spans
+
+
+def _words_between(text: str, a: int, b: int) -> list[str]:
+    return re.findall(r"[\w'-]+|[,;:]", text[a:b])
+
+
+@functools.lru_cache(maxsize=1)
+def _size_factors() -> dict[str, float]:
+    return {k: v.factor for k, v in _priors.load_priors().size_classes.items()}
+
+
+def _parse_size(low: str, mentions: list[_priors.CategoryMention]) -> tuple[str | None, float, str, list[_Hit]]:
+    used: list[_Hit] = []
+    for h in _scan(low, _SIZE_TABLE):
+        if _negated(low, h.start):
+            continue
+        if h.flag == "weak":
+            nxt = [m for m in mentions if m.start >= h.end]
+            if not nxt or len(_words_between(low, h.end, nxt[0].start)) > 2:
+                continue
+        used.append(h)
+    if not used:
+        return None, 1.0, "", []
+    facs = _size_factors()
+    first_dir = math.copysign(1.0, math.log(facs[str(used[0].value)])) if facs[str(used[0].value)] != 1.0 else 0.0
+    same = [h for h in used if first_dir == 0.0 or math.log(facs[str(h.value)]) * first_dir >= 0.0]
+    best = max(same, key=lambda h: abs(math.log(facs[str(h.value)])))
+    cls = str(best.value)
+    counted = [h for h in same if h.value != "regular" or cls == "regular"]
+    return cls, facs[cls], ", ".join(h.text for h in counted), counted
+
+
+def _state_hits(low: str) -> list[_Hit]:
+    hits = _scan(low, _STATE_TABLE)
+    out: list[_Hit] = []
+    for h in hits:
+        if h.flag == "bare":
+            if _VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]):
+                continue
+        out.append(h)
+    return out
+
+
+@dataclass
+class _Part:
+    start: int
+    end: int
+    label: str
+    ordinals: list[int]
+    quant: bool
+    phrase_start: int
+
+
+_ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
+
+
+def _parts(low: str) -> list[_Part]:
+    """Part nouns with their ordinals ("the first and second drawers", "top
+    drawer", "drawer 2") or quantifier ("every drawer")."""
+    ords = _scan(low, _ORDINALS)
+    out: list[_Part] = []
+    for m in _PART_RX.finditer(low):
+        label = _priors.canonical_label(m.group(0)) or m.group(0)
+        ordinals: list[int] = []
+        quant = False
+        pstart = m.start()
+        before = [o for o in ords if o.end <= m.start()]
+        if before:
+            o = before[-1]
+            gap = low[o.end: m.start()]
+            if len(_words_between(low, o.end, m.start())) <= 2 and not re.search(r"[,;:]", gap):
+                if o.flag == "quant":
+                    quant = True
+                else:
+                    ordinals.append(int(o.value))  # type: ignore[arg-type]
+                pstart = o.start
+                # enumerations: "the first, second and third drawers"
+                k = len(before) - 2
+                while not quant and k >= 0:
+                    prev = before[k]
+                    if prev.flag == "quant" or not _ORD_JOIN.match(low[prev.end: before[k + 1].start]):
+                        break
+                    ordinals.insert(0, int(prev.value))  # type: ignore[arg-type]
+                    pstart = prev.start
+                    k -= 1
+        num = _NUM_AFTER.match(low, m.end())
+        if not ordinals and num is not None and not quant:
+            ordinals = [int(n) - 1 for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
+        out.append(_Part(m.start(), m.end(), label, ordinals, quant, pstart))
+    return out
+
+
+_FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to", ","}
+
+
+def _forward_part(low: str, end: int, limit: int, parts: list[_Part]) -> _Part | None:
+    """A part noun right after a state ("slightly open rotational lid"): at most one
+    modifier word between, no clause break."""
+    toks = list(re.finditer(r"[\w'-]+|[,;:]", low[end:limit]))
+    for i, t in enumerate(toks[:2]):
+        word = t.group(0)
+        s = end + t.start()
+        for p in parts:
+            if p.start == s:
+                return p
+        if word in _FWD_STOP or word in {",", ";", ":"}:
+            return None
+    return None
+
+
+def _joint_states(low: str) -> tuple[list[JointStateRequest], list[_Hit]]:
+    bands = _state_hits(low)
+    parts = _parts(low)
+    ords = [o for o in _scan(low, _ORDINALS) if o.flag != "quant"]
+    result: list[JointStateRequest] = []
+    last_label: str | None = None
+    for s0, s1 in _sentences(low):
+        sb = [b for b in bands if s0 <= b.start < s1]
+        for i, b in enumerate(sb):
+            seg0 = sb[i - 1].end if i > 0 else s0
+            seg1 = sb[i + 1].start if i + 1 < len(sb) else s1
+            fwd = _forward_part(low, b.end, seg1, parts)
+            back = [p for p in parts if seg0 <= p.start and p.end <= b.start]
+            subjects: list[_Part] = []
+            if fwd is not None:
+                subjects = [fwd]
+            elif back:
+                subjects = [back[-1]]
+                # "the lid and the door closed"
+                if len(back) >= 2 and re.fullmatch(
+                    r"\s*(?:,|and|or|&)\s*(?:(?:the|a|an|its|their)\s+)?", low[back[-2].end: back[-1].phrase_start]
+                ):
+                    subjects.insert(0, back[-2])
+            if subjects:
+                for p in subjects:
+                    start = min(p.phrase_start, b.start)
+                    end = max(p.end, b.end)
+                    for ordinal in (p.ordinals if p.ordinals and not p.quant else [None]):
+                        result.append(
+                            JointStateRequest(
+                                selector="label",
+                                label=p.label,
+                                ordinal=ordinal,
+                                band=b.value,  # type: ignore[arg-type]
+                                phrase=" ".join(low[start:end].split()),
+                            )
+                        )
+                    last_label = p.label
+                continue
+            seg_ords = [o for o in ords if seg0 <= o.start and o.end <= b.start]
+            if seg_ords:
+                o = seg_ords[-1]
+                start = o.start
+                phrase = " ".join(low[start: b.end].split())
+                if last_label is not None:
+                    result.append(
+                        JointStateRequest(
+                            selector="label", label=last_label, ordinal=int(o.value),  # type: ignore[arg-type]
+                            band=b.value, phrase=phrase,  # type: ignore[arg-type]
+                        )
+                    )
+                else:
+                    result.append(
+                        JointStateRequest(
+                            selector="all", ordinal=int(o.value), band=b.value, phrase=phrase  # type: ignore[arg-type]
+                        )
+                    )
+                continue
+            result.append(JointStateRequest(selector="all", band=b.value, phrase=b.text))  # type: ignore[arg-type]
+    # one request per target: a later phrase overrides an earlier one
+    dedup: dict[tuple[str, str | None, int | None], JointStateRequest] = {}
+    for js in result:
+        dedup.pop((js.selector, js.label, js.ordinal), None)
+        dedup[(js.selector, js.label, js.ordinal)] = js
+    return list(dedup.values()), bands
+
+
+def parse_request(text: str) -> RequestSpec:
+    """Parse a request into a :class:`~asset2sim.schemas.request.RequestSpec`.
+
+    ``text`` any string (may be empty). Size factors: dimensionless multipliers
+    on the category's typical dimensions (``size_classes.yaml``, with sources).
+    See the module docstring for the vocabulary. Never raises for string input;
+    raises ``TypeError`` if ``text`` is not a string.
+    """
+    if not isinstance(text, str):
+        raise TypeError(f"request must be a string, got {type(text).__name__}")
+    low = (
+        text.lower()
+        .replace("\u2019", "'")
+        .replace("\u2018", "'")
+        .replace("\u2013", "-")
+        .replace("\u2014", " ")
+    )
+    matched: list[tuple[int, str]] = []
+
+    mentions = _priors.find_category_mentions(low)
+    hint, head = _priors.request_category(low)
+    if head is not None:
+        matched.append((head.start, head.phrase))
+
+    size_class, factor, size_phrase, size_hits = _parse_size(low, mentions)
+    matched += [(h.start, h.text) for h in size_hits]
+
+    joint_states, band_hits = _joint_states(low)
+    matched += [(h.start, h.text) for h in band_hits]
+
+    damping = "moderate"
+    strong_set = False
+    holds = False
+    spring = False
+    stiff = False
+    free = False
+    for h in _scan(low, _DYN_TABLE):
+        kind, val = h.value  # type: ignore[misc]
+        neg = _negated(low, h.start)
+        if kind == "spring":
+            spring = not neg
+            matched.append((h.start, ("no " if neg else "") + h.text))
+            continue
+        if neg:
+            matched.append((h.start, "not " + h.text))
+            continue
+        matched.append((h.start, h.text))
+        if kind == "hold":
+            holds = True
+        elif kind == "stiff":
+            stiff = True
+        elif kind == "free":
+            free = True
+            if not strong_set:
+                damping = "low"
+        elif kind == "heavy":
+            stiff = True
+            if not strong_set:
+                damping = "high"
+        elif kind == "damping":
+            if h.flag == "strong":
+                damping = str(val)
+                strong_set = True
+            elif not strong_set:
+                damping = str(val)
+
+    pose = None
+    for h in _scan(low, _POSE_TABLE):
+        if not _negated(low, h.start):
+            pose = h.value
+            matched.append((h.start, h.text))
+
+    seen: set[tuple[int, str]] = set()
+    ordered = []
+    for pos, ph in sorted(matched, key=lambda t: t[0]):
+        if (pos, ph) not in seen:
+            seen.add((pos, ph))
+            ordered.append(" ".join(ph.split()))
+
+    return RequestSpec(
+        text=text,
+        category_hint=hint,
+        size_class=size_class,  # type: ignore[arg-type]
+        size_factor=factor,
+        size_phrase=size_phrase,
+        joint_states=joint_states,
+        damping=damping,  # type: ignore[arg-type]
+        holds_position=holds,
+        spring=spring,
+        stiff=stiff,
+        free_moving=free,
+        pose_hint=pose,  # type: ignore[arg-type]
+        matched=ordered,
+    )

@@ -1,0 +1,1 @@
+"""Stage package ``publish`` of the refine data flow (see DEVELOPERS.md)."""

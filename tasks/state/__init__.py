@@ -1,0 +1,1 @@
+"""Stage package ``state`` of the refine data flow (see DEVELOPERS.md)."""

@@ -1,0 +1,190 @@
+"""Resting pose requested by words ("lying flat", "resting sideways").
+
+The URDF has no field for a resting orientation, so it is baked into the
+asset: the joints that hang from the root link (and the root's own geometry)
+are rotated by a fixed rotation R, which turns the whole object. R puts the
+object's smallest closed-state extent along z (the largest face down); of the
+two 90-degree rotations that do so, the one that brings the task-relevant
+moving parts up (their bounding-box center above the body's) is taken, so a
+suitcase lying flat has its lid on top.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from asset2sim.schemas.asset import AssetDescription
+
+
+def _rot(axis: int, angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    if axis == 0:
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == 1:
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def resting_rotation(
+    session,
+    asset: AssetDescription,
+    state: dict[str, float],
+    hull_points: dict[str, np.ndarray],
+    moving_links: list[str],
+) -> tuple[np.ndarray, str]:
+    """Rotation (3, 3) of the root that lays the object on its largest face,
+    moving parts up, and a note. Identity when the smallest extent is already
+    vertical (and the moving parts are up).
+
+    Args:
+        session: fixed-base PyBullet session of the input asset.
+        state: joint positions of the closed state (input units).
+        hull_points: :func:`asset2sim.tasks.geometry.closed_state.link_hull_points`.
+        moving_links: links moved by the task-relevant joints.
+    """
+    from asset2sim.tasks.geometry.closed_state import _aabb
+
+    names = [ln.name for ln in asset.links]
+    session.set_joint_positions(state)
+    box = _aabb(session, names, hull_points)
+    if box is None:
+        return np.eye(3), "no geometry: pose unchanged"
+    lo, hi = box
+    ext = hi - lo
+    center = 0.5 * (lo + hi)
+    up_hint = np.zeros(3)
+    mov = _aabb(session, moving_links, hull_points) if moving_links else None
+    if mov is not None:
+        up_hint = 0.5 * (mov[0] + mov[1]) - center
+    k = int(np.argmin(ext))
+    if k == 2:
+        if up_hint[2] >= 0:
+            return np.eye(3), "smallest extent already vertical: pose unchanged"
+        R = _rot(0, np.pi)
+        return R, "turned upside down so the moving parts face up"
+    # rotate about the horizontal axis perpendicular to axis k so that axis k maps to +z or -z
+    other = 1 - k  # the remaining horizontal axis (k in {0, 1})
+    best = None
+    for angle in (np.pi / 2, -np.pi / 2):
+        R = _rot(other, angle)
+        z = R @ up_hint
+        score = z[2]
+        if best is None or score > best[0]:
+            best = (score, R, angle)
+    _, R, angle = best
+    axis_name = "xyz"[other]
+    return R, f"laid on its largest face: rotated {np.degrees(angle):+.0f} deg about the root {axis_name} axis (smallest extent {ext[k]:.3g} along {'xyz'[k]} -> z, moving parts up)"
+
+
+#: The six axis-aligned resting orientations tried by :func:`most_stable_rotation`.
+CANDIDATES: tuple[tuple[str, int, float], ...] = (
+    ("as modelled", 0, 0.0),
+    ("rolled +90 deg about x", 0, np.pi / 2),
+    ("rolled -90 deg about x", 0, -np.pi / 2),
+    ("pitched +90 deg about y", 1, np.pi / 2),
+    ("pitched -90 deg about y", 1, -np.pi / 2),
+    ("upside down", 0, np.pi),
+)
+
+#: Static margin, as a fraction of the object's largest extent, beyond which an
+#: orientation clearly tips (margin < -this) or clearly stands (> +this).
+MIN_MARGIN_FRACTION = 0.02
+
+#: Points within this fraction of the largest extent above the lowest point
+#: form the support polygon (real bases are slightly uneven: feet, pads).
+SUPPORT_BAND_FRACTION = 0.02
+
+
+def static_margin(
+    session,
+    asset: AssetDescription,
+    links: dict,
+    state: dict[str, float],
+    scale: float,
+    hull_points: dict[str, np.ndarray],
+    rotation: np.ndarray,
+) -> tuple[float, float]:
+    """Static stability of the object resting on a plane.
+
+    Returns (margin m, largest extent m): the signed distance from the ground
+    projection of the total center of mass to the boundary of the support
+    polygon (convex hull of the points within 0.5 % of the size above the
+    lowest point, ``SUPPORT_BAND_FRACTION``), positive inside. ``links``: name -> LinkPhysics (scaled);
+    ``state`` in input units; ``rotation`` (3, 3) of the root.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    from asset2sim.tasks.geometry.closed_state import _link_pose
+
+    session.set_joint_positions(state)
+    R = np.asarray(rotation, float)
+    pts = []
+    m_tot = 0.0
+    mc = np.zeros(3)
+    for ln in asset.links:
+        pos, Rl = _link_pose(session, session.link_index(ln.name))
+        v = hull_points.get(ln.name)
+        if v is not None:
+            pts.append(((v @ Rl.T + pos) * scale) @ R.T)
+        lp = links.get(ln.name)
+        if lp is not None:
+            c = pos * scale + Rl @ np.asarray(lp.com, float)
+            mc += lp.mass * (R @ c)
+            m_tot += lp.mass
+    if not pts or m_tot <= 0:
+        return 0.0, 0.0
+    P = np.concatenate(pts)
+    size = float(np.max(P.max(axis=0) - P.min(axis=0)))
+    zmin = P[:, 2].min()
+    base = P[P[:, 2] <= zmin + SUPPORT_BAND_FRACTION * size][:, :2]
+    com = mc / m_tot
+    try:
+        hull = ConvexHull(base)
+    except (QhullError, ValueError):
+        return -size, size  # a point or a line of support: not statically stable
+    margin = float(np.min(-(hull.equations[:, :2] @ com[:2] + hull.equations[:, 2])))
+    return margin, size
+
+
+def most_stable_rotation(
+    session,
+    asset: AssetDescription,
+    links: dict,
+    state: dict[str, float],
+    scale: float,
+    hull_points: dict[str, np.ndarray],
+    moving_links: list[str],
+    *,
+    exclude_modelled: bool = False,
+) -> tuple[np.ndarray | None, str]:
+    """The axis-aligned resting orientation that clearly stands at ``state``
+    (margin >
+    ``MIN_MARGIN_FRACTION`` x size), preferring those that keep the moving
+    parts up, then the largest margin. With ``exclude_modelled`` the modelled
+    orientation is not a candidate (the simulator already saw it fail).
+    Returns (rotation, note) or (None, reason) when no candidate qualifies or
+    the best is the modelled orientation."""
+    from asset2sim.tasks.geometry.closed_state import _aabb
+
+    mov = _aabb(session, moving_links, hull_points) if moving_links else None
+    allbox = _aabb(session, [ln.name for ln in asset.links], hull_points)
+    up = np.zeros(3)
+    if mov is not None and allbox is not None:
+        up = 0.5 * (mov[0] + mov[1]) - 0.5 * (allbox[0] + allbox[1])
+    margin0, size = static_margin(session, asset, links, state, scale, hull_points, np.eye(3))
+    if size <= 0:
+        return None, "no geometry"
+    best = None
+    for label, axis, angle in CANDIDATES:
+        if exclude_modelled and label == "as modelled":
+            continue
+        R = _rot(axis, angle)
+        margin, _ = static_margin(session, asset, links, state, scale, hull_points, R)
+        # clearly standing first, then moving parts up, then the widest margin
+        key = (margin >= MIN_MARGIN_FRACTION * size, float((R @ up)[2]) > 1e-9, round(margin / size, 3))
+        if best is None or key > best[0]:
+            best = (key, R, label, margin)
+    _, R, label, margin = best
+    if label == "as modelled" or margin < MIN_MARGIN_FRACTION * size:
+        return None, f"no clearly stabler resting face (modelled margin {margin0 * 1000:.1f} mm, best {label} {margin * 1000:.1f} mm)"
+    return R, f"rests {label} (static margin {margin * 1000:.1f} mm; {margin0 * 1000:.1f} mm as modelled)"

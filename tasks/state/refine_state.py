@@ -1,0 +1,259 @@
+"""State refinement in the simulator (SPEC stage 3).
+
+Solves, within each joint's allowed interval,
+
+    min_q  Phi(q) + lambda * sum_j ((q_j - q_req_j) / R_j)^2
+
+where Phi(q) (m) is the self-penetration score of the SPEC measured in
+PyBullet (sum over self-contact points of max(0, -separation); queried per link pair
+with ``getClosestPoints`` so that no value depends on contact points Bullet
+cached at earlier states of the session), q_req the
+requested state projected onto the intervals, R_j the joint's opening range
+(so deviations are measured as fractions of the range) and lambda (m) the
+trade-off (``RefineConfig.state_lambda``). The allowed interval of a joint is
+its requested band (``schemas.request.BAND_INTERVAL``, as opening fractions
+from the geometric closed end) intersected with its limits, so the search
+never drifts to a state that contradicts the request.
+
+Search, in the order the SPEC describes: start from q_req; while Phi >
+tolerance: group penetrations by link pair, map the worst pairs to the joints
+on the kinematic path between the two links (focus joints), line-search each
+focus joint over its interval and accept only decreases of the objective;
+then random perturbations of the focus joints; then a coordinate pattern
+search with shrinking steps around the best state. The lowest-objective state
+found is returned. A contact query after setting joint states costs tens of
+microseconds here, so thousands of candidates are affordable
+(``RefineConfig.max_state_evaluations``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.report import StateRefinement
+from asset2sim.tasks.geometry.closed_state import ClosedState
+
+
+@dataclass
+class Interval:
+    """Allowed positions of one joint (output units)."""
+
+    lo: float
+    hi: float
+
+    @property
+    def width(self) -> float:
+        return self.hi - self.lo
+
+    def clip(self, q: float) -> float:
+        return float(min(max(q, self.lo), self.hi))
+
+
+def allowed_intervals(
+    closed: dict[str, ClosedState], fractions: dict[str, tuple[float, float]]
+) -> dict[str, Interval]:
+    """Positions allowed per joint: the band's opening fractions mapped through
+    the closed state and clipped to the limits (``closed`` in output units)."""
+    out = {}
+    for name, cs in closed.items():
+        f0, f1 = fractions.get(name, (0.0, 0.03))
+        a, b = cs.position(f0), cs.position(f1)
+        out[name] = Interval(min(a, b), max(a, b))
+    return out
+
+
+def path_joints(asset: AssetDescription, link_a: str, link_b: str) -> list[str]:
+    """Movable joints on the kinematic path between two links."""
+    parent_joint = {j.child: j for j in asset.joints}
+
+    def chain(link: str) -> list[str]:
+        out = [link]
+        while link in parent_joint:
+            link = parent_joint[link].parent
+            out.append(link)
+        return out
+
+    ca, cb = chain(link_a), chain(link_b)
+    common = next((ln for ln in ca if ln in set(cb)), None)
+    joints = []
+    for c in (ca, cb):
+        for ln in c:
+            if ln == common:
+                break
+            j = parent_joint.get(ln)
+            if j is not None and j.is_movable:
+                joints.append(j.name)
+    return joints
+
+
+def refine_initial_state(
+    session,
+    asset: AssetDescription,
+    closed: dict[str, ClosedState],
+    requested: dict[str, float],
+    fractions: dict[str, tuple[float, float]],
+    *,
+    tolerance: float = 1e-4,
+    lam: float = 0.05,
+    max_evaluations: int = 4000,
+    seed: int = 0,
+    proposer=None,
+) -> StateRefinement:
+    """Lowest-objective state near ``requested`` (see module docstring).
+
+    Args:
+        session: fixed-base PyBullet session of the *output* (scaled) URDF.
+        asset: the input description (kinematic tree, link names).
+        closed: closed states in output units (prismatic in metres).
+        requested: joint -> requested position (output units).
+        fractions: joint -> allowed opening-fraction interval (band).
+        tolerance: Phi (m) at which the search stops.
+        lam: lambda (m per squared fraction of range).
+        max_evaluations: budget of contact queries.
+        seed: random seed of the perturbation phase.
+        proposer: optional ``proposer(state, worst_pairs, intervals) ->
+            (list of {joint: value}, queries)`` asked once when the local search
+            stalls above ``tolerance`` (a model backend); each proposal is
+            clipped to the intervals and accepted only if it lowers the
+            objective.
+
+    Returns:
+        :class:`~asset2sim.schemas.report.StateRefinement` (Phi in m).
+    """
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    names = [n for n in session.joint_names if n in closed]
+    box = allowed_intervals({n: closed[n] for n in names}, fractions)
+    q_req = {n: box[n].clip(requested.get(n, closed[n].q_closed)) for n in names}
+    scale = {n: max(closed[n].open_range, 1e-9) for n in names}
+    evals = 0
+
+    penetration = getattr(session, "self_penetration_fresh", session.self_penetration)
+
+    def objective(q: dict[str, float]) -> tuple[float, float]:
+        nonlocal evals
+        evals += 1
+        session.set_joint_positions(q)
+        phi, _ = penetration()
+        reg = sum(((q[n] - q_req[n]) / scale[n]) ** 2 for n in names)
+        return phi + lam * reg, phi
+
+    best_q = dict(q_req)
+    best_f, best_phi = objective(best_q)
+    phi_req = best_phi
+    method = ["requested state"]
+    session.set_joint_positions(best_q)
+    _, pairs0 = penetration()
+    worst = [
+        {"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
+        for c in pairs0[:5]
+    ]
+
+    def focus_joints() -> list[str]:
+        session.set_joint_positions(best_q)
+        _, pairs = penetration()
+        out: list[str] = []
+        for c in pairs[:3]:
+            for j in path_joints(asset, c.link_a, c.link_b):
+                if j in box and box[j].width > 0 and j not in out:
+                    out.append(j)
+        return out
+
+    def budget() -> bool:
+        return evals < max_evaluations and best_phi > tolerance
+
+    # 1. focus joints: line searches, accept only improvements
+    for _round in range(6):
+        if not budget():
+            break
+        focus = focus_joints()
+        if not focus:
+            break
+        improved = False
+        for j in focus:
+            if not budget():
+                break
+            for q in np.linspace(box[j].lo, box[j].hi, 25):
+                cand = {**best_q, j: float(q)}
+                f, phi = objective(cand)
+                if f < best_f - 1e-12:
+                    best_q, best_f, best_phi, improved = cand, f, phi, True
+        if improved:
+            method.append("focus-joint line search")
+        else:
+            break
+    # 2. perturbations of the focus joints (all movable joints when none)
+    if budget():
+        focus = focus_joints() or [n for n in names if box[n].width > 0]
+        n_pert = min(400, max_evaluations - evals)
+        improved = False
+        for _ in range(n_pert):
+            if not budget():
+                break
+            cand = dict(best_q)
+            for j in focus:
+                sigma = 0.25 * box[j].width
+                cand[j] = box[j].clip(best_q[j] + rng.normal(0.0, sigma))
+            f, phi = objective(cand)
+            if f < best_f - 1e-12:
+                best_q, best_f, best_phi, improved = cand, f, phi, True
+        if improved:
+            method.append("random perturbations")
+    # 3. local pattern search around the best state
+    if budget():
+        movable = [n for n in names if box[n].width > 0]
+        steps = {n: 0.25 * box[n].width for n in movable}
+        improved_any = False
+        while budget() and movable and max(steps.values()) > 1e-4 * max(box[n].width for n in movable):
+            improved = False
+            for j in movable:
+                for sgn in (1.0, -1.0):
+                    if not budget():
+                        break
+                    cand = {**best_q, j: box[j].clip(best_q[j] + sgn * steps[j])}
+                    f, phi = objective(cand)
+                    if f < best_f - 1e-12:
+                        best_q, best_f, best_phi, improved = cand, f, phi, True
+            if improved:
+                improved_any = True
+            else:
+                steps = {n: v * 0.5 for n, v in steps.items()}
+        if improved_any:
+            method.append("local pattern search")
+    # 4. when the search stalls: ask the proposer (a model), accept only improvements
+    model_queries = 0
+    if proposer is not None and best_phi > tolerance:
+        session.set_joint_positions(best_q)
+        _, pairs = penetration()
+        worst_now = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth} for c in pairs[:5]]
+        try:
+            proposals, model_queries = proposer(dict(best_q), worst_now, {n: (box[n].lo, box[n].hi) for n in names})
+        except Exception as exc:  # a failed model call must not lose the search result
+            proposals, method = [], method + [f"model proposals failed: {type(exc).__name__}"]
+        accepted = 0
+        for prop in proposals:
+            cand = dict(best_q)
+            for n, v in prop.items():
+                if n in box:
+                    cand[n] = box[n].clip(float(v))
+            f, phi = objective(cand)
+            if f < best_f - 1e-12:
+                best_q, best_f, best_phi = cand, f, phi
+                accepted += 1
+        method.append(f"model proposals ({len(proposals)} asked, {accepted} accepted)")
+    session.set_joint_positions(best_q)
+    return StateRefinement(
+        requested={k: float(v) for k, v in q_req.items()},
+        result={k: float(v) for k, v in best_q.items()},
+        phi_requested=float(phi_req),
+        phi_result=float(best_phi),
+        evaluations=evals,
+        method=" -> ".join(method),
+        worst_pairs=worst,
+        seconds=time.perf_counter() - t0,
+        model_queries=model_queries,
+    )

@@ -1,0 +1,1 @@
+"""Stage package ``synthesize`` of the refine data flow (see DEVELOPERS.md)."""

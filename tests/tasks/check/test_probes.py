@@ -1,0 +1,161 @@
+"""Passive probes on generated drawers and lids built to pass and to fail."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.check.probes import ProbeConfig, probe_joint, probes_metric, run_probes
+
+
+def _inertial(mass, xyz=(0, 0, 0), i=(0.01, 0.01, 0.01)):
+    return (f'<inertial><origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/><mass value="{mass}"/>'
+            f'<inertia ixx="{i[0]}" iyy="{i[1]}" izz="{i[2]}" ixy="0" ixz="0" iyz="0"/></inertial>')
+
+
+def _box(x, y, z, xyz=(0, 0, 0)):
+    o = f'<origin xyz="{xyz[0]} {xyz[1]} {xyz[2]}"/>'
+    g = f'<geometry><box size="{x} {y} {z}"/></geometry>'
+    return f"<collision>{o}{g}</collision><visual>{o}{g}</visual>"
+
+
+def drawer(folder: Path, *, base_mass=20.0, friction=1.0, damping=2.0, stiffness=None, q0=0.15) -> Path:
+    """A carcass with a drawer sliding along +x beside it, limits [0, 0.3] m
+    (closed at 0, where the drawer is nearest the carcass)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="drawer">'
+        f'<link name="carcass">{_inertial(base_mass, i=(0.3, 0.3, 0.3))}{_box(0.4, 0.4, 0.3)}</link>'
+        f'<link name="drawer">{_inertial(1.0)}{_box(0.2, 0.3, 0.1)}</link>'
+        '<joint name="slide" type="prismatic"><parent link="carcass"/><child link="drawer"/>'
+        '<origin xyz="0.31 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.3" effort="100" velocity="1"/>'
+        f'<dynamics damping="{damping}" friction="{friction}"/></joint></robot>'
+    )
+    (folder / "initial_state.json").write_text(json.dumps({"initial_joint_positions": {"slide": q0}}))
+    if stiffness is not None:  # a spring pulling the drawer open (rest position 0.3 m)
+        (folder / "overlay.json").write_text(json.dumps({
+            "scale": 1.0, "estimator": {"name": "test"},
+            "joints": {"slide": {"damping": damping, "friction": friction, "stiffness": stiffness, "spring_reference": 0.3}},
+        }))
+    return folder
+
+
+def _probes(ev):
+    m = ev.metric("probes")
+    return m, {p["action"]: p for p in m.details["probes"]}
+
+
+def test_smooth_drawer_is_closed_and_opened_by_the_pusher(tmp_path):
+    ev = evaluate_asset(drawer(tmp_path / "d"))
+    assert ev.closed_positions["slide"]["q_closed"] == pytest.approx(0.0, abs=0.01)
+    m, p = _probes(ev)
+    assert m.passed is True and m.value == 0.0
+    for action in ("close", "open"):
+        assert p[action]["reached"] and p[action]["success"]
+        assert not p[action]["slid"] and not p[action]["tipped"]
+        assert 0.0 < p[action]["peak_force"] < 50.0  # friction 1 N, damping, 1 kg drawer
+        assert p[action]["lever_arm"] is None  # prismatic: the force is the generalised force
+    assert p["close"]["release_fraction"] <= 0.10
+    assert not p["close"]["rebound"]
+
+
+def test_drawer_that_springs_back_fails_the_close_probe(tmp_path):
+    ev = evaluate_asset(drawer(tmp_path / "d", stiffness=200.0))
+    m, p = _probes(ev)
+    assert m.passed is False
+    assert p["close"]["reached"] and p["close"]["rebound"]
+    assert p["close"]["failure"] == "springs back after release"
+    # it took roughly the spring force at the closed end to hold it (200 N/m x 0.3 m)
+    assert 30.0 < p["close"]["peak_force"] < 200.0
+
+
+def test_drawer_too_stiff_for_a_light_carcass_moves_the_object_instead(tmp_path):
+    ev = evaluate_asset(drawer(tmp_path / "d", base_mass=1.0, friction=100.0))
+    m, p = _probes(ev)
+    assert m.passed is False
+    for action in ("close", "open"):
+        assert not p[action]["reached"]
+        assert p[action]["slid"] or p[action]["tipped"]
+        assert "moved instead" in p[action]["failure"]
+        assert p[action]["peak_force"] <= p[action]["max_force"]
+
+
+def _lid(folder: Path, friction: float) -> Path:
+    """A box with a lid hinged along y at its top back edge; closed at 0,
+    opening towards +q up to 2 rad."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="box">'
+        f'<link name="body">{_inertial(10.0, i=(0.1, 0.1, 0.1))}{_box(0.3, 0.3, 0.2)}</link>'
+        f'<link name="lid">{_inertial(0.5, (0.15, 0, 0), (0.002, 0.004, 0.005))}{_box(0.3, 0.3, 0.01, (0.15, 0, 0.006))}</link>'
+        '<joint name="hinge" type="revolute"><parent link="body"/><child link="lid"/>'
+        '<origin xyz="-0.15 0 0.1"/><axis xyz="0 -1 0"/><limit lower="0" upper="2.0" effort="10" velocity="5"/>'
+        f'<dynamics damping="0.05" friction="{friction}"/></joint></robot>'
+    )
+    return folder
+
+
+@pytest.mark.parametrize("friction, holds", [(0.0, False), (2.0, True)])
+def test_open_probe_detects_a_lid_that_falls_shut(tmp_path, friction, holds):
+    f = _lid(tmp_path / "l", friction)
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"hinge": 0.0}))
+    try:
+        r = probe_joint(s, "hinge", closed=0.0, direction=1.0, open_range=2.0, action="open", holds_position=True)
+    finally:
+        s.close()
+    assert r.reached
+    assert r.peak_effort == pytest.approx(r.peak_force * r.lever_arm, rel=1e-6)
+    assert r.rebound is (not holds)
+    assert r.success is holds
+    if not holds:
+        assert r.failure == "does not hold the open position after release"
+        assert r.final_fraction < r.release_fraction - 0.05
+
+
+def test_falling_lid_is_only_a_note_when_holding_is_not_requested(tmp_path):
+    f = _lid(tmp_path / "l", 0.0)
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"hinge": 0.0}))
+    try:
+        (r,) = run_probes(s, {"hinge": (0.0, 1.0, 2.0)}, actions=("open",))
+        after = s.joint_positions()["hinge"]
+    finally:
+        s.close()
+    assert r.rebound and r.success and r.notes
+    assert after == pytest.approx(0.0, abs=1e-9)  # run_probes restores the saved state
+
+
+def test_probe_arguments_are_checked(tmp_path):
+    f = drawer(tmp_path / "d")
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions())
+    try:
+        with pytest.raises(ValueError, match="action"):
+            probe_joint(s, "slide", closed=0, direction=1, open_range=0.3, action="push")
+        with pytest.raises(ValueError, match="open_range"):
+            probe_joint(s, "slide", closed=0, direction=1, open_range=0.0, action="open")
+        with pytest.raises(KeyError):
+            probe_joint(s, "nope", closed=0, direction=1, open_range=0.3, action="open")
+    finally:
+        s.close()
+
+
+def test_probes_metric_without_probes_has_no_verdict():
+    m = probes_metric([])
+    assert m.passed is None and m.value == 0.0
+
+
+def test_probe_config_time_budget_limits_a_stuck_push(tmp_path):
+    f = drawer(tmp_path / "d", base_mass=200.0, friction=5000.0)
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"slide": 0.15}))
+    try:
+        cfg = ProbeConfig(push_time=0.5, release_time=0.1, force_factor=0.05)  # F_max ~ 99 N: below both frictions
+        r = probe_joint(s, "slide", closed=0.0, direction=1.0, open_range=0.3, action="close", config=cfg)
+    finally:
+        s.close()
+    assert not r.reached and r.failure == "target not reached"
+    # stuck: the force ramps at F_max / ramp_time (1 s) for the 0.5 s budget
+    assert r.peak_force == pytest.approx(0.5 * r.max_force, rel=0.02)
+    assert len([x for x in r.trace["phase"] if x == 0.0]) == int(round(0.5 * 240))

@@ -1,0 +1,79 @@
+"""Closed-state detection on generated assets with known closed ends and on real objects."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from asset2sim import demo_assets
+from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.tasks.geometry.closed_state import closed_positions, object_extents
+from asset2sim.tasks.ingest.extract import extract_asset
+from tests.conftest import SHARED, needs_shared
+
+
+def _closed(folder):
+    asset = extract_asset(folder)
+    s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    try:
+        return asset, closed_positions(s, asset), s.joint_limits
+    finally:
+        s.close()
+
+
+@pytest.mark.parametrize("entry", demo_assets.DEMO_OBJECTS, ids=lambda e: e.asset_id)
+def test_closed_end_found_from_geometry(entry, demo_root):
+    asset, closed, limits = _closed(demo_root / entry.asset_id)
+    for joint, truth in entry.closed_positions.items():
+        cs = closed[joint]
+        lo, hi = limits[joint]
+        tol = 0.03 * (hi - lo)
+        assert abs(cs.q_closed - truth) <= tol, (entry.asset_id, joint, cs.q_closed, truth)
+        # the opening side is the farther limit
+        far = hi if (hi - truth) >= (truth - lo) else lo
+        assert math.copysign(1.0, far - truth) == cs.direction
+        assert cs.open_range == pytest.approx(abs(far - cs.q_closed), rel=1e-9)
+        assert cs.fraction(cs.q_closed) == pytest.approx(0.0)
+        assert cs.fraction(cs.position(0.5)) == pytest.approx(0.5)
+
+
+def test_zero_pose_open_laptop_is_not_taken_as_closed(demo_root):
+    # the laptop's zero pose is open by 105 degrees; closed is the lower limit
+    _, closed, limits = _closed(demo_root / "laptop")
+    cs = closed["joint_1"]
+    assert abs(cs.q_closed - 0.0) > 1.0
+    assert cs.q_closed == pytest.approx(limits["joint_1"][0], abs=0.06)
+
+
+@needs_shared
+@pytest.mark.parametrize(
+    "obj, joint, expected",
+    [
+        # closed ends checked by looking at renders of each state
+        ("9748", "joint_0", -2.0923),  # laptop screen modelled open at zero; closed = folded, lower limit
+        ("100221", "joint_0", -1.047),  # chest lid half open at zero, closed at the lower limit
+        ("101668", "joint_2", -0.785),  # briefcase lid open 45 deg at zero
+        ("103755", "joint_1", -1.047),  # briefcase lid open 60 deg at zero
+        ("7236", "joint_0", 0.0),  # microwave door
+        ("102622", "joint_0", 0.0),  # toilet lid resting on the seat despite hull overlap
+        ("102703", "joint_2", 0.0),  # toilet lid modelled slightly sloped, resting on the seat
+        ("20279", "joint_0", -0.188),  # desk drawer pushed home at the lower limit
+    ],
+)
+def test_real_objects_closed_end(obj, joint, expected):
+    _, closed, _ = _closed(SHARED / obj)
+    assert closed[joint].q_closed == pytest.approx(expected, abs=0.05)
+
+
+def test_object_extents_closed_smaller_than_open(demo_root):
+    asset = extract_asset(demo_root / "box_lid")
+    s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    try:
+        closed = closed_positions(s, asset)
+        e_closed = object_extents(s, {k: v.q_closed for k, v in closed.items()}, asset)
+        e_open = object_extents(s, {k: v.position(1.0) for k, v in closed.items()}, asset)
+    finally:
+        s.close()
+    assert e_closed.prod() < e_open.prod()
+    assert (e_closed > 0).all()

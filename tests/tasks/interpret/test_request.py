@@ -1,0 +1,419 @@
+"""Tests of asset2sim.tasks.interpret.request.parse_request."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from asset2sim.schemas.request import BAND_TARGET, RequestSpec
+from asset2sim.tasks.interpret.priors import size_factor
+from asset2sim.tasks.interpret.request import parse_request
+
+DATASET = Path(__file__).resolve().parents[3].parent / "shared" / "datasets" / "partnet_mobility"
+
+
+def states(spec: RequestSpec) -> list[tuple[str, str | None, int | None, str]]:
+    return [(j.selector, j.label, j.ordinal, j.band) for j in spec.joint_states]
+
+
+# Expected values written by reading each manifest prompt.
+# id: (prompt, category_hint, size_class, joint states, damping, holds, spring, stiff, free, pose)
+MANIFEST_EXPECTED = {
+    "103275": ("I want a slightly open stapler.",
+               "Stapler", None, [("all", None, None, "slightly_open")], "moderate", False, False, False, False, None),
+    "100221": ("A very small jewelry box or treasure chest with a slightly open rotational lid. Low damping for smooth hinge behavior.",
+               "Box", "very_small", [("label", "lid", None, "slightly_open")], "low", False, False, False, False, None),
+    "7236": ("I want a microwave with its door halfway open. Low damping for hinge-like behavior.",
+             "Microwave", None, [("label", "door", None, "halfway")], "low", False, False, False, False, None),
+    "102703": ("I want a very small toilet for a baby, with its lid fully open. Low damping for hinge-like behavior.",
+               "Toilet", "very_small", [("label", "lid", None, "fully")], "low", False, False, False, False, None),
+    "9912": ("I want a slightly open laptop. Low damping for smooth operation.",
+             "Laptop", None, [("all", None, None, "slightly_open")], "low", False, False, False, False, None),
+    "101673": ("I want a small purse or handbag with the handle moving freely, resting sideways.",
+               "Bag", "small", [], "low", False, False, False, True, "sideways"),
+    "19179": ("I want a very small two-drawer under-desk office cabinet, with the first drawer closed and the second slightly open, with low damping sliding joints.",
+              "StorageFurniture", "very_small",
+              [("label", "drawer", 0, "closed"), ("label", "drawer", 1, "slightly_open")],
+              "low", False, False, False, False, None),
+    "103755": ("I want a small business suitcase with its lid slightly open and a low damping hinge.",
+               "Suitcase", "small", [("label", "lid", None, "slightly_open")], "low", False, False, False, False, None),
+    "102181": ("A very small personal trash can with its lid slightly open. The hinge has low damping and holds its position.",
+               "TrashCan", "very_small", [("label", "lid", None, "slightly_open")], "low", True, False, False, False, None),
+    "47645": ("A small box with slightly open rotational lid. Low damping for a smooth hinge behavior.",
+              "Box", "small", [("label", "lid", None, "slightly_open")], "low", False, False, False, False, None),
+    "9748": ("I want a slightly open laptop. Low damping for smooth operation.",
+             "Laptop", None, [("all", None, None, "slightly_open")], "low", False, False, False, False, None),
+    "7119": ("I want a microwave opening its door halfway. Low damping for hinge-like behavior.",
+             "Microwave", None, [("label", "door", None, "halfway")], "low", False, False, False, False, None),
+    "102990": ("I want a slightly open stapler, with spring behavior in its joint for pressing/stapling.",
+               "Stapler", None, [("all", None, None, "slightly_open")], "moderate", False, True, False, False, None),
+    "102622": ("I want a very small toilet for a baby, with its lid open all the way. Low damping for hinge-like behavior.",
+               "Toilet", "very_small", [("label", "lid", None, "fully")], "low", False, False, False, False, None),
+    "102155": ("A very small, personal trash can with its lid slightly open. The lid hinge has low damping and holds its position.",
+               "TrashCan", "very_small", [("label", "lid", None, "slightly_open")], "low", True, False, False, False, None),
+    "20279": ("A small bedside cabinet with every drawer closed. Smooth, low damping drawer slides.",
+              "StorageFurniture", "small", [("label", "drawer", None, "closed")], "low", False, False, False, False, None),
+    "101668": ("A carry-on suitcase lying flat with its lid half open.",
+               "Suitcase", "small", [("label", "lid", None, "halfway")], "moderate", False, False, False, False, "lying_flat"),
+    "12085": ("A compact countertop dishwasher with its door slightly open. The door hinge holds its position.",
+              "Dishwasher", "small", [("label", "door", None, "slightly_open")], "moderate", True, False, False, False, None),
+    "11178": ("A mini fridge for a dorm room with its door a quarter open.",
+              "Refrigerator", "small", [("label", "door", None, "quarter")], "moderate", False, False, False, False, None),
+    "8877": ("A small cabinet-sized door in its frame, closed, with a heavy, well-damped hinge.",
+             "Door", "small", [("label", "door", None, "closed")], "high", False, False, True, False, None),
+    "148": ("A kitchen faucet with its handle turned off and a stiff handle joint.",
+            "Faucet", None, [("label", "handle", None, "closed")], "moderate", False, False, True, False, None),
+}
+
+
+@pytest.mark.parametrize("asset_id", sorted(MANIFEST_EXPECTED))
+def test_manifest_prompts(asset_id: str) -> None:
+    prompt, cat, size, js, damping, holds, spring, stiff, free, pose = MANIFEST_EXPECTED[asset_id]
+    spec = parse_request(prompt)
+    assert spec.text == prompt
+    assert spec.category_hint == cat
+    assert spec.size_class == size
+    assert spec.size_factor == pytest.approx(size_factor(size))
+    assert states(spec) == js
+    assert spec.damping == damping
+    assert spec.holds_position is holds
+    assert spec.spring is spring
+    assert spec.stiff is stiff
+    assert spec.free_moving is free
+    assert spec.pose_hint == pose
+    for j in spec.joint_states:
+        assert j.phrase, "every joint state keeps the words it came from"
+        assert j.phrase.split()[-1] in " ".join(spec.matched) or j.phrase in prompt.lower()
+
+
+def test_manifest_prompts_match_the_dataset() -> None:
+    manifest = DATASET / "manifest.csv"
+    if not manifest.exists():
+        pytest.skip("shared dataset not present")
+    rows = {r["id"]: r["prompt"] for r in csv.DictReader(manifest.open())}
+    assert set(rows) == set(MANIFEST_EXPECTED)
+    for asset_id, (prompt, *_rest) in MANIFEST_EXPECTED.items():
+        assert rows[asset_id] == prompt
+
+
+def test_matched_lists_the_recognised_phrases() -> None:
+    spec = parse_request(MANIFEST_EXPECTED["102181"][0])
+    assert spec.matched == [
+        "very small", "personal", "trash can", "slightly open", "low damping", "holds its position",
+    ]
+    assert spec.size_phrase == "very small, personal"
+    spec = parse_request(MANIFEST_EXPECTED["8877"][0])
+    assert "cabinet-sized" in spec.matched and "well-damped" in spec.matched and "heavy" in spec.matched
+
+
+# ----------------------------------------------------------------- state words
+
+
+@pytest.mark.parametrize(
+    "text, band",
+    [
+        ("a box with its lid closed", "closed"),
+        ("a box with its lid shut", "closed"),
+        ("the lid is fully closed", "closed"),
+        ("a faucet with its handle switched off", "closed"),
+        ("the lid is not open", "closed"),
+        ("a box with its lid slightly open", "slightly_open"),
+        ("a box with its lid ajar", "slightly_open"),
+        ("a box with its lid a bit open", "slightly_open"),
+        ("a box with its lid cracked open", "slightly_open"),
+        ("a box with its lid opened slightly", "slightly_open"),
+        ("the lid not quite closed", "slightly_open"),
+        ("a fridge with its door a quarter open", "quarter"),
+        ("a fridge with its door quarter-open", "quarter"),
+        ("a fridge with its door open a quarter of the way", "quarter"),
+        ("a microwave with its door halfway open", "halfway"),
+        ("a microwave with its door half open", "halfway"),
+        ("a microwave with its door half-open", "halfway"),
+        ("a microwave with its door open halfway", "halfway"),
+        ("a microwave with its door partially open", "halfway"),
+        ("a box whose lid is not closed", "halfway"),
+        ("a laptop with its screen mostly open", "mostly"),
+        ("a laptop with its screen almost fully open", "mostly"),
+        ("a laptop with its screen three quarters open", "mostly"),
+        ("a laptop with its screen not fully open", "mostly"),
+        ("a laptop with its screen open", "mostly"),
+        ("a laptop with its screen fully open", "fully"),
+        ("a laptop with its screen open all the way", "fully"),
+        ("a laptop with its screen all the way open", "fully"),
+        ("a laptop with its screen wide open", "fully"),
+        ("a faucet with its handle turned on", "fully"),
+    ],
+)
+def test_state_bands(text: str, band: str) -> None:
+    spec = parse_request(text)
+    assert [j.band for j in spec.joint_states] == [band], spec.joint_states
+
+
+def test_closed_and_open_are_not_confused() -> None:
+    # "closed" contains no "open"; "not open" is closed; "open" alone is not "closed"
+    assert [j.band for j in parse_request("the lid closed").joint_states] == ["closed"]
+    assert [j.band for j in parse_request("the lid open").joint_states] == ["mostly"]
+    assert [j.band for j in parse_request("the lid isn't open").joint_states] == ["closed"]
+    spec = parse_request("a cabinet with the top drawer open and the bottom drawer closed")
+    assert states(spec) == [("label", "drawer", 0, "mostly"), ("label", "drawer", -1, "closed")]
+
+
+def test_half_versus_halfway() -> None:
+    # "half" alone is not a state; "half the size" is a size
+    spec = parse_request("a laptop half the size of a normal one, screen halfway")
+    assert spec.size_class == "very_small"
+    assert states(spec) == [("label", "screen", None, "halfway")]
+    assert parse_request("cut in half").joint_states == []
+    assert [j.band for j in parse_request("the lid half open").joint_states] == ["halfway"]
+
+
+def test_open_as_a_verb_is_not_a_state() -> None:
+    assert parse_request("open the door of a regular microwave").joint_states == []
+    assert parse_request("I want the door to open smoothly").joint_states == []
+    assert parse_request("a box that is easy to open").joint_states == []
+    assert parse_request("a microwave").joint_states == []
+
+
+# ----------------------------------------------------------------- per-joint phrases
+
+
+@pytest.mark.parametrize(
+    "word, ordinal",
+    [("first", 0), ("second", 1), ("third", 2), ("fourth", 3), ("fifth", 4),
+     ("1st", 0), ("2nd", 1), ("3rd", 2), ("4th", 3), ("5th", 4),
+     ("top", 0), ("upper", 0), ("bottom", -1), ("lowest", -1), ("last", -1)],
+)
+def test_ordinals(word: str, ordinal: int) -> None:
+    spec = parse_request(f"a dresser with the {word} drawer slightly open")
+    assert states(spec) == [("label", "drawer", ordinal, "slightly_open")]
+    assert spec.joint_states[0].phrase == f"{word} drawer slightly open"
+
+
+def test_elided_noun_inherits_the_label() -> None:
+    spec = parse_request("the third drawer three quarters open and the fifth fully open")
+    assert states(spec) == [("label", "drawer", 2, "mostly"), ("label", "drawer", 4, "fully")]
+
+
+def test_enumerated_and_numbered_ordinals() -> None:
+    spec = parse_request("a cabinet with the first, second and third drawers closed")
+    assert states(spec) == [("label", "drawer", i, "closed") for i in range(3)]
+    spec = parse_request("a cabinet with drawers 1 and 2 closed")
+    assert states(spec) == [("label", "drawer", 0, "closed"), ("label", "drawer", 1, "closed")]
+    spec = parse_request("drawer #3 half open")
+    assert states(spec) == [("label", "drawer", 2, "halfway")]
+
+
+@pytest.mark.parametrize("quant", ["every drawer", "all drawers", "all the drawers", "both drawers", "each drawer"])
+def test_quantifiers_select_every_joint_with_the_label(quant: str) -> None:
+    spec = parse_request(f"a cabinet with {quant} closed")
+    assert states(spec) == [("label", "drawer", None, "closed")]
+
+
+def test_quantifier_then_exception() -> None:
+    spec = parse_request("a dresser with all drawers closed except the top drawer which is slightly open")
+    assert states(spec) == [("label", "drawer", None, "closed"), ("label", "drawer", 0, "slightly_open")]
+
+
+def test_two_parts_one_state_and_two_states() -> None:
+    spec = parse_request("a cabinet with the lid and the door slightly open")
+    assert states(spec) == [("label", "lid", None, "slightly_open"), ("label", "door", None, "slightly_open")]
+    spec = parse_request("a box with its lid open and the drawer closed")
+    assert states(spec) == [("label", "lid", None, "mostly"), ("label", "drawer", None, "closed")]
+
+
+def test_part_words_are_canonicalised() -> None:
+    assert states(parse_request("a bin with its cover ajar")) == [("label", "lid", None, "slightly_open")]
+    assert states(parse_request("a dishwasher with its rack pulled all the way out")) == [
+        ("label", "shelf", None, "fully")
+    ]
+    assert states(parse_request("a laptop with its display half open")) == [("label", "screen", None, "halfway")]
+
+
+def test_hyphenated_compounds_are_not_parts() -> None:
+    spec = parse_request("a two-drawer cabinet, slightly open")
+    assert states(spec) == [("all", None, None, "slightly_open")]
+
+
+def test_no_state_words_gives_no_joint_states() -> None:
+    for text in ["", "a stapler", "a heavy door with a stiff hinge", "I want a microwave. Low damping."]:
+        assert parse_request(text).joint_states == []
+
+
+# ----------------------------------------------------------------- size, dynamics, pose, category
+
+
+@pytest.mark.parametrize(
+    "text, size",
+    [
+        ("a tiny stapler", "tiny"),
+        ("a miniature microwave", "tiny"),
+        ("a very small box", "very_small"),
+        ("an extra-small box", "very_small"),
+        ("a toilet for a baby", "very_small"),
+        ("a toy oven", "very_small"),
+        ("a small box", "small"),
+        ("a mini fridge", "small"),
+        ("a compact dishwasher", "small"),
+        ("a personal trash can", "small"),
+        ("a carry-on suitcase", "small"),
+        ("a cabinet-sized door", "small"),
+        ("a chair for a child", "small"),
+        ("a little box", "small"),
+        ("a regular microwave", "regular"),
+        ("a standard microwave", "regular"),
+        ("a normal-sized microwave", "regular"),
+        ("a microwave of normal size", "regular"),
+        ("a large suitcase", "large"),
+        ("a big suitcase", "large"),
+        ("a huge suitcase", "very_large"),
+        ("a very large suitcase", "very_large"),
+        ("a suitcase", None),
+        ("a box that is not small", None),
+    ],
+)
+def test_size_words(text: str, size: str | None) -> None:
+    spec = parse_request(text)
+    assert spec.size_class == size
+    assert spec.size_factor == pytest.approx(size_factor(size))
+
+
+def test_size_factors_are_ordered() -> None:
+    seq = ["a tiny box", "a very small box", "a small box", "a box", "a large box", "a huge box"]
+    facs = [parse_request(t).size_factor for t in seq]
+    assert facs == sorted(facs) and len(set(facs)) == len(facs)
+    assert parse_request("a box").size_factor == 1.0
+
+
+def test_weak_size_words_need_a_category_after_them() -> None:
+    spec = parse_request("a box with the lid a little open")
+    assert spec.size_class is None
+    assert states(spec) == [("label", "lid", None, "slightly_open")]
+    spec = parse_request("a normal hinge on a box")
+    assert spec.size_class is None
+
+
+def test_the_most_extreme_size_word_wins() -> None:
+    assert parse_request("a small, very small box").size_class == "very_small"
+    assert parse_request("a very small, personal trash can").size_class == "very_small"
+
+
+@pytest.mark.parametrize(
+    "text, damping, free",
+    [
+        ("a box with low damping", "low", False),
+        ("a box with a low-damping hinge", "low", False),
+        ("a smooth hinge", "low", False),
+        ("the handle moving freely", "low", True),
+        ("a door that swings freely", "low", True),
+        ("a well-damped hinge", "high", False),
+        ("a heavily damped lid", "high", False),
+        ("high damping", "high", False),
+        ("a heavy hinge", "high", False),
+        ("smooth but well-damped", "high", False),
+        ("well-damped yet smooth", "high", False),
+        ("a box", "moderate", False),
+        ("moderate damping", "moderate", False),
+    ],
+)
+def test_damping_words(text: str, damping: str, free: bool) -> None:
+    spec = parse_request(text)
+    assert spec.damping == damping
+    assert spec.free_moving is free
+
+
+def test_holds_spring_stiff() -> None:
+    for t in ["the lid holds its position", "the lid stays where it is", "a lid that holds its state",
+              "a door that does not fall under its own weight"]:
+        assert parse_request(t).holds_position, t
+    for t in ["a springy lid", "a spring-loaded lever", "a lid that returns to closed",
+              "spring behavior in its joint", "a self-closing door"]:
+        assert parse_request(t).spring, t
+    for t in ["a lid without a spring", "no spring in the hinge", "a stapler"]:
+        assert not parse_request(t).spring, t
+    assert parse_request("a stiff handle joint").stiff
+    assert parse_request("a heavy door").stiff
+    assert not parse_request("a door that is not stiff").stiff
+    assert "no spring" in parse_request("no spring in the hinge").matched
+
+
+@pytest.mark.parametrize(
+    "text, pose",
+    [
+        ("a suitcase lying flat", "lying_flat"),
+        ("a laptop laid flat on the table", "lying_flat"),
+        ("a bag resting sideways", "sideways"),
+        ("a trash can lying on its side", "sideways"),
+        ("a bottle on its side", "sideways"),
+        ("a suitcase standing upright", "upright"),
+        ("a bag whose handle swings sideways", None),
+        ("a suitcase", None),
+    ],
+)
+def test_pose_words(text: str, pose: str | None) -> None:
+    assert parse_request(text).pose_hint == pose
+
+
+@pytest.mark.parametrize(
+    "text, cat",
+    [
+        ("a small purse", "Bag"),
+        ("a handbag", "Bag"),
+        ("a jewelry box", "Box"),
+        ("a treasure chest", "Box"),
+        ("a drawer cabinet", "StorageFurniture"),
+        ("a bedside cabinet with every drawer closed", "StorageFurniture"),
+        ("a fridge", "Refrigerator"),
+        ("a mini-fridge", "Refrigerator"),
+        ("a trash bin", "TrashCan"),
+        ("a garbage can", "TrashCan"),
+        ("a kitchen tap", "Faucet"),
+        ("a microwave oven", "Microwave"),
+        ("an oven", "Oven"),
+        ("a desk lamp", "Lamp"),
+        ("a desk", "Table"),
+        ("a two-drawer under-desk office cabinet", "StorageFurniture"),
+        ("a small cabinet-sized door in its frame", "Door"),
+        ("a dishwasher with its door slightly open", "Dishwasher"),
+        ("open the door of a microwave", "Microwave"),
+        ("a folding chair", "FoldingChair"),
+        ("a washing machine", "WashingMachine"),
+        ("a usb stick", "USB"),
+        ("a spaceship with a hatch", None),
+        ("", None),
+    ],
+)
+def test_category_hint(text: str, cat: str | None) -> None:
+    assert parse_request(text).category_hint == cat
+
+
+def test_non_string_is_a_type_error() -> None:
+    with pytest.raises(TypeError):
+        parse_request(None)  # type: ignore[arg-type]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.text(alphabet=st.sampled_from(list("abcdefghilmnoprstuvwy -,.'0123456789")), max_size=120))
+def test_parse_never_raises_and_is_well_formed(text: str) -> None:
+    spec = parse_request(text)
+    assert spec.size_factor > 0
+    for j in spec.joint_states:
+        assert j.band in BAND_TARGET
+        assert j.ordinal is None or -1 <= j.ordinal <= 98
+        assert (j.selector == "label") == (j.label is not None)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.sampled_from(["lid", "door", "drawer", "screen", "seat"]),
+    st.sampled_from(["closed", "slightly open", "a quarter open", "halfway open", "mostly open", "fully open"]),
+    st.sampled_from(["a box", "a cabinet", "a toilet", "a fridge", "a laptop", "a thing"]),
+)
+def test_composed_phrases(part: str, state: str, obj: str) -> None:
+    band = {"closed": "closed", "slightly open": "slightly_open", "a quarter open": "quarter",
+            "halfway open": "halfway", "mostly open": "mostly", "fully open": "fully"}[state]
+    spec = parse_request(f"I want {obj} with its {part} {state}.")
+    assert states(spec) == [("label", part, None, band)]

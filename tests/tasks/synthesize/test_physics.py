@@ -1,0 +1,115 @@
+"""Physics reasoning: mass from geometry, joint loads against analytic statics,
+damping from the damping-ratio formula, friction that holds a state."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.schemas.overlay import Inertia, LinkPhysics
+from asset2sim.tasks.synthesize import physics
+from asset2sim.tasks.geometry.analyze import analyze_asset
+from asset2sim.tasks.geometry.closed_state import subtree_links
+from asset2sim.tasks.ingest.extract import extract_asset
+from tests.helpers import write_hinged_plate, write_slider
+
+
+def _plate_links(arm, mass=0.5):
+    # a uniform plate of `mass` kg, arm along +x from the hinge (link frame origin)
+    I = Inertia(ixx=mass * (0.2**2 + 0.01**2) / 12, iyy=mass * (arm**2 + 0.01**2) / 12, izz=mass * (arm**2 + 0.2**2) / 12)
+    return {"plate": LinkPhysics(mass=mass, inertia=I, com=(arm / 2, 0.0, 0.005))}
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+@pytest.mark.parametrize("q", [0.0, 0.6, -0.4])
+def test_revolute_gravity_load_matches_statics(tmp_path, q, scale):
+    arm = 0.4
+    asset = extract_asset(write_hinged_plate(tmp_path / "p", arm=arm))
+    s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    try:
+        links = _plate_links(arm * scale)
+        links["plate"] = links["plate"].model_copy(update={"com": (arm * scale / 2, 0.0, 0.005 * scale)})
+        loads = physics.joint_loads(s, asset, links, {"hinge": q}, scale, {"hinge": subtree_links(asset, "plate")})
+    finally:
+        s.close()
+    m, g = 0.5, physics.G
+    # rotation about +y by q: the COM (d, 0, h) goes to (d cos q + h sin q, 0, -d sin q + h cos q);
+    # torque about +y of weight -m g z at r: tau_y = r_z F_x - r_x F_z = r_x m g
+    d, h = arm * scale / 2, 0.005 * scale
+    rx = d * math.cos(q) + h * math.sin(q)
+    expected = m * g * rx
+    ld = loads["hinge"]
+    assert ld.gravity_load == pytest.approx(expected, rel=1e-3, abs=1e-6)
+    assert ld.mass == pytest.approx(m)
+    # |d tau / d q| = m g |d rx/dq|
+    assert ld.gravity_stiffness == pytest.approx(m * g * abs(-d * math.sin(q) + h * math.cos(q)), rel=0.02, abs=1e-4)
+    # inertia about the hinge axis: I_yy(com) + m (d^2 + h^2)
+    iyy = m * ((arm * scale) ** 2 + 0.01**2) / 12
+    assert ld.inertia_axis == pytest.approx(iyy + m * (d * d + h * h), rel=1e-3)
+
+
+def test_vertical_axis_has_no_gravity_load(tmp_path):
+    asset = extract_asset(write_hinged_plate(tmp_path / "p", axis="0 0 1"))
+    s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    try:
+        loads = physics.joint_loads(s, asset, _plate_links(0.4), {"hinge": 0.3}, 1.0, {"hinge": ["plate"]})
+    finally:
+        s.close()
+    assert abs(loads["hinge"].gravity_load) < 1e-9
+    assert loads["hinge"].gravity_stiffness < 1e-6
+
+
+@pytest.mark.parametrize("axis, expected", [("1 0 0", 0.0), ("0 0 1", -1.0)])
+def test_prismatic_load_is_weight_along_axis(tmp_path, axis, expected):
+    asset = extract_asset(write_slider(tmp_path / "s", axis=axis))
+    s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    links = {"block": LinkPhysics(mass=2.0, inertia=Inertia(ixx=0.01, iyy=0.01, izz=0.01), com=(0, 0, 0))}
+    try:
+        loads = physics.joint_loads(s, asset, links, {"slide": 0.1}, 1.0, {"slide": ["block"]})
+    finally:
+        s.close()
+    assert loads["slide"].gravity_load == pytest.approx(expected * 2.0 * physics.G, abs=1e-6)
+    assert loads["slide"].inertia_axis == pytest.approx(2.0)
+
+
+def test_damping_ratio_formula():
+    ld = physics.JointLoad(joint="j", mass=1.0, inertia_axis=0.2, gravity_load=1.0, gravity_stiffness=5.0)
+    assert physics.damping_for(ld, 0.5) == pytest.approx(2 * 0.5 * math.sqrt(0.2 * 5.0))
+    # without a restoring load the floor frequency sets k
+    free = physics.JointLoad(joint="j", mass=1.0, inertia_axis=0.2, gravity_load=0.0, gravity_stiffness=0.0)
+    w0 = 2 * math.pi * physics.FLOOR_FREQUENCY_HZ
+    assert physics.damping_for(free, 0.5) == pytest.approx(2 * 0.5 * 0.2 * w0)
+
+
+def test_friction_holds_the_load_and_levels_order():
+    ld = physics.JointLoad(joint="j", mass=1.0, inertia_axis=0.2, gravity_load=-0.8, gravity_stiffness=5.0)
+    low = physics.joint_dynamics(ld, 0.8, prismatic=False, damping_level="low")
+    high = physics.joint_dynamics(ld, 0.8, prismatic=False, damping_level="high")
+    stiff = physics.joint_dynamics(ld, 0.8, prismatic=False, stiff=True)
+    assert low.friction >= physics.HOLD_SAFETY * 0.8
+    assert low.damping < high.damping
+    assert stiff.friction > low.friction
+    assert low.stiffness == 0.0
+    sp = physics.joint_dynamics(ld, 0.8, prismatic=False, spring=(3.0, 0.5))
+    assert sp.stiffness == 3.0 and sp.spring_reference == 0.5
+
+
+def test_mass_from_geometry_solid_and_shell(tmp_path):
+    asset = extract_asset(write_hinged_plate(tmp_path / "p"))
+    geom = analyze_asset(asset)["body"]  # a 0.2 m cube
+    solid = physics.MaterialChoice(name="wood", density=600.0, shell=False, wall_thickness=0.01)
+    shell = physics.MaterialChoice(name="abs", density=1050.0, shell=True, wall_thickness=0.002)
+    for s in (1.0, 0.5):
+        lp = physics.link_physics(geom, s, solid)
+        assert lp.mass == pytest.approx(600.0 * (0.2 * s) ** 3, rel=1e-6)
+        assert lp.hollow_fraction == 1.0
+        sh = physics.link_physics(geom, s, shell)
+        # thin shell: area * t * rho
+        assert sh.mass == pytest.approx(1050.0 * 6 * (0.2 * s) ** 2 * 0.002, rel=1e-6)
+        assert sh.hollow_fraction == pytest.approx(6 * (0.2 * s) ** 2 * 0.002 / (0.2 * s) ** 3)
+        # a shell has a larger per-kg inertia than the same solid (mass further out)
+        assert sh.inertia.ixx / sh.mass > lp.inertia.ixx / lp.mass
+    np.testing.assert_allclose(lp.com, (0, 0, 0.1 * 0.5), atol=1e-9)
