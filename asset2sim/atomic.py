@@ -5,17 +5,107 @@ Every output file of asset2sim is written through :func:`write_bytes` /
 in the same folder, ``fsync``, then ``os.replace`` (atomic on POSIX), then an
 ``fsync`` of the folder. A run killed at any moment leaves each output file
 either absent or complete.
+
+Files are created with mode ``0o666`` minus the process umask (0644 under
+umask 022), as ``open()`` would: the temporary file is made with
+``os.open(O_CREAT | O_EXCL, 0o666)``, not ``tempfile.mkstemp`` (always 0600).
+Temporary files are named ``.<name>.<random>.tmp`` beside their destination.
+
+An observer lets an owner of an output folder (``tasks.publish.
+output_folder``) hear of every destination before its temporary file is
+created (:func:`add_observer`), so a killed run leaves no file its owner
+does not know of.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
 import os
-import tempfile
+import secrets
+import threading
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable, Iterator
+
+Observer = Callable[[list[Path]], None]
+"""observer(destinations): called before any of ``destinations`` is created;
+it may raise to refuse the write (nothing is then created)."""
+
+_OBSERVERS: list[Observer] = []
+_OBSERVERS_LOCK = threading.Lock()
+
+
+def add_observer(observer: Observer) -> None:
+    """Call ``observer`` with the destination paths of every atomic write (any
+    thread) before anything is created; adding the same observer twice keeps
+    one. An exception raised by the observer aborts that write before any
+    temporary file exists."""
+    with _OBSERVERS_LOCK:
+        if observer not in _OBSERVERS:
+            _OBSERVERS.append(observer)
+
+
+def remove_observer(observer: Observer) -> None:
+    """Stop calling ``observer`` (no error when it was not added)."""
+    with _OBSERVERS_LOCK:
+        if observer in _OBSERVERS:
+            _OBSERVERS.remove(observer)
+
+
+@contextlib.contextmanager
+def observe(observer: Observer) -> Iterator[None]:
+    """:func:`add_observer` for the duration of a ``with`` block."""
+    add_observer(observer)
+    try:
+        yield
+    finally:
+        remove_observer(observer)
+
+
+def _announce(paths: list[Path]) -> None:
+    with _OBSERVERS_LOCK:
+        observers = list(_OBSERVERS)
+    for obs in observers:
+        obs(paths)
+
+
+def announce(paths: Iterable[Path | str]) -> None:
+    """Tell the observers that ``paths`` belong to the current write although
+    they are kept as they are (e.g. a copy whose content is already right)."""
+    paths = [Path(p) for p in paths]
+    if paths:
+        _announce(paths)
+
+
+def temp_name(path: Path | str) -> str:
+    """A fresh temporary file name beside ``path``: ``.<name>.<16 hex>.tmp``."""
+    return f".{Path(path).name}.{secrets.token_hex(8)}.tmp"
+
+
+def is_temp_of(name: str, target: str) -> bool:
+    """True when file ``name`` is a temporary file of the destination named
+    ``target`` (same folder), as :func:`temp_name` makes them (also the
+    ``mkstemp`` names of earlier versions: ``.<target>.<8 chars>.tmp``)."""
+    prefix = f".{target}."
+    if not (name.startswith(prefix) and name.endswith(".tmp")):
+        return False
+    mid = name[len(prefix):-4]
+    return 1 <= len(mid) <= 32 and all(c.isalnum() or c == "_" for c in mid)
+
+
+def _create_temp(path: Path) -> tuple[int, str]:
+    """Create a new empty temporary file beside ``path`` with mode 0o666 minus
+    the umask; returns (fd, name)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0)
+    for _ in range(100):
+        tmp = str(path.parent / temp_name(path))
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name beside {path}")
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -38,8 +128,9 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
         OSError: the folder cannot be written.
     """
     path = Path(path)
+    _announce([path])
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    fd, tmp = _create_temp(path)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
@@ -84,12 +175,14 @@ def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
     is renamed into place. A kill at any moment leaves every destination absent
     or complete (one sync instead of one fsync per file: meshes come by the
     hundred)."""
+    pairs = [(src, Path(dst)) for src, dst in pairs]
+    if pairs:
+        _announce([dst for _, dst in pairs])
     staged: list[tuple[str, Path]] = []
     try:
         for src, dst in pairs:
-            dst = Path(dst)
             dst.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".tmp", dir=str(dst.parent))
+            fd, tmp = _create_temp(dst)
             staged.append((tmp, dst))
             with os.fdopen(fd, "wb") as fh:
                 fh.write(Path(src).read_bytes())

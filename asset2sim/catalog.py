@@ -24,10 +24,7 @@ the column names (``_mm``, ``_m``, ``_rad``, ``_kg``, ``_seconds``).
 
 from __future__ import annotations
 
-import csv
-import io
 import json
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +34,9 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from asset2sim import atomic
+from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.ingest import partnet_mobility
 
 # --------------------------------------------------------------------------- config
 
@@ -191,8 +191,6 @@ class Catalog:
         Raises:
             CatalogError: an unknown or invalid ``refine`` field.
         """
-        from asset2sim.schemas.config import RefineConfig
-
         fields = dict(self.config.refine)
         fields.setdefault("estimator", self.config.estimator.name)
         fields.setdefault("model", self.config.estimator.model)
@@ -240,121 +238,41 @@ class ManifestEntry:
     time_limit_seconds: float | None = None
 
 
-_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
-
-
-def _positive(manifest: Path, line: int, row: dict, column: str) -> float | None:
-    text = (row.get(column) or "").strip()
-    if not text:
-        return None
-    try:
-        value = float(text)
-    except ValueError as exc:
-        raise CatalogError(f"{manifest}:{line}: {column} {text!r} is not a number") from exc
-    if not (math.isfinite(value) and value > 0):
-        raise CatalogError(f"{manifest}:{line}: {column} must be a positive number")
-    return value
-
-
 def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
     """Entries of a manifest CSV (columns ``id``, ``prompt``; optional
     ``category``, ``reference_scale``, ``time_limit_seconds``), asset folders
-    under ``root``.
+    under ``root``. Parsed by
+    :func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest`.
 
     Raises:
         CatalogError: missing file or columns, an empty/duplicate/unsafe id
             (ids name folders and files: letters, digits, ``_.-``), or a
             ``reference_scale`` / ``time_limit_seconds`` that is not a positive number.
     """
-    manifest, root = Path(manifest), Path(root)
+    manifest = Path(manifest)
     try:
-        text = manifest.read_text(encoding="utf-8-sig")
+        rows = partnet_mobility.read_manifest(manifest, root)
     except OSError as exc:
         raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
-    reader = csv.DictReader(io.StringIO(text))
-    cols = set(reader.fieldnames or [])
-    missing = {"id", "prompt"} - cols
-    if missing:
-        raise CatalogError(f"{manifest}: missing column(s) {sorted(missing)}")
-    out: list[ManifestEntry] = []
-    seen: set[str] = set()
-    for line, row in enumerate(reader, start=2):
-        aid = (row.get("id") or "").strip()
-        if not aid or not _ID_RE.match(aid):
-            raise CatalogError(f"{manifest}:{line}: invalid asset id {aid!r}")
-        if aid in seen:
-            raise CatalogError(f"{manifest}:{line}: duplicate asset id {aid!r}")
-        seen.add(aid)
-        out.append(
-            ManifestEntry(
-                asset_id=aid,
-                prompt=(row.get("prompt") or "").strip(),
-                asset_dir=root / aid,
-                category=(row.get("category") or "").strip() or None,
-                reference_scale=_positive(manifest, line, row, "reference_scale"),
-                time_limit_seconds=_positive(manifest, line, row, "time_limit_seconds"),
-            )
+    except partnet_mobility.ManifestError as exc:
+        raise CatalogError(str(exc)) from exc
+    return [
+        ManifestEntry(
+            asset_id=r.id,
+            prompt=r.prompt,
+            asset_dir=r.folder,
+            category=r.category or None,
+            reference_scale=r.reference_scale,
+            time_limit_seconds=r.time_limit_seconds,
         )
-    return out
+        for r in rows
+    ]
 
 
 # ----------------------------------------------------------------------- Parquet rows
 
-
-def _schema():
-    import pyarrow as pa
-
-    return pa.schema(
-        [
-            ("asset_id", pa.string()),
-            ("category", pa.string()),
-            ("prompt", pa.string()),
-            ("status", pa.string()),  # done | skipped | failed
-            ("failure_mode", pa.string()),  # schemas.report.FAILURE_MODES
-            ("error", pa.string()),
-            ("estimator", pa.string()),
-            ("model", pa.string()),
-            ("scale", pa.float64()),
-            ("reference_scale", pa.float64()),
-            ("scale_deviation_pct", pa.float64()),
-            ("total_mass_kg", pa.float64()),
-            ("initial_state", pa.string()),  # JSON {joint: rad or m}
-            ("penetration_mm", pa.float64()),
-            ("rest_stable", pa.bool_()),
-            ("d_pos_m", pa.float64()),
-            ("d_ori_rad", pa.float64()),
-            ("oscillation_pass", pa.bool_()),
-            ("prompt_alignment", pa.float64()),
-            ("model_queries", pa.int64()),
-            ("tokens", pa.int64()),
-            ("wall_seconds", pa.float64()),
-            ("stage_seconds", pa.string()),  # JSON {stage: s}
-            ("input_hash", pa.string()),
-            ("config_hash", pa.string()),
-            ("refine_config_hash", pa.string()),
-            ("code_version", pa.string()),
-            ("out_dir", pa.string()),
-            ("source_run", pa.string()),  # run that produced the output (differs when skipped)
-            ("flow_run_id", pa.string()),
-            ("worker", pa.string()),
-            ("started_at", pa.timestamp("us", tz="UTC")),
-            ("finished_at", pa.timestamp("us", tz="UTC")),
-        ]
-    )
-
-
-#: Column names of a catalog row, in order (partition columns ``dataset`` and
-#: ``run`` come from the folder names).
-ROW_COLUMNS: tuple[str, ...] = (
-    "asset_id", "category", "prompt", "status", "failure_mode", "error", "estimator", "model",
-    "scale", "reference_scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
-    "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
-    "model_queries", "tokens", "wall_seconds", "stage_seconds", "input_hash", "config_hash",
-    "refine_config_hash", "code_version", "out_dir", "source_run", "flow_run_id", "worker",
-    "started_at", "finished_at",
-)  # fmt: skip
-
-ROW_STATUSES = ("done", "skipped", "failed")
+#: The Parquet schema of a row, derived from :class:`~asset2sim.schemas.catalog.CatalogRow`.
+_schema = arrow_schema
 
 _PART_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 
@@ -374,9 +292,10 @@ class ResultCatalog:
     def run_dir(self, dataset: str, run: str) -> Path:
         return self.root / f"dataset={_check_part('dataset', dataset)}" / f"run={_check_part('run', run)}"
 
-    def append_row(self, dataset: str, run: str, row: dict[str, Any]) -> Path:
-        """Write one row (a dict with the :data:`ROW_COLUMNS` keys; missing keys
-        are null) atomically as ``<asset_id>.parquet`` of the run's partition.
+    def append_row(self, dataset: str, run: str, row: CatalogRow | dict[str, Any]) -> Path:
+        """Write one row (a :class:`~asset2sim.schemas.catalog.CatalogRow`, or a
+        dict with its keys; missing keys are null) atomically as
+        ``<asset_id>.parquet`` of the run's partition.
 
         Writing the same asset again in the same run replaces its row.
 
@@ -387,20 +306,16 @@ class ResultCatalog:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        extra = set(row) - set(ROW_COLUMNS)
-        if extra:
-            raise ValueError(f"unknown catalog column(s): {sorted(extra)}")
-        if row.get("status") not in ROW_STATUSES:
-            raise ValueError(f"status must be one of {ROW_STATUSES}, got {row.get('status')!r}")
-        aid = _check_part("asset", str(row.get("asset_id") or ""))
-        schema = _schema()
-        values = {}
-        for name in ROW_COLUMNS:
-            v = row.get(name)
-            if isinstance(v, float) and not math.isfinite(v):
-                v = None
-            values[name] = [v]
-        table = pa.Table.from_pydict(values, schema=schema)
+        if not isinstance(row, CatalogRow):
+            extra = set(row) - set(ROW_COLUMNS)
+            if extra:
+                raise ValueError(f"unknown catalog column(s): {sorted(extra)}")
+            if row.get("status") not in ROW_STATUSES:
+                raise ValueError(f"status must be one of {ROW_STATUSES}, got {row.get('status')!r}")
+            row = CatalogRow.model_validate(row)
+        aid = _check_part("asset", row.asset_id)
+        values = {name: [v] for name, v in row.model_dump().items()}
+        table = pa.Table.from_pydict(values, schema=_schema())
         buf = pa.BufferOutputStream()
         pq.write_table(table, buf, compression="zstd")
         return atomic.write_bytes(self.run_dir(dataset, run) / f"{aid}.parquet", buf.getvalue().to_pybytes())

@@ -5,27 +5,41 @@ Subcommands live in :mod:`asset2sim.commands`, one module each, defining
 ``run(args) -> int`` (the exit code). They are discovered at start-up, so a
 command is added by adding a module. The library itself never prints or exits;
 only these command modules talk to the terminal.
+
+One top-level handler (:func:`main`): an expected failure
+(:class:`asset2sim.commands._status.CommandError`) prints one line with its
+code and path and exits with its status; any other exception is an internal
+error: one line naming a log file that holds the traceback, exit status 70.
+``--debug`` also prints the traceback. Statuses: :mod:`asset2sim.commands._status`
+and README.md ("Exit statuses").
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
+import tempfile
+import time
+import traceback
 
+import asset2sim.commands as commands
 from asset2sim import __version__
+from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, CommandError
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every discovered subcommand."""
-    import asset2sim.commands as commands
-
     parser = argparse.ArgumentParser(
         prog="asset2sim",
         description="Turn articulated-object assets into interaction-ready simulation assets.",
+        epilog="exit statuses: 0 done, 1 invalid input, 2 invalid request/overlay or usage, 3 written but not "
+        "interaction-ready, 4 output location problem, 70 internal error (see README.md)",
     )
     parser.add_argument("--version", action="version", version=f"asset2sim {__version__}")
+    parser.add_argument("--debug", action="store_true", help="print the traceback of an error (also accepted after the command)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
@@ -33,8 +47,21 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"asset2sim.commands.{info.name}")
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of an error")
         p.set_defaults(_run=module.run)
     return parser
+
+
+def write_error_log(command: str | None, exc: BaseException) -> str:
+    """Write ``exc``'s traceback to a new log file (``$ASSET2SIM_LOG_DIR`` or
+    the temporary folder); returns its path."""
+    folder = os.environ.get("ASSET2SIM_LOG_DIR") or tempfile.gettempdir()
+    os.makedirs(folder, exist_ok=True)
+    fd, path = tempfile.mkstemp(prefix=f"asset2sim-{command or 'cli'}-{time.strftime('%Y%m%d-%H%M%S')}-", suffix=".log", dir=folder)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(f"asset2sim {__version__} {command or ''}: internal error\nargv: {sys.argv!r}\n\n")
+        fh.write("".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,7 +71,28 @@ def main(argv: list[str] | None = None) -> int:
     if not hasattr(args, "_run"):
         parser.print_help()
         return 2
-    return int(args._run(args) or 0)
+    debug = bool(getattr(args, "debug", False))
+    command = getattr(args, "command", None)
+    try:
+        return int(args._run(args) or 0)
+    except CommandError as exc:
+        if debug:
+            traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+        print(exc.line(command), file=sys.stderr, flush=True)
+        return exc.status
+    except KeyboardInterrupt:
+        print(f"asset2sim {command}: INTERRUPTED", file=sys.stderr, flush=True)
+        return INTERRUPTED
+    except Exception as exc:  # the one place that turns a bug into a status
+        if debug:
+            traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+        try:
+            where = f"traceback in {write_error_log(command, exc)}"
+        except OSError as log_exc:
+            where = f"no log written ({log_exc}); rerun with --debug for the traceback"
+        first = (str(exc).strip().splitlines() or [""])[0]
+        print(f"asset2sim {command}: INTERNAL_ERROR: {type(exc).__name__}: {first}; {where}", file=sys.stderr, flush=True)
+        return INTERNAL_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -20,13 +20,13 @@ import json
 from pathlib import Path
 from typing import Any, Iterable
 
+from asset2sim.catalog import ResultCatalog
 from asset2sim.schemas.report import FAILURE_MODES
+from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
 
 
 def load(catalog_root: Path | str, dataset: str | None = None, run: str | None = None):
     """Rows of the catalog at ``catalog_root`` (optionally one dataset / run)."""
-    from asset2sim.catalog import ResultCatalog
-
     return ResultCatalog(catalog_root).read(dataset, run)
 
 
@@ -78,7 +78,7 @@ def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = No
     d = df.copy()
     for k in keys:
         d[k] = d[k].fillna("(unknown)")
-    d["failure_mode"] = pd.Categorical(d["failure_mode"].fillna("crash"), categories=list(FAILURE_MODES))
+    d["failure_mode"] = pd.Categorical(d["failure_mode"].fillna(MISSING_FAILURE_MODE), categories=list(FAILURE_MODES))
     table = pd.crosstab([d[k] for k in keys], d["failure_mode"], dropna=False)
     table = table.reindex(columns=list(FAILURE_MODES), fill_value=0)
     table = table.loc[table.sum(axis=1) > 0]
@@ -109,7 +109,7 @@ def run_summary(df) -> dict[str, Any]:
         out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None)
         out["failure_modes"] = {m: 0 for m in FAILURE_MODES}
         return out
-    modes = df["failure_mode"].fillna("crash")
+    modes = df["failure_mode"].fillna(MISSING_FAILURE_MODE)
     out["failure_modes"] = {m: int((modes == m).sum()) for m in FAILURE_MODES}
     out["pass_rate_all"] = float((modes == "none").mean())
     out["stability_pass_rate"] = _rate(df["rest_stable"])
@@ -239,7 +239,7 @@ def failed_assets(df, run: str | None = None):
 
     if run is not None:
         df = df[df["run"] == run]
-    d = df[df["failure_mode"].fillna("crash") != "none"]
+    d = df[df["failure_mode"].fillna(MISSING_FAILURE_MODE) != "none"]
     cols = ["asset_id", "category", "status", "failure_mode", "error"]
     if d.empty:
         return pd.DataFrame(columns=cols)

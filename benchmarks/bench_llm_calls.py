@@ -50,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     from asset2sim.schemas.config import RefineConfig
     from asset2sim.tasks.synthesize import estimate
     from asset2sim.tasks.synthesize import llm_estimator as le
+    from asset2sim.tasks.synthesize.context import build_context
     from asset2sim.tasks.synthesize.llm_client import LLMError
     from asset2sim.tasks.refine import RefineError, refine_asset
 
@@ -82,9 +83,9 @@ def main(argv: list[str] | None = None) -> int:
                         rec.update(report_queries=res.report.model_queries, failure_mode=res.report.failure_mode,
                                    scale=res.report.scale)
                     else:
-                        with le.build_context(src, row["prompt"], category=row["category"] or None, asset_id=row["id"]) as ctx:
+                        with build_context(src, row["prompt"], category=row["category"] or None, asset_id=row["id"]) as ctx:
                             if method == "asset2sim":
-                                ov = estimate.get_estimator("openai", model="m", base_url=srv.url).estimate(ctx)
+                                ov = estimate.get_estimator("openai", model="m", base_url=srv.url).estimate(ctx).overlay
                             elif method == "direct":
                                 ov = le.direct_overlay(ctx, client)
                             else:

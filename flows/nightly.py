@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim.catalog import load_catalog
-from asset2sim.flows.refine_flow import FLOW_NAME, flow_parameters
+from asset2sim.flows.stages import FLOW_NAME, default_prefect_home, flow_parameters
 
 
 @dataclass(frozen=True)
@@ -152,8 +152,6 @@ def start_local_server(project_root: Path | str, port: int | None = None, timeou
             is ``<project>/.prefect/server.log``).
     """
     import urllib.request
-
-    from asset2sim.flows.refine_flow import default_prefect_home
 
     home = default_prefect_home(project_root)
     home.mkdir(parents=True, exist_ok=True)

@@ -1,42 +1,50 @@
 """Refine one asset end to end: a folder and a request in, the SPEC's output
 folder out, verified in PyBullet.
 
-Stages (each a plain function of its own module; this module chains them and
-records wall time per stage):
+Stages (each a plain function of its own module; this module chains them,
+one small function per stage, and records wall time per stage):
 
-1. extract (``tasks.extract``), 2. analyze (``tasks.analyze``),
-3. request + category (``tasks.request``, ``tasks.priors``) and the geometric
-closed states (``tasks.closed_state``), 4. synthesize the overlay
-(``tasks.estimate``) and validate it (``tasks.validate_overlay``), 5. write
-(``tasks.write``), 6. refine the initial state (``tasks.refine_state``),
-7. post-check and escalation (``tasks.postcheck``), 8. report, exports and a
-completion marker written last.
+1. extract (``tasks.ingest.extract``), 2. analyze (``tasks.geometry.analyze``),
+3. request, category and the geometric closed states, the estimation context
+(``tasks.synthesize.context.build_context``), and a resting pose the request
+asks for (``tasks.state.pose``), 4. synthesize the overlay and the requested
+bands (``tasks.synthesize.estimate``) and validate it
+(``tasks.synthesize.validate_overlay``), 5. write (``tasks.publish.write``),
+6. refine the initial state (``tasks.state.refine_state``, ``tasks.state.collision``),
+7. post-check and escalation (``tasks.check.postcheck``), 8. report, extras
+(MJCF export, renders, HTML report) and a completion marker written last.
 
 The library never prints: progress goes to the optional ``progress`` callback.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
 from asset2sim import __version__, atomic
 from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.pybullet_engine import _quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.schemas.report import EscalationRound, RefineReport
-from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents, subtree_links
+from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
+from asset2sim.tasks.check import parity, postcheck
+from asset2sim.tasks.check.verdict import post_check_failure_mode
+from asset2sim.tasks.evaluation import evaluate
+from asset2sim.tasks.geometry import analyze
+from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.interpret import request
+from asset2sim.tasks.publish import export_mjcf, output_folder, render, write
+from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
+from asset2sim.tasks.state import collision, pose, refine_state
+from asset2sim.tasks.synthesize import estimate, validate_overlay
+from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 
-MARKER_NAME = ".asset2sim-complete.json"
-REPORT_NAME = "report.json"
 
 Progress = Callable[[str, str], None]
 """progress(stage, message)"""
@@ -63,33 +71,264 @@ class RefineResult:
     extras: dict[str, str] = field(default_factory=dict)
 
 
-def run_hash(input_hash: str, config: RefineConfig, prompt: str, category: str | None) -> str:
-    """Configuration hash of one run: config + prompt + category override (hex, 16)."""
-    blob = json.dumps(
-        {"config": config.config_hash(), "prompt": prompt, "category": category, "version": __version__},
-        sort_keys=True,
-    ).encode()
-    return hashlib.sha256(blob).hexdigest()[:16]
+def refine_asset(
+    asset_dir: Path | str,
+    prompt: str,
+    out_dir: Path | str,
+    config: RefineConfig | None = None,
+    *,
+    category: str | None = None,
+    asset_id: str | None = None,
+    progress: Progress | None = None,
+    skip_if_complete: bool = True,
+    extras: bool = True,
+    overwrite: bool = False,
+) -> RefineResult:
+    """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``.
+
+    Args:
+        asset_dir: PartNet-Mobility-style folder (or a URDF file).
+        prompt: the request, e.g. "I want a slightly open stapler.".
+        out_dir: output folder (created; must not be inside the input).
+        config: pipeline knobs (default :class:`RefineConfig`).
+        category: overrides the asset's own category (e.g. a manifest column).
+        asset_id: identifier for reports (default: folder name).
+        progress: callback(stage, message) for user-facing progress.
+        skip_if_complete: return the existing result when the completion
+            marker matches the input and configuration hashes.
+        extras: also write exports (MJCF), renders and the HTML report.
+        overwrite: write into an output folder that holds files asset2sim did
+            not write (they are kept unless the run writes the same path);
+            without it such a folder is refused
+            (:mod:`asset2sim.tasks.publish.output_folder`).
+
+    Returns:
+        :class:`RefineResult`; ``report.failure_mode`` is "none" when every
+        check passed, else the first failing check's mode (the output is still
+        written: the report shows the evidence).
+
+    Raises:
+        RefineError: input invalid, estimator failure or invalid overlay
+            (``failure_mode`` says which); nothing but partial-free atomic files
+            are left in ``out_dir``.
+    """
+    config = config or RefineConfig()
+    out_dir = Path(out_dir)
+    _check_prompt(prompt)
+    est = _open_estimator(config)  # first: a model backend without its key fails before any work
+    log = _StageLog(progress)
+    asset, findings = _extract(asset_dir, out_dir, asset_id, category)
+    chash = run_hash(asset.input_hash, config, prompt, category)
+    if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
+        return _completed_result(out_dir, log)
+    owner = _start_output(asset, out_dir, overwrite)
+    _announce_extract(asset, findings, log)
+    cache = analyze.MeshCache()
+    geometry = _analyze(asset, cache, log)
+    with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
+        pose_note = _interpret(ctx, log)
+        att, pose_note = _synthesize_and_check(ctx, est, config, out_dir, cache, log, pose_note)
+    _remove_stale_collision(owner, asset, att.overrides)
+    _announce_post_check(att, log)
+    report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
+    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
+    extra_paths = _extras(out_dir, report, att.check, log) if extras else {}
+    _write_marker(owner, asset.input_hash, chash)
+    return RefineResult(out_dir=out_dir, report=report, overlay=att.overlay, extras=extra_paths)
 
 
-def is_complete(out_dir: Path, input_hash: str, config_hash: str) -> bool:
-    """True when ``out_dir`` holds a completion marker for exactly this input
-    and configuration, and every file it lists exists with its recorded hash."""
-    marker = Path(out_dir) / MARKER_NAME
+# ------------------------------------------------------------------ progress
+class _StageLog:
+    """Progress messages and wall time per stage (s, summed over repeats)."""
+
+    def __init__(self, progress: Progress | None):
+        self.say: Progress = progress or (lambda stage, msg: None)
+        self.times: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        """Charge the time since the previous lap to ``stage``."""
+        now = time.perf_counter()
+        self.times[stage] = self.times.get(stage, 0.0) + (now - self._t)
+        self._t = now
+
+
+# ---------------------------------------------------------- 1-3: extract .. interpret
+def _check_prompt(prompt: str) -> None:
+    """A request over the length cap is refused before any work:
+    RefineError("invalid_input", ["REQUEST_TOO_LONG"]) from ``RequestTooLong``."""
     try:
-        data = json.loads(marker.read_text())
-    except (OSError, ValueError):
-        return False
-    if data.get("input_hash") != input_hash or data.get("config_hash") != config_hash or data.get("version") != __version__:
-        return False
-    for rel, digest in data.get("files", {}).items():
-        p = Path(out_dir) / rel
-        if not p.is_file() or atomic.sha256_file(p) != digest:
-            return False
-    return True
+        request.check_request_length(prompt)
+    except request.RequestTooLong as exc:
+        raise RefineError(str(exc), "invalid_input", exc.codes) from exc
+
+
+def _open_estimator(config: RefineConfig) -> estimate.Estimator:
+    """The configured estimator; RefineError("estimator_failure") when it cannot be made."""
+    try:
+        return estimate.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
+    except Exception as exc:
+        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure") from exc
+
+
+def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None) -> tuple[AssetDescription, list]:
+    """Stage 1: the checked asset and its validation findings; the output
+    folder checked against it. RefineError("invalid_input") with the codes."""
+    try:
+        asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
+        write.check_output_folder(asset, out_dir)
+    except (extract.AssetError, write.OutputError) as exc:
+        err = RefineError(str(exc), "invalid_input")
+        err.codes = list(getattr(exc, "codes", []) or [])
+        raise err from exc
+    return asset, findings
+
+
+def _completed_result(out_dir: Path, log: _StageLog) -> RefineResult:
+    """The result recorded in a complete output folder (nothing recomputed)."""
+    report = RefineReport.model_validate_json((out_dir / REPORT_NAME).read_text())
+    overlay = Overlay.model_validate_json((out_dir / write.OVERLAY_NAME).read_text())
+    log.say("skip", f"{out_dir} is complete for this input and configuration")
+    return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
+
+
+def _announce_extract(asset: AssetDescription, findings: list, log: _StageLog) -> None:
+    log.say("extract", f"{asset.urdf_path}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, category {asset.category}"
+            + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
+    log.lap("extract")
+
+
+def _analyze(asset: AssetDescription, cache: analyze.MeshCache, log: _StageLog) -> dict[str, LinkGeometry]:
+    """Stage 2: mesh analysis of every link; RefineError("invalid_input") on failure."""
+    try:
+        geometry = analyze.analyze_asset(asset, cache=cache)
+    except Exception as exc:
+        raise RefineError(f"{asset.urdf_path}: mesh analysis failed: {exc}", "invalid_input") from exc
+    log.say("analyze", f"{len(geometry)} links with geometry, volumes " + ", ".join(f"{k}={g.volume:.3g}" for k, g in geometry.items()))
+    log.lap("analyze")
+    return geometry
+
+
+def _moving_links(ctx: EstimationContext) -> list[str]:
+    """Links moved by the task-relevant joints (sorted)."""
+    return sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in ctx.subtrees[j]})
+
+
+def _interpret(ctx: EstimationContext, log: _StageLog) -> str:
+    """Stage 3 (after :func:`build_context`): the resting pose the request's
+    words ask for ("lying flat", "sideways") into ``ctx.root_rotation``.
+    Returns the pose note ("" when none was asked)."""
+    spec = ctx.request
+    pose_note = ""
+    if spec.pose_hint in ("lying_flat", "sideways"):
+        ctx.root_rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
+        log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
+    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
+    log.lap("closed_state")
+    return pose_note
+
+
+# ----------------------------------------------------- 4-7: synthesize .. post-check
+@dataclass
+class _Synthesis:
+    """Stage 4's result: the validated overlay and the state it asks for."""
+
+    overlay: Overlay
+    issues: list
+    bands: dict[str, str]
+    prismatic: set[str]
+    closed_out: dict[str, ClosedState]
+    """Closed ends at the overlay's scale."""
+    requested: dict[str, float]
+    """Requested joint positions (output units)."""
+
+
+@dataclass
+class _Attempt:
+    """One synthesize -> validate -> write -> refine state -> post-check pass."""
+
+    asset: AssetDescription
+    overlay: Overlay
+    issues: list
+    bands: dict[str, str]
+    prismatic: set[str]
+    closed_out: dict[str, ClosedState]
+    st: StateRefinement
+    state: dict[str, float]
+    overrides: dict
+    root_rotation: object
+    check: postcheck.PostCheck
+    rounds: list[EscalationRound]
+
+    def rewrite(self, out_dir: Path) -> None:
+        """Write this attempt's files again (after another attempt overwrote them)."""
+        write.write_output(
+            self.asset, self.overlay, out_dir, self.state, copy=False,
+            collision_overrides=self.overrides, root_rotation=self.root_rotation,
+        )
+
+
+def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog, pose_note: str) -> tuple[_Attempt, str]:
+    """Stages 4-7 once; when the object is unstable as modelled and the
+    request named no pose, once more resting on its stablest face (kept only
+    if better in simulation). Returns (attempt, pose note)."""
+    att = _attempt(ctx, est, config, out_dir, cache, log)
+    if att.check.stable or ctx.request.pose_hint is not None:
+        return att, pose_note
+    state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
+    R, note = pose.most_stable_rotation(ctx.session, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points, _moving_links(ctx), exclude_modelled=True)
+    if R is None:
+        return att, pose_note
+    log.say("post_check", f"unstable as modelled; {note}")
+    ctx.root_rotation = R
+    second = _attempt(ctx, est, config, out_dir, cache, log)
+    if second.check.stable and (second.check.passed or not att.check.passed):
+        return second, note
+    ctx.root_rotation = None
+    att.rewrite(out_dir)  # the first attempt stays the result
+    return att, f"{note}; not better in simulation, kept as modelled"
+
+
+def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog) -> _Attempt:
+    """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
+    syn = _synthesize(ctx, est, config, log)
+    urdf = _write(ctx, syn, out_dir, log)
+    st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
+    state = dict(st.result)
+    overlay, check, rounds = _post_check(ctx, syn.overlay, state, overrides, urdf, config, out_dir, log)
+    return _Attempt(
+        asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=syn.closed_out,
+        st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds,
+    )
+
+
+def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLog) -> _Synthesis:
+    """Stage 4: the estimator's overlay and bands, the overlay validated and
+    the requested state at its scale. RefineError("estimator_failure" or
+    "invalid_overlay")."""
+    asset = ctx.asset
+    prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
+    try:
+        result = est.estimate(ctx)
+    except Exception as exc:
+        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure") from exc
+    bands = dict(result.bands)
+    log.lap("synthesize")
+    try:
+        overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
+    except validate_overlay.OverlayInvalid as exc:
+        raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
+    s = overlay.scale
+    requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
+    if overlay.initial_joint_positions:
+        requested.update(overlay.initial_joint_positions)
+    log.say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")
+    log.lap("validate")
+    return _Synthesis(overlay, issues, bands, prismatic, _scaled_closed(ctx.closed, s, prismatic), requested)
 
 
 def _scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
+    """Closed ends at ``scale`` (prismatic positions and ranges times ``scale``)."""
     out = {}
     for n, cs in closed.items():
         if n in prismatic:
@@ -108,306 +347,36 @@ def _scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[
     return out
 
 
-def _subtree_height(session, links: list[str], hull: dict[str, np.ndarray]) -> float:
-    from asset2sim.tasks.geometry.closed_state import _aabb
-
-    box = _aabb(session, links, hull)
-    return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
-
-
-def refine_asset(
-    asset_dir: Path | str,
-    prompt: str,
-    out_dir: Path | str,
-    config: RefineConfig | None = None,
-    *,
-    category: str | None = None,
-    asset_id: str | None = None,
-    progress: Progress | None = None,
-    skip_if_complete: bool = True,
-    extras: bool = True,
-) -> RefineResult:
-    """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``.
-
-    Args:
-        asset_dir: PartNet-Mobility-style folder (or a URDF file).
-        prompt: the request, e.g. "I want a slightly open stapler.".
-        out_dir: output folder (created; must not be inside the input).
-        config: pipeline knobs (default :class:`RefineConfig`).
-        category: overrides the asset's own category (e.g. a manifest column).
-        asset_id: identifier for reports (default: folder name).
-        progress: callback(stage, message) for user-facing progress.
-        skip_if_complete: return the existing result when the completion
-            marker matches the input and configuration hashes.
-        extras: also write exports (MJCF), renders and the HTML report when
-            those modules are available.
-
-    Returns:
-        :class:`RefineResult`; ``report.failure_mode`` is "none" when every
-        check passed, else the first failing check's mode (the output is still
-        written: the report shows the evidence).
-
-    Raises:
-        RefineError: input invalid, estimator failure or invalid overlay
-            (``failure_mode`` says which); nothing but partial-free atomic files
-            are left in ``out_dir``.
-    """
-    from asset2sim.tasks.geometry import analyze
-    from asset2sim.tasks.synthesize import estimate
-    from asset2sim.tasks.ingest import extract
-    from asset2sim.tasks.interpret import priors
-    from asset2sim.tasks.interpret import request
-    from asset2sim.tasks.publish import write
-
-    config = config or RefineConfig()
-    say = progress or (lambda stage, msg: None)
-    out_dir = Path(out_dir)
-    # the estimator first: a model backend without its key fails before any work
-    try:
-        est = estimate.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
-    except Exception as exc:
-        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure") from exc
-    times: dict[str, float] = {}
-    t = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal t
-        now = time.perf_counter()
-        times[stage] = times.get(stage, 0.0) + (now - t)
-        t = now
-
-    # 1. extract
-    try:
-        asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
-        write.check_output_folder(asset, out_dir)
-    except (extract.AssetError, write.OutputError) as exc:
-        err = RefineError(str(exc), "invalid_input")
-        err.codes = list(getattr(exc, "codes", []) or [])
-        raise err from exc
-    chash = run_hash(asset.input_hash, config, prompt, category)
-    if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
-        report = RefineReport.model_validate_json((out_dir / REPORT_NAME).read_text())
-        overlay = Overlay.model_validate_json((out_dir / write.OVERLAY_NAME).read_text())
-        say("skip", f"{out_dir} is complete for this input and configuration")
-        return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
-    _start_output(out_dir)
-    say("extract", f"{asset.urdf_path}: {len(asset.links)} links, {len(asset.movable_joints())} movable joints, category {asset.category}"
-        + (f"; {len(findings)} validation findings (none fatal)" if findings else ""))
-    lap("extract")
-
-    # 2. analyze
-    mesh_cache = analyze.MeshCache()
-    try:
-        geometry: dict[str, LinkGeometry] = analyze.analyze_asset(asset, cache=mesh_cache)
-    except Exception as exc:
-        raise RefineError(f"{asset.urdf_path}: mesh analysis failed: {exc}", "invalid_input") from exc
-    say("analyze", f"{len(geometry)} links with geometry, volumes " + ", ".join(f"{k}={g.volume:.3g}" for k, g in geometry.items()))
-    lap("analyze")
-
-    # 3. request, category, closed states
-    spec = request.parse_request(prompt)
-    labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
-    match = priors.recognize_category(category or asset.category, labels, prompt)
-    cat_name = getattr(match, "name", None) or str(match)
-    kin = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim))
-    try:
-        hull = link_hull_points(asset, cache=mesh_cache)
-        closed = closed_positions(kin, asset, hull_points=hull)
-        closed_state = {n: c.q_closed for n, c in closed.items()}
-        extents = object_extents(kin, closed_state, asset, hull)
-        subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
-        heights = {n: _subtree_height(kin, links, hull) for n, links in subtrees.items()}
-        ctx = estimate.EstimationContext(
-            asset=asset,
-            geometry=geometry,
-            request=spec,
-            category=cat_name,
-            category_reason=getattr(match, "reason", ""),
-            closed=closed,
-            closed_extents=extents,
-            session=kin,
-            subtrees=subtrees,
-            joint_heights=heights,
-        )
-        moving = sorted({ln for j in estimate.task_relevant_joints(ctx) for ln in subtrees[j]})
-        pose_note = ""
-        if spec.pose_hint in ("lying_flat", "sideways"):
-            from asset2sim.tasks.state import pose
-
-            ctx.root_rotation, pose_note = pose.resting_rotation(kin, asset, closed_state, hull, moving)
-            say("request", f"pose '{spec.pose_hint}': {pose_note}")
-        say("request", f"category {cat_name}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
-        lap("closed_state")
-
-        att = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
-        if not att.check.stable and spec.pose_hint is None:
-            # the object tips or slides as modelled: try resting it on its stablest face
-            from asset2sim.tasks.state import pose
-
-            state_in = estimate.state_from_bands(closed, att.bands, 1.0, att.prismatic)
-            R, note = pose.most_stable_rotation(kin, asset, att.overlay.links, state_in, att.overlay.scale, hull, moving, exclude_modelled=True)
-            if R is not None:
-                say("post_check", f"unstable as modelled; {note}")
-                ctx.root_rotation = R
-                second = _attempt(ctx, est, config, out_dir, mesh_cache, say, lap)
-                if second.check.stable and (second.check.passed or not att.check.passed):
-                    att, pose_note = second, note
-                else:
-                    ctx.root_rotation = None
-                    att.rewrite(out_dir)  # the first attempt stays the result
-                    pose_note = f"{note}; not better in simulation, kept as modelled"
-    finally:
-        kin.close()
-    overlay, st, check, rounds, issues, bands, state, closed_out = (
-        att.overlay, att.st, att.check, att.rounds, att.issues, att.bands, att.state, att.closed_out
-    )
-    s = overlay.scale
-    _remove_stale_collision(out_dir, att.overrides)
-    pen = check.metric("penetration")
-    stab = check.metric("rest_stability")
-    osc = check.metric("oscillation")
-    say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(rounds) - 1}")
-
-    if not check.stable:
-        failure = "unstable"
-    elif not osc.passed:
-        failure = "oscillating"
-    elif pen.value is not None and pen.value > 5.0:
-        failure = "unresolved_penetration"
-    else:
-        failure = "none"
-    report = RefineReport(
-        asset_id=asset.asset_id,
-        source=str(asset.source_dir),
-        prompt=prompt,
-        category=cat_name,
-        version=__version__,
-        input_hash=asset.input_hash,
-        config_hash=chash,
-        estimator=overlay.estimator.name,
-        model=overlay.estimator.model,
-        model_queries=overlay.estimator.queries + (st.model_queries if st is not None else 0),
-        model_tokens=overlay.estimator.tokens,
-        model_cost_usd=overlay.estimator.cost_usd,
-        model_seconds=overlay.estimator.seconds,
-        scale=s,
-        total_mass=overlay.total_mass(),
-        initial_joint_positions=state,
-        closed_positions={n_: c.q_closed for n_, c in closed_out.items()},
-        requested_bands=bands,
-        opening_fractions={n_: abs(c.fraction(state[n_])) for n_, c in closed_out.items() if n_ in state},
-        state=st,
-        metrics=check.metrics + [m for res in check.engine_results.values() for m in res],
-        parity=_parity_rows(check),
-        escalation=rounds,
-        validation=[_finding_dict(f) for f in findings] + [i.model_dump() for i in issues],
-        failure_mode=failure,
-        stage_seconds=times,
-        notes=list(overlay.notes.other) + ([f"resting pose ({spec.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
-    )
-    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-    extra_paths: dict[str, str] = {}
-    if extras:
-        from asset2sim.engines.pybullet_engine import _quiet_stdout
-
-        with _quiet_stdout():  # engines and renderers print from C; the library must not
-            extra_paths = _write_extras(out_dir, report, check, say)
-        lap("extras")
-        report.stage_seconds = times
-        atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-    files = sorted(
-        str(p_.relative_to(out_dir)) for p_ in out_dir.rglob("*")
-        if p_.is_file() and p_.name != MARKER_NAME and not p_.name.endswith(".tmp")
-    )
-    atomic.write_json(
-        out_dir / MARKER_NAME,
-        {
-            "input_hash": asset.input_hash,
-            "config_hash": chash,
-            "version": __version__,
-            "files": {f: atomic.sha256_file(out_dir / f) for f in files},
-        },
-    )
-    return RefineResult(out_dir=out_dir, report=report, overlay=overlay, extras=extra_paths)
+def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLog) -> Path:
+    """Stage 5: the output folder at the requested state (meshes copied once;
+    later writes only rewrite the small files). Returns the URDF path."""
+    paths = write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, root_rotation=ctx.root_rotation)
+    log.lap("write")
+    return paths.urdf
 
 
-
-@dataclass
-class _Attempt:
-    """One synthesize -> validate -> write -> refine state -> post-check pass."""
-
-    asset: AssetDescription
-    overlay: Overlay
-    issues: list
-    bands: dict[str, str]
-    prismatic: set[str]
-    closed_out: dict[str, ClosedState]
-    st: object
-    state: dict[str, float]
-    overrides: dict
-    root_rotation: object
-    check: object
-    rounds: list[EscalationRound]
-
-    def rewrite(self, out_dir: Path) -> None:
-        """Write this attempt's files again (after another attempt overwrote them)."""
-        from asset2sim.tasks.publish import write
-
-        write.write_output(
-            self.asset, self.overlay, out_dir, self.state, copy=False,
-            collision_overrides=self.overrides, root_rotation=self.root_rotation,
-        )
-
-
-def _attempt(ctx, est, config: RefineConfig, out_dir: Path, mesh_cache, say: Progress, lap) -> _Attempt:
-    """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
-    from asset2sim.tasks.synthesize import estimate
-    from asset2sim.tasks.check import postcheck
-    from asset2sim.tasks.synthesize import validate_overlay
-    from asset2sim.tasks.publish import write
-
-    asset, geometry, closed = ctx.asset, ctx.geometry, ctx.closed
-    prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
-    root_rotation = ctx.root_rotation
-    # 4. synthesize + validate
-    try:
-        overlay = est.estimate(ctx)
-    except Exception as exc:
-        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure") from exc
-    bands, _ = estimate.requested_bands(ctx)
-    bands.update(ctx.settings.get("model_bands", {}))  # a model backend's band choice wins
-    lap("synthesize")
-    try:
-        overlay, issues = validate_overlay.validate_overlay(overlay, asset, geometry)
-    except validate_overlay.OverlayInvalid as exc:
-        raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
-    s = overlay.scale
-    closed_out = _scaled_closed(closed, s, prismatic)
-    requested = estimate.state_from_bands(closed, bands, s, prismatic)
-    if overlay.initial_joint_positions:
-        requested.update(overlay.initial_joint_positions)
-    say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")
-    lap("validate")
-
-    # 5. write (meshes copied once; later writes only rewrite the small files)
-    paths = write.write_output(asset, overlay, out_dir, requested, root_rotation=root_rotation)
-    lap("write")
-
-    # 6. state refinement on the written (scaled) asset
+def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog) -> tuple[StateRefinement, dict]:
+    """Stage 6: state refinement on the written (scaled) asset, with the
+    estimator's joint proposer when it has one. Returns (refinement, collision overrides)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, overrides = _refine_state_with_decomposition(
-        asset, overlay, closed_out, bands, requested, paths.urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=proposer
+        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer
     )
-    state = dict(st.result)
-    say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
-    lap("refine_state")
+    log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
+    log.lap("refine_state")
+    return st, overrides
 
-    # 7. post-check and escalation
+
+def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
+    """Stage 7: write the refined state, post-check it, and escalate damping
+    and friction (rewrite, re-check) up to ``config.max_escalation_rounds``
+    times while it fails. Returns (final overlay, last check, rounds)."""
+    asset, root_rotation = ctx.asset, ctx.root_rotation
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
     write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-    check = postcheck.run_post_check(paths.urdf, state, overlay, config)
+    check = postcheck.run_post_check(urdf, state, overlay, config)
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     n = 0
     while not check.passed and n < config.max_escalation_rounds:
@@ -416,49 +385,38 @@ def _attempt(ctx, est, config: RefineConfig, out_dir: Path, mesh_cache, say: Pro
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-        check = postcheck.run_post_check(paths.urdf, state, overlay, config)
+        check = postcheck.run_post_check(urdf, state, overlay, config)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
-    lap("post_check")
-    return _Attempt(
-        asset=asset, overlay=overlay, issues=issues, bands=bands, prismatic=prismatic, closed_out=closed_out,
-        st=st, state=state, overrides=overrides, root_rotation=root_rotation, check=check, rounds=rounds,
-    )
+    log.lap("post_check")
+    return overlay, check, rounds
 
 
 def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None):
     """State refinement; when hull overlaps keep Phi above tolerance, CoACD
     decomposition of the colliding pieces and a second search (kept only if
     it lowers Phi). Returns (StateRefinement, collision overrides)."""
-    from asset2sim.tasks.synthesize import estimate
-    from asset2sim.tasks.state import refine_state
-    from asset2sim.tasks.publish import write
-
     fractions = estimate.band_intervals(bands)
     s = overlay.scale
 
     def search(start: dict[str, float]):
-        sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim))
-        try:
+        with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
             return refine_state.refine_initial_state(
                 sess, asset, closed_out, start, fractions,
                 tolerance=config.penetration_tolerance, lam=config.state_lambda,
                 max_evaluations=config.max_state_evaluations, seed=config.seed,
                 proposer=proposer,
             )
-        finally:
-            sess.close()
 
     st = search(requested)
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
         return st, {}
-    from asset2sim.tasks.state import collision
-
     deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
     links = sorted({ln for pair in deep for ln in pair})
     sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
     try:
         overrides, dnotes = collision.improve_collisions(
-            sess, asset, deep, s, out_dir, cache=mesh_cache, budget_s=config.decomposition_budget
+            sess, asset, deep, s, out_dir, cache=mesh_cache, budget_s=config.decomposition_budget,
+            folder=write.collision_folder(asset),
         )
     except (collision.DecompositionUnavailable, ValueError) as exc:
         say("refine_state", f"collision improvement skipped: {exc}")
@@ -490,17 +448,75 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     return st, overrides
 
 
-def _start_output(out_dir: Path) -> None:
-    """Before (re)writing an output folder: drop its completion marker (the
-    folder is not complete until the run finishes) and temporary files a
-    killed run left behind."""
-    (out_dir / MARKER_NAME).unlink(missing_ok=True)
-    if out_dir.is_dir():
-        for tmp in out_dir.rglob(".*.tmp"):
-            try:
-                tmp.unlink()
-            except OSError:
-                pass
+# ---------------------------------------------------------- 8: report, extras, marker
+def _announce_post_check(att: _Attempt, log: _StageLog) -> None:
+    check = att.check
+    pen = check.metric("penetration")
+    stab = check.metric("rest_stability")
+    osc = check.metric("oscillation")
+    log.say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
+
+
+def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt, findings: list, pose_note: str, times: dict[str, float]) -> RefineReport:
+    """``report.json``'s model from the final attempt."""
+    asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
+    return RefineReport(
+        asset_id=asset.asset_id,
+        source=str(asset.source_dir),
+        prompt=prompt,
+        category=ctx.category,
+        version=__version__,
+        input_hash=asset.input_hash,
+        config_hash=chash,
+        estimator=overlay.estimator.name,
+        model=overlay.estimator.model,
+        model_queries=overlay.estimator.queries + (st.model_queries if st is not None else 0),
+        model_tokens=overlay.estimator.tokens,
+        model_cost_usd=overlay.estimator.cost_usd,
+        model_seconds=overlay.estimator.seconds,
+        scale=overlay.scale,
+        total_mass=overlay.total_mass(),
+        initial_joint_positions=state,
+        closed_positions={n_: c.q_closed for n_, c in closed_out.items()},
+        requested_bands=att.bands,
+        opening_fractions={n_: abs(c.fraction(state[n_])) for n_, c in closed_out.items() if n_ in state},
+        state=st,
+        metrics=att.check.metrics + [m for res in att.check.engine_results.values() for m in res],
+        parity=_parity_rows(att.check),
+        escalation=att.rounds,
+        validation=[_finding_dict(f) for f in findings] + [i.model_dump() for i in att.issues],
+        failure_mode=post_check_failure_mode(att.check),
+        stage_seconds=times,
+        notes=list(overlay.notes.other) + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
+    )
+
+
+def _extras(out_dir: Path, report: RefineReport, check: postcheck.PostCheck, log: _StageLog) -> dict[str, str]:
+    """Exports, renders and the HTML report, then ``report.json`` again with
+    their notes and the final stage times. Returns name -> path."""
+    with _quiet_stdout():  # engines and renderers print from C; the library must not
+        paths = _write_extras(out_dir, report, check, log.say)
+    log.lap("extras")
+    report.stage_seconds = log.times
+    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
+    return paths
+
+
+def _write_marker(owner: output_folder.OwnedFolder, input_hash: str, chash: str) -> None:
+    """The completion marker, written last and only when every file the run
+    wrote exists (:func:`asset2sim.tasks.publish.contract.write_completion_marker`)."""
+    write_completion_marker(owner.root, input_hash, chash, owner=owner)
+
+
+def _start_output(asset: AssetDescription, out_dir: Path, overwrite: bool) -> output_folder.OwnedFolder:
+    """Before (re)writing an output folder: remove the completion marker and
+    the files earlier runs recorded, nothing else; refuse files asset2sim did
+    not write unless ``overwrite`` (:func:`asset2sim.tasks.publish.output_folder.start`).
+    RefineError("invalid_input") with the ``OUTPUT_*`` code."""
+    try:
+        return output_folder.start(asset.source_dir, out_dir, overwrite=overwrite)
+    except output_folder.OutputError as exc:
+        raise RefineError(str(exc), "invalid_input", exc.codes) from exc
 
 
 def _finding_dict(f) -> dict:
@@ -516,56 +532,35 @@ def _parity_rows(check) -> list[dict]:
     """Side-by-side engine rows for the report (PyBullet first)."""
     if not check.engine_results:
         return []
-    from asset2sim.tasks.check import parity
-
     base = [m for m in check.metrics if m.name in parity.METRICS]
     return parity.parity_table({"pybullet": base, **check.engine_results})
 
 
-def _remove_stale_collision(out_dir: Path, overrides: dict) -> None:
-    """Delete ``collision/`` pieces the final URDF does not reference."""
+def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescription, overrides: dict) -> None:
+    """Delete the collision pieces this run wrote that the final URDF does not
+    reference (only files of the run, never copied input meshes)."""
     used = {p_.filename for pcs in overrides.values() for p_ in pcs}
-    folder = out_dir / "collision"
-    if folder.is_dir():
-        for f in folder.iterdir():
-            if f"collision/{f.name}" not in used:
-                f.unlink(missing_ok=True)
-        if not any(folder.iterdir()):
-            folder.rmdir()
+    owner.remove_unreferenced(write.collision_folder(asset), used)
 
 
 def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> dict[str, str]:
-    """Optional outputs: MJCF export, renders, HTML report. Each is skipped
-    (with a note in the report) when its module or engine is unavailable."""
+    """Optional outputs: MJCF export, renders, HTML report. Each failure (an
+    engine or renderer unavailable included) is a note in the report, never
+    the loss of the refined asset."""
     out: dict[str, str] = {}
     try:
-        from asset2sim.tasks.publish import export_mjcf
-    except ImportError:
-        export_mjcf = None
-    if export_mjcf is not None:
-        try:
-            out["mjcf"] = str(export_mjcf.export_mjcf(out_dir))
-        except ImportError as exc:
-            report.notes.append(f"MJCF export skipped: {exc}")
-        except Exception as exc:  # export must not lose the refined asset
-            report.notes.append(f"MJCF export failed: {exc}")
+        out["mjcf"] = str(export_mjcf.export_mjcf(out_dir))
+    except ImportError as exc:  # MuJoCo not installed
+        report.notes.append(f"MJCF export skipped: {exc}")
+    except Exception as exc:  # export must not lose the refined asset
+        report.notes.append(f"MJCF export failed: {exc}")
     try:
-        from asset2sim.tasks.publish import render
-    except ImportError:
-        render = None
-    if render is not None:
-        try:
-            render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views")
-            out["views"] = str(out_dir / "views")
-        except Exception as exc:
-            report.notes.append(f"renders failed: {exc}")
+        render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views")
+        out["views"] = str(out_dir / "views")
+    except Exception as exc:
+        report.notes.append(f"renders failed: {exc}")
     try:
-        from asset2sim.tasks.publish import report_html
-    except ImportError:
-        report_html = None
-    if report_html is not None and hasattr(report_html, "write_refine_report"):
-        try:
-            out["html"] = str(report_html.write_refine_report(out_dir, report, check.trace))
-        except Exception as exc:
-            report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
+        out["html"] = str(evaluate.evaluate_refined(out_dir, report)["report"])
+    except Exception as exc:
+        report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
     return out

@@ -35,5 +35,6 @@ def run(args: argparse.Namespace) -> int:
             no_extras=args.no_extras,
             quiet=False,
             engines="pybullet",
+            overwrite=False,
         )
         return refine_cmd.run(ns)

@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         print("asset2sim export: MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'", file=sys.stderr)
         return 2
     from asset2sim.engines.fake import UrdfError
-    from asset2sim.engines.mujoco_engine import MjcfError
+    from asset2sim.engines.mjcf import MjcfError
     from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
 
     try:

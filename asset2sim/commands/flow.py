@@ -43,7 +43,7 @@ def _fmt(v, pct: bool = False) -> str:
 def run(args: argparse.Namespace) -> int:
     t0, t0_epoch = time.perf_counter(), time.time()
     from asset2sim.catalog import CatalogError, load_catalog
-    from asset2sim.flows.refine_flow import prepare_prefect_environment
+    from asset2sim.flows.stages import prepare_prefect_environment
 
     try:
         cat = load_catalog(args.catalog)

@@ -1,11 +1,23 @@
-"""``asset2sim refine ASSET --prompt P --out OUT``: refine one asset."""
+"""``asset2sim refine ASSET --prompt P --out OUT``: refine one asset.
+
+Exit status (:mod:`asset2sim.commands._status`): 0 written and
+interaction-ready, 1 invalid input, 2 invalid request (too long), estimator
+failure or invalid overlay, 3 written but not interaction-ready, 4 output
+location problem (inside or containing the input, not a folder, holding files
+asset2sim did not write without ``--overwrite``, not writable, disk full).
+"""
 
 from __future__ import annotations
 
 import argparse
-import sys
+import errno
+import os
 import time
 from pathlib import Path
+
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
+from asset2sim.tasks.interpret.request import RequestTooLong
+from asset2sim.tasks.publish.output_folder import OutputError
 
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (output folder of the SPEC's contract)."
@@ -31,6 +43,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="comma-separated engines the asset must pass in (pybullet,physx,mujoco); missing ones are skipped and reported",
     )
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)",
+    )
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
     parser.add_argument("--quiet", "-q", action="store_true", help="print only the summary")
 
@@ -66,6 +83,39 @@ def summary_lines(result) -> list[str]:
     return lines
 
 
+def _inside(path: str | os.PathLike | None, folder: Path) -> bool:
+    if path is None:
+        return False
+    p = os.path.abspath(os.fsdecode(path))
+    root = os.path.abspath(folder)
+    return p == root or p.startswith(root.rstrip(os.sep) + os.sep)
+
+
+def _refine_failure(exc: Exception, args: argparse.Namespace) -> CommandError:
+    """The one-line failure of a refine run: status, code and path."""
+    cause = exc.__cause__
+    codes = list(getattr(exc, "codes", []) or [])
+    if isinstance(cause, OutputError):
+        return CommandError(OUTPUT_LOCATION, cause.code, cause.path or args.out, str(cause))
+    if isinstance(cause, RequestTooLong):
+        return CommandError(INVALID_REQUEST, cause.code, args.asset, str(cause))
+    mode = getattr(exc, "failure_mode", "invalid_input")
+    status = INVALID_INPUT if mode == "invalid_input" else INVALID_REQUEST
+    code = f"{mode}" + (f" [{', '.join(codes)}]" if codes else "")
+    return CommandError(status, code, args.asset, str(exc))
+
+
+def _os_failure(exc: OSError, args: argparse.Namespace) -> CommandError:
+    """An OSError of a refine run: under the output folder (read-only, full
+    disk, permissions) -> status 4, else the input could not be read -> 1."""
+    name = errno.errorcode.get(exc.errno or 0, "OSERROR")
+    paths = [exc.filename, exc.filename2]
+    out = Path(args.out)
+    if any(_inside(p, out) for p in paths) or exc.errno in (errno.ENOSPC, errno.EROFS, getattr(errno, "EDQUOT", -1)):
+        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{name}]", exc.filename or args.out, exc.strerror or str(exc))
+    return CommandError(INVALID_INPUT, f"INPUT_READ_FAILED [{name}]", exc.filename or args.asset, exc.strerror or str(exc))
+
+
 def run(args: argparse.Namespace) -> int:
     from asset2sim.schemas.config import RefineConfig
     from asset2sim.tasks.refine import RefineError, refine_asset
@@ -88,10 +138,14 @@ def run(args: argparse.Namespace) -> int:
             progress=progress,
             skip_if_complete=not args.force,
             extras=not args.no_extras,
+            overwrite=getattr(args, "overwrite", False),
         )
     except RefineError as exc:
-        print(f"asset2sim refine: {exc.failure_mode}: {exc}", file=sys.stderr)
-        return 2
+        raise _refine_failure(exc, args) from exc
+    except OutputError as exc:  # e.g. an output file missing at the end: no completion marker
+        raise CommandError(OUTPUT_LOCATION, exc.code, exc.path or args.out, str(exc)) from exc
+    except OSError as exc:
+        raise _os_failure(exc, args) from exc
     for line in summary_lines(result):
         print(line)
-    return 0
+    return 0 if result.report.failure_mode == "none" else NOT_READY

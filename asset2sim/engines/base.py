@@ -73,21 +73,108 @@ class SessionOptions:
     conventions: SimConventions = field(default_factory=SimConventions)
 
 
+class EngineUnsupported(NotImplementedError):
+    """The engine cannot answer this query (names the engine and the query)."""
+
+
 class SimSession(Protocol):
-    """One loaded asset in one engine."""
+    """One loaded asset in one engine.
+
+    Stages talk to a simulator only through these attributes and methods
+    (as dm_control's tasks talk to ``Physics``); an engine that cannot answer
+    a query raises :class:`EngineUnsupported`. Positions m, angles rad,
+    quaternions x, y, z, w, every pose in the world frame.
+    """
 
     engine: str
+    options: SessionOptions
     joint_names: list[str]
     """Movable (revolute, continuous, prismatic) joints, in file order."""
     joint_types: dict[str, str]
     joint_limits: dict[str, tuple[float, float]]
+    joint_child: dict[str, str]
+    """Movable joint -> its child link."""
+    link_names: list[str]
+    """Every link of the URDF, the root first (PyBullet: then in joint index order)."""
 
+    # -------------------------------------------------------------- joints
     def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
         """Teleport joints (rad or m); unspecified joints keep their value."""
 
     def joint_positions(self) -> dict[str, float]:
         """Current joint positions (rad or m)."""
 
+    def joint_velocities(self) -> dict[str, float]:
+        """Current joint velocities (rad/s or m/s)."""
+
+    def joint_state(self, joint: str) -> tuple[float, float]:
+        """Position (rad or m) and velocity (rad/s or m/s) of one movable joint.
+
+        Raises:
+            KeyError: not a movable joint.
+        """
+
+    def joint_axis(self, joint: str) -> np.ndarray:
+        """Axis (3,) of a movable joint in its child link's frame, as the
+        engine holds it (world axis: ``link_frame(joint_child[joint])[1] @ axis``).
+
+        Raises:
+            KeyError: not a movable joint.
+        """
+
+    def apply_joint_effort(self, joint: str, effort: float) -> None:
+        """Generalized force (N*m or N) on a joint for the next step."""
+
+    # --------------------------------------------------------------- links
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """World position (3,) m and rotation matrix (3, 3) of the link's URDF
+        frame (the child frame of its parent joint) at the current state.
+
+        Raises:
+            KeyError: unknown link.
+        """
+
+    def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """The engine's axis-aligned bounding box of a link's collision
+        shapes, world, (lo (3,), hi (3,)) m. PyBullet: its broadphase AABB
+        (loose for rotated hulls); PhysX: bounds of the cooked hull points.
+
+        Raises:
+            KeyError: unknown link.
+        """
+
+    def link_has_collision(self, link: str) -> bool:
+        """Whether the link carries at least one collision shape."""
+
+    def link_collision_vertices(self, link: str) -> np.ndarray:
+        """Vertices (k, 3) of the link's collision meshes in the link frame, m
+        (k = 0 when it has none or the engine keeps none)."""
+
+    def link_masses(self) -> dict[str, float]:
+        """Mass (kg) the engine uses for every link (defaults included)."""
+
+    def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
+        """Signed distances (m, negative = penetration) of the closest points
+        between the collision shapes of two links of the body, every pair
+        within ``max_distance``, parent-child pairs included. Independent of
+        cached contacts.
+
+        Raises:
+            KeyError: unknown link.
+        """
+
+    def apply_link_force(self, link: str, force: np.ndarray, point: np.ndarray) -> None:
+        """External force (3,) N at a world point (3,) m on a link, for the
+        next step only."""
+
+    # ---------------------------------------------------------------- root
+    def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Root link position (3,) m and orientation quaternion (4,) x, y, z, w."""
+
+    def set_root_pose(self, pos: np.ndarray, orn: np.ndarray) -> None:
+        """Teleport the root to ``pos`` (3,) m, ``orn`` (4,) xyzw; zero its velocity."""
+
+    # ------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         """Phi (m) = sum over self-contact points of max(0, -separation), and the
         pairs sorted by depth (deepest first). Contacts with the ground excluded."""
@@ -95,19 +182,88 @@ class SimSession(Protocol):
     def ground_penetration(self) -> float:
         """Deepest penetration of any link into the ground plane, m (>= 0)."""
 
-    def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """Root link position (3,) m and orientation quaternion (4,) x, y, z, w."""
+    def step_ground_penetration(self) -> float:
+        """Deepest ground penetration (m, >= 0) among the contacts the last
+        step generated, without a new collision query (PyBullet: a query
+        would refresh its contact manifolds and change the next steps);
+        engines without step contacts answer :meth:`ground_penetration`."""
 
+    # ------------------------------------------------------------ dynamics
     def step(self, n: int = 1) -> None:
         """Advance n timesteps, applying springs each step."""
+
+    def save_state(self) -> int:
+        """Snapshot the simulation state (poses, velocities, contacts the
+        engine caches); returns a handle for :meth:`restore_state`."""
+
+    def restore_state(self, handle: int) -> None:
+        """Return to a snapshot of :meth:`save_state`."""
+
+    def discard_state(self, handle: int) -> None:
+        """Free a snapshot."""
 
     def close(self) -> None:
         """Release the engine's resources."""
 
 
+class ShapeWorld(Protocol):
+    """Free static convex shapes in a private collision world (no articulation,
+    no dynamics): distance queries between pieces of geometry."""
+
+    def add_convex(self, vertices: np.ndarray, scale: np.ndarray, position: np.ndarray, orientation: np.ndarray) -> int:
+        """Add the convex hull of ``vertices`` (k, 3), scaled per axis by
+        ``scale`` (3,), at ``position`` (3,) m and ``orientation`` (4,) xyzw;
+        returns its id."""
+
+    def set_pose(self, shape: int, position, orientation) -> None:
+        """Move a shape to ``position`` (3,) m, ``orientation`` (4,) xyzw."""
+
+    def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
+        """Signed distances (m, negative = penetration) of the closest points
+        between two shapes, within ``max_distance``."""
+
+    def close(self) -> None:
+        """Release the world."""
+
+
+class Viewer(Protocol):
+    """A URDF loaded for drawing (fixed base, visual shapes, MTL colours)."""
+
+    joint_names: list[str]
+    """Movable (revolute, prismatic) joints, in joint index order."""
+    link_names: list[str]
+    """Every link, the root first."""
+
+    def visual_colors(self) -> list[tuple[str, int, tuple[float, float, float, float]]]:
+        """(link, shape index within the link, rgba) of every visual shape."""
+
+    def set_visual_color(self, link: str, shape: int, rgba) -> None:
+        """Change the rgba (4,) of one visual shape."""
+
+    def set_joint_positions(self, q: dict[str, float]) -> None:
+        """Teleport joints (rad or m), zero velocity."""
+
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """World position (3,) m and rotation (3, 3) of the link's URDF frame."""
+
+    def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
+        """RGBA (height, width, 4) uint8 and segmentation (height, width) int
+        (< 0 where no body) of the scene from ``camera`` (eye, target, up (3,)
+        m; fov_deg, near, far) under ``light`` (direction (3,), color (3,),
+        distance m, shadow bool, ambient, diffuse, specular coefficients)."""
+
+    def close(self) -> None:
+        """Release the viewer."""
+
+
 EngineFactory = Callable[[Path, SessionOptions], SimSession]
 
+ShapeWorldFactory = Callable[[], ShapeWorld]
+ViewerFactory = Callable[[Path], Viewer]
+
 _ENGINES: dict[str, EngineFactory] = {}
+_SHAPE_WORLDS: dict[str, ShapeWorldFactory] = {}
+_VIEWERS: dict[str, ViewerFactory] = {}
 _LAZY: dict[str, str] = {
     "pybullet": "asset2sim.engines.pybullet_engine",
     "physx": "asset2sim.engines.physx_engine",
@@ -123,6 +279,16 @@ class EngineUnavailable(RuntimeError):
 def register_engine(name: str, factory: EngineFactory) -> None:
     """Register ``factory(urdf_path, options) -> SimSession`` under ``name``."""
     _ENGINES[name] = factory
+
+
+def register_shape_world(name: str, factory: ShapeWorldFactory) -> None:
+    """Register ``factory() -> ShapeWorld`` under the engine name ``name``."""
+    _SHAPE_WORLDS[name] = factory
+
+
+def register_viewer(name: str, factory: ViewerFactory) -> None:
+    """Register ``factory(urdf_path) -> Viewer`` under the engine name ``name``."""
+    _VIEWERS[name] = factory
 
 
 def available_engines() -> list[str]:
@@ -160,7 +326,30 @@ def open_session(engine: str, urdf_path: Path | str, options: SessionOptions | N
     return _factory(engine)(Path(urdf_path), options or SessionOptions())
 
 
-def quat_angle(q0: np.ndarray, q1: np.ndarray) -> float:
-    """Rotation angle (rad, in [0, pi]) between two unit quaternions (4,) xyzw."""
-    d = abs(float(np.dot(np.asarray(q0, float), np.asarray(q1, float))))
-    return float(2.0 * np.arccos(min(1.0, d)))
+def open_shape_world(engine: str = "pybullet") -> ShapeWorld:
+    """Open an empty :class:`ShapeWorld` of ``engine``.
+
+    Raises:
+        KeyError: unknown engine name.
+        EngineUnavailable: the engine's package is not installed.
+        EngineUnsupported: the engine has no shape world.
+    """
+    _factory(engine)
+    if engine not in _SHAPE_WORLDS:
+        raise EngineUnsupported(f"engine {engine!r} has no free-shape collision world")
+    return _SHAPE_WORLDS[engine]()
+
+
+def open_viewer(engine: str, urdf_path: Path | str) -> Viewer:
+    """Load ``urdf_path`` into a :class:`Viewer` of ``engine``.
+
+    Raises:
+        KeyError: unknown engine name.
+        EngineUnavailable: the engine's package is not installed.
+        EngineUnsupported: the engine cannot draw images.
+        RuntimeError: the engine could not load the file.
+    """
+    _factory(engine)
+    if engine not in _VIEWERS:
+        raise EngineUnsupported(f"engine {engine!r} cannot draw images")
+    return _VIEWERS[engine](Path(urdf_path))

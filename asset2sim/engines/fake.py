@@ -2,10 +2,9 @@
 
 Three things live here, all pure numpy (no simulator is imported):
 
-1. :func:`read_urdf`: a small, strict reader of the URDF subset asset2sim writes
-   (links with ``<inertial>``, ``<collision>`` meshes or primitives, the
-   PyBullet ``<contact>`` extension; revolute / continuous / prismatic / fixed
-   joints with ``<limit>`` and ``<dynamics>``), and :func:`mesh_hulls`, which
+1. :func:`read_urdf`: the engines' reading of a URDF (the shared model and
+   reader of :mod:`asset2sim.urdf`, strict, limited to revolute / continuous /
+   prismatic / fixed joints), and :func:`mesh_hulls`, which
    splits a collision mesh into the point sets whose convex hulls PyBullet
    collides with (one hull per OBJ ``o``/``g`` group). The PhysX and MuJoCo
    engines build their bodies from this one reading, so the three engines see
@@ -35,9 +34,22 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from asset2sim.engines.base import ContactPair, SessionOptions, register_engine
-
-MOVABLE = ("revolute", "continuous", "prismatic")
+from asset2sim import atomic, urdf
+from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
+from asset2sim.frames import matrix_quat_wxyz, pose_matrix, quat_wxyz_matrix, rpy_matrix, translation_matrix
+from asset2sim.mesh_io import MeshReadError, hull_point_sets
+from asset2sim.urdf import (
+    SIMULATED_JOINT_TYPES,
+    UrdfDynamics,
+    UrdfError,
+    UrdfGeometry,
+    UrdfInertial,
+    UrdfJoint,
+    UrdfLimit,
+    UrdfLink,
+    UrdfModel,
+    write_urdf,
+)
 
 #: What PyBullet 3.2.7 gives a link that has no ``<inertial>``: 1 kg, identity
 #: inertia (kg*m^2) at the link origin (Bullet's ``UrdfParser``; checked in
@@ -50,421 +62,27 @@ BULLET_DEFAULT_FRICTION = 0.5
 BULLET_PLANE_FRICTION = 0.5
 
 
-class UrdfError(ValueError):
-    """The URDF cannot be read (names the file and the element)."""
-
-
-# ------------------------------------------------------------------ geometry
-def rpy_matrix(rpy) -> np.ndarray:
-    """Rotation (3, 3) of URDF roll-pitch-yaw (rad): fixed axes X, then Y, then Z,
-    i.e. R = Rz(yaw) @ Ry(pitch) @ Rx(roll)."""
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def pose_matrix(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Homogeneous transform (4, 4) of a URDF origin (xyz m, rpy rad)."""
-    t = np.eye(4)
-    t[:3, :3] = rpy_matrix(rpy)
-    t[:3, 3] = np.asarray(xyz, float)
-    return t
-
-
-def matrix_quat_wxyz(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (4,) w, x, y, z of a rotation matrix (3, 3), w >= 0."""
-    r = np.asarray(r, float)
-    tr = r[0, 0] + r[1, 1] + r[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = math.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
-        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-    elif r[1, 1] > r[2, 2]:
-        s = math.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
-        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
-    else:
-        s = math.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
-        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0 else q
-
-
-# ------------------------------------------------------------------ the model
-@dataclass
-class UrdfInertial:
-    """``<inertial>``: ``mass`` kg, ``origin`` (4, 4) COM frame in the link
-    frame, ``inertia`` (3, 3) kg*m^2 about the COM in the COM frame's axes."""
-
-    mass: float
-    origin: np.ndarray
-    inertia: np.ndarray
-
-    def com(self) -> np.ndarray:
-        """COM (3,) in the link frame, m."""
-        return self.origin[:3, 3].copy()
-
-    def inertia_in_link_axes(self) -> np.ndarray:
-        """Inertia (3, 3) about the COM expressed in the link frame's axes."""
-        r = self.origin[:3, :3]
-        return r @ self.inertia @ r.T
-
-
-@dataclass
-class UrdfCollision:
-    """``<collision>``: ``kind`` mesh / box / cylinder / sphere; ``origin`` (4, 4)
-    in the link frame; mesh ``path`` (absolute) with ``filename`` as written and
-    ``scale`` (3,); ``size`` (3,) m for boxes; ``radius``/``length`` m."""
-
-    kind: str
-    origin: np.ndarray
-    filename: str | None = None
-    path: Path | None = None
-    scale: np.ndarray = field(default_factory=lambda: np.ones(3))
-    size: np.ndarray | None = None
-    radius: float | None = None
-    length: float | None = None
-
-
-@dataclass
-class UrdfLink:
-    """A link: inertial (None when the file has none), collisions and visuals
-    in file order (visuals use :class:`UrdfCollision` for their geometry), and
-    the PyBullet ``<contact>`` extension values when present."""
-
-    name: str
-    inertial: UrdfInertial | None
-    collisions: list[UrdfCollision]
-    lateral_friction: float | None = None
-    restitution: float | None = None
-    visuals: list[UrdfCollision] = field(default_factory=list)
-
-
-@dataclass
-class UrdfJoint:
-    """A joint: ``type`` as written; ``origin`` (4, 4) child frame in the parent
-    frame; unit ``axis`` (3,) in the child frame; limits (rad or m; +-inf when
-    absent or continuous); ``damping`` (N*m*s/rad or N*s/m) and ``friction``
-    (N*m or N) from ``<dynamics>`` (0 when absent)."""
-
-    name: str
-    type: str
-    parent: str
-    child: str
-    origin: np.ndarray
-    axis: np.ndarray
-    lower: float = -math.inf
-    upper: float = math.inf
-    damping: float = 0.0
-    friction: float = 0.0
-    has_dynamics: bool = False
-
-
-@dataclass
-class UrdfModel:
-    """A parsed URDF. ``joints`` in file order; ``root`` the link without a
-    parent joint; ``path`` the file."""
-
-    name: str
-    path: Path
-    links: dict[str, UrdfLink]
-    joints: list[UrdfJoint]
-    root: str
-
-    @property
-    def movable_joints(self) -> list[UrdfJoint]:
-        """Revolute, continuous and prismatic joints in file order."""
-        return [j for j in self.joints if j.type in MOVABLE]
-
-    def parent_joint(self, link: str) -> UrdfJoint | None:
-        for j in self.joints:
-            if j.child == link:
-                return j
-        return None
-
-    def children(self, link: str) -> list[UrdfJoint]:
-        return [j for j in self.joints if j.parent == link]
-
-    def tree_order(self) -> list[str]:
-        """Links depth-first from the root (children in joint file order)."""
-        out, stack = [], [self.root]
-        while stack:
-            name = stack.pop()
-            out.append(name)
-            stack.extend(j.child for j in reversed(self.children(name)))
-        return out
-
-    def total_mass(self) -> float:
-        """Sum of the file's ``<inertial>`` masses, kg (links without one count 0)."""
-        return float(sum(l.inertial.mass for l in self.links.values() if l.inertial is not None))
-
-    def adjacent_pairs(self) -> set[frozenset[str]]:
-        """Parent-child link pairs (every joint, fixed ones included)."""
-        return {frozenset((j.parent, j.child)) for j in self.joints}
-
-    def link_poses(self, q: dict[str, float] | None = None, root_pose: np.ndarray | None = None) -> dict[str, np.ndarray]:
-        """World pose (4, 4) of every link for joint positions ``q`` (rad or m,
-        missing joints at 0) and the root link pose ``root_pose`` (identity)."""
-        q = q or {}
-        poses = {self.root: np.eye(4) if root_pose is None else np.asarray(root_pose, float)}
-        for name in self.tree_order():
-            for j in self.children(name):
-                t = poses[name] @ j.origin
-                v = float(q.get(j.name, 0.0))
-                m = np.eye(4)
-                if j.type in ("revolute", "continuous"):
-                    m[:3, :3] = _axis_angle(j.axis, v)
-                elif j.type == "prismatic":
-                    m[:3, 3] = j.axis * v
-                poses[j.child] = t @ m
-        return poses
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    a = np.asarray(axis, float)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
-
-
-def _floats(text: str | None, n: int, where: str, default=None) -> np.ndarray:
-    if text is None:
-        if default is None:
-            raise UrdfError(f"{where}: missing value")
-        return np.asarray(default, float)
-    try:
-        vals = [float(v) for v in text.split()]
-    except ValueError as exc:
-        raise UrdfError(f"{where}: not numbers: {text!r}") from exc
-    if len(vals) == 1 and n == 3:
-        vals = vals * 3
-    if len(vals) != n or not all(math.isfinite(v) for v in vals):
-        raise UrdfError(f"{where}: expected {n} finite numbers, got {text!r}")
-    return np.asarray(vals, float)
-
-
-def _origin(elem, where: str) -> np.ndarray:
-    o = elem.find("origin") if elem is not None else None
-    if o is None:
-        return np.eye(4)
-    return pose_matrix(_floats(o.get("xyz"), 3, f"{where} origin xyz", (0, 0, 0)), _floats(o.get("rpy"), 3, f"{where} origin rpy", (0, 0, 0)))
-
-
-def _parse_xml(path: Path):
-    from lxml import etree
-
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, remove_comments=True, huge_tree=False)
-    try:
-        return etree.parse(str(path), parser).getroot()
-    except (OSError, etree.XMLSyntaxError) as exc:
-        raise UrdfError(f"{path}: cannot parse URDF: {exc}") from exc
-
-
-def _geometry(elem, base: Path, where: str) -> UrdfCollision:
-    ge = elem.find("geometry")
-    if ge is None or len(ge) == 0:
-        raise UrdfError(f"{where}: no <geometry>")
-    g = ge[0]
-    org = _origin(elem, where)
-    if g.tag == "mesh":
-        fname = g.get("filename")
-        if not fname:
-            raise UrdfError(f"{where}: mesh without filename")
-        rel = fname[len("package://"):] if fname.startswith("package://") else fname
-        rel = rel[len("file://"):] if rel.startswith("file://") else rel
-        return UrdfCollision(
-            kind="mesh",
-            origin=org,
-            filename=fname,
-            path=(base / rel).resolve(),
-            scale=_floats(g.get("scale"), 3, f"{where} scale", (1, 1, 1)),
-        )
-    if g.tag == "box":
-        return UrdfCollision(kind="box", origin=org, size=_floats(g.get("size"), 3, f"{where} size"))
-    if g.tag == "cylinder":
-        return UrdfCollision(
-            kind="cylinder",
-            origin=org,
-            radius=float(_floats(g.get("radius"), 1, f"{where} radius")[0]),
-            length=float(_floats(g.get("length"), 1, f"{where} length")[0]),
-        )
-    if g.tag == "sphere":
-        return UrdfCollision(kind="sphere", origin=org, radius=float(_floats(g.get("radius"), 1, f"{where} radius")[0]))
-    raise UrdfError(f"{where}: unsupported geometry <{g.tag}>")
-
-
 def read_urdf(path: Path | str) -> UrdfModel:
-    """Read a URDF file into a :class:`UrdfModel`.
-
-    Mesh file names are resolved relative to the URDF's folder (``package://``
-    prefixes are stripped and resolved the same way).
+    """The engines' reading of a URDF file: :func:`asset2sim.urdf.read_urdf`
+    in mode strict, limited to the joint types the engines build (revolute,
+    continuous, prismatic, fixed).
 
     Raises:
-        UrdfError: unreadable XML, a malformed number, an unknown joint type, a
-            joint naming a missing link, or not exactly one root link.
+        UrdfError: unreadable XML, a malformed number, an unsupported joint
+            type, a joint naming a missing link, or not exactly one root link
+            (names the file, line and link or joint).
     """
-    path = Path(path)
-    root = _parse_xml(path)
-    if root.tag != "robot":
-        raise UrdfError(f"{path}: root element is <{root.tag}>, not <robot>")
-    base = path.parent
-    links: dict[str, UrdfLink] = {}
-    for le in root.findall("link"):
-        name = le.get("name")
-        if not name:
-            raise UrdfError(f"{path}: a <link> has no name")
-        where = f"{path}: link {name!r}"
-        inertial = None
-        ie = le.find("inertial")
-        if ie is not None:
-            me, te = ie.find("mass"), ie.find("inertia")
-            if me is None or te is None:
-                raise UrdfError(f"{where}: <inertial> needs <mass> and <inertia>")
-            mass = float(_floats(me.get("value"), 1, f"{where} mass")[0])
-            vals = {k: float(_floats(te.get(k, "0"), 1, f"{where} inertia {k}")[0]) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-            inertia = np.array(
-                [
-                    [vals["ixx"], vals["ixy"], vals["ixz"]],
-                    [vals["ixy"], vals["iyy"], vals["iyz"]],
-                    [vals["ixz"], vals["iyz"], vals["izz"]],
-                ]
-            )
-            inertial = UrdfInertial(mass=mass, origin=_origin(ie, f"{where} inertial"), inertia=inertia)
-        cols = [_geometry(ce, base, f"{where} collision {k}") for k, ce in enumerate(le.findall("collision"))]
-        vis = [_geometry(ve, base, f"{where} visual {k}") for k, ve in enumerate(le.findall("visual"))]
-        lat = rest = None
-        ct = le.find("contact")
-        if ct is not None:
-            lf, rs = ct.find("lateral_friction"), ct.find("restitution")
-            if lf is not None:
-                lat = float(_floats(lf.get("value"), 1, f"{where} lateral_friction")[0])
-            if rs is not None:
-                rest = float(_floats(rs.get("value"), 1, f"{where} restitution")[0])
-        links[name] = UrdfLink(name, inertial, cols, lat, rest, visuals=vis)
-    joints = []
-    children = set()
-    for je in root.findall("joint"):
-        name, jtype = je.get("name"), je.get("type")
-        where = f"{path}: joint {name!r}"
-        if jtype not in MOVABLE + ("fixed",):
-            raise UrdfError(f"{where}: joint type {jtype!r} is not supported (revolute, continuous, prismatic, fixed)")
-        pe, ce = je.find("parent"), je.find("child")
-        if pe is None or ce is None or pe.get("link") not in links or ce.get("link") not in links:
-            raise UrdfError(f"{where}: parent/child must name links of the file")
-        axis = _floats(je.find("axis").get("xyz") if je.find("axis") is not None else None, 3, f"{where} axis", (1, 0, 0))
-        n = np.linalg.norm(axis)
-        if jtype != "fixed" and n < 1e-12:
-            raise UrdfError(f"{where}: zero axis")
-        axis = axis / n if n > 0 else np.array([1.0, 0.0, 0.0])
-        lo, hi = -math.inf, math.inf
-        lim = je.find("limit")
-        if jtype in ("revolute", "prismatic"):
-            if lim is None:
-                raise UrdfError(f"{where}: {jtype} joint without <limit>")
-            lo = float(_floats(lim.get("lower", "0"), 1, f"{where} lower")[0])
-            hi = float(_floats(lim.get("upper", "0"), 1, f"{where} upper")[0])
-        damping = friction = 0.0
-        dyn = je.find("dynamics")
-        if dyn is not None:
-            damping = float(_floats(dyn.get("damping", "0"), 1, f"{where} damping")[0])
-            friction = float(_floats(dyn.get("friction", "0"), 1, f"{where} friction")[0])
-        child = ce.get("link")
-        if child in children:
-            raise UrdfError(f"{where}: link {child!r} has two parent joints")
-        children.add(child)
-        joints.append(
-            UrdfJoint(
-                name=name,
-                type=jtype,
-                parent=pe.get("link"),
-                child=child,
-                origin=_origin(je, where),
-                axis=axis,
-                lower=lo,
-                upper=hi,
-                damping=damping,
-                friction=friction,
-                has_dynamics=dyn is not None,
-            )
-        )
-    roots = [n for n in links if n not in children]
-    if len(roots) != 1:
-        raise UrdfError(f"{path}: expected one root link, found {roots}")
-    model = UrdfModel(name=root.get("name", path.stem), path=path, links=links, joints=joints, root=roots[0])
-    if len(model.tree_order()) != len(links):
-        raise UrdfError(f"{path}: the joints do not form a tree over all links")
-    return model
+    return urdf.read_urdf(path, joint_types=SIMULATED_JOINT_TYPES)
 
 
 # ------------------------------------------------------------ collision hulls
 _HULL_CACHE: dict[tuple, list[np.ndarray]] = {}
 
 
-def obj_groups(path: Path) -> list[np.ndarray]:
-    """Point sets (k, 3) of an OBJ file, one per ``o``/``g`` group that has
-    faces, holding the vertices its faces use (file units, unscaled).
-
-    This is how PyBullet's URDF importer builds collision shapes from an OBJ
-    (one convex hull per tinyobj shape), verified in
-    ``tests/asset2sim/test_engines_fake.py``.
-
-    Raises:
-        UrdfError: the file cannot be read or a face names a missing vertex.
-    """
-    try:
-        text = Path(path).read_text(errors="replace")
-    except OSError as exc:
-        raise UrdfError(f"cannot read mesh {path}: {exc}") from exc
-    verts: list[tuple[float, float, float]] = []
-    groups: list[list[int]] = []
-    current: list[int] = []
-    for line in text.splitlines():
-        if not line or line[0] not in "vfog":
-            continue
-        parts = line.split()
-        if not parts:
-            continue
-        tag = parts[0]
-        if tag == "v":
-            try:
-                verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
-            except (IndexError, ValueError) as exc:
-                raise UrdfError(f"{path}: bad vertex line {line!r}") from exc
-        elif tag == "f":
-            for tok in parts[1:]:
-                try:
-                    i = int(tok.split("/")[0])
-                except ValueError as exc:
-                    raise UrdfError(f"{path}: bad face line {line!r}") from exc
-                current.append(i - 1 if i > 0 else len(verts) + i)
-        elif tag in ("o", "g"):
-            if current:
-                groups.append(current)
-            current = []
-    if current:
-        groups.append(current)
-    v = np.asarray(verts, float).reshape(-1, 3)
-    out = []
-    for idx in groups:
-        ids = np.unique(np.asarray(idx, int))
-        if ids.min() < 0 or ids.max() >= len(v):
-            raise UrdfError(f"{path}: a face names a vertex that does not exist")
-        out.append(v[ids])
-    return out
-
-
 def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
     """Point sets (k, 3), m, whose convex hulls PyBullet uses for a collision
     mesh ``path`` scaled by ``scale`` (3,): one per OBJ group; other formats
-    (STL, ...) as one set of all vertices (loaded with trimesh). Cached by file
+    (STL, ...) as one set of all vertices (:func:`asset2sim.mesh_io.hull_point_sets`). Cached by file
     modification time. Sets with fewer than 4 points or no volume are kept:
     engines decide what to do with them.
 
@@ -479,16 +97,10 @@ def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
     key = (str(path), st.st_mtime_ns, st.st_size)
     groups = _HULL_CACHE.get(key)
     if groups is None:
-        if path.suffix.lower() == ".obj":
-            groups = obj_groups(path)
-        else:
-            import trimesh
-
-            try:
-                m = trimesh.load(str(path), force="mesh", process=False)
-            except Exception as exc:  # trimesh raises many types
-                raise UrdfError(f"cannot read mesh {path}: {exc}") from exc
-            groups = [np.asarray(m.vertices, float)]
+        try:
+            groups = hull_point_sets(path)
+        except MeshReadError as exc:
+            raise UrdfError(str(exc)) from exc
         if len(_HULL_CACHE) > 4096:
             _HULL_CACHE.clear()
         _HULL_CACHE[key] = groups
@@ -682,18 +294,23 @@ class FakeSession:
         self.joint_names = [j.name for j in self.model.movable_joints]
         self.joint_types = {j.name: j.type for j in self.model.movable_joints}
         self.joint_limits = {j.name: (j.lower, j.upper) for j in self.model.movable_joints}
+        self.joint_child = {j.name: j.child for j in self.model.movable_joints}
+        self.link_names = self.model.tree_order()
         self.steps = 0
         self._anchor = {n: (0.0, 0) for n in self.joint_names}  # value, step when set
         self.set_joint_positions(options.initial_state)
         self._root0 = np.zeros(3)
+        self._root_q0: np.ndarray | None = None  # xyzw set by set_root_pose
+        self._points: dict[str, np.ndarray] | None = None
+        self._states: dict[int, tuple] = {}
 
-    def _t(self, name: str) -> float:
-        return (self.steps - self._anchor[name][1]) * self.dt
+    def _t(self, name: str, steps: int | None = None) -> float:
+        return ((self.steps if steps is None else steps) - self._anchor[name][1]) * self.dt
 
-    def _value(self, name: str) -> float:
+    def _value(self, name: str, steps: int | None = None) -> float:
         b = self.behaviour
         q0, _ = self._anchor[name]
-        t = self._t(name)
+        t = self._t(name, steps)
         spring = self.options.springs.get(name)
         if spring is not None and b.springs_pull and spring.stiffness > 0:
             q = spring.reference + (q0 - spring.reference) * math.exp(-t / b.spring_time_constant)
@@ -712,6 +329,96 @@ class FakeSession:
 
     def joint_positions(self) -> dict[str, float]:
         return {n: self._value(n) for n in self.joint_names}
+
+    def joint_state(self, joint: str) -> tuple[float, float]:
+        """Position and the backward difference over the last step (0 right
+        after the joint was set)."""
+        q = self._value(joint)
+        if self.steps - self._anchor[joint][1] < 1:
+            return q, 0.0
+        return q, (q - self._value(joint, self.steps - 1)) / self.dt
+
+    def joint_velocities(self) -> dict[str, float]:
+        return {n: self.joint_state(n)[1] for n in self.joint_names}
+
+    def joint_axis(self, joint: str) -> np.ndarray:
+        if joint not in self.joint_child:
+            raise KeyError(joint)
+        return np.asarray(self.model.parent_joint(self.joint_child[joint]).axis, float).copy()
+
+    def apply_joint_effort(self, joint: str, effort: float) -> None:
+        """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
+        raise EngineUnsupported("fake: no dynamics; joint efforts are not modelled")
+
+    def apply_link_force(self, link: str, force, point) -> None:
+        """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
+        raise EngineUnsupported("fake: no dynamics; external forces are not modelled")
+
+    # ------------------------------------------------------------------ links
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """Forward kinematics of the URDF at the current joint positions and root pose."""
+        if link not in self.model.links:
+            raise KeyError(link)
+        pos, orn = self.root_pose()
+        root = np.eye(4)
+        root[:3, :3] = quat_wxyz_matrix([orn[3], orn[0], orn[1], orn[2]])
+        root[:3, 3] = pos
+        t = self.model.link_poses(self.joint_positions(), root)[link]
+        return t[:3, 3].copy(), t[:3, :3].copy()
+
+    def _local_points(self, link: str) -> np.ndarray:
+        """Collision points (k, 3) of a link in its frame: hull vertices and
+        the corners of the primitives' boxes."""
+        if self._points is None:
+            pieces, _ = collision_pieces(self.model)
+            self._points = {}
+            for name, plist in pieces.items():
+                pts = []
+                for p in plist:
+                    if p.kind == "hull":
+                        v = np.asarray(p.points, float)
+                    else:
+                        h = (np.asarray(p.size, float) / 2 if p.kind == "box"
+                             else np.array([p.radius, p.radius, p.radius if p.kind == "sphere" else p.length / 2]))
+                        v = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+                    pts.append(v @ p.origin[:3, :3].T + p.origin[:3, 3])
+                self._points[name] = np.concatenate(pts) if pts else np.zeros((0, 3))
+        if link not in self.model.links:
+            raise KeyError(link)
+        return self._points.get(link, np.zeros((0, 3)))
+
+    def link_collision_vertices(self, link: str) -> np.ndarray:
+        return self._local_points(link).copy()
+
+    def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the link's collision points at the current state (its
+        origin when it has none)."""
+        pos, R = self.link_frame(link)
+        v = self._local_points(link)
+        if not len(v):
+            return pos.copy(), pos.copy()
+        w = v @ R.T + pos
+        return w.min(axis=0), w.max(axis=0)
+
+    def link_has_collision(self, link: str) -> bool:
+        return bool(self.model.links[link].collisions)
+
+    def link_masses(self) -> dict[str, float]:
+        """The file's masses; PyBullet's 1 kg for a link without ``<inertial>``."""
+        return {
+            name: BULLET_DEFAULT_MASS if link.inertial is None else float(link.inertial.mass)
+            for name, link in ((n, self.model.links[n]) for n in self.link_names)
+        }
+
+    def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
+        """The behaviour's penetration, for its pair only: [-Phi] or []."""
+        for ln in (link_a, link_b):
+            if ln not in self.model.links:
+                raise KeyError(ln)
+        phi, pairs = self.self_penetration()
+        if pairs and {link_a, link_b} == {pairs[0].link_a, pairs[0].link_b} and -phi < max_distance:
+            return [-phi]
+        return []
 
     def _pair(self) -> tuple[str, str]:
         if self.behaviour.pair is not None:
@@ -736,13 +443,49 @@ class FakeSession:
     def ground_penetration(self) -> float:
         return float(self.behaviour.ground_penetration)
 
+    def step_ground_penetration(self) -> float:
+        return self.ground_penetration()
+
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         if self.options.fixed_base:
-            return self._root0.copy(), np.array([0.0, 0.0, 0.0, 1.0])
+            q = np.array([0.0, 0.0, 0.0, 1.0]) if self._root_q0 is None else self._root_q0.copy()
+            return self._root0.copy(), q
         t = self.steps * self.dt
         pos = self._root0 + np.asarray(self.behaviour.root_velocity, float) * t
         half = 0.5 * self.behaviour.root_yaw_rate * t
-        return pos, np.array([0.0, 0.0, math.sin(half), math.cos(half)])
+        yaw = np.array([0.0, 0.0, math.sin(half), math.cos(half)])
+        if self._root_q0 is None:
+            return pos, yaw
+        x, y, z, w = self._root_q0  # yaw (about world z) after the set orientation
+        sz, cz = yaw[2], yaw[3]
+        return pos, np.array([cz * x - sz * y, cz * y + sz * x, cz * z + sz * w, cz * w - sz * z])
+
+    def set_root_pose(self, pos, orn) -> None:
+        """Put the root at ``pos`` (3,) m, ``orn`` (4,) xyzw now; the behaviour's
+        drift continues from there."""
+        t = 0.0 if self.options.fixed_base else self.steps * self.dt
+        self._root0 = np.asarray(pos, float) - np.asarray(self.behaviour.root_velocity, float) * t
+        q = np.asarray(orn, float)
+        self._root_q0 = q / np.linalg.norm(q)
+        if not self.options.fixed_base and self.behaviour.root_yaw_rate:
+            half = 0.5 * self.behaviour.root_yaw_rate * t  # undo the yaw already accumulated
+            x, y, z, w = self._root_q0
+            sz, cz = -math.sin(half), math.cos(half)
+            self._root_q0 = np.array([cz * x - sz * y, cz * y + sz * x, cz * z + sz * w, cz * w - sz * z])
+
+    def save_state(self) -> int:
+        handle = max(self._states, default=0) + 1
+        self._states[handle] = (self.steps, dict(self._anchor), self._root0.copy(),
+                                None if self._root_q0 is None else self._root_q0.copy())
+        return handle
+
+    def restore_state(self, handle: int) -> None:
+        steps, anchor, root0, rq = self._states[handle]
+        self.steps, self._anchor, self._root0 = steps, dict(anchor), root0.copy()
+        self._root_q0 = None if rq is None else rq.copy()
+
+    def discard_state(self, handle: int) -> None:
+        self._states.pop(handle, None)
 
     def step(self, n: int = 1) -> None:
         self.steps += int(n)
@@ -845,8 +588,6 @@ def write_contract_asset(
     stiffness N*m/rad. Files: ``mobility.urdf``, ``textured_objs/*.obj``,
     ``initial_state.json``, ``overlay.json``. Returns a :class:`ContractAsset`.
     """
-    from asset2sim import atomic
-
     out = Path(out_dir)
     L, W, H, t = 0.30, 0.20, 0.12, 0.01
     walls = [
@@ -873,39 +614,40 @@ def write_contract_asset(
     post = (post_mass, *_box_inertia(post_mass, post_lo, post_hi))
     base = (0.01, np.zeros(3), np.diag([1e-5, 1e-5, 1e-5]))
 
-    def inertial(m, com, inertia):
-        f = lambda x: repr(float(x))  # noqa: E731 - shortest round-trip text
-        return (
-            f'    <inertial>\n      <origin xyz="{f(com[0])} {f(com[1])} {f(com[2])}" rpy="0 0 0"/>\n'
-            f'      <mass value="{f(m)}"/>\n'
-            f'      <inertia ixx="{f(inertia[0, 0])}" ixy="{f(inertia[0, 1])}" ixz="{f(inertia[0, 2])}" '
-            f'iyy="{f(inertia[1, 1])}" iyz="{f(inertia[1, 2])}" izz="{f(inertia[2, 2])}"/>\n    </inertial>\n'
+    def link(name: str, parts, with_mesh: bool = True) -> UrdfLink:
+        ln = UrdfLink(name=name)
+        if parts is not None:
+            m, com, inertia = parts
+            ln.inertial = UrdfInertial(mass=float(m), origin=translation_matrix(com), inertia=np.asarray(inertia, float))
+        if with_mesh:
+            mesh = dict(kind="mesh", filename=f"textured_objs/{name}.obj", mesh_scale=np.ones(3))
+            ln.visuals.append(UrdfGeometry(**mesh))
+            ln.collisions.append(UrdfGeometry(**mesh))
+        return ln
+
+    def moving(name, jtype, child, origin, axis, upper, damping, friction) -> UrdfJoint:
+        return UrdfJoint(
+            name=name, type=jtype, parent="body", child=child, origin=translation_matrix(origin), axis_xyz=np.asarray(axis, float),
+            limit=UrdfLimit(lower=0.0, upper=upper, effort=1000.0, velocity=1000.0),
+            dynamics=UrdfDynamics(damping=float(damping), friction=float(friction)),
         )
 
-    def mesh(name, origin="0 0 0"):
-        geo = f'<geometry><mesh filename="textured_objs/{name}.obj" scale="1 1 1"/></geometry>'
-        return f'    <visual><origin xyz="{origin}"/>{geo}</visual>\n    <collision><origin xyz="{origin}"/>{geo}</collision>\n'
-
-    urdf = (
-        '<?xml version="1.0" encoding="utf-8"?>\n<robot name="contract_box">\n'
-        "  <!-- initial joint positions: initial_state.json -->\n"
-        f'  <link name="base">\n{inertial(*base) if base_inertial else ""}  </link>\n'
-        f'  <link name="body">\n{inertial(*body)}{mesh("body")}  </link>\n'
-        f'  <link name="lid">\n{inertial(*lid)}{mesh("lid")}  </link>\n'
-        f'  <link name="post">\n{inertial(*post)}{mesh("post")}  </link>\n'
-        '  <joint name="root_fixed" type="fixed"><parent link="base"/><child link="body"/>'
-        '<origin xyz="0 0 0" rpy="0 0 0"/></joint>\n'
-        f'  <joint name="lid_hinge" type="revolute"><parent link="body"/><child link="lid"/>'
-        f'<origin xyz="0 {W / 2!r} {H!r}" rpy="0 0 0"/><axis xyz="-1 0 0"/>'
-        f'<limit lower="0.0" upper="2.0" effort="1000" velocity="1000"/>'
-        f'<dynamics damping="{lid_damping!r}" friction="{lid_friction!r}"/></joint>\n'
-        f'  <joint name="post_slide" type="prismatic"><parent link="body"/><child link="post"/>'
-        f'<origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>'
-        f'<limit lower="0.0" upper="0.05" effort="1000" velocity="1000"/>'
-        f'<dynamics damping="{post_damping!r}" friction="{post_friction!r}"/></joint>\n'
-        "</robot>\n"
+    model = UrdfModel(
+        name="contract_box",
+        links={
+            "base": link("base", base if base_inertial else None, with_mesh=False),
+            "body": link("body", body),
+            "lid": link("lid", lid),
+            "post": link("post", post),
+        },
+        joints=[
+            UrdfJoint(name="root_fixed", type="fixed", parent="base", child="body"),
+            moving("lid_hinge", "revolute", "lid", (0.0, W / 2, H), (-1.0, 0.0, 0.0), 2.0, lid_damping, lid_friction),
+            moving("post_slide", "prismatic", "post", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.05, post_damping, post_friction),
+        ],
     )
-    urdf_path = atomic.write_text(out / "mobility.urdf", urdf)
+    urdf_text = write_urdf(model, comment=" initial joint positions: initial_state.json ")
+    urdf_path = atomic.write_bytes(out / "mobility.urdf", urdf_text)
     state = {"lid_hinge": float(lid_angle), "post_slide": float(post_height)}
     atomic.write_json(out / "initial_state.json", {"initial_joint_positions": state})
 
@@ -961,7 +703,7 @@ __all__ = [
     "FLAT_HULL_THICKNESS",
     "FakeBehaviour",
     "FakeSession",
-    "UrdfCollision",
+    "UrdfGeometry",
     "UrdfError",
     "UrdfInertial",
     "UrdfJoint",
@@ -972,7 +714,6 @@ __all__ = [
     "hull_is_solid",
     "matrix_quat_wxyz",
     "mesh_hulls",
-    "obj_groups",
     "pose_matrix",
     "read_initial_state",
     "read_urdf",

@@ -41,7 +41,7 @@ import numpy as np
 import sapien  # noqa: F401  - an ImportError here marks the engine unavailable
 from sapien import physx
 
-from asset2sim.engines.base import ContactPair, SessionOptions, register_engine
+from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
 from asset2sim.engines.fake import (
     BULLET_DEFAULT_FRICTION,
     BULLET_DEFAULT_INERTIA,
@@ -224,6 +224,10 @@ class PhysXSession:
 
         self.joint_names = [j.name for j in self.urdf.movable_joints]
         self.joint_types = {j.name: j.type for j in self.urdf.movable_joints}
+        self.joint_child = {j.name: j.child for j in self.urdf.movable_joints}
+        self.link_names = list(self.links)
+        self._states: dict[int, tuple] = {}
+        self._effort = None
         self.joint_limits = {j.name: (j.lower, j.upper) for j in self.urdf.movable_joints}
         active = [j.name for j in self.art.active_joints]
         if sorted(active) != sorted(self.joint_names):
@@ -272,6 +276,79 @@ class PhysXSession:
     def joint_velocities(self) -> dict[str, float]:
         qvel = self.art.get_qvel()
         return {n: float(qvel[i]) for n, i in self._index.items()}
+
+    def joint_state(self, joint: str) -> tuple[float, float]:
+        i = self._index[joint]
+        return float(self.art.get_qpos()[i]), float(self.art.get_qvel()[i])
+
+    def joint_axis(self, joint: str) -> np.ndarray:
+        """The URDF axis (3,) of the joint (PhysX moves the joint along/about
+        the x axis of a frame built on it)."""
+        if joint not in self._index:
+            raise KeyError(joint)
+        return np.asarray(self.urdf.parent_joint(self.joint_child[joint]).axis, float).copy()
+
+    def apply_joint_effort(self, joint: str, effort: float) -> None:
+        """Generalized force (N*m or N) on a joint for the next step (added to
+        the spring forces)."""
+        if self._effort is None:
+            self._effort = np.zeros(len(self._joints))
+        self._effort[self._index[joint]] += float(effort)
+
+    # ------------------------------------------------------------------ links
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """The link component's pose: PhysX builds each link in its URDF frame
+        (the child frame of its joint), the center of mass separately."""
+        t = self.links[link].get_pose().to_transformation_matrix().astype(float)
+        return t[:3, 3].copy(), t[:3, :3].copy()
+
+    def link_collision_vertices(self, link: str) -> np.ndarray:
+        """Vertices (k, 3) m of the link's cooked convex meshes, link frame."""
+        out = []
+        for shape in self.links[link].get_collision_shapes():
+            if isinstance(shape, physx.PhysxCollisionShapeConvexMesh):
+                t = shape.get_local_pose().to_transformation_matrix()
+                v = np.asarray(shape.get_vertices(), float) * np.asarray(shape.get_scale(), float)
+                out.append(v @ t[:3, :3].T + t[:3, 3])
+        return np.concatenate(out) if out else np.zeros((0, 3))
+
+    def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the cooked hull vertices at the current pose (PhysX's own
+        tight box for boxes, spheres and cylinders)."""
+        comp = self.links[link]
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        v = self.link_collision_vertices(link)
+        if len(v):
+            pos, R = self.link_frame(link)
+            w = v @ R.T + pos
+            lo, hi = w.min(axis=0), w.max(axis=0)
+        if any(not isinstance(sh, physx.PhysxCollisionShapeConvexMesh) for sh in comp.get_collision_shapes()):
+            box = comp.compute_global_aabb_tight()
+            lo, hi = np.minimum(lo, np.asarray(box[0], float)), np.maximum(hi, np.asarray(box[1], float))
+        if not np.all(np.isfinite(lo)):
+            pos, _ = self.link_frame(link)
+            return pos.copy(), pos.copy()
+        return lo, hi
+
+    def link_has_collision(self, link: str) -> bool:
+        return bool(self.links[link].get_collision_shapes())
+
+    def link_masses(self) -> dict[str, float]:
+        return {name: float(comp.get_mass()) for name, comp in self.links.items()}
+
+    def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
+        """Not available: SAPIEN exposes no closest-point query between the
+        shapes of an articulation (its contacts come only from a step and skip
+        parent-child pairs).
+
+        Raises:
+            EngineUnsupported: always.
+        """
+        raise EngineUnsupported("physx: no closest-point query between links (use pybullet or mujoco)")
+
+    def apply_link_force(self, link: str, force, point) -> None:
+        """``add_force_at_point`` (world frame); PhysX clears it after the step."""
+        self.links[link].add_force_at_point(np.asarray(force, np.float32), np.asarray(point, np.float32))
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         pose = self.art.get_root_pose()
@@ -366,6 +443,40 @@ class PhysXSession:
         low = self.lowest_point()
         return max(0.0, -low) if math.isfinite(low) else 0.0
 
+    def step_ground_penetration(self) -> float:
+        """:meth:`ground_penetration` (from the geometry, no contact cache)."""
+        return self.ground_penetration()
+
+    # ------------------------------------------------------------------ state
+    def save_state(self) -> int:
+        """Snapshot root pose and velocities, joint positions, velocities and
+        forces, and the pending joint efforts (PhysX keeps no contact cache
+        across ``set_qpos``)."""
+        handle = max(self._states, default=0) + 1
+        self._states[handle] = (
+            self.art.get_root_pose(),
+            np.asarray(self.art.get_root_linear_velocity(), np.float32).copy(),
+            np.asarray(self.art.get_root_angular_velocity(), np.float32).copy(),
+            np.asarray(self.art.get_qpos(), np.float32).copy(),
+            np.asarray(self.art.get_qvel(), np.float32).copy(),
+            np.asarray(self.art.get_qf(), np.float32).copy(),
+            None if self._effort is None else self._effort.copy(),
+        )
+        return handle
+
+    def restore_state(self, handle: int) -> None:
+        pose, lin, ang, qpos, qvel, qf, effort = self._states[handle]
+        self.art.set_root_pose(pose)
+        self.art.set_root_linear_velocity(lin)
+        self.art.set_root_angular_velocity(ang)
+        self.art.set_qpos(qpos)
+        self.art.set_qvel(qvel)
+        self.art.set_qf(qf)
+        self._effort = None if effort is None else effort.copy()
+
+    def discard_state(self, handle: int) -> None:
+        self._states.pop(handle, None)
+
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
         """Advance n steps: before each, the passive drives' force limits
@@ -381,6 +492,14 @@ class PhysXSession:
             if springs:
                 q = np.asarray(self.art.get_qpos(), float)
                 self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))
+            if self._effort is not None:
+                base = np.asarray(self.art.get_qf(), float) if springs else np.zeros(len(self._joints))
+                self.art.set_qf((base + self._effort).astype(np.float32))
+                self.scene.step()
+                self._effort = None
+                if not springs:
+                    self.art.set_qf(np.zeros(len(self._joints), np.float32))
+                continue
             self.scene.step()
 
     def close(self) -> None:

@@ -13,12 +13,20 @@ force is ``<dynamics friction>`` (Coulomb friction, SPEC).
 from __future__ import annotations
 
 import os
+import sys
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import ContactPair, SessionOptions, register_engine
+from asset2sim.engines.base import (
+    ContactPair,
+    SessionOptions,
+    register_engine,
+    register_shape_world,
+    register_viewer,
+)
 
 _TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
 
@@ -39,6 +47,43 @@ def _quiet_stdout():
         os.dup2(fd, 1)
         os.close(fd)
         os.close(devnull)
+
+
+_QUIET_LOCK = threading.Lock()
+
+
+@contextmanager
+def quiet_fds():
+    """Silence Bullet's C-level prints (build time, b3Warning) on fd 1 and 2.
+
+    Process-wide (file descriptors), so serialized by a lock: two threads
+    swapping fd 1 at once could otherwise leave stdout pointing at /dev/null.
+    """
+    with _QUIET_LOCK:
+        for stream in (sys.stdout, sys.stderr):  # what Python buffered goes out first
+            try:
+                stream.flush()
+            except Exception:
+                pass
+        saved = []
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+        except OSError:  # pragma: no cover
+            yield
+            return
+        try:
+            for fd in (1, 2):
+                try:
+                    saved.append((fd, os.dup(fd)))
+                    os.dup2(devnull, fd)
+                except OSError:
+                    pass
+            yield
+        finally:
+            for fd, dup in saved:
+                os.dup2(dup, fd)
+                os.close(dup)
+            os.close(devnull)
 
 
 def _bullet():
@@ -82,7 +127,8 @@ class PyBulletSession:
             p.disconnect(self.cid)
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
         self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
-        self.link_names: dict[int, str] = {-1: self.base_link}
+        self._link_by_index: dict[int, str] = {-1: self.base_link}
+        self._has_collision: dict[int, bool] = {}
         self._index: dict[str, int] = {}
         self.joint_names: list[str] = []
         self.joint_types: dict[str, str] = {}
@@ -91,7 +137,7 @@ class PyBulletSession:
         for j in range(p.getNumJoints(self.body, physicsClientId=self.cid)):
             info = p.getJointInfo(self.body, j, physicsClientId=self.cid)
             name = info[1].decode()
-            self.link_names[j] = info[12].decode()
+            self._link_by_index[j] = info[12].decode()
             jtype = _TYPES.get(info[2], "other")
             if jtype not in ("revolute", "prismatic"):
                 continue
@@ -112,6 +158,8 @@ class PyBulletSession:
                 force=float(info[7]),
                 physicsClientId=self.cid,
             )
+        self.link_names: list[str] = list(self._link_by_index.values())
+        self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}
         self.set_joint_positions(options.initial_state)
         if options.ground and not options.fixed_base:
             self.place_on_ground()
@@ -140,6 +188,71 @@ class PyBulletSession:
         states = p.getJointStates(self.body, list(self._index.values()), physicsClientId=self.cid)
         return {name: float(s[1]) for name, s in zip(self._index, states)}
 
+    def joint_state(self, joint: str) -> tuple[float, float]:
+        s = self._p.getJointState(self.body, self._index[joint], physicsClientId=self.cid)
+        return float(s[0]), float(s[1])
+
+    def joint_axis(self, joint: str) -> np.ndarray:
+        info = self._p.getJointInfo(self.body, self._index[joint], physicsClientId=self.cid)
+        return np.array(info[13], float)
+
+    # ------------------------------------------------------------------ links
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        p = self._p
+        idx = self.link_index(link)
+        if idx < 0:
+            pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
+        else:
+            st = p.getLinkState(self.body, idx, computeForwardKinematics=True, physicsClientId=self.cid)
+            pos, orn = st[4], st[5]
+        R = np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+        return np.array(pos, float), R
+
+    def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self._p.getAABB(self.body, self.link_index(link), physicsClientId=self.cid)
+        return np.array(lo, float), np.array(hi, float)
+
+    def link_has_collision(self, link: str) -> bool:
+        idx = self.link_index(link)
+        if idx not in self._has_collision:
+            self._has_collision[idx] = bool(self._p.getCollisionShapeData(self.body, idx, physicsClientId=self.cid))
+        return self._has_collision[idx]
+
+    def link_collision_vertices(self, link: str) -> np.ndarray:
+        """Vertices (k, 3) m of the link's collision mesh, link frame
+        (``getMeshData``; empty when Bullet returns none)."""
+        try:
+            n, verts = self._p.getMeshData(self.body, self.link_index(link), physicsClientId=self.cid)
+        except Exception:
+            return np.zeros((0, 3))
+        if not n:
+            return np.zeros((0, 3))
+        return np.asarray(verts, float)
+
+    def link_masses(self) -> dict[str, float]:
+        p = self._p
+        return {
+            name: float(p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)[0])
+            for idx, name in self._link_by_index.items()
+        }
+
+    def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
+        pts = self._p.getClosestPoints(
+            self.body, self.body, max_distance, self.link_index(link_a), self.link_index(link_b), physicsClientId=self.cid
+        )
+        return [pt[8] for pt in pts]
+
+    def apply_link_force(self, link: str, force, point) -> None:
+        p = self._p
+        p.applyExternalForce(
+            self.body,
+            self.link_index(link),
+            np.asarray(force, float).tolist(),
+            np.asarray(point, float).tolist(),
+            p.WORLD_FRAME,
+            physicsClientId=self.cid,
+        )
+
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         pos, orn = self._p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
         return np.array(pos, float), np.array(orn, float)
@@ -155,7 +268,7 @@ class PyBulletSession:
         """
         p = self._p
         lo = min(
-            p.getAABB(self.body, link, physicsClientId=self.cid)[0][2] for link in self.link_names
+            p.getAABB(self.body, link, physicsClientId=self.cid)[0][2] for link in self._link_by_index
         )
         pos, orn = self.root_pose()
         shift = -lo
@@ -164,7 +277,7 @@ class PyBulletSession:
         # rotated hulls are loose (up to tens of cm above the true lowest point).
         if self.plane is not None:
             p.performCollisionDetection(physicsClientId=self.cid)
-            hi = max(p.getAABB(self.body, link, physicsClientId=self.cid)[1][2] for link in self.link_names)
+            hi = max(p.getAABB(self.body, link, physicsClientId=self.cid)[1][2] for link in self._link_by_index)
             pts = p.getClosestPoints(self.body, self.plane, max(hi, 0.0) + 0.05, physicsClientId=self.cid)
             if pts:
                 dmin = min(pt[8] for pt in pts)
@@ -188,7 +301,7 @@ class PyBulletSession:
             d = pt[8]
             if d >= 0.0:
                 continue
-            a, b = self.link_names[pt[3]], self.link_names[pt[4]]
+            a, b = self._link_by_index[pt[3]], self._link_by_index[pt[4]]
             key = (a, b) if a <= b else (b, a)
             cp = pairs.get(key)
             if cp is None:
@@ -209,7 +322,7 @@ class PyBulletSession:
         p = self._p
         cache = self.__dict__.setdefault("_pairs_cache", None)
         if cache is None:
-            with_shape = [i for i in self.link_names if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
+            with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
             parent = {j: p.getJointInfo(self.body, j, physicsClientId=self.cid)[16] for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))}
             cache = [
                 (a, b)
@@ -229,6 +342,15 @@ class PyBulletSession:
         p = self._p
         p.performCollisionDetection(physicsClientId=self.cid)
         pts = p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
+        return float(max([0.0] + [-pt[8] for pt in pts]))
+
+    def step_ground_penetration(self) -> float:
+        """Deepest ground penetration (m) among the contact points the last
+        step left (no ``performCollisionDetection``: it would refresh Bullet's
+        manifolds and change the following steps)."""
+        if self.plane is None:
+            return 0.0
+        pts = self._p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
         return float(max([0.0] + [-pt[8] for pt in pts]))
 
     # --------------------------------------------------------------- dynamics
@@ -254,11 +376,26 @@ class PyBulletSession:
             self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort), physicsClientId=self.cid
         )
 
+    def save_state(self) -> int:
+        """``saveState``: Bullet's in-memory snapshot (contact manifolds included)."""
+        return self._p.saveState(physicsClientId=self.cid)
+
+    def restore_state(self, handle: int) -> None:
+        self._p.restoreState(stateId=handle, physicsClientId=self.cid)
+
+    def discard_state(self, handle: int) -> None:
+        self._p.removeState(handle, physicsClientId=self.cid)
+
     def link_index(self, link_name: str) -> int:
-        for idx, name in self.link_names.items():
-            if name == link_name:
-                return idx
-        raise KeyError(link_name)
+        """Bullet's link index (-1 for the root) of a link name.
+
+        Raises:
+            KeyError: unknown link.
+        """
+        try:
+            return self._link_index[link_name]
+        except KeyError:
+            raise KeyError(link_name) from None
 
     def close(self) -> None:
         if self.cid is not None:
@@ -281,8 +418,162 @@ class PyBulletSession:
             pass
 
 
+class PyBulletShapeWorld:
+    """A :class:`~asset2sim.engines.base.ShapeWorld`: static convex mesh
+    bodies in a private DIRECT-mode client (no gravity, no stepping)."""
+
+    engine = "pybullet"
+
+    def __init__(self):
+        p = _bullet()
+        self._p = p
+        self.cid = p.connect(p.DIRECT)
+
+    def add_convex(self, vertices, scale, position, orientation) -> int:
+        p = self._p
+        shape = p.createCollisionShape(
+            p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
+            meshScale=np.asarray(scale, float).tolist(), physicsClientId=self.cid,
+        )
+        return p.createMultiBody(
+            0, shape, basePosition=np.asarray(position, float).tolist(),
+            baseOrientation=np.asarray(orientation, float).tolist(), physicsClientId=self.cid,
+        )
+
+    def set_pose(self, shape: int, position, orientation) -> None:
+        self._p.resetBasePositionAndOrientation(
+            shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist(), physicsClientId=self.cid
+        )
+
+    def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
+        return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance, physicsClientId=self.cid)]
+
+    def close(self) -> None:
+        if self.cid is not None:
+            self._p.disconnect(self.cid)
+            self.cid = None
+
+
+class PyBulletViewer:
+    """A :class:`~asset2sim.engines.base.Viewer`: the URDF loaded with a fixed
+    base and MTL colours into a private DIRECT-mode client, drawn by Bullet's
+    TinyRenderer on the CPU.
+
+    Raises (constructor):
+        RuntimeError: Bullet could not load the file.
+    """
+
+    engine = "pybullet"
+
+    def __init__(self, urdf_path: Path):
+        with quiet_fds():  # the import prints PyBullet's build time
+            p = _bullet()
+        self._p = p
+        self.cid = None
+        with quiet_fds():
+            cid = p.connect(p.DIRECT)
+        self.cid = cid
+        try:
+            with quiet_fds():
+                self.body = p.loadURDF(
+                    str(urdf_path),
+                    basePosition=[0, 0, 0],
+                    useFixedBase=True,
+                    flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
+                    physicsClientId=cid,
+                )
+        except Exception as exc:
+            self.close()
+            raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
+        self._links: dict[int, str] = {-1: p.getBodyInfo(self.body, physicsClientId=cid)[0].decode()}
+        self._joints: dict[str, int] = {}
+        self.joint_names: list[str] = []
+        for j in range(p.getNumJoints(self.body, physicsClientId=cid)):
+            info = p.getJointInfo(self.body, j, physicsClientId=cid)
+            self._links[j] = info[12].decode()
+            name = info[1].decode()
+            self._joints[name] = j
+            if info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
+                self.joint_names.append(name)
+        self.link_names = list(self._links.values())
+        self._index = {name: idx for idx, name in reversed(list(self._links.items()))}
+
+    def visual_colors(self) -> list[tuple[str, int, tuple[float, float, float, float]]]:
+        """(link, shape index within the link, rgba) of every visual shape,
+        in ``getVisualShapeData`` order."""
+        out = []
+        counts: dict[int, int] = {}
+        for row in self._p.getVisualShapeData(self.body, physicsClientId=self.cid):
+            link = row[1]
+            k = counts.get(link, 0)
+            counts[link] = k + 1
+            out.append((self._links[link], k, tuple(row[7])))
+        return out
+
+    def set_visual_color(self, link: str, shape: int, rgba) -> None:
+        self._p.changeVisualShape(self.body, self._index[link], shapeIndex=shape, rgbaColor=list(rgba), physicsClientId=self.cid)
+
+    def set_joint_positions(self, q: dict[str, float]) -> None:
+        for name, value in q.items():
+            self._p.resetJointState(self.body, self._joints[name], float(value), 0.0, physicsClientId=self.cid)
+
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        p = self._p
+        idx = self._index[link]
+        if idx == -1:
+            pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
+        else:
+            st = p.getLinkState(self.body, idx, computeForwardKinematics=True, physicsClientId=self.cid)
+            pos, orn = st[4], st[5]
+        return np.asarray(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+
+    def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
+        p = self._p
+        view = p.computeViewMatrix(
+            np.asarray(camera["eye"], float).tolist(), np.asarray(camera["target"], float).tolist(),
+            np.asarray(camera["up"], float).tolist(), physicsClientId=self.cid,
+        )
+        proj = p.computeProjectionMatrixFOV(camera["fov_deg"], width / height, camera["near"], camera["far"], physicsClientId=self.cid)
+        res = p.getCameraImage(
+            width,
+            height,
+            view,
+            proj,
+            lightDirection=np.asarray(light["direction"], float).tolist(),
+            lightColor=list(light["color"]),
+            lightDistance=light["distance"],
+            shadow=int(light["shadow"]),
+            lightAmbientCoeff=light["ambient"],
+            lightDiffuseCoeff=light["diffuse"],
+            lightSpecularCoeff=light["specular"],
+            renderer=p.ER_TINY_RENDERER,
+            physicsClientId=self.cid,
+        )
+        if res is None or len(res) < 5:
+            raise RuntimeError("PyBullet returned no image")
+        rgba = np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4)
+        seg = np.asarray(res[4]).reshape(height, width)
+        return rgba, seg
+
+    def close(self) -> None:
+        if self.cid is not None:
+            try:
+                self._p.disconnect(physicsClientId=self.cid)
+            except Exception:
+                pass
+            self.cid = None
+
+    def __del__(self):  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
 def _open(urdf_path: Path, options: SessionOptions) -> PyBulletSession:
     return PyBulletSession(urdf_path, options)
 
 
 register_engine("pybullet", _open)
+register_shape_world("pybullet", PyBulletShapeWorld)
+register_viewer("pybullet", PyBulletViewer)

@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession, quat_angle
+from asset2sim.engines.base import SimSession
+from asset2sim.frames import quat_angle
 from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 
 
@@ -70,7 +72,7 @@ def penetration(session: SimSession) -> MetricResult:
     return MetricResult(
         name="penetration",
         value=phi * 1000.0,
-        unit="mm",
+        unit=unit("penetration"),
         passed=None,
         threshold="reported (no SPEC threshold)",
         details={
@@ -147,7 +149,7 @@ def rest_stability(trace: RestTrace, conventions: SimConventions | None = None, 
         return MetricResult(
             name="rest_stability",
             value=None,
-            unit="m",
+            unit=unit("rest_stability"),
             passed=False,
             threshold=f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad",
             details={"diverged": True},
@@ -159,7 +161,7 @@ def rest_stability(trace: RestTrace, conventions: SimConventions | None = None, 
     return MetricResult(
         name="rest_stability",
         value=d_pos,
-        unit="m",
+        unit=unit("rest_stability"),
         passed=passed,
         threshold=f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad",
         details={"D_pos_m": d_pos, "D_ori_rad": d_ori, "diverged": False},
@@ -177,14 +179,14 @@ def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
     """Root rotation (rad) between placement and the end of settling; fails
     above :data:`SETTLE_TILT_LIMIT` (the object fell over while settling)."""
     if trace.initial_root_quat is None or trace.diverged:
-        return MetricResult(name="settle_tilt", value=None, unit="rad", passed=not trace.diverged, engine=engine,
+        return MetricResult(name="settle_tilt", value=None, unit=unit("settle_tilt"), passed=not trace.diverged, engine=engine,
                             threshold=f"<= {SETTLE_TILT_LIMIT} rad", details={"diverged": trace.diverged})
     tilt = quat_angle(trace.initial_root_quat, trace.q0)
     drop = float(np.linalg.norm(trace.p0 - trace.initial_root_pos))
     return MetricResult(
         name="settle_tilt",
         value=tilt,
-        unit="rad",
+        unit=unit("settle_tilt"),
         passed=tilt <= SETTLE_TILT_LIMIT,
         threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (asset2sim check, not SPEC)",
         details={"tilt_rad": tilt, "displacement_m": drop},
@@ -230,7 +232,7 @@ def oscillation(trace: RestTrace, conventions: SimConventions | None = None, eng
     return MetricResult(
         name="oscillation",
         value=float(len(failing)),
-        unit="joints",
+        unit=unit("oscillation"),
         passed=not failing and not trace.diverged,
         threshold=(
             f"no joint with >= {conv.oscillation_sign_changes} sign changes and peak-to-peak amplitude > "

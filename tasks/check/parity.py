@@ -24,15 +24,16 @@ from typing import Any
 
 from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
 from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
 
-METRICS = ("penetration", "rest_stability", "oscillation")
-_UNITS = {"penetration": "mm", "rest_stability": "m", "oscillation": "joints"}
+#: The metrics compared across engines (the registry's SPEC metrics).
+METRICS = SPEC_METRICS
 
 
 def _not_run(engine: str, key: str, reason: str, passed: bool | None) -> list[MetricResult]:
     return [
-        MetricResult(name=n, value=None, unit=_UNITS[n], passed=None if n == "penetration" else passed, details={key: reason}, engine=engine)
+        MetricResult(name=n, value=None, unit=unit(n), passed=None if n == "penetration" else passed, details={key: reason}, engine=engine)
         for n in METRICS
     ]
 
@@ -176,7 +177,7 @@ def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
             if name == "penetration" and m.value is not None:
                 per[engine]["max_depth_mm"] = max((p["max_depth_mm"] for p in m.details.get("pairs", [])), default=0.0)
         if not per:
-            out.append(MetricResult(name=name, value=None, unit=_UNITS[name], passed=None, details={"skipped": "no engine ran"}, engine="worst"))
+            out.append(MetricResult(name=name, value=None, unit=unit(name), passed=None, details={"skipped": "no engine ran"}, engine="worst"))
             continue
         values = [v["value"] for v in per.values() if v["value"] is not None]
         if name == "penetration":
@@ -185,5 +186,5 @@ def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
         else:
             passed = all(v["passed"] is True for v in per.values())
             value = max(values) if values else None
-        out.append(MetricResult(name=name, value=value, unit=_UNITS[name], passed=passed, details={"per_engine": per}, engine="worst"))
+        out.append(MetricResult(name=name, value=value, unit=unit(name), passed=passed, details={"per_engine": per}, engine="worst"))
     return out

@@ -17,6 +17,7 @@ from pathlib import Path
 from asset2sim.engines.base import SessionOptions, Spring, open_session
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics
 
@@ -99,7 +100,7 @@ def run_post_check(
     sag_metric = MetricResult(
         name="state_hold",
         value=max(drift.values()) if drift else 0.0,
-        unit="rad|m",
+        unit=unit("state_hold"),
         passed=not sagging,
         threshold=f"every joint within {config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m of its initial state",
         details={"drift": drift, "sagging": sagging},

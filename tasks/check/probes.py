@@ -1,7 +1,7 @@
 """Passive behaviour probes: a scripted pusher tries to close / open a joint.
 
 The cheap stand-in for the thesis's policies (SPEC, "Behavioral fidelity"). A
-probe runs in PyBullet under the SPEC's conventions (root free on the ground,
+probe runs in a simulator session (PyBullet in the evaluation) under the SPEC's conventions (root free on the ground,
 gravity, passive joints) and applies an *external* force on the moving link,
 as a finger would, so the whole object feels the reaction: a joint that resists
 more than the ground friction can hold makes the object slide or tip instead.
@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import quat_angle
+from asset2sim.frames import quat_angle
 from asset2sim.schemas.report import MetricResult
 
 CLOSE_TARGET, CLOSE_REACHED = 0.05, 0.10
@@ -118,28 +118,15 @@ class ProbeResult:
         return d
 
 
-def _link_world_frame(session, link_idx: int) -> tuple[np.ndarray, np.ndarray]:
-    p = session._p
-    if link_idx < 0:
-        pos, orn = p.getBasePositionAndOrientation(session.body, physicsClientId=session.cid)
-    else:
-        st = p.getLinkState(session.body, link_idx, computeForwardKinematics=True, physicsClientId=session.cid)
-        pos, orn = st[4], st[5]
-    R = np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
-    return np.array(pos, float), R
-
-
 def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | None]:
     """Push point (3,) m, unit direction (3,) that increases q, lever (m) or None."""
-    p = session._p
-    j = session._index[joint]
-    info = p.getJointInfo(session.body, j, physicsClientId=session.cid)
-    axis_local = np.array(info[13], float)
-    o, R = _link_world_frame(session, j)
+    link = session.joint_child[joint]
+    axis_local = session.joint_axis(joint)
+    o, R = session.link_frame(link)
     a = R @ axis_local
     a /= max(np.linalg.norm(a), 1e-12)
-    lo, hi = p.getAABB(session.body, j, physicsClientId=session.cid)
-    c = 0.5 * (np.array(lo, float) + np.array(hi, float))
+    lo, hi = session.link_aabb(link)
+    c = 0.5 * (lo + hi)
     if session.joint_types[joint] == "prismatic":
         return c, a, None
     r = (c - o) - np.dot(c - o, a) * a
@@ -157,9 +144,8 @@ def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float |
 
 
 def total_mass(session) -> float:
-    """Sum of the masses PyBullet uses for every link of the body, kg."""
-    p = session._p
-    return float(sum(p.getDynamicsInfo(session.body, i, physicsClientId=session.cid)[0] for i in session.link_names))
+    """Sum of the masses the engine uses for every link of the body, kg."""
+    return float(sum(session.link_masses().values()))
 
 
 def probe_joint(
@@ -173,11 +159,10 @@ def probe_joint(
     config: ProbeConfig | None = None,
     holds_position: bool = False,
 ) -> ProbeResult:
-    """Run one probe on ``joint`` of a PyBullet session from its current state.
+    """Run one probe on ``joint`` of a session from its current state.
 
     Args:
-        session: :class:`asset2sim.engines.pybullet_engine.PyBulletSession`
-            (root free, on the ground); it is stepped in place.
+        session: a :class:`asset2sim.engines.base.SimSession` (root free, on the ground); it is stepped in place.
         joint: movable joint name.
         closed: q_closed, rad or m; ``direction`` +1/-1 the opening direction;
             ``open_range`` > 0 the largest opening from q_closed (rad or m).
@@ -195,8 +180,9 @@ def probe_joint(
     if not open_range > 0:
         raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
     cfg = config or ProbeConfig()
-    p = session._p
-    j = session._index[joint]
+    if joint not in session.joint_child:
+        raise KeyError(joint)
+    link = session.joint_child[joint]
     dt = session.options.conventions.timestep
     jtype = session.joint_types[joint]
     prismatic = jtype == "prismatic"
@@ -205,8 +191,7 @@ def probe_joint(
         return float(direction * (q - closed) / open_range)
 
     def qpos() -> tuple[float, float]:
-        s = p.getJointState(session.body, j, physicsClientId=session.cid)
-        return float(s[0]), float(s[1])
+        return session.joint_state(joint)
 
     # Let the object come to rest on the ground first, so drift of an object
     # that is unstable by itself is not taken for the push moving it.
@@ -244,7 +229,7 @@ def probe_joint(
         # speed of the push point along d
         v = sign * qd * (lever if lever is not None else 1.0)
         force = float(np.clip(force + gain * (cfg.push_speed - v) * dt, 0.0, f_max))
-        p.applyExternalForce(session.body, j, (force * d).tolist(), c.tolist(), p.WORLD_FRAME, physicsClientId=session.cid)
+        session.apply_link_force(link, force * d, c)
         session.step(1)
         k += 1
         peak_force = max(peak_force, force)
@@ -349,11 +334,11 @@ def run_probes(
     holds_position: bool = False,
 ) -> list[ProbeResult]:
     """Probe every joint of ``joints`` with every action, each from the
-    session's state at call time (saved and restored with PyBullet's
-    ``saveState``/``restoreState``).
+    session's state at call time (saved and restored with the session's
+    ``save_state``/``restore_state``; PyBullet: ``saveState``/``restoreState``).
 
     Args:
-        session: PyBullet session at the initial state on the ground.
+        session: a session at the initial state on the ground.
         joints: joint -> (q_closed, direction, open_range).
         actions: which probes.
         config, holds_position: see :func:`probe_joint`.
@@ -362,13 +347,12 @@ def run_probes(
         One :class:`ProbeResult` per joint and action, in order. The session is
         left at the saved state.
     """
-    p = session._p
-    sid = p.saveState(physicsClientId=session.cid)
+    sid = session.save_state()
     out = []
     try:
         for name, (closed, direction, rng) in joints.items():
             for action in actions:
-                p.restoreState(stateId=sid, physicsClientId=session.cid)
+                session.restore_state(sid)
                 out.append(
                     probe_joint(
                         session,
@@ -381,9 +365,9 @@ def run_probes(
                         holds_position=holds_position,
                     )
                 )
-        p.restoreState(stateId=sid, physicsClientId=session.cid)
+        session.restore_state(sid)
     finally:
-        p.removeState(sid, physicsClientId=session.cid)
+        session.discard_state(sid)
     return out
 
 

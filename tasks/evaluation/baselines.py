@@ -22,8 +22,9 @@ saying how it was made (``method``, ``scale``, rules used, notes).
   limits, which is exactly the reference state the evaluation compares
   against (see ``docs/metrics.md`` for why).
 - ``direct``: one estimator call applied as is (no validation, no state
-  refinement, no post-check), via the estimator registry
-  ``asset2sim.tasks.synthesize.estimate`` when it exists.
+  refinement, no post-check), on the refine pipeline's estimation context
+  (``asset2sim.tasks.synthesize.context``) through the estimator registry
+  (``asset2sim.tasks.synthesize.estimate``).
 - ``asset2sim``: the full pipeline, :func:`asset2sim.tasks.refine.refine_asset`.
 
 Scaling bakes a uniform factor s into a URDF copy: mesh ``scale`` attributes,
@@ -36,78 +37,27 @@ baseline folder is self-contained, as the SPEC's output contract asks.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import time
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from asset2sim.atomic import copy_file, sha256_file, write_json, write_text
+from asset2sim.atomic import copy_file, sha256_file, write_bytes, write_json, write_text
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks import refine
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, read_manifest
+from asset2sim.tasks.publish import write
+from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize.context import build_context
+from asset2sim.urdf import UrdfLimit, read_urdf, scale_model, write_urdf
 
 METHODS = ("defaults", "human", "direct", "asset2sim")
 
 
 class BaselineError(RuntimeError):
     """A baseline could not be produced (message names the asset and why)."""
-
-
-@dataclass
-class ManifestRow:
-    """One row of ``manifest.csv``. ``reference_scale`` dimensionless or None;
-    ``reference_joint_range`` (lo, hi) in the file's units or None."""
-
-    id: str
-    category: str
-    prompt: str
-    task: str = ""
-    gensim2_task: str = ""
-    reference_scale: float | None = None
-    reference_joint_range: tuple[float, float] | None = None
-    folder: Path = Path(".")
-
-
-def read_manifest(path: Path | str) -> list[ManifestRow]:
-    """Rows of a benchmark manifest (columns id, category, prompt, task,
-    gensim2_task, reference_scale, reference_joint_range); ``folder`` is
-    ``<manifest dir>/<id>``.
-
-    Raises:
-        FileNotFoundError: no such manifest.
-        ValueError: a row without id, or an unreadable scale/range (names the row).
-    """
-    path = Path(path)
-    rows = []
-    with open(path, newline="", encoding="utf-8") as fh:
-        for i, rec in enumerate(csv.DictReader(fh), 2):
-            rid = (rec.get("id") or "").strip()
-            if not rid:
-                raise ValueError(f"{path}:{i}: row without id")
-            scale_s = (rec.get("reference_scale") or "").strip()
-            rng_s = (rec.get("reference_joint_range") or "").strip().strip('"')
-            try:
-                scale = float(scale_s) if scale_s else None
-                rng = None
-                if rng_s:
-                    vals = json.loads(rng_s)
-                    rng = (float(vals[0]), float(vals[1]))
-            except (ValueError, TypeError, IndexError) as exc:
-                raise ValueError(f"{path}:{i} (id {rid}): bad reference_scale/range: {exc}") from exc
-            rows.append(
-                ManifestRow(
-                    id=rid,
-                    category=(rec.get("category") or "").strip(),
-                    prompt=(rec.get("prompt") or "").strip(),
-                    task=(rec.get("task") or "").strip(),
-                    gensim2_task=(rec.get("gensim2_task") or "").strip(),
-                    reference_scale=scale,
-                    reference_joint_range=rng,
-                    folder=path.parent / rid,
-                )
-            )
-    return rows
 
 
 @dataclass
@@ -133,18 +83,6 @@ def _inside(path: Path, root: Path) -> bool:
         return False
 
 
-def _fmt(v: float) -> str:
-    return repr(float(v))
-
-
-def _scale_xyz(elem: ET.Element, attr: str, s: float) -> None:
-    val = elem.get(attr)
-    if val is None:
-        return
-    parts = [float(x) for x in val.split()]
-    elem.set(attr, " ".join(_fmt(x * s) for x in parts))
-
-
 def scale_urdf(
     src: Path | str,
     dst: Path | str,
@@ -154,7 +92,9 @@ def scale_urdf(
     header: str = "",
     copy_meshes: bool = True,
 ) -> Path:
-    """Write a copy of URDF ``src`` with the uniform scale ``scale`` baked in.
+    """Write a copy of URDF ``src`` with the uniform scale ``scale`` baked in
+    (:func:`asset2sim.urdf.scale_model` on the lenient reading of the file,
+    written by :func:`asset2sim.urdf.write_urdf`).
 
     Args:
         src: input URDF; relative mesh paths are resolved against its folder.
@@ -162,7 +102,7 @@ def scale_urdf(
         scale: s > 0, dimensionless.
         joint_limits: joint -> (lower, upper) in the *input* units, replacing
             the file's limits (prismatic values are then scaled).
-        header: a comment placed after the XML declaration.
+        header: a comment placed at the top of ``<robot>``.
         copy_meshes: copy every mesh inside ``src``'s folder (with its MTL and
             textures) to the same relative path beside ``dst`` and keep the
             path relative (a self-contained folder); else write absolute paths.
@@ -173,100 +113,59 @@ def scale_urdf(
     Raises:
         ValueError: s <= 0 or not finite; ``package://`` mesh paths; a joint
             of ``joint_limits`` not in the file.
+        UrdfError: ``src`` cannot be read (a ``ValueError`` too).
     """
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be a finite number > 0, got {scale}")
     src = Path(src).resolve()
-    import defusedxml.ElementTree as DET
-
-    root = DET.parse(str(src)).getroot()
-    s = float(scale)
+    model = read_urdf(src, mode="lenient")
     to_copy: set[Path] = set()
-    for link in root.iter("link"):
-        for part in list(link.iter("visual")) + list(link.iter("collision")):
-            for origin in part.iter("origin"):
-                _scale_xyz(origin, "xyz", s)
-            for mesh in part.iter("mesh"):
-                fname = mesh.get("filename", "")
-                if fname.startswith("package://"):
-                    raise ValueError(f"{src}: link {link.get('name')!r}: package:// mesh paths are not supported")
-                if fname.startswith("file://"):
-                    fname = fname[len("file://") :]
-                mesh_src = (src.parent / fname).resolve()
-                if copy_meshes and _inside(mesh_src, src.parent):
-                    rel = mesh_src.relative_to(src.parent)
-                    to_copy.add(mesh_src)
-                    mesh.set("filename", rel.as_posix())
-                else:
-                    mesh.set("filename", str(mesh_src))
-                sc = [float(x) for x in mesh.get("scale", "1 1 1").split()]
-                mesh.set("scale", " ".join(_fmt(x * s) for x in sc))
-            for box in part.iter("box"):
-                _scale_xyz(box, "size", s)
-            for cyl in part.iter("cylinder"):
-                for a in ("radius", "length"):
-                    if cyl.get(a) is not None:
-                        cyl.set(a, _fmt(float(cyl.get(a)) * s))
-            for sph in part.iter("sphere"):
-                if sph.get("radius") is not None:
-                    sph.set("radius", _fmt(float(sph.get("radius")) * s))
-        for inertial in link.iter("inertial"):
-            for origin in inertial.iter("origin"):
-                _scale_xyz(origin, "xyz", s)
-            for inertia in inertial.iter("inertia"):
-                for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-                    if inertia.get(a) is not None:
-                        inertia.set(a, _fmt(float(inertia.get(a)) * s * s))
-    seen = set()
+    for link in model.links.values():
+        for g in link.visuals + link.collisions:
+            if g.kind != "mesh":
+                continue
+            fname = g.filename or ""
+            if fname.startswith("package://"):
+                raise ValueError(f"{src}: link {link.name!r}: package:// mesh paths are not supported")
+            if fname.startswith("file://"):
+                fname = fname[len("file://") :]
+            mesh_src = (src.parent / fname).resolve()
+            if copy_meshes and _inside(mesh_src, src.parent):
+                to_copy.add(mesh_src)
+                g.filename = mesh_src.relative_to(src.parent).as_posix()
+            else:
+                g.filename = str(mesh_src)
     dst_dir = Path(dst).parent
     for mesh_src in sorted(to_copy):
-        files = [mesh_src]
-        try:
-            from asset2sim.tasks.publish.write import mesh_dependencies
-
-            files += mesh_dependencies(mesh_src, src.parent)
-        except ImportError:
-            pass
-        for f in files:
+        for f in [mesh_src] + write.mesh_dependencies(mesh_src, src.parent):
             out = dst_dir / f.relative_to(src.parent)
             if not (out.is_file() and sha256_file(out) == sha256_file(f)):
                 copy_file(f, out)
-    for joint in root.iter("joint"):
-        name = joint.get("name")
-        for origin in joint.findall("origin"):
-            _scale_xyz(origin, "xyz", s)
-        lim = joint.find("limit")
-        if joint_limits and name in joint_limits:
-            seen.add(name)
-            if lim is None:
-                lim = ET.SubElement(joint, "limit")
-            lim.set("lower", _fmt(joint_limits[name][0]))
-            lim.set("upper", _fmt(joint_limits[name][1]))
-        if joint.get("type") == "prismatic" and lim is not None:
-            for a in ("lower", "upper"):
-                if lim.get(a) is not None:
-                    lim.set(a, _fmt(float(lim.get(a)) * s))
-    missing = set(joint_limits or {}) - seen
+    names = {j.name: j for j in model.joints}
+    missing = set(joint_limits or {}) - set(names)
     if missing:
         raise ValueError(f"{src}: joints {sorted(missing)} not found")
-    body = ET.tostring(root, encoding="unicode")
-    text = '<?xml version="1.0" ?>\n' + (f"<!-- {header} -->\n" if header else "") + body + "\n"
-    write_text(Path(dst), text)
+    for name, (lo, hi) in (joint_limits or {}).items():
+        joint = names[name]
+        if joint.limit is None:
+            joint.limit = UrdfLimit()
+        joint.limit.lower, joint.limit.upper = float(lo), float(hi)
+    scale_model(model, float(scale))
+    write_bytes(Path(dst), write_urdf(model, comment=f" {header} " if header else None))
     return Path(dst)
 
 
 def urdf_joints(urdf: Path | str) -> dict[str, dict[str, Any]]:
-    """Joint name -> {type, lower, upper} (limits None when absent) of a URDF."""
-    import defusedxml.ElementTree as DET
+    """Joint name -> {type, lower, upper} (limits as written, rad or m; None
+    when absent) of a URDF, read by :func:`asset2sim.urdf.read_urdf` (lenient).
 
+    Raises:
+        UrdfError: unreadable XML or a malformed number.
+    """
     out = {}
-    for joint in DET.parse(str(urdf)).getroot().iter("joint"):
-        lim = joint.find("limit")
-        lo = hi = None
-        if lim is not None:
-            lo = float(lim.get("lower")) if lim.get("lower") is not None else None
-            hi = float(lim.get("upper")) if lim.get("upper") is not None else None
-        out[joint.get("name")] = {"type": joint.get("type"), "lower": lo, "upper": hi}
+    for joint in read_urdf(urdf, mode="lenient").joints:
+        lim = joint.limit
+        out[joint.name] = {"type": joint.type, "lower": None if lim is None else lim.lower, "upper": None if lim is None else lim.upper}
     return out
 
 
@@ -276,32 +175,6 @@ def _clip(q: float, lo: float | None, hi: float | None) -> float:
     if hi is not None:
         q = min(q, hi)
     return float(q)
-
-
-def reference_info(folder: Path | str) -> dict[str, Any]:
-    """GenSim2 reference of a PartNet-Mobility folder.
-
-    Returns:
-        {scale (float | None), joint_position_range ((lo, hi) | None),
-        task_joints (movable joints of reference_gensim2.urdf), urdf (Path | None)}.
-    """
-    folder = Path(folder)
-    info: dict[str, Any] = {"scale": None, "joint_position_range": None, "task_joints": [], "urdf": None}
-    js = folder / "reference_gensim2.json"
-    if js.is_file():
-        data = json.loads(js.read_text(encoding="utf-8"))
-        if isinstance(data.get("scale"), (int, float)):
-            info["scale"] = float(data["scale"])
-        rng = data.get("joint_position_range")
-        if isinstance(rng, list) and len(rng) == 2:
-            info["joint_position_range"] = (float(rng[0]), float(rng[1]))
-    ru = folder / "reference_gensim2.urdf"
-    if ru.is_file():
-        info["urdf"] = ru
-        info["task_joints"] = [
-            n for n, j in urdf_joints(ru).items() if j["type"] in ("revolute", "continuous", "prismatic")
-        ]
-    return info
 
 
 def human_initial_state(
@@ -335,8 +208,8 @@ def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     src = row.folder / "mobility.urdf"
     if not src.is_file():
         raise BaselineError(f"{row.id}: no mobility.urdf in {row.folder}")
-    ref = reference_info(row.folder)
-    scale = ref["scale"] if ref["scale"] is not None else row.reference_scale
+    ref = partnet_mobility.read_reference(row.folder)
+    scale = ref.scale if ref.scale is not None else row.reference_scale
     notes = []
     if scale is None:
         scale = 1.0
@@ -373,41 +246,41 @@ def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     """
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
-    ref = reference_info(row.folder)
-    if ref["urdf"] is None:
+    ref = partnet_mobility.read_reference(row.folder)
+    if ref.urdf is None:
         raise BaselineError(f"{row.id}: no reference_gensim2.urdf in {row.folder}")
     notes = []
-    scale = ref["scale"]
+    scale = ref.scale
     if scale is None:
         scale = 1.0
         notes.append("reference_gensim2.json has no scale: 1.0 (SAPIEN's default)")
-    rng = ref["joint_position_range"]
+    rng = ref.joint_position_range
     limits = None
     if rng is not None:
         # GenSim2's range, within the file's own limits (an empty intersection keeps the range)
-        file_joints = urdf_joints(ref["urdf"])
+        file_joints = urdf_joints(ref.urdf)
         limits = {}
-        for j in ref["task_joints"]:
+        for j in ref.task_joints:
             lo = max(rng[0], file_joints[j]["lower"]) if file_joints[j]["lower"] is not None else rng[0]
             hi = min(rng[1], file_joints[j]["upper"]) if file_joints[j]["upper"] is not None else rng[1]
             limits[j] = (lo, hi) if lo <= hi else rng
     urdf = scale_urdf(
-        ref["urdf"], out_dir / "mobility.urdf", scale, joint_limits=limits,
+        ref.urdf, out_dir / "mobility.urdf", scale, joint_limits=limits,
         header=f"asset2sim baseline 'human' (GenSim2 reference) of {row.id} at scale {scale}",
     )
     joints = urdf_joints(urdf)
-    state = human_initial_state(joints, ref["task_joints"], rng, scale)
+    state = human_initial_state(joints, ref.task_joints, rng, scale)
     write_json(out_dir / "initial_state.json", {"initial_joint_positions": state})
     write_json(
         out_dir / "baseline.json",
         {
             "method": "human",
             "asset_id": row.id,
-            "source": str(ref["urdf"]),
+            "source": str(ref.urdf),
             "scale": scale,
             "category": row.category,
             "joint_position_range": list(rng) if rng else None,
-            "task_joints": ref["task_joints"],
+            "task_joints": ref.task_joints,
             "initial_state_rule": "lower end of joint_position_range (else 0) clipped to the limits",
             "notes": notes,
         },
@@ -418,61 +291,30 @@ def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
 def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimator: str = "offline") -> BaselineResult:
     """``direct`` baseline: one estimator call, its overlay written as is.
 
-    The same stages as :func:`asset2sim.tasks.refine.refine_asset` up to the
-    estimator (extract, analyze, request, category, closed ends), then one
-    ``estimate`` call of the registered ``estimator``
+    The same context as :func:`asset2sim.tasks.refine.refine_asset` builds
+    (:func:`asset2sim.tasks.synthesize.context.build_context`: extract,
+    analyze, request, category, closed ends), then one ``estimate`` call of
+    the registered ``estimator``
     (:func:`asset2sim.tasks.synthesize.estimate.get_estimator`) and
-    :func:`asset2sim.tasks.publish.write.write_output` with the state the estimator's
-    bands imply; no overlay validation, no state refinement, no post-check or
-    escalation.
+    :func:`asset2sim.tasks.publish.write.write_output` with the state the
+    estimator's bands imply; no overlay validation, no state refinement, no
+    post-check or escalation.
 
     Raises:
-        BaselineError: a pipeline module is missing, or a stage failed (the
-            message names it; an overlay the writer cannot write counts as the
-            method failing on this asset).
+        BaselineError: a stage failed (the message names it; an overlay the
+            writer cannot write counts as the method failing on this asset).
     """
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     try:
-        from asset2sim.engines.base import SessionOptions, open_session
-        from asset2sim.tasks.geometry import analyze
-        from asset2sim.tasks.synthesize import estimate
-        from asset2sim.tasks.ingest import extract
-        from asset2sim.tasks.interpret import priors
-        from asset2sim.tasks.interpret import request
-        from asset2sim.tasks.publish import write
-        from asset2sim.tasks.geometry.closed_state import closed_positions, link_hull_points, object_extents, subtree_links
-    except ImportError as exc:
-        raise BaselineError(f"{row.id}: the 'direct' method needs the pipeline modules ({exc})") from exc
-    try:
-        asset = extract.extract_asset(row.folder, asset_id=row.id, category=row.category or None)
-        geometry = analyze.analyze_asset(asset)
-        spec = request.parse_request(row.prompt)
-        labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
-        match = priors.recognize_category(row.category or asset.category, labels, row.prompt)
-        cat = getattr(match, "name", None) or str(match)
-        kin = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
-        try:
-            hull = link_hull_points(asset)
-            closed = closed_positions(kin, asset, hull_points=hull)
-            extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
-            subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
-            ctx = estimate.EstimationContext(
-                asset=asset, geometry=geometry, request=spec, category=cat,
-                category_reason=getattr(match, "reason", ""), closed=closed, closed_extents=extents,
-                session=kin, subtrees=subtrees, settings={"seed": seed},
-            )
-            overlay = estimate.get_estimator(estimator).estimate(ctx)
-            bands, _ = estimate.requested_bands(ctx)
-        finally:
-            kin.close()
-        prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
-        state = estimate.state_from_bands(closed, bands, overlay.scale, prismatic)
+        with build_context(row.folder, row.prompt, category=row.category or None, asset_id=row.id, settings={"seed": seed}) as ctx:
+            result = estimate.get_estimator(estimator).estimate(ctx)
+        overlay = result.overlay
+        prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
+        state = estimate.state_from_bands(ctx.closed, result.bands, overlay.scale, prismatic)
         if overlay.initial_joint_positions:
             state.update(overlay.initial_joint_positions)
-        write.write_output(asset, overlay, out_dir, state)
-    except BaselineError:
-        raise
+        write.write_output(ctx.asset, overlay, out_dir, state)
     except Exception as exc:
         raise BaselineError(f"{row.id}: direct ({estimator}) failed: {type(exc).__name__}: {exc}") from exc
     write_json(
@@ -482,7 +324,7 @@ def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimat
             "asset_id": row.id,
             "source": str(row.folder),
             "scale": overlay.scale,
-            "category": cat,
+            "category": ctx.category,
             "estimator": overlay.estimator.name,
             "initial_state_rule": "the estimator's requested bands, unrefined",
             "notes": ["one estimator call; no validation, no state refinement, no post-check"],
@@ -493,44 +335,22 @@ def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimat
 
 
 def make_asset2sim(row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> BaselineResult:
-    """``asset2sim``: the full pipeline (:func:`asset2sim.tasks.refine.refine_asset`).
+    """``asset2sim``: the full pipeline (:func:`asset2sim.tasks.refine.refine_asset`,
+    no extras: the benchmark writes its own report).
 
     Raises:
-        BaselineError: the refine pipeline is not available or failed.
+        BaselineError: the refine pipeline failed.
     """
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     try:
-        from asset2sim.tasks.refine import refine_asset
-    except ImportError as exc:
-        raise BaselineError(f"{row.id}: asset2sim.tasks.refine is not available ({exc})") from exc
-    config = None
-    try:
-        from asset2sim.schemas.config import RefineConfig
-
-        config = RefineConfig(seed=seed)
-    except Exception:  # pragma: no cover - schema always present
-        config = None
-    kwargs: dict[str, Any] = {"category": row.category or None}
-    try:
-        import inspect
-
-        params = inspect.signature(refine_asset).parameters
-        if "extras" in params:
-            kwargs["extras"] = False  # the benchmark writes its own report
-        if "asset_id" in params:
-            kwargs["asset_id"] = row.id
-    except (TypeError, ValueError):
-        pass
-    try:
-        res = refine_asset(row.folder, row.prompt, out_dir, config, **kwargs)
+        res = refine.refine_asset(row.folder, row.prompt, out_dir, RefineConfig(seed=seed),
+                                  category=row.category or None, asset_id=row.id, extras=False)
     except Exception as exc:
         raise BaselineError(f"{row.id}: refine_asset failed: {type(exc).__name__}: {exc}") from exc
-    report = getattr(res, "report", None)
-    scale = getattr(report, "scale", None)
-    state = dict(getattr(report, "initial_joint_positions", {}) or {})
-    queries = int(getattr(report, "model_queries", 0) or 0)
-    return BaselineResult("asset2sim", row.id, out_dir, scale, state, time.perf_counter() - t0, queries)
+    report = res.report
+    return BaselineResult("asset2sim", row.id, out_dir, report.scale, dict(report.initial_joint_positions or {}),
+                          time.perf_counter() - t0, int(report.model_queries or 0))
 
 
 MethodFn = Callable[..., BaselineResult]

@@ -39,9 +39,14 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
 
 from asset2sim.engines.base import EngineUnavailable, SessionOptions, Spring, open_session
 from asset2sim.schemas.config import RefineConfig, SimConventions
+from asset2sim.schemas.metrics import METRIC_INFO, REST_TEST_METRICS
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.evaluation import semantic_metrics as sem
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.publish.report_html import write_report
+from asset2sim.urdf import UrdfError, read_urdf
 
 EVALUATION_VERSION = "1"
 
@@ -228,11 +233,15 @@ class MetricSpec:
 METRICS: dict[str, MetricSpec] = {}
 
 
-def register_metric(name: str, group: str, description: str) -> Callable[[MetricFn], MetricFn]:
-    """Decorator registering ``fn(context, runs) -> list[MetricResult]``."""
+def register_metric(name: str, group: str | None = None, description: str | None = None) -> Callable[[MetricFn], MetricFn]:
+    """Decorator registering ``fn(context, runs) -> list[MetricResult]`` for
+    metric ``name``; ``group`` and ``description`` default to the registry
+    table's (:data:`asset2sim.schemas.metrics.METRIC_INFO`)."""
+    info = METRIC_INFO.get(name)
 
     def deco(fn: MetricFn) -> MetricFn:
-        METRICS[name] = MetricSpec(name, group, fn, description)
+        METRICS[name] = MetricSpec(name, group or (info.group if info else "physical"), fn,
+                                   description or (info.description if info else ""))
         return fn
 
     return deco
@@ -245,68 +254,47 @@ def metric_names() -> list[str]:
 
 # ------------------------------------------------------------------ reading
 def find_urdf(path: Path | str) -> Path:
-    """The URDF of ``path`` (:func:`asset2sim.tasks.ingest.extract.find_urdf`: the file
+    """The URDF of ``path`` (:func:`asset2sim.tasks.ingest.partnet_mobility.find_urdf`: the file
     itself, else ``mobility.urdf``, else the only ``*.urdf`` not named
     ``reference_*``).
 
     Raises:
         EvaluationError: nothing (or several candidates) found.
     """
-    from asset2sim.tasks.ingest.extract import AssetError
-    from asset2sim.tasks.ingest.extract import find_urdf as _find
-
     try:
-        return _find(path)
+        return partnet_mobility.find_urdf(path)
     except AssetError as exc:
         raise EvaluationError(str(exc)) from exc
 
 
 def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
-    """Links and joints of a URDF (hardened XML parsing with defusedxml).
+    """Links and joints of a URDF as written, read by :func:`asset2sim.urdf.read_urdf`
+    in lenient mode (raw PartNet-Mobility and GenSim2 reference files are graded too).
 
     Raises:
-        EvaluationError: unreadable XML or a malformed number (names the element).
+        EvaluationError: unreadable XML or a malformed number (names the file,
+            line and link or joint).
     """
-    import defusedxml.ElementTree as DET
-
     try:
-        root = DET.parse(str(urdf)).getroot()
-    except Exception as exc:
-        raise EvaluationError(f"{urdf}: unreadable URDF: {exc}") from exc
-    links = {}
-    for ln in root.findall("link"):
-        name = ln.get("name")
-        mass = None
-        inertial = ln.find("inertial")
-        if inertial is not None and inertial.find("mass") is not None:
-            try:
-                mass = float(inertial.find("mass").get("value"))
-            except (TypeError, ValueError) as exc:
-                raise EvaluationError(f"{urdf}: link {name!r}: bad <mass>: {exc}") from exc
-        links[name] = LinkInfo(name, mass, ln.find("collision") is not None, ln.find("visual") is not None)
+        model = read_urdf(urdf, mode="lenient")
+    except UrdfError as exc:
+        raise EvaluationError(f"unreadable URDF: {exc}") from exc
+    links = {
+        name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))
+        for name, ln in model.links.items()
+    }
     joints = {}
-    for jt in root.findall("joint"):
-        name = jt.get("name")
-        lim = jt.find("limit")
-        dyn = jt.find("dynamics")
-
-        def num(elem, attr):
-            if elem is None or elem.get(attr) is None:
-                return None
-            try:
-                return float(elem.get(attr))
-            except ValueError as exc:
-                raise EvaluationError(f"{urdf}: joint {name!r}: bad {attr}: {exc}") from exc
-
-        joints[name] = JointInfo(
-            name=name,
-            type=jt.get("type", ""),
-            parent=jt.find("parent").get("link") if jt.find("parent") is not None else "",
-            child=jt.find("child").get("link") if jt.find("child") is not None else "",
-            lower=num(lim, "lower"),
-            upper=num(lim, "upper"),
-            damping=num(dyn, "damping"),
-            friction=num(dyn, "friction"),
+    for jt in model.joints:
+        lim, dyn = jt.limit, jt.dynamics
+        joints[jt.name] = JointInfo(
+            name=jt.name,
+            type=jt.type,
+            parent=jt.parent,
+            child=jt.child,
+            lower=None if lim is None else lim.lower,
+            upper=None if lim is None else lim.upper,
+            damping=None if dyn is None else dyn.damping,
+            friction=None if dyn is None else dyn.friction,
         )
     return links, joints
 
@@ -322,20 +310,16 @@ def _read_json(path: Path) -> dict[str, Any] | None:
 
 
 def _read_semantics(folder: Path) -> dict[str, tuple[str, str]]:
-    """``semantics.txt`` via the extraction stage; malformed files read as empty
-    (evaluation works on any URDF)."""
-    from asset2sim.tasks.ingest.extract import AssetError, read_semantics
-
+    """``semantics.txt`` (:func:`asset2sim.tasks.ingest.partnet_mobility.read_semantics`);
+    malformed files read as empty (evaluation works on any URDF)."""
     try:
-        return read_semantics(folder)
+        return partnet_mobility.read_semantics(folder)
     except AssetError:
         return {}
 
 
 def _read_category(folder: Path) -> str | None:
-    from asset2sim.tasks.ingest.extract import read_category
-
-    return read_category(folder)
+    return partnet_mobility.read_category(folder)
 
 
 def _clip(q: float, lo: float | None, hi: float | None) -> float:
@@ -509,12 +493,11 @@ def _geometry_extents(session, desc, state: dict[str, float], hull: dict[str, np
 def _extents(session) -> np.ndarray:
     """Extents (3,) m of the union of Bullet's link AABBs (loose; see
     :func:`_geometry_extents`)."""
-    p = session._p
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for idx in session.link_names:
-        if not p.getCollisionShapeData(session.body, idx, physicsClientId=session.cid):
+    for name in session.link_names:
+        if not session.link_has_collision(name):
             continue
-        a, b = p.getAABB(session.body, idx, physicsClientId=session.cid)
+        a, b = session.link_aabb(name)
         lo, hi = np.minimum(lo, a), np.maximum(hi, b)
     if not np.all(np.isfinite(lo)):
         return np.zeros(3)
@@ -525,10 +508,8 @@ def _extents(session) -> np.ndarray:
 def _task_joints(ctx_joints: dict[str, JointInfo], reference_dir: Path | None, requested: list[str]) -> tuple[list[str], str]:
     movable = [n for n, j in ctx_joints.items() if j.type in _MOVABLE]
     if reference_dir is not None:
-        from asset2sim.tasks.evaluation.baselines import reference_info
-
-        ref = reference_info(reference_dir)
-        tj = [j for j in ref["task_joints"] if j in movable]
+        ref = partnet_mobility.read_reference(reference_dir)
+        tj = [j for j in ref.task_joints if j in movable]
         if tj:
             return tj, "movable joints of reference_gensim2.urdf"
     if requested:
@@ -713,10 +694,10 @@ def build_context(
     rule = ""
     ref_info = None
     if ref_dir is not None:
-        from asset2sim.tasks.evaluation.baselines import reference_info, urdf_joints
+        from asset2sim.tasks.evaluation.baselines import urdf_joints
 
-        ref_info = reference_info(ref_dir)
-        ref_scale = ref_info["scale"]
+        ref_info = partnet_mobility.read_reference(ref_dir)
+        ref_scale = ref_info.scale
     # scale of the evaluated asset
     scale, scale_src = None, "unknown"
     if overlay is not None and isinstance(overlay.get("scale"), (int, float)):
@@ -769,10 +750,10 @@ def build_context(
         notes=notes,
     )
     # reference state (output units of the evaluated asset)
-    if ref_info is not None and ref_info["urdf"] is not None:
-        rj = urdf_joints(ref_info["urdf"])
-        rng = ref_info["joint_position_range"]
-        for n in ref_info["task_joints"]:
+    if ref_info is not None and ref_info.urdf is not None:
+        rj = urdf_joints(ref_info.urdf)
+        rng = ref_info.joint_position_range
+        for n in ref_info.task_joints:
             if n not in joints:
                 continue
             jr = rj[n]
@@ -797,17 +778,12 @@ class _Recorder:
         self.root: list[np.ndarray] = []
         self.ground: list[float] = []
         self.joints: list[dict[str, float]] = []
-        self._fast = hasattr(session, "_p") and getattr(session, "plane", None) is not None
 
     def __getattr__(self, name):
         return getattr(self._s, name)
 
     def _ground_now(self) -> float:
-        if self._fast:
-            s = self._s
-            pts = s._p.getContactPoints(s.body, s.plane, physicsClientId=s.cid)
-            return float(max([0.0] + [-pt[8] for pt in pts]))
-        return float(self._s.ground_penetration())
+        return float(self._s.step_ground_penetration())
 
     def step(self, n: int = 1) -> None:
         for _ in range(n):
@@ -817,43 +793,29 @@ class _Recorder:
 
 
 def _link_centres(session) -> dict[str, np.ndarray]:
-    p = session._p
     out = {}
-    for idx, name in session.link_names.items():
-        a, b = p.getAABB(session.body, idx, physicsClientId=session.cid)
-        out[name] = 0.5 * (np.array(a) + np.array(b))
+    for name in session.link_names:
+        a, b = session.link_aabb(name)
+        out[name] = 0.5 * (a + b)
     return out
 
 
 def _masses(session, links: dict[str, LinkInfo]) -> dict[str, dict[str, Any]]:
-    p = session._p
     out = {}
-    for idx, name in session.link_names.items():
-        m = float(p.getDynamicsInfo(session.body, idx, physicsClientId=session.cid)[0])
+    for name, m in session.link_masses().items():
         li = links.get(name)
         out[name] = {"mass": m, "source": "file <inertial>" if li is not None and li.mass is not None else "engine default (no <inertial>)"}
     return out
 
 
 def _point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
-    p = session._p
     out = {}
-    for idx, name in session.link_names.items():
-        try:
-            n, verts = p.getMeshData(session.body, idx, physicsClientId=session.cid)
-        except Exception:
+    for name in session.link_names:
+        v = session.link_collision_vertices(name)
+        if not len(v):
             continue
-        if not n:
-            continue
-        v = np.asarray(verts, float)
-        if idx < 0:
-            pos, orn = p.getBasePositionAndOrientation(session.body, physicsClientId=session.cid)
-        else:
-            st = p.getLinkState(session.body, idx, computeForwardKinematics=True, physicsClientId=session.cid)
-            pos, orn = st[4], st[5]
-        # getMeshData returns vertices in the link's (URDF) frame for mesh shapes.
-        R = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
-        w = v @ R.T + np.array(pos)
+        pos, R = session.link_frame(name)
+        w = v @ R.T + pos
         if len(w) > max_points:
             w = w[np.linspace(0, len(w) - 1, max_points).astype(int)]
         out[name] = w
@@ -861,12 +823,14 @@ def _point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
 
 
 def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
-               closed_for: list[str] | None = None) -> EngineRun:
+               closed_for: list[str] | None = None, rest_test: bool = True) -> EngineRun:
     """Open ``engine`` on the asset and take every raw measurement once:
     penetration at the initial state, extents, masses, the SPEC rest test with
     per-step root/ground recording, and (PyBullet) the probes from the initial
     state. ``closed_for``: joints whose closed end is computed in this
-    (PyBullet) session into ``ctx.closed`` before anything is stepped. Errors
+    (PyBullet) session into ``ctx.closed`` before anything is stepped.
+    ``rest_test=False``: no rest test (its measurement was taken elsewhere,
+    e.g. by the post-check); ``trace`` and the series stay None. Errors
     are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()
     run = EngineRun(engine)
@@ -879,7 +843,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
         run.error = f"could not load: {type(exc).__name__}: {exc}"
         return run
     try:
-        pyb = hasattr(session, "_p")
+        pyb = session.engine == "pybullet"  # the reference engine takes the extra measurements
         # Phi first, in the fresh session: Bullet keeps contact manifolds (up to 4
         # cached points per pair) across later queries and restoreState, so Phi
         # "at the initial state" is only history-free at the first query.
@@ -891,15 +855,16 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
             run.masses = _masses(session, ctx.links)
             if keep_geometry:
                 run.point_cloud = _point_cloud(session)
-            saved = session._p.saveState(physicsClientId=session.cid)
-        rec = _Recorder(session)
-        run.trace = spec_metrics.run_rest_test(rec, ctx.conventions)
-        run.root_series = np.array(rec.root) if rec.root else np.zeros((0, 3))
-        run.ground_series = np.array(rec.ground)
-        run.joint_series = {
-            n: np.concatenate([run.trace.settle_joints.get(n, np.empty(0)), run.trace.joints[n][1:]])
-            for n in run.trace.joints
-        }
+            saved = session.save_state()
+        if rest_test:
+            rec = _Recorder(session)
+            run.trace = spec_metrics.run_rest_test(rec, ctx.conventions)
+            run.root_series = np.array(rec.root) if rec.root else np.zeros((0, 3))
+            run.ground_series = np.array(rec.ground)
+            run.joint_series = {
+                n: np.concatenate([run.trace.settle_joints.get(n, np.empty(0)), run.trace.joints[n][1:]])
+                for n in run.trace.joints
+            }
         if pyb and closed_for is not None:
             # In a fresh fixed-base session: contact manifolds cached here would
             # change the closed ends' penetration tie-breaks.
@@ -910,7 +875,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
         if pyb and probes and saved is not None:
             from asset2sim.tasks.check.probes import run_probes
 
-            session._p.restoreState(stateId=saved, physicsClientId=session.cid)
+            session.restore_state(saved)
             targets = {
                 n: (c.q_closed, c.direction, c.open_range)
                 for n, c in ctx.closed.items()
@@ -931,12 +896,12 @@ def _skip(name: str, unit: str, engine: str, reason: str) -> MetricResult:
     return MetricResult(name=name, value=None, unit=unit, passed=None, threshold="", details={"skipped": reason}, engine=engine)
 
 
-@register_metric("penetration", "physical", "Phi at the initial state (self-contacts), mm, with link pairs")
+@register_metric("penetration")
 def _m_penetration(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return [r.penetration if r.penetration is not None else _skip("penetration", "mm", e, r.error or "not measured") for e, r in runs.items()]
 
 
-@register_metric("ground_penetration", "physical", "deepest penetration into the ground during the rest test, mm")
+@register_metric("ground_penetration")
 def _m_ground(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     out = []
     for e, r in runs.items():
@@ -961,7 +926,7 @@ def _m_ground(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return out
 
 
-@register_metric("rest_stability", "physical", "SPEC rest test: D_pos <= 1e-3 m and D_ori <= 1e-2 rad")
+@register_metric("rest_stability")
 def _m_rest(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     out = []
     for e, r in runs.items():
@@ -972,7 +937,7 @@ def _m_rest(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return out
 
 
-@register_metric("oscillation", "physical", "SPEC joint oscillation during T_test")
+@register_metric("oscillation")
 def _m_osc(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     out = []
     for e, r in runs.items():
@@ -1029,7 +994,7 @@ def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_type
     }
 
 
-@register_metric("divergence", "physical", "NaN or explosion during the rest test")
+@register_metric("divergence")
 def _m_div(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     out = []
     for e, r in runs.items():
@@ -1058,7 +1023,7 @@ def _m_div(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return out
 
 
-@register_metric("joint_hold", "physical", "task-relevant joints keep their initial state during the rest test")
+@register_metric("joint_hold")
 def _m_hold(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     out = []
     for e, r in runs.items():
@@ -1100,12 +1065,12 @@ def _m_hold(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return out
 
 
-@register_metric("scale_deviation", "semantic", "|s - s_ref| / s_ref vs GenSim2's scale, %")
+@register_metric("scale_deviation")
 def _m_scale(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return [sem.scale_deviation(ctx.scale, ctx.reference_scale, scale_source=ctx.scale_source)]
 
 
-@register_metric("initial_joint_deviation", "semantic", "|q - q_ref| of the task-relevant joint")
+@register_metric("initial_joint_deviation")
 def _m_initdev(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     if ctx.reference_dir is None:
         return [MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None,
@@ -1133,7 +1098,7 @@ def _largest_extent(ctx: Context, runs: dict[str, EngineRun]) -> tuple[float | N
     return None, "unknown"
 
 
-@register_metric("total_mass", "semantic", "total mass and its plausibility for the category and size")
+@register_metric("total_mass")
 def _m_mass(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     r = _first_run(runs)
     if r is None:
@@ -1154,7 +1119,7 @@ def _m_mass(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return [m]
 
 
-@register_metric("prompt_alignment", "semantic", "0.5 size + 0.5 joint state vs the request")
+@register_metric("prompt_alignment")
 def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     if not ctx.prompt:
         return [MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")]
@@ -1189,7 +1154,7 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return [m]
 
 
-@register_metric("probes", "behaviour", "scripted pusher closes/opens each task-relevant joint")
+@register_metric("probes")
 def _m_probes(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     from asset2sim.tasks.check.probes import probes_metric
 
@@ -1215,6 +1180,7 @@ def evaluate_asset(
     write_report: bool = False,
     probes: bool = True,
     conventions: SimConventions | None = None,
+    measured: list[MetricResult] | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -1239,6 +1205,14 @@ def evaluate_asset(
         write_report: write ``report.html`` into ``out_dir``.
         probes: run the passive probes.
         conventions: SPEC conventions (default :class:`SimConventions`).
+        measured: results of the rest-test metrics
+            (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`) already
+            measured in the first engine under the same conventions and
+            initial state (the refine post-check): recorded as they are, and
+            that engine's rest test is not run again (unless ``probes``, which
+            continue from the state the rest test leaves); the metrics that
+            need its per-step trace (ground penetration, divergence, joint
+            hold) are then recorded as skipped.
 
     Returns:
         The :class:`Evaluation`.
@@ -1266,9 +1240,11 @@ def evaluate_asset(
         need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
     runs: dict[str, EngineRun] = {}
     order = sorted(engines, key=lambda e: e != "pybullet")  # PyBullet first: it computes the closed ends
+    reuse_engine = engines[0] if measured is not None and not probes else None
     for e in order:
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
-        runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending)
+        runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending,
+                             rest_test=e != reuse_engine)
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:
@@ -1280,6 +1256,15 @@ def evaluate_asset(
     results: list[MetricResult] = []
     for spec in METRICS.values():
         if spec.name == "probes" and not probes:
+            continue
+        if reuse_engine is not None and spec.name in REST_TEST_METRICS:
+            results += [m for m in measured if m.name == spec.name and m.engine == reuse_engine]
+            others = {e: r for e, r in runs.items() if e != reuse_engine}
+            try:
+                results += spec.fn(ctx, others) if others else []
+            except Exception as exc:
+                results.append(MetricResult(name=spec.name, value=None, unit="", passed=False,
+                                            details={"error": f"{type(exc).__name__}: {exc}"}, engine="none"))
             continue
         try:
             results += spec.fn(ctx, runs)
@@ -1315,6 +1300,27 @@ def evaluate_asset(
     return ev
 
 
+def evaluate_refined(out_dir: Path | str, report: Any) -> dict[str, Path]:
+    """Evaluate a refined output folder and write ``evaluation.json`` and
+    ``report.html`` beside its ``report.json`` (refine's extras).
+
+    Args:
+        out_dir: the refined output folder.
+        report: its :class:`~asset2sim.schemas.report.RefineReport` (the
+            run's ``prompt`` and ``category`` are used; no reference).
+
+    Returns:
+        {"evaluation": path, "report": path}.
+
+    Raises:
+        EvaluationError: the folder cannot be read.
+    """
+    out_dir = Path(out_dir)
+    evaluate_asset(out_dir, prompt=getattr(report, "prompt", None) or None, category=getattr(report, "category", None),
+                   method="asset2sim", out_dir=out_dir, write_report=True)
+    return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
+
+
 def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True) -> dict[str, Path]:
     """Write ``evaluation.json`` (and ``report.html``) into ``out_dir`` atomically.
 
@@ -1326,8 +1332,6 @@ def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True
     out_dir = Path(out_dir)
     paths = {"evaluation": write_json(out_dir / "evaluation.json", _jsonable(ev.model_dump(mode="json")))}
     if report:
-        from asset2sim.tasks.publish.report_html import write_report
-
         paths["report"] = write_report(ev, out_dir / "report.html")
     return paths
 

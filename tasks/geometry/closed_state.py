@@ -40,6 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from asset2sim.frames import rpy_matrix
+from asset2sim.mesh_io import MeshCache
 from asset2sim.schemas.asset import AssetDescription
 
 
@@ -102,22 +104,13 @@ def default_reference(session) -> dict[str, float]:
     return ref
 
 
-def _has_collision(session, idx: int) -> bool:
-    cache = session.__dict__.setdefault("_has_collision_cache", {})
-    if idx not in cache:
-        cache[idx] = bool(session._p.getCollisionShapeData(session.body, idx, physicsClientId=session.cid))
-    return cache[idx]
-
-
 def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarray]:
     """Convex-hull vertices (N, 3) of every link's collision geometry (visual
     when it has none), in the link frame at scale 1 — the points whose
     transformed extremes give exact bounding boxes at any state (Bullet's own
     AABBs of rotated hulls are loose). ``cache``: an
-    :class:`asset2sim.tasks.geometry.analyze.MeshCache` shared with the analysis stage."""
+    :class:`asset2sim.mesh_io.MeshCache` shared with the analysis stage."""
     from scipy.spatial import ConvexHull, QhullError
-
-    from asset2sim.tasks.geometry.analyze import MeshCache, rpy_matrix
 
     cache = cache if cache is not None else MeshCache()
     out: dict[str, np.ndarray] = {}
@@ -155,16 +148,6 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
     return out
 
 
-def _link_pose(session, idx: int) -> tuple[np.ndarray, np.ndarray]:
-    p = session._p
-    if idx == -1:
-        pos, orn = p.getBasePositionAndOrientation(session.body, physicsClientId=session.cid)
-    else:
-        st = p.getLinkState(session.body, idx, computeForwardKinematics=True, physicsClientId=session.cid)
-        pos, orn = st[4], st[5]
-    return np.asarray(pos, float), np.asarray(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
-
-
 def _aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -172,7 +155,7 @@ def _aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.
         v = points.get(name)
         if v is None:
             continue
-        pos, R = _link_pose(session, session.link_index(name))
+        pos, R = session.link_frame(name)
         w = v @ R.T + pos
         lo = np.minimum(lo, w.min(axis=0))
         hi = np.maximum(hi, w.max(axis=0))
@@ -192,15 +175,14 @@ def _subtree_phi(session, subset: set[str]) -> float:
     """Penetration (m) between the moving subtree and every other link,
     parent included (the SPEC's self-collision filter excludes parent-child
     pairs, but a lid pushed through its own body is not closed)."""
-    p = session._p
-    sub = [i for i, n in session.link_names.items() if n in subset and _has_collision(session, i)]
-    rest = [i for i, n in session.link_names.items() if n not in subset and _has_collision(session, i)]
+    sub = [n for n in session.link_names if n in subset and session.link_has_collision(n)]
+    rest = [n for n in session.link_names if n not in subset and session.link_has_collision(n)]
     total = 0.0
     for a in sub:
         for b in rest:
-            for pt in p.getClosestPoints(session.body, session.body, 0.0, a, b, physicsClientId=session.cid):
-                if pt[8] < 0:
-                    total += -pt[8]
+            for d in session.link_distances(a, b, 0.0):
+                if d < 0:
+                    total += -d
     return total
 
 
@@ -219,7 +201,9 @@ def closed_positions(
     ``asset`` opened with ``fixed_base=True``).
 
     Args:
-        session: :class:`asset2sim.engines.pybullet_engine.PyBulletSession`.
+        session: a :class:`asset2sim.engines.base.SimSession` (the pipeline
+            uses PyBullet; any engine answering ``link_frame`` and
+            ``link_distances``).
         asset: the description of the same URDF (for the kinematic tree).
         reference: starting state of the other joints (default 0 clipped).
         coarse, fine: samples over the range and in the refinement window.

@@ -4,7 +4,7 @@ Validation runs first (:mod:`asset2sim.tasks.ingest.validate_input`: hardened XM
 strict numbers, kinematic tree, inertials, mesh paths and mesh contents); an
 asset with any finding of severity ``error`` is refused with an
 :class:`AssetError` that carries every finding. Then the validated URDF bytes
-(never the file a second time) are read by yourdfpy (links, joints, types,
+(never the file a second time) are read by :mod:`asset2sim.urdf` (links, joints, types,
 axes, limits, origins, visual and collision geometry), with the
 PartNet-Mobility extras when present: ``semantics.txt`` (``link_name
 joint_kind semantic_label`` per line) and ``meta.json`` (``model_cat``). Any
@@ -20,16 +20,14 @@ report.
 
 from __future__ import annotations
 
-import io
-import json
 import os
-import stat
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from asset2sim.atomic import sha256_files
+from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import (
     AssetDescription,
     GeometryRef,
@@ -38,146 +36,45 @@ from asset2sim.schemas.asset import (
     LinkDesc,
     Origin,
 )
+from asset2sim.tasks.ingest import validate_input
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
+from asset2sim.urdf import UrdfError, UrdfGeometry, parse_urdf_bytes
 
 if TYPE_CHECKING:  # pragma: no cover
     from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy
 
-URDF_NAMES = ("mobility.urdf",)
 
 #: How many error findings the AssetError message lists (all are in ``.findings``).
 MESSAGE_FINDINGS = 20
 
 
-class AssetError(ValueError):
-    """The asset cannot be read; the message names the file and the element.
-
-    ``findings`` holds every validation finding of severity ``error`` (empty
-    when the error did not come from validation); ``codes`` their codes.
-    """
-
-    def __init__(self, message: str, findings: Sequence["Finding"] = ()):
-        super().__init__(message)
-        self.findings = list(findings)
-
-    @property
-    def codes(self) -> list[str]:
-        return [f.code for f in self.findings]
-
-
-def _is_regular(path: Path) -> bool:
-    try:
-        return stat.S_ISREG(os.stat(path).st_mode)
-    except OSError:
-        return False
-
-
-def find_urdf(asset: Path | str) -> Path:
-    """The URDF of an asset: the path itself if it is a file, else
-    ``mobility.urdf`` in the folder, else the only ``*.urdf`` there (files
-    named ``reference_*`` excluded). Only regular files qualify (a FIFO named
-    ``mobility.urdf`` is never opened).
-
-    Raises:
-        AssetError: no (or several candidate) URDF files, or not a regular file.
-    """
-    asset = Path(asset)
-    if asset.is_dir():
-        for name in URDF_NAMES:
-            if os.path.lexists(asset / name):
-                if not _is_regular(asset / name):
-                    raise AssetError(f"{asset / name}: not a regular file")
-                return asset / name
-        cands = sorted(p for p in asset.glob("*.urdf") if not p.name.startswith("reference_"))
-        if len(cands) == 1:
-            if not _is_regular(cands[0]):
-                raise AssetError(f"{cands[0]}: not a regular file")
-            return cands[0]
-        if not cands:
-            raise AssetError(f"{asset}: no mobility.urdf or other *.urdf file")
-        raise AssetError(f"{asset}: several URDF files ({', '.join(p.name for p in cands)}); pass one")
-    if not os.path.lexists(asset):
-        raise AssetError(f"{asset}: no such file or folder")
-    if not _is_regular(asset):
-        raise AssetError(f"{asset}: not a regular file")
-    return asset
-
-
 def _origin(matrix) -> Origin:
-    import trimesh.transformations as tf
-
     if matrix is None:
         return Origin()
     m = np.asarray(matrix, float)
     xyz = tuple(float(v) for v in m[:3, 3])
-    rpy = tuple(float(v) for v in tf.euler_from_matrix(m, "sxyz"))
+    rpy = tuple(float(v) for v in matrix_rpy(m))
     return Origin(xyz=xyz, rpy=rpy)
 
 
-def _geometry(elem, role: str, mesh_paths: dict[str, Path], where: str) -> GeometryRef | None:
-    g = elem.geometry
-    if g is None:
-        return None
-    name = getattr(elem, "name", None)
-    origin = _origin(elem.origin)
-    if g.mesh is not None:
-        fname = g.mesh.filename
-        path = mesh_paths.get(fname)
+def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: str) -> GeometryRef | None:
+    """The description of one ``<visual>`` / ``<collision>`` of the model."""
+    origin = _origin(g.origin)
+    if g.kind == "mesh":
+        fname = g.filename
+        path = mesh_paths.get(fname or "")
         if path is None:  # validation refuses every unresolved reference; defensive
             raise AssetError(f"{where}: mesh {fname!r} was not validated")
-        scale = g.mesh.scale
-        if scale is None:
-            sc = (1.0, 1.0, 1.0)
-        else:
-            arr = np.broadcast_to(np.asarray(scale, float).ravel(), (3,)) if np.size(scale) in (1, 3) else None
-            if arr is None:
-                raise AssetError(f"{where}: mesh scale {scale!r} must have 1 or 3 values")
-            sc = tuple(float(v) for v in arr)
-        return GeometryRef(role=role, kind="mesh", name=name, origin=origin, filename=fname, path=path, scale=sc)
-    if g.box is not None:
-        return GeometryRef(role=role, kind="box", name=name, origin=origin, size=tuple(float(v) for v in g.box.size))
-    if g.cylinder is not None:
-        return GeometryRef(
-            role=role, kind="cylinder", name=name, origin=origin, radius=float(g.cylinder.radius), length=float(g.cylinder.length)
-        )
-    if g.sphere is not None:
-        return GeometryRef(role=role, kind="sphere", name=name, origin=origin, radius=float(g.sphere.radius))
+        sc = tuple(float(v) for v in g.scale)
+        return GeometryRef(role=role, kind="mesh", name=g.name, origin=origin, filename=fname, path=path, scale=sc)
+    if g.kind == "box" and g.size is not None:
+        return GeometryRef(role=role, kind="box", name=g.name, origin=origin, size=tuple(float(v) for v in g.size))
+    if g.kind == "cylinder":
+        return GeometryRef(role=role, kind="cylinder", name=g.name, origin=origin, radius=float(g.radius), length=float(g.length))
+    if g.kind == "sphere":
+        return GeometryRef(role=role, kind="sphere", name=g.name, origin=origin, radius=float(g.radius))
     return None
-
-
-def read_semantics(folder: Path) -> dict[str, tuple[str, str]]:
-    """``semantics.txt`` as link -> (joint_kind, semantic_label); {} when absent.
-
-    Raises:
-        AssetError: a line that is not ``link joint_kind label``, or
-            ``semantics.txt`` is not a regular file.
-    """
-    path = folder / "semantics.txt"
-    if not os.path.lexists(path):
-        return {}
-    if not _is_regular(path):
-        raise AssetError(f"{path}: not a regular file")
-    out = {}
-    for i, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
-        parts = line.split()
-        if not parts:
-            continue
-        if len(parts) < 3:
-            raise AssetError(f"{path}:{i}: expected 'link_name joint_kind semantic_label', got {line!r}")
-        out[parts[0]] = (parts[1], " ".join(parts[2:]))
-    return out
-
-
-def read_category(folder: Path) -> str | None:
-    """``model_cat`` of ``meta.json``; None when absent, unreadable or not a regular file."""
-    path = folder / "meta.json"
-    if not _is_regular(path):
-        return None
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, OSError):
-        return None
-    cat = meta.get("model_cat") if isinstance(meta, dict) else None
-    return str(cat) if cat else None
 
 
 def _refusal_message(asset: Path | str, errs: list["Finding"]) -> str:
@@ -210,12 +107,8 @@ def extract_asset_checked(
     Raises:
         AssetError: validation found errors (``.findings`` has them all and the
             message lists them with code, file, line, link or joint), or
-            yourdfpy cannot read the validated URDF.
+            the shared URDF reader cannot read the validated bytes.
     """
-    import yourdfpy
-
-    from asset2sim.tasks.ingest import validate_input
-
     result = validate_input.run_validation(asset, policy)
     errs = result.errors
     if errs:
@@ -223,21 +116,14 @@ def extract_asset_checked(
     assert result.urdf is not None and result.folder is not None and result.urdf_bytes is not None
     urdf = Path(os.path.realpath(result.urdf))
     folder = Path(os.path.realpath(result.folder))
-    try:
-        model = yourdfpy.URDF.load(
-            io.BytesIO(result.urdf_bytes),
-            build_scene_graph=False,
-            load_meshes=False,
-            build_collision_scene_graph=False,
-            load_collision_meshes=False,
-            filename_handler=lambda fname: fname,
-        )
-    except Exception as exc:
-        raise AssetError(f"{urdf}: yourdfpy could not parse the URDF: {exc}") from exc
-    robot = model.robot
+    try:  # the validated bytes, never the file a second time
+        robot = parse_urdf_bytes(result.urdf_bytes, source=str(urdf), mode="lenient")
+    except UrdfError as exc:
+        raise AssetError(f"{urdf}: the validated URDF could not be read: {exc}") from exc
+    assert robot is not None
     sem = result.semantics
     links: list[LinkDesc] = []
-    for ln in robot.links:
+    for ln in robot.links.values():
         where = f"{urdf.name}: link {ln.name!r}"
         visuals = [g for v in ln.visuals if (g := _geometry(v, "visual", result.mesh_paths, where))]
         collisions = [g for c in ln.collisions if (g := _geometry(c, "collision", result.mesh_paths, where))]
@@ -264,7 +150,7 @@ def extract_asset_checked(
     for jt in robot.joints:
         lim = jt.limit
         dyn = jt.dynamics
-        axis = tuple(float(v) for v in (jt.axis if jt.axis is not None else (1.0, 0.0, 0.0)))
+        axis = tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0)))
         jtype = jt.type
         lower = upper = None
         if lim is not None and jtype in ("revolute", "prismatic"):

@@ -63,7 +63,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from asset2sim import safexml
+from asset2sim.frames import rpy_matrix
 from asset2sim.schemas.overlay import ValidationIssue
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.urdf import NumberError, parse_number_list
 
 Severity = Literal["error", "warning", "info"]
 Action = Literal["refuse", "replace_with_estimate", "mass_from_area", "ignore"]
@@ -336,58 +339,8 @@ def has_errors(findings: Iterable[Finding]) -> bool:
 
 
 # ----------------------------------------------------------------------------- numbers
-
-
-class NumberError(ValueError):
-    """A numeric attribute is not acceptable; ``code`` is a ``NUMBER_*`` code."""
-
-    def __init__(self, code: str, message: str):
-        super().__init__(message)
-        self.code = code
-
-
-_DECIMAL = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\Z")
-_NAN = {"nan", "+nan", "-nan", "nan(ind)", "-nan(ind)", "qnan", "snan"}
-_INF = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "1.#inf", "-1.#inf"}
-
-
-def parse_number_list(text: str | None, count: int | tuple[int, ...]) -> tuple[float, ...]:
-    """Strictly parse a whitespace-separated list of decimal numbers.
-
-    Args:
-        text: the attribute value.
-        count: the required number of values, or a tuple of allowed counts.
-
-    Returns:
-        The values as floats (all finite).
-
-    Raises:
-        NumberError: with code NUMBER_EMPTY (empty or blank), NUMBER_NAN,
-            NUMBER_INF, NUMBER_OVERFLOW (finite literal beyond float64),
-            NUMBER_MALFORMED (anything but ``[+-]digits[.digits][e[+-]digits]``),
-            NUMBER_COUNT (wrong number of values).
-    """
-    if text is None or not text.strip():
-        raise NumberError("NUMBER_EMPTY", "empty value where a number is required")
-    toks = text.split()
-    out = []
-    for tok in toks:
-        low = tok.lower()
-        if low in _NAN:
-            raise NumberError("NUMBER_NAN", f"{tok!r} is NaN")
-        if low in _INF:
-            raise NumberError("NUMBER_INF", f"{tok!r} is infinite")
-        if not _DECIMAL.match(tok):
-            raise NumberError("NUMBER_MALFORMED", f"{tok!r} is not a decimal number")
-        v = float(tok)
-        if not math.isfinite(v):
-            raise NumberError("NUMBER_OVERFLOW", f"{tok!r} overflows a 64-bit float")
-        out.append(v)
-    allowed = (count,) if isinstance(count, int) else count
-    if len(out) not in allowed:
-        want = " or ".join(str(c) for c in allowed)
-        raise NumberError("NUMBER_COUNT", f"{len(out)} value(s) in {text!r}, expected {want}")
-    return tuple(out)
+# NumberError and parse_number_list are the URDF reader's strict number parser
+# (asset2sim.urdf), re-exported here for the validator's callers.
 
 
 # ----------------------------------------------------------------------------- inertia
@@ -817,22 +770,10 @@ def _is_flat(n: int, s1: np.ndarray, s2: np.ndarray) -> bool:
     return bool(lam[2] <= 0 or math.sqrt(max(lam[0], 0.0)) <= 1e-9 * math.sqrt(lam[2]))
 
 
-def _rpy_matrix(rpy: tuple[float, float, float]) -> np.ndarray:
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
 def _transform_moments(mom, rpy, xyz, scale):
     """Moments of A x + t for A = R(rpy) diag(scale), t = xyz."""
     n, s1, s2 = mom
-    a = _rpy_matrix(rpy) @ np.diag(scale)
+    a = rpy_matrix(rpy) @ np.diag(scale)
     t = np.asarray(xyz, float)
     as1 = a @ s1
     return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
@@ -969,22 +910,18 @@ class _Validator:
             return None
         if stat.S_ISDIR(st.st_mode):
             folder = asset
-            cand = folder / "mobility.urdf"
-            if os.path.lexists(cand):
-                urdf = cand
-            else:
-                try:
-                    cands = sorted(p for p in folder.glob("*.urdf") if not p.name.startswith("reference_"))
-                except OSError as exc:
-                    self.add("URDF_UNREADABLE", f"cannot list {folder}: {exc}", file=str(folder))
-                    return None
-                if not cands:
-                    self.add("URDF_NOT_FOUND", f"{folder}: no mobility.urdf or other *.urdf file", file=str(folder))
-                    return None
-                if len(cands) > 1:
-                    self.add("URDF_AMBIGUOUS", f"several URDF files ({', '.join(p.name for p in cands)}); pass one", file=str(folder))
-                    return None
-                urdf = cands[0]
+            try:
+                cands = partnet_mobility.urdf_candidates(folder)
+            except OSError as exc:
+                self.add("URDF_UNREADABLE", f"cannot list {folder}: {exc}", file=str(folder))
+                return None
+            if not cands:
+                self.add("URDF_NOT_FOUND", f"{folder}: no mobility.urdf or other *.urdf file", file=str(folder))
+                return None
+            if len(cands) > 1:
+                self.add("URDF_AMBIGUOUS", f"several URDF files ({', '.join(p.name for p in cands)}); pass one", file=str(folder))
+                return None
+            urdf = cands[0]
         else:
             urdf = asset
             folder = asset.parent
@@ -1437,26 +1374,24 @@ class _Validator:
     # -- extras
     def extras(self, link_names: set[str]) -> None:
         assert self.folder is not None
-        sem = self.folder / "semantics.txt"
+        sem = self.folder / partnet_mobility.SEMANTICS_NAME
         if os.path.lexists(sem):
             text = self._read_extra(sem)
             if text is not None:
                 self.result.extra_files.append(sem)
-                for i, line in enumerate(text.splitlines(), 1):
-                    parts = line.split()
-                    if not parts:
-                        continue
-                    if len(parts) < 3:
-                        self.add("SEMANTICS_MALFORMED_LINE", f"line {i}: expected 'link_name joint_kind semantic_label', got {line[:80]!r}",
+                for ln in partnet_mobility.iter_semantics(text):
+                    i, link, entry = ln.lineno, ln.link, ln.entry
+                    if link is None or entry is None:
+                        self.add("SEMANTICS_MALFORMED_LINE", f"line {i}: expected 'link_name joint_kind semantic_label', got {ln.text[:80]!r}",
                                  file="semantics.txt", line=i)
                         continue
-                    self.result.semantics[parts[0]] = (parts[1], " ".join(parts[2:]))
-                    if link_names and parts[0] not in link_names:
-                        self.add("SEMANTICS_UNKNOWN_LINK", f"line {i}: no link {parts[0]!r} in the URDF", file="semantics.txt", line=i, link=parts[0])
-                    if parts[1] not in SEMANTIC_KINDS:
-                        self.add("SEMANTICS_UNKNOWN_KIND", f"line {i}: joint kind {parts[1]!r} is not one of {', '.join(sorted(SEMANTIC_KINDS))}",
-                                 file="semantics.txt", line=i, link=parts[0])
-        meta = self.folder / "meta.json"
+                    self.result.semantics[link] = entry
+                    if link_names and link not in link_names:
+                        self.add("SEMANTICS_UNKNOWN_LINK", f"line {i}: no link {link!r} in the URDF", file="semantics.txt", line=i, link=link)
+                    if entry.joint_kind not in SEMANTIC_KINDS:
+                        self.add("SEMANTICS_UNKNOWN_KIND", f"line {i}: joint kind {entry.joint_kind!r} is not one of {', '.join(sorted(SEMANTIC_KINDS))}",
+                                 file="semantics.txt", line=i, link=link)
+        meta = self.folder / partnet_mobility.META_NAME
         if os.path.lexists(meta):
             text = self._read_extra(meta)
             if text is not None:
@@ -1469,8 +1404,7 @@ class _Validator:
                 if not isinstance(obj, dict):
                     self.add("META_UNREADABLE", "not a JSON object", file="meta.json")
                     return
-                cat = obj.get("model_cat")
-                self.result.category = str(cat) if cat else None
+                self.result.category = partnet_mobility.meta_category(obj)
 
     def _read_extra(self, path: Path) -> str | None:
         assert self.folder is not None

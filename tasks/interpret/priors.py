@@ -553,10 +553,30 @@ def _mention_regex() -> tuple[re.Pattern[str], dict[str, tuple[str, bool]]]:
             phrase_to.setdefault(s, (name, weak))
     alts = sorted(phrase_to, key=lambda p: (-len(p), p))
     src = "|".join(f"(?:{phrase_regex(p, plural=True)})" for p in alts)
-    return re.compile(src), phrase_to
+    # the same matches, tried only where a word starts with a first letter of
+    # some phrase (the alternation is otherwise tried at every character)
+    first = "".join(re.escape(c) for c in sorted({p[0] for p in alts}))
+    return re.compile(f"{_WORD_L}(?=[{first}])(?:{src})"), phrase_to
 
 
 _POSSESSIVES = {"its", "their", "his", "her", "whose"}
+_BACKWARD = re.compile(r"[.,;:!?()]|[a-z']+")
+
+
+def _last_words(rev: str, pos: int, n: int = 2) -> list[str]:
+    """The last ``n`` words (``[a-z']+``) of the clause that ends where
+    ``rev[pos:]`` (the text reversed) begins, in text order: the same as
+    ``re.findall(r"[a-z']+", re.split(r"[.,;:!?()]", text[:i])[-1])[-n:]``,
+    but reading only back to the n-th word or the clause mark."""
+    words: list[str] = []
+    for t in _BACKWARD.finditer(rev, pos):
+        w = t.group(0)
+        if w in ".,;:!?()":
+            break
+        words.append(w[::-1])
+        if len(words) == n:
+            break
+    return words[::-1]
 
 
 def find_category_mentions(text: str) -> list[CategoryMention]:
@@ -568,6 +588,7 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
     low = text.lower()
     rx, phrase_to = _mention_regex()
     out: list[CategoryMention] = []
+    rev = low[::-1]  # words before a mention are read backwards: linear in len(text)
     for m in rx.finditer(low):
         words = " ".join(m.group(0).split())
         key = words
@@ -579,7 +600,7 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
         if key not in phrase_to:  # pragma: no cover - regex built from the keys
             continue
         cat, weak = phrase_to[key]
-        before = re.findall(r"[a-z']+", re.split(r"[.,;:!?()]", low[: m.start()])[-1])[-2:]
+        before = _last_words(rev, len(low) - m.start())
         possessive = any(w in _POSSESSIVES for w in before)
         out.append(CategoryMention(m.start(), m.end(), m.group(0), cat, weak, possessive))
     # "the door of a microwave": a mention followed by "of <det>" and another

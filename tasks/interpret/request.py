@@ -42,7 +42,10 @@ closed and the second slightly open, low damping")`` recognises:
   "mini fridge" -> Refrigerator).
 
 ``matched`` lists every recognised phrase in text order. Pure function; never
-raises on any string input.
+raises on a string of at most :data:`MAX_REQUEST_CHARS` characters (a longer
+one raises :class:`RequestTooLong`). Time and memory grow linearly with the
+length (every lookup between phrases is a binary search over positions found
+once; ``benchmarks/bench_request.py`` prints the timings).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from __future__ import annotations
 import functools
 import math
 import re
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, RequestSpec
@@ -57,6 +61,29 @@ from asset2sim.tasks.interpret import priors as _priors
 
 _L = r"(?<![\w-])"
 _R = r"(?![\w-])"
+
+#: Longest request accepted (characters): 64 KiB, hundreds of times a real
+#: request; parsing it takes well under a second (benchmarks/bench_request.py).
+MAX_REQUEST_CHARS = 65_536
+
+
+class RequestTooLong(ValueError):
+    """The request is longer than :data:`MAX_REQUEST_CHARS` (``code``
+    ``REQUEST_TOO_LONG``; ``length`` and ``limit`` in characters)."""
+
+    code = "REQUEST_TOO_LONG"
+
+    def __init__(self, length: int, limit: int = MAX_REQUEST_CHARS):
+        super().__init__(f"REQUEST_TOO_LONG: the request has {length} characters; at most {limit} are accepted")
+        self.length = length
+        self.limit = limit
+        self.codes = [self.code]
+
+
+def check_request_length(text: str) -> None:
+    """Raise :class:`RequestTooLong` when ``text`` exceeds :data:`MAX_REQUEST_CHARS`."""
+    if len(text) > MAX_REQUEST_CHARS:
+        raise RequestTooLong(len(text))
 
 
 @dataclass(frozen=True)
@@ -238,8 +265,39 @@ def _sentences(text: str) -> list[tuple[int, int]]:
     return spans
 
 
-def _words_between(text: str, a: int, b: int) -> list[str]:
-    return re.findall(r"[\w'-]+|[,;:]", text[a:b])
+_RUN = re.compile(r"[\w'-]+")
+_MARK = re.compile(r"[,;:]")
+_TOKEN = re.compile(r"[\w'-]+|[,;:]")
+
+
+class _Tokens:
+    """Word runs (``[\\w'-]+``) and clause marks (``[,;:]``) of a text, found
+    once, so the tokens of any slice are counted by binary search: O(log n)
+    instead of O(slice length)."""
+
+    def __init__(self, text: str):
+        self.starts: list[int] = []
+        self.ends: list[int] = []
+        for m in _RUN.finditer(text):
+            self.starts.append(m.start())
+            self.ends.append(m.end())
+        self.marks = [m.start() for m in _MARK.finditer(text)]
+
+    def count(self, a: int, b: int) -> int:
+        """Number of tokens (``re.findall(r"[\\w'-]+|[,;:]", text[a:b])``):
+        runs starting in [a, b), the tail of a run cut at ``a``, and the marks
+        in [a, b)."""
+        if b <= a:
+            return 0
+        i = bisect_left(self.starts, a)
+        n = bisect_left(self.starts, b) - i
+        if i > 0 and self.ends[i - 1] > a:
+            n += 1
+        return n + self.marks_between(a, b)
+
+    def marks_between(self, a: int, b: int) -> int:
+        """Number of ``[,;:]`` in text[a:b]."""
+        return 0 if b <= a else bisect_left(self.marks, b) - bisect_left(self.marks, a)
 
 
 @functools.lru_cache(maxsize=1)
@@ -247,14 +305,15 @@ def _size_factors() -> dict[str, float]:
     return {k: v.factor for k, v in _priors.load_priors().size_classes.items()}
 
 
-def _parse_size(low: str, mentions: list[_priors.CategoryMention]) -> tuple[str | None, float, str, list[_Hit]]:
+def _parse_size(low: str, mentions: list[_priors.CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit]]:
     used: list[_Hit] = []
+    mention_starts = [m.start for m in mentions]  # left to right
     for h in _scan(low, _SIZE_TABLE):
         if _negated(low, h.start):
             continue
         if h.flag == "weak":
-            nxt = [m for m in mentions if m.start >= h.end]
-            if not nxt or len(_words_between(low, h.end, nxt[0].start)) > 2:
+            k = bisect_left(mention_starts, h.end)  # the first mention after the word
+            if k == len(mentions) or tokens.count(h.end, mentions[k].start) > 2:
                 continue
         used.append(h)
     if not used:
@@ -292,35 +351,35 @@ class _Part:
 _ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
 
 
-def _parts(low: str) -> list[_Part]:
+def _parts(low: str, tokens: _Tokens) -> list[_Part]:
     """Part nouns with their ordinals ("the first and second drawers", "top
     drawer", "drawer 2") or quantifier ("every drawer")."""
-    ords = _scan(low, _ORDINALS)
+    ords = _scan(low, _ORDINALS)  # left to right, not overlapping: ends ascend too
+    ord_ends = [o.end for o in ords]
+    # enumerations: "the first, second and third drawers": chain[j] is the
+    # first ordinal of the run ending at ords[j] (joined by , and or &)
+    chain: list[int] = []
+    for j, o in enumerate(ords):
+        prev = ords[j - 1] if j else None
+        joined = prev is not None and prev.flag != "quant" and _ORD_JOIN.match(low, prev.end, o.start) is not None
+        chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
     for m in _PART_RX.finditer(low):
         label = _priors.canonical_label(m.group(0)) or m.group(0)
         ordinals: list[int] = []
         quant = False
         pstart = m.start()
-        before = [o for o in ords if o.end <= m.start()]
-        if before:
-            o = before[-1]
-            gap = low[o.end: m.start()]
-            if len(_words_between(low, o.end, m.start())) <= 2 and not re.search(r"[,;:]", gap):
+        n_before = bisect_right(ord_ends, m.start())  # ordinals ending before the noun
+        if n_before:
+            o = ords[n_before - 1]
+            if tokens.count(o.end, m.start()) <= 2 and not tokens.marks_between(o.end, m.start()):
                 if o.flag == "quant":
                     quant = True
+                    pstart = o.start
                 else:
-                    ordinals.append(int(o.value))  # type: ignore[arg-type]
-                pstart = o.start
-                # enumerations: "the first, second and third drawers"
-                k = len(before) - 2
-                while not quant and k >= 0:
-                    prev = before[k]
-                    if prev.flag == "quant" or not _ORD_JOIN.match(low[prev.end: before[k + 1].start]):
-                        break
-                    ordinals.insert(0, int(prev.value))  # type: ignore[arg-type]
-                    pstart = prev.start
-                    k -= 1
+                    first = chain[n_before - 1]
+                    ordinals = [int(ords[i].value) for i in range(first, n_before)]  # type: ignore[arg-type]
+                    pstart = ords[first].start
         num = _NUM_AFTER.match(low, m.end())
         if not ordinals and num is not None and not quant:
             ordinals = [int(n) - 1 for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
@@ -331,34 +390,40 @@ def _parts(low: str) -> list[_Part]:
 _FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "their", "his", "her", "in", "of", "for", "to", ","}
 
 
-def _forward_part(low: str, end: int, limit: int, parts: list[_Part]) -> _Part | None:
+def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> _Part | None:
     """A part noun right after a state ("slightly open rotational lid"): at most one
-    modifier word between, no clause break."""
-    toks = list(re.finditer(r"[\w'-]+|[,;:]", low[end:limit]))
-    for i, t in enumerate(toks[:2]):
+    modifier word between, no clause break. ``part_at``: part nouns by start."""
+    for i, t in enumerate(_TOKEN.finditer(low, end, limit)):
+        if i >= 2:
+            break
         word = t.group(0)
-        s = end + t.start()
-        for p in parts:
-            if p.start == s:
-                return p
+        p = part_at.get(t.start())
+        if p is not None:
+            return p
         if word in _FWD_STOP or word in {",", ";", ":"}:
             return None
     return None
 
 
-def _joint_states(low: str) -> tuple[list[JointStateRequest], list[_Hit]]:
-    bands = _state_hits(low)
-    parts = _parts(low)
+def _joint_states(low: str, tokens: _Tokens) -> tuple[list[JointStateRequest], list[_Hit]]:
+    bands = _state_hits(low)  # every list here is left to right and not overlapping
+    parts = _parts(low, tokens)
     ords = [o for o in _scan(low, _ORDINALS) if o.flag != "quant"]
+    band_starts = [b.start for b in bands]
+    part_starts = [p.start for p in parts]
+    part_ends = [p.end for p in parts]
+    part_at = {p.start: p for p in parts}
+    ord_starts = [o.start for o in ords]
+    ord_ends = [o.end for o in ords]
     result: list[JointStateRequest] = []
     last_label: str | None = None
     for s0, s1 in _sentences(low):
-        sb = [b for b in bands if s0 <= b.start < s1]
+        sb = bands[bisect_left(band_starts, s0): bisect_left(band_starts, s1)]
         for i, b in enumerate(sb):
             seg0 = sb[i - 1].end if i > 0 else s0
             seg1 = sb[i + 1].start if i + 1 < len(sb) else s1
-            fwd = _forward_part(low, b.end, seg1, parts)
-            back = [p for p in parts if seg0 <= p.start and p.end <= b.start]
+            fwd = _forward_part(low, b.end, seg1, part_at)
+            back = parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)]
             subjects: list[_Part] = []
             if fwd is not None:
                 subjects = [fwd]
@@ -385,7 +450,7 @@ def _joint_states(low: str) -> tuple[list[JointStateRequest], list[_Hit]]:
                         )
                     last_label = p.label
                 continue
-            seg_ords = [o for o in ords if seg0 <= o.start and o.end <= b.start]
+            seg_ords = ords[bisect_left(ord_starts, seg0): bisect_right(ord_ends, b.start)]
             if seg_ords:
                 o = seg_ords[-1]
                 start = o.start
@@ -418,11 +483,16 @@ def parse_request(text: str) -> RequestSpec:
 
     ``text`` any string (may be empty). Size factors: dimensionless multipliers
     on the category's typical dimensions (``size_classes.yaml``, with sources).
-    See the module docstring for the vocabulary. Never raises for string input;
-    raises ``TypeError`` if ``text`` is not a string.
+    See the module docstring for the vocabulary. Time linear in ``len(text)``.
+
+    Raises:
+        TypeError: ``text`` is not a string.
+        RequestTooLong: ``text`` has more than :data:`MAX_REQUEST_CHARS`
+            characters.
     """
     if not isinstance(text, str):
         raise TypeError(f"request must be a string, got {type(text).__name__}")
+    check_request_length(text)
     low = (
         text.lower()
         .replace("\u2019", "'")
@@ -437,10 +507,11 @@ def parse_request(text: str) -> RequestSpec:
     if head is not None:
         matched.append((head.start, head.phrase))
 
-    size_class, factor, size_phrase, size_hits = _parse_size(low, mentions)
+    tokens = _Tokens(low)
+    size_class, factor, size_phrase, size_hits = _parse_size(low, mentions, tokens)
     matched += [(h.start, h.text) for h in size_hits]
 
-    joint_states, band_hits = _joint_states(low)
+    joint_states, band_hits = _joint_states(low, tokens)
     matched += [(h.start, h.text) for h in band_hits]
 
     damping = "moderate"

@@ -12,7 +12,7 @@ output folder::
 
 Original meshes are referenced where they are (``textured_objs/...``), so the
 folder stays self-contained and portable. The conversion is
-:func:`asset2sim.engines.mujoco_engine.urdf_to_mjcf` (MuJoCo's own URDF
+:func:`asset2sim.engines.mjcf.urdf_to_mjcf` (MuJoCo's own URDF
 import, then the fixes listed in ``docs/simulators.md``); here the result is
 written atomically and checked by loading the written file with MuJoCo:
 total mass equal to the URDF's (1e-6 relative), every body's mass, COM and
@@ -32,6 +32,8 @@ import numpy as np
 
 from asset2sim import atomic
 from asset2sim.engines.base import Spring
+from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
+from asset2sim.frames import quat_wxyz_matrix
 
 MJCF_DIR = "mjcf"
 URDF_NAME = "mobility.urdf"
@@ -103,7 +105,6 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float])
     import mujoco
 
     from asset2sim.engines.fake import read_urdf
-    from asset2sim.engines.mujoco_engine import KEYFRAME, mujoco_messages
 
     try:
         with mujoco_messages():
@@ -125,7 +126,7 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float])
             if mass != 0.0:
                 raise ExportError(f"{xml_path}: body {name!r} weighs {mass} kg, the URDF link has no <inertial>")
             continue
-        r = np.array(_quat_to_matrix(m.body_iquat[bid]))
+        r = np.array(quat_wxyz_matrix(m.body_iquat[bid]))
         tensor = r @ np.diag(m.body_inertia[bid]) @ r.T
         want = link.inertial.inertia_in_link_axes()
         dc = float(np.abs(m.body_ipos[bid] - link.inertial.com()).max())
@@ -160,17 +161,6 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float])
     )
 
 
-def _quat_to_matrix(q) -> np.ndarray:
-    w, x, y, z = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Path:
     """Write ``out_dir/mjcf/<urdf stem>.xml`` (and its derived meshes) from
     ``out_dir/mobility.urdf``, ``overlay.json`` and ``initial_state.json``.
@@ -193,7 +183,6 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     import mujoco  # noqa: F401  - the clear ImportError when the extra is missing
 
     from asset2sim.engines.fake import read_initial_state
-    from asset2sim.engines.mujoco_engine import urdf_to_mjcf
 
     out_dir = Path(out_dir)
     urdf = out_dir / URDF_NAME

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from asset2sim.frames import quat_angle
+
 
 def _plt():
     import matplotlib
@@ -69,8 +71,6 @@ def plot_root_drift(root_series: np.ndarray, trace, dt: float, settle_steps: int
         trace: :class:`asset2sim.tasks.check.metrics.RestTrace`.
         dt: timestep s; settle_steps: steps in T_set.
     """
-    from asset2sim.engines.base import quat_angle
-
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.4))
     if len(root_series):

@@ -51,23 +51,22 @@ cos + SPECULAR``; optional cast shadows (``shadows=True``, slower).
 
 from __future__ import annotations
 
-import copy
 import json
 import math
-import os
 import shutil
-import sys
 import tempfile
-import threading
 import time
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from asset2sim import mesh_io
 from asset2sim.atomic import write_bytes
+from asset2sim.engines.base import open_viewer
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.urdf import UrdfError, UrdfGeometry, read_urdf, write_urdf
 
 DEFAULT_VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
 """The five views of the SPEC's extraction stage."""
@@ -130,46 +129,10 @@ class RenderError(RuntimeError):
 
 
 # ------------------------------------------------------------------ utilities
-_QUIET_LOCK = threading.Lock()
-
-
-@contextmanager
-def _quiet_fds():
-    """Silence Bullet's C-level prints (build time, b3Warning) on fd 1 and 2.
-
-    Process-wide (file descriptors), so serialized by a lock: two threads
-    swapping fd 1 at once could otherwise leave stdout pointing at /dev/null.
-    """
-    with _QUIET_LOCK:
-        for stream in (sys.stdout, sys.stderr):  # what Python buffered goes out first
-            try:
-                stream.flush()
-            except Exception:
-                pass
-        saved = []
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-        except OSError:  # pragma: no cover
-            yield
-            return
-        try:
-            for fd in (1, 2):
-                try:
-                    saved.append((fd, os.dup(fd)))
-                    os.dup2(devnull, fd)
-                except OSError:
-                    pass
-            yield
-        finally:
-            for fd, dup in saved:
-                os.dup2(dup, fd)
-                os.close(dup)
-            os.close(devnull)
-
-
 def resolve_urdf(asset: Path | str) -> Path:
     """The URDF of ``asset``: the file itself, or ``mobility.urdf`` (else the only
-    ``*.urdf``) in a folder.
+    ``*.urdf`` not named ``reference_*``) in a folder
+    (:func:`asset2sim.tasks.ingest.partnet_mobility.urdf_candidates`).
 
     Raises:
         FileNotFoundError: no such file or folder, or no URDF in the folder.
@@ -180,9 +143,7 @@ def resolve_urdf(asset: Path | str) -> Path:
         return asset
     if not asset.is_dir():
         raise FileNotFoundError(f"no such asset file or folder: {asset}")
-    if (asset / "mobility.urdf").is_file():
-        return asset / "mobility.urdf"
-    urdfs = sorted(asset.glob("*.urdf"))
+    urdfs = partnet_mobility.urdf_candidates(asset)
     if len(urdfs) == 1:
         return urdfs[0]
     if not urdfs:
@@ -232,23 +193,6 @@ class _ObjInfo:
     parts: list[Path]
     bare: Path | None = None
     bare_text: str | None = None
-
-
-def _parse_floats3(lines: list[str]) -> np.ndarray:
-    if not lines:
-        return np.zeros((0, 3))
-    try:
-        return np.array([ln.split()[1:4] for ln in lines], dtype=float).reshape(-1, 3)
-    except ValueError:  # ragged or malformed lines: parse one by one
-        rows = []
-        for ln in lines:
-            try:
-                row = [float(t) for t in ln.split()[1:4]]
-            except ValueError:
-                continue
-            if len(row) == 3:
-                rows.append(row)
-        return np.array(rows, dtype=float).reshape(-1, 3)
 
 
 class _Textures:
@@ -319,7 +263,7 @@ def _read_mtl(path: Path, textures: _Textures) -> tuple[dict[str, list[str]], bo
             continue
         if current is None:
             continue
-        if key.lower().startswith("map_") or key.lower() in ("bump", "disp", "decal", "refl"):
+        if mesh_io.is_texture_statement(key):
             tokens = line.split()
             tex = (path.parent / tokens[-1]).resolve()
             if len(tokens) < 2 or not tex.is_file():
@@ -343,35 +287,9 @@ def _split_obj(path: Path, work: Path, tag: str, textures: _Textures) -> _ObjInf
     to :attr:`_ObjInfo.bare`. A file whose textures had to be downscaled (see
     :class:`_Textures`) is rewritten too.
     """
-    text = path.read_text(encoding="utf-8", errors="replace")
-    vlines: list[str] = []
-    data_lines: list[str] = []  # v, vt, vn in file order
-    counts = [0, 0, 0]  # v, vt, vn seen so far (for negative indices)
-    faces: dict[str | None, list[str]] = {}
-    mtllibs: list[str] = []
-    current: str | None = None
-    for raw in text.splitlines():
-        if not raw:
-            continue
-        c0 = raw[0]
-        if c0 == "v":
-            if raw.startswith("v "):
-                vlines.append(raw)
-                counts[0] += 1
-            elif raw.startswith("vt"):
-                counts[1] += 1
-            elif raw.startswith("vn"):
-                counts[2] += 1
-            data_lines.append(raw)
-        elif c0 == "f" and raw.startswith("f "):
-            if "-" in raw:
-                raw = _absolute_face(raw, counts)
-            faces.setdefault(current, []).append(raw)
-        elif raw.startswith("usemtl"):
-            current = raw[6:].strip() or None
-        elif raw.startswith("mtllib"):
-            mtllibs.append(raw[6:].strip())
-    vertices = _parse_floats3(vlines)
+    scan = mesh_io.scan_obj_text(path.read_text(encoding="utf-8", errors="replace"))
+    data_lines, faces, mtllibs = scan.data_lines, scan.faces, scan.mtllibs
+    vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
     materials: dict[str, list[str]] = {}
     downscaled = False
     for lib in mtllibs:
@@ -421,17 +339,6 @@ def _colored_obj(info: _ObjInfo, source: Path, rgba: Sequence[float], work: Path
     return out
 
 
-def _absolute_face(line: str, counts: list[int]) -> str:
-    out = ["f"]
-    for corner in line.split()[1:]:
-        idx = corner.split("/")
-        for i, s in enumerate(idx):
-            if s.startswith("-") and i < 3:
-                idx[i] = str(counts[i] + 1 + int(s))
-        out.append("/".join(idx))
-    return " ".join(out)
-
-
 def _resolve_mesh(filename: str, urdf_dir: Path) -> Path:
     """Absolute path of a URDF mesh reference (relative, absolute, file://, package://)."""
     name = filename.strip()
@@ -451,58 +358,37 @@ def _resolve_mesh(filename: str, urdf_dir: Path) -> Path:
     return (p if p.is_absolute() else urdf_dir / p).resolve()
 
 
-def _primitive_points(geom) -> np.ndarray:
-    """Points (N, 3) whose hull bounds a URDF box / cylinder / sphere / capsule, m."""
-    kind = geom.tag
+def _primitive_points(geom: UrdfGeometry) -> np.ndarray:
+    """Points (N, 3) whose hull bounds a URDF box / cylinder / sphere / capsule, m
+    (a missing size counts as 0)."""
+    kind = geom.kind
     if kind == "box":
-        sx, sy, sz = (float(v) for v in geom.get("size", "0 0 0").split())
+        sx, sy, sz = (float(v) for v in (geom.size if geom.size is not None else (0.0, 0.0, 0.0)))
         g = np.array(np.meshgrid([-0.5, 0.5], [-0.5, 0.5], [-0.5, 0.5])).reshape(3, -1).T
         return g * [sx, sy, sz]
     ang = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    r = float(geom.radius or 0.0)
     if kind in ("cylinder", "capsule"):
-        r, length = float(geom.get("radius", 0)), float(geom.get("length", 0))
+        length = float(geom.length or 0.0)
         ring = np.stack([r * np.cos(ang), r * np.sin(ang)], axis=1)
         h = length / 2 + (r if kind == "capsule" else 0.0)
         return np.concatenate([np.c_[ring, np.full(24, -h)], np.c_[ring, np.full(24, h)]])
     if kind == "sphere":
-        r = float(geom.get("radius", 0))
         el = np.linspace(-np.pi / 2, np.pi / 2, 9)
         A, E = np.meshgrid(ang, el)
         return r * np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
     return np.zeros((0, 3))
 
 
-def _origin_matrix(elem) -> np.ndarray:
-    """4x4 transform of a URDF ``<origin xyz rpy>`` (rpy = fixed-axis roll, pitch, yaw, rad)."""
-    T = np.eye(4)
-    if elem is None:
-        return T
-    xyz = [float(v) for v in (elem.get("xyz") or "0 0 0").split()]
-    r, p, y = (float(v) for v in (elem.get("rpy") or "0 0 0").split())
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    T[:3, :3] = [
-        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-        [-sp, cp * sr, cp * cr],
-    ]
-    T[:3, 3] = xyz
-    return T
-
-
-def _visual_rgba(vis, named: dict[str, tuple[float, ...]]) -> tuple[float, ...] | None:
+def _visual_rgba(vis: UrdfGeometry, named: dict[str, tuple[float, ...]]) -> tuple[float, ...] | None:
     """The RGBA of a visual's ``<material>`` (inline ``<color>`` or a named
     top-level material), or None."""
-    mat = vis.find("material")
+    mat = vis.material
     if mat is None:
         return None
-    color = mat.find("color")
-    if color is not None and color.get("rgba"):
-        try:
-            rgba = tuple(float(v) for v in color.get("rgba").split())
-        except ValueError:
-            return None
-        return rgba if len(rgba) == 4 else None
-    rgba = named.get(mat.get("name", ""))
+    if mat.rgba is not None:
+        return tuple(float(v) for v in mat.rgba)
+    rgba = named.get(mat.name or "")
     return rgba if rgba is not None and len(rgba) == 4 else None
 
 
@@ -525,64 +411,45 @@ def _prepare(urdf_path: Path, work: Path, texture_max: int = 1024) -> _Prepared:
         FileNotFoundError: the URDF or one of its visual meshes is missing.
         ValueError: the URDF or a mesh does not parse, or there is no visual geometry.
     """
-    import xml.etree.ElementTree as ET
-
-    from defusedxml import ElementTree as DET
-
     if not urdf_path.is_file():
         raise FileNotFoundError(f"no such URDF: {urdf_path}")
     try:
-        tree = DET.parse(str(urdf_path))
-    except Exception as exc:  # defusedxml / expat errors
+        model = read_urdf(urdf_path, mode="lenient")
+    except UrdfError as exc:
         raise ValueError(f"{urdf_path}: not a parseable URDF ({exc})") from exc
-    root = tree.getroot()
-    if root.tag != "robot":
-        raise ValueError(f"{urdf_path}: root element is <{root.tag}>, expected <robot>")
     urdf_dir = urdf_path.parent.resolve()
     named: dict[str, tuple[float, ...]] = {}  # URDF materials are global by name
-    for mat in [*root.findall("material"), *root.findall("link/visual/material")]:
-        color = mat.find("color")
-        if mat.get("name") and color is not None and mat.get("name") not in named:
-            try:
-                named[mat.get("name")] = tuple(float(v) for v in (color.get("rgba") or "").split())
-            except ValueError:
-                continue
+    for mat in [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]:
+        if mat.name and mat.rgba is not None and mat.name not in named:
+            named[mat.name] = tuple(float(v) for v in mat.rgba)
     notes: list[str] = []
-    if root.find("link/visual") is None and root.find("link/collision") is not None:
-        for el in root.iter("collision"):  # nothing else to show: draw the collision shapes
-            el.tag = "visual"
+    if not any(ln.visuals for ln in model.links.values()) and any(ln.collisions for ln in model.links.values()):
+        for ln in model.links.values():  # nothing else to show: draw the collision shapes
+            ln.visuals = ln.collisions
         notes.append("the URDF has no <visual>: its collision shapes are drawn")
     textures = _Textures(work, texture_max)
     cache: dict[Path, _ObjInfo] = {}
     colored: dict[tuple[Path, tuple[float, ...]], Path] = {}
     link_points: dict[str, np.ndarray] = {}
     n_split = 0
-    for link in root.findall("link"):
-        lname = link.get("name", "")
-        for tag in ("collision", "inertial"):
-            for el in link.findall(tag):
-                link.remove(el)
+    for lname, link in model.links.items():
+        link.collisions = []
+        link.inertial = None
         pts: list[np.ndarray] = []
-        for vis in list(link.findall("visual")):
-            geom_el = vis.find("geometry")
-            if geom_el is None or len(geom_el) == 0:
+        shown: list[UrdfGeometry] = []
+        for vis in link.visuals:
+            if vis.kind is None:
                 continue
-            geom = geom_el[0]
-            try:
-                T = _origin_matrix(vis.find("origin"))
-            except ValueError as exc:
-                raise ValueError(f"{urdf_path}: link {lname!r}: bad visual <origin> ({exc})") from exc
-            if geom.tag != "mesh":
-                local = _primitive_points(geom)
+            T = vis.origin
+            if vis.kind != "mesh":
+                local = _primitive_points(vis)
                 if len(local):
                     pts.append(local @ T[:3, :3].T + T[:3, 3])
+                shown.append(vis)
                 continue
-            mesh_file = _resolve_mesh(geom.get("filename", ""), urdf_dir)
+            mesh_file = _resolve_mesh(vis.filename or "", urdf_dir)
             if not mesh_file.is_file():
                 raise FileNotFoundError(f"{urdf_path}: link {lname!r} visual mesh not found: {mesh_file}")
-            scale = np.array([float(v) for v in (geom.get("scale") or "1 1 1").split()], float)
-            if scale.size == 1:
-                scale = np.repeat(scale, 3)
             info = cache.get(mesh_file)
             if info is None:
                 tag = f"m{len(cache):04d}"
@@ -601,30 +468,25 @@ def _prepare(urdf_path: Path, work: Path, texture_max: int = 1024) -> _Prepared:
                     colored[key] = _colored_obj(info, source, rgba, work, f"k{len(colored):04d}")
                 files.append(colored[key])
             if len(info.vertices):
-                pts.append((info.vertices * scale) @ T[:3, :3].T + T[:3, 3])
-            if not files:
-                link.remove(vis)
-                continue
-            geom.set("filename", str(files[0]))
-            idx = list(link).index(vis)
-            for k, part in enumerate(files[1:], start=1):
-                clone = copy.deepcopy(vis)
-                clone.find("geometry")[0].set("filename", str(part))
-                link.insert(idx + k, clone)
+                pts.append((info.vertices * vis.scale) @ T[:3, :3].T + T[:3, 3])
+            shown.extend(replace(vis, filename=str(part)) for part in files)
+        link.visuals = shown
         if pts:
             link_points[lname] = np.concatenate(pts)
     if not link_points:
         raise ValueError(f"{urdf_path}: no visual geometry to render")
-    for tex in root.iter("texture"):  # URDF-level <material><texture filename=...>
-        src = _resolve_mesh(tex.get("filename") or "", urdf_dir)
-        if tex.get("filename") and src.is_file():
-            tex.set("filename", textures.link(src)[0])
+    materials = [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]
+    for mat in {id(m): m for m in materials}.values():  # <material><texture filename=...> (clones share one)
+        if mat.texture:
+            src = _resolve_mesh(mat.texture, urdf_dir)
+            if src.is_file():
+                mat.texture = textures.link(src)[0]
     if n_split:
         notes.append(f"{n_split} multi-material OBJ file(s) split into one OBJ per material")
     if textures.downscaled:
         notes.append(f"{textures.downscaled} texture(s) over {texture_max} px downscaled")
     out = work / "render.urdf"
-    out.write_bytes(ET.tostring(root, encoding="utf-8"))
+    out.write_bytes(write_urdf(model))
     return _Prepared(out, link_points, notes)
 
 
@@ -639,7 +501,7 @@ def _other_mesh(mesh_file: Path, work: Path, tag: str, notes: list[str]) -> _Obj
     import trimesh
 
     try:
-        mesh = trimesh.load(str(mesh_file), force="mesh", process=False)
+        mesh = mesh_io.load_trimesh(mesh_file)
     except Exception as exc:
         raise ValueError(f"cannot read mesh {mesh_file}: {exc}") from exc
     verts = np.asarray(mesh.vertices, float).reshape(-1, 3)
@@ -776,7 +638,7 @@ class SceneRenderer:
         self.shadows = bool(shadows)
         self.timings = RenderTimings()
         self.urdf_path = Path(urdf_path)
-        self._cid: int | None = None
+        self._viewer = None
         self._work = Path(tempfile.mkdtemp(prefix="asset2sim-render-"))
         try:
             t0 = time.perf_counter()
@@ -792,52 +654,23 @@ class SceneRenderer:
 
     # ---------------------------------------------------------------- setup
     def _load(self) -> None:
-        with _quiet_fds():  # the import prints PyBullet's build time
-            import pybullet as p
-
-        self._p = p
-        with _quiet_fds():
-            cid = p.connect(p.DIRECT)
-        self._cid = cid
         try:
-            with _quiet_fds():
-                self._body = p.loadURDF(
-                    str(self._prep.urdf),
-                    basePosition=[0, 0, 0],
-                    useFixedBase=True,
-                    flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
-                    physicsClientId=cid,
-                )
-        except Exception as exc:
-            raise RenderError(f"PyBullet could not load {self.urdf_path} for rendering: {exc}") from exc
+            self._viewer = open_viewer("pybullet", self._prep.urdf)
+        except RuntimeError as exc:
+            raise RenderError(f"PyBullet could not load {self.urdf_path} for rendering: {exc.__cause__ or exc}") from exc
         self._lift_dark_colors()
-        self._links: dict[int, str] = {-1: p.getBodyInfo(self._body, physicsClientId=cid)[0].decode()}
-        self._joints: dict[str, int] = {}
-        self.joint_names: list[str] = []
-        for j in range(p.getNumJoints(self._body, physicsClientId=cid)):
-            info = p.getJointInfo(self._body, j, physicsClientId=cid)
-            self._links[j] = info[12].decode()
-            name = info[1].decode()
-            self._joints[name] = j
-            if info[2] in (p.JOINT_REVOLUTE, p.JOINT_PRISMATIC):
-                self.joint_names.append(name)
+        self.joint_names: list[str] = list(self._viewer.joint_names)
 
     def _lift_dark_colors(self) -> None:
         """Raise each visual's diffuse color to at least :data:`ALBEDO_FLOOR`
         (c' = f + (1 - f) c), so black materials (Kd 0 0 0 is common in
         PartNet-Mobility) still show their shading instead of a flat silhouette."""
-        p = self._p
         f = ALBEDO_FLOOR
         if f <= 0:
             return
-        counts: dict[int, int] = {}
-        for row in p.getVisualShapeData(self._body, physicsClientId=self._cid):
-            link = row[1]
-            k = counts.get(link, 0)
-            counts[link] = k + 1
-            rgba = row[7]
+        for link, k, rgba in self._viewer.visual_colors():
             lifted = [f + (1 - f) * c for c in rgba[:3]] + [rgba[3]]
-            p.changeVisualShape(self._body, link, shapeIndex=k, rgbaColor=lifted, physicsClientId=self._cid)
+            self._viewer.set_visual_color(link, k, lifted)
 
     # ---------------------------------------------------------------- state
     def set_joint_positions(self, q: Mapping[str, float] | None) -> None:
@@ -850,7 +683,6 @@ class SceneRenderer:
         """
         if not q:
             return
-        p = self._p
         for name, value in q.items():
             if name not in self.joint_names:
                 raise KeyError(
@@ -859,24 +691,17 @@ class SceneRenderer:
             v = float(value)
             if not math.isfinite(v):
                 raise ValueError(f"joint {name!r}: position {value!r} is not finite")
-            p.resetJointState(self._body, self._joints[name], v, 0.0, physicsClientId=self._cid)
+            self._viewer.set_joint_positions({name: v})
 
     def world_points(self) -> np.ndarray:
         """Visual vertices (N, 3) of all links in the base frame, m, at the current state."""
-        p = self._p
         out = []
-        index = {name: idx for idx, name in self._links.items()}
+        links = set(self._viewer.link_names)
         for lname, local in self._prep.link_points.items():
-            idx = index.get(lname)
-            if idx is None:
+            if lname not in links:
                 continue
-            if idx == -1:
-                pos, orn = p.getBasePositionAndOrientation(self._body, physicsClientId=self._cid)
-            else:
-                st = p.getLinkState(self._body, idx, computeForwardKinematics=True, physicsClientId=self._cid)
-                pos, orn = st[4], st[5]
-            R = np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
-            out.append(local @ R.T + np.asarray(pos, float))
+            pos, R = self._viewer.link_frame(lname)
+            out.append(local @ R.T + pos)
         return np.concatenate(out)
 
     # --------------------------------------------------------------- render
@@ -905,12 +730,9 @@ class SceneRenderer:
         return img
 
     def _draw(self, cam: Camera) -> np.ndarray:
-        p = self._p
         w, h = self.size
         s = self.supersample
         W, H = w * s, h * s
-        view = p.computeViewMatrix(cam.eye.tolist(), cam.target.tolist(), cam.up.tolist(), physicsClientId=self._cid)
-        proj = p.computeProjectionMatrixFOV(cam.fov_deg, W / H, cam.near, cam.far, physicsClientId=self._cid)
         # light from the camera's upper left, fixed relative to the camera
         b = cam.eye - cam.target
         b /= np.linalg.norm(b)
@@ -919,25 +741,16 @@ class SceneRenderer:
         light = b * 1.0 + cam.up * 0.75 - r * 0.6
         light /= np.linalg.norm(light)
         dist = float(np.linalg.norm(cam.eye - cam.target))
-        res = p.getCameraImage(
-            W,
-            H,
-            view,
-            proj,
-            lightDirection=light.tolist(),
-            lightColor=[1.0, 1.0, 1.0],
-            lightDistance=dist * 4,
-            shadow=int(self.shadows),
-            lightAmbientCoeff=AMBIENT,
-            lightDiffuseCoeff=DIFFUSE,
-            lightSpecularCoeff=SPECULAR,
-            renderer=p.ER_TINY_RENDERER,
-            physicsClientId=self._cid,
-        )
-        if res is None or len(res) < 5:
-            raise RenderError(f"{self.urdf_path}: PyBullet returned no image")
-        rgba = np.asarray(res[2], dtype=np.uint8).reshape(H, W, 4)
-        seg = np.asarray(res[4]).reshape(H, W)
+        try:
+            rgba, seg = self._viewer.draw(
+                W,
+                H,
+                {"eye": cam.eye, "target": cam.target, "up": cam.up, "fov_deg": cam.fov_deg, "near": cam.near, "far": cam.far},
+                {"direction": light, "color": (1.0, 1.0, 1.0), "distance": dist * 4, "shadow": self.shadows,
+                 "ambient": AMBIENT, "diffuse": DIFFUSE, "specular": SPECULAR},
+            )
+        except RuntimeError as exc:
+            raise RenderError(f"{self.urdf_path}: {exc}") from exc
         alpha = (seg >= 0).astype(np.float32)
         rgb = rgba[:, :, :3].astype(np.float32)
         bg = np.asarray(BACKGROUND, np.float32)
@@ -949,12 +762,9 @@ class SceneRenderer:
     # -------------------------------------------------------------- cleanup
     def close(self) -> None:
         """Disconnect from PyBullet and delete the temporary files."""
-        if self._cid is not None:
-            try:
-                self._p.disconnect(physicsClientId=self._cid)
-            except Exception:
-                pass
-            self._cid = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
         if self._work is not None:
             shutil.rmtree(self._work, ignore_errors=True)
             self._work = None

@@ -442,27 +442,3 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
             "<a href='summary.html'>summary table</a> &middot; green pass, red fail, grey reported without threshold</p>"
             "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table></body></html>\n")
 
-
-def write_refine_report(out_dir: Path | str, report, trace=None) -> Path:
-    """``report.html`` of a refined output folder (called by
-    :func:`asset2sim.tasks.refine.refine_asset` among its extras).
-
-    Evaluates the folder with :func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`
-    (the refine run's prompt and category; no reference) and writes
-    ``evaluation.json`` and ``report.html`` beside ``report.json``.
-
-    Args:
-        out_dir: the refined output folder.
-        report: its :class:`~asset2sim.schemas.report.RefineReport`.
-        trace: the post-check's rest trace (unused: the evaluation re-runs the
-            rest test so the report shows exactly the SPEC's measurement).
-
-    Returns:
-        The path of ``report.html``.
-    """
-    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
-
-    out_dir = Path(out_dir)
-    evaluate_asset(out_dir, prompt=getattr(report, "prompt", None) or None, category=getattr(report, "category", None),
-                   method="asset2sim", out_dir=out_dir, write_report=True)
-    return out_dir / "report.html"

@@ -12,24 +12,20 @@ written atomically; the input folder is never written.
 
 from __future__ import annotations
 
-import io
-import re
+import os
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from asset2sim import atomic
+from asset2sim import atomic, frames, mesh_io, urdf
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.publish.output_folder import MARKER_NAME, RECORD_NAME, OutputError, check_location
 
 URDF_NAME = "mobility.urdf"
 STATE_NAME = "initial_state.json"
 OVERLAY_NAME = "overlay.json"
-
-
-class OutputError(ValueError):
-    """The output folder cannot be used (e.g. it is inside the input)."""
 
 
 @dataclass
@@ -43,20 +39,15 @@ class OutputPaths:
 
 
 def check_output_folder(asset: AssetDescription, out_dir: Path) -> Path:
-    """Resolve ``out_dir`` and refuse the input folder or anything inside it.
+    """Resolve ``out_dir`` (symlinks followed) and refuse the input folder,
+    anything inside it, a folder containing it and a path that is not a
+    folder (:func:`asset2sim.tasks.publish.output_folder.check_location`).
 
     Raises:
-        OutputError: ``out_dir`` is the input folder or lies inside it.
+        OutputError: with ``code`` OUTPUT_IS_INPUT, OUTPUT_INSIDE_INPUT,
+            OUTPUT_CONTAINS_INPUT or OUTPUT_NOT_A_FOLDER and the ``path``.
     """
-    out = Path(out_dir).resolve()
-    src = asset.source_dir.resolve()
-    if out == src or src in out.parents:
-        raise OutputError(f"output folder {out} is the input folder {src} or inside it; choose another")
-    return out
-
-
-_MTLLIB = re.compile(rb"^\s*mtllib\s+(.+?)\s*$", re.M)
-_MAP = re.compile(rb"^\s*(?:map_\w+|bump|disp|decal|refl)\s+(?:-\S+\s+\S+\s+)*(\S.*?)\s*$", re.M)
+    return check_location(asset.source_dir, out_dir)
 
 
 def _inside(path: Path, root: Path) -> bool:
@@ -70,77 +61,132 @@ def _inside(path: Path, root: Path) -> bool:
 def mesh_dependencies(mesh_path: Path, asset_root: Path) -> list[Path]:
     """Files an OBJ mesh needs besides itself (MTL libraries and their texture
     maps), as absolute paths inside ``asset_root``; missing or outside files are
-    skipped (visual only)."""
-    deps: list[Path] = []
-    if mesh_path.suffix.lower() != ".obj":
-        return deps
-    try:
-        data = mesh_path.read_bytes()
-    except OSError:
-        return deps
-    for m in _MTLLIB.finditer(data):
-        mtl = (mesh_path.parent / m.group(1).decode("utf-8", "replace")).resolve()
-        if not (mtl.is_file() and _inside(mtl, asset_root)):
+    skipped (visual only). Parsing: :func:`asset2sim.mesh_io.obj_material_files`."""
+    return mesh_io.obj_material_files(mesh_path, keep=lambda p: _inside(p, asset_root))
+
+
+#: output paths a copied input file may not take (the contract's own files)
+RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, "report.json", "report.html", MARKER_NAME, RECORD_NAME})
+
+
+def _reference_dirs(filename: str) -> list[str]:
+    """Folders (relative POSIX paths) that must exist in the output for the
+    path ``filename`` as written to open there: every folder the path walks
+    through, also those it leaves again with ``..`` (``dir/../m.obj`` needs
+    ``dir``)."""
+    out: list[str] = []
+    cur: list[str] = []
+    for part in PurePosixPath(filename).parts[:-1]:
+        if part in ("", "."):
             continue
-        deps.append(mtl)
-        try:
-            mdata = mtl.read_bytes()
-        except OSError:
+        if part == "..":
+            if cur:
+                cur.pop()
             continue
-        for t in _MAP.finditer(mdata):
-            tex = (mtl.parent / t.group(1).decode("utf-8", "replace")).resolve()
-            if tex.is_file() and _inside(tex, asset_root):
-                deps.append(tex)
-    return deps
+        cur.append(part)
+        out.append("/".join(cur))
+    return out
+
+
+def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
+    """What :func:`copy_meshes` copies: output path (relative, POSIX, exactly
+    where the output URDF, the copied OBJ and MTL files will look for it) ->
+    the real input file. A mesh reached through a symlink inside the asset
+    folder is copied as a regular file at the referenced path; MTL files and
+    textures are placed relative to their mesh as the mesh looks for them.
+
+    Raises:
+        OutputError: ``OUTPUT_OUTSIDE_INPUT`` (a file outside the asset
+            folder), ``OUTPUT_NAME_CONFLICT`` (two different input files for
+            one output path, or an input file named like a contract file).
+    """
+    root = asset.source_dir.resolve()
+    base = asset.urdf_path.parent
+    copies: dict[str, Path] = {}
+
+    def add(rel: str, src: Path) -> None:
+        if not _inside(src, root):
+            raise OutputError(f"mesh {src} lies outside the asset folder {root}", "OUTPUT_OUTSIDE_INPUT", src)
+        rel = PurePosixPath(os.path.normpath(rel).replace(os.sep, "/")).as_posix()
+        if rel.startswith("../") or rel in ("..", ".") or rel.startswith("/"):
+            raise OutputError(f"{src} would be copied to {rel!r}, outside the output folder", "OUTPUT_OUTSIDE_INPUT", src)
+        if rel in RESERVED_NAMES:
+            raise OutputError(f"input file {src} would be copied onto the output's own {rel}", "OUTPUT_NAME_CONFLICT", src)
+        if copies.get(rel, src) != src:
+            raise OutputError(f"input files {copies[rel]} and {src} would both be copied to {rel}", "OUTPUT_NAME_CONFLICT", src)
+        copies[rel] = src
+
+    for ln in asset.links:
+        for g in ln.visuals + ln.collisions:
+            if g.kind != "mesh" or g.path is None:
+                continue
+            src = g.path.resolve()
+            rel = os.path.normpath(g.filename) if g.filename else os.path.relpath(src, root)
+            add(rel, src)
+            lexical = base / rel
+            lookup = os.path.realpath(lexical.parent)
+            for dep in mesh_dependencies(lexical, root):
+                dep = dep.resolve()
+                dep_rel = os.path.normpath(os.path.join(os.path.dirname(rel), os.path.relpath(dep, lookup)))
+                add(dep_rel if not dep_rel.startswith("..") else os.path.relpath(dep, root), dep)
+    return copies
+
+
+def collision_folder(asset: AssetDescription) -> str:
+    """Output folder name for generated collision pieces (convex
+    decomposition) that no copied input file uses: ``collision``, or
+    ``collision_1``, ``collision_2`` ... when the asset's own meshes live in
+    a folder of that name."""
+    taken = set(mesh_copies(asset))
+    for ln in asset.links:
+        for g in ln.visuals + ln.collisions:
+            if g.kind == "mesh" and g.filename:
+                taken.update(_reference_dirs(g.filename))
+    for i in range(10_000):
+        name = "collision" if i == 0 else f"collision_{i}"
+        if not any(t == name or t.startswith(name + "/") for t in taken):
+            return name
+    raise OutputError(f"{asset.source_dir}: no free folder name for collision pieces", "OUTPUT_NAME_CONFLICT", asset.source_dir)
 
 
 def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
     """Copy every mesh the URDF references (and its MTL/textures) into
-    ``out_dir`` under the same path relative to the asset folder.
+    ``out_dir`` at the paths of :func:`mesh_copies` (regular files, never
+    links), creating the folders a referenced path walks through.
 
-    Returns the copied destination paths. Files already present with the same
-    content are not rewritten.
+    Returns the destination paths. Files already present with the same
+    content (and not symlinks) are not rewritten; they are announced to the
+    atomic writer's observers as kept (:func:`asset2sim.atomic.announce`).
+
+    Raises:
+        OutputError: see :func:`mesh_copies`.
+        OSError: a file cannot be read or written.
     """
-    root = asset.source_dir.resolve()
-    files: set[Path] = set()
-    for ln in asset.links:
-        for g in ln.visuals + ln.collisions:
-            if g.kind == "mesh" and g.path is not None:
-                files.add(g.path.resolve())
-                files.update(mesh_dependencies(g.path, root))
-    out = []
-    todo = []
-    for src in sorted(files):
-        if not _inside(src, root):
-            raise OutputError(f"mesh {src} lies outside the asset folder {root}")
-        dst = out_dir / src.relative_to(root)
-        if not (dst.is_file() and dst.stat().st_size == src.stat().st_size and atomic.sha256_file(dst) == atomic.sha256_file(src)):
+    copies = mesh_copies(asset)
+    out_dir = Path(out_dir)
+    out: list[Path] = []
+    todo: list[tuple[Path, Path]] = []
+    kept: list[Path] = []
+    for rel, src in sorted(copies.items()):
+        dst = out_dir / rel
+        same = (
+            dst.is_file() and not dst.is_symlink() and dst.stat().st_size == src.stat().st_size
+            and atomic.sha256_file(dst) == atomic.sha256_file(src)
+        )
+        if same:
+            kept.append(dst)
+        else:
             todo.append((src, dst))
         out.append(dst)
+    if kept:
+        atomic.announce(kept)
     atomic.copy_files(todo)
+    for ln in asset.links:
+        for g in ln.visuals + ln.collisions:
+            if g.kind == "mesh" and g.filename:
+                for d in _reference_dirs(g.filename):
+                    (out_dir / d).mkdir(parents=True, exist_ok=True)
     return out
-
-
-def _scale_origin(matrix, s: float):
-    if matrix is None:
-        return None
-    m = np.array(matrix, float)
-    m[:3, 3] *= s
-    return m
-
-
-def _origin_xyz(xyz) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, 3] = np.asarray(xyz, float)
-    return m
-
-
-def _origin_matrix(origin) -> np.ndarray:
-    import trimesh.transformations as tf
-
-    m = tf.euler_matrix(*origin.rpy, axes="sxyz")
-    m[:3, 3] = np.asarray(origin.xyz, float)
-    return m
 
 
 def build_urdf(
@@ -151,6 +197,17 @@ def build_urdf(
 ) -> bytes:
     """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``.
 
+    The input URDF is read by :func:`asset2sim.urdf.read_urdf` (it was
+    validated at extraction), changed on the model and written by
+    :func:`asset2sim.urdf.write_urdf`: scale baked in
+    (:func:`asset2sim.urdf.scale_model`), the overlay's inertial on every link
+    that has one (a link with geometry must), ``<dynamics>`` and a complete
+    ``<limit>`` (effort and velocity 1000 when absent) on every movable
+    joint, an explicit ``<axis>`` on every joint, and a comment pointing to
+    ``initial_state.json`` and ``overlay.json``. As the yourdfpy writer used
+    before, the output leaves out the input's ``<contact>``, ``<mimic>``,
+    ``<calibration>``, ``<safety_controller>`` and vendor extensions.
+
     ``collision_overrides``: link -> list of
     :class:`asset2sim.tasks.state.collision.CollisionPiece` replacing the link's
     mesh collisions (convex decomposition), paths relative to the output.
@@ -160,96 +217,64 @@ def build_urdf(
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
             movable joint (validate the overlay first).
+        UrdfError: the input URDF cannot be read.
     """
-    import yourdfpy
-    from lxml import etree
-
-    from asset2sim import safexml
-
     s = float(overlay.scale)
-    data = asset.urdf_path.read_bytes()
-    safexml.parse_xml_bytes(data, source=str(asset.urdf_path))  # the hardened parser sees it first, every time
-    model = yourdfpy.URDF.load(
-        io.BytesIO(data),
-        build_scene_graph=False,
-        load_meshes=False,
-        build_collision_scene_graph=False,
-        load_collision_meshes=False,
-        filename_handler=lambda fname: fname,
-    )
-    robot = model.robot
+    model = urdf.read_urdf(asset.urdf_path, mode="lenient")
+    model.extensions = []
+    model.name = model.name or ""
     overrides = collision_overrides or {}
-    for link in robot.links:
+    for link in model.links.values():
+        link.contact = {}
         pieces = overrides.get(link.name)
         if pieces:
-            kept = [c for c in link.collisions if c.geometry is None or c.geometry.mesh is None]
+            kept = [c for c in link.collisions if c.kind != "mesh"]
             for piece in pieces:
                 kept.append(
-                    yourdfpy.Collision(
-                        name=None,
-                        origin=_origin_matrix(piece.source.origin),
-                        geometry=yourdfpy.Geometry(mesh=yourdfpy.Mesh(filename=piece.filename, scale=np.asarray(piece.source.scale, float))),
+                    urdf.UrdfGeometry(
+                        kind="mesh",
+                        origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
+                        filename=piece.filename,
+                        mesh_scale=np.asarray(piece.source.scale, float),
                     )
                 )
             link.collisions = kept
-        for elem in list(link.visuals) + list(link.collisions):
-            elem.origin = _scale_origin(elem.origin, s)
-            g = elem.geometry
-            if g is None:
-                continue
-            if g.mesh is not None:
-                base = np.ones(3) if g.mesh.scale is None else np.broadcast_to(np.asarray(g.mesh.scale, float).ravel(), (3,))
-                g.mesh.scale = np.asarray(base, float) * s
-            if g.box is not None:
-                g.box.size = np.asarray(g.box.size, float) * s
-            if g.cylinder is not None:
-                g.cylinder.radius = float(g.cylinder.radius) * s
-                g.cylinder.length = float(g.cylinder.length) * s
-            if g.sphere is not None:
-                g.sphere.radius = float(g.sphere.radius) * s
+    urdf.scale_model(model, s, joints=False, inertials=False)
+    for link in model.links.values():
         lp = overlay.links.get(link.name)
         if lp is None:
-            has_geom = bool(link.visuals or link.collisions)
-            if has_geom:
+            if link.visuals or link.collisions:
                 raise OutputError(f"overlay has no mass/inertia for link {link.name!r} (validate the overlay first)")
             link.inertial = None
             continue
-        link.inertial = yourdfpy.Inertial(
-            origin=_origin_xyz(lp.com), mass=float(lp.mass), inertia=lp.inertia.matrix()
-        )
+        link.inertial = urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com), inertia=lp.inertia.matrix())
     if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
         T = np.eye(4)
         T[:3, :3] = np.asarray(root_rotation, float)
-        root_name = asset.root_link
-        for joint in robot.joints:
-            if joint.parent == root_name:
-                joint.origin = T @ (np.eye(4) if joint.origin is None else np.asarray(joint.origin, float))
-        for link in robot.links:
-            if link.name == root_name:
-                for elem in list(link.visuals) + list(link.collisions):
-                    elem.origin = T @ (np.eye(4) if elem.origin is None else np.asarray(elem.origin, float))
-                if link.inertial is not None:
-                    link.inertial.origin = T @ (np.eye(4) if link.inertial.origin is None else np.asarray(link.inertial.origin, float))
-    for joint in robot.joints:
-        joint.origin = _scale_origin(joint.origin, s)
-        if joint.type == "prismatic" and joint.limit is not None:
-            if joint.limit.lower is not None:
-                joint.limit.lower = float(joint.limit.lower) * s
-            if joint.limit.upper is not None:
-                joint.limit.upper = float(joint.limit.upper) * s
-        if joint.type in ("revolute", "continuous", "prismatic"):
+        for joint in model.children(asset.root_link):
+            joint.origin = T @ joint.origin
+        root = model.links.get(asset.root_link)
+        if root is not None:
+            for elem in root.visuals + root.collisions:
+                elem.origin = T @ elem.origin
+            if root.inertial is not None:
+                root.inertial.origin = T @ root.inertial.origin
+    urdf.scale_model(model, s, geometry=False, inertials=False)
+    for joint in model.joints:
+        joint.mimic = joint.calibration = joint.safety_controller = None
+        if joint.axis_xyz is None:
+            joint.axis_xyz = np.array([1.0, 0.0, 0.0])
+        if joint.type in urdf.MOVABLE:
             dyn = overlay.joints.get(joint.name)
             if dyn is None:
                 raise OutputError(f"overlay has no dynamics for joint {joint.name!r} (validate the overlay first)")
-            joint.dynamics = yourdfpy.Dynamics(damping=float(dyn.damping), friction=float(dyn.friction))
+            joint.dynamics = urdf.UrdfDynamics(damping=float(dyn.damping), friction=float(dyn.friction))
             if joint.limit is None:
-                joint.limit = yourdfpy.Limit()
+                joint.limit = urdf.UrdfLimit()
             if joint.limit.effort is None:
                 joint.limit.effort = 1000.0
             if joint.limit.velocity is None:
                 joint.limit.velocity = 1000.0
-    tree = model.write_xml()
-    root = tree.getroot()
     springs = {n: (d.stiffness, d.spring_reference) for n, d in overlay.joints.items() if d.stiffness > 0}
     comment = (
         f" Written by asset2sim. Uniform scale {s!r} is baked in (mesh scale, origins, prismatic limits, inertials); "
@@ -258,9 +283,7 @@ def build_urdf(
         + (f"; springs on {', '.join(sorted(springs))}" if springs else "")
         + ". "
     )
-    root.insert(0, etree.Comment(comment.replace("--", "- -")))
-    etree.indent(root, space="  ")
-    return etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
+    return urdf.write_urdf(model, comment=comment)
 
 
 def write_output(

@@ -29,6 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic
+from asset2sim.frames import rpy_matrix
+from asset2sim.engines.base import open_shape_world
+from asset2sim.mesh_io import MeshCache, read_mesh
 from asset2sim.schemas.asset import AssetDescription, GeometryRef
 
 #: CoACD settings: concavity threshold (dimensionless, fraction of the mesh
@@ -91,8 +94,6 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
         DecompositionUnavailable: coacd is not installed.
         ValueError: the mesh cannot be read.
     """
-    from asset2sim.tasks.geometry.analyze import read_mesh
-
     digest = hashlib.sha256(path.read_bytes() + json.dumps({**COACD_SETTINGS, "refit": 1}, sort_keys=True).encode()).hexdigest()
     cfile = cache_dir() / "coacd" / f"{digest}.npz"
     if cfile.is_file():
@@ -176,8 +177,6 @@ def convexity_ratio(path: Path, cache=None) -> float:
     concave closed surfaces, ~1 for convex ones; open surfaces can be < 1)."""
     import trimesh
 
-    from asset2sim.tasks.geometry.analyze import MeshCache
-
     cache = cache or MeshCache()
     v, f, _ = cache.get(path)
     m = trimesh.Trimesh(np.asarray(v, float), np.asarray(f, int), process=False)
@@ -189,26 +188,22 @@ def convexity_ratio(path: Path, cache=None) -> float:
 
 
 class _PieceWorld:
-    """Every collision piece of some links as a separate static body in a
-    private PyBullet world, posed as in ``session`` (scaled output), so the
-    penetration between two links can be measured piece by piece."""
+    """Every collision piece of some links as a separate static shape in a
+    private collision world (:func:`asset2sim.engines.base.open_shape_world`,
+    PyBullet), posed as in ``session`` (scaled output), so the penetration
+    between two links can be measured piece by piece."""
 
     def __init__(self, session, asset: AssetDescription, links: list[str], scale: float, cache):
-        import pybullet as p
         from scipy.spatial.transform import Rotation
 
-        from asset2sim.tasks.geometry.analyze import rpy_matrix
-        from asset2sim.tasks.geometry.closed_state import _link_pose
-
-        self.p = p
-        self.cid = p.connect(p.DIRECT)
+        self.world = open_shape_world("pybullet")
         self.scale = scale
         self.poses = {}
         self.bodies: dict[tuple[str, int], list[int]] = {}
         self.refs: dict[tuple[str, int], GeometryRef] = {}
         self._rot = Rotation
         for ln in links:
-            pos, R = _link_pose(session, session.link_index(ln))
+            pos, R = session.link_frame(ln)
             for k, g in enumerate(asset.link(ln).collisions):
                 if g.kind != "mesh" or g.path is None:
                     continue
@@ -220,33 +215,29 @@ class _PieceWorld:
                 self.bodies[(ln, k)] = [self._body(v[np.all(np.isfinite(v), axis=1)], g)]
 
     def _body(self, vertices: np.ndarray, g: GeometryRef) -> int:
-        p = self.p
         Rw, tw = self.poses[next(key for key, ref in self.refs.items() if ref is g)]
-        shape = p.createCollisionShape(
-            p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
-            meshScale=(np.asarray(g.scale, float) * self.scale).tolist(), physicsClientId=self.cid,
+        return self.world.add_convex(
+            vertices, np.asarray(g.scale, float) * self.scale, tw, self._rot.from_matrix(Rw).as_quat()
         )
-        return p.createMultiBody(0, shape, basePosition=tw.tolist(), baseOrientation=self._rot.from_matrix(Rw).as_quat().tolist(), physicsClientId=self.cid)
 
     def replace(self, key: tuple[str, int], pieces: list[np.ndarray]) -> list[int]:
         """Swap the bodies of ``key`` for ``pieces`` (vertex arrays); returns the old ids."""
         old = self.bodies[key]
         for b in old:
-            self.p.resetBasePositionAndOrientation(b, [1e3, 1e3, 1e3], [0, 0, 0, 1], physicsClientId=self.cid)
+            self.world.set_pose(b, [1e3, 1e3, 1e3], [0, 0, 0, 1])
         self.bodies[key] = [self._body(v, self.refs[key]) for v in pieces]
         return old
 
     def restore(self, key: tuple[str, int], old: list[int]) -> None:
         for b in self.bodies[key]:
-            self.p.resetBasePositionAndOrientation(b, [1e3, 1e3, 1e3], [0, 0, 0, 1], physicsClientId=self.cid)
+            self.world.set_pose(b, [1e3, 1e3, 1e3], [0, 0, 0, 1])
         Rw, tw = self.poses[key]
         for b in old:
-            self.p.resetBasePositionAndOrientation(b, tw.tolist(), self._rot.from_matrix(Rw).as_quat().tolist(), physicsClientId=self.cid)
+            self.world.set_pose(b, tw, self._rot.from_matrix(Rw).as_quat())
         self.bodies[key] = old
 
     def penetration(self, a: str, b: str) -> float:
         """Sum over piece pairs of the deepest penetration, m."""
-        p = self.p
         total = 0.0
         for (la, _), ids_a in self.bodies.items():
             if la != a:
@@ -256,25 +247,24 @@ class _PieceWorld:
                     continue
                 for ia in ids_a:
                     for ib in ids_b:
-                        d = [pt[8] for pt in p.getClosestPoints(ia, ib, 0.0, physicsClientId=self.cid) if pt[8] < 0]
+                        d = [x for x in self.world.distances(ia, ib, 0.0) if x < 0]
                         if d:
                             total += -min(d)
         return total
 
     def overlapping(self, key: tuple[str, int], other: str) -> float:
-        p = self.p
         worst = 0.0
         for (lb, _), ids_b in self.bodies.items():
             if lb != other:
                 continue
             for ia in self.bodies[key]:
                 for ib in ids_b:
-                    for pt in p.getClosestPoints(ia, ib, 0.0, physicsClientId=self.cid):
-                        worst = max(worst, -pt[8])
+                    for x in self.world.distances(ia, ib, 0.0):
+                        worst = max(worst, -x)
         return worst
 
     def close(self) -> None:
-        self.p.disconnect(self.cid)
+        self.world.close()
 
 
 def improve_collisions(
@@ -286,6 +276,7 @@ def improve_collisions(
     *,
     cache=None,
     budget_s: float = 60.0,
+    folder: str = "collision",
 ) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """Greedy, piece by piece, for link pairs whose hulls keep penetrating:
 
@@ -296,12 +287,12 @@ def improve_collisions(
 
     each change is kept only if it lowers the pair's piece-wise penetration
     (sum over piece pairs of the deepest point). ``session``: PyBullet session
-    of the scaled output at the refined state. Returns (collision overrides
-    for the writer, notes).
+    of the scaled output at the refined state. Pieces are written to
+    ``out_dir/<folder>/`` (``tasks.publish.write.collision_folder`` picks a
+    name no input mesh uses). Returns (collision overrides for the writer,
+    notes).
     """
     import time
-
-    from asset2sim.tasks.geometry.analyze import MeshCache
 
     cache = cache or MeshCache()
     links = sorted({ln for pair in pairs for ln in pair})
@@ -371,7 +362,7 @@ def improve_collisions(
                 if changed[(ln, k)] is None:
                     continue
                 for i, (v, f) in enumerate(changed[(ln, k)]):
-                    rel = f"collision/{ln}_{k}_{i}.obj"
+                    rel = f"{folder}/{ln}_{k}_{i}.obj"
                     atomic.write_text(out_dir / rel, _obj_text(v, f))
                     pieces_out.append(CollisionPiece(filename=rel, source=g))
             elif g.kind == "mesh" and g.filename:

@@ -13,16 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from asset2sim.frames import axis_rotation
 from asset2sim.schemas.asset import AssetDescription
-
-
-def _rot(axis: int, angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    if axis == 0:
-        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-    if axis == 1:
-        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
 def resting_rotation(
@@ -60,13 +52,13 @@ def resting_rotation(
     if k == 2:
         if up_hint[2] >= 0:
             return np.eye(3), "smallest extent already vertical: pose unchanged"
-        R = _rot(0, np.pi)
+        R = axis_rotation(0, np.pi)
         return R, "turned upside down so the moving parts face up"
     # rotate about the horizontal axis perpendicular to axis k so that axis k maps to +z or -z
     other = 1 - k  # the remaining horizontal axis (k in {0, 1})
     best = None
     for angle in (np.pi / 2, -np.pi / 2):
-        R = _rot(other, angle)
+        R = axis_rotation(other, angle)
         z = R @ up_hint
         score = z[2]
         if best is None or score > best[0]:
@@ -114,15 +106,13 @@ def static_margin(
     """
     from scipy.spatial import ConvexHull, QhullError
 
-    from asset2sim.tasks.geometry.closed_state import _link_pose
-
     session.set_joint_positions(state)
     R = np.asarray(rotation, float)
     pts = []
     m_tot = 0.0
     mc = np.zeros(3)
     for ln in asset.links:
-        pos, Rl = _link_pose(session, session.link_index(ln.name))
+        pos, Rl = session.link_frame(ln.name)
         v = hull_points.get(ln.name)
         if v is not None:
             pts.append(((v @ Rl.T + pos) * scale) @ R.T)
@@ -178,7 +168,7 @@ def most_stable_rotation(
     for label, axis, angle in CANDIDATES:
         if exclude_modelled and label == "as modelled":
             continue
-        R = _rot(axis, angle)
+        R = axis_rotation(axis, angle)
         margin, _ = static_margin(session, asset, links, state, scale, hull_points, R)
         # clearly standing first, then moving parts up, then the widest margin
         key = (margin >= MIN_MARGIN_FRACTION * size, float((R @ up)[2]) > 1e-9, round(margin / size, 3))

@@ -1,11 +1,13 @@
 """Overlay synthesis (SPEC stage 2): the estimator protocol, its registry, and
 the offline estimator (the default; needs no network).
 
-An estimator turns an :class:`EstimationContext` (the extracted asset, its
-mesh analysis, the parsed request, the recognised category and the geometric
-closed states) into an :class:`~asset2sim.schemas.overlay.Overlay`. Whatever
-produced it, the overlay is then validated mechanically
-(:mod:`asset2sim.tasks.synthesize.validate_overlay`).
+An estimator turns an :class:`~asset2sim.tasks.synthesize.context.EstimationContext`
+(the extracted asset, its mesh analysis, the parsed request, the recognised
+category and the geometric closed states; built by
+:func:`asset2sim.tasks.synthesize.context.build_context`) into an
+:class:`Estimate`: the :class:`~asset2sim.schemas.overlay.Overlay` and the
+state band of every movable joint. Whatever produced it, the overlay is then
+validated mechanically (:mod:`asset2sim.tasks.synthesize.validate_overlay`).
 
 The offline estimator's knowledge is per category, per part label and per
 word of the request (``asset2sim/priors/*.yaml`` through
@@ -14,13 +16,13 @@ word of the request (``asset2sim/priors/*.yaml`` through
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
 from asset2sim import __version__
-from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import (
     ContactMaterial,
     EstimatorInfo,
@@ -29,32 +31,27 @@ from asset2sim.schemas.overlay import (
     Overlay,
     ValidationNotes,
 )
-from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, RequestSpec
-from asset2sim.tasks.synthesize import physics
+from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
 from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.synthesize import physics
+from asset2sim.tasks.synthesize.context import EstimationContext
+
 
 @dataclass
-class EstimationContext:
-    """Everything an estimator may use (units: input asset at scale 1 unless noted)."""
+class Estimate:
+    """What an estimator returns: the overlay, the state band it chose for
+    every movable joint, and notes on how it read the request.
 
-    asset: AssetDescription
-    geometry: dict[str, LinkGeometry]
-    request: RequestSpec
-    category: str
-    category_reason: str
-    closed: dict[str, ClosedState]
-    """Closed ends at scale 1 (prismatic in input units)."""
-    closed_extents: np.ndarray
-    """(3,) extents of the whole object in its closed state, root frame, scale 1."""
-    session: Any
-    """Fixed-base, gravity-free PyBullet session of the input asset (kinematics)."""
-    subtrees: dict[str, list[str]]
-    """joint -> links moved by it."""
-    joint_heights: dict[str, float] = field(default_factory=dict)
-    """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
-    root_rotation: Any = None
-    """(3, 3) resting-pose rotation the output will carry (``tasks.pose``), or None."""
-    settings: dict[str, Any] = field(default_factory=dict)
+    ``bands``: joint name -> band name (:data:`asset2sim.schemas.request.BAND_TARGET`),
+    every movable joint present; the refine stage turns them into the
+    requested state (:func:`state_from_bands`) and the allowed intervals of
+    the state search (:func:`band_intervals`).
+    """
+
+    overlay: Overlay
+    bands: dict[str, str]
+    notes: list[str] = field(default_factory=list)
 
 
 class Estimator(Protocol):
@@ -62,8 +59,8 @@ class Estimator(Protocol):
 
     name: str
 
-    def estimate(self, ctx: EstimationContext) -> Overlay:
-        """Return an overlay (validated afterwards by the caller)."""
+    def estimate(self, ctx: EstimationContext) -> Estimate:
+        """Return the overlay (validated afterwards by the caller) and the bands."""
 
 
 _REGISTRY: dict[str, Callable[..., Estimator]] = {}
@@ -81,13 +78,8 @@ def get_estimator(name: str, **settings) -> Estimator:
         KeyError: unknown name (the message lists the known ones).
     """
     if name not in _REGISTRY:
-        # model backends register on import
-        try:
-            import importlib
-
-            importlib.import_module("asset2sim.tasks.synthesize.llm_estimator")
-        except ImportError:
-            pass
+        # model backends register on import (litellm itself is imported only when a client is made)
+        importlib.import_module("asset2sim.tasks.synthesize.llm_estimator")
     if name not in _REGISTRY:
         raise KeyError(f"unknown estimator {name!r}; known: {sorted(_REGISTRY)}")
     return _REGISTRY[name](**settings)
@@ -99,8 +91,6 @@ def task_relevant_joints(ctx: EstimationContext) -> list[str]:
     drawer, screen ...; ``priors.part_role`` == "task"), ordered by the
     category's priority; every non-accessory movable joint when none
     qualifies, and all movable joints when even that is empty."""
-    from asset2sim.tasks.interpret import priors
-
     movable = ctx.asset.movable_joints()
     ranked = []
     for j in movable:
@@ -118,8 +108,6 @@ def task_relevant_joints(ctx: EstimationContext) -> list[str]:
 
 
 def _label_matches(ctx: EstimationContext, request_label: str, semantic_label: str | None) -> bool:
-    from asset2sim.tasks.interpret import priors
-
     return priors.request_label_matches(ctx.category, request_label, semantic_label)
 
 
@@ -184,8 +172,6 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     handheld category is then capped so that at least two dimensions fit a
     parallel gripper (second-largest <= ``priors.GRASPABLE_WIDTH_M``).
     """
-    from asset2sim.tasks.interpret import priors
-
     target = priors.target_size(ctx.category, ctx.request)
     dims = np.sort(np.asarray(target.dims, float))[::-1]
     ext = np.maximum(np.sort(np.asarray(ctx.closed_extents, float))[::-1], 1e-9)
@@ -208,8 +194,6 @@ def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, f
     the named variant's) regular mass range scaled to the actual size factor
     f = geometric mean of (scaled closed extents / regular dims) over the two
     largest dimensions (``priors.scale_mass_range``: f^2..f^3)."""
-    from asset2sim.tasks.interpret import priors
-
     target = priors.target_size(ctx.category, ctx.request)
     cat = priors.category_prior(ctx.category)
     var = cat.variant(target.variant) if target.variant else None
@@ -221,15 +205,11 @@ def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, f
 
 
 def _variant(ctx: EstimationContext) -> str | None:
-    from asset2sim.tasks.interpret import priors
-
     v = priors.find_variant(ctx.category, ctx.request.text) if ctx.request.text else None
     return v.name if v is not None else None
 
 
 def _material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoice:
-    from asset2sim.tasks.interpret import priors
-
     m = priors.material_for(ctx.category, label, _variant(ctx))
     return physics.MaterialChoice(
         name=m.name,
@@ -319,9 +299,9 @@ class OfflineEstimator:
     def __init__(self, **settings):
         self.settings = settings
 
-    def estimate(self, ctx: EstimationContext) -> Overlay:
-        from asset2sim.tasks.interpret import priors
-
+    def estimate(self, ctx: EstimationContext) -> Estimate:
+        """The overlay from priors, geometry and kinematics, and the parsed
+        request's bands (:func:`requested_bands`)."""
         s, size_note = choose_scale(ctx)
         # ---- links
         links: dict[str, LinkPhysics] = {}
@@ -371,7 +351,7 @@ class OfflineEstimator:
         body_mat = _material(ctx, None)
         friction_coeff = float(body_prior.lateral_friction)
         asked_state = bool(ctx.request.joint_states)
-        return Overlay(
+        overlay = Overlay(
             estimator=EstimatorInfo(name=self.name, model=None, version=__version__, queries=0),
             scale=s,
             category=ctx.category,
@@ -393,6 +373,7 @@ class OfflineEstimator:
                 + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),
             ),
         )
+        return Estimate(overlay=overlay, bands=bands, notes=band_notes)
 
 
 register_estimator("offline", OfflineEstimator)

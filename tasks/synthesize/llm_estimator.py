@@ -31,8 +31,9 @@ kept within a factor :data:`MASS_AGREEMENT` of the model's own mass estimate;
 inertia comes from the scaled geometry; damping and friction from the joint
 loads (:func:`physics.joint_dynamics`); the state from the band through the
 geometric closed ends (:func:`estimate.state_from_bands`), and the refine
-pipeline still refines it in the simulator. The chosen bands are left in
-``ctx.settings["model_bands"]`` for the refine stage.
+pipeline still refines it in the simulator. The chosen bands are returned with
+the overlay (:class:`asset2sim.tasks.synthesize.estimate.Estimate`) for the
+refine stage.
 
 **Baselines** (SPEC): :func:`direct_overlay` (one call, five views, the
 model's numbers applied as they are) and :func:`ivw_overlay` (each of 5 views
@@ -43,11 +44,9 @@ asked 5 times, numbers fused per parameter by inverse-variance weighting,
 from __future__ import annotations
 
 import base64
-import contextlib
 import io
 import json
-from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -69,9 +68,19 @@ from asset2sim.schemas.overlay import (
     ValidationNotes,
 )
 from asset2sim.schemas.request import BAND_TARGET
-from asset2sim.tasks.synthesize import estimate
-from asset2sim.tasks.synthesize import physics
-from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient, ModelCallError, ReplyError, ReplyInvalid, Usage
+from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.publish import render
+from asset2sim.tasks.synthesize import estimate, ivw, physics, validate_overlay
+from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.llm_client import (
+    ClientConfig,
+    LLMClient,
+    LLMError,
+    ModelCallError,
+    ReplyError,
+    ReplyInvalid,
+    Usage,
+)
 
 DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 PROPOSAL_MARK = "STALLED STATE SEARCH (JSON):"
@@ -94,7 +103,7 @@ def _r(x: float, n: int = 5) -> float:
     return float(f"{float(x):.{n}g}")
 
 
-def describe(ctx: estimate.EstimationContext) -> dict[str, Any]:
+def describe(ctx: EstimationContext) -> dict[str, Any]:
     """The structured description sent to the model (JSON-able; lengths in m
     and angles in rad, all at scale 1 in the input asset's frames; prismatic
     values in the input's units, which the scale multiplies).
@@ -107,8 +116,6 @@ def describe(ctx: estimate.EstimationContext) -> dict[str, Any]:
     closed end, opening direction and range, whether tasks act on it, the band
     the parser read for it).
     """
-    from asset2sim.tasks.interpret import priors
-
     asset = ctx.asset
     req = ctx.request
     target = priors.target_size(ctx.category, req)
@@ -231,15 +238,13 @@ def png_data_url(image: np.ndarray) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def render_closed_views(ctx: estimate.EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
+def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
     """Render ``views`` of the input asset at its geometric closed state.
 
     Returns:
         (view -> PNG data URL, notes). A render failure is not fatal: the
         request then carries the description only and the note says why.
     """
-    from asset2sim.tasks.publish import render
-
     q = {n: float(cs.q_closed) for n, cs in ctx.closed.items()}
     try:
         images = render.render_views(ctx.asset.urdf_path, q, views=views, size=size)
@@ -268,7 +273,7 @@ def build_messages(description: dict[str, Any], images: dict[str, str], schema: 
 
 
 # ------------------------------------------------------------ reply -> overlay
-def check_reply_names(ctx: estimate.EstimationContext, reply: ModelReply) -> list[str]:
+def check_reply_names(ctx: EstimationContext, reply: ModelReply) -> list[str]:
     """Problems with the names in a reply: unknown or duplicated links and joints."""
     errors = []
     links = {ln.name for ln in ctx.asset.links}
@@ -290,9 +295,7 @@ def check_reply_names(ctx: estimate.EstimationContext, reply: ModelReply) -> lis
     return errors
 
 
-def _prior_material(ctx: estimate.EstimationContext, label: str | None) -> physics.MaterialChoice:
-    from asset2sim.tasks.interpret import priors
-
+def _prior_material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoice:
     m = priors.material_for(ctx.category, label)
     return physics.MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness), source=m.source)
 
@@ -307,7 +310,7 @@ def _scaled_link(lp: LinkPhysics, f: float, why: str) -> LinkPhysics:
     )
 
 
-def overlay_from_reply(ctx: estimate.EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> tuple[Overlay, dict[str, str], list[str]]:
+def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> tuple[Overlay, dict[str, str], list[str]]:
     """The asset2sim overlay from a model reply (the reply is a prior; see the
     module docstring), validated with :func:`validate_overlay.validate_overlay`.
 
@@ -322,8 +325,6 @@ def overlay_from_reply(ctx: estimate.EstimationContext, reply: ModelReply, *, na
         ReplyInvalid: unknown or duplicated names, a link whose mass cannot be
             computed, or an overlay the validator rejects (messages name them).
     """
-    from asset2sim.tasks.synthesize import validate_overlay
-
     errors = check_reply_names(ctx, reply)
     if errors:
         raise ReplyInvalid(errors)
@@ -494,10 +495,10 @@ class LLMEstimator:
         self._memo: dict[tuple, tuple[ModelReply, Usage, list[list[str]], list[str]]] = {}
 
     @staticmethod
-    def _memo_key(ctx: estimate.EstimationContext) -> tuple:
+    def _memo_key(ctx: EstimationContext) -> tuple:
         return (ctx.asset.asset_id, ctx.asset.input_hash, str(ctx.asset.urdf_path), ctx.request.text, ctx.category)
 
-    def joint_proposer(self, ctx: estimate.EstimationContext):
+    def joint_proposer(self, ctx: EstimationContext):
         """A proposer for :func:`asset2sim.tasks.state.refine_state.refine_initial_state`:
         when the simulator's local search stalls, the model sees the current
         state, the allowed interval of every joint and the worst colliding link
@@ -552,8 +553,9 @@ class LLMEstimator:
 
         return propose
 
-    def estimate(self, ctx: estimate.EstimationContext) -> Overlay:
-        """Ask the model (once per asset and request) and build the overlay.
+    def estimate(self, ctx: EstimationContext) -> estimate.Estimate:
+        """Ask the model (once per asset and request) and build the overlay;
+        the bands are the model's choice per movable joint.
 
         A repeated call for the same asset and request reuses the remembered
         reply (the physics is recomputed for the context, e.g. another resting
@@ -580,20 +582,20 @@ class LLMEstimator:
                 accept=lambda r: overlay_from_reply(ctx, r, name=self.name, model=cfg.model),
                 max_reasks=self.max_reasks,
             )
-            overlay, bands, _ = answer.value
+            overlay, bands, notes = answer.value
             memo = (answer.reply, answer.usage, answer.history, render_notes)
             while len(self._memo) >= self.MEMO_SIZE:
                 self._memo.pop(next(iter(self._memo)))
             self._memo[key] = memo
         else:
-            overlay, bands, _ = overlay_from_reply(ctx, memo[0], name=self.name, model=cfg.model)
+            overlay, bands, notes = overlay_from_reply(ctx, memo[0], name=self.name, model=cfg.model)
         reply, usage, history, render_notes = memo
-        ctx.settings["model_bands"] = dict(bands)
         other = list(overlay.notes.other) + render_notes
         other.append(f"model {cfg.model}: {usage.summary()}")
         for i, errs in enumerate(history):
             other.append(f"model reply {i + 1} rejected and re-asked: " + "; ".join(errs[:5]))
-        return overlay.model_copy(update={"estimator": _info(self.name, cfg.model, usage), "notes": overlay.notes.model_copy(update={"other": other})})
+        overlay = overlay.model_copy(update={"estimator": _info(self.name, cfg.model, usage), "notes": overlay.notes.model_copy(update={"other": other})})
+        return estimate.Estimate(overlay=overlay, bands=dict(bands), notes=list(notes))
 
 
 class OpenAICompatibleEstimator(LLMEstimator):
@@ -609,7 +611,7 @@ estimate.register_estimator("openai", OpenAICompatibleEstimator)
 
 # -------------------------------------------------------------------- baselines
 def _numeric_overlay(
-    ctx: estimate.EstimationContext,
+    ctx: EstimationContext,
     name: str,
     model: str,
     usage: Usage,
@@ -623,8 +625,6 @@ def _numeric_overlay(
     and dynamics as given, inertia of the scaled geometry at that mass (shell
     or solid tensor as the model said; URDF needs a tensor and the reply has
     none), COM of the scaled geometry; links the reply misses stay missing."""
-    from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia
-
     links = {}
     for ln, (mass, shell) in link_mass.items():
         g = ctx.geometry.get(ln)
@@ -632,7 +632,7 @@ def _numeric_overlay(
             continue
         links[ln] = LinkPhysics(
             mass=float(mass),
-            inertia=Inertia.from_matrix(geometry_inertia(g, float(mass), scale, shell)),
+            inertia=Inertia.from_matrix(validate_overlay.geometry_inertia(g, float(mass), scale, shell)),
             com=tuple(float(c) * scale for c in g.com),
             source=f"{name}: model mass, geometry inertia",
         )
@@ -659,7 +659,7 @@ def _numeric_overlay(
     )
 
 
-def direct_overlay(ctx: estimate.EstimationContext, client: LLMClient) -> Overlay:
+def direct_overlay(ctx: EstimationContext, client: LLMClient) -> Overlay:
     """``direct`` baseline: one call with the five views; the reply's numbers
     (scale, link masses, damping, friction, stiffness, joint positions) applied
     as they are: no re-ask, no validation, no physics, no state refinement.
@@ -686,7 +686,7 @@ def direct_overlay(ctx: estimate.EstimationContext, client: LLMClient) -> Overla
     )
 
 
-def ivw_overlay(ctx: estimate.EstimationContext, client: LLMClient, n_views: int = 5, n_calls: int = 5) -> Overlay:
+def ivw_overlay(ctx: EstimationContext, client: LLMClient, n_views: int = 5, n_calls: int = 5) -> Overlay:
     """``ivw`` baseline: ``n_calls`` independent calls for each of the first
     ``n_views`` views (one image per call, temperature :data:`IVW_TEMPERATURE`),
     each reply's numbers with their reported std fused per parameter by
@@ -698,9 +698,6 @@ def ivw_overlay(ctx: estimate.EstimationContext, client: LLMClient, n_views: int
         ValueError: ``n_views`` not in 1..5 or ``n_calls`` < 1.
         ReplyError: no call gave a usable reply (the last error is chained).
     """
-    from asset2sim.tasks.synthesize import ivw
-    from asset2sim.tasks.synthesize.llm_client import LLMError, ReplyError
-
     if not (1 <= n_views <= len(VIEWS)) or n_calls < 1:
         raise ValueError(f"n_views must be in 1..{len(VIEWS)} and n_calls >= 1, got {n_views}, {n_calls}")
     cfg = client.config
@@ -762,54 +759,3 @@ def ivw_overlay(ctx: estimate.EstimationContext, client: LLMClient, n_views: int
         + [f"ivw: {len(replies)} usable replies of {len(views) * n_calls} calls ({n_views} views x {n_calls}); scale {scale.value:.4g} +- {scale.std:.3g}"]
         + [f"skipped: {f}" for f in failures[:10]],
     )
-
-
-# ------------------------------------------------------------------ contexts
-@contextlib.contextmanager
-def build_context(asset_dir: Path | str, prompt: str, *, category: str | None = None, asset_id: str | None = None) -> Iterator[estimate.EstimationContext]:
-    """The estimation context of an asset, as :func:`asset2sim.tasks.refine.refine_asset`
-    builds it (extract, analyze, request, category, closed ends, extents,
-    subtrees, heights), for callers that need an estimator without the rest of
-    the pipeline (benchmarks, baselines). The kinematic session closes on exit.
-
-    Raises:
-        asset2sim.tasks.ingest.extract.AssetError: the asset cannot be read.
-    """
-    from asset2sim.engines.base import SessionOptions, open_session
-    from asset2sim.tasks.geometry import analyze
-    from asset2sim.tasks.ingest import extract
-    from asset2sim.tasks.interpret import priors
-    from asset2sim.tasks.interpret import request
-    from asset2sim.tasks.geometry.closed_state import _aabb, closed_positions, link_hull_points, object_extents, subtree_links
-
-    asset = extract.extract_asset(asset_dir, asset_id=asset_id, category=category)
-    cache = analyze.MeshCache()
-    geometry = analyze.analyze_asset(asset, cache=cache)
-    spec = request.parse_request(prompt)
-    labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
-    match = priors.recognize_category(category or asset.category, labels, prompt)
-    kin = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
-    try:
-        hull = link_hull_points(asset, cache=cache)
-        closed = closed_positions(kin, asset, hull_points=hull)
-        extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
-        subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
-        heights = {}
-        for n, lns in subtrees.items():
-            box = _aabb(kin, lns, hull)
-            heights[n] = 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
-        yield estimate.EstimationContext(
-            asset=asset,
-            geometry=geometry,
-            request=spec,
-            category=getattr(match, "name", None) or str(match),
-            category_reason=getattr(match, "reason", ""),
-            closed=closed,
-            closed_extents=extents,
-            session=kin,
-            subtrees=subtrees,
-            joint_heights=heights,
-        )
-    finally:
-        kin.close()
-

@@ -140,17 +140,6 @@ class JointLoad:
     gravity_stiffness: float
 
 
-def _link_world(session, idx: int) -> tuple[np.ndarray, np.ndarray]:
-    p = session._p
-    if idx == -1:
-        pos, orn = p.getBasePositionAndOrientation(session.body, physicsClientId=session.cid)
-    else:
-        st = p.getLinkState(session.body, idx, computeForwardKinematics=True, physicsClientId=session.cid)
-        pos, orn = st[4], st[5]
-    R = np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
-    return np.array(pos, float), R
-
-
 def joint_loads(
     session,
     asset: AssetDescription,
@@ -172,7 +161,6 @@ def joint_loads(
     ``root_rotation`` (3, 3): the resting-pose rotation the output will carry
     (gravity is expressed in the input's root frame as R^T g).
     """
-    p = session._p
     gvec = np.array([0.0, 0.0, gravity])
     if root_rotation is not None:
         gvec = np.asarray(root_rotation, float).T @ gvec
@@ -185,11 +173,10 @@ def joint_loads(
 
     def load_at(name: str, st: dict[str, float]) -> tuple[float, float, float]:
         session.set_joint_positions(to_input(st))
-        jidx = session._index[name]
-        info = p.getJointInfo(session.body, jidx, physicsClientId=session.cid)
-        child_pos, child_R = _link_world(session, jidx)
+        axis_local = session.joint_axis(name)
+        child_pos, child_R = session.link_frame(session.joint_child[name])
         child_pos = child_pos * scale
-        axis = child_R @ np.asarray(info[13], float)
+        axis = child_R @ axis_local
         axis = axis / max(np.linalg.norm(axis), 1e-12)
         M = 0.0
         mc = np.zeros(3)
@@ -198,7 +185,7 @@ def joint_loads(
             lp = links.get(ln)
             if lp is None:
                 continue
-            pos, R = _link_world(session, session.link_index(ln))
+            pos, R = session.link_frame(ln)
             c = pos * scale + R @ np.asarray(lp.com, float)
             M += lp.mass
             mc += lp.mass * c

@@ -9,11 +9,13 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring, available_engines, open_session
 from asset2sim.engines.fake import BULLET_DEFAULT_MASS, read_urdf, write_contract_asset
+from asset2sim.frames import translation_matrix
+from asset2sim.urdf import write_urdf
 
 pytestmark = pytest.mark.mujoco
 mujoco = pytest.importorskip("mujoco")
 
-from asset2sim.engines.mujoco_engine import (  # noqa: E402
+from asset2sim.engines.mjcf import (  # noqa: E402
     FREE_JOINT,
     KEYFRAME,
     contact_policy,
@@ -67,7 +69,10 @@ def test_multi_group_obj_becomes_pieces_and_single_group_stays_the_file(tmp_path
 
 def test_scaled_meshes_keep_their_scale(tmp_path):
     a = write_contract_asset(tmp_path)
-    a.urdf.write_text(a.urdf.read_text().replace('filename="textured_objs/post.obj" scale="1 1 1"', 'filename="textured_objs/post.obj" scale="0.5 0.5 2.0"'))
+    model = read_urdf(a.urdf)
+    for g in model.links["post"].visuals + model.links["post"].collisions:
+        g.mesh_scale = np.array([0.5, 0.5, 2.0])
+    a.urdf.write_bytes(write_urdf(model))
     b = urdf_to_mjcf(a.urdf)
     assert 'scale="0.5 0.5 2.0"' in b.xml
     m = _compile(b)
@@ -145,10 +150,9 @@ def test_keyframe_places_the_object_on_the_ground(tmp_path):
     """Open the lid past vertical so nothing changes at the bottom, then sink
     the body's collision 3 cm below the root frame: the root is lifted 3 cm."""
     a = write_contract_asset(tmp_path, lid_angle=1.9)
-    text = a.urdf.read_text()
-    head, sep, tail = text.partition('<link name="body">')
-    tail = tail.replace('<collision><origin xyz="0 0 0"/>', '<collision><origin xyz="0 0 -0.03"/>', 1)
-    a.urdf.write_text(head + sep + tail)
+    model = read_urdf(a.urdf)
+    model.links["body"].collisions[0].origin = translation_matrix([0.0, 0.0, -0.03])
+    a.urdf.write_bytes(write_urdf(model))
     b = urdf_to_mjcf(a.urdf, initial_state=a.initial_state)
     assert b.root_height == pytest.approx(0.03, abs=1e-9)
     assert b.initial_qpos[:3] == pytest.approx([0, 0, 0.03])

@@ -15,7 +15,9 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring, open_session
 from asset2sim.engines.fake import write_contract_asset
+from asset2sim.frames import translation_matrix
 from asset2sim.tasks.check import metrics
+from asset2sim.urdf import UrdfGeometry, read_urdf, write_urdf
 
 ENGINES = [
     pytest.param("pybullet", id="pybullet"),
@@ -239,11 +241,9 @@ def _add_base_block(a) -> None:
         + "".join(f"v {x} {y} {z}\n" for x in (-0.05, 0.05) for y in (-0.05, 0.05) for z in (0.115, 0.135))
         + "f 1 2 4\nf 1 4 3\nf 5 7 8\nf 5 8 6\nf 1 5 6\nf 1 6 2\nf 3 4 8\nf 3 8 7\nf 1 3 7\nf 1 7 5\nf 2 6 8\nf 2 8 4\n"
     )
-    text = a.urdf.read_text().replace(
-        '<link name="base">',
-        '<link name="base">\n    <collision><origin xyz="0 0 0"/><geometry><mesh filename="textured_objs/block.obj"/></geometry></collision>',
-    )
-    a.urdf.write_text(text)
+    model = read_urdf(a.urdf)
+    model.links["base"].collisions.append(UrdfGeometry(kind="mesh", filename="textured_objs/block.obj"))
+    a.urdf.write_bytes(write_urdf(model))
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -266,10 +266,9 @@ def test_parent_child_overlap_is_not_a_contact(tmp_path, engine):
     """The post's collision sunk 5 mm into the body's bottom plate (its
     parent): never reported, never pushed apart."""
     a = write_contract_asset(tmp_path, lid_angle=0.6, post_height=0.0)
-    text = a.urdf.read_text()
-    head, sep, tail = text.partition('<link name="post">')
-    tail = tail.replace('<collision><origin xyz="0 0 0"/>', '<collision><origin xyz="0 0 -0.005"/>', 1)
-    a.urdf.write_text(head + sep + tail)
+    model = read_urdf(a.urdf)
+    model.links["post"].collisions[0].origin = translation_matrix([0.0, 0.0, -0.005])
+    a.urdf.write_bytes(write_urdf(model))
     s = _open(engine, a)
     try:
         assert s.self_penetration() == (0.0, [])

@@ -61,7 +61,7 @@ def refine_fake(asset_dir, prompt, out_dir, config=None, *, category=None, asset
     """Same signature and output contract as ``asset2sim.tasks.refine.refine_asset``."""
     from asset2sim.schemas.report import MetricResult, RefineReport
     from asset2sim.tasks.ingest.extract import extract_asset
-    from asset2sim.tasks.refine import MARKER_NAME, run_hash
+    from asset2sim.tasks.publish.contract import MARKER_NAME, run_hash
 
     t0 = time.perf_counter()
     asset_dir, out_dir = Path(asset_dir), Path(out_dir)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from asset2sim.tasks.evaluation import baselines as bl
+from asset2sim.tasks.ingest import partnet_mobility
 
 CUBE_OBJ = "\n".join(
     [f"v {x} {y} {z}" for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]
@@ -58,12 +59,11 @@ def _aabb_extents(urdf: Path, drawer_q: float) -> np.ndarray:
     s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False,
                                                       initial_state={"joint_lid": 0.0, "joint_drawer": drawer_q}))
     try:
-        p = s._p
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for idx in s.link_names:
-            if not p.getCollisionShapeData(s.body, idx, physicsClientId=s.cid):
+        for name in s.link_names:
+            if not s.link_has_collision(name):
                 continue
-            a, b = p.getAABB(s.body, idx, physicsClientId=s.cid)
+            a, b = s.link_aabb(name)
             lo, hi = np.minimum(lo, a), np.maximum(hi, b)
         return hi - lo
     finally:
@@ -137,8 +137,8 @@ def test_human_baseline_without_scale_or_range(dataset, tmp_path):
 
 
 def test_reference_info_and_missing_reference(dataset, tmp_path):
-    info = bl.reference_info(dataset / "1001")
-    assert info["scale"] == 0.5 and info["task_joints"] == ["joint_lid"]
+    info = partnet_mobility.read_reference(dataset / "1001")
+    assert info.scale == 0.5 and info.task_joints == ["joint_lid"]
     (dataset / "1001" / "reference_gensim2.urdf").unlink()
     (row,) = bl.read_manifest(dataset / "manifest.csv")
     with pytest.raises(bl.BaselineError, match="reference_gensim2.urdf"):

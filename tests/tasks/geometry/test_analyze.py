@@ -23,6 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from asset2sim import frames, mesh_io
 from asset2sim.atomic import tree_hashes
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, LinkDesc, Origin
 from asset2sim.tasks.geometry import analyze as an
@@ -159,7 +160,7 @@ def tube_mesh(r_in, r_out, length, n=256, caps=True, inner=True, outer=True):
 
 
 def rot(rpy):
-    return an.rpy_matrix(rpy)
+    return frames.rpy_matrix(rpy)
 
 
 def assert_valid_inertia(i):
@@ -436,7 +437,7 @@ def test_primitives_analytic_and_rotated():
 def test_obj_reader_styles(tmp_path, style):
     v, f = box_mesh(0.1, 0.2, 0.3)
     path = write_obj(tmp_path / f"b_{style}.obj", v, f, style=style)
-    rv, rf, _ = an.read_mesh(path)
+    rv, rf, _ = mesh_io.read_mesh(path)
     assert np.allclose(rv, v) and np.array_equal(rf, f)
 
 
@@ -446,7 +447,7 @@ def test_obj_reader_polygons_comments_and_colours(tmp_path):
         "v 0 0 0 1 0 0\nv 1 0 0 1 0 0\nv 1 1 0 1 0 0\nv 0 1 0 1 0 0  # coloured\n"
         "f 1 2 3 4\n# comment\nf 1/1 2/2 3/3\nl 1 2\n"
     )
-    v, f, _ = an.read_mesh(path)
+    v, f, _ = mesh_io.read_mesh(path)
     assert v.shape == (4, 3)
     assert f.tolist() == [[0, 1, 2], [0, 2, 3], [0, 1, 2]]
 
@@ -535,11 +536,11 @@ def test_property_box_anywhere_exact(tmp_path, dims, rpy, xyz):
 
 def test_rpy_matrix_matches_urdf_convention():
     # URDF: fixed-axis roll (x), then pitch (y), then yaw (z): R = Rz Ry Rx
-    r = an.rpy_matrix((math.pi / 2, 0, 0))
+    r = frames.rpy_matrix((math.pi / 2, 0, 0))
     assert np.allclose(r @ [0, 1, 0], [0, 0, 1])
-    r = an.rpy_matrix((0, 0, math.pi / 2))
+    r = frames.rpy_matrix((0, 0, math.pi / 2))
     assert np.allclose(r @ [1, 0, 0], [0, 1, 0])
-    r = an.rpy_matrix((math.pi / 2, 0, math.pi / 2))
+    r = frames.rpy_matrix((math.pi / 2, 0, math.pi / 2))
     assert np.allclose(r @ [0, 1, 0], [0, 0, 1])  # roll first, then yaw leaves z alone
     assert np.allclose(r @ [1, 0, 0], [0, 1, 0])
 

@@ -417,3 +417,40 @@ def test_composed_phrases(part: str, state: str, obj: str) -> None:
             "halfway open": "halfway", "mostly open": "mostly", "fully open": "fully"}[state]
     spec = parse_request(f"I want {obj} with its {part} {state}.")
     assert states(spec) == [("label", part, None, band)]
+
+
+# ------------------------------------------------------------------ length cap and linear time
+
+
+def test_request_over_the_cap_is_refused_with_a_named_error() -> None:
+    from asset2sim.tasks.interpret.request import MAX_REQUEST_CHARS, RequestTooLong
+
+    parse_request("a" * MAX_REQUEST_CHARS)  # at the cap: parsed
+    with pytest.raises(RequestTooLong) as err:
+        parse_request("a" * (MAX_REQUEST_CHARS + 1))
+    assert err.value.code == "REQUEST_TOO_LONG" and err.value.length == MAX_REQUEST_CHARS + 1
+    assert isinstance(err.value, ValueError) and "REQUEST_TOO_LONG" in str(err.value)
+
+
+def test_a_long_request_parses_like_its_sentence() -> None:
+    """A request repeated to 32 KiB gives the same reading as once (timings:
+    benchmarks/bench_request.py, not a timed test)."""
+    sentence = ("I want a very small two-drawer cabinet, with the first drawer closed and the second slightly open; "
+                "its door halfway open, low damping and a lid that holds its position. ")
+    once = parse_request(sentence)
+    many = parse_request(sentence * (32768 // len(sentence)))
+    assert (many.size_class, many.damping, many.holds_position, many.category_hint) == (
+        once.size_class, once.damping, once.holds_position, once.category_hint)
+    assert states(many) == states(once)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet="abcits' .,;:!?()-\n", max_size=60), st.integers(0, 60))
+def test_words_before_a_mention_read_backwards_match_the_split(text: str, i: int) -> None:
+    import re
+
+    from asset2sim.tasks.interpret.priors import _last_words
+
+    i = min(i, len(text))
+    expected = re.findall(r"[a-z']+", re.split(r"[.,;:!?()]", text[:i])[-1])[-2:]
+    assert _last_words(text[::-1], len(text) - i) == expected

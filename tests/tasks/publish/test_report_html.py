@@ -130,10 +130,10 @@ def test_benchmark_pages(tmp_path):
 def test_write_refine_report_evaluates_the_output_folder(tmp_path):
     from types import SimpleNamespace
 
-    from asset2sim.tasks.publish.report_html import write_refine_report
+    from asset2sim.tasks.evaluation.evaluate import evaluate_refined
 
     f = _drawer(tmp_path / "cab", True)
-    path = write_refine_report(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture"))
+    path = evaluate_refined(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture"))["report"]
     assert path == f / "report.html" and path.is_file()
     data = json.loads((f / "evaluation.json").read_text())
     assert data["method"] == "asset2sim" and data["prompt"] == "a cabinet with its drawer closed"

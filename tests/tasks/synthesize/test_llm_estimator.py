@@ -28,6 +28,7 @@ from asset2sim.schemas.overlay import Overlay  # noqa: E402
 from asset2sim.tasks.synthesize import ivw
 from asset2sim.tasks.synthesize import physics  # noqa: E402
 from asset2sim.tasks.synthesize import llm_estimator as le  # noqa: E402
+from asset2sim.tasks.synthesize.context import build_context  # noqa: E402
 from asset2sim.tasks.synthesize.llm_client import ReplyError  # noqa: E402
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, refine_asset  # noqa: E402
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems  # noqa: E402
@@ -156,7 +157,7 @@ def test_rerun_makes_no_calls(server, plate, tmp_path):
 
 # ----------------------------------------------------- the reply is a prior
 def _ctx(plate: Path, prompt: str = PROMPT):
-    return le.build_context(plate, prompt)
+    return build_context(plate, prompt)
 
 
 def test_mass_comes_from_geometry_and_material_not_the_models_number(plate):
@@ -409,9 +410,11 @@ def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monke
     monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", "off")  # the memo, not the disk cache
     est = estimate.get_estimator("openai", model="m", base_url=server.url)
     with _ctx(plate) as ctx:
-        a = est.estimate(ctx)
+        ea = est.estimate(ctx)
         ctx.root_rotation = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # lying on its side
-        b = est.estimate(ctx)
+        eb = est.estimate(ctx)
+    a, b = ea.overlay, eb.overlay
+    assert eb.bands == ea.bands and set(ea.bands) == {"hinge"}
     assert server.n_chat == 1
     assert a.estimator.queries == b.estimator.queries == 1
     assert b.links["plate"].mass == a.links["plate"].mass

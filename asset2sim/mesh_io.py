@@ -1,0 +1,439 @@
+"""Mesh files: the one reader every stage uses.
+
+One loader per format, pure array results (trimesh's ``exchange/`` layout):
+
+* :func:`read_mesh`: vertices (N, 3) and triangle faces (M, 3) of any mesh
+  file, without materials or textures. OBJ is read by a vectorized parser
+  (``v`` and ``f`` records only) that falls back to a line parser for
+  polygons, negative indices and comments; other formats (STL, PLY, OFF, GLB,
+  DAE ...) go through ``trimesh.load`` (:func:`load_trimesh`).
+  :class:`MeshCache` memoises it by path for one asset.
+* :func:`obj_groups`: the vertex sets of an OBJ's ``o`` / ``g`` groups, the
+  pieces whose convex hulls PyBullet collides with; :func:`hull_point_sets`
+  extends it to every format.
+* :func:`scan_obj_text`: an OBJ as lines (vertex data, faces per ``usemtl``
+  material with absolute indices, ``mtllib`` names) for tools that rewrite
+  OBJ files (the renderer's per-material split).
+* :func:`mtl_libraries` / :func:`mtl_texture_maps` / :func:`obj_material_files`:
+  the files an OBJ needs besides itself (MTL libraries and their texture
+  maps), for copying an asset.
+
+Units are the file's (no scaling here); vertex coordinates are float64, face
+indices int64 and 0-based. Nothing here writes a file. OBJ format reference:
+Wavefront "Object Files (.obj)" and "Material Library File (.mtl)",
+Appendix B1/B2 of the Advanced Visualizer manual.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "MeshCache",
+    "MeshReadError",
+    "ObjText",
+    "hull_point_sets",
+    "is_texture_statement",
+    "load_trimesh",
+    "mtl_libraries",
+    "mtl_texture_maps",
+    "obj_groups",
+    "obj_material_files",
+    "parse_vertex_lines",
+    "read_mesh",
+    "read_obj",
+    "scan_obj_text",
+]
+
+
+class MeshReadError(ValueError):
+    """A mesh file is missing or cannot be parsed (the message names the file)."""
+
+
+# ------------------------------------------------------------------ OBJ arrays
+
+
+def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """Vectorized OBJ reader for the common case (``v x y z`` lines, triangle
+    faces of one index format, positive indices). ``None`` when the file needs
+    the general parser."""
+    arr = np.frombuffer(data, np.uint8)
+    n = arr.size
+    if n == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    nl = np.flatnonzero(arr == 10)
+    starts = np.concatenate(([0], nl + 1))
+    lens = np.diff(np.concatenate((starts, [n + 1])))
+    padded = np.concatenate((arr, np.zeros(2, np.uint8)))
+    c0 = padded[starts]
+    c1 = padded[starts + 1]
+    ws = (c1 == 32) | (c1 == 9)
+    is_v = (c0 == 118) & ws
+    is_f = (c0 == 102) & ws
+    nv, nf = int(is_v.sum()), int(is_f.sum())
+
+    def select(mask_lines: np.ndarray) -> np.ndarray:
+        mask = np.repeat(mask_lines, lens)[:n]
+        s = starts[mask_lines]
+        mask[s] = False
+        mask[s + 1] = False
+        return arr[mask]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # partial parses raise instead of truncating
+        try:
+            vbytes = select(is_v)
+            if np.any(vbytes == 35):  # '#': trailing comment
+                return None
+            verts = np.fromstring(vbytes.tobytes(), dtype=np.float64, sep=" ") if nv else np.zeros(0)
+            if verts.size != 3 * nv:
+                return None
+            if nf == 0:
+                return verts.reshape(-1, 3), np.zeros((0, 3), np.int64)
+            fbytes = select(is_f).copy()
+            if np.any(fbytes == 35):
+                return None
+            first_end = np.flatnonzero(fbytes == 10)
+            first = fbytes[: first_end[0] if first_end.size else fbytes.size].tobytes().split()
+            if len(first) != 3:
+                return None
+            per_vertex = len([p for p in first[0].split(b"/") if p])
+            fbytes[fbytes == 47] = 32  # '/' -> ' '
+            idx = np.fromstring(fbytes.tobytes(), dtype=np.int64, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    if idx.size != 3 * per_vertex * nf:
+        return None
+    faces = idx.reshape(nf, 3, per_vertex)[:, :, 0]
+    if np.any(faces < 1):
+        return None  # negative (relative) or zero indices: general parser
+    return verts.reshape(-1, 3), faces - 1
+
+
+def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Line-by-line OBJ reader: polygons (fan-triangulated), negative indices,
+    vertex colours, comments. Raises MeshReadError on malformed records."""
+    verts: list[tuple[float, float, float]] = []
+    faces: list[tuple[int, int, int]] = []
+    bad = 0
+    for lineno, raw in enumerate(data.splitlines(), 1):
+        line = raw.split(b"#", 1)[0].strip()
+        if line.startswith((b"v ", b"v\t")):
+            parts = line.split()
+            if len(parts) < 4:
+                raise MeshReadError(f"{where}: line {lineno}: vertex with fewer than 3 coordinates")
+            try:
+                verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
+            except ValueError as exc:
+                raise MeshReadError(f"{where}: line {lineno}: bad vertex ({exc})") from None
+        elif line.startswith((b"f ", b"f\t")):
+            parts = line.split()[1:]
+            try:
+                ids = [int(p.split(b"/", 1)[0]) for p in parts]
+            except ValueError:
+                raise MeshReadError(f"{where}: line {lineno}: bad face record") from None
+            nvert = len(verts)
+            ids = [i - 1 if i > 0 else nvert + i for i in ids]
+            if len(ids) < 3:
+                bad += 1
+                continue
+            for j in range(1, len(ids) - 1):
+                faces.append((ids[0], ids[j], ids[j + 1]))
+    notes = [f"{where}: {bad} face records with < 3 vertices skipped"] if bad else []
+    v = np.asarray(verts, np.float64).reshape(-1, 3)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    return v, f, notes
+
+
+def read_obj(data: bytes, where: str = "<obj>") -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Triangle mesh of OBJ bytes: ``(vertices (N, 3) float64, faces (M, 3)
+    int64, notes)``; polygons are fan-triangulated, negative (relative)
+    indices resolved, texture / normal indices and materials ignored.
+    Indices are not validated (may be out of range) and vertices may be NaN.
+
+    Raises:
+        MeshReadError: a malformed ``v`` or ``f`` record (names ``where`` and
+            the line).
+    """
+    fast = _parse_obj_fast(data)
+    if fast is not None:
+        return fast[0], fast[1], []
+    return _parse_obj_general(data, where)
+
+
+def load_trimesh(path: Path | str, *, skip_materials: bool = False):
+    """``trimesh.load(path, force="mesh", process=False)``: a
+    :class:`trimesh.Trimesh` of any format trimesh reads (vertices in file
+    units, no merging or reordering). ``skip_materials`` skips MTL/texture
+    loading. Exceptions of trimesh propagate unchanged (they are many types).
+    """
+    import trimesh  # about 1 s to import; only non-OBJ files and primitives need it
+
+    if skip_materials:
+        return trimesh.load(str(path), force="mesh", process=False, skip_materials=True)
+    return trimesh.load(str(path), force="mesh", process=False)
+
+
+def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Read a triangle mesh file without materials or textures.
+
+    Returns ``(vertices (N, 3) float64, faces (M, 3) int64, notes)`` in the
+    file's units, faces indexing ``vertices`` (not yet validated: indices may
+    be out of range and vertices may be NaN; the analysis cleans them). OBJ
+    by :func:`read_obj`; other formats via :func:`load_trimesh`.
+
+    Raises:
+        MeshReadError: the file is missing or cannot be parsed (message names
+            the file).
+    """
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".obj":
+            return read_obj(path.read_bytes(), str(path))
+        loaded = load_trimesh(path, skip_materials=True)
+        return np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces, np.int64), []
+    except MeshReadError:
+        raise
+    except Exception as exc:  # OSError, trimesh parse errors of every kind
+        raise MeshReadError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+
+
+class MeshCache:
+    """Meshes read by :func:`read_mesh`, keyed by path (one asset; several
+    links of some assets reference the same files). Arrays are shared and
+    read-only; a failed read is remembered and raised again."""
+
+    def __init__(self) -> None:
+        self._store: dict[Path, tuple[np.ndarray, np.ndarray, list[str]] | MeshReadError] = {}
+
+    def get(self, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """The mesh at ``path`` (read on first use): vertices (N, 3), faces
+        (M, 3), notes. Raises MeshReadError."""
+        key = Path(path)
+        hit = self._store.get(key)
+        if hit is None:
+            try:
+                hit = read_mesh(key)
+                for a in hit[:2]:
+                    a.setflags(write=False)
+            except MeshReadError as exc:
+                hit = exc
+            self._store[key] = hit
+        if isinstance(hit, MeshReadError):
+            raise hit
+        return hit
+
+    def __len__(self) -> int:
+        return len(self._store)
+
+
+# ------------------------------------------------------------------ OBJ groups
+
+
+def obj_groups(path: Path | str) -> list[np.ndarray]:
+    """Point sets (k, 3) of an OBJ file, one per ``o``/``g`` group that has
+    faces, holding the vertices its faces use (sorted by index, file units,
+    unscaled), in file order.
+
+    This is how PyBullet's URDF importer builds collision shapes from an OBJ
+    (one convex hull per tinyobj shape), verified in
+    ``tests/asset2sim/test_engines_fake.py``.
+
+    Raises:
+        MeshReadError: the file cannot be read or a face names a missing vertex.
+    """
+    try:
+        text = Path(path).read_text(errors="replace")
+    except OSError as exc:
+        raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
+    verts: list[tuple[float, float, float]] = []
+    groups: list[list[int]] = []
+    current: list[int] = []
+    for line in text.splitlines():
+        if not line or line[0] not in "vfog":
+            continue
+        parts = line.split()
+        if not parts:
+            continue
+        tag = parts[0]
+        if tag == "v":
+            try:
+                verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
+            except (IndexError, ValueError) as exc:
+                raise MeshReadError(f"{path}: bad vertex line {line!r}") from exc
+        elif tag == "f":
+            for tok in parts[1:]:
+                try:
+                    i = int(tok.split("/")[0])
+                except ValueError as exc:
+                    raise MeshReadError(f"{path}: bad face line {line!r}") from exc
+                current.append(i - 1 if i > 0 else len(verts) + i)
+        elif tag in ("o", "g"):
+            if current:
+                groups.append(current)
+            current = []
+    if current:
+        groups.append(current)
+    v = np.asarray(verts, float).reshape(-1, 3)
+    out = []
+    for idx in groups:
+        ids = np.unique(np.asarray(idx, int))
+        if ids.min() < 0 or ids.max() >= len(v):
+            raise MeshReadError(f"{path}: a face names a vertex that does not exist")
+        out.append(v[ids])
+    return out
+
+
+def hull_point_sets(path: Path | str) -> list[np.ndarray]:
+    """Point sets (k, 3), file units, whose convex hulls a simulator collides
+    with for the mesh ``path``: :func:`obj_groups` for OBJ, else one set of all
+    vertices (:func:`load_trimesh`).
+
+    Raises:
+        MeshReadError: the mesh cannot be read.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".obj":
+        return obj_groups(path)
+    try:
+        m = load_trimesh(path)
+    except Exception as exc:  # trimesh raises many types
+        raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
+    return [np.asarray(m.vertices, float)]
+
+
+# ------------------------------------------------------------------ OBJ as text
+
+
+@dataclass
+class ObjText:
+    """An OBJ file as lines, for tools that rewrite it.
+
+    ``vertex_lines``: the ``v`` records; ``data_lines``: every ``v``/``vt``/
+    ``vn`` (and other ``v...``) record in file order; ``faces``: ``usemtl``
+    material (``None`` before any, or for an empty name) -> its ``f`` records,
+    negative indices made absolute; ``mtllibs``: the ``mtllib`` names.
+    """
+
+    vertex_lines: list[str] = field(default_factory=list)
+    data_lines: list[str] = field(default_factory=list)
+    faces: dict[str | None, list[str]] = field(default_factory=dict)
+    mtllibs: list[str] = field(default_factory=list)
+
+
+def _absolute_face(line: str, counts: list[int]) -> str:
+    out = ["f"]
+    for corner in line.split()[1:]:
+        idx = corner.split("/")
+        for i, s in enumerate(idx):
+            if s.startswith("-") and i < 3:
+                idx[i] = str(counts[i] + 1 + int(s))
+        out.append("/".join(idx))
+    return " ".join(out)
+
+
+def scan_obj_text(text: str) -> ObjText:
+    """Split OBJ ``text`` into :class:`ObjText` (records must start at the
+    beginning of their line; other records are ignored)."""
+    out = ObjText()
+    counts = [0, 0, 0]  # v, vt, vn seen so far (for negative indices)
+    current: str | None = None
+    for raw in text.splitlines():
+        if not raw:
+            continue
+        c0 = raw[0]
+        if c0 == "v":
+            if raw.startswith("v "):
+                out.vertex_lines.append(raw)
+                counts[0] += 1
+            elif raw.startswith("vt"):
+                counts[1] += 1
+            elif raw.startswith("vn"):
+                counts[2] += 1
+            out.data_lines.append(raw)
+        elif c0 == "f" and raw.startswith("f "):
+            if "-" in raw:
+                raw = _absolute_face(raw, counts)
+            out.faces.setdefault(current, []).append(raw)
+        elif raw.startswith("usemtl"):
+            current = raw[6:].strip() or None
+        elif raw.startswith("mtllib"):
+            out.mtllibs.append(raw[6:].strip())
+    return out
+
+
+def parse_vertex_lines(lines: list[str]) -> np.ndarray:
+    """Coordinates (N, 3) of OBJ ``v x y z ...`` lines (extra values such as
+    colours ignored); malformed or short lines are skipped."""
+    if not lines:
+        return np.zeros((0, 3))
+    try:
+        return np.array([ln.split()[1:4] for ln in lines], dtype=float).reshape(-1, 3)
+    except ValueError:  # ragged or malformed lines: parse one by one
+        rows = []
+        for ln in lines:
+            try:
+                row = [float(t) for t in ln.split()[1:4]]
+            except ValueError:
+                continue
+            if len(row) == 3:
+                rows.append(row)
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
+
+# ------------------------------------------------------------------ materials
+
+_MTLLIB = re.compile(rb"^\s*mtllib\s+(.+?)\s*$", re.M)
+_MAP = re.compile(rb"^\s*(?:map_\w+|bump|disp|decal|refl)\s+(?:-\S+\s+\S+\s+)*(\S.*?)\s*$", re.M)
+
+
+def is_texture_statement(key: str) -> bool:
+    """Whether an MTL statement keyword names a texture file (``map_*``,
+    ``bump``, ``disp``, ``decal``, ``refl``; case-insensitive)."""
+    k = key.lower()
+    return k.startswith("map_") or k in ("bump", "disp", "decal", "refl")
+
+
+def mtl_libraries(obj_data: bytes) -> list[str]:
+    """The ``mtllib`` names of OBJ bytes, as written (relative to the OBJ's folder)."""
+    return [m.group(1).decode("utf-8", "replace") for m in _MTLLIB.finditer(obj_data)]
+
+
+def mtl_texture_maps(mtl_data: bytes) -> list[str]:
+    """The texture file names of MTL bytes (``map_*``, ``bump``, ``disp``,
+    ``decal``, ``refl`` statements, options with one argument skipped), as
+    written (relative to the MTL's folder)."""
+    return [t.group(1).decode("utf-8", "replace") for t in _MAP.finditer(mtl_data)]
+
+
+def obj_material_files(mesh_path: Path, keep=lambda p: True) -> list[Path]:
+    """Files an OBJ mesh needs besides itself: its MTL libraries and their
+    texture maps, as resolved absolute paths, in file order. Files that do not
+    exist, or for which ``keep(path)`` is false, are skipped (an MTL skipped
+    is not read). A mesh that is not ``.obj`` or cannot be read has none."""
+    deps: list[Path] = []
+    if mesh_path.suffix.lower() != ".obj":
+        return deps
+    try:
+        data = mesh_path.read_bytes()
+    except OSError:
+        return deps
+    for name in mtl_libraries(data):
+        mtl = (mesh_path.parent / name).resolve()
+        if not (mtl.is_file() and keep(mtl)):
+            continue
+        deps.append(mtl)
+        try:
+            mdata = mtl.read_bytes()
+        except OSError:
+            continue
+        for tname in mtl_texture_maps(mdata):
+            tex = (mtl.parent / tname).resolve()
+            if tex.is_file() and keep(tex):
+                deps.append(tex)
+    return deps

@@ -1,0 +1,505 @@
+"""The refine flow's per-asset stages as plain functions (no Prefect here).
+
+``flows.refine_flow`` wraps them in Prefect tasks; each is a plain, typed,
+testable function:
+
+- :func:`plan_jobs`: ``catalog.yaml`` and the manifest -> one
+  :class:`AssetJob` per asset;
+- :func:`prepare_asset` (input stage): read the asset once for its input hash
+  and the skip decision (:func:`asset2sim.tasks.publish.contract.finished_result`);
+- :func:`refine_stage`: the refine function (``tasks.refine.refine_asset``:
+  synthesize, refine state, write, post-check) in an isolated child process
+  inside the asset's time limit;
+- :func:`metrics_stage`: the stability metrics (``tasks.evaluation.evaluate``).
+  The post-check's rest-test measurement is reused when the engine and the
+  conventions match (the rest test runs once per engine); the semantic
+  metrics (prompt alignment, scale deviation against a reference) are
+  measured here.
+
+Each stage returns a :class:`~asset2sim.tasks.publish.contract.StageRecord`;
+:func:`asset2sim.tasks.publish.contract.build_row` turns them into the
+asset's catalog row. Nothing here imports Prefect, Dask or MLflow.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import time
+import uuid
+from dataclasses import asdict, dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from asset2sim import __version__
+from asset2sim.catalog import Catalog, CatalogError, ManifestEntry, ResultCatalog, read_manifest, result_key
+from asset2sim.demo_assets import ensure_demo_dataset
+from asset2sim.flows.isolation import call_target, import_target, run_isolated
+from asset2sim.schemas.config import RefineConfig, SimConventions
+from asset2sim.schemas.metrics import REST_TEST_METRICS, column_values
+from asset2sim.schemas.report import MetricResult, RefineReport
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.tasks.publish.contract import (
+    Measurement,
+    Prepared,
+    RefineOutput,
+    StageRecord,
+    finished_result,
+    flow_config_hash,
+    run_hash,
+)
+
+FLOW_NAME = "refine-dataset"
+SUBFLOW_NAME = "refine-assets"
+#: Per run, ``<output_root>/<dataset>/<run>/_metrics/<asset id>/evaluation.json``
+#: holds the metrics stage's measurement (beside, not inside, the refined folder).
+METRICS_DIRNAME = "_metrics"
+DEFAULT_REFINE_FUNCTION = "asset2sim.tasks.refine:refine_asset"
+
+#: Failure modes a retry cannot fix are recorded at once; this one is retried
+#: when the estimator calls a model.
+RETRYABLE_FAILURE = "estimator_failure"
+
+
+class ModelCallFailure(RuntimeError):
+    """A model-backed estimator failed (the only failure Prefect retries)."""
+
+    failure_mode = RETRYABLE_FAILURE
+
+
+# ----------------------------------------------------------------------------- jobs
+
+
+@dataclass
+class AssetJob:
+    """Everything one asset's task chain needs (JSON-able, shipped to workers).
+
+    Paths absolute (``out_dir`` the refined folder, ``metrics_dir`` the metrics
+    stage's ``evaluation.json``, ``work_dir`` scratch of isolated stages); ``time_limit_seconds`` s over all stages of the asset;
+    ``config`` the :class:`~asset2sim.schemas.config.RefineConfig` as a dict;
+    ``finished`` the catalog rows of earlier finished runs keyed by
+    :func:`asset2sim.catalog.result_key` for this asset (empty when forced).
+    """
+
+    dataset: str
+    run_id: str
+    asset_id: str
+    prompt: str
+    asset_dir: str
+    out_dir: str
+    work_dir: str
+    metrics_dir: str
+    category: str | None = None
+    reference_scale: float | None = None
+    reference_dir: str | None = None
+    config: dict[str, Any] = field(default_factory=dict)
+    refine_function: str = DEFAULT_REFINE_FUNCTION
+    evaluate: bool = True
+    probes: bool = False
+    extras: bool = True
+    isolation: str = "process"
+    time_limit_seconds: float = 1800.0
+    finished: dict[str, dict[str, Any]] = field(default_factory=dict)
+    code_version: str = __version__
+
+
+def code_version() -> str:
+    """The code that produced a result: the package version, plus the git
+    commit of the source tree (``+g<sha>``, ``.dirty`` with uncommitted
+    changes to tracked files) when the package runs from a git checkout."""
+    src = Path(__file__).resolve().parent.parent
+    try:
+        sha = subprocess.run(
+            ["git", "-C", str(src), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        )
+        if sha.returncode != 0 or not sha.stdout.strip():
+            return __version__
+        dirty = subprocess.run(
+            ["git", "-C", str(src), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    return f"{__version__}+g{sha.stdout.strip()}" + (".dirty" if dirty.stdout.strip() else "")
+
+
+def make_run_id(now: datetime | None = None) -> str:
+    """A run id that sorts chronologically: ``YYYYmmddTHHMMSSZ-xxxxxx`` (UTC)."""
+    now = now or datetime.now(timezone.utc)
+    return now.strftime("%Y%m%dT%H%M%SZ") + "-" + uuid.uuid4().hex[:6]
+
+
+def flow_parameters(
+    catalog: str | Path = "catalog.yaml",
+    dataset: str | None = None,
+    workers: int | None = None,
+    dask_address: str | None = None,
+) -> dict[str, Any]:
+    """The parameters ``make flow`` passes to :data:`refine_dataset` (and the
+    nightly deployment stores): the catalog as an absolute path, the dataset,
+    workers and Dask scheduler address (None = catalog/environment defaults)."""
+    return {
+        "catalog": str(Path(catalog).expanduser().resolve()),
+        "dataset": dataset,
+        "workers": workers,
+        "dask_address": dask_address,
+    }
+
+
+def plan_jobs(
+    cat: Catalog,
+    dataset: str,
+    run_id: str,
+    *,
+    ids: list[str] | None = None,
+    limit: int | None = None,
+    force: bool = False,
+) -> list[AssetJob]:
+    """The jobs of a run: one per manifest entry (optionally only ``ids``, at
+    most ``limit``), with earlier finished results for the skip decision.
+
+    Generates the demo assets first when the dataset says ``generate: demo``
+    and they are missing or outdated.
+
+    Raises:
+        CatalogError: bad manifest or dataset; an id in ``ids`` not in the manifest.
+    """
+    name, ds = cat.dataset(dataset)
+    root = cat.dataset_root(name)
+    if ds.generate == "demo":
+        ensure_demo_dataset(root)
+    entries: list[ManifestEntry] = read_manifest(cat.manifest_path(name), root)
+    if ids:
+        known = {e.asset_id for e in entries}
+        unknown = [i for i in ids if i not in known]
+        if unknown:
+            raise CatalogError(f"{cat.manifest_path(name)}: unknown id(s) {unknown}")
+        entries = [e for e in entries if e.asset_id in set(ids)]
+    if limit is not None:
+        entries = entries[: max(0, int(limit))]
+    settings = cat.config.run
+    config = cat.refine_config().model_dump(mode="json")
+    finished = {} if force else ResultCatalog(cat.catalog_root).finished(name)
+    run_out = cat.output_root / name / run_id
+    version = code_version()
+    jobs = []
+    for e in entries:
+        ref_dir = None
+        if ds.reference and partnet_mobility.has_reference(e.asset_dir):
+            ref_dir = str(e.asset_dir)
+        jobs.append(
+            AssetJob(
+                dataset=name,
+                run_id=run_id,
+                asset_id=e.asset_id,
+                prompt=e.prompt,
+                asset_dir=str(e.asset_dir),
+                out_dir=str(run_out / e.asset_id),
+                work_dir=str(run_out / ".work" / e.asset_id),
+                metrics_dir=str(run_out / METRICS_DIRNAME / e.asset_id),
+                category=e.category,
+                reference_scale=e.reference_scale,
+                reference_dir=ref_dir,
+                config=config,
+                refine_function=settings.refine_function,
+                evaluate=settings.evaluate,
+                probes=settings.probes,
+                extras=settings.extras,
+                isolation=settings.isolation,
+                time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
+                finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
+                code_version=version,
+            )
+        )
+    return jobs
+
+
+# --------------------------------------------------------------------------- stages
+
+
+def _worker_name() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def job_config_hash(job: AssetJob, refine_hash: str) -> str:
+    """The catalog configuration hash of ``job``'s result
+    (:func:`asset2sim.tasks.publish.contract.flow_config_hash` of its settings)."""
+    return flow_config_hash(
+        refine_hash,
+        refine_function=job.refine_function,
+        evaluate=job.evaluate,
+        probes=job.probes,
+        extras=job.extras,
+        reference=bool(job.reference_dir),
+        reference_scale=job.reference_scale,
+    )
+
+
+def prepare_asset(job: AssetJob) -> Prepared:
+    """Input stage: validate and read the asset, hash input and
+    configuration, decide whether an earlier result can be reused.
+
+    Returns:
+        The :class:`~asset2sim.tasks.publish.contract.Prepared` record
+        (``ok`` False with ``failure_mode`` ``invalid_input`` and ``error``
+        for an asset that cannot be read). Never raises for a bad asset.
+    """
+    t0 = time.perf_counter()
+    rec = Prepared(worker=_worker_name())
+    try:
+        asset = extract_asset(Path(job.asset_dir), asset_id=job.asset_id, category=job.category)
+    except Exception as exc:  # any reading problem is the input's
+        rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
+        return rec
+    rhash = run_hash(asset.input_hash, RefineConfig(**job.config), job.prompt, job.category)
+    chash = job_config_hash(job, rhash)
+    rec.ok = True
+    rec.input_hash, rec.config_hash, rec.refine_config_hash = asset.input_hash, chash, rhash
+    rec.category = job.category or asset.category
+    rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
+    rec.skip = finished_result(job.finished.get(result_key(job.asset_id, asset.input_hash, chash)), asset.input_hash)
+    rec.seconds = time.perf_counter() - t0
+    return rec
+
+
+def stage_refine(
+    asset_dir: str,
+    prompt: str,
+    out_dir: str,
+    config: dict[str, Any],
+    category: str | None,
+    asset_id: str,
+    refine_function: str = DEFAULT_REFINE_FUNCTION,
+    extras: bool = True,
+) -> dict[str, Any]:
+    """Run the refine function on one asset (in whichever process calls it).
+
+    Returns:
+        A :class:`~asset2sim.tasks.publish.contract.RefineOutput` as JSON
+        (it crosses the isolation boundary as JSON).
+
+    Raises:
+        Whatever the refine function raises (``RefineError`` carries
+        ``failure_mode``).
+    """
+    import inspect
+
+    fn = import_target(refine_function)
+    t0 = time.perf_counter()
+    progress: list[list[Any]] = []
+
+    def say(stage: str, message: str) -> None:
+        progress.append([stage, message, round(time.perf_counter() - t0, 3)])
+
+    kwargs: dict[str, Any] = {"category": category, "progress": say}
+    params = inspect.signature(fn).parameters
+    if "asset_id" in params:
+        kwargs["asset_id"] = asset_id
+    if "extras" in params:
+        kwargs["extras"] = extras
+    result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
+    report = RefineReport.model_validate(result.report.model_dump(mode="json"))
+    out = RefineOutput(
+        report=report,
+        out_dir=str(result.out_dir),
+        skipped=bool(getattr(result, "skipped", False)),
+        progress=progress,
+        tokens=_tokens(report, Path(result.out_dir)),
+    )
+    return out.model_dump(mode="json")
+
+
+def _tokens(report: RefineReport, out_dir: Path) -> int | None:
+    """Model tokens used: 0 when no model was queried, else the report's
+    ``model_tokens`` (or the overlay's estimator ``tokens``) when positive,
+    else None (the model API did not say)."""
+    if int(report.model_queries or 0) == 0:
+        return 0
+    if report.model_tokens > 0:
+        return int(report.model_tokens)
+    try:
+        est = json.loads((out_dir / "overlay.json").read_text()).get("estimator", {})
+        if isinstance(est.get("tokens"), (int, float)) and est["tokens"] > 0:
+            return int(est["tokens"])
+    except (OSError, ValueError, AttributeError):
+        pass
+    return None
+
+
+def reusable_rest_test(report: RefineReport, config: dict[str, Any], engine: str = "pybullet") -> list[MetricResult] | None:
+    """The post-check's rest-test measurement in ``engine``
+    (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`) when the metrics
+    stage may record it instead of measuring again: the refine run used the
+    SPEC conventions the evaluation uses, and every rest-test metric of
+    ``engine`` is in the report. None otherwise."""
+    if RefineConfig(**config).sim != SimConventions():
+        return None
+    found = {m.name: m for m in report.metrics if m.engine == engine and m.name in REST_TEST_METRICS}
+    if set(found) != set(REST_TEST_METRICS):
+        return None
+    return [found[n] for n in REST_TEST_METRICS]
+
+
+def stage_metrics(
+    out_dir: str,
+    prompt: str,
+    category: str | None,
+    reference_dir: str | None = None,
+    probes: bool = False,
+    metrics_dir: str | None = None,
+    post_check: list[dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """Stability metrics of a refined asset (``asset2sim.tasks.evaluation.evaluate``,
+    PyBullet, SPEC conventions); writes ``evaluation.json`` into
+    ``metrics_dir`` when given. The refined folder itself is never touched
+    (its completion marker covers every file in it).
+
+    ``post_check``: the post-check's rest-test metrics (JSON of
+    :class:`~asset2sim.schemas.report.MetricResult`, :func:`reusable_rest_test`);
+    recorded instead of running the rest test again.
+
+    Returns:
+        A :class:`~asset2sim.tasks.publish.contract.Measurement` as JSON:
+        the catalog's metric columns (``penetration_mm`` mm, ``rest_stable``,
+        ``d_pos_m`` m, ``d_ori_rad`` rad, ``oscillation_pass``,
+        ``prompt_alignment`` 0..1, ``scale_deviation_pct`` %), failures, seconds.
+
+    Raises:
+        EvaluationError: the output cannot be read.
+    """
+    measured = None if post_check is None else [MetricResult.model_validate(m) for m in post_check]
+    ev = evaluate_asset(
+        Path(out_dir),
+        reference=Path(reference_dir) if reference_dir else None,
+        prompt=prompt,
+        engines=("pybullet",),
+        category=category,
+        out_dir=Path(metrics_dir) if metrics_dir else None,
+        write_report=False,
+        probes=probes,
+        measured=measured,
+    )
+    return Measurement(
+        columns=column_values(ev.metrics, "pybullet"),
+        failures=list(ev.failures),
+        seconds=float(ev.seconds),
+        reused_post_check=measured is not None and not probes,
+    ).model_dump(mode="json")
+
+
+def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
+    """Run a stage function per the job's isolation; a uniform record
+    (``status`` ok/error/timeout/crash, ``value`` the JSON it returned)."""
+    t0 = time.perf_counter()
+    if timeout <= 0:
+        return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
+    if job.isolation == "process":
+        rec = asdict(run_isolated(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name))
+    else:
+        out = call_target(target, kwargs)
+        rec = {"status": "ok" if out["ok"] else "error", **out}
+    rec["seconds"] = time.perf_counter() - t0
+    return StageRecord.model_validate(rec)
+
+
+def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
+    """Refine stage: synthesize, refine state, write and post-check one asset
+    (the refine function), inside the asset's time limit.
+
+    Returns:
+        The stage record, ``value`` a :class:`~asset2sim.tasks.publish.contract.RefineOutput`;
+        ``skipped`` when ``prepared`` says so or the asset was invalid.
+
+    Raises:
+        ModelCallFailure: a model-backed estimator failed (Prefect retries it).
+    """
+    if not prepared.ok or prepared.skip is not None:
+        return StageRecord(status="skipped", seconds=0.0)
+    budget = job.time_limit_seconds - float(prepared.seconds or 0.0)
+    rec = _run_stage(
+        job,
+        "refine",
+        "asset2sim.flows.stages:stage_refine",
+        {
+            "asset_dir": job.asset_dir,
+            "prompt": job.prompt,
+            "out_dir": job.out_dir,
+            "config": job.config,
+            "category": job.category,
+            "asset_id": job.asset_id,
+            "refine_function": job.refine_function,
+            "extras": job.extras,
+        },
+        budget,
+    )
+    rec.worker = _worker_name()
+    if rec.status == "ok":
+        rec.value = RefineOutput.model_validate(rec.value)
+    if rec.failure_mode == RETRYABLE_FAILURE and str(job.config.get("estimator", "offline")) != "offline":
+        raise ModelCallFailure(f"{job.asset_id}: estimator {job.config.get('estimator')!r} failed: {rec.error}")
+    return rec
+
+
+def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> StageRecord:
+    """Metrics stage: the stability metrics of the refined output, inside
+    what is left of the asset's time limit, recording the post-check's rest
+    test when :func:`reusable_rest_test` allows. ``skipped`` when there is no
+    output or ``job.evaluate`` is off."""
+    if refined.status != "ok" or not job.evaluate:
+        return StageRecord(status="skipped", seconds=0.0)
+    value: RefineOutput = refined.value
+    budget = job.time_limit_seconds - float(prepared.seconds or 0.0) - float(refined.seconds or 0.0)
+    post = None if job.probes else reusable_rest_test(value.report, job.config)
+    rec = _run_stage(
+        job,
+        "metrics",
+        "asset2sim.flows.stages:stage_metrics",
+        {
+            "out_dir": value.out_dir or job.out_dir,
+            "prompt": job.prompt,
+            "category": value.report.category or job.category,
+            "reference_dir": job.reference_dir,
+            "probes": job.probes,
+            "metrics_dir": job.metrics_dir,
+            "post_check": None if post is None else [m.model_dump(mode="json") for m in post],
+        },
+        budget,
+    )
+    if rec.status == "ok":
+        rec.value = Measurement.model_validate(rec.value)
+    return rec
+
+
+# ------------------------------------------------------------------------- Prefect env
+
+
+def default_prefect_home(project_root: Path | str) -> Path:
+    """Where the CLI keeps Prefect's local state (``<project>/.prefect``), so
+    runs of this project do not share a SQLite database with other projects."""
+    return Path(project_root) / ".prefect"
+
+
+def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
+    """Environment defaults for Prefect, to apply *before* Prefect is imported:
+    ``PREFECT_HOME`` under the project, analytics off, a longer start-up
+    timeout of the temporary server. Existing variables win. Returns what was set."""
+    defaults = {
+        "PREFECT_HOME": str(default_prefect_home(project_root)),
+        "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
+        "DO_NOT_TRACK": "1",
+        # a first start migrates a fresh SQLite database: slower than Prefect's 20 s on a busy machine
+        "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "180",
+    }
+    set_now = {}
+    for k, v in defaults.items():
+        if k not in os.environ:
+            os.environ[k] = v
+            set_now[k] = v
+    return set_now

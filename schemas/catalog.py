@@ -1,0 +1,110 @@
+"""One row of the Parquet result catalog, as a typed model.
+
+:class:`CatalogRow` is the contract between the flow (which builds one row
+per asset per run, :func:`asset2sim.tasks.publish.contract.build_row`) and the
+catalog (:class:`asset2sim.catalog.ResultCatalog`, which writes and reads
+them). The Parquet schema is derived from the model's fields
+(:func:`arrow_schema`), so a column is declared once. Units are in the column
+names (``_mm``, ``_m``, ``_rad``, ``_kg``, ``_seconds``, ``_pct``); the
+metric columns are those of :func:`asset2sim.schemas.metrics.catalog_columns`.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+import typing
+from datetime import datetime
+from typing import Literal, Optional
+
+from pydantic import BaseModel, ConfigDict, field_validator
+
+RowStatus = Literal["done", "skipped", "failed"]
+ROW_STATUSES: tuple[str, ...] = RowStatus.__args__  # type: ignore[attr-defined]
+
+
+class CatalogRow(BaseModel):
+    """One asset's result in one flow run (partition columns ``dataset`` and
+    ``run`` come from the folder names).
+
+    ``status``: ``done`` (worked on in this run), ``skipped`` (an earlier
+    finished result reused; ``source_run`` names it), ``failed``;
+    ``failure_mode`` from :data:`asset2sim.schemas.report.FAILURE_MODES`;
+    ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON {stage: s}.
+    Non-finite floats are stored as null.
+    """
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    asset_id: str
+    category: Optional[str] = None
+    prompt: Optional[str] = None
+    status: RowStatus
+    failure_mode: Optional[str] = None
+    error: Optional[str] = None
+    estimator: Optional[str] = None
+    model: Optional[str] = None
+    scale: Optional[float] = None
+    reference_scale: Optional[float] = None
+    scale_deviation_pct: Optional[float] = None
+    total_mass_kg: Optional[float] = None
+    initial_state: Optional[str] = None
+    penetration_mm: Optional[float] = None
+    rest_stable: Optional[bool] = None
+    d_pos_m: Optional[float] = None
+    d_ori_rad: Optional[float] = None
+    oscillation_pass: Optional[bool] = None
+    prompt_alignment: Optional[float] = None
+    model_queries: Optional[int] = None
+    tokens: Optional[int] = None
+    wall_seconds: Optional[float] = None
+    stage_seconds: Optional[str] = None
+    input_hash: Optional[str] = None
+    config_hash: Optional[str] = None
+    refine_config_hash: Optional[str] = None
+    code_version: Optional[str] = None
+    out_dir: Optional[str] = None
+    source_run: Optional[str] = None
+    flow_run_id: Optional[str] = None
+    worker: Optional[str] = None
+    started_at: Optional[datetime] = None
+    finished_at: Optional[datetime] = None
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _finite(cls, v):
+        """NaN / inf floats (and NaN-like missing values) become null."""
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        return v
+
+
+#: Column names of a catalog row, in order.
+ROW_COLUMNS: tuple[str, ...] = tuple(CatalogRow.model_fields)
+
+
+def _arrow_type(annotation):
+    import pyarrow as pa
+
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    base = args[0] if typing.get_origin(annotation) in (typing.Union, types.UnionType) else annotation
+    if typing.get_origin(base) is Literal or base is str:
+        return pa.string()
+    if base is bool:
+        return pa.bool_()
+    if base is int:
+        return pa.int64()
+    if base is float:
+        return pa.float64()
+    if base is datetime:
+        return pa.timestamp("us", tz="UTC")
+    raise TypeError(f"no Parquet type for {annotation!r}")
+
+
+def arrow_schema():
+    """The Parquet (pyarrow) schema of :class:`CatalogRow`, field for field:
+    str -> string, float -> float64, int -> int64, bool -> bool,
+    datetime -> timestamp(us, UTC); every column nullable."""
+    import pyarrow as pa
+
+    return pa.schema([(name, _arrow_type(f.annotation)) for name, f in CatalogRow.model_fields.items()])

@@ -1,0 +1,130 @@
+"""The metric registry's table: every metric's name, unit, group and the
+catalog columns it fills.
+
+One table serves the post-check (:mod:`asset2sim.tasks.check.postcheck`), the
+evaluation (:mod:`asset2sim.tasks.evaluation.evaluate` attaches a function to
+each name with ``register_metric``), cross-simulator parity
+(:mod:`asset2sim.tasks.check.parity`: the :data:`SPEC_METRICS`) and the
+Parquet catalog (:class:`asset2sim.schemas.catalog.CatalogRow`: the columns
+of :func:`catalog_columns`).
+
+A catalog column is taken from one field of a
+:class:`~asset2sim.schemas.report.MetricResult`: ``value``, ``passed`` or
+``details.<key>``. Definitions, conventions and thresholds: ``docs/metrics.md``
+and the SPEC ("How quality is measured").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Literal
+
+from asset2sim.schemas.report import MetricResult
+
+MetricGroup = Literal["physical", "semantic", "behaviour", "check"]
+
+
+@dataclass(frozen=True)
+class MetricInfo:
+    """One metric of the registry.
+
+    ``unit`` of ``MetricResult.value``; ``group``: ``physical`` (measured in a
+    simulator, per engine), ``semantic`` (against the request or a
+    reference), ``behaviour`` (probes), ``check`` (refine's own post-check
+    checks, not SPEC metrics); ``columns``: catalog column -> field of the
+    result (``value``, ``passed`` or ``details.<key>``); ``description`` one line.
+    """
+
+    name: str
+    unit: str
+    group: MetricGroup
+    description: str
+    columns: dict[str, str] = field(default_factory=dict)
+
+
+#: name -> :class:`MetricInfo`, in evaluation order.
+METRIC_INFO: dict[str, MetricInfo] = {
+    m.name: m
+    for m in (
+        MetricInfo("penetration", "mm", "physical", "Phi at the initial state (self-contacts), mm, with link pairs",
+                   {"penetration_mm": "value"}),
+        MetricInfo("ground_penetration", "mm", "physical", "deepest penetration into the ground during the rest test, mm"),
+        MetricInfo("rest_stability", "m", "physical", "SPEC rest test: D_pos <= 1e-3 m and D_ori <= 1e-2 rad",
+                   {"rest_stable": "passed", "d_pos_m": "details.D_pos_m", "d_ori_rad": "details.D_ori_rad"}),
+        MetricInfo("oscillation", "joints", "physical", "SPEC joint oscillation during T_test",
+                   {"oscillation_pass": "passed"}),
+        MetricInfo("divergence", "flag", "physical", "NaN or explosion during the rest test"),
+        MetricInfo("joint_hold", "rad/m", "physical", "task-relevant joints keep their initial state during the rest test"),
+        MetricInfo("scale_deviation", "%", "semantic", "|s - s_ref| / s_ref vs GenSim2's scale, %",
+                   {"scale_deviation_pct": "value"}),
+        MetricInfo("initial_joint_deviation", "rad", "semantic", "|q - q_ref| of the task-relevant joint"),
+        MetricInfo("total_mass", "kg", "semantic", "total mass and its plausibility for the category and size"),
+        MetricInfo("prompt_alignment", "fraction", "semantic", "0.5 size + 0.5 joint state vs the request",
+                   {"prompt_alignment": "value"}),
+        MetricInfo("probes", "failed probes", "behaviour", "scripted pusher closes/opens each task-relevant joint"),
+        MetricInfo("state_hold", "rad|m", "check", "every joint stays within the sag tolerance of its initial state"),
+        MetricInfo("settle_tilt", "rad", "check", "root rotation while settling (the object fell over)"),
+    )
+}  # fmt: skip
+
+#: The SPEC's physical-robustness metrics measured in every engine (parity).
+SPEC_METRICS: tuple[str, ...] = ("penetration", "rest_stability", "oscillation")
+
+#: Metrics whose verdict depends only on the rest test and the initial state:
+#: the post-check's measurement of them is the measurement.
+REST_TEST_METRICS: tuple[str, ...] = SPEC_METRICS
+
+
+def unit(name: str) -> str:
+    """Unit of metric ``name``'s value.
+
+    Raises:
+        KeyError: not a registered metric.
+    """
+    return METRIC_INFO[name].unit
+
+
+def catalog_columns() -> dict[str, str]:
+    """Catalog column -> metric name, for every metric that fills a column."""
+    return {col: m.name for m in METRIC_INFO.values() for col in m.columns}
+
+
+def _field(m: MetricResult, source: str) -> Any:
+    if source == "value":
+        v = m.value
+    elif source == "passed":
+        return m.passed
+    elif source.startswith("details."):
+        v = (m.details or {}).get(source[len("details."):])
+    else:
+        raise ValueError(f"unknown metric field {source!r}")
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def column_values(metrics: Iterable[MetricResult], engine: str | None = "pybullet",
+                  names: Iterable[str] | None = None) -> dict[str, Any]:
+    """Catalog column values of ``metrics`` (first result per name, of
+    ``engine`` or engine-less ``none`` when given; only ``names`` when given).
+
+    A metric absent from ``metrics`` contributes no key; a present one gives
+    every column of :data:`METRIC_INFO` (None for a missing or non-finite
+    number). Numbers are floats, verdicts booleans or None.
+    """
+    wanted = None if names is None else set(names)
+    seen: set[str] = set()
+    out: dict[str, Any] = {}
+    for m in metrics:
+        info = METRIC_INFO.get(m.name)
+        if info is None or m.name in seen or (wanted is not None and m.name not in wanted):
+            continue
+        if engine is not None and m.engine not in (engine, "none"):
+            continue
+        seen.add(m.name)
+        for col, source in info.columns.items():
+            out[col] = _field(m, source)
+    return out

@@ -1,0 +1,365 @@
+"""The output contract's bookkeeping: hashes, the completion marker, the skip
+rule, and the catalog row of a flow run, in one place.
+
+An output folder is *complete* for an input and a configuration when its
+completion marker (:data:`MARKER_NAME`, written last) names both hashes and
+the code version, and every file it lists still has its recorded SHA-256
+(hashing inputs once in one place, as Isaac Lab's asset converters do in
+their base class). ``tasks.refine`` writes and checks the marker; the flow
+reuses a finished result only when the catalog holds a row for the same
+asset, input hash and flow configuration hash *and* the folder is still
+complete (:func:`finished_result`).
+
+Catalog rows (:class:`asset2sim.schemas.catalog.CatalogRow`) are built from
+typed stage results by :func:`build_row`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from asset2sim import __version__, atomic
+from asset2sim.schemas.catalog import CatalogRow
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.metrics import column_values
+from asset2sim.schemas.report import RefineReport
+from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
+from asset2sim.tasks.publish.output_folder import MARKER_NAME, OwnedFolder
+REPORT_NAME = "report.json"
+
+
+# --------------------------------------------------------------------------- hashes
+
+
+def _hash16(blob: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def run_hash(input_hash: str, config: RefineConfig, prompt: str, category: str | None) -> str:
+    """Configuration hash of one refine run (hex, 16): SHA-256 of the
+    configuration's own hash, the prompt, the category override and the code
+    version. ``input_hash`` is recorded beside it, not inside."""
+    return _hash16({"config": config.config_hash(), "prompt": prompt, "category": category, "version": __version__})
+
+
+def flow_config_hash(
+    refine_hash: str,
+    *,
+    refine_function: str,
+    evaluate: bool,
+    probes: bool,
+    extras: bool,
+    reference: bool,
+    reference_scale: float | None,
+) -> str:
+    """Configuration hash of one asset's result in the catalog (hex, 16): the
+    refine run hash (:func:`run_hash`) plus the flow settings that change the
+    result (refine function, metrics stage and probes, extras, whether a
+    reference is measured, the reference scale)."""
+    return _hash16(
+        {
+            "refine": refine_hash,
+            "refine_function": refine_function,
+            "evaluate": evaluate,
+            "probes": probes,
+            "extras": extras,
+            "reference": reference,
+            "reference_scale": reference_scale,
+        }
+    )
+
+
+# ---------------------------------------------------------------------- completion
+
+
+def is_complete(out_dir: Path | str, input_hash: str, config_hash: str) -> bool:
+    """True when ``out_dir`` holds a completion marker for exactly this input
+    and configuration (and this code version), and every file it lists exists
+    with its recorded SHA-256."""
+    marker = Path(out_dir) / MARKER_NAME
+    try:
+        data = json.loads(marker.read_text())
+    except (OSError, ValueError):
+        return False
+    if data.get("input_hash") != input_hash or data.get("config_hash") != config_hash or data.get("version") != __version__:
+        return False
+    for rel, digest in data.get("files", {}).items():
+        p = Path(out_dir) / rel
+        if not p.is_file() or atomic.sha256_file(p) != digest:
+            return False
+    return True
+
+
+def output_files(out_dir: Path | str) -> list[str]:
+    """Files of an output folder the marker covers (relative, sorted): every
+    file except the marker itself and temporary files of atomic writes."""
+    out_dir = Path(out_dir)
+    return sorted(
+        str(p.relative_to(out_dir)) for p in out_dir.rglob("*")
+        if p.is_file() and p.name != MARKER_NAME and not p.name.endswith(".tmp")
+    )  # fmt: skip
+
+
+def write_completion_marker(out_dir: Path | str, input_hash: str, config_hash: str, owner: OwnedFolder | None = None) -> Path:
+    """Write the completion marker (last, atomically): both hashes, the code
+    version and the SHA-256 of every file of :func:`output_files`, or, with
+    ``owner`` (the run's :class:`~asset2sim.tasks.publish.output_folder.OwnedFolder`),
+    of exactly the files the run wrote (:meth:`OwnedFolder.finish`, which
+    raises ``OutputError`` and writes no marker when one of them is missing)."""
+    out_dir = Path(out_dir)
+    if owner is not None:
+        owner.finish({"input_hash": input_hash, "config_hash": config_hash, "version": __version__})
+        return out_dir / MARKER_NAME
+    return atomic.write_json(
+        out_dir / MARKER_NAME,
+        {
+            "input_hash": input_hash,
+            "config_hash": config_hash,
+            "version": __version__,
+            "files": {f: atomic.sha256_file(out_dir / f) for f in output_files(out_dir)},
+        },
+    )
+
+
+def finished_result(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
+    """The skip rule: ``row`` (an earlier catalog row for the same asset,
+    input and flow configuration, or None) when its output folder is still
+    complete for ``input_hash`` and the row's refine configuration hash, else None."""
+    if row is None:
+        return None
+    out = row.get("out_dir")
+    if not out or not Path(out).is_dir():
+        return None
+    return row if is_complete(Path(out), input_hash, row.get("refine_config_hash") or "") else None
+
+
+# ---------------------------------------------------------------------- stage records
+
+
+class Prepared(BaseModel):
+    """What the flow's input stage found for one asset.
+
+    ``ok``: the asset was read; ``input_hash`` of its files; ``config_hash``
+    (:func:`flow_config_hash`) and ``refine_config_hash`` (:func:`run_hash`);
+    ``category`` (manifest's, else the asset's); ``skip``: the earlier catalog
+    row to reuse; ``seconds`` wall time; on failure ``failure_mode`` and ``error``.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    ok: bool = False
+    worker: str | None = None
+    seconds: float | None = None
+    input_hash: str | None = None
+    config_hash: str | None = None
+    refine_config_hash: str | None = None
+    category: str | None = None
+    links: int | None = None
+    movable_joints: int | None = None
+    skip: dict[str, Any] | None = None
+    failure_mode: str | None = None
+    error: str | None = None
+
+
+class RefineOutput(BaseModel):
+    """The refine stage's value: the typed report, the folder, whether the
+    refine function reused a complete folder, its progress messages
+    ``[stage, message, t_s]`` and the model tokens used (None: unknown)."""
+
+    model_config = ConfigDict(extra="forbid")
+    report: RefineReport
+    out_dir: str
+    skipped: bool = False
+    progress: list[list[Any]] = Field(default_factory=list)
+    tokens: int | None = None
+
+
+class Measurement(BaseModel):
+    """The metrics stage's value: the catalog's metric columns
+    (:func:`asset2sim.schemas.metrics.column_values`), the failed metrics
+    (``name@engine``), wall time (s) and whether the post-check's rest test
+    was reused (``reused_post_check``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    columns: dict[str, Any] = Field(default_factory=dict)
+    failures: list[str] = Field(default_factory=list)
+    seconds: float = 0.0
+    reused_post_check: bool = False
+
+
+class StageRecord(BaseModel):
+    """One stage's outcome (``flows.isolation``'s record): ``status`` ok /
+    skipped / error / timeout / crash; ``value`` the stage's typed value when
+    ok; ``seconds`` wall time; error fields when it failed."""
+
+    model_config = ConfigDict(extra="allow")
+    status: str
+    value: Any = None
+    error: str = ""
+    error_type: str = ""
+    failure_mode: str | None = None
+    seconds: float = 0.0
+    log_tail: str = ""
+    worker: str | None = None
+
+
+# ------------------------------------------------------------------------------ rows
+
+
+def _utc(ts: float | None) -> datetime | None:
+    return None if ts is None else datetime.fromtimestamp(ts, timezone.utc)
+
+
+#: Columns a skipped row copies from the finished row it reuses.
+REUSED_COLUMNS = (
+    "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
+    "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
+    "failure_mode", "model_queries", "tokens", "out_dir", "error",
+)  # fmt: skip
+
+
+def build_row(
+    job: Any,
+    prepared: Prepared | None,
+    refined: StageRecord | None,
+    measured: StageRecord | None,
+    *,
+    error: str | None = None,
+    failure_mode: str | None = None,
+    flow_run_id: str | None = None,
+    started_at: float | None = None,
+    finished_at: float | None = None,
+) -> CatalogRow:
+    """One catalog row from the typed stage records of an asset.
+
+    Args:
+        job: the asset's job (``asset2sim.flows.stages.AssetJob``: asset id,
+            prompt, category, config dict, reference scale, run id, code
+            version, output folder, ``evaluate``).
+        prepared: the input stage's record (None: it did not finish).
+        refined: the refine stage's record; ``value`` a :class:`RefineOutput`.
+        measured: the metrics stage's record; ``value`` a :class:`Measurement`.
+        error, failure_mode: an exception that stopped the chain outside the
+            stages (a killed worker, a Prefect time-out, retries exhausted).
+        flow_run_id: Prefect flow run; started_at, finished_at: epoch s.
+
+    Verdict columns come from the metrics stage when it ran, else from the
+    refine post-check; the failure mode is
+    :func:`asset2sim.tasks.check.verdict.asset_failure_mode`'s.
+    """
+    prepared = prepared or Prepared(worker=None)
+    now = time.time()
+    row = CatalogRow(
+        asset_id=job.asset_id,
+        status="failed",
+        category=prepared.category or job.category,
+        prompt=job.prompt,
+        estimator=job.config.get("estimator"),
+        model=job.config.get("model"),
+        reference_scale=job.reference_scale,
+        input_hash=prepared.input_hash,
+        config_hash=prepared.config_hash,
+        refine_config_hash=prepared.refine_config_hash,
+        code_version=job.code_version,
+        flow_run_id=flow_run_id,
+        worker=(refined.worker if refined is not None else None) or prepared.worker,
+        started_at=_utc(started_at or now),
+        finished_at=_utc(finished_at or now),
+        source_run=job.run_id,
+    )
+    stages: dict[str, float] = {}
+    if prepared.seconds is not None:
+        stages["prepare"] = round(float(prepared.seconds), 4)
+
+    prev = prepared.skip
+    if prev is not None:  # reuse an earlier finished result
+        for col in REUSED_COLUMNS:
+            setattr(row, col, prev.get(col))
+        row.status = "skipped"
+        row.source_run = prev.get("source_run") or prev.get("run")
+        row.model_queries = 0  # nothing was asked in this run
+        row.tokens = 0
+        row.stage_seconds = json.dumps(stages)
+        row.wall_seconds = sum(stages.values())
+        return row
+
+    errors: list[str] = []
+    input_failure = None
+    if not prepared.ok and prepared.seconds is not None:
+        input_failure = prepared.failure_mode or "invalid_input"
+        errors.append(f"prepare: {prepared.error or ''}")
+    refine_status = refined.status if refined is not None else None
+    refine_mode = None
+    if refined is not None and refined.status == "ok":
+        value: RefineOutput = refined.value
+        report = value.report
+        row.out_dir = value.out_dir or job.out_dir
+        stages["refine"] = round(float(refined.seconds or 0.0), 4)
+        for k, v in report.stage_seconds.items():
+            stages[f"refine.{k}"] = round(float(v), 4)
+        row.scale = report.scale
+        row.total_mass_kg = report.total_mass
+        row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
+        row.model_queries = int(report.model_queries or 0)
+        # the hash the refine function wrote into its completion marker
+        row.refine_config_hash = report.config_hash or row.refine_config_hash
+        row.tokens = value.tokens
+        row.estimator = report.estimator or row.estimator
+        row.model = report.model or row.model
+        row.category = report.category or row.category
+        refine_mode = report.failure_mode
+        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation"))
+        row.penetration_mm = post.get("penetration_mm")
+        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass"):
+            if col in post:
+                setattr(row, col, post[col])
+    elif refined is not None and refined.status in FAILED_STATUSES:
+        stages["refine"] = round(float(refined.seconds or 0.0), 4)
+        refine_mode = refined.failure_mode
+        errors.append(f"refine: {refined.error_type} {refined.error}".strip())
+        if refined.status == "crash" and refined.log_tail:
+            errors.append(refined.log_tail[-600:])
+
+    measured_status = measured.status if measured is not None else None
+    cols: dict[str, Any] = {}
+    if measured is not None and measured.status == "ok":
+        m: Measurement = measured.value
+        stages["metrics"] = round(float(measured.seconds or 0.0), 4)
+        cols = m.columns
+        for col, v in cols.items():
+            if v is not None:
+                setattr(row, col, v)
+    verdict = asset_failure_mode(
+        input_failure=input_failure,
+        refine_status=refine_status,
+        refine_mode=refine_mode,
+        measured_status=measured_status,
+        rest_stable=cols.get("rest_stable"),
+        oscillation_pass=cols.get("oscillation_pass"),
+        chain_error_mode=(failure_mode or "crash") if error else None,
+    )
+    errors += verdict.errors
+    if measured is not None and measured.status in FAILED_STATUSES:
+        stages["metrics"] = round(float(measured.seconds or 0.0), 4)
+        errors.append(f"metrics: {measured.error_type} {measured.error}".strip())
+    if error:
+        errors.append(error)
+    recorded_nothing = (
+        input_failure is None and refine_status not in ("ok", *FAILED_STATUSES)
+        and measured_status not in FAILED_STATUSES and not error
+    )  # fmt: skip
+    if recorded_nothing and not errors:
+        errors.append("the asset's task chain produced no result")
+    finished_stages = refine_status == "ok" and (measured_status in ("ok", "skipped", None) or not job.evaluate)
+    row.status = "done" if finished_stages and not error and measured_status not in FAILED_STATUSES else "failed"
+    row.failure_mode = verdict.failure_mode
+    row.error = "\n".join(e for e in errors if e) or None
+    row.stage_seconds = json.dumps(stages, sort_keys=True)
+    row.wall_seconds = round(sum(v for k, v in stages.items() if "." not in k), 4)
+    return row

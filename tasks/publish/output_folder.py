@@ -1,0 +1,377 @@
+"""The output folder owns only what it wrote.
+
+An output folder of ``refine`` holds the files of the SPEC's contract, the
+copied meshes and the extras, and possibly files of its user. This module
+decides which files are the product's and keeps that record on disk:
+
+- **where**: :func:`check_location` refuses an output folder that is the input
+  folder, lies inside it, contains it, or resolves into it through symlinks,
+  and a path that exists but is not a folder (a file, ``/dev/null``).
+- **what is ours**: while a run writes, ``.asset2sim-owned.json`` lists every
+  file the run is about to write (updated *before* each file's temporary file
+  is created, through :func:`asset2sim.atomic.add_observer`), so a run killed
+  at any moment leaves no file its successor does not know it owns. When the
+  run finishes, the completion marker ``.asset2sim-complete.json`` lists the
+  files with their sha256 and the ownership record is removed.
+- **rewrite**: :func:`start` removes exactly the files a previous run recorded
+  (and the temporary files of those), never anything else; a folder holding
+  files the product did not write is refused unless ``overwrite=True`` (those
+  files are then left alone unless the run writes the same path).
+- **finish**: :meth:`OwnedFolder.finish` writes the completion marker only when
+  every file the run wrote exists (a write that failed, e.g. on a full disk,
+  leaves no marker, so a rerun redoes the asset).
+
+Errors are :class:`OutputError` with a ``code`` (``OUTPUT_*``) and the
+``path`` concerned. ``tasks.publish.write`` re-exports :class:`OutputError`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+from typing import Any, Iterable
+
+from asset2sim import atomic
+
+MARKER_NAME = ".asset2sim-complete.json"
+RECORD_NAME = ".asset2sim-owned.json"
+_BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})
+_MAX_LISTED = 5
+
+#: codes of :class:`OutputError`
+CODES = {
+    "OUTPUT_IS_INPUT": "the output folder is the input folder",
+    "OUTPUT_INSIDE_INPUT": "the output folder lies inside the input folder (also through a symlink)",
+    "OUTPUT_CONTAINS_INPUT": "the output folder contains the input folder",
+    "OUTPUT_NOT_A_FOLDER": "the output path exists and is not a folder",
+    "OUTPUT_NOT_EMPTY": "the output folder holds files asset2sim did not write (use --overwrite)",
+    "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
+    "OUTPUT_NAME_CONFLICT": "two different input files would be copied to one output path, or onto a file of the contract",
+    "OUTPUT_INCOMPLETE": "a file the run wrote is missing at the end (no completion marker written)",
+    "OUTPUT_OUTSIDE_INPUT": "a referenced file lies outside the asset folder",
+}
+
+
+class OutputError(ValueError):
+    """The output folder cannot be used or written as asked.
+
+    ``code``: one of :data:`CODES` (``OUTPUT_INVALID`` when not given);
+    ``path``: the file or folder concerned; ``codes``: ``[code]`` (the
+    attribute ``refine`` copies into its error)."""
+
+    def __init__(self, message: str, code: str = "OUTPUT_INVALID", path: Path | str | None = None):
+        super().__init__(message)
+        self.code = code
+        self.path = None if path is None else Path(path)
+        self.codes = [code]
+
+
+def _within(path: Path, root: Path) -> bool:
+    return path == root or root in path.parents
+
+
+def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:
+    """Resolve ``out_dir`` (symlinks followed) and refuse a location that would
+    mix output and input.
+
+    Args:
+        source_dir: the asset folder (read only).
+        out_dir: the requested output folder (need not exist).
+
+    Returns:
+        The resolved output folder.
+
+    Raises:
+        OutputError: ``OUTPUT_IS_INPUT``, ``OUTPUT_INSIDE_INPUT`` (also when a
+            symlink on the way leads into the input), ``OUTPUT_CONTAINS_INPUT``
+            or ``OUTPUT_NOT_A_FOLDER``.
+    """
+    given = Path(os.path.abspath(out_dir))
+    out = given.resolve()
+    src = Path(source_dir).resolve()
+    src_lex = Path(os.path.abspath(source_dir))
+    if out == src or given == src_lex:
+        raise OutputError(f"output folder {given} is the input folder {src}; choose another", "OUTPUT_IS_INPUT", given)
+    if _within(out, src) or _within(given, src_lex):
+        via = "" if _within(given, src_lex) else f" (it resolves to {out} through a symlink)"
+        raise OutputError(f"output folder {given} is inside the input folder {src}{via}; choose another", "OUTPUT_INSIDE_INPUT", given)
+    if _within(src, out) or _within(src_lex, given):
+        raise OutputError(f"output folder {given} contains the input folder {src}; choose a folder beside it", "OUTPUT_CONTAINS_INPUT", given)
+    if os.path.lexists(given) and not out.is_dir():
+        raise OutputError(f"output path {given} exists and is not a folder", "OUTPUT_NOT_A_FOLDER", given)
+    return out
+
+
+def _safe_rel(rel: Any) -> str | None:
+    """A recorded relative path, or None when it is not one we could have
+    written (absolute, empty, with ``..``): such entries are ignored."""
+    if not isinstance(rel, str) or not rel or "\x00" in rel:
+        return None
+    p = PurePosixPath(rel)
+    if p.is_absolute() or any(part in ("..", ".", "") for part in p.parts) or rel.startswith("/"):
+        return None
+    return p.as_posix()
+
+
+def recorded_files(out_dir: Path | str) -> set[str]:
+    """Relative paths (POSIX) the product recorded as its own in ``out_dir``:
+    the ownership record of an unfinished run plus the files of the completion
+    marker. Unreadable records count as empty; unsafe entries are ignored."""
+    out = Path(out_dir)
+    owned: set[str] = set()
+    for name, key in ((RECORD_NAME, "files"), (MARKER_NAME, "files")):
+        try:
+            data = json.loads((out / name).read_text(encoding="utf-8"))
+        except (OSError, ValueError, UnicodeDecodeError):
+            continue
+        entries = data.get(key) if isinstance(data, dict) else None
+        for rel in entries or []:
+            safe = _safe_rel(rel)
+            if safe is not None:
+                owned.add(safe)
+    return owned
+
+
+def _entries(root: Path) -> list[str]:
+    """Relative POSIX paths of every non-directory entry under ``root``
+    (files, symlinks including symlinks to folders, FIFOs ...); symlinked
+    folders are not entered."""
+    out: list[str] = []
+    for folder, dirs, files in os.walk(root, followlinks=False):
+        base = Path(folder)
+        for name in files:
+            out.append((base / name).relative_to(root).as_posix())
+        for name in list(dirs):
+            if (base / name).is_symlink():
+                out.append((base / name).relative_to(root).as_posix())
+                dirs.remove(name)
+    return sorted(out)
+
+
+def foreign_files(out_dir: Path | str, owned: Iterable[str] | None = None) -> list[str]:
+    """Entries of ``out_dir`` the product did not write: not in ``owned``
+    (default :func:`recorded_files`), not the bookkeeping files, not a
+    temporary file of an owned path. Sorted relative paths."""
+    root = Path(out_dir)
+    if not root.is_dir():
+        return []
+    owned = set(recorded_files(root) if owned is None else owned)
+    tmp_targets: dict[str, set[str]] = {}
+    for rel in owned:
+        p = PurePosixPath(rel)
+        tmp_targets.setdefault(p.parent.as_posix(), set()).add(p.name)
+    out = []
+    for rel in _entries(root):
+        if rel in owned or rel in _BOOKKEEPING:
+            continue
+        p = PurePosixPath(rel)
+        names = tmp_targets.get(p.parent.as_posix(), set()) | (_BOOKKEEPING if p.parent.as_posix() == "." else set())
+        if any(atomic.is_temp_of(p.name, t) for t in names):
+            continue
+        out.append(rel)
+    return out
+
+
+def _unlink_inside(root: Path, rel: str) -> bool:
+    """Remove ``root/rel`` only when its real parent folder is exactly
+    ``root/<parent of rel>`` (no symlink on the way that could lead into other
+    data) and it is not a folder. Returns True when something was removed."""
+    target = root / rel
+    try:
+        if target.parent.resolve() != root / PurePosixPath(rel).parent:
+            return False
+        if target.is_dir() and not target.is_symlink():
+            return False
+        target.unlink()
+        return True
+    except FileNotFoundError:
+        return False
+    except OSError:
+        return False
+
+
+def _remove_with_temps(root: Path, rel: str) -> None:
+    _unlink_inside(root, rel)
+    p = PurePosixPath(rel)
+    folder = root / p.parent
+    try:
+        if folder.resolve() != folder or not folder.is_dir():
+            return
+        names = os.listdir(folder)
+    except OSError:
+        return
+    for name in names:
+        if atomic.is_temp_of(name, p.name):
+            _unlink_inside(root, (p.parent / name).as_posix())
+
+
+def _prune_empty(root: Path, rels: Iterable[str]) -> None:
+    """Remove folders left empty by removing ``rels`` (never ``root``)."""
+    folders = sorted({p for rel in rels for p in PurePosixPath(rel).parents if p.as_posix() != "."}, key=lambda p: -len(p.parts))
+    for p in folders:
+        d = root / p
+        try:
+            if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
+                d.rmdir()
+        except OSError:
+            pass
+
+
+_ACTIVE: dict[Path, "OwnedFolder"] = {}
+_ACTIVE_LOCK = threading.Lock()
+
+
+def _dispatch(paths: list[Path]) -> None:
+    """The atomic writer's observer: hands each destination to the owned
+    folder it lies in."""
+    with _ACTIVE_LOCK:
+        owners = list(_ACTIVE.values())
+    for owner in owners:
+        owner._observe(paths)
+
+
+@dataclass
+class OwnedFolder:
+    """An output folder during one run: ``root`` (resolved), ``given`` (as
+    asked, absolute), ``source`` (the resolved input folder) and ``files``,
+    the relative paths this run has written or is writing."""
+
+    root: Path
+    given: Path
+    source: Path
+    files: set[str] = field(default_factory=set)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def _rel(self, path: Path) -> str | None:
+        """Relative path of a destination inside this folder, or None when it
+        lies elsewhere. Raises OutputError when it lies here by name but a
+        symlink leads it out."""
+        ap = Path(os.path.abspath(path))
+        parent = ap.parent.resolve()
+        if _within(parent, self.root):
+            if _within(parent, self.source):
+                raise OutputError(f"{ap} would be written into the input folder {self.source}", "OUTPUT_SYMLINK_ESCAPES", ap)
+            return (parent / ap.name).relative_to(self.root).as_posix()
+        if _within(ap, self.given) or _within(ap, self.root):
+            raise OutputError(
+                f"{ap} would be written through a symlink to {parent}, outside the output folder {self.given}",
+                "OUTPUT_SYMLINK_ESCAPES", ap,
+            )
+        return None
+
+    def _observe(self, paths: list[Path]) -> None:
+        new = []
+        for p in paths:
+            rel = self._rel(p)
+            if rel is not None and rel not in _BOOKKEEPING and rel not in self.files:
+                new.append(rel)
+        if new:
+            with self._lock:
+                self.files.update(new)
+                self._save()
+
+    def _save(self) -> None:
+        atomic.write_json(self.root / RECORD_NAME, {"version": 1, "complete": False, "files": sorted(self.files)})
+
+    def record(self, paths: Iterable[Path | str]) -> None:
+        """Record files of this folder as the run's own (absolute paths or
+        paths relative to the folder) without writing them, e.g. copies kept
+        because their content is already right."""
+        self._observe([p if Path(p).is_absolute() else self.root / p for p in paths])
+
+    def remove_unreferenced(self, folder: str, keep: Iterable[str]) -> list[str]:
+        """Remove the files this run wrote under ``folder`` (relative, e.g.
+        ``collision``) that are not in ``keep`` (relative paths). Files it did
+        not write are never touched. Returns the removed relative paths."""
+        prefix = PurePosixPath(folder).as_posix().rstrip("/") + "/"
+        keep = {PurePosixPath(k).as_posix() for k in keep}
+        gone = [rel for rel in sorted(self.files) if rel.startswith(prefix) and rel not in keep]
+        for rel in gone:
+            _remove_with_temps(self.root, rel)
+        with self._lock:
+            self.files.difference_update(gone)
+            self._save()
+        _prune_empty(self.root, gone)
+        return gone
+
+    def finish(self, marker: dict[str, Any]) -> dict[str, str]:
+        """Write the completion marker: ``marker`` plus ``files`` (relative
+        path -> sha256 of every file this run wrote), then drop the ownership
+        record. Stops observing writes.
+
+        Raises:
+            OutputError: ``OUTPUT_INCOMPLETE`` when a file the run wrote is
+                missing (e.g. its write failed on a full disk); no marker is
+                written, the ownership record stays.
+        """
+        try:
+            missing = sorted(rel for rel in self.files if not (self.root / rel).is_file())
+            if missing:
+                raise OutputError(
+                    f"{self.given}: {len(missing)} file(s) the run wrote are missing ({', '.join(missing[:_MAX_LISTED])}); "
+                    "the output is incomplete, no completion marker written",
+                    "OUTPUT_INCOMPLETE", self.given / missing[0],
+                )
+            hashes = {rel: atomic.sha256_file(self.root / rel) for rel in sorted(self.files)}
+            atomic.write_json(self.root / MARKER_NAME, {**marker, "files": hashes})
+            (self.root / RECORD_NAME).unlink(missing_ok=True)
+            return hashes
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop observing writes (the ownership record stays on disk)."""
+        with _ACTIVE_LOCK:
+            if _ACTIVE.get(self.root) is self:
+                del _ACTIVE[self.root]
+            if not _ACTIVE:
+                atomic.remove_observer(_dispatch)
+
+
+def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = False) -> OwnedFolder:
+    """Begin a (re)write of ``out_dir`` for the asset in ``source_dir``.
+
+    Checks the location (:func:`check_location`), refuses files the product
+    did not write unless ``overwrite``, then removes the completion marker and
+    every file a previous run recorded (with their temporary files), and from
+    here on records every atomic write into the folder (any thread of this
+    process) until :meth:`OwnedFolder.finish` or :meth:`OwnedFolder.close`.
+
+    Raises:
+        OutputError: a refused location, or ``OUTPUT_NOT_EMPTY`` naming the
+            first files the product did not write.
+        OSError: the folder cannot be created or written.
+    """
+    root = check_location(source_dir, out_dir)
+    given = Path(os.path.abspath(out_dir))
+    src = Path(source_dir).resolve()
+    if root.is_dir():
+        previous = recorded_files(root)
+        foreign = foreign_files(root, previous)
+        if foreign and not overwrite:
+            raise OutputError(
+                f"output folder {given} holds {len(foreign)} file(s) asset2sim did not write "
+                f"({', '.join(foreign[:_MAX_LISTED])}{', ...' if len(foreign) > _MAX_LISTED else ''}); "
+                "choose an empty or new folder, or pass --overwrite (overwrite=True) to write beside them",
+                "OUTPUT_NOT_EMPTY", given / foreign[0],
+            )
+    else:
+        previous = set()
+        root.mkdir(parents=True, exist_ok=True)
+        root = root.resolve()
+    owner = OwnedFolder(root=root, given=given, source=src)
+    if previous:
+        # claim first, so a kill during the removal leaves them recorded
+        atomic.write_json(root / RECORD_NAME, {"version": 1, "complete": False, "files": sorted(previous)})
+    (root / MARKER_NAME).unlink(missing_ok=True)
+    for rel in sorted(previous):
+        _remove_with_temps(root, rel)
+    _prune_empty(root, previous)
+    owner._save()
+    with _ACTIVE_LOCK:
+        _ACTIVE[root] = owner
+        atomic.add_observer(_dispatch)
+    return owner

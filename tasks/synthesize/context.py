@@ -1,0 +1,185 @@
+"""The estimation context: what stages 1-4 hand to overlay synthesis.
+
+One builder, :func:`build_context`, used by the refine pipeline
+(:func:`asset2sim.tasks.refine.refine_asset`), the ``direct`` baseline
+(:func:`asset2sim.tasks.evaluation.baselines.make_direct`) and the model
+estimators' benchmarks and baselines
+(:mod:`asset2sim.tasks.synthesize.llm_estimator`). It chains
+
+1. extract (:func:`asset2sim.tasks.ingest.extract.extract_asset`; skipped when
+   an :class:`~asset2sim.schemas.asset.AssetDescription` is given),
+2. analyze (:func:`asset2sim.tasks.geometry.analyze.analyze_asset`; skipped
+   when the geometry is given),
+3. request and category (:func:`asset2sim.tasks.interpret.request.parse_request`,
+   :func:`asset2sim.tasks.interpret.priors.recognize_category`),
+4. the geometric closed states in a kinematic PyBullet session
+   (:mod:`asset2sim.tasks.geometry.closed_state`): closed ends, the closed
+   object's extents, the links each movable joint moves and the height of
+   each moving subtree,
+
+and yields an :class:`EstimationContext`. The kinematic session (fixed base,
+no gravity, no ground) stays open while the ``with`` block runs (estimators
+compute joint loads in it) and is closed when it ends, also on errors.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, SimSession, open_session
+from asset2sim.schemas.asset import AssetDescription, LinkGeometry
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.request import RequestSpec
+from asset2sim.tasks.geometry import analyze
+from asset2sim.tasks.geometry.closed_state import (
+    ClosedState,
+    _aabb,
+    closed_positions,
+    link_hull_points,
+    object_extents,
+    subtree_links,
+)
+from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.interpret import priors, request
+
+
+@dataclass
+class EstimationContext:
+    """Everything an estimator may use (units: input asset at scale 1 unless noted)."""
+
+    asset: AssetDescription
+    geometry: dict[str, LinkGeometry]
+    request: RequestSpec
+    category: str
+    category_reason: str
+    closed: dict[str, ClosedState]
+    """Closed ends at scale 1 (prismatic in input units)."""
+    closed_extents: np.ndarray
+    """(3,) extents of the whole object in its closed state, root frame, scale 1."""
+    session: Any
+    """Fixed-base, gravity-free PyBullet session of the input asset (kinematics);
+    open only inside :func:`build_context`'s ``with`` block."""
+    subtrees: dict[str, list[str]]
+    """joint -> links moved by it."""
+    joint_heights: dict[str, float] = field(default_factory=dict)
+    """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
+    hull_points: dict[str, np.ndarray] = field(default_factory=dict)
+    """link -> (N, 3) convex-hull vertices of its collision geometry, link frame, scale 1."""
+    root_rotation: Any = None
+    """(3, 3) resting-pose rotation the output will carry (``tasks.state.pose``), or None."""
+    settings: dict[str, Any] = field(default_factory=dict)
+    """Knobs for the estimator (e.g. ``seed``); read-only for estimators."""
+
+    def closed_state(self) -> dict[str, float]:
+        """joint -> closed position (rad, or input units for prismatic joints)."""
+        return {n: c.q_closed for n, c in self.closed.items()}
+
+
+@dataclass(frozen=True)
+class Interpretation:
+    """The request and the category of one asset (stage 3)."""
+
+    request: RequestSpec
+    category: str
+    category_reason: str
+
+
+def interpret(asset: AssetDescription, prompt: str, category: str | None = None) -> Interpretation:
+    """Parse ``prompt`` and recognise the category of ``asset``.
+
+    ``category`` (e.g. a manifest column) wins over the asset's own; the
+    semantic labels of the links and the prompt's words decide otherwise
+    (:func:`asset2sim.tasks.interpret.priors.recognize_category`).
+    """
+    spec = request.parse_request(prompt)
+    labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
+    match = priors.recognize_category(category or asset.category, labels, prompt)
+    return Interpretation(spec, getattr(match, "name", None) or str(match), getattr(match, "reason", ""))
+
+
+def subtree_height(session: SimSession, links: list[str], hull_points: dict[str, np.ndarray]) -> float:
+    """z (m at the session's scale) of the center of the world-frame
+    axis-aligned box around ``links``' hull points at the session's current
+    state; 0 when none of them has geometry."""
+    box = _aabb(session, links, hull_points)
+    return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
+
+
+def kinematic_session(asset: AssetDescription, config: RefineConfig | None = None) -> SimSession:
+    """A fixed-base, gravity-free PyBullet session of the input asset without
+    a ground plane (contact and pose queries only), with ``config.sim``'s
+    conventions. The caller closes it (sessions are context managers).
+
+    Raises:
+        as :func:`asset2sim.engines.base.open_session`.
+    """
+    conventions = (config or RefineConfig()).sim
+    return open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=conventions))
+
+
+@contextlib.contextmanager
+def build_context(
+    source: AssetDescription | Path | str,
+    prompt: str,
+    config: RefineConfig | None = None,
+    *,
+    category: str | None = None,
+    asset_id: str | None = None,
+    geometry: dict[str, LinkGeometry] | None = None,
+    cache: analyze.MeshCache | None = None,
+    settings: dict[str, Any] | None = None,
+) -> Iterator[EstimationContext]:
+    """The estimation context of an asset for ``prompt`` (stages 1-4; see the
+    module docstring), as a context manager: the kinematic session inside
+    ``ctx.session`` is closed when the ``with`` block ends.
+
+    Args:
+        source: an extracted asset, or its folder / URDF file (extracted here
+            with ``asset_id`` and ``category``).
+        prompt: the request text.
+        config: pipeline knobs; only ``config.sim`` (simulator conventions) is
+            used here (default :class:`RefineConfig`).
+        category: overrides the asset's own category.
+        asset_id: identifier when ``source`` is a path (default folder name).
+        geometry: the analysis stage's result when the caller ran it already.
+        cache: mesh cache shared with the caller's other stages (a new one by default).
+        settings: estimator knobs stored in ``ctx.settings``.
+
+    Yields:
+        :class:`EstimationContext` (lengths at scale 1, in the input's units).
+
+    Raises:
+        asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read.
+        asset2sim.tasks.geometry.analyze.MeshAnalysisError: a link with
+            geometry has no usable geometry.
+    """
+    asset = source if isinstance(source, AssetDescription) else extract.extract_asset(source, asset_id=asset_id, category=category)
+    cache = cache if cache is not None else analyze.MeshCache()
+    if geometry is None:
+        geometry = analyze.analyze_asset(asset, cache=cache)
+    meaning = interpret(asset, prompt, category)
+    with kinematic_session(asset, config) as kin:
+        hull = link_hull_points(asset, cache=cache)
+        closed = closed_positions(kin, asset, hull_points=hull)
+        extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
+        subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
+        heights = {n: subtree_height(kin, links, hull) for n, links in subtrees.items()}
+        yield EstimationContext(
+            asset=asset,
+            geometry=geometry,
+            request=meaning.request,
+            category=meaning.category,
+            category_reason=meaning.category_reason,
+            closed=closed,
+            closed_extents=extents,
+            session=kin,
+            subtrees=subtrees,
+            joint_heights=heights,
+            hull_points=hull,
+            settings=dict(settings or {}),
+        )

@@ -1,0 +1,187 @@
+"""The shared URDF model: reader (strict / lenient / collect), writer, scaling,
+on the 21 real PartNet-Mobility objects and their GenSim2 references."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from asset2sim import urdf
+from asset2sim.engines.fake import write_contract_asset
+
+DATASET = Path("/work/shared/datasets/partnet_mobility")
+REAL = sorted(DATASET.glob("*/mobility.urdf")) + sorted(DATASET.glob("*/reference_gensim2.urdf"))
+needs_dataset = pytest.mark.skipif(not REAL, reason="shared PartNet-Mobility dataset not available")
+_NUMBER = re.compile(r"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
+
+
+@needs_dataset
+@pytest.mark.parametrize("mode", ["strict", "lenient"])
+def test_round_trip_of_every_real_urdf(mode):
+    assert len(REAL) == 42
+    for path in REAL:
+        model = urdf.read_urdf(path, mode=mode)
+        data = urdf.write_urdf(model)
+        again = urdf.parse_urdf_bytes(data, source=str(path), base=path.parent, mode=mode)
+        assert again == model, path
+        assert urdf.write_urdf(again) == data, path  # the writer's own output is a fixed point
+        for style in (urdf.PARTNET_STYLE,):
+            assert urdf.parse_urdf_bytes(urdf.write_urdf(model, style=style), mode=mode) == model, path
+
+
+@needs_dataset
+def test_partnet_style_reproduces_partnet_files_up_to_number_spelling():
+    """Files in PartNet-Mobility's own layout (``<?xml version="1.0" ?>``,
+    tabs, ``/>``, visuals before collisions) come back line for line; only
+    the spelling of numbers may differ (``0.0`` / ``0``), never their value."""
+    same_layout = 0
+    for path in sorted(DATASET.glob("*/mobility.urdf")):
+        original = path.read_text().splitlines()
+        if original[0] != '<?xml version="1.0" ?>' or any("<!--" in ln or " />" in ln for ln in original):
+            continue
+        model = urdf.read_urdf(path)
+        written = urdf.write_urdf(model, style=urdf.PARTNET_STYLE).decode().splitlines()
+        if [_NUMBER.sub("#", ln) for ln in written] != [_NUMBER.sub("#", ln) for ln in original]:
+            continue  # another element order (collisions first)
+        same_layout += 1
+        for a, b in zip(written, original):
+            assert [float(x) for x in _NUMBER.findall(a)] == [float(x) for x in _NUMBER.findall(b)], (path, a, b)
+    assert same_layout >= 10
+
+
+@needs_dataset
+def test_model_values_match_the_file():
+    path = DATASET / "103275" / "mobility.urdf"
+    if not path.is_file():
+        pytest.skip("103275 not in the dataset")
+    model = urdf.read_urdf(path)
+    assert model.root == "base" and model.path == path
+    for j in model.joints:
+        assert j.line is not None and j.parent in model.links and j.child in model.links
+        if j.type in ("revolute", "prismatic"):
+            assert j.lower == j.limit.lower and j.upper == j.limit.upper
+        else:
+            assert math.isinf(j.upper)
+        assert np.linalg.norm(j.axis) == pytest.approx(1.0)
+        assert not j.has_dynamics and j.damping == 0.0
+    for ln in model.links.values():
+        for g in ln.visuals + ln.collisions:
+            assert g.kind == "mesh" and g.path.is_file() and np.array_equal(g.scale, np.ones(3))
+    assert model.tree_order()[0] == "base" and sorted(model.tree_order()) == sorted(model.links)
+
+
+def test_writer_output_of_the_contract_asset_reads_back(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.3)
+    model = urdf.read_urdf(a.urdf)
+    text = a.urdf.read_text()
+    assert text.startswith("<?xml version='1.0' encoding='utf-8'?>\n<robot name=\"contract_box\">\n")
+    assert "<!-- initial joint positions: initial_state.json -->" in text
+    hinge = model.joint("lid_hinge")
+    assert (hinge.limit.effort, hinge.limit.velocity, hinge.damping) == (1000.0, 1000.0, 0.02)
+    assert model.joint("root_fixed").axis_xyz is None and "<axis" not in text.split('name="root_fixed"')[1].split("</joint>")[0]
+    assert urdf.write_urdf(model, comment=" initial joint positions: initial_state.json ") == a.urdf.read_bytes()
+
+
+def _write(tmp_path: Path, body: str) -> Path:
+    p = tmp_path / "r.urdf"
+    p.write_text(f'<?xml version="1.0"?>\n<robot name="r">\n{body}\n</robot>\n')
+    return p
+
+
+_LINKS = '<link name="a"/>\n<link name="b"><inertial><mass value="{mass}"/><inertia ixx="1" iyy="1" izz="1"/></inertial></link>\n'
+_JOINT = '<joint name="j" type="{type}"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>{limit}</joint>'
+
+
+def test_errors_name_the_file_line_and_element(tmp_path):
+    p = _write(tmp_path, _LINKS.format(mass="heavy") + _JOINT.format(type="revolute", limit='<limit lower="0" upper="1"/>'))
+    with pytest.raises(urdf.UrdfError) as e:
+        urdf.read_urdf(p)
+    assert e.value.code == "NUMBER_MALFORMED" and e.value.link == "b"
+    assert str(e.value).startswith(f"{p}:4: link 'b': ") and "'heavy' is not a decimal number" in str(e.value)
+
+    p = _write(tmp_path, _LINKS.format(mass="1") + _JOINT.format(type="revolute", limit=""))
+    with pytest.raises(urdf.UrdfError, match=r"r\.urdf:5: joint 'j': a revolute joint needs <limit") as e:
+        urdf.read_urdf(p)
+    assert e.value.code == "JOINT_LIMIT_MISSING"
+    lenient = urdf.read_urdf(p, mode="lenient")  # raw files are graded as they are
+    assert lenient.joint("j").limit is None and lenient.joint("j").lower == -math.inf
+
+    p = _write(tmp_path, _LINKS.format(mass="1") + _JOINT.format(type="planar", limit=""))
+    assert urdf.read_urdf(p).joint("j").type == "planar"
+    with pytest.raises(urdf.UrdfError, match="not supported") as e:
+        urdf.read_urdf(p, joint_types=urdf.SIMULATED_JOINT_TYPES)
+    assert e.value.joint == "j"
+
+    p = _write(tmp_path, _LINKS.format(mass="1") + '<link name="c"/>')
+    with pytest.raises(urdf.UrdfError, match="one root"):
+        urdf.read_urdf(p)
+    assert urdf.read_urdf(p, mode="lenient").root is None
+
+
+def test_lenient_mode_still_refuses_numbers_that_do_not_parse(tmp_path):
+    p = _write(tmp_path, _LINKS.format(mass="1,5"))
+    with pytest.raises(urdf.UrdfError, match="link 'b'"):
+        urdf.read_urdf(p, mode="lenient")
+    p = _write(tmp_path, _LINKS.format(mass="nan"))
+    assert math.isnan(urdf.read_urdf(p, mode="lenient").links["b"].inertial.mass)
+    with pytest.raises(urdf.UrdfError, match="NaN"):
+        urdf.read_urdf(p)
+
+
+def test_collect_mode_reports_every_problem_and_goes_on(tmp_path):
+    body = (
+        '<link name="a"><visual><geometry/></visual></link>\n'
+        '<link name="b"><inertial><mass value="-1e999"/></inertial>'
+        '<collision><geometry><box size="1 0 1"/></geometry></collision></link>\n'
+        '<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 2"/>'
+        '<limit lower="1" upper="0" effort="-1"/><dynamics damping="-2"/></joint>'
+    )
+    problems: list[urdf.Problem] = []
+    model = urdf.read_urdf(_write(tmp_path, body), mode="collect", on_problem=problems.append)
+    assert [p.code for p in problems] == [
+        "GEOMETRY_MISSING", "GEOMETRY_SIZE_NONPOSITIVE", "NUMBER_OVERFLOW", "INERTIA_MISSING", "JOINT_AXIS_NOT_UNIT",
+        "JOINT_LIMIT_REVERSED", "JOINT_EFFORT_NEGATIVE", "JOINT_DYNAMICS_NEGATIVE",
+    ]
+    assert problems[0].line == 3 and problems[0].link == "a" and problems[-1].joint == "j"
+    assert model.joint("j").damping == -2.0 and not model.links["b"].collisions[0].complete
+
+
+@pytest.mark.parametrize(
+    "text, code",
+    [
+        ('<!DOCTYPE r [<!ENTITY x "y">]><robot name="r"/>', "XML_ENTITY_FORBIDDEN"),
+        ('<!DOCTYPE r SYSTEM "file:///etc/passwd"><robot name="r"/>', "XML_EXTERNAL_REFERENCE_FORBIDDEN"),
+        ('<robot name="r"><link name="a">', "XML_MALFORMED"),
+    ],
+)
+def test_xml_is_hardened(tmp_path, text, code):
+    (tmp_path / "x.urdf").write_text(text)
+    for mode in ("strict", "lenient"):
+        with pytest.raises(urdf.UrdfError) as e:
+            urdf.read_urdf(tmp_path / "x.urdf", mode=mode)
+        assert e.value.code == code and str(tmp_path / "x.urdf") in str(e.value)
+    problems: list[urdf.Problem] = []
+    assert urdf.parse_urdf_bytes(text.encode(), mode="collect", on_problem=problems.append) is None
+    assert [p.code for p in problems] == [code]
+
+
+def test_scale_model(tmp_path):
+    a = write_contract_asset(tmp_path)
+    model = urdf.read_urdf(a.urdf)
+    before = urdf.read_urdf(a.urdf)
+    urdf.scale_model(model, 0.5)
+    lid, post = model.joint("lid_hinge"), model.joint("post_slide")
+    assert lid.origin[:3, 3] == pytest.approx(before.joint("lid_hinge").origin[:3, 3] * 0.5)
+    assert (lid.lower, lid.upper) == (0.0, 2.0)  # radians do not scale
+    assert (post.lower, post.upper) == (0.0, 0.025)
+    body, body0 = model.links["body"], before.links["body"]
+    assert np.array_equal(body.collisions[0].scale, [0.5, 0.5, 0.5])
+    assert body.inertial.mass == body0.inertial.mass
+    assert body.inertial.com() == pytest.approx(body0.inertial.com() * 0.5)
+    assert body.inertial.inertia == pytest.approx(body0.inertial.inertia * 0.25)
+    with pytest.raises(ValueError):
+        urdf.scale_model(model, 0.0)

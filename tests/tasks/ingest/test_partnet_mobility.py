@@ -1,0 +1,107 @@
+"""The PartNet-Mobility adapter on the real dev folder (21 objects + manifest)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from asset2sim.tasks.ingest import partnet_mobility as pm
+from asset2sim.tasks.ingest.errors import AssetError
+from tests.conftest import SHARED, needs_shared
+
+pytestmark = needs_shared
+
+
+def test_manifest_rows_are_typed_and_point_at_the_folders():
+    rows = pm.read_manifest(SHARED / pm.MANIFEST_NAME)
+    assert len(rows) == 21 and len({r.id for r in rows}) == 21
+    by_id = {r.id: r for r in rows}
+    st = by_id["103275"]
+    assert (st.category, st.gensim2_task, st.reference_scale, st.reference_joint_range) == ("Stapler", "stapler_press", 0.1, (-0.15, 0.3))
+    assert st.prompt == "I want a slightly open stapler." and st.folder == SHARED / "103275"
+    assert by_id["7236"].reference_joint_range is None  # written as """""" in the CSV
+    for r in rows:
+        assert r.folder.is_dir() and r.prompt and r.category
+        assert r.reference_scale is None or r.reference_scale > 0
+
+
+def test_manifest_errors_name_file_line_and_id(tmp_path):
+    m = tmp_path / "m.csv"
+    cases = {
+        "id,prompt\n,x\n": "without id",
+        "id,prompt\n../x,y\n": "invalid asset id",
+        "id,prompt\na,x\na,y\n": "duplicate",
+        "id,category\na,b\n": "prompt",
+        "id,prompt,reference_scale\n7,x,abc\n": r"m.csv:2 \(id 7\): reference_scale",
+        "id,prompt,reference_scale\n7,x,-1\n": "positive",
+        "id,prompt,reference_joint_range\n7,x,[1]\n": "reference_joint_range",
+    }
+    for text, match in cases.items():
+        m.write_text(text)
+        with pytest.raises(pm.ManifestError, match=match):
+            pm.read_manifest(m)
+    m.write_text("\ufeffid,prompt,time_limit_seconds\nbox,A box.,30\n")  # a byte-order mark is fine
+    (row,) = pm.read_manifest(m, root=tmp_path / "r")
+    assert row.id == "box" and row.time_limit_seconds == 30.0 and row.folder == tmp_path / "r" / "box"
+    with pytest.raises(FileNotFoundError):
+        pm.read_manifest(tmp_path / "none.csv")
+
+
+def test_every_object_has_urdf_semantics_category_and_reference():
+    links_seen = 0
+    for row in pm.read_manifest(SHARED / pm.MANIFEST_NAME):
+        urdf = pm.find_urdf(row.folder)
+        assert urdf == row.folder / "mobility.urdf"
+        sem = pm.read_semantics(row.folder)
+        assert sem and all(s.joint_kind in {"hinge", "slider", "free", "heavy", "static", "junk"} for s in sem.values())
+        links_seen += len(sem)
+        assert pm.read_category(row.folder) == json.loads((row.folder / "meta.json").read_text())["model_cat"]
+        assert pm.has_reference(row.folder)
+        ref = pm.read_reference(row.folder)
+        assert ref.urdf == row.folder / pm.REFERENCE_URDF and ref.task_joints
+        if row.reference_scale is not None:
+            assert ref.scale == row.reference_scale
+        if row.reference_joint_range is not None:
+            assert ref.joint_position_range == row.reference_joint_range
+    assert links_seen > 21
+
+
+def test_semantics_tuple_shape_and_line_parsing():
+    sem = pm.read_semantics(SHARED / "103275")
+    assert sem["link_1"] == ("hinge", "lid")
+    kind, label = sem["link_2"]
+    assert (kind, label) == ("free", "stapler_base")
+    lines = list(pm.iter_semantics("a hinge big lid\n\nbad line\n"))
+    assert [ln.lineno for ln in lines] == [1, 3]
+    assert lines[0].entry == pm.Semantics("hinge", "big lid") and lines[1].entry is None
+
+
+def test_find_urdf_rules(tmp_path):
+    (tmp_path / "reference_gensim2.urdf").write_text("<robot/>")
+    with pytest.raises(AssetError, match="no mobility.urdf"):
+        pm.find_urdf(tmp_path)
+    (tmp_path / "other.urdf").write_text("<robot/>")
+    assert pm.find_urdf(tmp_path) == tmp_path / "other.urdf"  # reference_* never counts
+    (tmp_path / "third.urdf").write_text("<robot/>")
+    with pytest.raises(AssetError, match="several"):
+        pm.find_urdf(tmp_path)
+    os.mkfifo(tmp_path / "mobility.urdf")
+    with pytest.raises(AssetError, match="not a regular file"):
+        pm.find_urdf(tmp_path)  # mobility.urdf wins and is never opened
+    with pytest.raises(AssetError, match="no such"):
+        pm.find_urdf(tmp_path / "gone")
+
+
+def test_side_files_absent_or_broken(tmp_path):
+    assert pm.read_semantics(tmp_path) == {} and pm.read_category(tmp_path) is None
+    assert pm.read_reference(tmp_path) == pm.GenSim2Reference() and not pm.has_reference(tmp_path)
+    (tmp_path / "semantics.txt").write_text("link_0 hinge\n")
+    with pytest.raises(AssetError, match="semantics.txt:1"):
+        pm.read_semantics(tmp_path)
+    (tmp_path / "meta.json").write_text("[1, 2]")
+    assert pm.read_category(tmp_path) is None
+    (tmp_path / "meta.json").write_text("{not json")
+    assert pm.read_category(tmp_path) is None
+    assert pm.meta_category({"model_cat": "Box"}) == "Box" and pm.meta_category({"model_cat": ""}) is None
