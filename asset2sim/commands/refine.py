@@ -95,13 +95,13 @@ def _refine_failure(exc: Exception, args: argparse.Namespace) -> CommandError:
     """The one-line failure of a refine run: status, code and path."""
     cause = exc.__cause__
     codes = list(getattr(exc, "codes", []) or [])
-    if isinstance(cause, OutputError):
-        return CommandError(OUTPUT_LOCATION, cause.code, cause.path or args.out, str(cause))
-    if isinstance(cause, RequestTooLong):
-        return CommandError(INVALID_REQUEST, cause.code, args.asset, str(cause))
     mode = getattr(exc, "failure_mode", "invalid_input")
+    code = f"{mode}" + (f" [{', '.join(codes)}]" if codes else "")  # e.g. "invalid_input [OUTPUT_INSIDE_INPUT]"
+    if isinstance(cause, OutputError):
+        return CommandError(OUTPUT_LOCATION, code, cause.path or args.out, str(cause))
+    if isinstance(cause, RequestTooLong):
+        return CommandError(INVALID_REQUEST, code, args.asset, str(cause))
     status = INVALID_INPUT if mode == "invalid_input" else INVALID_REQUEST
-    code = f"{mode}" + (f" [{', '.join(codes)}]" if codes else "")
     return CommandError(status, code, args.asset, str(exc))
 
 

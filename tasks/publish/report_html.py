@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 
 from asset2sim.atomic import write_text
+from asset2sim.tasks.publish import plots
+from asset2sim.tasks.publish.render import render_views
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px;color:#1d2430;max-width:1200px}
@@ -90,25 +92,16 @@ def _array_png(arr: np.ndarray) -> bytes:
 def _renders(ev) -> tuple[str, str]:
     """(HTML of the object views, what they are)."""
     try:
-        from asset2sim.tasks.publish.render import render_views
-    except ImportError:
-        render_views = None
-    if render_views is not None:
-        try:
-            views = render_views(Path(ev.urdf), dict(ev.initial_state))
-            figs = "".join(
-                f"<figure>{img_tag(_array_png(v), k)}<figcaption class='small'>{esc(k)}</figcaption></figure>"
-                for k, v in views.items()
-            )
-            return f"<div class='views'>{figs}</div>", "renders (asset2sim.tasks.publish.render)"
-        except Exception as exc:  # fall back to the plot
-            note = f"render failed ({type(exc).__name__}: {exc}); "
-    else:
-        note = "renderer not available; "
-    from asset2sim.tasks.publish.plots import plot_object
-
+        views = render_views(Path(ev.urdf), dict(ev.initial_state))
+        figs = "".join(
+            f"<figure>{img_tag(_array_png(v), k)}<figcaption class='small'>{esc(k)}</figcaption></figure>"
+            for k, v in views.items()
+        )
+        return f"<div class='views'>{figs}</div>", "renders (asset2sim.tasks.publish.render)"
+    except Exception as exc:  # fall back to the plot
+        note = f"render failed ({type(exc).__name__}: {exc}); "
     run = next((r for r in ev._runs.values() if r.point_cloud), None)
-    png = plot_object(run.point_cloud) if run is not None else None
+    png = plots.plot_object(run.point_cloud) if run is not None else None
     if png is None:
         return "<p class='small'>no geometry recorded</p>", note + "no plot"
     return img_tag(png, "collision geometry"), note + "plot of the collision vertices per link"
@@ -297,8 +290,6 @@ def _parameter_table(ev) -> str:
 
 def render_report(ev) -> str:
     """The HTML text of one evaluation's report (see module docstring)."""
-    from asset2sim.tasks.publish import plots
-
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240

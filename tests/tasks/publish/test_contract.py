@@ -1,0 +1,90 @@
+"""The output contract's bookkeeping: hashes, completion marker, skip rule, catalog rows."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.report import MetricResult, RefineReport
+from asset2sim.tasks.publish.contract import (
+    MARKER_NAME,
+    Measurement,
+    Prepared,
+    RefineOutput,
+    StageRecord,
+    build_row,
+    finished_result,
+    flow_config_hash,
+    is_complete,
+    run_hash,
+    write_completion_marker,
+)
+
+
+def test_hashes_change_with_what_changes_the_result():
+    cfg = RefineConfig()
+    h = run_hash("in", cfg, "a laptop", None)
+    assert h == run_hash("in", cfg, "a laptop", None) and len(h) == 16
+    assert h != run_hash("in", cfg, "a closed laptop", None)
+    assert h != run_hash("in", cfg.model_copy(update={"seed": 7}), "a laptop", None)
+    kw = dict(refine_function="m:f", evaluate=True, probes=False, extras=True, reference=False, reference_scale=None)
+    base = flow_config_hash(h, **kw)
+    assert base != flow_config_hash(h, **{**kw, "probes": True}) and base != flow_config_hash("x" * 16, **kw)
+
+
+def test_marker_covers_every_file_and_the_skip_rule_checks_it(tmp_path):
+    out = tmp_path / "out"
+    (out / "meshes").mkdir(parents=True)
+    (out / "mobility.urdf").write_text("<robot/>")
+    (out / "meshes" / "a.obj").write_text("v 0 0 0\n")
+    (out / ".x.json.tmp").write_text("torn")
+    write_completion_marker(out, "IN", "CFG")
+    files = json.loads((out / MARKER_NAME).read_text())["files"]
+    assert sorted(files) == ["meshes/a.obj", "mobility.urdf"]
+    assert is_complete(out, "IN", "CFG") and not is_complete(out, "IN", "OTHER") and not is_complete(out, "X", "CFG")
+    row = {"out_dir": str(out), "refine_config_hash": "CFG"}
+    assert finished_result(row, "IN") is row and finished_result(None, "IN") is None
+    (out / "meshes" / "a.obj").write_text("v 1 0 0\n")  # a changed file: not complete any more
+    assert not is_complete(out, "IN", "CFG") and finished_result(row, "IN") is None
+
+
+def _job(**kw):
+    base = dict(asset_id="lap", prompt="a laptop", category=None, config={"estimator": "offline", "model": None},
+                reference_scale=None, code_version="v", run_id="r2", out_dir="/o/lap", evaluate=True)
+    return SimpleNamespace(**{**base, **kw})
+
+
+def _report(failure_mode="none") -> RefineReport:
+    return RefineReport(
+        asset_id="lap", source="/a", prompt="a laptop", category="Laptop", version="v", input_hash="IN",
+        config_hash="RC", estimator="offline", scale=0.5, total_mass=1.25, initial_joint_positions={"j": 0.25},
+        metrics=[MetricResult(name="penetration", value=0.5, unit="mm"),
+                 MetricResult(name="rest_stability", value=1e-5, unit="m", passed=True, details={"D_pos_m": 1e-5, "D_ori_rad": 2e-4}),
+                 MetricResult(name="oscillation", value=0.0, unit="joints", passed=True)],
+        failure_mode=failure_mode, stage_seconds={"extract": 0.1},
+    )  # fmt: skip
+
+
+def test_rows_from_typed_stage_records():
+    prep = Prepared(ok=True, seconds=0.5, input_hash="IN", config_hash="C", refine_config_hash="RC", category="Laptop", worker="w")
+    refined = StageRecord(status="ok", seconds=2.0, value=RefineOutput(report=_report(), out_dir="/o/lap", tokens=0))
+    measured = StageRecord(status="ok", seconds=1.0, value=Measurement(columns={"rest_stable": False, "d_pos_m": 0.1, "prompt_alignment": 0.5}))
+    row = build_row(_job(), prep, refined, measured, started_at=1.0, finished_at=2.0)
+    assert row.status == "done" and row.failure_mode == "unstable" and "metrics stage" in row.error
+    assert row.penetration_mm == 0.5 and row.d_pos_m == 0.1 and row.d_ori_rad == 2e-4 and row.prompt_alignment == 0.5
+    assert row.scale == 0.5 and row.total_mass_kg == 1.25 and json.loads(row.initial_state) == {"j": 0.25}
+    assert json.loads(row.stage_seconds) == {"prepare": 0.5, "refine": 2.0, "refine.extract": 0.1, "metrics": 1.0}
+    assert row.wall_seconds == 3.5
+
+    failed = build_row(_job(), prep, StageRecord(status="timeout", seconds=9.0, error="killed"), None)
+    assert failed.status == "failed" and failed.failure_mode == "timeout"
+    bad = build_row(_job(), Prepared(ok=False, seconds=0.1, failure_mode="invalid_input", error="no mesh"), None, None)
+    assert bad.failure_mode == "invalid_input" and bad.error == "prepare: no mesh"
+    lost = build_row(_job(), None, None, None)
+    assert lost.failure_mode == "crash" and "no result" in lost.error
+
+    earlier = row.model_dump() | {"failure_mode": "none", "source_run": "r1"}
+    skipped = build_row(_job(), prep.model_copy(update={"skip": earlier}), None, None)
+    assert skipped.status == "skipped" and skipped.source_run == "r1" and skipped.model_queries == 0
+    assert skipped.penetration_mm == 0.5 and skipped.failure_mode == "none"
