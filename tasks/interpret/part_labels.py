@@ -1,0 +1,78 @@
+"""Canonical part labels: ``rotation_lid`` -> ``lid``, ``drawers`` -> ``drawer``.
+
+PartNet-Mobility's semantic labels name the same part many ways; the rules
+that map them onto the canonical labels of ``labels.yaml`` (aliases, prefixes
+to strip, plural ``s``, the last known word) are data in that file. Every
+other prior lookup (materials, part roles, category evidence, the request's
+part words) goes through :func:`canonical_label`.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+
+from asset2sim.tasks.interpret.prior_tables import load_priors
+
+#: Canonical labels of an object's main body (its material is the category's
+#: body material; a ``<category>_body`` label names the category).
+BODY_LABELS = frozenset({"body", "base", "frame"})
+
+
+def _norm_token(s: str) -> str:
+    return re.sub(r"[\s\-]+", "_", s.strip().lower()).strip("_")
+
+
+@functools.lru_cache(maxsize=4096)
+def canonical_label(label: str | None) -> str | None:
+    """Canonical part label of a PartNet-Mobility semantic label.
+
+    ``rotation_lid`` -> ``lid``, ``stapler_body`` -> ``body``, ``door_frame``
+    -> ``frame``, ``foot_pad`` -> ``foot``, ``drawers`` -> ``drawer``. Rules in
+    ``labels.yaml``. Unknown labels are returned normalised (lower case, ``_``);
+    None or blank gives None.
+    """
+    if label is None or not label.strip():
+        return None
+    table = load_priors().labels
+    known = table.labels
+    s = _norm_token(label)
+
+    def look(x: str) -> str | None:
+        if x in table.aliases:
+            return table.aliases[x]
+        if x in known:
+            return x
+        if x.endswith("s") and x[:-1] in known:
+            return x[:-1]
+        return None
+
+    hit = look(s)
+    if hit:
+        return hit
+    stripped = s
+    changed = True
+    while changed:
+        changed = False
+        for p in table.strip_prefixes:
+            if stripped.startswith(p) and len(stripped) > len(p):
+                stripped = stripped[len(p):]
+                changed = True
+    hit = look(stripped)
+    if hit:
+        return hit
+    toks = [t for t in stripped.split("_") if t]
+    for tok in reversed(toks):
+        hit = look(tok)
+        if hit:
+            return hit
+    return stripped
+
+
+def body_label_tokens(label: str) -> list[str]:
+    """Prefix words of a body-like label (``suitcase_body`` -> [``suitcase``])."""
+    s = _norm_token(label)
+    toks = [t for t in s.split("_") if t]
+    if len(toks) >= 2 and canonical_label(toks[-1]) in BODY_LABELS:
+        return toks[:-1]
+    return []

@@ -1,0 +1,336 @@
+"""The prior tables as data: their models, loading and cross-checks.
+
+The numbers live in ``asset2sim/priors/*.yaml`` (package data), each with its
+source: ``materials.yaml`` (density, shell or solid, wall thickness, contact
+friction), ``labels.yaml`` (part-label canonicalisation and per-label
+defaults), ``size_classes.yaml`` (linear size factors) and
+``categories.yaml`` (per-category dimensions, mass ranges, materials, part
+roles, variants). This module defines their pydantic models, loads them
+(:func:`load_priors`, cached; :func:`load_priors_from` a folder) and checks
+every cross-reference (materials, labels, synonyms), raising
+:class:`PriorsError` naming the yaml file and key.
+
+Units: SI throughout: lengths m, masses kg, densities kg/m^3. Sources of the
+tables: see each yaml entry and ``docs/priors.md``.
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from asset2sim.schemas.request import SizeClass
+
+#: Largest object width (m) a robot's parallel gripper is assumed to close on.
+#: Source: Franka Emika Hand datasheet, stroke 80 mm (2 x 40 mm); Robotiq 2F-85
+#: datasheet, stroke 85 mm; 0.075 m leaves ~5-10 mm of approach margin. A
+#: handheld object keeps at least two of its three dimensions within it.
+GRASPABLE_WIDTH_M: float = 0.075
+
+#: Canonical name of the fallback category.
+GENERIC: str = "Generic"
+
+SIZE_CLASSES: tuple[str, ...] = ("tiny", "very_small", "small", "regular", "large", "very_large")
+
+PartRole = Literal["task", "body", "accessory", "other"]
+
+
+class PriorsError(ValueError):
+    """Bad prior data; the message names the yaml file and the key."""
+
+
+# --------------------------------------------------------------------------- models
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class MaterialPrior(_Model):
+    """One material (``materials.yaml``).
+
+    ``density`` kg/m^3; ``shell`` True for hollow molded/sheet/panel parts
+    (mass = area * wall_thickness * density); ``wall_thickness`` m;
+    ``lateral_friction`` dry Coulomb coefficient for contacts; ``restitution``
+    0..1. ``*_source`` fields cite the references.
+    """
+
+    key: str = ""
+    name: str = Field(min_length=1)
+    density: float = Field(gt=50.0, lt=25000.0)
+    density_source: str = Field(min_length=10)
+    shell: bool
+    wall_thickness: float = Field(gt=0.0, lt=0.1)
+    wall_thickness_source: str = Field(min_length=10)
+    lateral_friction: float = Field(ge=0.05, le=1.5)
+    friction_source: str = Field(min_length=10)
+    restitution: float = Field(default=0.1, ge=0.0, le=1.0)
+
+    @property
+    def source(self) -> str:
+        """All sources of this entry in one string."""
+        return (
+            f"density: {self.density_source}; wall: {self.wall_thickness_source}; "
+            f"friction: {self.friction_source}"
+        )
+
+
+class SizeClassPrior(_Model):
+    """Linear size factor of one size class (``size_classes.yaml``), dimensionless."""
+
+    factor: float = Field(gt=0.0, lt=10.0)
+    source: str = Field(min_length=10)
+
+
+class LabelPrior(_Model):
+    """Defaults of one canonical part label (``labels.yaml``)."""
+
+    material: str
+    role: PartRole
+    spring: bool = False
+
+
+class LabelTable(_Model):
+    """``labels.yaml``: canonicalisation rules and per-label defaults."""
+
+    strip_prefixes: list[str] = Field(default_factory=list)
+    aliases: dict[str, str] = Field(default_factory=dict)
+    labels: dict[str, LabelPrior]
+
+
+Dims = tuple[float, float, float]
+
+
+def _check_dims(v: Dims) -> Dims:
+    if any(not (x > 0.0) for x in v):
+        raise ValueError(f"dims must be positive metres, got {v}")
+    if not (v[0] >= v[1] >= v[2]):
+        raise ValueError(f"dims must be sorted [longest, middle, shortest], got {v}")
+    if v[0] > 20.0:
+        raise ValueError(f"dims larger than 20 m are not a household object: {v}")
+    return v
+
+
+def _check_mass(v: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = v
+    if not (0.0 < lo < hi):
+        raise ValueError(f"mass_range must satisfy 0 < low < high (kg), got {v}")
+    return v
+
+
+#: Dimensions (m, sorted longest first) and a mass range (kg) as read from the
+#: yaml tables, checked on load.
+CheckedDims = Annotated[Dims, AfterValidator(_check_dims)]
+MassRange = Annotated[tuple[float, float], AfterValidator(_check_mass)]
+
+
+class VariantPrior(_Model):
+    """A sub-type of a category named by request words (e.g. ``mini fridge``).
+
+    ``dims`` m sorted [longest, middle, shortest]; ``size_class`` is the size
+    class these dims already represent relative to the category; ``mass_range``
+    kg for that size.
+    """
+
+    name: str = Field(min_length=1)
+    phrases: list[str] = Field(min_length=1)
+    dims: CheckedDims
+    size_class: SizeClass = "regular"
+    mass_range: MassRange
+    body_material: str | None = None
+    part_materials: dict[str, str] = Field(default_factory=dict)
+    source: str = Field(min_length=10)
+
+
+class CategoryPrior(_Model):
+    """Priors of one category (``categories.yaml``); see that file's header.
+
+    ``dims`` m sorted [longest, middle, shortest] of a regular-size object in
+    its closed state; ``mass_range`` kg of a regular-size object.
+    """
+
+    name: str = ""
+    synonyms: list[str] = Field(default_factory=list)
+    model_cats: list[str] = Field(default_factory=list)
+    label_tokens: list[str] = Field(default_factory=list)
+    dims: CheckedDims
+    dims_source: str = Field(min_length=10)
+    handheld: bool = False
+    mass_range: MassRange
+    mass_source: str = Field(min_length=10)
+    body_material: str
+    part_materials: dict[str, str] = Field(default_factory=dict)
+    material_source: str = Field(min_length=10)
+    spring_labels: list[str] = Field(default_factory=list)
+    spring_source: str = ""
+    task_relevant: list[str] = Field(default_factory=list)
+    accessories: list[str] = Field(default_factory=list)
+    label_synonyms: dict[str, list[str]] = Field(default_factory=dict)
+    part_evidence: dict[str, float] = Field(default_factory=dict)
+    variants: list[VariantPrior] = Field(default_factory=list)
+    notes: str = ""
+
+    @model_validator(mode="after")
+    def _consistency(self) -> "CategoryPrior":
+        if self.spring_labels and len(self.spring_source) < 10:
+            raise ValueError("spring_labels given without a spring_source")
+        if self.handheld and self.dims[1] > GRASPABLE_WIDTH_M + 1e-9:
+            raise ValueError(
+                f"handheld but the middle dimension {self.dims[1]} m exceeds the "
+                f"gripper limit GRASPABLE_WIDTH_M = {GRASPABLE_WIDTH_M} m"
+            )
+        for k, w in self.part_evidence.items():
+            if not (0.0 < w <= 1.0):
+                raise ValueError(f"part_evidence[{k!r}] must be in (0, 1], got {w}")
+        return self
+
+    def variant(self, name: str) -> VariantPrior | None:
+        """The variant called ``name`` (case-insensitive), or None."""
+        for v in self.variants:
+            if v.name.lower() == name.lower():
+                return v
+        return None
+
+
+class Priors(_Model):
+    """All prior tables, validated and cross-checked."""
+
+    size_classes: dict[str, SizeClassPrior]
+    materials: dict[str, MaterialPrior]
+    labels: LabelTable
+    categories: dict[str, CategoryPrior]
+
+
+# --------------------------------------------------------------------------- loading
+_FILES = ("materials.yaml", "labels.yaml", "size_classes.yaml", "categories.yaml")
+
+
+def _read_yaml(directory: Path | None, fname: str) -> Any:
+    try:
+        if directory is None:
+            text = resources.files("asset2sim.priors").joinpath(fname).read_text(encoding="utf-8")
+        else:
+            text = (Path(directory) / fname).read_text(encoding="utf-8")
+    except FileNotFoundError as exc:
+        raise PriorsError(f"{fname}: file not found ({exc})") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise PriorsError(f"{fname}: not valid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise PriorsError(f"{fname}: top level must be a mapping, got {type(data).__name__}")
+    return data
+
+
+def _fmt_validation(fname: str, prefix: str, exc: ValidationError) -> str:
+    lines = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in (prefix, *err["loc"]) if str(p) != "")
+        lines.append(f"{fname}: {loc}: {err['msg']}")
+    return "; ".join(lines)
+
+
+def _validate_entry(
+    model: type[BaseModel], fname: str, where: str, data: Any, **extra: Any
+) -> Any:
+    if not isinstance(data, dict):
+        raise PriorsError(f"{fname}: {where}: entry must be a mapping, got {type(data).__name__}")
+    try:
+        return model.model_validate({**data, **extra})
+    except ValidationError as exc:
+        raise PriorsError(_fmt_validation(fname, where, exc)) from exc
+
+
+def _build(directory: Path | None) -> Priors:
+    raw_mat = _read_yaml(directory, "materials.yaml")
+    materials = {
+        k: _validate_entry(MaterialPrior, "materials.yaml", k, v, key=k) for k, v in raw_mat.items()
+    }
+    raw_sc = _read_yaml(directory, "size_classes.yaml")
+    size_classes = {
+        k: _validate_entry(SizeClassPrior, "size_classes.yaml", k, v) for k, v in raw_sc.items()
+    }
+    if set(size_classes) != set(SIZE_CLASSES):
+        raise PriorsError(
+            f"size_classes.yaml: keys must be exactly {list(SIZE_CLASSES)}, got {sorted(size_classes)}"
+        )
+    facs = [size_classes[c].factor for c in SIZE_CLASSES]
+    if any(b <= a for a, b in zip(facs, facs[1:])) or size_classes["regular"].factor != 1.0:
+        raise PriorsError(
+            "size_classes.yaml: factors must increase from tiny to very_large with regular = 1.0"
+        )
+    labels = _validate_entry(LabelTable, "labels.yaml", "", _read_yaml(directory, "labels.yaml"))
+    for lab, lp in labels.labels.items():
+        if lp.material not in materials:
+            raise PriorsError(f"labels.yaml: labels.{lab}.material: unknown material {lp.material!r}")
+    for alias, target in labels.aliases.items():
+        if target not in labels.labels:
+            raise PriorsError(f"labels.yaml: aliases.{alias}: target {target!r} is not a label")
+
+    raw_cat = _read_yaml(directory, "categories.yaml")
+    categories = {
+        k: _validate_entry(CategoryPrior, "categories.yaml", k, v, name=k) for k, v in raw_cat.items()
+    }
+    if GENERIC not in categories:
+        raise PriorsError(f"categories.yaml: the fallback category {GENERIC!r} is missing")
+    seen_syn: dict[str, str] = {}
+    for name, cat in categories.items():
+        where = f"categories.yaml: {name}"
+        mats = [("body_material", cat.body_material)] + [
+            (f"part_materials.{k}", m) for k, m in cat.part_materials.items()
+        ]
+        for i, var in enumerate(cat.variants):
+            if var.body_material is not None:
+                mats.append((f"variants.{i}.body_material", var.body_material))
+            mats += [(f"variants.{i}.part_materials.{k}", m) for k, m in var.part_materials.items()]
+        for key, mat in mats:
+            if mat not in materials:
+                raise PriorsError(f"{where}.{key}: unknown material {mat!r} (not in materials.yaml)")
+        label_refs: list[tuple[str, str]] = []
+        label_refs += [(f"part_materials.{k}", k) for k in cat.part_materials]
+        label_refs += [("spring_labels", k) for k in cat.spring_labels]
+        label_refs += [("task_relevant", k) for k in cat.task_relevant]
+        label_refs += [("accessories", k) for k in cat.accessories]
+        label_refs += [(f"label_synonyms.{k}", k) for k in cat.label_synonyms]
+        label_refs += [(f"label_synonyms.{k}", v) for k, vs in cat.label_synonyms.items() for v in vs]
+        label_refs += [(f"part_evidence.{k}", k) for k in cat.part_evidence]
+        for i, var in enumerate(cat.variants):
+            label_refs += [(f"variants.{i}.part_materials.{k}", k) for k in var.part_materials]
+        for key, lab in label_refs:
+            if lab not in labels.labels:
+                raise PriorsError(
+                    f"{where}.{key}: {lab!r} is not a canonical label of labels.yaml"
+                )
+        for syn in cat.synonyms:
+            s = syn.lstrip("~").strip().lower()
+            if not s:
+                raise PriorsError(f"{where}.synonyms: empty synonym")
+            if s in seen_syn and seen_syn[s] != name:
+                raise PriorsError(
+                    f"{where}.synonyms: {s!r} is also a synonym of {seen_syn[s]} (ambiguous)"
+                )
+            seen_syn[s] = name
+    return Priors(size_classes=size_classes, materials=materials, labels=labels, categories=categories)
+
+
+@functools.lru_cache(maxsize=1)
+def load_priors() -> Priors:
+    """The packaged prior tables, validated once and cached.
+
+    Raises :class:`PriorsError` naming the yaml file and key on bad data.
+    Sources: each yaml entry; summary in ``docs/priors.md``.
+    """
+    return _build(None)
+
+
+def load_priors_from(directory: str | Path) -> Priors:
+    """Load and validate the four prior yaml files from ``directory`` (not cached).
+
+    Used to check edited tables. Raises :class:`PriorsError` (file and key in
+    the message) on missing files or bad data.
+    """
+    return _build(Path(directory))
