@@ -26,8 +26,7 @@ from pathlib import Path
 from typing import Callable
 
 from asset2sim import __version__, atomic
-from asset2sim.engines.base import SessionOptions, open_session
-from asset2sim.engines.pybullet_engine import _quiet_stdout
+from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
@@ -38,6 +37,7 @@ from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import request
 from asset2sim.tasks.publish import export_mjcf, output_folder, render, write
 from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
@@ -83,6 +83,8 @@ def refine_asset(
     skip_if_complete: bool = True,
     extras: bool = True,
     overwrite: bool = False,
+    extracted: tuple[AssetDescription, list[Finding]] | None = None,
+    reference: Path | str | None = None,
 ) -> RefineResult:
     """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``.
 
@@ -101,6 +103,14 @@ def refine_asset(
             not write (they are kept unless the run writes the same path);
             without it such a folder is refused
             (:mod:`asset2sim.tasks.publish.output_folder`).
+        extracted: the asset already read by
+            :func:`asset2sim.tasks.ingest.extract.extract_asset_checked` for
+            this ``asset_dir``, ``asset_id`` and ``category`` (description,
+            validation findings), e.g. by the flow's prepare stage; it is
+            then not read again. None: read here.
+        reference: PartNet-Mobility folder with the reference (GenSim2) for
+            the extras' evaluation (scale deviation, initial joint deviation,
+            task-relevant joints); None: evaluated without one.
 
     Returns:
         :class:`RefineResult`; ``report.failure_mode`` is "none" when every
@@ -117,7 +127,7 @@ def refine_asset(
     _check_prompt(prompt)
     est = _open_estimator(config)  # first: a model backend without its key fails before any work
     log = _StageLog(progress)
-    asset, findings = _extract(asset_dir, out_dir, asset_id, category)
+    asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted)
     chash = run_hash(asset.input_hash, config, prompt, category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
@@ -132,7 +142,7 @@ def refine_asset(
     _announce_post_check(att, log)
     report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-    extra_paths = _extras(out_dir, report, att.check, log) if extras else {}
+    extra_paths = _extras(out_dir, report, att, log, reference) if extras else {}
     _write_marker(owner, asset.input_hash, chash)
     return RefineResult(out_dir=out_dir, report=report, overlay=att.overlay, extras=extra_paths)
 
@@ -171,11 +181,16 @@ def _open_estimator(config: RefineConfig) -> estimate.Estimator:
         raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure") from exc
 
 
-def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None) -> tuple[AssetDescription, list]:
-    """Stage 1: the checked asset and its validation findings; the output
-    folder checked against it. RefineError("invalid_input") with the codes."""
+def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
+             extracted: tuple[AssetDescription, list[Finding]] | None = None) -> tuple[AssetDescription, list[Finding]]:
+    """Stage 1: the checked asset and its validation findings (``extracted``
+    when the caller has read them already); the output folder checked
+    against it. RefineError("invalid_input") with the codes."""
     try:
-        asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
+        if extracted is None:
+            asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
+        else:
+            asset, findings = extracted[0], list(extracted[1])
         write.check_output_folder(asset, out_dir)
     except (extract.AssetError, write.OutputError) as exc:
         err = RefineError(str(exc), "invalid_input")
@@ -259,9 +274,13 @@ class _Attempt:
     root_rotation: object
     check: postcheck.PostCheck
     rounds: list[EscalationRound]
+    rewritten: bool = False
+    """Written again after another attempt: files that attempt wrote (collision
+    pieces) may differ from those ``check`` measured."""
 
     def rewrite(self, out_dir: Path) -> None:
         """Write this attempt's files again (after another attempt overwrote them)."""
+        self.rewritten = True
         write.write_output(
             self.asset, self.overlay, out_dir, self.state, copy=False,
             collision_overrides=self.overrides, root_rotation=self.root_rotation,
@@ -491,11 +510,14 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
     )
 
 
-def _extras(out_dir: Path, report: RefineReport, check: postcheck.PostCheck, log: _StageLog) -> dict[str, str]:
+def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None = None) -> dict[str, str]:
     """Exports, renders and the HTML report, then ``report.json`` again with
-    their notes and the final stage times. Returns name -> path."""
-    with _quiet_stdout():  # engines and renderers print from C; the library must not
-        paths = _write_extras(out_dir, report, check, log.say)
+    their notes and the final stage times. The evaluation records the final
+    post-check's rest test (when it measured the files as they are now)
+    instead of simulating it again. Returns name -> path."""
+    recording = None if att.rewritten else att.check.recording
+    with quiet_stdout():  # engines and renderers print from C; the library must not
+        paths = _write_extras(out_dir, report, log.say, recording, reference)
     log.lap("extras")
     report.stage_seconds = log.times
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
@@ -543,10 +565,12 @@ def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescri
     owner.remove_unreferenced(write.collision_folder(asset), used)
 
 
-def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> dict[str, str]:
-    """Optional outputs: MJCF export, renders, HTML report. Each failure (an
-    engine or renderer unavailable included) is a note in the report, never
-    the loss of the refined asset."""
+def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording: postcheck.RestRecording | None = None,
+                  reference: Path | str | None = None) -> dict[str, str]:
+    """Optional outputs: MJCF export, renders, evaluation and HTML report
+    (the renders reused in it). Each failure (an engine or renderer
+    unavailable included) is a note in the report, never the loss of the
+    refined asset."""
     out: dict[str, str] = {}
     try:
         out["mjcf"] = str(export_mjcf.export_mjcf(out_dir))
@@ -554,13 +578,16 @@ def _write_extras(out_dir: Path, report: RefineReport, check, say: Progress) -> 
         report.notes.append(f"MJCF export skipped: {exc}")
     except Exception as exc:  # export must not lose the refined asset
         report.notes.append(f"MJCF export failed: {exc}")
+    views = None
     try:
-        render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views")
+        views = render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views")
         out["views"] = str(out_dir / "views")
     except Exception as exc:
         report.notes.append(f"renders failed: {exc}")
     try:
-        out["html"] = str(evaluate.evaluate_refined(out_dir, report)["report"])
+        paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference,
+                                          views=views, views_state=report.initial_joint_positions)
+        out["html"] = str(paths["report"])
     except Exception as exc:
         report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
     return out

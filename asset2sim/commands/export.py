@@ -53,13 +53,13 @@ def run(args: argparse.Namespace) -> int:
     if "mujoco" not in available_engines():
         print("asset2sim export: MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'", file=sys.stderr)
         return 2
-    from asset2sim.engines.fake import UrdfError
+    from asset2sim.urdf import UrdfError
     from asset2sim.engines.mjcf import MjcfError
     from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
 
     try:
         path = export_mjcf(out, visuals=not args.no_visuals, check=False)
-        from asset2sim.engines.fake import read_initial_state
+        from asset2sim.engines.loading import read_initial_state
 
         check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out))
     except (FileNotFoundError, ValueError, UrdfError) as exc:

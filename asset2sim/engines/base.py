@@ -20,6 +20,8 @@ heavy engines are imported lazily by name.
 from __future__ import annotations
 
 import importlib
+import os
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Protocol
@@ -353,3 +355,25 @@ def open_viewer(engine: str, urdf_path: Path | str) -> Viewer:
     if engine not in _VIEWERS:
         raise EngineUnsupported(f"engine {engine!r} cannot draw images")
     return _VIEWERS[engine](Path(urdf_path))
+
+
+@contextmanager
+def quiet_stdout():
+    """Silence C-level prints of engines and renderers (Bullet's b3Warning ...)
+    on file descriptor 1 while the block runs: the library never prints.
+
+    Not reentrant-safe across threads (process-wide file descriptors); nested
+    use in one thread is fine."""
+    try:
+        fd = os.dup(1)
+    except OSError:  # no stdout
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(fd, 1)
+        os.close(fd)
+        os.close(devnull)

@@ -52,17 +52,9 @@ from lxml import etree
 from scipy.spatial import ConvexHull
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.fake import (
-    BULLET_DEFAULT_FRICTION,
-    BULLET_DEFAULT_INERTIA,
-    BULLET_DEFAULT_MASS,
-    BULLET_PLANE_FRICTION,
-    CollisionPiece,
-    UrdfModel,
-    collision_pieces,
-    matrix_quat_wxyz,
-    read_urdf,
-)
+from asset2sim.engines.loading import BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, read_urdf
+from asset2sim.urdf import UrdfModel
+from asset2sim.frames import matrix_quat_wxyz
 from asset2sim.frames import translation_matrix
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfStyle, write_urdf

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
-from asset2sim.engines.fake import read_urdf
+from asset2sim.engines.loading import read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
 
 

@@ -1,7 +1,7 @@
 """PhysX engine (SAPIEN 3 on the CPU, physics only) under the SPEC's conventions.
 
 The articulation is built from the same reading of the URDF as the MuJoCo
-engine (:func:`asset2sim.engines.fake.read_urdf`): the same inertials (a link
+engine (:func:`asset2sim.engines.loading.read_urdf`): the same inertials (a link
 without ``<inertial>`` gets PyBullet's 1 kg and unit inertia, as in the
 reference engine), the same joint frames, and the same convex collision pieces
 (one hull per OBJ group, as PyBullet builds them). No render system is created
@@ -42,15 +42,8 @@ import sapien  # noqa: F401  - an ImportError here marks the engine unavailable
 from sapien import physx
 
 from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
-from asset2sim.engines.fake import (
-    BULLET_DEFAULT_FRICTION,
-    BULLET_DEFAULT_INERTIA,
-    BULLET_DEFAULT_MASS,
-    BULLET_PLANE_FRICTION,
-    matrix_quat_wxyz,
-    collision_pieces,
-    read_urdf,
-)
+from asset2sim.engines.loading import BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION, collision_pieces, read_urdf
+from asset2sim.frames import matrix_quat_wxyz
 
 #: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive that carries the
 #: passive joint forces: large enough that the drive acts as a velocity

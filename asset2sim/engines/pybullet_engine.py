@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import (
+    quiet_stdout,
     ContactPair,
     SessionOptions,
     register_engine,
@@ -29,24 +30,6 @@ from asset2sim.engines.base import (
 )
 
 _TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
-
-
-@contextmanager
-def _quiet_stdout():
-    """Silence Bullet's C-level prints (b3Warning ...) on fd 1 during loading."""
-    try:
-        fd = os.dup(1)
-    except OSError:  # no stdout
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(fd, 1)
-        os.close(fd)
-        os.close(devnull)
 
 
 _QUIET_LOCK = threading.Lock()
@@ -102,7 +85,7 @@ class PyBulletSession:
         self._p = p
         self.options = options
         conv = options.conventions
-        with _quiet_stdout():
+        with quiet_stdout():
             self.cid = p.connect(p.DIRECT)
         try:
             p.setTimeStep(conv.timestep, physicsClientId=self.cid)
@@ -116,7 +99,7 @@ class PyBulletSession:
                 | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
                 | p.URDF_USE_INERTIA_FROM_FILE
             )
-            with _quiet_stdout():
+            with quiet_stdout():
                 self.body = p.loadURDF(
                     str(urdf_path),
                     useFixedBase=options.fixed_base,

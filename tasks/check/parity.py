@@ -57,7 +57,7 @@ def evaluate_engine(
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
-    from asset2sim.engines.fake import read_initial_state
+    from asset2sim.engines.loading import read_initial_state
     from asset2sim.tasks.check import metrics
     from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
 

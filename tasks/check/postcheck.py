@@ -14,12 +14,96 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from asset2sim.engines.base import SessionOptions, Spring, open_session
-from asset2sim.schemas.config import RefineConfig
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session
+from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import metrics
+from asset2sim.tasks.check import metrics, parity
+from asset2sim.tasks.synthesize.physics import max_stable_damping
+
+
+class _StepRecorder:
+    """Wraps a session; records the root position (m) and the ground
+    penetration the step's own contacts left (m) after every step."""
+
+    def __init__(self, session: SimSession):
+        self._s = session
+        self.root: list[np.ndarray] = []
+        self.ground: list[float] = []
+
+    def __getattr__(self, name):
+        return getattr(self._s, name)
+
+    def step(self, n: int = 1) -> None:
+        for _ in range(n):
+            self._s.step(1)
+            self.root.append(self._s.root_pose()[0])
+            self.ground.append(float(self._s.step_ground_penetration()))
+
+
+@dataclass
+class RestRecording:
+    """One SPEC rest test recorded step by step, with what it was run on.
+
+    ``trace``: the SPEC recording (:class:`~asset2sim.tasks.check.metrics.RestTrace`);
+    ``root_series`` (K, 3) m root position after every step of settling and
+    test (K = M + N - 1 steps); ``ground_series`` (K,) m deepest ground
+    penetration after every step; ``joint_series`` joint -> (K,) rad or m
+    (settling then test). ``engine``, ``urdf`` (resolved path),
+    ``initial_state`` (rad/m), ``springs`` and ``conventions``: the
+    simulation it belongs to (:meth:`matches`).
+    """
+
+    trace: metrics.RestTrace
+    root_series: np.ndarray
+    ground_series: np.ndarray
+    joint_series: dict[str, np.ndarray]
+    engine: str
+    urdf: Path
+    initial_state: dict[str, float]
+    springs: dict[str, Spring]
+    conventions: SimConventions
+
+    def matches(self, engine: str, urdf: Path | str, initial_state: dict[str, float],
+                springs: dict[str, Spring], conventions: SimConventions) -> bool:
+        """True when this recording is the rest test of exactly that
+        simulation: same engine, URDF file, initial state, springs and
+        conventions (floats compared exactly)."""
+        return (
+            self.engine == engine
+            and self.urdf == Path(urdf).resolve()
+            and dict(self.initial_state) == dict(initial_state)
+            and dict(self.springs) == dict(springs)
+            and self.conventions == conventions
+        )
+
+
+def record_rest_test(session: SimSession, conventions: SimConventions, urdf: Path | str,
+                     initial_state: dict[str, float], springs: dict[str, Spring]) -> RestRecording:
+    """Run the SPEC rest test (:func:`asset2sim.tasks.check.metrics.run_rest_test`)
+    on ``session`` in place, recording root position and ground penetration
+    after every step. ``urdf``, ``initial_state`` and ``springs`` are the
+    options ``session`` was opened with (recorded for :meth:`RestRecording.matches`).
+
+    Returns:
+        The :class:`RestRecording`.
+    """
+    rec = _StepRecorder(session)
+    trace = metrics.run_rest_test(rec, conventions)
+    return RestRecording(
+        trace=trace,
+        root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)),
+        ground_series=np.array(rec.ground),
+        joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
+        engine=session.engine,
+        urdf=Path(urdf).resolve(),
+        initial_state=dict(initial_state),
+        springs=dict(springs),
+        conventions=conventions,
+    )
 
 
 @dataclass
@@ -33,6 +117,8 @@ class PostCheck:
     sagging: list[str] = field(default_factory=list)
     engine_results: dict[str, list[MetricResult]] = field(default_factory=dict)
     """Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation]."""
+    recording: RestRecording | None = None
+    """The rest test step by step (reused by the evaluation of the same files)."""
 
     def engine_failures(self) -> tuple[bool, list[str]]:
         """(any other engine unstable, joints oscillating in another engine);
@@ -79,16 +165,18 @@ def run_post_check(
     asset in ``engine`` (SPEC conventions), and the SPEC metrics in every other
     engine of ``config.engines`` (``tasks.parity``; missing engines skipped)."""
     conv = config.sim
+    springs = springs_of(overlay)
     session = open_session(
         engine,
         urdf_path,
-        SessionOptions(initial_state=initial_state, springs=springs_of(overlay), conventions=conv),
+        SessionOptions(initial_state=initial_state, springs=springs, conventions=conv),
     )
     try:
         pen = metrics.penetration(session)
-        trace = metrics.run_rest_test(session, conv)
+        recording = record_rest_test(session, conv, urdf_path, initial_state, springs)
     finally:
         session.close()
+    trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
     drift = metrics.joint_drift(trace)
@@ -110,10 +198,9 @@ def run_post_check(
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
     engine_results = {}
     if others:
-        from asset2sim.tasks.check import parity
-
         engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
-    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results)
+    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt], trace=trace, sag=drift, sagging=sagging,
+                     engine_results=engine_results, recording=recording)
 
 
 def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay, dict[str, dict[str, float]], str]:
@@ -141,8 +228,6 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
             continue
         damping = max(d.damping * factor, 1e-4)
         if d.inertia_axis:
-            from asset2sim.tasks.synthesize.physics import max_stable_damping
-
             damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
         new = d.model_copy(
             update={

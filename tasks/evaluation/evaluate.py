@@ -42,6 +42,7 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.metrics import METRIC_INFO, REST_TEST_METRICS
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
+from asset2sim.tasks.check.postcheck import RestRecording, record_rest_test
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
@@ -769,29 +770,6 @@ def build_context(
 
 
 # ------------------------------------------------------------------ simulation
-class _Recorder:
-    """Wraps a session; records root position, joint positions and ground
-    penetration after every step (PyBullet: from the step's own contacts)."""
-
-    def __init__(self, session):
-        self._s = session
-        self.root: list[np.ndarray] = []
-        self.ground: list[float] = []
-        self.joints: list[dict[str, float]] = []
-
-    def __getattr__(self, name):
-        return getattr(self._s, name)
-
-    def _ground_now(self) -> float:
-        return float(self._s.step_ground_penetration())
-
-    def step(self, n: int = 1) -> None:
-        for _ in range(n):
-            self._s.step(1)
-            self.root.append(self._s.root_pose()[0])
-            self.ground.append(self._ground_now())
-
-
 def _link_centres(session) -> dict[str, np.ndarray]:
     out = {}
     for name in session.link_names:
@@ -823,15 +801,22 @@ def _point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
 
 
 def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
-               closed_for: list[str] | None = None, rest_test: bool = True) -> EngineRun:
+               closed_for: list[str] | None = None, rest_test: bool = True,
+               recording: RestRecording | None = None) -> EngineRun:
     """Open ``engine`` on the asset and take every raw measurement once:
     penetration at the initial state, extents, masses, the SPEC rest test with
     per-step root/ground recording, and (PyBullet) the probes from the initial
     state. ``closed_for``: joints whose closed end is computed in this
     (PyBullet) session into ``ctx.closed`` before anything is stepped.
     ``rest_test=False``: no rest test (its measurement was taken elsewhere,
-    e.g. by the post-check); ``trace`` and the series stay None. Errors
-    are caught into ``EngineRun.error``."""
+    e.g. by the post-check); ``trace`` and the series stay None.
+    ``recording``: the post-check's step-by-step rest test
+    (:class:`~asset2sim.tasks.check.postcheck.RestRecording`); when it
+    :meth:`~asset2sim.tasks.check.postcheck.RestRecording.matches` this
+    engine, URDF, initial state, springs and conventions, its trace and
+    series are recorded and the rest test is not simulated again (the probes
+    start from the saved initial state either way: ``restoreState`` restores
+    Bullet's contact manifolds too). Errors are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()
     run = EngineRun(engine)
     try:
@@ -857,14 +842,12 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 run.point_cloud = _point_cloud(session)
             saved = session.save_state()
         if rest_test:
-            rec = _Recorder(session)
-            run.trace = spec_metrics.run_rest_test(rec, ctx.conventions)
-            run.root_series = np.array(rec.root) if rec.root else np.zeros((0, 3))
-            run.ground_series = np.array(rec.ground)
-            run.joint_series = {
-                n: np.concatenate([run.trace.settle_joints.get(n, np.empty(0)), run.trace.joints[n][1:]])
-                for n in run.trace.joints
-            }
+            if recording is None or not recording.matches(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions):
+                recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
+            run.trace = recording.trace
+            run.root_series = recording.root_series
+            run.ground_series = recording.ground_series
+            run.joint_series = recording.joint_series
         if pyb and closed_for is not None:
             # In a fresh fixed-base session: contact manifolds cached here would
             # change the closed ends' penetration tie-breaks.

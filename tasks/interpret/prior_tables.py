@@ -46,11 +46,14 @@ class PriorsError(ValueError):
 
 # --------------------------------------------------------------------------- models
 
-class _Model(BaseModel):
+
+class PriorModel(BaseModel):
+    """Base of the prior models: no extra fields, immutable, finite numbers."""
+
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
-class MaterialPrior(_Model):
+class MaterialPrior(PriorModel):
     """One material (``materials.yaml``).
 
     ``density`` kg/m^3; ``shell`` True for hollow molded/sheet/panel parts
@@ -79,14 +82,14 @@ class MaterialPrior(_Model):
         )
 
 
-class SizeClassPrior(_Model):
+class SizeClassPrior(PriorModel):
     """Linear size factor of one size class (``size_classes.yaml``), dimensionless."""
 
     factor: float = Field(gt=0.0, lt=10.0)
     source: str = Field(min_length=10)
 
 
-class LabelPrior(_Model):
+class LabelPrior(PriorModel):
     """Defaults of one canonical part label (``labels.yaml``)."""
 
     material: str
@@ -94,7 +97,7 @@ class LabelPrior(_Model):
     spring: bool = False
 
 
-class LabelTable(_Model):
+class LabelTable(PriorModel):
     """``labels.yaml``: canonicalisation rules and per-label defaults."""
 
     strip_prefixes: list[str] = Field(default_factory=list)
@@ -128,7 +131,7 @@ CheckedDims = Annotated[Dims, AfterValidator(_check_dims)]
 MassRange = Annotated[tuple[float, float], AfterValidator(_check_mass)]
 
 
-class VariantPrior(_Model):
+class VariantPrior(PriorModel):
     """A sub-type of a category named by request words (e.g. ``mini fridge``).
 
     ``dims`` m sorted [longest, middle, shortest]; ``size_class`` is the size
@@ -146,7 +149,7 @@ class VariantPrior(_Model):
     source: str = Field(min_length=10)
 
 
-class CategoryPrior(_Model):
+class CategoryPrior(PriorModel):
     """Priors of one category (``categories.yaml``); see that file's header.
 
     ``dims`` m sorted [longest, middle, shortest] of a regular-size object in
@@ -196,7 +199,7 @@ class CategoryPrior(_Model):
         return None
 
 
-class Priors(_Model):
+class Priors(PriorModel):
     """All prior tables, validated and cross-checked."""
 
     size_classes: dict[str, SizeClassPrior]
@@ -206,6 +209,7 @@ class Priors(_Model):
 
 
 # --------------------------------------------------------------------------- loading
+
 _FILES = ("materials.yaml", "labels.yaml", "size_classes.yaml", "categories.yaml")
 
 

@@ -57,7 +57,9 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, RequestSpec
-from asset2sim.tasks.interpret import priors as _priors
+from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, request_category
+from asset2sim.tasks.interpret.part_labels import canonical_label
+from asset2sim.tasks.interpret.prior_tables import load_priors
 
 _L = r"(?<![\w-])"
 _R = r"(?![\w-])"
@@ -302,10 +304,10 @@ class _Tokens:
 
 @functools.lru_cache(maxsize=1)
 def _size_factors() -> dict[str, float]:
-    return {k: v.factor for k, v in _priors.load_priors().size_classes.items()}
+    return {k: v.factor for k, v in load_priors().size_classes.items()}
 
 
-def _parse_size(low: str, mentions: list[_priors.CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit]]:
+def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit]]:
     used: list[_Hit] = []
     mention_starts = [m.start for m in mentions]  # left to right
     for h in _scan(low, _SIZE_TABLE):
@@ -365,7 +367,7 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
         chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
     for m in _PART_RX.finditer(low):
-        label = _priors.canonical_label(m.group(0)) or m.group(0)
+        label = canonical_label(m.group(0)) or m.group(0)
         ordinals: list[int] = []
         quant = False
         pstart = m.start()
@@ -502,8 +504,8 @@ def parse_request(text: str) -> RequestSpec:
     )
     matched: list[tuple[int, str]] = []
 
-    mentions = _priors.find_category_mentions(low)
-    hint, head = _priors.request_category(low)
+    mentions = find_category_mentions(low)
+    hint, head = request_category(low)
     if head is not None:
         matched.append((head.start, head.phrase))
 

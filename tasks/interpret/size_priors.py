@@ -121,7 +121,7 @@ def fits_gripper(dims: Iterable[float]) -> bool:
     return gripper_limit_factor(dims) >= 1.0 - 1e-9
 
 
-def target_size(category: str, request: "RequestSpec | str | None" = None) -> SizeTarget:
+def target_size(category: str, request: RequestSpec | str | None = None) -> SizeTarget:
     """Target dimensions and mass range for an output asset.
 
     ``request`` is a parsed :class:`~asset2sim.schemas.request.RequestSpec`,
@@ -135,8 +135,6 @@ def target_size(category: str, request: "RequestSpec | str | None" = None) -> Si
     gripper. Units: m, kg.
     """
     if isinstance(request, str):
-        from asset2sim.tasks.interpret.request import parse_request
-
         request = parse_request(request)
     cat = category_prior(category)
     size_class = request.size_class if request is not None else None

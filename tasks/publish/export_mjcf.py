@@ -104,7 +104,7 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float])
     """
     import mujoco
 
-    from asset2sim.engines.fake import read_urdf
+    from asset2sim.engines.loading import read_urdf
 
     try:
         with mujoco_messages():
@@ -182,7 +182,7 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     """
     import mujoco  # noqa: F401  - the clear ImportError when the extra is missing
 
-    from asset2sim.engines.fake import read_initial_state
+    from asset2sim.engines.loading import read_initial_state
 
     out_dir = Path(out_dir)
     urdf = out_dir / URDF_NAME

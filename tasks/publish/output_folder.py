@@ -17,6 +17,9 @@ decides which files are the product's and keeps that record on disk:
   (and the temporary files of those), never anything else; a folder holding
   files the product did not write is refused unless ``overwrite=True`` (those
   files are then left alone unless the run writes the same path).
+- **later writers**: ``evaluate``, ``export`` and ``render`` writing into a
+  finished output folder record their files too (:func:`adopting`), so a
+  later rewrite removes them and does not take them for a user's files.
 - **finish**: :meth:`OwnedFolder.finish` writes the completion marker only when
   every file the run wrote exists (a write that failed, e.g. on a full disk,
   leaves no marker, so a rerun redoes the asset).
@@ -27,12 +30,13 @@ Errors are :class:`OutputError` with a ``code`` (``OUTPUT_*``) and the
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 from asset2sim import atomic
 
@@ -274,7 +278,7 @@ class OwnedFolder:
                 self._save()
 
     def _save(self) -> None:
-        atomic.write_json(self.root / RECORD_NAME, {"version": 1, "complete": False, "files": sorted(self.files)})
+        atomic.write_json(self.root / RECORD_NAME, {"version": 1, "files": sorted(self.files)})
 
     def record(self, paths: Iterable[Path | str]) -> None:
         """Record files of this folder as the run's own (absolute paths or
@@ -365,7 +369,7 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
     owner = OwnedFolder(root=root, given=given, source=src)
     if previous:
         # claim first, so a kill during the removal leaves them recorded
-        atomic.write_json(root / RECORD_NAME, {"version": 1, "complete": False, "files": sorted(previous)})
+        atomic.write_json(root / RECORD_NAME, {"version": 1, "files": sorted(previous)})
     (root / MARKER_NAME).unlink(missing_ok=True)
     for rel in sorted(previous):
         _remove_with_temps(root, rel)
@@ -375,3 +379,47 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
         _ACTIVE[root] = owner
         atomic.add_observer(_dispatch)
     return owner
+
+
+def product_folder(path: Path | str) -> Path | None:
+    """The output folder of asset2sim that ``path`` is (or lies in): the
+    nearest folder, ``path`` included, holding a completion marker or an
+    ownership record; None when there is none."""
+    p = Path(os.path.abspath(path))
+    for folder in (p, *p.parents):
+        if (folder / MARKER_NAME).is_file() or (folder / RECORD_NAME).is_file():
+            return folder.resolve()
+    return None
+
+
+@contextlib.contextmanager
+def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
+    """While the block runs, every atomic write into the asset2sim output
+    folder around ``path`` (:func:`product_folder`) is added to its ownership
+    record (before the file is created), so a later rewrite removes it
+    instead of refusing the folder. Nothing happens when ``path`` is not in
+    such a folder. Yields the :class:`OwnedFolder` or None."""
+    root = product_folder(path)
+    if root is None:
+        yield None
+        return
+    try:
+        data = json.loads((root / RECORD_NAME).read_text(encoding="utf-8"))
+        files = {r for r in (_safe_rel(x) for x in data.get("files", [])) if r is not None}
+    except (OSError, ValueError, AttributeError):
+        files = set()
+    owner = OwnedFolder(root=root, given=root, source=root / "\x00none", files=files)
+    with _ACTIVE_LOCK:
+        previous = _ACTIVE.get(root)
+        _ACTIVE[root] = owner
+        atomic.add_observer(_dispatch)
+    try:
+        yield owner
+    finally:
+        with _ACTIVE_LOCK:
+            if previous is not None:
+                _ACTIVE[root] = previous
+            elif _ACTIVE.get(root) is owner:
+                del _ACTIVE[root]
+            if not _ACTIVE:
+                atomic.remove_observer(_dispatch)

@@ -11,7 +11,7 @@ estimators' benchmarks and baselines
 2. analyze (:func:`asset2sim.tasks.geometry.analyze.analyze_asset`; skipped
    when the geometry is given),
 3. request and category (:func:`asset2sim.tasks.interpret.request.parse_request`,
-   :func:`asset2sim.tasks.interpret.priors.recognize_category`),
+   :func:`asset2sim.tasks.interpret.categories.recognize_category`),
 4. the geometric closed states in a kinematic PyBullet session
    (:mod:`asset2sim.tasks.geometry.closed_state`): closed ends, the closed
    object's extents, the links each movable joint moves and the height of
@@ -45,7 +45,8 @@ from asset2sim.tasks.geometry.closed_state import (
     subtree_links,
 )
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.interpret import priors, request
+from asset2sim.tasks.interpret.categories import recognize_category
+from asset2sim.tasks.interpret.request import parse_request
 
 
 @dataclass
@@ -94,11 +95,11 @@ def interpret(asset: AssetDescription, prompt: str, category: str | None = None)
 
     ``category`` (e.g. a manifest column) wins over the asset's own; the
     semantic labels of the links and the prompt's words decide otherwise
-    (:func:`asset2sim.tasks.interpret.priors.recognize_category`).
+    (:func:`asset2sim.tasks.interpret.categories.recognize_category`).
     """
-    spec = request.parse_request(prompt)
+    spec = parse_request(prompt)
     labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
-    match = priors.recognize_category(category or asset.category, labels, prompt)
+    match = recognize_category(category or asset.category, labels, prompt)
     return Interpretation(spec, getattr(match, "name", None) or str(match), getattr(match, "reason", ""))
 
 

@@ -10,21 +10,10 @@ import numpy as np
 import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring, available_engines, open_session
-from asset2sim.engines.fake import (
-    BULLET_DEFAULT_INERTIA,
-    BULLET_DEFAULT_MASS,
-    FLAT_HULL_THICKNESS,
-    FakeBehaviour,
-    FakeSession,
-    UrdfError,
-    collision_pieces,
-    fake_behaviour,
-    matrix_quat_wxyz,
-    read_initial_state,
-    read_urdf,
-    rpy_matrix,
-    write_contract_asset,
-)
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, FLAT_HULL_THICKNESS, collision_pieces, read_initial_state, read_urdf
+from asset2sim.engines.fake import FakeBehaviour, FakeSession, fake_behaviour, write_contract_asset
+from asset2sim.urdf import UrdfError
+from asset2sim.frames import matrix_quat_wxyz, rpy_matrix
 from asset2sim.mesh_io import obj_groups
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check import metrics

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring, available_engines, open_session
-from asset2sim.engines.fake import BULLET_DEFAULT_MASS, read_urdf, write_contract_asset
+from asset2sim.engines.loading import BULLET_DEFAULT_MASS, read_urdf
+from asset2sim.engines.fake import write_contract_asset
 from asset2sim.frames import translation_matrix
 from asset2sim.urdf import write_urdf
 
@@ -21,7 +22,7 @@ from asset2sim.engines.mjcf import (  # noqa: E402
     contact_policy,
     urdf_to_mjcf,
 )
-from asset2sim.engines.fake import collision_pieces  # noqa: E402
+from asset2sim.engines.loading import collision_pieces  # noqa: E402
 
 
 def _compile(build):

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from asset2sim.engines.base import SessionOptions, available_engines, open_session
-from asset2sim.engines.fake import BULLET_DEFAULT_MASS, read_urdf, write_contract_asset
+from asset2sim.engines.loading import BULLET_DEFAULT_MASS, read_urdf
+from asset2sim.engines.fake import write_contract_asset
 
 pytestmark = pytest.mark.physx
 pytest.importorskip("sapien")

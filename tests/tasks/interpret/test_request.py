@@ -449,7 +449,7 @@ def test_a_long_request_parses_like_its_sentence() -> None:
 def test_words_before_a_mention_read_backwards_match_the_split(text: str, i: int) -> None:
     import re
 
-    from asset2sim.tasks.interpret.priors import _last_words
+    from asset2sim.tasks.interpret.categories import _last_words
 
     i = min(i, len(text))
     expected = re.findall(r"[a-z']+", re.split(r"[.,;:!?()]", text[:i])[-1])[-2:]

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.fake import read_initial_state, read_urdf, write_contract_asset
+from asset2sim.engines.loading import read_initial_state, read_urdf
+from asset2sim.engines.fake import write_contract_asset
 
 pytestmark = pytest.mark.mujoco
 mujoco = pytest.importorskip("mujoco")

@@ -1,0 +1,207 @@
+"""What every engine loads from a URDF: the one reading the PyBullet,
+PhysX, MuJoCo and fake engines share, so they see the same inertials, frames
+and collision hulls.
+
+- :func:`read_urdf`: :func:`asset2sim.urdf.read_urdf` (strict) limited to the
+  joint types the engines build;
+- :func:`mesh_hulls` / :func:`collision_pieces`: the point sets whose convex
+  hulls PyBullet collides with (one hull per OBJ ``o``/``g`` group), flat
+  hulls thickened;
+- :func:`read_initial_state`: ``initial_state.json`` beside a URDF;
+- Bullet's defaults for links without inertials and for contact friction,
+  which the other engines copy so that every engine simulates the same file.
+
+Pure numpy: no simulator is imported here. Units SI, radians.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import urdf
+from asset2sim.mesh_io import MeshReadError, hull_point_sets
+from asset2sim.urdf import SIMULATED_JOINT_TYPES, UrdfError, UrdfModel
+
+#: What PyBullet 3.2.7 gives a link that has no ``<inertial>``: 1 kg, identity
+#: inertia (kg*m^2) at the link origin (Bullet's ``UrdfParser``; checked in
+#: ``tests/asset2sim/test_engines_fake.py``).
+BULLET_DEFAULT_MASS = 1.0
+BULLET_DEFAULT_INERTIA = (1.0, 1.0, 1.0)
+#: PyBullet's default lateral friction of a link and of its ground plane; the
+#: contact friction is their product (Bullet multiplies), 0.25.
+BULLET_DEFAULT_FRICTION = 0.5
+BULLET_PLANE_FRICTION = 0.5
+
+
+def read_urdf(path: Path | str) -> UrdfModel:
+    """The engines' reading of a URDF file: :func:`asset2sim.urdf.read_urdf`
+    in mode strict, limited to the joint types the engines build (revolute,
+    continuous, prismatic, fixed).
+
+    Raises:
+        UrdfError: unreadable XML, a malformed number, an unsupported joint
+            type, a joint naming a missing link, or not exactly one root link
+            (names the file, line and link or joint).
+    """
+    return urdf.read_urdf(path, joint_types=SIMULATED_JOINT_TYPES)
+
+
+# ------------------------------------------------------------ collision hulls
+_HULL_CACHE: dict[tuple, list[np.ndarray]] = {}
+
+
+def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
+    """Point sets (k, 3), m, whose convex hulls PyBullet uses for a collision
+    mesh ``path`` scaled by ``scale`` (3,): one per OBJ group; other formats
+    (STL, ...) as one set of all vertices (:func:`asset2sim.mesh_io.hull_point_sets`). Cached by file
+    modification time. Sets with fewer than 4 points or no volume are kept:
+    engines decide what to do with them.
+
+    Raises:
+        UrdfError: the mesh cannot be read.
+    """
+    path = Path(path)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise UrdfError(f"collision mesh {path} does not exist") from exc
+    key = (str(path), st.st_mtime_ns, st.st_size)
+    groups = _HULL_CACHE.get(key)
+    if groups is None:
+        try:
+            groups = hull_point_sets(path)
+        except MeshReadError as exc:
+            raise UrdfError(str(exc)) from exc
+        if len(_HULL_CACHE) > 4096:
+            _HULL_CACHE.clear()
+        _HULL_CACHE[key] = groups
+    s = np.asarray(scale, float).reshape(3)
+    return [g * s for g in groups]
+
+
+def hull_is_solid(points: np.ndarray, tol: float = 1e-9) -> bool:
+    """True when the points (k, 3) span a volume (not all on one plane/line)."""
+    p = np.asarray(points, float)
+    if len(p) < 4:
+        return False
+    c = p - p.mean(axis=0)
+    sv = np.linalg.svd(c, compute_uv=False)
+    return bool(sv[-1] > tol * max(1.0, sv[0]))
+
+
+#: Thickness (m) given to a collision hull whose points are coplanar: PyBullet
+#: keeps such a hull and inflates it by its 1 mm collision margin on each side,
+#: PhysX cannot cook it and MuJoCo refuses it, so both get a 2 mm slab instead.
+FLAT_HULL_THICKNESS = 0.002
+
+
+@dataclass
+class CollisionPiece:
+    """One convex collision shape of a link, as PyBullet builds it.
+
+    ``kind``: ``hull`` (``points`` (k, 3) m in the collision frame, scale
+    applied), ``box`` (``size`` (3,) full extents m), ``sphere`` (``radius``),
+    ``cylinder`` (``radius``, ``length`` along z). ``origin`` (4, 4) collision
+    frame in the link frame. ``collision`` index of the URDF ``<collision>``,
+    ``group`` index of the OBJ group; ``source`` the mesh file; ``whole_file``
+    True when the hull is the whole (single-group) file unchanged, so exports
+    may reference the file itself; ``thickened`` True for a coplanar group made
+    a slab of :data:`FLAT_HULL_THICKNESS`.
+    """
+
+    link: str
+    collision: int
+    group: int
+    kind: str
+    origin: np.ndarray
+    points: np.ndarray | None = None
+    size: np.ndarray | None = None
+    radius: float | None = None
+    length: float | None = None
+    source: Path | None = None
+    scale: np.ndarray | None = None
+    whole_file: bool = False
+    thickened: bool = False
+
+
+def _thicken(points: np.ndarray, thickness: float) -> np.ndarray | None:
+    p = np.asarray(points, float)
+    c = p.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+    if len(sv) < 2 or sv[1] <= 1e-12 * max(1.0, sv[0]):
+        return None  # a point or a segment: nothing to collide with
+    n = vt[-1] if len(vt) == 3 else np.cross(vt[0], vt[1])
+    n = n / np.linalg.norm(n)
+    h = 0.5 * thickness
+    return np.vstack([p + h * n, p - h * n])
+
+
+def collision_pieces(model: UrdfModel, flat_thickness: float = FLAT_HULL_THICKNESS) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+    """Every link's convex collision pieces (PyBullet's convention: one hull
+    per OBJ group), and notes on what had to change: coplanar groups become
+    slabs ``flat_thickness`` m thick, groups spanning no area are dropped.
+
+    Raises:
+        UrdfError: a mesh cannot be read.
+    """
+    out: dict[str, list[CollisionPiece]] = {}
+    notes: list[str] = []
+    for name, link in model.links.items():
+        pieces: list[CollisionPiece] = []
+        for k, c in enumerate(link.collisions):
+            if c.kind != "mesh":
+                pieces.append(
+                    CollisionPiece(name, k, 0, c.kind, c.origin, size=c.size, radius=c.radius, length=c.length)
+                )
+                continue
+            groups = mesh_hulls(c.path, c.scale)
+            for g, pts in enumerate(groups):
+                thick = False
+                if not hull_is_solid(pts):
+                    slab = _thicken(pts, flat_thickness)
+                    if slab is None:
+                        notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) spans no area: dropped")
+                        continue
+                    notes.append(
+                        f"link {name!r} collision {k} group {g} ({c.filename}) is flat: made a {flat_thickness * 1000:g} mm slab"
+                    )
+                    pts, thick = slab, True
+                pieces.append(
+                    CollisionPiece(
+                        name,
+                        k,
+                        g,
+                        "hull",
+                        c.origin,
+                        points=pts,
+                        source=c.path,
+                        scale=np.asarray(c.scale, float),
+                        whole_file=len(groups) == 1 and not thick,
+                        thickened=thick,
+                    )
+                )
+        out[name] = pieces
+    return out, notes
+
+
+def read_initial_state(folder: Path) -> dict[str, float]:
+    """``initial_state.json`` of an output folder: joint -> rad or m ({} when absent).
+
+    Raises:
+        ValueError: the file exists but is not the contract's shape.
+    """
+    p = Path(folder) / "initial_state.json"
+    if not p.is_file():
+        return {}
+    data = json.loads(p.read_text())
+    q = data.get("initial_joint_positions") if isinstance(data, dict) else None
+    if not isinstance(q, dict):
+        raise ValueError(f"{p}: expected {{'initial_joint_positions': {{joint: value}}}}")
+    return {str(k): float(v) for k, v in q.items()}
+
+
+# ----------------------------------------------------------------- the fake
