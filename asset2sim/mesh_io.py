@@ -98,6 +98,11 @@ def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
             fbytes = select(is_f).copy()
             if np.any(fbytes == 35):
                 return None
+            # exactly 3 corners on every face line (a quad and a 2-gon must not pair up)
+            tok = fbytes > 32
+            starts_tok = tok & ~np.concatenate(([False], tok[:-1]))
+            if np.any(np.bincount(np.cumsum(fbytes == 10)[starts_tok], minlength=nf) != 3):
+                return None
             first_end = np.flatnonzero(fbytes == 10)
             first = fbytes[: first_end[0] if first_end.size else fbytes.size].tobytes().split()
             if len(first) != 3:
@@ -138,13 +143,13 @@ def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray,
             except ValueError:
                 raise MeshReadError(f"{where}: line {lineno}: bad face record") from None
             nvert = len(verts)
-            ids = [i - 1 if i > 0 else nvert + i for i in ids]
-            if len(ids) < 3:
+            if len(ids) < 3 or 0 in ids:  # OBJ indices start at 1: 0 names no vertex
                 bad += 1
                 continue
+            ids = [i - 1 if i > 0 else nvert + i for i in ids]
             for j in range(1, len(ids) - 1):
                 faces.append((ids[0], ids[j], ids[j + 1]))
-    notes = [f"{where}: {bad} face records with < 3 vertices skipped"] if bad else []
+    notes = [f"{where}: {bad} face records with < 3 vertices or index 0 skipped"] if bad else []
     v = np.asarray(verts, np.float64).reshape(-1, 3)
     f = np.asarray(faces, np.int64).reshape(-1, 3)
     return v, f, notes
@@ -388,8 +393,9 @@ def parse_vertex_lines(lines: list[str]) -> np.ndarray:
 
 # ------------------------------------------------------------------ materials
 
-_MTLLIB = re.compile(rb"^\s*mtllib\s+(.+?)\s*$", re.M)
-_MAP = re.compile(rb"^\s*(?:map_\w+|bump|disp|decal|refl)\s+(?:-\S+\s+\S+\s+)*(\S.*?)\s*$", re.M)
+# [ \t] not \s around the keyword: a bare "mtllib" line must not take the next line as its name
+_MTLLIB = re.compile(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t\r]*$", re.M)
+_MAP = re.compile(rb"^[ \t]*(?:map_\w+|bump|disp|decal|refl)[ \t]+(?:-\S+[ \t]+\S+[ \t]+)*(\S.*?)[ \t\r]*$", re.M)
 
 
 def is_texture_statement(key: str) -> bool:

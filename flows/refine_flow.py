@@ -8,11 +8,29 @@ Shape (DEVELOPERS.md, "Shape of the product")::
       -> refine_assets (Prefect subflow on a DaskTaskRunner)
            per asset, a chain of Prefect tasks on Dask workers:
              prepare  (read the asset: input hash, skip when finished)
-             refine   (synthesize -> refine state -> write -> post-check)
-             metrics  (stability, prompt alignment, scale deviation; the
-                       post-check's rest test reused)
+             refine   (synthesize -> refine state -> write -> post-check
+                       -> extras: export, renders, evaluation + HTML report)
+             metrics  (stability, prompt alignment, scale deviation)
            each finished chain -> build_row -> one catalog row, appended atomically
       -> run summary + failure-mode plot -> MLflow run (nested run per asset)
+
+Each piece of work is done once per asset:
+
+- The asset is read (validated, extracted, hashed) once, by ``prepare``; the
+  typed description and its validation findings travel in the ``Prepared``
+  record to ``refine`` (as JSON into its child process under
+  ``isolation: process``), which does not read the asset again.
+- The rest test runs once per engine: in the post-check (again only for a
+  changed asset: an escalation round or a second resting pose). refine's
+  extras evaluate the written asset with that recording
+  (``tasks.check.postcheck.RestRecording``) and the manifest's reference, and
+  the HTML report renders that evaluation (with the renders refine took).
+- ``metrics`` then reads that typed ``Evaluation`` from the refined folder
+  (``flows.stages.refined_evaluation``: same prompt, category and reference)
+  instead of evaluating again, and copies it to ``_metrics/<asset>``. With
+  extras off (or a refine function that writes no evaluation) it evaluates
+  the asset itself, recording the post-check's rest-test metrics instead of
+  simulating them again.
 
 The flow wires; the stages decide. The stage functions are plain functions
 of :mod:`asset2sim.flows.stages`; hashing, the skip rule and the catalog row

@@ -5,16 +5,22 @@ testable function:
 
 - :func:`plan_jobs`: ``catalog.yaml`` and the manifest -> one
   :class:`AssetJob` per asset;
-- :func:`prepare_asset` (input stage): read the asset once for its input hash
-  and the skip decision (:func:`asset2sim.tasks.publish.contract.finished_result`);
+- :func:`prepare_asset` (input stage): read (validate and extract) the asset,
+  once, for its input hash and the skip decision
+  (:func:`asset2sim.tasks.publish.contract.finished_result`); the extracted
+  description and its findings travel on in the
+  :class:`~asset2sim.tasks.publish.contract.Prepared` record;
 - :func:`refine_stage`: the refine function (``tasks.refine.refine_asset``:
-  synthesize, refine state, write, post-check) in an isolated child process
-  inside the asset's time limit;
-- :func:`metrics_stage`: the stability metrics (``tasks.evaluation.evaluate``).
-  The post-check's rest-test measurement is reused when the engine and the
-  conventions match (the rest test runs once per engine); the semantic
-  metrics (prompt alignment, scale deviation against a reference) are
-  measured here.
+  synthesize, refine state, write, post-check, extras) in an isolated child
+  process inside the asset's time limit, given the extracted asset (as JSON
+  across the process boundary) and the reference for the extras' evaluation;
+- :func:`metrics_stage`: the catalog's metric columns. When refine's extras
+  wrote ``evaluation.json`` for this prompt, category and reference
+  (:func:`refined_evaluation`), that typed Evaluation is read; otherwise
+  (extras off, or a refine function that writes none) the stability metrics
+  are evaluated (``tasks.evaluation.evaluate``), recording the post-check's
+  rest-test measurement instead of running it again when the engine and
+  conventions match (:func:`reusable_rest_test`).
 
 Each stage returns a :class:`~asset2sim.tasks.publish.contract.StageRecord`;
 :func:`asset2sim.tasks.publish.contract.build_row` turns them into the
@@ -41,9 +47,12 @@ from asset2sim.flows.isolation import call_target, import_target, run_isolated
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.metrics import REST_TEST_METRICS, column_values
 from asset2sim.schemas.report import MetricResult, RefineReport
-from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim import atomic
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.tasks.ingest.extract import extract_asset_checked
+from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.publish.contract import (
     Measurement,
     Prepared,
@@ -247,14 +256,15 @@ def prepare_asset(job: AssetJob) -> Prepared:
     configuration, decide whether an earlier result can be reused.
 
     Returns:
-        The :class:`~asset2sim.tasks.publish.contract.Prepared` record
-        (``ok`` False with ``failure_mode`` ``invalid_input`` and ``error``
-        for an asset that cannot be read). Never raises for a bad asset.
+        The :class:`~asset2sim.tasks.publish.contract.Prepared` record with
+        the extracted description and its validation findings (``ok`` False
+        with ``failure_mode`` ``invalid_input`` and ``error`` for an asset
+        that cannot be read). Never raises for a bad asset.
     """
     t0 = time.perf_counter()
     rec = Prepared(worker=_worker_name())
     try:
-        asset = extract_asset(Path(job.asset_dir), asset_id=job.asset_id, category=job.category)
+        asset, findings = extract_asset_checked(Path(job.asset_dir), asset_id=job.asset_id, category=job.category)
     except Exception as exc:  # any reading problem is the input's
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
         return rec
@@ -265,6 +275,8 @@ def prepare_asset(job: AssetJob) -> Prepared:
     rec.category = job.category or asset.category
     rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
     rec.skip = finished_result(job.finished.get(result_key(job.asset_id, asset.input_hash, chash)), asset.input_hash)
+    if rec.skip is None:
+        rec.asset, rec.findings = asset, list(findings)
     rec.seconds = time.perf_counter() - t0
     return rec
 
@@ -278,8 +290,16 @@ def stage_refine(
     asset_id: str,
     refine_function: str = DEFAULT_REFINE_FUNCTION,
     extras: bool = True,
+    extracted: dict[str, Any] | None = None,
+    reference_dir: str | None = None,
 ) -> dict[str, Any]:
     """Run the refine function on one asset (in whichever process calls it).
+
+    ``extracted``: the prepare stage's reading of the asset as JSON
+    (``{"asset": AssetDescription, "findings": [Finding, ...]}``), handed to
+    a refine function that takes ``extracted`` so it does not read the asset
+    again; ``reference_dir``: the reference folder for its extras'
+    evaluation (a refine function that takes ``reference``).
 
     Returns:
         A :class:`~asset2sim.tasks.publish.contract.RefineOutput` as JSON
@@ -304,6 +324,13 @@ def stage_refine(
         kwargs["asset_id"] = asset_id
     if "extras" in params:
         kwargs["extras"] = extras
+    if extracted is not None and "extracted" in params:
+        kwargs["extracted"] = (
+            AssetDescription.model_validate(extracted["asset"]),
+            [Finding.model_validate(f) for f in extracted["findings"]],
+        )
+    if reference_dir is not None and "reference" in params:
+        kwargs["reference"] = Path(reference_dir)
     result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
     report = RefineReport.model_validate(result.report.model_dump(mode="json"))
     out = RefineOutput(
@@ -347,6 +374,24 @@ def reusable_rest_test(report: RefineReport, config: dict[str, Any], engine: str
     return [found[n] for n in REST_TEST_METRICS]
 
 
+def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, reference_dir: str | None) -> Evaluation | None:
+    """The typed :class:`~asset2sim.tasks.evaluation.evaluate.Evaluation`
+    refine's extras wrote into the refined folder (``evaluation.json``), when
+    it is the evaluation the metrics stage would make: PyBullet only, the
+    same prompt, category and reference (resolved path, or none). It then
+    holds every metric of the catalog row, the rest-test ones measured by
+    the post-check. None otherwise (no file, unreadable, another request or
+    reference)."""
+    try:
+        ev = Evaluation.model_validate_json((Path(out_dir) / "evaluation.json").read_text())
+    except (OSError, ValueError):
+        return None
+    ref = str(Path(reference_dir).resolve()) if reference_dir else None
+    if ev.engines != ["pybullet"] or ev.prompt != (prompt or None) or ev.category != category or ev.reference != ref:
+        return None
+    return ev
+
+
 def stage_metrics(
     out_dir: str,
     prompt: str,
@@ -361,9 +406,12 @@ def stage_metrics(
     ``metrics_dir`` when given. The refined folder itself is never touched
     (its completion marker covers every file in it).
 
-    ``post_check``: the post-check's rest-test metrics (JSON of
-    :class:`~asset2sim.schemas.report.MetricResult`, :func:`reusable_rest_test`);
-    recorded instead of running the rest test again.
+    When refine's extras already evaluated the folder for this prompt,
+    category and reference (:func:`refined_evaluation`), that evaluation is
+    read and copied to ``metrics_dir``: nothing is simulated here.
+    Otherwise the asset is evaluated; ``post_check``: the post-check's
+    rest-test metrics (JSON of :class:`~asset2sim.schemas.report.MetricResult`,
+    :func:`reusable_rest_test`), recorded instead of running the rest test again.
 
     Returns:
         A :class:`~asset2sim.tasks.publish.contract.Measurement` as JSON:
@@ -374,6 +422,18 @@ def stage_metrics(
     Raises:
         EvaluationError: the output cannot be read.
     """
+    t0 = time.perf_counter()
+    ev = refined_evaluation(out_dir, prompt, category, reference_dir)
+    if ev is not None:
+        if metrics_dir:
+            atomic.copy_file(Path(out_dir) / "evaluation.json", Path(metrics_dir) / "evaluation.json")
+        return Measurement(
+            columns=column_values(ev.metrics, "pybullet"),
+            failures=list(ev.failures),
+            seconds=time.perf_counter() - t0,
+            reused_post_check=True,
+            reused_evaluation=True,
+        ).model_dump(mode="json")
     measured = None if post_check is None else [MetricResult.model_validate(m) for m in post_check]
     ev = evaluate_asset(
         Path(out_dir),
@@ -436,6 +496,11 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
             "asset_id": job.asset_id,
             "refine_function": job.refine_function,
             "extras": job.extras,
+            "extracted": None if prepared.asset is None else {
+                "asset": prepared.asset.model_dump(mode="json"),
+                "findings": [f.model_dump(mode="json") for f in prepared.findings],
+            },
+            "reference_dir": job.reference_dir,
         },
         budget,
     )
@@ -448,10 +513,11 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
 
 
 def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> StageRecord:
-    """Metrics stage: the stability metrics of the refined output, inside
-    what is left of the asset's time limit, recording the post-check's rest
-    test when :func:`reusable_rest_test` allows. ``skipped`` when there is no
-    output or ``job.evaluate`` is off."""
+    """Metrics stage: the metric columns of the refined output, inside what
+    is left of the asset's time limit: read from refine's evaluation when it
+    matches (:func:`refined_evaluation`), else evaluated, recording the
+    post-check's rest test when :func:`reusable_rest_test` allows.
+    ``skipped`` when there is no output or ``job.evaluate`` is off."""
     if refined.status != "ok" or not job.evaluate:
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value

@@ -499,6 +499,93 @@ def _stl_nan() -> bytes:
     return bytes(data)
 
 
+# ----------------------------------------------------------------------------- classes of issue 11
+# (validate agrees with refine: formats, encodings, link cap, special files
+# named by MTL files, limits that cannot be meant, mimic, the face cap)
+
+BOX_V = [(x, y, z) for z in (0.0, 0.05) for y in (-1.0, 0.0) for x in (0.0, 1.0)]
+BOX_T = [(0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4), (2, 6, 7), (2, 7, 3), (0, 4, 6), (0, 6, 2), (1, 3, 7), (1, 7, 5)]
+
+
+def box_ply() -> str:
+    """The lid box as ASCII PLY."""
+    head = f"ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n"
+    return head + "".join(f"{x} {y} {z}\n" for x, y, z in BOX_V) + "".join(f"3 {a} {b} {c}\n" for a, b, c in BOX_T)
+
+
+def box_off() -> str:
+    """The lid box as OFF."""
+    return "OFF\n8 12 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in BOX_V) + "".join(f"3 {a} {b} {c}\n" for a, b, c in BOX_T)
+
+
+def box_glb() -> bytes:
+    """The lid box as binary glTF (written by trimesh)."""
+    import trimesh  # heavy; only this case needs it
+
+    return trimesh.Trimesh(BOX_V, BOX_T, process=False).export(file_type="glb")
+
+
+def _mesh_file(rel: str, data: Callable[[], bytes | str]) -> Callable[[Path], None]:
+    def fn(folder: Path) -> None:
+        _write(rel, data())(folder)
+
+    return fn
+
+
+def _utf16(folder: Path) -> None:
+    p = folder / "mobility.urdf"
+    p.write_bytes(p.read_text().encode("utf-16"))
+
+
+def _latin1_declared(folder: Path) -> None:
+    p = folder / "mobility.urdf"
+    text = p.read_text().replace('name="lid"', 'name="lid\u00e9"')
+    p.write_bytes(b'<?xml version="1.0" encoding="ISO-8859-1"?>\n' + text.encode("latin-1"))
+
+
+def _chain(n: int) -> Callable[[Model], None]:
+    """Hang a chain of ``n`` small fixed links under the handle."""
+
+    def fn(m: Model) -> None:
+        prev = "handle"
+        for i in range(n):
+            m.links.append(Link(f"chain_{i}", inertial=Inertial(mass="0.01", ixx="1e-6", iyy="1e-6", izz="1e-6")))
+            m.joints.append(Joint(f"chain_joint_{i}", "fixed", prev, f"chain_{i}", xyz="0 0 0.001"))
+            prev = f"chain_{i}"
+
+    return fn
+
+
+def _mimic(m: Model) -> None:
+    m.links.append(Link("lid2", visuals=[Geom(filename="meshes/lid.obj")], collisions=[Geom(filename="meshes/lid.obj")],
+                        inertial=Inertial(mass="0.3", ixx="0.02", iyy="0.02", izz="0.03")))
+    m.joints.append(Joint("lid2_hinge", "revolute", "base", "lid2", xyz="0 0 0.5", axis="1 0 0", lower="-1.5", upper="0",
+                          effort="10", velocity="1", mimic="lid_hinge"))
+
+
+def _missing_dir_dotdot(m: Model) -> None:
+    _mesh("lid", "nodir/../meshes/lid.obj")(m)
+
+
+def _mtl_special(kind: str, which: str) -> Callable[[Path], None]:
+    """Replace the MTL (``which='mtl'``) or its texture (``'texture'``) by a
+    FIFO (``kind='fifo'``) or a symlink to /dev/zero (``'device'``)."""
+
+    def fn(folder: Path) -> None:
+        p = folder / ("meshes/base.mtl" if which == "mtl" else "images/tex.png")
+        os.unlink(p)
+        if kind == "fifo":
+            os.mkfifo(p)
+        else:
+            os.symlink("/dev/zero", p)
+
+    return fn
+
+
+def _symlink_other_format(folder: Path) -> None:
+    os.symlink("drawer.stl", folder / "meshes" / "alias.obj")
+
+
 def _cases() -> list[Case]:
     C = Case
     out: list[Case] = []
@@ -698,11 +785,53 @@ def _cases() -> list[Case]:
     add(C("mesh_visual_only_bad_index", "mesh_contents", "MESH_BAD_INDEX",
           _files_case(_write("meshes/lid_visual.obj", CUBE_V + CUBE_F + "f 1 2 99\n"), _mesh("lid", "meshes/lid_visual.obj", role="visual")),
           refused=False, note="a visual-only defect is a warning"))
+    # --- issue 11: validate agrees with refine
+    for fmt, data in (("glb", box_glb), ("ply", box_ply), ("off", box_off)):
+        add(C(f"format_{fmt}_mesh", "refine_agreement", "MESH_FORMAT_UNSUPPORTED",
+              _files_case(_mesh_file(f"meshes/lid.{fmt}", data), _mesh("lid", f"meshes/lid.{fmt}")),
+              note="PyBullet (refine loads the input URDF) reads OBJ, STL, DAE only: refused, convert to OBJ"))
+    add(C("format_symlink_name_differs", "refine_agreement", "MESH_FORMAT_UNSUPPORTED",
+          _files_case(_symlink_other_format, _mesh("lid", "meshes/alias.obj")),
+          note="alias.obj -> drawer.stl: the simulator picks the reader by the name"))
+    add(C("encoding_utf16", "refine_agreement", "URDF_ENCODING_UNSUPPORTED", _files_case(_utf16),
+          note="UTF-16 with BOM: the XML parser reads it, PyBullet does not"))
+    add(C("encoding_latin1_declared", "refine_agreement", "URDF_ENCODING_UNSUPPORTED", _files_case(_latin1_declared),
+          note="declared ISO-8859-1 with a non-ASCII name: names would differ between readers"))
+    add(C("links_400_chain", "refine_agreement", "URDF_TOO_MANY_LINKS", _model_case(_chain(400)),
+          note="PyBullet loads at most 128 links per body"))
+    add(C("path_dotdot_through_missing_dir", "refine_agreement", "MESH_NOT_FOUND", _model_case(_missing_dir_dotdot),
+          note="'nodir/../meshes/lid.obj' normalizes inside the folder but cannot be opened as written"))
+    add(C("material_mtl_fifo", "refine_agreement", "MATERIAL_NOT_REGULAR_FILE", _files_case(_mtl_special("fifo", "mtl")),
+          note="was 'ignored' by validate, then hung refine (PyBullet reads the MTL)"))
+    add(C("material_texture_fifo", "refine_agreement", "MATERIAL_NOT_REGULAR_FILE", _files_case(_mtl_special("fifo", "texture")),
+          note="was 'ignored' by validate, then hung refine (PyBullet reads the texture)"))
+    add(C("material_texture_symlink_dev_zero", "refine_agreement", "MATERIAL_NOT_REGULAR_FILE",
+          _files_case(_mtl_special("device", "texture")), note="a symlink leaving the folder to an endless device"))
+    add(C("limit_revolute_1e300", "refine_agreement", "JOINT_LIMIT_IMPLAUSIBLE",
+          _model_case(_attr("joint", "lid_hinge", lower="-1e300", upper="1e300")),
+          note="gave an initial state of 9.5e299 rad called interaction-ready"))
+    add(C("limit_revolute_degrees", "refine_agreement", "JOINT_LIMIT_IMPLAUSIBLE",
+          _model_case(_attr("joint", "lid_hinge", lower="-90", upper="0")), note="degrees written as radians"))
+    add(C("limit_prismatic_beyond_size", "refine_agreement", "JOINT_LIMIT_IMPLAUSIBLE",
+          _model_case(_attr("joint", "drawer_slide", upper="30")), note="30 m of travel on an object about 1.6 m across"))
+    add(C("mimic_joint", "refine_agreement", "JOINT_MIMIC_UNSUPPORTED", _model_case(_mimic),
+          note="was silently dropped from the output"))
+    add(C("faces_total_cap", "refine_agreement", "MESH_TOO_MANY_FACES", build_valid, policy={"max_total_faces": 30},
+          note="the per-asset face cap (1,000,000 by default; docs/validation.md) with a lowered cap"))
     return out
 
 
 CASES: list[Case] = _cases()
 CASES_BY_NAME: dict[str, Case] = {c.name: c for c in CASES}
+
+
+#: Assets refine must handle that validate accepts (issue 11): name -> builder.
+ACCEPTED: dict[str, Callable[[Path], Path]] = {
+    "symlink_mesh_inside": _files_case(lambda f: os.symlink("lid.obj", f / "meshes" / "alias.obj"), _mesh("lid", "meshes/alias.obj")),
+    "dotdot_through_existing_dir": _model_case(_mesh("lid", "images/../meshes/lid.obj")),
+    "utf8_bom": _files_case(lambda f: (f / "mobility.urdf").write_bytes(b"\xef\xbb\xbf" + (f / "mobility.urdf").read_bytes())),
+    "revolute_two_turns": _model_case(_attr("joint", "lid_hinge", lower="-12.5", upper="0")),
+}
 
 
 def clone_model(m: Model) -> Model:

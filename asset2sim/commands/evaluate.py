@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from asset2sim.tasks.publish import output_folder
+
 NAME = "evaluate"
 HELP = "Evaluate an asset (any URDF): physical robustness, semantic accuracy, probes; writes evaluation.json and report.html."
 
@@ -36,17 +38,18 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or (args.asset if args.asset.is_dir() else args.asset.parent)
     engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
     try:
-        ev = evaluate_asset(
-            args.asset,
-            reference=args.reference,
-            prompt=args.prompt,
-            engines=engines,
-            seed=args.seed,
-            category=args.category,
-            out_dir=out,
-            write_report=not args.no_report,
-            probes=not args.no_probes,
-        )
+        with output_folder.adopting(out):  # into a refined folder: its files become the product's
+            ev = evaluate_asset(
+                args.asset,
+                reference=args.reference,
+                prompt=args.prompt,
+                engines=engines,
+                seed=args.seed,
+                category=args.category,
+                out_dir=out,
+                write_report=not args.no_report,
+                probes=not args.no_probes,
+            )
     except (EvaluationError, ValueError, OSError) as exc:
         console.print(f"[red]cannot evaluate {args.asset}: {exc}[/red]")
         return 2

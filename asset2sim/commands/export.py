@@ -17,6 +17,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from asset2sim.tasks.publish import output_folder
+
 NAME = "export"
 HELP = "Export an output folder for other simulators (MJCF for MuJoCo), optionally checking parity across engines."
 
@@ -58,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
     from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
 
     try:
-        path = export_mjcf(out, visuals=not args.no_visuals, check=False)
+        with output_folder.adopting(out):  # the MJCF files become the output folder's own
+            path = export_mjcf(out, visuals=not args.no_visuals, check=False)
         from asset2sim.engines.loading import read_initial_state
 
         check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out))

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from asset2sim.tasks.publish import output_folder
+
 NAME = "render"
 HELP = "Render textured views (front, back, left, right, perspective; optionally top) of an asset at a joint state to PNGs."
 
@@ -79,9 +81,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"render failed: {exc}")
         return 1
     try:
-        written = [write_png(args.out / f"{v}.png", img) for v, img in images.items()]
-        if args.sheet:
-            written.append(write_png(args.out / "contact_sheet.png", render_contact_sheet(images, title=urdf.parent.name)))
+        with output_folder.adopting(args.out):  # views written into a refined folder become its own
+            written = [write_png(args.out / f"{v}.png", img) for v, img in images.items()]
+            if args.sheet:
+                written.append(write_png(args.out / "contact_sheet.png", render_contact_sheet(images, title=urdf.parent.name)))
     except OSError as exc:
         print(f"error: cannot write to {args.out}: {exc}")
         return 1

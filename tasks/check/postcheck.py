@@ -106,6 +106,27 @@ def record_rest_test(session: SimSession, conventions: SimConventions, urdf: Pat
     )
 
 
+def measure_rest_test(engine: str, urdf: Path | str, initial_state: dict[str, float], springs: dict[str, Spring],
+                      conventions: SimConventions) -> tuple[MetricResult, RestRecording]:
+    """Open ``engine`` on ``urdf`` at ``initial_state`` (SPEC conventions,
+    ``springs``), measure the penetration at the initial state first (in the
+    fresh session), then record the rest test (:func:`record_rest_test`).
+
+    Returns:
+        (penetration :class:`~asset2sim.schemas.report.MetricResult` in mm, the :class:`RestRecording`).
+
+    Raises:
+        EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
+    """
+    session = open_session(engine, urdf, SessionOptions(initial_state=initial_state, springs=springs, conventions=conventions))
+    try:
+        pen = metrics.penetration(session)
+        recording = record_rest_test(session, conventions, urdf, initial_state, springs)
+    finally:
+        session.close()
+    return pen, recording
+
+
 @dataclass
 class PostCheck:
     """Result of one post-check (metrics, the trace and per-joint sag)."""
@@ -165,17 +186,7 @@ def run_post_check(
     asset in ``engine`` (SPEC conventions), and the SPEC metrics in every other
     engine of ``config.engines`` (``tasks.parity``; missing engines skipped)."""
     conv = config.sim
-    springs = springs_of(overlay)
-    session = open_session(
-        engine,
-        urdf_path,
-        SessionOptions(initial_state=initial_state, springs=springs, conventions=conv),
-    )
-    try:
-        pen = metrics.penetration(session)
-        recording = record_rest_test(session, conv, urdf_path, initial_state, springs)
-    finally:
-        session.close()
+    pen, recording = measure_rest_test(engine, urdf_path, initial_state, springs_of(overlay), conv)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)

@@ -37,12 +37,13 @@ from typing import Any, Callable
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
 
+from asset2sim.atomic import write_json
 from asset2sim.engines.base import EngineUnavailable, SessionOptions, Spring, open_session
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.metrics import METRIC_INFO, REST_TEST_METRICS
-from asset2sim.schemas.report import MetricResult
+from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.check import metrics as spec_metrics
-from asset2sim.tasks.check.postcheck import RestRecording, record_rest_test
+from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, record_rest_test
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
@@ -814,9 +815,15 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
     (:class:`~asset2sim.tasks.check.postcheck.RestRecording`); when it
     :meth:`~asset2sim.tasks.check.postcheck.RestRecording.matches` this
     engine, URDF, initial state, springs and conventions, its trace and
-    series are recorded and the rest test is not simulated again (the probes
-    start from the saved initial state either way: ``restoreState`` restores
-    Bullet's contact manifolds too). Errors are caught into ``EngineRun.error``."""
+    series are recorded and the rest test is not simulated again. With
+    probes, a rest test still to be simulated runs in a session of its own
+    (:func:`~asset2sim.tasks.check.postcheck.measure_rest_test`, as in the
+    post-check), so the probes start from a session that was never stepped
+    whether or not the rest test was reused: Bullet's ``restoreState`` puts
+    back poses and velocities but not everything a rest test leaves behind
+    (the probes measured after a rest test and a restore differed by up to
+    ~1e-3 relative from those measured without one). Errors are caught into
+    ``EngineRun.error``."""
     t0 = time.perf_counter()
     run = EngineRun(engine)
     try:
@@ -843,7 +850,10 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
             saved = session.save_state()
         if rest_test:
             if recording is None or not recording.matches(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions):
-                recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
+                if pyb and probes:  # in a session of its own, as the post-check does: the probes start unstepped
+                    _, recording = measure_rest_test(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions)
+                else:
+                    recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
             run.trace = recording.trace
             run.root_series = recording.root_series
             run.ground_series = recording.ground_series
@@ -1164,6 +1174,9 @@ def evaluate_asset(
     probes: bool = True,
     conventions: SimConventions | None = None,
     measured: list[MetricResult] | None = None,
+    recording: RestRecording | None = None,
+    views: dict[str, np.ndarray] | None = None,
+    views_state: dict[str, float] | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -1196,6 +1209,19 @@ def evaluate_asset(
             continue from the state the rest test leaves); the metrics that
             need its per-step trace (ground penetration, divergence, joint
             hold) are then recorded as skipped.
+        recording: the post-check's rest test of this asset, step by step
+            (:class:`~asset2sim.tasks.check.postcheck.RestRecording`): when it
+            matches an engine's simulation (engine, URDF, initial state,
+            springs, conventions) every rest-test metric of that engine
+            (ground penetration, divergence and joint hold included) is
+            computed from it and the rest test is not simulated again; the
+            result equals a fresh rest test's (the simulation is
+            deterministic). Otherwise it is ignored.
+        views, views_state: renders of the object already taken
+            (:func:`asset2sim.tasks.publish.render.render_views`, view name ->
+            (H, W, 3) uint8) at the joint positions ``views_state`` (rad/m):
+            ``report.html`` shows them when that is the evaluated initial
+            state, else it renders its own.
 
     Returns:
         The :class:`Evaluation`.
@@ -1227,7 +1253,7 @@ def evaluate_asset(
     for e in order:
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
         runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending,
-                             rest_test=e != reuse_engine)
+                             rest_test=e != reuse_engine, recording=recording)
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:
@@ -1279,18 +1305,35 @@ def evaluate_asset(
     ev._runs = runs
     ev._context = ctx
     if out_dir is not None:
-        write_evaluation(ev, out_dir, report=write_report)
+        same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
+        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None)
     return ev
 
 
-def evaluate_refined(out_dir: Path | str, report: Any) -> dict[str, Path]:
-    """Evaluate a refined output folder and write ``evaluation.json`` and
-    ``report.html`` beside its ``report.json`` (refine's extras).
+def evaluate_refined(
+    out_dir: Path | str,
+    report: RefineReport,
+    *,
+    recording: RestRecording | None = None,
+    reference: Path | str | None = None,
+    views: dict[str, np.ndarray] | None = None,
+    views_state: dict[str, float] | None = None,
+) -> dict[str, Path]:
+    """Evaluate a refined output folder (PyBullet, SPEC conventions, probes)
+    and write ``evaluation.json`` and ``report.html`` beside its
+    ``report.json`` (refine's extras).
 
     Args:
         out_dir: the refined output folder.
         report: its :class:`~asset2sim.schemas.report.RefineReport` (the
-            run's ``prompt`` and ``category`` are used; no reference).
+            run's ``prompt`` and ``category`` are used).
+        recording: the final post-check's rest test
+            (:class:`~asset2sim.tasks.check.postcheck.RestRecording`), reused
+            when it matches (see :func:`evaluate_asset`).
+        reference: the reference folder (GenSim2), None for none.
+        views: the renders refine wrote (view -> (H, W, 3) uint8), taken at
+            ``views_state`` (rad/m); used in ``report.html`` when that is the
+            evaluated initial state, else the report renders its own.
 
     Returns:
         {"evaluation": path, "report": path}.
@@ -1299,23 +1342,26 @@ def evaluate_refined(out_dir: Path | str, report: Any) -> dict[str, Path]:
         EvaluationError: the folder cannot be read.
     """
     out_dir = Path(out_dir)
-    evaluate_asset(out_dir, prompt=getattr(report, "prompt", None) or None, category=getattr(report, "category", None),
-                   method="asset2sim", out_dir=out_dir, write_report=True)
+    evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
+                   method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
+                   views=views, views_state=views_state)
     return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
 
 
-def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True) -> dict[str, Path]:
-    """Write ``evaluation.json`` (and ``report.html``) into ``out_dir`` atomically.
+def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
+                     views: dict[str, np.ndarray] | None = None) -> dict[str, Path]:
+    """Write ``evaluation.json`` (and ``report.html``, rendering ``ev``:
+    :func:`asset2sim.tasks.publish.report_html.write_report`, with ``views``
+    the renders at ``ev.initial_state`` when already taken) into ``out_dir``
+    atomically.
 
     Returns:
         {"evaluation": path, "report": path (when written)}.
     """
-    from asset2sim.atomic import write_json
-
     out_dir = Path(out_dir)
     paths = {"evaluation": write_json(out_dir / "evaluation.json", _jsonable(ev.model_dump(mode="json")))}
     if report:
-        paths["report"] = write_report(ev, out_dir / "report.html")
+        paths["report"] = write_report(ev, out_dir / "report.html", views=views)
     return paths
 
 

@@ -15,7 +15,9 @@ a moving link, inertia not positive definite or violating the triangle
 inequality, incomplete) are left out of the description
 (``given_inertial=None``), so later stages estimate them; they are never
 "balanced". :func:`extract_asset_checked` also returns the findings, for the
-report.
+report. ``input_hash`` covers every file the asset references: the URDF, its
+meshes, their MTL libraries and texture maps, the URDF's ``<texture>`` files,
+``semantics.txt`` and ``meta.json``.
 """
 
 from __future__ import annotations
@@ -178,6 +180,9 @@ def extract_asset_checked(
         raise AssetError(f"{urdf}: expected exactly one root link, found {roots or 'none'}")
     files = [urdf] + sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path})
     files += [Path(os.path.realpath(p)) for p in result.extra_files]
+    # every file the asset references: MTL libraries and texture maps too, so
+    # an edited texture changes the hash and is never skipped as complete
+    files += [Path(os.path.realpath(p)) for p in result.material_files]
     desc = AssetDescription(
         asset_id=asset_id or (folder.name if urdf.name in URDF_NAMES else urdf.stem),
         source_dir=folder,

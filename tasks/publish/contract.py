@@ -26,11 +26,13 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from asset2sim import __version__, atomic
+from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.catalog import CatalogRow
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.metrics import column_values
 from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
+from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.publish.output_folder import MARKER_NAME, OwnedFolder
 REPORT_NAME = "report.json"
 
@@ -150,6 +152,9 @@ class Prepared(BaseModel):
     (:func:`flow_config_hash`) and ``refine_config_hash`` (:func:`run_hash`);
     ``category`` (manifest's, else the asset's); ``skip``: the earlier catalog
     row to reuse; ``seconds`` wall time; on failure ``failure_mode`` and ``error``.
+    ``asset`` and ``findings``: the extracted description and its validation
+    findings (:func:`asset2sim.tasks.ingest.extract.extract_asset_checked`),
+    handed to the refine stage so the asset is read once (:meth:`extracted`).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -165,6 +170,13 @@ class Prepared(BaseModel):
     skip: dict[str, Any] | None = None
     failure_mode: str | None = None
     error: str | None = None
+    asset: AssetDescription | None = None
+    findings: list[Finding] = Field(default_factory=list)
+
+    def extracted(self) -> tuple[AssetDescription, list[Finding]] | None:
+        """``(asset, findings)`` for ``refine_asset(extracted=...)``; None when
+        the asset was not read."""
+        return None if self.asset is None else (self.asset, list(self.findings))
 
 
 class RefineOutput(BaseModel):
@@ -184,13 +196,15 @@ class Measurement(BaseModel):
     """The metrics stage's value: the catalog's metric columns
     (:func:`asset2sim.schemas.metrics.column_values`), the failed metrics
     (``name@engine``), wall time (s) and whether the post-check's rest test
-    was reused (``reused_post_check``)."""
+    was reused (``reused_post_check``) or the whole evaluation (``reused_evaluation``)."""
 
     model_config = ConfigDict(extra="forbid")
     columns: dict[str, Any] = Field(default_factory=dict)
     failures: list[str] = Field(default_factory=list)
     seconds: float = 0.0
     reused_post_check: bool = False
+    reused_evaluation: bool = False
+    """The refined folder's ``evaluation.json`` (refine's extras) was read instead of evaluating."""
 
 
 class StageRecord(BaseModel):

@@ -240,12 +240,13 @@ def _dispatch(paths: list[Path]) -> None:
 @dataclass
 class OwnedFolder:
     """An output folder during one run: ``root`` (resolved), ``given`` (as
-    asked, absolute), ``source`` (the resolved input folder) and ``files``,
+    asked, absolute), ``source`` (the resolved input folder, None when not
+    known) and ``files``,
     the relative paths this run has written or is writing."""
 
     root: Path
     given: Path
-    source: Path
+    source: Path | None
     files: set[str] = field(default_factory=set)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -256,7 +257,7 @@ class OwnedFolder:
         ap = Path(os.path.abspath(path))
         parent = ap.parent.resolve()
         if _within(parent, self.root):
-            if _within(parent, self.source):
+            if self.source is not None and _within(parent, self.source):
                 raise OutputError(f"{ap} would be written into the input folder {self.source}", "OUTPUT_SYMLINK_ESCAPES", ap)
             return (parent / ap.name).relative_to(self.root).as_posix()
         if _within(ap, self.given) or _within(ap, self.root):
@@ -408,7 +409,7 @@ def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
         files = {r for r in (_safe_rel(x) for x in data.get("files", [])) if r is not None}
     except (OSError, ValueError, AttributeError):
         files = set()
-    owner = OwnedFolder(root=root, given=root, source=root / "\x00none", files=files)
+    owner = OwnedFolder(root=root, given=root, source=None, files=files)
     with _ACTIVE_LOCK:
         previous = _ACTIVE.get(root)
         _ACTIVE[root] = owner

@@ -89,10 +89,12 @@ def _array_png(arr: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def _renders(ev) -> tuple[str, str]:
-    """(HTML of the object views, what they are)."""
+def _renders(ev, views: dict[str, np.ndarray] | None = None) -> tuple[str, str]:
+    """(HTML of the object views, what they are); ``views`` the renders at
+    ``ev.initial_state`` when already taken, else rendered here."""
     try:
-        views = render_views(Path(ev.urdf), dict(ev.initial_state))
+        if views is None:
+            views = render_views(Path(ev.urdf), dict(ev.initial_state))
         figs = "".join(
             f"<figure>{img_tag(_array_png(v), k)}<figcaption class='small'>{esc(k)}</figcaption></figure>"
             for k, v in views.items()
@@ -288,14 +290,16 @@ def _parameter_table(ev) -> str:
     return "<table><tr><th>where</th><th>parameter</th><th>value</th><th>unit</th><th>source</th></tr>" + rows + "</table>"
 
 
-def render_report(ev) -> str:
-    """The HTML text of one evaluation's report (see module docstring)."""
+def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
+    """The HTML text of one evaluation's report (see module docstring);
+    ``views``: renders of the object at ``ev.initial_state`` (view name ->
+    (H, W, 3) uint8) already taken, None to render them here."""
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
     badge = ("<span class='badge pass'>interaction-ready: all checks pass</span>" if ev.passed
              else f"<span class='badge fail'>not ready: {esc(', '.join(ev.failures))}</span>")
-    views_html, views_what = _renders(ev)
+    views_html, views_what = _renders(ev, views)
     sections = [
         f"<h1>asset2sim evaluation: {esc(ev.asset_id)}</h1>",
         f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
@@ -335,9 +339,9 @@ def render_report(ev) -> str:
             f"{esc(ev.asset_id)}</title><style>{CSS}</style></head><body>" + "\n".join(sections) + "</body></html>\n")
 
 
-def write_report(ev, path: Path | str) -> Path:
-    """Write ``report.html`` atomically; returns the path."""
-    return write_text(Path(path), render_report(ev))
+def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None) -> Path:
+    """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path."""
+    return write_text(Path(path), render_report(ev, views))
 
 
 # ------------------------------------------------------------------ benchmark pages

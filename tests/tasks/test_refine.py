@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import statistics
+from pathlib import Path
 
 import pytest
 
@@ -180,3 +181,73 @@ def test_plain_urdf_without_partnet_extras(tmp_path):
     lo, hi = BAND_INTERVAL["halfway"]
     assert lo <= r.opening_fractions["door_hinge"] <= hi
     assert r.initial_joint_positions["wheel_j"] == 0.0
+
+
+# ------------------------------------------------------------ each piece of work once
+
+
+def _metrics_without_timing(ev: dict) -> list[dict]:
+    return [{k: v for k, v in m.items() if k != "seconds"} for m in ev["metrics"]]
+
+
+def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_path, monkeypatch):
+    """The asset is read once; the extras' evaluation records the post-check's
+    rest test instead of simulating it again, and its evaluation.json (probes
+    included) equals a fresh evaluation that simulates it."""
+    from asset2sim.tasks.check import metrics as check_metrics
+    from asset2sim.tasks.evaluation.evaluate import _jsonable, evaluate_asset
+    from asset2sim.tasks.ingest import extract
+
+    counts = {"extract": 0, "rest_test": 0}
+    real_extract, real_rest = extract.extract_asset_checked, check_metrics.run_rest_test
+
+    def counting_extract(*a, **k):
+        if Path(a[0]).resolve() == (demo_root / "box_lid").resolve():  # the input (the evaluator reads the output URDF)
+            counts["extract"] += 1
+        return real_extract(*a, **k)
+
+    def counting_rest(*a, **k):
+        counts["rest_test"] += 1
+        return real_rest(*a, **k)
+
+    monkeypatch.setattr(extract, "extract_asset_checked", counting_extract)
+    monkeypatch.setattr(check_metrics, "run_rest_test", counting_rest)
+    entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "box_lid")
+    out = tmp_path / "out"
+    res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
+    assert "html" in res.extras, res.report.notes
+    assert counts["extract"] == 1
+    assert counts["rest_test"] == len(res.report.escalation)  # one per post-check, none in the extras
+    written = json.loads((out / "evaluation.json").read_text())
+    names = {m["name"] for m in written["metrics"]}
+    assert {"ground_penetration", "divergence", "joint_hold", "probes"} <= names
+    assert not [m for m in written["metrics"] if (m.get("details") or {}).get("skipped")]
+
+    counts["rest_test"] = 0
+    fresh = evaluate_asset(out, prompt=entry.prompt, category=res.report.category, method="asset2sim")
+    assert counts["rest_test"] == 1
+    assert _metrics_without_timing(_jsonable(fresh.model_dump(mode="json"))) == _metrics_without_timing(written)
+
+
+def test_refine_takes_an_already_extracted_asset(demo_root, tmp_path, monkeypatch):
+    """``extracted=`` (what the flow's prepare stage read) is used as it is: no
+    second reading, and the same report as a run that reads the asset itself."""
+    from asset2sim.tasks.ingest import extract
+
+    entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "laptop")
+    src = demo_root / entry.asset_id
+    asset, findings = extract.extract_asset_checked(src, asset_id="laptop")
+    read_here = refine_asset(src, entry.prompt, tmp_path / "a", asset_id="laptop", extras=False).report
+
+    def no_reading(*a, **k):
+        raise AssertionError("the asset was read again")
+
+    monkeypatch.setattr(extract, "extract_asset_checked", no_reading)
+    handed = refine_asset(src, entry.prompt, tmp_path / "b", asset_id="laptop", extras=False, extracted=(asset, findings)).report
+    def strip(r):  # timing fields excepted
+        d = r.model_dump(mode="json")
+        d.pop("stage_seconds")
+        d["state"].pop("seconds")
+        return d
+
+    assert strip(handed) == strip(read_here)

@@ -348,3 +348,19 @@ def test_refine_output_is_readable_by_others_under_umask_022(tmp_path, box):
     for p in res.out_dir.rglob("*"):
         if p.is_file():
             assert stat.S_IMODE(p.stat().st_mode) == 0o644, p
+
+
+def test_files_evaluate_writes_into_a_refined_folder_are_the_products(tmp_path, box):
+    from asset2sim.cli import main
+
+    out = tmp_path / "out"
+    refine_asset(box, PROMPT, out, extras=False)
+    assert main(["evaluate", str(out), "--no-probes", "--no-report"]) in (0, 1)
+    assert (out / "evaluation.json").is_file()
+    assert "evaluation.json" in of.recorded_files(out) and of.foreign_files(out) == []
+    with of.adopting(tmp_path / "elsewhere") as owner:  # not an output folder: nothing recorded
+        assert owner is None
+    before = outside_hashes(tmp_path, out)
+    res = refine_asset(box, "a small box with its lid closed", out, extras=False)  # no --overwrite needed
+    assert not res.skipped and not (out / "evaluation.json").exists()  # stale after the rewrite: removed
+    assert outside_hashes(tmp_path, out) == before

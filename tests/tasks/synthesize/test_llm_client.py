@@ -183,7 +183,7 @@ def test_retry_after_ms_and_http_date(server, tmp_path):
     class E(Exception):
         litellm_response_headers = {"retry-after": time.strftime("%a, %d %b %Y %H:%M:%S GMT", time.gmtime(time.time() + 30))}
 
-    assert 25 <= lc._retry_after_s(E()) <= 31
+    assert 25 <= lc.retry_after_s(E()) <= 31
 
 
 def test_429_without_retry_after_uses_exponential_backoff(server, tmp_path):

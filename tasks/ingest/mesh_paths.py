@@ -1,0 +1,181 @@
+"""Safe resolution of the paths an asset names, and reading what they name.
+
+:func:`resolve_mesh_reference` decides, with ``stat`` only (nothing is
+opened, so a FIFO cannot block), whether a path written in a URDF, an OBJ's
+``mtllib`` or an MTL texture statement is a regular file inside the asset
+folder, and the same path the operating system (hence PyBullet, which reads
+the input) would open. :func:`read_regular` reads such a file without
+blocking and without following a symlink swapped in after the check.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+from asset2sim.tasks.ingest.findings import MESH_EXTENSIONS
+
+__all__ = ["MeshReference", "file_kind", "inside", "read_regular", "resolve_mesh_reference"]
+
+
+@dataclass(frozen=True)
+class MeshReference:
+    """Outcome of resolving one ``<mesh filename=...>``.
+
+    ``path`` is the real (symlink-free, absolute) path when acceptable, else
+    None and ``code``/``message`` say why. ``size`` bytes when known.
+    """
+
+    filename: str
+    path: Path | None
+    code: str | None = None
+    message: str = ""
+    size: int | None = None
+
+
+_URI = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*://")
+_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]{1,}:")  # 'data:', 'mailto:' (not 'C:')
+_DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
+
+
+def inside(path: str, root: str) -> bool:
+    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+
+def _kind(mode: int) -> str:
+    return (
+        "FIFO" if stat.S_ISFIFO(mode)
+        else "character device" if stat.S_ISCHR(mode)
+        else "block device" if stat.S_ISBLK(mode)
+        else "socket" if stat.S_ISSOCK(mode)
+        else "directory" if stat.S_ISDIR(mode)
+        else "regular file" if stat.S_ISREG(mode)
+        else "special file"
+    )
+
+
+def file_kind(filename: str, base: Path | str) -> str | None:
+    """What ``filename`` (absolute, or relative to ``base``) names when opened,
+    symlinks followed, if it is a FIFO, a device, a socket or another special
+    file: ``"FIFO"``, ``"character device"``, ... ; None for a regular file,
+    a directory, a missing path, a URI or a string with NUL. Only ``os.stat``
+    is used (nothing is opened, so a FIFO cannot block). Wherever the path
+    leads (inside the asset folder or not), a reader of the input would block
+    on it or read without end."""
+    if not filename or "\x00" in filename or _URI.match(filename):
+        return None
+    try:
+        st = os.stat(os.path.join(str(base), filename))
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode):
+        return None
+    return _kind(st.st_mode)
+
+
+def resolve_mesh_reference(
+    folder: Path | str,
+    filename: str | None,
+    *,
+    base: Path | str | None = None,
+    extensions: Iterable[str] = MESH_EXTENSIONS,
+    max_bytes: int | None = None,
+) -> MeshReference:
+    """Resolve a mesh path written in a URDF (or an OBJ's ``mtllib``) safely.
+
+    Checks, in this order (the first failure is returned): filename present;
+    no NUL or control character; not a URI; not absolute (``/x``, ``\\x``,
+    ``C:\\x``); the lexically normalized path stays in ``folder``; the real
+    path (symlinks resolved) stays in the real ``folder``; it exists; it is not
+    a directory; it is a regular file (no FIFO, device, socket); its suffix is
+    in ``extensions`` (when non-empty); its size is <= ``max_bytes``; the path
+    as written opens (``dir/../x`` needs ``dir``, which normalization hides). Only
+    ``os.stat`` is used: nothing is opened, so a FIFO cannot block.
+
+    Args:
+        folder: the asset folder.
+        filename: the string as written.
+        base: folder the path is relative to (default ``folder``; the OBJ's
+            folder for ``mtllib``).
+        extensions: accepted suffixes, lower case with the dot; empty: any.
+        max_bytes: size cap in bytes (None: none).
+
+    Returns:
+        A :class:`MeshReference` (never raises for bad input).
+    """
+    fname = filename if filename is not None else ""
+    if not fname.strip():
+        return MeshReference(fname, None, "MESH_FILENAME_EMPTY", "<mesh> has no filename")
+    if "\x00" in fname:
+        return MeshReference(fname, None, "MESH_PATH_NUL", "the path contains a NUL byte")
+    if any(ord(ch) < 32 or ord(ch) == 127 for ch in fname):
+        return MeshReference(fname, None, "MESH_PATH_CONTROL_CHAR", "the path contains a control character")
+    if _URI.match(fname) or (_SCHEME.match(fname) and not _DRIVE.match(fname)):
+        return MeshReference(fname, None, "MESH_URI_FORBIDDEN", f"URI {fname!r}: only relative paths inside the asset folder are accepted")
+    if fname.startswith(("/", "\\")) or _DRIVE.match(fname):
+        return MeshReference(fname, None, "MESH_PATH_ABSOLUTE", f"absolute path {fname!r}: only relative paths inside the asset folder are accepted")
+    root_abs = os.path.abspath(str(folder))
+    base_abs = os.path.abspath(str(base)) if base is not None else root_abs
+    lexical = os.path.normpath(os.path.join(base_abs, fname))
+    if not inside(lexical, root_abs):
+        return MeshReference(fname, None, "MESH_PATH_ESCAPES", f"{fname!r} resolves to {lexical}, outside the asset folder")
+    root_real = os.path.realpath(root_abs)
+    real = os.path.realpath(os.path.join(base_abs, fname))
+    if not inside(real, root_real):
+        return MeshReference(fname, None, "MESH_SYMLINK_ESCAPES", f"{fname!r} is a symlink (or under one) to {real}, outside the asset folder")
+    try:
+        st = os.stat(real)
+    except FileNotFoundError:
+        return MeshReference(fname, None, "MESH_NOT_FOUND", f"{fname!r} does not exist")
+    except NotADirectoryError:
+        return MeshReference(fname, None, "MESH_NOT_FOUND", f"{fname!r} does not exist (a parent is a file)")
+    except OSError as exc:
+        return MeshReference(fname, None, "MESH_UNREADABLE", f"{fname!r}: {exc.strerror or exc}")
+    if stat.S_ISDIR(st.st_mode):
+        return MeshReference(fname, None, "MESH_IS_DIRECTORY", f"{fname!r} is a directory")
+    if not stat.S_ISREG(st.st_mode):
+        return MeshReference(fname, None, "MESH_NOT_REGULAR_FILE", f"{fname!r} is a {_kind(st.st_mode)}, not a regular file")
+    try:  # the path as written, as the operating system (PyBullet, a user's simulator) opens it
+        os.stat(os.path.join(base_abs, fname))
+    except OSError:
+        return MeshReference(fname, None, "MESH_NOT_FOUND",
+                             f"{fname!r} cannot be opened as written: a folder it walks through ('dir/../') does not exist "
+                             "(only the normalized path does)")
+    exts = frozenset(e.lower() for e in extensions)
+    if exts:
+        for name in (fname, real):
+            suf = os.path.splitext(name)[1].lower()
+            if suf not in exts:
+                return MeshReference(
+                    fname, None, "MESH_EXTENSION_UNSUPPORTED",
+                    f"{os.path.basename(name)!r} does not end in a mesh extension ({', '.join(sorted(exts))})",
+                )
+    if max_bytes is not None and st.st_size > max_bytes:
+        return MeshReference(fname, None, "MESH_TOO_LARGE", f"{fname!r} has {st.st_size} bytes > cap {max_bytes}", st.st_size)
+    return MeshReference(fname, Path(real), None, "", st.st_size)
+
+
+
+def read_regular(path: Path, max_bytes: int) -> bytes:
+    """Read a file that was checked to be regular, re-checking on the open
+    descriptor (no blocking on a FIFO swapped in, no symlink followed)."""
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    fd = os.open(str(path), flags)
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise OSError(f"{path} is not a regular file")
+        if st.st_size > max_bytes:
+            raise OSError(f"{path} has {st.st_size} bytes > cap {max_bytes}")
+        with os.fdopen(os.dup(fd), "rb") as fh:
+            data = fh.read(max_bytes + 1)
+        if len(data) > max_bytes:
+            raise OSError(f"{path} grew beyond {max_bytes} bytes")
+        return data
+    finally:
+        os.close(fd)
+

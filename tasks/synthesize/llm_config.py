@@ -1,0 +1,118 @@
+"""Settings of a model client (:class:`ClientConfig`), from code or the environment.
+
+Operational knobs come from ``ASSET2SIM_LLM_*`` environment variables
+(:meth:`ClientConfig.from_env`); API keys are never stored here unless given
+explicitly, and then never hashed or printed (``repr=False``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+
+def _env_float(name: str, default: float) -> float:
+    v = os.environ.get(name)
+    if v is None or v == "":
+        return default
+    try:
+        x = float(v)
+    except ValueError as exc:
+        raise ValueError(f"environment variable {name}={v!r} is not a number") from exc
+    if not math.isfinite(x) or x < 0:
+        raise ValueError(f"environment variable {name}={v!r} must be a finite number >= 0")
+    return x
+
+
+def default_cache_dir() -> Path:
+    """``$ASSET2SIM_LLM_CACHE_DIR``, else ``$XDG_CACHE_HOME/asset2sim/llm``,
+    else ``~/.cache/asset2sim/llm``."""
+    env = os.environ.get("ASSET2SIM_LLM_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "asset2sim" / "llm"
+
+
+@dataclass(frozen=True)
+class ClientConfig:
+    """Settings of one :class:`LLMClient`.
+
+    Attributes:
+        model: litellm model string, ``provider/name`` (``gemini/gemini-2.5-flash``).
+        base_url: API base of an OpenAI-compatible or local server (no key needed).
+        api_key: explicit key (else the provider's environment variable is used;
+            with ``base_url`` and no key a placeholder is sent). Never hashed.
+        timeout_s: per-attempt timeout, s.
+        max_attempts: HTTP tries per call (1 + retries), >= 1.
+        backoff_s: delay before the first retry, s (doubled each retry).
+        max_backoff_s: cap on the computed backoff, s.
+        max_retry_after_s: longest server-requested wait that is honoured, s;
+            a longer ``Retry-After`` fails the call at once.
+        max_reply_chars: longest reply accepted, characters.
+        max_tokens: completion token limit sent with each call.
+        temperature: sampling temperature (None: the provider's default).
+        cache_dir: reply cache folder; None disables the cache.
+        render_size: (width, height) pixels of the views sent to the model.
+    """
+
+    model: str
+    base_url: str | None = None
+    api_key: str | None = field(default=None, repr=False)
+    timeout_s: float = 120.0
+    max_attempts: int = 4
+    backoff_s: float = 2.0
+    max_backoff_s: float = 60.0
+    max_retry_after_s: float = 300.0
+    max_reply_chars: int = 1_000_000
+    max_tokens: int = 16384
+    temperature: float | None = 0.0
+    cache_dir: Path | None = None
+    render_size: tuple[int, int] = (384, 384)
+
+    def __post_init__(self):
+        if not self.model or not isinstance(self.model, str):
+            raise ValueError("a model string is required (e.g. gemini/gemini-2.5-flash)")
+        if self.max_attempts < 1:
+            raise ValueError(f"max_attempts must be >= 1, got {self.max_attempts}")
+        if not (self.timeout_s > 0):
+            raise ValueError(f"timeout_s must be > 0, got {self.timeout_s}")
+
+    @classmethod
+    def from_env(cls, model: str, base_url: str | None = None, **overrides) -> "ClientConfig":
+        """Config for ``model`` with knobs from the environment:
+        ``ASSET2SIM_LLM_TIMEOUT_S`` (120), ``ASSET2SIM_LLM_MAX_ATTEMPTS`` (4),
+        ``ASSET2SIM_LLM_BACKOFF_S`` (2), ``ASSET2SIM_LLM_MAX_BACKOFF_S`` (60),
+        ``ASSET2SIM_LLM_MAX_RETRY_AFTER_S`` (300), ``ASSET2SIM_LLM_MAX_REPLY_CHARS``
+        (1e6), ``ASSET2SIM_LLM_MAX_TOKENS`` (16384), ``ASSET2SIM_LLM_RENDER_SIZE``
+        (384), ``ASSET2SIM_LLM_CACHE_DIR`` (:func:`default_cache_dir`; ``off``
+        disables the cache). Keyword ``overrides`` win.
+
+        Raises:
+            ValueError: a malformed environment value.
+        """
+        cache_env = os.environ.get("ASSET2SIM_LLM_CACHE_DIR", "")
+        size = int(_env_float("ASSET2SIM_LLM_RENDER_SIZE", 384))
+        kw: dict[str, Any] = dict(
+            model=model,
+            base_url=base_url,
+            timeout_s=_env_float("ASSET2SIM_LLM_TIMEOUT_S", 120.0),
+            max_attempts=int(_env_float("ASSET2SIM_LLM_MAX_ATTEMPTS", 4)),
+            backoff_s=_env_float("ASSET2SIM_LLM_BACKOFF_S", 2.0),
+            max_backoff_s=_env_float("ASSET2SIM_LLM_MAX_BACKOFF_S", 60.0),
+            max_retry_after_s=_env_float("ASSET2SIM_LLM_MAX_RETRY_AFTER_S", 300.0),
+            max_reply_chars=int(_env_float("ASSET2SIM_LLM_MAX_REPLY_CHARS", 1_000_000)),
+            max_tokens=int(_env_float("ASSET2SIM_LLM_MAX_TOKENS", 16384)),
+            cache_dir=None if cache_env.lower() in ("off", "none", "0") else default_cache_dir(),
+            render_size=(max(size, 16), max(size, 16)),
+        )
+        kw.update(overrides)
+        return cls(**kw)
+
+
+def with_overrides(config: ClientConfig, **kw) -> ClientConfig:
+    """A copy of ``config`` with fields replaced."""
+    return replace(config, **kw)

@@ -1,0 +1,196 @@
+"""A model's reply turned into an overlay: the reply is a prior, not the answer.
+
+The model picks the scale, a material (density, shell or solid, wall
+thickness) per link, and per joint a state band and qualitative dynamics
+(damping level, holds position, spring, stiff, free moving). Mass then follows
+the geometry (m = v rho s^3 eta, or A s^2 t rho for open shells;
+:func:`asset2sim.tasks.synthesize.physics.link_physics`), kept within a factor
+:data:`MASS_AGREEMENT` of the model's own mass estimate; inertia comes from the
+scaled geometry; damping and friction from the joint loads
+(:func:`asset2sim.tasks.synthesize.physics.joint_dynamics`); the state from
+the band through the geometric closed ends
+(:func:`asset2sim.tasks.synthesize.estimate.state_from_bands`). The overlay is
+checked with the offline estimator's validator
+(:func:`asset2sim.tasks.synthesize.validate_overlay.validate_overlay`).
+"""
+
+from __future__ import annotations
+
+from asset2sim import __version__
+from asset2sim.schemas.model_reply import ModelReply
+from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
+from asset2sim.tasks.interpret.part_priors import material_for
+from asset2sim.tasks.synthesize import estimate, physics, validate_overlay
+from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.llm_errors import ReplyInvalid
+from asset2sim.tasks.synthesize.llm_usage import Usage
+
+MASS_AGREEMENT = 3.0
+"""Largest factor between the geometric total mass and the model's own
+estimate before the links are rescaled to the nearer bound (dimensionless)."""
+
+
+def check_reply_names(ctx: EstimationContext, reply: ModelReply) -> list[str]:
+    """Problems with the names in a reply: unknown or duplicated links and joints."""
+    errors = []
+    links = {ln.name for ln in ctx.asset.links}
+    movable = {j.name for j in ctx.asset.movable_joints()}
+    seen: set[str] = set()
+    for i, lr in enumerate(reply.links):
+        if lr.link not in links:
+            errors.append(f"links.{i}.link: {lr.link!r} is not a link of the asset; links are {sorted(ctx.geometry)}")
+        elif lr.link in seen:
+            errors.append(f"links.{i}.link: {lr.link!r} appears twice")
+        seen.add(lr.link)
+    seen = set()
+    for i, jr in enumerate(reply.joints):
+        if jr.joint not in movable:
+            errors.append(f"joints.{i}.joint: {jr.joint!r} is not a movable joint of the asset; movable joints are {sorted(movable)}")
+        elif jr.joint in seen:
+            errors.append(f"joints.{i}.joint: {jr.joint!r} appears twice")
+        seen.add(jr.joint)
+    return errors
+
+
+def _prior_material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoice:
+    m = material_for(ctx.category, label)
+    return physics.MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness), source=m.source)
+
+
+def _scaled_link(lp: LinkPhysics, f: float, why: str) -> LinkPhysics:
+    return lp.model_copy(
+        update={
+            "mass": lp.mass * f,
+            "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
+            "source": lp.source + why,
+        }
+    )
+
+
+def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> tuple[Overlay, dict[str, str], list[str]]:
+    """The asset2sim overlay from a model reply (the reply is a prior; see the
+    module docstring), validated with :func:`validate_overlay.validate_overlay`.
+
+    Links without a reply entry get the offline prior's material, joints
+    without one the request parser's band and dynamics words (both noted).
+
+    Returns:
+        (overlay, band per movable joint, notes). ``overlay.estimator`` has no
+        usage yet (the caller fills it).
+
+    Raises:
+        ReplyInvalid: unknown or duplicated names, a link whose mass cannot be
+            computed, or an overlay the validator rejects (messages name them).
+    """
+    errors = check_reply_names(ctx, reply)
+    if errors:
+        raise ReplyInvalid(errors)
+    s = float(reply.scale.value)
+    notes: list[str] = []
+    # ---- links: material from the model, mass and inertia from the geometry
+    by_link = {lr.link: lr for lr in reply.links}
+    links: dict[str, LinkPhysics] = {}
+    mat_notes, missing = [], []
+    for ln in ctx.asset.links:
+        geom = ctx.geometry.get(ln.name)
+        if geom is None:
+            continue
+        lr = by_link.get(ln.name)
+        if lr is None:
+            mat = _prior_material(ctx, ln.semantic_label)
+            missing.append(ln.name)
+            src = f"geometry + {mat.name} (offline prior; no model entry)"
+        else:
+            mat = physics.MaterialChoice(name=lr.material, density=lr.density, shell=lr.shell, wall_thickness=lr.wall_thickness, source="model")
+            src = f"geometry + {mat.name} (model)"
+        try:
+            links[ln.name] = physics.link_physics(geom, s, mat, source=src)
+        except ValueError as exc:
+            errors.append(f"links: {exc}")
+            continue
+        mat_notes.append(f"{ln.name}: {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
+    if errors:
+        raise ReplyInvalid(errors)
+    if missing:
+        notes.append(f"the model gave no material for {missing}; offline priors used")
+    geo_total = sum(lp.mass for lp in links.values())
+    model_total = sum(by_link[n].mass.value for n in links if n in by_link)
+    geo_known = sum(links[n].mass for n in links if n in by_link)
+    mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {geo_total:.4g} kg from the geometry (m = v*rho*s^3*eta)"
+    if model_total > 0 and geo_known > 0:
+        ratio = geo_known / model_total
+        mass_note += f"; the model estimated {model_total:.4g} kg for those links (ratio {ratio:.3g})"
+        if ratio > MASS_AGREEMENT or ratio < 1.0 / MASS_AGREEMENT:
+            target = model_total * (MASS_AGREEMENT if ratio > MASS_AGREEMENT else 1.0 / MASS_AGREEMENT)
+            f = target / geo_known
+            links = {n: _scaled_link(lp, f, f"; x{f:.3g} to within {MASS_AGREEMENT:g}x of the model's mass estimate") for n, lp in links.items()}
+            mass_note += f"; more than {MASS_AGREEMENT:g}x apart: every link scaled by {f:.3g}"
+    # ---- state: the model's band per joint through the geometric closed ends
+    parsed, _ = estimate.requested_bands(ctx)
+    by_joint = {jr.joint: jr for jr in reply.joints}
+    movable = ctx.asset.movable_joints()
+    prismatic = {j.name for j in movable if j.type == "prismatic"}
+    bands: dict[str, str] = {}
+    for j in movable:
+        jr = by_joint.get(j.name)
+        bands[j.name] = jr.band if jr is not None else parsed.get(j.name, "closed")
+        if jr is None:
+            notes.append(f"{j.name}: no model entry; the request parser's band {bands[j.name]!r} and dynamics words used")
+        elif jr.band != parsed.get(j.name, "closed"):
+            notes.append(f"{j.name}: the model chose band {jr.band!r}, the request parser read {parsed.get(j.name, 'closed')!r}; the model's band used")
+    state = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
+    # ---- dynamics from the loads, with the model's qualitative choices
+    relevant = set(estimate.task_relevant_joints(ctx))
+    choices: dict[str, estimate.JointChoice] = {}
+    for j in movable:
+        jr = by_joint.get(j.name)
+        rq = ctx.request
+        is_rel = j.name in relevant
+        if jr is not None:
+            choices[j.name] = estimate.JointChoice(jr.damping_level, jr.holds_position, jr.spring, jr.stiff, jr.free_moving)
+        else:
+            choices[j.name] = estimate.JointChoice(
+                rq.damping if is_rel else "moderate",
+                rq.holds_position and is_rel,
+                rq.spring and is_rel,
+                rq.stiff and is_rel,
+                rq.free_moving and is_rel,
+            )
+    joints = estimate.joint_dynamics_for(ctx, links, state, s, choices, source=f"{name} physics (model choices)")
+    asked_state = bool(ctx.request.joint_states) or any(b != "closed" for b in bands.values())
+    if reply.category.strip().lower() != str(ctx.category).lower():
+        notes.append(f"the model calls it {reply.category!r}; the pipeline's category {ctx.category!r} is kept")
+    overlay = Overlay(
+        estimator=EstimatorInfo(name=name, model=model, version=__version__),
+        scale=s,
+        category=ctx.category,
+        contact_material=ContactMaterial(lateral_friction=reply.lateral_friction, restitution=reply.restitution, note=f"model ({name})"),
+        links=links,
+        joints=joints,
+        initial_joint_positions=state if asked_state else None,
+        notes=ValidationNotes(
+            size=f"model: s = {s:.4g} +- {reply.scale.std:.3g}; {reply.notes.size}",
+            material="; ".join(mat_notes) + (f" | model: {reply.notes.material}" if reply.notes.material else ""),
+            mass_arithmetic=mass_note + (f" | model: {reply.notes.mass_arithmetic}" if reply.notes.mass_arithmetic else ""),
+            other=[f"category: {ctx.category} ({ctx.category_reason})", "bands (model): " + ", ".join(f"{k}={v}" for k, v in bands.items())] + notes,
+        ),
+    )
+    try:
+        validate_overlay.validate_overlay(overlay, ctx.asset, ctx.geometry)
+    except validate_overlay.OverlayInvalid as exc:
+        raise ReplyInvalid([f"{i.code} at {i.where}: {i.message}" for i in exc.issues if i.severity == "error" and not i.fixed]) from None
+    return overlay, bands, notes
+
+
+def estimator_info(name: str, model: str, usage: Usage) -> EstimatorInfo:
+    """The overlay's estimator record: ``name``, ``model``, the package
+    version and what the calls cost (``usage``: calls, tokens, USD, s)."""
+    return EstimatorInfo(
+        name=name,
+        model=model,
+        version=__version__,
+        queries=usage.calls,
+        tokens=usage.total_tokens,
+        cost_usd=usage.cost_usd,
+        seconds=round(usage.seconds, 3),
+    )

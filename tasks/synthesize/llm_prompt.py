@@ -1,0 +1,257 @@
+"""What a model-backed estimator sends: the description, the views, the messages.
+
+- :func:`describe`: the structured description of the analysis stage
+  (links with semantic labels, volumes, areas and extents at scale 1, joints
+  with types, limits and closed ends, the category, the request text and what
+  the request parser understood, the typical size and mass of the category);
+- :func:`render_closed_views`: the five views of the input asset at its
+  geometric closed state (:func:`asset2sim.tasks.publish.render.render_views`),
+  as PNG data URLs;
+- :func:`build_messages`: the system prompt (instructions and the reply's
+  JSON schema) and the user message (description, then each view);
+- :func:`proposal_messages`: the request for alternative joint states when
+  the simulator's state search stalls.
+
+Lengths in m, angles in rad, all at scale 1 in the input asset's frames.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+from typing import Any
+
+import numpy as np
+
+from asset2sim.schemas.request import BAND_TARGET
+from asset2sim.tasks.interpret.part_priors import material_for
+from asset2sim.tasks.interpret.size_priors import target_size
+from asset2sim.tasks.publish import render
+from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize.context import EstimationContext
+
+DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
+"""Line preceding the structured description in the user message."""
+
+PROPOSAL_MARK = "STALLED STATE SEARCH (JSON):"
+"""Line that precedes the state-search summary in a joint-proposal request."""
+
+VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
+"""Views sent with a request (the SPEC's five)."""
+
+
+def _r(x: float, n: int = 5) -> float:
+    return float(f"{float(x):.{n}g}")
+
+
+def describe(ctx: EstimationContext) -> dict[str, Any]:
+    """The structured description sent to the model (JSON-able; lengths in m
+    and angles in rad, all at scale 1 in the input asset's frames; prismatic
+    values in the input's units, which the scale multiplies).
+
+    Contents: category (and why), the request text and what the request parser
+    understood, the closed object's extents, the typical real dimensions and
+    mass range of the category for this request (priors), every link (semantic
+    label, joint kind, volume, area, extents, the offline prior's material)
+    and every movable joint (type, parent, child and its label, axis, limits,
+    closed end, opening direction and range, whether tasks act on it, the band
+    the parser read for it).
+    """
+    asset = ctx.asset
+    req = ctx.request
+    target = target_size(ctx.category, req)
+    bands, band_notes = estimate.requested_bands(ctx)
+    relevant = set(estimate.task_relevant_joints(ctx))
+    links = []
+    for ln in asset.links:
+        g = ctx.geometry.get(ln.name)
+        pj = asset.parent_joint(ln.name)
+        entry: dict[str, Any] = {
+            "name": ln.name,
+            "semantic_label": ln.semantic_label,
+            "semantic_joint": ln.semantic_joint,
+            "parent_joint": pj.name if pj else None,
+            "has_geometry": g is not None,
+        }
+        if g is not None:
+            mat = material_for(ctx.category, ln.semantic_label)
+            entry.update(
+                {
+                    "volume_m3": _r(g.volume),
+                    "volume_method": g.volume_method,
+                    "watertight": g.watertight,
+                    "area_m2": _r(g.area),
+                    "extents_m": [_r(e) for e in g.extents],
+                    "typical_material": {"name": mat.name, "density": mat.density, "shell": mat.shell, "wall_thickness": mat.wall_thickness},
+                }
+            )
+        links.append(entry)
+    joints = []
+    for j in asset.movable_joints():
+        cs = ctx.closed.get(j.name)
+        entry = {
+            "name": j.name,
+            "type": j.type,
+            "parent": j.parent,
+            "child": j.child,
+            "child_label": asset.link(j.child).semantic_label,
+            "axis": [_r(a) for a in j.axis],
+            "lower": None if j.lower is None else _r(j.lower),
+            "upper": None if j.upper is None else _r(j.upper),
+            "unit": "m at scale 1 (multiply by the scale)" if j.type == "prismatic" else "rad",
+            "task_relevant": j.name in relevant,
+            "requested_band": bands.get(j.name, "closed"),
+            "height_m": _r(ctx.joint_heights.get(j.name, 0.0)),
+        }
+        if cs is not None:
+            entry.update(
+                {
+                    "closed_position": _r(cs.q_closed),
+                    "opening_direction": int(cs.direction),
+                    "opening_range": _r(cs.open_range),
+                }
+            )
+        joints.append(entry)
+    return {
+        "asset_id": asset.asset_id,
+        "category": ctx.category,
+        "category_reason": ctx.category_reason,
+        "request": req.text,
+        "request_parse": {
+            "size_class": req.size_class,
+            "size_factor": req.size_factor,
+            "joint_states": [js.model_dump() for js in req.joint_states],
+            "damping": req.damping,
+            "holds_position": req.holds_position,
+            "spring": req.spring,
+            "stiff": req.stiff,
+            "free_moving": req.free_moving,
+            "pose": req.pose_hint,
+            "notes": band_notes,
+        },
+        "closed_extents_m": [_r(e) for e in np.asarray(ctx.closed_extents, float)],
+        "typical_dims_m": [_r(d) for d in target.dims],
+        "typical_mass_range_kg": [_r(m) for m in target.mass_range],
+        "typical_size_note": target.note,
+        "links": links,
+        "joints": joints,
+        "band_fractions": dict(BAND_TARGET),
+    }
+
+
+SYSTEM_PROMPT = """You turn an articulated 3D asset into an interaction-ready simulation asset.
+You get renders of the object in its closed state (views named before each image; the render scale is arbitrary) and a
+structured description (JSON) from mesh analysis at scale 1. Answer with exactly ONE JSON object that follows the JSON
+schema below: every field present, no other fields, no prose, no Markdown.
+
+How your answer is used and what each field means (SI units, angles in radians):
+- scale: the uniform factor s that gives the object the real-world size the request asks for
+  (real dimensions = closed_extents_m * s; typical_dims_m is the usual size of such an object for this request).
+- links: one entry per link that has geometry, names exactly as given. material, density (kg/m^3), shell (true for hollow
+  molded / sheet / panel parts), wall_thickness (m). The mass will be computed from the geometry:
+  solid m = volume_m3 * density * s^3, shell m = area_m2 * s^2 * wall_thickness * density. mass: your own estimate (kg) of
+  that link at the requested size.
+- joints: one entry per movable joint, names exactly as given. band: the state the request asks for (fraction of the
+  opening range from the closed end: closed 0, slightly_open 0.2, quarter 0.25, halfway 0.5, mostly 0.75, fully 1);
+  joints the request does not address stay closed. position: that state's joint value
+  q = closed_position + opening_direction * fraction * opening_range (prismatic: times s, in metres).
+  damping_level low / moderate / high; holds_position (friction must hold the state against gravity); spring (a return
+  spring is intended); stiff; free_moving. damping, friction, stiffness: numbers for the scaled object
+  (revolute N*m*s/rad, N*m, N*m/rad; prismatic N*s/m, N, N/m); stiffness 0 unless a spring is intended.
+- Every number with a std is your estimate and its 1-sigma uncertainty in the same unit (std > 0).
+- lateral_friction and restitution: the object's contact material.
+- notes: size reasoning, material reasoning, mass arithmetic.
+"""
+
+
+def system_prompt(schema: dict[str, Any]) -> str:
+    """The system message: instructions plus the JSON schema (also sent as
+    ``response_format``, repeated here for servers that ignore it)."""
+    return SYSTEM_PROMPT + "\nJSON schema:\n" + json.dumps(schema, separators=(",", ":"))
+
+
+def png_data_url(image: np.ndarray) -> str:
+    """``data:image/png;base64,...`` of an RGB(A) uint8 (H, W, 3|4) image."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
+    """Render ``views`` of the input asset at its geometric closed state.
+
+    Returns:
+        (view -> PNG data URL, notes). A render failure is not fatal: the
+        request then carries the description only and the note says why.
+    """
+    q = {n: float(cs.q_closed) for n, cs in ctx.closed.items()}
+    try:
+        images = render.render_views(ctx.asset.urdf_path, q, views=views, size=size)
+    except Exception as exc:  # renders are evidence, not a requirement
+        return {}, [f"renders failed ({type(exc).__name__}: {exc}); the model got the description only"]
+    return {v: png_data_url(img) for v, img in images.items()}, []
+
+
+def build_messages(description: dict[str, Any], images: dict[str, str], schema: dict[str, Any], *, extra: str = "") -> list[dict[str, Any]]:
+    """OpenAI-format chat messages: the system prompt (with the schema) and one
+    user message with the description and each view (name, then image)."""
+    parts: list[dict[str, Any]] = [
+        {
+            "type": "text",
+            "text": (
+                f"Request: {description.get('request') or '(no request: a generic interaction-ready asset)'}\n"
+                + (extra + "\n" if extra else "")
+                + f"{DESCRIPTION_MARK}\n{json.dumps(description, separators=(',', ':'))}"
+            ),
+        }
+    ]
+    for view, url in images.items():
+        parts.append({"type": "text", "text": f"view: {view} (closed state)"})
+        parts.append({"type": "image_url", "image_url": {"url": url}})
+    return [{"role": "system", "content": system_prompt(schema)}, {"role": "user", "content": parts}]
+
+
+def proposal_messages(
+    ctx: EstimationContext,
+    state: dict[str, float],
+    pairs: list[dict[str, Any]],
+    intervals: dict[str, tuple[float, float]],
+    schema: dict[str, Any],
+) -> list[dict[str, Any]]:
+    """OpenAI-format chat messages asking for alternative initial states when
+    the simulator's state search stalls: the instructions with ``schema``
+    (:class:`~asset2sim.schemas.model_reply.JointProposalReply`'s JSON schema),
+    then :data:`PROPOSAL_MARK` and the summary: category, request, every joint
+    of ``state`` that has an allowed interval (type, part label, current
+    value, ``intervals[joint]`` = (low, high); rad for revolute, m for
+    prismatic) and the colliding link ``pairs`` (``link_a``, ``link_b``,
+    ``depth_m`` penetration in m). Values rounded to 1e-6."""
+    labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
+    types = {j.name: j.type for j in ctx.asset.movable_joints()}
+    text = (
+        "The physics simulator could not remove all self-penetration of this articulated object "
+        "by searching joint positions near the requested state. Propose up to 4 alternative "
+        "initial states (joint positions; radians for revolute, metres for prismatic; each inside "
+        "its allowed interval) that might separate the colliding parts. Reply with JSON only, "
+        "following this schema:\n" + json.dumps(schema)
+    )
+    info = {
+        "category": ctx.category,
+        "request": ctx.request.text,
+        "joints": [
+            {"name": n, "type": types.get(n), "part": labels.get(n), "current": round(float(q), 6),
+             "allowed": [round(float(intervals[n][0]), 6), round(float(intervals[n][1]), 6)]}
+            for n, q in state.items() if n in intervals
+        ],
+        "colliding_link_pairs": [
+            {"link_a": p_["link_a"], "link_b": p_["link_b"], "penetration_m": round(float(p_["depth_m"]), 6)}
+            for p_ in pairs
+        ],
+    }
+    return [
+        {"role": "system", "content": text},
+        {"role": "user", "content": f"{PROPOSAL_MARK}\n{json.dumps(info, separators=(',', ':'))}"},
+    ]

@@ -1,0 +1,140 @@
+"""Strict parsing of model replies, and the message that asks again.
+
+:func:`parse_json_strict` accepts exactly one JSON object: non-finite numbers
+(``NaN``, ``Infinity``, ``1e999``), duplicate keys, prose and truncated
+documents are rejected (one Markdown code fence around the whole reply is
+tolerated); :func:`parse_reply` then validates it against the reply's pydantic
+model in strict mode. Problems come back as :class:`ReplyInvalid` with one line
+each, which :func:`reask_text` turns into the follow-up message.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any, TypeVar
+
+from pydantic import BaseModel, ValidationError
+
+from asset2sim.tasks.synthesize.llm_errors import ReplyInvalid
+
+
+class _Reject(ValueError):
+    pass
+
+
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise _Reject(f"duplicate key {k!r}")
+        out[k] = v
+    return out
+
+
+def _no_constant(name: str) -> Any:
+    raise _Reject(f"non-finite number {name} is not allowed")
+
+
+def _finite_float(text: str) -> float:
+    x = float(text)
+    if not math.isfinite(x):
+        raise _Reject(f"number {text} overflows to a non-finite value")
+    return x
+
+
+def _strip_fence(text: str) -> str:
+    """Remove one Markdown code fence around the whole text (```json ... ```),
+    which many models add although asked not to; anything else is kept."""
+    t = text.strip()
+    if t.startswith("```") and t.endswith("```") and len(t) >= 6:
+        first_nl = t.find("\n")
+        if first_nl > 0 and t[3:first_nl].strip().lower() in ("", "json"):
+            return t[first_nl + 1 : -3].strip()
+    return t
+
+
+def parse_json_strict(text: str) -> dict[str, Any]:
+    """Parse one JSON object strictly.
+
+    Rejects: anything but a single JSON object (prose, several values, a
+    truncated document), duplicate keys at any depth, ``NaN`` / ``Infinity`` /
+    numbers that overflow to infinity. One Markdown code fence around the whole
+    reply is tolerated.
+
+    Raises:
+        ReplyInvalid: with one message naming the problem and its position.
+    """
+    t = _strip_fence(text)
+    dec = json.JSONDecoder(object_pairs_hook=_no_duplicates, parse_constant=_no_constant, parse_float=_finite_float)
+    try:
+        obj, end = dec.raw_decode(t)
+    except _Reject as exc:
+        raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
+    except json.JSONDecodeError as exc:
+        what = "the reply is not JSON" if exc.pos == 0 else "invalid or truncated JSON"
+        raise ReplyInvalid([f"{what}: {exc.msg} at line {exc.lineno} column {exc.colno} (character {exc.pos} of {len(t)})"]) from None
+    except ValueError as exc:  # e.g. an integer with too many digits
+        raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
+    if t[end:].strip():
+        raise ReplyInvalid([f"extra text after the JSON object at character {end} of {len(t)}"])
+    if not isinstance(obj, dict):
+        raise ReplyInvalid([f"the reply must be one JSON object, got {type(obj).__name__}"])
+    return obj
+
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def pydantic_errors(exc: ValidationError, limit: int = 30) -> list[str]:
+    """One line per error: ``path.to.field: message (got value)``."""
+    out = []
+    for e in exc.errors()[:limit]:
+        loc = ".".join(str(p) for p in e.get("loc", ())) or "(top level)"
+        got = e.get("input")
+        got_s = "" if isinstance(got, (dict, list)) else f" (got {json.dumps(got)[:60] if _jsonable(got) else repr(got)[:60]})"
+        out.append(f"{loc}: {e.get('msg', 'invalid')}{got_s}")
+    if len(exc.errors()) > limit:
+        out.append(f"... and {len(exc.errors()) - limit} more errors")
+    return out
+
+
+def _jsonable(x: Any) -> bool:
+    try:
+        json.dumps(x)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def parse_reply(text: str, model_cls: type[M]) -> M:
+    """Strictly parse ``text`` into ``model_cls`` (strict JSON, then the pydantic
+    model in strict mode: no type coercion, extra fields forbidden by the model).
+
+    Raises:
+        ReplyInvalid: every problem found.
+    """
+    obj = parse_json_strict(text)
+    try:
+        return model_cls.model_validate(obj, strict=True)
+    except ValidationError as exc:
+        raise ReplyInvalid(pydantic_errors(exc)) from None
+
+
+def reask_text(errors: list[str]) -> str:
+    """The follow-up message listing a reply's problems."""
+    lines = "\n".join(f"- {e}" for e in errors[:30])
+    return (
+        "Your previous reply could not be used:\n"
+        f"{lines}\n"
+        "Answer again with exactly one JSON object that follows the schema: every field present, "
+        "no other fields, finite numbers within the stated ranges, names exactly as in the description. "
+        "No prose, no Markdown."
+    )
+
+
+def excerpt(text: str, limit: int) -> str:
+    """``text`` cut to ``limit`` characters, saying how many were left out."""
+    if len(text) <= limit:
+        return text
+    return text[:limit] + f"... [{len(text) - limit} more characters omitted]"
