@@ -509,7 +509,7 @@ BOX_T = [(0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4), (2, 6
 
 def box_ply() -> str:
     """The lid box as ASCII PLY."""
-    head = f"ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n"
+    head = "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n"
     return head + "".join(f"{x} {y} {z}\n" for x, y, z in BOX_V) + "".join(f"3 {a} {b} {c}\n" for a, b, c in BOX_T)
 
 

@@ -4,16 +4,18 @@ fast, without crash or hang, and extraction (hence ``refine``) refuses it."""
 from __future__ import annotations
 
 import collections
+import re
 import signal
 import time
 from contextlib import contextmanager
 
 import pytest
 
-from asset2sim import atomic
+from asset2sim import atomic, cli
 from asset2sim.tasks.ingest import validate_input as vi
 from asset2sim.tasks.ingest.extract import AssetError, extract_asset_checked
 from tests import corpus_builder as cb
+from tests.conftest import ROOT
 
 TIME_LIMIT_S = 5.0
 HANG_LIMIT_S = 30
@@ -83,3 +85,80 @@ def test_case_gets_its_code(case, tmp_path):
             if case.topic == "inertials" and vi.CODES[case.code].severity == "warning":
                 assert replaced, "an invalid inertial must be marked for replacement"
     assert atomic.tree_hashes(asset) == before
+
+
+# ----------------------------------------------------------------------------- issue 11: validate agrees with refine
+
+AGREEMENT = [c for c in cb.CASES if c.topic == "refine_agreement" and not c.policy]
+
+
+@pytest.mark.parametrize("case", AGREEMENT, ids=[c.name for c in AGREEMENT])
+def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
+    """What validate refuses, ``asset2sim refine`` refuses the same way: exit
+    status 1, one line naming the code, no traceback, no hang (FIFOs)."""
+    asset = case.build(tmp_path / "asset")
+    before = atomic.tree_hashes(asset)
+    with _no_hang(HANG_LIMIT_S):
+        assert cli.main(["validate", str(asset), "--quiet"]) == 1
+        capsys.readouterr()
+        status = cli.main(["refine", str(asset), "--out", str(tmp_path / "out"), "--no-extras", "-q"])
+    err = capsys.readouterr().err
+    assert status == 1, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim refine")]
+    assert len(lines) == 1 and case.code in lines[0], err
+    assert "Traceback" not in err
+    assert atomic.tree_hashes(asset) == before
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(cb.ACCEPTED))
+def test_refine_handles_what_validate_accepts(name, tmp_path, capsys):
+    """Symlinked mesh inside the folder, ``dir/../`` through an existing
+    folder, a UTF-8 byte-order mark, a two-turn revolute limit: validate
+    accepts them, refine writes an output whose URDF opens every mesh it
+    names (each a regular file)."""
+    asset = cb.ACCEPTED[name](tmp_path / "asset")
+    assert not vi.has_errors(vi.validate_asset(asset))
+    out = tmp_path / "out"
+    with _no_hang(240):
+        status = cli.main(["refine", str(asset), "--out", str(out), "--no-extras", "-q"])
+    err = capsys.readouterr().err
+    assert status in (0, 3), err
+    assert "Traceback" not in err
+    text = (out / "mobility.urdf").read_text()
+    for fname in set(re.findall(r'filename="([^"]+)"', text)):
+        p = out / fname
+        assert p.is_file() and not p.is_symlink(), fname
+
+
+def test_input_hash_covers_mtl_and_textures(tmp_path):
+    asset = cb.build_valid(tmp_path / "asset")
+    h0 = extract_asset_checked(asset)[0].input_hash
+    (asset / "images" / "tex.png").write_bytes(cb.PNG_1PX + b"\0")
+    h1 = extract_asset_checked(asset)[0].input_hash
+    assert h1 != h0, "an edited texture must change the input hash"
+    (asset / "meshes" / "base.mtl").write_text(cb.MTL + "Ks 0.1 0.1 0.1\n")
+    h2 = extract_asset_checked(asset)[0].input_hash
+    assert h2 not in (h0, h1), "an edited MTL must change the input hash"
+    result = vi.run_validation(asset)
+    names = sorted(p.name for p in result.material_files)
+    assert names == ["base.mtl", "tex.png"]
+
+
+def test_face_cap_counts_visual_only_meshes(tmp_path):
+    """A visual-only mesh over the per-file cap is a warning for that file but
+    counts in the asset's total (PyBullet and the renderer load it too)."""
+    asset = cb.build_valid(tmp_path / "asset")
+    (asset / "meshes" / "lid_visual.obj").write_text(cb.CUBE_V + cb.CUBE_F * 10)
+    text = (asset / "mobility.urdf").read_text().replace("meshes/lid.obj", "meshes/lid_visual.obj", 1)
+    (asset / "mobility.urdf").write_text(text)
+    policy = vi.ValidationPolicy(max_mesh_faces=100, max_total_faces=100)
+    found = vi.validate_asset(asset, policy)
+    assert any(f.code == "MESH_TOO_MANY_FACES" and f.severity == "error" and f.values.get("total_faces") for f in found)
+
+
+def test_default_caps_are_documented():
+    doc = (ROOT / "docs" / "validation.md").read_text()
+    pol = vi.DEFAULT_POLICY
+    assert pol.max_total_faces == vi.MAX_TOTAL_FACES and f"{vi.MAX_TOTAL_FACES:,}" in doc
+    assert pol.max_links == vi.MAX_LINKS == 128
