@@ -132,18 +132,22 @@ def refine_asset(
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
-    _announce_extract(asset, findings, log)
-    cache = analyze.MeshCache()
-    geometry = _analyze(asset, cache, log)
-    with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
-        pose_note = _interpret(ctx, log)
-        att, pose_note = _synthesize_and_check(ctx, est, config, out_dir, cache, log, pose_note)
-    _remove_stale_collision(owner, asset, att.overrides)
-    _announce_post_check(att, log)
-    report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
-    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-    extra_paths = _extras(out_dir, report, att, log, reference) if extras else {}
-    _write_marker(owner, asset.input_hash, chash)
+    try:
+        _announce_extract(asset, findings, log)
+        cache = analyze.MeshCache()
+        geometry = _analyze(asset, cache, log)
+        with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
+            pose_note = _interpret(ctx, log)
+            att, pose_note = _synthesize_and_check(ctx, est, config, out_dir, cache, log, pose_note)
+        _remove_stale_collision(owner, asset, att.overrides)
+        _announce_post_check(att, log)
+        report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
+        atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
+        extra_paths = _extras(out_dir, report, att, log, reference) if extras else {}
+        _write_marker(owner, asset.input_hash, chash)
+    except BaseException:
+        owner.abandon()
+        raise
     return RefineResult(out_dir=out_dir, report=report, overlay=att.overlay, extras=extra_paths)
 
 

@@ -248,6 +248,7 @@ class OwnedFolder:
     given: Path
     source: Path | None
     files: set[str] = field(default_factory=set)
+    created: bool = False
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def _rel(self, path: Path) -> str | None:
@@ -327,6 +328,20 @@ class OwnedFolder:
         finally:
             self.close()
 
+    def abandon(self) -> None:
+        """End a run that failed: stop observing writes; when it wrote no file,
+        also remove the ownership record (and the folder when this run created
+        it and it is empty), so a refused run leaves nothing behind. Files it
+        did write stay recorded for the next run to remove."""
+        self.close()
+        if not self.files:
+            (self.root / RECORD_NAME).unlink(missing_ok=True)
+            if self.created:
+                try:
+                    self.root.rmdir()
+                except OSError:  # not empty: someone else's file appeared
+                    pass
+
     def close(self) -> None:
         """Stop observing writes (the ownership record stays on disk)."""
         with _ACTIVE_LOCK:
@@ -353,7 +368,8 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
     root = check_location(source_dir, out_dir)
     given = Path(os.path.abspath(out_dir))
     src = Path(source_dir).resolve()
-    if root.is_dir():
+    created = not root.is_dir()
+    if not created:
         previous = recorded_files(root)
         foreign = foreign_files(root, previous)
         if foreign and not overwrite:
@@ -367,7 +383,7 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
         previous = set()
         root.mkdir(parents=True, exist_ok=True)
         root = root.resolve()
-    owner = OwnedFolder(root=root, given=given, source=src)
+    owner = OwnedFolder(root=root, given=given, source=src, created=created)
     if previous:
         # claim first, so a kill during the removal leaves them recorded
         atomic.write_json(root / RECORD_NAME, {"version": 1, "files": sorted(previous)})

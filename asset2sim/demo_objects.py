@@ -1,0 +1,362 @@
+"""The five demo objects (:data:`DEMO_OBJECTS`) built from boxes
+(:mod:`asset2sim.demo_geometry`), each with its category, manifest prompt and
+the closed joint positions tests check against.
+
+Conventions (PartNet-Mobility's, see :mod:`asset2sim.demo_assets`): geometry in
+the object frame (y up, +z front, x across) at the zero pose of every joint,
+roughly unit size; the body link hangs from ``base`` by a fixed joint with
+``rpy = (pi/2, 0, -pi/2)``; a moving link's joint origin is its hinge point
+(0 for sliders). Moving parts keep a clearance of at least 0.005 units from
+their parent in the closed state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, Pose, box_xyz, open_box
+
+#: rpy of PartNet-Mobility's fixed joint base -> body (y-up object frame to z-up).
+_PARTNET_BASE_RPY = "1.570796326794897 0 -1.570796326794897"
+
+_WOOD = (0.62, 0.45, 0.3)
+_DARK = (0.15, 0.15, 0.17)
+_GREY = (0.6, 0.62, 0.65)
+_WHITE = (0.9, 0.9, 0.88)
+_GLASS = (0.25, 0.3, 0.35)
+_METAL = (0.75, 0.76, 0.78)
+_GREEN = (0.3, 0.5, 0.35)
+
+
+def _box_with_lid() -> DemoArticulation:
+    # Body: x [-0.5, 0.5], y [-0.3, 0.22], z [-0.35, 0.35], walls 0.03.
+    body = open_box(-0.5, 0.5, -0.3, 0.22, -0.35, 0.35, 0.03, "box_body", _WOOD)
+    # Lid (closed at 0): plate on top with 0.005 clearance, side skirts outside
+    # the walls, a front lip with a pull tab (one OBJ, two pieces).
+    hinge = (0.0, 0.225, -0.35)
+    lid = [
+        Part("lid_top-6", [box_xyz(-0.525, 0.525, 0.225, 0.255, -0.35, 0.375)], _WOOD),
+        Part("lid_skirt-7", [box_xyz(-0.525, -0.505, 0.18, 0.225, -0.35, 0.375)], _WOOD),
+        Part("lid_skirt-8", [box_xyz(0.505, 0.525, 0.18, 0.225, -0.35, 0.375)], _WOOD),
+        Part(
+            "lid_lip-9",
+            [box_xyz(-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), box_xyz(-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)],
+            _METAL,
+        ),
+    ]
+    return DemoArticulation(
+        asset_id="box_lid",
+        category="Box",
+        robot_name="demo_box_lid",
+        links=[
+            DemoLink("link_0", "hinge", "rotation_lid", lid),
+            DemoLink("link_1", "free", "box_body", body),
+        ],
+        joints=[
+            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=-0.5, upper=1.9),
+            DemoJoint("joint_1", "fixed", "base", "link_1", rpy=_PARTNET_BASE_RPY),
+        ],
+    )
+
+
+def _drawer(front_y: tuple[float, float], box_y: tuple[float, float], n: int) -> list[Part]:
+    """A drawer closed at z = 0.405: front panel spanning ``front_y`` (object
+    units), open-topped drawer box spanning ``box_y``, U-shaped handle (one OBJ,
+    three pieces)."""
+    y0, y1 = front_y
+    by0, by1 = box_y
+    front = Part(f"drawer_front-{n}", [box_xyz(-0.495, 0.495, y0, y1, 0.405, 0.435)], _WOOD)
+    box = [
+        Part(f"drawer_bottom-{n + 1}", [box_xyz(-0.46, 0.46, by0, by0 + 0.02, -0.36, 0.405)], _WOOD),
+        Part(f"drawer_side-{n + 2}", [box_xyz(-0.46, -0.44, by0 + 0.02, by1, -0.36, 0.405)], _WOOD),
+        Part(f"drawer_side-{n + 3}", [box_xyz(0.44, 0.46, by0 + 0.02, by1, -0.36, 0.405)], _WOOD),
+        Part(f"drawer_back-{n + 4}", [box_xyz(-0.44, 0.44, by0 + 0.02, by1, -0.36, -0.34)], _WOOD),
+    ]
+    ym = 0.5 * (y0 + y1)
+    handle = Part(
+        f"handle-{n + 5}",
+        [
+            box_xyz(-0.16, -0.13, ym - 0.015, ym + 0.015, 0.435, 0.475),
+            box_xyz(0.13, 0.16, ym - 0.015, ym + 0.015, 0.435, 0.475),
+            box_xyz(-0.165, 0.165, ym - 0.015, ym + 0.015, 0.47, 0.495),
+        ],
+        _METAL,
+    )
+    return [front, *box, handle]
+
+
+def _cabinet_two_drawers() -> DemoArticulation:
+    # Carcass x [-0.5, 0.5], y [-0.55, 0.55], z [-0.4, 0.4], open front,
+    # 0.03 boards, a divider at y = 0.
+    t = 0.03
+    body = [
+        Part("board-1", [box_xyz(-0.5, -0.5 + t, -0.55, 0.55, -0.4, 0.4)], _WOOD),
+        Part("board-2", [box_xyz(0.5 - t, 0.5, -0.55, 0.55, -0.4, 0.4)], _WOOD),
+        Part("board-3", [box_xyz(-0.5 + t, 0.5 - t, 0.55 - t, 0.55, -0.4, 0.4)], _WOOD),
+        Part("board-4", [box_xyz(-0.5 + t, 0.5 - t, -0.55, -0.55 + t, -0.4, 0.4)], _WOOD),
+        Part("board-5", [box_xyz(-0.5 + t, 0.5 - t, -0.55 + t, 0.55 - t, -0.4, -0.4 + t)], _WOOD),
+        Part("shelf-6", [box_xyz(-0.5 + t, 0.5 - t, -0.015, 0.015, -0.4 + t, 0.4)], _WOOD),
+    ]
+    # Drawer boxes clear the divider (|y| <= 0.015), the top board (y >= 0.52)
+    # and the bottom board (y <= -0.52) by at least 0.01.
+    top = _drawer((0.02, 0.545), (0.03, 0.465), 10)
+    bottom = _drawer((-0.545, -0.02), (-0.51, -0.1), 20)
+    slide = (0.0, 0.0, 1.0)
+    return DemoArticulation(
+        asset_id="cabinet_2drawer",
+        category="StorageFurniture",
+        robot_name="demo_cabinet_2drawer",
+        links=[
+            DemoLink("link_0", "slider", "drawer", top),
+            DemoLink("link_1", "slider", "drawer", bottom),
+            DemoLink("link_2", "heavy", "furniture_body", body),
+        ],
+        joints=[
+            DemoJoint("joint_0", "prismatic", "link_2", "link_0", axis=slide, lower=0.0, upper=0.5),
+            DemoJoint("joint_1", "prismatic", "link_2", "link_1", axis=slide, lower=0.0, upper=0.5),
+            DemoJoint("joint_2", "fixed", "base", "link_2", rpy=_PARTNET_BASE_RPY),
+        ],
+    )
+
+
+#: Angle (rad) at which the laptop screen is modelled (open), measured from closed.
+LAPTOP_MODEL_OPENING = math.radians(105.0)
+
+
+def _laptop_base() -> list[Part]:
+    """The laptop's base: x [-0.55, 0.55], z [-0.38, 0.38], y [-0.056, 0.004]
+    with feet, rim, deck, keyboard and touchpad."""
+    return [
+        Part("base_bottom-1", [box_xyz(-0.55, 0.55, -0.05, -0.04, -0.38, 0.38)], _GREY),
+        Part(
+            "base_rim-2",
+            [
+                box_xyz(-0.55, 0.55, -0.04, -0.01, 0.37, 0.38),
+                box_xyz(-0.55, 0.55, -0.04, -0.01, -0.38, -0.37),
+            ],
+            _GREY,
+        ),
+        Part(
+            "base_rim-3",
+            [
+                box_xyz(-0.55, -0.54, -0.04, -0.01, -0.37, 0.37),
+                box_xyz(0.54, 0.55, -0.04, -0.01, -0.37, 0.37),
+            ],
+            _GREY,
+        ),
+        Part("base_deck-4", [box_xyz(-0.55, 0.55, -0.01, 0.0, -0.38, 0.38)], _GREY),
+        Part(
+            "keyboard-5",
+            [box_xyz(-0.45, 0.45, 0.0, 0.004, -0.3, 0.02), box_xyz(-0.12, 0.12, 0.0, 0.002, 0.1, 0.3)],
+            _DARK,
+        ),
+        Part(
+            "feet-6",
+            [
+                box_xyz(-0.5, -0.44, -0.056, -0.05, -0.33, -0.27),
+                box_xyz(0.44, 0.5, -0.056, -0.05, -0.33, -0.27),
+                box_xyz(-0.5, -0.44, -0.056, -0.05, 0.27, 0.33),
+                box_xyz(0.44, 0.5, -0.056, -0.05, 0.27, 0.33),
+            ],
+            _DARK,
+        ),
+    ]
+
+
+def _laptop_screen(hinge: tuple[float, float, float]) -> list[Part]:
+    """The laptop's screen, designed in its closed pose (lying on the base,
+    display down, 0.006 above the keyboard), then rotated open about the hinge
+    line (x axis through ``hinge``) by :data:`LAPTOP_MODEL_OPENING`."""
+    pose = Pose(axis=(-1.0, 0.0, 0.0), angle=LAPTOP_MODEL_OPENING, pivot=hinge)
+    return [
+        Part("screen_cover-7", [box_xyz(-0.55, 0.55, 0.03, 0.04, -0.38, 0.38)], _GREY, pose),
+        Part(
+            "bezel-8",
+            [
+                box_xyz(-0.55, -0.51, 0.01, 0.03, -0.38, 0.38),
+                box_xyz(0.51, 0.55, 0.01, 0.03, -0.38, 0.38),
+                box_xyz(-0.52, 0.52, 0.01, 0.03, 0.34, 0.38),
+                box_xyz(-0.52, 0.52, 0.01, 0.03, -0.38, -0.34),
+            ],
+            _DARK,
+            pose,
+        ),
+        Part("display-9", [box_xyz(-0.51, 0.51, 0.015, 0.03, -0.34, 0.34)], _GLASS, pose),
+    ]
+
+
+def _laptop() -> DemoArticulation:
+    hinge = (0.0, 0.025, -0.38)  # x axis through y = 0.025, z = -0.38
+    base = _laptop_base()
+    screen = _laptop_screen(hinge)
+    return DemoArticulation(
+        asset_id="laptop",
+        category="Laptop",
+        robot_name="demo_laptop",
+        links=[
+            DemoLink("link_0", "free", "laptop_base", base),
+            DemoLink("link_1", "hinge", "screen", screen),
+        ],
+        joints=[
+            DemoJoint("joint_0", "fixed", "base", "link_0", rpy=_PARTNET_BASE_RPY),
+            DemoJoint(
+                "joint_1",
+                "revolute",
+                "link_0",
+                "link_1",
+                origin=hinge,
+                axis=(-1.0, 0.0, 0.0),
+                lower=-LAPTOP_MODEL_OPENING,
+                upper=0.35,
+            ),
+        ],
+    )
+
+
+def _microwave() -> DemoArticulation:
+    # Body x [-0.6, 0.6], y [-0.35, 0.35], z [-0.4, 0.4]; cavity on the left
+    # (x < 0.25), control panel on the right; open front at z = 0.4.
+    t = 0.03
+    body = [
+        Part("frame-1", [box_xyz(-0.6, 0.6, -0.35, -0.35 + t, -0.4, 0.4)], _WHITE),
+        Part("frame-2", [box_xyz(-0.6, 0.6, 0.35 - t, 0.35, -0.4, 0.4)], _WHITE),
+        Part("frame-3", [box_xyz(-0.6, -0.6 + t, -0.35 + t, 0.35 - t, -0.4, 0.4)], _WHITE),
+        Part("frame-4", [box_xyz(0.6 - t, 0.6, -0.35 + t, 0.35 - t, -0.4, 0.4)], _WHITE),
+        Part("frame-5", [box_xyz(-0.6 + t, 0.6 - t, -0.35 + t, 0.35 - t, -0.4, -0.4 + t)], _WHITE),
+        Part("frame-6", [box_xyz(0.25, 0.25 + t, -0.35 + t, 0.35 - t, -0.4 + t, 0.4)], _WHITE),
+        Part(
+            "control_panel-7",
+            [box_xyz(0.25 + t, 0.6 - t, -0.35 + t, 0.35 - t, 0.37, 0.4), box_xyz(0.36, 0.48, 0.12, 0.2, 0.4, 0.42)],
+            _DARK,
+        ),
+    ]
+    # Turntable tray: a fixed (static) child link resting inside the cavity.
+    tray_center = (-0.16, -0.3, 0.0)
+    tray = [
+        Part(
+            "tray-8",
+            [box_xyz(-0.4, 0.08, -0.31, -0.3, -0.24, 0.24), box_xyz(-0.2, -0.12, -0.314, -0.31, -0.04, 0.04)],
+            _GLASS,
+        ),
+    ]
+    # Door (closed at 0): frame pieces around a recessed window, handle on the
+    # free edge; hinge on the left at the body's front-left edge.
+    hinge = (-0.6, 0.0, 0.405)
+    door = [
+        Part("door_frame-9", [box_xyz(-0.6, 0.245, -0.35, -0.25, 0.405, 0.445)], _WHITE),
+        Part("door_frame-10", [box_xyz(-0.6, 0.245, 0.25, 0.35, 0.405, 0.445)], _WHITE),
+        Part("door_frame-11", [box_xyz(-0.6, -0.5, -0.25, 0.25, 0.405, 0.445)], _WHITE),
+        Part("door_frame-12", [box_xyz(0.145, 0.245, -0.25, 0.25, 0.405, 0.445)], _WHITE),
+        Part("window-13", [box_xyz(-0.5, 0.145, -0.25, 0.25, 0.415, 0.435)], _GLASS),
+        Part(
+            "handle-14",
+            [
+                box_xyz(0.18, 0.22, -0.2, -0.16, 0.445, 0.485),
+                box_xyz(0.18, 0.22, 0.16, 0.2, 0.445, 0.485),
+                box_xyz(0.175, 0.225, -0.205, 0.205, 0.48, 0.505),
+            ],
+            _METAL,
+        ),
+    ]
+    return DemoArticulation(
+        asset_id="microwave",
+        category="Microwave",
+        robot_name="demo_microwave",
+        links=[
+            DemoLink("link_0", "hinge", "door", door),
+            DemoLink("link_1", "static", "tray", tray),
+            DemoLink("link_2", "heavy", "microwave_body", body),
+        ],
+        joints=[
+            DemoJoint("joint_0", "revolute", "link_2", "link_0", origin=hinge, axis=(0.0, -1.0, 0.0), lower=0.0, upper=1.75),
+            DemoJoint("joint_1", "fixed", "link_2", "link_1", origin=tray_center),
+            DemoJoint("joint_2", "fixed", "base", "link_2", rpy=_PARTNET_BASE_RPY),
+        ],
+    )
+
+
+def _trash_can() -> DemoArticulation:
+    # Bin x [-0.35, 0.35], y [-0.6, 0.5], z [-0.35, 0.35], walls 0.025.
+    body = open_box(-0.35, 0.35, -0.6, 0.5, -0.35, 0.35, 0.025, "body", _GREEN)
+    body.append(Part("rim-6", [box_xyz(-0.35, 0.35, -0.6, -0.57, 0.35, 0.37)], _GREEN))
+    # Lid closed at 0; axis +x so opening is a *negative* angle.
+    hinge = (0.0, 0.505, -0.35)
+    lid = [
+        Part("lid-7", [box_xyz(-0.375, 0.375, 0.505, 0.535, -0.35, 0.37)], _GREEN),
+        Part("lid_skirt-8", [box_xyz(-0.375, -0.355, 0.47, 0.505, -0.35, 0.37)], _GREEN),
+        Part("lid_skirt-9", [box_xyz(0.355, 0.375, 0.47, 0.505, -0.35, 0.37)], _GREEN),
+        Part(
+            "lid_lip-10",
+            [box_xyz(-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), box_xyz(-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)],
+            _DARK,
+        ),
+    ]
+    return DemoArticulation(
+        asset_id="trash_can",
+        category="TrashCan",
+        robot_name="demo_trash_can",
+        links=[
+            DemoLink("link_0", "hinge", "lid", lid),
+            DemoLink("link_1", "free", "trashcan_body", body),
+        ],
+        joints=[
+            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(1.0, 0.0, 0.0), lower=-1.9, upper=0.0),
+            DemoJoint("joint_1", "fixed", "base", "link_1", rpy=_PARTNET_BASE_RPY),
+        ],
+    )
+
+
+@dataclass(frozen=True)
+class DemoObject:
+    """One entry of the demo dataset: id, category, builder and manifest prompt."""
+
+    asset_id: str
+    category: str
+    prompt: str
+    make: Callable[[], DemoArticulation]
+    closed_positions: dict[str, float]
+    """Ground truth for tests: joint -> closed position (rad or m, object units).
+    Not written into the asset folder (the pipeline must find it itself)."""
+
+
+DEMO_OBJECTS: tuple[DemoObject, ...] = (
+    DemoObject(
+        "box_lid",
+        "Box",
+        "A small box with its lid slightly open. Low damping hinge.",
+        _box_with_lid,
+        {"joint_0": 0.0},
+    ),
+    DemoObject(
+        "cabinet_2drawer",
+        "StorageFurniture",
+        "A small two-drawer cabinet with the first drawer closed and the second slightly open, "
+        "with low damping sliding joints.",
+        _cabinet_two_drawers,
+        {"joint_0": 0.0, "joint_1": 0.0},
+    ),
+    DemoObject(
+        "laptop",
+        "Laptop",
+        "I want a slightly open laptop. Low damping for smooth operation.",
+        _laptop,
+        {"joint_1": -LAPTOP_MODEL_OPENING},
+    ),
+    DemoObject(
+        "microwave",
+        "Microwave",
+        "A microwave with its door halfway open. Low damping for hinge-like behavior.",
+        _microwave,
+        {"joint_0": 0.0},
+    ),
+    DemoObject(
+        "trash_can",
+        "TrashCan",
+        "A very small trash can with its lid closed. The lid hinge holds its position.",
+        _trash_can,
+        {"joint_0": 0.0},
+    ),
+)
+
