@@ -214,4 +214,3 @@ def open_box(x0, x1, y0, y1, z0, z1, t, prefix, color, first=1) -> list[Part]:
         Part(f"{prefix}_side-{n + 3}", [box_xyz(x0, x0 + t, y0 + t, y1, z0 + t, z1 - t)], color),
         Part(f"{prefix}_side-{n + 4}", [box_xyz(x1 - t, x1, y0 + t, y1, z0 + t, z1 - t)], color),
     ]
-

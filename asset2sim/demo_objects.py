@@ -359,4 +359,3 @@ DEMO_OBJECTS: tuple[DemoObject, ...] = (
         {"joint_0": 0.0},
     ),
 )
-

@@ -392,6 +392,26 @@ def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, r
     return ev
 
 
+def measurement_from_refine(out_dir: str, prompt: str, category: str | None, reference_dir: str | None,
+                            metrics_dir: str | None) -> Measurement | None:
+    """The metrics stage's measurement from refine's evaluation
+    (:func:`refined_evaluation`), copied into ``metrics_dir`` when given;
+    None when there is none to reuse. Reads and copies a file only."""
+    t0 = time.perf_counter()
+    ev = refined_evaluation(out_dir, prompt, category, reference_dir)
+    if ev is None:
+        return None
+    if metrics_dir:
+        atomic.copy_file(Path(out_dir) / "evaluation.json", Path(metrics_dir) / "evaluation.json")
+    return Measurement(
+        columns=column_values(ev.metrics, "pybullet"),
+        failures=list(ev.failures),
+        seconds=time.perf_counter() - t0,
+        reused_post_check=True,
+        reused_evaluation=True,
+    )
+
+
 def stage_metrics(
     out_dir: str,
     prompt: str,
@@ -422,18 +442,9 @@ def stage_metrics(
     Raises:
         EvaluationError: the output cannot be read.
     """
-    t0 = time.perf_counter()
-    ev = refined_evaluation(out_dir, prompt, category, reference_dir)
-    if ev is not None:
-        if metrics_dir:
-            atomic.copy_file(Path(out_dir) / "evaluation.json", Path(metrics_dir) / "evaluation.json")
-        return Measurement(
-            columns=column_values(ev.metrics, "pybullet"),
-            failures=list(ev.failures),
-            seconds=time.perf_counter() - t0,
-            reused_post_check=True,
-            reused_evaluation=True,
-        ).model_dump(mode="json")
+    reused = measurement_from_refine(out_dir, prompt, category, reference_dir, metrics_dir)
+    if reused is not None:
+        return reused.model_dump(mode="json")
     measured = None if post_check is None else [MetricResult.model_validate(m) for m in post_check]
     ev = evaluate_asset(
         Path(out_dir),
@@ -450,7 +461,7 @@ def stage_metrics(
         columns=column_values(ev.metrics, "pybullet"),
         failures=list(ev.failures),
         seconds=float(ev.seconds),
-        reused_post_check=measured is not None and not probes,
+        reused_post_check=measured is not None,
     ).model_dump(mode="json")
 
 
@@ -521,8 +532,12 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
     if refined.status != "ok" or not job.evaluate:
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value
+    category = value.report.category or job.category
+    reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, job.metrics_dir)
+    if reused is not None:  # nothing to simulate: no child process needed
+        return StageRecord(status="ok", value=reused, seconds=reused.seconds)
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0) - float(refined.seconds or 0.0)
-    post = None if job.probes else reusable_rest_test(value.report, job.config)
+    post = reusable_rest_test(value.report, job.config)
     rec = _run_stage(
         job,
         "metrics",
@@ -530,7 +545,7 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         {
             "out_dir": value.out_dir or job.out_dir,
             "prompt": job.prompt,
-            "category": value.report.category or job.category,
+            "category": category,
             "reference_dir": job.reference_dir,
             "probes": job.probes,
             "metrics_dir": job.metrics_dir,

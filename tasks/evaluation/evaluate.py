@@ -1205,10 +1205,10 @@ def evaluate_asset(
             (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`) already
             measured in the first engine under the same conventions and
             initial state (the refine post-check): recorded as they are, and
-            that engine's rest test is not run again (unless ``probes``, which
-            continue from the state the rest test leaves); the metrics that
-            need its per-step trace (ground penetration, divergence, joint
-            hold) are then recorded as skipped.
+            that engine's rest test is not run again (the probes start from
+            the unstepped initial state either way, :func:`run_engine`); the
+            metrics that need its per-step trace (ground penetration,
+            divergence, joint hold) are then recorded as skipped.
         recording: the post-check's rest test of this asset, step by step
             (:class:`~asset2sim.tasks.check.postcheck.RestRecording`): when it
             matches an engine's simulation (engine, URDF, initial state,
@@ -1249,7 +1249,7 @@ def evaluate_asset(
         need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
     runs: dict[str, EngineRun] = {}
     order = sorted(engines, key=lambda e: e != "pybullet")  # PyBullet first: it computes the closed ends
-    reuse_engine = engines[0] if measured is not None and not probes else None
+    reuse_engine = engines[0] if measured is not None else None
     for e in order:
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
         runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending,

@@ -26,6 +26,7 @@ from asset2sim import mesh_io, safexml
 from asset2sim.frames import rpy_matrix
 from asset2sim.tasks.ingest.findings import MeshUse, Recorder
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, file_kind, read_regular, resolve_mesh_reference
+from asset2sim.tasks.ingest.urdf_checks import GeomRecord, LinkRecord
 
 __all__ = ["MeshChecks", "MeshScan", "geometry_corners", "scan_mesh_file"]
 
@@ -252,10 +253,10 @@ def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
 
 
-def geometry_corners(g) -> np.ndarray | None:
+def geometry_corners(g: GeomRecord) -> np.ndarray | None:
     """Corners (8, 3) of a ``<visual>``/``<collision>``'s bounding box in its
     link's frame (file units; mesh scale, origin xyz and rpy applied), or
-    None when unknown. ``g`` is the validator's geometry record."""
+    None when unknown."""
     if not g.ok:
         return None
     if g.kind == "mesh":
@@ -273,7 +274,7 @@ def geometry_corners(g) -> np.ndarray | None:
 class MeshChecks(Recorder):
     """Mesh references, contents and materials (mixin of the validator)."""
 
-    def meshes(self, links: list) -> None:
+    def meshes(self, links: list[LinkRecord]) -> None:
         """Resolve, scan and check every ``<mesh>`` of ``links`` (the URDF
         checks' link records); record ``mesh_paths``, ``material_files`` and
         each mesh geometry's ``bounds``."""

@@ -1,11 +1,13 @@
-"""The URDF checks of the validator: numbers, elements, kinematic tree, inertials.
+"""The URDF checks of the validator: encoding, elements, numbers, limits.
 
-:class:`UrdfChecks` parses the validated XML tree (never the file again)
-into light link/joint records while checking every numeric attribute
-strictly (:func:`asset2sim.urdf.parse_number_list`), element by element
-(links, geometry, materials and textures, joints, limits, dynamics,
-mimic), then the kinematic structure (names, parents, cycles, roots, the
-link cap) and the given inertials (:func:`check_inertia`).
+:class:`UrdfChecks` checks the URDF's encoding (:func:`encoding_problem`),
+parses the validated XML tree (never the file again) into light records
+(:class:`LinkRecord`, :class:`JointRecord`, :class:`GeomRecord`) while
+checking every numeric attribute strictly
+(:func:`asset2sim.urdf.parse_number_list`), element by element: links,
+geometry, materials and textures, joints, limits (revolute within +-4 pi),
+dynamics, mimic. The tree checks read the records
+(:mod:`asset2sim.tasks.ingest.tree_checks`).
 """
 
 from __future__ import annotations
@@ -18,36 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import safexml
-from asset2sim.frames import rpy_matrix
 from asset2sim.tasks.ingest.findings import IMAGE_EXTENSIONS, JOINT_TYPES, MOVABLE_TYPES, Recorder
-from asset2sim.tasks.ingest.mesh_checks import geometry_corners
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, resolve_mesh_reference
 from asset2sim.urdf import NumberError, parse_number_list
 
-__all__ = ["UrdfChecks", "check_inertia", "encoding_problem"]
+__all__ = ["GeomRecord", "JointRecord", "LinkRecord", "UrdfChecks", "encoding_problem"]
 
-
-def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, izz: float) -> tuple[str | None, list[float]]:
-    """Check a URDF inertia tensor (kg*m^2, about the COM).
-
-    Returns:
-        ``(code, eigenvalues)``: code None when the tensor is symmetric
-        positive definite and its principal moments satisfy the triangle
-        inequality (each <= the sum of the other two, relative tolerance
-        1e-9 of the trace); else ``INERTIA_NOT_POSITIVE_DEFINITE`` (smallest
-        eigenvalue <= 1e-12 x largest, or largest <= 0) or
-        ``INERTIA_TRIANGLE_INEQUALITY``. Eigenvalues ascending, kg*m^2.
-        The tensor is never modified ("balanced").
-    """
-    m = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], float)
-    lam = np.linalg.eigvalsh(m)
-    vals = [float(x) for x in lam]
-    if lam[2] <= 0 or lam[0] <= 1e-12 * lam[2]:
-        return "INERTIA_NOT_POSITIVE_DEFINITE", vals
-    tol = 1e-9 * float(lam.sum())
-    if lam[2] > lam[0] + lam[1] + tol:
-        return "INERTIA_TRIANGLE_INEQUALITY", vals
-    return None, vals
 
 
 
@@ -90,7 +68,9 @@ def encoding_problem(data: bytes) -> str | None:
 
 
 @dataclass
-class _Geom:
+class GeomRecord:
+    """One ``<visual>``/``<collision>`` as read (file units, rad)."""
+
     role: str
     kind: str | None
     line: int | None
@@ -105,10 +85,12 @@ class _Geom:
 
 
 @dataclass
-class _Link:
+class LinkRecord:
+    """One ``<link>`` as read: geometry and given inertial."""
+
     name: str | None
     line: int | None
-    geoms: list[_Geom] = field(default_factory=list)
+    geoms: list[GeomRecord] = field(default_factory=list)
     inertial_line: int | None = None
     mass: float | None = None
     inertia: tuple[float, ...] | None = None
@@ -116,7 +98,9 @@ class _Link:
 
 
 @dataclass
-class _Joint:
+class JointRecord:
+    """One ``<joint>`` as read: type, parent, child, origin, axis, limits, mimic leader."""
+
     name: str | None
     line: int | None
     type: str | None
@@ -160,7 +144,7 @@ class UrdfChecks(Recorder):
         return xyz or (0.0, 0.0, 0.0), rpy or (0.0, 0.0, 0.0), xyz is not None and rpy is not None
 
     # -- URDF
-    def parse(self, urdf: Path) -> tuple[list[_Link], list[_Joint]] | None:
+    def parse(self, urdf: Path) -> tuple[list[LinkRecord], list[JointRecord]] | None:
         try:
             data = safexml.read_xml_file(urdf, self.policy.xml)
         except safexml.SafeXMLError as exc:
@@ -212,11 +196,11 @@ class UrdfChecks(Recorder):
                 self.add("TEXTURE_PATH_REFUSED", f"<texture filename={fname!r}>: {ref.message} ({ref.code})", line=tex.sourceline,
                          link=link, reason=ref.code)
 
-    def parse_link(self, el) -> _Link:
+    def parse_link(self, el) -> LinkRecord:
         name = el.get("name")
         if not name:
             self.add("LINK_NAME_MISSING", "<link> without name", line=el.sourceline)
-        ln = _Link(name=name or None, line=el.sourceline)
+        ln = LinkRecord(name=name or None, line=el.sourceline)
         for role in ("visual", "collision"):
             for g in el.findall(role):
                 ln.geoms.append(self.parse_geom(g, role, name))
@@ -248,9 +232,9 @@ class UrdfChecks(Recorder):
                 ln.inertia = tuple(vals) if all(v is not None for v in vals) else None
         return ln
 
-    def parse_geom(self, el, role: str, link: str | None) -> _Geom:
+    def parse_geom(self, el, role: str, link: str | None) -> GeomRecord:
         xyz, rpy, ok = self.origin(el, link=link)
-        g = _Geom(role=role, kind=None, line=el.sourceline, xyz=xyz, rpy=rpy, ok=ok)
+        g = GeomRecord(role=role, kind=None, line=el.sourceline, xyz=xyz, rpy=rpy, ok=ok)
         geo = el.find("geometry")
         shapes = list(geo) if geo is not None else []
         if len(shapes) != 1 or shapes[0].tag not in ("box", "cylinder", "sphere", "mesh"):
@@ -296,7 +280,7 @@ class UrdfChecks(Recorder):
                     g.size = (2 * r, 2 * r, vals["length"][0] if s.tag == "cylinder" else 2 * r)
         return g
 
-    def parse_joint(self, el) -> _Joint:
+    def parse_joint(self, el) -> JointRecord:
         name = el.get("name") or None
         if name is None:
             self.add("JOINT_NAME_MISSING", "<joint> without name", line=el.sourceline)
@@ -312,7 +296,7 @@ class UrdfChecks(Recorder):
             self.add("JOINT_PARENT_MISSING", "no <parent link=...>", line=el.sourceline, joint=name)
         if not child:
             self.add("JOINT_CHILD_MISSING", "no <child link=...>", line=el.sourceline, joint=name)
-        j = _Joint(name=name, line=el.sourceline, type=jtype, parent=parent or None, child=child or None)
+        j = JointRecord(name=name, line=el.sourceline, type=jtype, parent=parent or None, child=child or None)
         j.xyz, j.rpy, _ = self.origin(el, joint=name)
         a = el.find("axis")
         if a is not None:
@@ -376,187 +360,3 @@ class UrdfChecks(Recorder):
                 for k in attrs:
                     self.nums(sub, k, 1, joint=name)
         return j
-
-    # -- structure
-    def structure(self, links: list[_Link], joints: list[_Joint]) -> tuple[set[str], str | None]:
-        """Returns (moving links, root)."""
-        if not links:
-            self.add("URDF_NO_LINKS", "the robot has no <link>")
-            return set(), None
-        if len(links) > self.policy.max_links:
-            self.add("URDF_TOO_MANY_LINKS", f"{len(links)} links > cap {self.policy.max_links}: PyBullet, which refine "
-                     f"runs, loads at most {self.policy.max_links} links per body", links=len(links), cap=self.policy.max_links)
-        seen: dict[str, _Link] = {}
-        for ln in links:
-            if ln.name is None:
-                continue
-            if ln.name in seen:
-                self.add("LINK_NAME_DUPLICATE", f"link {ln.name!r} is defined again (first at line {seen[ln.name].line})", line=ln.line, link=ln.name)
-            else:
-                seen[ln.name] = ln
-        jseen: dict[str, _Joint] = {}
-        for j in joints:
-            if j.name is None:
-                continue
-            if j.name in jseen:
-                self.add("JOINT_NAME_DUPLICATE", f"joint {j.name!r} is defined again (first at line {jseen[j.name].line})", line=j.line, joint=j.name)
-            else:
-                jseen[j.name] = j
-        names = list(seen)
-        has_parent: dict[str, list[str]] = {}
-        children: dict[str, list[str]] = {n: [] for n in names}
-        first_parent: dict[str, str] = {}
-        touched: set[str] = set()
-        for j in joints:
-            ok = True
-            if j.parent is not None and j.parent not in seen:
-                self.add("JOINT_PARENT_UNKNOWN", f"parent {j.parent!r} is not a link", line=j.line, joint=j.name)
-                ok = False
-            if j.child is not None and j.child not in seen:
-                self.add("JOINT_CHILD_UNKNOWN", f"child {j.child!r} is not a link", line=j.line, joint=j.name)
-                ok = False
-            if j.parent is not None and j.parent == j.child:
-                self.add("JOINT_SELF_LOOP", f"parent and child are both {j.parent!r}", line=j.line, joint=j.name, link=j.child)
-                touched.add(j.parent)
-                continue
-            for n in (j.parent, j.child):
-                if n in seen:
-                    touched.add(n)
-            if j.child in seen:
-                has_parent.setdefault(j.child, []).append(j.name or "?")
-            if ok and j.parent and j.child:
-                if j.child not in first_parent:
-                    first_parent[j.child] = j.parent
-                    children[j.parent].append(j.child)
-            if j.mimic is not None and (j.mimic not in jseen or j.mimic == j.name):
-                self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={j.mimic!r}> names no other joint", line=j.line, joint=j.name)
-            elif j.mimic is not None:
-                self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={j.mimic!r}>: coupled joints are not modelled (the "
-                         "state search, the post-check simulators and the writer treat every joint as free), so the "
-                         "coupling would be lost; refused rather than dropped", line=j.line, joint=j.name, leader=j.mimic)
-        for child, js in has_parent.items():
-            if len(js) > 1:
-                self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
-                         line=seen[child].line, link=child, joints=js)
-        roots = [n for n in names if n not in has_parent]
-        if len(names) > 1:
-            for n in roots:
-                if n not in touched:
-                    self.add("LINK_ORPHAN", f"link {n!r} is connected by no joint", line=seen[n].line, link=n)
-        connected_roots = [n for n in roots if n in touched or len(names) == 1]
-        # reachability and cycles
-        reached: set[str] = set()
-        stack = list(roots)
-        while stack:
-            n = stack.pop()
-            if n in reached:
-                continue
-            reached.add(n)
-            stack.extend(children.get(n, []))
-        reported: set[str] = set()
-        for n in names:
-            if n in reached or n in reported or n not in first_parent:
-                continue
-            path: list[str] = []
-            cur = n
-            pos: dict[str, int] = {}
-            while cur in first_parent and cur not in pos and cur not in reported:
-                pos[cur] = len(path)
-                path.append(cur)
-                cur = first_parent[cur]
-            if cur in pos:
-                cyc = path[pos[cur]:]
-                self.add("TREE_CYCLE", f"joints form a cycle through links {' -> '.join(cyc + [cyc[0]])}",
-                         line=seen[cyc[0]].line, link=cyc[0], links=cyc)
-            reported.update(path)
-        if not roots:
-            self.add("TREE_NO_ROOT", "every link has a parent joint: there is no root link")
-            root = None
-        elif len(connected_roots) > 1:
-            self.add("TREE_MULTIPLE_ROOTS", f"several links have no parent: {', '.join(map(repr, connected_roots))}", roots=connected_roots)
-            root = None
-        elif len(roots) > 1 and not connected_roots:
-            self.add("TREE_MULTIPLE_ROOTS", f"no joint connects the links {', '.join(map(repr, roots))}", roots=roots)
-            root = None
-        else:
-            root = connected_roots[0] if connected_roots else roots[0]
-        moving = {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}
-        return moving, root
-
-    # -- inertials
-    def inertials(self, links: list[_Link], moving: set[str]) -> None:
-        for ln in links:
-            if not ln.has_inertial or ln.name is None:
-                continue
-            bad = False
-            if ln.mass is not None:
-                if ln.mass < 0 or (ln.mass == 0 and ln.name in moving):
-                    what = "a moving link" if ln.name in moving else "a link"
-                    self.add("INERTIAL_MASS_NONPOSITIVE", f"mass {ln.mass!r} kg on {what}; an estimate replaces it",
-                             line=ln.inertial_line, link=ln.name, action="replace_with_estimate", mass=ln.mass)
-                    bad = True
-                elif ln.mass == 0:
-                    self.add("INERTIAL_MASS_ZERO_STATIC", "mass 0 on a static link (the simulator may treat it as fixed)",
-                             line=ln.inertial_line, link=ln.name, mass=0.0)
-            if ln.inertia is not None and not (ln.mass == 0 and ln.name not in moving and not any(ln.inertia)):
-                code, lam = check_inertia(*ln.inertia)
-                if code is not None:
-                    why = ("an eigenvalue <= 0" if code == "INERTIA_NOT_POSITIVE_DEFINITE"
-                           else "the largest principal moment exceeds the sum of the other two")
-                    self.add(code, f"inertia (ixx ixy ixz iyy iyz izz) = {ln.inertia} kg*m^2 has eigenvalues "
-                             f"{', '.join(f'{x:.6g}' for x in lam)}: {why}; an estimate replaces it (never balanced)",
-                             line=ln.inertial_line, link=ln.name, action="replace_with_estimate",
-                             eigenvalues=lam, inertia=list(ln.inertia))
-                    bad = True
-            if ln.mass is None or ln.inertia is None:
-                bad = True
-            if bad:
-                self.result.replace_inertials.add(ln.name)
-
-    # -- joint travel against the object's size (after the meshes were scanned)
-    def joint_travel(self, links: list[_Link], joints: list[_Joint], root: str | None) -> None:
-        """Prismatic limits beyond ``policy.max_prismatic_travel`` x the
-        object's size: the diagonal of the bounding box of every geometry
-        placed by forward kinematics at the zero configuration (file units).
-        Skipped when the tree is broken or some size is unknown."""
-        if root is None:
-            return
-        by_parent: dict[str, list[_Joint]] = {}
-        for j in joints:
-            if j.parent and j.child:
-                by_parent.setdefault(j.parent, []).append(j)
-        geoms = {ln.name: ln.geoms for ln in links if ln.name}
-        pts: list[np.ndarray] = []
-        stack = [(root, np.eye(4))]
-        seen: set[str] = set()
-        while stack:
-            name, T = stack.pop()
-            if name in seen:
-                return
-            seen.add(name)
-            for g in geoms.get(name, []):
-                c = geometry_corners(g)
-                if c is None:
-                    if g.kind is not None:
-                        return  # a size is unknown: no claim about the object's size
-                    continue
-                pts.append(c @ T[:3, :3].T + T[:3, 3])
-            for j in by_parent.get(name, []):
-                J = np.eye(4)
-                J[:3, :3] = rpy_matrix(j.rpy)
-                J[:3, 3] = j.xyz
-                stack.append((j.child, T @ J))
-        if not pts:
-            return
-        allp = np.vstack(pts)
-        size = float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0)))
-        cap = self.policy.max_prismatic_travel * size
-        for j in joints:
-            if j.type != "prismatic" or j.lower is None or j.upper is None or size <= 0:
-                continue
-            travel = max(abs(j.lower), abs(j.upper))
-            if travel > cap:
-                self.add("JOINT_LIMIT_IMPLAUSIBLE", f"prismatic limits [{j.lower!r}, {j.upper!r}] go beyond the object's "
-                         f"size {size:.4g} (diagonal of its bounding box, file units): the part would leave the object; "
-                         "check the units of the limits and of the meshes", line=j.limit_line, joint=j.name,
-                         lower=j.lower, upper=j.upper, object_size=size)

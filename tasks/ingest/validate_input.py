@@ -12,7 +12,7 @@ What is checked, in order (later checks run on what the earlier ones could
 read; nothing stops at the first problem):
 
 1. Files: the URDF is a regular file inside the asset folder, below the size
-   cap (``URDF_*``).
+   cap, in UTF-8 (``URDF_*``).
 2. XML: hardened parsing by :mod:`asset2sim.safexml` (``XML_*``).
 3. Numbers: every numeric attribute the URDF format defines is parsed
    strictly (decimal literal, finite as a float64: NaN, inf, ``1e400``, empty,
@@ -21,7 +21,9 @@ read; nothing stops at the first problem):
    loop, no link with two parents, no cycles, no orphans, exactly one root,
    known joint types, non-zero axis, limits present on revolute/prismatic,
    lower <= upper (warning when equal), non-negative effort, velocity,
-   damping and friction (``LINK_*``, ``JOINT_*``, ``TREE_*``).
+   damping and friction, at most 128 links, no ``<mimic>`` (not modelled:
+   refused, never dropped), revolute limits within +-4 pi and prismatic
+   travel within the object's size (``LINK_*``, ``JOINT_*``, ``TREE_*``).
 5. Given inertials: mass > 0 on moving links, inertia symmetric positive
    definite with the triangle inequality of principal moments. An invalid
    one is reported with its eigenvalues and ``action="replace_with_estimate"``
@@ -31,9 +33,14 @@ read; nothing stops at the first problem):
    file with a mesh extension, below the size cap; absolute paths, ``..``
    escapes, URIs (``file://``, ``http://``, ``package://``), symlinks leaving
    the folder, NUL and control characters, directories, FIFOs, devices and
-   sockets are refused. Every missing mesh is listed (``MESH_*``).
-7. Mesh contents (OBJ and STL by a strict reader, PLY/OFF/GLB/GLTF/DAE via
-   trimesh): parse errors, no faces, face-count cap, non-finite vertices, bad
+   sockets are refused, and the path must open as written. Every missing
+   mesh is listed. Formats refine's simulator cannot load (PLY, OFF, GLB,
+   GLTF) are refused. MTL files and textures that are FIFOs, devices or
+   sockets are refused (``MESH_*``, ``MATERIAL_*``).
+7. Mesh contents (OBJ by :func:`asset2sim.mesh_io.read_obj`, the reader of
+   every later stage, with strict checks on top; STL by a strict reader; DAE
+   via trimesh): parse errors, no faces, the face caps (1,000,000 triangles
+   per asset: refine's time and memory bound), non-finite vertices, bad
    face indices, zero area. These are errors where the mesh is used for
    collision or for mass (a link's collision geometry, or its visual geometry
    when it has no collision), warnings where it is only drawn. A mesh with
@@ -42,6 +49,14 @@ read; nothing stops at the first problem):
    ``action="mass_from_area"`` (PartNet-Mobility has such links, e.g. the
    single-quad door of object 8877), because a volume-based mass would be 0.
 8. PartNet-Mobility extras: ``semantics.txt`` lines, ``meta.json``.
+
+Whatever is accepted, ``asset2sim refine`` can read without a traceback or a
+hang (``docs/validation.md``, "Agreement with refine"). The checks live in
+:mod:`~asset2sim.tasks.ingest.findings` (codes, policy, result),
+:mod:`~asset2sim.tasks.ingest.urdf_checks`,
+:mod:`~asset2sim.tasks.ingest.tree_checks`,
+:mod:`~asset2sim.tasks.ingest.mesh_paths` and
+:mod:`~asset2sim.tasks.ingest.mesh_checks`; this module runs them in order.
 
 Units: lengths in the file's units (metres nominally), angles rad, mass kg,
 inertia kg*m^2, sizes of files in bytes.
@@ -81,7 +96,8 @@ from asset2sim.tasks.ingest.findings import (
 )
 from asset2sim.tasks.ingest.mesh_checks import MeshChecks, MeshScan, scan_mesh_file
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, inside, read_regular, resolve_mesh_reference
-from asset2sim.tasks.ingest.urdf_checks import UrdfChecks, check_inertia
+from asset2sim.tasks.ingest.tree_checks import TreeChecks, check_inertia
+from asset2sim.tasks.ingest.urdf_checks import UrdfChecks
 from asset2sim.urdf import NumberError, parse_number_list
 
 __all__ = [
@@ -120,7 +136,7 @@ __all__ = [
 
 
 
-class _Validator(UrdfChecks, MeshChecks):
+class _Validator(UrdfChecks, TreeChecks, MeshChecks):
     """One run: files, then the URDF checks, then meshes, then extras."""
 
     # -- files

@@ -47,6 +47,14 @@ What is done beyond a plain ``loadURDF`` + ``getCameraImage``:
 Lighting: one directional light from the camera's upper left (fixed relative
 to each camera, so every view is lit alike), intensity ``AMBIENT + DIFFUSE *
 cos + SPECULAR``; optional cast shadows (``shadows=True``, slower).
+
+Modules: :mod:`~asset2sim.tasks.publish.render_scene` (URDF -> render-only
+URDF and visual points per link), :mod:`~asset2sim.tasks.publish.render_meshes`
+(OBJ split per material, colored OBJs, downscaled textures),
+:mod:`~asset2sim.tasks.publish.render_camera` (named views, fitted cameras),
+:mod:`~asset2sim.tasks.publish.render_images` (PNG files, contact sheets);
+this module draws (:class:`SceneRenderer`) and is the entry point
+(:func:`render_views`). Their public names are importable from here too.
 """
 
 from __future__ import annotations
@@ -56,65 +64,48 @@ import math
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Mapping
 
 import numpy as np
 
-from asset2sim import mesh_io
-from asset2sim.atomic import write_bytes
 from asset2sim.engines.base import open_viewer
 from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.urdf import UrdfError, UrdfGeometry, read_urdf, write_urdf
+from asset2sim.tasks.publish.render_camera import FILL, FOV_DEG, VIEWS, Camera, ViewSpec, fit_camera, view_spec
+from asset2sim.tasks.publish.render_images import BACKGROUND, render_contact_sheet, write_png
+from asset2sim.tasks.publish.render_meshes import DEFAULT_COLOR
+from asset2sim.tasks.publish.render_scene import prepare_scene
+
+__all__ = [
+    "ALBEDO_FLOOR",
+    "AMBIENT",
+    "BACKENDS",
+    "BACKGROUND",
+    "DEFAULT_COLOR",
+    "DEFAULT_VIEWS",
+    "DIFFUSE",
+    "FILL",
+    "FOV_DEG",
+    "SPECULAR",
+    "VIEWS",
+    "Camera",
+    "RenderError",
+    "RenderTimings",
+    "SceneRenderer",
+    "ViewSpec",
+    "fit_camera",
+    "read_joint_state",
+    "render_contact_sheet",
+    "render_views",
+    "resolve_urdf",
+    "write_png",
+]
 
 DEFAULT_VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
 """The five views of the SPEC's extraction stage."""
 
-BACKGROUND: tuple[int, int, int] = (236, 238, 242)
-"""RGB of the background behind the object (a light blue-grey, so white and
-black objects both stand out)."""
-
 BACKENDS: tuple[str, ...] = ("auto", "tiny")
-
-
-@dataclass(frozen=True)
-class ViewSpec:
-    """Where a named view's camera sits, seen from the object's center.
-
-    ``azimuth_deg``: angle in the xy plane from +x toward +y of the direction
-    object -> camera; ``elevation_deg``: angle above the xy plane (90 = top).
-    """
-
-    name: str
-    azimuth_deg: float
-    elevation_deg: float
-
-    def direction(self) -> np.ndarray:
-        """Unit vector (3,) from the object's center toward the camera."""
-        az, el = math.radians(self.azimuth_deg), math.radians(self.elevation_deg)
-        return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-
-
-VIEWS: dict[str, ViewSpec] = {
-    v.name: v
-    for v in (
-        ViewSpec("front", 180.0, 20.0),
-        ViewSpec("back", 0.0, 20.0),
-        ViewSpec("left", -90.0, 20.0),
-        ViewSpec("right", 90.0, 20.0),
-        ViewSpec("perspective", -135.0, 30.0),
-        ViewSpec("top", 180.0, 90.0),
-    )
-}
-"""Named views (see the module docstring for the convention)."""
-
-FOV_DEG = 35.0
-"""Vertical field of view of every camera, degrees."""
-
-FILL = 0.88
-"""Fraction of the image's half-size that the object's farthest point reaches."""
-
 
 AMBIENT, DIFFUSE, SPECULAR = 0.38, 0.68, 0.1
 """Light coefficients of the renderer (intensity = ambient + diffuse * cos + specular)."""
@@ -172,413 +163,6 @@ def read_joint_state(path: Path | str) -> dict[str, float]:
             raise ValueError(f"{path}: joint {name!r} has position {value!r}, not a finite number")
         out[str(name)] = float(value)
     return out
-
-
-# ------------------------------------------------------------ mesh handling
-DEFAULT_COLOR: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0)
-"""RGBA of mesh faces with neither an MTL material nor a URDF ``<material>``."""
-
-
-@dataclass
-class _ObjInfo:
-    """What the renderer needs from one mesh file.
-
-    ``vertices`` (N, 3) in the file's units; ``parts``: files to load that carry
-    their own material (the original file when it has exactly one); ``bare``:
-    a file with the faces that have no (known) material, colored later from the
-    URDF; ``bare_text``: its contents when it still has to be written per color.
-    """
-
-    vertices: np.ndarray
-    parts: list[Path]
-    bare: Path | None = None
-    bare_text: str | None = None
-
-
-class _Textures:
-    """Texture files made reachable from the work folder, by a plain relative
-    name (PyBullet resolves texture names relative to the MTL's folder and does
-    not accept absolute paths). Textures larger than ``max_side`` pixels are
-    stored downscaled (area filter): the software renderer samples textures
-    nearest-neighbour without mipmaps, so a 3000 px screen texture drawn on
-    200 px aliases into stripes. Smaller ones are symlinked (or copied)."""
-
-    def __init__(self, work: Path, max_side: int):
-        self.folder = work / "textures"
-        self.max_side = max_side
-        self._done: dict[Path, tuple[str, bool]] = {}
-        self.downscaled = 0
-
-    def link(self, tex: Path) -> tuple[str, bool]:
-        """(name relative to the work folder, whether the texture was downscaled)."""
-        if tex in self._done:
-            return self._done[tex]
-        import hashlib
-
-        self.folder.mkdir(exist_ok=True)
-        stem = hashlib.sha1(str(tex).encode()).hexdigest()[:12]
-        resized = False
-        name = f"{stem}{tex.suffix.lower()}"
-        try:
-            from PIL import Image
-
-            with Image.open(tex) as im:
-                if max(im.size) > self.max_side:
-                    im = im.convert("RGBA" if im.mode in ("RGBA", "LA", "P") else "RGB")
-                    im.thumbnail((self.max_side, self.max_side), Image.Resampling.BOX)
-                    name = f"{stem}.png"
-                    im.save(self.folder / name)
-                    resized = True
-                    self.downscaled += 1
-        except Exception:  # unreadable by PIL: let PyBullet try the original
-            resized = False
-        if not resized:
-            dst = self.folder / name
-            if not dst.exists():
-                try:
-                    dst.symlink_to(tex)
-                except OSError:
-                    shutil.copyfile(tex, dst)
-        self._done[tex] = (f"textures/{name}", resized)
-        return self._done[tex]
-
-
-def _read_mtl(path: Path, textures: _Textures) -> tuple[dict[str, list[str]], bool]:
-    """(material name -> its lines with textures linked into the work folder,
-    whether a texture was downscaled). Missing textures are dropped."""
-    mats: dict[str, list[str]] = {}
-    changed = False
-    current: list[str] | None = None
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return mats, changed
-    for raw in text.splitlines():
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        key = line.split(maxsplit=1)[0]
-        if key == "newmtl":
-            current = mats.setdefault(line[len("newmtl") :].strip(), [])
-            continue
-        if current is None:
-            continue
-        if mesh_io.is_texture_statement(key):
-            tokens = line.split()
-            tex = (path.parent / tokens[-1]).resolve()
-            if len(tokens) < 2 or not tex.is_file():
-                continue
-            name, resized = textures.link(tex)
-            changed |= resized
-            current.append(" ".join(tokens[:-1] + [name]))
-        else:
-            current.append(line)
-    return mats, changed
-
-
-def _split_obj(path: Path, work: Path, tag: str, textures: _Textures) -> _ObjInfo:
-    """Read the OBJ ``path`` and make it drawable by PyBullet with its materials.
-
-    PyBullet draws one material per OBJ file, so a file whose faces use several
-    materials is written again as one OBJ (+ MTL) per material into ``work``
-    (names start with ``tag``). Face indices are made absolute and every split
-    file carries all vertex data (unused vertices are harmless), so the split
-    files draw exactly the original faces. Faces without a known material go
-    to :attr:`_ObjInfo.bare`. A file whose textures had to be downscaled (see
-    :class:`_Textures`) is rewritten too.
-    """
-    scan = mesh_io.scan_obj_text(path.read_text(encoding="utf-8", errors="replace"))
-    data_lines, faces, mtllibs = scan.data_lines, scan.faces, scan.mtllibs
-    vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
-    materials: dict[str, list[str]] = {}
-    downscaled = False
-    for lib in mtllibs:
-        mats, changed = _read_mtl(path.parent / lib, textures)
-        downscaled |= changed
-        for name, lines in mats.items():
-            materials.setdefault(name, lines)
-    known = [m for m in faces if m is not None and m in materials]
-    unknown = [m for m in faces if m is None or m not in materials]
-    if len(known) == 1 and not unknown and not downscaled:
-        return _ObjInfo(vertices, [path])
-    if not known and not mtllibs and list(faces) in ([None], []):
-        return _ObjInfo(vertices, [], bare=path if faces else None)
-    header = "\n".join(data_lines)
-    parts = []
-    for k, mat in enumerate(known):
-        stem = f"{tag}_{k}"
-        (work / f"{stem}.mtl").write_text(f"newmtl {mat}\n" + "\n".join(materials[mat]) + "\n", encoding="utf-8")
-        body = "\n".join([f"mtllib {stem}.mtl", header, f"usemtl {mat}", *faces[mat]]) + "\n"
-        out = work / f"{stem}.obj"
-        out.write_text(body, encoding="utf-8")
-        parts.append(out)
-    bare_text = None
-    if unknown:
-        bare_text = "\n".join([header, *(f for m in unknown for f in faces[m])]) + "\n"
-    return _ObjInfo(vertices, parts, bare_text=bare_text)
-
-
-def _colored_obj(info: _ObjInfo, source: Path, rgba: Sequence[float], work: Path, tag: str) -> Path:
-    """An OBJ of ``info``'s material-less faces with one material of color ``rgba``.
-
-    PyBullet (with ``URDF_USE_MATERIAL_COLORS_FROM_MTL``) draws an OBJ without
-    a material black, so the URDF's ``<material>`` color (or
-    :data:`DEFAULT_COLOR`) is written into an MTL instead.
-    """
-    if info.bare_text is None:
-        text = "\n".join(
-            ln for ln in source.read_text(encoding="utf-8", errors="replace").splitlines()
-            if not ln.startswith(("mtllib", "usemtl"))
-        ) + "\n"
-    else:
-        text = info.bare_text
-    r, g, b = (min(1.0, max(0.0, float(c))) for c in rgba[:3])
-    (work / f"{tag}.mtl").write_text(f"newmtl color\nKd {r:.4f} {g:.4f} {b:.4f}\n", encoding="utf-8")
-    out = work / f"{tag}.obj"
-    out.write_text(f"mtllib {tag}.mtl\nusemtl color\n" + text, encoding="utf-8")
-    return out
-
-
-def _resolve_mesh(filename: str, urdf_dir: Path) -> Path:
-    """Absolute path of a URDF mesh reference (relative, absolute, file://, package://)."""
-    name = filename.strip()
-    if name.startswith("file://"):
-        name = name[len("file://") :]
-    if name.startswith("package://"):
-        rest = name[len("package://") :]
-        _pkg, _, sub = rest.partition("/")
-        candidates = [urdf_dir / sub, urdf_dir / rest]
-        for parent in urdf_dir.parents:
-            candidates += [parent / rest, parent / sub]
-        for c in candidates:
-            if c.is_file():
-                return c.resolve()
-        return (urdf_dir / sub).resolve()
-    p = Path(name)
-    return (p if p.is_absolute() else urdf_dir / p).resolve()
-
-
-def _primitive_points(geom: UrdfGeometry) -> np.ndarray:
-    """Points (N, 3) whose hull bounds a URDF box / cylinder / sphere / capsule, m
-    (a missing size counts as 0)."""
-    kind = geom.kind
-    if kind == "box":
-        sx, sy, sz = (float(v) for v in (geom.size if geom.size is not None else (0.0, 0.0, 0.0)))
-        g = np.array(np.meshgrid([-0.5, 0.5], [-0.5, 0.5], [-0.5, 0.5])).reshape(3, -1).T
-        return g * [sx, sy, sz]
-    ang = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    r = float(geom.radius or 0.0)
-    if kind in ("cylinder", "capsule"):
-        length = float(geom.length or 0.0)
-        ring = np.stack([r * np.cos(ang), r * np.sin(ang)], axis=1)
-        h = length / 2 + (r if kind == "capsule" else 0.0)
-        return np.concatenate([np.c_[ring, np.full(24, -h)], np.c_[ring, np.full(24, h)]])
-    if kind == "sphere":
-        el = np.linspace(-np.pi / 2, np.pi / 2, 9)
-        A, E = np.meshgrid(ang, el)
-        return r * np.stack([np.cos(E) * np.cos(A), np.cos(E) * np.sin(A), np.sin(E)], -1).reshape(-1, 3)
-    return np.zeros((0, 3))
-
-
-def _visual_rgba(vis: UrdfGeometry, named: dict[str, tuple[float, ...]]) -> tuple[float, ...] | None:
-    """The RGBA of a visual's ``<material>`` (inline ``<color>`` or a named
-    top-level material), or None."""
-    mat = vis.material
-    if mat is None:
-        return None
-    if mat.rgba is not None:
-        return tuple(float(v) for v in mat.rgba)
-    rgba = named.get(mat.name or "")
-    return rgba if rgba is not None and len(rgba) == 4 else None
-
-
-@dataclass
-class _Prepared:
-    urdf: Path  # the render-only URDF
-    link_points: dict[str, np.ndarray]  # link -> (N, 3) visual points in the link frame, m
-    notes: list[str] = field(default_factory=list)
-
-
-def _prepare(urdf_path: Path, work: Path, texture_max: int = 1024) -> _Prepared:
-    """Write the render-only URDF into ``work`` and collect visual points per link.
-
-    The copy has no ``<collision>`` or ``<inertial>`` (so the root link frame is
-    the body frame PyBullet places at the origin), absolute mesh paths, and
-    each visual mesh replaced by the files of :func:`_split_obj`; textures
-    larger than ``texture_max`` pixels are downscaled.
-
-    Raises:
-        FileNotFoundError: the URDF or one of its visual meshes is missing.
-        ValueError: the URDF or a mesh does not parse, or there is no visual geometry.
-    """
-    if not urdf_path.is_file():
-        raise FileNotFoundError(f"no such URDF: {urdf_path}")
-    try:
-        model = read_urdf(urdf_path, mode="lenient")
-    except UrdfError as exc:
-        raise ValueError(f"{urdf_path}: not a parseable URDF ({exc})") from exc
-    urdf_dir = urdf_path.parent.resolve()
-    named: dict[str, tuple[float, ...]] = {}  # URDF materials are global by name
-    for mat in [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]:
-        if mat.name and mat.rgba is not None and mat.name not in named:
-            named[mat.name] = tuple(float(v) for v in mat.rgba)
-    notes: list[str] = []
-    if not any(ln.visuals for ln in model.links.values()) and any(ln.collisions for ln in model.links.values()):
-        for ln in model.links.values():  # nothing else to show: draw the collision shapes
-            ln.visuals = ln.collisions
-        notes.append("the URDF has no <visual>: its collision shapes are drawn")
-    textures = _Textures(work, texture_max)
-    cache: dict[Path, _ObjInfo] = {}
-    colored: dict[tuple[Path, tuple[float, ...]], Path] = {}
-    link_points: dict[str, np.ndarray] = {}
-    n_split = 0
-    for lname, link in model.links.items():
-        link.collisions = []
-        link.inertial = None
-        pts: list[np.ndarray] = []
-        shown: list[UrdfGeometry] = []
-        for vis in link.visuals:
-            if vis.kind is None:
-                continue
-            T = vis.origin
-            if vis.kind != "mesh":
-                local = _primitive_points(vis)
-                if len(local):
-                    pts.append(local @ T[:3, :3].T + T[:3, 3])
-                shown.append(vis)
-                continue
-            mesh_file = _resolve_mesh(vis.filename or "", urdf_dir)
-            if not mesh_file.is_file():
-                raise FileNotFoundError(f"{urdf_path}: link {lname!r} visual mesh not found: {mesh_file}")
-            info = cache.get(mesh_file)
-            if info is None:
-                tag = f"m{len(cache):04d}"
-                if mesh_file.suffix.lower() == ".obj":
-                    info = _split_obj(mesh_file, work, tag, textures)
-                    n_split += len(info.parts) > 1
-                else:
-                    info = _other_mesh(mesh_file, work, tag, notes)
-                cache[mesh_file] = info
-            files = list(info.parts)
-            if info.bare is not None or info.bare_text is not None:
-                rgba = _visual_rgba(vis, named) or DEFAULT_COLOR
-                key = (mesh_file, tuple(rgba))
-                if key not in colored:
-                    source = info.bare if info.bare is not None else mesh_file
-                    colored[key] = _colored_obj(info, source, rgba, work, f"k{len(colored):04d}")
-                files.append(colored[key])
-            if len(info.vertices):
-                pts.append((info.vertices * vis.scale) @ T[:3, :3].T + T[:3, 3])
-            shown.extend(replace(vis, filename=str(part)) for part in files)
-        link.visuals = shown
-        if pts:
-            link_points[lname] = np.concatenate(pts)
-    if not link_points:
-        raise ValueError(f"{urdf_path}: no visual geometry to render")
-    materials = [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]
-    for mat in {id(m): m for m in materials}.values():  # <material><texture filename=...> (clones share one)
-        if mat.texture:
-            src = _resolve_mesh(mat.texture, urdf_dir)
-            if src.is_file():
-                mat.texture = textures.link(src)[0]
-    if n_split:
-        notes.append(f"{n_split} multi-material OBJ file(s) split into one OBJ per material")
-    if textures.downscaled:
-        notes.append(f"{textures.downscaled} texture(s) over {texture_max} px downscaled")
-    out = work / "render.urdf"
-    out.write_bytes(write_urdf(model))
-    return _Prepared(out, link_points, notes)
-
-
-def _other_mesh(mesh_file: Path, work: Path, tag: str, notes: list[str]) -> _ObjInfo:
-    """A non-OBJ visual mesh: STL is drawn by PyBullet as is (in the URDF's
-    color); other formats (DAE, PLY, GLB ...) are converted to OBJ with trimesh
-    (geometry only, colored from the URDF).
-
-    Raises:
-        ValueError: trimesh cannot read the file.
-    """
-    import trimesh
-
-    try:
-        mesh = mesh_io.load_trimesh(mesh_file)
-    except Exception as exc:
-        raise ValueError(f"cannot read mesh {mesh_file}: {exc}") from exc
-    verts = np.asarray(mesh.vertices, float).reshape(-1, 3)
-    if mesh_file.suffix.lower() == ".stl":
-        return _ObjInfo(verts, [mesh_file])
-    out = work / f"{tag}.obj"
-    out.write_text(trimesh.exchange.obj.export_obj(mesh, include_normals=True, include_color=False,
-                                                   include_texture=False), encoding="utf-8")
-    notes.append(f"{mesh_file.name}: converted to OBJ (its own colors and textures are not drawn)")
-    return _ObjInfo(verts, [], bare=out)
-
-
-# ------------------------------------------------------------------- camera
-@dataclass(frozen=True)
-class Camera:
-    """A pinhole camera: ``eye``/``target``/``up`` (3,) in m, vertical ``fov_deg``,
-    clipping ``near``/``far`` in m."""
-
-    eye: np.ndarray
-    target: np.ndarray
-    up: np.ndarray
-    fov_deg: float
-    near: float
-    far: float
-
-
-def fit_camera(
-    points: np.ndarray,
-    direction: np.ndarray,
-    *,
-    up: Sequence[float] = (0.0, 0.0, 1.0),
-    aspect: float = 1.0,
-    fov_deg: float = FOV_DEG,
-    fill: float = FILL,
-) -> Camera:
-    """The camera looking at ``points`` (N, 3) m from ``direction`` (3,) (unit,
-    object -> camera) that frames them: every point inside ``fill`` of the
-    image's half-extent, the projected extent centered. Works at any scale.
-
-    ``aspect`` is width / height; ``fov_deg`` the vertical field of view.
-
-    Raises:
-        ValueError: no points or a non-finite point.
-    """
-    P = np.asarray(points, float).reshape(-1, 3)
-    if not len(P) or not np.isfinite(P).all():
-        raise ValueError("fit_camera needs at least one finite point")
-    b = np.asarray(direction, float)
-    b = b / np.linalg.norm(b)
-    upv = np.asarray(up, float)
-    if abs(float(np.dot(upv / np.linalg.norm(upv), b))) > 0.999:  # looking along the up vector
-        upv = np.array([1.0, 0.0, 0.0]) if abs(b[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    f = -b
-    r = np.cross(f, upv)
-    r /= np.linalg.norm(r)
-    u = np.cross(r, f)
-    lo, hi = P.min(0), P.max(0)
-    extent = max(float(np.linalg.norm(hi - lo)), 1e-6)
-    target = (lo + hi) / 2
-    ty = math.tan(math.radians(fov_deg) / 2) * fill
-    tx = ty * aspect
-    d = extent
-    for _ in range(4):
-        rel = P - target
-        x, y, z = rel @ r, rel @ u, rel @ b
-        d = float(max(np.max(z + np.abs(x) / tx), np.max(z + np.abs(y) / ty), extent * 1e-3))
-        depth = d - z
-        X, Y = x / depth, y / depth
-        cx, cy = (X.max() + X.min()) / 2, (Y.max() + Y.min()) / 2
-        if abs(cx) < 1e-4 * tx and abs(cy) < 1e-4 * ty:
-            break
-        target = target + (r * cx + u * cy) * d
-    rel = P - target
-    depth = d - rel @ b
-    near = max(float(depth.min()) * 0.5, extent * 1e-4)
-    far = float(depth.max()) * 1.5 + extent * 0.1
-    return Camera(target + b * d, target, u, fov_deg, near, far)
 
 
 # ------------------------------------------------------------------ renderer
@@ -642,7 +226,7 @@ class SceneRenderer:
         self._work = Path(tempfile.mkdtemp(prefix="asset2sim-render-"))
         try:
             t0 = time.perf_counter()
-            self._prep = _prepare(self.urdf_path, self._work, texture_max=max(w, h) * self.supersample)
+            self._prep = prepare_scene(self.urdf_path, self._work, texture_max=max(w, h) * self.supersample)
             self.notes = list(self._prep.notes)
             t1 = time.perf_counter()
             self._load()
@@ -711,7 +295,7 @@ class SceneRenderer:
         Raises:
             KeyError: unknown view name.
         """
-        spec = _view_spec(view)
+        spec = view_spec(view)
         up = (1.0, 0.0, 0.0) if spec.elevation_deg >= 89.9 else (0.0, 0.0, 1.0)
         return fit_camera(self.world_points(), spec.direction(), up=up, aspect=self.size[0] / self.size[1])
 
@@ -722,7 +306,7 @@ class SceneRenderer:
             KeyError: unknown view name.
             RenderError: the renderer returned no image.
         """
-        spec = _view_spec(view)
+        spec = view_spec(view)
         t0 = time.perf_counter()
         cam = self.camera(spec)
         img = self._draw(cam)
@@ -782,15 +366,6 @@ class SceneRenderer:
             pass
 
 
-def _view_spec(view: str | ViewSpec) -> ViewSpec:
-    if isinstance(view, ViewSpec):
-        return view
-    try:
-        return VIEWS[view]
-    except KeyError:
-        raise KeyError(f"unknown view {view!r}; known views: {list(VIEWS)}") from None
-
-
 # ---------------------------------------------------------------- public API
 def render_views(
     urdf_path: Path | str,
@@ -829,7 +404,7 @@ def render_views(
     """
     views = list(views)
     for v in views:
-        _view_spec(v)
+        view_spec(v)
     images: dict[str, np.ndarray] = {}
     with SceneRenderer(urdf_path, size=size, backend=backend, supersample=supersample, shadows=shadows) as r:
         r.set_joint_positions(joint_positions)
@@ -839,84 +414,3 @@ def render_views(
         for v, img in images.items():
             write_png(Path(out_dir) / f"{v}.png", img)
     return images
-
-
-def write_png(path: Path | str, image: np.ndarray) -> Path:
-    """Write an RGB(A) uint8 image (H, W, 3|4) as PNG, atomically. Returns the path."""
-    import io
-
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
-    return write_bytes(path, buf.getvalue())
-
-
-def render_contact_sheet(
-    images: Mapping[str, np.ndarray],
-    *,
-    columns: int | None = None,
-    title: str | None = None,
-) -> np.ndarray:
-    """One RGB image (H, W, 3) uint8 with every view in a grid, each labelled
-    with its name above it (and an optional ``title`` line on top).
-
-    ``columns`` defaults to all views in one row up to 3, else ceil(n / 2)
-    columns (5 views -> 3 + 2). Views of different sizes are padded to the
-    largest.
-
-    Raises:
-        ValueError: no images, or an image that is not (H, W, 3|4) uint8.
-    """
-    from PIL import Image, ImageDraw
-
-    if not images:
-        raise ValueError("render_contact_sheet needs at least one image")
-    arrays = {}
-    for name, img in images.items():
-        a = np.asarray(img)
-        if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] not in (3, 4):
-            raise ValueError(f"view {name!r}: expected a (H, W, 3) uint8 image, got {a.dtype} {a.shape}")
-        arrays[name] = a[:, :, :3]
-    n = len(arrays)
-    cols = int(columns) if columns else (n if n <= 3 else math.ceil(n / 2))
-    cols = max(1, min(cols, n))
-    rows = math.ceil(n / cols)
-    tw = max(a.shape[1] for a in arrays.values())
-    th = max(a.shape[0] for a in arrays.values())
-    font = _font(max(11, tw // 16))
-    label_h = _text_height(font) + 8
-    title_h = label_h + 4 if title else 0
-    pad = 4
-    W = cols * tw + (cols + 1) * pad
-    H = title_h + rows * (th + label_h) + (rows + 1) * pad
-    sheet = Image.new("RGB", (W, H), (255, 255, 255))
-    draw = ImageDraw.Draw(sheet)
-    if title:
-        draw.text((pad + 2, pad), title, fill=(20, 20, 20), font=font)
-    for k, (name, a) in enumerate(arrays.items()):
-        i, j = divmod(k, cols)
-        x0 = pad + j * (tw + pad)
-        y0 = title_h + pad + i * (th + label_h + pad)
-        draw.text((x0 + 2, y0 + 3), name, fill=(30, 30, 30), font=font)
-        tile = Image.new("RGB", (tw, th), BACKGROUND)
-        tile.paste(Image.fromarray(a), ((tw - a.shape[1]) // 2, (th - a.shape[0]) // 2))
-        sheet.paste(tile, (x0, y0 + label_h))
-    return np.asarray(sheet, dtype=np.uint8)
-
-
-def _font(size: int):
-    from PIL import ImageFont
-
-    try:
-        return ImageFont.load_default(size=size)
-    except TypeError:  # Pillow without FreeType sizes
-        return ImageFont.load_default()
-
-
-def _text_height(font) -> int:
-    try:
-        box = font.getbbox("Ag")
-        return int(box[3] - box[1]) + 2
-    except Exception:  # pragma: no cover
-        return 12

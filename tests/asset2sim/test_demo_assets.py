@@ -11,8 +11,9 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from asset2sim import atomic, demo_assets
+from asset2sim import atomic, demo_assets, demo_objects
 from asset2sim.demo_assets import DEMO_OBJECTS, LAPTOP_MODEL_OPENING
+from asset2sim.demo_geometry import DemoArticulation, Part, Pose, box_xyz, fmt_number, mtl_text, obj_text, open_box
 
 IDS = [o.asset_id for o in DEMO_OBJECTS]
 
@@ -287,3 +288,44 @@ def test_single_builders_and_ensure(tmp_path: Path):
     (root / "manifest.csv").unlink()
     demo_assets.ensure_demo_dataset(root)
     assert demo_assets.demo_dataset_is_current(root)
+
+
+# ------------------------------------------------- geometry and object modules
+def test_registry_is_re_exported_and_builders_make_articulations():
+    assert demo_assets.DEMO_OBJECTS is demo_objects.DEMO_OBJECTS
+    assert demo_assets.DemoObject is demo_objects.DemoObject
+    for entry in DEMO_OBJECTS:
+        obj = entry.make()
+        assert isinstance(obj, DemoArticulation) and obj.asset_id == entry.asset_id
+        links = {ln.name for ln in obj.links}
+        assert {j.child for j in obj.joints} == links  # every link hangs from one joint
+        assert set(entry.closed_positions) <= {j.name for j in obj.joints if j.type != "fixed"}
+
+
+def test_obj_text_has_closed_outward_boxes():
+    """Every box piece is 8 vertices and 12 triangles wound outward: the signed
+    volume of each piece equals the box's volume, also after a rigid pose."""
+    pose = Pose(axis=(-1.0, 0.0, 0.0), angle=1.2, pivot=(0.0, 0.1, -0.2))
+    part = Part("lid-1", [box_xyz(0, 1, 0, 2, 0, 3), box_xyz(-1, -0.5, 0, 0.25, 0, 0.5)], (0.5, 0.5, 0.5), pose)
+    lines = obj_text(part, "a.mtl").splitlines()
+    v = np.array([[float(c) for c in ln.split()[1:]] for ln in lines if ln.startswith("v ")])
+    f = np.array([[int(c) - 1 for c in ln.split()[1:]] for ln in lines if ln.startswith("f ")])
+    assert v.shape == (16, 3) and f.shape == (24, 3)
+    for piece, volume in ((f[:12], 6.0), (f[12:], 0.5 * 0.25 * 0.5)):
+        a, b, c = v[piece[:, 0]], v[piece[:, 1]], v[piece[:, 2]]
+        signed = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0
+        assert signed == pytest.approx(volume, rel=1e-5)
+    assert "Kd 0.5 0.5 0.5" in mtl_text((0.5, 0.5, 0.5))
+    assert fmt_number(-0.0) == "0" and fmt_number(1 / 3) == "0.333333333"
+    with pytest.raises(ValueError, match="degenerate box"):
+        box_xyz(0, 0, 0, 1, 0, 1)
+
+
+def test_open_box_walls_do_not_overlap():
+    parts = open_box(-0.5, 0.5, -0.3, 0.2, -0.35, 0.35, 0.03, "body", (1.0, 1.0, 1.0))
+    assert [p.name for p in parts] == ["body_bottom-1", "body_front-2", "body_back-3", "body_side-4", "body_side-5"]
+    boxes = [b for p in parts for b in p.boxes]
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            overlap = [min(a.hi[k], b.hi[k]) - max(a.lo[k], b.lo[k]) for k in range(3)]
+            assert min(overlap) <= 1e-12

@@ -17,6 +17,7 @@ from asset2sim.tasks.evaluation.evaluate import (
     evaluate_asset,
     metric_names,
 )
+from tests.conftest import SHARED, needs_shared
 
 # ------------------------------------------------------------------ URDF builders
 
@@ -386,3 +387,37 @@ def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
     assert not (tmp_path / "o2" / "report.html").exists()
     assert "ground_penetration" in capsys.readouterr().out
     assert main(["evaluate", str(tmp_path / "missing")]) == 2
+
+
+# ------------------------------------------------ the rest test once per engine
+
+
+@needs_shared
+def test_reused_rest_test_gives_the_fresh_evaluation_probes_included(tmp_path):
+    """A PartNet-Mobility box whose lid rests on its body (contacts): the
+    evaluation that records refine's post-check (``recording``, and the
+    post-check's metrics through ``measured``) equals one that simulates the
+    rest test itself, probes included (they start from the unstepped initial
+    state either way; after a rest test Bullet's restoreState keeps the last
+    step's contact manifolds)."""
+    import csv
+
+    from asset2sim.schemas.metrics import REST_TEST_METRICS
+    from asset2sim.tasks.evaluation.evaluate import _jsonable
+    from asset2sim.tasks.refine import refine_asset
+
+    row = next(r for r in csv.DictReader(open(SHARED / "manifest.csv")) if r["id"] == "100221")
+    out = tmp_path / "out"
+    res = refine_asset(SHARED / "100221", row["prompt"], out)
+    written = json.loads((out / "evaluation.json").read_text())
+    fresh = evaluate_asset(out, prompt=row["prompt"], category=res.report.category, method="asset2sim")
+
+    def metrics(ev: dict) -> list[dict]:
+        return [{k: v for k, v in m.items() if k != "seconds"} for m in ev["metrics"]]
+
+    assert metrics(_jsonable(fresh.model_dump(mode="json"))) == metrics(written)
+    probes = [m for m in written["metrics"] if m["name"] == "probes"][0]
+    assert any(abs(p.get("peak_force") or 0.0) > 0 for p in probes["details"]["probes"])  # the probes touched the lid
+    post = [m for m in res.report.metrics if m.engine == "pybullet" and m.name in REST_TEST_METRICS]
+    measured = evaluate_asset(out, prompt=row["prompt"], category=res.report.category, measured=post)
+    assert measured.metric("probes").model_dump() == fresh.metric("probes").model_dump()

@@ -15,8 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from asset2sim import mesh_io
 from asset2sim.atomic import tree_hashes
 from asset2sim.tasks.publish import render as R
+from asset2sim.tasks.publish import render_camera, render_images, render_meshes
+from asset2sim.tasks.publish.render_camera import VIEWS, ViewSpec, view_spec
+from asset2sim.tasks.publish.render_meshes import TextureLinks, split_obj
+from asset2sim.tasks.publish.render_scene import prepare_scene
+from asset2sim.urdf import read_urdf
 
 SMALL = (96, 96)
 
@@ -438,3 +444,53 @@ def test_real_cabinet_drawer_front_is_minus_x(shared_dataset):
         rows = np.nonzero(mask.any(axis=1))[0]
         widths = mask[rows.min() : rows.max() + 1].sum(axis=1)
         assert bool(np.median(widths[-8:]) < 0.85 * np.median(widths[:8])) is narrower
+
+
+# ------------------------------------------------ the modules render.py uses
+def test_public_names_stay_importable_from_render():
+    assert R.fit_camera is render_camera.fit_camera and R.VIEWS is VIEWS
+    assert R.write_png is render_images.write_png and R.BACKGROUND == render_images.BACKGROUND
+    assert R.DEFAULT_COLOR == render_meshes.DEFAULT_COLOR
+    for name in R.__all__:
+        assert hasattr(R, name), name
+
+
+def test_split_obj_keeps_every_face_of_a_real_multi_material_obj(shared_dataset, tmp_path):
+    """100221's original-18.obj switches material 4 times: it is split into one
+    OBJ per material whose faces together are exactly the original's."""
+    src = shared_dataset / "100221" / "textured_objs" / "original-18.obj"
+    before = src.read_bytes()
+    info = split_obj(src, tmp_path, "m0000", TextureLinks(tmp_path, 4096))
+    assert src.read_bytes() == before  # inputs are never written
+    scan = mesh_io.scan_obj_text(src.read_text(encoding="utf-8", errors="replace"))
+    n_faces = sum(len(f) for m, f in scan.faces.items() if m is not None)
+    assert len(info.parts) > 1 and all(p.parent == tmp_path for p in info.parts)
+    split_faces = sum(sum(1 for ln in p.read_text().splitlines() if ln.startswith("f ")) for p in info.parts)
+    assert split_faces == n_faces
+    assert info.vertices.shape == (len(scan.vertex_lines), 3)
+    for p in info.parts:  # each part names its own one-material MTL
+        text = p.read_text()
+        assert text.count("usemtl ") == 1 and (tmp_path / text.splitlines()[0].split()[1]).is_file()
+
+
+def test_prepare_scene_writes_a_render_only_urdf(shared_dataset, tmp_path):
+    """103275: the render-only URDF has no collisions or inertials, every mesh
+    it names exists, and the visual points of each link are finite."""
+    scene = prepare_scene(shared_dataset / "103275" / "mobility.urdf", tmp_path, texture_max=128)
+    model = read_urdf(scene.urdf, mode="lenient")
+    assert scene.urdf.parent == tmp_path
+    assert all(not ln.collisions and ln.inertial is None for ln in model.links.values())
+    meshes = [Path(v.filename) for ln in model.links.values() for v in ln.visuals if v.kind == "mesh"]
+    assert meshes and all(p.is_absolute() and p.is_file() for p in meshes)
+    assert set(scene.link_points) <= set(model.links)
+    assert all(np.isfinite(p).all() and p.shape[1] == 3 for p in scene.link_points.values())
+    assert any("downscaled" in n for n in scene.notes)
+
+
+def test_view_spec_names_the_known_views():
+    assert view_spec("top") is VIEWS["top"]
+    custom = ViewSpec("low", 45.0, 5.0)
+    assert view_spec(custom) is custom
+    assert np.isclose(np.linalg.norm(custom.direction()), 1.0)
+    with pytest.raises(KeyError, match="known views"):
+        view_spec("underneath")

@@ -1,0 +1,206 @@
+"""Rewrites of MuJoCo's import at full precision, after checking MuJoCo read
+the URDF's values: compiler / option / default elements, mesh assets, body
+poses, inertials, joints, collision geoms, the free root joint and the ground.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from lxml import etree
+
+from asset2sim.engines.base import Spring
+from asset2sim.engines.loading import BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION, CollisionPiece
+from asset2sim.engines.mjcf.base import FREE_JOINT, GROUND, IMPRATIO, NOSLIP_ITERATIONS, MjcfError, close, num_text, quat_text, safe_name, vec_text
+from asset2sim.engines.mjcf.contacts import link_friction
+from asset2sim.schemas.config import SimConventions
+from asset2sim.urdf import UrdfModel
+
+
+def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None:
+    """``<compiler>``, ``<option>`` and ``<default>`` as the first three
+    children of ``root`` (timestep, gravity, no-slip, elliptic cones, contact
+    friction as PyBullet combines it)."""
+    comp = root.find("compiler")
+    if comp is None:
+        comp = etree.SubElement(root, "compiler")
+    for k in list(comp.attrib):
+        del comp.attrib[k]
+    comp.set("angle", "radian")
+    comp.set("meshdir", meshdir)
+    comp.set("autolimits", "true")
+    comp.set("inertiafromgeom", "false")
+    comp.set("balanceinertia", "false")
+    comp.set("boundmass", "0")
+    comp.set("boundinertia", "0")
+    comp.set("fusestatic", "false")
+    comp.set("discardvisual", "false")
+    root.remove(comp)
+    root.insert(0, comp)
+    opt = etree.Element("option")
+    opt.set("timestep", num_text(conv.timestep))
+    opt.set("gravity", f"0 0 {num_text(conv.gravity if gravity else 0.0)}")
+    opt.set("integrator", "implicitfast")
+    opt.set("noslip_iterations", str(NOSLIP_ITERATIONS))
+    opt.set("cone", "elliptic")  # with pyramidal cones the no-slip pass makes resting bodies walk
+    opt.set("impratio", num_text(IMPRATIO))
+    for old in root.findall("option"):
+        root.remove(old)
+    root.insert(1, opt)
+    default = etree.Element("default")
+    dg = etree.SubElement(default, "geom")
+    dg.set("condim", "3")
+    dg.set("friction", f"{num_text(BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION)} 0.005 0.0001")
+    dj = etree.SubElement(default, "joint")
+    dj.set("armature", "0")
+    for old in root.findall("default"):
+        root.remove(old)
+    root.insert(2, default)
+
+
+def rename_meshes(root, virtual: dict[str, tuple[str, np.ndarray | None]], urdf_path: Path) -> tuple[dict[str, str], set[str]]:
+    """Give the import's ``<mesh>`` assets their final file, scale and a
+    unique name; returns (import name -> mesh asset name, names used).
+
+    Raises:
+        MjcfError: the import produced a mesh that is not one of the pieces.
+    """
+    file_to_mesh: dict[str, str] = {}
+    used: set[str] = set()
+    for mesh in root.iter("mesh"):
+        f = mesh.get("file")
+        if f not in virtual:
+            raise MjcfError(f"{urdf_path}: MuJoCo's import produced an unknown mesh {f!r}")
+        rel, scale = virtual[f]
+        for k in ("content_type", "scale", "name"):
+            mesh.attrib.pop(k, None)
+        base = safe_name(Path(rel).stem)
+        nm, i = base, 1
+        while nm in used:
+            i += 1
+            nm = f"{base}_{i}"
+        used.add(nm)
+        mesh.set("name", nm)
+        mesh.set("file", rel)
+        if scale is not None:
+            mesh.set("scale", vec_text(scale))
+        mesh.set("inertia", "shell")  # mesh volumes are never used (inertiafromgeom="false")
+        file_to_mesh[f] = nm
+    return file_to_mesh, used
+
+
+def place_bodies(model: UrdfModel, spec, bodies: dict, urdf_path: Path) -> None:
+    """Body poses at full precision from the joint origins (after checking
+    MuJoCo placed each body where the URDF does, to 2e-5 relative).
+
+    Raises:
+        MjcfError: a body placed elsewhere.
+    """
+    tol = 2e-5
+    for jnt in model.joints:
+        b = bodies[jnt.child]
+        sb = spec.body(jnt.child)
+        if sb is None or not close(sb.pos, jnt.origin[:3, 3], tol * max(1.0, float(np.abs(jnt.origin[:3, 3]).max()))):
+            raise MjcfError(f"{urdf_path}: MuJoCo placed body {jnt.child!r} elsewhere than the URDF ({jnt.origin[:3, 3]})")
+        b.set("pos", vec_text(jnt.origin[:3, 3]))
+        b.set("quat", quat_text(jnt.origin[:3, :3]))
+        for k in ("euler", "axisangle", "xyaxes", "zaxis"):
+            b.attrib.pop(k, None)
+
+
+def set_inertial(b, link, missing_inertial: str, notes: list[str]) -> None:
+    """The body's ``<inertial>``: the file's (``fullinertia`` in the body
+    frame), PyBullet's default for a missing one under ``"bullet"``, else none."""
+    for old in b.findall("inertial"):
+        b.remove(old)
+    ine = link.inertial
+    el = None
+    if ine is not None:
+        i = ine.inertia_in_link_axes()
+        el = etree.Element("inertial", pos=vec_text(ine.com()), mass=num_text(ine.mass))
+        el.set("fullinertia", vec_text([i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]))
+    elif missing_inertial == "bullet":
+        el = etree.Element("inertial", pos="0 0 0", mass=num_text(BULLET_DEFAULT_MASS), diaginertia=vec_text(BULLET_DEFAULT_INERTIA))
+        notes.append(f"link {link.name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
+    elif link.collisions:
+        notes.append(f"link {link.name!r} has geometry but no <inertial>: massless in MuJoCo")
+    if el is not None:
+        b.insert(0, el)
+
+
+def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path) -> list[str]:
+    """Rewrite the body's joint at full precision (axis, range, damping,
+    ``frictionloss``, spring) after checking MuJoCo read the URDF's values;
+    returns the joint names written.
+
+    Raises:
+        MjcfError: an unexpected joint, or another axis / damping / friction.
+    """
+    pj = model.parent_joint(link.name)
+    names = []
+    for je in b.findall("joint"):
+        if pj is None or je.get("name") != pj.name:
+            raise MjcfError(f"{urdf_path}: unexpected joint {je.get('name')!r} in body {link.name!r}")
+        sj = spec.joint(pj.name)
+        axis = np.asarray(sj.axis, float)
+        if not close(axis / np.linalg.norm(axis), pj.axis, 1e-5):
+            raise MjcfError(f"{urdf_path}: MuJoCo read axis {axis} for joint {pj.name!r}, the URDF {pj.axis}")
+        if not (math.isclose(float(np.atleast_1d(sj.damping)[0]), pj.damping, rel_tol=1e-5, abs_tol=1e-12)
+                and math.isclose(float(sj.frictionloss), pj.friction, rel_tol=1e-5, abs_tol=1e-12)):
+            raise MjcfError(f"{urdf_path}: MuJoCo read other damping/friction for joint {pj.name!r}")
+        for k in list(je.attrib):
+            if k not in ("name", "type"):
+                del je.attrib[k]
+        je.set("axis", vec_text(pj.axis))
+        if pj.type in ("revolute", "prismatic"):
+            je.set("range", f"{num_text(pj.lower)} {num_text(pj.upper)}")
+            je.set("limited", "true")
+        else:
+            je.set("limited", "false")
+        je.set("damping", num_text(pj.damping))
+        je.set("frictionloss", num_text(pj.friction))
+        sp = springs.get(pj.name)
+        if sp is not None and sp.stiffness > 0:
+            je.set("stiffness", num_text(sp.stiffness))
+            je.set("springref", num_text(sp.reference))
+        names.append(pj.name)
+    return names
+
+
+def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:
+    """Name and place the body's collision geoms (one per piece), with their
+    mesh asset (``geom_mesh``: piece key -> mesh asset name) and friction.
+
+    Raises:
+        MjcfError: MuJoCo made another number of geoms than pieces.
+    """
+    geoms = b.findall("geom")
+    if len(geoms) != len(plist):
+        raise MjcfError(f"{urdf_path}: MuJoCo made {len(geoms)} geoms for link {link.name!r}, expected {len(plist)}")
+    fr = link_friction(model, link.name)
+    for g, p in zip(geoms, plist):
+        g.set("name", f"{safe_name(link.name)}__c{p.collision}_g{p.group}")
+        g.set("pos", vec_text(p.origin[:3, 3]))
+        g.set("quat", quat_text(p.origin[:3, :3]))
+        if p.kind == "hull":
+            g.set("mesh", geom_mesh[(link.name, p.collision, p.group)])
+        if not math.isclose(fr, BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION):
+            g.set("friction", f"{num_text(fr)} 0.005 0.0001")
+        if visuals:
+            g.set("group", "3")
+
+
+def add_root_and_ground(root_body, worldbody, fixed_base: bool, ground: bool) -> None:
+    """A free joint on the root body (unless ``fixed_base``) and the ground
+    plane geom :data:`GROUND` (friction: MuJoCo takes the larger, the link's)."""
+    if not fixed_base:
+        fj = etree.Element("freejoint", name=FREE_JOINT)
+        idx = 1 if root_body.find("inertial") is not None and list(root_body).index(root_body.find("inertial")) == 0 else 0
+        root_body.insert(idx, fj)
+    if ground:
+        plane = etree.Element("geom", name=GROUND, type="plane", size="0 0 1")
+        plane.set("friction", "0 0.005 0.0001")  # MuJoCo takes the larger friction: the link's
+        plane.set("rgba", "0.8 0.8 0.8 1")
+        worldbody.insert(0, plane)

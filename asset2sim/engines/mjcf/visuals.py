@@ -1,0 +1,81 @@
+"""Visual meshes as non-colliding MJCF geoms (group 2), coloured from the MTL
+``Kd`` / ``d`` of the material each OBJ uses.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+from lxml import etree
+
+from asset2sim.engines.mjcf.base import num_text, quat_text, relative_to, safe_name, vec_text
+
+
+def mtl_colour(obj: Path) -> str:
+    """``rgba`` text of the first material an OBJ uses (MTL ``Kd`` and ``d``),
+    grey when there is none."""
+    try:
+        text = obj.read_text(errors="replace")
+    except OSError:
+        return "0.7 0.7 0.7 1"
+    libs = re.findall(r"^\s*mtllib\s+(.+?)\s*$", text, re.M)
+    use = re.search(r"^\s*usemtl\s+(.+?)\s*$", text, re.M)
+    for lib in libs:
+        try:
+            mtl = (obj.parent / lib).read_text(errors="replace")
+        except OSError:
+            continue
+        blocks = re.split(r"^\s*newmtl\s+", mtl, flags=re.M)[1:]
+        for block in blocks:
+            name, _, body = block.partition("\n")
+            if use is not None and name.strip() != use.group(1).strip():
+                continue
+            kd = re.search(r"^\s*Kd\s+(\S+)\s+(\S+)\s+(\S+)", body, re.M)
+            dd = re.search(r"^\s*d\s+(\S+)", body, re.M)
+            try:
+                rgb = [min(1.0, max(0.0, float(v))) for v in kd.groups()] if kd else [0.7, 0.7, 0.7]
+                alpha = min(1.0, max(0.0, float(dd.group(1)))) if dd else 1.0
+            except ValueError:
+                continue
+            return vec_text(rgb + [alpha])
+    return "0.7 0.7 0.7 1"
+
+
+def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict, used: set, notes: list) -> None:
+    """Append ``link``'s visuals to ``body`` as non-colliding geoms (group 2)."""
+    for k, v in enumerate(link.visuals):
+        g = etree.SubElement(body, "geom", name=f"{safe_name(link.name)}__v{k}")
+        g.set("pos", vec_text(v.origin[:3, 3]))
+        g.set("quat", quat_text(v.origin[:3, :3]))
+        g.set("contype", "0")
+        g.set("conaffinity", "0")
+        g.set("group", "2")
+        if v.kind == "mesh":
+            rel = relative_to(v.path, mesh_root) if v.path is not None and v.path.is_file() else None
+            if rel is None:
+                body.remove(g)
+                notes.append(f"link {link.name!r} visual {k} ({v.filename}) is missing or outside the asset folder: not exported")
+                continue
+            name = f"{safe_name(link.name)}__v{k}"
+            while name in used:
+                name += "_"
+            used.add(name)
+            me = etree.SubElement(asset_el, "mesh", name=name, file=rel, inertia="shell")
+            if not np.allclose(v.scale, 1.0):
+                me.set("scale", vec_text(v.scale))
+            files[rel] = v.path
+            assets[rel] = v.path.read_bytes()
+            g.set("type", "mesh")
+            g.set("mesh", name)
+            g.set("rgba", mtl_colour(v.path))
+        elif v.kind == "box":
+            g.set("type", "box")
+            g.set("size", vec_text(np.asarray(v.size) / 2))
+        elif v.kind == "sphere":
+            g.set("type", "sphere")
+            g.set("size", num_text(v.radius))
+        else:
+            g.set("type", "cylinder")
+            g.set("size", f"{num_text(v.radius)} {num_text(v.length / 2)}")

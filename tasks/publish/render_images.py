@@ -1,0 +1,100 @@
+"""Rendered images to files and contact sheets: PNG writing (atomic) and a
+labelled grid of views (:func:`render_contact_sheet`)."""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from asset2sim.atomic import write_bytes
+
+BACKGROUND: tuple[int, int, int] = (236, 238, 242)
+"""RGB of the background behind the object (a light blue-grey, so white and
+black objects both stand out)."""
+
+
+def write_png(path: Path | str, image: np.ndarray) -> Path:
+    """Write an RGB(A) uint8 image (H, W, 3|4) as PNG, atomically. Returns the path.
+
+    Raises:
+        OSError: the file cannot be written.
+    """
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image)).save(buf, format="PNG", optimize=False)
+    return write_bytes(path, buf.getvalue())
+
+
+def render_contact_sheet(
+    images: Mapping[str, np.ndarray],
+    *,
+    columns: int | None = None,
+    title: str | None = None,
+) -> np.ndarray:
+    """One RGB image (H, W, 3) uint8 with every view in a grid, each labelled
+    with its name above it (and an optional ``title`` line on top).
+
+    ``columns`` defaults to all views in one row up to 3, else ceil(n / 2)
+    columns (5 views -> 3 + 2). Views of different sizes are padded to the
+    largest.
+
+    Raises:
+        ValueError: no images, or an image that is not (H, W, 3|4) uint8.
+    """
+    from PIL import Image, ImageDraw
+
+    if not images:
+        raise ValueError("render_contact_sheet needs at least one image")
+    arrays = {}
+    for name, img in images.items():
+        a = np.asarray(img)
+        if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] not in (3, 4):
+            raise ValueError(f"view {name!r}: expected a (H, W, 3) uint8 image, got {a.dtype} {a.shape}")
+        arrays[name] = a[:, :, :3]
+    n = len(arrays)
+    cols = int(columns) if columns else (n if n <= 3 else math.ceil(n / 2))
+    cols = max(1, min(cols, n))
+    rows = math.ceil(n / cols)
+    tw = max(a.shape[1] for a in arrays.values())
+    th = max(a.shape[0] for a in arrays.values())
+    font = _font(max(11, tw // 16))
+    label_h = _text_height(font) + 8
+    title_h = label_h + 4 if title else 0
+    pad = 4
+    W = cols * tw + (cols + 1) * pad
+    H = title_h + rows * (th + label_h) + (rows + 1) * pad
+    sheet = Image.new("RGB", (W, H), (255, 255, 255))
+    draw = ImageDraw.Draw(sheet)
+    if title:
+        draw.text((pad + 2, pad), title, fill=(20, 20, 20), font=font)
+    for k, (name, a) in enumerate(arrays.items()):
+        i, j = divmod(k, cols)
+        x0 = pad + j * (tw + pad)
+        y0 = title_h + pad + i * (th + label_h + pad)
+        draw.text((x0 + 2, y0 + 3), name, fill=(30, 30, 30), font=font)
+        tile = Image.new("RGB", (tw, th), BACKGROUND)
+        tile.paste(Image.fromarray(a), ((tw - a.shape[1]) // 2, (th - a.shape[0]) // 2))
+        sheet.paste(tile, (x0, y0 + label_h))
+    return np.asarray(sheet, dtype=np.uint8)
+
+
+def _font(size: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow without FreeType sizes
+        return ImageFont.load_default()
+
+
+def _text_height(font) -> int:
+    try:
+        box = font.getbbox("Ag")
+        return int(box[3] - box[1]) + 2
+    except Exception:  # pragma: no cover
+        return 12
