@@ -381,7 +381,7 @@ class MeshChecks(Recorder):
                 continue
             mtl_dir = Path(os.path.dirname(os.path.join(str(mesh_dir), name)))
             for tname in mesh_io.mtl_texture_maps(data):
-                tex = resolve_mesh_reference(self.folder, tname, base=mtl_dir, extensions=(), max_bytes=self.policy.max_mesh_bytes)
+                tex = resolve_mesh_reference(self.folder, tname, base=mtl_dir, extensions=())
                 self._material_ref(tex, mtl_dir, ref.path, link)
 
     def _material_ref(self, ref: MeshReference, base: Path, owner: Path, link: str | None) -> bool:
