@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Sequence
 
 if TYPE_CHECKING:  # pragma: no cover
-    from asset2sim.tasks.ingest.validate_input import Finding
+    from asset2sim.tasks.ingest.findings import Finding
 
 __all__ = ["AssetError"]
 
