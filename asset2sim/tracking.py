@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import atomic
+from asset2sim.catalog import TrackingSettings
+from asset2sim.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
 
 #: Columns of the run's summary table, in order.
@@ -66,7 +68,6 @@ def failure_mode_figure(df, title: str = ""):
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
-    from asset2sim.queries import failure_modes
 
     table = failure_modes(df, by="category")
     table = table.drop(index="total", errors="ignore")
@@ -100,7 +101,6 @@ def failure_mode_figure(df, title: str = ""):
 def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, Path]:
     """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
-    from asset2sim.queries import run_summary
 
     out_dir = Path(out_dir)
     table = summary_table(df)
@@ -197,7 +197,6 @@ def log_flow_run(
     from mlflow.entities import Metric, Param, RunTag
     from mlflow.tracking import MlflowClient
 
-    from asset2sim.catalog import TrackingSettings
 
     settings = settings or TrackingSettings()
     project_root = Path(project_root)

@@ -17,6 +17,13 @@ import json
 import math
 from pathlib import Path
 
+from asset2sim.tasks.evaluation.baselines import (
+    RESEARCH_NUMBERS,
+    benchmark_tables,
+    run_benchmark,
+    write_benchmark_outputs,
+)
+
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
 
@@ -93,7 +100,6 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from asset2sim.tasks.evaluation.baselines import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 
     console = Console(width=max(Console().width, 180))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]

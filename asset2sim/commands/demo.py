@@ -6,6 +6,9 @@ import argparse
 import tempfile
 from pathlib import Path
 
+from asset2sim import demo_assets
+from asset2sim.commands import refine as refine_cmd
+
 NAME = "demo"
 HELP = "Build a demo articulated object (a box with a hinged lid) from geometry and refine it end to end."
 
@@ -17,9 +20,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asset2sim import demo_assets
-    from asset2sim.commands import refine as refine_cmd
-
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:
         src = demo_assets.build_box_with_lid(Path(tmp) / "demo_box")
         print(f"built demo asset {src}")

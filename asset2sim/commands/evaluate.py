@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
 from asset2sim.tasks.publish import output_folder
 
 NAME = "evaluate"
@@ -32,7 +33,6 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
 
     console = Console(width=max(Console().width, 180))
     out = args.out or (args.asset if args.asset.is_dir() else args.asset.parent)

@@ -17,7 +17,13 @@ import argparse
 import sys
 from pathlib import Path
 
+from asset2sim.engines.base import available_engines
+from asset2sim.engines.loading import read_initial_state
+from asset2sim.engines.mjcf import MjcfError
+from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim.tasks.publish import output_folder
+from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
+from asset2sim.urdf import UrdfError
 
 NAME = "export"
 HELP = "Export an output folder for other simulators (MJCF for MuJoCo), optionally checking parity across engines."
@@ -46,8 +52,6 @@ def _fmt(v, spec: str = ".3g") -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asset2sim.engines.base import available_engines
-
     out = args.out
     if not (out / "mobility.urdf").is_file():
         print(f"asset2sim export: {out} has no mobility.urdf (not an output folder)", file=sys.stderr)
@@ -55,14 +59,10 @@ def run(args: argparse.Namespace) -> int:
     if "mujoco" not in available_engines():
         print("asset2sim export: MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'", file=sys.stderr)
         return 2
-    from asset2sim.urdf import UrdfError
-    from asset2sim.engines.mjcf import MjcfError
-    from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
 
     try:
         with output_folder.adopting(out):  # the MJCF files become the output folder's own
             path = export_mjcf(out, visuals=not args.no_visuals, check=False)
-        from asset2sim.engines.loading import read_initial_state
 
         check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out))
     except (FileNotFoundError, ValueError, UrdfError) as exc:
@@ -78,8 +78,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"keyframe    'initial': {state}")
     status = 0
     if args.parity:
-        from asset2sim.tasks.check.parity import evaluate_engines, parity_table
-
         engines = [e.strip() for e in args.parity.split(",") if e.strip()]
         rows = parity_table(evaluate_engines(out, engines))
         print()

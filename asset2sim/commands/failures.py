@@ -6,6 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from asset2sim import queries
+from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
+
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
 
@@ -23,8 +26,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-    from asset2sim import queries
-    from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
 
     try:
         cat = load_catalog(args.catalog)

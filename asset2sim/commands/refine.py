@@ -15,9 +15,18 @@ import os
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
+from asset2sim.commands._status import (
+    INVALID_INPUT,
+    INVALID_REQUEST,
+    NOT_READY,
+    OUTPUT_LOCATION,
+    CommandError,
+)
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.tasks.publish.output_folder import OutputError
+from asset2sim.tasks.refine import RefineError
 
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (output folder of the SPEC's contract)."
@@ -117,9 +126,6 @@ def _os_failure(exc: OSError, args: argparse.Namespace) -> CommandError:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asset2sim.schemas.config import RefineConfig
-    from asset2sim.tasks.refine import RefineError, refine_asset
-
     t0 = time.perf_counter()
 
     def progress(stage: str, message: str) -> None:
@@ -129,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     engines = ["pybullet"] + [e.strip() for e in getattr(args, "engines", "pybullet").split(",") if e.strip() and e.strip() != "pybullet"]
     config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url, engines=engines)
     try:
-        result = refine_asset(
+        result = refine_stage.refine_asset(
             args.asset,
             args.prompt,
             args.out,

@@ -11,6 +11,15 @@ import argparse
 from pathlib import Path
 
 from asset2sim.tasks.publish import output_folder
+from asset2sim.tasks.publish.render import (
+    VIEWS,
+    RenderError,
+    SceneRenderer,
+    read_joint_state,
+    render_contact_sheet,
+    resolve_urdf,
+    write_png,
+)
 
 NAME = "render"
 HELP = "Render textured views (front, back, left, right, perspective; optionally top) of an asset at a joint state to PNGs."
@@ -44,15 +53,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from asset2sim.tasks.publish.render import (
-        RenderError,
-        VIEWS,
-        SceneRenderer,
-        read_joint_state,
-        render_contact_sheet,
-        resolve_urdf,
-        write_png,
-    )
 
     views = [v.strip() for v in str(args.views).split(",") if v.strip()]
     unknown = [v for v in views if v not in VIEWS]

@@ -12,6 +12,13 @@ import json
 import sys
 from pathlib import Path
 
+from asset2sim.tasks.ingest.validate_input import (
+    CODES,
+    ValidationPolicy,
+    has_errors,
+    validate_asset,
+)
+
 NAME = "validate"
 HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh paths and contents); exit 1 on errors."
 
@@ -39,8 +46,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
-
     unknown = [c for c in args.error + args.allow if c not in CODES]
     if unknown:
         print(f"asset2sim validate: unknown code(s): {', '.join(unknown)}", file=sys.stderr)

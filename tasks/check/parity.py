@@ -22,10 +22,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import metrics
+from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
+
+from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
+from asset2sim.engines.loading import read_initial_state
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS
@@ -57,9 +61,6 @@ def evaluate_engine(
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
-    from asset2sim.engines.loading import read_initial_state
-    from asset2sim.tasks.check import metrics
-    from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
 
     urdf_dir = Path(urdf_dir)
     urdf = urdf_dir / "mobility.urdf"

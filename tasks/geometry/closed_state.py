@@ -39,11 +39,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from asset2sim.schemas.asset import AssetDescription
 
 from asset2sim.frames import rpy_matrix
 from asset2sim.mesh_io import MeshCache
-from asset2sim.schemas.asset import AssetDescription
-
 
 OWN_WEIGHT = 0.25
 """Exponent of the moving subtree's own-box ratio in the closed-state score."""
@@ -148,7 +147,12 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
     return out
 
 
-def _aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+def links_aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """World axis-aligned box (lo (3,), hi (3,)), m, of the links ``names`` at
+    the session's current state, from their collision hull points
+    (``points``: link -> (k, 3) in the link frame; exact, unlike the engines'
+    loose AABBs of rotated hulls). None when no link has points.
+    """
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for name in names:
@@ -165,7 +169,7 @@ def _aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.
 
 
 def _aabb_volume(session, names: list[str], points: dict[str, np.ndarray]) -> float:
-    box = _aabb(session, names, points)
+    box = links_aabb(session, names, points)
     if box is None:
         return 1e-27
     return float(np.prod(np.maximum(box[1] - box[0], 1e-9)))
@@ -291,7 +295,7 @@ def object_extents(session, state: dict[str, float], asset: AssetDescription, hu
     (root frame of a fixed-base session; the asset's units)."""
     points = link_hull_points(asset) if hull_points is None else hull_points
     session.set_joint_positions(state)
-    box = _aabb(session, [ln.name for ln in asset.links], points)
+    box = links_aabb(session, [ln.name for ln in asset.links], points)
     if box is None:
         return np.zeros(3)
     return np.maximum(box[1] - box[0], 0.0)

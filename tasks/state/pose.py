@@ -12,9 +12,10 @@ suitcase lying flat has its lid on top.
 from __future__ import annotations
 
 import numpy as np
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.tasks.geometry.closed_state import links_aabb
 
 from asset2sim.frames import axis_rotation
-from asset2sim.schemas.asset import AssetDescription
 
 
 def resting_rotation(
@@ -34,18 +35,17 @@ def resting_rotation(
         hull_points: :func:`asset2sim.tasks.geometry.closed_state.link_hull_points`.
         moving_links: links moved by the task-relevant joints.
     """
-    from asset2sim.tasks.geometry.closed_state import _aabb
 
     names = [ln.name for ln in asset.links]
     session.set_joint_positions(state)
-    box = _aabb(session, names, hull_points)
+    box = links_aabb(session, names, hull_points)
     if box is None:
         return np.eye(3), "no geometry: pose unchanged"
     lo, hi = box
     ext = hi - lo
     center = 0.5 * (lo + hi)
     up_hint = np.zeros(3)
-    mov = _aabb(session, moving_links, hull_points) if moving_links else None
+    mov = links_aabb(session, moving_links, hull_points) if moving_links else None
     if mov is not None:
         up_hint = 0.5 * (mov[0] + mov[1]) - center
     k = int(np.argmin(ext))
@@ -154,10 +154,9 @@ def most_stable_rotation(
     orientation is not a candidate (the simulator already saw it fail).
     Returns (rotation, note) or (None, reason) when no candidate qualifies or
     the best is the modelled orientation."""
-    from asset2sim.tasks.geometry.closed_state import _aabb
 
-    mov = _aabb(session, moving_links, hull_points) if moving_links else None
-    allbox = _aabb(session, [ln.name for ln in asset.links], hull_points)
+    mov = links_aabb(session, moving_links, hull_points) if moving_links else None
+    allbox = links_aabb(session, [ln.name for ln in asset.links], hull_points)
     up = np.zeros(3)
     if mov is not None and allbox is not None:
         up = 0.5 * (mov[0] + mov[1]) - 0.5 * (allbox[0] + allbox[1])

@@ -30,23 +30,23 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
-
-from asset2sim.engines.base import SessionOptions, SimSession, open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import (
     ClosedState,
-    _aabb,
     closed_positions,
     link_hull_points,
+    links_aabb,
     object_extents,
     subtree_links,
 )
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.request import parse_request
+
+from asset2sim.engines.base import SessionOptions, SimSession, open_session
 
 
 @dataclass
@@ -107,7 +107,7 @@ def subtree_height(session: SimSession, links: list[str], hull_points: dict[str,
     """z (m at the session's scale) of the center of the world-frame
     axis-aligned box around ``links``' hull points at the session's current
     state; 0 when none of them has geometry."""
-    box = _aabb(session, links, hull_points)
+    box = links_aabb(session, links, hull_points)
     return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
 
 

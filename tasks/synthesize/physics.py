@@ -30,9 +30,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics
+from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia
 
 G = 9.81
 """Standard gravity, m/s^2."""
@@ -109,7 +109,6 @@ def link_physics(geom: LinkGeometry, scale: float, material: MaterialChoice, sou
         hollow = eta < 0.999
     if not (mass > 0):
         raise ValueError(f"link {geom.link!r}: zero volume and area; cannot compute a mass")
-    from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia
 
     inertia = geometry_inertia(geom, mass, scale, hollow)
     return LinkPhysics(
