@@ -228,7 +228,8 @@ def load_catalog(path: Path | str) -> Catalog:
 @dataclass(frozen=True)
 class ManifestEntry:
     """One request of a manifest: asset id, prompt, the asset folder, optional
-    category, reference scale (dimensionless) and time limit (s)."""
+    category, reference scale (dimensionless) and time limit (s), and the
+    1-based line of the manifest where its row starts."""
 
     asset_id: str
     prompt: str
@@ -236,37 +237,63 @@ class ManifestEntry:
     category: str | None = None
     reference_scale: float | None = None
     time_limit_seconds: float | None = None
+    line: int | None = None
+
+
+def _entry(r: partnet_mobility.ManifestRow) -> ManifestEntry:
+    return ManifestEntry(
+        asset_id=r.id,
+        prompt=r.prompt,
+        asset_dir=r.folder,
+        category=r.category or None,
+        reference_scale=r.reference_scale,
+        time_limit_seconds=r.time_limit_seconds,
+        line=r.line,
+    )
+
+
+def read_manifest_entries(
+    manifest: Path | str, root: Path | str
+) -> tuple[list[ManifestEntry], list[partnet_mobility.ManifestRowError]]:
+    """Usable entries of a manifest CSV and the typed errors of its bad rows
+    (:class:`~asset2sim.tasks.ingest.partnet_mobility.ManifestRowError`: line,
+    id when known, code, message), each in file order; asset folders under
+    ``root``. Parsed by
+    :func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`: a bad
+    row (too long for the CSV reader, a missing/unsafe/duplicate id, no
+    prompt column, an invalid number) never hides the others.
+
+    Raises:
+        CatalogError: the manifest is missing or unreadable, not UTF-8 text,
+            or has no ``id`` / ``prompt`` column.
+    """
+    manifest = Path(manifest)
+    try:
+        reading = partnet_mobility.read_manifest_rows(manifest, root)
+    except OSError as exc:
+        raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
+    except partnet_mobility.ManifestError as exc:
+        raise CatalogError(str(exc)) from exc
+    return [_entry(r) for r in reading.rows], list(reading.errors)
 
 
 def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
     """Entries of a manifest CSV (columns ``id``, ``prompt``; optional
     ``category``, ``reference_scale``, ``time_limit_seconds``), asset folders
-    under ``root``. Parsed by
-    :func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest`.
+    under ``root``, all or nothing (:func:`read_manifest_entries` keeps the
+    good rows of a manifest with bad ones).
 
     Raises:
         CatalogError: missing file or columns, an empty/duplicate/unsafe id
             (ids name folders and files: letters, digits, ``_.-``), or a
-            ``reference_scale`` / ``time_limit_seconds`` that is not a positive number.
+            ``reference_scale`` / ``time_limit_seconds`` that is not a positive
+            number (the first bad row, naming the file and line).
     """
-    manifest = Path(manifest)
-    try:
-        rows = partnet_mobility.read_manifest(manifest, root)
-    except OSError as exc:
-        raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
-    except partnet_mobility.ManifestError as exc:
-        raise CatalogError(str(exc)) from exc
-    return [
-        ManifestEntry(
-            asset_id=r.id,
-            prompt=r.prompt,
-            asset_dir=r.folder,
-            category=r.category or None,
-            reference_scale=r.reference_scale,
-            time_limit_seconds=r.time_limit_seconds,
-        )
-        for r in rows
-    ]
+    entries, errors = read_manifest_entries(manifest, root)
+    if errors:
+        more = f" (and {len(errors) - 1} more bad row(s))" if len(errors) > 1 else ""
+        raise CatalogError(errors[0].message + more)
+    return entries
 
 
 # ----------------------------------------------------------------------- Parquet rows

@@ -14,6 +14,11 @@ dict, and writes ``{"ok": true, "value": ...}`` or ``{"ok": false, "error":
 ..., "error_type": ..., "failure_mode": ..., "traceback": ...}`` atomically to
 the result path. Its stdout/stderr go to ``child.log`` in the work folder.
 
+The child ends with the process that started it, killed or not: its first
+act is to ask for SIGKILL when that parent (pid ``parent`` of the spec) ends
+(:func:`asset2sim.flows.lifeline.set_parent_death_signal`), so a Dask worker
+that dies (with the flow's driver) leaves no stage process behind.
+
 Nothing here imports Prefect, Dask or MLflow.
 """
 
@@ -32,6 +37,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from asset2sim import atomic
+from asset2sim.flows.lifeline import set_parent_death_signal
 
 Status = Literal["ok", "error", "timeout", "crash"]
 
@@ -139,7 +145,7 @@ def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir
     if result_path.exists():
         result_path.unlink()
     spec = workdir / "spec.json"
-    atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path)})
+    atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path), "parent": os.getpid()})
     log = workdir / "child.log"
     t0 = time.perf_counter()
     with open(log, "wb") as fh:
@@ -210,6 +216,8 @@ def _kill_group(proc: subprocess.Popen) -> None:
 
 def _child_main(argv: list[str]) -> int:
     spec = json.loads(Path(argv[0]).read_text())
+    if spec.get("parent") is not None:  # end with the process that waits for this one
+        set_parent_death_signal(signal.SIGKILL, expected_parent=int(spec["parent"]))
     record = call_target(spec["target"], spec.get("kwargs") or {})
     try:
         atomic.write_text(spec["result"], json.dumps(record, allow_nan=True))

@@ -13,8 +13,8 @@ IANA name (``UTC``, ``Europe/Berlin``); the cron expression is evaluated in it
 ``make serve`` calls :func:`serve_nightly`: it registers the deployment with
 the Prefect server at ``PREFECT_API_URL`` (starting a local ``prefect server``
 under the project when none is configured, since schedules need a server's
-scheduler) and serves it until interrupted, so scheduled runs execute in that
-process. The deployment's entrypoint is the module path
+scheduler; it ends with the serving process, killed or not) and serves it
+until interrupted, so scheduled runs execute in that process. The deployment's entrypoint is the module path
 ``asset2sim.flows.refine_flow.refine_dataset``.
 
 Prefect is imported inside the functions.
@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim.catalog import load_catalog
+from asset2sim.flows import lifeline
 from asset2sim.flows.stages import FLOW_NAME, default_prefect_home, flow_parameters
 
 
@@ -141,9 +142,17 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_local_server(project_root: Path | str, port: int | None = None, timeout: float = 120.0):
-    """Start ``prefect server start`` (scheduler included) bound to 127.0.0.1,
-    state under ``<project>/.prefect``; wait until its API answers.
+def start_local_server(project_root: Path | str, port: int | None = None, timeout: float = 120.0, *,
+                       ephemeral: bool = False):
+    """Start a Prefect server bound to 127.0.0.1, state under
+    ``<project>/.prefect`` (unless ``PREFECT_HOME`` is set), log in
+    ``<project>/.prefect/server.log``; wait until its API answers. The server gets SIGKILL when this process ends, killed or
+    not (:mod:`asset2sim.flows.lifeline`); call from the main thread.
+
+    ``ephemeral`` False: ``prefect server start`` (scheduler and other
+    services included, what ``serve`` needs). True: the API alone, as
+    Prefect's temporary server runs it (``uvicorn`` on
+    ``prefect.server.api.server:create_app``, UI off), what one flow run needs.
 
     Returns ``(process, api_url)``; the caller stops the process.
 
@@ -155,34 +164,62 @@ def start_local_server(project_root: Path | str, port: int | None = None, timeou
 
     home = default_prefect_home(project_root)
     home.mkdir(parents=True, exist_ok=True)
-    port = port or _free_port()
     env = dict(os.environ)
     env.setdefault("PREFECT_HOME", str(home))
     env.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     env.pop("PREFECT_API_URL", None)
-    log = open(home / "server.log", "ab")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "prefect", "server", "start", "--host", "127.0.0.1", "--port", str(port)],
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        stdin=subprocess.DEVNULL,
-        env=env,
-        start_new_session=True,
-    )
-    log.close()
-    url = f"http://127.0.0.1:{port}/api"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"prefect server exited with code {proc.returncode}; see {home / 'server.log'}")
-        try:
-            with urllib.request.urlopen(url + "/health", timeout=2) as resp:
-                if resp.status == 200:
-                    return proc, url
-        except OSError:
-            time.sleep(0.5)
+    if ephemeral:
+        env.update({"PREFECT_UI_ENABLED": "0", "PREFECT__SERVER_EPHEMERAL": "1", "PREFECT__SERVER_FINAL": "1"})
+    log_path = home / "server.log"
+    for attempt in range(3):  # a free port may be taken before the server binds it
+        port_n = port or _free_port()
+        if ephemeral:
+            import prefect
+
+            argv = [sys.executable, "-m", "uvicorn", "--app-dir", str(Path(prefect.__file__).parent.parent),
+                    "--factory", "prefect.server.api.server:create_app", "--host", "127.0.0.1",
+                    "--port", str(port_n), "--log-level", "error", "--lifespan", "on"]  # fmt: skip
+        else:
+            argv = [sys.executable, "-m", "prefect", "server", "start", "--host", "127.0.0.1", "--port", str(port_n)]
+        with open(log_path, "ab") as log:
+            proc = subprocess.Popen(
+                lifeline.command(argv),
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                env=env,
+                start_new_session=True,
+            )
+        url = f"http://127.0.0.1:{port_n}/api"
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                break
+            try:
+                with urllib.request.urlopen(url + "/health", timeout=2) as resp:
+                    if resp.status == 200:
+                        return proc, url
+            except OSError:
+                time.sleep(0.25)
+        else:
+            stop_server(proc)
+            raise RuntimeError(f"prefect server did not answer at {url} within {timeout:.0f} s; see {log_path}")
+        if port is not None or proc.returncode != 3 or attempt == 2:  # 3: uvicorn could not bind the port
+            raise RuntimeError(f"prefect server exited with code {proc.returncode}; see {log_path}")
+    raise RuntimeError(f"prefect server did not start; see {log_path}")  # not reached
+
+
+def stop_server(proc, timeout: float = 20.0) -> None:
+    """Stop a server of :func:`start_local_server`: SIGTERM, then SIGKILL
+    after ``timeout`` s."""
+    if proc.poll() is not None:
+        return
     proc.terminate()
-    raise RuntimeError(f"prefect server did not answer at {url} within {timeout:.0f} s; see {home / 'server.log'}")
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=timeout)
 
 
 def serve_nightly(deployment) -> None:

@@ -55,6 +55,8 @@ can reach (set ``PREFECT_API_URL`` on them).
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import os
 import time
 from dataclasses import asdict
@@ -68,25 +70,28 @@ from prefect.futures import as_completed
 
 from asset2sim import queries, tracking
 from asset2sim.catalog import ResultCatalog, load_catalog
-from asset2sim.flows import stages
+from asset2sim.flows import nightly, stages
 from asset2sim.flows.stages import (  # re-exported: the flow's public names
     FLOW_NAME,
     SUBFLOW_NAME,
     AssetJob,
+    BadManifestRow,
     ModelCallFailure,
     code_version,
     default_prefect_home,
     flow_parameters,
     make_run_id,
     plan_jobs,
+    plan_run,
     prepare_prefect_environment,
 )
 from asset2sim.tasks.check.verdict import exception_failure_mode
-from asset2sim.tasks.publish.contract import build_row
+from asset2sim.tasks.publish.contract import Prepared, build_manifest_row, build_row
 
 __all__ = [
     "FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "code_version", "default_prefect_home", "flow_parameters",
-    "make_run_id", "plan_jobs", "prepare_prefect_environment", "refine_assets", "refine_dataset", "run_refine_flow",
+    "make_run_id", "plan_jobs", "plan_run", "prepare_prefect_environment", "refine_assets", "refine_dataset",
+    "run_refine_flow",
 ]  # fmt: skip
 
 
@@ -155,6 +160,10 @@ def refine_assets(
     starts: dict[str, float] = {}
 
     def record(job: AssetJob, prepared, refined, measured, exc: BaseException | None) -> None:
+        if exc is None and prepared is not None and prepared.resume is not None and refined is not None and refined.status == "ok":
+            skipped = _record_resumed(store, job, prepared, refined, measured, starts[job.asset_id])
+            if skipped is not None:
+                prepared, refined, measured = skipped, None, None
         row = build_row(
             job, prepared, refined, measured,
             error=None if exc is None else f"{type(exc).__name__}: {exc}",
@@ -178,6 +187,7 @@ def refine_assets(
         if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
             record(job, prepared, None, None, exc)
             continue
+        # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
         limit = {} if job.isolation == "process" else {"timeout_seconds": job.time_limit_seconds}
         rf = refine_task.with_options(**limit).submit(job, prepared)
         mf = metrics.with_options(**limit).submit(job, prepared, rf)
@@ -209,14 +219,19 @@ def refine_dataset(
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
     run_id = make_run_id(started)
-    jobs = plan_jobs(cat, name, run_id, ids=ids, limit=limit, force=force)
+    plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force)
+    jobs = plan.jobs
     address = dask_address or os.environ.get("DASK_ADDRESS") or None
     n_workers = workers or cat.config.run.workers
     store = ResultCatalog(cat.catalog_root)
     info = _run_info(cat, name, run_id, started, jobs, n_workers, address)
+    info["assets"] = len(jobs) + len(plan.bad_rows)
     store.write_run_info(name, run_id, info)
     log.info("run %s: %d assets of dataset %s on %s", run_id, len(jobs), name,
              address or f"a local Dask cluster ({n_workers} workers)")
+    _record_bad_rows(store, cat, name, run_id, plan.bad_rows, info["flow_run_id"], info["code_version"])
+    for bad in plan.bad_rows:
+        log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
     timing = _fan_out(cat, jobs, n_workers, address, info["flow_run_id"])
     t_track = time.perf_counter()
 
@@ -225,7 +240,7 @@ def refine_dataset(
     summary = queries.run_summary(df)
     summary.update(dataset=name, run=run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing)
     artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{name} / {run_id}")
-    mlflow_run_id, tracking_error = _log_to_mlflow(cat, df, summary, info, artifacts, len(jobs), n_workers, address, run_id)
+    mlflow_run_id, tracking_error = _log_to_mlflow(cat, df, summary, info, artifacts, info["assets"], n_workers, address, run_id)
     if tracking_error:
         log.warning("MLflow tracking failed: %s", tracking_error)
     summary.update(
@@ -247,6 +262,40 @@ def refine_dataset(
 
 
 # ------------------------------------------------------------------ flow helpers
+
+
+def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows: list[BadManifestRow],
+                     flow_run_id: str | None, version: str) -> None:
+    """One failed catalog row (``invalid_manifest_row``) per manifest row that
+    cannot be used, written before any asset runs."""
+    config = cat.refine_config().model_dump(mode="json")
+    for bad in bad_rows:
+        row = build_manifest_row(bad.error, asset_id=bad.asset_id, run_id=run_id, config=config,
+                                 code_version=version, flow_run_id=flow_run_id)
+        store.append_row(name, run_id, row)
+
+
+def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
+                    started: float) -> Prepared | None:
+    """Write the catalog row an earlier, killed run owed for its complete
+    folder (``prepared.resume``) into that run's partition (unless it appeared
+    meanwhile), built from the folder's report and the measurement; return
+    the prepared record with that row as ``skip``, so this run records the
+    asset as skipped (nothing was refined). None when that row would not be
+    ``done`` (the measurement failed): this run then records the asset itself."""
+    known = {f.name for f in dataclasses.fields(AssetJob)}
+    earlier = AssetJob(**{k: v for k, v in prepared.resume["job"].items() if k in known})
+    info = store.run_info(earlier.dataset, earlier.run_id) or {}
+    target = store.run_dir(earlier.dataset, earlier.run_id) / f"{earlier.asset_id}.parquet"
+    old = build_row(earlier, prepared.model_copy(update={"resume": None}), refined, measured,
+                    flow_run_id=info.get("flow_run_id"), started_at=started, finished_at=time.time())
+    if old.status != "done":
+        return None
+    if not target.exists():
+        store.append_row(earlier.dataset, earlier.run_id, old)
+    prev = old.model_dump(mode="json")
+    prev["run"] = earlier.run_id
+    return prepared.model_copy(update={"skip": prev})
 
 
 def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJob], n_workers, address) -> dict[str, Any]:
@@ -392,5 +441,50 @@ def run_refine_flow(
         CatalogError: invalid catalog or manifest (before any asset runs).
     """
     params = flow_parameters(catalog, dataset, workers, dask_address)
-    load_catalog(params["catalog"])  # fail early, before the flow starts
-    return refine_dataset(**params, ids=ids, limit=limit, force=force)
+    cat = load_catalog(params["catalog"])  # fail early, before the flow starts
+    with prefect_api_for_run(cat.project_root):
+        return refine_dataset(**params, ids=ids, limit=limit, force=force)
+
+
+@contextlib.contextmanager
+def prefect_api_for_run(project_root: Path | str):
+    """The Prefect API one flow run in this process talks to: the configured
+    ``PREFECT_API_URL`` when there is one, else a temporary server started
+    here (:func:`asset2sim.flows.nightly.start_local_server`, ``ephemeral``)
+    that ends with this process, killed or not, and is stopped when the block
+    ends. Yields the API URL. Call from the main thread.
+
+    Raises:
+        RuntimeError: the temporary server did not start (its log is
+            ``<project>/.prefect/server.log``).
+    """
+    from prefect.settings import PREFECT_API_URL, PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS, temporary_settings
+
+    url = PREFECT_API_URL.value()
+    if url:
+        yield str(url)
+        return
+    proc, url = nightly.start_local_server(
+        project_root, timeout=float(PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS.value()), ephemeral=True
+    )
+    try:
+        with temporary_settings({PREFECT_API_URL: url}):
+            try:
+                yield url
+            finally:
+                _drain_prefect_workers()
+    finally:
+        nightly.stop_server(proc)
+
+
+def _drain_prefect_workers() -> None:
+    """Send what Prefect's background log and event workers still hold to
+    the server before it stops."""
+    try:
+        from prefect.events.worker import EventsWorker
+        from prefect.logging.handlers import APILogWorker
+
+        APILogWorker.drain_all(timeout=5)
+        EventsWorker.drain_all(timeout=5)
+    except Exception:  # best effort: the catalog, not Prefect's log, is the record
+        pass

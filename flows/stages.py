@@ -3,11 +3,16 @@
 ``flows.refine_flow`` wraps them in Prefect tasks; each is a plain, typed,
 testable function:
 
-- :func:`plan_jobs`: ``catalog.yaml`` and the manifest -> one
-  :class:`AssetJob` per asset;
+- :func:`plan_run` (:func:`plan_jobs`): ``catalog.yaml`` and the manifest ->
+  one :class:`AssetJob` per usable manifest row, one :class:`BadManifestRow`
+  per row that cannot be used (recorded as a failed catalog row, the others
+  run), and per asset the job records of earlier runs that wrote no catalog
+  row for it (a killed flow's finished work, :func:`unrecorded_jobs`);
 - :func:`prepare_asset` (input stage): read (validate and extract) the asset,
   once, for its input hash and the skip decision
-  (:func:`asset2sim.tasks.publish.contract.finished_result`); the extracted
+  (:func:`asset2sim.tasks.publish.contract.finished_result`), or find a
+  complete folder of a killed run to record instead of refining
+  (:func:`asset2sim.tasks.publish.contract.resumable_output`); the extracted
   description and its findings travel on in the
   :class:`~asset2sim.tasks.publish.contract.Prepared` record;
 - :func:`refine_stage`: the refine function (``tasks.refine.refine_asset``:
@@ -29,7 +34,6 @@ asset's catalog row. Nothing here imports Prefect, Dask or MLflow.
 
 from __future__ import annotations
 
-import json
 import os
 import socket
 import subprocess
@@ -41,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import __version__
-from asset2sim.catalog import Catalog, CatalogError, ManifestEntry, ResultCatalog, read_manifest, result_key
+from asset2sim.catalog import Catalog, CatalogError, ManifestEntry, ResultCatalog, read_manifest_entries, result_key
 from asset2sim.demo_assets import ensure_demo_dataset
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
 from asset2sim.schemas.config import RefineConfig, SimConventions
@@ -53,14 +57,22 @@ from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.extract import extract_asset_checked
 from asset2sim.tasks.ingest.validate_input import Finding
+from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
 from asset2sim.tasks.publish.contract import (
+    JOB_RECORD_NAME,
+    JobRecord,
     Measurement,
     Prepared,
     RefineOutput,
     StageRecord,
     finished_result,
     flow_config_hash,
+    manifest_row_id,
+    refined_output,
+    report_tokens,
+    resumable_output,
     run_hash,
+    write_job_record,
 )
 
 FLOW_NAME = "refine-dataset"
@@ -92,7 +104,10 @@ class AssetJob:
     stage's ``evaluation.json``, ``work_dir`` scratch of isolated stages); ``time_limit_seconds`` s over all stages of the asset;
     ``config`` the :class:`~asset2sim.schemas.config.RefineConfig` as a dict;
     ``finished`` the catalog rows of earlier finished runs keyed by
-    :func:`asset2sim.catalog.result_key` for this asset (empty when forced).
+    :func:`asset2sim.catalog.result_key` for this asset (empty when forced);
+    ``resumable`` the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
+    dicts, newest first) of earlier runs that wrote no catalog row for this
+    asset (empty when forced).
     """
 
     dataset: str
@@ -114,7 +129,27 @@ class AssetJob:
     isolation: str = "process"
     time_limit_seconds: float = 1800.0
     finished: dict[str, dict[str, Any]] = field(default_factory=dict)
+    resumable: list[dict[str, Any]] = field(default_factory=list)
     code_version: str = __version__
+
+
+@dataclass
+class BadManifestRow:
+    """A manifest row of a run that cannot be used: ``asset_id`` its catalog
+    id (:func:`asset2sim.tasks.publish.contract.manifest_row_id`), ``error``
+    the reader's typed error (line, id as written, code, message)."""
+
+    asset_id: str
+    error: ManifestRowError
+
+
+@dataclass
+class RunPlan:
+    """What a run works on: ``jobs`` (usable manifest rows) and ``bad_rows``
+    (rows recorded as failed without running), each in manifest order."""
+
+    jobs: list[AssetJob]
+    bad_rows: list[BadManifestRow] = field(default_factory=list)
 
 
 def code_version() -> str:
@@ -171,35 +206,69 @@ def plan_jobs(
     limit: int | None = None,
     force: bool = False,
 ) -> list[AssetJob]:
-    """The jobs of a run: one per manifest entry (optionally only ``ids``, at
-    most ``limit``), with earlier finished results for the skip decision.
+    """The jobs of a run (:func:`plan_run` without the manifest's bad rows).
+
+    Raises:
+        CatalogError: as :func:`plan_run`.
+    """
+    return plan_run(cat, dataset, run_id, ids=ids, limit=limit, force=force).jobs
+
+
+def plan_run(
+    cat: Catalog,
+    dataset: str,
+    run_id: str,
+    *,
+    ids: list[str] | None = None,
+    limit: int | None = None,
+    force: bool = False,
+) -> RunPlan:
+    """The work of a run: one job per usable manifest row and one
+    :class:`BadManifestRow` per row that cannot be used (optionally only
+    ``ids``, at most ``limit`` rows of both kinds in manifest order), with
+    earlier finished results and unrecorded finished work for the skip
+    decision (none when ``force``).
 
     Generates the demo assets first when the dataset says ``generate: demo``
     and they are missing or outdated.
 
     Raises:
-        CatalogError: bad manifest or dataset; an id in ``ids`` not in the manifest.
+        CatalogError: a manifest that is missing, not UTF-8 text or without
+            ``id`` / ``prompt`` column; an unknown dataset; an id in ``ids``
+            that no manifest row has.
     """
     name, ds = cat.dataset(dataset)
     root = cat.dataset_root(name)
     if ds.generate == "demo":
         ensure_demo_dataset(root)
-    entries: list[ManifestEntry] = read_manifest(cat.manifest_path(name), root)
+    entries: list[ManifestEntry]
+    entries, errors = read_manifest_entries(cat.manifest_path(name), root)
+    taken = {e.asset_id for e in entries}
+    bad = [BadManifestRow(manifest_row_id(err, taken), err) for err in errors]
+    items: list[tuple[int, Any]] = sorted(
+        [(i, e) for i, e in enumerate(entries)] + [(len(entries) + k, b) for k, b in enumerate(bad)],
+        key=lambda t: (t[1].error.line if isinstance(t[1], BadManifestRow) else _entry_line(t[1], t[0]), t[0]),
+    )
+    ordered = [it for _, it in items]
     if ids:
-        known = {e.asset_id for e in entries}
+        known = {e.asset_id for e in entries} | {b.asset_id for b in bad} | {b.error.id for b in bad if b.error.id}
         unknown = [i for i in ids if i not in known]
         if unknown:
             raise CatalogError(f"{cat.manifest_path(name)}: unknown id(s) {unknown}")
-        entries = [e for e in entries if e.asset_id in set(ids)]
+        wanted = set(ids)
+        ordered = [it for it in ordered if it.asset_id in wanted or (isinstance(it, BadManifestRow) and it.error.id in wanted)]
     if limit is not None:
-        entries = entries[: max(0, int(limit))]
+        ordered = ordered[: max(0, int(limit))]
     settings = cat.config.run
     config = cat.refine_config().model_dump(mode="json")
     finished = {} if force else ResultCatalog(cat.catalog_root).finished(name)
+    unrecorded = {} if force else unrecorded_jobs(cat, name, run_id)
     run_out = cat.output_root / name / run_id
     version = code_version()
     jobs = []
-    for e in entries:
+    for e in ordered:
+        if isinstance(e, BadManifestRow):
+            continue
         ref_dir = None
         if ds.reference and partnet_mobility.has_reference(e.asset_dir):
             ref_dir = str(e.asset_dir)
@@ -224,10 +293,49 @@ def plan_jobs(
                 isolation=settings.isolation,
                 time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
+                resumable=unrecorded.get(e.asset_id, []),
                 code_version=version,
             )
         )
-    return jobs
+    return RunPlan(jobs=jobs, bad_rows=[b for b in ordered if isinstance(b, BadManifestRow)])
+
+
+def _entry_line(entry: ManifestEntry, index: int) -> int:
+    return entry.line if entry.line is not None else index
+
+
+def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> dict[str, list[dict[str, Any]]]:
+    """Per asset id, the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
+    dicts, newest run first) that earlier runs of ``dataset`` (all but
+    ``run_id``) left in their work folders without writing the asset's
+    catalog row: work of a flow killed between finishing an asset and
+    recording it. Lists two folders per run (outputs' ``.work`` and the
+    catalog partition) and reads only the records of unrecorded assets."""
+    store = ResultCatalog(cat.catalog_root)
+    base = cat.output_root / dataset
+    out: dict[str, list[dict[str, Any]]] = {}
+    try:
+        runs = sorted((p.name for p in base.iterdir() if p.is_dir() and p.name != run_id), reverse=True)
+    except OSError:
+        return out
+    for run in runs:
+        work = base / run / ".work"
+        if not work.is_dir():
+            continue
+        try:
+            recorded = {p.stem for p in store.run_dir(dataset, run).glob("*.parquet")}
+        except ValueError:  # not a run id the catalog could hold
+            continue
+        for folder in sorted(work.iterdir()):
+            if folder.name in recorded or not (folder / JOB_RECORD_NAME).is_file():
+                continue
+            try:
+                rec = JobRecord.model_validate_json((folder / JOB_RECORD_NAME).read_text())
+            except (OSError, ValueError):
+                continue
+            if rec.job.get("asset_id") == folder.name and rec.job.get("run_id") == run:
+                out.setdefault(folder.name, []).append(rec.model_dump(mode="json"))
+    return out
 
 
 # --------------------------------------------------------------------------- stages
@@ -255,11 +363,21 @@ def prepare_asset(job: AssetJob) -> Prepared:
     """Input stage: validate and read the asset, hash input and
     configuration, decide whether an earlier result can be reused.
 
+    When no catalog row allows a skip, an earlier run's complete folder for
+    the same input and flow configuration that has no catalog row (a killed
+    flow's finished work, ``job.resumable``) is taken instead
+    (``resume``). Otherwise the job record is written into ``job.work_dir``
+    (:data:`~asset2sim.tasks.publish.contract.JOB_RECORD_NAME`) before the
+    refine stage, so a later run can find this run's finished folder.
+
     Returns:
         The :class:`~asset2sim.tasks.publish.contract.Prepared` record with
         the extracted description and its validation findings (``ok`` False
         with ``failure_mode`` ``invalid_input`` and ``error`` for an asset
         that cannot be read). Never raises for a bad asset.
+
+    Raises:
+        OSError: the job record cannot be written.
     """
     t0 = time.perf_counter()
     rec = Prepared(worker=_worker_name())
@@ -276,7 +394,13 @@ def prepare_asset(job: AssetJob) -> Prepared:
     rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
     rec.skip = finished_result(job.finished.get(result_key(job.asset_id, asset.input_hash, chash)), asset.input_hash)
     if rec.skip is None:
+        found = resumable_output(job.resumable, asset.input_hash, chash, rhash)
+        rec.resume = None if found is None else found.model_dump(mode="json")
+    if rec.skip is None and rec.resume is None:
         rec.asset, rec.findings = asset, list(findings)
+        job_fields = {k: v for k, v in asdict(job).items() if k not in ("finished", "resumable")}
+        write_job_record(job.work_dir, JobRecord(job=job_fields, input_hash=asset.input_hash, config_hash=chash,
+                                                 refine_config_hash=rhash))
     rec.seconds = time.perf_counter() - t0
     return rec
 
@@ -338,26 +462,9 @@ def stage_refine(
         out_dir=str(result.out_dir),
         skipped=bool(getattr(result, "skipped", False)),
         progress=progress,
-        tokens=_tokens(report, Path(result.out_dir)),
+        tokens=report_tokens(report, Path(result.out_dir)),
     )
     return out.model_dump(mode="json")
-
-
-def _tokens(report: RefineReport, out_dir: Path) -> int | None:
-    """Model tokens used: 0 when no model was queried, else the report's
-    ``model_tokens`` (or the overlay's estimator ``tokens``) when positive,
-    else None (the model API did not say)."""
-    if int(report.model_queries or 0) == 0:
-        return 0
-    if report.model_tokens > 0:
-        return int(report.model_tokens)
-    try:
-        est = json.loads((out_dir / "overlay.json").read_text()).get("estimator", {})
-        if isinstance(est.get("tokens"), (int, float)) and est["tokens"] > 0:
-            return int(est["tokens"])
-    except (OSError, ValueError, AttributeError):
-        pass
-    return None
 
 
 def reusable_rest_test(report: RefineReport, config: dict[str, Any], engine: str = "pybullet") -> list[MetricResult] | None:
@@ -484,6 +591,11 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
     """Refine stage: synthesize, refine state, write and post-check one asset
     (the refine function), inside the asset's time limit.
 
+    With ``prepared.resume`` (an earlier run's complete folder) nothing is
+    refined: the value is read from that folder's ``report.json``
+    (:func:`~asset2sim.tasks.publish.contract.refined_output`), ``seconds``
+    the refine time its report records.
+
     Returns:
         The stage record, ``value`` a :class:`~asset2sim.tasks.publish.contract.RefineOutput`;
         ``skipped`` when ``prepared`` says so or the asset was invalid.
@@ -493,6 +605,15 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
     """
     if not prepared.ok or prepared.skip is not None:
         return StageRecord(status="skipped", seconds=0.0)
+    if prepared.resume is not None:
+        out_dir = prepared.resume["job"]["out_dir"]
+        try:
+            value = refined_output(out_dir)
+        except (OSError, ValueError) as exc:
+            return StageRecord(status="error", error=f"{out_dir}: cannot read the finished report: {exc}",
+                               error_type=type(exc).__name__, seconds=0.0, worker=_worker_name())
+        return StageRecord(status="ok", value=value, worker=_worker_name(),
+                           seconds=float(sum(value.report.stage_seconds.values())))
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0)
     rec = _run_stage(
         job,
@@ -528,12 +649,22 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
     is left of the asset's time limit: read from refine's evaluation when it
     matches (:func:`refined_evaluation`), else evaluated, recording the
     post-check's rest test when :func:`reusable_rest_test` allows.
-    ``skipped`` when there is no output or ``job.evaluate`` is off."""
+    ``skipped`` when there is no output or ``job.evaluate`` is off. For an
+    earlier run's folder (``prepared.resume``) that run's metrics folder is
+    used: its ``evaluation.json`` when the metrics stage had written it."""
     if refined.status != "ok" or not job.evaluate:
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value
     category = value.report.category or job.category
-    reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, job.metrics_dir)
+    metrics_dir = job.metrics_dir
+    if prepared.resume is not None:  # the earlier run's measurement, when it made one
+        metrics_dir = prepared.resume["job"]["metrics_dir"]
+        ev = refined_evaluation(metrics_dir, job.prompt, category, job.reference_dir)
+        if ev is not None:
+            earlier = Measurement(columns=column_values(ev.metrics, "pybullet"), failures=list(ev.failures),
+                                  seconds=float(ev.seconds))
+            return StageRecord(status="ok", value=earlier, seconds=earlier.seconds)
+    reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, metrics_dir)
     if reused is not None:  # nothing to simulate: no child process needed
         return StageRecord(status="ok", value=reused, seconds=reused.seconds)
     budget = job.time_limit_seconds - float(prepared.seconds or 0.0) - float(refined.seconds or 0.0)
@@ -548,7 +679,7 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
             "category": category,
             "reference_dir": job.reference_dir,
             "probes": job.probes,
-            "metrics_dir": job.metrics_dir,
+            "metrics_dir": metrics_dir,
             "post_check": None if post is None else [m.model_dump(mode="json") for m in post],
         },
         budget,

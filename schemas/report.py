@@ -17,6 +17,7 @@ FailureMode = Literal[
     "oscillating",
     "timeout",
     "crash",
+    "invalid_manifest_row",
 ]
 FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
 

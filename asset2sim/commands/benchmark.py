@@ -17,7 +17,7 @@ import json
 import math
 from pathlib import Path
 
-from asset2sim.tasks.evaluation.baselines import (
+from asset2sim.tasks.evaluation.benchmark import (
     RESEARCH_NUMBERS,
     benchmark_tables,
     run_benchmark,

@@ -135,9 +135,5 @@ def _serve(args: argparse.Namespace, cat) -> int:
                 pass
     finally:
         if server is not None:
-            server.terminate()
-            try:
-                server.wait(timeout=20)
-            except Exception:
-                server.kill()
+            nightly.stop_server(server)
     return 0

@@ -8,8 +8,10 @@ decisions use it:
   while settling, in any engine), ``oscillating``, ``unresolved_penetration``
   (Phi above :data:`UNRESOLVED_PENETRATION_MM`), else ``none``.
 - :func:`asset_failure_mode`: the catalog row's mode from what each stage of
-  the flow recorded (the flow's input check, the refine stage, the metrics
-  stage, an exception that stopped the chain).
+  the flow recorded (the manifest row, the flow's input check, the refine
+  stage, the metrics stage, an exception that stopped the chain). A manifest
+  row that cannot be read is :data:`INVALID_MANIFEST_ROW`: that asset alone
+  fails, the others run.
 
 A row without a recorded mode counts as :data:`MISSING_FAILURE_MODE`
 (``queries``).
@@ -26,6 +28,10 @@ UNRESOLVED_PENETRATION_MM = 5.0
 MISSING_FAILURE_MODE = "crash"
 #: Stage statuses of a stage that ran and failed (``flows.isolation``).
 FAILED_STATUSES = ("error", "timeout", "crash")
+#: Mode of an asset whose manifest row cannot be used (too long for the CSV
+#: reader, a missing or unsafe id, no prompt column, an invalid number); the
+#: row's code (``MANIFEST_*``) is in the error text.
+INVALID_MANIFEST_ROW = "invalid_manifest_row"
 
 
 def post_check_failure_mode(check: Any) -> str:
@@ -79,6 +85,7 @@ class AssetVerdict:
 
 def asset_failure_mode(
     *,
+    manifest_error: str | None = None,
     input_failure: str | None = None,
     refine_status: str | None = None,
     refine_mode: str | None = None,
@@ -90,6 +97,9 @@ def asset_failure_mode(
     """Failure mode of one asset in a flow run.
 
     Args:
+        manifest_error: the code (``MANIFEST_*``) and message of a manifest
+            row that could not be used: the mode is :data:`INVALID_MANIFEST_ROW`
+            whatever else is given (no stage ran).
         input_failure: mode of the input check when it refused the asset
             (``invalid_input``).
         refine_status: the refine stage's status (``ok``, ``error``,
@@ -109,6 +119,8 @@ def asset_failure_mode(
     """
     mode: str | None = None
     errors: list[str] = []
+    if manifest_error is not None:
+        return AssetVerdict(INVALID_MANIFEST_ROW, [f"manifest: {manifest_error}"])
     if input_failure is not None:
         mode = input_failure
     if refine_status == "ok":

@@ -10,6 +10,14 @@ reuses a finished result only when the catalog holds a row for the same
 asset, input hash and flow configuration hash *and* the folder is still
 complete (:func:`finished_result`).
 
+The completion marker is also the flow's record of finished work: a flow
+killed after an asset's folder was completed but before its catalog row was
+written left a *job record* (:data:`JOB_RECORD_NAME`, :class:`JobRecord`,
+written by the flow before the refine stage) beside a complete folder;
+:func:`resumable_output` finds such a folder for the same input and flow
+configuration, and the flow writes the missing row from the folder's typed
+report (:func:`refined_output`) instead of refining again.
+
 Catalog rows (:class:`asset2sim.schemas.catalog.CatalogRow`) are built from
 typed stage results by :func:`build_row`.
 """
@@ -32,9 +40,14 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.metrics import column_values
 from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
+from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.publish.output_folder import MARKER_NAME, OwnedFolder
+
 REPORT_NAME = "report.json"
+#: The flow's record of an asset's job in its run's work folder
+#: (``<run>/.work/<asset id>/job.json``), written before the refine stage.
+JOB_RECORD_NAME = "job.json"
 
 
 # --------------------------------------------------------------------------- hashes
@@ -142,6 +155,86 @@ def finished_result(row: dict[str, Any] | None, input_hash: str) -> dict[str, An
     return row if is_complete(Path(out), input_hash, row.get("refine_config_hash") or "") else None
 
 
+# ----------------------------------------------------------------- resuming a flow
+
+
+class JobRecord(BaseModel):
+    """What a flow run set out to do for one asset (:data:`JOB_RECORD_NAME`
+    in its work folder): the job (``asset2sim.flows.stages.AssetJob`` as a
+    dict, without its earlier results), the input hash and both
+    configuration hashes (flow: :func:`flow_config_hash`, refine:
+    :func:`run_hash`, the one the completion marker holds)."""
+
+    model_config = ConfigDict(extra="ignore")
+    job: dict[str, Any]
+    input_hash: str
+    config_hash: str
+    refine_config_hash: str
+
+
+def write_job_record(work_dir: Path | str, record: JobRecord) -> Path:
+    """Write ``record`` atomically as ``work_dir/job.json``."""
+    return atomic.write_json(Path(work_dir) / JOB_RECORD_NAME, record.model_dump(mode="json"))
+
+
+def read_job_record(work_dir: Path | str) -> JobRecord | None:
+    """The job record of ``work_dir``; None when absent or unreadable."""
+    try:
+        return JobRecord.model_validate_json((Path(work_dir) / JOB_RECORD_NAME).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def resumable_output(candidates: list[dict[str, Any]], input_hash: str, config_hash: str,
+                     refine_config_hash: str) -> JobRecord | None:
+    """The first of ``candidates`` (:class:`JobRecord` dicts of earlier runs
+    that wrote no catalog row for the asset, newest first) whose flow
+    configuration hash and input hash are these and whose output folder is
+    complete for them (:func:`is_complete` with the refine configuration
+    hash): finished work a killed flow did not record. None when there is none."""
+    for cand in candidates:
+        try:
+            rec = JobRecord.model_validate(cand)
+        except ValueError:
+            continue
+        if rec.input_hash != input_hash or rec.config_hash != config_hash or rec.refine_config_hash != refine_config_hash:
+            continue
+        out = rec.job.get("out_dir")
+        if out and Path(out).is_dir() and is_complete(Path(out), input_hash, refine_config_hash):
+            return rec
+    return None
+
+
+def refined_output(out_dir: Path | str) -> "RefineOutput":
+    """The refine stage's value for a complete output folder, read from its
+    typed ``report.json`` (nothing is refined): ``skipped`` True, model
+    tokens as the report (or overlay) records them.
+
+    Raises:
+        OSError / ValueError: no readable ``report.json`` of the report schema.
+    """
+    out_dir = Path(out_dir)
+    report = RefineReport.model_validate_json((out_dir / REPORT_NAME).read_text())
+    return RefineOutput(report=report, out_dir=str(out_dir), skipped=True, tokens=report_tokens(report, out_dir))
+
+
+def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
+    """Model tokens used: 0 when no model was queried, else the report's
+    ``model_tokens`` (or the overlay's estimator ``tokens``) when positive,
+    else None (the model API did not say)."""
+    if int(report.model_queries or 0) == 0:
+        return 0
+    if report.model_tokens > 0:
+        return int(report.model_tokens)
+    try:
+        est = json.loads((Path(out_dir) / "overlay.json").read_text()).get("estimator", {})
+        if isinstance(est.get("tokens"), (int, float)) and est["tokens"] > 0:
+            return int(est["tokens"])
+    except (OSError, ValueError, AttributeError):
+        pass
+    return None
+
+
 # ---------------------------------------------------------------------- stage records
 
 
@@ -151,7 +244,8 @@ class Prepared(BaseModel):
     ``ok``: the asset was read; ``input_hash`` of its files; ``config_hash``
     (:func:`flow_config_hash`) and ``refine_config_hash`` (:func:`run_hash`);
     ``category`` (manifest's, else the asset's); ``skip``: the earlier catalog
-    row to reuse; ``seconds`` wall time; on failure ``failure_mode`` and ``error``.
+    row to reuse; ``resume``: an earlier run's complete folder without a
+    catalog row, to record instead of refining; ``seconds`` wall time; on failure ``failure_mode`` and ``error``.
     ``asset`` and ``findings``: the extracted description and its validation
     findings (:func:`asset2sim.tasks.ingest.extract.extract_asset_checked`),
     handed to the refine stage so the asset is read once (:meth:`extracted`).
@@ -168,6 +262,9 @@ class Prepared(BaseModel):
     links: int | None = None
     movable_joints: int | None = None
     skip: dict[str, Any] | None = None
+    resume: dict[str, Any] | None = None
+    """An earlier run's :class:`JobRecord` (dict) whose complete folder this
+    run records instead of refining (:func:`resumable_output`)."""
     failure_mode: str | None = None
     error: str | None = None
     asset: AssetDescription | None = None
@@ -377,3 +474,55 @@ def build_row(
     row.stage_seconds = json.dumps(stages, sort_keys=True)
     row.wall_seconds = round(sum(v for k, v in stages.items() if "." not in k), 4)
     return row
+
+
+# ------------------------------------------------------------------ manifest rows
+
+
+def manifest_row_id(error: ManifestRowError, taken: set[str]) -> str:
+    """The catalog ``asset_id`` of a manifest row that cannot be used: its id
+    when that is a usable id no other row of the run takes, else
+    ``manifest-line-<line>`` (made unique against ``taken``). Adds the
+    result to ``taken``."""
+    rid = error.id if is_valid_id(error.id) and error.code != "MANIFEST_DUPLICATE_ID" else None
+    if rid is None or rid in taken:
+        base = rid = f"manifest-line-{error.line}"
+        n = 1
+        while rid in taken:
+            n += 1
+            rid = f"{base}-{n}"
+    taken.add(rid)
+    return rid
+
+
+def build_manifest_row(
+    error: ManifestRowError,
+    *,
+    asset_id: str,
+    run_id: str,
+    config: dict[str, Any],
+    code_version: str,
+    flow_run_id: str | None = None,
+    at: float | None = None,
+) -> CatalogRow:
+    """The failed catalog row of a manifest row that cannot be used (no
+    stage ran): failure mode from :func:`asset2sim.tasks.check.verdict.asset_failure_mode`
+    (``invalid_manifest_row``), the row's code and message as the error,
+    ``asset_id`` from :func:`manifest_row_id`; ``at`` epoch s."""
+    verdict = asset_failure_mode(manifest_error=f"{error.code}: {error.message}")
+    when = _utc(at if at is not None else time.time())
+    return CatalogRow(
+        asset_id=asset_id,
+        status="failed",
+        failure_mode=verdict.failure_mode,
+        error="\n".join(verdict.errors),
+        estimator=config.get("estimator"),
+        model=config.get("model"),
+        code_version=code_version,
+        flow_run_id=flow_run_id,
+        started_at=when,
+        finished_at=when,
+        source_run=run_id,
+        wall_seconds=0.0,
+        stage_seconds=json.dumps({}),
+    )

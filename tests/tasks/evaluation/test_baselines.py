@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from asset2sim.tasks.evaluation import baselines as bl
+from asset2sim.tasks.evaluation import benchmark
 from asset2sim.tasks.ingest import partnet_mobility
 
 CUBE_OBJ = "\n".join(
@@ -156,7 +157,7 @@ def test_benchmark_runs_every_method_and_a_failing_method_does_not_stop_the_othe
 
     bl.register_method("broken_for_test", broken)
     try:
-        records = bl.run_benchmark(dataset / "manifest.csv", ["defaults", "broken_for_test", "human"], tmp_path / "bench",
+        records = benchmark.run_benchmark(dataset / "manifest.csv", ["defaults", "broken_for_test", "human"], tmp_path / "bench",
                                    reports=False)
     finally:
         bl._REGISTRY.pop("broken_for_test", None)
@@ -169,7 +170,7 @@ def test_benchmark_runs_every_method_and_a_failing_method_does_not_stop_the_othe
         assert (tmp_path / "bench" / m / "1001" / "evaluation.json").is_file()
     assert by["human"]["scale_deviation"] == pytest.approx(0.0)
     assert by["human"]["initial_joint_deviation"] == pytest.approx(0.0)
-    table = bl.summarize(records, ["defaults", "broken_for_test", "human"])
+    table = benchmark.summarize(records, ["defaults", "broken_for_test", "human"])
     assert table["broken_for_test"]["errors"] == 1 and table["broken_for_test"]["rest_stability_pass"] is None
     assert table["human"]["n"] == 1
 
@@ -181,7 +182,7 @@ def test_summarize_statistics():
          "probes_pass": None, "all_pass": False, "seconds": float(i + 1)}
         for i, (cat, pen) in enumerate([("Toilet", 10.0), ("Stapler", 20.0), ("Box", 90.0)])
     ]
-    t = bl.summarize(recs, ["m"])["m"]
+    t = benchmark.summarize(recs, ["m"])["m"]
     assert t["pen_ts_mean"] == pytest.approx(15.0) and t["pen_ts_sd"] == pytest.approx(np.std([10, 20], ddof=1))
     assert t["pen_mean"] == pytest.approx(40.0)
     assert t["scale_mean"] == pytest.approx(10.0) and t["scale_sd"] == pytest.approx(10.0)

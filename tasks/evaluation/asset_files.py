@@ -1,0 +1,142 @@
+"""The evaluated asset's files as the evaluation reads them.
+
+Any URDF is graded (a refined output, a baseline, a raw PartNet-Mobility or
+GenSim2 reference file), so the URDF is read by :func:`asset2sim.urdf.read_urdf`
+in lenient mode and the PartNet-Mobility sidecars through their adapter
+(:mod:`asset2sim.tasks.ingest.partnet_mobility`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.urdf import UrdfError, read_urdf
+
+#: Joint types that move (the others are fixed).
+MOVABLE = ("revolute", "continuous", "prismatic")
+
+
+class EvaluationError(ValueError):
+    """The asset cannot be evaluated (message names the file and why)."""
+
+
+@dataclass
+class JointInfo:
+    """A joint as written in the URDF (limits rad/m, dynamics SI or None)."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    lower: float | None
+    upper: float | None
+    damping: float | None
+    friction: float | None
+
+
+@dataclass
+class LinkInfo:
+    """A link as written in the URDF (mass kg or None without ``<inertial>``)."""
+
+    name: str
+    mass: float | None
+    has_collision: bool
+    has_visual: bool
+
+
+def find_urdf(path: Path | str) -> Path:
+    """The URDF of ``path`` (:func:`asset2sim.tasks.ingest.partnet_mobility.find_urdf`: the file
+    itself, else ``mobility.urdf``, else the only ``*.urdf`` not named
+    ``reference_*``).
+
+    Raises:
+        EvaluationError: nothing (or several candidates) found.
+    """
+    try:
+        return partnet_mobility.find_urdf(path)
+    except AssetError as exc:
+        raise EvaluationError(str(exc)) from exc
+
+
+def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
+    """Links and joints of a URDF as written, read by :func:`asset2sim.urdf.read_urdf`
+    in lenient mode (raw PartNet-Mobility and GenSim2 reference files are graded too).
+
+    Returns:
+        (link name -> :class:`LinkInfo`, joint name -> :class:`JointInfo`), in
+        file order (a name written twice keeps its first place and last entry).
+
+    Raises:
+        EvaluationError: unreadable XML or a malformed number (names the file,
+            line and link or joint).
+    """
+    try:
+        model = read_urdf(urdf, mode="lenient")
+    except UrdfError as exc:
+        raise EvaluationError(f"unreadable URDF: {exc}") from exc
+    links = {
+        name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))
+        for name, ln in model.links.items()
+    }
+    joints = {}
+    for jt in model.joints:
+        lim, dyn = jt.limit, jt.dynamics
+        joints[jt.name] = JointInfo(
+            name=jt.name,
+            type=jt.type,
+            parent=jt.parent,
+            child=jt.child,
+            lower=None if lim is None else lim.lower,
+            upper=None if lim is None else lim.upper,
+            damping=None if dyn is None else dyn.damping,
+            friction=None if dyn is None else dyn.friction,
+        )
+    return links, joints
+
+
+def read_json(path: Path) -> dict[str, Any] | None:
+    """A JSON sidecar (``overlay.json``, ``report.json``, ``baseline.json``,
+    ``initial_state.json``): None when the file is absent or holds no object.
+
+    Raises:
+        EvaluationError: the file exists but is not readable JSON.
+    """
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, OSError) as exc:
+        raise EvaluationError(f"{path}: unreadable JSON: {exc}") from exc
+    return data if isinstance(data, dict) else None
+
+
+def read_semantics(folder: Path) -> dict[str, tuple[str, str]]:
+    """``semantics.txt`` as link -> (joint kind, label)
+    (:func:`asset2sim.tasks.ingest.partnet_mobility.read_semantics`);
+    a missing or malformed file reads as empty (evaluation works on any URDF)."""
+    try:
+        return partnet_mobility.read_semantics(folder)
+    except AssetError:
+        return {}
+
+
+def read_category(folder: Path) -> str | None:
+    """``meta.json``'s ``model_cat`` of ``folder``, or None
+    (:func:`asset2sim.tasks.ingest.partnet_mobility.read_category`)."""
+    return partnet_mobility.read_category(folder)
+
+
+def clip_to_limits(q: float, lo: float | None, hi: float | None) -> float:
+    """``q`` (rad or m) clipped to [lo, hi]; a missing or non-finite bound
+    does not clip."""
+    if lo is not None and math.isfinite(lo):
+        q = max(q, lo)
+    if hi is not None and math.isfinite(hi):
+        q = min(q, hi)
+    return float(q)

@@ -1,0 +1,170 @@
+"""Geometry the evaluation measures itself: closed ends, extents, scale.
+
+Every method is graded against closed ends computed here from its own
+geometry (:func:`asset2sim.tasks.geometry.closed_state.closed_positions`), so
+no method grades itself; the object's extents are those of the box bounding
+its links' convex-hull vertices
+(:func:`asset2sim.tasks.geometry.closed_state.object_extents`), Bullet's link
+AABBs being only the fallback.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.tasks.evaluation.asset_files import JointInfo, clip_to_limits
+from asset2sim.tasks.geometry.closed_state import closed_positions, link_hull_points, object_extents
+from asset2sim.tasks.ingest.extract import extract_asset
+
+
+@dataclass
+class ClosedEnd:
+    """Closed end of a joint: q_closed (rad/m), opening direction +-1, the
+    largest opening from q_closed (rad/m) and where it came from."""
+
+    q_closed: float
+    direction: float
+    open_range: float
+    source: str
+
+    def fraction(self, q: float) -> float:
+        """Opening fraction of position ``q`` (rad/m): 0 closed, 1 fully
+        open (0 when the joint cannot open)."""
+        if self.open_range <= 0:
+            return 0.0
+        return float(self.direction * (q - self.q_closed) / self.open_range)
+
+
+def closed_fallback(j: JointInfo) -> ClosedEnd:
+    """Closed end without geometry: the limit nearest 0 (continuous: 0, range pi)."""
+    lo, hi = j.lower, j.upper
+    if j.type == "continuous" or lo is None or hi is None or lo > hi:
+        return ClosedEnd(0.0, 1.0, math.pi, "fallback: continuous joint, 0 taken as closed")
+    qc = lo if abs(lo) <= abs(hi) else hi
+    d = 1.0 if qc == lo else -1.0
+    return ClosedEnd(float(qc), d, float(hi - lo), "fallback: the limit nearest 0")
+
+
+def hull_points(desc: AssetDescription) -> dict[str, np.ndarray] | None:
+    """Convex-hull vertices per link (link -> (N, 3) m, link frame) via
+    :func:`asset2sim.tasks.geometry.closed_state.link_hull_points`, or None
+    when they cannot be computed."""
+    try:
+        return link_hull_points(desc)
+    except Exception:
+        return None
+
+
+def aabb_extents(session) -> np.ndarray:
+    """Extents (3,) m of the union of the engine's link AABBs over the links
+    with collision geometry (loose; see :func:`geometry_extents`); zeros when
+    no link has collision geometry."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for name in session.link_names:
+        if not session.link_has_collision(name):
+            continue
+        a, b = session.link_aabb(name)
+        lo, hi = np.minimum(lo, a), np.maximum(hi, b)
+    if not np.all(np.isfinite(lo)):
+        return np.zeros(3)
+    return np.maximum(hi - lo, 0.0)
+
+
+def geometry_extents(session, desc: AssetDescription | None, state: dict[str, float],
+                     hull: dict[str, np.ndarray] | None) -> np.ndarray:
+    """Extents (3,) m of the box bounding the links' collision hull vertices at
+    ``state`` (rad/m) (:func:`asset2sim.tasks.geometry.closed_state.object_extents`).
+    Bullet's own AABBs are loose for a link whose inertia tensor has
+    off-diagonal terms (the shape sits rotated in the principal-axes frame and
+    its box is re-bounded: 0.67 m instead of 0.39 m for a refined toilet), so
+    they are only the fallback (:func:`aabb_extents` with the joints set to
+    ``state``), used without hull points or when the hull box fails."""
+    try:
+        if hull is not None:
+            return np.asarray(object_extents(session, state, desc, hull), float)
+    except Exception:
+        pass
+    session.set_joint_positions(state)
+    return aabb_extents(session)
+
+
+def infer_scale_from_geometry(urdf: Path, raw_urdf: Path) -> float | None:
+    """Uniform scale of ``urdf`` relative to ``raw_urdf`` from geometry.
+
+    Both are loaded in PyBullet (fixed base, no gravity, joints at 0 clipped to
+    their limits); s = largest extent of the box bounding the evaluated
+    asset's collision hull vertices / that of the raw asset
+    (:func:`geometry_extents`). Used only when no ``overlay.json``,
+    ``report.json`` or ``baseline.json`` states the scale. Returns None when
+    either cannot be measured.
+    """
+    exts = []
+    for path in (urdf, raw_urdf):
+        try:
+            s = open_session("pybullet", path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+        except Exception:
+            return None
+        try:
+            try:
+                desc = extract_asset(path)
+                hull = hull_points(desc)
+            except Exception:
+                desc, hull = None, None
+            q0 = {n: clip_to_limits(0.0, *s.joint_limits[n]) for n in s.joint_names}
+            exts.append(geometry_extents(s, desc, q0, hull))
+        finally:
+            s.close()
+    a, b = float(np.max(exts[0])), float(np.max(exts[1]))
+    return a / b if a > 0 and b > 0 else None
+
+
+def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
+                   extents_out: list | None = None) -> tuple[dict[str, ClosedEnd], list[str]]:
+    """Closed end of each joint in ``names`` (rad or m, the URDF's units).
+
+    Source: :func:`asset2sim.tasks.geometry.closed_state.closed_positions` (geometric,
+    computed here for every method alike, so no method grades itself) in a
+    fresh fixed-base, gravity-free PyBullet session; else (extraction or the
+    search failing, or a joint it gives no opening) the limit nearest 0,
+    opening towards the other limit (:func:`closed_fallback`).
+
+    Args:
+        urdf: the evaluated URDF.
+        joints: its joints (:func:`asset2sim.tasks.evaluation.asset_files.parse_urdf`).
+        names: joints to report.
+        extents_out: when given, the (3,) m AABB extents of the object with
+            every joint at its closed end are appended to it.
+
+    Returns:
+        (joint -> :class:`ClosedEnd`, notes).
+    """
+    notes: list[str] = []
+    out: dict[str, ClosedEnd] = {}
+    if not names:
+        return out, notes
+    try:
+        desc = extract_asset(urdf)
+        s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
+        try:
+            hull = hull_points(desc)
+            cs = closed_positions(s, desc, **({"hull_points": hull} if hull is not None else {}))
+            if extents_out is not None:
+                extents_out.append(geometry_extents(s, desc, {n: c.q_closed for n, c in cs.items()}, hull))
+        finally:
+            s.close()
+        for n in names:
+            c = cs.get(n)
+            if c is None or not c.open_range > 0:
+                out[n] = closed_fallback(joints[n])
+            else:
+                out[n] = ClosedEnd(float(c.q_closed), float(c.direction), float(c.open_range), "geometry (closed_state)")
+    except Exception as exc:
+        notes.append(f"closed_positions failed ({type(exc).__name__}: {exc}); closed end = limit nearest 0")
+        out = {n: closed_fallback(joints[n]) for n in names}
+    return out, notes

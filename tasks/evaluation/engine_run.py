@@ -1,0 +1,165 @@
+"""One engine's raw measurements of the evaluated asset: :func:`run_engine`.
+
+Each engine is opened once; penetration at the initial state, extents, masses
+and (PyBullet) the probes are measured in that session, and the SPEC's rest
+test is taken from the post-check's recording when it matches, else simulated
+(:mod:`asset2sim.tasks.check.postcheck`). The metrics
+(:mod:`asset2sim.tasks.evaluation.metric_defs`) only read the resulting
+:class:`EngineRun`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import metrics as spec_metrics
+from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, record_rest_test
+from asset2sim.tasks.check.probes import run_probes
+from asset2sim.tasks.evaluation.asset_files import LinkInfo
+from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
+from asset2sim.tasks.evaluation.eval_context import Context
+
+
+@dataclass
+class EngineRun:
+    """Raw measurements in one engine (shared by the metrics)."""
+
+    engine: str
+    error: str | None = None
+    penetration: MetricResult | None = None
+    trace: spec_metrics.RestTrace | None = None
+    ground_series: np.ndarray | None = None
+    """(K,) m: deepest ground penetration after each recorded step (settle + test)."""
+    root_series: np.ndarray | None = None
+    """(K, 3) m: root position after each step (settle + test)."""
+    joint_series: dict[str, np.ndarray] = field(default_factory=dict)
+    extents: np.ndarray | None = None
+    """(3,) m: AABB of every link with collision at the initial state."""
+    link_centres: dict[str, np.ndarray] = field(default_factory=dict)
+    masses: dict[str, dict[str, Any]] = field(default_factory=dict)
+    probes: list[Any] = field(default_factory=list)
+    point_cloud: dict[str, np.ndarray] = field(default_factory=dict)
+    """link -> (N, 3) m collision vertices in the world at the initial state (report)."""
+    seconds: float = 0.0
+
+
+def link_centres(session) -> dict[str, np.ndarray]:
+    """Link -> (3,) m centre of the engine's AABB of the link (world frame)."""
+    out = {}
+    for name in session.link_names:
+        a, b = session.link_aabb(name)
+        out[name] = 0.5 * (a + b)
+    return out
+
+
+def link_masses(session, links: dict[str, LinkInfo]) -> dict[str, dict[str, Any]]:
+    """Link -> {"mass" (kg, as the engine loaded it), "source"} (the file's
+    ``<inertial>``, else the engine's default)."""
+    out = {}
+    for name, m in session.link_masses().items():
+        li = links.get(name)
+        out[name] = {"mass": m, "source": "file <inertial>" if li is not None and li.mass is not None else "engine default (no <inertial>)"}
+    return out
+
+
+def point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
+    """Link -> (N, 3) m collision vertices in the world frame at the
+    session's current state, at most ``max_points`` per link (evenly picked)."""
+    out = {}
+    for name in session.link_names:
+        v = session.link_collision_vertices(name)
+        if not len(v):
+            continue
+        pos, R = session.link_frame(name)
+        w = v @ R.T + pos
+        if len(w) > max_points:
+            w = w[np.linspace(0, len(w) - 1, max_points).astype(int)]
+        out[name] = w
+    return out
+
+
+def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
+               closed_for: list[str] | None = None, rest_test: bool = True,
+               recording: RestRecording | None = None) -> EngineRun:
+    """Open ``engine`` on the asset and take every raw measurement once:
+    penetration at the initial state, extents, masses, the SPEC rest test with
+    per-step root/ground recording, and (PyBullet) the probes from the initial
+    state. ``closed_for``: joints whose closed end is computed in this
+    (PyBullet) session into ``ctx.closed`` before anything is stepped.
+    ``rest_test=False``: no rest test (its measurement was taken elsewhere,
+    e.g. by the post-check); ``trace`` and the series stay None.
+    ``recording``: the post-check's step-by-step rest test
+    (:class:`~asset2sim.tasks.check.postcheck.RestRecording`); when it
+    :meth:`~asset2sim.tasks.check.postcheck.RestRecording.matches` this
+    engine, URDF, initial state, springs and conventions, its trace and
+    series are recorded and the rest test is not simulated again. With
+    probes, a rest test still to be simulated runs in a session of its own
+    (:func:`~asset2sim.tasks.check.postcheck.measure_rest_test`, as in the
+    post-check), so the probes start from a session that was never stepped
+    whether or not the rest test was reused: Bullet's ``restoreState`` puts
+    back poses and velocities but not everything a rest test leaves behind
+    (the probes measured after a rest test and a restore differed by up to
+    ~1e-3 relative from those measured without one). Errors are caught into
+    ``EngineRun.error``."""
+    t0 = time.perf_counter()
+    run = EngineRun(engine)
+    try:
+        session = open_session(engine, ctx.urdf, SessionOptions(initial_state=dict(ctx.initial_state), springs=dict(ctx.springs), conventions=ctx.conventions))
+    except EngineUnavailable as exc:
+        run.error = f"engine unavailable: {exc}"
+        return run
+    except Exception as exc:
+        run.error = f"could not load: {type(exc).__name__}: {exc}"
+        return run
+    try:
+        pyb = session.engine == "pybullet"  # the reference engine takes the extra measurements
+        # Phi first, in the fresh session: Bullet keeps contact manifolds (up to 4
+        # cached points per pair) across later queries and restoreState, so Phi
+        # "at the initial state" is only history-free at the first query.
+        run.penetration = spec_metrics.penetration(session)
+        saved = None
+        if pyb:
+            run.extents = aabb_extents(session)
+            run.link_centres = link_centres(session)
+            run.masses = link_masses(session, ctx.links)
+            if keep_geometry:
+                run.point_cloud = point_cloud(session)
+            saved = session.save_state()
+        if rest_test:
+            if recording is None or not recording.matches(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions):
+                if pyb and probes:  # in a session of its own, as the post-check does: the probes start unstepped
+                    _, recording = measure_rest_test(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions)
+                else:
+                    recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
+            run.trace = recording.trace
+            run.root_series = recording.root_series
+            run.ground_series = recording.ground_series
+            run.joint_series = recording.joint_series
+        if pyb and closed_for is not None:
+            # In a fresh fixed-base session: contact manifolds cached here would
+            # change the closed ends' penetration tie-breaks.
+            ext: list = []
+            ctx.closed, cnotes = compute_closed(ctx.urdf, ctx.joints, closed_for, extents_out=ext)
+            ctx.closed_extents = ext[0] if ext else None
+            ctx.notes += cnotes
+        if pyb and probes and saved is not None:
+            session.restore_state(saved)
+            targets = {
+                n: (c.q_closed, c.direction, c.open_range)
+                for n, c in ctx.closed.items()
+                if n in ctx.task_joints and c.open_range > 0
+            }
+            holds = bool(getattr(ctx.request, "holds_position", False))
+            run.probes = run_probes(session, targets, holds_position=holds)
+    except Exception as exc:
+        run.error = f"{type(exc).__name__}: {exc}"
+    finally:
+        session.close()
+    run.seconds = time.perf_counter() - t0
+    return run

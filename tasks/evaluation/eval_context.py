@@ -1,0 +1,252 @@
+"""What an evaluation knows before any simulator runs: the :class:`Context`.
+
+:func:`build_context` reads the evaluated URDF and its sidecars
+(:mod:`asset2sim.tasks.evaluation.asset_files`), the reference through the
+PartNet-Mobility adapter
+(:func:`asset2sim.tasks.ingest.partnet_mobility.read_reference`), the request
+and the category prior (:mod:`asset2sim.tasks.evaluation.request_match`), and
+states the scale of the evaluated asset and where it came from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import Spring
+from asset2sim.schemas.config import RefineConfig, SimConventions
+from asset2sim.schemas.request import RequestSpec
+from asset2sim.tasks.evaluation.asset_files import (
+    MOVABLE,
+    EvaluationError,
+    JointInfo,
+    LinkInfo,
+    clip_to_limits,
+    find_urdf,
+    parse_urdf,
+    read_category,
+    read_json,
+    read_semantics,
+)
+from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, infer_scale_from_geometry
+from asset2sim.tasks.evaluation.request_match import category_prior, parse_prompt, recognize_category
+from asset2sim.tasks.ingest import partnet_mobility
+
+
+@dataclass
+class Context:
+    """Everything the metrics need besides the simulator runs.
+
+    Joint positions rad/m, scale dimensionless (relative to the raw input),
+    ``closed`` filled by the evaluation once the closed ends are computed,
+    ``task_joints`` once the task-relevant joints are chosen
+    (:func:`task_joints`).
+    """
+
+    urdf: Path
+    folder: Path
+    asset_id: str
+    links: dict[str, LinkInfo]
+    joints: dict[str, JointInfo]
+    initial_state: dict[str, float]
+    initial_state_source: str
+    overlay: dict[str, Any] | None
+    report: dict[str, Any] | None
+    baseline: dict[str, Any] | None
+    semantics: dict[str, tuple[str, str]]
+    category: str | None
+    prompt: str | None
+    request: RequestSpec | None
+    request_error: str | None
+    reference_dir: Path | None
+    reference_scale: float | None
+    reference_state: dict[str, float]
+    reference_rule: str
+    scale: float | None
+    scale_source: str
+    task_joints: list[str]
+    closed: dict[str, ClosedEnd]
+    springs: dict[str, Spring]
+    prior: dict[str, Any]
+    conventions: SimConventions
+    sag_tol_revolute: float
+    sag_tol_prismatic: float
+    notes: list[str] = field(default_factory=list)
+    closed_extents: np.ndarray | None = None
+    """(3,) m: AABB of the object with every joint at its closed end (file frame)."""
+
+    @property
+    def movable(self) -> list[str]:
+        """Names of the revolute, continuous and prismatic joints, in file order."""
+        return [n for n, j in self.joints.items() if j.type in MOVABLE]
+
+
+def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, requested: list[str]) -> tuple[list[str], str]:
+    """The task-relevant joints and the rule that chose them: the movable
+    joints of the reference's ``reference_gensim2.urdf`` present here; else
+    the movable joints the request names (``requested``); else every movable
+    joint.
+
+    Raises:
+        ValueError: the reference's JSON is malformed.
+        asset2sim.urdf.UrdfError: its URDF cannot be parsed.
+    """
+    movable = [n for n, j in joints.items() if j.type in MOVABLE]
+    if reference_dir is not None:
+        ref = partnet_mobility.read_reference(reference_dir)
+        tj = [j for j in ref.task_joints if j in movable]
+        if tj:
+            return tj, "movable joints of reference_gensim2.urdf"
+    if requested:
+        return [j for j in movable if j in requested], "joints the request names"
+    return movable, "every movable joint"
+
+
+def _stated_scale(overlay: dict[str, Any] | None, report: dict[str, Any] | None, baseline: dict[str, Any] | None,
+                  urdf: Path, ref_dir: Path | None) -> tuple[float | None, str]:
+    """Scale of the evaluated asset and its source: the first sidecar that
+    states one (``overlay.json``, ``report.json``, ``baseline.json``), else the
+    geometry against the reference's raw ``mobility.urdf``, else unknown."""
+    if overlay is not None and isinstance(overlay.get("scale"), (int, float)):
+        return float(overlay["scale"]), "overlay.json"
+    if report is not None and isinstance(report.get("scale"), (int, float)):
+        return float(report["scale"]), "report.json"
+    if baseline is not None and isinstance(baseline.get("scale"), (int, float)):
+        return float(baseline["scale"]), "baseline.json"
+    if ref_dir is not None and (ref_dir / "mobility.urdf").is_file():
+        inferred = infer_scale_from_geometry(urdf, ref_dir / "mobility.urdf")
+        if inferred is not None:
+            return inferred, "geometry: largest AABB extent vs the raw mobility.urdf at q = 0"
+    return None, "unknown"
+
+
+def _reference_state(ref: partnet_mobility.GenSim2Reference, joints: dict[str, JointInfo], scale: float | None
+                     ) -> tuple[dict[str, float], str]:
+    """The reference state of the task joints in the evaluated asset's units:
+    the lower end of ``joint_position_range`` (else 0) clipped to
+    ``reference_gensim2.urdf``'s limits, prismatic values times the evaluated
+    scale (else the reference scale, else 1). Returns (state, the rule).
+
+    Raises:
+        EvaluationError: the reference URDF cannot be read.
+    """
+    state: dict[str, float] = {}
+    _, ref_joints = parse_urdf(ref.urdf)
+    rng = ref.joint_position_range
+    for n in ref.task_joints:
+        if n not in joints:
+            continue
+        jr = ref_joints[n]
+        q = clip_to_limits(rng[0] if rng is not None else 0.0, jr.lower, jr.upper)
+        if jr.type == "prismatic":
+            q *= scale if scale is not None else (ref.scale or 1.0)
+        state[n] = q
+    rule = ("lower end of joint_position_range" if rng is not None else "0") + (
+        " clipped to reference_gensim2.urdf's limits (prismatic x the evaluated scale)"
+    )
+    return state, rule
+
+
+def build_context(
+    asset: Path | str,
+    *,
+    reference: Path | str | None = None,
+    prompt: str | None = None,
+    category: str | None = None,
+    conventions: SimConventions | None = None,
+) -> Context:
+    """Read the asset and its sidecars, the reference and the request.
+
+    Args:
+        asset: asset folder or URDF file (:func:`find_urdf`).
+        reference: PartNet-Mobility folder with GenSim2's reference, or None.
+        prompt: the request, or None.
+        category: overrides the category of the sidecars, ``meta.json`` and
+            the request.
+        conventions: SPEC conventions (default :class:`SimConventions`).
+
+    Returns:
+        The :class:`Context` with ``task_joints`` and ``closed`` still empty.
+
+    Raises:
+        EvaluationError: no URDF, unreadable URDF/JSON, a reference folder that
+            does not exist.
+    """
+    urdf = find_urdf(asset).resolve()
+    folder = urdf.parent
+    links, joints = parse_urdf(urdf)
+    notes: list[str] = []
+    overlay = read_json(folder / "overlay.json")
+    report = read_json(folder / "report.json")
+    baseline = read_json(folder / "baseline.json")
+    st = read_json(folder / "initial_state.json")
+    movable = [n for n, j in joints.items() if j.type in MOVABLE]
+    if st is not None:
+        raw = st.get("initial_joint_positions", st)
+        initial = {k: float(v) for k, v in raw.items() if k in joints}
+        src = "initial_state.json"
+    else:
+        initial, src = {}, "none: 0 clipped to the limits"
+    for n in movable:
+        if n not in initial:
+            initial[n] = clip_to_limits(0.0, joints[n].lower, joints[n].upper)
+    ref_dir = Path(reference).resolve() if reference is not None else None
+    if ref_dir is not None and not ref_dir.is_dir():
+        raise EvaluationError(f"reference {ref_dir}: no such folder")
+    semantics = read_semantics(folder) or (read_semantics(ref_dir) if ref_dir else {})
+    cat = (
+        category
+        or (overlay or {}).get("category")
+        or (report or {}).get("category")
+        or (baseline or {}).get("category")
+        or recognize_category(prompt, read_category(folder) or (read_category(ref_dir) if ref_dir else None),
+                              [lab for _, lab in semantics.values()])
+    )
+    spec, req_err = parse_prompt(prompt)
+    if req_err:
+        notes.append(req_err)
+    ref_info = partnet_mobility.read_reference(ref_dir) if ref_dir is not None else None
+    scale, scale_src = _stated_scale(overlay, report, baseline, urdf, ref_dir)
+    springs: dict[str, Spring] = {}
+    for jn, jd in ((overlay or {}).get("joints") or {}).items():
+        k = float(jd.get("stiffness") or 0.0)
+        if k > 0 and jn in joints:
+            ref_q = jd.get("spring_reference")
+            springs[jn] = Spring(k, float(ref_q) if ref_q is not None else initial.get(jn, 0.0))
+    ref_state, rule = ({}, "")
+    if ref_info is not None and ref_info.urdf is not None:
+        ref_state, rule = _reference_state(ref_info, joints, scale)
+    return Context(
+        urdf=urdf,
+        folder=folder,
+        asset_id=(report or {}).get("asset_id") or (baseline or {}).get("asset_id") or folder.name,
+        links=links,
+        joints=joints,
+        initial_state=initial,
+        initial_state_source=src,
+        overlay=overlay,
+        report=report,
+        baseline=baseline,
+        semantics=semantics,
+        category=cat,
+        prompt=prompt,
+        request=spec,
+        request_error=req_err,
+        reference_dir=ref_dir,
+        reference_scale=ref_info.scale if ref_info is not None else None,
+        reference_state=ref_state,
+        reference_rule=rule,
+        scale=scale,
+        scale_source=scale_src,
+        task_joints=[],
+        closed={},
+        springs=springs,
+        prior=category_prior(cat, spec),
+        conventions=conventions or SimConventions(),
+        sag_tol_revolute=RefineConfig().sag_tolerance_revolute,
+        sag_tol_prismatic=RefineConfig().sag_tolerance_prismatic,
+        notes=notes,
+    )

@@ -1,0 +1,360 @@
+"""The evaluation's metrics: the registry and one function per metric.
+
+Each metric is ``fn(context, runs) -> [MetricResult]`` over the
+:class:`~asset2sim.tasks.evaluation.eval_context.Context` and the raw
+measurements of each engine
+(:class:`~asset2sim.tasks.evaluation.engine_run.EngineRun`), registered with
+:func:`register_metric` under its name in
+:data:`asset2sim.schemas.metrics.METRIC_INFO` (group and description come from
+that table). :data:`METRICS` holds them in evaluation order:
+
+physical robustness (per engine)
+    ``penetration`` (Phi at the initial state, mm, link pairs; from
+    :mod:`asset2sim.tasks.check.metrics`), ``ground_penetration`` (mm),
+    ``rest_stability`` and ``oscillation`` (:mod:`asset2sim.tasks.check.metrics`),
+    ``divergence`` (NaN or explosion), ``joint_hold`` (a requested state that
+    sags, a lid that snaps shut).
+semantic accuracy
+    ``scale_deviation``, ``initial_joint_deviation``, ``total_mass``
+    (:mod:`asset2sim.tasks.evaluation.semantic_metrics`), ``prompt_alignment``.
+behaviour
+    ``probes`` (:mod:`asset2sim.tasks.check.probes`, PyBullet only).
+
+Definitions, conventions and thresholds are in ``docs/metrics.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from asset2sim.schemas.metrics import METRIC_INFO
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import metrics as spec_metrics
+from asset2sim.tasks.check.probes import probes_metric
+from asset2sim.tasks.evaluation import semantic_metrics as sem
+from asset2sim.tasks.evaluation.engine_run import EngineRun
+from asset2sim.tasks.evaluation.eval_context import Context
+from asset2sim.tasks.evaluation.request_match import requested_joints, scaled_mass_range
+
+#: Largest ground penetration during the rest test that passes, m.
+GROUND_PENETRATION_TOL = 0.005
+#: Explosion thresholds (divergence): root speed m/s, revolute rad/s, prismatic m/s.
+EXPLOSION_ROOT_SPEED = 10.0
+EXPLOSION_JOINT_SPEED_REVOLUTE = 100.0
+EXPLOSION_JOINT_SPEED_PRISMATIC = 10.0
+#: Root travel that counts as an explosion: max(1 m, 5 x largest extent).
+EXPLOSION_TRAVEL_MIN = 1.0
+EXPLOSION_TRAVEL_FACTOR = 5.0
+
+
+# ------------------------------------------------------------------ registry
+MetricFn = Callable[[Context, dict[str, EngineRun]], list[MetricResult]]
+
+
+@dataclass
+class MetricSpec:
+    """A registered metric: ``fn(context, runs) -> [MetricResult]``; ``group``
+    ``physical`` / ``semantic`` / ``behaviour``; ``description`` one line."""
+
+    name: str
+    group: str
+    fn: MetricFn
+    description: str
+
+
+METRICS: dict[str, MetricSpec] = {}
+
+
+def register_metric(name: str, group: str | None = None, description: str | None = None) -> Callable[[MetricFn], MetricFn]:
+    """Decorator registering ``fn(context, runs) -> list[MetricResult]`` for
+    metric ``name``; ``group`` and ``description`` default to the registry
+    table's (:data:`asset2sim.schemas.metrics.METRIC_INFO`)."""
+    info = METRIC_INFO.get(name)
+
+    def deco(fn: MetricFn) -> MetricFn:
+        METRICS[name] = MetricSpec(name, group or (info.group if info else "physical"), fn,
+                                   description or (info.description if info else ""))
+        return fn
+
+    return deco
+
+
+def metric_names() -> list[str]:
+    """Registered metric names in evaluation order."""
+    return list(METRICS)
+
+
+# ------------------------------------------------------------------ metrics
+def _skip(name: str, unit: str, engine: str, reason: str) -> MetricResult:
+    return MetricResult(name=name, value=None, unit=unit, passed=None, threshold="", details={"skipped": reason}, engine=engine)
+
+
+@register_metric("penetration")
+def _m_penetration(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    return [r.penetration if r.penetration is not None else _skip("penetration", "mm", e, r.error or "not measured") for e, r in runs.items()]
+
+
+@register_metric("ground_penetration")
+def _m_ground(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    out = []
+    for e, r in runs.items():
+        if r.ground_series is None:
+            out.append(_skip("ground_penetration", "mm", e, r.error or "not measured"))
+            continue
+        g = r.ground_series
+        finite = g[np.isfinite(g)]
+        worst = float(np.max(finite)) if len(finite) else 0.0
+        at = int(np.argmax(finite)) if len(finite) else 0
+        out.append(
+            MetricResult(
+                name="ground_penetration",
+                value=worst * 1000.0,
+                unit="mm",
+                passed=bool(worst <= GROUND_PENETRATION_TOL and len(finite) == len(g)),
+                threshold=f"<= {GROUND_PENETRATION_TOL * 1000:g} mm at every step of the rest test",
+                details={"worst_step": at, "worst_time_s": (at + 1) * ctx.conventions.timestep, "steps": int(len(g))},
+                engine=e,
+            )
+        )
+    return out
+
+
+@register_metric("rest_stability")
+def _m_rest(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    out = []
+    for e, r in runs.items():
+        if r.trace is None:
+            out.append(_skip("rest_stability", "m", e, r.error or "not measured"))
+        else:
+            out.append(spec_metrics.rest_stability(r.trace, ctx.conventions, engine=e))
+    return out
+
+
+@register_metric("oscillation")
+def _m_osc(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    out = []
+    for e, r in runs.items():
+        if r.trace is None:
+            out.append(_skip("oscillation", "joints", e, r.error or "not measured"))
+        else:
+            out.append(spec_metrics.oscillation(r.trace, ctx.conventions, engine=e))
+    return out
+
+
+def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_types: dict[str, str],
+                     dt: float, largest_extent: float) -> dict[str, Any]:
+    """Divergence of one run: non-finite values or an explosion.
+
+    Args:
+        root: (K, 3) m root positions per step (settle + test); the first row
+            is compared with the rest for travel.
+        joints: joint -> (K,) positions per step.
+        joint_types: joint -> type.
+        dt: timestep s; largest_extent: m.
+
+    Returns:
+        {diverged, nan, reasons, peak_root_speed (m/s), root_travel (m),
+        peak_joint_speed {joint: rad/s or m/s}}.
+    """
+    reasons = []
+    nan = not (np.all(np.isfinite(root)) and all(np.all(np.isfinite(v)) for v in joints.values()))
+    if nan:
+        reasons.append("non-finite pose or joint position")
+    r = root[np.all(np.isfinite(root), axis=1)] if len(root) else root
+    speed = float(np.max(np.linalg.norm(np.diff(r, axis=0), axis=1)) / dt) if len(r) > 1 else 0.0
+    travel = float(np.max(np.linalg.norm(r - r[0], axis=1))) if len(r) else 0.0
+    travel_lim = max(EXPLOSION_TRAVEL_MIN, EXPLOSION_TRAVEL_FACTOR * largest_extent)
+    if speed > EXPLOSION_ROOT_SPEED:
+        reasons.append(f"root speed {speed:.3g} m/s > {EXPLOSION_ROOT_SPEED} m/s")
+    if travel > travel_lim:
+        reasons.append(f"root travelled {travel:.3g} m > {travel_lim:.3g} m")
+    peak = {}
+    for n, q in joints.items():
+        q = q[np.isfinite(q)]
+        v = float(np.max(np.abs(np.diff(q))) / dt) if len(q) > 1 else 0.0
+        peak[n] = v
+        lim = EXPLOSION_JOINT_SPEED_PRISMATIC if joint_types.get(n) == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
+        if v > lim:
+            reasons.append(f"joint {n} speed {v:.3g} > {lim}")
+    return {
+        "diverged": bool(reasons),
+        "nan": bool(nan),
+        "reasons": reasons,
+        "peak_root_speed": speed,
+        "root_travel": travel,
+        "travel_limit": travel_lim,
+        "peak_joint_speed": peak,
+    }
+
+
+@register_metric("divergence")
+def _m_div(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    out = []
+    for e, r in runs.items():
+        if r.trace is None or r.root_series is None:
+            out.append(_skip("divergence", "", e, r.error or "not measured"))
+            continue
+        largest = float(np.max(r.extents)) if r.extents is not None else 0.0
+        d = divergence_check(r.root_series, r.joint_series, r.trace.joint_types, ctx.conventions.timestep, largest)
+        d["nan"] = d["nan"] or r.trace.diverged
+        d["diverged"] = d["diverged"] or r.trace.diverged
+        out.append(
+            MetricResult(
+                name="divergence",
+                value=float(d["diverged"]),
+                unit="flag",
+                passed=not d["diverged"],
+                threshold=(
+                    f"finite, root speed <= {EXPLOSION_ROOT_SPEED} m/s, joint speed <= {EXPLOSION_JOINT_SPEED_REVOLUTE} rad/s "
+                    f"({EXPLOSION_JOINT_SPEED_PRISMATIC} m/s), root travel <= max({EXPLOSION_TRAVEL_MIN} m, "
+                    f"{EXPLOSION_TRAVEL_FACTOR} x largest extent)"
+                ),
+                details=d,
+                engine=e,
+            )
+        )
+    return out
+
+
+@register_metric("joint_hold")
+def _m_hold(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    out = []
+    for e, r in runs.items():
+        if r.trace is None:
+            out.append(_skip("joint_hold", "rad", e, r.error or "not measured"))
+            continue
+        drift = spec_metrics.joint_drift(r.trace)
+        per, failing = {}, []
+        for n in ctx.task_joints:
+            if n not in drift:
+                continue
+            pri = ctx.joints[n].type == "prismatic"
+            tol = ctx.sag_tol_prismatic if pri else ctx.sag_tol_revolute
+            q_end = float(r.trace.joints[n][-1])
+            c = ctx.closed.get(n)
+            per[n] = {
+                "drift": drift[n],
+                "unit": "m" if pri else "rad",
+                "tolerance": tol,
+                "q_initial": ctx.initial_state.get(n),
+                "q_end": q_end,
+                "fraction_initial": c.fraction(ctx.initial_state.get(n, 0.0)) if c else None,
+                "fraction_end": c.fraction(q_end) if c else None,
+                "failed": drift[n] > tol,
+            }
+            if drift[n] > tol:
+                failing.append(n)
+        out.append(
+            MetricResult(
+                name="joint_hold",
+                value=float(max([v["drift"] for v in per.values()], default=0.0)),
+                unit="rad/m",
+                passed=(not failing) if per else None,
+                threshold=f"largest |q(t) - q_initial| <= {ctx.sag_tol_revolute} rad / {ctx.sag_tol_prismatic} m over settle + test",
+                details={"joints": per, "failing": failing},
+                engine=e,
+            )
+        )
+    return out
+
+
+@register_metric("scale_deviation")
+def _m_scale(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    return [sem.scale_deviation(ctx.scale, ctx.reference_scale, scale_source=ctx.scale_source)]
+
+
+@register_metric("initial_joint_deviation")
+def _m_initdev(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    if ctx.reference_dir is None:
+        return [MetricResult(name="initial_joint_deviation", value=None, unit="rad", passed=None,
+                             details={"reason": "no reference given"}, engine="none")]
+    m = sem.initial_joint_deviation(ctx.initial_state, ctx.reference_state, ctx.task_joints,
+                                    {n: j.type for n, j in ctx.joints.items()})
+    m.details["reference_rule"] = ctx.reference_rule
+    return [m]
+
+
+def _first_run(runs: dict[str, EngineRun]) -> EngineRun | None:
+    for r in runs.values():
+        if r.extents is not None:
+            return r
+    return None
+
+
+def _largest_extent(ctx: Context, runs: dict[str, EngineRun]) -> tuple[float | None, str]:
+    """Largest extent (m) of the object: closed state when known, else initial."""
+    if ctx.closed_extents is not None and float(np.max(ctx.closed_extents)) > 0:
+        return float(np.max(ctx.closed_extents)), "closed state"
+    r = _first_run(runs)
+    if r is not None and r.extents is not None and float(np.max(r.extents)) > 0:
+        return float(np.max(r.extents)), "initial state"
+    return None, "unknown"
+
+
+@register_metric("total_mass")
+def _m_mass(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    r = _first_run(runs)
+    if r is None:
+        total = sum((li.mass if li.mass is not None else 1.0) for li in ctx.links.values())
+        per = {n: {"mass": li.mass if li.mass is not None else 1.0, "source": "file" if li.mass is not None else "default 1 kg"} for n, li in ctx.links.items()}
+    else:
+        total = sum(v["mass"] for v in r.masses.values())
+        per = r.masses
+    largest, where = _largest_extent(ctx, runs)
+    rfirst = _first_run(runs)
+    extents = ctx.closed_extents if ctx.closed_extents is not None else (rfirst.extents if rfirst is not None else None)
+    rng, f = scaled_mass_range(ctx.prior, extents)
+    m = sem.mass_plausibility(total, rng, per_link=per, category=ctx.category)
+    m.details.update({"size_factor_vs_prior": f, "largest_extent_m": largest, "extent_state": where,
+                      "base_mass_range_kg": ctx.prior.get("base_mass_range"), "prior_source": ctx.prior.get("source")})
+    if rng is not None:
+        m.threshold = f"{rng[0]:.3g} kg <= m <= {rng[1]:.3g} kg (category range scaled to the asset's size, f = {f:.3g})"
+    return [m]
+
+
+@register_metric("prompt_alignment")
+def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    if not ctx.prompt:
+        return [MetricResult(name="prompt_alignment", value=None, unit="fraction", details={"reason": "no prompt"}, engine="none")]
+    spec = ctx.request
+    if spec is None:
+        return [MetricResult(name="prompt_alignment", value=None, unit="fraction",
+                             details={"reason": ctx.request_error or "request not parsed"}, engine="none")]
+    r = _first_run(runs)
+    centres = r.link_centres if r is not None else {}
+    largest, where = _largest_extent(ctx, runs)
+    req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, centres, ctx.task_joints, ctx.category)
+    checks = []
+    for name, band, label, phrase in req:
+        c = ctx.closed.get(name)
+        checks.append(sem.JointStateCheck(name, band, c.fraction(ctx.initial_state[name]) if c else None, label, phrase))
+    dims = ctx.prior.get("base_dims")
+    m = sem.prompt_alignment(
+        size_requested=spec.size_class is not None,
+        largest_extent=largest,
+        typical_largest=dims[0] if dims else None,
+        size_factor=float(ctx.prior.get("factor", 1.0)),
+        joint_checks=checks,
+        state_requested=bool(spec.joint_states),
+        unmatched_requests=unmatched,
+        text=ctx.prompt,
+    )
+    m.details["size_class"] = spec.size_class
+    m.details["category"] = ctx.category
+    m.details["variant"] = ctx.prior.get("variant")
+    m.details["extent_state"] = where
+    m.details["prior_note"] = ctx.prior.get("note")
+    return [m]
+
+
+@register_metric("probes")
+def _m_probes(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    r = runs.get("pybullet")
+    if r is None:
+        return [_skip("probes", "failed probes", "pybullet", "probes run in PyBullet only; pybullet not among the engines")]
+    if r.error and not r.probes:
+        return [_skip("probes", "failed probes", "pybullet", r.error)]
+    return [probes_metric(r.probes)]
