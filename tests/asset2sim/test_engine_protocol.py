@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import SHARED
 from asset2sim.engines.base import EngineUnsupported, SessionOptions, open_session, open_shape_world, open_viewer
 from asset2sim.engines.fake import write_contract_asset
 
-REAL = Path("/work/shared/datasets/partnet_mobility/100221/mobility.urdf")
+REAL = SHARED / "100221" / "mobility.urdf"
 OTHERS = [
     pytest.param("physx", marks=pytest.mark.physx, id="physx"),
     pytest.param("mujoco", marks=pytest.mark.mujoco, id="mujoco"),

@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import SHARED
 from asset2sim import urdf
 from asset2sim.engines.fake import write_contract_asset
 
-DATASET = Path("/work/shared/datasets/partnet_mobility")
+DATASET = SHARED
 REAL = sorted(DATASET.glob("*/mobility.urdf")) + sorted(DATASET.glob("*/reference_gensim2.urdf"))
 needs_dataset = pytest.mark.skipif(not REAL, reason="shared PartNet-Mobility dataset not available")
 _NUMBER = re.compile(r"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
@@ -185,3 +186,52 @@ def test_scale_model(tmp_path):
     assert body.inertial.inertia == pytest.approx(body0.inertial.inertia * 0.25)
     with pytest.raises(ValueError):
         urdf.scale_model(model, 0.0)
+
+
+@needs_dataset
+def test_reader_agrees_with_yourdfpy_on_every_real_urdf():
+    """Independent check of the one reader against yourdfpy (the stack's URDF
+    library): same links, joints, types, parents, children, origins, axes,
+    limits, dynamics, inertials and mesh references on all 42 real files."""
+    import yourdfpy
+
+    def close(a, b):
+        return np.allclose(np.asarray(a, float), np.asarray(b, float), atol=1e-12)
+
+    for path in REAL:
+        ours = urdf.read_urdf(path, mode="lenient")
+        ref = yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False,
+                                 build_collision_scene_graph=False, load_collision_meshes=False).robot
+        assert ours.name == ref.name, path
+        assert list(ours.links) == [ln.name for ln in ref.links], path
+        for ln in ref.links:
+            mine = ours.links[ln.name]
+            assert (mine.inertial is None) == (ln.inertial is None), (path, ln.name)
+            if ln.inertial is not None:
+                assert math.isclose(mine.inertial.mass, ln.inertial.mass), (path, ln.name)
+                assert close(mine.inertial.origin, ln.inertial.origin), (path, ln.name)
+                assert close(mine.inertial.inertia, ln.inertial.inertia), (path, ln.name)
+            for role, theirs in (("visuals", ln.visuals), ("collisions", ln.collisions)):
+                geoms = getattr(mine, role)
+                assert len(geoms) == len(theirs), (path, ln.name, role)
+                for g, t in zip(geoms, theirs):
+                    assert close(g.origin, t.origin if t.origin is not None else np.eye(4)), (path, ln.name, role)
+                    if t.geometry.mesh is not None:
+                        assert g.kind == "mesh" and g.filename == t.geometry.mesh.filename, (path, ln.name)
+        assert [j.name for j in ours.joints] == [j.name for j in ref.joints], path
+        for j, t in zip(ours.joints, ref.joints):
+            where = (path, j.name)
+            assert (j.type, j.parent, j.child) == (t.type, t.parent, t.child), where
+            assert close(j.origin, t.origin if t.origin is not None else np.eye(4)), where
+            if t.axis is not None and j.axis_xyz is not None:
+                assert close(j.axis_xyz, t.axis), where
+            if t.limit is not None:
+                assert j.limit is not None, where
+                for f in ("lower", "upper", "effort", "velocity"):
+                    a, b = getattr(j.limit, f), getattr(t.limit, f)
+                    assert (a is None and b is None) or (a is not None and b is not None and math.isclose(a, b)), (where, f)
+            if t.dynamics is not None:
+                assert j.dynamics is not None, where
+                for f in ("damping", "friction"):
+                    a, b = getattr(j.dynamics, f), getattr(t.dynamics, f)
+                    assert (a is None and b is None) or (a is not None and b is not None and math.isclose(a, b)), (where, f)
