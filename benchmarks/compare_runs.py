@@ -112,6 +112,25 @@ def _rows(catalog_run: Path) -> dict[str, dict]:
     return out
 
 
+def _print_timing(label: str, rows: dict[str, dict]) -> None:
+    """Per-asset worker time of a run (the catalog's ``wall_seconds``: all
+    stages of one asset on its worker), s: median, mean, total, and the
+    per-stage totals of ``stage_seconds``."""
+    walls = sorted(float(r["wall_seconds"]) for r in rows.values() if r.get("wall_seconds") is not None)
+    if not walls:
+        return
+    stages: dict[str, float] = {}
+    for r in rows.values():
+        raw = r.get("stage_seconds")
+        for k, v in (json.loads(raw) if isinstance(raw, str) else (raw or {})).items():
+            if v is not None:
+                stages[k] = stages.get(k, 0.0) + float(v)
+    med = walls[len(walls) // 2] if len(walls) % 2 else 0.5 * (walls[len(walls) // 2 - 1] + walls[len(walls) // 2])
+    print(f"{label}: per-asset worker time median {med:.2f} s, mean {sum(walls) / len(walls):.2f} s, "
+          f"total {sum(walls):.1f} s over {len(walls)} assets; stage totals "
+          + ", ".join(f"{k} {v:.1f}" for k, v in sorted(stages.items()) if "." not in k))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("old", type=Path)
@@ -147,6 +166,8 @@ def main(argv: list[str] | None = None) -> int:
         compare(cat_old[aid], cat_new[aid], f"catalog {aid}", args.rtol, diffs)
     for d in diffs:
         print(d)
+    _print_timing("old", cat_old)
+    _print_timing("new", cat_new)
     print(f"{len(ids)} assets, {len(cat_old)} old / {len(cat_new)} new catalog rows, {len(diffs)} differences "
           f"(rtol {args.rtol}; old {old_run.name}, new {new_run.name})")
     return 1 if diffs else 0

@@ -2,7 +2,7 @@
 catalog columns it fills.
 
 One table serves the post-check (:mod:`asset2sim.tasks.check.postcheck`), the
-evaluation (:mod:`asset2sim.tasks.evaluation.evaluate` attaches a function to
+evaluation (:mod:`asset2sim.tasks.evaluation.metric_defs` attaches a function to
 each name with ``register_metric``), cross-simulator parity
 (:mod:`asset2sim.tasks.check.parity`: the :data:`SPEC_METRICS`) and the
 Parquet catalog (:class:`asset2sim.schemas.catalog.CatalogRow`: the columns

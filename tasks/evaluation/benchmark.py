@@ -20,7 +20,7 @@ from asset2sim.atomic import write_bytes, write_json, write_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.evaluation.baselines import available_methods, run_method
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
-from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, read_manifest
+from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.publish.plots import plot_method_summary
 from asset2sim.tasks.publish.report_html import render_benchmark_index, render_benchmark_summary
 
@@ -118,8 +118,10 @@ def run_benchmark(
 
     Layout: ``out_dir/<method>/<id>/asset/`` the method's asset,
     ``out_dir/<method>/<id>/evaluation.json`` and ``report.html``. A row that
-    a method cannot produce, or that fails to evaluate, becomes a record with
-    ``error`` set; the others go on.
+    a method cannot produce, or that fails to evaluate, or a manifest row that
+    cannot be read (:func:`~asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`:
+    ``id`` its id or ``line <n>``), becomes a record with ``error`` set; the
+    others go on.
 
     Args:
         manifest: ``manifest.csv``.
@@ -137,19 +139,30 @@ def run_benchmark(
 
     Raises:
         KeyError: an unknown method.
+        ManifestError / OSError: the manifest is not a CSV with ``id`` and
+            ``prompt`` columns, or cannot be read.
     """
     known = available_methods()
     for m in methods:
         if m not in known:
             raise KeyError(f"unknown method {m!r}; known: {sorted(known)}")
     out_dir = Path(out_dir)
-    all_rows = read_manifest(manifest)
-    thesis = {r.id for r in all_rows[:9]}
-    sel = [r for r in all_rows if rows is None or r.id in rows]
+    reading = read_manifest_rows(manifest)  # a bad row becomes an error record; the others run
+    lines = sorted([r.line or 0 for r in reading.rows] + [e.line for e in reading.errors])
+    thesis = {r.id for r in reading.rows if (r.line or 0) in lines[:9]}
+    sel: list[ManifestRow | ManifestRowError] = sorted(
+        [r for r in reading.rows if rows is None or r.id in rows]
+        + [e for e in reading.errors if rows is None or e.id in rows], key=lambda r: r.line or 0)
     say = progress or (lambda m, i, msg: None)
     records = []
     for method in methods:
         for row in sel:
+            if isinstance(row, ManifestRowError):
+                rec = {"id": row.id or f"line {row.line}", "category": None, "method": method,
+                       "thesis_set": row.line in lines[:9], "error": f"manifest row {row.code}: {row.message}"}
+                records.append(rec)
+                say(method, rec["id"], rec["error"])
+                continue
             folder = out_dir / method / row.id
             base: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "thesis_set": row.id in thesis}
             try:

@@ -368,6 +368,11 @@ def is_valid_id(text: str | None) -> bool:
     return bool(text) and _ID_RE.match(text) is not None
 
 
+def _short(text: str, n: int = 80) -> str:
+    """``repr`` of ``text``, cut to ``n`` characters (messages never echo a huge field)."""
+    return repr(text) if len(text) <= n else repr(text[:n]) + f"... ({len(text)} characters)"
+
+
 class _RowError(Exception):
     def __init__(self, code: str, message: str):
         super().__init__(message)
@@ -381,9 +386,9 @@ def _positive(where: str, rec: dict, column: str, code: str) -> float | None:
     try:
         value = float(text)
     except ValueError as exc:
-        raise _RowError(code, f"{where}: {column} {text!r} is not a number") from exc
+        raise _RowError(code, f"{where}: {column} {_short(text)} is not a number") from exc
     if not (math.isfinite(value) and value > 0):
-        raise _RowError(code, f"{where}: {column} must be a positive number, got {text!r}")
+        raise _RowError(code, f"{where}: {column} must be a positive number, got {_short(text)}")
     return value
 
 
@@ -395,7 +400,8 @@ def _joint_range(where: str, rec: dict) -> tuple[float, float] | None:
         vals = json.loads(text)
         return (float(vals[0]), float(vals[1]))
     except (ValueError, TypeError, IndexError, KeyError) as exc:
-        raise _RowError("MANIFEST_INVALID_JOINT_RANGE", f"{where}: reference_joint_range {text!r} is not [lo, hi] ({exc})") from exc
+        raise _RowError("MANIFEST_INVALID_JOINT_RANGE",
+                        f"{where}: reference_joint_range {_short(text)} is not [lo, hi] ({str(exc)[:80]})") from exc
 
 
 class _Lines:
@@ -508,7 +514,7 @@ def _row(path: Path, base: Path, line: int, header: list[str], fields: list[str]
     if not rid:
         raise _RowError("MANIFEST_MISSING_ID", f"{path}:{line}: row without id")
     if not is_valid_id(rid):
-        raise _RowError("MANIFEST_INVALID_ID", f"{path}:{line}: invalid asset id {rid[:80]!r}")
+        raise _RowError("MANIFEST_INVALID_ID", f"{path}:{line}: invalid asset id {_short(rid)}")
     if rid in seen:
         raise _RowError("MANIFEST_DUPLICATE_ID", f"{path}:{line}: duplicate asset id {rid!r}")
     where = f"{path}:{line} (id {rid})"

@@ -11,7 +11,11 @@ output folder::
                                groups, flat groups made 2 mm slabs)
 
 Original meshes are referenced where they are (``textured_objs/...``), so the
-folder stays self-contained and portable. The conversion is
+folder stays self-contained and portable. A re-export removes the pieces of
+an earlier export that it no longer uses, but only files the product wrote:
+those the folder's ownership record or completion marker lists
+(:mod:`asset2sim.tasks.publish.output_folder`); in a folder without either,
+nothing is removed. The conversion is
 :func:`asset2sim.engines.mjcf.urdf_to_mjcf` (MuJoCo's own URDF
 import, then the fixes listed in ``docs/simulators.md``); here the result is
 written atomically and checked by loading the written file with MuJoCo:
@@ -24,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +39,7 @@ from asset2sim import atomic
 from asset2sim.engines.base import Spring
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.frames import quat_wxyz_matrix
+from asset2sim.tasks.publish import output_folder
 
 MJCF_DIR = "mjcf"
 URDF_NAME = "mobility.urdf"
@@ -204,16 +210,39 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
         dst = out_dir / rel
         if not (dst.is_file() and dst.read_bytes() == data):
             atomic.write_bytes(dst, data)
-    mesh_dir = out_dir / "mjcf" / "meshes"
-    if mesh_dir.is_dir():  # pieces of an earlier export that this one does not use
-        keep = {(out_dir / rel).resolve() for rel in build.derived_meshes}
-        for p in mesh_dir.iterdir():
-            if p.is_file() and _DERIVED.match(p.name) and p.resolve() not in keep:
-                p.unlink()
+    _remove_stale_pieces(out_dir, set(build.derived_meshes))
     xml_path = atomic.write_text(target_dir / f"{urdf.stem}.xml", _header(build.notes) + build.xml + "\n")
     if check:
         check_mjcf(xml_path, urdf, initial)
     return xml_path
+
+
+def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> list[Path]:
+    """Remove the convex pieces (``mjcf/meshes/*__c<i>_g<j>.obj``) of an
+    earlier export that this one does not use (``keep``: paths relative to
+    ``out_dir``), but only those the product wrote: listed by the ownership
+    record or completion marker of the output folder around ``out_dir``
+    (:func:`asset2sim.tasks.publish.output_folder.recorded_files`), lying in
+    that folder with no symlink on the way. Returns the removed files."""
+    mesh_dir = out_dir / MJCF_DIR / "meshes"
+    root = output_folder.product_folder(out_dir)
+    if root is None or not mesh_dir.is_dir() or mesh_dir.is_symlink():
+        return []
+    owned = output_folder.recorded_files(root)
+    keep_abs = {Path(os.path.abspath(out_dir / rel)) for rel in keep}
+    real_dir = mesh_dir.resolve()
+    gone = []
+    for p in sorted(mesh_dir.iterdir()):
+        if not _DERIVED.match(p.name) or p.is_symlink() or not p.is_file() or Path(os.path.abspath(p)) in keep_abs:
+            continue
+        try:
+            rel = (real_dir / p.name).relative_to(root).as_posix()
+        except ValueError:  # the meshes folder lies outside the product folder
+            continue
+        if rel in owned:
+            p.unlink(missing_ok=True)
+            gone.append(p)
+    return gone
 
 
 def _header(notes: list[str]) -> str:

@@ -4,7 +4,7 @@ Everything is inline (CSS, PNG images as base64 ``data:`` URIs), so a report
 opens offline from any folder. Text is HTML-escaped.
 
 - :func:`render_report` / :func:`write_report`: ``report.html`` of one
-  :class:`asset2sim.tasks.evaluation.evaluate.Evaluation`: renders of the object at its
+  :class:`asset2sim.schemas.evaluation.Evaluation`: renders of the object at its
   initial state (:func:`asset2sim.tasks.publish.render.render_views` when available,
   else plots of its collision geometry), verdicts with thresholds, metric
   details (penetrating link pairs, prompt-alignment reasons per joint, probes),

@@ -122,3 +122,9 @@ def refine_fake(asset_dir, prompt, out_dir, config=None, *, category=None, asset
         },
     )
     return FakeResult(out_dir, report)
+
+
+def sleep_for(seconds: float) -> dict:
+    """A stage function that only sleeps (``seconds`` s), for process tests."""
+    time.sleep(float(seconds))
+    return {"slept": float(seconds)}

@@ -111,16 +111,44 @@ def test_visuals_are_non_colliding_and_coloured(tmp_path):
     assert mujoco.mj_name2id(m2, mujoco.mjtObj.mjOBJ_GEOM, "lid__v0") == -1
 
 
+def _product_folder(path: Path) -> None:
+    """Make ``path`` an output folder of the product: a completion marker
+    listing the files it holds now."""
+    from asset2sim.tasks.publish.contract import write_completion_marker
+
+    write_completion_marker(path, "input", "config")
+
+
 def test_reexport_replaces_stale_pieces(tmp_path):
+    from asset2sim.tasks.publish.output_folder import adopting
+
     a = write_contract_asset(tmp_path)
-    export_mjcf(tmp_path)
+    _product_folder(tmp_path)
+    with adopting(tmp_path):  # as `asset2sim export` does: the pieces become the folder's own
+        export_mjcf(tmp_path)
     assert len(list((tmp_path / "mjcf" / "meshes").glob("body__c0_g*.obj"))) == 5
     (tmp_path / "textured_objs" / "body.obj").write_text((tmp_path / "textured_objs" / "lid.obj").read_text())
     keep = tmp_path / "mjcf" / "meshes" / "notes.txt"
     keep.write_text("not ours")
-    export_mjcf(tmp_path)
+    users = tmp_path / "mjcf" / "meshes" / "mine__c7_g7.obj"  # the naming pattern, but not written by the product
+    users.write_text("v 0 0 0\n")
+    with adopting(tmp_path):
+        export_mjcf(tmp_path)
     assert not list((tmp_path / "mjcf" / "meshes").glob("body__c0_g*.obj"))
-    assert keep.exists()
+    assert keep.exists() and users.read_text() == "v 0 0 0\n"
+
+
+def test_export_never_removes_pieces_it_did_not_write(tmp_path):
+    """In a folder with no ownership record or completion marker, nothing
+    named like a piece is the product's: a re-export removes none of them."""
+    write_contract_asset(tmp_path)
+    export_mjcf(tmp_path)
+    pieces = sorted((tmp_path / "mjcf" / "meshes").glob("body__c0_g*.obj"))
+    assert len(pieces) == 5
+    before = {p.name: p.read_bytes() for p in pieces}
+    (tmp_path / "textured_objs" / "body.obj").write_text((tmp_path / "textured_objs" / "lid.obj").read_text())
+    export_mjcf(tmp_path)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "mjcf" / "meshes").glob("body__c0_g*.obj")} == before
 
 
 def test_the_massless_root_stays_massless(tmp_path):
