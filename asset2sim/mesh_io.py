@@ -417,6 +417,31 @@ def mtl_texture_maps(mtl_data: bytes) -> list[str]:
     return [t.group(1).decode("utf-8", "replace") for t in _MAP.finditer(mtl_data)]
 
 
+def read_mtl(text: str) -> dict[str, list[str]]:
+    """Materials of MTL text: name (``newmtl``) -> its statement lines, each
+    stripped, in file order; blank lines, comments (``#``) and statements
+    before the first ``newmtl`` dropped. A repeated name continues its list.
+
+    Source: the Wavefront MTL format (Paul Bourke's MTL specification).
+    """
+    mats: dict[str, list[str]] = {}
+    current: list[str] | None = None
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        if line.split(maxsplit=1)[0] == "newmtl":
+            current = mats.setdefault(line[len("newmtl"):].strip(), [])
+        elif current is not None:
+            current.append(line)
+    return mats
+
+
+def obj_material_uses(obj_text: str) -> list[str]:
+    """The material names an OBJ's ``usemtl`` statements name, in file order."""
+    return [m.group(1) for m in re.finditer(r"^[ \t]*usemtl[ \t]+(.+?)[ \t\r]*$", obj_text, re.M)]
+
+
 def obj_material_files(mesh_path: Path, keep=lambda p: True) -> list[Path]:
     """Files an OBJ mesh needs besides itself: its MTL libraries and their
     texture maps, as resolved absolute paths, in file order. Files that do not

@@ -94,24 +94,19 @@ def read_mtl(path: Path, textures: TextureLinks) -> tuple[dict[str, list[str]], 
     """(material name -> its lines with textures linked into the work folder,
     whether a texture was downscaled). Missing textures are dropped; an
     unreadable MTL gives no materials."""
-    mats: dict[str, list[str]] = {}
     changed = False
-    current: list[str] | None = None
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
-        return mats, changed
-    for raw in text.splitlines():
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        key = line.split(maxsplit=1)[0]
-        if key == "newmtl":
-            current = mats.setdefault(line[len("newmtl") :].strip(), [])
-            continue
-        if current is None:
-            continue
-        if mesh_io.is_texture_statement(key):
+        return {}, changed
+    mats: dict[str, list[str]] = {}
+    for material, lines in mesh_io.read_mtl(text).items():
+        current = mats.setdefault(material, [])
+        for line in lines:
+            key = line.split(maxsplit=1)[0]
+            if not mesh_io.is_texture_statement(key):
+                current.append(line)
+                continue
             tokens = line.split()
             tex = (path.parent / tokens[-1]).resolve()
             if len(tokens) < 2 or not tex.is_file():
@@ -119,8 +114,6 @@ def read_mtl(path: Path, textures: TextureLinks) -> tuple[dict[str, list[str]], 
             name, resized = textures.link(tex)
             changed |= resized
             current.append(" ".join(tokens[:-1] + [name]))
-        else:
-            current.append(line)
     return mats, changed
 
 

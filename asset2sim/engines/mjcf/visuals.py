@@ -4,13 +4,19 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 from lxml import etree
 
-from asset2sim.engines.mjcf.base import num_text, quat_text, relative_to, safe_name, vec_text
+from asset2sim import mesh_io
+from asset2sim.engines.mjcf.base import (
+    num_text,
+    quat_text,
+    relative_to,
+    safe_name,
+    vec_text,
+)
 
 
 def mtl_colour(obj: Path) -> str:
@@ -20,23 +26,20 @@ def mtl_colour(obj: Path) -> str:
         text = obj.read_text(errors="replace")
     except OSError:
         return "0.7 0.7 0.7 1"
-    libs = re.findall(r"^\s*mtllib\s+(.+?)\s*$", text, re.M)
-    use = re.search(r"^\s*usemtl\s+(.+?)\s*$", text, re.M)
-    for lib in libs:
+    uses = mesh_io.obj_material_uses(text)
+    for lib in mesh_io.mtl_libraries(text.encode("utf-8", "replace")):
         try:
-            mtl = (obj.parent / lib).read_text(errors="replace")
+            materials = mesh_io.read_mtl((obj.parent / lib).read_text(errors="replace"))
         except OSError:
             continue
-        blocks = re.split(r"^\s*newmtl\s+", mtl, flags=re.M)[1:]
-        for block in blocks:
-            name, _, body = block.partition("\n")
-            if use is not None and name.strip() != use.group(1).strip():
+        for name, lines in materials.items():
+            if uses and name != uses[0]:
                 continue
-            kd = re.search(r"^\s*Kd\s+(\S+)\s+(\S+)\s+(\S+)", body, re.M)
-            dd = re.search(r"^\s*d\s+(\S+)", body, re.M)
+            kd = next((ln.split()[1:4] for ln in lines if ln.split()[0] == "Kd" and len(ln.split()) >= 4), None)
+            dd = next((ln.split()[1] for ln in lines if ln.split()[0] == "d" and len(ln.split()) >= 2), None)
             try:
-                rgb = [min(1.0, max(0.0, float(v))) for v in kd.groups()] if kd else [0.7, 0.7, 0.7]
-                alpha = min(1.0, max(0.0, float(dd.group(1)))) if dd else 1.0
+                rgb = [min(1.0, max(0.0, float(x))) for x in kd] if kd else [0.7, 0.7, 0.7]
+                alpha = min(1.0, max(0.0, float(dd))) if dd else 1.0
             except ValueError:
                 continue
             return vec_text(rgb + [alpha])
