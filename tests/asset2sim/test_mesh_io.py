@@ -128,3 +128,31 @@ def test_every_partnet_mesh_reads_like_trimesh():
             continue
         # trimesh drops unreferenced vertices; compare the triangles' corner coordinates
         assert np.allclose(np.sort(v[f].reshape(-1, 3), axis=0), np.sort(ref.vertices[ref.faces].reshape(-1, 3), axis=0)), p
+
+
+def test_read_mtl_and_material_uses():
+    """Materials by name with their statements; comments, blanks and lines
+    before the first newmtl dropped; a repeated name continues its list."""
+    from asset2sim import mesh_io
+
+    text = "# c\nKd 1 1 1\nnewmtl a\n  Kd 0.1 0.2 0.3\n\nd 0.5\nnewmtl b \nmap_Kd -s 1 1 1 tex.png\nnewmtl a\nNs 10\n"
+    assert mesh_io.read_mtl(text) == {"a": ["Kd 0.1 0.2 0.3", "d 0.5", "Ns 10"], "b": ["map_Kd -s 1 1 1 tex.png"]}
+    assert mesh_io.obj_material_uses("v 0 0 0\nusemtl a\nf 1 1 1\n  usemtl b \n") == ["a", "b"]
+
+
+def test_read_mtl_on_every_dev_set_material(shared_dataset):
+    """Every MTL of the dev set: each material's statements are the file's
+    own non-comment lines, and every texture map it names exists."""
+    from asset2sim import mesh_io
+
+    mtls = sorted(shared_dataset.glob("*/textured_objs/*.mtl"))
+    assert mtls
+    for path in mtls:
+        text = path.read_text(errors="replace")
+        mats = mesh_io.read_mtl(text)
+        names = [ln.split(maxsplit=1)[1].strip() for ln in text.splitlines() if ln.strip().startswith("newmtl ")]
+        assert list(mats) == list(dict.fromkeys(names)), path
+        for lines in mats.values():
+            for ln in lines:
+                if mesh_io.is_texture_statement(ln.split()[0]):
+                    assert (path.parent / ln.split()[-1]).is_file(), (path, ln)
