@@ -81,3 +81,14 @@ class RequestSpec(BaseModel):
     pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
     matched: list[str] = Field(default_factory=list)
     """Every phrase the parser recognised (for the report)."""
+    unused_words: list[str] = Field(default_factory=list)
+    """Words of the request that no rule used (common function words, part
+    labels and category names excepted), in order, each once: nothing is
+    silently ignored; the report lists them."""
+
+    @property
+    def understood(self) -> bool:
+        """False for a non-empty request of which no word was recognised
+        (e.g. one in a language other than English): refine then uses the
+        category's defaults and says so."""
+        return bool(self.matched) or not self.text.strip()

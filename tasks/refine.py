@@ -25,12 +25,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from asset2sim import __version__, atomic
-from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
+from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.check import parity, postcheck
 from asset2sim.tasks.check.verdict import post_check_failure_mode
 from asset2sim.tasks.evaluation import evaluate
@@ -40,11 +39,21 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import request
 from asset2sim.tasks.publish import export_mjcf, output_folder, render, write
-from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
+from asset2sim.tasks.publish.contract import (
+    MARKER_NAME,
+    REPORT_NAME,
+    is_complete,
+    run_hash,
+    write_completion_marker,
+)
 from asset2sim.tasks.state import collision, pose, refine_state
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 
+from asset2sim import __version__, atomic
+from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
+
+__all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
 Progress = Callable[[str, str], None]
 """progress(stage, message)"""
@@ -242,9 +251,24 @@ def _interpret(ctx: EstimationContext, log: _StageLog) -> str:
     if spec.pose_hint in ("lying_flat", "sideways"):
         ctx.root_rotation, pose_note = pose.resting_rotation(ctx.session, ctx.asset, ctx.closed_state(), ctx.hull_points, _moving_links(ctx))
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
+    for note in request_notes(spec):
+        log.say("request", note)
     log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
     return pose_note
+
+
+def request_notes(spec: RequestSpec) -> list[str]:
+    """What the report and the terminal say about the words of a request that
+    were not used: a warning when none was understood (the category's
+    defaults are used: size, closed state, moderate damping), else the list of
+    unused words. Empty when every word was used."""
+    if not spec.understood:
+        return [f"WARNING: request not understood (English words only; none recognised): {spec.text[:120]!r}; "
+                "refined with the category's defaults (typical size, closed, moderate damping)"]
+    if spec.unused_words:
+        return ["request words not used: " + ", ".join(spec.unused_words[:30]) + (" ..." if len(spec.unused_words) > 30 else "")]
+    return []
 
 
 # ----------------------------------------------------- 4-7: synthesize .. post-check
@@ -510,7 +534,8 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         validation=[_finding_dict(f) for f in findings] + [i.model_dump() for i in att.issues],
         failure_mode=post_check_failure_mode(att.check),
         stage_seconds=times,
-        notes=list(overlay.notes.other) + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
+        notes=request_notes(ctx.request) + list(overlay.notes.other)
+        + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
     )
 
 

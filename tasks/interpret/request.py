@@ -579,4 +579,49 @@ def parse_request(text: str) -> RequestSpec:
         free_moving=free,
         pose_hint=pose,  # type: ignore[arg-type]
         matched=ordered,
+        unused_words=_unused_words(low, matched, mentions),
     )
+
+
+#: Function words of English requests that carry no physical meaning ("I want
+#: a ... with its ..."); they are not reported as unused.
+_FUNCTION_WORDS = frozenset(
+    "a an the i i'd i'm me my we our you your it its it's their them his her this that these those "
+    "want wants need needs would like please give make made get have has having be is are was were being "
+    "with without and or but of for to in on at by from as into onto so such some any one which who whose "
+    "can could should will shall may might must do does also just very really quite rather more most less "
+    "there here where when while than then every all each both".split()
+)
+
+
+def _unused_words(low: str, matched: list[tuple[int, str]], mentions) -> list[str]:
+    """Words of ``low`` (the lower-cased request) outside every recognised
+    phrase and category mention that are neither function words nor known
+    part labels (``labels.yaml``), in order, each once. Linear in ``len(low)``
+    (spans are merged once, words visited once)."""
+    spans = []
+    for pos, phrase in matched:
+        for prefix in ("no ", "not "):
+            if phrase.startswith(prefix) and not low.startswith(prefix, pos):
+                phrase = phrase[len(prefix):]
+        spans.append((pos, pos + len(phrase)))
+    spans += [(m.start, m.end) for m in mentions]
+    spans += [(h.start, h.start + len(h.text)) for h in _scan(low, _ORDINALS)]  # joint selectors
+    spans.sort()
+    labels = load_priors().labels
+    known = set(labels.labels) | set(labels.aliases)
+    out: list[str] = []
+    seen: set[str] = set()
+    k = 0
+    for m in _RUN.finditer(low):
+        while k < len(spans) and spans[k][1] <= m.start():
+            k += 1
+        if k < len(spans) and spans[k][0] <= m.start() < spans[k][1]:
+            continue
+        word = m.group(0).strip("'-")
+        if (not word or word in _FUNCTION_WORDS or word.isdigit() or word in known
+                or word.rstrip("s") in known or word in seen):
+            continue
+        seen.add(word)
+        out.append(word)
+    return out

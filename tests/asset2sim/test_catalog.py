@@ -15,6 +15,7 @@ from asset2sim.catalog import (
     ResultCatalog,
     load_catalog,
     read_manifest,
+    read_manifest_entries,
     result_key,
 )
 
@@ -93,6 +94,14 @@ def test_manifest_parsing(tmp_path):
     m.write_text("id,category\na,b\n")
     with pytest.raises(CatalogError, match="prompt"):
         read_manifest(m, tmp_path)
+    # the tolerant reading keeps the good rows and types the bad ones
+    m.write_text("id,prompt\na,x\n../evil,y\nb,z\n")
+    entries, errors = read_manifest_entries(m, tmp_path)
+    assert [(e.asset_id, e.line) for e in entries] == [("a", 2), ("b", 4)]
+    assert [(e.line, e.id, e.code) for e in errors] == [(3, "../evil", "MANIFEST_INVALID_ID")]
+    m.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(CatalogError, match="not a CSV manifest"):
+        read_manifest_entries(m, tmp_path)
 
 
 def test_rows_append_atomically_into_partitions_and_read_back(tmp_path):

@@ -6,7 +6,7 @@ malformed manifest row fails that asset alone.
   row from the folder's report and evaluation, and records the asset as
   skipped. A folder that is not complete, or another request, is redone.
 - Bad manifest rows (a field over the CSV limit, an unsafe id, a duplicate
-  id, a row without its prompt column, an invalid reference_scale) become
+  id, a row without its prompt column, an invalid time limit) become
   failed rows (``invalid_manifest_row``) while the other assets run; a file
   that is not a CSV manifest still fails as a whole.
 """
@@ -22,14 +22,13 @@ import pytest
 
 from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
 from asset2sim.tasks.publish.contract import JOB_RECORD_NAME
-from asset2sim.tasks.publish.output_folder import MARKER_NAME
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
-    from .conftest import CALLS_PATH, make_project
+    from .conftest import CALLS_PATH, make_project, write_manifest
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from conftest import CALLS_PATH, make_project
+    from conftest import CALLS_PATH, make_project, write_manifest
 
 
 def _run(catalog: Path, **kw):
@@ -89,16 +88,13 @@ def test_a_complete_folder_without_its_row_is_recorded_not_refined(tmp_path, das
 
     # another request for box_lid: its earlier folder is not this job's; refined again
     (store.run_dir("gen", s1["run"]) / "box_lid.parquet").unlink()
-    for r in (s2["run"],):
-        (store.run_dir("gen", r) / "box_lid.parquet").unlink()
+    (store.run_dir("gen", s2["run"]) / "box_lid.parquet").unlink()
     manifest = cat.manifest_path("gen")
     with open(manifest, newline="") as fh:
         entries = list(csv.DictReader(fh))
     for e in entries:
         if e["id"] == "box_lid":
             e["prompt"] = "I want the lid of the box wide open."
-    from conftest import write_manifest
-
     write_manifest(manifest, entries)
     CALLS_PATH.write_text("")
     s3 = _run(catalog, ids=["box_lid"], dask_address=dask_address)
@@ -114,7 +110,7 @@ def _write_bad_manifest(path: Path) -> None:
         + "../evil,Box,I want it open.,\n"
         + "box_lid,Box,a second box_lid,\n"
         + "no_prompt,Box\n"
-        + "bad_scale,Box,I want it open.,-3\n"
+        + "bad_limit,Box,I want it open.,-3\n"
     )
 
 
@@ -130,12 +126,12 @@ def test_bad_manifest_rows_fail_alone_while_the_others_run(tmp_path, dask_addres
     assert sorted(_called()) == ["box_lid", "laptop"]
     assert rows["box_lid"]["status"] == "done" and rows["laptop"]["status"] == "done"
     bad = {a: r for a, r in rows.items() if r["failure_mode"] == "invalid_manifest_row"}
-    assert set(bad) == {"huge_row", "manifest-line-5", "manifest-line-6", "no_prompt", "bad_scale"}
+    assert set(bad) == {"huge_row", "manifest-line-5", "manifest-line-6", "no_prompt", "bad_limit"}
     assert all(r["status"] == "failed" for r in bad.values())
     codes = {a: r["error"].split(":")[1].strip() for a, r in bad.items()}
     assert codes == {"huge_row": "MANIFEST_ROW_TOO_LARGE", "manifest-line-5": "MANIFEST_INVALID_ID",
                      "manifest-line-6": "MANIFEST_DUPLICATE_ID", "no_prompt": "MANIFEST_MISSING_PROMPT",
-                     "bad_scale": "MANIFEST_INVALID_REFERENCE_SCALE"}
+                     "bad_limit": "MANIFEST_INVALID_TIME_LIMIT"}
     assert "'../evil'" in bad["manifest-line-5"]["error"] and ":4" in bad["huge_row"]["error"]
     assert s["assets"] == 7 and s["failed"] == 5 and s["failure_modes"]["invalid_manifest_row"] == 5
     assert time.perf_counter() - t0 < 120

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.report import FAILURE_MODES, MetricResult
 from asset2sim.tasks.check.verdict import (
+    INVALID_MANIFEST_ROW,
     UNRESOLVED_PENETRATION_MM,
     asset_failure_mode,
     exception_failure_mode,
@@ -46,7 +47,11 @@ def test_asset_mode_first_failure_in_stage_order():
     assert asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="timeout").failure_mode == "timeout"
     assert asset_failure_mode(refine_status="ok", refine_mode="none", chain_error_mode="timeout").failure_mode == "timeout"
     assert asset_failure_mode().failure_mode == "crash"
-    for kw in ({}, {"refine_status": "crash"}, {"input_failure": "invalid_input"}):
+    bad_row = asset_failure_mode(manifest_error="MANIFEST_INVALID_ID: m.csv:3: invalid asset id '../x'",
+                                 refine_status="ok", refine_mode="none")
+    assert bad_row.failure_mode == INVALID_MANIFEST_ROW == "invalid_manifest_row"  # no stage ran for such a row
+    assert "MANIFEST_INVALID_ID" in bad_row.errors[0]
+    for kw in ({}, {"refine_status": "crash"}, {"input_failure": "invalid_input"}, {"manifest_error": "x"}):
         assert asset_failure_mode(**kw).failure_mode in FAILURE_MODES
 
 

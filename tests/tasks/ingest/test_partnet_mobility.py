@@ -105,3 +105,64 @@ def test_side_files_absent_or_broken(tmp_path):
     (tmp_path / "meta.json").write_text("{not json")
     assert pm.read_category(tmp_path) is None
     assert pm.meta_category({"model_cat": "Box"}) == "Box" and pm.meta_category({"model_cat": ""}) is None
+
+
+def test_manifest_rows_bad_rows_are_typed_errors_and_the_others_are_kept(tmp_path):
+    """read_manifest_rows: each bad row a typed error (line, id when known,
+    code); the good rows around it are kept, in file order."""
+    m = tmp_path / "m.csv"
+    huge = "x" * 200_000  # beyond csv.field_size_limit() (131072)
+    m.write_text(
+        "id,category,prompt,reference_scale,time_limit_seconds\n"
+        "a,Box,open it,0.5,\n"  # 2
+        f"big,Box,{huge},,\n"  # 3: too long for the CSV reader, id still read
+        f"{huge},Box,p,,\n"  # 4: too long, in the id itself
+        "../x,Box,p,,\n"  # 5
+        ",Box,p,,\n"  # 6
+        "a,Box,again,,\n"  # 7
+        "short,Box\n"  # 8
+        "extra,Box,p,,,surplus\n"  # 9
+        "neg,Box,p,-1,\n"  # 10
+        "slow,Box,p,,inf\n"  # 11
+        "\n"  # 12: blank, skipped
+        'b,Box,"two\nlines",0.2,\n'  # 13-14
+        "c,Box,,,\n"  # 15: an empty prompt is usable
+    )
+    reading = pm.read_manifest_rows(m)
+    assert [(r.id, r.line) for r in reading.rows] == [("a", 2), ("b", 13), ("c", 15)]
+    assert reading.rows[1].prompt == "two\nlines" and reading.rows[2].prompt == ""
+    got = [(e.line, e.id, e.code) for e in reading.errors]
+    assert got == [
+        (3, "big", "MANIFEST_ROW_TOO_LARGE"),
+        (4, None, "MANIFEST_ROW_TOO_LARGE"),
+        (5, "../x", "MANIFEST_INVALID_ID"),
+        (6, None, "MANIFEST_MISSING_ID"),
+        (7, "a", "MANIFEST_DUPLICATE_ID"),
+        (8, "short", "MANIFEST_MISSING_PROMPT"),
+        (9, "extra", "MANIFEST_EXTRA_FIELDS"),
+        (10, "neg", "MANIFEST_INVALID_REFERENCE_SCALE"),
+        (11, "slow", "MANIFEST_INVALID_TIME_LIMIT"),
+    ]
+    assert all(e.code in pm.ROW_ERROR_CODES and f"m.csv:{e.line}" in e.message for e in reading.errors)
+    assert all(len(e.message) < 400 for e in reading.errors)  # a huge field is never echoed
+    # the strict reader refuses the file at its first bad row, with that row's code
+    with pytest.raises(pm.ManifestError, match=r"m.csv:3 \(id big\).*and 8 more") as info:
+        pm.read_manifest(m)
+    assert info.value.code == "MANIFEST_ROW_TOO_LARGE"
+
+
+def test_a_file_that_is_not_a_csv_manifest_fails_as_a_whole(tmp_path):
+    m = tmp_path / "m.csv"
+    m.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\xff\xfe")
+    with pytest.raises(pm.ManifestError, match="not a CSV manifest") as info:
+        pm.read_manifest_rows(m)
+    assert info.value.code == "MANIFEST_NOT_TEXT"
+    for text in ("", "{\"id\": 1}\n", "name,request\nbox,open\n"):
+        m.write_text(text)
+        with pytest.raises(pm.ManifestError, match="missing column") as info:
+            pm.read_manifest_rows(m)
+        assert info.value.code == "MANIFEST_MISSING_COLUMNS"
+    m.write_text("id," + "h" * 200_000 + "\n")
+    with pytest.raises(pm.ManifestError) as info:
+        pm.read_manifest_rows(m)
+    assert info.value.code == "MANIFEST_BAD_HEADER"

@@ -454,3 +454,19 @@ def test_words_before_a_mention_read_backwards_match_the_split(text: str, i: int
     i = min(i, len(text))
     expected = re.findall(r"[a-z']+", re.split(r"[.,;:!?()]", text[:i])[-1])[-2:]
     assert _last_words(text[::-1], len(text) - i) == expected
+
+
+def test_unused_words_are_reported_and_a_foreign_request_is_not_understood():
+    """Nothing silently ignored: words no rule used are listed (function words,
+    part labels, category names and joint selectors excepted); a request with
+    no recognised word is marked not understood."""
+    from asset2sim.tasks.interpret.request import parse_request
+
+    toaster = parse_request("A two-slot toaster with its lever up and a spring-loaded lever.")
+    assert toaster.understood and "up" in toaster.unused_words and "lever" not in toaster.unused_words
+    drawers = parse_request("A small cabinet with the first drawer closed and the second slightly open.")
+    assert drawers.unused_words == []
+    german = parse_request("Ein kleiner Kasten mit leicht geöffnetem Deckel")
+    assert not german.understood and german.matched == []
+    assert german.unused_words[:2] == ["ein", "kleiner"]
+    assert parse_request("").understood and parse_request("   ").unused_words == []

@@ -7,18 +7,27 @@ from types import SimpleNamespace
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import MetricResult, RefineReport
+from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
 from asset2sim.tasks.publish.contract import (
     MARKER_NAME,
+    REPORT_NAME,
+    JobRecord,
     Measurement,
     Prepared,
     RefineOutput,
     StageRecord,
+    build_manifest_row,
     build_row,
     finished_result,
     flow_config_hash,
     is_complete,
+    manifest_row_id,
+    read_job_record,
+    refined_output,
+    resumable_output,
     run_hash,
     write_completion_marker,
+    write_job_record,
 )
 
 
@@ -88,3 +97,40 @@ def test_rows_from_typed_stage_records():
     skipped = build_row(_job(), prep.model_copy(update={"skip": earlier}), None, None)
     assert skipped.status == "skipped" and skipped.source_run == "r1" and skipped.model_queries == 0
     assert skipped.penetration_mm == 0.5 and skipped.failure_mode == "none"
+
+
+def test_a_complete_folder_of_an_earlier_run_is_resumable_for_the_same_job_only(tmp_path):
+    out, work = tmp_path / "run1" / "lap", tmp_path / "run1" / ".work" / "lap"
+    out.mkdir(parents=True)
+    (out / "mobility.urdf").write_text("<robot/>")
+    (out / REPORT_NAME).write_text(_report().model_dump_json())
+    write_completion_marker(out, "IN", "RCFG")
+    rec = JobRecord(job={"asset_id": "lap", "run_id": "run1", "out_dir": str(out)}, input_hash="IN",
+                    config_hash="FCFG", refine_config_hash="RCFG")
+    write_job_record(work, rec)
+    cands = [read_job_record(work).model_dump(mode="json")]
+    assert resumable_output(cands, "IN", "FCFG", "RCFG") == rec
+    assert resumable_output(cands, "CHANGED", "FCFG", "RCFG") is None  # another input
+    assert resumable_output(cands, "IN", "OTHER", "RCFG") is None  # other flow settings (extras, refine function ...)
+    assert resumable_output(cands, "IN", "FCFG", "OTHER") is None  # another request or refine configuration
+    assert resumable_output([{"junk": 1}, *cands], "IN", "FCFG", "RCFG") == rec
+    value = refined_output(out)  # the refine stage's value, read from the typed report
+    assert value.skipped and value.report == _report() and value.out_dir == str(out) and value.tokens == 0
+    (out / "mobility.urdf").write_text("<robot name='edited'/>")  # no longer complete
+    assert resumable_output(cands, "IN", "FCFG", "RCFG") is None
+    assert read_job_record(tmp_path / "nowhere") is None
+
+
+def test_rows_of_bad_manifest_rows_have_unique_ids_and_their_own_failure_mode():
+    taken = {"box", "manifest-line-4"}
+    errs = [
+        ManifestRowError(3, "big", "MANIFEST_ROW_TOO_LARGE", "m.csv:3 (id big): too long"),
+        ManifestRowError(4, "../x", "MANIFEST_INVALID_ID", "m.csv:4: invalid asset id '../x'"),
+        ManifestRowError(5, "box", "MANIFEST_DUPLICATE_ID", "m.csv:5: duplicate asset id 'box'"),
+        ManifestRowError(6, None, "MANIFEST_MISSING_ID", "m.csv:6: row without id"),
+    ]
+    ids = [manifest_row_id(e, taken) for e in errs]
+    assert ids == ["big", "manifest-line-4-2", "manifest-line-5", "manifest-line-6"]
+    row = build_manifest_row(errs[1], asset_id=ids[1], run_id="r1", config={"estimator": "offline"}, code_version="v")
+    assert row.status == "failed" and row.failure_mode == "invalid_manifest_row"
+    assert row.error.startswith("manifest: MANIFEST_INVALID_ID: m.csv:4") and row.source_run == "r1"
