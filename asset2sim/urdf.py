@@ -32,7 +32,13 @@ Reading modes (``mode``):
 ``"collect"``
     For input validation: nothing raises for the content; every problem is
     handed to ``on_problem`` as a :class:`Problem` (stable ``code``, message,
-    line, link or joint) and reading goes on with what could be read.
+    line, link or joint) and reading goes on with what could be read. The
+    input validation (:mod:`asset2sim.tasks.ingest.urdf_checks`) reads
+    through it and checks the model: ``UrdfModel.link_elements`` keeps every
+    ``<link>`` element (unnamed and repeated ones), ``UrdfLimit.unreadable``
+    the limit attributes that did not parse, ``UrdfMaterial.texture_line``
+    where a texture is named; problems come in the validator's order (a
+    link's visuals, its collisions, the visuals' materials, its inertial).
 
 Units: lengths in the file's units (metres nominally), angles rad, mass kg,
 inertia kg*m^2 (about the center of mass, in the ``<inertial><origin>`` frame),
@@ -228,12 +234,15 @@ def _eye() -> np.ndarray:
 @dataclass(eq=False)
 class UrdfMaterial(_ArrayEq):
     """``<material>``: ``name``; ``rgba`` (4,) in [0, 1] from ``<color>``;
-    ``texture`` the ``<texture filename>`` as written."""
+    ``texture`` the ``<texture filename>`` as written (the first
+    ``<texture>``, as PyBullet reads it); ``line`` / ``texture_line`` the
+    source lines of ``<material>`` and ``<texture>``."""
 
     name: str | None = None
     rgba: np.ndarray | None = None
     texture: str | None = None
     line: int | None = field(default=None, compare=False)
+    texture_line: int | None = field(default=None, compare=False)
 
 
 @dataclass(eq=False)
@@ -328,6 +337,8 @@ class UrdfLimit(_ArrayEq):
     effort: float | None = None
     velocity: float | None = None
     line: int | None = field(default=None, compare=False)
+    unreadable: frozenset[str] = field(default=frozenset(), compare=False, repr=False)
+    """Attributes written but not readable (mode collect; their value is None)."""
 
 
 @dataclass(eq=False)
@@ -428,6 +439,10 @@ class UrdfModel(_ArrayEq):
     joints: list[UrdfJoint] = field(default_factory=list)
     materials: list[UrdfMaterial] = field(default_factory=list)
     extensions: list[ET.Element] = field(default_factory=list, compare=False)
+    link_elements: list[UrdfLink] = field(default_factory=list, compare=False, repr=False)
+    """Every ``<link>`` element in file order, unnamed (``name == ""``) and
+    repeated ones included (:attr:`links` keeps the first of each name);
+    empty for a model built in code. Input validation grades them all."""
     root: str | None = None
     path: Path | None = field(default=None, compare=False)
 
@@ -584,16 +599,13 @@ class _Reader:
         tex = el.find("texture")
         if tex is not None:
             mat.texture = tex.get("filename")
+            mat.texture_line = _line(tex)
         return mat
 
     def _parse_geometry(self, el, role: str, link: str | None) -> UrdfGeometry:
         origin, ok = self._parse_origin(el, link=link)
         g = UrdfGeometry(kind=None, origin=origin, name=el.get("name"), line=_line(el))
         g_ok = ok
-        if role == "visual":
-            m = el.find("material")
-            if m is not None:
-                g.material = self._parse_material(m, link)
         geo = el.find("geometry")
         shapes = list(geo) if geo is not None else []
         known = len(shapes) == 1 and shapes[0].tag in GEOMETRY_KINDS
@@ -676,8 +688,13 @@ class _Reader:
             self.problem("LINK_NAME_MISSING", "<link> without name", line=_line(el))
         lname = name or None
         ln = UrdfLink(name=name, line=_line(el))
-        ln.visuals = [self._parse_geometry(g, "visual", lname) for g in el.findall("visual")]
+        visual_els = el.findall("visual")
+        ln.visuals = [self._parse_geometry(g, "visual", lname) for g in visual_els]
         ln.collisions = [self._parse_geometry(g, "collision", lname) for g in el.findall("collision")]
+        for g, g_el in zip(ln.visuals, visual_els):  # after the collisions: problems in the validator's order
+            m = g_el.find("material")
+            if m is not None:
+                g.material = self._parse_material(m, lname)
         inert = el.find("inertial")
         if inert is not None:
             ln.inertial = self._parse_inertial(inert, lname)
@@ -751,6 +768,8 @@ class _Reader:
         out = UrdfLimit(line=_line(lim))
         for k in ("lower", "upper", "effort", "velocity"):
             setattr(out, k, self.num(lim, k, joint=name))
+        out.unreadable = frozenset(k for k in ("lower", "upper", "effort", "velocity")
+                                   if lim.get(k) is not None and getattr(out, k) is None)
         if jtype in ("revolute", "prismatic"):
             if lim.get("lower") is None or lim.get("upper") is None:
                 miss = [k for k in ("lower", "upper") if lim.get(k) is None]
@@ -784,6 +803,7 @@ class _Reader:
         for el in root.findall("material"):
             model.materials.append(self._parse_material(el, None))
         model.extensions = [el for el in root if isinstance(el.tag, str) and el.tag not in ("link", "joint", "material")]
+        model.link_elements = link_list
         for ln in link_list:
             if not ln.name:
                 continue

@@ -23,10 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import mesh_io, safexml
-from asset2sim.frames import rpy_matrix
 from asset2sim.tasks.ingest.findings import MeshUse, Recorder
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, file_kind, read_regular, resolve_mesh_reference
-from asset2sim.tasks.ingest.urdf_checks import GeomRecord, LinkRecord
+from asset2sim.urdf import UrdfGeometry, UrdfLink
 
 __all__ = ["MeshChecks", "MeshScan", "geometry_corners", "scan_mesh_file"]
 
@@ -238,11 +237,11 @@ def _is_flat(n: int, s1: np.ndarray, s2: np.ndarray) -> bool:
     return bool(lam[2] <= 0 or math.sqrt(max(lam[0], 0.0)) <= 1e-9 * math.sqrt(lam[2]))
 
 
-def _transform_moments(mom, rpy, xyz, scale):
-    """Moments of A x + t for A = R(rpy) diag(scale), t = xyz."""
+def _transform_moments(mom, origin, scale):
+    """Moments of A x + t for A = R diag(scale), (R, t) the (4, 4) ``origin``."""
     n, s1, s2 = mom
-    a = rpy_matrix(rpy) @ np.diag(scale)
-    t = np.asarray(xyz, float)
+    a = origin[:3, :3] @ np.diag(scale)
+    t = origin[:3, 3]
     as1 = a @ s1
     return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
 
@@ -253,59 +252,76 @@ def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
 
 
-def geometry_corners(g: GeomRecord) -> np.ndarray | None:
+def geometry_corners(g: UrdfGeometry, bounds: np.ndarray | None = None) -> np.ndarray | None:
     """Corners (8, 3) of a ``<visual>``/``<collision>``'s bounding box in its
-    link's frame (file units; mesh scale, origin xyz and rpy applied), or
-    None when unknown."""
-    if not g.ok:
+    link's frame (file units; mesh scale and origin applied), or None when
+    unknown (``g`` not completely read, or a mesh without ``bounds``).
+
+    Args:
+        g: the geometry as :mod:`asset2sim.urdf` read it.
+        bounds: (2, 3) lower and upper corner of a mesh's vertices (file
+            units, scale 1; :attr:`MeshScan.bounds`); unused for primitives.
+    """
+    if not g.complete:
         return None
     if g.kind == "mesh":
-        if g.bounds is None:
+        if bounds is None:
             return None
-        c = _box_corners(g.bounds[0], g.bounds[1]) * np.asarray(g.scale, float)
-    elif g.kind in ("box", "cylinder", "sphere") and g.size is not None:
+        c = _box_corners(bounds[0], bounds[1]) * g.scale
+    elif g.kind == "box" and g.size is not None:
         h = np.asarray(g.size, float) / 2.0
+        c = _box_corners(-h, h)
+    elif g.kind in ("cylinder", "sphere") and g.radius is not None:
+        r = g.radius
+        h = np.array((2 * r, 2 * r, g.length if g.kind == "cylinder" else 2 * r), float) / 2.0
         c = _box_corners(-h, h)
     else:
         return None
-    return c @ rpy_matrix(g.rpy).T + np.asarray(g.xyz, float)
+    return c @ g.origin[:3, :3].T + g.origin[:3, 3]
 
 
 class MeshChecks(Recorder):
     """Mesh references, contents and materials (mixin of the validator)."""
 
-    def meshes(self, links: list[LinkRecord]) -> None:
-        """Resolve, scan and check every ``<mesh>`` of ``links`` (the URDF
-        checks' link records); record ``mesh_paths``, ``material_files`` and
-        each mesh geometry's ``bounds``."""
+    def __init__(self, asset: Path, policy):
+        super().__init__(asset, policy)
+        #: (2, 3) vertex bounds (file units, scale 1) of each scanned mesh geometry, by ``id`` of its UrdfGeometry
+        self.mesh_bounds: dict[int, np.ndarray] = {}
+
+    def meshes(self, links: list[UrdfLink]) -> None:
+        """Resolve, scan and check every ``<mesh>`` of ``links`` (every
+        ``<link>`` element of the model, :attr:`asset2sim.urdf.UrdfModel.link_elements`);
+        record ``mesh_paths``, ``material_files`` and each mesh geometry's
+        bounds in ``mesh_bounds`` (by ``id`` of the geometry)."""
         assert self.folder is not None
         pol = self.policy
         scans: dict[Path, MeshScan | str] = {}
         total_faces = 0
         for ln in links:
-            mass_role = "collision" if any(g.role == "collision" for g in ln.geoms) else "visual"
+            lname = ln.name or None
+            geoms = [("visual", g) for g in ln.visuals] + [("collision", g) for g in ln.collisions]
+            mass_role = "collision" if ln.collisions else "visual"
             link_moments = None
             link_has_volume = False
             link_mass_geoms = 0
-            for g in ln.geoms:
-                use: MeshUse = "collision" if g.role == "collision" else ("mass" if mass_role == "visual" else "visual")
-                in_mass = g.role == mass_role
+            for role, g in geoms:
+                use: MeshUse = "collision" if role == "collision" else ("mass" if mass_role == "visual" else "visual")
+                in_mass = role == mass_role
                 if g.kind != "mesh":
                     if g.kind is not None and in_mass:
                         link_mass_geoms += 1
-                        link_has_volume = link_has_volume or g.ok
+                        link_has_volume = link_has_volume or g.complete
                     continue
                 ref = resolve_mesh_reference(self.folder, g.filename, extensions=pol.mesh_extensions, max_bytes=pol.max_mesh_bytes)
-                g.ref = ref
                 fname = g.filename or ""
                 if ref.code is not None:
-                    self.add(ref.code, f"<{g.role}> mesh {ref.message}", line=g.line, link=ln.name, role=g.role, filename=fname)
+                    self.add(ref.code, f"<{role}> mesh {ref.message}", line=g.line, link=lname, role=role, filename=fname)
                     continue
                 assert ref.path is not None
                 fmt = self._format_problem(fname, ref.path)
                 if fmt is not None:
-                    self.add("MESH_FORMAT_UNSUPPORTED", f"<{g.role}> mesh {fname!r}: {fmt}", line=g.line, link=ln.name,
-                             role=g.role, filename=fname)
+                    self.add("MESH_FORMAT_UNSUPPORTED", f"<{role}> mesh {fname!r}: {fmt}", line=g.line, link=lname,
+                             role=role, filename=fname)
                     continue
                 self.result.mesh_paths[fname] = ref.path
                 if not pol.check_mesh_contents:
@@ -321,29 +337,30 @@ class MeshChecks(Recorder):
                         total_faces += scan.n_faces
                         # the OBJ's own folder as the operating system (and PyBullet) sees it
                         as_written = os.path.dirname(os.path.join(os.path.abspath(str(self.folder)), fname))
-                        self.materials(ref.path, Path(as_written), scan, ln.name)
+                        self.materials(ref.path, Path(as_written), scan, lname)
                 frel = self.rel(ref.path)
                 at = f"{self.urdf_rel}:{g.line}"
                 if isinstance(scan, str):
-                    self.add("MESH_UNREADABLE", f"{scan} (referenced at {at})", file=frel, link=ln.name, role=g.role, urdf_line=g.line)
+                    self.add("MESH_UNREADABLE", f"{scan} (referenced at {at})", file=frel, link=lname, role=role, urdf_line=g.line)
                     continue
-                g.bounds = scan.bounds
+                if scan.bounds is not None:
+                    self.mesh_bounds[id(g)] = scan.bounds
                 for code, msg in scan.defects.items():
                     if code == "MESH_ZERO_VOLUME":
-                        self.add(code, f"{msg} (<{g.role}> at {at})", file=frel, link=ln.name, role=g.role, urdf_line=g.line)
+                        self.add(code, f"{msg} (<{role}> at {at})", file=frel, link=lname, role=role, urdf_line=g.line)
                     else:
-                        self.add(code, f"{msg}; used for {use} (<{g.role}> at {at})", file=frel, link=ln.name, use=use,
-                                 role=g.role, urdf_line=g.line)
-                if in_mass and g.ok:
+                        self.add(code, f"{msg}; used for {use} (<{role}> at {at})", file=frel, link=lname, use=use,
+                                 role=role, urdf_line=g.line)
+                if in_mass and g.complete:
                     link_mass_geoms += 1
                     if scan.moments is not None:
-                        mom = _transform_moments(scan.moments, g.rpy, g.xyz, g.scale)
+                        mom = _transform_moments(scan.moments, g.origin, g.scale)
                         link_moments = mom if link_moments is None else (
                             link_moments[0] + mom[0], link_moments[1] + mom[1], link_moments[2] + mom[2])
             if link_mass_geoms and not link_has_volume and link_moments is not None and _is_flat(*link_moments):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "
                          "mass must come from the surface area (shell), not the volume",
-                         line=ln.line, link=ln.name, action="mass_from_area", role=mass_role)
+                         line=ln.line, link=lname, action="mass_from_area", role=mass_role)
         if total_faces > pol.max_total_faces:
             self.add("MESH_TOO_MANY_FACES", f"{total_faces} triangles over all meshes > cap {pol.max_total_faces} "
                      "(the bound that keeps one asset's refine within the flow's time and memory limits; docs/validation.md)",

@@ -1,7 +1,8 @@
 """The kinematic-tree checks of the validator: structure, inertials, joint travel.
 
-:class:`TreeChecks` works on the link and joint records the URDF checks
-(:mod:`asset2sim.tasks.ingest.urdf_checks`) read: unique names, parents and
+:class:`TreeChecks` works on the :class:`asset2sim.urdf.UrdfModel` the URDF
+checks (:mod:`asset2sim.tasks.ingest.urdf_checks`) read, every ``<link>``
+element included (``link_elements``): unique names, parents and
 children, self loops, several parents, cycles, orphans, exactly one root,
 the link cap, mimic joints; the given inertials (:func:`check_inertia`); and,
 after the meshes were scanned, prismatic travel against the object's size.
@@ -11,10 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from asset2sim.frames import rpy_matrix
 from asset2sim.tasks.ingest.findings import MOVABLE_TYPES, Recorder
 from asset2sim.tasks.ingest.mesh_checks import geometry_corners
-from asset2sim.tasks.ingest.urdf_checks import JointRecord, LinkRecord
+from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
+from asset2sim.urdf import UrdfJoint, UrdfLink, UrdfModel
 
 __all__ = ["TreeChecks", "check_inertia"]
 
@@ -43,29 +44,37 @@ def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, iz
 
 
 
+_INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy ixz iyy iyz izz
+
+
 class TreeChecks(Recorder):
     """Structure, inertials and joint travel (mixin of the validator)."""
 
+    mesh_bounds: dict[int, np.ndarray]  # set by MeshChecks (mesh vertex bounds by id of the geometry)
+
     # -- structure
-    def structure(self, links: list[LinkRecord], joints: list[JointRecord]) -> tuple[set[str], str | None]:
-        """Returns (moving links, root)."""
+    def structure(self, model: UrdfModel) -> tuple[set[str], str | None]:
+        """Names, parents and children, cycles, orphans, the root, the link
+        cap and mimic joints of ``model`` (every ``<link>`` element).
+        Returns (moving links, root)."""
+        links, joints = model.link_elements, model.joints
         if not links:
             self.add("URDF_NO_LINKS", "the robot has no <link>")
             return set(), None
         if len(links) > self.policy.max_links:
             self.add("URDF_TOO_MANY_LINKS", f"{len(links)} links > cap {self.policy.max_links}: PyBullet, which refine "
                      f"runs, loads at most {self.policy.max_links} links per body", links=len(links), cap=self.policy.max_links)
-        seen: dict[str, LinkRecord] = {}
+        seen: dict[str, UrdfLink] = {}
         for ln in links:
-            if ln.name is None:
+            if not ln.name:
                 continue
             if ln.name in seen:
                 self.add("LINK_NAME_DUPLICATE", f"link {ln.name!r} is defined again (first at line {seen[ln.name].line})", line=ln.line, link=ln.name)
             else:
                 seen[ln.name] = ln
-        jseen: dict[str, JointRecord] = {}
+        jseen: dict[str, UrdfJoint] = {}
         for j in joints:
-            if j.name is None:
+            if not j.name:
                 continue
             if j.name in jseen:
                 self.add("JOINT_NAME_DUPLICATE", f"joint {j.name!r} is defined again (first at line {jseen[j.name].line})", line=j.line, joint=j.name)
@@ -77,32 +86,34 @@ class TreeChecks(Recorder):
         first_parent: dict[str, str] = {}
         touched: set[str] = set()
         for j in joints:
+            jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
             ok = True
-            if j.parent is not None and j.parent not in seen:
-                self.add("JOINT_PARENT_UNKNOWN", f"parent {j.parent!r} is not a link", line=j.line, joint=j.name)
+            if parent is not None and parent not in seen:
+                self.add("JOINT_PARENT_UNKNOWN", f"parent {parent!r} is not a link", line=j.line, joint=jname)
                 ok = False
-            if j.child is not None and j.child not in seen:
-                self.add("JOINT_CHILD_UNKNOWN", f"child {j.child!r} is not a link", line=j.line, joint=j.name)
+            if child is not None and child not in seen:
+                self.add("JOINT_CHILD_UNKNOWN", f"child {child!r} is not a link", line=j.line, joint=jname)
                 ok = False
-            if j.parent is not None and j.parent == j.child:
-                self.add("JOINT_SELF_LOOP", f"parent and child are both {j.parent!r}", line=j.line, joint=j.name, link=j.child)
-                touched.add(j.parent)
+            if parent is not None and parent == child:
+                self.add("JOINT_SELF_LOOP", f"parent and child are both {parent!r}", line=j.line, joint=jname, link=child)
+                touched.add(parent)
                 continue
-            for n in (j.parent, j.child):
+            for n in (parent, child):
                 if n in seen:
                     touched.add(n)
-            if j.child in seen:
-                has_parent.setdefault(j.child, []).append(j.name or "?")
-            if ok and j.parent and j.child:
-                if j.child not in first_parent:
-                    first_parent[j.child] = j.parent
-                    children[j.parent].append(j.child)
-            if j.mimic is not None and (j.mimic not in jseen or j.mimic == j.name):
-                self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={j.mimic!r}> names no other joint", line=j.line, joint=j.name)
-            elif j.mimic is not None:
-                self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={j.mimic!r}>: coupled joints are not modelled (the "
+            if child in seen:
+                has_parent.setdefault(child, []).append(jname or "?")
+            if ok and parent and child:
+                if child not in first_parent:
+                    first_parent[child] = parent
+                    children[parent].append(child)
+            leader = None if j.mimic is None else j.mimic.joint
+            if leader is not None and (leader not in jseen or leader == jname):
+                self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={leader!r}> names no other joint", line=j.line, joint=jname)
+            elif leader is not None:
+                self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={leader!r}>: coupled joints are not modelled (the "
                          "state search, the post-check simulators and the writer treat every joint as free), so the "
-                         "coupling would be lost; refused rather than dropped", line=j.line, joint=j.name, leader=j.mimic)
+                         "coupling would be lost; refused rather than dropped", line=j.line, joint=jname, leader=leader)
         for child, js in has_parent.items():
             if len(js) > 1:
                 self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
@@ -153,48 +164,57 @@ class TreeChecks(Recorder):
         return moving, root
 
     # -- inertials
-    def inertials(self, links: list[LinkRecord], moving: set[str]) -> None:
-        for ln in links:
-            if not ln.has_inertial or ln.name is None:
+    def inertials(self, model: UrdfModel, moving: set[str]) -> None:
+        """The given ``<inertial>`` of every named ``<link>`` element: mass >
+        0 on moving links, inertia tensor positive definite with the triangle
+        inequality (:func:`check_inertia`); invalid or incomplete ones go to
+        ``result.replace_inertials``."""
+        for ln in model.link_elements:
+            ine = ln.inertial
+            if ine is None or not ln.name:
                 continue
+            mass = ine.mass
+            inertia = None if ine.inertia is None else tuple(float(ine.inertia[a, b]) for a, b in _INERTIA_ENTRIES)
             bad = False
-            if ln.mass is not None:
-                if ln.mass < 0 or (ln.mass == 0 and ln.name in moving):
+            if mass is not None:
+                if mass < 0 or (mass == 0 and ln.name in moving):
                     what = "a moving link" if ln.name in moving else "a link"
-                    self.add("INERTIAL_MASS_NONPOSITIVE", f"mass {ln.mass!r} kg on {what}; an estimate replaces it",
-                             line=ln.inertial_line, link=ln.name, action="replace_with_estimate", mass=ln.mass)
+                    self.add("INERTIAL_MASS_NONPOSITIVE", f"mass {mass!r} kg on {what}; an estimate replaces it",
+                             line=ine.line, link=ln.name, action="replace_with_estimate", mass=mass)
                     bad = True
-                elif ln.mass == 0:
+                elif mass == 0:
                     self.add("INERTIAL_MASS_ZERO_STATIC", "mass 0 on a static link (the simulator may treat it as fixed)",
-                             line=ln.inertial_line, link=ln.name, mass=0.0)
-            if ln.inertia is not None and not (ln.mass == 0 and ln.name not in moving and not any(ln.inertia)):
-                code, lam = check_inertia(*ln.inertia)
+                             line=ine.line, link=ln.name, mass=0.0)
+            if inertia is not None and not (mass == 0 and ln.name not in moving and not any(inertia)):
+                code, lam = check_inertia(*inertia)
                 if code is not None:
                     why = ("an eigenvalue <= 0" if code == "INERTIA_NOT_POSITIVE_DEFINITE"
                            else "the largest principal moment exceeds the sum of the other two")
-                    self.add(code, f"inertia (ixx ixy ixz iyy iyz izz) = {ln.inertia} kg*m^2 has eigenvalues "
+                    self.add(code, f"inertia (ixx ixy ixz iyy iyz izz) = {inertia} kg*m^2 has eigenvalues "
                              f"{', '.join(f'{x:.6g}' for x in lam)}: {why}; an estimate replaces it (never balanced)",
-                             line=ln.inertial_line, link=ln.name, action="replace_with_estimate",
-                             eigenvalues=lam, inertia=list(ln.inertia))
+                             line=ine.line, link=ln.name, action="replace_with_estimate",
+                             eigenvalues=lam, inertia=list(inertia))
                     bad = True
-            if ln.mass is None or ln.inertia is None:
+            if mass is None or inertia is None:
                 bad = True
             if bad:
                 self.result.replace_inertials.add(ln.name)
 
     # -- joint travel against the object's size (after the meshes were scanned)
-    def joint_travel(self, links: list[LinkRecord], joints: list[JointRecord], root: str | None) -> None:
+    def joint_travel(self, model: UrdfModel, root: str | None) -> None:
         """Prismatic limits beyond ``policy.max_prismatic_travel`` x the
         object's size: the diagonal of the bounding box of every geometry
-        placed by forward kinematics at the zero configuration (file units).
-        Skipped when the tree is broken or some size is unknown."""
+        placed by forward kinematics at the zero configuration (file units;
+        mesh bounds from the mesh scan, ``mesh_bounds``). Skipped when the
+        tree is broken or some size is unknown."""
         if root is None:
             return
+        joints = model.joints
         by_parent: dict[str, list] = {}
         for j in joints:
             if j.parent and j.child:
                 by_parent.setdefault(j.parent, []).append(j)
-        geoms = {ln.name: ln.geoms for ln in links if ln.name}
+        geoms = {ln.name: ln.visuals + ln.collisions for ln in model.link_elements if ln.name}
         pts: list[np.ndarray] = []
         stack = [(root, np.eye(4))]
         seen: set[str] = set()
@@ -204,28 +224,26 @@ class TreeChecks(Recorder):
                 return
             seen.add(name)
             for g in geoms.get(name, []):
-                c = geometry_corners(g)
+                c = geometry_corners(g, self.mesh_bounds.get(id(g)))
                 if c is None:
                     if g.kind is not None:
                         return  # a size is unknown: no claim about the object's size
                     continue
                 pts.append(c @ T[:3, :3].T + T[:3, 3])
             for j in by_parent.get(name, []):
-                J = np.eye(4)
-                J[:3, :3] = rpy_matrix(j.rpy)
-                J[:3, 3] = j.xyz
-                stack.append((j.child, T @ J))
+                stack.append((j.child, T @ j.origin))
         if not pts:
             return
         allp = np.vstack(pts)
         size = float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0)))
         cap = self.policy.max_prismatic_travel * size
         for j in joints:
-            if j.type != "prismatic" or j.lower is None or j.upper is None or size <= 0:
+            lim = j.limit
+            if j.type != "prismatic" or lim is None or lim.lower is None or lim.upper is None or size <= 0:
                 continue
-            travel = max(abs(j.lower), abs(j.upper))
+            travel = max(abs(lim.lower), abs(lim.upper))
             if travel > cap:
-                self.add("JOINT_LIMIT_IMPLAUSIBLE", f"prismatic limits [{j.lower!r}, {j.upper!r}] go beyond the object's "
+                self.add("JOINT_LIMIT_IMPLAUSIBLE", f"prismatic limits [{lim.lower!r}, {lim.upper!r}] go beyond the object's "
                          f"size {size:.4g} (diagonal of its bounding box, file units): the part would leave the object; "
-                         "check the units of the limits and of the meshes", line=j.limit_line, joint=j.name,
-                         lower=j.lower, upper=j.upper, object_size=size)
+                         "check the units of the limits and of the meshes", line=lim.line, joint=joint_name(j.name),
+                         lower=lim.lower, upper=lim.upper, object_size=size)

@@ -13,7 +13,9 @@ read; nothing stops at the first problem):
 
 1. Files: the URDF is a regular file inside the asset folder, below the size
    cap, in UTF-8 (``URDF_*``).
-2. XML: hardened parsing by :mod:`asset2sim.safexml` (``XML_*``).
+2. XML: hardened parsing by :mod:`asset2sim.safexml` (``XML_*``), through
+   the one URDF reader, :func:`asset2sim.urdf.parse_urdf_bytes` in mode
+   ``"collect"``; every later check runs on its :class:`asset2sim.urdf.UrdfModel`.
 3. Numbers: every numeric attribute the URDF format defines is parsed
    strictly (decimal literal, finite as a float64: NaN, inf, ``1e400``, empty,
    hex, ``1_0``, ``1,2`` rejected) with the right count (``NUMBER_*``).
@@ -233,15 +235,14 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         urdf = self.locate()
         if urdf is None:
             return self.result
-        parsed = self.parse(urdf)
-        if parsed is None:
+        model = self.read(urdf)
+        if model is None:
             return self.result
-        links, joints = parsed
-        moving, root = self.structure(links, joints)
-        self.inertials(links, moving)
-        self.meshes(links)
-        self.joint_travel(links, joints, root)
-        self.extras({ln.name for ln in links if ln.name})
+        moving, root = self.structure(model)
+        self.inertials(model, moving)
+        self.meshes(model.link_elements)
+        self.joint_travel(model, root)
+        self.extras({ln.name for ln in model.link_elements if ln.name})
         return self.result
 
 

@@ -151,6 +151,28 @@ def test_collect_mode_reports_every_problem_and_goes_on(tmp_path):
     assert model.joint("j").damping == -2.0 and not model.links["b"].collisions[0].complete
 
 
+def test_collect_mode_keeps_every_link_element_and_orders_materials_after_collisions(tmp_path):
+    """Input validation grades every <link> element (unnamed and repeated
+    ones too), reads materials after the collisions, knows where a texture
+    is written and which limit attributes could not be read."""
+    body = (
+        '<link name="a"><visual><geometry><box size="1 1 1"/></geometry>'
+        '<material name="m"><color rgba="1 0 0"/>\n<texture filename="t.png"/></material></visual>'
+        '<collision><geometry/></collision></link>\n'
+        '<link><inertial><mass value="1"/></inertial></link>\n'
+        '<link name="a"/>\n'
+        '<joint name="j" type="revolute"><parent link="a"/><child link="a"/><limit lower="x" upper="1"/></joint>'
+    )
+    problems: list[urdf.Problem] = []
+    model = urdf.read_urdf(_write(tmp_path, body), mode="collect", on_problem=problems.append)
+    assert [p.code for p in problems][:3] == ["GEOMETRY_MISSING", "NUMBER_COUNT", "LINK_NAME_MISSING"]
+    assert [ln.name for ln in model.link_elements] == ["a", "", "a"] and list(model.links) == ["a"]
+    assert model.links["a"] is model.link_elements[0]
+    mat = model.links["a"].visuals[0].material
+    assert mat.texture == "t.png" and mat.texture_line == mat.line + 1
+    assert model.joint("j").limit.unreadable == {"lower"} and model.joint("j").limit.upper == 1.0
+
+
 @pytest.mark.parametrize(
     "text, code",
     [

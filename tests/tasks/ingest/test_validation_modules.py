@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from asset2sim import mesh_io
+from asset2sim.frames import pose_matrix
 from asset2sim.tasks.ingest import findings, mesh_checks, mesh_paths, tree_checks, urdf_checks
 from asset2sim.tasks.ingest import validate_input as vi
+from asset2sim.urdf import UrdfGeometry
 from tests import corpus_builder as cb
 
 
@@ -132,11 +134,15 @@ def test_prismatic_travel_against_object_size(tmp_path):
 
 
 def test_geometry_corners_of_primitives():
-    g = urdf_checks.GeomRecord(role="collision", kind="cylinder", line=None, size=(0.2, 0.2, 1.0), xyz=(1.0, 0.0, 0.0))
+    g = UrdfGeometry(kind="cylinder", radius=0.1, length=1.0, origin=pose_matrix((1.0, 0.0, 0.0)))
     c = mesh_checks.geometry_corners(g)
     assert c.shape == (8, 3)
     assert np.allclose(c.min(axis=0), [0.9, -0.1, -0.5]) and np.allclose(c.max(axis=0), [1.1, 0.1, 0.5])
-    assert mesh_checks.geometry_corners(urdf_checks.GeomRecord(role="visual", kind="mesh", line=None)) is None
+    assert mesh_checks.geometry_corners(UrdfGeometry(kind="mesh")) is None
+    bounds = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]])
+    m = mesh_checks.geometry_corners(UrdfGeometry(kind="mesh", mesh_scale=np.array([2.0])), bounds)
+    assert np.allclose(m.max(axis=0), [2.0, 4.0, 6.0])
+    assert mesh_checks.geometry_corners(UrdfGeometry(kind="box", size=np.ones(3), complete=False)) is None
 
 
 def test_public_names_unchanged():
