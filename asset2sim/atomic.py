@@ -20,14 +20,16 @@ does not know of.
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import math
 import os
 import secrets
+import stat
 import threading
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, BinaryIO, Callable, Iterable, Iterator
 
 Observer = Callable[[list[Path]], None]
 """observer(destinations): called before any of ``destinations`` is created;
@@ -121,11 +123,20 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
+def _replace(tmp: str, path: Path) -> None:
+    """``os.replace(tmp, path)``; an error names the destination, not the
+    temporary file (e.g. ``IsADirectoryError`` for ``path``)."""
+    try:
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+
+
 def write_bytes(path: Path | str, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (parents created). Returns the path.
 
     Raises:
-        OSError: the folder cannot be written.
+        OSError: the folder cannot be written (the error names ``path``).
     """
     path = Path(path)
     _announce([path])
@@ -136,7 +147,7 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        _replace(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
@@ -188,7 +199,7 @@ def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
                 fh.write(Path(src).read_bytes())
         os.sync()
         for tmp, dst in staged:
-            os.replace(tmp, dst)
+            _replace(tmp, dst)
         for folder in {dst.parent for _, dst in staged}:
             _fsync_dir(folder)
     except BaseException:
@@ -206,10 +217,90 @@ def copy_file(src: Path | str, dst: Path | str) -> Path:
     return write_bytes(dst, Path(src).read_bytes())
 
 
+class NotRegularFileError(OSError):
+    """A path that must be a regular file is a FIFO, device, socket or folder
+    (``errno`` EINVAL, or EISDIR for a folder); raised before anything is read,
+    so a FIFO never blocks the reader."""
+
+
+def _open_regular(path: Path | str, follow_symlinks: bool = True) -> int:
+    """A read-only descriptor of ``path`` after checking, on the open
+    descriptor, that it is a regular file. The open itself cannot block
+    (``O_NONBLOCK``: a FIFO opens at once, and is then refused).
+
+    Raises:
+        NotRegularFileError: not a regular file.
+        OSError: it cannot be opened (``ELOOP`` for a symlink when
+            ``follow_symlinks`` is False).
+    """
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
+    if not follow_symlinks:
+        flags |= getattr(os, "O_NOFOLLOW", 0)
+    fd = os.open(str(path), flags)
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            code = errno.EISDIR if stat.S_ISDIR(mode) else errno.EINVAL
+            raise NotRegularFileError(code, "not a regular file (a folder, FIFO, device or socket)", str(path))
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def open_regular(path: Path | str) -> BinaryIO:
+    """``path`` opened for binary reading once it is known, on the open
+    descriptor, to be a regular file (a FIFO never blocks the open); e.g. for
+    reading an image header without reading the file.
+
+    Raises:
+        NotRegularFileError: not a regular file.
+        OSError: it cannot be opened.
+    """
+    return os.fdopen(_open_regular(path), "rb")
+
+
+def read_regular(path: Path | str, max_bytes: int | None = None, *, follow_symlinks: bool = True) -> bytes:
+    """The bytes of ``path``, which must be a regular file: checked on the open
+    descriptor before reading, so a FIFO, a device or a socket put where a file
+    was expected is refused at once instead of blocking or streaming without end.
+
+    Args:
+        path: the file.
+        max_bytes: refuse a larger file (bytes); None: no cap.
+        follow_symlinks: False refuses a symlink (``ELOOP``).
+
+    Raises:
+        NotRegularFileError: not a regular file.
+        OSError: it cannot be opened or read, or it has more than ``max_bytes``
+            bytes (``EFBIG``).
+    """
+    fd = _open_regular(path, follow_symlinks)
+    with os.fdopen(fd, "rb") as fh:
+        if max_bytes is None:
+            return fh.read()
+        data = fh.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise OSError(errno.EFBIG, f"more than {max_bytes} bytes", str(path))
+    return data
+
+
+def read_regular_text(path: Path | str, max_bytes: int | None = None) -> str:
+    """:func:`read_regular` decoded as UTF-8 (``UnicodeDecodeError``, a
+    ``ValueError``, when it is not)."""
+    return read_regular(path, max_bytes).decode("utf-8")
+
+
 def sha256_file(path: Path | str, chunk: int = 1 << 20) -> str:
-    """Hex sha256 of a file's bytes."""
+    """Hex sha256 of a regular file's bytes.
+
+    Raises:
+        NotRegularFileError: ``path`` is a FIFO, device, socket or folder
+            (never blocks on it).
+        OSError: it cannot be read.
+    """
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with os.fdopen(_open_regular(path), "rb") as fh:
         while True:
             block = fh.read(chunk)
             if not block:

@@ -32,6 +32,27 @@ Each piece of work is done once per asset:
   the asset itself, recording the post-check's rest-test metrics instead of
   simulating them again.
 
+Nothing finished is done twice, nothing malformed stops the others:
+
+- A flow killed after an asset's folder was completed (completion marker
+  written) but before its catalog row: the next run finds the folder through
+  the job record the killed run left in its work folder
+  (``flows.stages.unrecorded_jobs``, ``tasks.publish.contract.resumable_output``:
+  same input, same flow configuration, folder still complete), writes the
+  missing row into the killed run's partition from the folder's typed report
+  (and the killed run's measurement when it had made one) and records the
+  asset as skipped: no refine.
+- A manifest row that cannot be used (a field over the CSV field limit, a
+  missing, unsafe or duplicate id, no prompt column, an invalid number)
+  becomes a failed row with failure mode ``invalid_manifest_row`` before the
+  fan-out; the other rows run. A manifest that is not a CSV with ``id`` and
+  ``prompt`` columns still stops the run before it starts.
+- The processes of a run end with its driver, killed or not: the temporary
+  Prefect server is started here (:func:`prefect_api_for_run`) through
+  :mod:`asset2sim.flows.lifeline` (SIGKILL when the driver ends), Dask's
+  local workers exit when the driver does, and each isolated stage process
+  gets SIGKILL when its Dask worker ends (:mod:`.isolation`).
+
 The flow wires; the stages decide. The stage functions are plain functions
 of :mod:`asset2sim.flows.stages`; hashing, the skip rule and the catalog row
 are :mod:`asset2sim.tasks.publish.contract`'s; the failure mode is

@@ -241,15 +241,10 @@ def plan_run(
     root = cat.dataset_root(name)
     if ds.generate == "demo":
         ensure_demo_dataset(root)
-    entries: list[ManifestEntry]
     entries, errors = read_manifest_entries(cat.manifest_path(name), root)
     taken = {e.asset_id for e in entries}
     bad = [BadManifestRow(manifest_row_id(err, taken), err) for err in errors]
-    items: list[tuple[int, Any]] = sorted(
-        [(i, e) for i, e in enumerate(entries)] + [(len(entries) + k, b) for k, b in enumerate(bad)],
-        key=lambda t: (t[1].error.line if isinstance(t[1], BadManifestRow) else _entry_line(t[1], t[0]), t[0]),
-    )
-    ordered = [it for _, it in items]
+    ordered: list[ManifestEntry | BadManifestRow] = sorted([*entries, *bad], key=_manifest_line)  # file order
     if ids:
         known = {e.asset_id for e in entries} | {b.asset_id for b in bad} | {b.error.id for b in bad if b.error.id}
         unknown = [i for i in ids if i not in known]
@@ -300,8 +295,8 @@ def plan_run(
     return RunPlan(jobs=jobs, bad_rows=[b for b in ordered if isinstance(b, BadManifestRow)])
 
 
-def _entry_line(entry: ManifestEntry, index: int) -> int:
-    return entry.line if entry.line is not None else index
+def _manifest_line(item: ManifestEntry | BadManifestRow) -> int:
+    return item.error.line if isinstance(item, BadManifestRow) else (item.line or 0)
 
 
 def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> dict[str, list[dict[str, Any]]]:

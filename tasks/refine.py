@@ -191,7 +191,7 @@ def _open_estimator(config: RefineConfig) -> estimate.Estimator:
     try:
         return estimate.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
     except Exception as exc:
-        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure") from exc
+        raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
 
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
@@ -214,8 +214,8 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
 
 def _completed_result(out_dir: Path, log: _StageLog) -> RefineResult:
     """The result recorded in a complete output folder (nothing recomputed)."""
-    report = RefineReport.model_validate_json((out_dir / REPORT_NAME).read_text())
-    overlay = Overlay.model_validate_json((out_dir / write.OVERLAY_NAME).read_text())
+    report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, output_folder.MAX_RECORD_BYTES))
+    overlay = Overlay.model_validate_json(atomic.read_regular(out_dir / write.OVERLAY_NAME, output_folder.MAX_RECORD_BYTES))
     log.say("skip", f"{out_dir} is complete for this input and configuration")
     return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
 
@@ -358,7 +358,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
     try:
         result = est.estimate(ctx)
     except Exception as exc:
-        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure") from exc
+        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure", ["ESTIMATOR_FAILED"]) from exc
     bands = dict(result.bands)
     log.lap("synthesize")
     try:

@@ -586,6 +586,36 @@ def _symlink_other_format(folder: Path) -> None:
     os.symlink("drawer.stl", folder / "meshes" / "alias.obj")
 
 
+def png_header(width: int, height: int) -> bytes:
+    """A PNG whose header claims ``width`` x ``height`` RGB pixels, with one
+    tiny IDAT chunk (valid CRCs): what a reader learns from the header
+    without decoding (the image data would not decode)."""
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0\0\0\0")) + chunk(b"IEND", b"")
+
+
+def _sparse_texture(size: int) -> Callable[[Path], None]:
+    """Extend the texture to ``size`` bytes with zeros (a sparse file: no disk used)."""
+
+    def fn(folder: Path) -> None:
+        os.truncate(folder / "images" / "tex.png", size)
+
+    return fn
+
+
+def _lid_scale(factor: str) -> Callable[[Model], None]:
+    def fn(m: Model) -> None:
+        for g in m.link("lid").visuals + m.link("lid").collisions:
+            g.scale = f"{factor} {factor} {factor}"
+
+    return fn
+
+
 def _cases() -> list[Case]:
     C = Case
     out: list[Case] = []
@@ -818,6 +848,24 @@ def _cases() -> list[Case]:
           note="was silently dropped from the output"))
     add(C("faces_total_cap", "refine_agreement", "MESH_TOO_MANY_FACES", build_valid, policy={"max_total_faces": 30},
           note="the per-asset face cap (1,000,000 by default; docs/validation.md) with a lowered cap"))
+    # --- issue 11, second check (H14): sizes and textures refine or PyBullet cannot take
+    add(C("mesh_coordinate_1e308", "refine_agreement", "MESH_COORDINATE_IMPLAUSIBLE",
+          _files_case(_write("meshes/lid.obj", "v 1e308 0 0\nv -1e308 0 0\nv 0 1e308 0\nv 0 0 1e308\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")),
+          note="overflowed numpy (warnings, then INTERNAL_ERROR LinAlgError); now checked by comparison before any arithmetic"))
+    add(C("asset_size_mesh_scale_1e6", "refine_agreement", "ASSET_SIZE_IMPLAUSIBLE", _model_case(_lid_scale("1e6")),
+          note="passed validate, then refine refused the overlay (OVL_SCALE_INVALID, exit 2)"))
+    add(C("asset_size_box_1e6", "refine_agreement", "ASSET_SIZE_IMPLAUSIBLE",
+          _model_case(lambda m: setattr(m.link("handle").collisions[0], "size", "1e6 2e6 1e6")),
+          note="a primitive 2e6 units across: the size bound holds for primitives too"))
+    add(C("texture_2gb_sparse", "refine_agreement", "TEXTURE_TOO_LARGE", _files_case(_sparse_texture(2200 * 1024 * 1024)),
+          note="passed validate, then PyBullet died with std::bad_alloc (exit 134)"))
+    add(C("texture_pixels_over_cap", "refine_agreement", "TEXTURE_TOO_LARGE",
+          _files_case(_write("images/tex.png", png_header(8193, 8193))),
+          note="8193 x 8193 pixels from the PNG header (nothing decoded); PyBullet decodes ~8.6 MiB per megapixel at each load"))
+    add(C("texture_not_an_image", "refine_agreement", "TEXTURE_UNREADABLE", _files_case(_write("images/tex.png", "not an image\n")),
+          note="PIL cannot identify it: neither PyBullet nor the renderer can use it"))
+    add(C("texture_total_cap", "mesh_paths", "TEXTURE_TOO_LARGE", build_valid, policy={"max_total_texture_pixels": 0},
+          note="the per-asset texture caps (1 GiB, 4 x 8192 x 8192 pixels by default) with a lowered cap"))
     return out
 
 

@@ -17,6 +17,7 @@ import json
 import math
 from pathlib import Path
 
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
 from asset2sim.tasks.evaluation.benchmark import (
     RESEARCH_NUMBERS,
     benchmark_tables,
@@ -104,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console(width=max(Console().width, 180))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     ids = [i.strip() for i in args.ids.split(",")] if args.ids else None
-    engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
+    engines = tuple(parse_engines(args.engines))
     out = args.out
 
     def progress(method: str, rid: str, msg: str) -> None:
@@ -114,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
         records = run_benchmark(args.manifest, methods, out, rows=ids, seed=args.seed, engines=engines,
                                 reports=not args.no_reports, progress=progress)
     except (KeyError, FileNotFoundError, ValueError) as exc:
-        console.print(f"[red]benchmark cannot run: {exc}[/red]")
-        return 2
+        raise CommandError(INVALID_REQUEST, "BENCHMARK_INPUT_INVALID", getattr(exc, "filename", None) or args.manifest,
+                           f"benchmark cannot run: {exc.args[0] if isinstance(exc, KeyError) and exc.args else exc}") from exc
     records = _clean(records)
     tables = benchmark_tables(records, methods)
     meta = {"manifest": str(args.manifest), "methods": methods, "seed": args.seed, "rows": len({r["id"] for r in records}),

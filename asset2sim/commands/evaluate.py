@@ -2,7 +2,9 @@
 and report.html, print a verdict table.
 
 Exit code 0 when every metric with a verdict passes, 1 when one fails, 2 when
-the asset cannot be evaluated.
+the asset cannot be evaluated (or an engine is unknown), 4 when the output
+location cannot be written; failures print one line
+``asset2sim evaluate: CODE: PATH: message`` (:mod:`asset2sim.commands._status`).
 """
 
 from __future__ import annotations
@@ -10,6 +12,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from asset2sim.commands._status import (
+    INVALID_REQUEST,
+    CommandError,
+    os_failure,
+    output_failure,
+    output_folder_failure,
+    parse_engines,
+)
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
 from asset2sim.tasks.publish import output_folder
 
@@ -36,7 +46,10 @@ def run(args: argparse.Namespace) -> int:
 
     console = Console(width=max(Console().width, 180))
     out = args.out or (args.asset if args.asset.is_dir() else args.asset.parent)
-    engines = tuple(e.strip() for e in args.engines.split(",") if e.strip())
+    engines = tuple(parse_engines(args.engines))
+    bad_out = output_folder_failure(out)
+    if bad_out is not None:
+        raise bad_out
     try:
         with output_folder.adopting(out):  # into a refined folder: its files become the product's
             ev = evaluate_asset(
@@ -50,9 +63,13 @@ def run(args: argparse.Namespace) -> int:
                 write_report=not args.no_report,
                 probes=not args.no_probes,
             )
-    except (EvaluationError, ValueError, OSError) as exc:
-        console.print(f"[red]cannot evaluate {args.asset}: {exc}[/red]")
-        return 2
+    except output_folder.OutputError as exc:
+        raise output_failure(exc, out) from exc
+    except OSError as exc:
+        raise os_failure(exc, out, args.asset, INVALID_REQUEST, "EVALUATION_INPUT_UNREADABLE") from exc
+    except (EvaluationError, ValueError) as exc:
+        raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "EVALUATION_INPUT_INVALID", args.asset,
+                           str(exc)) from exc
     table = Table(title=f"{ev.asset_id} ({ev.category or 'no category'}): {'READY' if ev.passed else 'NOT READY'}")
     for col in ("metric", "engine", "value", "unit", "verdict", "threshold"):
         table.add_column(col)

@@ -8,15 +8,24 @@ oscillation tests in those engines and prints them side by side.
 
 Exit status: 0 when the export checks out (and, with ``--parity``, every
 engine that ran passes), 1 when a check or a parity verdict fails, 2 when the
-folder cannot be exported (missing files, MuJoCo not installed).
+folder cannot be exported (missing files, MuJoCo not installed, unknown
+engine), 4 when its ``mjcf/`` folder cannot be written; failures print one
+line ``asset2sim export: CODE: PATH: message``.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
+from asset2sim.commands._status import (
+    INVALID_INPUT,
+    INVALID_REQUEST,
+    CommandError,
+    os_failure,
+    output_failure,
+    parse_engines,
+)
 from asset2sim.engines.base import available_engines
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.engines.mjcf import MjcfError
@@ -53,33 +62,36 @@ def _fmt(v, spec: str = ".3g") -> str:
 
 def run(args: argparse.Namespace) -> int:
     out = args.out
+    parity = parse_engines(args.parity, "--parity") if args.parity else []
     if not (out / "mobility.urdf").is_file():
-        print(f"asset2sim export: {out} has no mobility.urdf (not an output folder)", file=sys.stderr)
-        return 2
+        raise CommandError(INVALID_REQUEST, "NOT_AN_OUTPUT_FOLDER", out, "has no mobility.urdf (not an output folder)")
     if "mujoco" not in available_engines():
-        print("asset2sim export: MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'", file=sys.stderr)
-        return 2
+        raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None,
+                           "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
 
     try:
         with output_folder.adopting(out):  # the MJCF files become the output folder's own
             path = export_mjcf(out, visuals=not args.no_visuals, check=False)
 
         check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out))
-    except (FileNotFoundError, ValueError, UrdfError) as exc:
-        print(f"asset2sim export: cannot export {out}: {exc}", file=sys.stderr)
-        return 2
+    except output_folder.OutputError as exc:
+        raise output_failure(exc, out) from exc
+    except UrdfError as exc:
+        raise CommandError(INVALID_REQUEST, exc.code, out, f"cannot export: {exc}") from exc
+    except (FileNotFoundError, ValueError) as exc:
+        raise CommandError(INVALID_REQUEST, "EXPORT_INPUT_INVALID", getattr(exc, "filename", None) or out, f"cannot export: {exc}") from exc
+    except OSError as exc:
+        raise os_failure(exc, out / "mjcf", out, INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE") from exc
     except (MjcfError, ExportError) as exc:
-        print(f"asset2sim export: {exc}", file=sys.stderr)
-        return 1
+        raise CommandError(INVALID_INPUT, "EXPORT_CHECK_FAILED", out, str(exc)) from exc
     print(f"wrote       {path}")
     print(f"total mass  {check.total_mass:.6g} kg (URDF {check.urdf_mass:.6g} kg)")
     print(f"inertials   largest COM difference {check.max_com_error:.1e} m, tensor {check.max_inertia_error:.1e} kg*m^2")
     state = ", ".join(f"{k}={v:.4g}" for k, v in check.keyframe.items()) or "(no movable joints)"
     print(f"keyframe    'initial': {state}")
     status = 0
-    if args.parity:
-        engines = [e.strip() for e in args.parity.split(",") if e.strip()]
-        rows = parity_table(evaluate_engines(out, engines))
+    if parity:
+        rows = parity_table(evaluate_engines(out, parity))
         print()
         print(f"{'engine':<10} {'Phi mm':>9} {'deepest mm':>10} {'rest':>5} {'D_pos m':>9} {'D_ori rad':>9} {'osc':>5}  notes")
         for r in rows:

@@ -10,8 +10,7 @@ asset2sim did not write without ``--overwrite``, not writable, disk full).
 from __future__ import annotations
 
 import argparse
-import errno
-import os
+import sys
 import time
 from pathlib import Path
 
@@ -19,14 +18,18 @@ from asset2sim.commands._status import (
     INVALID_INPUT,
     INVALID_REQUEST,
     NOT_READY,
-    OUTPUT_LOCATION,
     CommandError,
+    join_codes,
+    os_failure,
+    output_failure,
+    parse_engines,
 )
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.tasks.publish.output_folder import OutputError
 from asset2sim.tasks.refine import RefineError
+from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
 
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (output folder of the SPEC's contract)."
@@ -58,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)",
     )
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
-    parser.add_argument("--quiet", "-q", action="store_true", help="print only the summary")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
 
 
 def summary_lines(result) -> list[str]:
@@ -92,47 +95,47 @@ def summary_lines(result) -> list[str]:
     return lines
 
 
-def _inside(path: str | os.PathLike | None, folder: Path) -> bool:
-    if path is None:
-        return False
-    p = os.path.abspath(os.fsdecode(path))
-    root = os.path.abspath(folder)
-    return p == root or p.startswith(root.rstrip(os.sep) + os.sep)
+def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
+    """The one-line failure of a refine run: status, code(s) and path.
 
-
-def _refine_failure(exc: Exception, args: argparse.Namespace) -> CommandError:
-    """The one-line failure of a refine run: status, code and path."""
+    Output location: status 4 with the ``OUTPUT_*`` code; a request over the
+    cap: 2 ``REQUEST_TOO_LONG``; a refused input: 1 with the distinct
+    validation codes; an invalid overlay: 2 with its fatal ``OVL_*`` codes;
+    an estimator failure: 2 with ``ESTIMATOR_*``. The failure mode (the
+    flow's vocabulary) starts the message."""
     cause = exc.__cause__
-    codes = list(getattr(exc, "codes", []) or [])
-    mode = getattr(exc, "failure_mode", "invalid_input")
-    code = f"{mode}" + (f" [{', '.join(codes)}]" if codes else "")  # e.g. "invalid_input [OUTPUT_INSIDE_INPUT]"
     if isinstance(cause, OutputError):
-        return CommandError(OUTPUT_LOCATION, code, cause.path or args.out, str(cause))
-    if isinstance(cause, RequestTooLong):
-        return CommandError(INVALID_REQUEST, code, args.asset, str(cause))
-    status = INVALID_INPUT if mode == "invalid_input" else INVALID_REQUEST
-    return CommandError(status, code, args.asset, str(exc))
+        return output_failure(cause, args.out)
+    codes = list(exc.codes)
+    if isinstance(cause, OverlayInvalid) and not codes:
+        codes = [i.code for i in cause.issues if i.severity == "error" and not i.fixed]
+    mode = exc.failure_mode
+    code = join_codes(codes) or mode.upper()
+    status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, RequestTooLong) else INVALID_REQUEST
+    msg = str(exc)
+    prefix = f"{args.asset}: "
+    if msg.startswith(prefix):
+        msg = msg[len(prefix):]
+    return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}")
 
 
 def _os_failure(exc: OSError, args: argparse.Namespace) -> CommandError:
     """An OSError of a refine run: under the output folder (read-only, full
     disk, permissions) -> status 4, else the input could not be read -> 1."""
-    name = errno.errorcode.get(exc.errno or 0, "OSERROR")
-    paths = [exc.filename, exc.filename2]
-    out = Path(args.out)
-    if any(_inside(p, out) for p in paths) or exc.errno in (errno.ENOSPC, errno.EROFS, getattr(errno, "EDQUOT", -1)):
-        return CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{name}]", exc.filename or args.out, exc.strerror or str(exc))
-    return CommandError(INVALID_INPUT, f"INPUT_READ_FAILED [{name}]", exc.filename or args.asset, exc.strerror or str(exc))
+    return os_failure(exc, args.out, args.asset)
 
 
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
 
     def progress(stage: str, message: str) -> None:
-        if not args.quiet:
-            print(f"[{time.perf_counter() - t0:6.2f}s] {stage:<12} {message}", flush=True)
+        line = f"[{time.perf_counter() - t0:6.2f}s] {stage:<12} {message}"
+        if message.startswith("WARNING"):  # warnings are printed with --quiet too, on stderr
+            print(line, file=sys.stderr, flush=True)
+        elif not args.quiet:
+            print(line, flush=True)
 
-    engines = ["pybullet"] + [e.strip() for e in getattr(args, "engines", "pybullet").split(",") if e.strip() and e.strip() != "pybullet"]
+    engines = ["pybullet"] + [e for e in parse_engines(getattr(args, "engines", "pybullet")) if e != "pybullet"]
     config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url, engines=engines)
     try:
         result = refine_stage.refine_asset(
@@ -149,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
     except OutputError as exc:  # e.g. an output file missing at the end: no completion marker
-        raise CommandError(OUTPUT_LOCATION, exc.code, exc.path or args.out, str(exc)) from exc
+        raise output_failure(exc, args.out) from exc
     except OSError as exc:
         raise _os_failure(exc, args) from exc
     for line in summary_lines(result):

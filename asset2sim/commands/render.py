@@ -2,14 +2,26 @@
 textured PNG views of an asset at a joint state.
 
 Exit code 0 when every view was written, 2 on bad input (missing asset or
-state file, unknown joint or view), 1 when rendering fails.
+state file, unknown joint or view), 1 when rendering fails, 4 when the output
+folder cannot be used (a file, ``/dev/null``, read-only); failures print one
+line ``asset2sim render: CODE: PATH: message``.
 """
 
 from __future__ import annotations
 
 import argparse
+import time
 from pathlib import Path
 
+from asset2sim.commands._status import (
+    INVALID_INPUT,
+    INVALID_REQUEST,
+    OUTPUT_LOCATION,
+    CommandError,
+    errno_name,
+    output_failure,
+    output_folder_failure,
+)
 from asset2sim.tasks.publish import output_folder
 from asset2sim.tasks.publish.render import (
     VIEWS,
@@ -51,20 +63,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import time
-
-
     views = [v.strip() for v in str(args.views).split(",") if v.strip()]
     unknown = [v for v in views if v not in VIEWS]
     if unknown or not views:
-        print(f"error: unknown view(s) {unknown}; known views: {list(VIEWS)}")
-        return 2
+        raise CommandError(INVALID_REQUEST, "VIEW_UNKNOWN", None, f"--views: unknown view(s) {unknown}; known views: {list(VIEWS)}")
+    bad_out = output_folder_failure(args.out)
+    if bad_out is not None:
+        raise bad_out
     try:
         urdf = resolve_urdf(args.asset)
         state = read_joint_state(args.state) if args.state is not None else {}
     except (OSError, ValueError) as exc:
-        print(f"error: {exc}")
-        return 2
+        where = args.state if args.state is not None and args.asset.exists() else args.asset
+        raise CommandError(INVALID_REQUEST, "RENDER_INPUT_INVALID", getattr(exc, "filename", None) or where, str(exc)) from exc
     t0 = time.perf_counter()
     try:
         with SceneRenderer(urdf, size=tuple(args.size), backend=args.backend, shadows=args.shadows) as r:
@@ -72,22 +83,21 @@ def run(args: argparse.Namespace) -> int:
             images = {v: r.render(v) for v in views}
             load = r.timings.prepare + r.timings.load
     except KeyError as exc:  # unknown joint or view
-        print(f"error: {exc.args[0] if exc.args else exc}")
-        return 2
+        raise CommandError(INVALID_REQUEST, "RENDER_INPUT_INVALID", args.state or urdf, str(exc.args[0] if exc.args else exc)) from exc
     except (OSError, ValueError) as exc:
-        print(f"error: {exc}")
-        return 2
+        raise CommandError(INVALID_REQUEST, "RENDER_INPUT_INVALID", urdf, str(exc)) from exc
     except RenderError as exc:
-        print(f"render failed: {exc}")
-        return 1
+        raise CommandError(INVALID_INPUT, "RENDER_FAILED", urdf, str(exc)) from exc
     try:
         with output_folder.adopting(args.out):  # views written into a refined folder become its own
             written = [write_png(args.out / f"{v}.png", img) for v, img in images.items()]
             if args.sheet:
                 written.append(write_png(args.out / "contact_sheet.png", render_contact_sheet(images, title=urdf.parent.name)))
+    except output_folder.OutputError as exc:
+        raise output_failure(exc, args.out) from exc
     except OSError as exc:
-        print(f"error: cannot write to {args.out}: {exc}")
-        return 1
+        raise CommandError(OUTPUT_LOCATION, f"OUTPUT_WRITE_FAILED [{errno_name(exc)}]", exc.filename or args.out,
+                           exc.strerror or str(exc)) from exc
     total = time.perf_counter() - t0
     for path in written:
         print(path)

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
+
+from asset2sim.commands._status import INVALID_REQUEST, CommandError
 
 from asset2sim.tasks.ingest.validate_input import (
     CODES,
@@ -48,8 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     unknown = [c for c in args.error + args.allow if c not in CODES]
     if unknown:
-        print(f"asset2sim validate: unknown code(s): {', '.join(unknown)}", file=sys.stderr)
-        return 2
+        raise CommandError(INVALID_REQUEST, "CODE_UNKNOWN", None, f"--error/--allow: unknown code(s): {', '.join(unknown)} "
+                           "(docs/validation.md lists the codes)")
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)

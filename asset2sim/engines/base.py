@@ -293,6 +293,11 @@ def register_viewer(name: str, factory: ViewerFactory) -> None:
     _VIEWERS[name] = factory
 
 
+def known_engines() -> list[str]:
+    """Names of every engine asset2sim knows (installed or not), sorted."""
+    return sorted(set(_ENGINES) | set(_LAZY))
+
+
 def available_engines() -> list[str]:
     """Names of engines that can be opened here (their packages import)."""
     out = []

@@ -10,6 +10,7 @@ with the policy's severity).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +20,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from asset2sim import safexml
 from asset2sim.schemas.overlay import ValidationIssue
+from asset2sim.tasks.interpret.prior_tables import MAX_PRIOR_DIM_M, load_priors
+from asset2sim.tasks.synthesize.validate_overlay import SCALE_RANGE
 
 Severity = Literal["error", "warning", "info"]
 Action = Literal["refuse", "replace_with_estimate", "mass_from_area", "ignore"]
@@ -32,8 +35,14 @@ __all__ = [
     "Finding",
     "IMAGE_EXTENSIONS",
     "JOINT_TYPES",
+    "MAX_COORDINATE",
     "MAX_LINKS",
+    "MAX_MOVABLE_JOINTS",
     "MAX_REVOLUTE_LIMIT",
+    "MAX_TEXTURE_BYTES",
+    "MAX_TEXTURE_PIXELS",
+    "MAX_TOTAL_TEXTURE_BYTES",
+    "MAX_TOTAL_TEXTURE_PIXELS",
     "MAX_TOTAL_FACES",
     "MESH_EXTENSIONS",
     "MESH_USE_DEPENDENT",
@@ -45,6 +54,7 @@ __all__ = [
     "Severity",
     "ValidationPolicy",
     "ValidationResult",
+    "asset_size_range",
     "codes_markdown_table",
     "errors",
     "has_errors",
@@ -92,6 +102,7 @@ CODES: dict[str, CodeInfo] = {
     "URDF_ROBOT_NAME_MISSING": _c("error", "structure", "<robot> has no name attribute (required by URDF; yourdfpy fails on it)"),
     "URDF_NO_LINKS": _c("error", "structure", "the robot has no <link>"),
     "URDF_TOO_MANY_LINKS": _c("error", "structure", "more links than the cap (128: PyBullet cannot load more)"),
+    "URDF_TOO_MANY_MOVABLE_JOINTS": _c("error", "structure", "more movable joints than the cap (64: refine would not finish within the flow's per-asset time limit)"),
     # numbers
     "NUMBER_NAN": _c("error", "numbers", "a NaN where a number is required"),
     "NUMBER_INF": _c("error", "numbers", "an infinity where a number is required"),
@@ -159,13 +170,17 @@ CODES: dict[str, CodeInfo] = {
     "MESH_MALFORMED": _c("error", "mesh_contents", "the mesh cannot be parsed"),
     "MESH_NO_FACES": _c("error", "mesh_contents", "the mesh has no face"),
     "MESH_NONFINITE_VERTEX": _c("error", "mesh_contents", "NaN or infinite vertex coordinates"),
+    "MESH_COORDINATE_IMPLAUSIBLE": _c("error", "mesh_contents", "a vertex coordinate beyond +-2e5 file units (MAX_COORDINATE: 20 m even at the smallest overlay scale 1e-4); checked before any arithmetic"),
+    "ASSET_SIZE_IMPLAUSIBLE": _c("error", "geometry", "the object's size (bounding box of all geometry at the zero pose) lies outside what any overlay scale in [1e-4, 1e4] can bring to a household size (asset_size_range)"),
     "MESH_BAD_INDEX": _c("error", "mesh_contents", "face indices out of range (or 0 in OBJ), faces with < 3 vertices"),
     "MESH_ZERO_AREA": _c("error", "mesh_contents", "every face is degenerate: the mesh has no surface"),
     "MESH_ZERO_VOLUME": _c("info", "mesh_contents", "all vertices in one plane (a sheet); fine when other pieces give volume"),
     "LINK_ZERO_VOLUME": _c("warning", "mesh_contents", "a link's whole mass geometry is flat: mass must come from area"),
-    "MESH_MATERIAL_OUTSIDE": _c("warning", "mesh_paths", "an mtllib/texture path leaving the folder (not used, not copied)"),
+    "MESH_MATERIAL_OUTSIDE": _c("warning", "mesh_paths", "an mtllib/texture path leaving the folder (not used, not copied; the statement is dropped from the output's copy of the OBJ/MTL)"),
     "MESH_MATERIAL_MISSING": _c("info", "mesh_paths", "an mtllib/texture file that does not exist"),
     "MATERIAL_NOT_REGULAR_FILE": _c("error", "mesh_paths", "an mtllib/texture path (or its symlink target, anywhere) is a FIFO, device or socket"),
+    "TEXTURE_TOO_LARGE": _c("error", "mesh_paths", "a texture above the file-size or pixel cap, per file (256 MiB, 8192 x 8192) or per asset (1 GiB, 4 x 8192 x 8192); read from the image header, nothing decoded"),
+    "TEXTURE_UNREADABLE": _c("error", "mesh_paths", "a texture file that is not an image PIL can identify (PyBullet and the renderer would fail on it)"),
     "TEXTURE_PATH_REFUSED": _c("error", "mesh_paths", "a URDF <texture filename> that is absolute, a URI, escapes the folder or is not an image file"),
     "TEXTURE_NOT_FOUND": _c("warning", "mesh_paths", "a URDF <texture filename> that does not exist"),
     # extras
@@ -186,14 +201,73 @@ MESH_EXTENSIONS = frozenset({".obj", ".stl", ".ply", ".off", ".glb", ".gltf", ".
 SIMULATOR_MESH_EXTENSIONS = frozenset({".obj", ".stl", ".dae"})
 #: PyBullet loads at most this many links (base included); measured: 128 load, 129 give an invalid body.
 MAX_LINKS = 128
+#: Movable (revolute, continuous, prismatic) joints per asset: refine's time grows about as N^2 in the worst
+#: case (every link pair in contact), so a bound on N bounds one asset's time (benchmarks/bench_joint_cap.py,
+#: docs/validation.md "Joint cap").
+MAX_MOVABLE_JOINTS = 64
 #: |revolute limit| above this (rad, two turns) cannot be meant as a stop.
 MAX_REVOLUTE_LIMIT = 4.0 * math.pi
 #: Total triangles per asset: refine's time and memory grow linearly (benchmarks/bench_mesh_cap.py, docs/validation.md).
 MAX_TOTAL_FACES = 1_000_000
+#: |vertex coordinate| of a mesh file above this (file units) cannot be meant:
+#: even at the smallest overlay scale refine accepts (SCALE_RANGE[0] = 1e-4) the
+#: vertex would lie more than MAX_PRIOR_DIM_M = 20 m (the largest dimension any
+#: prior may give a household object) from its link's frame. 2e5. Checked
+#: before any arithmetic on the vertices (1e308 would overflow).
+MAX_COORDINATE = MAX_PRIOR_DIM_M / SCALE_RANGE[0]
+#: Texture caps, from benchmarks/bench_texture_cap.py (PyBullet 3.2.x loading
+#: object 103275 with one texture replaced; docs/validation.md "Texture caps"):
+#: PyBullet's importer reads a texture file whole and holds about 2 bytes per
+#: byte of file (256 MiB: +510 MiB, 0.5 s per load; 1 GiB: +2.0 GiB, 3.1 s;
+#: 2 GiB: std::bad_alloc, the process dies), and decodes every texture at
+#: every load, about 8.6 MiB and 29 ms per megapixel (8192 x 8192: +577 MiB,
+#: 1.3 s; 16384 x 16384: +2.3 GiB, 7.7 s). Per file: 256 MiB (an 8192 x 8192
+#: PNG fits), 8192 x 8192 pixels; per asset: 1 GiB and 4 x 8192 x 8192
+#: pixels, about 2.3 GiB and 8 s per load at most, within the per-asset
+#: memory budget (8 GiB, benchmarks/bench_mesh_cap.py) beside the face cap.
+MAX_TEXTURE_BYTES = 256 * 1024 * 1024
+MAX_TEXTURE_PIXELS = 8192 * 8192
+MAX_TOTAL_TEXTURE_BYTES = 1024 * 1024 * 1024
+MAX_TOTAL_TEXTURE_PIXELS = 4 * 8192 * 8192
 IMAGE_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tga", ".tif", ".tiff", ".gif"})
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 MOVABLE_TYPES = frozenset({"revolute", "continuous", "prismatic", "floating", "planar"})
 SEMANTIC_KINDS = frozenset({"hinge", "slider", "free", "heavy", "static", "junk"})
+
+
+@functools.lru_cache(maxsize=1)
+def asset_size_range() -> tuple[float, float]:
+    """The sizes (file units) an asset may have for refine to find an overlay
+    scale inside ``SCALE_RANGE`` of ``tasks.synthesize.validate_overlay``.
+
+    The size measure is the one the estimator scales by
+    (``tasks.synthesize.estimate.choose_scale``): g = sqrt(e1 * e2), the
+    geometric mean of the two largest extents of the object's bounding box.
+    Refine's scale is s = G / g for a target G = sqrt(d1 * d2) of the
+    category's (or a named variant's) dimensions times a size-class factor
+    (``tasks.interpret.size_priors.target_size``). Over every category,
+    variant and size class of the priors, G lies in [G_min, G_max]; some
+    request can give s in [s_min, s_max] only when
+    g in [G_min / s_max, G_max / s_min]. With the shipped priors:
+    about [1.0e-6, 2.3e4] (USB stick "tiny" .. door "very large").
+    The handheld gripper cap only lowers s and is category-specific: not
+    part of this (request-independent) bound.
+
+    Returns:
+        (lowest, highest) g in file units.
+    """
+    pri = load_priors()
+    factors = [sc.factor for sc in pri.size_classes.values()]
+    targets: list[float] = []
+    for cat in pri.categories.values():
+        g = math.sqrt(cat.dims[0] * cat.dims[1])
+        targets += [g * f for f in factors]
+        for var in cat.variants:
+            gv = math.sqrt(var.dims[0] * var.dims[1])
+            own = pri.size_classes[var.size_class].factor
+            targets += [gv] + [gv * f / own for f in factors]
+    lo, hi = SCALE_RANGE
+    return min(targets) / hi, max(targets) / lo
 
 
 # ----------------------------------------------------------------------------- findings & policy
@@ -267,6 +341,17 @@ class ValidationPolicy:
         simulator_mesh_extensions: the formats refine can load; a
             recognised mesh of another format is ``MESH_FORMAT_UNSUPPORTED``.
         max_links: links per URDF (:data:`MAX_LINKS`).
+        max_movable_joints: revolute, continuous and prismatic joints per
+            URDF (:data:`MAX_MOVABLE_JOINTS`).
+        max_coordinate: |vertex coordinate| of a mesh file, file units
+            (:data:`MAX_COORDINATE`).
+        asset_size_range: (lowest, highest) size of the object, file units,
+            as :func:`asset_size_range` measures it; None: that function's
+            value (derived from the priors and the overlay's scale range).
+        max_texture_bytes: per texture file (MTL maps, URDF ``<texture>``), bytes.
+        max_texture_pixels: width x height per texture (image header).
+        max_total_texture_bytes, max_total_texture_pixels: the same over
+            every distinct texture map the asset's MTL files name.
         max_revolute_limit: |lower| and |upper| of a revolute joint, rad.
         max_prismatic_travel: |lower| and |upper| of a prismatic joint as a
             multiple of the object's size (the diagonal of the bounding box of
@@ -285,6 +370,13 @@ class ValidationPolicy:
     mesh_extensions: frozenset[str] = MESH_EXTENSIONS
     simulator_mesh_extensions: frozenset[str] = SIMULATOR_MESH_EXTENSIONS
     max_links: int = MAX_LINKS
+    max_movable_joints: int = MAX_MOVABLE_JOINTS
+    max_coordinate: float = MAX_COORDINATE
+    asset_size_range: tuple[float, float] | None = None
+    max_texture_bytes: int = MAX_TEXTURE_BYTES
+    max_texture_pixels: int = MAX_TEXTURE_PIXELS
+    max_total_texture_bytes: int = MAX_TOTAL_TEXTURE_BYTES
+    max_total_texture_pixels: int = MAX_TOTAL_TEXTURE_PIXELS
     max_revolute_limit: float = MAX_REVOLUTE_LIMIT
     max_prismatic_travel: float = 1.0
     check_mesh_contents: bool = True

@@ -17,17 +17,20 @@ import io
 import math
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import mesh_io, safexml
-from asset2sim.tasks.ingest.findings import MeshUse, Recorder
-from asset2sim.tasks.ingest.mesh_paths import MeshReference, file_kind, read_regular, resolve_mesh_reference
-from asset2sim.urdf import UrdfGeometry, UrdfLink
+from PIL import Image, UnidentifiedImageError
 
-__all__ = ["MeshChecks", "MeshScan", "geometry_corners", "scan_mesh_file"]
+from asset2sim import atomic, mesh_io, safexml
+from asset2sim.tasks.ingest.findings import MAX_COORDINATE, MeshUse, Recorder, asset_size_range
+from asset2sim.tasks.ingest.mesh_paths import MeshReference, file_kind, read_regular, resolve_mesh_reference
+from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfModel
+
+__all__ = ["MeshChecks", "MeshScan", "geometry_corners", "scan_mesh_file", "texture_problem", "zero_pose_bounds"]
 
 
 @dataclass
@@ -146,7 +149,8 @@ def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> tuple[n
 
 
 
-def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000) -> MeshScan:
+def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000,
+                   max_coordinate: float = MAX_COORDINATE) -> MeshScan:
     """Strictly read one mesh file and report its defects.
 
     OBJ by :func:`asset2sim.mesh_io.read_obj`, the reader of every later
@@ -160,12 +164,16 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
         path: a regular file (resolve it with :func:`resolve_mesh_reference`).
         max_bytes: size cap, bytes.
         max_faces: triangle cap.
+        max_coordinate: |coordinate| cap of the used vertices, file units;
+            checked (by comparison only) before any arithmetic on them, so
+            1e308 overflows nothing and prints no numpy warning.
 
     Returns:
         A :class:`MeshScan`; ``defects`` may hold MESH_MALFORMED,
         MESH_TOO_MANY_FACES, MESH_NO_FACES, MESH_NONFINITE_VERTEX,
-        MESH_BAD_INDEX, MESH_ZERO_AREA, MESH_ZERO_VOLUME. Never raises for a
-        bad file; OSError when the file cannot be read.
+        MESH_COORDINATE_IMPLAUSIBLE, MESH_BAD_INDEX, MESH_ZERO_AREA,
+        MESH_ZERO_VOLUME. Never raises for a bad file; OSError when the file
+        cannot be read.
     """
     path = Path(path)
     scan = MeshScan()
@@ -207,6 +215,13 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
         uv = uv[finite]
         if len(f) == 0:
             return scan
+    far = np.abs(uv) > max_coordinate  # a comparison: no overflow, no warning
+    if far.any():
+        worst = float(np.abs(uv).max())
+        scan.defects["MESH_COORDINATE_IMPLAUSIBLE"] = (
+            f"{int(far.any(axis=1).sum())} used vertex(es) beyond +-{max_coordinate:g} file units (largest |coordinate| "
+            f"{worst:.3g}): no overlay scale can make this a household object; check the mesh's units")
+        return scan
     tri = v[f]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area2 = np.linalg.norm(cross, axis=1)
@@ -228,11 +243,18 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
 
 
 def _is_flat(n: int, s1: np.ndarray, s2: np.ndarray) -> bool:
-    """Vertices whose scatter has a zero direction (relative 1e-9 of the extent)."""
+    """Vertices whose scatter has a zero direction (relative 1e-9 of the extent).
+    False when the moments are not finite (an implausible size, refused by
+    ASSET_SIZE_IMPLAUSIBLE; nothing to say about flatness)."""
     if n < 4:
         return True
-    mean = s1 / n
-    cov = s2 / n - np.outer(mean, mean)
+    if not (np.isfinite(s1).all() and np.isfinite(s2).all()):
+        return False
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = s1 / n
+        cov = s2 / n - np.outer(mean, mean)
+    if not np.isfinite(cov).all():
+        return False
     lam = np.linalg.eigvalsh(0.5 * (cov + cov.T))
     return bool(lam[2] <= 0 or math.sqrt(max(lam[0], 0.0)) <= 1e-9 * math.sqrt(lam[2]))
 
@@ -242,8 +264,9 @@ def _transform_moments(mom, origin, scale):
     n, s1, s2 = mom
     a = origin[:3, :3] @ np.diag(scale)
     t = origin[:3, 3]
-    as1 = a @ s1
-    return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge scales or origins: non-finite, see _is_flat
+        as1 = a @ s1
+        return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
 
 
 
@@ -280,6 +303,92 @@ def geometry_corners(g: UrdfGeometry, bounds: np.ndarray | None = None) -> np.nd
     return c @ g.origin[:3, :3].T + g.origin[:3, 3]
 
 
+def zero_pose_bounds(model: UrdfModel, root: str | None, mesh_bounds: dict[int, np.ndarray]) -> np.ndarray | None:
+    """Lower and upper corner (2, 3) of the axis-aligned bounding box of every
+    ``<visual>`` and ``<collision>`` geometry placed by forward kinematics at
+    the zero configuration (file units, root link frame; mesh bounds from
+    the mesh scan, ``mesh_bounds`` by ``id`` of the geometry). None when the
+    tree is broken (no root, a link reached twice), some geometry's size is
+    unknown, or there is no geometry. Huge numbers give non-finite corners,
+    without a numpy warning."""
+    if root is None:
+        return None
+    by_parent: dict[str, list] = {}
+    for j in model.joints:
+        if j.parent and j.child:
+            by_parent.setdefault(j.parent, []).append(j)
+    geoms = {ln.name: ln.visuals + ln.collisions for ln in model.link_elements if ln.name}
+    pts: list[np.ndarray] = []
+    stack = [(root, np.eye(4))]
+    seen: set[str] = set()
+    with np.errstate(over="ignore", invalid="ignore"):
+        while stack:
+            name, T = stack.pop()
+            if name in seen:
+                return None
+            seen.add(name)
+            for g in geoms.get(name, []):
+                c = geometry_corners(g, mesh_bounds.get(id(g)))
+                if c is None:
+                    if g.kind is not None:
+                        return None  # a size is unknown: no claim about the object's size
+                    continue
+                pts.append(c @ T[:3, :3].T + T[:3, 3])
+            for j in by_parent.get(name, []):
+                stack.append((j.child, T @ j.origin))
+        if not pts:
+            return None
+        allp = np.vstack(pts)
+        return np.stack([allp.min(axis=0), allp.max(axis=0)])
+
+
+def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
+    """(file size in bytes, width, height in pixels) of a texture map, read
+    without decoding it: the size by ``os.stat``, the dimensions from the
+    image header (``PIL.Image.open`` is lazy), the file opened only when it
+    is a regular file (:func:`asset2sim.atomic.open_regular`); a file above
+    ``max_bytes`` is not opened (width and height -1).
+
+    Raises:
+        OSError: it cannot be inspected or is not a regular file.
+        ValueError: PIL cannot identify it as an image
+            (``PIL.UnidentifiedImageError``, a decompression bomb beyond
+            PIL's own limit, a truncated header).
+    """
+    size = os.stat(path).st_size
+    if size > max_bytes:
+        return size, -1, -1
+    with atomic.open_regular(path) as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            with Image.open(fh) as im:
+                w, h = im.size
+        except (UnidentifiedImageError, Image.DecompressionBombError, SyntaxError) as exc:
+            raise ValueError(f"{type(exc).__name__}: {str(exc)[:160]}") from exc
+    return size, int(w), int(h)
+
+
+def texture_problem(path: Path, max_bytes: int, max_pixels: int) -> tuple[str, str] | None:
+    """Why a texture map cannot be loaded safely (None: it can): above the
+    file-size cap, not an image PIL can identify, or above the pixel cap
+    (width x height from the header, :func:`texture_header`).
+
+    Returns:
+        (code, message): ``TEXTURE_TOO_LARGE`` or ``TEXTURE_UNREADABLE``.
+    """
+    try:
+        size, w, h = texture_header(path, max_bytes)
+    except OSError as exc:
+        return "TEXTURE_UNREADABLE", f"cannot be opened as a regular file ({exc.strerror or exc})"
+    except ValueError as exc:
+        return "TEXTURE_UNREADABLE", f"not an image the simulator can load ({exc})"
+    if size > max_bytes:
+        return "TEXTURE_TOO_LARGE", f"{size} bytes > cap {max_bytes} (PyBullet reads the whole file, twice over)"
+    if w * h > max_pixels:
+        return "TEXTURE_TOO_LARGE", f"{w} x {h} = {w * h} pixels > cap {max_pixels} (PyBullet decodes it at every load)"
+    return None
+
+
 class MeshChecks(Recorder):
     """Mesh references, contents and materials (mixin of the validator)."""
 
@@ -287,6 +396,30 @@ class MeshChecks(Recorder):
         super().__init__(asset, policy)
         #: (2, 3) vertex bounds (file units, scale 1) of each scanned mesh geometry, by ``id`` of its UrdfGeometry
         self.mesh_bounds: dict[int, np.ndarray] = {}
+        self._textures_seen: set[Path] = set()
+        self._texture_totals = [0, 0]  # bytes, pixels of the accepted texture maps
+
+    def asset_size(self, model: UrdfModel, root: str | None) -> None:
+        """``ASSET_SIZE_IMPLAUSIBLE`` when the object's size g = sqrt(e1 * e2)
+        (the two largest extents of :func:`zero_pose_bounds`, file units) is
+        not finite or lies outside ``policy.asset_size_range`` (default
+        :func:`asset2sim.tasks.ingest.findings.asset_size_range`: the sizes
+        for which some category and size class give an overlay scale that
+        ``tasks.synthesize.validate_overlay`` accepts). Skipped when the size
+        is unknown (broken tree, unread mesh)."""
+        box = zero_pose_bounds(model, root, self.mesh_bounds)
+        if box is None:
+            return
+        lo, hi = self.policy.asset_size_range or asset_size_range()
+        with np.errstate(over="ignore", invalid="ignore"):
+            ext = np.sort(box[1] - box[0])[::-1]
+            g = float(math.sqrt(ext[0]) * math.sqrt(ext[1])) if np.isfinite(ext).all() else math.inf
+        if not (lo <= g <= hi):
+            self.add("ASSET_SIZE_IMPLAUSIBLE",
+                     f"the object measures {np.array2string(ext, precision=3)} file units (bounding box of all geometry at the "
+                     f"zero pose; size sqrt(e1 e2) = {g:.3g}): refine scales it to a household size with one factor in "
+                     f"the overlay's range, which needs a size within [{lo:.3g}, {hi:.3g}]; check the units of the "
+                     "meshes and of the mesh scale", size=g, extents=[float(x) for x in ext], size_range=[lo, hi])
 
     def meshes(self, links: list[UrdfLink]) -> None:
         """Resolve, scan and check every ``<mesh>`` of ``links`` (every
@@ -329,7 +462,8 @@ class MeshChecks(Recorder):
                 scan = scans.get(ref.path)
                 if scan is None:
                     try:
-                        scan = scan_mesh_file(ref.path, max_bytes=pol.max_mesh_bytes, max_faces=pol.max_mesh_faces)
+                        scan = scan_mesh_file(ref.path, max_bytes=pol.max_mesh_bytes, max_faces=pol.max_mesh_faces,
+                                              max_coordinate=pol.max_coordinate)
                     except OSError as exc:
                         scan = f"cannot read: {exc}"
                     scans[ref.path] = scan
@@ -361,6 +495,7 @@ class MeshChecks(Recorder):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "
                          "mass must come from the surface area (shell), not the volume",
                          line=ln.line, link=lname, action="mass_from_area", role=mass_role)
+        self.texture_totals()
         if total_faces > pol.max_total_faces:
             self.add("MESH_TOO_MANY_FACES", f"{total_faces} triangles over all meshes > cap {pol.max_total_faces} "
                      "(the bound that keeps one asset's refine within the flow's time and memory limits; docs/validation.md)",
@@ -399,7 +534,35 @@ class MeshChecks(Recorder):
             mtl_dir = Path(os.path.dirname(os.path.join(str(mesh_dir), name)))
             for tname in mesh_io.mtl_texture_maps(data):
                 tex = resolve_mesh_reference(self.folder, tname, base=mtl_dir, extensions=())
-                self._material_ref(tex, mtl_dir, ref.path, link)
+                if self._material_ref(tex, mtl_dir, ref.path, link):
+                    assert tex.path is not None
+                    self.texture_file(tex.path, tname, self.rel(ref.path), link=link)
+
+    def texture_file(self, path: Path, name: str, owner: str, *, line: int | None = None, link: str | None = None) -> None:
+        """The texture caps on one texture map (:func:`texture_problem`), each
+        real file checked once; ``owner`` the file that names it (relative)."""
+        if path in self._textures_seen:
+            return
+        self._textures_seen.add(path)
+        pol = self.policy
+        problem = texture_problem(path, pol.max_texture_bytes, pol.max_texture_pixels)
+        if problem is not None:
+            code, msg = problem
+            self.add(code, f"{owner} refers to texture {name!r}: {msg}", file=self.rel(path), line=line, link=link, referenced_by=owner)
+            return
+        size, w, h = texture_header(path, pol.max_texture_bytes)
+        self._texture_totals[0] += size
+        self._texture_totals[1] += w * h
+
+    def texture_totals(self) -> None:
+        """The per-asset texture caps (bytes and pixels over every distinct
+        texture map the MTL files name): PyBullet holds them all at once."""
+        pol = self.policy
+        size, pixels = self._texture_totals
+        if size > pol.max_total_texture_bytes or pixels > pol.max_total_texture_pixels:
+            self.add("TEXTURE_TOO_LARGE", f"the textures of the asset total {size} bytes and {pixels} pixels > caps "
+                     f"{pol.max_total_texture_bytes} bytes, {pol.max_total_texture_pixels} pixels (PyBullet loads them all; "
+                     "docs/validation.md, Texture caps)", total_bytes=size, total_pixels=pixels)
 
     def _material_ref(self, ref: MeshReference, base: Path, owner: Path, link: str | None) -> bool:
         """Record one MTL or texture reference; True when it is a usable file
@@ -417,6 +580,7 @@ class MeshChecks(Recorder):
         elif ref.code == "MESH_NOT_FOUND":
             self.add("MESH_MATERIAL_MISSING", f"{orel} refers to {ref.filename!r}, which does not exist", file=orel, link=link)
         else:
-            self.add("MESH_MATERIAL_OUTSIDE", f"{orel} refers to {ref.filename!r}: {ref.message}; it is ignored",
+            self.add("MESH_MATERIAL_OUTSIDE", f"{orel} refers to {ref.filename!r}: {ref.message}; it is ignored "
+                     "(not copied; the statement is dropped from the output's copy)",
                      file=orel, link=link, reason=ref.code)
         return False

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from asset2sim.tasks.ingest.findings import MOVABLE_TYPES, Recorder
-from asset2sim.tasks.ingest.mesh_checks import geometry_corners
+from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
 from asset2sim.urdf import UrdfJoint, UrdfLink, UrdfModel
 
@@ -55,7 +55,7 @@ class TreeChecks(Recorder):
     # -- structure
     def structure(self, model: UrdfModel) -> tuple[set[str], str | None]:
         """Names, parents and children, cycles, orphans, the root, the link
-        cap and mimic joints of ``model`` (every ``<link>`` element).
+        cap, the movable-joint cap and mimic joints of ``model`` (every ``<link>`` element).
         Returns (moving links, root)."""
         links, joints = model.link_elements, model.joints
         if not links:
@@ -64,6 +64,11 @@ class TreeChecks(Recorder):
         if len(links) > self.policy.max_links:
             self.add("URDF_TOO_MANY_LINKS", f"{len(links)} links > cap {self.policy.max_links}: PyBullet, which refine "
                      f"runs, loads at most {self.policy.max_links} links per body", links=len(links), cap=self.policy.max_links)
+        movable = model.movable_joints
+        if len(movable) > self.policy.max_movable_joints:
+            self.add("URDF_TOO_MANY_MOVABLE_JOINTS", f"{len(movable)} movable joints > cap {self.policy.max_movable_joints}: "
+                     f"refine's closed-state, state search and rest tests grow with the number of joints and would not "
+                     f"finish within the flow's per-asset time limit", joints=len(movable), cap=self.policy.max_movable_joints)
         seen: dict[str, UrdfLink] = {}
         for ln in links:
             if not ln.name:
@@ -207,35 +212,11 @@ class TreeChecks(Recorder):
         placed by forward kinematics at the zero configuration (file units;
         mesh bounds from the mesh scan, ``mesh_bounds``). Skipped when the
         tree is broken or some size is unknown."""
-        if root is None:
+        box = zero_pose_bounds(model, root, self.mesh_bounds)
+        if box is None or not np.isfinite(box).all():
             return
         joints = model.joints
-        by_parent: dict[str, list] = {}
-        for j in joints:
-            if j.parent and j.child:
-                by_parent.setdefault(j.parent, []).append(j)
-        geoms = {ln.name: ln.visuals + ln.collisions for ln in model.link_elements if ln.name}
-        pts: list[np.ndarray] = []
-        stack = [(root, np.eye(4))]
-        seen: set[str] = set()
-        while stack:
-            name, T = stack.pop()
-            if name in seen:
-                return
-            seen.add(name)
-            for g in geoms.get(name, []):
-                c = geometry_corners(g, self.mesh_bounds.get(id(g)))
-                if c is None:
-                    if g.kind is not None:
-                        return  # a size is unknown: no claim about the object's size
-                    continue
-                pts.append(c @ T[:3, :3].T + T[:3, 3])
-            for j in by_parent.get(name, []):
-                stack.append((j.child, T @ j.origin))
-        if not pts:
-            return
-        allp = np.vstack(pts)
-        size = float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0)))
+        size = float(np.linalg.norm(box[1] - box[0]))
         cap = self.policy.max_prismatic_travel * size
         for j in joints:
             lim = j.limit

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from asset2sim import safexml
 from asset2sim.tasks.ingest.findings import IMAGE_EXTENSIONS, Recorder
+from asset2sim.tasks.ingest.mesh_checks import texture_problem
 from asset2sim.tasks.ingest.mesh_paths import resolve_mesh_reference
 from asset2sim.urdf import Problem, UrdfMaterial, UrdfModel, parse_urdf_bytes
 
@@ -134,6 +135,9 @@ class UrdfChecks(Recorder):
         ref = resolve_mesh_reference(self.folder, fname, extensions=IMAGE_EXTENSIONS, max_bytes=self.policy.max_mesh_bytes)
         if ref.path is not None and ref.path not in self.result.material_files:
             self.result.material_files.append(ref.path)
+        problem = texture_problem(ref.path, self.policy.max_texture_bytes, self.policy.max_texture_pixels) if ref.code is None and ref.path else None
+        if problem is not None:
+            self.add(problem[0], f"<texture filename={fname!r}>: {problem[1]}", line=mat.texture_line, link=link)
         if ref.code == "MESH_NOT_FOUND":
             self.add("TEXTURE_NOT_FOUND", f"<texture filename={fname!r}> does not exist", line=mat.texture_line, link=link)
         elif ref.code is not None:

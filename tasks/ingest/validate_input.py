@@ -241,6 +241,7 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         moving, root = self.structure(model)
         self.inertials(model, moving)
         self.meshes(model.link_elements)
+        self.asset_size(model, root)
         self.joint_travel(model, root)
         self.extras({ln.name for ln in model.link_elements if ln.name})
         return self.result

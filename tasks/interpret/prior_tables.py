@@ -107,14 +107,18 @@ class LabelTable(PriorModel):
 
 Dims = tuple[float, float, float]
 
+#: Largest dimension (m) a category or variant prior may give: beyond it an
+#: object is not a household object (checked on load).
+MAX_PRIOR_DIM_M: float = 20.0
+
 
 def _check_dims(v: Dims) -> Dims:
     if any(not (x > 0.0) for x in v):
         raise ValueError(f"dims must be positive metres, got {v}")
     if not (v[0] >= v[1] >= v[2]):
         raise ValueError(f"dims must be sorted [longest, middle, shortest], got {v}")
-    if v[0] > 20.0:
-        raise ValueError(f"dims larger than 20 m are not a household object: {v}")
+    if v[0] > MAX_PRIOR_DIM_M:
+        raise ValueError(f"dims larger than {MAX_PRIOR_DIM_M:g} m are not a household object: {v}")
     return v
 
 

@@ -42,7 +42,7 @@ from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.publish.output_folder import MARKER_NAME, OwnedFolder
+from asset2sim.tasks.publish.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OwnedFolder, read_record
 
 REPORT_NAME = "report.json"
 #: The flow's record of an asset's job in its run's work folder
@@ -100,14 +100,19 @@ def is_complete(out_dir: Path | str, input_hash: str, config_hash: str) -> bool:
     with its recorded SHA-256."""
     marker = Path(out_dir) / MARKER_NAME
     try:
-        data = json.loads(marker.read_text())
+        data = read_record(marker)  # a regular file only: a FIFO there never blocks
     except (OSError, ValueError):
+        return False
+    if not isinstance(data, dict) or not isinstance(data.get("files", {}), dict):
         return False
     if data.get("input_hash") != input_hash or data.get("config_hash") != config_hash or data.get("version") != __version__:
         return False
     for rel, digest in data.get("files", {}).items():
         p = Path(out_dir) / rel
-        if not p.is_file() or atomic.sha256_file(p) != digest:
+        try:
+            if not p.is_file() or atomic.sha256_file(p) != digest:
+                return False
+        except OSError:  # replaced by a FIFO or removed meanwhile
             return False
     return True
 
@@ -180,7 +185,7 @@ def write_job_record(work_dir: Path | str, record: JobRecord) -> Path:
 def read_job_record(work_dir: Path | str) -> JobRecord | None:
     """The job record of ``work_dir``; None when absent or unreadable."""
     try:
-        return JobRecord.model_validate_json((Path(work_dir) / JOB_RECORD_NAME).read_text())
+        return JobRecord.model_validate_json(atomic.read_regular(Path(work_dir) / JOB_RECORD_NAME, MAX_RECORD_BYTES))
     except (OSError, ValueError):
         return None
 
@@ -214,7 +219,7 @@ def refined_output(out_dir: Path | str) -> "RefineOutput":
         OSError / ValueError: no readable ``report.json`` of the report schema.
     """
     out_dir = Path(out_dir)
-    report = RefineReport.model_validate_json((out_dir / REPORT_NAME).read_text())
+    report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, MAX_RECORD_BYTES))
     return RefineOutput(report=report, out_dir=str(out_dir), skipped=True, tokens=report_tokens(report, out_dir))
 
 
@@ -227,7 +232,7 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
     if report.model_tokens > 0:
         return int(report.model_tokens)
     try:
-        est = json.loads((Path(out_dir) / "overlay.json").read_text()).get("estimator", {})
+        est = read_record(Path(out_dir) / "overlay.json").get("estimator", {})
         if isinstance(est.get("tokens"), (int, float)) and est["tokens"] > 0:
             return int(est["tokens"])
     except (OSError, ValueError, AttributeError):

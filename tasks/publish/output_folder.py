@@ -6,7 +6,13 @@ decides which files are the product's and keeps that record on disk:
 
 - **where**: :func:`check_location` refuses an output folder that is the input
   folder, lies inside it, contains it, or resolves into it through symlinks,
-  and a path that exists but is not a folder (a file, ``/dev/null``).
+  a path that exists but is not a folder (a file, ``/dev/null``), and a
+  folder whose bookkeeping file (below) is not a regular file (a FIFO there
+  would block the reader forever).
+- **reading**: every file this module or the skip rule reads back from an
+  output folder (the bookkeeping files, ``report.json``, ``overlay.json``) is
+  read through :func:`asset2sim.atomic.read_regular`, which checks on the open
+  descriptor that it is a regular file before reading: never a hang.
 - **what is ours**: while a run writes, ``.asset2sim-owned.json`` lists every
   file the run is about to write (updated *before* each file's temporary file
   is created, through :func:`asset2sim.atomic.add_observer`), so a run killed
@@ -33,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import stat
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
@@ -44,6 +51,8 @@ MARKER_NAME = ".asset2sim-complete.json"
 RECORD_NAME = ".asset2sim-owned.json"
 _BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})
 _MAX_LISTED = 5
+#: A bookkeeping file larger than this (bytes) is not one asset2sim wrote (a marker lists at most a few thousand files).
+MAX_RECORD_BYTES = 64 * 1024 * 1024
 
 #: codes of :class:`OutputError`
 CODES = {
@@ -52,6 +61,8 @@ CODES = {
     "OUTPUT_CONTAINS_INPUT": "the output folder contains the input folder",
     "OUTPUT_NOT_A_FOLDER": "the output path exists and is not a folder",
     "OUTPUT_NOT_EMPTY": "the output folder holds files asset2sim did not write (use --overwrite)",
+    "OUTPUT_RECORD_NOT_A_FILE": "a bookkeeping file (.asset2sim-complete.json, .asset2sim-owned.json) is not a regular file (FIFO, folder, symlink ...)",
+    "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
     "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
     "OUTPUT_NAME_CONFLICT": "two different input files would be copied to one output path, or onto a file of the contract",
     "OUTPUT_INCOMPLETE": "a file the run wrote is missing at the end (no completion marker written)",
@@ -90,8 +101,8 @@ def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:
 
     Raises:
         OutputError: ``OUTPUT_IS_INPUT``, ``OUTPUT_INSIDE_INPUT`` (also when a
-            symlink on the way leads into the input), ``OUTPUT_CONTAINS_INPUT``
-            or ``OUTPUT_NOT_A_FOLDER``.
+            symlink on the way leads into the input), ``OUTPUT_CONTAINS_INPUT``,
+            ``OUTPUT_NOT_A_FOLDER`` or ``OUTPUT_RECORD_NOT_A_FILE``.
     """
     given = Path(os.path.abspath(out_dir))
     out = given.resolve()
@@ -106,7 +117,50 @@ def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:
         raise OutputError(f"output folder {given} contains the input folder {src}; choose a folder beside it", "OUTPUT_CONTAINS_INPUT", given)
     if os.path.lexists(given) and not out.is_dir():
         raise OutputError(f"output path {given} exists and is not a folder", "OUTPUT_NOT_A_FOLDER", given)
+    if out.is_dir():
+        check_bookkeeping(out)
     return out
+
+
+def check_bookkeeping(out_dir: Path | str) -> None:
+    """Refuse an output folder whose completion marker or ownership record
+    exists but is not a regular file (``os.lstat``: nothing is opened, so a
+    FIFO cannot block; a symlink is refused too, asset2sim never writes one).
+
+    Raises:
+        OutputError: ``OUTPUT_RECORD_NOT_A_FILE`` naming the file.
+    """
+    for name in (MARKER_NAME, RECORD_NAME):
+        p = Path(out_dir) / name
+        try:
+            mode = os.lstat(p).st_mode
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"{p}: cannot be inspected ({exc.strerror})", "OUTPUT_RECORD_NOT_A_FILE", p) from exc
+        if not stat.S_ISREG(mode):
+            kind = _KINDS.get(stat.S_IFMT(mode), "special file")
+            raise OutputError(
+                f"{p}: a {kind}, not the regular file asset2sim writes there; remove it or choose another output folder",
+                "OUTPUT_RECORD_NOT_A_FILE", p,
+            )
+
+
+_KINDS = {stat.S_IFDIR: "folder", stat.S_IFIFO: "FIFO", stat.S_IFLNK: "symlink", stat.S_IFCHR: "character device",
+          stat.S_IFBLK: "block device", stat.S_IFSOCK: "socket"}
+
+
+def read_record(path: Path | str) -> Any:
+    """The JSON of a bookkeeping file (or of ``report.json`` and the like) of
+    an output folder, read only when it is a regular file of at most
+    :data:`MAX_RECORD_BYTES` (:func:`asset2sim.atomic.read_regular`: a FIFO
+    never blocks).
+
+    Raises:
+        OSError: missing, not a regular file, too large, unreadable.
+        ValueError: not UTF-8 JSON.
+    """
+    return json.loads(atomic.read_regular(path, MAX_RECORD_BYTES).decode("utf-8"))
 
 
 def _safe_rel(rel: Any) -> str | None:
@@ -128,8 +182,8 @@ def recorded_files(out_dir: Path | str) -> set[str]:
     owned: set[str] = set()
     for name, key in ((RECORD_NAME, "files"), (MARKER_NAME, "files")):
         try:
-            data = json.loads((out / name).read_text(encoding="utf-8"))
-        except (OSError, ValueError, UnicodeDecodeError):
+            data = read_record(out / name)
+        except (OSError, ValueError):
             continue
         entries = data.get(key) if isinstance(data, dict) else None
         for rel in entries or []:
@@ -361,9 +415,9 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
     process) until :meth:`OwnedFolder.finish` or :meth:`OwnedFolder.close`.
 
     Raises:
-        OutputError: a refused location, or ``OUTPUT_NOT_EMPTY`` naming the
-            first files the product did not write.
-        OSError: the folder cannot be created or written.
+        OutputError: a refused location, ``OUTPUT_NOT_EMPTY`` naming the
+            first files the product did not write, or ``OUTPUT_WRITE_FAILED``
+            when the folder cannot be created or written.
     """
     root = check_location(source_dir, out_dir)
     given = Path(os.path.abspath(out_dir))
@@ -376,26 +430,38 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
             raise OutputError(
                 f"output folder {given} holds {len(foreign)} file(s) asset2sim did not write "
                 f"({', '.join(foreign[:_MAX_LISTED])}{', ...' if len(foreign) > _MAX_LISTED else ''}); "
-                "choose an empty or new folder, or pass --overwrite (overwrite=True) to write beside them",
+                "choose an empty or new folder, or allow writing beside them (overwrite)",
                 "OUTPUT_NOT_EMPTY", given / foreign[0],
             )
     else:
         previous = set()
-        root.mkdir(parents=True, exist_ok=True)
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _write_failed(given, exc) from exc
         root = root.resolve()
     owner = OwnedFolder(root=root, given=given, source=src, created=created)
-    if previous:
-        # claim first, so a kill during the removal leaves them recorded
-        atomic.write_json(root / RECORD_NAME, {"version": 1, "files": sorted(previous)})
-    (root / MARKER_NAME).unlink(missing_ok=True)
-    for rel in sorted(previous):
-        _remove_with_temps(root, rel)
-    _prune_empty(root, previous)
-    owner._save()
+    try:
+        if previous:
+            # claim first, so a kill during the removal leaves them recorded
+            atomic.write_json(root / RECORD_NAME, {"version": 1, "files": sorted(previous)})
+        (root / MARKER_NAME).unlink(missing_ok=True)
+        for rel in sorted(previous):
+            _remove_with_temps(root, rel)
+        _prune_empty(root, previous)
+        owner._save()
+    except OSError as exc:
+        raise _write_failed(given, exc) from exc
     with _ACTIVE_LOCK:
         _ACTIVE[root] = owner
         atomic.add_observer(_dispatch)
     return owner
+
+
+def _write_failed(given: Path, exc: OSError) -> OutputError:
+    """``OUTPUT_WRITE_FAILED`` for an OSError met while preparing the folder."""
+    where = exc.filename or given
+    return OutputError(f"output folder {given} cannot be created or written ({exc.strerror or exc})", "OUTPUT_WRITE_FAILED", where)
 
 
 def product_folder(path: Path | str) -> Path | None:
@@ -421,7 +487,7 @@ def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
         yield None
         return
     try:
-        data = json.loads((root / RECORD_NAME).read_text(encoding="utf-8"))
+        data = read_record(root / RECORD_NAME)
         files = {r for r in (_safe_rel(x) for x in data.get("files", [])) if r is not None}
     except (OSError, ValueError, AttributeError):
         files = set()

@@ -12,6 +12,7 @@ written atomically; the input folder is never written.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -149,10 +150,100 @@ def collision_folder(asset: AssetDescription) -> str:
     raise OutputError(f"{asset.source_dir}: no free folder name for collision pieces", "OUTPUT_NAME_CONFLICT", asset.source_dir)
 
 
+_URI = ("file:", "http:", "https:", "ftp:", "package:", "data:")
+
+
+def reference_leaves_folder(ref: str, file_rel: str) -> bool:
+    """True when the path ``ref``, written in the output file ``file_rel``
+    (relative POSIX path inside the output folder), would be opened outside
+    the output folder: absolute, a URI (``file://``, ``package://`` ...), a
+    drive or NUL, or a relative path whose ``..`` leave the folder."""
+    r = ref.strip().strip('"')
+    if not r or "\x00" in r or r.startswith(("/", "\\")) or r.lower().startswith(_URI) or "://" in r:
+        return True
+    if len(r) > 1 and r[1] == ":":  # C:\x
+        return True
+    joined = os.path.normpath(os.path.join(os.path.dirname(file_rel), r.replace("\\", "/")))
+    return joined == ".." or joined.startswith("../") or os.path.isabs(joined)
+
+
+def _drop_outside_references(data: bytes, file_rel: str, names_of) -> tuple[bytes, list[str]]:
+    """``data`` with every line that names a file outside the output folder
+    (:func:`reference_leaves_folder`) replaced by a comment; ``names_of(line)``
+    gives the file names a line names (``mesh_io.mtl_texture_maps`` for an
+    MTL, ``mesh_io.mtl_libraries`` for an OBJ). Returns (bytes, dropped
+    statement keywords)."""
+    out: list[bytes] = []
+    dropped: list[str] = []
+    for line in data.splitlines(keepends=True):
+        names = names_of(line)
+        if names and any(reference_leaves_folder(n, file_rel) for n in names):
+            key = line.split(maxsplit=1)[0].decode("utf-8", "replace")
+            dropped.append(key)
+            end = b"\r\n" if line.endswith(b"\r\n") else (b"\n" if line.endswith(b"\n") else b"")
+            out.append(f"# asset2sim: a {key} statement naming a file outside the asset folder was dropped".encode() + end)
+        else:
+            out.append(line)
+    return b"".join(out), dropped
+
+
+def material_references(asset: AssetDescription, copies: dict[str, Path] | None = None) -> dict[str, str]:
+    """The copied files that name other files: output path -> ``"obj"`` (its
+    ``mtllib`` statements) or ``"mtl"`` (its texture statements), for the
+    OBJ meshes of the URDF and the MTL libraries they name (as the copies of
+    :func:`mesh_copies` place them)."""
+    copies = mesh_copies(asset) if copies is None else copies
+    kinds: dict[str, str] = {}
+    for ln in asset.links:
+        for g in ln.visuals + ln.collisions:
+            if g.kind != "mesh" or g.path is None or not g.filename:
+                continue
+            rel = PurePosixPath(os.path.normpath(g.filename).replace(os.sep, "/")).as_posix()
+            if rel not in copies or PurePosixPath(rel).suffix.lower() != ".obj":
+                continue
+            kinds[rel] = "obj"
+            try:
+                names = mesh_io.mtl_libraries(atomic.read_regular(copies[rel]))
+            except OSError:
+                continue
+            for name in names:
+                if reference_leaves_folder(name, rel):
+                    continue
+                mtl_rel = PurePosixPath(os.path.normpath(os.path.join(os.path.dirname(rel), name))).as_posix()
+                if mtl_rel in copies:
+                    kinds.setdefault(mtl_rel, "mtl")
+    return kinds
+
+
+def copied_bytes(src: Path, rel: str, kind: str | None) -> bytes:
+    """What the output holds at ``rel`` for the input file ``src``: its bytes,
+    for an OBJ (``kind="obj"``) or MTL (``"mtl"``) with every ``mtllib`` /
+    texture statement that names a file outside the asset folder (absolute,
+    URI, ``..`` leaving it) replaced by a comment, so the output never makes a
+    simulator (PyBullet, SAPIEN, MuJoCo) open a file outside it; the
+    validator reports such statements (``MESH_MATERIAL_OUTSIDE``)."""
+    data = atomic.read_regular(src)
+    edited = _edited_copy(data, rel, kind)
+    return data if edited is None else edited
+
+
+def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
+    """:func:`copied_bytes` of ``data`` when a statement was dropped, else None."""
+    if kind not in ("obj", "mtl"):
+        return None
+    if kind == "obj" and b"mtllib" not in data:  # fast path for large meshes
+        return None
+    new, dropped = _drop_outside_references(data, rel, mesh_io.mtl_libraries if kind == "obj" else mesh_io.mtl_texture_maps)
+    return new if dropped else None
+
+
 def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
     """Copy every mesh the URDF references (and its MTL/textures) into
     ``out_dir`` at the paths of :func:`mesh_copies` (regular files, never
     links), creating the folders a referenced path walks through.
+
+    OBJ and MTL copies lose the statements that name files outside the asset
+    folder (:func:`copied_bytes`); every other file is copied byte for byte.
 
     Returns the destination paths. Files already present with the same
     content (and not symlinks) are not rewritten; they are announced to the
@@ -163,24 +254,32 @@ def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
         OSError: a file cannot be read or written.
     """
     copies = mesh_copies(asset)
+    kinds = material_references(asset, copies)
     out_dir = Path(out_dir)
     out: list[Path] = []
     todo: list[tuple[Path, Path]] = []
+    edited: list[tuple[Path, bytes]] = []
     kept: list[Path] = []
     for rel, src in sorted(copies.items()):
         dst = out_dir / rel
+        data = _edited_copy(atomic.read_regular(src), rel, kinds[rel]) if rel in kinds else None  # None: a plain copy
+        size = len(data) if data is not None else src.stat().st_size
         same = (
-            dst.is_file() and not dst.is_symlink() and dst.stat().st_size == src.stat().st_size
-            and atomic.sha256_file(dst) == atomic.sha256_file(src)
+            dst.is_file() and not dst.is_symlink() and dst.stat().st_size == size
+            and atomic.sha256_file(dst) == (atomic.sha256_file(src) if data is None else hashlib.sha256(data).hexdigest())
         )
         if same:
             kept.append(dst)
-        else:
+        elif data is None:
             todo.append((src, dst))
+        else:
+            edited.append((dst, data))
         out.append(dst)
     if kept:
         atomic.announce(kept)
     atomic.copy_files(todo)
+    for dst, data in edited:
+        atomic.write_bytes(dst, data)
     for ln in asset.links:
         for g in ln.visuals + ln.collisions:
             if g.kind == "mesh" and g.filename:

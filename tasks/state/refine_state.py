@@ -7,7 +7,8 @@ Solves, within each joint's allowed interval,
 where Phi(q) (m) is the self-penetration score of the SPEC measured in
 PyBullet (sum over self-contact points of max(0, -separation); queried per link pair
 with ``getClosestPoints`` so that no value depends on contact points Bullet
-cached at earlier states of the session), q_req the
+cached at earlier states of the session; pairs that did not move since
+their last query are not re-queried: :mod:`~asset2sim.tasks.state.penetration`), q_req the
 requested state projected onto the intervals, R_j the joint's opening range
 (so deviations are measured as fractions of the range) and lambda (m) the
 trade-off (``RefineConfig.state_lambda``). The allowed interval of a joint is
@@ -36,6 +37,7 @@ import numpy as np
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.report import StateRefinement
 from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.state.penetration import StatePenetration
 
 
 @dataclass
@@ -132,13 +134,18 @@ def refine_initial_state(
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
     evals = 0
 
-    penetration = getattr(session, "self_penetration_fresh", session.self_penetration)
+    if hasattr(session, "self_penetration_fresh"):
+        # the same Phi as the engine's fresh query, re-queried only for moved pairs
+        fresh = StatePenetration(session, asset, names)
+        penetration = lambda q: fresh(q)  # noqa: E731
+    else:
+        penetration = lambda q: session.self_penetration()  # noqa: E731
 
     def objective(q: dict[str, float]) -> tuple[float, float]:
         nonlocal evals
         evals += 1
         session.set_joint_positions(q)
-        phi, _ = penetration()
+        phi, _ = penetration(q)
         reg = sum(((q[n] - q_req[n]) / scale[n]) ** 2 for n in names)
         return phi + lam * reg, phi
 
@@ -147,7 +154,7 @@ def refine_initial_state(
     phi_req = best_phi
     method = ["requested state"]
     session.set_joint_positions(best_q)
-    _, pairs0 = penetration()
+    _, pairs0 = penetration(best_q)
     worst = [
         {"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
         for c in pairs0[:5]
@@ -155,7 +162,7 @@ def refine_initial_state(
 
     def focus_joints() -> list[str]:
         session.set_joint_positions(best_q)
-        _, pairs = penetration()
+        _, pairs = penetration(best_q)
         out: list[str] = []
         for c in pairs[:3]:
             for j in path_joints(asset, c.link_a, c.link_b):
@@ -228,7 +235,7 @@ def refine_initial_state(
     model_queries = 0
     if proposer is not None and best_phi > tolerance:
         session.set_joint_positions(best_q)
-        _, pairs = penetration()
+        _, pairs = penetration(best_q)
         worst_now = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth} for c in pairs[:5]]
         try:
             proposals, model_queries = proposer(dict(best_q), worst_now, {n: (box[n].lo, box[n].hi) for n in names})

@@ -45,6 +45,12 @@ from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics, Overl
 TRIANGLE_RTOL = 1e-9
 
 
+#: The overlay's uniform scale must lie in this range (dimensionless); the
+#: input validator derives its asset-size bound from it (ASSET_SIZE_IMPLAUSIBLE).
+SCALE_RANGE: tuple[float, float] = (1e-4, 1e4)
+_SCALE_TEXT = ", ".join(f"{x:.0e}".replace("e+0", "e").replace("e-0", "e-").replace("e+", "e") for x in SCALE_RANGE)  # "1e-4, 1e4"
+
+
 class OverlayInvalid(ValueError):
     """The overlay has issues the policy treats as fatal; ``issues`` lists all."""
 
@@ -178,8 +184,8 @@ def validate_overlay(
         issues.append(ValidationIssue(code=code, severity=severity, where=where, message=message, fixed=fixed))
 
     s = ov.scale
-    if not (math.isfinite(s) and 1e-4 <= s <= 1e4):
-        add("OVL_SCALE_INVALID", "error", "global", f"scale {s!r} is not a finite value in [1e-4, 1e4]")
+    if not (math.isfinite(s) and SCALE_RANGE[0] <= s <= SCALE_RANGE[1]):
+        add("OVL_SCALE_INVALID", "error", "global", f"scale {s!r} is not a finite value in [{_SCALE_TEXT}]")
         policy.check(issues)
         return ov, issues
 

@@ -144,3 +144,21 @@ def test_bad_manifest_rows_fail_alone_while_the_others_run(tmp_path, dask_addres
     m.write_text("name,request\nbox_lid,I want it open.\n")
     with pytest.raises(CatalogError, match=r"missing column\(s\) \['id', 'prompt'\]"):
         _run(catalog, dask_address=dask_address)
+
+
+def test_planning_keeps_manifest_order_and_selects_bad_rows_by_id(tmp_path):
+    from asset2sim.flows.stages import plan_run
+
+    catalog = make_project(tmp_path, {"box_lid": "box_lid", "laptop": "laptop"})
+    cat = load_catalog(catalog)
+    _write_bad_manifest(cat.manifest_path("gen"))
+    plan = plan_run(cat, "gen", "20990101T000000Z-aaaaaa")
+    assert [j.asset_id for j in plan.jobs] == ["box_lid", "laptop"]
+    assert [(b.asset_id, b.error.line) for b in plan.bad_rows] == [
+        ("huge_row", 4), ("manifest-line-5", 5), ("manifest-line-6", 6), ("no_prompt", 7), ("bad_limit", 8)]
+    only = plan_run(cat, "gen", "20990101T000000Z-aaaaaa", ids=["../evil", "laptop"])
+    assert [j.asset_id for j in only.jobs] == ["laptop"] and [b.asset_id for b in only.bad_rows] == ["manifest-line-5"]
+    first3 = plan_run(cat, "gen", "20990101T000000Z-aaaaaa", limit=3)  # bad rows count in manifest order
+    assert [j.asset_id for j in first3.jobs] == ["box_lid", "laptop"] and [b.asset_id for b in first3.bad_rows] == ["huge_row"]
+    with pytest.raises(CatalogError, match="unknown id"):
+        plan_run(cat, "gen", "20990101T000000Z-aaaaaa", ids=["nope"])

@@ -162,3 +162,62 @@ def test_default_caps_are_documented():
     pol = vi.DEFAULT_POLICY
     assert pol.max_total_faces == vi.MAX_TOTAL_FACES and f"{vi.MAX_TOTAL_FACES:,}" in doc
     assert pol.max_links == vi.MAX_LINKS == 128
+
+
+# ----------------------------------------------------------------------------- issue 11, second check: sizes and textures
+
+
+def test_huge_coordinates_print_no_numpy_warning(tmp_path):
+    """1e308 coordinates are refused by comparison, before any arithmetic:
+    no RuntimeWarning (turned into an error here), no INTERNAL_ERROR."""
+    import warnings
+
+    asset = cb.CASES_BY_NAME["mesh_coordinate_1e308"].build(tmp_path / "asset")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        found = vi.validate_asset(asset)
+    codes = {f.code for f in found if f.severity == "error"}
+    assert "MESH_COORDINATE_IMPLAUSIBLE" in codes and "INTERNAL_ERROR" not in codes
+
+
+def test_size_bounds_derive_from_the_overlay_scale_range_and_the_priors():
+    from asset2sim.tasks.ingest import findings
+    from asset2sim.tasks.interpret.prior_tables import MAX_PRIOR_DIM_M, load_priors
+    from asset2sim.tasks.interpret.size_priors import target_size
+    from asset2sim.tasks.synthesize.validate_overlay import SCALE_RANGE
+
+    assert findings.MAX_COORDINATE == MAX_PRIOR_DIM_M / SCALE_RANGE[0] == vi.DEFAULT_POLICY.max_coordinate
+    lo, hi = findings.asset_size_range()
+    for name in load_priors().categories:
+        for words in ("", "a tiny one", "a very large one"):
+            d = sorted(target_size(name, words).dims, reverse=True)
+            g_target = (d[0] * d[1]) ** 0.5
+            # an asset of size lo (hi) reaches this target with a scale <= 1e4 (>= 1e-4)
+            assert g_target / lo <= SCALE_RANGE[1] * (1 + 1e-9) and g_target / hi >= SCALE_RANGE[0] * (1 - 1e-9), name
+
+
+def test_texture_pixels_read_from_the_header_only(tmp_path):
+    from asset2sim.tasks.ingest.mesh_checks import texture_header, texture_problem
+
+    p = tmp_path / "t.png"
+    p.write_bytes(cb.png_header(100_000, 100_000))  # 10 gigapixels claimed, 60 bytes on disk
+    t = time.perf_counter()
+    assert texture_header(p, 1 << 20) == (p.stat().st_size, 100_000, 100_000)
+    code, msg = texture_problem(p, 1 << 20, 8192 * 8192)
+    assert code == "TEXTURE_TOO_LARGE" and "100000 x 100000" in msg
+    assert time.perf_counter() - t < 1.0
+    p.write_bytes(cb.png_header(64, 64))
+    assert texture_problem(p, 1 << 20, 8192 * 8192) is None
+    assert texture_problem(p, 10, 8192 * 8192)[0] == "TEXTURE_TOO_LARGE"  # the file cap, by os.stat
+
+
+def test_texture_that_is_a_fifo_never_blocks(tmp_path):
+    import os
+
+    from asset2sim.tasks.ingest.mesh_checks import texture_problem
+
+    p = tmp_path / "t.png"
+    os.mkfifo(p)
+    with _no_hang(10):
+        code, _ = texture_problem(p, 1 << 20, 1 << 20)
+    assert code == "TEXTURE_UNREADABLE"

@@ -122,7 +122,7 @@ def _product_folder(path: Path) -> None:
 def test_reexport_replaces_stale_pieces(tmp_path):
     from asset2sim.tasks.publish.output_folder import adopting
 
-    a = write_contract_asset(tmp_path)
+    write_contract_asset(tmp_path)
     _product_folder(tmp_path)
     with adopting(tmp_path):  # as `asset2sim export` does: the pieces become the folder's own
         export_mjcf(tmp_path)
