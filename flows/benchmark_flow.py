@@ -98,7 +98,11 @@ def run_benchmark_flow(
     """
     from prefect import flow, task
 
-    from asset2sim.tasks.evaluation.benchmark import benchmark_tables, run_benchmark, write_benchmark_outputs
+    from asset2sim.tasks.evaluation.benchmark import (
+        benchmark_tables,
+        run_benchmark,
+        write_benchmark_outputs,
+    )
 
     out = Path(out)
 

@@ -20,7 +20,7 @@ of a parent that died before: it then ends itself the same way.
 Dask worker processes of a local cluster already exit when the driver dies
 (``distributed`` watches a pipe from the parent); Prefect's own temporary
 server does not, which is why the flow starts its server through this module
-(:func:`asset2sim.flows.nightly.start_local_server`). A process that a
+(:func:`asset2sim.flows.server.start_local_server`). A process that a
 lifeline-bound child starts itself is not covered (nothing the refine stage
 runs starts one).
 

@@ -91,7 +91,7 @@ from prefect.futures import as_completed
 
 from asset2sim import queries, tracking
 from asset2sim.catalog import ResultCatalog, load_catalog
-from asset2sim.flows import nightly, stages
+from asset2sim.flows import server, stages
 from asset2sim.flows.stages import (  # re-exported: the flow's public names
     FLOW_NAME,
     SUBFLOW_NAME,
@@ -471,7 +471,7 @@ def run_refine_flow(
 def prefect_api_for_run(project_root: Path | str):
     """The Prefect API one flow run in this process talks to: the configured
     ``PREFECT_API_URL`` when there is one, else a temporary server started
-    here (:func:`asset2sim.flows.nightly.start_local_server`, ``ephemeral``)
+    here (:func:`asset2sim.flows.server.start_local_server`, ``ephemeral``)
     that ends with this process, killed or not, and is stopped when the block
     ends. Yields the API URL. Call from the main thread.
 
@@ -479,13 +479,17 @@ def prefect_api_for_run(project_root: Path | str):
         RuntimeError: the temporary server did not start (its log is
             ``<project>/.prefect/server.log``).
     """
-    from prefect.settings import PREFECT_API_URL, PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS, temporary_settings
+    from prefect.settings import (
+        PREFECT_API_URL,
+        PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS,
+        temporary_settings,
+    )
 
     url = PREFECT_API_URL.value()
     if url:
         yield str(url)
         return
-    proc, url = nightly.start_local_server(
+    proc, url = server.start_local_server(
         project_root, timeout=float(PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS.value()), ephemeral=True
     )
     try:
@@ -495,7 +499,7 @@ def prefect_api_for_run(project_root: Path | str):
             finally:
                 _drain_prefect_workers()
     finally:
-        nightly.stop_server(proc)
+        server.stop_server(proc)
 
 
 def _drain_prefect_workers() -> None:

@@ -44,20 +44,26 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from asset2sim import __version__
-from asset2sim.catalog import Catalog, CatalogError, ManifestEntry, ResultCatalog, read_manifest_entries, result_key
+from asset2sim import __version__, atomic
+from asset2sim.catalog import (
+    Catalog,
+    CatalogError,
+    ManifestEntry,
+    ResultCatalog,
+    read_manifest_entries,
+    result_key,
+)
 from asset2sim.demo_assets import ensure_demo_dataset
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
+from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.metrics import REST_TEST_METRICS, column_values
 from asset2sim.schemas.report import MetricResult, RefineReport
-from asset2sim import atomic
-from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.extract import extract_asset_checked
-from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
+from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.publish.contract import (
     JOB_RECORD_NAME,
     JobRecord,

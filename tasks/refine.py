@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from asset2sim import __version__, atomic
+from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
@@ -49,9 +51,6 @@ from asset2sim.tasks.publish.contract import (
 from asset2sim.tasks.state import collision, pose, refine_state
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
-
-from asset2sim import __version__, atomic
-from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 

@@ -124,7 +124,7 @@ def output_folder_failure(out: Path | str) -> CommandError | None:
 
 
 #: What the command line adds to an output-location message (the library names no options).
-_HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to write beside them"}
+_HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
 
 
 def output_failure(exc: OutputError, out: Path | str) -> CommandError:

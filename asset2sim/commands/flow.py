@@ -94,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _serve(args: argparse.Namespace, cat) -> int:
     from asset2sim.flows import nightly
+    from asset2sim.flows import server as prefect_server
 
     try:
         sched = nightly.nightly_schedule(cat.path, cron=args.cron, timezone=args.timezone)
@@ -105,7 +106,7 @@ def _serve(args: argparse.Namespace, cat) -> int:
         # schedules need a server's scheduler; start one before Prefect reads its settings
         print("starting a local Prefect server (PREFECT_API_URL is not set) ...")
         try:
-            server, url = nightly.start_local_server(cat.project_root)
+            server, url = prefect_server.start_local_server(cat.project_root)
         except RuntimeError as exc:
             print(f"error: {exc}")
             return 1
@@ -135,5 +136,5 @@ def _serve(args: argparse.Namespace, cat) -> int:
                 pass
     finally:
         if server is not None:
-            nightly.stop_server(server)
+            prefect_server.stop_server(server)
     return 0

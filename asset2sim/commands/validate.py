@@ -12,7 +12,6 @@ import json
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError
-
 from asset2sim.tasks.ingest.validate_input import (
     CODES,
     ValidationPolicy,

@@ -352,8 +352,9 @@ def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
     Raises:
         OSError: it cannot be inspected or is not a regular file.
         ValueError: PIL cannot identify it as an image
-            (``PIL.UnidentifiedImageError``, a decompression bomb beyond
-            PIL's own limit, a truncated header).
+            (``PIL.UnidentifiedImageError``, a truncated header).
+        PIL.Image.DecompressionBombError: the header claims more pixels
+            than PIL's own limit (``Image.MAX_IMAGE_PIXELS`` x 2).
     """
     size = os.stat(path).st_size
     if size > max_bytes:
@@ -363,7 +364,7 @@ def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
         try:
             with Image.open(fh) as im:
                 w, h = im.size
-        except (UnidentifiedImageError, Image.DecompressionBombError, SyntaxError) as exc:
+        except (UnidentifiedImageError, SyntaxError) as exc:
             raise ValueError(f"{type(exc).__name__}: {str(exc)[:160]}") from exc
     return size, int(w), int(h)
 
@@ -378,6 +379,8 @@ def texture_problem(path: Path, max_bytes: int, max_pixels: int) -> tuple[str, s
     """
     try:
         size, w, h = texture_header(path, max_bytes)
+    except Image.DecompressionBombError as exc:
+        return "TEXTURE_TOO_LARGE", f"{exc}".split(",")[0] + f" (cap {max_pixels} pixels)"
     except OSError as exc:
         return "TEXTURE_UNREADABLE", f"cannot be opened as a regular file ({exc.strerror or exc})"
     except ValueError as exc:

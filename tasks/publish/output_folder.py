@@ -430,7 +430,7 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
             raise OutputError(
                 f"output folder {given} holds {len(foreign)} file(s) asset2sim did not write "
                 f"({', '.join(foreign[:_MAX_LISTED])}{', ...' if len(foreign) > _MAX_LISTED else ''}); "
-                "choose an empty or new folder, or allow writing beside them (overwrite)",
+                "choose an empty or new folder, or allow writing beside them",
                 "OUTPUT_NOT_EMPTY", given / foreign[0],
             )
     else:

@@ -51,8 +51,8 @@ def test_refine_bad_input_exits_nonzero_with_named_error(tmp_path):
     bad.mkdir()
     (bad / "mobility.urdf").write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'><parent link='a'/><child link='missing'/></joint></robot>")
     p = run("refine", str(bad), "--out", str(tmp_path / "o"))
-    assert p.returncode != 0
-    assert "invalid_input" in p.stderr and "mobility.urdf" in p.stderr
+    assert p.returncode == 1
+    assert "JOINT_CHILD_UNKNOWN" in p.stderr and "invalid input" in p.stderr and "mobility.urdf" in p.stderr
 
 
 # ------------------------------------------------------------------ exit statuses (in process)
@@ -82,7 +82,8 @@ def test_output_location_problems_exit_4_with_code_and_path(box, tmp_path, capsy
     before = atomic.tree_hashes(tmp_path)
     assert main(["refine", str(box), "--out", str(out), "--no-extras", "-q"]) == 4
     line = _one_line(capsys.readouterr().err)
-    assert code in line and str(out) in line
+    assert line.startswith(f"asset2sim refine: {code}: ") and str(out) in line  # labelled by its own code
+    assert "invalid_input" not in line
     assert atomic.tree_hashes(tmp_path) == before
 
 
@@ -93,6 +94,7 @@ def test_foreign_files_need_overwrite(box, tmp_path, capsys):
     assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(out), "--no-extras", "-q"]) == 4
     line = _one_line(capsys.readouterr().err)
     assert "OUTPUT_NOT_EMPTY" in line and "keep.txt" in line and "--overwrite" in line
+    assert "overwrite=True" not in line
     assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(out), "--no-extras", "-q", "--overwrite"]) == 0
     assert (out / "keep.txt").read_text() == "mine" and (out / "mobility.urdf").is_file()
 
@@ -103,7 +105,9 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
     (bad / "mobility.urdf").write_text("<robot name='x'><link name='a'/><link name='b'/></robot>")
     assert main(["refine", str(bad), "--out", str(tmp_path / "o1"), "--no-extras"]) == 1
     line = _one_line(capsys.readouterr().err)
-    assert "invalid_input" in line and str(bad) in line
+    assert "invalid input" in line and str(bad) in line
+    code = line.split(": ")[1]
+    assert code and code == code.upper() and " " not in code, line
     assert main(["refine", str(box), "--prompt", "x" * (MAX_REQUEST_CHARS + 1), "--out", str(tmp_path / "o2"), "--no-extras"]) == 2
     assert "REQUEST_TOO_LONG" in _one_line(capsys.readouterr().err)
     assert not (tmp_path / "o2").exists()  # refused before any work
@@ -142,3 +146,83 @@ def test_internal_error_exits_70_with_a_log_and_traceback_only_with_debug(box, t
     assert "Traceback" in capsys.readouterr().err
     assert main(["--debug", "refine", str(box), "--out", str(tmp_path / "o")]) == 70
     assert "Traceback" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ one line format for every command (issue 11, H14's check)
+
+
+def _fields(line: str) -> tuple[str, str, str]:
+    """(command, CODE, rest) of ``asset2sim COMMAND: CODE: PATH: message``."""
+    prog, code, rest = line.split(": ", 2)
+    return prog, code, rest
+
+
+def test_validation_failure_names_path_once_and_codes_once(tmp_path, capsys):
+    from tests import corpus_builder as cb
+
+    asset = cb.CASES_BY_NAME["format_glb_mesh"].build(tmp_path / "glb")  # visual and collision: 2 errors, one code
+    assert main(["refine", str(asset), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
+    line = _one_line(capsys.readouterr().err)
+    prog, code, rest = _fields(line)
+    assert prog == "asset2sim refine" and code == "MESH_FORMAT_UNSUPPORTED"
+    assert rest.startswith(f"{asset}: ") and rest.count(str(asset)) == 1, line
+
+
+def test_estimator_and_engine_errors_have_codes(box, tmp_path, capsys):
+    assert main(["refine", str(box), "--out", str(tmp_path / "o"), "--estimator", "bogus", "-q"]) == 2
+    assert _fields(_one_line(capsys.readouterr().err))[1] == "ESTIMATOR_UNAVAILABLE"
+    assert main(["refine", str(box), "--out", str(tmp_path / "o"), "--engines", "pybullet,foo", "-q"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert _fields(line)[1] == "ENGINE_UNKNOWN" and "foo" in line and "mujoco" in line and "physx" in line
+    assert not (tmp_path / "o").exists()
+    from asset2sim.commands._status import parse_engines
+
+    assert parse_engines("pybullet, physx,mujoco,physx") == ["pybullet", "physx", "mujoco"]  # known: kept (skipped later if absent)
+
+
+def test_proc_self_output_exits_4(box, capsys):
+    assert main(["refine", str(box), "--out", "/proc/self/x", "--no-extras", "-q"]) == 4
+    line = _one_line(capsys.readouterr().err)
+    assert _fields(line)[1].startswith("OUTPUT_WRITE_FAILED")
+
+
+def test_output_file_that_is_a_folder_is_named_not_its_temp_file(box, tmp_path, capsys):
+    out = tmp_path / "out"
+    (out / "mobility.urdf").mkdir(parents=True)
+    assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(out), "--no-extras", "-q", "--overwrite"]) == 4
+    line = _one_line(capsys.readouterr().err)
+    assert "OUTPUT_WRITE_FAILED [EISDIR]" in line and str(out / "mobility.urdf") in line and ".tmp" not in line
+
+
+def test_fifo_marker_exits_4_without_hanging(box, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / ".asset2sim-complete.json")
+    p = run("refine", str(box), "--prompt", PROMPT, "--out", str(out), "--no-extras", "-q", timeout=120)
+    assert p.returncode == 4, p.stderr
+    assert "OUTPUT_RECORD_NOT_A_FILE" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_quiet_still_prints_warnings(box, tmp_path, capsys):
+    assert main(["refine", str(box), "--prompt", "Ich möchte eine leicht geöffnete Kiste.", "--out", str(tmp_path / "o"),
+                 "--no-extras", "-q"]) == 0
+    cap = capsys.readouterr()
+    assert "request not understood" in cap.err
+    assert "] extract" not in cap.out  # progress stays quiet
+
+
+def test_other_commands_use_the_one_line_format(box, tmp_path, capsys):
+    cases = [
+        (["render", str(box), "--out", "/dev/null"], 4, "OUTPUT_NOT_A_FOLDER"),
+        (["render", str(box), "--views", "front,side", "--out", str(tmp_path / "v")], 2, "VIEW_UNKNOWN"),
+        (["evaluate", str(tmp_path / "missing")], 2, "EVALUATION_INPUT_INVALID"),
+        (["evaluate", str(box), "--engines", "foo"], 2, "ENGINE_UNKNOWN"),
+        (["export", str(tmp_path / "missing")], 2, "NOT_AN_OUTPUT_FOLDER"),
+        (["validate", str(box), "--error", "NO_SUCH_CODE"], 2, "CODE_UNKNOWN"),
+    ]
+    for argv, status, code in cases:
+        assert main(argv) == status, argv
+        cap = capsys.readouterr()
+        line = _one_line(cap.err)
+        assert line.startswith(f"asset2sim {argv[0]}: {code}: "), line
+        assert "error:" not in cap.out

@@ -148,12 +148,12 @@ def test_the_server_scheduler_creates_runs_of_the_nightly_deployment(tmp_path, m
     from prefect.client.schemas.filters import DeploymentFilter, DeploymentFilterId
     from prefect.settings import PREFECT_API_URL, temporary_settings
 
-    from asset2sim.flows import nightly
+    from asset2sim.flows import nightly, server
 
     catalog = make_project(tmp_path, {"box_lid": "box_lid"}, catalog_extra={"tracking": {"enabled": False}})
     monkeypatch.setenv("PREFECT_SERVER_SERVICES_SCHEDULER_LOOP_SECONDS", "5")
     monkeypatch.setenv("PREFECT_HOME", str(tmp_path / ".prefect"))
-    proc, url = nightly.start_local_server(tmp_path)
+    proc, url = server.start_local_server(tmp_path)
     try:
         with temporary_settings({PREFECT_API_URL: url}):
             dep = nightly.build_nightly_deployment(catalog, cron="* * * * *", timezone="Europe/Berlin")

@@ -13,6 +13,7 @@ import errno
 import hashlib
 import json
 import os
+import signal
 import stat
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import pytest
 from asset2sim import atomic, demo_assets
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.tasks.ingest.validate_input import validate_asset
 from asset2sim.tasks.publish import output_folder as of
 from asset2sim.tasks.publish import write
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
@@ -364,3 +366,107 @@ def test_files_evaluate_writes_into_a_refined_folder_are_the_products(tmp_path, 
     res = refine_asset(box, "a small box with its lid closed", out, extras=False)  # no --overwrite needed
     assert not res.skipped and not (out / "evaluation.json").exists()  # stale after the rewrite: removed
     assert outside_hashes(tmp_path, out) == before
+
+
+# ----------------------------------------------------------------------------- non-regular files in the output (no hang)
+
+
+def _alarm(seconds: int):
+    def on_alarm(signum, frame):
+        raise TimeoutError(f"still blocked after {seconds} s")
+
+    signal.signal(signal.SIGALRM, on_alarm)
+    signal.alarm(seconds)
+
+
+@pytest.mark.parametrize("name", [of.MARKER_NAME, of.RECORD_NAME])
+@pytest.mark.parametrize("kind", ["fifo", "dir", "symlink"])
+def test_bookkeeping_file_that_is_not_regular_is_refused_without_blocking(tmp_path, box, name, kind):
+    out = tmp_path / "out"
+    out.mkdir()
+    p = out / name
+    {"fifo": lambda: os.mkfifo(p), "dir": p.mkdir, "symlink": lambda: p.symlink_to(tmp_path / "elsewhere.json")}[kind]()
+    before = outside_hashes(tmp_path, out)
+    _alarm(20)
+    try:
+        assert of.recorded_files(out) == set()  # a FIFO is not read: no block
+        assert not is_complete(out, "x", "y")
+        with pytest.raises(of.OutputError) as err:
+            of.check_location(box, out)
+        assert err.value.code == "OUTPUT_RECORD_NOT_A_FILE" and err.value.path == p
+        with pytest.raises(RefineError) as rerr:
+            refine_asset(box, PROMPT, out, extras=False)
+        assert "OUTPUT_RECORD_NOT_A_FILE" in rerr.value.codes
+    finally:
+        signal.alarm(0)
+    assert outside_hashes(tmp_path, out) == before
+    assert os.path.lexists(p)  # left for the user to look at
+
+
+def test_read_regular_refuses_fifo_and_devices_at_once(tmp_path):
+    fifo = tmp_path / "f"
+    os.mkfifo(fifo)
+    _alarm(10)
+    try:
+        for p in (fifo, Path("/dev/zero"), tmp_path):
+            with pytest.raises(atomic.NotRegularFileError):
+                atomic.read_regular(p)
+            with pytest.raises(atomic.NotRegularFileError):
+                atomic.sha256_file(p)
+    finally:
+        signal.alarm(0)
+    (tmp_path / "r").write_bytes(b"abc")
+    assert atomic.read_regular(tmp_path / "r") == b"abc"
+    with pytest.raises(OSError):
+        atomic.read_regular(tmp_path / "r", max_bytes=2)
+
+
+def test_write_error_names_the_destination_not_the_temp_file(tmp_path):
+    (tmp_path / "mobility.urdf").mkdir()
+    with pytest.raises(IsADirectoryError) as err:
+        atomic.write_text(tmp_path / "mobility.urdf", "x")
+    assert err.value.filename == str(tmp_path / "mobility.urdf")
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+# ----------------------------------------------------------------------------- MTL statements naming files outside
+
+
+def test_output_mtl_and_obj_never_reference_files_outside(tmp_path):
+    """``map_Kd /etc/hostname``, ``map_Kd ../../x.png`` and an ``mtllib`` with an
+    absolute path are dropped from the output's copies (validate warns); the
+    statements that stay inside are kept, and files without such statements
+    are copied byte for byte."""
+    src = cb.build_valid(tmp_path / "in")
+    (tmp_path / "x.png").write_bytes(cb.PNG_1PX)  # exists beside the input: must not be referenced
+    (src / "meshes" / "base.mtl").write_text(
+        "newmtl m0\nKd 0.8 0.6 0.4\nmap_Kd ../images/tex.png\nmap_Ks /etc/hostname\nmap_Bump -bm 1 ../../x.png\n"
+        "newmtl m1\nKd 0.1 0.2 0.3\nmap_Kd file:///etc/passwd\n")
+    base_obj = (src / "meshes" / "base.obj").read_text()
+    (src / "meshes" / "base.obj").write_text("mtllib /etc/other.mtl\n" + base_obj)
+    found = {f.code for f in validate_asset(src)}
+    assert "MESH_MATERIAL_OUTSIDE" in found
+    before = outside_hashes(tmp_path, tmp_path / "out")
+    res = refine_asset(src, "a cabinet with the lid closed", tmp_path / "out", extras=False)
+    out = res.out_dir
+    mtl = (out / "meshes" / "base.mtl").read_text()
+    obj = (out / "meshes" / "base.obj").read_text()
+    assert "/etc/" not in mtl and "../../x.png" not in mtl and "file:" not in mtl and "/etc/" not in obj
+    assert "map_Kd ../images/tex.png" in mtl and "Kd 0.1 0.2 0.3" in mtl and "mtllib base.mtl" in obj
+    assert mtl.count("# asset2sim: a ") == 3 and obj.count("# asset2sim: a mtllib") == 1
+    assert (out / "meshes" / "lid.obj").read_bytes() == (src / "meshes" / "lid.obj").read_bytes()
+    for rel in ("meshes/base.mtl", "meshes/base.obj"):  # recorded and hashed as the output's own
+        assert rel in json.loads((out / MARKER_NAME).read_text())["files"]
+    assert is_complete(out, extract_asset(src).input_hash, json.loads((out / MARKER_NAME).read_text())["config_hash"])
+    with open_session("pybullet", out / "mobility.urdf", SessionOptions(initial_state=res.report.initial_joint_positions)):
+        pass
+    assert outside_hashes(tmp_path, tmp_path / "out") == before
+
+
+@pytest.mark.parametrize(
+    "ref, inside",
+    [("tex.png", True), ("../images/tex.png", True), ("a/../b.png", True), ("/etc/hostname", False), ("../../x", False),
+     ("file:///x", False), ("package://p/x.png", False), ("C:\\x.png", False), ("../..", False)],
+)
+def test_reference_leaves_folder(ref, inside):
+    assert write.reference_leaves_folder(ref, "meshes/base.mtl") is (not inside)

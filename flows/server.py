@@ -1,0 +1,104 @@
+"""A local Prefect server for one flow run or for the nightly deployment,
+bound to 127.0.0.1, ended with the process that started it
+(:mod:`asset2sim.flows.lifeline`). Used by :mod:`.refine_flow` (a temporary
+API for one run) and :mod:`.nightly` (``serve``)."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from asset2sim.flows import lifeline
+from asset2sim.flows.stages import default_prefect_home
+
+__all__ = ["start_local_server", "stop_server"]
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_local_server(project_root: Path | str, port: int | None = None, timeout: float = 120.0, *,
+                       ephemeral: bool = False):
+    """Start a Prefect server bound to 127.0.0.1, state under
+    ``<project>/.prefect`` (unless ``PREFECT_HOME`` is set), log in
+    ``<project>/.prefect/server.log``; wait until its API answers. The server gets SIGKILL when this process ends, killed or
+    not (:mod:`asset2sim.flows.lifeline`); call from the main thread.
+
+    ``ephemeral`` False: ``prefect server start`` (scheduler and other
+    services included, what ``serve`` needs). True: the API alone, as
+    Prefect's temporary server runs it (``uvicorn`` on
+    ``prefect.server.api.server:create_app``, UI off), what one flow run needs.
+
+    Returns ``(process, api_url)``; the caller stops the process.
+
+    Raises:
+        RuntimeError: the server did not answer within ``timeout`` s (its log
+            is ``<project>/.prefect/server.log``).
+    """
+    import urllib.request
+
+    home = default_prefect_home(project_root)
+    home.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ)
+    env.setdefault("PREFECT_HOME", str(home))
+    env.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
+    env.pop("PREFECT_API_URL", None)
+    if ephemeral:
+        env.update({"PREFECT_UI_ENABLED": "0", "PREFECT__SERVER_EPHEMERAL": "1", "PREFECT__SERVER_FINAL": "1"})
+    log_path = home / "server.log"
+    for attempt in range(3):  # a free port may be taken before the server binds it
+        port_n = port or _free_port()
+        if ephemeral:
+            import prefect
+
+            argv = [sys.executable, "-m", "uvicorn", "--app-dir", str(Path(prefect.__file__).parent.parent),
+                    "--factory", "prefect.server.api.server:create_app", "--host", "127.0.0.1",
+                    "--port", str(port_n), "--log-level", "error", "--lifespan", "on"]  # fmt: skip
+        else:
+            argv = [sys.executable, "-m", "prefect", "server", "start", "--host", "127.0.0.1", "--port", str(port_n)]
+        with open(log_path, "ab") as log:
+            proc = subprocess.Popen(
+                lifeline.command(argv),
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                env=env,
+                start_new_session=True,
+            )
+        url = f"http://127.0.0.1:{port_n}/api"
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                break
+            try:
+                with urllib.request.urlopen(url + "/health", timeout=2) as resp:
+                    if resp.status == 200:
+                        return proc, url
+            except OSError:
+                time.sleep(0.25)
+        else:
+            stop_server(proc)
+            raise RuntimeError(f"prefect server did not answer at {url} within {timeout:.0f} s; see {log_path}")
+        if port is not None or proc.returncode != 3 or attempt == 2:  # 3: uvicorn could not bind the port
+            raise RuntimeError(f"prefect server exited with code {proc.returncode}; see {log_path}")
+    raise RuntimeError(f"prefect server did not start; see {log_path}")  # not reached
+
+
+def stop_server(proc, timeout: float = 20.0) -> None:
+    """Stop a server of :func:`start_local_server`: SIGTERM, then SIGKILL
+    after ``timeout`` s."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=timeout)
