@@ -84,6 +84,11 @@ class RunSettings(BaseModel):
     ``time_limit_seconds``: wall-time limit per asset (s), over all its stages.
     ``isolation``: ``process`` runs each asset's stages in a child process that
     is killed at the time limit (a crash or hang costs only that asset);
+    ``memory_limit_mb``: address-space limit of that child process (MiB,
+    ``RLIMIT_AS``; None = no limit): an asset that needs more fails alone with
+    a memory error instead of taking the machine's memory from the others
+    (default 8192: a 1,000,000-triangle asset, the validator's cap, peaks near
+    3.3 GiB, ``benchmarks/bench_mesh_cap.py``);
     ``none`` runs them in the Dask worker (Prefect's timeout, which cannot
     interrupt a long native call). ``evaluate``: run the metrics stage
     (``tasks.evaluate``: penetration, rest stability, oscillation, prompt
@@ -96,6 +101,7 @@ class RunSettings(BaseModel):
     model_config = ConfigDict(extra="forbid")
     workers: int | None = Field(default=2, ge=1)
     time_limit_seconds: float = Field(default=1800.0, gt=0.0)
+    memory_limit_mb: int | None = Field(default=8192, ge=256)
     isolation: Literal["process", "none"] = "process"
     evaluate: bool = True
     probes: bool = False

@@ -27,6 +27,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -118,7 +119,8 @@ def _child_env() -> dict[str, str]:
     return env
 
 
-def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str) -> IsolatedResult:
+def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
+                 memory_limit_mb: int | None = None) -> IsolatedResult:
     """Call ``target(**kwargs)`` in a child Python process, killing it (and its
     process group) after ``timeout`` seconds.
 
@@ -129,6 +131,10 @@ def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir
         timeout: wall-time limit, s (> 0).
         workdir: folder for ``spec.json``, ``result.json`` and ``child.log``
             (created; kept for inspection).
+        memory_limit_mb: address-space limit of the child, MiB
+            (``RLIMIT_AS``), None for none. An allocation beyond it fails in
+            the child (a ``MemoryError``: status ``error``; a native
+            ``std::bad_alloc``: status ``crash``) and costs only this call.
 
     Returns:
         :class:`IsolatedResult` (errors of the function are in it, not raised).
@@ -145,7 +151,8 @@ def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir
     if result_path.exists():
         result_path.unlink()
     spec = workdir / "spec.json"
-    atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path), "parent": os.getpid()})
+    atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path), "parent": os.getpid(),
+                             "memory_limit_mb": memory_limit_mb})
     log = workdir / "child.log"
     t0 = time.perf_counter()
     with open(log, "wb") as fh:
@@ -218,6 +225,9 @@ def _child_main(argv: list[str]) -> int:
     spec = json.loads(Path(argv[0]).read_text())
     if spec.get("parent") is not None:  # end with the process that waits for this one
         set_parent_death_signal(signal.SIGKILL, expected_parent=int(spec["parent"]))
+    if spec.get("memory_limit_mb"):
+        limit = int(spec["memory_limit_mb"]) * 1024 * 1024
+        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     record = call_target(spec["target"], spec.get("kwargs") or {})
     try:
         atomic.write_text(spec["result"], json.dumps(record, allow_nan=True))

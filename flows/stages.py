@@ -134,6 +134,7 @@ class AssetJob:
     extras: bool = True
     isolation: str = "process"
     time_limit_seconds: float = 1800.0
+    memory_limit_mb: int | None = 8192
     finished: dict[str, dict[str, Any]] = field(default_factory=dict)
     resumable: list[dict[str, Any]] = field(default_factory=list)
     code_version: str = __version__
@@ -293,6 +294,7 @@ def plan_run(
                 extras=settings.extras,
                 isolation=settings.isolation,
                 time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
+                memory_limit_mb=settings.memory_limit_mb,
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
                 resumable=unrecorded.get(e.asset_id, []),
                 code_version=version,
@@ -580,7 +582,8 @@ def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], ti
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
     if job.isolation == "process":
-        rec = asdict(run_isolated(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name))
+        rec = asdict(run_isolated(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
+                                  memory_limit_mb=job.memory_limit_mb))
     else:
         out = call_target(target, kwargs)
         rec = {"status": "ok" if out["ok"] else "error", **out}

@@ -69,3 +69,20 @@ def test_in_process_call_and_bad_targets(tmp_path):
         run_isolated(f"{__name__}:add", {}, timeout=0, workdir=tmp_path)
     res = run_isolated("asset2sim.no_such_module:f", {}, timeout=60, workdir=tmp_path)
     assert res.status == "error" and "ModuleNotFoundError" in res.error_type
+
+
+def allocate(mb: int) -> dict:
+    import numpy as np
+
+    block = np.ones(mb * 1024 * 1024 // 8)  # touches every page
+    return {"sum": float(block.sum())}
+
+
+def test_memory_limit_fails_the_child_alone(tmp_path):
+    """An allocation beyond the child's address-space limit is a MemoryError
+    in that child (status error), not the machine's memory; the same call
+    under no limit succeeds."""
+    res = run_isolated(f"{__name__}:allocate", {"mb": 2048}, timeout=120, workdir=tmp_path / "limited", memory_limit_mb=1024)
+    assert res.status == "error" and res.error_type.endswith("MemoryError"), (res.status, res.error, res.log_tail)
+    ok = run_isolated(f"{__name__}:allocate", {"mb": 64}, timeout=120, workdir=tmp_path / "small", memory_limit_mb=1024)
+    assert ok.status == "ok" and ok.value["sum"] == 64 * 1024 * 1024 // 8
