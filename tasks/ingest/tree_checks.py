@@ -67,8 +67,9 @@ class TreeChecks(Recorder):
         movable = model.movable_joints
         if len(movable) > self.policy.max_movable_joints:
             self.add("URDF_TOO_MANY_MOVABLE_JOINTS", f"{len(movable)} movable joints > cap {self.policy.max_movable_joints}: "
-                     f"refine's closed-state, state search and rest tests grow with the number of joints and would not "
-                     f"finish within the flow's per-asset time limit", joints=len(movable), cap=self.policy.max_movable_joints)
+                     f"refine's closed-state, state search and rest tests grow with the number of joints; with every "
+                     f"link touching (worst case, benchmarks/bench_joint_cap.py) it may not finish within the flow's "
+                     f"per-asset time limit, which then ends it", joints=len(movable), cap=self.policy.max_movable_joints)
         seen: dict[str, UrdfLink] = {}
         for ln in links:
             if not ln.name:

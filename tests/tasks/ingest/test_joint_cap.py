@@ -22,8 +22,10 @@ def _revolute_chain(n: int):
 
 
 def test_default_cap():
-    assert vi.DEFAULT_POLICY.max_movable_joints == findings.MAX_MOVABLE_JOINTS == 64
-    assert findings.CODES["URDF_TOO_MANY_MOVABLE_JOINTS"].severity == "error"
+    assert vi.DEFAULT_POLICY.max_movable_joints == findings.MAX_MOVABLE_JOINTS == 32
+    # a warning: objects with many keys or buttons rarely have touching links and refine far faster
+    # than the worst case; the flow's per-asset time limit is the hard bound
+    assert findings.CODES["URDF_TOO_MANY_MOVABLE_JOINTS"].severity == "warning"
 
 
 def test_movable_joint_cap_is_exact(tmp_path):
@@ -33,6 +35,7 @@ def test_movable_joint_cap_is_exact(tmp_path):
     ok = vi.validate_asset(cb._model_case(_revolute_chain(n_extra))(tmp_path / "ok"))
     assert not vi.has_errors(ok), [f.describe() for f in ok if f.severity == "error"]
     over = vi.validate_asset(cb._model_case(_revolute_chain(n_extra + 1))(tmp_path / "over"))
+    assert not vi.has_errors(over)
     hits = [f for f in over if f.code == "URDF_TOO_MANY_MOVABLE_JOINTS"]
     assert len(hits) == 1 and hits[0].values == {"joints": findings.MAX_MOVABLE_JOINTS + 1, "cap": findings.MAX_MOVABLE_JOINTS}
     # fixed joints do not count
