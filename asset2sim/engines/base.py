@@ -24,7 +24,7 @@ import os
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Protocol
+from typing import Callable, Iterable, Protocol
 
 import numpy as np
 
@@ -256,6 +256,35 @@ class Viewer(Protocol):
 
     def close(self) -> None:
         """Release the viewer."""
+
+
+def penetration_sum(points: Iterable[tuple[str, str, float]]) -> tuple[float, list[ContactPair]]:
+    """Phi and its per-pair parts from signed contact distances.
+
+    Args:
+        points: ``(link_a, link_b, separation)`` per contact point, separation
+            in m (< 0: penetration), in the engine's order (the sum is taken
+            in that order).
+
+    Returns:
+        ``(Phi, pairs)``: Phi (m) = sum of max(0, -separation) (SPEC,
+        "Refine the initial state"); one :class:`ContactPair` per unordered
+        link pair with a penetrating point, deepest total first.
+    """
+    pairs: dict[tuple[str, str], ContactPair] = {}
+    total = 0.0
+    for a, b, d in points:
+        if d >= 0.0:
+            continue
+        key = (a, b) if a <= b else (b, a)
+        cp = pairs.get(key)
+        if cp is None:
+            cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
+        cp.depth += -d
+        cp.max_depth = max(cp.max_depth, -d)
+        cp.points += 1
+        total += -d
+    return total, sorted(pairs.values(), key=lambda c: -c.depth)
 
 
 EngineFactory = Callable[[Path, SessionOptions], SimSession]

@@ -28,11 +28,10 @@ import numpy as np
 
 from asset2sim import atomic
 from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
-from asset2sim.frames import matrix_quat_wxyz, pose_matrix, quat_wxyz_matrix, rpy_matrix, translation_matrix
 from asset2sim.engines.loading import BULLET_DEFAULT_MASS, collision_pieces, read_urdf
+from asset2sim.frames import quat_wxyz_matrix, translation_matrix
 from asset2sim.urdf import (
     UrdfDynamics,
-    UrdfError,
     UrdfGeometry,
     UrdfInertial,
     UrdfJoint,
@@ -41,6 +40,7 @@ from asset2sim.urdf import (
     UrdfModel,
     write_urdf,
 )
+
 
 @dataclass
 class FakeBehaviour:

@@ -37,12 +37,18 @@ import math
 from pathlib import Path
 
 import numpy as np
-
 import sapien  # noqa: F401  - an ImportError here marks the engine unavailable
 from sapien import physx
 
-from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
-from asset2sim.engines.loading import BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION, collision_pieces, read_urdf
+from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, penetration_sum, register_engine
+from asset2sim.engines.loading import (
+    BULLET_DEFAULT_FRICTION,
+    BULLET_DEFAULT_INERTIA,
+    BULLET_DEFAULT_MASS,
+    BULLET_PLANE_FRICTION,
+    collision_pieces,
+    read_urdf,
+)
 from asset2sim.frames import matrix_quat_wxyz
 
 #: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive that carries the
@@ -408,25 +414,15 @@ class PhysXSession:
         return None
 
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
-        pairs: dict[tuple[str, str], ContactPair] = {}
-        total = 0.0
+        return penetration_sum(self._contact_separations())
+
+    def _contact_separations(self):
         for c in self._probe_contacts():
             a, b = self._link_name(c.bodies[0]), self._link_name(c.bodies[1])
             if a is None or b is None:
                 continue  # the ground or another object
-            key = (a, b) if a <= b else (b, a)
             for pt in c.points:
-                sep = float(pt.separation)
-                if sep >= 0.0:
-                    continue
-                cp = pairs.get(key)
-                if cp is None:
-                    cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
-                cp.depth += -sep
-                cp.max_depth = max(cp.max_depth, -sep)
-                cp.points += 1
-                total += -sep
-        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+                yield a, b, float(pt.separation)
 
     def ground_penetration(self) -> float:
         """Deepest point (m) of the cooked collision shapes below z = 0, from

@@ -21,9 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import (
-    quiet_stdout,
     ContactPair,
     SessionOptions,
+    penetration_sum,
+    quiet_stdout,
     register_engine,
     register_shape_world,
     register_viewer,
@@ -278,22 +279,8 @@ class PyBulletSession:
     def _penetration_of(self, points) -> tuple[float, list[ContactPair]]:
         """Phi (m) and per-pair sums of Bullet contact/closest points (fields 3/4:
         link indices, 8: signed distance)."""
-        pairs: dict[tuple[str, str], ContactPair] = {}
-        total = 0.0
-        for pt in points:
-            d = pt[8]
-            if d >= 0.0:
-                continue
-            a, b = self._link_by_index[pt[3]], self._link_by_index[pt[4]]
-            key = (a, b) if a <= b else (b, a)
-            cp = pairs.get(key)
-            if cp is None:
-                cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
-            cp.depth += -d
-            cp.max_depth = max(cp.max_depth, -d)
-            cp.points += 1
-            total += -d
-        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+        names = self._link_by_index
+        return penetration_sum((names[pt[3]], names[pt[4]], pt[8]) for pt in points)
 
     def self_penetration_fresh(self) -> tuple[float, list[ContactPair]]:
         """Phi (m) like :meth:`self_penetration`, but from ``getClosestPoints``

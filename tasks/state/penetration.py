@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from asset2sim.engines.base import ContactPair
+from asset2sim.engines.base import ContactPair, penetration_sum
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import CONSERVATIVE_AABB_ENGINES
 
@@ -108,22 +108,7 @@ class StatePenetration:
                     self._penetrating.add(p)
                 else:
                     self._penetrating.discard(p)
-        pairs: dict[tuple[str, str], ContactPair] = {}
-        total = 0.0
         # pairs without a penetrating point add nothing: the sum runs in pair order
-        for p in sorted(self._penetrating):
-            a, b = self.pairs[p]
-            for d in self._points[p]:
-                if d >= 0.0:
-                    continue
-                k = (a, b) if a <= b else (b, a)
-                cp = pairs.get(k)
-                if cp is None:
-                    cp = pairs[k] = ContactPair(k[0], k[1], 0.0, 0.0, 0)
-                cp.depth += -d
-                cp.max_depth = max(cp.max_depth, -d)
-                cp.points += 1
-                total += -d
-        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+        return penetration_sum((*self.pairs[p], d) for p in sorted(self._penetrating) for d in self._points[p])
 
 

@@ -16,7 +16,17 @@ from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MAS
 from asset2sim.engines.mjcf.base import MjcfError, num_text, safe_name
 from asset2sim.engines.mjcf.compiler import load_mujoco, mujoco_messages, mujoco_warnings
 from asset2sim.frames import translation_matrix
-from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel, UrdfStyle, write_urdf
+from asset2sim.urdf import (
+    UrdfDynamics,
+    UrdfGeometry,
+    UrdfInertial,
+    UrdfJoint,
+    UrdfLimit,
+    UrdfLink,
+    UrdfModel,
+    UrdfStyle,
+    write_urdf,
+)
 
 #: Numbers of the URDF handed to MuJoCo's importer: :func:`num_text` (shortest round trip, 0 as ``0``).
 _IMPORT_STYLE = UrdfStyle(number=num_text)

@@ -12,8 +12,25 @@ import numpy as np
 from lxml import etree
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.loading import BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION, CollisionPiece
-from asset2sim.engines.mjcf.base import FREE_JOINT, GROUND, IMPRATIO, NOSLIP_ITERATIONS, MjcfError, close, num_text, quat_text, safe_name, vec_text
+from asset2sim.engines.loading import (
+    BULLET_DEFAULT_FRICTION,
+    BULLET_DEFAULT_INERTIA,
+    BULLET_DEFAULT_MASS,
+    BULLET_PLANE_FRICTION,
+    CollisionPiece,
+)
+from asset2sim.engines.mjcf.base import (
+    FREE_JOINT,
+    GROUND,
+    IMPRATIO,
+    NOSLIP_ITERATIONS,
+    MjcfError,
+    close,
+    num_text,
+    quat_text,
+    safe_name,
+    vec_text,
+)
 from asset2sim.engines.mjcf.contacts import link_friction
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
