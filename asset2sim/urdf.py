@@ -1197,6 +1197,38 @@ def _scale_translation(m: np.ndarray, s: float) -> np.ndarray:
     return out
 
 
+#: Joint types whose ``<limit>`` means something (ROS URDF specification,
+#: wiki.ros.org/urdf/XML/joint: ``<limit>`` is required for revolute and
+#: prismatic joints; continuous joints use its effort and velocity).
+LIMITED_TYPES = ("revolute", "prismatic", "continuous")
+
+
+def conform_limits(model: UrdfModel, effort: float, velocity: float) -> list[str]:
+    """Make every ``<limit>`` of ``model`` (in place) one that every URDF
+    parser accepts: a joint whose type has no limits (fixed, floating,
+    planar) loses its ``<limit>`` (ROS's ``urdf_parser_py`` refuses one
+    without ``effort`` and ``velocity``, and no simulator reads it); a
+    revolute or prismatic joint gets a ``<limit>`` if it has none, and every
+    limited joint missing ``effort`` (N*m or N) / ``velocity`` (rad/s or m/s)
+    gets the values given. Returns notes naming each joint changed."""
+    notes: list[str] = []
+    for j in model.joints:
+        if j.type not in LIMITED_TYPES:
+            if j.limit is not None:
+                notes.append(f"joint {j.name!r} ({j.type}): <limit> dropped (a {j.type} joint has none)")
+                j.limit = None
+            continue
+        if j.limit is None:
+            if j.type == "continuous":
+                continue
+            j.limit = UrdfLimit()
+        if j.limit.effort is None:
+            j.limit.effort = float(effort)
+        if j.limit.velocity is None:
+            j.limit.velocity = float(velocity)
+    return notes
+
+
 def scale_model(model: UrdfModel, s: float, *, geometry: bool = True, joints: bool = True,
                 inertials: bool = True) -> UrdfModel:
     """Bake a uniform scale ``s`` (> 0, dimensionless) into ``model`` in place.

@@ -8,13 +8,24 @@ and the time to refuse a request above the length cap
 ``RequestTooLong``). Requests above the cap are timed with the cap lifted for
 the measurement only.
 
-    python benchmarks/bench_request.py [--sizes 1024,131072,1000000]
+It then parses the request corpus (``tests/data/request_corpus.yaml``:
+requests over the dev objects, the demo assets and a generated toaster) and
+prints the share of parses that match their expected parse, the misses, and
+the parse time per request; ``--outcomes N`` also refines the first N corpus
+entries that have an expected outcome (``all``: every one; dev objects
+included, minutes) and prints how many land (numbers within 5 %, bands in
+their interval, sizes, masses, materials, damping levels, warnings).
+
+    python benchmarks/bench_request.py [--sizes 1024,131072,1000000] [--outcomes 10|all]
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 from asset2sim.tasks.interpret import request
 
@@ -39,9 +50,38 @@ def time_parse(text: str, repeat: int) -> float:
     return best
 
 
+def corpus(outcomes: str | None) -> None:
+    """Parse match rate of the corpus (and optionally its outcomes)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tests.tasks.interpret.request_corpus import load_corpus, parse_misses, run_outcome  # the test corpus tools
+
+    entries = load_corpus()
+    t = time.perf_counter()
+    misses = parse_misses(entries)
+    secs = time.perf_counter() - t
+    print(f"corpus: {len(entries) - len(misses)}/{len(entries)} parses match ({1 - len(misses) / len(entries):.1%}); "
+          f"{1000 * secs / len(entries):.2f} ms per request")
+    for m in misses:
+        print("  MISS", m)
+    if not outcomes:
+        return
+    todo = [e for e in entries if "outcome" in e]
+    if outcomes != "all":
+        todo = todo[: int(outcomes)]
+    missed = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for e in todo:
+            t = time.perf_counter()
+            m = run_outcome(e, Path(tmp))
+            missed += bool(m)
+            print(f"  {e['id']} {time.perf_counter() - t:6.1f}s {e['object']:<22} {'OK' if not m else 'MISS ' + '; '.join(m)}  {e['text']!r}")
+    print(f"outcomes: {len(todo) - missed}/{len(todo)} land ({1 - missed / max(len(todo), 1):.1%})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1024,16384,65536,131072,1000000", help="request lengths in characters")
+    ap.add_argument("--outcomes", default=None, help="refine the first N corpus entries with an outcome ('all': every one)")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     request.parse_request(SENTENCE)  # priors and regexes loaded once, outside the timings
@@ -67,6 +107,7 @@ def main() -> None:
     except request.RequestTooLong as exc:
         refused = f"refused: {exc}"
     print(f"{cap + 1:>11} {time.perf_counter() - t:>9.6f} {'':>11}  {refused}")
+    corpus(args.outcomes)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,13 @@ Shape (DEVELOPERS.md, "Shape of the product")::
                        -> extras: export, renders, evaluation + HTML report)
              metrics  (stability, prompt alignment, scale deviation)
            each finished chain -> build_row -> one catalog row, appended atomically
-      -> run summary + failure-mode plot -> MLflow run (nested run per asset)
+           (and a progress event: asset2sim.flow_progress, the bar of `make flow`)
+      -> end of run (asset2sim.catalog_finish): the run's partition compacted
+         into one Parquet file; the run compared with the previous run of the
+         dataset (asset2sim.catalog_compare: verdict flips, pass-rate and
+         metric drift, judged by catalog.yaml results.regression)
+      -> run summary + failure-mode plot + comparison + pass rate over runs
+         -> MLflow run (regression.* tags, nested run per asset)
 
 Each piece of work is done once per asset:
 
@@ -89,8 +95,9 @@ from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
 
-from asset2sim import queries, tracking
+from asset2sim import catalog_compare, catalog_finish, flow_progress, queries, tracking
 from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import server, stages
 from asset2sim.flows.stages import (  # re-exported: the flow's public names
     FLOW_NAME,
@@ -193,6 +200,8 @@ def refine_assets(
         )  # fmt: skip
         store.append_row(job.dataset, job.run_id, row)
         rows.append(row)
+        flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
+                                         status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
         log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
 
     prep_futures = {}
@@ -250,20 +259,34 @@ def refine_dataset(
     store.write_run_info(name, run_id, info)
     log.info("run %s: %d assets of dataset %s on %s", run_id, len(jobs), name,
              address or f"a local Dask cluster ({n_workers} workers)")
+    flow_progress.emit(ProgressEvent("run_started", name, run_id, total=info["assets"]))
     _record_bad_rows(store, cat, name, run_id, plan.bad_rows, info["flow_run_id"], info["code_version"])
     for bad in plan.bad_rows:
         log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
     timing = _fan_out(cat, jobs, n_workers, address, info["flow_run_id"])
     t_track = time.perf_counter()
+    flow_progress.emit(ProgressEvent("run_finished", name, run_id, total=info["assets"]))
 
-    df = store.read(name, run_id)
     run_out = cat.output_root / name / run_id
+    # end of run: compact the partition, compare with the previous run (catalog.yaml results:)
+    finish = catalog_finish.finish_run(store, name, run_id, run_out, cat.config.results)
+    for line in catalog_compare.comparison_lines(finish.comparison):
+        log.info("%s", line)
+    for err in finish.errors:
+        log.warning("%s", err)
+    df = store.read(name, run_id)
     summary = queries.run_summary(df)
     summary.update(dataset=name, run=run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing)
+    summary.update(finish.comparison.metrics_for_tracking())
+    summary["regression"] = catalog_compare.comparison_summary(finish.comparison)
+    summary["compaction"] = None if finish.compaction is None else dataclasses.asdict(finish.compaction)
     artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{name} / {run_id}")
-    mlflow_run_id, tracking_error = _log_to_mlflow(cat, df, summary, info, artifacts, info["assets"], n_workers, address, run_id)
+    artifacts.update(finish.artifacts)
+    mlflow_run_id, tracking_error = _log_to_mlflow(cat, df, summary, info, artifacts, info["assets"], n_workers, address, run_id,
+                                                   extra_tags=finish.comparison.tags())
     if tracking_error:
         log.warning("MLflow tracking failed: %s", tracking_error)
+    _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id)
     summary.update(
         mlflow_run_id=mlflow_run_id,
         tracking_error=tracking_error,
@@ -276,6 +299,7 @@ def refine_dataset(
         status="finished",
         finished_at=datetime.now(timezone.utc).isoformat(),
         mlflow_run_id=mlflow_run_id,
+        regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
         summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
     )
     store.write_run_info(name, run_id, info)
@@ -294,6 +318,8 @@ def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows
         row = build_manifest_row(bad.error, asset_id=bad.asset_id, run_id=run_id, config=config,
                                  code_version=version, flow_run_id=flow_run_id)
         store.append_row(name, run_id, row)
+        flow_progress.emit(ProgressEvent("asset_finished", name, run_id, asset_id=bad.asset_id, status=row.status,
+                                         failure_mode=row.failure_mode, seconds=0.0))
 
 
 def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
@@ -307,16 +333,38 @@ def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, ref
     known = {f.name for f in dataclasses.fields(AssetJob)}
     earlier = AssetJob(**{k: v for k, v in prepared.resume["job"].items() if k in known})
     info = store.run_info(earlier.dataset, earlier.run_id) or {}
-    target = store.run_dir(earlier.dataset, earlier.run_id) / f"{earlier.asset_id}.parquet"
     old = build_row(earlier, prepared.model_copy(update={"resume": None}), refined, measured,
                     flow_run_id=info.get("flow_run_id"), started_at=started, finished_at=time.time())
     if old.status != "done":
         return None
-    if not target.exists():
+    if not store.has_row(earlier.dataset, earlier.run_id, earlier.asset_id):  # row files and the compacted file
         store.append_row(earlier.dataset, earlier.run_id, old)
     prev = old.model_dump(mode="json")
     prev["run"] = earlier.run_id
     return prepared.model_copy(update={"skip": prev})
+
+
+def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None) -> None:
+    """A markdown artifact on the Prefect flow run (shown in the Prefect UI)
+    with the run's counts, the regression check and the MLflow run id, so
+    both UIs show the same run. Best effort: a failure is logged, not raised."""
+    try:
+        from prefect.artifacts import create_markdown_artifact
+
+        lines = [
+            f"### asset2sim run {summary['run']} of dataset {summary['dataset']}",
+            f"{summary['assets']} assets: {summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed; "
+            f"all checks passed {100 * (summary.get('pass_rate_all') or 0):.1f}%",
+            f"MLflow run: `{mlflow_run_id or 'not logged'}`",
+            "",
+            "```",
+            *catalog_compare.comparison_lines(comparison),
+            "```",
+        ]
+        create_markdown_artifact(markdown="\n".join(lines), key="asset2sim-run-summary",
+                                 description=f"asset2sim {summary['dataset']} / {summary['run']}")
+    except Exception as exc:  # the catalog and MLflow are the record
+        get_run_logger().warning("Prefect summary artifact not created: %s", exc)
 
 
 def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJob], n_workers, address) -> dict[str, Any]:
@@ -360,7 +408,8 @@ def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id) -> dict
     return timing
 
 
-def _log_to_mlflow(cat, df, summary, info, artifacts, n_assets: int, n_workers, address, run_id) -> tuple[str | None, str | None]:
+def _log_to_mlflow(cat, df, summary, info, artifacts, n_assets: int, n_workers, address, run_id,
+                   extra_tags: dict[str, str] | None = None) -> tuple[str | None, str | None]:
     """Log the run to MLflow when tracking is enabled: (MLflow run id, error text)."""
     if not cat.config.tracking.enabled:
         return None, None
@@ -382,7 +431,7 @@ def _log_to_mlflow(cat, df, summary, info, artifacts, n_assets: int, n_workers, 
             artifacts=artifacts,
             project_root=cat.project_root,
             settings=cat.config.tracking,
-            tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id},
+            tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id, **(extra_tags or {})},
         )
     except Exception as exc:  # the catalog is the record; tracking must not lose it
         return None, f"{type(exc).__name__}: {exc}"

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import os
 import socket
-import subprocess
 import time
 import uuid
 from dataclasses import asdict, dataclass, field
@@ -78,8 +77,10 @@ from asset2sim.tasks.publish.contract import (
     report_tokens,
     resumable_output,
     run_hash,
+    skip_code_hash,
     write_job_record,
 )
+from asset2sim.tasks.publish.contract import code_version as contract_code_version
 
 FLOW_NAME = "refine-dataset"
 SUBFLOW_NAME = "refine-assets"
@@ -160,25 +161,9 @@ class RunPlan:
 
 
 def code_version() -> str:
-    """The code that produced a result: the package version, plus the git
-    commit of the source tree (``+g<sha>``, ``.dirty`` with uncommitted
-    changes to tracked files) when the package runs from a git checkout."""
-    src = Path(__file__).resolve().parent.parent
-    try:
-        sha = subprocess.run(
-            ["git", "-C", str(src), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
-        )
-        if sha.returncode != 0 or not sha.stdout.strip():
-            return __version__
-        dirty = subprocess.run(
-            ["git", "-C", str(src), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=20,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return __version__
-    return f"{__version__}+g{sha.stdout.strip()}" + (".dirty" if dirty.stdout.strip() else "")
+    """The code that produced a result (:func:`asset2sim.tasks.publish.contract.code_version`:
+    the package version plus the git commit, or the hash of the package source)."""
+    return contract_code_version()
 
 
 def make_run_id(now: datetime | None = None) -> str:
@@ -263,7 +248,8 @@ def plan_run(
         ordered = ordered[: max(0, int(limit))]
     settings = cat.config.run
     config = cat.refine_config().model_dump(mode="json")
-    finished = {} if force else ResultCatalog(cat.catalog_root).finished(name)
+    finished = {} if force else ResultCatalog(cat.catalog_root).finished(
+        name, code_hash=skip_code_hash(cat.config.results.code_change))
     unrecorded = {} if force else unrecorded_jobs(cat, name, run_id)
     run_out = cat.output_root / name / run_id
     version = code_version()
@@ -326,7 +312,7 @@ def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> di
         if not work.is_dir():
             continue
         try:
-            recorded = {p.stem for p in store.run_dir(dataset, run).glob("*.parquet")}
+            recorded = store.recorded_assets(dataset, run)  # row files and the compacted file
         except ValueError:  # not a run id the catalog could hold
             continue
         for folder in sorted(work.iterdir()):

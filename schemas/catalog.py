@@ -19,6 +19,20 @@ from typing import Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, field_validator
 
+#: Version of the row schema, written into every Parquet file's metadata
+#: (key :data:`SCHEMA_VERSION_KEY`). Columns are only ever added (nullable),
+#: never renamed, removed or retyped, so a reader of version N reads every
+#: file of versions <= N: a column a file lacks reads as null
+#: (:meth:`asset2sim.catalog.ResultCatalog.read`). History:
+#:
+#: - 1: the columns up to ``finished_at``;
+#: - 2: ``code_hash`` (SHA-256 of the package source, the skip key's code part,
+#:   :func:`asset2sim.tasks.publish.contract.code_hash`).
+SCHEMA_VERSION = 2
+SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
+#: The columns each schema version added (version 1: all of its columns).
+SCHEMA_ADDED: dict[int, tuple[str, ...]] = {2: ("code_hash",)}
+
 RowStatus = Literal["done", "skipped", "failed"]
 ROW_STATUSES: tuple[str, ...] = RowStatus.__args__  # type: ignore[attr-defined]
 
@@ -30,7 +44,9 @@ class CatalogRow(BaseModel):
     ``status``: ``done`` (worked on in this run), ``skipped`` (an earlier
     finished result reused; ``source_run`` names it), ``failed``;
     ``failure_mode`` from :data:`asset2sim.schemas.report.FAILURE_MODES`;
-    ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON {stage: s}.
+    ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON {stage: s};
+    ``code_version`` the human-readable code version (package version and git
+    commit), ``code_hash`` the hash of the package source the skip rule compares.
     Non-finite floats are stored as null.
     """
 
@@ -63,6 +79,7 @@ class CatalogRow(BaseModel):
     config_hash: Optional[str] = None
     refine_config_hash: Optional[str] = None
     code_version: Optional[str] = None
+    code_hash: Optional[str] = None
     out_dir: Optional[str] = None
     source_run: Optional[str] = None
     flow_run_id: Optional[str] = None
@@ -101,10 +118,24 @@ def _arrow_type(annotation):
     raise TypeError(f"no Parquet type for {annotation!r}")
 
 
-def arrow_schema():
+def arrow_schema(with_version: bool = False):
     """The Parquet (pyarrow) schema of :class:`CatalogRow`, field for field:
     str -> string, float -> float64, int -> int64, bool -> bool,
-    datetime -> timestamp(us, UTC); every column nullable."""
+    datetime -> timestamp(us, UTC); every column nullable. ``with_version``:
+    with :data:`SCHEMA_VERSION` in the schema metadata (what the writer stores)."""
     import pyarrow as pa
 
-    return pa.schema([(name, _arrow_type(f.annotation)) for name, f in CatalogRow.model_fields.items()])
+    schema = pa.schema([(name, _arrow_type(f.annotation)) for name, f in CatalogRow.model_fields.items()])
+    if with_version:
+        schema = schema.with_metadata({SCHEMA_VERSION_KEY: str(SCHEMA_VERSION).encode()})
+    return schema
+
+
+def file_schema_version(metadata: dict | None) -> int:
+    """The row-schema version recorded in a Parquet file's schema metadata
+    (1 for files written before versions were recorded)."""
+    raw = (metadata or {}).get(SCHEMA_VERSION_KEY)
+    try:
+        return int(raw) if raw is not None else 1
+    except ValueError:
+        return 1

@@ -63,6 +63,10 @@ METRIC_INFO: dict[str, MetricInfo] = {
         MetricInfo("prompt_alignment", "fraction", "semantic", "0.5 size + 0.5 joint state vs the request",
                    {"prompt_alignment": "value"}),
         MetricInfo("probes", "failed probes", "behaviour", "scripted pusher closes/opens each task-relevant joint"),
+        MetricInfo("joint_sweep", "joints", "behaviour",
+                   "root fixed: each movable joint driven (force-limited) from its closed end to >= 95 % open and back"),
+        MetricInfo("robust_rest", "trials", "physical",
+                   "dropped 2 cm, tilted 5 deg about each horizontal axis, nudged: back to rest, joints held"),
         MetricInfo("state_hold", "rad|m", "check", "every joint stays within the sag tolerance of its initial state"),
         MetricInfo("settle_tilt", "rad", "check", "root rotation while settling (the object fell over)"),
     )

@@ -136,6 +136,22 @@ class ValidationNotes(_Strict):
     other: list[str] = Field(default_factory=list)
 
 
+MountingKind = Literal["free-standing", "counter-mounted", "wall-mounted", "floor-mounted", "hangs-in-frame"]
+
+
+class RootMount(_Strict):
+    """How the asset is held in the world (``tasks.interpret.mounting``).
+
+    ``fixed``: the root link is fixed in every simulation (mounted); False:
+    free on the ground (the SPEC's convention). ``source``: the category
+    prior or the request words that decided it.
+    """
+
+    kind: MountingKind = "free-standing"
+    fixed: bool = False
+    source: str = ""
+
+
 class Overlay(_Strict):
     """The full physics overlay of one asset."""
 
@@ -150,6 +166,8 @@ class Overlay(_Strict):
     initial_joint_positions: dict[str, float] | None = None
     """Only when the request asks for a state (output units: rad or m)."""
     notes: ValidationNotes = Field(default_factory=ValidationNotes)
+    mounting: RootMount | None = None
+    """How the root is held (None: free-standing, the SPEC's convention)."""
 
     @field_validator("scale")
     @classmethod

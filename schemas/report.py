@@ -6,6 +6,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from asset2sim.schemas.overlay import RootMount
+from asset2sim.schemas.request import RequestFindings
+
 #: Fixed vocabulary of per-asset failure modes (pipeline catalog, reports).
 FailureMode = Literal[
     "none",
@@ -15,6 +18,10 @@ FailureMode = Literal[
     "unresolved_penetration",
     "unstable",
     "oscillating",
+    "joint_not_held",
+    "blocked_joint",
+    "not_robust_at_rest",
+    "probe_failed",
     "timeout",
     "crash",
     "invalid_manifest_row",
@@ -105,6 +112,19 @@ class RefineReport(BaseModel):
     failure_mode: str = "none"
     stage_seconds: dict[str, float] = Field(default_factory=dict)
     notes: list[str] = Field(default_factory=list)
+    request: RequestFindings | None = None
+    """Ignored word groups, warnings and every number of the request with what
+    the output achieved (:func:`asset2sim.tasks.interpret.request_apply.findings`)."""
+    mounting: RootMount | None = None
+    """How the root was held in every check (``tasks.interpret.mounting``);
+    None in reports written before it was recorded (free-standing)."""
+    readiness: dict[str, bool | None] = Field(default_factory=dict)
+    """Interaction-readiness per tier (``tasks.check.verdict.TIERS``): True
+    pass, False fail, None not measured; ``failure_mode`` is the first
+    failing tier's mode. The terminal, ``report.html`` and the catalog show
+    this verdict."""
+    design_changes: list[str] = Field(default_factory=list)
+    """What stability by design changed and why (``tasks.state.stability``)."""
 
     def metric(self, name: str) -> MetricResult | None:
         for m in self.metrics:

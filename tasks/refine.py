@@ -29,18 +29,19 @@ from asset2sim import __version__, atomic
 from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import parity, postcheck
-from asset2sim.tasks.check.verdict import post_check_failure_mode
+from asset2sim.tasks.check import manipulation, parity, postcheck
+from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.interpret import request
-from asset2sim.tasks.publish import export_mjcf, output_folder, render, write
+from asset2sim.tasks.interpret import mounting, request, request_apply
+from asset2sim.tasks.publish import collision_geometry, export_mjcf, output_folder, render, write
 from asset2sim.tasks.publish.contract import (
     MARKER_NAME,
     REPORT_NAME,
@@ -48,7 +49,7 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import collision, pose, refine_state
+from asset2sim.tasks.state import collision, pose, refine_state, stability
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 
@@ -265,9 +266,10 @@ def request_notes(spec: RequestSpec) -> list[str]:
     if not spec.understood:
         return [f"WARNING: request not understood (English words only; none recognised): {spec.text[:120]!r}; "
                 "refined with the category's defaults (typical size, closed, moderate damping)"]
-    if spec.unused_words:
-        return ["request words not used: " + ", ".join(spec.unused_words[:30]) + (" ..." if len(spec.unused_words) > 30 else "")]
-    return []
+    out = [f"WARNING: {w}" for w in spec.warnings]
+    if spec.ignored:
+        out.append("request words not used: " + "; ".join(f"'{g}'" for g in spec.ignored[:30]) + (" ..." if len(spec.ignored) > 30 else ""))
+    return out
 
 
 # ----------------------------------------------------- 4-7: synthesize .. post-check
@@ -283,6 +285,8 @@ class _Synthesis:
     """Closed ends at the overlay's scale."""
     requested: dict[str, float]
     """Requested joint positions (output units)."""
+    targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)
+    """Numbers / ends the request asked, resolved per joint (their intervals replace the bands')."""
 
 
 @dataclass
@@ -301,6 +305,10 @@ class _Attempt:
     root_rotation: object
     check: postcheck.PostCheck
     rounds: list[EscalationRound]
+    design: list[str] = field(default_factory=list)
+    """What stability by design changed and why (``tasks.state.stability``)."""
+    targets: dict = field(default_factory=dict)
+    """joint -> :class:`~asset2sim.tasks.interpret.request_apply.JointTarget` (numbers / ends the request asked)."""
     rewritten: bool = False
     """Written again after another attempt: files that attempt wrote (collision
     pieces) may differ from those ``check`` measured."""
@@ -341,10 +349,15 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     urdf = _write(ctx, syn, out_dir, log)
     st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
     state = dict(st.result)
-    overlay, check, rounds = _post_check(ctx, syn.overlay, state, overrides, urdf, config, out_dir, log)
+    balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
+    for line in design:
+        log.say("stability", line)
+    overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, out_dir, log,
+                                         closed=manipulation.closed_tuples(syn.closed_out))
     return _Attempt(
         asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=syn.closed_out,
-        st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds,
+        st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
+        targets=syn.targets,
     )
 
 
@@ -364,13 +377,15 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
         overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
+    overlay = overlay.model_copy(update={"mounting": mounting.resolve_mounting(ctx.category, ctx.request.text)})
     s = overlay.scale
+    overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
     if overlay.initial_joint_positions:
         requested.update(overlay.initial_joint_positions)
     log.say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")
     log.lap("validate")
-    return _Synthesis(overlay, issues, bands, prismatic, _scaled_closed(ctx.closed, s, prismatic), requested)
+    return _Synthesis(overlay, issues, bands, prismatic, _scaled_closed(ctx.closed, s, prismatic), requested, targets)
 
 
 def _scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
@@ -406,23 +421,27 @@ def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, conf
     estimator's joint proposer when it has one. Returns (refinement, collision overrides)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, overrides = _refine_state_with_decomposition(
-        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer
+        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer,
+        intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
     )
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, overrides
 
 
-def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
-    """Stage 7: write the refined state, post-check it, and escalate damping
-    and friction (rewrite, re-check) up to ``config.max_escalation_rounds``
-    times while it fails. Returns (final overlay, last check, rounds)."""
+def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
+                closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
+    """Stage 7: write the refined state, post-check it (with ``closed``, the
+    closed ends at the output scale: the joint sweep and robust rest too),
+    and escalate damping and friction (rewrite, re-check) up to
+    ``config.max_escalation_rounds`` times while it fails. Returns (final
+    overlay, last check, rounds)."""
     asset, root_rotation = ctx.asset, ctx.root_rotation
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
     write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-    check = postcheck.run_post_check(urdf, state, overlay, config)
+    check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed)
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     n = 0
     while not check.passed and n < config.max_escalation_rounds:
@@ -431,17 +450,17 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-        check = postcheck.run_post_check(urdf, state, overlay, config)
+        check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return overlay, check, rounds
 
 
-def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None):
+def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None, intervals=None):
     """State refinement; when hull overlaps keep Phi above tolerance, CoACD
     decomposition of the colliding pieces and a second search (kept only if
     it lowers Phi). Returns (StateRefinement, collision overrides)."""
-    fractions = estimate.band_intervals(bands)
+    fractions = estimate.band_intervals(bands, intervals)
     s = overlay.scale
 
     def search(start: dict[str, float]):
@@ -532,10 +551,24 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         escalation=att.rounds,
         validation=[_finding_dict(f) for f in findings] + [i.model_dump() for i in att.issues],
         failure_mode=post_check_failure_mode(att.check),
+        readiness=readiness(att.check.metrics + [m for res in att.check.engine_results.values() for m in res]).tiers,
         stage_seconds=times,
         notes=request_notes(ctx.request) + list(overlay.notes.other)
-        + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else []),
+        + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else [])
+        + [mounting_note(overlay)] + att.design,
+        mounting=overlay.mounting,
+        design_changes=att.design,
+        request=request_apply.findings(ctx, att.targets, closed_out, state, overlay.scale, overlay.total_mass(), list(overlay.notes.other),
+                                       overlay, att.rounds),
     )
+
+
+def mounting_note(overlay: Overlay) -> str:
+    """The report's line on how the root was held in every check."""
+    m = overlay.mounting
+    if m is None or not m.fixed:
+        return "root: free-standing, free on the ground in every check (SPEC convention)" + (f"; {m.source}" if m else "")
+    return f"root: mounted ({m.kind}), fixed in every check (rest, oscillation, probes, evaluation), no ground plane; {m.source}"
 
 
 def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None = None) -> dict[str, str]:
@@ -590,6 +623,7 @@ def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescri
     """Delete the collision pieces this run wrote that the final URDF does not
     reference (only files of the run, never copied input meshes)."""
     used = {p_.filename for pcs in overrides.values() for p_ in pcs}
+    used |= collision_geometry.referenced_files(owner.root / write.URDF_NAME)
     owner.remove_unreferenced(write.collision_folder(asset), used)
 
 
@@ -614,8 +648,11 @@ def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording:
         report.notes.append(f"renders failed: {exc}")
     try:
         paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference,
-                                          views=views, views_state=report.initial_joint_positions)
+                                          views=views, views_state=report.initial_joint_positions,
+                                          checks=list(report.metrics) if recording is not None else None)
         out["html"] = str(paths["report"])
+        ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
+        combine_verdict(report, ev.metrics)  # report.json says what report.html says
     except Exception as exc:
         report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
     return out

@@ -79,7 +79,8 @@ def _print_table(console, title: str, summary: dict) -> None:
 
     t = Table(title=title)
     for c in ("method", "pen. mm (toilet+stapler)", "pen. mm (all)", "rest pass", "osc. pass", "probes pass",
-              "scale dev. %", "init. dev.", "prompt", "all pass", "median eval s", "failed"):
+              "sweep pass", "robust rest pass", "ready", "scale dev. %", "init. dev.", "prompt", "all pass",
+              "median eval s", "failed"):
         t.add_column(c)
 
     def pm(m, s):
@@ -91,7 +92,10 @@ def _print_table(console, title: str, summary: dict) -> None:
     for method, r in summary.items():
         t.add_row(method, pm(r["pen_ts_mean"], r["pen_ts_sd"]), pm(r["pen_mean"], r["pen_sd"]),
                   f"{pct(r['rest_stability_pass'])} ({r['rest_n']})", f"{pct(r['oscillation_pass'])} ({r['osc_n']})",
-                  f"{pct(r['probes_pass'])} ({r['probes_n']})", pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
+                  f"{pct(r['probes_pass'])} ({r['probes_n']})",
+                  f"{pct(r.get('sweep_pass'))} ({r.get('sweep_n', 0)})", f"{pct(r.get('robust_rest_pass'))} ({r.get('robust_n', 0)})",
+                  f"{pct(r.get('ready'))} ({r.get('ready_n', 0)})",
+                  pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
                   pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",
                   str(r["errors"]))
     console.print(t)

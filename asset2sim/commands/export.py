@@ -32,6 +32,7 @@ from asset2sim.engines.mjcf import MjcfError
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim.tasks.publish import output_folder
 from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
+from asset2sim.tasks.publish.write import read_root
 from asset2sim.urdf import UrdfError
 
 NAME = "export"
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         with output_folder.adopting(out):  # the MJCF files become the output folder's own
             path = export_mjcf(out, visuals=not args.no_visuals, check=False)
 
-        check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out))
+        check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out), fixed_base=read_root(out).fixed)
     except output_folder.OutputError as exc:
         raise output_failure(exc, out) from exc
     except UrdfError as exc:

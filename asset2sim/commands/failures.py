@@ -1,16 +1,29 @@
 """``asset2sim failures``: failure-mode breakdowns and other questions of the
-Parquet result catalog (``make failures``)."""
+Parquet result catalog (``make failures``).
+
+Each query reads only the runs and columns it needs (one compacted file per
+run, :class:`asset2sim.catalog.ResultCatalog`), so it stays fast on a catalog
+of a year of nightly runs (``benchmarks/bench_catalog.py``: 10^6 rows over
+365 runs)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from asset2sim import queries
+from asset2sim import catalog_compare, queries
 from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
 
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
+
+#: Columns the breakdown of a run reads (besides the --by columns): those of
+#: :func:`asset2sim.queries.status_counts`.
+BREAKDOWN_COLUMNS = queries.COUNT_COLUMNS
+#: Columns of the list of assets that did not pass all checks.
+FAILED_COLUMNS = ("asset_id", "category", "status", "failure_mode", "error")
+#: At most this many failed assets are listed.
+MAX_LISTED = 50
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,22 +32,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--run", default="latest", help="run id, or 'latest' (default), or 'all'")
     parser.add_argument("--by", default="category", help="group by these columns, comma-separated (default category)")
     parser.add_argument("--over-time", action="store_true", help="pass rates per run, oldest first")
-    parser.add_argument("--slowest", type=int, default=0, metavar="N", help="also list the N slowest assets")
+    parser.add_argument("--slowest", type=int, default=0, metavar="N",
+                        help="the N slowest assets of the run (--run; 'all': of every run)")
     parser.add_argument("--changes", nargs=2, metavar=("RUN_A", "RUN_B"), help="assets whose verdict changed between two runs")
+    parser.add_argument("--compare", action="store_true",
+                        help="the run (--run, default latest) against the previous run of its dataset: "
+                             "verdict flips, pass-rate and metric drift (the flow's regression check)")
+
+
+def format_table(table) -> str:
+    """A DataFrame of counts (index: one or more key levels) as fixed-width
+    text, like ``DataFrame.to_string`` but in time linear in its size (a
+    breakdown by run and category of a year of runs has ~17,000 lines)."""
+    names = [str(n) if n is not None else "" for n in table.index.names]
+    keys = [k if isinstance(k, tuple) else (k,) for k in table.index]
+    cols = [str(c) for c in table.columns]
+    body = [[str(v) for v in k] + [str(int(x)) for x in vals] for k, vals in zip(keys, table.to_numpy().tolist())]
+    head = names + cols
+    widths = [max([len(head[i])] + [len(r[i]) for r in body]) for i in range(len(head))]
+    nk = len(names)
+    fmt = "  ".join(f"{{:<{w}}}" if i < nk else f"{{:>{w}}}" for i, w in enumerate(widths))
+    return "\n".join(fmt.format(*cells).rstrip() for cells in [head, *body])
+
+
+def _latest(store: ResultCatalog, dataset: str | None) -> tuple[str, str] | None:
+    """(dataset, run) of the most recent run (run ids start with the UTC start time)."""
+    parts = store.runs(dataset)
+    if not parts:
+        return None
+    return max(parts, key=lambda p: (p[1], p[0]))
 
 
 def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
-
     try:
         cat = load_catalog(args.catalog)
-    except CatalogError as exc:
+        store = ResultCatalog(cat.catalog_root)
+    except (CatalogError, ValueError) as exc:
         print(f"error: {exc}")
         return 2
-    store = ResultCatalog(cat.catalog_root)
-    df = store.read(args.dataset)
-    if df.empty:
+    latest = _latest(store, args.dataset)
+    if latest is None:
         print(f"the catalog {cat.catalog_root} has no rows" + (f" for dataset {args.dataset!r}" if args.dataset else "")
               + "; run `make flow` first")
         return 1
@@ -43,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     pd.set_option("display.max_colwidth", 80)
 
     if args.changes:
+        df = store.read(args.dataset, list(args.changes), columns=[*queries.CHANGE_COLUMNS])
         try:
             ch = queries.verdict_changes(df, *args.changes)
         except KeyError as exc:
@@ -54,44 +94,61 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     if args.over_time:
-        print(queries.pass_rates_over_time(df, args.dataset).to_string(index=False))
+        table = store.read_table(args.dataset, columns=[*queries.PASS_RATE_COLUMNS])
+        print(queries.pass_rates_over_time(table, args.dataset).to_string(index=False))
         return 0
 
     if args.run == "latest":
-        dataset = args.dataset
-        if dataset is None:  # the dataset of the most recent run of any dataset
-            last = df.sort_values("started_at").iloc[-1]
-            dataset = str(last["dataset"])
-        df = df[df["dataset"] == dataset]
-        run_id = queries.latest_run(df)
-        df = df[df["run"] == run_id]
+        dataset, run_id = latest
+        runs: str | None = run_id
         scope = f"run {run_id} of dataset {dataset}"
     elif args.run == "all":
+        dataset, run_id, runs = args.dataset, None, None
         scope = "all runs" + (f" of dataset {args.dataset}" if args.dataset else "")
-        run_id = None
     else:
-        run_id = args.run
-        df = df[df["run"] == run_id]
-        if df.empty:
+        run_id = runs = args.run
+        found = [d for d, r in store.runs(args.dataset) if r == run_id]
+        if not found:
             print(f"error: no run {run_id!r} in the catalog")
             return 2
+        dataset = args.dataset or found[0]
         scope = f"run {run_id}"
+
+    if args.slowest:
+        print(f"{args.slowest} slowest assets of {scope}:")
+        print(queries.slowest_in_catalog(store, dataset, runs, args.slowest).to_string(index=False))
+        return 0
+
+    if getattr(args, "compare", False):
+        if run_id is None or dataset is None:
+            print("error: --compare needs one run (--run latest or a run id)")
+            return 2
+        cmp = catalog_compare.compare_with_previous(store, dataset, run_id, cat.config.results.regression)
+        print("\n".join(catalog_compare.comparison_lines(cmp)))
+        return 0
+
     by = [b.strip() for b in args.by.split(",") if b.strip()]
     try:
+        # an Arrow table: the queries aggregate it in Arrow (fast on 10^6 rows)
+        df = store.read_table(dataset, runs, columns=list(dict.fromkeys([*BREAKDOWN_COLUMNS, *[b for b in by if b not in ("dataset", "run")]])))
         table = queries.failure_modes(df, by=by if len(by) > 1 else by[0])
     except KeyError as exc:
         print(f"error: {exc.args[0]}")
         return 2
     table = table.loc[:, (table != 0).any(axis=0)]
-    s = queries.run_summary(df)
+    s = queries.status_counts(df)
     print(f"failure modes of {scope}: {s['assets']} assets, {s['done']} done, {s['skipped']} skipped, {s['failed']} failed; "
           f"all checks passed {100 * (s['pass_rate_all'] or 0):.1f}%")
-    print(table.to_string())
-    failed = queries.failed_assets(df)
+    print(format_table(table))
+    import pyarrow.dataset as pads
+
+    not_passed = ~(pads.field("failure_mode") == "none") | pads.field("failure_mode").is_null()
+    failed = queries.failed_assets(store.read_table(dataset, runs, columns=[*FAILED_COLUMNS], filter=not_passed,
+                                                    limit=MAX_LISTED), limit=MAX_LISTED)
+    n_failed = s["assets"] - s["failure_modes"].get("none", 0)
     if len(failed):
         print("\nassets that did not pass all checks:")
         print(failed.to_string(index=False))
-    if args.slowest:
-        print(f"\n{args.slowest} slowest assets:")
-        print(queries.slowest_assets(df, args.slowest).to_string(index=False))
+        if n_failed > len(failed):
+            print(f"... and {n_failed - len(failed)} more")
     return 0

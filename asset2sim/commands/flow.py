@@ -1,13 +1,26 @@
 """``asset2sim flow``: refine a dataset of ``catalog.yaml`` with the Prefect flow
 (``make flow``), or register and serve the nightly deployment (``--serve``,
-``make serve``)."""
+``make serve``).
+
+While the flow runs, a live progress bar (one step per asset, counts of done /
+skipped / failed, elapsed time and ETA; one line per asset when the output is
+not a terminal, ``--no-progress`` for none). At the end, the run summary and
+the regression check against the previous run of the dataset; the exit
+status is 5 (:data:`asset2sim.commands._status.REGRESSION`) when the run
+regressed beyond the limits of ``catalog.yaml`` (``results.regression``,
+``fail_flow: true``), else 0."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import time
 from pathlib import Path
+
+from asset2sim.commands._progress import FlowProgress
+from asset2sim.commands._status import REGRESSION
+from asset2sim.flow_progress import listening
 
 NAME = "flow"
 HELP = (
@@ -28,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ids", default=None, help="comma-separated asset ids to run (default: all)")
     parser.add_argument("--limit", type=int, default=None, help="run at most this many assets")
     parser.add_argument("--force", action="store_true", help="redo assets even when a finished result exists")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-asset lines")
     parser.add_argument("--serve", action="store_true", help="register the nightly deployment and serve it")
     parser.add_argument("--cron", default=None, help="with --serve: cron expression (default: catalog schedule.cron)")
     parser.add_argument("--timezone", default=None, help="with --serve: IANA time zone (default: catalog schedule.timezone)")
@@ -53,13 +67,18 @@ def run(args: argparse.Namespace) -> int:
     prepare_prefect_environment(cat.project_root)  # before Prefect is imported
     if args.serve:
         return _serve(args, cat)
-    from asset2sim.flows.refine_flow import run_refine_flow
+    from asset2sim.flows.refine_flow import run_refine_flow  # imports Prefect: after its environment is set
 
     ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
+    progress = FlowProgress()
     try:
-        summary = run_refine_flow(
-            cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force
-        )
+        with contextlib.ExitStack() as stack:
+            if not getattr(args, "no_progress", False):
+                stack.enter_context(listening(progress))
+            stack.callback(progress.close)
+            summary = run_refine_flow(
+                cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force
+            )
     except CatalogError as exc:
         print(f"error: {exc}")
         return 2
@@ -89,6 +108,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"  MLflow   run {summary['mlflow_run_id']} in {resolve_tracking_uri(cat.project_root, cat.config.tracking.uri)}")
     elif summary.get("tracking_error"):
         print(f"  MLflow   not logged: {summary['tracking_error']}")
+    regression = summary.get("regression") or {}
+    for line in regression.get("lines", []):
+        print(line)
+    if regression.get("exceeded") and cat.config.results.regression.fail_flow:
+        print(f"exit status {REGRESSION}: the run regressed beyond catalog.yaml results.regression "
+              f"(comparison.json, verdict_flips.csv and pass_rate_over_runs.png in {summary['output_dir']})")
+        return REGRESSION
     return 0
 
 

@@ -84,15 +84,55 @@ def summary_lines(result) -> list[str]:
             else "stability    n/a"
         ),
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
-        f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}",
+        _manipulation_line(r),
+        f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
     ] + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
-    ] + [
+    ] + request_lines(r.request) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
     return lines
+
+
+def request_lines(found) -> list[str]:
+    """The request's account in the summary: numbers asked vs achieved,
+    warnings, and the word groups no rule used (``report.request``)."""
+    if found is None:
+        return []
+    out = [f"request      {a}" for a in found.asked]
+    for q in found.quantities:
+        if q.asked is None or q.achieved is None:
+            continue
+        out.append(f"request      {q.what}: asked {q.asked:.4g} {q.unit}, got {q.achieved:.4g}"
+                   + ("" if q.within_tolerance else f"  (NOT within 5 %: {q.why})"))
+    out += [f"request      {w}" for w in found.warnings]
+    if found.ignored:
+        out.append("request      not understood: " + "; ".join(f"'{g}'" for g in found.ignored))
+    return out
+
+
+def _tiers(report) -> str:
+    """`` (rest pass, sweep pass, robust_rest FAIL, probes n/a)``: the
+    report's readiness tiers (:func:`asset2sim.tasks.check.verdict.readiness`),
+    the same verdict report.html and the catalog show."""
+    if not report.readiness:
+        return ""
+    return " (" + ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in report.readiness.items()) + ")"
+
+
+def _manipulation_line(report) -> str:
+    """Joint sweep and robust rest of the post-check, one line."""
+    parts = []
+    for name, label in (("joint_sweep", "sweep"), ("robust_rest", "robust rest")):
+        m = report.metric(name)
+        if m is None:
+            continue
+        verdict = "n/a" if m.passed is None else ("PASS" if m.passed else "FAIL")
+        fails = m.details.get("failures") or []
+        parts.append(f"{label} {verdict}" + (f" ({'; '.join(fails[:3])})" if fails else ""))
+    return "manipulation " + (", ".join(parts) if parts else "n/a")
 
 
 def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:

@@ -127,6 +127,26 @@ class SimSession(Protocol):
     def apply_joint_effort(self, joint: str, effort: float) -> None:
         """Generalized force (N*m or N) on a joint for the next step."""
 
+    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
+        """Drive a movable joint towards ``velocity`` (rad/s or m/s) with a
+        motor whose effort is at most ``max_force`` (N*m or N, >= 0), as a
+        robot's force-limited velocity controller; the drive acts on every
+        following step until :meth:`release_joint`. The joint's own Coulomb
+        friction stays a load the drive must overcome (PyBullet and PhysX: the
+        passive friction motor's limit becomes ``max_force + friction``;
+        MuJoCo: ``frictionloss`` stays and the drive adds a clipped force).
+        Position control is this drive with ``velocity`` recomputed each step
+        from the position error (:mod:`asset2sim.tasks.check.sweep`).
+
+        Raises:
+            KeyError: not a movable joint.
+            EngineUnsupported: the engine has no drives.
+        """
+
+    def release_joint(self, joint: str) -> None:
+        """End :meth:`drive_joint`: the joint is passive again (Coulomb
+        friction, damping, spring). Raises KeyError: not a movable joint."""
+
     # --------------------------------------------------------------- links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) m and rotation matrix (3, 3) of the link's URDF
@@ -175,6 +195,14 @@ class SimSession(Protocol):
 
     def set_root_pose(self, pos: np.ndarray, orn: np.ndarray) -> None:
         """Teleport the root to ``pos`` (3,) m, ``orn`` (4,) xyzw; zero its velocity."""
+
+    def set_root_velocity(self, linear: np.ndarray, angular: np.ndarray) -> None:
+        """Set the root's linear (3,) m/s and angular (3,) rad/s velocity,
+        world frame (a nudge); joint velocities are kept.
+
+        Raises:
+            EngineUnsupported: fixed base, or an engine without dynamics.
+        """
 
     # ------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:

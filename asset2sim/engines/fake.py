@@ -110,6 +110,7 @@ class FakeSession:
         self.link_names = self.model.tree_order()
         self.steps = 0
         self._anchor = {n: (0.0, 0) for n in self.joint_names}  # value, step when set
+        self._driven: dict[str, float] = {}  # joint -> drive velocity (drive_joint)
         self.set_joint_positions(options.initial_state)
         self._root0 = np.zeros(3)
         self._root_q0: np.ndarray | None = None  # xyzw set by set_root_pose
@@ -124,7 +125,9 @@ class FakeSession:
         q0, _ = self._anchor[name]
         t = self._t(name, steps)
         spring = self.options.springs.get(name)
-        if spring is not None and b.springs_pull and spring.stiffness > 0:
+        if name in self._driven:
+            q = q0 + self._driven[name] * t
+        elif spring is not None and b.springs_pull and spring.stiffness > 0:
             q = spring.reference + (q0 - spring.reference) * math.exp(-t / b.spring_time_constant)
         else:
             q = q0 + b.joint_drift.get(name, b.joint_drift.get("*", 0.0)) * t
@@ -161,6 +164,26 @@ class FakeSession:
     def apply_joint_effort(self, joint: str, effort: float) -> None:
         """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
         raise EngineUnsupported("fake: no dynamics; joint efforts are not modelled")
+
+    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
+        """Kinematic drive: from now the joint moves at ``velocity`` (rad/s or
+        m/s, clipped at its limits) instead of the behaviour's drift; the fake
+        has no forces, so ``max_force`` is not modelled."""
+        if joint not in self._anchor:
+            raise KeyError(joint)
+        self._anchor[joint] = (self._value(joint), self.steps)
+        self._driven[joint] = float(velocity)
+
+    def release_joint(self, joint: str) -> None:
+        """The joint follows the behaviour again from where it is."""
+        if joint not in self._anchor:
+            raise KeyError(joint)
+        self._anchor[joint] = (self._value(joint), self.steps)
+        self._driven.pop(joint, None)
+
+    def set_root_velocity(self, linear, angular) -> None:
+        """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
+        raise EngineUnsupported("fake: no dynamics; root velocities are not modelled")
 
     def apply_link_force(self, link: str, force, point) -> None:
         """Raises :class:`EngineUnsupported`: the fake has no dynamics."""

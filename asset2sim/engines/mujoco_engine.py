@@ -75,6 +75,8 @@ class MuJoCoSession:
         self._state_sig = mujoco.mjtState.mjSTATE_INTEGRATION
         self._states: dict[int, np.ndarray] = {}
         self._applied = False
+        self._drive: dict[str, tuple[float, float]] = {}
+        """joint -> (target velocity, force limit) of :meth:`drive_joint`"""
         self._qadr = {}
         self._dadr = {}
         for n in self.joint_names:
@@ -119,6 +121,59 @@ class MuJoCoSession:
         """Generalized force (N*m or N) on a joint for the next step (``qfrc_applied``)."""
         self.d.qfrc_applied[self._dadr[joint]] += float(effort)
         self._applied = True
+
+    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
+        """A force-limited velocity drive computed before each step:
+        tau = clip(f_c sign(velocity) + c velocity + 0.5 * I_eff * (velocity - qdot) / dt,
+        +-(max_force + f_c + |c velocity|)) in ``qfrc_applied`` (f_c the joint's
+        ``frictionloss``, c its damping: the loads the drive carries, as in
+        PyBullet and PhysX), I_eff = 1 / (M^-1)_ii the joint's effective inertia
+        (``mj_solveM``), so the explicit controller removes half the velocity
+        error per step and stays stable whatever the inertia (gain below the
+        explicit-Euler bound 2 I_eff / dt). ``frictionloss`` and damping stay
+        loads on the joint."""
+        if joint not in self._dadr:
+            raise KeyError(joint)
+        self._drive[joint] = (float(velocity), float(max(max_force, 0.0)))
+
+    def release_joint(self, joint: str) -> None:
+        """End the drive of :meth:`drive_joint`."""
+        if joint not in self._dadr:
+            raise KeyError(joint)
+        self._drive.pop(joint, None)
+
+    def _apply_drives(self) -> None:
+        mj = self._mj
+        dt = float(self.m.opt.timestep)
+        for joint, (v, fmax) in self._drive.items():
+            i = self._dadr[joint]
+            e = np.zeros(self.m.nv)
+            e[i] = 1.0
+            x = np.zeros(self.m.nv)
+            mj.mj_solveM(self.m, self.d, x.reshape(1, -1), e.reshape(1, -1))
+            inertia = 1.0 / max(float(x[i]), 1e-12)
+            # feed-forward of the joint's own friction and damping at the target
+            # speed (loads the limit covers, as in PyBullet and PhysX) + feedback
+            load = float(self.m.dof_frictionloss[i]) * float(np.sign(v)) + float(self.m.dof_damping[i]) * v
+            limit = fmax + float(self.m.dof_frictionloss[i]) + abs(float(self.m.dof_damping[i]) * v)
+            tau = float(np.clip(load + 0.5 * inertia * (v - float(self.d.qvel[i])) / dt, -limit, limit))
+            self.d.qfrc_applied[i] += tau
+        self._applied = True
+
+    def set_root_velocity(self, linear, angular) -> None:
+        """Root (free joint) velocity: linear world frame, angular given in
+        the world frame (MuJoCo holds it in the body frame).
+
+        Raises:
+            EngineUnsupported: fixed base."""
+        if not self._free:
+            raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
+        w, x, y, z = self.d.qpos[3:7]
+        R = np.zeros(9)
+        self._mj.mju_quat2Mat(R, np.array([w, x, y, z], float))
+        self.d.qvel[0:3] = np.asarray(linear, float)
+        self.d.qvel[3:6] = R.reshape(3, 3).T @ np.asarray(angular, float)
+        self._mj.mj_forward(self.m, self.d)
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -273,6 +328,8 @@ class MuJoCoSession:
     def step(self, n: int = 1) -> None:
         mj = self._mj
         for _ in range(int(n)):
+            if self._drive:
+                self._apply_drives()
             mj.mj_step(self.m, self.d)
             if self._applied:  # efforts and forces act for one step
                 self.d.qfrc_applied[:] = 0.0

@@ -236,6 +236,8 @@ class PhysXSession:
         self._friction = np.zeros(len(active))
         self._damping = np.zeros(len(active))
         self._stiffness = np.zeros(len(active))
+        self._drive: dict[int, tuple[float, float]] = {}
+        """joint index -> (target velocity, force limit beyond friction) of :meth:`drive_joint`"""
         self._reference = np.zeros(len(active))
         for pj in self.urdf.movable_joints:
             i = self._index[pj.name]
@@ -293,6 +295,35 @@ class PhysXSession:
         if self._effort is None:
             self._effort = np.zeros(len(self._joints))
         self._effort[self._index[joint]] += float(effort)
+
+    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
+        """The passive zero-velocity drive gets velocity target ``velocity``
+        and force limit ``max_force + friction (+ damping * |qdot|)``."""
+        i = self._index[joint]
+        self._drive[i] = (float(velocity), float(max(max_force, 0.0)))
+        self._set_drive(i, abs(float(self.art.get_qvel()[i])))
+
+    def release_joint(self, joint: str) -> None:
+        """Back to the passive drive (velocity target 0)."""
+        i = self._index[joint]
+        self._drive.pop(i, None)
+        self._set_drive(i, abs(float(self.art.get_qvel()[i])))
+
+    def _set_drive(self, i: int, qd_abs: float) -> None:
+        """Drive i's force limit and velocity target (passive or driven)."""
+        v, extra = self._drive.get(i, (0.0, 0.0))
+        self._joints[i].set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self._friction[i] + self._damping[i] * qd_abs + extra), "force")
+        self._joints[i].set_drive_velocity_target(v)
+
+    def set_root_velocity(self, linear, angular) -> None:
+        """Root linear and angular velocity (world frame).
+
+        Raises:
+            EngineUnsupported: fixed base."""
+        if self.options.fixed_base:
+            raise EngineUnsupported("physx: the root of a fixed-base session cannot be moved")
+        self.art.set_root_linear_velocity(np.asarray(linear, np.float32))
+        self.art.set_root_angular_velocity(np.asarray(angular, np.float32))
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
@@ -473,11 +504,11 @@ class PhysXSession:
         springs = bool(np.any(self._stiffness))
         viscous = bool(np.any(self._damping))
         for _ in range(int(n)):
-            if viscous:
+            if viscous or self._drive:
                 qd = np.abs(np.asarray(self.art.get_qvel(), float))
                 for i, joint in enumerate(self._joints):
-                    if self._damping[i] > 0:
-                        joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self._friction[i] + self._damping[i] * qd[i]), "force")
+                    if self._damping[i] > 0 or i in self._drive:
+                        self._set_drive(i, float(qd[i]))
             if springs:
                 q = np.asarray(self.art.get_qpos(), float)
                 self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))

@@ -22,6 +22,7 @@ import numpy as np
 
 from asset2sim.engines.base import (
     ContactPair,
+    EngineUnsupported,
     SessionOptions,
     penetration_sum,
     quiet_stdout,
@@ -114,6 +115,7 @@ class PyBulletSession:
         self._link_by_index: dict[int, str] = {-1: self.base_link}
         self._has_collision: dict[int, bool] = {}
         self._index: dict[str, int] = {}
+        self._friction: dict[str, float] = {}
         self.joint_names: list[str] = []
         self.joint_types: dict[str, str] = {}
         self.joint_limits: dict[str, tuple[float, float]] = {}
@@ -133,6 +135,7 @@ class PyBulletSession:
             self.joint_types[name] = jtype
             self.joint_limits[name] = (lo, hi)
             self.joint_child[name] = info[12].decode()
+            self._friction[name] = float(info[7])
             # Coulomb friction: zero-target-velocity motor with max force = <dynamics friction>.
             p.setJointMotorControl2(
                 self.body,
@@ -345,6 +348,30 @@ class PyBulletSession:
         self._p.setJointMotorControl2(
             self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort), physicsClientId=self.cid
         )
+
+    def drive_joint(self, name: str, velocity: float, max_force: float) -> None:
+        """The joint's velocity motor (the passive friction motor) gets target
+        ``velocity`` and maximum force ``max_force + <dynamics friction>``."""
+        self._p.setJointMotorControl2(
+            self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=float(velocity),
+            force=float(max(max_force, 0.0) + self._friction[name]), physicsClientId=self.cid,
+        )
+
+    def release_joint(self, name: str) -> None:
+        """Back to the passive zero-target-velocity friction motor."""
+        self._p.setJointMotorControl2(
+            self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=0.0,
+            force=self._friction[name], physicsClientId=self.cid,
+        )
+
+    def set_root_velocity(self, linear, angular) -> None:
+        """``resetBaseVelocity`` (world frame).
+
+        Raises:
+            EngineUnsupported: fixed base."""
+        if self.options.fixed_base:
+            raise EngineUnsupported("pybullet: the root of a fixed-base session cannot be moved")
+        self._p.resetBaseVelocity(self.body, [float(v) for v in linear], [float(v) for v in angular], physicsClientId=self.cid)
 
     def save_state(self) -> int:
         """``saveState``: Bullet's in-memory snapshot (contact manifolds included)."""

@@ -30,6 +30,8 @@ from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
 
 from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
 from asset2sim.engines.loading import read_initial_state
+from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.tasks.publish.write import read_root
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS
@@ -70,7 +72,9 @@ def evaluate_engine(
     state = read_initial_state(urdf_dir) if initial_state is None else dict(initial_state)
     springs = springs_from_overlay(urdf_dir, state)
     try:
-        session = open_session(engine, urdf, SessionOptions(initial_state=state, springs=springs, conventions=conv))
+        # the root as the folder declares it (initial_state.json "root": fixed when mounted)
+        session = open_session(engine, urdf, SessionOptions(initial_state=state, springs=springs, conventions=conv,
+                                                            **session_root_options(read_root(urdf_dir).fixed)))
     except EngineUnavailable as exc:
         return _not_run(engine, "skipped", str(exc), None)
     except KeyError as exc:

@@ -21,7 +21,8 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import metrics, parity
+from asset2sim.tasks.check import manipulation, metrics, parity
+from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
 
 
@@ -66,14 +67,17 @@ class RestRecording:
     initial_state: dict[str, float]
     springs: dict[str, Spring]
     conventions: SimConventions
+    fixed_base: bool = False
+    """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
 
     def matches(self, engine: str, urdf: Path | str, initial_state: dict[str, float],
-                springs: dict[str, Spring], conventions: SimConventions) -> bool:
+                springs: dict[str, Spring], conventions: SimConventions, fixed_base: bool = False) -> bool:
         """True when this recording is the rest test of exactly that
-        simulation: same engine, URDF file, initial state, springs and
-        conventions (floats compared exactly)."""
+        simulation: same engine, URDF file, initial state, springs,
+        conventions (floats compared exactly) and root (fixed or free)."""
         return (
-            self.engine == engine
+            self.fixed_base == bool(fixed_base)
+            and self.engine == engine
             and self.urdf == Path(urdf).resolve()
             and dict(self.initial_state) == dict(initial_state)
             and dict(self.springs) == dict(springs)
@@ -103,13 +107,15 @@ def record_rest_test(session: SimSession, conventions: SimConventions, urdf: Pat
         initial_state=dict(initial_state),
         springs=dict(springs),
         conventions=conventions,
+        fixed_base=bool(session.options.fixed_base),
     )
 
 
 def measure_rest_test(engine: str, urdf: Path | str, initial_state: dict[str, float], springs: dict[str, Spring],
-                      conventions: SimConventions) -> tuple[MetricResult, RestRecording]:
+                      conventions: SimConventions, fixed_base: bool = False) -> tuple[MetricResult, RestRecording]:
     """Open ``engine`` on ``urdf`` at ``initial_state`` (SPEC conventions,
-    ``springs``), measure the penetration at the initial state first (in the
+    ``springs``; the root fixed where ``fixed_base``, a mounted asset:
+    :func:`asset2sim.tasks.interpret.mounting.session_root_options`), measure the penetration at the initial state first (in the
     fresh session), then record the rest test (:func:`record_rest_test`).
 
     Returns:
@@ -118,7 +124,8 @@ def measure_rest_test(engine: str, urdf: Path | str, initial_state: dict[str, fl
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
     """
-    session = open_session(engine, urdf, SessionOptions(initial_state=initial_state, springs=springs, conventions=conventions))
+    session = open_session(engine, urdf, SessionOptions(initial_state=initial_state, springs=springs, conventions=conventions,
+                                                        **session_root_options(fixed_base)))
     try:
         pen = metrics.penetration(session)
         recording = record_rest_test(session, conventions, urdf, initial_state, springs)
@@ -163,7 +170,8 @@ class PostCheck:
 
     @property
     def passed(self) -> bool:
-        return bool(self.stable and self.metric("oscillation").passed and not self.sagging and not self.engine_failures()[1])
+        return bool(self.stable and self.metric("oscillation").passed and not self.sagging and not self.engine_failures()[1]
+                    and not manipulation.failing(self.metrics))
 
 
 def springs_of(overlay: Overlay) -> dict[str, Spring]:
@@ -181,12 +189,19 @@ def run_post_check(
     overlay: Overlay,
     config: RefineConfig,
     engine: str = "pybullet",
+    closed: dict[str, tuple[float, float, float]] | None = None,
 ) -> PostCheck:
     """Measure penetration, rest stability, oscillation and sag of the written
     asset in ``engine`` (SPEC conventions), and the SPEC metrics in every other
-    engine of ``config.engines`` (``tasks.parity``; missing engines skipped)."""
+    engine of ``config.engines`` (``tasks.parity``; missing engines skipped).
+    The root is as the overlay declares (``overlay.mounting``): fixed for a
+    mounted asset, else free on the ground; every metric says which
+    (``details["root"]``). With ``closed`` (joint -> (q_closed, direction,
+    open range), rad or m) the manipulation tiers too: joint sweep and robust
+    rest in ``engine`` (:mod:`asset2sim.tasks.check.manipulation`)."""
     conv = config.sim
-    pen, recording = measure_rest_test(engine, urdf_path, initial_state, springs_of(overlay), conv)
+    fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
+    pen, recording = measure_rest_test(engine, urdf_path, initial_state, springs_of(overlay), conv, fixed_base=fixed)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
@@ -210,8 +225,17 @@ def run_post_check(
     engine_results = {}
     if others:
         engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
-    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt], trace=trace, sag=drift, sagging=sagging,
+    for m in (pen, stab, osc, sag_metric, tilt):
+        m.details["root"] = root_label(fixed)
+    extra = [] if closed is None else manipulation.measure_manipulation(
+        engine, urdf_path, initial_state, springs_of(overlay), conv, closed, fixed_base=fixed)
+    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt, *extra], trace=trace, sag=drift, sagging=sagging,
                      engine_results=engine_results, recording=recording)
+
+
+def root_label(fixed: bool) -> str:
+    """How a check held the root: "fixed (mounted)" or "free (on the ground)"."""
+    return "fixed (mounted)" if fixed else "free (on the ground)"
 
 
 def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay, dict[str, dict[str, float]], str]:
@@ -222,12 +246,15 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
     """
     other_unstable, other_osc = check.engine_failures()
     osc = list(dict.fromkeys(list(check.metric("oscillation").details.get("failing", [])) + other_osc))
-    targets = list(dict.fromkeys(list(osc) + list(check.sagging)))
+    not_held = manipulation.joints_not_held(check.metrics)
+    targets = list(dict.fromkeys(list(osc) + list(check.sagging) + not_held))
     reason = []
     if osc:
         reason.append(f"oscillating: {', '.join(osc)}")
     if check.sagging:
         reason.append(f"sagging: {', '.join(check.sagging)}")
+    if not_held:
+        reason.append(f"not held under robust rest: {', '.join(not_held)}")
     if not targets and not check.stable:
         targets = list(overlay.joints)
         reason.append("root unstable: damping all joints")
@@ -237,14 +264,17 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
         d = ov.joints.get(name)
         if d is None:
             continue
-        damping = max(d.damping * factor, 1e-4)
+        f = factor
+        if name in not_held and name not in osc and name not in check.sagging:  # only robust rest: as far as needed
+            f = manipulation.hold_factor(check.metrics, name, factor * factor)
+        damping = max(d.damping * f, 1e-4)
         if d.inertia_axis:
             damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
         new = d.model_copy(
             update={
                 "damping": damping,
-                "friction": max(d.friction * factor, 1e-3),
-                "source": d.source + f"; escalated x{factor:g}",
+                "friction": max(d.friction * f, 1e-3),
+                "source": d.source + f"; escalated x{f:.3g}",
             }
         )
         ov.joints[name] = new

@@ -2,9 +2,20 @@
 
 The cheap stand-in for the thesis's policies (SPEC, "Behavioral fidelity"). A
 probe runs in a simulator session (PyBullet in the evaluation) under the SPEC's conventions (root free on the ground,
-gravity, passive joints) and applies an *external* force on the moving link,
-as a finger would, so the whole object feels the reaction: a joint that resists
-more than the ground friction can hold makes the object slide or tip instead.
+or fixed where the output folder declares the asset mounted: ``initial_state.json``
+"root", ``tasks.interpret.mounting``; gravity, passive joints) and applies a force on the moving link, as a finger
+would, while **the other hand holds the body**: by default
+(``ProbeConfig.hold_body``) the equal and opposite force acts on the root link
+at the same point, so the push is internal to the object (no net force or
+torque on it) as when a person steadies a laptop while closing its screen or a
+robot holds a box while lifting its lid. A light object then no longer slides
+away from the pusher merely because it is light (the earlier definition, an
+external push only, failed every light object: staplers, boxes, laptops, bags,
+suitcases, trash cans; "the object moved instead"); the object still moves
+when the part's motion itself tips or shifts it, which is what a user must
+know. Whether a *free* object can be operated with a realistic force without
+sliding is the task-execution metric's question. ``hold_body=False`` gives the
+external push (the pusher alone; the object's ground friction must resist it).
 
 Definitions (re-derivable; see ``docs/metrics.md``):
 
@@ -17,7 +28,10 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   0, F_max), v the speed of the push point along the direction (m/s), v_des =
   ``push_speed``, g = F_max / (v_des * ramp_time). A stuck joint sees the force
   ramp to F_max in ``ramp_time``; a free one is pushed at about v_des.
-- F_max = max(``min_force``, ``force_factor`` * m_total * g) (N).
+- F_max = max(``min_force``, ``force_factor`` * m_total * g) (N); ``min_force``
+  = 22.2 N (5 lbf), the largest force the 2010 ADA Standards for Accessible
+  Design (section 309.4, operable parts) allow a control to need: any hand can
+  apply it, so a light object's part that needs up to this much is operable.
 - Targets as opening fractions f (0 closed, 1 fully open, from the geometric
   closed end): close -> f = 0.05, reached at f <= 0.10; open -> f = 0.6,
   reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55).
@@ -69,12 +83,15 @@ class ProbeConfig:
     """time for a stuck pusher to reach F_max, s"""
     force_factor: float = 2.0
     """F_max = force_factor * total weight (dimensionless) ..."""
-    min_force: float = 5.0
-    """... but at least this, N"""
+    min_force: float = 22.2
+    """... but at least this, N (ADA 2010 section 309.4: 5 lbf)"""
     slide_tol: float = 0.005
     """root displacement that counts as the object sliding, m"""
     tip_tol: float = 0.05
     """root rotation that counts as tipping, rad"""
+    hold_body: bool = True
+    """the reaction of the push acts on the root at the push point (the other
+    hand holds the body); False: an external push only"""
     settle_velocity_revolute: float = 0.05
     """|q_dot| after release that counts as still moving, rad/s"""
     settle_velocity_prismatic: float = 0.005
@@ -230,6 +247,8 @@ def probe_joint(
         v = sign * qd * (lever if lever is not None else 1.0)
         force = float(np.clip(force + gain * (cfg.push_speed - v) * dt, 0.0, f_max))
         session.apply_link_force(link, force * d, c)
+        if cfg.hold_body and link != session.link_names[0]:
+            session.apply_link_force(session.link_names[0], -force * d, c)  # the holding hand's reaction
         session.step(1)
         k += 1
         peak_force = max(peak_force, force)

@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from asset2sim.atomic import write_bytes, write_json, write_text
 from asset2sim.schemas.evaluation import Evaluation
+from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.evaluation.baselines import available_methods, run_method
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
@@ -38,14 +39,17 @@ RESEARCH_NUMBERS: list[dict[str, str]] = [
 
 #: Metrics flattened into one benchmark record: name -> column prefix.
 RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "joint_hold",
-                  "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes")
+                  "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes",
+                  "joint_sweep", "robust_rest")
 
 
 def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: str = "pybullet") -> dict[str, Any]:
     """One flat benchmark record (JSON/CSV-able) of an evaluation: for each
     metric of :data:`RECORD_METRICS` its value (``<name>``) and verdict
     (``<name>_pass``, None without threshold), plus D_pos/D_ori, all_pass and
-    the evaluation time (s)."""
+    the evaluation time (s); ``ready`` (interaction-ready on every tier in
+    every evaluated engine, :func:`asset2sim.tasks.check.verdict.readiness`),
+    its failures and ``tier_<name>`` verdicts."""
     rec: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "error": None}
     for name in RECORD_METRICS:
         m = ev.metric(name, engine)
@@ -55,6 +59,11 @@ def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: 
     rec["D_pos_m"] = rs.details.get("D_pos_m") if rs else None
     rec["D_ori_rad"] = rs.details.get("D_ori_rad") if rs else None
     rec["scale"] = ev.scale
+    ready = readiness(list(ev.metrics))  # every engine evaluated: the verdict report.html shows
+    rec["ready"] = ready.ready and not any(f.startswith("engine@") for f in ev.failures)
+    rec["ready_failures"] = ";".join(ready.failures)
+    for tier, verdict in ready.tiers.items():
+        rec[f"tier_{tier}"] = verdict
     rec["all_pass"] = bool(ev.passed)
     rec["failures"] = ";".join(ev.failures)
     rec["seconds"] = ev.seconds
@@ -79,8 +88,9 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
     """The thesis table for a set of records: per method mean and sample sd
     (ddof = 1) of penetration (mm; all rows and Toilet+Stapler rows), scale
     deviation (%), initial joint deviation; pass rates (fraction) of rest
-    stability, oscillation, probes and all checks over the assets with a
-    verdict; mean prompt alignment; median evaluation time (s); count of
+    stability, oscillation, probes, joint sweep, robust rest (PyBullet),
+    interaction-readiness (every tier, every evaluated engine) and all checks
+    over the assets with a verdict; mean prompt alignment; median evaluation time (s); count of
     assets the method failed to produce (``errors``)."""
     out: dict[str, dict[str, Any]] = {}
     for m in methods:
@@ -96,6 +106,9 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
         row["rest_stability_pass"], row["rest_n"] = _rate([r["rest_stability_pass"] for r in ok])
         row["oscillation_pass"], row["osc_n"] = _rate([r["oscillation_pass"] for r in ok])
         row["probes_pass"], row["probes_n"] = _rate([r["probes_pass"] for r in ok])
+        row["sweep_pass"], row["sweep_n"] = _rate([r.get("joint_sweep_pass") for r in ok])
+        row["robust_rest_pass"], row["robust_n"] = _rate([r.get("robust_rest_pass") for r in ok])
+        row["ready"], row["ready_n"] = _rate([r.get("ready") for r in ok])
         row["all_pass"], _ = _rate([r["all_pass"] for r in ok])
         secs = sorted(r["seconds"] for r in ok if r.get("seconds") is not None)
         row["median_seconds"] = (secs[len(secs) // 2] if len(secs) % 2 else 0.5 * (secs[len(secs) // 2 - 1] + secs[len(secs) // 2])) if secs else None

@@ -24,6 +24,7 @@ from asset2sim.tasks.check.probes import run_probes
 from asset2sim.tasks.evaluation.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context
+from asset2sim.tasks.interpret.mounting import session_root_options
 
 
 @dataclass
@@ -110,7 +111,8 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
     t0 = time.perf_counter()
     run = EngineRun(engine)
     try:
-        session = open_session(engine, ctx.urdf, SessionOptions(initial_state=dict(ctx.initial_state), springs=dict(ctx.springs), conventions=ctx.conventions))
+        session = open_session(engine, ctx.urdf, SessionOptions(initial_state=dict(ctx.initial_state), springs=dict(ctx.springs), conventions=ctx.conventions,
+                                                                **session_root_options(ctx.root_fixed)))  # the root as declared
     except EngineUnavailable as exc:
         run.error = f"engine unavailable: {exc}"
         return run
@@ -132,9 +134,9 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 run.point_cloud = point_cloud(session)
             saved = session.save_state()
         if rest_test:
-            if recording is None or not recording.matches(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions):
+            if recording is None or not recording.matches(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed):
                 if pyb and probes:  # in a session of its own, as the post-check does: the probes start unstepped
-                    _, recording = measure_rest_test(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions)
+                    _, recording = measure_rest_test(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed)
                 else:
                     recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
             run.trace = recording.trace

@@ -34,6 +34,8 @@ from asset2sim.tasks.evaluation.asset_files import (
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, infer_scale_from_geometry
 from asset2sim.tasks.evaluation.request_match import category_prior, parse_prompt, recognize_category
 from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.publish.output_folder import OutputError
+from asset2sim.tasks.publish.write import read_root
 
 
 @dataclass
@@ -77,6 +79,9 @@ class Context:
     notes: list[str] = field(default_factory=list)
     closed_extents: np.ndarray | None = None
     """(3,) m: AABB of the object with every joint at its closed end (file frame)."""
+    root_fixed: bool = False
+    """The folder declares a mounted asset (``initial_state.json`` ``"root"``):
+    every simulation holds the root fixed."""
 
     @property
     def movable(self) -> list[str]:
@@ -193,6 +198,12 @@ def build_context(
     for n in movable:
         if n not in initial:
             initial[n] = clip_to_limits(0.0, joints[n].lower, joints[n].upper)
+    try:
+        root_fixed = read_root(folder).fixed
+    except OutputError as exc:
+        raise EvaluationError(str(exc)) from exc
+    if root_fixed:
+        notes.append("root fixed as initial_state.json declares (mounted asset): every simulation holds it, no ground plane")
     ref_dir = Path(reference).resolve() if reference is not None else None
     if ref_dir is not None and not ref_dir.is_dir():
         raise EvaluationError(f"reference {ref_dir}: no such folder")
@@ -249,4 +260,5 @@ def build_context(
         sag_tol_revolute=RefineConfig().sag_tolerance_revolute,
         sag_tol_prismatic=RefineConfig().sag_tolerance_prismatic,
         notes=notes,
+        root_fixed=root_fixed,
     )

@@ -56,6 +56,7 @@ from asset2sim.tasks.evaluation.metric_defs import (
     MetricSpec,
     divergence_check,
     metric_names,
+    movable_joints,
     register_metric,
 )
 from asset2sim.tasks.evaluation.request_match import (
@@ -124,6 +125,7 @@ def evaluate_asset(
     recording: RestRecording | None = None,
     views: dict[str, np.ndarray] | None = None,
     views_state: dict[str, float] | None = None,
+    checks: list[MetricResult] | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -169,6 +171,14 @@ def evaluate_asset(
             (H, W, 3) uint8) at the joint positions ``views_state`` (rad/m):
             ``report.html`` shows them when that is the evaluated initial
             state, else it renders its own.
+        checks: results the refine post-check already measured on these
+            same files (its report's metrics): every one the evaluation does
+            not measure itself (same name and engine: ``state_hold``,
+            ``settle_tilt``, other engines' rest tests) is recorded as it is,
+            so ``report.html``'s verdict is the refine report's
+            (:func:`asset2sim.tasks.check.verdict.readiness`). The evaluation
+            measures everything else itself (its own closed ends: no method
+            grades itself).
 
     Returns:
         The :class:`Evaluation`.
@@ -190,6 +200,7 @@ def evaluate_asset(
     need_closed = list(dict.fromkeys(ctx.task_joints + pre_req))
     if ctx.request is not None and any(js.selector == "all" for js in ctx.request.joint_states):
         need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
+    need_closed = list(dict.fromkeys(need_closed + movable_joints(ctx)))  # the joint sweep drives every one
     runs: dict[str, EngineRun] = {}
     order = sorted(engines, key=lambda e: e != "pybullet")  # PyBullet first: it computes the closed ends
     reuse_engine = engines[0] if measured is not None else None
@@ -223,6 +234,9 @@ def evaluate_asset(
         except Exception as exc:  # one broken metric must not hide the others
             results.append(MetricResult(name=spec.name, value=None, unit="", passed=False,
                                         details={"error": f"{type(exc).__name__}: {exc}"}, engine="none"))
+    if checks:
+        have = {(m.name, m.engine) for m in results}
+        results += [m for m in checks if (m.name, m.engine) not in have]
     failures = [f"{m.name}@{m.engine}" for m in results if m.passed is False]
     ev = Evaluation(
         asset_id=ctx.asset_id,
@@ -261,6 +275,7 @@ def evaluate_refined(
     reference: Path | str | None = None,
     views: dict[str, np.ndarray] | None = None,
     views_state: dict[str, float] | None = None,
+    checks: list[MetricResult] | None = None,
 ) -> dict[str, Path]:
     """Evaluate a refined output folder (PyBullet, SPEC conventions, probes)
     and write ``evaluation.json`` and ``report.html`` beside its
@@ -277,6 +292,7 @@ def evaluate_refined(
         views: the renders refine wrote (view -> (H, W, 3) uint8), taken at
             ``views_state`` (rad/m); used in ``report.html`` when that is the
             evaluated initial state, else the report renders its own.
+        checks: the post-check's results of these files (see :func:`evaluate_asset`).
 
     Returns:
         {"evaluation": path, "report": path}.
@@ -287,7 +303,7 @@ def evaluate_refined(
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
-                   views=views, views_state=views_state)
+                   views=views, views_state=views_state, checks=checks)
     return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
 
 

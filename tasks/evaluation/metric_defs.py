@@ -19,6 +19,10 @@ semantic accuracy
     (:mod:`asset2sim.tasks.evaluation.semantic_metrics`), ``prompt_alignment``.
 behaviour
     ``probes`` (:mod:`asset2sim.tasks.check.probes`, PyBullet only).
+interaction under manipulation (per engine, each in sessions of its own)
+    ``joint_sweep`` (:mod:`asset2sim.tasks.check.sweep`: root fixed, every
+    movable joint driven through its range and back) and ``robust_rest``
+    (:mod:`asset2sim.tasks.check.robust_rest`: drop, tilts, nudge).
 
 Definitions, conventions and thresholds are in ``docs/metrics.md``.
 """
@@ -31,8 +35,10 @@ from typing import Any, Callable
 import numpy as np
 
 from asset2sim.schemas.metrics import METRIC_INFO
+from asset2sim.schemas.metrics import unit as unit_of
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
+from asset2sim.tasks.check import robust_rest, sweep
 from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
@@ -358,3 +364,39 @@ def _m_probes(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     if r.error and not r.probes:
         return [_skip("probes", "failed probes", "pybullet", r.error)]
     return [probes_metric(r.probes)]
+
+
+# ------------------------------------------------ interaction under manipulation
+def movable_joints(ctx: Context) -> list[str]:
+    """Revolute, continuous and prismatic joints of the evaluated URDF, in file order."""
+    return [n for n, j in ctx.joints.items() if j.type in ("revolute", "continuous", "prismatic")]
+
+
+@register_metric("joint_sweep")
+def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """:mod:`asset2sim.tasks.check.sweep` in every engine that loaded the asset
+    (its own fixed-root session), closed ends from ``ctx.closed``."""
+    out = []
+    closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in movable_joints(ctx)}
+    for e, r in runs.items():
+        if r.error:
+            out.append(_skip("joint_sweep", unit_of("joint_sweep"), e, r.error))
+            continue
+        run = sweep.run_sweep(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions)
+        out.append(sweep.sweep_metric(run))
+    return out
+
+
+@register_metric("robust_rest")
+def _m_robust(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """:mod:`asset2sim.tasks.check.robust_rest` in every engine that loaded the
+    asset, the root as the asset declares (``ctx.root_fixed``: skipped)."""
+    out = []
+    for e, r in runs.items():
+        if r.error:
+            out.append(_skip("robust_rest", unit_of("robust_rest"), e, r.error))
+            continue
+        run = robust_rest.run_robust_rest(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                          fixed_base=ctx.root_fixed)
+        out.append(robust_rest.robust_rest_metric(run))
+    return out

@@ -37,6 +37,16 @@ closed and the second slightly open, low damping")`` recognises:
   ``spring`` ("no spring" -> False); stiff/hard to move -> ``stiff``.
 - **pose words**: lying flat -> lying_flat; resting sideways/on its side ->
   sideways; upright -> upright.
+- **numbers and materials** (:mod:`asset2sim.tasks.interpret.request_values`):
+  states in numbers ("30 degrees", "10 cm", "60 % open", "two-thirds open")
+  as a ``StateTarget``; physical ends ("lever up", "the switch off") as
+  ``end`` targets decided later from the geometry
+  (:mod:`asset2sim.tasks.interpret.request_apply`); sizes in numbers
+  ("30 cm tall"); masses and materials per part; explicit damping /
+  friction / stiffness; part counts ("two-drawer"); spatial ordinals
+  (left/right/front/back); "the others". Contradictions are ``warnings``;
+  groups of unused words are ``ignored``. The full grammar:
+  ``docs/requests.md``.
 - **category**: the object the request is about (first category word that is not
   "its <part>"), canonical name from ``categories.yaml`` (e.g. "purse" -> Bag,
   "mini fridge" -> Refrigerator).
@@ -56,10 +66,11 @@ import re
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
-from asset2sim.schemas.request import JointStateRequest, RequestSpec
+from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, request_category
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.prior_tables import load_priors
+from asset2sim.tasks.interpret import request_values as rv
 
 _L = r"(?<![\w-])"
 _R = r"(?![\w-])"
@@ -136,6 +147,8 @@ _SIZE_TABLE = _compile(
         (r"bab(?:y|ies)|toddlers?|infants?|toy|doll" + r"(?:[- ]?house)?", "very_small", ""),
         (r"small(?:er|ish)?|mini|minifridge|compact|petite|personal|carry[- ]?on", "small", ""),
         (r"(?:cabinet|cupboard|desk|travel|child|kid|apartment)" + _SZ, "small", ""),
+        (r"countertop|counter[- ]top|benchtop|tabletop|table[- ]top|desktop", "small", ""),
+        (r"life[- ]?siz(?:e|ed)|real[- ]siz(?:e|ed)|actual size", "regular", ""),
         (r"for (?:a |the |my )?(?:child(?:ren)?|kids?)", "small", ""),
         (r"little", "small", "weak"),
         (r"regular(?:" + _SZ + r")?", "regular", ""),
@@ -158,12 +171,20 @@ _STATE_TABLE = _compile(
         (r"not (?:fully|completely|all the way|entirely) " + _OPEN, "mostly", ""),
         # closed
         (r"(?:fully |completely |all the way )?(?:closed|shut)(?: all the way| completely| tight)?", "closed", ""),
-        (r"(?:turned|switched|shut) off|in the off position", "closed", ""),
+        (r"(?:turned|switched|shut) off", "closed", ""),
         # fully
         (r"(?:fully|completely|totally|maximally|wide) " + _OPEN, "fully", ""),
         (r"(?:" + _OPEN + r" )?all the way(?: " + _OPEN + r")?", "fully", ""),
         (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
-        (r"(?:turned|switched) (?:fully )?on|in the on position|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
+        (r"(?:turned|switched) (?:fully )?on|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
+        # named states: which end they are does not depend on the geometry
+        (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
+        (r"pushed (?:all the way )?in|retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|pressed (?:down|in)|pressed|depressed|tucked in", "closed", ""),
+        # physical ends: decided from the geometry after scaling (request_apply)
+        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up", "end:high", "end"),
+        (r"(?:in|at|to) (?:the|its|their) (?:down|lowered|lower|bottom|lowest) position|(?:lowered|flipped|pulled|pushed|swung|tilted|flicked|moved|set|left)(?: all the way)? down|lowered|(?:all the way |fully )?down", "end:low", "end"),
+        (r"(?:in|at|to) (?:the|its) on position|(?:set|flipped|flicked|toggled|left) on|on", "end:on", "end"),
+        (r"(?:in|at|to) (?:the|its) off position|(?:flipped|flicked|toggled|left) off|off", "end:off", "end"),
         # mostly
         (r"(?:mostly|largely|almost fully|nearly fully|almost completely|nearly completely|almost all the way|nearly all the way) " + _OPEN, "mostly", ""),
         (r"(?:almost|nearly) (?:fully|all the way)(?: " + _OPEN + r")?", "mostly", ""),
@@ -171,7 +192,7 @@ _STATE_TABLE = _compile(
         (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         # halfway
         (r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
-        (r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?", "halfway", ""),
+        (r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
         (_OPEN + r" (?:half[- ]?way|half)", "halfway", ""),
         (r"(?:partially|partly) " + _OPEN, "halfway", ""),
         # quarter
@@ -193,11 +214,7 @@ _VERB_BEFORE = re.compile(
     r"(?:\bto|\bcan|\bcould|\bwill|\bwould|\bshould|\bmust|\bplease|\blet me|\band|\bor|\bto be able to)\s+$"
 )
 
-_PART_WORDS = (
-    r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
-    r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
-    r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?"
-)
+_PART_WORDS = rv.PART_WORDS
 _PART_RX = re.compile(_L + r"(?:" + _PART_WORDS + r")" + _R)
 _NUM_AFTER = re.compile(
     r"\s*(?:#|no\.?\s*|numbers?\s*)?(\d{1,2}(?:\s*(?:,\s*(?:and\s+)?|and\s+|or\s+|&\s*)\d{1,2})*)\b"
@@ -213,6 +230,11 @@ _ORDINALS = _compile(
         (r"top(?:most)?|upper(?:most)?|highest", 0, ""),
         (r"bottom(?:most)?|lowest|lower|last", -1, ""),
         (r"every|all|each|both", None, "quant"),
+        # spatial words: the flag is the order they count in (docs/requests.md)
+        (r"left(?:most|[- ]hand)?", 0, "left_right"),
+        (r"right(?:most|[- ]hand)?", 0, "right_left"),
+        (r"front(?:most)?", 0, "front_back"),
+        (r"back(?:most)?|rear(?:most)?", -1, "front_back"),
     ]
 )
 
@@ -307,7 +329,10 @@ def _size_factors() -> dict[str, float]:
     return {k: v.factor for k, v in load_priors().size_classes.items()}
 
 
-def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit]]:
+def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit], list[_Hit]]:
+    """Size class, factor, the size phrase, the size words used, and the size
+    words pointing the other way from the first one (a contradiction: "a small
+    large box" -> small, and "large" is reported)."""
     used: list[_Hit] = []
     mention_starts = [m.start for m in mentions]  # left to right
     for h in _scan(low, _SIZE_TABLE):
@@ -319,25 +344,56 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> t
                 continue
         used.append(h)
     if not used:
-        return None, 1.0, "", []
+        return None, 1.0, "", [], []
     facs = _size_factors()
     first_dir = math.copysign(1.0, math.log(facs[str(used[0].value)])) if facs[str(used[0].value)] != 1.0 else 0.0
     same = [h for h in used if first_dir == 0.0 or math.log(facs[str(h.value)]) * first_dir >= 0.0]
     best = max(same, key=lambda h: abs(math.log(facs[str(h.value)])))
     cls = str(best.value)
     counted = [h for h in same if h.value != "regular" or cls == "regular"]
-    return cls, facs[cls], ", ".join(h.text for h in counted), counted
+    return cls, facs[cls], ", ".join(h.text for h in counted), counted, [h for h in used if h not in same]
 
 
-def _state_hits(low: str) -> list[_Hit]:
+_END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
+_BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)")
+_END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
+
+
+def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
+    """State phrases left to right, not overlapping: the state table's words
+    and the numeric states of :func:`request_values.state_quantities` (value
+    (band, StateTarget)). A bare "up"/"down"/"on"/"off" counts only right
+    after a part noun ("its lever up", "the switch is on")."""
     hits = _scan(low, _STATE_TABLE)
+    hits += [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
+    hits.sort(key=lambda h: (h.start, -(h.end - h.start)))
     out: list[_Hit] = []
+    last = -1
     for h in hits:
+        if h.start < last:
+            continue
         if h.flag == "bare":
             if _VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]):
                 continue
+        if h.flag == "end" and _BARE_END.fullmatch(h.text):
+            if not _END_LEAD.search(low[max(0, h.start - 40): h.start]) or _negated(low, h.start):
+                continue
+            if h.text.endswith(("on", "off")) and not _END_TAIL.match(low, h.end):
+                continue  # "a door on a plastic body": a preposition
         out.append(h)
+        last = h.end
     return out
+
+
+def _band_and_target(value: object) -> tuple[str, StateTarget | None]:
+    """A state hit's value -> (band, target)."""
+    if isinstance(value, tuple):
+        return value[0], value[1]
+    v = str(value)
+    if v.startswith("end:"):
+        end = v[4:]
+        return ("fully" if end in ("high", "on") else "closed"), StateTarget(kind="end", end=end)  # type: ignore[arg-type]
+    return v, None
 
 
 @dataclass
@@ -345,7 +401,8 @@ class _Part:
     start: int
     end: int
     label: str
-    ordinals: list[int]
+    ordinals: list[tuple[int, str]]
+    """(ordinal, order) pairs; order "vertical" or a spatial order."""
     quant: bool
     phrase_start: int
 
@@ -368,7 +425,7 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
     out: list[_Part] = []
     for m in _PART_RX.finditer(low):
         label = canonical_label(m.group(0)) or m.group(0)
-        ordinals: list[int] = []
+        ordinals: list[tuple[int, str]] = []
         quant = False
         pstart = m.start()
         n_before = bisect_right(ord_ends, m.start())  # ordinals ending before the noun
@@ -380,11 +437,13 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
                     pstart = o.start
                 else:
                     first = chain[n_before - 1]
-                    ordinals = [int(ords[i].value) for i in range(first, n_before)]  # type: ignore[arg-type]
+                    ordinals = [(int(ords[i].value), ords[i].flag or "vertical") for i in range(first, n_before)]  # type: ignore[arg-type]
                     pstart = ords[first].start
         num = _NUM_AFTER.match(low, m.end())
+        if num is not None and rv.UNIT_AHEAD.match(low, num.end()):
+            num = None  # "drawer 10 cm": a distance
         if not ordinals and num is not None and not quant:
-            ordinals = [int(n) - 1 for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
+            ordinals = [(int(n) - 1, "vertical") for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
         out.append(_Part(m.start(), m.end(), label, ordinals, quant, pstart))
     return out
 
@@ -407,10 +466,19 @@ def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> 
     return None
 
 
-def _joint_states(low: str, tokens: _Tokens) -> tuple[list[JointStateRequest], list[_Hit]]:
-    bands = _state_hits(low)  # every list here is left to right and not overlapping
+_ELIDED = re.compile(r"\s*(?:,\s*)?(?:and|or|but|then|yet)?\s*(?:also\s+|at the same time\s+)?")
+_OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(?: ones)?|other(?: ones?)?)(?![\w-])")
+
+
+def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = None) -> tuple[list[JointStateRequest], list[_Hit], list[str]]:
+    """Joint-state requests, the state hits used and warnings (contradictions).
+
+    Order of the result: requests for every joint first, then per-label ones,
+    then those naming one part ("the top drawer open and the others closed":
+    the specific request wins whatever the word order)."""
+    bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
-    ords = [o for o in _scan(low, _ORDINALS) if o.flag != "quant"]
+    ords = [o for o in _scan(low, _ORDINALS) if o.flag == ""]
     band_starts = [b.start for b in bands]
     part_starts = [p.start for p in parts]
     part_ends = [p.end for p in parts]
@@ -418,7 +486,15 @@ def _joint_states(low: str, tokens: _Tokens) -> tuple[list[JointStateRequest], l
     ord_starts = [o.start for o in ords]
     ord_ends = [o.end for o in ords]
     result: list[JointStateRequest] = []
+    used: list[_Hit] = []
     last_label: str | None = None
+    prev_subjects: list[_Part] = []
+
+    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: _Hit, phrase: str) -> JointStateRequest:
+        band, target = _band_and_target(b.value)
+        return JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
+                                 band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
+
     for s0, s1 in _sentences(low):
         sb = bands[bisect_left(band_starts, s0): bisect_left(band_starts, s1)]
         for i, b in enumerate(sb):
@@ -429,6 +505,8 @@ def _joint_states(low: str, tokens: _Tokens) -> tuple[list[JointStateRequest], l
             subjects: list[_Part] = []
             if fwd is not None:
                 subjects = [fwd]
+            elif not back and i > 0 and prev_subjects and _ELIDED.fullmatch(low, seg0, b.start):
+                subjects = list(prev_subjects)  # "the lid fully open and closed": the same lid
             elif back:
                 subjects = [back[-1]]
                 # "the lid and the door closed"
@@ -440,44 +518,41 @@ def _joint_states(low: str, tokens: _Tokens) -> tuple[list[JointStateRequest], l
                 for p in subjects:
                     start = min(p.phrase_start, b.start)
                     end = max(p.end, b.end)
-                    for ordinal in (p.ordinals if p.ordinals and not p.quant else [None]):
-                        result.append(
-                            JointStateRequest(
-                                selector="label",
-                                label=p.label,
-                                ordinal=ordinal,
-                                band=b.value,  # type: ignore[arg-type]
-                                phrase=" ".join(low[start:end].split()),
-                            )
-                        )
+                    phrase = " ".join(low[start:end].split())
+                    for ordinal, order in (p.ordinals if p.ordinals and not p.quant else [(None, "vertical")]):
+                        result.append(make("label", p.label, ordinal, order, b, phrase))
                     last_label = p.label
+                prev_subjects = subjects
+                continue
+            prev_subjects = []
+            others = _OTHERS.search(low, seg0, b.start)
+            if others is not None and last_label is not None:
+                used.append(_Hit(others.start(), others.end(), others.group(0), None))
+                result.append(make("label", last_label, None, "vertical", b, " ".join(low[others.start(): b.end].split())))
                 continue
             seg_ords = ords[bisect_left(ord_starts, seg0): bisect_right(ord_ends, b.start)]
             if seg_ords:
                 o = seg_ords[-1]
-                start = o.start
-                phrase = " ".join(low[start: b.end].split())
-                if last_label is not None:
-                    result.append(
-                        JointStateRequest(
-                            selector="label", label=last_label, ordinal=int(o.value),  # type: ignore[arg-type]
-                            band=b.value, phrase=phrase,  # type: ignore[arg-type]
-                        )
-                    )
-                else:
-                    result.append(
-                        JointStateRequest(
-                            selector="all", ordinal=int(o.value), band=b.value, phrase=phrase  # type: ignore[arg-type]
-                        )
-                    )
+                phrase = " ".join(low[o.start: b.end].split())
+                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), "vertical", b, phrase))  # type: ignore[arg-type]
                 continue
-            result.append(JointStateRequest(selector="all", band=b.value, phrase=b.text))  # type: ignore[arg-type]
-    # one request per target: a later phrase overrides an earlier one
-    dedup: dict[tuple[str, str | None, int | None], JointStateRequest] = {}
+            result.append(make("all", None, None, "vertical", b, b.text))
+    # one request per target: a later phrase overrides an earlier one; a
+    # different state for the same target is a contradiction (warned)
+    warnings: list[str] = []
+    dedup: dict[tuple, JointStateRequest] = {}
     for js in result:
-        dedup.pop((js.selector, js.label, js.ordinal), None)
-        dedup[(js.selector, js.label, js.ordinal)] = js
-    return list(dedup.values()), bands
+        key = (js.selector, js.label, js.ordinal, js.order)
+        old = dedup.pop(key, None)
+        if old is not None and (old.band, old.target) != (js.band, js.target):
+            who = "every task-relevant part" if js.selector == "all" else (js.label or "part") + ("" if js.ordinal is None else f" #{js.ordinal} ({js.order})")
+            warnings.append(f"contradiction: '{old.phrase}' and '{js.phrase}' both set {who}; the later one ('{js.phrase}') is used")
+        dedup[key] = js
+
+    def specificity(js: JointStateRequest) -> int:
+        return 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2)
+
+    return sorted(dedup.values(), key=specificity), bands + used, warnings
 
 
 def parse_request(text: str) -> RequestSpec:
@@ -510,11 +585,39 @@ def parse_request(text: str) -> RequestSpec:
         matched.append((head.start, head.phrase))
 
     tokens = _Tokens(low)
-    size_class, factor, size_phrase, size_hits = _parse_size(low, mentions, tokens)
-    matched += [(h.start, h.text) for h in size_hits]
+    size_class, factor, size_phrase, size_hits, size_against = _parse_size(low, mentions, tokens)
+    matched += [(h.start, h.text) for h in size_hits + size_against]
 
-    joint_states, band_hits = _joint_states(low, tokens)
+    mention_starts = [m.start for m in mentions]
+    warnings: list[str] = []
+    if size_against:
+        warnings.append(f"contradiction: size words {size_phrase!r} and " + ", ".join(repr(h.text) for h in size_against)
+                        + f" point opposite ways; '{size_class}' (the first direction) is used")
+    numeric, sizes, size_warn, verbs = rv.state_quantities(low, mention_starts)
+    warnings += size_warn
+    joint_states, band_hits, contradictions = _joint_states(low, tokens, numeric)
+    warnings += contradictions
     matched += [(h.start, h.text) for h in band_hits]
+    matched += [(f.start, f.text) for f in sizes + verbs]
+    if sizes and size_class is not None:
+        warnings.append(f"size words ({size_phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
+    head_starts = [head.start] if head is not None else []  # the object itself ("a wooden door")
+    mass_found = rv.masses(low, head_starts)
+    material_found = rv.materials(low, mention_starts, head_starts)
+    level_found = rv.mass_levels(low, mention_starts)
+    dyn_found, dyn_warn = rv.dynamics_values(low, head_starts)
+    warnings += dyn_warn
+    matched += [(f.start, f.text) for f in mass_found + material_found + level_found + dyn_found]
+    properties = _merge_properties([f.value for f in mass_found + material_found], warnings)  # type: ignore[misc]
+    mass_level = level_found[-1].value if level_found else None
+    if len({f.value for f in level_found}) > 1:
+        warnings.append("contradiction: " + " and ".join(f"'{f.text}'" for f in level_found) + f" for the mass; '{level_found[-1].text}' is used")
+    if mass_level is not None and any(p.mass is not None and p.label is None for p in properties):
+        warnings.append(f"'{level_found[-1].text}' and a mass in numbers: the number is used")
+    level_spans = [(f.start, f.end) for f in level_found]
+    counts = rv.part_counts(low)
+    matched += [(f.start, f.text) for f in counts]
+    matched += [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
 
     damping = "moderate"
     strong_set = False
@@ -524,6 +627,8 @@ def parse_request(text: str) -> RequestSpec:
     free = False
     for h in _scan(low, _DYN_TABLE):
         kind, val = h.value  # type: ignore[misc]
+        if any(a <= h.start < b for a, b in level_spans) and not _part_soon(low, h.end):
+            continue  # "a heavy box": a mass, not a dynamics word ("a heavy door": both)
         neg = _negated(low, h.start)
         if kind == "spring":
             spring = not neg
@@ -552,12 +657,18 @@ def parse_request(text: str) -> RequestSpec:
             elif not strong_set:
                 damping = str(val)
 
+    if stiff and free:
+        warnings.append("contradiction: both stiff and moving freely are asked; both are applied (friction x4 over the floor, then no extra floor)")
+    levels = {str(h.value[1]) for h in _scan(low, _DYN_TABLE) if h.flag == "strong" and not _negated(low, h.start)}
+    if len(levels) > 1:
+        warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
     pose = None
     for h in _scan(low, _POSE_TABLE):
         if not _negated(low, h.start):
             pose = h.value
             matched.append((h.start, h.text))
 
+    unused, groups = _unused_words(low, matched, mentions)
     seen: set[tuple[int, str]] = set()
     ordered = []
     for pos, ph in sorted(matched, key=lambda t: t[0]):
@@ -578,9 +689,49 @@ def parse_request(text: str) -> RequestSpec:
         stiff=stiff,
         free_moving=free,
         pose_hint=pose,  # type: ignore[arg-type]
+        sizes=[f.value for f in sizes],  # type: ignore[misc]
+        mass_level=mass_level,  # type: ignore[arg-type]
+        properties=properties,
+        dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
+        part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
+        ignored=groups,
+        warnings=warnings,
         matched=ordered,
-        unused_words=_unused_words(low, matched, mentions),
+        unused_words=unused,
     )
+
+
+def _part_soon(text: str, i: int) -> bool:
+    """A part noun within the next three words ("a heavy wooden door")."""
+    words = re.findall(r"[\w'-]+|[,;:.!?]", text[i: i + 60])[:3]
+    for w in words:
+        if rv.PART_RX.fullmatch(w):
+            return True
+        if not re.fullmatch(r"[\w'-]+", w):
+            return False
+    return False
+
+
+def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[PartProperty]:
+    """One :class:`PartProperty` per label (None = whole object): mass and
+    material of the same part merged; two different values for one part are a
+    contradiction (warned; the later one is used)."""
+    out: dict[str | None, PartProperty] = {}
+    for p in props:
+        old = out.get(p.label)
+        if old is None:
+            out[p.label] = p
+            continue
+        upd = {}
+        for field in ("mass", "material"):
+            new, prev = getattr(p, field), getattr(old, field)
+            if new is None:
+                continue
+            if prev is not None and prev != new:
+                warnings.append(f"contradiction: '{old.phrase}' and '{p.phrase}' give the {p.label or 'object'} two {field}s; '{p.phrase}' is used")
+            upd[field] = new
+        out[p.label] = old.model_copy(update={**upd, "phrase": f"{old.phrase}; {p.phrase}"})
+    return list(out.values())
 
 
 #: Function words of English requests that carry no physical meaning ("I want
@@ -594,11 +745,16 @@ _FUNCTION_WORDS = frozenset(
 )
 
 
-def _unused_words(low: str, matched: list[tuple[int, str]], mentions) -> list[str]:
+_SELECTOR_AFTER = re.compile(r"\s+(?:[\w'-]+\s+){0,2}?(?:" + rv.PART_WORDS + r"|ones?)(?![\w-])")
+
+
+def _unused_words(low: str, matched: list[tuple[int, str]], mentions) -> tuple[list[str], list[str]]:
     """Words of ``low`` (the lower-cased request) outside every recognised
     phrase and category mention that are neither function words nor known
-    part labels (``labels.yaml``), in order, each once. Linear in ``len(low)``
-    (spans are merged once, words visited once)."""
+    part labels (``labels.yaml``), in order, each once; and the groups of
+    such words: runs of them joined only by function words, within one clause
+    ("a rubber duck on top" -> "rubber duck on top"), each once. Linear in
+    ``len(low)`` (spans are merged once, words visited once)."""
     spans = []
     for pos, phrase in matched:
         for prefix in ("no ", "not "):
@@ -606,22 +762,50 @@ def _unused_words(low: str, matched: list[tuple[int, str]], mentions) -> list[st
                 phrase = phrase[len(prefix):]
         spans.append((pos, pos + len(phrase)))
     spans += [(m.start, m.end) for m in mentions]
-    spans += [(h.start, h.start + len(h.text)) for h in _scan(low, _ORDINALS)]  # joint selectors
+    spans.sort()
+    starts = [a for a, _ in spans]
+    for h in _scan(low, _ORDINALS):  # joint selectors: before a part noun or "one", or right before a state
+        after = low[h.end: h.end + 60]
+        k = bisect_left(starts, h.end)
+        state_next = k < len(spans) and spans[k][0] - h.end <= 12 and not _MARK.search(low, h.end, spans[k][0])
+        if _SELECTOR_AFTER.match(after) or state_next:
+            spans.append((h.start, h.end))
     spans.sort()
     labels = load_priors().labels
     known = set(labels.labels) | set(labels.aliases)
     out: list[str] = []
     seen: set[str] = set()
+    groups: list[str] = []
+    cur: list[int] = []  # [start, end] of the open group
+
+    def close() -> None:
+        if cur:
+            g = " ".join(low[cur[0]: cur[1]].split())
+            if g not in groups:
+                groups.append(g)
+            cur.clear()
+
     k = 0
     for m in _RUN.finditer(low):
         while k < len(spans) and spans[k][1] <= m.start():
             k += 1
         if k < len(spans) and spans[k][0] <= m.start() < spans[k][1]:
+            close()
             continue
+        if cur and _MARK.search(low, cur[1], m.start()) or cur and re.search(r"[.!?()]", low[cur[1]: m.start()]):
+            close()
         word = m.group(0).strip("'-")
-        if (not word or word in _FUNCTION_WORDS or word.isdigit() or word in known
-                or word.rstrip("s") in known or word in seen):
+        if not word or word in _FUNCTION_WORDS:
             continue
-        seen.add(word)
-        out.append(word)
-    return out
+        if word.isdigit() or word in known or word.rstrip("s") in known:
+            close()
+            continue
+        if cur:
+            cur[1] = m.end()
+        else:
+            cur.extend([m.start(), m.end()])
+        if word not in seen:
+            seen.add(word)
+            out.append(word)
+    close()
+    return out, groups

@@ -20,12 +20,25 @@ report (:func:`refined_output`) instead of refining again.
 
 Catalog rows (:class:`asset2sim.schemas.catalog.CatalogRow`) are built from
 typed stage results by :func:`build_row`.
+
+The code is part of the skip key: :func:`code_hash` hashes the package
+version and the package's source files (Python modules and the data tables
+shipped with them), and every row records it (``code_hash``) beside a
+readable :func:`code_version` (the git commit when the package runs from a
+checkout). With ``results.code_change: rerun`` (``catalog.yaml``, default) a
+finished result is reused only when its row has the current code hash
+(:func:`skip_code_hash`), so any change to the source reruns finished assets
+once; ``keep`` reuses results of earlier code. The source hash, not the git
+commit, is the key: a commit that changes only documentation or tests
+reruns nothing, and an uncommitted change to the source does.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
+import subprocess
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -33,6 +46,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+import asset2sim
 from asset2sim import __version__, atomic
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.catalog import CatalogRow
@@ -51,6 +65,85 @@ JOB_RECORD_NAME = "job.json"
 
 
 # --------------------------------------------------------------------------- hashes
+
+#: Sub-packages of ``asset2sim`` whose sources make up the code (they may live
+#: outside the ``asset2sim`` folder: ``package-dir`` in pyproject.toml).
+CODE_PACKAGES = ("asset2sim", "asset2sim.tasks", "asset2sim.schemas", "asset2sim.flows")
+#: File suffixes of the package source that change results (modules and the data tables shipped with them).
+CODE_SUFFIXES = (".py", ".yaml", ".yml", ".json", ".csv", ".txt")
+
+
+def _package_dirs() -> list[Path]:
+    import importlib.util
+
+    dirs = []
+    for name in CODE_PACKAGES:
+        spec = importlib.util.find_spec(name)  # imports only the parent package
+        for loc in (spec.submodule_search_locations or []) if spec is not None else []:
+            p = Path(loc).resolve()
+            if p not in dirs:
+                dirs.append(p)
+    return dirs
+
+
+@functools.lru_cache(maxsize=1)
+def code_hash() -> str:
+    """Hash of the code that makes results (hex, 16): SHA-256 over the
+    package version and every source file of the package (:data:`CODE_SUFFIXES`
+    under the folders of :data:`CODE_PACKAGES`, nested sub-packages included,
+    ``__pycache__`` left out), each as its path relative to its package
+    folder and its bytes, in sorted order. Computed once per process
+    (about 250 files, a few milliseconds)."""
+    h = hashlib.sha256(__version__.encode())
+    dirs = _package_dirs()
+    files: list[tuple[str, Path]] = []
+    for i, d in enumerate(dirs):
+        nested = [o for o in dirs if o != d and d in o.parents]
+        for p in d.rglob("*"):
+            if p.suffix not in CODE_SUFFIXES or "__pycache__" in p.parts or not p.is_file():
+                continue
+            if any(o in p.parents for o in nested):  # hashed with its own package
+                continue
+            files.append((f"{i}/{p.relative_to(d).as_posix()}", p))
+    for rel, p in sorted(files):
+        h.update(b"\0" + rel.encode() + b"\0")
+        h.update(p.read_bytes())
+    return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """The code version as people read it (PEP 440 local version):
+    ``<version>+g<commit>`` when the package runs from a clean git checkout,
+    ``<version>+g<commit>.dirty.<code hash 8>`` with uncommitted changes to
+    tracked files, ``<version>+src.<code hash 12>`` without git. Computed once per process."""
+    src = Path(asset2sim.__file__).resolve().parent.parent
+    try:
+        sha = subprocess.run(["git", "-C", str(src), "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True, timeout=10)  # fmt: skip
+        if sha.returncode == 0 and sha.stdout.strip():
+            dirty = subprocess.run(["git", "-C", str(src), "status", "--porcelain", "--untracked-files=no"],
+                                   capture_output=True, text=True, timeout=20)  # fmt: skip
+            tail = f".dirty.{code_hash()[:8]}" if dirty.stdout.strip() else ""
+            return f"{__version__}+g{sha.stdout.strip()}{tail}"
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return f"{__version__}+src.{code_hash()[:12]}"
+
+
+def skip_code_hash(code_change: str) -> str | None:
+    """The code hash finished results must have to be reused under the
+    ``results.code_change`` policy of ``catalog.yaml``: :func:`code_hash`
+    for ``rerun``, None (any code) for ``keep``.
+
+    Raises:
+        ValueError: an unknown policy.
+    """
+    if code_change == "rerun":
+        return code_hash()
+    if code_change == "keep":
+        return None
+    raise ValueError(f"results.code_change must be 'rerun' or 'keep', got {code_change!r}")
 
 
 def _hash16(blob: dict[str, Any]) -> str:
@@ -332,11 +425,12 @@ def _utc(ts: float | None) -> datetime | None:
     return None if ts is None else datetime.fromtimestamp(ts, timezone.utc)
 
 
-#: Columns a skipped row copies from the finished row it reuses.
+#: Columns a skipped row copies from the finished row it reuses (``code_hash``:
+#: the code that made the reused output, so a later ``rerun`` policy sees it).
 REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
-    "failure_mode", "model_queries", "tokens", "out_dir", "error",
+    "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash",
 )  # fmt: skip
 
 
@@ -383,6 +477,7 @@ def build_row(
         config_hash=prepared.config_hash,
         refine_config_hash=prepared.refine_config_hash,
         code_version=job.code_version,
+        code_hash=code_hash(),
         flow_run_id=flow_run_id,
         worker=(refined.worker if refined is not None else None) or prepared.worker,
         started_at=_utc(started_at or now),
@@ -444,10 +539,12 @@ def build_row(
 
     measured_status = measured.status if measured is not None else None
     cols: dict[str, Any] = {}
+    measured_failures: list[str] | None = None
     if measured is not None and measured.status == "ok":
         m: Measurement = measured.value
         stages["metrics"] = round(float(measured.seconds or 0.0), 4)
         cols = m.columns
+        measured_failures = list(m.failures)
         for col, v in cols.items():
             if v is not None:
                 setattr(row, col, v)
@@ -459,6 +556,7 @@ def build_row(
         rest_stable=cols.get("rest_stable"),
         oscillation_pass=cols.get("oscillation_pass"),
         chain_error_mode=(failure_mode or "crash") if error else None,
+        measured_failures=measured_failures,
     )
     errors += verdict.errors
     if measured is not None and measured.status in FAILED_STATUSES:
@@ -524,6 +622,7 @@ def build_manifest_row(
         estimator=config.get("estimator"),
         model=config.get("model"),
         code_version=code_version,
+        code_hash=code_hash(),
         flow_run_id=flow_run_id,
         started_at=when,
         finished_at=when,

@@ -40,6 +40,7 @@ from asset2sim.engines.base import Spring
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.tasks.publish import output_folder
+from asset2sim.tasks.publish.write import read_root
 
 MJCF_DIR = "mjcf"
 URDF_NAME = "mobility.urdf"
@@ -95,8 +96,11 @@ class MjcfCheck:
     notes: list[str] = field(default_factory=list)
 
 
-def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float]) -> MjcfCheck:
+def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float], fixed_base: bool = False) -> MjcfCheck:
     """Load ``xml_path`` with MuJoCo and compare it with the URDF.
+
+    ``fixed_base`` (a mounted asset, ``initial_state.json`` ``"root"``): the
+    model must have no free joint (the root is welded to the world).
 
     Per body: mass, COM (link frame) and inertia tensor about the COM (link
     axes) against the URDF link's ``<inertial>`` (a link without one must be
@@ -144,6 +148,8 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float])
                 f"the URDF {link.inertial.mass}, {link.inertial.com()}, {want.tolist()}"
             )
         com_err, inertia_err = max(com_err, dc), max(inertia_err, di)
+    if fixed_base and any(int(t) == int(mujoco.mjtJoint.mjJNT_FREE) for t in m.jnt_type):
+        raise ExportError(f"{xml_path}: the asset is mounted (fixed root) but the MJCF has a free joint")
     kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
     if kid < 0:
         raise ExportError(f"{xml_path}: no keyframe {KEYFRAME!r}")
@@ -196,10 +202,13 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
         raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
     initial = read_initial_state(out_dir)
     springs = springs_from_overlay(out_dir, initial)
+    fixed = read_root(out_dir).fixed  # mounted: no free joint, the root welded where the file puts it
     build = urdf_to_mjcf(
         urdf,
         initial_state=initial,
         springs=springs,
+        fixed_base=fixed,
+        ground=not fixed,
         missing_inertial="massless",
         mesh_root=out_dir,
         meshdir="..",
@@ -211,9 +220,9 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
         if not (dst.is_file() and dst.read_bytes() == data):
             atomic.write_bytes(dst, data)
     _remove_stale_pieces(out_dir, set(build.derived_meshes))
-    xml_path = atomic.write_text(target_dir / f"{urdf.stem}.xml", _header(build.notes) + build.xml + "\n")
+    xml_path = atomic.write_text(target_dir / f"{urdf.stem}.xml", _header(build.notes, fixed) + build.xml + "\n")
     if check:
-        check_mjcf(xml_path, urdf, initial)
+        check_mjcf(xml_path, urdf, initial, fixed_base=fixed)
     return xml_path
 
 
@@ -245,11 +254,14 @@ def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> list[Path]:
     return gone
 
 
-def _header(notes: list[str]) -> str:
+def _header(notes: list[str], fixed: bool = False) -> str:
     text = (
         "Written by asset2sim from mobility.urdf (the source of truth), overlay.json (springs) and "
         "initial_state.json (keyframe 'initial'). Load with mujoco.MjModel.from_xml_path; "
-        "mj_resetDataKeyframe(model, data, 0) puts the object on the ground at its initial state."
+        + ("mj_resetDataKeyframe(model, data, 0) puts the object at its initial state. Mounted asset: the root is "
+           "fixed at the world origin (no free joint, no ground plane; initial_state.json \"root\")."
+           if fixed else
+           "mj_resetDataKeyframe(model, data, 0) puts the object on the ground at its initial state.")
     )
     if notes:
         text += " Conversion notes: " + "; ".join(notes)

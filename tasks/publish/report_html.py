@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.atomic import write_text
+from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.publish import plots
 from asset2sim.tasks.publish.render import render_views
 
@@ -290,6 +291,23 @@ def _parameter_table(ev) -> str:
     return "<table><tr><th>where</th><th>parameter</th><th>value</th><th>unit</th><th>source</th></tr>" + rows + "</table>"
 
 
+def _badge(ev) -> str:
+    """The interaction-readiness verdict (:func:`asset2sim.tasks.check.verdict.readiness`,
+    the same the refine report, the terminal and the catalog show), with the
+    semantic checks that fail beside it."""
+    r = readiness(list(ev.metrics))
+    engine_errors = [f for f in ev.failures if f.startswith("engine@")]
+    other = [f for f in ev.failures if f not in r.failures and not f.startswith("engine@")]
+    if r.ready and not engine_errors:
+        html = f"<span class='badge pass'>{esc(r.line())}</span>"
+    else:
+        html = f"<span class='badge fail'>{esc(r.line() if not r.ready else 'NOT READY')}" + (
+            f"; {esc(', '.join(engine_errors))}" if engine_errors else "") + "</span>"
+    if other:
+        html += f" <span class='small'>other checks failing: {esc(', '.join(other))}</span>"
+    return html
+
+
 def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
     """The HTML text of one evaluation's report (see module docstring);
     ``views``: renders of the object at ``ev.initial_state`` (view name ->
@@ -297,8 +315,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
-    badge = ("<span class='badge pass'>interaction-ready: all checks pass</span>" if ev.passed
-             else f"<span class='badge fail'>not ready: {esc(', '.join(ev.failures))}</span>")
+    badge = _badge(ev)
     views_html, views_what = _renders(ev, views)
     sections = [
         f"<h1>asset2sim evaluation: {esc(ev.asset_id)}</h1>",
@@ -365,6 +382,9 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
         ("rest-stability pass", "rest"),
         ("oscillation pass", "osc"),
         ("probes pass", "probes"),
+        ("joint sweep pass", "sweep"),
+        ("robust rest pass", "robust"),
+        ("interaction-ready", "ready"),
         ("scale dev. vs GenSim2", "scale"),
         ("init. joint dev. (rad)", "init"),
         ("prompt alignment", "prompt"),
@@ -383,6 +403,9 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
                 _pm(r.get("rest_stability_pass"), None, pct=True) + f" ({r.get('rest_n', 0)})",
                 _pm(r.get("oscillation_pass"), None, pct=True) + f" ({r.get('osc_n', 0)})",
                 _pm(r.get("probes_pass"), None, pct=True) + f" ({r.get('probes_n', 0)})",
+                _pm(r.get("sweep_pass"), None, pct=True) + f" ({r.get('sweep_n', 0)})",
+                _pm(r.get("robust_rest_pass"), None, pct=True) + f" ({r.get('robust_n', 0)})",
+                _pm(r.get("ready"), None, pct=True) + f" ({r.get('ready_n', 0)})",
                 _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
                 _pm(r.get("init_mean"), r.get("init_sd")),
                 _pm(r.get("prompt_mean"), None, pct=True),

@@ -13,6 +13,7 @@ written atomically; the input folder is never written.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -21,7 +22,8 @@ import numpy as np
 
 from asset2sim import atomic, frames, mesh_io, urdf
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.overlay import Overlay, RootMount
+from asset2sim.tasks.publish import collision_geometry
 from asset2sim.tasks.publish.output_folder import MARKER_NAME, RECORD_NAME, OutputError, check_location
 
 URDF_NAME = "mobility.urdf"
@@ -293,6 +295,7 @@ def build_urdf(
     overlay: Overlay,
     collision_overrides: dict | None = None,
     root_rotation: np.ndarray | None = None,
+    collision_out: tuple[Path, dict[str, float]] | None = None,
 ) -> bytes:
     """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``.
 
@@ -312,6 +315,10 @@ def build_urdf(
     mesh collisions (convex decomposition), paths relative to the output.
     ``root_rotation``: (3, 3) rotation baked into the root link's geometry and
     the joints that hang from it (a requested resting pose, ``tasks.pose``).
+    ``collision_out``: (output folder, initial state): the mesh collisions
+    become the convex pieces of
+    :func:`asset2sim.tasks.publish.collision_geometry.convex_collisions`,
+    written into the folder (every engine loads them).
 
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
@@ -374,6 +381,9 @@ def build_urdf(
                 joint.limit.effort = 1000.0
             if joint.limit.velocity is None:
                 joint.limit.velocity = 1000.0
+    urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
+    if collision_out is not None:
+        collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1])
     springs = {n: (d.stiffness, d.spring_reference) for n, d in overlay.joints.items() if d.stiffness > 0}
     comment = (
         f" Written by asset2sim. Uniform scale {s!r} is baked in (mesh scale, origins, prismatic limits, inertials); "
@@ -381,6 +391,7 @@ def build_urdf(
         f"Joint stiffness, spring references and the reasoning notes: see {OVERLAY_NAME}"
         + (f"; springs on {', '.join(sorted(springs))}" if springs else "")
         + ". "
+        + root_sentence(overlay.mounting)
     )
     return urdf.write_urdf(model, comment=comment)
 
@@ -410,7 +421,65 @@ def write_output(
     out.mkdir(parents=True, exist_ok=True)
     if copy:
         copy_meshes(asset, out)
-    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation))
-    state = atomic.write_json(out / STATE_NAME, {"initial_joint_positions": {k: float(v) for k, v in initial_state.items()}})
+    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state)))
+    state = atomic.write_json(out / STATE_NAME, {
+        "initial_joint_positions": {k: float(v) for k, v in initial_state.items()},
+        ROOT_KEY: root_record(overlay.mounting),
+    })
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
     return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl)
+
+
+#: Key of the root declaration in ``initial_state.json``.
+ROOT_KEY = "root"
+
+
+def root_record(mount: RootMount | None) -> dict:
+    """The ``"root"`` entry of ``initial_state.json`` for a mounting (None:
+    free-standing): ``{"fixed": bool, "mounting": kind, "pose": ...,
+    "source": ...}``. A fixed root's ``pose`` is the root link frame in the
+    world, ``{"xyz": [0, 0, 0] m, "quat_xyzw": [0, 0, 0, 1]}`` (the file's
+    frame: the mount holds it there, no ground plane); a free root's pose is
+    null: the SPEC places it with its lowest collision point on the ground
+    at z = 0 and lets it settle."""
+    mount = mount or RootMount()
+    pose = {"xyz": [0.0, 0.0, 0.0], "quat_xyzw": [0.0, 0.0, 0.0, 1.0]} if mount.fixed else None
+    return {"fixed": bool(mount.fixed), "mounting": mount.kind, "pose": pose, "source": mount.source}
+
+
+def root_sentence(mount: RootMount | None) -> str:
+    """The URDF comment's sentence on how the root is held."""
+    mount = mount or RootMount()
+    if mount.fixed:
+        return (f"Mounted ({mount.kind}): load with a FIXED root link at the file's origin "
+                f"(PyBullet useFixedBase, SAPIEN fix_root_link, MJCF without a free joint); see {STATE_NAME} \"{ROOT_KEY}\". ")
+    return f"Free-standing: root free, resting on the ground; see {STATE_NAME} \"{ROOT_KEY}\". "
+
+
+def read_root(folder: Path | str) -> RootMount:
+    """The root declaration of an output folder's ``initial_state.json``
+    (:func:`root_record`); free-standing when the file or its ``"root"`` entry
+    is absent (outputs of other tools, earlier versions).
+
+    Raises:
+        OutputError: ``"root"`` is present but not the shape
+            :func:`root_record` writes (names the file).
+    """
+    p = Path(folder) / STATE_NAME
+    if not p.is_file():
+        return RootMount()
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise OutputError(f"{p}: not readable JSON: {exc}") from exc
+    rec = data.get(ROOT_KEY) if isinstance(data, dict) else None
+    if rec is None:
+        return RootMount()
+    if not isinstance(rec, dict) or not isinstance(rec.get("fixed"), bool):
+        raise OutputError(f"{p}: \"{ROOT_KEY}\" must be an object with a boolean \"fixed\"")
+    fixed = rec["fixed"]
+    kind = rec.get("mounting") or ("wall-mounted" if fixed else "free-standing")
+    try:
+        return RootMount(kind=kind, fixed=fixed, source=str(rec.get("source") or f"declared in {STATE_NAME}"))
+    except ValueError as exc:
+        raise OutputError(f"{p}: \"{ROOT_KEY}\": {exc}") from exc

@@ -314,6 +314,8 @@ def improve_collisions(
                 world._pass = n_pass
                 tried.clear()
             before = world.penetration(a, b)
+            if before <= IMPROVEMENT_EPS:
+                continue  # this pair no longer overlaps: spend no budget on it
             cands = []
             for ln, other in ((a, b), (b, a)):
                 for key in [k for k in world.refs if k[0] == ln]:
@@ -322,7 +324,7 @@ def improve_collisions(
                         cands.append((depth, key, other))
             cands.sort(key=lambda c: -c[0])
             for _, key, other in cands:
-                if key in changed or key in tried:
+                if key in changed or key in tried or before <= IMPROVEMENT_EPS:
                     continue
                 tried.add(key)
                 ln = key[0]

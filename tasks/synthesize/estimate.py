@@ -33,7 +33,7 @@ from asset2sim.schemas.overlay import (
 )
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret import priors, request_apply
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import EstimationContext
 
@@ -52,6 +52,10 @@ class Estimate:
     overlay: Overlay
     bands: dict[str, str]
     notes: list[str] = field(default_factory=list)
+    targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)
+    """joint -> a number or end the request asked ("30 degrees", "lever up"),
+    resolved (:mod:`asset2sim.tasks.interpret.request_apply`); its interval
+    replaces the band's in the state search."""
 
 
 class Estimator(Protocol):
@@ -90,67 +94,17 @@ def task_relevant_joints(ctx: EstimationContext) -> list[str]:
     """Movable joints whose moving part is what tasks manipulate (lid, door,
     drawer, screen ...; ``priors.part_role`` == "task"), ordered by the
     category's priority; every non-accessory movable joint when none
-    qualifies, and all movable joints when even that is empty."""
-    movable = ctx.asset.movable_joints()
-    ranked = []
-    for j in movable:
-        rank = priors.task_relevant_rank(ctx.category, ctx.asset.link(j.child).semantic_label)
-        if rank is not None or priors.part_role(ctx.category, ctx.asset.link(j.child).semantic_label) == "task":
-            ranked.append((rank if rank is not None else 99, j.name))
-    if ranked:
-        return [n for _, n in sorted(ranked, key=lambda t: t[0])]
-    out = [
-        j.name
-        for j in movable
-        if priors.part_role(ctx.category, ctx.asset.link(j.child).semantic_label) not in ("accessory", "body")
-    ]
-    return out or [j.name for j in movable]
+    qualifies, and all movable joints when even that is empty
+    (:func:`asset2sim.tasks.interpret.request_apply.task_relevant_joints`)."""
+    return request_apply.task_relevant_joints(ctx)
 
 
-def _label_matches(ctx: EstimationContext, request_label: str, semantic_label: str | None) -> bool:
-    return priors.request_label_matches(ctx.category, request_label, semantic_label)
-
-
-def requested_bands(ctx: EstimationContext) -> tuple[dict[str, str], list[str]]:
-    """Band per movable joint from the request (joint -> band name), and notes.
-
-    Rules: a per-label request applies to joints whose moving part carries that
-    label (``priors.request_label_matches``); a label that matches nothing, and
-    an "all" request, apply to the task-relevant joints; an ordinal picks among
-    the targets ordered top to bottom by the height of the moving part in the
-    closed state (0 = "first"/"top", -1 = "last"/"bottom"). Joints not
-    addressed are closed.
-    """
-    notes: list[str] = []
-    relevant = task_relevant_joints(ctx)
-    bands: dict[str, str] = {}
-    for jr in ctx.request.joint_states:
-        if jr.selector == "all" or not jr.label:
-            # continuous joints (wheels, knobs without stops) have no open/closed
-            targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
-        else:
-            targets = [
-                j.name
-                for j in ctx.asset.movable_joints()
-                if _label_matches(ctx, jr.label, ctx.asset.link(j.child).semantic_label)
-            ]
-            if not targets:
-                targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
-                notes.append(
-                    f"request names '{jr.label}' but no part has that label; applied '{jr.band}' to the task-relevant joints {targets}"
-                )
-        if jr.ordinal is not None:
-            targets.sort(key=lambda n: -ctx.joint_heights.get(n, 0.0))
-            if -len(targets) <= jr.ordinal < len(targets):
-                targets = [targets[jr.ordinal]]
-            else:
-                notes.append(f"request asks for {jr.label or 'part'} #{jr.ordinal} but only {len(targets)} exist; ignored")
-                targets = []
-        for t in targets:
-            bands[t] = jr.band
-    for j in ctx.asset.movable_joints():
-        bands.setdefault(j.name, "closed")
-    return bands, notes
+def requested_bands(ctx: EstimationContext, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
+    """Band per movable joint from the request (joint -> band name), and notes
+    (warnings first): :func:`asset2sim.tasks.interpret.request_apply.resolve_states`
+    at ``scale`` (default :func:`choose_scale`). Joints not addressed are closed."""
+    res = request_apply.resolve_states(ctx, choose_scale(ctx)[0] if scale is None else scale)
+    return res.bands, res.warnings + res.notes
 
 
 def state_from_bands(closed: dict[str, ClosedState], bands: dict[str, str], scale: float, prismatic: set[str]) -> dict[str, float]:
@@ -170,8 +124,13 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     s is the geometric mean of the ratios of the two largest sorted dimensions
     (the smallest is the least reliable: thickness of lids, screens); a
     handheld category is then capped so that at least two dimensions fit a
-    parallel gripper (second-largest <= ``priors.GRASPABLE_WIDTH_M``).
+    parallel gripper (second-largest <= ``priors.GRASPABLE_WIDTH_M``). Sizes in
+    numbers ("30 cm tall") decide alone
+    (:func:`asset2sim.tasks.interpret.request_apply.scale_from_sizes`).
     """
+    sized = request_apply.scale_from_sizes(ctx)
+    if sized is not None:
+        return sized
     target = priors.target_size(ctx.category, ctx.request)
     dims = np.sort(np.asarray(target.dims, float))[::-1]
     ext = np.maximum(np.sort(np.asarray(ctx.closed_extents, float))[::-1], 1e-9)
@@ -209,8 +168,8 @@ def _variant(ctx: EstimationContext) -> str | None:
     return v.name if v is not None else None
 
 
-def _material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoice:
-    m = priors.material_for(ctx.category, label, _variant(ctx))
+def _material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
+    m = (request_apply.requested_material(ctx, link) if link is not None else None) or priors.material_for(ctx.category, label, _variant(ctx))
     return physics.MaterialChoice(
         name=m.name,
         density=float(m.density),
@@ -310,13 +269,17 @@ class OfflineEstimator:
             geom = ctx.geometry.get(ln.name)
             if geom is None:
                 continue
-            mat = _material(ctx, ln.semantic_label)
+            mat = _material(ctx, ln.semantic_label, ln.name)
             links[ln.name] = physics.link_physics(geom, s, mat, source=f"geometry + {mat.name} prior")
             mat_notes.append(f"{ln.name} ({ln.semantic_label or 'unlabelled'}): {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
         total = sum(lp.mass for lp in links.values())
         mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
         lo, hi = plausible_mass_range(ctx, s)
-        if total > 0 and (total < lo or total > hi):
+        links, req_mass_notes, mass_asked = request_apply.apply_masses(ctx, links, (lo, hi))
+        if req_mass_notes:
+            total = sum(lp.mass for lp in links.values())
+            mass_note += "; request: " + "; ".join(req_mass_notes) + f"; total {total:.4g} kg"
+        if total > 0 and not mass_asked and (total < lo or total > hi):
             # into the plausible range, a margin inside its ends (10 %)
             target = lo * 1.1 if total < lo else hi * 0.9
             f = target / total
@@ -331,8 +294,9 @@ class OfflineEstimator:
             mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
         # ---- state
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
-        bands, band_notes = requested_bands(ctx)
-        state = state_from_bands(ctx.closed, bands, s, prismatic)
+        resolved = request_apply.resolve_states(ctx, s)
+        bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
+        state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
         # ---- dynamics
         relevant = set(task_relevant_joints(ctx))
         choices = {}
@@ -347,6 +311,8 @@ class OfflineEstimator:
                 free_moving=ctx.request.free_moving and rel,
             )
         joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
+        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, [n for n in task_relevant_joints(ctx)], state)
+        band_notes += dyn_notes
         body_prior = priors.material_for(ctx.category, None, _variant(ctx))
         body_mat = _material(ctx, None)
         friction_coeff = float(body_prior.lateral_friction)
@@ -373,12 +339,15 @@ class OfflineEstimator:
                 + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),
             ),
         )
-        return Estimate(overlay=overlay, bands=bands, notes=band_notes)
+        return Estimate(overlay=overlay, bands=bands, notes=band_notes, targets=resolved.targets)
 
 
 register_estimator("offline", OfflineEstimator)
 
 
-def band_intervals(bands: dict[str, str]) -> dict[str, tuple[float, float]]:
-    """Allowed opening-fraction interval per joint for its band."""
-    return {name: BAND_INTERVAL[b] for name, b in bands.items()}
+def band_intervals(bands: dict[str, str], intervals: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
+    """Allowed opening-fraction interval per joint for its band; ``intervals``
+    (a number or end the request asked, :attr:`Estimate.intervals`) win."""
+    out = {name: BAND_INTERVAL[b] for name, b in bands.items()}
+    out.update(intervals or {})
+    return out

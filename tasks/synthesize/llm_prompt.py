@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.schemas.request import BAND_TARGET
+from asset2sim.tasks.interpret import request_apply
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.interpret.size_priors import target_size
 from asset2sim.tasks.publish import render
@@ -61,7 +62,8 @@ def describe(ctx: EstimationContext) -> dict[str, Any]:
     asset = ctx.asset
     req = ctx.request
     target = target_size(ctx.category, req)
-    bands, band_notes = estimate.requested_bands(ctx)
+    resolved = request_apply.resolve_states(ctx, estimate.choose_scale(ctx)[0])
+    bands, band_notes = resolved.bands, resolved.warnings + resolved.notes
     relevant = set(estimate.task_relevant_joints(ctx))
     links = []
     for ln in asset.links:
@@ -102,6 +104,7 @@ def describe(ctx: EstimationContext) -> dict[str, Any]:
             "unit": "m at scale 1 (multiply by the scale)" if j.type == "prismatic" else "rad",
             "task_relevant": j.name in relevant,
             "requested_band": bands.get(j.name, "closed"),
+            "requested_opening_fraction": None if j.name not in resolved.targets else _r(resolved.targets[j.name].fraction),
             "height_m": _r(ctx.joint_heights.get(j.name, 0.0)),
         }
         if cs is not None:
@@ -128,6 +131,7 @@ def describe(ctx: EstimationContext) -> dict[str, Any]:
             "stiff": req.stiff,
             "free_moving": req.free_moving,
             "pose": req.pose_hint,
+            **request_apply.prompt_fields(req),
             "notes": band_notes,
         },
         "closed_extents_m": [_r(e) for e in np.asarray(ctx.closed_extents, float)],
@@ -162,6 +166,10 @@ How your answer is used and what each field means (SI units, angles in radians):
 - Every number with a std is your estimate and its 1-sigma uncertainty in the same unit (std > 0).
 - lateral_friction and restitution: the object's contact material.
 - notes: size reasoning, material reasoning, mass arithmetic.
+- request_parse also holds what the request asks in numbers; honour it exactly: a joint's requested_opening_fraction
+  (when not null, its position is at that fraction from the closed end), sizes_m (the scale gives these dimensions),
+  masses_and_materials (kg; material keys with their density), joint_parameters (SI values to use as given). Your overlay
+  is checked against them.
 """
 
 

@@ -247,3 +247,54 @@ def test_viewer_only_in_pybullet(tmp_path):
         v.close()
     with pytest.raises(EngineUnsupported):
         open_viewer("fake", a.urdf)
+
+
+@pytest.mark.parametrize("engine", [pytest.param("pybullet", id="pybullet"), *OTHERS, pytest.param("fake", id="fake")])
+def test_joint_drive_moves_at_target_speed_and_release_holds(tmp_path, engine):
+    """drive_joint: a force-limited velocity drive (the joint's friction is a
+    load it overcomes); release_joint: passive again, the joint stays."""
+    _need(engine)
+    a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.02)
+    s = open_session(engine, a.urdf, SessionOptions(initial_state=dict(a.initial_state), fixed_base=True, gravity=False, ground=False))
+    try:
+        for joint, speed in (("lid_hinge", 0.2), ("post_slide", 0.01)):
+            q0 = s.joint_state(joint)[0]
+            s.drive_joint(joint, speed, 50.0)
+            s.step(120)  # 0.5 s
+            q1, qd1 = s.joint_state(joint)
+            assert q1 - q0 == pytest.approx(0.5 * speed, rel=0.05)
+            assert qd1 == pytest.approx(speed, rel=0.05)
+            s.release_joint(joint)
+            s.step(120)
+            assert abs(s.joint_state(joint)[0] - q1) < 0.05 * (q1 - q0)
+        # a drive weaker than an opposing load cannot move the joint
+        q0 = s.joint_state("post_slide")[0]
+        if engine != "fake":  # the fake has no forces
+            s.drive_joint("post_slide", 0.01, 0.5)
+            for _ in range(120):
+                s.apply_joint_effort("post_slide", -(0.5 + 2.0 + 3.0))  # beyond limit + friction (2 N)
+                s.step(1)
+            assert s.joint_state("post_slide")[0] <= q0 + 1e-4
+            s.release_joint("post_slide")
+    finally:
+        s.close()
+
+
+@pytest.mark.parametrize("engine", [pytest.param("pybullet", id="pybullet"), *OTHERS])
+def test_set_root_velocity_moves_a_free_root(tmp_path, engine):
+    _need(engine)
+    a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.02)
+    s = open_session(engine, a.urdf, SessionOptions(initial_state=dict(a.initial_state)))
+    try:
+        p0 = s.root_pose()[0]
+        s.set_root_velocity(np.array([0.05, 0.0, 0.0]), np.zeros(3))
+        s.step(1)
+        assert (s.root_pose()[0][0] - p0[0]) * 240 == pytest.approx(0.05, rel=0.25)
+    finally:
+        s.close()
+    s = open_session(engine, a.urdf, SessionOptions(initial_state=dict(a.initial_state), fixed_base=True))
+    try:
+        with pytest.raises(EngineUnsupported):
+            s.set_root_velocity(np.array([0.05, 0.0, 0.0]), np.zeros(3))
+    finally:
+        s.close()

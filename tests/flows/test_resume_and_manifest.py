@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 
 from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.publish.contract import JOB_RECORD_NAME
 
 try:
@@ -62,7 +64,7 @@ def test_a_complete_folder_without_its_row_is_recorded_not_refined(tmp_path, das
     # laptop's folder then loses a file (no longer complete)
     store = ResultCatalog(cat.catalog_root)
     for aid in ("box_lid", "laptop"):
-        (store.run_dir("gen", s1["run"]) / f"{aid}.parquet").unlink()
+        assert store.delete_row("gen", s1["run"], aid)
     (run1 / "laptop" / "initial_state.json").unlink()
     assert set(_rows(catalog, s1["run"])) == {"trash_can"}
 
@@ -78,7 +80,13 @@ def test_a_complete_folder_without_its_row_is_recorded_not_refined(tmp_path, das
     restored = _rows(catalog, s1["run"])
     assert set(restored) == {"box_lid", "trash_can"}
     old = restored["box_lid"]
-    assert old["status"] == "done" and old["failure_mode"] == "none" and old["source_run"] == s1["run"]
+    # the fake refine reports "none"; the metrics stage's evaluation of the (unrefined) copy decides the
+    # readiness tiers it finds failing (tasks.check.verdict.asset_failure_mode(measured_failures=...))
+    measured = json.loads((run1 / "_metrics" / "box_lid" / "evaluation.json").read_text())
+    assert old["rest_stable"] and old["oscillation_pass"]
+    expected = readiness([MetricResult(**m) for m in measured["metrics"]
+                          if m["name"] in ("joint_sweep", "robust_rest", "probes")]).failure_mode
+    assert old["status"] == "done" and old["failure_mode"] == expected and old["source_run"] == s1["run"]
     assert old["out_dir"] == str(run1 / "box_lid")
     report = json.loads((run1 / "box_lid" / "report.json").read_text())
     assert old["scale"] == report["scale"] and old["total_mass_kg"] == report["total_mass"]
@@ -87,8 +95,8 @@ def test_a_complete_folder_without_its_row_is_recorded_not_refined(tmp_path, das
         assert old[col] == rows1["box_lid"][col], col
 
     # another request for box_lid: its earlier folder is not this job's; refined again
-    (store.run_dir("gen", s1["run"]) / "box_lid.parquet").unlink()
-    (store.run_dir("gen", s2["run"]) / "box_lid.parquet").unlink()
+    assert store.delete_row("gen", s1["run"], "box_lid")
+    assert store.delete_row("gen", s2["run"], "box_lid")
     manifest = cat.manifest_path("gen")
     with open(manifest, newline="") as fh:
         entries = list(csv.DictReader(fh))

@@ -45,6 +45,21 @@ def mujoco_messages():
         mujoco.set_mju_user_warning(previous)
 
 
+def compile_xml(xml: str, assets: dict[str, bytes], urdf_path: Path):
+    """Compile the MJCF text ``xml`` with the mesh ``assets`` (relative path
+    -> bytes); returns the ``MjModel``.
+
+    Raises:
+        MjcfError: MuJoCo refuses it (names the URDF it came from).
+    """
+    mujoco = load_mujoco()
+    try:
+        with mujoco_messages():
+            return mujoco.MjModel.from_xml_string(xml, assets=assets)
+    except Exception as exc:
+        raise MjcfError(f"{urdf_path}: the converted MJCF does not compile: {exc}") from exc
+
+
 def place_on_ground(root, root_body, assets: dict[str, bytes], initial_state: dict[str, float], fixed_base: bool,
                      urdf_path: Path, notes: list[str]):
     """Compile ``root`` and lift the root so the lowest collision point

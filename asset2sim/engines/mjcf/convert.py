@@ -13,7 +13,7 @@ from lxml import etree
 from asset2sim.engines.base import Spring
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import KEYFRAME, MjcfError, vec_text
-from asset2sim.engines.mjcf.compiler import load_mujoco, place_on_ground
+from asset2sim.engines.mjcf.compiler import compile_xml, load_mujoco, place_on_ground
 from asset2sim.engines.mjcf.contacts import set_contacts
 from asset2sim.engines.mjcf.importer import import_skeleton, urdf_for_import
 from asset2sim.engines.mjcf.meshes import MeshAssets, mesh_assets
@@ -135,6 +135,8 @@ def urdf_to_mjcf(
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)
     xml = _with_keyframe(root, qpos)
+    if visuals:  # the visual meshes were not in ``compiled``: the file as written must compile too
+        compile_xml(xml, final_assets, urdf_path)
     # Only the root's pose and the keyframe changed since ``compiled``.
     order = [mujoco.mj_id2name(compiled, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(compiled.njnt)]
     joint_names = [n for n in order if n in movable]

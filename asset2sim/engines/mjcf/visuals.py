@@ -46,6 +46,30 @@ def mtl_colour(obj: Path) -> str:
     return "0.7 0.7 0.7 1"
 
 
+#: Fewest distinct vertices MuJoCo compiles a mesh from ("at least 4
+#: vertices required", MuJoCo 3's mesh compiler).
+MIN_MESH_VERTICES = 4
+
+
+def visual_mesh_problem(path: Path) -> str:
+    """Why MuJoCo would refuse ``path`` as a visual mesh ("" when it takes
+    it): unreadable, no faces, fewer than :data:`MIN_MESH_VERTICES` distinct
+    vertices (a single triangle), or a format MuJoCo does not read."""
+    if path.suffix.lower() not in (".obj", ".stl", ".msh"):
+        return f"is a {path.suffix} file (MuJoCo reads OBJ, STL and MSH)"
+    try:
+        v, f, _ = mesh_io.read_mesh(path)
+    except mesh_io.MeshReadError as exc:
+        return f"cannot be read ({exc})"
+    v = np.asarray(v, float)
+    v = v[np.all(np.isfinite(v), axis=1)]
+    if len(f) == 0:
+        return "has no faces"
+    if len(np.unique(v, axis=0)) < MIN_MESH_VERTICES:
+        return f"has fewer than {MIN_MESH_VERTICES} distinct vertices"
+    return ""
+
+
 def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict, used: set, notes: list) -> None:
     """Append ``link``'s visuals to ``body`` as non-colliding geoms (group 2)."""
     for k, v in enumerate(link.visuals):
@@ -60,6 +84,11 @@ def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict
             if rel is None:
                 body.remove(g)
                 notes.append(f"link {link.name!r} visual {k} ({v.filename}) is missing or outside the asset folder: not exported")
+                continue
+            why = visual_mesh_problem(v.path)
+            if why:
+                body.remove(g)
+                notes.append(f"link {link.name!r} visual {k} ({v.filename}) {why}: not exported (MuJoCo refuses it)")
                 continue
             name = f"{safe_name(link.name)}__v{k}"
             while name in used:

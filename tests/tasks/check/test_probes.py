@@ -73,15 +73,37 @@ def test_drawer_that_springs_back_fails_the_close_probe(tmp_path):
     assert 30.0 < p["close"]["peak_force"] < 200.0
 
 
-def test_drawer_too_stiff_for_a_light_carcass_moves_the_object_instead(tmp_path):
-    ev = evaluate_asset(drawer(tmp_path / "d", base_mass=1.0, friction=100.0))
+def test_drawer_too_stiff_for_a_light_carcass_is_not_moved_by_a_hand_force(tmp_path):
+    """The probe holds the body (the reaction acts on the carcass): a drawer
+    whose friction (100 N) is beyond the probe's force (2 x the weight) is not
+    reached, and the held carcass does not slide (3 kg: with the 1 kg drawer
+    out, the center of mass stays over the carcass)."""
+    ev = evaluate_asset(drawer(tmp_path / "d", base_mass=3.0, friction=100.0))
     m, p = _probes(ev)
     assert m.passed is False
     for action in ("close", "open"):
         assert not p[action]["reached"]
-        assert p[action]["slid"] or p[action]["tipped"]
-        assert "moved instead" in p[action]["failure"]
-        assert p[action]["peak_force"] <= p[action]["max_force"]
+        assert not p[action]["slid"] and not p[action]["tipped"]
+        assert p[action]["failure"] == "target not reached"
+        assert p[action]["peak_force"] == pytest.approx(p[action]["max_force"])
+
+
+def test_a_light_carcass_held_by_the_probe_is_operated_pushed_alone_it_slides(tmp_path):
+    """A 3 kg carcass with a drawer that needs 40 N (the probe's limit is
+    2 x 39 N): held (default) the drawer closes; pushed without holding the
+    body (an external push), the carcass slides away instead (ground friction
+    about 0.5 x 39 N < 40 N)."""
+    f = drawer(tmp_path / "d", base_mass=3.0, friction=40.0)
+    for hold, ok in ((True, True), (False, False)):
+        s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"slide": 0.15}))
+        try:
+            r = probe_joint(s, "slide", closed=0.0, direction=1.0, open_range=0.3, action="close",
+                            config=ProbeConfig(hold_body=hold))
+        finally:
+            s.close()
+        assert r.success is ok, r.failure
+        if not ok:
+            assert r.slid and "moved instead" in r.failure
 
 
 def _lid(folder: Path, friction: float) -> Path:

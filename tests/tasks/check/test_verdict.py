@@ -11,6 +11,7 @@ from asset2sim.tasks.check.verdict import (
     asset_failure_mode,
     exception_failure_mode,
     post_check_failure_mode,
+    readiness,
 )
 
 
@@ -19,6 +20,7 @@ class _Check:
     stable: bool
     osc: bool
     pen: float | None
+    metrics: tuple = ()
 
     def metric(self, name):
         if name == "oscillation":
@@ -66,3 +68,42 @@ def test_exception_modes():
     assert exception_failure_mode(TimeoutError()) == "timeout"
     assert exception_failure_mode(TaskRunTimeoutError()) == "timeout"
     assert exception_failure_mode(ValueError()) == "crash"
+
+
+def _m(name, passed, engine="pybullet"):
+    return MetricResult(name=name, value=0.0, unit="", passed=passed, engine=engine)
+
+
+def test_readiness_names_every_failing_tier_and_the_first_mode():
+    r = readiness([_m("rest_stability", True), _m("oscillation", True), _m("joint_sweep", True),
+                   _m("robust_rest", False, "physx"), _m("probes", False), _m("total_mass", False)])
+    assert not r.ready
+    assert r.tiers == {"rest": True, "penetration": None, "sweep": True, "robust_rest": False, "probes": False}
+    assert r.failures == ["robust_rest@physx", "probes@pybullet"]  # semantic metrics do not decide readiness
+    assert r.failure_mode == "not_robust_at_rest"
+    assert r.line().startswith("NOT READY: robust_rest@physx, probes@pybullet")
+    ok = readiness([_m("rest_stability", True), _m("probes", None), _m("joint_sweep", True)])
+    assert ok.ready and ok.failure_mode == "none" and ok.tiers["probes"] is None
+    assert ok.line().startswith("interaction-ready")
+    assert readiness([_m("oscillation", False)]).failure_mode == "oscillating"
+    assert readiness([_m("state_hold", False)]).failure_mode == "joint_not_held"
+    assert readiness([_m("state_hold", False), _m("settle_tilt", False)]).failure_mode == "unstable"
+    assert readiness([_m("joint_sweep", False)]).failure_mode == "blocked_joint"
+    pen = MetricResult(name="penetration", value=UNRESOLVED_PENETRATION_MM + 1, unit="mm", passed=None)
+    assert readiness([_m("rest_stability", True), pen]).failure_mode == "unresolved_penetration"
+    assert readiness([_m("oscillation", False), pen]).failure_mode == "oscillating"  # the post-check's order
+    for mode in ("blocked_joint", "not_robust_at_rest", "probe_failed", "joint_not_held"):
+        assert mode in FAILURE_MODES
+
+
+def test_post_check_mode_includes_the_manipulation_tiers():
+    assert post_check_failure_mode(_Check(True, True, 0.0, (_m("joint_sweep", False),))) == "blocked_joint"
+    assert post_check_failure_mode(_Check(True, True, 0.0, (_m("robust_rest", False),))) == "not_robust_at_rest"
+
+
+def test_catalog_mode_takes_a_failing_measured_tier():
+    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", rest_stable=True,
+                           oscillation_pass=True, measured_failures=["total_mass@none", "probes@pybullet"])
+    assert v.failure_mode == "probe_failed" and "probes@pybullet" in v.errors[0]
+    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", measured_failures=["total_mass@none"])
+    assert v.failure_mode == "none"

@@ -95,7 +95,11 @@ def test_state_and_overlay_json_written(cabinet, tmp_path):
     asset, geometry = cabinet
     ov = _overlay(asset, geometry, 0.5)
     out = write_output(asset, ov, tmp_path / "out", {"joint_0": 0.01})
-    assert json.loads(out.initial_state.read_text()) == {"initial_joint_positions": {"joint_0": 0.01}}
+    assert json.loads(out.initial_state.read_text()) == {
+        "initial_joint_positions": {"joint_0": 0.01},
+        # the root declaration (issue 16): no mounting in the overlay -> free-standing
+        "root": {"fixed": False, "mounting": "free-standing", "pose": None, "source": ""},
+    }
     back = Overlay.model_validate_json(out.overlay.read_text())
     assert back == ov
 

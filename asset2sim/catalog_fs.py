@@ -1,0 +1,152 @@
+"""Where the Parquet result catalog lives: a local folder or any object store
+or remote filesystem that pyarrow or fsspec can open.
+
+``catalog_root`` in ``catalog.yaml`` is either a path (relative to the
+project root) or a URI:
+
+- ``s3://bucket/prefix`` (Amazon S3 or any S3-compatible store: MinIO, Ceph,
+  moto), ``gs://bucket/prefix``, ``hdfs://...``: pyarrow's own C++
+  filesystems (:func:`pyarrow.fs.FileSystem.from_uri`). Credentials and the
+  endpoint come from the usual environment (``AWS_ACCESS_KEY_ID``,
+  ``AWS_SECRET_ACCESS_KEY``, ``AWS_DEFAULT_REGION``, ``AWS_ENDPOINT_URL`` for
+  an S3-compatible server) or from the URI's query
+  (``s3://bucket/prefix?endpoint_override=http://127.0.0.1:9000&region=us-east-1``,
+  the parameters pyarrow documents for ``S3FileSystem.from_uri``);
+- any other scheme fsspec knows (``memory://``, ``abfs://``, ...): the fsspec
+  filesystem wrapped for pyarrow (:class:`pyarrow.fs.FSSpecHandler`).
+
+Atomic writes: on a local folder a file is written to a temporary name,
+fsynced and renamed (:mod:`asset2sim.atomic`); on an object store a single
+``PUT`` of the whole object is atomic (a reader sees the old object, the new
+one or none, never a part), so the object is written in one upload.
+
+pyarrow is imported inside the functions (the package imports without it).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from asset2sim import atomic
+
+_URI_RE = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*://")
+
+
+def is_uri(root: str | Path) -> bool:
+    """True when ``root`` is a URI with a scheme (``s3://``, ``file://``, ...), not a plain path."""
+    return isinstance(root, str) and bool(_URI_RE.match(root))
+
+
+@dataclass(frozen=True)
+class Location:
+    """An opened catalog root: the pyarrow filesystem ``fs``, the root as a
+    path inside it (``base``, no trailing slash), the root as the user wrote
+    it (``uri``) and whether it is a local folder."""
+
+    fs: Any
+    base: str
+    uri: str
+    local: bool
+
+    def join(self, *parts: str) -> str:
+        """The filesystem path of ``parts`` under the root."""
+        return "/".join([self.base.rstrip("/"), *parts]) if self.base else "/".join(parts)
+
+    def display(self, path: str) -> str:
+        """``path`` (inside the filesystem) as a user would address it: a
+        local path, or the URI with the root's scheme."""
+        if self.local:
+            return path
+        rel = path[len(self.base):].lstrip("/") if path.startswith(self.base) else path
+        return self.uri.split("?", 1)[0].rstrip("/") + ("/" + rel if rel else "")
+
+
+def open_location(root: str | Path) -> Location:
+    """Open the catalog root ``root`` (a local path or a URI, see the module docstring).
+
+    Raises:
+        ValueError: a URI whose scheme neither pyarrow nor fsspec can open
+            (the message names the URI).
+    """
+    import pyarrow.fs as pafs
+
+    if isinstance(root, Path) or not is_uri(root):
+        p = Path(root).expanduser().resolve()
+        return Location(fs=pafs.LocalFileSystem(), base=str(p), uri=str(p), local=True)
+    uri = str(root)
+    scheme = uri.split("://", 1)[0].lower()
+    if scheme == "file":
+        p = Path(uri.split("://", 1)[1]).expanduser().resolve()
+        return Location(fs=pafs.LocalFileSystem(), base=str(p), uri=str(p), local=True)
+    try:
+        fs, path = pafs.FileSystem.from_uri(uri)
+        return Location(fs=fs, base=path.rstrip("/"), uri=uri, local=False)
+    except (ValueError, NotImplementedError, OSError) as arrow_exc:  # not one of pyarrow's own
+        try:
+            from fsspec.core import url_to_fs
+
+            ffs, path = url_to_fs(uri)
+        except (ImportError, ValueError, NotImplementedError) as exc:
+            raise ValueError(f"catalog root {uri!r}: no filesystem for scheme {scheme!r} "
+                             f"(pyarrow: {arrow_exc}; fsspec: {exc})") from exc
+        fs = pafs.PyFileSystem(pafs.FSSpecHandler(ffs))
+        return Location(fs=fs, base=str(path).rstrip("/"), uri=uri, local=False)
+
+
+def write_bytes(loc: Location, path: str, data: bytes) -> None:
+    """Write ``data`` as the file ``path`` of ``loc`` atomically (see the
+    module docstring), creating parent folders where the filesystem has them."""
+    if loc.local:
+        atomic.write_bytes(Path(path), data)
+        return
+    if loc.fs.type_name not in ("s3", "gcs"):  # object stores have no folders to make (a marker object would be one more request)
+        try:
+            loc.fs.create_dir(path.rsplit("/", 1)[0], recursive=True)
+        except OSError:  # a filesystem without directories
+            pass
+    with loc.fs.open_output_stream(path) as fh:
+        fh.write(data)
+
+
+def read_bytes(loc: Location, path: str) -> bytes | None:
+    """The contents of file ``path``; None when it does not exist."""
+    import pyarrow.fs as pafs
+
+    info = loc.fs.get_file_info(path)
+    if info.type != pafs.FileType.File:
+        return None
+    try:
+        with loc.fs.open_input_stream(path) as fh:
+            return fh.read()
+    except (FileNotFoundError, OSError):
+        return None
+
+
+def list_files(loc: Location, path: str, recursive: bool = False) -> list[Any]:
+    """:class:`pyarrow.fs.FileInfo` of the entries under folder ``path``
+    (files and folders; all depths with ``recursive``); empty when it does not exist."""
+    import pyarrow.fs as pafs
+
+    try:
+        return list(loc.fs.get_file_info(pafs.FileSelector(path, allow_not_found=True, recursive=recursive)))
+    except FileNotFoundError:
+        return []
+
+
+def delete_file(loc: Location, path: str) -> bool:
+    """Delete file ``path``; False when it was not there."""
+    if loc.local:
+        try:
+            os.unlink(path)
+        except FileNotFoundError:
+            return False
+        return True
+    try:
+        loc.fs.delete_file(path)
+    except FileNotFoundError:
+        return False
+    return True

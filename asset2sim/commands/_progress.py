@@ -1,0 +1,99 @@
+"""The live progress of ``asset2sim flow`` (``make flow``) in the terminal:
+a per-asset progress bar with the counts of done / skipped / failed assets,
+elapsed time and an ETA (rich), or one line per asset when the output is
+not a terminal (a log, CI). Fed by :mod:`asset2sim.flow_progress` events."""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+from asset2sim.flow_progress import ProgressEvent
+
+
+def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = None) -> float | None:
+    """Seconds left at the average rate so far (s per finished asset); None
+    before the first asset. Skipped assets finish in moments and would make
+    the rate look better than it is: with ``worked`` (assets done or failed)
+    the rate is over those, and the assets left are assumed to need work."""
+    if finished <= 0 or finished >= total:
+        return 0.0 if finished >= total else None
+    n = worked if worked else finished
+    return elapsed / n * (total - finished)
+
+
+class FlowProgress:
+    """A listener of :mod:`asset2sim.flow_progress` that shows the run's progress.
+
+    ``live``: draw a rich progress bar (default: when stdout is a terminal);
+    otherwise print one line per asset."""
+
+    def __init__(self, live: bool | None = None, stream: Any = None):
+        self.stream = stream or sys.stdout
+        self.live = self.stream.isatty() if live is None else live
+        self.counts = {"done": 0, "skipped": 0, "failed": 0}
+        self.total = 0
+        self.started = time.perf_counter()
+        self._progress = None
+        self._task = None
+
+    def __call__(self, ev: ProgressEvent) -> None:
+        if ev.kind == "run_started":
+            self.total, self.started = ev.total, time.perf_counter()
+            self.counts = {"done": 0, "skipped": 0, "failed": 0}
+            if self.live:
+                self._start_bar(ev)
+            else:
+                print(f"run {ev.run} of dataset {ev.dataset}: {ev.total} assets", file=self.stream, flush=True)
+        elif ev.kind == "asset_finished":
+            self.counts[ev.status if ev.status in self.counts else "failed"] += 1
+            if self._progress is not None:
+                self._progress.update(self._task, advance=1, **self.counts)
+            elif not self.live:
+                print(self._line(ev), file=self.stream, flush=True)
+        elif ev.kind == "run_finished":
+            self.close()
+
+    def _line(self, ev: ProgressEvent) -> str:
+        n = sum(self.counts.values())
+        elapsed = time.perf_counter() - self.started
+        eta = eta_seconds(elapsed, n, self.total, self.counts["done"] + self.counts["failed"])
+        mode = f" ({ev.failure_mode})" if ev.failure_mode and ev.failure_mode != "none" else ""
+        secs = f" {ev.seconds:.1f} s" if ev.seconds is not None else ""
+        c = self.counts
+        return (f"[{n}/{self.total}] {ev.asset_id}: {ev.status}{mode}{secs} | done {c['done']}, skipped {c['skipped']}, "
+                f"failed {c['failed']} | elapsed {elapsed:.0f} s" + ("" if eta is None else f", ETA {eta:.0f} s"))
+
+    def _start_bar(self, ev: ProgressEvent) -> None:
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self.close()
+        self._progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("[green]done {task.fields[done]}[/] [cyan]skipped {task.fields[skipped]}[/] "
+                       "[red]failed {task.fields[failed]}[/]"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=Console(file=self.stream),
+            transient=False,
+        )
+        self._progress.start()
+        self._task = self._progress.add_task(f"{ev.dataset} {ev.run}", total=max(1, ev.total), **self.counts)
+
+    def close(self) -> None:
+        """Stop drawing the bar (idempotent)."""
+        if self._progress is not None:
+            self._progress.stop()
+            self._progress = None

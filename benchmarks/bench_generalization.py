@@ -1,0 +1,254 @@
+"""Generalization benchmark: every dev object x a set of requests per
+category, plus generated assets; prints the pass rate per category and per
+request kind, and the failures by mode.
+
+    python benchmarks/bench_generalization.py [--manifest PATH] [--out DIR]
+        [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,mount]
+        [--no-generated] [--evaluate]
+
+Corpus (issue 16): for every manifest object (its category from the
+manifest), the requests
+
+- ``plain``:  "A <noun>."
+- ``state``:  "A <noun>, <state>." for each state word (closed, slightly open,
+  a quarter open, halfway open, mostly open, fully open);
+- ``size``:   "A <size> <noun>." for each size word (tiny, very small, small,
+  large, very large);
+- ``hinge``:  "A <noun> with its <part> fully open." for every movable joint's
+  part label (``semantics.txt``), once per distinct label;
+- ``closed``: "A <noun> with everything closed.";
+- ``mount``:  "A free-standing <noun>." / "A <noun> mounted on the wall."
+  (the mounting override);
+
+and the same kinds on the generated assets (the demo objects of
+``asset2sim.demo_assets`` and the failure-mode assets of
+``tests/tasks/check/failure_assets.py``: a tall faucet, a laptop whose open
+screen tips it, a box whose latch penetrates every closed state). <noun> is
+the category's first request synonym (``asset2sim/priors/categories.yaml``).
+
+A case passes when ``refine_asset`` reports ``failure_mode == "none"`` (every
+post-check: penetration, rest stability, oscillation, state hold) and, with
+``--evaluate``, the evaluation (the interaction tier: probes included) lists
+no failures. Cases run in ``--jobs`` worker processes (default 1); ``--limit``
+keeps the first N cases (in a deterministic, category-interleaved order so a
+small limit still spans categories). Writes DIR/cases.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+from collections import Counter, defaultdict
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "manifest.csv"
+
+STATE_WORDS = ["closed", "slightly open", "a quarter open", "halfway open", "mostly open", "fully open"]
+SIZE_WORDS = ["tiny", "very small", "small", "large", "very large"]
+KINDS = ("plain", "state", "size", "hinge", "closed", "mount")
+
+
+def _noun(category: str) -> str:
+    from asset2sim.tasks.interpret.prior_tables import load_priors
+
+    cats = load_priors().categories
+    prior = cats.get(category)
+    syn = [s.lstrip("~") for s in (prior.synonyms if prior is not None else [])]
+    return syn[0] if syn else category.lower()
+
+
+def _part_words(src: Path) -> list[str]:
+    """Distinct part labels of the movable joints' child links (semantics.txt)."""
+    p = src / "semantics.txt"
+    if not p.is_file():
+        return []
+    words = []
+    for line in p.read_text().splitlines():
+        f = line.split()
+        if len(f) >= 3 and f[1] in ("hinge", "slider"):
+            w = f[2].replace("rotation_", "").replace("translation_", "").replace("_", " ")
+            if w not in words:
+                words.append(w)
+    return words
+
+
+def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> list[tuple[str, str]]:
+    """(request kind, request text) for one object."""
+    n = _noun(category)
+    out: list[tuple[str, str]] = []
+    if "plain" in kinds:
+        out.append(("plain", f"A {n}."))
+    if "state" in kinds:
+        out += [(f"state:{w}", f"A {n}, {w}.") for w in STATE_WORDS]
+    if "size" in kinds:
+        out += [(f"size:{w}", f"A {w} {n}.") for w in SIZE_WORDS]
+    if "hinge" in kinds:
+        out += [("hinge:fully open", f"A {n} with its {w} fully open.") for w in _part_words(src)]
+    if "closed" in kinds:
+        out.append(("everything closed", f"A {n} with everything closed."))
+    if "mount" in kinds:
+        out += [("mount:free-standing", f"A free-standing {n}."), ("mount:wall", f"A {n} mounted on the wall.")]
+    return out
+
+
+def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], ids: set[str]) -> list[dict]:
+    """Every case: {"case", "source", "asset", "category", "kind", "prompt", "generated"}."""
+    per_object: list[list[dict]] = []
+    rows = list(csv.DictReader(manifest.open())) if manifest.is_file() else []
+    objects = [(r["id"], manifest.parent / r["id"], r["category"], False) for r in rows]
+    if gen_root is not None:
+        sys.path.insert(0, str(ROOT))
+        from asset2sim import demo_assets
+        from tests.tasks.check import failure_assets
+
+        demo = demo_assets.ensure_demo_dataset(gen_root / "demo")
+        for entry in demo_assets.DEMO_OBJECTS:
+            objects.append((f"gen:{entry.asset_id}", demo / entry.asset_id, entry.category, True))
+        for name, build, cat in (("tall_faucet", failure_assets.build_tall_faucet, "Faucet"),
+                                 ("tipping_laptop", failure_assets.build_tipping_laptop, "Laptop"),
+                                 ("interlocked_box", failure_assets.build_interlocked_box, "Box")):
+            folder = gen_root / name
+            if not (folder / "mobility.urdf").is_file():
+                build(folder)
+            objects.append((f"gen:{name}", folder, cat, True))
+    for oid, src, cat, gen in objects:
+        if ids and oid not in ids:
+            continue
+        cases = []
+        for k, (kind, prompt) in enumerate(requests_for(cat, src, kinds)):
+            cases.append({"case": f"{oid}#{k}", "asset": oid, "source": str(src), "category": cat, "kind": kind,
+                          "prompt": prompt, "generated": gen})
+        per_object.append(cases)
+    out: list[dict] = []  # interleave objects so that --limit spans categories
+    for i in range(max((len(c) for c in per_object), default=0)):
+        for cases in per_object:
+            if i < len(cases):
+                out.append(cases[i])
+    return out
+
+
+def run_case(case: dict, out_root: str, evaluate: bool) -> dict:
+    """Refine one case in this process; returns the case with its outcome."""
+    from asset2sim.tasks.refine import RefineError, refine_asset
+
+    t0 = time.perf_counter()
+    res = dict(case)
+    out = Path(out_root) / case["case"].replace(":", "_").replace("#", "_")
+    try:
+        r = refine_asset(case["source"], case["prompt"], out, category=case["category"], skip_if_complete=False,
+                         extras=evaluate, overwrite=True).report
+        res["mode"] = r.failure_mode
+        res["mounted"] = bool(r.mounting is not None and r.mounting.fixed)
+        res["design"] = list(r.design_changes)
+        res["collision"] = list(r.state.collision_changes) if r.state else []
+        if evaluate:
+            ev_path = out / "evaluation.json"
+            failures = json.loads(ev_path.read_text()).get("failures", []) if ev_path.is_file() else ["no evaluation.json"]
+            res["evaluation_failures"] = failures
+            if res["mode"] == "none" and failures:
+                res["mode"] = "evaluation:" + ",".join(sorted(failures))
+    except RefineError as exc:
+        res["mode"] = exc.failure_mode
+        res["error"] = str(exc)[:300]
+    except Exception as exc:  # a crash is a failure mode of its own
+        res["mode"] = "crash"
+        res["error"] = f"{type(exc).__name__}: {exc}"[:300]
+    res["seconds"] = time.perf_counter() - t0
+    return res
+
+
+def _table(title: str, groups: dict[str, list[dict]]) -> list[str]:
+    lines = [f"\n{title}", f"{'':28} {'pass':>6} {'n':>5} {'rate':>7}"]
+    for key in sorted(groups):
+        g = groups[key]
+        ok = sum(1 for c in g if c["mode"] == "none")
+        lines.append(f"{key:28} {ok:6d} {len(g):5d} {100.0 * ok / len(g):6.1f}%")
+    return lines
+
+
+def report(results: list[dict]) -> str:
+    """The printed summary: pass rate overall, per category, per request kind,
+    failures by mode and the failing cases. Refused inputs (``invalid_input``)
+    are listed but not counted as valid inputs."""
+    valid = [c for c in results if c["mode"] != "invalid_input"]
+    ok = sum(1 for c in valid if c["mode"] == "none")
+    lines = [f"cases {len(results)}, valid {len(valid)}, passed {ok} ({100.0 * ok / max(len(valid), 1):.1f} % of valid inputs)"]
+    by_cat, by_kind = defaultdict(list), defaultdict(list)
+    for c in valid:
+        by_cat[c["category"] + (" (generated)" if c["generated"] else "")].append(c)
+        by_kind[c["kind"]].append(c)
+    lines += _table("per category", by_cat)
+    lines += _table("per request kind", by_kind)
+    modes = Counter(c["mode"] for c in results if c["mode"] != "none")
+    lines.append("\nfailures by mode")
+    for mode, n in modes.most_common():
+        lines.append(f"  {mode:40} {n}")
+    fails = [c for c in results if c["mode"] != "none"]
+    if fails:
+        lines.append("\nfailing cases")
+        for c in fails:
+            lines.append(f"  {c['asset']:>22} {c['category']:>16} {c['mode']:>24}  {c['prompt']!r}" + (f"  {c['error'][:120]}" if c.get("error") else ""))
+    changed = [c for c in results if any(d.startswith("stability by design") for d in c.get("design", []))]
+    if changed:
+        lines.append(f"\nstability by design changed part masses in {len(changed)} cases: "
+                     + ", ".join(f"{c['asset']} {c['prompt']!r}" for c in changed[:20]))
+    mounted = [c for c in results if c.get("mounted")]
+    lines.append(f"mounted (fixed root) in {len(mounted)} of {len(results)} cases")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--manifest", type=Path, default=DEFAULT_MANIFEST)
+    ap.add_argument("--out", type=Path, default=ROOT / "out" / "bench_generalization")
+    ap.add_argument("--limit", type=int, default=0, help="run only the first N cases (0: all)")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes")
+    ap.add_argument("--ids", default="", help="comma-separated subset of object ids (generated: gen:<name>)")
+    ap.add_argument("--kinds", default=",".join(KINDS), help="request kinds to include")
+    ap.add_argument("--no-generated", action="store_true", help="dev objects only")
+    ap.add_argument("--evaluate", action="store_true", help="also run the evaluation (extras; probes) and count its failures")
+    args = ap.parse_args(argv)
+    kinds = tuple(k for k in args.kinds.split(",") if k)
+    unknown = set(kinds) - set(KINDS)
+    if unknown:
+        ap.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(KINDS)}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    cases = build_corpus(args.manifest, None if args.no_generated else args.out / "generated", kinds,
+                         set(filter(None, args.ids.split(","))))
+    if args.limit:
+        cases = cases[: args.limit]
+    print(f"{len(cases)} cases, {args.jobs} job(s)", flush=True)
+    t0 = time.perf_counter()
+    results: list[dict] = []
+    runs = args.out / "runs"
+    if args.jobs <= 1:
+        for c in cases:
+            results.append(run_case(c, str(runs), args.evaluate))
+            r = results[-1]
+            print(f"  {r['mode']:>24} {r['seconds']:6.1f} s  {r['asset']:>22}  {r['prompt']!r}", flush=True)
+    else:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            futs = [pool.submit(run_case, c, str(runs), args.evaluate) for c in cases]
+            for f in as_completed(futs):
+                r = f.result()
+                results.append(r)
+                print(f"  {r['mode']:>24} {r['seconds']:6.1f} s  {r['asset']:>22}  {r['prompt']!r}", flush=True)
+    order = {c["case"]: i for i, c in enumerate(cases)}
+    results.sort(key=lambda r: order[r["case"]])
+    (args.out / "cases.json").write_text(json.dumps(results, indent=1))
+    print(report(results))
+    secs = sorted(r["seconds"] for r in results)
+    if secs:
+        print(f"\nwall {time.perf_counter() - t0:.0f} s; per case median {secs[len(secs) // 2]:.1f} s, max {secs[-1]:.1f} s "
+              f"(pid {os.getpid()}, {args.jobs} job(s))")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""Do the files refine writes load where their users load them? Over output
+folders (each holding ``mobility.urdf``): MuJoCo's URDF importer on the URDF,
+the MJCF (``mjcf/mobility.xml``, or converted in memory when absent) dropped
+from 5 cm, the collision pieces, the parent-child containment at the initial
+state, fixed-joint limits and the lightest link. Prints one row per object and
+the counts.
+
+    python benchmarks/bench_simulator_files.py OUTPUT_ROOT [--ids 9912,7236] [--convert]
+
+``--convert``: convert every URDF to MJCF in memory (the current converter)
+instead of loading the ``mjcf/`` an earlier run wrote.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+#: Drop height (m) above the resting placement, and simulated time (s).
+DROP_HEIGHT = 0.05
+DROP_TIME = 1.0
+
+
+def signed_volume(path: Path) -> float:
+    """Signed volume (m^3, file units) of an OBJ's triangles: > 0 when the
+    faces of a closed mesh wind outward."""
+    from asset2sim.mesh_io import read_mesh
+
+    v, f, _ = read_mesh(path)
+    t = np.asarray(v, float)[np.asarray(f, int)]
+    return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
+
+
+def drop_test(xml_path: Path | None, build) -> dict:
+    """Compile the MJCF (``xml_path`` or the in-memory ``build``), start at
+    the keyframe lifted by :data:`DROP_HEIGHT`, simulate :data:`DROP_TIME`;
+    returns compile error / max contacts / MuJoCo warnings / lowest point."""
+    import mujoco
+
+    from asset2sim.engines.mjcf import lowest_point, mujoco_messages
+
+    out = {"compiles": False, "max_contacts": 0, "warnings": [], "lowest_m": None, "error": ""}
+    try:
+        with mujoco_messages() as caught:
+            m = mujoco.MjModel.from_xml_path(str(xml_path)) if xml_path else mujoco.MjModel.from_xml_string(build.xml, assets=build.assets())
+    except Exception as exc:
+        out["error"] = str(exc).splitlines()[0][:200]
+        return out
+    out["compiles"] = True
+    out["ngeom"] = int(m.ngeom)
+    d = mujoco.MjData(m)
+    if m.nkey:
+        mujoco.mj_resetDataKeyframe(m, d, 0)
+    free = m.njnt and m.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE
+    if free:
+        d.qpos[2] += DROP_HEIGHT
+    try:
+        with mujoco_messages() as caught:
+            for _ in range(int(DROP_TIME / m.opt.timestep)):
+                mujoco.mj_step(m, d)
+                out["max_contacts"] = max(out["max_contacts"], int(d.ncon))
+    except Exception as exc:
+        out["error"] = str(exc).splitlines()[0][:200]
+    out["warnings"] = sorted({w.split(":")[0][:80] for w in caught})
+    bad = [i for i in range(len(d.warning)) if d.warning[i].number > 0]
+    out["warnings"] += [mujoco.mjtWarning(i).name for i in bad]
+    mujoco.mj_forward(m, d)
+    out["lowest_m"] = lowest_point(m, d)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("root", type=Path, help="folder of output folders (or one output folder)")
+    ap.add_argument("--ids", default="")
+    ap.add_argument("--convert", action="store_true")
+    args = ap.parse_args(argv)
+
+    import mujoco
+
+    from asset2sim.engines.loading import collision_pieces, read_initial_state, read_urdf
+    from asset2sim.engines.mjcf import mujoco_messages, urdf_to_mjcf
+    from asset2sim.tasks.publish.collision_geometry import Piece, containment_depths
+    from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
+
+    folders = [args.root] if (args.root / "mobility.urdf").is_file() else sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
+    if args.ids:
+        keep = set(args.ids.split(","))
+        folders = [f for f in folders if f.name in keep]
+    rows = []
+    for f in folders:
+        urdf_path = f / "mobility.urdf"
+        row = {"id": f.name}
+        try:
+            with mujoco_messages():
+                mujoco.MjModel.from_xml_path(str(urdf_path))
+            row["urdf_mujoco"] = "ok"
+        except Exception as exc:
+            row["urdf_mujoco"] = str(exc).splitlines()[0][:120]
+        model = read_urdf(urdf_path)
+        state = read_initial_state(f)
+        pieces, notes = collision_pieces(model)
+        row["max_pieces_per_link"] = max((len(v) for v in pieces.values()), default=0)
+        row["flat_groups"] = sum("is flat" in n for n in notes)
+        # collision-only files (generated pieces) must be closed and wound outward
+        visual_files = {v.path.resolve() for ln in model.links.values() for v in ln.visuals if v.kind == "mesh" and v.path}
+        inside_out = sum(
+            1 for ln in model.links.values() for c in ln.collisions
+            if c.kind == "mesh" and c.path is not None and c.path.resolve() not in visual_files
+            and c.path.suffix.lower() == ".obj" and signed_volume(c.path) <= 0
+        )
+        row["inside_out"] = inside_out
+        hulls = {}
+        for name, plist in pieces.items():
+            hulls[name] = []
+            for p in plist:
+                if p.kind != "hull":
+                    continue
+                pts = p.points @ p.origin[:3, :3].T + p.origin[:3, 3]
+                try:
+                    hulls[name].append(Piece.of(pts))
+                except Exception:
+                    pass
+        depths = containment_depths(model, hulls, state)
+        worst = max(depths.items(), key=lambda kv: kv[1], default=(("", ""), 0.0))
+        row["contain_mm"] = round(worst[1] * 1000, 2)
+        row["contain_pair"] = "/".join(worst[0])
+        row["fixed_limit_incomplete"] = sum(
+            1 for j in model.joints if j.type == "fixed" and j.limit is not None and (j.limit.effort is None or j.limit.velocity is None)
+        )
+        masses = [ln.inertial.mass for ln in model.links.values() if ln.inertial is not None and (ln.collisions or ln.visuals)]
+        row["min_link_mass_g"] = round(min(masses) * 1000, 3) if masses else None
+        row["min_mass_ratio"] = round(min(masses) / sum(masses), 5) if masses else None
+        xml = f / "mjcf" / "mobility.xml"
+        build = None
+        if args.convert or not xml.is_file():
+            try:
+                with tempfile.TemporaryDirectory():
+                    build = urdf_to_mjcf(urdf_path, initial_state=state, springs=springs_from_overlay(f, state), visuals=True)
+                xml = None
+            except Exception as exc:
+                row["mjcf"] = f"convert failed: {str(exc)[:120]}"
+                rows.append(row)
+                continue
+        drop = drop_test(xml, build)
+        row["mjcf_compiles"] = drop["compiles"]
+        row["drop_max_contacts"] = drop["max_contacts"]
+        row["drop_warnings"] = ",".join(drop["warnings"])
+        row["drop_error"] = drop["error"]
+        row["drop_lowest_mm"] = None if drop["lowest_m"] is None or not math.isfinite(drop["lowest_m"]) else round(drop["lowest_m"] * 1000, 1)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    n = len(rows)
+    print(f"\n{n} outputs")
+    print(f"MuJoCo loads the URDF: {sum(r['urdf_mujoco'] == 'ok' for r in rows)}/{n}")
+    print(f"MJCF compiles: {sum(bool(r.get('mjcf_compiles')) for r in rows)}/{n}")
+    print(f"5 cm drop without MuJoCo warnings or errors: {sum(r.get('mjcf_compiles') and not r['drop_warnings'] and not r['drop_error'] for r in rows)}/{n}")
+    print(f"drop max contacts: max {max((r.get('drop_max_contacts', 0) for r in rows), default=0)}")
+    print(f"flat collision groups: {sum(r['flat_groups'] for r in rows)}; inside-out collision files: {sum(r['inside_out'] for r in rows)}")
+    print(f"max pieces per link: {max((r['max_pieces_per_link'] for r in rows), default=0)}")
+    print(f"parts > 2 mm inside the parent's hull: {sum(r['contain_mm'] > 2 for r in rows)}/{n} (max {max((r['contain_mm'] for r in rows), default=0)} mm)")
+    print(f"fixed joints with an incomplete <limit>: {sum(r['fixed_limit_incomplete'] for r in rows)}")
+    ms = [r["min_link_mass_g"] for r in rows if r["min_link_mass_g"] is not None]
+    print(f"lightest link: {min(ms) if ms else None} g")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,277 @@
+"""Robust rest: does the object come back to rest, with its joints held, after
+the small disturbances of being put down by a hand or a robot?
+
+Definition (SPEC, "Interaction under manipulation"; issue 15; written so
+anyone can re-derive it, see ``docs/metrics.md``). The object is loaded as
+for the SPEC rest test (root free, lowest collision point on the ground,
+joints at the initial state, passive joints) and saved; each **trial**
+starts from that saved placement:
+
+- ``drop``: the root lifted by :attr:`RobustRestConfig.drop_height` (2 cm) and
+  released;
+- ``tilt+x``, ``tilt-x``, ``tilt+y``, ``tilt-y``: the object rotated by
+  :attr:`RobustRestConfig.tilt` (5 deg) about the world x / y axis through the
+  centre of its footprint (the point below the middle of its bounding box on
+  the ground), then moved up or down so that its lowest collision vertex
+  touches z = 0, and released;
+- ``nudge``: the root given a horizontal velocity of
+  :attr:`RobustRestConfig.nudge_speed` (0.05 m/s along world x, a light bump
+  of a hand) on the ground.
+
+After the disturbance the SPEC rest test runs (settle T_set = 1 s, test
+T_test = 2 s, :func:`asset2sim.tasks.check.metrics.run_rest_test`). A trial
+**passes** iff
+
+1. it comes back to rest: D_pos <= 1e-3 m and D_ori <= 1e-2 rad over T_test
+   (:func:`asset2sim.tasks.check.metrics.rest_stability`), nothing diverges;
+2. it did not topple: the body's "up" (the world z axis of the undisturbed
+   placement, carried in the root frame) ends within
+   :attr:`RobustRestConfig.topple_tol` (0.05 rad) of the world z axis (yaw,
+   a turn about the vertical, is not toppling);
+3. joints held: every movable joint stays within
+   :attr:`RobustRestConfig.joint_tol_revolute` (0.02 rad) or
+   :attr:`RobustRestConfig.joint_tol_prismatic` (2 mm) of its initial state at
+   every step of settling and test (positions clipped to the joint's limits:
+   an engine's soft limit lets a joint pressed against it pass it by a few
+   mm, which no real object does).
+
+The metric passes iff every trial passes. A trial the engine cannot perform
+(the fake engine has no root velocity; a fixed root cannot be moved) is
+recorded as skipped; with the root fixed as the asset declares, only the
+joints-held condition of a plain rest applies and the metric is skipped
+(``passed`` None): a mounted object is not put down.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring, open_session
+from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.metrics import unit
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import metrics
+
+#: The trials, in order.
+TRIALS: tuple[str, ...] = ("drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudge")
+
+
+@dataclass
+class RobustRestConfig:
+    """Robust-rest knobs (units on every field)."""
+
+    drop_height: float = 0.02
+    """lift before the drop, m (SPEC: 2 cm)"""
+    tilt: float = math.radians(5.0)
+    """tilt about each horizontal axis, rad (SPEC: 5 deg)"""
+    nudge_speed: float = 0.05
+    """horizontal root speed of the nudge, m/s"""
+    joint_tol_revolute: float = 0.02
+    """largest |q - q_initial| of a revolute joint, rad (SPEC)"""
+    joint_tol_prismatic: float = 0.002
+    """... of a prismatic joint, m (SPEC: 2 mm)"""
+    topple_tol: float = 0.05
+    """largest change of the body's up direction, rad
+    (:data:`asset2sim.tasks.check.metrics.SETTLE_TILT_LIMIT`)"""
+    trials: tuple[str, ...] = TRIALS
+
+
+@dataclass
+class Trial:
+    """One disturbance and what followed. Lengths m, angles rad."""
+
+    name: str
+    passed: bool | None
+    d_pos: float | None = None
+    d_ori: float | None = None
+    topple: float | None = None
+    joint_drift: dict[str, float] = field(default_factory=dict)
+    joint_tolerance: dict[str, float] = field(default_factory=dict)
+    """joint -> its tolerance (rad or m)"""
+    failing_joints: list[str] = field(default_factory=list)
+    diverged: bool = False
+    failure: str = ""
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able dict."""
+        return dict(self.__dict__)
+
+
+def world_vertices(session: SimSession) -> np.ndarray:
+    """Collision vertices (k, 3) of every link in the world, m (the corners of
+    the engine's link AABBs for links whose vertices the engine keeps none)."""
+    pts = []
+    for ln in session.link_names:
+        if not session.link_has_collision(ln):
+            continue
+        v = session.link_collision_vertices(ln)
+        if len(v):
+            p, R = session.link_frame(ln)
+            pts.append(v @ R.T + p)
+        else:
+            lo, hi = session.link_aabb(ln)
+            pts.append(np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]))
+    return np.concatenate(pts) if pts else np.zeros((0, 3))
+
+
+def tilt_pose(session: SimSession, axis: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """Root pose (position (3,) m, quaternion (4,) xyzw) of the object turned
+    by ``angle`` (rad) about world ``axis`` (3,) through the centre of its
+    footprint, then shifted vertically so its lowest collision vertex is at
+    z = 0. Does not move the session (it is moved and put back)."""
+    pos, quat = session.root_pose()
+    pts = world_vertices(session)
+    if not len(pts):
+        raise ValueError("no collision geometry: the object cannot be tilted on the ground")
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pivot = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]])
+    Rt = axis_angle_matrix(axis, angle)
+    R0 = quat_wxyz_matrix(quat_xyzw_to_wxyz(quat))
+    new_pos = pivot + Rt @ (pos - pivot)
+    new_quat = quat_wxyz_to_xyzw(matrix_quat_wxyz(Rt @ R0))
+    low = float(np.min(((pts - pivot) @ Rt.T)[:, 2] + pivot[2]))  # lowest vertex after the turn
+    new_pos = new_pos - np.array([0.0, 0.0, low])
+    return new_pos, new_quat
+
+
+def _up_change(q_ref: np.ndarray, q_now: np.ndarray) -> float:
+    """Angle (rad) between world z and the body's reference up direction
+    (world z of the reference orientation ``q_ref``, carried by the body) at
+    ``q_now`` (quaternions xyzw)."""
+    R0 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_ref))
+    R1 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_now))
+    up = R1 @ (R0.T @ np.array([0.0, 0.0, 1.0]))
+    return float(math.acos(max(-1.0, min(1.0, up[2] / max(np.linalg.norm(up), 1e-12)))))
+
+
+def _disturb(session: SimSession, name: str, cfg: RobustRestConfig) -> None:
+    pos, quat = session.root_pose()
+    if name == "drop":
+        session.set_root_pose(pos + np.array([0.0, 0.0, cfg.drop_height]), quat)
+    elif name.startswith("tilt"):
+        axis = np.array([1.0, 0.0, 0.0]) if name.endswith("x") else np.array([0.0, 1.0, 0.0])
+        sign = 1.0 if name[4] == "+" else -1.0
+        p, q = tilt_pose(session, axis, sign * cfg.tilt)
+        session.set_root_pose(p, q)
+    elif name == "nudge":
+        session.set_root_velocity(np.array([cfg.nudge_speed, 0.0, 0.0]), np.zeros(3))
+    else:
+        raise ValueError(f"unknown robust-rest trial {name!r}; known: {', '.join(TRIALS)}")
+
+
+def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q_ref: np.ndarray,
+              conventions: SimConventions, config: RobustRestConfig) -> Trial:
+    """Disturb the session (at the saved placement) by trial ``name``, run the
+    SPEC rest test and grade it (see the module docstring).
+
+    Raises:
+        EngineUnsupported: the engine cannot perform the disturbance.
+        ValueError: unknown trial.
+    """
+    cfg = config
+    _disturb(session, name, cfg)
+    trace = metrics.run_rest_test(session, conventions)
+    stab = metrics.rest_stability(trace, conventions, engine=session.engine)
+    drift: dict[str, float] = {}
+    tols: dict[str, float] = {}
+    failing = []
+    for j, q in trace.joints.items():
+        allq = np.concatenate([trace.settle_joints.get(j, np.empty(0)), q])
+        lo, hi = session.joint_limits.get(j, (-np.inf, np.inf))
+        if lo <= hi:  # an engine's soft limit lets a joint pressed on it pass it by mm: not a motion
+            allq = np.clip(allq, lo, hi)
+        q0 = initial_state.get(j, float(allq[0]) if len(allq) else 0.0)
+        d = float(np.max(np.abs(allq - q0))) if len(allq) and np.all(np.isfinite(allq)) else float("inf")
+        drift[j] = d
+        tol = tols[j] = cfg.joint_tol_prismatic if trace.joint_types.get(j) == "prismatic" else cfg.joint_tol_revolute
+        if not d <= tol:
+            failing.append(j)
+    diverged = trace.diverged
+    topple = None if diverged else _up_change(q_ref, trace.root_quat[-1])
+    why = []
+    if diverged:
+        why.append("diverged")
+    elif not stab.passed:
+        why.append(f"not at rest (D_pos {stab.details['D_pos_m']:.2g} m, D_ori {stab.details['D_ori_rad']:.2g} rad)")
+    if topple is not None and topple > cfg.topple_tol:
+        why.append(f"toppled ({topple:.2f} rad)")
+    if failing:
+        why.append("joints not held: " + ", ".join(f"{j} {drift[j]:.3g}" for j in failing))
+    return Trial(
+        name=name, passed=not why, d_pos=stab.details.get("D_pos_m"), d_ori=stab.details.get("D_ori_rad"),
+        topple=topple, joint_drift=drift, joint_tolerance=tols, failing_joints=failing, diverged=diverged, failure="; ".join(why),
+    )
+
+
+@dataclass
+class RobustRestRun:
+    """Every trial in one engine."""
+
+    engine: str
+    trials: list[Trial] = field(default_factory=list)
+    skipped: str | None = None
+    """why the whole metric was skipped (fixed root)"""
+
+
+def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, float],
+                    springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
+                    config: RobustRestConfig | None = None, fixed_base: bool = False) -> RobustRestRun:
+    """Every trial of ``config`` in one session of ``engine`` opened as for
+    the SPEC rest test (the placement saved once, restored before each trial).
+
+    Args:
+        fixed_base: the asset declares its root fixed (a mounted fixture):
+            nothing is put down, the metric is skipped.
+
+    Raises:
+        EngineUnavailable: the engine is not installed; whatever loading raises.
+    """
+    cfg = config or RobustRestConfig()
+    conv = conventions or SimConventions()
+    run = RobustRestRun(engine)
+    if fixed_base:
+        run.skipped = "root fixed as the asset declares: a mounted object is not dropped, tilted or nudged"
+        return run
+    session = open_session(engine, urdf, SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}),
+                                                        conventions=conv))
+    try:
+        _, q_ref = session.root_pose()
+        saved = session.save_state()
+        for name in cfg.trials:
+            session.restore_state(saved)
+            try:
+                run.trials.append(run_trial(session, name, initial_state, q_ref, conv, cfg))
+            except EngineUnsupported as exc:
+                run.trials.append(Trial(name=name, passed=None, failure=f"skipped: {exc}"))
+        session.discard_state(saved)
+    finally:
+        session.close()
+    return run
+
+
+def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = None) -> MetricResult:
+    """The ``robust_rest`` :class:`~asset2sim.schemas.report.MetricResult`:
+    value = number of failed trials; passes iff none failed (None when every
+    trial was skipped)."""
+    cfg = config or RobustRestConfig()
+    done = [t for t in run.trials if t.passed is not None]
+    failed = [t for t in done if not t.passed]
+    return MetricResult(
+        name="robust_rest",
+        value=float(len(failed)) if done else None,
+        unit=unit("robust_rest"),
+        passed=(not failed) if done else None,
+        threshold=(f"after a {cfg.drop_height * 100:g} cm drop, {math.degrees(cfg.tilt):g} deg tilts about x and y and a "
+                   f"{cfg.nudge_speed:g} m/s nudge: at rest (D_pos <= 1e-3 m, D_ori <= 1e-2 rad), up within "
+                   f"{cfg.topple_tol:g} rad, joints within {cfg.joint_tol_revolute:g} rad / {cfg.joint_tol_prismatic * 1000:g} mm"),
+        details={"trials": {t.name: t.summary() for t in run.trials},
+                 "failures": [f"{t.name}: {t.failure}" for t in failed],
+                 "skipped": run.skipped or [t.name for t in run.trials if t.passed is None]},
+        engine=run.engine,
+    )

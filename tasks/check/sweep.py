@@ -1,0 +1,313 @@
+"""Joint sweep (physical executability): can every movable joint be driven
+through its range and back?
+
+Definition (SPEC, "Interaction under manipulation"; issue 15; written so
+anyone can re-derive it, see ``docs/metrics.md``):
+
+- The object is loaded with its **root fixed** (a mounted object, or a robot's
+  second hand holding the body), gravity off and no ground, so the only
+  resistance a joint meets is its own Coulomb friction, damping, spring and
+  the object's self-collision geometry. Other joints start at the initial
+  state and stay passive.
+- Each movable joint is teleported to its geometric closed end q_c
+  (:mod:`asset2sim.tasks.geometry.closed_state`, opening direction d, largest
+  opening R) and driven by a force-limited **position controller built on a
+  velocity drive** (:meth:`asset2sim.engines.base.SimSession.drive_joint`):
+  every step the target velocity is v = clip(k_p (q_goal - q), -v_max, v_max)
+  with k_p = :attr:`SweepConfig.position_gain` (1/s) and v_max = R /
+  :attr:`SweepConfig.traverse_time` (a full traverse in about 1 s, like a
+  robot opening a drawer or lid at a moderate speed); first to the far end
+  q_c + d R, then back to q_c.
+- Force limit (beyond the joint's own friction, which the engines add):
+  E = f_w m_sub g L + k R + c v_max, with m_sub the mass of the links the
+  joint moves (kg), L (m) the largest distance of their collision vertices
+  from the joint axis (revolute; L = 1 for prismatic, E in N), g = 9.81 m/s^2,
+  k, c the joint's spring stiffness and damping, f_w =
+  :attr:`SweepConfig.weight_factor`. So the drive can lift the moving part's
+  own weight f_w times over (the scale a hand or gripper applies) but cannot
+  push a link through a hull that blocks it.
+- Each way, the drive runs until the opening fraction f = d (q - q_c) / R
+  reaches >= 0.95 (out) or <= 0.05 (back), at most
+  :attr:`SweepConfig.time_limit` s. The self-penetration (deepest self-contact
+  point, m) and non-finite or exploding motion (|q_dot| > 100 rad/s or 10 m/s)
+  are watched at every step.
+- A joint **passes** iff >= 95 % of the range is reached both ways, the
+  deepest self-contact point stays below :attr:`SweepConfig.max_penetration`
+  (5 mm) throughout and nothing diverges. The metric passes iff every swept
+  joint passes (``passed`` None when the object has no movable joint).
+
+Continuous joints are swept over pi (their closed end is a convention).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.metrics import unit
+from asset2sim.schemas.report import MetricResult
+from asset2sim.urdf import UrdfModel, read_urdf
+
+#: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
+REACH_FRACTION = 0.95
+#: Joint speeds that count as divergence, rad/s and m/s (as the evaluation's
+#: divergence metric, :mod:`asset2sim.tasks.evaluation.metric_defs`).
+DIVERGED_SPEED_REVOLUTE = 100.0
+DIVERGED_SPEED_PRISMATIC = 10.0
+#: Standard gravity, m/s^2 (the SPEC's).
+G = 9.81
+
+
+@dataclass
+class SweepConfig:
+    """Sweep knobs (units on every field)."""
+
+    traverse_time: float = 1.0
+    """nominal time for a full traverse, s: v_max = range / traverse_time"""
+    time_limit: float = 3.0
+    """longest drive each way, s"""
+    position_gain: float = 10.0
+    """k_p of the position loop, 1/s"""
+    weight_factor: float = 2.0
+    """force limit in multiples of the moving part's own weight (torque)"""
+    max_penetration: float = 0.005
+    """deepest self-contact point allowed during the sweep, m"""
+    reach_fraction: float = REACH_FRACTION
+    """fraction of the range to reach each way"""
+
+
+@dataclass
+class JointSweep:
+    """One joint's sweep. Positions rad or m; forces N*m or N; depths m."""
+
+    joint: str
+    joint_type: str
+    q_closed: float
+    q_far: float
+    open_range: float
+    effort_limit: float
+    reached_open: float
+    """largest opening fraction reached on the way out"""
+    reached_closed: float
+    """smallest opening fraction reached on the way back"""
+    time_open: float | None
+    time_close: float | None
+    max_penetration: float
+    worst_pair: tuple[str, str] | None
+    diverged: bool
+    passed: bool
+    failure: str = ""
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able dict."""
+        d = dict(self.__dict__)
+        d["worst_pair"] = list(self.worst_pair) if self.worst_pair else None
+        return d
+
+
+def joint_subtrees(model: UrdfModel) -> dict[str, list[str]]:
+    """Movable joint -> the links it moves (its child and everything below)."""
+    out = {}
+    for j in model.movable_joints:
+        links, stack = [], [j.child]
+        while stack:
+            ln = stack.pop()
+            links.append(ln)
+            stack.extend(c.child for c in model.children(ln))
+        out[j.name] = links
+    return out
+
+
+def _lever(session: SimSession, joint: str, links: list[str]) -> float:
+    """Largest distance (m) of the collision vertices of ``links`` from the
+    axis of ``joint`` at the current state (1e-3 m at least)."""
+    o, R = session.link_frame(session.joint_child[joint])
+    a = R @ session.joint_axis(joint)
+    a = a / max(np.linalg.norm(a), 1e-12)
+    best = 1e-3
+    for ln in links:
+        v = session.link_collision_vertices(ln)
+        if not len(v):
+            lo, hi = session.link_aabb(ln)
+            v_w = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        else:
+            p, Rl = session.link_frame(ln)
+            v_w = v @ Rl.T + p
+        r = v_w - o
+        r = r - np.outer(r @ a, a)
+        best = max(best, float(np.max(np.linalg.norm(r, axis=1))))
+    return best
+
+
+def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, v_max: float,
+                 cfg: SweepConfig) -> float:
+    """E = f_w m_sub g L + k R + c v_max (N*m or N; see the module docstring).
+
+    The spring stiffness comes from the session's options; the damping is not
+    in the protocol, so c v_max is covered by the weight term's margin and
+    the engines' own handling (PyBullet applies joint damping separately)."""
+    masses = session.link_masses()
+    m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
+    lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
+    spring = session.options.springs.get(joint)
+    k = spring.stiffness if spring is not None else 0.0
+    return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
+
+
+def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
+    _, pairs = session.self_penetration()
+    if not pairs:
+        return 0.0, None
+    worst = max(pairs, key=lambda c: c.max_depth)
+    return float(worst.max_depth), (worst.link_a, worst.link_b)
+
+
+def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: float, open_range: float,
+                links: list[str], initial_state: dict[str, float], config: SweepConfig | None = None) -> JointSweep:
+    """Sweep one joint out and back in a fixed-root session (see the module
+    docstring). The session is stepped in place; other joints are put back to
+    ``initial_state`` first.
+
+    Args:
+        session: a :class:`~asset2sim.engines.base.SimSession` opened with
+            ``fixed_base=True`` (gravity off, no ground: :func:`run_sweep`).
+        joint: movable joint; ``closed`` q_c (rad or m), ``direction`` +-1 the
+            opening direction, ``open_range`` R > 0 (rad or m).
+        links: the links the joint moves (:func:`joint_subtrees`).
+        initial_state: joint -> position (rad or m) of the other joints.
+
+    Raises:
+        KeyError: unknown joint. ValueError: ``open_range`` <= 0.
+    """
+    if not open_range > 0:
+        raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
+    cfg = config or SweepConfig()
+    dt = session.options.conventions.timestep
+    jtype = session.joint_types[joint]
+    prismatic = jtype == "prismatic"
+    q_far = closed + direction * open_range
+    v_max = open_range / cfg.traverse_time
+    limit = effort_limit(session, joint, links, open_range, v_max, cfg)
+    session.set_joint_positions({**initial_state, joint: closed})
+    vdiv = DIVERGED_SPEED_PRISMATIC if prismatic else DIVERGED_SPEED_REVOLUTE
+    max_pen, worst = _deepest(session)
+    diverged = False
+
+    def frac(q: float) -> float:
+        return float(direction * (q - closed) / open_range)
+
+    def drive(goal: float, done) -> tuple[float, float | None]:
+        nonlocal max_pen, worst, diverged
+        best = None
+        n = int(round(cfg.time_limit / dt))
+        for k in range(n):
+            q, qd = session.joint_state(joint)
+            if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > vdiv:
+                diverged = True
+                return (best if best is not None else float("nan")), None
+            f = frac(q)
+            best = f if best is None else (max(best, f) if goal == q_far else min(best, f))
+            if done(f):
+                return best, k * dt
+            v = float(np.clip(cfg.position_gain * (goal - q), -v_max, v_max))
+            session.drive_joint(joint, v, limit)
+            session.step(1)
+            d, pair = _deepest(session)
+            if d > max_pen:
+                max_pen, worst = d, pair
+        q, _ = session.joint_state(joint)
+        f = frac(q)
+        if np.isfinite(f):
+            best = max(best, f) if goal == q_far else min(best, f)
+        return best, (n * dt if done(f) else None)
+
+    try:
+        out, t_out = drive(q_far, lambda f: f >= cfg.reach_fraction)
+        back, t_back = (float("nan"), None) if diverged else drive(closed, lambda f: f <= 1.0 - cfg.reach_fraction)
+    finally:
+        session.release_joint(joint)
+    failure = []
+    if diverged:
+        failure.append("diverged")
+    if t_out is None and not diverged:
+        failure.append(f"reached only {out:.0%} of the range opening")
+    if t_back is None and not diverged:
+        failure.append(f"closed back only to {back:.0%} open")
+    if max_pen >= cfg.max_penetration:
+        failure.append(f"self-penetration {max_pen * 1000:.1f} mm" + (f" ({worst[0]} / {worst[1]})" if worst else ""))
+    return JointSweep(
+        joint=joint, joint_type=jtype, q_closed=float(closed), q_far=float(q_far), open_range=float(open_range),
+        effort_limit=limit, reached_open=float(out), reached_closed=float(back), time_open=t_out, time_close=t_back,
+        max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure),
+    )
+
+
+@dataclass
+class SweepRun:
+    """Every joint's sweep in one engine."""
+
+    engine: str
+    joints: list[JointSweep] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+    """joint -> why it was not swept"""
+
+
+def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],
+              initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
+              conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
+    """Sweep every joint of ``closed`` (joint -> (q_closed, direction,
+    open_range), rad or m) in a fresh fixed-root, gravity-free, ground-free
+    session of ``engine`` (one session; the state is restored before each joint).
+
+    Raises:
+        EngineUnavailable: the engine is not installed; whatever loading raises.
+    """
+    cfg = config or SweepConfig()
+    conv = conventions or SimConventions()
+    subtrees = joint_subtrees(read_urdf(urdf))
+    run = SweepRun(engine)
+    opts = SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}), fixed_base=True,
+                          gravity=False, ground=False, conventions=conv)
+    session = open_session(engine, urdf, opts)
+    try:
+        saved = session.save_state()
+        for name, (qc, d, rng) in closed.items():
+            if name not in session.joint_types:
+                run.skipped[name] = "not a movable joint in this engine"
+                continue
+            if not rng > 0:
+                run.skipped[name] = "no opening range"
+                continue
+            session.restore_state(saved)
+            run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
+                                          links=subtrees.get(name, [session.joint_child[name]]),
+                                          initial_state=initial_state, config=cfg))
+        session.discard_state(saved)
+    finally:
+        session.close()
+    return run
+
+
+def sweep_metric(run: SweepRun, config: SweepConfig | None = None) -> MetricResult:
+    """The ``joint_sweep`` :class:`~asset2sim.schemas.report.MetricResult`:
+    value = number of joints that fail; passes iff none fails (None when no
+    joint was swept)."""
+    cfg = config or SweepConfig()
+    failing = [j.joint for j in run.joints if not j.passed]
+    return MetricResult(
+        name="joint_sweep",
+        value=float(len(failing)),
+        unit=unit("joint_sweep"),
+        passed=(not failing) if run.joints else None,
+        threshold=(f"root fixed; every movable joint driven (force-limited) from its closed end to >= "
+                   f"{cfg.reach_fraction:.0%} open and back to <= {1 - cfg.reach_fraction:.0%} within "
+                   f"{cfg.time_limit:g} s each way, deepest self-contact < {cfg.max_penetration * 1000:g} mm, no divergence"),
+        details={"joints": {j.joint: j.summary() for j in run.joints}, "failing": failing,
+                 "failures": [f"{j.joint}: {j.failure}" for j in run.joints if not j.passed], "skipped": run.skipped},
+        engine=run.engine,
+    )

@@ -1,0 +1,445 @@
+"""Numbers, units, masses, materials and explicit joint parameters in a request.
+
+Used by :func:`asset2sim.tasks.interpret.request.parse_request`; every function
+here reads the lower-cased request and returns typed findings with their
+character spans (so the parser can report what it used and what it did not).
+
+Units (converted to SI, radians):
+
+- angles: degrees (``deg``, ``degree(s)``, ``°``) x pi/180, radians (``rad``);
+- lengths: ``mm`` 1e-3, ``cm`` 1e-2, ``m``/``metre(s)``/``meter(s)`` 1,
+  ``in``/``inch(es)``/``"`` 0.0254, ``ft``/``foot``/``feet`` 0.3048 (NIST
+  SP 811, Appendix B: exact definitions of the inch and the foot);
+- masses: ``g`` 1e-3, ``kg``/``kilo(gram)s`` 1, ``lb``/``pound(s)`` 0.45359237,
+  ``oz``/``ounce(s)`` 0.028349523125 (NIST SP 811, Appendix B, exact);
+- fractions: ``%``/``percent`` /100, "a third" 1/3, "two-thirds" 2/3,
+  "N/M" N/M;
+- joint parameters: damping N*m*s/rad (rotational) or N*s/m (linear),
+  friction N*m or N, stiffness N*m/rad or N/m.
+
+Pure functions, linear in the length of the text (a fixed set of regular
+expressions, each scanned once).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+from asset2sim.schemas.request import BAND_TARGET, DynamicsValue, PartProperty, SizeTarget, StateTarget
+from asset2sim.tasks.interpret.part_labels import canonical_label
+
+_L = r"(?<![\w.-])"
+_R = r"(?![\w-])"
+
+#: Part nouns a request may name (singular and plural); the parser's per-part
+#: phrases and the per-part masses, materials and joint parameters use them.
+PART_WORDS = (
+    r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
+    r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
+    r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?"
+)
+PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
+#: Words for the object's fixed body (material per part: "on a plastic body").
+BODY_RX = re.compile(r"(?<![\w-])(?:body|bodies|frame|base|casing|housing|carcass|chassis)(?![\w-])")
+
+_WORD_NUMBERS = {
+    "zero": 0, "one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6, "seven": 7, "eight": 8,
+    "nine": 9, "ten": 10, "eleven": 11, "twelve": 12, "fifteen": 15, "twenty": 20, "thirty": 30,
+    "forty": 40, "forty-five": 45, "fifty": 50, "sixty": 60, "seventy": 70, "eighty": 80, "ninety": 90,
+    "a hundred": 100, "hundred": 100, "half a": 0.5, "a half": 0.5,
+}
+NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_NUMBERS), key=len, reverse=True)) + r")"
+
+
+def number_value(text: str) -> float:
+    """The value of a number matched by :data:`NUM` ("30", "0.5", "two")."""
+    t = text.strip()
+    if t in _WORD_NUMBERS:
+        return float(_WORD_NUMBERS[t])
+    return float(t)
+
+
+_ANGLE_UNITS = [(r"°|deg(?:rees?|s)?", math.pi / 180.0), (r"rad(?:ians?|s)?", 1.0)]
+_LENGTH_UNITS = [
+    (r"mm|millimet(?:er|re)s?", 1e-3),
+    (r"cm|centimet(?:er|re)s?", 1e-2),
+    (r"m|met(?:er|re)s?", 1.0),
+    (r"in(?:ch(?:es)?)?|\"|''", 0.0254),
+    (r"ft|foot|feet", 0.3048),
+]
+_MASS_UNITS = [
+    (r"g|grams?|grammes?", 1e-3),
+    (r"kg|kgs|kilos?|kilograms?|kilogrammes?", 1.0),
+    (r"lbs?|pounds?", 0.45359237),
+    (r"oz|ounces?", 0.028349523125),
+]
+
+
+def _unit_rx(units: list[tuple[str, float]]) -> str:
+    return "|".join(f"(?:{u})" for u, _ in units)
+
+
+def _factor(units: list[tuple[str, float]], text: str) -> float:
+    for u, f in units:
+        if re.fullmatch(u, text):
+            return f
+    raise ValueError(f"unknown unit {text!r}")
+
+
+#: A unit right after a number ("drawer 10 cm" is a distance, not drawer number 10).
+UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + "|".join(f"(?:{u})" for u, _ in _ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS) + r")(?![\w])")
+
+_QTY = r"(?P<num>" + NUM + r")\s*-?\s*(?P<unit>{units})(?![\w])"
+_ANGLE_RX = re.compile(_L + _QTY.format(units=_unit_rx(_ANGLE_UNITS)))
+_LENGTH_RX = re.compile(_L + _QTY.format(units=_unit_rx(_LENGTH_UNITS)))
+_MASS_RX = re.compile(_L + _QTY.format(units=_unit_rx(_MASS_UNITS)))
+_PERCENT_RX = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?:%|percent|per cent)(?![\w])")
+_THIRDS_RX = re.compile(
+    _L + r"(?P<frac>(?:two|2)[- ]thirds?|(?:a|one|1)[- ]third|(?P<n>\d)\s*/\s*(?P<d>[1-9]))"
+    r"(?:(?: of the way)?(?: of its (?:travel|range))?)" + _R
+)
+
+_STATE_BEFORE = re.compile(
+    r"(?<![\w-])(?:(?:open(?:ed)?|rotated|tilted|swung(?: open)?|turned|raised|lifted|pulled(?: out)?|pushed(?: in)?|slid(?: out| open)?|"
+    r"extended|lowered|set|positioned|sits?|stands?)\s+)?(?:(?:up )?to |by |at |of )?(?:about |around |roughly |approximately |exactly |an? angle of )?$"
+)
+_STATE_AFTER = re.compile(
+    r"^(?:\s+(?:open(?:ed)?|ajar|out|outwards?|apart|up|from (?:the )?(?:closed|shut)(?: position)?|(?:of |of the )?(?:opening|travel)))+"
+)
+_STATE_WORD_BEFORE = re.compile(r"(?<![\w-])(?:open(?:ed)?|rotated|tilted|swung|raised|lifted|pulled|pushed|slid|extended|lowered)\s+(?:\w+\s+){0,3}$")
+_DIM_AFTER = re.compile(r"^\s*(?P<dim>tall|high|in height|wide|in width|across|in diameter|diameter|deep|in depth|long|in length)" + _R)
+_DIM_BEFORE = re.compile(r"(?P<dim>height|width|depth|length|diameter)\s*(?:of|is|:|=|at)?\s*(?:about |around |roughly |approximately |exactly )?$")
+_DIM_NAMES = {
+    "tall": "height", "high": "height", "in height": "height", "height": "height",
+    "wide": "width", "in width": "width", "across": "width", "width": "width", "in diameter": "width", "diameter": "width",
+    "deep": "depth", "in depth": "depth", "depth": "depth",
+    "long": "length", "in length": "length", "length": "length",
+}
+
+
+@dataclass
+class Found:
+    """One finding with its character span in the lower-cased request."""
+
+    start: int
+    end: int
+    text: str
+    value: object
+
+
+def _band_of_fraction(f: float) -> str:
+    """Nearest band (by target fraction) of an opening fraction."""
+    return min(BAND_TARGET, key=lambda b: abs(BAND_TARGET[b] - f))
+
+
+def _next_words(low: str, end: int, n: int) -> list[tuple[int, int, str]]:
+    out = []
+    for m in re.finditer(r"[\w'-]+|[,;:.!?]", low[end: end + 80]):
+        out.append((end + m.start(), end + m.end(), m.group(0)))
+        if len(out) >= n:
+            break
+    return out
+
+
+def _near_category(low: str, end: int, mention_starts: list[int], max_words: int = 2) -> bool:
+    """A category mention starts within ``max_words`` words after ``end``."""
+    words = _next_words(low, end, max_words + 1)
+    for s, _e, w in words:
+        if s in mention_starts:
+            return True
+        if w in {",", ";", ":", ".", "!", "?"}:
+            return False
+    return False
+
+
+def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], list[Found], list[str], list[Found]]:
+    """Numeric joint states and numeric sizes.
+
+    Returns (states, sizes, warnings, verbs): ``verbs`` the state verbs a
+    number refers back to ("open the drawer 10 cm"); ``states`` hold ``(band, StateTarget)``
+    values (angles always; lengths next to a state word such as open/out/
+    pulled/at; percentages; "a third"/"two-thirds"/"N/M" next to open);
+    ``sizes`` hold :class:`SizeTarget` (a length followed by tall/high/wide/
+    deep/long/across, preceded by height/width/depth/length, or right before
+    the object's name: "a 1.8 m fridge" -> largest dimension); ``warnings``
+    name lengths that are neither.
+    """
+    states: list[Found] = []
+    sizes: list[Found] = []
+    warnings: list[str] = []
+    verbs: list[Found] = []
+
+    def widen(m: re.Match) -> tuple[int, int]:
+        b = _STATE_BEFORE.search(low[max(0, m.start() - 40): m.start()])
+        start = m.start() - (len(b.group(0)) if b else 0)
+        a = _STATE_AFTER.match(low[m.end():])
+        end = m.end() + (len(a.group(0)) if a else 0)
+        return start, end
+
+    for m in _ANGLE_RX.finditer(low):
+        v = number_value(m.group("num")) * _factor(_ANGLE_UNITS, m.group("unit"))
+        s, e = widen(m)
+        states.append(Found(s, e, low[s:e].strip(), ("halfway", StateTarget(kind="angle", value=v))))
+    for m in _PERCENT_RX.finditer(low):
+        f = number_value(m.group("num")) / 100.0
+        s, e = widen(m)
+        states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
+    for m in _THIRDS_RX.finditer(low):
+        s, e = widen(m)
+        if s == m.start() and e == m.end():
+            continue  # "a third" without open/out next to it is not a state
+        fr = m.group("frac")
+        if m.group("n"):
+            f = int(m.group("n")) / int(m.group("d"))
+        else:
+            f = 2 / 3 if fr.startswith(("two", "2")) else 1 / 3
+        states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
+    for m in _LENGTH_RX.finditer(low):
+        v = number_value(m.group("num")) * _factor(_LENGTH_UNITS, m.group("unit"))
+        if v <= 0:
+            continue
+        if m.group("unit") == "in" and (not m.group("num")[0].isdigit() or re.match(r"\s*\d", low[m.end():])):
+            continue  # "two in a row", "a 2 in 1 laptop": a preposition
+        after = _DIM_AFTER.match(low[m.end():])
+        before = _DIM_BEFORE.search(low[max(0, m.start() - 40): m.start()])
+        if after:
+            e = m.end() + len(after.group(0))
+            sizes.append(Found(m.start(), e, low[m.start():e].strip(), SizeTarget(dimension=_DIM_NAMES[after.group("dim")], value=v, phrase=low[m.start():e].strip())))
+            continue
+        if before:
+            s = m.start() - len(before.group(0))
+            sizes.append(Found(s, m.end(), low[s:m.end()].strip(), SizeTarget(dimension=_DIM_NAMES[before.group("dim")], value=v, phrase=low[s:m.end()].strip())))
+            continue
+        s, e = widen(m)
+        w0 = max(0, m.start() - 60)
+        verb = _STATE_WORD_BEFORE.search(low[w0: m.start()])
+        if verb is not None and (s, e) == (m.start(), m.end()):
+            v_end = w0 + verb.start() + len(verb.group(0).split()[0])
+            verbs.append(Found(w0 + verb.start(), v_end, low[w0 + verb.start(): v_end], None))
+        if (s, e) != (m.start(), m.end()) or verb is not None:
+            states.append(Found(s, e, low[s:e].strip(), ("halfway", StateTarget(kind="distance", value=v))))
+        elif _near_category(low, m.end(), mention_starts):
+            sizes.append(Found(m.start(), m.end(), m.group(0), SizeTarget(dimension="largest", value=v, phrase=m.group(0))))
+        else:
+            warnings.append(f"'{m.group(0)}' is a length but neither a size (tall/wide/deep/long) nor a state (open/out): not used")
+    states.sort(key=lambda f: f.start)
+    return _no_overlap(states), sizes, warnings, verbs
+
+
+def _no_overlap(found: list[Found]) -> list[Found]:
+    out: list[Found] = []
+    last = -1
+    for f in sorted(found, key=lambda f: (f.start, -(f.end - f.start))):
+        if f.start >= last:
+            out.append(f)
+            last = f.end
+    return out
+
+
+_WEIGHS_BEFORE = re.compile(r"(?:weighs?|weighing|weight(?: of| is|:)?|mass(?: of| is|:)?|of)\s+(?:about |around |roughly |approximately |exactly |only |just )?$")
+
+
+def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int] | None = None) -> str | None:
+    """The part noun closest before ``pos`` within ``max_words`` words and no
+    clause mark; None when that noun names the object itself (a category
+    mention: "a door with stiffness 5 N m/rad" is about the whole door)."""
+    w0 = max(0, pos - 60)
+    window = low[w0: pos]
+    cut = max((m.end() for m in re.finditer(r"[,;:.!?]", window)), default=0)
+    words = list(re.finditer(r"[\w'-]+", window[cut:]))[-max_words:]
+    for m in reversed(words):
+        w = m.group(0)
+        start = w0 + cut + m.start()
+        if PART_RX.fullmatch(w):
+            return None if mention_starts and start in mention_starts else (canonical_label(w) or w)
+        if BODY_RX.fullmatch(w):
+            return "body"
+    return None
+
+
+def _part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
+    """The part (or body) noun within ``max_words`` words after ``end``: (label,
+    end of the noun); label None when the noun names the object itself (a
+    category mention: "a wooden door")."""
+    for s, e, w in _next_words(low, end, max_words):
+        if PART_RX.fullmatch(w):
+            return (None if mention_starts and s in mention_starts else (canonical_label(w) or w)), e
+        if BODY_RX.fullmatch(w):
+            return "body", e
+        if w in {",", ";", ":", ".", "!", "?", "and", "with", "on", "in", "of"}:
+            return None, end
+    return None, end
+
+
+def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
+    """Masses in numbers: "weighs 2 kg", "500 g", "a 300 g lid" (per part when a
+    part noun follows the number or precedes "weighs"). Values ``PartProperty``."""
+    out: list[Found] = []
+    for m in _MASS_RX.finditer(low):
+        v = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
+        if v <= 0:
+            continue
+        label, end = _part_after(low, m.end(), mention_starts=mention_starts)
+        start = m.start()
+        w = _WEIGHS_BEFORE.search(low[max(0, m.start() - 40): m.start()])
+        if w:
+            start -= len(w.group(0))
+            if label is None:
+                label = _part_before(low, start, mention_starts=mention_starts)
+        text = low[start:max(end, m.end())].strip()
+        out.append(Found(start, max(end, m.end()), text, PartProperty(label=label, mass=v, phrase=text)))
+    return out
+
+
+_MASS_LEVEL_RX = re.compile(
+    _L + r"(?:(?:very|quite|really|rather|fairly|extra)[- ])?(?P<w>heavy(?:weight)?|heavier|light(?:weight)?|lighter)" + _R
+)
+_MASS_LEVEL_BEFORE = re.compile(r"(?:is|it's|feels?|be|and|but|,)\s+$")
+
+
+def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
+    """"a heavy box", "it is light", "lightweight": value ``"heavy"``/``"light"``.
+    "heavy"/"light" before a part or joint word ("a heavy hinge", "light
+    damping") are dynamics words, not masses."""
+    out: list[Found] = []
+    for m in _MASS_LEVEL_RX.finditer(low):
+        w = m.group("w")
+        level = "heavy" if w.startswith("heav") else "light"
+        if w.endswith("weight") or _near_category(low, m.end(), mention_starts, 2):
+            out.append(Found(m.start(), m.end(), m.group(0), level))
+            continue
+        nxt = _next_words(low, m.end(), 1)
+        if _MASS_LEVEL_BEFORE.search(low[max(0, m.start() - 12): m.start()]) and (not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "but", "to"}):
+            out.append(Found(m.start(), m.end(), m.group(0), level))
+    return out
+
+
+#: Request words -> ``materials.yaml`` key. Household "metal" parts are
+#: painted or stainless sheet; "wood"/"wooden" solid wood; "plastic" ABS (the
+#: common injection-molding plastic of appliance parts). Sources of the
+#: numbers: ``asset2sim/priors/materials.yaml``.
+MATERIAL_WORDS: dict[str, str] = {
+    r"wood(?:en)?|timber|oak|pine|walnut|maple|beech": "solid_wood",
+    r"plywood": "plywood",
+    r"mdf": "mdf",
+    r"particle ?board|chipboard": "particle_board",
+    r"metal(?:lic)?|steel|sheet[- ]metal|tin": "steel_sheet",
+    r"stainless(?: steel)?": "stainless_steel",
+    r"alumini?um": "aluminium",
+    r"brass": "brass",
+    r"cast iron|iron|solid steel": "steel_solid",
+    r"zinc|die[- ]cast": "cast_zinc",
+    r"glass": "glass",
+    r"plastic|abs": "abs_plastic",
+    r"polypropylene|pp": "pp_plastic",
+    r"polycarbonate": "polycarbonate",
+    r"pvc": "pvc_plastic",
+    r"cardboard|carton|paperboard": "corrugated_cardboard",
+    r"leather": "leather",
+    r"fabric|cloth|canvas|textile|nylon": "textile",
+    r"ceramic|porcelain|china": "vitreous_china",
+    r"rubber": "rubber",
+}
+_MATERIAL_RX = [(re.compile(_L + r"(?:made (?:of|from|out of) |in )?(?:solid |real )?(?:" + pat + r")" + _R), key) for pat, key in MATERIAL_WORDS.items()]
+_MADE_OF = re.compile(r"(?:made (?:of|from|out of)|in) ")
+
+
+def materials(low: str, mention_starts: list[int], head_starts: list[int] | None = None) -> list[Found]:
+    """Material words: per part when a part noun follows ("a metal door"), the
+    body when a body word follows ("a plastic body"), the whole object before
+    the object's name or after "made of". ``mention_starts``: every category
+    mention; ``head_starts``: the mention of the object the request is about
+    (a part noun there names the whole object). Values ``PartProperty``."""
+    hits: list[Found] = []
+    for rx, key in _MATERIAL_RX:
+        for m in rx.finditer(low):
+            hits.append(Found(m.start(), m.end(), m.group(0), key))
+    out: list[Found] = []
+    for h in _no_overlap(hits):
+        made_of = _MADE_OF.match(h.text) is not None
+        label, end = (None, h.end) if made_of else _part_after(low, h.end, mention_starts=head_starts)
+        if made_of:
+            label = _part_before(low, h.start, 3, head_starts)
+        elif label is None:
+            nxt = _next_words(low, h.end, 1)
+            if not (_near_category(low, h.end, mention_starts, 2) or not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "with", "but"}):
+                continue  # "a rubber duck": not the object's material
+        text = low[h.start:max(end, h.end)].strip()
+        out.append(Found(h.start, max(end, h.end), text, PartProperty(label=label, material=str(h.value), phrase=text)))
+    return out
+
+
+_NSEP = r"\s*[·*.\-]?\s*"
+_DYN_UNITS = [
+    ("damping", "rotational", r"n" + _NSEP + r"m" + _NSEP + r"s\s*/\s*rad|nms/rad"),
+    ("damping", "linear", r"n" + _NSEP + r"s\s*/\s*m|ns/m"),
+    ("stiffness", "rotational", r"n" + _NSEP + r"m\s*/\s*rad|nm/rad"),
+    ("stiffness", "linear", r"n\s*/\s*m"),
+    ("friction", "rotational", r"n" + _NSEP + r"m|nm"),
+    ("friction", "linear", r"n"),
+]
+_DYN_NAME = r"(?P<q>damping|friction|stiffness|spring (?:constant|stiffness|rate))(?: coefficient)?"
+_DYN_RX = re.compile(
+    _L + _DYN_NAME + r"(?:\s+(?:of|=|is|at|to|about|around)|\s*[:=])*\s*(?P<num>" + NUM + r")\s*(?P<unit>"
+    + "|".join(f"(?:{u})" for _q, _m, u in _DYN_UNITS) + r")?(?![\w/])"
+)
+_DYN_RX_AFTER = re.compile(
+    _L + r"(?P<num>" + NUM + r")\s*(?P<unit>" + "|".join(f"(?:{u})" for _q, _m, u in _DYN_UNITS) + r")\s+(?:of\s+)?" + _DYN_NAME + _R
+)
+
+
+def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[list[Found], list[str]]:
+    """Explicit joint parameters ("damping 0.5 N m s/rad", "friction of 0.2",
+    "2 N/m stiffness"): values :class:`DynamicsValue` (per part when a part
+    noun precedes the name within four words). Warnings when the unit does not
+    fit the quantity ("damping 2 N m")."""
+    out: list[Found] = []
+    warns: list[str] = []
+    for rx in (_DYN_RX, _DYN_RX_AFTER):
+        for m in rx.finditer(low):
+            q = m.group("q")
+            q = "stiffness" if q.startswith("spring") else q
+            v = number_value(m.group("num"))
+            motion = "any"
+            unit = m.group("unit")
+            if unit:
+                fit = [(qq, mm) for qq, mm, u in _DYN_UNITS if re.fullmatch(u, unit)]
+                same = [mm for qq, mm in fit if qq == q]
+                if same:
+                    motion = same[0]
+                else:
+                    warns.append(f"'{m.group(0)}': the unit {unit!r} does not fit {q} (expected "
+                                 + " or ".join(u for qq, _mm, u in _DYN_UNITS if qq == q).replace("\\s*", " ") + "); used as a number without unit")
+            label = _part_before(low, m.start(), mention_starts=mention_starts)
+            out.append(Found(m.start(), m.end(), m.group(0), DynamicsValue(quantity=q, value=v, motion=motion, label=label if label != "body" else None, phrase=m.group(0))))
+    return _no_overlap(out), warns
+
+
+_COUNT_WORDS = {"one": 1, "single": 1, "two": 2, "double": 2, "twin": 2, "three": 3, "triple": 3, "four": 4, "five": 5, "six": 6}
+_COUNT_RX = re.compile(
+    _L + r"(?P<n>one|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
+    r"shel(?:f|ves)|compartments?|burners?|buttons?|knobs?|handles?|wheels?)" + _R
+)
+
+
+def part_counts(low: str) -> list[Found]:
+    """Counts of parts ("a two-drawer cabinet", "a double-door fridge", "a
+    two-slot toaster"): value (canonical label, count)."""
+    out = []
+    for m in _COUNT_RX.finditer(low):
+        n = m.group("n")
+        k = int(n) if n.isdigit() else _COUNT_WORDS[n]
+        part = m.group("part")
+        out.append(Found(m.start(), m.end(), m.group(0), (canonical_label(part) or part.rstrip("s"), k)))
+    return out
+
+
+#: Words that name the kind of joint or motion ("a rotational lid", "sliding
+#: joints", "hinge-like behavior", "smooth operation"): understood, no effect
+#: on the numbers (the asset's joints decide their kind).
+DESCRIPTOR_RX = re.compile(
+    _L + r"(?:(?:rotational|rotating|rotary|revolute|hinged|hinge[- ]like|pivoting|swinging|sliding|prismatic|linear|telescopic)"
+    r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling)" + _R
+)

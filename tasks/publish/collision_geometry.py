@@ -1,0 +1,690 @@
+"""Output collision geometry that every engine takes.
+
+Every simulator collides a moving mesh through convex shapes: PyBullet one
+hull per OBJ group, PhysX one cooked hull per mesh, MuJoCo one hull per mesh
+file (and it refuses flat ones), Drake one hull per file. The input's visual
+part meshes make poor collision files: flat (zero-thickness) groups that
+MuJoCo's URDF importer refuses, degenerate groups, faces wound inside-out, and
+links made of a hundred small parts (a laptop's keys) that become a hundred
+geoms and hundreds of contacts.
+
+:func:`convex_collisions` replaces the mesh collisions of every link of a
+written URDF model by a few closed convex pieces, written as OBJ files in the
+link frame (scale and collision origin baked in), each:
+
+- the convex hull of one OBJ group of the link's collision meshes (the hull
+  PyBullet collided with before), so the colliding volume is unchanged where
+  nothing below applies;
+- never flat: a group thinner than :data:`FLAT_WIDTH` is grown
+  symmetrically along its thinnest direction to :data:`MIN_THICKNESS` (the
+  2 mm slab of :data:`asset2sim.engines.loading.FLAT_HULL_THICKNESS`); a
+  group that spans no area (a point or a segment) is dropped;
+- wound with outward normals (every face's normal points away from the
+  hull's interior);
+- at most :data:`MAX_PIECES_PER_LINK` per link: beyond that, the two pieces
+  whose merged hull adds the least empty volume are merged, repeatedly
+  (the greedy hierarchical merge of Mamou and Ghorbel, "A simple and
+  efficient approach for 3D mesh approximate convex decomposition", ICIP
+  2009), never into a hull that would swallow another link's geometry at the
+  initial state when another merge is possible.
+
+A parent whose piece contains its child at the initial state (a toilet seat
+inside the convex hull of the bowl) would make the two collide as soon as an
+engine does not skip parent-child pairs (a fixed object, a robot finger in
+between). :func:`convex_collisions` measures that depth; above
+:data:`CONTAINMENT_TOLERANCE` the parent's mesh is cut into convex pieces
+around the child (:func:`split_surface`: the surface, densely sampled, is
+halved across its longest extent where a piece's hull still holds the child,
+a binary space partition as in the BSP-tree decompositions of Naylor,
+"Binary space partitioning trees as an alternative representation of
+polytopes", CAD 1990), kept only when the child then sits less deep. Parts
+are never moved. CoACD (used by the state search,
+:mod:`asset2sim.tasks.state.collision`) took 215 s on the toilet 102703's
+bowl on this machine; the cut takes well under a second.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import heapq
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from asset2sim import atomic, mesh_io, urdf
+from asset2sim.engines.loading import FLAT_HULL_THICKNESS, mesh_hulls
+
+#: Most convex pieces a link's collision keeps. MuJoCo makes one contact per
+#: colliding geom pair (``mjMAXCONPAIR`` more only for multi-contact pairs),
+#: so contacts grow with the number of pieces: laptop 9912 with 118 part
+#: meshes made 423 contacts in a 5 cm drop and overflowed MuJoCo's default
+#: arena. 16 is the number of hulls this project already asks CoACD for per
+#: mesh (:data:`asset2sim.tasks.state.collision.COACD_SETTINGS`), enough for a
+#: drawer, a box or a cabinet with shelves (5-10 slabs) to keep their hollow.
+MAX_PIECES_PER_LINK = 16
+
+#: Thinnest convex piece written, m: the 2 mm slab every engine here takes
+#: (PyBullet inflates a flat hull by its 1 mm margin per side; PhysX cannot
+#: cook a flat hull and MuJoCo refuses it).
+MIN_THICKNESS = FLAT_HULL_THICKNESS
+
+#: Width (m) under which a piece counts as flat and is grown to
+#: :data:`MIN_THICKNESS`: 0.1 mm, far above Qhull's precision (MuJoCo's
+#: "coplanar vertices" refusal, PhysX's failed cooking) and far below any
+#: modelled wall.
+FLAT_WIDTH = 1e-4
+
+#: Depth (m) a child may sit inside its parent's collision pieces at the
+#: initial state before the parent is decomposed: the SPEC's 2 mm
+#: penetration tolerance.
+CONTAINMENT_TOLERANCE = 0.002
+
+#: Relative tolerance (of a piece's size) under which a point counts as
+#: inside a hull (numerical noise of Qhull's plane equations).
+_INSIDE_EPS = 1e-9
+
+
+class CollisionGeometryError(RuntimeError):
+    """A link's collision geometry cannot be made into convex pieces (names the link and file)."""
+
+
+@dataclass
+class Piece:
+    """A convex piece in the link frame: ``points`` (k, 3) m (hull vertices),
+    ``equations`` (f, 4) outward planes (n, d with n.x + d <= 0 inside),
+    ``volume`` m^3; ``sources`` the mesh files it came from."""
+
+    points: np.ndarray
+    equations: np.ndarray
+    volume: float
+    sources: tuple[str, ...] = ()
+    _support: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def support(self) -> np.ndarray:
+        """:func:`support_points` of the piece (computed once)."""
+        if self._support is None:
+            self._support = support_points(self.points)
+        return self._support
+
+    @classmethod
+    def of(cls, points: np.ndarray, sources: tuple[str, ...] = ()) -> "Piece":
+        """The hull of ``points`` (k, 3) m.
+
+        Raises:
+            QhullError, ValueError: the points span no volume.
+        """
+        hull = ConvexHull(np.asarray(points, float))
+        return cls(hull.points[hull.vertices], hull.equations, float(hull.volume), sources)
+
+
+@dataclass
+class LinkPieces:
+    """What :func:`link_pieces` made of one link: the ``pieces``, how many
+    input groups there were (``n_groups``), and ``notes``."""
+
+    pieces: list[Piece]
+    n_groups: int
+    notes: list[str] = field(default_factory=list)
+
+
+def solid_points(points: np.ndarray, thickness: float = MIN_THICKNESS, flat: float = None) -> np.ndarray | None:
+    """``points`` (k, 3) m, grown to ``thickness`` m along their thinnest
+    principal direction (both sides equally) when they are flat (thinner than
+    ``flat`` m, default :data:`FLAT_WIDTH`); None when they span no area
+    (fewer than 3 points, or all on a line). Thin but not flat sets are kept
+    as they are: the collision volume the engines used before."""
+    flat = FLAT_WIDTH if flat is None else flat
+    p = np.asarray(points, float)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if len(p) < 3:
+        return None
+    c = p.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+    scale = max(float(sv[0]), 1e-12)
+    if len(sv) < 2 or sv[1] <= 1e-9 * scale:
+        return None
+    n = vt[2] if vt.shape[0] == 3 else np.cross(vt[0], vt[1])
+    n = n / np.linalg.norm(n)
+    width = float(np.ptp(p @ n))
+    if width >= min(flat, thickness):
+        return p
+    h = 0.5 * (thickness - width)
+    return np.vstack([p + h * n, p - h * n])
+
+
+def _sphere_directions(n: int = 100) -> np.ndarray:
+    """``n`` unit vectors (n, 3) spread evenly over the sphere (Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1 - 2 * i / n)
+    theta = np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=1)
+
+
+_DIRECTIONS = _sphere_directions()
+
+
+def support_points(points: np.ndarray) -> np.ndarray:
+    """The extreme points (<= 100, 3) of ``points`` (k, 3) along 100 evenly
+    spread directions: their hull is inside the hull of ``points`` and close
+    to it (within the polytope approximation error of 100 support directions)."""
+    p = np.asarray(points, float)
+    if len(p) <= len(_DIRECTIONS):
+        return p
+    return p[np.unique(np.argmax(p @ _DIRECTIONS.T, axis=0))]
+
+
+def piece_obj(piece: Piece) -> bytes:
+    """OBJ bytes of ``piece``: its hull vertices and triangles wound so that
+    every face normal (right-hand rule) points outward."""
+    hull = ConvexHull(piece.points)
+    tri = hull.simplices.copy()
+    a, b, c = (hull.points[tri[:, i]] for i in range(3))
+    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
+    tri[flip, 1], tri[flip, 2] = hull.simplices[flip, 2], hull.simplices[flip, 1]
+    used = np.unique(tri)
+    remap = np.zeros(len(hull.points), int)
+    remap[used] = np.arange(1, len(used) + 1)
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in hull.points[used]]
+    lines += [f"f {i} {j} {k}" for i, j, k in remap[tri]]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def depth_inside(points: np.ndarray, piece: Piece) -> float:
+    """Largest depth (m, >= 0) of any of ``points`` (k, 3) inside ``piece``
+    (distance to the nearest face plane of a point inside the hull)."""
+    if len(points) == 0:
+        return 0.0
+    lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
+    points = points[np.all((points > lo) & (points < hi), axis=1)]  # only points in the box can be inside
+    if len(points) == 0:
+        return 0.0
+    d = np.max(points @ piece.equations[:, :3].T + piece.equations[:, 3], axis=1)
+    return float(max(0.0, -d.min()))
+
+
+def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> tuple[list[Piece], int]:
+    """Pieces of every mesh collision of ``link`` (one per OBJ group, in the
+    link frame, :func:`solid_points` applied)."""
+    out: list[Piece] = []
+    n = 0
+    for k, c in enumerate(link.collisions):
+        if c.kind != "mesh":
+            continue
+        path = mesh_path(c)
+        try:
+            groups = mesh_hulls(path, c.scale)
+        except urdf.UrdfError as exc:
+            raise CollisionGeometryError(f"link {link.name!r} collision {k} ({c.filename}): {exc}") from exc
+        for g, pts in enumerate(groups):
+            n += 1
+            solid = solid_points(pts)
+            if solid is None:
+                notes.append(f"link {link.name!r}: group {g} of {c.filename} spans no area; no collision")
+                continue
+            world = solid @ c.origin[:3, :3].T + c.origin[:3, 3]
+            try:
+                out.append(Piece.of(world, (str(c.filename),)))
+            except (QhullError, ValueError):
+                notes.append(f"link {link.name!r}: group {g} of {c.filename} has no hull; no collision")
+    return out, n
+
+
+def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = None, neighbours: int = 8,
+                 *, free_only: bool = False) -> list[Piece]:
+    """At most ``limit`` pieces: the pair whose merged hull adds the least
+    volume (``vol(hull(A u B)) - vol(A) - vol(B)``, m^3) is merged first,
+    among each piece's ``neighbours`` nearest pieces (by centre). A merge that
+    would newly contain any of ``others`` (k, 3) m (other links' vertices in
+    this link's frame) costs more than any merge that does not; with
+    ``free_only`` such merges are never made (merging stops before one)."""
+    pieces = list(pieces)
+    if len(pieces) <= limit:
+        return pieces
+    others = np.zeros((0, 3)) if others is None else np.asarray(others, float)
+    alive = {i: p for i, p in enumerate(pieces)}
+    nxt = len(pieces)
+    penalty = 1.0 + sum(p.volume for p in pieces) * 1e6
+
+    def cost(a: Piece, b: Piece) -> tuple[float, Piece | None]:
+        try:  # on support points (an inner approximation of each hull): Qhull's time grows with the points
+            m = Piece.of(np.vstack([a.support, b.support]))
+        except (QhullError, ValueError):
+            return float("inf"), None
+        c = m.volume - a.volume - b.volume
+        if len(others):
+            lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+            near = others[np.all((others >= lo) & (others <= hi), axis=1)]
+            size = float(np.ptp(m.points, axis=0).max())
+            if len(near):
+                inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
+                if inside_m.any():
+                    before = np.zeros(len(near), bool)
+                    for p in (a, b):
+                        before |= np.max(near @ p.equations[:, :3].T + p.equations[:, 3], axis=1) < -_INSIDE_EPS * size
+                    if (inside_m & ~before).any():
+                        c += penalty
+        return c, m
+
+    def centre(p: Piece) -> np.ndarray:
+        return p.points.mean(axis=0)
+
+    heap: list[tuple[float, int, int]] = []
+    merged: dict[tuple[int, int], Piece] = {}
+
+    def push_for(i: int) -> None:
+        ids = [j for j in alive if j != i]
+        if not ids:
+            return
+        cs = np.array([centre(alive[j]) for j in ids])
+        order = np.argsort(np.linalg.norm(cs - centre(alive[i]), axis=1))[:neighbours]
+        for o in order:
+            j = ids[int(o)]
+            key = (min(i, j), max(i, j))
+            if key in merged:
+                continue
+            c, m = cost(alive[key[0]], alive[key[1]])
+            if m is not None:
+                merged[key] = m
+                heapq.heappush(heap, (c, key[0], key[1]))
+
+    for i in list(alive):
+        push_for(i)
+    while len(alive) > limit and heap:
+        c, i, j = heapq.heappop(heap)
+        if i not in alive or j not in alive:
+            continue
+        if free_only and c >= penalty:
+            break
+        merged.pop((i, j))
+        a, b = alive.pop(i), alive.pop(j)
+        alive[nxt] = Piece.of(np.vstack([a.points, b.points]), a.sources + tuple(s for s in b.sources if s not in a.sources))
+        push_for(nxt)
+        nxt += 1
+    if len(alive) > limit and not free_only:  # no neighbour pair could merge: merge everything left into the limit by order
+        rest = list(alive.values())
+        while len(rest) > limit:
+            a, b = rest.pop(), rest.pop()
+            rest.append(Piece.of(np.vstack([a.points, b.points]), a.sources + b.sources))
+        return rest
+    return list(alive.values())
+
+
+def surface_samples(triangles: np.ndarray, spacing: float) -> np.ndarray:
+    """Points (k, 3) on the triangles (m, 3, 3) no farther than ``spacing``
+    apart along any edge: each triangle's barycentric grid with
+    ``ceil(longest edge / spacing)`` steps (its corners included)."""
+    tri = np.asarray(triangles, float)
+    if len(tri) == 0:
+        return np.zeros((0, 3))
+    longest = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
+    steps = np.clip(np.ceil(longest / max(spacing, 1e-12)).astype(int), 1, 64)
+    out = [tri.reshape(-1, 3)]
+    for n in np.unique(steps[steps > 1]):
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        a, b = i[keep] / n, j[keep] / n
+        w = np.stack([1 - a - b, a, b], axis=1)  # (g, 3) barycentric weights
+        t = tri[steps == n]
+        out.append(np.einsum("gk,mkd->mgd", w, t).reshape(-1, 3))
+    return np.unique(np.vstack(out), axis=0)
+
+
+#: Where a point set may be cut, as fractions of its extent along each axis
+#: of the link frame: near the ends a cut peels a wall off a hollow part, in
+#: the middle it halves a long one.
+CUT_FRACTIONS = (0.04, 0.1, 0.2, 0.35, 0.5, 0.65, 0.8, 0.9, 0.96)
+
+
+def facets(triangles: np.ndarray, gap: float) -> list[np.ndarray]:
+    """The triangles (m, 3, 3) grouped into facets: by the axis direction
+    (+-x, +-y, +-z) their normal is closest to, then, within a direction,
+    into layers along that axis separated by more than ``gap`` m (the inner
+    face of one wall and the outer face of the opposite wall face the same
+    way). Each facet is nearly flat across the axis it faces, so its hull
+    hugs it; returns the facets' triangles (largest first)."""
+    tri = np.asarray(triangles, float)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    good = np.linalg.norm(n, axis=1) > 0
+    tri, n = tri[good], n[good]
+    if len(tri) == 0:
+        return []
+    dirs = np.vstack([np.eye(3), -np.eye(3)])
+    bin_ = np.argmax(n @ dirs.T / np.linalg.norm(n, axis=1)[:, None], axis=1)
+    out = []
+    for b in range(6):
+        t = tri[bin_ == b]
+        if len(t) == 0:
+            continue
+        ax = b % 3
+        c = t[:, :, ax].mean(axis=1)
+        order = np.argsort(c)
+        lo, hi = t[order][:, :, ax].min(axis=1), t[order][:, :, ax].max(axis=1)
+        reach = np.maximum.accumulate(hi)
+        cuts = np.nonzero(lo[1:] > reach[:-1] + gap)[0] + 1
+        out += [t[order][a:b2] for a, b2 in zip(np.r_[0, cuts], np.r_[cuts, len(t)])]
+    return sorted(out, key=len, reverse=True)
+
+
+#: Points of a set that :func:`split_surface` measures a candidate cut with,
+#: and child vertices it keeps out (even subsamples: time grows with both).
+MEASURE_SAMPLES = 1000
+PROBE_POINTS = 1500
+
+
+def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, budget: int, spacing: float) -> list[np.ndarray]:
+    """Split surface samples ``points`` (k, 3) m into point sets whose hulls
+    hold none of ``keep_out`` (j, 3) m deeper than ``tolerance`` m.
+
+    Greedy binary space partition: the set whose hull holds a point deepest
+    is cut by the plane (normal along an axis of the frame, at one of
+    :data:`CUT_FRACTIONS` of the set's extent) after which the deeper of the
+    two halves holds ``keep_out`` least deep (ties: the smaller summed hull
+    volume); points within ``spacing`` of the plane go to both halves, so
+    neighbouring hulls overlap and leave no gap. Stops when no hull holds a
+    point deeper than ``tolerance``, when ``budget`` sets exist, or when no
+    cut helps. Returns the point sets."""
+    def measure(p: np.ndarray) -> tuple[float, float]:
+        p = p[:: max(1, len(p) // MEASURE_SAMPLES)]  # an even subsample guides the cut; the pieces keep every point
+        solid = solid_points(p)
+        if solid is None:
+            return 0.0, 0.0
+        try:
+            piece = Piece.of(solid)
+        except (QhullError, ValueError):
+            return 0.0, 0.0
+        return depth_inside(keep_out, piece), piece.volume
+
+    sets = [(measure(points)[0], points)]
+    while len(sets) < budget:
+        sets.sort(key=lambda t: -t[0])
+        d, p = sets[0]
+        if d <= tolerance or len(p) < 8:
+            break
+        lo_b, ext = p.min(axis=0), np.ptp(p, axis=0)
+        best = None
+        for ax in range(3):
+            if ext[ax] <= 2 * spacing:
+                continue
+            for f in CUT_FRACTIONS:
+                cut = lo_b[ax] + f * ext[ax]
+                lo, hi = p[p[:, ax] <= cut + spacing], p[p[:, ax] >= cut - spacing]
+                if len(lo) < 4 or len(hi) < 4 or len(lo) == len(p) or len(hi) == len(p):
+                    continue
+                (dl, vl), (dh, vh) = measure(lo), measure(hi)
+                score = (max(dl, dh), vl + vh)
+                if best is None or score < best[0]:
+                    best = (score, (dl, lo), (dh, hi))
+        if best is None or best[0][0] >= d:
+            break
+        sets = sets[1:] + [best[1], best[2]]
+    return [p for _, p in sets]
+
+
+def _split_pieces(link: urdf.UrdfLink, source: str, mesh_path, keep_out: np.ndarray, budget: int) -> list[Piece]:
+    """Pieces of the collision mesh ``source`` of ``link`` (link frame) cut
+    by :func:`split_surface` so that they hold none of ``keep_out`` (k, 3)
+    deeper than :data:`CONTAINMENT_TOLERANCE`, at most ``budget`` pieces.
+
+    Raises:
+        CollisionGeometryError: the mesh cannot be read.
+    """
+    tris = []
+    for c in link.collisions:
+        if c.kind != "mesh" or str(c.filename) != source:
+            continue
+        try:
+            v, f, _ = mesh_io.read_mesh(mesh_path(c))
+        except mesh_io.MeshReadError as exc:
+            raise CollisionGeometryError(f"link {link.name!r}: {exc}") from exc
+        v = np.asarray(v, float) * c.scale @ c.origin[:3, :3].T + c.origin[:3, 3]
+        f = np.asarray(f, int)
+        f = f[np.all((f >= 0) & (f < len(v)), axis=1)]
+        t = v[f]
+        tris.append(t[np.all(np.isfinite(t), axis=(1, 2))])
+    if not tris:
+        return []
+    tri = np.concatenate(tris)
+    size = float(np.ptp(tri.reshape(-1, 3), axis=0).max())
+    spacing = size / SPLIT_RESOLUTION
+    best: list[Piece] = []
+    best_depth = np.inf
+    for parts in (facets(tri, 2 * spacing), [tri]):  # cut facet by facet, or the whole surface: the better
+        sets = []
+        for part in parts:
+            samples = surface_samples(part, spacing)
+            if len(samples) > MAX_SPLIT_SAMPLES:  # a fixed subsample: the same pieces on every run
+                samples = samples[np.random.default_rng(0).choice(len(samples), MAX_SPLIT_SAMPLES, replace=False)]
+            sets += split_surface(samples, keep_out, CONTAINMENT_TOLERANCE, budget, spacing)
+        out = []
+        for p in sets:
+            solid = solid_points(p)
+            if solid is None:
+                continue
+            try:
+                out.append(Piece.of(solid, (source,)))
+            except (QhullError, ValueError):
+                continue
+        out = merge_pieces(out, 1, keep_out, free_only=True)
+        depth = max((depth_inside(keep_out, p) for p in out), default=0.0)
+        if depth < best_depth - 1e-6 or (depth <= best_depth + 1e-6 and len(out) < len(best)):
+            best, best_depth = out, depth
+        if best_depth <= CONTAINMENT_TOLERANCE:
+            break
+    return best
+
+
+#: Surface sampling of a parent mesh cut around its child: samples at most
+#: 1/24 of the mesh's largest extent apart (4 mm on a 10 cm part), at most
+#: :data:`MAX_SPLIT_SAMPLES` of them (time grows with the samples).
+SPLIT_RESOLUTION = 24
+MAX_SPLIT_SAMPLES = 8000
+
+
+def _child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], poses: dict[str, np.ndarray], link: str) -> dict[str, np.ndarray]:
+    """Vertices of every child link's pieces in ``link``'s frame at ``poses``."""
+    inv = np.linalg.inv(poses[link])
+    out = {}
+    for j in model.children(link):
+        pts = [p.points for p in pieces.get(j.child, [])]
+        if not pts:
+            continue
+        T = inv @ poses[j.child]
+        out[j.child] = np.vstack(pts) @ T[:3, :3].T + T[:3, 3]
+    return out
+
+
+def containment_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:
+    """(parent, child) -> largest depth (m) of a child's collision vertex
+    inside one of the parent's pieces, at joint positions ``state`` (rad or m)."""
+    poses = model.link_poses(state)
+    out = {}
+    for parent in model.links:
+        for child, pts in _child_points(model, pieces, poses, parent).items():
+            out[(parent, child)] = max((depth_inside(pts, p) for p in pieces.get(parent, [])), default=0.0)
+    return out
+
+
+def _resolve_containment(model, pieces, state, mesh_path, notes, decompose: bool, limit: int, geometry_key: str = "") -> None:
+    """Cut the parent pieces that contain a child deeper than
+    :data:`CONTAINMENT_TOLERANCE` (:func:`_split_pieces`; kept only when the
+    child then sits less deep). Cuts are reused across states of the same
+    geometry (``geometry_key``) while they keep the child as far out."""
+    poses = model.link_poses(state)
+    for parent in list(pieces):
+        for child, pts in _child_points(model, pieces, poses, parent).items():
+            deep = [(d, p) for d, p in ((depth_inside(pts, p), p) for p in pieces[parent]) if d > CONTAINMENT_TOLERANCE]
+            if not deep:
+                continue
+            before = max(d for d, _ in deep)
+            if not decompose:
+                notes.append(f"link {child!r} sits {before * 1000:.3g} mm inside the collision hull of its parent {parent!r}")
+                continue
+            sources = sorted({s for _, p in deep for s in p.sources})
+            trial = [p for p in pieces[parent] if not set(p.sources) & set(sources)]
+            budget = max(2, limit - len(trial)) if len(sources) == 1 else max(2, (limit - len(trial)) // len(sources))
+            ckey = (geometry_key, parent, child, tuple(sources), budget)
+            cut = _CUT_CACHE.get(ckey)
+            after = np.inf
+            if cut is not None:  # the cut made for another state of the same geometry, if it holds here as well
+                after = max((depth_inside(pts, p) for p in trial + cut[0]), default=0.0)
+                if after <= max(CONTAINMENT_TOLERANCE, cut[1]) + 1e-6:
+                    trial += cut[0]
+                else:
+                    cut = None
+            if cut is None:
+                made: list[Piece] = []
+                for s in sources:
+                    # guided by an even subsample of the child's vertices, judged on all of them
+                    made += _split_pieces(model.links[parent], s, mesh_path, pts[:: max(1, len(pts) // PROBE_POINTS)], budget)
+                trial += made
+                after = max((depth_inside(pts, p) for p in trial), default=0.0)
+                if len(_CUT_CACHE) >= 64:
+                    _CUT_CACHE.pop(next(iter(_CUT_CACHE)))
+                _CUT_CACHE[ckey] = (made, after)
+            if after < before - 1e-6:
+                pieces[parent] = trial
+                notes.append(
+                    f"link {parent!r}: {', '.join(sources)} cut into convex pieces around {child!r}: "
+                    f"{before * 1000:.3g} -> {after * 1000:.3g} mm inside"
+                )
+            else:
+                notes.append(f"link {child!r} sits {before * 1000:.3g} mm inside its parent {parent!r}; cutting did not help")
+
+
+def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
+                limit: int = MAX_PIECES_PER_LINK, decompose: bool = True) -> tuple[dict[str, list[Piece]], list[str]]:
+    """The convex pieces of every link's mesh collisions (link frame, m).
+
+    Args:
+        model: a URDF model (scale baked in).
+        mesh_path: ``UrdfGeometry -> Path`` of a collision mesh's file.
+        state: joint -> rad or m, the initial state (for the containment of
+            children and the merge's guard), missing joints at 0.
+        limit: most pieces per link.
+        decompose: decompose a parent piece that contains its child
+            (:func:`split_surface`; else only a note).
+
+    Returns:
+        (link -> pieces, notes).
+
+    Raises:
+        CollisionGeometryError: a collision mesh cannot be read.
+    """
+    state = state or {}
+    key = _cache_key(model, mesh_path, state, limit, decompose)
+    hit = _PIECE_CACHE.get(key)
+    if hit is not None:
+        return {k: list(v) for k, v in hit[0].items()}, list(hit[1])
+    notes: list[str] = []
+    pieces: dict[str, list[Piece]] = {}
+    for name, link in model.links.items():
+        pieces[name], _ = _group_pieces(link, mesh_path, notes)
+    _resolve_containment(model, pieces, state, mesh_path, notes, decompose, limit, _cache_key(model, mesh_path, {}, limit, decompose))
+    poses = model.link_poses(state)
+    for name in model.links:
+        if len(pieces[name]) <= limit:
+            continue
+        inv = np.linalg.inv(poses[name])
+        others = [p.points @ (inv @ poses[o])[:3, :3].T + (inv @ poses[o])[:3, 3] for o in model.links if o != name for p in pieces[o]]
+        n = len(pieces[name])
+        pieces[name] = merge_pieces(pieces[name], limit, np.vstack(others) if others else None)
+        notes.append(f"link {name!r}: {n} convex pieces merged into {len(pieces[name])}")
+    if len(_PIECE_CACHE) >= 16:
+        _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
+    _PIECE_CACHE[key] = ({k: list(v) for k, v in pieces.items()}, list(notes))
+    return pieces, notes
+
+
+#: Cuts of a parent around a child made in this process: (geometry key,
+#: parent, child, sources, budget) -> (pieces, depth reached).
+_CUT_CACHE: dict[tuple, tuple[list[Piece], float]] = {}
+
+#: Pieces made in this process, by :func:`_cache_key` (a refine run writes the
+#: same URDF several times: state search, post-check, escalation rounds).
+_PIECE_CACHE: dict[str, tuple[dict[str, list[Piece]], list[str]]] = {}
+
+
+def _cache_key(model: urdf.UrdfModel, mesh_path, state: dict[str, float], limit: int, decompose: bool) -> str:
+    """Digest of everything :func:`link_pieces` reads: every collision
+    (file identity, origin, scale, primitive sizes), every joint's frame,
+    axis and type, the state, the limit and the decomposition switch."""
+    h = hashlib.sha256(repr((limit, decompose, sorted((k, round(float(v), 12)) for k, v in state.items()))).encode())
+    for name, link in model.links.items():
+        h.update(name.encode())
+        for c in link.collisions:
+            h.update(repr((c.kind, c.filename, c.size, c.radius, c.length)).encode())
+            h.update(np.asarray(c.origin, float).tobytes() + c.scale.tobytes())
+            if c.kind == "mesh":
+                path = Path(mesh_path(c))
+                try:
+                    st = path.stat()
+                    h.update(repr((str(path.resolve()), st.st_mtime_ns, st.st_size)).encode())
+                except OSError:
+                    h.update(str(path).encode())
+    for j in model.joints:
+        h.update(repr((j.name, j.type, j.parent, j.child)).encode() + np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+    return h.hexdigest()
+
+
+def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
+                      mesh_base: Path | None = None, *, decompose: bool = True) -> list[str]:
+    """Replace the mesh collisions of every link of ``model`` (in place) by
+    the convex pieces of :func:`link_pieces`, written as OBJ files
+    ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; named by
+    their content, so an unchanged piece is not rewritten). Primitive
+    collisions (box, sphere, cylinder) stay.
+
+    Args:
+        out_dir: the output folder.
+        folder: folder (relative to ``out_dir``) of the pieces.
+        state: the initial state (joint -> rad or m).
+        mesh_base: folder that relative collision filenames without a
+            resolved ``path`` are relative to (default ``out_dir``).
+
+    Returns:
+        notes (what changed).
+
+    Raises:
+        CollisionGeometryError: a collision mesh cannot be read.
+    """
+    out_dir = Path(out_dir)
+    base = Path(mesh_base) if mesh_base is not None else out_dir
+
+    def mesh_path(g: urdf.UrdfGeometry) -> Path:
+        return Path(g.path) if g.path is not None else base / str(g.filename)
+
+    pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose)
+    for name, link in model.links.items():
+        if not any(c.kind == "mesh" for c in link.collisions):
+            continue
+        kept = [c for c in link.collisions if c.kind != "mesh"]
+        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
+        for i, p in enumerate(pieces[name]):
+            data = piece_obj(p)
+            rel = f"{folder}/{safe}_hull{i}_{hashlib.sha256(data).hexdigest()[:12]}.obj"
+            dst = out_dir / rel
+            if not (dst.is_file() and not dst.is_symlink() and dst.read_bytes() == data):
+                atomic.write_bytes(dst, data)
+            else:
+                atomic.announce([dst])
+            kept.append(urdf.UrdfGeometry(kind="mesh", filename=rel, path=dst))
+        link.collisions = kept
+    return notes
+
+
+def referenced_files(urdf_path: Path) -> set[str]:
+    """Filenames (as written) of the collision meshes a written URDF
+    references ({} when there is no file), so a clean-up of the collision
+    folder keeps them.
+
+    Raises:
+        UrdfError: the URDF cannot be read.
+    """
+    urdf_path = Path(urdf_path)
+    if not urdf_path.is_file():
+        return set()
+    model = urdf.read_urdf(urdf_path, mode="lenient")
+    return {str(c.filename) for link in model.links.values() for c in link.collisions if c.kind == "mesh" and c.filename}

@@ -1,0 +1,95 @@
+"""Fixtures are mounted: a tall, thin faucet tips over when free-standing and
+passes every check with its root fixed as the asset declares (issue 16)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.check import postcheck
+from asset2sim.tasks.evaluation import eval_context
+from asset2sim.tasks.evaluation.engine_run import run_engine
+from asset2sim.tasks.publish import write
+from asset2sim.tasks.refine import refine_asset
+from tests.tasks.check.failure_assets import build_tall_faucet
+
+
+@pytest.fixture(scope="module")
+def faucet(tmp_path_factory):
+    return build_tall_faucet(tmp_path_factory.mktemp("faucet") / "tall_faucet")
+
+
+@pytest.fixture(scope="module")
+def mounted(faucet, tmp_path_factory):
+    return refine_asset(faucet, "A faucet.", tmp_path_factory.mktemp("m") / "out", extras=True)
+
+
+def test_mounted_fixture_passes_every_check_with_a_fixed_root(mounted):
+    r = mounted.report
+    assert r.failure_mode == "none"
+    assert r.mounting is not None and r.mounting.fixed and r.mounting.kind == "counter-mounted"
+    for m in r.metrics:
+        assert m.details.get("root") == "fixed (mounted)", m.name
+    assert any(n.startswith("root: mounted (counter-mounted)") for n in r.notes)
+
+
+def test_mounted_output_declares_the_root(mounted):
+    out = mounted.out_dir
+    state = json.loads((out / "initial_state.json").read_text())
+    assert state["root"]["fixed"] is True and state["root"]["mounting"] == "counter-mounted"
+    assert state["root"]["pose"] == {"xyz": [0.0, 0.0, 0.0], "quat_xyzw": [0.0, 0.0, 0.0, 1.0]}
+    assert "Mounted (counter-mounted)" in (out / "mobility.urdf").read_text()
+    assert write.read_root(out).fixed
+
+
+def test_mounted_mjcf_has_no_free_joint(mounted):
+    pytest.importorskip("mujoco")
+    xml = (mounted.out_dir / "mjcf" / "mobility.xml").read_text()
+    assert "freejoint" not in xml and 'type="free"' not in xml
+    assert "Mounted asset" in xml
+
+
+def test_evaluation_runs_with_the_root_as_declared(mounted):
+    ev = json.loads((mounted.out_dir / "evaluation.json").read_text())
+    assert any("root fixed" in n for n in ev.get("notes", [])), ev.get("notes")
+    ctx = eval_context.build_context(mounted.out_dir)
+    assert ctx.root_fixed
+    run = run_engine(ctx, "pybullet", probes=False)
+    assert run.error is None
+    assert float(abs(run.root_series).max()) == pytest.approx(0.0, abs=1e-9)  # held at the file's origin
+
+
+def test_the_same_fixture_tips_when_free_standing(faucet, tmp_path):
+    res = refine_asset(faucet, "A free-standing faucet.", tmp_path / "free", extras=False)
+    r = res.report
+    assert r.mounting is not None and not r.mounting.fixed
+    assert r.failure_mode == "unstable"
+    assert r.metric("settle_tilt").passed is False and r.metric("settle_tilt").details["root"] == "free (on the ground)"
+    assert json.loads((res.out_dir / "initial_state.json").read_text())["root"] == {
+        "fixed": False, "mounting": "free-standing", "pose": None, "source": "request: 'free-standing' -> free-standing"}
+
+
+def test_post_check_follows_the_overlay_root(mounted):
+    out = mounted.out_dir
+    ov = mounted.overlay
+    state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
+    fixed = postcheck.run_post_check(out / "mobility.urdf", state, ov, RefineConfig())
+    free = postcheck.run_post_check(out / "mobility.urdf", state, ov.model_copy(update={"mounting": None}), RefineConfig())
+    assert fixed.stable and fixed.recording.fixed_base
+    assert not free.stable and not free.recording.fixed_base
+    assert not fixed.recording.matches("pybullet", out / "mobility.urdf", state, fixed.recording.springs, RefineConfig().sim, False)
+
+
+def test_mjcf_check_refuses_a_free_joint_on_a_mounted_asset(faucet, tmp_path):
+    pytest.importorskip("mujoco")
+    from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
+
+    free = refine_asset(faucet, "A free-standing faucet.", tmp_path / "free", extras=False)
+    xml = export_mjcf(free.out_dir)
+    assert "freejoint" in xml.read_text() or 'type="free"' in xml.read_text()
+    state = json.loads((free.out_dir / "initial_state.json").read_text())["initial_joint_positions"]
+    check_mjcf(xml, free.out_dir / "mobility.urdf", state)  # free asset: fine
+    with pytest.raises(ExportError, match="free joint"):
+        check_mjcf(xml, free.out_dir / "mobility.urdf", state, fixed_base=True)

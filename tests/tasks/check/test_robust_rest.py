@@ -1,0 +1,110 @@
+"""Robust rest on generated assets built to pass and to fail it, in every installed engine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from asset2sim.engines.base import SessionOptions, available_engines, open_session
+from asset2sim.engines.fake import write_contract_asset
+from asset2sim.tasks.check.robust_rest import (
+    RobustRestConfig,
+    robust_rest_metric,
+    run_robust_rest,
+    tilt_pose,
+    world_vertices,
+)
+
+ENGINES = [e for e in ("pybullet", "physx", "mujoco") if e in available_engines()]
+
+
+def _box_obj(lo, hi) -> str:
+    v = [(x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    faces = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+    return "".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(
+        f"f {a} {b} {c}\nf {a} {c} {d}\n" for a, b, c, d in faces)
+
+
+def _pillar(folder: Path, width: float) -> Path:
+    """A 0.4 m pillar of square section ``width`` with a small flap hinged on
+    its side (friction 1 N*m holds it): at width 0.02 m it tips over past
+    atan(0.01 / 0.2) = 2.9 deg, so a 5 deg tilt topples it; at 0.3 m it is a
+    squat block that comes back."""
+    folder.mkdir(parents=True, exist_ok=True)
+    w = width / 2
+    (folder / "body.obj").write_text(_box_obj((-w, -w, 0.0), (w, w, 0.4)))
+    (folder / "flap.obj").write_text(_box_obj((0.0, -0.01, -0.02), (0.004, 0.01, 0.0)))
+    m, i = 1.0, 1.0 / 12 * (width ** 2 + 0.16)
+    (folder / "mobility.urdf").write_text(f"""<?xml version="1.0"?>
+<robot name="pillar">
+  <link name="base">
+    <inertial><origin xyz="0 0 0.2"/><mass value="{m}"/><inertia ixx="{i}" iyy="{i}" izz="{width ** 2 / 6}" ixy="0" ixz="0" iyz="0"/></inertial>
+    <visual><geometry><mesh filename="body.obj"/></geometry></visual>
+    <collision><geometry><mesh filename="body.obj"/></geometry></collision>
+  </link>
+  <link name="flap">
+    <inertial><origin xyz="0.002 0 -0.01"/><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0" iyz="0"/></inertial>
+    <visual><geometry><mesh filename="flap.obj"/></geometry></visual>
+    <collision><geometry><mesh filename="flap.obj"/></geometry></collision>
+  </link>
+  <joint name="flap_hinge" type="revolute">
+    <parent link="base"/><child link="flap"/><origin xyz="{w + 0.001} 0 0.35"/><axis xyz="0 1 0"/>
+    <limit lower="0" upper="1.5" effort="10" velocity="10"/><dynamics damping="0.01" friction="1.0"/>
+  </joint>
+</robot>
+""")
+    return folder / "mobility.urdf"
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_box_whose_lid_holds_passes(tmp_path, engine):
+    a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.0, lid_friction=2.0)
+    run = run_robust_rest(engine, a.urdf, {"lid_hinge": 0.4, "post_slide": 0.0})
+    m = robust_rest_metric(run)
+    assert m.passed, m.details["failures"]
+    assert [t.name for t in run.trials] == ["drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudge"]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_lid_held_without_margin_falls(tmp_path, engine):
+    """Lid friction 0.02 N*m against a gravity torque of about 0.2 N*m: the
+    lid falls shut and every trial fails on its joint."""
+    a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.0, lid_friction=0.02)
+    m = robust_rest_metric(run_robust_rest(engine, a.urdf, {"lid_hinge": 0.4, "post_slide": 0.0}))
+    assert m.passed is False
+    assert all("lid_hinge" in t["failing_joints"] for t in m.details["trials"].values())
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_slender_pillar_topples_when_tilted_a_squat_block_does_not(tmp_path, engine):
+    thin = robust_rest_metric(run_robust_rest(engine, _pillar(tmp_path / "thin", 0.02), {"flap_hinge": 0.0}))
+    assert thin.passed is False
+    assert any("toppled" in f for f in thin.details["failures"])
+    squat = robust_rest_metric(run_robust_rest(engine, _pillar(tmp_path / "squat", 0.3), {"flap_hinge": 0.0}))
+    assert squat.passed, squat.details["failures"]
+
+
+def test_tilt_pose_turns_about_the_footprint_and_touches_the_ground(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    s = open_session("pybullet", a.urdf, SessionOptions(initial_state=dict(a.initial_state)))
+    try:
+        pos, quat = tilt_pose(s, np.array([1.0, 0.0, 0.0]), np.radians(5))
+        s.set_root_pose(pos, quat)
+        pts = world_vertices(s)
+        assert pts[:, 2].min() == pytest.approx(0.0, abs=1e-6)
+    finally:
+        s.close()
+
+
+def test_a_fixed_root_is_not_put_down(tmp_path):
+    a = write_contract_asset(tmp_path)
+    m = robust_rest_metric(run_robust_rest("pybullet", a.urdf, {}, fixed_base=True))
+    assert m.passed is None and "root fixed" in m.details["skipped"]
+
+
+def test_the_fake_engine_skips_the_nudge(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    run = run_robust_rest("fake", a.urdf, dict(a.initial_state), config=RobustRestConfig(trials=("drop", "nudge")))
+    assert run.trials[0].passed is True and run.trials[1].passed is None

@@ -1,0 +1,71 @@
+"""Interaction-readiness under manipulation: the joint sweep and robust rest
+run in every engine through the protocol, and the terminal, report.json,
+report.html and the exit status give one verdict (tasks.check.verdict)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from asset2sim.cli import main
+from asset2sim.engines.base import available_engines
+from asset2sim.engines.fake import write_contract_asset
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+
+ENGINES = tuple(e for e in ("pybullet", "physx", "mujoco") if e in available_engines())
+
+
+def _badge(html: Path) -> str:
+    return re.findall(r"<span class='badge (?:pass|fail)'>([^<]*)<", html.read_text())[0]
+
+
+def test_manipulation_metrics_run_in_every_installed_engine(tmp_path):
+    # the lid held wide open (1.2 rad) by its friction, out of the post's way
+    a = write_contract_asset(tmp_path / "a", lid_angle=1.2, post_height=0.0, lid_friction=2.0)
+    ev = evaluate_asset(a.root, engines=ENGINES, probes=False)
+    for name in ("joint_sweep", "robust_rest"):
+        got = {m.engine: m for m in ev.metrics if m.name == name}
+        assert set(got) == set(ENGINES), name
+        assert all(m.passed for m in got.values()), {e: m.details.get("failures") for e, m in got.items()}
+    # every movable joint is swept, not only the task-relevant ones
+    assert set(ev.metric("joint_sweep", "pybullet").details["joints"]) == {"lid_hinge", "post_slide"}
+
+
+def test_a_lid_that_falls_fails_robust_rest_in_every_engine(tmp_path):
+    a = write_contract_asset(tmp_path / "a", lid_angle=0.4, post_height=0.0, lid_friction=0.02)
+    ev = evaluate_asset(a.root, engines=ENGINES, probes=False)
+    assert {m.engine for m in ev.metrics if m.name == "robust_rest" and m.passed is False} == set(ENGINES)
+    assert not ev.passed
+
+
+def test_demo_is_interaction_ready_on_every_tier_and_says_so_everywhere(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == 0
+    verdict = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("verdict")][0]
+    report = json.loads((out / "report.json").read_text())
+    assert report["failure_mode"] == "none"
+    assert report["readiness"] == {"rest": True, "penetration": True, "sweep": True, "robust_rest": True, "probes": True}
+    assert "interaction-ready" in verdict and "FAIL" not in verdict
+    assert _badge(out / "report.html").startswith("interaction-ready")
+
+
+def test_an_asset_written_but_not_ready_exits_3_and_every_output_agrees(tmp_path, capsys):
+    """A post raised into the lid's path: the lid cannot be driven shut
+    (joint sweep) although the object rests well."""
+    a = write_contract_asset(tmp_path / "src", lid_angle=0.4, post_height=0.03, lid_friction=0.02)
+    (a.root / "initial_state.json").unlink()
+    (a.root / "overlay.json").unlink()
+    out = tmp_path / "out"
+    assert main(["refine", str(a.root), "--prompt", "A box with its lid slightly open.", "--out", str(out)]) == 3
+    verdict = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("verdict")][0]
+    report = json.loads((out / "report.json").read_text())
+    ev = json.loads((out / "evaluation.json").read_text())
+    assert report["failure_mode"] == "blocked_joint"
+    assert report["readiness"]["sweep"] is False
+    assert f"FAILED: {report['failure_mode']}" in verdict and "sweep FAIL" in verdict
+    badge = _badge(out / "report.html")
+    assert badge.startswith("NOT READY") and "joint_sweep@pybullet" in badge
+    assert "joint_sweep@pybullet" in ev["failures"]

@@ -1,0 +1,93 @@
+"""The request corpus (``tests/data/request_corpus.yaml``, >= 200 requests over
+the dev objects, the demo assets and a generated toaster), each with its
+expected parse and, for many, the expected outcome of refining.
+
+- The parse of every entry runs in the normal test run (pure parser, well
+  under a second) and at least 95 % must match; the misses are printed.
+- Outcomes: the entries over the demo assets and the generated toaster with a
+  fast subset (:data:`FAST_OUTCOMES`) in the normal run, every entry with an
+  outcome under ``-m slow`` (dev objects included; also
+  ``benchmarks/bench_request.py --outcomes``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import needs_shared
+from tests.tasks.interpret.request_corpus import load_corpus, parse_misses, run_outcome
+
+ENTRIES = load_corpus()
+WITH_OUTCOME = [e for e in ENTRIES if "outcome" in e]
+#: Outcome entries checked in the normal run: one per kind of check, on the
+#: demo assets and the generated toaster (a few seconds each).
+FAST_OUTCOMES = [
+    "A two-slot toaster with its lever up and a spring-loaded lever.",
+    "A toaster with its lever down.",
+    "A microwave with the door at 30 degrees.",
+    "A cabinet with the top drawer open 8 cm.",
+    "A cabinet with the top drawer open and the others closed.",
+    "A box 30 cm tall.",
+    "A microwave with a metal door on a plastic body.",
+    "A trash can of 3 kg.",
+    "A microwave with the door at 150 degrees.",
+    "A box with damping 0.05 N m s/rad.",
+]
+
+
+def test_corpus_is_large_and_covers_every_kind_of_request():
+    assert len(ENTRIES) >= 200
+    kinds = {k for e in ENTRIES for k in (e.get("parse") or {})}
+    assert {"states", "size", "sizes", "props", "mass_level", "damping", "flags", "dyn", "warnings", "ignored"} <= kinds
+    objects = {e["object"] for e in ENTRIES}
+    assert sum(o.startswith("demo:") for o in objects) == 5 and "gen:toaster" in objects
+    assert sum(not o.startswith(("demo:", "gen:")) for o in objects) >= 20
+    assert len(WITH_OUTCOME) >= 60
+
+
+def test_corpus_parses_match_at_least_95_percent():
+    misses = parse_misses(ENTRIES)
+    rate = 1.0 - len(misses) / len(ENTRIES)
+    print(f"request corpus: {len(ENTRIES) - len(misses)}/{len(ENTRIES)} parses match ({rate:.1%})")
+    for m in misses:
+        print("MISS", m)
+    assert rate >= 0.95, "\n".join(misses)
+
+
+def test_a_wrong_expectation_is_a_miss():
+    """The comparison can fail: a changed expected band is reported."""
+    entry = dict(ENTRIES[0])
+    entry["parse"] = {**entry["parse"], "states": ["door=fully"]}
+    assert parse_misses([entry]) and "states" in parse_misses([entry])[0]
+
+
+def _by_text(texts: list[str]) -> list[dict]:
+    out = [e for e in WITH_OUTCOME if e["text"] in texts and e["object"].startswith(("demo:", "gen:"))]
+    assert len(out) == len(texts)
+    return out
+
+
+@pytest.mark.parametrize("entry", _by_text(FAST_OUTCOMES), ids=lambda e: e["id"])
+def test_corpus_outcome_fast_subset(entry: dict, tmp_path_factory) -> None:
+    scratch = tmp_path_factory.getbasetemp() / "request_corpus"
+    scratch.mkdir(exist_ok=True)
+    misses = run_outcome(entry, Path(scratch))
+    assert not misses, f"{entry['id']} {entry['text']!r}: {misses}"
+
+
+@pytest.mark.slow
+@needs_shared
+def test_corpus_outcomes_all_at_least_95_percent(tmp_path_factory) -> None:
+    scratch = tmp_path_factory.mktemp("request_corpus_all")
+    missed = []
+    for e in WITH_OUTCOME:
+        m = run_outcome(e, scratch)
+        if m:
+            missed.append(f"{e['id']} {e['object']} {e['text']!r}: {m}")
+    rate = 1.0 - len(missed) / len(WITH_OUTCOME)
+    print(f"request corpus outcomes: {len(WITH_OUTCOME) - len(missed)}/{len(WITH_OUTCOME)} ({rate:.1%})")
+    for m in missed:
+        print("MISS", m)
+    assert rate >= 0.95, "\n".join(missed)

@@ -1,0 +1,100 @@
+"""Stability by design (tasks.state.stability): a laptop whose open screen
+tips it is balanced by its part masses within the sourced ratio; nothing
+changes for an object that already balances or is mounted."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.overlay import RootMount
+from asset2sim.tasks.check import postcheck
+from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.publish import write
+from asset2sim.tasks.refine import refine_asset
+from asset2sim.tasks.state import stability
+from tests.tasks.check.failure_assets import build_tipping_laptop
+
+
+@pytest.fixture(scope="module")
+def laptop(tmp_path_factory):
+    return build_tipping_laptop(tmp_path_factory.mktemp("lap") / "tipping_laptop")
+
+
+@pytest.fixture(scope="module")
+def fully_open(laptop, tmp_path_factory):
+    return refine_asset(laptop, "A laptop, fully open.", tmp_path_factory.mktemp("o") / "out", extras=False)
+
+
+def test_open_screen_tips_the_laptop_as_estimated(laptop, fully_open, tmp_path):
+    """The failure mode: with the estimator's (volume) masses the open screen
+    puts the centre of mass behind the support, and the rest test tips it."""
+    out = fully_open.out_dir
+    r = fully_open.report
+    assert r.opening_fractions["joint_0"] > 0.85
+    change = r.design_changes[0]
+    assert "stability by design" in change and "sourced range 25%-40%" in change
+    estimated = json.loads((out / "overlay.json").read_text())
+    # undo the design change: the estimator's masses (recorded in each link's source)
+    ov = fully_open.overlay
+    undone = ov.model_copy(deep=True)
+    for ln, lp in undone.links.items():
+        if "for stability by design" in lp.source:
+            f = float(lp.source.split("mass x")[-1].split(" ")[0])
+            undone.links[ln] = lp.model_copy(update={"mass": lp.mass / f})
+    asset, _ = extract.extract_asset_checked(laptop)
+    paths = write.write_output(asset, undone, tmp_path / "undone", r.initial_joint_positions)
+    bal = stability.measure_balance(paths.urdf, undone, r.initial_joint_positions)
+    assert bal.margin < 0, "the estimated masses should put the COM outside the support"
+    check = postcheck.run_post_check(paths.urdf, r.initial_joint_positions, undone, RefineConfig())
+    assert not check.stable
+    assert estimated["links"]["link_0"]["mass"] == pytest.approx(ov.links["link_0"].mass)
+
+
+def test_design_balances_within_the_sourced_ratio(fully_open):
+    r, ov = fully_open.report, fully_open.overlay
+    assert r.failure_mode == "none"
+    total = ov.total_mass()
+    assert total == pytest.approx(r.total_mass)
+    screen = ov.links["link_0"].mass / total
+    assert 0.25 - 1e-9 <= screen <= 0.40 + 1e-9
+    assert ov.links["link_1"].mass > ov.links["link_0"].mass  # the base outweighs the screen
+    bal = stability.measure_balance(fully_open.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
+    assert bal.stable
+    assert r.initial_joint_positions == r.state.result  # the requested state is kept
+    assert any("stability by design" in n for n in r.notes)
+
+
+def test_closed_laptop_is_left_unchanged(laptop, tmp_path):
+    r = refine_asset(laptop, "A laptop, closed.", tmp_path / "c", extras=False).report
+    assert r.failure_mode == "none" and r.design_changes == []
+
+
+def test_mounted_asset_is_never_redesigned(fully_open):
+    ov = fully_open.overlay.model_copy(update={"mounting": RootMount(kind="wall-mounted", fixed=True, source="test")})
+    same, changes = stability.design_for_stability(fully_open.out_dir / "mobility.urdf", None, ov, fully_open.report.initial_joint_positions, "Laptop")
+    assert same is ov and changes == []
+
+
+def test_support_polygon_and_margin():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0.0005], [0.5, 0.5, 1.0]], float)
+    poly = stability.support_polygon(pts, 1e-3)
+    assert len(poly) == 4
+    assert stability._signed_margin(poly, np.array([0.5, 0.5])) == pytest.approx(0.5)
+    assert stability._signed_margin(poly, np.array([1.2, 0.5])) == pytest.approx(-0.2)
+
+
+def test_support_is_the_face_under_the_centre_of_mass():
+    """A body resting on its flat bottom with an open door whose lower edge
+    hangs 5 mm above the ground far to one side: the hull's bottom face that
+    joins both is nearly flat, but the object rests on the body's bottom."""
+    body = np.array([[x, y, z] for x in (0.0, 0.3) for y in (0.0, 0.3) for z in (0.0, 0.3)], float)
+    door = np.array([[x, y, z] for x in (-0.5, -0.49) for y in (0.0, 0.3) for z in (0.005, 0.3)], float)
+    pts = np.vstack([body, door])
+    poly = stability.support_polygon(pts, 1e-3, com=np.array([0.15, 0.15, 0.15]))
+    assert poly[:, 0].min() == pytest.approx(0.0) and len(poly) == 4
+    # without the COM: the largest nearly flat face, the one reaching the door
+    assert stability.support_polygon(pts, 1e-3)[:, 0].min() < -0.4
