@@ -1,10 +1,17 @@
 """The live progress of ``asset2sim flow`` (``make flow``) in the terminal:
 a per-asset progress bar with the counts of done / skipped / failed assets,
 elapsed time and an ETA (rich), or one line per asset when the output is
-not a terminal (a log, CI). Fed by :mod:`asset2sim.flow_progress` events."""
+not a terminal (a log, CI). Fed by :mod:`asset2sim.flow_progress` events.
+
+While the bar is drawn, console log handlers (Prefect's, Dask's through it)
+show warnings and errors only: their INFO lines (a task finished, a worker
+registered) would be written across the bar, and the bar says the same; the
+Prefect server and UI still receive every log line. They are restored when
+the bar stops."""
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from typing import Any
@@ -37,6 +44,7 @@ class FlowProgress:
         self.started = time.perf_counter()
         self._progress = None
         self._task = None
+        self._quieted: list[tuple[logging.Handler, int]] = []
 
     def __call__(self, ev: ProgressEvent) -> None:
         if ev.kind == "run_started":
@@ -89,11 +97,26 @@ class FlowProgress:
             console=Console(file=self.stream),
             transient=False,
         )
+        self._quiet_console_logs()
         self._progress.start()
-        self._task = self._progress.add_task(f"{ev.dataset} {ev.run}", total=max(1, ev.total), **self.counts)
+        self._task = self._progress.add_task(ev.dataset, total=max(1, ev.total), **self.counts)
+
+    def _quiet_console_logs(self) -> None:
+        """Raise every terminal log handler to WARNING (remembering its level)."""
+        loggers = [logging.getLogger()] + [lg for lg in logging.root.manager.loggerDict.values() if isinstance(lg, logging.Logger)]
+        for lg in loggers:
+            for h in lg.handlers:
+                stream = getattr(h, "stream", None) or getattr(getattr(h, "console", None), "file", None)
+                if stream in (sys.stderr, sys.stdout, sys.__stderr__, sys.__stdout__) or type(h).__name__ == "PrefectConsoleHandler":
+                    if h.level < logging.WARNING and all(h is not q for q, _ in self._quieted):
+                        self._quieted.append((h, h.level))
+                        h.setLevel(logging.WARNING)
 
     def close(self) -> None:
-        """Stop drawing the bar (idempotent)."""
+        """Stop drawing the bar and restore the log handlers (idempotent)."""
         if self._progress is not None:
             self._progress.stop()
             self._progress = None
+        for h, level in self._quieted:
+            h.setLevel(level)
+        self._quieted = []

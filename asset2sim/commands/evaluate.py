@@ -36,6 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, help="where to write evaluation.json and report.html (default: the asset folder)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--no-probes", action="store_true", help="skip the passive probes")
+    p.add_argument("--task", default=None,
+                   help='the manipulation task, e.g. "close the microwave door": the probes try only its part and direction')
     p.add_argument("--seed", type=int, default=0)
 
 
@@ -62,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
                 out_dir=out,
                 write_report=not args.no_report,
                 probes=not args.no_probes,
+                task=getattr(args, "task", None),
             )
     except output_folder.OutputError as exc:
         raise output_failure(exc, out) from exc

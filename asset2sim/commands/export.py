@@ -1,4 +1,10 @@
-"""``asset2sim export OUT --format mjcf``: derive simulator files from an output folder.
+"""``asset2sim export OUT --format mjcf|usd``: derive simulator files from an output folder.
+
+``--format usd`` writes ``OUT/usd/mobility.usd`` (OpenUSD with UsdPhysics, for
+Isaac Sim / Isaac Lab and Newton; :mod:`asset2sim.tasks.publish.export_usd`),
+reads it back and compares every link's mass, COM and inertia and every
+joint's limits, damping, friction, stiffness and initial position with the
+folder's files (needs ``usd-core``).
 
 Writes ``OUT/mjcf/mobility.xml`` (and ``OUT/mjcf/meshes/``) from
 ``OUT/mobility.urdf``, ``overlay.json`` and ``initial_state.json``, loads the
@@ -32,13 +38,14 @@ from asset2sim.engines.mjcf import MjcfError
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 from asset2sim.tasks.publish import output_folder
 from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
+from asset2sim.tasks.publish.export_usd import UsdExportError, check_usd, export_usd
 from asset2sim.tasks.publish.write import read_root
 from asset2sim.urdf import UrdfError
 
 NAME = "export"
-HELP = "Export an output folder for other simulators (MJCF for MuJoCo), optionally checking parity across engines."
+HELP = "Export an output folder for other simulators (MJCF for MuJoCo, USD for Isaac Sim and Newton), optionally checking parity across engines."
 
-FORMATS = ("mjcf",)
+FORMATS = ("mjcf", "usd")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -66,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
     parity = parse_engines(args.parity, "--parity") if args.parity else []
     if not (out / "mobility.urdf").is_file():
         raise CommandError(INVALID_REQUEST, "NOT_AN_OUTPUT_FOLDER", out, "has no mobility.urdf (not an output folder)")
+    if args.format == "usd":
+        return _run_usd(args, out)
     if "mujoco" not in available_engines():
         raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None,
                            "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
@@ -111,3 +120,30 @@ def run(args: argparse.Namespace) -> int:
             if r["rest_stability"] is False or r["oscillation"] is False:
                 status = 1
     return status
+
+
+def _run_usd(args: argparse.Namespace, out: Path) -> int:
+    """``--format usd``: write ``OUT/usd/mobility.usd``, read it back and print the check."""
+    try:
+        with output_folder.adopting(out):
+            build = export_usd(out, visuals=not args.no_visuals, check=False)
+        check = check_usd(build.path, out)
+    except ImportError as exc:
+        raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None, f"{exc}") from exc
+    except output_folder.OutputError as exc:
+        raise output_failure(exc, out) from exc
+    except UrdfError as exc:
+        raise CommandError(INVALID_REQUEST, exc.code, out, f"cannot export: {exc}") from exc
+    except (FileNotFoundError, ValueError) as exc:
+        raise CommandError(INVALID_REQUEST, "EXPORT_INPUT_INVALID", getattr(exc, "filename", None) or out, f"cannot export: {exc}") from exc
+    except OSError as exc:
+        raise os_failure(exc, out / "usd", out, INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE") from exc
+    except UsdExportError as exc:
+        raise CommandError(INVALID_INPUT, "EXPORT_CHECK_FAILED", out, str(exc)) from exc
+    print(f"wrote       {build.path}")
+    print(f"read back   {check.links} links, {check.joints} movable joints; largest relative difference "
+          f"{check.max_rel_error:.1e} (binary32 attributes)")
+    print(f"root        {'fixed (root_joint to the world)' if build.fixed_root else 'free'}")
+    for note in build.notes[:5]:
+        print(f"note        {note}")
+    return 0

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -67,10 +68,15 @@ def run(args: argparse.Namespace) -> int:
     prepare_prefect_environment(cat.project_root)  # before Prefect is imported
     if args.serve:
         return _serve(args, cat)
+    live = not getattr(args, "no_progress", False) and sys.stdout.isatty()
+    if live:
+        # the bar replaces Prefect's INFO lines in the terminal (this process and the
+        # Dask workers it starts, which inherit the environment); the Prefect UI keeps them
+        os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "WARNING")
     from asset2sim.flows.refine_flow import run_refine_flow  # imports Prefect: after its environment is set
 
     ids = [i.strip() for i in args.ids.split(",") if i.strip()] if args.ids else None
-    progress = FlowProgress()
+    progress = FlowProgress(live=live)
     try:
         with contextlib.ExitStack() as stack:
             if not getattr(args, "no_progress", False):

@@ -135,6 +135,12 @@ class ProbeResult:
         return d
 
 
+#: A push point closer to the axis than this fraction of the link's largest
+#: radial extent is moved to the far corner of the link's box (a push 3 mm
+#: from a faucet handle's stem cannot turn it with a finger's force).
+SHORT_LEVER_FRACTION = 0.1
+
+
 def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | None]:
     """Push point (3,) m, unit direction (3,) that increases q, lever (m) or None."""
     link = session.joint_child[joint]
@@ -148,11 +154,12 @@ def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float |
         return c, a, None
     r = (c - o) - np.dot(c - o, a) * a
     lever = float(np.linalg.norm(r))
-    if lever < 1e-4:
-        # The AABB centre lies on the axis (a symmetric knob): push at the far corner.
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        rr = (corners - o) - np.outer((corners - o) @ a, a)
-        k = int(np.argmax(np.linalg.norm(rr, axis=1)))
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    rr = (corners - o) - np.outer((corners - o) @ a, a)
+    k = int(np.argmax(np.linalg.norm(rr, axis=1)))
+    if lever < 1e-4 or lever < SHORT_LEVER_FRACTION * float(np.linalg.norm(rr[k])):
+        # The AABB centre lies on or near the axis (a knob, a faucet handle turning
+        # about its stem): push at the far corner, as a finger pushes a handle's end.
         c, r = corners[k], rr[k]
         lever = float(np.linalg.norm(r))
     t = np.cross(a, r)

@@ -37,9 +37,9 @@ T_test = 2 s, :func:`asset2sim.tasks.check.metrics.run_rest_test`). A trial
 
 The metric passes iff every trial passes. A trial the engine cannot perform
 (the fake engine has no root velocity; a fixed root cannot be moved) is
-recorded as skipped; with the root fixed as the asset declares, only the
-joints-held condition of a plain rest applies and the metric is skipped
-(``passed`` None): a mounted object is not put down.
+recorded as skipped; with the root fixed as the asset declares (a mounted
+fixture) the metric is skipped (``passed`` None): a mounted object is not
+put down (its joints' hold is the rest test's ``joint_hold``).
 """
 
 from __future__ import annotations

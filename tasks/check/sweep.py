@@ -19,13 +19,15 @@ anyone can re-derive it, see ``docs/metrics.md``):
   robot opening a drawer or lid at a moderate speed); first to the far end
   q_c + d R, then back to q_c.
 - Force limit (beyond the joint's own friction, which the engines add):
-  E = f_w m_sub g L + k R + c v_max, with m_sub the mass of the links the
-  joint moves (kg), L (m) the largest distance of their collision vertices
-  from the joint axis (revolute; L = 1 for prismatic, E in N), g = 9.81 m/s^2,
-  k, c the joint's spring stiffness and damping, f_w =
-  :attr:`SweepConfig.weight_factor`. So the drive can lift the moving part's
-  own weight f_w times over (the scale a hand or gripper applies) but cannot
-  push a link through a hull that blocks it.
+  E = f_w m_sub g L + k R, with m_sub the mass of the links the joint moves
+  (kg), L (m) the largest distance of their collision vertices from the joint
+  axis (revolute; L = 1 for prismatic, E in N), g = 9.81 m/s^2, k the joint's
+  spring stiffness, f_w = :attr:`SweepConfig.weight_factor`. So the drive can
+  lift the moving part's own weight f_w times over (the scale a hand or
+  gripper applies) but cannot push a link through a hull that blocks it.
+  Viscous damping is not in the limit (the protocol does not expose it): a
+  well-damped joint moves slower than v_max, which the 3 s limit (3x the
+  nominal traverse) allows.
 - Each way, the drive runs until the opening fraction f = d (q - q_c) / R
   reaches >= 0.95 (out) or <= 0.05 (back), at most
   :attr:`SweepConfig.time_limit` s. The self-penetration (deepest self-contact
@@ -144,13 +146,11 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
     return best
 
 
-def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, v_max: float,
-                 cfg: SweepConfig) -> float:
-    """E = f_w m_sub g L + k R + c v_max (N*m or N; see the module docstring).
-
-    The spring stiffness comes from the session's options; the damping is not
-    in the protocol, so c v_max is covered by the weight term's margin and
-    the engines' own handling (PyBullet applies joint damping separately)."""
+def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
+    """E = f_w m_sub g L + k R (N*m or N; see the module docstring): the
+    masses the engine uses, L from the links' collision vertices (their AABB
+    corners where the engine keeps none), k from the session's springs,
+    ``open_range`` R (rad or m)."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
     lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
@@ -192,7 +192,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     prismatic = jtype == "prismatic"
     q_far = closed + direction * open_range
     v_max = open_range / cfg.traverse_time
-    limit = effort_limit(session, joint, links, open_range, v_max, cfg)
+    limit = effort_limit(session, joint, links, open_range, cfg)
     session.set_joint_positions({**initial_state, joint: closed})
     vdiv = DIVERGED_SPEED_PRISMATIC if prismatic else DIVERGED_SPEED_REVOLUTE
     max_pen, worst = _deepest(session)

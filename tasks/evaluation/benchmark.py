@@ -189,7 +189,7 @@ def run_benchmark(
                 # ev.seconds is measured before evaluation.json / report.html are written
                 ev = evaluate_asset(folder / "asset", reference=row.folder, prompt=row.prompt, engines=engines,
                                     seed=seed, category=row.category or None, method=method,
-                                    out_dir=folder, write_report=reports)
+                                    out_dir=folder, write_report=reports, task=row.task or None)
             except Exception as exc:
                 rec = dict(base, error=f"evaluation failed: {type(exc).__name__}: {exc}")
                 records.append(rec)

@@ -87,7 +87,8 @@ def point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
 
 def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
                closed_for: list[str] | None = None, rest_test: bool = True,
-               recording: RestRecording | None = None) -> EngineRun:
+               recording: RestRecording | None = None, probe_joints: list[str] | None = None,
+               probe_actions: tuple[str, ...] = ("close", "open")) -> EngineRun:
     """Open ``engine`` on the asset and take every raw measurement once:
     penetration at the initial state, extents, masses, the SPEC rest test with
     per-step root/ground recording, and (PyBullet) the probes from the initial
@@ -106,8 +107,10 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
     whether or not the rest test was reused: Bullet's ``restoreState`` puts
     back poses and velocities but not everything a rest test leaves behind
     (the probes measured after a rest test and a restore differed by up to
-    ~1e-3 relative from those measured without one). Errors are caught into
-    ``EngineRun.error``."""
+    ~1e-3 relative from those measured without one). ``probe_joints`` /
+    ``probe_actions``: what the probes try (a task,
+    :mod:`asset2sim.tasks.evaluation.task_spec`); default the task-relevant
+    joints, close and open. Errors are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()
     run = EngineRun(engine)
     try:
@@ -155,10 +158,10 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
             targets = {
                 n: (c.q_closed, c.direction, c.open_range)
                 for n, c in ctx.closed.items()
-                if n in ctx.task_joints and c.open_range > 0
+                if n in (ctx.task_joints if probe_joints is None else probe_joints) and c.open_range > 0
             }
             holds = bool(getattr(ctx.request, "holds_position", False))
-            run.probes = run_probes(session, targets, holds_position=holds)
+            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds)
     except Exception as exc:
         run.error = f"{type(exc).__name__}: {exc}"
     finally:

@@ -67,6 +67,7 @@ from asset2sim.tasks.evaluation.request_match import (
     requested_joints,
     scaled_mass_range,
 )
+from asset2sim.tasks.evaluation.task_spec import parse_task
 from asset2sim.tasks.publish.report_html import write_report
 
 __all__ = [
@@ -126,6 +127,7 @@ def evaluate_asset(
     views: dict[str, np.ndarray] | None = None,
     views_state: dict[str, float] | None = None,
     checks: list[MetricResult] | None = None,
+    task: str | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -179,6 +181,10 @@ def evaluate_asset(
             (:func:`asset2sim.tasks.check.verdict.readiness`). The evaluation
             measures everything else itself (its own closed ends: no method
             grades itself).
+        task: the manipulation task ("close the microwave door", a
+            manifest's ``task``): the probes try only its joints and
+            direction (:func:`asset2sim.tasks.evaluation.task_spec.parse_task`);
+            None: every task-relevant joint, close and open.
 
     Returns:
         The :class:`Evaluation`.
@@ -201,13 +207,18 @@ def evaluate_asset(
     if ctx.request is not None and any(js.selector == "all" for js in ctx.request.joint_states):
         need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
     need_closed = list(dict.fromkeys(need_closed + movable_joints(ctx)))  # the joint sweep drives every one
+    tspec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints) if task else None
+    if tspec is not None:
+        ctx.notes.append(f"task {task!r}: {', '.join(tspec.actions)} {', '.join(tspec.joints) or 'no joint'} ({tspec.rule})"
+                         + "".join(f"; {n}" for n in tspec.notes))
     runs: dict[str, EngineRun] = {}
     order = sorted(engines, key=lambda e: e != "pybullet")  # PyBullet first: it computes the closed ends
     reuse_engine = engines[0] if measured is not None else None
     for e in order:
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
         runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending,
-                             rest_test=e != reuse_engine, recording=recording)
+                             rest_test=e != reuse_engine, recording=recording,
+                             **({} if tspec is None else {"probe_joints": tspec.joints, "probe_actions": tspec.actions}))
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:

@@ -144,3 +144,21 @@ def test_the_live_bar_draws_counts(monkeypatch):
     view(ProgressEvent("run_finished", "d", RUN1, total=2))
     out = buf.getvalue()
     assert "2/2" in out and "done 1" in out and "failed 1" in out and "skipped 0" in out
+
+
+def test_the_live_bar_quiets_terminal_log_lines_and_restores_them():
+    import logging
+    import sys
+
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setLevel(logging.INFO)
+    lg = logging.getLogger("a2s.test.progress")
+    lg.addHandler(handler)
+    try:
+        view = FlowProgress(live=True, stream=io.StringIO())
+        view(ProgressEvent("run_started", "d", RUN1, total=1))
+        assert handler.level == logging.WARNING  # INFO lines would be written across the bar
+        view(ProgressEvent("run_finished", "d", RUN1, total=1))
+        assert handler.level == logging.INFO
+    finally:
+        lg.removeHandler(handler)

@@ -1,0 +1,108 @@
+"""A manipulation task ("close the microwave door", the manifest's ``task``
+column or ``--task``) as joints, a direction and a target opening fraction.
+
+Parsing (re-derivable; ``docs/metrics.md``):
+
+1. The leading verb gives the action (:data:`VERBS`): ``close`` (close, shut,
+   press, push down, lower: towards the closed end, target opening fraction
+   :data:`~asset2sim.tasks.check.probes.CLOSE_TARGET`), ``open`` (open, pull,
+   lift, raise: target :data:`~asset2sim.tasks.check.probes.OPEN_TARGET`);
+   any other verb (turn, move, rotate, swing ...) or none: ``both``
+   directions.
+2. The words after the verb name the part with the request machinery
+   (:func:`asset2sim.tasks.interpret.request.parse_request` on "<words>
+   closed", so part words, category names and their synonyms are read exactly
+   as in a request): a part label ("door", "lid", "drawer", "handle") selects
+   the movable joints whose child link carries that semantic label
+   (:func:`asset2sim.tasks.evaluation.request_match.labelled_joints`); a
+   whole-object phrase ("the stapler", "the laptop") selects every
+   task-relevant joint.
+3. Nothing matched (an unknown part, no semantics): every task-relevant joint,
+   both directions (the fallback is recorded in ``rule``).
+
+Ordinals ("the top drawer") are read but not used to pick one of several
+labelled joints: without the joints' heights every drawer is tried.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
+from asset2sim.tasks.evaluation.asset_files import JointInfo
+from asset2sim.tasks.evaluation.request_match import labelled_joints, parse_prompt
+
+#: Leading verbs -> action ("close" / "open"); any other verb: both directions.
+VERBS: dict[str, str] = {
+    "close": "close", "shut": "close", "press": "close", "push down": "close", "lower": "close", "fold": "close",
+    "open": "open", "pull": "open", "pull out": "open", "lift": "open", "raise": "open", "unfold": "open",
+}
+
+
+@dataclass
+class TaskSpec:
+    """A parsed task. ``actions``: the probe actions (``close``, ``open`` or
+    both); ``targets``: action -> target opening fraction (0 closed, 1 fully
+    open); ``joints``: the movable joints it acts on; ``rule``: how they were
+    found."""
+
+    text: str
+    actions: tuple[str, ...]
+    targets: dict[str, float]
+    joints: list[str]
+    part: str | None = None
+    rule: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+def _verb(low: str) -> tuple[str | None, str]:
+    """(action or None, the words after the verb)."""
+    for verb in sorted(VERBS, key=len, reverse=True):
+        m = re.match(rf"\s*{re.escape(verb)}\b(.*)$", low)
+        if m:
+            return VERBS[verb], m.group(1).strip()
+    m = re.match(r"\s*(\w+)\b(.*)$", low)
+    return None, (m.group(2).strip() if m else low)
+
+
+def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
+               category: str | None, task_joints: list[str]) -> TaskSpec:
+    """The :class:`TaskSpec` of ``text`` for an asset (see the module docstring).
+
+    Args:
+        text: the task, e.g. "close the microwave door".
+        joints: the asset's joints (:func:`asset2sim.tasks.evaluation.asset_files.parse_urdf`).
+        semantics: link -> (joint kind, label) (``semantics.txt``).
+        category: the asset's category (label synonyms are per category).
+        task_joints: the task-relevant joints (the fallback).
+
+    Returns:
+        The task spec; never raises on unknown words (fallback, see ``rule``).
+    """
+    low = " ".join(str(text or "").lower().split())
+    action, rest = _verb(low)
+    actions = (action,) if action else ("close", "open")
+    targets = {a: (CLOSE_TARGET if a == "close" else OPEN_TARGET) for a in actions}
+    spec, err = parse_prompt(f"{rest} closed") if rest else (None, None)
+    notes = [f"task words not parsed: {err}"] if err else []
+    if action is None:
+        notes.append(f"verb of {text!r} has no direction: both directions")
+    part = None
+    found: list[str] = []
+    if spec is not None:
+        labels = [js.label for js in spec.joint_states if js.selector == "label" and js.label]
+        part = labels[0] if labels else None
+        found = list(dict.fromkeys(labelled_joints(spec, joints, semantics, category)))
+        if any(js.ordinal is not None for js in spec.joint_states):
+            notes.append("ordinal read but not used: every joint with the label is tried")
+        if spec.ignored:
+            notes.append("task words not understood: " + "; ".join(spec.ignored))
+        if not labels and not spec.ignored and any(js.selector == "all" for js in spec.joint_states):
+            return TaskSpec(text, actions, targets, list(task_joints), None, "whole object: every task-relevant joint", notes)
+    if found:
+        return TaskSpec(text, actions, targets, found, part, f"part label {part!r} in semantics.txt", notes)
+    rule = "fallback: every task-relevant joint" + ("" if action else ", both directions")
+    if part:
+        notes.append(f"no movable joint's link is labelled {part!r}")
+    return TaskSpec(text, actions, targets, list(task_joints), part, rule, notes)

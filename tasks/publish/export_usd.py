@@ -1,0 +1,613 @@
+"""Export an output folder to OpenUSD with UsdPhysics (Isaac Sim / Isaac Lab,
+Newton, any UsdPhysics reader).
+
+``mobility.urdf`` stays the source of truth; the USD is derived from it, from
+``overlay.json`` (springs: stiffness and reference, which URDF cannot hold)
+and ``initial_state.json`` (joint positions, the root's mounting). Layout,
+inside the output folder::
+
+    usd/mobility.usd     one self-contained binary (crate) layer: every mesh
+                         is a UsdGeom.Mesh prim inside it, no external files
+
+What is written (``/<robot>`` is the default prim):
+
+- ``/<robot>``: ``UsdGeom.Xform`` with ``UsdPhysics.ArticulationRootAPI``;
+  stage metadata ``metersPerUnit = 1``, ``kilogramsPerUnit = 1``,
+  ``upAxis = Z``; no physics scene (the user's scene gives gravity and the
+  time step).
+- ``/<robot>/<link>`` per URDF link, flat (as Isaac Sim's URDF importer lays
+  them out), posed at the initial state (root link at the world origin):
+  ``UsdPhysics.RigidBodyAPI`` and ``UsdPhysics.MassAPI`` with
+  ``physics:mass`` (kg), ``physics:centerOfMass`` (m, link frame),
+  ``physics:diagonalInertia`` (kg*m^2, the eigenvalues of the URDF inertia
+  tensor about the COM) and ``physics:principalAxes`` (the rotation whose
+  columns are the eigenvectors, a proper rotation: det = +1). A link without
+  ``<inertial>`` gets mass 0 and no inertia (UsdPhysics: "computed from the
+  colliders"), and the check says so.
+- ``.../<link>/visuals/*``: the visual meshes as ``UsdGeom.Mesh`` (points in
+  the link frame, the URDF's origin and mesh scale applied; colour from the
+  URDF material's rgba); no textures.
+- ``.../<link>/collisions/*``: the convex pieces every engine of asset2sim
+  collides with (:func:`asset2sim.engines.loading.collision_pieces`: refine's
+  outputs already hold closed, outward, >= 2 mm thick pieces, see
+  ``tasks/publish/collision_geometry.py``), each a ``UsdGeom.Mesh`` of its
+  convex hull with ``CollisionAPI`` and ``MeshCollisionAPI``
+  ``physics:approximation = "convexHull"`` and purpose ``guide``; box, sphere
+  and cylinder collisions as ``Cube`` / ``Sphere`` / ``Cylinder``.
+- ``/<robot>/joints/<joint>``: ``UsdPhysics.RevoluteJoint`` /
+  ``PrismaticJoint`` / ``FixedJoint`` (continuous: revolute without limits),
+  ``physics:axis = "X"`` with the joint frames rotated so that X is the URDF
+  axis; limits in the units UsdPhysics prescribes: **degrees** for revolute,
+  metres for prismatic.
+- Passive dynamics (the units conversions Isaac Sim's URDF importer gets
+  wrong or drops, IsaacSim issues #841, #842):
+
+  ======================  ==========================================================
+  URDF / overlay (SI)     USD
+  ======================  ==========================================================
+  damping c (N*m*s/rad)   ``drive:angular:physics:damping`` = c * pi/180 (per degree/s),
+                          ``targetVelocity`` 0: a viscous drive (PhysX's way)
+  damping c (N*s/m)       ``drive:linear:physics:damping`` = c
+  stiffness k (N*m/rad)   ``drive:angular:physics:stiffness`` = k * pi/180 (per degree),
+                          ``targetPosition`` = spring reference in degrees
+  friction f (N*m or N)   ``newton:friction`` (NewtonJointAPI, SI; what Newton's USD
+                          importer reads) and ``asset2sim:friction``; PhysX's
+                          ``physxJoint:jointFriction`` is a coefficient on the joint's
+                          constraint force, not a torque, so it is not authored
+  ======================  ==========================================================
+
+  The drive is ``type = "force"`` with no force limit; a joint without
+  damping and spring gets no drive. Every joint also carries the SI values
+  as ``asset2sim:damping``, ``asset2sim:friction``, ``asset2sim:stiffness``,
+  ``asset2sim:springReference`` for readers that want them.
+- Initial state: ``PhysicsJointStateAPI:angular`` / ``:linear``
+  (``state:angular:physics:position`` in degrees, velocity 0; PhysX /
+  Isaac), the same value as ``newton:angular:position`` /
+  ``newton:linear:position`` (what Newton's importer reads by default), and
+  the link poses themselves.
+- Mounting (``initial_state.json`` ``"root"``): a fixed asset gets a
+  ``FixedJoint`` ``/<robot>/joints/root_joint`` from the world
+  (``physics:body0`` empty) to the root link; a free one none.
+
+USD stores these attributes as 32-bit floats (``float``, ``float3``,
+``quatf``): :func:`check_usd` compares with relative tolerance
+:data:`FLOAT_RTOL`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import atomic
+from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_initial_state, read_urdf
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
+from asset2sim.mesh_io import MeshReadError, read_mesh
+from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
+from asset2sim.tasks.publish.write import read_root
+from asset2sim.urdf import UrdfJoint, UrdfModel
+
+USD_DIR = "usd"
+URDF_NAME = "mobility.urdf"
+#: Relative tolerance of a value read back from the USD: attributes are 32-bit
+#: floats (IEEE 754 binary32, 24-bit significand: 6e-8 relative rounding), and
+#: degree conversions add one more rounding.
+FLOAT_RTOL = 1e-6
+#: Absolute floor for quantities that may be 0 (COM components, off-diagonal
+#: inertia): 1e-6 of the largest value of the same quantity.
+DEG = 180.0 / math.pi
+
+
+class UsdExportError(RuntimeError):
+    """The USD export failed or did not check out (names the folder, link or joint)."""
+
+
+# --------------------------------------------------------------------- helpers
+def _pxr():
+    """Import pxr lazily (``usd-core``, an optional extra)."""
+    try:
+        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics  # noqa: F401
+    except ImportError as exc:
+        raise ImportError(f"OpenUSD is not installed ({exc}); install the extra: pip install 'asset2sim[usd]'") from exc
+    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
+
+    return Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
+
+
+def principal_axes(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal moments (3,) kg*m^2 and axes (3, 3) (columns, a proper
+    rotation, det = +1) of a symmetric inertia tensor (3, 3):
+    ``tensor = axes @ diag(moments) @ axes.T`` (numpy ``eigh``)."""
+    t = 0.5 * (np.asarray(tensor, float) + np.asarray(tensor, float).T)
+    w, v = np.linalg.eigh(t)
+    if np.linalg.det(v) < 0:
+        v[:, 2] = -v[:, 2]
+    return w, v
+
+
+def _axis_frame(axis: np.ndarray) -> np.ndarray:
+    """A rotation (3, 3) whose first column is the unit ``axis`` (3,)."""
+    x = np.asarray(axis, float) / np.linalg.norm(axis)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    y = np.cross(helper, x)
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    return np.column_stack([x, y, z])
+
+
+def _hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (k, 3) and outward-wound triangles (m, 3) of the convex hull
+    of ``points`` (n, 3) (scipy's Qhull)."""
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(np.asarray(points, float))
+    used = np.unique(hull.simplices)
+    remap = {int(v): i for i, v in enumerate(used)}
+    verts = hull.points[used]
+    tris = []
+    for simplex, eq in zip(hull.simplices, hull.equations):
+        a, b, c = (hull.points[i] for i in simplex)
+        tri = [remap[int(i)] for i in simplex]
+        if np.dot(np.cross(b - a, c - a), eq[:3]) < 0:
+            tri = [tri[0], tri[2], tri[1]]
+        tris.append(tri)
+    return verts, np.asarray(tris, int)
+
+
+def _transform(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    return np.asarray(points, float) @ pose[:3, :3].T + pose[:3, 3]
+
+
+def _names(names: list[str], make_valid) -> dict[str, str]:
+    """URDF name -> a unique valid USD prim name."""
+    out, used = {}, set()
+    for n in names:
+        base = make_valid(n) or "_"
+        cand, k = base, 1
+        while cand in used:
+            cand, k = f"{base}_{k}", k + 1
+        used.add(cand)
+        out[n] = cand
+    return out
+
+
+# ---------------------------------------------------------------------- writing
+@dataclass
+class UsdBuild:
+    """What :func:`export_usd` wrote: ``path``, the prim path of every link and
+    joint (URDF name -> prim path), and conversion ``notes``."""
+
+    path: Path
+    links: dict[str, str]
+    joints: dict[str, str]
+    fixed_root: bool
+    notes: list[str] = field(default_factory=list)
+
+
+def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> UsdBuild:
+    """Write ``out_dir/usd/<urdf stem>.usd`` from ``mobility.urdf``,
+    ``overlay.json`` and ``initial_state.json`` (see the module docstring for
+    what is written and the unit conversions).
+
+    Args:
+        out_dir: an output folder of the SPEC's contract.
+        visuals: include the visual meshes.
+        check: read the written file back and run :func:`check_usd`.
+
+    Raises:
+        FileNotFoundError: no ``mobility.urdf`` in ``out_dir``.
+        ImportError: ``usd-core`` is not installed.
+        ValueError: invalid ``initial_state.json`` / ``overlay.json``.
+        UrdfError: the URDF or a collision mesh cannot be read.
+        UsdExportError: the written file does not check out.
+    """
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    out_dir = Path(out_dir)
+    urdf_path = out_dir / URDF_NAME
+    if not urdf_path.is_file():
+        raise FileNotFoundError(f"{urdf_path} does not exist (not an output folder?)")
+    model = read_urdf(urdf_path)
+    initial = read_initial_state(out_dir)
+    springs = springs_from_overlay(out_dir, initial)
+    fixed = read_root(out_dir).fixed
+    pieces, notes = collision_pieces(model)
+
+    stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+    robot_name = Tf.MakeValidIdentifier(model.name or "asset") or "asset"
+    root_path = Sdf.Path(f"/{robot_name}")
+    robot = UsdGeom.Xform.Define(stage, root_path)
+    stage.SetDefaultPrim(robot.GetPrim())
+    UsdPhysics.ArticulationRootAPI.Apply(robot.GetPrim())
+    robot.GetPrim().SetDocumentation(
+        "Written by asset2sim from mobility.urdf (source of truth), overlay.json (springs) and initial_state.json "
+        "(joint positions, mounting). SI units; revolute limits, drive gains and joint states in degrees as "
+        "UsdPhysics prescribes; Coulomb joint friction in newton:friction / asset2sim:friction (N*m or N)."
+    )
+
+    link_names = _names(model.tree_order(), Tf.MakeValidIdentifier)
+    joint_names = _names([j.name for j in model.joints], Tf.MakeValidIdentifier)
+    poses = model.link_poses(initial)
+    link_paths: dict[str, str] = {}
+    for name in model.tree_order():
+        link = model.links[name]
+        path = root_path.AppendChild(link_names[name])
+        link_paths[name] = str(path)
+        xf = UsdGeom.Xform.Define(stage, path)
+        pose = poses[name]
+        xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, pose[:3, 3])))
+        w, x, y, z = (float(v) for v in matrix_quat_wxyz(pose[:3, :3]))
+        xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(w, x, y, z))
+        prim = xf.GetPrim()
+        prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
+        UsdPhysics.RigidBodyAPI.Apply(prim)
+        mass_api = UsdPhysics.MassAPI.Apply(prim)
+        if link.inertial is not None and link.inertial.mass is not None:
+            mass_api.CreateMassAttr(float(link.inertial.mass))
+            mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
+            moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
+            mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
+            qw, qx, qy, qz = (float(v) for v in matrix_quat_wxyz(axes))
+            mass_api.CreatePrincipalAxesAttr(Gf.Quatf(qw, qx, qy, qz))
+        else:
+            notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
+        if link.lateral_friction is not None:
+            mat_path = path.AppendChild("physics_material")
+            UsdGeom.Scope.Define(stage, mat_path)
+            mat = UsdPhysics.MaterialAPI.Apply(stage.GetPrimAtPath(mat_path))
+            mat.CreateStaticFrictionAttr(float(link.lateral_friction))
+            mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
+            mat.CreateRestitutionAttr(float(link.restitution or 0.0))
+        if visuals:
+            _write_visuals(stage, path, model, name, notes)
+        _write_collisions(stage, path, pieces.get(name, []))
+
+    joints_scope = root_path.AppendChild("joints")
+    UsdGeom.Scope.Define(stage, joints_scope)
+    joint_paths: dict[str, str] = {}
+    for j in model.joints:
+        jp = joints_scope.AppendChild(joint_names[j.name])
+        joint_paths[j.name] = str(jp)
+        _write_joint(stage, jp, j, link_paths, initial, springs.get(j.name))
+    if fixed:
+        jp = joints_scope.AppendChild("root_joint" if "root_joint" not in joint_names.values() else "asset2sim_root_joint")
+        fj = UsdPhysics.FixedJoint.Define(stage, jp)
+        fj.CreateBody1Rel().SetTargets([Sdf.Path(link_paths[model.root])])
+        fj.CreateLocalPos0Attr(Gf.Vec3f(0, 0, 0))
+        fj.CreateLocalRot0Attr(Gf.Quatf(1, 0, 0, 0))
+        fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
+        fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
+
+    target = out_dir / USD_DIR / f"{urdf_path.stem}.usd"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".usd", dir=target.parent)
+    os.close(fd)
+    try:
+        stage.GetRootLayer().Export(tmp)
+        atomic.write_bytes(target, Path(tmp).read_bytes())
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
+    if check:
+        check_usd(target, out_dir)
+    return build
+
+
+def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[str]) -> None:
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    scope = link_path.AppendChild("visuals")
+    UsdGeom.Scope.Define(stage, scope)
+    for k, v in enumerate(model.links[link].visuals):
+        p = scope.AppendChild(f"visual_{k}")
+        if v.kind == "mesh":
+            try:
+                verts, faces, _ = read_mesh(v.path)
+            except MeshReadError as exc:
+                notes.append(f"link {link!r} visual {k}: {exc}; left out")
+                continue
+            faces = faces[(faces >= 0).all(axis=1) & (faces < len(verts)).all(axis=1)]
+            if len(faces) == 0:
+                notes.append(f"link {link!r} visual {k} ({v.filename}) has no faces; left out")
+                continue
+            pts = _transform(verts * v.scale, v.origin)
+            mesh = UsdGeom.Mesh.Define(stage, p)
+            mesh.CreatePointsAttr([Gf.Vec3f(*map(float, q)) for q in pts])
+            mesh.CreateFaceVertexCountsAttr([3] * len(faces))
+            mesh.CreateFaceVertexIndicesAttr([int(i) for i in faces.ravel()])
+            mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            mesh.CreateDoubleSidedAttr(True)
+        else:
+            mesh = _primitive(stage, p, v.kind, v.size, v.radius, v.length, v.origin)
+            if mesh is None:
+                continue
+        if v.material is not None and v.material.rgba is not None:
+            rgba = np.asarray(v.material.rgba, float)
+            mesh.CreateDisplayColorAttr([Gf.Vec3f(*map(float, rgba[:3]))])
+
+
+def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray):
+    """A box / sphere / cylinder prim (UsdGeom Cube / Sphere / Cylinder along z) at ``origin`` (4, 4)."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    if kind == "box":
+        g = UsdGeom.Cube.Define(stage, path)
+        g.CreateSizeAttr(1.0)
+    elif kind == "sphere":
+        g = UsdGeom.Sphere.Define(stage, path)
+        g.CreateRadiusAttr(float(radius))
+    elif kind == "cylinder":
+        g = UsdGeom.Cylinder.Define(stage, path)
+        g.CreateRadiusAttr(float(radius))
+        g.CreateHeightAttr(float(length))
+        g.CreateAxisAttr(UsdGeom.Tokens.z)
+    else:
+        return None
+    g.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, origin[:3, 3])))
+    w, x, y, z = (float(v) for v in matrix_quat_wxyz(origin[:3, :3]))
+    g.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(w, x, y, z))
+    if kind == "box":
+        g.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, size)))
+    return g
+
+
+def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    scope = link_path.AppendChild("collisions")
+    UsdGeom.Scope.Define(stage, scope)
+    for k, piece in enumerate(pieces):
+        p = scope.AppendChild(f"piece_{k}")
+        if piece.kind == "hull":
+            verts, tris = _hull_mesh(_transform(piece.points, piece.origin))
+            g = UsdGeom.Mesh.Define(stage, p)
+            g.CreatePointsAttr([Gf.Vec3f(*map(float, q)) for q in verts])
+            g.CreateFaceVertexCountsAttr([3] * len(tris))
+            g.CreateFaceVertexIndicesAttr([int(i) for i in tris.ravel()])
+            g.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            UsdPhysics.CollisionAPI.Apply(g.GetPrim())
+            UsdPhysics.MeshCollisionAPI.Apply(g.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
+        else:
+            g = _primitive(stage, p, piece.kind, piece.size, piece.radius, piece.length, piece.origin)
+            if g is None:
+                continue
+            UsdPhysics.CollisionAPI.Apply(g.GetPrim())
+        g.CreatePurposeAttr(UsdGeom.Tokens.guide)
+
+
+def _write_joint(stage, path, j: UrdfJoint, link_paths: dict[str, str], initial: dict[str, float], spring) -> None:
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    rot = j.type in ("revolute", "continuous")
+    if rot:
+        joint = UsdPhysics.RevoluteJoint.Define(stage, path)
+    elif j.type == "prismatic":
+        joint = UsdPhysics.PrismaticJoint.Define(stage, path)
+    else:
+        joint = UsdPhysics.FixedJoint.Define(stage, path)
+    joint.CreateBody0Rel().SetTargets([Sdf.Path(link_paths[j.parent])])
+    joint.CreateBody1Rel().SetTargets([Sdf.Path(link_paths[j.child])])
+    prim = joint.GetPrim()
+    prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(j.name)
+    a = _axis_frame(j.axis) if j.type in ("revolute", "continuous", "prismatic") else np.eye(3)
+    r0 = j.origin[:3, :3] @ a
+    joint.CreateLocalPos0Attr(Gf.Vec3f(*map(float, j.origin[:3, 3])))
+    joint.CreateLocalRot0Attr(Gf.Quatf(*map(float, matrix_quat_wxyz(r0))))
+    joint.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
+    joint.CreateLocalRot1Attr(Gf.Quatf(*map(float, matrix_quat_wxyz(a))))
+    if j.type == "fixed":
+        return
+    joint.CreateAxisAttr(UsdPhysics.Tokens.x)
+    unit = DEG if rot else 1.0
+    if j.type in ("revolute", "prismatic"):
+        joint.CreateLowerLimitAttr(float(j.lower * unit))
+        joint.CreateUpperLimitAttr(float(j.upper * unit))
+    dof = "angular" if rot else "linear"
+    k = spring.stiffness if spring is not None else 0.0
+    ref = spring.reference if spring is not None else 0.0
+    if j.damping > 0 or k > 0:
+        drive = UsdPhysics.DriveAPI.Apply(prim, dof)
+        drive.CreateTypeAttr(UsdPhysics.Tokens.force)
+        drive.CreateDampingAttr(float(j.damping / unit))
+        drive.CreateStiffnessAttr(float(k / unit))
+        drive.CreateTargetPositionAttr(float(ref * unit))
+        drive.CreateTargetVelocityAttr(0.0)
+    prim.AddAppliedSchema(f"PhysicsJointStateAPI:{dof}")
+    prim.CreateAttribute(f"state:{dof}:physics:position", Sdf.ValueTypeNames.Float).Set(float(initial.get(j.name, 0.0) * unit))
+    prim.CreateAttribute(f"state:{dof}:physics:velocity", Sdf.ValueTypeNames.Float).Set(0.0)
+    # Newton's importer reads its own namespace by default (newton:<dof>:position, degrees for angular)
+    prim.CreateAttribute(f"newton:{dof}:position", Sdf.ValueTypeNames.Float).Set(float(initial.get(j.name, 0.0) * unit))
+    prim.AddAppliedSchema("NewtonJointAPI")
+    prim.CreateAttribute("newton:friction", Sdf.ValueTypeNames.Float).Set(float(j.friction))
+    for attr, value in (("damping", j.damping), ("friction", j.friction), ("stiffness", k), ("springReference", ref)):
+        prim.CreateAttribute(f"asset2sim:{attr}", Sdf.ValueTypeNames.Double, custom=True).Set(float(value))
+
+
+# ---------------------------------------------------------------------- reading
+@dataclass
+class UsdLink:
+    """A rigid body as the USD holds it, SI units, link frame: ``mass`` kg,
+    ``com`` (3,) m, ``inertia`` (3, 3) kg*m^2 about the COM (from the
+    diagonal inertia and principal axes); None where not authored."""
+
+    mass: float | None
+    com: np.ndarray | None
+    inertia: np.ndarray | None
+
+
+@dataclass
+class UsdJoint:
+    """A joint as the USD holds it, converted back to SI (rad or m):
+    ``type`` revolute / prismatic / fixed, ``lower`` / ``upper`` (None when
+    unlimited), ``damping``, ``stiffness``, ``reference`` from the drive,
+    ``friction`` from ``newton:friction``, ``position`` the joint state."""
+
+    type: str
+    lower: float | None
+    upper: float | None
+    damping: float
+    stiffness: float
+    reference: float
+    friction: float
+    position: float
+
+
+@dataclass
+class UsdAsset:
+    """What a USD file holds, by URDF name (``asset2sim:name``)."""
+
+    links: dict[str, UsdLink]
+    joints: dict[str, UsdJoint]
+    articulation_root: bool
+    fixed_root: bool
+
+
+def read_usd(path: Path) -> UsdAsset:
+    """Read the physics of a USD written by :func:`export_usd` back, in SI
+    units (degrees converted to radians).
+
+    Raises:
+        ImportError: ``usd-core`` is not installed.
+        UsdExportError: the file cannot be opened or has no default prim.
+    """
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    stage = Usd.Stage.Open(str(path))
+    if stage is None or not stage.GetDefaultPrim():
+        raise UsdExportError(f"{path}: not a USD stage with a default prim")
+    links, joints, fixed_root = {}, {}, False
+    art = stage.GetDefaultPrim().HasAPI(UsdPhysics.ArticulationRootAPI)
+    for prim in stage.Traverse():
+        name_attr = prim.GetAttribute("asset2sim:name")
+        name = name_attr.Get() if name_attr and name_attr.HasAuthoredValue() else None
+        if prim.HasAPI(UsdPhysics.RigidBodyAPI):
+            m = UsdPhysics.MassAPI(prim)
+            mass_attr, com_attr = m.GetMassAttr(), m.GetCenterOfMassAttr()
+            mass = float(mass_attr.Get()) if mass_attr.HasAuthoredValue() else None
+            com = np.array(com_attr.Get(), float) if com_attr.HasAuthoredValue() else None
+            inertia = None
+            if m.GetDiagonalInertiaAttr().HasAuthoredValue():
+                d = np.array(m.GetDiagonalInertiaAttr().Get(), float)
+                q = m.GetPrincipalAxesAttr().Get()
+                r = np.array(quat_wxyz_matrix([q.GetReal(), *q.GetImaginary()]))
+                inertia = r @ np.diag(d) @ r.T
+            links[name or prim.GetName()] = UsdLink(mass, com, inertia)
+        elif prim.IsA(UsdPhysics.Joint):
+            j = UsdPhysics.Joint(prim)
+            if prim.IsA(UsdPhysics.FixedJoint) and not j.GetBody0Rel().GetTargets():
+                fixed_root = True
+                continue
+            if prim.IsA(UsdPhysics.RevoluteJoint):
+                kind, dof, unit, jj = "revolute", "angular", DEG, UsdPhysics.RevoluteJoint(prim)
+            elif prim.IsA(UsdPhysics.PrismaticJoint):
+                kind, dof, unit, jj = "prismatic", "linear", 1.0, UsdPhysics.PrismaticJoint(prim)
+            else:
+                joints[name or prim.GetName()] = UsdJoint("fixed", None, None, 0.0, 0.0, 0.0, 0.0, 0.0)
+                continue
+            lo = jj.GetLowerLimitAttr()
+            hi = jj.GetUpperLimitAttr()
+            drive = UsdPhysics.DriveAPI.Get(prim, dof) if prim.HasAPI(UsdPhysics.DriveAPI, dof) else None
+            fr = prim.GetAttribute("newton:friction")
+            st = prim.GetAttribute(f"state:{dof}:physics:position")
+            joints[name or prim.GetName()] = UsdJoint(
+                type=kind,
+                lower=float(lo.Get()) / unit if lo.HasAuthoredValue() else None,
+                upper=float(hi.Get()) / unit if hi.HasAuthoredValue() else None,
+                damping=float(drive.GetDampingAttr().Get()) * unit if drive else 0.0,
+                stiffness=float(drive.GetStiffnessAttr().Get()) * unit if drive else 0.0,
+                reference=float(drive.GetTargetPositionAttr().Get()) / unit if drive else 0.0,
+                friction=float(fr.Get()) if fr and fr.HasAuthoredValue() else 0.0,
+                position=float(st.Get()) / unit if st and st.HasAuthoredValue() else 0.0,
+            )
+    return UsdAsset(links=links, joints=joints, articulation_root=bool(art), fixed_root=fixed_root)
+
+
+def _close(a: float, b: float, scale: float) -> bool:
+    return abs(a - b) <= FLOAT_RTOL * max(abs(b), scale) + 1e-15
+
+
+@dataclass
+class UsdCheck:
+    """Largest relative differences between the USD and the source files
+    (mass, COM, inertia tensor, joint values), over links / joints compared."""
+
+    links: int
+    joints: int
+    max_rel_error: float
+
+
+def check_usd(path: Path, out_dir: Path) -> UsdCheck:
+    """Authored equals intended: read ``path`` back (:func:`read_usd`) and
+    compare every link's mass, COM and inertia tensor with ``mobility.urdf``
+    (the overlay's values as written) and every movable joint's limits,
+    damping, Coulomb friction, stiffness, spring reference and initial
+    position with the URDF, ``overlay.json`` and ``initial_state.json``.
+
+    Tolerance: :data:`FLOAT_RTOL` relative (USD stores binary32), against the
+    larger of the value and the largest value of the same quantity on that
+    link (COM: the largest |component| or 1 mm; inertia: the largest moment).
+
+    Raises:
+        UsdExportError: a value differs (names the link or joint and the
+            quantity), a link or joint is missing, the articulation root or
+            the mounting differs.
+    """
+    out_dir = Path(out_dir)
+    model = read_urdf(out_dir / URDF_NAME)
+    initial = read_initial_state(out_dir)
+    springs = springs_from_overlay(out_dir, initial)
+    fixed = read_root(out_dir).fixed
+    usd = read_usd(path)
+    worst = 0.0
+
+    def cmp(what: str, got, want, scale: float) -> None:
+        nonlocal worst
+        got, want = np.atleast_1d(np.asarray(got, float)), np.atleast_1d(np.asarray(want, float))
+        err = float(np.abs(got - want).max()) / max(scale, 1e-300)
+        worst = max(worst, err)
+        if not all(_close(float(g), float(w), scale) for g, w in zip(got.ravel(), want.ravel())):
+            raise UsdExportError(f"{path}: {what} is {got.tolist()} in the USD, {want.tolist()} in {out_dir}")
+
+    if not usd.articulation_root:
+        raise UsdExportError(f"{path}: the default prim has no PhysicsArticulationRootAPI")
+    if usd.fixed_root != fixed:
+        raise UsdExportError(f"{path}: root {'fixed' if usd.fixed_root else 'free'} in the USD, "
+                             f"{'fixed' if fixed else 'free'} in {out_dir / 'initial_state.json'}")
+    for name, link in model.links.items():
+        got = usd.links.get(name)
+        if got is None:
+            raise UsdExportError(f"{path}: no rigid body for link {name!r}")
+        if link.inertial is None:
+            if got.mass is not None:
+                raise UsdExportError(f"{path}: link {name!r} has a mass in the USD but no <inertial> in the URDF")
+            continue
+        if got.mass is None or got.com is None or got.inertia is None:
+            raise UsdExportError(f"{path}: link {name!r} lacks mass, COM or inertia in the USD")
+        cmp(f"link {name!r} mass (kg)", got.mass, link.inertial.mass, abs(link.inertial.mass))
+        com = link.inertial.com()
+        cmp(f"link {name!r} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
+        want = link.inertial.inertia_in_link_axes()
+        cmp(f"link {name!r} inertia tensor (kg*m^2)", got.inertia, want, float(np.abs(want).max()))
+    for j in model.movable_joints:
+        got = usd.joints.get(j.name)
+        if got is None:
+            raise UsdExportError(f"{path}: no joint {j.name!r}")
+        if j.type in ("revolute", "prismatic"):
+            span = max(abs(j.lower), abs(j.upper), 1e-3)
+            if got.lower is None or got.upper is None:
+                raise UsdExportError(f"{path}: joint {j.name!r} has no limits in the USD")
+            cmp(f"joint {j.name!r} limits", [got.lower, got.upper], [j.lower, j.upper], span)
+        elif got.lower is not None or got.upper is not None:
+            raise UsdExportError(f"{path}: continuous joint {j.name!r} has limits in the USD")
+        cmp(f"joint {j.name!r} damping", got.damping, j.damping, abs(j.damping))
+        cmp(f"joint {j.name!r} friction", got.friction, j.friction, abs(j.friction))
+        s = springs.get(j.name)
+        cmp(f"joint {j.name!r} stiffness", got.stiffness, s.stiffness if s else 0.0, abs(s.stiffness) if s else 0.0)
+        if s is not None:
+            cmp(f"joint {j.name!r} spring reference", got.reference, s.reference, max(abs(s.reference), 1e-3))
+        want_q = float(initial.get(j.name, 0.0))
+        cmp(f"joint {j.name!r} initial position", got.position, want_q, max(abs(want_q), 1e-3))
+    return UsdCheck(links=len(model.links), joints=len(model.movable_joints), max_rel_error=worst)
+

@@ -1,0 +1,233 @@
+"""USD export: UsdPhysics bodies, joints, drives and states read back equal
+the output folder's files (authored equals intended), in pxr and in Newton."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from asset2sim.engines.fake import write_contract_asset
+from asset2sim.engines.loading import read_initial_state, read_urdf
+from asset2sim.frames import quat_wxyz_matrix
+from tests.conftest import SHARED
+
+pxr = pytest.importorskip("pxr")
+
+from pxr import Usd, UsdGeom, UsdPhysics  # noqa: E402
+
+from asset2sim.tasks.publish.export_usd import (  # noqa: E402
+    DEG,
+    UsdExportError,
+    check_usd,
+    export_usd,
+    principal_axes,
+    read_usd,
+)
+
+
+def _tilt_lid_inertial(urdf: Path) -> None:
+    """Rotate the lid's inertial frame and add a product of inertia, so the
+    principal axes are not the link axes."""
+    text = urdf.read_text()
+    head, sep, tail = text.partition('<link name="lid">')
+    tail = tail.replace('rpy="0 0 0"/>', 'rpy="0.3 -0.2 0.5"/>', 1).replace('ixy="0.0"', 'ixy="0.0001"', 1)
+    urdf.write_text(head + sep + tail)
+
+
+@pytest.fixture
+def contract(tmp_path) -> Path:
+    out = tmp_path / "out"
+    write_contract_asset(out, lid_angle=0.4, post_height=0.01, lid_stiffness=0.3, lid_spring_reference=0.2)
+    _tilt_lid_inertial(out / "mobility.urdf")
+    return out
+
+
+def test_principal_axes_rebuild_the_tensor():
+    t = np.array([[3.0, 0.4, -0.2], [0.4, 2.0, 0.1], [-0.2, 0.1, 1.0]]) * 1e-3
+    w, r = principal_axes(t)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    assert np.allclose(r @ np.diag(w) @ r.T, t, atol=1e-15)
+
+
+def test_export_reads_back_equal_to_the_folder(contract):
+    build = export_usd(contract)
+    assert build.path == contract / "usd" / "mobility.usd"
+    urdf = read_urdf(contract / "mobility.urdf")
+    usd = read_usd(build.path)
+    lid = urdf.links["lid"].inertial
+    got = usd.links["lid"]
+    assert got.mass == pytest.approx(lid.mass, rel=1e-6)
+    assert np.allclose(got.com, lid.com(), rtol=1e-6, atol=1e-9)
+    want = lid.inertia_in_link_axes()
+    assert abs(want[0, 1]) > 1e-5  # the tilt made a full tensor
+    assert np.allclose(got.inertia, want, rtol=0, atol=1e-6 * np.abs(want).max())
+    hinge = usd.joints["lid_hinge"]
+    j = urdf.joint("lid_hinge")
+    assert hinge.type == "revolute"
+    assert (hinge.lower, hinge.upper) == pytest.approx((j.lower, j.upper), rel=1e-6)
+    assert hinge.damping == pytest.approx(j.damping, rel=1e-6)
+    assert hinge.friction == pytest.approx(j.friction, rel=1e-6)
+    assert hinge.stiffness == pytest.approx(0.3, rel=1e-6)
+    assert hinge.reference == pytest.approx(0.2, rel=1e-6)
+    assert hinge.position == pytest.approx(0.4, rel=1e-6)
+    slide = usd.joints["post_slide"]
+    assert slide.type == "prismatic" and slide.position == pytest.approx(0.01, rel=1e-6)
+    assert usd.articulation_root and not usd.fixed_root
+    assert check_usd(build.path, contract).max_rel_error < 1e-6
+
+
+def test_units_are_the_ones_usd_prescribes(contract):
+    """Revolute limits, drive gains and states in degrees (UsdPhysics; the
+    conversion Isaac Sim's URDF importer gets wrong, IsaacSim #842);
+    prismatic ones in metres."""
+    build = export_usd(contract)
+    stage = Usd.Stage.Open(str(build.path))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0 and UsdGeom.GetStageUpAxis(stage) == "Z"
+    hinge = stage.GetPrimAtPath(build.joints["lid_hinge"])
+    rj = UsdPhysics.RevoluteJoint(hinge)
+    assert rj.GetUpperLimitAttr().Get() == pytest.approx(2.0 * DEG, rel=1e-6)
+    drive = UsdPhysics.DriveAPI.Get(hinge, "angular")
+    assert drive.GetStiffnessAttr().Get() == pytest.approx(0.3 / DEG, rel=1e-6)
+    assert drive.GetDampingAttr().Get() == pytest.approx(0.02 / DEG, rel=1e-6)
+    assert drive.GetTargetPositionAttr().Get() == pytest.approx(0.2 * DEG, rel=1e-6)
+    assert hinge.GetAttribute("state:angular:physics:position").Get() == pytest.approx(0.4 * DEG, rel=1e-6)
+    slide = stage.GetPrimAtPath(build.joints["post_slide"])
+    assert UsdPhysics.PrismaticJoint(slide).GetUpperLimitAttr().Get() == pytest.approx(0.05, rel=1e-6)
+    assert UsdPhysics.DriveAPI.Get(slide, "linear").GetDampingAttr().Get() == pytest.approx(1.0, rel=1e-6)
+
+
+def test_joint_frames_put_the_child_where_the_urdf_does(contract):
+    """Joint frame 0 (in the parent) and frame 1 (in the child) coincide in
+    the world at the authored link poses, and their X axis is the URDF axis."""
+    build = export_usd(contract)
+    stage = Usd.Stage.Open(str(build.path))
+    cache = UsdGeom.XformCache()
+    urdf = read_urdf(contract / "mobility.urdf")
+    poses = urdf.link_poses(read_initial_state(contract))
+    for name, path in build.links.items():
+        m = np.array(cache.GetLocalToWorldTransform(stage.GetPrimAtPath(path))).T
+        assert np.allclose(m, poses[name], atol=1e-9), name
+    for jname in ("lid_hinge", "post_slide"):
+        j = UsdPhysics.Joint(stage.GetPrimAtPath(build.joints[jname]))
+        uj = urdf.joint(jname)
+        p0 = poses[uj.parent][:3, :3] @ np.array(j.GetLocalPos0Attr().Get()) + poses[uj.parent][:3, 3]
+        p1 = poses[uj.child][:3, :3] @ np.array(j.GetLocalPos1Attr().Get()) + poses[uj.child][:3, 3]
+        if uj.type == "revolute":
+            assert np.allclose(p0, p1, atol=1e-6)
+        q1 = j.GetLocalRot1Attr().Get()
+        r1 = np.array(quat_wxyz_matrix([q1.GetReal(), *q1.GetImaginary()]))
+        assert np.allclose(r1[:, 0], uj.axis, atol=1e-6)
+
+
+def test_collisions_are_closed_outward_convex_hulls(contract):
+    build = export_usd(contract)
+    stage = Usd.Stage.Open(str(build.path))
+    n = 0
+    for prim in stage.Traverse():
+        if not prim.HasAPI(UsdPhysics.CollisionAPI):
+            continue
+        assert UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr().Get() == "convexHull"
+        mesh = UsdGeom.Mesh(prim)
+        v = np.array(mesh.GetPointsAttr().Get(), float)
+        f = np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+        a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+        vol = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0
+        assert vol > 0, prim.GetPath()  # outward winding: positive signed volume
+        n += 1
+    assert n >= 7  # five box walls, lid, post
+
+
+def test_fixed_root_gets_a_world_joint(contract):
+    state = json.loads((contract / "initial_state.json").read_text())
+    state["root"] = {"fixed": True, "mounting": "wall-mounted", "source": "test"}
+    (contract / "initial_state.json").write_text(json.dumps(state))
+    build = export_usd(contract)
+    assert build.fixed_root and read_usd(build.path).fixed_root
+
+
+def test_check_catches_a_changed_value(contract):
+    build = export_usd(contract)
+    stage = Usd.Stage.Open(str(build.path))
+    prim = stage.GetPrimAtPath(build.joints["lid_hinge"])
+    UsdPhysics.DriveAPI.Get(prim, "angular").GetDampingAttr().Set(0.02)  # per rad, not per degree: the Isaac bug
+    stage.GetRootLayer().Save()
+    with pytest.raises(UsdExportError, match="lid_hinge.*damping"):
+        check_usd(build.path, contract)
+
+
+def test_missing_folder_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="mobility.urdf"):
+        export_usd(tmp_path)
+
+
+def test_cli_exports_usd(contract, capsys):
+    from asset2sim.cli import main
+
+    assert main(["export", str(contract), "--format", "usd"]) == 0
+    out = capsys.readouterr().out
+    assert "usd/mobility.usd" in out and "read back" in out
+
+
+# ------------------------------------------------------------------- Newton
+def _newton_model(path: Path):
+    newton = pytest.importorskip("newton")
+    pytest.importorskip("newton_usd_schemas")
+    builder = newton.ModelBuilder()
+    builder.add_usd(str(path))
+    return newton, builder
+
+
+def test_newton_holds_what_was_authored(contract):
+    """Newton's USD importer (newton 1.8) reads mass, COM, limits, Coulomb
+    friction, drive gains (converted back per radian) and initial positions
+    as the folder holds them."""
+    build = export_usd(contract)
+    _, b = _newton_model(build.path)
+    urdf = read_urdf(contract / "mobility.urdf")
+    labels = list(getattr(b, "body_label", None) or b.body_key)
+    for name, path in build.links.items():
+        i = labels.index(path)
+        assert b.body_mass[i] == pytest.approx(urdf.links[name].inertial.mass, rel=1e-6), name
+        assert np.allclose(np.array(b.body_com[i]), urdf.links[name].inertial.com(), atol=1e-7), name
+    jl = list(getattr(b, "joint_label", None) or b.joint_key)
+    for jname, stiff in (("lid_hinge", 0.3), ("post_slide", 0.0)):
+        ji = jl.index(build.joints[jname])
+        d = b.joint_qd_start[ji]
+        q = b.joint_q_start[ji]
+        uj = urdf.joint(jname)
+        assert b.joint_limit_lower[d] == pytest.approx(uj.lower, abs=1e-6)
+        assert b.joint_limit_upper[d] == pytest.approx(uj.upper, rel=1e-6)
+        assert b.joint_friction[d] == pytest.approx(uj.friction, rel=1e-6)
+        assert b.joint_target_kd[d] == pytest.approx(uj.damping, rel=1e-6)
+        assert b.joint_target_ke[d] == pytest.approx(stiff, rel=1e-6, abs=1e-12)
+        assert b.joint_q[q] == pytest.approx(read_initial_state(contract)[jname], rel=1e-6)
+
+
+# --------------------------------------------------------------- real assets
+def _dev_object(asset_id: str) -> Path:
+    p = SHARED / asset_id
+    if not (p / "mobility.urdf").is_file():
+        pytest.skip(f"dev object {asset_id} not present")
+    return p
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("asset_id,prompt", [("103275", "I want a slightly open stapler."), ("7236", "I want a microwave with its door halfway open.")])
+def test_refined_dev_objects_export(asset_id, prompt, tmp_path):
+    """Refine a real dev object (no extras) and export it: every link's
+    mass/COM/inertia and every joint's values read back equal (check_usd)."""
+    from asset2sim.tasks.refine import refine_asset
+
+    out = tmp_path / asset_id
+    refine_asset(_dev_object(asset_id), prompt, out, extras=False)
+    build = export_usd(out)
+    check = check_usd(build.path, out)
+    urdf = read_urdf(out / "mobility.urdf")
+    assert check.links == len(urdf.links) and check.joints == len(urdf.movable_joints)
+    assert check.max_rel_error < 1e-6
+    usd = read_usd(build.path)
+    assert math.isclose(sum(l.mass or 0.0 for l in usd.links.values()), urdf.total_mass(), rel_tol=1e-6)
