@@ -334,9 +334,11 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     largest, where = _largest_extent(ctx, runs)
     req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, centres, ctx.task_joints, ctx.category)
     checks = []
-    for name, band, label, phrase in req:
+    for name, band, label, phrase, target in req:
         c = ctx.closed.get(name)
-        checks.append(sem.JointStateCheck(name, band, c.fraction(ctx.initial_state[name]) if c else None, label, phrase))
+        q = ctx.initial_state[name]
+        checks.append(sem.JointStateCheck(name, band, c.fraction(q) if c else None, label, phrase, target,
+                                          c.direction * (q - c.q_closed) if c else None, ctx.joints[name].type))
     dims = ctx.prior.get("base_dims")
     m = sem.prompt_alignment(
         size_requested=spec.size_class is not None,

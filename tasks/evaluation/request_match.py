@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.schemas.request import RequestSpec
+from asset2sim.schemas.request import RequestSpec, StateTarget
 from asset2sim.tasks.evaluation.asset_files import MOVABLE, JointInfo
 from asset2sim.tasks.interpret import categories, part_priors, size_priors
 from asset2sim.tasks.interpret.request import parse_request
@@ -146,7 +146,9 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     overrides an earlier one for the same joint.
 
     Returns:
-        ([(joint, band, label, phrase)], [phrases that matched no joint]).
+        ([(joint, band, label, phrase, target)], [phrases that matched no
+        joint]); ``target`` is the joint state's
+        :class:`asset2sim.schemas.request.StateTarget` or None.
     """
     out, unmatched = [], []
     if spec is None:
@@ -166,8 +168,8 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
         if not names:
             unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
         for n in names:
-            out.append((n, js.band, semantics.get(joints[n].child, (None, None))[1], js.phrase))
-    dedup: dict[str, tuple[str, str, str | None, str]] = {}
+            out.append((n, js.band, semantics.get(joints[n].child, (None, None))[1], js.phrase, js.target))
+    dedup: dict[str, tuple[str, str, str | None, str, StateTarget | None]] = {}
     for item in out:
         dedup[item[0]] = item
     return list(dedup.values()), unmatched

@@ -26,6 +26,17 @@ accuracy"; the exact conventions are in ``docs/metrics.md``):
     :mod:`asset2sim.tasks.geometry.closed_state`) against the band's acceptance interval
     (``schemas.request.BAND_INTERVAL``): inside scores 1, within 0.1 of it
     0.5, else 0; the joint half is the mean over requested joints.
+  * a joint asked in numbers or by an end (``RequestSpec`` joint state with a
+    ``target``, ``docs/requests.md``) is graded against the number instead of
+    its nominal band, by :func:`target_score`: the opening o = direction *
+    (q - q_closed) (rad or m) or the fraction f against the asked value,
+    within 5 % of it (the request issue's tolerance; at least 0.5 deg,
+    1 mm or 0.01 of the range) scores 1, within 10 % scores 0.5, else 0. An
+    end target ("lever up", "switch on") scores 1 at either travel end
+    (f <= 0.03 or f >= 0.97: which end is high is refine's geometric decision,
+    checked by its own tests), else 0. A distance asked on a hinge (the gap at
+    the part's far edge) is not graded here (the hinge radius is geometry the
+    evaluation does not re-derive) and says so.
   * When the request names no joint state, the score is the size half alone
     (and vice versa); with neither, the metric is not applicable (value None).
 """
@@ -39,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.schemas.report import MetricResult
-from asset2sim.schemas.request import BAND_INTERVAL
+from asset2sim.schemas.request import BAND_INTERVAL, StateTarget
 
 #: |ln(L / L_target)| bounds for a full and a half size score (dimensionless).
 SIZE_FULL_RATIO = 1.5
@@ -224,15 +235,78 @@ def band_score(fraction: float, band: str) -> tuple[float, str]:
     return 0.0, f"opening {fraction:.2f} outside {band} [{lo}, {hi}] (by {dist:.2f})"
 
 
+#: Relative tolerance of a number asked in a request (5 %, the request
+#: issue's "numeric requests land within 5 %"), its half-score bound, and
+#: the absolute floors per kind (rad, m, fraction of the range).
+TARGET_REL_TOL = 0.05
+TARGET_HALF_REL_TOL = 0.10
+TARGET_ABS_TOL = {"angle": math.radians(0.5), "distance": 1e-3, "fraction": 0.01}
+#: Opening fraction within which a joint sits at a travel end (the closed band's width).
+END_FRACTION_TOL = 0.03
+
+
 @dataclass
 class JointStateCheck:
-    """One requested joint: its band and measured opening fraction."""
+    """One requested joint: its band and measured opening fraction.
+
+    ``target`` (a :class:`asset2sim.schemas.request.StateTarget`) replaces the
+    band when the request asked a number or an end; ``opening`` is then
+    direction * (q - q_closed) (rad for revolute, m for prismatic) and
+    ``joint_type`` the URDF joint type.
+    """
 
     joint: str
     band: str
     fraction: float | None
     label: str | None = None
     phrase: str = ""
+    target: StateTarget | None = None
+    opening: float | None = None
+    joint_type: str = "revolute"
+
+
+def target_score(check: JointStateCheck) -> tuple[float | None, str]:
+    """Score of a joint asked by a number or an end (module docstring).
+
+    Args:
+        check: the joint, with ``target`` set, ``fraction`` (dimensionless) and
+            ``opening`` (rad or m from the geometric closed end).
+
+    Returns:
+        (score 1 / 0.5 / 0, or None when not graded; the reason).
+
+    Raises:
+        ValueError: ``check.target`` is None.
+    """
+    t = check.target
+    if t is None:
+        raise ValueError(f"joint {check.joint}: no target to grade")
+    if check.fraction is None:
+        return 0.0, "closed end unknown"
+    if t.kind == "end":
+        at_end = check.fraction <= END_FRACTION_TOL or check.fraction >= 1.0 - END_FRACTION_TOL
+        where = f"opening {check.fraction:.2f}"
+        return (1.0, f"{where}: at a travel end ({t.end})") if at_end else (0.0, f"{where}: not at a travel end ({t.end})")
+    if t.kind == "fraction":
+        achieved, unit = check.fraction, ""
+    else:
+        prismatic = check.joint_type == "prismatic"
+        if t.kind == "distance" and not prismatic:
+            return None, "a distance asked on a hinge (gap at the far edge) is not graded by the evaluation"
+        if t.kind == "angle" and prismatic:
+            return 0.0, "an angle asked on a sliding joint"
+        if check.opening is None:
+            return 0.0, "opening unknown"
+        achieved, unit = check.opening, (" m" if prismatic else " rad")
+    asked = float(t.value or 0.0)
+    err = abs(achieved - asked)
+    tol = max(TARGET_REL_TOL * abs(asked), TARGET_ABS_TOL[t.kind])
+    why = f"asked {asked:.4g}{unit}, measured {achieved:.4g}{unit} (error {err:.3g}, tolerance {tol:.3g})"
+    if err <= tol:
+        return 1.0, why
+    if err <= max(TARGET_HALF_REL_TOL * abs(asked), 2 * TARGET_ABS_TOL[t.kind]):
+        return 0.5, why
+    return 0.0, why
 
 
 def prompt_alignment(
@@ -282,17 +356,24 @@ def prompt_alignment(
                 scores.append(0.0)
                 details["joints"].append({"joint": c.joint, "band": c.band, "score": 0.0, "reason": "closed end unknown"})
                 continue
-            sc, reason = band_score(c.fraction, c.band)
-            scores.append(sc)
+            if c.target is not None:
+                sc, reason = target_score(c)
+            else:
+                sc, reason = band_score(c.fraction, c.band)
+            if sc is not None:
+                scores.append(sc)
             details["joints"].append(
-                {"joint": c.joint, "band": c.band, "label": c.label, "fraction": c.fraction, "score": sc, "reason": reason}
+                {"joint": c.joint, "band": c.band, "label": c.label, "fraction": c.fraction, "score": sc, "reason": reason,
+                 "target": c.target.model_dump() if c.target is not None else None}
             )
         for phrase in unmatched_requests or []:
             scores.append(0.0)
             details["joints"].append({"joint": None, "band": None, "score": 0.0, "reason": f"no joint matches {phrase!r}"})
-        js = float(np.mean(scores)) if scores else 0.0
+        graded = bool(scores) or not joint_checks
+        js = float(np.mean(scores)) if scores else (0.0 if graded else None)
         details["joint_state_score"] = js
-        halves.append(js)
+        if js is not None:
+            halves.append(js)
     else:
         details["joint_state_score"] = None
         details["joint_state_reason"] = "the request asks for no joint state"

@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.schemas.request import JointStateRequest, RequestSpec
+from asset2sim.schemas.request import JointStateRequest, RequestSpec, StateTarget
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.evaluate import JointInfo, evaluate_asset, requested_joints
+from asset2sim.tasks.interpret.request import parse_request
 
 # ------------------------------------------------------------------ pure definitions
 
@@ -105,12 +106,12 @@ def test_requested_joints_orders_drawers_top_to_bottom():
         JointStateRequest(selector="label", label="door", band="fully", phrase="door fully open"),
     ])
     req, unmatched = requested_joints(spec, joints, sem_, centres, [])
-    got = {j: band for j, band, _, _ in req}
+    got = {j: band for j, band, *_ in req}
     assert got == {"j_high": "closed", "j_low": "slightly_open", "j_lid": "halfway"}
     assert unmatched == ["door fully open"]
     # a part word that names nothing falls back to the task-relevant joints
     req, unmatched = requested_joints(spec, joints, sem_, centres, ["j_lid"])
-    assert {j: band for j, band, _, _ in req}["j_lid"] == "fully" and unmatched == []
+    assert {j: band for j, band, *_ in req}["j_lid"] == "fully" and unmatched == []
 
 
 def test_label_matching_does_not_confuse_a_pump_lid_with_the_lid():
@@ -215,3 +216,43 @@ def test_scale_is_inferred_from_geometry_when_no_sidecar_states_it(tmp_path):
     assert ev.scale == pytest.approx(2.0, rel=0.02) and ev.scale_source.startswith("geometry")
     assert ev.metric("scale_deviation").value == pytest.approx(0.0, abs=2.0)
     assert not math.isnan(ev.metric("scale_deviation").value)
+
+
+@pytest.mark.parametrize("kind, value, fraction, opening, jtype, score", [
+    ("angle", math.radians(30), 0.33, math.radians(30.9), "revolute", 1.0),   # 3 % off
+    ("angle", math.radians(30), 0.35, math.radians(32.5), "revolute", 0.5),   # 8 % off
+    ("angle", math.radians(30), 0.5, math.radians(45), "revolute", 0.0),
+    ("distance", 0.10, 0.3, 0.104, "prismatic", 1.0),
+    ("distance", 0.10, 0.3, 0.13, "prismatic", 0.0),
+    ("fraction", 0.6, 0.61, None, "revolute", 1.0),
+    ("fraction", 0.6, 0.5, None, "revolute", 0.0),
+    ("angle", 0.5, 0.5, 0.05, "prismatic", 0.0),                               # an angle on a slider
+])
+def test_target_score_grades_numbers_within_five_percent(kind, value, fraction, opening, jtype, score):
+    c = sem.JointStateCheck("j", "halfway", fraction, target=StateTarget(kind=kind, value=value), opening=opening,
+                            joint_type=jtype)
+    assert sem.target_score(c)[0] == score
+
+
+def test_target_score_end_and_hinge_distance():
+    up = StateTarget(kind="end", end="high")
+    assert sem.target_score(sem.JointStateCheck("j", "fully", 1.0, target=up))[0] == 1.0
+    assert sem.target_score(sem.JointStateCheck("j", "fully", 0.0, target=up))[0] == 1.0
+    assert sem.target_score(sem.JointStateCheck("j", "fully", 0.5, target=up))[0] == 0.0
+    gap = StateTarget(kind="distance", value=0.05)
+    score, why = sem.target_score(sem.JointStateCheck("j", "halfway", 0.3, target=gap, opening=0.4))
+    assert score is None and "hinge" in why
+    # an ungraded joint leaves the joint half out rather than scoring it 0
+    m = sem.prompt_alignment(size_requested=False, largest_extent=0.2, typical_largest=0.2, size_factor=1.0,
+                             joint_checks=[sem.JointStateCheck("j", "halfway", 0.3, target=gap, opening=0.4)],
+                             state_requested=True)
+    assert m.value == 1.0 and m.details["joint_state_score"] is None
+
+
+def test_numeric_request_reaches_the_evaluation_as_a_target():
+    spec = parse_request("A box with its lid open 30 degrees.")
+    joints = {"j_lid": JointInfo("j_lid", "revolute", "base", "lid", 0.0, 2.0, None, None)}
+    req, unmatched = requested_joints(spec, joints, {"lid": ("hinge", "lid")}, {}, ["j_lid"], "Box")
+    assert unmatched == [] and len(req) == 1
+    target = req[0][4]
+    assert target is not None and target.kind == "angle" and abs(target.value - math.radians(30)) < 1e-9
