@@ -107,6 +107,14 @@ class JointDynamics(_Strict):
     inertia_axis: float | None = None
     """Inertia of the moving subtree about / along the axis (kg*m^2 or kg), when
     known: bounds the damping a simulator integrates stably (c <= I / dt)."""
+    lower: float | None = None
+    """Clipped lower limit (rad, or m at the output scale) when the raw limit
+    lets the part pass into other links (``tasks.geometry.limits``); None: the
+    raw limit (scaled) is kept."""
+    upper: float | None = None
+    """Clipped upper limit (rad or m at the output scale); None: raw limit kept."""
+    limit_source: str = ""
+    """Why and by how much the limit was clipped (empty when not clipped)."""
     source: str = ""
 
 

@@ -213,6 +213,18 @@ def request_category(text: str) -> tuple[str | None, CategoryMention | None]:
 def find_variant(category: str, text: str) -> VariantPrior | None:
     """The variant of ``category`` named earliest in ``text`` (longest phrase
     wins at a position), or None."""
+    found = variant_mention(category, text)
+    return found[2] if found else None
+
+
+def variant_mention(category: str, text: str) -> tuple[int, int, VariantPrior] | None:
+    """Where ``text`` names a variant of ``category`` ("kitchen faucet",
+    "mini fridge"): (start, end, variant) in character offsets of ``text``,
+    the earliest mention (longest phrase at a position), or None.
+
+    Raises:
+        KeyError: ``category`` is not in categories.yaml.
+    """
     if not text:
         return None
     cat = category_prior(category)
@@ -221,9 +233,9 @@ def find_variant(category: str, text: str) -> VariantPrior | None:
     for var in cat.variants:
         for ph in var.phrases:
             m = re.search(phrase_regex(" ".join(ph.lower().split())), low)
-            if m and (best is None or (m.start(), -(m.end() - m.start())) < (best[0], best[1])):
-                best = (m.start(), -(m.end() - m.start()), var)
-    return best[2] if best else None
+            if m and (best is None or (m.start(), -m.end()) < (best[0], -best[1])):
+                best = (m.start(), m.end(), var)
+    return best
 
 
 def recognize_category(

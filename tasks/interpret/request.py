@@ -67,7 +67,7 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
-from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, request_category
+from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, request_category, variant_mention
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.prior_tables import load_priors
 from asset2sim.tasks.interpret import request_values as rv
@@ -668,6 +668,13 @@ def parse_request(text: str) -> RequestSpec:
             pose = h.value
             matched.append((h.start, h.text))
 
+    if hint is not None:  # a variant of the category ("kitchen faucet") is understood, not ignored
+        try:
+            var = variant_mention(hint, low)
+        except KeyError:
+            var = None
+        if var is not None:
+            matched.append((var[0], low[var[0]: var[1]]))
     unused, groups = _unused_words(low, matched, mentions)
     seen: set[tuple[int, str]] = set()
     ordered = []

@@ -381,6 +381,10 @@ def build_urdf(
                 joint.limit.effort = 1000.0
             if joint.limit.velocity is None:
                 joint.limit.velocity = 1000.0
+            if dyn.lower is not None:  # clipped to what the geometry allows (tasks.geometry.limits)
+                joint.limit.lower = float(dyn.lower)
+            if dyn.upper is not None:
+                joint.limit.upper = float(dyn.upper)
     urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
     if collision_out is not None:
         collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1])

@@ -474,3 +474,11 @@ def test_unused_words_are_reported_and_a_foreign_request_is_not_understood():
     assert not german.understood and german.matched == []
     assert german.unused_words[:2] == ["ein", "kleiner"]
     assert parse_request("").understood and parse_request("   ").unused_words == []
+
+
+def test_a_named_variant_is_understood_not_ignored():
+    spec = parse_request("A kitchen faucet with its handle turned off and a stiff handle joint.")
+    assert spec.ignored == [] and "kitchen faucet" in spec.matched
+    assert parse_request("A mini fridge with its door open.").ignored == []
+    # a word near the category that is no variant is still reported
+    assert parse_request("A purple faucet.").ignored == ["purple"]
