@@ -33,10 +33,11 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import manipulation, parity, postcheck
+from asset2sim.tasks.check import manipulation, operating, parity, postcheck
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
+from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
@@ -52,6 +53,7 @@ from asset2sim.tasks.publish.contract import (
 from asset2sim.tasks.state import collision, pose, refine_state, stability
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
+from asset2sim.urdf import read_urdf
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
@@ -352,10 +354,11 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
     for line in design:
         log.say("stability", line)
+    balanced, closed_out = _clip_limits(balanced, syn.closed_out, state, urdf, config, log)
     overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, out_dir, log,
-                                         closed=manipulation.closed_tuples(syn.closed_out))
+                                         closed=manipulation.closed_tuples(closed_out))
     return _Attempt(
-        asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=syn.closed_out,
+        asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
         st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
         targets=syn.targets,
     )
@@ -429,6 +432,21 @@ def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, conf
     return st, overrides
 
 
+def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], urdf: Path, config: RefineConfig,
+                 log: _StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
+    """Stage 6b: joint limits clipped to what the geometry allows at the
+    refined state (:mod:`asset2sim.tasks.geometry.limits`; the writer writes
+    them, the sweep measures against them). Returns (overlay, closed ends)."""
+    with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
+                                                       conventions=config.sim)) as sess:
+        clips = limits.geometric_limits(sess, read_urdf(urdf), manipulation.closed_tuples(closed_out), state)
+    overlay, notes = limits.apply_clips(overlay, clips)
+    for line in notes:
+        log.say("limits", line)
+    log.lap("limits")
+    return overlay, limits.clipped_closed(closed_out, clips)
+
+
 def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
                 closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
     """Stage 7: write the refined state, post-check it (with ``closed``, the
@@ -441,16 +459,19 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
     write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-    check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed)
+    recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
+    check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, rounds_left=config.max_escalation_rounds, recorded=recorded)
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     n = 0
+    caps = operating.friction_caps(overlay, overlay, asset, ctx.geometry)
     while not check.passed and n < config.max_escalation_rounds:
         n += 1
-        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor)
+        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps)
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-        check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed)
+        check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, rounds_left=config.max_escalation_rounds - n,
+                                         recorded=recorded)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return overlay, check, rounds
@@ -578,7 +599,7 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
     instead of simulating it again. Returns name -> path."""
     recording = None if att.rewritten else att.check.recording
     with quiet_stdout():  # engines and renderers print from C; the library must not
-        paths = _write_extras(out_dir, report, log.say, recording, reference)
+        paths = _write_extras(out_dir, report, log.say, recording, reference, recorded=att.check.recorded)
     log.lap("extras")
     report.stage_seconds = log.times
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
@@ -628,7 +649,7 @@ def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescri
 
 
 def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording: postcheck.RestRecording | None = None,
-                  reference: Path | str | None = None) -> dict[str, str]:
+                  reference: Path | str | None = None, recorded: postcheck.RecordedRuns | None = None) -> dict[str, str]:
     """Optional outputs: MJCF export, renders, evaluation and HTML report
     (the renders reused in it). Each failure (an engine or renderer
     unavailable included) is a note in the report, never the loss of the
@@ -647,7 +668,7 @@ def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording:
     except Exception as exc:
         report.notes.append(f"renders failed: {exc}")
     try:
-        paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference,
+        paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=recorded,
                                           views=views, views_state=report.initial_joint_positions,
                                           checks=list(report.metrics) if recording is not None else None)
         out["html"] = str(paths["report"])

@@ -12,12 +12,15 @@ gives more friction and damping (never a different state). Definitions:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import robust_rest, sweep
+from asset2sim.tasks.check import recorded_runs, robust_rest, sweep
+from asset2sim.tasks.check.recorded_runs import RecordedRuns
 
 #: The metrics this module adds to the post-check.
 MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "robust_rest")
@@ -25,13 +28,20 @@ MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "robust_rest")
 
 def measure_manipulation(engine: str, urdf: Path | str, initial_state: dict[str, float], springs: dict[str, Spring],
                          conventions: SimConventions, closed: dict[str, tuple[float, float, float]],
-                         fixed_base: bool = False) -> list[MetricResult]:
-    """Joint sweep and robust rest of ``urdf`` in ``engine``.
+                         fixed_base: bool = False, *, recorded: RecordedRuns | None = None,
+                         sweep_needed: Callable[[MetricResult], str | None] | None = None) -> list[MetricResult]:
+    """Joint sweep and robust rest of ``urdf`` in ``engine`` (robust rest first).
 
     Args:
         closed: joint -> (q_closed rad or m, opening direction +-1, open range rad or m)
             of every movable joint (the refine run's closed ends at the output scale).
         fixed_base: the asset declares its root fixed (robust rest skipped).
+        recorded: runs taken from / recorded into it by the digest of their
+            inputs (:mod:`asset2sim.tasks.check.recorded_runs`).
+        sweep_needed: given the robust-rest result, the reason the sweep is
+            not needed (the post-check's round fails and is escalated
+            whatever the sweep says), or None to run it; the sweep is then
+            recorded as not run (``passed`` None, ``details["not_run"]``).
 
     Returns:
         [joint_sweep, robust_rest] results (``details["root"]`` says how the root was held).
@@ -39,11 +49,17 @@ def measure_manipulation(engine: str, urdf: Path | str, initial_state: dict[str,
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
     """
-    sw = sweep.sweep_metric(sweep.run_sweep(engine, urdf, closed, initial_state, springs, conventions))
-    sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
-    rr = robust_rest.robust_rest_metric(robust_rest.run_robust_rest(engine, urdf, initial_state, springs, conventions,
-                                                                    fixed_base=fixed_base))
+    rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, urdf, initial_state, springs, conventions,
+                                                                      fixed_base=fixed_base, recorded=recorded))
     rr.details["root"] = "fixed (mounted)" if fixed_base else "free (on the ground)"
+    why_not = sweep_needed(rr) if sweep_needed is not None else None
+    if why_not:
+        sw = MetricResult(name="joint_sweep", value=None, unit=unit("joint_sweep"), passed=None,
+                          details={"not_run": why_not}, engine=engine)
+    else:
+        sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, urdf, closed, initial_state, springs, conventions,
+                                                        recorded=recorded))
+    sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
     return [sw, rr]
 
 

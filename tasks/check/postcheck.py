@@ -22,6 +22,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import manipulation, metrics, parity
+from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
 
@@ -147,6 +148,9 @@ class PostCheck:
     """Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation]."""
     recording: RestRecording | None = None
     """The rest test step by step (reused by the evaluation of the same files)."""
+    recorded: RecordedRuns = field(default_factory=RecordedRuns)
+    """The manipulation tiers' runs by the digest of their inputs (reused by
+    the evaluation of the same files, :mod:`asset2sim.tasks.check.recorded_runs`)."""
 
     def engine_failures(self) -> tuple[bool, list[str]]:
         """(any other engine unstable, joints oscillating in another engine);
@@ -190,6 +194,9 @@ def run_post_check(
     config: RefineConfig,
     engine: str = "pybullet",
     closed: dict[str, tuple[float, float, float]] | None = None,
+    *,
+    rounds_left: int = 0,
+    recorded: RecordedRuns | None = None,
 ) -> PostCheck:
     """Measure penetration, rest stability, oscillation and sag of the written
     asset in ``engine`` (SPEC conventions), and the SPEC metrics in every other
@@ -198,7 +205,19 @@ def run_post_check(
     mounted asset, else free on the ground; every metric says which
     (``details["root"]``). With ``closed`` (joint -> (q_closed, direction,
     open range), rad or m) the manipulation tiers too: joint sweep and robust
-    rest in ``engine`` (:mod:`asset2sim.tasks.check.manipulation`)."""
+    rest in ``engine`` (:mod:`asset2sim.tasks.check.manipulation`).
+
+    Tiers run cheapest first: the rest test (and other engines), then robust
+    rest, then the joint sweep. With ``rounds_left`` > 0 (escalation rounds
+    the caller may still run after this check) the sweep is not run when the
+    check already fails without it and :func:`escalate` changes the overlay:
+    the round is escalated whatever the sweep says, and escalation never reads
+    the sweep (only the last round's sweep is reported; an escalation round
+    records it as not run, ``details["not_run"]``). Robust rest always runs
+    every trial: escalation sizes each joint's friction from the worst drift
+    over all trials (:func:`~asset2sim.tasks.check.manipulation.hold_factor`).
+    ``recorded``: manipulation runs taken from / recorded into it (a new
+    record when None; :attr:`PostCheck.recorded`)."""
     conv = config.sim
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
     pen, recording = measure_rest_test(engine, urdf_path, initial_state, springs_of(overlay), conv, fixed_base=fixed)
@@ -227,10 +246,22 @@ def run_post_check(
         engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
     for m in (pen, stab, osc, sag_metric, tilt):
         m.details["root"] = root_label(fixed)
+    base = [pen, stab, osc, sag_metric, tilt]
+    recorded = recorded if recorded is not None else RecordedRuns()
+
+    def sweep_needed(rr: MetricResult) -> str | None:
+        if rounds_left <= 0:
+            return None
+        partial = PostCheck(metrics=[*base, rr], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results)
+        if partial.passed or not escalate(overlay, partial, config.escalation_factor)[1]:
+            return None
+        return "escalation round: the check fails without the sweep and is escalated whatever it says"
+
     extra = [] if closed is None else manipulation.measure_manipulation(
-        engine, urdf_path, initial_state, springs_of(overlay), conv, closed, fixed_base=fixed)
-    return PostCheck(metrics=[pen, stab, osc, sag_metric, tilt, *extra], trace=trace, sag=drift, sagging=sagging,
-                     engine_results=engine_results, recording=recording)
+        engine, urdf_path, initial_state, springs_of(overlay), conv, closed, fixed_base=fixed,
+        recorded=recorded, sweep_needed=sweep_needed)
+    return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,
+                     engine_results=engine_results, recording=recording, recorded=recorded)
 
 
 def root_label(fixed: bool) -> str:
@@ -238,9 +269,16 @@ def root_label(fixed: bool) -> str:
     return "fixed (mounted)" if fixed else "free (on the ground)"
 
 
-def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+def escalate(overlay: Overlay, check: PostCheck, factor: float,
+             friction_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
     """Raise damping and friction of the joints that oscillate or sag (all
     joints when the root is unstable and no joint is singled out).
+
+    ``friction_caps`` (joint -> N*m or N, :func:`asset2sim.tasks.check.operating.friction_caps`):
+    friction never rises above what a hand or the probe can still overcome;
+    a joint at its cap gets the rest of the factor as damping only (damping
+    resists the drop's and the nudge's transients without making the part
+    harder to move slowly).
 
     Returns (new overlay, changes joint -> {parameter: new value}, reason).
     """
@@ -268,13 +306,21 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float) -> tuple[Overlay
         if name in not_held and name not in osc and name not in check.sagging:  # only robust rest: as far as needed
             f = manipulation.hold_factor(check.metrics, name, factor * factor)
         damping = max(d.damping * f, 1e-4)
+        friction = max(d.friction * f, 1e-3)
+        note = f"; escalated x{f:.3g}"
+        cap = (friction_caps or {}).get(name)
+        if cap is not None and friction > cap:
+            friction = max(cap, d.friction)
+            note += f" (friction capped at {friction:.3g}, operable by the probe's force)"
         if d.inertia_axis:
             damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
+        if friction == d.friction and damping == d.damping:
+            continue
         new = d.model_copy(
             update={
                 "damping": damping,
-                "friction": max(d.friction * f, 1e-3),
-                "source": d.source + f"; escalated x{f:.3g}",
+                "friction": friction,
+                "source": d.source + note,
             }
         )
         ov.joints[name] = new

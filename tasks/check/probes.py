@@ -19,7 +19,10 @@ external push (the pusher alone; the object's ground friction must resist it).
 
 Definitions (re-derivable; see ``docs/metrics.md``):
 
-- Push point c: centre of the moving link's collision AABB (world, m). For a
+- Push point c: for a revolute joint the corner of the moving link's collision
+  AABB (world, m) farthest from the axis (where a hand or a gripper opens a
+  lid, a door or a handle: the issue's "point of the moving link farthest
+  from the axis"); for a prismatic joint the AABB's centre. For a
   revolute joint with axis a (unit, world) through the link frame origin o, the
   lever r = (c - o) - ((c - o).a) a; the push direction is +-(a x r)/|a x r|
   and the generalised torque is F |r|. For a prismatic joint the direction is
@@ -135,10 +138,6 @@ class ProbeResult:
         return d
 
 
-#: A push point closer to the axis than this fraction of the link's largest
-#: radial extent is moved to the far corner of the link's box (a push 3 mm
-#: from a faucet handle's stem cannot turn it with a finger's force).
-SHORT_LEVER_FRACTION = 0.1
 
 
 def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | None]:
@@ -152,16 +151,13 @@ def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float |
     c = 0.5 * (lo + hi)
     if session.joint_types[joint] == "prismatic":
         return c, a, None
-    r = (c - o) - np.dot(c - o, a) * a
-    lever = float(np.linalg.norm(r))
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     rr = (corners - o) - np.outer((corners - o) @ a, a)
+    # The point of the moving link farthest from the axis (its box's far
+    # corner), where a hand or a gripper opens a lid, a door or a handle.
     k = int(np.argmax(np.linalg.norm(rr, axis=1)))
-    if lever < 1e-4 or lever < SHORT_LEVER_FRACTION * float(np.linalg.norm(rr[k])):
-        # The AABB centre lies on or near the axis (a knob, a faucet handle turning
-        # about its stem): push at the far corner, as a finger pushes a handle's end.
-        c, r = corners[k], rr[k]
-        lever = float(np.linalg.norm(r))
+    c, r = corners[k], rr[k]
+    lever = float(np.linalg.norm(r))
     t = np.cross(a, r)
     t /= max(np.linalg.norm(t), 1e-12)
     return c, t, max(lever, 1e-4)

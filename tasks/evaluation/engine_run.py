@@ -20,6 +20,7 @@ from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_sessi
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, record_rest_test
+from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.check.probes import run_probes
 from asset2sim.tasks.evaluation.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
@@ -48,6 +49,11 @@ class EngineRun:
     point_cloud: dict[str, np.ndarray] = field(default_factory=dict)
     """link -> (N, 3) m collision vertices in the world at the initial state (report)."""
     seconds: float = 0.0
+    recorded: RecordedRuns | None = None
+    """Manipulation-tier runs already simulated on these inputs (the refine
+    post-check's): the joint sweep and robust rest metrics take a run from it
+    when the digest of their inputs matches, else simulate
+    (:mod:`asset2sim.tasks.check.recorded_runs`)."""
 
 
 def link_centres(session) -> dict[str, np.ndarray]:
@@ -88,7 +94,7 @@ def point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
 def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
                closed_for: list[str] | None = None, rest_test: bool = True,
                recording: RestRecording | None = None, probe_joints: list[str] | None = None,
-               probe_actions: tuple[str, ...] = ("close", "open")) -> EngineRun:
+               probe_actions: tuple[str, ...] = ("close", "open"), recorded: RecordedRuns | None = None) -> EngineRun:
     """Open ``engine`` on the asset and take every raw measurement once:
     penetration at the initial state, extents, masses, the SPEC rest test with
     per-step root/ground recording, and (PyBullet) the probes from the initial
@@ -110,9 +116,10 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
     ~1e-3 relative from those measured without one). ``probe_joints`` /
     ``probe_actions``: what the probes try (a task,
     :mod:`asset2sim.tasks.evaluation.task_spec`); default the task-relevant
-    joints, close and open. Errors are caught into ``EngineRun.error``."""
+    joints, close and open. ``recorded``: kept in :attr:`EngineRun.recorded`
+    for the manipulation metrics. Errors are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()
-    run = EngineRun(engine)
+    run = EngineRun(engine, recorded=recorded)
     try:
         session = open_session(engine, ctx.urdf, SessionOptions(initial_state=dict(ctx.initial_state), springs=dict(ctx.springs), conventions=ctx.conventions,
                                                                 **session_root_options(ctx.root_fixed)))  # the root as declared

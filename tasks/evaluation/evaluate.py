@@ -40,6 +40,7 @@ from asset2sim.schemas.evaluation import EVALUATION_VERSION, Evaluation
 from asset2sim.schemas.metrics import REST_TEST_METRICS
 from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.check.postcheck import RestRecording
+from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.evaluation.asset_files import EvaluationError, JointInfo, LinkInfo, find_urdf, parse_urdf
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed, infer_scale_from_geometry
 from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine
@@ -128,6 +129,7 @@ def evaluate_asset(
     views_state: dict[str, float] | None = None,
     checks: list[MetricResult] | None = None,
     task: str | None = None,
+    recorded: RecordedRuns | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -185,6 +187,13 @@ def evaluate_asset(
             manifest's ``task``): the probes try only its joints and
             direction (:func:`asset2sim.tasks.evaluation.task_spec.parse_task`);
             None: every task-relevant joint, close and open.
+        recorded: the post-check's joint sweep and robust rest runs
+            (:class:`~asset2sim.tasks.check.recorded_runs.RecordedRuns`): a
+            run whose inputs (URDF bytes and meshes, initial state, springs,
+            conventions, root, configuration and, for the sweep, the
+            evaluation's own closed ends) hash the same is taken from it
+            instead of simulated again (the simulations are deterministic);
+            any difference re-runs it.
 
     Returns:
         The :class:`Evaluation`.
@@ -217,7 +226,7 @@ def evaluate_asset(
     for e in order:
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
         runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending,
-                             rest_test=e != reuse_engine, recording=recording,
+                             rest_test=e != reuse_engine, recording=recording, recorded=recorded,
                              **({} if tspec is None else {"probe_joints": tspec.joints, "probe_actions": tspec.actions}))
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
@@ -287,6 +296,7 @@ def evaluate_refined(
     views: dict[str, np.ndarray] | None = None,
     views_state: dict[str, float] | None = None,
     checks: list[MetricResult] | None = None,
+    recorded: RecordedRuns | None = None,
 ) -> dict[str, Path]:
     """Evaluate a refined output folder (PyBullet, SPEC conventions, probes)
     and write ``evaluation.json`` and ``report.html`` beside its
@@ -304,6 +314,7 @@ def evaluate_refined(
             ``views_state`` (rad/m); used in ``report.html`` when that is the
             evaluated initial state, else the report renders its own.
         checks: the post-check's results of these files (see :func:`evaluate_asset`).
+        recorded: the post-check's manipulation runs (see :func:`evaluate_asset`).
 
     Returns:
         {"evaluation": path, "report": path}.
@@ -314,7 +325,7 @@ def evaluate_refined(
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
-                   views=views, views_state=views_state, checks=checks)
+                   views=views, views_state=views_state, checks=checks, recorded=recorded)
     return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
 
 

@@ -38,7 +38,7 @@ from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.schemas.metrics import unit as unit_of
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
-from asset2sim.tasks.check import robust_rest, sweep
+from asset2sim.tasks.check import recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
@@ -384,7 +384,8 @@ def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         if r.error:
             out.append(_skip("joint_sweep", unit_of("joint_sweep"), e, r.error))
             continue
-        run = sweep.run_sweep(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions)
+        run = recorded_runs.sweep_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                      recorded=r.recorded)
         out.append(sweep.sweep_metric(run))
     return out
 
@@ -398,7 +399,7 @@ def _m_robust(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         if r.error:
             out.append(_skip("robust_rest", unit_of("robust_rest"), e, r.error))
             continue
-        run = robust_rest.run_robust_rest(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                          fixed_base=ctx.root_fixed)
+        run = recorded_runs.robust_rest_run(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                            fixed_base=ctx.root_fixed, recorded=r.recorded)
         out.append(robust_rest.robust_rest_metric(run))
     return out

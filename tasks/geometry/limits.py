@@ -1,0 +1,261 @@
+"""Joint limits clipped to what the geometry allows (issue 13; checked by the
+joint sweep of issue 15, :mod:`asset2sim.tasks.check.sweep`).
+
+A raw PartNet-Mobility limit can let a part swing or slide *into* its parent
+or a sibling (a stapler arm through its base, a lid through its box). The
+sweep drives each joint from its geometric closed end to 95 % of its range,
+so such a range cannot be reached without penetration. This module finds the
+geometric ends by a collision-aware scan, like
+:mod:`asset2sim.tasks.geometry.closed_state` finds the closed end.
+
+Method (per movable joint j with closed end q_c, opening direction d and
+range R, other joints at the state the sweep starts from, a fixed-base,
+gravity-free session at the output scale):
+
+1. Pairs: (link of j's moving subtree, any other link with collision
+   geometry), the parent included. Baseline b_p = the deepest penetration
+   (m, >= 0) of pair p at q_c (hull overlaps that exist already at the closed
+   end, e.g. a parent hull filling a door's cavity or a hinge barrel inside
+   its bracket, are the collision geometry's, not the limit's).
+2. Excess e(q) = max_p (depth_p(q) - b_p), m.
+3. Opening side: sample q = q_c + d R k / n, k = 1..n (n =
+   :data:`SCAN_SAMPLES`); the first sample with e > tol ends the free
+   range; bisection (:data:`BISECTIONS` halvings) between it and the previous
+   sample gives the geometric far end q_g. Closing side: the same from q_c
+   towards the other raw limit.
+4. The limit on that side becomes q_g when it lies inside the raw range by
+   more than :data:`MIN_CLIP_FRACTION` of R. When the free range is less than
+   :data:`MIN_FREE_FRACTION` of R the part is blocked at its closed end: the
+   collision geometry (not the limit) is wrong, and the limit is kept (the
+   sweep reports the block).
+
+tol = :data:`EXCESS_TOLERANCE` (2.5 mm, half the sweep's 5 mm
+self-penetration bound, so a drive pressing on the new stop stays inside it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.urdf import UrdfModel
+
+#: Deepest penetration increase (m) over the closed end that ends the free range.
+EXCESS_TOLERANCE = 0.0025
+#: Samples over the raw range on each side of the closed end.
+SCAN_SAMPLES = 48
+#: Bisection halvings between the last free and the first blocked sample.
+BISECTIONS = 7
+#: A side is clipped only when the geometric end is inside the raw range by
+#: more than this fraction of the opening range (smaller differences are noise).
+MIN_CLIP_FRACTION = 0.01
+#: Below this fraction of the raw opening range the part is blocked at its
+#: closed end: a collision-geometry defect, the limit is kept.
+MIN_FREE_FRACTION = 0.05
+
+
+@dataclass
+class LimitClip:
+    """Geometric limits of one joint (rad or m at the session's scale)."""
+
+    joint: str
+    raw_lower: float
+    raw_upper: float
+    lower: float
+    upper: float
+    q_closed: float
+    direction: float
+    open_range: float
+    """opening range from q_closed to the (clipped) far end, rad or m"""
+    blocked_by: str | None = None
+    """the link the moving part runs into on the opening side (None: free)"""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def clipped(self) -> bool:
+        """True when either side was clipped."""
+        return self.lower != self.raw_lower or self.upper != self.raw_upper
+
+
+def subtrees(model: UrdfModel) -> dict[str, list[str]]:
+    """Movable joint -> the links it moves (its child and every link below)."""
+    out = {}
+    for j in model.movable_joints:
+        links, stack = [], [j.child]
+        while stack:
+            ln = stack.pop()
+            links.append(ln)
+            stack.extend(c.child for c in model.children(ln))
+        out[j.name] = links
+    return out
+
+
+def _pairs(session, sub: list[str]) -> list[tuple[str, str]]:
+    subset = set(sub)
+    a = [n for n in sub if session.link_has_collision(n)]
+    b = [n for n in session.link_names if n not in subset and session.link_has_collision(n)]
+    return [(x, y) for x in a for y in b]
+
+
+def _depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
+    """Deepest penetration (m, >= 0) of each pair at the current state."""
+    out = np.zeros(len(pairs))
+    for i, (x, y) in enumerate(pairs):
+        d = session.link_distances(x, y, 0.0)
+        if d:
+            out[i] = max(0.0, -min(d))
+    return out
+
+
+def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
+             tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES) -> tuple[float, str | None]:
+    """Scan ``joint`` from ``q_from`` to ``q_to`` (rad or m) and return the
+    last position whose penetration excess over ``baseline`` ((P,) m, one per
+    pair of ``pairs``) stays <= ``tol`` (m), with the link it runs into
+    (None when the whole way is free). Other joints stay where the session has them."""
+    prev = q_from
+    for k in range(1, samples + 1):
+        q = q_from + (q_to - q_from) * k / samples
+        session.set_joint_positions({joint: q})
+        exc = _depths(session, pairs) - baseline
+        if float(exc.max(initial=0.0)) > tol:
+            lo, hi = prev, q
+            worst = pairs[int(np.argmax(exc))][1]
+            for _ in range(BISECTIONS):
+                mid = 0.5 * (lo + hi)
+                session.set_joint_positions({joint: mid})
+                e = _depths(session, pairs) - baseline
+                if float(e.max(initial=0.0)) > tol:
+                    hi, worst = mid, pairs[int(np.argmax(e))][1]
+                else:
+                    lo = mid
+            return float(lo), worst
+        prev = q
+    return float(q_to), None
+
+
+def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
+                     tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES) -> dict[str, LimitClip]:
+    """Geometric limits of every joint of ``closed`` (see the module docstring).
+
+    Args:
+        session: a fixed-base :class:`~asset2sim.engines.base.SimSession` of
+            the URDF ``model`` (any engine answering ``link_distances``).
+        model: the same URDF (kinematic tree).
+        closed: joint -> (q_closed, direction +-1, open range), rad or m, at the session's scale.
+        state: joint -> position (rad or m) the other joints hold (the sweep's start state).
+        tol: penetration excess (m) that ends the free range.
+        samples: samples over the raw range.
+
+    Returns:
+        joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
+        The session is left at ``state``.
+    """
+    subs = subtrees(model)
+    out: dict[str, LimitClip] = {}
+    for name, (qc, d, rng) in closed.items():
+        if name not in session.joint_limits or not rng > 0:
+            continue
+        lo, hi = session.joint_limits[name]
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            continue
+        session.set_joint_positions({**state, name: qc})
+        pairs = _pairs(session, subs.get(name, [session.joint_child[name]]))
+        clip = LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
+                         q_closed=float(qc), direction=float(d), open_range=float(rng))
+        out[name] = clip
+        if not pairs:
+            continue
+        # baseline: each pair's least depth over the raw range (overlaps present everywhere are the hulls')
+        qs = np.unique(np.concatenate([np.linspace(lo, hi, samples + 1), [qc]]))
+        depth = []
+        for q in qs:
+            session.set_joint_positions({name: q})
+            depth.append(_depths(session, pairs))
+        depth = np.array(depth)
+        base = depth.min(axis=0)
+        free = (depth - base).max(axis=1) <= tol
+        far_raw = hi if d > 0 else lo
+        back_raw = lo if d > 0 else hi
+        k_c = int(np.flatnonzero(qs == qc)[0])
+        q_close = float(qc)
+        if not free[k_c]:
+            # the closed end itself pushes into another link: first free sample towards the opening side
+            step = 1 if d > 0 else -1
+            k = k_c
+            while 0 <= k < len(qs) and not free[k]:
+                k += step
+            if not 0 <= k < len(qs):
+                clip.notes.append("penetrates other links over its whole range: collision geometry, limit kept")
+                continue
+            q_close, who_c = free_end(session, name, float(qs[k]), qc, pairs, base, tol, samples=4)
+            clip.notes.append(f"closed end {qc:.4g} -> {q_close:.4g}: at {qc:.4g} it runs into {who_c}")
+        session.set_joint_positions({name: q_close})
+        far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples)
+        span = abs(far - q_close)
+        if span < MIN_FREE_FRACTION * rng:
+            clip.notes.append(f"blocked at its closed end by {who} (free {span:.3g} of {rng:.3g}): collision geometry, limit kept")
+            clip.blocked_by = who
+            clip.notes = clip.notes[-1:]
+            continue
+        if abs(far_raw - far) > MIN_CLIP_FRACTION * rng:
+            clip.blocked_by = who
+            clip.notes.append(f"{'upper' if d > 0 else 'lower'} limit {far_raw:.4g} -> {far:.4g} "
+                              f"({abs(far_raw - far):.3g} clipped): runs into {who}")
+        else:
+            far = float(far_raw)
+        back = float(back_raw)
+        if q_close != qc:
+            back = q_close
+            clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {back:.4g} "
+                              f"({abs(back_raw - back):.3g} clipped): the new closed end")
+        elif abs(back_raw - qc) > MIN_CLIP_FRACTION * rng:
+            session.set_joint_positions({name: qc})
+            b, who_b = free_end(session, name, qc, back_raw, pairs, base, tol, samples)
+            if abs(back_raw - b) > MIN_CLIP_FRACTION * rng:
+                back = b
+                clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {b:.4g} "
+                                  f"({abs(back_raw - b):.3g} clipped, beyond the closed end): runs into {who_b}")
+        clip.lower, clip.upper = (back, far) if d > 0 else (far, back)
+        clip.q_closed, clip.open_range = q_close, span
+        q0 = state.get(name)
+        if q0 is not None and not clip.lower <= q0 <= clip.upper:  # the requested state stays inside
+            clip.lower, clip.upper = min(clip.lower, float(q0)), max(clip.upper, float(q0))
+            clip.open_range = max(clip.open_range, abs(float(q0) - clip.q_closed))
+            clip.notes.append(f"widened to keep the initial state {q0:.4g}")
+    session.set_joint_positions(state)
+    return out
+
+
+def apply_clips(overlay: Overlay, clips: dict[str, LimitClip]) -> tuple[Overlay, list[str]]:
+    """The overlay with the clipped limits of ``clips`` in its joints'
+    ``lower`` / ``upper`` (and ``limit_source``), plus one note per clipped
+    joint (also added to ``overlay.notes.other``). Joints not clipped are unchanged."""
+    ov = overlay.model_copy(deep=True)
+    notes = []
+    for name, c in clips.items():
+        dyn = ov.joints.get(name)
+        if dyn is None or not c.clipped:
+            continue
+        why = "; ".join(c.notes)
+        ov.joints[name] = dyn.model_copy(update={
+            "lower": c.lower if c.lower != c.raw_lower else dyn.lower,
+            "upper": c.upper if c.upper != c.raw_upper else dyn.upper,
+            "limit_source": f"clipped to the geometry (tasks.geometry.limits): {why}",
+        })
+        notes.append(f"joint {name}: {why}")
+    if notes:
+        ov.notes.other = list(ov.notes.other) + [f"limit clipped to the geometry: {n}" for n in notes]
+    return ov, notes
+
+
+def clipped_closed(closed: dict, clips: dict[str, LimitClip]) -> dict:
+    """``closed`` (joint -> :class:`~asset2sim.tasks.geometry.closed_state.ClosedState`)
+    with the clipped joints' limits and opening range."""
+    out = dict(closed)
+    for name, c in clips.items():
+        if name in out and c.clipped:
+            out[name] = replace(out[name], q_closed=c.q_closed, lower=c.lower, upper=c.upper, open_range=c.open_range)
+    return out

@@ -1,0 +1,81 @@
+"""Joint limits clipped to what the geometry allows (tasks.geometry.limits), on generated assets."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.fake import write_contract_asset
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
+from asset2sim.tasks.geometry import limits
+from asset2sim.urdf import read_urdf
+
+STATE = {"lid_hinge": 0.4, "post_slide": 0.0}
+
+
+def _lid_asset(tmp_path: Path, upper: float) -> Path:
+    """The contract box with the lid's raw upper limit set to ``upper`` rad:
+    beyond about 3.3 rad the lid swings into the back wall of its own body."""
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    u = Path(a.urdf)
+    text = re.sub(r'(<joint name="lid_hinge".*?<limit[^>]*upper=")([^"]+)"', lambda m: m.group(1) + f'{upper}"',
+                  u.read_text(), flags=re.S)
+    u.write_text(text)
+    return u
+
+
+def _session(urdf: Path, state: dict[str, float]):
+    return open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state))
+
+
+def test_a_lid_limit_through_its_body_is_clipped_and_the_sweep_passes(tmp_path):
+    urdf = _lid_asset(tmp_path, 5.0)
+    closed = {"lid_hinge": (0.0, 1.0, 5.0)}
+    with _session(urdf, STATE) as sess:
+        # the raw far end is inside the body: deeper than the sweep allows
+        sess.set_joint_positions({**STATE, "lid_hinge": 5.0})
+        assert min(sess.link_distances("lid", "body", 0.0)) < -0.005
+        clips = limits.geometric_limits(sess, read_urdf(urdf), closed, STATE)
+        c = clips["lid_hinge"]
+        assert c.clipped and c.blocked_by == "body"
+        assert 2.0 < c.upper < 4.5 and c.lower == 0.0
+        assert c.open_range == c.upper - c.q_closed
+        sess.set_joint_positions({**STATE, "lid_hinge": c.upper})
+        assert min(sess.link_distances("lid", "body", 0.0), default=0.0) > -0.005  # the sweep's bound
+    # the URDF carries the clipped limit; the sweep measured against it passes
+    text = urdf.read_text()
+    urdf.write_text(re.sub(r'(<joint name="lid_hinge".*?<limit[^>]*upper=")([^"]+)"', lambda m: m.group(1) + f'{c.upper}"',
+                           text, flags=re.S))
+    run = run_sweep("pybullet", urdf, {"lid_hinge": (c.q_closed, c.direction, c.open_range)}, STATE)
+    m = sweep_metric(run)
+    assert m.passed, m.details["failures"]
+
+
+def test_a_limit_inside_the_geometry_is_kept(tmp_path):
+    urdf = _lid_asset(tmp_path, 2.0)
+    with _session(urdf, STATE) as sess:
+        c = limits.geometric_limits(sess, read_urdf(urdf), {"lid_hinge": (0.0, 1.0, 2.0)}, STATE)["lid_hinge"]
+    assert not c.clipped and (c.lower, c.upper, c.open_range) == (0.0, 2.0, 2.0)
+
+
+def test_a_limit_beyond_the_closed_end_is_clipped(tmp_path):
+    """Raw range [-0.6, 2]: closing past 0 pushes the lid into the body's front wall."""
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    u = Path(a.urdf)
+    u.write_text(re.sub(r'(<joint name="lid_hinge".*?<limit[^>]*lower=")([^"]+)"', lambda m: m.group(1) + '-0.6"',
+                        u.read_text(), flags=re.S))
+    with _session(u, STATE) as sess:
+        c = limits.geometric_limits(sess, read_urdf(u), {"lid_hinge": (0.0, 1.0, 2.0)}, STATE)["lid_hinge"]
+    assert c.upper == 2.0 and -0.1 < c.lower <= 0.0 and c.clipped
+
+
+def test_clipped_limits_reach_the_overlay(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    ov = Overlay.model_validate_json((a.root / "overlay.json").read_text())
+    clip = limits.LimitClip(joint="lid_hinge", raw_lower=0.0, raw_upper=5.0, lower=0.0, upper=3.3, q_closed=0.0,
+                            direction=1.0, open_range=3.3, blocked_by="body", notes=["upper limit 5 -> 3.3"])
+    new, notes = limits.apply_clips(ov, {"lid_hinge": clip})
+    assert new.joints["lid_hinge"].upper == 3.3 and new.joints["lid_hinge"].lower is None
+    assert "upper limit 5 -> 3.3" in new.joints["lid_hinge"].limit_source and notes
