@@ -33,7 +33,7 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import manipulation, operating, parity, postcheck
+from asset2sim.tasks.check import manipulation, operating, parity, postcheck, sweep
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
@@ -50,7 +50,7 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import collision, pose, refine_state, stability
+from asset2sim.tasks.state import clearance, collision, pose, refine_state, stability
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
@@ -354,9 +354,12 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
     for line in design:
         log.say("stability", line)
+    unclipped = balanced
     balanced, closed_out = _clip_limits(balanced, syn.closed_out, state, urdf, config, log)
     overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, out_dir, log,
                                          closed=manipulation.closed_tuples(closed_out))
+    overlay, check, rounds, overrides, closed_out = _repair_sweep(
+        ctx, unclipped, syn.closed_out, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, out_dir, log)
     return _Attempt(
         asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
         st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
@@ -447,6 +450,47 @@ def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: di
     return overlay, limits.clipped_closed(closed_out, clips)
 
 
+def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
+                  state: dict[str, float], urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog):
+    """Stage 7b: where the joint sweep is blocked by a sliding contact, give
+    the moving pieces running clearance (:mod:`asset2sim.tasks.state.clearance`),
+    clip the limits again from ``unclipped`` (the overlay before stage 6b) and
+    ``closed_raw`` (contacts changed) and post-check again; kept only when
+    fewer joints fail the sweep and no metric that passed fails (else the
+    files are written back). ``result``: (overlay, check, rounds, collision
+    overrides, closed ends) so far, returned unchanged or replaced; notes go
+    to ``st.collision_changes``."""
+    overlay, check, rounds, overrides, closed_out = result
+    sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
+    blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
+    if not blocked:
+        return result
+    model = read_urdf(urdf)
+    rep = clearance.clearance_for_blocked(model, urdf, blocked, state, limits.subtrees(model))
+    if not rep.pieces:
+        return result
+    new = {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))}
+    write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=new, root_rotation=ctx.root_rotation)
+    clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log)
+    ov2, check2, rounds2 = _post_check(ctx, clipped, state, new, urdf, config, out_dir, log, closed=manipulation.closed_tuples(closed2))
+    sw2 = next(m for m in check2.metrics if m.name == "joint_sweep")
+    passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
+    lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
+    if sweep.sweep_score(sw2) < sweep.sweep_score(sw) and not lost:
+        for line in rep.notes:
+            log.say("sweep_repair", line)
+        st.collision_changes = list(st.collision_changes) + rep.notes
+        n = len(rounds)
+        rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"running clearance (sweep blocked): {r.reason}"})
+                           for r in rounds2]
+        return ov2, check2, rounds, new, closed2
+    log.say("sweep_repair", f"running clearance not kept (sweep failures {sw.value:g} -> {sw2.value:g}: "
+                            f"{'; '.join(sw2.details.get('failures') or []) or 'none'}"
+                            f"{'; would fail ' + ', '.join(lost) if lost else ''}); collision pieces kept")
+    write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
+    return result
+
+
 def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
                 closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
     """Stage 7: write the refined state, post-check it (with ``closed``, the
@@ -460,18 +504,22 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     rounds: list[EscalationRound] = []
     write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
-    check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, rounds_left=config.max_escalation_rounds, recorded=recorded)
-    rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     n = 0
     caps = operating.friction_caps(overlay, overlay, asset, ctx.geometry)
+
+    def escalated(chk: postcheck.PostCheck) -> bool:
+        """This loop escalates ``chk`` into another round (the post-check then skips the sweep)."""
+        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps)[1])
+
+    check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded)
+    rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     while not check.passed and n < config.max_escalation_rounds:
         n += 1
         overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps)
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-        check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, rounds_left=config.max_escalation_rounds - n,
-                                         recorded=recorded)
+        check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded)
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return overlay, check, rounds

@@ -327,6 +327,7 @@ _LAZY: dict[str, str] = {
     "pybullet": "asset2sim.engines.pybullet_engine",
     "physx": "asset2sim.engines.physx_engine",
     "mujoco": "asset2sim.engines.mujoco_engine",
+    "newton": "asset2sim.engines.newton_engine",
     "fake": "asset2sim.engines.fake",
 }
 

@@ -11,6 +11,7 @@ rounds); every round is recorded.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -195,7 +196,7 @@ def run_post_check(
     engine: str = "pybullet",
     closed: dict[str, tuple[float, float, float]] | None = None,
     *,
-    rounds_left: int = 0,
+    escalated: Callable[[PostCheck], bool] | None = None,
     recorded: RecordedRuns | None = None,
 ) -> PostCheck:
     """Measure penetration, rest stability, oscillation and sag of the written
@@ -208,12 +209,13 @@ def run_post_check(
     rest in ``engine`` (:mod:`asset2sim.tasks.check.manipulation`).
 
     Tiers run cheapest first: the rest test (and other engines), then robust
-    rest, then the joint sweep. With ``rounds_left`` > 0 (escalation rounds
-    the caller may still run after this check) the sweep is not run when the
-    check already fails without it and :func:`escalate` changes the overlay:
-    the round is escalated whatever the sweep says, and escalation never reads
-    the sweep (only the last round's sweep is reported; an escalation round
-    records it as not run, ``details["not_run"]``). Robust rest always runs
+    rest, then the joint sweep. ``escalated(check)``: the caller's escalation
+    loop says whether it escalates ``check`` into another round (it must
+    decide from what :func:`escalate` reads, which is never the sweep); when
+    the check already fails without the sweep and ``escalated`` says so, the
+    sweep is not run: the round is escalated whatever the sweep says, only the
+    last round's sweep is reported, and an escalation round records it as not
+    run (``passed`` None, ``details["not_run"]``). Robust rest always runs
     every trial: escalation sizes each joint's friction from the worst drift
     over all trials (:func:`~asset2sim.tasks.check.manipulation.hold_factor`).
     ``recorded``: manipulation runs taken from / recorded into it (a new
@@ -250,10 +252,11 @@ def run_post_check(
     recorded = recorded if recorded is not None else RecordedRuns()
 
     def sweep_needed(rr: MetricResult) -> str | None:
-        if rounds_left <= 0:
+        if escalated is None:
             return None
-        partial = PostCheck(metrics=[*base, rr], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results)
-        if partial.passed or not escalate(overlay, partial, config.escalation_factor)[1]:
+        partial = PostCheck(metrics=[*base, rr], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results,
+                            recording=recording, recorded=recorded)
+        if partial.passed or not escalated(partial):
             return None
         return "escalation round: the check fails without the sweep and is escalated whatever it says"
 

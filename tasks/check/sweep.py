@@ -7,8 +7,20 @@ anyone can re-derive it, see ``docs/metrics.md``):
 - The object is loaded with its **root fixed** (a mounted object, or a robot's
   second hand holding the body), gravity off and no ground, so the only
   resistance a joint meets is its own Coulomb friction, damping, spring and
-  the object's self-collision geometry. Other joints start at the initial
-  state and stay passive.
+  the object's self-collision geometry. The other movable joints are held
+  at the initial state (a zero-velocity drive with force limit
+  :data:`HOLD_FORCE`: the second hand or fixture holding the rest of the
+  object), so each joint is tested on its own: without gravity a
+  spring-loaded part balanced by its weight at rest (a stapler's lid, 102990)
+  springs away if left passive and carries the swept part with it, and in
+  PyBullet a spring torque on a passive joint held by its friction motor
+  stalled the velocity drive of the swept joint at a force-independent
+  position (103275: 95 % short; reproduced with raw PyBullet calls). With the
+  others held only the swept joint's own spring is applied (a held joint's
+  spring load is taken by the hold). Exception: PyBullet applies a spring by
+  torque control every step, which leaves the holds of the other joints
+  drifting, so in PyBullet the others stay passive while a joint with a
+  spring is swept.
 - Each movable joint is teleported to its geometric closed end q_c
   (:mod:`asset2sim.tasks.geometry.closed_state`, opening direction d, largest
   opening R) and driven by a force-limited **position controller built on a
@@ -53,6 +65,7 @@ from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_sess
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.geometry import limits
 from asset2sim.urdf import UrdfModel, read_urdf
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
@@ -63,6 +76,10 @@ DIVERGED_SPEED_REVOLUTE = 100.0
 DIVERGED_SPEED_PRISMATIC = 10.0
 #: Standard gravity, m/s^2 (the SPEC's).
 G = 9.81
+#: Force limit (N*m or N) of the zero-velocity drive that holds the joints not
+#: swept: far above any part's operating force (a second hand or the fixture
+#: holding the rest of the object), so they do not yield.
+HOLD_FORCE = 1000.0
 
 
 @dataclass
@@ -81,6 +98,10 @@ class SweepConfig:
     """deepest self-contact point allowed during the sweep, m"""
     reach_fraction: float = REACH_FRACTION
     """fraction of the range to reach each way"""
+    hold_others: bool = True
+    """hold the other movable joints at the initial state while one is swept"""
+    hold_force: float = HOLD_FORCE
+    """force limit of the hold, N*m or N (beyond the joint's friction)"""
 
 
 @dataclass
@@ -104,6 +125,8 @@ class JointSweep:
     diverged: bool
     passed: bool
     failure: str = ""
+    range_note: str = ""
+    """how the range differs from the closed end's (parts held in the way)"""
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict."""
@@ -216,6 +239,8 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
                 return best, k * dt
             v = float(np.clip(cfg.position_gain * (goal - q), -v_max, v_max))
             session.drive_joint(joint, v, limit)
+            for o in held:
+                session.drive_joint(o, 0.0, cfg.hold_force)
             session.step(1)
             d, pair = _deepest(session)
             if d > max_pen:
@@ -226,11 +251,18 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
             best = max(best, f) if goal == q_far else min(best, f)
         return best, (n * dt if done(f) else None)
 
+    # PyBullet applies springs by torque control every step, which left the
+    # zero-velocity holds of other joints drifting (102990: a held joint ran
+    # 1.3 rad while the swept lid's spring acted): with a spring in the
+    # session the other joints stay passive
+    hold = cfg.hold_others and not (session.options.springs and session.engine == "pybullet")
+    held = [o for o in session.joint_types if o != joint] if hold else []
     try:
         out, t_out = drive(q_far, lambda f: f >= cfg.reach_fraction)
         back, t_back = (float("nan"), None) if diverged else drive(closed, lambda f: f <= 1.0 - cfg.reach_fraction)
     finally:
-        session.release_joint(joint)
+        for o in [joint, *held]:
+            session.release_joint(o)
     failure = []
     if diverged:
         failure.append("diverged")
@@ -257,6 +289,28 @@ class SweepRun:
     """joint -> why it was not swept"""
 
 
+def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
+                conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
+    """The ranges the sweep can demand with the other joints held at
+    ``state``: each joint's (q_closed, direction, range) of ``closed`` (rad
+    or m) cut where its moving part meets a part of another movable joint
+    (:func:`asset2sim.tasks.geometry.limits.geometric_limits` with
+    ``against="held"``; the URDF limit against the part's own stops is
+    refine's business). Measured in a PyBullet session (closest-point
+    queries; the same for every engine, like the closed ends). Returns
+    (closed tuples, joint -> note for the joints whose range was cut)."""
+    out = dict(closed)
+    notes = {}
+    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False,
+                                                       conventions=conventions or SimConventions())) as s:
+        clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held")
+    for name, c in clips.items():
+        if c.clipped:
+            out[name] = (c.q_closed, c.direction, c.open_range)
+            notes[name] = "held parts in the way: " + "; ".join(c.notes)
+    return out, notes
+
+
 def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
@@ -271,25 +325,41 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
     conv = conventions or SimConventions()
     subtrees = joint_subtrees(read_urdf(urdf))
     run = SweepRun(engine)
-    opts = SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}), fixed_base=True,
-                          gravity=False, ground=False, conventions=conv)
-    session = open_session(engine, urdf, opts)
-    try:
-        saved = session.save_state()
-        for name, (qc, d, rng) in closed.items():
-            if name not in session.joint_types:
-                run.skipped[name] = "not a movable joint in this engine"
-                continue
-            if not rng > 0:
-                run.skipped[name] = "no opening range"
-                continue
-            session.restore_state(saved)
-            run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
-                                          links=subtrees.get(name, [session.joint_child[name]]),
-                                          initial_state=initial_state, config=cfg))
-        session.discard_state(saved)
-    finally:
-        session.close()
+    springs = dict(springs or {})
+    notes: dict[str, str] = {}
+    if cfg.hold_others and closed:
+        closed, notes = held_ranges(urdf, closed, initial_state, conv)
+    # with the others held, only the swept joint's own spring acts (a held
+    # joint's spring load is taken by the hold): one session per spring set
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name in closed:
+        key = ((name,) if name in springs else ()) if cfg.hold_others else tuple(sorted(springs))
+        groups.setdefault(key, []).append(name)
+    for key, names in groups.items():
+        opts = SessionOptions(initial_state=dict(initial_state), springs={n: springs[n] for n in key}, fixed_base=True,
+                              gravity=False, ground=False, conventions=conv)
+        session = open_session(engine, urdf, opts)
+        try:
+            saved = session.save_state()
+            for name in names:
+                qc, d, rng = closed[name]
+                if name not in session.joint_types:
+                    run.skipped[name] = "not a movable joint in this engine"
+                    continue
+                if not rng > 0:
+                    run.skipped[name] = "no opening range"
+                    continue
+                session.restore_state(saved)
+                run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
+                                              links=subtrees.get(name, [session.joint_child[name]]),
+                                              initial_state=initial_state, config=cfg))
+            session.discard_state(saved)
+        finally:
+            session.close()
+    order = list(closed)
+    run.joints.sort(key=lambda j: order.index(j.joint))
+    for j in run.joints:
+        j.range_note = notes.get(j.joint, "")
     return run
 
 
@@ -311,3 +381,38 @@ def sweep_metric(run: SweepRun, config: SweepConfig | None = None) -> MetricResu
                  "failures": [f"{j.joint}: {j.failure}" for j in run.joints if not j.passed], "skipped": run.skipped},
         engine=run.engine,
     )
+
+
+def blocked_positions(metric: MetricResult) -> dict[str, float]:
+    """Joint -> the position (rad or m) where the sweep of ``metric`` (a
+    ``joint_sweep`` result) stopped short: on the way out when the far end was
+    not reached, else on the way back when the closed end was not. Joints
+    that passed, diverged or only penetrated are left out."""
+    out = {}
+    for name, j in (metric.details.get("joints") or {}).items():
+        if j["passed"] or j["diverged"]:
+            continue
+        if j["time_open"] is None:
+            f = j["reached_open"]
+        elif j["time_close"] is None:
+            f = j["reached_closed"]
+        else:
+            continue
+        if np.isfinite(f):
+            out[name] = float(j["q_closed"] + (j["q_far"] - j["q_closed"]) * f)
+    return out
+
+
+def sweep_score(metric: MetricResult) -> tuple[float, float]:
+    """Order of two ``joint_sweep`` results of the same asset, lower is
+    better: (failing joints, summed shortfall of the failing joints: 0.95 -
+    reached opening plus reached closing - 0.05, each >= 0, rounded to 0.01
+    so noise does not count). A non-finite reach counts as the whole range."""
+    short = 0.0
+    for j in (metric.details.get("joints") or {}).values():
+        if j["passed"]:
+            continue
+        out, back = j["reached_open"], j["reached_closed"]
+        short += max(0.0, REACH_FRACTION - out) if np.isfinite(out) else 1.0
+        short += max(0.0, back - (1.0 - REACH_FRACTION)) if np.isfinite(back) else 1.0
+    return float(metric.value), round(short, 2)

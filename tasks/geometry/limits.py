@@ -14,23 +14,33 @@ gravity-free session at the output scale):
 
 1. Pairs: (link of j's moving subtree, any other link with collision
    geometry), the parent included. Baseline b_p = the deepest penetration
-   (m, >= 0) of pair p at q_c (hull overlaps that exist already at the closed
-   end, e.g. a parent hull filling a door's cavity or a hinge barrel inside
-   its bracket, are the collision geometry's, not the limit's).
+   (m, >= 0) of pair p at q_c for a parent-child pair (a parent hull filling
+   a door's cavity is the collision geometry's, not the limit's), and its
+   least over the raw range for any other pair (the pairs the sweep
+   measures; an overlap present everywhere, e.g. a part touching a wall it
+   slides along, is the hulls'). A closed end where the excess (2.) is above
+   tol moves to the first free state towards the opening side.
 2. Excess e(q) = max_p (depth_p(q) - b_p), m.
 3. Opening side: sample q = q_c + d R k / n, k = 1..n (n =
    :data:`SCAN_SAMPLES`); the first sample with e > tol ends the free
    range; bisection (:data:`BISECTIONS` halvings) between it and the previous
    sample gives the geometric far end q_g. Closing side: the same from q_c
    towards the other raw limit.
-4. The limit on that side becomes q_g when it lies inside the raw range by
-   more than :data:`MIN_CLIP_FRACTION` of R. When the free range is less than
+4. When the refined initial state of j lies outside the free range found,
+   the scan disagrees with a state the state search accepted (hull overlap):
+   the limit is kept and a note says so.
+5. The limit on that side becomes q_g when it lies inside the raw range by
+   more than :data:`MIN_CLIP_FRACTION` of R, moved back to where the contact
+   begins (excess <= :data:`ONSET_TOLERANCE`, at most
+   :data:`BACK_OFF_FRACTION` of R back; :func:`contact_onset`): a
+   force-limited drive stalls where the contact force balances it. When the free range is less than
    :data:`MIN_FREE_FRACTION` of R the part is blocked at its closed end: the
    collision geometry (not the limit) is wrong, and the limit is kept (the
    sweep reports the block).
 
-tol = :data:`EXCESS_TOLERANCE` (2.5 mm, half the sweep's 5 mm
-self-penetration bound, so a drive pressing on the new stop stays inside it).
+tol = :data:`EXCESS_TOLERANCE` (1 mm: the force-limited drive of the sweep
+stalls within about that depth of a contact, so the 95 % of the clipped range
+it must reach lie inside the free range).
 """
 
 from __future__ import annotations
@@ -42,8 +52,16 @@ import numpy as np
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.urdf import UrdfModel
 
-#: Deepest penetration increase (m) over the closed end that ends the free range.
-EXCESS_TOLERANCE = 0.0025
+#: Deepest penetration increase (m) over the baseline that ends the free range:
+#: about where a force-limited drive stalls against the contact (the sweep
+#: must reach 95 % of the clipped range).
+EXCESS_TOLERANCE = 0.001
+#: Excess (m) under which a contact has not yet begun (:func:`contact_onset`).
+ONSET_TOLERANCE = 0.0002
+#: Farthest a clipped far end is moved back from the tolerance crossing to
+#: the contact's onset, as a fraction of the opening range (the 5 % the sweep
+#: allows stay free of the contact).
+BACK_OFF_FRACTION = 0.03
 #: Samples over the raw range on each side of the closed end.
 SCAN_SAMPLES = 48
 #: Bisection halvings between the last free and the first blocked sample.
@@ -92,10 +110,27 @@ def subtrees(model: UrdfModel) -> dict[str, list[str]]:
     return out
 
 
-def _pairs(session, sub: list[str]) -> list[tuple[str, str]]:
+def rigid_group(model: UrdfModel, link: str) -> set[str]:
+    """``link`` and every link joined to it by fixed joints only (either way):
+    the links that keep their pose relative to ``link`` whatever the movable
+    joints do."""
+    out, stack = {link}, [link]
+    while stack:
+        ln = stack.pop()
+        for j in model.joints:
+            if j.type != "fixed":
+                continue
+            for a, b in ((j.parent, j.child), (j.child, j.parent)):
+                if a == ln and b not in out:
+                    out.add(b)
+                    stack.append(b)
+    return out
+
+
+def _pairs(session, sub: list[str], against: set[str] | None = None) -> list[tuple[str, str]]:
     subset = set(sub)
     a = [n for n in sub if session.link_has_collision(n)]
-    b = [n for n in session.link_names if n not in subset and session.link_has_collision(n)]
+    b = [n for n in session.link_names if n not in subset and session.link_has_collision(n) and (against is None or n in against)]
     return [(x, y) for x in a for y in b]
 
 
@@ -136,8 +171,26 @@ def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[
     return float(q_to), None
 
 
+def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
+                  max_back: float, onset: float = ONSET_TOLERANCE, steps: int = 8) -> float:
+    """Where the contact that ends the free range at ``q_end`` begins: the
+    first of ``steps`` positions from ``q_end`` back towards ``q_free`` (rad
+    or m), at most ``max_back`` away, whose penetration excess over
+    ``baseline`` is <= ``onset`` m; ``q_end`` moved back by ``max_back`` when
+    none is (the drive of the sweep stalls where the contact force balances
+    it, before the excess reaches the scan's tolerance)."""
+    sgn = 1.0 if q_free > q_end else -1.0
+    back = min(max_back, abs(q_free - q_end))
+    for k in range(1, steps + 1):
+        q = q_end + sgn * back * k / steps
+        session.set_joint_positions({joint: q})
+        if float((_depths(session, pairs) - baseline).max(initial=0.0)) <= onset:
+            return float(q)
+    return float(q_end + sgn * back)
+
+
 def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                     tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES) -> dict[str, LimitClip]:
+                     tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, against: str = "stops") -> dict[str, LimitClip]:
     """Geometric limits of every joint of ``closed`` (see the module docstring).
 
     Args:
@@ -148,12 +201,19 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         state: joint -> position (rad or m) the other joints hold (the sweep's start state).
         tol: penetration excess (m) that ends the free range.
         samples: samples over the raw range.
+        against: ``"stops"``: only the links rigid with the joint's parent
+            (:func:`rigid_group`), whose geometry stops the part in every
+            state of the other joints (the URDF limit); ``"held"``: only the
+            other links (parts of other movable joints, held at ``state``:
+            the range the joint sweep can demand there; the far end only:
+            a held part that keeps the part from shutting is not cut away).
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
         The session is left at ``state``.
     """
     subs = subtrees(model)
+    parent_of = {j.child: j.parent for j in model.joints}
     out: dict[str, LimitClip] = {}
     for name, (qc, d, rng) in closed.items():
         if name not in session.joint_limits or not rng > 0:
@@ -162,7 +222,10 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         if not (np.isfinite(lo) and np.isfinite(hi)):
             continue
         session.set_joint_positions({**state, name: qc})
-        pairs = _pairs(session, subs.get(name, [session.joint_child[name]]))
+        jd = model.joint(name)
+        sub = subs.get(name, [session.joint_child[name]])
+        stops = rigid_group(model, jd.parent) - set(sub)
+        pairs = _pairs(session, sub, stops if against == "stops" else set(session.link_names) - stops - set(sub))
         clip = LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
                          q_closed=float(qc), direction=float(d), open_range=float(rng))
         out[name] = clip
@@ -175,13 +238,18 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             session.set_joint_positions({name: q})
             depth.append(_depths(session, pairs))
         depth = np.array(depth)
-        base = depth.min(axis=0)
-        free = (depth - base).max(axis=1) <= tol
         far_raw = hi if d > 0 else lo
         back_raw = lo if d > 0 else hi
         k_c = int(np.flatnonzero(qs == qc)[0])
+        # baseline: a parent-child pair's depth at the closed end (a parent hull
+        # filling the closed part's cavity: the hulls', not the limit's); any
+        # other pair's least depth over the range (the sweep measures those
+        # pairs: a closed end pressed into a sibling is not closed)
+        adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in pairs])
+        base = np.where(adjacent, depth[k_c], depth.min(axis=0))
+        free = (depth - base).max(axis=1) <= tol
         q_close = float(qc)
-        if not free[k_c]:
+        if not free[k_c] and against == "stops":  # a held part in the way of shutting is the sweep's finding
             # the closed end itself pushes into another link: first free sample towards the opening side
             step = 1 if d > 0 else -1
             k = k_c
@@ -201,6 +269,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             clip.notes = clip.notes[-1:]
             continue
         if abs(far_raw - far) > MIN_CLIP_FRACTION * rng:
+            far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * rng)
             clip.blocked_by = who
             clip.notes.append(f"{'upper' if d > 0 else 'lower'} limit {far_raw:.4g} -> {far:.4g} "
                               f"({abs(far_raw - far):.3g} clipped): runs into {who}")
@@ -211,7 +280,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             back = q_close
             clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {back:.4g} "
                               f"({abs(back_raw - back):.3g} clipped): the new closed end")
-        elif abs(back_raw - qc) > MIN_CLIP_FRACTION * rng:
+        elif against == "stops" and abs(back_raw - qc) > MIN_CLIP_FRACTION * rng:
             session.set_joint_positions({name: qc})
             b, who_b = free_end(session, name, qc, back_raw, pairs, base, tol, samples)
             if abs(back_raw - b) > MIN_CLIP_FRACTION * rng:
@@ -219,12 +288,14 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
                 clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {b:.4g} "
                                   f"({abs(back_raw - b):.3g} clipped, beyond the closed end): runs into {who_b}")
         clip.lower, clip.upper = (back, far) if d > 0 else (far, back)
-        clip.q_closed, clip.open_range = q_close, span
+        clip.q_closed, clip.open_range = q_close, abs(far - q_close)
         q0 = state.get(name)
-        if q0 is not None and not clip.lower <= q0 <= clip.upper:  # the requested state stays inside
-            clip.lower, clip.upper = min(clip.lower, float(q0)), max(clip.upper, float(q0))
-            clip.open_range = max(clip.open_range, abs(float(q0) - clip.q_closed))
-            clip.notes.append(f"widened to keep the initial state {q0:.4g}")
+        if q0 is not None and not clip.lower <= q0 <= clip.upper:
+            # the refined state lies beyond the free range: the hulls, not the limit, disagree; keep the raw limit
+            out[name] = LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
+                                  q_closed=float(qc), direction=float(d), open_range=float(rng), blocked_by=who,
+                                  notes=[f"not clipped: the initial state {q0:.4g} lies beyond the free range "
+                                         f"[{clip.lower:.4g}, {clip.upper:.4g}] (hull overlap, not the limit)"])
     session.set_joint_positions(state)
     return out
 

@@ -111,13 +111,31 @@ class Piece:
 
     @classmethod
     def of(cls, points: np.ndarray, sources: tuple[str, ...] = ()) -> "Piece":
-        """The hull of ``points`` (k, 3) m.
+        """The hull of ``points`` (k, 3) m (Qhull once per distinct point
+        array in this process: :data:`_HULLS`; the arrays are shared, never
+        modified).
 
         Raises:
             QhullError, ValueError: the points span no volume.
         """
-        hull = ConvexHull(np.asarray(points, float))
-        return cls(hull.points[hull.vertices], hull.equations, float(hull.volume), sources)
+        pts = np.ascontiguousarray(points, dtype=float)
+        key = (pts.shape, hashlib.sha1(pts.tobytes()).digest())
+        hit = _HULLS.get(key)
+        if hit is None:
+            hull = ConvexHull(pts)
+            hit = (hull.points[hull.vertices], hull.equations, float(hull.volume))
+            if len(_HULLS) >= _HULLS_MAX:
+                _HULLS.pop(next(iter(_HULLS)))
+            _HULLS[key] = hit
+        return cls(hit[0], hit[1], hit[2], sources)
+
+
+#: Hulls computed in this process: (shape, SHA-1 of the points) -> (vertices,
+#: equations, volume). A refine run builds the same pieces at every write
+#: (state search, post-check, escalation rounds), and the greedy merge tries
+#: the same pairs again for every initial state.
+_HULLS: dict[tuple, tuple[np.ndarray, np.ndarray, float]] = {}
+_HULLS_MAX = 5000
 
 
 @dataclass
@@ -178,8 +196,25 @@ def support_points(points: np.ndarray) -> np.ndarray:
 
 def piece_obj(piece: Piece) -> bytes:
     """OBJ bytes of ``piece``: its hull vertices and triangles wound so that
-    every face normal (right-hand rule) points outward."""
-    hull = ConvexHull(piece.points)
+    every face normal (right-hand rule) points outward (made once per
+    distinct point array in this process, :data:`_OBJS`)."""
+    pts = np.ascontiguousarray(piece.points, dtype=float)
+    key = (pts.shape, hashlib.sha1(pts.tobytes()).digest())
+    data = _OBJS.get(key)
+    if data is None:
+        data = _piece_obj(pts)
+        if len(_OBJS) >= 4096:
+            _OBJS.pop(next(iter(_OBJS)))
+        _OBJS[key] = data
+    return data
+
+
+#: OBJ bytes of pieces written in this process, by (shape, SHA-1 of the points).
+_OBJS: dict[tuple, bytes] = {}
+
+
+def _piece_obj(points: np.ndarray) -> bytes:
+    hull = ConvexHull(points)
     tri = hull.simplices.copy()
     a, b, c = (hull.points[tri[:, i]] for i in range(3))
     flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0

@@ -88,6 +88,7 @@ from asset2sim import atomic
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_initial_state, read_urdf
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, read_mesh
+from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
 from asset2sim.tasks.publish.write import read_root
 from asset2sim.urdf import UrdfJoint, UrdfModel
@@ -142,21 +143,20 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
 
 def _hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (k, 3) and outward-wound triangles (m, 3) of the convex hull
-    of ``points`` (n, 3) (scipy's Qhull)."""
+    of ``points`` (n, 3) (scipy's Qhull; each facet turned to agree with its
+    outward plane normal)."""
     from scipy.spatial import ConvexHull
 
     hull = ConvexHull(np.asarray(points, float))
     used = np.unique(hull.simplices)
-    remap = {int(v): i for i, v in enumerate(used)}
+    remap = np.full(len(hull.points), -1)
+    remap[used] = np.arange(len(used))
+    tris = remap[hull.simplices]
     verts = hull.points[used]
-    tris = []
-    for simplex, eq in zip(hull.simplices, hull.equations):
-        a, b, c = (hull.points[i] for i in simplex)
-        tri = [remap[int(i)] for i in simplex]
-        if np.dot(np.cross(b - a, c - a), eq[:3]) < 0:
-            tri = [tri[0], tri[2], tri[1]]
-        tris.append(tri)
-    return verts, np.asarray(tris, int)
+    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
+    tris[flip] = tris[flip][:, [0, 2, 1]]
+    return verts, tris
 
 
 def _transform(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -318,9 +318,7 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
                 continue
             pts = _transform(verts * v.scale, v.origin)
             mesh = UsdGeom.Mesh.Define(stage, p)
-            mesh.CreatePointsAttr([Gf.Vec3f(*map(float, q)) for q in pts])
-            mesh.CreateFaceVertexCountsAttr([3] * len(faces))
-            mesh.CreateFaceVertexIndicesAttr([int(i) for i in faces.ravel()])
+            _set_mesh(mesh, pts, faces)
             mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
             mesh.CreateDoubleSidedAttr(True)
         else:
@@ -330,6 +328,15 @@ def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[st
         if v.material is not None and v.material.rgba is not None:
             rgba = np.asarray(v.material.rgba, float)
             mesh.CreateDisplayColorAttr([Gf.Vec3f(*map(float, rgba[:3]))])
+
+
+def _set_mesh(mesh, points: np.ndarray, triangles: np.ndarray) -> None:
+    """Points (k, 3) m and triangles (m, 3) of a UsdGeom.Mesh (binary32 points)."""
+    from pxr import Vt
+
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, np.float32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(triangles), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(triangles, np.int32).ravel()))
 
 
 def _primitive(stage, path, kind: str, size, radius, length, origin: np.ndarray):
@@ -365,9 +372,7 @@ def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
         if piece.kind == "hull":
             verts, tris = _hull_mesh(_transform(piece.points, piece.origin))
             g = UsdGeom.Mesh.Define(stage, p)
-            g.CreatePointsAttr([Gf.Vec3f(*map(float, q)) for q in verts])
-            g.CreateFaceVertexCountsAttr([3] * len(tris))
-            g.CreateFaceVertexIndicesAttr([int(i) for i in tris.ravel()])
+            _set_mesh(g, verts, tris)
             g.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
             UsdPhysics.CollisionAPI.Apply(g.GetPrim())
             UsdPhysics.MeshCollisionAPI.Apply(g.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
@@ -549,7 +554,11 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
     larger of the value and the largest value of the same quantity on that
     link (COM: the largest |component| or 1 mm; inertia: the largest moment).
 
+    Every link and joint ``overlay.json`` lists is also compared with the
+    overlay's own numbers (mass, COM, inertia; damping, friction, stiffness).
+
     Raises:
+        ValueError: ``overlay.json`` is not a valid overlay.
         UsdExportError: a value differs (names the link or joint and the
             quantity), a link or joint is missing, the articulation root or
             the mounting differs.
@@ -590,6 +599,28 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
         cmp(f"link {name!r} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
         want = link.inertial.inertia_in_link_axes()
         cmp(f"link {name!r} inertia tensor (kg*m^2)", got.inertia, want, float(np.abs(want).max()))
+    overlay_path = out_dir / "overlay.json"
+    if overlay_path.is_file():  # the overlay's own numbers, not only the URDF that carries them
+        try:
+            overlay = Overlay.model_validate_json(overlay_path.read_text())
+        except ValueError as exc:
+            raise ValueError(f"{overlay_path}: not a valid overlay: {exc}") from exc
+        for name, lp in overlay.links.items():
+            got = usd.links.get(name)
+            if got is None or got.mass is None or got.com is None or got.inertia is None:
+                raise UsdExportError(f"{path}: overlay link {name!r} has no mass, COM or inertia in the USD")
+            cmp(f"overlay link {name!r} mass (kg)", got.mass, lp.mass, abs(lp.mass))
+            com = np.asarray(lp.com, float)
+            cmp(f"overlay link {name!r} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
+            want = lp.inertia.matrix()
+            cmp(f"overlay link {name!r} inertia tensor (kg*m^2)", got.inertia, want, float(np.abs(want).max()))
+        for name, jd in overlay.joints.items():
+            got = usd.joints.get(name)
+            if got is None:
+                raise UsdExportError(f"{path}: overlay joint {name!r} is not in the USD")
+            cmp(f"overlay joint {name!r} damping", got.damping, jd.damping, abs(jd.damping))
+            cmp(f"overlay joint {name!r} friction", got.friction, jd.friction, abs(jd.friction))
+            cmp(f"overlay joint {name!r} stiffness", got.stiffness, jd.stiffness, abs(jd.stiffness))
     for j in model.movable_joints:
         got = usd.joints.get(j.name)
         if got is None:

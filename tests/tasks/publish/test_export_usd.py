@@ -13,6 +13,7 @@ import pytest
 from asset2sim.engines.fake import write_contract_asset
 from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
+from asset2sim.schemas.overlay import Inertia
 from asset2sim.tasks.publish.export_mjcf import export_mjcf
 from tests.conftest import SHARED
 
@@ -44,7 +45,23 @@ def contract(tmp_path) -> Path:
     out = tmp_path / "out"
     write_contract_asset(out, lid_angle=0.4, post_height=0.01, lid_stiffness=0.3, lid_spring_reference=0.2)
     _tilt_lid_inertial(out / "mobility.urdf")
+    # the overlay says what the URDF now carries
+    lid = read_urdf(out / "mobility.urdf").links["lid"].inertial
+    overlay = json.loads((out / "overlay.json").read_text())
+    overlay["links"]["lid"]["com"] = lid.com().tolist()
+    overlay["links"]["lid"]["inertia"] = Inertia.from_matrix(lid.inertia_in_link_axes()).model_dump()
+    (out / "overlay.json").write_text(json.dumps(overlay))
     return out
+
+
+def test_check_compares_with_the_overlay(contract):
+    """A URDF that does not carry the overlay's numbers is caught by name."""
+    build = export_usd(contract)
+    overlay = json.loads((contract / "overlay.json").read_text())
+    overlay["links"]["lid"]["mass"] *= 2
+    (contract / "overlay.json").write_text(json.dumps(overlay))
+    with pytest.raises(UsdExportError, match="overlay link 'lid' mass"):
+        check_usd(build.path, contract)
 
 
 def test_principal_axes_rebuild_the_tensor():

@@ -1,0 +1,214 @@
+"""Collision repair where the joint sweep is blocked: running clearance for
+parts modelled with none.
+
+PartNet-Mobility parts often fit with zero clearance: a stapler's magazine
+between the two walls of its base, a drawer between its runners, a hinge
+leaf against its bracket. Real parts slide there; in a simulator the two
+convex pieces touch, every engine's contact margin (PyBullet: about 1 mm per
+convex hull, so touching hulls report 2 mm of penetration) turns the touch
+into an interference, and the penetration recovery presses the faces together:
+friction then holds the part, and the force-limited drive of the joint sweep
+(:mod:`asset2sim.tasks.check.sweep`) cannot move it (stapler 103275: 0 % of
+the body's range; the same drive passes once the pair is not collided).
+
+Method, for every joint the sweep reports blocked (``reached only ...`` or
+``closed back only ...``), at the state where it stopped (other joints at the
+sweep's start state), with the written collision pieces (the writer's convex
+pieces, link frame, m):
+
+1. For each convex piece P of a link the joint moves and each piece Q of a
+   link it does not move (parent-child pairs excepted: every engine skips
+   them, SPEC), the separating-axis test over the face normals of both hulls
+   (Gottschalk, Lin and Manocha, "OBBTree", SIGGRAPH 1996; the face-normal
+   axes of the SAT for convex polyhedra) gives the gap g (m, negative when
+   they overlap) and the axis n (from P to Q) of least overlap. P and Q are
+   in contact when g < :data:`CLEARANCE`.
+2. The contact is a **sliding** one when n is nearly perpendicular to the
+   motion of P's contact face: |n . t| < :data:`SLIDING_COS` with t the unit
+   velocity direction of the face centre (a x r for a revolute joint with
+   axis a through o, r = centre - o; a for a prismatic one). A contact along
+   the motion is a stop (the limit's business, :mod:`asset2sim.tasks.geometry.limits`).
+3. P's face towards Q is moved back along n by delta = max(0, -g) +
+   :data:`CLEARANCE` (an affine squeeze of P along n that keeps its far face:
+   the piece stays convex), never by more than half of P's width along n.
+
+The pieces of the changed links are returned (link frame, m, every piece of
+the link, changed or not) for the writer's collision overrides.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from asset2sim import atomic
+from asset2sim.schemas.asset import GeometryRef
+from asset2sim.tasks.state.collision import CollisionPiece
+from asset2sim.urdf import UrdfModel
+
+#: Running clearance (m) given to a sliding contact: PyBullet's two 1 mm hull
+#: margins (touching hulls report 2 mm; see
+#: :data:`asset2sim.engines.loading.FLAT_HULL_THICKNESS`) plus 0.5 mm.
+CLEARANCE = 0.0025
+#: |cos| between the contact normal and the motion below which a contact slides (60 deg or more).
+SLIDING_COS = 0.5
+#: A squeeze never takes more than this fraction of a piece's width along n.
+MAX_SQUEEZE = 0.5
+
+
+@dataclass
+class ClearanceRepair:
+    """Pieces with clearance for the links that needed it."""
+
+    pieces: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    """link -> every convex piece of the link (k, 3) m in the link frame"""
+    notes: list[str] = field(default_factory=list)
+
+
+def _hull(points: np.ndarray) -> ConvexHull | None:
+    try:
+        return ConvexHull(points)
+    except (QhullError, ValueError):
+        return None
+
+
+def sat_gap(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
+    """Separating-axis test of two convex point sets (k, 3), (l, 3) m over the
+    face normals of both hulls. Returns (gap g m, unit axis n from p to q):
+    g > 0 they are apart by at least g; g <= 0 they overlap by at most -g along n.
+
+    Raises:
+        ValueError: a set spans no volume.
+    """
+    hp, hq = _hull(p), _hull(q)
+    if hp is None or hq is None:
+        raise ValueError("a convex piece spans no volume")
+    axes = np.vstack([hp.equations[:, :3], hq.equations[:, :3]])
+    axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    sp, sq = p @ axes.T, q @ axes.T  # (k, A), (l, A)
+    ahead = sq.min(axis=0) - sp.max(axis=0)  # q beyond p along +axis
+    behind = sp.min(axis=0) - sq.max(axis=0)  # q before p
+    gaps = np.maximum(ahead, behind)
+    i = int(np.argmax(gaps))
+    n = axes[i] if ahead[i] >= behind[i] else -axes[i]
+    return float(gaps[i]), n
+
+
+def _squeeze(p: np.ndarray, n: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
+    """Move the face of ``p`` (k, 3) towards +n back by ``delta`` m (at most
+    :data:`MAX_SQUEEZE` of its width), keeping the face towards -n. Returns (points, delta used)."""
+    s = p @ n
+    lo, w = float(s.min()), float(np.ptp(s))
+    d = min(delta, MAX_SQUEEZE * w)
+    if w <= 0 or d <= 0:
+        return p, 0.0
+    return p - np.outer((s - lo) * (d / w), n), d
+
+
+def _link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
+    """Vertices (k, 3) m of each mesh collision of ``link`` in the link frame
+    (collision origin and mesh scale applied; one piece per file: the
+    writer's convex pieces are one hull per file)."""
+    out = []
+    for c in model.links[link].collisions:
+        if c.kind != "mesh" or not c.filename:
+            continue
+        path = Path(c.path) if c.path is not None else root / c.filename
+        v = np.array([[float(x) for x in ln.split()[1:4]] for ln in path.read_text().splitlines() if ln.startswith("v ")])
+        if not len(v):
+            continue
+        v = v * (c.mesh_scale if c.mesh_scale is not None else 1.0)
+        out.append(v @ c.origin[:3, :3].T + c.origin[:3, 3])
+    return out
+
+
+def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float], state: dict[str, float],
+                          subtrees: dict[str, list[str]]) -> ClearanceRepair:
+    """Clearance repairs for the joints in ``blocked`` (joint -> the position,
+    rad or m, where the sweep stopped) of the written URDF ``model`` (file
+    ``urdf``, its collision files beside it), other joints at ``state``.
+    ``subtrees``: joint -> the links it moves. See the module docstring.
+
+    Raises:
+        OSError: a collision file cannot be read.
+    """
+    root = Path(urdf).parent
+    rep = ClearanceRepair()
+    cache: dict[str, list[np.ndarray]] = {}
+
+    def pieces(ln: str) -> list[np.ndarray]:
+        if ln not in cache:
+            cache[ln] = _link_pieces(model, root, ln)
+        return cache[ln]
+
+    parent_of = {j.child: j.parent for j in model.joints}
+    for name, q in blocked.items():
+        joint = model.joint(name)
+        poses = model.link_poses({**state, name: q})
+        sub = subtrees.get(name, [joint.child])
+        others = [ln for ln in model.links if ln not in sub and pieces(ln)]
+        T_j = poses[joint.child]
+        axis_w = T_j[:3, :3] @ joint.axis
+        origin_w = T_j[:3, 3]
+        for ln in sub:
+            Tl = poses[ln]
+            Rl, tl = Tl[:3, :3], Tl[:3, 3]
+            own = [P.copy() for P in (rep.pieces.get(ln) or pieces(ln))]
+            changed = False
+            for other in others:
+                if parent_of.get(ln) == other or parent_of.get(other) == ln:
+                    continue  # parent-child pairs are not collided (SPEC)
+                To = np.linalg.inv(Tl) @ poses[other]
+                for Q in pieces(other):
+                    Ql = Q @ To[:3, :3].T + To[:3, 3]
+                    for i, P in enumerate(own):
+                        try:
+                            g, n = sat_gap(P, Ql)
+                        except ValueError:
+                            continue
+                        if g >= CLEARANCE:
+                            continue
+                        face = P[(P @ n) >= (P @ n).max() - 1e-3].mean(axis=0)
+                        n_w, c_w = Rl @ n, Rl @ face + tl
+                        t = axis_w if joint.type == "prismatic" else np.cross(axis_w, c_w - origin_w)
+                        if np.linalg.norm(t) > 1e-9 and abs(float(n_w @ t) / np.linalg.norm(t)) >= SLIDING_COS:
+                            continue  # a stop along the motion, not a sliding contact
+                        own[i], used = _squeeze(P, n, max(0.0, -g) + CLEARANCE)
+                        if used > 0:
+                            changed = True
+                            rep.notes.append(
+                                f"{ln}: collision piece {i} given {used * 1000:.2g} mm running clearance against {other} "
+                                f"(gap {g * 1000:.2g} mm, sliding contact blocking {name})")
+            if changed:
+                rep.pieces[ln] = own
+    return rep
+
+
+def _obj(points: np.ndarray) -> str:
+    h = ConvexHull(points)
+    v = points[h.vertices]
+    index = {int(k): i for i, k in enumerate(h.vertices)}
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in v.tolist()]
+    lines += [f"f {index[int(a)] + 1} {index[int(b)] + 1} {index[int(c)] + 1}" for a, b, c in h.simplices]
+    return "\n".join(lines) + "\n"
+
+
+def write_overrides(rep: ClearanceRepair, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
+    """Write the repaired pieces as OBJ files ``out_dir/folder/<link>_clear<i>.obj``
+    (at the input's units: divided by the overlay ``scale``, which the writer
+    multiplies back) and return the writer's collision overrides (link ->
+    pieces; every mesh collision of the link is replaced)."""
+    out: dict[str, list[CollisionPiece]] = {}
+    for ln, plist in rep.pieces.items():
+        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in ln)
+        items = []
+        for i, P in enumerate(plist):
+            rel = f"{folder}/{safe}_clear{i}.obj"
+            atomic.write_text(Path(out_dir) / rel, _obj(np.asarray(P, float) / scale))
+            ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=(Path(out_dir) / rel).resolve())
+            items.append(CollisionPiece(filename=rel, source=ref))
+        out[ln] = items
+    return out

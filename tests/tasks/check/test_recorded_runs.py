@@ -1,0 +1,104 @@
+"""The manipulation tiers recorded once and reused only for identical inputs;
+the post-check runs the sweep only on a round it may report (issue 14)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from asset2sim.engines.fake import write_contract_asset
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.check import postcheck, recorded_runs
+from asset2sim.tasks.check.recorded_runs import RecordedRuns
+from asset2sim.tasks.check.robust_rest import robust_rest_metric, run_robust_rest
+from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.refine import refine_asset
+from asset2sim.urdf import read_urdf
+from tests.tasks.check.failure_assets import build_tall_faucet
+
+CLOSED = {"lid_hinge": (0.0, 1.0, 2.0), "post_slide": (0.0, 1.0, 0.05)}
+STATE = {"lid_hinge": 0.4, "post_slide": 0.0}
+
+
+def test_sweep_is_reused_for_the_same_inputs_and_rerun_for_other_closed_ends(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    rec = RecordedRuns()
+    first = recorded_runs.sweep_run("pybullet", a.urdf, CLOSED, STATE, recorded=rec)
+    again = recorded_runs.sweep_run("pybullet", a.urdf, CLOSED, dict(reversed(list(STATE.items()))), recorded=rec)
+    assert (rec.hits, rec.misses) == (1, 1)
+    assert sweep_metric(again) == sweep_metric(first) == sweep_metric(run_sweep("pybullet", a.urdf, CLOSED, STATE))
+    other = {"lid_hinge": (0.0, 1.0, 1.5), "post_slide": (0.0, 1.0, 0.05)}
+    shorter = recorded_runs.sweep_run("pybullet", a.urdf, other, STATE, recorded=rec)
+    assert (rec.hits, rec.misses) == (1, 2)
+    assert shorter.joints[0].open_range == 1.5 != first.joints[0].open_range
+
+
+def test_robust_rest_is_rerun_when_the_urdf_or_state_changes(tmp_path):
+    a = write_contract_asset(tmp_path / "a", lid_angle=0.4)
+    rec = RecordedRuns()
+    first = recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)
+    again = recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)
+    assert (rec.hits, rec.misses) == (1, 1)
+    assert robust_rest_metric(again) == robust_rest_metric(first) == robust_rest_metric(run_robust_rest("pybullet", a.urdf, STATE))
+    again.trials[0].joint_drift.clear()  # a copy: the record is not changed through it
+    assert robust_rest_metric(recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)) == robust_rest_metric(first)
+    recorded_runs.robust_rest_run("pybullet", a.urdf, {**STATE, "lid_hinge": 0.5}, recorded=rec)
+    assert rec.misses == 2
+    # the same path written again with a stiffer hinge: other bytes, another run
+    write_contract_asset(tmp_path / "a", lid_angle=0.4, lid_friction=5.0)
+    stiff = recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)
+    assert rec.misses == 3
+    assert robust_rest_metric(stiff) == robust_rest_metric(run_robust_rest("pybullet", a.urdf, STATE))
+
+
+def _closed(out):
+    """Every movable joint closed at its lower limit, opening over its range."""
+    return {j.name: (float(j.lower), 1.0, float(j.upper - j.lower))
+            for j in read_urdf(out / "mobility.urdf").movable_joints}
+
+
+@pytest.fixture(scope="module")
+def faucet_out(tmp_path_factory):
+    src = build_tall_faucet(tmp_path_factory.mktemp("faucet") / "tall_faucet")
+    return refine_asset(src, "A faucet.", tmp_path_factory.mktemp("out") / "out", extras=False)
+
+
+def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(faucet_out):
+    """Free-standing, the tall faucet tips over: the check fails without the
+    sweep and escalation changes the overlay, so while the loop escalates the
+    sweep is not run; everything escalation reads is the same either way, and
+    on the last round (not escalated) the sweep is measured."""
+    out, ov = faucet_out.out_dir, faucet_out.overlay.model_copy(update={"mounting": None})
+    state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
+    closed = _closed(out)
+    cfg = RefineConfig()
+    rec = RecordedRuns()
+    def escalated(chk):  # as refine's loop: another round whenever escalation changes something
+        return bool(postcheck.escalate(ov, chk, cfg.escalation_factor)[1])
+
+    early = postcheck.run_post_check(out / "mobility.urdf", state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
+    last = postcheck.run_post_check(out / "mobility.urdf", state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
+    assert not early.passed and not last.passed
+    assert early.metric("joint_sweep").passed is None and "not_run" in early.metric("joint_sweep").details
+    assert last.metric("joint_sweep").passed is not None and "not_run" not in last.metric("joint_sweep").details
+    assert [m for m in early.metrics if m.name != "joint_sweep"] == [m for m in last.metrics if m.name != "joint_sweep"]
+    assert postcheck.escalate(ov, early, cfg.escalation_factor) == postcheck.escalate(ov, last, cfg.escalation_factor)
+    assert rec.hits == 1  # robust rest of the same files taken from the first check
+
+
+def test_evaluation_takes_the_post_checks_runs_only_where_inputs_match(faucet_out):
+    """refine's evaluation reused the post-check's robust rest (same files and
+    state) and reports what a fresh evaluation measures."""
+    out = faucet_out.out_dir
+    ov = faucet_out.overlay
+    state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
+    closed = _closed(out)
+    check = postcheck.run_post_check(out / "mobility.urdf", state, ov, RefineConfig(), closed=closed)
+    rec = check.recorded
+    reused = evaluate_asset(out, probes=False, recorded=rec)
+    fresh = evaluate_asset(out, probes=False)
+    assert rec.hits >= 1  # at least robust rest; the sweep too when the evaluation's closed ends are the same
+    pick = lambda ev: [m for m in ev.metrics if m.name in ("joint_sweep", "robust_rest")]  # noqa: E731
+    assert pick(reused) == pick(fresh)

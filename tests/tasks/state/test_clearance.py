@@ -1,0 +1,90 @@
+"""Running clearance for sliding contacts that block the joint sweep (tasks.state.clearance), on generated assets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim.tasks.check.sweep import joint_subtrees
+from asset2sim.tasks.state import clearance
+from asset2sim.urdf import read_urdf
+
+W = 0.02  # slider half width (m) along y
+
+
+def _cube_obj(lo, hi) -> str:
+    c = [lo, hi]
+    v = [[c[i][0], c[j][1], c[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    f = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4),
+         (1, 5, 7), (1, 7, 3)]
+    return "\n".join([f"v {a} {b} {c_}" for a, b, c_ in v] + [f"f {a + 1} {b + 1} {c_ + 1}" for a, b, c_ in f]) + "\n"
+
+
+def _link(name: str, meshes: list[str], mass: float) -> str:
+    cols = "".join(f'    <collision><geometry><mesh filename="{m}"/></geometry></collision>\n' for m in meshes)
+    return (f'  <link name="{name}"><inertial><mass value="{mass}"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" '
+            f'ixy="0" ixz="0" iyz="0"/></inertial>\n{cols}  </link>\n')
+
+
+def write_channel(root: Path, side_gap: float, end_stop: bool = False) -> Path:
+    """A slider (0.06 x 0.04 x 0.04 m box) on a prismatic joint along +x in a
+    channel whose two walls (a sibling link ``frame``) stand ``side_gap`` m
+    from its sides; with ``end_stop`` a wall across the channel touches the
+    slider's +x face at q = 0."""
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "wall_a.obj").write_text(_cube_obj([-0.1, -W - 0.01 - side_gap, 0], [0.1, -W - side_gap, 0.05]))
+    (root / "wall_b.obj").write_text(_cube_obj([-0.1, W + side_gap, 0], [0.1, W + 0.01 + side_gap, 0.05]))
+    (root / "stop.obj").write_text(_cube_obj([0.03, -W - 0.01, 0], [0.04, W + 0.01, 0.05]))
+    (root / "slider.obj").write_text(_cube_obj([-0.03, -W, 0.005], [0.03, W, 0.045]))
+    walls = ["wall_a.obj", "wall_b.obj"] + (["stop.obj"] if end_stop else [])
+    urdf = ('<robot name="channel">\n' + _link("base", [], 1.0) + _link("frame", walls, 1.0) + _link("slider", ["slider.obj"], 0.1)
+            + '  <joint name="mount" type="fixed"><parent link="base"/><child link="frame"/></joint>\n'
+            + '  <joint name="slide" type="prismatic"><parent link="base"/><child link="slider"/><axis xyz="1 0 0"/>\n'
+            + '    <limit lower="0" upper="0.06" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
+            + "</robot>\n")
+    (root / "mobility.urdf").write_text(urdf)
+    return root / "mobility.urdf"
+
+
+def _repair(urdf: Path):
+    m = read_urdf(urdf)
+    return m, clearance.clearance_for_blocked(m, urdf, {"slide": 0.0}, {"slide": 0.0}, joint_subtrees(m))
+
+
+def test_sat_gap_of_two_boxes():
+    a = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    g, n = clearance.sat_gap(a, a + [1.1, 0.0, 0.0])
+    assert abs(g - 0.1) < 1e-12 and np.allclose(n, [1, 0, 0])
+    g, n = clearance.sat_gap(a, a - [0.0, 0.0, 0.7])
+    assert abs(g + 0.3) < 1e-12 and np.allclose(n, [0, 0, -1])
+
+
+def test_a_slider_touching_both_walls_gets_running_clearance(tmp_path):
+    urdf = write_channel(tmp_path, side_gap=0.0)
+    model, rep = _repair(urdf)
+    assert set(rep.pieces) == {"slider"} and len(rep.notes) == 2
+    (piece,) = rep.pieces["slider"]
+    assert abs(np.ptp(piece[:, 1]) - (2 * W - 2 * clearance.CLEARANCE)) < 1e-12
+    assert abs(np.ptp(piece[:, 0]) - 0.06) < 1e-12 and abs(np.ptp(piece[:, 2]) - 0.04) < 1e-12  # along and across the motion unchanged
+    for wall in clearance._link_pieces(model, tmp_path, "frame"):
+        g, _ = clearance.sat_gap(piece, wall)
+        assert g >= clearance.CLEARANCE - 1e-12
+
+
+def test_a_stop_along_the_motion_and_a_free_channel_are_left_alone(tmp_path):
+    _, rep = _repair(write_channel(tmp_path / "stop", side_gap=0.004, end_stop=True))
+    assert not rep.pieces  # the end wall is a stop (the limit's business), the side walls are clear
+    _, rep = _repair(write_channel(tmp_path / "free", side_gap=0.004))
+    assert not rep.pieces
+
+
+def test_overrides_are_written_at_the_input_scale(tmp_path):
+    urdf = write_channel(tmp_path, side_gap=0.0)
+    _, rep = _repair(urdf)
+    out = clearance.write_overrides(rep, 0.5, tmp_path, "collision_x")
+    (piece,) = out["slider"]
+    v = np.array([[float(x) for x in ln.split()[1:4]] for ln in (tmp_path / piece.filename).read_text().splitlines()
+                  if ln.startswith("v ")])
+    assert abs(np.ptp(v[:, 1]) * 0.5 - (2 * W - 2 * clearance.CLEARANCE)) < 1e-9
+    assert piece.source.filename == piece.filename and piece.source.scale == (1.0, 1.0, 1.0)
