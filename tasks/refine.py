@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -42,7 +42,7 @@ from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, request, request_apply
-from asset2sim.tasks.publish import collision_geometry, export_mjcf, output_folder, render, write
+from asset2sim.tasks.publish import collision_geometry, export_mjcf, export_usd, output_folder, render, write
 from asset2sim.tasks.publish.contract import (
     MARKER_NAME,
     REPORT_NAME,
@@ -349,17 +349,18 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
     syn = _synthesize(ctx, est, config, log)
     urdf = _write(ctx, syn, out_dir, log)
+    closed_raw = syn.closed_out
+    syn = _clip_synthesis(ctx, syn, urdf, config, out_dir, log)
     st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
     state = dict(st.result)
     balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
     for line in design:
         log.say("stability", line)
-    unclipped = balanced
-    balanced, closed_out = _clip_limits(balanced, syn.closed_out, state, urdf, config, log)
+    closed_out = syn.closed_out
     overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, out_dir, log,
                                          closed=manipulation.closed_tuples(closed_out))
     overlay, check, rounds, overrides, closed_out = _repair_sweep(
-        ctx, unclipped, syn.closed_out, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, out_dir, log)
+        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, out_dir, log)
     return _Attempt(
         asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
         st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
@@ -435,6 +436,25 @@ def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, conf
     return st, overrides
 
 
+def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog) -> _Synthesis:
+    """Stage 5b: the limits clipped to what the geometry allows
+    (:func:`_clip_limits`, other joints at the requested state) before the
+    state search, the requested state recomputed from the bands over the
+    clipped ranges (a "half open" lid is half of the range it can open), and
+    the output rewritten. Returns the synthesis with the clipped overlay,
+    closed ends and requested state (unchanged when nothing was clipped)."""
+    overlay, closed_out = _clip_limits(syn.overlay, syn.closed_out, syn.requested, urdf, config, log)
+    if overlay is syn.overlay:
+        return syn
+    s = overlay.scale
+    unscaled = _scaled_closed(closed_out, 1.0 / s, syn.prismatic)
+    requested = estimate.state_from_bands(unscaled, syn.bands, s, syn.prismatic)
+    if overlay.initial_joint_positions:
+        requested.update(overlay.initial_joint_positions)
+    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, root_rotation=ctx.root_rotation)
+    return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested)
+
+
 def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], urdf: Path, config: RefineConfig,
                  log: _StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
     """Stage 6b: joint limits clipped to what the geometry allows at the
@@ -443,6 +463,9 @@ def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: di
     with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                        conventions=config.sim)) as sess:
         clips = limits.geometric_limits(sess, read_urdf(urdf), manipulation.closed_tuples(closed_out), state)
+    if not any(c.clipped for c in clips.values()):
+        log.lap("limits")
+        return overlay, closed_out
     overlay, notes = limits.apply_clips(overlay, clips)
     for line in notes:
         log.say("limits", line)
@@ -709,6 +732,12 @@ def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording:
         report.notes.append(f"MJCF export skipped: {exc}")
     except Exception as exc:  # export must not lose the refined asset
         report.notes.append(f"MJCF export failed: {exc}")
+    try:
+        out["usd"] = str(export_usd.export_usd(out_dir).path)
+    except ImportError as exc:  # usd-core (pxr) not installed
+        report.notes.append(f"USD export skipped: {exc}")
+    except Exception as exc:  # export must not lose the refined asset
+        report.notes.append(f"USD export failed: {exc}")
     views = None
     try:
         views = render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views")
