@@ -406,8 +406,21 @@ def is_texture_statement(key: str) -> bool:
 
 
 def mtl_libraries(obj_data: bytes) -> list[str]:
-    """The ``mtllib`` names of OBJ bytes, as written (relative to the OBJ's folder)."""
-    return [m.group(1).decode("utf-8", "replace") for m in _MTLLIB.finditer(obj_data)]
+    """The ``mtllib`` names of OBJ bytes, as written (relative to the OBJ's
+    folder), in file order. Only the lines that contain ``mtllib`` are
+    matched (a statement never spans lines): a line-anchored scan of a whole
+    17 MB mesh took 0.5 s."""
+    out: list[str] = []
+    pos = obj_data.find(b"mtllib")
+    while pos != -1:
+        start = obj_data.rfind(b"\n", 0, pos) + 1
+        end = obj_data.find(b"\n", pos)
+        end = len(obj_data) if end == -1 else end
+        m = _MTLLIB.match(obj_data, start, end)
+        if m is not None:
+            out.append(m.group(1).decode("utf-8", "replace"))
+        pos = obj_data.find(b"mtllib", end)
+    return out
 
 
 def mtl_texture_maps(mtl_data: bytes) -> list[str]:

@@ -293,17 +293,22 @@ def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]],
                 conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
     """The ranges the sweep can demand with the other joints held at
     ``state``: each joint's (q_closed, direction, range) of ``closed`` (rad
-    or m) cut where its moving part meets a part of another movable joint
-    (:func:`asset2sim.tasks.geometry.limits.geometric_limits` with
-    ``against="held"``; the URDF limit against the part's own stops is
-    refine's business). Measured in a PyBullet session (closest-point
+    or m) cut where its moving part meets a link of the chain that carries
+    it, beyond its parent's rigid group (a stapler's magazine, hinged on the
+    top, meets the base: how far depends on the held top, not on a limit;
+    :func:`asset2sim.tasks.geometry.limits.geometric_limits` with
+    ``against="held"``). Siblings and other branches in the way are not cut
+    away (the sweep reports them), nor is the closing side; the URDF limit
+    against the part's own stops is refine's business. Measured in a PyBullet session (closest-point
     queries; the same for every engine, like the closed ends). Returns
     (closed tuples, joint -> note for the joints whose range was cut)."""
     out = dict(closed)
     notes = {}
     with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False,
                                                        conventions=conventions or SimConventions())) as s:
-        clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held")
+        # any contact ends the range (1 mm, no stop confirmation):
+        # the drive stalls at it, and a held part is never a hinge artefact of the parent
+        clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held", confirm_stops=False)
     for name, c in clips.items():
         if c.clipped:
             out[name] = (c.q_closed, c.direction, c.open_range)

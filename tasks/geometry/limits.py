@@ -22,8 +22,10 @@ gravity-free session at the output scale):
    tol moves to the first free state towards the opening side.
 2. Excess e(q) = max_p (depth_p(q) - b_p), m.
 3. Opening side: sample q = q_c + d R k / n, k = 1..n (n =
-   :data:`SCAN_SAMPLES`); the first sample with e > tol ends the free
-   range; bisection (:data:`BISECTIONS` halvings) between it and the previous
+   :data:`SCAN_SAMPLES`); the first sample with e >= :data:`STOP_DEPTH`
+   (5 mm, the sweep's bound: a stop) and, walking back from it, the last
+   sample with e <= tol ends the free range (overlaps that never get 5 mm
+   deeper are the hulls'); bisection (:data:`BISECTIONS` halvings) between it and the previous
    sample gives the geometric far end q_g. Closing side: the same from q_c
    towards the other raw limit.
 4. When the refined initial state of j lies outside the free range found,
@@ -38,9 +40,10 @@ gravity-free session at the output scale):
    collision geometry (not the limit) is wrong, and the limit is kept (the
    sweep reports the block).
 
-tol = :data:`EXCESS_TOLERANCE` (1 mm: the force-limited drive of the sweep
-stalls within about that depth of a contact, so the 95 % of the clipped range
-it must reach lie inside the free range).
+tol = :data:`EXCESS_TOLERANCE` (1 mm) decides whether the closed end is
+pressed into another link (the sweep returns there and allows 5 mm) and
+where a stop begins; the end is then put at the stop's onset (:data:`ONSET_TOLERANCE`), because the force-limited drive of
+the sweep stalls where the contact begins.
 """
 
 from __future__ import annotations
@@ -56,12 +59,18 @@ from asset2sim.urdf import UrdfModel
 #: about where a force-limited drive stalls against the contact (the sweep
 #: must reach 95 % of the clipped range).
 EXCESS_TOLERANCE = 0.001
+#: Excess (m) a contact must reach somewhere on the way to be a stop: the
+#: sweep's 5 mm self-penetration bound (an overlap that never gets deeper is
+#: the hulls', not a limit's: toilet 102703's seat grows 5.7 -> 8.1 mm over
+#: its whole 1.69 rad in the body's hinge piece, suitcase 103755's lid
+#: 4.3 -> 7.6 mm; a plain 1 mm tolerance clipped them at 0.32 and 0.43 rad).
+STOP_DEPTH = 0.005
 #: Excess (m) under which a contact has not yet begun (:func:`contact_onset`).
 ONSET_TOLERANCE = 0.0002
 #: Farthest a clipped far end is moved back from the tolerance crossing to
 #: the contact's onset, as a fraction of the opening range (the 5 % the sweep
 #: allows stay free of the contact).
-BACK_OFF_FRACTION = 0.03
+BACK_OFF_FRACTION = 0.1
 #: Samples over the raw range on each side of the closed end.
 SCAN_SAMPLES = 48
 #: Bisection halvings between the last free and the first blocked sample.
@@ -145,30 +154,46 @@ def _depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
 
 
 def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
-             tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES) -> tuple[float, str | None]:
-    """Scan ``joint`` from ``q_from`` to ``q_to`` (rad or m) and return the
-    last position whose penetration excess over ``baseline`` ((P,) m, one per
-    pair of ``pairs``) stays <= ``tol`` (m), with the link it runs into
-    (None when the whole way is free). Other joints stay where the session has them."""
-    prev = q_from
-    for k in range(1, samples + 1):
-        q = q_from + (q_to - q_from) * k / samples
+             tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
+    """Scan ``joint`` from ``q_from`` to ``q_to`` (rad or m): the first
+    sample whose penetration excess over ``baseline`` ((P,) m, one per pair
+    of ``pairs``) reaches ``stop_depth`` (m; ``tol`` when None) is in a stop;
+    walking back from it, the last sample with excess <= ``tol`` (m), refined
+    by bisection, is the free end. Returns (free end, the link run into), or
+    (``q_to``, None) when no sample reaches ``stop_depth`` (an overlap that
+    never gets that deep is the hulls', not a stop). Other joints stay where
+    the session has them."""
+    stop = tol if stop_depth is None else max(stop_depth, tol)
+    qs = [q_from + (q_to - q_from) * k / samples for k in range(samples + 1)]
+    exc_max: list[float] = []
+    hit = None
+    for k, q in enumerate(qs):
         session.set_joint_positions({joint: q})
         exc = _depths(session, pairs) - baseline
-        if float(exc.max(initial=0.0)) > tol:
-            lo, hi = prev, q
-            worst = pairs[int(np.argmax(exc))][1]
-            for _ in range(BISECTIONS):
-                mid = 0.5 * (lo + hi)
-                session.set_joint_positions({joint: mid})
-                e = _depths(session, pairs) - baseline
-                if float(e.max(initial=0.0)) > tol:
-                    hi, worst = mid, pairs[int(np.argmax(e))][1]
-                else:
-                    lo = mid
-            return float(lo), worst
-        prev = q
-    return float(q_to), None
+        exc_max.append(float(exc.max(initial=0.0)))
+        if k > 0 and exc_max[-1] >= stop:
+            hit = k
+            break
+    if hit is None:
+        return float(q_to), None
+    k = hit
+    while k > 0 and exc_max[k - 1] > tol:
+        k -= 1
+    if k == 0:
+        return float(q_from), None
+    lo, hi = qs[k - 1], qs[k]
+    session.set_joint_positions({joint: hi})
+    e = _depths(session, pairs) - baseline
+    worst = pairs[int(np.argmax(e))][1]
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        session.set_joint_positions({joint: mid})
+        e = _depths(session, pairs) - baseline
+        if float(e.max(initial=0.0)) > tol:
+            hi, worst = mid, pairs[int(np.argmax(e))][1]
+        else:
+            lo = mid
+    return float(lo), worst
 
 
 def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
@@ -190,7 +215,8 @@ def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[
 
 
 def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                     tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, against: str = "stops") -> dict[str, LimitClip]:
+                     tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, against: str = "stops",
+                     confirm_stops: bool = True) -> dict[str, LimitClip]:
     """Geometric limits of every joint of ``closed`` (see the module docstring).
 
     Args:
@@ -199,14 +225,21 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         model: the same URDF (kinematic tree).
         closed: joint -> (q_closed, direction +-1, open range), rad or m, at the session's scale.
         state: joint -> position (rad or m) the other joints hold (the sweep's start state).
-        tol: penetration excess (m) that ends the free range.
+        tol: penetration excess (m) above which a closed end is pressed into another link.
+        confirm_stops: a contact ends the range only when it is a stop (its
+            excess reaches :data:`STOP_DEPTH` further on, :func:`free_end`);
+            the end is then put at the contact's onset. False: any contact.
         samples: samples over the raw range.
         against: ``"stops"``: only the links rigid with the joint's parent
             (:func:`rigid_group`), whose geometry stops the part in every
             state of the other joints (the URDF limit); ``"held"``: only the
-            other links (parts of other movable joints, held at ``state``:
-            the range the joint sweep can demand there; the far end only:
-            a held part that keeps the part from shutting is not cut away).
+            links of the chain that carries the joint beyond its parent's
+            rigid group (its ancestors, posed by the held joints between:
+            a stapler's base for the magazine hinged on the top), the range
+            the joint sweep can demand with them held at ``state``; the far
+            end only (a part that cannot shut is the sweep's finding), and
+            siblings and other branches are not cut away (a part in the way
+            is the sweep's finding too).
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
@@ -225,7 +258,14 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         jd = model.joint(name)
         sub = subs.get(name, [session.joint_child[name]])
         stops = rigid_group(model, jd.parent) - set(sub)
-        pairs = _pairs(session, sub, stops if against == "stops" else set(session.link_names) - stops - set(sub))
+        if against == "stops":
+            pairs = _pairs(session, sub, stops)
+        else:  # the links of the chain that carries the joint: its ancestors beyond the parent's rigid group
+            chain, ln = set(), parent_of.get(jd.parent)
+            while ln is not None:
+                chain |= rigid_group(model, ln)
+                ln = parent_of.get(ln)
+            pairs = _pairs(session, sub, chain - stops - set(sub))
         clip = LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
                          q_closed=float(qc), direction=float(d), open_range=float(rng))
         out[name] = clip
@@ -261,7 +301,8 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             q_close, who_c = free_end(session, name, float(qs[k]), qc, pairs, base, tol, samples=4)
             clip.notes.append(f"closed end {qc:.4g} -> {q_close:.4g}: at {qc:.4g} it runs into {who_c}")
         session.set_joint_positions({name: q_close})
-        far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples)
+        stop_depth = STOP_DEPTH if confirm_stops else None
+        far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples, stop_depth)
         span = abs(far - q_close)
         if span < MIN_FREE_FRACTION * rng:
             clip.notes.append(f"blocked at its closed end by {who} (free {span:.3g} of {rng:.3g}): collision geometry, limit kept")
@@ -270,6 +311,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             continue
         if abs(far_raw - far) > MIN_CLIP_FRACTION * rng:
             far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * rng)
+            span = abs(far - q_close)
             clip.blocked_by = who
             clip.notes.append(f"{'upper' if d > 0 else 'lower'} limit {far_raw:.4g} -> {far:.4g} "
                               f"({abs(far_raw - far):.3g} clipped): runs into {who}")
@@ -282,9 +324,9 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
                               f"({abs(back_raw - back):.3g} clipped): the new closed end")
         elif against == "stops" and abs(back_raw - qc) > MIN_CLIP_FRACTION * rng:
             session.set_joint_positions({name: qc})
-            b, who_b = free_end(session, name, qc, back_raw, pairs, base, tol, samples)
+            b, who_b = free_end(session, name, qc, back_raw, pairs, base, tol, samples, stop_depth)
             if abs(back_raw - b) > MIN_CLIP_FRACTION * rng:
-                back = b
+                back = b = contact_onset(session, name, b, qc, pairs, base, BACK_OFF_FRACTION * rng)
                 clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {b:.4g} "
                                   f"({abs(back_raw - b):.3g} clipped, beyond the closed end): runs into {who_b}")
         clip.lower, clip.upper = (back, far) if d > 0 else (far, back)
@@ -330,3 +372,14 @@ def clipped_closed(closed: dict, clips: dict[str, LimitClip]) -> dict:
         if name in out and c.clipped:
             out[name] = replace(out[name], q_closed=c.q_closed, lower=c.lower, upper=c.upper, open_range=c.open_range)
     return out
+
+
+def strip_clips(overlay: Overlay) -> Overlay:
+    """The overlay without clipped limits (every joint's ``lower`` /
+    ``upper`` None, ``limit_source`` empty): the raw limits are written again."""
+    ov = overlay.model_copy(deep=True)
+    for name, dyn in ov.joints.items():
+        if dyn.lower is not None or dyn.upper is not None or dyn.limit_source:
+            ov.joints[name] = dyn.model_copy(update={"lower": None, "upper": None, "limit_source": ""})
+    ov.notes.other = [n for n in ov.notes.other if not n.startswith("limit clipped to the geometry: ")]
+    return ov
