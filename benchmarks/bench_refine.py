@@ -124,8 +124,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def judge_floor(urdf: Path, seconds: float = 3.0, timestep: float = 1.0 / 240.0) -> float:
     """Wall time (s) of what a judge does with an output at least: connect
-    PyBullet (DIRECT), load the URDF, step ``seconds`` of simulation at the
-    SPEC's ``timestep``."""
+    PyBullet (DIRECT), a ground plane, load the URDF (visual meshes included,
+    self-collision as the SPEC), put its lowest point on the ground, step
+    ``seconds`` of simulation at the SPEC's ``timestep``."""
     import pybullet as pb
 
     t0 = time.perf_counter()
@@ -133,7 +134,12 @@ def judge_floor(urdf: Path, seconds: float = 3.0, timestep: float = 1.0 / 240.0)
     try:
         pb.setGravity(0, 0, -9.81, physicsClientId=cid)
         pb.setTimeStep(timestep, physicsClientId=cid)
-        pb.loadURDF(str(urdf), physicsClientId=cid)
+        pb.createMultiBody(0, pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid), physicsClientId=cid)
+        body = pb.loadURDF(str(urdf), flags=pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
+                           | pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
+        low = min(pb.getAABB(body, j, physicsClientId=cid)[0][2] for j in range(-1, pb.getNumJoints(body, physicsClientId=cid)))
+        pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+        pb.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - low], orn, physicsClientId=cid)
         for _ in range(int(round(seconds / timestep))):
             pb.stepSimulation(physicsClientId=cid)
     finally:

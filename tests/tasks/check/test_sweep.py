@@ -108,7 +108,10 @@ def _stapler(root):
     (root / "top.obj").write_text(_cube_obj([0.0, -0.02, 0.04], [0.2, 0.02, 0.05]))
     (root / "mag.obj").write_text(_cube_obj([0.0, -0.015, 0.02], [0.18, 0.015, 0.035]))
     inertial = '<inertial><mass value="0.05"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>'
-    link = lambda n, m: f'  <link name="{n}">{inertial}<collision><origin xyz="0 0 -0.03"/><geometry><mesh filename="{m}"/></geometry></collision></link>\n' if n != "base" else f'  <link name="{n}">{inertial}<collision><geometry><mesh filename="{m}"/></geometry></collision></link>\n'
+    def link(name: str, mesh: str) -> str:
+        origin = "" if name == "base" else '<origin xyz="0 0 -0.03"/>'  # meshes in base coordinates, frames at the hinge
+        return f'  <link name="{name}">{inertial}<collision>{origin}<geometry><mesh filename="{mesh}"/></geometry></collision></link>\n'
+
     urdf = ('<robot name="stapler">\n' + link("base", "base.obj") + link("top_link", "top.obj") + link("mag_link", "mag.obj")
             + '  <joint name="top" type="revolute"><parent link="base"/><child link="top_link"/><origin xyz="0 0 0.03"/>'
             + '<axis xyz="0 -1 0"/><limit lower="0" upper="1.5" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'

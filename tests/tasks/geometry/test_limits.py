@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
+from asset2sim.cli import main
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.engines.fake import write_contract_asset
 from asset2sim.schemas.overlay import Overlay
@@ -79,3 +81,21 @@ def test_clipped_limits_reach_the_overlay(tmp_path):
     new, notes = limits.apply_clips(ov, {"lid_hinge": clip})
     assert new.joints["lid_hinge"].upper == 3.3 and new.joints["lid_hinge"].lower is None
     assert "upper limit 5 -> 3.3" in new.joints["lid_hinge"].limit_source and notes
+
+
+def test_refine_writes_the_clipped_limit_and_reports_it(tmp_path):
+    """End to end: a box whose lid's raw limit (5 rad) swings it through its
+    own body. refine writes the clipped limit into the URDF and the overlay
+    (with why), and its sweep passes against it."""
+    src = _lid_asset(tmp_path / "src", 5.0).parent
+    (src / "overlay.json").unlink()
+    out = tmp_path / "out"
+    main(["refine", str(src), "--prompt", "A box with its lid slightly open.", "--out", str(out), "--no-extras"])
+    text = (out / "mobility.urdf").read_text()
+    upper = float(re.search(r'<joint name="lid_hinge".*?upper="([^"]+)"', text, flags=re.S).group(1))
+    assert 2.0 < upper < 4.5
+    ov = json.loads((out / "overlay.json").read_text())
+    assert ov["joints"]["lid_hinge"]["upper"] == upper and "runs into body" in ov["joints"]["lid_hinge"]["limit_source"]
+    report = json.loads((out / "report.json").read_text())
+    sweep = next(m for m in report["metrics"] if m["name"] == "joint_sweep")
+    assert sweep["passed"] and abs(sweep["details"]["joints"]["lid_hinge"]["q_far"] - upper) < 1e-9
