@@ -33,7 +33,7 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import manipulation, operating, parity, postcheck, sweep
+from asset2sim.tasks.check import manipulation, operating, parity, postcheck, robust_rest, sweep
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
@@ -529,16 +529,17 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
     n = 0
     caps = operating.friction_caps(overlay, overlay, asset, ctx.geometry)
+    floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:
         """This loop escalates ``chk`` into another round (the post-check then skips the sweep)."""
-        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps)[1])
+        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps, floors)[1])
 
     check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded)
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     while not check.passed and n < config.max_escalation_rounds:
         n += 1
-        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps)
+        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors)
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)

@@ -25,6 +25,14 @@ Definitions (SI units; ``docs/metrics.md``, section "Operable friction"):
   that lever horizontal) or m_s g (prismatic, a vertical slide's worst case).
 - Friction cap = ``OPERABLE_SHARE`` * E - L, at least the joint's friction
   before escalation (escalation never lowers a value).
+- Tilt floor: a joint that robust rest's tilts move needs friction for the
+  extra gravity load a tilt by theta adds: at least the friction before
+  escalation plus ``TILT_MARGIN`` m_s g r sin(theta) (revolute, r the lever
+  to the child's center of mass; the change of m_s g r cos(phi) when phi
+  moves by theta is at most m_s g r sin(theta)) or ``TILT_MARGIN`` m_s g
+  sin(theta) (prismatic, a horizontal slide tilted by theta). Escalation by
+  factors alone never reaches it from a friction near zero (a horizontal
+  drawer's or handle's estimate).
 """
 
 from __future__ import annotations
@@ -38,6 +46,9 @@ from asset2sim.tasks.geometry.closed_state import subtree_links
 
 GRAVITY = 9.81
 """m/s^2"""
+TILT_MARGIN = 2.0
+"""Safety factor on the tilt's extra gravity load (dimensionless): static
+friction must also stop the motion the tilt has already started."""
 OPERABLE_SHARE = 0.7
 """Share of the operating effort that friction plus gravity may take
 (dimensionless): the rest is the margin the probe needs to accelerate the part
@@ -128,3 +139,23 @@ def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, ge
         floor = before.joints[name].friction if name in before.joints else d.friction
         caps[name] = float(max(cap, floor))
     return caps
+
+
+def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt: float) -> dict[str, float]:
+    """Friction (N*m or N) a movable joint of ``overlay`` needs to hold
+    through a tilt of ``tilt`` rad (module docstring, "Tilt floor"), from the
+    friction of ``before`` (the overlay before escalation).
+
+    Raises:
+        KeyError: a joint of ``overlay`` is not in ``asset``.
+    """
+    floors: dict[str, float] = {}
+    for name, d in overlay.joints.items():
+        jd = asset.joint(name)
+        if jd.type not in ("revolute", "continuous", "prismatic"):
+            continue
+        sub_mass = sum(overlay.links[ln].mass for ln in subtree_links(asset, jd.child) if ln in overlay.links)
+        lever = 1.0 if jd.type == "prismatic" else com_lever(overlay, asset, name)
+        base = before.joints[name].friction if name in before.joints else d.friction
+        floors[name] = float(base + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
+    return floors

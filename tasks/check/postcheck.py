@@ -273,12 +273,16 @@ def root_label(fixed: bool) -> str:
 
 
 def escalate(overlay: Overlay, check: PostCheck, factor: float,
-             friction_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+             friction_caps: dict[str, float] | None = None,
+             tilt_floors: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
     """Raise damping and friction of the joints that oscillate or sag (all
     joints when the root is unstable and no joint is singled out).
 
     ``friction_caps`` (joint -> N*m or N, :func:`asset2sim.tasks.check.operating.friction_caps`):
     friction never rises above what a hand or the probe can still overcome;
+    ``tilt_floors`` (joint -> N*m or N, :func:`asset2sim.tasks.check.operating.tilt_floors`):
+    a joint robust rest does not hold gets at least this friction (then the
+    cap applies);
     a joint at its cap gets the rest of the factor as damping only (damping
     resists the drop's and the nudge's transients without making the part
     harder to move slowly).
@@ -311,6 +315,10 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
         damping = max(d.damping * f, 1e-4)
         friction = max(d.friction * f, 1e-3)
         note = f"; escalated x{f:.3g}"
+        floor = (tilt_floors or {}).get(name) if name in not_held else None
+        if floor is not None and floor > friction:
+            friction = floor
+            note += f" (friction raised to {floor:.3g} for robust rest's tilts)"
         cap = (friction_caps or {}).get(name)
         if cap is not None and friction > cap:
             friction = max(cap, d.friction)

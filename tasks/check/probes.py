@@ -40,8 +40,11 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55).
 - The object first settles freely for ``settle_time`` s; the push starts from
   there (root pose and joint position at that moment are the references).
-- Push for at most ``push_time`` s (the pusher stops early once the object
-  slid or tipped), then release (no force) for
+- Push for at most max(``push_time``, ``ramp_time`` + 1.5 * travel /
+  ``push_speed``) s, travel the distance the push point covers to the target
+  (|q_target - q0| times the lever; m), so a long lid pushed at its far corner
+  has time to arrive (the pusher stops early once the object slid or tipped),
+  then release (no force) for
   ``release_time`` s.
 - Object moved: during the push the root moved > ``slide_tol`` (m, slid) or
   rotated > ``tip_tol`` (rad, tipped).
@@ -68,6 +71,8 @@ CLOSE_TARGET, CLOSE_REACHED = 0.05, 0.10
 OPEN_TARGET, OPEN_REACHED = 0.6, 0.55
 OPEN_FAR_TARGET, OPEN_FAR_REACHED = 0.9, 0.85
 REBOUND_FRACTION = 0.05
+#: Push time allowed per unit of travel time at ``push_speed`` (dimensionless).
+TRAVEL_TIME_MARGIN = 1.5
 
 
 @dataclass
@@ -77,7 +82,7 @@ class ProbeConfig:
     settle_time: float = 0.25
     """free settling before the push, s"""
     push_time: float = 2.0
-    """longest push, s"""
+    """longest push, s, unless the travel needs longer (module docstring)"""
     release_time: float = 0.75
     """observation after release, s"""
     push_speed: float = 0.25
@@ -232,7 +237,12 @@ def probe_joint(
     f_max = max(cfg.min_force, cfg.force_factor * weight)
     gain = f_max / (cfg.push_speed * cfg.ramp_time)
     root_p0, root_q0 = session.root_pose()
-    n_push = int(round(cfg.push_time / dt))
+    # The push may last as long as the travel needs at the push speed (with
+    # the force ramp and a 50 % margin), at least ``push_time``: a pusher at
+    # a long lid's far corner has a longer arc to cover than at its centre.
+    _, _, lever0 = _push_geometry(session, joint)
+    travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
+    n_push = int(round(max(cfg.push_time, cfg.ramp_time + TRAVEL_TIME_MARGIN * travel / cfg.push_speed) / dt))
     n_rel = int(round(cfg.release_time / dt))
     tr: dict[str, list[float]] = {"t": [], "q": [], "force": [], "root_disp": [], "phase": []}
     force = 0.0

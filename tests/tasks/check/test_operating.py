@@ -61,3 +61,25 @@ def test_escalated_laptop_holds_through_robust_rest_and_still_opens(laptop):
     tiers = {m["name"]: m["passed"] for m in report["metrics"]}
     assert tiers["robust_rest"] is True and tiers["joint_sweep"] is True
     assert report["failure_mode"] == "none", report["readiness"]
+
+
+def test_tilt_floor_adds_the_tilts_gravity_load(laptop, tmp_path):
+    src, _, res = laptop
+    asset = extract_asset(src)
+    ov = res.overlay
+    (name,) = [j.name for j in asset.movable_joints()]
+    tilt = np.radians(5.0)
+    m = ov.links[asset.joint(name).child].mass
+    want = ov.joints[name].friction + operating.TILT_MARGIN * m * operating.GRAVITY * operating.com_lever(ov, asset, name) * np.sin(tilt)
+    assert operating.tilt_floors(ov, ov, asset, tilt)[name] == pytest.approx(want)
+    assert operating.tilt_floors(ov, ov, asset, 0.0)[name] == pytest.approx(ov.joints[name].friction)
+    # a sliding drawer: its weight times sin(tilt), whatever its lever
+    cab = demo_assets.build_two_drawer_cabinet(tmp_path / "cab")
+    cres = refine_asset(cab, "A small two-drawer cabinet with both drawers closed.", tmp_path / "out", extras=False)
+    casset = extract_asset(cab)
+    floors = operating.tilt_floors(cres.overlay, cres.overlay, casset, tilt)
+    for j in casset.movable_joints():
+        assert j.type == "prismatic"
+        mass = cres.overlay.links[j.child].mass
+        assert floors[j.name] == pytest.approx(cres.overlay.joints[j.name].friction
+                                               + operating.TILT_MARGIN * mass * operating.GRAVITY * np.sin(tilt))
