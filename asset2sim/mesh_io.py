@@ -312,6 +312,34 @@ def hull_point_sets(path: Path | str) -> list[np.ndarray]:
     return [np.asarray(m.vertices, float)]
 
 
+def convex_hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The convex hull of ``points`` (n, 3) as a triangle mesh: vertices
+    (k, 3) (the hull's vertices in the order of their index in ``points``) and
+    triangles (m, 3) into them, each wound so its normal points outward
+    (scipy's Qhull; a facet whose winding disagrees with its outward plane
+    normal is turned). The one hull-to-mesh routine of the package: the
+    collision pieces, the MJCF and USD exports and the Newton engine use it.
+
+    Raises:
+        scipy.spatial.QhullError: fewer than 4 points not in one plane.
+        ValueError: ``points`` is not (n, 3).
+    """
+    from scipy.spatial import ConvexHull
+
+    pts = np.asarray(points, float)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"convex_hull_mesh: points must be (n, 3), got {pts.shape}")
+    hull = ConvexHull(pts)
+    tri = hull.simplices.copy()
+    a, b, c = (hull.points[tri[:, i]] for i in range(3))
+    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
+    tri[flip] = tri[flip][:, [0, 2, 1]]
+    used = np.unique(tri)
+    remap = np.full(len(hull.points), -1)
+    remap[used] = np.arange(len(used))
+    return hull.points[used], remap[tri]
+
+
 # ------------------------------------------------------------------ OBJ as text
 
 

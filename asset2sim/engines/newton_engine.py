@@ -50,6 +50,7 @@ from asset2sim.engines.loading import (
     read_urdf,
 )
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
+from asset2sim.mesh_io import convex_hull_mesh
 
 #: Contact friction coefficient on every shape and the ground (PyBullet's
 #: 0.5 x 0.5 product, what the other engines use).
@@ -66,19 +67,9 @@ def _newton():
 
 
 def _hull_triangles(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (k, 3) and triangles (m, 3) of the convex hull of ``points`` (n, 3), outward wound (Qhull)."""
-    from scipy.spatial import ConvexHull
-
-    hull = ConvexHull(np.asarray(points, float))
-    used = np.unique(hull.simplices)
-    remap = np.full(len(hull.points), -1)
-    remap[used] = np.arange(len(used))
-    tris = remap[hull.simplices]
-    v = hull.points[used]
-    a, b, c = v[tris[:, 0]], v[tris[:, 1]], v[tris[:, 2]]
-    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
-    tris[flip] = tris[flip][:, [0, 2, 1]]
-    return v, tris
+    """Vertices (k, 3) and outward-wound triangles (m, 3) of the convex hull of
+    ``points`` (n, 3): :func:`asset2sim.mesh_io.convex_hull_mesh`."""
+    return convex_hull_mesh(points)
 
 
 class NewtonSession:

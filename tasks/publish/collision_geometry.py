@@ -214,16 +214,11 @@ _OBJS: dict[tuple, bytes] = {}
 
 
 def _piece_obj(points: np.ndarray) -> bytes:
-    hull = ConvexHull(points)
-    tri = hull.simplices.copy()
-    a, b, c = (hull.points[tri[:, i]] for i in range(3))
-    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
-    tri[flip, 1], tri[flip, 2] = hull.simplices[flip, 2], hull.simplices[flip, 1]
-    used = np.unique(tri)
-    remap = np.zeros(len(hull.points), int)
-    remap[used] = np.arange(1, len(used) + 1)
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in hull.points[used]]
-    lines += [f"f {i} {j} {k}" for i, j, k in remap[tri]]
+    """OBJ bytes of the outward-wound hull of ``points`` (k, 3) m
+    (:func:`asset2sim.mesh_io.convex_hull_mesh`), coordinates written exactly."""
+    verts, tris = mesh_io.convex_hull_mesh(points)
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in verts]
+    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
     return ("\n".join(lines) + "\n").encode()
 
 

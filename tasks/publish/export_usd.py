@@ -87,7 +87,7 @@ import numpy as np
 from asset2sim import atomic
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_initial_state, read_urdf
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
-from asset2sim.mesh_io import MeshReadError, read_mesh
+from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
 from asset2sim.tasks.publish.write import read_root
@@ -143,20 +143,8 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
 
 def _hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (k, 3) and outward-wound triangles (m, 3) of the convex hull
-    of ``points`` (n, 3) (scipy's Qhull; each facet turned to agree with its
-    outward plane normal)."""
-    from scipy.spatial import ConvexHull
-
-    hull = ConvexHull(np.asarray(points, float))
-    used = np.unique(hull.simplices)
-    remap = np.full(len(hull.points), -1)
-    remap[used] = np.arange(len(used))
-    tris = remap[hull.simplices]
-    verts = hull.points[used]
-    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
-    tris[flip] = tris[flip][:, [0, 2, 1]]
-    return verts, tris
+    of ``points`` (n, 3): :func:`asset2sim.mesh_io.convex_hull_mesh`."""
+    return convex_hull_mesh(points)
 
 
 def _transform(points: np.ndarray, pose: np.ndarray) -> np.ndarray:

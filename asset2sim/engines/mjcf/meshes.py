@@ -9,25 +9,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from asset2sim.engines.loading import CollisionPiece
 from asset2sim.engines.mjcf.base import DERIVED_MESH_DIR, relative_to, safe_name, vec_text
+from asset2sim.mesh_io import convex_hull_mesh
 
 
 def hull_obj(points: np.ndarray) -> bytes:
-    """OBJ bytes of the convex hull of ``points`` (k, 3) m (vertices + outward faces)."""
-    pts = np.asarray(points, float)
-    hull = ConvexHull(pts)
-    used = np.unique(hull.simplices)
-    remap = np.zeros(len(pts), int)
-    remap[used] = np.arange(1, len(used) + 1)
-    tri = hull.simplices.copy()
-    a, b, c = pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]
-    flip = np.einsum("ij,ij->i", np.cross(b - a, c - a), hull.equations[:, :3]) < 0
-    tri[flip, 1], tri[flip, 2] = hull.simplices[flip, 2], hull.simplices[flip, 1]
-    lines = [f"v {vec_text(pts[v])}" for v in used]
-    lines += [f"f {i} {j} {k}" for i, j, k in remap[tri]]
+    """OBJ bytes of the convex hull of ``points`` (k, 3) m (vertices + outward
+    faces, :func:`asset2sim.mesh_io.convex_hull_mesh`)."""
+    verts, tris = convex_hull_mesh(points)
+    lines = [f"v {vec_text(v)}" for v in verts]
+    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
     return ("\n".join(lines) + "\n").encode()
 
 

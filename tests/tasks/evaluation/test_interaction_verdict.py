@@ -8,7 +8,6 @@ import json
 import re
 from pathlib import Path
 
-import pytest
 
 from asset2sim.cli import main
 from asset2sim.engines.base import available_engines

@@ -248,7 +248,7 @@ def test_refined_dev_objects_export(asset_id, prompt, tmp_path):
     assert check.links == len(urdf.links) and check.joints == len(urdf.movable_joints)
     assert check.max_rel_error < 1e-6
     usd = read_usd(build.path)
-    assert math.isclose(sum(l.mass or 0.0 for l in usd.links.values()), urdf.total_mass(), rel_tol=1e-6)
+    assert math.isclose(sum(lk.mass or 0.0 for lk in usd.links.values()), urdf.total_mass(), rel_tol=1e-6)
 
 
 # ------------------------------------------------------------ docs snippets
