@@ -136,16 +136,9 @@ class JointSweep:
 
 
 def joint_subtrees(model: UrdfModel) -> dict[str, list[str]]:
-    """Movable joint -> the links it moves (its child and everything below)."""
-    out = {}
-    for j in model.movable_joints:
-        links, stack = [], [j.child]
-        while stack:
-            ln = stack.pop()
-            links.append(ln)
-            stack.extend(c.child for c in model.children(ln))
-        out[j.name] = links
-    return out
+    """Movable joint -> the links it moves (its child and everything below):
+    :func:`asset2sim.tasks.geometry.limits.subtrees`."""
+    return limits.subtrees(model)
 
 
 def _lever(session: SimSession, joint: str, links: list[str]) -> float:
