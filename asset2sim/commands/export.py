@@ -22,6 +22,8 @@ line ``asset2sim export: CODE: PATH: message``.
 from __future__ import annotations
 
 import argparse
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 from asset2sim.commands._status import (
@@ -68,6 +70,26 @@ def _fmt(v, spec: str = ".3g") -> str:
     return format(v, spec)
 
 
+@contextlib.contextmanager
+def _export_errors(out: Path, folder: str, check_errors: tuple[type[Exception], ...]) -> Iterator[None]:
+    """An export's failures as :class:`CommandError` naming the file: the
+    output folder's own errors, a bad URDF (its code), a missing or invalid
+    input, an unreadable file (``out/folder``), and the export's read-back
+    check failing (``check_errors``, ``EXPORT_CHECK_FAILED``)."""
+    try:
+        yield
+    except output_folder.OutputError as exc:
+        raise output_failure(exc, out) from exc
+    except UrdfError as exc:
+        raise CommandError(INVALID_REQUEST, exc.code, out, f"cannot export: {exc}") from exc
+    except (FileNotFoundError, ValueError) as exc:
+        raise CommandError(INVALID_REQUEST, "EXPORT_INPUT_INVALID", getattr(exc, "filename", None) or out, f"cannot export: {exc}") from exc
+    except OSError as exc:
+        raise os_failure(exc, out / folder, out, INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE") from exc
+    except check_errors as exc:
+        raise CommandError(INVALID_INPUT, "EXPORT_CHECK_FAILED", out, str(exc)) from exc
+
+
 def run(args: argparse.Namespace) -> int:
     out = args.out
     parity = parse_engines(args.parity, "--parity") if args.parity else []
@@ -79,21 +101,10 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None,
                            "MuJoCo is not installed; install the extra: pip install 'asset2sim[mujoco]'")
 
-    try:
+    with _export_errors(out, "mjcf", (MjcfError, ExportError)):
         with output_folder.adopting(out):  # the MJCF files become the output folder's own
             path = export_mjcf(out, visuals=not args.no_visuals, check=False)
-
         check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out), fixed_base=read_root(out).fixed)
-    except output_folder.OutputError as exc:
-        raise output_failure(exc, out) from exc
-    except UrdfError as exc:
-        raise CommandError(INVALID_REQUEST, exc.code, out, f"cannot export: {exc}") from exc
-    except (FileNotFoundError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "EXPORT_INPUT_INVALID", getattr(exc, "filename", None) or out, f"cannot export: {exc}") from exc
-    except OSError as exc:
-        raise os_failure(exc, out / "mjcf", out, INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE") from exc
-    except (MjcfError, ExportError) as exc:
-        raise CommandError(INVALID_INPUT, "EXPORT_CHECK_FAILED", out, str(exc)) from exc
     print(f"wrote       {path}")
     print(f"total mass  {check.total_mass:.6g} kg (URDF {check.urdf_mass:.6g} kg)")
     print(f"inertials   largest COM difference {check.max_com_error:.1e} m, tensor {check.max_inertia_error:.1e} kg*m^2")
@@ -125,21 +136,12 @@ def run(args: argparse.Namespace) -> int:
 def _run_usd(args: argparse.Namespace, out: Path) -> int:
     """``--format usd``: write ``OUT/usd/mobility.usd``, read it back and print the check."""
     try:
-        with output_folder.adopting(out):
-            build = export_usd(out, visuals=not args.no_visuals, check=False)
-        check = check_usd(build.path, out)
-    except ImportError as exc:
+        with _export_errors(out, "usd", (UsdExportError,)):
+            with output_folder.adopting(out):
+                build = export_usd(out, visuals=not args.no_visuals, check=False)
+            check = check_usd(build.path, out)
+    except ImportError as exc:  # usd-core (pxr) not installed
         raise CommandError(INVALID_REQUEST, "ENGINE_UNAVAILABLE", None, f"{exc}") from exc
-    except output_folder.OutputError as exc:
-        raise output_failure(exc, out) from exc
-    except UrdfError as exc:
-        raise CommandError(INVALID_REQUEST, exc.code, out, f"cannot export: {exc}") from exc
-    except (FileNotFoundError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "EXPORT_INPUT_INVALID", getattr(exc, "filename", None) or out, f"cannot export: {exc}") from exc
-    except OSError as exc:
-        raise os_failure(exc, out / "usd", out, INVALID_REQUEST, "EXPORT_INPUT_UNREADABLE") from exc
-    except UsdExportError as exc:
-        raise CommandError(INVALID_INPUT, "EXPORT_CHECK_FAILED", out, str(exc)) from exc
     print(f"wrote       {build.path}")
     print(f"read back   {check.links} links, {check.joints} movable joints; largest relative difference "
           f"{check.max_rel_error:.1e} (binary32 attributes)")
