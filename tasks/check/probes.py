@@ -46,7 +46,10 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   has time to arrive (the pusher stops early once the object slid or tipped),
   then release (no force) for
   ``release_time`` s.
-- Object moved: during the push the root moved > ``slide_tol`` (m, slid) or
+- Object moved: during the push the object's footprint point (the point below
+  the root's origin at the object's lowest height at the start, carried with
+  the root) moved horizontally > ``slide_tol`` (m, slid: a tall object that
+  rocks a little does not count as sliding) or
   rotated > ``tip_tol`` (rad, tipped).
 - Rebound: after release the fraction moved back towards the start by > 0.05;
   kept moving: moved on beyond the target by > 0.05 or ends with |q_dot| >
@@ -64,7 +67,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.frames import quat_angle
+from asset2sim.frames import quat_angle, quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.schemas.report import MetricResult
 
 CLOSE_TARGET, CLOSE_REACHED = 0.05, 0.10
@@ -237,6 +240,16 @@ def probe_joint(
     f_max = max(cfg.min_force, cfg.force_factor * weight)
     gain = f_max / (cfg.push_speed * cfg.ramp_time)
     root_p0, root_q0 = session.root_pose()
+    # Sliding is measured where the object stands: the point below the root's
+    # origin at the object's lowest height, carried with the root (a tall
+    # fridge rocking 0.3 deg moves its root origin 1 cm without sliding).
+    z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
+    foot0 = np.array([root_p0[0], root_p0[1], z_low])
+    foot_local = quat_wxyz_matrix(quat_xyzw_to_wxyz(root_q0)).T @ (foot0 - np.asarray(root_p0, float))
+
+    def slide(rp: np.ndarray, rq: np.ndarray) -> float:
+        moved = np.asarray(rp, float) + quat_wxyz_matrix(quat_xyzw_to_wxyz(rq)) @ foot_local - foot0
+        return float(np.linalg.norm(moved[:2]))  # horizontal: rocking lifts the point, it does not slide
     # The push may last as long as the travel needs at the push speed (with
     # the force ramp and a 50 % margin), at least ``push_time``: a pusher at
     # a long lid's far corner has a longer arc to cover than at its centre.
@@ -270,7 +283,7 @@ def probe_joint(
             peak_effort, lever_used = eff, lever
         q, qd = qpos()
         rp, rq = session.root_pose()
-        disp = float(np.linalg.norm(rp - root_p0))
+        disp = slide(rp, rq)
         rot = quat_angle(root_q0, rq)
         max_disp, max_rot = max(max_disp, disp), max(max_rot, rot)
         tr["t"].append(k * dt)
@@ -292,11 +305,11 @@ def probe_joint(
         q, qd = qpos()
         f = frac(q)
         f_min, f_maxv = min(f_min, f), max(f_maxv, f)
-        rp, _ = session.root_pose()
+        rp, rq = session.root_pose()
         tr["t"].append((k + i + 1) * dt)
         tr["q"].append(q)
         tr["force"].append(0.0)
-        tr["root_disp"].append(float(np.linalg.norm(rp - root_p0)))
+        tr["root_disp"].append(slide(rp, rq))
         tr["phase"].append(1.0)
     q_end, qd_end = qpos()
     f_end = frac(q_end)
