@@ -89,7 +89,10 @@ class RunSettings(BaseModel):
     ``workers``: Dask workers of the local cluster (count; None = CPU count).
     ``time_limit_seconds``: wall-time limit per asset (s), over all its stages.
     ``isolation``: ``process`` runs each asset's stages in a child process that
-    is killed at the time limit (a crash or hang costs only that asset);
+    is killed at the time limit (a crash or hang costs only that asset),
+    forked from a stage server each Dask worker starts once with the
+    pipeline imported (:mod:`asset2sim.flows.forkserver`); ``spawn`` the same
+    in a fresh Python per stage call (imports paid per asset);
     ``memory_limit_mb``: address-space limit of that child process (MiB,
     ``RLIMIT_AS``; None = no limit): an asset that needs more fails alone with
     a memory error instead of taking the machine's memory from the others
@@ -108,7 +111,7 @@ class RunSettings(BaseModel):
     workers: int | None = Field(default=2, ge=1)
     time_limit_seconds: float = Field(default=1800.0, gt=0.0)
     memory_limit_mb: int | None = Field(default=8192, ge=256)
-    isolation: Literal["process", "none"] = "process"
+    isolation: Literal["process", "spawn", "none"] = "process"
     evaluate: bool = True
     probes: bool = False
     extras: bool = True
@@ -183,6 +186,11 @@ class CatalogConfig(BaseModel):
     default_dataset: str
     output_root: str = "data/refined"
     catalog_root: str = "data/catalog"
+    output_store: str | None = None
+    """Where refined outputs are published (``s3://bucket/prefix``, any
+    pyarrow / fsspec URI, or a path): each worker refines into a local
+    temporary folder and uploads it (``asset2sim.flows.store``); None: the
+    outputs stay under ``output_root``, which the workers must share."""
     datasets: dict[str, DatasetConfig]
     estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
     refine: dict[str, Any] = Field(default_factory=dict)
@@ -237,6 +245,15 @@ class Catalog:
         written (``s3://bucket/prefix``)."""
         root = self.config.catalog_root
         return root if catalog_fs.is_uri(root) and not root.startswith("file://") else self.resolve(root.removeprefix("file://"))
+
+    @property
+    def output_store(self) -> str | None:
+        """The output store: the URI as written, an absolute path for a
+        path (relative to the project root), or None (outputs under ``output_root``)."""
+        root = self.config.output_store
+        if not root:
+            return None
+        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else str(self.resolve(root.removeprefix("file://")))
 
     def refine_config(self):
         """The :class:`~asset2sim.schemas.config.RefineConfig` of this catalog

@@ -1,10 +1,14 @@
 """The ``asset2sim`` command line.
 
-Subcommands live in :mod:`asset2sim.commands`, one module each, defining
-``NAME`` (str), ``HELP`` (str), ``add_arguments(parser)`` and
-``run(args) -> int`` (the exit code). They are discovered at start-up, so a
-command is added by adding a module. The library itself never prints or exits;
-only these command modules talk to the terminal.
+Subcommands live in :mod:`asset2sim.commands`, one module each, named as the
+command and defining ``NAME`` (str, the module's name), ``HELP`` (str),
+``add_arguments(parser)`` and ``run(args) -> int`` (the exit code). They are
+discovered at start-up, so a command is added by adding a module. Only the
+module of the command given is imported (``asset2sim refine`` does not pay
+for the imports of ``flow`` or ``benchmark``); ``asset2sim --help`` and a
+command line without a known command import them all to list them. The
+library itself never prints or exits; only these command modules talk to the
+terminal.
 
 One top-level handler (:func:`main`): an expected failure
 (:class:`asset2sim.commands._status.CommandError`) prints one line with its
@@ -30,8 +34,14 @@ from asset2sim import __version__
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, CommandError
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every discovered subcommand."""
+def command_names() -> list[str]:
+    """The subcommands' module names, sorted (without importing them)."""
+    return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every discovered subcommand, or only the one
+    named ``only`` (its module alone is imported)."""
     parser = argparse.ArgumentParser(
         prog="asset2sim",
         description="Turn articulated-object assets into interaction-ready simulation assets.",
@@ -41,15 +51,28 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"asset2sim {__version__}")
     parser.add_argument("--debug", action="store_true", help="print the traceback of an error (also accepted after the command)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
+    for name in command_names():
+        if only is not None and name != only:
             continue
-        module = importlib.import_module(f"asset2sim.commands.{info.name}")
+        module = importlib.import_module(f"asset2sim.commands.{name}")
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of an error")
         p.set_defaults(_run=module.run)
     return parser
+
+
+def requested_command(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names when it is a known one and comes before
+    any option that could take a value (``--debug`` may precede it); else None
+    (then every command's module is imported to parse or to list them)."""
+    for arg in argv:
+        if arg == "--debug":
+            continue
+        if arg.startswith("-"):
+            return None
+        return arg if arg in command_names() else None
+    return None
 
 
 def write_error_log(command: str | None, exc: BaseException) -> str:
@@ -66,7 +89,8 @@ def write_error_log(command: str | None, exc: BaseException) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(only=requested_command(argv))
     args = parser.parse_args(argv)
     if not hasattr(args, "_run"):
         parser.print_help()

@@ -2,11 +2,22 @@
 wall time per stage, and the checks of the refine issue.
 
     python benchmarks/bench_refine.py [--manifest PATH] [--out DIR] [--ids 103275,7236] [--extras] [--process]
+    nice -n 10 python benchmarks/bench_refine.py --process-only [--ids ...]
 
-``--process`` also times ``asset2sim refine`` as a whole process per object
-(imports, extras included: the throughput issue's measure) and prints its
-median beside the judge-style floor: a fresh PyBullet load of the same
-output plus 3 s of simulation (SPEC step), in one run.
+``--process`` also times ``asset2sim refine --force`` as a whole process per
+object (cold imports, extras included: the throughput issue's measure) and
+prints, per object and as medians, its wall time, the time the process spent
+outside the stages it records (imports, argument parsing, interpreter exit),
+the core stages, each extra (MJCF, USD, renders, evaluation + HTML report)
+from the output's ``report.json``, and beside it the judge-style floor: a
+fresh Python process that loads the output URDF in PyBullet and simulates 3 s
+at the SPEC's step, in one run. ``--process-only`` skips the warm in-process
+pass. Processes run with a bytecode cache outside the working tree (as an
+installed package does; ``--no-bytecode-cache`` keeps this shell's
+PYTHONDONTWRITEBYTECODE). The load average is printed before and after (the
+machine is shared);
+beside each wall time the CPU time (user + system) of the process, the
+figure to compare on a loaded machine.
 
 Writes DIR/summary.json. Numbers in notes and README come from this script.
 """
@@ -16,7 +27,10 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
+import resource
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -33,17 +47,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--extras", action="store_true", help="also time exports, renders and the HTML report")
     ap.add_argument("--process", action="store_true",
                     help="also time `asset2sim refine` (extras included) as a whole process per object, beside the "
-                         "judge-style floor (PyBullet load of the output + 3 s of simulation)")
+                         "judge-style floor (PyBullet load of the output + 3 s of simulation in a fresh process)")
+    ap.add_argument("--process-only", action="store_true", help="only the whole-process timing (no warm in-process pass)")
+    ap.add_argument("--no-bytecode-cache", action="store_true",
+                    help="run the processes as this environment says (PYTHONDONTWRITEBYTECODE: every module compiled from "
+                         "source, about 0.2 s of CPU per process) instead of with a bytecode cache outside the tree")
+    ap.add_argument("--judge", type=Path, default=None, help=argparse.SUPPRESS)  # internal: one judge-floor run
     args = ap.parse_args(argv)
+    if args.judge is not None:
+        print(f"{judge_floor(args.judge):.4f}")
+        return 0
+    if args.process_only:
+        rows = _rows(args)
+        print(f"load average before: {_load()}", flush=True)
+        results: list[dict] = []
+        _whole_process(rows, args, results)
+        print(f"load average after: {_load()}", flush=True)
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "summary_process.json").write_text(json.dumps(results, indent=1, default=float))
+        return 0 if all(e.get("process_exit") in (0, 3) for e in results) else 1
 
     from asset2sim.schemas.request import BAND_INTERVAL
     from asset2sim.tasks.refine import RefineError, refine_asset
     from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
 
-    rows = list(csv.DictReader(args.manifest.open()))
-    if args.ids:
-        keep = set(args.ids.split(","))
-        rows = [r for r in rows if r["id"] in keep]
+    rows = _rows(args)
     results = []
     for i, row in enumerate(rows):
         src = args.manifest.parent / row["id"]
@@ -147,31 +175,94 @@ def judge_floor(urdf: Path, seconds: float = 3.0, timestep: float = 1.0 / 240.0)
     return time.perf_counter() - t0
 
 
+def _rows(args) -> list[dict]:
+    """The manifest rows (``--ids`` subset, manifest order)."""
+    rows = list(csv.DictReader(args.manifest.open()))
+    if args.ids:
+        keep = set(args.ids.split(","))
+        rows = [r for r in rows if r["id"] in keep]
+    return rows
+
+
+def _load() -> str:
+    """The 1/5/15-minute load averages of this machine."""
+    return " ".join(f"{x:.2f}" for x in os.getloadavg()) + f" ({os.cpu_count()} cores)"
+
+
+CORE_STAGES = ("extract", "analyze", "closed_state", "synthesize", "validate", "write", "limits", "refine_state",
+               "post_check")
+
+
 def _whole_process(rows: list[dict], args, results: list[dict]) -> None:
     """Time ``asset2sim refine --force`` (extras included) as a subprocess per
-    row and the judge floor of its output; print both medians."""
-    import subprocess
-
+    row and the judge floor of its output in another fresh process; print
+    per-object lines and medians (wall, outside the stages, core, extras)."""
     cli = Path(sys.executable).parent / "asset2sim"
-    print("\nwhole process (`asset2sim refine`, extras included):")
-    walls, floors = [], []
+    env = dict(os.environ)
+    if not getattr(args, "no_bytecode_cache", False):
+        # as an installed package runs: compiled modules cached (here outside the working tree), written by a
+        # first import; PYTHONDONTWRITEBYTECODE, when this shell sets it, would compile every module from source
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(Path.home() / ".cache" / "asset2sim" / "pycache")
+        subprocess.run([sys.executable, "-c", "import asset2sim.commands.refine, asset2sim.tasks.publish.svg_chart, mujoco, pybullet"],
+                       env=env, capture_output=True)
+    print(f"bytecode cache: {env.get('PYTHONPYCACHEPREFIX') or 'as the environment says'}"
+          f"{' (PYTHONDONTWRITEBYTECODE set: modules compiled from source)' if env.get('PYTHONDONTWRITEBYTECODE') else ''}")
+    print("\nwhole process (`asset2sim refine --force`, extras included); judge floor = fresh process: "
+          "PyBullet load + 3 s of simulation")
+    print(f"{'id':>7} {'wall':>6} {'cpu':>6} {'outside':>7} {'core':>6} {'extras':>6}  {'judge':>5} {'jcpu':>5}  exit  "
+          "extras by part / slowest core stages (wall s)")
+    cols: dict[str, list[float]] = {"wall": [], "cpu": [], "outside": [], "core": [], "extras": [], "judge": [], "judge_cpu": []}
     for row in rows:
         out = args.out / "process" / row["id"]
         cmd = [str(cli), "refine", str(args.manifest.parent / row["id"]), "--prompt", row["prompt"], "--out", str(out),
                "--force", "--quiet"]
+        ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         wall = time.perf_counter() - t0
-        floor = judge_floor(out / "mobility.urdf") if (out / "mobility.urdf").is_file() else float("nan")
-        walls.append(wall)
-        floors.append(floor)
+        ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+        urdf = out / "mobility.urdf"
+        floor = floor_cpu = float("nan")
+        if urdf.is_file():
+            ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t1 = time.perf_counter()
+            jp = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--judge", str(urdf)], capture_output=True, text=True,
+                                env=env)
+            floor = time.perf_counter() - t1 if jp.returncode == 0 else float("nan")
+            ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            floor_cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+        stages: dict[str, float] = {}
+        rep = out / "report.json"
+        if rep.is_file():
+            stages = json.loads(rep.read_text()).get("stage_seconds", {})
+        core = sum(v for k, v in stages.items() if not k.startswith("extras"))
+        extras = sum(v for k, v in stages.items() if k.startswith("extras"))
+        outside = wall - core - extras
+        for k, v in (("wall", wall), ("cpu", cpu), ("outside", outside), ("core", core), ("extras", extras), ("judge", floor),
+                     ("judge_cpu", floor_cpu)):
+            cols[k].append(v)
         entry = next((e for e in results if e["id"] == row["id"]), None)
-        if entry is not None:
-            entry["process_seconds"], entry["judge_floor_seconds"], entry["process_exit"] = wall, floor, proc.returncode
-        print(f"{row['id']:>7} process {wall:.2f}s (exit {proc.returncode})  judge floor {floor:.2f}s", flush=True)
-    if walls:
-        print(f"median whole-process refine: {statistics.median(walls):.2f} s; judge floor (load + 3 s sim): "
-              f"{statistics.median(floors):.2f} s; over {len(walls)} objects")
+        if entry is None:
+            entry = {"id": row["id"]}
+            results.append(entry)
+        entry.update(process_seconds=wall, process_cpu_seconds=cpu, judge_floor_seconds=floor, judge_floor_cpu_seconds=floor_cpu,
+                     process_exit=proc.returncode,
+                     process_stage_seconds=stages, outside_stages_seconds=outside)
+        parts = " ".join(f"{k.removeprefix('extras_')}={v:.2f}" for k, v in stages.items() if k.startswith("extras"))
+        slow = " ".join(f"{k}={v:.2f}" for k, v in sorted(((k, v) for k, v in stages.items() if not k.startswith("extras")),
+                                                          key=lambda kv: -kv[1])[:3])
+        print(f"{row['id']:>7} {wall:6.2f} {cpu:6.2f} {outside:7.2f} {core:6.2f} {extras:6.2f}  {floor:5.2f} {floor_cpu:5.2f}  {proc.returncode:>4}  "
+              f"{parts} | {slow}", flush=True)
+        if proc.returncode not in (0, 3):
+            print("        " + (proc.stderr.strip().splitlines() or ["(no stderr)"])[-1], flush=True)
+    if cols["wall"]:
+        med = {k: statistics.median(v) for k, v in cols.items()}
+        print(f"median over {len(cols['wall'])} objects: whole-process refine {med['wall']:.2f} s wall, {med['cpu']:.2f} s CPU "
+              f"(outside the stages {med['outside']:.2f} s, core {med['core']:.2f} s, extras {med['extras']:.2f} s); judge floor "
+              f"(fresh process, load + 3 s sim) {med['judge']:.2f} s wall, {med['judge_cpu']:.2f} s CPU; ratio "
+              f"{med['wall'] / med['judge']:.1f}x wall, {med['cpu'] / med['judge_cpu']:.1f}x CPU")
 
 
 if __name__ == "__main__":

@@ -58,6 +58,7 @@ def drop_test(xml_path: Path | None, build) -> dict:
     if m.nkey:
         mujoco.mj_resetDataKeyframe(m, d, 0)
     free = m.njnt and m.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE
+    out["free"] = bool(free)
     if free:
         d.qpos[2] += DROP_HEIGHT
     try:
@@ -72,6 +73,9 @@ def drop_test(xml_path: Path | None, build) -> dict:
     out["warnings"] += [mujoco.mjtWarning(i).name for i in bad]
     mujoco.mj_forward(m, d)
     out["lowest_m"] = lowest_point(m, d)
+    # arena: MuJoCo's default memory unless the file sets <size memory> (ours does not)
+    out["arena_bytes"] = int(m.narena)
+    out["arena_max_used_bytes"] = int(d.maxuse_arena)
     return out
 
 
@@ -153,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
         row["drop_max_contacts"] = drop["max_contacts"]
         row["drop_warnings"] = ",".join(drop["warnings"])
         row["drop_error"] = drop["error"]
+        row["arena_used_pct"] = round(100.0 * drop.get("arena_max_used_bytes", 0) / max(drop.get("arena_bytes", 0), 1), 2) if drop["compiles"] else None
+        row["root_free"] = drop.get("free")
         row["drop_lowest_mm"] = None if drop["lowest_m"] is None or not math.isfinite(drop["lowest_m"]) else round(drop["lowest_m"] * 1000, 1)
         rows.append(row)
         print(json.dumps(row), flush=True)
@@ -161,7 +167,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"MuJoCo loads the URDF: {sum(r['urdf_mujoco'] == 'ok' for r in rows)}/{n}")
     print(f"MJCF compiles: {sum(bool(r.get('mjcf_compiles')) for r in rows)}/{n}")
     print(f"5 cm drop without MuJoCo warnings or errors: {sum(r.get('mjcf_compiles') and not r['drop_warnings'] and not r['drop_error'] for r in rows)}/{n}")
-    print(f"drop max contacts: max {max((r.get('drop_max_contacts', 0) for r in rows), default=0)}")
+    print(f"drop max contacts: max {max((r.get('drop_max_contacts', 0) for r in rows), default=0)}; "
+          f"largest share of MuJoCo's default arena used: {max((r.get('arena_used_pct') or 0 for r in rows), default=0)} %; "
+          f"lowest point after the drop (free roots): min {min((r['drop_lowest_mm'] for r in rows if r.get('root_free') and r.get('drop_lowest_mm') is not None), default=None)} mm "
+          f"(below about -5 mm: fell into the floor); fixed roots (mounted, not dropped): {sum(r.get('root_free') is False for r in rows)}")
     print(f"flat collision groups: {sum(r['flat_groups'] for r in rows)}; inside-out collision files: {sum(r['inside_out'] for r in rows)}")
     print(f"max pieces per link: {max((r['max_pieces_per_link'] for r in rows), default=0)}")
     print(f"parts > 2 mm inside the parent's hull: {sum(r['contain_mm'] > 2 for r in rows)}/{n} (max {max((r['contain_mm'] for r in rows), default=0)} mm)")

@@ -11,6 +11,9 @@ Shape (DEVELOPERS.md, "Shape of the product")::
              refine   (synthesize -> refine state -> write -> post-check
                        -> extras: export, renders, evaluation + HTML report)
              metrics  (stability, prompt alignment, scale deviation)
+             publish  (only with an output store, ``--out s3://...``: upload
+                       the worker's local folder, completion marker last;
+                       :mod:`asset2sim.flows.store`)
            each finished chain -> build_row -> one catalog row, appended atomically
            (and a progress event: asset2sim.flow_progress, the bar of `make flow`)
       -> end of run (asset2sim.catalog_finish): the run's partition compacted
@@ -53,6 +56,10 @@ Nothing finished is done twice, nothing malformed stops the others:
   becomes a failed row with failure mode ``invalid_manifest_row`` before the
   fan-out; the other rows run. A manifest that is not a CSV with ``id`` and
   ``prompt`` columns still stops the run before it starts.
+- A run regressed beyond ``catalog.yaml`` ``results.regression`` (with
+  ``fail_flow``) ends in state Failed with the regression report
+  (:class:`RegressionFailure`, raised after everything is recorded): the
+  nightly deployment's run fails; ``run_refine_flow`` still returns the summary.
 - The processes of a run end with its driver, killed or not: the temporary
   Prefect server is started here (:func:`prefect_api_for_run`) through
   :mod:`asset2sim.flows.lifeline` (SIGKILL when the driver ends), Dask's
@@ -70,7 +77,9 @@ asset never stops the others; a Prefect retry happens only when a model-backed
 estimator failed (``estimator_failure`` with an estimator other than
 ``offline``): that is the only failure a retry can fix. Each asset has a
 wall-time limit over all its stages; with ``isolation: process`` (default)
-stages run in a child process killed at the limit (:mod:`.isolation`), so
+stages run in a child process killed at the limit, forked from a stage
+server each Dask worker starts once with the pipeline imported
+(:mod:`.forkserver`; ``spawn``: a fresh Python per call, :mod:`.isolation`), so
 hangs and native crashes become ``timeout`` / ``crash`` rows.
 
 Dask: a local cluster with ``workers`` processes by default; an existing
@@ -99,12 +108,14 @@ from asset2sim import catalog_compare, catalog_finish, flow_progress, queries, t
 from asset2sim.catalog import ResultCatalog, load_catalog
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import server, stages
+from asset2sim.flows.store import join_uri, upload_folder
 from asset2sim.flows.stages import (  # re-exported: the flow's public names
     FLOW_NAME,
     SUBFLOW_NAME,
     AssetJob,
     BadManifestRow,
     ModelCallFailure,
+    RegressionFailure,
     code_version,
     default_prefect_home,
     flow_parameters,
@@ -128,6 +139,7 @@ __all__ = [
 prepare = task(stages.prepare_asset, name="prepare", cache_policy=NO_CACHE, persist_result=False)
 refine = task(stages.refine_stage, name="refine", cache_policy=NO_CACHE, persist_result=False)
 metrics = task(stages.metrics_stage, name="metrics", cache_policy=NO_CACHE, persist_result=False)
+publish = task(stages.publish_stage, name="publish", cache_policy=NO_CACHE, persist_result=False)
 
 
 def _retry_on_model_failure(task, task_run, state) -> bool:
@@ -187,14 +199,19 @@ def refine_assets(
     rows = []
     starts: dict[str, float] = {}
 
-    def record(job: AssetJob, prepared, refined, measured, exc: BaseException | None) -> None:
+    def record(job: AssetJob, prepared, refined, measured, exc: BaseException | None, published=None) -> None:
+        publish_error = None
+        if published is not None and published.status == "ok":  # the row points at the store
+            refined.value.out_dir = published.value["out_uri"]
+        elif published is not None and published.status == "error":
+            publish_error = f"publish: {published.error}"
         if exc is None and prepared is not None and prepared.resume is not None and refined is not None and refined.status == "ok":
             skipped = _record_resumed(store, job, prepared, refined, measured, starts[job.asset_id])
             if skipped is not None:
                 prepared, refined, measured = skipped, None, None
         row = build_row(
             job, prepared, refined, measured,
-            error=None if exc is None else f"{type(exc).__name__}: {exc}",
+            error=publish_error if exc is None else f"{type(exc).__name__}: {exc}",
             failure_mode=None if exc is None else exception_failure_mode(exc, ModelCallFailure),
             flow_run_id=flow_run_id, started_at=starts[job.asset_id], finished_at=time.time(),
         )  # fmt: skip
@@ -218,16 +235,18 @@ def refine_assets(
             record(job, prepared, None, None, exc)
             continue
         # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
-        limit = {} if job.isolation == "process" else {"timeout_seconds": job.time_limit_seconds}
+        limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
         rf = refine_task.with_options(**limit).submit(job, prepared)
         mf = metrics.with_options(**limit).submit(job, prepared, rf)
-        chains[mf] = (job, prepared, rf)
+        last = publish.submit(job, rf, mf) if job.out_uri else mf  # upload to the output store, marker last
+        chains[last] = (job, prepared, rf, mf)
 
-    for mf in as_completed(list(chains)):
-        job, prepared, rf = chains[mf]
+    for last in as_completed(list(chains)):
+        job, prepared, rf, mf = chains[last]
         refined, exc_r = _outcome(rf)
         measured, exc_m = _outcome(mf) if exc_r is None else (None, None)
-        record(job, prepared, refined, measured, exc_r or exc_m)
+        published, exc_p = _outcome(last) if last is not mf and exc_r is None and exc_m is None else (None, None)
+        record(job, prepared, refined, measured, exc_r or exc_m or exc_p, published)
     return {"rows": rows, "body_started": body_started, "body_seconds": time.time() - body_started}
 
 
@@ -240,16 +259,19 @@ def refine_dataset(
     ids: list[str] | None = None,
     limit: int | None = None,
     force: bool = False,
+    out: str | None = None,
 ) -> dict[str, Any]:
     """Refine every asset of ``dataset`` (default: the catalog's) as declared
-    in ``catalog``; returns the run summary (see :func:`run_refine_flow`)."""
+    in ``catalog``, publishing the outputs to ``out`` (default: ``catalog.yaml``
+    ``output_store``, else ``output_root``); returns the run summary (see
+    :func:`run_refine_flow`)."""
     log = get_run_logger()
     t0, body_started_epoch = time.perf_counter(), time.time()
     started = datetime.now(timezone.utc)
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
     run_id = make_run_id(started)
-    plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force)
+    plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)
     jobs = plan.jobs
     address = dask_address or os.environ.get("DASK_ADDRESS") or None
     n_workers = workers or cat.config.run.workers
@@ -277,11 +299,18 @@ def refine_dataset(
     df = store.read(name, run_id)
     summary = queries.run_summary(df)
     summary.update(dataset=name, run=run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing)
+    out_store = out or cat.output_store
+    summary["output_store"] = join_uri(out_store, name, run_id) if out_store else None
     summary.update(finish.comparison.metrics_for_tracking())
     summary["regression"] = catalog_compare.comparison_summary(finish.comparison)
     summary["compaction"] = None if finish.compaction is None else dataclasses.asdict(finish.compaction)
     artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{name} / {run_id}")
     artifacts.update(finish.artifacts)
+    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
+        try:
+            upload_folder(run_out, summary["output_store"])
+        except (OSError, ValueError) as exc:
+            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
     mlflow_run_id, tracking_error = _log_to_mlflow(cat, df, summary, info, artifacts, info["assets"], n_workers, address, run_id,
                                                    extra_tags=finish.comparison.tags())
     if tracking_error:
@@ -303,6 +332,12 @@ def refine_dataset(
         summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
     )
     store.write_run_info(name, run_id, info)
+    regression = summary["regression"]
+    if regression.get("exceeded") and cat.config.results.regression.fail_flow:
+        # the nightly deployment's run ends Failed with the report (catalog.yaml results.regression.fail_flow)
+        report = "\n".join(["run regressed beyond catalog.yaml results.regression", *regression.get("lines", [])])
+        log.error("%s", report)
+        raise RegressionFailure(report, summary)
     return summary
 
 
@@ -497,23 +532,34 @@ def run_refine_flow(
     ids: list[str] | None = None,
     limit: int | None = None,
     force: bool = False,
+    out: str | None = None,
 ) -> dict[str, Any]:
-    """Run :func:`refine_dataset` in this process (what ``make flow`` does).
+    """Run :func:`refine_dataset` in this process (what ``make flow`` does);
+    ``out``: the output store (``s3://bucket/prefix``, :mod:`.store`).
 
     Returns the run summary (counts, pass rates, failure modes, paths, MLflow
     run id, timings in s: ``dask_startup_seconds``, ``assets_seconds`` (the
     fan-out with the cluster up), ``dask_teardown_seconds``,
     ``tracking_seconds`` (summary, plot, MLflow), ``flow_body_seconds``, and
-    ``flow_started_epoch``). Call from a ``__main__``-guarded program:
+    ``flow_started_epoch``). A run that regressed beyond ``catalog.yaml``
+    (``results.regression``, ``fail_flow``) ends as a Failed flow run
+    (:class:`RegressionFailure`, what a nightly deployment shows); its
+    summary is still returned here (``summary["regression"]["exceeded"]``),
+    for the caller's exit status. Call from a ``__main__``-guarded program:
     the local Dask cluster starts worker processes.
 
     Raises:
         CatalogError: invalid catalog or manifest (before any asset runs).
     """
-    params = flow_parameters(catalog, dataset, workers, dask_address)
+    params = flow_parameters(catalog, dataset, workers, dask_address, out)
     cat = load_catalog(params["catalog"])  # fail early, before the flow starts
     with prefect_api_for_run(cat.project_root):
-        return refine_dataset(**params, ids=ids, limit=limit, force=force)
+        state = refine_dataset(**params, ids=ids, limit=limit, force=force, return_state=True)
+    if state.is_failed():
+        exc = state.result(raise_on_failure=False)
+        if isinstance(exc, RegressionFailure):  # recorded and reported; the caller sets the exit status
+            return exc.summary
+    return state.result(raise_on_failure=True)
 
 
 @contextlib.contextmanager

@@ -53,6 +53,8 @@ from asset2sim.catalog import (
     result_key,
 )
 from asset2sim.demo_assets import ensure_demo_dataset
+from asset2sim.flows import store as store_mod
+from asset2sim.flows.forkserver import run_forked
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig, SimConventions
@@ -100,6 +102,18 @@ class ModelCallFailure(RuntimeError):
     failure_mode = RETRYABLE_FAILURE
 
 
+class RegressionFailure(RuntimeError):
+    """The run regressed beyond ``catalog.yaml`` ``results.regression`` with
+    ``fail_flow`` on: raised at the very end of the flow (everything is
+    recorded by then), so the flow run's state, the nightly deployment's
+    included, is Failed with the regression report as its message.
+    ``summary``: the run summary the flow would have returned."""
+
+    def __init__(self, report: str, summary: dict[str, Any]):
+        super().__init__(report)
+        self.summary = summary
+
+
 # ----------------------------------------------------------------------------- jobs
 
 
@@ -114,7 +128,10 @@ class AssetJob:
     :func:`asset2sim.catalog.result_key` for this asset (empty when forced);
     ``resumable`` the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
     dicts, newest first) of earlier runs that wrote no catalog row for this
-    asset (empty when forced).
+    asset (empty when forced). With an output store (:mod:`asset2sim.flows.store`)
+    ``out_dir`` / ``metrics_dir`` / ``work_dir`` are local temporary folders
+    of the worker and ``out_uri`` / ``metrics_uri`` where the publish stage
+    uploads them (None: the outputs stay in ``out_dir``).
     """
 
     dataset: str
@@ -139,6 +156,8 @@ class AssetJob:
     finished: dict[str, dict[str, Any]] = field(default_factory=dict)
     resumable: list[dict[str, Any]] = field(default_factory=list)
     code_version: str = __version__
+    out_uri: str | None = None
+    metrics_uri: str | None = None
 
 
 @dataclass
@@ -177,16 +196,21 @@ def flow_parameters(
     dataset: str | None = None,
     workers: int | None = None,
     dask_address: str | None = None,
+    out: str | None = None,
 ) -> dict[str, Any]:
     """The parameters ``make flow`` passes to :data:`refine_dataset` (and the
     nightly deployment stores): the catalog as an absolute path, the dataset,
-    workers and Dask scheduler address (None = catalog/environment defaults)."""
-    return {
+    workers, Dask scheduler address and output store (None = catalog/environment
+    defaults; ``out`` only when given)."""
+    params = {
         "catalog": str(Path(catalog).expanduser().resolve()),
         "dataset": dataset,
         "workers": workers,
         "dask_address": dask_address,
     }
+    if out:
+        params["out"] = out
+    return params
 
 
 def plan_jobs(
@@ -214,12 +238,16 @@ def plan_run(
     ids: list[str] | None = None,
     limit: int | None = None,
     force: bool = False,
+    out_store: str | None = None,
 ) -> RunPlan:
     """The work of a run: one job per usable manifest row and one
     :class:`BadManifestRow` per row that cannot be used (optionally only
     ``ids``, at most ``limit`` rows of both kinds in manifest order), with
     earlier finished results and unrecorded finished work for the skip
-    decision (none when ``force``).
+    decision (none when ``force``). ``out_store``: publish the outputs there
+    (:mod:`asset2sim.flows.store`; default ``catalog.yaml`` ``output_store``);
+    with a store, the work of a killed run that wrote no catalog row is not
+    looked for (it is redone; its folder in the store has no row pointing at it).
 
     Generates the demo assets first when the dataset says ``generate: demo``
     and they are missing or outdated.
@@ -250,8 +278,9 @@ def plan_run(
     config = cat.refine_config().model_dump(mode="json")
     finished = {} if force else ResultCatalog(cat.catalog_root).finished(
         name, code_hash=skip_code_hash(cat.config.results.code_change))
-    unrecorded = {} if force else unrecorded_jobs(cat, name, run_id)
-    run_out = cat.output_root / name / run_id
+    store = out_store or cat.output_store
+    unrecorded = {} if force or store else unrecorded_jobs(cat, name, run_id)
+    run_out = (store_mod.local_work_root() if store else cat.output_root) / name / run_id
     version = code_version()
     jobs = []
     for e in ordered:
@@ -284,6 +313,8 @@ def plan_run(
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
                 resumable=unrecorded.get(e.asset_id, []),
                 code_version=version,
+                out_uri=store_mod.join_uri(store, name, run_id, e.asset_id) if store else None,
+                metrics_uri=store_mod.join_uri(store, name, run_id, METRICS_DIRNAME, e.asset_id) if store else None,
             )
         )
     return RunPlan(jobs=jobs, bad_rows=[b for b in ordered if isinstance(b, BadManifestRow)])
@@ -348,6 +379,42 @@ def job_config_hash(job: AssetJob, refine_hash: str) -> str:
     )
 
 
+def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
+    """The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`)
+    for a row whose output is a local folder or a folder in an output store
+    (:func:`asset2sim.flows.store.store_complete`, read from the store)."""
+    if row is not None and store_mod.is_store_uri(row.get("out_dir")):
+        return row if store_mod.store_complete(row["out_dir"], input_hash, row.get("refine_config_hash") or "") else None
+    return finished_result(row, input_hash)
+
+
+def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | None = None) -> StageRecord:
+    """Publish stage: with an output store (``job.out_uri``), upload the
+    refined folder (completion marker last) and the metrics folder, then
+    delete the worker's local copies; ``skipped`` without a store or without
+    an output. ``value``: ``{"out_uri", "files", "bytes"}``.
+
+    Never raises for a store that refuses the upload: status ``error`` with
+    the reason (the asset's row is then failed)."""
+    if job.out_uri is None or refined is None or refined.status != "ok":
+        return StageRecord(status="skipped", seconds=0.0)
+    t0 = time.perf_counter()
+    value: RefineOutput = refined.value
+    local = value.out_dir or job.out_dir
+    try:
+        up = store_mod.upload_folder(local, job.out_uri)
+        if job.metrics_uri and Path(job.metrics_dir).is_dir():
+            store_mod.upload_folder(job.metrics_dir, job.metrics_uri)
+    except (OSError, ValueError) as exc:
+        return StageRecord(status="error", error=f"upload of {local} to {job.out_uri} failed: {type(exc).__name__}: {exc}",
+                           error_type=type(exc).__name__, failure_mode="crash", seconds=time.perf_counter() - t0,
+                           worker=_worker_name())
+    for folder in (local, job.metrics_dir, job.work_dir):
+        store_mod.remove_local(folder)
+    return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"]},
+                       seconds=time.perf_counter() - t0, worker=_worker_name())
+
+
 def prepare_asset(job: AssetJob) -> Prepared:
     """Input stage: validate and read the asset, hash input and
     configuration, decide whether an earlier result can be reused.
@@ -381,7 +448,7 @@ def prepare_asset(job: AssetJob) -> Prepared:
     rec.input_hash, rec.config_hash, rec.refine_config_hash = asset.input_hash, chash, rhash
     rec.category = job.category or asset.category
     rec.links, rec.movable_joints = len(asset.links), len(asset.movable_joints())
-    rec.skip = finished_result(job.finished.get(result_key(job.asset_id, asset.input_hash, chash)), asset.input_hash)
+    rec.skip = finished_in_store(job.finished.get(result_key(job.asset_id, asset.input_hash, chash)), asset.input_hash)
     if rec.skip is None:
         found = resumable_output(job.resumable, asset.input_hash, chash, rhash)
         rec.resume = None if found is None else found.model_dump(mode="json")
@@ -567,7 +634,11 @@ def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], ti
     t0 = time.perf_counter()
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
-    if job.isolation == "process":
+    if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
+        preload = (job.refine_function.split(":", 1)[0],)
+        rec = asdict(run_forked(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
+                                memory_limit_mb=job.memory_limit_mb, preload=preload))
+    elif job.isolation == "spawn":  # a fresh interpreter per call (imports paid every time)
         rec = asdict(run_isolated(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
                                   memory_limit_mb=job.memory_limit_mb))
     else:

@@ -8,6 +8,7 @@ stably (:meth:`RefineConfig.config_hash`) so converters can skip unchanged work.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -37,6 +38,15 @@ class SimConventions(BaseModel):
     """... or above this for prismatic joints, m"""
 
 
+def default_engines() -> list[str]:
+    """The post-check's default engines: PyBullet, and PhysX (SAPIEN 3) when
+    ``sapien`` is installed (it is with ``make setup``), the engine of Isaac
+    Sim, SAPIEN and ManiSkill; on the 21 dev objects PhysX adds about 0.2 s
+    per post-check round plus 0.9 s of import once per process
+    (``docs/simulators.md``)."""
+    return ["pybullet", "physx"] if importlib.util.find_spec("sapien") is not None else ["pybullet"]
+
+
 class RefineConfig(BaseModel):
     """Knobs of the refine pipeline (units on every field)."""
 
@@ -64,9 +74,10 @@ class RefineConfig(BaseModel):
     """Largest drift of a requested joint state during the rest test, m."""
     convex_decomposition: bool = True
     """Allow CoACD decomposition of collision meshes whose hulls always overlap."""
-    engines: list[str] = Field(default_factory=lambda: ["pybullet"])
+    engines: list[str] = Field(default_factory=lambda: default_engines())
     """Engines the post-check must pass in (worst case over them); PyBullet is
-    always first (state refinement and escalation run there)."""
+    always first (state refinement and escalation run there). Default:
+    :func:`default_engines` (PyBullet, and PhysX where SAPIEN is installed)."""
     decomposition_budget: float = 60.0
     """Wall time allowed for convex decomposition per asset, s."""
     seed: int = 0

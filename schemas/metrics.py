@@ -67,6 +67,10 @@ METRIC_INFO: dict[str, MetricInfo] = {
                    "root fixed: each movable joint driven (force-limited) from its closed end to >= 95 % open and back"),
         MetricInfo("robust_rest", "trials", "physical",
                    "dropped 2 cm, tilted 5 deg about each horizontal axis, nudged: back to rest, joints held"),
+        MetricInfo("task_execution", "failed attempts", "behaviour",
+                   "a 70 N, 0.25 m/s gripper performs the task on the free object: target reached and held 1 s, no sliding or tipping"),
+        MetricInfo("operating_force", "N", "behaviour",
+                   "the task's peak operating force (and hinge torque) inside the real operating range of the category and part"),
         MetricInfo("state_hold", "rad|m", "check", "every joint stays within the sag tolerance of its initial state"),
         MetricInfo("settle_tilt", "rad", "check", "root rotation while settling (the object fell over)"),
     )

@@ -22,6 +22,8 @@ FailureMode = Literal[
     "blocked_joint",
     "not_robust_at_rest",
     "probe_failed",
+    "task_failed",
+    "implausible_force",
     "timeout",
     "crash",
     "invalid_manifest_row",

@@ -50,7 +50,7 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import clearance, collision, pose, refine_state, stability
+from asset2sim.tasks.state import clearance, collision, ground_clearance, pose, refine_state, stability
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
@@ -353,7 +353,11 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     syn = _clip_synthesis(ctx, syn, urdf, config, out_dir, log)
     st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
     state = dict(st.result)
+    state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
+        ctx.asset, syn.overlay, out_dir, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
+    st.collision_changes = list(st.collision_changes) + lifted
     balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
+    design = floored + design
     for line in design:
         log.say("stability", line)
     closed_out = syn.closed_out
@@ -671,8 +675,7 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
     instead of simulating it again. Returns name -> path."""
     recording = None if att.rewritten else att.check.recording
     with quiet_stdout():  # engines and renderers print from C; the library must not
-        paths = _write_extras(out_dir, report, log.say, recording, reference, recorded=att.check.recorded)
-    log.lap("extras")
+        paths = _write_extras(out_dir, report, log, recording, reference, recorded=att.check.recorded)
     report.stage_seconds = log.times
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
     return paths
@@ -720,12 +723,13 @@ def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescri
     owner.remove_unreferenced(write.collision_folder(asset), used)
 
 
-def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording: postcheck.RestRecording | None = None,
+def _write_extras(out_dir: Path, report: RefineReport, log: _StageLog, recording: postcheck.RestRecording | None = None,
                   reference: Path | str | None = None, recorded: postcheck.RecordedRuns | None = None) -> dict[str, str]:
     """Optional outputs: MJCF export, renders, evaluation and HTML report
     (the renders reused in it). Each failure (an engine or renderer
     unavailable included) is a note in the report, never the loss of the
-    refined asset."""
+    refined asset. Wall time per part in ``log`` (``extras_mjcf``,
+    ``extras_usd``, ``extras_render``, ``extras_report``)."""
     out: dict[str, str] = {}
     try:
         out["mjcf"] = str(export_mjcf.export_mjcf(out_dir))
@@ -733,18 +737,22 @@ def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording:
         report.notes.append(f"MJCF export skipped: {exc}")
     except Exception as exc:  # export must not lose the refined asset
         report.notes.append(f"MJCF export failed: {exc}")
+    log.lap("extras_mjcf")
     try:
         out["usd"] = str(export_usd.export_usd(out_dir).path)
     except ImportError as exc:  # usd-core (pxr) not installed
         report.notes.append(f"USD export skipped: {exc}")
     except Exception as exc:  # export must not lose the refined asset
         report.notes.append(f"USD export failed: {exc}")
+    log.lap("extras_usd")
     views = None
     try:
-        views = render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views")
+        views = render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views",
+                                    size=render.OUTPUT_VIEW_SIZE)
         out["views"] = str(out_dir / "views")
     except Exception as exc:
         report.notes.append(f"renders failed: {exc}")
+    log.lap("extras_render")
     try:
         paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=recorded,
                                           views=views, views_state=report.initial_joint_positions,
@@ -754,4 +762,5 @@ def _write_extras(out_dir: Path, report: RefineReport, say: Progress, recording:
         combine_verdict(report, ev.metrics)  # report.json says what report.html says
     except Exception as exc:
         report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
+    log.lap("extras_report")
     return out

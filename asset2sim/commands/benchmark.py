@@ -79,7 +79,7 @@ def _print_table(console, title: str, summary: dict) -> None:
 
     t = Table(title=title)
     for c in ("method", "pen. mm (toilet+stapler)", "pen. mm (all)", "rest pass", "osc. pass", "probes pass",
-              "sweep pass", "robust rest pass", "ready", "scale dev. %", "init. dev.", "prompt", "all pass",
+              "sweep pass", "robust rest pass", "task pass", "force plausible", "ready", "scale dev. %", "init. dev.", "prompt", "all pass",
               "median eval s", "failed"):
         t.add_column(c)
 
@@ -94,6 +94,7 @@ def _print_table(console, title: str, summary: dict) -> None:
                   f"{pct(r['rest_stability_pass'])} ({r['rest_n']})", f"{pct(r['oscillation_pass'])} ({r['osc_n']})",
                   f"{pct(r['probes_pass'])} ({r['probes_n']})",
                   f"{pct(r.get('sweep_pass'))} ({r.get('sweep_n', 0)})", f"{pct(r.get('robust_rest_pass'))} ({r.get('robust_n', 0)})",
+                  f"{pct(r.get('task_pass'))} ({r.get('task_n', 0)})", f"{pct(r.get('force_pass'))} ({r.get('force_n', 0)})",
                   f"{pct(r.get('ready'))} ({r.get('ready_n', 0)})",
                   pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
                   pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",

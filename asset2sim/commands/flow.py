@@ -36,8 +36,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
     parser.add_argument(
         "--dask-address",
+        "--scheduler",
+        dest="dask_address",
         default=None,
-        help="existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_ADDRESS, else a local cluster)",
+        help="existing Dask scheduler (`dask scheduler`, dask-jobqueue, dask-kubernetes), e.g. tcp://host:8786 "
+        "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/pipeline.md)",
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="output store: s3://bucket/prefix or any pyarrow/fsspec URI or path; workers refine locally and upload "
+        "(default: catalog output_store, else output_root)",
     )
     parser.add_argument("--ids", default=None, help="comma-separated asset ids to run (default: all)")
     parser.add_argument("--limit", type=int, default=None, help="run at most this many assets")
@@ -83,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
                 stack.enter_context(listening(progress))
             stack.callback(progress.close)
             summary = run_refine_flow(
-                cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force
+                cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
+                out=getattr(args, "out", None),
             )
     except CatalogError as exc:
         print(f"error: {exc}")
@@ -106,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
           f"assets {assets_s:.1f} s"
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")
-    print(f"  outputs  {summary['output_dir']}")
+    print(f"  outputs  {summary.get('output_store') or summary['output_dir']}")
     print(f"  catalog  {summary['catalog_root']}")
     if summary.get("mlflow_run_id"):
         from asset2sim.tracking import resolve_tracking_uri

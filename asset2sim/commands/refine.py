@@ -24,7 +24,7 @@ from asset2sim.commands._status import (
     output_failure,
     parse_engines,
 )
-from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.tasks.publish.output_folder import OutputError
@@ -51,8 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
     parser.add_argument(
         "--engines",
-        default="pybullet",
-        help="comma-separated engines the asset must pass in (pybullet,physx,mujoco); missing ones are skipped and reported",
+        default=None,
+        help="comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
+             "reported (default: pybullet, and physx where SAPIEN is installed)",
     )
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
     parser.add_argument(
@@ -175,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
         elif not args.quiet:
             print(line, flush=True)
 
-    engines = ["pybullet"] + [e for e in parse_engines(getattr(args, "engines", "pybullet")) if e != "pybullet"]
+    engines = ["pybullet"] + [e for e in parse_engines(getattr(args, "engines", None) or ",".join(default_engines())) if e != "pybullet"]
     config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url, engines=engines)
     try:
         result = refine_stage.refine_asset(

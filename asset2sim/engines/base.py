@@ -75,6 +75,61 @@ class SessionOptions:
     conventions: SimConventions = field(default_factory=SimConventions)
 
 
+@dataclass
+class HeldLink:
+    """A rigid body as an engine holds it after loading: ``mass`` kg, ``com``
+    (3,) m in the URDF link frame, ``principal`` (3,) kg*m^2 the principal
+    moments of inertia about the COM, ascending."""
+
+    mass: float
+    com: np.ndarray
+    principal: np.ndarray
+
+
+@dataclass
+class HeldJoint:
+    """A movable joint as an engine holds it (SI: rad or m): ``lower`` /
+    ``upper`` limits (+-inf when unlimited), viscous ``damping`` (N*m*s/rad or
+    N*s/m), Coulomb ``friction`` (N*m or N), spring ``stiffness`` (N*m/rad or
+    N/m) and ``reference`` (rad or m; None without a spring), ``position`` the
+    initial joint position."""
+
+    lower: float
+    upper: float
+    damping: float
+    friction: float
+    stiffness: float
+    reference: float | None
+    position: float
+
+
+@dataclass
+class HeldPhysics:
+    """What an engine holds after loading a file, read back from the engine's
+    own data structures (not from the file), by URDF link and joint name.
+
+    ``source``: the file the engine loaded (URDF, MJCF, USD); ``how``: where
+    each quantity was read (engine API / attribute names), for the report.
+    """
+
+    engine: str
+    source: str
+    links: dict[str, HeldLink]
+    joints: dict[str, HeldJoint]
+    how: dict[str, str] = field(default_factory=dict)
+    welded_to_world: list[str] = field(default_factory=list)
+    """Links the engine welds to the world (a fixed root): their mass and
+    inertia take no part in the simulation and some engines do not keep them
+    (PyBullet stores 0 kg for a fixed base)."""
+
+
+def principal_moments(tensor: np.ndarray) -> np.ndarray:
+    """Principal moments (3,) ascending of a symmetric inertia tensor (3, 3)
+    (eigenvalues, ``numpy.linalg.eigvalsh``)."""
+    t = np.asarray(tensor, float)
+    return np.sort(np.linalg.eigvalsh(0.5 * (t + t.T)))
+
+
 class EngineUnsupported(NotImplementedError):
     """The engine cannot answer this query (names the engine and the query)."""
 
@@ -232,6 +287,12 @@ class SimSession(Protocol):
     def discard_state(self, handle: int) -> None:
         """Free a snapshot."""
 
+    def held_physics(self) -> HeldPhysics:
+        """Every link's mass, COM and principal moments and every movable
+        joint's limits, damping, friction, spring and position as the engine
+        holds them (read from the engine, for the authored-equals-simulated
+        check, ``asset2sim.tasks.check.authored``)."""
+
     def close(self) -> None:
         """Release the engine's resources."""
 
@@ -320,7 +381,12 @@ EngineFactory = Callable[[Path, SessionOptions], SimSession]
 ShapeWorldFactory = Callable[[], ShapeWorld]
 ViewerFactory = Callable[[Path], Viewer]
 
+#: ``reader(path, links, joints) -> HeldPhysics``: load an exported file
+#: (MJCF, USD) with the engine's own importer and read back what it holds.
+FileReader = Callable[[Path, list[str], list[str]], HeldPhysics]
+
 _ENGINES: dict[str, EngineFactory] = {}
+_FILE_READERS: dict[tuple[str, str], FileReader] = {}
 _SHAPE_WORLDS: dict[str, ShapeWorldFactory] = {}
 _VIEWERS: dict[str, ViewerFactory] = {}
 _LAZY: dict[str, str] = {
@@ -349,6 +415,29 @@ def register_shape_world(name: str, factory: ShapeWorldFactory) -> None:
 def register_viewer(name: str, factory: ViewerFactory) -> None:
     """Register ``factory(urdf_path) -> Viewer`` under the engine name ``name``."""
     _VIEWERS[name] = factory
+
+
+def register_file_reader(engine: str, fmt: str, reader: FileReader) -> None:
+    """Register how ``engine`` loads an exported file of format ``fmt``
+    (``"mjcf"``, ``"usd"``) and reads back what it holds."""
+    _FILE_READERS[(engine, fmt)] = reader
+
+
+def read_held_physics(engine: str, fmt: str, path: Path | str, links: list[str], joints: list[str]) -> HeldPhysics:
+    """Load ``path`` (format ``fmt``) with ``engine``'s own importer and read
+    back every link's and joint's physics (:class:`HeldPhysics`), by the URDF
+    names ``links`` and ``joints``.
+
+    Raises:
+        KeyError: unknown engine name.
+        EngineUnavailable: the engine's package is not installed.
+        EngineUnsupported: the engine has no reader for ``fmt``.
+        Exception: whatever the engine raises when the file does not load.
+    """
+    _factory(engine)
+    if (engine, fmt) not in _FILE_READERS:
+        raise EngineUnsupported(f"engine {engine!r} has no {fmt} reader")
+    return _FILE_READERS[(engine, fmt)](Path(path), list(links), list(joints))
 
 
 def known_engines() -> list[str]:

@@ -27,8 +27,17 @@ from typing import Callable, Iterator
 import numpy as np
 
 from asset2sim import atomic
-from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
-from asset2sim.engines.loading import BULLET_DEFAULT_MASS, collision_pieces, read_urdf
+from asset2sim.engines.base import (
+    ContactPair,
+    EngineUnsupported,
+    HeldJoint,
+    HeldLink,
+    HeldPhysics,
+    SessionOptions,
+    principal_moments,
+    register_engine,
+)
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, read_urdf
 from asset2sim.frames import quat_wxyz_matrix, translation_matrix
 from asset2sim.urdf import (
     UrdfDynamics,
@@ -324,6 +333,25 @@ class FakeSession:
 
     def step(self, n: int = 1) -> None:
         self.steps += int(n)
+
+    def held_physics(self) -> HeldPhysics:
+        """The file's values (the fake engine holds the URDF it read; links
+        without ``<inertial>``: PyBullet's 1 kg, unit inertia), springs from
+        the options, positions the current ones."""
+        links = {}
+        for name in self.link_names:
+            ine = self.model.links[name].inertial
+            if ine is None or ine.mass is None:
+                links[name] = HeldLink(BULLET_DEFAULT_MASS, np.zeros(3), np.sort(np.array(BULLET_DEFAULT_INERTIA, float)))
+            else:
+                links[name] = HeldLink(float(ine.mass), np.asarray(ine.com(), float), principal_moments(ine.inertia_in_link_axes()))
+        q = self.joint_positions()
+        joints = {}
+        for j in self.model.movable_joints:
+            s = self.options.springs.get(j.name)
+            joints[j.name] = HeldJoint(j.lower, j.upper, float(j.damping), float(j.friction), s.stiffness if s else 0.0,
+                                       s.reference if s else None, q[j.name])
+        return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how={"all": "the URDF as read"})
 
     def close(self) -> None:
         pass

@@ -14,9 +14,19 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, register_engine
+from asset2sim.engines.base import (
+    ContactPair,
+    EngineUnsupported,
+    HeldJoint,
+    HeldLink,
+    HeldPhysics,
+    SessionOptions,
+    register_engine,
+    register_file_reader,
+)
 from asset2sim.engines.loading import read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
+from asset2sim.engines.mjcf.base import safe_name
 
 
 def _mujoco():
@@ -336,6 +346,11 @@ class MuJoCoSession:
                 self.d.xfrc_applied[:] = 0.0
                 self._applied = False
 
+    def held_physics(self) -> HeldPhysics:
+        """What MuJoCo's compiled model holds (:func:`held_physics_of_model`),
+        joint positions from the session's ``qpos``."""
+        return held_physics_of_model(self.m, self.d.qpos, list(self.urdf.links), self.joint_names, source="urdf (converted in memory)")
+
     def close(self) -> None:
         self.d = None
         self.m = None
@@ -347,6 +362,67 @@ class MuJoCoSession:
         self.close()
 
 
+def _named(m, kind, name: str) -> int:
+    i = _mujoco().mj_name2id(m, kind, name)
+    return i if i >= 0 else _mujoco().mj_name2id(m, kind, safe_name(name))
+
+
+def held_physics_of_model(m, qpos: np.ndarray, links: list[str], joints: list[str], source: str) -> HeldPhysics:
+    """Per-body and per-joint physics of a compiled ``mujoco.MjModel`` ``m``,
+    by URDF link and joint name (the MJCF name is the URDF name, or its
+    :func:`safe_name`):
+    ``body_mass``, ``body_ipos`` (COM in the body frame, which is the URDF
+    link frame in our MJCF), ``body_inertia`` (principal moments),
+    ``jnt_range`` (unlimited: +-inf), ``dof_damping``, ``dof_frictionloss``,
+    ``jnt_stiffness`` and ``qpos_spring`` (reference; None when the stiffness
+    is 0), positions from ``qpos`` (nq,).
+
+    Raises:
+        KeyError: a link or joint has no MuJoCo body or joint of its name.
+    """
+    mujoco = _mujoco()
+    held_links = {}
+    for name in links:
+        b = _named(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b < 0:
+            raise KeyError(f"MuJoCo model has no body for link {name!r}")
+        held_links[name] = HeldLink(mass=float(m.body_mass[b]), com=np.array(m.body_ipos[b], float),
+                                    principal=np.sort(np.array(m.body_inertia[b], float)))
+    held_joints = {}
+    for name in joints:
+        jid = _named(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if jid < 0:
+            raise KeyError(f"MuJoCo model has no joint {name!r}")
+        qa, da = int(m.jnt_qposadr[jid]), int(m.jnt_dofadr[jid])
+        lo, hi = (float(m.jnt_range[jid, 0]), float(m.jnt_range[jid, 1])) if m.jnt_limited[jid] else (-math.inf, math.inf)
+        k = float(m.jnt_stiffness[jid])
+        held_joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(m.dof_damping[da]), friction=float(m.dof_frictionloss[da]),
+                                      stiffness=k, reference=float(m.qpos_spring[qa]) if k != 0.0 else None, position=float(qpos[qa]))
+    how = {"mass, com, inertia": "body_mass, body_ipos, body_inertia", "limits": "jnt_range (jnt_limited)",
+           "damping, friction": "dof_damping, dof_frictionloss", "spring": "jnt_stiffness, qpos_spring", "position": "qpos"}
+    return HeldPhysics(engine="mujoco", source=source, links=held_links, joints=held_joints, how=how)
+
+
+def held_physics_of_mjcf(path: Path, links: list[str], joints: list[str]) -> HeldPhysics:
+    """Load an MJCF file (``mujoco.MjModel.from_xml_path``) and read back what
+    MuJoCo holds (:func:`held_physics_of_model`), joint positions from the
+    keyframe :data:`KEYFRAME` (``initial``; ``qpos0`` without one).
+
+    Raises:
+        MjcfError: MuJoCo cannot compile the file.
+        KeyError: a link or joint is not in the model.
+    """
+    mujoco = _mujoco()
+    try:
+        with mujoco_messages():
+            m = mujoco.MjModel.from_xml_path(str(path))
+    except Exception as exc:
+        raise MjcfError(f"MuJoCo could not compile {path}: {exc}") from exc
+    kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
+    qpos = np.array(m.key_qpos[kid], float) if kid >= 0 else np.array(m.qpos0, float)
+    return held_physics_of_model(m, qpos, links, joints, source=f"mjcf ({Path(path).name}, keyframe {KEYFRAME!r})")
+
+
 def _open(urdf_path: Path, options: SessionOptions) -> MuJoCoSession:
     return MuJoCoSession(urdf_path, options)
 
@@ -356,3 +432,4 @@ def _open(urdf_path: Path, options: SessionOptions) -> MuJoCoSession:
 import mujoco as _mujoco_check  # noqa: E402,F401
 
 register_engine("mujoco", _open)
+register_file_reader("mujoco", "mjcf", held_physics_of_mjcf)

@@ -40,7 +40,16 @@ import numpy as np
 import sapien  # noqa: F401  - an ImportError here marks the engine unavailable
 from sapien import physx
 
-from asset2sim.engines.base import ContactPair, EngineUnsupported, SessionOptions, penetration_sum, register_engine
+from asset2sim.engines.base import (
+    ContactPair,
+    EngineUnsupported,
+    HeldJoint,
+    HeldLink,
+    HeldPhysics,
+    SessionOptions,
+    penetration_sum,
+    register_engine,
+)
 from asset2sim.engines.loading import (
     BULLET_DEFAULT_FRICTION,
     BULLET_DEFAULT_INERTIA,
@@ -521,6 +530,38 @@ class PhysXSession:
                     self.art.set_qf(np.zeros(len(self._joints), np.float32))
                 continue
             self.scene.step()
+
+    def held_physics(self) -> HeldPhysics:
+        """What PhysX holds: each link's ``get_mass``, ``get_cmass_local_pose``
+        (COM in the link frame) and ``get_inertia`` (principal moments); each
+        joint's ``get_limits``, its drive's force limit at rest (the Coulomb
+        friction, see the module notes), the damping the session adds to
+        that limit (``friction + damping * |qdot|``), the spring the session
+        applies as a joint force and ``get_qpos``. PhysX's own joint friction
+        coefficient (``get_friction``) is reported under ``how`` (0 here)."""
+        links = {}
+        for name, comp in self.links.items():
+            links[name] = HeldLink(mass=float(comp.get_mass()), com=np.array(comp.get_cmass_local_pose().p, float),
+                                   principal=np.sort(np.array(comp.get_inertia(), float)))
+        q = self.art.get_qpos()
+        joints = {}
+        coeff = []
+        for name, i in self._index.items():
+            joint = self._joints[i]
+            lim = np.array(joint.get_limits(), float).reshape(-1, 2)
+            lo, hi = (float(lim[0, 0]), float(lim[0, 1])) if len(lim) else (-np.inf, np.inf)
+            if self.joint_types[name] == "continuous":
+                lo, hi = -np.inf, np.inf
+            ref = float(self._reference[i]) if name in self.options.springs else None
+            joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(self._damping[i]), friction=float(joint.get_force_limit()),
+                                     stiffness=float(self._stiffness[i]), reference=ref, position=float(q[i]))
+            coeff.append(float(joint.get_friction()))
+        how = {"mass, com, inertia": "get_mass, get_cmass_local_pose().p, get_inertia",
+               "limits": "PhysxArticulationJoint.get_limits", "friction": "drive force limit at rest (get_force_limit)",
+               "damping": "session: added to the drive's force limit each step",
+               "spring": "session joint force (qf) each step", "position": "get_qpos",
+               "physx joint friction coefficient": f"max {max(coeff, default=0.0):g} (0: not used)"}
+        return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how=how)
 
     def close(self) -> None:
         if getattr(self, "scene", None) is not None:

@@ -23,6 +23,9 @@ import numpy as np
 from asset2sim.engines.base import (
     ContactPair,
     EngineUnsupported,
+    HeldJoint,
+    HeldLink,
+    HeldPhysics,
     SessionOptions,
     penetration_sum,
     quiet_stdout,
@@ -397,6 +400,32 @@ class PyBulletSession:
             return self._link_index[link_name]
         except KeyError:
             raise KeyError(link_name) from None
+
+    def held_physics(self) -> HeldPhysics:
+        """What Bullet holds: ``getDynamicsInfo`` (mass, local inertia
+        diagonal = principal moments, local inertial position = COM in the
+        link frame) and ``getJointInfo`` (limits, ``jointDamping``,
+        ``jointFriction``, which the session's friction motor uses as its
+        force); springs are the session's (Bullet has none; applied as a
+        torque each step); positions ``getJointState``."""
+        p = self._p
+        links = {}
+        for idx, name in self._link_by_index.items():
+            info = p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)
+            links[name] = HeldLink(mass=float(info[0]), com=np.array(info[3], float), principal=np.sort(np.array(info[2], float)))
+        q = self.joint_positions()
+        joints = {}
+        for name, j in self._index.items():
+            info = p.getJointInfo(self.body, j, physicsClientId=self.cid)
+            lo, hi = self.joint_limits[name]
+            s = self.options.springs.get(name)
+            joints[name] = HeldJoint(lower=lo, upper=hi, damping=float(info[6]), friction=float(info[7]),
+                                     stiffness=s.stiffness if s else 0.0, reference=s.reference if s else None,
+                                     position=q[name])
+        how = {"mass, com, inertia": "getDynamicsInfo [0], [3], [2]", "limits, damping, friction": "getJointInfo [8:10], [6], [7]",
+               "spring": "session torque -k (q - q_s) (Bullet has no joint spring)", "position": "getJointState"}
+        welded = [self.base_link] if self.options.fixed_base else []
+        return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how=how, welded_to_world=welded)
 
     def close(self) -> None:
         if self.cid is not None:

@@ -64,24 +64,43 @@ def measure_manipulation(engine: str, urdf: Path | str, initial_state: dict[str,
 
 
 def joints_not_held(metrics: list[MetricResult]) -> list[str]:
-    """Joints that left their state in any robust-rest trial of ``metrics`` (first-seen order)."""
-    out: list[str] = []
+    """Joints that left their state in any robust-rest trial of ``metrics``
+    and, when one did, the joints that came within a margin of leaving it
+    (drift above :data:`HOLD_TARGET_SHARE` of their tolerance in some
+    trial), first-seen order. The trials are chaotic where parts are coupled:
+    a cabinet's two drawers share the impact of landing after a tilt, and
+    raising one drawer's friction moved the other from 1.6 mm to 3.2 mm of
+    drift (19179, tolerance 2 mm) at the same friction; escalating the joints
+    near their tolerance with those beyond it keeps one round from undoing
+    another."""
+    failing_: list[str] = []
+    near: list[str] = []
     for m in metrics:
         if m.name != "robust_rest":
             continue
         for trial in (m.details.get("trials") or {}).values():
-            out.extend(trial.get("failing_joints") or [])
-    return list(dict.fromkeys(out))
+            failing_.extend(trial.get("failing_joints") or [])
+            for j, d in (trial.get("joint_drift") or {}).items():
+                tol = (trial.get("joint_tolerance") or {}).get(j)
+                if d is not None and tol and float(d) > HOLD_TARGET_SHARE * float(tol):
+                    near.append(j)
+    if not failing_:
+        return []
+    return list(dict.fromkeys(failing_ + near))
 
 
-#: Margin and exponents of :func:`hold_factor`. Two loads make a joint leave
+#: Share of a joint's tolerance that escalation aims its drift at
+#: (:func:`hold_factor`): the drift of coupled parts varies about 2x from one
+#: round to the next at the same friction (see :func:`joints_not_held`), so
+#: escalation aims at half the tolerance, not at the tolerance.
+HOLD_TARGET_SHARE = 0.5
+#: Exponents of :func:`hold_factor`. Two loads make a joint leave
 #: its state under robust rest: an impact (the drop, the nudge), whose travel
 #: falls about as 1 / friction^2 (the kinetic energy I w0^2 / 2 an impact
 #: gives the part is spent by the friction torque over the travel; measured on
 #: the demo box's lid: 0.152 / 0.052 / 0.025 / 0.016 rad at 0.32 / 0.6 / 1.0 /
 #: 1.3 N*m), and a static slope load (a tilt; a side-hinged door sized for no
 #: gravity torque when level), which needs friction about proportional to it.
-HOLD_MARGIN = 1.15
 HOLD_EXPONENT_IMPACT = 0.5
 HOLD_EXPONENT_SLOPE = 1.0
 #: Smallest friction step of :func:`hold_factor`.
@@ -91,8 +110,8 @@ HOLD_MIN_STEP = 1.2
 def hold_factor(metrics: list[MetricResult], joint: str, largest: float) -> float:
     """Factor on the friction (and damping) of ``joint`` that should make it
     hold through robust rest: the largest over the trials of ``metrics`` of
-    HOLD_MARGIN * (drift / tolerance) ** e (e = HOLD_EXPONENT_IMPACT for the
-    drop and the nudge, HOLD_EXPONENT_SLOPE for the tilts), between
+    (drift / (HOLD_TARGET_SHARE * tolerance)) ** e (e = HOLD_EXPONENT_IMPACT
+    for the drop and the nudge, HOLD_EXPONENT_SLOPE for the tilts), between
     HOLD_MIN_STEP and ``largest`` (the post-check passes the escalation
     factor squared: a side-hinged door may need 8x for a 5 deg slope), so
     escalation raises friction as far as the disturbances need (a lid that
@@ -104,10 +123,10 @@ def hold_factor(metrics: list[MetricResult], joint: str, largest: float) -> floa
         for name, trial in (m.details.get("trials") or {}).items():
             d = (trial.get("joint_drift") or {}).get(joint)
             tol = (trial.get("joint_tolerance") or {}).get(joint)
-            if d is None or not tol or d <= tol:
+            if d is None or not tol or d <= HOLD_TARGET_SHARE * tol:
                 continue
             e = HOLD_EXPONENT_SLOPE if name.startswith("tilt") else HOLD_EXPONENT_IMPACT
-            best = max(best, HOLD_MARGIN * (float(d) / float(tol)) ** e)
+            best = max(best, (float(d) / (HOLD_TARGET_SHARE * float(tol))) ** e)
     return float(min(largest, best))
 
 

@@ -23,8 +23,11 @@ Definitions (SI units; ``docs/metrics.md``, section "Operable friction"):
 - Gravity load L: the weight of the moving subtree m_s g times the distance
   from the axis to the child link's center of mass (revolute, the worst case:
   that lever horizontal) or m_s g (prismatic, a vertical slide's worst case).
-- Friction cap = ``OPERABLE_SHARE`` * E - L, at least the joint's friction
-  before escalation (escalation never lowers a value).
+- Friction cap = min(``OPERABLE_SHARE`` * E - L, the friction above which
+  the engine's friction motor locks the joint,
+  :func:`asset2sim.tasks.synthesize.physics.max_stable_friction`: F dt / I
+  beyond Bullet's joint speed clamp), at least the joint's friction before
+  escalation (escalation never lowers a value).
 - Tilt floor: a joint that robust rest's tilts move needs friction for the
   extra gravity load a tilt by theta adds: at least the friction before
   escalation plus ``TILT_MARGIN`` m_s g r sin(theta) (revolute, r the lever
@@ -43,6 +46,7 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check.probes import ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
+from asset2sim.tasks.synthesize.physics import max_stable_friction
 
 GRAVITY = 9.81
 """m/s^2"""
@@ -136,6 +140,8 @@ def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, ge
         sub_mass = sum(overlay.links[ln].mass for ln in subtree_links(asset, jd.child) if ln in overlay.links)
         load = sub_mass * GRAVITY * (1.0 if jd.type == "prismatic" else com_lever(overlay, asset, name))
         cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry, config) - load
+        if d.inertia_axis:  # above it the engine's friction motor locks the joint (a light handle)
+            cap = min(cap, max_stable_friction(d.inertia_axis))
         floor = before.joints[name].friction if name in before.joints else d.friction
         caps[name] = float(max(cap, floor))
     return caps

@@ -57,7 +57,9 @@ def evaluate_engine(
     Returns penetration (mm; ``details.engine_notes`` lists what the engine had
     to change for this asset), rest stability and oscillation. A missing
     package gives ``details.skipped`` and ``passed=None``; a load or run error
-    gives ``details.error`` and ``passed=False``.
+    gives ``details.error`` and ``passed=False``. ``details.root`` says how
+    the root was held (the folder's declaration: "fixed (mounted)" or
+    "free (on the ground)").
 
     Raises:
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
@@ -68,6 +70,15 @@ def evaluate_engine(
     urdf = urdf_dir / "mobility.urdf"
     if not urdf.is_file():
         raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
+    results = _evaluate_engine(urdf_dir, urdf, engine, initial_state, conventions)
+    fixed = read_root(urdf_dir).fixed
+    for m in results:  # how the root was held (the post-check's label, postcheck.root_label)
+        m.details["root"] = "fixed (mounted)" if fixed else "free (on the ground)"
+    return results
+
+
+def _evaluate_engine(urdf_dir: Path, urdf: Path, engine: str, initial_state: dict[str, float] | None,
+                     conventions: SimConventions | None) -> list[MetricResult]:
     conv = conventions or SimConventions()
     state = read_initial_state(urdf_dir) if initial_state is None else dict(initial_state)
     springs = springs_from_overlay(urdf_dir, state)

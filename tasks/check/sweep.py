@@ -309,6 +309,95 @@ def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]],
     return out, notes
 
 
+#: Opening fraction under which a part whose drive stalls counts as shut in
+#: by another part (:func:`_sweep_clearing`): the free fraction under which
+#: :mod:`asset2sim.tasks.geometry.limits` calls a part blocked at its closed end.
+SHUT_IN_FRACTION = limits.MIN_FREE_FRACTION
+#: Distance (m) within which a link counts as touching the swept part where
+#: its drive stalled (:func:`blocking_link`): the 1 mm of the limits scan.
+BLOCK_DISTANCE = 0.001
+
+
+def blocking_link(session: SimSession, links: list[str], exclude: set[str]) -> str | None:
+    """The link (not in ``links`` nor ``exclude``) nearest to, or deepest
+    into, the links ``links`` at the session's current state, when within
+    :data:`BLOCK_DISTANCE` m; None when none is."""
+    sub = set(links)
+    best, who = BLOCK_DISTANCE, None
+    for a in links:
+        if not session.link_has_collision(a):
+            continue
+        for b in session.link_names:
+            if b in sub or b in exclude or not session.link_has_collision(b):
+                continue
+            d = session.link_distances(a, b, BLOCK_DISTANCE)
+            if d and min(d) <= best:
+                best, who = min(d), b
+    return who
+
+
+def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
+    """Movable joints on the kinematic-tree path between links ``a`` and
+    ``b`` (either order), nearest to ``b`` first."""
+    parent = {j.child: j for j in model.joints}
+
+    def chain(ln: str) -> list[str]:
+        out = [ln]
+        while ln in parent:
+            ln = parent[ln].parent
+            out.append(ln)
+        return out
+
+    ca, cb = chain(a), chain(b)
+    common = next((x for x in ca if x in set(cb)), None)
+    path_a = ca[: ca.index(common)] if common is not None else ca
+    path_b = cb[: cb.index(common)] if common is not None else cb
+    return [parent[ln].name for ln in path_b + path_a[::-1] if parent[ln].type in ("revolute", "prismatic", "continuous")]
+
+
+def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],
+                    links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int) -> JointSweep:
+    """:func:`sweep_joint` of ``name``; when the part is shut in (its drive
+    stalls on the way out before :data:`SHUT_IN_FRACTION` of the range)
+    against a link that another movable joint places (a sibling closed over
+    it: a toilet's lid on its seat; a part between a held top and the base:
+    a stapler's magazine under its closed top), sweep again with the joints
+    between the part and that link at their open ends (as a hand lifts the
+    lid before the seat). The second sweep is kept only when it passes; its
+    ``range_note`` says what was opened. A link rigid with the joint's parent
+    (the part's own stop) opens nothing, nor does a part that opens partly
+    before it meets another (a limit beyond the geometry: the sweep's finding)."""
+    qc, d, rng = closed[name]
+    first = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
+                        initial_state=initial_state, config=cfg)
+    if (first.passed or first.diverged or first.time_open is not None or not np.isfinite(first.reached_open)
+            or first.reached_open >= SHUT_IN_FRACTION):
+        return first
+    jd = model.joint(name)
+    session.restore_state(saved)
+    session.set_joint_positions({**initial_state, name: qc + d * rng * max(first.reached_open, 0.0)})
+    who = blocking_link(session, links, limits.rigid_group(model, jd.parent))
+    if who is None:
+        return first
+    opened = {}
+    for k in joints_between(model, jd.child, who):
+        if k == name or k not in closed or k not in session.joint_types:
+            continue
+        kc, kd, kr = closed[k]
+        if kr > 0:
+            opened[k] = kc + kd * kr
+    if not opened:
+        return first
+    session.restore_state(saved)
+    second = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
+                         initial_state={**initial_state, **opened}, config=cfg)
+    if not second.passed:
+        return first
+    second.range_note = (f"{who} is in the way at the initial state (stalled at {first.reached_open:.0%}); "
+                         f"swept with {', '.join(sorted(opened))} open")
+    return second
+
+
 def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
@@ -321,7 +410,8 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
     """
     cfg = config or SweepConfig()
     conv = conventions or SimConventions()
-    subtrees = joint_subtrees(read_urdf(urdf))
+    model = read_urdf(urdf)
+    subtrees = joint_subtrees(model)
     run = SweepRun(engine)
     springs = dict(springs or {})
     notes: dict[str, str] = {}
@@ -348,16 +438,19 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
                     run.skipped[name] = "no opening range"
                     continue
                 session.restore_state(saved)
-                run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
-                                              links=subtrees.get(name, [session.joint_child[name]]),
-                                              initial_state=initial_state, config=cfg))
+                links = subtrees.get(name, [session.joint_child[name]])
+                if cfg.hold_others:
+                    run.joints.append(_sweep_clearing(session, model, name, closed, links, initial_state, cfg, saved))
+                else:
+                    run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
+                                                  links=links, initial_state=initial_state, config=cfg))
             session.discard_state(saved)
         finally:
             session.close()
     order = list(closed)
     run.joints.sort(key=lambda j: order.index(j.joint))
     for j in run.joints:
-        j.range_note = notes.get(j.joint, "")
+        j.range_note = "; ".join(x for x in (notes.get(j.joint, ""), j.range_note) if x)
     return run
 
 

@@ -20,8 +20,10 @@ Interaction-readiness is decided here too, tier by tier (:data:`TIERS`,
 :func:`readiness`): ``rest`` (the SPEC's passive half: rest stability,
 oscillation, joints held, no toppling, no divergence, ground penetration),
 ``sweep`` (:mod:`asset2sim.tasks.check.sweep`), ``robust_rest``
-(:mod:`asset2sim.tasks.check.robust_rest`) and ``probes``
-(:mod:`asset2sim.tasks.check.probes`). An asset is interaction-ready iff no
+(:mod:`asset2sim.tasks.check.robust_rest`), ``probes``
+(:mod:`asset2sim.tasks.check.probes`) and, when a task is given, ``task``
+(:mod:`asset2sim.tasks.check.task_execution`) and ``force``
+(:mod:`asset2sim.tasks.check.force_ranges`). An asset is interaction-ready iff no
 measured metric of any tier fails, in any engine. Semantic accuracy (scale,
 mass, prompt alignment) is reported beside it and does not decide it. The
 refine report (``readiness``, ``failure_mode``), the terminal summary,
@@ -58,6 +60,8 @@ TIERS: dict[str, tuple[tuple[str, ...], str]] = {
     "sweep": (("joint_sweep",), "blocked_joint"),
     "robust_rest": (("robust_rest",), "not_robust_at_rest"),
     "probes": (("probes",), "probe_failed"),
+    "task": (("task_execution",), "task_failed"),
+    "force": (("operating_force",), "implausible_force"),
 }
 
 

@@ -40,7 +40,7 @@ RESEARCH_NUMBERS: list[dict[str, str]] = [
 #: Metrics flattened into one benchmark record: name -> column prefix.
 RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "joint_hold",
                   "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes",
-                  "joint_sweep", "robust_rest")
+                  "joint_sweep", "robust_rest", "task_execution", "operating_force")
 
 
 def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: str = "pybullet") -> dict[str, Any]:
@@ -88,7 +88,8 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
     """The thesis table for a set of records: per method mean and sample sd
     (ddof = 1) of penetration (mm; all rows and Toilet+Stapler rows), scale
     deviation (%), initial joint deviation; pass rates (fraction) of rest
-    stability, oscillation, probes, joint sweep, robust rest (PyBullet),
+    stability, oscillation, probes, joint sweep, robust rest, task success
+    and force plausibility (PyBullet),
     interaction-readiness (every tier, every evaluated engine) and all checks
     over the assets with a verdict; mean prompt alignment; median evaluation time (s); count of
     assets the method failed to produce (``errors``)."""
@@ -108,6 +109,8 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
         row["probes_pass"], row["probes_n"] = _rate([r["probes_pass"] for r in ok])
         row["sweep_pass"], row["sweep_n"] = _rate([r.get("joint_sweep_pass") for r in ok])
         row["robust_rest_pass"], row["robust_n"] = _rate([r.get("robust_rest_pass") for r in ok])
+        row["task_pass"], row["task_n"] = _rate([r.get("task_execution_pass") for r in ok])
+        row["force_pass"], row["force_n"] = _rate([r.get("operating_force_pass") for r in ok])
         row["ready"], row["ready_n"] = _rate([r.get("ready") for r in ok])
         row["all_pass"], _ = _rate([r["all_pass"] for r in ok])
         secs = sorted(r["seconds"] for r in ok if r.get("seconds") is not None)

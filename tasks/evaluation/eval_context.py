@@ -33,6 +33,7 @@ from asset2sim.tasks.evaluation.asset_files import (
 )
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, infer_scale_from_geometry
 from asset2sim.tasks.evaluation.request_match import category_prior, parse_prompt, recognize_category
+from asset2sim.tasks.evaluation.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.publish.output_folder import OutputError
 from asset2sim.tasks.publish.write import read_root
@@ -82,6 +83,9 @@ class Context:
     root_fixed: bool = False
     """The folder declares a mounted asset (``initial_state.json`` ``"root"``):
     every simulation holds the root fixed."""
+    task: TaskSpec | None = None
+    """The manipulation task given to the evaluation (``--task``, the
+    manifest's ``task``), parsed; None: no task (task execution not run)."""
 
     @property
     def movable(self) -> list[str]:

@@ -185,8 +185,11 @@ def evaluate_asset(
             grades itself).
         task: the manipulation task ("close the microwave door", a
             manifest's ``task``): the probes try only its joints and
-            direction (:func:`asset2sim.tasks.evaluation.task_spec.parse_task`);
-            None: every task-relevant joint, close and open.
+            direction (:func:`asset2sim.tasks.evaluation.task_spec.parse_task`),
+            and a gripper executes it (``task_execution``,
+            ``operating_force``: :mod:`asset2sim.tasks.check.task_execution`);
+            None: the probes try every task-relevant joint, close and open,
+            and task execution is not run.
         recorded: the post-check's joint sweep and robust rest runs
             (:class:`~asset2sim.tasks.check.recorded_runs.RecordedRuns`): a
             run whose inputs (URDF bytes and meshes, initial state, springs,
@@ -217,6 +220,7 @@ def evaluate_asset(
         need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
     need_closed = list(dict.fromkeys(need_closed + movable_joints(ctx)))  # the joint sweep drives every one
     tspec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints) if task else None
+    ctx.task = tspec  # task execution (metric_defs: task_execution, operating_force) runs only with a task
     if tspec is not None:
         ctx.notes.append(f"task {task!r}: {', '.join(tspec.actions)} {', '.join(tspec.joints) or 'no joint'} ({tspec.rule})"
                          + "".join(f"; {n}" for n in tspec.notes))

@@ -22,7 +22,12 @@ behaviour
 interaction under manipulation (per engine, each in sessions of its own)
     ``joint_sweep`` (:mod:`asset2sim.tasks.check.sweep`: root fixed, every
     movable joint driven through its range and back) and ``robust_rest``
-    (:mod:`asset2sim.tasks.check.robust_rest`: drop, tilts, nudge).
+    (:mod:`asset2sim.tasks.check.robust_rest`: drop, tilts, nudge);
+    with a task (``ctx.task``) ``task_execution``
+    (:mod:`asset2sim.tasks.check.task_execution`: a force- and speed-limited
+    gripper performs it on the free object) and ``operating_force``
+    (:mod:`asset2sim.tasks.check.force_ranges`: its peak force against real
+    operating forces).
 
 Definitions, conventions and thresholds are in ``docs/metrics.md``.
 """
@@ -39,11 +44,14 @@ from asset2sim.schemas.metrics import unit as unit_of
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.check import recorded_runs, robust_rest, sweep
+from asset2sim.tasks.check import task_execution
+from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import Context
 from asset2sim.tasks.evaluation.request_match import requested_joints, scaled_mass_range
+from asset2sim.tasks.interpret.priors import spring_expected
 
 #: Largest ground penetration during the rest test that passes, m.
 GROUND_PENETRATION_TOL = 0.005
@@ -403,3 +411,55 @@ def _m_robust(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
                                             fixed_base=ctx.root_fixed, recorded=r.recorded)
         out.append(robust_rest.robust_rest_metric(run))
     return out
+
+
+def _task_joints(ctx: Context) -> dict[str, tuple[float, float, float]]:
+    """joint -> (q_closed, direction, open range) of the task's joints with a closed end and a range."""
+    names = ctx.task.joints if ctx.task is not None else []
+    return {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in names and c.open_range > 0}
+
+
+def _hold_required(ctx: Context, joints: list[str]) -> dict[str, bool]:
+    """joint -> whether the task's target must hold after release: not for a
+    joint the request asks to move freely, nor for one with a spring that the
+    request or the category's part prior asks for (it returns by design)."""
+    req = ctx.request
+    out = {}
+    for n in joints:
+        link = ctx.joints[n].child if n in ctx.joints else None
+        label = (ctx.semantics.get(link) or (None, None))[1] if link else None
+        sprung = n in ctx.springs and ((req is not None and req.spring) or spring_expected(ctx.category or "", label))
+        out[n] = not ((req is not None and req.free_moving) or sprung)
+    return out
+
+
+@register_metric("task_execution")
+def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """:mod:`asset2sim.tasks.check.task_execution` in every engine that
+    loaded the asset (fresh sessions, the root as declared), and from the same
+    run the ``operating_force`` check (:mod:`asset2sim.tasks.check.force_ranges`).
+    Without a task (``ctx.task`` None) both are skipped."""
+    out = []
+    labels = {link: lab for link, (_, lab) in ctx.semantics.items()}
+    for e, r in runs.items():
+        if ctx.task is None or r.error:
+            why = r.error or "no task given (--task, the manifest's task column)"
+            out += [_skip("task_execution", unit_of("task_execution"), e, why),
+                    _skip("operating_force", unit_of("operating_force"), e, why)]
+            continue
+        joints = _task_joints(ctx)
+        actions = tuple(a for a in ctx.task.actions if a in ("close", "open"))
+        run = task_execution.run_task(e, ctx.urdf, joints, actions=actions, targets=dict(ctx.task.targets),
+                                      initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
+                                      conventions=ctx.conventions, fixed_base=ctx.root_fixed,
+                                      hold_required=_hold_required(ctx, list(joints)), task=ctx.task.text)
+        tm = task_execution.task_metric(run)
+        tm.details["joints_rule"] = ctx.task.rule
+        out += [tm, force_metric(run, ctx.category, labels)]
+    return out
+
+
+@register_metric("operating_force")
+def _m_force(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """Measured with ``task_execution`` (one gripper run gives both): nothing here."""
+    return []

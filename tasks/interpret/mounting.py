@@ -81,7 +81,7 @@ def load_mounting_priors() -> dict[str, MountingPrior]:
             missing (the message names ``mounting.yaml`` and the category).
     """
     text = resources.files("asset2sim.priors").joinpath(_FILE).read_text(encoding="utf-8")
-    return _parse_table(yaml.safe_load(text), _FILE)
+    return _parse_table(yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)), _FILE)  # libyaml when built in
 
 
 def category_mounting(category: str | None) -> RootMount:

@@ -226,7 +226,7 @@ def _read_yaml(directory: Path | None, fname: str) -> Any:
     except FileNotFoundError as exc:
         raise PriorsError(f"{fname}: file not found ({exc})") from exc
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # libyaml: same result, ~7x faster
     except yaml.YAMLError as exc:
         raise PriorsError(f"{fname}: not valid YAML: {exc}") from exc
     if not isinstance(data, dict):

@@ -21,19 +21,24 @@ link frame (scale and collision origin baked in), each:
   group that spans no area (a point or a segment) is dropped;
 - wound with outward normals (every face's normal points away from the
   hull's interior);
-- at most :data:`MAX_PIECES_PER_LINK` per link: beyond that, the two pieces
+- at most :data:`MAX_PIECES_PER_LINK` per link (:data:`MAX_PIECES_HARD`
+  when fewer pieces would hold another link): beyond that, the two pieces
   whose merged hull adds the least empty volume are merged, repeatedly
   (the greedy hierarchical merge of Mamou and Ghorbel, "A simple and
   efficient approach for 3D mesh approximate convex decomposition", ICIP
-  2009), never into a hull that would swallow another link's geometry at the
-  initial state when another merge is possible.
+  2009), never into a hull that would swallow another link's geometry
+  anywhere over the joints' ranges (each joint swept in turn,
+  :func:`swept_other_points`) when another merge is possible.
 
-A parent whose piece contains its child at the initial state (a toilet seat
-inside the convex hull of the bowl) would make the two collide as soon as an
-engine does not skip parent-child pairs (a fixed object, a robot finger in
-between). :func:`convex_collisions` measures that depth; above
+A parent whose piece contains its child (a toilet seat inside the convex
+hull of the bowl) would make the two collide as soon as an engine does not
+skip parent-child pairs (a fixed object, a robot finger in between), and a
+hull that fills the space the child moves through blocks the joint.
+:func:`convex_collisions` measures the depth of the child's vertices inside
+the parent's pieces over the whole range of the joint between them
+(:func:`swept_child_points`: the volume the child sweeps); above
 :data:`CONTAINMENT_TOLERANCE` the parent's mesh is cut into convex pieces
-around the child (:func:`split_surface`: the surface, densely sampled, is
+around that volume (:func:`split_surface`: the surface, densely sampled, is
 halved across its longest extent where a piece's hull still holds the child,
 a binary space partition as in the BSP-tree decompositions of Naylor,
 "Binary space partitioning trees as an alternative representation of
@@ -41,6 +46,13 @@ polytopes", CAD 1990), kept only when the child then sits less deep. Parts
 are never moved. CoACD (used by the state search,
 :mod:`asset2sim.tasks.state.collision`) took 215 s on the toilet 102703's
 bowl on this machine; the cut takes well under a second.
+
+The pieces depend on the geometry and the joint limits only, never on the
+initial state: the state search, the limit scan, the post-check and the
+evaluation's closed ends all measure the same collision geometry whatever
+state the file was written at (cutting and merging at the initial state made
+faucet 148's written pieces close its handle at -0.079 rad where the input's
+closed at -0.228 rad).
 """
 
 from __future__ import annotations
@@ -54,6 +66,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim import atomic, mesh_io, urdf
+from asset2sim.frames import axis_angle_matrix
 from asset2sim.engines.loading import FLAT_HULL_THICKNESS, mesh_hulls
 
 #: Most convex pieces a link's collision keeps. MuJoCo makes one contact per
@@ -64,6 +77,12 @@ from asset2sim.engines.loading import FLAT_HULL_THICKNESS, mesh_hulls
 #: mesh (:data:`asset2sim.tasks.state.collision.COACD_SETTINGS`), enough for a
 #: drawer, a box or a cabinet with shelves (5-10 slabs) to keep their hollow.
 MAX_PIECES_PER_LINK = 16
+
+#: Most convex pieces a link keeps when merging further would make a piece
+#: hold another link somewhere over the joints' ranges (a parent cut around
+#: the volume its child sweeps): twice :data:`MAX_PIECES_PER_LINK`, still
+#: far below the 118 pieces of laptop 9912 that overflowed MuJoCo.
+MAX_PIECES_HARD = 32
 
 #: Thinnest convex piece written, m: the 2 mm slab every engine here takes
 #: (PyBullet inflates a flat hull by its 1 mm margin per side; PhysX cannot
@@ -412,20 +431,32 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
     is cut by the plane (normal along an axis of the frame, at one of
     :data:`CUT_FRACTIONS` of the set's extent) after which the deeper of the
     two halves holds ``keep_out`` least deep (ties: the smaller summed hull
-    volume); points within ``spacing`` of the plane go to both halves, so
+    volume; the planes through the keep-out point held deepest are tried as
+    well); points within ``spacing`` of the plane go to both halves, so
     neighbouring hulls overlap and leave no gap. Stops when no hull holds a
     point deeper than ``tolerance``, when ``budget`` sets exist, or when no
     cut helps. Returns the point sets."""
-    def measure(p: np.ndarray) -> tuple[float, float]:
+    def hull_of(p: np.ndarray) -> Piece | None:
         p = p[:: max(1, len(p) // MEASURE_SAMPLES)]  # an even subsample guides the cut; the pieces keep every point
         solid = solid_points(p)
         if solid is None:
-            return 0.0, 0.0
+            return None
         try:
-            piece = Piece.of(solid)
+            return Piece.of(solid)
         except (QhullError, ValueError):
-            return 0.0, 0.0
-        return depth_inside(keep_out, piece), piece.volume
+            return None
+
+    def measure(p: np.ndarray) -> tuple[float, float]:
+        piece = hull_of(p)
+        return (0.0, 0.0) if piece is None else (depth_inside(keep_out, piece), piece.volume)
+
+    def deepest(p: np.ndarray) -> np.ndarray | None:
+        """The keep-out point held deepest by the hull of ``p`` (3,), or None."""
+        piece = hull_of(p)
+        if piece is None or not len(keep_out):
+            return None
+        d = np.max(keep_out @ piece.equations[:, :3].T + piece.equations[:, 3], axis=1)
+        return keep_out[int(np.argmin(d))] if d.min() < 0 else None
 
     sets = [(measure(points)[0], points)]
     while len(sets) < budget:
@@ -435,11 +466,14 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
             break
         lo_b, ext = p.min(axis=0), np.ptp(p, axis=0)
         best = None
+        at = deepest(p)
         for ax in range(3):
             if ext[ax] <= 2 * spacing:
                 continue
-            for f in CUT_FRACTIONS:
-                cut = lo_b[ax] + f * ext[ax]
+            cuts = [lo_b[ax] + f * ext[ax] for f in CUT_FRACTIONS]
+            if at is not None:  # through the point held deepest: it ends up on the faces of both halves
+                cuts.append(at[ax])
+            for cut in cuts:
                 lo, hi = p[p[:, ax] <= cut + spacing], p[p[:, ax] >= cut - spacing]
                 if len(lo) < 4 or len(hi) < 4 or len(lo) == len(p) or len(hi) == len(p):
                     continue
@@ -526,6 +560,70 @@ def _child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], poses: 
     return out
 
 
+#: Largest motion (m) of a child's collision vertex between two neighbouring
+#: positions of its joint at which the child is kept out of its parent's
+#: pieces (:func:`sweep_positions`): the 2 mm containment tolerance, so a
+#: hull that holds no sampled position holds the positions in between no
+#: deeper than about that; at most :data:`MAX_SWEEP_SAMPLES` positions (the
+#: time of a cut grows with them).
+SWEEP_STEP = CONTAINMENT_TOLERANCE
+MAX_SWEEP_SAMPLES = 48
+
+
+def sweep_positions(joint: urdf.UrdfJoint, reach: float, step: float = SWEEP_STEP) -> np.ndarray:
+    """Positions (n,) rad or m spread evenly over ``joint``'s whole range
+    (its limits; a continuous joint over a full turn), at most ``step`` m of
+    motion apart for a point ``reach`` m from a revolute axis (a prismatic
+    joint moves every point by the travel), n <= :data:`MAX_SWEEP_SAMPLES`;
+    [0] for a fixed joint or an empty range."""
+    if joint.type == "fixed":
+        return np.zeros(1)
+    if joint.type == "continuous":
+        lo, hi = -np.pi, np.pi
+    else:
+        lo, hi = float(joint.lower), float(joint.upper)
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        return np.array([0.0 if not np.isfinite(lo) else lo])
+    travel = (hi - lo) * (1.0 if joint.type == "prismatic" else max(reach, 1e-9))
+    n = int(np.clip(np.ceil(travel / max(step, 1e-9)) + 1, 2, MAX_SWEEP_SAMPLES))
+    return np.linspace(lo, hi, n)
+
+
+def _joint_motion(joint: urdf.UrdfJoint, q: float) -> np.ndarray:
+    """(4, 4) parent -> child transform of ``joint`` at position ``q`` (rad
+    or m): its origin, then the rotation about or translation along its axis,
+    as :meth:`asset2sim.urdf.UrdfModel.link_poses` composes it."""
+    m = np.eye(4)
+    if joint.type in ("revolute", "continuous"):
+        m[:3, :3] = axis_angle_matrix(joint.axis, float(q))
+    elif joint.type == "prismatic":
+        m[:3, 3] = joint.axis * float(q)
+    return joint.origin @ m
+
+
+def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
+                       support: bool = False) -> dict[str, np.ndarray]:
+    """Vertices of every child link's pieces (their :attr:`Piece.support`
+    points with ``support``) in ``link``'s frame at every position of
+    :func:`sweep_positions` of the joint between them: the volume the child
+    sweeps over its whole range. A parent-child pose depends on that one
+    joint only, so this holds for every state of the object."""
+    out = {}
+    for j in model.children(link):
+        pts = [p.support if support else p.points for p in pieces.get(j.child, [])]
+        if not pts:
+            continue
+        local = np.vstack(pts)
+        # distance of the vertices from the axis (the child frame turns about the axis through its origin)
+        reach = float(np.max(np.linalg.norm(np.cross(local, j.axis), axis=1), initial=0.0)) if j.type in ("revolute", "continuous") else 0.0
+        sets = []
+        for q in sweep_positions(j, reach):
+            T = _joint_motion(j, q)
+            sets.append(local @ T[:3, :3].T + T[:3, 3])
+        out[j.child] = np.vstack(sets)
+    return out
+
+
 def containment_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:
     """(parent, child) -> largest depth (m) of a child's collision vertex
     inside one of the parent's pieces, at joint positions ``state`` (rad or m)."""
@@ -537,62 +635,187 @@ def containment_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], st
     return out
 
 
-def _resolve_containment(model, pieces, state, mesh_path, notes, decompose: bool, limit: int, geometry_key: str = "") -> None:
+#: Largest part of a parent piece's width (along the face moved) that
+#: :func:`shave_piece` may take off: the piece keeps at least half of itself.
+MAX_SHAVE_FRACTION = 0.5
+
+
+def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:
+    """``piece`` cut by the half-space ``normal . x + offset <= 0`` (m): the
+    hull of its vertices inside the half-space and of the points where its
+    edges cross the plane; None when nothing with volume is left."""
+    verts, tris = mesh_io.convex_hull_mesh(piece.points)
+    s = verts @ normal + offset
+    keep = [verts[s <= 0]]
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    a, b = edges[:, 0], edges[:, 1]
+    cross = (s[a] > 0) != (s[b] > 0)
+    if cross.any():
+        t = s[a[cross]] / (s[a[cross]] - s[b[cross]])
+        keep.append(verts[a[cross]] + t[:, None] * (verts[b[cross]] - verts[a[cross]]))
+    pts = np.vstack(keep)
+    solid = solid_points(pts)
+    if solid is None:
+        return None
+    try:
+        return Piece.of(solid, piece.sources)
+    except (QhullError, ValueError):
+        return None
+
+
+def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT_TOLERANCE,
+                max_fraction: float = MAX_SHAVE_FRACTION) -> Piece | None:
+    """``piece`` with one face moved inwards just far enough that none of
+    ``points`` (k, 3) m held deeper than ``tolerance`` m sits deeper than half
+    of it (a margin against rounding): of the
+    piece's faces, the one that needs the least move (the overlap of two
+    parts' meshes, a drawer's side 3 mm into its carcass's panel: the convex
+    panel cannot be cut around it, only trimmed). None when the least move
+    exceeds ``max_fraction`` of the piece's width along that face's normal
+    (the part does not merely overlap the face: it sits within the piece)."""
+    if not len(points):
+        return piece
+    d = points @ piece.equations[:, :3].T + piece.equations[:, 3]  # (k, f), <= 0 inside
+    inside = np.max(d, axis=1) < -tolerance
+    if not inside.any():
+        return piece
+    need = np.max(-d[inside], axis=0) - 0.5 * tolerance  # (f,) move of each face that leaves every point within half the tolerance
+    f = int(np.argmin(need))
+    n = piece.equations[f, :3]
+    width = float(np.ptp(piece.points @ n))
+    if need[f] > max_fraction * width:
+        return None
+    return clip_piece(piece, n, piece.equations[f, 3] + need[f])
+
+
+def probe_points(points: np.ndarray, pieces: list[Piece], n: int = PROBE_POINTS) -> np.ndarray:
+    """At most ``n`` of ``points`` (k, 3) m that guide a cut of ``pieces``:
+    those inside any of the pieces (the others cannot be held deeper by a
+    piece cut from them), the deepest half of ``n`` first, then an even
+    subsample of the rest (an even subsample of a swept child alone missed
+    the few vertices that sat deepest)."""
+    depth = np.zeros(len(points))
+    for p in pieces:
+        depth = np.maximum(depth, -np.max(points @ p.equations[:, :3].T + p.equations[:, 3], axis=1))
+    inside = np.flatnonzero(depth > 0)
+    if len(inside) <= n:
+        return points[inside]
+    order = inside[np.argsort(-depth[inside])]
+    head, rest = order[: n // 2], order[n // 2:]
+    return points[np.concatenate([head, rest[:: max(1, len(rest) // (n - len(head)))]])]
+
+
+def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit: int) -> None:
     """Cut the parent pieces that contain a child deeper than
-    :data:`CONTAINMENT_TOLERANCE` (:func:`_split_pieces`; kept only when the
-    child then sits less deep). Cuts are reused across states of the same
-    geometry (``geometry_key``) while they keep the child as far out."""
-    poses = model.link_poses(state)
+    :data:`CONTAINMENT_TOLERANCE` anywhere over the child's joint range
+    (:func:`swept_child_points`; :func:`_split_pieces`, kept only when the
+    children then sit less deep), so that no state of a joint starts or
+    moves its child inside its parent's hull; every child of a parent at
+    once (a cut around one child alone was undone by the cut around the
+    next: toilet 102703's lid and seat). Pieces that still hold a child
+    (overlapping meshes) are trimmed (:func:`_trim`)."""
     for parent in list(pieces):
-        for child, pts in _child_points(model, pieces, poses, parent).items():
-            deep = [(d, p) for d, p in ((depth_inside(pts, p), p) for p in pieces[parent]) if d > CONTAINMENT_TOLERANCE]
-            if not deep:
+        swept = swept_child_points(model, pieces, parent, support=True)
+        if not swept:
+            continue
+        pts = np.vstack(list(swept.values()))
+        deep = [(d, p) for d, p in ((depth_inside(pts, p), p) for p in pieces[parent]) if d > CONTAINMENT_TOLERANCE]
+        if not deep:
+            continue
+        before = max(d for d, _ in deep)
+        names = ", ".join(repr(c) for c in swept)
+        if not decompose:
+            notes.append(f"{names} sit {before * 1000:.3g} mm inside the collision hull of their parent {parent!r} over their ranges")
+            continue
+        sources = sorted({s for _, p in deep for s in p.sources})
+        trial = [p for p in pieces[parent] if not set(p.sources) & set(sources)]
+        budget = max(2, limit - len(trial)) if len(sources) == 1 else max(2, (limit - len(trial)) // len(sources))
+        probe = probe_points(pts, [p for _, p in deep])
+        for s in sources:
+            # guided by the swept vertices inside the pieces cut, judged on all of them
+            trial += _split_pieces(model.links[parent], s, mesh_path, probe, budget)
+        after = max((depth_inside(pts, p) for p in trial), default=0.0)
+        if after < before - 1e-6:
+            pieces[parent] = trial
+            notes.append(f"link {parent!r}: {', '.join(sources)} cut into convex pieces around {names} over their ranges: "
+                         f"{before * 1000:.3g} -> {after * 1000:.3g} mm inside")
+        else:
+            after = before
+        if after > CONTAINMENT_TOLERANCE:  # the meshes overlap: trim the pieces that still hold a child
+            _trim(pieces, parent, names, pts, after, notes)
+
+
+def _trim(pieces: dict[str, list[Piece]], parent: str, child: str, pts: np.ndarray, depth: float, notes: list[str]) -> None:
+    """Trim the pieces of ``parent`` that hold any of ``pts`` (the swept
+    vertices of its children ``child``, names for the notes, (k, 3) m)
+    deeper than :data:`CONTAINMENT_TOLERANCE` (:func:`shave_piece`), kept
+    when the children then sit less deep than ``depth`` m."""
+    shaved = [shave_piece(p, pts) if depth_inside(pts, p) > CONTAINMENT_TOLERANCE else p for p in pieces[parent]]
+    shaved = [q if q is not None else p for p, q in zip(pieces[parent], shaved)]
+    after = max((depth_inside(pts, p) for p in shaved), default=0.0)
+    if after < depth - 1e-6:
+        pieces[parent] = shaved
+        notes.append(f"link {parent!r}: collision pieces trimmed where {child} overlap them over their ranges: "
+                     f"{depth * 1000:.3g} -> {after * 1000:.3g} mm inside")
+    else:
+        notes.append(f"{child} sit {depth * 1000:.3g} mm inside their parent {parent!r} over their ranges; "
+                     "neither cutting nor trimming its pieces helps")
+
+
+#: Positions per movable joint at which other links are kept out of a link's
+#: merged pieces (:func:`merge_pieces`), evenly over the joint's range.
+GUARD_SAMPLES = 9
+
+
+def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
+                       samples: int = GUARD_SAMPLES) -> np.ndarray | None:
+    """Support points (:attr:`Piece.support`) of every other link's pieces in
+    ``link``'s frame, with the movable joints at their reference (0 clipped
+    to the limits) and each joint in turn at ``samples`` positions over its
+    range: the volume the other links sweep one joint at a time (k, 3) m, or
+    None when no other link has pieces. Independent of the initial state."""
+    ref = {}
+    for j in model.movable_joints:
+        lo, hi = j.lower, j.upper
+        ref[j.name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) and np.isfinite(hi) else 0.0
+    local = {o: np.vstack([p.support for p in pieces[o]]) for o in model.links if o != link and pieces.get(o)}
+    if not local:
+        return None
+    states = [ref]
+    for j in model.movable_joints:
+        qs = sweep_positions(j, 1.0)
+        qs = qs[np.unique(np.linspace(0, len(qs) - 1, min(samples, len(qs))).round().astype(int))]
+        states += [{**ref, j.name: float(q)} for q in qs]
+    seen: dict[str, list[np.ndarray]] = {o: [] for o in local}
+    out = []
+    for st in states:
+        poses = model.link_poses(st)
+        inv = np.linalg.inv(poses[link])
+        for o, pts in local.items():
+            T = inv @ poses[o]
+            if any(np.allclose(T, U, atol=1e-9) for U in seen[o]):
                 continue
-            before = max(d for d, _ in deep)
-            if not decompose:
-                notes.append(f"link {child!r} sits {before * 1000:.3g} mm inside the collision hull of its parent {parent!r}")
-                continue
-            sources = sorted({s for _, p in deep for s in p.sources})
-            trial = [p for p in pieces[parent] if not set(p.sources) & set(sources)]
-            budget = max(2, limit - len(trial)) if len(sources) == 1 else max(2, (limit - len(trial)) // len(sources))
-            ckey = (geometry_key, parent, child, tuple(sources), budget)
-            cut = _CUT_CACHE.get(ckey)
-            after = np.inf
-            if cut is not None:  # the cut made for another state of the same geometry, if it holds here as well
-                after = max((depth_inside(pts, p) for p in trial + cut[0]), default=0.0)
-                if after <= max(CONTAINMENT_TOLERANCE, cut[1]) + 1e-6:
-                    trial += cut[0]
-                else:
-                    cut = None
-            if cut is None:
-                made: list[Piece] = []
-                for s in sources:
-                    # guided by an even subsample of the child's vertices, judged on all of them
-                    made += _split_pieces(model.links[parent], s, mesh_path, pts[:: max(1, len(pts) // PROBE_POINTS)], budget)
-                trial += made
-                after = max((depth_inside(pts, p) for p in trial), default=0.0)
-                if len(_CUT_CACHE) >= 64:
-                    _CUT_CACHE.pop(next(iter(_CUT_CACHE)))
-                _CUT_CACHE[ckey] = (made, after)
-            if after < before - 1e-6:
-                pieces[parent] = trial
-                notes.append(
-                    f"link {parent!r}: {', '.join(sources)} cut into convex pieces around {child!r}: "
-                    f"{before * 1000:.3g} -> {after * 1000:.3g} mm inside"
-                )
-            else:
-                notes.append(f"link {child!r} sits {before * 1000:.3g} mm inside its parent {parent!r}; cutting did not help")
+            seen[o].append(T)
+            out.append(pts @ T[:3, :3].T + T[:3, 3])
+    return np.vstack(out)
 
 
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m).
 
+    The pieces do not depend on the state of the joints: a parent is cut
+    around the volume its child sweeps over the joint's whole range
+    (:func:`swept_child_points`) and merges are guarded against the other
+    links over their ranges (:func:`swept_other_points`), so every state of
+    the object (the initial state, a closed end measured on the written
+    pieces, a state the sweep drives to) sees the same collision geometry.
+
     Args:
-        model: a URDF model (scale baked in).
+        model: a URDF model (scale baked in; its joint limits are the ranges swept).
         mesh_path: ``UrdfGeometry -> Path`` of a collision mesh's file.
-        state: joint -> rad or m, the initial state (for the containment of
-            children and the merge's guard), missing joints at 0.
+        state: joint -> rad or m, the initial state: only for a note when
+            a child still sits inside its parent there.
         limit: most pieces per link.
         decompose: decompose a parent piece that contains its child
             (:func:`split_surface`; else only a note).
@@ -603,45 +826,54 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     Raises:
         CollisionGeometryError: a collision mesh cannot be read.
     """
-    state = state or {}
-    key = _cache_key(model, mesh_path, state, limit, decompose)
+    key = _cache_key(model, mesh_path, limit, decompose)
     hit = _PIECE_CACHE.get(key)
-    if hit is not None:
-        return {k: list(v) for k, v in hit[0].items()}, list(hit[1])
-    notes: list[str] = []
-    pieces: dict[str, list[Piece]] = {}
-    for name, link in model.links.items():
-        pieces[name], _ = _group_pieces(link, mesh_path, notes)
-    _resolve_containment(model, pieces, state, mesh_path, notes, decompose, limit, _cache_key(model, mesh_path, {}, limit, decompose))
-    poses = model.link_poses(state)
-    for name in model.links:
-        if len(pieces[name]) <= limit:
-            continue
-        inv = np.linalg.inv(poses[name])
-        others = [p.points @ (inv @ poses[o])[:3, :3].T + (inv @ poses[o])[:3, 3] for o in model.links if o != name for p in pieces[o]]
-        n = len(pieces[name])
-        pieces[name] = merge_pieces(pieces[name], limit, np.vstack(others) if others else None)
-        notes.append(f"link {name!r}: {n} convex pieces merged into {len(pieces[name])}")
-    if len(_PIECE_CACHE) >= 16:
-        _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
-    _PIECE_CACHE[key] = ({k: list(v) for k, v in pieces.items()}, list(notes))
+    if hit is None:
+        notes: list[str] = []
+        pieces: dict[str, list[Piece]] = {}
+        for name, link in model.links.items():
+            pieces[name], _ = _group_pieces(link, mesh_path, notes)
+        _resolve_containment(model, pieces, mesh_path, notes, decompose, limit)
+        for name in model.links:
+            if len(pieces[name]) <= limit:
+                continue
+            n = len(pieces[name])
+            guard = [x for x in (swept_other_points(model, pieces, name),
+                                 *swept_child_points(model, pieces, name, support=True).values()) if x is not None]
+            guard = np.vstack(guard) if guard else None
+            # merges that hold no other link over the ranges down to the limit; beyond
+            # MAX_PIECES_HARD (pieces a parent was cut into around its child) any merge
+            pieces[name] = merge_pieces(pieces[name], limit, guard, free_only=True)
+            if len(pieces[name]) > max(limit, MAX_PIECES_HARD):
+                pieces[name] = merge_pieces(pieces[name], max(limit, MAX_PIECES_HARD), guard)
+            notes.append(f"link {name!r}: {n} convex pieces merged into {len(pieces[name])}")
+            swept = swept_child_points(model, pieces, name, support=True)
+            if decompose and swept:  # a merge the limit forced may hold a child again
+                pts = np.vstack(list(swept.values()))
+                d = max((depth_inside(pts, p) for p in pieces[name]), default=0.0)
+                if d > CONTAINMENT_TOLERANCE:
+                    _trim(pieces, name, ", ".join(repr(c) for c in swept), pts, d, notes)
+        if len(_PIECE_CACHE) >= 16:
+            _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
+        _PIECE_CACHE[key] = hit = ({k: list(v) for k, v in pieces.items()}, list(notes))
+    pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
+    if state:
+        for (parent, child), d in containment_depths(model, pieces, state).items():
+            if d > CONTAINMENT_TOLERANCE:
+                notes.append(f"link {child!r} sits {d * 1000:.3g} mm inside the collision pieces of its parent {parent!r} at the initial state")
     return pieces, notes
 
-
-#: Cuts of a parent around a child made in this process: (geometry key,
-#: parent, child, sources, budget) -> (pieces, depth reached).
-_CUT_CACHE: dict[tuple, tuple[list[Piece], float]] = {}
 
 #: Pieces made in this process, by :func:`_cache_key` (a refine run writes the
 #: same URDF several times: state search, post-check, escalation rounds).
 _PIECE_CACHE: dict[str, tuple[dict[str, list[Piece]], list[str]]] = {}
 
 
-def _cache_key(model: urdf.UrdfModel, mesh_path, state: dict[str, float], limit: int, decompose: bool) -> str:
+def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str:
     """Digest of everything :func:`link_pieces` reads: every collision
     (file identity, origin, scale, primitive sizes), every joint's frame,
-    axis and type, the state, the limit and the decomposition switch."""
-    h = hashlib.sha256(repr((limit, decompose, sorted((k, round(float(v), 12)) for k, v in state.items()))).encode())
+    axis, type and limits, the piece limit and the decomposition switch."""
+    h = hashlib.sha256(repr((limit, decompose)).encode())
     for name, link in model.links.items():
         h.update(name.encode())
         for c in link.collisions:
@@ -655,7 +887,8 @@ def _cache_key(model: urdf.UrdfModel, mesh_path, state: dict[str, float], limit:
                 except OSError:
                     h.update(str(path).encode())
     for j in model.joints:
-        h.update(repr((j.name, j.type, j.parent, j.child)).encode() + np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+        h.update(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)).encode()
+                 + np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
     return h.hexdigest()
 
 

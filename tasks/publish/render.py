@@ -84,6 +84,7 @@ __all__ = [
     "BACKGROUND",
     "DEFAULT_COLOR",
     "DEFAULT_VIEWS",
+    "OUTPUT_VIEW_SIZE",
     "DIFFUSE",
     "FILL",
     "FOV_DEG",
@@ -104,6 +105,12 @@ __all__ = [
 
 DEFAULT_VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
 """The five views of the SPEC's extraction stage."""
+
+OUTPUT_VIEW_SIZE: tuple[int, int] = (192, 192)
+"""(width, height) px of the views ``asset2sim refine`` writes into an output
+folder (``views/``, shown in ``report.html``): drawn at 384 x 384
+(``supersample`` 2) and box-filtered, about 0.56 of the drawing time of
+256 x 256 (``docs/renders.md``, "Time"). ``asset2sim render`` keeps 256 x 256."""
 
 BACKENDS: tuple[str, ...] = ("auto", "tiny")
 

@@ -1,7 +1,9 @@
 """Self-contained HTML reports: one asset's evaluation, and the benchmark pages.
 
-Everything is inline (CSS, PNG images as base64 ``data:`` URIs), so a report
-opens offline from any folder. Text is HTML-escaped.
+Everything is inline (CSS, renders as PNG and figures as SVG, both base64
+``data:`` URIs), so a report opens offline from any folder. Text is
+HTML-escaped. The figures are SVG drawn by
+:mod:`asset2sim.tasks.publish.plots` without a plotting library.
 
 - :func:`render_report` / :func:`write_report`: ``report.html`` of one
   :class:`asset2sim.schemas.evaluation.Evaluation`: renders of the object at its
@@ -72,6 +74,14 @@ def img_tag(png: bytes | None, alt: str) -> str:
     return f'<img alt="{esc(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}"/>'
 
 
+def svg_tag(svg: bytes | None, alt: str) -> str:
+    """An ``<img>`` with an SVG figure inline (:mod:`asset2sim.tasks.publish.plots`;
+    empty string for None). As an image, the figure's text cannot reach the page."""
+    if not svg:
+        return ""
+    return f'<img alt="{esc(alt)}" src="data:{plots.SVG_MIME};base64,{base64.b64encode(svg).decode()}"/>'
+
+
 def verdict_cell(passed: bool | None) -> str:
     """A colour-coded table cell for a verdict."""
     if passed is None:
@@ -104,10 +114,10 @@ def _renders(ev, views: dict[str, np.ndarray] | None = None) -> tuple[str, str]:
     except Exception as exc:  # fall back to the plot
         note = f"render failed ({type(exc).__name__}: {exc}); "
     run = next((r for r in ev._runs.values() if r.point_cloud), None)
-    png = plots.plot_object(run.point_cloud) if run is not None else None
-    if png is None:
+    svg = plots.plot_object(run.point_cloud) if run is not None else None
+    if svg is None:
         return "<p class='small'>no geometry recorded</p>", note + "no plot"
-    return img_tag(png, "collision geometry"), note + "plot of the collision vertices per link"
+    return svg_tag(svg, "collision geometry"), note + "plot of the collision vertices per link"
 
 
 def _verdict_table(ev) -> str:
@@ -341,13 +351,13 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
             sections.append(f"<p class='small'>{esc(eng)}: {esc(run.error)}</p>")
             continue
         sections.append(f"<h3>{esc(eng)}</h3>")
-        sections.append(img_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
+        sections.append(svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
         closed = {n: c["q_closed"] for n, c in ev.closed_positions.items()}
-        sections.append(img_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}"))
+        sections.append(svg_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}"))
     sections += ["<h2>Prompt alignment</h2>", _prompt_details(ev), "<h2>Passive probes</h2>", _probe_details(ev)]
     pb = ev._runs.get("pybullet")
     if pb is not None and pb.probes:
-        sections.append(img_tag(plots.plot_probes(pb.probes), "probes"))
+        sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
     sections += ["<h2>Physical parameters</h2>", _parameter_table(ev)]
     sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
     sections.append("<p class='small'>Definitions, conventions and thresholds: docs/metrics.md. Simulation: PyBullet DIRECT, "
@@ -384,6 +394,8 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
         ("probes pass", "probes"),
         ("joint sweep pass", "sweep"),
         ("robust rest pass", "robust"),
+        ("task success", "task"),
+        ("operating force plausible", "force"),
         ("interaction-ready", "ready"),
         ("scale dev. vs GenSim2", "scale"),
         ("init. joint dev. (rad)", "init"),
@@ -405,6 +417,8 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
                 _pm(r.get("probes_pass"), None, pct=True) + f" ({r.get('probes_n', 0)})",
                 _pm(r.get("sweep_pass"), None, pct=True) + f" ({r.get('sweep_n', 0)})",
                 _pm(r.get("robust_rest_pass"), None, pct=True) + f" ({r.get('robust_n', 0)})",
+                _pm(r.get("task_pass"), None, pct=True) + f" ({r.get('task_n', 0)})",
+                _pm(r.get("force_pass"), None, pct=True) + f" ({r.get('force_n', 0)})",
                 _pm(r.get("ready"), None, pct=True) + f" ({r.get('ready_n', 0)})",
                 _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
                 _pm(r.get("init_mean"), r.get("init_sd")),
@@ -420,7 +434,7 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
                  + "".join("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)
                  + "</table>")
     if chart:
-        parts.append("<h2>Pass rates</h2>" + img_tag(chart, "pass rates"))
+        parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
     parts.append("<p class='small'>Ours: PyBullet under the SPEC's conventions (docs/metrics.md); the research measured in "
                  "Isaac Sim (PhysX). Penetration in mm is Phi summed over contact points; pass rates count assets that were "
                  "produced; (n) is the number of assets with a verdict.</p>")

@@ -235,6 +235,35 @@ def max_stable_damping(inertia_axis: float, timestep: float = TIMESTEP) -> float
     return float(max(inertia_axis, 0.0) / timestep)
 
 
+#: Largest joint speed Bullet's multibodies allow, rad/s or m/s
+#: (``btMultiBody::m_maxCoordinateVelocity`` = 100 in its constructor,
+#: bullet3 src/BulletDynamics/Featherstone/btMultiBody.cpp; PyBullet's
+#: ``changeDynamics(maxJointVelocity=...)``).
+MAX_JOINT_SPEED = 100.0
+#: Share of the locking bound I v_max / dt that joint friction may take
+#: (:func:`max_stable_friction`): the joint moved freely at 0.88 of it and
+#: locked at 1.06 (measurements in that function's docstring).
+FRICTION_LOCK_SHARE = 0.8
+
+
+def max_stable_friction(inertia_axis: float, timestep: float = TIMESTEP) -> float:
+    """Largest joint friction (N*m or N) the engines' friction motor takes
+    without locking the joint: FRICTION_LOCK_SHARE * I v_max / dt (I the
+    inertia about the axis, kg*m^2, or the moving mass, kg; v_max =
+    :data:`MAX_JOINT_SPEED`; dt the timestep, s).
+
+    PyBullet models Coulomb joint friction as a zero-target-velocity motor
+    whose impulse per step is at most F dt; when F dt / I exceeds the joint
+    speed clamp v_max, the motor holds the joint against any effort.
+    Measured on the 47 g handle of suitcase 103755 (I = 4.7e-5 kg*m^2,
+    dt = 1/240 s; bound I v_max / dt = 1.13 N*m): locked at friction 1.2 and
+    1.48 N*m under efforts up to 100 N*m, free at 1.0 N*m under an effort of
+    1.5 N*m. Escalation therefore never raises friction above this (a light
+    handle whose friction escalated to 1.48 N*m could not be opened by any
+    force)."""
+    return float(FRICTION_LOCK_SHARE * max(inertia_axis, 0.0) * MAX_JOINT_SPEED / timestep)
+
+
 def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: float = FLOOR_FREQUENCY_HZ) -> float:
     """Viscous damping c = 2 zeta sqrt(I k_eff) (N*m*s/rad or N*s/m), with
     k_eff = max(gravity stiffness, spring stiffness, I (2 pi f0)^2)."""
@@ -268,7 +297,9 @@ def joint_dynamics(
     The friction floor is a Coulomb coefficient of 0.05 on the moving mass's
     weight (prismatic, N; typical of drawer slides, e.g. Engineering ToolBox
     friction coefficients for lubricated sliding) or that force at a 1 cm pin
-    radius (revolute, N*m).
+    radius (revolute, N*m). Friction never exceeds :func:`max_stable_friction`
+    (the engine's friction motor would lock the joint), damping never
+    :func:`max_stable_damping`.
     """
     zeta = DAMPING_RATIO.get(damping_level, DAMPING_RATIO["moderate"])
     k = spring[0] if spring else 0.0
@@ -283,6 +314,8 @@ def joint_dynamics(
         friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor)
         c *= 2.0
     c = min(c, c_max)
+    if load_at_state.inertia_axis > 0:  # above it the engine's friction motor locks the joint
+        friction = min(friction, max_stable_friction(load_at_state.inertia_axis))
     return JointDynamics(
         damping=float(c),
         friction=float(friction),

@@ -231,3 +231,31 @@ def test_other_commands_use_the_one_line_format(box, tmp_path, capsys):
         line = _one_line(cap.err)
         assert line.startswith(f"asset2sim {argv[0]}: {code}: "), line
         assert "error:" not in cap.out
+
+
+# ------------------------------------------------------------------ only the command given is imported (issue 14)
+
+
+def test_requested_command_is_found_before_any_option():
+    from asset2sim.cli import command_names, requested_command
+
+    assert {"refine", "flow", "benchmark", "evaluate"} <= set(command_names())
+    assert requested_command(["refine", "x", "--out", "y"]) == "refine"
+    assert requested_command(["--debug", "render", "x"]) == "render"
+    assert requested_command(["--help"]) is None and requested_command([]) is None
+    assert requested_command(["refyne", "x"]) is None  # unknown: every command is listed in the usage error
+
+
+def test_a_command_imports_only_its_own_module():
+    code = ("import sys; from asset2sim.cli import build_parser; p = build_parser(only='refine'); "
+            "print(sorted(m for m in sys.modules if m.startswith('asset2sim.commands.') and not m.split('.')[-1].startswith('_'))); "
+            "print(sorted(m for m in ('prefect', 'dask', 'mlflow', 'litellm', 'matplotlib', 'sapien', 'mujoco', 'pxr', 'pandas') if m in sys.modules))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    commands_line, heavy_line = p.stdout.strip().splitlines()
+    assert commands_line == "['asset2sim.commands.refine']"
+    assert heavy_line == "[]", heavy_line  # refine's imports stay light until a stage needs a simulator or exporter
+    full = run("--help")
+    assert full.returncode == 0 and all(c in full.stdout for c in ("refine", "flow", "benchmark", "failures"))
+    bad = run("refyne")
+    assert bad.returncode == 2 and "invalid choice" in bad.stderr and "refine" in bad.stderr

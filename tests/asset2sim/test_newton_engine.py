@@ -85,3 +85,32 @@ def test_newton_rest_and_oscillation_pass_like_pybullet(tmp_path):
     assert rows["newton"]["status"] == "ok", rows["newton"]["reason"]
     assert rows["newton"]["rest_stability"] is True and rows["newton"]["oscillation"] is True
     assert rows["newton"]["penetration_mm"] == pytest.approx(0.0, abs=0.1)
+
+
+def test_contact_capacity_follows_the_contacts_and_never_drops_one(tmp_path, monkeypatch):
+    """The stepping pipeline and Kamino are sized from the contacts the
+    object makes (Kamino's CPU cost grows with the capacity); a step that
+    fills the capacity grows it. The trajectory equals one at a large fixed
+    capacity (no contact dropped)."""
+    from asset2sim.engines import newton_engine
+
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    opts = SessionOptions(initial_state=dict(a.initial_state))
+    runs = {}
+    for label, minimum, headroom in (("large", 1024, 1), ("tight", 1, 1)):
+        monkeypatch.setattr(newton_engine, "CONTACT_CAPACITY_MIN", minimum)
+        monkeypatch.setattr(newton_engine, "CONTACT_CAPACITY_HEADROOM", headroom)
+        s = open_session("newton", a.urdf, opts)
+        try:
+            start = s._capacity
+            s.step(24)
+            runs[label] = (start, s._capacity, s.rebuilds, s.root_pose()[0], s.joint_positions())
+        finally:
+            s.close()
+    assert runs["large"][0] == 1024 and runs["large"][2] == 0
+    start, end, rebuilds, pos, q = runs["tight"]
+    assert start < 1024
+    if rebuilds:  # the tight capacity filled and grew
+        assert end > start
+    np.testing.assert_allclose(pos, runs["large"][3], atol=1e-6)
+    assert q == pytest.approx(runs["large"][4], abs=1e-6)

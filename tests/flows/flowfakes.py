@@ -9,7 +9,7 @@ tests can see which assets were really worked on. Special asset ids trigger
 failures: ``hang_*`` sleeps past any time limit, ``crash_*`` aborts the
 process, ``flaky_*`` fails like a model call on its first attempt,
 ``modelfail_*`` always fails like a model call, ``unstable_*`` reports an
-unstable result.
+unstable result; ``$FLOWFAKES_DELAY_S`` makes every call take that long (s).
 """
 
 from __future__ import annotations
@@ -67,6 +67,8 @@ def refine_fake(asset_dir, prompt, out_dir, config=None, *, category=None, asset
     asset_dir, out_dir = Path(asset_dir), Path(out_dir)
     aid = asset_id or asset_dir.name
     n = _log_call(aid, prompt)
+    if os.environ.get("FLOWFAKES_DELAY_S"):  # a refine that takes a while (a worker can be killed mid-asset)
+        time.sleep(float(os.environ["FLOWFAKES_DELAY_S"]))
     if aid.startswith("hang_"):
         time.sleep(3600)
     if aid.startswith("crash_"):

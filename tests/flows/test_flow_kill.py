@@ -119,7 +119,7 @@ def _alive(seen: dict[int, tuple[float, str]]) -> dict[int, str]:
 
 def test_killed_flow_driver_leaves_no_process_behind(tmp_path):
     """``asset2sim flow`` on generated assets (two of them hang in their
-    isolated refine process), its driver alone killed with SIGKILL mid-run:
+    isolated refine process, forked from their worker's stage server), its driver alone killed with SIGKILL mid-run:
     within 20 s no process it started, directly or not, is left."""
     root = tmp_path / "proj"
     catalog = make_project(
@@ -140,13 +140,14 @@ def test_killed_flow_driver_leaves_no_process_behind(tmp_path):
         deadline = time.time() + 120
         while time.time() < deadline and proc.poll() is None:
             _descendants(proc.pid, seen)
-            if sum("asset2sim.flows.isolation" in cmd for cmd in _alive(seen).values()) >= 2:
+            # per worker its stage server and the child forked for the hanging stage
+            if sum("asset2sim.flows.forkserver" in cmd for cmd in _alive(seen).values()) >= 4:
                 break
             time.sleep(0.2)
         time.sleep(0.5)
         _descendants(proc.pid, seen)
         kinds = " ".join(seen[p][1] for p in _alive(seen))
-        assert proc.poll() is None and "asset2sim.flows.isolation" in kinds, "the flow did not reach its stages in time"
+        assert proc.poll() is None and "asset2sim.flows.forkserver" in kinds, "the flow did not reach its stages in time"
         assert "uvicorn" in kinds and "multiprocessing" in kinds  # the Prefect server and the Dask workers
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)

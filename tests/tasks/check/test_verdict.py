@@ -78,7 +78,8 @@ def test_readiness_names_every_failing_tier_and_the_first_mode():
     r = readiness([_m("rest_stability", True), _m("oscillation", True), _m("joint_sweep", True),
                    _m("robust_rest", False, "physx"), _m("probes", False), _m("total_mass", False)])
     assert not r.ready
-    assert r.tiers == {"rest": True, "penetration": None, "sweep": True, "robust_rest": False, "probes": False}
+    assert r.tiers == {"rest": True, "penetration": None, "sweep": True, "robust_rest": False, "probes": False,
+                       "task": None, "force": None}
     assert r.failures == ["robust_rest@physx", "probes@pybullet"]  # semantic metrics do not decide readiness
     assert r.failure_mode == "not_robust_at_rest"
     assert r.line().startswith("NOT READY: robust_rest@physx, probes@pybullet")
@@ -89,6 +90,8 @@ def test_readiness_names_every_failing_tier_and_the_first_mode():
     assert readiness([_m("state_hold", False)]).failure_mode == "joint_not_held"
     assert readiness([_m("state_hold", False), _m("settle_tilt", False)]).failure_mode == "unstable"
     assert readiness([_m("joint_sweep", False)]).failure_mode == "blocked_joint"
+    assert readiness([_m("task_execution", False)]).failure_mode == "task_failed"
+    assert readiness([_m("task_execution", True), _m("operating_force", False)]).failure_mode == "implausible_force"
     pen = MetricResult(name="penetration", value=UNRESOLVED_PENETRATION_MM + 1, unit="mm", passed=None)
     assert readiness([_m("rest_stability", True), pen]).failure_mode == "unresolved_penetration"
     assert readiness([_m("oscillation", False), pen]).failure_mode == "oscillating"  # the post-check's order

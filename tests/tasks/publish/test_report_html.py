@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import re
 from pathlib import Path
@@ -55,14 +56,21 @@ def test_report_is_self_contained(report):
     assert html.startswith("<!DOCTYPE html>")
     # no external resources: every src is inline data, no stylesheet or script links
     srcs = re.findall(r'src="([^"]*)"', html)
-    assert srcs and all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert srcs and all(s.startswith(("data:image/png;base64,", "data:image/svg+xml;base64,")) for s in srcs)
     assert "<link " not in html and "<script" not in html and "http://" not in html and "https://" not in html
 
 
 def test_report_shows_views_plots_verdicts_probes_and_parameters(report):
     ev, html = report
     # object at its initial state (renders, or the geometry plot until they exist), rest test plots, probe plot
-    assert html.count("data:image/png;base64,") >= 4
+    assert html.count("data:image/png;base64,") + html.count("data:image/svg+xml;base64,") >= 4
+    # the figures are SVG documents with the axes' units and the run's data drawn
+    figs = [base64.b64decode(s).decode() for s in re.findall(r'src="data:image/svg\+xml;base64,([^"]*)"', html)]
+    assert len(figs) >= 3 and all(f.startswith("<svg ") and "</svg>" in f for f in figs)
+    assert any("D_pos(t) (mm)" in f and "1 mm threshold" in f for f in figs)  # rest test
+    assert any("slide (m)" in f for f in figs)  # joint trajectory
+    assert any("root displacement (mm)" in f for f in figs)  # probes
+    assert all(f.count("<polyline") >= 1 for f in figs)
     for section in ("Object at its initial state", "Verdicts", "Rest test", "Prompt alignment", "Passive probes",
                     "Physical parameters"):
         assert section in html

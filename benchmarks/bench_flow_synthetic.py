@@ -1,0 +1,282 @@
+"""Throughput of the dataset flow on N generated articulated assets.
+
+    .venv/bin/python benchmarks/bench_flow_synthetic.py            # N = 200, 2 workers
+    .venv/bin/python benchmarks/bench_flow_synthetic.py --n 10 --sample 3
+
+1. Generates N PartNet-Mobility-style asset folders (``mobility.urdf``,
+   ``textured_objs/*.obj``, ``semantics.txt``, ``meta.json``) and a
+   ``manifest.csv``: storage cabinets of varied width, height and depth
+   (0.6-1.4 x 0.35-1.9 x 0.5-0.9 object units) with 1 to 6 sliding drawers
+   (joint count 1-6, 7-37 mesh files), built from boxes with the demo
+   generator's serialiser (:mod:`asset2sim.demo_assets`, :mod:`asset2sim.demo_geometry`);
+   deterministic for a seed.
+2. Runs the flow (``run_refine_flow``, what ``make flow`` runs: Prefect,
+   a local Dask cluster of ``--workers`` single-threaded workers, per-asset
+   isolation in a child forked from each worker's pre-imported stage
+   server) over them with extras (MJCF export, renders, HTML report) and the
+   metrics stage, and prints assets per hour, start-up (Prefect, Dask) and
+   the per-asset worker time.
+3. In the same run, side by side: for a sample of the assets (``--sample``,
+   spread over sizes), the same stages in this process (prepare: read and
+   hash; refine with extras; metrics), timed per asset, against the flow's
+   per-asset worker time of the same assets: the overhead ratio.
+4. Reruns the flow: every asset skipped; prints its wall time.
+5. Prints the isolation's cost: the stage server's start-up (once per
+   worker) and a call through it (fork + pipe messages) against a direct call.
+
+Goals (issue 14): >= 2,000 assets/hour with extras, overhead <= 1.3x,
+rerun of 200 skipped assets <= 10 s. The machine's load (other processes on
+the same cores) is printed with the results; numbers from a loaded machine
+are upper bounds of the cost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import os
+import random
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from asset2sim.demo_assets import _serialise, _write_folder
+from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, box_xyz
+
+_BASE_RPY = "1.570796326794897 0 -1.570796326794897"  # PartNet-Mobility's y-up body under a z-up base
+_WOOD, _METAL = (0.62, 0.45, 0.3), (0.75, 0.76, 0.78)
+
+
+# ------------------------------------------------------------------------ generator
+
+
+def cabinet(asset_id: str, width: float, height: float, depth: float, drawers: int) -> DemoArticulation:
+    """A storage cabinet of ``width`` x ``height`` x ``depth`` object units
+    (x across, y up, z front) with ``drawers`` sliding drawers stacked in an
+    open-front carcass of 0.03 boards; every drawer closed at 0 with 0.005
+    clearance in front of the carcass and at least 0.01 to every board,
+    sliding +z up to 0.75 of the depth."""
+    t, c = 0.03, 0.01
+    x0, x1, y0, y1, z0, z1 = -width / 2, width / 2, -height / 2, height / 2, -depth / 2, depth / 2
+    body = [
+        Part("board-1", [box_xyz(x0, x0 + t, y0, y1, z0, z1)], _WOOD),
+        Part("board-2", [box_xyz(x1 - t, x1, y0, y1, z0, z1)], _WOOD),
+        Part("board-3", [box_xyz(x0 + t, x1 - t, y1 - t, y1, z0, z1)], _WOOD),
+        Part("board-4", [box_xyz(x0 + t, x1 - t, y0, y0 + t, z0, z1)], _WOOD),
+        Part("board-5", [box_xyz(x0 + t, x1 - t, y0 + t, y1 - t, z0, z0 + t)], _WOOD),
+    ]
+    slot = (height - 2 * t - (drawers - 1) * t) / drawers
+    links, joints, n = [], [], 10
+    for i in range(drawers):
+        s0 = y0 + t + i * (slot + t)
+        s1 = s0 + slot
+        if i > 0:
+            body.append(Part(f"shelf-{6 + i}", [box_xyz(x0 + t, x1 - t, s0 - t, s0, z0 + t, z1)], _WOOD))
+        fy0, fy1 = s0 - t / 2 + 0.005, s1 + t / 2 - 0.005
+        bx0, bx1, by0, by1, bz0 = x0 + t + c, x1 - t - c, s0 + c, s1 - c, z0 + t + c
+        ym = 0.5 * (s0 + s1)
+        hw = min(0.165, 0.3 * width)
+        parts = [
+            Part(f"drawer_front-{n}", [box_xyz(x0 + 0.005, x1 - 0.005, fy0, fy1, z1 + 0.005, z1 + 0.035)], _WOOD),
+            Part(f"drawer_bottom-{n + 1}", [box_xyz(bx0, bx1, by0, by0 + 0.02, bz0, z1 + 0.005)], _WOOD),
+            Part(f"drawer_side-{n + 2}", [box_xyz(bx0, bx0 + 0.02, by0 + 0.02, by1, bz0, z1 + 0.005)], _WOOD),
+            Part(f"drawer_side-{n + 3}", [box_xyz(bx1 - 0.02, bx1, by0 + 0.02, by1, bz0, z1 + 0.005)], _WOOD),
+            Part(f"drawer_back-{n + 4}", [box_xyz(bx0 + 0.02, bx1 - 0.02, by0 + 0.02, by1, bz0, bz0 + 0.02)], _WOOD),
+            Part(f"handle-{n + 5}", [
+                box_xyz(-hw, -hw + 0.03, ym - 0.015, ym + 0.015, z1 + 0.035, z1 + 0.075),
+                box_xyz(hw - 0.03, hw, ym - 0.015, ym + 0.015, z1 + 0.035, z1 + 0.075),
+                box_xyz(-hw - 0.005, hw + 0.005, ym - 0.015, ym + 0.015, z1 + 0.07, z1 + 0.095),
+            ], _METAL),
+        ]
+        n += 10
+        links.append(DemoLink(f"link_{i}", "slider", "drawer", parts))
+        joints.append(DemoJoint(f"joint_{i}", "prismatic", f"link_{drawers}", f"link_{i}", axis=(0.0, 0.0, 1.0),
+                                lower=0.0, upper=round(0.75 * depth, 3)))
+    links.append(DemoLink(f"link_{drawers}", "heavy", "furniture_body", body))
+    joints.append(DemoJoint(f"joint_{drawers}", "fixed", "base", f"link_{drawers}", rpy=_BASE_RPY))
+    return DemoArticulation(asset_id=asset_id, category="StorageFurniture", robot_name=f"synthetic_{asset_id}",
+                            links=links, joints=joints, extra_meta={"synthetic": {"width": width, "height": height,
+                                                                                   "depth": depth, "drawers": drawers}})
+
+
+def generate(root: Path, n: int, seed: int = 0) -> list[dict]:
+    """Write ``n`` cabinets under ``root/<id>/`` and ``root/manifest.csv``;
+    returns the manifest rows (id, category, prompt, drawers, size)."""
+    rng = random.Random(seed)
+    rows = []
+    root.mkdir(parents=True, exist_ok=True)
+    for i in range(n):
+        drawers = 1 + i % 6
+        width = round(rng.uniform(0.6, 1.4), 3)
+        height = round(drawers * rng.uniform(0.25, 0.3) + 0.06, 3)
+        depth = round(rng.uniform(0.5, 0.9), 3)
+        aid = f"syn{i:04d}_d{drawers}"
+        _write_folder(root / aid, _serialise(cabinet(aid, width, height, depth, drawers)))
+        size = "small" if width * height < 0.6 else "large"
+        rows.append({"id": aid, "category": "StorageFurniture", "drawers": drawers, "size": round(width * height * depth, 3),
+                     "prompt": f"A {size} wooden cabinet with {drawers} drawer{'s' if drawers > 1 else ''}, all closed, "
+                               "with low damping sliding joints."})
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=["id", "category", "prompt"], extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    (root / "manifest.csv").write_text(buf.getvalue())
+    return rows
+
+
+# ------------------------------------------------------------------------ measuring
+
+
+def in_process(job) -> float:
+    """Wall time (s) of the flow's stages for one job run directly in this
+    process: prepare (read, hash), refine (with extras), metrics."""
+    from asset2sim.flows import stages
+
+    t0 = time.perf_counter()
+    prepared = stages.prepare_asset(job)
+    extracted = {"asset": prepared.asset.model_dump(mode="json"),
+                 "findings": [f.model_dump(mode="json") for f in prepared.findings]}
+    out = stages.stage_refine(job.asset_dir, job.prompt, job.out_dir, job.config, job.category, job.asset_id,
+                              job.refine_function, job.extras, extracted=extracted, reference_dir=job.reference_dir)
+    stages.stage_metrics(out["out_dir"], job.prompt, job.category, job.reference_dir, job.probes, job.metrics_dir)
+    return time.perf_counter() - t0
+
+
+def isolation_cost(work: Path, calls: int = 10) -> dict[str, float]:
+    """The stage server's start-up (s) and the median time of a trivial call
+    through it against the same call made directly (s)."""
+    from asset2sim.flows.forkserver import StageServer
+    from asset2sim.flows.isolation import call_target
+
+    srv = StageServer()
+    t0 = time.perf_counter()
+    srv.start()
+    start = time.perf_counter() - t0
+    via, direct = [], []
+    try:
+        for i in range(calls):
+            t0 = time.perf_counter()
+            res = srv.call("asset2sim.flows.store:join_uri", {"root": "s3://b/p"}, timeout=60, workdir=work / f"call{i}")
+            via.append(time.perf_counter() - t0)
+            assert res.status == "ok", res.error
+            t0 = time.perf_counter()
+            call_target("asset2sim.flows.store:join_uri", {"root": "s3://b/p"})
+            direct.append(time.perf_counter() - t0)
+    finally:
+        srv.close()
+    return {"server_start_s": start, "call_via_server_s": statistics.median(via), "call_direct_s": statistics.median(direct)}
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{v:.1f}" for v in os.getloadavg()) + f" on {os.cpu_count()} cores"
+    except OSError:
+        return "n/a"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=200, help="assets to generate and refine (default 200)")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--sample", type=int, default=10, help="assets also refined in process for the overhead ratio")
+    ap.add_argument("--no-extras", action="store_true", help="without renders, MJCF export and HTML report")
+    ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    work = args.work or Path(tempfile.mkdtemp(prefix="a2s-bench-flow-"))
+    keep = args.work is not None
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run(args, work)
+    finally:
+        if not keep:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def _run(args, work: Path) -> int:
+    from asset2sim.flows.stages import prepare_prefect_environment
+
+    t0 = time.perf_counter()
+    rows = generate(work / "raw", args.n, args.seed)
+    gen_s = time.perf_counter() - t0
+    drawers = [r["drawers"] for r in rows]
+    print(f"generated {args.n} assets in {gen_s:.1f} s: drawers {min(drawers)}-{max(drawers)} "
+          f"(joints = drawers), volume {min(r['size'] for r in rows)}-{max(r['size'] for r in rows)} units^3")
+    config = {
+        "version": 1, "default_dataset": "synthetic", "output_root": "refined", "catalog_root": "catalog",
+        "datasets": {"synthetic": {"root": "raw", "manifest": "raw/manifest.csv"}},
+        "run": {"workers": args.workers, "time_limit_seconds": 900, "extras": not args.no_extras, "evaluate": True},
+        "tracking": {"enabled": False},
+        "results": {"code_change": "keep"},  # the rerun measures skipping, whatever else edits the source meanwhile
+    }
+    catalog = work / "catalog.yaml"
+    catalog.write_text(json.dumps(config))  # JSON is YAML
+    prepare_prefect_environment(work)
+    from asset2sim.catalog import ResultCatalog, load_catalog
+    from asset2sim.flows.refine_flow import run_refine_flow
+    from asset2sim.flows.stages import plan_run
+
+    print(f"load before the flow: {_load()}")
+    t0, t0_epoch = time.perf_counter(), time.time()
+    summary = run_refine_flow(catalog, workers=args.workers)
+    wall = time.perf_counter() - t0
+    prefect_s = max(0.0, float(summary["flow_started_epoch"]) - t0_epoch)
+    cat = load_catalog(catalog)
+    df = ResultCatalog(cat.catalog_root).read("synthetic", summary["run"])
+    worked = int(summary["done"]) + int(summary["failed"])
+    assets_s = float(summary["assets_seconds"])
+    stage_s = df["wall_seconds"].astype(float)
+    occupancy = assets_s * args.workers / max(1, worked)
+    print(f"flow: {summary['assets']} assets ({summary['done']} done, {summary['failed']} failed, "
+          f"{summary['skipped']} skipped) in {wall:.1f} s wall; load after: {_load()}")
+    print(f"  start-up: Prefect {prefect_s:.1f} s, Dask {summary['dask_startup_seconds']:.1f} s "
+          f"(+ tear-down {summary['dask_teardown_seconds']:.1f} s); assets phase {assets_s:.1f} s; "
+          f"summary {summary['tracking_seconds']:.1f} s")
+    print(f"  throughput: {worked / assets_s * 3600:.0f} assets/hour over the assets phase, "
+          f"{worked / wall * 3600:.0f} assets/hour over the whole run (goal >= 2000)")
+    print(f"  per-asset worker time: stages {stage_s.median():.2f} s median ({stage_s.mean():.2f} mean); "
+          f"worker occupancy (assets phase x workers / assets) {occupancy:.2f} s")
+    fails = df[df["status"] == "failed"]
+    if len(fails):
+        print("  failed: " + ", ".join(f"{a} ({m})" for a, m in zip(fails["asset_id"], fails["failure_mode"])))
+
+    # side by side: the same stages in this process, on a sample spread over joint counts
+    k = max(0, min(args.sample, len(rows)))
+    sample_ids = [rows[round(i * (len(rows) - 1) / max(1, k - 1))]["id"] for i in range(k)] if k else []
+    if sample_ids:
+        plan = plan_run(cat, "synthetic", "inprocess", ids=sample_ids, force=True)
+        inproc = {}
+        for job in plan.jobs:
+            job.out_dir = str(work / "inprocess" / job.asset_id)
+            job.metrics_dir = str(work / "inprocess" / "_metrics" / job.asset_id)
+            job.work_dir = str(work / "inprocess" / ".work" / job.asset_id)
+            inproc[job.asset_id] = in_process(job)
+        by_id = df.set_index("asset_id")
+        flow_s = [float(by_id.loc[a, "wall_seconds"]) for a in sample_ids if a in by_id.index]
+        ip = [inproc[a] for a in sample_ids]
+        print(f"side by side on {k} assets: in process {statistics.median(ip):.2f} s median, "
+              f"flow stages {statistics.median(flow_s):.2f} s median: overhead {statistics.median(flow_s) / statistics.median(ip):.2f}x "
+              f"(occupancy {occupancy / statistics.mean(ip):.2f}x of the in-process mean {statistics.mean(ip):.2f} s; goal <= 1.3x)")
+        for a in sample_ids:
+            print(f"    {a}: in process {inproc[a]:.2f} s, flow stages {float(by_id.loc[a, 'wall_seconds']):.2f} s")
+
+    t0 = time.perf_counter()
+    again = run_refine_flow(catalog, workers=args.workers)
+    rerun = time.perf_counter() - t0
+    print(f"rerun: {again['skipped']} of {again['assets']} skipped in {rerun:.1f} s wall "
+          f"(assets phase {again['assets_seconds']:.1f} s, Dask start-up {again['dask_startup_seconds']:.1f} s; goal <= 10 s)")
+
+    iso = isolation_cost(work / "iso")
+    print(f"isolation: stage server start-up {iso['server_start_s']:.2f} s once per worker; a call through it "
+          f"{1000 * iso['call_via_server_s']:.1f} ms against {1000 * iso['call_direct_s']:.2f} ms direct")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,387 @@
+"""Per-worker pre-imported stage processes: isolation paid once per worker.
+
+:func:`asset2sim.flows.isolation.run_isolated` starts a fresh Python for each
+call, which pays the imports of the refine pipeline (numpy, scipy, trimesh,
+pybullet, mujoco, matplotlib and the project's own modules: several seconds
+on a busy machine) for every asset. Here each Dask worker process keeps one
+long-lived *stage server*: a child Python that imports all of that once and
+then, per call, ``fork()``\\ s a copy of itself (copy-on-write: a few
+milliseconds) that runs the call. The isolation of each asset is unchanged:
+
+- the forked child is its own process (and process group): a segmentation
+  fault or ``abort()`` in a simulator kills only it (status ``crash``, the
+  signal recorded);
+- the caller waits at most ``timeout`` seconds, then SIGKILLs the child's
+  process group (status ``timeout``);
+- the child sets ``RLIMIT_AS`` to ``memory_limit_mb`` before it runs the
+  call (a ``MemoryError`` / ``std::bad_alloc`` costs only this asset);
+- the child asks for SIGKILL when the server ends, and the server asks for
+  SIGKILL when the worker that started it ends
+  (:func:`asset2sim.flows.lifeline.set_parent_death_signal`), so a killed
+  Dask worker leaves no stage process behind.
+
+A server that died (killed from outside) is restarted on the next call; the
+call it was serving is recorded as a ``crash``.
+
+Protocol (one JSON object per line): the worker writes ``{"spec": path}``
+(the same ``spec.json`` as :func:`run_isolated`: ``target``, ``kwargs``,
+``result``, ``memory_limit_mb``, ``log``) to the server's stdin; the server
+answers ``{"pid": n}`` when the child runs and ``{"rc": n}`` when it ended
+(``rc`` < 0: killed by signal ``-rc``, the :mod:`subprocess` convention).
+The server's own stdout is redirected away from the protocol pipe, so
+nothing a module prints on import can break it.
+
+Measured cost (``benchmarks/bench_flow_synthetic.py`` prints it): the
+server's start-up (the imports) once per worker; per call a ``fork`` and a
+few pipe messages.
+
+Nothing here imports Prefect, Dask or MLflow.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import resource
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from asset2sim import atomic
+from asset2sim.flows.isolation import IsolatedResult, _child_env, _tail, call_target
+from asset2sim.flows.lifeline import set_parent_death_signal
+
+#: Modules the server imports before it forks anything (heavy third-party
+#: packages the refine pipeline imports lazily; missing ones are skipped).
+WARM_MODULES = (
+    "numpy",
+    "scipy.spatial",
+    "scipy.sparse.csgraph",
+    "scipy.ndimage",
+    "trimesh",
+    "pybullet",
+    "mujoco",
+    "matplotlib",
+    "matplotlib.figure",
+    "matplotlib.ticker",
+    "PIL.Image",
+    "PIL.ImageDraw",
+)
+#: Project modules the server imports (the stage functions and the refine pipeline).
+PROJECT_MODULES = ("asset2sim.flows.stages", "asset2sim.tasks.refine", "asset2sim.tasks.evaluation.evaluate")
+
+
+class StageServer:
+    """One pre-imported stage server (a child process of this one).
+
+    Args:
+        preload: module names the server imports at start (besides
+            :data:`WARM_MODULES` and :data:`PROJECT_MODULES`; one that fails
+            to import is skipped: the call that needs it fails in its child).
+    """
+
+    def __init__(self, preload: tuple[str, ...] = ()):
+        self.preload = tuple(dict.fromkeys((*PROJECT_MODULES, *preload)))
+        self.proc: subprocess.Popen | None = None
+        self.started_seconds = 0.0
+        self.calls = 0
+        self.starts = 0
+        self._buf = b""
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def start(self) -> None:
+        """Start the server and wait until its imports are done.
+
+        Raises:
+            RuntimeError: it exited before it was ready (its stderr is inherited).
+        """
+        self.close()
+        t0 = time.perf_counter()
+        env = _child_env()
+        env.setdefault("MPLBACKEND", "Agg")
+        self.proc = _popen_from_owner_thread(
+            [sys.executable, "-m", "asset2sim.flows.forkserver", str(os.getpid()), *self.preload],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=None,
+            env=env,
+            start_new_session=True,
+        )
+        self.starts += 1
+        self._buf = b""
+        msg = self._read(timeout=600.0)
+        if msg is None or not msg.get("ready"):
+            self.close()
+            raise RuntimeError("the stage server exited before it was ready")
+        self.started_seconds = time.perf_counter() - t0
+
+    def close(self) -> None:
+        """Stop the server (SIGKILL of its process group; children end with it)."""
+        if self.proc is None:
+            return
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pass
+        for fh in (self.proc.stdin, self.proc.stdout):
+            try:
+                fh.close()
+            except (OSError, AttributeError):
+                pass
+        self.proc = None
+
+    # ---------------------------------------------------------------------- I/O
+
+    def _send(self, obj: dict[str, Any]) -> bool:
+        try:
+            self.proc.stdin.write((json.dumps(obj) + "\n").encode())
+            self.proc.stdin.flush()
+            return True
+        except (BrokenPipeError, OSError, ValueError):
+            return False
+
+    def _read(self, timeout: float | None) -> dict[str, Any] | None:
+        """The next message, None at end of file; raises TimeoutError after ``timeout`` s."""
+        fd = self.proc.stdout.fileno()
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while b"\n" not in self._buf:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            ready, _, _ = select.select([fd], [], [], left)
+            if not ready:
+                raise TimeoutError
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                return None
+            self._buf += chunk
+        line, self._buf = self._buf.split(b"\n", 1)
+        return json.loads(line)
+
+    # --------------------------------------------------------------------- calls
+
+    def call(self, target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
+             memory_limit_mb: int | None = None) -> IsolatedResult:
+        """:func:`asset2sim.flows.isolation.run_isolated`'s contract, in a
+        child forked from this server (started or restarted when needed).
+
+        Raises:
+            ValueError: ``timeout`` <= 0 or ``kwargs`` not JSON-able.
+            OSError: the work folder cannot be written.
+            RuntimeError: the server cannot start.
+        """
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout}")
+        with self._lock:
+            workdir = Path(workdir)
+            workdir.mkdir(parents=True, exist_ok=True)
+            result_path, log = workdir / "result.json", workdir / "child.log"
+            if result_path.exists():
+                result_path.unlink()
+            spec = workdir / "spec.json"
+            atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path),
+                                     "memory_limit_mb": memory_limit_mb, "log": str(log)})
+            if not self.alive():
+                self.start()
+            t0 = time.perf_counter()
+            if not self._send({"spec": str(spec)}):
+                self.start()
+                if not self._send({"spec": str(spec)}):
+                    raise RuntimeError("the stage server does not take calls")
+            self.calls += 1
+            return self._wait(t0, timeout, result_path, log)
+
+    def _wait(self, t0: float, timeout: float, result_path: Path, log: Path) -> IsolatedResult:
+        def lost() -> IsolatedResult:
+            self.close()
+            return IsolatedResult(status="crash", error="the stage server died during the call",
+                                  failure_mode="crash", seconds=time.perf_counter() - t0, log_tail=_tail(log))
+
+        try:
+            msg = self._read(timeout)
+        except TimeoutError:
+            msg = None
+        if msg is None or "pid" not in msg:
+            return lost()
+        pid = int(msg["pid"])
+        try:
+            msg = self._read(max(0.0, timeout - (time.perf_counter() - t0)))
+        except TimeoutError:
+            try:
+                os.killpg(pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+            try:
+                rc_msg = self._read(10.0)
+            except TimeoutError:
+                rc_msg = None
+            if rc_msg is None:
+                self.close()
+            return IsolatedResult(status="timeout", error=f"time limit of {timeout:.0f} s exceeded; child process killed",
+                                  failure_mode="timeout", returncode=None if rc_msg is None else rc_msg.get("rc"),
+                                  seconds=time.perf_counter() - t0, log_tail=_tail(log))
+        if msg is None or "rc" not in msg:
+            return lost()
+        rc = int(msg["rc"])
+        seconds = time.perf_counter() - t0
+        try:
+            data = json.loads(result_path.read_text())
+        except (OSError, ValueError):
+            sig = -rc if rc < 0 else None
+            what = f"killed by signal {sig} ({signal.Signals(sig).name})" if sig else f"exited with code {rc}"
+            return IsolatedResult(status="crash", error=f"child process {what} without a result", failure_mode="crash",
+                                  returncode=rc, seconds=seconds, log_tail=_tail(log))
+        if data.get("ok"):
+            return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds)
+        return IsolatedResult(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
+                              failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""),
+                              returncode=rc, seconds=seconds, log_tail=_tail(log))
+
+
+_OWNER: dict[int, tuple[threading.Thread, queue.Queue]] = {}
+_OWNER_LOCK = threading.Lock()
+
+
+def _popen_from_owner_thread(args: list[str], **kwargs) -> subprocess.Popen:
+    """``subprocess.Popen(args, **kwargs)`` run by one long-lived thread of
+    this process. The server's parent-death signal fires when the *thread*
+    that forked it ends (Linux ``PR_SET_PDEATHSIG``), and a Dask worker may
+    retire the pool thread that ran a task; a thread that lives as long as
+    the process keeps the server alive until the process itself ends."""
+    with _OWNER_LOCK:
+        owner = _OWNER.get(os.getpid())
+        if owner is None or not owner[0].is_alive():
+            requests: queue.Queue = queue.Queue()
+
+            def serve() -> None:
+                while True:
+                    a, kw, box, done = requests.get()
+                    try:
+                        box.append(subprocess.Popen(a, **kw))
+                    except BaseException as exc:  # noqa: BLE001 - handed to the caller
+                        box.append(exc)
+                    done.set()
+
+            thread = threading.Thread(target=serve, name="asset2sim-stage-server-owner", daemon=True)
+            thread.start()
+            owner = _OWNER[os.getpid()] = (thread, requests)
+    box: list = []
+    done = threading.Event()
+    owner[1].put((args, kwargs, box, done))
+    done.wait()
+    if isinstance(box[0], BaseException):
+        raise box[0]
+    return box[0]
+
+
+_SERVERS: dict[int, StageServer] = {}
+_SERVERS_LOCK = threading.Lock()
+
+
+def worker_server(preload: tuple[str, ...] = ()) -> StageServer:
+    """This process's stage server (one per process: a Dask worker keeps
+    its own for its lifetime; a forked copy of this process gets a new one)."""
+    with _SERVERS_LOCK:
+        srv = _SERVERS.get(os.getpid())
+        if srv is None:
+            srv = _SERVERS[os.getpid()] = StageServer(preload)
+        return srv
+
+
+def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
+               memory_limit_mb: int | None = None, preload: tuple[str, ...] = ()) -> IsolatedResult:
+    """Call ``target(**kwargs)`` in a child forked from this process's
+    pre-imported stage server (:func:`worker_server`), with the contract of
+    :func:`asset2sim.flows.isolation.run_isolated` (same statuses, time and
+    memory limit, ``spec.json`` / ``result.json`` / ``child.log`` in ``workdir``).
+    ``preload``: modules the server should import (used when it starts)."""
+    srv = worker_server(preload)
+    for mod in preload:
+        if mod not in srv.preload:  # a new refine function: restart with it imported
+            srv.preload = (*srv.preload, mod)
+            srv.close()
+    return srv.call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
+
+
+# ------------------------------------------------------------------------ server side
+
+
+def _run_child(spec_path: str, out_fd: int) -> None:
+    """In the forked child: own process group, end with the server, output to
+    the log, memory limit, the call, the result file; never returns."""
+    code = 0
+    try:
+        os.close(out_fd)
+        os.setpgid(0, 0)
+        set_parent_death_signal(signal.SIGKILL)
+        spec = json.loads(Path(spec_path).read_text())
+        fd = os.open(spec["log"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.close(fd)
+        if spec.get("memory_limit_mb"):
+            limit = int(spec["memory_limit_mb"]) * 1024 * 1024
+            resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+        record = call_target(spec["target"], spec.get("kwargs") or {})
+        try:
+            atomic.write_text(spec["result"], json.dumps(record, allow_nan=True))
+        except (TypeError, ValueError) as exc:
+            atomic.write_json(spec["result"], {"ok": False, "error": f"result not JSON-able: {exc}", "error_type": "TypeError"})
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # noqa: BLE001 - the child must never return into the server loop
+        code = 1
+    os._exit(code)
+
+
+def _server_main(argv: list[str]) -> int:
+    parent = int(argv[0])
+    set_parent_death_signal(signal.SIGKILL, expected_parent=parent)
+    out_fd = os.dup(1)  # the protocol pipe; fd 1 goes to stderr so prints cannot break it
+    os.dup2(2, 1)
+    import importlib
+
+    for mod in (*WARM_MODULES, *argv[1:]):
+        try:
+            importlib.import_module(mod)
+        except Exception:  # noqa: BLE001 - a missing optional package: the call that needs it fails in its child
+            pass
+    out = os.fdopen(out_fd, "w", buffering=1)
+
+    def say(obj: dict[str, Any]) -> None:
+        out.write(json.dumps(obj) + "\n")
+        out.flush()
+
+    say({"ready": True, "pid": os.getpid()})
+    for line in sys.stdin:
+        line = line.strip()
+        if not line:
+            continue
+        spec = json.loads(line)["spec"]
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:
+            _run_child(spec, out_fd)
+        say({"pid": pid})
+        _, status = os.waitpid(pid, 0)
+        rc = -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
+        say({"rc": rc})
+    return 0
+
+
+if __name__ == "__main__":  # the stage server
+    sys.exit(_server_main(sys.argv[1:]))

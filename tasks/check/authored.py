@@ -1,0 +1,283 @@
+"""Authored equals simulated: what each engine holds after loading an output
+equals what the output's files say.
+
+The files of an output folder say, per link, the mass, center of mass and
+inertia tensor (``mobility.urdf`` ``<inertial>``, written from
+``overlay.json``), per movable joint the limits, viscous damping and Coulomb
+friction (``<limit>``, ``<dynamics>``), the spring (``overlay.json``
+stiffness and reference: :func:`springs_from_overlay`) and the initial
+position (``initial_state.json``). :func:`authored_physics` reads them;
+:func:`held_by_engines` loads the folder in each engine and reads the same
+quantities back from the engine's own data structures
+(:meth:`asset2sim.engines.base.SimSession.held_physics`, and for exported files
+:func:`asset2sim.engines.base.read_held_physics`: the MJCF in MuJoCo, the USD in
+Newton's importer); :func:`compare_physics` names every quantity an engine
+dropped or rescaled. This catches the class of importer bug where a value is
+silently lost or converted (Isaac Sim's URDF importer drops ``<dynamics>``
+and converts gains per degree: IsaacSim issues #841, #842).
+
+Tolerances (:class:`Tolerances`) are set by the engines' number formats:
+PhysX, Newton and USD store binary32 (relative resolution 2^-24 = 6e-8 per
+value, more after PhysX's and Newton's float32 eigen-decomposition of the
+inertia tensor), PyBullet and MuJoCo binary64.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim.engines.base import (
+    EngineUnavailable,
+    EngineUnsupported,
+    HeldJoint,
+    HeldLink,
+    HeldPhysics,
+    SessionOptions,
+    open_session,
+    principal_moments,
+    read_held_physics,
+)
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_initial_state, read_urdf
+from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
+from asset2sim.tasks.publish.write import read_root
+
+#: The exported files each engine's own importer reads back:
+#: (engine, format, path in the output folder).
+EXPORTED_FILES: tuple[tuple[str, str, str], ...] = (
+    ("mujoco", "mjcf", "mjcf/mobility.xml"),
+    ("newton", "usd", "usd/mobility.usd"),
+)
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """How close a held value must be to the authored one.
+
+    ``rel``: relative, for mass, principal moments (against the link's
+    largest moment), damping, friction and stiffness: 1e-5, about 170 float32
+    ulps (PhysX's and Newton's float32 diagonalisation of a tensor whose
+    moments span 3 decades loses about 1e-6 of the largest moment).
+    ``length``: absolute for COM components, prismatic limits, positions and
+    spring references, m or rad: 1e-6 (float32 of a 1 m value is 6e-8;
+    PhysX's qpos of a 1.5 rad joint 1.2e-7).
+    ``floor``: absolute below which a damping, friction or stiffness
+    difference is ignored (1e-9 N*m*s/rad, N*m, N*m/rad).
+    """
+
+    rel: float = 1e-5
+    length: float = 1e-6
+    floor: float = 1e-9
+
+
+@dataclass
+class Mismatch:
+    """One quantity an engine holds differently from the files: ``item``
+    ``link NAME`` / ``joint NAME``, ``quantity`` (mass, com, principal
+    moments, lower, upper, damping, friction, stiffness, reference,
+    position, missing), the ``held`` and ``authored`` values."""
+
+    item: str
+    quantity: str
+    held: object
+    authored: object
+
+    def __str__(self) -> str:
+        return f"{self.item} {self.quantity}: engine holds {self.held}, files say {self.authored}"
+
+
+@dataclass
+class AuthoredCheck:
+    """The comparison for one engine and one loaded file.
+
+    ``status``: ``ok`` (compared; ``mismatches`` may still be non-empty),
+    ``skipped`` (package or exported file missing), ``error`` (the file
+    did not load); ``reason`` says why; ``max_error`` per quantity family
+    (mass, com, inertia, limits, damping, friction, stiffness, position) is
+    the largest difference in units of its tolerance (<= 1 passes);
+    ``notes``: what was not compared and why (a link welded to the world).
+    """
+
+    engine: str
+    source: str
+    status: str
+    links: int = 0
+    joints: int = 0
+    mismatches: list[Mismatch] = field(default_factory=list)
+    max_error: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
+    how: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool | None:
+        """True when compared without a mismatch, None when skipped."""
+        if self.status == "skipped":
+            return None
+        return self.status == "ok" and not self.mismatches
+
+
+def authored_physics(out_dir: Path) -> HeldPhysics:
+    """What an output folder's files say, as a :class:`HeldPhysics`
+    (``engine`` = ``"files"``): ``mobility.urdf`` inertials (link without
+    ``<inertial>``: PyBullet's 1 kg and unit inertia, what every engine here
+    gives it), limits, damping and friction; springs from ``overlay.json``;
+    positions from ``initial_state.json``.
+
+    Raises:
+        FileNotFoundError: no ``mobility.urdf``.
+        ValueError: invalid ``initial_state.json`` or ``overlay.json``.
+    """
+    out_dir = Path(out_dir)
+    urdf_path = out_dir / "mobility.urdf"
+    if not urdf_path.is_file():
+        raise FileNotFoundError(f"{urdf_path} does not exist (not an output folder?)")
+    urdf = read_urdf(urdf_path)
+    state = read_initial_state(out_dir)
+    springs = springs_from_overlay(out_dir, state)
+    links = {}
+    for name, link in urdf.links.items():
+        ine = link.inertial
+        if ine is None or ine.mass is None:
+            links[name] = HeldLink(BULLET_DEFAULT_MASS, np.zeros(3), np.sort(np.array(BULLET_DEFAULT_INERTIA, float)))
+        else:
+            links[name] = HeldLink(float(ine.mass), np.asarray(ine.com(), float), principal_moments(ine.inertia_in_link_axes()))
+    joints = {}
+    for j in urdf.movable_joints:
+        s = springs.get(j.name)
+        joints[j.name] = HeldJoint(lower=float(j.lower), upper=float(j.upper), damping=float(j.damping), friction=float(j.friction),
+                                   stiffness=s.stiffness if s else 0.0, reference=s.reference if s else None,
+                                   position=float(state.get(j.name, 0.0)))
+    return HeldPhysics(engine="files", source=str(out_dir), links=links, joints=joints)
+
+
+def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | None = None) -> AuthoredCheck:
+    """Compare what an engine holds with what the files say, every link and
+    movable joint of ``authored``; see :class:`Tolerances`. A link or joint
+    the engine lacks is a ``missing`` mismatch. Unlimited limits (inf) must
+    be unlimited in both. The mass and inertia of links the engine welds to
+    the world (``held.welded_to_world``: PyBullet's fixed base) are not
+    compared, with a note.
+    """
+    tol = tol or Tolerances()
+    out = AuthoredCheck(engine=held.engine, source=held.source, status="ok", links=len(authored.links),
+                        joints=len(authored.joints), how=dict(held.how))
+    worst: dict[str, float] = {}
+
+    def note(family: str, err: float) -> None:
+        worst[family] = max(worst.get(family, 0.0), float(err))
+
+    for name, a in authored.links.items():
+        h = held.links.get(name)
+        if h is None:
+            out.mismatches.append(Mismatch(f"link {name}", "missing", None, "a body"))
+            continue
+        if name in held.welded_to_world:  # a fixed root: its mass is never simulated
+            out.notes.append(f"link {name}: welded to the world, mass and inertia not simulated "
+                             f"({held.engine} holds {h.mass:g} kg, files say {a.mass:g} kg); not compared")
+            continue
+        e = abs(h.mass - a.mass) / (tol.rel * max(abs(a.mass), 1e-300))
+        note("mass", e)
+        if e > 1.0:
+            out.mismatches.append(Mismatch(f"link {name}", "mass (kg)", h.mass, a.mass))
+        e = float(np.abs(np.asarray(h.com) - a.com).max()) / (tol.length + tol.rel * float(np.abs(a.com).max()))
+        note("com", e)
+        if e > 1.0:
+            out.mismatches.append(Mismatch(f"link {name}", "center of mass (m)", np.round(h.com, 9).tolist(), np.round(a.com, 9).tolist()))
+        scale = float(np.abs(a.principal).max())
+        e = float(np.abs(np.sort(h.principal) - a.principal).max()) / (tol.rel * max(scale, 1e-300))
+        note("inertia", e)
+        if e > 1.0:
+            out.mismatches.append(Mismatch(f"link {name}", "principal moments (kg*m^2)", np.sort(h.principal).tolist(), a.principal.tolist()))
+    for name, a in authored.joints.items():
+        h = held.joints.get(name)
+        if h is None:
+            out.mismatches.append(Mismatch(f"joint {name}", "missing", None, "a joint"))
+            continue
+        for q in ("lower", "upper"):
+            hv, av = getattr(h, q), getattr(a, q)
+            if math.isinf(av) or math.isinf(hv):
+                e = 0.0 if hv == av else math.inf
+            else:
+                e = abs(hv - av) / (tol.length + tol.rel * abs(av))
+            note("limits", e)
+            if e > 1.0:
+                out.mismatches.append(Mismatch(f"joint {name}", f"{q} limit", hv, av))
+        for q in ("damping", "friction", "stiffness"):
+            hv, av = getattr(h, q), getattr(a, q)
+            e = abs(hv - av) / (tol.floor + tol.rel * abs(av))
+            note(q, e)
+            if e > 1.0:
+                out.mismatches.append(Mismatch(f"joint {name}", q, hv, av))
+        if a.reference is not None and a.stiffness != 0.0:
+            e = math.inf if h.reference is None else abs(h.reference - a.reference) / (tol.length + tol.rel * abs(a.reference))
+            note("position", e)
+            if e > 1.0:
+                out.mismatches.append(Mismatch(f"joint {name}", "spring reference", h.reference, a.reference))
+        e = abs(h.position - a.position) / (tol.length + tol.rel * abs(a.position))
+        note("position", e)
+        if e > 1.0:
+            out.mismatches.append(Mismatch(f"joint {name}", "initial position", h.position, a.position))
+    out.max_error = worst
+    return out
+
+
+def held_by_engines(out_dir: Path, engines: list[str], *, files: bool = True,
+                    tol: Tolerances | None = None) -> list[AuthoredCheck]:
+    """Load ``out_dir`` in each engine (as :func:`asset2sim.tasks.check.parity.evaluate_engine`
+    does: the URDF, initial state, springs, the folder's mounting; no step)
+    and compare what it holds with the files (:func:`compare_physics`). With
+    ``files``, also each exported file with its engine's own importer
+    (:data:`EXPORTED_FILES`: the MJCF in MuJoCo, the USD in Newton) when the
+    folder has it and the engine is in ``engines``.
+
+    Returns one :class:`AuthoredCheck` per (engine, file); a missing package
+    or file is ``skipped``, a load error ``error``.
+
+    Raises:
+        FileNotFoundError: no ``mobility.urdf``.
+        ValueError: invalid ``initial_state.json`` or ``overlay.json``.
+    """
+    out_dir = Path(out_dir)
+    authored = authored_physics(out_dir)
+    state = read_initial_state(out_dir)
+    springs = springs_from_overlay(out_dir, state)
+    opts = SessionOptions(initial_state=state, springs=springs, **session_root_options(read_root(out_dir).fixed))
+    results: list[AuthoredCheck] = []
+    for engine in dict.fromkeys(engines):
+        try:
+            session = open_session(engine, out_dir / "mobility.urdf", opts)
+        except (EngineUnavailable, KeyError) as exc:
+            results.append(AuthoredCheck(engine, "urdf", "skipped", reason=str(exc)))
+            continue
+        except Exception as exc:  # the file does not load in this engine
+            results.append(AuthoredCheck(engine, "urdf", "error", reason=f"{type(exc).__name__}: {exc}"))
+            continue
+        try:
+            results.append(compare_physics(session.held_physics(), authored, tol))
+        except EngineUnsupported as exc:
+            results.append(AuthoredCheck(engine, "urdf", "skipped", reason=str(exc)))
+        finally:
+            session.close()
+    if files:
+        for engine, fmt, rel in EXPORTED_FILES:
+            if engine not in engines:
+                continue
+            path = out_dir / rel
+            if not path.is_file():
+                results.append(AuthoredCheck(engine, fmt, "skipped", reason=f"{rel} not exported"))
+                continue
+            try:
+                held = read_held_physics(engine, fmt, path, list(authored.links), list(authored.joints))
+            except (EngineUnavailable, EngineUnsupported) as exc:
+                results.append(AuthoredCheck(engine, fmt, "skipped", reason=str(exc)))
+                continue
+            except Exception as exc:
+                results.append(AuthoredCheck(engine, fmt, "error", reason=f"{type(exc).__name__}: {exc}"))
+                continue
+            results.append(compare_physics(held, authored, tol))
+    return results

@@ -1,0 +1,178 @@
+"""Real operating forces per category and part label, and the force
+plausibility check of task execution (``operating_force``).
+
+The table is data: ``asset2sim/priors/operating_forces.yaml`` (every range
+with its sources: the 2010 ADA Standards for Accessible Design 309.4,
+404.2.9, 604.6, 606.4, 804.6, 811.4; MIL-STD-1472E; hinge manufacturers'
+torque formula; ranges no source states directly are marked ``estimate``).
+:func:`operating_range` looks a part up (category, canonical part label ->
+the category's ``default`` -> the table's ``default``) and
+:func:`force_metric` compares the peak force and torque a task execution
+measured (:mod:`asset2sim.tasks.check.task_execution`) with it.
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib import resources
+
+import yaml
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.task_execution import TaskRun
+from asset2sim.tasks.interpret.part_labels import canonical_label
+
+_FILE = "operating_forces.yaml"
+
+
+class OperatingForcesError(ValueError):
+    """Bad operating-force data; the message names the yaml file and key."""
+
+
+class ForceRange(BaseModel):
+    """A part's real operating range: ``force_n`` (lo, hi) N at the hand /
+    grasp point and/or ``torque_nm`` (lo, hi) N m about the joint axis;
+    ``sources`` keys of the table's ``sources``; ``estimate`` when no source
+    states it directly (``note`` says how it was derived)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    force_n: tuple[float, float] | None = None
+    torque_nm: tuple[float, float] | None = None
+    sources: tuple[str, ...]
+    estimate: bool = False
+    note: str = ""
+
+    @model_validator(mode="after")
+    def _check(self) -> "ForceRange":
+        if self.force_n is None and self.torque_nm is None:
+            raise ValueError("a range needs force_n or torque_nm")
+        for name in ("force_n", "torque_nm"):
+            r = getattr(self, name)
+            if r is not None and not (0.0 <= r[0] <= r[1]):
+                raise ValueError(f"{name} must be [lo, hi] with 0 <= lo <= hi, got {list(r)}")
+        if not self.sources:
+            raise ValueError("a range needs at least one source")
+        return self
+
+
+class OperatingForces(BaseModel):
+    """The whole table (``operating_forces.yaml``)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    sources: dict[str, str]
+    default: ForceRange
+    categories: dict[str, dict[str, ForceRange]]
+
+    @model_validator(mode="after")
+    def _known_sources(self) -> "OperatingForces":
+        ranges = [("default", self.default)] + [(f"{c}.{l}", r) for c, d in self.categories.items() for l, r in d.items()]
+        for where, r in ranges:
+            unknown = [s for s in r.sources if s not in self.sources]
+            if unknown:
+                raise ValueError(f"{where}: unknown source(s) {unknown}")
+        return self
+
+
+def parse_operating_forces(data: object, where: str = _FILE) -> OperatingForces:
+    """Validate a parsed table.
+
+    Raises:
+        OperatingForcesError: malformed (names ``where`` and the key).
+    """
+    try:
+        return OperatingForces.model_validate(data)
+    except ValidationError as exc:
+        raise OperatingForcesError(f"{where}: {exc}") from exc
+
+
+@functools.lru_cache(maxsize=1)
+def load_operating_forces() -> OperatingForces:
+    """The packaged table (``asset2sim/priors/operating_forces.yaml``).
+
+    Raises:
+        OperatingForcesError: malformed data.
+    """
+    text = resources.files("asset2sim.priors").joinpath(_FILE).read_text(encoding="utf-8")
+    return parse_operating_forces(yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)), _FILE)  # libyaml when built in
+
+
+def operating_range(category: str | None, label: str | None, table: OperatingForces | None = None
+                    ) -> tuple[ForceRange, str]:
+    """The range of a part: (range, where it came from:
+    ``<category>.<label>``, ``<category>.default`` or ``default``).
+    ``label`` is canonicalised (:func:`~asset2sim.tasks.interpret.part_labels.canonical_label`)."""
+    t = table or load_operating_forces()
+    cat = t.categories.get(category or "")
+    lab = canonical_label(label) if label else None
+    if cat is not None:
+        if lab and lab in cat:
+            return cat[lab], f"{category}.{lab}"
+        if "default" in cat:
+            return cat["default"], f"{category}.default"
+    return t.default, "default"
+
+
+def _inside(v: float | None, r: tuple[float, float] | None) -> bool | None:
+    if r is None or v is None:
+        return None
+    return bool(r[0] <= v <= r[1])
+
+
+def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str | None],
+                 table: OperatingForces | None = None) -> MetricResult:
+    """``operating_force``: are the peak operating forces of a task execution
+    inside the real ranges of the category and part?
+
+    For every attempt in which the gripper moved a joint, its peak operating
+    force (N: the force along the part's motion, torque / lever or the axial
+    force; :class:`~asset2sim.tasks.check.task_execution.TaskAttempt`) and,
+    for a revolute joint, its peak torque about the axis (N m) are
+    compared with :func:`operating_range` of the category and the canonical
+    label of the joint's moving link (``link_labels``: link -> semantic
+    label, e.g. from ``semantics.txt``; the grasped child link; a grasp of
+    the parent's side takes the category's default). An
+    attempt passes iff each range the entry gives contains the measurement.
+
+    Returns:
+        value = the largest peak operating force (N); ``passed`` None when no attempt
+        moved a joint; details per attempt (range, where from, sources,
+        estimate).
+    """
+    t = table or load_operating_forces()
+    rows = []
+    bad = []
+    for a in run.attempts:
+        if not a.moved:
+            continue
+        # The part operated: the grasped child link's label; a parent-side grasp
+        # (the child carries the object) takes the category's default.
+        label = link_labels.get(a.link) if a.side == "child" else None
+        r, where = operating_range(category, label, t)
+        f_ok = _inside(a.peak_operating_force_n, r.force_n)
+        tau = a.peak_torque_nm
+        t_ok = _inside(tau, r.torque_nm)
+        ok = f_ok is not False and t_ok is not False
+        row = {"joint": a.joint, "action": a.action, "peak_operating_force_n": a.peak_operating_force_n,
+               "peak_gripper_force_n": a.peak_force_n, "peak_torque_nm": tau,
+               "force_range_n": list(r.force_n) if r.force_n else None,
+               "torque_range_nm": list(r.torque_nm) if r.torque_nm else None,
+               "range_of": where, "sources": [t.sources[s] for s in r.sources], "estimate": r.estimate, "passed": ok}
+        rows.append(row)
+        if not ok:
+            what = []
+            if f_ok is False:
+                what.append(f"force {a.peak_operating_force_n:.1f} N outside {r.force_n[0]:g}-{r.force_n[1]:g} N")
+            if t_ok is False:
+                what.append(f"torque {tau:.2f} N m outside {r.torque_nm[0]:g}-{r.torque_nm[1]:g} N m")
+            bad.append(f"{a.joint} {a.action}: {', '.join(what)} ({where})")
+    return MetricResult(
+        name="operating_force",
+        value=max((r["peak_operating_force_n"] for r in rows), default=None),
+        unit="N",
+        passed=(not bad) if rows else None,
+        threshold="the task's peak operating force (and torque about the axis) inside the real operating range of the "
+                  "category and part (asset2sim/priors/operating_forces.yaml)",
+        details={"attempts": rows, "failures": bad, "category": category},
+        engine=run.engine,
+    )

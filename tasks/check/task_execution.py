@@ -1,0 +1,479 @@
+"""Task execution by a gripper: a force- and speed-limited floating gripper
+performs the task of the manifest row on the free object (issue 15, Build 3;
+SPEC, "Interaction under manipulation").
+
+Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
+
+1. Session: SPEC conventions (timestep 1/240 s, gravity, a ground plane; the
+   root **free**, resting on the ground; a mounted asset keeps its root fixed
+   as it declares, :func:`asset2sim.tasks.interpret.mounting.session_root_options`),
+   joints at the initial state, springs as the asset has them. Ground
+   contact friction is the engines' documented default, mu = 0.25 (PyBullet
+   multiplies the link's default lateral friction 0.5 by the plane's 0.5;
+   PhysX and MuJoCo are given the same product: ``asset2sim/engines``), or the
+   link's ``<contact><lateral_friction>`` where the asset writes one.
+2. The object settles for ``settle_time`` s, then the gripper approaches for
+   ``approach_distance / max_speed`` s (a floating gripper without collision
+   shapes: nothing touches the object); the root pose at the grasp is the
+   reference of sliding and tipping.
+3. Grasp at the contact point (:func:`asset2sim.tasks.check.gripper.contact_point_rule`:
+   a handle when a geometry element is named so, else the middle of the
+   moving link's far edge from the axis, a drawer's front) with a bounded-force
+   attachment (:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`, the
+   standard grasp model of simulation benchmarks; limits
+   :class:`~asset2sim.tasks.check.gripper.GripperLimits`: 70 N, 0.25 m/s).
+4. Move along the joint's motion: the gripper is led towards the grasp
+   point's position at the commanded joint position q_des (an arc about the
+   joint axis for revolute joints, a line along it for prismatic ones),
+   q_des going from the start q0 to q_target = q_c + d f_target R at the
+   gripper's top speed (v_max / r rad/s at lever r; v_max m/s), ramped up
+   over ``accel_time`` s. While the grasp point's direction of motion is
+   within 60 deg of vertical (``vertical_share``) the gripper presses or
+   lifts vertically only (the attachment's force projected on world z, the
+   finger sliding along the part): as a person closes a lid or presses a
+   stapler, the press loads the object onto the ground instead of pushing it
+   sideways; otherwise the full attachment drives the part along its path. At most ``accel_time + travel_margin * travel /
+   v_max + extra_time`` s; the move ends once q_des = q_target and the joint
+   has reached the target (opening fraction within ``reach_tol`` on the
+   target's side: close f <= f_target + 0.05, open f >= f_target - 0.05) and
+   slowed below 0.05 rad/s (0.005 m/s).
+5. Release; wait ``hold_time`` = 1 s.
+6. Success iff the target was reached, is still reached 1 s after release
+   (waived only where the joint is meant to return: the request asks it to
+   move freely, a freely swinging handle, or it returns by a spring the
+   request or the category's part prior asks for, a stapler's arm), and the object neither slid (its
+   footprint point, the point below the carrying link's origin at the
+   object's lowest height at the grasp, carried with that link, moved
+   horizontally > ``slide_tol`` = 5 mm) nor tipped (that link's rotation >
+   ``tip_tol`` = 0.05 rad) from the grasp to the end of the wait; the
+   carrying link is the root, or the joint's child when the gripper moves
+   the parent side. A joint already at the target needs
+   no motion (success, no force recorded).
+7. Recorded: peak gripper force |F| (N, the robot's load), peak torque
+   about the joint axis tau = |a . ((p - o) x F)| (N m; prismatic: the axial
+   force |F . a|, N), p the grasp point, o the joint origin, and the peak
+   operating force tau / r (r the grasp point's distance from the axis;
+   prismatic |F . a|): the force along the part's motion, what a hand
+   pushing along it needs. The force plausibility check
+   (:mod:`asset2sim.tasks.check.force_ranges`) compares them with real
+   operating forces of the category and part.
+
+Opening fractions f = d (q - q_c) / R (0 closed, 1 fully open; closed ends:
+``docs/metrics.md`` section 4). Targets: the task's
+(:mod:`asset2sim.tasks.evaluation.task_spec`): close 0.05, open 0.6. A joint
+whose initial state already meets the target is first set to the far side
+(close: f = 0.6, open: f = 0) and settled again, so every task moves its
+joint (an asset delivered closed is still asked to close).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, Spring, open_session, quiet_stdout
+from asset2sim.frames import axis_angle_matrix
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule, grasp_side
+from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
+from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
+
+_UP = np.array([0.0, 0.0, 1.0])
+#: Opening fraction a close task starts from when the delivered state is already closed.
+FAR_SIDE_OPEN = OPEN_TARGET
+
+#: |q_dot| below which a joint counts as stopped: rad/s (revolute), m/s (prismatic).
+STOPPED_REVOLUTE, STOPPED_PRISMATIC = 0.05, 0.005
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Knobs of task execution (units on every field)."""
+
+    settle_time: float = 0.5
+    """free settling before the approach, s"""
+    approach_distance: float = 0.05
+    """stand-off the gripper covers before the grasp, m (time only: it has no shapes)"""
+    accel_time: float = 0.2
+    """time to ramp the commanded joint speed up to the gripper's top speed, s"""
+    travel_margin: float = 1.5
+    """time allowed per unit of travel time at top speed (dimensionless)"""
+    extra_time: float = 1.0
+    """time after the commanded motion ends to reach the target, s"""
+    hold_time: float = 1.0
+    """wait after release, s"""
+    reach_tol: float = 0.05
+    """opening-fraction tolerance on the target's side (dimensionless)"""
+    slide_tol: float = 0.005
+    """footprint displacement that counts as sliding, m"""
+    tip_tol: float = 0.05
+    """root rotation that counts as tipping, rad"""
+    vertical_share: float = 0.5
+    """the gripper presses or lifts vertically (a push along world z) while the
+    vertical component of the grasp point's direction of motion is at least
+    this share of it (dimensionless; 0.5: within 60 deg of vertical), else it
+    drives the full attachment along the joint's motion"""
+    from_far_side: bool = True
+    """a joint whose initial state already meets the task's target is first
+    set to the far side (close: opening fraction 0.6; open: the closed end)
+    and settled again, so that every task moves its joint; False: such an
+    attempt succeeds without motion"""
+    limits: GripperLimits = field(default_factory=GripperLimits)
+
+
+@dataclass
+class TaskAttempt:
+    """One joint, one action. Angles rad, lengths m, forces N, torques N m."""
+
+    joint: str
+    joint_type: str
+    action: str
+    link: str
+    side: str
+    """``child`` (the part the joint moves) or ``parent`` (the child carries the object)"""
+    contact_rule: str
+    contact_point: list[float]
+    """grasp point in the link frame, m"""
+    started_from: str
+    """``initial state`` or the far side the joint was set to (``TaskConfig.from_far_side``)"""
+    start_fraction: float
+    target_fraction: float
+    reached: bool
+    release_fraction: float
+    final_fraction: float
+    held: bool
+    hold_required: bool
+    peak_force_n: float
+    """peak |F| the gripper applied (a robot's load), N"""
+    peak_operating_force_n: float
+    """peak force along the part's motion: |torque about the axis| / lever
+    (revolute) or |F . a| (prismatic), N: what a hand pushing along the
+    motion needs (the quantity accessibility standards bound)"""
+    peak_torque_nm: float | None
+    """peak |torque about the joint axis| (revolute), N m"""
+    peak_axial_force_n: float | None
+    """peak |force along the axis| (prismatic), N"""
+    lever_m: float | None
+    root_slide_m: float
+    root_tilt_rad: float
+    slid: bool
+    tipped: bool
+    force_limited: bool
+    """the gripper's force reached its limit"""
+    moved: bool
+    """the gripper had to move the joint (False: already at the target)"""
+    seconds_simulated: float
+    success: bool
+    failure: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able dict."""
+        return dict(self.__dict__)
+
+
+@dataclass
+class TaskRun:
+    """Task execution of an asset in one engine."""
+
+    engine: str
+    root: str
+    """``free (on the ground)`` or ``fixed (mounted)``"""
+    attempts: list[TaskAttempt] = field(default_factory=list)
+    task: str | None = None
+    config: TaskConfig = field(default_factory=TaskConfig)
+
+
+def _frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+    """Joint origin o (3,) and unit world axis a (3,)."""
+    o, R = session.link_frame(link)
+    a = np.asarray(R, float) @ np.asarray(session.joint_axis(joint), float)
+    return np.asarray(o, float), a / max(float(np.linalg.norm(a)), 1e-12)
+
+
+class _SupportWatch:
+    """Sliding (horizontal footprint displacement, m) and tipping (rad) of the
+    link that carries the object (the root; the joint's child when the
+    gripper moves the parent side), since construction."""
+
+    def __init__(self, session, link: str) -> None:
+        self.session, self.link = session, link
+        p0, R0 = session.link_frame(link)
+        self.p0, self.R0 = np.asarray(p0, float), np.asarray(R0, float)
+        z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
+        self.foot0 = np.array([self.p0[0], self.p0[1], z_low])
+        self.foot_local = self.R0.T @ (self.foot0 - self.p0)
+        self.slide = self.tilt = 0.0
+
+    def update(self) -> tuple[float, float]:
+        p, R = self.session.link_frame(self.link)
+        R = np.asarray(R, float)
+        moved = np.asarray(p, float) + R @ self.foot_local - self.foot0
+        s = float(np.linalg.norm(moved[:2]))
+        c = (float(np.trace(self.R0.T @ R)) - 1.0) / 2.0
+        t = float(np.arccos(np.clip(c, -1.0, 1.0))) if np.isfinite(c) else float("inf")
+        self.slide = max(self.slide, s) if np.isfinite(s) else float("inf")
+        self.tilt = max(self.tilt, t)
+        return self.slide, self.tilt
+
+
+def execute_task(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
+                 target_fraction: float | None = None, config: TaskConfig | None = None,
+                 model: UrdfModel | None = None, hold_required: bool = True, root_fixed: bool = False) -> TaskAttempt:
+    """Execute one action on ``joint`` from the session's current state (module docstring).
+
+    Args:
+        session: a :class:`~asset2sim.engines.base.SimSession` at the initial
+            state (root as declared); it is stepped in place.
+        joint: movable joint name.
+        closed, direction, open_range: q_c (rad or m), opening direction +-1,
+            range R > 0 (rad or m).
+        action: ``close`` or ``open``.
+        target_fraction: the task's target opening fraction; None: close 0.05,
+            open 0.6 (0.9 when the joint starts beyond 0.55).
+        config: knobs.
+        model: the URDF model (handles, :func:`~asset2sim.tasks.check.gripper.handle_points`).
+        hold_required: the target must still be reached 1 s after release.
+        root_fixed: the session's root is fixed (mounted): the child side is
+            always the one moved.
+
+    Raises:
+        ValueError: unknown action, non-positive ``open_range``.
+        KeyError: unknown joint.
+    """
+    if action not in ("close", "open"):
+        raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
+    if not open_range > 0:
+        raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
+    if joint not in session.joint_child:
+        raise KeyError(f"joint {joint!r} is not a movable joint of the session")
+    cfg = config or TaskConfig()
+    lim = cfg.limits
+    dt = float(session.options.conventions.timestep)
+    jtype = session.joint_types[joint]
+    prismatic = jtype == "prismatic"
+    stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
+
+    def frac(q: float) -> float:
+        return float(direction * (q - closed) / open_range)
+
+    n_settle = int(round((cfg.settle_time + cfg.approach_distance / lim.max_speed_m_s) / dt))
+    session.step(n_settle)
+    q0, _ = session.joint_state(joint)
+    f0 = frac(q0)
+    if target_fraction is None:
+        target_fraction = CLOSE_TARGET if action == "close" else OPEN_TARGET
+
+    def reached(f: float) -> bool:
+        return f <= target_fraction + cfg.reach_tol if action == "close" else f >= target_fraction - cfg.reach_tol
+
+    notes: list[str] = []
+    started_from = "initial state"
+    if reached(f0) and cfg.from_far_side:
+        # The delivered state already does the task: start from the far side so
+        # that every task moves its joint (close from open, open from closed).
+        f_from = FAR_SIDE_OPEN if action == "close" else 0.0
+        session.set_joint_positions({joint: closed + direction * f_from * open_range})
+        session.step(n_settle)
+        q0, _ = session.joint_state(joint)
+        f0 = frac(q0)
+        started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
+        notes.append(started_from)
+
+    side = grasp_side(session, joint, model, root_fixed=root_fixed)
+    link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
+    # Moving the parent side by -dq about the joint gives the same relative motion dq.
+    side_sign = 1.0 if side == "child" else -1.0
+    # Sliding and tipping of the link that carries the object.
+    watch = _SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
+    q_target = closed + direction * target_fraction * open_range
+    steps = 0
+    peak_tau = peak_ax = peak_op = 0.0
+    lever = None
+    force_limited = False
+    if reached(f0):
+        f_rel = f_end = f0
+        moved = False
+        peak_force = 0.0
+        held_ok = True
+        notes.append("at the target before the motion: nothing to move")
+    else:
+        moved = True
+        grasp = BoundedGrasp(session, link, point, lim)
+        o, a = _frame_axis(session, joint, link)
+        p = grasp.grasp_point_world()
+        if not prismatic:
+            r_vec = (p - o) - float((p - o) @ a) * a
+            lever = max(float(np.linalg.norm(r_vec)), 1e-3)
+            qdot_max = lim.max_speed_m_s / lever
+        else:
+            qdot_max = lim.max_speed_m_s
+        travel = abs(q_target - q0) * (lever if lever is not None else 1.0)
+        n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / lim.max_speed_m_s + cfg.extra_time) / dt))
+        sgn = 1.0 if q_target >= q0 else -1.0
+        q_des = q0
+        done = False
+        pushed_steps = 0
+        for k in range(n_move):
+            speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
+            q_des = q_des + sgn * speed * dt
+            if sgn * (q_des - q_target) > 0:
+                q_des = q_target
+            q, _ = session.joint_state(joint)
+            o, a = _frame_axis(session, joint, link)
+            p = grasp.grasp_point_world()
+            if prismatic:
+                target = p + a * side_sign * (q_des - q)
+            else:
+                target = o + axis_angle_matrix(a, side_sign * (q_des - q)) @ (p - o)
+            # Press or lift vertically where that moves the part well enough:
+            # it loads the object onto the ground instead of pushing it sideways.
+            t_dir = a if prismatic else np.cross(a, p - o)
+            nt = float(np.linalg.norm(t_dir))
+            push = nt > 0 and abs(float(t_dir[2])) >= cfg.vertical_share * nt
+            if push:
+                # the vertical stretch that moves the part as far along its path
+                # as the target asks: (progress along the tangent) / t_z
+                t_hat = t_dir / nt
+                target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
+            F = grasp.step_towards(target, dt, direction=_UP if push else None)
+            pushed_steps += int(push)
+            if prismatic:
+                peak_ax = max(peak_ax, abs(float(F @ a)))
+                peak_op = peak_ax
+            else:
+                tau = abs(float(a @ np.cross(p - o, F)))
+                peak_tau = max(peak_tau, tau)
+                r_now = float(np.linalg.norm((p - o) - float((p - o) @ a) * a))
+                peak_op = max(peak_op, tau / max(r_now, 1e-3))
+            if float(np.linalg.norm(F)) >= lim.max_force_n * (1 - 1e-9):
+                force_limited = True
+            session.step(1)
+            steps += 1
+            q, qd = session.joint_state(joint)
+            slide, tilt = watch.update()
+            if not np.isfinite(q):
+                break
+            if slide > cfg.slide_tol or tilt > cfg.tip_tol:
+                break  # the object moves instead of the joint: the gripper stops
+            if q_des == q_target and reached(frac(q)) and abs(qd) < stopped:
+                done = True
+                break
+        peak_force = grasp.peak_force_n
+        grasp.release()
+        if pushed_steps:
+            notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
+        q_rel, _ = session.joint_state(joint)
+        f_rel = frac(q_rel)
+        if not done and reached(f_rel):
+            notes.append("target reached but the joint was still moving at the time limit")
+        for _ in range(int(round(cfg.hold_time / dt))):
+            session.step(1)
+            steps += 1
+            watch.update()
+        q_end, _ = session.joint_state(joint)
+        f_end = frac(q_end)
+        held_ok = reached(f_end) if np.isfinite(f_end) else False
+    slid = watch.slide > cfg.slide_tol
+    tipped = watch.tilt > cfg.tip_tol
+    ok_reached = reached(f_rel) if np.isfinite(f_rel) else False
+    failure = ""
+    if not np.isfinite(f_end):
+        failure = "diverged"
+    elif slid or tipped:
+        failure = "the object " + ("slid" if slid else "tipped") + (" before the target was reached" if not ok_reached else "")
+    elif not ok_reached:
+        failure = "target not reached" + (f" (gripper at its {lim.max_force_n:g} N limit)" if force_limited else "")
+    elif not held_ok and hold_required:
+        failure = "target not held 1 s after release"
+    if not held_ok and not hold_required and not failure:
+        notes.append("does not hold the target after release (allowed: the joint moves freely or returns by its spring by design)")
+    return TaskAttempt(
+        joint=joint, joint_type=jtype, action=action, link=link, side=side, contact_rule=rule,
+        contact_point=[float(x) for x in point], started_from=started_from, start_fraction=f0, target_fraction=float(target_fraction),
+        reached=bool(ok_reached), release_fraction=float(f_rel), final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"),
+        held=bool(held_ok), hold_required=bool(hold_required), peak_force_n=float(peak_force),
+        peak_operating_force_n=float(peak_op),
+        peak_torque_nm=None if prismatic or not moved else float(peak_tau),
+        peak_axial_force_n=float(peak_ax) if prismatic and moved else None, lever_m=lever,
+        root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
+        force_limited=bool(force_limited), moved=moved, seconds_simulated=steps * dt, success=not failure,
+        failure=failure, notes=notes,
+    )
+
+
+def run_task(engine: str, urdf: Path | str, joints: dict[str, tuple[float, float, float]], *,
+             actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
+             initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
+             conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
+             hold_required: dict[str, bool] | None = None, task: str | None = None) -> TaskRun:
+    """Execute the task on every joint of ``joints`` with every action, each
+    in a fresh session of ``engine`` (the root as declared: ``fixed_base``).
+
+    Args:
+        joints: joint -> (q_closed, direction, open_range), rad or m.
+        actions: ``close`` / ``open``.
+        targets: action -> target opening fraction (the task's); None: defaults.
+        initial_state, springs, conventions: the session's.
+        hold_required: joint -> whether the target must hold after release
+            (:func:`execute_task`; False where the joint moves freely or returns
+            by a requested spring); missing joints: True.
+        task: the task text, recorded.
+
+    Returns:
+        A :class:`TaskRun`, one attempt per joint and action in order.
+
+    Raises:
+        EngineUnavailable, and whatever loading the URDF raises.
+    """
+    cfg = config or TaskConfig()
+    conv = conventions or SimConventions()
+    try:
+        model = read_urdf(urdf, mode="lenient")
+    except (UrdfError, OSError):
+        model = None
+    run = TaskRun(engine=engine, root="fixed (mounted)" if fixed_base else "free (on the ground)", task=task, config=cfg)
+    opts = SessionOptions(initial_state=dict(initial_state or {}), springs=dict(springs or {}), conventions=conv,
+                          **session_root_options(fixed_base))
+    for name, (qc, d, rng) in joints.items():
+        for action in actions:
+            with quiet_stdout():
+                session = open_session(engine, urdf, opts)
+            try:
+                run.attempts.append(execute_task(session, name, closed=qc, direction=d, open_range=rng, action=action,
+                                                 target_fraction=(targets or {}).get(action), config=cfg, model=model,
+                                                 hold_required=(hold_required or {}).get(name, True),
+                                                 root_fixed=fixed_base))
+            finally:
+                session.close()
+    return run
+
+
+def task_metric(run: TaskRun) -> MetricResult:
+    """``task_execution``: value = failed attempts; passes iff none failed
+    (``passed`` None when nothing was attempted)."""
+    failed = [a for a in run.attempts if not a.success]
+    cfg = run.config
+    return MetricResult(
+        name="task_execution",
+        value=float(len(failed)),
+        unit="failed attempts",
+        passed=(not failed) if run.attempts else None,
+        threshold=(f"a {cfg.limits.max_force_n:g} N, {cfg.limits.max_speed_m_s:g} m/s gripper reaches the target "
+                   f"(+-{cfg.reach_tol:g} opening fraction), it holds {cfg.hold_time:g} s after release, the object "
+                   f"slides <= {cfg.slide_tol * 1e3:g} mm and tips <= {cfg.tip_tol:g} rad"),
+        details={
+            "root": run.root,
+            "task": run.task,
+            "attempts": [a.summary() for a in run.attempts],
+            "failures": [f"{a.joint} {a.action}: {a.failure}" for a in failed],
+            "peak_force_n": max((a.peak_force_n for a in run.attempts), default=None),
+            "peak_operating_force_n": max((a.peak_operating_force_n for a in run.attempts), default=None),
+        },
+        engine=run.engine,
+    )

@@ -1,0 +1,282 @@
+"""Third-party checkers on an output folder: what other tools say about the
+files refine writes.
+
+- ``urdf_parser_py`` (ROS's URDF parser, PyPI ``urdf-parser-py==0.0.4``):
+  :func:`check_urdf_parser_py` parses ``mobility.urdf``; its non-fatal
+  complaints (it writes them to stderr by default) are collected too.
+- ``urdf-validator`` (PyPI ``urdf-validator==1.6.0``, command
+  ``urdf_validate``): :func:`check_urdf_validator` runs it and reads its
+  JSON report (``overall_status``, ``critical_issues``, ``warnings``).
+- ``mjcf-doctor`` (PyPI ``mjcf-doctor==0.2.1``): :func:`check_mjcf_doctor`
+  runs ``mjcf-doctor check --json`` on ``mjcf/mobility.xml`` (errors,
+  warnings, finding codes).
+- Drake (PyPI ``drake``; 1.51.1 is the newest that installs here on Python
+  3.11, about 170 MB): :func:`check_drake` parses the URDF into a
+  ``MultibodyPlant``, finalizes it, checks every body's spatial inertia with
+  ``SpatialInertia.IsPhysicallyValid`` and reads each joint's damping back;
+  Drake's parser warnings are collected (it warns that joint friction is not
+  supported: ``MultibodyPlant`` has no Coulomb joint friction, so a lid held
+  by friction alone falls in Drake).
+
+All four are optional (extra ``checkers``); a missing one raises
+:class:`CheckerUnavailable`. Tool findings are reported as the tool gives
+them; which are false alarms for an articulated object is said in
+``docs/simulators.md``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import logging
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from asset2sim.engines.loading import read_urdf
+
+URDF_NAME = "mobility.urdf"
+MJCF_PATH = "mjcf/mobility.xml"
+#: Wall-clock limit for one run of a checker's command line (s).
+COMMAND_TIMEOUT = 300
+
+
+class CheckerUnavailable(RuntimeError):
+    """The checker's package or command is not installed (names it)."""
+
+
+@dataclass
+class CheckerResult:
+    """One checker on one file: ``errors`` (the tool's errors / critical
+    issues / exceptions, as text), ``warnings`` (its warnings), ``details``
+    (tool-specific numbers)."""
+
+    tool: str
+    file: str
+    errors: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    details: dict = field(default_factory=dict)
+
+    @property
+    def passed(self) -> bool:
+        return not self.errors
+
+
+def _need_module(module: str, package: str) -> None:
+    if importlib.util.find_spec(module) is None:
+        raise CheckerUnavailable(f"{package} is not installed (pip install 'asset2sim[checkers]')")
+
+
+def _command(name: str) -> str:
+    """The checker's console script: next to this Python first, then PATH."""
+    local = Path(sys.executable).with_name(name)
+    if local.is_file():
+        return str(local)
+    found = shutil.which(name)
+    if not found:
+        raise CheckerUnavailable(f"command {name!r} not found (pip install 'asset2sim[checkers]')")
+    return found
+
+
+def check_urdf_parser_py(urdf: Path) -> CheckerResult:
+    """Parse ``urdf`` with ``urdf_parser_py.urdf.URDF.from_xml_string``.
+
+    Errors: the ``ParseError`` it raises (e.g. a ``<limit>`` without
+    ``effort``/``velocity``); warnings: the messages its ``on_error`` hook
+    receives for elements it skips.
+
+    Raises:
+        CheckerUnavailable: urdf-parser-py is not installed.
+    """
+    _need_module("urdf_parser_py", "urdf-parser-py")
+    from urdf_parser_py import xml_reflection
+    from urdf_parser_py.urdf import URDF
+
+    res = CheckerResult("urdf_parser_py", str(urdf))
+    core = xml_reflection.core
+    saved = core.on_error
+    core.on_error = res.warnings.append
+    try:
+        robot = URDF.from_xml_string(Path(urdf).read_bytes())
+        res.details = {"links": len(robot.links), "joints": len(robot.joints)}
+    except Exception as exc:  # the parser's verdict on the file
+        res.errors.append(f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+    finally:
+        core.on_error = saved
+    return res
+
+
+def check_urdf_validator(urdf: Path) -> CheckerResult:
+    """Run ``urdf_validate URDF --output-dir TMP`` and read its JSON report.
+
+    Errors: ``critical_issues`` and a non-PASS schema, or a crash; warnings:
+    ``warnings``; details: ``overall_status``, per-section statuses.
+
+    Raises:
+        CheckerUnavailable: urdf-validator is not installed.
+    """
+    cmd = _command("urdf_validate")
+    res = CheckerResult("urdf-validator", str(urdf))
+    with tempfile.TemporaryDirectory() as tmp:
+        proc = subprocess.run([cmd, "--output-dir", tmp, str(Path(urdf).resolve())], capture_output=True, text=True,
+                              timeout=COMMAND_TIMEOUT, cwd=tmp)
+        reports = list(Path(tmp).glob("*.json"))
+        if not reports:
+            res.errors.append(f"no report (exit {proc.returncode}): {(proc.stderr or proc.stdout).strip()[-300:]}")
+            return res
+        rep = json.loads(reports[0].read_text())
+    res.errors += [_text(x) for x in rep.get("critical_issues", [])]
+    schema = rep.get("schema") or {}
+    if schema.get("status") not in (None, "PASS"):
+        res.errors += [f"schema: {_text(x)}" for x in schema.get("critical_issues", [])] or [f"schema {schema.get('status')}"]
+    res.warnings += [_text(x) for x in rep.get("warnings", [])] + [f"schema: {_text(x)}" for x in schema.get("warnings", [])]
+    res.details = {"overall_status": rep.get("overall_status"), "schema": schema.get("status"),
+                   "statics": (rep.get("statics") or {}).get("status"), "links": len(rep.get("links") or [])}
+    return res
+
+
+def check_mjcf_doctor(xml: Path) -> CheckerResult:
+    """Run ``mjcf-doctor check --json XML`` (static rules and a 2 s
+    simulation); errors and warnings are its ERROR and WARN findings as
+    ``code subject: message``.
+
+    Raises:
+        CheckerUnavailable: mjcf-doctor is not installed.
+    """
+    cmd = _command("mjcf-doctor")
+    res = CheckerResult("mjcf-doctor", str(xml))
+    with tempfile.TemporaryDirectory() as tmp:  # MuJoCo appends its warnings to MUJOCO_LOG.TXT in the working directory
+        proc = subprocess.run([cmd, "check", "--json", str(Path(xml).resolve())], capture_output=True, text=True,
+                              timeout=COMMAND_TIMEOUT, cwd=tmp)
+    out = proc.stdout
+    start = out.find("\n[")
+    try:
+        reports = json.loads(out[start + 1:] if start >= 0 else out)
+    except ValueError:
+        res.errors.append(f"no JSON report (exit {proc.returncode}): {(proc.stderr or out).strip()[-300:]}")
+        return res
+    for rep in reports:
+        for f in rep.get("findings", []):
+            text = f"{f.get('code')} {f.get('subject')}: {f.get('message')}"
+            if f.get("level") == "ERROR":
+                res.errors.append(text)
+            elif f.get("level") == "WARN":
+                res.warnings.append(text)
+        res.details = {"errors": rep.get("errors"), "warnings": rep.get("warnings")}
+    return res
+
+
+class _Collect(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
+def check_drake(urdf: Path) -> CheckerResult:
+    """Parse ``urdf`` with Drake (``Parser(plant).AddModels``), finalize the
+    ``MultibodyPlant`` and check every body's spatial inertia
+    (``SpatialInertia.IsPhysicallyValid`` about the body origin, and
+    ``RotationalInertia.CouldBePhysicallyValid`` about the COM: positive mass,
+    principal moments positive and satisfying the triangle inequality; Drake's
+    parser only warns about an invalid one). Errors: the parse/finalize
+    exception, each body whose spatial inertia is not valid (and Drake's
+    warning about it),
+    each joint whose damping Drake holds differently from the URDF
+    (1e-9 relative); warnings: Drake's parser warnings (joint friction is
+    not supported). Details: bodies, joints, joints whose friction Drake
+    ignores.
+
+    Raises:
+        CheckerUnavailable: drake is not installed.
+    """
+    _need_module("pydrake", "drake")
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+    from pydrake.multibody.tree import BodyIndex, JointIndex
+
+    res = CheckerResult("drake", str(urdf))
+    handler = _Collect()
+    log = logging.getLogger("drake")
+    saved = log.handlers[:], log.propagate
+    log.handlers, log.propagate = [handler], False  # collected, not printed
+    try:
+        plant = MultibodyPlant(0.0)
+        Parser(plant).AddModels(str(urdf))
+        plant.Finalize()
+    except Exception as exc:  # Drake refuses the file
+        res.errors.append(f"{type(exc).__name__}: {' '.join(str(exc).split())[:400]}")
+        return res
+    finally:
+        log.handlers, log.propagate = saved
+    for m in handler.messages:  # Drake's parser only warns about an invalid inertia and goes on
+        (res.errors if "PhysicallyValid" in m else res.warnings).append(" ".join(m.split()))
+    model = read_urdf(urdf)
+    context = plant.CreateDefaultContext()
+    bodies = 0
+    for i in range(plant.num_bodies()):
+        body = plant.get_body(BodyIndex(i))
+        if body.index() == plant.world_body().index():
+            continue
+        bodies += 1
+        si = body.CalcSpatialInertiaInBodyFrame(context)
+        about_com = si.Shift(si.get_com()).CalcRotationalInertia()
+        if not si.IsPhysicallyValid() or not about_com.CouldBePhysicallyValid():
+            res.errors.append(f"link {body.name()!r}: spatial inertia not physically valid (mass {si.get_mass()}, "
+                              f"principal moments about the COM {sorted(about_com.CalcPrincipalMomentsOfInertia())})")
+    joints = 0
+    for i in range(plant.num_joints()):
+        joint = plant.get_joint(JointIndex(i))
+        if joint.name() not in {j.name for j in model.movable_joints}:
+            continue
+        joints += 1
+        want = float(model.joint(joint.name()).damping)
+        got = [float(x) for x in joint.default_damping_vector()]
+        if any(abs(g - want) > 1e-9 * max(abs(want), 1e-12) for g in got):
+            res.errors.append(f"joint {joint.name()!r}: Drake holds damping {got}, the URDF says {want}")
+    ignored = [j.name for j in model.movable_joints if j.friction]
+    res.details = {"bodies": bodies, "joints": joints, "friction_ignored": ignored}
+    return res
+
+
+def _text(x) -> str:
+    if isinstance(x, dict):
+        return "; ".join(f"{k}={v}" for k, v in x.items() if v not in (None, "", []))
+    return str(x)
+
+
+#: checker name -> (function, file in the output folder it reads)
+CHECKERS = {
+    "urdf_parser_py": (check_urdf_parser_py, URDF_NAME),
+    "urdf-validator": (check_urdf_validator, URDF_NAME),
+    "drake": (check_drake, URDF_NAME),
+    "mjcf-doctor": (check_mjcf_doctor, MJCF_PATH),
+}
+
+
+def run_checkers(out_dir: Path, names: list[str] | None = None) -> dict[str, CheckerResult | str]:
+    """Every checker of :data:`CHECKERS` (or ``names``) on an output folder:
+    name -> :class:`CheckerResult`, or a string saying why it did not run
+    (not installed, file missing).
+
+    Raises:
+        KeyError: an unknown checker name.
+    """
+    out_dir = Path(out_dir)
+    out: dict[str, CheckerResult | str] = {}
+    for name in names or list(CHECKERS):
+        fn, rel = CHECKERS[name]
+        path = out_dir / rel
+        if not path.is_file():
+            out[name] = f"skipped: {rel} not in {out_dir}"
+            continue
+        try:
+            out[name] = fn(path)
+        except CheckerUnavailable as exc:
+            out[name] = f"skipped: {exc}"
+    return out

@@ -1,0 +1,518 @@
+"""A learning environment per manipulation task: can a policy learn to do it
+on this asset? (issue 15, "Learnability benchmark"; SPEC, "Behavioral
+fidelity, learning feasibility": the thesis trained PPO on 9 tasks.)
+
+A `gymnasium <https://gymnasium.farama.org>`_ environment over any asset folder
+(a refined output, a baseline's asset: anything
+:func:`asset2sim.tasks.evaluation.eval_context.build_context` reads) and a
+task text ("close the box lid", a manifest's ``task`` column). It talks to
+physics only through the engine protocol
+(:func:`asset2sim.engines.base.open_session`), so it runs in every engine the
+protocol answers; the benchmark uses PyBullet.
+
+Definitions (re-derivable; ``docs/metrics.md``):
+
+- **Task instance** (:func:`prepare_task`): the task is parsed by
+  :func:`asset2sim.tasks.evaluation.task_spec.parse_task` into joints and
+  actions; the closed ends are the evaluation's own
+  (:func:`asset2sim.tasks.evaluation.closed_ends.compute_closed`, no method
+  grades itself). Where the PartNet-Mobility reference
+  (``reference_gensim2.urdf``) keeps some of the parsed joints movable, only
+  those are candidates (every method then acts on the same joint: "close
+  the cabinet drawer" on GenSim2's drawer). Of every (joint, action) pair the one whose target is
+  farthest from the initial opening fraction is the instance (a "close the
+  drawer" task acts on the open drawer; a both-ways task such as "move the bag
+  handle" moves the handle the way it can go farthest). Targets and reach
+  thresholds are the probes'
+  (:mod:`asset2sim.tasks.check.probes`): close -> f <= 0.10; open -> f >= 0.55
+  (f >= 0.85 when the joint starts beyond 0.55).
+- **World**: the object as its folder declares (free on the ground under the
+  SPEC's conventions, or mounted: root fixed,
+  :func:`asset2sim.tasks.interpret.mounting.session_root_options`), gravity,
+  passive joints, initial state from ``initial_state.json`` except the task
+  joint, which starts at the common start of its action
+  (:data:`START_FRACTION`: a close task half open, an open task closed; the
+  same motion is asked of every method, and no method gets a task its initial
+  state already satisfies; ``start="asset"`` keeps the asset's state). It first settles
+  for :attr:`LearnConfig.settle_time`; every episode starts from that settled
+  snapshot, with the task joint moved by a uniform random offset of at most
+  :attr:`LearnConfig.reset_noise` opening fraction (kept inside the limits).
+- **Agent**: a floating, force- and speed-limited gripper attached to the
+  task link's contact point (handle, else the far edge of a revolute part,
+  else the front of a drawer), the bounded-force grasp of
+  :mod:`asset2sim.tasks.check.gripper` (:class:`~asset2sim.tasks.check.gripper.GripperLimits`:
+  70 N, 0.25 m/s by default; a bounded-force attachment is the standard
+  stand-in for finger contacts, see that module).
+- **Action** (3,) in [-1, 1]: the gripper point's velocity in units of the
+  speed limit, world frame, clipped to the unit ball (so |v| <= max speed);
+  held for :attr:`LearnConfig.action_repeat` engine steps (1/240 s each).
+- **Observation** (13,), float32: opening fraction f of the task joint;
+  f - f_target; joint velocity / open range (1/s); gripper point minus grasp
+  point (3,) / L; grasp point minus its position at reset (3,) / L, L the
+  characteristic length (revolute: the grasp point's distance from the axis;
+  prismatic: the open range); the object's footprint slide (2,) /
+  slide tolerance; root rotation / tip tolerance; time / episode length.
+- **Reward** (the thesis's staged reward with its reach and contact stages
+  given by the attachment): joint progress w_p (|f_prev - f*| - |f - f*|) /
+  |f_0 - f*|, minus w_s |g - p| F_max^-1 k (the grasp spring's pull as a
+  share of the force limit: pulling against a stuck part), minus w_m and end
+  of the episode when the object slid or tipped, plus w_b on success.
+- **Success**: the target fraction is reached, the object has not slid
+  (footprint > 5 mm horizontally, as the probes measure it) or tipped
+  (> 0.05 rad) during the episode and, after the gripper releases, the
+  target is still held for :attr:`LearnConfig.hold_time` s (the
+  task-execution check's definition) without the object moving. The episode
+  ends at success, at a slide or tip, or after :attr:`LearnConfig.episode_time`.
+
+``gymnasium`` is the optional extra ``learn`` (``pip install .[learn]``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session, quiet_stdout
+from asset2sim.frames import quat_angle, quat_wxyz_matrix, quat_xyzw_to_wxyz
+from asset2sim.schemas.config import SimConventions
+from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule
+from asset2sim.tasks.check.probes import (
+    CLOSE_REACHED,
+    CLOSE_TARGET,
+    OPEN_FAR_REACHED,
+    OPEN_FAR_TARGET,
+    OPEN_REACHED,
+    OPEN_TARGET,
+)
+from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
+from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
+from asset2sim.tasks.evaluation.task_spec import parse_task
+from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.urdf import UrdfModel, read_urdf
+
+#: Observation length (see the module docstring).
+OBS_DIM = 13
+
+#: Common start of the task joint per action, opening fraction
+#: (:func:`prepare_task` ``start="task"``): a close task starts half open, an open
+#: task at the closed end, so the same motion is asked of every method.
+START_FRACTION: dict[str, float] = {"close": 0.5, "open": 0.0}
+
+
+class LearnTaskError(ValueError):
+    """The task cannot be set up on this asset (names the asset, the task and why)."""
+
+
+@dataclass
+class LearnTask:
+    """One task instance on one asset (module docstring, "Task instance").
+
+    Positions rad or m; fractions dimensionless (0 closed, 1 fully open).
+    """
+
+    urdf: Path
+    task: str
+    joint: str
+    joint_type: str
+    action: str
+    """``close`` or ``open``"""
+    closed: ClosedEnd
+    target_fraction: float
+    reach_fraction: float
+    """f <= this (close) or f >= this (open) counts as reached"""
+    initial_state: dict[str, float]
+    springs: dict[str, Spring]
+    root_fixed: bool
+    conventions: SimConventions
+    start_fraction: float
+    """the task joint's opening fraction at the start of an episode"""
+    start: str = "task"
+    """``task`` (the common start) or ``asset`` (the initial state)"""
+    candidates: list[str] = field(default_factory=list)
+    """the task's joints (the parse; those the reference keeps movable when it names any)"""
+    rule: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    def reached(self, fraction: float) -> bool:
+        """Whether ``fraction`` satisfies the task's reach threshold."""
+        if self.action == "close":
+            return fraction <= self.reach_fraction
+        return fraction >= self.reach_fraction
+
+    def fraction(self, q: float) -> float:
+        """Opening fraction of the task joint at ``q`` (rad or m)."""
+        return self.closed.fraction(q)
+
+
+def targets_for(action: str, start_fraction: float) -> tuple[float, float]:
+    """(target fraction, reach threshold) of an action from a start fraction,
+    the probes' (:mod:`asset2sim.tasks.check.probes`).
+
+    Raises:
+        ValueError: ``action`` is not ``close`` or ``open``.
+    """
+    if action == "close":
+        return CLOSE_TARGET, CLOSE_REACHED
+    if action == "open":
+        return (OPEN_TARGET, OPEN_REACHED) if start_fraction < OPEN_REACHED else (OPEN_FAR_TARGET, OPEN_FAR_REACHED)
+    raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
+
+
+def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None = None,
+                 category: str | None = None, conventions: SimConventions | None = None,
+                 start: str = "task") -> LearnTask:
+    """The :class:`LearnTask` of ``task`` on the asset folder (or URDF) ``asset``.
+
+    Args:
+        asset: an asset folder (``mobility.urdf`` with ``initial_state.json``
+            and its other sidecars) or a URDF path.
+        task: the task text ("close the box lid").
+        reference: the PartNet-Mobility folder with ``reference_gensim2.urdf``
+            (its movable joints are the task-relevant joints), or None.
+        category: the category when the folder does not state it.
+        conventions: simulation conventions (default the SPEC's).
+        start: ``task`` (the common start :data:`START_FRACTION`) or
+            ``asset`` (the asset's initial state for the task joint too;
+            a method whose initial state already satisfies the task then
+            gets a task already done).
+
+    Returns:
+        The task instance (module docstring).
+
+    Raises:
+        LearnTaskError: no movable joint the task can act on (none parsed, or
+            none with an opening range > 0).
+        asset2sim.tasks.evaluation.asset_files.EvaluationError: the asset
+            cannot be read.
+    """
+    if start not in ("task", "asset"):
+        raise ValueError(f"start must be 'task' or 'asset', got {start!r}")
+    ctx = build_context(asset, reference=reference, prompt=None, category=category, conventions=conventions)
+    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, [])
+    spec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints)
+    if not spec.joints:
+        raise LearnTaskError(f"{ctx.urdf}: task {task!r} names no movable joint ({spec.rule})")
+    # Where the reference names the task's joint (GenSim2 keeps only it movable), every method acts on it.
+    candidates = [j for j in spec.joints if j in ctx.task_joints] or list(spec.joints)
+    with quiet_stdout():
+        closed, cnotes = compute_closed(ctx.urdf, ctx.joints, candidates)
+    best: tuple[float, str, str] | None = None
+    for j in candidates:
+        c = closed[j]
+        if not c.open_range > 0:
+            continue
+        for action in spec.actions:
+            f0 = c.fraction(ctx.initial_state.get(j, 0.0)) if start == "asset" else START_FRACTION[action]
+            target, _ = targets_for(action, f0)
+            gap = abs(target - f0)
+            if best is None or gap > best[0]:
+                best = (gap, j, action)
+    if best is None:
+        raise LearnTaskError(f"{ctx.urdf}: task {task!r}: none of {candidates} can open (range 0)")
+    _, joint, action = best
+    c = closed[joint]
+    f0 = c.fraction(ctx.initial_state.get(joint, 0.0)) if start == "asset" else START_FRACTION[action]
+    target, reach = targets_for(action, f0)
+    notes = list(spec.notes) + cnotes + [f"task-relevant joints: {tj_rule}"]
+    return LearnTask(
+        urdf=ctx.urdf, task=task, joint=joint, joint_type=ctx.joints[joint].type, action=action, closed=c,
+        target_fraction=target, reach_fraction=reach, initial_state=dict(ctx.initial_state),
+        springs=dict(ctx.springs), root_fixed=ctx.root_fixed, conventions=ctx.conventions,
+        start_fraction=f0, start=start, candidates=candidates, rule=spec.rule, notes=notes,
+    )
+
+
+@dataclass
+class LearnConfig:
+    """Environment knobs (units on every field)."""
+
+    engine: str = "pybullet"
+    """engine name (:func:`asset2sim.engines.base.open_session`)"""
+    action_repeat: int = 12
+    """engine steps per action (12 x 1/240 s = 20 Hz control, a typical
+    end-effector velocity-control rate)"""
+    episode_time: float = 3.0
+    """longest episode, s of simulated time"""
+    settle_time: float = 0.25
+    """free settling before the snapshot every episode starts from, s (the probes')"""
+    hold_time: float = 1.0
+    """after success the gripper releases and the target must hold this long, s
+    (the task-execution check's 1 s)"""
+    reset_noise: float = 0.02
+    """largest random offset of the task joint at reset, opening fraction"""
+    slide_tol: float = 0.005
+    """footprint slide that counts as the object sliding, m (the probes')"""
+    tip_tol: float = 0.05
+    """root rotation that counts as tipping, rad (the probes')"""
+    progress_weight: float = 10.0
+    """w_p: reward for moving the whole way from the start to the target"""
+    stretch_weight: float = 0.05
+    """w_s: penalty per step for pulling at the force limit"""
+    moved_penalty: float = 5.0
+    """w_m: penalty when the object slides or tips"""
+    success_bonus: float = 10.0
+    """w_b: bonus on success"""
+    limits: GripperLimits = field(default_factory=GripperLimits)
+    """the gripper's force and speed limits"""
+
+
+class TaskEnv(gym.Env):
+    """The learning environment of one :class:`LearnTask` (module docstring).
+
+    Args:
+        task: the task instance (:func:`prepare_task`).
+        config: knobs.
+
+    The simulator session is opened at the first :meth:`reset` and kept until
+    :meth:`close`; episodes restore its settled snapshot.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, task: LearnTask, config: LearnConfig | None = None) -> None:
+        super().__init__()
+        self.task = task
+        self.config = config or LearnConfig()
+        if self.config.action_repeat < 1:
+            raise ValueError(f"action_repeat must be >= 1, got {self.config.action_repeat}")
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
+        self.dt = float(task.conventions.timestep)
+        self.max_steps = max(1, int(round(self.config.episode_time / (self.dt * self.config.action_repeat))))
+        self._session: SimSession | None = None
+        self._snapshot: int | None = None
+        self._model: UrdfModel | None = None
+        self.grasp: BoundedGrasp | None = None
+        self.grasp_rule = ""
+        self._length = 1.0
+        self._steps = 0
+        self._f_prev = 0.0
+        self._f_start = 0.0
+        self._p_reset = np.zeros(3)
+        self._root0: tuple[np.ndarray, np.ndarray] | None = None
+        self._foot_local = np.zeros(3)
+        self._foot0 = np.zeros(3)
+        self._max_slide = 0.0
+        self._max_tip = 0.0
+        self.sim_steps = 0
+        """engine steps taken since the environment was made (the budget)"""
+        self.episodes = 0
+        """episodes ended (terminated or truncated) since the environment was made"""
+
+    # ---------------------------------------------------------------- session
+    @property
+    def session(self) -> SimSession:
+        """The open session (opened at the first :meth:`reset`).
+
+        Raises:
+            RuntimeError: before the first reset.
+        """
+        if self._session is None:
+            raise RuntimeError("TaskEnv: call reset() first")
+        return self._session
+
+    def _open(self) -> None:
+        t = self.task
+        init = dict(t.initial_state)
+        if t.start == "task":
+            init[t.joint] = t.closed.q_closed + t.closed.direction * t.start_fraction * t.closed.open_range
+        opts = SessionOptions(initial_state=init, springs=dict(t.springs), conventions=t.conventions,
+                              **session_root_options(t.root_fixed))
+        with quiet_stdout():
+            s = open_session(self.config.engine, t.urdf, opts)
+        self._session = s
+        self._model = read_urdf(t.urdf, mode="lenient")
+        n = int(round(self.config.settle_time / self.dt))
+        s.step(n)
+        self.sim_steps += n
+        self._snapshot = s.save_state()
+
+    def close(self) -> None:
+        """Release the simulator session."""
+        if self._session is not None:
+            if self._snapshot is not None:
+                self._session.discard_state(self._snapshot)
+            self._session.close()
+        self._session = None
+        self._snapshot = None
+
+    # -------------------------------------------------------------- measures
+    def joint_fraction(self) -> tuple[float, float]:
+        """(opening fraction, its rate 1/s) of the task joint now."""
+        q, qd = self.session.joint_state(self.task.joint)
+        rng = self.task.closed.open_range
+        return self.task.fraction(q), float(self.task.closed.direction * qd / rng)
+
+    def _moved(self) -> tuple[float, float]:
+        """(footprint slide m, root rotation rad) since reset (the probes' measure:
+        the point below the root's origin at the object's lowest height, carried
+        with the root, moved horizontally)."""
+        rp, rq = self.session.root_pose()
+        moved = np.asarray(rp, float) + quat_wxyz_matrix(quat_xyzw_to_wxyz(rq)) @ self._foot_local - self._foot0
+        return float(np.linalg.norm(moved[:2])), float(quat_angle(self._root0[1], rq))
+
+    def _obs(self) -> np.ndarray:
+        f, fd = self.joint_fraction()
+        p = self.grasp.grasp_point_world()
+        rp, rq = self.session.root_pose()
+        moved = np.asarray(rp, float) + quat_wxyz_matrix(quat_xyzw_to_wxyz(rq)) @ self._foot_local - self._foot0
+        rot = quat_angle(self._root0[1], rq)
+        L = self._length
+        o = np.concatenate([
+            [f, f - self.task.target_fraction, fd],
+            (self.grasp.gripper_point - p) / L,
+            (p - self._p_reset) / L,
+            moved[:2] / self.config.slide_tol,
+            [rot / self.config.tip_tol, self._steps / self.max_steps],
+        ])
+        return np.nan_to_num(o, nan=0.0, posinf=1e3, neginf=-1e3).astype(np.float32)
+
+    def _info(self, success: bool = False, failure: str = "") -> dict[str, Any]:
+        f, _ = self.joint_fraction()
+        return {"fraction": f, "success": success, "failure": failure, "slide_m": self._max_slide,
+                "tip_rad": self._max_tip, "peak_force_n": self.grasp.peak_force_n if self.grasp else 0.0,
+                "steps": self._steps, "grasp_rule": self.grasp_rule}
+
+    # ------------------------------------------------------------------ gym
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        """Restore the settled snapshot, offset the task joint by the reset
+        noise, grasp; returns (observation (13,), info)."""
+        super().reset(seed=seed)
+        if self._session is None:
+            self._open()
+        s = self.session
+        s.restore_state(self._snapshot)
+        t = self.task
+        if self.config.reset_noise > 0:
+            q, _ = s.joint_state(t.joint)
+            dq = float(self.np_random.uniform(-1.0, 1.0)) * self.config.reset_noise * t.closed.open_range
+            lo, hi = s.joint_limits.get(t.joint, (-np.inf, np.inf))
+            s.set_joint_positions({t.joint: float(np.clip(q + dq, lo, hi))})
+        link, point, self.grasp_rule = contact_point_rule(s, t.joint, self._model, opening_direction=t.closed.direction)
+        self.grasp = BoundedGrasp(s, link, point, self.config.limits)
+        p = self.grasp.grasp_point_world()
+        self._p_reset = p.copy()
+        if t.joint_type == "prismatic":
+            self._length = max(t.closed.open_range, 1e-3)
+        else:
+            o, R = s.link_frame(s.joint_child[t.joint])
+            a = R @ s.joint_axis(t.joint)
+            a = a / max(float(np.linalg.norm(a)), 1e-12)
+            r = (p - o) - ((p - o) @ a) * a
+            self._length = max(float(np.linalg.norm(r)), 1e-3)
+        self._root0 = s.root_pose()
+        z_low = min(float(s.link_aabb(ln)[0][2]) for ln in s.link_names)
+        rp0, rq0 = self._root0
+        self._foot0 = np.array([rp0[0], rp0[1], z_low])
+        self._foot_local = quat_wxyz_matrix(quat_xyzw_to_wxyz(rq0)).T @ (self._foot0 - np.asarray(rp0, float))
+        self._steps = 0
+        self._max_slide = self._max_tip = 0.0
+        self._f_prev, _ = self.joint_fraction()
+        self._f_start = self._f_prev
+        return self._obs(), self._info()
+
+    def _engine_step(self) -> None:
+        self.session.step(1)
+        self.sim_steps += 1
+
+    def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Move the gripper for ``action_repeat`` engine steps at the velocity
+        ``action`` (3,) x max speed (clipped to the unit ball); returns
+        (observation, reward, terminated, truncated, info)."""
+        cfg = self.config
+        a = np.nan_to_num(np.asarray(action, float).reshape(3), nan=0.0)
+        n = float(np.linalg.norm(a))
+        if n > 1.0:
+            a = a / n
+        v = a * cfg.limits.max_speed_m_s
+        for _ in range(cfg.action_repeat):
+            self.grasp.step_towards(self.grasp.gripper_point + v * self.dt, self.dt)
+            self._engine_step()
+        self._steps += 1
+        slide, tip = self._moved()
+        self._max_slide, self._max_tip = max(self._max_slide, slide), max(self._max_tip, tip)
+        f, _ = self.joint_fraction()
+        t = self.task
+        span = max(abs(self._f_start - t.target_fraction), 0.05)
+        reward = cfg.progress_weight * (abs(self._f_prev - t.target_fraction) - abs(f - t.target_fraction)) / span
+        stretch = float(np.linalg.norm(self.grasp.gripper_point - self.grasp.grasp_point_world()))
+        reward -= cfg.stretch_weight * stretch * self.grasp.stiffness / cfg.limits.max_force_n
+        self._f_prev = f
+        moved = self._max_slide > cfg.slide_tol or self._max_tip > cfg.tip_tol
+        if not np.isfinite(f) or moved or t.reached(f):
+            self.episodes += 1
+        if not np.isfinite(f):
+            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, "diverged")
+        if moved:
+            why = "the object slid" if self._max_slide > cfg.slide_tol else "the object tipped"
+            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, why)
+        if t.reached(f):
+            ok, why = self._hold()
+            if ok:
+                reward += cfg.success_bonus
+            return self._obs(), float(reward), True, False, self._info(ok, why)
+        truncated = self._steps >= self.max_steps
+        if truncated:
+            self.episodes += 1
+        return self._obs(), float(reward), False, truncated, self._info(False, "time limit" if truncated else "")
+
+    def _hold(self) -> tuple[bool, str]:
+        """Release and watch :attr:`LearnConfig.hold_time` s: (held, failure)."""
+        cfg = self.config
+        self.grasp.release()
+        for _ in range(int(round(cfg.hold_time / self.dt))):
+            self._engine_step()
+            slide, tip = self._moved()
+            self._max_slide, self._max_tip = max(self._max_slide, slide), max(self._max_tip, tip)
+        f, _ = self.joint_fraction()
+        if self._max_slide > cfg.slide_tol:
+            return False, "the object slid after release"
+        if self._max_tip > cfg.tip_tol:
+            return False, "the object tipped after release"
+        if not self.task.reached(f):
+            return False, "target not held after release"
+        return True, ""
+
+    # ------------------------------------------------------------ reference
+    def scripted_action(self, speed: float = 0.5) -> np.ndarray:
+        """A hand-written policy (the feasibility reference, not learned):
+        full speed along the grasp point's direction of motion towards the
+        target (revolute: the tangent a x r at the grasp point; prismatic:
+        +-a) at ``speed`` times the speed limit, plus a correction of the
+        stretch. (3,) in the unit ball."""
+        s, t = self.session, self.task
+        o, R = s.link_frame(s.joint_child[t.joint])
+        a = R @ s.joint_axis(t.joint)
+        a = a / max(float(np.linalg.norm(a)), 1e-12)
+        q, _ = s.joint_state(t.joint)
+        f = t.fraction(q)
+        sign = 1.0 if t.closed.direction * (t.target_fraction - f) > 0 else -1.0  # sign of the q change wanted
+        p = self.grasp.grasp_point_world()
+        if t.joint_type == "prismatic":
+            d = a
+        else:
+            d = np.cross(a, (p - o) - ((p - o) @ a) * a)
+            d = d / max(float(np.linalg.norm(d)), 1e-12)
+        d = sign * d
+        corr = (p - self.grasp.gripper_point) / max(self.config.limits.max_speed_m_s * self.dt * self.config.action_repeat, 1e-9)
+        act = speed * d + corr
+        n = float(np.linalg.norm(act))
+        return act / n if n > 1.0 else act
+
+
+def run_episode(env: TaskEnv, policy, *, seed: int | None = None) -> dict[str, Any]:
+    """One episode of ``policy(obs) -> action (3,)`` (or ``"scripted"``:
+    :meth:`TaskEnv.scripted_action`); returns the last info plus ``return``."""
+    obs, info = env.reset(seed=seed)
+    total = 0.0
+    while True:
+        act = env.scripted_action() if policy == "scripted" else policy(obs)
+        obs, r, term, trunc, info = env.step(act)
+        total += r
+        if term or trunc:
+            break
+    return dict(info, **{"return": total})

@@ -1,0 +1,327 @@
+"""Ground clearance: moving parts of a free-standing object that rest on the
+floor.
+
+PartNet-Mobility models the doors of refrigerators, microwaves and cabinets,
+and the bottom drawers of cabinets, flush with the body's bottom face: at
+rest the door's lowest edge lies on the ground plane exactly as the body's
+does. Real ones clear the floor (a refrigerator stands on levelling feet
+under a toe grille, a countertop microwave on rubber feet, a cabinet on a
+plinth or feet), so the door swings and the drawer slides without touching
+the floor. In a simulator the flush part carries part of the object's weight
+(refrigerator 11178: its lower door carried 266 N of the 700 N weight) and,
+when it is opened, drags on the ground with the ground's friction: the body
+is pulled along and rocks (the door probe failed with the refrigerator
+sliding 5 mm at a 59 N push; the generated microwave the same at 11 N).
+
+Method (the written URDF, at the refined state, root resting pose applied,
+z up; collision pieces as the writer wrote them):
+
+1. The ground is the lowest collision vertex over every link, z_g. The body
+   (the links no movable joint moves) must itself reach the ground (its
+   lowest vertex within :data:`CONTACT_BAND` of z_g): an object that stands
+   on parts that move (wheels, legs, a suitcase on its casters) is left as
+   it is.
+2. A piece P of a link moved by joint j *drags* on the ground when its
+   lowest vertex is less than :data:`GROUND_CLEARANCE` above z_g (an object
+   whose bottom is not flat rocks onto a door that ends a few mm above its
+   lowest point: refrigerator 11178, 4.4 mm) and j moves it along
+   the ground: a revolute (not continuous) joint whose axis is within
+   :data:`SLIDE_ANGLE` of vertical (a side-hinged door) or a prismatic joint
+   whose axis is within :data:`SLIDE_ANGLE` of horizontal (a drawer). A
+   horizontal hinge lifts its part off the floor or rolls it (a wheel), it
+   does not drag it.
+3. P's bottom face is raised by delta = z_g + :data:`GROUND_CLEARANCE` -
+   min_z(P) (an affine squeeze of P along the world vertical that keeps its
+   top face, so the piece stays convex), never by more than
+   :data:`MAX_SQUEEZE` of P's height. Visual meshes, masses and the state are
+   unchanged.
+
+The pieces of the changed links are written beside the URDF as the writer's
+collision overrides (link -> every mesh collision of the link).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from asset2sim import atomic
+from asset2sim.schemas.asset import AssetDescription, GeometryRef
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.publish import write
+from asset2sim.tasks.state.collision import CollisionPiece
+from asset2sim.urdf import UrdfModel, read_urdf
+
+__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
+           "ground_clearance", "write_overrides"]
+
+#: Floor clearance (m) given to a moving part that rests on or near the
+#: ground: the levelling feet of refrigerators and the rubber feet of
+#: countertop appliances lift their doors about 1 cm and more off the floor
+#: (manufacturers' installation instructions and dimension drawings show the
+#: door bottom above the toe grille / feet). 5 mm was not enough: refrigerator
+#: 11178 stands on three corners of its uneven bottom and rocks 0.5 deg onto a
+#: door that ends 4.4 mm above its lowest point (0.9 m away), and the fully
+#: open door then dragged on the floor when closed.
+GROUND_CLEARANCE = 0.01
+#: Distance (m) above the ground within which a vertex counts as resting on it.
+CONTACT_BAND = 0.0015
+#: Largest angle (rad) between a hinge axis and the vertical (or a slide axis
+#: and the horizontal) for the joint to move its part along the ground.
+SLIDE_ANGLE = math.radians(30.0)
+#: A squeeze never takes more than this fraction of a piece's height.
+MAX_SQUEEZE = 0.5
+
+
+@dataclass
+class GroundClearance:
+    """Pieces with floor clearance for the links that needed it."""
+
+    pieces: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    """link -> every mesh collision piece of the link (k, 3) m in the link frame"""
+    notes: list[str] = field(default_factory=list)
+
+
+def _mesh_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
+    """Vertices (k, 3) m of each mesh collision of ``link`` in the link frame
+    (collision origin and mesh scale applied; the writer's pieces are OBJ
+    files)."""
+    out = []
+    for c in model.links[link].collisions:
+        if c.kind != "mesh" or not c.filename:
+            continue
+        path = Path(c.path) if c.path is not None else root / c.filename
+        v = np.array([[float(x) for x in ln.split()[1:4]] for ln in path.read_text().splitlines() if ln.startswith("v ")])
+        if not len(v):
+            continue
+        v = v * (c.mesh_scale if c.mesh_scale is not None else 1.0)
+        out.append(v @ c.origin[:3, :3].T + c.origin[:3, 3])
+    return out
+
+
+def _moving_joint(model: UrdfModel) -> dict[str, object]:
+    """link -> the nearest movable joint above it (None for the body)."""
+    out: dict[str, object] = {}
+    for name in model.tree_order():
+        pj = model.parent_joint(name)
+        if pj is None:
+            out[name] = None
+        elif pj.type in ("revolute", "continuous", "prismatic"):
+            out[name] = pj
+        else:
+            out[name] = out.get(pj.parent)
+    return out
+
+
+def _drags(joint, R_parent_joint: np.ndarray) -> bool:
+    """The joint moves its part along the ground (module docstring, step 2)."""
+    a = R_parent_joint @ np.asarray(joint.axis, float)
+    az = abs(float(a[2])) / max(float(np.linalg.norm(a)), 1e-12)
+    if joint.type == "revolute":
+        return az >= math.cos(SLIDE_ANGLE)
+    if joint.type == "prismatic":
+        return az <= math.sin(SLIDE_ANGLE)
+    return False  # continuous: wheels and knobs roll or spin
+
+
+def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]) -> GroundClearance:
+    """Floor clearance for the moving parts of the written URDF ``model``
+    (file ``urdf``, its collision files beside it) at ``state`` (rad or m)
+    that rest on the ground (module docstring).
+
+    Raises:
+        OSError: a collision file cannot be read.
+    """
+    root = Path(urdf).parent
+    poses = model.link_poses(state)
+    world: dict[str, list[np.ndarray]] = {}
+    local: dict[str, list[np.ndarray]] = {}
+    for ln in model.links:
+        local[ln] = _mesh_pieces(model, root, ln)
+        T = poses[ln]
+        world[ln] = [P @ T[:3, :3].T + T[:3, 3] for P in local[ln]]
+    lows = {ln: min(float(W[:, 2].min()) for W in ws) for ln, ws in world.items() if ws}
+    rep = GroundClearance()
+    if not lows:
+        return rep
+    z_g = min(lows.values())
+    mover = _moving_joint(model)
+    body_low = [lows[ln] for ln in lows if mover.get(ln) is None]
+    if not body_low or min(body_low) > z_g + CONTACT_BAND:
+        return rep  # the object stands on parts that move (wheels, legs): their contact is the support
+    for ln, ws in world.items():
+        j = mover.get(ln)
+        if j is None or not ws:
+            continue
+        if not _drags(j, poses[j.parent][:3, :3] @ j.origin[:3, :3]):
+            continue
+        R = poses[ln][:3, :3]
+        n = R.T @ np.array([0.0, 0.0, -1.0])  # the ground side, link frame
+        own = [P.copy() for P in local[ln]]
+        changed = False
+        for i, W in enumerate(ws):
+            zmin = float(W[:, 2].min())
+            if zmin >= z_g + GROUND_CLEARANCE - 1e-4:
+                continue  # already clear of the floor
+            height = float(np.ptp(W[:, 2]))
+            delta = min(z_g + GROUND_CLEARANCE - zmin, MAX_SQUEEZE * height)
+            if height <= 0 or delta <= 0:
+                continue
+            s = own[i] @ n  # distance towards the ground; the top face (s.min()) stays
+            top = float(s.min())
+            own[i] = own[i] - np.outer((s - top) * (delta / height), n)
+            changed = True
+            rep.notes.append(f"{ln}: collision piece {i} raised {delta * 1000:.2g} mm to {GROUND_CLEARANCE * 1000:.2g} mm above the "
+                             f"ground (it ended {(zmin - z_g) * 1000:.2g} mm above the body's lowest point and {j.name} moves it "
+                             f"along the ground: it dragged on the floor; real ones clear the floor on feet)")
+        if changed:
+            rep.pieces[ln] = own
+    return rep
+
+
+def _obj(points: np.ndarray) -> str:
+    """Convex hull of ``points`` (k, 3) as OBJ text."""
+    h = ConvexHull(points)
+    v = points[h.vertices]
+    index = {int(k): i for i, k in enumerate(h.vertices)}
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in v.tolist()]
+    lines += [f"f {index[int(a)] + 1} {index[int(b)] + 1} {index[int(c)] + 1}" for a, b, c in h.simplices]
+    return "\n".join(lines) + "\n"
+
+
+def write_overrides(rep: GroundClearance, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
+    """Write the pieces as OBJ files ``out_dir/folder/<link>_ground<i>.obj`` (at
+    the input's units: divided by the overlay ``scale``, which the writer
+    multiplies back) and return the writer's collision overrides (link ->
+    pieces; every mesh collision of the link is replaced).
+
+    Raises:
+        ValueError: a piece spans no volume (scipy's QhullError).
+    """
+    out: dict[str, list[CollisionPiece]] = {}
+    for ln, plist in rep.pieces.items():
+        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in ln)
+        items = []
+        for i, P in enumerate(plist):
+            rel = f"{folder}/{safe}_ground{i}.obj"
+            try:
+                text = _obj(np.asarray(P, float) / scale)
+            except QhullError as exc:
+                raise ValueError(f"link {ln!r}: collision piece {i} spans no volume") from exc
+            atomic.write_text(Path(out_dir) / rel, text)
+            ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=(Path(out_dir) / rel).resolve())
+            items.append(CollisionPiece(filename=rel, source=ref))
+        out[ln] = items
+    return out
+
+
+def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: Path, urdf: Path, state: dict[str, float],
+                           overrides: dict, closed: dict[str, tuple[float, float, float]],
+                           root_rotation=None) -> tuple[dict[str, float], dict, list[str], list[str]]:
+    """Refine's step after the state search (nothing for a mounted asset,
+    which has no ground): write the output with ``overrides``; limit the
+    opening of parts the floor stops (:func:`floor_limited_state`); raise the
+    collision pieces of moving parts that drag on the floor
+    (:func:`ground_clearance`); write the output again when anything changed.
+
+    Args:
+        closed: joint -> (q_closed, direction, open_range), rad or m.
+
+    Returns:
+        (state, collision overrides, state notes, collision notes): the
+        inputs themselves and empty notes when nothing changed.
+
+    Raises:
+        OSError: a collision file cannot be read or written.
+    """
+    if overlay.mounting is not None and overlay.mounting.fixed:
+        return state, overrides, [], []
+    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+    new_state, state_notes = floor_limited_state(read_urdf(urdf), urdf, state, closed)
+    rep = ground_clearance(read_urdf(urdf), urdf, new_state)
+    new = overrides
+    if rep.pieces:
+        new = {**overrides, **write_overrides(rep, overlay.scale, out_dir, write.collision_folder(asset))}
+    if rep.pieces or state_notes:
+        write.write_output(asset, overlay, out_dir, new_state, copy=False, collision_overrides=new, root_rotation=root_rotation)
+    return new_state, new, state_notes, rep.notes
+
+
+#: Gap (m) a moving part keeps above the body's lowest point when the floor
+#: limits its opening (:func:`floor_limited_state`): PyBullet's 1 mm hull
+#: margin plus 1 mm.
+FLOOR_GAP = 0.002
+
+
+def _lowest(world: dict[str, list[np.ndarray]], links) -> float:
+    vals = [float(W[:, 2].min()) for ln in links for W in world.get(ln, [])]
+    return min(vals) if vals else np.inf
+
+
+def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, float],
+                        closed: dict[str, tuple[float, float, float]]) -> tuple[dict[str, float], list[str]]:
+    """The opening of parts that the floor stops, at ``state`` (rad or m).
+
+    A pedal pressed "fully open" or a lid folded down past the body's bottom
+    reaches below the floor the body stands on: placed on the ground, the
+    object then stands on that part and its weight pushes the part back
+    (trash can 102181: the fully pressed foot pad 1.6 mm below the body,
+    pushed back 0.03-0.05 rad whatever its friction). On a real floor the part
+    stops at the floor. For each movable joint j whose subtree's lowest
+    collision vertex is below the body's lowest (links no movable joint
+    moves) plus :data:`FLOOR_GAP`, while at its closed end the subtree is
+    above it, q_j is moved towards the closed end (bisection on the opening,
+    30 halvings) to the most open position whose subtree keeps that gap; the
+    other joints stay at ``state``. ``closed``: joint -> (q_closed,
+    direction, open_range).
+
+    Returns (state, notes): ``state`` itself and no notes when nothing moved.
+
+    Raises:
+        OSError: a collision file cannot be read.
+    """
+    root = Path(urdf).parent
+    local = {ln: _mesh_pieces(model, root, ln) for ln in model.links}
+
+    def world_at(q: dict[str, float]) -> dict[str, list[np.ndarray]]:
+        poses = model.link_poses(q)
+        return {ln: [P @ poses[ln][:3, :3].T + poses[ln][:3, 3] for P in ps] for ln, ps in local.items() if ps}
+
+    mover = _moving_joint(model)
+    body = [ln for ln in model.links if mover.get(ln) is None]
+    out = dict(state)
+    notes: list[str] = []
+    for j in model.joints:
+        if j.type not in ("revolute", "prismatic") or j.name not in closed or j.name not in out:
+            continue
+        sub, stack = [], [j.child]
+        while stack:
+            ln = stack.pop()
+            sub.append(ln)
+            stack.extend(c.child for c in model.children(ln))
+        w = world_at(out)
+        floor = _lowest(w, body) + FLOOR_GAP
+        if not np.isfinite(floor) or _lowest(w, sub) >= floor:
+            continue
+        q_closed = closed[j.name][0]
+        if _lowest(world_at({**out, j.name: q_closed}), sub) < floor:
+            continue  # the part reaches the floor even closed: it is part of the support
+        lo, hi = 0.0, 1.0  # fraction of the way from q_closed to the state's q
+        q_state = out[j.name]
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            if _lowest(world_at({**out, j.name: q_closed + mid * (q_state - q_closed)}), sub) >= floor:
+                lo = mid
+            else:
+                hi = mid
+        q_new = q_closed + lo * (q_state - q_closed)
+        notes.append(f"{j.name}: opening limited by the floor, {q_state:.4g} -> {q_new:.4g} "
+                     f"({'m' if j.type == 'prismatic' else 'rad'}): at the requested state {j.child} reached "
+                     f"{(floor - FLOOR_GAP - _lowest(w, sub)) * 1000:.2g} mm below the body's bottom, so the object stood on it "
+                     "and its weight pushed it back; a real one stops at the floor")
+        out[j.name] = float(q_new)
+    return (out, notes) if notes else (state, [])

@@ -1,0 +1,69 @@
+"""The flow against a real Dask cluster: ``dask scheduler`` and 2 ``dask
+worker`` processes started separately on 127.0.0.1, the flow given the
+scheduler's address; one worker killed with SIGKILL mid-run. After a rerun
+every asset is done exactly once (one catalog row with status done over
+both runs, one complete output folder) or failed with its reason: nothing
+lost, nothing duplicated."""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+
+import pytest
+
+from asset2sim.catalog import ResultCatalog, load_catalog
+
+try:
+    from . import flowfakes  # type: ignore[no-redef]
+    from .cluster import check_exactly_once, kill_one_worker_when, start_cluster, tally
+    from .conftest import make_project
+except ImportError:
+    import flowfakes  # type: ignore[no-redef]
+    from cluster import check_exactly_once, kill_one_worker_when, start_cluster, tally
+    from conftest import make_project
+
+ASSETS = {f"{src}_{i}": src for i in range(3) for src in ("box_lid", "laptop", "trash_can")}
+
+
+@pytest.mark.slow  # two flow runs on a cluster started here: about 100 s on 2 busy cores
+def test_a_worker_killed_mid_run_loses_and_duplicates_nothing(tmp_path, prefect_server):
+    from asset2sim.flows.refine_flow import run_refine_flow
+
+    catalog = make_project(tmp_path / "proj", ASSETS, catalog_extra={
+        "run": {"evaluate": False, "time_limit_seconds": 120}, "tracking": {"enabled": False},
+        # other work may edit the package source meanwhile: the rerun must not redo finished assets for that
+        "results": {"code_change": "keep"}})
+    env = {
+        "PREFECT_API_URL": prefect_server,
+        "PYTHONPATH": os.pathsep.join([str(Path(flowfakes.__file__).parent), os.environ.get("PYTHONPATH", "")]),
+        "FLOWFAKES_DELAY_S": "1.0",  # each refine takes a while: the kill lands mid-asset
+    }
+    cluster = start_cluster(tmp_path / "dask", 2, env=env)
+    try:
+        cat = load_catalog(catalog)
+        rows_dir = Path(cat.catalog_root) / "dataset=gen"
+        killed = {}
+
+        def one_row() -> bool:
+            return any(p for p in rows_dir.glob("run=*/*.parquet") if not p.name.startswith("_"))
+
+        watcher = threading.Thread(target=lambda: killed.update(p=kill_one_worker_when(cluster, one_row, 300)))
+        watcher.start()
+        first = run_refine_flow(catalog, dask_address=cluster.address)
+        watcher.join(timeout=60)
+        assert killed.get("p") is not None, "no worker was killed"
+        assert first["assets"] == len(ASSETS)
+        second = run_refine_flow(catalog, dask_address=cluster.address)
+        assert second["assets"] == len(ASSETS) and second["done"] + second["skipped"] + second["failed"] == len(ASSETS)
+    finally:
+        cluster.close()
+    t = tally(catalog, "gen")
+    assert check_exactly_once(t, sorted(ASSETS)) == []
+    assert set(t.rows_per_run) == {first["run"], second["run"]}
+    assert all(sum(c.values()) == len(ASSETS) for c in t.rows_per_run.values())  # one row per asset per run
+    # what the killed worker held was redone on the other (or restarted) worker, not lost
+    assert sum(t.done.values()) + sum(1 for a in ASSETS if t.done[a] == 0) == len(ASSETS)
+    runs = ResultCatalog(load_catalog(catalog).catalog_root).runs("gen")
+    assert len(runs) == 2

@@ -1,0 +1,121 @@
+"""Ground clearance: a door modelled flush with the body's bottom drags on the
+floor when opened (the body slides and the door probe fails); refine raises
+the door's collision pieces off the ground."""
+
+from __future__ import annotations
+
+import pytest
+
+from asset2sim.demo_assets import build_microwave
+from asset2sim.tasks import refine
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.state import ground_clearance
+from asset2sim.urdf import read_urdf
+
+
+def _lowest(urdf, state) -> dict[str, float]:
+    """link -> lowest collision vertex (m, z) of the written URDF at ``state``."""
+    model = read_urdf(urdf)
+    poses = model.link_poses(state)
+    out = {}
+    for ln in model.links:
+        ps = ground_clearance._mesh_pieces(model, urdf.parent, ln)
+        if ps:
+            T = poses[ln]
+            out[ln] = min(float((P @ T[:3, :3].T + T[:3, 3])[:, 2].min()) for P in ps)
+    return out
+
+
+def _open_probe(out):
+    ev = evaluate_asset(out)
+    return next(p for p in ev.metric("probes").details["probes"] if p["action"] == "open")
+
+
+def test_door_flush_with_the_floor_is_raised_and_opens_without_the_body_sliding(tmp_path):
+    src = build_microwave(tmp_path / "src")
+    res = refine.refine_asset(src, "A microwave.", tmp_path / "out", extras=False)
+    urdf = tmp_path / "out" / "mobility.urdf"
+    state = res.report.initial_joint_positions
+    low = _lowest(urdf, state)
+    assert any("link_0: collision piece" in c and "above the ground" in c for c in res.report.state.collision_changes)
+    body = min(low[ln] for ln in low if ln != "link_0")
+    assert low["link_0"] - body >= ground_clearance.GROUND_CLEARANCE - 1e-6
+    p = _open_probe(tmp_path / "out")
+    assert p["success"], p["failure"]
+    assert p["root_displacement"] < 0.002
+
+
+def test_without_ground_clearance_the_door_drags_and_the_body_slides(tmp_path, monkeypatch):
+    """The failure the repair removes: the same refine with the repair off
+    leaves the door on the floor, and opening it pulls the body along."""
+    monkeypatch.setattr(ground_clearance, "apply_ground_clearance",
+                        lambda asset, ov, out, urdf, state, overrides, closed, rr=None: (state, overrides, [], []))
+    src = build_microwave(tmp_path / "src")
+    res = refine.refine_asset(src, "A microwave.", tmp_path / "out", extras=False)
+    low = _lowest(tmp_path / "out" / "mobility.urdf", res.report.initial_joint_positions)
+    assert abs(low["link_0"] - min(low.values())) < 1e-3  # flush with the body's bottom
+    p = _open_probe(tmp_path / "out")
+    assert not p["success"] and p["slid"]
+
+
+def _box_obj(path, lo, hi):
+    v = [(x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    f = [(1, 2, 4), (1, 4, 3), (5, 7, 8), (5, 8, 6), (1, 5, 6), (1, 6, 2), (3, 4, 8), (3, 8, 7), (1, 3, 7), (1, 7, 5), (2, 6, 8), (2, 8, 4)]
+    path.write_text("".join(f"v {a} {b} {c}\n" for a, b, c in v) + "".join(f"f {a} {b} {c}\n" for a, b, c in f))
+
+
+def _two_part(folder, *, part_lo, part_hi, body_lo, body_hi, axis, jtype="revolute", origin="0 0 0"):
+    """A body box and a part box joined at ``origin`` by ``jtype`` about ``axis``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    _box_obj(folder / "body.obj", body_lo, body_hi)
+    _box_obj(folder / "part.obj", part_lo, part_hi)
+    inert = '<inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>'
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="t">'
+        f'<link name="body">{inert}<collision><geometry><mesh filename="body.obj"/></geometry></collision></link>'
+        f'<link name="part">{inert}<collision><geometry><mesh filename="part.obj"/></geometry></collision></link>'
+        f'<joint name="j" type="{jtype}"><parent link="body"/><child link="part"/><origin xyz="{origin}"/><axis xyz="{axis}"/>'
+        '<limit lower="0" upper="1.5" effort="10" velocity="1"/></joint></robot>')
+    return folder / "mobility.urdf"
+
+
+def test_flush_side_hinged_door_is_raised_by_the_clearance(tmp_path):
+    urdf = _two_part(tmp_path / "a", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.3), part_lo=(-0.02, 0, 0), part_hi=(0, 0.4, 0.3),
+                     axis="0 0 1")
+    rep = ground_clearance.ground_clearance(read_urdf(urdf), urdf, {"j": 0.0})
+    assert list(rep.pieces) == ["part"]
+    assert float(rep.pieces["part"][0][:, 2].min()) == pytest.approx(ground_clearance.GROUND_CLEARANCE)
+    assert float(rep.pieces["part"][0][:, 2].max()) == pytest.approx(0.3)  # the top face stays
+
+
+def test_horizontal_hinge_wheel_and_parts_that_carry_the_body_are_left_alone(tmp_path):
+    # a flap on a horizontal hinge at the floor: it lifts off, it does not drag
+    flap = _two_part(tmp_path / "f", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.3), part_lo=(-0.02, 0, 0), part_hi=(0, 0.4, 0.3),
+                     axis="0 1 0")
+    assert not ground_clearance.ground_clearance(read_urdf(flap), flap, {"j": 0.0}).pieces
+    # a wheel (continuous joint)
+    wheel = _two_part(tmp_path / "w", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.3), part_lo=(-0.02, 0, 0), part_hi=(0, 0.4, 0.3),
+                      axis="0 0 1", jtype="continuous")
+    assert not ground_clearance.ground_clearance(read_urdf(wheel), wheel, {"j": 0.0}).pieces
+    # a swivel stand under a body that does not reach the ground: the stand is the support
+    stand = _two_part(tmp_path / "s", body_lo=(-0.2, -0.2, 0.05), body_hi=(0.2, 0.2, 0.3), part_lo=(-0.1, -0.1, 0),
+                      part_hi=(0.1, 0.1, 0.05), axis="0 0 1")
+    assert not ground_clearance.ground_clearance(read_urdf(stand), stand, {"j": 0.0}).pieces
+
+
+def test_pedal_pressed_below_the_floor_is_stopped_at_the_floor(tmp_path):
+    """A pedal on a horizontal hinge 2 cm above the floor, 15 cm long: pressed
+    to 0.4 rad its tip would be 4 cm below the floor the body stands on (trash
+    can 102181: the object then stood on the pedal and its weight pushed it
+    back); the opening is limited to where the pedal keeps FLOOR_GAP."""
+    urdf = _two_part(tmp_path / "p", body_lo=(0, -0.2, 0), body_hi=(0.4, 0.2, 0.3), part_lo=(-0.15, -0.05, -0.005),
+                     part_hi=(0, 0.05, 0.005), axis="0 -1 0", origin="0 0 0.02")
+    model = read_urdf(urdf)
+    state, notes = ground_clearance.floor_limited_state(model, urdf, {"j": 0.4}, {"j": (0.0, 1.0, 1.5)})
+    assert notes and "limited by the floor" in notes[0]
+    assert 0.0 < state["j"] < 0.4
+    low = _lowest(urdf, state)
+    assert low["part"] == pytest.approx(ground_clearance.FLOOR_GAP, abs=1e-5)
+    # already above the floor: unchanged (the same dict, no notes)
+    same = {"j": 0.05}
+    assert ground_clearance.floor_limited_state(model, urdf, same, {"j": (0.0, 1.0, 1.5)}) == (same, [])
