@@ -6,7 +6,8 @@ Shape (DEVELOPERS.md, "Shape of the product")::
     refine_dataset (Prefect flow, driver process)
       load catalog.yaml -> plan_jobs (demo assets generated if needed, manifest)
       -> refine_assets (Prefect subflow on a DaskTaskRunner)
-           per asset, a chain of Prefect tasks on Dask workers:
+           per asset, a chain of stages on Dask workers in two Prefect tasks,
+           ``prepare`` (a batch of assets per task) and ``refine-metrics``:
              prepare  (read the asset: input hash, skip when finished)
              refine   (synthesize -> refine state -> write -> post-check
                        -> extras: export, renders, evaluation + HTML report)
@@ -136,10 +137,18 @@ __all__ = [
 
 # ------------------------------------------------------------------------- tasks
 
-prepare = task(stages.prepare_asset, name="prepare", cache_policy=NO_CACHE, persist_result=False)
-refine = task(stages.refine_stage, name="refine", cache_policy=NO_CACHE, persist_result=False)
-metrics = task(stages.metrics_stage, name="metrics", cache_policy=NO_CACHE, persist_result=False)
-publish = task(stages.publish_stage, name="publish", cache_policy=NO_CACHE, persist_result=False)
+prepare_many = task(stages.prepare_batch, name="prepare", cache_policy=NO_CACHE, persist_result=False)
+chain = task(stages.refine_chain, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
+
+#: Largest batch of assets one prepare task reads (a rerun's skip decisions
+#: cost one task per batch, not per asset).
+PREPARE_BATCH_MAX = 25
+
+
+def prepare_batch_size(n_jobs: int, workers: int | None) -> int:
+    """Assets per prepare task: about four batches per worker, 1 to
+    :data:`PREPARE_BATCH_MAX` (small runs keep one asset per task)."""
+    return max(1, min(PREPARE_BATCH_MAX, n_jobs // (4 * max(1, int(workers or 2)))))
 
 
 def _retry_on_model_failure(task, task_run, state) -> bool:
@@ -180,10 +189,15 @@ def refine_assets(
     retries: int = 0,
     retry_delay_seconds: float = 10.0,
     parent_flow_run_id: str | None = None,
+    batch_size: int = 1,
 ) -> dict[str, Any]:
-    """Fan out one ``prepare -> refine -> metrics`` chain per asset on the
-    flow's task runner and append each asset's catalog row (under
-    ``catalog_root``) as soon as its chain ends.
+    """Fan out one ``prepare -> refine -> metrics (-> publish)`` chain per
+    asset on the flow's task runner and append each asset's catalog row
+    (under ``catalog_root``) as soon as its chain ends. Two tasks per asset
+    at most: ``prepare`` (``batch_size`` assets per task: the skip decision)
+    and ``refine-metrics`` (:func:`asset2sim.flows.stages.refine_chain`,
+    only for assets not skipped); each Prefect task costs a few calls to
+    the Prefect API, paid per task.
 
     Returns:
         ``{"rows": [CatalogRow, ...], "body_started": epoch s, "body_seconds": s}``.
@@ -192,7 +206,7 @@ def refine_assets(
     flow_run_id = parent_flow_run_id or _current_flow_run_id()
     body_started = time.time()  # the Dask cluster is up once the body runs
     store = ResultCatalog(catalog_root)
-    refine_task = refine.with_options(
+    chain_task = chain.with_options(
         retries=retries, retry_delay_seconds=retry_delay_seconds, retry_condition_fn=_retry_on_model_failure,
         timeout_seconds=None,
     )  # fmt: skip
@@ -221,32 +235,39 @@ def refine_assets(
                                          status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
         log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
 
+    all_jobs = [AssetJob(**j) for j in jobs]
     prep_futures = {}
-    for job in (AssetJob(**j) for j in jobs):
-        starts[job.asset_id] = time.time()
-        prep_futures[prepare.submit(job)] = job
+    size = max(1, int(batch_size))
+    for i in range(0, len(all_jobs), size):
+        batch = all_jobs[i:i + size]
+        for job in batch:
+            starts[job.asset_id] = time.time()
+        prep_futures[prepare_many.submit(batch)] = batch
 
     # the time limit of a non-isolated stage is Prefect's (process isolation has its own)
     chains = {}
     for fut in as_completed(list(prep_futures)):
-        job = prep_futures[fut]
-        prepared, exc = _outcome(fut)
-        if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
-            record(job, prepared, None, None, exc)
-            continue
-        # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
-        limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
-        rf = refine_task.with_options(**limit).submit(job, prepared)
-        mf = metrics.with_options(**limit).submit(job, prepared, rf)
-        last = publish.submit(job, rf, mf) if job.out_uri else mf  # upload to the output store, marker last
-        chains[last] = (job, prepared, rf, mf)
+        batch = prep_futures[fut]
+        results, exc_b = _outcome(fut)
+        for k, job in enumerate(batch):
+            prepared = None if exc_b is not None else results[k]
+            exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
+            if exc is not None:
+                prepared = None
+            if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
+                record(job, prepared, None, None, exc)
+                continue
+            # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
+            limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
+            chains[chain_task.with_options(**limit).submit(job, prepared)] = (job, prepared)
 
-    for last in as_completed(list(chains)):
-        job, prepared, rf, mf = chains[last]
-        refined, exc_r = _outcome(rf)
-        measured, exc_m = _outcome(mf) if exc_r is None else (None, None)
-        published, exc_p = _outcome(last) if last is not mf and exc_r is None and exc_m is None else (None, None)
-        record(job, prepared, refined, measured, exc_r or exc_m or exc_p, published)
+    for cf in as_completed(list(chains)):
+        job, prepared = chains[cf]
+        res, exc = _outcome(cf)
+        if exc is not None:
+            record(job, prepared, None, None, exc)
+        else:
+            record(job, prepared, res.refined, res.measured, res.error, res.published)
     return {"rows": rows, "body_started": body_started, "body_seconds": time.time() - body_started}
 
 
@@ -434,6 +455,7 @@ def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id) -> dict
         str(cat.catalog_root),
         retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
         retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
+        batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
         parent_flow_run_id=flow_run_id,
     )
     fan_seconds = time.perf_counter() - t_fan

@@ -415,6 +415,50 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
                        seconds=time.perf_counter() - t0, worker=_worker_name())
 
 
+def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
+    """:func:`prepare_asset` for several jobs in one call (one task of the
+    flow's task runner instead of one per asset: a rerun of finished assets
+    pays the orchestration once per batch). An exception of one job is its
+    item of the list; the others go on."""
+    out: list[Prepared | Exception] = []
+    for job in jobs:
+        try:
+            out.append(prepare_asset(job))
+        except Exception as exc:  # recorded in that asset's row
+            out.append(exc)
+    return out
+
+
+@dataclass
+class ChainResult:
+    """The stage records of one asset's chain after prepare: ``refined``,
+    ``measured`` (None when metrics raised), ``published`` (None without an
+    output store) and ``error`` the exception that stopped metrics or publish."""
+
+    refined: StageRecord
+    measured: StageRecord | None = None
+    published: StageRecord | None = None
+    error: Exception | None = None
+
+
+def refine_chain(job: AssetJob, prepared: Prepared) -> ChainResult:
+    """refine -> metrics -> publish of one asset in one call (one task of
+    the flow: the orchestration's cost is paid once per asset, not per stage).
+
+    Raises:
+        ModelCallFailure: from the refine stage (the flow retries the chain).
+    """
+    refined = refine_stage(job, prepared)
+    res = ChainResult(refined=refined)
+    try:
+        res.measured = metrics_stage(job, prepared, refined)
+        if job.out_uri:
+            res.published = publish_stage(job, refined, res.measured)
+    except Exception as exc:  # recorded in the row, like a failed stage
+        res.error = exc
+    return res
+
+
 def prepare_asset(job: AssetJob) -> Prepared:
     """Input stage: validate and read the asset, hash input and
     configuration, decide whether an earlier result can be reused.

@@ -356,6 +356,11 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
         ctx.asset, syn.overlay, out_dir, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
     st.collision_changes = list(st.collision_changes) + lifted
+    if overrides:  # the state search changed the collision pieces: the limits are clipped again on them (stage 6b)
+        unclipped = limits.strip_clips(syn.overlay)
+        write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
+        reclipped, closed_re = _clip_limits(unclipped, closed_raw, state, urdf, config, log)
+        syn = replace(syn, overlay=reclipped, closed_out=closed_re)
     balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
     design = floored + design
     for line in design:

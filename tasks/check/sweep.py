@@ -50,6 +50,14 @@ anyone can re-derive it, see ``docs/metrics.md``):
   (5 mm) throughout and nothing diverges. The metric passes iff every swept
   joint passes (``passed`` None when the object has no movable joint).
 
+- A part shut in by another (its drive stalls before 5 % of the range
+  against a link that another movable joint places: a toilet's seat under
+  its closed lid, a stapler's magazine under its closed top) is swept again
+  with the joints between the two at their open ends, as a hand lifts the lid
+  before the seat; that second sweep counts when it passes, and
+  ``range_note`` names what was opened. A part stopped by its own parent's
+  geometry, or that opens partly before it meets another part, is not.
+
 Continuous joints are swept over pi (their closed end is a convention).
 """
 
