@@ -601,16 +601,35 @@ def _joint_motion(joint: urdf.UrdfJoint, q: float) -> np.ndarray:
     return joint.origin @ m
 
 
+def reference_state(model: urdf.UrdfModel) -> dict[str, float]:
+    """Joint -> 0 clipped to its limits (rad or m; 0 for a joint without
+    finite limits): the pose the other joints hold while one is swept."""
+    ref = {}
+    for j in model.movable_joints:
+        lo, hi = j.lower, j.upper
+        ref[j.name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) and np.isfinite(hi) else 0.0
+    return ref
+
+
 def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
                        support: bool = False) -> dict[str, np.ndarray]:
-    """Vertices of every child link's pieces (their :attr:`Piece.support`
-    points with ``support``) in ``link``'s frame at every position of
+    """Vertices of every child link's pieces, and of the links below it
+    (their :attr:`Piece.support` points with ``support``; the joints below
+    at :func:`reference_state`), in ``link``'s frame at every position of
     :func:`sweep_positions` of the joint between them: the volume the child
-    sweeps over its whole range. A parent-child pose depends on that one
-    joint only, so this holds for every state of the object."""
+    sweeps over its whole range (a latch carried through a box by its lid
+    included). A parent-child pose depends on that one joint only, so this
+    holds for every state of the object. Child -> (k, 3) m."""
     out = {}
+    poses = model.link_poses(reference_state(model))
     for j in model.children(link):
-        pts = [p.support if support else p.points for p in pieces.get(j.child, [])]
+        inv = np.linalg.inv(poses[j.child])
+        pts, stack = [], [j.child]
+        while stack:
+            ln = stack.pop()
+            stack.extend(c.child for c in model.children(ln))
+            T = inv @ poses[ln]
+            pts += [(p.support if support else p.points) @ T[:3, :3].T + T[:3, 3] for p in pieces.get(ln, [])]
         if not pts:
             continue
         local = np.vstack(pts)
@@ -774,10 +793,7 @@ def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
     to the limits) and each joint in turn at ``samples`` positions over its
     range: the volume the other links sweep one joint at a time (k, 3) m, or
     None when no other link has pieces. Independent of the initial state."""
-    ref = {}
-    for j in model.movable_joints:
-        lo, hi = j.lower, j.upper
-        ref[j.name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) and np.isfinite(hi) else 0.0
+    ref = reference_state(model)
     local = {o: np.vstack([p.support for p in pieces[o]]) for o in model.links if o != link and pieces.get(o)}
     if not local:
         return None

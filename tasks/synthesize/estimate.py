@@ -179,12 +179,6 @@ def _material(ctx: EstimationContext, label: str | None, link: str | None = None
     )
 
 
-#: Opening fractions (0 closed) at which joint friction must also hold a
-#: gravity load that pushes the part open (:func:`joint_dynamics_for`): the
-#: probes close a part to fraction 0.05 and require it to stay there.
-CLOSED_HOLD_FRACTIONS = (0.0, 0.05, 0.1)
-
-
 @dataclass
 class JointChoice:
     """Qualitative dynamics choices for one joint (from request words, priors
@@ -211,9 +205,7 @@ def joint_dynamics_for(
     qualitative ``choices`` (see ``docs/refine.md``, "Joint dynamics").
 
     Friction holds the largest gravity load within 5 % of the range around the
-    state, or over the whole range when the joint must hold its position, and
-    any gravity load that pushes the part open at opening fractions
-    :data:`CLOSED_HOLD_FRACTIONS` (a part closed by hand stays closed); a
+    state, or over the whole range when the joint must hold its position; a
     spring gets k = max(3 x 1.5 x hold / range, 2 k_g) and the reference
     q_s = q - tau_g / k so that it holds the state (equilibrium of
     -k (q - q_s) + tau_g = 0), friction then only 10 % of the load.
@@ -237,13 +229,6 @@ def joint_dynamics_for(
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             hold = max(hold, abs(ld[name].gravity_load))
-        # A part closed by a hand stays closed (the close probe): near the
-        # closed end friction also holds a gravity load that pushes it open
-        # (a flush lever modelled resting open fell back open from closed).
-        for f in CLOSED_HOLD_FRACTIONS:
-            st = {**state, name: cs.position(float(f)) * unit}
-            ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
-            hold = max(hold, ld[name].gravity_load * cs.direction)
         spring = None
         if ch.spring:
             load = loads[name]
