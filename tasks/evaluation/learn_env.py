@@ -19,10 +19,11 @@ Definitions (re-derivable; ``docs/metrics.md``):
   grades itself). Where the PartNet-Mobility reference
   (``reference_gensim2.urdf``) keeps some of the parsed joints movable, only
   those are candidates (every method then acts on the same joint: "close
-  the cabinet drawer" on GenSim2's drawer). Of every (joint, action) pair the one whose target is
-  farthest from the initial opening fraction is the instance (a "close the
-  drawer" task acts on the open drawer; a both-ways task such as "move the bag
-  handle" moves the handle the way it can go farthest). Targets and reach
+  the cabinet drawer" on GenSim2's drawer). Of every (joint, action) pair the
+  one whose target is farthest from its start fraction (see "World") is the
+  instance, the first in file order on a tie (with ``start="asset"`` a "close
+  the drawer" task acts on the open drawer; a both-ways task such as "move
+  the bag handle" moves the handle the way it can go farthest). Targets and reach
   thresholds are the probes'
   (:mod:`asset2sim.tasks.check.probes`): close -> f <= 0.10; open -> f >= 0.55
   (f >= 0.85 when the joint starts beyond 0.55).
@@ -54,7 +55,7 @@ Definitions (re-derivable; ``docs/metrics.md``):
   slide tolerance; root rotation / tip tolerance; time / episode length.
 - **Reward** (the thesis's staged reward with its reach and contact stages
   given by the attachment): joint progress w_p (|f_prev - f*| - |f - f*|) /
-  |f_0 - f*|, minus w_s |g - p| F_max^-1 k (the grasp spring's pull as a
+  max(|f_0 - f*|, 0.05) (f_0 at reset), minus w_s |g - p| F_max^-1 k (the grasp spring's pull as a
   share of the force limit: pulling against a stuck part), minus w_m and end
   of the episode when the object slid or tipped, plus w_b on success.
 - **Success**: the target fraction is reached, the object has not slid

@@ -352,3 +352,15 @@ def test_a_child_overlapping_a_panel_over_its_slide_is_kept_out(tmp_path):
     pieces, notes = cg.link_pieces(model, lambda g: g.path, {"slide": 0.0})
     for q in np.linspace(0.0, 0.2, 9):
         assert cg.containment_depths(model, pieces, {"slide": float(q)})[("carcass", "drawer")] <= cg.CONTAINMENT_TOLERANCE
+
+
+def test_slivers_and_duplicates_left_by_cuts_are_dropped():
+    """A cut can leave a duplicate of a piece and a 0.1 mm flake on its cut
+    plane (PyBullet collided such a flake 2 mm deep); both go, the pieces
+    with volume stay."""
+    a = cg.Piece.of(_box([0, 0, 0], [0.1, 0.05, 0.02])[0])
+    b = cg.Piece.of(_box([0.1, 0, 0], [0.2, 0.05, 0.02])[0])
+    dup = cg.Piece.of(_box([0.01, 0.01, 0.0], [0.05, 0.04, 0.02])[0])  # inside a
+    flake = cg.Piece.of(_box([0.1, 0.0, 0.0], [0.1016, 0.0015, 0.0001])[0])  # 0.24 mm^3
+    kept = cg.drop_slivers([a, dup, flake, b])
+    assert [k is a or k is b for k in kept] == [True, True]
