@@ -340,6 +340,23 @@ def convex_hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return hull.points[used], remap[tri]
 
 
+def hull_obj(points: np.ndarray) -> bytes:
+    """OBJ bytes of the convex hull of ``points`` (n, 3), in the points' units
+    (m where they are): the vertices written exactly (``repr`` of each float)
+    and triangles wound outward (:func:`convex_hull_mesh`). The one hull-to-OBJ
+    writer: collision pieces, the state search's repairs and the MJCF export
+    use it.
+
+    Raises:
+        scipy.spatial.QhullError: fewer than 4 points not in one plane.
+        ValueError: ``points`` is not (n, 3).
+    """
+    verts, tris = convex_hull_mesh(points)
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in verts]
+    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
+    return ("\n".join(lines) + "\n").encode()
+
+
 # ------------------------------------------------------------------ OBJ as text
 
 

@@ -38,6 +38,7 @@ from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mo
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.geometry import urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
@@ -349,8 +350,12 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
     syn = _synthesize(ctx, est, config, log)
     urdf = _write(ctx, syn, out_dir, log)
+    syn = _closed_on_output(ctx, syn, urdf, out_dir, log)
     closed_raw = syn.closed_out
-    syn = _clip_synthesis(ctx, syn, urdf, config, out_dir, log)
+    clipped = _clip_synthesis(ctx, syn, urdf, config, out_dir, log)
+    if clipped is not syn:  # clipped limits change the pieces and the range the closed end is found in: measured once more
+        clipped = _closed_on_output(ctx, clipped, urdf, out_dir, log)
+    syn = clipped
     st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
     state = dict(st.result)
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
@@ -443,6 +448,35 @@ def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, conf
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, overrides
+
+
+def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_dir: Path, log: _StageLog) -> _Synthesis:
+    """Stage 5a: the closed ends measured on the written output with the
+    evaluation's own measurement (:mod:`asset2sim.tasks.geometry.urdf_closed`;
+    the output's collision pieces depend only on the meshes and the limits),
+    the requested state and the overlay's initial positions moved onto them
+    (opening fraction kept; the opening for a number of degrees / metres) and
+    the output rewritten. Unchanged when the measurement fails."""
+    try:
+        measured = urdf_closed.measure_closed(urdf)
+    except Exception as exc:
+        log.say("closed_state", f"closed ends not measured on the output ({type(exc).__name__}: {exc}); the input's are used")
+        return syn
+    new = {n: measured.get(n, c) for n, c in syn.closed_out.items()}
+    moved = [n for n, c in new.items() if abs(c.q_closed - syn.closed_out[n].q_closed) > 1e-9 or c.direction != syn.closed_out[n].direction]
+    if not moved:
+        return replace(syn, closed_out=new)
+    keep = {n for n, t in syn.targets.items() if t.kind in ("angle", "distance")}
+    requested = urdf_closed.replace_positions(syn.requested, syn.closed_out, new, keep)
+    overlay = syn.overlay
+    if overlay.initial_joint_positions:
+        overlay = overlay.model_copy(update={"initial_joint_positions": urdf_closed.replace_positions(
+            overlay.initial_joint_positions, syn.closed_out, new, keep)})
+    for n in moved:
+        log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
+                                f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
+    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, root_rotation=ctx.root_rotation)
+    return replace(syn, overlay=overlay, closed_out=new, requested=requested)
 
 
 def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog) -> _Synthesis:

@@ -19,7 +19,8 @@ import numpy as np
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.evaluation.asset_files import JointInfo, clip_to_limits
-from asset2sim.tasks.geometry.closed_state import closed_positions, link_hull_points, object_extents
+from asset2sim.tasks.geometry.closed_state import link_hull_points, object_extents
+from asset2sim.tasks.geometry.urdf_closed import closed_session
 from asset2sim.tasks.ingest.extract import extract_asset
 
 
@@ -128,9 +129,11 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
                    extents_out: list | None = None) -> tuple[dict[str, ClosedEnd], list[str]]:
     """Closed end of each joint in ``names`` (rad or m, the URDF's units).
 
-    Source: :func:`asset2sim.tasks.geometry.closed_state.closed_positions` (geometric,
-    computed here for every method alike, so no method grades itself) in a
-    fresh fixed-base, gravity-free PyBullet session; else (extraction or the
+    Source: :func:`asset2sim.tasks.geometry.urdf_closed.closed_session`
+    (:func:`asset2sim.tasks.geometry.closed_state.closed_positions` in a fresh
+    fixed-base, gravity-free PyBullet session; computed here for every method
+    alike, so no method grades itself; refine places its requested state from
+    the same measurement of its own output); else (extraction or the
     search failing, or a joint it gives no opening) the limit nearest 0,
     opening towards the other limit (:func:`closed_fallback`).
 
@@ -149,15 +152,10 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
     if not names:
         return out, notes
     try:
-        desc = extract_asset(urdf)
-        s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
-        try:
-            hull = hull_points(desc)
-            cs = closed_positions(s, desc, **({"hull_points": hull} if hull is not None else {}))
+        with closed_session(urdf) as m:
+            cs = m.closed
             if extents_out is not None:
-                extents_out.append(geometry_extents(s, desc, {n: c.q_closed for n, c in cs.items()}, hull))
-        finally:
-            s.close()
+                extents_out.append(geometry_extents(m.session, m.asset, {n: c.q_closed for n, c in cs.items()}, m.hull))
         for n in names:
             c = cs.get(n)
             if c is None or not c.open_range > 0:

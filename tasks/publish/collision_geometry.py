@@ -221,7 +221,7 @@ def piece_obj(piece: Piece) -> bytes:
     key = (pts.shape, hashlib.sha1(pts.tobytes()).digest())
     data = _OBJS.get(key)
     if data is None:
-        data = _piece_obj(pts)
+        data = mesh_io.hull_obj(pts)
         if len(_OBJS) >= 4096:
             _OBJS.pop(next(iter(_OBJS)))
         _OBJS[key] = data
@@ -230,15 +230,6 @@ def piece_obj(piece: Piece) -> bytes:
 
 #: OBJ bytes of pieces written in this process, by (shape, SHA-1 of the points).
 _OBJS: dict[tuple, bytes] = {}
-
-
-def _piece_obj(points: np.ndarray) -> bytes:
-    """OBJ bytes of the outward-wound hull of ``points`` (k, 3) m
-    (:func:`asset2sim.mesh_io.convex_hull_mesh`), coordinates written exactly."""
-    verts, tris = mesh_io.convex_hull_mesh(points)
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in verts]
-    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
-    return ("\n".join(lines) + "\n").encode()
 
 
 def depth_inside(points: np.ndarray, piece: Piece) -> float:

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asset2sim import atomic
+from asset2sim import atomic, mesh_io
 from asset2sim.schemas.asset import GeometryRef
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
@@ -187,27 +187,41 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
     return rep
 
 
-def _obj(points: np.ndarray) -> str:
-    h = ConvexHull(points)
-    v = points[h.vertices]
-    index = {int(k): i for i, k in enumerate(h.vertices)}
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in v.tolist()]
-    lines += [f"f {index[int(a)] + 1} {index[int(b)] + 1} {index[int(c)] + 1}" for a, b, c in h.simplices]
-    return "\n".join(lines) + "\n"
-
-
 def write_overrides(rep: ClearanceRepair, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
     """Write the repaired pieces as OBJ files ``out_dir/folder/<link>_clear<i>.obj``
-    (at the input's units: divided by the overlay ``scale``, which the writer
-    multiplies back) and return the writer's collision overrides (link ->
-    pieces; every mesh collision of the link is replaced)."""
+    (:func:`write_piece_overrides`) and return the writer's collision overrides.
+
+    Raises:
+        ValueError: a piece spans no volume, naming its link.
+        OSError: a file cannot be written.
+    """
+    return write_piece_overrides(rep.pieces, scale, out_dir, folder, "clear")
+
+
+def write_piece_overrides(pieces: dict[str, list[np.ndarray]], scale: float, out_dir: Path, folder: str,
+                          stem: str) -> dict[str, list[CollisionPiece]]:
+    """Write convex collision pieces as OBJ files ``out_dir/folder/<link><stem><i>.obj``
+    (outward-wound hulls, :func:`asset2sim.mesh_io.hull_obj`; at the input's
+    units: the points (k, 3), m, are divided by the overlay ``scale``, which the
+    writer multiplies back) and return the writer's collision overrides (link ->
+    pieces; every mesh collision of the link is replaced). The one writer of the
+    state stage's repaired pieces (running clearance, ground clearance).
+
+    Raises:
+        ValueError: a piece spans no volume (scipy's QhullError), naming its link.
+        OSError: a file cannot be written.
+    """
     out: dict[str, list[CollisionPiece]] = {}
-    for ln, plist in rep.pieces.items():
+    for ln, plist in pieces.items():
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in ln)
         items = []
         for i, P in enumerate(plist):
-            rel = f"{folder}/{safe}_clear{i}.obj"
-            atomic.write_text(Path(out_dir) / rel, _obj(np.asarray(P, float) / scale))
+            rel = f"{folder}/{safe}_{stem}{i}.obj"
+            try:
+                data = mesh_io.hull_obj(np.asarray(P, float) / scale)
+            except QhullError as exc:
+                raise ValueError(f"link {ln!r}: collision piece {i} spans no volume") from exc
+            atomic.write_bytes(Path(out_dir) / rel, data)
             ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=(Path(out_dir) / rel).resolve())
             items.append(CollisionPiece(filename=rel, source=ref))
         out[ln] = items

@@ -47,12 +47,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
-from asset2sim import atomic
-from asset2sim.schemas.asset import AssetDescription, GeometryRef
+from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.publish import write
+from asset2sim.tasks.state.clearance import write_piece_overrides
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf
 
@@ -183,40 +182,17 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     return rep
 
 
-def _obj(points: np.ndarray) -> str:
-    """Convex hull of ``points`` (k, 3) as OBJ text."""
-    h = ConvexHull(points)
-    v = points[h.vertices]
-    index = {int(k): i for i, k in enumerate(h.vertices)}
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in v.tolist()]
-    lines += [f"f {index[int(a)] + 1} {index[int(b)] + 1} {index[int(c)] + 1}" for a, b, c in h.simplices]
-    return "\n".join(lines) + "\n"
-
-
 def write_overrides(rep: GroundClearance, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
-    """Write the pieces as OBJ files ``out_dir/folder/<link>_ground<i>.obj`` (at
-    the input's units: divided by the overlay ``scale``, which the writer
-    multiplies back) and return the writer's collision overrides (link ->
-    pieces; every mesh collision of the link is replaced).
+    """Write the pieces as OBJ files ``out_dir/folder/<link>_ground<i>.obj``
+    (:func:`asset2sim.tasks.state.clearance.write_piece_overrides`) and return
+    the writer's collision overrides (link -> pieces; every mesh collision of
+    the link is replaced).
 
     Raises:
-        ValueError: a piece spans no volume (scipy's QhullError).
+        ValueError: a piece spans no volume, naming its link.
+        OSError: a file cannot be written.
     """
-    out: dict[str, list[CollisionPiece]] = {}
-    for ln, plist in rep.pieces.items():
-        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in ln)
-        items = []
-        for i, P in enumerate(plist):
-            rel = f"{folder}/{safe}_ground{i}.obj"
-            try:
-                text = _obj(np.asarray(P, float) / scale)
-            except QhullError as exc:
-                raise ValueError(f"link {ln!r}: collision piece {i} spans no volume") from exc
-            atomic.write_text(Path(out_dir) / rel, text)
-            ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=(Path(out_dir) / rel).resolve())
-            items.append(CollisionPiece(filename=rel, source=ref))
-        out[ln] = items
-    return out
+    return write_piece_overrides(rep.pieces, scale, out_dir, folder, "ground")
 
 
 def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: Path, urdf: Path, state: dict[str, float],

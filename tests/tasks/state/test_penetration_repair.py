@@ -34,5 +34,7 @@ def test_without_repair_the_band_stays_penetrating(tmp_path):
     src = build_interlocked_box(tmp_path / "interlocked_box")
     cfg = RefineConfig(convex_decomposition=False, max_state_evaluations=120)
     r = refine_asset(src, "A box with its lid closed.", tmp_path / "out", config=cfg, extras=False).report
-    assert r.state.phi_result > 10 * cfg.penetration_tolerance
-    assert r.failure_mode == "unresolved_penetration"
+    assert r.state.phi_result > 10 * cfg.penetration_tolerance  # the state search alone cannot resolve it
+    # the sweep's running clearance (tasks.state.clearance) may then squeeze the latch out of the body, but the
+    # lid stays locked: without the decomposition the asset is never ready
+    assert r.failure_mode in {"unresolved_penetration", "blocked_joint"}
