@@ -64,11 +64,11 @@ def test_each_asset_is_read_once_and_rest_tested_once(demo_root, tmp_path, count
     # disturbances in every post-check, and the extras' evaluation reuses the last round's runs
     # (tasks/check/recorded_runs.py)
     trials = len(robust_rest.TRIALS)
-    assert counters["rest_test"] == len(report.escalation) * (1 + trials)
+    assert counters["rest_test"] == len(report.escalation) * (len(RefineConfig().engines) + trials)
     measured = metrics_stage(job, prepared, refined)
     assert measured.status == "ok", measured.error
     assert measured.value.reused_evaluation and counters["evaluate"] == 0
-    assert counters["rest_test"] == len(report.escalation) * (1 + trials)
+    assert counters["rest_test"] == len(report.escalation) * (len(RefineConfig().engines) + trials)
     refined_ev = (refined.value.out_dir + "/evaluation.json")
     assert json.loads(open(refined_ev).read()) == json.loads(open(job.metrics_dir + "/evaluation.json").read())
 

@@ -1,0 +1,100 @@
+"""Refine places the requested state from the closed ends the evaluation
+measures on the output (:mod:`asset2sim.tasks.geometry.urdf_closed`)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from asset2sim.schemas.request import BAND_INTERVAL
+from asset2sim.tasks.evaluation.asset_files import parse_urdf
+from asset2sim.tasks.evaluation.closed_ends import compute_closed
+from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.geometry.urdf_closed import measure_closed, replace_positions
+from asset2sim.tasks.refine import refine_asset
+from tests.conftest import SHARED, needs_shared
+
+
+def _box_obj(boxes: list[tuple[tuple[float, float, float], tuple[float, float, float]]]) -> str:
+    """OBJ text of axis-aligned boxes (lo, hi) in one mesh (m)."""
+    vs, fs = [], []
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    for lo, hi in boxes:
+        base = len(vs)
+        for i in range(8):
+            vs.append([(hi if i & m else lo)[k] for k, m in enumerate((1, 2, 4))])
+        for a, b, c, d in quads:
+            fs += [(base + a, base + b, base + c), (base + a, base + c, base + d)]
+    return "".join(f"v {x:.4f} {y:.4f} {z:.4f}\n" for x, y, z in vs) + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in fs)
+
+
+def write_lever_in_slot(folder: Path) -> Path:
+    """A faucet-like lever whose stem hangs into a U-shaped body (one mesh:
+    base slab and two walls, so the body's convex hull fills the slot and the
+    stem overlaps it at every angle of its [-1.2, 1.2] rad hinge about y);
+    the output's collision pieces follow the walls instead."""
+    folder.mkdir(parents=True, exist_ok=True)
+    body = [((-0.1, -0.05, 0.0), (0.1, 0.05, 0.04)), ((-0.1, -0.05, 0.04), (-0.06, 0.05, 0.2)), ((0.06, -0.05, 0.04), (0.1, 0.05, 0.2))]
+    lever = [((-0.01, -0.03, -0.12), (0.01, 0.03, 0.02)), ((-0.01, -0.03, 0.02), (0.15, 0.03, 0.04))]
+    (folder / "body.obj").write_text(_box_obj(body))
+    (folder / "lever.obj").write_text(_box_obj(lever))
+    (folder / "mobility.urdf").write_text("""<?xml version="1.0"?>
+<robot name="lever_in_slot">
+  <link name="body"><visual><geometry><mesh filename="body.obj"/></geometry></visual><collision><geometry><mesh filename="body.obj"/></geometry></collision></link>
+  <link name="lever"><visual><geometry><mesh filename="lever.obj"/></geometry></visual><collision><geometry><mesh filename="lever.obj"/></geometry></collision></link>
+  <joint name="lever_j" type="revolute"><parent link="body"/><child link="lever"/><origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>
+    <limit lower="-1.2" upper="1.2" effort="5" velocity="2"/></joint>
+</robot>
+""")
+    return folder
+
+
+def _evaluation_closed(urdf: Path, joint: str):
+    _, joints = parse_urdf(urdf)
+    closed, notes = compute_closed(urdf, joints, [joint])
+    assert closed[joint].source.startswith("geometry"), notes
+    return closed[joint]
+
+
+def test_replace_positions_keeps_the_fraction_or_the_opening():
+    old = ClosedState("j", q_closed=1.0, direction=-1.0, open_range=2.0, lower=-1.0, upper=1.0)
+    new = ClosedState("j", q_closed=0.0, direction=1.0, open_range=1.0, lower=0.0, upper=1.0)
+    # half open on the old end (q = 0) -> half of the new range
+    assert replace_positions({"j": 0.0}, {"j": old}, {"j": new}) == {"j": pytest.approx(0.5)}
+    # 0.3 rad asked from the closed end stays 0.3 rad from the new one
+    assert replace_positions({"j": 0.7}, {"j": old}, {"j": new}, {"j"}) == {"j": pytest.approx(0.3)}
+    # clipped to the new limits; joints without both ends untouched
+    assert replace_positions({"j": -1.0, "k": 0.2}, {"j": old}, {"j": new}, {"j"}) == {"j": 1.0, "k": 0.2}
+
+
+def test_refine_closed_end_is_the_evaluations_when_a_part_overlaps_its_parent(tmp_path):
+    """The lever overlaps the body's hull at every angle, so the closed end
+    on the input meshes (its upper limit) is not the one on the output's
+    pieces; refine's closed end, and the closed state it writes, are those the
+    evaluation measures on the output."""
+    src = write_lever_in_slot(tmp_path / "src")
+    on_input = measure_closed(src / "mobility.urdf")["lever_j"].q_closed
+    res = refine_asset(src, "a faucet with its handle turned off", tmp_path / "out", extras=False)
+    r = res.report
+    ev = _evaluation_closed(res.out_dir / "mobility.urdf", "lever_j")
+    assert abs(ev.q_closed - on_input) > 0.05  # the case this test is about: input and output disagree
+    assert r.closed_positions["lever_j"] == pytest.approx(ev.q_closed, abs=1e-9)
+    lo, hi = BAND_INTERVAL[r.requested_bands["lever_j"]]
+    assert lo - 1e-9 <= ev.fraction(r.initial_joint_positions["lever_j"]) <= hi + 1e-9
+
+
+@needs_shared
+def test_faucet_148_handle_off_is_closed_by_the_evaluations_measure(tmp_path):
+    """Faucet 148's handle overlaps its body by 120-156 mm summed at every
+    angle; "turned off" must be closed as the evaluation measures it."""
+    with open(SHARED / "manifest.csv", newline="") as f:
+        row = next(r for r in csv.DictReader(f) if r["id"] == "148")
+    res = refine_asset(SHARED / "148", row["prompt"], tmp_path / "148", extras=False)
+    r = res.report
+    joint = next(iter(r.requested_bands))
+    ev = _evaluation_closed(res.out_dir / "mobility.urdf", joint)
+    assert r.closed_positions[joint] == pytest.approx(ev.q_closed, abs=1e-9)
+    lo, hi = BAND_INTERVAL[r.requested_bands[joint]]
+    assert lo - 1e-9 <= ev.fraction(r.initial_joint_positions[joint]) <= hi + 1e-9
