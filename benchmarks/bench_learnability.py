@@ -41,7 +41,7 @@ Prints the table (success per task and method: PPO, scripted, passive; mean per
 method), the wall time and the budget used (environment and engine steps,
 episodes). Each run is appended to ``DIR/results.jsonl`` as it ends, so a run
 cut short keeps what it finished; ``--table`` prints the table of such a file.
-Needs the ``learn`` extra (``pip install .[learn]``).
+Needs the ``learn`` extra (``pip install -e ".[learn]"``: stable-baselines3 and torch, about 5 GB from PyPI).
 """
 
 from __future__ import annotations

@@ -65,7 +65,8 @@ Definitions (re-derivable; ``docs/metrics.md``):
   task-execution check's definition) without the object moving. The episode
   ends at success, at a slide or tip, or after :attr:`LearnConfig.episode_time`.
 
-``gymnasium`` is the optional extra ``learn`` (``pip install .[learn]``).
+``gymnasium`` is the optional extra ``gym`` (in ``all``); PPO (stable-baselines3,
+torch) is the extra ``learn`` (``pip install -e ".[learn]"``).
 """
 
 from __future__ import annotations

@@ -108,19 +108,25 @@ def _squeeze(p: np.ndarray, n: np.ndarray, delta: float) -> tuple[np.ndarray, fl
     return p - np.outer((s - lo) * (d / w), n), d
 
 
-def _link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
+def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
     """Vertices (k, 3) m of each mesh collision of ``link`` in the link frame
     (collision origin and mesh scale applied; one piece per file: the
-    writer's convex pieces are one hull per file)."""
+    writer's convex pieces are one hull per file), read with
+    :func:`asset2sim.mesh_io.read_obj`.
+
+    Raises:
+        OSError: a collision file cannot be read.
+        asset2sim.mesh_io.MeshReadError: a malformed record in a collision file.
+    """
     out = []
     for c in model.links[link].collisions:
         if c.kind != "mesh" or not c.filename:
             continue
         path = Path(c.path) if c.path is not None else root / c.filename
-        v = np.array([[float(x) for x in ln.split()[1:4]] for ln in path.read_text().splitlines() if ln.startswith("v ")])
+        v, _, _ = mesh_io.read_obj(path.read_bytes(), str(path))
         if not len(v):
             continue
-        v = v * (c.mesh_scale if c.mesh_scale is not None else 1.0)
+        v = np.asarray(v, float) * (c.mesh_scale if c.mesh_scale is not None else 1.0)
         out.append(v @ c.origin[:3, :3].T + c.origin[:3, 3])
     return out
 
@@ -141,7 +147,7 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
 
     def pieces(ln: str) -> list[np.ndarray]:
         if ln not in cache:
-            cache[ln] = _link_pieces(model, root, ln)
+            cache[ln] = link_pieces(model, root, ln)
         return cache[ln]
 
     parent_of = {j.child: j.parent for j in model.joints}

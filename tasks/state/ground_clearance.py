@@ -51,7 +51,7 @@ import numpy as np
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.publish import write
-from asset2sim.tasks.state.clearance import write_piece_overrides
+from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf
 
@@ -83,23 +83,6 @@ class GroundClearance:
     pieces: dict[str, list[np.ndarray]] = field(default_factory=dict)
     """link -> every mesh collision piece of the link (k, 3) m in the link frame"""
     notes: list[str] = field(default_factory=list)
-
-
-def _mesh_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
-    """Vertices (k, 3) m of each mesh collision of ``link`` in the link frame
-    (collision origin and mesh scale applied; the writer's pieces are OBJ
-    files)."""
-    out = []
-    for c in model.links[link].collisions:
-        if c.kind != "mesh" or not c.filename:
-            continue
-        path = Path(c.path) if c.path is not None else root / c.filename
-        v = np.array([[float(x) for x in ln.split()[1:4]] for ln in path.read_text().splitlines() if ln.startswith("v ")])
-        if not len(v):
-            continue
-        v = v * (c.mesh_scale if c.mesh_scale is not None else 1.0)
-        out.append(v @ c.origin[:3, :3].T + c.origin[:3, 3])
-    return out
 
 
 def _moving_joint(model: UrdfModel) -> dict[str, object]:
@@ -140,7 +123,7 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     world: dict[str, list[np.ndarray]] = {}
     local: dict[str, list[np.ndarray]] = {}
     for ln in model.links:
-        local[ln] = _mesh_pieces(model, root, ln)
+        local[ln] = link_pieces(model, root, ln)
         T = poses[ln]
         world[ln] = [P @ T[:3, :3].T + T[:3, 3] for P in local[ln]]
     lows = {ln: min(float(W[:, 2].min()) for W in ws) for ln, ws in world.items() if ws}
@@ -261,7 +244,7 @@ def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, flo
         OSError: a collision file cannot be read.
     """
     root = Path(urdf).parent
-    local = {ln: _mesh_pieces(model, root, ln) for ln in model.links}
+    local = {ln: link_pieces(model, root, ln) for ln in model.links}
 
     def world_at(q: dict[str, float]) -> dict[str, list[np.ndarray]]:
         poses = model.link_poses(q)

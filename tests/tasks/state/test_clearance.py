@@ -67,7 +67,7 @@ def test_a_slider_touching_both_walls_gets_running_clearance(tmp_path):
     (piece,) = rep.pieces["slider"]
     assert abs(np.ptp(piece[:, 1]) - (2 * W - 2 * clearance.CLEARANCE)) < 1e-12
     assert abs(np.ptp(piece[:, 0]) - 0.06) < 1e-12 and abs(np.ptp(piece[:, 2]) - 0.04) < 1e-12  # along and across the motion unchanged
-    for wall in clearance._link_pieces(model, tmp_path, "frame"):
+    for wall in clearance.link_pieces(model, tmp_path, "frame"):
         g, _ = clearance.sat_gap(piece, wall)
         assert g >= clearance.CLEARANCE - 1e-12
 

@@ -19,7 +19,7 @@ def _lowest(urdf, state) -> dict[str, float]:
     poses = model.link_poses(state)
     out = {}
     for ln in model.links:
-        ps = ground_clearance._mesh_pieces(model, urdf.parent, ln)
+        ps = ground_clearance.link_pieces(model, urdf.parent, ln)
         if ps:
             T = poses[ln]
             out[ln] = min(float((P @ T[:3, :3].T + T[:3, 3])[:, 2].min()) for P in ps)
