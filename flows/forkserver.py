@@ -43,7 +43,6 @@ from __future__ import annotations
 import json
 import os
 import queue
-import resource
 import select
 import signal
 import subprocess
@@ -54,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import atomic
-from asset2sim.flows.isolation import IsolatedResult, _child_env, _tail, call_target
+from asset2sim.flows.isolation import IsolatedResult, _child_env, _tail, run_child_spec
 from asset2sim.flows.lifeline import set_parent_death_signal
 
 #: Modules the server imports before it forks anything (heavy third-party
@@ -332,14 +331,7 @@ def _run_child(spec_path: str, out_fd: int) -> None:
         os.dup2(fd, 1)
         os.dup2(fd, 2)
         os.close(fd)
-        if spec.get("memory_limit_mb"):
-            limit = int(spec["memory_limit_mb"]) * 1024 * 1024
-            resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-        record = call_target(spec["target"], spec.get("kwargs") or {})
-        try:
-            atomic.write_text(spec["result"], json.dumps(record, allow_nan=True))
-        except (TypeError, ValueError) as exc:
-            atomic.write_json(spec["result"], {"ok": False, "error": f"result not JSON-able: {exc}", "error_type": "TypeError"})
+        run_child_spec(spec)
         sys.stdout.flush()
         sys.stderr.flush()
     except BaseException:  # noqa: BLE001 - the child must never return into the server loop

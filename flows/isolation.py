@@ -225,6 +225,21 @@ def _child_main(argv: list[str]) -> int:
     spec = json.loads(Path(argv[0]).read_text())
     if spec.get("parent") is not None:  # end with the process that waits for this one
         set_parent_death_signal(signal.SIGKILL, expected_parent=int(spec["parent"]))
+    run_child_spec(spec)
+    return 0
+
+
+def run_child_spec(spec: dict[str, Any]) -> None:
+    """The body of an isolated call in its child process (a spawned one here,
+    a forked one in :mod:`asset2sim.flows.forkserver`): set the address-space
+    limit ``spec["memory_limit_mb"]`` (MiB; RLIMIT_AS), run
+    :func:`call_target` on ``spec["target"]`` and ``spec["kwargs"]``, write its
+    record atomically as JSON to ``spec["result"]`` (a record that is not
+    JSON-able is written as a ``TypeError`` failure).
+
+    Raises:
+        OSError: the result file cannot be written.
+    """
     if spec.get("memory_limit_mb"):
         limit = int(spec["memory_limit_mb"]) * 1024 * 1024
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
@@ -233,7 +248,6 @@ def _child_main(argv: list[str]) -> int:
         atomic.write_text(spec["result"], json.dumps(record, allow_nan=True))
     except (TypeError, ValueError) as exc:
         atomic.write_json(spec["result"], {"ok": False, "error": f"result not JSON-able: {exc}", "error_type": "TypeError"})
-    return 0
 
 
 if __name__ == "__main__":  # the child process
