@@ -74,6 +74,7 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.geometry.closed_state import tree_path
 from asset2sim.urdf import UrdfModel, read_urdf
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
@@ -346,21 +347,10 @@ def blocking_link(session: SimSession, links: list[str], exclude: set[str]) -> s
 
 def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
     """Movable joints on the kinematic-tree path between links ``a`` and
-    ``b`` (either order), nearest to ``b`` first."""
-    parent = {j.child: j for j in model.joints}
-
-    def chain(ln: str) -> list[str]:
-        out = [ln]
-        while ln in parent:
-            ln = parent[ln].parent
-            out.append(ln)
-        return out
-
-    ca, cb = chain(a), chain(b)
-    common = next((x for x in ca if x in set(cb)), None)
-    path_a = ca[: ca.index(common)] if common is not None else ca
-    path_b = cb[: cb.index(common)] if common is not None else cb
-    return [parent[ln].name for ln in path_b + path_a[::-1] if parent[ln].type in ("revolute", "prismatic", "continuous")]
+    ``b`` (either order), nearest to ``b`` first
+    (:func:`asset2sim.tasks.geometry.closed_state.tree_path`)."""
+    from_a, from_b = tree_path(model.joints, a, b)
+    return [j.name for j in from_b + from_a[::-1] if j.type in ("revolute", "prismatic", "continuous")]
 
 
 def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],

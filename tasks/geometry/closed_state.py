@@ -36,6 +36,7 @@ the range on the opening side.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -91,6 +92,30 @@ def subtree_links(asset: AssetDescription, link: str) -> list[str]:
         out.append(ln)
         stack.extend(children.get(ln, []))
     return out
+
+
+def tree_path(joints: Sequence, link_a: str, link_b: str) -> tuple[list, list]:
+    """The joints on the kinematic-tree path between two links: (those from
+    ``link_a`` up to the nearest common ancestor, nearest ``link_a`` first;
+    those from ``link_b`` up to it, nearest ``link_b`` first). ``joints``: any
+    joint records with ``parent`` and ``child`` link names (a URDF model's or
+    an :class:`AssetDescription`'s); links in separate trees give each whole
+    chain to its root."""
+    parent = {j.child: j for j in joints}
+
+    def chain(link: str) -> list[str]:
+        out = [link]
+        while link in parent:
+            link = parent[link].parent
+            out.append(link)
+        return out
+
+    ca, cb = chain(link_a), chain(link_b)
+    in_b = set(cb)
+    common = next((ln for ln in ca if ln in in_b), None)
+    path_a = ca[: ca.index(common)] if common is not None else ca
+    path_b = cb[: cb.index(common)] if common is not None else cb
+    return [parent[ln] for ln in path_a if ln in parent], [parent[ln] for ln in path_b if ln in parent]
 
 
 def default_reference(session) -> dict[str, float]:

@@ -36,7 +36,7 @@ import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.report import StateRefinement
-from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.geometry.closed_state import ClosedState, tree_path
 from asset2sim.tasks.state.penetration import StatePenetration
 
 
@@ -69,27 +69,11 @@ def allowed_intervals(
 
 
 def path_joints(asset: AssetDescription, link_a: str, link_b: str) -> list[str]:
-    """Movable joints on the kinematic path between two links."""
-    parent_joint = {j.child: j for j in asset.joints}
-
-    def chain(link: str) -> list[str]:
-        out = [link]
-        while link in parent_joint:
-            link = parent_joint[link].parent
-            out.append(link)
-        return out
-
-    ca, cb = chain(link_a), chain(link_b)
-    common = next((ln for ln in ca if ln in set(cb)), None)
-    joints = []
-    for c in (ca, cb):
-        for ln in c:
-            if ln == common:
-                break
-            j = parent_joint.get(ln)
-            if j is not None and j.is_movable:
-                joints.append(j.name)
-    return joints
+    """Movable joints on the kinematic path between two links (from
+    ``link_a`` up, then from ``link_b`` up:
+    :func:`asset2sim.tasks.geometry.closed_state.tree_path`)."""
+    from_a, from_b = tree_path(asset.joints, link_a, link_b)
+    return [j.name for j in from_a + from_b if j.is_movable]
 
 
 def refine_initial_state(

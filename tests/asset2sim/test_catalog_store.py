@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 from pathlib import Path
 
 import pytest
@@ -16,6 +15,7 @@ from asset2sim import catalog_fs
 from asset2sim.catalog import COMPACTED_NAME, CatalogConfig, ResultCatalog, load_catalog
 from asset2sim.schemas.catalog import SCHEMA_VERSION, SCHEMA_VERSION_KEY, CatalogRow, file_schema_version
 from asset2sim.tasks.publish import contract
+from tests.helpers import local_s3_server
 
 RUN1, RUN2 = "20260101T020000Z-aaaaaa", "20260102T020000Z-bbbbbb"
 
@@ -189,32 +189,12 @@ def test_the_catalog_on_an_fsspec_filesystem():
     _exercise(store)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture()
 def s3_server(monkeypatch):
     """A local S3-compatible server (moto in server mode) on 127.0.0.1 with
     one bucket; the environment points S3 clients at it."""
-    pytest.importorskip("moto")
-    boto3 = pytest.importorskip("boto3")
-    from moto.server import ThreadedMotoServer
-
-    port = _free_port()
-    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-    server.start()
-    endpoint = f"http://127.0.0.1:{port}"
-    for k, v in {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing", "AWS_DEFAULT_REGION": "us-east-1",
-                 "AWS_ENDPOINT_URL": endpoint, "AWS_EC2_METADATA_DISABLED": "true"}.items():  # fmt: skip
-        monkeypatch.setenv(k, v)
-    boto3.client("s3", endpoint_url=endpoint, region_name="us-east-1").create_bucket(Bucket="a2s-test")
-    try:
+    with local_s3_server(monkeypatch, "a2s-test") as endpoint:
         yield endpoint
-    finally:
-        server.stop()
 
 
 def test_the_catalog_round_trips_through_a_local_s3_server(s3_server, tmp_path, capsys):

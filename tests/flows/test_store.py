@@ -6,7 +6,6 @@ a folder made incomplete in the store is redone."""
 
 from __future__ import annotations
 
-import socket
 
 import pytest
 
@@ -14,6 +13,7 @@ from asset2sim.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import store
 from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.tasks.publish.output_folder import MARKER_NAME
+from tests.helpers import local_s3_server
 
 try:
     from .conftest import make_project
@@ -23,32 +23,12 @@ except ImportError:
 BUCKET = "a2s-flow"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture()
 def s3_server(monkeypatch):
     """moto's S3 server on 127.0.0.1 with one bucket; the environment (inherited
     by the worker processes the flow starts) points S3 clients at it."""
-    pytest.importorskip("moto")
-    boto3 = pytest.importorskip("boto3")
-    from moto.server import ThreadedMotoServer
-
-    port = _free_port()
-    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-    server.start()
-    endpoint = f"http://127.0.0.1:{port}"
-    for k, v in {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing", "AWS_DEFAULT_REGION": "us-east-1",
-                 "AWS_ENDPOINT_URL": endpoint, "AWS_EC2_METADATA_DISABLED": "true"}.items():  # fmt: skip
-        monkeypatch.setenv(k, v)
-    boto3.client("s3", endpoint_url=endpoint, region_name="us-east-1").create_bucket(Bucket=BUCKET)
-    try:
+    with local_s3_server(monkeypatch, BUCKET) as endpoint:
         yield endpoint
-    finally:
-        server.stop()
 
 
 def _keys(endpoint: str, prefix: str = "") -> list[str]:
