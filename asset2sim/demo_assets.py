@@ -279,12 +279,12 @@ def build_trash_can(out_dir: Path) -> Path:
 
 
 def manifest_text() -> str:
-    """The demo ``manifest.csv`` (columns id, category, prompt)."""
+    """The demo ``manifest.csv`` (columns id, category, prompt, task)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["id", "category", "prompt"])
+    w.writerow(["id", "category", "prompt", "task"])
     for entry in DEMO_OBJECTS:
-        w.writerow([entry.asset_id, entry.category, entry.prompt])
+        w.writerow([entry.asset_id, entry.category, entry.prompt, entry.task])
     return buf.getvalue()
 
 

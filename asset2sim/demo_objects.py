@@ -308,9 +308,22 @@ def _trash_can() -> DemoArticulation:
     )
 
 
+#: The manipulation task of each demo category (the manifest's ``task``
+#: column; parsed by :func:`asset2sim.tasks.evaluation.task_spec.parse_task`):
+#: the everyday use of the category's task part, as the dev manifest words it.
+CATEGORY_TASKS: dict[str, str] = {
+    "Box": "close the box lid",
+    "StorageFurniture": "close the cabinet drawer",
+    "Laptop": "close the laptop",
+    "Microwave": "close the microwave door",
+    "TrashCan": "open the trashcan lid",
+}
+
+
 @dataclass(frozen=True)
 class DemoObject:
-    """One entry of the demo dataset: id, category, builder and manifest prompt."""
+    """One entry of the demo dataset: id, category, builder, manifest prompt
+    and task (:data:`CATEGORY_TASKS` of its category)."""
 
     asset_id: str
     category: str
@@ -319,6 +332,11 @@ class DemoObject:
     closed_positions: dict[str, float]
     """Ground truth for tests: joint -> closed position (rad or m, object units).
     Not written into the asset folder (the pipeline must find it itself)."""
+
+    @property
+    def task(self) -> str:
+        """The manipulation task of this object's category."""
+        return CATEGORY_TASKS[self.category]
 
 
 DEMO_OBJECTS: tuple[DemoObject, ...] = (

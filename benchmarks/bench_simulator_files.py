@@ -2,7 +2,10 @@
 folders (each holding ``mobility.urdf``): MuJoCo's URDF importer on the URDF,
 the MJCF (``mjcf/mobility.xml``, or converted in memory when absent) dropped
 from 5 cm, the collision pieces, the parent-child containment at the initial
-state, fixed-joint limits and the lightest link. Prints one row per object and
+state (the depth of the child's vertices inside the parent's pieces, and the
+penetration an engine colliding the pair reports: the hulls' separating-axis
+depth, PyBullet's and MuJoCo's closest points), fixed-joint limits and the
+lightest link. Prints one row per object and
 the counts.
 
     python benchmarks/bench_simulator_files.py OUTPUT_ROOT [--ids 9912,7236] [--convert]
@@ -90,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from asset2sim.engines.loading import collision_pieces, read_initial_state, read_urdf
     from asset2sim.engines.mjcf import mujoco_messages, urdf_to_mjcf
-    from asset2sim.tasks.publish.collision_geometry import Piece, containment_depths
+    from asset2sim.tasks.check.parent_child import parent_child_penetration
+    from asset2sim.tasks.publish.collision_geometry import Piece, containment_depths, parent_child_depths
     from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
 
     folders = [args.root] if (args.root / "mobility.urdf").is_file() else sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
@@ -135,6 +139,15 @@ def main(argv: list[str] | None = None) -> int:
         worst = max(depths.items(), key=lambda kv: kv[1], default=(("", ""), 0.0))
         row["contain_mm"] = round(worst[1] * 1000, 2)
         row["contain_pair"] = "/".join(worst[0])
+        # the same pairs as an engine that collides them sees them: the hulls' penetration depth
+        # (separating axes), PyBullet's and MuJoCo's closest points with the margins removed
+        sat = parent_child_depths(model, hulls, state)
+        row["pc_sat_mm"] = round(max(sat.values(), default=0.0) * 1000, 2)
+        for e in ("pybullet", "mujoco"):
+            m = parent_child_penetration(urdf_path, state, e)
+            row[f"pc_{e}_mm"] = round(m.value, 2)
+            if e == "pybullet":
+                row["pc_pairs"] = m.details["pairs"]
         row["fixed_limit_incomplete"] = sum(
             1 for j in model.joints if j.type == "fixed" and j.limit is not None and (j.limit.effort is None or j.limit.velocity is None)
         )
@@ -174,6 +187,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"flat collision groups: {sum(r['flat_groups'] for r in rows)}; inside-out collision files: {sum(r['inside_out'] for r in rows)}")
     print(f"max pieces per link: {max((r['max_pieces_per_link'] for r in rows), default=0)}")
     print(f"parts > 2 mm inside the parent's hull: {sum(r['contain_mm'] > 2 for r in rows)}/{n} (max {max((r['contain_mm'] for r in rows), default=0)} mm)")
+    for key, what in (("pc_sat_mm", "hull penetration depth (separating axes)"), ("pc_pybullet_mm", "PyBullet closest points - 2 mm margins"),
+                      ("pc_mujoco_mm", "MuJoCo mj_geomDistance")):
+        print(f"child penetrating its parent > 2 mm, pair collided, {what}: {sum(r[key] > 2 for r in rows)}/{n} "
+              f"(max {max((r[key] for r in rows), default=0)} mm)")
     print(f"fixed joints with an incomplete <limit>: {sum(r['fixed_limit_incomplete'] for r in rows)}")
     ms = [r["min_link_mass_g"] for r in rows if r["min_link_mass_g"] is not None]
     print(f"lightest link: {min(ms) if ms else None} g")

@@ -26,8 +26,11 @@ call it was serving is recorded as a ``crash``.
 Protocol (one JSON object per line): the worker writes ``{"spec": path}``
 (the same ``spec.json`` as :func:`run_isolated`: ``target``, ``kwargs``,
 ``result``, ``memory_limit_mb``, ``log``) to the server's stdin; the server
-answers ``{"pid": n}`` when the child runs and ``{"rc": n}`` when it ended
-(``rc`` < 0: killed by signal ``-rc``, the :mod:`subprocess` convention).
+answers ``{"pid": n}`` when the child runs and ``{"rc": n, "cpu": s}`` when
+it ended (``rc`` < 0: killed by signal ``-rc``, the :mod:`subprocess`
+convention; ``cpu`` its CPU time, user + system, from ``wait4``). The
+result's ``extra`` carries ``cpu_seconds`` and, for the call that had to
+start (or restart) the server, ``server_start_seconds``.
 The server's own stdout is redirected away from the protocol pipe, so
 nothing a module prints on import can break it.
 
@@ -71,9 +74,62 @@ WARM_MODULES = (
     "matplotlib.ticker",
     "PIL.Image",
     "PIL.ImageDraw",
+    # imported lazily by the post-check's PhysX run and the USD export: without
+    # them here every forked child paid 0.5-1 s of imports per asset
+    # (measured: a child of a server without them 4.7-7.1 s per synthetic
+    # cabinet, with them 4.7-5.0 s, the same refine in a warm process 4.4 s)
+    "sapien",
+    "sapien.physx",
+    "pxr.Gf",
+    "pxr.Sdf",
+    "pxr.Tf",
+    "pxr.Usd",
+    "pxr.UsdGeom",
+    "pxr.UsdPhysics",
+    "pxr.Vt",
+    "requests",
 )
-#: Project modules the server imports (the stage functions and the refine pipeline).
-PROJECT_MODULES = ("asset2sim.flows.stages", "asset2sim.tasks.refine", "asset2sim.tasks.evaluation.evaluate")
+#: Project modules the server imports (the stage functions, the refine
+#: pipeline and the modules its stages import lazily: engines, priors, USD export).
+PROJECT_MODULES = (
+    "asset2sim.flows.stages",
+    "asset2sim.tasks.refine",
+    "asset2sim.tasks.evaluation.evaluate",
+    "asset2sim.engines.pybullet_engine",
+    "asset2sim.engines.physx_engine",
+    "asset2sim.priors",
+    "asset2sim.tasks.publish.export_usd",
+)
+
+
+def warm_tables() -> list[str]:
+    """Fill the per-process caches of the pipeline's tables before forking:
+    call every module-level function of the loaded ``asset2sim.tasks``
+    modules that is a ``functools.lru_cache(maxsize=1)`` wrapper taking no
+    argument (prior tables, mounting priors, category and label tables:
+    YAML parsed and validated once, 0.2-0.3 s that each forked child paid
+    again). Pure Python, no threads, safe before ``fork``. Returns the names
+    called; one that raises is skipped (the call that needs it fails in its
+    child as it would have)."""
+    import functools
+    import inspect
+
+    done = []
+    for name, mod in sorted(sys.modules.items()):
+        if not name.startswith("asset2sim.tasks.") or mod is None:
+            continue
+        for attr, fn in sorted(vars(mod).items()):
+            info = getattr(fn, "cache_info", None)
+            if info is None or not isinstance(fn, functools._lru_cache_wrapper) or getattr(fn, "__module__", None) != name:
+                continue
+            try:
+                if fn.cache_parameters().get("maxsize") != 1 or inspect.signature(fn).parameters:
+                    continue
+                fn()
+                done.append(f"{name}:{attr}")
+            except Exception:  # noqa: BLE001 - a warm-up only
+                continue
+    return done
 
 
 class StageServer:
@@ -124,6 +180,23 @@ class StageServer:
             self.close()
             raise RuntimeError("the stage server exited before it was ready")
         self.started_seconds = time.perf_counter() - t0
+
+    def start_soon(self) -> None:
+        """Start the server in a background thread unless it runs (a call
+        made meanwhile waits for it): its imports overlap the worker's other
+        work, e.g. reading the assets of a batch."""
+        if self.alive():
+            return
+
+        def run() -> None:
+            with self._lock:
+                if not self.alive():
+                    try:
+                        self.start()
+                    except RuntimeError:  # the next call starts it again and reports the failure
+                        pass
+
+        threading.Thread(target=run, name="asset2sim-stage-server-start", daemon=True).start()
 
     def close(self) -> None:
         """Stop the server (SIGKILL of its process group; children end with it)."""
@@ -184,7 +257,9 @@ class StageServer:
         """
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout}")
+        t_start = time.perf_counter()
         with self._lock:
+            waited = time.perf_counter() - t_start  # a start begun by start_soon()
             workdir = Path(workdir)
             workdir.mkdir(parents=True, exist_ok=True)
             result_path, log = workdir / "result.json", workdir / "child.log"
@@ -193,15 +268,20 @@ class StageServer:
             spec = workdir / "spec.json"
             atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path),
                                      "memory_limit_mb": memory_limit_mb, "log": str(log)})
-            if not self.alive():
+            started = not self.alive()
+            if started:
                 self.start()
             t0 = time.perf_counter()
             if not self._send({"spec": str(spec)}):
                 self.start()
+                started = True
                 if not self._send({"spec": str(spec)}):
                     raise RuntimeError("the stage server does not take calls")
             self.calls += 1
-            return self._wait(t0, timeout, result_path, log)
+            res = self._wait(t0, timeout, result_path, log)
+            if started or waited > 0.05:  # paid once per worker (and after a lost server), not by the call
+                res.extra["server_start_seconds"] = t0 - t_start
+            return res
 
     def _wait(self, t0: float, timeout: float, result_path: Path, log: Path) -> IsolatedResult:
         def lost() -> IsolatedResult:
@@ -236,18 +316,19 @@ class StageServer:
             return lost()
         rc = int(msg["rc"])
         seconds = time.perf_counter() - t0
+        extra = {} if msg.get("cpu") is None else {"cpu_seconds": float(msg["cpu"])}
         try:
             data = json.loads(result_path.read_text())
         except (OSError, ValueError):
             sig = -rc if rc < 0 else None
             what = f"killed by signal {sig} ({signal.Signals(sig).name})" if sig else f"exited with code {rc}"
             return IsolatedResult(status="crash", error=f"child process {what} without a result", failure_mode="crash",
-                                  returncode=rc, seconds=seconds, log_tail=_tail(log))
+                                  returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
         if data.get("ok"):
-            return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds)
+            return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds, extra=extra)
         return IsolatedResult(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
                               failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""),
-                              returncode=rc, seconds=seconds, log_tail=_tail(log))
+                              returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
 
 
 _OWNER: dict[int, tuple[threading.Thread, queue.Queue]] = {}
@@ -298,6 +379,17 @@ def worker_server(preload: tuple[str, ...] = ()) -> StageServer:
         if srv is None:
             srv = _SERVERS[os.getpid()] = StageServer(preload)
         return srv
+
+
+def start_soon(preload: tuple[str, ...] = ()) -> None:
+    """Start this process's stage server (:func:`worker_server`) in the
+    background if it does not run yet."""
+    srv = worker_server(preload)
+    for mod in preload:
+        if mod not in srv.preload:
+            srv.preload = (*srv.preload, mod)
+            srv.close()
+    srv.start_soon()
 
 
 def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
@@ -351,6 +443,7 @@ def _server_main(argv: list[str]) -> int:
             importlib.import_module(mod)
         except Exception:  # noqa: BLE001 - a missing optional package: the call that needs it fails in its child
             pass
+    warm_tables()
     out = os.fdopen(out_fd, "w", buffering=1)
 
     def say(obj: dict[str, Any]) -> None:
@@ -369,9 +462,9 @@ def _server_main(argv: list[str]) -> int:
         if pid == 0:
             _run_child(spec, out_fd)
         say({"pid": pid})
-        _, status = os.waitpid(pid, 0)
+        _, status, usage = os.wait4(pid, 0)
         rc = -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
-        say({"rc": rc})
+        say({"rc": rc, "cpu": round(usage.ru_utime + usage.ru_stime, 4)})  # the child's CPU time (user + system, s)
     return 0
 
 

@@ -5,7 +5,10 @@ Shape (DEVELOPERS.md, "Shape of the product")::
 
     refine_dataset (Prefect flow, driver process)
       load catalog.yaml -> plan_jobs (demo assets generated if needed, manifest)
-      -> refine_assets (Prefect subflow on a DaskTaskRunner)
+      -> skips decided by the driver (asset2sim.flows.driver_skip: unchanged
+         input folder, earlier result still complete): their rows at once
+      -> refine_assets (Prefect subflow on a DaskTaskRunner; not started
+         when nothing is left)
            per asset, a chain of stages on Dask workers in two Prefect tasks,
            ``prepare`` (a batch of assets per task) and ``refine-metrics``:
              prepare  (read the asset: input hash, skip when finished)
@@ -94,8 +97,11 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
+import logging
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from datetime import datetime, timezone
 from pathlib import Path
@@ -108,7 +114,7 @@ from prefect.futures import as_completed
 from asset2sim import catalog_compare, catalog_finish, flow_progress, queries, tracking
 from asset2sim.catalog import ResultCatalog, load_catalog
 from asset2sim.flow_progress import ProgressEvent
-from asset2sim.flows import server, stages
+from asset2sim.flows import driver_skip, server, stages
 from asset2sim.flows.store import join_uri, upload_folder
 from asset2sim.flows.stages import (  # re-exported: the flow's public names
     FLOW_NAME,
@@ -190,6 +196,7 @@ def refine_assets(
     retry_delay_seconds: float = 10.0,
     parent_flow_run_id: str | None = None,
     batch_size: int = 1,
+    fingerprints: dict[str, str | None] | None = None,
 ) -> dict[str, Any]:
     """Fan out one ``prepare -> refine -> metrics (-> publish)`` chain per
     asset on the flow's task runner and append each asset's catalog row
@@ -199,8 +206,13 @@ def refine_assets(
     only for assets not skipped); each Prefect task costs a few calls to
     the Prefect API, paid per task.
 
+    ``fingerprints``: asset id -> folder fingerprint taken by the driver
+    before the run (:func:`asset2sim.flows.driver_skip.input_fingerprint`),
+    recorded with what the input stage found.
+
     Returns:
-        ``{"rows": [CatalogRow, ...], "body_started": epoch s, "body_seconds": s}``.
+        ``{"rows": [CatalogRow, ...], "inputs": {asset id: InputEntry},
+        "body_started": epoch s, "body_seconds": s}``.
     """
     log = get_run_logger()
     flow_run_id = parent_flow_run_id or _current_flow_run_id()
@@ -212,6 +224,7 @@ def refine_assets(
     )  # fmt: skip
     rows = []
     starts: dict[str, float] = {}
+    inputs: dict[str, driver_skip.InputEntry] = {}
 
     def record(job: AssetJob, prepared, refined, measured, exc: BaseException | None, published=None) -> None:
         publish_error = None
@@ -229,6 +242,7 @@ def refine_assets(
             failure_mode=None if exc is None else exception_failure_mode(exc, ModelCallFailure),
             flow_run_id=flow_run_id, started_at=starts[job.asset_id], finished_at=time.time(),
         )  # fmt: skip
+        _add_isolation_times(row, refined, measured)
         store.append_row(job.dataset, job.run_id, row)
         rows.append(row)
         flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
@@ -254,6 +268,10 @@ def refine_assets(
             exc = exc_b if exc_b is not None else (prepared if isinstance(prepared, BaseException) else None)
             if exc is not None:
                 prepared = None
+            else:
+                entry = driver_skip.entry_for(job, prepared, (fingerprints or {}).get(job.asset_id))
+                if entry is not None:
+                    inputs[job.asset_id] = entry
             if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
                 record(job, prepared, None, None, exc)
                 continue
@@ -268,7 +286,7 @@ def refine_assets(
             record(job, prepared, None, None, exc)
         else:
             record(job, prepared, res.refined, res.measured, res.error, res.published)
-    return {"rows": rows, "body_started": body_started, "body_seconds": time.time() - body_started}
+    return {"rows": rows, "inputs": inputs, "body_started": body_started, "body_seconds": time.time() - body_started}
 
 
 @flow(name=FLOW_NAME, persist_result=False)
@@ -286,13 +304,74 @@ def refine_dataset(
     in ``catalog``, publishing the outputs to ``out`` (default: ``catalog.yaml``
     ``output_store``, else ``output_root``); returns the run summary (see
     :func:`run_refine_flow`)."""
-    log = get_run_logger()
-    t0, body_started_epoch = time.perf_counter(), time.time()
-    started = datetime.now(timezone.utc)
-    cat = load_catalog(catalog)
-    name, _ = cat.dataset(dataset)
+    return run_dataset(get_run_logger(), catalog, dataset, workers, dask_address, ids=ids, limit=limit,
+                       force=force, out=out)
+
+
+@dataclasses.dataclass
+class DriverPlan:
+    """A run planned by the driver before any Prefect flow or Dask cluster
+    starts: the run's id and start, its :class:`~asset2sim.flows.stages.RunPlan`,
+    the folder fingerprints of its assets and the assets the driver skips
+    (:mod:`asset2sim.flows.driver_skip`: asset id -> prepared record)."""
+
+    run_id: str
+    started: datetime
+    plan: Any
+    fingerprints: dict[str, str | None]
+    skips: dict[str, Prepared]
+
+    @property
+    def pending(self) -> list[AssetJob]:
+        """The jobs left for the workers."""
+        return [j for j in self.plan.jobs if j.asset_id not in self.skips]
+
+
+def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None,
+                started: datetime | None = None) -> DriverPlan:
+    """Plan a run of dataset ``name`` and decide in this process which assets
+    are finished already (:func:`asset2sim.flows.driver_skip.decide_skips`:
+    unchanged input folder, earlier result still complete); none when ``force``.
+
+    Raises:
+        CatalogError: as :func:`asset2sim.flows.stages.plan_run`.
+    """
+    started = started or datetime.now(timezone.utc)
     run_id = make_run_id(started)
     plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)
+    fps = driver_skip.fingerprints(plan.jobs)
+    skips = {} if force else driver_skip.decide_skips(
+        plan.jobs, driver_skip.read_index(ResultCatalog(cat.catalog_root), name), fps,
+        stages.job_config_hash, stages.finished_in_store)
+    return DriverPlan(run_id=run_id, started=started, plan=plan, fingerprints=fps, skips=skips)
+
+
+def run_dataset(
+    log,
+    catalog: str = "catalog.yaml",
+    dataset: str | None = None,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    *,
+    ids: list[str] | None = None,
+    limit: int | None = None,
+    force: bool = False,
+    out: str | None = None,
+    planned: DriverPlan | None = None,
+) -> dict[str, Any]:
+    """The body of :func:`refine_dataset` (in a Prefect flow run, or, for a
+    run that has nothing to dispatch, without one: :func:`run_refine_flow`);
+    ``log`` the logger; ``planned`` a plan made already by :func:`plan_driver`.
+
+    Assets the driver can skip (:mod:`asset2sim.flows.driver_skip`) get
+    their rows here; only the others go to the Dask workers, and with none
+    left no Dask cluster and no Prefect task starts."""
+    t0, body_started_epoch = time.perf_counter(), time.time()
+    cat = load_catalog(catalog)
+    name, _ = cat.dataset(dataset)
+    if planned is None:
+        planned = plan_driver(cat, name, ids=ids, limit=limit, force=force, out=out)
+    started, run_id, plan = planned.started, planned.run_id, planned.plan
     jobs = plan.jobs
     address = dask_address or os.environ.get("DASK_ADDRESS") or None
     n_workers = workers or cat.config.run.workers
@@ -306,7 +385,17 @@ def refine_dataset(
     _record_bad_rows(store, cat, name, run_id, plan.bad_rows, info["flow_run_id"], info["code_version"])
     for bad in plan.bad_rows:
         log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
-    timing = _fan_out(cat, jobs, n_workers, address, info["flow_run_id"])
+    _record_driver_skips(store, jobs, planned.skips, info["flow_run_id"])
+    pending = planned.pending
+    if planned.skips:
+        log.info("%d of %d assets finished already (decided by the driver); %d to the workers",
+                 len(planned.skips), len(jobs), len(pending))
+    timing = _fan_out(cat, pending, n_workers, address, info["flow_run_id"], planned.fingerprints)
+    try:  # the input index: the next run's skip decisions (a cache: a failed write costs only a miss)
+        driver_skip.write_index(store, name, timing.pop("inputs", {}))
+    except (OSError, ValueError) as exc:
+        log.warning("input index not written: %s: %s", type(exc).__name__, exc)
+    timing["driver_skipped"] = len(planned.skips)
     t_track = time.perf_counter()
     flow_progress.emit(ProgressEvent("run_finished", name, run_id, total=info["assets"]))
 
@@ -336,8 +425,10 @@ def refine_dataset(
                                                    extra_tags=finish.comparison.tags())
     if tracking_error:
         log.warning("MLflow tracking failed: %s", tracking_error)
-    _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id)
+    if info["flow_run_id"]:  # in a Prefect flow run
+        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
     summary.update(
+        flow_run_id=info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
         mlflow_run_id=mlflow_run_id,
         tracking_error=tracking_error,
         tracking_seconds=time.perf_counter() - t_track,
@@ -378,6 +469,52 @@ def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows
                                          failure_mode=row.failure_mode, seconds=0.0))
 
 
+def _add_isolation_times(row, refined, measured) -> None:
+    """Add to the row's ``stage_seconds`` what the isolated stages measured
+    besides their wall time (:mod:`.forkserver`): ``cpu.refine`` /
+    ``cpu.metrics``, the CPU time (user + system, s) of the stage's child
+    process, and ``isolation.server_start``, the start of the worker's stage
+    server when this asset's call had to start it (included in the stage's
+    wall time; once per worker). Keys with a dot are not summed into
+    ``wall_seconds``."""
+    add: dict[str, float] = {}
+    for name, rec in (("refine", refined), ("metrics", measured)):
+        extra = (getattr(rec, "model_extra", None) or {}).get("extra") if rec is not None else None
+        if not isinstance(extra, dict):
+            continue
+        if extra.get("cpu_seconds") is not None:
+            add[f"cpu.{name}"] = round(float(extra["cpu_seconds"]), 4)
+        if extra.get("server_start_seconds") is not None:
+            add["isolation.server_start"] = round(add.get("isolation.server_start", 0.0) + float(extra["server_start_seconds"]), 4)
+    if add:
+        stages_s = json.loads(row.stage_seconds or "{}")
+        stages_s.update(add)
+        row.stage_seconds = json.dumps(stages_s, sort_keys=True)
+
+
+def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict[str, Prepared],
+                         flow_run_id: str | None) -> None:
+    """The catalog row of each asset the driver skipped (``skips``: asset id
+    -> prepared record with the earlier row), written before any worker
+    starts (a few threads: each row is one atomic file write)."""
+    todo = [job for job in jobs if job.asset_id in skips]
+    if not todo:
+        return
+
+    def write(job: AssetJob):
+        prepared = skips[job.asset_id]
+        t = time.time()
+        row = build_row(job, prepared, None, None, flow_run_id=flow_run_id,
+                        started_at=t - float(prepared.seconds or 0.0), finished_at=t)
+        store.append_row(job.dataset, job.run_id, row)
+        return job, row
+
+    with ThreadPoolExecutor(max_workers=min(4, len(todo))) as pool:
+        for job, row in pool.map(write, todo):  # progress events from this thread, in manifest order
+            flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
+                                             status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
+
+
 def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
                     started: float) -> Prepared | None:
     """Write the catalog row an earlier, killed run owed for its complete
@@ -400,7 +537,7 @@ def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, ref
     return prepared.model_copy(update={"skip": prev})
 
 
-def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None) -> None:
+def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:
     """A markdown artifact on the Prefect flow run (shown in the Prefect UI)
     with the run's counts, the regression check and the MLflow run id, so
     both UIs show the same run. Best effort: a failure is logged, not raised."""
@@ -420,7 +557,7 @@ def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id
         create_markdown_artifact(markdown="\n".join(lines), key="asset2sim-run-summary",
                                  description=f"asset2sim {summary['dataset']} / {summary['run']}")
     except Exception as exc:  # the catalog and MLflow are the record
-        get_run_logger().warning("Prefect summary artifact not created: %s", exc)
+        log.warning("Prefect summary artifact not created: %s", exc)
 
 
 def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJob], n_workers, address) -> dict[str, Any]:
@@ -442,10 +579,14 @@ def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJo
     }
 
 
-def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id) -> dict[str, float]:
-    """Run :func:`refine_assets` on a Dask task runner; its timings (s):
-    ``dask_startup_seconds``, ``assets_seconds``, ``dask_teardown_seconds``."""
-    timing = {"dask_startup_seconds": 0.0, "assets_seconds": 0.0, "dask_teardown_seconds": 0.0}
+def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
+             fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
+    """Run :func:`refine_assets` on a Dask task runner (nothing starts for no
+    jobs); its timings (s): ``dask_startup_seconds``, ``assets_seconds``,
+    ``dask_teardown_seconds``, and ``inputs``: the input index entries of the
+    assets it read (:mod:`asset2sim.flows.driver_skip`)."""
+    timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "assets_seconds": 0.0, "dask_teardown_seconds": 0.0,
+                              "inputs": {}}
     if not jobs:
         return timing
     t_fan, t_fan_epoch = time.perf_counter(), time.time()
@@ -457,7 +598,9 @@ def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id) -> dict
         retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
         batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
         parent_flow_run_id=flow_run_id,
+        fingerprints={j.asset_id: (fingerprints or {}).get(j.asset_id) for j in jobs},
     )
+    timing["inputs"] = out.get("inputs", {})
     fan_seconds = time.perf_counter() - t_fan
     timing["dask_startup_seconds"] = max(0.0, out["body_started"] - t_fan_epoch)
     timing["assets_seconds"] = out["body_seconds"]
@@ -570,11 +713,29 @@ def run_refine_flow(
     for the caller's exit status. Call from a ``__main__``-guarded program:
     the local Dask cluster starts worker processes.
 
+    With no Prefect server configured (``PREFECT_API_URL`` unset) the run is
+    planned here first; when the driver finds every asset finished already
+    (:mod:`asset2sim.flows.driver_skip`) the run is recorded (skipped rows,
+    compaction, comparison, MLflow) without a Prefect flow run, a temporary
+    server or a Dask cluster (``summary["driver_skipped"]``, no
+    ``prefect.flow_run_id``): a rerun of a finished dataset takes seconds.
+
     Raises:
         CatalogError: invalid catalog or manifest (before any asset runs).
     """
     params = flow_parameters(catalog, dataset, workers, dask_address, out)
     cat = load_catalog(params["catalog"])  # fail early, before the flow starts
+    if not _prefect_api_configured():
+        # no Prefect server to talk to: plan here first; a run with nothing to
+        # dispatch (every asset finished) starts neither a server nor Dask
+        name, _ = cat.dataset(dataset)
+        planned = plan_driver(cat, name, ids=ids, limit=limit, force=force, out=params.get("out"))
+        if not planned.pending:
+            try:
+                return run_dataset(logging.getLogger("asset2sim.flow"), **params, ids=ids, limit=limit, force=force,
+                                   planned=planned)
+            except RegressionFailure as exc:  # recorded and reported; the caller sets the exit status
+                return exc.summary
     with prefect_api_for_run(cat.project_root):
         state = refine_dataset(**params, ids=ids, limit=limit, force=force, return_state=True)
     if state.is_failed():
@@ -582,6 +743,14 @@ def run_refine_flow(
         if isinstance(exc, RegressionFailure):  # recorded and reported; the caller sets the exit status
             return exc.summary
     return state.result(raise_on_failure=True)
+
+
+def _prefect_api_configured() -> bool:
+    """True when ``PREFECT_API_URL`` names a Prefect server (else a run
+    starts a temporary one)."""
+    from prefect.settings import PREFECT_API_URL
+
+    return bool(PREFECT_API_URL.value())
 
 
 @contextlib.contextmanager

@@ -54,7 +54,7 @@ from asset2sim.catalog import (
 )
 from asset2sim.demo_assets import ensure_demo_dataset
 from asset2sim.flows import store as store_mod
-from asset2sim.flows.forkserver import run_forked
+from asset2sim.flows.forkserver import run_forked, start_soon
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig, SimConventions
@@ -419,7 +419,11 @@ def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
     """:func:`prepare_asset` for several jobs in one call (one task of the
     flow's task runner instead of one per asset: a rerun of finished assets
     pays the orchestration once per batch). An exception of one job is its
-    item of the list; the others go on."""
+    item of the list; the others go on. Starts this worker's stage server
+    in the background meanwhile when the jobs run isolated in it."""
+    for job in jobs[:1]:
+        if job.isolation == "process":
+            start_soon((job.refine_function.split(":", 1)[0],))
     out: list[Prepared | Exception] = []
     for job in jobs:
         try:

@@ -73,6 +73,8 @@ METRIC_INFO: dict[str, MetricInfo] = {
                    "the task's peak operating force (and hinge torque) inside the real operating range of the category and part"),
         MetricInfo("state_hold", "rad|m", "check", "every joint stays within the sag tolerance of its initial state"),
         MetricInfo("settle_tilt", "rad", "check", "root rotation while settling (the object fell over)"),
+        MetricInfo("parent_child_penetration", "mm", "check",
+                   "deepest penetration of a child into its parent's collision shapes at the initial state, the pair collided"),
     )
 }  # fmt: skip
 

@@ -84,6 +84,8 @@ class RefineReport(BaseModel):
     source: str
     prompt: str
     category: str | None
+    task: str | None = None
+    """The manipulation task refine was given (``--task``): its post-check executed it (tiers task, force)."""
     version: str
     input_hash: str
     config_hash: str

@@ -33,7 +33,7 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import manipulation, operating, parity, postcheck, robust_rest, sweep
+from asset2sim.tasks.check import manipulation, operating, parity, postcheck, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
@@ -51,7 +51,7 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import clearance, collision, ground_clearance, pose, refine_state, stability
+from asset2sim.tasks.state import clearance, collision, ground_clearance, pose, refine_state, stability, stop_repair
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
@@ -97,6 +97,7 @@ def refine_asset(
     overwrite: bool = False,
     extracted: tuple[AssetDescription, list[Finding]] | None = None,
     reference: Path | str | None = None,
+    task: str | None = None,
 ) -> RefineResult:
     """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``.
 
@@ -123,6 +124,12 @@ def refine_asset(
         reference: PartNet-Mobility folder with the reference (GenSim2) for
             the extras' evaluation (scale deviation, initial joint deviation,
             task-relevant joints); None: evaluated without one.
+        task: the manipulation task ("close the microwave door"): the
+            post-check executes it with the gripper (tiers ``task`` and
+            ``force``, :mod:`asset2sim.tasks.check.task_tier`) and the
+            operating budget of friction and damping follows its direction
+            (:func:`asset2sim.tasks.check.operating.operating_budgets`); None:
+            both directions, no task tier.
 
     Returns:
         :class:`RefineResult`; ``report.failure_mode`` is "none" when every
@@ -140,7 +147,7 @@ def refine_asset(
     est = _open_estimator(config)  # first: a model backend without its key fails before any work
     log = _StageLog(progress)
     asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted)
-    chash = run_hash(asset.input_hash, config, prompt, category)
+    chash = run_hash(asset.input_hash, config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
@@ -149,6 +156,7 @@ def refine_asset(
         cache = analyze.MeshCache()
         geometry = _analyze(asset, cache, log)
         with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
+            ctx.task = task
             pose_note = _interpret(ctx, log)
             att, pose_note = _synthesize_and_check(ctx, est, config, out_dir, cache, log, pose_note)
         _remove_stale_collision(owner, asset, att.overrides)
@@ -366,7 +374,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
         write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
         reclipped, closed_re = _clip_limits(unclipped, closed_raw, state, urdf, config, log)
         syn = replace(syn, overlay=reclipped, closed_out=closed_re)
-    balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category)
+    balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
     design = floored + design
     for line in design:
         log.say("stability", line)
@@ -499,13 +507,15 @@ def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config:
 
 
 def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], urdf: Path, config: RefineConfig,
-                 log: _StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
+                 log: _StageLog, chain_open: bool = False) -> tuple[Overlay, dict[str, ClosedState]]:
     """Stage 6b: joint limits clipped to what the geometry allows at the
     refined state (:mod:`asset2sim.tasks.geometry.limits`; the writer writes
-    them, the sweep measures against them). Returns (overlay, closed ends)."""
+    them, the sweep measures against them; ``chain_open``: also against the
+    carrying chain with the joints between open, step 6). Returns (overlay, closed ends)."""
     with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                        conventions=config.sim)) as sess:
-        clips = limits.geometric_limits(sess, read_urdf(urdf), manipulation.closed_tuples(closed_out), state)
+        clips = limits.geometric_limits(sess, read_urdf(urdf), manipulation.closed_tuples(closed_out), state,
+                                        chain_open=chain_open)
     if not any(c.clipped for c in clips.values()):
         log.lap("limits")
         return overlay, closed_out
@@ -518,43 +528,72 @@ def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: di
 
 def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
                   state: dict[str, float], urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog):
-    """Stage 7b: where the joint sweep is blocked by a sliding contact, give
-    the moving pieces running clearance (:mod:`asset2sim.tasks.state.clearance`),
-    clip the limits again from ``unclipped`` (the overlay before stage 6b) and
-    ``closed_raw`` (contacts changed) and post-check again; kept only when
-    fewer joints fail the sweep and no metric that passed fails (else the
-    files are written back). ``result``: (overlay, check, rounds, collision
-    overrides, closed ends) so far, returned unchanged or replaced; notes go
-    to ``st.collision_changes``."""
+    """Stage 7b: where the joint sweep stops short, the repairs of
+    :func:`_sweep_repairs` in turn (limits against the carrying chain,
+    running clearance, convex decomposition); each is written, the limits
+    clipped again from ``unclipped`` (the overlay before stage 6b) and
+    ``closed_raw`` (contacts changed) and the asset post-checked again; the
+    first that makes the sweep better (fewer failing joints, else a smaller
+    shortfall) while no metric that passed fails is kept (else the files are
+    written back and the next is tried). ``result``: (overlay, check, rounds,
+    collision overrides, closed ends) so far, returned unchanged or
+    replaced; notes go to ``st.collision_changes``."""
     overlay, check, rounds, overrides, closed_out = result
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
     if not blocked:
         return result
     model = read_urdf(urdf)
-    rep = clearance.clearance_for_blocked(model, urdf, blocked, state, limits.subtrees(model))
-    if not rep.pieces:
-        return result
-    new = {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))}
-    write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=new, root_rotation=ctx.root_rotation)
-    clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log)
-    ov2, check2, rounds2 = _post_check(ctx, clipped, state, new, urdf, config, out_dir, log, closed=manipulation.closed_tuples(closed2))
-    sw2 = next(m for m in check2.metrics if m.name == "joint_sweep")
-    passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
-    lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
-    if sweep.sweep_score(sw2) < sweep.sweep_score(sw) and not lost:
-        for line in rep.notes:
-            log.say("sweep_repair", line)
-        st.collision_changes = list(st.collision_changes) + rep.notes
-        n = len(rounds)
-        rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"running clearance (sweep blocked): {r.reason}"})
-                           for r in rounds2]
-        return ov2, check2, rounds, new, closed2
-    log.say("sweep_repair", f"running clearance not kept (sweep failures {sw.value:g} -> {sw2.value:g}: "
-                            f"{'; '.join(sw2.details.get('failures') or []) or 'none'}"
-                            f"{'; would fail ' + ', '.join(lost) if lost else ''}); collision pieces kept")
-    write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
+    for what, new, notes, chain_open in _sweep_repairs(ctx, model, unclipped, sw, blocked, overrides, state, urdf, config, out_dir):
+        write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=new, root_rotation=ctx.root_rotation)
+        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=chain_open)
+        ov2, check2, rounds2 = _post_check(ctx, clipped, state, new, urdf, config, out_dir, log, closed=manipulation.closed_tuples(closed2))
+        sw2 = next(m for m in check2.metrics if m.name == "joint_sweep")
+        passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
+        lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
+        if sweep.sweep_score(sw2) < sweep.sweep_score(sw) and not lost:
+            for line in notes:
+                log.say("sweep_repair", line)
+            st.collision_changes = list(st.collision_changes) + notes
+            n = len(rounds)
+            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{what} (sweep blocked): {r.reason}"})
+                               for r in rounds2]
+            return ov2, check2, rounds, new, closed2
+        log.say("sweep_repair", f"{what} not kept (sweep failures {sw.value:g} -> {sw2.value:g}: "
+                                f"{'; '.join(sw2.details.get('failures') or []) or 'none'}"
+                                f"{'; would fail ' + ', '.join(lost) if lost else ''}); the asset kept as it was")
+        write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return result
+
+
+def _sweep_repairs(ctx: EstimationContext, model, unclipped: Overlay, sw, blocked: dict[str, float], overrides: dict,
+                   state: dict[str, float], urdf: Path, config: RefineConfig, out_dir: Path):
+    """The candidate repairs of stage 7b, lazily, in order: (what, collision
+    overrides, notes, clip against the carrying chain):
+
+    1. a blocked joint carried by a moving part (a stapler's magazine on its
+       top): its limit clipped where it meets the chain with the joints
+       between open (:mod:`asset2sim.tasks.geometry.limits`, step 6);
+    2. running clearance for sliding contacts (:mod:`asset2sim.tasks.state.clearance`);
+    3. convex decomposition where a hull that bulges stops the part
+       (:mod:`asset2sim.tasks.state.stop_repair`; with ``config.convex_decomposition``)."""
+    if any(limits.chain_links(model, j) for j in blocked):
+        yield "limits against the carrying chain", overrides, [], True
+    rep = clearance.clearance_for_blocked(model, urdf, blocked, state, limits.subtrees(model))
+    if rep.pieces:
+        yield ("running clearance", {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))},
+               rep.notes, False)
+        return
+    if not config.convex_decomposition:
+        return
+    try:
+        dec, notes = stop_repair.decompose_for_blocked(
+            model, urdf, ctx.asset, sw, state, limits.subtrees(model), set(overrides), unclipped.scale, out_dir,
+            write.collision_folder(ctx.asset), budget_s=config.decomposition_budget, conventions=config.sim)
+    except collision.DecompositionUnavailable:
+        return
+    if dec:
+        yield "convex decomposition", {**overrides, **dec}, notes, False
 
 
 def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
@@ -571,22 +610,45 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
     n = 0
-    caps = operating.friction_caps(overlay, overlay, asset, ctx.geometry)
+    spec = task_tier.task_spec_for(ctx.task, urdf, asset, ctx.category, estimate.task_relevant_joints(ctx)) if ctx.task and closed else None
+    # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
+    lim = task_tier.operating_limits(urdf, state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
+                                     free_moving=ctx.request.free_moving, conventions=config.sim,
+                                     joints=spec.joints if spec is not None else None)
+    bounded, notes = operating.bound_overlay(overlay, lim.budgets)
+    for line in notes:
+        log.say("post_check", line)
+    if bounded != overlay:
+        overlay = bounded
+        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+    caps, dcaps = lim.friction_caps, lim.damping_caps
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:
         """This loop escalates ``chk`` into another round (the post-check then skips the sweep)."""
-        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps, floors)[1])
+        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps)[1])
 
-    check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded)
+    def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:
+        """The task tier appended to ``chk`` when refine was given a task."""
+        if spec is not None:
+            chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
+                "pybullet", urdf, state, postcheck.springs_of(overlay), config.sim, closed, spec, asset, ctx.category,
+                fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
+                free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring)]
+        return chk
+
+    check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
-    while not check.passed and n < config.max_escalation_rounds:
+    while (not check.passed or task_tier.task_failing(check.metrics)) and n < config.max_escalation_rounds:
         n += 1
-        overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors)
+        # a task that needed more than a real operating force first: lower friction / damping (and their caps)
+        overlay, changes, reason = task_tier.relieve(overlay, check.metrics, lim)
+        if not changes:
+            overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-        check = postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded)
+        check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return overlay, check, rounds
@@ -666,6 +728,7 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         source=str(asset.source_dir),
         prompt=prompt,
         category=ctx.category,
+        task=ctx.task,
         version=__version__,
         input_hash=asset.input_hash,
         config_hash=chash,

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from asset2sim import demo_assets
 from asset2sim.commands import refine as refine_cmd
+from asset2sim.demo_objects import CATEGORY_TASKS
 
 NAME = "demo"
 HELP = "Build a demo articulated object (a box with a hinged lid) from geometry and refine it end to end."
@@ -16,6 +17,8 @@ HELP = "Build a demo articulated object (a box with a hinged lid) from geometry 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", "-o", type=Path, default=Path("out/demo"), help="output folder (default out/demo)")
     parser.add_argument("--prompt", "-p", default="A small box with its lid slightly open. Low damping hinge.")
+    parser.add_argument("--task", default=CATEGORY_TASKS["Box"],
+                        help=f"the manipulation task the gripper executes (default {CATEGORY_TASKS['Box']!r}, the Box category's)")
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
 
 
@@ -28,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
             prompt=args.prompt,
             out=args.out,
             category=None,
+            task=args.task,
             estimator="offline",
             model=None,
             base_url=None,

@@ -112,7 +112,9 @@ def run(args: argparse.Namespace) -> int:
           f"queries/asset {_fmt(summary.get('queries_per_asset'))}")
     modes = {k: v for k, v in (summary.get("failure_modes") or {}).items() if v}
     print("  failure modes: " + (", ".join(f"{k} {v}" for k, v in modes.items()) or "none"))
-    print(f"  wall time {total:.1f} s: Prefect start-up {prefect_s:.1f} s, Dask start-up + tear-down {dask_s:.1f} s, "
+    startup = (f"Prefect start-up {prefect_s:.1f} s" if summary.get("flow_run_id")
+               else "no Prefect flow run (nothing to dispatch)")
+    print(f"  wall time {total:.1f} s: {startup}, Dask start-up + tear-down {dask_s:.1f} s, "
           f"assets {assets_s:.1f} s"
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")

@@ -41,6 +41,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
     parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")
     parser.add_argument(
+        "--task",
+        default=None,
+        help='the manipulation task, e.g. "close the microwave door": the post-check executes it with a force- and '
+             "speed-limited gripper (tiers task and force) and friction and damping are kept to what a real operating "
+             "force overcomes in its direction (docs/metrics.md)",
+    )
+    parser.add_argument(
         "--estimator",
         default="offline",
         help="overlay estimator: offline (default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
@@ -78,6 +85,7 @@ def summary_lines(result) -> list[str]:
         f"scale        {r.scale:.4g}",
         f"total mass   {r.total_mass:.4g} kg",
         f"initial state {state}  (rad / m)",
+    ] + ([f"task         {r.task}"] if r.task else []) + [
         f"penetration  {pen.value:.3f} mm" if pen and pen.value is not None else "penetration  n/a",
         (
             f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad)"
@@ -124,9 +132,11 @@ def _tiers(report) -> str:
 
 
 def _manipulation_line(report) -> str:
-    """Joint sweep and robust rest of the post-check, one line."""
+    """Joint sweep, robust rest and (with a task) task execution and operating
+    force of the post-check, one line."""
     parts = []
-    for name, label in (("joint_sweep", "sweep"), ("robust_rest", "robust rest")):
+    for name, label in (("joint_sweep", "sweep"), ("robust_rest", "robust rest"), ("task_execution", "task"),
+                        ("operating_force", "force")):
         m = report.metric(name)
         if m is None:
             continue
@@ -185,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
             args.out,
             config,
             category=args.category,
+            task=getattr(args, "task", None) or None,
             progress=progress,
             skip_if_complete=not args.force,
             extras=not args.no_extras,

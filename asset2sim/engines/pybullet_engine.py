@@ -187,8 +187,13 @@ class PyBulletSession:
         return float(s[0]), float(s[1])
 
     def joint_axis(self, joint: str) -> np.ndarray:
-        info = self._p.getJointInfo(self.body, self._index[joint], physicsClientId=self.cid)
-        return np.array(info[13], float)
+        # getJointInfo's axis is in the child's local inertial frame, which Bullet
+        # turns to the principal axes of a non-diagonal inertia tensor: back to the link frame.
+        idx = self._index[joint]
+        info = self._p.getJointInfo(self.body, idx, physicsClientId=self.cid)
+        orn = self._p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)[4]
+        R = np.array(self._p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+        return R @ np.array(info[13], float)
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:

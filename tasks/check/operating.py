@@ -40,13 +40,21 @@ Definitions (SI units; ``docs/metrics.md``, section "Operable friction"):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
+from asset2sim.engines.base import SessionOptions, SimSession, open_session, quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
+from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.check.probes import ProbeConfig
+from asset2sim.tasks.check.force_ranges import operating_range
+from asset2sim.tasks.check.gripper import GripperLimits, contact_point_rule, grasp_side
+from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import max_stable_friction
+from asset2sim.urdf import UrdfModel, read_urdf
 
 GRAVITY = 9.81
 """m/s^2"""
@@ -165,3 +173,281 @@ def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt
         base = before.joints[name].friction if name in before.joints else d.friction
         floors[name] = float(base + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
     return floors
+
+
+# ------------------------------------------------------------------ operating budget
+#: Coulomb friction between a free object and the ground (dimensionless): the
+#: SPEC ground friction of task execution (PyBullet's default lateral friction
+#: 0.5 of the link times the plane's 0.5; ``docs/metrics.md``, "task_execution" 1),
+#: or 0.5 x the ``<contact><lateral_friction>`` a link writes.
+GROUND_FRICTION = 0.25
+#: Share of the allowed operating force that friction, damping at the
+#: gripper's top speed and gravity may take (dimensionless); the rest covers
+#: accelerating the part and the gripper's tracking transients.
+BUDGET_SHARE = 0.95
+#: Share of the budget left after gravity that friction may take; the rest is
+#: damping at the gripper's top speed (dimensionless).
+FRICTION_SHARE = 0.75
+#: Friction never capped below this multiple of the gravity load at the
+#: requested state (dimensionless): below it the state does not hold at all.
+HOLD_MARGIN = 1.2
+#: Opening fractions sampled along a task's path (per path, including ends).
+PATH_SAMPLES = 5
+
+
+@dataclass(frozen=True)
+class OperatingBudget:
+    """How hard one joint may be to operate by the task's gripper (SI units;
+    module docstring of :func:`operating_budgets`)."""
+
+    joint: str
+    joint_type: str
+    link: str
+    """the grasped link"""
+    rule: str
+    """contact point rule (handle, far edge, front)"""
+    lever: float | None
+    """distance (m) of the grasp point from the axis (revolute)"""
+    force_n: float
+    """the operating force allowed at the grasp point along the motion, N (the tightest sample)"""
+    bound: str
+    """what set ``force_n``: the category/part range, its torque, or the ground friction"""
+    budget: float
+    """friction plus damping at top speed the task may meet: N m or N"""
+    speed: float
+    """the gripper's top speed at the grasp point: rad/s (v_max / lever) or m/s"""
+    gravity_state: float
+    """|gravity load| (N m or N) at the requested state"""
+    friction_cap: float
+    damping_cap: float
+    conflict: str = ""
+    """non-empty where the budget cannot hold the requested state (the friction cap is then the hold floor)"""
+    hold_floor: float = 0.0
+    """friction (N m or N) below which the requested state does not hold: HOLD_MARGIN |Q| at the
+    state, 0 where the request asks the parts to move freely"""
+
+
+def _subtree(model: UrdfModel, link: str) -> list[str]:
+    out, stack = [], [link]
+    while stack:
+        n = stack.pop()
+        if n in out:
+            continue
+        out.append(n)
+        stack.extend(j.child for j in model.children(n))
+    return out
+
+
+def _gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
+    """Generalised gravity force Q on ``joint`` (N m or N; > 0 pushes q up)
+    of the links ``links`` at the session's state: a . sum((c_i - o) x m_i g)
+    (revolute) or a . sum(m_i g) (prismatic), c_i the centres of mass."""
+    child = session.joint_child[joint]
+    o, R = session.link_frame(child)
+    a = np.asarray(R, float) @ np.asarray(session.joint_axis(joint), float)
+    a = a / max(float(np.linalg.norm(a)), 1e-12)
+    g = np.array([0.0, 0.0, -GRAVITY])
+    q = 0.0
+    for ln in links:
+        lk = model.links.get(ln)
+        if lk is None or lk.inertial is None or not lk.inertial.mass:
+            continue
+        p, Rl = session.link_frame(ln)
+        c = np.asarray(p, float) + np.asarray(Rl, float) @ lk.inertial.com()
+        f = lk.inertial.mass * g
+        q += float(a @ f) if session.joint_types[joint] == "prismatic" else float(a @ np.cross(c - o, f))
+    return q
+
+
+def ground_friction(model: UrdfModel) -> float:
+    """Ground friction mu of ``model`` on the SPEC ground plane
+    (:data:`GROUND_FRICTION`, or 0.5 x the smallest ``<contact><lateral_friction>``
+    a link writes: PyBullet multiplies it by the plane's 0.5)."""
+    vals = [0.5 * float(lk.contact["lateral_friction"]) for lk in model.links.values()
+            if "lateral_friction" in (lk.contact or {})]
+    return float(min(vals)) if vals else GROUND_FRICTION
+
+
+def _task_path(f_state: float, action: str) -> np.ndarray:
+    """Opening fractions a task moves the joint through (task_execution's start
+    rule: a joint already at the target starts from the far side)."""
+    if action == "close":
+        start = f_state if f_state > CLOSE_TARGET + 0.05 else OPEN_TARGET
+        return np.linspace(start, CLOSE_TARGET, PATH_SAMPLES)
+    start = f_state if f_state < OPEN_TARGET - 0.05 else 0.0
+    return np.linspace(start, OPEN_TARGET, PATH_SAMPLES)
+
+
+def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overlay,
+                      closed: dict[str, tuple[float, float, float]], *, category: str | None,
+                      labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
+                      free: bool = True, ground: bool = True, free_moving: bool = False, engine: str = "pybullet",
+                      limits: GripperLimits | None = None, conventions: SimConventions | None = None,
+                      vertical_share: float = 0.5) -> dict[str, OperatingBudget]:
+    """The operating budget of every movable joint of ``closed`` in the written
+    asset ``urdf`` at ``state``: how much friction and damping the task's
+    gripper (:mod:`asset2sim.tasks.check.task_execution`) can overcome with a
+    real operating force. Definitions (``docs/metrics.md``, "Operable friction"):
+
+    - Grasp as the task: the side (:func:`~asset2sim.tasks.check.gripper.grasp_side`),
+      the contact point (:func:`~asset2sim.tasks.check.gripper.contact_point_rule`),
+      its lever r from the axis (revolute).
+    - Path: the task's actions (close / open) from the state (or the far side
+      where the state already meets the target) to the target fraction,
+      :data:`PATH_SAMPLES` fractions each.
+    - Allowed operating force at each sample: F = min(the category/part's
+      force range's upper end, its torque range's upper end / r
+      (:func:`asset2sim.tasks.check.force_ranges.operating_range`), and, for a
+      free object whose grasp point moves within 60 deg of horizontal (the
+      gripper pushes along the path; nearer vertical it presses or lifts),
+      mu M g / (h - mu v): the force whose horizontal part h F the ground
+      friction mu (M g + v F) still resists (mu :func:`ground_friction`, M the
+      whole mass, h the horizontal and v the downward share of the motion
+      direction)).
+    - Gravity against the motion L_g = -Q s (Q :func:`_gravity_force` of the
+      moving subtree, s the sign of the motion; negative where gravity helps).
+    - Budget B = min over samples of (BUDGET_SHARE F_h r - L_g) (prismatic:
+      F_h instead of F_h r), F_h the hand's bound (the ranges) only: the
+      ground bound is not modelled into the caps (where gravity or a spring
+      moves the part the gripper guides rather than pushes, which this model
+      does not see: stapler 102990 closed from the far side at 2.4 N without
+      sliding where mu M g = 1.1 N); ``force_n`` (the tightest F, ground
+      included) is what :func:`asset2sim.tasks.check.task_tier.relieve`
+      compares a measured slide with. Friction cap = FRICTION_SHARE B, damping cap =
+      (1 - FRICTION_SHARE) B / w, w = v_max / r rad/s (prismatic v_max m/s),
+      v_max the gripper's top speed; the friction cap is at most
+      :func:`~asset2sim.tasks.synthesize.physics.max_stable_friction` and,
+      unless the request asks the part to move freely, at least HOLD_MARGIN
+      |Q| at the state (``conflict`` says so where the budget is smaller).
+
+    Args:
+        urdf: the written asset; ``state``: its joint positions (rad or m).
+        overlay: its overlay (``inertia_axis`` of the joints).
+        closed: joint -> (q_closed, opening direction +-1, open range), output units.
+        category, labels: the category and link -> semantic label (force ranges).
+        actions: the task's actions (both without a task).
+        free: the root is free on the ground (False: mounted, no ground bound).
+        ground: apply the ground bound to a free object (False: the other
+            hand holds the body, as the probes do).
+        free_moving: the request asks the parts to move freely (no hold floor).
+
+    Raises:
+        EngineUnavailable; whatever loading ``urdf`` raises.
+    """
+    lim = limits or GripperLimits()
+    model = read_urdf(urdf, mode="lenient")
+    mu = ground_friction(model)
+    out: dict[str, OperatingBudget] = {}
+    opts = SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=dict(state),
+                          conventions=conventions or SimConventions())
+    with quiet_stdout():
+        session = open_session(engine, urdf, opts)
+    try:
+        total = sum(float(m) for m in session.link_masses().values())
+        for name, (qc, d, rng) in closed.items():
+            if name not in session.joint_child or name not in overlay.joints or not rng > 0:
+                continue
+            jtype = session.joint_types[name]
+            if jtype not in ("revolute", "continuous", "prismatic"):
+                continue
+            session.set_joint_positions(dict(state))
+            side = grasp_side(session, name, model, root_fixed=not free)
+            link, point, rule = contact_point_rule(session, name, model, opening_direction=d, side=side)
+            child = session.joint_child[name]
+            moving = _subtree(model, child)
+            if side == "parent":  # the gripper moves the rest of the object: same relative motion
+                moving = [ln for ln in session.link_names if ln not in moving]
+            rng_, where = operating_range(category, labels.get(child) if side == "child" else None)
+            f_state = float(d * (state.get(name, qc) - qc) / rng)
+            lever = None
+            best: tuple[float, float, str] | None = None  # (budget, force, bound)
+            q_state = None
+            for action in actions:
+                s_motion = (-d if action == "close" else d) * (1.0 if side == "child" else -1.0)
+                for f in _task_path(f_state, action):
+                    session.set_joint_positions({**state, name: qc + d * f * rng})
+                    o, R = session.link_frame(child)
+                    a = np.asarray(R, float) @ np.asarray(session.joint_axis(name), float)
+                    a = a / max(float(np.linalg.norm(a)), 1e-12)
+                    lo, Rl = session.link_frame(link)
+                    p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(point, float)
+                    if jtype == "prismatic":
+                        t = a
+                    else:
+                        rv = (p - o) - float((p - o) @ a) * a
+                        lever = max(float(np.linalg.norm(rv)), 1e-3)
+                        t = np.cross(a, p - o)
+                    nt = max(float(np.linalg.norm(t)), 1e-12)
+                    force, bound = float("inf"), ""
+                    if rng_.force_n is not None:
+                        force, bound = rng_.force_n[1], f"force range of {where}"
+                    if rng_.torque_nm is not None and lever is not None and rng_.torque_nm[1] / lever < force:
+                        force, bound = rng_.torque_nm[1] / lever, f"torque range of {where}"
+                    hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
+                    horiz = float(np.linalg.norm(t[:2])) / nt
+                    down = max(0.0, -s_motion * float(t[2]) / nt)  # a push with a downward part loads the ground more
+                    if free and ground and abs(float(t[2])) / nt < vertical_share and horiz - mu * down > 0:
+                        fg = mu * total * GRAVITY / (horiz - mu * down)
+                        if fg < force:
+                            force, bound = fg, f"ground friction mu={mu:g} of the free object (M={total:.3g} kg)"
+                    qg = _gravity_force(session, model, name, moving)
+                    if q_state is None:
+                        q_state = abs(_state_gravity(session, model, name, moving, state))
+                    b = hand + qg * s_motion
+                    if best is None or b < best[0]:
+                        best = (b, best[1] if best else float("inf"), best[2] if best else "")
+                    if force < best[1]:
+                        best = (best[0], force, bound)
+            session.set_joint_positions(dict(state))
+            if best is None:
+                continue
+            budget, force, bound = best
+            speed = lim.max_speed_m_s / lever if lever is not None else lim.max_speed_m_s
+            fcap = FRICTION_SHARE * max(budget, 0.0)
+            dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
+            conflict = ""
+            floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
+            if fcap < floor:
+                conflict = (f"{name}: the operating budget {max(budget, 0.0):.3g} {'N' if jtype == 'prismatic' else 'N m'} "
+                            f"({bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
+                fcap = floor
+            inertia = overlay.joints[name].inertia_axis
+            if inertia:
+                fcap = min(fcap, max_stable_friction(inertia))
+            out[name] = OperatingBudget(joint=name, joint_type=jtype, link=link, rule=rule, lever=lever, force_n=float(force),
+                                        bound=bound, budget=float(budget), speed=float(speed),
+                                        gravity_state=float(q_state or 0.0), friction_cap=float(fcap),
+                                        damping_cap=float(dcap), conflict=conflict, hold_floor=float(floor))
+    finally:
+        session.close()
+    return out
+
+
+def _state_gravity(session: SimSession, model: UrdfModel, joint: str, links: list[str], state: dict[str, float]) -> float:
+    """:func:`_gravity_force` at ``state`` (the session is left there)."""
+    session.set_joint_positions(dict(state))
+    return _gravity_force(session, model, joint, links)
+
+
+def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tuple[Overlay, list[str]]:
+    """``overlay`` with every joint's friction and damping lowered to its
+    operating budget's caps where above them (friction never below the hold
+    floor: :func:`operating_budgets`). Returns (overlay, notes, one per change
+    and per conflict)."""
+    ov = overlay.model_copy(deep=True)
+    notes: list[str] = []
+    for name, b in budgets.items():
+        d = ov.joints.get(name)
+        if d is None:
+            continue
+        fr, dm = min(d.friction, b.friction_cap), min(d.damping, b.damping_cap)
+        if b.conflict:
+            notes.append(b.conflict)
+        if fr == d.friction and dm == d.damping:
+            continue
+        unit = "N" if b.joint_type == "prismatic" else "N m"
+        note = (f"; operable: friction {d.friction:.3g} -> {fr:.3g} {unit}, damping {d.damping:.3g} -> {dm:.3g} "
+                f"(operating force <= {b.force_n:.3g} N: {b.bound})")
+        ov.joints[name] = d.model_copy(update={"friction": fr, "damping": dm, "source": d.source + note})
+        notes.append(f"{name}{note[1:]}")
+    return ov, notes

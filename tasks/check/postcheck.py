@@ -22,7 +22,7 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import manipulation, metrics, parity
+from asset2sim.tasks.check import manipulation, metrics, parent_child, parity
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
@@ -246,9 +246,10 @@ def run_post_check(
     engine_results = {}
     if others:
         engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
-    for m in (pen, stab, osc, sag_metric, tilt):
+    nested = parent_child.parent_child_penetration(urdf_path, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
+    for m in (pen, stab, osc, sag_metric, tilt, nested):
         m.details["root"] = root_label(fixed)
-    base = [pen, stab, osc, sag_metric, tilt]
+    base = [pen, stab, osc, sag_metric, tilt, nested]
     recorded = recorded if recorded is not None else RecordedRuns()
 
     def sweep_needed(rr: MetricResult) -> str | None:
@@ -274,7 +275,8 @@ def root_label(fixed: bool) -> str:
 
 def escalate(overlay: Overlay, check: PostCheck, factor: float,
              friction_caps: dict[str, float] | None = None,
-             tilt_floors: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+             tilt_floors: dict[str, float] | None = None,
+             damping_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
     """Raise damping and friction of the joints that oscillate or sag (all
     joints when the root is unstable and no joint is singled out).
 
@@ -285,7 +287,10 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
     cap applies);
     a joint at its cap gets the rest of the factor as damping only (damping
     resists the drop's and the nudge's transients without making the part
-    harder to move slowly).
+    harder to move slowly), up to ``damping_caps`` (joint -> N m s/rad or
+    N s/m, :func:`asset2sim.tasks.check.task_tier.operating_limits`: what the
+    task's gripper still overcomes at its top speed; never below the damping
+    before).
 
     Returns (new overlay, changes joint -> {parameter: new value}, reason).
     """
@@ -322,9 +327,12 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
         cap = (friction_caps or {}).get(name)
         if cap is not None and friction > cap:
             friction = max(cap, d.friction)
-            note += f" (friction capped at {friction:.3g}, operable by the probe's force)"
+            note += f" (friction capped at {friction:.3g}, operable by a real operating force)"
         if d.inertia_axis:
             damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
+        dcap = (damping_caps or {}).get(name)
+        if dcap is not None and damping > dcap:
+            damping = max(dcap, d.damping)
         if friction == d.friction and damping == d.damping:
             continue
         new = d.model_copy(

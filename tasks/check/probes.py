@@ -27,21 +27,45 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   lever r = (c - o) - ((c - o).a) a; the push direction is +-(a x r)/|a x r|
   and the generalised torque is F |r|. For a prismatic joint the direction is
   +-a. The sign points from the current position towards the target.
-- Force law (a velocity-limited pusher): F_{k+1} = clip(F_k + g (v_des - v) dt,
-  0, F_max), v the speed of the push point along the direction (m/s), v_des =
-  ``push_speed``, g = F_max / (v_des * ramp_time). A stuck joint sees the force
-  ramp to F_max in ``ramp_time``; a free one is pushed at about v_des.
+- Force law (a hand moving at v_des, coupled to the part by a spring-damper,
+  the impedance model of a hand or a gripper): the hand runs ahead of the push
+  point by s, s_{k+1} = clip(s_k + (v_des - v) dt, 0, F_max / k), and pushes
+  with F = clip(k s + c (v_des - v), 0, F_max); v the speed of the push point
+  along the direction (m/s), v_des = ``push_speed``. A stuck joint sees the
+  force ramp to F_max in F_max / (k v_des) s; a free one is pushed at about
+  v_des without overshoot.
+- Stiffness k = min(F_max / (v_des * ramp_time), m_eff omega^2) and damping
+  c = 2 sqrt(k m_eff) (critical damping of the hand-part spring), omega =
+  ``PUSHER_OMEGA_DT`` / dt: the spring acts explicitly on the engine's step dt,
+  and a stiffness set by the whole object's weight made a light part (a
+  toilet's flush lever, 5 g of effective mass on a 50 kg toilet) jump 0.14 rad
+  in one step, slam into its stop and bounce back. With omega dt = 0.25 and
+  critical damping the step is stable for an effective mass up to 4 times below
+  m_eff (explicit step of a spring-damper: |z| < 1 for the characteristic
+  polynomial z^2 - (2 - a) z + (1 - a + b), a = c dt / m, b = k dt^2 / m, iff
+  b < a < 2 + b / 2; Jury's criterion, e.g. Franklin, Powell & Workman,
+  *Digital Control of Dynamic Systems*, 3rd ed. 1998, section 4.5). m_eff is a
+  lower bound of the part's effective mass at the push point: for a revolute
+  joint (I_min + m d^2) / r^2 summed over the links rigid with the child (I_min
+  the smallest principal moment about the link's COM, d the COM's distance
+  from the axis, r the lever: the parallel-axis theorem with the smallest
+  moment), for a prismatic joint their mass.
 - F_max = max(``min_force``, ``force_factor`` * m_total * g) (N); ``min_force``
   = 22.2 N (5 lbf), the largest force the 2010 ADA Standards for Accessible
   Design (section 309.4, operable parts) allow a control to need: any hand can
   apply it, so a light object's part that needs up to this much is operable.
+  A stuck part sees the force ramp at k v_des: a light part's bounded
+  stiffness ramps slower than ``ramp_time``, and the push lasts at least
+  until ``min_force`` is reached (ramp below), so every part is pushed with
+  at least the ADA force before it counts as not moving.
 - Targets as opening fractions f (0 closed, 1 fully open, from the geometric
   closed end): close -> f = 0.05, reached at f <= 0.10; open -> f = 0.6,
   reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55).
 - The object first settles freely for ``settle_time`` s; the push starts from
   there (root pose and joint position at that moment are the references).
-- Push for at most max(``push_time``, ``ramp_time`` + 1.5 * travel /
-  ``push_speed``) s, travel the distance the push point covers to the target
+- Push for at most max(``push_time``, ramp + 1.5 * travel / ``push_speed``)
+  s, ramp = max(``ramp_time``, ``min_force`` / (k v_des)), travel the distance the
+  push point covers to the target
   (|q_target - q0| times the lever; m), so a long lid pushed at its far corner
   has time to arrive (the pusher stops early once the object slid or tipped),
   then release (no force) for
@@ -51,9 +75,20 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   the root) moved horizontally > ``slide_tol`` (m, slid: a tall object that
   rocks a little does not count as sliding) or
   rotated > ``tip_tol`` (rad, tipped).
-- Rebound: after release the fraction moved back towards the start by > 0.05;
-  kept moving: moved on beyond the target by > 0.05 or ends with |q_dot| >
-  0.05 rad/s (0.005 m/s).
+- Rebound: after release the fraction moved back towards the start by >
+  max(0.05, floor / range), floor the SPEC's rest tolerance (0.01 rad, 1 mm:
+  ``REBOUND_FLOOR_*``); kept moving: moved on beyond the target by as much or
+  ends with |q_dot| > 0.05 rad/s (0.005 m/s).
+- A part shut in by another (an open probe stalls before
+  ``SHUT_IN_FRACTION`` of its range without the object moving, and the link
+  it touches there is placed by other movable joints: a stapler's magazine
+  under its closed top, a toilet seat under its lid) is probed again with the
+  joints between them lifted towards their open ends, only as far as needed
+  (``CLEARING_SHARES`` of the way, in turn) and held there (a zero-velocity
+  drive limited to the probe's force at their lever), as a hand lifts the top
+  first (the
+  joint sweep's rule, :func:`asset2sim.tasks.check.sweep._sweep_clearing`);
+  the retry is kept when it succeeds, with a note. Needs the URDF model.
 - A probe succeeds iff the target is reached without the object moving and, for
   a close probe, without rebound (a drawer that springs back). An open probe's
   rebound (a lid that falls shut) fails only when the request asks the joint
@@ -69,13 +104,28 @@ import numpy as np
 
 from asset2sim.frames import quat_angle, quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.sweep import SHUT_IN_FRACTION, blocking_link, joints_between
+from asset2sim.tasks.geometry.limits import rigid_group, subtrees
+from asset2sim.urdf import UrdfModel
 
 CLOSE_TARGET, CLOSE_REACHED = 0.05, 0.10
 OPEN_TARGET, OPEN_REACHED = 0.6, 0.55
 OPEN_FAR_TARGET, OPEN_FAR_REACHED = 0.9, 0.85
 REBOUND_FRACTION = 0.05
+#: Smallest motion after release that counts as a rebound or as moving on, rad
+#: / m: the SPEC's rest-stability tolerances (D_ori <= 0.01 rad, D_pos <= 1 mm;
+#: ``tasks.check.metrics``). A 6 mm toilet button pressed 0.3 mm into its stop
+#: (the engine's soft limit) comes back 0.7 mm: 11 % of its range, no spring.
+REBOUND_FLOOR_REVOLUTE = 0.01
+REBOUND_FLOOR_PRISMATIC = 0.001
 #: Push time allowed per unit of travel time at ``push_speed`` (dimensionless).
 TRAVEL_TIME_MARGIN = 1.5
+#: Shares of the way to their open ends that the joints shutting a part in
+#: are lifted to, in turn, when that part is probed again (module docstring).
+CLEARING_SHARES = (0.25, 0.5, 0.75, 1.0)
+#: omega dt of the pusher's spring against the part's effective mass (module
+#: docstring, "Stiffness"): a quarter of the explicit step's stability limit.
+PUSHER_OMEGA_DT = 0.25
 
 
 @dataclass
@@ -176,6 +226,47 @@ def total_mass(session) -> float:
     return float(sum(session.link_masses().values()))
 
 
+def moved_links(session, joint: str, model: UrdfModel | None = None) -> list[str]:
+    """The links ``joint`` moves (its child and every link below) by the URDF
+    ``model``; the child link alone without a model."""
+    if model is not None:
+        links = subtrees(model).get(joint)
+        if links:
+            return [ln for ln in links if ln in session.link_names]
+    return [session.joint_child[joint]]
+
+
+def effective_mass(session, joint: str, model: UrdfModel | None = None) -> float:
+    """Lower bound (kg) of the effective mass of ``joint``'s part at the probe's
+    push point: for a revolute joint sum (I_min + m d^2) / r^2 over the links
+    rigid with the child (module docstring), for a prismatic joint their mass;
+    at least 1e-4 kg. From the session's own masses and principal moments
+    (:meth:`SimSession.held_physics`) and the current link frames.
+
+    Raises:
+        KeyError: unknown joint.
+    """
+    child = session.joint_child[joint]
+    rigid = [ln for ln in (rigid_group(model, child) if model is not None else {child}) if ln in session.link_names]
+    held = session.held_physics().links
+    _, _, lever = _push_geometry(session, joint)
+    if lever is None:
+        return max(sum(held[ln].mass for ln in rigid if ln in held), 1e-4)
+    o, R = session.link_frame(child)
+    a = R @ np.asarray(session.joint_axis(joint), float)
+    a /= max(float(np.linalg.norm(a)), 1e-12)
+    inertia = 0.0
+    for ln in rigid:
+        h = held.get(ln)
+        if h is None or not h.mass > 0:
+            continue
+        p, Rl = session.link_frame(ln)
+        c = np.asarray(p, float) + np.asarray(Rl, float) @ np.asarray(h.com, float) - np.asarray(o, float)
+        d2 = float(c @ c - (c @ a) ** 2)
+        inertia += float(np.min(h.principal)) + h.mass * max(d2, 0.0)
+    return max(inertia / lever**2, 1e-4)
+
+
 def probe_joint(
     session,
     joint: str,
@@ -186,6 +277,7 @@ def probe_joint(
     action: str,
     config: ProbeConfig | None = None,
     holds_position: bool = False,
+    model: UrdfModel | None = None,
 ) -> ProbeResult:
     """Run one probe on ``joint`` of a session from its current state.
 
@@ -198,6 +290,8 @@ def probe_joint(
         config: probe knobs.
         holds_position: the request asks the joint to hold its position (an
             open probe that falls back then fails).
+        model: the session's URDF model (the mass the joint moves and the
+            links rigid with its child); None: the child link alone.
 
     Raises:
         ValueError: unknown action or non-positive ``open_range``.
@@ -238,7 +332,10 @@ def probe_joint(
     sign = 1.0 if q_target >= q0 else -1.0
     weight = total_mass(session) * abs(session.options.conventions.gravity)
     f_max = max(cfg.min_force, cfg.force_factor * weight)
-    gain = f_max / (cfg.push_speed * cfg.ramp_time)
+    m_eff = effective_mass(session, joint, model)
+    stiffness = min(f_max / (cfg.push_speed * cfg.ramp_time), m_eff * (PUSHER_OMEGA_DT / dt) ** 2)
+    damping = 2.0 * float(np.sqrt(stiffness * m_eff))
+    ramp = max(cfg.ramp_time, cfg.min_force / (stiffness * cfg.push_speed))
     root_p0, root_q0 = session.root_pose()
     # Sliding is measured where the object stands: the point below the root's
     # origin at the object's lowest height, carried with the root (a tall
@@ -255,10 +352,10 @@ def probe_joint(
     # a long lid's far corner has a longer arc to cover than at its centre.
     _, _, lever0 = _push_geometry(session, joint)
     travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
-    n_push = int(round(max(cfg.push_time, cfg.ramp_time + TRAVEL_TIME_MARGIN * travel / cfg.push_speed) / dt))
+    n_push = int(round(max(cfg.push_time, ramp + TRAVEL_TIME_MARGIN * travel / cfg.push_speed) / dt))
     n_rel = int(round(cfg.release_time / dt))
     tr: dict[str, list[float]] = {"t": [], "q": [], "force": [], "root_disp": [], "phase": []}
-    force = 0.0
+    force = lead = 0.0  # lead: how far the hand runs ahead of the push point, m
     peak_force = peak_effort = 0.0
     lever_used: float | None = None
     reached = reached_if(f0)
@@ -271,7 +368,8 @@ def probe_joint(
         q, qd = qpos()
         # speed of the push point along d
         v = sign * qd * (lever if lever is not None else 1.0)
-        force = float(np.clip(force + gain * (cfg.push_speed - v) * dt, 0.0, f_max))
+        lead = float(np.clip(lead + (cfg.push_speed - v) * dt, 0.0, f_max / stiffness))
+        force = float(np.clip(stiffness * lead + damping * (cfg.push_speed - v), 0.0, f_max))
         session.apply_link_force(link, force * d, c)
         if cfg.hold_body and link != session.link_names[0]:
             session.apply_link_force(session.link_names[0], -force * d, c)  # the holding hand's reaction
@@ -314,12 +412,13 @@ def probe_joint(
     q_end, qd_end = qpos()
     f_end = frac(q_end)
     # "towards the start": for close the start is more open (larger f).
+    tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
     if action == "close":
-        rebound = f_maxv - f_rel > REBOUND_FRACTION
-        kept = f_rel - f_min > REBOUND_FRACTION
+        rebound = f_maxv - f_rel > tol
+        kept = f_rel - f_min > tol
     else:
-        rebound = f_rel - f_min > REBOUND_FRACTION
-        kept = f_maxv - f_rel > REBOUND_FRACTION
+        rebound = f_rel - f_min > tol
+        kept = f_maxv - f_rel > tol
     vlim = cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute
     if abs(qd_end) > vlim:
         kept = True
@@ -377,6 +476,7 @@ def run_probes(
     actions: tuple[str, ...] = ("close", "open"),
     config: ProbeConfig | None = None,
     holds_position: bool = False,
+    model: UrdfModel | None = None,
 ) -> list[ProbeResult]:
     """Probe every joint of ``joints`` with every action, each from the
     session's state at call time (saved and restored with the session's
@@ -387,6 +487,9 @@ def run_probes(
         joints: joint -> (q_closed, direction, open_range).
         actions: which probes.
         config, holds_position: see :func:`probe_joint`.
+        model: the session's URDF model: the mass a joint moves, and a part
+            shut in by another is probed again with that one open (module
+            docstring); None: neither.
 
     Returns:
         One :class:`ProbeResult` per joint and action, in order. The session is
@@ -398,22 +501,77 @@ def run_probes(
         for name, (closed, direction, rng) in joints.items():
             for action in actions:
                 session.restore_state(sid)
-                out.append(
-                    probe_joint(
-                        session,
-                        name,
-                        closed=closed,
-                        direction=direction,
-                        open_range=rng,
-                        action=action,
-                        config=config,
-                        holds_position=holds_position,
-                    )
-                )
+                kw = dict(closed=closed, direction=direction, open_range=rng, action=action, config=config,
+                          holds_position=holds_position, model=model)
+                r = probe_joint(session, name, **kw)
+                if model is not None and _shut_in(r):
+                    retry = _probe_cleared(session, r, joints, model, sid, kw)
+                    if retry is not None:
+                        r = retry
+                out.append(r)
         session.restore_state(sid)
     finally:
         session.discard_state(sid)
     return out
+
+
+def _shut_in(r: ProbeResult) -> bool:
+    """An open probe that stalled near the closed end with the object still."""
+    return (r.action == "open" and not r.success and not r.reached and not (r.slid or r.tipped)
+            and np.isfinite(r.release_fraction) and r.release_fraction < SHUT_IN_FRACTION)
+
+
+def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, float, float]], model: UrdfModel, sid: int,
+                   kw: dict) -> ProbeResult | None:
+    """The open probe of ``name`` again with the joints between its part and
+    the link it stalled against lifted towards their open ends (module docstring); None
+    when no other movable joint places that link or the retry fails too. The
+    session must be where the first probe left it."""
+    name = first.joint
+    jd = next((j for j in model.joints if j.name == name), None)
+    if jd is None:
+        return None
+    links = moved_links(session, name, model)
+    who = blocking_link(session, links, rigid_group(model, jd.parent))
+    if who is None:
+        return None
+    ends: dict[str, tuple[float, float]] = {}  # joint -> (position now, its open end)
+    now = session.joint_positions()
+    for k in joints_between(model, jd.child, who):
+        if k == name or k not in session.joint_types:
+            continue
+        if k in joints:
+            kc, kd, kr = joints[k]
+            if kr > 0:
+                ends[k] = (now[k], kc + kd * kr)
+        else:  # not probed: the end of its limits farther from where it is
+            lo, hi = session.joint_limits[k]
+            if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+                ends[k] = (now[k], hi if abs(hi - now[k]) >= abs(now[k] - lo) else lo)
+    if not ends:
+        return None
+    # the other hand lifts them only as far as needed (a stapler whose top is
+    # swung fully back tips over): a quarter of the way to their open ends,
+    # then half, three quarters, all the way; held there by a zero-velocity
+    # drive limited to the probe's force at their lever
+    f_max = first.max_force
+    for share in CLEARING_SHARES:
+        opened = {k: q + share * (end - q) for k, (q, end) in ends.items()}
+        session.restore_state(sid)
+        session.set_joint_positions(opened)
+        for k in opened:
+            _, _, lever = _push_geometry(session, k)
+            session.drive_joint(k, 0.0, f_max * (lever if lever is not None else 1.0))
+        try:
+            retry = probe_joint(session, name, **kw)
+        finally:
+            for k in opened:
+                session.release_joint(k)
+        if retry.success:
+            retry.notes.append(f"{who} is in the way at the initial state (stalled at {max(first.release_fraction, 0.0):.0%} open); "
+                               f"probed with {', '.join(sorted(opened))} held {share:.0%} of the way open, as a hand opens it first")
+            return retry
+    return None
 
 
 def probes_metric(results: list[ProbeResult], *, engine: str = "pybullet") -> MetricResult:

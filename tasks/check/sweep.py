@@ -472,24 +472,31 @@ def sweep_metric(run: SweepRun, config: SweepConfig | None = None) -> MetricResu
     )
 
 
-def blocked_positions(metric: MetricResult) -> dict[str, float]:
-    """Joint -> the position (rad or m) where the sweep of ``metric`` (a
-    ``joint_sweep`` result) stopped short: on the way out when the far end was
-    not reached, else on the way back when the closed end was not. Joints
-    that passed, diverged or only penetrated are left out."""
+def blocked_stops(metric: MetricResult) -> dict[str, tuple[float, float]]:
+    """Joint -> (position where the sweep of ``metric`` (a ``joint_sweep``
+    result) stalled, position it was driven to), rad or m: on the way out
+    (towards ``q_far``) when the far end was not reached, else on the way
+    back (towards ``q_closed``). Joints that passed, diverged or only
+    penetrated are left out."""
     out = {}
     for name, j in (metric.details.get("joints") or {}).items():
         if j["passed"] or j["diverged"]:
             continue
         if j["time_open"] is None:
-            f = j["reached_open"]
+            f, goal = j["reached_open"], j["q_far"]
         elif j["time_close"] is None:
-            f = j["reached_closed"]
+            f, goal = j["reached_closed"], j["q_closed"]
         else:
             continue
         if np.isfinite(f):
-            out[name] = float(j["q_closed"] + (j["q_far"] - j["q_closed"]) * f)
+            out[name] = (float(j["q_closed"] + (j["q_far"] - j["q_closed"]) * f), float(goal))
     return out
+
+
+def blocked_positions(metric: MetricResult) -> dict[str, float]:
+    """Joint -> the position (rad or m) where the sweep of ``metric`` stopped
+    short (the first element of :func:`blocked_stops`)."""
+    return {name: stall for name, (stall, _goal) in blocked_stops(metric).items()}
 
 
 def sweep_score(metric: MetricResult) -> tuple[float, float]:

@@ -27,7 +27,10 @@ Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
    joint axis for revolute joints, a line along it for prismatic ones),
    q_des going from the start q0 to q_target = q_c + d f_target R at the
    gripper's top speed (v_max / r rad/s at lever r; v_max m/s), ramped up
-   over ``accel_time`` s. While the grasp point's direction of motion is
+   over ``accel_time`` s and down at the same rate before the target (a
+   trapezoidal speed profile: an arm decelerates; stopping the commanded
+   motion at once made the gripper brake the part's momentum within a step,
+   7.5 N peaks on a laptop screen that needed 2 N to move). While the grasp point's direction of motion is
    within 60 deg of vertical (``vertical_share``) the gripper presses or
    lifts vertically only (the attachment's force projected on world z, the
    finger sliding along the part): as a person closes a lid or presses a
@@ -316,11 +319,15 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         travel = abs(q_target - q0) * (lever if lever is not None else 1.0)
         n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / lim.max_speed_m_s + cfg.extra_time) / dt))
         sgn = 1.0 if q_target >= q0 else -1.0
+        decel = qdot_max / cfg.accel_time
         q_des = q0
         done = False
         pushed_steps = 0
         for k in range(n_move):
+            # trapezoidal speed profile: ramped up over accel_time, and down at the same rate
+            # before the target (an arm decelerates; an abrupt stop would brake the part's momentum in one step)
             speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
+            speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
             q_des = q_des + sgn * speed * dt
             if sgn * (q_des - q_target) > 0:
                 q_des = q_target

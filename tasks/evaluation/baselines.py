@@ -357,8 +357,8 @@ def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimat
 
 
 def make_asset2sim(row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> BaselineResult:
-    """``asset2sim``: the full pipeline (:func:`asset2sim.tasks.refine.refine_asset`,
-    no extras: the benchmark writes its own report).
+    """``asset2sim``: the full pipeline (:func:`asset2sim.tasks.refine.refine_asset`
+    with the row's task, no extras: the benchmark writes its own report).
 
     Raises:
         BaselineError: the refine pipeline failed.
@@ -367,7 +367,7 @@ def make_asset2sim(row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> B
     out_dir = Path(out_dir)
     try:
         res = refine.refine_asset(row.folder, row.prompt, out_dir, RefineConfig(seed=seed),
-                                  category=row.category or None, asset_id=row.id, extras=False)
+                                  category=row.category or None, asset_id=row.id, extras=False, task=row.task or None)
     except Exception as exc:
         raise BaselineError(f"{row.id}: refine_asset failed: {type(exc).__name__}: {exc}") from exc
     report = res.report

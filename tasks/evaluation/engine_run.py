@@ -26,6 +26,7 @@ from asset2sim.tasks.evaluation.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context
 from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.urdf import read_urdf
 
 
 @dataclass
@@ -168,7 +169,8 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 if n in (ctx.task_joints if probe_joints is None else probe_joints) and c.open_range > 0
             }
             holds = bool(getattr(ctx.request, "holds_position", False))
-            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds)
+            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds,
+                                    model=read_urdf(ctx.urdf, mode="lenient"))
     except Exception as exc:
         run.error = f"{type(exc).__name__}: {exc}"
     finally:

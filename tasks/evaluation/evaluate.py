@@ -309,7 +309,7 @@ def evaluate_refined(
     Args:
         out_dir: the refined output folder.
         report: its :class:`~asset2sim.schemas.report.RefineReport` (the
-            run's ``prompt`` and ``category`` are used).
+            run's ``prompt``, ``category`` and ``task`` are used).
         recording: the final post-check's rest test
             (:class:`~asset2sim.tasks.check.postcheck.RestRecording`), reused
             when it matches (see :func:`evaluate_asset`).
@@ -329,7 +329,7 @@ def evaluate_refined(
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
-                   views=views, views_state=views_state, checks=checks, recorded=recorded)
+                   views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task)
     return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
 
 

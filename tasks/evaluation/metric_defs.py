@@ -51,7 +51,6 @@ from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import Context
 from asset2sim.tasks.evaluation.request_match import requested_joints, scaled_mass_range
-from asset2sim.tasks.interpret.priors import spring_expected
 
 #: Largest ground penetration during the rest test that passes, m.
 GROUND_PENETRATION_TOL = 0.005
@@ -420,17 +419,15 @@ def _task_joints(ctx: Context) -> dict[str, tuple[float, float, float]]:
 
 
 def _hold_required(ctx: Context, joints: list[str]) -> dict[str, bool]:
-    """joint -> whether the task's target must hold after release: not for a
-    joint the request asks to move freely, nor for one with a spring that the
-    request or the category's part prior asks for (it returns by design)."""
+    """:func:`asset2sim.tasks.check.task_tier.hold_required_by_label` for
+    ``joints`` of the context's asset and request."""
+    from asset2sim.tasks.check.task_tier import hold_required_by_label
+
+    labels = {n: ((ctx.semantics.get(ctx.joints[n].child) or (None, None))[1] if n in ctx.joints else None)
+              for n in joints}
     req = ctx.request
-    out = {}
-    for n in joints:
-        link = ctx.joints[n].child if n in ctx.joints else None
-        label = (ctx.semantics.get(link) or (None, None))[1] if link else None
-        sprung = n in ctx.springs and ((req is not None and req.spring) or spring_expected(ctx.category or "", label))
-        out[n] = not ((req is not None and req.free_moving) or sprung)
-    return out
+    return hold_required_by_label(labels, ctx.springs, ctx.category, free_moving=bool(req is not None and req.free_moving),
+                                  spring_requested=bool(req is not None and req.spring))
 
 
 @register_metric("task_execution")

@@ -106,3 +106,10 @@ def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tup
     if part:
         notes.append(f"no movable joint's link is labelled {part!r}")
     return TaskSpec(text, actions, targets, list(task_joints), part, rule, notes)
+
+
+def task_actions(text: str | None) -> tuple[str, ...]:
+    """The actions of a task's leading verb (:data:`VERBS`): ``("close",)``,
+    ``("open",)``, or both when the verb has no direction or there is no task."""
+    action, _ = _verb(" ".join(str(text or "").lower().split()))
+    return (action,) if action else ("close", "open")

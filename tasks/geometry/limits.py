@@ -40,6 +40,20 @@ gravity-free session at the output scale):
    collision geometry (not the limit) is wrong, and the limit is kept (the
    sweep reports the block).
 
+6. A part hinged on a moving part (a stapler's magazine on its top arm,
+   102990) can also meet the links of the chain that carries it beyond its
+   parent's rigid group (the base): how far depends on the joints between.
+   With those joints at their open ends (the most room the mechanism
+   gives: a hand lifts the top before the magazine swings down to the base)
+   the far end is scanned against the chain as in 3. (baseline: each pair's
+   least depth over the raw range in that state); when it ends the range
+   before the far end of 5., it becomes the limit: beyond it the part meets
+   the chain in every state the mechanism reaches (the magazine's raw limit,
+   2.83 rad from the top arm, swings it through the base whatever the top
+   does; the joint sweep demanded that range and failed). A part that cannot
+   open even then is left to the sweep. Only on request (``chain_open``):
+   refine runs it where the joint sweep stopped short (stage 7b).
+
 tol = :data:`EXCESS_TOLERANCE` (1 mm) decides whether the closed end is
 pressed into another link (the sweep returns there and allows 5 mm) and
 where a stop begins; the end is then put at the stop's onset (:data:`ONSET_TOLERANCE`), because the force-limited drive of
@@ -214,9 +228,67 @@ def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[
     return float(q_end + sgn * back)
 
 
+def chain_links(model: UrdfModel, joint: str) -> set[str]:
+    """The links of the chain that carries ``joint`` beyond its parent's
+    rigid group (:func:`rigid_group`): its ancestors, posed by the movable
+    joints between (a stapler's base for the magazine hinged on the top)."""
+    parent_of = {j.child: j.parent for j in model.joints}
+    jd = model.joint(joint)
+    chain, ln = set(), parent_of.get(jd.parent)
+    while ln is not None:
+        chain |= rigid_group(model, ln)
+        ln = parent_of.get(ln)
+    return chain - rigid_group(model, jd.parent)
+
+
+def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed: dict[str, tuple[float, float, float]],
+                   state: dict[str, float], q_close: float, far_raw: float, tol: float, samples: int,
+                   range_: float) -> tuple[float, str | None, list[str]]:
+    """Step 6 of the module docstring: the far end of ``name`` against the
+    links of its carrying chain (:func:`chain_links`) with the movable joints
+    between (those of ``closed`` above its parent) at their open ends, moved
+    back to the contact's onset (:func:`contact_onset`). Returns (far end,
+    the link run into, the joints opened); (``far_raw``, None, ...) when the
+    chain does not end the range or the part cannot open from ``q_close``
+    even then. The session is left at ``state`` with ``name`` at ``q_close``."""
+    pairs = _pairs(session, sub, chain_links(model, name) - set(sub))
+    if not pairs:
+        return float(far_raw), None, []
+    parent_of = {j.child: j for j in model.joints}
+    opened, ln = {}, model.joint(name).parent
+    while ln in parent_of:
+        j = parent_of[ln]
+        if j.name in closed and j.name in session.joint_limits:
+            kc, kd, kr = closed[j.name]
+            if kr > 0:
+                opened[j.name] = kc + kd * kr
+        ln = j.parent
+    if not opened:
+        return float(far_raw), None, []
+    try:
+        session.set_joint_positions({**state, **opened, name: q_close})
+        lo, hi = sorted((q_close, far_raw))
+        qs = np.unique(np.concatenate([np.linspace(lo, hi, samples + 1), [q_close]]))
+        depth = []
+        for q in qs:
+            session.set_joint_positions({name: q})
+            depth.append(_depths(session, pairs))
+        base = np.array(depth).min(axis=0)
+        session.set_joint_positions({name: q_close})
+        if float((_depths(session, pairs) - base).max(initial=0.0)) > tol:
+            return float(far_raw), None, []  # not free at its closed end even with the chain open: the sweep's finding
+        far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples, STOP_DEPTH)
+        if who is None or abs(far - q_close) < MIN_FREE_FRACTION * range_:
+            return float(far_raw), None, []
+        far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * range_)
+        return float(far), who, sorted(opened)
+    finally:
+        session.set_joint_positions({**state, name: q_close})
+
+
 def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
                      tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, against: str = "stops",
-                     confirm_stops: bool = True) -> dict[str, LimitClip]:
+                     confirm_stops: bool = True, chain_open: bool = False) -> dict[str, LimitClip]:
     """Geometric limits of every joint of ``closed`` (see the module docstring).
 
     Args:
@@ -232,7 +304,9 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         samples: samples over the raw range.
         against: ``"stops"``: only the links rigid with the joint's parent
             (:func:`rigid_group`), whose geometry stops the part in every
-            state of the other joints (the URDF limit); ``"held"``: only the
+            state of the other joints (the URDF limit), and on the opening
+            side the links of the carrying chain with the joints between
+            open (step 6, with ``chain_open``); ``"held"``: only the
             links of the chain that carries the joint beyond its parent's
             rigid group (its ancestors, posed by the held joints between:
             a stapler's base for the magazine hinged on the top), the range
@@ -240,6 +314,10 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             end only (a part that cannot shut is the sweep's finding), and
             siblings and other branches are not cut away (a part in the way
             is the sweep's finding too).
+        chain_open: with ``against="stops"``, step 6 too (refine's repair
+            of a sweep that stopped short, ``tasks/refine.py``: the scan is
+            not run on every asset, whose later stages would then start from
+            other ranges).
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
@@ -309,7 +387,25 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             clip.blocked_by = who
             clip.notes = clip.notes[-1:]
             continue
-        if abs(far_raw - far) > MIN_CLIP_FRACTION * rng:
+        onset_done = False
+        if against == "stops" and chain_open:
+            far_c, who_c, opened = _chain_far_end(session, model, name, sub, closed, state, q_close, far_raw, tol,
+                                                  samples, rng)
+            nearer = (far_c - far) * d < 0
+            if who_c is not None and nearer and abs(far_raw - far_c) > MIN_CLIP_FRACTION * rng:
+                if abs(far_raw - far) > MIN_CLIP_FRACTION * rng:  # the parent's stop, at its onset, may still be nearer
+                    far_s = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * rng)
+                    if (far_s - far_c) * d < 0:
+                        far_c, who_c, opened = far_s, who, []
+                far, who, onset_done = far_c, who_c, True
+                span = abs(far - q_close)
+                clip.blocked_by = who
+                clip.notes.append(f"{'upper' if d > 0 else 'lower'} limit {far_raw:.4g} -> {far:.4g} "
+                                  f"({abs(far_raw - far):.3g} clipped): runs into {who}"
+                                  + (f" even with {', '.join(opened)} open" if opened else ""))
+        if onset_done:  # the chain's end (step 6), already at its onset
+            pass
+        elif abs(far_raw - far) > MIN_CLIP_FRACTION * rng:
             far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * rng)
             span = abs(far - q_close)
             clip.blocked_by = who

@@ -120,6 +120,7 @@ class Piece:
     volume: float
     sources: tuple[str, ...] = ()
     _support: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _edges: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def support(self) -> np.ndarray:
@@ -834,21 +835,347 @@ def drop_slivers(pieces: list[Piece]) -> list[Piece]:
     return [p for p in pieces if any(p is k for k in kept)]
 
 
+#: Overlap (m) along the separating direction that :func:`separate_parent_child`
+#: leaves between a parent's and its child's pieces: touching (0). Engines
+#: with a contact margin read touching hulls as penetrating by the margin
+#: (PyBullet: 1 mm per hull, so -2 mm for a touching pair).
+SEPARATION_GAP = 0.0
+
+#: Axes projected at once by :func:`penetration_depth` (memory: chunk x points).
+_AXIS_CHUNK = 4096
+
+
+def _edge_directions(piece: Piece) -> np.ndarray:
+    """Unit directions (e, 3) of the edges of the hull of ``piece``'s
+    support points (:attr:`Piece.support`: at most about 100 vertices), one
+    per direction up to sign; diagonals of triangulated facets included
+    (extra candidate axes never make :func:`penetration_depth` wrong).
+    Computed once per piece (kept on it, turned with it by :func:`_transformed`)."""
+    if piece._edges is None:
+        piece._edges = _hull_edge_directions(piece.support)
+    return piece._edges
+
+
+def _hull_edge_directions(pts: np.ndarray) -> np.ndarray:
+    """See :func:`_edge_directions`; ``pts`` (k, 3)."""
+    try:
+        verts, tris = mesh_io.convex_hull_mesh(pts)
+    except (QhullError, ValueError):
+        return np.zeros((0, 3))
+    e = np.concatenate([verts[tris[:, 1]] - verts[tris[:, 0]], verts[tris[:, 2]] - verts[tris[:, 1]],
+                        verts[tris[:, 0]] - verts[tris[:, 2]]])
+    n = np.linalg.norm(e, axis=1)
+    e = e[n > 1e-12] / n[n > 1e-12, None]
+    flip = (e[:, 0] < 0) | ((e[:, 0] == 0) & (e[:, 1] < 0)) | ((e[:, 0] == 0) & (e[:, 1] == 0) & (e[:, 2] < 0))
+    e[flip] *= -1
+    _, keep = np.unique(np.round(e * 50.0), axis=0, return_index=True)  # one per ~1 degree cell
+    e = e[np.sort(keep)]
+    if len(e) > MAX_EDGE_DIRECTIONS:  # an even subsample: fewer axes only bound the depth from above
+        e = e[np.linspace(0, len(e) - 1, MAX_EDGE_DIRECTIONS).round().astype(int)]
+    return e
+
+
+#: Most edge directions per piece that :func:`penetration_depth` crosses
+#: (its time grows with their product).
+MAX_EDGE_DIRECTIONS = 64
+
+
+def _overlaps(a: np.ndarray, b: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Overlap (n,) m of the projections of points ``a`` (k, 3) and ``b``
+    (j, 3) on each of ``axes`` (n, 3) unit, and whether ``a`` lies on the
+    lower side (n,) bool (separating along +axis moves ``b`` up)."""
+    out, low = [], []
+    for i in range(0, len(axes), _AXIS_CHUNK):
+        ax = axes[i:i + _AXIS_CHUNK]
+        pa, pb = a @ ax.T, b @ ax.T
+        up, down = pa.max(axis=0) - pb.min(axis=0), pb.max(axis=0) - pa.min(axis=0)
+        out.append(np.minimum(up, down))
+        low.append(up <= down)
+    return np.concatenate(out), np.concatenate(low)
+
+
+#: Candidate axes of :func:`penetration_depth` measured on every vertex, the
+#: ones with the smallest overlap of the pieces' support points.
+EXACT_AXES = 48
+
+
+def _least_overlap(a: Piece, b: Piece, axes: np.ndarray) -> tuple[float, np.ndarray]:
+    """Smallest overlap (m) of ``a`` and ``b`` over ``axes`` (n, 3) and its
+    axis oriented from ``a`` to ``b``: ranked on the support points (fast,
+    an under-estimate per axis), the :data:`EXACT_AXES` best measured on all
+    vertices (exact per axis, so the result bounds the depth from above)."""
+    if len(axes) > EXACT_AXES:
+        approx, _ = _overlaps(a.support, b.support, axes)
+        axes = axes[np.argpartition(approx, EXACT_AXES)[:EXACT_AXES]]
+    ov, low = _overlaps(a.points, b.points, axes)
+    i = int(np.argmin(ov))
+    return float(ov[i]), axes[i] * (1.0 if low[i] else -1.0)
+
+
+def penetration_depth(a: Piece, b: Piece, lower_bound: float = 0.0) -> tuple[float, np.ndarray]:
+    """Penetration depth (m, >= 0) of two convex pieces in one frame and the
+    direction (3,) unit along which ``b`` moves that far to separate from
+    ``a`` (zero vector when they do not overlap): the smallest overlap of
+    their projections over the separating-axis candidates of two convex
+    polyhedra, the face normals of both and the cross products of their
+    edge directions (Gottschalk, Lin and Manocha, "OBBTree", SIGGRAPH 1996;
+    Ericson, "Real-Time Collision Detection", 2005, sec. 5.2.1). The
+    overlap along any direction bounds the depth from above, so the minimum
+    over these candidates is the depth (what MuJoCo's ``mj_geomDistance``
+    reports as a negative distance; PyBullet adds its margins). Edge
+    directions come from the hull of the support points
+    (:func:`_edge_directions`) and candidates are ranked on the support
+    points (:func:`_least_overlap`), so the result may read slightly deeper
+    than exact, never shallower.
+
+    ``lower_bound``: when the face normals already bound the depth at or
+    below it (m), the edge axes are not tried (the result is then an upper
+    bound, <= ``lower_bound``)."""
+    lo = np.maximum(a.points.min(axis=0), b.points.min(axis=0))
+    hi = np.minimum(a.points.max(axis=0), b.points.max(axis=0))
+    if np.any(hi <= lo):
+        return 0.0, np.zeros(3)
+    best, axis = _least_overlap(a, b, np.vstack([a.equations[:, :3], b.equations[:, :3]]))
+    if best <= 0.0:
+        return 0.0, np.zeros(3)
+    if best <= lower_bound:
+        return best, axis
+    ea, eb = _edge_directions(a), _edge_directions(b)
+    if len(ea) and len(eb):
+        cross = np.cross(ea[:, None, :], eb[None, :, :]).reshape(-1, 3)
+        n = np.linalg.norm(cross, axis=1)
+        cross = cross[n > 1e-6] / n[n > 1e-6, None]
+        if len(cross):
+            d, ax = _least_overlap(a, b, cross)
+            if d < best:
+                best, axis = d, ax
+    if best <= 0.0:
+        return 0.0, np.zeros(3)
+    return best, axis
+
+
+def _transformed(piece: Piece, T: np.ndarray) -> Piece:
+    """``piece`` moved by the (4, 4) transform ``T`` (planes moved with it, no Qhull)."""
+    R, t = T[:3, :3], T[:3, 3]
+    n = piece.equations[:, :3] @ R.T
+    eq = np.hstack([n, (piece.equations[:, 3] - n @ t)[:, None]])
+    return Piece(piece.points @ R.T + t, eq, piece.volume, piece.sources, piece.support @ R.T + t, _edge_directions(piece) @ R.T)
+
+
+def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint) -> tuple[list[np.ndarray], int]:
+    """(4, 4) parent-frame poses of ``joint``'s child link at every position
+    of :func:`sweep_positions` over its range (the reach from the axis taken
+    from the child's pieces), in order, and the index of the position
+    nearest the joint's :func:`reference_state`. A parent-child pose depends
+    on that joint only."""
+    local = np.vstack([p.points for p in pieces[joint.child]])
+    reach = float(np.max(np.linalg.norm(np.cross(local, joint.axis), axis=1), initial=0.0)) if joint.type in ("revolute", "continuous") else 0.0
+    qs = sweep_positions(joint, reach)
+    ref = reference_state(model).get(joint.name, 0.0)
+    return [_joint_motion(joint, q) for q in qs], int(np.argmin(np.abs(qs - ref)))
+
+
+def _carried(depths: list[float], ref: int, tolerance: float) -> list[int]:
+    """Indices of the positions (ordered over the range) whose depth the
+    joint carries from its reference position ``ref``: the run of depths
+    above ``tolerance`` m that contains ``ref`` (empty when the reference
+    position is clear). A depth reached only after the child moved clear is
+    a stop (the child runs into its parent), left to the limit scan."""
+    if depths[ref] <= tolerance:
+        return []
+    lo = hi = ref
+    while lo > 0 and depths[lo - 1] > tolerance:
+        lo -= 1
+    while hi < len(depths) - 1 and depths[hi + 1] > tolerance:
+        hi += 1
+    return list(range(lo, hi + 1))
+
+
+def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str],
+                          tolerance: float = CONTAINMENT_TOLERANCE, state: dict[str, float] | None = None) -> None:
+    """Clip, in place, the pieces of every parent and child link so that no
+    child piece penetrates a parent piece deeper than ``tolerance`` m
+    (:func:`penetration_depth`, the depth an engine colliding the pair
+    reports) at the joint's reference position (:func:`reference_state`,
+    0 clipped to the limits: the pose the meshes were modelled in) and at
+    every position the overlap is carried to from there
+    (:func:`sweep_positions` over the range, :func:`_carried`), so the
+    pieces stay independent of the initial state. An overlap the child
+    only runs into after moving clear of its parent is a stop: it is kept,
+    and the limit scan (:mod:`asset2sim.tasks.geometry.limits`) clips the
+    joint's range before it. With ``state`` (joint -> rad or m), only that
+    state is separated (what :func:`link_pieces` does last for the initial
+    state it writes: an overlap the joint was written into). The
+    parent-child pairs every engine here skips
+    (the SPEC's exclusion) then also work where they are collided (a fixed
+    object, a robot's finger between them, a simulator without the
+    exclusion). Each overlap is removed along its separating direction by
+    cutting one of the two pieces (:func:`clip_piece`), up to :data:`SEPARATION_GAP`; the cut is
+    the resolution of any other penetration (move apart along the
+    minimum-translation direction) applied to the geometry, since a
+    parent and its child cannot move apart. Per pair of pieces, every
+    position's cut goes to the same piece, as one of two cuts: the side of
+    the piece beyond the plane taken off, or a slot (the band the other
+    piece spans along the direction taken out, :func:`_slot`, at most
+    :data:`SLOT_PIECES` parts and :data:`MAX_PIECES_HARD` per link: a latch's
+    shaft through a lid leaves the lid in pieces around it). Of the four
+    (two pieces, two cuts) the one that removes the smallest share of its
+    link's volume is made (a small piece of one link held whole in
+    another's hull, a dishwasher's rail inside its rack's, is removed
+    rather than the rack's hull cut around it; a microwave's thin door is
+    not eaten away around its frame); a link's last piece is never removed
+    (such an overlap is kept and noted). Cuts only remove volume, so an
+    overlap resolved stays resolved."""
+    for joint in model.joints:
+        P, C = pieces.get(joint.parent), pieces.get(joint.child)
+        if not P or not C:
+            continue
+        if state is None:
+            transforms, ref = _joint_transforms(model, pieces, joint)
+        else:
+            transforms, ref = [_joint_motion(joint, float(state.get(joint.name, reference_state(model).get(joint.name, 0.0))))], 0
+        size_p, size_c = sum(p.volume for p in P), sum(c.volume for c in C)
+        before = after = 0.0
+        cut_p, cut_c, kept = set(), set(), 0
+        i = 0
+        while i < len(P):
+            k = 0
+            while k < len(C) and P[i] is not None:
+                if C[k] is None:
+                    k += 1
+                    continue
+                planes_p, planes_c, slots_p, slots_c = [], [], [], []
+                found = [penetration_depth(P[i], _transformed(C[k], T), tolerance) for T in transforms]
+                for t in _carried([d for d, _ in found], ref, tolerance):
+                    T, (d, n) = transforms[t], found[t]
+                    c = _transformed(C[k], T)
+                    before = max(before, d)
+                    # P[i] on the low side along n: keep n.x <= min(c.n) + gap, or c above max(P.n) - gap
+                    lo_c, hi_p = float((c.points @ n).min()), float((P[i].points @ n).max())
+                    planes_p.append((n, -(lo_c + SEPARATION_GAP)))
+                    nc = T[:3, :3].T @ n  # the same direction in the child frame
+                    planes_c.append((-nc, hi_p - SEPARATION_GAP - float(n @ T[:3, 3])))
+                    # or a slot: the band the other piece spans along n taken out (two pieces left)
+                    slots_p.append((n, lo_c + SEPARATION_GAP, float((c.points @ n).max()) - SEPARATION_GAP, c))
+                    shift = float(n @ T[:3, 3])
+                    slots_c.append((nc, float((P[i].points @ n).min()) - shift + SEPARATION_GAP, hi_p - shift - SEPARATION_GAP,
+                                    _transformed(P[i], np.linalg.inv(T))))
+                if not planes_p:
+                    k += 1
+                    continue
+                room_p, room_c = MAX_PIECES_HARD - len(P), MAX_PIECES_HARD - len(C)
+                options = []  # (loss share, which, parts)
+                for which, piece, size, others, planes, slots, room in (("p", P[i], size_p, _others(P, i), planes_p, slots_p, room_p),
+                                                                         ("c", C[k], size_c, _others(C, k), planes_c, slots_c, room_c)):
+                    for parts in ([_clip_all(piece, planes)], _slot(piece, slots, tolerance, min(SLOT_PIECES, 1 + max(room, 0)))):
+                        if parts is None:
+                            continue
+                        parts = [q for q in parts if q is not None]
+                        if not parts and not others:  # a link's last piece is never removed
+                            continue
+                        options.append(((piece.volume - sum(q.volume for q in parts)) / size, len(parts), which, parts))
+                if not options:
+                    kept += 1
+                    after = max(after, max(d for d, _ in found))
+                    k += 1
+                    continue
+                _, _, which, parts = min(options, key=lambda o: (o[0], o[1]))
+                target, idx, cut = (P, i, cut_p) if which == "p" else (C, k, cut_c)
+                target[idx] = parts[0] if parts else None
+                target.extend(parts[1:])
+                cut.add(idx)
+                k += 1
+            i += 1
+        gone = sum(p is None for p in P) + sum(c is None for c in C)
+        P[:] = [p for p in P if p is not None]
+        C[:] = [c for c in C if c is not None]
+        if before > 0.0:
+            what = ", ".join(x for x in (f"{len(cut_p)} of {joint.parent!r}'s pieces" if cut_p else "",
+                                         f"{len(cut_c)} of {joint.child!r}'s" if cut_c else "") if x)
+            notes.append(f"joint {joint.name!r}: {joint.child!r} penetrated its parent {joint.parent!r} up to {before * 1000:.3g} mm "
+                         + ("from its reference position on" if state is None else "at the initial state") + f"; cut {what or 'nothing'}" + (f" ({gone} removed whole)" if gone else "")
+                         + (f"; {kept} overlap(s) of a link's last piece held whole inside another kept ({after * 1000:.3g} mm)" if kept else ""))
+
+
+def _clip_all(piece: Piece, planes: list[tuple[np.ndarray, float]]) -> Piece | None:
+    """``piece`` cut by every half-space ``n . x + offset <= 0`` of ``planes``
+    (:func:`clip_piece` in turn); None when nothing with volume is left."""
+    for n, off in planes:
+        if piece is None:
+            return None
+        if float((piece.points @ n).max()) + off <= 0.0:
+            continue
+        piece = clip_piece(piece, n, off)
+    return piece
+
+
+#: Most pieces :func:`_slot` leaves of one piece.
+SLOT_PIECES = 4
+
+
+def _slot(piece: Piece, slots: list[tuple[np.ndarray, float, float, Piece]], tolerance: float, most: int) -> list[Piece] | None:
+    """``piece`` with, for each slot (n (3,) unit, lo, hi m, other piece), the
+    band ``lo < n . x < hi`` taken out of every part that still penetrates
+    the other piece deeper than ``tolerance`` m (each such part becomes the
+    two parts beyond the band): a shaft through a lid leaves the lid in
+    pieces around it rather than one side of the lid. None when more than
+    ``most`` parts would be left."""
+    parts = [piece]
+    for n, lo, hi, other in slots:
+        out = []
+        for q in parts:
+            if penetration_depth(q, other, tolerance)[0] <= tolerance:
+                out.append(q)
+                continue
+            out += [x for x in (clip_piece(q, n, -lo), clip_piece(q, -n, hi)) if x is not None]
+        parts = out
+        if len(parts) > most:
+            return None
+    return parts
+
+
+def _others(pieces: list[Piece | None], i: int) -> bool:
+    """Whether ``pieces`` holds a piece besides the ``i``-th (removed ones are None)."""
+    return any(p is not None for j, p in enumerate(pieces) if j != i)
+
+
+def parent_child_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float]) -> dict[tuple[str, str], float]:
+    """(parent, child) -> penetration depth (m) of the child's pieces into the
+    parent's (:func:`penetration_depth`, the deepest piece pair) at joint
+    positions ``state`` (rad or m): what an engine that collides the pair
+    reports (margins aside)."""
+    poses = model.link_poses(state)
+    out = {}
+    for j in model.joints:
+        P, C = pieces.get(j.parent), pieces.get(j.child)
+        if not P or not C:
+            continue
+        T = np.linalg.inv(poses[j.parent]) @ poses[j.child]
+        out[(j.parent, j.child)] = max(penetration_depth(p, _transformed(c, T))[0] for p in P for c in C)
+    return out
+
+
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m).
 
-    The pieces do not depend on the state of the joints: a parent is cut
+    The pieces hardly depend on the state of the joints: a parent is cut
     around the volume its child sweeps over the joint's whole range
-    (:func:`swept_child_points`) and merges are guarded against the other
-    links over their ranges (:func:`swept_other_points`), so every state of
-    the object (the initial state, a closed end measured on the written
-    pieces, a state the sweep drives to) sees the same collision geometry.
+    (:func:`swept_child_points`), merges are guarded against the other
+    links over their ranges (:func:`swept_other_points`) and a child's
+    overlap with its parent is cut from the reference position on
+    (:func:`separate_parent_child`), so every state of the object (the
+    initial state, a closed end measured on the written pieces, a state the
+    sweep drives to) sees the same collision geometry, except where the
+    initial state ``state`` puts a child into its parent (a stop it was
+    written into): that overlap is cut last, for that state.
 
     Args:
         model: a URDF model (scale baked in; its joint limits are the ranges swept).
         mesh_path: ``UrdfGeometry -> Path`` of a collision mesh's file.
-        state: joint -> rad or m, the initial state: only for a note when
+        state: joint -> rad or m, the initial state: what a child still
+            penetrates of its parent there is cut (:func:`separate_parent_child`
+            with ``state``; the only state-dependent step), and a note when
             a child still sits inside its parent there.
         limit: most pieces per link.
         decompose: decompose a parent piece that contains its child
@@ -887,16 +1214,22 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
                 d = max((depth_inside(pts, p) for p in pieces[name]), default=0.0)
                 if d > CONTAINMENT_TOLERANCE:
                     _trim(pieces, name, ", ".join(repr(c) for c in swept), pts, d, notes)
+        if decompose:
+            separate_parent_child(model, pieces, notes)
         for name in model.links:
             pieces[name] = drop_slivers(pieces[name])
         if len(_PIECE_CACHE) >= 16:
             _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
         _PIECE_CACHE[key] = hit = ({k: list(v) for k, v in pieces.items()}, list(notes))
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
+    if state is not None and decompose:  # what the initial state still holds: a stop the joint was written into
+        separate_parent_child(model, pieces, notes, state=state)
+        for name in model.links:
+            pieces[name] = drop_slivers(pieces[name])
     if state:
-        for (parent, child), d in containment_depths(model, pieces, state).items():
+        for (parent, child), d in parent_child_depths(model, pieces, state).items():
             if d > CONTAINMENT_TOLERANCE:
-                notes.append(f"link {child!r} sits {d * 1000:.3g} mm inside the collision pieces of its parent {parent!r} at the initial state")
+                notes.append(f"link {child!r} penetrates the collision pieces of its parent {parent!r} {d * 1000:.3g} mm at the initial state")
     return pieces, notes
 
 

@@ -15,6 +15,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
@@ -53,9 +55,11 @@ def check_output_folder(asset: AssetDescription, out_dir: Path) -> Path:
     return check_location(asset.source_dir, out_dir)
 
 
-def _inside(path: Path, root: Path) -> bool:
+def _inside(path: Path, root: Path, *, resolved: bool = False) -> bool:
+    """True when ``path`` lies inside ``root`` after resolving symlinks
+    (``resolved``: both are resolved already)."""
     try:
-        path.resolve().relative_to(root.resolve())
+        (path if resolved else path.resolve()).relative_to(root if resolved else root.resolve())
         return True
     except ValueError:
         return False
@@ -91,6 +95,36 @@ def _reference_dirs(filename: str) -> list[str]:
     return out
 
 
+#: Results of :func:`mesh_copies` kept per process (a refine writes its
+#: output several times; a long-lived stage server serves many assets):
+#: key -> (files it read, their stamps and their folders', copies). Bounded.
+_COPIES_CACHE: OrderedDict[tuple, tuple[list[Path], tuple, dict[str, Path]]] = OrderedDict()
+_COPIES_CACHE_SIZE = 32
+_COPIES_LOCK = threading.Lock()
+
+
+def _copies_key(asset: AssetDescription) -> tuple:
+    meshes = tuple(
+        (str(g.path), g.filename)
+        for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh" and g.path is not None
+    )  # fmt: skip
+    return str(asset.source_dir), str(asset.urdf_path), meshes
+
+
+def _stamps(files: list[Path]) -> tuple:
+    """(path, size, modification time ns, inode) of each file and of each
+    folder holding one (a file added, removed or renamed there changes the
+    folder's time); None for a path that cannot be read."""
+    out = []
+    for p in sorted({str(f) for f in files} | {str(Path(f).parent) for f in files}):
+        try:
+            st = os.stat(p)
+            out.append((p, st.st_size, st.st_mtime_ns, st.st_ino))
+        except OSError:
+            out.append((p, None, None, None))
+    return tuple(out)
+
+
 def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     """What :func:`copy_meshes` copies: output path (relative, POSIX, exactly
     where the output URDF, the copied OBJ and MTL files will look for it) ->
@@ -98,17 +132,42 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     folder is copied as a regular file at the referenced path; MTL files and
     textures are placed relative to their mesh as the mesh looks for them.
 
+    Finding the MTL libraries and textures reads every OBJ file (16-80 ms per
+    PartNet-Mobility asset, asked for 5-11 times per refine), so the answer
+    is kept per process, keyed by the asset's mesh references and checked
+    against the size, modification time and inode of every file it read and
+    of the folders holding them (an edited, added or replaced file computes
+    it again).
+
     Raises:
         OutputError: ``OUTPUT_OUTSIDE_INPUT`` (a file outside the asset
             folder), ``OUTPUT_NAME_CONFLICT`` (two different input files for
             one output path, or an input file named like a contract file).
     """
+    key = _copies_key(asset)
+    with _COPIES_LOCK:
+        hit = _COPIES_CACHE.get(key)
+    if hit is not None and _stamps(hit[0]) == hit[1]:
+        return dict(hit[2])
+    read = [g.path for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh" and g.path is not None]
+    copies = _mesh_copies(asset)
+    files = [*read, *copies.values()]
+    entry = (files, _stamps(files), dict(copies))
+    with _COPIES_LOCK:
+        _COPIES_CACHE[key] = entry
+        _COPIES_CACHE.move_to_end(key)
+        while len(_COPIES_CACHE) > _COPIES_CACHE_SIZE:
+            _COPIES_CACHE.popitem(last=False)
+    return copies
+
+
+def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     root = asset.source_dir.resolve()
     base = asset.urdf_path.parent
     copies: dict[str, Path] = {}
 
-    def add(rel: str, src: Path) -> None:
-        if not _inside(src, root):
+    def add(rel: str, src: Path) -> None:  # src resolved
+        if not _inside(src, root, resolved=True):
             raise OutputError(f"mesh {src} lies outside the asset folder {root}", "OUTPUT_OUTSIDE_INPUT", src)
         rel = PurePosixPath(os.path.normpath(rel).replace(os.sep, "/")).as_posix()
         if rel.startswith("../") or rel in ("..", ".") or rel.startswith("/"):
@@ -277,8 +336,9 @@ def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
         else:
             edited.append((dst, data))
         out.append(dst)
-    if kept:
-        atomic.announce(kept)
+    # every destination announced at once: an output folder's owner records them
+    # in one write of its record instead of one per edited file
+    atomic.announce([*kept, *(d for _, d in todo), *(d for d, _ in edited)])
     atomic.copy_files(todo)
     for dst, data in edited:
         atomic.write_bytes(dst, data)

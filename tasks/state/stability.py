@@ -14,6 +14,19 @@ and the requested state are never changed (the request fixes them); the
 inertia tensor of each changed link is scaled with its mass (same geometry,
 same COM in the link frame). Every change is reported with its reason.
 
+Where no sourced fraction covers an opened part, its mass may go down to its
+**envelope shell mass** (:func:`envelope_masses`): for a part of a shell
+material (sheet metal, molded plastic, panels: ``materials.yaml`` ``shell``)
+the material lies on its outer surface, m = A_env t rho (thin-shell mass,
+Roark's Formulas for Stress and Strain, 8th ed., thin-walled members), A_env
+the area of the convex hull of its collision geometry (its outer envelope), t
+and rho the material's wall thickness and density, times the factor the
+estimate applied to the link (the plausible-mass scaling). The estimate's area
+is the mesh's, which counts both faces of a modelled wall and every inner
+face; where it saturates the hollow fraction a sheet part becomes solid (a
+stapler's sheet-steel arm 3 times its envelope mass), so the envelope mass is
+the physical lower end of the part's mass. Needs the links' geometry.
+
 Statics (rigid bodies on a plane under gravity -z): the object rests iff the
 vertical projection of its COM lies inside the convex hull of its contact
 points (the support polygon); e.g. Featherstone & Orin, "Dynamics", Springer
@@ -32,9 +45,11 @@ import numpy as np
 
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.engines.loading import collision_pieces, read_urdf
-from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.interpret.part_labels import canonical_label
+from asset2sim.tasks.interpret.prior_tables import MaterialPrior, load_priors
+from asset2sim.tasks.synthesize import physics
 
 __all__ = ["PART_MASS_FRACTION", "Balance", "design_for_stability", "measure_balance", "support_polygon"]
 
@@ -264,6 +279,42 @@ def measure_balance(urdf: Path | str, overlay: Overlay, state: dict[str, float])
     return Balance(com, poly, _signed_margin(poly, com[:2]), max(2e-3, SUPPORT_MARGIN_FRACTION * np.sqrt(area), h * np.tan(TILT_RECOVERY_RAD)))
 
 
+def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
+                    geometry: dict[str, LinkGeometry]) -> dict[str, float]:
+    """Envelope shell mass (kg) of every link of ``overlay`` made of a shell
+    material (module docstring): A_env t rho times the factor the estimate
+    applied to the link (its mass over the geometric mass
+    :func:`asset2sim.tasks.synthesize.physics.link_physics` gives for its
+    ``geometry`` and material: the plausible-range scaling, a validator's
+    raise, a requested mass), capped at the link's mass. A_env is the
+    convex-hull area of its collision points ``points`` (link -> (N, 3) m,
+    world, scale baked in). Links of solid or unknown materials, or without
+    geometry or a hull, are left out.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    by_name: dict[str, MaterialPrior] = {m.name: m for m in load_priors().materials.values()}
+    out: dict[str, float] = {}
+    for ln, lp in overlay.links.items():
+        mat = by_name.get(lp.material)
+        pts, geom = points.get(ln), geometry.get(ln)
+        if mat is None or not mat.shell or pts is None or len(pts) < 4 or geom is None:
+            continue
+        try:
+            area = float(ConvexHull(pts).area)
+        except (QhullError, ValueError):
+            continue
+        choice = physics.MaterialChoice(name=mat.name, density=mat.density, shell=True, wall_thickness=mat.wall_thickness)
+        try:
+            raw = physics.link_physics(geom, overlay.scale, choice).mass
+        except ValueError:
+            continue
+        if not raw > 0:
+            continue
+        out[ln] = float(min(lp.mass, area * mat.wall_thickness * mat.density * lp.mass / raw))
+    return out
+
+
 def _subtree(asset: AssetDescription, link: str) -> set[str]:
     out, todo = {link}, [link]
     while todo:
@@ -281,6 +332,7 @@ def design_for_stability(
     overlay: Overlay,
     state: dict[str, float],
     category: str | None,
+    geometry: dict[str, LinkGeometry] | None = None,
 ) -> tuple[Overlay, list[str]]:
     """Make a free-standing object balance at ``state`` by its part masses.
 
@@ -289,8 +341,11 @@ def design_for_stability(
     links of the opened parts that :data:`PART_MASS_FRACTION` covers (the
     child link of a movable joint with that label, and its subtree) to the
     links that are moved by no joint (the body), each side scaled
-    proportionally, down to the part's sourced lower fraction at most; the
-    smallest transfer that balances the object is used. Total mass, scale and
+    proportionally, down to the part's sourced lower fraction at most, and
+    from the other opened parts of shell materials down to their envelope
+    shell mass (module docstring; each opened link moves linearly towards its
+    floor, the body scaled up alike); the smallest transfer that balances the
+    object is used. Total mass, scale and
     state are unchanged. A mounted asset (``overlay.mounting.fixed``) and an
     object already balanced are returned unchanged.
 
@@ -300,6 +355,9 @@ def design_for_stability(
         overlay: the overlay the URDF was written from.
         state: joint -> rad or m, the refined initial state.
         category: canonical category (the key of :data:`PART_MASS_FRACTION`).
+        geometry: link -> :class:`LinkGeometry` (scale 1): opened parts no
+            sourced fraction covers may go down to their envelope shell mass
+            (:func:`envelope_masses`); None: only the sourced fractions.
 
     Returns:
         (overlay, changes): the new overlay (the same object when nothing
@@ -322,38 +380,54 @@ def design_for_stability(
             for ln in _subtree(asset, j.child):
                 parts[ln] = pf
     body = [ln for ln in overlay.links if ln not in moved]
-    light = [ln for ln in overlay.links if ln in parts]
     total = overlay.total_mass()
-    m_part = sum(overlay.links[ln].mass for ln in light)
     m_body = sum(overlay.links[ln].mass for ln in body)
-    if not light or m_body <= 0 or total <= 0:
+    floors: dict[str, float] = {}  # link -> the least mass it may take
+    reasons: list[str] = []
+    table = [ln for ln in overlay.links if ln in parts]
+    pf = min((parts[ln] for ln in table), key=lambda p: p.lo) if table else None
+    if pf is not None:
+        m_table = sum(overlay.links[ln].mass for ln in table)
+        share = min(1.0, pf.lo * total / max(m_table, 1e-12))
+        floors.update({ln: overlay.links[ln].mass * share for ln in table})
+        reasons.append(f"sourced range {pf.lo:.0%}-{pf.hi:.0%}: {pf.source}")
+    env = envelope_masses(overlay, _link_world(Path(urdf), state)[1], geometry) if geometry else {}
+    env_links = [ln for ln in overlay.links if ln in moved and ln not in parts and ln in env
+                 and env[ln] < overlay.links[ln].mass * (1 - 1e-9)]
+    if env_links:
+        floors.update({ln: env[ln] for ln in env_links})
+        reasons.append("envelope shell mass (outer area x wall thickness x density) of "
+                       + ", ".join(f"{ln} {env[ln]:.3g} kg" for ln in env_links))
+    light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
+    m_part = sum(overlay.links[ln].mass for ln in floors)
+    if not floors or m_body <= 0 or total <= 0:
         if bal.margin >= 0:  # inside, only closer to the edge than asked: nothing to say without a sourced ratio
             return overlay, []
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge at the requested state "
                          f"(needs >= {bal.required * 1000:.3g} mm inside); no part-mass ratio of {category} to move within"]
-    pf = min((parts[ln] for ln in light), key=lambda p: p.lo)
-    floor = pf.lo * total
-    if m_part <= floor:
+    if not light:
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; the opened parts already weigh "
-                         f"{m_part / total:.0%} of the object, the lower end of the sourced range ({pf.lo:.0%}): masses kept"]
+                         f"{m_part / total:.0%} of the object, the lower end of the "
+                         + ("sourced range" if pf is not None else "physical range") + (f" ({pf.lo:.0%})" if pf is not None else "")
+                         + ": masses kept"]
     frames, _ = _link_world(Path(urdf), state)
+    span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
 
-    def masses_for(delta: float) -> dict[str, float]:
+    def masses_for(t: float) -> dict[str, float]:
         out = {ln: lp.mass for ln, lp in overlay.links.items()}
         for ln in light:
-            out[ln] *= (m_part - delta) / m_part
+            out[ln] -= t * (out[ln] - floors[ln])
         for ln in body:
-            out[ln] *= (m_body + delta) / m_body
+            out[ln] *= (m_body + t * span) / m_body
         return out
 
-    def margin(delta: float) -> float:
-        return _signed_margin(bal.support, _com(overlay, frames, masses_for(delta))[:2])
+    def margin(t: float) -> float:
+        return _signed_margin(bal.support, _com(overlay, frames, masses_for(t))[:2])
 
-    hi = m_part - floor
-    if margin(hi) < bal.required:
+    if margin(1.0) < bal.required:
         return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
-                         f"{pf.lo:.0%} of the mass (the lower end of the sourced range) it stays outside: masses kept"]
-    lo = 0.0
+                         "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
+    lo, hi = 0.0, 1.0
     for _ in range(40):  # the margin is monotone in the transfer along this segment
         mid = 0.5 * (lo + hi)
         lo, hi = (lo, mid) if margin(mid) >= bal.required else (mid, hi)
@@ -368,10 +442,12 @@ def design_for_stability(
             "source": lp.source + f"; mass x{f:.3g} for stability by design",
         })
     after = _signed_margin(bal.support, _com(ov, frames)[:2])
+    moved_kg = hi * span
+    m_after = sum(new[ln] for ln in floors)
     change = (
         f"stability by design: at the requested state the centre of mass was {bal.margin * 1000:.3g} mm from the support's edge "
-        f"(needs >= {bal.required * 1000:.3g} mm inside); moved {hi:.3g} kg from {', '.join(light)} to {', '.join(body)} "
-        f"(opened parts {m_part / total:.0%} -> {(m_part - hi) / total:.0%} of {total:.3g} kg, sourced range {pf.lo:.0%}-{pf.hi:.0%}: "
-        f"{pf.source}); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
+        f"(needs >= {bal.required * 1000:.3g} mm inside); moved {moved_kg:.3g} kg from {', '.join(light)} to {', '.join(body)} "
+        f"(opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, " + "; ".join(reasons) + "); "
+        f"margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
     )
     return ov, [change]

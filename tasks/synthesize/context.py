@@ -75,6 +75,8 @@ class EstimationContext:
     """(3, 3) resting-pose rotation the output will carry (``tasks.state.pose``), or None."""
     settings: dict[str, Any] = field(default_factory=dict)
     """Knobs for the estimator (e.g. ``seed``); read-only for estimators."""
+    task: str | None = None
+    """The manipulation task refine was given ("close the microwave door"): the post-check executes it."""
 
     def closed_state(self) -> dict[str, float]:
         """joint -> closed position (rad, or input units for prismatic joints)."""

@@ -205,7 +205,9 @@ def joint_dynamics_for(
     qualitative ``choices`` (see ``docs/refine.md``, "Joint dynamics").
 
     Friction holds the largest gravity load within 5 % of the range around the
-    state, or over the whole range when the joint must hold its position; a
+    state, or over the whole range when the joint must hold its position, and
+    the load at :data:`CLOSED_HOLD_FRACTIONS` where gravity pushes the part
+    open there (a closed part stays closed); a
     spring gets k = max(3 x 1.5 x hold / range, 2 k_g) and the reference
     q_s = q - tau_g / k so that it holds the state (equilibrium of
     -k (q - q_s) + tau_g = 0), friction then only 10 % of the load.
@@ -229,6 +231,14 @@ def joint_dynamics_for(
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             hold = max(hold, abs(ld[name].gravity_load))
+        # A part stays shut once closed: where gravity pushes it open near its
+        # closed end (a lever hanging open), friction holds that too; a load
+        # towards the closed end rests on the stop.
+        for f in CLOSED_HOLD_FRACTIONS:
+            st = {**state, name: cs.position(float(f)) * unit}
+            ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
+            if ld[name].gravity_load * cs.direction > 0:
+                hold = max(hold, abs(ld[name].gravity_load))
         spring = None
         if ch.spring:
             load = loads[name]
@@ -247,6 +257,12 @@ def joint_dynamics_for(
             source=source,
         )
     return out
+
+
+#: Opening fractions near the closed end where friction also holds a joint
+#: that gravity pushes open (:func:`joint_dynamics_from_loads`): a part closed
+#: by a hand (the probes release a closed part at f <= 0.10) stays closed.
+CLOSED_HOLD_FRACTIONS = (0.0, 0.05, 0.10)
 
 
 # ------------------------------------------------------------ offline estimator

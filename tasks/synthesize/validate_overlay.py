@@ -43,6 +43,7 @@ import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics, Overlay, ValidationIssue
+from asset2sim.tasks.geometry.closed_state import subtree_links
 
 TRIANGLE_RTOL = 1e-9
 
@@ -96,11 +97,17 @@ class ValidationPolicy:
 MIN_LINK_MASS_FRACTION = 1e-3
 
 
-def _raise_light_links(ov: Overlay, add) -> None:
+def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None) -> None:
     """Raise every link lighter than :data:`MIN_LINK_MASS_FRACTION` of the
     overlay's total mass to that floor, its inertia tensor scaled by the same
     factor (same shape and density distribution); ``OVL_MASS_TOO_SMALL``
-    warning per link (fixed)."""
+    warning per link (fixed). With ``asset``, the dynamics of every movable
+    joint whose moving subtree got heavier follow its mass (friction, damping
+    and inertia about the axis times the subtree's mass ratio r): the friction
+    was derived from the gravity load of the lighter part (a toilet's flush
+    lever raised from 30 g to 50 g fell open against the friction set for 30
+    g; the load scales with the mass, the lever arm unchanged)."""
+    before = {n: lp.mass for n, lp in ov.links.items()}
     masses = {n: lp.mass for n, lp in ov.links.items() if math.isfinite(lp.mass) and lp.mass > 0}
     total = sum(masses.values())
     f = MIN_LINK_MASS_FRACTION
@@ -121,6 +128,23 @@ def _raise_light_links(ov: Overlay, add) -> None:
                 "mass": floor, "inertia": Inertia.from_matrix(lp.inertia.matrix() * k),
                 "source": lp.source + "; mass raised to the floor by validator",
             })
+    if asset is None:
+        return
+    for jd in asset.movable_joints():
+        dyn = ov.joints.get(jd.name)
+        if dyn is None:
+            continue
+        sub = [ln for ln in subtree_links(asset, jd.child) if ln in ov.links]
+        m0 = sum(before.get(ln, 0.0) for ln in sub)
+        m1 = sum(ov.links[ln].mass for ln in sub)
+        if not (m0 > 0 and m1 > m0 * (1 + 1e-9)):
+            continue
+        r = m1 / m0
+        ov.joints[jd.name] = dyn.model_copy(update={
+            "friction": dyn.friction * r, "damping": dyn.damping * r,
+            "inertia_axis": dyn.inertia_axis * r if dyn.inertia_axis else dyn.inertia_axis,
+            "source": dyn.source + f"; friction and damping x{r:.3g} with the moving part's mass raised by the validator",
+        })
 
 
 def inertia_problems(m: np.ndarray) -> str | None:
@@ -316,7 +340,7 @@ def validate_overlay(
             add("OVL_COM_OUTSIDE", "error", ln.name, "center of mass is not finite")
         ov.links[ln.name] = lp
 
-    _raise_light_links(ov, add)
+    _raise_light_links(ov, add, asset)
 
     # ---- joints
     limits = scaled_limits(asset, s)

@@ -32,7 +32,15 @@ def test_demo_runs_without_data(tmp_path):
     assert "interaction-ready" in p.stdout
     for stage in ("extract", "analyze", "refine_state", "post_check"):
         assert stage in p.stdout
-    assert json.loads((out / "report.json").read_text())["failure_mode"] == "none"
+    report = json.loads((out / "report.json").read_text())
+    assert report["failure_mode"] == "none"
+    # the demo box is given its category's task: every tier the post-check measures passed, none n/a
+    # (the probes are the evaluation's, which --no-extras skips)
+    assert report["task"] == "close the box lid" and "task         close the box lid" in p.stdout
+    assert all(v is True for t, v in report["readiness"].items() if t != "probes"), report["readiness"]
+    for tier in ("task", "force", "robust_rest", "sweep"):
+        assert tier in report["readiness"]
+    assert "task PASS, force PASS" in p.stdout
 
 
 @needs_shared

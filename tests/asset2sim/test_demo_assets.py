@@ -79,11 +79,12 @@ def test_manifest_and_folder_layout(dataset: Path):
     with open(dataset / "manifest.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["id"] for r in rows] == IDS
-    assert list(rows[0]) == ["id", "category", "prompt"]
+    assert list(rows[0]) == ["id", "category", "prompt", "task"]
     for row in rows:
         folder = dataset / row["id"]
         assert row["category"] == EXPECTED_CATEGORY[row["id"]]
         assert len(row["prompt"]) > 20
+        assert row["task"] == demo_objects.CATEGORY_TASKS[row["category"]]
         meta = json.loads((folder / "meta.json").read_text())
         assert meta["model_cat"] == row["category"]
         assert (folder / "mobility.urdf").is_file()

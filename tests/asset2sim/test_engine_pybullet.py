@@ -101,3 +101,34 @@ def test_parent_child_pairs_excluded_siblings_counted(tmp_path):
         assert not math.isnan(float(np.sum(s.root_pose()[0])))
     finally:
         s.close()
+
+
+def test_joint_axis_is_in_the_link_frame_with_a_non_diagonal_inertia(tmp_path):
+    """Bullet turns a link's inertial frame to the principal axes of a
+    non-diagonal inertia tensor and reports the joint axis in that frame; the
+    protocol's axis is in the child link's frame, so world axes of the
+    gripper, sweep and probes stay right (faucet 148's handle turned the wrong
+    way in task execution before)."""
+    folder = tmp_path / "tilted"
+    folder.mkdir()
+    (folder / "mobility.urdf").write_text(
+        """<?xml version="1.0"?>
+<robot name="t">
+  <link name="base"><inertial><mass value="5"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+    <collision><origin xyz="0 0 0.05"/><geometry><box size="0.6 0.6 0.1"/></geometry></collision></link>
+  <link name="arm"><inertial><origin xyz="0 0.07 0.03"/><mass value="0.4"/>
+    <inertia ixx="0.0008" ixy="-0.00001" ixz="-0.00001" iyy="0.0007" iyz="-0.00027" izz="0.0003"/></inertial>
+    <collision><origin xyz="0 0.07 0.03"/><geometry><box size="0.02 0.14 0.06"/></geometry></collision></link>
+  <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 0.2"/><axis xyz="0 -1 0"/>
+    <limit lower="-2" upper="2" effort="10" velocity="10"/></joint>
+</robot>
+"""
+    )
+    s = open_session("pybullet", folder / "mobility.urdf", SessionOptions(fixed_base=True, initial_state={"j": 0.3}))
+    try:
+        assert s.joint_axis("j") == pytest.approx([0.0, -1.0, 0.0], abs=1e-6)
+        # the world axis does not move as the joint turns about it
+        R = s.link_frame("arm")[1]
+        assert R @ s.joint_axis("j") == pytest.approx([0.0, -1.0, 0.0], abs=1e-6)
+    finally:
+        s.close()

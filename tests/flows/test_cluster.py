@@ -25,20 +25,31 @@ except ImportError:
     from conftest import make_project
 
 ASSETS = {f"{src}_{i}": src for i in range(3) for src in ("box_lid", "laptop", "trash_can")}
+#: The fast variant's assets (fewer, shorter refines): the same checks.
+FEW = {f"{src}_{i}": src for i in range(2) for src in ("box_lid", "laptop")}
 
 
 @pytest.mark.slow  # two flow runs on a cluster started here: about 100 s on 2 busy cores
 def test_a_worker_killed_mid_run_loses_and_duplicates_nothing(tmp_path, prefect_server):
+    _killed_worker_run(tmp_path, prefect_server, ASSETS, delay_s=1.0)
+
+
+def test_a_worker_killed_mid_run_fast(tmp_path, prefect_server):
+    """The same on four assets (a shorter run; the slow test above has nine)."""
+    _killed_worker_run(tmp_path, prefect_server, FEW, delay_s=1.0)
+
+
+def _killed_worker_run(tmp_path, prefect_server, assets: dict[str, str], delay_s: float) -> None:
     from asset2sim.flows.refine_flow import run_refine_flow
 
-    catalog = make_project(tmp_path / "proj", ASSETS, catalog_extra={
+    catalog = make_project(tmp_path / "proj", assets, catalog_extra={
         "run": {"evaluate": False, "time_limit_seconds": 120}, "tracking": {"enabled": False},
         # other work may edit the package source meanwhile: the rerun must not redo finished assets for that
         "results": {"code_change": "keep"}})
     env = {
         "PREFECT_API_URL": prefect_server,
         "PYTHONPATH": os.pathsep.join([str(Path(flowfakes.__file__).parent), os.environ.get("PYTHONPATH", "")]),
-        "FLOWFAKES_DELAY_S": "1.0",  # each refine takes a while: the kill lands mid-asset
+        "FLOWFAKES_DELAY_S": str(delay_s),  # each refine takes a while: the kill lands mid-asset
     }
     cluster = start_cluster(tmp_path / "dask", 2, env=env)
     try:
@@ -54,16 +65,16 @@ def test_a_worker_killed_mid_run_loses_and_duplicates_nothing(tmp_path, prefect_
         first = run_refine_flow(catalog, dask_address=cluster.address)
         watcher.join(timeout=60)
         assert killed.get("p") is not None, "no worker was killed"
-        assert first["assets"] == len(ASSETS)
+        assert first["assets"] == len(assets)
         second = run_refine_flow(catalog, dask_address=cluster.address)
-        assert second["assets"] == len(ASSETS) and second["done"] + second["skipped"] + second["failed"] == len(ASSETS)
+        assert second["assets"] == len(assets) and second["done"] + second["skipped"] + second["failed"] == len(assets)
     finally:
         cluster.close()
     t = tally(catalog, "gen")
-    assert check_exactly_once(t, sorted(ASSETS)) == []
+    assert check_exactly_once(t, sorted(assets)) == []
     assert set(t.rows_per_run) == {first["run"], second["run"]}
-    assert all(sum(c.values()) == len(ASSETS) for c in t.rows_per_run.values())  # one row per asset per run
+    assert all(sum(c.values()) == len(assets) for c in t.rows_per_run.values())  # one row per asset per run
     # what the killed worker held was redone on the other (or restarted) worker, not lost
-    assert sum(t.done.values()) + sum(1 for a in ASSETS if t.done[a] == 0) == len(ASSETS)
+    assert sum(t.done.values()) + sum(1 for a in assets if t.done[a] == 0) == len(assets)
     runs = ResultCatalog(load_catalog(catalog).catalog_root).runs("gen")
     assert len(runs) == 2

@@ -30,9 +30,12 @@ def test_one_server_many_isolated_calls(tmp_path):
     try:
         a = srv.call(f"{MOD}:add", {"a": 2, "b": 3}, timeout=120, workdir=tmp_path / "a")
         assert a.status == "ok" and a.value["sum"] == 5
+        assert a.extra["server_start_seconds"] > 0  # the first call started the server ...
         server_pid = srv.proc.pid
         b = srv.call(f"{MOD}:add", {"a": 1, "b": 1}, timeout=60, workdir=tmp_path / "b")
         assert b.status == "ok" and b.value["sum"] == 2
+        assert "server_start_seconds" not in b.extra  # ... the next did not pay for it
+        assert a.extra["cpu_seconds"] >= 0 and b.extra["cpu_seconds"] >= 0  # the child's CPU time (wait4)
         assert srv.proc.pid == server_pid  # the same server ...
         assert len({a.value["pid"], b.value["pid"], server_pid, os.getpid()}) == 4  # ... a new child per call
 
@@ -102,5 +105,19 @@ def test_the_server_outlives_the_thread_that_started_it(tmp_path):
         assert psutil.pid_exists(first) and psutil.Process(first).status() != psutil.STATUS_ZOMBIE
         res = srv.call(f"{MOD}:add", {"a": 2, "b": 2}, timeout=60, workdir=tmp_path / "m")
         assert res.status == "ok" and srv.proc.pid == first and srv.starts == 1
+    finally:
+        srv.close()
+
+
+def test_start_soon_starts_the_server_in_the_background(tmp_path):
+    srv = StageServer(preload=(MOD,))
+    try:
+        srv.start_soon()
+        res = srv.call(f"{MOD}:add", {"a": 2, "b": 2}, timeout=120, workdir=tmp_path / "a")
+        assert res.status == "ok" and res.value["sum"] == 4 and srv.starts == 1  # one server, started once
+        assert res.extra["server_start_seconds"] > 0  # the call waited for that start
+        srv.start_soon()  # running: nothing happens
+        assert srv.call(f"{MOD}:add", {"a": 1, "b": 2}, timeout=60, workdir=tmp_path / "b").value["sum"] == 3
+        assert srv.starts == 1
     finally:
         srv.close()

@@ -79,7 +79,10 @@ def test_refine_closed_end_is_the_evaluations_when_a_part_overlaps_its_parent(tm
     res = refine_asset(src, "a faucet with its handle turned off", tmp_path / "out", extras=False)
     r = res.report
     ev = _evaluation_closed(res.out_dir / "mobility.urdf", "lever_j")
-    assert abs(ev.q_closed - on_input) > 0.05  # the case this test is about: input and output disagree
+    # the case this test is about: input and output disagree (since the parent-child cut of the
+    # body's pieces, collision_geometry.separate_parent_child, by 0.024 rad; the next line's 1e-9
+    # still tells them apart)
+    assert abs(ev.q_closed - on_input) > 0.01
     assert r.closed_positions["lever_j"] == pytest.approx(ev.q_closed, abs=1e-9)
     lo, hi = BAND_INTERVAL[r.requested_bands["lever_j"]]
     assert lo - 1e-9 <= ev.fraction(r.initial_joint_positions["lever_j"]) <= hi + 1e-9

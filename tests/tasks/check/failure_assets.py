@@ -99,7 +99,7 @@ def build_interlocked_box(out_dir: Path) -> Path:
                DemoLink("link_1", "free", "box_body", body)],
         joints=[
             DemoJoint("joint_1", "fixed", "base", "link_1", rpy=_BASE_RPY),
-            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(1.0, 0.0, 0.0), lower=0.0, upper=1.8),
+            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=0.0, upper=1.8),
             DemoJoint("joint_2", "revolute", "link_0", "link_2", origin=(0.0, 0.011, 0.1), axis=(0.0, 1.0, 0.0), lower=-1.5, upper=1.5),
         ],
     )

@@ -1,7 +1,9 @@
 """Operable friction: escalation holds a state through robust rest only with
-friction the probe can still overcome (tasks/check/operating.py), on the
-generated demo laptop whose screen needs escalation to hold through a 2 cm
-drop."""
+friction a real operating force still overcomes (tasks/check/operating.py,
+tasks/check/task_tier.py): the probe's cap, the task gripper's operating
+budget (category/part ranges, ground friction of a free object, gravity along
+the task's path), the estimate lowered to it, and the relief of a task that
+needed more than the range; on generated demo objects."""
 
 from __future__ import annotations
 
@@ -11,7 +13,11 @@ import numpy as np
 import pytest
 
 from asset2sim import demo_assets
-from asset2sim.tasks.check import operating
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import operating, task_tier
+from asset2sim.tasks.check.gripper import GripperLimits
+from asset2sim.tasks.evaluation.task_spec import task_actions
 from asset2sim.tasks.check.probes import ProbeConfig
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
@@ -49,18 +55,118 @@ def test_push_lever_is_the_far_corner_and_the_cap_leaves_the_probe_a_margin(lapt
         update={"friction": 10 * cap})}}), asset, geometry)[name] == pytest.approx(10 * cap)
 
 
-def test_escalated_laptop_holds_through_robust_rest_and_still_opens(laptop):
-    src, out, res = laptop
-    asset = extract_asset(src)
-    geometry = analyze_asset(asset)
-    (name,) = [j.name for j in asset.movable_joints()]
+def test_laptop_friction_stays_within_what_a_hand_closes_it_with(tmp_path_factory):
+    """With the task "close the laptop" refine keeps the screen hinge within the
+    operating budget of the Laptop torque range (1.5 N m): the estimate or the
+    escalation may not exceed its caps, and the post-check's own task run
+    measures a torque inside the range (the escalation for robust rest stops
+    at the cap: the demo screen's 0.8 N m gravity moment is the case where a
+    hand-operable hinge and a 2 cm drop conflict, reported, not hidden)."""
+    src = demo_assets.build_laptop(tmp_path_factory.mktemp("src") / "laptop")
+    out = tmp_path_factory.mktemp("out") / "laptop"
+    res = refine_asset(src, "I want a slightly open laptop. Low damping for smooth operation.", out, extras=False,
+                       task="close the laptop")
     report = json.loads((out / "report.json").read_text())
-    assert len(report["escalation"]) > 1, "the screen needs escalation to hold through the drop"
-    cap = operating.friction_caps(res.overlay, res.overlay, asset, geometry)[name]
-    assert res.overlay.joints[name].friction <= cap * (1 + 1e-9)
-    tiers = {m["name"]: m["passed"] for m in report["metrics"]}
-    assert tiers["robust_rest"] is True and tiers["joint_sweep"] is True
-    assert report["failure_mode"] == "none", report["readiness"]
+    assert report["task"] == "close the laptop"
+    tiers = {m["name"]: m for m in report["metrics"]}
+    assert tiers["task_execution"]["passed"] is True
+    assert tiers["operating_force"]["passed"] is True
+    assert report["readiness"]["task"] is True and report["readiness"]["force"] is True
+    (row,) = tiers["operating_force"]["details"]["attempts"]
+    assert row["peak_torque_nm"] <= 1.5
+    (name,) = list(res.overlay.joints)
+    assert len(report["escalation"]) > 1, "the screen needs escalation for robust rest"
+    # escalation stopped at the cap the budget gave (gravity helps the close: the cap exceeds 0.75 x 1.5 N m)
+    sources = res.overlay.joints[name].source
+    assert "escalated" in sources and "friction capped" in sources
+
+
+def _budgets(out, res, task):
+    asset = extract_asset(out)
+    report = json.loads((out / "report.json").read_text())
+    state = report["initial_joint_positions"]
+    closed = {}
+    for n, qc in report["closed_positions"].items():
+        j = asset.joint(n)
+        lo, hi = j.lower, j.upper
+        d = 1.0 if abs(hi - qc) >= abs(qc - lo) else -1.0
+        closed[n] = (qc, d, abs((hi if d > 0 else lo) - qc))
+    return operating.operating_budgets(out / "mobility.urdf", state, res.overlay, closed, category=report["category"],
+                                       labels={ln.name: ln.semantic_label for ln in asset.links},
+                                       actions=task_actions(task), free=True, ground=bool(task))
+
+
+def test_budget_of_a_side_hinged_door_is_bounded_by_ground_friction(tmp_path):
+    """A free microwave's door is pushed horizontally: the operating force is
+    at most mu M g (the ground friction of the free object), below the ADA
+    22.2 N of the Microwave range; without a task (the other hand holds the
+    body, as the probes do) only the range bounds it."""
+    src = demo_assets.build_microwave(tmp_path / "mw")
+    res = refine_asset(src, "A small microwave with its door halfway open.", tmp_path / "out", extras=False)
+    total = res.overlay.total_mass()
+    (name,) = list(res.overlay.joints)
+    with_task = _budgets(tmp_path / "out", res, "close the microwave door")[name]
+    no_task = _budgets(tmp_path / "out", res, None)[name]
+    ground = operating.GROUND_FRICTION * total * operating.GRAVITY
+    assert ground < 22.2
+    assert with_task.bound.startswith("ground friction")
+    assert with_task.force_n == pytest.approx(ground, rel=5e-3)  # a vertical axis: (almost) all of the push is horizontal
+    assert no_task.bound == "force range of Microwave.default" and no_task.force_n == pytest.approx(22.2)
+    for b in (with_task, no_task):
+        assert b.friction_cap == pytest.approx(max(operating.FRICTION_SHARE * b.budget, operating.HOLD_MARGIN * b.gravity_state))
+        assert b.damping_cap == pytest.approx((1 - operating.FRICTION_SHARE) * b.budget / b.speed)
+        assert b.speed == pytest.approx(GripperLimits().max_speed_m_s / b.lever)
+
+
+def test_bound_overlay_lowers_only_what_is_above_the_caps():
+    ov = Overlay.model_validate_json(json.dumps(_overlay_json(friction=2.0, damping=1.0)))
+    b = operating.OperatingBudget(joint="j", joint_type="revolute", link="lid", rule="far edge", lever=0.2, force_n=5.0,
+                                  bound="x", budget=1.0, speed=1.25, gravity_state=0.1, friction_cap=0.75, damping_cap=0.2)
+    new, notes = operating.bound_overlay(ov, {"j": b})
+    assert new.joints["j"].friction == pytest.approx(0.75) and new.joints["j"].damping == pytest.approx(0.2)
+    assert notes and "operable" in new.joints["j"].source
+    same, notes = operating.bound_overlay(new, {"j": b})
+    assert same.joints["j"] == new.joints["j"] and not [n for n in notes if "operable" in n]
+
+
+def test_relieve_lowers_friction_by_the_measured_excess():
+    ov = Overlay.model_validate_json(json.dumps(_overlay_json(friction=2.0, damping=0.5)))
+    b = operating.OperatingBudget(joint="j", joint_type="revolute", link="lid", rule="far edge", lever=0.25, force_n=6.0,
+                                  bound="torque range of Laptop.default", budget=1.6, speed=1.0, gravity_state=0.3,
+                                  friction_cap=2.0, damping_cap=0.5, hold_floor=operating.HOLD_MARGIN * 0.3)
+    lim = task_tier.OperatingLimits(friction_caps={"j": 2.0}, damping_caps={"j": 0.5}, budgets={"j": b})
+    force = MetricResult(name="operating_force", value=8.0, unit="N", passed=False, details={"attempts": [
+        {"joint": "j", "passed": False, "peak_operating_force_n": 8.0, "force_range_n": [0.0, 22.2],
+         "peak_torque_nm": 2.0, "torque_range_nm": [0.0, 1.5]}]})
+    new, changes, reason = task_tier.relieve(ov, [force], lim)
+    want = 2.0 - 0.5 / operating.BUDGET_SHARE
+    assert new.joints["j"].friction == pytest.approx(want) and changes["j"]["friction"] == pytest.approx(want)
+    assert lim.friction_caps["j"] == pytest.approx(want), "escalation may not raise it again"
+    assert "operating force" in reason
+    # at most half the friction in one round (part of an excess may be inertia); the rest comes off the damping
+    big = force.model_copy(deep=True)
+    big.details["attempts"][0]["peak_torque_nm"] = 4.0
+    new, _, _ = task_tier.relieve(ov, [big], lim)
+    assert new.joints["j"].friction == pytest.approx(task_tier.RELIEF_MIN_SHARE * 2.0)
+    assert new.joints["j"].damping < 0.5
+    # never below the hold floor
+    heavy = b.__class__(**{**b.__dict__, "gravity_state": 1.5, "hold_floor": operating.HOLD_MARGIN * 1.5})
+    lim.budgets["j"] = heavy
+    new, _, _ = task_tier.relieve(ov, [big], lim)
+    assert new.joints["j"].friction == pytest.approx(operating.HOLD_MARGIN * 1.5)
+    # a task inside its range changes nothing
+    ok = force.model_copy(update={"passed": True})
+    assert task_tier.relieve(ov, [ok], lim)[1] == {}
+
+
+def _overlay_json(friction: float, damping: float) -> dict:
+    return {
+        "scale": 1.0,
+        "links": {"body": {"mass": 1.0, "com": [0, 0, 0], "inertia": {"ixx": 0.01, "iyy": 0.01, "izz": 0.01}, "source": "t"},
+                  "lid": {"mass": 0.3, "com": [0.1, 0, 0], "inertia": {"ixx": 0.001, "iyy": 0.001, "izz": 0.001}, "source": "t"}},
+        "joints": {"j": {"damping": damping, "friction": friction, "source": "t"}},
+        "estimator": {"name": "test"},
+    }
 
 
 def test_tilt_floor_adds_the_tilts_gravity_load(laptop, tmp_path):

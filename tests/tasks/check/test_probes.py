@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.check.probes import TRAVEL_TIME_MARGIN, ProbeConfig, probe_joint, probes_metric, run_probes
+from asset2sim.urdf import read_urdf
 
 
 def _inertial(mass, xyz=(0, 0, 0), i=(0.01, 0.01, 0.01)):
@@ -184,3 +186,83 @@ def test_probe_config_time_budget_limits_a_stuck_push(tmp_path):
     assert budget > cfg.push_time
     assert r.peak_force == pytest.approx(r.max_force, rel=1e-6)
     assert len([x for x in r.trace["phase"] if x == 0.0]) == int(round(budget * 240))
+
+
+def _lever_on_heavy_body(folder: Path) -> Path:
+    """A 50 kg body with a 20 g lever (6 cm) turning about a vertical axis
+    (no gravity load), limits [0, 0.52] rad, closed at 0: a toilet's flush
+    lever."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="toilet">'
+        f'<link name="body">{_inertial(50.0, i=(2.0, 2.0, 2.0))}{_box(0.4, 0.4, 0.4, (0, 0, 0.2))}</link>'
+        f'<link name="lever">{_inertial(0.02, (0.03, 0, 0), (1e-7, 6e-6, 6e-6))}{_box(0.06, 0.01, 0.01, (0.03, 0, 0))}</link>'
+        '<joint name="flush" type="revolute"><parent link="body"/><child link="lever"/>'
+        '<origin xyz="0.2 0 0.35"/><axis xyz="0 0 1"/><limit lower="0" upper="0.52" effort="10" velocity="50"/>'
+        '<dynamics damping="0.0001" friction="0.002"/></joint></robot>'
+    )
+    return folder
+
+
+def test_a_light_lever_on_a_heavy_body_is_closed_without_slamming_into_its_stop(tmp_path):
+    """The pusher's stiffness is bounded by the lever's effective mass (module
+    docstring): the 20 g lever of a 50 kg body is closed at about the push
+    speed and stays closed. With the stiffness set by the whole object's
+    weight (the earlier force law) the first step's 4 N threw it at ~4 m/s
+    into its stop and it bounced back open ("springs back after release")."""
+    f = _lever_on_heavy_body(tmp_path / "t")
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"flush": 0.52}))
+    try:
+        r = probe_joint(s, "flush", closed=0.0, direction=1.0, open_range=0.52, action="close")
+    finally:
+        s.close()
+    assert r.success, r.failure
+    assert r.reached and not r.rebound
+    assert r.release_fraction > -0.05  # not driven into the stop
+    # it moved at about the push speed (0.25 m/s at a 6 cm lever: ~4 rad/s), not tens of rad/s
+    q = np.array(r.trace["q"])
+    assert np.max(np.abs(np.diff(q))) * 240 < 8.0
+
+
+def _stapler(folder: Path) -> Path:
+    """A base with a top hinged at its back edge (no friction: it falls shut)
+    and a magazine hinged to the top's front edge that opens downwards, into
+    the base while the top is closed (a stapler's magazine under its top)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="stapler">'
+        f'<link name="base">{_inertial(5.0, (0, 0, 0.05), (0.05, 0.05, 0.05))}{_box(0.3, 0.3, 0.1, (0, 0, 0.05))}</link>'
+        f'<link name="top">{_inertial(0.3, (0.075, 0, 0.006), (0.002, 0.001, 0.002))}{_box(0.15, 0.3, 0.01, (0.075, 0, 0.006))}</link>'
+        f'<link name="magazine">{_inertial(0.2, (0.075, 0, 0.006), (0.0015, 0.0005, 0.0015))}{_box(0.14, 0.3, 0.01, (0.075, 0, 0.006))}</link>'
+        '<joint name="top_hinge" type="revolute"><parent link="base"/><child link="top"/>'
+        '<origin xyz="-0.15 0 0.1"/><axis xyz="0 -1 0"/><limit lower="0" upper="1.6" effort="10" velocity="5"/>'
+        '<dynamics damping="0.01" friction="0.0"/></joint>'
+        '<joint name="magazine_hinge" type="revolute"><parent link="top"/><child link="magazine"/>'
+        '<origin xyz="0.155 0 0"/><axis xyz="0 1 0"/><limit lower="0" upper="1.5" effort="10" velocity="5"/>'
+        '<dynamics damping="0.01" friction="0.05"/></joint></robot>'
+    )
+    return folder
+
+
+def test_a_part_shut_in_by_another_is_probed_with_that_one_held_open(tmp_path):
+    """The magazine opens into the base while the top is closed: its open
+    probe stalls at the closed end. Given the URDF model, the probe finds the
+    base in the way, holds the top open (it falls shut by itself) and opens
+    the magazine, with a note; without the model the stall is the verdict."""
+    f = _stapler(tmp_path / "s")
+    joints = {"magazine_hinge": (0.0, 1.0, 1.5), "top_hinge": (0.0, 1.0, 1.6)}
+    out = {}
+    for with_model in (False, True):
+        s = open_session("pybullet", f / "mobility.urdf", SessionOptions())
+        try:
+            out[with_model] = run_probes(s, joints, actions=("open",),
+                                         model=read_urdf(f / "mobility.urdf") if with_model else None)
+        finally:
+            s.close()
+    plain, cleared = ({r.joint: r for r in out[k]} for k in (False, True))
+    assert not plain["magazine_hinge"].success and plain["magazine_hinge"].failure == "target not reached"
+    assert plain["magazine_hinge"].release_fraction < 0.05
+    r = cleared["magazine_hinge"]
+    assert r.success, r.failure
+    assert any("base is in the way" in n and "top_hinge held" in n for n in r.notes)
+    assert cleared["top_hinge"].success and plain["top_hinge"].success  # the top itself opens either way

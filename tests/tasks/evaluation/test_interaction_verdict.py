@@ -46,9 +46,11 @@ def test_demo_is_interaction_ready_on_every_tier_and_says_so_everywhere(tmp_path
     verdict = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("verdict")][0]
     report = json.loads((out / "report.json").read_text())
     assert report["failure_mode"] == "none"
-    # task execution and force plausibility run only with a task (the demo gives none): n/a
+    # the demo's manifest gives the task "close the box lid": task execution and force plausibility run too
+    assert report["task"] == "close the box lid"
     assert report["readiness"] == {"rest": True, "penetration": True, "sweep": True, "robust_rest": True, "probes": True,
-                                   "task": None, "force": None}
+                                   "task": True, "force": True}
+    assert "task pass" in verdict and "force pass" in verdict
     assert "interaction-ready" in verdict and "FAIL" not in verdict
     assert _badge(out / "report.html").startswith("interaction-ready")
 

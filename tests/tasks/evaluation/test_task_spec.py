@@ -8,7 +8,7 @@ import pytest
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.evaluation.asset_files import parse_urdf, read_semantics
-from asset2sim.tasks.evaluation.task_spec import parse_task
+from asset2sim.tasks.evaluation.task_spec import parse_task, task_actions
 from tests.conftest import SHARED, needs_shared
 
 
@@ -53,3 +53,11 @@ def test_verbs(verb, action):
     joints, sem = _asset("102703")
     t = parse_task(f"{verb} the toilet lid", joints, sem, "Toilet", [])
     assert t.actions == (action,)
+
+
+def test_task_actions_follow_the_verb():
+    from_verb = {"close the microwave door": ("close",), "press the stapler": ("close",), "open the top drawer": ("open",),
+                 "Lift the lid": ("open",), "turn the faucet handle": ("close", "open"), "": ("close", "open")}
+    for text, want in from_verb.items():
+        assert task_actions(text) == want, text
+    assert task_actions(None) == ("close", "open")

@@ -13,6 +13,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
 from asset2sim.tasks.geometry import limits
 from asset2sim.urdf import read_urdf
+from tests.tasks.check.test_sweep import _cube_obj
 
 STATE = {"lid_hinge": 0.4, "post_slide": 0.0}
 
@@ -99,3 +100,75 @@ def test_refine_writes_the_clipped_limit_and_reports_it(tmp_path):
     report = json.loads((out / "report.json").read_text())
     sweep = next(m for m in report["metrics"] if m["name"] == "joint_sweep")
     assert sweep["passed"] and abs(sweep["details"]["joints"]["lid_hinge"]["q_far"] - upper) < 1e-9
+
+
+def _stapler_shut_in(root: Path) -> Path:
+    """A stapler-like chain (z up): a base plate (top at z = 0); a top arm
+    hinged about y at x = 0, z = 0.03 (+q lifts it, 0..1.5 rad); a magazine
+    hinged on the top at the same axis, +q swinging it down towards the base,
+    its raw limit 2.5 rad. Closed, the magazine lies 4 mm above the base: it
+    is shut in under the closed top, and even with the top fully open it
+    meets the base long before 2.5 rad (about 1.5 rad)."""
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "base.obj").write_text(_cube_obj([-0.01, -0.02, -0.01], [0.2, 0.02, 0.0]))
+    (root / "top.obj").write_text(_cube_obj([0.0, -0.02, 0.04], [0.2, 0.02, 0.05]))
+    (root / "mag.obj").write_text(_cube_obj([0.0, -0.015, 0.004], [0.18, 0.015, 0.0385]))
+    inertial = '<inertial><mass value="0.05"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>'
+
+    def link(name: str, mesh: str) -> str:
+        origin = "" if name == "base" else '<origin xyz="0 0 -0.03"/>'  # meshes in base coordinates, frames at the hinge
+        return f'  <link name="{name}">{inertial}<collision>{origin}<geometry><mesh filename="{mesh}"/></geometry></collision></link>\n'
+
+    urdf = ('<robot name="stapler">\n' + link("base", "base.obj") + link("top_link", "top.obj") + link("mag_link", "mag.obj")
+            + '  <joint name="top" type="revolute"><parent link="base"/><child link="top_link"/><origin xyz="0 0 0.03"/>'
+            + '<axis xyz="0 -1 0"/><limit lower="0" upper="1.5" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
+            + '  <joint name="magazine" type="revolute"><parent link="top_link"/><child link="mag_link"/>'
+            + '<axis xyz="0 1 0"/><limit lower="0" upper="2.5" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
+            + "</robot>\n")
+    (root / "mobility.urdf").write_text(urdf)
+    return root / "mobility.urdf"
+
+
+def test_a_magazine_limit_through_the_base_is_clipped_with_the_top_open(tmp_path):
+    """Step 6 (stapler 102990; refine's repair of a sweep that stopped short): the magazine's raw limit swings it through the
+    base whatever the top does. The sweep, which opens the top for a part
+    shut in under it, then still stops short of the raw far end; the limit
+    is clipped where the magazine meets the base with the top open, and the
+    sweep passes against it."""
+    urdf = _stapler_shut_in(tmp_path)
+    state = {"top": 0.0, "magazine": 0.0}
+    closed = {"top": (0.0, 1.0, 1.5), "magazine": (0.0, 1.0, 2.5)}
+    raw = sweep_metric(run_sweep("pybullet", urdf, closed, state))
+    assert not raw.passed and raw.details["failing"] == ["magazine"]  # the raw range cannot be swept
+    with _session(urdf, state) as sess:
+        assert not limits.geometric_limits(sess, read_urdf(urdf), closed, state)["magazine"].clipped  # only on request
+        clips = limits.geometric_limits(sess, read_urdf(urdf), closed, state, chain_open=True)
+        c = clips["magazine"]
+        assert c.clipped and c.blocked_by == "base" and c.lower == 0.0
+        assert 1.2 < c.upper < 1.7 and "with top open" in c.notes[-1]
+        assert not clips["top"].clipped
+        sess.set_joint_positions({"top": 1.5, "magazine": c.upper})  # free at the clipped end with the top open
+        assert min(sess.link_distances("mag_link", "base", 0.0), default=0.0) > -0.0021
+    run = run_sweep("pybullet", urdf, {**closed, "magazine": (c.q_closed, c.direction, c.open_range)}, state)
+    m = sweep_metric(run)
+    assert m.passed, m.details["failures"]
+    assert "swept with top open" in next(j for j in run.joints if j.joint == "magazine").range_note
+
+
+def test_refine_clips_a_shut_in_magazine_where_its_sweep_stopped(tmp_path):
+    """End to end: the post-check's sweep of the magazine stops short (the
+    raw range swings it through the base even with the top open); refine's
+    stage 7b clips the limit against the carrying chain, writes it and
+    sweeps again: the asset passes, the overlay says why."""
+    src = _stapler_shut_in(tmp_path / "src").parent
+    out = tmp_path / "out"
+    main(["refine", str(src), "--prompt", "A stapler.", "--out", str(out), "--no-extras"])
+    text = (out / "mobility.urdf").read_text()
+    upper = float(re.search(r'<joint name="magazine".*?upper="([^"]+)"', text, flags=re.S).group(1))
+    assert 1.2 < upper < 1.7
+    ov = json.loads((out / "overlay.json").read_text())
+    assert "even with top open" in ov["joints"]["magazine"]["limit_source"]
+    report = json.loads((out / "report.json").read_text())
+    sweep = next(m for m in report["metrics"] if m["name"] == "joint_sweep")
+    assert sweep["passed"] and abs(sweep["details"]["joints"]["magazine"]["q_far"] - upper) < 1e-9
+    assert any("limits against the carrying chain (sweep blocked)" in r["reason"] for r in report["escalation"])

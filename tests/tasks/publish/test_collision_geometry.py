@@ -364,3 +364,56 @@ def test_slivers_and_duplicates_left_by_cuts_are_dropped():
     flake = cg.Piece.of(_box([0.1, 0.0, 0.0], [0.1016, 0.0015, 0.0001])[0])  # 0.24 mm^3
     kept = cg.drop_slivers([a, dup, flake, b])
     assert [k is a or k is b for k in kept] == [True, True]
+
+
+def test_penetration_depth_is_the_smallest_separating_overlap():
+    """Two boxes overlapping 5 mm along x (and 40 mm along y, z): depth 5 mm
+    along x; apart: 0; a slab crossing a rotated slab edge to edge (no vertex
+    of either inside the other) still reads its depth."""
+    a = cg.Piece.of(_box([0, 0, 0], [0.1, 0.1, 0.1])[0])
+    b = cg.Piece.of(_box([0.095, 0.03, 0.03], [0.2, 0.07, 0.07])[0])
+    d, n = cg.penetration_depth(a, b)
+    assert d == pytest.approx(0.005, abs=1e-9)
+    assert np.allclose(np.abs(n), [1, 0, 0])
+    far = cg.Piece.of(_box([0.15, 0, 0], [0.2, 0.1, 0.1])[0])
+    assert cg.penetration_depth(a, far)[0] == 0.0
+    bar = _box([-0.1, -0.005, -0.005], [0.1, 0.005, 0.005])[0]  # along x
+    R = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]], float)  # along y, 8 mm lower: crossing by 2 mm
+    cross = cg.Piece.of(bar @ R.T + [0, 0, 0.008])
+    assert cg.depth_inside(cross.points, cg.Piece.of(bar)) == 0.0 and cg.depth_inside(bar, cross) == 0.0
+    assert cg.penetration_depth(cg.Piece.of(bar), cross)[0] == pytest.approx(0.002, abs=1e-9)
+
+
+def _post_in_lid(tmp_path: Path) -> Path:
+    """A body (a slab and a thin post) whose post stands 20 mm inside the
+    lid's hull (a closed box) at the initial state: no lid vertex lies in a
+    body piece, so only the body's post inside the lid's hull overlaps."""
+    slab, post = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.045, 0.045, 0.01], [0.055, 0.055, 0.04])
+    lid = _box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])
+    return _asset(tmp_path, [slab, post], [lid])
+
+
+def test_a_child_that_starts_around_its_parent_is_separated(tmp_path):
+    """The lid's hull holds the body's post 20 mm deep: measured with the
+    pair collided (PyBullet's closest points, margins removed, as refine's
+    post-check does) the input penetrates, the written output does not
+    (<= 2 mm) at any position of the hinge, and the lid keeps its volume."""
+    from asset2sim.tasks.check.parent_child import parent_child_penetration
+
+    folder = _post_in_lid(tmp_path)
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    before, _ = cg.link_pieces(model, lambda g: g.path, {}, decompose=False)
+    assert cg.containment_depths(model, before, {"hinge": 0.0})[("body", "lid")] == 0.0  # no lid vertex inside the body
+    assert cg.parent_child_depths(model, before, {"hinge": 0.0})[("body", "lid")] > 0.015
+    assert parent_child_penetration(folder / "mobility.urdf", {"hinge": 0.0}).value > 15.0
+    out = _write(folder, tmp_path / "out")
+    m = parent_child_penetration(out.urdf, {"hinge": 0.0})
+    assert m.passed and m.value <= cg.CONTAINMENT_TOLERANCE * 1000
+    written = urdf.read_urdf(out.urdf)
+    after, _ = cg.link_pieces(written, lambda g: g.path, {}, decompose=False)
+    for q in np.linspace(0.0, 1.5, 7):
+        assert cg.parent_child_depths(written, after, {"hinge": float(q)})[("body", "lid")] <= cg.CONTAINMENT_TOLERANCE + 1e-9
+    assert sum(p.volume for p in after["lid"]) == pytest.approx(0.06 * 0.06 * 0.03, rel=1e-6)  # the post was cut, not the lid
+    mujoco = pytest.importorskip("mujoco")
+    assert parent_child_penetration(out.urdf, {"hinge": 0.0}, engine="mujoco").value <= cg.CONTAINMENT_TOLERANCE * 1000
+    assert mujoco.MjModel.from_xml_path(str(out.urdf)).ngeom >= 2

@@ -141,7 +141,7 @@ def test_write_refine_report_evaluates_the_output_folder(tmp_path):
     from asset2sim.tasks.evaluation.evaluate import evaluate_refined
 
     f = _drawer(tmp_path / "cab", True)
-    path = evaluate_refined(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture"))["report"]
+    path = evaluate_refined(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture", task=None))["report"]
     assert path == f / "report.html" and path.is_file()
     data = json.loads((f / "evaluation.json").read_text())
     assert data["method"] == "asset2sim" and data["prompt"] == "a cabinet with its drawer closed"

@@ -16,6 +16,8 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.publish import write
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.state import stability
+from asset2sim.tasks.geometry.analyze import analyze_asset
+from tests.conftest import SHARED
 from tests.tasks.check.failure_assets import build_tipping_laptop
 
 
@@ -98,3 +100,57 @@ def test_support_is_the_face_under_the_centre_of_mass():
     assert poly[:, 0].min() == pytest.approx(0.0) and len(poly) == 4
     # without the COM: the largest nearly flat face, the one reaching the door
     assert stability.support_polygon(pts, 1e-3)[:, 0].min() < -0.4
+
+
+STAPLER = SHARED / "102990"
+
+
+@pytest.fixture(scope="module")
+def open_stapler(tmp_path_factory):
+    if not STAPLER.is_dir():
+        pytest.skip("PartNet-Mobility 102990 not available")
+    return refine_asset(STAPLER, "A stapler with its stapler body fully open.", tmp_path_factory.mktemp("st") / "out",
+                        extras=False)
+
+
+@pytest.mark.slow
+def test_open_stapler_is_balanced_by_the_envelope_mass_of_its_sheet_steel_parts(open_stapler, tmp_path):
+    """Stapler 102990 with its body fully open: the estimate's mesh areas make
+    its sheet-steel arm and body near-solid steel (72 % of the mass), the
+    centre of mass leaves the support and robust rest topples it. No sourced
+    fraction covers a stapler's parts; the opened parts go down towards their
+    envelope shell mass (outer area x 0.6 mm x 7850 kg/m^3), the base takes
+    the rest: balanced at the requested state, robust rest passes."""
+    r, ov = open_stapler.report, open_stapler.overlay
+    (change,) = [c for c in r.design_changes if "stability by design" in c]
+    assert "envelope shell mass" in change
+    total = ov.total_mass()
+    assert total == pytest.approx(r.total_mass)
+    bal = stability.measure_balance(open_stapler.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
+    assert bal.stable
+    rr = {m.name: m.passed for m in r.metrics}
+    assert rr["robust_rest"] is True and rr["rest_stability"] is True
+    # the estimate's masses (before the design change) put the COM outside the support
+    undone = ov.model_copy(deep=True)
+    for ln, lp in undone.links.items():
+        if "for stability by design" in lp.source:
+            f = float(lp.source.split("mass x")[-1].split(" ")[0])
+            undone.links[ln] = lp.model_copy(update={"mass": lp.mass / f})
+    assert undone.total_mass() == pytest.approx(total, rel=1e-6)
+    before = stability.measure_balance(open_stapler.out_dir / "mobility.urdf", undone, r.initial_joint_positions)
+    assert before.margin < 0
+    # no opened link went below its envelope mass
+    asset, _ = extract.extract_asset_checked(STAPLER)
+    geometry = analyze_asset(asset)
+    _, pts = stability._link_world(open_stapler.out_dir / "mobility.urdf", r.initial_joint_positions)
+    env = stability.envelope_masses(undone, pts, geometry)
+    for ln in ("link_0", "link_1"):
+        assert env[ln] - 1e-9 <= ov.links[ln].mass < undone.links[ln].mass
+
+
+def test_without_geometry_only_sourced_fractions_are_used(fully_open):
+    """The laptop's design is the same with or without the envelope bound
+    (its screen has a sourced fraction)."""
+    r, ov = fully_open.report, fully_open.overlay
+    same, changes = stability.design_for_stability(fully_open.out_dir / "mobility.urdf", None, ov, r.initial_joint_positions, "Laptop")
+    assert changes == [] and same is ov  # already balanced

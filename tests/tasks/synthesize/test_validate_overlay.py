@@ -154,3 +154,31 @@ def test_non_finite_values_rejected_by_schema():
         Overlay(estimator=EstimatorInfo(name="t"), scale=float("nan"))
     with pytest.raises(ValueError):
         JointDynamics(damping=float("inf"), friction=0.0)
+
+
+def test_a_raised_light_part_keeps_the_friction_that_holds_it(box):
+    """The validator raises a link far lighter than its object to the mass
+    floor; the friction (and damping, inertia about the axis) of the joint
+    that moves it follow the part's new mass: they were derived from the
+    gravity load of the lighter part, which a heavier part exceeds (a toilet's
+    30 g flush lever raised to 50 g fell open against the friction set for
+    30 g)."""
+    asset, geometry = box
+    ov = _good(asset, geometry)
+    (jd,) = [j for j in asset.movable_joints() if j.child in ov.links]
+    lid = jd.child
+    before = ov.joints[jd.name].model_copy(update={"friction": 0.01, "damping": 0.002, "inertia_axis": 1e-5})
+    ov.joints[jd.name] = before
+    ov.links[lid] = ov.links[lid].model_copy(update={"mass": 5e-5})
+    fixed, issues = validate_overlay(ov, asset, geometry)
+    assert any(i.code == "OVL_MASS_TOO_SMALL" and i.where == lid for i in issues)
+    r = fixed.links[lid].mass / 5e-5
+    assert r > 10
+    after = fixed.joints[jd.name]
+    assert after.friction == pytest.approx(before.friction * r, rel=1e-9)
+    assert after.damping == pytest.approx(before.damping * r, rel=1e-9)
+    assert after.inertia_axis == pytest.approx(before.inertia_axis * r, rel=1e-9)
+    assert "mass raised by the validator" in after.source
+    # a link raised on a body no joint moves changes no joint
+    again, _ = validate_overlay(fixed, asset, geometry)
+    assert again.joints[jd.name].friction == pytest.approx(after.friction, rel=1e-12)

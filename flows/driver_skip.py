@@ -1,0 +1,230 @@
+"""Skip decisions in the driver, before any worker starts.
+
+The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`,
+:func:`asset2sim.flows.stages.finished_in_store`) needs the asset's input
+hash: SHA-256 over every file the asset references, which the input stage
+(:func:`asset2sim.flows.stages.prepare_asset`) learns by reading and
+validating the asset (0.03-0.3 s per asset, on a worker). A rerun of a
+dataset whose inputs did not change would start Dask, its workers and a
+Prefect task per batch only to learn that everything is finished.
+
+Here the driver decides instead, from a small per-dataset *input index*
+kept in the catalog (``<catalog_root>/dataset=<name>/_inputs.json``): per
+asset the *fingerprint* of its folder when it was last read (every regular
+file under it: resolved path, size and modification time in ns; one
+``stat`` per file, no reading) and what the input stage found then (input
+hash, category, link and movable joint counts), with the code hash of the
+process that recorded it. When the folder's fingerprint, the manifest's
+category and the code hash are unchanged, every file is unchanged (as far
+as ``make``-style checks can tell), so the input stage would find the same
+input hash again; the driver then computes the configuration hashes itself
+and applies the same skip rule to the earlier catalog row (the output
+folder, or the output store's marker, still complete). A miss of any kind
+(no entry, a changed file, another code, an incomplete folder) hands the
+asset to the workers as before: the index can only save work, never change
+a decision the input stage would make.
+
+The index is rewritten (merged) at the end of each run with the entries of
+the assets the run read; two runs of one dataset at once may lose each
+other's entries (a cache miss on the next run, nothing worse).
+
+Nothing here imports Prefect or Dask.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import socket
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from asset2sim import catalog_fs
+from asset2sim.catalog import ResultCatalog, result_key
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.publish.contract import Prepared, code_hash, run_hash
+
+#: The input index of a dataset, beside its run partitions (not a partition:
+#: the catalog's readers list only ``run=`` folders).
+INDEX_NAME = "_inputs.json"
+INDEX_VERSION = 1
+
+
+@dataclass
+class InputEntry:
+    """What the input stage found for one asset folder with ``fingerprint``
+    (:func:`input_fingerprint`): ``input_hash``, ``category`` (the
+    prepared record's: the manifest's ``job_category``, else the asset's),
+    ``links`` and ``movable_joints`` counts; ``code_hash`` of the code that
+    read it."""
+
+    fingerprint: str
+    input_hash: str
+    job_category: str | None
+    category: str | None
+    links: int | None
+    movable_joints: int | None
+    code_hash: str
+
+
+def input_fingerprint(asset_dir: Path | str) -> str | None:
+    """Fingerprint of an asset folder: SHA-256 (hex) over the sorted
+    (resolved path, size in bytes, modification time in ns) of every regular
+    file under it, symlinks followed to their targets. None when the folder
+    cannot be listed. One ``stat`` per file; contents are not read (the
+    rule ``make`` and ``rsync`` use: an edit changes the modification time)."""
+    root = Path(asset_dir)
+    items = []
+    try:
+        if not root.is_dir():
+            return None
+        for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+            dirnames.sort()
+            for name in filenames:
+                p = os.path.join(dirpath, name)
+                try:
+                    st = os.stat(p)  # follows a symlink: its target's size and time
+                except OSError:
+                    continue
+                if not os.path.isfile(p):
+                    continue
+                items.append(f"{os.path.realpath(p)}\0{st.st_size}\0{st.st_mtime_ns}")
+    except OSError:
+        return None
+    h = hashlib.sha256(str(root.resolve()).encode())
+    for it in sorted(items):
+        h.update(b"\n")
+        h.update(it.encode())
+    return h.hexdigest()
+
+
+def _index_path(store: ResultCatalog, dataset: str) -> str:
+    return store.location.join(f"dataset={dataset}", INDEX_NAME)
+
+
+def read_index(store: ResultCatalog, dataset: str) -> dict[str, InputEntry]:
+    """The dataset's input index, asset id -> entry; empty when absent,
+    unreadable or of another version."""
+    try:
+        data = catalog_fs.read_bytes(store.location, _index_path(store, dataset))
+        doc = json.loads(data) if data else {}
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(doc, dict) or doc.get("version") != INDEX_VERSION or not isinstance(doc.get("assets"), dict):
+        return {}
+    out = {}
+    for aid, e in doc["assets"].items():
+        try:
+            out[str(aid)] = InputEntry(**e)
+        except TypeError:
+            continue
+    return out
+
+
+def write_index(store: ResultCatalog, dataset: str, entries: dict[str, InputEntry]) -> None:
+    """Merge ``entries`` into the dataset's input index (read, update,
+    written atomically). Nothing to do for no entries.
+
+    Raises:
+        OSError: the catalog's filesystem refused the write.
+    """
+    if not entries:
+        return
+    merged = read_index(store, dataset)
+    merged.update(entries)
+    doc = {"version": INDEX_VERSION, "assets": {k: asdict(v) for k, v in sorted(merged.items())}}
+    catalog_fs.write_bytes(store.location, _index_path(store, dataset), json.dumps(doc, separators=(",", ":")).encode())
+
+
+def entry_for(job: Any, prepared: Prepared, fingerprint: str | None) -> InputEntry | None:
+    """The index entry to record for ``job`` (an ``AssetJob``) after its input
+    stage: None when the asset was not read or its folder had no fingerprint."""
+    if fingerprint is None or not prepared.ok or not prepared.input_hash:
+        return None
+    return InputEntry(
+        fingerprint=fingerprint,
+        input_hash=prepared.input_hash,
+        job_category=job.category,
+        category=prepared.category,
+        links=prepared.links,
+        movable_joints=prepared.movable_joints,
+        code_hash=code_hash(),
+    )
+
+
+def _decide(
+    job: Any, entry: InputEntry | None, fingerprint: str | None, code: str, config_hash_of, finished_check
+) -> Prepared | None:
+    t0 = time.perf_counter()
+    if entry is None or fingerprint is None or entry.fingerprint != fingerprint or entry.code_hash != code:
+        return None
+    if entry.job_category != job.category or not job.finished:
+        return None
+    rhash = run_hash(entry.input_hash, RefineConfig(**job.config), job.prompt, job.category)
+    chash = config_hash_of(job, rhash)
+    row = job.finished.get(result_key(job.asset_id, entry.input_hash, chash))
+    if row is None:
+        return None
+    skip = finished_check(row, entry.input_hash)
+    if skip is None:
+        return None
+    return Prepared(
+        ok=True,
+        worker=f"{socket.gethostname()}:{os.getpid()} (driver)",
+        input_hash=entry.input_hash,
+        config_hash=chash,
+        refine_config_hash=rhash,
+        category=entry.category,
+        links=entry.links,
+        movable_joints=entry.movable_joints,
+        skip=skip,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def decide_skips(
+    jobs: list[Any],
+    index: dict[str, InputEntry],
+    fingerprints: dict[str, str | None],
+    config_hash_of,
+    finished_check,
+    threads: int = 8,
+) -> dict[str, Prepared]:
+    """The jobs the driver can skip: asset id -> the prepared record (with
+    ``skip`` the earlier catalog row) the input stage would have returned.
+
+    Args:
+        jobs: ``AssetJob`` s of the run (``finished``: their earlier rows).
+        index: :func:`read_index`; fingerprints: asset id -> :func:`input_fingerprint`.
+        config_hash_of: ``(job, refine_config_hash) -> flow config hash``
+            (``asset2sim.flows.stages.job_config_hash``).
+        finished_check: the skip rule, ``(row, input_hash) -> row or None``
+            (``asset2sim.flows.stages.finished_in_store``: checks that the
+            output folder or store folder is still complete).
+        threads: the completeness checks run in a thread pool (hashing
+            output files and listing a store release the GIL).
+    """
+    code = code_hash()
+    todo = [j for j in jobs if j.finished and j.asset_id in index]
+    if not todo:
+        return {}
+
+    def one(job):
+        return job.asset_id, _decide(
+            job, index.get(job.asset_id), fingerprints.get(job.asset_id), code, config_hash_of, finished_check
+        )
+
+    with ThreadPoolExecutor(max_workers=max(1, min(threads, len(todo)))) as pool:
+        return {aid: p for aid, p in pool.map(one, todo) if p is not None}
+
+
+def fingerprints(jobs: list[Any], threads: int = 8) -> dict[str, str | None]:
+    """:func:`input_fingerprint` of every job's asset folder (asset id -> fingerprint)."""
+    if not jobs:
+        return {}
+    with ThreadPoolExecutor(max_workers=max(1, min(threads, len(jobs)))) as pool:
+        return dict(zip((j.asset_id for j in jobs), pool.map(lambda j: input_fingerprint(j.asset_dir), jobs)))

@@ -1,0 +1,228 @@
+"""The task tier of refine's post-check: the gripper executes the task refine
+was given (``refine --task``, the manifest's ``task`` column) on the written
+asset, with the same definitions as the evaluation
+(:mod:`asset2sim.tasks.check.task_execution`,
+:mod:`asset2sim.tasks.check.force_ranges`; ``docs/metrics.md``,
+"task_execution" and "operating_force"), and the operating limits
+escalation keeps to (:func:`operating_limits`).
+
+The task is parsed as in the evaluation
+(:func:`asset2sim.tasks.evaluation.task_spec.parse_task`: its verb gives the
+direction and target, its part words the joints, over the asset's
+``semantics.txt`` labels); the target must hold 1 s after release except
+where the request asks the part to move freely or a spring asked for (by the
+request or the category's part prior) returns it by design.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from asset2sim.engines.base import Spring
+from asset2sim.schemas.asset import AssetDescription, LinkGeometry
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import operating, task_execution
+from asset2sim.tasks.check.force_ranges import force_metric
+from asset2sim.tasks.evaluation.asset_files import parse_urdf
+from asset2sim.tasks.evaluation.task_spec import TaskSpec, parse_task, task_actions
+from asset2sim.tasks.interpret.part_priors import spring_expected
+
+#: The metrics this tier adds to the post-check.
+TASK_METRICS: tuple[str, ...] = ("task_execution", "operating_force")
+#: Smallest share of its friction a joint keeps in one relief round
+#: (:func:`relieve`): part of a measured excess may be the part's inertia or
+#: contact friction, which lowering joint friction does not remove, so one
+#: round never takes more than half of it (the next round measures again).
+RELIEF_MIN_SHARE = 0.5
+
+
+def link_labels(asset: AssetDescription) -> dict[str, str | None]:
+    """link -> semantic label (``semantics.txt``) of ``asset``."""
+    return {ln.name: ln.semantic_label for ln in asset.links}
+
+
+def hold_required_by_label(joint_labels: dict[str, str | None], springs: dict[str, Spring], category: str | None,
+                           *, free_moving: bool, spring_requested: bool) -> dict[str, bool]:
+    """joint -> whether the task's target must hold after release, for the
+    task's joints ``joint_labels`` (joint -> semantic label of its child
+    link): not where the request asks the parts to move freely, nor for a
+    joint with a spring the request or the category's part prior
+    (:func:`~asset2sim.tasks.interpret.part_priors.spring_expected`) asks for
+    (it returns by design). The one rule of refine's task tier and the
+    evaluation's task metric."""
+    out = {}
+    for n, label in joint_labels.items():
+        sprung = n in springs and (spring_requested or spring_expected(category or "", label))
+        out[n] = not (free_moving or sprung)
+    return out
+
+
+def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str, Spring], category: str | None,
+                  *, free_moving: bool, spring_requested: bool) -> dict[str, bool]:
+    """:func:`hold_required_by_label` for ``joints`` of ``asset``."""
+    labels = link_labels(asset)
+    named = {}
+    for n in joints:
+        try:
+            named[n] = labels.get(asset.joint(n).child)
+        except KeyError:
+            named[n] = None
+    return hold_required_by_label(named, springs, category, free_moving=free_moving, spring_requested=spring_requested)
+
+
+def task_spec_for(text: str, urdf: Path | str, asset: AssetDescription, category: str | None,
+                  task_joints: list[str]) -> TaskSpec:
+    """The :class:`~asset2sim.tasks.evaluation.task_spec.TaskSpec` of ``text``
+    on the written asset ``urdf`` (labels from ``asset``'s semantics)."""
+    _, joints = parse_urdf(Path(urdf))
+    semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
+    return parse_task(text, joints, semantics, category, task_joints)
+
+
+def run_task_tier(engine: str, urdf: Path | str, state: dict[str, float], springs: dict[str, Spring],
+                  conventions: SimConventions, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
+                  asset: AssetDescription, category: str | None, *, fixed_base: bool, free_moving: bool,
+                  spring_requested: bool) -> list[MetricResult]:
+    """``task_execution`` and ``operating_force`` of the written asset in
+    ``engine`` (fresh sessions, the root as declared).
+
+    Args:
+        closed: joint -> (q_closed, direction, open range) at the output scale.
+        spec: the parsed task (:func:`task_spec_for`).
+
+    Returns:
+        [task_execution, operating_force].
+
+    Raises:
+        EngineUnavailable; whatever loading ``urdf`` raises.
+    """
+    joints = {n: closed[n] for n in spec.joints if n in closed and closed[n][2] > 0}
+    actions = tuple(a for a in spec.actions if a in ("close", "open"))
+    run = task_execution.run_task(engine, urdf, joints, actions=actions, targets=dict(spec.targets),
+                                  initial_state=dict(state), springs=dict(springs), conventions=conventions,
+                                  fixed_base=fixed_base, task=spec.text,
+                                  hold_required=hold_required(asset, list(joints), springs, category,
+                                                              free_moving=free_moving, spring_requested=spring_requested))
+    tm = task_execution.task_metric(run)
+    tm.details["joints_rule"] = spec.rule
+    return [tm, force_metric(run, category, link_labels(asset))]
+
+
+@dataclass
+class OperatingLimits:
+    """What escalation keeps to: joint -> friction cap and damping cap (N m
+    or N; N m s/rad or N s/m), the budgets they come from, and notes."""
+
+    friction_caps: dict[str, float]
+    damping_caps: dict[str, float]
+    budgets: dict[str, operating.OperatingBudget] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
+                     geometry: dict[str, LinkGeometry], closed: dict[str, tuple[float, float, float]] | None, *,
+                     category: str | None, task: str | None, free_moving: bool,
+                     conventions: SimConventions | None = None, joints: list[str] | None = None) -> OperatingLimits:
+    """Friction and damping caps of every movable joint: with a task, the
+    operating budget of the task's gripper
+    (:func:`asset2sim.tasks.check.operating.operating_budgets`, the task's
+    direction) where the closed ends are known; without a task (nothing
+    executes it, and the probes push with the other hand holding the body and
+    a force of max(22.2 N, 2 M g)) the probe's cap
+    (:func:`asset2sim.tasks.check.operating.friction_caps`) and no damping cap.
+    ``joints``: the task's joints (:func:`task_spec_for`); the others (a
+    stapler's base plate, a suitcase's handle) keep the probe's cap: the task
+    does not operate them.
+
+    Raises:
+        EngineUnavailable; whatever loading ``urdf`` raises.
+    """
+    fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
+    sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
+    budgets = operating.operating_budgets(urdf, state, overlay, sel, category=category, labels=link_labels(asset),
+                                          actions=task_actions(task), free=not fixed, free_moving=free_moving,
+                                          conventions=conventions) if sel and task else {}
+    caps = operating.friction_caps(overlay, overlay, asset, geometry)
+    caps.update({n: b.friction_cap for n, b in budgets.items()})
+    return OperatingLimits(friction_caps=caps, damping_caps={n: b.damping_cap for n, b in budgets.items()}, budgets=budgets,
+                           notes=[b.conflict for b in budgets.values() if b.conflict])
+
+
+def relieve(overlay: Overlay, metrics: list[MetricResult], limits: OperatingLimits) -> tuple[Overlay, dict[str, dict[str, float]], str]:
+    """Lower the friction (then the damping) of joints whose task needed more
+    than a real operating force: the ``operating_force`` attempts outside their
+    range, and the attempts in which the free object slid while the gripper
+    pushed, by the measured excess (revolute: the excess torque, the larger of
+    peak torque - the range's torque and (peak operating force - the range's
+    force) x lever; prismatic: the excess force; a slide: the peak operating
+    force above the budget's ground bound), divided by :data:`~asset2sim.tasks.check.operating.BUDGET_SHARE`,
+    at most down to :data:`RELIEF_MIN_SHARE` of the friction in one round.
+    Resistance the budget did not foresee (a drawer's contact friction on its
+    runners, the part's inertia) is measured, not modelled. Friction never goes
+    below the budget's hold floor (the requested state must still hold);
+    what is left of the excess comes off the damping at the gripper's top
+    speed. ``limits``' caps are lowered to the new values, so escalation does
+    not raise them again.
+
+    Returns:
+        (new overlay, joint -> {"friction", "damping"} changed, reason); no
+        changes when nothing failed on force.
+    """
+    excess: dict[str, float] = {}
+    why: dict[str, str] = {}
+    for m in metrics:
+        if m.name == "operating_force" and m.passed is False:
+            for row in m.details.get("attempts") or []:
+                if row.get("passed") is not False:
+                    continue
+                b = limits.budgets.get(row["joint"])
+                e = 0.0
+                if row.get("force_range_n"):
+                    e = max(e, float(row["peak_operating_force_n"]) - float(row["force_range_n"][1]))
+                    if b is not None and b.lever:
+                        e *= b.lever
+                if row.get("torque_range_nm") and row.get("peak_torque_nm") is not None:
+                    e = max(e, float(row["peak_torque_nm"]) - float(row["torque_range_nm"][1]))
+                if e > 0:
+                    excess[row["joint"]] = max(excess.get(row["joint"], 0.0), e)
+                    why[row["joint"]] = "operating force above the real range"
+        if m.name == "task_execution" and m.passed is False:
+            for a in m.details.get("attempts") or []:
+                b = limits.budgets.get(a["joint"])
+                if not (a.get("slid") or a.get("tipped")) or b is None or not a.get("moved"):
+                    continue
+                e = float(a["peak_operating_force_n"]) - b.force_n
+                e = e * b.lever if b.lever else e
+                if e > 0:
+                    excess[a["joint"]] = max(excess.get(a["joint"], 0.0), e)
+                    why.setdefault(a["joint"], "the free object slid under the gripper's push")
+    ov = overlay.model_copy(deep=True)
+    changes: dict[str, dict[str, float]] = {}
+    for name, e in excess.items():
+        d = ov.joints.get(name)
+        b = limits.budgets.get(name)
+        if d is None or b is None:
+            continue
+        need = e / operating.BUDGET_SHARE
+        fr = max(d.friction - need, RELIEF_MIN_SHARE * d.friction, min(b.hold_floor, d.friction))
+        left = need - (d.friction - fr)
+        dm = max(d.damping - left / b.speed, 0.0) if left > 0 else d.damping
+        if fr == d.friction and dm == d.damping:
+            continue
+        unit = "N" if b.joint_type == "prismatic" else "N m"
+        ov.joints[name] = d.model_copy(update={"friction": fr, "damping": dm, "source": d.source + (
+            f"; task needed {e:.3g} {unit} more than a real operating force: friction {d.friction:.3g} -> {fr:.3g}, "
+            f"damping {d.damping:.3g} -> {dm:.3g}")})
+        limits.friction_caps[name] = fr
+        limits.damping_caps[name] = dm
+        changes[name] = {"damping": dm, "friction": fr}
+    reason = "; ".join(f"{j}: {w}" for j, w in why.items() if j in changes)
+    return ov, changes, reason
+
+
+def task_failing(metrics: list[MetricResult]) -> bool:
+    """The task tier fails in ``metrics`` (either of :data:`TASK_METRICS`)."""
+    return any(m.name in TASK_METRICS and m.passed is False for m in metrics)

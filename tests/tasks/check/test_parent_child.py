@@ -1,0 +1,43 @@
+"""Refine's post-check measures parent-child penetration with the pair
+collided (the pairs the SPEC's Phi skips), in the engine's own query."""
+
+from __future__ import annotations
+
+import pytest
+
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.check import postcheck
+from asset2sim.tasks.check.parent_child import parent_child_penetration
+from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
+from asset2sim.tasks.geometry.analyze import analyze_asset
+from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.tasks.publish.write import write_output
+from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
+from tests.tasks.publish.test_collision_geometry import _asset, _box
+
+
+def _nested(tmp_path):
+    """A body (slab + thin post) and a lid whose hull holds the post 20 mm deep."""
+    slab, post = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.045, 0.045, 0.01], [0.055, 0.055, 0.04])
+    return _asset(tmp_path, [slab, post], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
+
+
+@pytest.mark.parametrize("engine", ["pybullet", "mujoco"])
+def test_input_nested_in_its_parent_reads_its_depth(tmp_path, engine):
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    m = parent_child_penetration(_nested(tmp_path) / "mobility.urdf", {"hinge": 0.0}, engine)
+    assert m.value == pytest.approx(20.0, abs=0.05)  # the post's top 20 mm into the lid's hull, margins removed
+    assert m.passed is False and m.details["pairs"] == {"body/lid": m.value}
+    assert m.engine == engine
+
+
+def test_post_check_reports_the_metric_on_the_written_output(tmp_path):
+    asset = extract_asset(_nested(tmp_path))
+    ov = Overlay(estimator=EstimatorInfo(name="test"), scale=1.0,
+                 joints={j.name: JointDynamics(damping=0.1, friction=0.01) for j in asset.movable_joints()})
+    ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
+    out = write_output(asset, ov, tmp_path / "out", {"hinge": 0.0})
+    check = postcheck.run_post_check(out.urdf, {"hinge": 0.0}, ov, RefineConfig(engines=["pybullet"]))
+    m = check.metric("parent_child_penetration")
+    assert m.passed and m.value <= 2.0
