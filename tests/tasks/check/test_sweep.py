@@ -99,15 +99,16 @@ def _cube_obj(lo, hi) -> str:
     return "\n".join([f"v {a} {b} {c_}" for a, b, c_ in v] + [f"f {a + 1} {b + 1} {c_ + 1}" for a, b, c_ in f]) + "\n"
 
 
-def _stapler(root):
+def _stapler(root, magazine_z=(0.02, 0.035), magazine_upper=2.0):
     """base plate (0.2 x 0.04 x 0.01 m, top at z = 0); a top plate hinged
     about y at x = 0, z = 0.03, opening upwards (+q lifts its far end); a
-    magazine plate hinged on the top at the same axis, +q swinging it down
-    towards the base."""
+    magazine plate (bottom and top z in m: ``magazine_z``) hinged on the top
+    at the same axis, +q swinging it down towards the base, raw upper limit
+    ``magazine_upper`` rad."""
     root.mkdir(parents=True, exist_ok=True)
     (root / "base.obj").write_text(_cube_obj([-0.01, -0.02, -0.01], [0.2, 0.02, 0.0]))
     (root / "top.obj").write_text(_cube_obj([0.0, -0.02, 0.04], [0.2, 0.02, 0.05]))
-    (root / "mag.obj").write_text(_cube_obj([0.0, -0.015, 0.02], [0.18, 0.015, 0.035]))
+    (root / "mag.obj").write_text(_cube_obj([0.0, -0.015, magazine_z[0]], [0.18, 0.015, magazine_z[1]]))
     inertial = '<inertial><mass value="0.05"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>'
     def link(name: str, mesh: str) -> str:
         origin = "" if name == "base" else '<origin xyz="0 0 -0.03"/>'  # meshes in base coordinates, frames at the hinge
@@ -117,7 +118,7 @@ def _stapler(root):
             + '  <joint name="top" type="revolute"><parent link="base"/><child link="top_link"/><origin xyz="0 0 0.03"/>'
             + '<axis xyz="0 -1 0"/><limit lower="0" upper="1.5" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
             + '  <joint name="magazine" type="revolute"><parent link="top_link"/><child link="mag_link"/>'
-            + '<axis xyz="0 1 0"/><limit lower="0" upper="2.0" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
+            + f'<axis xyz="0 1 0"/><limit lower="0" upper="{magazine_upper}" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
             + "</robot>\n")
     (root / "mobility.urdf").write_text(urdf)
     return root / "mobility.urdf"

@@ -13,7 +13,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
 from asset2sim.tasks.geometry import limits
 from asset2sim.urdf import read_urdf
-from tests.tasks.check.test_sweep import _cube_obj
+from tests.tasks.check.test_sweep import _stapler
 
 STATE = {"lid_hinge": 0.4, "post_slide": 0.0}
 
@@ -109,24 +109,7 @@ def _stapler_shut_in(root: Path) -> Path:
     its raw limit 2.5 rad. Closed, the magazine lies 4 mm above the base: it
     is shut in under the closed top, and even with the top fully open it
     meets the base long before 2.5 rad (about 1.5 rad)."""
-    root.mkdir(parents=True, exist_ok=True)
-    (root / "base.obj").write_text(_cube_obj([-0.01, -0.02, -0.01], [0.2, 0.02, 0.0]))
-    (root / "top.obj").write_text(_cube_obj([0.0, -0.02, 0.04], [0.2, 0.02, 0.05]))
-    (root / "mag.obj").write_text(_cube_obj([0.0, -0.015, 0.004], [0.18, 0.015, 0.0385]))
-    inertial = '<inertial><mass value="0.05"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>'
-
-    def link(name: str, mesh: str) -> str:
-        origin = "" if name == "base" else '<origin xyz="0 0 -0.03"/>'  # meshes in base coordinates, frames at the hinge
-        return f'  <link name="{name}">{inertial}<collision>{origin}<geometry><mesh filename="{mesh}"/></geometry></collision></link>\n'
-
-    urdf = ('<robot name="stapler">\n' + link("base", "base.obj") + link("top_link", "top.obj") + link("mag_link", "mag.obj")
-            + '  <joint name="top" type="revolute"><parent link="base"/><child link="top_link"/><origin xyz="0 0 0.03"/>'
-            + '<axis xyz="0 -1 0"/><limit lower="0" upper="1.5" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
-            + '  <joint name="magazine" type="revolute"><parent link="top_link"/><child link="mag_link"/>'
-            + '<axis xyz="0 1 0"/><limit lower="0" upper="2.5" effort="1000" velocity="1000"/><dynamics damping="0.01" friction="0.05"/></joint>\n'
-            + "</robot>\n")
-    (root / "mobility.urdf").write_text(urdf)
-    return root / "mobility.urdf"
+    return _stapler(root, magazine_z=(0.004, 0.0385), magazine_upper=2.5)
 
 
 def test_a_magazine_limit_through_the_base_is_clipped_with_the_top_open(tmp_path):
