@@ -84,18 +84,23 @@ def test_clipped_limits_reach_the_overlay(tmp_path):
     assert "upper limit 5 -> 3.3" in new.joints["lid_hinge"].limit_source and notes
 
 
+def _refined_upper(src: Path, prompt: str, joint: str, out: Path) -> tuple[float, dict, Path]:
+    """Refine ``src`` for ``prompt`` into ``out`` (no extras): (the upper
+    limit of ``joint`` in the written URDF, the written overlay, ``out``)."""
+    main(["refine", str(src), "--prompt", prompt, "--out", str(out), "--no-extras"])
+    text = (out / "mobility.urdf").read_text()
+    upper = float(re.search(rf'<joint name="{joint}".*?upper="([^"]+)"', text, flags=re.S).group(1))
+    return upper, json.loads((out / "overlay.json").read_text()), out
+
+
 def test_refine_writes_the_clipped_limit_and_reports_it(tmp_path):
     """End to end: a box whose lid's raw limit (5 rad) swings it through its
     own body. refine writes the clipped limit into the URDF and the overlay
     (with why), and its sweep passes against it."""
     src = _lid_asset(tmp_path / "src", 5.0).parent
     (src / "overlay.json").unlink()
-    out = tmp_path / "out"
-    main(["refine", str(src), "--prompt", "A box with its lid slightly open.", "--out", str(out), "--no-extras"])
-    text = (out / "mobility.urdf").read_text()
-    upper = float(re.search(r'<joint name="lid_hinge".*?upper="([^"]+)"', text, flags=re.S).group(1))
+    upper, ov, out = _refined_upper(src, "A box with its lid slightly open.", "lid_hinge", tmp_path / "out")
     assert 2.0 < upper < 4.5
-    ov = json.loads((out / "overlay.json").read_text())
     assert ov["joints"]["lid_hinge"]["upper"] == upper and "runs into body" in ov["joints"]["lid_hinge"]["limit_source"]
     report = json.loads((out / "report.json").read_text())
     sweep = next(m for m in report["metrics"] if m["name"] == "joint_sweep")
@@ -144,12 +149,8 @@ def test_refine_clips_a_shut_in_magazine_where_its_sweep_stopped(tmp_path):
     stage 7b clips the limit against the carrying chain, writes it and
     sweeps again: the asset passes, the overlay says why."""
     src = _stapler_shut_in(tmp_path / "src").parent
-    out = tmp_path / "out"
-    main(["refine", str(src), "--prompt", "A stapler.", "--out", str(out), "--no-extras"])
-    text = (out / "mobility.urdf").read_text()
-    upper = float(re.search(r'<joint name="magazine".*?upper="([^"]+)"', text, flags=re.S).group(1))
+    upper, ov, out = _refined_upper(src, "A stapler.", "magazine", tmp_path / "out")
     assert 1.2 < upper < 1.7
-    ov = json.loads((out / "overlay.json").read_text())
     assert "even with top open" in ov["joints"]["magazine"]["limit_source"]
     report = json.loads((out / "report.json").read_text())
     sweep = next(m for m in report["metrics"] if m["name"] == "joint_sweep")
