@@ -64,8 +64,11 @@ class RefineConfig(BaseModel):
     """lambda in Phi(q) + lambda*||q - q_request||^2, m per rad^2 (or per m^2)."""
     max_state_evaluations: int = 4000
     """Budget of contact queries during state refinement (count)."""
-    max_escalation_rounds: int = 3
-    """Post-check rounds raising damping/friction (count)."""
+    max_escalation_rounds: int = 5
+    """Post-check rounds changing damping/friction (count): escalation and
+    relief, bracketed by what each round measured
+    (:mod:`asset2sim.tasks.check.dynamics_search`: a joint in conflict
+    between robust rest and the task needs a round or two of bisection)."""
     escalation_factor: float = 3.0
     """Multiplier on damping/friction per escalation round (dimensionless)."""
     sag_tolerance_revolute: float = 0.02

@@ -33,7 +33,7 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.check import manipulation, operating, parity, postcheck, robust_rest, sweep, task_tier
+from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.geometry import analyze
@@ -639,17 +639,38 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
 
     check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
+    search = dynamics_search.DynamicsSearch(lim.budgets)  # relief and escalation bracketed by what each round measured
+    search.record(overlay, check.metrics)
+    tried = [(overlay, check)]
     while (not check.passed or task_tier.task_failing(check.metrics)) and n < config.max_escalation_rounds:
         n += 1
+        before = overlay
         # a task that needed more than a real operating force first: lower friction / damping (and their caps)
         overlay, changes, reason = task_tier.relieve(overlay, check.metrics, lim)
         if not changes:
             overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
+        overlay, changes, notes = search.settle(before, overlay, changes, caps)
+        reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
         if not changes:
             break
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
         check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
+        search.record(overlay, check.metrics)
+        tried.append((overlay, check))
+    best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
+    sweep_skipped = any(m.name == "joint_sweep" and "not_run" in m.details for m in check.metrics)
+    if best != len(tried) - 1 or sweep_skipped:
+        # the rounds ended worse than an earlier round (that round's setting), or on a round whose sweep
+        # was skipped for an escalation that did not come: checked again, the sweep included
+        reason = f"round {best} failed the fewest tiers: its friction and damping kept" if best != len(tried) - 1 else \
+            "the last round's setting checked again with the joint sweep"
+        if best != len(tried) - 1:
+            overlay = tried[best][0]
+            write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+        check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, recorded=recorded))
+        changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
+        rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return overlay, check, rounds
 

@@ -1,0 +1,284 @@
+"""The friction and damping of a joint between the two tiers that pull them
+apart: robust rest wants them high (the state held through a drop, tilts and
+a nudge), the task wants them low (a real operating force, a free object
+that does not slide under the gripper). Refine's post-check (stage 7)
+alternates relief (:func:`asset2sim.tasks.check.task_tier.relieve`) and
+escalation (:func:`asset2sim.tasks.check.postcheck.escalate`); each is a
+model of one tier and, on its own, undoes the other's last step (a stapler
+lid escalated past the force where the body slides, then relieved below
+where it held; a laptop screen left 1 % short of holding because the
+modelled operating budget was spent while the measured operating torque
+still had room).
+
+:class:`DynamicsSearch` remembers, per joint, what each post-check round
+measured at which setting (friction f, damping c) and turns the two models'
+proposals into a bracketed search:
+
+- **weak**: the strongest setting at which robust rest did not hold the
+  joint (a trial's ``failing_joints``);
+- **strong**: the weakest setting at which the task failed on the joint by
+  force (its ``operating_force`` attempt outside the range, or the free
+  object slid or tipped under the gripper while the part moved);
+- **good**: the latest setting at which the joint was held and its task
+  passed, in a round where both tiers ran.
+
+Settings are ordered by their operating cost f + c w (w the gripper's top
+speed at the grasp point, rad/s or m/s, from the operating budget; 1 where
+no budget is known), the resistance the task's gripper meets at its top
+speed. Rules, for each joint a round's proposal changes or robust rest did
+not hold (:meth:`DynamicsSearch.settle`):
+
+1. A proposal at or beyond a known bound (up to ``strong``, down to
+   ``weak``) is replaced by the joint's ``good`` setting when there is one,
+   else by the midpoint of ``weak`` and ``strong`` when both are known (a
+   bisection: each round halves the interval in which both tiers can hold),
+   else by the midpoint of the current setting and the bound.
+2. A joint robust rest did not hold, which neither model changed (its caps
+   are spent), moves to the midpoint of the current setting and ``strong``
+   when that is known; else, when its task passed with a measured peak
+   operating force F_peak below the budget's allowed force F
+   (:class:`asset2sim.tasks.check.operating.OperatingBudget` ``force_n``),
+   its friction rises by the measured headroom
+   (BUDGET_SHARE F - F_peak) r (revolute, r the grasp lever) or
+   (BUDGET_SHARE F - F_peak) (prismatic). The caps are models; the task's
+   measurement is the evidence.
+
+Nothing here changes a state, a mass or a joint's stiffness; a joint with no
+conflict (no ``strong`` bound) escalates as before.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check import operating
+
+#: Settings whose operating costs differ by less than this share are the same
+#: setting (dimensionless): a bracket this narrow is not split again.
+SAME_SHARE = 0.02
+#: Smallest measured headroom worth a round, as a share of the joint's
+#: friction (dimensionless): robust rest's drift falls about as 1 / friction^2
+#: after an impact (:data:`asset2sim.tasks.check.manipulation.HOLD_EXPONENT_IMPACT`),
+#: so 1 % more friction takes about 2 % off the drift.
+HEADROOM_MIN_SHARE = 0.01
+
+
+@dataclass(frozen=True)
+class Setting:
+    """Friction (N m or N) and damping (N m s/rad or N s/m) of one joint."""
+
+    friction: float
+    damping: float
+
+    def cost(self, speed: float) -> float:
+        """Resistance at ``speed`` (rad/s or m/s): friction + damping x speed (N m or N)."""
+        return self.friction + self.damping * speed
+
+    def midpoint(self, other: Setting) -> Setting:
+        """The setting halfway between ``self`` and ``other``, per component."""
+        return Setting(0.5 * (self.friction + other.friction), 0.5 * (self.damping + other.damping))
+
+
+@dataclass
+class JointRecord:
+    """What the rounds measured for one joint (:mod:`module docstring <asset2sim.tasks.check.dynamics_search>`)."""
+
+    weak: Setting | None = None
+    strong: Setting | None = None
+    good: Setting | None = None
+
+
+@dataclass
+class RoundOutcome:
+    """Per-joint outcome of one post-check round, read from its metrics."""
+
+    not_held: set[str] = field(default_factory=set)
+    """joints a robust-rest trial found leaving their state"""
+    held: set[str] = field(default_factory=set)
+    """joints robust rest ran on and found held in every trial"""
+    task_bad: set[str] = field(default_factory=set)
+    """joints whose task needed more than a real force (range exceeded, or the free object slid / tipped)"""
+    task_ok: set[str] = field(default_factory=set)
+    """joints with task attempts, every one a success and inside the force range"""
+    peak_force: dict[str, float] = field(default_factory=dict)
+    """joint -> largest peak operating force of its attempts, N"""
+    task_ran: bool = False
+
+
+def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget] | None = None) -> RoundOutcome:
+    """The per-joint outcome of a post-check round's ``metrics``
+    (``robust_rest``, ``task_execution`` and ``operating_force`` details).
+    A slide or tip counts against a joint's setting as relief counts it
+    (:func:`asset2sim.tasks.check.task_tier.relieve`): the part moved and the
+    peak operating force exceeded the budget's allowed force (``budgets``);
+    a tip at a lower force is the object's balance, not the joint's resistance."""
+    out = RoundOutcome()
+    seen: set[str] = set()
+    for m in metrics:
+        if m.name == "robust_rest":
+            for trial in (m.details.get("trials") or {}).values():
+                out.not_held.update(trial.get("failing_joints") or [])
+                seen.update((trial.get("joint_drift") or {}).keys())
+    out.held = seen - out.not_held
+    tried: dict[str, bool] = {}
+    for m in metrics:
+        if m.name == "task_execution" and m.passed is not None:
+            out.task_ran = True
+            for a in m.details.get("attempts") or []:
+                j = a["joint"]
+                tried[j] = tried.get(j, True) and bool(a.get("success"))
+                out.peak_force[j] = max(out.peak_force.get(j, 0.0), float(a.get("peak_operating_force_n") or 0.0))
+                b = (budgets or {}).get(j)
+                if ((a.get("slid") or a.get("tipped")) and a.get("moved") and b is not None
+                        and float(a.get("peak_operating_force_n") or 0.0) > b.force_n):
+                    out.task_bad.add(j)
+        if m.name == "operating_force":
+            for row in m.details.get("attempts") or []:
+                if row.get("passed") is False:
+                    out.task_bad.add(row["joint"])
+    out.task_ok = {j for j, ok in tried.items() if ok and j not in out.task_bad}
+    return out
+
+
+class DynamicsSearch:
+    """Bracketed search of each joint's friction and damping over the
+    post-check rounds (module docstring).
+
+    Args:
+        budgets: joint -> operating budget of the task's gripper
+            (:func:`asset2sim.tasks.check.operating.operating_budgets`); joints
+            without one are ordered by friction + damping x 1 and get no
+            measured-headroom step.
+    """
+
+    def __init__(self, budgets: dict[str, operating.OperatingBudget] | None = None):
+        self.budgets = dict(budgets or {})
+        self.joints: dict[str, JointRecord] = {}
+        self._last: RoundOutcome | None = None
+
+    def _speed(self, joint: str) -> float:
+        b = self.budgets.get(joint)
+        return float(b.speed) if b is not None and b.speed > 0 else 1.0
+
+    def _cost(self, joint: str, s: Setting) -> float:
+        return s.cost(self._speed(joint))
+
+    def record(self, overlay: Overlay, metrics: list[MetricResult]) -> RoundOutcome:
+        """Record what a round measured at ``overlay``'s settings; returns the round's outcome."""
+        out = round_outcome(metrics, self.budgets)
+        for name, d in overlay.joints.items():
+            s = Setting(float(d.friction), float(d.damping))
+            rec = self.joints.setdefault(name, JointRecord())
+            if name in out.not_held and (rec.weak is None or self._cost(name, s) > self._cost(name, rec.weak)):
+                rec.weak = s
+            if name in out.task_bad and (rec.strong is None or self._cost(name, s) < self._cost(name, rec.strong)):
+                rec.strong = s
+            if out.task_ran and name in out.held and name not in out.task_bad and (
+                    name in out.task_ok or name not in out.peak_force):
+                rec.good = s
+        self._last = out
+        return out
+
+    def _same(self, joint: str, a: Setting, b: Setting) -> bool:
+        ca, cb = self._cost(joint, a), self._cost(joint, b)
+        return abs(ca - cb) <= SAME_SHARE * max(ca, cb, 1e-12)
+
+    def _headroom(self, joint: str) -> float:
+        """Friction (N m or N) the task's measured peak force leaves under the budget's allowed force."""
+        b = self.budgets.get(joint)
+        out = self._last
+        if b is None or out is None or joint not in out.task_ok or joint not in out.peak_force or b.force_n == float("inf"):
+            return 0.0
+        h = operating.BUDGET_SHARE * float(b.force_n) - out.peak_force[joint]
+        return max(0.0, h * (float(b.lever) if b.lever else 1.0))
+
+    def settle(self, before: Overlay, proposal: Overlay, changes: dict[str, dict[str, float]],
+               caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], list[str]]:
+        """Apply the rules of the module docstring to a round's ``proposal``
+        (relief's or escalation's overlay made from ``before``, the overlay of
+        the round just recorded, with its ``changes``).
+
+        Args:
+            caps: joint -> friction cap escalation keeps to (N m or N); a
+                measured-headroom step raises it (in place).
+
+        Returns:
+            (overlay, joint -> {"friction", "damping"} changed from ``before``, notes).
+        """
+        out = self._last or RoundOutcome()
+        ov = proposal.model_copy(deep=True)
+        notes: list[str] = []
+        names = list(dict.fromkeys([*changes, *sorted(out.not_held)]))
+        for name in names:
+            d0, d1 = before.joints.get(name), ov.joints.get(name)
+            if d0 is None or d1 is None:
+                continue
+            rec = self.joints.get(name, JointRecord())
+            cur = Setting(float(d0.friction), float(d0.damping))
+            prop = Setting(float(d1.friction), float(d1.damping))
+            new, why = prop, ""
+            c_prop, c_cur = self._cost(name, prop), self._cost(name, cur)
+            up, down = c_prop > c_cur, c_prop < c_cur
+            to_strong = up and rec.strong is not None and c_prop >= self._cost(name, rec.strong)
+            to_weak = down and rec.weak is not None and c_prop <= self._cost(name, rec.weak)
+            stuck = not up and not down and name in out.not_held
+            empty = rec.strong is not None and rec.weak is not None and self._cost(name, rec.weak) >= self._cost(name, rec.strong)
+            if (to_strong or to_weak or (stuck and rec.strong is not None)) and rec.good is not None \
+                    and not self._same(name, rec.good, cur):
+                new, why = rec.good, "back to the last setting where robust rest held it and its task passed"
+            elif empty:
+                pass  # robust rest failed where the task already failed by force: no bracket, the models decide
+            elif to_strong:
+                new, why = self._inside(name, rec, cur, rec.strong, "the task needed more than a real force at")
+            elif to_weak:
+                new, why = self._inside(name, rec, cur, rec.weak, "robust rest did not hold it at")
+            elif stuck:
+                if rec.strong is not None:
+                    new, why = self._inside(name, rec, cur, rec.strong, "not held at its caps; the task needed more than a real force at")
+                else:
+                    h = self._headroom(name)
+                    if h > HEADROOM_MIN_SHARE * max(cur.friction, 1e-9):
+                        new = Setting(cur.friction + h, cur.damping)
+                        why = (f"not held at its caps; the task's measured operating force leaves {h:.3g} "
+                               f"{'N' if self._is_prismatic(name) else 'N m'} of the real range: friction raised by it")
+                        if caps is not None:
+                            caps[name] = max(caps.get(name, 0.0), new.friction)
+            if new == cur:
+                ov.joints[name] = d0
+                changes.pop(name, None)
+                continue
+            if new != prop:
+                ov.joints[name] = d1.model_copy(update={"friction": new.friction, "damping": new.damping,
+                                                        "source": d0.source + f"; {why}: friction {new.friction:.3g}, damping {new.damping:.3g}"})
+                notes.append(f"{name}: {why}")
+            changes[name] = {"damping": new.damping, "friction": new.friction}
+        return ov, {k: v for k, v in changes.items() if k in ov.joints}, notes
+
+    def _is_prismatic(self, joint: str) -> bool:
+        b = self.budgets.get(joint)
+        return b is not None and b.joint_type == "prismatic"
+
+    def _inside(self, joint: str, rec: JointRecord, cur: Setting, bound: Setting, what: str) -> tuple[Setting, str]:
+        """The setting rule 1 / 2 puts a joint at, between the current setting and a known ``bound``."""
+        b = f"{what} friction {bound.friction:.3g}, damping {bound.damping:.3g}"
+        if rec.weak is not None and rec.strong is not None:
+            if self._same(joint, rec.weak, rec.strong):
+                return cur, ""
+            return rec.weak.midpoint(rec.strong), f"{b}; bisecting between robust rest's and the task's bounds"
+        if self._same(joint, cur, bound):
+            return cur, ""
+        return cur.midpoint(bound), f"{b}; halfway to it"
+
+
+def failing_tiers(metrics: list[MetricResult]) -> int:
+    """Number of metrics of a post-check round that fail (``passed`` False)."""
+    return sum(1 for m in metrics if m.passed is False)
+
+
+def fewest_failures(rounds: list[list[MetricResult]]) -> int:
+    """Index of the round (its metrics) with the fewest failing metrics, the
+    latest of equals: where no setting satisfies both tiers, refine keeps the
+    setting that fails the fewest rather than the last one tried."""
+    return min(range(len(rounds)), key=lambda i: (failing_tiers(rounds[i]), -i))
