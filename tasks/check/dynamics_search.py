@@ -18,30 +18,36 @@ proposals into a bracketed search:
   joint (a trial's ``failing_joints``);
 - **strong**: the weakest setting at which the task failed on the joint by
   force (its ``operating_force`` attempt outside the range, or the free
-  object slid or tipped under the gripper while the part moved);
+  object slid or tipped under the gripper while the part moved and the peak
+  operating force exceeded the budget's allowed force: relief's criterion;
+  a tip at a lower force is the object's balance, not the joint's);
 - **good**: the latest setting at which the joint was held and its task
   passed, in a round where both tiers ran.
 
 Settings are ordered by their operating cost f + c w (w the gripper's top
 speed at the grasp point, rad/s or m/s, from the operating budget; 1 where
 no budget is known), the resistance the task's gripper meets at its top
-speed. Rules, for each joint a round's proposal changes or robust rest did
-not hold (:meth:`DynamicsSearch.settle`):
+speed. For each joint a round's proposal changes, or that robust rest did
+not hold and neither model changed (:meth:`DynamicsSearch.settle`):
 
-1. A proposal at or beyond a known bound (up to ``strong``, down to
-   ``weak``) is replaced by the joint's ``good`` setting when there is one,
-   else by the midpoint of ``weak`` and ``strong`` when both are known (a
-   bisection: each round halves the interval in which both tiers can hold),
-   else by the midpoint of the current setting and the bound.
-2. A joint robust rest did not hold, which neither model changed (its caps
-   are spent), moves to the midpoint of the current setting and ``strong``
-   when that is known; else, when its task passed with a measured peak
-   operating force F_peak below the budget's allowed force F
-   (:class:`asset2sim.tasks.check.operating.OperatingBudget` ``force_n``),
-   its friction rises by the measured headroom
+1. A proposal that reaches a known bound (up to ``strong``, down to
+   ``weak``), or a joint stuck at its caps with a ``strong`` bound, goes
+   back to the joint's ``good`` setting when there is one.
+2. Where robust rest failed at a setting at least as strong as one where
+   the task failed by force, there is no bracket: the models' proposal
+   stands (and the round failing the fewest tiers is kept at the end,
+   :func:`fewest_failures`).
+3. Otherwise a proposal reaching a bound becomes the midpoint of ``weak``
+   and ``strong`` when both are known (a bisection: each round halves the
+   interval in which both tiers can hold), else the midpoint of the current
+   setting and the bound; a stuck joint with a ``strong`` bound the same.
+4. A stuck joint without a ``strong`` bound whose task passed with a
+   measured peak operating force F_peak below the budget's allowed force F
+   (:class:`asset2sim.tasks.check.operating.OperatingBudget` ``force_n``)
+   gets its friction raised by the measured headroom
    (BUDGET_SHARE F - F_peak) r (revolute, r the grasp lever) or
-   (BUDGET_SHARE F - F_peak) (prismatic). The caps are models; the task's
-   measurement is the evidence.
+   (BUDGET_SHARE F - F_peak) (prismatic), and its cap with it. The caps are
+   models; the task's measurement is the evidence.
 
 Nothing here changes a state, a mass or a joint's stiffness; a joint with no
 conflict (no ``strong`` bound) escalates as before.
