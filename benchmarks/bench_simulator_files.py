@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     from asset2sim.tasks.check.parent_child import parent_child_penetration
     from asset2sim.tasks.publish.collision_geometry import Piece, containment_depths, parent_child_depths
     from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
+    from asset2sim.tasks.publish.write import read_root
 
     folders = [args.root] if (args.root / "mobility.urdf").is_file() else sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
     if args.ids:
@@ -159,7 +160,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.convert or not xml.is_file():
             try:
                 with tempfile.TemporaryDirectory():
-                    build = urdf_to_mjcf(urdf_path, initial_state=state, springs=springs_from_overlay(f, state), visuals=True)
+                    fixed = read_root(f).fixed  # a mounted asset converts as export_mjcf writes it: no free joint
+                    build = urdf_to_mjcf(urdf_path, initial_state=state, springs=springs_from_overlay(f, state), visuals=True,
+                                         fixed_base=fixed, ground=not fixed)
                 xml = None
             except Exception as exc:
                 row["mjcf"] = f"convert failed: {str(exc)[:120]}"
