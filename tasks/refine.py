@@ -659,13 +659,14 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         search.record(overlay, check.metrics)
         tried.append((overlay, check))
     best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
+    earlier = best != len(tried) - 1
     sweep_skipped = any(m.name == "joint_sweep" and "not_run" in m.details for m in check.metrics)
-    if best != len(tried) - 1 or sweep_skipped:
+    if earlier or sweep_skipped:
         # the rounds ended worse than an earlier round (that round's setting), or on a round whose sweep
         # was skipped for an escalation that did not come: checked again, the sweep included
-        reason = f"round {best} failed the fewest tiers: its friction and damping kept" if best != len(tried) - 1 else \
-            "the last round's setting checked again with the joint sweep"
-        if best != len(tried) - 1:
+        reason = (f"round {best} failed the fewest tiers: its friction and damping kept" if earlier
+                  else "the last round's setting checked again with the joint sweep")
+        if earlier:
             overlay = tried[best][0]
             write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
         check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, recorded=recorded))

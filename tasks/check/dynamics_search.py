@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import operating
+from asset2sim.tasks.check import operating, task_tier
 
 #: Settings whose operating costs differ by less than this share are the same
 #: setting (dimensionless): a bracket this narrow is not split again.
@@ -116,10 +116,10 @@ class RoundOutcome:
 def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget] | None = None) -> RoundOutcome:
     """The per-joint outcome of a post-check round's ``metrics``
     (``robust_rest``, ``task_execution`` and ``operating_force`` details).
-    A slide or tip counts against a joint's setting as relief counts it
-    (:func:`asset2sim.tasks.check.task_tier.relieve`): the part moved and the
-    peak operating force exceeded the budget's allowed force (``budgets``);
-    a tip at a lower force is the object's balance, not the joint's resistance."""
+    A task counts against a joint's setting as relief counts it
+    (:func:`asset2sim.tasks.check.task_tier.force_excess`): a tip or slide at
+    a force below the budget's allowed force (``budgets``) is the object's
+    balance, not the joint's resistance."""
     out = RoundOutcome()
     seen: set[str] = set()
     for m in metrics:
@@ -136,14 +136,7 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
                 j = a["joint"]
                 tried[j] = tried.get(j, True) and bool(a.get("success"))
                 out.peak_force[j] = max(out.peak_force.get(j, 0.0), float(a.get("peak_operating_force_n") or 0.0))
-                b = (budgets or {}).get(j)
-                if ((a.get("slid") or a.get("tipped")) and a.get("moved") and b is not None
-                        and float(a.get("peak_operating_force_n") or 0.0) > b.force_n):
-                    out.task_bad.add(j)
-        if m.name == "operating_force":
-            for row in m.details.get("attempts") or []:
-                if row.get("passed") is False:
-                    out.task_bad.add(row["joint"])
+    out.task_bad = set(task_tier.force_excess(metrics, budgets or {})[0])
     out.task_ok = {j for j, ok in tried.items() if ok and j not in out.task_bad}
     return out
 
@@ -267,7 +260,7 @@ class DynamicsSearch:
         return b is not None and b.joint_type == "prismatic"
 
     def _inside(self, joint: str, rec: JointRecord, cur: Setting, bound: Setting, what: str) -> tuple[Setting, str]:
-        """The setting rule 1 / 2 puts a joint at, between the current setting and a known ``bound``."""
+        """The setting rule 3 of the module docstring puts a joint at, between the current setting and a known ``bound``."""
         b = f"{what} friction {bound.friction:.3g}, damping {bound.damping:.3g}"
         if rec.weak is not None and rec.strong is not None:
             if self._same(joint, rec.weak, rec.strong):

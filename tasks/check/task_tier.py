@@ -151,6 +151,43 @@ def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay
                            notes=[b.conflict for b in budgets.values() if b.conflict])
 
 
+def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget]) -> tuple[dict[str, float], dict[str, str]]:
+    """Joints whose task in ``metrics`` needed more than a real operating force, with the measured excess
+    (N m or N, :func:`relieve`'s definition) and why: an ``operating_force`` attempt outside its range, or a
+    task attempt in which the part moved and the free object slid or tipped at a peak operating force above
+    the budget's allowed force (``budgets``: :func:`asset2sim.tasks.check.operating.operating_budgets`).
+    The one criterion of relief and of :mod:`asset2sim.tasks.check.dynamics_search`."""
+    excess: dict[str, float] = {}
+    why: dict[str, str] = {}
+    for m in metrics:
+        if m.name == "operating_force" and m.passed is False:
+            for row in m.details.get("attempts") or []:
+                if row.get("passed") is not False:
+                    continue
+                b = budgets.get(row["joint"])
+                e = 0.0
+                if row.get("force_range_n"):
+                    e = max(e, float(row["peak_operating_force_n"]) - float(row["force_range_n"][1]))
+                    if b is not None and b.lever:
+                        e *= b.lever
+                if row.get("torque_range_nm") and row.get("peak_torque_nm") is not None:
+                    e = max(e, float(row["peak_torque_nm"]) - float(row["torque_range_nm"][1]))
+                if e > 0:
+                    excess[row["joint"]] = max(excess.get(row["joint"], 0.0), e)
+                    why[row["joint"]] = "operating force above the real range"
+        if m.name == "task_execution" and m.passed is False:
+            for a in m.details.get("attempts") or []:
+                b = budgets.get(a["joint"])
+                if not (a.get("slid") or a.get("tipped")) or b is None or not a.get("moved"):
+                    continue
+                e = float(a["peak_operating_force_n"]) - b.force_n
+                e = e * b.lever if b.lever else e
+                if e > 0:
+                    excess[a["joint"]] = max(excess.get(a["joint"], 0.0), e)
+                    why.setdefault(a["joint"], "the free object slid under the gripper's push")
+    return excess, why
+
+
 def relieve(overlay: Overlay, metrics: list[MetricResult], limits: OperatingLimits) -> tuple[Overlay, dict[str, dict[str, float]], str]:
     """Lower the friction (then the damping) of joints whose task needed more
     than a real operating force: the ``operating_force`` attempts outside their
@@ -171,34 +208,7 @@ def relieve(overlay: Overlay, metrics: list[MetricResult], limits: OperatingLimi
         (new overlay, joint -> {"friction", "damping"} changed, reason); no
         changes when nothing failed on force.
     """
-    excess: dict[str, float] = {}
-    why: dict[str, str] = {}
-    for m in metrics:
-        if m.name == "operating_force" and m.passed is False:
-            for row in m.details.get("attempts") or []:
-                if row.get("passed") is not False:
-                    continue
-                b = limits.budgets.get(row["joint"])
-                e = 0.0
-                if row.get("force_range_n"):
-                    e = max(e, float(row["peak_operating_force_n"]) - float(row["force_range_n"][1]))
-                    if b is not None and b.lever:
-                        e *= b.lever
-                if row.get("torque_range_nm") and row.get("peak_torque_nm") is not None:
-                    e = max(e, float(row["peak_torque_nm"]) - float(row["torque_range_nm"][1]))
-                if e > 0:
-                    excess[row["joint"]] = max(excess.get(row["joint"], 0.0), e)
-                    why[row["joint"]] = "operating force above the real range"
-        if m.name == "task_execution" and m.passed is False:
-            for a in m.details.get("attempts") or []:
-                b = limits.budgets.get(a["joint"])
-                if not (a.get("slid") or a.get("tipped")) or b is None or not a.get("moved"):
-                    continue
-                e = float(a["peak_operating_force_n"]) - b.force_n
-                e = e * b.lever if b.lever else e
-                if e > 0:
-                    excess[a["joint"]] = max(excess.get(a["joint"], 0.0), e)
-                    why.setdefault(a["joint"], "the free object slid under the gripper's push")
+    excess, why = force_excess(metrics, limits.budgets)
     ov = overlay.model_copy(deep=True)
     changes: dict[str, dict[str, float]] = {}
     for name, e in excess.items():
