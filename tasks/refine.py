@@ -528,42 +528,92 @@ def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: di
 
 def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
                   state: dict[str, float], urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog):
-    """Stage 7b: where the joint sweep stops short, the repairs of
-    :func:`_sweep_repairs` in turn (limits against the carrying chain,
-    running clearance, convex decomposition); each is written, the limits
-    clipped again from ``unclipped`` (the overlay before stage 6b) and
-    ``closed_raw`` (contacts changed) and the asset post-checked again; the
-    first that makes the sweep better (fewer failing joints, else a smaller
-    shortfall) while no metric that passed fails is kept (else the files are
-    written back and the next is tried). ``result``: (overlay, check, rounds,
-    collision overrides, closed ends) so far, returned unchanged or
-    replaced; notes go to ``st.collision_changes``."""
+    """Stage 7b: collision repairs where the post-check shows a part held by
+    its neighbours' collision pieces, each written, the limits clipped again
+    from ``unclipped`` (the overlay before stage 6b) and ``closed_raw``
+    (contacts changed) and the asset post-checked again; a repair is kept iff
+    it makes the check better while no metric that passed fails (else the
+    files are written back and the next is tried):
+
+    - the joint sweep stops short: the repairs of :func:`_sweep_repairs` in
+      turn (limits against the carrying chain, running clearance, convex
+      decomposition); better = a better :func:`~asset2sim.tasks.check.sweep.sweep_score`;
+    - the sweep passes but a manipulation tier (robust rest, the task, the
+      probes) fails while the penetration metric reports parts in contact at
+      the state (two drawers touching along their runners move together:
+      the sweep holds the neighbour with a drive, robust rest and the gripper
+      do not): running clearance for the sliding contacts between the
+      joints' parts (:func:`asset2sim.tasks.state.clearance.touching_joints`);
+      better = fewer failing metrics.
+
+    ``result``: (overlay, check, rounds, collision overrides, closed ends) so
+    far, returned unchanged or replaced; notes go to ``st.collision_changes``."""
     overlay, check, rounds, overrides, closed_out = result
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
-    if not blocked:
-        return result
     model = read_urdf(urdf)
-    for what, new, notes, chain_open in _sweep_repairs(ctx, model, unclipped, sw, blocked, overrides, state, urdf, config, out_dir):
+    if blocked:
+        label, repairs = "sweep blocked", _sweep_repairs(ctx, model, unclipped, sw, blocked, overrides, state, urdf, config, out_dir)
+
+        def better(chk2) -> bool:
+            return sweep.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep.sweep_score(sw)
+    else:
+        touching = _touching_joints(model, check, state)
+        if not touching:
+            return result
+        label, repairs = "parts held together", _clearance_repairs(ctx, model, unclipped, touching, overrides, state, urdf, out_dir)
+
+        def better(chk2) -> bool:
+            return _failing(chk2) < _failing(check)
+    for what, new, notes, chain_open in repairs:
         write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=new, root_rotation=ctx.root_rotation)
         clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=chain_open)
         ov2, check2, rounds2 = _post_check(ctx, clipped, state, new, urdf, config, out_dir, log, closed=manipulation.closed_tuples(closed2))
-        sw2 = next(m for m in check2.metrics if m.name == "joint_sweep")
         passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
-        if sweep.sweep_score(sw2) < sweep.sweep_score(sw) and not lost:
+        if better(check2) and not lost:
             for line in notes:
                 log.say("sweep_repair", line)
             st.collision_changes = list(st.collision_changes) + notes
             n = len(rounds)
-            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{what} (sweep blocked): {r.reason}"})
+            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{what} ({label}): {r.reason}"})
                                for r in rounds2]
             return ov2, check2, rounds, new, closed2
-        log.say("sweep_repair", f"{what} not kept (sweep failures {sw.value:g} -> {sw2.value:g}: "
-                                f"{'; '.join(sw2.details.get('failures') or []) or 'none'}"
+        log.say("sweep_repair", f"{what} not kept ({label}; failing metrics {_failing(check)} -> {_failing(check2)}"
                                 f"{'; would fail ' + ', '.join(lost) if lost else ''}); the asset kept as it was")
         write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return result
+
+
+#: Tiers whose failure, with parts in contact at the state, asks for running clearance (stage 7b).
+_HELD_TOGETHER_TIERS = ("robust_rest", "task_execution", "probes")
+
+
+def _failing(check: postcheck.PostCheck) -> int:
+    """Number of failing metrics (``passed is False``) of a post-check, any engine."""
+    return sum(1 for m in check.metrics if m.passed is False)
+
+
+def _touching_joints(model, check: postcheck.PostCheck, state: dict[str, float]) -> dict[str, float]:
+    """Joint -> position in ``state`` for the joints between parts in contact
+    at the state (the PyBullet penetration metric's pairs), when a tier of
+    :data:`_HELD_TOGETHER_TIERS` failed; else empty."""
+    if not any(m.name in _HELD_TOGETHER_TIERS and m.passed is False for m in check.metrics):
+        return {}
+    pen = next((m for m in check.metrics if m.name == "penetration" and m.engine == "pybullet"), None)
+    pairs = [(p["link_a"], p["link_b"]) for p in ((pen.details.get("pairs") or []) if pen is not None else [])]
+    return clearance.touching_joints(model, pairs, state, limits.subtrees(model)) if pairs else {}
+
+
+def _clearance_repairs(ctx: EstimationContext, model, unclipped: Overlay, joints: dict[str, float], overrides: dict,
+                       state: dict[str, float], urdf: Path, out_dir: Path):
+    """Stage 7b's repair for parts held together: running clearance for the
+    sliding contacts of ``joints`` (joint -> position) at ``state``, as
+    (what, collision overrides, notes, clip against the carrying chain)."""
+    rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model))
+    if rep.pieces:
+        yield ("running clearance", {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))},
+               rep.notes, False)
 
 
 def _sweep_repairs(ctx: EstimationContext, model, unclipped: Overlay, sw, blocked: dict[str, float], overrides: dict,
@@ -579,10 +629,11 @@ def _sweep_repairs(ctx: EstimationContext, model, unclipped: Overlay, sw, blocke
        (:mod:`asset2sim.tasks.state.stop_repair`; with ``config.convex_decomposition``)."""
     if any(limits.chain_links(model, j) for j in blocked):
         yield "limits against the carrying chain", overrides, [], True
-    rep = clearance.clearance_for_blocked(model, urdf, blocked, state, limits.subtrees(model))
-    if rep.pieces:
-        yield ("running clearance", {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))},
-               rep.notes, False)
+    found = False
+    for cand in _clearance_repairs(ctx, model, unclipped, blocked, overrides, state, urdf, out_dir):
+        found = True
+        yield cand
+    if found:
         return
     if not config.convex_decomposition:
         return

@@ -168,14 +168,14 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
                 if parent_of.get(ln) == other or parent_of.get(other) == ln:
                     continue  # parent-child pairs are not collided (SPEC)
                 To = np.linalg.inv(Tl) @ poses[other]
-                for Q in pieces(other):
+                for Q in (rep.pieces.get(other) or pieces(other)):  # a piece already given clearance is not squeezed again from the other side
                     Ql = Q @ To[:3, :3].T + To[:3, 3]
                     for i, P in enumerate(own):
                         try:
                             g, n = sat_gap(P, Ql)
                         except ValueError:
                             continue
-                        if g >= CLEARANCE:
+                        if g >= CLEARANCE - 1e-9:  # (rounding of a piece already given clearance)
                             continue
                         face = P[(P @ n) >= (P @ n).max() - 1e-3].mean(axis=0)
                         n_w, c_w = Rl @ n, Rl @ face + tl
@@ -191,6 +191,35 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
             if changed:
                 rep.pieces[ln] = own
     return rep
+
+
+def touching_joints(model: UrdfModel, pairs: list[tuple[str, str]], state: dict[str, float],
+                    subtrees: dict[str, list[str]]) -> dict[str, float]:
+    """The movable joints between two links that touch at ``state``: joint ->
+    its position in ``state`` (rad or m), for every joint that moves exactly
+    one link of a pair in ``pairs`` ((link_a, link_b), e.g. the pairs of the
+    penetration metric, which PyBullet reports while hulls are within its
+    margins) and not the other, so that their relative motion is that joint's
+    (two drawers of one cabinet: each drawer's joint). ``subtrees``: joint ->
+    the links it moves. Fixed joints and joints missing from ``state`` are
+    skipped. Input for :func:`clearance_for_blocked`, which gives running
+    clearance only where the contact slides along that motion.
+
+    Raises:
+        KeyError: a link of ``pairs`` is not in ``model`` (naming it).
+    """
+    out: dict[str, float] = {}
+    for a, b in pairs:
+        for ln in (a, b):
+            if ln not in model.links:
+                raise KeyError(f"link {ln!r} of a touching pair is not in the URDF")
+        for j in model.joints:
+            if j.type == "fixed" or j.name not in state:
+                continue
+            moved = set(subtrees.get(j.name, [j.child]))
+            if (a in moved) != (b in moved):
+                out[j.name] = float(state[j.name])
+    return out
 
 
 def write_overrides(rep: ClearanceRepair, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
