@@ -551,6 +551,9 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
     overlay, check, rounds, overrides, closed_out = result
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
+    pairs = [] if blocked else _held_together_pairs(check)
+    if not blocked and not pairs:
+        return result  # the common case: nothing read, nothing simulated
     model = read_urdf(urdf)
     if blocked:
         label, repairs = "sweep blocked", _sweep_repairs(ctx, model, unclipped, sw, blocked, overrides, state, urdf, config, out_dir)
@@ -558,13 +561,12 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
         def better(chk2) -> bool:
             return sweep.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep.sweep_score(sw)
     else:
-        touching = _touching_joints(model, check, state)
-        if not touching:
-            return result
-        label, repairs = "parts held together", _clearance_repairs(ctx, model, unclipped, touching, overrides, state, urdf, out_dir)
+        touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
+        repair = _clearance_repair(ctx, model, unclipped, touching, overrides, state, urdf, out_dir) if touching else None
+        label, repairs = "parts held together", [repair] if repair else []
 
         def better(chk2) -> bool:
-            return _failing(chk2) < _failing(check)
+            return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
     for what, new, notes, chain_open in repairs:
         write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=new, root_rotation=ctx.root_rotation)
         clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=chain_open)
@@ -579,7 +581,7 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
             rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{what} ({label}): {r.reason}"})
                                for r in rounds2]
             return ov2, check2, rounds, new, closed2
-        log.say("sweep_repair", f"{what} not kept ({label}; failing metrics {_failing(check)} -> {_failing(check2)}"
+        log.say("sweep_repair", f"{what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> {dynamics_search.failing_tiers(check2.metrics)}"
                                 f"{'; would fail ' + ', '.join(lost) if lost else ''}); the asset kept as it was")
         write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return result
@@ -589,31 +591,25 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
 _HELD_TOGETHER_TIERS = ("robust_rest", "task_execution", "probes")
 
 
-def _failing(check: postcheck.PostCheck) -> int:
-    """Number of failing metrics (``passed is False``) of a post-check, any engine."""
-    return sum(1 for m in check.metrics if m.passed is False)
-
-
-def _touching_joints(model, check: postcheck.PostCheck, state: dict[str, float]) -> dict[str, float]:
-    """Joint -> position in ``state`` for the joints between parts in contact
-    at the state (the PyBullet penetration metric's pairs), when a tier of
-    :data:`_HELD_TOGETHER_TIERS` failed; else empty."""
+def _held_together_pairs(check: postcheck.PostCheck) -> list[tuple[str, str]]:
+    """The link pairs in contact at the state (the PyBullet penetration
+    metric's pairs) when a tier of :data:`_HELD_TOGETHER_TIERS` failed; else empty."""
     if not any(m.name in _HELD_TOGETHER_TIERS and m.passed is False for m in check.metrics):
-        return {}
+        return []
     pen = next((m for m in check.metrics if m.name == "penetration" and m.engine == "pybullet"), None)
-    pairs = [(p["link_a"], p["link_b"]) for p in ((pen.details.get("pairs") or []) if pen is not None else [])]
-    return clearance.touching_joints(model, pairs, state, limits.subtrees(model)) if pairs else {}
+    return [(p["link_a"], p["link_b"]) for p in ((pen.details.get("pairs") or []) if pen is not None else [])]
 
 
-def _clearance_repairs(ctx: EstimationContext, model, unclipped: Overlay, joints: dict[str, float], overrides: dict,
-                       state: dict[str, float], urdf: Path, out_dir: Path):
-    """Stage 7b's repair for parts held together: running clearance for the
-    sliding contacts of ``joints`` (joint -> position) at ``state``, as
-    (what, collision overrides, notes, clip against the carrying chain)."""
+def _clearance_repair(ctx: EstimationContext, model, unclipped: Overlay, joints: dict[str, float], overrides: dict,
+                      state: dict[str, float], urdf: Path, out_dir: Path) -> tuple | None:
+    """Stage 7b's running clearance for the sliding contacts of ``joints``
+    (joint -> position) at ``state``, as (what, collision overrides, notes,
+    clip against the carrying chain); None when no sliding contact needs it."""
     rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model))
-    if rep.pieces:
-        yield ("running clearance", {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))},
-               rep.notes, False)
+    if not rep.pieces:
+        return None
+    return ("running clearance", {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))},
+            rep.notes, False)
 
 
 def _sweep_repairs(ctx: EstimationContext, model, unclipped: Overlay, sw, blocked: dict[str, float], overrides: dict,
@@ -629,11 +625,9 @@ def _sweep_repairs(ctx: EstimationContext, model, unclipped: Overlay, sw, blocke
        (:mod:`asset2sim.tasks.state.stop_repair`; with ``config.convex_decomposition``)."""
     if any(limits.chain_links(model, j) for j in blocked):
         yield "limits against the carrying chain", overrides, [], True
-    found = False
-    for cand in _clearance_repairs(ctx, model, unclipped, blocked, overrides, state, urdf, out_dir):
-        found = True
-        yield cand
-    if found:
+    repair = _clearance_repair(ctx, model, unclipped, blocked, overrides, state, urdf, out_dir)
+    if repair is not None:
+        yield repair
         return
     if not config.convex_decomposition:
         return
