@@ -248,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
                           eval_episodes=args.eval_episodes * len(SCRIPTED_SPEEDS), engine_steps=env.sim_steps,
                           failures=fails, peak_force_n=peak, seconds=time.perf_counter() - t0, grasp_rule=env.grasp_rule))
                 print(f"  {m:>9} {row.id} scripted: {by_speed} ({time.perf_counter() - t0:.1f} s)", flush=True)
-                outs = [run_episode(env, lambda o: np.zeros(3), seed=10000 + i) for i in range(args.eval_episodes)]
+                outs = [run_episode(env, lambda o: np.zeros(4), seed=10000 + i) for i in range(args.eval_episodes)]
                 emit(dict(base, kind="passive", success_rate=sum(bool(o["success"]) for o in outs) / len(outs),
                           eval_episodes=len(outs), failures=[o["failure"] for o in outs if not o["success"]],
                           final_fractions=[o["fraction"] for o in outs]))

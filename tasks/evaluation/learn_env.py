@@ -32,10 +32,12 @@ Definitions (re-derivable; ``docs/metrics.md``):
   :func:`asset2sim.tasks.interpret.mounting.session_root_options`), gravity,
   passive joints, initial state from ``initial_state.json`` except the task
   joint, which starts at the common start of its action
-  (:data:`START_FRACTION`: a close task half open, an open task closed; the
-  same motion is asked of every method, and no method gets a task its initial
-  state already satisfies; ``start="asset"`` keeps the asset's state). It first settles
-  for :attr:`LearnConfig.settle_time`; every episode starts from that settled
+  (:func:`common_start`: a close task half open, a revolute part at most
+  60 deg open, an open task closed; the same motion is asked of every
+  method, and no method gets a task its initial state already satisfies;
+  ``start="asset"`` keeps the asset's state). It first settles for at least
+  :attr:`LearnConfig.settle_time` and until at rest (every joint and the root
+  still, at most :attr:`LearnConfig.settle_max_time`); every episode starts from that settled
   snapshot, with the task joint moved by a uniform random offset of at most
   :attr:`LearnConfig.reset_noise` opening fraction (kept inside the limits).
 - **Agent**: a floating, force- and speed-limited gripper attached to the
@@ -44,9 +46,13 @@ Definitions (re-derivable; ``docs/metrics.md``):
   :mod:`asset2sim.tasks.check.gripper` (:class:`~asset2sim.tasks.check.gripper.GripperLimits`:
   70 N, 0.25 m/s by default; a bounded-force attachment is the standard
   stand-in for finger contacts, see that module).
-- **Action** (3,) in [-1, 1]: the gripper point's velocity in units of the
-  speed limit, world frame, clipped to the unit ball (so |v| <= max speed);
-  held for :attr:`LearnConfig.action_repeat` engine steps (1/240 s each).
+- **Action** (4,) in [-1, 1]: the gripper point's velocity (3,) in units of
+  the speed limit, world frame, clipped to the unit ball (so |v| <= max
+  speed), and a press flag: > 0, the gripper presses or lifts along world z
+  only, its finger sliding along the part (the task-execution check's
+  vertical press: it loads the object onto the ground instead of pushing it
+  sideways); <= 0, the full bounded-force grasp. Held for
+  :attr:`LearnConfig.action_repeat` engine steps (1/240 s each).
 - **Observation** (13,), float32: opening fraction f of the task joint;
   f - f_target; joint velocity / open range (1/s); gripper point minus grasp
   point (3,) / L; grasp point minus its position at reset (3,) / L, L the
@@ -62,7 +68,9 @@ Definitions (re-derivable; ``docs/metrics.md``):
   (footprint > 5 mm horizontally, as the probes measure it) or tipped
   (> 0.05 rad) during the episode and, after the gripper releases, the
   target is still held for :attr:`LearnConfig.hold_time` s (the
-  task-execution check's definition) without the object moving. The episode
+  task-execution check's definition; waived, as there, for a joint that
+  returns by the spring its part prior expects: a stapler's arm) without
+  the object moving. The episode
   ends at success, at a slide or tip, or after :attr:`LearnConfig.episode_time`.
 
 ``gymnasium`` is the optional extra ``gym`` (in ``all``); PPO (stable-baselines3,
@@ -90,6 +98,7 @@ from asset2sim.tasks.check.probes import (
     OPEN_REACHED,
     OPEN_TARGET,
 )
+from asset2sim.tasks.check.task_tier import hold_required_by_label
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
 from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
 from asset2sim.tasks.evaluation.task_spec import parse_task
@@ -99,10 +108,24 @@ from asset2sim.urdf import UrdfModel, read_urdf
 #: Observation length (see the module docstring).
 OBS_DIM = 13
 
+#: Action length (see the module docstring): gripper velocity (3,), press flag.
+ACTION_DIM = 4
+
 #: Common start of the task joint per action, opening fraction
 #: (:func:`prepare_task` ``start="task"``): a close task starts half open, an open
 #: task at the closed end, so the same motion is asked of every method.
 START_FRACTION: dict[str, float] = {"close": 0.5, "open": 0.0}
+
+#: Largest opening of a revolute task joint at the common start of a close
+#: task, rad: half of a wide range (a box lid's 183 deg, a stapler's 147 deg)
+#: stands the part near vertical, where its motion is horizontal and closing
+#: it pushes a light object sideways; 60 deg is where the part's motion is
+#: still half vertical (``vertical_share`` of the task-execution check), so
+#: the same start is a press for every method.
+START_MAX_ANGLE = 0.7853981633974483
+
+#: World up, the direction of a press (action component 4 > 0).
+_UP = np.array([0.0, 0.0, 1.0])
 
 
 class LearnTaskError(ValueError):
@@ -126,6 +149,10 @@ class LearnTask:
     target_fraction: float
     reach_fraction: float
     """f <= this (close) or f >= this (open) counts as reached"""
+    hold_required: bool
+    """the target must still be reached after release (False for a joint that
+    returns by the spring its part prior expects, a stapler's arm: the rule of
+    :func:`asset2sim.tasks.check.task_tier.hold_required_by_label`)"""
     initial_state: dict[str, float]
     springs: dict[str, Spring]
     root_fixed: bool
@@ -148,6 +175,23 @@ class LearnTask:
     def fraction(self, q: float) -> float:
         """Opening fraction of the task joint at ``q`` (rad or m)."""
         return self.closed.fraction(q)
+
+
+def common_start(action: str, joint_type: str, open_range: float) -> float:
+    """The common start of a task joint, opening fraction: an open task at the
+    closed end (0); a close task half open (:data:`START_FRACTION`), a
+    revolute joint at most :data:`START_MAX_ANGLE` open (``open_range`` rad,
+    or m for a prismatic joint).
+
+    Raises:
+        ValueError: ``action`` is not ``close`` or ``open``.
+    """
+    if action not in START_FRACTION:
+        raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
+    f = START_FRACTION[action]
+    if action == "close" and joint_type != "prismatic" and open_range > 0:
+        f = min(f, START_MAX_ANGLE / open_range)
+    return f
 
 
 def targets_for(action: str, start_fraction: float) -> tuple[float, float]:
@@ -208,7 +252,8 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
         if not c.open_range > 0:
             continue
         for action in spec.actions:
-            f0 = c.fraction(ctx.initial_state.get(j, 0.0)) if start == "asset" else START_FRACTION[action]
+            f0 = c.fraction(ctx.initial_state.get(j, 0.0)) if start == "asset" else \
+                common_start(action, ctx.joints[j].type, c.open_range)
             target, _ = targets_for(action, f0)
             gap = abs(target - f0)
             if best is None or gap > best[0]:
@@ -217,12 +262,18 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
         raise LearnTaskError(f"{ctx.urdf}: task {task!r}: none of {candidates} can open (range 0)")
     _, joint, action = best
     c = closed[joint]
-    f0 = c.fraction(ctx.initial_state.get(joint, 0.0)) if start == "asset" else START_FRACTION[action]
+    jtype = ctx.joints[joint].type
+    f0 = c.fraction(ctx.initial_state.get(joint, 0.0)) if start == "asset" else common_start(action, jtype, c.open_range)
     target, reach = targets_for(action, f0)
     notes = list(spec.notes) + cnotes + [f"task-relevant joints: {tj_rule}"]
+    label = (ctx.semantics.get(ctx.joints[joint].child) or (None, None))[1]
+    hold = hold_required_by_label({joint: label}, ctx.springs, ctx.category, free_moving=False,
+                                  spring_requested=False)[joint]
+    if not hold:
+        notes.append(f"{joint} returns by its spring by design ({ctx.category} {label}): the target need not hold after release")
     return LearnTask(
-        urdf=ctx.urdf, task=task, joint=joint, joint_type=ctx.joints[joint].type, action=action, closed=c,
-        target_fraction=target, reach_fraction=reach, initial_state=dict(ctx.initial_state),
+        urdf=ctx.urdf, task=task, joint=joint, joint_type=jtype, action=action, closed=c,
+        target_fraction=target, reach_fraction=reach, hold_required=hold, initial_state=dict(ctx.initial_state),
         springs=dict(ctx.springs), root_fixed=ctx.root_fixed, conventions=ctx.conventions,
         start_fraction=f0, start=start, candidates=candidates, rule=spec.rule, notes=notes,
     )
@@ -240,7 +291,17 @@ class LearnConfig:
     episode_time: float = 3.0
     """longest episode, s of simulated time"""
     settle_time: float = 0.25
-    """free settling before the snapshot every episode starts from, s (the probes')"""
+    """shortest free settling before the snapshot every episode starts from, s (the probes')"""
+    settle_max_time: float = 3.0
+    """longest settling, s: after :attr:`settle_time` it goes on until every
+    joint is slower than :attr:`rest_joint_speed` and the root moved less than
+    :attr:`rest_root_speed` over a control period (a spring-driven part, a
+    stapler's arm, is still moving after 0.25 s)"""
+    rest_joint_speed: tuple[float, float] = (0.05, 0.005)
+    """joint speed below which a joint is at rest: revolute rad/s, prismatic m/s
+    (the task-execution check's "stopped")"""
+    rest_root_speed: float = 0.005
+    """root speed below which the object is at rest, m/s"""
     hold_time: float = 1.0
     """after success the gripper releases and the target must hold this long, s
     (the task-execution check's 1 s)"""
@@ -281,7 +342,7 @@ class TaskEnv(gym.Env):
         self.config = config or LearnConfig()
         if self.config.action_repeat < 1:
             raise ValueError(f"action_repeat must be >= 1, got {self.config.action_repeat}")
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(ACTION_DIM,), dtype=np.float32)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(OBS_DIM,), dtype=np.float32)
         self.dt = float(task.conventions.timestep)
         self.max_steps = max(1, int(round(self.config.episode_time / (self.dt * self.config.action_repeat))))
@@ -328,10 +389,27 @@ class TaskEnv(gym.Env):
             s = open_session(self.config.engine, t.urdf, opts)
         self._session = s
         self._model = read_urdf(t.urdf, mode="lenient")
-        n = int(round(self.config.settle_time / self.dt))
+        self._settle(s)
+        self._snapshot = s.save_state()
+
+    def _settle(self, s: SimSession) -> None:
+        """Step at least ``settle_time`` and until at rest (:attr:`LearnConfig.settle_max_time`)."""
+        cfg = self.config
+        n = int(round(cfg.settle_time / self.dt))
         s.step(n)
         self.sim_steps += n
-        self._snapshot = s.save_state()
+        chunk = cfg.action_repeat
+        types = {j.name: j.type for j in self._model.joints} if self._model is not None else {}
+        while n < int(round(cfg.settle_max_time / self.dt)):
+            p0 = np.asarray(s.root_pose()[0], float)
+            s.step(chunk)
+            n += chunk
+            self.sim_steps += chunk
+            root_v = float(np.linalg.norm(np.asarray(s.root_pose()[0], float) - p0)) / (chunk * self.dt)
+            fast = [j for j, qd in s.joint_velocities().items()
+                    if not abs(qd) < cfg.rest_joint_speed[1 if types.get(j) == "prismatic" else 0]]
+            if root_v < cfg.rest_root_speed and not fast:
+                break
 
     def close(self) -> None:
         """Release the simulator session."""
@@ -426,13 +504,17 @@ class TaskEnv(gym.Env):
         ``action`` (3,) x max speed (clipped to the unit ball); returns
         (observation, reward, terminated, truncated, info)."""
         cfg = self.config
-        a = np.nan_to_num(np.asarray(action, float).reshape(3), nan=0.0)
-        n = float(np.linalg.norm(a))
+        a = np.nan_to_num(np.asarray(action, float).reshape(-1), nan=0.0)
+        if a.shape != (ACTION_DIM,):
+            raise ValueError(f"action must have {ACTION_DIM} components (velocity x, y, z; press), got shape {a.shape}")
+        v = a[:3]
+        n = float(np.linalg.norm(v))
         if n > 1.0:
-            a = a / n
-        v = a * cfg.limits.max_speed_m_s
+            v = v / n
+        v = v * cfg.limits.max_speed_m_s
+        press = _UP if a[3] > 0 else None
         for _ in range(cfg.action_repeat):
-            self.grasp.step_towards(self.grasp.gripper_point + v * self.dt, self.dt)
+            self.grasp.step_towards(self.grasp.gripper_point + v * self.dt, self.dt, direction=press)
             self._engine_step()
         self._steps += 1
         slide, tip = self._moved()
@@ -475,17 +557,25 @@ class TaskEnv(gym.Env):
             return False, "the object slid after release"
         if self._max_tip > cfg.tip_tol:
             return False, "the object tipped after release"
-        if not self.task.reached(f):
+        if self.task.hold_required and not self.task.reached(f):
             return False, "target not held after release"
         return True, ""
 
     # ------------------------------------------------------------ reference
-    def scripted_action(self, speed: float = 0.5) -> np.ndarray:
-        """A hand-written policy (the feasibility reference, not learned):
-        full speed along the grasp point's direction of motion towards the
-        target (revolute: the tangent a x r at the grasp point; prismatic:
-        +-a) at ``speed`` times the speed limit, plus a correction of the
-        stretch. (3,) in the unit ball."""
+    def scripted_action(self, speed: float = 0.5, vertical_share: float = 0.5) -> np.ndarray:
+        """A hand-written policy (the feasibility reference, not learned), the
+        task-execution check's motion
+        (:func:`asset2sim.tasks.check.task_execution.execute_task`): along the
+        grasp point's direction of motion towards the target (revolute: the
+        tangent a x r at the grasp point; prismatic: +-a) at ``speed`` times
+        the speed limit, plus a correction of the stretch; where that
+        direction is within acos(``vertical_share``) of vertical (60 deg) a
+        vertical press or lift instead (component 4 > 0), at the vertical
+        speed that moves the part as far along its path.
+
+        Returns:
+            The action (4,): velocity in the unit ball, press flag in [-1, 1].
+        """
         s, t = self.session, self.task
         o, R = s.link_frame(s.joint_child[t.joint])
         a = R @ s.joint_axis(t.joint)
@@ -501,13 +591,18 @@ class TaskEnv(gym.Env):
             d = d / max(float(np.linalg.norm(d)), 1e-12)
         d = sign * d
         corr = (p - self.grasp.gripper_point) / max(self.config.limits.max_speed_m_s * self.dt * self.config.action_repeat, 1e-9)
-        act = speed * d + corr
-        n = float(np.linalg.norm(act))
-        return act / n if n > 1.0 else act
+        press = abs(float(d[2])) >= vertical_share
+        if press:
+            vel = _UP * (speed / float(d[2])) + corr[2] * _UP
+        else:
+            vel = speed * d + corr
+        n = float(np.linalg.norm(vel))
+        vel = vel / n if n > 1.0 else vel
+        return np.append(vel, 1.0 if press else -1.0)
 
 
 def run_episode(env: TaskEnv, policy, *, seed: int | None = None) -> dict[str, Any]:
-    """One episode of ``policy(obs) -> action (3,)`` (or ``"scripted"``:
+    """One episode of ``policy(obs) -> action (4,)`` (or ``"scripted"``:
     :meth:`TaskEnv.scripted_action`); returns the last info plus ``return``."""
     obs, info = env.reset(seed=seed)
     total = 0.0

@@ -12,6 +12,7 @@ pytest.importorskip("gymnasium")
 from asset2sim import demo_assets  # noqa: E402
 from asset2sim.tasks.check.gripper import GripperLimits  # noqa: E402
 from asset2sim.tasks.evaluation.learn_env import (  # noqa: E402
+    ACTION_DIM,
     OBS_DIM,
     START_FRACTION,
     LearnConfig,
@@ -51,11 +52,15 @@ def test_spaces_shapes_and_budget_counter(box):
         obs, info = env.reset(seed=0)
         assert obs.shape == (OBS_DIM,) and obs.dtype == np.float32
         assert env.observation_space.contains(obs)
-        assert env.action_space.shape == (3,)
-        assert abs(info["fraction"] - 0.5) <= env.config.reset_noise + 0.02  # half open, settled
-        obs2, r, term, trunc, info2 = env.step(np.zeros(3, np.float32))
+        assert env.action_space.shape == (ACTION_DIM,)
+        assert abs(info["fraction"] - env.task.start_fraction) <= env.config.reset_noise + 0.02  # settled at the start
+        settled = env.sim_steps
+        assert round(env.config.settle_time * 240) <= settled <= round(env.config.settle_max_time * 240)
+        obs2, r, term, trunc, info2 = env.step(np.zeros(ACTION_DIM, np.float32))
         assert obs2.shape == (OBS_DIM,) and isinstance(r, float) and not term and not trunc
-        assert env.sim_steps == round(env.config.settle_time * 240) + env.config.action_repeat
+        assert env.sim_steps == settled + env.config.action_repeat
+        with pytest.raises(ValueError, match="4 components"):
+            env.step(np.zeros(3))
         # the gripper starts on the grasp point: no stretch in the observation
         assert np.linalg.norm(obs[3:6]) < 1e-6
     finally:
@@ -69,7 +74,7 @@ def test_reward_follows_progress_towards_the_target(cabinet):
         towards = [env.step(env.scripted_action())[1] for _ in range(3)]
         f_towards = env.joint_fraction()[0]
         env.reset(seed=0)
-        away = [env.step(-env.scripted_action())[1] for _ in range(3)]
+        away = [env.step(env.scripted_action() * np.array([-1.0, -1.0, -1.0, 1.0]))[1] for _ in range(3)]
         f_away = env.joint_fraction()[0]
     finally:
         env.close()
@@ -92,7 +97,7 @@ def test_scripted_close_succeeds_and_is_held(cabinet):
 def test_doing_nothing_fails_by_time_limit(cabinet):
     env = TaskEnv(prepare_task(cabinet, "close the drawer"))
     try:
-        out = run_episode(env, lambda o: np.zeros(3), seed=2)
+        out = run_episode(env, lambda o: np.zeros(ACTION_DIM), seed=2)
     finally:
         env.close()
     assert not out["success"] and out["failure"] == "time limit"
@@ -107,8 +112,9 @@ def test_object_that_slides_fails(cabinet):
     try:
         env.reset(seed=0)
         a = env.scripted_action()
-        side = np.cross(a, [0.0, 0.0, 1.0])
-        side = side / np.linalg.norm(side)
+        assert a.shape == (ACTION_DIM,) and a[3] < 0  # a drawer is pulled, not pressed
+        side = np.cross(a[:3], [0.0, 0.0, 1.0])
+        side = np.append(side / np.linalg.norm(side), -1.0)
         for _ in range(env.max_steps):
             _, r, term, trunc, info = env.step(side)
             if term or trunc:
