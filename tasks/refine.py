@@ -51,7 +51,7 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import clearance, collision, ground_clearance, pose, refine_state, stability, stop_repair
+from asset2sim.tasks.state import clearance, collision, ground_clearance, pose, refine_state, repair, stability
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
@@ -551,94 +551,47 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
     overlay, check, rounds, overrides, closed_out = result
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
-    pairs = [] if blocked else _held_together_pairs(check)
+    pairs = [] if blocked else repair.held_together_pairs(check.metrics)
     if not blocked and not pairs:
         return result  # the common case: nothing read, nothing simulated
     model = read_urdf(urdf)
+    folder = write.collision_folder(ctx.asset)
     if blocked:
-        label, repairs = "sweep blocked", _sweep_repairs(ctx, model, unclipped, sw, blocked, overrides, state, urdf, config, out_dir)
+        label = "sweep blocked"
+        repairs = repair.sweep_repairs(model, urdf, ctx.asset, sw, blocked, state, overrides, unclipped.scale, out_dir,
+                                       folder, config)
 
         def better(chk2) -> bool:
             return sweep.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep.sweep_score(sw)
     else:
+        label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
-        repair = _clearance_repair(ctx, model, unclipped, touching, overrides, state, urdf, out_dir) if touching else None
-        label, repairs = "parts held together", [repair] if repair else []
+        one = repair.clearance_repair(model, urdf, touching, state, overrides, unclipped.scale, out_dir, folder) if touching else None
+        repairs = iter([one] if one is not None else [])
 
         def better(chk2) -> bool:
             return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
-    for what, new, notes, chain_open in repairs:
-        write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=new, root_rotation=ctx.root_rotation)
-        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=chain_open)
-        ov2, check2, rounds2 = _post_check(ctx, clipped, state, new, urdf, config, out_dir, log, closed=manipulation.closed_tuples(closed2))
+    for rep in repairs:
+        write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=rep.overrides,
+                           root_rotation=ctx.root_rotation)
+        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=rep.chain_open)
+        ov2, check2, rounds2 = _post_check(ctx, clipped, state, rep.overrides, urdf, config, out_dir, log,
+                                           closed=manipulation.closed_tuples(closed2))
         passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
         if better(check2) and not lost:
-            for line in notes:
+            for line in rep.notes:
                 log.say("sweep_repair", line)
-            st.collision_changes = list(st.collision_changes) + notes
+            st.collision_changes = list(st.collision_changes) + rep.notes
             n = len(rounds)
-            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{what} ({label}): {r.reason}"})
+            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{rep.what} ({label}): {r.reason}"})
                                for r in rounds2]
-            return ov2, check2, rounds, new, closed2
-        log.say("sweep_repair", f"{what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> {dynamics_search.failing_tiers(check2.metrics)}"
-                                f"{'; would fail ' + ', '.join(lost) if lost else ''}); the asset kept as it was")
+            return ov2, check2, rounds, rep.overrides, closed2
+        log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
+                                f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
+                                "the asset kept as it was")
         write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return result
-
-
-#: Tiers whose failure, with parts in contact at the state, asks for running clearance (stage 7b).
-_HELD_TOGETHER_TIERS = ("robust_rest", "task_execution", "probes")
-
-
-def _held_together_pairs(check: postcheck.PostCheck) -> list[tuple[str, str]]:
-    """The link pairs in contact at the state (the PyBullet penetration
-    metric's pairs) when a tier of :data:`_HELD_TOGETHER_TIERS` failed; else empty."""
-    if not any(m.name in _HELD_TOGETHER_TIERS and m.passed is False for m in check.metrics):
-        return []
-    pen = next((m for m in check.metrics if m.name == "penetration" and m.engine == "pybullet"), None)
-    return [(p["link_a"], p["link_b"]) for p in ((pen.details.get("pairs") or []) if pen is not None else [])]
-
-
-def _clearance_repair(ctx: EstimationContext, model, unclipped: Overlay, joints: dict[str, float], overrides: dict,
-                      state: dict[str, float], urdf: Path, out_dir: Path) -> tuple | None:
-    """Stage 7b's running clearance for the sliding contacts of ``joints``
-    (joint -> position) at ``state``, as (what, collision overrides, notes,
-    clip against the carrying chain); None when no sliding contact needs it."""
-    rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model))
-    if not rep.pieces:
-        return None
-    return ("running clearance", {**overrides, **clearance.write_overrides(rep, unclipped.scale, out_dir, write.collision_folder(ctx.asset))},
-            rep.notes, False)
-
-
-def _sweep_repairs(ctx: EstimationContext, model, unclipped: Overlay, sw, blocked: dict[str, float], overrides: dict,
-                   state: dict[str, float], urdf: Path, config: RefineConfig, out_dir: Path):
-    """The candidate repairs of stage 7b, lazily, in order: (what, collision
-    overrides, notes, clip against the carrying chain):
-
-    1. a blocked joint carried by a moving part (a stapler's magazine on its
-       top): its limit clipped where it meets the chain with the joints
-       between open (:mod:`asset2sim.tasks.geometry.limits`, step 6);
-    2. running clearance for sliding contacts (:mod:`asset2sim.tasks.state.clearance`);
-    3. convex decomposition where a hull that bulges stops the part
-       (:mod:`asset2sim.tasks.state.stop_repair`; with ``config.convex_decomposition``)."""
-    if any(limits.chain_links(model, j) for j in blocked):
-        yield "limits against the carrying chain", overrides, [], True
-    repair = _clearance_repair(ctx, model, unclipped, blocked, overrides, state, urdf, out_dir)
-    if repair is not None:
-        yield repair
-        return
-    if not config.convex_decomposition:
-        return
-    try:
-        dec, notes = stop_repair.decompose_for_blocked(
-            model, urdf, ctx.asset, sw, state, limits.subtrees(model), set(overrides), unclipped.scale, out_dir,
-            write.collision_folder(ctx.asset), budget_s=config.decomposition_budget, conventions=config.sim)
-    except collision.DecompositionUnavailable:
-        return
-    if dec:
-        yield "convex decomposition", {**overrides, **dec}, notes, False
 
 
 def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
