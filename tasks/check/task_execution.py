@@ -39,7 +39,12 @@ Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
    v_max + extra_time`` s; the move ends once q_des = q_target and the joint
    has reached the target (opening fraction within ``reach_tol`` on the
    target's side: close f <= f_target + 0.05, open f >= f_target - 0.05) and
-   slowed below 0.05 rad/s (0.005 m/s).
+   slowed below 0.05 rad/s (0.005 m/s). When the free object slid or tipped
+   under the gripper, the attempt is made again from a fresh session with
+   v_max replaced by 0.5 and then 0.25 of it (``retry_speed_shares``; the
+   top speed is a limit, not a required speed: a robot or a person that
+   pushes the object away does it again more slowly, and the damping's share
+   of the force falls with the speed); the last attempt is the one recorded.
 5. Release; wait ``hold_time`` = 1 s.
 6. Success iff the target was reached, is still reached 1 s after release
    (waived only where the joint is meant to return: the request asks it to
@@ -126,6 +131,13 @@ class TaskConfig:
     set to the far side (close: opening fraction 0.6; open: the closed end)
     and settled again, so that every task moves its joint; False: such an
     attempt succeeds without motion"""
+    retry_speed_shares: tuple[float, ...] = (0.5, 0.25)
+    """shares of the gripper's top speed at which an attempt is made again,
+    in order, from a fresh session, when the free object slid or tipped under
+    the gripper (dimensionless): the top speed is a limit, not a required
+    speed; a robot (or a person) that pushes the object away does it again
+    more slowly, and the joint damping's share of the force falls with the
+    speed. Empty: one attempt at top speed"""
     limits: GripperLimits = field(default_factory=GripperLimits)
 
 
@@ -174,6 +186,9 @@ class TaskAttempt:
     success: bool
     failure: str = ""
     notes: list[str] = field(default_factory=list)
+    speed_share: float = 1.0
+    """commanded joint speed as a share of the gripper's top speed (1: top
+    speed; lower on a retry, :attr:`TaskConfig.retry_speed_shares`)"""
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict."""
@@ -227,7 +242,8 @@ class _SupportWatch:
 
 def execute_task(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
                  target_fraction: float | None = None, config: TaskConfig | None = None,
-                 model: UrdfModel | None = None, hold_required: bool = True, root_fixed: bool = False) -> TaskAttempt:
+                 model: UrdfModel | None = None, hold_required: bool = True, root_fixed: bool = False,
+                 speed_share: float = 1.0) -> TaskAttempt:
     """Execute one action on ``joint`` from the session's current state (module docstring).
 
     Args:
@@ -244,9 +260,11 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         hold_required: the target must still be reached 1 s after release.
         root_fixed: the session's root is fixed (mounted): the child side is
             always the one moved.
+        speed_share: the commanded speed as a share of the gripper's top
+            speed, in (0, 1].
 
     Raises:
-        ValueError: unknown action, non-positive ``open_range``.
+        ValueError: unknown action, non-positive ``open_range``, ``speed_share`` outside (0, 1].
         KeyError: unknown joint.
     """
     if action not in ("close", "open"):
@@ -255,6 +273,8 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
     if joint not in session.joint_child:
         raise KeyError(f"joint {joint!r} is not a movable joint of the session")
+    if not 0.0 < speed_share <= 1.0:
+        raise ValueError(f"joint {joint!r}: speed_share must be in (0, 1], got {speed_share!r}")
     cfg = config or TaskConfig()
     lim = cfg.limits
     dt = float(session.options.conventions.timestep)
@@ -310,14 +330,15 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         grasp = BoundedGrasp(session, link, point, lim)
         o, a = _frame_axis(session, joint, link)
         p = grasp.grasp_point_world()
+        v_cmd = lim.max_speed_m_s * speed_share
         if not prismatic:
             r_vec = (p - o) - float((p - o) @ a) * a
             lever = max(float(np.linalg.norm(r_vec)), 1e-3)
-            qdot_max = lim.max_speed_m_s / lever
+            qdot_max = v_cmd / lever
         else:
-            qdot_max = lim.max_speed_m_s
+            qdot_max = v_cmd
         travel = abs(q_target - q0) * (lever if lever is not None else 1.0)
-        n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / lim.max_speed_m_s + cfg.extra_time) / dt))
+        n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
         sgn = 1.0 if q_target >= q0 else -1.0
         decel = qdot_max / cfg.accel_time
         q_des = q0
@@ -410,7 +431,7 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         peak_axial_force_n=float(peak_ax) if prismatic and moved else None, lever_m=lever,
         root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
         force_limited=bool(force_limited), moved=moved, seconds_simulated=steps * dt, success=not failure,
-        failure=failure, notes=notes,
+        failure=failure, notes=notes, speed_share=float(speed_share),
     )
 
 
@@ -420,7 +441,11 @@ def run_task(engine: str, urdf: Path | str, joints: dict[str, tuple[float, float
              conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
              hold_required: dict[str, bool] | None = None, task: str | None = None) -> TaskRun:
     """Execute the task on every joint of ``joints`` with every action, each
-    in a fresh session of ``engine`` (the root as declared: ``fixed_base``).
+    in a fresh session of ``engine`` (the root as declared: ``fixed_base``);
+    an attempt under which the free object slid or tipped is made again at
+    each of :attr:`TaskConfig.retry_speed_shares` of the top speed in turn
+    (fresh sessions) until one does not; the last attempt is recorded, with
+    a note of the ones before.
 
     Args:
         joints: joint -> (q_closed, direction, open_range), rad or m.
@@ -449,15 +474,23 @@ def run_task(engine: str, urdf: Path | str, joints: dict[str, tuple[float, float
                           **session_root_options(fixed_base))
     for name, (qc, d, rng) in joints.items():
         for action in actions:
-            with quiet_stdout():
-                session = open_session(engine, urdf, opts)
-            try:
-                run.attempts.append(execute_task(session, name, closed=qc, direction=d, open_range=rng, action=action,
-                                                 target_fraction=(targets or {}).get(action), config=cfg, model=model,
-                                                 hold_required=(hold_required or {}).get(name, True),
-                                                 root_fixed=fixed_base))
-            finally:
-                session.close()
+            tried: list[str] = []
+            for share in (1.0, *cfg.retry_speed_shares):
+                with quiet_stdout():
+                    session = open_session(engine, urdf, opts)
+                try:
+                    att = execute_task(session, name, closed=qc, direction=d, open_range=rng, action=action,
+                                       target_fraction=(targets or {}).get(action), config=cfg, model=model,
+                                       hold_required=(hold_required or {}).get(name, True),
+                                       root_fixed=fixed_base, speed_share=share)
+                finally:
+                    session.close()
+                if tried:
+                    att.notes = [f"retried more slowly after: {'; '.join(tried)}"] + att.notes
+                if not (att.slid or att.tipped) or fixed_base:
+                    break
+                tried.append(f"{att.failure} at {share:g}x the top speed ({att.peak_operating_force_n:.3g} N)")
+            run.attempts.append(att)
     return run
 
 
