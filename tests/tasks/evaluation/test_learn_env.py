@@ -15,8 +15,10 @@ from asset2sim.tasks.evaluation.learn_env import (  # noqa: E402
     ACTION_DIM,
     OBS_DIM,
     START_FRACTION,
+    START_MAX_ANGLE,
     LearnConfig,
     TaskEnv,
+    common_start,
     prepare_task,
     run_episode,
     targets_for,
@@ -124,3 +126,25 @@ def test_object_that_slides_fails(cabinet):
     assert term and not info["success"]
     assert info["failure"] in ("the object slid", "the object tipped")
     assert r < 0
+
+
+def test_common_start_keeps_a_wide_hinge_below_vertical():
+    # half of a 183 deg box lid would stand it near vertical: at most 45 deg open instead
+    assert abs(common_start("close", "revolute", 3.2) * 3.2 - START_MAX_ANGLE) < 1e-12
+    assert common_start("close", "revolute", 1.0) == START_FRACTION["close"]  # a 57 deg range: half open is 29 deg
+    assert common_start("close", "prismatic", 3.2) == START_FRACTION["close"]
+    assert common_start("open", "revolute", 3.2) == 0.0
+    with pytest.raises(ValueError, match="close' or 'open"):
+        common_start("twist", "revolute", 1.0)
+
+
+def test_scripted_close_of_a_lid_presses_down(box):
+    env = TaskEnv(prepare_task(box, "close the box lid"))
+    try:
+        env.reset(seed=0)
+        a = env.scripted_action()
+        assert a[3] > 0 and a[2] < 0 and np.allclose(a[:2], 0.0)  # a vertical press, not a sideways push
+        out = run_episode(env, lambda o: env.scripted_action(0.5), seed=3)
+    finally:
+        env.close()
+    assert out["success"], out
