@@ -102,8 +102,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.frames import quat_angle, quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.check.sweep import SHUT_IN_FRACTION, blocking_link, joints_between
 from asset2sim.tasks.geometry.limits import rigid_group, subtrees
 from asset2sim.urdf import UrdfModel
@@ -336,17 +336,8 @@ def probe_joint(
     stiffness = min(f_max / (cfg.push_speed * cfg.ramp_time), m_eff * (PUSHER_OMEGA_DT / dt) ** 2)
     damping = 2.0 * float(np.sqrt(stiffness * m_eff))
     ramp = max(cfg.ramp_time, cfg.min_force / (stiffness * cfg.push_speed))
-    root_p0, root_q0 = session.root_pose()
-    # Sliding is measured where the object stands: the point below the root's
-    # origin at the object's lowest height, carried with the root (a tall
-    # fridge rocking 0.3 deg moves its root origin 1 cm without sliding).
-    z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
-    foot0 = np.array([root_p0[0], root_p0[1], z_low])
-    foot_local = quat_wxyz_matrix(quat_xyzw_to_wxyz(root_q0)).T @ (foot0 - np.asarray(root_p0, float))
-
-    def slide(rp: np.ndarray, rq: np.ndarray) -> float:
-        moved = np.asarray(rp, float) + quat_wxyz_matrix(quat_xyzw_to_wxyz(rq)) @ foot_local - foot0
-        return float(np.linalg.norm(moved[:2]))  # horizontal: rocking lifts the point, it does not slide
+    # Sliding is measured where the object stands (the footprint point, carried with the root).
+    watch = SupportWatch(session, session.link_names[0])
     # The push may last as long as the travel needs at the push speed (with
     # the force ramp and a 50 % margin), at least ``push_time``: a pusher at
     # a long lid's far corner has a longer arc to cover than at its centre.
@@ -380,9 +371,8 @@ def probe_joint(
         if eff >= peak_effort:
             peak_effort, lever_used = eff, lever
         q, qd = qpos()
-        rp, rq = session.root_pose()
-        disp = slide(rp, rq)
-        rot = quat_angle(root_q0, rq)
+        xy, rot = watch.current()
+        disp = float(np.linalg.norm(xy))
         max_disp, max_rot = max(max_disp, disp), max(max_rot, rot)
         tr["t"].append(k * dt)
         tr["q"].append(q)
@@ -403,11 +393,10 @@ def probe_joint(
         q, qd = qpos()
         f = frac(q)
         f_min, f_maxv = min(f_min, f), max(f_maxv, f)
-        rp, rq = session.root_pose()
         tr["t"].append((k + i + 1) * dt)
         tr["q"].append(q)
         tr["force"].append(0.0)
-        tr["root_disp"].append(slide(rp, rq))
+        tr["root_disp"].append(float(np.linalg.norm(watch.current()[0])))
         tr["phase"].append(1.0)
     q_end, qd_end = qpos()
     f_end = frac(q_end)

@@ -88,6 +88,7 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule, grasp_side
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
+from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
 
@@ -207,37 +208,12 @@ class TaskRun:
     config: TaskConfig = field(default_factory=TaskConfig)
 
 
-def _frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.ndarray]:
-    """Joint origin o (3,) and unit world axis a (3,)."""
+def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+    """Origin o (3,) m of ``link``'s frame (the joint's frame when ``link`` is
+    its child) and the joint's unit axis a (3,) in world coordinates."""
     o, R = session.link_frame(link)
     a = np.asarray(R, float) @ np.asarray(session.joint_axis(joint), float)
     return np.asarray(o, float), a / max(float(np.linalg.norm(a)), 1e-12)
-
-
-class _SupportWatch:
-    """Sliding (horizontal footprint displacement, m) and tipping (rad) of the
-    link that carries the object (the root; the joint's child when the
-    gripper moves the parent side), since construction."""
-
-    def __init__(self, session, link: str) -> None:
-        self.session, self.link = session, link
-        p0, R0 = session.link_frame(link)
-        self.p0, self.R0 = np.asarray(p0, float), np.asarray(R0, float)
-        z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
-        self.foot0 = np.array([self.p0[0], self.p0[1], z_low])
-        self.foot_local = self.R0.T @ (self.foot0 - self.p0)
-        self.slide = self.tilt = 0.0
-
-    def update(self) -> tuple[float, float]:
-        p, R = self.session.link_frame(self.link)
-        R = np.asarray(R, float)
-        moved = np.asarray(p, float) + R @ self.foot_local - self.foot0
-        s = float(np.linalg.norm(moved[:2]))
-        c = (float(np.trace(self.R0.T @ R)) - 1.0) / 2.0
-        t = float(np.arccos(np.clip(c, -1.0, 1.0))) if np.isfinite(c) else float("inf")
-        self.slide = max(self.slide, s) if np.isfinite(s) else float("inf")
-        self.tilt = max(self.tilt, t)
-        return self.slide, self.tilt
 
 
 def execute_task(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
@@ -313,7 +289,7 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
     # Moving the parent side by -dq about the joint gives the same relative motion dq.
     side_sign = 1.0 if side == "child" else -1.0
     # Sliding and tipping of the link that carries the object.
-    watch = _SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
+    watch = SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
     q_target = closed + direction * target_fraction * open_range
     steps = 0
     peak_tau = peak_ax = peak_op = 0.0
@@ -328,7 +304,7 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
     else:
         moved = True
         grasp = BoundedGrasp(session, link, point, lim)
-        o, a = _frame_axis(session, joint, link)
+        o, a = joint_frame_axis(session, joint, link)
         p = grasp.grasp_point_world()
         v_cmd = lim.max_speed_m_s * speed_share
         if not prismatic:
@@ -353,7 +329,7 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
             if sgn * (q_des - q_target) > 0:
                 q_des = q_target
             q, _ = session.joint_state(joint)
-            o, a = _frame_axis(session, joint, link)
+            o, a = joint_frame_axis(session, joint, link)
             p = grasp.grasp_point_world()
             if prismatic:
                 target = p + a * side_sign * (q_des - q)

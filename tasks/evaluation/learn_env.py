@@ -88,7 +88,6 @@ import gymnasium as gym
 import numpy as np
 
 from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session, quiet_stdout
-from asset2sim.frames import quat_angle, quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule
 from asset2sim.tasks.check.probes import (
@@ -99,7 +98,8 @@ from asset2sim.tasks.check.probes import (
     OPEN_REACHED,
     OPEN_TARGET,
 )
-from asset2sim.tasks.check.task_execution import TaskConfig
+from asset2sim.tasks.check.support import SupportWatch
+from asset2sim.tasks.check.task_execution import TaskConfig, joint_frame_axis
 from asset2sim.tasks.check.task_tier import hold_required_by_label
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
 from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
@@ -360,11 +360,8 @@ class TaskEnv(gym.Env):
         self._f_prev = 0.0
         self._f_start = 0.0
         self._p_reset = np.zeros(3)
-        self._root0: tuple[np.ndarray, np.ndarray] | None = None
-        self._foot_local = np.zeros(3)
-        self._foot0 = np.zeros(3)
-        self._max_slide = 0.0
-        self._max_tip = 0.0
+        self._watch: SupportWatch | None = None
+        """slide and tip of the object since reset"""
         self.sim_steps = 0
         """engine steps taken since the environment was made (the budget)"""
         self.episodes = 0
@@ -431,34 +428,24 @@ class TaskEnv(gym.Env):
         rng = self.task.closed.open_range
         return self.task.fraction(q), float(self.task.closed.direction * qd / rng)
 
-    def _moved(self) -> tuple[float, float]:
-        """(footprint slide m, root rotation rad) since reset (the probes' measure:
-        the point below the root's origin at the object's lowest height, carried
-        with the root, moved horizontally)."""
-        rp, rq = self.session.root_pose()
-        moved = np.asarray(rp, float) + quat_wxyz_matrix(quat_xyzw_to_wxyz(rq)) @ self._foot_local - self._foot0
-        return float(np.linalg.norm(moved[:2])), float(quat_angle(self._root0[1], rq))
-
     def _obs(self) -> np.ndarray:
         f, fd = self.joint_fraction()
         p = self.grasp.grasp_point_world()
-        rp, rq = self.session.root_pose()
-        moved = np.asarray(rp, float) + quat_wxyz_matrix(quat_xyzw_to_wxyz(rq)) @ self._foot_local - self._foot0
-        rot = quat_angle(self._root0[1], rq)
+        moved, rot = self._watch.current()
         L = self._length
         o = np.concatenate([
             [f, f - self.task.target_fraction, fd],
             (self.grasp.gripper_point - p) / L,
             (p - self._p_reset) / L,
-            moved[:2] / self.config.slide_tol,
+            moved / self.config.slide_tol,
             [rot / self.config.tip_tol, self._steps / self.max_steps],
         ])
         return np.nan_to_num(o, nan=0.0, posinf=1e3, neginf=-1e3).astype(np.float32)
 
     def _info(self, success: bool = False, failure: str = "") -> dict[str, Any]:
         f, _ = self.joint_fraction()
-        return {"fraction": f, "success": success, "failure": failure, "slide_m": self._max_slide,
-                "tip_rad": self._max_tip, "peak_force_n": self.grasp.peak_force_n if self.grasp else 0.0,
+        return {"fraction": f, "success": success, "failure": failure, "slide_m": self._watch.slide,
+                "tip_rad": self._watch.tilt, "peak_force_n": self.grasp.peak_force_n if self.grasp else 0.0,
                 "steps": self._steps, "grasp_rule": self.grasp_rule}
 
     # ------------------------------------------------------------------ gym
@@ -483,18 +470,11 @@ class TaskEnv(gym.Env):
         if t.joint_type == "prismatic":
             self._length = max(t.closed.open_range, 1e-3)
         else:
-            o, R = s.link_frame(s.joint_child[t.joint])
-            a = R @ s.joint_axis(t.joint)
-            a = a / max(float(np.linalg.norm(a)), 1e-12)
+            o, a = joint_frame_axis(s, t.joint, s.joint_child[t.joint])
             r = (p - o) - ((p - o) @ a) * a
             self._length = max(float(np.linalg.norm(r)), 1e-3)
-        self._root0 = s.root_pose()
-        z_low = min(float(s.link_aabb(ln)[0][2]) for ln in s.link_names)
-        rp0, rq0 = self._root0
-        self._foot0 = np.array([rp0[0], rp0[1], z_low])
-        self._foot_local = quat_wxyz_matrix(quat_xyzw_to_wxyz(rq0)).T @ (self._foot0 - np.asarray(rp0, float))
+        self._watch = SupportWatch(s, s.link_names[0])
         self._steps = 0
-        self._max_slide = self._max_tip = 0.0
         self._f_prev, _ = self.joint_fraction()
         self._f_start = self._f_prev
         return self._obs(), self._info()
@@ -521,8 +501,7 @@ class TaskEnv(gym.Env):
             self.grasp.step_towards(self.grasp.gripper_point + v * self.dt, self.dt, direction=press)
             self._engine_step()
         self._steps += 1
-        slide, tip = self._moved()
-        self._max_slide, self._max_tip = max(self._max_slide, slide), max(self._max_tip, tip)
+        self._watch.update()
         f, _ = self.joint_fraction()
         t = self.task
         span = max(abs(self._f_start - t.target_fraction), 0.05)
@@ -530,13 +509,13 @@ class TaskEnv(gym.Env):
         stretch = float(np.linalg.norm(self.grasp.gripper_point - self.grasp.grasp_point_world()))
         reward -= cfg.stretch_weight * stretch * self.grasp.stiffness / cfg.limits.max_force_n
         self._f_prev = f
-        moved = self._max_slide > cfg.slide_tol or self._max_tip > cfg.tip_tol
+        moved = self._watch.slide > cfg.slide_tol or self._watch.tilt > cfg.tip_tol
         if not np.isfinite(f) or moved or t.reached(f):
             self.episodes += 1
         if not np.isfinite(f):
             return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, "diverged")
         if moved:
-            why = "the object slid" if self._max_slide > cfg.slide_tol else "the object tipped"
+            why = "the object slid" if self._watch.slide > cfg.slide_tol else "the object tipped"
             return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, why)
         if t.reached(f):
             ok, why = self._hold()
@@ -554,12 +533,11 @@ class TaskEnv(gym.Env):
         self.grasp.release()
         for _ in range(int(round(cfg.hold_time / self.dt))):
             self._engine_step()
-            slide, tip = self._moved()
-            self._max_slide, self._max_tip = max(self._max_slide, slide), max(self._max_tip, tip)
+            self._watch.update()
         f, _ = self.joint_fraction()
-        if self._max_slide > cfg.slide_tol:
+        if self._watch.slide > cfg.slide_tol:
             return False, "the object slid after release"
-        if self._max_tip > cfg.tip_tol:
+        if self._watch.tilt > cfg.tip_tol:
             return False, "the object tipped after release"
         if self.task.hold_required and not self.task.reached(f):
             return False, "target not held after release"
@@ -581,9 +559,7 @@ class TaskEnv(gym.Env):
             The action (4,): velocity in the unit ball, press flag in [-1, 1].
         """
         s, t = self.session, self.task
-        o, R = s.link_frame(s.joint_child[t.joint])
-        a = R @ s.joint_axis(t.joint)
-        a = a / max(float(np.linalg.norm(a)), 1e-12)
+        o, a = joint_frame_axis(s, t.joint, s.joint_child[t.joint])
         q, _ = s.joint_state(t.joint)
         f = t.fraction(q)
         sign = 1.0 if t.closed.direction * (t.target_fraction - f) > 0 else -1.0  # sign of the q change wanted

@@ -1,0 +1,57 @@
+"""Did the object slide or tip while it was being operated? One measure for
+the probes (:mod:`asset2sim.tasks.check.probes`), the gripper task
+(:mod:`asset2sim.tasks.check.task_execution`) and the learning environment
+(:mod:`asset2sim.tasks.evaluation.learn_env`); definition in
+``docs/metrics.md`` (probes: "slid").
+
+Sliding is measured where the object stands: the **footprint point**, below
+the carrying link's origin at the object's lowest height (the lowest corner
+of every link's bounding box) when the watch starts, carried rigidly with
+that link; its horizontal displacement is the slide (a tall fridge rocking
+0.3 deg moves its root origin 1 cm without sliding; rocking lifts the point,
+it does not move it sideways). Tipping is the rotation angle of the carrying
+link since the start.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class SupportWatch:
+    """Slide (m) and tip (rad) of the link ``link`` of ``session`` (a
+    :class:`~asset2sim.engines.base.SimSession`) since construction: the
+    root, or the joint's child when a gripper moves the parent side.
+
+    Attributes:
+        slide: largest horizontal footprint displacement seen by :meth:`update`, m.
+        tilt: largest rotation seen by :meth:`update`, rad.
+    """
+
+    def __init__(self, session, link: str) -> None:
+        self.session, self.link = session, link
+        p0, R0 = session.link_frame(link)
+        self.p0, self.R0 = np.asarray(p0, float), np.asarray(R0, float)
+        z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
+        self.foot0 = np.array([self.p0[0], self.p0[1], z_low])
+        self.foot_local = self.R0.T @ (self.foot0 - self.p0)
+        self.slide = self.tilt = 0.0
+
+    def current(self) -> tuple[np.ndarray, float]:
+        """(horizontal footprint displacement (2,) m, rotation rad) now; the
+        rotation is inf when the engine reports a non-finite orientation."""
+        p, R = self.session.link_frame(self.link)
+        R = np.asarray(R, float)
+        moved = np.asarray(p, float) + R @ self.foot_local - self.foot0
+        c = (float(np.trace(self.R0.T @ R)) - 1.0) / 2.0
+        t = float(np.arccos(np.clip(c, -1.0, 1.0))) if np.isfinite(c) else float("inf")
+        return moved[:2], t
+
+    def update(self) -> tuple[float, float]:
+        """Fold the present slide and tip into the running maxima; returns
+        (:attr:`slide` m, :attr:`tilt` rad)."""
+        xy, t = self.current()
+        s = float(np.linalg.norm(xy))
+        self.slide = max(self.slide, s) if np.isfinite(s) else float("inf")
+        self.tilt = max(self.tilt, t)
+        return self.slide, self.tilt
