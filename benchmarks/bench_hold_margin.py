@@ -65,12 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     category = json.loads((a.asset / "overlay.json").read_text()).get("category")
     rng, where = operating_range(category, a.label)
     unit = "N" if joint.type == "prismatic" else "N m"
-    tol = robust_rest.RobustRestConfig().joint_tol_prismatic if joint.type == "prismatic" else \
-        robust_rest.RobustRestConfig().joint_tol_revolute
-    print(f"{urdf} {a.joint} ({joint.type}), written friction {joint.friction:.3g} {unit}, damping {joint.damping:.3g}")
-    print(f"operating range {where}: force {rng.force_n} N, torque {rng.torque_nm} N m; tolerance {tol:g}")
     trials = tuple(t for t in a.trials.split(",") if t)
     cfg = robust_rest.RobustRestConfig(trials=trials)
+    tol = cfg.joint_tol_prismatic if joint.type == "prismatic" else cfg.joint_tol_revolute
+    print(f"{urdf} {a.joint} ({joint.type}), written friction {joint.friction:.3g} {unit}, damping {joint.damping:.3g}")
+    print(f"operating range {where}: force {rng.force_n} N, torque {rng.torque_nm} N m; tolerance {tol:g}")
     scale = 1000.0 if joint.type == "prismatic" else 1.0
     shown = "mm" if joint.type == "prismatic" else "rad"
     print(f"{'friction':>9} {'damping':>8}  " + "  ".join(f"{t:>9}" for t in trials) + f"   (drift, {shown})")

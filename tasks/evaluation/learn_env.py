@@ -400,7 +400,6 @@ class TaskEnv(gym.Env):
         s.step(n)
         self.sim_steps += n
         chunk = cfg.action_repeat
-        types = {j.name: j.type for j in self._model.joints} if self._model is not None else {}
         while n < int(round(cfg.settle_max_time / self.dt)):
             p0 = np.asarray(s.root_pose()[0], float)
             s.step(chunk)
@@ -408,7 +407,7 @@ class TaskEnv(gym.Env):
             self.sim_steps += chunk
             root_v = float(np.linalg.norm(np.asarray(s.root_pose()[0], float) - p0)) / (chunk * self.dt)
             fast = [j for j, qd in s.joint_velocities().items()
-                    if not abs(qd) < cfg.rest_joint_speed[1 if types.get(j) == "prismatic" else 0]]
+                    if not abs(qd) < cfg.rest_joint_speed[1 if s.joint_types.get(j) == "prismatic" else 0]]
             if root_v < cfg.rest_root_speed and not fast:
                 break
 
