@@ -334,21 +334,24 @@ class _Attempt:
 
 
 def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog, pose_note: str) -> tuple[_Attempt, str]:
-    """Stages 4-7 once; when the object is unstable as modelled and the
-    request named no pose, once more resting on its stablest face (kept only
-    if better in simulation). Returns (attempt, pose note)."""
+    """Stages 4-7 once; when the object is unstable as modelled, or a
+    robust-rest disturbance topples it, and the request named no pose, once
+    more resting on its stablest face (kept only if better in simulation).
+    Returns (attempt, pose note)."""
     att = _attempt(ctx, est, config, out_dir, cache, log)
-    if att.check.stable or ctx.request.pose_hint is not None:
+    if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
         return att, pose_note
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
     R, note = pose.most_stable_rotation(ctx.session, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points, _moving_links(ctx), exclude_modelled=True)
     if R is None:
         return att, pose_note
-    log.say("post_check", f"unstable as modelled; {note}")
+    why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
+    log.say("post_check", f"{why}; {note}")
     ctx.root_rotation = R
     second = _attempt(ctx, est, config, out_dir, cache, log)
-    if second.check.stable and (second.check.passed or not att.check.passed):
-        return second, note
+    if second.check.stable and (second.check.passed or not att.check.passed) and not (
+            second.check.topples and not att.check.topples):
+        return second, f"{why}; {note}"
     ctx.root_rotation = None
     att.rewrite(out_dir)  # the first attempt stays the result
     return att, f"{note}; not better in simulation, kept as modelled"

@@ -435,6 +435,7 @@ def write_contract_asset(
     base_inertial: bool = True,
     body_mass: float = 1.5,
     lid_mass: float = 0.2,
+    latch: bool = False,
 ) -> ContractAsset:
     """Write a small box-with-lid asset that satisfies the SPEC output contract.
 
@@ -445,7 +446,12 @@ def write_contract_asset(
     positive opens; limits [0, 2.0]) and ``post`` (a 0.02 x 0.02 x 0.10 m
     square post standing in the box on a prismatic joint along +z, limits
     [0, 0.05] m; at ``post_height`` > ``post_overlap_at`` its top pokes into
-    the closed lid, which is a sibling, so the two collide).
+    the closed lid, which is a sibling, so the two collide). With ``latch``
+    a ``latch`` link (a 0.30 x 0.03 x 0.01 m bar, 0.02 kg) is fixed to the
+    body across its front edge 1 mm above the closed lid: the lid is held
+    shut by geometry rigid with its parent (a blocked joint that no other
+    joint's position frees; a sibling link, since engines do not collide a
+    child with its own parent).
 
     Masses kg, damping N*m*s/rad (lid) / N*s/m (post), friction N*m / N,
     stiffness N*m/rad. Files: ``mobility.urdf``, ``textured_objs/*.obj``,
@@ -465,10 +471,13 @@ def write_contract_asset(
     # is -x so that positive angles lift its front edge.
     lid_lo, lid_hi = (-L / 2, -W, 0.0005), (L / 2, 0.0, 0.0005 + t)
     post_lo, post_hi = (-0.01, -0.01, t), (0.01, 0.01, t + 0.10)
+    latch_lo, latch_hi = (-L / 2, -W / 2, H + 0.0015 + t), (L / 2, -W / 2 + 0.03, H + 0.0115 + t)
     gap = H + 0.0005 - post_hi[2]  # post top to lid underside at q=0
     atomic.write_text(out / "textured_objs" / "body.obj", _box_obj(walls))
     atomic.write_text(out / "textured_objs" / "lid.obj", _box_obj([(lid_lo, lid_hi)]))
     atomic.write_text(out / "textured_objs" / "post.obj", _box_obj([(post_lo, post_hi)]))
+    if latch:
+        atomic.write_text(out / "textured_objs" / "latch.obj", _box_obj([(latch_lo, latch_hi)]))
 
     vol = [np.prod(np.subtract(hi, lo)) for lo, hi in walls]
     body = _combine([(body_mass * v / sum(vol), *_box_inertia(body_mass * v / sum(vol), lo, hi)) for v, (lo, hi) in zip(vol, walls)])
@@ -476,6 +485,7 @@ def write_contract_asset(
     post_mass = 0.05
     post = (post_mass, *_box_inertia(post_mass, post_lo, post_hi))
     base = (0.01, np.zeros(3), np.diag([1e-5, 1e-5, 1e-5]))
+    latch_part = (0.02, *_box_inertia(0.02, latch_lo, latch_hi))
 
     def link(name: str, parts, with_mesh: bool = True) -> UrdfLink:
         ln = UrdfLink(name=name)
@@ -509,6 +519,9 @@ def write_contract_asset(
             moving("post_slide", "prismatic", "post", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.05, post_damping, post_friction),
         ],
     )
+    if latch:
+        model.links["latch"] = link("latch", latch_part)
+        model.joints.append(UrdfJoint(name="latch_fixed", type="fixed", parent="body", child="latch"))
     urdf_text = write_urdf(model, comment=" initial joint positions: initial_state.json ")
     urdf_path = atomic.write_bytes(out / "mobility.urdf", urdf_text)
     state = {"lid_hinge": float(lid_angle), "post_slide": float(post_height)}
@@ -523,6 +536,8 @@ def write_contract_asset(
         }
 
     links = {"body": link_entry(*body), "lid": link_entry(*lid), "post": link_entry(*post)}
+    if latch:
+        links["latch"] = link_entry(*latch_part)
     if base_inertial:
         links["base"] = link_entry(*base)
     overlay = {
@@ -543,6 +558,8 @@ def write_contract_asset(
     }
     atomic.write_json(out / "overlay.json", overlay)
     masses = {"body": float(body[0]), "lid": float(lid[0]), "post": float(post[0])}
+    if latch:
+        masses["latch"] = float(latch_part[0])
     if base_inertial:
         masses["base"] = float(base[0])
     return ContractAsset(

@@ -22,7 +22,7 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import manipulation, metrics, parent_child, parity
+from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
@@ -172,6 +172,15 @@ class PostCheck:
     def stable(self) -> bool:
         """SPEC rest stability (in every engine) and no toppling while settling."""
         return bool(self.metric("rest_stability").passed and self.metric("settle_tilt").passed and not self.engine_failures()[0])
+
+    @property
+    def topples(self) -> bool:
+        """A robust-rest trial (a 2 cm drop, a 5 deg tilt, a nudge) toppled the
+        object: its up direction ended more than
+        :attr:`~asset2sim.tasks.check.robust_rest.RobustRestConfig.topple_tol`
+        (rad) off the vertical. Statically at rest, but on an edge a hand's
+        placement tips it over."""
+        return any(robust_rest.toppled(m) for m in self.metrics if m.name == "robust_rest")
 
     @property
     def passed(self) -> bool:

@@ -283,3 +283,21 @@ def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = Non
                  "skipped": run.skipped or [t.name for t in run.trials if t.passed is None]},
         engine=run.engine,
     )
+
+
+def toppled(metric: MetricResult, config: RobustRestConfig | None = None) -> bool:
+    """Whether a trial of a ``robust_rest`` metric (made by
+    :func:`robust_rest_metric`) toppled the object: its up direction ended
+    more than :attr:`RobustRestConfig.topple_tol` (rad) off the vertical.
+    False for a skipped metric or trial and for a diverged one (no topple
+    measured).
+
+    Raises:
+        ValueError: ``metric`` is not a ``robust_rest`` metric.
+    """
+    if metric.name != "robust_rest":
+        raise ValueError(f"not a robust_rest metric: {metric.name!r}")
+    tol = (config or RobustRestConfig()).topple_tol
+    trials = metric.details.get("trials") or {}
+    return any(t.get("topple") is not None and float(t["topple"]) > tol for t in trials.values())
+

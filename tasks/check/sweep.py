@@ -52,11 +52,15 @@ anyone can re-derive it, see ``docs/metrics.md``):
 
 - A part shut in by another (its drive stalls before 5 % of the range
   against a link that another movable joint places: a toilet's seat under
-  its closed lid, a stapler's magazine under its closed top) is swept again
-  with the joints between the two at their open ends, as a hand lifts the lid
-  before the seat; that second sweep counts when it passes, and
-  ``range_note`` names what was opened. A part stopped by its own parent's
-  geometry, or that opens partly before it meets another part, is not.
+  its closed lid, a stapler's magazine under its closed top, a lid whose
+  closed end lies inside the seat held a quarter open) is swept again with
+  the joints between the two at their closed ends, as a hand lowers the seat
+  before it shuts the lid, and then at their open ends, as it lifts the lid
+  before the seat; a part stopped part-way by another (a seat raised into
+  the lid held a quarter open) is swept again with the joints between at
+  their open ends. The first of these sweeps that passes counts, and
+  ``range_note`` names what was moved. A part stopped by its own parent's
+  geometry is not.
 
 Continuous joints are swept over pi (their closed end is a convention).
 """
@@ -355,21 +359,27 @@ def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
 
 def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],
                     links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int) -> JointSweep:
-    """:func:`sweep_joint` of ``name``; when the part is shut in (its drive
-    stalls on the way out before :data:`SHUT_IN_FRACTION` of the range)
-    against a link that another movable joint places (a sibling closed over
-    it: a toilet's lid on its seat; a part between a held top and the base:
-    a stapler's magazine under its closed top), sweep again with the joints
-    between the part and that link at their open ends (as a hand lifts the
-    lid before the seat). The second sweep is kept only when it passes; its
-    ``range_note`` says what was opened. A link rigid with the joint's parent
-    (the part's own stop) opens nothing, nor does a part that opens partly
-    before it meets another (a limit beyond the geometry: the sweep's finding)."""
+    """:func:`sweep_joint` of ``name``; when its drive stalls on the way out
+    against a link that another movable joint places, sweep again with the
+    joints between the part and that link moved out of the way:
+
+    - shut in (stalled before :data:`SHUT_IN_FRACTION` of the range: a
+      sibling closed over it, a toilet's lid on its seat; a part between a
+      held top and the base, a stapler's magazine under its closed top; a
+      sibling raised under its closed end, a lid shut onto the seat held a
+      quarter open): those joints at their closed ends (a hand lowers the
+      seat before it shuts the lid), then at their open ends (it lifts the
+      lid before the seat);
+    - stopped part-way (a seat raised into the lid held a quarter open):
+      those joints at their open ends (the hand lifts the lid first).
+
+    The first such sweep that passes is kept; its ``range_note`` says what
+    was moved. A link rigid with the joint's parent (the part's own stop:
+    a limit beyond the geometry, the sweep's finding) moves nothing."""
     qc, d, rng = closed[name]
     first = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
                         initial_state=initial_state, config=cfg)
-    if (first.passed or first.diverged or first.time_open is not None or not np.isfinite(first.reached_open)
-            or first.reached_open >= SHUT_IN_FRACTION):
+    if first.passed or first.diverged or first.time_open is not None or not np.isfinite(first.reached_open):
         return first
     jd = model.joint(name)
     session.restore_state(saved)
@@ -377,23 +387,26 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     who = blocking_link(session, links, limits.rigid_group(model, jd.parent))
     if who is None:
         return first
-    opened = {}
-    for k in joints_between(model, jd.child, who):
-        if k == name or k not in closed or k not in session.joint_types:
+    between = [k for k in joints_between(model, jd.child, who)
+               if k != name and k in closed and k in session.joint_types and closed[k][2] > 0]
+    # the parts in the way moved out of it: a part shut in at its closed end
+    # tries them at their closed ends first (a hand lowers a raised seat
+    # before it shuts the lid onto it), then at their open ends (it lifts a
+    # closed lid before the seat); a part stopped part-way, at their open ends
+    # (it lifts a lid held a quarter open before it raises the seat under it)
+    ends = ((0.0, "closed"), (1.0, "open")) if first.reached_open < SHUT_IN_FRACTION else ((1.0, "open"),)
+    for end, word in ends:
+        moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
+        if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
             continue
-        kc, kd, kr = closed[k]
-        if kr > 0:
-            opened[k] = kc + kd * kr
-    if not opened:
-        return first
-    session.restore_state(saved)
-    second = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
-                         initial_state={**initial_state, **opened}, config=cfg)
-    if not second.passed:
-        return first
-    second.range_note = (f"{who} is in the way at the initial state (stalled at {first.reached_open:.0%}); "
-                         f"swept with {', '.join(sorted(opened))} open")
-    return second
+        session.restore_state(saved)
+        second = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
+                             initial_state={**initial_state, **moved}, config=cfg)
+        if second.passed:
+            second.range_note = (f"{who} is in the way at the initial state (stalled at {first.reached_open:.0%}); "
+                                 f"swept with {', '.join(sorted(moved))} {word}")
+            return second
+    return first
 
 
 def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],

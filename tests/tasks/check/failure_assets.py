@@ -8,6 +8,8 @@
 - :func:`build_interlocked_box`: a box whose lid carries an inner skirt that
   hangs inside the body; the body's single mesh is one convex hull, so every
   lid state near closed penetrates until the collision geometry is repaired.
+- :func:`build_edge_standing_case`: a slim document case modelled standing
+  on its narrow edge: at rest as modelled, toppled by a 5 deg tilt.
 
 Built with the demo generator's geometry (:mod:`asset2sim.demo_geometry`),
 PartNet-Mobility layout (y up, the base joint's rpy turns it z up).
@@ -104,3 +106,22 @@ def build_interlocked_box(out_dir: Path) -> Path:
         ],
     )
     return _write(obj, out_dir, one_hull=("box_body-1",))
+
+
+def build_edge_standing_case(out_dir: Path) -> Path:
+    """Suitcase-category slim case (40 x 30 x 2.4 cm, object units = m at
+    scale 1) modelled standing on its 40 x 2.4 cm edge, a carry handle hinged
+    on the top edge. The centre of mass is 1.2 cm from either long edge of
+    the support at 15 cm height: it rests, but tips past its edge at
+    atan(1.2 / 15) = 4.6 deg, so a 5 deg tilt (robust rest) topples it."""
+    body = [Part("suitcase_body-1", [box_xyz(-0.2, 0.2, 0.0, 0.3, -0.012, 0.012)], _GREY)]
+    handle = [Part("handle-2", [box_xyz(-0.06, 0.06, 0.30, 0.31, -0.005, 0.005)], _DARK)]
+    obj = DemoArticulation(
+        asset_id="edge_standing_case", category="Suitcase", robot_name="edge_standing_case",
+        links=[DemoLink("link_0", "hinge", "handle", handle), DemoLink("link_1", "free", "suitcase_body", body)],
+        joints=[
+            DemoJoint("joint_1", "fixed", "base", "link_1", rpy=_BASE_RPY),
+            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=(0.0, 0.3, 0.0), axis=(1.0, 0.0, 0.0), lower=-1.5, upper=1.5),
+        ],
+    )
+    return _write(obj, out_dir)

@@ -56,9 +56,10 @@ def test_demo_is_interaction_ready_on_every_tier_and_says_so_everywhere(tmp_path
 
 
 def test_an_asset_written_but_not_ready_exits_3_and_every_output_agrees(tmp_path, capsys):
-    """A post raised into the lid's path: the lid cannot be driven shut
-    (joint sweep) although the object rests well."""
-    a = write_contract_asset(tmp_path / "src", lid_angle=0.4, post_height=0.03, lid_friction=0.02)
+    """A latch bar fixed to the body holds the closed lid down: the lid
+    cannot be driven open from its closed end (joint sweep) although the
+    object rests well, and no other joint's position frees it."""
+    a = write_contract_asset(tmp_path / "src", lid_friction=0.02, latch=True)
     (a.root / "initial_state.json").unlink()
     (a.root / "overlay.json").unlink()
     out = tmp_path / "out"
