@@ -300,4 +300,3 @@ def toppled(metric: MetricResult, config: RobustRestConfig | None = None) -> boo
     tol = (config or RobustRestConfig()).topple_tol
     trials = metric.details.get("trials") or {}
     return any(t.get("topple") is not None and float(t["topple"]) > tol for t in trials.values())
-

@@ -389,11 +389,7 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
         return first
     between = [k for k in joints_between(model, jd.child, who)
                if k != name and k in closed and k in session.joint_types and closed[k][2] > 0]
-    # the parts in the way moved out of it: a part shut in at its closed end
-    # tries them at their closed ends first (a hand lowers a raised seat
-    # before it shuts the lid onto it), then at their open ends (it lifts a
-    # closed lid before the seat); a part stopped part-way, at their open ends
-    # (it lifts a lid held a quarter open before it raises the seat under it)
+    # shut in: closed ends, then open ends; stopped part-way: open ends (see the docstring)
     ends = ((0.0, "closed"), (1.0, "open")) if first.reached_open < SHUT_IN_FRACTION else ((1.0, "open"),)
     for end, word in ends:
         moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
