@@ -574,13 +574,13 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
 
         def better(chk2) -> bool:
             return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
+    passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
     for rep in repairs:
         write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=rep.overrides,
                            root_rotation=ctx.root_rotation)
         clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=rep.chain_open)
         ov2, check2, rounds2 = _post_check(ctx, clipped, state, rep.overrides, urdf, config, out_dir, log,
                                            closed=manipulation.closed_tuples(closed2))
-        passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
         if better(check2) and not lost:
             for line in rep.notes:

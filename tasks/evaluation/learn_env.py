@@ -483,9 +483,14 @@ class TaskEnv(gym.Env):
         self.sim_steps += 1
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
-        """Move the gripper for ``action_repeat`` engine steps at the velocity
-        ``action`` (3,) x max speed (clipped to the unit ball); returns
-        (observation, reward, terminated, truncated, info)."""
+        """Move the gripper for ``action_repeat`` engine steps: ``action``
+        (4,) is the velocity (3,) x max speed (clipped to the unit ball) and
+        the press flag (> 0: a vertical press or lift; module docstring);
+        returns (observation, reward, terminated, truncated, info).
+
+        Raises:
+            ValueError: ``action`` does not have 4 components.
+        """
         cfg = self.config
         a = np.nan_to_num(np.asarray(action, float).reshape(-1), nan=0.0)
         if a.shape != (ACTION_DIM,):
