@@ -297,8 +297,10 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
     a joint at its cap gets the rest of the factor as damping only (damping
     resists the drop's and the nudge's transients without making the part
     harder to move slowly), up to ``damping_caps`` (joint -> N m s/rad or
-    N s/m, :func:`asset2sim.tasks.check.task_tier.operating_limits`: what the
-    task's gripper still overcomes at its top speed; never below the damping
+    N s/m: what the task's gripper still overcomes at its top speed,
+    :func:`asset2sim.tasks.check.task_tier.operating_limits`, and what the
+    joint sweep's drive still moves through the range in time,
+    :func:`asset2sim.tasks.check.sweep.damping_caps`; never below the damping
     before).
 
     Returns (new overlay, changes joint -> {parameter: new value}, reason).

@@ -39,7 +39,8 @@ anyone can re-derive it, see ``docs/metrics.md``):
   gripper applies) but cannot push a link through a hull that blocks it.
   Viscous damping is not in the limit (the protocol does not expose it): a
   well-damped joint moves slower than v_max, which the 3 s limit (3x the
-  nominal traverse) allows.
+  nominal traverse) allows; refine's escalation keeps damping under
+  :func:`damping_caps`, where the damped speed still covers the range in time.
 - Each way, the drive runs until the opening fraction f = d (q - q_c) / R
   reaches >= 0.95 (out) or <= 0.05 (back), at most
   :attr:`SweepConfig.time_limit` s. The self-penetration (deepest self-contact
@@ -186,6 +187,47 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
     spring = session.options.springs.get(joint)
     k = spring.stiffness if spring is not None else 0.0
     return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
+
+
+#: Speed margin of :func:`damping_caps` (dimensionless): the damped speed
+#: E / c must cover the range this many times over in the time limit (the
+#: drive also accelerates the part and works against sliding contacts).
+DAMPED_SPEED_MARGIN = 2.0
+
+
+def damping_caps(urdf: Path | str, closed: dict[str, tuple[float, float, float]], initial_state: dict[str, float],
+                 springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
+                 config: SweepConfig | None = None) -> dict[str, float]:
+    """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
+    the sweep's drive still traverses the joint's range in time:
+    c_max = E T / (``DAMPED_SPEED_MARGIN`` R), E the drive's force limit
+    (:func:`effort_limit`, N m or N, at the joint's closed end), T =
+    :attr:`SweepConfig.time_limit` (s), R the range of ``closed`` (joint ->
+    (q_closed, direction, R), rad or m). Under damping alone the drive moves
+    the part at E / c, so a damping above c_max makes a free part fail the
+    sweep as if it were blocked (a drawer escalated to 3,900 N s/m for robust
+    rest crawls 0.63 m in 3 s). Measured in a fixed-root, gravity-free
+    PyBullet session (masses and collision vertices as the sweep reads them).
+    Joints with no range are left out.
+
+    Raises:
+        EngineUnavailable: PyBullet is not installed; whatever loading ``urdf`` raises.
+    """
+    cfg = config or SweepConfig()
+    model = read_urdf(urdf)
+    subtrees = joint_subtrees(model)
+    caps: dict[str, float] = {}
+    opts = SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}), fixed_base=True,
+                          gravity=False, ground=False, conventions=conventions or SimConventions())
+    with open_session("pybullet", urdf, opts) as session:
+        for name, (qc, _, rng) in closed.items():
+            if name not in session.joint_types or not rng > 0:
+                continue
+            session.set_joint_positions({**initial_state, name: qc})
+            links = subtrees.get(name, [session.joint_child[name]])
+            e = effort_limit(session, name, links, rng, cfg)
+            caps[name] = e * cfg.time_limit / (DAMPED_SPEED_MARGIN * rng)
+    return caps
 
 
 def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:

@@ -145,6 +145,28 @@ def test_two_drawer_ordinals_follow_height(tmp_path):
 
 
 @needs_shared
+def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
+    """A large cabinet (19179, scale ~0.85): robust rest's tilts slide its
+    closed drawers, and escalation raised their damping 63-fold (3,900 N s/m)
+    until the sweep's drive crawled 74 % of the 0.85 m range in its 3 s.
+    With the sweep's damping cap, friction holds the drawers instead and
+    both the sweep and robust rest pass."""
+    from asset2sim.tasks.check.sweep import damping_caps
+    from asset2sim.urdf import read_urdf
+
+    res = refine_asset(SHARED / "19179", "A large cabinet.", tmp_path / "o", extras=False)
+    r = res.report
+    assert r.metric("joint_sweep").passed, r.metric("joint_sweep").details.get("failures")
+    assert r.metric("robust_rest").passed
+    urdf = res.out_dir / "mobility.urdf"
+    model = read_urdf(urdf)  # the drawers close at their lower limit and open towards the upper
+    closed = {j: (model.joint(j).lower, 1.0, model.joint(j).upper - model.joint(j).lower) for j in r.closed_positions}
+    assert all(r.closed_positions[j] == pytest.approx(c[0]) for j, c in closed.items())
+    caps = damping_caps(urdf, closed, r.initial_joint_positions)
+    assert caps and all(res.overlay.joints[j].damping <= c * (1 + 1e-6) for j, c in caps.items())
+
+
+@needs_shared
 @pytest.mark.slow
 def test_thesis_set_meets_the_refine_issue_targets(tmp_path):
     """First nine manifest rows: stability 9/9, oscillation 9/9, penetration <= 5 mm,

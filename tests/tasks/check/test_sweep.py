@@ -6,8 +6,8 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, available_engines, open_session
 from asset2sim.engines.fake import write_contract_asset
-from asset2sim.tasks.check.sweep import (SweepConfig, blocked_positions, joint_subtrees, run_sweep, sweep_joint, sweep_metric,
-                                         sweep_score)
+from asset2sim.tasks.check.sweep import (DAMPED_SPEED_MARGIN, SweepConfig, blocked_positions, damping_caps, effort_limit,
+                                         joint_subtrees, run_sweep, sweep_joint, sweep_metric, sweep_score)
 from asset2sim.urdf import read_urdf
 
 # closed ends of the contract asset (lid hinge 0..2 rad, post 0..0.05 m; 0 closed)
@@ -203,3 +203,23 @@ def test_parts_held_a_quarter_open_are_moved_out_of_each_others_way(tmp_path):
         lid = sweep_joint(s, "lid", closed=0.0, direction=1.0, open_range=1.5, links=["lid_link"], initial_state=state)
     assert not seat.passed and 0.05 <= seat.reached_open < 0.95
     assert not lid.passed and lid.reached_open < 0.05
+
+
+def test_damping_above_the_cap_fails_the_sweep_and_below_it_passes(tmp_path):
+    """sweep.damping_caps: c_max = E T / (2 R). The free post (lid held open,
+    out of its way) is swept through its 5 cm at half its cap; at four times
+    its cap the damped drive (speed E / c) covers only part of the range in
+    the time limit, as a blocked part would."""
+    state = {"lid_hinge": 1.0, "post_slide": 0.0}
+    post = {"post_slide": CLOSED["post_slide"]}
+    probe = write_contract_asset(tmp_path / "probe", lid_angle=1.0)
+    cap = damping_caps(probe.urdf, post, state)["post_slide"]
+    with open_session("pybullet", probe.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False)) as s:
+        e = effort_limit(s, "post_slide", ["post"], 0.05, SweepConfig())
+    assert cap == pytest.approx(e * SweepConfig().time_limit / (DAMPED_SPEED_MARGIN * 0.05))
+    ok = write_contract_asset(tmp_path / "ok", lid_angle=1.0, post_damping=0.5 * cap, post_friction=0.0)
+    slow = write_contract_asset(tmp_path / "slow", lid_angle=1.0, post_damping=4.0 * cap, post_friction=0.0)
+    passed = run_sweep("pybullet", ok.urdf, post, state).joints[0]
+    crawled = run_sweep("pybullet", slow.urdf, post, state).joints[0]
+    assert passed.passed, passed.failure
+    assert not crawled.passed and 0.0 < crawled.reached_open < 0.95
