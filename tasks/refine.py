@@ -622,12 +622,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     if bounded != overlay:
         overlay = bounded
         write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-    caps, dcaps = lim.friction_caps, dict(lim.damping_caps)
-    if closed:
-        # damping the sweep's drive still moves through the range in time (sweep.damping_caps): escalation
-        # for robust rest or a sag may not turn a free part into one the sweep reports as blocked
-        for name, c in sweep.damping_caps(urdf, closed, state, postcheck.springs_of(overlay), config.sim).items():
-            dcaps[name] = min(c, dcaps.get(name, c))
+    caps, dcaps = lim.friction_caps, lim.damping_caps
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:

@@ -24,7 +24,8 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import operating, task_execution
+from asset2sim.tasks.check import operating, sweep, task_execution
+from asset2sim.tasks.check.postcheck import springs_of
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.evaluation.asset_files import parse_urdf
 from asset2sim.tasks.evaluation.task_spec import TaskSpec, parse_task, task_actions
@@ -132,7 +133,10 @@ def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay
     direction) where the closed ends are known; without a task (nothing
     executes it, and the probes push with the other hand holding the body and
     a force of max(22.2 N, 2 M g)) the probe's cap
-    (:func:`asset2sim.tasks.check.operating.friction_caps`) and no damping cap.
+    (:func:`asset2sim.tasks.check.operating.friction_caps`). Damping caps:
+    the task's where there is one, and, where the closed ends are known, at
+    most what the joint sweep's drive still moves through the range in time
+    (:func:`asset2sim.tasks.check.sweep.damping_caps`).
     ``joints``: the task's joints (:func:`task_spec_for`); the others (a
     stapler's base plate, a suitcase's handle) keep the probe's cap: the task
     does not operate them.
@@ -147,7 +151,11 @@ def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay
                                           conventions=conventions) if sel and task else {}
     caps = operating.friction_caps(overlay, overlay, asset, geometry)
     caps.update({n: b.friction_cap for n, b in budgets.items()})
-    return OperatingLimits(friction_caps=caps, damping_caps={n: b.damping_cap for n, b in budgets.items()}, budgets=budgets,
+    dcaps = {n: b.damping_cap for n, b in budgets.items()}
+    if closed:  # what the joint sweep's drive still moves through the range in time
+        for name, c in sweep.damping_caps(urdf, closed, state, springs_of(overlay), conventions).items():
+            dcaps[name] = min(c, dcaps.get(name, c))
+    return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
                            notes=[b.conflict for b in budgets.values() if b.conflict])
 
 
