@@ -39,7 +39,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import asset2sim.commands as commands  # noqa: E402
-from asset2sim import __version__  # noqa: E402
+from asset2sim import __version__, allocator  # noqa: E402
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, CommandError  # noqa: E402
 
 
@@ -99,6 +99,7 @@ def write_error_log(command: str | None, exc: BaseException) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    allocator.keep_freed_memory()  # freed arrays reused, not faulted in again (asset2sim.allocator)
     parser = build_parser(only=requested_command(argv))
     args = parser.parse_args(argv)
     if not hasattr(args, "_run"):

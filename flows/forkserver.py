@@ -43,6 +43,7 @@ Nothing here imports Prefect, Dask or MLflow.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import queue
@@ -55,7 +56,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from asset2sim import atomic
+from asset2sim import allocator, atomic
 from asset2sim.flows.isolation import IsolatedResult, _child_env, _tail, run_child_spec
 from asset2sim.flows.lifeline import set_parent_death_signal
 
@@ -436,6 +437,7 @@ def _server_main(argv: list[str]) -> int:
     set_parent_death_signal(signal.SIGKILL, expected_parent=parent)
     out_fd = os.dup(1)  # the protocol pipe; fd 1 goes to stderr so prints cannot break it
     os.dup2(2, 1)
+    allocator.keep_freed_memory()  # the children inherit it (Dask gives its workers a 64 KiB trim threshold)
     import importlib
 
     for mod in (*WARM_MODULES, *argv[1:]):
@@ -444,6 +446,8 @@ def _server_main(argv: list[str]) -> int:
         except Exception:  # noqa: BLE001 - a missing optional package: the call that needs it fails in its child
             pass
     warm_tables()
+    gc.collect()
+    gc.freeze()  # what the imports made is never collected, so a child's collections do not copy its pages
     out = os.fdopen(out_fd, "w", buffering=1)
 
     def say(obj: dict[str, Any]) -> None:

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from asset2sim import atomic
+from asset2sim import allocator, atomic
 from asset2sim.flows.lifeline import set_parent_death_signal
 
 Status = Literal["ok", "error", "timeout", "crash"]
@@ -240,6 +240,7 @@ def run_child_spec(spec: dict[str, Any]) -> None:
     Raises:
         OSError: the result file cannot be written.
     """
+    allocator.keep_freed_memory()  # a stage process lives for one call: freed arrays are reused, not faulted in again
     if spec.get("memory_limit_mb"):
         limit = int(spec["memory_limit_mb"]) * 1024 * 1024
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
