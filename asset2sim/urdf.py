@@ -916,6 +916,11 @@ def read_urdf(
     """Read a URDF file into a :class:`UrdfModel` (mesh paths resolved against
     its folder). Arguments as for :func:`parse_urdf_bytes`.
 
+    A file this process read before with the same arguments (and no
+    ``on_problem``), unchanged since (same device, inode, size and mtime:
+    :mod:`asset2sim.file_memo`), is not parsed again: the caller gets its own
+    copy of the model read then (:data:`_READ_MEMO`).
+
     Raises:
         UrdfError: the file cannot be read (missing, not a regular file, too
             large: ``XML_*`` codes) or parsed, or (modes strict / lenient) its

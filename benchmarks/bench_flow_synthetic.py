@@ -46,8 +46,14 @@ import tempfile
 import time
 from pathlib import Path
 
-from asset2sim.demo_assets import _serialise, _write_folder
-from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, box_xyz
+# The in-process side runs as `asset2sim refine` does (asset2sim.cli): one BLAS
+# thread unless set, freed memory kept for reuse (asset2sim.allocator).
+for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from asset2sim import allocator  # noqa: E402
+from asset2sim.demo_assets import _serialise, _write_folder  # noqa: E402
+from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, box_xyz  # noqa: E402
 
 _BASE_RPY = "1.570796326794897 0 -1.570796326794897"  # PartNet-Mobility's y-up body under a z-up base
 _WOOD, _METAL = (0.62, 0.45, 0.3), (0.75, 0.76, 0.78)
@@ -240,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     os.environ.setdefault("MPLBACKEND", "Agg")
+    allocator.keep_freed_memory()
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-bench-flow-"))
     keep = args.work is not None
     work.mkdir(parents=True, exist_ok=True)

@@ -102,6 +102,11 @@ def extract_asset_checked(
         policy: validation policy (what is an error, caps); default
             :data:`asset2sim.tasks.ingest.validate_input.DEFAULT_POLICY`.
 
+    With the default policy, an asset this process extracted before with
+    the same arguments, whose folder and referenced files are unchanged since
+    (:mod:`asset2sim.file_memo`), is not validated again: the caller gets its
+    own copy of the result (:data:`_EXTRACT_MEMO`).
+
     Returns:
         ``(description, findings)``: lengths in the file's units, angles in
         radians; findings of every severity (warnings and infos included), for
