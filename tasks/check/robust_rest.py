@@ -24,8 +24,23 @@ starts from that saved placement:
   of a hand) on the ground.
 
 After the disturbance the SPEC rest test runs (settle T_set = 1 s, test
-T_test = 2 s, :func:`asset2sim.tasks.check.metrics.run_rest_test`). A trial
-**passes** iff
+T_test = 2 s, :func:`asset2sim.tasks.check.metrics.run_rest_test`), with
+settling allowed to go on while the disturbed object still moves, up to
+:attr:`RobustRestConfig.recovery_time` (3 s) more, until a quarter second
+in which its root moved less than half the SPEC's stability tolerances.
+The SPEC's T_set is for an object put down at rest; a disturbed object comes
+back to rest in a time its shape sets. A tall cabinet (6 drawers) tilted
+5 deg about the axis across its depth rocks on its front and back edges,
+each impact keeping about 3/4 of the swing's amplitude (PyBullet), and stops
+at 2.4 s (a trash can whose open lid puts its centre of mass near the edge
+of its footprint: 1.6 s). A rigid block rocks so (Housner 1963, "The
+behavior of inverted pendulum structures during earthquakes", BSSA 53(2):
+each impact keeps r = (1 - 3/2 sin^2 alpha)^2 of the energy, alpha the
+block's slenderness angle; 0.73 at 18 deg). The object must still
+come back to rest and stay there for the whole T_test, and its joints must
+hold through the whole settling.
+
+A trial **passes** iff
 
 1. it comes back to rest: D_pos <= 1e-3 m and D_ori <= 1e-2 rad over T_test
    (:func:`asset2sim.tasks.check.metrics.rest_stability`), nothing diverges;
@@ -84,6 +99,9 @@ class RobustRestConfig:
     topple_tol: float = 0.05
     """largest change of the body's up direction, rad
     (:data:`asset2sim.tasks.check.metrics.SETTLE_TILT_LIMIT`)"""
+    recovery_time: float = 3.0
+    """settling allowed after T_set while the disturbed object still moves, s
+    (:func:`asset2sim.tasks.check.metrics.run_rest_test`)"""
     trials: tuple[str, ...] = TRIALS
 
 
@@ -184,7 +202,7 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
     """
     cfg = config
     _disturb(session, name, cfg)
-    trace = metrics.run_rest_test(session, conventions)
+    trace = metrics.run_rest_test(session, conventions, recovery_time=cfg.recovery_time)
     stab = metrics.rest_stability(trace, conventions, engine=session.engine)
     drift: dict[str, float] = {}
     tols: dict[str, float] = {}

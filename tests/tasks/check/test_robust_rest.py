@@ -130,3 +130,44 @@ def test_tilted_refined_laptop_is_put_down_touching_the_ground(tmp_path):
             assert abs(s.place_on_ground()) < 1e-3, name  # already touching: nothing to move
     run = run_robust_rest("pybullet", tmp_path / "out" / "mobility.urdf", state)
     assert all(t.topple is not None and t.topple < 0.05 for t in run.trials), [t.failure for t in run.trials]
+
+
+def _block(folder: Path, width: float, height: float, mass: float) -> Path:
+    """A solid block ``width`` x ``width`` x ``height`` m standing on the ground."""
+    folder.mkdir(parents=True, exist_ok=True)
+    ixx, izz = mass * (width ** 2 + height ** 2) / 12, mass * width ** 2 / 6
+    (folder / "mobility.urdf").write_text(f"""<?xml version="1.0"?>
+<robot name="block"><link name="base">
+  <inertial><origin xyz="0 0 {height / 2}"/><mass value="{mass}"/><inertia ixx="{ixx}" iyy="{ixx}" izz="{izz}" ixy="0" ixz="0" iyz="0"/></inertial>
+  <collision><origin xyz="0 0 {height / 2}"/><geometry><box size="{width} {width} {height}"/></geometry></collision>
+</link></robot>
+""")
+    return folder / "mobility.urdf"
+
+
+def test_a_tall_block_rocking_after_a_tilt_comes_back_to_rest_within_the_recovery_time(tmp_path):
+    """A 2.0 m x 0.5 m block (slenderness atan(0.25 / 1.0) = 14 deg) let go
+    at 5 deg rocks on its edges for about 3 s (a rigid block's rocking,
+    Housner 1963): still moving after the SPEC's 1 s settle, at rest and
+    upright after the recovery time."""
+    urdf = _block(tmp_path / "tall", 0.5, 2.0, 60.0)
+    spec_only = run_robust_rest("pybullet", urdf, {}, config=RobustRestConfig(trials=("tilt+y",), recovery_time=0.0))
+    assert not spec_only.trials[0].passed and "not at rest" in spec_only.trials[0].failure
+    recovered = run_robust_rest("pybullet", urdf, {}, config=RobustRestConfig(trials=("tilt+y",)))
+    assert recovered.trials[0].passed, recovered.trials[0].failure
+    assert recovered.trials[0].d_pos <= 1e-3 and recovered.trials[0].topple <= 0.05
+
+
+def test_an_object_that_keeps_moving_still_fails_after_the_recovery_time(tmp_path):
+    """A cylinder lying on its side and nudged across its axis rolls away:
+    never at rest, however long the settling goes on."""
+    (tmp_path / "roller").mkdir()
+    urdf = tmp_path / "roller" / "mobility.urdf"
+    urdf.write_text("""<?xml version="1.0"?>
+<robot name="roller"><link name="base">
+  <inertial><mass value="2"/><inertia ixx="0.02" iyy="0.01" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial>
+  <collision><origin rpy="1.5707963 0 0"/><geometry><cylinder radius="0.1" length="0.3"/></geometry></collision>
+</link></robot>
+""")
+    run = run_robust_rest("pybullet", urdf, {}, config=RobustRestConfig(trials=("nudge",)))
+    assert run.trials[0].passed is False and "not at rest" in run.trials[0].failure
