@@ -134,7 +134,8 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
                 moved = turned = float("inf")
                 break
             moved, turned = max(moved, float(np.linalg.norm(np.asarray(p) - w_pos))), max(turned, quat_angle(w_quat, q))
-        if moved <= 0.5 * conv.stability_pos_tol and turned <= 0.5 * conv.stability_ori_tol or not np.isfinite(moved):
+        quiet = moved <= 0.5 * conv.stability_pos_tol and turned <= 0.5 * conv.stability_ori_tol
+        if quiet or not np.isfinite(moved):  # at rest for a window, or diverged (the test records it)
             break
     settle = {n: np.array([row[n] for row in settle_rows], float) for n in names}
     p0, q0 = session.root_pose()
