@@ -24,7 +24,9 @@ print(applied, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
 
 
 def _faults(mode: str) -> tuple[str, int]:
-    env = {**os.environ, "MALLOC_TRIM_THRESHOLD_": "65536"}  # what Dask's nanny gives its workers
+    # what Dask's nanny gives its workers; numpy's huge-page advice off, so the
+    # count does not depend on whether the kernel had huge pages free
+    env = {**os.environ, "MALLOC_TRIM_THRESHOLD_": "65536", "NUMPY_MADVISE_HUGEPAGE": "0"}
     out = subprocess.run([sys.executable, "-c", _LOOP, mode], env=env, capture_output=True, text=True, check=True)
     applied, faults = out.stdout.split()
     return applied, int(faults)
@@ -35,6 +37,8 @@ def test_freed_arrays_are_reused_instead_of_faulted_in_again():
     _, plain = _faults("plain")
     applied, kept = _faults("keep")
     assert applied == "True"
-    pages = (8 << 20) // os.sysconf("SC_PAGE_SIZE")
-    assert plain > 40 * 100  # each 8 MiB array mapped afresh and faulted in again (20,640 faults here)
-    assert kept < pages // 4  # reused from the heap (none here)
+    # each 8 MiB array mapped afresh faults in at least once per allocation, page by
+    # page (81,960 faults here; 4 per array where the kernel backs it with 2 MiB pages)
+    assert plain >= 40
+    assert kept < 40  # reused from the heap: fewer faults than allocations (none here)
+    assert kept < plain
