@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from asset2sim import file_memo
+
 __all__ = [
     "MeshCache",
     "MeshReadError",
@@ -500,25 +502,22 @@ def obj_material_uses(obj_text: str) -> list[str]:
     return [m.group(1) for m in re.finditer(r"^[ \t]*usemtl[ \t]+(.+?)[ \t\r]*$", obj_text, re.M)]
 
 
-#: ``mtllib`` names of OBJ files read in this process, by (path as given,
-#: device, inode, size, mtime ns): a refine run asks for the same input
-#: meshes' materials at every write (a laptop's 118 part meshes, 17 MB of OBJ
-#: text, scanned 5 times took 1.2 s).
-_MTL_NAMES: dict[tuple, list[str]] = {}
+#: ``mtllib`` names of OBJ files read in this process, by path, while the
+#: file is unchanged (:class:`asset2sim.file_memo.FileMemo`): a refine run
+#: asks for the same input meshes' materials at every write (a laptop's 118
+#: part meshes, 17 MB of OBJ text, scanned 5 times took 1.2 s).
+_MTL_NAMES: file_memo.FileMemo[list[str]] = file_memo.FileMemo(list, max_entries=8192)
 
 
 def _obj_mtl_names(mesh_path: Path) -> list[str]:
     """:func:`mtl_libraries` of the OBJ file ``mesh_path``, read once per
     file version (:data:`_MTL_NAMES`). Raises OSError when it cannot be read."""
-    st = mesh_path.stat()
-    key = (str(mesh_path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-    names = _MTL_NAMES.get(key)
+    names = _MTL_NAMES.get(str(mesh_path))
     if names is None:
+        files = file_memo.identities([mesh_path])  # before reading
         names = mtl_libraries(mesh_path.read_bytes())
-        if len(_MTL_NAMES) >= 8192:
-            _MTL_NAMES.pop(next(iter(_MTL_NAMES)))
-        _MTL_NAMES[key] = names
-    return list(names)
+        _MTL_NAMES.put(str(mesh_path), files, names)
+    return names
 
 
 def obj_material_files(mesh_path: Path, keep=lambda p: True) -> list[Path]:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import urdf
+from asset2sim import file_memo, urdf
 from asset2sim.mesh_io import MeshReadError, hull_point_sets
 from asset2sim.urdf import SIMULATED_JOINT_TYPES, UrdfError, UrdfModel
 
@@ -51,34 +51,33 @@ def read_urdf(path: Path | str) -> UrdfModel:
 
 
 # ------------------------------------------------------------ collision hulls
-_HULL_CACHE: dict[tuple, list[np.ndarray]] = {}
+#: Unscaled point sets of the collision meshes read in this process, by
+#: path, while the file is unchanged (:class:`asset2sim.file_memo.FileMemo`;
+#: the arrays are shared and never modified: callers get scaled copies).
+_HULLS: file_memo.FileMemo[list[np.ndarray]] = file_memo.FileMemo(list, max_entries=4096)
 
 
 def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
     """Point sets (k, 3), m, whose convex hulls PyBullet uses for a collision
     mesh ``path`` scaled by ``scale`` (3,): one per OBJ group; other formats
-    (STL, ...) as one set of all vertices (:func:`asset2sim.mesh_io.hull_point_sets`). Cached by file
-    modification time. Sets with fewer than 4 points or no volume are kept:
-    engines decide what to do with them.
+    (STL, ...) as one set of all vertices (:func:`asset2sim.mesh_io.hull_point_sets`),
+    read once per file version (:data:`_HULLS`). Sets with fewer than 4
+    points or no volume are kept: engines decide what to do with them.
 
     Raises:
         UrdfError: the mesh cannot be read.
     """
     path = Path(path)
-    try:
-        st = path.stat()
-    except OSError as exc:
-        raise UrdfError(f"collision mesh {path} does not exist") from exc
-    key = (str(path), st.st_mtime_ns, st.st_size)
-    groups = _HULL_CACHE.get(key)
+    groups = _HULLS.get(str(path))
     if groups is None:
+        files = file_memo.identities([path])  # before reading
+        if files[0][1] is None:
+            raise UrdfError(f"collision mesh {path} does not exist")
         try:
             groups = hull_point_sets(path)
         except MeshReadError as exc:
             raise UrdfError(str(exc)) from exc
-        if len(_HULL_CACHE) > 4096:
-            _HULL_CACHE.clear()
-        _HULL_CACHE[key] = groups
+        _HULLS.put(str(path), files, groups)
     s = np.asarray(scale, float).reshape(3)
     return [g * s for g in groups]
 

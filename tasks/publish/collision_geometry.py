@@ -1221,11 +1221,13 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         if len(_PIECE_CACHE) >= 16:
             _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
         _PIECE_CACHE[key] = hit = ({k: list(v) for k, v in pieces.items()}, list(notes))
-    skey = (key, None if state is None else tuple(sorted((str(k), float(v)) for k, v in state.items())))
+    if state is None:  # nothing depends on a state
+        return {k: list(v) for k, v in hit[0].items()}, list(hit[1])
+    skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())))
     done = _STATE_CACHE.get(skey)
     if done is None:
         pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
-        if state is not None and decompose:  # what the initial state still holds: a stop the joint was written into
+        if decompose:  # what the initial state still holds: a stop the joint was written into
             separate_parent_child(model, pieces, notes, state=state)
             for name in model.links:
                 pieces[name] = drop_slivers(pieces[name])
