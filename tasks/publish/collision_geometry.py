@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import hashlib
 import heapq
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -962,6 +963,21 @@ def _transformed(piece: Piece, T: np.ndarray) -> Piece:
     return Piece(piece.points @ R.T + t, eq, piece.volume, piece.sources, piece.support @ R.T + t, _edge_directions(piece) @ R.T)
 
 
+def _boxes_apart(a: Piece, b: Piece, transforms: list[np.ndarray], margin: float = 1e-9) -> np.ndarray:
+    """(n,) bool: whether ``b`` moved by each of the n (4, 4) ``transforms``
+    has an axis-aligned bounding box more than ``margin`` m clear of
+    ``a``'s, i.e. :func:`penetration_depth` would return 0 at its first
+    test; computed for all transforms at once, without moving ``b``'s
+    planes, support points and edges (:func:`_transformed`). The margin
+    absorbs the rounding of the batched product, so a pose this calls apart
+    is one the exact test calls apart too."""
+    T = np.asarray(transforms, dtype=float)
+    moved = np.einsum("kj,nij->nki", b.points, T[:, :3, :3]) + T[:, None, :3, 3]  # (n, k, 3)
+    lo = np.maximum(a.points.min(axis=0), moved.min(axis=1))
+    hi = np.minimum(a.points.max(axis=0), moved.max(axis=1))
+    return np.any(hi + margin < lo, axis=1)
+
+
 def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint) -> tuple[list[np.ndarray], int]:
     """(4, 4) parent-frame poses of ``joint``'s child link at every position
     of :func:`sweep_positions` over its range (the reach from the axis taken
@@ -975,18 +991,20 @@ def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joi
     return [_joint_motion(joint, q) for q in qs], int(np.argmin(np.abs(qs - ref)))
 
 
-def _carried(depths: list[float], ref: int, tolerance: float) -> list[int]:
-    """Indices of the positions (ordered over the range) whose depth the
-    joint carries from its reference position ``ref``: the run of depths
-    above ``tolerance`` m that contains ``ref`` (empty when the reference
-    position is clear). A depth reached only after the child moved clear is
-    a stop (the child runs into its parent), left to the limit scan."""
-    if depths[ref] <= tolerance:
+def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) -> list[int]:
+    """Indices of the ``n`` positions (ordered over the range) whose depth
+    (m, ``depth(i)``) the joint carries from its reference position ``ref``:
+    the run of depths above ``tolerance`` m that contains ``ref`` (empty
+    when the reference position is clear). A depth reached only after the
+    child moved clear is a stop (the child runs into its parent), left to
+    the limit scan. ``depth`` is asked only for ``ref`` and the run's
+    neighbours (one position for a pair clear at the reference)."""
+    if depth(ref) <= tolerance:
         return []
     lo = hi = ref
-    while lo > 0 and depths[lo - 1] > tolerance:
+    while lo > 0 and depth(lo - 1) > tolerance:
         lo -= 1
-    while hi < len(depths) - 1 and depths[hi + 1] > tolerance:
+    while hi < n - 1 and depth(hi + 1) > tolerance:
         hi += 1
     return list(range(lo, hi + 1))
 
@@ -1045,8 +1063,16 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
                     k += 1
                     continue
                 planes_p, planes_c, slots_p, slots_c = [], [], [], []
-                found = [penetration_depth(P[i], _transformed(C[k], T), tolerance) for T in transforms]
-                for t in _carried([d for d, _ in found], ref, tolerance):
+                found: dict[int, tuple[float, np.ndarray]] = {}
+
+                def depth_at(t: int, a: Piece = P[i], b: Piece = C[k]) -> float:
+                    """The pair's depth (m) at position ``t`` (kept in ``found``)."""
+                    if t not in found:
+                        T = transforms[t]
+                        found[t] = (0.0, np.zeros(3)) if _boxes_apart(a, b, [T])[0] else penetration_depth(a, _transformed(b, T), tolerance)
+                    return found[t][0]
+
+                for t in _carried(depth_at, len(transforms), ref, tolerance):
                     T, (d, n) = transforms[t], found[t]
                     c = _transformed(C[k], T)
                     before = max(before, d)
