@@ -35,6 +35,7 @@ from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, infer_scale_from_g
 from asset2sim.tasks.evaluation.request_match import category_prior, parse_prompt, recognize_category
 from asset2sim.tasks.evaluation.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.interpret.part_priors import task_relevant_joints
 from asset2sim.tasks.publish.output_folder import OutputError
 from asset2sim.tasks.publish.write import read_root
 
@@ -93,11 +94,16 @@ class Context:
         return [n for n, j in self.joints.items() if j.type in MOVABLE]
 
 
-def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, requested: list[str]) -> tuple[list[str], str]:
+def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, requested: list[str],
+                category: str | None = None, semantics: dict[str, tuple[str, str]] | None = None) -> tuple[list[str], str]:
     """The task-relevant joints and the rule that chose them: the movable
     joints of the reference's ``reference_gensim2.urdf`` present here; else
-    the movable joints the request names (``requested``); else every movable
-    joint.
+    the movable joints the request names (``requested``); else, when the
+    asset labels its parts (``semantics``: link -> (joint kind, label)) and
+    its ``category`` is known, the joints refine itself treats as
+    task-relevant (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`,
+    so a refined output is evaluated on the joints it was refined for);
+    else every movable joint.
 
     Raises:
         ValueError: the reference's JSON is malformed.
@@ -111,6 +117,9 @@ def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, reques
             return tj, "movable joints of reference_gensim2.urdf"
     if requested:
         return [j for j in movable if j in requested], "joints the request names"
+    labels = {n: (semantics or {}).get(joints[n].child, (None, None))[1] for n in movable}
+    if category and any(labels.values()):
+        return task_relevant_joints(category, list(labels.items()))
     return movable, "every movable joint"
 
 

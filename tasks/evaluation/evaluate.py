@@ -213,7 +213,7 @@ def evaluate_asset(
     ctx = build_context(urdf_dir_or_path, reference=reference, prompt=prompt, category=category, conventions=conventions)
     # joints that matter: the task's, plus those the request names
     pre_req = labelled_joints(ctx.request, ctx.joints, ctx.semantics, ctx.category)
-    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, pre_req)
+    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, pre_req, ctx.category, ctx.semantics)
     ctx.notes.append(f"task-relevant joints: {', '.join(ctx.task_joints) or 'none'} ({tj_rule})")
     need_closed = list(dict.fromkeys(ctx.task_joints + pre_req))
     if ctx.request is not None and any(js.selector == "all" for js in ctx.request.joint_states):

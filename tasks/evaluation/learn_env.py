@@ -242,7 +242,7 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     if start not in ("task", "asset"):
         raise ValueError(f"start must be 'task' or 'asset', got {start!r}")
     ctx = build_context(asset, reference=reference, prompt=None, category=category, conventions=conventions)
-    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, [])
+    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, [], ctx.category, ctx.semantics)
     spec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints)
     if not spec.joints:
         raise LearnTaskError(f"{ctx.urdf}: task {task!r} names no movable joint ({spec.rule})")

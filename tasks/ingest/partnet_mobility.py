@@ -60,6 +60,7 @@ __all__ = [
     "Semantics",
     "SemanticsLine",
     "find_urdf",
+    "format_semantics",
     "has_reference",
     "iter_semantics",
     "meta_category",
@@ -192,6 +193,30 @@ def read_semantics(folder: Path) -> dict[str, Semantics]:
             raise AssetError(f"{path}:{ln.lineno}: expected 'link_name joint_kind semantic_label', got {ln.text!r}")
         out[ln.link] = ln.entry  # type: ignore[index]
     return out
+
+
+def format_semantics(entries: dict[str, Semantics]) -> str:
+    """``semantics.txt`` text for link -> :class:`Semantics`, one
+    ``link_name joint_kind semantic_label`` line per link in the given order
+    (the writer of :func:`iter_semantics`: ``iter_semantics(format_semantics(e))``
+    gives ``e`` back).
+
+    Raises:
+        ValueError: a link name or joint kind that is empty or contains
+            whitespace, or a label that is empty or spans lines (the format
+            cannot express them); the message names the link.
+    """
+    lines = []
+    for link, (kind, label) in entries.items():
+        if not link or len(link.split()) != 1 or link.split()[0] != link:
+            raise ValueError(f"semantics.txt: link name {link!r} is empty or contains whitespace")
+        if not kind or len(kind.split()) != 1 or kind.split()[0] != kind:
+            raise ValueError(f"semantics.txt: link {link!r}: joint kind {kind!r} is empty or contains whitespace")
+        words = str(label).split()
+        if not words or len(str(label).splitlines()) > 1:
+            raise ValueError(f"semantics.txt: link {link!r}: label {label!r} is empty or spans lines")
+        lines.append(f"{link} {kind} {' '.join(words)}\n")
+    return "".join(lines)
 
 
 # ------------------------------------------------------------------ meta.json

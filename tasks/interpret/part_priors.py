@@ -11,6 +11,8 @@ The category's lists in ``categories.yaml`` win over the per-label defaults of
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from asset2sim.tasks.interpret.categories import category_prior
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.tasks.interpret.prior_tables import MaterialPrior, PartRole, load_priors
@@ -125,3 +127,25 @@ def request_label_matches(category: str, request_label: str | None, semantic_lab
         return True
     return b in category_prior(category).label_synonyms.get(a, [])
 
+
+
+def task_relevant_joints(category: str, joint_labels: Sequence[tuple[str, str | None]]) -> tuple[list[str], str]:
+    """The joints whose moving part tasks manipulate, and the rule that chose
+    them, from ``joint_labels`` ((movable joint, its child link's part label
+    or None), in the asset's order): the joints of the category's
+    task-relevant parts (:func:`task_relevant_rank`, or labels.yaml's
+    ``task`` role) ordered by the category's priority; else every joint
+    whose part is neither ``body`` nor ``accessory``; else every joint. One
+    rule for refine (which states it sets and tasks it checks) and for the
+    evaluation of any output that carries its part labels."""
+    ranked = []
+    for name, label in joint_labels:
+        rank = task_relevant_rank(category, label)
+        if rank is not None or part_role(category, label) == "task":
+            ranked.append((rank if rank is not None else 99, name))
+    if ranked:
+        return [n for _, n in sorted(ranked, key=lambda t: t[0])], f"the task-relevant parts of {category} (category prior)"
+    out = [name for name, label in joint_labels if part_role(category, label) not in ("accessory", "body")]
+    if out:
+        return out, "every joint of a part that is neither body nor accessory"
+    return [name for name, _ in joint_labels], "every movable joint"

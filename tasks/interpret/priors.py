@@ -47,6 +47,7 @@ from asset2sim.tasks.interpret.part_priors import (
     part_role,
     request_label_matches,
     spring_expected,
+    task_relevant_joints,
     task_relevant_rank,
 )
 from asset2sim.tasks.interpret.prior_tables import (
@@ -123,5 +124,6 @@ __all__ = [
     "size_factor",
     "spring_expected",
     "target_size",
+    "task_relevant_joints",
     "task_relevant_rank",
 ]

@@ -112,19 +112,12 @@ class StateResolution:
 
 def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
     """Movable joints whose moving part tasks manipulate, by the category's
-    priority (see :func:`asset2sim.tasks.synthesize.estimate.task_relevant_joints`,
-    which calls this)."""
-    movable = ctx.asset.movable_joints()
-    ranked = []
-    for j in movable:
-        label = ctx.asset.link(j.child).semantic_label
-        rank = priors.task_relevant_rank(ctx.category, label)
-        if rank is not None or priors.part_role(ctx.category, label) == "task":
-            ranked.append((rank if rank is not None else 99, j.name))
-    if ranked:
-        return [n for _, n in sorted(ranked, key=lambda t: t[0])]
-    out = [j.name for j in movable if priors.part_role(ctx.category, ctx.asset.link(j.child).semantic_label) not in ("accessory", "body")]
-    return out or [j.name for j in movable]
+    priority (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`
+    on the asset's part labels; see
+    :func:`asset2sim.tasks.synthesize.estimate.task_relevant_joints`, which
+    calls this)."""
+    labelled = [(j.name, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()]
+    return priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
 def object_parts(ctx: "EstimationContext") -> list[str]:

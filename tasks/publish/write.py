@@ -4,7 +4,9 @@
 geometry origins, primitive sizes, prismatic limits, inertials), an
 ``<inertial>`` on every link (mass > 0, valid inertia tensor, COM origin),
 ``<dynamics damping friction>`` on every movable joint, a comment pointing to
-``initial_state.json`` / ``overlay.json``; meshes (with their MTL files and
+``initial_state.json`` / ``overlay.json``; ``semantics.txt`` with the input's
+part labels (PartNet-Mobility's format, link names unchanged) when it had
+any, so the output names its parts without the input beside it; meshes (with their MTL files and
 textures) copied inside the folder under the same relative paths. Floats are
 written at full precision (Python's shortest round-trip repr). Every file is
 written atomically; the input folder is never written.
@@ -25,12 +27,14 @@ import numpy as np
 from asset2sim import atomic, frames, mesh_io, urdf
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay, RootMount
+from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.publish import collision_geometry
 from asset2sim.tasks.publish.output_folder import MARKER_NAME, RECORD_NAME, OutputError, check_location
 
 URDF_NAME = "mobility.urdf"
 STATE_NAME = "initial_state.json"
 OVERLAY_NAME = "overlay.json"
+SEMANTICS_NAME = partnet_mobility.SEMANTICS_NAME
 
 
 @dataclass
@@ -41,6 +45,8 @@ class OutputPaths:
     urdf: Path
     initial_state: Path
     overlay: Path
+    semantics: Path | None = None
+    """``semantics.txt``, None when the input had no part labels."""
 
 
 def check_output_folder(asset: AssetDescription, out_dir: Path) -> Path:
@@ -471,7 +477,8 @@ def write_output(
     root_rotation: np.ndarray | None = None,
 ) -> OutputPaths:
     """Write (or rewrite) the output folder: meshes, ``mobility.urdf``,
-    ``initial_state.json`` and ``overlay.json``. Atomic per file.
+    ``initial_state.json``, ``overlay.json`` and (when the input labelled
+    parts) ``semantics.txt``. Atomic per file.
 
     Args:
         initial_state: joint -> position in output units (rad or m).
@@ -491,7 +498,22 @@ def write_output(
         ROOT_KEY: root_record(overlay.mounting),
     })
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
-    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl)
+    labels = part_labels(asset)
+    sem = atomic.write_bytes(out / SEMANTICS_NAME, partnet_mobility.format_semantics(labels).encode()) if labels else None
+    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem)
+
+
+def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics]:
+    """link -> (joint kind, part label) of the asset's links that
+    ``semantics.txt`` labelled, in link order ({} for an unlabelled URDF).
+    The evaluation and the task tier find parts (``lid``, ``drawer``) by
+    these labels; links whose name or label the format cannot express
+    (whitespace in the name) are left out."""
+    out: dict[str, partnet_mobility.Semantics] = {}
+    for ln in asset.links:
+        if ln.semantic_label and ln.semantic_joint and ln.name.split() == [ln.name] and ln.semantic_joint.split() == [ln.semantic_joint]:
+            out[ln.name] = partnet_mobility.Semantics(ln.semantic_joint, ln.semantic_label)
+    return out
 
 
 #: Key of the root declaration in ``initial_state.json``.

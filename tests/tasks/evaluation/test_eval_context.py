@@ -24,7 +24,7 @@ from asset2sim.tasks.evaluation.request_match import (
     scaled_mass_range,
 )
 from asset2sim.urdf import read_urdf
-from tests.conftest import needs_shared
+from tests.conftest import SHARED, needs_shared
 
 STAPLER_PROMPT = "I want a slightly open stapler."
 
@@ -53,6 +53,23 @@ def test_reference_state_is_the_range_lower_end_clipped_to_the_reference_limits(
 def test_missing_reference_folder_is_an_evaluation_error(demo_root, tmp_path):
     with pytest.raises(EvaluationError, match="no such folder"):
         build_context(demo_root / "box_lid", reference=tmp_path / "nowhere")
+
+
+@needs_shared
+def test_without_reference_or_named_part_the_task_joints_are_refines_own(tmp_path):
+    """A stapler folder evaluated without its reference: the category's
+    task-relevant part (the lid) by its semantics.txt label, the joint
+    refine's post-check operates; with no labels, every movable joint."""
+    from asset2sim.tasks.ingest.extract import extract_asset
+    from asset2sim.tasks.interpret import priors
+
+    ctx = build_context(SHARED / "103275")
+    tj, rule = task_joints(ctx.joints, None, [], ctx.category, ctx.semantics)
+    asset = extract_asset(SHARED / "103275")
+    refine_rule = priors.task_relevant_joints(ctx.category, [(j.name, asset.link(j.child).semantic_label) for j in asset.movable_joints()])
+    assert (tj, rule) == refine_rule
+    assert tj == ["joint_1"] and ctx.semantics[ctx.joints["joint_1"].child][1] == "lid" and "category prior" in rule
+    assert task_joints(ctx.joints, None, [], ctx.category, {}) == (ctx.movable, "every movable joint")
 
 
 def test_initial_state_defaults_to_zero_clipped_and_task_joints_to_every_movable_joint(demo_root):

@@ -8,11 +8,14 @@ import json
 import re
 from pathlib import Path
 
+import pytest
 
 from asset2sim.cli import main
 from asset2sim.engines.base import available_engines
 from asset2sim.engines.fake import write_contract_asset
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.ingest import partnet_mobility
+from tests.conftest import SHARED, needs_shared
 
 ENGINES = tuple(e for e in ("pybullet", "physx", "mujoco") if e in available_engines())
 
@@ -73,3 +76,29 @@ def test_an_asset_written_but_not_ready_exits_3_and_every_output_agrees(tmp_path
     badge = _badge(out / "report.html")
     assert badge.startswith("NOT READY") and "joint_sweep@pybullet" in badge
     assert "joint_sweep@pybullet" in ev["failures"]
+
+
+@needs_shared
+@pytest.mark.parametrize("obj, prompt, task, joints, rule", [
+    ("102703", "A very small toilet with its lid fully open.", "close the toilet lid", ["joint_2"], "part label 'lid' in semantics.txt"),
+    ("103275", "I want a slightly open stapler.", "press the stapler", ["joint_1"], "whole object: every task-relevant joint"),
+])
+def test_the_post_check_and_the_outputs_evaluation_operate_the_same_joints(obj, prompt, task, joints, rule, tmp_path):
+    """One verdict without the input beside the output: the output carries
+    the input's part labels (semantics.txt) and its evaluation picks the
+    task's joints by refine's own rule (a part the task names; else the
+    category's task-relevant parts: the stapler's lid, not its body or
+    base). Before, the toilet's evaluation fell back to every joint (flush
+    lever, pump lid) and the stapler's tipped it over pressing its body
+    joint: task_failed, while the post-check said pass."""
+    out = tmp_path / "out"
+    rc = main(["refine", str(SHARED / obj), "--prompt", prompt, "--task", task, "--out", str(out)])
+    assert (out / "semantics.txt").read_text() == partnet_mobility.format_semantics(partnet_mobility.read_semantics(SHARED / obj))
+    report = json.loads((out / "report.json").read_text())
+    ev = json.loads((out / "evaluation.json").read_text())
+    post = [m for m in report["metrics"] if m["name"] == "task_execution" and m["engine"] == "pybullet"][0]
+    task_ev = [m for m in ev["metrics"] if m["name"] == "task_execution"][0]
+    for m in (post, task_ev):
+        assert [a["joint"] for a in m["details"]["attempts"]] == joints and m["details"]["joints_rule"] == rule
+    assert report["readiness"]["task"] is post["passed"] is task_ev["passed"]
+    assert rc == (0 if report["failure_mode"] == "none" else 3)

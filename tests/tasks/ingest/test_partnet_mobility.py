@@ -78,6 +78,18 @@ def test_semantics_tuple_shape_and_line_parsing():
     assert lines[0].entry == pm.Semantics("hinge", "big lid") and lines[1].entry is None
 
 
+def test_semantics_writer_round_trips_every_dev_object_and_refuses_what_the_format_cannot_say():
+    for row in pm.read_manifest(SHARED / pm.MANIFEST_NAME):
+        sem = pm.read_semantics(row.folder)
+        again = {ln.link: ln.entry for ln in pm.iter_semantics(pm.format_semantics(sem))}
+        assert again == sem and list(again) == list(sem), row.id
+    assert pm.format_semantics({"a": pm.Semantics("hinge", "big  lid")}) == "a hinge big lid\n"
+    for bad, word in [({"a b": pm.Semantics("hinge", "lid")}, "'a b'"), ({"a": pm.Semantics("", "lid")}, "'a'"),
+                      ({"a": pm.Semantics("hinge", "lid\nx")}, "'a'"), ({"a": pm.Semantics("hinge", " ")}, "'a'")]:
+        with pytest.raises(ValueError, match=word):
+            pm.format_semantics(bad)
+
+
 def test_find_urdf_rules(tmp_path):
     (tmp_path / "reference_gensim2.urdf").write_text("<robot/>")
     with pytest.raises(AssetError, match="no mobility.urdf"):
