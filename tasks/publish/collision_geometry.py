@@ -286,6 +286,8 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     if len(pieces) <= limit:
         return pieces
     others = np.zeros((0, 3)) if others is None else np.asarray(others, float)
+    others = others[np.argsort(others[:, 0], kind="stable")]  # by x: a box's points are one slice of it
+    xs = others[:, 0]
     alive = {i: p for i, p in enumerate(pieces)}
     nxt = len(pieces)
     penalty = 1.0 + sum(p.volume for p in pieces) * 1e6
@@ -298,7 +300,8 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         c = m.volume - a.volume - b.volume
         if len(others):
             lo, hi = m.points.min(axis=0), m.points.max(axis=0)
-            near = others[np.all((others >= lo) & (others <= hi), axis=1)]
+            band = others[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
+            near = band[np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1)]
             size = float(np.ptp(m.points, axis=0).max())
             if len(near):
                 inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
