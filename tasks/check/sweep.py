@@ -74,7 +74,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session
+from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring, open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
@@ -399,11 +399,41 @@ def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
     return [j.name for j in from_b + from_a[::-1] if j.type in ("revolute", "prismatic", "continuous")]
 
 
+class _Blocker:
+    """:func:`blocking_link` at a state, in the session when its engine
+    answers closest-point queries, else in a PyBullet session of the same
+    URDF (opened once, on first use; PhysX answers none), so every engine
+    moves the same parts out of the way."""
+
+    def __init__(self, session: SimSession, urdf: Path | str, conventions: SimConventions):
+        self.session, self.urdf, self.conventions = session, urdf, conventions
+        self._pybullet: SimSession | None = None
+
+    def __call__(self, state: dict[str, float], links: list[str], exclude: set[str]) -> str | None:
+        try:
+            self.session.set_joint_positions(state)
+            return blocking_link(self.session, links, exclude)
+        except EngineUnsupported:
+            pass
+        if self._pybullet is None:
+            self._pybullet = open_session("pybullet", self.urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False,
+                                                                                ground=False, conventions=self.conventions))
+        self._pybullet.set_joint_positions(state)
+        return blocking_link(self._pybullet, links, exclude)
+
+    def close(self) -> None:
+        if self._pybullet is not None:
+            self._pybullet.close()
+            self._pybullet = None
+
+
 def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],
-                    links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int) -> JointSweep:
-    """:func:`sweep_joint` of ``name``; when its drive stalls on the way out
-    against a link that another movable joint places, sweep again with the
-    joints between the part and that link moved out of the way:
+                    links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int,
+                    blocker: _Blocker) -> JointSweep:
+    """:func:`sweep_joint` of ``name``; when its drive stalls against a link
+    that another movable joint places, or the part is pushed into such a
+    link deeper than the sweep allows, sweep again with the joints between
+    the part and that link moved out of the way:
 
     - shut in (stalled before :data:`SHUT_IN_FRACTION` of the range: a
       sibling closed over it, a toilet's lid on its seat; a part between a
@@ -413,7 +443,11 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
       seat before it shuts the lid), then at their open ends (it lifts the
       lid before the seat);
     - stopped part-way (a seat raised into the lid held a quarter open):
-      those joints at their open ends (the hand lifts the lid first).
+      those joints at their open ends (the hand lifts the lid first);
+    - opened, then stopped on the way back, or pushed through, by such a
+      link (a lid shut onto a seat held slightly open, a raised post under a
+      lid): those joints at their closed ends (the hand lowers the seat
+      before it shuts the lid).
 
     The first such sweep that passes is kept; its ``range_note`` says what
     was moved. A link rigid with the joint's parent (the part's own stop:
@@ -421,18 +455,34 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
     qc, d, rng = closed[name]
     first = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
                         initial_state=initial_state, config=cfg)
-    if first.passed or first.diverged or first.time_open is not None or not np.isfinite(first.reached_open):
+    opened = first.time_open is not None
+    if first.passed or first.diverged or not np.isfinite(first.reached_open):
         return first
     jd = model.joint(name)
+    own = limits.rigid_group(model, jd.parent)
+    pushed = opened and first.time_close is not None and first.max_penetration >= cfg.max_penetration
+    if opened and not pushed and (first.time_close is not None or not np.isfinite(first.reached_closed)):
+        return first
     session.restore_state(saved)
-    session.set_joint_positions({**initial_state, name: qc + d * rng * max(first.reached_open, 0.0)})
-    who = blocking_link(session, links, limits.rigid_group(model, jd.parent))
+    if pushed:  # closed back, through the other link: the deepest pair names it
+        stall = first.reached_closed
+        pair = first.worst_pair or ()
+        who = next((b for b in pair if b not in links and b not in own), None) if set(pair) & set(links) else None
+    else:
+        stall = first.reached_closed if opened else first.reached_open
+        who = blocker({**initial_state, name: qc + d * rng * max(stall, 0.0)}, links, own)
     if who is None:
         return first
     between = [k for k in joints_between(model, jd.child, who)
                if k != name and k in closed and k in session.joint_types and closed[k][2] > 0]
-    # shut in: closed ends, then open ends; stopped part-way: open ends (see the docstring)
-    ends = ((0.0, "closed"), (1.0, "open")) if first.reached_open < SHUT_IN_FRACTION else ((1.0, "open"),)
+    # opened, then stopped or pushed on the way back: closed ends; shut in: closed ends,
+    # then open ends; stopped part-way out: open ends (see the docstring)
+    if opened:
+        ends: tuple[tuple[float, str], ...] = ((0.0, "closed"),)
+    elif first.reached_open < SHUT_IN_FRACTION:
+        ends = ((0.0, "closed"), (1.0, "open"))
+    else:
+        ends = ((1.0, "open"),)
     for end, word in ends:
         moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
         if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
@@ -441,8 +491,9 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
         second = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
                              initial_state={**initial_state, **moved}, config=cfg)
         if second.passed:
-            second.range_note = (f"{who} is in the way at the initial state (stalled at {first.reached_open:.0%}); "
-                                 f"swept with {', '.join(sorted(moved))} {word}")
+            where = (f"of closing at the initial state ({'pushed into it' if pushed else f'stalled at {stall:.0%}'} on the way back)"
+                     if opened else f"at the initial state (stalled at {stall:.0%})")
+            second.range_note = f"{who} is in the way {where}; swept with {', '.join(sorted(moved))} {word}"
             return second
     return first
 
@@ -476,6 +527,7 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
         opts = SessionOptions(initial_state=dict(initial_state), springs={n: springs[n] for n in key}, fixed_base=True,
                               gravity=False, ground=False, conventions=conv)
         session = open_session(engine, urdf, opts)
+        blocker = _Blocker(session, urdf, conv)
         try:
             saved = session.save_state()
             for name in names:
@@ -489,12 +541,13 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
                 session.restore_state(saved)
                 links = subtrees.get(name, [session.joint_child[name]])
                 if cfg.hold_others:
-                    run.joints.append(_sweep_clearing(session, model, name, closed, links, initial_state, cfg, saved))
+                    run.joints.append(_sweep_clearing(session, model, name, closed, links, initial_state, cfg, saved, blocker))
                 else:
                     run.joints.append(sweep_joint(session, name, closed=qc, direction=d, open_range=rng,
                                                   links=links, initial_state=initial_state, config=cfg))
             session.discard_state(saved)
         finally:
+            blocker.close()
             session.close()
     order = list(closed)
     run.joints.sort(key=lambda j: order.index(j.joint))
