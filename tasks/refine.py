@@ -341,6 +341,9 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, out
     att = _attempt(ctx, est, config, out_dir, cache, log)
     if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
         return att, pose_note
+    steadier = _steadier_state(ctx, est, config, out_dir, cache, log, att)
+    if steadier is not None:
+        return steadier, pose_note
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
     R, note = pose.most_stable_rotation(ctx.session, ctx.asset, att.overlay.links, state_in, att.overlay.scale, ctx.hull_points, _moving_links(ctx), exclude_modelled=True)
     if R is None:
@@ -357,9 +360,49 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, out
     return att, f"{note}; not better in simulation, kept as modelled"
 
 
-def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog) -> _Attempt:
-    """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``)."""
+def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
+                    att: _Attempt) -> _Attempt | None:
+    """Stability by design through the opening: when the first attempt
+    (``att``) stood unsteadily (unstable, or toppled by a robust-rest
+    disturbance), the opened joints placed where, within their requested
+    bands (or the interval a number asked), the object stands steadiest
+    (:func:`asset2sim.tasks.state.stability.steadiest_fractions`), and
+    stages 4-7 run once more from there; kept only when that attempt passes
+    every check (else the resting-pose retry of :func:`_synthesize_and_check`
+    still runs, from the first attempt). The request is
+    never contradicted: a band allows the whole interval, its target is a
+    default. Returns the kept attempt (its design notes say what moved and
+    why) or None (the first attempt's files written back)."""
+    intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
+    try:
+        fractions, before, after = stability.steadiest_fractions(out_dir / write.URDF_NAME, att.overlay, att.state, att.closed_out, intervals)
+    except Exception as exc:  # a measurement that fails leaves the attempt as it was
+        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
+        return None
+    if not fractions:
+        return None
+    why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
+    note = (f"stability by design: {why} at the bands' targets; "
+            + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
+            + f", where the object stands steadiest: static margin {before * 1000:.3g} -> {after * 1000:.3g} mm")
+    log.say("stability", note)
+    second = _attempt(ctx, est, config, out_dir, cache, log, fractions=fractions)
+    if second.check.passed and not second.check.topples:
+        second.design = [note, *second.design]
+        return second
+    log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
+    att.rewrite(out_dir)
+    return None
+
+
+def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
+             fractions: dict[str, float] | None = None) -> _Attempt:
+    """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``);
+    ``fractions`` (joint -> opening fraction) replace the requested state of
+    those joints (:func:`_steadier_state`)."""
     syn = _synthesize(ctx, est, config, log)
+    if fractions:
+        syn = replace(syn, requested={**syn.requested, **{n: syn.closed_out[n].position(f) for n, f in fractions.items() if n in syn.closed_out}})
     urdf = _write(ctx, syn, out_dir, log)
     syn = _closed_on_output(ctx, syn, urdf, out_dir, log)
     closed_raw = syn.closed_out

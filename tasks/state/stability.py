@@ -51,7 +51,7 @@ from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.synthesize import physics
 
-__all__ = ["PART_MASS_FRACTION", "Balance", "design_for_stability", "measure_balance", "support_polygon"]
+__all__ = ["PART_MASS_FRACTION", "Balance", "design_for_stability", "measure_balance", "steadiest_fractions", "support_polygon"]
 
 
 @dataclass(frozen=True)
@@ -225,7 +225,14 @@ def _link_world(urdf: Path, state: dict[str, float]) -> tuple[dict, dict[str, np
     model = read_urdf(urdf)
     pieces, _ = collision_pieces(model)
     with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
-        frames = {ln: s.link_frame(ln) for ln in s.link_names}
+        return _world_at(s, pieces, state)
+
+
+def _world_at(session, pieces: dict, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
+    """:func:`_link_world` in an open fixed-base ``session`` of the URDF whose
+    collision ``pieces`` (link -> pieces) are given, its joints set to ``state``."""
+    session.set_joint_positions(dict(state))
+    frames = {ln: session.link_frame(ln) for ln in session.link_names}
     pts: dict[str, np.ndarray] = {}
     for ln, pcs in pieces.items():
         if ln not in frames:
@@ -266,7 +273,11 @@ def measure_balance(urdf: Path | str, overlay: Overlay, state: dict[str, float])
     Raises:
         whatever loading the URDF raises.
     """
-    frames, pts = _link_world(Path(urdf), state)
+    return _balance(overlay, *_link_world(Path(urdf), state))
+
+
+def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Balance:
+    """:func:`measure_balance` from the link frames and world collision points of one state."""
     allp = np.vstack(list(pts.values())) if pts else np.zeros((0, 3))
     if not len(allp):
         com = _com(overlay, frames)
@@ -277,6 +288,73 @@ def measure_balance(urdf: Path | str, overlay: Overlay, state: dict[str, float])
     h = max(float(com[2] - allp[:, 2].min()), 0.0)
     area = 0.5 * abs(float(np.dot(poly[:, 0], np.roll(poly[:, 1], -1)) - np.dot(poly[:, 1], np.roll(poly[:, 0], -1)))) if len(poly) >= 3 else 0.0
     return Balance(com, poly, _signed_margin(poly, com[:2]), max(2e-3, SUPPORT_MARGIN_FRACTION * np.sqrt(area), h * np.tan(TILT_RECOVERY_RAD)))
+
+
+#: Opening fractions tried per joint across its allowed interval by
+#: :func:`steadiest_fractions` (both ends included).
+BAND_SAMPLES = 9
+#: Smallest gain of static margin (m) for which :func:`steadiest_fractions`
+#: moves a joint within its interval: 2 mm, the SPEC's 1 mm rest tolerance
+#: and PyBullet's contact slop (as :func:`measure_balance`'s least margin).
+MARGIN_GAIN = 2e-3
+
+
+def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, float], closed: dict,
+                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], float, float]:
+    """The opening fractions, within what the request allows, at which a
+    free-standing object stands steadiest: for each joint of ``intervals``
+    (joint -> allowed opening-fraction interval (lo, hi), the requested
+    band's, dimensionless) that is opened (lo > 0), ``samples`` fractions
+    evenly over its interval with the other joints as found so far, keeping
+    the one with the largest static margin (:func:`measure_balance`'s signed
+    distance of the COM's projection to the support's edge) when it beats
+    the margin before by at least :data:`MARGIN_GAIN`. A fraction at which
+    the object's lowest point drops more than 1 mm (an opened part reaching
+    below the body: the support would change) is not used. Statics: see the
+    module docstring.
+
+    Args:
+        urdf: the written URDF (scale baked in).
+        overlay: the overlay it was written from (masses, COMs).
+        state: joint -> rad or m, the refined state.
+        closed: joint -> :class:`~asset2sim.tasks.geometry.closed_state.ClosedState`
+            in the URDF's units (its ``position(fraction)``).
+        intervals: see above.
+        samples: fractions per joint (>= 2).
+
+    Returns:
+        (joint -> fraction for the joints moved, margin before m, margin after m);
+        ({}, m, m) for a mounted asset or when nothing gains.
+
+    Raises:
+        whatever loading the URDF raises.
+    """
+    model = read_urdf(Path(urdf))
+    pieces, _ = collision_pieces(model)
+    cur = dict(state)
+    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
+        frames, pts = _world_at(s, pieces, cur)
+        before = _balance(overlay, frames, pts).margin
+        if overlay.mounting is not None and overlay.mounting.fixed:
+            return {}, before, before
+        floor = min(float(p[:, 2].min()) for p in pts.values()) if pts else 0.0
+        best_margin, chosen = before, {}
+        for name, (lo, hi) in intervals.items():
+            cs = closed.get(name)
+            if cs is None or name not in cur or not lo > 0 or hi <= lo:
+                continue
+            top, at = -np.inf, None
+            for f in np.linspace(lo, hi, max(2, samples)):
+                frames, pts = _world_at(s, pieces, {**cur, name: cs.position(float(f))})
+                if pts and min(float(p[:, 2].min()) for p in pts.values()) < floor - 1e-3:
+                    continue
+                m = _balance(overlay, frames, pts).margin
+                if m > top:
+                    top, at = m, float(f)
+            if at is not None and top >= best_margin + MARGIN_GAIN:
+                best_margin, chosen[name] = top, at
+                cur = {**cur, name: cs.position(at)}
+    return chosen, before, best_margin
 
 
 def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.schemas.overlay import RootMount
+from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.publish import write
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.state import stability
 from asset2sim.tasks.geometry.analyze import analyze_asset
-from tests.conftest import SHARED
+from tests.conftest import SHARED, needs_shared
 from tests.tasks.check.failure_assets import build_tipping_laptop
 
 
@@ -154,3 +154,27 @@ def test_without_geometry_only_sourced_fractions_are_used(fully_open):
     r, ov = fully_open.report, fully_open.overlay
     same, changes = stability.design_for_stability(fully_open.out_dir / "mobility.urdf", None, ov, r.initial_joint_positions, "Laptop")
     assert changes == [] and same is ov  # already balanced
+
+
+@needs_shared
+def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_opening_the_band_allows(tmp_path):
+    """Treasure chest 100221 "mostly open" (band 0.6-0.9 of the lid's range,
+    target 0.75): at the target the lid hangs behind the box and robust
+    rest's disturbances topple it although its part masses were moved to
+    the static margin asked. The lid is placed where the band lets the
+    object stand steadiest (0.6), and the refine is interaction-ready there;
+    the design notes say what moved and why. Measured directly too: the
+    static margin is larger at the chosen opening than at the target."""
+    res = refine_asset(SHARED / "100221", "A box, mostly open.", tmp_path / "out", extras=False)
+    r = res.report
+    assert r.failure_mode == "none"
+    note = [d for d in r.design_changes if "where the object stands steadiest" in d]
+    assert note and "toppled by a robust-rest disturbance" in note[0] and "joint_0 opened to 0.60" in note[0]
+    f = r.opening_fractions["joint_0"]
+    assert 0.6 - 1e-6 <= f < 0.75 and r.requested_bands["joint_0"] == "mostly"
+    overlay = Overlay.model_validate_json((res.out_dir / "overlay.json").read_text())
+    closed = r.closed_positions["joint_0"]
+    here = stability.measure_balance(res.out_dir / "mobility.urdf", overlay, dict(r.initial_joint_positions)).margin
+    at_target = stability.measure_balance(res.out_dir / "mobility.urdf", overlay, {
+        "joint_0": closed + 0.75 * (r.initial_joint_positions["joint_0"] - closed) / f}).margin
+    assert here > at_target + stability.MARGIN_GAIN
