@@ -366,7 +366,8 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     (``att``) stood unsteadily (unstable, or toppled by a robust-rest
     disturbance), the opened joints placed where, within their requested
     bands (or the interval a number asked), the object stands steadiest
-    (:func:`asset2sim.tasks.state.stability.steadiest_fractions`), and
+    (:func:`asset2sim.tasks.state.stability.steadiest_fractions`), when that
+    alone gives it the static margin stability by design asks, and
     stages 4-7 run once more from there; kept only when that attempt passes
     every check (else the resting-pose retry of :func:`_synthesize_and_check`
     still runs, from the first attempt). The request is
@@ -379,12 +380,13 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None
-    if not fractions:
+    if not fractions or not after.stable:  # the opening alone does not make it steady: the resting pose may
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
     note = (f"stability by design: {why} at the bands' targets; "
             + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
-            + f", where the object stands steadiest: static margin {before * 1000:.3g} -> {after * 1000:.3g} mm")
+            + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
+            f" (asked >= {after.required * 1000:.3g} mm)")
     log.say("stability", note)
     second = _attempt(ctx, est, config, out_dir, cache, log, fractions=fractions)
     if second.check.passed and not second.check.topples:

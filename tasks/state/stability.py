@@ -300,7 +300,7 @@ MARGIN_GAIN = 2e-3
 
 
 def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, float], closed: dict,
-                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], float, float]:
+                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], Balance, Balance]:
     """The opening fractions, within what the request allows, at which a
     free-standing object stands steadiest: for each joint of ``intervals``
     (joint -> allowed opening-fraction interval (lo, hi), the requested
@@ -323,8 +323,9 @@ def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, flo
         samples: fractions per joint (>= 2).
 
     Returns:
-        (joint -> fraction for the joints moved, margin before m, margin after m);
-        ({}, m, m) for a mounted asset or when nothing gains.
+        (joint -> fraction for the joints moved, :class:`Balance` before,
+        :class:`Balance` after); ({}, b, b) for a mounted asset or when
+        nothing gains.
 
     Raises:
         whatever loading the URDF raises.
@@ -334,27 +335,27 @@ def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, flo
     cur = dict(state)
     with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
         frames, pts = _world_at(s, pieces, cur)
-        before = _balance(overlay, frames, pts).margin
+        before = best = _balance(overlay, frames, pts)
         if overlay.mounting is not None and overlay.mounting.fixed:
             return {}, before, before
         floor = min(float(p[:, 2].min()) for p in pts.values()) if pts else 0.0
-        best_margin, chosen = before, {}
+        chosen: dict[str, float] = {}
         for name, (lo, hi) in intervals.items():
             cs = closed.get(name)
             if cs is None or name not in cur or not lo > 0 or hi <= lo:
                 continue
-            top, at = -np.inf, None
+            top, at = None, None
             for f in np.linspace(lo, hi, max(2, samples)):
                 frames, pts = _world_at(s, pieces, {**cur, name: cs.position(float(f))})
                 if pts and min(float(p[:, 2].min()) for p in pts.values()) < floor - 1e-3:
                     continue
-                m = _balance(overlay, frames, pts).margin
-                if m > top:
-                    top, at = m, float(f)
-            if at is not None and top >= best_margin + MARGIN_GAIN:
-                best_margin, chosen[name] = top, at
+                b = _balance(overlay, frames, pts)
+                if top is None or b.margin > top.margin:
+                    top, at = b, float(f)
+            if top is not None and top.margin >= best.margin + MARGIN_GAIN:
+                best, chosen[name] = top, at
                 cur = {**cur, name: cs.position(at)}
-    return chosen, before, best_margin
+    return chosen, before, best
 
 
 def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
