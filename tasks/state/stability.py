@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,6 +51,9 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.synthesize import physics
+
+if TYPE_CHECKING:
+    from asset2sim.tasks.geometry.closed_state import ClosedState
 
 __all__ = ["PART_MASS_FRACTION", "Balance", "design_for_stability", "measure_balance", "steadiest_fractions", "support_polygon"]
 
@@ -299,7 +303,7 @@ BAND_SAMPLES = 9
 MARGIN_GAIN = 2e-3
 
 
-def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, float], closed: dict,
+def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
                         intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], Balance, Balance]:
     """The opening fractions, within what the request allows, at which a
     free-standing object stands steadiest: for each joint of ``intervals``
