@@ -51,7 +51,7 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import clearance, collision, ground_clearance, pose, refine_state, repair, stability
+from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, repair, stability
 from asset2sim.tasks.synthesize import estimate, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
@@ -366,7 +366,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     (``att``) stood unsteadily (unstable, or toppled by a robust-rest
     disturbance), the opened joints placed where, within their requested
     bands (or the interval a number asked), the object stands steadiest
-    (:func:`asset2sim.tasks.state.stability.steadiest_fractions`), when that
+    (:func:`asset2sim.tasks.state.balance.steadiest_fractions`), when that
     alone gives it the static margin stability by design asks, and
     stages 4-7 run once more from there; kept only when that attempt passes
     every check (else the resting-pose retry of :func:`_synthesize_and_check`
@@ -376,7 +376,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     why) or None (the first attempt's files written back)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = stability.steadiest_fractions(out_dir / write.URDF_NAME, att.overlay, att.state, att.closed_out, intervals)
+        fractions, before, after = balance.steadiest_fractions(out_dir / write.URDF_NAME, att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None

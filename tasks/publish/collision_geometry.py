@@ -966,19 +966,17 @@ def _transformed(piece: Piece, T: np.ndarray) -> Piece:
     return Piece(piece.points @ R.T + t, eq, piece.volume, piece.sources, piece.support @ R.T + t, _edge_directions(piece) @ R.T)
 
 
-def _boxes_apart(a: Piece, b: Piece, transforms: list[np.ndarray], margin: float = 1e-9) -> np.ndarray:
-    """(n,) bool: whether ``b`` moved by each of the n (4, 4) ``transforms``
-    has an axis-aligned bounding box more than ``margin`` m clear of
-    ``a``'s, i.e. :func:`penetration_depth` would return 0 at its first
-    test; computed for all transforms at once, without moving ``b``'s
-    planes, support points and edges (:func:`_transformed`). The margin
-    absorbs the rounding of the batched product, so a pose this calls apart
-    is one the exact test calls apart too."""
-    T = np.asarray(transforms, dtype=float)
-    moved = np.einsum("kj,nij->nki", b.points, T[:, :3, :3]) + T[:, None, :3, 3]  # (n, k, 3)
-    lo = np.maximum(a.points.min(axis=0), moved.min(axis=1))
-    hi = np.minimum(a.points.max(axis=0), moved.max(axis=1))
-    return np.any(hi + margin < lo, axis=1)
+def _boxes_apart(a: Piece, b: Piece, T: np.ndarray, margin: float = 1e-9) -> bool:
+    """Whether ``b`` moved by the (4, 4) transform ``T`` has an axis-aligned
+    bounding box more than ``margin`` m clear of ``a``'s, i.e.
+    :func:`penetration_depth` would return 0 at its first test; without
+    moving ``b``'s planes, support points and edges (:func:`_transformed`).
+    The margin absorbs rounding, so a pose this calls apart is one the exact
+    test calls apart too."""
+    moved = b.points @ T[:3, :3].T + T[:3, 3]
+    lo = np.maximum(a.points.min(axis=0), moved.min(axis=0))
+    hi = np.minimum(a.points.max(axis=0), moved.max(axis=0))
+    return bool(np.any(hi + margin < lo))
 
 
 def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint) -> tuple[list[np.ndarray], int]:
@@ -1072,7 +1070,7 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
                     """The pair's depth (m) at position ``t`` (kept in ``found``)."""
                     if t not in found:
                         T = transforms[t]
-                        found[t] = (0.0, np.zeros(3)) if _boxes_apart(a, b, [T])[0] else penetration_depth(a, _transformed(b, T), tolerance)
+                        found[t] = (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), tolerance)
                     return found[t][0]
 
                 for t in _carried(depth_at, len(transforms), ref, tolerance):

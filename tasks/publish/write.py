@@ -482,7 +482,8 @@ def write_output(
 
     Args:
         initial_state: joint -> position in output units (rad or m).
-        copy: copy the meshes (skip when only dynamics changed).
+        copy: copy the meshes and write ``semantics.txt`` (skip when only
+            dynamics or the state changed).
         collision_overrides, root_rotation: see :func:`build_urdf`.
 
     Raises:
@@ -490,17 +491,19 @@ def write_output(
     """
     out = check_output_folder(asset, out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if copy:
+    sem = out / SEMANTICS_NAME
+    if copy:  # what comes from the input, once: later writes change only the dynamics and the state
         copy_meshes(asset, out)
+        labels = part_labels(asset)
+        if labels:
+            atomic.write_bytes(sem, partnet_mobility.format_semantics(labels).encode())
     urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state)))
     state = atomic.write_json(out / STATE_NAME, {
         "initial_joint_positions": {k: float(v) for k, v in initial_state.items()},
         ROOT_KEY: root_record(overlay.mounting),
     })
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
-    labels = part_labels(asset)
-    sem = atomic.write_bytes(out / SEMANTICS_NAME, partnet_mobility.format_semantics(labels).encode()) if labels else None
-    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem)
+    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem if part_labels(asset) else None)
 
 
 def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics]:

@@ -15,7 +15,7 @@ from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.publish import write
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.state import stability
+from asset2sim.tasks.state import balance, stability
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.check.failure_assets import build_tipping_laptop
@@ -49,7 +49,7 @@ def test_open_screen_tips_the_laptop_as_estimated(laptop, fully_open, tmp_path):
             undone.links[ln] = lp.model_copy(update={"mass": lp.mass / f})
     asset, _ = extract.extract_asset_checked(laptop)
     paths = write.write_output(asset, undone, tmp_path / "undone", r.initial_joint_positions)
-    bal = stability.measure_balance(paths.urdf, undone, r.initial_joint_positions)
+    bal = balance.measure_balance(paths.urdf, undone, r.initial_joint_positions)
     assert bal.margin < 0, "the estimated masses should put the COM outside the support"
     check = postcheck.run_post_check(paths.urdf, r.initial_joint_positions, undone, RefineConfig())
     assert not check.stable
@@ -64,7 +64,7 @@ def test_design_balances_within_the_sourced_ratio(fully_open):
     screen = ov.links["link_0"].mass / total
     assert 0.25 - 1e-9 <= screen <= 0.40 + 1e-9
     assert ov.links["link_1"].mass > ov.links["link_0"].mass  # the base outweighs the screen
-    bal = stability.measure_balance(fully_open.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
+    bal = balance.measure_balance(fully_open.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
     assert bal.stable
     assert r.initial_joint_positions == r.state.result  # the requested state is kept
     assert any("stability by design" in n for n in r.notes)
@@ -83,10 +83,10 @@ def test_mounted_asset_is_never_redesigned(fully_open):
 
 def test_support_polygon_and_margin():
     pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0.0005], [0.5, 0.5, 1.0]], float)
-    poly = stability.support_polygon(pts, 1e-3)
+    poly = balance.support_polygon(pts, 1e-3)
     assert len(poly) == 4
-    assert stability._signed_margin(poly, np.array([0.5, 0.5])) == pytest.approx(0.5)
-    assert stability._signed_margin(poly, np.array([1.2, 0.5])) == pytest.approx(-0.2)
+    assert balance._signed_margin(poly, np.array([0.5, 0.5])) == pytest.approx(0.5)
+    assert balance._signed_margin(poly, np.array([1.2, 0.5])) == pytest.approx(-0.2)
 
 
 def test_support_is_the_face_under_the_centre_of_mass():
@@ -96,10 +96,10 @@ def test_support_is_the_face_under_the_centre_of_mass():
     body = np.array([[x, y, z] for x in (0.0, 0.3) for y in (0.0, 0.3) for z in (0.0, 0.3)], float)
     door = np.array([[x, y, z] for x in (-0.5, -0.49) for y in (0.0, 0.3) for z in (0.005, 0.3)], float)
     pts = np.vstack([body, door])
-    poly = stability.support_polygon(pts, 1e-3, com=np.array([0.15, 0.15, 0.15]))
+    poly = balance.support_polygon(pts, 1e-3, com=np.array([0.15, 0.15, 0.15]))
     assert poly[:, 0].min() == pytest.approx(0.0) and len(poly) == 4
     # without the COM: the largest nearly flat face, the one reaching the door
-    assert stability.support_polygon(pts, 1e-3)[:, 0].min() < -0.4
+    assert balance.support_polygon(pts, 1e-3)[:, 0].min() < -0.4
 
 
 STAPLER = SHARED / "102990"
@@ -126,7 +126,7 @@ def test_open_stapler_is_balanced_by_the_envelope_mass_of_its_sheet_steel_parts(
     assert "envelope shell mass" in change
     total = ov.total_mass()
     assert total == pytest.approx(r.total_mass)
-    bal = stability.measure_balance(open_stapler.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
+    bal = balance.measure_balance(open_stapler.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
     assert bal.stable
     rr = {m.name: m.passed for m in r.metrics}
     assert rr["robust_rest"] is True and rr["rest_stability"] is True
@@ -137,12 +137,12 @@ def test_open_stapler_is_balanced_by_the_envelope_mass_of_its_sheet_steel_parts(
             f = float(lp.source.split("mass x")[-1].split(" ")[0])
             undone.links[ln] = lp.model_copy(update={"mass": lp.mass / f})
     assert undone.total_mass() == pytest.approx(total, rel=1e-6)
-    before = stability.measure_balance(open_stapler.out_dir / "mobility.urdf", undone, r.initial_joint_positions)
+    before = balance.measure_balance(open_stapler.out_dir / "mobility.urdf", undone, r.initial_joint_positions)
     assert before.margin < 0
     # no opened link went below its envelope mass
     asset, _ = extract.extract_asset_checked(STAPLER)
     geometry = analyze_asset(asset)
-    _, pts = stability._link_world(open_stapler.out_dir / "mobility.urdf", r.initial_joint_positions)
+    _, pts = balance._link_world(open_stapler.out_dir / "mobility.urdf", r.initial_joint_positions)
     env = stability.envelope_masses(undone, pts, geometry)
     for ln in ("link_0", "link_1"):
         assert env[ln] - 1e-9 <= ov.links[ln].mass < undone.links[ln].mass
@@ -174,7 +174,7 @@ def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_openin
     assert 0.6 - 1e-6 <= f < 0.75 and r.requested_bands["joint_0"] == "mostly"
     overlay = Overlay.model_validate_json((res.out_dir / "overlay.json").read_text())
     closed = r.closed_positions["joint_0"]
-    here = stability.measure_balance(res.out_dir / "mobility.urdf", overlay, dict(r.initial_joint_positions)).margin
-    at_target = stability.measure_balance(res.out_dir / "mobility.urdf", overlay, {
+    here = balance.measure_balance(res.out_dir / "mobility.urdf", overlay, dict(r.initial_joint_positions)).margin
+    at_target = balance.measure_balance(res.out_dir / "mobility.urdf", overlay, {
         "joint_0": closed + 0.75 * (r.initial_joint_positions["joint_0"] - closed) / f}).margin
-    assert here > at_target + stability.MARGIN_GAIN
+    assert here > at_target + balance.MARGIN_GAIN

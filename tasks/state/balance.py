@@ -1,0 +1,301 @@
+"""Static balance of a written asset on the ground: the support polygon, the
+centre of mass (COM) against it, the margin a free-standing object needs,
+and the opening within the requested bands at which it stands steadiest.
+
+Statics (rigid bodies on a plane under gravity -z): the object rests iff the
+vertical projection of its COM lies inside the convex hull of its contact
+points (the support polygon); e.g. Featherstone & Orin, "Dynamics", Springer
+Handbook of Robotics (2008) section 2.9 / the zero-moment-point condition of
+Vukobratovic & Borovac, "Zero-moment point - thirty five years of its life",
+IJHR 1(1) 2004 (the static case: ZMP = COM projection). Stability by design
+(:mod:`asset2sim.tasks.state.stability`) acts on what this measures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.loading import collision_pieces, read_urdf
+from asset2sim.schemas.overlay import Overlay
+
+if TYPE_CHECKING:
+    from asset2sim.tasks.geometry.closed_state import ClosedState
+
+__all__ = ["BAND_SAMPLES", "MARGIN_GAIN", "SUPPORT_MARGIN_FRACTION", "TILT_RECOVERY_RAD", "Balance", "measure_balance",
+           "steadiest_fractions", "support_polygon"]
+
+
+#: Tilt (rad) from which the object must fall back onto its support: the COM
+#: must lie at least h * tan(TILT_RECOVERY_RAD) inside the support's edge (h:
+#: COM height above the support), the static tipping angle being
+#: atan(margin / h) (Featherstone & Orin 2008, statics of a rigid body on a
+#: plane). Twice the 5 deg tilt of the robust-rest trials
+#: (``tasks.check.robust_rest``), which must also survive a 2 cm drop and a
+#: nudge; see :data:`SUPPORT_MARGIN_FRACTION` for low, wide objects.
+TILT_RECOVERY_RAD = math.radians(10.0)
+
+
+#: Margin (fraction of the support polygon's square-root area) the COM must
+#: keep inside its edge whatever its height: measured on the generated tipping
+#: laptop (``tests/tasks/check/failure_assets.py``, COM 6 cm high), a margin of
+#: 11 mm (h tan 10 deg, 5 % of sqrt-area) still toppled it on the robust-rest
+#: drop and backward tilt, 24 mm (10 %) passed every trial.
+SUPPORT_MARGIN_FRACTION = 0.10
+
+
+@dataclass
+class Balance:
+    """Static balance at one state (world = the written URDF's frame, z up).
+
+    ``com`` (3,) m; ``support`` (K, 2) m support polygon (counter-clockwise);
+    ``margin`` m signed distance of the COM's projection to the polygon's
+    edge (positive inside); ``required`` m the margin asked for.
+    """
+
+    com: np.ndarray
+    support: np.ndarray
+    margin: float
+    required: float
+
+    @property
+    def stable(self) -> bool:
+        return self.margin >= self.required
+
+
+def _hull2d(points: np.ndarray) -> np.ndarray:
+    """Convex hull (K, 2) counter-clockwise of points (N, 2) (Andrew's
+    monotone chain, Comp. Geom. Theory Appl. 1979)."""
+    pts = np.unique(np.round(np.asarray(points, float), 9), axis=0)
+    if len(pts) < 3:
+        return pts
+    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower, upper = [], []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in pts[::-1]:
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _signed_margin(poly: np.ndarray, p: np.ndarray) -> float:
+    """Signed distance (m) of point ``p`` (2,) to the edge of the convex
+    polygon ``poly`` (K, 2, counter-clockwise): positive inside. A degenerate
+    polygon (K < 3) gives minus the distance to its points."""
+    if len(poly) < 3:
+        return -float(np.min(np.linalg.norm(poly - p, axis=1))) if len(poly) else -np.inf
+    d = np.inf
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        e = b - a
+        n = np.array([-e[1], e[0]]) / max(np.linalg.norm(e), 1e-12)  # inward normal of a CCW polygon
+        d = min(d, float(np.dot(p - a, n)))
+    return d
+
+
+#: Largest angle (rad) between a bottom face of the convex hull and the
+#: ground for the object to settle onto it without counting as fallen
+#: (``tasks.check.metrics.SETTLE_TILT_LIMIT``).
+SETTLE_FACE_ANGLE = 0.05
+
+
+def support_polygon(points: np.ndarray, tol: float, com: np.ndarray | None = None) -> np.ndarray:
+    """Support polygon (K, 2) m of collision points (N, 3) resting on the
+    ground (meshes' bottoms are rarely exactly flat, so the object settles on
+    a face of the points' 3-D convex hull):
+
+    - the face the vertical line through ``com`` (3,) leaves the hull by,
+      when its outward normal is within :data:`SETTLE_FACE_ANGLE` of straight
+      down (the object tilts onto it and rests there);
+    - else (no ``com``, or that face is steep: the object rolls off it) the
+      largest such near-horizontal face;
+    - else the points within ``tol`` of the lowest one;
+
+    as the 2-D convex hull of the points within ``tol`` m of the face's plane.
+    Empty (0, 2) when there are no points."""
+    pts = np.asarray(points, float)
+    if not len(pts):
+        return np.zeros((0, 2))
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(pts)
+    except (QhullError, ValueError):
+        hull = None
+    if hull is not None:
+        eq = hull.equations  # (F, 4): outward unit normal n, offset d; n.x + d <= 0 inside
+        flat = eq[:, 2] < -np.cos(SETTLE_FACE_ANGLE)
+        plane = None
+        if com is not None:
+            c = np.asarray(com, float)
+            down = eq[:, 2] < -1e-9
+            inside = np.all(eq[:, :3] @ c + eq[:, 3] <= 1e-9)
+            if inside and down.any():
+                t = np.where(down, (eq[:, :3] @ c + eq[:, 3]) / np.where(down, eq[:, 2], -1.0), np.inf)
+                exit_face = int(np.argmin(t))
+                if flat[exit_face]:
+                    plane = eq[exit_face]
+        if plane is None and flat.any():
+            tri = pts[hull.simplices[flat]]
+            area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+            keys = np.round(eq[flat] / np.array([1e-3, 1e-3, 1e-3, 1e-4]))
+            _, inv = np.unique(keys, axis=0, return_inverse=True)
+            best = int(np.argmax(np.bincount(inv.ravel(), weights=area)))
+            plane = eq[flat][inv.ravel() == best][0]
+        if plane is not None:
+            on = np.abs(pts @ plane[:3] + plane[3]) <= tol
+            if on.sum() >= 3:
+                return _hull2d(pts[on][:, :2])
+    low = pts[pts[:, 2] <= pts[:, 2].min() + tol]
+    return _hull2d(low[:, :2])
+
+
+def _link_world(urdf: Path, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
+    """Link frames (position (3,), rotation (3, 3)) at ``state`` and every
+    link's collision hull points in the world (N, 3), from the written URDF."""
+    model = read_urdf(urdf)
+    pieces, _ = collision_pieces(model)
+    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
+        return _world_at(s, pieces, state)
+
+
+def _world_at(session, pieces: dict, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
+    """:func:`_link_world` in an open fixed-base ``session`` of the URDF whose
+    collision ``pieces`` (link -> pieces) are given, its joints set to ``state``."""
+    session.set_joint_positions(dict(state))
+    frames = {ln: session.link_frame(ln) for ln in session.link_names}
+    pts: dict[str, np.ndarray] = {}
+    for ln, pcs in pieces.items():
+        if ln not in frames:
+            continue
+        pos, R = frames[ln]
+        arr = []
+        for pc in pcs:
+            if pc.points is None:
+                continue
+            local = pc.points @ pc.origin[:3, :3].T + pc.origin[:3, 3]
+            arr.append(local @ R.T + pos)
+        if arr:
+            pts[ln] = np.vstack(arr)
+    return frames, pts
+
+
+def _com(overlay: Overlay, frames: dict, masses: dict[str, float] | None = None) -> np.ndarray:
+    m_tot, acc = 0.0, np.zeros(3)
+    for ln, lp in overlay.links.items():
+        if ln not in frames:
+            continue
+        m = lp.mass if masses is None else masses[ln]
+        pos, R = frames[ln]
+        acc += m * (pos + R @ np.asarray(lp.com, float))
+        m_tot += m
+    return acc / max(m_tot, 1e-12)
+
+
+def measure_balance(urdf: Path | str, overlay: Overlay, state: dict[str, float]) -> Balance:
+    """Static balance of the written asset ``urdf`` (scale baked in) at
+    ``state`` (rad or m) with the overlay's link masses and COMs. The contact
+    band is 1 mm or 0.5 % of the object's height, whichever is larger; the
+    margin asked for is the largest of 2 mm (the SPEC's 1 mm rest tolerance
+    and PyBullet's contact slop), :data:`SUPPORT_MARGIN_FRACTION` of the
+    support polygon's square-root area and h * tan(:data:`TILT_RECOVERY_RAD`)
+    (h: the COM's height above the support).
+
+    Raises:
+        whatever loading the URDF raises.
+    """
+    return _balance(overlay, *_link_world(Path(urdf), state))
+
+
+def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Balance:
+    """:func:`measure_balance` from the link frames and world collision points of one state."""
+    allp = np.vstack(list(pts.values())) if pts else np.zeros((0, 3))
+    if not len(allp):
+        com = _com(overlay, frames)
+        return Balance(com, np.zeros((0, 2)), -np.inf, 0.0)
+    height = float(allp[:, 2].max() - allp[:, 2].min())
+    com = _com(overlay, frames)
+    poly = support_polygon(allp, max(1e-3, 0.005 * height), com)
+    h = max(float(com[2] - allp[:, 2].min()), 0.0)
+    area = 0.5 * abs(float(np.dot(poly[:, 0], np.roll(poly[:, 1], -1)) - np.dot(poly[:, 1], np.roll(poly[:, 0], -1)))) if len(poly) >= 3 else 0.0
+    return Balance(com, poly, _signed_margin(poly, com[:2]), max(2e-3, SUPPORT_MARGIN_FRACTION * np.sqrt(area), h * np.tan(TILT_RECOVERY_RAD)))
+
+
+#: Opening fractions tried per joint across its allowed interval by
+#: :func:`steadiest_fractions` (both ends included).
+BAND_SAMPLES = 9
+#: Smallest gain of static margin (m) for which :func:`steadiest_fractions`
+#: moves a joint within its interval: 2 mm, the SPEC's 1 mm rest tolerance
+#: and PyBullet's contact slop (as :func:`measure_balance`'s least margin).
+MARGIN_GAIN = 2e-3
+
+
+def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
+                        intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], Balance, Balance]:
+    """The opening fractions, within what the request allows, at which a
+    free-standing object stands steadiest: for each joint of ``intervals``
+    (joint -> allowed opening-fraction interval (lo, hi), the requested
+    band's, dimensionless) that is opened (lo > 0), ``samples`` fractions
+    evenly over its interval with the other joints as found so far, keeping
+    the one with the largest static margin (:func:`measure_balance`'s signed
+    distance of the COM's projection to the support's edge) when it beats
+    the margin before by at least :data:`MARGIN_GAIN`. A fraction at which
+    the object's lowest point drops more than 1 mm (an opened part reaching
+    below the body: the support would change) is not used. Statics: see the
+    module docstring.
+
+    Args:
+        urdf: the written URDF (scale baked in).
+        overlay: the overlay it was written from (masses, COMs).
+        state: joint -> rad or m, the refined state.
+        closed: joint -> :class:`~asset2sim.tasks.geometry.closed_state.ClosedState`
+            in the URDF's units (its ``position(fraction)``).
+        intervals: see above.
+        samples: fractions per joint (>= 2).
+
+    Returns:
+        (joint -> fraction for the joints moved, :class:`Balance` before,
+        :class:`Balance` after); ({}, b, b) for a mounted asset or when
+        nothing gains.
+
+    Raises:
+        whatever loading the URDF raises.
+    """
+    model = read_urdf(Path(urdf))
+    pieces, _ = collision_pieces(model)
+    cur = dict(state)
+    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
+        frames, pts = _world_at(s, pieces, cur)
+        before = best = _balance(overlay, frames, pts)
+        if overlay.mounting is not None and overlay.mounting.fixed:
+            return {}, before, before
+        floor = min(float(p[:, 2].min()) for p in pts.values()) if pts else 0.0
+        chosen: dict[str, float] = {}
+        for name, (lo, hi) in intervals.items():
+            cs = closed.get(name)
+            if cs is None or name not in cur or not lo > 0 or hi <= lo:
+                continue
+            top, at = None, None
+            for f in np.linspace(lo, hi, max(2, samples)):
+                frames, pts = _world_at(s, pieces, {**cur, name: cs.position(float(f))})
+                if pts and min(float(p[:, 2].min()) for p in pts.values()) < floor - 1e-3:
+                    continue
+                b = _balance(overlay, frames, pts)
+                if top is None or b.margin > top.margin:
+                    top, at = b, float(f)
+            if top is not None and top.margin >= best.margin + MARGIN_GAIN:
+                best, chosen[name] = top, at
+                cur = {**cur, name: cs.position(at)}
+    return chosen, before, best
