@@ -706,7 +706,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         tried.append((overlay, check))
     best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
     earlier = best != len(tried) - 1
-    sweep_skipped = any(m.name == "joint_sweep" and "not_run" in m.details for m in check.metrics)
+    sweep_skipped = postcheck.sweep_not_run(check.metrics)  # an escalation round: the sweep (and the other engines) not run
     if earlier or sweep_skipped:
         # the rounds ended worse than an earlier round (that round's setting), or on a round whose sweep
         # was skipped for an escalation that did not come: checked again, the sweep included

@@ -224,7 +224,11 @@ def run_post_check(
     the check already fails without the sweep and ``escalated`` says so, the
     sweep is not run: the round is escalated whatever the sweep says, only the
     last round's sweep is reported, and an escalation round records it as not
-    run (``passed`` None, ``details["not_run"]``). Robust rest always runs
+    run (``passed`` None, ``details["not_run"]``). When ``engine``'s own
+    tiers already fail and are escalated, the other engines are not run in
+    that round either (``engine_results`` empty): they are run in every round
+    that is not escalated on ``engine``'s tiers alone, the last included, so
+    a joint that fails only in another engine is escalated a round later. Robust rest always runs
     every trial: escalation sizes each joint's friction from the worst drift
     over all trials (:func:`~asset2sim.tasks.check.manipulation.hold_factor`).
     ``recorded``: manipulation runs taken from / recorded into it (a new
@@ -252,29 +256,49 @@ def run_post_check(
     )
     tilt = metrics.settle_tilt(trace, engine=engine)
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
-    engine_results = {}
-    if others:
-        engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
+    engine_results: dict[str, list[MetricResult]] = {}
+    parity_done = not others
+
+    def run_parity() -> None:
+        nonlocal engine_results, parity_done
+        if not parity_done:
+            engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
+            parity_done = True
+
     nested = parent_child.parent_child_penetration(urdf_path, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
     for m in (pen, stab, osc, sag_metric, tilt, nested):
         m.details["root"] = root_label(fixed)
     base = [pen, stab, osc, sag_metric, tilt, nested]
     recorded = recorded if recorded is not None else RecordedRuns()
 
+    def partial_escalated(rr: MetricResult) -> bool:
+        partial = PostCheck(metrics=[*base, rr], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results,
+                            recording=recording, recorded=recorded)
+        return not partial.passed and escalated(partial)
+
     def sweep_needed(rr: MetricResult) -> str | None:
         if escalated is None:
             return None
-        partial = PostCheck(metrics=[*base, rr], trace=trace, sag=drift, sagging=sagging, engine_results=engine_results,
-                            recording=recording, recorded=recorded)
-        if partial.passed or not escalated(partial):
-            return None
-        return "escalation round: the check fails without the sweep and is escalated whatever it says"
+        if partial_escalated(rr):  # escalated on this engine's tiers alone: the other engines are not run either
+            return "escalation round: the check fails without the sweep and is escalated whatever it says"
+        run_parity()
+        if partial_escalated(rr):
+            return "escalation round: the check fails without the sweep and is escalated whatever it says"
+        return None
 
     extra = [] if closed is None else manipulation.measure_manipulation(
         engine, urdf_path, initial_state, springs_of(overlay), conv, closed, fixed_base=fixed,
         recorded=recorded, sweep_needed=sweep_needed)
+    if not sweep_not_run(extra):
+        run_parity()
     return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,
                      engine_results=engine_results, recording=recording, recorded=recorded)
+
+
+def sweep_not_run(metrics: list[MetricResult]) -> bool:
+    """The joint sweep of ``metrics`` was not run (an escalation round:
+    :func:`run_post_check`)."""
+    return any(m.name == "joint_sweep" and "not_run" in m.details for m in metrics)
 
 
 def root_label(fixed: bool) -> str:

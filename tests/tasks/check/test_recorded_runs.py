@@ -68,8 +68,10 @@ def faucet_out(tmp_path_factory):
 def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(faucet_out):
     """Free-standing, the tall faucet tips over: the check fails without the
     sweep and escalation changes the overlay, so while the loop escalates the
-    sweep is not run; everything escalation reads is the same either way, and
-    on the last round (not escalated) the sweep is measured."""
+    sweep is not run, nor are the other engines (the faucet already fails in
+    PyBullet); everything escalation reads is the same either way, and on
+    the last round (not escalated) the sweep and the other engines are
+    measured."""
     out, ov = faucet_out.out_dir, faucet_out.overlay.model_copy(update={"mounting": None})
     state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
     closed = _closed(out)
@@ -84,6 +86,9 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     assert early.metric("joint_sweep").passed is None and "not_run" in early.metric("joint_sweep").details
     assert last.metric("joint_sweep").passed is not None and "not_run" not in last.metric("joint_sweep").details
     assert [m for m in early.metrics if m.name != "joint_sweep"] == [m for m in last.metrics if m.name != "joint_sweep"]
+    assert postcheck.sweep_not_run(early.metrics) and not postcheck.sweep_not_run(last.metrics)
+    others = [e for e in cfg.engines if e != "pybullet"]
+    assert early.engine_results == {} and sorted(last.engine_results) == sorted(others)
     assert postcheck.escalate(ov, early, cfg.escalation_factor) == postcheck.escalate(ov, last, cfg.escalation_factor)
     assert rec.hits == 1  # robust rest of the same files taken from the first check
 
