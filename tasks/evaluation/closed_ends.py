@@ -19,8 +19,11 @@ import numpy as np
 from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.evaluation.asset_files import JointInfo, clip_to_limits
-from asset2sim.tasks.geometry.closed_state import link_hull_points, object_extents
-from asset2sim.tasks.geometry.urdf_closed import closed_session
+from asset2sim.tasks.geometry.closed_state import link_hull_points
+from asset2sim.tasks.geometry.urdf_closed import aabb_extents, geometry_extents, measure_closed_ends
+
+__all__ = ["ClosedEnd", "aabb_extents", "closed_fallback", "compute_closed", "geometry_extents", "hull_points",
+           "infer_scale_from_geometry"]
 from asset2sim.tasks.ingest.extract import extract_asset
 
 
@@ -62,39 +65,6 @@ def hull_points(desc: AssetDescription) -> dict[str, np.ndarray] | None:
         return None
 
 
-def aabb_extents(session) -> np.ndarray:
-    """Extents (3,) m of the union of the engine's link AABBs over the links
-    with collision geometry (loose; see :func:`geometry_extents`); zeros when
-    no link has collision geometry."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for name in session.link_names:
-        if not session.link_has_collision(name):
-            continue
-        a, b = session.link_aabb(name)
-        lo, hi = np.minimum(lo, a), np.maximum(hi, b)
-    if not np.all(np.isfinite(lo)):
-        return np.zeros(3)
-    return np.maximum(hi - lo, 0.0)
-
-
-def geometry_extents(session, desc: AssetDescription | None, state: dict[str, float],
-                     hull: dict[str, np.ndarray] | None) -> np.ndarray:
-    """Extents (3,) m of the box bounding the links' collision hull vertices at
-    ``state`` (rad/m) (:func:`asset2sim.tasks.geometry.closed_state.object_extents`).
-    Bullet's own AABBs are loose for a link whose inertia tensor has
-    off-diagonal terms (the shape sits rotated in the principal-axes frame and
-    its box is re-bounded: 0.67 m instead of 0.39 m for a refined toilet), so
-    they are only the fallback (:func:`aabb_extents` with the joints set to
-    ``state``), used without hull points or when the hull box fails."""
-    try:
-        if hull is not None:
-            return np.asarray(object_extents(session, state, desc, hull), float)
-    except Exception:
-        pass
-    session.set_joint_positions(state)
-    return aabb_extents(session)
-
-
 def infer_scale_from_geometry(urdf: Path, raw_urdf: Path) -> float | None:
     """Uniform scale of ``urdf`` relative to ``raw_urdf`` from geometry.
 
@@ -129,7 +99,8 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
                    extents_out: list | None = None) -> tuple[dict[str, ClosedEnd], list[str]]:
     """Closed end of each joint in ``names`` (rad or m, the URDF's units).
 
-    Source: :func:`asset2sim.tasks.geometry.urdf_closed.closed_session`
+    Source: :func:`asset2sim.tasks.geometry.urdf_closed.measure_closed_ends`
+    (:func:`~asset2sim.tasks.geometry.urdf_closed.closed_session`
     (:func:`asset2sim.tasks.geometry.closed_state.closed_positions` in a fresh
     fixed-base, gravity-free PyBullet session; computed here for every method
     alike, so no method grades itself; refine places its requested state from
@@ -152,10 +123,10 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
     if not names:
         return out, notes
     try:
-        with closed_session(urdf) as m:
-            cs = m.closed
-            if extents_out is not None:
-                extents_out.append(geometry_extents(m.session, m.asset, {n: c.q_closed for n, c in cs.items()}, m.hull))
+        m = measure_closed_ends(urdf)
+        cs = m.closed
+        if extents_out is not None:
+            extents_out.append(m.extents)
         for n in names:
             c = cs.get(n)
             if c is None or not c.open_range > 0:

@@ -257,3 +257,25 @@ def test_reader_agrees_with_yourdfpy_on_every_real_urdf():
                 for f in ("damping", "friction"):
                     a, b = getattr(j.dynamics, f), getattr(t.dynamics, f)
                     assert (a is None and b is None) or (a is not None and b is not None and math.isclose(a, b)), (where, f)
+
+
+@needs_dataset
+def test_clone_is_an_independent_copy_that_keeps_shared_objects_shared(tmp_path):
+    """clone_model (the read memo's copy) gives what copy.deepcopy gives: an
+    equal model, nothing shared with the original, and an object reached
+    twice (a link in links and link_elements) still one object."""
+    import copy
+
+    for path in REAL:
+        model = urdf.read_urdf(path, mode="collect", on_problem=lambda p: None)
+        twin = urdf.clone_model(model)
+        assert twin == model == copy.deepcopy(model), path
+        assert urdf.write_urdf(twin) == urdf.write_urdf(model), path
+        for name, link in twin.links.items():
+            assert link is not model.links[name]
+            assert any(e is link for e in twin.link_elements) == any(e is model.links[name] for e in model.link_elements)
+        for a, b in zip(twin.joints, model.joints):
+            assert a is not b and a.origin is not b.origin
+        twin.joints[0].origin[0, 3] += 1.0
+        twin.links[next(iter(twin.links))].collisions.clear()
+        assert twin != model and urdf.write_urdf(model) == urdf.write_urdf(copy.deepcopy(model)), path
