@@ -74,6 +74,10 @@ class StateRefinement(BaseModel):
     seconds: float = 0.0
     model_queries: int = 0
     """Model calls made by the state search (joint proposals when it stalled)."""
+    room_made: dict[str, float] = Field(default_factory=dict)
+    """joint -> opening fraction of each joint the request did not address
+    (closed by default) that the search opened because a part the request
+    opened penetrated its part (:func:`asset2sim.tasks.state.refine_state.joints_in_the_way`)."""
 
 
 class RefineReport(BaseModel):

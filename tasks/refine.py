@@ -414,6 +414,12 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     syn = clipped
     st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
     state = dict(st.result)
+    room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "
+            f"did not address it (closed by default) and a part the request opened lay through it closed" for j, f in st.room_made.items()]
+    if st.room_made:
+        syn = replace(syn, bands={**syn.bands, **{j: request_apply.band_of(f) for j, f in st.room_made.items()}})
+        for line in room:
+            log.say("refine_state", line)
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
         ctx.asset, syn.overlay, out_dir, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
     st.collision_changes = list(st.collision_changes) + lifted
@@ -426,6 +432,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     design = floored + design
     for line in design:
         log.say("stability", line)
+    design = room + design
     closed_out = syn.closed_out
     overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, out_dir, log,
                                          closed=manipulation.closed_tuples(closed_out))
@@ -500,6 +507,7 @@ def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, conf
     st, overrides = _refine_state_with_decomposition(
         ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
+        addressed=request_apply.resolve_states(ctx, syn.overlay.scale).addressed,
     )
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
@@ -722,10 +730,15 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     return overlay, check, rounds
 
 
-def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None, intervals=None):
-    """State refinement; when hull overlaps keep Phi above tolerance, CoACD
-    decomposition of the colliding pieces and a second search (kept only if
-    it lowers Phi). Returns (StateRefinement, collision overrides)."""
+def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None, intervals=None,
+                                     addressed: set[str] | None = None):
+    """State refinement; when a part the request opened penetrates one the
+    request left closed by default (``addressed``: the joints the request
+    set), a second search with those parts free over their whole range
+    (kept only if it lowers Phi; :attr:`StateRefinement.room_made`); when
+    hull overlaps keep Phi above tolerance, CoACD decomposition of the
+    colliding pieces and another search (kept only if it lowers Phi).
+    Returns (StateRefinement, collision overrides)."""
     fractions = estimate.band_intervals(bands, intervals)
     s = overlay.scale
 
@@ -739,6 +752,21 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
             )
 
     st = search(requested)
+    in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \
+        refine_state.joints_in_the_way(asset, st.worst_pairs, bands, addressed, config.penetration_tolerance)
+    if in_the_way:
+        held = fractions
+        fractions = {**fractions, **{j: (0.0, 1.0) for j in in_the_way}}
+        room = search(st.result)
+        if room.phi_result < st.phi_result:
+            room.requested, room.phi_requested = st.requested, st.phi_requested
+            room.evaluations += st.evaluations
+            room.model_queries += st.model_queries
+            room.method = f"{st.method} | {', '.join(in_the_way)} free to make room -> {room.method}"
+            room.room_made = {j: float(abs(closed_out[j].fraction(room.result[j]))) for j in in_the_way if j in closed_out}
+            st = room
+        else:
+            fractions = held
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
         return st, {}
     deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]

@@ -103,6 +103,8 @@ class StateResolution:
     targets: dict[str, JointTarget] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    addressed: set[str] = field(default_factory=set)
+    """joints a phrase of the request set (the others are closed by default)"""
 
     @property
     def intervals(self) -> dict[str, tuple[float, float]]:
@@ -255,7 +257,9 @@ def _fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, sca
         f"{target.value:.4g} m gap at the part's farthest point from the axis (r = {r:.4g} m): {np.degrees(ang):.4g} deg")
 
 
-def _band_of(f: float) -> str:
+def band_of(f: float) -> str:
+    """The band (``schemas.request.BAND_INTERVAL``) of opening fraction ``f``: the
+    one whose interval holds it with the nearest target, else the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
     pool = inside or list(BAND_TARGET)
     return min(pool, key=lambda b: abs(BAND_TARGET[b] - f))
@@ -276,6 +280,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
         targets = _targets_of(ctx, jr, relevant, centers, res.warnings)
         for t in targets:
             res.bands[t] = jr.band
+            res.addressed.add(t)
             res.targets.pop(t, None)
             if jr.target is None:
                 continue
@@ -293,7 +298,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
             else:
                 tol = max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
             interval = (max(0.0, f - tol), min(1.0, f + tol))
-            band = _band_of(f)
+            band = band_of(f)
             res.bands[t] = band
             res.targets[t] = JointTarget(joint=t, band=band, fraction=f, interval=interval, kind=jr.target.kind,
                                          asked=jr.target.value, phrase=jr.phrase, note=why)

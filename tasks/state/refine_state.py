@@ -68,6 +68,32 @@ def allowed_intervals(
     return out
 
 
+def joints_in_the_way(asset: AssetDescription, worst_pairs: list[dict], bands: dict[str, str], addressed: set[str],
+                      tolerance: float) -> list[str]:
+    """Joints the request did not address (``addressed``: the joints a phrase
+    of the request set; the others are closed by default, band "closed") on
+    the kinematic path of a link pair that penetrates deeper than
+    ``tolerance`` (m) and on whose path the request opened a joint (band
+    other than "closed"): the parts in the way of a requested opening. A
+    toilet's seat asked fully open lies through the lid closed by default; a
+    person who opens the seat has opened the lid first. First-seen order.
+
+    Args:
+        worst_pairs: :attr:`~asset2sim.schemas.report.StateRefinement.worst_pairs`
+            (``link_a``, ``link_b``, ``depth_m`` in m).
+        bands: joint -> band name of the search.
+    """
+    out: list[str] = []
+    for pair in worst_pairs:
+        if not float(pair.get("depth_m", 0.0)) > tolerance:
+            continue
+        path = path_joints(asset, pair["link_a"], pair["link_b"])
+        if not any(j in addressed and bands.get(j, "closed") != "closed" for j in path):
+            continue
+        out.extend(j for j in path if j not in addressed and bands.get(j, "closed") == "closed" and j not in out)
+    return out
+
+
 def path_joints(asset: AssetDescription, link_a: str, link_b: str) -> list[str]:
     """Movable joints on the kinematic path between two links (from
     ``link_a`` up, then from ``link_b`` up:

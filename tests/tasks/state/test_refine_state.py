@@ -8,7 +8,8 @@ from asset2sim.engines.base import SessionOptions, open_session
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.tasks.state.refine_state import allowed_intervals, path_joints, refine_initial_state
+from asset2sim.tasks.state.refine_state import allowed_intervals, joints_in_the_way, path_joints, refine_initial_state
+from tests.conftest import SHARED, needs_shared
 from tests.helpers import write_arm_through_post
 
 
@@ -55,3 +56,36 @@ def test_path_joints_between_links(arm):
     asset, _, _ = arm
     assert path_joints(asset, "arm", "post") == ["hinge"]
     assert path_joints(asset, "body", "post") == []
+
+
+@needs_shared
+def test_parts_in_the_way_are_the_unaddressed_closed_ones_a_requested_opening_runs_through():
+    """Toilet 102703: the seat (joint_3) asked fully open lies through the lid
+    (joint_2) closed by default: the lid is in the way; not when the request
+    set the lid, opened nothing, or the overlap is within tolerance."""
+    asset = extract_asset(SHARED / "102703")
+    deep = [{"link_a": "link_2", "link_b": "link_3", "depth_m": 0.08}]
+    bands = {"joint_0": "closed", "joint_1": "closed", "joint_2": "closed", "joint_3": "fully"}
+    assert joints_in_the_way(asset, deep, bands, {"joint_3"}, 1e-3) == ["joint_2"]
+    assert joints_in_the_way(asset, deep, bands, {"joint_2", "joint_3"}, 1e-3) == []  # "... and its lid closed"
+    assert joints_in_the_way(asset, deep, {**bands, "joint_3": "closed"}, {"joint_3"}, 1e-3) == []  # nothing opened
+    assert joints_in_the_way(asset, [{**deep[0], "depth_m": 5e-4}], bands, {"joint_3"}, 1e-3) == []
+
+
+@needs_shared
+def test_a_seat_asked_fully_open_opens_the_lid_the_request_left_closed(tmp_path):
+    """refine makes room: the lid the request did not address opens out of
+    the seat's way, the report says so and its band is the one it landed
+    in; a lid the request asked closed stays closed."""
+    from asset2sim.tasks.refine import refine_asset
+
+    res = refine_asset(SHARED / "102703", "A toilet with its seat fully open.", tmp_path / "seat", extras=False)
+    rep = res.report
+    assert rep.failure_mode == "none"
+    assert set(rep.state.room_made) == {"joint_2"} and rep.state.room_made["joint_2"] > 0.9
+    assert rep.requested_bands["joint_3"] == "fully" and rep.requested_bands["joint_2"] == "fully"
+    assert rep.metric("penetration").value <= 1.0
+    assert any(line.startswith("joint_2 (lid) opened") for line in rep.design_changes)
+    kept = refine_asset(SHARED / "102703", "A toilet with its seat fully open and its lid closed.", tmp_path / "kept",
+                        extras=False).report
+    assert kept.state.room_made == {} and kept.opening_fractions["joint_2"] <= BAND_INTERVAL["closed"][1] + 1e-9
