@@ -243,7 +243,7 @@ def test_scale_mass_range_rejects_bad_factor() -> None:
         ("foot_pad", "foot"), ("rotation_handle", "handle"), ("rotation_tray", "tray"),
         ("suitcase_body", "body"), ("furniture_body", "body"), ("faucet_base", "base"),
         ("surface_board", "board"), ("caster", "wheel"), ("Drawers", "drawer"), ("pump_lid", "button"),
-        ("glass_door", "door"), ("toggle_button", "button"), ("mystery_part", "mystery_part"),
+        ("glass_door", "door"), ("toggle_button", "switch"), ("rocker_switch", "switch"), ("pressing_button", "button"), ("mystery_part", "mystery_part"),
         (None, None), ("  ", None),
     ],
 )
@@ -308,6 +308,8 @@ def test_roles_and_springs() -> None:
     assert P.spring_expected("Stapler", "lid")
     assert P.spring_expected("Toaster", "slider")
     assert P.spring_expected("Remote", "button")
+    assert P.spring_expected("Remote", "push_button")
+    assert not P.spring_expected("Switch", "toggle_button")  # a toggle stays where it is flipped
     assert not P.spring_expected("Microwave", "door")
     assert not P.spring_expected("Stapler", "stapler_base")
 

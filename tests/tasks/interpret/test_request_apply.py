@@ -116,3 +116,21 @@ def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged
             k: v.model_copy(update={"mass": v.mass * 3, "density": 1000.0}) for k, v in est.overlay.links.items()}})
         flagged = "\n".join(request_apply.check_overlay(ctx, bad, request_apply.StateResolution(bands={}, targets=est.targets)))
         assert "total mass" in flagged and "30 cm tall" in flagged and "glass" in flagged
+
+
+def test_a_toggle_switch_turned_on_stays_on_without_a_return_spring(tmp_path):
+    """A toggle ("toggle_button") is a switch: "on" is its high end, and it
+    stays where it is flipped: no spring (a push button's), so the probes
+    that flip it find it holding (with the spring a toggle swung back from
+    0.10 to 0.37 of its range: probe_failed)."""
+    from tests.unseen_assets import build_toggle_switch
+
+    src = build_toggle_switch(tmp_path / "switch")
+    res = refine_asset(src, "A light switch turned on.", tmp_path / "out", extras=True)
+    rep = res.report
+    assert rep.category == "Switch" and rep.failure_mode == "none"
+    assert res.overlay.joints["joint_0"].stiffness == 0.0
+    assert rep.opening_fractions["joint_0"] > 0.97  # at a travel end
+    ev = json.loads((res.out_dir / "evaluation.json").read_text())
+    probes = next(m for m in ev["metrics"] if m["name"] == "probes")
+    assert probes["passed"], probes["details"]

@@ -1,0 +1,88 @@
+"""Generated assets of categories the dev set lacks, in PartNet-Mobility's
+layout (a y-up body under a z-up ``base``, ``link_N`` / ``joint_N`` with the
+body listed last, ``semantics.txt``, ``meta.json``), built from boxes with
+the demo generator (:mod:`asset2sim.demo_geometry`). Nothing is copied from a
+dataset; dimensions are in object units, as PartNet-Mobility's are.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from asset2sim.demo_assets import _serialise, _write_folder
+from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, Pose, box_xyz
+
+_BASE_RPY = "1.570796326794897 0 -1.570796326794897"
+_WHITE, _GREY, _DARK = (0.92, 0.92, 0.9), (0.6, 0.62, 0.65), (0.15, 0.15, 0.17)
+
+
+class _Builder:
+    """Links and joints of one object; joints placed at object-frame pivots."""
+
+    def __init__(self, asset_id: str, category: str):
+        self.asset_id, self.category = asset_id, category
+        self.links: list[DemoLink] = []
+        self.joints: list[DemoJoint] = []
+        self.frame: dict[str, tuple[float, float, float]] = {}
+        self.n = 0
+
+    def part(self, label: str, boxes, color, pose: Pose | None = None) -> Part:
+        self.n += 1
+        return Part(f"{label}-{self.n}", boxes if isinstance(boxes, list) else [boxes], color, *([pose] if pose else []))
+
+    def body(self, name: str, label: str, parts: list[Part]) -> None:
+        self.links.append(DemoLink(name, "static", label, parts))
+        self.joints.append(DemoJoint(name.replace("link", "joint"), "fixed", "base", name, rpy=_BASE_RPY))
+        self.frame[name] = (0.0, 0.0, 0.0)
+
+    def moving(self, name: str, kind: str, label: str, parts: list[Part], jtype: str, parent: str, pivot, axis,
+               lo: float | None = None, hi: float | None = None) -> None:
+        self.links.append(DemoLink(name, kind, label, parts))
+        origin = tuple(p - q for p, q in zip(pivot, self.frame[parent]))
+        self.frame[name] = tuple(pivot)
+        self.joints.append(DemoJoint(name.replace("link", "joint"), jtype, parent, name, origin=origin, axis=axis, lower=lo, upper=hi))
+
+    def write(self, folder: Path) -> Path:
+        links = self.links[1:] + self.links[:1]  # moving links first, the body last
+        obj = DemoArticulation(asset_id=self.asset_id, category=self.category, robot_name=f"partnet_{self.asset_id}",
+                               links=links, joints=self.joints)
+        return _write_folder(Path(folder), _serialise(obj))
+
+
+def build_toggle_switch(folder: Path) -> Path:
+    """A wall light switch: a plate and a toggle (``toggle_button``) on a
+    revolute joint of +-0.35 rad about the plate's horizontal axis."""
+    b = _Builder("u_switch", "Switch")
+    b.body("link_1", "switch_frame", [b.part("switch_frame", box_xyz(-0.3, 0.3, -0.5, 0.5, -0.08, 0.0), _WHITE)])
+    b.moving("link_0", "hinge", "toggle_button", [b.part("toggle_button", box_xyz(-0.06, 0.06, -0.03, 0.03, 0.03, 0.3), _WHITE)],
+             "revolute", "link_1", (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), -0.35, 0.35)
+    return b.write(folder)
+
+
+def _wheel(b: _Builder, cx: float, cy: float, cz: float, radius: float, half_width: float, sticks: int = 8) -> list[Part]:
+    """A roughly round wheel in the y-z plane (axis x): ``sticks`` bars of
+    half-length ``radius`` through the centre, turned in steps of pi / sticks."""
+    return [b.part("wheel", box_xyz(cx - half_width, cx + half_width, cy - radius, cy + radius, cz - 0.012, cz + 0.012), _DARK,
+                   Pose(axis=(1.0, 0.0, 0.0), angle=math.pi * k / sticks, pivot=(cx, cy, cz))) for k in range(sticks)]
+
+
+def build_cart(folder: Path) -> Path:
+    """A hand cart: a tray with a push handle on four wheels (continuous
+    joints, label ``wheel``) that stand on the ground."""
+    b = _Builder("u_cart", "Cart")
+    body = [b.part("cart_body", box_xyz(-0.5, 0.5, -0.2, -0.16, -0.3, 0.3), _GREY),
+            b.part("cart_body", [box_xyz(-0.5, 0.5, -0.16, 0.05, -0.3, -0.28), box_xyz(-0.5, 0.5, -0.16, 0.05, 0.28, 0.3),
+                                 box_xyz(-0.5, -0.48, -0.16, 0.05, -0.28, 0.28), box_xyz(0.48, 0.5, -0.16, 0.05, -0.28, 0.28)], _GREY),
+            b.part("handle", [box_xyz(-0.52, -0.5, -0.16, 0.45, -0.25, -0.22), box_xyz(-0.52, -0.5, -0.16, 0.45, 0.22, 0.25),
+                              box_xyz(-0.52, -0.5, 0.42, 0.45, -0.22, 0.22)], _DARK)]
+    for x in (-0.42, 0.42):
+        for z in (-0.22, 0.22):
+            body.append(b.part("cart_body", box_xyz(x - 0.06, x - 0.045, -0.35, -0.2, z - 0.015, z + 0.015), _DARK))
+    b.body("link_4", "cart_body", body)
+    i = 0
+    for x in (-0.42, 0.42):
+        for z in (-0.22, 0.22):
+            b.moving(f"link_{i}", "hinge", "wheel", _wheel(b, x, -0.38, z, 0.1, 0.03), "continuous", "link_4", (x, -0.38, z), (1.0, 0.0, 0.0))
+            i += 1
+    return b.write(folder)
