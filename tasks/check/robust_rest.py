@@ -48,7 +48,10 @@ A trial **passes** iff
    placement, carried in the root frame) ends within
    :attr:`RobustRestConfig.topple_tol` (0.05 rad) of the world z axis (yaw,
    a turn about the vertical, is not toppling);
-3. joints held: every movable joint stays within
+3. joints held: every movable joint (but the wheels and casters the object
+   rolls on: continuous joints whose part rests on the ground,
+   :func:`asset2sim.tasks.check.support.rolling_joints`; their drift is
+   recorded, not graded) stays within
    :attr:`RobustRestConfig.joint_tol_revolute` (0.02 rad) or
    :attr:`RobustRestConfig.joint_tol_prismatic` (2 mm) of its initial state at
    every step of settling and test (positions clipped to the joint's limits:
@@ -76,7 +79,9 @@ from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_matr
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import metrics
+from asset2sim.tasks.check import metrics, support
+from asset2sim.tasks.geometry.limits import subtrees
+from asset2sim.urdf import read_urdf
 
 #: The trials, in order.
 TRIALS: tuple[str, ...] = ("drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudge")
@@ -118,6 +123,9 @@ class Trial:
     joint_tolerance: dict[str, float] = field(default_factory=dict)
     """joint -> its tolerance (rad or m)"""
     failing_joints: list[str] = field(default_factory=list)
+    rolling: list[str] = field(default_factory=list)
+    """joints the object rolls on (:func:`asset2sim.tasks.check.support.rolling_joints`):
+    their drift is recorded, not graded (no tolerance)"""
     diverged: bool = False
     failure: str = ""
 
@@ -192,9 +200,10 @@ def _disturb(session: SimSession, name: str, cfg: RobustRestConfig) -> None:
 
 
 def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q_ref: np.ndarray,
-              conventions: SimConventions, config: RobustRestConfig) -> Trial:
+              conventions: SimConventions, config: RobustRestConfig, rolling: list[str] | tuple[str, ...] = ()) -> Trial:
     """Disturb the session (at the saved placement) by trial ``name``, run the
-    SPEC rest test and grade it (see the module docstring).
+    SPEC rest test and grade it (see the module docstring). ``rolling``:
+    joints whose drift is not graded (wheels on the ground).
 
     Raises:
         EngineUnsupported: the engine cannot perform the disturbance.
@@ -215,6 +224,8 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
         q0 = initial_state.get(j, float(allq[0]) if len(allq) else 0.0)
         d = float(np.max(np.abs(allq - q0))) if len(allq) and np.all(np.isfinite(allq)) else float("inf")
         drift[j] = d
+        if j in rolling:
+            continue
         tol = tols[j] = cfg.joint_tol_prismatic if trace.joint_types.get(j) == "prismatic" else cfg.joint_tol_revolute
         if not d <= tol:
             failing.append(j)
@@ -231,7 +242,8 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
         why.append("joints not held: " + ", ".join(f"{j} {drift[j]:.3g}" for j in failing))
     return Trial(
         name=name, passed=not why, d_pos=stab.details.get("D_pos_m"), d_ori=stab.details.get("D_ori_rad"),
-        topple=topple, joint_drift=drift, joint_tolerance=tols, failing_joints=failing, diverged=diverged, failure="; ".join(why),
+        topple=topple, joint_drift=drift, joint_tolerance=tols, failing_joints=failing, rolling=[j for j in trace.joints if j in rolling],
+        diverged=diverged, failure="; ".join(why),
     )
 
 
@@ -268,11 +280,12 @@ def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, floa
                                                         conventions=conv))
     try:
         _, q_ref = session.root_pose()
+        rolling = support.rolling_joints(session, subtrees(read_urdf(urdf, mode="lenient")))
         saved = session.save_state()
         for name in cfg.trials:
             session.restore_state(saved)
             try:
-                run.trials.append(run_trial(session, name, initial_state, q_ref, conv, cfg))
+                run.trials.append(run_trial(session, name, initial_state, q_ref, conv, cfg, rolling))
             except EngineUnsupported as exc:
                 run.trials.append(Trial(name=name, passed=None, failure=f"skipped: {exc}"))
         session.discard_state(saved)

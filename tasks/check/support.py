@@ -55,3 +55,49 @@ class SupportWatch:
         self.slide = max(self.slide, s) if np.isfinite(s) else float("inf")
         self.tilt = max(self.tilt, t)
         return self.slide, self.tilt
+
+
+#: Height (m) above the object's lowest collision point within which a link
+#: counts as resting on the ground (:func:`rolling_joints`): PyBullet's 1 mm
+#: collision margin on each of the two shapes plus 1 mm.
+GROUND_CONTACT_GAP = 0.003
+
+
+def link_lowest_z(session, link: str) -> float:
+    """Lowest world z (m) of ``link``'s collision geometry (its collision
+    vertices in the world; the engine's AABB where it keeps none); inf for a
+    link without collision geometry."""
+    if not session.link_has_collision(link):
+        return float("inf")
+    v = session.link_collision_vertices(link)
+    if len(v):
+        p, R = session.link_frame(link)
+        return float(np.min((np.asarray(v, float) @ np.asarray(R, float).T + np.asarray(p, float))[:, 2]))
+    return float(session.link_aabb(link)[0][2])
+
+
+def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:
+    """Continuous joints of ``session`` whose moving part rests on the ground
+    where the session stands now (a link of the part within
+    :data:`GROUND_CONTACT_GAP` of the object's lowest collision point): the
+    wheels and casters the object rolls on. Their angle is not a state the
+    object holds (a cart nudged or tilted rolls; a wheel turns with the
+    ground under it) and a finger does not operate them (the object is
+    rolled), so robust rest does not grade their drift and the probes do not
+    push them (``docs/metrics.md``). Revolute and prismatic parts touching
+    the ground (a pedal, a foot, a lid folded down) are not rolling.
+
+    Args:
+        moved: movable joint -> the links it moves
+            (:func:`asset2sim.tasks.geometry.limits.subtrees`).
+
+    Returns:
+        Joint names, in ``moved``'s order.
+    """
+    low = {ln: link_lowest_z(session, ln) for ln in session.link_names}
+    finite = [z for z in low.values() if np.isfinite(z)]
+    if not finite:
+        return []
+    floor = min(finite) + GROUND_CONTACT_GAP
+    return [j for j, links in moved.items()
+            if session.joint_types.get(j) == "continuous" and any(low.get(ln, np.inf) <= floor for ln in links)]

@@ -22,9 +22,11 @@ from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, record_rest_test
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.check.probes import run_probes
+from asset2sim.tasks.check.support import rolling_joints
 from asset2sim.tasks.evaluation.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context
+from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import read_urdf
 
@@ -163,14 +165,15 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
             ctx.notes += cnotes
         if pyb and probes and saved is not None:
             session.restore_state(saved)
+            model = read_urdf(ctx.urdf, mode="lenient")
+            rolling = set(rolling_joints(session, subtrees(model)))  # wheels on the ground: the object is rolled, not them
             targets = {
                 n: (c.q_closed, c.direction, c.open_range)
                 for n, c in ctx.closed.items()
-                if n in (ctx.task_joints if probe_joints is None else probe_joints) and c.open_range > 0
+                if n in (ctx.task_joints if probe_joints is None else probe_joints) and c.open_range > 0 and n not in rolling
             }
             holds = bool(getattr(ctx.request, "holds_position", False))
-            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds,
-                                    model=read_urdf(ctx.urdf, mode="lenient"))
+            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds, model=model)
     except Exception as exc:
         run.error = f"{type(exc).__name__}: {exc}"
     finally:

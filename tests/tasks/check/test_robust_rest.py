@@ -171,3 +171,40 @@ def test_an_object_that_keeps_moving_still_fails_after_the_recovery_time(tmp_pat
 """)
     run = run_robust_rest("pybullet", urdf, {}, config=RobustRestConfig(trials=("nudge",)))
     assert run.trials[0].passed is False and "not at rest" in run.trials[0].failure
+
+
+def test_wheels_the_object_rolls_on_are_not_held_states_and_are_not_pushed(tmp_path):
+    """A cart on four wheels (continuous joints resting on the ground): the
+    wheels turn when it is tilted or nudged, as wheels do, so robust rest
+    records their drift without grading it and the probes do not push them
+    (a finger does not turn a wheel under a cart: the cart is rolled). Before
+    this, the wheels' 0.07-0.23 rad turns failed robust rest, escalation
+    braked them, and every wheel probe then failed ("the object moved
+    instead"). A continuous joint off the ground (the contract asset has
+    none on the ground) is not rolling."""
+    import json
+
+    from asset2sim.tasks.check.support import rolling_joints
+    from asset2sim.tasks.geometry.limits import subtrees
+    from asset2sim.urdf import read_urdf
+    from tests.unseen_assets import build_cart
+
+    src = build_cart(tmp_path / "cart")
+    wheels = [f"joint_{i}" for i in range(4)]
+    moved = subtrees(read_urdf(src / "mobility.urdf"))
+    with open_session("pybullet", src / "mobility.urdf", SessionOptions()) as s:
+        assert rolling_joints(s, moved) == wheels
+        s.set_root_pose(s.root_pose()[0] + np.array([0.0, 0.0, 0.5]), s.root_pose()[1])
+        assert rolling_joints(s, moved) == wheels  # the lowest parts of the object, wherever it is
+    a = write_contract_asset(tmp_path / "contract", lid_angle=0.4)
+    with open_session("pybullet", a.urdf, SessionOptions()) as s:
+        assert rolling_joints(s, subtrees(read_urdf(a.urdf))) == []
+    res = refine_asset(src, "A cart.", tmp_path / "out")
+    rep = res.report
+    assert rep.failure_mode == "none", rep.readiness
+    rr = rep.metric("robust_rest")
+    assert rr.passed and all(t["rolling"] == wheels for t in rr.details["trials"].values())
+    assert max(t["joint_drift"]["joint_0"] for t in rr.details["trials"].values()) > 0.02  # they did turn
+    ev = json.loads((res.out_dir / "evaluation.json").read_text())
+    probes = next(m for m in ev["metrics"] if m["name"] == "probes")
+    assert probes["details"]["probes"] == [] and probes["passed"] is None  # the cart's only movable parts are its wheels
