@@ -86,3 +86,27 @@ def build_cart(folder: Path) -> Path:
             b.moving(f"link_{i}", "hinge", "wheel", _wheel(b, x, -0.38, z, 0.1, 0.03), "continuous", "link_4", (x, -0.38, z), (1.0, 0.0, 0.0))
             i += 1
     return b.write(folder)
+
+
+_GLASS = (0.6, 0.8, 0.9)
+
+
+def build_sliding_window(folder: Path) -> Path:
+    """A window frame (``window_frame``) with two sashes (``window``) that
+    slide past each other in two tracks (prismatic, 0-0.5 units): modelled
+    closed, each sash over its half of the opening. Sliding one open moves
+    it over the other inside the frame: the object is equally compact at
+    every opening."""
+    b = _Builder("u_window_slide", "Window")
+    x, y, z, f = 0.6, 0.45, 0.05, 0.06
+    b.body("link_2", "window_frame", [
+        b.part("window_frame", box_xyz(-x, x, -y, -y + f, -z, z), _WHITE),
+        b.part("window_frame", box_xyz(-x, x, y - f, y, -z, z), _WHITE),
+        b.part("window_frame", box_xyz(-x, -x + f, -y + f, y - f, -z, z), _WHITE),
+        b.part("window_frame", box_xyz(x - f, x, -y + f, y - f, -z, z), _WHITE)])
+    xi, yi = x - f - 0.005, y - f - 0.005
+    b.moving("link_0", "slider", "window", [b.part("window", box_xyz(-xi, 0.02, -yi, yi, 0.005, 0.035), _GLASS)],
+             "prismatic", "link_2", (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.0, 0.5)
+    b.moving("link_1", "slider", "window", [b.part("window", box_xyz(-0.02, xi, -yi, yi, -0.035, -0.005), _GLASS)],
+             "prismatic", "link_2", (0.0, 0.0, 0.0), (-1.0, 0.0, 0.0), 0.0, 0.5)
+    return b.write(folder)

@@ -27,6 +27,12 @@ asset, other joints at their reference state):
    rests against its parent (a toilet lid on its seat, a drawer pushed home).
 4. Refine with ``fine`` samples between the neighbouring coarse samples.
 
+A joint whose motion leaves the parent+subtree box within ``tie_tol`` of its
+smallest over the whole range (a knob, a sash sliding in its frame, a button
+pressed into its body) has no geometric closed end: the limit nearest the
+modelled pose 0 is used, as for a continuous joint (unless the part
+penetrates the rest there: then steps 2-4 decide).
+
 The opening direction is towards the farther limit from q_closed, and the
 opening range is that distance. Continuous joints have no stops and so no
 closed end: their modelled pose 0 is kept (opening range pi for the measure). The measure used by
@@ -332,19 +338,25 @@ def closed_positions(
             vals = np.array([measure(q) for q in qs])
             c = vals[:, 0]
             cmin = c.min()
-            q_open = float(qs[int(np.argmax(c))])
-            best = pick(qs, vals, tie_tol, q_open)
-            a = qs[max(best - 1, 0)]
-            b = qs[min(best + 1, coarse - 1)]
-            qf = np.linspace(a, b, fine)
-            vf = np.array([measure(q) for q in qf])
-            q_closed = float(qf[pick(qf, vf, tie_tol, q_open)])
+            ratio = float(c.max() / max(cmin, 1e-12))
+            notes = []
+            modelled = _modelled_end(qs, vals, ratio, tie_tol)
+            if modelled is not None:
+                q_closed = modelled
+                notes.append("compactness does not change over the range (a knob, a sash sliding in its frame): "
+                             "no geometric closed end; the limit nearest the modelled pose 0 is used")
+            else:
+                q_open = float(qs[int(np.argmax(c))])
+                best = pick(qs, vals, tie_tol, q_open)
+                a = qs[max(best - 1, 0)]
+                b = qs[min(best + 1, coarse - 1)]
+                qf = np.linspace(a, b, fine)
+                vf = np.array([measure(q) for q in qf])
+                q_closed = float(qf[pick(qf, vf, tie_tol, q_open)])
+                if ratio < 1.0 + tie_tol:
+                    notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
             up, down = hi - q_closed, q_closed - lo
             direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
-            notes = []
-            ratio = float(c.max() / max(cmin, 1e-12))
-            if ratio < 1.0 + tie_tol:
-                notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
             result[name] = ClosedState(
                 joint=name,
                 q_closed=q_closed,
@@ -358,6 +370,24 @@ def closed_positions(
             state[name] = q_closed
     session.set_joint_positions(state)
     return result
+
+
+def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float, tie_tol: float) -> float | None:
+    """The closed end of a joint whose motion leaves the object as compact
+    as it is (``ratio`` = largest / smallest parent+subtree box over the
+    samples ``qs`` below 1 + ``tie_tol``): the limit nearest the modelled
+    pose 0 (as for a continuous joint, and as the evaluation's fallback),
+    unless the subtree penetrates the rest there by more than
+    ``PHI_TIE_FRACTION`` of the object's size beyond the least-penetrating
+    sample (then None: the geometric search decides). ``vals`` (n, 3):
+    (parent+subtree box, subtree box, penetration) per sample."""
+    if not ratio < 1.0 + tie_tol:
+        return None
+    i = 0 if abs(qs[0]) <= abs(qs[-1]) else len(qs) - 1
+    size = float(vals[:, 0].min()) ** (1.0 / 3.0)
+    if vals[i, 2] > vals[:, 2].min() + PHI_TIE_FRACTION * size:
+        return None
+    return float(qs[i])
 
 
 def object_extents(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray] | None = None) -> np.ndarray:

@@ -109,3 +109,34 @@ def test_closed_ends_of_one_geometry_are_measured_once_and_stay_right(tmp_path):
     shorter = urdf_closed.measure_closed_ends(a.urdf)
     assert urdf_closed._MEASURED.hits == hits + 2  # the copy check above; the new limit was measured
     assert shorter.closed["lid_hinge"].upper == lid.limit.upper != first.closed["lid_hinge"].upper
+
+
+def test_a_motion_that_leaves_the_object_as_compact_closes_at_the_modelled_pose(tmp_path):
+    """Sashes sliding past each other in their frame: the object is as
+    compact at every opening, so the geometry has no closed end and the
+    limit nearest the modelled pose 0 is used (the window as modelled,
+    closed), not the far limit the tie rule picked (0.5: "fully open" was
+    then the modelled closed window). A lid, whose opening changes the box,
+    is still found from the geometry (the other tests here)."""
+    from asset2sim.tasks.geometry.urdf_closed import closed_session
+    from tests.unseen_assets import build_sliding_window
+
+    src = build_sliding_window(tmp_path / "window")
+    with closed_session(src / "mobility.urdf") as m:
+        for j in ("joint_0", "joint_1"):
+            c = m.closed[j]
+            assert (c.q_closed, c.direction) == (0.0, 1.0) and c.open_range == pytest.approx(0.5)
+            assert c.compactness_ratio < 1.03 and "modelled pose" in c.notes[0]
+
+
+@needs_shared
+def test_suitcase_buttons_close_unpressed():
+    """101668's two lock buttons (prismatic 0-12 mm into the body) change
+    nothing of the suitcase's box: closed is the modelled, unpressed 0 (the
+    tie rule put them 6.9 mm in)."""
+    from asset2sim.tasks.geometry.urdf_closed import closed_session
+
+    with closed_session(SHARED / "101668" / "mobility.urdf") as m:
+        for j in ("joint_0", "joint_1"):
+            assert m.closed[j].q_closed == 0.0 and m.closed[j].open_range == pytest.approx(0.012, abs=1e-4)
+        assert m.closed["joint_2"].compactness_ratio > 1.5  # the lid: found from the geometry
