@@ -56,17 +56,12 @@ def dataset(tmp_path) -> Path:
 
 def _aabb_extents(urdf: Path, drawer_q: float) -> np.ndarray:
     from asset2sim.engines.base import SessionOptions, open_session
+    from asset2sim.tasks.geometry.urdf_closed import aabb_extents
 
     s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False,
                                                       initial_state={"joint_lid": 0.0, "joint_drawer": drawer_q}))
     try:
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for name in s.link_names:
-            if not s.link_has_collision(name):
-                continue
-            a, b = s.link_aabb(name)
-            lo, hi = np.minimum(lo, a), np.maximum(hi, b)
-        return hi - lo
+        return aabb_extents(s)
     finally:
         s.close()
 
