@@ -160,3 +160,18 @@ def local_s3_server(monkeypatch, bucket: str) -> Iterator[str]:
         yield endpoint
     finally:
         server.stop()
+
+
+def rest_tests_of_refine(report) -> int:
+    """SPEC rest tests a refine run with ``report`` (a ``RefineReport``)
+    simulated: per post-check round one in PyBullet and one after each
+    robust-rest disturbance (``tasks.check.robust_rest.TRIALS``), and one in
+    each other engine (``RefineConfig().engines``) on every round not
+    escalated on PyBullet's own tiers (an escalation round runs neither the
+    sweep nor the other engines: ``postcheck.run_post_check``)."""
+    from asset2sim.schemas.config import RefineConfig
+    from asset2sim.tasks.check import postcheck, robust_rest
+
+    rounds = report.escalation
+    full = [r for r in rounds if not postcheck.sweep_not_run(r.metrics)]
+    return len(rounds) * (1 + len(robust_rest.TRIALS)) + len(full) * (len(RefineConfig().engines) - 1)

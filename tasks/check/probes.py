@@ -90,9 +90,12 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   joint sweep's rule, :func:`asset2sim.tasks.check.sweep._sweep_clearing`);
   the retry is kept when it succeeds, with a note. Needs the URDF model.
 - A probe succeeds iff the target is reached without the object moving and, for
-  a close probe, without rebound (a drawer that springs back). An open probe's
-  rebound (a lid that falls shut) fails only when the request asks the joint
-  to hold its position.
+  a close probe, without rebound (a drawer that springs back), unless the
+  joint's spring is one its part prior or the request expects (it returns
+  by design: a toaster's carriage lever pushed down, a stapler's arm; the
+  task-execution check's rule, :func:`asset2sim.tasks.check.task_tier.hold_required_by_label`).
+  An open probe's rebound (a lid that falls shut) fails only when the
+  request asks the joint to hold its position.
 """
 
 from __future__ import annotations
@@ -278,6 +281,7 @@ def probe_joint(
     config: ProbeConfig | None = None,
     holds_position: bool = False,
     model: UrdfModel | None = None,
+    returns: bool = False,
 ) -> ProbeResult:
     """Run one probe on ``joint`` of a session from its current state.
 
@@ -292,6 +296,10 @@ def probe_joint(
             open probe that falls back then fails).
         model: the session's URDF model (the mass the joint moves and the
             links rigid with its child); None: the child link alone.
+        returns: the joint's spring is one its part prior or the request
+            expects (:func:`asset2sim.tasks.check.task_tier.hold_required_by_label`):
+            a close probe's rebound is its design (a toaster's carriage
+            lever, a stapler's arm), noted, not a failure.
 
     Raises:
         ValueError: unknown action or non-positive ``open_range``.
@@ -420,13 +428,15 @@ def probe_joint(
         failure = "target not reached" + (" (the object moved instead)" if slid or tipped else "")
     elif slid or tipped:
         failure = "the object " + ("slid" if slid else "tipped") + " instead of the joint moving"
-    elif action == "close" and rebound:
+    elif action == "close" and rebound and not returns:
         failure = "springs back after release"
     elif action == "open" and rebound and holds_position:
         failure = "does not hold the open position after release"
     notes = []
     if action == "open" and rebound and not holds_position:
         notes.append("falls back after release (allowed: the request does not ask it to hold)")
+    if action == "close" and rebound and returns:
+        notes.append("springs back after release (allowed: a spring its part prior or the request expects returns it)")
     if kept:
         notes.append("keeps moving after release")
     return ProbeResult(
@@ -466,6 +476,7 @@ def run_probes(
     config: ProbeConfig | None = None,
     holds_position: bool = False,
     model: UrdfModel | None = None,
+    returns: set[str] | frozenset[str] = frozenset(),
 ) -> list[ProbeResult]:
     """Probe every joint of ``joints`` with every action, each from the
     session's state at call time (saved and restored with the session's
@@ -479,6 +490,7 @@ def run_probes(
         model: the session's URDF model: the mass a joint moves, and a part
             shut in by another is probed again with that one open (module
             docstring); None: neither.
+        returns: joints whose spring returns them by design (see :func:`probe_joint`).
 
     Returns:
         One :class:`ProbeResult` per joint and action, in order. The session is
@@ -491,7 +503,7 @@ def run_probes(
             for action in actions:
                 session.restore_state(sid)
                 kw = dict(closed=closed, direction=direction, open_range=rng, action=action, config=config,
-                          holds_position=holds_position, model=model)
+                          holds_position=holds_position, model=model, returns=name in returns)
                 r = probe_joint(session, name, **kw)
                 if model is not None and _shut_in(r):
                     retry = _probe_cleared(session, r, joints, model, sid, kw)

@@ -9,8 +9,12 @@ the carrying link's origin at the object's lowest height (the lowest corner
 of every link's bounding box) when the watch starts, carried rigidly with
 that link; its horizontal displacement is the slide (a tall fridge rocking
 0.3 deg moves its root origin 1 cm without sliding; rocking lifts the point,
-it does not move it sideways). Tipping is the rotation angle of the carrying
-link since the start.
+it does not move it sideways). Tipping is the angle between the world
+vertical and the carrying link's up direction (the world vertical at the
+start, carried with the link), as robust rest measures toppling: a turn
+about the vertical is not tipping (a pair of scissors lying flat turns on
+the table as one blade is opened against the other: 0.95 rad of turn, no
+tilt and 0.7 mm of slide; counted as "tipped", its probes failed).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ class SupportWatch:
 
     Attributes:
         slide: largest horizontal footprint displacement seen by :meth:`update`, m.
-        tilt: largest rotation seen by :meth:`update`, rad.
+        tilt: largest tilt of the up direction seen by :meth:`update`, rad.
     """
 
     def __init__(self, session, link: str) -> None:
@@ -35,15 +39,17 @@ class SupportWatch:
         z_low = min(float(session.link_aabb(ln)[0][2]) for ln in session.link_names)
         self.foot0 = np.array([self.p0[0], self.p0[1], z_low])
         self.foot_local = self.R0.T @ (self.foot0 - self.p0)
+        self.up_local = self.R0.T @ np.array([0.0, 0.0, 1.0])
         self.slide = self.tilt = 0.0
 
     def current(self) -> tuple[np.ndarray, float]:
-        """(horizontal footprint displacement (2,) m, rotation rad) now; the
-        rotation is inf when the engine reports a non-finite orientation."""
+        """(horizontal footprint displacement (2,) m, tilt of the up
+        direction from the vertical, rad) now; the tilt is inf when the
+        engine reports a non-finite orientation."""
         p, R = self.session.link_frame(self.link)
         R = np.asarray(R, float)
         moved = np.asarray(p, float) + R @ self.foot_local - self.foot0
-        c = (float(np.trace(self.R0.T @ R)) - 1.0) / 2.0
+        c = float((R @ self.up_local)[2])
         t = float(np.arccos(np.clip(c, -1.0, 1.0))) if np.isfinite(c) else float("inf")
         return moved[:2], t
 

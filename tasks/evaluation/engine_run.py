@@ -25,7 +25,7 @@ from asset2sim.tasks.check.probes import run_probes
 from asset2sim.tasks.check.support import rolling_joints
 from asset2sim.tasks.evaluation.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
-from asset2sim.tasks.evaluation.eval_context import Context
+from asset2sim.tasks.evaluation.eval_context import Context, hold_required
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import read_urdf
@@ -173,7 +173,9 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 if n in (ctx.task_joints if probe_joints is None else probe_joints) and c.open_range > 0 and n not in rolling
             }
             holds = bool(getattr(ctx.request, "holds_position", False))
-            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds, model=model)
+            returns = {n for n, h in hold_required(ctx, list(targets)).items() if not h}  # sprung by design
+            run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds, model=model,
+                                    returns=returns)
     except Exception as exc:
         run.error = f"{type(exc).__name__}: {exc}"
     finally:

@@ -275,3 +275,18 @@ def build_context(
         notes=notes,
         root_fixed=root_fixed,
     )
+
+
+def hold_required(ctx: Context, joints: list[str]) -> dict[str, bool]:
+    """joint -> whether ``joints`` of the context's asset must hold where an
+    operation leaves them (:func:`asset2sim.tasks.check.task_tier.hold_required_by_label`
+    with the context's part labels, springs, category and request): not a
+    joint whose spring the part prior or the request expects (it returns by
+    design), nor any where the request asks the parts to move freely."""
+    from asset2sim.tasks.check.task_tier import hold_required_by_label
+
+    labels = {n: ((ctx.semantics.get(ctx.joints[n].child) or (None, None))[1] if n in ctx.joints else None)
+              for n in joints}
+    req = ctx.request
+    return hold_required_by_label(labels, ctx.springs, ctx.category, free_moving=bool(req is not None and req.free_moving),
+                                  spring_requested=bool(req is not None and req.spring))

@@ -49,7 +49,7 @@ from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
-from asset2sim.tasks.evaluation.eval_context import Context
+from asset2sim.tasks.evaluation.eval_context import Context, hold_required
 from asset2sim.tasks.evaluation.request_match import requested_joints, scaled_mass_range
 
 #: Largest ground penetration during the rest test that passes, m.
@@ -418,18 +418,6 @@ def _task_joints(ctx: Context) -> dict[str, tuple[float, float, float]]:
     return {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in names and c.open_range > 0}
 
 
-def _hold_required(ctx: Context, joints: list[str]) -> dict[str, bool]:
-    """:func:`asset2sim.tasks.check.task_tier.hold_required_by_label` for
-    ``joints`` of the context's asset and request."""
-    from asset2sim.tasks.check.task_tier import hold_required_by_label
-
-    labels = {n: ((ctx.semantics.get(ctx.joints[n].child) or (None, None))[1] if n in ctx.joints else None)
-              for n in joints}
-    req = ctx.request
-    return hold_required_by_label(labels, ctx.springs, ctx.category, free_moving=bool(req is not None and req.free_moving),
-                                  spring_requested=bool(req is not None and req.spring))
-
-
 @register_metric("task_execution")
 def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.task_execution` in every engine that
@@ -449,7 +437,7 @@ def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         run = task_execution.run_task(e, ctx.urdf, joints, actions=actions, targets=dict(ctx.task.targets),
                                       initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
                                       conventions=ctx.conventions, fixed_base=ctx.root_fixed,
-                                      hold_required=_hold_required(ctx, list(joints)), task=ctx.task.text)
+                                      hold_required=hold_required(ctx, list(joints)), task=ctx.task.text)
         tm = task_execution.task_metric(run)
         tm.details["joints_rule"] = ctx.task.rule
         out += [tm, force_metric(run, ctx.category, labels)]

@@ -130,6 +130,10 @@ def _scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[_
 
 
 _OPEN = r"open(?:ed)?"
+#: Verbs of a part's motion that a degree word may follow ("pulled out halfway",
+#: "lifted a quarter of the way"): the degree is the state, not the verb's end.
+_MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
+          r"turned|rotated|unfolded|folded)")
 _SZ = r"[- ]?siz(?:ed?|es)"
 
 # (regex, size class, flag) - flag "weak": only counts right before a category word.
@@ -190,18 +194,22 @@ _STATE_TABLE = _compile(
         (r"(?:almost|nearly) (?:fully|all the way)(?: " + _OPEN + r")?", "mostly", ""),
         (r"three[- ]quarters?(?: of the way)?(?:[- ]" + _OPEN + r")?", "mostly", ""),
         (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
+        (_MOVED + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         # halfway
         (r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
         (r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
         (_OPEN + r" (?:half[- ]?way|half)", "halfway", ""),
+        (_MOVED + r" (?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
         (r"(?:partially|partly) " + _OPEN, "halfway", ""),
         # quarter
         (r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
         (_OPEN + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (_MOVED + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
         (r"(?:a |one )?quarter of the way", "quarter", ""),
         # slightly open
         (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
         (_OPEN + r" (?:slightly|a (?:little |tiny )?bit|a little|a crack|a tad|just a (?:little|bit))", "slightly_open", ""),
+        (_MOVED + r" (?:slightly|a (?:little |tiny )?bit|a little|a tad|just a (?:little|bit))", "slightly_open", ""),
         (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?", "slightly_open", ""),
         (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
         # a lone "open"

@@ -38,7 +38,8 @@ _R = r"(?![\w-])"
 PART_WORDS = (
     r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
     r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
-    r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?"
+    r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?|"
+    r"containers?|carafes?|jugs?|temples?|lens(?:es)?"
 )
 PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
 #: Words for the object's fixed body (material per part: "on a plastic body").

@@ -17,6 +17,7 @@ from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
 from tests.conftest import SHARED, needs_shared
+from tests.helpers import rest_tests_of_refine
 
 
 def check_output_contract(out, report):
@@ -249,17 +250,11 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
     res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
     assert "html" in res.extras, res.report.notes
     assert counts["extract"] == 1
-    # the SPEC rest test once per post-check in PyBullet and once in each other engine (PhysX where SAPIEN is
-    # installed: schemas.config.default_engines) on every round not escalated on PyBullet's own tiers (an
-    # escalation round runs neither the sweep nor the other engines: postcheck.run_post_check), none in the
-    # extras; robust rest runs it after each of its disturbances (tasks.check.robust_rest.TRIALS) in every
-    # post-check, and the evaluation takes the last post-check's robust rest (same files, state and
-    # conventions: tasks.check.recorded_runs)
-    trials = len(robust_rest.TRIALS)
+    # the post-check's rest tests (tests.helpers.rest_tests_of_refine), none in the extras: the evaluation
+    # takes the last post-check's robust rest (same files, state and conventions: tasks.check.recorded_runs)
     rounds = res.report.escalation
-    full = [r for r in rounds if not postcheck.sweep_not_run(r.metrics)]
-    assert rounds[-1] in full and len(full) < len(rounds)  # box_lid escalates once
-    assert counts["rest_test"] == len(rounds) * (1 + trials) + len(full) * (len(RefineConfig().engines) - 1)
+    assert len(rounds) > 1 and postcheck.sweep_not_run(rounds[0].metrics)  # box_lid escalates once
+    assert counts["rest_test"] == rest_tests_of_refine(res.report)
     written = json.loads((out / "evaluation.json").read_text())
     names = {m["name"] for m in written["metrics"]}
     assert {"ground_penetration", "divergence", "joint_hold", "probes"} <= names
@@ -270,7 +265,7 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
 
     counts["rest_test"] = 0
     fresh = evaluate_asset(out, prompt=entry.prompt, category=res.report.category, method="asset2sim")
-    assert counts["rest_test"] == 1 + trials
+    assert counts["rest_test"] == 1 + len(robust_rest.TRIALS)
     assert _metrics_without_timing(_jsonable(fresh.model_dump(mode="json"))) == _metrics_without_timing(written)
 
 

@@ -266,3 +266,37 @@ def test_a_part_shut_in_by_another_is_probed_with_that_one_held_open(tmp_path):
     assert r.success, r.failure
     assert any("base is in the way" in n and "top_hinge held" in n for n in r.notes)
     assert cleared["top_hinge"].success and plain["top_hinge"].success  # the top itself opens either way
+
+
+def test_a_spring_the_part_prior_expects_may_return_the_close_probe_a_stray_one_may_not(tmp_path):
+    """The rebound rule is the task check's hold rule: the same sprung drawer
+    fails the close probe as a drawer (no spring expected) and passes, with a
+    note, where its spring is one the joint is expected to have."""
+    from asset2sim.engines.base import SessionOptions, Spring, open_session
+    from asset2sim.tasks.check.probes import run_probes
+
+    urdf = drawer(tmp_path / "d", stiffness=200.0) / "mobility.urdf"
+    opts = SessionOptions(initial_state={"slide": 0.15}, springs={"slide": Spring(stiffness=200.0, reference=0.3)})
+    with open_session("pybullet", urdf, opts) as s:
+        stray, = run_probes(s, {"slide": (0.0, 1.0, 0.3)}, actions=("close",))
+        designed, = run_probes(s, {"slide": (0.0, 1.0, 0.3)}, actions=("close",), returns={"slide"})
+    assert stray.rebound and stray.failure == "springs back after release"
+    assert designed.rebound and designed.success and any("springs back" in n for n in designed.notes)
+
+
+def test_a_turn_about_the_vertical_is_not_tipping(tmp_path):
+    """SupportWatch's tilt is the up direction's angle from the vertical (as
+    robust rest's topple): a flat object turned on the table by 0.9 rad has
+    not tipped; one tilted by 0.1 rad has, whatever it was turned by."""
+    from asset2sim.engines.base import SessionOptions, open_session
+    from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_to_xyzw
+    from asset2sim.tasks.check.support import SupportWatch
+
+    urdf = drawer(tmp_path / "d") / "mobility.urdf"
+    with open_session("pybullet", urdf, SessionOptions()) as s:
+        watch = SupportWatch(s, s.link_names[0])
+        p, _ = s.root_pose()
+        for R, tilt in ((axis_angle_matrix(np.array([0.0, 0.0, 1.0]), 0.9), 0.0),
+                        (axis_angle_matrix(np.array([1.0, 0.0, 0.0]), 0.1) @ axis_angle_matrix(np.array([0.0, 0.0, 1.0]), 0.9), 0.1)):
+            s.set_root_pose(p, quat_wxyz_to_xyzw(matrix_quat_wxyz(R)))
+            assert watch.current()[1] == pytest.approx(tilt, abs=1e-6)
