@@ -110,3 +110,25 @@ def build_sliding_window(folder: Path) -> Path:
     b.moving("link_1", "slider", "window", [b.part("window", box_xyz(-0.02, xi, -yi, yi, -0.035, -0.005), _GLASS)],
              "prismatic", "link_2", (0.0, 0.0, 0.0), (-1.0, 0.0, 0.0), 0.0, 0.5)
     return b.write(folder)
+
+
+_STEEL, _RED = (0.75, 0.76, 0.78), (0.8, 0.15, 0.1)
+
+
+def build_pliers(folder: Path) -> Path:
+    """A pair of pliers lying flat (0.04 units thick): two coplanar halves
+    (jaw + handle, label ``leg`` / ``handle``) on one revolute joint about
+    the vertical through the pivot (0-0.5 rad), each half one layer at the
+    pivot, out beyond the other layer's swept radius."""
+    b = _Builder("u_pliers", "Pliers")
+    up, down, full = (0.0025, 0.02), (-0.02, -0.0025), (-0.02, 0.02)
+    b.body("link_1", "leg", [
+        b.part("leg", [box_xyz(-0.06, 0.06, *up, -0.06, 0.06), box_xyz(0.06, 0.1, *up, 0.0025, 0.04),
+                       box_xyz(-0.1, -0.06, *up, -0.06, -0.03), box_xyz(0.1, 0.32, *full, 0.0025, 0.04)], _STEEL),
+        b.part("handle", [box_xyz(-0.7, -0.1, *full, -0.1, -0.03)], _RED)])
+    b.moving("link_0", "hinge", "leg", [
+        b.part("leg", [box_xyz(-0.06, 0.06, *down, -0.06, 0.06), box_xyz(0.06, 0.1, *down, -0.04, -0.0025),
+                       box_xyz(-0.1, -0.06, *down, 0.03, 0.06), box_xyz(0.1, 0.32, *full, -0.04, -0.0025)], _STEEL),
+        b.part("handle", [box_xyz(-0.7, -0.1, *full, 0.03, 0.1)], _RED)],
+        "revolute", "link_1", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 0.0, 0.5)
+    return b.write(folder)

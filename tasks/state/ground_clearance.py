@@ -20,7 +20,11 @@ z up; collision pieces as the writer wrote them):
    (the links no movable joint moves) must itself reach the ground (its
    lowest vertex within :data:`CONTACT_BAND` of z_g): an object that stands
    on parts that move (wheels, legs, a suitcase on its casters) is left as
-   it is.
+   it is. So is an object lower than :data:`THIN_OBJECT` clearances (a pair
+   of pliers, scissors, a pocket knife, a USB stick lying flat): it lies on
+   the floor as a whole, its moving parts are half of what it lies on, not
+   doors over a floor (raised, a 8.9 mm pair of pliers lay on one half and
+   tilted 0.052 rad when the other was opened).
 2. A piece P of a link moved by joint j *drags* on the ground when its
    lowest vertex is less than :data:`GROUND_CLEARANCE` above z_g (an object
    whose bottom is not flat rocks onto a door that ends a few mm above its
@@ -55,7 +59,7 @@ from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf
 
-__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
+__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
            "ground_clearance", "write_overrides"]
 
 #: Floor clearance (m) given to a moving part that rests on or near the
@@ -69,6 +73,10 @@ __all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "GroundClearance", "
 GROUND_CLEARANCE = 0.01
 #: Distance (m) above the ground within which a vertex counts as resting on it.
 CONTACT_BAND = 0.0015
+#: An object whose height above the ground is below this many
+#: :data:`GROUND_CLEARANCE` lies on the floor as a whole (module docstring,
+#: step 1): 2, i.e. 2 cm.
+THIN_OBJECT = 2.0
 #: Largest angle (rad) between a hinge axis and the vertical (or a slide axis
 #: and the horizontal) for the joint to move its part along the ground.
 SLIDE_ANGLE = math.radians(30.0)
@@ -131,6 +139,9 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     if not lows:
         return rep
     z_g = min(lows.values())
+    top = max(float(W[:, 2].max()) for ws in world.values() for W in ws)
+    if top - z_g < THIN_OBJECT * GROUND_CLEARANCE:
+        return rep  # lying flat as a whole: its moving parts are part of its support
     mover = _moving_joint(model)
     body_low = [lows[ln] for ln in lows if mover.get(ln) is None]
     if not body_low or min(body_low) > z_g + CONTACT_BAND:
