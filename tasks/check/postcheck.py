@@ -228,8 +228,8 @@ def run_post_check(
     tiers already fail and are escalated, the other engines are not run in
     that round either (``engine_results`` empty): they are run in every round
     that is not escalated on ``engine``'s tiers alone, the last included, so
-    a joint that fails only in another engine is escalated a round later. Robust rest always runs
-    every trial: escalation sizes each joint's friction from the worst drift
+    a joint that fails only in another engine is escalated a round later.
+    Robust rest always runs every trial: escalation sizes each joint's friction from the worst drift
     over all trials (:func:`~asset2sim.tasks.check.manipulation.hold_factor`).
     ``recorded``: manipulation runs taken from / recorded into it (a new
     record when None; :attr:`PostCheck.recorded`)."""
@@ -280,11 +280,9 @@ def run_post_check(
         if escalated is None:
             return None
         if partial_escalated(rr):  # escalated on this engine's tiers alone: the other engines are not run either
-            return "escalation round: the check fails without the sweep and is escalated whatever it says"
+            return ESCALATION_ROUND
         run_parity()
-        if partial_escalated(rr):
-            return "escalation round: the check fails without the sweep and is escalated whatever it says"
-        return None
+        return ESCALATION_ROUND if partial_escalated(rr) else None
 
     extra = [] if closed is None else manipulation.measure_manipulation(
         engine, urdf_path, initial_state, springs_of(overlay), conv, closed, fixed_base=fixed,
@@ -293,6 +291,10 @@ def run_post_check(
         run_parity()
     return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,
                      engine_results=engine_results, recording=recording, recorded=recorded)
+
+
+#: Why an escalation round records the sweep as not run (:func:`run_post_check`).
+ESCALATION_ROUND = "escalation round: the check fails without the sweep and is escalated whatever it says"
 
 
 def sweep_not_run(metrics: list[MetricResult]) -> bool:

@@ -21,10 +21,10 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.evaluation.asset_files import JointInfo, clip_to_limits
 from asset2sim.tasks.geometry.closed_state import link_hull_points
 from asset2sim.tasks.geometry.urdf_closed import aabb_extents, geometry_extents, measure_closed_ends
+from asset2sim.tasks.ingest.extract import extract_asset
 
 __all__ = ["ClosedEnd", "aabb_extents", "closed_fallback", "compute_closed", "geometry_extents", "hull_points",
            "infer_scale_from_geometry"]
-from asset2sim.tasks.ingest.extract import extract_asset
 
 
 @dataclass
@@ -100,11 +100,11 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
     """Closed end of each joint in ``names`` (rad or m, the URDF's units).
 
     Source: :func:`asset2sim.tasks.geometry.urdf_closed.measure_closed_ends`
-    (:func:`~asset2sim.tasks.geometry.urdf_closed.closed_session`
     (:func:`asset2sim.tasks.geometry.closed_state.closed_positions` in a fresh
-    fixed-base, gravity-free PyBullet session; computed here for every method
-    alike, so no method grades itself; refine places its requested state from
-    the same measurement of its own output); else (extraction or the
+    fixed-base, gravity-free PyBullet session, once per geometry in a
+    process; computed here for every method alike, so no method grades
+    itself; refine places its requested state from the same measurement of
+    its own output); else (extraction or the
     search failing, or a joint it gives no opening) the limit nearest 0,
     opening towards the other limit (:func:`closed_fallback`).
 

@@ -85,7 +85,7 @@ def joints_in_the_way(asset: AssetDescription, worst_pairs: list[dict], bands: d
     """
     out: list[str] = []
     for pair in worst_pairs:
-        if not float(pair.get("depth_m", 0.0)) > tolerance:
+        if not float(pair["depth_m"]) > tolerance:
             continue
         path = path_joints(asset, pair["link_a"], pair["link_b"])
         if not any(j in addressed and bands.get(j, "closed") != "closed" for j in path):
