@@ -20,11 +20,14 @@ z up; collision pieces as the writer wrote them):
    (the links no movable joint moves) must itself reach the ground (its
    lowest vertex within :data:`CONTACT_BAND` of z_g): an object that stands
    on parts that move (wheels, legs, a suitcase on its casters) is left as
-   it is. So is an object lower than :data:`THIN_OBJECT` clearances (a pair
-   of pliers, scissors, a pocket knife, a USB stick lying flat): it lies on
-   the floor as a whole, its moving parts are half of what it lies on, not
-   doors over a floor (raised, a 8.9 mm pair of pliers lay on one half and
-   tilted 0.052 rad when the other was opened).
+   it is. So is a part of an object lower than :data:`THIN_OBJECT`
+   clearances whose own floor contact spans at least :data:`SUPPORT_AREA`
+   of the body's (a half of a pair of pliers lying flat: the object lies
+   on the floor as a whole, that part is half of what it lies on, not a
+   door over a floor; raised, a 8.9 mm pair of pliers lay on one half and
+   tilted 0.052 rad when the other was opened); a smaller part of such an
+   object (a lighter's lid, the lighter lying on its side: 0.41 of the
+   body's contact) is raised as a door is.
 2. A piece P of a link moved by joint j *drags* on the ground when its
    lowest vertex is less than :data:`GROUND_CLEARANCE` above z_g (an object
    whose bottom is not flat rocks onto a door that ends a few mm above its
@@ -51,6 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
@@ -59,7 +63,7 @@ from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf
 
-__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
+__all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
            "ground_clearance", "write_overrides"]
 
 #: Floor clearance (m) given to a moving part that rests on or near the
@@ -77,6 +81,11 @@ CONTACT_BAND = 0.0015
 #: :data:`GROUND_CLEARANCE` lies on the floor as a whole (module docstring,
 #: step 1): 2, i.e. 2 cm.
 THIN_OBJECT = 2.0
+#: Area of a moving part's floor contact, as a share of the body's, from
+#: which the part of a thin object is part of its support (module
+#: docstring, step 1): half (a generated pair of pliers' moving half 1.18,
+#: a USB stick's cover 1.34, a lighter's lid 0.41).
+SUPPORT_AREA = 0.5
 #: Largest angle (rad) between a hinge axis and the vertical (or a slide axis
 #: and the horizontal) for the joint to move its part along the ground.
 SLIDE_ANGLE = math.radians(30.0)
@@ -105,6 +114,20 @@ def _moving_joint(model: UrdfModel) -> dict[str, object]:
         else:
             out[name] = out.get(pj.parent)
     return out
+
+
+def _floor_area(pieces: list[np.ndarray], z_g: float) -> float:
+    """Area (m^2) of the 2-D convex hull of the vertices of ``pieces``
+    ((k, 3) m, world) within :data:`CONTACT_BAND` of the ground ``z_g``; 0
+    when they span none."""
+    pts = [W[W[:, 2] <= z_g + CONTACT_BAND, :2] for W in pieces]
+    pts = np.vstack(pts) if pts else np.zeros((0, 2))
+    if len(pts) < 3:
+        return 0.0
+    try:
+        return float(ConvexHull(pts).volume)
+    except (QhullError, ValueError):
+        return 0.0
 
 
 def _drags(joint, R_parent_joint: np.ndarray) -> bool:
@@ -140,16 +163,18 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
         return rep
     z_g = min(lows.values())
     top = max(float(W[:, 2].max()) for ws in world.values() for W in ws)
-    if top - z_g < THIN_OBJECT * GROUND_CLEARANCE:
-        return rep  # lying flat as a whole: its moving parts are part of its support
     mover = _moving_joint(model)
     body_low = [lows[ln] for ln in lows if mover.get(ln) is None]
     if not body_low or min(body_low) > z_g + CONTACT_BAND:
         return rep  # the object stands on parts that move (wheels, legs): their contact is the support
+    thin = top - z_g < THIN_OBJECT * GROUND_CLEARANCE
+    body_area = _floor_area([W for ln, ws in world.items() if mover.get(ln) is None for W in ws], z_g) if thin else 0.0
     for ln, ws in world.items():
         j = mover.get(ln)
         if j is None or not ws:
             continue
+        if thin and _floor_area(ws, z_g) >= SUPPORT_AREA * body_area:
+            continue  # half of what a flat-lying object lies on: part of its support
         if not _drags(j, poses[j.parent][:3, :3] @ j.origin[:3, :3]):
             continue
         R = poses[ln][:3, :3]

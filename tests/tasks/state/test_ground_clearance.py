@@ -122,15 +122,20 @@ def test_pedal_pressed_below_the_floor_is_stopped_at_the_floor(tmp_path):
 
 
 def test_an_object_lying_flat_as_a_whole_keeps_its_moving_half_on_the_floor(tmp_path):
-    """The side-hinged door of the test above at 15 mm tall is not raised:
-    lower than 2 clearances, the object lies on the floor as a whole. A pair
-    of pliers lying flat refines interaction-ready: raised, its moving half
-    left it lying on the other and it tipped 0.052 rad when opened."""
+    """15 mm tall (lower than 2 clearances), a side-hinged half with as much
+    floor contact as the body is half of what the object lies on: not
+    raised; a narrow flap on the same body (a lighter's lid) is raised as a
+    door is. A pair of pliers lying flat refines interaction-ready: raised,
+    its moving half left it lying on the other and it tipped 0.052 rad when
+    opened."""
     from tests.unseen_assets import build_pliers
 
-    thin = _two_part(tmp_path / "t", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.015), part_lo=(-0.02, 0, 0),
+    half = _two_part(tmp_path / "t", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.015), part_lo=(-0.4, 0, 0),
                      part_hi=(0, 0.4, 0.015), axis="0 0 1")
-    assert not ground_clearance.ground_clearance(read_urdf(thin), thin, {"j": 0.0}).pieces
+    assert not ground_clearance.ground_clearance(read_urdf(half), half, {"j": 0.0}).pieces
+    flap = _two_part(tmp_path / "f", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.015), part_lo=(-0.02, 0, 0),
+                     part_hi=(0, 0.4, 0.015), axis="0 0 1")
+    assert list(ground_clearance.ground_clearance(read_urdf(flap), flap, {"j": 0.0}).pieces) == ["part"]
     res = refine.refine_asset(build_pliers(tmp_path / "pliers"), "Pliers, fully open.", tmp_path / "out")
     assert res.report.failure_mode == "none", res.report.readiness
     assert not any("raised" in n for n in res.report.state.collision_changes)
