@@ -507,7 +507,7 @@ def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, conf
     st, overrides = _refine_state_with_decomposition(
         ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
-        addressed=request_apply.resolve_states(ctx, syn.overlay.scale).addressed,
+        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed,
     )
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
@@ -731,10 +731,10 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
 
 
 def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None, intervals=None,
-                                     addressed: set[str] | None = None):
+                                     addressed: Callable[[], set[str]] | None = None):
     """State refinement; when a part the request opened penetrates one the
-    request left closed by default (``addressed``: the joints the request
-    set), a second search with those parts free over their whole range
+    request left closed by default (``addressed()``: the joints the request
+    set, asked only then), a second search with those parts free over their whole range
     (kept only if it lowers Phi; :attr:`StateRefinement.room_made`); when
     hull overlaps keep Phi above tolerance, CoACD decomposition of the
     colliding pieces and another search (kept only if it lowers Phi).
@@ -753,7 +753,7 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
 
     st = search(requested)
     in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \
-        refine_state.joints_in_the_way(asset, st.worst_pairs, bands, addressed, config.penetration_tolerance)
+        refine_state.joints_in_the_way(asset, st.worst_pairs, bands, addressed(), config.penetration_tolerance)
     if in_the_way:
         held = fractions
         fractions = {**fractions, **{j: (0.0, 1.0) for j in in_the_way}}

@@ -137,17 +137,7 @@ class Trial:
 def world_vertices(session: SimSession) -> np.ndarray:
     """Collision vertices (k, 3) of every link in the world, m (the corners of
     the engine's link AABBs for links whose vertices the engine keeps none)."""
-    pts = []
-    for ln in session.link_names:
-        if not session.link_has_collision(ln):
-            continue
-        v = session.link_collision_vertices(ln)
-        if len(v):
-            p, R = session.link_frame(ln)
-            pts.append(v @ R.T + p)
-        else:
-            lo, hi = session.link_aabb(ln)
-            pts.append(np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]))
+    pts = [support.link_world_vertices(session, ln) for ln in session.link_names]
     return np.concatenate(pts) if pts else np.zeros((0, 3))
 
 

@@ -69,17 +69,19 @@ class SupportWatch:
 GROUND_CONTACT_GAP = 0.003
 
 
-def link_lowest_z(session, link: str) -> float:
-    """Lowest world z (m) of ``link``'s collision geometry (its collision
-    vertices in the world; the engine's AABB where it keeps none); inf for a
-    link without collision geometry."""
+def link_world_vertices(session, link: str) -> np.ndarray:
+    """Collision vertices (k, 3) of ``link`` in the world, m: the engine's
+    collision vertices carried by the link frame, or the 8 corners of its
+    AABB where the engine keeps none; (0, 3) for a link without collision
+    geometry."""
     if not session.link_has_collision(link):
-        return float("inf")
+        return np.zeros((0, 3))
     v = session.link_collision_vertices(link)
     if len(v):
         p, R = session.link_frame(link)
-        return float(np.min((np.asarray(v, float) @ np.asarray(R, float).T + np.asarray(p, float))[:, 2]))
-    return float(session.link_aabb(link)[0][2])
+        return np.asarray(v, float) @ np.asarray(R, float).T + np.asarray(p, float)
+    lo, hi = session.link_aabb(link)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=float)
 
 
 def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:
@@ -100,7 +102,8 @@ def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:
     Returns:
         Joint names, in ``moved``'s order.
     """
-    low = {ln: link_lowest_z(session, ln) for ln in session.link_names}
+    low = {ln: float(v[:, 2].min()) if len(v) else np.inf
+           for ln, v in ((ln, link_world_vertices(session, ln)) for ln in session.link_names)}
     finite = [z for z in low.values() if np.isfinite(z)]
     if not finite:
         return []

@@ -491,10 +491,10 @@ def write_output(
     """
     out = check_output_folder(asset, out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    labels = part_labels(asset)
     sem = out / SEMANTICS_NAME
     if copy:  # what comes from the input, once: later writes change only the dynamics and the state
         copy_meshes(asset, out)
-        labels = part_labels(asset)
         if labels:
             atomic.write_bytes(sem, partnet_mobility.format_semantics(labels).encode())
     urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state)))
@@ -503,7 +503,7 @@ def write_output(
         ROOT_KEY: root_record(overlay.mounting),
     })
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
-    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem if part_labels(asset) else None)
+    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem if labels else None)
 
 
 def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics]:
