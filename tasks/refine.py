@@ -406,13 +406,15 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     if fractions:
         syn = replace(syn, requested={**syn.requested, **{n: syn.closed_out[n].position(f) for n, f in fractions.items() if n in syn.closed_out}})
     urdf = _write(ctx, syn, out_dir, log)
-    syn = _closed_on_output(ctx, syn, urdf, out_dir, log)
+    shut, shut_notes = _shut_repair(ctx, syn, urdf, config, out_dir, cache, log)
+    syn = _closed_on_output(ctx, syn, urdf, out_dir, log, shut)
     closed_raw = syn.closed_out
-    clipped = _clip_synthesis(ctx, syn, urdf, config, out_dir, log)
+    clipped = _clip_synthesis(ctx, syn, urdf, config, out_dir, log, shut)
     if clipped is not syn:  # clipped limits change the pieces and the range the closed end is found in: measured once more
-        clipped = _closed_on_output(ctx, clipped, urdf, out_dir, log)
+        clipped = _closed_on_output(ctx, clipped, urdf, out_dir, log, shut)
     syn = clipped
-    st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log)
+    st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log, shut)
+    st.collision_changes = shut_notes + list(st.collision_changes)
     state = dict(st.result)
     room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "
             f"did not address it (closed by default) and a part the request opened lay through it closed" for j, f in st.room_made.items()]
@@ -423,7 +425,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
         ctx.asset, syn.overlay, out_dir, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
     st.collision_changes = list(st.collision_changes) + lifted
-    if overrides:  # the state search changed the collision pieces: the limits are clipped again on them (stage 6b)
+    if overrides is not shut:  # the state search changed the collision pieces: the limits are clipped again on them (stage 6b)
         unclipped = limits.strip_clips(syn.overlay)
         write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
         reclipped, closed_re = _clip_limits(unclipped, closed_raw, state, urdf, config, log)
@@ -500,27 +502,31 @@ def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLo
     return paths.urdf
 
 
-def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog) -> tuple[StateRefinement, dict]:
+def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
+                  base: dict | None = None) -> tuple[StateRefinement, dict]:
     """Stage 6: state refinement on the written (scaled) asset, with the
-    estimator's joint proposer when it has one. Returns (refinement, collision overrides)."""
+    estimator's joint proposer when it has one; ``base``: the collision
+    overrides the asset is written with (:func:`_shut_repair`). Returns
+    (refinement, collision overrides: ``base`` and what the state search changed)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, overrides = _refine_state_with_decomposition(
         ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
-        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed,
+        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed, base=base,
     )
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, overrides
 
 
-def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_dir: Path, log: _StageLog) -> _Synthesis:
+def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_dir: Path, log: _StageLog,
+                      overrides: dict | None = None) -> _Synthesis:
     """Stage 5a: the closed ends measured on the written output with the
     evaluation's own measurement (:mod:`asset2sim.tasks.geometry.urdf_closed`;
     the output's collision pieces depend only on the meshes and the limits),
     the requested state and the overlay's initial positions moved onto them
     (opening fraction kept; the opening for a number of degrees / metres) and
-    the output rewritten. Unchanged when the measurement fails."""
+    the output rewritten (with the collision ``overrides``). Unchanged when the measurement fails."""
     try:
         measured = urdf_closed.measure_closed(urdf)
     except Exception as exc:
@@ -539,16 +545,17 @@ def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_d
     for n in moved:
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
-    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, root_rotation=ctx.root_rotation)
+    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return replace(syn, overlay=overlay, closed_out=new, requested=requested)
 
 
-def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog) -> _Synthesis:
+def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
+                    overrides: dict | None = None) -> _Synthesis:
     """Stage 5b: the limits clipped to what the geometry allows
     (:func:`_clip_limits`, other joints at the requested state) before the
     state search, the requested state recomputed from the bands over the
     clipped ranges (a "half open" lid is half of the range it can open), and
-    the output rewritten. Returns the synthesis with the clipped overlay,
+    the output rewritten (with the collision ``overrides``). Returns the synthesis with the clipped overlay,
     closed ends and requested state (unchanged when nothing was clipped)."""
     overlay, closed_out = _clip_limits(syn.overlay, syn.closed_out, syn.requested, urdf, config, log)
     if overlay is syn.overlay:
@@ -558,7 +565,7 @@ def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config:
     requested = estimate.state_from_bands(unscaled, syn.bands, s, syn.prismatic)
     if overlay.initial_joint_positions:
         requested.update(overlay.initial_joint_positions)
-    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, root_rotation=ctx.root_rotation)
+    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested)
 
 
@@ -730,14 +737,71 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     return overlay, check, rounds
 
 
+#: Largest opening fraction of every joint at which the requested state counts
+#: as the closed configuration (:func:`_shut_repair` leaves it to the state search).
+SHUT_FRACTION = 0.03
+
+
+def _closed_penetration(urdf: Path, asset: AssetDescription, closed: dict[str, float],
+                        config: RefineConfig) -> tuple[float, list[tuple[str, str]]]:
+    """Phi (m) of the written URDF with its joints at ``closed`` (joint -> rad
+    or m) and the link pairs that penetrate deeper than the tolerance."""
+    with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=closed,
+                                                       conventions=config.sim)) as sess:
+        phi, pairs = sess.self_penetration_fresh()
+    return float(phi), [(c.link_a, c.link_b) for c in pairs if c.depth > config.penetration_tolerance]
+
+
+def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache,
+                 log: _StageLog) -> tuple[dict, list[str]]:
+    """Stage 5 (after the first write): collision pieces that let the object
+    shut. When the request opens a joint and the modelled closed
+    configuration (every joint at its closed end) overlaps deeper than the
+    tolerance on the written pieces, the state search with its collision
+    repair runs as for a request of the closed state
+    (:func:`_refine_state_with_decomposition`, every band "closed"), before
+    the closed ends and limits are measured on the pieces, and the pieces it
+    repaired are kept for the requested state. Without it an open request
+    kept hulls that overlap when shut: the limit scan cut the closed end
+    where they met and the requested state was placed from that end (stapler
+    102990 "fully open": closed end -0.22 -> 0.81 rad and its joint sweep
+    failed; stapler 103275 "a quarter open": its closed end flipped to the far
+    limit, the state placed at 0.82 of the range).
+
+    Returns (collision overrides, notes for ``state.collision_changes``);
+    ({}, []) when nothing was changed (the output is then as written).
+    """
+    closed = {n: c.q_closed for n, c in syn.closed_out.items()}
+    opened = [n for n, c in syn.closed_out.items()
+              if abs(c.fraction(syn.requested.get(n, c.q_closed))) > SHUT_FRACTION]
+    if not (config.convex_decomposition and opened):
+        return {}, []
+    phi, _ = _closed_penetration(urdf, ctx.asset, closed, config)
+    if not phi > config.penetration_tolerance:
+        return {}, []
+    write.write_output(ctx.asset, syn.overlay, out_dir, closed, copy=False, root_rotation=ctx.root_rotation)
+    shut, overrides = _refine_state_with_decomposition(
+        ctx.asset, syn.overlay, syn.closed_out, {n: "closed" for n in syn.closed_out}, closed, urdf, ctx.root_rotation,
+        config, out_dir, cache, log.say)
+    write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, copy=False, collision_overrides=overrides,
+                       root_rotation=ctx.root_rotation)
+    head = (f"closed configuration (the request opens {', '.join(opened)}): Phi {shut.phi_requested * 1000:.3g} -> "
+            f"{shut.phi_result * 1000:.3g} mm" + ("" if overrides else "; collision pieces kept"))
+    log.say("shut_repair", head)
+    log.lap("shut_repair")
+    return overrides, [head + (":" if shut.collision_changes else "")] + list(shut.collision_changes)
+
+
 def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None, intervals=None,
-                                     addressed: Callable[[], set[str]] | None = None):
+                                     addressed: Callable[[], set[str]] | None = None, base: dict | None = None):
     """State refinement; when a part the request opened penetrates one the
     request left closed by default (``addressed()``: the joints the request
     set, asked only then), a second search with those parts free over their whole range
     (kept only if it lowers Phi; :attr:`StateRefinement.room_made`); when
     hull overlaps keep Phi above tolerance, CoACD decomposition of the
     colliding pieces and another search (kept only if it lowers Phi).
+    ``base``: collision overrides the asset is written with; the pieces
+    changed here replace those of the same links.
     Returns (StateRefinement, collision overrides)."""
     fractions = estimate.band_intervals(bands, intervals)
     s = overlay.scale
@@ -767,8 +831,9 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
             st = room
         else:
             fractions = held
+    base = {} if base is None else base  # returned as it is when nothing changes (the caller tells by identity)
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
-        return st, {}
+        return st, base
     deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
     links = sorted({ln for pair in deep for ln in pair})
     sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
@@ -780,12 +845,13 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     except (collision.DecompositionUnavailable, ValueError) as exc:
         say("refine_state", f"collision improvement skipped: {exc}")
         st.collision_changes = [f"collision improvement skipped: {exc}"]
-        return st, {}
+        return st, base
     finally:
         sess.close()
     if not overrides:
         st.collision_changes = dnotes or [f"no collision piece change lowered the overlap of {', '.join(links)}"]
-        return st, {}
+        return st, base
+    overrides = {**base, **overrides}
     before = st
     write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
     st = search(requested)
@@ -794,14 +860,14 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     st.phi_requested = before.phi_requested
     if st.phi_result >= before.phi_result:
         # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
-        write.write_output(asset, overlay, out_dir, requested, copy=False, root_rotation=root_rotation)
+        write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=base, root_rotation=root_rotation)
         before.evaluations = st.evaluations
         before.model_queries = st.model_queries
         before.collision_changes = [
             f"collision pieces changed for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
             f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
         ] + dnotes
-        return before, {}
+        return before, base
     st.collision_changes = dnotes
     st.method = before.method + " | collision pieces improved -> " + st.method
     return st, overrides

@@ -54,3 +54,33 @@ def test_after_the_repair_the_lid_and_latch_sweep_their_ranges(tmp_path):
     assert sw.passed, sw.details["failures"]
     assert set(sw.details["joints"]) == {"joint_0", "joint_2"}
 
+
+
+def test_an_open_request_still_gets_pieces_that_let_the_lid_shut(tmp_path):
+    """Asked fully open, the box's requested state is clear of overlaps (the
+    latch lifted out with the lid), but its closed configuration is not: the
+    latch sits in the body's solid hull. Repaired only at the requested state,
+    the pieces kept the lid from shutting (the limit scan cut its closed end
+    to 0.22 rad, 13 deg open); repaired at the closed configuration first, as
+    for a closed request, the lid shuts at its modelled closed end."""
+    src = build_interlocked_box(tmp_path / "interlocked_box")
+    r = refine_asset(src, "A box with its lid fully open.", tmp_path / "out", extras=False).report
+    changes = r.state.collision_changes
+    assert any(c.startswith("closed configuration") for c in changes), changes
+    assert any("CoACD" in c and "->" in c for c in changes)  # before -> after, per link
+    assert r.state.phi_result <= RefineConfig().penetration_tolerance
+    assert abs(r.closed_positions["joint_0"]) <= 0.02  # the lid shuts where it was modelled shut
+    assert not any("closed end" in n and "runs into" in n for n in r.notes)
+    assert r.opening_fractions["joint_0"] >= 0.95  # the request is kept
+    assert r.metric("joint_sweep").passed
+
+
+def test_a_partly_open_request_is_placed_from_the_end_the_lid_shuts_at(tmp_path):
+    """The state of an open request is placed from the closed end measured
+    on the repaired pieces: "a quarter open" lands in its band of the whole
+    range, not of a range cut short by hulls that overlapped when shut."""
+    src = build_interlocked_box(tmp_path / "interlocked_box")
+    r = refine_asset(src, "A box with its lid a quarter open.", tmp_path / "out", extras=False).report
+    assert abs(r.closed_positions["joint_0"]) <= 0.02
+    assert 0.15 <= r.opening_fractions["joint_0"] <= 0.35
+    assert abs(r.initial_joint_positions["joint_0"] - 0.25 * 1.8) <= 0.1 * 1.8  # a quarter of the modelled 0-1.8 rad
