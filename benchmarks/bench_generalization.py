@@ -27,7 +27,10 @@ screen tips it, a box whose latch penetrates every closed state). <noun> is
 the category's first request synonym (``asset2sim/priors/categories.yaml``).
 
 A case passes when ``refine_asset`` reports ``failure_mode == "none"`` (every
-post-check: penetration, rest stability, oscillation, state hold) and, with
+post-check: penetration, rest stability, oscillation, state hold), every
+requested band's joint is written inside its band (``BAND_INTERVAL`` +-
+:data:`BAND_SLACK`) or a design note names the joint and says why (a part
+the floor stops, a steadier opening; else ``state_out_of_band``) and, with
 ``--evaluate``, the evaluation (the interaction tier: probes included) lists
 no failures. Cases run in ``--jobs`` worker processes (default 1); ``--limit``
 keeps the first N cases (in a deterministic, category-interleaved order so a
@@ -133,6 +136,31 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
     return out
 
 
+#: Opening fraction (of the range) a written state may lie beyond its band's
+#: interval (``BAND_INTERVAL``) and still count as in the band.
+BAND_SLACK = 0.02
+
+
+def out_of_band(report) -> list[tuple[str, str]]:
+    """Joints of a refine ``report`` whose written opening fraction lies
+    outside their requested band (by more than :data:`BAND_SLACK`), each with
+    the design note that says why ("" when none names the joint: the state
+    is not what was asked, a failure of its own, ``state_out_of_band``)."""
+    from asset2sim.schemas.request import BAND_INTERVAL
+
+    out = []
+    for joint, band in (report.requested_bands or {}).items():
+        f = (report.opening_fractions or {}).get(joint)
+        if f is None or band not in BAND_INTERVAL:
+            continue
+        lo, hi = BAND_INTERVAL[band]
+        if lo - BAND_SLACK <= f <= hi + BAND_SLACK:
+            continue
+        why = next((d for d in report.design_changes if d.startswith((f"{joint}:", f"{joint} ")) or f" {joint} " in d), "")
+        out.append((f"{joint} {band} at {f:.2f}", why))
+    return out
+
+
 def run_case(case: dict, out_root: str, evaluate: bool) -> dict:
     """Refine one case in this process; returns the case with its outcome."""
     from asset2sim.tasks.refine import RefineError, refine_asset
@@ -147,6 +175,9 @@ def run_case(case: dict, out_root: str, evaluate: bool) -> dict:
         res["mounted"] = bool(r.mounting is not None and r.mounting.fixed)
         res["design"] = list(r.design_changes)
         res["collision"] = list(r.state.collision_changes) if r.state else []
+        res["out_of_band"] = out_of_band(r)
+        if res["mode"] == "none" and any(not why for _, why in res["out_of_band"]):
+            res["mode"] = "state_out_of_band"
         if evaluate:
             ev_path = out / "evaluation.json"
             failures = json.loads(ev_path.read_text()).get("failures", []) if ev_path.is_file() else ["no evaluation.json"]
@@ -198,6 +229,10 @@ def report(results: list[dict]) -> str:
     if changed:
         lines.append(f"\nstability by design changed part masses in {len(changed)} cases: "
                      + ", ".join(f"{c['asset']} {c['prompt']!r}" for c in changed[:20]))
+    explained = [c for c in results if c.get("out_of_band") and c["mode"] == "none"]
+    if explained:
+        lines.append(f"\nwritten outside the requested band with a design note saying why, in {len(explained)} passing cases: "
+                     + ", ".join(f"{c['asset']} {c['prompt']!r} ({'; '.join(j for j, _ in c['out_of_band'])})" for c in explained[:20]))
     mounted = [c for c in results if c.get("mounted")]
     lines.append(f"mounted (fixed root) in {len(mounted)} of {len(results)} cases")
     return "\n".join(lines)
