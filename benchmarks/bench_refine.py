@@ -189,7 +189,7 @@ def _load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg()) + f" ({os.cpu_count()} cores)"
 
 
-CORE_STAGES = ("extract", "analyze", "closed_state", "synthesize", "validate", "write", "limits", "refine_state",
+CORE_STAGES = ("extract", "analyze", "closed_state", "synthesize", "validate", "write", "shut_repair", "limits", "refine_state",
                "post_check")
 
 

@@ -754,7 +754,7 @@ def _closed_penetration(urdf: Path, asset: AssetDescription, closed: dict[str, f
 
 def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache,
                  log: _StageLog) -> tuple[dict, list[str]]:
-    """Stage 5 (after the first write): collision pieces that let the object
+    """Stage 5 (after :func:`_write`, before stage 5a): collision pieces that let the object
     shut. When the request opens a joint and the modelled closed
     configuration (every joint at its closed end) overlaps deeper than the
     tolerance on the written pieces, the state search with its collision
