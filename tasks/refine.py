@@ -742,14 +742,12 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
 SHUT_FRACTION = 0.03
 
 
-def _closed_penetration(urdf: Path, asset: AssetDescription, closed: dict[str, float],
-                        config: RefineConfig) -> tuple[float, list[tuple[str, str]]]:
-    """Phi (m) of the written URDF with its joints at ``closed`` (joint -> rad
-    or m) and the link pairs that penetrate deeper than the tolerance."""
-    with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=closed,
+def _phi_at(urdf: Path, state: dict[str, float], config: RefineConfig) -> float:
+    """Phi (m, the SPEC's self-penetration) of the written URDF with its
+    joints at ``state`` (joint -> rad or m)."""
+    with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                        conventions=config.sim)) as sess:
-        phi, pairs = sess.self_penetration_fresh()
-    return float(phi), [(c.link_a, c.link_b) for c in pairs if c.depth > config.penetration_tolerance]
+        return float(sess.self_penetration_fresh()[0])
 
 
 def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache,
@@ -768,16 +766,17 @@ def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: Re
     failed; stapler 103275 "a quarter open": its closed end flipped to the far
     limit, the state placed at 0.82 of the range).
 
-    Returns (collision overrides, notes for ``state.collision_changes``);
-    ({}, []) when nothing was changed (the output is then as written).
+    Returns (collision overrides, notes for ``state.collision_changes``):
+    ({}, []) when the request opens nothing or the closed configuration is
+    clear, ({}, notes) when the repair kept the pieces; the output is then
+    as written.
     """
     closed = {n: c.q_closed for n, c in syn.closed_out.items()}
     opened = [n for n, c in syn.closed_out.items()
               if abs(c.fraction(syn.requested.get(n, c.q_closed))) > SHUT_FRACTION]
     if not (config.convex_decomposition and opened):
         return {}, []
-    phi, _ = _closed_penetration(urdf, ctx.asset, closed, config)
-    if not phi > config.penetration_tolerance:
+    if not _phi_at(urdf, closed, config) > config.penetration_tolerance:
         return {}, []
     write.write_output(ctx.asset, syn.overlay, out_dir, closed, copy=False, root_rotation=ctx.root_rotation)
     shut, overrides = _refine_state_with_decomposition(
