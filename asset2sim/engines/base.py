@@ -396,6 +396,17 @@ _LAZY: dict[str, str] = {
     "newton": "asset2sim.engines.newton_engine",
     "fake": "asset2sim.engines.fake",
 }
+#: The third-party packages each engine module needs (its optional extra):
+#: when one does not import, the engine is unavailable; the project's own
+#: module is then imported unguarded, so an error in it is never mistaken
+#: for a missing extra.
+_REQUIRES: dict[str, tuple[str, ...]] = {
+    "pybullet": ("pybullet",),
+    "physx": ("sapien",),
+    "mujoco": ("mujoco",),
+    "newton": ("newton", "warp", "scipy"),
+    "fake": (),
+}
 
 
 class EngineUnavailable(RuntimeError):
@@ -462,10 +473,12 @@ def _factory(name: str) -> EngineFactory:
         module = _LAZY.get(name)
         if module is None:
             raise KeyError(f"unknown engine {name!r}; known: {sorted(set(_ENGINES) | set(_LAZY))}")
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:  # optional extra missing
-            raise EngineUnavailable(f"engine {name!r} is not installed ({exc})") from exc
+        for package in _REQUIRES.get(name, ()):
+            try:
+                importlib.import_module(package)
+            except ImportError as exc:  # optional extra missing
+                raise EngineUnavailable(f"engine {name!r} is not installed ({exc})") from exc
+        importlib.import_module(module)
     return _ENGINES[name]
 
 

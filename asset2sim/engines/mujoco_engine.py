@@ -427,9 +427,5 @@ def _open(urdf_path: Path, options: SessionOptions) -> MuJoCoSession:
     return MuJoCoSession(urdf_path, options)
 
 
-# Registering needs the package: without it the import fails here and the
-# registry reports the engine as unavailable (an optional extra).
-import mujoco as _mujoco_check  # noqa: E402,F401
-
 register_engine("mujoco", _open)
 register_file_reader("mujoco", "mjcf", held_physics_of_mjcf)

@@ -38,7 +38,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-import sapien  # noqa: F401  - an ImportError here marks the engine unavailable
+import sapien
 from sapien import physx
 
 from asset2sim.engines.base import (
