@@ -32,7 +32,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
-from asset2sim.schemas.request import RequestSpec
+from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
@@ -737,11 +737,6 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     return overlay, check, rounds
 
 
-#: Largest opening fraction of every joint at which the requested state counts
-#: as the closed configuration (:func:`_shut_repair` leaves it to the state search).
-SHUT_FRACTION = 0.03
-
-
 def _phi_at(urdf: Path, state: dict[str, float], config: RefineConfig) -> float:
     """Phi (m, the SPEC's self-penetration) of the written URDF with its
     joints at ``state`` (joint -> rad or m)."""
@@ -773,7 +768,7 @@ def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: Re
     """
     closed = {n: c.q_closed for n, c in syn.closed_out.items()}
     opened = [n for n, c in syn.closed_out.items()
-              if abs(c.fraction(syn.requested.get(n, c.q_closed))) > SHUT_FRACTION]
+              if abs(c.fraction(syn.requested.get(n, c.q_closed))) > BAND_INTERVAL["closed"][1]]
     if not (config.convex_decomposition and opened):
         return {}, []
     if not _phi_at(urdf, closed, config) > config.penetration_tolerance:
