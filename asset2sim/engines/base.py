@@ -259,6 +259,20 @@ class SimSession(Protocol):
             EngineUnsupported: fixed base, or an engine without dynamics.
         """
 
+    def hold_root(self, max_force: float) -> None:
+        """Hold the root at its current pose as a hand grips a body: a fixed
+        constraint to the world whose force is at most ``max_force`` (N; the
+        engine applies the same bound, as N*m, to its torque rows), acting on
+        every following step until :meth:`release_root`. A no-op on a
+        fixed-base session (its root is already held).
+
+        Raises:
+            EngineUnsupported: the engine has no bounded constraints.
+        """
+
+    def release_root(self) -> None:
+        """End :meth:`hold_root` (no-op when the root is not held)."""
+
     # ------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         """Phi (m) = sum over self-contact points of max(0, -separation), and the

@@ -190,6 +190,17 @@ class FakeSession:
         self._anchor[joint] = (self._value(joint), self.steps)
         self._driven.pop(joint, None)
 
+    def hold_root(self, max_force: float) -> None:
+        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
+        no bounded root constraint is built for fake (the probes, which hold
+        the root, run in PyBullet)."""
+        if self.options.fixed_base:
+            return
+        raise EngineUnsupported("fake: no bounded root hold")
+
+    def release_root(self) -> None:
+        """Nothing to release (:meth:`hold_root` holds nothing here)."""
+
     def set_root_velocity(self, linear, angular) -> None:
         """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
         raise EngineUnsupported("fake: no dynamics; root velocities are not modelled")

@@ -170,6 +170,17 @@ class MuJoCoSession:
             self.d.qfrc_applied[i] += tau
         self._applied = True
 
+    def hold_root(self, max_force: float) -> None:
+        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
+        no bounded root constraint is built for mujoco (the probes, which hold
+        the root, run in PyBullet)."""
+        if self.options.fixed_base:
+            return
+        raise EngineUnsupported("mujoco: no bounded root hold")
+
+    def release_root(self) -> None:
+        """Nothing to release (:meth:`hold_root` holds nothing here)."""
+
     def set_root_velocity(self, linear, angular) -> None:
         """Root (free joint) velocity: linear world frame, angular given in
         the world frame (MuJoCo holds it in the body frame).

@@ -334,6 +334,17 @@ class NewtonSession:
         self.state0.joint_qd.assign(jd)
         self._refresh()
 
+    def hold_root(self, max_force: float) -> None:
+        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
+        no bounded root constraint is built for newton (the probes, which hold
+        the root, run in PyBullet)."""
+        if self.options.fixed_base:
+            return
+        raise EngineUnsupported("newton: no bounded root hold")
+
+    def release_root(self) -> None:
+        """Nothing to release (:meth:`hold_root` holds nothing here)."""
+
     def set_root_velocity(self, linear, angular) -> None:
         raise EngineUnsupported("newton: set_root_velocity is not implemented")
 

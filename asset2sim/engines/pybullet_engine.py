@@ -89,6 +89,7 @@ class PyBulletSession:
         p = _bullet()
         self._p = p
         self.options = options
+        self._root_hold: int | None = None  # hold_root's constraint
         conv = options.conventions
         with quiet_stdout():
             self.cid = p.connect(p.DIRECT)
@@ -375,6 +376,25 @@ class PyBulletSession:
             self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=0.0,
             force=self._friction[name], physicsClientId=self.cid,
         )
+
+    def hold_root(self, max_force: float) -> None:
+        """``createConstraint(JOINT_FIXED)`` from the root to the world at the
+        root's current pose, ``changeConstraint(maxForce=max_force)``
+        (Bullet bounds every row of the constraint by it)."""
+        if self.options.fixed_base:
+            return
+        self.release_root()
+        p = self._p
+        pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
+        self._root_hold = p.createConstraint(self.body, -1, -1, -1, p.JOINT_FIXED, [0, 0, 0], [0, 0, 0], list(pos),
+                                             childFrameOrientation=list(orn), physicsClientId=self.cid)
+        p.changeConstraint(self._root_hold, maxForce=float(max(max_force, 0.0)), physicsClientId=self.cid)
+
+    def release_root(self) -> None:
+        """``removeConstraint`` of :meth:`hold_root`'s constraint."""
+        if self._root_hold is not None:
+            self._p.removeConstraint(self._root_hold, physicsClientId=self.cid)
+            self._root_hold = None
 
     def set_root_velocity(self, linear, angular) -> None:
         """``resetBaseVelocity`` (world frame).

@@ -21,13 +21,14 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, record_rest_test
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.check.probes import run_probes
+from asset2sim.tasks.check.probes import OPEN_FAR_TARGET, run_probes
 from asset2sim.tasks.check.support import rolling_joints
 from asset2sim.tasks.evaluation.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.tasks.state.ground_clearance import floor_stops
 from asset2sim.urdf import read_urdf
 
 
@@ -91,6 +92,27 @@ def point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
         if len(w) > max_points:
             w = w[np.linspace(0, len(w) - 1, max_points).astype(int)]
         out[name] = w
+    return out
+
+
+def _floor_stops(model, ctx: Context, targets: dict[str, tuple[float, float, float]]) -> dict[str, float]:
+    """Where the floor stops the probed parts (joint -> opening from the
+    closed end, rad or m), the object resting on its body at the initial
+    state (:func:`~asset2sim.tasks.state.ground_clearance.floor_stops`: a
+    suitcase standing on its edge whose lid opens downwards cannot be opened
+    further in place; the refine writes such a state at the floor with a
+    design note); only stops before the open probe's target. Notes go to
+    ``ctx.notes``."""
+    stops = floor_stops(model, ctx.urdf, dict(ctx.initial_state), targets)
+    out = {}
+    for name, stop in stops.items():
+        _, _, rng = targets[name]
+        if stop / rng >= OPEN_FAR_TARGET:
+            continue
+        out[name] = stop
+        unit = "m" if ctx.joints[name].type == "prismatic" else "rad"
+        ctx.notes.append(f"probes: the floor stops {name} {stop:.3g} {unit} from its closed end, of its {rng:.3g} {unit} "
+                         "range (the object resting as it is): an open probe's target ends there")
     return out
 
 
@@ -172,10 +194,11 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 for n, c in ctx.closed.items()
                 if n in (ctx.task_joints if probe_joints is None else probe_joints) and c.open_range > 0 and n not in rolling
             }
+            stops = _floor_stops(model, ctx, targets)
             holds = bool(getattr(ctx.request, "holds_position", False))
             returns = {n for n, h in hold_required(ctx, list(targets)).items() if not h}  # sprung by design
             run.probes = run_probes(session, targets, actions=tuple(probe_actions), holds_position=holds, model=model,
-                                    returns=returns)
+                                    returns=returns, floor_stops=stops)
     except Exception as exc:
         run.error = f"{type(exc).__name__}: {exc}"
     finally:

@@ -64,7 +64,7 @@ from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf
 
 __all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
-           "ground_clearance", "write_overrides"]
+           "floor_stops", "ground_clearance", "write_overrides"]
 
 #: Floor clearance (m) given to a moving part that rests on or near the
 #: ground: the levelling feet of refrigerators and the rubber feet of
@@ -257,6 +257,41 @@ def _lowest(world: dict[str, list[np.ndarray]], links) -> float:
     return min(vals) if vals else np.inf
 
 
+class _FloorScene:
+    """The collision pieces of a URDF posed by joint positions, with the floor
+    its body stands on (the body: links no movable joint moves)."""
+
+    def __init__(self, model: UrdfModel, urdf: Path | str):
+        root = Path(urdf).parent
+        self.model = model
+        self.local = {ln: link_pieces(model, root, ln) for ln in model.links}
+        mover = _moving_joint(model)
+        self.body = [ln for ln in model.links if mover.get(ln) is None]
+
+    def world_at(self, q: dict[str, float]) -> dict[str, list[np.ndarray]]:
+        """link -> its pieces (k, 3) in the root frame (m) at joint positions ``q``."""
+        poses = self.model.link_poses(q)
+        return {ln: [P @ poses[ln][:3, :3].T + poses[ln][:3, 3] for P in ps] for ln, ps in self.local.items() if ps}
+
+    def subtree(self, joint) -> list[str]:
+        """The links ``joint`` (a URDF joint) moves: its child and every link below."""
+        sub, stack = [], [joint.child]
+        while stack:
+            ln = stack.pop()
+            sub.append(ln)
+            stack.extend(c.child for c in self.model.children(ln))
+        return sub
+
+    def floor(self, q: dict[str, float]) -> float:
+        """Height (m, root frame) a moving part keeps above: the body's lowest
+        point at ``q`` plus :data:`FLOOR_GAP`."""
+        return _lowest(self.world_at(q), self.body) + FLOOR_GAP
+
+    def lowest(self, q: dict[str, float], links) -> float:
+        """Lowest point (m, root frame) of ``links`` at ``q``; inf without pieces."""
+        return _lowest(self.world_at(q), links)
+
+
 def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, float],
                         closed: dict[str, tuple[float, float, float]]) -> tuple[dict[str, float], list[str]]:
     """The opening of parts that the floor stops, at ``state`` (rad or m).
@@ -279,44 +314,94 @@ def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, flo
     Raises:
         OSError: a collision file cannot be read.
     """
-    root = Path(urdf).parent
-    local = {ln: link_pieces(model, root, ln) for ln in model.links}
-
-    def world_at(q: dict[str, float]) -> dict[str, list[np.ndarray]]:
-        poses = model.link_poses(q)
-        return {ln: [P @ poses[ln][:3, :3].T + poses[ln][:3, 3] for P in ps] for ln, ps in local.items() if ps}
-
-    mover = _moving_joint(model)
-    body = [ln for ln in model.links if mover.get(ln) is None]
+    scene = _FloorScene(model, urdf)
     out = dict(state)
     notes: list[str] = []
     for j in model.joints:
         if j.type not in ("revolute", "prismatic") or j.name not in closed or j.name not in out:
             continue
-        sub, stack = [], [j.child]
-        while stack:
-            ln = stack.pop()
-            sub.append(ln)
-            stack.extend(c.child for c in model.children(ln))
-        w = world_at(out)
-        floor = _lowest(w, body) + FLOOR_GAP
-        if not np.isfinite(floor) or _lowest(w, sub) >= floor:
+        sub = scene.subtree(j)
+        floor = scene.floor(out)
+        low = scene.lowest(out, sub)
+        if not np.isfinite(floor) or low >= floor:
             continue
         q_closed = closed[j.name][0]
-        if _lowest(world_at({**out, j.name: q_closed}), sub) < floor:
+        if scene.lowest({**out, j.name: q_closed}, sub) < floor:
             continue  # the part reaches the floor even closed: it is part of the support
         lo, hi = 0.0, 1.0  # fraction of the way from q_closed to the state's q
         q_state = out[j.name]
         for _ in range(30):
             mid = 0.5 * (lo + hi)
-            if _lowest(world_at({**out, j.name: q_closed + mid * (q_state - q_closed)}), sub) >= floor:
+            if scene.lowest({**out, j.name: q_closed + mid * (q_state - q_closed)}, sub) >= floor:
                 lo = mid
             else:
                 hi = mid
         q_new = q_closed + lo * (q_state - q_closed)
         notes.append(f"{j.name}: opening limited by the floor, {q_state:.4g} -> {q_new:.4g} "
                      f"({'m' if j.type == 'prismatic' else 'rad'}): at the requested state {j.child} reached "
-                     f"{(floor - FLOOR_GAP - _lowest(w, sub)) * 1000:.2g} mm below the body's bottom, so the object stood on it "
+                     f"{(floor - FLOOR_GAP - low) * 1000:.2g} mm below the body's bottom, so the object stood on it "
                      "and its weight pushed it back; a real one stops at the floor")
         out[j.name] = float(q_new)
     return (out, notes) if notes else (state, [])
+
+
+#: Openings sampled along a joint's range when looking for where the floor
+#: stops its part (:func:`floor_stops`), before bisecting the first step
+#: that reaches the floor.
+FLOOR_SAMPLES = 32
+
+
+def floor_stops(model: UrdfModel, urdf: Path | str, state: dict[str, float],
+                closed: dict[str, tuple[float, float, float]]) -> dict[str, float]:
+    """Where the floor stops the opening of parts, with the object resting on
+    its body at ``state`` (rad or m).
+
+    For each movable joint j of ``closed`` (joint -> (q_closed, direction,
+    open_range)) whose subtree is above the floor at its closed end (the
+    body's lowest point plus :data:`FLOOR_GAP`, as in
+    :func:`floor_limited_state`; a part below it even closed is part of the
+    support): the opening o (from q_closed along ``direction``, 0 < o <=
+    open_range) at which the subtree first reaches the floor, the other
+    joints at ``state``: :data:`FLOOR_SAMPLES` openings along the range, then
+    30 halvings of the first step that reaches it. A suitcase standing on
+    its back edge whose lid opens downwards, a lid folded down past the
+    body's bottom: on a real floor the part stops there, so an operation
+    cannot open it further with the object resting as it is.
+
+    Returns:
+        joint -> o (rad or m) for the joints the floor stops before their
+        open end; 0 when the part touches the floor right away.
+
+    Raises:
+        OSError: a collision file cannot be read.
+    """
+    scene = _FloorScene(model, urdf)
+    joints = {j.name: j for j in model.joints}
+    floor = scene.floor(state)
+    out: dict[str, float] = {}
+    if not np.isfinite(floor):
+        return out
+    for name, (q_closed, direction, open_range) in closed.items():
+        j = joints.get(name)
+        if j is None or j.type not in ("revolute", "prismatic") or not open_range > 0:
+            continue
+        sub = scene.subtree(j)
+
+        def clear(o: float) -> bool:
+            return scene.lowest({**state, name: q_closed + direction * o}, sub) >= floor
+
+        if not clear(0.0):
+            continue  # part of the support
+        good = 0.0
+        for k in range(1, FLOOR_SAMPLES + 1):
+            o = open_range * k / FLOOR_SAMPLES
+            if clear(o):
+                good = o
+                continue
+            bad = o
+            for _ in range(30):
+                mid = 0.5 * (good + bad)
+                good, bad = (mid, bad) if clear(mid) else (good, mid)
+            out[name] = float(good)
+            break
+    return out

@@ -132,3 +132,34 @@ def test_joint_axis_is_in_the_link_frame_with_a_non_diagonal_inertia(tmp_path):
         assert R @ s.joint_axis("j") == pytest.approx([0.0, -1.0, 0.0], abs=1e-6)
     finally:
         s.close()
+
+
+@pytest.mark.parametrize("hold, moves", [(None, True), (1000.0, False), (10.0, True)])
+def test_a_held_root_resists_a_push_up_to_its_force_bound(tmp_path, hold, moves):
+    """A 5.2 kg object on the ground (Coulomb friction about 0.5 x 51 N)
+    pushed sideways with 60 N for 0.5 s slides; held by ``hold_root`` with
+    1000 N it stays put; held with 10 N (ground friction + 10 N < 60 N) it
+    slides; released, the same push moves it again."""
+    urdf = _urdf_with_dynamics(tmp_path / "h", 0.1, 0.5)
+    s = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.0}))
+    try:
+        s.step(60)
+
+        def push() -> float:
+            p0, _ = s.root_pose()
+            for _ in range(120):
+                s.apply_link_force("base", np.array([60.0, 0.0, 0.0]), p0 + np.array([0.0, 0.0, 0.05]))
+                s.step(1)
+            return float(np.linalg.norm((s.root_pose()[0] - p0)[:2]))
+
+        if hold is not None:
+            s.hold_root(hold)
+        moved = push()
+        assert (moved > 0.01) is moves, moved
+        if hold is not None:
+            assert moved < 1e-3 or hold < 60.0
+            s.release_root()
+            assert push() > 0.01
+    finally:
+        s.close()
+

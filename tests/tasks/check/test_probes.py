@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import EngineUnsupported, SessionOptions, open_session
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.check.probes import TRAVEL_TIME_MARGIN, ProbeConfig, probe_joint, probes_metric, run_probes
 from asset2sim.urdf import read_urdf
@@ -106,6 +106,60 @@ def test_a_light_carcass_held_by_the_probe_is_operated_pushed_alone_it_slides(tm
         assert r.success is ok, r.failure
         if not ok:
             assert r.slid and "moved instead" in r.failure
+
+
+def _swivel(folder: Path) -> Path:
+    """A USB-stick-sized stick (5 g, 60 x 20 x 10 mm) with a 15 g cover
+    beside it that swivels about a vertical axis at the stick's end, both
+    lying on the ground: swinging the cover drags it over the ground."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="swivel">'
+        f'<link name="stick">{_inertial(0.005, i=(2e-7, 2e-6, 2e-6))}{_box(0.06, 0.02, 0.01)}</link>'
+        f'<link name="cover">{_inertial(0.015, (0.035, 0, 0), (5e-7, 5e-6, 5e-6))}{_box(0.06, 0.02, 0.01, (0.035, 0, 0))}</link>'
+        '<joint name="swivel" type="revolute"><parent link="stick"/><child link="cover"/>'
+        '<origin xyz="0.03 0 0"/><axis xyz="0 0 1"/><limit lower="0" upper="1.2" effort="1" velocity="5"/>'
+        '<dynamics damping="0.0001" friction="0.0001"/></joint></robot>'
+    )
+    return folder
+
+
+class _NoRootHold:
+    """A session whose engine cannot hold the root (the probe then applies
+    the push's reaction on the root only)."""
+
+    def __init__(self, session):
+        self._session = session
+
+    def hold_root(self, max_force: float) -> None:
+        raise EngineUnsupported("test: no bounded root hold")
+
+    def __getattr__(self, name):
+        return getattr(self._session, name)
+
+
+@pytest.mark.parametrize("hold", ["held", "reaction only", "external push"])
+def test_a_cover_that_drags_on_the_ground_is_swung_open_while_the_other_hand_holds_the_stick(tmp_path, hold):
+    """The ground's friction on the 15 g cover (about 0.07 N) is a force from
+    outside the object: the push's reaction on the 5 g stick alone (ground
+    friction about 0.025 N) leaves it to slide or turn with the cover, as
+    does an external push; the stick held by the other hand (the default,
+    a bounded hold of the root) stays put and the cover swings open."""
+    f = _swivel(tmp_path / "s")
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"swivel": 0.0}))
+    try:
+        session = _NoRootHold(s) if hold == "reaction only" else s
+        r = probe_joint(session, "swivel", closed=0.0, direction=1.0, open_range=1.2, action="open",
+                        config=ProbeConfig(hold_body=hold != "external push"))
+    finally:
+        s.close()
+    if hold == "held":
+        assert r.success, r.failure
+        assert r.root_displacement < 1e-3 and r.root_rotation < 0.01
+    else:
+        assert not r.success and "moved instead" in r.failure
+        assert r.slid or r.tipped
+    assert any("not held" in n for n in r.notes) is (hold == "reaction only")
 
 
 def _lid(folder: Path, friction: float) -> Path:

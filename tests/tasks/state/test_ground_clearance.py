@@ -139,3 +139,82 @@ def test_an_object_lying_flat_as_a_whole_keeps_its_moving_half_on_the_floor(tmp_
     res = refine.refine_asset(build_pliers(tmp_path / "pliers"), "Pliers, fully open.", tmp_path / "out")
     assert res.report.failure_mode == "none", res.report.readiness
     assert not any("raised" in n for n in res.report.state.collision_changes)
+
+
+#: The drop-down door of :func:`_drop_door`: hinge height above the floor,
+#: door length and thickness, m.
+HINGE_Z, DOOR, DOOR_T = 0.05, 0.2, 0.01
+
+
+def _drop_door(folder, q0: float):
+    """A 3 kg box (0.3 m cube) standing on the floor with a 0.5 kg door
+    hinged 5 cm above the floor on its front face, opening outwards and down
+    (closed at 0, limit 2.5 rad): past 90 deg the door's top edge swings
+    down to the floor."""
+    folder.mkdir(parents=True, exist_ok=True)
+    _box_obj(folder / "body.obj", (-0.15, -0.15, 0.0), (0.15, 0.15, 0.3))
+    _box_obj(folder / "door.obj", (0.0, -0.14, 0.0), (DOOR_T, 0.14, DOOR))
+
+    def link(name, mass, com, inertia):
+        return (f'<link name="{name}"><inertial><origin xyz="{com}"/><mass value="{mass}"/>'
+                f'<inertia ixx="{inertia}" iyy="{inertia}" izz="{inertia}" ixy="0" ixz="0" iyz="0"/></inertial>'
+                f'<collision><geometry><mesh filename="{name}.obj"/></geometry></collision></link>')
+
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="dropdoor">'
+        + link("body", 3.0, "0 0 0.15", 0.05) + link("door", 0.5, f"{DOOR_T / 2} 0 {DOOR / 2}", 0.002)
+        + '<joint name="flap" type="revolute"><parent link="body"/><child link="door"/>'
+        f'<origin xyz="0.15 0 {HINGE_Z}"/><axis xyz="0 1 0"/><limit lower="0" upper="2.5" effort="10" velocity="5"/>'
+        '<dynamics damping="0.05" friction="1.0"/></joint></robot>')
+    (folder / "initial_state.json").write_text(f'{{"initial_joint_positions": {{"flap": {q0}}}}}')
+    return folder
+
+
+def _door_stop() -> float:
+    """The opening (rad) at which the door's lowest corner comes FLOOR_GAP
+    above the floor: corners (0, DOOR) and (DOOR_T, DOOR) of the door rotated
+    by q about the hinge, by bisection on the closed form."""
+    import math
+
+    def lowest(q):
+        return HINGE_Z + min(DOOR * math.cos(q) - DOOR_T * math.sin(q), DOOR * math.cos(q), -DOOR_T * math.sin(q))
+
+    lo, hi = 1.0, 2.5
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if lowest(mid) >= ground_clearance.FLOOR_GAP else (lo, mid)
+    return lo
+
+
+def test_floor_stops_finds_where_a_drop_down_door_meets_the_floor(tmp_path):
+    f = _drop_door(tmp_path / "d", 0.0)
+    stops = ground_clearance.floor_stops(read_urdf(f / "mobility.urdf"), f / "mobility.urdf", {"flap": 0.0},
+                                         {"flap": (0.0, 1.0, 2.5)})
+    assert stops["flap"] == pytest.approx(_door_stop(), abs=1e-6)  # 1.763 rad
+    # a range that ends before the floor: no stop
+    assert ground_clearance.floor_stops(read_urdf(f / "mobility.urdf"), f / "mobility.urdf", {"flap": 0.0},
+                                        {"flap": (0.0, 1.0, 1.5)}) == {}
+
+
+@pytest.mark.parametrize("with_stop", [True, False])
+def test_the_open_probe_stops_where_the_floor_stops_the_door(tmp_path, monkeypatch, with_stop):
+    """Held at 1.45 rad (58 % of its range), the door's open probe aims at
+    90 % (2.25 rad), beyond the floor (1.76 rad): pushed into the floor it
+    levers the box up (the object moved instead). Capped at the floor stop
+    (the evaluation's floor stops) the door opens to it and the probe passes,
+    with notes."""
+    from asset2sim.tasks.evaluation import engine_run
+
+    if not with_stop:
+        monkeypatch.setattr(engine_run, "floor_stops", lambda *a, **k: {})
+    ev = evaluate_asset(_drop_door(tmp_path / "d", 1.45))
+    m = ev.metric("probes")
+    opened = next(p for p in m.details["probes"] if p["action"] == "open")
+    if with_stop:
+        assert m.passed is True, m.details["failures"]
+        assert opened["target_fraction"] == pytest.approx(_door_stop() / 2.5, abs=1e-4)
+        assert any("floor stops it" in n for n in opened["notes"])
+        assert any("probes: the floor stops flap" in n for n in ev.notes)
+    else:
+        assert m.passed is False and not opened["success"]
+        assert opened["target_fraction"] == pytest.approx(0.9)
