@@ -311,6 +311,26 @@ class SimSession(Protocol):
         """Release the engine's resources."""
 
 
+class NoRootHold:
+    """:meth:`SimSession.hold_root` / :meth:`SimSession.release_root` of an
+    engine without a bounded root constraint (every engine but PyBullet; the
+    probes, which hold the root, run in PyBullet): a no-op on a fixed base,
+    else :class:`EngineUnsupported`. Mixed into the engine's session class,
+    which has ``engine`` and ``options``."""
+
+    engine: str
+    options: SessionOptions
+
+    def hold_root(self, max_force: float) -> None:
+        """Raises :class:`EngineUnsupported` unless the base is fixed (then a no-op)."""
+        if self.options.fixed_base:
+            return
+        raise EngineUnsupported(f"{self.engine}: no bounded root hold")
+
+    def release_root(self) -> None:
+        """Nothing to release: :meth:`hold_root` holds nothing here."""
+
+
 class ShapeWorld(Protocol):
     """Free static convex shapes in a private collision world (no articulation,
     no dynamics): distance queries between pieces of geometry."""

@@ -33,6 +33,7 @@ from asset2sim.engines.base import (
     HeldJoint,
     HeldLink,
     HeldPhysics,
+    NoRootHold,
     SessionOptions,
     principal_moments,
     register_engine,
@@ -97,7 +98,7 @@ def fake_behaviour(behaviour: FakeBehaviour | None = None, **changes) -> Iterato
         _DEFAULT_BEHAVIOUR = old
 
 
-class FakeSession:
+class FakeSession(NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` without physics (see the
     module docstring). Deterministic: the same calls give the same numbers.
 
@@ -189,17 +190,6 @@ class FakeSession:
             raise KeyError(joint)
         self._anchor[joint] = (self._value(joint), self.steps)
         self._driven.pop(joint, None)
-
-    def hold_root(self, max_force: float) -> None:
-        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
-        no bounded root constraint is built for fake (the probes, which hold
-        the root, run in PyBullet)."""
-        if self.options.fixed_base:
-            return
-        raise EngineUnsupported("fake: no bounded root hold")
-
-    def release_root(self) -> None:
-        """Nothing to release (:meth:`hold_root` holds nothing here)."""
 
     def set_root_velocity(self, linear, angular) -> None:
         """Raises :class:`EngineUnsupported`: the fake has no dynamics."""

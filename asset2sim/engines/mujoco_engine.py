@@ -20,6 +20,7 @@ from asset2sim.engines.base import (
     HeldJoint,
     HeldLink,
     HeldPhysics,
+    NoRootHold,
     SessionOptions,
     register_engine,
     register_file_reader,
@@ -36,7 +37,7 @@ def _mujoco():
 
 
 # ------------------------------------------------------------------ session
-class MuJoCoSession:
+class MuJoCoSession(NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` in MuJoCo, compiled from
     :func:`urdf_to_mjcf` in memory (links without ``<inertial>`` get
     PyBullet's default, as in the reference engine).
@@ -169,17 +170,6 @@ class MuJoCoSession:
             tau = float(np.clip(load + 0.5 * inertia * (v - float(self.d.qvel[i])) / dt, -limit, limit))
             self.d.qfrc_applied[i] += tau
         self._applied = True
-
-    def hold_root(self, max_force: float) -> None:
-        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
-        no bounded root constraint is built for mujoco (the probes, which hold
-        the root, run in PyBullet)."""
-        if self.options.fixed_base:
-            return
-        raise EngineUnsupported("mujoco: no bounded root hold")
-
-    def release_root(self) -> None:
-        """Nothing to release (:meth:`hold_root` holds nothing here)."""
 
     def set_root_velocity(self, linear, angular) -> None:
         """Root (free joint) velocity: linear world frame, angular given in

@@ -45,6 +45,7 @@ from asset2sim.engines.base import (
     HeldJoint,
     HeldLink,
     HeldPhysics,
+    NoRootHold,
     SessionOptions,
     penetration_sum,
     principal_moments,
@@ -83,7 +84,7 @@ def _hull_triangles(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return convex_hull_mesh(points)
 
 
-class NewtonSession:
+class NewtonSession(NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` in Newton on the CPU.
 
     ``notes``: what the reading of the URDF changed (flat pieces made slabs).
@@ -333,17 +334,6 @@ class NewtonSession:
         self.state0.joint_q.assign(jq)
         self.state0.joint_qd.assign(jd)
         self._refresh()
-
-    def hold_root(self, max_force: float) -> None:
-        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
-        no bounded root constraint is built for newton (the probes, which hold
-        the root, run in PyBullet)."""
-        if self.options.fixed_base:
-            return
-        raise EngineUnsupported("newton: no bounded root hold")
-
-    def release_root(self) -> None:
-        """Nothing to release (:meth:`hold_root` holds nothing here)."""
 
     def set_root_velocity(self, linear, angular) -> None:
         raise EngineUnsupported("newton: set_root_velocity is not implemented")

@@ -47,6 +47,7 @@ from asset2sim.engines.base import (
     HeldJoint,
     HeldLink,
     HeldPhysics,
+    NoRootHold,
     SessionOptions,
     penetration_sum,
     register_engine,
@@ -113,7 +114,7 @@ def _principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return w, v
 
 
-class PhysXSession:
+class PhysXSession(NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3.
 
     ``notes``: what had to change for this asset (flat hulls, missing
@@ -334,17 +335,6 @@ class PhysXSession:
         v, extra = self._drive.get(i, (0.0, 0.0))
         self._joints[i].set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self._friction[i] + self._damping[i] * qd_abs + extra), "force")
         self._joints[i].set_drive_velocity_target(v)
-
-    def hold_root(self, max_force: float) -> None:
-        """No-op on a fixed base; otherwise raises :class:`EngineUnsupported`:
-        no bounded root constraint is built for physx (the probes, which hold
-        the root, run in PyBullet)."""
-        if self.options.fixed_base:
-            return
-        raise EngineUnsupported("physx: no bounded root hold")
-
-    def release_root(self) -> None:
-        """Nothing to release (:meth:`hold_root` holds nothing here)."""
 
     def set_root_velocity(self, linear, angular) -> None:
         """Root linear and angular velocity (world frame).

@@ -25,17 +25,24 @@ def _box(x, y, z, xyz=(0, 0, 0)):
     return f"<collision>{o}{g}</collision><visual>{o}{g}</visual>"
 
 
+def _two_links(folder: Path, robot: str, parent: str, child: str, joint: str) -> Path:
+    """Write ``folder``/mobility.urdf: links ``parent`` and ``child`` (their
+    XML) and ``joint`` (its XML); returns ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "mobility.urdf").write_text(f'<?xml version="1.0"?><robot name="{robot}">{parent}{child}{joint}</robot>')
+    return folder
+
+
 def drawer(folder: Path, *, base_mass=20.0, friction=1.0, damping=2.0, stiffness=None, q0=0.15) -> Path:
     """A carcass with a drawer sliding along +x beside it, limits [0, 0.3] m
     (closed at 0, where the drawer is nearest the carcass)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "mobility.urdf").write_text(
-        '<?xml version="1.0"?><robot name="drawer">'
-        f'<link name="carcass">{_inertial(base_mass, i=(0.3, 0.3, 0.3))}{_box(0.4, 0.4, 0.3)}</link>'
-        f'<link name="drawer">{_inertial(1.0)}{_box(0.2, 0.3, 0.1)}</link>'
+    _two_links(
+        folder, "drawer",
+        f'<link name="carcass">{_inertial(base_mass, i=(0.3, 0.3, 0.3))}{_box(0.4, 0.4, 0.3)}</link>',
+        f'<link name="drawer">{_inertial(1.0)}{_box(0.2, 0.3, 0.1)}</link>',
         '<joint name="slide" type="prismatic"><parent link="carcass"/><child link="drawer"/>'
         '<origin xyz="0.31 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.3" effort="100" velocity="1"/>'
-        f'<dynamics damping="{damping}" friction="{friction}"/></joint></robot>'
+        f'<dynamics damping="{damping}" friction="{friction}"/></joint>',
     )
     (folder / "initial_state.json").write_text(json.dumps({"initial_joint_positions": {"slide": q0}}))
     if stiffness is not None:  # a spring pulling the drawer open (rest position 0.3 m)
@@ -112,16 +119,14 @@ def _swivel(folder: Path) -> Path:
     """A USB-stick-sized stick (5 g, 60 x 20 x 10 mm) with a 15 g cover
     beside it that swivels about a vertical axis at the stick's end, both
     lying on the ground: swinging the cover drags it over the ground."""
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "mobility.urdf").write_text(
-        '<?xml version="1.0"?><robot name="swivel">'
-        f'<link name="stick">{_inertial(0.005, i=(2e-7, 2e-6, 2e-6))}{_box(0.06, 0.02, 0.01)}</link>'
-        f'<link name="cover">{_inertial(0.015, (0.035, 0, 0), (5e-7, 5e-6, 5e-6))}{_box(0.06, 0.02, 0.01, (0.035, 0, 0))}</link>'
+    return _two_links(
+        folder, "swivel",
+        f'<link name="stick">{_inertial(0.005, i=(2e-7, 2e-6, 2e-6))}{_box(0.06, 0.02, 0.01)}</link>',
+        f'<link name="cover">{_inertial(0.015, (0.035, 0, 0), (5e-7, 5e-6, 5e-6))}{_box(0.06, 0.02, 0.01, (0.035, 0, 0))}</link>',
         '<joint name="swivel" type="revolute"><parent link="stick"/><child link="cover"/>'
         '<origin xyz="0.03 0 0"/><axis xyz="0 0 1"/><limit lower="0" upper="1.2" effort="1" velocity="5"/>'
-        '<dynamics damping="0.0001" friction="0.0001"/></joint></robot>'
+        '<dynamics damping="0.0001" friction="0.0001"/></joint>',
     )
-    return folder
 
 
 class _NoRootHold:
@@ -165,16 +170,14 @@ def test_a_cover_that_drags_on_the_ground_is_swung_open_while_the_other_hand_hol
 def _lid(folder: Path, friction: float) -> Path:
     """A box with a lid hinged along y at its top back edge; closed at 0,
     opening towards +q up to 2 rad."""
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "mobility.urdf").write_text(
-        '<?xml version="1.0"?><robot name="box">'
-        f'<link name="body">{_inertial(10.0, i=(0.1, 0.1, 0.1))}{_box(0.3, 0.3, 0.2)}</link>'
-        f'<link name="lid">{_inertial(0.5, (0.15, 0, 0), (0.002, 0.004, 0.005))}{_box(0.3, 0.3, 0.01, (0.15, 0, 0.006))}</link>'
+    return _two_links(
+        folder, "box",
+        f'<link name="body">{_inertial(10.0, i=(0.1, 0.1, 0.1))}{_box(0.3, 0.3, 0.2)}</link>',
+        f'<link name="lid">{_inertial(0.5, (0.15, 0, 0), (0.002, 0.004, 0.005))}{_box(0.3, 0.3, 0.01, (0.15, 0, 0.006))}</link>',
         '<joint name="hinge" type="revolute"><parent link="body"/><child link="lid"/>'
         '<origin xyz="-0.15 0 0.1"/><axis xyz="0 -1 0"/><limit lower="0" upper="2.0" effort="10" velocity="5"/>'
-        f'<dynamics damping="0.05" friction="{friction}"/></joint></robot>'
+        f'<dynamics damping="0.05" friction="{friction}"/></joint>',
     )
-    return folder
 
 
 @pytest.mark.parametrize("friction, holds", [(0.0, False), (2.0, True)])
