@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
+from asset2sim.mesh_io import MeshReadError
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
 from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, record_rest_test
@@ -101,9 +102,14 @@ def _floor_stops(model, ctx: Context, targets: dict[str, tuple[float, float, flo
     state (:func:`~asset2sim.tasks.state.ground_clearance.floor_stops`: a
     suitcase standing on its edge whose lid opens downwards cannot be opened
     further in place; the refine writes such a state at the floor with a
-    design note); only stops before the open probe's target. Notes go to
-    ``ctx.notes``."""
-    stops = floor_stops(model, ctx.urdf, dict(ctx.initial_state), targets)
+    design note); only stops before the open probe's target. A collision
+    file that cannot be read gives no stops (the engine loaded what it
+    could). Notes go to ``ctx.notes``."""
+    try:
+        stops = floor_stops(model, ctx.urdf, dict(ctx.initial_state), targets)
+    except (OSError, MeshReadError) as exc:
+        ctx.notes.append(f"probes: where the floor stops the parts was not measured ({exc}): no stop")
+        return {}
     out = {}
     for name, stop in stops.items():
         _, _, rng = targets[name]

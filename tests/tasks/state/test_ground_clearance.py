@@ -218,3 +218,15 @@ def test_the_open_probe_stops_where_the_floor_stops_the_door(tmp_path, monkeypat
     else:
         assert m.passed is False and not opened["success"]
         assert opened["target_fraction"] == pytest.approx(0.9)
+
+
+def test_a_collision_file_the_floor_stops_cannot_read_leaves_the_probes_running(tmp_path):
+    """A door mesh with a two-coordinate vertex: PyBullet loads what it can,
+    the floor stops are not measured (a note says why) and the probes still
+    run and report."""
+    f = _drop_door(tmp_path / "d", 1.45)
+    (f / "door.obj").write_text("v 0 0 0\nv 1 0\nf 1 2 3\n")
+    ev = evaluate_asset(f)
+    m = ev.metric("probes")
+    assert m is not None and m.details["probes"]
+    assert any("where the floor stops the parts was not measured" in n and "door.obj" in n for n in ev.notes)
