@@ -440,6 +440,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
                                          closed=manipulation.closed_tuples(closed_out))
     overlay, check, rounds, overrides, closed_out = _repair_sweep(
         ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, out_dir, log)
+    st.collision_changes = _clearance_notes(ctx, overlay, state, overrides, out_dir) + list(st.collision_changes)
     return _Attempt(
         asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
         st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
@@ -498,8 +499,22 @@ def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLo
     """Stage 5: the output folder at the requested state (meshes copied once;
     later writes only rewrite the small files). Returns the URDF path."""
     paths = write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, root_rotation=ctx.root_rotation)
+    for line in paths.collision_notes:
+        if collision_geometry.RUNNING_CLEARANCE_NOTE in line:
+            log.say("write", line)
     log.lap("write")
     return paths.urdf
+
+
+def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, out_dir: Path) -> list[str]:
+    """The running clearance the writer gives sliding contacts between parts
+    (:func:`asset2sim.tasks.publish.collision_geometry.running_clearance`) in
+    the output as written with ``overlay``, ``state`` and the collision
+    ``overrides`` (the pieces are the writer's cached ones: nothing is
+    recomputed, no file changes), for ``state.collision_changes``."""
+    notes: list[str] = []
+    write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (out_dir, state), notes)
+    return [n for n in notes if collision_geometry.RUNNING_CLEARANCE_NOTE in n]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog,

@@ -19,7 +19,7 @@ import json
 import os
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -47,6 +47,9 @@ class OutputPaths:
     overlay: Path
     semantics: Path | None = None
     """``semantics.txt``, None when the input had no part labels."""
+    collision_notes: list[str] = field(default_factory=list)
+    """What the writer's convex collision pieces changed
+    (:func:`asset2sim.tasks.publish.collision_geometry.link_pieces`' notes)."""
 
 
 def check_output_folder(asset: AssetDescription, out_dir: Path) -> Path:
@@ -362,6 +365,7 @@ def build_urdf(
     collision_overrides: dict | None = None,
     root_rotation: np.ndarray | None = None,
     collision_out: tuple[Path, dict[str, float]] | None = None,
+    collision_notes: list[str] | None = None,
 ) -> bytes:
     """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``.
 
@@ -384,7 +388,8 @@ def build_urdf(
     ``collision_out``: (output folder, initial state): the mesh collisions
     become the convex pieces of
     :func:`asset2sim.tasks.publish.collision_geometry.convex_collisions`,
-    written into the folder (every engine loads them).
+    written into the folder (every engine loads them); their notes (what
+    the pieces changed) are appended to ``collision_notes`` when given.
 
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
@@ -453,7 +458,9 @@ def build_urdf(
                 joint.limit.upper = float(dyn.upper)
     urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
     if collision_out is not None:
-        collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1])
+        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1])
+        if collision_notes is not None:
+            collision_notes.extend(notes)
     springs = {n: (d.stiffness, d.spring_reference) for n, d in overlay.joints.items() if d.stiffness > 0}
     comment = (
         f" Written by asset2sim. Uniform scale {s!r} is baked in (mesh scale, origins, prismatic limits, inertials); "
@@ -497,13 +504,15 @@ def write_output(
         copy_meshes(asset, out)
         if labels:
             atomic.write_bytes(sem, partnet_mobility.format_semantics(labels).encode())
-    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state)))
+    notes: list[str] = []
+    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state), notes))
     state = atomic.write_json(out / STATE_NAME, {
         "initial_joint_positions": {k: float(v) for k, v in initial_state.items()},
         ROOT_KEY: root_record(overlay.mounting),
     })
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
-    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem if labels else None)
+    return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem if labels else None,
+                       collision_notes=notes)
 
 
 def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics]:

@@ -28,9 +28,14 @@ pieces, link frame, m):
    velocity direction of the face centre (a x r for a revolute joint with
    axis a through o, r = centre - o; a for a prismatic one). A contact along
    the motion is a stop (the limit's business, :mod:`asset2sim.tasks.geometry.limits`).
-3. P's face towards Q is moved back along n by delta = max(0, -g) +
-   :data:`CLEARANCE` (an affine squeeze of P along n that keeps its far face:
-   the piece stays convex), never by more than half of P's width along n.
+3. P's face towards Q is moved back along n by delta = :data:`CLEARANCE`
+   - g (an affine squeeze of P along n that keeps its far face: the piece
+   stays convex), never by more than half of P's width along n.
+
+Steps 1-3 are :func:`asset2sim.tasks.publish.collision_geometry.clear_sliding_contact`,
+which the writer also runs at the modelled pose when it makes the pieces
+(:func:`~asset2sim.tasks.publish.collision_geometry.running_clearance`);
+this repair finds the contacts that appear at other states.
 
 The pieces of the changed links are returned (link frame, m, every piece of
 the link, changed or not) for the writer's collision overrides.
@@ -42,21 +47,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial import QhullError
 
 from asset2sim import atomic, mesh_io
 from asset2sim.schemas.asset import GeometryRef
+from asset2sim.tasks.publish.collision_geometry import RUNNING_CLEARANCE, clear_sliding_contact, joint_velocity, sat_gap
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
 
-#: Running clearance (m) given to a sliding contact: PyBullet's two 1 mm hull
-#: margins (touching hulls report 2 mm; see
-#: :data:`asset2sim.engines.loading.FLAT_HULL_THICKNESS`) plus 0.5 mm.
-CLEARANCE = 0.0025
-#: |cos| between the contact normal and the motion below which a contact slides (60 deg or more).
-SLIDING_COS = 0.5
-#: A squeeze never takes more than this fraction of a piece's width along n.
-MAX_SQUEEZE = 0.5
+#: Running clearance (m), the sliding test and the squeeze are the writer's
+#: (:func:`asset2sim.tasks.publish.collision_geometry.clear_sliding_contact`),
+#: which gives sliding contacts at the modelled pose their clearance when
+#: the pieces are made; this module repairs the contacts a blocked sweep finds
+#: at other states.
+CLEARANCE = RUNNING_CLEARANCE
+__all__ = ["CLEARANCE", "ClearanceRepair", "clearance_for_blocked", "link_pieces", "sat_gap", "touching_joints",
+           "write_overrides", "write_piece_overrides"]
 
 
 @dataclass
@@ -66,46 +72,6 @@ class ClearanceRepair:
     pieces: dict[str, list[np.ndarray]] = field(default_factory=dict)
     """link -> every convex piece of the link (k, 3) m in the link frame"""
     notes: list[str] = field(default_factory=list)
-
-
-def _hull(points: np.ndarray) -> ConvexHull | None:
-    try:
-        return ConvexHull(points)
-    except (QhullError, ValueError):
-        return None
-
-
-def sat_gap(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
-    """Separating-axis test of two convex point sets (k, 3), (l, 3) m over the
-    face normals of both hulls. Returns (gap g m, unit axis n from p to q):
-    g > 0 they are apart by at least g; g <= 0 they overlap by at most -g along n.
-
-    Raises:
-        ValueError: a set spans no volume.
-    """
-    hp, hq = _hull(p), _hull(q)
-    if hp is None or hq is None:
-        raise ValueError("a convex piece spans no volume")
-    axes = np.vstack([hp.equations[:, :3], hq.equations[:, :3]])
-    axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
-    sp, sq = p @ axes.T, q @ axes.T  # (k, A), (l, A)
-    ahead = sq.min(axis=0) - sp.max(axis=0)  # q beyond p along +axis
-    behind = sp.min(axis=0) - sq.max(axis=0)  # q before p
-    gaps = np.maximum(ahead, behind)
-    i = int(np.argmax(gaps))
-    n = axes[i] if ahead[i] >= behind[i] else -axes[i]
-    return float(gaps[i]), n
-
-
-def _squeeze(p: np.ndarray, n: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
-    """Move the face of ``p`` (k, 3) towards +n back by ``delta`` m (at most
-    :data:`MAX_SQUEEZE` of its width), keeping the face towards -n. Returns (points, delta used)."""
-    s = p @ n
-    lo, w = float(s.min()), float(np.ptp(s))
-    d = min(delta, MAX_SQUEEZE * w)
-    if w <= 0 or d <= 0:
-        return p, 0.0
-    return p - np.outer((s - lo) * (d / w), n), d
 
 
 def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
@@ -156,38 +122,30 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
         poses = model.link_poses({**state, name: q})
         sub = subtrees.get(name, [joint.child])
         others = [ln for ln in model.links if ln not in sub and pieces(ln)]
-        T_j = poses[joint.child]
-        axis_w = T_j[:3, :3] @ joint.axis
-        origin_w = T_j[:3, 3]
         for ln in sub:
             Tl = poses[ln]
-            Rl, tl = Tl[:3, :3], Tl[:3, 3]
+            inv = np.linalg.inv(Tl)
+            velocity = joint_velocity(joint, inv @ poses[joint.child])
             own = [P.copy() for P in (rep.pieces.get(ln) or pieces(ln))]
             changed = False
             for other in others:
                 if parent_of.get(ln) == other or parent_of.get(other) == ln:
                     continue  # parent-child pairs are not collided (SPEC)
-                To = np.linalg.inv(Tl) @ poses[other]
+                To = inv @ poses[other]
                 for Q in (rep.pieces.get(other) or pieces(other)):  # a piece already given clearance is not squeezed again from the other side
                     Ql = Q @ To[:3, :3].T + To[:3, 3]
                     for i, P in enumerate(own):
                         try:
-                            g, n = sat_gap(P, Ql)
+                            hit = clear_sliding_contact(P, Ql, velocity)
                         except ValueError:
                             continue
-                        if g >= CLEARANCE - 1e-9:  # (rounding of a piece already given clearance)
-                            continue
-                        face = P[(P @ n) >= (P @ n).max() - 1e-3].mean(axis=0)
-                        n_w, c_w = Rl @ n, Rl @ face + tl
-                        t = axis_w if joint.type == "prismatic" else np.cross(axis_w, c_w - origin_w)
-                        if np.linalg.norm(t) > 1e-9 and abs(float(n_w @ t) / np.linalg.norm(t)) >= SLIDING_COS:
-                            continue  # a stop along the motion, not a sliding contact
-                        own[i], used = _squeeze(P, n, max(0.0, -g) + CLEARANCE)
-                        if used > 0:
-                            changed = True
-                            rep.notes.append(
-                                f"{ln}: collision piece {i} given {used * 1000:.2g} mm running clearance against {other} "
-                                f"(gap {g * 1000:.2g} mm, sliding contact blocking {name})")
+                        if hit is None:
+                            continue  # apart, or a stop along the motion, not a sliding contact
+                        own[i], used, g = hit
+                        changed = True
+                        rep.notes.append(
+                            f"{ln}: collision piece {i} given {used * 1000:.2g} mm running clearance against {other} "
+                            f"(gap {g * 1000:.2g} mm, sliding contact blocking {name})")
             if changed:
                 rep.pieces[ln] = own
     return rep

@@ -417,3 +417,53 @@ def test_a_child_that_starts_around_its_parent_is_separated(tmp_path):
     mujoco = pytest.importorskip("mujoco")
     assert parent_child_penetration(out.urdf, {"hinge": 0.0}, engine="mujoco").value <= cg.CONTAINMENT_TOLERANCE * 1000
     assert mujoco.MjModel.from_xml_path(str(out.urdf)).ngeom >= 2
+
+
+def test_sliding_contacts_between_parts_are_given_running_clearance(tmp_path):
+    """Two drawers stacked with no gap (siblings, both prismatic along +x): the
+    writer's pieces keep the engines' margins apart (gap >= RUNNING_CLEARANCE),
+    the lower drawer (first joint in file order) squeezed at its top face only;
+    the upper one is then clear and unchanged."""
+    from tests.tasks.state.test_clearance import write_stacked_drawers
+
+    urdf_path = write_stacked_drawers(tmp_path / "drawers")
+    model = urdf.read_urdf(urdf_path)
+    pieces, notes = cg.link_pieces(model, lambda g: urdf_path.parent / str(g.filename))
+    (lower,), (upper,) = pieces["lower"], pieces["upper"]
+    assert lower.points[:, 2].min() == pytest.approx(0.005) and lower.points[:, 2].max() == pytest.approx(0.025 - cg.RUNNING_CLEARANCE)
+    assert np.ptp(lower.points[:, 0]) == pytest.approx(0.06) and np.ptp(lower.points[:, 1]) == pytest.approx(0.04)
+    assert upper.points[:, 2].min() == pytest.approx(0.025) and upper.points[:, 2].max() == pytest.approx(0.045)
+    g, _ = cg.sat_gap(lower.points, upper.points)
+    assert g >= cg.RUNNING_CLEARANCE - 1e-12
+    clear = [n for n in notes if cg.RUNNING_CLEARANCE_NOTE in n]
+    assert len(clear) == 1 and "'lower'" in clear[0] and "'slide_lower'" in clear[0]
+
+
+def test_a_stop_along_the_motion_keeps_its_contact(tmp_path):
+    """A slider between two walls that touch its sides and against an end wall
+    that touches its +x face at q = 0: the sides slide (squeezed in y on both
+    sides), the end wall is a stop (the slider keeps its length in x)."""
+    from tests.tasks.state.test_clearance import W, write_channel
+
+    urdf_path = write_channel(tmp_path / "channel", side_gap=0.0, end_stop=True)
+    model = urdf.read_urdf(urdf_path)
+    pieces, notes = cg.link_pieces(model, lambda g: urdf_path.parent / str(g.filename))
+    (slider,) = pieces["slider"]
+    assert np.ptp(slider.points[:, 0]) == pytest.approx(0.06)
+    assert slider.points[:, 0].max() == pytest.approx(0.03)
+    assert np.ptp(slider.points[:, 1]) == pytest.approx(2 * W - 2 * cg.RUNNING_CLEARANCE)
+    assert len([n for n in notes if cg.RUNNING_CLEARANCE_NOTE in n]) == 2
+
+
+def test_clear_sliding_contact_leaves_deep_overlaps_and_stops():
+    """The sliding test on two boxes: touching side by side across the motion
+    slides; touching along the motion is a stop; an overlap deeper than
+    ``deepest`` is left to the state search."""
+    a = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    along_x = lambda c: np.array([1.0, 0.0, 0.0])  # noqa: E731
+    pts, used, g = cg.clear_sliding_contact(a, a + [0.0, 1.0, 0.0], along_x)
+    assert g == pytest.approx(0.0) and used == pytest.approx(cg.RUNNING_CLEARANCE)
+    assert pts[:, 1].max() == pytest.approx(1.0 - cg.RUNNING_CLEARANCE) and pts[:, 1].min() == pytest.approx(0.0)
+    assert cg.clear_sliding_contact(a, a + [1.0, 0.0, 0.0], along_x) is None  # a stop
+    assert cg.clear_sliding_contact(a, a + [0.0, 1.1, 0.0], along_x) is None  # apart
+    assert cg.clear_sliding_contact(a, a + [0.0, 0.9, 0.0], along_x, deepest=0.05) is None  # 0.1 m deep

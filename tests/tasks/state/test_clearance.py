@@ -144,8 +144,9 @@ def test_refine_gives_clearance_to_drawers_that_move_together(tmp_path):
     """PartNet-Mobility 19179, a two-drawer cabinet, first drawer slightly open: the drawers' hulls
     touch (2 mm inside PyBullet's margins), so the free object's drawers move as one: the gripper
     closing one drawer had to push both and slid the cabinet (43 N, above the 22.2 N range), although
-    the position-driven sweep, which holds the other drawer, passed. Stage 7b gives the sliding contact
-    running clearance: no penetration left, the task passes with a real force."""
+    the position-driven sweep, which holds the other drawer, passed. The writer's pieces give the sliding
+    contact running clearance (collision_geometry.running_clearance; stage 7b's repair did, after a
+    post-check): no penetration left, the task passes with a real force."""
     from asset2sim.tasks.refine import refine_asset
 
     res = refine_asset(SHARED / "19179", "I want a very small two-drawer under-desk office cabinet, with the first drawer "
