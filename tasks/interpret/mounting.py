@@ -129,6 +129,22 @@ def request_mounting(text: str, category: str | None = None) -> RootMount | None
     in the text wins; a span already covered by an earlier (more specific)
     pattern is not matched again.
     """
+    hits = mounting_mentions(text)
+    if not hits:
+        return None
+    _, kind, phrase = max(hits, key=lambda h: h[0])
+    if kind == "mounted":
+        prior = category_mounting(category)
+        kind = prior.kind if prior.fixed else "wall-mounted"
+    return RootMount(kind=kind, fixed=kind != FREE, source=f"request: {phrase.strip()!r} -> {kind}")
+
+
+def mounting_mentions(text: str) -> list[tuple[int, str, str]]:
+    """Every mounting phrase of a request (:func:`request_mounting`'s
+    patterns; a span already covered by an earlier, more specific pattern is
+    not matched again): (start index in the lower-cased text, kind, the
+    phrase as written in lower case), in pattern order. The request parser
+    counts these words as understood."""
     low = (text or "").lower()
     taken: list[tuple[int, int]] = []
     hits: list[tuple[int, str, str]] = []
@@ -138,13 +154,7 @@ def request_mounting(text: str, category: str | None = None) -> RootMount | None
                 continue
             taken.append((m.start(), m.end()))
             hits.append((m.start(), kind, m.group(0)))
-    if not hits:
-        return None
-    _, kind, phrase = max(hits, key=lambda h: h[0])
-    if kind == "mounted":
-        prior = category_mounting(category)
-        kind = prior.kind if prior.fixed else "wall-mounted"
-    return RootMount(kind=kind, fixed=kind != FREE, source=f"request: {phrase.strip()!r} -> {kind}")
+    return hits
 
 
 def resolve_mounting(category: str | None, text: str) -> RootMount:

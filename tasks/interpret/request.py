@@ -68,6 +68,7 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, request_category, variant_mention
+from asset2sim.tasks.interpret.mounting import mounting_mentions
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.prior_tables import load_priors
 from asset2sim.tasks.interpret import request_values as rv
@@ -180,14 +181,15 @@ _STATE_TABLE = _compile(
         (r"(?:fully|completely|totally|maximally|wide) " + _OPEN, "fully", ""),
         (r"(?:" + _OPEN + r" )?all the way(?: " + _OPEN + r")?", "fully", ""),
         (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
-        (r"(?:turned|switched) (?:fully )?on|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
+        (r"(?:turned|switched) (?:fully )?on(?: (?:full|fully|completely|all the way))?|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
+        (r"(?:" + _OPEN + r"|laid open|lying open|unfolded|folded out|swung open) flat|flat open|(?:" + _OPEN + r"|folded|swung) (?:out )?flat", "fully", ""),
         # named states: which end they are does not depend on the geometry
         (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
         (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
         (r"pushed (?:all the way )?in|retracted|folded(?: up| shut| closed| down)?|screwed (?:on|shut|closed|tight)|pressed (?:down|in)|pressed|depressed|tucked in", "closed", ""),
         # physical ends: decided from the geometry after scaling (request_apply)
         (r"(?:raised|lifted) (?:all the way|fully|completely|to the top)", "end:high", "end"),
-        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up", "end:high", "end"),
+        (r"(?:in|at|to) (?:the|its|their) (?:up|raised|upper|top|highest) position|(?:raised|lifted|propped|popped|sprung|flipped|pulled|pushed|swung|tilted|turned|flicked|moved|set|left)(?: all the way)? up|raised|lifted|(?:all the way |fully )?up", "end:high", "end"),
         (r"(?:in|at|to) (?:the|its|their) (?:down|lowered|lower|bottom|lowest) position|(?:lowered|flipped|pulled|pushed|swung|tilted|flicked|moved|set|left)(?: all the way)? down|lowered|(?:all the way |fully )?down", "end:low", "end"),
         (r"(?:in|at|to) (?:the|its) on position|(?:set|flipped|flicked|toggled|left) on|on", "end:on", "end"),
         (r"(?:in|at|to) (?:the|its) off position|(?:flipped|flicked|toggled|left) off|off", "end:off", "end"),
@@ -214,6 +216,8 @@ _STATE_TABLE = _compile(
         (_MOVED + r" (?:slightly|a (?:little |tiny )?bit|a little|a tad|just a (?:little|bit))", "slightly_open", ""),
         (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?", "slightly_open", ""),
         (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
+        # "open" after a verb that leaves it open ("the lid propped open"): as a lone "open", never the verb "to open"
+        (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", ""),
         # a lone "open"
         (_OPEN, "mostly", "bare"),
     ]
@@ -226,6 +230,7 @@ _VERB_BEFORE = re.compile(
 
 _PART_WORDS = rv.PART_WORDS
 _PART_RX = re.compile(_L + r"(?:" + _PART_WORDS + r")" + _R)
+_PART_WORD = re.compile(r"(?:" + _PART_WORDS + r")")
 _NUM_AFTER = re.compile(
     r"\s*(?:#|no\.?\s*|numbers?\s*)?(\d{1,2}(?:\s*(?:,\s*(?:and\s+)?|and\s+|or\s+|&\s*)\d{1,2})*)\b"
 )
@@ -685,6 +690,8 @@ def parse_request(text: str) -> RequestSpec:
             var = None
         if var is not None:
             matched.append((var[0], low[var[0]: var[1]]))
+    for pos, _, phrase in mounting_mentions(low):  # "free-standing", "mounted on the wall": the mounting's words (tasks.interpret.mounting)
+        matched.append((pos, phrase))
     unused, groups = _unused_words(low, matched, mentions)
     seen: set[tuple[int, str]] = set()
     ordered = []
@@ -758,7 +765,7 @@ _FUNCTION_WORDS = frozenset(
     "want wants need needs would like please give make made get have has having be is are was were being "
     "with without and or but of for to in on at by from as into onto so such some any one which who whose "
     "can could should will shall may might must do does also just very really quite rather more most less "
-    "there here where when while than then every all each both".split()
+    "there here where when while than then every all each both everything pair".split()
 )
 
 
@@ -814,7 +821,7 @@ def _unused_words(low: str, matched: list[tuple[int, str]], mentions) -> tuple[l
         word = m.group(0).strip("'-")
         if not word or word in _FUNCTION_WORDS:
             continue
-        if word.isdigit() or word in known or word.rstrip("s") in known:
+        if word.isdigit() or word in known or word.rstrip("s") in known or _PART_WORD.fullmatch(word):
             close()
             continue
         if cur:

@@ -476,6 +476,22 @@ def test_unused_words_are_reported_and_a_foreign_request_is_not_understood():
     assert parse_request("").understood and parse_request("   ").unused_words == []
 
 
+def test_mounting_words_are_understood_not_reported_unused():
+    """"free-standing", "mounted on the wall", "wall-mounted", "built-in" set the
+    root's mounting (tasks.interpret.mounting); they were listed as words not
+    understood (a warning on stderr for every mounting request) although the
+    mounting was applied. Words beside them are still reported."""
+    from asset2sim.tasks.interpret.mounting import request_mounting
+
+    for text, kind in (("A free-standing faucet.", "free-standing"), ("A faucet mounted on the wall.", "wall-mounted"),
+                       ("A wall-mounted switch, turned on.", "wall-mounted"), ("A built-in oven with its door closed.", "counter-mounted")):
+        spec = parse_request(text)
+        assert spec.unused_words == [], text
+        assert request_mounting(text).kind == kind
+        assert any(kind.split("-")[0] in m or "built" in m for m in spec.matched), (text, spec.matched)
+    assert parse_request("A free-standing faucet, painted blue.").ignored == ["painted blue"]
+
+
 def test_a_named_variant_is_understood_not_ignored():
     spec = parse_request("A kitchen faucet with its handle turned off and a stiff handle joint.")
     assert spec.ignored == [] and "kitchen faucet" in spec.matched
