@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import hashlib
 import heapq
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,7 +75,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asset2sim import atomic, mesh_io, urdf
+from asset2sim import array_cache, atomic, mesh_io, urdf
 from asset2sim.frames import axis_angle_matrix
 from asset2sim.engines.loading import FLAT_HULL_THICKNESS, mesh_hulls
 from asset2sim.tasks.geometry import limits
@@ -1391,6 +1392,12 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     """
     key = _cache_key(model, mesh_path, limit, decompose)
     hit = _PIECE_CACHE.get(key)
+    disk_key = None
+    if hit is None:
+        disk_key = _content_key(model, mesh_path, limit, decompose)
+        hit = _load_pieces(disk_key, model) if disk_key is not None else None
+        if hit is not None:
+            _remember(key, hit)
     if hit is None:
         notes: list[str] = []
         pieces: dict[str, list[Piece]] = {}
@@ -1421,9 +1428,10 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         running_clearance(model, pieces, notes)
         for name in model.links:
             pieces[name] = drop_slivers(pieces[name])
-        if len(_PIECE_CACHE) >= 16:
-            _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
-        _PIECE_CACHE[key] = hit = ({k: list(v) for k, v in pieces.items()}, list(notes))
+        hit = ({k: list(v) for k, v in pieces.items()}, list(notes))
+        _remember(key, hit)
+        if disk_key is not None:
+            _store_pieces(disk_key, hit)
     if state is None:  # nothing depends on a state
         return {k: list(v) for k, v in hit[0].items()}, list(hit[1])
     skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())))
@@ -1454,6 +1462,83 @@ _PIECE_CACHE: dict[str, tuple[dict[str, list[Piece]], list[str]]] = {}
 #: (post-check, escalation rounds, re-check); a drawer cabinet's cut costs
 #: 0.1-0.3 s per write.
 _STATE_CACHE: dict[tuple, tuple[dict[str, list[Piece]], list[str]]] = {}
+
+
+def _remember(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
+    """Keep ``hit`` in :data:`_PIECE_CACHE` (the oldest of 16 dropped)."""
+    if len(_PIECE_CACHE) >= 16:
+        _PIECE_CACHE.pop(next(iter(_PIECE_CACHE)))
+    _PIECE_CACHE[key] = hit
+
+
+#: Modules whose source the pieces depend on: a change to any of them makes
+#: every on-disk entry of :func:`link_pieces` a miss.
+PIECES_CODE = ("asset2sim.tasks.publish.collision_geometry", "asset2sim.tasks.geometry.limits", "asset2sim.mesh_io",
+               "asset2sim.engines.loading", "asset2sim.urdf", "asset2sim.frames")
+
+
+def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str | None:
+    """Digest of everything :func:`link_pieces` computes from, by content:
+    the collision meshes' bytes (not their paths: an output folder's copy of
+    a mesh hits the entry its input made), every collision's origin, scale
+    and primitive sizes, every joint's frame, axis, type and limits, the
+    piece limit, the decomposition switch and the source of
+    :data:`PIECES_CODE`. None when a mesh cannot be read (no disk cache:
+    the computation raises its own error)."""
+    parts: list[bytes | str] = [array_cache.source_digest(*PIECES_CODE), repr((limit, decompose))]
+    for name, link in model.links.items():
+        parts.append(name)
+        for c in link.collisions:
+            parts.append(repr((c.kind, c.size, c.radius, c.length)))
+            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
+            if c.kind == "mesh":
+                try:
+                    parts.append(hashlib.sha256(Path(mesh_path(c)).read_bytes()).digest())
+                except OSError:
+                    return None
+    for j in model.joints:
+        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
+        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+    return array_cache.digest(*parts)
+
+
+def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
+    """Write :func:`link_pieces`' state-independent result to the on-disk
+    cache (:mod:`asset2sim.array_cache`, kind ``pieces``): per piece its
+    vertices, planes and volume; the links, sources and notes as JSON."""
+    pieces, notes = hit
+    arrays: dict[str, np.ndarray] = {}
+    links, n = {}, 0
+    for name, plist in pieces.items():
+        links[name] = [list(p.sources) for p in plist]
+        for p in plist:
+            arrays[f"p{n}"], arrays[f"e{n}"], arrays[f"v{n}"] = p.points, p.equations, np.array(p.volume)
+            n += 1
+    arrays["meta"] = np.frombuffer(json.dumps({"links": links, "notes": notes}).encode(), dtype=np.uint8)
+    array_cache.store("pieces", key, arrays)
+
+
+def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]], list[str]] | None:
+    """What :func:`_store_pieces` wrote under ``key``, or None (no entry, an
+    unreadable one, or one whose links are not ``model``'s)."""
+    data = array_cache.load("pieces", key)
+    if data is None:
+        return None
+    try:
+        meta = json.loads(bytes(data["meta"]).decode())
+        if set(meta["links"]) != set(model.links):
+            return None
+        pieces, n = {}, 0
+        for name, sources in meta["links"].items():
+            plist = []
+            for src in sources:
+                plist.append(Piece(np.asarray(data[f"p{n}"], float), np.asarray(data[f"e{n}"], float), float(data[f"v{n}"]),
+                                   tuple(str(x) for x in src)))
+                n += 1
+            pieces[name] = plist
+        return pieces, [str(x) for x in meta["notes"]]
+    except (KeyError, ValueError, TypeError, UnicodeDecodeError):
+        return None
 
 
 def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str:

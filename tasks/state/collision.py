@@ -15,20 +15,19 @@ only if it lowers the overlap. Visual meshes are untouched; the report lists
 every change.
 
 Decompositions are cached on disk by the sha256 of the mesh file and the
-settings (``ASSET2SIM_CACHE`` or ``~/.cache/asset2sim``), so reruns are fast.
+settings (:mod:`asset2sim.array_cache`: ``ASSET2SIM_CACHE`` or ``~/.cache/asset2sim``), so reruns are fast.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic
+from asset2sim import array_cache, atomic
 from asset2sim.frames import rpy_matrix
 from asset2sim.engines.base import open_shape_world
 from asset2sim.mesh_io import MeshCache, read_mesh
@@ -74,12 +73,6 @@ class CollisionPiece:
     source: GeometryRef
 
 
-def cache_dir() -> Path:
-    """Folder of the on-disk decomposition cache."""
-    root = os.environ.get("ASSET2SIM_CACHE")
-    return Path(root) if root else Path.home() / ".cache" / "asset2sim"
-
-
 def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
     lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in np.asarray(vertices, float)]
     lines += [f"f {int(a) + 1} {int(b) + 1} {int(c) + 1}" for a, b, c in np.asarray(faces, int)]
@@ -95,13 +88,11 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
         ValueError: the mesh cannot be read.
     """
     digest = hashlib.sha256(path.read_bytes() + json.dumps({**COACD_SETTINGS, "refit": 1}, sort_keys=True).encode()).hexdigest()
-    cfile = cache_dir() / "coacd" / f"{digest}.npz"
-    if cfile.is_file():
+    data = array_cache.load("coacd", digest)
+    if data is not None:
         try:
-            data = np.load(cfile)
-            n = int(data["n"])
-            return [(data[f"v{i}"], data[f"f{i}"]) for i in range(n)]
-        except (OSError, ValueError, KeyError):
+            return [(data[f"v{i}"], data[f"f{i}"]) for i in range(int(data["n"]))]
+        except (KeyError, ValueError):
             pass
     try:
         import coacd
@@ -114,18 +105,11 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     coacd.set_log_level("error")
     parts = coacd.run_coacd(coacd.Mesh(v, f), **COACD_SETTINGS)
     pieces = refit_pieces(v, [(np.asarray(pv, float), np.asarray(pf, int)) for pv, pf in parts])
-    try:
-        import io
-
-        buf = io.BytesIO()
-        arrays = {"n": np.array(len(pieces))}
-        for i, (pv, pf) in enumerate(pieces):
-            arrays[f"v{i}"] = pv
-            arrays[f"f{i}"] = pf
-        np.savez(buf, **arrays)
-        atomic.write_bytes(cfile, buf.getvalue())
-    except OSError:
-        pass  # the cache is an optimisation only
+    arrays = {"n": np.array(len(pieces))}
+    for i, (pv, pf) in enumerate(pieces):
+        arrays[f"v{i}"] = pv
+        arrays[f"f{i}"] = pf
+    array_cache.store("coacd", digest, arrays)
     return pieces
 
 

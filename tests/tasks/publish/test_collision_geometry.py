@@ -467,3 +467,72 @@ def test_clear_sliding_contact_leaves_deep_overlaps_and_stops():
     assert cg.clear_sliding_contact(a, a + [1.0, 0.0, 0.0], along_x) is None  # a stop
     assert cg.clear_sliding_contact(a, a + [0.0, 1.1, 0.0], along_x) is None  # apart
     assert cg.clear_sliding_contact(a, a + [0.0, 0.9, 0.0], along_x, deepest=0.05) is None  # 0.1 m deep
+
+
+def test_pieces_are_kept_on_disk_by_content_and_code(tmp_path, monkeypatch):
+    """A second process (the in-memory caches cleared) loads the same pieces
+    and notes from the on-disk cache (asset2sim.array_cache) instead of
+    computing them; a copy of the meshes elsewhere hits the same entry; a
+    changed mesh, a changed limit or a changed source of the code misses; an
+    unreadable entry is ignored and rewritten; ASSET2SIM_CACHE=off writes nothing."""
+    from asset2sim import array_cache
+    from tests.tasks.state.test_clearance import write_stacked_drawers
+
+    monkeypatch.setenv("ASSET2SIM_CACHE", str(tmp_path / "cache"))
+
+    def fresh():
+        cg._PIECE_CACHE.clear()
+        cg._STATE_CACHE.clear()
+
+    def pieces_of(folder: Path, model=None):
+        model = model or urdf.read_urdf(folder / "mobility.urdf")
+        return cg.link_pieces(model, lambda g: folder / str(g.filename))
+
+    folder = write_stacked_drawers(tmp_path / "a").parent
+    fresh()
+    computed, notes = pieces_of(folder)
+    entries = list((tmp_path / "cache" / "pieces").glob("*.npz"))
+    assert len(entries) == 1
+    fresh()
+    calls = []
+    monkeypatch.setattr(cg, "_resolve_containment", lambda *a, **k: calls.append(a))
+    loaded, notes2 = pieces_of(folder)
+    assert calls == [] and notes2 == notes and set(loaded) == set(computed)
+    for name in computed:
+        for a, b in zip(computed[name], loaded[name], strict=True):
+            assert np.array_equal(a.points, b.points) and np.array_equal(a.equations, b.equations)
+            assert a.volume == b.volume and a.sources == b.sources
+    # the same meshes in another folder: the same entry
+    import shutil
+    shutil.copytree(folder, tmp_path / "b")
+    fresh()
+    pieces_of(tmp_path / "b")
+    assert calls == []
+    monkeypatch.undo()
+    monkeypatch.setenv("ASSET2SIM_CACHE", str(tmp_path / "cache"))
+    # a changed limit, a changed mesh: misses (new entries)
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    model.joint("slide_upper").limit.upper = 0.05
+    fresh()
+    pieces_of(folder, model)
+    (tmp_path / "b" / "upper.obj").write_text((tmp_path / "b" / "upper.obj").read_text().replace("0.045", "0.044"))
+    fresh()
+    pieces_of(tmp_path / "b")
+    assert len(list((tmp_path / "cache" / "pieces").glob("*.npz"))) == 3
+    # an unreadable entry is ignored and rewritten
+    entries[0].write_bytes(b"not an npz")
+    fresh()
+    again, _ = pieces_of(folder)
+    assert all(np.array_equal(a.points, b.points) for n in computed for a, b in zip(computed[n], again[n]))
+    assert array_cache.load("pieces", entries[0].stem) is not None
+    # the code's source is part of the key
+    array_cache.source_digest.cache_clear()
+    monkeypatch.setattr(cg, "PIECES_CODE", cg.PIECES_CODE + ("asset2sim.atomic",))
+    assert cg._content_key(urdf.read_urdf(folder / "mobility.urdf"), lambda g: folder / str(g.filename), 16, True) != entries[0].stem
+    # off: nothing written
+    monkeypatch.setenv("ASSET2SIM_CACHE", "off")
+    assert array_cache.cache_dir() is None
+    shutil.rmtree(tmp_path / "cache")
+    fresh()
+    pieces_of(folder)
+    assert not (tmp_path / "cache").exists()
