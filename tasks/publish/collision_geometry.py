@@ -1148,6 +1148,12 @@ RUNNING_CLEARANCE = 0.0025
 SLIDING_COS = 0.5
 #: A squeeze never takes more than this fraction of a piece's width along the contact normal.
 MAX_SQUEEZE = 0.5
+#: Deepest overlap (m) :func:`running_clearance` treats as parts modelled
+#: touching (PartNet-Mobility's zero-clearance fits overlap by rounding, well
+#: under a millimetre); a deeper one is a penetration the state search and
+#: its convex decomposition resolve (a latch's shaft 1.7 mm into a box's
+#: solid hull is not shortened here).
+TOUCHING_OVERLAP = 0.0005
 
 
 def sat_gap(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
@@ -1250,7 +1256,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     users report drawers jammed by their neighbours (ManiSkill issues #1205,
     #1156), and a free cabinet's drawer pushed by 1,060 N moved at 0.07 m/s
     (dev object 19179). Each moving piece in contact (gap below
-    :data:`RUNNING_CLEARANCE`, overlap less than it) along a face that slides
+    :data:`RUNNING_CLEARANCE`, overlap at most :data:`TOUCHING_OVERLAP`) along a face that slides
     is squeezed back (:func:`clear_sliding_contact`); a contact along the
     motion (a stop) and deeper overlaps are left as they are. The moving
     link's piece is squeezed, the first joint in file order taking the
@@ -1284,7 +1290,7 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                             continue  # bounding boxes apart by more than the clearance
                         try:
                             hit = clear_sliding_contact(P.points, Q.points @ To[:3, :3].T + To[:3, 3], velocity,
-                                                        deepest=RUNNING_CLEARANCE)
+                                                        deepest=TOUCHING_OVERLAP)
                         except ValueError:
                             continue
                         if hit is None:
