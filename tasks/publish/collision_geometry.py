@@ -1490,8 +1490,12 @@ def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
     and primitive sizes, every joint's frame, axis, type and limits, the
     piece limit, the decomposition switch and the source of
     :data:`PIECES_CODE`. None when a mesh cannot be read (no disk cache:
-    the computation raises its own error)."""
-    parts: list[bytes | str] = [array_cache.source_digest(*PIECES_CODE), repr((limit, decompose))]
+    the computation raises its own error) or the code's source cannot."""
+    try:
+        code = array_cache.source_digest(*PIECES_CODE)
+    except (ImportError, OSError, TypeError):  # no source beside the bytecode: no disk cache
+        return None
+    parts: list[bytes | str] = [code, repr((limit, decompose))]
     for name, link in model.links.items():
         parts.append(name)
         for c in link.collisions:
