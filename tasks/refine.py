@@ -405,7 +405,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     syn = _synthesize(ctx, est, config, log)
     if fractions:
         syn = replace(syn, requested={**syn.requested, **{n: syn.closed_out[n].position(f) for n, f in fractions.items() if n in syn.closed_out}})
-    urdf = _write(ctx, syn, out_dir, log)
+    urdf, first_clear = _write(ctx, syn, out_dir, log)
     shut, shut_notes = _shut_repair(ctx, syn, urdf, config, out_dir, cache, log)
     syn = _closed_on_output(ctx, syn, urdf, out_dir, log, shut)
     closed_raw = syn.closed_out
@@ -440,7 +440,9 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
                                          closed=manipulation.closed_tuples(closed_out))
     overlay, check, rounds, overrides, closed_out = _repair_sweep(
         ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, out_dir, log)
-    st.collision_changes = _clearance_notes(ctx, overlay, state, overrides, out_dir) + list(st.collision_changes)
+    # the clearance of the first pieces (carried on by pieces a repair rewrote from them) and of the final ones
+    clear = list(dict.fromkeys(first_clear + _clearance_notes(ctx, overlay, state, overrides, out_dir)))
+    st.collision_changes = clear + list(st.collision_changes)
     return _Attempt(
         asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
         st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
@@ -495,15 +497,16 @@ def _scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[
     return out
 
 
-def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLog) -> Path:
+def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLog) -> tuple[Path, list[str]]:
     """Stage 5: the output folder at the requested state (meshes copied once;
-    later writes only rewrite the small files). Returns the URDF path."""
+    later writes only rewrite the small files). Returns (the URDF path, the
+    running clearance the writer gave sliding contacts, its notes)."""
     paths = write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, root_rotation=ctx.root_rotation)
-    for line in paths.collision_notes:
-        if collision_geometry.RUNNING_CLEARANCE_NOTE in line:
-            log.say("write", line)
+    clear = [line for line in paths.collision_notes if collision_geometry.RUNNING_CLEARANCE_NOTE in line]
+    for line in clear:
+        log.say("write", line)
     log.lap("write")
-    return paths.urdf
+    return paths.urdf, clear
 
 
 def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, out_dir: Path) -> list[str]:

@@ -132,3 +132,22 @@ def build_pliers(folder: Path) -> Path:
         b.part("handle", [box_xyz(-0.7, -0.1, *full, 0.03, 0.1)], _RED)],
         "revolute", "link_1", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 0.0, 0.5)
     return b.write(folder)
+
+
+def build_double_door_cabinet(folder: Path) -> Path:
+    """A wardrobe-like cabinet (0.8 x 1.0 x 0.5 units, open-front carcass of
+    0.03 boards) with two doors (``door``, revolute 0-1.57 rad about vertical
+    axes at the outer edges) that meet at the middle with no gap, as
+    PartNet-Mobility's double doors are modelled: closing one door slides its
+    edge past the other's."""
+    b = _Builder("u_double_door", "StorageFurniture")
+    w, h, d, t = 0.4, 0.5, 0.25, 0.03
+    b.body("link_2", "furniture_body", [
+        b.part("board", box_xyz(-w, -w + t, -h, h, -d, d), _WHITE), b.part("board", box_xyz(w - t, w, -h, h, -d, d), _WHITE),
+        b.part("board", box_xyz(-w + t, w - t, h - t, h, -d, d), _WHITE), b.part("board", box_xyz(-w + t, w - t, -h, -h + t, -d, d), _WHITE),
+        b.part("board", box_xyz(-w + t, w - t, -h + t, h - t, -d, -d + t), _WHITE)])
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, 0.0, -h, h, d, d + 0.02), _GREY)],
+             "revolute", "link_2", (-w, 0.0, d), (0.0, -1.0, 0.0), 0.0, 1.57)
+    b.moving("link_1", "hinge", "door", [b.part("door", box_xyz(0.0, w, -h, h, d, d + 0.02), _GREY)],
+             "revolute", "link_2", (w, 0.0, d), (0.0, 1.0, 0.0), 0.0, 1.57)
+    return b.write(folder)
