@@ -502,7 +502,7 @@ def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLo
     later writes only rewrite the small files). Returns (the URDF path, the
     running clearance the writer gave sliding contacts, its notes)."""
     paths = write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, root_rotation=ctx.root_rotation)
-    clear = [line for line in paths.collision_notes if collision_geometry.RUNNING_CLEARANCE_NOTE in line]
+    clear = _clearance_lines(paths.collision_notes)
     for line in clear:
         log.say("write", line)
     log.lap("write")
@@ -517,6 +517,11 @@ def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, 
     recomputed, no file changes), for ``state.collision_changes``."""
     notes: list[str] = []
     write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (out_dir, state), notes)
+    return _clearance_lines(notes)
+
+
+def _clearance_lines(notes: list[str]) -> list[str]:
+    """The running-clearance lines of the writer's collision notes."""
     return [n for n in notes if collision_geometry.RUNNING_CLEARANCE_NOTE in n]
 
 

@@ -1484,32 +1484,23 @@ PIECES_CODE = ("asset2sim.tasks.publish.collision_geometry", "asset2sim.tasks.ge
 
 
 def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str | None:
-    """Digest of everything :func:`link_pieces` computes from, by content:
-    the collision meshes' bytes (not their paths: an output folder's copy of
-    a mesh hits the entry its input made), every collision's origin, scale
-    and primitive sizes, every joint's frame, axis, type and limits, the
-    piece limit, the decomposition switch and the source of
-    :data:`PIECES_CODE`. None when a mesh cannot be read (no disk cache:
-    the computation raises its own error) or the code's source cannot."""
+    """:func:`_model_digest` with the collision meshes' bytes (not their
+    paths: an output folder's copy of a mesh hits the entry its input made)
+    and the source of :data:`PIECES_CODE`: the on-disk key. None when a mesh
+    cannot be read (no disk cache: the computation raises its own error) or
+    the code's source cannot."""
     try:
         code = array_cache.source_digest(*PIECES_CODE)
     except (ImportError, OSError, TypeError):  # no source beside the bytecode: no disk cache
         return None
-    parts: list[bytes | str] = [code, repr((limit, decompose))]
-    for name, link in model.links.items():
-        parts.append(name)
-        for c in link.collisions:
-            parts.append(repr((c.kind, c.size, c.radius, c.length)))
-            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
-            if c.kind == "mesh":
-                try:
-                    parts.append(hashlib.sha256(Path(mesh_path(c)).read_bytes()).digest())
-                except OSError:
-                    return None
-    for j in model.joints:
-        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
-        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
-    return array_cache.digest(*parts)
+
+    def content(path: Path) -> bytes | None:
+        try:
+            return hashlib.sha256(path.read_bytes()).digest()
+        except OSError:
+            return None
+
+    return _model_digest(model, mesh_path, limit, decompose, content, code)
 
 
 def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
@@ -1551,27 +1542,42 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
         return None
 
 
-def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str:
+def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
+                  mesh_id: Callable[[Path], bytes | None], prefix: str = "") -> str | None:
     """Digest of everything :func:`link_pieces` reads: every collision
-    (file identity, origin, scale, primitive sizes), every joint's frame,
-    axis, type and limits, the piece limit and the decomposition switch."""
-    h = hashlib.sha256(repr((limit, decompose)).encode())
+    (``mesh_id`` of its mesh file, origin, scale, primitive sizes), every
+    joint's frame, axis, type and limits, the piece limit and the
+    decomposition switch, after ``prefix``. None when ``mesh_id`` gives None."""
+    parts: list[bytes | str] = [prefix, repr((limit, decompose))]
     for name, link in model.links.items():
-        h.update(name.encode())
+        parts.append(name)
         for c in link.collisions:
-            h.update(repr((c.kind, c.filename, c.size, c.radius, c.length)).encode())
-            h.update(np.asarray(c.origin, float).tobytes() + c.scale.tobytes())
+            parts.append(repr((c.kind, c.size, c.radius, c.length)))
+            parts.append(np.asarray(c.origin, float).tobytes() + np.asarray(c.scale, float).tobytes())
             if c.kind == "mesh":
-                path = Path(mesh_path(c))
-                try:
-                    st = path.stat()
-                    h.update(repr((str(path.resolve()), st.st_mtime_ns, st.st_size)).encode())
-                except OSError:
-                    h.update(str(path).encode())
+                ident = mesh_id(Path(mesh_path(c)))
+                if ident is None:
+                    return None
+                parts.append(ident)
     for j in model.joints:
-        h.update(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)).encode()
-                 + np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
-    return h.hexdigest()
+        parts.append(repr((j.name, j.type, j.parent, j.child, j.lower, j.upper)))
+        parts.append(np.asarray(j.origin, float).tobytes() + np.asarray(j.axis, float).tobytes())
+    return array_cache.digest(*parts)
+
+
+def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str:
+    """:func:`_model_digest` with each mesh file's identity (resolved path,
+    modification time in ns, size; the path alone when it cannot be
+    read): the in-process key."""
+
+    def identity(path: Path) -> bytes:
+        try:
+            st = path.stat()
+            return repr((str(path.resolve()), st.st_mtime_ns, st.st_size)).encode()
+        except OSError:
+            return str(path).encode()
+
+    return _model_digest(model, mesh_path, limit, decompose, identity)
 
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
