@@ -100,6 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
     allocator.keep_freed_memory()  # freed arrays reused, not faulted in again (asset2sim.allocator)
+    # asset2sim compiles and simulates MJCF but never renders with MuJoCo: without an OpenGL back-end its
+    # import skips GLFW and the GL context (0.12 s per process here); a value the user set is kept
+    os.environ.setdefault("MUJOCO_GL", "disable")
     parser = build_parser(only=requested_command(argv))
     args = parser.parse_args(argv)
     if not hasattr(args, "_run"):

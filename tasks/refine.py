@@ -521,8 +521,9 @@ def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, 
 
 
 def _clearance_lines(notes: list[str]) -> list[str]:
-    """The running-clearance lines of the writer's collision notes."""
-    return [n for n in notes if collision_geometry.RUNNING_CLEARANCE_NOTE in n]
+    """The lines of the writer's collision notes on what it changed at the
+    written state: running clearance and a levelled footprint."""
+    return [n for n in notes if collision_geometry.RUNNING_CLEARANCE_NOTE in n or collision_geometry.LEVEL_NOTE in n]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
@@ -694,7 +695,8 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
     n = 0
-    spec = task_tier.task_spec_for(ctx.task, urdf, asset, ctx.category, estimate.task_relevant_joints(ctx)) if ctx.task and closed else None
+    spec = task_tier.task_spec_for(ctx.task, urdf, asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
+        if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
     lim = task_tier.operating_limits(urdf, state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, conventions=config.sim,

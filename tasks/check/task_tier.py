@@ -28,7 +28,7 @@ from asset2sim.tasks.check import operating, sweep, task_execution
 from asset2sim.tasks.check.postcheck import springs_of
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.evaluation.asset_files import parse_urdf
-from asset2sim.tasks.evaluation.task_spec import TaskSpec, parse_task, task_actions
+from asset2sim.tasks.evaluation.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import spring_expected
 
 #: The metrics this tier adds to the post-check.
@@ -75,12 +75,20 @@ def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str,
 
 
 def task_spec_for(text: str, urdf: Path | str, asset: AssetDescription, category: str | None,
-                  task_joints: list[str]) -> TaskSpec:
+                  task_joints: list[str], state: dict[str, float] | None = None,
+                  closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
     """The :class:`~asset2sim.tasks.evaluation.task_spec.TaskSpec` of ``text``
-    on the written asset ``urdf`` (labels from ``asset``'s semantics)."""
+    on the written asset ``urdf`` (labels from ``asset``'s semantics); with
+    the initial ``state`` (joint -> rad or m) and the ``closed`` ends (joint
+    -> (q_closed, direction, open range)), narrowed to the joints it has work
+    on (:func:`~asset2sim.tasks.evaluation.task_spec.with_work_to_do`)."""
     _, joints = parse_urdf(Path(urdf))
     semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
-    return parse_task(text, joints, semantics, category, task_joints)
+    spec = parse_task(text, joints, semantics, category, task_joints)
+    if state is not None and closed:
+        fractions = {n: d * (state[n] - qc) / r for n, (qc, d, r) in closed.items() if n in state and r > 0}
+        spec = with_work_to_do(spec, fractions)
+    return spec
 
 
 def run_task_tier(engine: str, urdf: Path | str, state: dict[str, float], springs: dict[str, Spring],

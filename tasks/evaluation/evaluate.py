@@ -68,7 +68,7 @@ from asset2sim.tasks.evaluation.request_match import (
     requested_joints,
     scaled_mass_range,
 )
-from asset2sim.tasks.evaluation.task_spec import parse_task
+from asset2sim.tasks.evaluation.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.publish.report_html import write_report
 
 __all__ = [
@@ -110,6 +110,15 @@ __all__ = [
 
 
 # ------------------------------------------------------------------ entry point
+def _closed_ends(ctx: Context, joints: list[str]) -> None:
+    """The closed ends of ``joints`` into ``ctx.closed`` (with their extents
+    and notes), in a fresh session (:func:`compute_closed`)."""
+    ext: list = []
+    ctx.closed, cnotes = compute_closed(ctx.urdf, ctx.joints, joints, extents_out=ext)
+    ctx.closed_extents = ext[0] if ext else None
+    ctx.notes += cnotes
+
+
 def evaluate_asset(
     urdf_dir_or_path: Path | str,
     *,
@@ -220,6 +229,12 @@ def evaluate_asset(
         need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
     need_closed = list(dict.fromkeys(need_closed + movable_joints(ctx)))  # the joint sweep drives every one
     tspec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints) if task else None
+    if tspec is not None and len(tspec.joints) > 1:
+        # which of the task's joints have work to do at the initial state (task_spec.with_work_to_do): the closed ends first
+        if need_closed and not ctx.closed:
+            _closed_ends(ctx, need_closed)
+        tspec = with_work_to_do(tspec, {n: c.fraction(ctx.initial_state[n]) for n, c in ctx.closed.items()
+                                        if n in ctx.initial_state and c.open_range > 0})
     ctx.task = tspec  # task execution (metric_defs: task_execution, operating_force) runs only with a task
     if tspec is not None:
         ctx.notes.append(f"task {task!r}: {', '.join(tspec.actions)} {', '.join(tspec.joints) or 'no joint'} ({tspec.rule})"
@@ -235,10 +250,7 @@ def evaluate_asset(
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:
-        ext: list = []
-        ctx.closed, cnotes = compute_closed(ctx.urdf, ctx.joints, need_closed, extents_out=ext)
-        ctx.closed_extents = ext[0] if ext else None
-        ctx.notes += cnotes
+        _closed_ends(ctx, need_closed)
     runs = {e: runs[e] for e in engines}
     results: list[MetricResult] = []
     for spec in METRICS.values():

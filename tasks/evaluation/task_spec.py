@@ -22,12 +22,22 @@ Parsing (re-derivable; ``docs/metrics.md``):
 
 Ordinals ("the top drawer") are read but not used to pick one of several
 labelled joints: without the joints' heights every drawer is tried.
+
+4. Where the initial state is known (:func:`with_work_to_do`): a task with one
+   direction that names one part ("close the cabinet drawer", not "the
+   drawers", "every drawer", "both doors") and finds several joints acts on
+   those it has work on at the initial state (close: opening fraction above
+   the close target; open: below the open target), as a person asked to
+   "close the drawer" of a cabinet with one drawer open closes that one
+   (ManiSkill's drawer and door tasks likewise act on one target link). When
+   every joint or none has work, every one is kept (an asset delivered closed
+   is still asked to close: :mod:`asset2sim.tasks.check.task_execution`).
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.evaluation.asset_files import JointInfo
@@ -113,3 +123,33 @@ def task_actions(text: str | None) -> tuple[str, ...]:
     ``("open",)``, or both when the verb has no direction or there is no task."""
     action, _ = _verb(" ".join(str(text or "").lower().split()))
     return (action,) if action else ("close", "open")
+
+
+#: Words that make a task act on every joint of its part.
+_EVERY = re.compile(r"\b(?:all|every|each|both)\b")
+
+
+def with_work_to_do(spec: TaskSpec, fractions: dict[str, float]) -> TaskSpec:
+    """``spec`` narrowed to the joints it has work on (module docstring, rule
+    4). ``fractions``: joint -> opening fraction at the initial state (0
+    closed, 1 fully open); a joint missing from it counts as having work.
+    Returns ``spec`` itself when nothing is narrowed."""
+    low = " ".join(spec.text.lower().split())
+    if len(spec.actions) != 1 or len(spec.joints) < 2 or spec.rule.startswith("fallback") or _EVERY.search(low):
+        return spec
+    if spec.part and re.search(rf"\b{re.escape(spec.part.lower())}(?:s|es)\b", low):
+        return spec  # "close the drawers"
+    action = spec.actions[0]
+    target = spec.targets[action]
+
+    def todo(j: str) -> bool:
+        f = fractions.get(j)
+        return f is None or (f > target if action == "close" else f < target)
+
+    keep = [j for j in spec.joints if todo(j)]
+    if not keep or len(keep) == len(spec.joints):
+        return spec
+    left = [j for j in spec.joints if j not in keep]
+    note = (f"{', '.join(left)} already {'closed' if action == 'close' else 'open'} at the initial state: "
+            f"the task acts on {', '.join(keep)}")
+    return replace(spec, joints=keep, rule=spec.rule + "; the joints with work to do", notes=[*spec.notes, note])

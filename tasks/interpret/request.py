@@ -67,7 +67,7 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
 from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
-from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, request_category, variant_mention
+from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, phrase_regex, request_category, variant_mention
 from asset2sim.tasks.interpret.mounting import mounting_mentions
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.prior_tables import load_priors
@@ -688,8 +688,10 @@ def parse_request(text: str) -> RequestSpec:
             var = variant_mention(hint, low)
         except KeyError:
             var = None
-        if var is not None:
-            matched.append((var[0], low[var[0]: var[1]]))
+        if var is not None:  # every phrase of it ("under-desk office cabinet": two phrases of one variant)
+            for ph in var[2].phrases:
+                for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low):
+                    matched.append((m.start(), m.group(0)))
     for pos, _, phrase in mounting_mentions(low):  # "free-standing", "mounted on the wall": the mounting's words (tasks.interpret.mounting)
         matched.append((pos, phrase))
     unused, groups = _unused_words(low, matched, mentions)

@@ -1306,6 +1306,76 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                                      f"{other!r} (gap {g * 1000:.2g} mm, sliding along {joint.name!r})")
 
 
+#: Height above the lowest collision point of a free-standing object within
+#: which the collision vertices of its body are taken to stand on the
+#: ground, m (:func:`level_footprint`): PartNet-Mobility's bottoms are
+#: modelled to about this (laptop 9912's four corners span 0.49 mm), and it
+#: is PyBullet's contact margin of one shape.
+LEVEL_TOLERANCE = 1e-3
+
+#: ... at most this fraction of the object's largest horizontal extent (a
+#: 5 cm object gets 0.25 mm).
+LEVEL_FRACTION = 0.005
+
+#: The words of :func:`level_footprint`'s notes (the report picks them out).
+LEVEL_NOTE = "footprint levelled"
+
+
+def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float],
+                    notes: list[str]) -> None:
+    """Make the footprint of a free-standing object's body planar, in place:
+    at ``state`` (joint -> rad or m; the root frame upright as written, z
+    up), every collision vertex of the body (the links no movable joint
+    moves) lower than the lowest collision point of the object plus
+    ``min(LEVEL_TOLERANCE, LEVEL_FRACTION * largest horizontal extent)`` is
+    moved straight down onto the plane of that lowest point (each piece is
+    the hull of its moved vertices: it only grows, downward).
+
+    Why: a bottom whose corners differ by a fraction of a millimetre
+    (modelling noise) stands on three of them like a table with one short
+    leg. PyBullet then keeps it balanced on a diagonal with one contact
+    pressed 0.6 mm into the ground, creeping 0.5 mm/s for seconds before it
+    drops back onto the fourth corner (laptop 9912 halfway open after a 5 deg
+    tilt: robust rest failed, D_pos 2 mm); levelled, it lands on all four.
+    Real objects stand on feet made coplanar (rubber feet, glides). Moving
+    links (a lid or door resting on the floor, wheels) are left as they are.
+    A note names each link changed and the largest move.
+    """
+    poses = model.link_poses(state)
+    moved: set[str] = set()
+    subtrees = limits.subtrees(model)
+    for joint in model.movable_joints:
+        moved |= set(subtrees[joint.name])
+    world = {ln: [p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3] for p in pl] for ln, pl in pieces.items() if pl}
+    if not world:
+        return
+    allpts = np.vstack([w for ws in world.values() for w in ws])
+    zmin = float(allpts[:, 2].min())
+    extent = float(np.max(allpts[:, :2].max(axis=0) - allpts[:, :2].min(axis=0)))
+    tol = min(LEVEL_TOLERANCE, LEVEL_FRACTION * extent)
+    for ln, ws in world.items():
+        if ln in moved:
+            continue
+        R, t = poses[ln][:3, :3], poses[ln][:3, 3]
+        lift = 0.0
+        count = 0
+        for i, w in enumerate(ws):
+            sel = w[:, 2] < zmin + tol
+            low = w[sel, 2] - zmin
+            if not np.any(low > 1e-9):
+                continue
+            w2 = w.copy()
+            w2[sel, 2] = zmin
+            try:
+                pieces[ln][i] = Piece.of((w2 - t) @ R, pieces[ln][i].sources)
+            except (QhullError, ValueError):
+                continue
+            lift, count = max(lift, float(low.max())), count + 1
+        if count:
+            notes.append(f"link {ln!r}: {LEVEL_NOTE}: {count} collision piece(s), vertices up to {lift * 1000:.2g} mm "
+                         f"above the lowest point moved down onto it (free-standing: stands on every foot)")
+
+
 def _clip_all(piece: Piece, planes: list[tuple[np.ndarray, float]]) -> Piece | None:
     """``piece`` cut by every half-space ``n . x + offset <= 0`` of ``planes``
     (:func:`clip_piece` in turn); None when nothing with volume is left."""
@@ -1365,7 +1435,8 @@ def parent_child_depths(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], s
 
 
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
-                limit: int = MAX_PIECES_PER_LINK, decompose: bool = True) -> tuple[dict[str, list[Piece]], list[str]]:
+                limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
+                level: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m).
 
     The pieces hardly depend on the state of the joints: a parent is cut
@@ -1389,6 +1460,8 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         limit: most pieces per link.
         decompose: decompose a parent piece that contains its child
             (:func:`split_surface`; else only a note).
+        level: the object is free-standing: its footprint at ``state`` is
+            made planar (:func:`level_footprint`; needs ``state``).
 
     Returns:
         (link -> pieces, notes).
@@ -1440,7 +1513,7 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
             _store_pieces(disk_key, hit)
     if state is None:  # nothing depends on a state
         return {k: list(v) for k, v in hit[0].items()}, list(hit[1])
-    skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())))
+    skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
     done = _STATE_CACHE.get(skey)
     if done is None:
         pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
@@ -1448,6 +1521,8 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
             separate_parent_child(model, pieces, notes, state=state)
             for name in model.links:
                 pieces[name] = drop_slivers(pieces[name])
+        if level:
+            level_footprint(model, pieces, state, notes)
         if state:
             for (parent, child), d in parent_child_depths(model, pieces, state).items():
                 if d > CONTAINMENT_TOLERANCE:
@@ -1581,7 +1656,7 @@ def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) ->
 
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
-                      mesh_base: Path | None = None, *, decompose: bool = True) -> list[str]:
+                      mesh_base: Path | None = None, *, decompose: bool = True, level: bool = False) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by
     the convex pieces of :func:`link_pieces`, written as OBJ files
     ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; named by
@@ -1594,6 +1669,8 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         state: the initial state (joint -> rad or m).
         mesh_base: folder that relative collision filenames without a
             resolved ``path`` are relative to (default ``out_dir``).
+        level: the object is free-standing: its body's footprint at
+            ``state`` is made planar (:func:`level_footprint`).
 
     Returns:
         notes (what changed).
@@ -1607,7 +1684,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
     def mesh_path(g: urdf.UrdfGeometry) -> Path:
         return Path(g.path) if g.path is not None else base / str(g.filename)
 
-    pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose)
+    pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose, level=level and state is not None)
     for name, link in model.links.items():
         if not any(c.kind == "mesh" for c in link.collisions):
             continue

@@ -388,8 +388,11 @@ def build_urdf(
     ``collision_out``: (output folder, initial state): the mesh collisions
     become the convex pieces of
     :func:`asset2sim.tasks.publish.collision_geometry.convex_collisions`,
-    written into the folder (every engine loads them); their notes (what
-    the pieces changed) are appended to ``collision_notes`` when given.
+    written into the folder (every engine loads them; a free-standing
+    object's footprint levelled,
+    :func:`asset2sim.tasks.publish.collision_geometry.level_footprint`);
+    their notes (what the pieces changed) are appended to
+    ``collision_notes`` when given.
 
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
@@ -458,7 +461,8 @@ def build_urdf(
                 joint.limit.upper = float(dyn.upper)
     urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
     if collision_out is not None:
-        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1])
+        free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
+        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free)
         if collision_notes is not None:
             collision_notes.extend(notes)
     springs = {n: (d.stiffness, d.spring_reference) for n, d in overlay.joints.items() if d.stiffness > 0}

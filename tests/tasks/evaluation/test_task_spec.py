@@ -8,7 +8,7 @@ import pytest
 
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.evaluation.asset_files import parse_urdf, read_semantics
-from asset2sim.tasks.evaluation.task_spec import parse_task, task_actions
+from asset2sim.tasks.evaluation.task_spec import parse_task, task_actions, with_work_to_do
 from tests.conftest import SHARED, needs_shared
 
 
@@ -61,3 +61,24 @@ def test_task_actions_follow_the_verb():
     for text, want in from_verb.items():
         assert task_actions(text) == want, text
     assert task_actions(None) == ("close", "open")
+
+
+@needs_shared
+def test_a_task_on_one_of_several_drawers_acts_on_the_one_with_work_to_do():
+    """Cabinet 19179 (two drawers), "close the cabinet drawer" with one drawer
+    open: the task acts on the open one; "close the drawers", "close every
+    drawer", an open task (both have work) and both drawers closed (neither
+    has: an asset delivered closed is still asked to close) keep both."""
+    joints, sem = _asset("19179")
+    drawers = sorted(j for j in _movable(joints) if sem[joints[j].child][1] == "drawer")
+    assert len(drawers) == 2
+    one_open = {drawers[0]: 0.12, drawers[1]: 0.0}
+    t = with_work_to_do(parse_task("close the cabinet drawer", joints, sem, "StorageFurniture", []), one_open)
+    assert t.joints == [drawers[0]] and any(f"{drawers[1]} already closed" in n for n in t.notes)
+    for text in ("close the drawers", "close every drawer", "close both drawers"):
+        assert sorted(with_work_to_do(parse_task(text, joints, sem, "StorageFurniture", []), one_open).joints) == drawers
+    assert sorted(with_work_to_do(parse_task("open the drawer", joints, sem, "StorageFurniture", []), one_open).joints) == drawers
+    shut = {drawers[0]: 0.0, drawers[1]: 0.0}
+    assert sorted(with_work_to_do(parse_task("close the drawer", joints, sem, "StorageFurniture", []), shut).joints) == drawers
+    wide = {drawers[0]: 0.9, drawers[1]: 0.1}  # open the drawer: only the second is below the open target
+    assert with_work_to_do(parse_task("open the drawer", joints, sem, "StorageFurniture", []), wide).joints == [drawers[1]]

@@ -536,3 +536,82 @@ def test_pieces_are_kept_on_disk_by_content_and_code(tmp_path, monkeypatch):
     fresh()
     pieces_of(folder)
     assert not (tmp_path / "cache").exists()
+
+
+def _wobbly(tmp_path: Path, short: float) -> Path:
+    """A 0.2 m square slab on four 1 cm feet, one foot ``short`` m shorter
+    (the body, z up), with a lid hinged on top."""
+    feet = [_box([x, y, 0.0 if k else short], [x + 0.03, y + 0.03, 0.01])
+            for k, (x, y) in enumerate([(-0.1, -0.1), (0.07, -0.1), (-0.1, 0.07), (0.07, 0.07)])]
+    # the short foot is the first one: k == 0
+    return _asset(tmp_path, [_box([-0.1, -0.1, 0.01], [0.1, 0.1, 0.03]), *feet], [_box([-0.1, -0.1, 0.03], [0.1, 0.1, 0.04])])
+
+
+def _foot_bottoms(pieces: list) -> list[float]:
+    """Lowest z of each piece below the slab (the feet), sorted by x then y."""
+    feet = [p for p in pieces if p.points[:, 2].max() <= 0.01 + 1e-9]
+    feet.sort(key=lambda p: (round(float(p.points[:, 0].min()), 3), round(float(p.points[:, 1].min()), 3)))
+    return [float(p.points[:, 2].min()) for p in feet]
+
+
+def test_a_free_standing_body_stands_on_every_foot(tmp_path):
+    """A foot 0.6 mm short (within LEVEL_TOLERANCE) is brought down onto the
+    plane of the others when the object is free-standing, and a note says
+    so; without levelling (a mounted root) it stays short."""
+    folder = _wobbly(tmp_path, 0.0006)
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    path = lambda g: folder / str(g.filename)  # noqa: E731
+    plain, _ = cg.link_pieces(model, path, {"hinge": 0.0})
+    assert _foot_bottoms(plain["body"]) == pytest.approx([0.0006, 0.0, 0.0, 0.0], abs=1e-9)
+    level, notes = cg.link_pieces(model, path, {"hinge": 0.0}, level=True)
+    assert _foot_bottoms(level["body"]) == pytest.approx([0.0, 0.0, 0.0, 0.0], abs=1e-9)
+    (line,) = [n for n in notes if cg.LEVEL_NOTE in n]
+    assert "'body'" in line and "0.6 mm" in line
+    assert [p.points.tolist() for p in level["lid"]] == [p.points.tolist() for p in plain["lid"]]  # a moving link is left alone
+
+
+def test_a_foot_far_off_the_ground_is_not_levelled(tmp_path):
+    """A foot 3 mm short is a shape, not modelling noise: kept."""
+    folder = _wobbly(tmp_path, 0.003)
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    level, notes = cg.link_pieces(model, lambda g: folder / str(g.filename), {"hinge": 0.0}, level=True)
+    assert _foot_bottoms(level["body"]) == pytest.approx([0.003, 0.0, 0.0, 0.0], abs=1e-9)
+    assert not [n for n in notes if cg.LEVEL_NOTE in n]
+
+
+def _feet_on_the_ground(urdf_path: Path) -> int:
+    """Feet (quadrants of the 0.2 m slab) touching the ground after 1 s at
+    rest in PyBullet, the root free."""
+    from asset2sim.engines.base import SessionOptions, open_session
+
+    with open_session("pybullet", urdf_path, SessionOptions(initial_state={"hinge": 0.0})) as s:
+        s.step(240)
+        x0, y0 = s.link_frame("body")[0][:2]
+        cps = s._p.getContactPoints(bodyA=s.body, bodyB=s.plane, physicsClientId=s.cid)
+        return len({(c[5][0] > x0, c[5][1] > y0) for c in cps if c[8] < 1e-4})
+
+
+def test_written_free_standing_object_rests_on_four_feet_mounted_one_is_not_levelled(tmp_path):
+    """Through the writer: free-standing (the SPEC's default), PyBullet puts
+    the object on the ground touching all four feet; with a fixed root the
+    written feet keep their shape."""
+    from asset2sim.schemas.overlay import RootMount
+
+    folder = _wobbly(tmp_path, 0.0006)
+    _write(folder, tmp_path / "free")
+    assert _feet_on_the_ground(tmp_path / "free" / "mobility.urdf") == 4
+    model = urdf.read_urdf(tmp_path / "free" / "mobility.urdf")
+    lows = sorted(float(read_mesh(c.path)[0][:, 2].min()) for c in model.links["body"].collisions
+                  if float(read_mesh(c.path)[0][:, 2].max()) <= 0.01 + 1e-9)
+    assert lows == pytest.approx([0.0] * 4, abs=1e-9)
+
+    asset = extract_asset(folder)
+    ov = Overlay(estimator=EstimatorInfo(name="test"), scale=1.0, mounting=RootMount(kind="wall-mounted", fixed=True),
+                 joints={j.name: JointDynamics(damping=0.1, friction=0.01) for j in asset.movable_joints()})
+    ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
+    write_output(asset, ov, tmp_path / "mounted", {"hinge": 0.0})
+    model = urdf.read_urdf(tmp_path / "mounted" / "mobility.urdf")
+    lows = sorted(float(read_mesh(c.path)[0][:, 2].min()) for c in model.links["body"].collisions
+                  if float(read_mesh(c.path)[0][:, 2].max()) <= 0.01 + 1e-9)
+    assert lows == pytest.approx([0.0, 0.0, 0.0, 0.0006], abs=1e-9)
+    assert _feet_on_the_ground(tmp_path / "mounted" / "mobility.urdf") == 3  # put down free, it stands on three
