@@ -1,5 +1,3 @@
-import sys
+from asset2sim.cli import run
 
-from asset2sim.cli import main
-
-sys.exit(main())
+run()

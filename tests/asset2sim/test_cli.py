@@ -267,3 +267,38 @@ def test_a_command_imports_only_its_own_module():
     assert full.returncode == 0 and all(c in full.stdout for c in ("refine", "flow", "benchmark", "failures"))
     bad = run("refyne")
     assert bad.returncode == 2 and "invalid choice" in bad.stderr and "refine" in bad.stderr
+
+
+def test_fast_exit_runs_the_exit_handlers_flushes_and_keeps_the_code(tmp_path):
+    """fast_exit skips only the interpreter's teardown: an atexit handler
+    still runs, buffered Python and C output still reaches the pipe, and the
+    exit status is the command's."""
+    marker = tmp_path / "atexit_ran"
+    code = (
+        "import atexit, ctypes, sys\n"
+        f"atexit.register(lambda: open({str(marker)!r}, 'w').write('ok'))\n"
+        "sys.stdout.write('python buffered')\n"
+        "ctypes.CDLL(None).printf(b' c buffered')\n"
+        "from asset2sim.cli import fast_exit\n"
+        "fast_exit(3)\n"
+        "print('never')\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 3, p.stderr
+    assert marker.read_text() == "ok"
+    assert "python buffered" in p.stdout and "c buffered" in p.stdout and "never" not in p.stdout
+
+
+def test_a_thread_the_interpreter_waits_for_falls_back_to_a_normal_exit(tmp_path):
+    """A non-daemon thread still running: fast_exit leaves the exit to
+    sys.exit, which waits for the thread (its output is not lost)."""
+    code = (
+        "import threading, time, sys\n"
+        "def late():\n"
+        "    time.sleep(0.3); print('thread finished', flush=True)\n"
+        "threading.Thread(target=late).start()\n"
+        "from asset2sim.cli import fast_exit\n"
+        "fast_exit(4)\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 4 and "thread finished" in p.stdout
