@@ -424,3 +424,35 @@ def test_reused_rest_test_gives_the_fresh_evaluation_probes_included(tmp_path):
     post = [m for m in res.report.metrics if m.engine == "pybullet" and m.name in REST_TEST_METRICS]
     measured = evaluate_asset(out, prompt=row["prompt"], category=res.report.category, measured=post)
     assert measured.metric("probes").model_dump() == fresh.metric("probes").model_dump()
+
+
+def test_a_task_naming_one_of_two_drawers_is_executed_on_the_open_one(tmp_path):
+    """The generated two-drawer cabinet, refined closed, then one drawer set
+    open in its initial_state.json: "close the drawer" is executed on that
+    drawer only (task_spec.with_work_to_do), "close the drawers" on both."""
+    from asset2sim import demo_assets
+    from asset2sim.tasks.refine import refine_asset
+    from asset2sim.urdf import read_urdf
+
+    src = demo_assets.build_two_drawer_cabinet(tmp_path / "cab")
+    out = tmp_path / "out"
+    res = refine_asset(src, "A cabinet, closed.", out, extras=False)
+    model = read_urdf(out / "mobility.urdf")
+    drawers = sorted(j.name for j in model.movable_joints)
+    assert len(drawers) == 2
+    closed = res.report.closed_positions
+    first = model.joint(drawers[0])
+    q_open = closed[drawers[0]] + 0.4 * (first.upper - first.lower)  # 40 % open (closed at the lower end)
+    assert abs(closed[drawers[0]] - first.lower) < 1e-6
+    state_path = out / "initial_state.json"
+    state = json.loads(state_path.read_text())
+    state["initial_joint_positions"][drawers[0]] = q_open
+    state_path.write_text(json.dumps(state))
+
+    ev = evaluate_asset(out, task="close the drawer", probes=False)
+    (task,) = [m for m in ev.metrics if m.name == "task_execution"]
+    assert [a["joint"] for a in task.details["attempts"]] == [drawers[0]]
+    assert any(f"{drawers[1]} already closed at the initial state" in n for n in ev.notes)
+    ev = evaluate_asset(out, task="close the drawers", probes=False)
+    (task,) = [m for m in ev.metrics if m.name == "task_execution"]
+    assert sorted(a["joint"] for a in task.details["attempts"]) == drawers
