@@ -605,3 +605,29 @@ def test_real_objects_inputs_untouched():
     before = tree_hashes(folder)
     analyze_asset(extract_asset(folder))
     assert tree_hashes(folder) == before
+
+
+def test_analysis_is_kept_on_disk_by_content(tmp_path, monkeypatch):
+    """A link analysed twice with one cache folder: the second result is read
+    back equal; a mesh file whose bytes change (same name) is analysed again;
+    with the cache off nothing is written."""
+    monkeypatch.setenv("ASSET2SIM_CACHE", str(tmp_path / "cache"))
+    v, f = box_mesh(1.0, 1.0, 1.0)
+    path = write_obj(tmp_path / "box.obj", v, f)
+    link = link_of([mesh_ref(path, scale=(0.3, 0.2, 0.1))])
+    first = analyze_link(link)
+    stored = list((tmp_path / "cache" / an.DISK_KIND).glob("*.npz"))
+    assert len(stored) == 1
+    calls = []
+    real = an._analyze_surface
+    monkeypatch.setattr(an, "_analyze_surface", lambda *a: calls.append(1) or real(*a))
+    again = analyze_link(link)
+    assert again == first and not calls  # read back, not computed
+    write_obj(path, v * 2.0, f)  # the same file, other bytes
+    bigger = analyze_link(link)
+    assert calls == [1] and bigger.volume == pytest.approx(8 * first.volume, rel=1e-12)
+    assert len(list((tmp_path / "cache" / an.DISK_KIND).glob("*.npz"))) == 2
+    monkeypatch.setenv("ASSET2SIM_CACHE", "off")
+    other = write_obj(tmp_path / "other.obj", v * 3.0, f)
+    analyze_link(link_of([mesh_ref(other)]))
+    assert len(list((tmp_path / "cache" / an.DISK_KIND).glob("*.npz"))) == 2
