@@ -503,7 +503,8 @@ def test_link_without_geometry_and_collision_preferred(tmp_path):
     assert any("collision" in n for n in analyze_link(link).notes)
 
 
-def test_analyze_asset_shares_cache_and_skips_empty_links(tmp_path):
+def test_analyze_asset_shares_cache_and_skips_empty_links(tmp_path, monkeypatch):
+    monkeypatch.setenv("ASSET2SIM_CACHE", "off")  # the meshes are read (once): no analysis read back from disk
     p = write_obj(tmp_path / "shared.obj", *box_mesh(0.1, 0.1, 0.1))
     links = [LinkDesc(name="base"), link_of([mesh_ref(p)], name="a"), link_of([mesh_ref(p, xyz=(1, 0, 0))], name="b")]
     asset = AssetDescription(asset_id="t", source_dir=tmp_path, urdf_path=tmp_path / "x.urdf", robot_name="t", links=links, joints=[], root_link="base")
