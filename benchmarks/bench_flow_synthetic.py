@@ -19,7 +19,11 @@
 3. In the same run, side by side: for a sample of the assets (``--sample``,
    spread over sizes), the same stages in this process (prepare: read and
    hash; refine with extras; metrics), timed per asset, against the flow's
-   per-asset worker time of the same assets: the overhead ratio.
+   per-asset worker time of the same assets: the overhead ratio. The flow
+   and the in-process side each start from an empty on-disk cache of their
+   own (``ASSET2SIM_CACHE`` under the work folder; ``--keep-cache`` uses the
+   environment's): the caches are keyed by content and the assets are the
+   same for a seed, so a shared cache would time one side warm.
 4. Reruns the flow: every asset skipped; prints its wall time.
 5. Prints the isolation's cost: the stage server's start-up (once per
    worker) and a call through it (fork + pipe messages) against a direct call.
@@ -244,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-extras", action="store_true", help="without renders, MJCF export and HTML report")
     ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--keep-cache", action="store_true",
+                    help="use the environment's on-disk cache (ASSET2SIM_CACHE or ~/.cache/asset2sim) for both sides")
     args = ap.parse_args(argv)
     os.environ.setdefault("MPLBACKEND", "Agg")
     allocator.keep_freed_memory()
@@ -280,7 +286,12 @@ def _run(args, work: Path) -> int:
     from asset2sim.flows.refine_flow import run_refine_flow
     from asset2sim.flows.stages import plan_run
 
-    print(f"load before the flow: {_load()}")
+    # both sides start from an empty on-disk cache of their own (asset2sim.array_cache: CoACD, collision
+    # pieces, link analyses, keyed by content): the generated assets are the same for a seed, so an earlier run's
+    # entries would speed the flow up, and the flow's own entries the in-process side after it
+    if not args.keep_cache:
+        os.environ["ASSET2SIM_CACHE"] = str(work / "cache-flow")
+    print(f"load before the flow: {_load()}; on-disk cache {os.environ.get('ASSET2SIM_CACHE') or 'the default'}")
     ru_self0, ru_kids0 = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     t0, t0_epoch = time.perf_counter(), time.time()
     summary = run_refine_flow(catalog, workers=args.workers)
@@ -335,9 +346,13 @@ def _run(args, work: Path) -> int:
 
         # warm this process first (the flow's stage servers import everything before their first asset) on an
         # asset outside the sample: caches keyed by an asset's files must not favour a sampled asset
+        if not args.keep_cache:
+            os.environ["ASSET2SIM_CACHE"] = str(work / "cache-inprocess")  # as cold as the flow's was
         spare = [r["id"] for r in rows if r["id"] not in sample_ids][:1] or sample_ids[:1]
         _timed_in_process(place(plan_run(cat, "synthetic", "inprocess", ids=spare, force=True).jobs, "inprocess-warmup")[0])
         inproc = dict(_timed_in_process(j) for j in place(plan.jobs, "inprocess"))
+        if not args.keep_cache:
+            os.environ["ASSET2SIM_CACHE"] = str(work / "cache-concurrent")  # cold again for the 2-at-a-time side
         conc = in_process_concurrent(place(plan.jobs, "inprocess-concurrent"), args.workers)
         sample_ids = [a for a in sample_ids if a in ft and inproc[a][0] == inproc[a][0] and conc[a][0] == conc[a][0]]
         flow_s = [ft[a][0] for a in sample_ids]
