@@ -31,7 +31,7 @@ import numpy as np
 
 from asset2sim import atomic
 
-__all__ = ["cache_dir", "digest", "load", "source_digest", "store"]
+__all__ = ["array_text", "cache_dir", "digest", "load", "source_digest", "store", "text_array"]
 
 _OFF = ("off", "none", "0")
 
@@ -105,3 +105,18 @@ def store(kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
         atomic.write_bytes(path, buf.getvalue())
     except (OSError, ValueError):
         pass  # an optimisation only
+
+
+def text_array(text: str) -> np.ndarray:
+    """``text`` as a uint8 array (UTF-8), to store beside arrays (JSON
+    metadata, a serialised model) without pickles."""
+    return np.frombuffer(text.encode(), dtype=np.uint8)
+
+
+def array_text(array: np.ndarray) -> str:
+    """The text :func:`text_array` stored.
+
+    Raises:
+        UnicodeDecodeError: the bytes are not UTF-8.
+    """
+    return np.asarray(array, dtype=np.uint8).tobytes().decode()

@@ -263,6 +263,14 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(work, ignore_errors=True)
 
 
+def _own_cache(args, work: Path, name: str) -> None:
+    """Point this process and the processes it starts from now on at an
+    empty on-disk cache folder ``work/name`` (``ASSET2SIM_CACHE``), unless
+    ``--keep-cache``."""
+    if not args.keep_cache:
+        os.environ["ASSET2SIM_CACHE"] = str(work / name)
+
+
 def _run(args, work: Path) -> int:
     from asset2sim.flows.stages import prepare_prefect_environment
 
@@ -289,8 +297,7 @@ def _run(args, work: Path) -> int:
     # both sides start from an empty on-disk cache of their own (asset2sim.array_cache: CoACD, collision
     # pieces, link analyses, keyed by content): the generated assets are the same for a seed, so an earlier run's
     # entries would speed the flow up, and the flow's own entries the in-process side after it
-    if not args.keep_cache:
-        os.environ["ASSET2SIM_CACHE"] = str(work / "cache-flow")
+    _own_cache(args, work, "cache-flow")
     print(f"load before the flow: {_load()}; on-disk cache {os.environ.get('ASSET2SIM_CACHE') or 'the default'}")
     ru_self0, ru_kids0 = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     t0, t0_epoch = time.perf_counter(), time.time()
@@ -346,13 +353,11 @@ def _run(args, work: Path) -> int:
 
         # warm this process first (the flow's stage servers import everything before their first asset) on an
         # asset outside the sample: caches keyed by an asset's files must not favour a sampled asset
-        if not args.keep_cache:
-            os.environ["ASSET2SIM_CACHE"] = str(work / "cache-inprocess")  # as cold as the flow's was
+        _own_cache(args, work, "cache-inprocess")  # as cold as the flow's was
         spare = [r["id"] for r in rows if r["id"] not in sample_ids][:1] or sample_ids[:1]
         _timed_in_process(place(plan_run(cat, "synthetic", "inprocess", ids=spare, force=True).jobs, "inprocess-warmup")[0])
         inproc = dict(_timed_in_process(j) for j in place(plan.jobs, "inprocess"))
-        if not args.keep_cache:
-            os.environ["ASSET2SIM_CACHE"] = str(work / "cache-concurrent")  # cold again for the 2-at-a-time side
+        _own_cache(args, work, "cache-concurrent")  # cold again for the 2-at-a-time side
         conc = in_process_concurrent(place(plan.jobs, "inprocess-concurrent"), args.workers)
         sample_ids = [a for a in sample_ids if a in ft and inproc[a][0] == inproc[a][0] and conc[a][0] == conc[a][0]]
         flow_s = [ft[a][0] for a in sample_ids]

@@ -82,6 +82,7 @@ the voxel volume.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 from typing import Literal
@@ -223,12 +224,16 @@ def _disk_key(link: LinkDesc, params: tuple) -> str | None:
     the source of :data:`ANALYSIS_CODE`; None when a file or the code cannot
     be read (then nothing is cached)."""
     parts: list[bytes | str] = [link.name, repr(params)]
+    files: dict[Path, bytes] = {}  # a visual and a collision of PartNet-Mobility name the same file: read once
     try:
         parts.append(array_cache.source_digest(*ANALYSIS_CODE))
         for ref in (*link.collisions, *link.visuals):
             parts.append(ref.model_dump_json(exclude={"path"}))
             if ref.kind == "mesh" and ref.path is not None:
-                parts.append(Path(ref.path).read_bytes())
+                path = Path(ref.path)
+                if path not in files:
+                    files[path] = hashlib.sha256(path.read_bytes()).digest()
+                parts.append(files[path])
     except (OSError, ImportError):
         return None
     return array_cache.digest(*parts)
@@ -284,12 +289,12 @@ def analyze_link(
     hit = array_cache.load(DISK_KIND, key) if key is not None else None
     if hit is not None and "json" in hit:
         try:
-            return LinkGeometry.model_validate_json(hit["json"].tobytes())
-        except ValueError:
+            return LinkGeometry.model_validate_json(array_cache.array_text(hit["json"]))
+        except ValueError:  # UnicodeDecodeError and pydantic's ValidationError included
             pass  # an unreadable entry: computed again and rewritten
     geo = _analyze_surface(link, prefer, voxels_per_axis, max_voxels, close_gaps, layer_correction, subvoxel, cache)
     if geo is not None and key is not None:
-        array_cache.store(DISK_KIND, key, {"json": np.frombuffer(geo.model_dump_json().encode(), dtype=np.uint8)})
+        array_cache.store(DISK_KIND, key, {"json": array_cache.text_array(geo.model_dump_json())})
     return geo
 
 

@@ -1342,10 +1342,7 @@ def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state
     A note names each link changed and the largest move.
     """
     poses = model.link_poses(state)
-    moved: set[str] = set()
-    subtrees = limits.subtrees(model)
-    for joint in model.movable_joints:
-        moved |= set(subtrees[joint.name])
+    body = limits.rigid_group(model, model.root)  # the links no movable joint moves
     world = {ln: [p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3] for p in pl] for ln, pl in pieces.items() if pl}
     if not world:
         return
@@ -1354,7 +1351,7 @@ def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state
     extent = float(np.max(allpts[:, :2].max(axis=0) - allpts[:, :2].min(axis=0)))
     tol = min(LEVEL_TOLERANCE, LEVEL_FRACTION * extent)
     for ln, ws in world.items():
-        if ln in moved:
+        if ln not in body:
             continue
         R, t = poses[ln][:3, :3], poses[ln][:3, 3]
         lift = 0.0
@@ -1590,7 +1587,7 @@ def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> No
         for p in plist:
             arrays[f"p{n}"], arrays[f"e{n}"], arrays[f"v{n}"] = p.points, p.equations, np.array(p.volume)
             n += 1
-    arrays["meta"] = np.frombuffer(json.dumps({"links": links, "notes": notes}).encode(), dtype=np.uint8)
+    arrays["meta"] = array_cache.text_array(json.dumps({"links": links, "notes": notes}))
     array_cache.store("pieces", key, arrays)
 
 
@@ -1601,7 +1598,7 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
     if data is None:
         return None
     try:
-        meta = json.loads(bytes(data["meta"]).decode())
+        meta = json.loads(array_cache.array_text(data["meta"]))
         if set(meta["links"]) != set(model.links):
             return None
         pieces, n = {}, 0
