@@ -318,7 +318,8 @@ def _run(args, work: Path) -> int:
     print(f"flow: {summary['assets']} assets ({summary['done']} done, {summary['failed']} failed, "
           f"{summary['skipped']} skipped) in {wall:.1f} s wall; load after: {_load()}")
     print(f"  start-up: Prefect {prefect_s:.1f} s, Dask {summary['dask_startup_seconds']:.1f} s "
-          f"(+ tear-down {summary['dask_teardown_seconds']:.1f} s); assets phase {assets_s:.1f} s; "
+          f"(+ tear-down {summary['dask_teardown_seconds']:.1f} s), stage servers on every worker "
+          f"{summary.get('stage_servers_seconds', 0.0):.1f} s; assets phase {assets_s:.1f} s; "
           f"summary {summary['tracking_seconds']:.1f} s")
     print(f"  throughput: {worked / assets_s * 3600:.0f} assets/hour over the assets phase, "
           f"{worked / wall * 3600:.0f} assets/hour over the whole run (goal >= 2000)")

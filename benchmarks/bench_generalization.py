@@ -23,7 +23,12 @@ manifest), the requests
 and the same kinds on the generated assets (the demo objects of
 ``asset2sim.demo_assets`` and the failure-mode assets of
 ``tests/tasks/check/failure_assets.py``: a tall faucet, a laptop whose open
-screen tips it, a box whose latch penetrates every closed state). <noun> is
+screen tips it, a box whose latch penetrates every closed state; and the
+assets of ``tests/unseen_assets.py`` in categories the dev set lacks: a wall
+switch, a cart on wheels, a sliding window, pliers, a safe with a dial, a
+toaster with a lever and a dial, a capped bottle, a desk with a drawer, a
+range oven with a drop-down door, and a double-door cabinet; reported as
+"(generated, unseen)" per category). <noun> is
 the category's first request synonym (``asset2sim/priors/categories.yaml``).
 
 A case passes when ``refine_asset`` reports ``failure_mode == "none"`` (every
@@ -108,6 +113,7 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
     if gen_root is not None:
         sys.path.insert(0, str(ROOT))
         from asset2sim import demo_assets
+        from tests import unseen_assets
         from tests.tasks.check import failure_assets
 
         demo = demo_assets.ensure_demo_dataset(gen_root / "demo")
@@ -116,6 +122,11 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
         for name, build, cat in (("tall_faucet", failure_assets.build_tall_faucet, "Faucet"),
                                  ("tipping_laptop", failure_assets.build_tipping_laptop, "Laptop"),
                                  ("interlocked_box", failure_assets.build_interlocked_box, "Box")):
+            folder = gen_root / name
+            if not (folder / "mobility.urdf").is_file():
+                build(folder)
+            objects.append((f"gen:{name}", folder, cat, True))
+        for name, build, cat in unseen_assets.UNSEEN_BUILDERS:  # categories the dev set lacks (or its shapes)
             folder = gen_root / name
             if not (folder / "mobility.urdf").is_file():
                 build(folder)
@@ -211,8 +222,9 @@ def report(results: list[dict]) -> str:
     ok = sum(1 for c in valid if c["mode"] == "none")
     lines = [f"cases {len(results)}, valid {len(valid)}, passed {ok} ({100.0 * ok / max(len(valid), 1):.1f} % of valid inputs)"]
     by_cat, by_kind = defaultdict(list), defaultdict(list)
+    seen = {c["category"] for c in results if not c["generated"]}
     for c in valid:
-        by_cat[c["category"] + (" (generated)" if c["generated"] else "")].append(c)
+        by_cat[c["category"] + ("" if not c["generated"] else " (generated)" if c["category"] in seen else " (generated, unseen)")].append(c)
         by_kind[c["kind"]].append(c)
     lines += _table("per category", by_cat)
     lines += _table("per request kind", by_kind)

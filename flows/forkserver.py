@@ -199,6 +199,19 @@ class StageServer:
 
         threading.Thread(target=run, name="asset2sim-stage-server-start", daemon=True).start()
 
+    def ensure_started(self) -> float:
+        """Start the server unless it runs, waiting for a start begun by
+        :meth:`start_soon`. Returns the seconds waited.
+
+        Raises:
+            RuntimeError: it exited before it was ready.
+        """
+        t0 = time.perf_counter()
+        with self._lock:
+            if not self.alive():
+                self.start()
+        return time.perf_counter() - t0
+
     def close(self) -> None:
         """Stop the server (SIGKILL of its process group; children end with it)."""
         if self.proc is None:
@@ -382,15 +395,34 @@ def worker_server(preload: tuple[str, ...] = ()) -> StageServer:
         return srv
 
 
-def start_soon(preload: tuple[str, ...] = ()) -> None:
-    """Start this process's stage server (:func:`worker_server`) in the
-    background if it does not run yet."""
+def _server_with(preload: tuple[str, ...]) -> StageServer:
+    """This process's stage server, restarted on its next start when it
+    lacks a module of ``preload``."""
     srv = worker_server(preload)
     for mod in preload:
         if mod not in srv.preload:
             srv.preload = (*srv.preload, mod)
             srv.close()
-    srv.start_soon()
+    return srv
+
+
+def start_soon(preload: tuple[str, ...] = ()) -> None:
+    """Start this process's stage server (:func:`worker_server`) in the
+    background if it does not run yet."""
+    _server_with(preload).start_soon()
+
+
+def ready_server(preload: tuple[str, ...] = ()) -> float:
+    """Start this process's stage server with ``preload`` imported and wait
+    until it is ready. The flow runs it on every Dask worker
+    (``Client.run``) before the first asset: the servers' imports (about
+    2 s of CPU each) are then start-up, not part of the assets phase.
+    Returns the seconds waited.
+
+    Raises:
+        RuntimeError: the server exited before it was ready.
+    """
+    return _server_with(tuple(preload)).ensure_started()
 
 
 def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
@@ -400,11 +432,7 @@ def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: 
     :func:`asset2sim.flows.isolation.run_isolated` (same statuses, time and
     memory limit, ``spec.json`` / ``result.json`` / ``child.log`` in ``workdir``).
     ``preload``: modules the server should import (used when it starts)."""
-    srv = worker_server(preload)
-    for mod in preload:
-        if mod not in srv.preload:  # a new refine function: restart with it imported
-            srv.preload = (*srv.preload, mod)
-            srv.close()
+    srv = _server_with(preload)  # a new refine function: restarted with it imported
     return srv.call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
 
 

@@ -109,12 +109,14 @@ from typing import Any
 
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
+from prefect.context import FlowRunContext
 from prefect.futures import as_completed
 
 from asset2sim import catalog_compare, catalog_finish, flow_progress, queries, tracking
 from asset2sim.catalog import ResultCatalog, load_catalog
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, server, stages
+from asset2sim.flows.forkserver import ready_server
 from asset2sim.flows.store import join_uri, upload_folder
 from asset2sim.flows.stages import (  # re-exported: the flow's public names
     FLOW_NAME,
@@ -212,11 +214,12 @@ def refine_assets(
 
     Returns:
         ``{"rows": [CatalogRow, ...], "inputs": {asset id: InputEntry},
-        "body_started": epoch s, "body_seconds": s}``.
+        "cluster_up": epoch s, "servers_seconds": s (:func:`_ready_stage_servers`),
+        "body_started": epoch s, "body_seconds": s}`` (the body: the assets, after the servers).
     """
     log = get_run_logger()
     flow_run_id = parent_flow_run_id or _current_flow_run_id()
-    body_started = time.time()  # the Dask cluster is up once the body runs
+    cluster_up = time.time()  # the Dask cluster is up once the body runs
     store = ResultCatalog(catalog_root)
     chain_task = chain.with_options(
         retries=retries, retry_delay_seconds=retry_delay_seconds, retry_condition_fn=_retry_on_model_failure,
@@ -250,6 +253,8 @@ def refine_assets(
         log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
 
     all_jobs = [AssetJob(**j) for j in jobs]
+    servers_seconds = _ready_stage_servers(all_jobs, log)
+    body_started = time.time()  # the stage servers' start-up is not the assets'
     prep_futures = {}
     size = max(1, int(batch_size))
     for i in range(0, len(all_jobs), size):
@@ -286,7 +291,35 @@ def refine_assets(
             record(job, prepared, None, None, exc)
         else:
             record(job, prepared, res.refined, res.measured, res.error, res.published)
-    return {"rows": rows, "inputs": inputs, "body_started": body_started, "body_seconds": time.time() - body_started}
+    return {"rows": rows, "inputs": inputs, "body_started": body_started, "body_seconds": time.time() - body_started,
+            "cluster_up": cluster_up, "servers_seconds": servers_seconds}
+
+
+def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
+    """Start the stage server of every worker of the flow's Dask cluster
+    and wait until all are ready (:func:`asset2sim.flows.forkserver.ready_server`
+    through ``Client.run``), before the first asset is submitted: each
+    server's imports (about 2 s of CPU) are then start-up, reported apart,
+    not part of the assets phase where they ran beside the other workers'
+    first assets. A worker
+    that joins later starts its server with its first batch
+    (:func:`asset2sim.flows.stages.prepare_batch`), as before. Returns the
+    seconds waited (0 when no job runs in a stage server or the task runner
+    is not a Dask one); a server that cannot start is logged and left to the
+    first call, which records the failure in that asset's row."""
+    from prefect_dask import DaskTaskRunner
+
+    mods = tuple(sorted({m for m in (stages.stage_server_module(j) for j in jobs) if m is not None}))
+    ctx = FlowRunContext.get()
+    runner = getattr(ctx, "task_runner", None)
+    if not mods or not isinstance(runner, DaskTaskRunner):
+        return 0.0
+    t0 = time.perf_counter()
+    try:
+        runner.client.run(ready_server, mods)
+    except (RuntimeError, OSError, TimeoutError) as exc:
+        log.warning("stage servers not started before the first asset: %s: %s", type(exc).__name__, exc)
+    return time.perf_counter() - t0
 
 
 @flow(name=FLOW_NAME, persist_result=False)
@@ -582,10 +615,11 @@ def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJo
 def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
              fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
     """Run :func:`refine_assets` on a Dask task runner (nothing starts for no
-    jobs); its timings (s): ``dask_startup_seconds``, ``assets_seconds``,
+    jobs); its timings (s): ``dask_startup_seconds``, ``stage_servers_seconds``, ``assets_seconds``,
     ``dask_teardown_seconds``, and ``inputs``: the input index entries of the
     assets it read (:mod:`asset2sim.flows.driver_skip`)."""
-    timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "assets_seconds": 0.0, "dask_teardown_seconds": 0.0,
+    timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0,
+                              "dask_teardown_seconds": 0.0,
                               "inputs": {}}
     if not jobs:
         return timing
@@ -602,9 +636,11 @@ def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
     )
     timing["inputs"] = out.get("inputs", {})
     fan_seconds = time.perf_counter() - t_fan
-    timing["dask_startup_seconds"] = max(0.0, out["body_started"] - t_fan_epoch)
+    timing["dask_startup_seconds"] = max(0.0, out["cluster_up"] - t_fan_epoch)
+    timing["stage_servers_seconds"] = out["servers_seconds"]
     timing["assets_seconds"] = out["body_seconds"]
-    timing["dask_teardown_seconds"] = max(0.0, fan_seconds - timing["dask_startup_seconds"] - out["body_seconds"])
+    timing["dask_teardown_seconds"] = max(0.0, fan_seconds - timing["dask_startup_seconds"] - out["servers_seconds"]
+                                          - out["body_seconds"])
     return timing
 
 
@@ -703,8 +739,9 @@ def run_refine_flow(
     ``out``: the output store (``s3://bucket/prefix``, :mod:`.store`).
 
     Returns the run summary (counts, pass rates, failure modes, paths, MLflow
-    run id, timings in s: ``dask_startup_seconds``, ``assets_seconds`` (the
-    fan-out with the cluster up), ``dask_teardown_seconds``,
+    run id, timings in s: ``dask_startup_seconds``, ``stage_servers_seconds``
+    (every worker's stage server started before the first asset),
+    ``assets_seconds`` (the fan-out with the cluster and servers up), ``dask_teardown_seconds``,
     ``tracking_seconds`` (summary, plot, MLflow), ``flow_body_seconds``, and
     ``flow_started_epoch``). A run that regressed beyond ``catalog.yaml``
     (``results.regression``, ``fail_flow``) ends as a Failed flow run

@@ -415,6 +415,12 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
                        seconds=time.perf_counter() - t0, worker=_worker_name())
 
 
+def stage_server_module(job: AssetJob) -> str | None:
+    """The module a job's stage server imports before it forks (its refine
+    function's), or None when the job does not run isolated in one."""
+    return job.refine_function.split(":", 1)[0] if job.isolation == "process" else None
+
+
 def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
     """:func:`prepare_asset` for several jobs in one call (one task of the
     flow's task runner instead of one per asset: a rerun of finished assets
@@ -422,8 +428,8 @@ def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
     item of the list; the others go on. Starts this worker's stage server
     in the background meanwhile when the jobs run isolated in it."""
     for job in jobs[:1]:
-        if job.isolation == "process":
-            start_soon((job.refine_function.split(":", 1)[0],))
+        if stage_server_module(job) is not None:
+            start_soon((stage_server_module(job),))
     out: list[Prepared | Exception] = []
     for job in jobs:
         try:

@@ -367,8 +367,12 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     disturbance), the opened joints placed where, within their requested
     bands (or the interval a number asked), the object stands steadiest
     (:func:`asset2sim.tasks.state.balance.steadiest_fractions`), when that
-    alone gives it the static margin stability by design asks, and
-    stages 4-7 run once more from there; kept only when that attempt passes
+    alone gives it the static margin stability by design asks; when it
+    was statically steady already and a drop or tilt toppled it anyway (the
+    static margin cannot tell the openings apart: stapler 102990 "fully
+    open" has 14.6-16.5 mm over its whole band, and topples at 0.98-1.0 of
+    its range, not at 0.9), the least opening each band allows
+    (:func:`_least_openings`). Stages 4-7 run once more from there; kept only when that attempt passes
     every check (else the resting-pose retry of :func:`_synthesize_and_check`
     still runs, from the first attempt). The request is
     never contradicted: a band allows the whole interval, its target is a
@@ -380,13 +384,24 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None
-    if not fractions or not after.stable:  # the opening alone does not make it steady: the resting pose may
-        return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
-    note = (f"stability by design: {why} at the bands' targets; "
-            + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
-            + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
-            f" (asked >= {after.required * 1000:.3g} mm)")
+    if fractions and after.stable:
+        note = (f"stability by design: {why} at the bands' targets; "
+                + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
+                + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
+                f" (asked >= {after.required * 1000:.3g} mm)")
+    elif att.check.stable and before.stable:
+        # statically steady at every allowed opening, yet a drop or tilt toppled it: the opened parts swing
+        # and strike their stops there; the least opening the bands allow moves the least mass the least far
+        fractions = _least_openings(att, intervals)
+        if not fractions:
+            return None
+        note = (f"stability by design: {why} at the bands' targets although statically steady (margin "
+                f"{before.margin * 1000:.3g} mm, asked >= {before.required * 1000:.3g} mm); "
+                + ", ".join(f"{n} opened to {f:.2f} of its range, the least its band allows ({intervals[n][0]:.2f}-{intervals[n][1]:.2f})"
+                            for n, f in fractions.items()))
+    else:  # the opening alone does not make it steady: the resting pose may
+        return None
     log.say("stability", note)
     second = _attempt(ctx, est, config, out_dir, cache, log, fractions=fractions)
     if second.check.passed and not second.check.topples:
@@ -395,6 +410,20 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
     att.rewrite(out_dir)
     return None
+
+
+def _least_openings(att: _Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:
+    """Joint -> the lower end of its allowed opening-fraction interval, for
+    the joints the attempt opened (interval's lower end > 0) past that end
+    by more than 0.01 of the range (dimensionless fractions)."""
+    out = {}
+    for name, (lo, hi) in intervals.items():
+        cs = att.closed_out.get(name)
+        if cs is None or name not in att.state or not 0 < lo < hi:
+            continue
+        if cs.fraction(att.state[name]) > lo + 0.01:
+            out[name] = float(lo)
+    return out
 
 
 def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
@@ -409,7 +438,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     shut, shut_notes = _shut_repair(ctx, syn, urdf, config, out_dir, cache, log)
     syn = _closed_on_output(ctx, syn, urdf, out_dir, log, shut)
     closed_raw = syn.closed_out
-    clipped = _clip_synthesis(ctx, syn, urdf, config, out_dir, log, shut)
+    clipped = _clip_synthesis(ctx, syn, urdf, config, out_dir, log, shut, fractions)
     if clipped is not syn:  # clipped limits change the pieces and the range the closed end is found in: measured once more
         clipped = _closed_on_output(ctx, clipped, urdf, out_dir, log, shut)
     syn = clipped
@@ -574,11 +603,13 @@ def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_d
 
 
 def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
-                    overrides: dict | None = None) -> _Synthesis:
+                    overrides: dict | None = None, fractions: dict[str, float] | None = None) -> _Synthesis:
     """Stage 5b: the limits clipped to what the geometry allows
     (:func:`_clip_limits`, other joints at the requested state) before the
     state search, the requested state recomputed from the bands over the
-    clipped ranges (a "half open" lid is half of the range it can open), and
+    clipped ranges (a "half open" lid is half of the range it can open;
+    ``fractions``, joint -> opening fraction chosen by stability by design,
+    :func:`_steadier_state`, win over the bands' targets), and
     the output rewritten (with the collision ``overrides``). Returns the synthesis with the clipped overlay,
     closed ends and requested state (unchanged when nothing was clipped)."""
     overlay, closed_out = _clip_limits(syn.overlay, syn.closed_out, syn.requested, urdf, config, log)
@@ -589,6 +620,7 @@ def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config:
     requested = estimate.state_from_bands(unscaled, syn.bands, s, syn.prismatic)
     if overlay.initial_joint_positions:
         requested.update(overlay.initial_joint_positions)
+    requested.update({n: closed_out[n].position(f) for n, f in (fractions or {}).items() if n in closed_out})
     write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested)
 

@@ -151,3 +151,116 @@ def build_double_door_cabinet(folder: Path) -> Path:
     b.moving("link_1", "hinge", "door", [b.part("door", box_xyz(0.0, w, -h, h, d, d + 0.02), _GREY)],
              "revolute", "link_2", (w, 0.0, d), (0.0, 1.0, 0.0), 0.0, 1.57)
     return b.write(folder)
+
+
+def _carcass(b: _Builder, label: str, w: float, h: float, d: float, t: float, color) -> list[Part]:
+    """An open-front box (x in [-w, w], y in [-h, h], z in [-d, d], front at
+    +z) of boards ``t`` thick."""
+    return [b.part(label, box_xyz(-w, -w + t, -h, h, -d, d), color), b.part(label, box_xyz(w - t, w, -h, h, -d, d), color),
+            b.part(label, box_xyz(-w + t, w - t, h - t, h, -d, d), color), b.part(label, box_xyz(-w + t, w - t, -h, -h + t, -d, d), color),
+            b.part(label, box_xyz(-w + t, w - t, -h + t, h - t, -d, -d + t), color)]
+
+
+def build_safe(folder: Path) -> Path:
+    """A home safe: a thick-walled steel box (0.8 x 0.9 x 0.8 units) whose
+    door (``door``, revolute 0-1.75 rad about the vertical axis at its left
+    edge) closes the front, with a dial (``knob``, continuous about the
+    door's normal) on the door."""
+    b = _Builder("u_safe", "Safe")
+    w, h, d, t = 0.4, 0.45, 0.4, 0.06
+    b.body("link_2", "safe_body", _carcass(b, "safe_body", w, h, d, t, _GREY))
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, w, -h, h, d, d + 0.06), _GREY)],
+             "revolute", "link_2", (-w, 0.0, d + 0.03), (0.0, -1.0, 0.0), 0.0, 1.75)
+    b.moving("link_1", "hinge", "knob", [b.part("knob", [box_xyz(0.12, 0.24, 0.04, 0.16, d + 0.06, d + 0.1),
+                                                         box_xyz(0.17, 0.19, 0.16, 0.19, d + 0.06, d + 0.1)], _DARK)],
+             "continuous", "link_0", (0.18, 0.1, d + 0.08), (0.0, 0.0, 1.0))
+    return b.write(folder)
+
+
+def build_toaster(folder: Path) -> Path:
+    """A two-slot toaster (0.6 x 0.45 x 0.3 units) with a push-down lever
+    (``slider``, prismatic 0-0.2 units down the front face, in a slot) and a
+    browning dial (``knob``, continuous about the front face's normal)."""
+    b = _Builder("u_toaster", "Toaster")
+    w, h, d = 0.3, 0.22, 0.15
+    body = [b.part("toaster_body", box_xyz(-w, w, -h, -h + 0.03, -d, d), _STEEL),  # base plate
+            b.part("toaster_body", box_xyz(-w, w, -h + 0.03, h, -d, -0.05), _STEEL),  # back half, up to the slots
+            b.part("toaster_body", box_xyz(-w, w, -h + 0.03, h, 0.05, d), _STEEL),  # front half
+            b.part("toaster_body", box_xyz(-w, -0.2, -h + 0.03, h, -0.05, 0.05), _STEEL),  # ends and middle wall between the slots
+            b.part("toaster_body", box_xyz(0.2, w, -h + 0.03, h, -0.05, 0.05), _STEEL),
+            b.part("toaster_body", box_xyz(-0.02, 0.02, -h + 0.03, h, -0.05, 0.05), _STEEL)]
+    b.body("link_2", "toaster_body", body)
+    b.moving("link_0", "slider", "slider", [b.part("slider", box_xyz(0.2, 0.27, 0.1, 0.14, d, d + 0.06), _DARK)],
+             "prismatic", "link_2", (0.235, 0.12, d), (0.0, -1.0, 0.0), 0.0, 0.2)
+    b.moving("link_1", "hinge", "knob", [b.part("knob", [box_xyz(-0.2, -0.12, -0.08, 0.0, d, d + 0.04),
+                                                         box_xyz(-0.17, -0.15, 0.0, 0.02, d, d + 0.04)], _DARK)],
+             "continuous", "link_2", (-0.16, -0.04, d + 0.02), (0.0, 0.0, 1.0))
+    return b.write(folder)
+
+
+def build_bottle(folder: Path) -> Path:
+    """A bottle (body 0.3 x 0.8 x 0.3 units and a neck) with a cap
+    (``lid``, prismatic 0-0.25 units up along the neck) over the neck."""
+    b = _Builder("u_bottle", "Bottle")
+    b.body("link_1", "bottle_body", [b.part("bottle_body", box_xyz(-0.15, 0.15, -0.5, 0.3, -0.15, 0.15), _GLASS),
+                                      b.part("bottle_body", box_xyz(-0.06, 0.06, 0.3, 0.45, -0.06, 0.06), _GLASS)])
+    c, t = 0.08, 0.02
+    cap = [box_xyz(-c, c, 0.45, 0.47, -c, c), box_xyz(-c, -c + t, 0.37, 0.45, -c, c), box_xyz(c - t, c, 0.37, 0.45, -c, c),
+           box_xyz(-c + t, c - t, 0.37, 0.45, -c, -c + t), box_xyz(-c + t, c - t, 0.37, 0.45, c - t, c)]
+    b.moving("link_0", "slider", "lid", [b.part("lid", cap, _RED)], "prismatic", "link_1", (0.0, 0.45, 0.0), (0.0, 1.0, 0.0), 0.0, 0.25)
+    return b.write(folder)
+
+
+def build_table_with_drawer(folder: Path) -> Path:
+    """A desk (top 1.2 x 0.8 units on four legs, 0.8 high) with a drawer
+    (``drawer``, prismatic 0-0.5 units out of the front) in a housing under
+    the top."""
+    b = _Builder("u_table", "Table")
+    top, leg = 0.4, 0.05
+    body = [b.part("tabletop", box_xyz(-0.6, 0.6, top - 0.04, top, -0.4, 0.4), _WHITE)]
+    for x in (-0.6, 0.6 - leg):
+        for z in (-0.4, 0.4 - leg):
+            body.append(b.part("leg", box_xyz(x, x + leg, -0.4, top - 0.04, z, z + leg), _GREY))
+    body += [b.part("drawer_housing", box_xyz(-0.3, -0.28, 0.16, top - 0.04, -0.35, 0.38), _WHITE),
+             b.part("drawer_housing", box_xyz(0.28, 0.3, 0.16, top - 0.04, -0.35, 0.38), _WHITE),
+             b.part("drawer_housing", box_xyz(-0.28, 0.28, 0.16, 0.18, -0.35, 0.38), _WHITE)]
+    b.body("link_1", "table_body", body)
+    drawer = [box_xyz(-0.3, 0.3, 0.17, 0.35, 0.38, 0.4),  # front
+              box_xyz(-0.27, 0.27, 0.185, 0.2, -0.33, 0.38),  # bottom
+              box_xyz(-0.27, -0.255, 0.2, 0.33, -0.33, 0.38), box_xyz(0.255, 0.27, 0.2, 0.33, -0.33, 0.38),
+              box_xyz(-0.255, 0.255, 0.2, 0.33, -0.33, -0.315)]
+    b.moving("link_0", "slider", "drawer", [b.part("drawer", drawer, _GREY)], "prismatic", "link_1", (0.0, 0.25, 0.39), (0.0, 0.0, 1.0), 0.0, 0.5)
+    return b.write(folder)
+
+
+def build_oven(folder: Path) -> Path:
+    """A range oven (0.9 x 0.8 x 0.7 units carcass on a 0.12 plinth) with a
+    bottom-hinged door (``door``, revolute 0-1.57 rad about the horizontal
+    axis at its lower edge) and a temperature dial (``knob``, continuous) on
+    the top rail."""
+    b = _Builder("u_oven", "Oven")
+    w, h, d, t = 0.45, 0.4, 0.35, 0.04
+    body = _carcass(b, "oven_body", w, h, d, t, _DARK) + [b.part("oven_body", box_xyz(-w, w, h, h + 0.12, -d, d + 0.02), _STEEL),
+                                                          b.part("oven_body", box_xyz(-w, w, -h - 0.12, -h, -d, d), _DARK)]  # plinth
+    b.body("link_2", "oven_body", body)
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, w, -h, h, d, d + 0.05), _STEEL),
+                                        b.part("handle", box_xyz(-0.3, 0.3, h - 0.08, h - 0.05, d + 0.05, d + 0.1), _DARK)],
+             "revolute", "link_2", (0.0, -h, d + 0.025), (1.0, 0.0, 0.0), 0.0, 1.57)
+    b.moving("link_1", "hinge", "knob", [b.part("knob", box_xyz(0.2, 0.28, h + 0.02, h + 0.1, d + 0.02, d + 0.06), _DARK)],
+             "continuous", "link_2", (0.24, h + 0.06, d + 0.04), (0.0, 0.0, 1.0))
+    return b.write(folder)
+
+
+#: Every builder of this module: (asset name, builder, category).
+UNSEEN_BUILDERS = (
+    ("u_switch", build_toggle_switch, "Switch"),
+    ("u_cart", build_cart, "Cart"),
+    ("u_window_slide", build_sliding_window, "Window"),
+    ("u_pliers", build_pliers, "Pliers"),
+    ("u_double_door", build_double_door_cabinet, "StorageFurniture"),
+    ("u_safe", build_safe, "Safe"),
+    ("u_toaster", build_toaster, "Toaster"),
+    ("u_bottle", build_bottle, "Bottle"),
+    ("u_table", build_table_with_drawer, "Table"),
+    ("u_oven", build_oven, "Oven"),
+)

@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
     dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
+    servers_s = float(summary.get("stage_servers_seconds") or 0.0)
     assets_s = float(summary.get("assets_seconds") or 0.0)
     tracking_s = float(summary.get("tracking_seconds") or 0.0)
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
@@ -115,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     startup = (f"Prefect start-up {prefect_s:.1f} s" if summary.get("flow_run_id")
                else "no Prefect flow run (nothing to dispatch)")
     print(f"  wall time {total:.1f} s: {startup}, Dask start-up + tear-down {dask_s:.1f} s, "
-          f"assets {assets_s:.1f} s"
+          f"stage servers {servers_s:.1f} s, assets {assets_s:.1f} s"
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")
     print(f"  outputs  {summary.get('output_store') or summary['output_dir']}")

@@ -121,3 +121,20 @@ def test_start_soon_starts_the_server_in_the_background(tmp_path):
         assert srv.starts == 1
     finally:
         srv.close()
+
+
+def test_ready_server_waits_for_a_started_server_and_keeps_it(tmp_path):
+    """What the flow runs on every Dask worker before the first asset: the
+    server is up when it returns, and the next call pays no start."""
+    from asset2sim.flows import forkserver
+
+    waited = forkserver.ready_server((MOD,))
+    srv = forkserver.worker_server((MOD,))
+    try:
+        assert waited > 0 and srv.alive() and MOD in srv.preload and srv.starts == 1
+        assert forkserver.ready_server((MOD,)) < waited  # running: returns at once, no second start
+        res = srv.call(f"{MOD}:add", {"a": 2, "b": 5}, timeout=60, workdir=tmp_path / "a")
+        assert res.status == "ok" and res.value["sum"] == 7
+        assert "server_start_seconds" not in res.extra and srv.starts == 1
+    finally:
+        srv.close()

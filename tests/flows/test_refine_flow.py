@@ -251,6 +251,9 @@ def test_flow_with_the_real_refine_pipeline_on_demo_assets(tmp_path, prefect_ser
     )
     s = _run(catalog, workers=2)
     rows = _rows(catalog, s["run"])
+    # both workers' stage servers were started before the first asset: no asset paid for one
+    assert s["stage_servers_seconds"] > 0
+    assert not any("isolation.server_start" in json.loads(r["stage_seconds"]) for r in rows.values())
     for aid in ("box_lid", "laptop"):
         r = rows[aid]
         assert r["status"] == "done", r["error"]

@@ -1,0 +1,38 @@
+"""Categories the dev set lacks, on generated assets (tests/unseen_assets.py):
+a safe with a dial on its door, a toaster with a lever and a dial, a capped
+bottle, a desk with a drawer, a range oven with a drop-down door. Each is
+refined for a short request of the hidden set's kind and must be
+interaction-ready on every tier (probes included), recognised as its
+category, mounted as the category's prior says, with the requested joint in
+its band."""
+
+from __future__ import annotations
+
+import pytest
+
+from asset2sim.schemas.request import BAND_INTERVAL
+from asset2sim.tasks.interpret.mounting import category_mounting
+from asset2sim.tasks.refine import refine_asset
+from tests.unseen_assets import build_bottle, build_oven, build_safe, build_table_with_drawer, build_toaster
+
+CASES = [
+    (build_safe, "Safe", "A safe, halfway open.", "joint_0", "halfway"),
+    (build_toaster, "Toaster", "A toaster with everything closed.", "joint_0", "closed"),
+    (build_bottle, "Bottle", "A bottle, fully open.", "joint_0", "fully"),
+    (build_table_with_drawer, "Table", "A table, opened halfway.", "joint_0", "halfway"),
+    (build_oven, "Oven", "A small oven, mostly open.", "joint_0", "mostly"),
+]
+
+
+@pytest.mark.parametrize("build, category, prompt, joint, band", CASES, ids=[c[1] for c in CASES])
+def test_an_unseen_category_is_interaction_ready(tmp_path, build, category, prompt, joint, band):
+    src = build(tmp_path / "src")
+    res = refine_asset(src, prompt, tmp_path / "out")
+    r = res.report
+    assert r.category == category
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    assert all(v in (True, None) for v in r.readiness.values()), r.readiness
+    assert r.mounting.fixed == category_mounting(category).fixed
+    assert r.requested_bands[joint] == band
+    lo, hi = BAND_INTERVAL[band]
+    assert lo - 0.02 <= r.opening_fractions[joint] <= hi + 0.02
