@@ -335,6 +335,11 @@ class ShapeWorld(Protocol):
     """Free static convex shapes in a private collision world (no articulation,
     no dynamics): distance queries between pieces of geometry."""
 
+    contact_margin: float
+    """Distance (m) the world reports between two convex shapes whose
+    surfaces touch, as a penetration: the engine's collision margins of
+    both shapes (PyBullet: 1 mm each, -2 mm reported for touching hulls)."""
+
     def add_convex(self, vertices: np.ndarray, scale: np.ndarray, position: np.ndarray, orientation: np.ndarray) -> int:
         """Add the convex hull of ``vertices`` (k, 3), scaled per axis by
         ``scale`` (3,), at ``position`` (3,) m and ``orientation`` (4,) xyzw;

@@ -9,6 +9,7 @@ import pytest
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check.verdict import UNRESOLVED_PENETRATION_MM
 from asset2sim.tasks.refine import refine_asset
+from tests.conftest import SHARED, needs_shared
 from tests.tasks.check.failure_assets import build_interlocked_box
 
 pytest.importorskip("coacd")
@@ -84,3 +85,39 @@ def test_a_partly_open_request_is_placed_from_the_end_the_lid_shuts_at(tmp_path)
     assert abs(r.closed_positions["joint_0"]) <= 0.02
     assert 0.15 <= r.opening_fractions["joint_0"] <= 0.35
     assert abs(r.initial_joint_positions["joint_0"] - 0.25 * 1.8) <= 0.1 * 1.8  # a quarter of the modelled 0-1.8 rad
+
+
+def test_piece_overlaps_are_measured_net_of_the_engine_contact_margins():
+    """What the repair compares: two convex pieces whose faces touch are not
+    an overlap (PyBullet reports -2 mm for them, its 1 mm hull margin on
+    each), pieces 1 mm into each other overlap by 1 mm."""
+    import numpy as np
+
+    from asset2sim.engines.base import open_shape_world
+    from asset2sim.tasks.state.collision import overlap_depths
+
+    world = open_shape_world("pybullet")
+    cube = np.array([[x, y, z] for x in (-0.01, 0.01) for y in (-0.01, 0.01) for z in (-0.01, 0.01)])
+    a = world.add_convex(cube, np.ones(3), [0.0, 0.0, 0.0], [0, 0, 0, 1])
+    touching = world.add_convex(cube, np.ones(3), [0.0, 0.0, 0.02], [0, 0, 0, 1])
+    into = world.add_convex(cube, np.ones(3), [0.0, 0.0, -0.019], [0, 0, 0, 1])
+    try:
+        assert min(world.distances(a, touching)) == pytest.approx(-world.contact_margin, abs=1e-6)
+        assert overlap_depths(world, a, touching) == []
+        assert max(overlap_depths(world, a, into)) == pytest.approx(0.001, abs=1e-6)
+    finally:
+        world.close()
+
+
+@needs_shared
+def test_a_tiny_stapler_gets_the_decomposition_its_regular_size_gets(tmp_path):
+    """Stapler 103275 asked "tiny" (0.3 of its size): counted with the engine
+    margins, each touching pair of CoACD pieces added 2 mm, so the
+    decomposition of its arm looked worse than the arm's single hull, which
+    stayed 1.35 mm inside the base and jammed the joints (sweep and robust
+    rest failed). Net of the margins the arm is decomposed as at its regular
+    size and the refine is interaction-ready."""
+    r = refine_asset(SHARED / "103275", "A tiny stapler.", tmp_path / "out", extras=False).report
+    assert r.failure_mode == "none", r.failure_mode
+    assert any("CoACD" in c for c in r.state.collision_changes), r.state.collision_changes
+    assert r.state.phi_result <= RefineConfig().penetration_tolerance
