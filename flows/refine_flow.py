@@ -301,9 +301,8 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
     through ``Client.run``), before the first asset is submitted: each
     server's imports (about 2 s of CPU) are then start-up, reported apart,
     not part of the assets phase where they ran beside the other workers'
-    first assets. A worker
-    that joins later starts its server with its first batch
-    (:func:`asset2sim.flows.stages.prepare_batch`), as before. Returns the
+    first assets. A worker that joins later starts its server with its
+    first batch (:func:`asset2sim.flows.stages.prepare_batch`). Returns the
     seconds waited (0 when no job runs in a stage server or the task runner
     is not a Dask one); a server that cannot start is logged and left to the
     first call, which records the failure in that asset's row."""

@@ -391,8 +391,8 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
                 + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
                 f" (asked >= {after.required * 1000:.3g} mm)")
     elif att.check.stable and before.stable:
-        # statically steady at every allowed opening, yet a drop or tilt toppled it: the opened parts swing
-        # and strike their stops there; the least opening the bands allow moves the least mass the least far
+        # statically steady, yet a drop or tilt toppled it: the static margin cannot rank the openings;
+        # the least opening the bands allow is the one nearest the closed configuration
         fractions = _least_openings(att, intervals)
         if not fractions:
             return None
