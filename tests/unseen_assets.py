@@ -251,6 +251,95 @@ def build_oven(folder: Path) -> Path:
     return b.write(folder)
 
 
+def _open_box(b: _Builder, label: str, w: float, h: float, d: float, t: float, color) -> list[Part]:
+    """A box open at the top (x in [-w, w], y in [-h, h], z in [-d, d]) of
+    walls ``t`` thick."""
+    return [b.part(label, box_xyz(-w, w, -h, -h + t, -d, d), color),
+            b.part(label, box_xyz(-w, -w + t, -h + t, h, -d, d), color), b.part(label, box_xyz(w - t, w, -h + t, h, -d, d), color),
+            b.part(label, box_xyz(-w + t, w - t, -h + t, h, -d, -d + t), color), b.part(label, box_xyz(-w + t, w - t, -h + t, h, d - t, d), color)]
+
+
+def build_kitchen_pot(folder: Path) -> Path:
+    """A cooking pot (1.0 x 0.6 x 1.0 units, open at the top, two side
+    handles) with a lid (``lid``, prismatic 0-0.4 units straight up) resting
+    on its rim."""
+    b = _Builder("u_pot", "KitchenPot")
+    w, h = 0.5, 0.3
+    body = _open_box(b, "pot_body", w, h, w, 0.04, _STEEL)
+    body += [b.part("handle", box_xyz(-w - 0.15, -w, h - 0.1, h - 0.05, -0.1, 0.1), _DARK),
+             b.part("handle", box_xyz(w, w + 0.15, h - 0.1, h - 0.05, -0.1, 0.1), _DARK)]
+    b.body("link_1", "pot_body", body)
+    b.moving("link_0", "slider", "lid", [b.part("lid", [box_xyz(-w - 0.02, w + 0.02, h, h + 0.03, -w - 0.02, w + 0.02),
+                                                       box_xyz(-0.08, 0.08, h + 0.03, h + 0.1, -0.05, 0.05)], _STEEL)],
+             "prismatic", "link_1", (0.0, h, 0.0), (0.0, 1.0, 0.0), 0.0, 0.4)
+    return b.write(folder)
+
+
+def build_washing_machine(folder: Path) -> Path:
+    """A front-loading washing machine (0.6 x 0.85 x 0.6 units carcass with
+    an open front) with a door (``door``, revolute 0-1.9 rad about the
+    vertical axis at its left edge) and a programme dial (``knob``,
+    continuous) on the top panel's front."""
+    b = _Builder("u_washer", "WashingMachine")
+    w, h, d, t = 0.3, 0.425, 0.3, 0.03
+    b.body("link_2", "washing_machine_body", _carcass(b, "washing_machine_body", w, h, d, t, _WHITE))
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, w, -h, h - 0.15, d, d + 0.04), _GLASS)],
+             "revolute", "link_2", (-w, 0.0, d + 0.02), (0.0, -1.0, 0.0), 0.0, 1.9)
+    b.moving("link_1", "hinge", "knob", [b.part("knob", box_xyz(0.12, 0.2, h - 0.11, h - 0.03, d, d + 0.04), _DARK)],
+             "continuous", "link_2", (0.16, h - 0.07, d + 0.02), (0.0, 0.0, 1.0))
+    return b.write(folder)
+
+
+def build_eyeglasses(folder: Path) -> Path:
+    """A pair of glasses standing open (frame 1.0 x 0.35 units, 0.04 thick)
+    with two temples (``leg``, 0.45 long, revolute 0-1.5 rad about vertical
+    axes on hinge blocks behind the frame's ends, folding inwards behind the
+    frame); the right hinge block is deeper, so the folded temples lie one
+    behind the other and each folds clear of the other."""
+    b = _Builder("u_glasses", "Eyeglasses")
+    w, h, q = 0.5, 0.175, 0.03
+    frame = [box_xyz(-w, w, h - 0.05, h, -0.02, 0.02), box_xyz(-w, -0.05, -h, h - 0.05, -0.02, 0.02),
+             box_xyz(0.05, w, -h, h - 0.05, -0.02, 0.02),
+             box_xyz(-w, -w + q, h - 0.06, h, -0.05, -0.02), box_xyz(w - q, w, h - 0.06, h, -0.1, -0.02)]  # hinge blocks
+    b.body("link_2", "eyeglasses_body", [b.part("eyeglasses_body", frame, _DARK)])
+    b.moving("link_0", "hinge", "leg", [b.part("leg", box_xyz(-w, -w + q, h - 0.06, h, -0.5, -0.05), _DARK)],
+             "revolute", "link_2", (-w, 0.0, -0.05), (0.0, -1.0, 0.0), 0.0, 1.5)
+    b.moving("link_1", "hinge", "leg", [b.part("leg", box_xyz(w - q, w, h - 0.06, h, -0.55, -0.1), _DARK)],
+             "revolute", "link_2", (w, 0.0, -0.1), (0.0, 1.0, 0.0), 0.0, 1.5)
+    return b.write(folder)
+
+
+def build_usb_swivel(folder: Path) -> Path:
+    """A swivel USB stick lying flat (body 1.0 x 0.16 x 0.35 units with its
+    plug) whose U-shaped cover (``rotor``, revolute 0-3.14 rad about the
+    vertical axis through the body's rear) covers the plug closed and swings
+    around the body to open it."""
+    b = _Builder("u_usb", "USB")
+    t = 0.08
+    b.body("link_1", "usb_body", [b.part("usb_body", box_xyz(-0.5, 0.5, -t, t, -0.175, 0.175), _DARK),
+                                  b.part("usb_body", box_xyz(0.5, 0.75, -0.03, 0.03, -0.12, 0.12), _STEEL)])
+    cover = [box_xyz(-0.45, 0.8, t + 0.01, t + 0.04, -0.19, 0.19), box_xyz(-0.45, 0.8, -t - 0.04, -t - 0.01, -0.19, 0.19),
+             box_xyz(0.78, 0.8, -t - 0.01, t + 0.01, -0.19, 0.19)]
+    b.moving("link_0", "hinge", "rotor", [b.part("rotor", cover, _STEEL)], "revolute", "link_1", (-0.35, 0.0, 0.0),
+             (0.0, 1.0, 0.0), 0.0, 3.14)
+    return b.write(folder)
+
+
+def build_kettle(folder: Path) -> Path:
+    """An electric kettle (body 0.8 x 1.0 x 0.7 units, open at the top, a
+    handle at the back) with a lid (``lid``, revolute 0-1.4 rad about the
+    horizontal axis at its rear edge) resting on the rim."""
+    b = _Builder("u_kettle", "Kettle")
+    w, h, d = 0.4, 0.5, 0.35
+    body = _open_box(b, "kettle_body", w, h, d, 0.04, _STEEL)
+    body += [b.part("handle", [box_xyz(-0.08, 0.08, -0.3, 0.4, -d - 0.2, -d - 0.12), box_xyz(-0.08, 0.08, 0.32, 0.4, -d - 0.12, -d),
+                               box_xyz(-0.08, 0.08, -0.3, -0.22, -d - 0.12, -d)], _DARK)]
+    b.body("link_1", "kettle_body", body)
+    b.moving("link_0", "hinge", "lid", [b.part("lid", box_xyz(-w, w, h, h + 0.04, -d, d), _STEEL)],
+             "revolute", "link_1", (0.0, h + 0.02, -d), (-1.0, 0.0, 0.0), 0.0, 1.4)
+    return b.write(folder)
+
+
 #: Every builder of this module: (asset name, builder, category).
 UNSEEN_BUILDERS = (
     ("u_switch", build_toggle_switch, "Switch"),
@@ -263,4 +352,9 @@ UNSEEN_BUILDERS = (
     ("u_bottle", build_bottle, "Bottle"),
     ("u_table", build_table_with_drawer, "Table"),
     ("u_oven", build_oven, "Oven"),
+    ("u_pot", build_kitchen_pot, "KitchenPot"),
+    ("u_washer", build_washing_machine, "WashingMachine"),
+    ("u_glasses", build_eyeglasses, "Eyeglasses"),
+    ("u_usb", build_usb_swivel, "USB"),
+    ("u_kettle", build_kettle, "Kettle"),
 )

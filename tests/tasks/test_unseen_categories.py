@@ -1,6 +1,7 @@
 """Categories the dev set lacks, on generated assets (tests/unseen_assets.py):
 a safe with a dial on its door, a toaster with a lever and a dial, a capped
-bottle, a desk with a drawer, a range oven with a drop-down door. Each is
+bottle, a desk with a drawer, a range oven with a drop-down door, a pot with
+a lid, a front-loading washing machine, a kettle, folding glasses. Each is
 refined for a short request of the hidden set's kind and must be
 interaction-ready on every tier (probes included), recognised as its
 category, mounted as the category's prior says, with the requested joint in
@@ -13,7 +14,17 @@ import pytest
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.interpret.mounting import category_mounting
 from asset2sim.tasks.refine import refine_asset
-from tests.unseen_assets import build_bottle, build_oven, build_safe, build_table_with_drawer, build_toaster
+from tests.unseen_assets import (
+    build_bottle,
+    build_eyeglasses,
+    build_kettle,
+    build_kitchen_pot,
+    build_oven,
+    build_safe,
+    build_table_with_drawer,
+    build_toaster,
+    build_washing_machine,
+)
 
 CASES = [
     (build_safe, "Safe", "A safe, halfway open.", "joint_0", "halfway"),
@@ -21,6 +32,10 @@ CASES = [
     (build_bottle, "Bottle", "A bottle, fully open.", "joint_0", "fully"),
     (build_table_with_drawer, "Table", "A table, opened halfway.", "joint_0", "halfway"),
     (build_oven, "Oven", "A small oven, mostly open.", "joint_0", "mostly"),
+    (build_kitchen_pot, "KitchenPot", "A cooking pot, slightly open.", "joint_0", "slightly_open"),
+    (build_washing_machine, "WashingMachine", "A washing machine with its door fully open.", "joint_0", "fully"),
+    (build_kettle, "Kettle", "A kettle, halfway open.", "joint_0", "halfway"),
+    (build_eyeglasses, "Eyeglasses", "Eyeglasses, fully open.", "joint_1", "fully"),
 ]
 
 
