@@ -190,12 +190,10 @@ class StageServer:
             return
 
         def run() -> None:
-            with self._lock:
-                if not self.alive():
-                    try:
-                        self.start()
-                    except RuntimeError:  # the next call starts it again and reports the failure
-                        pass
+            try:
+                self.ensure_started()
+            except RuntimeError:  # the next call starts it again and reports the failure
+                pass
 
         threading.Thread(target=run, name="asset2sim-stage-server-start", daemon=True).start()
 
@@ -414,10 +412,8 @@ def start_soon(preload: tuple[str, ...] = ()) -> None:
 
 def ready_server(preload: tuple[str, ...] = ()) -> float:
     """Start this process's stage server with ``preload`` imported and wait
-    until it is ready. The flow runs it on every Dask worker
-    (``Client.run``) before the first asset: the servers' imports (about
-    2 s of CPU each) are then start-up, not part of the assets phase.
-    Returns the seconds waited.
+    until it is ready (the flow runs it on every Dask worker before the
+    first asset). Returns the seconds waited.
 
     Raises:
         RuntimeError: the server exited before it was ready.

@@ -428,8 +428,8 @@ def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
     item of the list; the others go on. Starts this worker's stage server
     in the background meanwhile when the jobs run isolated in it."""
     for job in jobs[:1]:
-        if stage_server_module(job) is not None:
-            start_soon((stage_server_module(job),))
+        if (module := stage_server_module(job)) is not None:
+            start_soon((module,))
     out: list[Prepared | Exception] = []
     for job in jobs:
         try:

@@ -426,6 +426,12 @@ def _least_openings(att: _Attempt, intervals: dict[str, tuple[float, float]]) ->
     return out
 
 
+def _at_fractions(closed: dict[str, ClosedState], fractions: dict[str, float]) -> dict[str, float]:
+    """Joint -> position (rad or m) at each opening fraction of ``fractions``
+    (joints without a closed state are left out)."""
+    return {n: closed[n].position(f) for n, f in fractions.items() if n in closed}
+
+
 def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
              fractions: dict[str, float] | None = None) -> _Attempt:
     """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``);
@@ -433,7 +439,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
     those joints (:func:`_steadier_state`)."""
     syn = _synthesize(ctx, est, config, log)
     if fractions:
-        syn = replace(syn, requested={**syn.requested, **{n: syn.closed_out[n].position(f) for n, f in fractions.items() if n in syn.closed_out}})
+        syn = replace(syn, requested={**syn.requested, **_at_fractions(syn.closed_out, fractions)})
     urdf, first_clear = _write(ctx, syn, out_dir, log)
     shut, shut_notes = _shut_repair(ctx, syn, urdf, config, out_dir, cache, log)
     syn = _closed_on_output(ctx, syn, urdf, out_dir, log, shut)
@@ -620,7 +626,7 @@ def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config:
     requested = estimate.state_from_bands(unscaled, syn.bands, s, syn.prismatic)
     if overlay.initial_joint_positions:
         requested.update(overlay.initial_joint_positions)
-    requested.update({n: closed_out[n].position(f) for n, f in (fractions or {}).items() if n in closed_out})
+    requested.update(_at_fractions(closed_out, fractions or {}))
     write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
     return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested)
 
