@@ -132,6 +132,59 @@ def _replace(tmp: str, path: Path) -> None:
         raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
 
 
+_RENAME_EXCHANGE = 2  # renameat2(2) flag, Linux >= 3.15 (linux/fs.h)
+_AT_FDCWD = -100  # fcntl.h
+
+
+def _renameat2_exchange(a: Path, b: Path) -> bool:
+    """Linux's ``renameat2(a, b, RENAME_EXCHANGE)`` through libc; False when
+    libc or the filesystem does not offer it (then nothing was changed).
+
+    Raises:
+        OSError: the exchange was refused for another reason (names ``b``).
+    """
+    import ctypes
+
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if fn(_AT_FDCWD, os.fsencode(str(a)), _AT_FDCWD, os.fsencode(str(b)), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def exchange_folders(a: Path | str, b: Path | str) -> None:
+    """Swap two folders of one filesystem: afterwards ``b`` holds what ``a``
+    held and ``a`` what ``b`` held.
+
+    On Linux this is one atomic ``renameat2(RENAME_EXCHANGE)``: at every
+    moment ``b`` is either the old or the new folder (how a complete output
+    replaces an earlier complete one). Where the kernel, libc or filesystem
+    lacks it, three renames through ``.<b>.asset2sim-previous`` beside ``b``
+    (then ``b`` is missing for the instant between two renames).
+
+    Raises:
+        OSError: either folder is missing, they lie on different
+            filesystems, or the parent cannot be written.
+    """
+    a, b = Path(a), Path(b)
+    if not _renameat2_exchange(a, b):
+        aside = b.parent / f".{b.name}.asset2sim-previous"
+        os.rename(b, aside)
+        try:
+            os.rename(a, b)
+        except OSError:
+            os.rename(aside, b)
+            raise
+        os.rename(aside, a)
+    _fsync_dir(b.parent)
+
+
 def write_bytes(path: Path | str, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (parents created). Returns the path.
 

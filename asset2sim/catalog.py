@@ -105,6 +105,14 @@ class RunSettings(BaseModel):
     scripted probes in it. ``extras``: write the MJCF export, renders and
     HTML report of each asset (SPEC output). ``refine_function``: ``module:function`` with the
     signature of :func:`asset2sim.tasks.refine.refine_asset`.
+    ``dask_host``: interface address the local Dask cluster listens on
+    (scheduler, nannies, workers, dashboard; default ``127.0.0.1``, loopback
+    only: ``0.0.0.0`` or a host's address opens them, unauthenticated, to
+    its network). ``dashboard``: serve the scheduler's dashboard (its
+    status, info and JSON pages, on a free port of ``dask_host``); ``false``
+    turns every HTTP page of the local cluster off. Both ignored with
+    ``--dask-address`` / ``DASK_ADDRESS``: an existing cluster listens where
+    it was started.
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -116,6 +124,8 @@ class RunSettings(BaseModel):
     probes: bool = False
     extras: bool = True
     refine_function: str = "asset2sim.tasks.refine:refine_asset"
+    dask_host: str = Field(default="127.0.0.1", min_length=1)
+    dashboard: bool = True
 
 
 class ScheduleSettings(BaseModel):

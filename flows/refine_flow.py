@@ -88,9 +88,14 @@ hangs and native crashes become ``timeout`` / ``crash`` rows.
 
 Dask: a local cluster with ``workers`` processes by default; an existing
 scheduler when ``dask_address`` (parameter) or ``DASK_ADDRESS`` (environment)
-is given. Workers of a local cluster are pointed at the driver's Prefect API
-(``PREFECT_API_URL``); workers of a remote cluster need a Prefect server they
-can reach (set ``PREFECT_API_URL`` on them).
+is given. The local cluster's scheduler, nannies, workers and dashboard
+listen on ``catalog.yaml`` ``run.dask_host`` (default ``127.0.0.1``, loopback
+only; ``asset2sim flow --dask-host``); ``run.dashboard: false``
+(``--no-dashboard``) turns its dashboard and other HTTP pages off. The
+temporary Prefect server listens on 127.0.0.1 (:mod:`.server`). Workers of a
+local cluster are pointed at the driver's Prefect API (``PREFECT_API_URL``);
+workers of a remote cluster need a Prefect server they can reach (set
+``PREFECT_API_URL`` on them).
 """
 
 from __future__ import annotations
@@ -331,13 +336,17 @@ def refine_dataset(
     limit: int | None = None,
     force: bool = False,
     out: str | None = None,
+    dask_host: str | None = None,
+    dashboard: bool | None = None,
 ) -> dict[str, Any]:
     """Refine every asset of ``dataset`` (default: the catalog's) as declared
     in ``catalog``, publishing the outputs to ``out`` (default: ``catalog.yaml``
-    ``output_store``, else ``output_root``); returns the run summary (see
-    :func:`run_refine_flow`)."""
+    ``output_store``, else ``output_root``); ``dask_host`` / ``dashboard``:
+    where the local Dask cluster listens and whether it serves its dashboard
+    (default: ``catalog.yaml`` ``run.dask_host`` / ``run.dashboard``); returns
+    the run summary (see :func:`run_refine_flow`)."""
     return run_dataset(get_run_logger(), catalog, dataset, workers, dask_address, ids=ids, limit=limit,
-                       force=force, out=out)
+                       force=force, out=out, dask_host=dask_host, dashboard=dashboard)
 
 
 @dataclasses.dataclass
@@ -390,10 +399,14 @@ def run_dataset(
     force: bool = False,
     out: str | None = None,
     planned: DriverPlan | None = None,
+    dask_host: str | None = None,
+    dashboard: bool | None = None,
 ) -> dict[str, Any]:
     """The body of :func:`refine_dataset` (in a Prefect flow run, or, for a
     run that has nothing to dispatch, without one: :func:`run_refine_flow`);
-    ``log`` the logger; ``planned`` a plan made already by :func:`plan_driver`.
+    ``log`` the logger; ``planned`` a plan made already by :func:`plan_driver`;
+    ``dask_host`` / ``dashboard``: the local cluster's listening address and
+    dashboard (None: ``catalog.yaml`` ``run.dask_host`` / ``run.dashboard``).
 
     Assets the driver can skip (:mod:`asset2sim.flows.driver_skip`) get
     their rows here; only the others go to the Dask workers, and with none
@@ -411,8 +424,11 @@ def run_dataset(
     info = _run_info(cat, name, run_id, started, jobs, n_workers, address)
     info["assets"] = len(jobs) + len(plan.bad_rows)
     store.write_run_info(name, run_id, info)
+    host = dask_host or cat.config.run.dask_host
+    dashboard = cat.config.run.dashboard if dashboard is None else bool(dashboard)
     log.info("run %s: %d assets of dataset %s on %s", run_id, len(jobs), name,
-             address or f"a local Dask cluster ({n_workers} workers)")
+             address or f"a local Dask cluster ({n_workers} workers, listening on {host}, "
+                        f"dashboard {'on a free port' if dashboard else 'off'})")
     flow_progress.emit(ProgressEvent("run_started", name, run_id, total=info["assets"]))
     _record_bad_rows(store, cat, name, run_id, plan.bad_rows, info["flow_run_id"], info["code_version"])
     for bad in plan.bad_rows:
@@ -422,7 +438,8 @@ def run_dataset(
     if planned.skips:
         log.info("%d of %d assets finished already (decided by the driver); %d to the workers",
                  len(planned.skips), len(jobs), len(pending))
-    timing = _fan_out(cat, pending, n_workers, address, info["flow_run_id"], planned.fingerprints)
+    timing = _fan_out(cat, pending, n_workers, address, info["flow_run_id"], planned.fingerprints,
+                      host=host, dashboard=dashboard)
     try:  # the input index: the next run's skip decisions (a cache: a failed write costs only a miss)
         driver_skip.write_index(store, name, timing.pop("inputs", {}))
     except (OSError, ValueError) as exc:
@@ -612,9 +629,12 @@ def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJo
 
 
 def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
-             fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
+             fingerprints: dict[str, str | None] | None = None, *, host: str = "127.0.0.1",
+             dashboard: bool = True) -> dict[str, Any]:
     """Run :func:`refine_assets` on a Dask task runner (nothing starts for no
-    jobs); its timings (s): ``dask_startup_seconds``, ``stage_servers_seconds``, ``assets_seconds``,
+    jobs; a local cluster listens on ``host``, with its dashboard when
+    ``dashboard``: :func:`_dask_task_runner`); its timings (s):
+    ``dask_startup_seconds``, ``stage_servers_seconds``, ``assets_seconds``,
     ``dask_teardown_seconds``, and ``inputs``: the input index entries of the
     assets it read (:mod:`asset2sim.flows.driver_skip`)."""
     timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0,
@@ -623,16 +643,17 @@ def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
     if not jobs:
         return timing
     t_fan, t_fan_epoch = time.perf_counter(), time.time()
-    sub = refine_assets.with_options(task_runner=_dask_task_runner(n_workers, address))
-    out = sub(
-        [asdict(j) for j in jobs],
-        str(cat.catalog_root),
-        retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
-        retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
-        batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
-        parent_flow_run_id=flow_run_id,
-        fingerprints={j.asset_id: (fingerprints or {}).get(j.asset_id) for j in jobs},
-    )
+    sub = refine_assets.with_options(task_runner=_dask_task_runner(n_workers, address, host=host, dashboard=dashboard))
+    with _local_cluster_config(address, dashboard):
+        out = sub(
+            [asdict(j) for j in jobs],
+            str(cat.catalog_root),
+            retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
+            retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
+            batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
+            parent_flow_run_id=flow_run_id,
+            fingerprints={j.asset_id: (fingerprints or {}).get(j.asset_id) for j in jobs},
+        )
     timing["inputs"] = out.get("inputs", {})
     fan_seconds = time.perf_counter() - t_fan
     timing["dask_startup_seconds"] = max(0.0, out["cluster_up"] - t_fan_epoch)
@@ -673,10 +694,14 @@ def _log_to_mlflow(cat, df, summary, info, artifacts, n_assets: int, n_workers, 
     return run, None
 
 
-def _dask_task_runner(workers: int | None, address: str | None):
+def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "127.0.0.1",
+                      dashboard: bool = True):
     """A DaskTaskRunner: the scheduler at ``address``, else a local cluster of
-    ``workers`` single-threaded worker processes (dashboard on a free port) that report to
-    this process's Prefect API."""
+    ``workers`` single-threaded worker processes that report to this
+    process's Prefect API. Its scheduler, nannies and workers listen on
+    ``host`` (``catalog.yaml`` ``run.dask_host``; default loopback only), and
+    so does its dashboard, on a free port, when ``dashboard`` (else
+    ``dashboard_address`` None: see :func:`_local_cluster_config`)."""
     from prefect_dask import DaskTaskRunner
 
     if address:
@@ -686,15 +711,38 @@ def _dask_task_runner(workers: int | None, address: str | None):
     api = _prefect_api_url()
     if api:
         env["PREFECT_API_URL"] = api
+    # a free port (several clusters may run on one machine) on ``host``: a bare ":0" makes
+    # distributed listen on 0.0.0.0 whatever ``host`` is; a tuple also takes an IPv6 address
+    http_address = (host.strip("[]"), 0)
     return DaskTaskRunner(
         cluster_kwargs={
             "n_workers": n,
             "threads_per_worker": 1,
             "processes": True,
-            "dashboard_address": ":0",  # a free port: several clusters may run on one machine
+            "host": host,
+            "dashboard_address": http_address if dashboard else None,
+            # without the dashboard the scheduler still opens its HTTP port (8787 by default)
+            "scheduler_kwargs": {} if dashboard else {"dashboard_address": http_address},
             "env": env,
         }
     )
+
+
+@contextlib.contextmanager
+def _local_cluster_config(address: str | None, dashboard: bool):
+    """Dask configuration while a local cluster (no ``address``) starts and
+    runs: without ``dashboard``, no HTTP routes on its scheduler and workers
+    (``dashboard_address=None`` alone leaves the scheduler's info pages, JSON
+    API and metrics; distributed always opens the scheduler's HTTP port,
+    which then answers 404 to everything). The nannies pass the configuration
+    to the worker processes they start."""
+    if address or dashboard:
+        yield
+        return
+    import dask
+
+    with dask.config.set({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}):
+        yield
 
 
 def _prefect_api_url() -> str | None:
@@ -733,9 +781,14 @@ def run_refine_flow(
     limit: int | None = None,
     force: bool = False,
     out: str | None = None,
+    dask_host: str | None = None,
+    dashboard: bool | None = None,
 ) -> dict[str, Any]:
     """Run :func:`refine_dataset` in this process (what ``make flow`` does);
-    ``out``: the output store (``s3://bucket/prefix``, :mod:`.store`).
+    ``out``: the output store (``s3://bucket/prefix``, :mod:`.store`);
+    ``dask_host`` / ``dashboard``: where the local Dask cluster listens and
+    whether it serves its dashboard (None: ``catalog.yaml`` ``run.dask_host``,
+    default 127.0.0.1, / ``run.dashboard``).
 
     Returns the run summary (counts, pass rates, failure modes, paths, MLflow
     run id, timings in s: ``dask_startup_seconds``, ``stage_servers_seconds``
@@ -760,6 +813,7 @@ def run_refine_flow(
         CatalogError: invalid catalog or manifest (before any asset runs).
     """
     params = flow_parameters(catalog, dataset, workers, dask_address, out)
+    params.update({k: v for k, v in (("dask_host", dask_host), ("dashboard", dashboard)) if v is not None})
     cat = load_catalog(params["catalog"])  # fail early, before the flow starts
     if not _prefect_api_configured():
         # no Prefect server to talk to: plan here first; a run with nothing to

@@ -43,7 +43,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from asset2sim import __version__, atomic
+from asset2sim import __version__, array_cache, atomic
 from asset2sim.catalog import (
     Catalog,
     CatalogError,
@@ -663,17 +663,18 @@ def stage_metrics(
     if reused is not None:
         return reused.model_dump(mode="json")
     measured = None if post_check is None else [MetricResult.model_validate(m) for m in post_check]
-    ev = evaluate_asset(
-        Path(out_dir),
-        reference=Path(reference_dir) if reference_dir else None,
-        prompt=prompt,
-        engines=("pybullet",),
-        category=category,
-        out_dir=Path(metrics_dir) if metrics_dir else None,
-        write_report=False,
-        probes=probes,
-        measured=measured,
-    )
+    with array_cache.guard(out_dir, reference_dir, metrics_dir):  # no cache entry in the refined folder or the reference
+        ev = evaluate_asset(
+            Path(out_dir),
+            reference=Path(reference_dir) if reference_dir else None,
+            prompt=prompt,
+            engines=("pybullet",),
+            category=category,
+            out_dir=Path(metrics_dir) if metrics_dir else None,
+            write_report=False,
+            probes=probes,
+            measured=measured,
+        )
     return Measurement(
         columns=column_values(ev.metrics, "pybullet"),
         failures=list(ev.failures),

@@ -81,8 +81,12 @@ class RefineConfig(BaseModel):
     """Engines the post-check must pass in (worst case over them); PyBullet is
     always first (state refinement and escalation run there). Default:
     :func:`default_engines` (PyBullet, and PhysX where SAPIEN is installed)."""
-    decomposition_budget: float = 60.0
-    """Wall time allowed for convex decomposition per asset, s."""
+    max_decompositions: int = Field(32, ge=0)
+    """CoACD decompositions one collision repair may try (a count of calls,
+    never seconds, so the same input gives the same files on a loaded or a
+    quiet machine). The 21 dev rows with their manifest requests call CoACD
+    at most 4 times per refine (102990; 103275: 2); a repair that reaches
+    the cap keeps the remaining meshes as their hulls and says so."""
     seed: int = 0
 
     def config_hash(self) -> str:

@@ -19,13 +19,14 @@ The library never prints: progress goes to the optional ``progress`` callback.
 
 from __future__ import annotations
 
+import errno
 import time
 import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
-from asset2sim import __version__, atomic
+from asset2sim import __version__, array_cache, atomic
 from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
@@ -151,6 +152,8 @@ def refine_asset(
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
+    kept_out = array_cache.keep_out(asset.source_dir, out_dir, owner.root, reference)  # no cache entry in the input or output
+    work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     try:
         _announce_extract(asset, findings, log)
         cache = analyze.MeshCache()
@@ -158,16 +161,19 @@ def refine_asset(
         with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
             ctx.task = task
             pose_note = _interpret(ctx, log)
-            att, pose_note = _synthesize_and_check(ctx, est, config, out_dir, cache, log, pose_note)
+            att, pose_note = _synthesize_and_check(ctx, est, config, work, cache, log, pose_note)
         _remove_stale_collision(owner, asset, att.overrides)
         _announce_post_check(att, log)
         report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
-        atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-        extra_paths = _extras(out_dir, report, att, log, reference) if extras else {}
+        atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
+        extra_paths = _extras(work, report, att, log, reference, shown=out_dir) if extras else {}
         _write_marker(owner, asset.input_hash, chash)
     except BaseException:
         owner.abandon()
         raise
+    finally:
+        array_cache.release(kept_out)
+    extra_paths = {k: str(out_dir / Path(v).relative_to(work)) if Path(v).is_relative_to(work) else v for k, v in extra_paths.items()}
     return RefineResult(out_dir=out_dir, report=report, overlay=att.overlay, extras=extra_paths)
 
 
@@ -896,7 +902,7 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
     try:
         overrides, dnotes = collision.improve_collisions(
-            sess, asset, deep, s, out_dir, cache=mesh_cache, budget_s=config.decomposition_budget,
+            sess, asset, deep, s, out_dir, cache=mesh_cache, max_decompositions=config.max_decompositions,
             folder=write.collision_folder(asset),
         )
     except (collision.DecompositionUnavailable, ValueError) as exc:
@@ -989,14 +995,17 @@ def mounting_note(overlay: Overlay) -> str:
     return f"root: mounted ({m.kind}), fixed in every check (rest, oscillation, probes, evaluation), no ground plane; {m.source}"
 
 
-def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None = None) -> dict[str, str]:
+def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None = None,
+            shown: Path | None = None) -> dict[str, str]:
     """Exports, renders and the HTML report, then ``report.json`` again with
     their notes and the final stage times. The evaluation records the final
     post-check's rest test (when it measured the files as they are now)
-    instead of simulating it again. Returns name -> path."""
+    instead of simulating it again. ``shown``: the output folder as the user
+    named it, recorded in the evaluation when ``out_dir`` is a staging folder.
+    Returns name -> path."""
     recording = None if att.rewritten else att.check.recording
     with quiet_stdout():  # engines and renderers print from C; the library must not
-        paths = _write_extras(out_dir, report, log, recording, reference, recorded=att.check.recorded)
+        paths = _write_extras(out_dir, report, log, recording, reference, recorded=att.check.recorded, shown=shown)
     report.stage_seconds = log.times
     atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
     return paths
@@ -1044,19 +1053,47 @@ def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescri
     owner.remove_unreferenced(write.collision_folder(asset), used)
 
 
+#: errno values of an OSError that says nothing more can be written to the
+#: output folder: a full disk, an exhausted quota, a read-only file system.
+_UNWRITABLE = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS) if e is not None)
+
+
+def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
+    """Raise ``OUTPUT_WRITE_FAILED`` (an
+    :class:`~asset2sim.tasks.publish.output_folder.OutputError` raised from
+    the OSError, so the command line prints ``OUTPUT_WRITE_FAILED [ENOSPC]``
+    and the file) when ``exc``, or an exception it was raised from or while
+    handling, is an OSError whose errno is in :data:`_UNWRITABLE`; return
+    otherwise. An optional output that fails for such a cause must not become
+    a note: the HTML report missing on a full disk ended the run as
+    ``OUTPUT_INCOMPLETE``, naming the file instead of the cause."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, OSError) and cur.errno in _UNWRITABLE:
+            where = cur.filename or out_dir
+            raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
+                                            "OUTPUT_WRITE_FAILED", where) from cur
+        cur = cur.__cause__ or cur.__context__
+
+
 def _write_extras(out_dir: Path, report: RefineReport, log: _StageLog, recording: postcheck.RestRecording | None = None,
-                  reference: Path | str | None = None, recorded: postcheck.RecordedRuns | None = None) -> dict[str, str]:
+                  reference: Path | str | None = None, recorded: postcheck.RecordedRuns | None = None,
+                  shown: Path | None = None) -> dict[str, str]:
     """Optional outputs: MJCF export, renders, evaluation and HTML report
     (the renders reused in it). Each failure (an engine or renderer
     unavailable included) is a note in the report, never the loss of the
-    refined asset. Wall time per part in ``log`` (``extras_mjcf``,
-    ``extras_usd``, ``extras_render``, ``extras_report``)."""
+    refined asset, except a full disk, a quota or a read-only file system
+    (:func:`_raise_if_unwritable`: ``OUTPUT_WRITE_FAILED``). Wall time per part
+    in ``log`` (``extras_mjcf``, ``extras_usd``, ``extras_render``, ``extras_report``)."""
     out: dict[str, str] = {}
     try:
         out["mjcf"] = str(export_mjcf.export_mjcf(out_dir))
     except ImportError as exc:  # MuJoCo not installed
         report.notes.append(f"MJCF export skipped: {exc}")
     except Exception as exc:  # export must not lose the refined asset
+        _raise_if_unwritable(exc, out_dir)
         report.notes.append(f"MJCF export failed: {exc}")
     log.lap("extras_mjcf")
     try:
@@ -1064,6 +1101,7 @@ def _write_extras(out_dir: Path, report: RefineReport, log: _StageLog, recording
     except ImportError as exc:  # usd-core (pxr) not installed
         report.notes.append(f"USD export skipped: {exc}")
     except Exception as exc:  # export must not lose the refined asset
+        _raise_if_unwritable(exc, out_dir)
         report.notes.append(f"USD export failed: {exc}")
     log.lap("extras_usd")
     views = None
@@ -1072,16 +1110,19 @@ def _write_extras(out_dir: Path, report: RefineReport, log: _StageLog, recording
                                     size=render.OUTPUT_VIEW_SIZE)
         out["views"] = str(out_dir / "views")
     except Exception as exc:
+        _raise_if_unwritable(exc, out_dir)
         report.notes.append(f"renders failed: {exc}")
     log.lap("extras_render")
     try:
         paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=recorded,
                                           views=views, views_state=report.initial_joint_positions,
-                                          checks=list(report.metrics) if recording is not None else None)
+                                          checks=list(report.metrics) if recording is not None else None,
+                                          shown=shown)
         out["html"] = str(paths["report"])
         ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
         combine_verdict(report, ev.metrics)  # report.json says what report.html says
     except Exception as exc:
+        _raise_if_unwritable(exc, out_dir)
         report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
     log.lap("extras_report")
     return out

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from asset2sim.file_names import file_stem
+
 # ----------------------------------------------------------------------------- mesh files
 
 
@@ -608,6 +610,34 @@ def _sparse_texture(size: int) -> Callable[[Path], None]:
     return fn
 
 
+def _sparse_extra(name: str, size: int) -> Callable[[Path], None]:
+    """Extend ``name`` (``meta.json``, ``semantics.txt``) to ``size`` bytes with
+    zeros (a sparse file: no disk used)."""
+
+    def fn(folder: Path) -> None:
+        os.truncate(folder / name, size)
+
+    return fn
+
+
+def _rename_link(old: str, new: str) -> Callable[[Model], None]:
+    """Rename link ``old`` to ``new`` everywhere the URDF names it."""
+
+    def fn(m: Model) -> None:
+        m.link(old).name = new
+        for j in m.joints:
+            j.parent = new if j.parent == old else j.parent
+            j.child = new if j.child == old else j.child
+
+    return fn
+
+
+def _strip_geometry(m: Model) -> None:
+    """No link keeps a <visual> or <collision> (links, joints and inertials stay)."""
+    for ln in m.links:
+        ln.visuals, ln.collisions = [], []
+
+
 def _lid_scale(factor: str) -> Callable[[Model], None]:
     def fn(m: Model) -> None:
         for g in m.link("lid").visuals + m.link("lid").collisions:
@@ -646,6 +676,8 @@ def _cases() -> list[Case]:
     add(C("files_urdf_symlink_outside", "files", "URDF_OUTSIDE_ASSET", _files_case(_urdf_symlink_out)))
     add(C("files_semantics_bad_line", "files", "SEMANTICS_MALFORMED_LINE", _files_case(_write("semantics.txt", "base static body\nlid\n"))))
     add(C("files_semantics_is_fifo", "files", "ASSET_FILE_NOT_REGULAR", _files_case(_extra_fifo)))
+    add(C("files_meta_1gb_sparse", "files", "ASSET_FILE_TOO_LARGE", _files_case(_sparse_extra("meta.json", 1 << 30)),
+          note="a regular file above the 1 MiB cap; was called ASSET_FILE_NOT_REGULAR"))
     add(C("files_asset_missing", "files", "ASSET_NOT_FOUND", _files_case(_remove_folder)))
     add(C("files_meta_not_json", "files", "META_UNREADABLE", _files_case(_write("meta.json", "{model_cat: Box")), refused=False))
     add(C("files_semantics_unknown_link", "files", "SEMANTICS_UNKNOWN_LINK",
@@ -846,6 +878,26 @@ def _cases() -> list[Case]:
           _model_case(_attr("joint", "drawer_slide", upper="30")), note="30 m of travel on an object about 1.6 m across"))
     add(C("mimic_joint", "refine_agreement", "JOINT_MIMIC_UNSUPPORTED", _model_case(_mimic),
           note="was silently dropped from the output"))
+    # --- issue 36: every URDF joint type is carried through or refused here, never an internal error
+    add(C("joint_type_floating_below_root", "refine_agreement", "JOINT_TYPE_UNSUPPORTED",
+          _model_case(_attr("joint", "handle_fix", type="floating")),
+          note="passed validate, then refine's balance stage refused its own output (INTERNAL_ERROR, exit 70, partial output); "
+               "PyBullet loads it as fixed, SAPIEN and MuJoCo refuse a floating joint below the root"))
+    add(C("joint_type_floating_from_root", "refine_agreement", "JOINT_TYPE_UNSUPPORTED",
+          _model_case(_attr("joint", "lid_hinge", type="floating", axis=None, lower=None, upper=None, effort=None,
+                            velocity=None, damping=None, friction=None)),
+          note="a loose part on the root: SAPIEN makes it a separate actor, refine cannot set or check it"))
+    add(C("joint_type_planar", "refine_agreement", "JOINT_TYPE_UNSUPPORTED",
+          _model_case(_attr("joint", "drawer_slide", type="planar", axis="0 0 1", with_limit=False)),
+          note="3 degrees of freedom (axis = plane normal): same internal error as floating before; SAPIEN builds no planar joint"))
+    # --- issue 36: names are data, never paths
+    add(C("link_name_path_traversal", "structure", "LINK_NAME_NOT_A_FILE_NAME",
+          _model_case(_rename_link("lid", "../../../../../../elsewhere/pwn")), refused=False,
+          note="its CoACD pieces were written as ../../../../../../elsewhere/pwn_5_0.obj outside --out; now named "
+               "'elsewhere_pwn-<sha256>' inside the output (tests/tasks/test_unsafe_names.py refines such assets)"))
+    add(C("link_names_sharing_a_file_name", "refine_agreement", "LINK_FILE_NAMES_CLASH",
+          _model_case(lambda m: (_rename_link("lid", "a/b")(m), _rename_link("drawer", file_stem("a/b"))(m))),
+          note="a crafted link named as another's safe file name: their files would share one name, refused"))
     add(C("faces_total_cap", "refine_agreement", "MESH_TOO_MANY_FACES", build_valid, policy={"max_total_faces": 30},
           note="the per-asset face cap (1,000,000 by default; docs/validation.md) with a lowered cap"))
     # --- issue 11, second check (H14): sizes and textures refine or PyBullet cannot take
@@ -857,6 +909,8 @@ def _cases() -> list[Case]:
     add(C("asset_size_box_1e6", "refine_agreement", "ASSET_SIZE_IMPLAUSIBLE",
           _model_case(lambda m: setattr(m.link("handle").collisions[0], "size", "1e6 2e6 1e6")),
           note="a primitive 2e6 units across: the size bound holds for primitives too"))
+    add(C("asset_no_geometry", "refine_agreement", "ASSET_NO_GEOMETRY", _model_case(_strip_geometry),
+          note="passed validate, then refine blamed the request: OVL_SCALE_INVALID, scale 7.9e8 (the size of no geometry)"))
     add(C("texture_2gb_sparse", "refine_agreement", "TEXTURE_TOO_LARGE", _files_case(_sparse_texture(2200 * 1024 * 1024)),
           note="passed validate, then PyBullet died with std::bad_alloc (exit 134)"))
     add(C("texture_pixels_over_cap", "refine_agreement", "TEXTURE_TOO_LARGE",
@@ -873,12 +927,16 @@ CASES: list[Case] = _cases()
 CASES_BY_NAME: dict[str, Case] = {c.name: c for c in CASES}
 
 
-#: Assets refine must handle that validate accepts (issue 11): name -> builder.
+#: Assets refine must handle that validate accepts (issue 11; continuous and
+#: fixed joints: issue 36): name -> builder.
 ACCEPTED: dict[str, Callable[[Path], Path]] = {
     "symlink_mesh_inside": _files_case(lambda f: os.symlink("lid.obj", f / "meshes" / "alias.obj"), _mesh("lid", "meshes/alias.obj")),
     "dotdot_through_existing_dir": _model_case(_mesh("lid", "images/../meshes/lid.obj")),
     "utf8_bom": _files_case(lambda f: (f / "mobility.urdf").write_bytes(b"\xef\xbb\xbf" + (f / "mobility.urdf").read_bytes())),
     "revolute_two_turns": _model_case(_attr("joint", "lid_hinge", lower="-12.5", upper="0")),
+    "joint_continuous": _model_case(_attr("joint", "lid_hinge", type="continuous", lower=None, upper=None)),
+    "joint_fixed": _model_case(_attr("joint", "lid_hinge", type="fixed", axis=None, lower=None, upper=None, effort=None,
+                                     velocity=None, damping=None, friction=None)),
 }
 
 

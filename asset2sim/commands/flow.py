@@ -43,6 +43,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/pipeline.md)",
     )
     parser.add_argument(
+        "--dask-host",
+        default=None,
+        help="interface the local Dask cluster (scheduler, workers, dashboard) listens on "
+        "(default: catalog run.dask_host, 127.0.0.1: this machine only)",
+    )
+    parser.add_argument(
+        "--no-dashboard",
+        action="store_true",
+        help="no Dask dashboard (nor other HTTP pages) on the local cluster (default: catalog run.dashboard)",
+    )
+    parser.add_argument(
         "--out",
         default=None,
         help="output store: s3://bucket/prefix or any pyarrow/fsspec URI or path; workers refine locally and upload "
@@ -93,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
             stack.callback(progress.close)
             summary = run_refine_flow(
                 cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
-                out=getattr(args, "out", None),
+                out=getattr(args, "out", None), dask_host=getattr(args, "dask_host", None),
+                dashboard=False if getattr(args, "no_dashboard", False) else None,
             )
     except CatalogError as exc:
         print(f"error: {exc}")

@@ -72,7 +72,9 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   A stuck part sees the force ramp at k v_des: a light part's bounded
   stiffness ramps slower than ``ramp_time``, and the push lasts at least
   until ``min_force`` is reached (ramp below), so every part is pushed with
-  at least the ADA force before it counts as not moving.
+  at least the ADA force before it counts as not moving (within the push
+  cap ``max_push_time``: a part lighter than about 1 g at the push point
+  ramps longer than that, and its probe's note says the cap cut it).
 - Targets as opening fractions f (0 closed, 1 fully open, from the geometric
   closed end): close -> f = 0.05, reached at f <= 0.10; open -> f = 0.6,
   reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55);
@@ -85,7 +87,9 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   push point covers to the target
   (|q_target - q0| times the lever; m), so a long lid pushed at its far corner
   has time to arrive (the pusher stops early once the object slid or tipped),
-  then release (no force) for
+  but never longer than ``max_push_time`` (30 s, :data:`MAX_PUSH_TIME`:
+  bounds the probe's cost when a part lies far from its axis or is very
+  light; a note says when the cap cut the push), then release (no force) for
   ``release_time`` s.
 - Object moved: during the push the object's footprint point (the point below
   the root's origin at the object's lowest height at the start, carried with
@@ -145,6 +149,20 @@ TRAVEL_TIME_MARGIN = 1.5
 #: Shares of the way to their open ends that the joints shutting a part in
 #: are lifted to, in turn, when that part is probed again (module docstring).
 CLEARING_SHARES = (0.25, 0.5, 0.75, 1.0)
+#: Longest push of one probe, s of simulated time, whatever the travel and the
+#: force ramp ask (``ProbeConfig.max_push_time``). The asked time grows with
+#: the lever (travel = opening x lever) and with 1 / the part's effective mass
+#: (the ramp of the bounded pusher stiffness): an asset whose parts lie far
+#: from their joint axes (mesh ``scale`` 1e-4 on a stapler, the joint origins
+#: left in file units: a 95 m lever on a 0.18 m part) asked up to 924 s per
+#: probe (222,000 engine steps), and the evaluation behind its HTML report
+#: took 10.7 - 17.2 s instead of 1.2 s.
+#: The largest household part needs far less: a "very large" door (the
+#: Door prior 2.1 x 0.9 m times 1.7: 3.6 m tall, 1.5 m wide, so a lever of
+#: about 1.5 m) opened 1.57 rad travels 2.4 m, 1 + 1.5 x 2.4 / 0.25 = 15 s;
+#: twice that is the cap. The 12 dev objects' probes reach their targets
+#: within 3.1 s. A push cut by the cap says so in the probe's notes.
+MAX_PUSH_TIME = 30.0
 #: omega dt of the pusher's spring against the part's effective mass (module
 #: docstring, "Stiffness"): a quarter of the explicit step's stability limit.
 PUSHER_OMEGA_DT = 0.25
@@ -158,6 +176,9 @@ class ProbeConfig:
     """free settling before the push, s"""
     push_time: float = 2.0
     """longest push, s, unless the travel needs longer (module docstring)"""
+    max_push_time: float = MAX_PUSH_TIME
+    """longest push whatever the travel and the ramp ask, s (module docstring):
+    bounds a probe's cost (:data:`MAX_PUSH_TIME`)"""
     release_time: float = 0.75
     """observation after release, s"""
     push_speed: float = 0.25
@@ -246,6 +267,17 @@ def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float |
     t = np.cross(a, r)
     t /= max(np.linalg.norm(t), 1e-12)
     return c, t, max(lever, 1e-4)
+
+
+def push_budget(cfg: ProbeConfig, ramp: float, travel: float) -> tuple[float, float]:
+    """(allowed, asked) push time of one probe, s: asked = max(``push_time``,
+    ``ramp`` + ``TRAVEL_TIME_MARGIN`` x ``travel`` / ``push_speed``) (``ramp``
+    the force ramp's time, s; ``travel`` the distance the push point covers
+    to the target, m); allowed = asked capped at ``max_push_time`` (never
+    below ``push_time``), which bounds a probe's engine steps whatever the
+    part's lever and effective mass (:data:`MAX_PUSH_TIME`)."""
+    asked = max(cfg.push_time, ramp + TRAVEL_TIME_MARGIN * travel / cfg.push_speed)
+    return min(asked, max(cfg.max_push_time, cfg.push_time)), asked
 
 
 def total_mass(session) -> float:
@@ -407,7 +439,8 @@ def probe_joint(
     # a long lid's far corner has a longer arc to cover than at its centre.
     _, _, lever0 = _push_geometry(session, joint)
     travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
-    n_push = int(round(max(cfg.push_time, ramp + TRAVEL_TIME_MARGIN * travel / cfg.push_speed) / dt))
+    push_s, asked_s = push_budget(cfg, ramp, travel)
+    n_push = int(round(push_s / dt))
     n_rel = int(round(cfg.release_time / dt))
     tr: dict[str, list[float]] = {"t": [], "q": [], "force": [], "root_disp": [], "phase": []}
     force = lead = 0.0  # lead: how far the hand runs ahead of the push point, m
@@ -495,6 +528,10 @@ def probe_joint(
     elif action == "open" and rebound and holds_position:
         failure = "does not hold the open position after release"
     notes = stop_notes + hold_notes
+    if not reached and push_s < asked_s and k >= n_push:
+        notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
+                     f"push point, lever {lever0 if lever0 is not None else 0.0:.3g} m) and the force ramp ({ramp:.3g} s) asked "
+                     f"{asked_s:.0f} s")
     if action == "open" and rebound and not holds_position:
         notes.append("falls back after release (allowed: the request does not ask it to hold)")
     if action == "close" and rebound and returns:

@@ -139,6 +139,7 @@ def evaluate_asset(
     checks: list[MetricResult] | None = None,
     task: str | None = None,
     recorded: RecordedRuns | None = None,
+    shown_urdf: Path | str | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -206,6 +207,9 @@ def evaluate_asset(
             evaluation's own closed ends) hash the same is taken from it
             instead of simulated again (the simulations are deterministic);
             any difference re-runs it.
+        shown_urdf: the URDF path recorded in the evaluation (and its HTML
+            report) instead of the evaluated file's, e.g. where a staged
+            refine's output will lie once swapped in (None: the evaluated one).
 
     Returns:
         The :class:`Evaluation`.
@@ -276,7 +280,7 @@ def evaluate_asset(
     failures = [f"{m.name}@{m.engine}" for m in results if m.passed is False]
     ev = Evaluation(
         asset_id=ctx.asset_id,
-        urdf=str(ctx.urdf),
+        urdf=str(shown_urdf or ctx.urdf),
         method=method or (ctx.baseline or {}).get("method") or ("asset2sim" if ctx.overlay else None),
         prompt=prompt,
         reference=str(ctx.reference_dir) if ctx.reference_dir else None,
@@ -313,6 +317,7 @@ def evaluate_refined(
     views_state: dict[str, float] | None = None,
     checks: list[MetricResult] | None = None,
     recorded: RecordedRuns | None = None,
+    shown: Path | str | None = None,
 ) -> dict[str, Path]:
     """Evaluate a refined output folder (PyBullet, SPEC conventions, probes)
     and write ``evaluation.json`` and ``report.html`` beside its
@@ -331,6 +336,9 @@ def evaluate_refined(
             evaluated initial state, else the report renders its own.
         checks: the post-check's results of these files (see :func:`evaluate_asset`).
         recorded: the post-check's manipulation runs (see :func:`evaluate_asset`).
+        shown: the output folder as its user will find it, recorded as the
+            evaluated URDF's folder when ``out_dir`` is the staging folder a
+            rerun swaps in at its end (None: ``out_dir``).
 
     Returns:
         {"evaluation": path, "report": path}.
@@ -341,7 +349,8 @@ def evaluate_refined(
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
-                   views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task)
+                   views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task,
+                   shown_urdf=None if shown is None else Path(shown) / "mobility.urdf")
     return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
 
 

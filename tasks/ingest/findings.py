@@ -88,6 +88,7 @@ CODES: dict[str, CodeInfo] = {
     "URDF_UNREADABLE": _c("error", "files", "the URDF cannot be opened or read"),
     "URDF_ENCODING_UNSUPPORTED": _c("error", "files", "the URDF is not UTF-8 (UTF-16/32, invalid UTF-8, or another declared encoding with non-ASCII bytes)"),
     "ASSET_FILE_NOT_REGULAR": _c("error", "files", "semantics.txt or meta.json is not a regular file inside the folder"),
+    "ASSET_FILE_TOO_LARGE": _c("error", "files", "semantics.txt or meta.json is a regular file above the cap (max_extra_bytes, 1 MiB); not read"),
     # xml (safexml)
     "XML_TOO_LARGE": _c("error", "xml", "document above the size cap"),
     "XML_TOKEN_TOO_LARGE": _c("error", "xml", "a text, tag or attribute value above the token cap"),
@@ -101,6 +102,7 @@ CODES: dict[str, CodeInfo] = {
     "URDF_ROOT_NOT_ROBOT": _c("error", "structure", "the root element is not <robot>"),
     "URDF_ROBOT_NAME_MISSING": _c("error", "structure", "<robot> has no name attribute (required by URDF; yourdfpy fails on it)"),
     "URDF_NO_LINKS": _c("error", "structure", "the robot has no <link>"),
+    "ASSET_NO_GEOMETRY": _c("error", "structure", "no link has a <visual> or <collision>: there is nothing to size, weigh or collide"),
     "URDF_TOO_MANY_LINKS": _c("error", "structure", "more links than the cap (128: PyBullet cannot load more)"),
     "URDF_TOO_MANY_MOVABLE_JOINTS": _c("warning", "structure", "more movable joints than 32: in the worst case (all links touching) refine may not finish within the flow's per-asset time limit, which then ends it"),
     # numbers
@@ -113,10 +115,13 @@ CODES: dict[str, CodeInfo] = {
     # structure
     "LINK_NAME_MISSING": _c("error", "structure", "a <link> without name"),
     "LINK_NAME_DUPLICATE": _c("error", "structure", "two links with the same name"),
+    "LINK_NAME_NOT_A_FILE_NAME": _c("warning", "structure", "a link name with path separators, '..', control or non-ASCII characters or over 64 characters: files made for it get a safe name (asset2sim.file_names)"),
+    "LINK_FILE_NAMES_CLASH": _c("error", "structure", "two link names that give their files one safe name (only a crafted asset can)"),
     "JOINT_NAME_MISSING": _c("error", "structure", "a <joint> without name"),
     "JOINT_NAME_DUPLICATE": _c("error", "structure", "two joints with the same name"),
     "JOINT_TYPE_MISSING": _c("error", "structure", "a joint without type"),
     "JOINT_TYPE_INVALID": _c("error", "structure", "a type other than revolute, continuous, prismatic, fixed, floating, planar"),
+    "JOINT_TYPE_UNSUPPORTED": _c("error", "structure", "a floating or planar joint: refine and its simulators model revolute, continuous, prismatic and fixed joints only"),
     "JOINT_PARENT_MISSING": _c("error", "structure", "a joint without <parent link=...>"),
     "JOINT_CHILD_MISSING": _c("error", "structure", "a joint without <child link=...>"),
     "JOINT_PARENT_UNKNOWN": _c("error", "structure", "the parent names no link"),
@@ -178,6 +183,7 @@ CODES: dict[str, CodeInfo] = {
     "LINK_ZERO_VOLUME": _c("warning", "mesh_contents", "a link's whole mass geometry is flat: mass must come from area"),
     "MESH_MATERIAL_OUTSIDE": _c("warning", "mesh_paths", "an mtllib/texture path leaving the folder (not used, not copied; the statement is dropped from the output's copy of the OBJ/MTL)"),
     "MESH_MATERIAL_MISSING": _c("info", "mesh_paths", "an mtllib/texture file that does not exist"),
+    "MESH_MATERIAL_BESIDE_TARGET": _c("info", "mesh_paths", "an OBJ reached through a symlink names an mtllib that lies beside the real file, not beside the link: loaders of the input miss it; the output copies it beside the mesh"),
     "MATERIAL_NOT_REGULAR_FILE": _c("error", "mesh_paths", "an mtllib/texture path (or its symlink target, anywhere) is a FIFO, device or socket"),
     "TEXTURE_TOO_LARGE": _c("error", "mesh_paths", "a texture above the file-size or pixel cap, per file (256 MiB, 8192 x 8192) or per asset (1 GiB, 4 x 8192 x 8192); read from the image header, nothing decoded"),
     "TEXTURE_UNREADABLE": _c("error", "mesh_paths", "a texture file that is not an image PIL can identify (PyBullet and the renderer would fail on it)"),

@@ -523,18 +523,33 @@ class MeshChecks(Recorder):
     def materials(self, mesh: Path, mesh_dir: Path, scan: MeshScan, link: str | None) -> None:
         """The ``mtllib`` files of an OBJ (relative to ``mesh_dir``, the OBJ's
         folder as written) and the texture maps they name
-        (:func:`asset2sim.mesh_io.mtl_texture_maps`)."""
+        (:func:`asset2sim.mesh_io.mtl_texture_maps`). For an OBJ reached
+        through a symlink into another folder, a library missing beside the
+        link but present beside the real file ``mesh`` is checked and
+        recorded there (``MESH_MATERIAL_BESIDE_TARGET``, info: the output
+        copies it beside the mesh, :func:`asset2sim.tasks.publish.write.beside_link_target`)."""
         assert self.folder is not None
         for name in scan.mtllibs:
             ref = resolve_mesh_reference(self.folder, name, base=mesh_dir, extensions=(), max_bytes=self.policy.max_mesh_bytes)
-            if not self._material_ref(ref, mesh_dir, mesh, link):
+            lib_dir = mesh_dir
+            if ref.code == "MESH_NOT_FOUND" and os.path.realpath(mesh_dir) != str(mesh.parent):
+                beside = resolve_mesh_reference(self.folder, name, base=mesh.parent, extensions=(), max_bytes=self.policy.max_mesh_bytes)
+                if beside.code is None:
+                    assert beside.path is not None
+                    self.add("MESH_MATERIAL_BESIDE_TARGET",
+                             f"a mesh in {self.rel(mesh_dir)}/ is a symlink to {self.rel(mesh)}, whose mtllib {name!r} is not in "
+                             f"{self.rel(mesh_dir)}/ but beside the real file ({self.rel(beside.path)}): a simulator loading the "
+                             "input draws the mesh without its material; the output copies it (and its textures) beside "
+                             "the copied mesh", file=self.rel(mesh), link=link, mtllib=name, found=self.rel(beside.path))
+                    ref, lib_dir = beside, mesh.parent
+            if not self._material_ref(ref, lib_dir, mesh, link):
                 continue
             assert ref.path is not None
             try:
                 data = read_regular(ref.path, self.policy.max_mesh_bytes)
             except OSError:
                 continue
-            mtl_dir = Path(os.path.dirname(os.path.join(str(mesh_dir), name)))
+            mtl_dir = Path(os.path.dirname(os.path.join(str(lib_dir), name)))
             for tname in mesh_io.mtl_texture_maps(data):
                 tex = resolve_mesh_reference(self.folder, tname, base=mtl_dir, extensions=())
                 if self._material_ref(tex, mtl_dir, ref.path, link):

@@ -4,7 +4,8 @@
 checks (:mod:`asset2sim.tasks.ingest.urdf_checks`) read, every ``<link>``
 element included (``link_elements``): unique names, parents and
 children, self loops, several parents, cycles, orphans, exactly one root,
-the link cap, mimic joints; the given inertials (:func:`check_inertia`); and,
+the link cap, mimic joints, joint types refine does not model (floating,
+planar); the given inertials (:func:`check_inertia`); and,
 after the meshes were scanned, prismatic travel against the object's size.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from asset2sim import file_names
 from asset2sim.tasks.ingest.findings import MOVABLE_TYPES, Recorder
 from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
@@ -46,16 +48,49 @@ def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, iz
 
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy ixz iyy iyz izz
 
+#: Joint types of the URDF specification refine refuses (``JOINT_TYPE_UNSUPPORTED``),
+#: with why and what to write instead. Refine carries the others through
+#: (:data:`asset2sim.urdf.SIMULATED_JOINT_TYPES`: revolute, continuous,
+#: prismatic, fixed): its closed-state and state search, limits, written
+#: initial state and post-check move one coordinate per joint, and its
+#: engines read only those types. Measured on a stapler with one such joint
+#: (docs/validation.md, "Joint types").
+_UNSUPPORTED_JOINT_TYPES: dict[str, str] = {
+    "floating": "a part with 6 free degrees of freedom is not an articulation refine can set or check (it models "
+                "revolute, continuous, prismatic and fixed joints); PyBullet silently loads a floating joint as fixed, "
+                "SAPIEN makes the part a separate free body (on the root link only; it refuses one elsewhere) and MuJoCo "
+                "refuses a free joint below the top level. Write type=\"fixed\" if the part is attached, or make the "
+                "loose part an asset of its own",
+    "planar": "a joint with 3 degrees of freedom (sliding in the plane normal to its axis and turning about it) is "
+              "not an articulation refine can set or check (it models one coordinate per joint: revolute, continuous, "
+              "prismatic, and fixed joints); SAPIEN's URDF loader builds no planar joint, PyBullet and MuJoCo make it "
+              "three coordinates. Write the motion meant as a prismatic or revolute joint, or type=\"fixed\"",
+}
+
 
 class TreeChecks(Recorder):
     """Structure, inertials and joint travel (mixin of the validator)."""
 
     mesh_bounds: dict[int, np.ndarray]  # set by MeshChecks (mesh vertex bounds by id of the geometry)
 
+    # -- names that become file names
+    def _file_names(self, links: dict[str, UrdfLink]) -> None:
+        """Link names are data: one that is not a clean file name is reported
+        with the name its files get (:func:`asset2sim.file_names.file_stem`);
+        two links whose files would share a name are refused."""
+        for name, ln in links.items():
+            if not file_names.is_clean(name):
+                self.add("LINK_NAME_NOT_A_FILE_NAME", f"not a safe file name; files made for it are "
+                         f"named {file_names.file_stem(name)!r}", line=ln.line, link=name)
+        for stem, same in file_names.clashes(links).items():
+            self.add("LINK_FILE_NAMES_CLASH", f"links {', '.join(map(repr, same))} would give their files one name "
+                     f"{stem!r}; rename one", line=links[same[1]].line, link=same[1])
+
     # -- structure
     def structure(self, model: UrdfModel) -> tuple[set[str], str | None]:
         """Names, parents and children, cycles, orphans, the root, the link
-        cap, the movable-joint cap and mimic joints of ``model`` (every ``<link>`` element).
+        cap, the movable-joint cap, mimic joints and floating or planar
+        joints of ``model`` (every ``<link>`` element).
         Returns (moving links, root)."""
         links, joints = model.link_elements, model.joints
         if not links:
@@ -86,6 +121,7 @@ class TreeChecks(Recorder):
                 self.add("JOINT_NAME_DUPLICATE", f"joint {j.name!r} is defined again (first at line {jseen[j.name].line})", line=j.line, joint=j.name)
             else:
                 jseen[j.name] = j
+        self._file_names(seen)
         names = list(seen)
         has_parent: dict[str, list[str]] = {}
         children: dict[str, list[str]] = {n: [] for n in names}
@@ -120,6 +156,9 @@ class TreeChecks(Recorder):
                 self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={leader!r}>: coupled joints are not modelled (the "
                          "state search, the post-check simulators and the writer treat every joint as free), so the "
                          "coupling would be lost; refused rather than dropped", line=j.line, joint=jname, leader=leader)
+            if j.type in _UNSUPPORTED_JOINT_TYPES:
+                self.add("JOINT_TYPE_UNSUPPORTED", f"a {j.type} joint between {parent!r} and {child!r}: "
+                         f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
         for child, js in has_parent.items():
             if len(js) > 1:
                 self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",

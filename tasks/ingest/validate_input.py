@@ -50,7 +50,12 @@ read; nothing stops at the first problem):
    mass geometry has zero volume is a warning with
    ``action="mass_from_area"`` (PartNet-Mobility has such links, e.g. the
    single-quad door of object 8877), because a volume-based mass would be 0.
-8. PartNet-Mobility extras: ``semantics.txt`` lines, ``meta.json``.
+8. PartNet-Mobility extras: ``semantics.txt`` lines, ``meta.json`` (regular
+   files of at most ``max_extra_bytes``: ``ASSET_FILE_NOT_REGULAR``,
+   ``ASSET_FILE_TOO_LARGE``).
+
+A URDF whose links have no ``<visual>`` or ``<collision>`` at all is refused
+(``ASSET_NO_GEOMETRY``): there is nothing to size, weigh or collide.
 
 Whatever is accepted, ``asset2sim refine`` can read without a traceback or a
 hang (``docs/validation.md``, "Agreement with refine"). The checks live in
@@ -220,8 +225,19 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
                 self.result.category = partnet_mobility.meta_category(obj)
 
     def _read_extra(self, path: Path) -> str | None:
+        """The text of ``semantics.txt`` or ``meta.json`` (``path``), or None
+        after recording why it cannot be read: ``ASSET_FILE_TOO_LARGE`` (a
+        regular file above ``policy.max_extra_bytes``, never opened) or
+        ``ASSET_FILE_NOT_REGULAR`` (a FIFO, device, folder, a symlink leaving
+        the folder ...)."""
         assert self.folder is not None
-        ref = resolve_mesh_reference(self.folder, path.name, extensions=(), max_bytes=self.policy.max_extra_bytes)
+        cap = self.policy.max_extra_bytes
+        ref = resolve_mesh_reference(self.folder, path.name, extensions=(), max_bytes=cap)
+        if ref.code == "MESH_TOO_LARGE":  # a regular file, only too big to read
+            self.add("ASSET_FILE_TOO_LARGE", f"{path.name} has {ref.size} bytes, above the cap of {cap} bytes for "
+                     f"{partnet_mobility.SEMANTICS_NAME} and {partnet_mobility.META_NAME} (ValidationPolicy.max_extra_bytes); "
+                     "it is not read", file=path.name, size=ref.size, cap=cap)
+            return None
         if ref.path is None:
             self.add("ASSET_FILE_NOT_REGULAR", f"{path.name}: {ref.message}", file=path.name)
             return None
@@ -231,6 +247,22 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
             self.add("ASSET_FILE_NOT_REGULAR", f"{path.name}: {exc}", file=path.name)
             return None
 
+    def geometry_present(self, links: list) -> None:
+        """``ASSET_NO_GEOMETRY`` when the URDF has links but none of them has
+        a ``<visual>`` or ``<collision>`` element: refine takes the object's
+        size (hence its scale), masses and contacts from its geometry, so
+        such an asset would otherwise fail later with a misleading code
+        (an overlay scale out of range, blaming the request). Links without
+        geometry beside others with it are fine (PartNet-Mobility's
+        ``base``)."""
+        if not links or any(ln.visuals or ln.collisions for ln in links):
+            return
+        names = [ln.name for ln in links if ln.name]
+        shown = ", ".join(repr(n) for n in names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+        self.add("ASSET_NO_GEOMETRY", f"none of the {len(links)} links of {self.urdf_rel} ({shown or 'unnamed'}) has a <visual> or "
+                 "<collision> element: there is no geometry to size, weigh or collide, so the asset cannot be refined "
+                 "(add the meshes or primitives of its parts)", links=len(links))
+
     def run(self) -> ValidationResult:
         urdf = self.locate()
         if urdf is None:
@@ -239,6 +271,7 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         if model is None:
             return self.result
         moving, root = self.structure(model)
+        self.geometry_present(model.link_elements)
         self.inertials(model, moving)
         self.meshes(model.link_elements)
         self.asset_size(model, root)

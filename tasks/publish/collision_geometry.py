@@ -75,7 +75,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asset2sim import array_cache, atomic, mesh_io, urdf
+from asset2sim import array_cache, atomic, file_names, mesh_io, urdf
 from asset2sim.frames import axis_angle_matrix
 from asset2sim.engines.loading import FLAT_HULL_THICKNESS, mesh_hulls
 from asset2sim.tasks.geometry import limits
@@ -1113,7 +1113,9 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
                         options.append(((piece.volume - sum(q.volume for q in parts)) / size, len(parts), which, parts))
                 if not options:
                     kept += 1
-                    after = max(after, max(d for d, _ in found))
+                    # ``found`` maps position index -> (depth, direction); the
+                    # positions not carried read <= tolerance, so this is the carried depth
+                    after = max(after, max(d for d, _ in found.values()))
                     k += 1
                     continue
                 _, _, which, parts = min(options, key=lambda o: (o[0], o[1]))
@@ -1686,11 +1688,11 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         if not any(c.kind == "mesh" for c in link.collisions):
             continue
         kept = [c for c in link.collisions if c.kind != "mesh"]
-        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
+        safe = file_names.file_stem(name)
         for i, p in enumerate(pieces[name]):
             data = piece_obj(p)
             rel = f"{folder}/{safe}_hull{i}_{hashlib.sha256(data).hexdigest()[:12]}.obj"
-            dst = out_dir / rel
+            dst = file_names.join_inside(out_dir, rel)
             if not (dst.is_file() and not dst.is_symlink() and dst.read_bytes() == data):
                 atomic.write_bytes(dst, data)
             else:

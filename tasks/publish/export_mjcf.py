@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic
+from asset2sim import atomic, file_names
 from asset2sim.engines.base import Spring
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.frames import quat_wxyz_matrix
@@ -216,7 +216,7 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     )
     target_dir = out_dir / MJCF_DIR
     for rel, data in build.derived_meshes.items():
-        dst = out_dir / rel
+        dst = file_names.join_inside(out_dir, rel)
         if not (dst.is_file() and dst.read_bytes() == data):
             atomic.write_bytes(dst, data)
     _remove_stale_pieces(out_dir, set(build.derived_meshes))

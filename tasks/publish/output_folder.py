@@ -29,6 +29,12 @@ decides which files are the product's and keeps that record on disk:
 - **finish**: :meth:`OwnedFolder.finish` writes the completion marker only when
   every file the run wrote exists (a write that failed, e.g. on a full disk,
   leaves no marker, so a rerun redoes the asset).
+- **old or new**: a rerun over a *complete* earlier output (its marker is
+  there and the folder holds nothing else) writes into a staging folder
+  ``.<name>.asset2sim-next`` beside it and, once complete, swaps the two in
+  one atomic rename (:func:`asset2sim.atomic.exchange_folders`); a run
+  refused, failed or killed before that leaves the earlier output as it was
+  (a killed run's staging folder is removed by the next run).
 
 Errors are :class:`OutputError` with a ``code`` (``OUTPUT_*``) and the
 ``path`` concerned. ``tasks.publish.write`` re-exports :class:`OutputError`.
@@ -39,6 +45,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import stat
 import threading
 from dataclasses import dataclass, field
@@ -64,6 +71,7 @@ CODES = {
     "OUTPUT_RECORD_NOT_A_FILE": "a bookkeeping file (.asset2sim-complete.json, .asset2sim-owned.json) is not a regular file (FIFO, folder, symlink ...)",
     "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
     "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
+    "OUTPUT_PATH_ESCAPES": "a file would be written outside the output folder through '..' (a name used as a path)",
     "OUTPUT_NAME_CONFLICT": "two different input files would be copied to one output path, or onto a file of the contract",
     "OUTPUT_INCOMPLETE": "a file the run wrote is missing at the end (no completion marker written)",
     "OUTPUT_OUTSIDE_INPUT": "a referenced file lies outside the asset folder",
@@ -303,6 +311,8 @@ class OwnedFolder:
     source: Path | None
     files: set[str] = field(default_factory=set)
     created: bool = False
+    #: the output folder a staged run replaces when it finishes (None: the run writes ``root`` in place)
+    final: Path | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def _rel(self, path: Path) -> str | None:
@@ -311,6 +321,7 @@ class OwnedFolder:
         symlink leads it out."""
         ap = Path(os.path.abspath(path))
         parent = ap.parent.resolve()
+        self._refuse_dotdot_escape(Path(path), parent)
         if _within(parent, self.root):
             if self.source is not None and _within(parent, self.source):
                 raise OutputError(f"{ap} would be written into the input folder {self.source}", "OUTPUT_SYMLINK_ESCAPES", ap)
@@ -321,6 +332,19 @@ class OwnedFolder:
                 "OUTPUT_SYMLINK_ESCAPES", ap,
             )
         return None
+
+    def _refuse_dotdot_escape(self, path: Path, parent: Path) -> None:
+        """Refuse a path that starts in this folder and leaves it through
+        ``..`` (``out/collision/../../x.obj``, a name from an input used as a
+        path): such a write never happens, whatever wrote it."""
+        parts = path.parts
+        if ".." not in parts:
+            return
+        head = Path(os.path.abspath(Path(*parts[: parts.index("..")]) if parts.index("..") else Path(".")))
+        starts_here = any(_within(head, base) for base in (self.given, self.root) + ((self.final,) if self.final else ()))
+        if starts_here and not _within(parent, self.root):
+            raise OutputError(f"{path} would be written outside the output folder {self.given} (through '..')",
+                              "OUTPUT_PATH_ESCAPES", path)
 
     def _observe(self, paths: list[Path]) -> None:
         new = []
@@ -378,17 +402,59 @@ class OwnedFolder:
             hashes = {rel: atomic.sha256_file(self.root / rel) for rel in sorted(self.files)}
             atomic.write_json(self.root / MARKER_NAME, {**marker, "files": hashes})
             (self.root / RECORD_NAME).unlink(missing_ok=True)
-            return hashes
         finally:
             self.close()
+        if self.final is not None:
+            self._swap_in()
+        return hashes
+
+    def _swap_in(self) -> None:
+        """A staged run, complete: exchange the staging folder with the earlier
+        output, then delete the earlier output (now at the staging path).
+
+        Raises:
+            OutputError: ``OUTPUT_WRITE_FAILED`` when the exchange fails (the
+                earlier output is then untouched).
+        """
+        staging, final = self.root, self.final
+        try:
+            atomic.exchange_folders(staging, final)
+        except OSError as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise _write_failed(self.given, exc) from exc
+        shutil.rmtree(staging, ignore_errors=True)
+        self.root, self.final = final, None
+
+    def write_path(self, path: Path | str) -> Path:
+        """Where this run writes ``path`` (a path in the output folder as the
+        user named it): the same path for a run in place, its counterpart in
+        the staging folder for a staged run."""
+        if self.final is None:
+            return Path(path)
+        ap = Path(os.path.abspath(path))
+        for base in (self.given, self.final):
+            if _within(ap, base):
+                return self.root / ap.relative_to(base)
+        return Path(path)
 
     def abandon(self) -> None:
-        """End a run that failed: stop observing writes; when it wrote no file,
-        also remove the ownership record (and the folder when this run created
-        it and it is empty), so a refused run leaves nothing behind. Files it
-        did write stay recorded for the next run to remove."""
+        """End a run that failed or was refused: stop observing writes, remove
+        the files it wrote (with their temporary files), the ownership record
+        and the folder when this run created it and it is left empty, so the
+        folder holds what it held before the run (a staged run's earlier
+        output was never touched). A file that cannot be removed stays
+        recorded for the next run."""
         self.close()
-        if not self.files:
+        if self.final is not None:  # staged: the earlier output was never touched
+            shutil.rmtree(self.root, ignore_errors=True)
+            return
+        for rel in sorted(self.files):
+            _remove_with_temps(self.root, rel)
+        _prune_empty(self.root, self.files)
+        self.files = {rel for rel in self.files if os.path.lexists(self.root / rel)}
+        if self.files:
+            self._save()
+        else:
             (self.root / RECORD_NAME).unlink(missing_ok=True)
             if self.created:
                 try:
@@ -433,6 +499,9 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
                 "choose an empty or new folder, or allow writing beside them",
                 "OUTPUT_NOT_EMPTY", given / foreign[0],
             )
+        staged = _start_staged(root, given, src, previous, foreign)
+        if staged is not None:
+            return staged
     else:
         previous = set()
         try:
@@ -454,6 +523,61 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
         raise _write_failed(given, exc) from exc
     with _ACTIVE_LOCK:
         _ACTIVE[root] = owner
+        atomic.add_observer(_dispatch)
+    return owner
+
+
+STAGING_SUFFIX = ".asset2sim-next"
+
+
+def staging_folder(root: Path) -> Path:
+    """The staging folder of output folder ``root``: ``.<name>.asset2sim-next`` beside it."""
+    return root.parent / f".{root.name}{STAGING_SUFFIX}"
+
+
+def _complete(root: Path) -> bool:
+    """``root`` holds a readable completion marker listing files."""
+    try:
+        data = read_record(root / MARKER_NAME)
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("files"), dict)
+
+
+def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreign: list[str]) -> "OwnedFolder | None":
+    """A rerun over a complete earlier output that holds only the product's
+    files: an :class:`OwnedFolder` writing a fresh staging folder beside it
+    (swapped in by :meth:`OwnedFolder.finish`). None when the folder is not
+    such an output, or no staging folder can be made beside it (e.g. a
+    read-only parent): then the run rewrites the folder in place.
+
+    Raises:
+        OutputError: ``OUTPUT_NAME_CONFLICT`` when the staging path is taken
+            by something asset2sim did not make (a file, a symlink, a folder
+            of other files).
+    """
+    if foreign or not previous or not _complete(root):
+        return None
+    staging = staging_folder(root)
+    if os.path.lexists(staging):
+        ours = staging.is_dir() and not staging.is_symlink() and (
+            not any(staging.iterdir()) or any((staging / n).exists() for n in _BOOKKEEPING))
+        if not ours:
+            raise OutputError(f"{staging} (the staging folder of {given}) exists and is not asset2sim's; remove it",
+                              "OUTPUT_NAME_CONFLICT", staging)
+        shutil.rmtree(staging)  # a killed run's leftovers
+    try:
+        staging.mkdir(mode=stat.S_IMODE(root.stat().st_mode))
+    except OSError:
+        return None
+    owner = OwnedFolder(root=staging.resolve(), given=given, source=src, created=True, final=root)
+    try:
+        owner._save()
+    except OSError as exc:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise _write_failed(given, exc) from exc
+    with _ACTIVE_LOCK:
+        _ACTIVE[owner.root] = owner
         atomic.add_observer(_dispatch)
     return owner
 

@@ -139,7 +139,9 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     where the output URDF, the copied OBJ and MTL files will look for it) ->
     the real input file. A mesh reached through a symlink inside the asset
     folder is copied as a regular file at the referenced path; MTL files and
-    textures are placed relative to their mesh as the mesh looks for them.
+    textures are placed relative to their mesh as the mesh looks for them
+    (an MTL that lies beside a symlinked mesh's real file and not beside the
+    link is placed beside the copy: :func:`beside_link_target`).
 
     Finding the MTL libraries and textures reads every OBJ file (16-80 ms per
     PartNet-Mobility asset, asked for 5-11 times per refine), so the answer
@@ -159,6 +161,9 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     if hit is not None and _stamps(hit[0]) == hit[1]:
         return dict(hit[2])
     read = [g.path for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh" and g.path is not None]
+    # the paths as written too: a library added beside a symlinked mesh changes where its material comes from
+    read += [asset.urdf_path.parent / g.filename for ln in asset.links for g in ln.visuals + ln.collisions
+             if g.kind == "mesh" and g.path is not None and g.filename]
     copies = _mesh_copies(asset)
     files = [*read, *copies.values()]
     entry = (files, _stamps(files), dict(copies))
@@ -196,11 +201,55 @@ def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
             add(rel, src)
             lexical = base / rel
             lookup = os.path.realpath(lexical.parent)
-            for dep in mesh_dependencies(lexical, root):
+            deps = [(dep, lookup) for dep in mesh_dependencies(lexical, root)]
+            if str(src.parent) != lookup:  # a symlink into another folder
+                deps += [(dep, str(src.parent)) for dep in beside_link_target(lexical, src, root)]
+            for dep, folder in deps:
                 dep = dep.resolve()
-                dep_rel = os.path.normpath(os.path.join(os.path.dirname(rel), os.path.relpath(dep, lookup)))
+                dep_rel = os.path.normpath(os.path.join(os.path.dirname(rel), os.path.relpath(dep, folder)))
                 add(dep_rel if not dep_rel.startswith("..") else os.path.relpath(dep, root), dep)
     return copies
+
+
+def beside_link_target(lexical: Path, real: Path, asset_root: Path) -> list[Path]:
+    """The material files of an OBJ reached through a symlink into another
+    folder (``lexical``: the path as the URDF writes it; ``real``: the file
+    it leads to) that lie beside the real file and not beside the link: each
+    ``mtllib`` the OBJ names that does not exist relative to the link's
+    folder but does relative to the real file's, with the texture maps it
+    names (relative to it), as resolved paths inside ``asset_root``.
+
+    The mesh's author put them beside the real OBJ; a loader opening the
+    link looks beside the link and draws the mesh without them. The output
+    copies the OBJ as a regular file at the link's path, so
+    :func:`mesh_copies` places these files relative to that copy as they lie
+    relative to the real file, and the copy finds its material (the
+    validator reports the input's case as ``MESH_MATERIAL_BESIDE_TARGET``).
+    Missing files, files outside ``asset_root`` and libraries that do exist
+    beside the link (those are the input's own choice) are left out."""
+    if real.suffix.lower() != ".obj":
+        return []
+    try:
+        names = mesh_io.mtl_libraries(atomic.read_regular(real))
+    except OSError:
+        return []
+    out: list[Path] = []
+    for name in names:
+        if os.path.lexists(lexical.parent / name):
+            continue
+        mtl = (real.parent / name).resolve()
+        if not (mtl.is_file() and _inside(mtl, asset_root)):
+            continue
+        out.append(mtl)
+        try:
+            data = atomic.read_regular(mtl)
+        except OSError:
+            continue
+        for tname in mesh_io.mtl_texture_maps(data):
+            tex = (mtl.parent / tname).resolve()
+            if tex.is_file() and _inside(tex, asset_root):
+                out.append(tex)
+    return out
 
 
 def collision_folder(asset: AssetDescription) -> str:

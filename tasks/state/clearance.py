@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import QhullError
 
-from asset2sim import atomic, mesh_io
+from asset2sim import atomic, file_names, mesh_io
 from asset2sim.schemas.asset import GeometryRef
 from asset2sim.tasks.publish.collision_geometry import RUNNING_CLEARANCE, clear_sliding_contact, joint_velocity, sat_gap
 from asset2sim.tasks.state.collision import CollisionPiece
@@ -206,7 +206,7 @@ def write_piece_overrides(pieces: dict[str, list[np.ndarray]], scale: float, out
     """
     out: dict[str, list[CollisionPiece]] = {}
     for ln, plist in pieces.items():
-        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in ln)
+        safe = file_names.file_stem(ln)
         items = []
         for i, P in enumerate(plist):
             rel = f"{folder}/{safe}_{stem}{i}.obj"
@@ -214,8 +214,8 @@ def write_piece_overrides(pieces: dict[str, list[np.ndarray]], scale: float, out
                 data = mesh_io.hull_obj(np.asarray(P, float) / scale)
             except QhullError as exc:
                 raise ValueError(f"link {ln!r}: collision piece {i} spans no volume") from exc
-            atomic.write_bytes(Path(out_dir) / rel, data)
-            ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=(Path(out_dir) / rel).resolve())
+            dst = atomic.write_bytes(file_names.join_inside(out_dir, rel), data)
+            ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=dst.resolve())
             items.append(CollisionPiece(filename=rel, source=ref))
         out[ln] = items
     return out

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import array_cache, atomic
+from asset2sim import array_cache, atomic, file_names
 from asset2sim.frames import rpy_matrix
 from asset2sim.engines.base import open_shape_world
 from asset2sim.mesh_io import MeshCache, read_mesh
@@ -274,7 +274,7 @@ def improve_collisions(
     out_dir: Path,
     *,
     cache=None,
-    budget_s: float = 60.0,
+    max_decompositions: int = 32,
     folder: str = "collision",
 ) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """Greedy, piece by piece, for link pairs whose hulls keep penetrating:
@@ -286,21 +286,20 @@ def improve_collisions(
 
     each change is kept only if it lowers the pair's piece-wise penetration
     (sum over piece pairs of the deepest point, net of the engine's contact
-    margins: :func:`overlap_depths`). ``session``: PyBullet session
+    margins: :func:`overlap_depths`); at most ``max_decompositions`` CoACD
+    calls (a count, so the result never depends on the machine's load). ``session``: PyBullet session
     of the scaled output at the refined state. Pieces are written to
     ``out_dir/<folder>/`` (``tasks.publish.write.collision_folder`` picks a
     name no input mesh uses). Returns (collision overrides for the writer,
     notes).
     """
-    import time
-
     cache = cache or MeshCache()
     links = sorted({ln for pair in pairs for ln in pair})
     world = _PieceWorld(session, asset, links, scale, cache)
     notes: list[str] = []
     changed: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]] | None] = {}
     tried: set[tuple[str, int]] = set()
-    t0 = time.perf_counter()
+    decompositions = 0
     try:
         area = {}
         for (ln, k), g in world.refs.items():
@@ -340,11 +339,12 @@ def improve_collisions(
                     else:
                         world.restore(key, old)
                     continue
-                if time.perf_counter() - t0 > budget_s:
-                    notes.append(f"decomposition budget {budget_s:g} s spent; {g.filename} of {ln} kept as its hull")
-                    continue
                 if convexity_ratio(g.path, cache) < 1.05:
                     continue
+                if decompositions >= max_decompositions:
+                    notes.append(f"decomposition budget of {max_decompositions} CoACD calls spent; {g.filename} of {ln} kept as its hull")
+                    continue
+                decompositions += 1
                 pieces = decompose_mesh(g.path)
                 old = world.replace(key, [pv for pv, _ in pieces])
                 after = world.penetration(a, b)
@@ -364,8 +364,8 @@ def improve_collisions(
                 if changed[(ln, k)] is None:
                     continue
                 for i, (v, f) in enumerate(changed[(ln, k)]):
-                    rel = f"{folder}/{ln}_{k}_{i}.obj"
-                    atomic.write_text(out_dir / rel, _obj_text(v, f))
+                    rel = f"{folder}/{file_names.file_stem(ln)}_{k}_{i}.obj"
+                    atomic.write_text(file_names.join_inside(out_dir, rel), _obj_text(v, f))
                     pieces_out.append(CollisionPiece(filename=rel, source=g))
             elif g.kind == "mesh" and g.filename:
                 pieces_out.append(CollisionPiece(filename=g.filename, source=g))

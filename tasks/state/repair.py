@@ -96,7 +96,7 @@ def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_m
         state: joint -> initial position (rad or m).
         overrides: the collision overrides written so far.
         scale: the overlay's uniform scale; ``out_dir`` / ``folder``: where pieces are written.
-        config: ``convex_decomposition``, ``decomposition_budget`` (s), ``sim``.
+        config: ``convex_decomposition``, ``max_decompositions``, ``sim``.
 
     Raises:
         OSError: a collision file cannot be read or written.
@@ -112,7 +112,7 @@ def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_m
     try:
         dec, notes = stop_repair.decompose_for_blocked(
             model, urdf, asset, sweep_metric, state, limits.subtrees(model), set(overrides), scale, out_dir,
-            folder, budget_s=config.decomposition_budget, conventions=config.sim)
+            folder, max_decompositions=config.max_decompositions, conventions=config.sim)
     except collision.DecompositionUnavailable:
         return
     if dec:

@@ -75,7 +75,7 @@ def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str]
 
 def decompose_for_blocked(model: UrdfModel, urdf: Path, asset: AssetDescription, metric: MetricResult,
                           state: dict[str, float], subtrees: dict[str, list[str]], replaced: set[str], scale: float,
-                          out_dir: Path, folder: str, *, cache=None, budget_s: float = 60.0,
+                          out_dir: Path, folder: str, *, cache=None, max_decompositions: int = 32,
                           conventions: SimConventions | None = None) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """Convex-decomposition repairs for the joints the ``joint_sweep``
     ``metric`` found stopped short (see the module docstring).
@@ -115,7 +115,7 @@ def decompose_for_blocked(model: UrdfModel, urdf: Path, asset: AssetDescription,
                 continue
             session.set_joint_positions({**state, name: q})
             new, dnotes = collision.improve_collisions(session, asset, [pair], scale, out_dir, cache=cache,
-                                                       budget_s=budget_s, folder=folder)
+                                                       max_decompositions=max_decompositions, folder=folder)
             if new:
                 overrides.update(new)
                 notes += [f"{n} (sweep of {name} stopped by {pair[1]}: {depth * 1000:.3g} mm at {q:.4g})" for n in dnotes]

@@ -16,7 +16,12 @@ Everything a model backend needs from the network lives here:
 - **an on-disk reply cache** keyed by the sha256 of (model, messages with
   their images, JSON schema, sampling parameters): a rerun makes no calls.
   Only replies that parsed into the reply schema are stored (a transient
-  garbled reply is asked again on the next run).
+  garbled reply is asked again on the next run). Each record holds its key
+  and the sha256 of what is read back (:func:`record_digest`); a record
+  larger than :meth:`LLMClient.cache_record_cap`, unreadable, stored under
+  another key (copied or moved) or altered is rejected with an
+  :class:`~asset2sim.array_cache.CacheWarning`, deleted, and the reply is
+  asked again and stored anew.
 - **strict JSON parsing** (:func:`parse_json_strict`): non-finite numbers
   (``NaN``, ``Infinity``, ``1e999``), duplicate keys and anything but one JSON
   object are rejected; the schema model then rejects extra and missing fields
@@ -49,10 +54,11 @@ import json
 import math
 import threading
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Callable
 
-from asset2sim import atomic
+from asset2sim import array_cache, atomic
 from asset2sim.tasks.synthesize.llm_config import ClientConfig, default_cache_dir, with_overrides
 from asset2sim.tasks.synthesize.llm_errors import (
     LLMError,
@@ -81,6 +87,24 @@ from asset2sim.tasks.synthesize.llm_transport import (
 from asset2sim.tasks.synthesize.llm_usage import M, Answer, Completion, T, Usage
 
 CACHE_FORMAT = 1
+
+#: Slack (bytes) of a reply record beyond its content: the key, digest, model
+#: name, finish reason and JSON punctuation (:meth:`LLMClient.cache_record_cap`).
+RECORD_OVERHEAD_BYTES = 64 << 10
+
+
+def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str:
+    """sha256 (hex) of what a cached reply record gives back (its key, model,
+    content and finish reason), as canonical JSON: stored in the record and
+    checked when it is read.
+
+    Raises:
+        TypeError: a value is not JSON-serialisable.
+    """
+    blob = json.dumps({"key": key, "model": model, "content": content, "finish_reason": finish_reason},
+                      sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()
+
 
 __all__ = [
     "CACHE_FORMAT",
@@ -180,18 +204,47 @@ class LLMClient:
         d = self.config.cache_dir
         return None if d is None else Path(d) / key[:2] / f"{key}.json"
 
+    def cache_record_cap(self) -> int:
+        """Largest reply record read back, bytes: replies longer than
+        ``max_reply_chars`` are never stored, and JSON writes a character in
+        at most 12 bytes (an escaped surrogate pair), plus
+        :data:`RECORD_OVERHEAD_BYTES`."""
+        return 12 * self.config.max_reply_chars + RECORD_OVERHEAD_BYTES
+
     def cache_get(self, key: str) -> dict[str, Any] | None:
-        """The cached reply record for ``key``, or None (missing or unreadable)."""
+        """The cached reply record for ``key``, or None: missing, or rejected
+        (larger than :meth:`cache_record_cap`, unreadable, not a record of
+        this format, stored under another key, or its content and finish
+        reason not matching its :func:`record_digest`); a rejected record is
+        deleted and named in a :class:`~asset2sim.array_cache.CacheWarning`,
+        so the reply is asked again and stored anew."""
         p = self._cache_path(key)
         if p is None or not p.is_file():
             return None
         try:
-            rec = json.loads(p.read_text())
-        except (OSError, ValueError):
+            rec = json.loads(atomic.read_regular(p, self.cache_record_cap()))
+            why = None
+        except FileNotFoundError:  # deleted since: a miss
             return None
-        if not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or not isinstance(rec.get("content"), str):
-            return None
-        return rec
+        except (OSError, ValueError) as exc:  # too large, not a regular file, not JSON
+            rec, why = None, f"unreadable ({type(exc).__name__}: {exc})"
+        if why is None:
+            if not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or not isinstance(rec.get("content"), str):
+                why = "not a reply record of this version"
+            elif not isinstance(rec.get("finish_reason"), (str, type(None))):
+                why = "its finish reason is not text"
+            elif rec.get("key") != key:
+                why = "it carries no key, or another key's (copied or moved between keys)"
+            elif rec.get("sha256") != record_digest(key, rec.get("model"), rec["content"], rec.get("finish_reason")):
+                why = "its reply does not match its digest (altered)"
+        if why is None:
+            return rec
+        warnings.warn(f"asset2sim reply cache: record {p} rejected: {why}; asking again", array_cache.CacheWarning, stacklevel=2)
+        try:
+            p.unlink()
+        except OSError:
+            pass  # replaced when the reply is stored again
+        return None
 
     def cache_put(self, key: str, completion: Completion) -> None:
         """Store a reply (atomically); does nothing without a cache folder.
@@ -206,6 +259,8 @@ class LLMClient:
             p,
             {
                 "format": CACHE_FORMAT,
+                "key": key,
+                "sha256": record_digest(key, self.config.model, completion.content, completion.finish_reason),
                 "model": self.config.model,
                 "content": completion.content,
                 "finish_reason": completion.finish_reason,

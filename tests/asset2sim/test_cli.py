@@ -143,6 +143,28 @@ def test_unwritable_output_exits_4(box, tmp_path, capsys, monkeypatch):
     assert "OUTPUT_WRITE_FAILED [EROFS]" in line and str(tmp_path / "o") in line
 
 
+@pytest.mark.parametrize("name", ["report.html", "report.json"])
+def test_full_disk_while_writing_the_report_exits_4_with_enospc(name, box, tmp_path, capsys, monkeypatch):
+    """A full disk met by the report writer (``report.html`` among the extras,
+    ``report.json`` after the post-check) is the documented
+    ``OUTPUT_WRITE_FAILED [ENOSPC]`` naming the file, not ``OUTPUT_INCOMPLETE``
+    (which the missing ``report.html`` gave, the error having become a note)."""
+    monkeypatch.setattr(refine_mod.render, "render_views", lambda *a, **k: None)
+    monkeypatch.setattr(refine_mod.export_mjcf, "export_mjcf", lambda *a, **k: None)
+    real = atomic._create_temp
+
+    def full_disk(path):
+        if path.name == name:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path)
+
+    monkeypatch.setattr(atomic, "_create_temp", full_disk)
+    assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "-q"]) == 4
+    line = _one_line(capsys.readouterr().err)
+    assert "OUTPUT_WRITE_FAILED [ENOSPC]" in line and name in line, line
+    assert not (tmp_path / "o" / ".asset2sim-complete.json").exists()
+
+
 def test_internal_error_exits_70_with_a_log_and_traceback_only_with_debug(box, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("ASSET2SIM_LOG_DIR", str(tmp_path / "logs"))
 

@@ -77,7 +77,7 @@ def start_cluster(workdir: Path, n_workers: int = 2, env: dict[str, str] | None 
     env = {**os.environ, **(env or {})}
     sched_file = workdir / "scheduler.json"
     log = open(workdir / "scheduler.log", "wb")
-    sched = subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", "0", "--dashboard-address", ":0",
+    sched = subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", "0", "--dashboard-address", "127.0.0.1:0",
                               "--scheduler-file", str(sched_file)], env=env, stdout=log, stderr=subprocess.STDOUT,
                              start_new_session=True)
     deadline = time.time() + timeout

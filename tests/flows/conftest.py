@@ -53,7 +53,7 @@ def dask_address(prefect_server):
         n_workers=2,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=":0",
+        dashboard_address="127.0.0.1:0",
         env={"PREFECT_API_URL": prefect_server},
     )
     try:

@@ -144,8 +144,11 @@ def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
         k = names[i % len(names)]
         out = outs[k] if i % 4 != 3 else tmp_path / "fresh" / f"{k}_{i}"  # some runs start from an empty folder
         at = rng.uniform(0.0, 1.1 * durations[k])
+        old = i % 4 != 3 and check_output_complete(out, assets[k]).get("marker_valid") == 1
         rc = _run(assets[k], out, PROMPTS[k], force=True, kill_after=at)
         counts = check_output_complete(out, assets[k])
+        if old:  # --force over a complete output: a kill leaves the old output or the complete new one
+            assert counts.get("marker_valid") == 1, (k, at, rc, counts)
         log.append((k, round(at, 2), rc, counts))
         assert atomic.tree_hashes(assets[k]) == before[k], f"input {k} changed"
     print("\n".join(map(str, log)))

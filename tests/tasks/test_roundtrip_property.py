@@ -130,6 +130,9 @@ def models(draw, min_links: int = 1):
     if any(j.type == "prismatic" for j in joints):
         # travel up to 3 must stay within the object's size (JOINT_LIMIT_IMPLAUSIBLE): a 6 m box on the root
         links[0].visuals.append(cb.Geom(kind="box", size="6 6 6"))
+    if not any(ln.visuals or ln.collisions for ln in links):
+        # an asset without any geometry is refused (ASSET_NO_GEOMETRY): nothing to size, weigh or collide
+        links[0].collisions.append(cb.Geom(kind="box", size="0.2 0.2 0.2"))
     # the joint list order is not the tree order in real files: shuffle it
     order = draw(st.permutations(range(len(joints))))
     return cb.Model(name=draw(st.text(NAME_CHARS, min_size=1, max_size=8)), links=links, joints=[joints[k] for k in order])

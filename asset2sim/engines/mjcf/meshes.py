@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.loading import CollisionPiece
-from asset2sim.engines.mjcf.base import DERIVED_MESH_DIR, relative_to, safe_name, vec_text
+from asset2sim.file_names import file_stem
+from asset2sim.engines.mjcf.base import DERIVED_MESH_DIR, relative_to, vec_text
 from asset2sim.mesh_io import convex_hull_mesh
 
 
@@ -57,7 +58,7 @@ def mesh_assets(pieces: dict[str, list[CollisionPiece]], mesh_root: Path) -> Mes
                 data = p.source.read_bytes()
                 scale = None if np.allclose(p.scale, 1.0) else np.asarray(p.scale, float)
             else:
-                rel = f"{DERIVED_MESH_DIR}/{safe_name(name)}__c{p.collision}_g{p.group}.obj"
+                rel = f"{DERIVED_MESH_DIR}/{file_stem(name)}__c{p.collision}_g{p.group}.obj"
                 data = hull_obj(p.points)
                 out.derived[rel] = data
                 scale = None

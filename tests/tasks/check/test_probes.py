@@ -10,7 +10,15 @@ import pytest
 
 from asset2sim.engines.base import EngineUnsupported, SessionOptions, open_session
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
-from asset2sim.tasks.check.probes import TRAVEL_TIME_MARGIN, ProbeConfig, probe_joint, probes_metric, run_probes
+from asset2sim.tasks.check.probes import (
+    MAX_PUSH_TIME,
+    TRAVEL_TIME_MARGIN,
+    ProbeConfig,
+    probe_joint,
+    probes_metric,
+    push_budget,
+    run_probes,
+)
 from asset2sim.urdf import read_urdf
 
 
@@ -243,6 +251,43 @@ def test_probe_config_time_budget_limits_a_stuck_push(tmp_path):
     assert budget > cfg.push_time
     assert r.peak_force == pytest.approx(r.max_force, rel=1e-6)
     assert len([x for x in r.trace["phase"] if x == 0.0]) == int(round(budget * 240))
+
+
+def test_push_budget_is_capped_but_never_below_push_time():
+    cfg = ProbeConfig()
+    assert push_budget(cfg, 1.0, 0.1) == (cfg.push_time, cfg.push_time)  # a short travel: push_time
+    allowed, asked = push_budget(cfg, 1.0, 2.4)  # a very large door opened 1.57 rad at 1.5 m: not cut
+    assert allowed == asked == pytest.approx(1.0 + TRAVEL_TIME_MARGIN * 2.4 / cfg.push_speed) and asked < MAX_PUSH_TIME
+    assert push_budget(cfg, 1.0, 30.0) == (MAX_PUSH_TIME, pytest.approx(1.0 + TRAVEL_TIME_MARGIN * 30.0 / cfg.push_speed))
+    assert push_budget(cfg, 250.0, 0.0)[0] == MAX_PUSH_TIME  # a part of 0.1 g effective mass: the ramp is cut too
+    assert push_budget(ProbeConfig(push_time=40.0), 1.0, 30.0)[0] == 40.0
+
+
+def test_push_on_a_part_far_from_its_axis_is_bounded(tmp_path):
+    """Issue 36 (the HTML report took 78 s on an asset with mesh scale 1e-6,
+    its joint origins left in file units): a lid whose hinge lies 100 m
+    away asks 1 + 1.5 x 30 m / 0.25 m/s = 181 s of push for a 0.3 rad
+    opening (43,440 engine steps when stuck). The push stops at
+    ``MAX_PUSH_TIME`` (30 s) and the probe says so."""
+    f = _two_links(
+        tmp_path / "far", "box",
+        f'<link name="body">{_inertial(10.0, i=(0.1, 0.1, 0.1))}{_box(0.3, 0.3, 0.2)}</link>',
+        f'<link name="lid">{_inertial(0.5, (-100.0, 0, 0.006), (0.002, 0.004, 0.005))}{_box(0.3, 0.3, 0.01, (-100.0, 0, 0.106))}</link>',
+        '<joint name="hinge" type="revolute"><parent link="body"/><child link="lid"/>'
+        '<origin xyz="100 0 0"/><axis xyz="0 -1 0"/><limit lower="0" upper="0.5" effort="10" velocity="5"/>'
+        '<dynamics damping="0.05" friction="100000.0"/></joint>',  # stuck: more friction than the pusher's torque
+    )
+    s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"hinge": 0.0}))
+    try:
+        r = probe_joint(s, "hinge", closed=0.0, direction=1.0, open_range=0.5, action="open")
+        dt = s.options.conventions.timestep
+    finally:
+        s.close()
+    assert r.lever_arm == pytest.approx(100.15, abs=0.01)
+    assert not r.reached and r.failure == "target not reached"
+    assert len([x for x in r.trace["phase"] if x == 0.0]) == int(round(MAX_PUSH_TIME / dt))
+    (note,) = [n for n in r.notes if "cap" in n]
+    assert "30 s cap" in note and "asked 181 s" in note and "lever 100 m" in note
 
 
 def _lever_on_heavy_body(folder: Path) -> Path:

@@ -114,9 +114,9 @@ def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
 @pytest.mark.parametrize("name", sorted(cb.ACCEPTED))
 def test_refine_handles_what_validate_accepts(name, tmp_path, capsys):
     """Symlinked mesh inside the folder, ``dir/../`` through an existing
-    folder, a UTF-8 byte-order mark, a two-turn revolute limit: validate
-    accepts them, refine writes an output whose URDF opens every mesh it
-    names (each a regular file)."""
+    folder, a UTF-8 byte-order mark, a two-turn revolute limit, a continuous
+    or a fixed lid joint: validate accepts them, refine writes an output
+    whose URDF opens every mesh it names (each a regular file)."""
     asset = cb.ACCEPTED[name](tmp_path / "asset")
     assert not vi.has_errors(vi.validate_asset(asset))
     out = tmp_path / "out"

@@ -193,6 +193,44 @@ def test_mesh_defect_severity_depends_on_use(tmp_path):
     assert f.severity == "error" and "used for mass" in f.message
 
 
+@pytest.mark.parametrize("name", ["meta.json", "semantics.txt"])
+def test_oversized_side_file_has_its_own_code(name, tmp_path):
+    """Issue 36: a 1 GiB (sparse) ``meta.json`` or ``semantics.txt`` is a
+    regular file, only too large: ``ASSET_FILE_TOO_LARGE`` naming the file,
+    its size and the cap (was ``ASSET_FILE_NOT_REGULAR``); a FIFO keeps
+    ``ASSET_FILE_NOT_REGULAR``."""
+    asset = cb.build_valid(tmp_path / "a")
+    with open(asset / name, "r+b") as fh:
+        fh.truncate(1 << 30)
+    found = [f for f in vi.validate_asset(asset) if f.code.startswith("ASSET_FILE_")]
+    assert [(f.code, f.severity, f.file) for f in found] == [("ASSET_FILE_TOO_LARGE", "error", name)]
+    cap = vi.DEFAULT_POLICY.max_extra_bytes
+    assert str(1 << 30) in found[0].message and str(cap) in found[0].message
+    assert found[0].values == {"size": 1 << 30, "cap": cap}
+    os.unlink(asset / name)
+    os.mkfifo(asset / name)
+    assert {f.code for f in vi.validate_asset(asset) if f.code.startswith("ASSET_FILE_")} == {"ASSET_FILE_NOT_REGULAR"}
+
+
+def test_asset_without_any_geometry_is_refused_naming_the_urdf(tmp_path):
+    """Issue 36: links but no ``<visual>``/``<collision>`` anywhere is
+    ``ASSET_NO_GEOMETRY`` on the URDF (refine blamed the request with
+    ``OVL_SCALE_INVALID``); one link without geometry beside others is fine."""
+    model = cb.valid_model()
+    for ln in model.links:
+        ln.visuals, ln.collisions = [], []
+    asset = cb.write_asset(tmp_path / "none", model)
+    found = [f for f in vi.validate_asset(asset) if f.severity == "error"]
+    assert [(f.code, f.file) for f in found] == [("ASSET_NO_GEOMETRY", "mobility.urdf")]
+    assert "'lid'" in found[0].message and "4 links" in found[0].message
+    with pytest.raises(AssetError) as err:
+        extract_asset_checked(asset)
+    assert err.value.codes == ["ASSET_NO_GEOMETRY"]
+    model = cb.valid_model()
+    model.link("lid").visuals, model.link("lid").collisions = [], []
+    assert not vi.has_errors(vi.validate_asset(cb.write_asset(tmp_path / "one", model)))
+
+
 # ----------------------------------------------------------------------------- CLI
 
 

@@ -5,6 +5,7 @@ loads in MuJoCo's URDF importer."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -417,6 +418,39 @@ def test_a_child_that_starts_around_its_parent_is_separated(tmp_path):
     mujoco = pytest.importorskip("mujoco")
     assert parent_child_penetration(out.urdf, {"hinge": 0.0}, engine="mujoco").value <= cg.CONTAINMENT_TOLERANCE * 1000
     assert mujoco.MjModel.from_xml_path(str(out.urdf)).ngeom >= 2
+
+
+def test_a_child_sliding_through_its_parent_keeps_the_overlap_and_notes_its_depth():
+    """A bar (the child, one convex piece) slides up through a crossing bar
+    (the parent, one piece): the overlap is carried from the reference
+    position until the child clears the parent, and the direction that
+    separates them flips on the way (down at first, up from 7.5 mm on), so
+    cutting either piece at every carried position removes it whole. A link's
+    last piece is never removed: both pieces are kept and the note gives the
+    depth kept. This raised ``TypeError: cannot unpack non-iterable int
+    object`` (the kept-overlap note iterated the positions' depths, a dict
+    position -> (depth, direction), as if it were the list of pairs it was
+    before), which ended a flow's refine on a hidden-dataset bucket."""
+    model = urdf.parse_urdf_bytes(b"""<robot name="crossing">
+  <link name="body"/><link name="slider"/>
+  <joint name="slide" type="prismatic"><parent link="body"/><child link="slider"/><axis xyz="0 0 1"/>
+    <limit lower="0" upper="0.05"/></joint>
+</robot>""")
+    body = cg.Piece.of(_box([0.0, 0.0, 0.0], [0.01, 0.1, 0.02])[0])  # along y, 20 mm high
+    slider = cg.Piece.of(_box([-0.03, 0.045, -0.01], [0.04, 0.055, 0.015])[0])  # along x, across the body
+    joint = model.joint("slide")
+    d0, n0 = cg.penetration_depth(body, cg._transformed(slider, cg._joint_motion(joint, 0.0)))
+    d1, n1 = cg.penetration_depth(body, cg._transformed(slider, cg._joint_motion(joint, 0.02)))
+    assert d0 == pytest.approx(0.015) and d1 == pytest.approx(0.01)
+    assert np.allclose(n0, -n1) and abs(n0[2]) == pytest.approx(1.0)  # the situation: the direction flips
+    pieces = {"body": [body], "slider": [slider]}
+    notes: list[str] = []
+    cg.separate_parent_child(model, pieces, notes)
+    assert [p is body for p in pieces["body"]] == [True] and [p is slider for p in pieces["slider"]] == [True]  # nothing cut
+    (note,) = notes
+    m = re.search(r"up to ([0-9.]+) mm .*; 1 overlap\(s\) of a link's last piece held whole inside another kept \(([0-9.]+) mm\)", note)
+    assert m is not None, note
+    assert float(m.group(1)) == float(m.group(2)) >= 15.0, note
 
 
 def test_sliding_contacts_between_parts_are_given_running_clearance(tmp_path):

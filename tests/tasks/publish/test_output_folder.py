@@ -300,8 +300,10 @@ def test_symlinked_and_dotdot_mesh_paths_are_copied_where_referenced(tmp_path):
 
 
 def test_failed_write_during_extras_leaves_no_marker(tmp_path, box, monkeypatch):
-    """A full disk while the HTML report is written: the run says so and
-    writes no completion marker, so a rerun redoes the asset."""
+    """A full disk while the HTML report is written: the run says so
+    (``OUTPUT_WRITE_FAILED`` raised from the ENOSPC error, naming report.html;
+    it was ``OUTPUT_INCOMPLETE``, which named the missing file but not the
+    cause) and writes no completion marker, so a rerun redoes the asset."""
     from asset2sim.tasks import refine as refine_mod
 
     monkeypatch.setattr(refine_mod.render, "render_views", lambda *a, **k: None)
@@ -317,11 +319,85 @@ def test_failed_write_during_extras_leaves_no_marker(tmp_path, box, monkeypatch)
     out = tmp_path / "out"
     with pytest.raises(of.OutputError) as err:
         refine_asset(box, PROMPT, out, extras=True)
-    assert err.value.code == "OUTPUT_INCOMPLETE" and "report.html" in str(err.value)
+    assert err.value.code == "OUTPUT_WRITE_FAILED" and "report.html" in str(err.value)
+    assert isinstance(err.value.__cause__, OSError) and err.value.__cause__.errno == errno.ENOSPC
     assert not (out / MARKER_NAME).exists()
     monkeypatch.setattr(atomic, "_create_temp", real)
     res = refine_asset(box, PROMPT, out, extras=True)  # the rerun redoes it (nothing foreign in the folder)
     assert not res.skipped and (out / "report.html").is_file() and (out / MARKER_NAME).is_file()
+
+
+def _tree(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, monkeypatch):
+    """--force over a complete output that then fails (here: the report step
+    raises) leaves the earlier output byte for byte, marker valid, and no
+    staging folder; a rerun that completes replaces it whole."""
+    from asset2sim.tasks import refine as refine_mod
+
+    out = tmp_path / "out"
+    first = refine_asset(box, PROMPT, out, extras=False)
+    before = _tree(out)
+    real = refine_mod._build_report
+
+    def broken(*a, **k):
+        raise RuntimeError("refused mid-way")
+
+    monkeypatch.setattr(refine_mod, "_build_report", broken)
+    with pytest.raises(RuntimeError):
+        refine_asset(box, "a small box with its lid closed", out, extras=False, skip_if_complete=False)
+    assert _tree(out) == before
+    assert is_complete(out, first.report.input_hash, first.report.config_hash)
+    assert not of.staging_folder(out).exists()
+    monkeypatch.setattr(refine_mod, "_build_report", real)
+    again = refine_asset(box, "a small box with its lid closed", out, extras=False, skip_if_complete=False)
+    assert is_complete(out, again.report.input_hash, again.report.config_hash)
+    assert not is_complete(out, first.report.input_hash, first.report.config_hash)
+    assert not of.staging_folder(out).exists() and of.foreign_files(out) == []
+    assert set(json.loads((out / MARKER_NAME).read_text())["files"]) == set(_tree(out)) - {MARKER_NAME}
+
+
+def test_a_first_run_that_fails_mid_way_leaves_no_partial_output(tmp_path, box, monkeypatch):
+    """An internal error after the writer ran (here: the report step raises)
+    removes what the run wrote: no URDF without its report, no folder."""
+    from asset2sim.tasks import refine as refine_mod
+
+    def broken(*a, **k):
+        raise RuntimeError("internal error")
+
+    monkeypatch.setattr(refine_mod, "_build_report", broken)
+    out = tmp_path / "new" / "out"
+    with pytest.raises(RuntimeError):
+        refine_asset(box, PROMPT, out, extras=False)
+    assert not out.exists()
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "kept" / "user.txt").write_text("mine")
+    with pytest.raises(RuntimeError):
+        refine_asset(box, PROMPT, tmp_path / "kept", extras=False, overwrite=True)
+    assert sorted(p.name for p in (tmp_path / "kept").iterdir()) == ["user.txt"]
+
+
+def test_staged_rerun_records_the_folder_the_user_named(tmp_path, box):
+    """The evaluation of a rerun written in the staging folder names the
+    output folder, not the staging folder it was written in."""
+    out = tmp_path / "out"
+    refine_asset(box, PROMPT, out, extras=True)
+    res = refine_asset(box, PROMPT, out, extras=True, skip_if_complete=False)
+    ev = json.loads((out / "evaluation.json").read_text())
+    assert ev["urdf"] == str(out / "mobility.urdf")
+    assert of.STAGING_SUFFIX not in (out / "report.html").read_text()
+    assert all(Path(p).is_relative_to(out) for p in res.extras.values())
+
+
+def test_staging_path_taken_by_a_user_file_is_refused(tmp_path, box):
+    out = tmp_path / "out"
+    refine_asset(box, PROMPT, out, extras=False)
+    of.staging_folder(out).write_text("mine")
+    with pytest.raises(RefineError) as err:
+        refine_asset(box, PROMPT, out, extras=False, skip_if_complete=False)
+    assert err.value.codes == ["OUTPUT_NAME_CONFLICT"] and of.staging_folder(out).read_text() == "mine"
 
 
 # ----------------------------------------------------------------------------- modes

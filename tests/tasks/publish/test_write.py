@@ -130,3 +130,39 @@ def test_no_temporary_files_left(cabinet, tmp_path):
     out = write_output(asset, _overlay(asset, geometry, 0.5), tmp_path / "out", {})
     assert not [p for p in out.root.rglob("*") if p.name.endswith(".tmp")]
     assert math.isfinite(json.loads(out.overlay.read_text())["scale"])
+
+
+def test_mesh_reached_through_a_symlink_keeps_its_material(tmp_path):
+    """Issue 36: the URDF names ``textured_objs/a.obj``, a symlink to
+    ``meshes/base.obj`` whose ``mtllib base.mtl`` (and its texture) lie beside
+    the real file. The output's copy at ``textured_objs/a.obj`` finds its MTL
+    and texture as written (before: the MTL was not copied, no warning);
+    validate says where the input's material is (info), and an edit of that
+    MTL changes the input hash."""
+    from asset2sim import mesh_io
+    from asset2sim.tasks.ingest.validate_input import validate_asset
+    from asset2sim.tasks.publish import write
+    from tests import corpus_builder as cb
+
+    src = cb.build_valid(tmp_path / "in")
+    (src / "textured_objs").mkdir()
+    (src / "textured_objs" / "a.obj").symlink_to("../meshes/base.obj")
+    urdf = src / "mobility.urdf"
+    urdf.write_text(urdf.read_text().replace('"meshes/base.obj"', '"textured_objs/a.obj"'))
+    assert not mesh_io.obj_material_files(src / "textured_objs" / "a.obj")  # the input's loaders miss it
+    found = validate_asset(src)
+    assert not [f.describe() for f in found if f.severity == "error"]
+    (hint,) = [f for f in found if f.code == "MESH_MATERIAL_BESIDE_TARGET"]
+    assert hint.severity == "info" and "textured_objs" in hint.message and "meshes/base.mtl" in hint.message
+    asset = extract_asset(src)
+    out = tmp_path / "out"
+    write.copy_meshes(asset, out)
+    obj = out / "textured_objs" / "a.obj"
+    assert obj.is_file() and not obj.is_symlink()
+    deps = mesh_io.obj_material_files(obj)  # as a loader of the output looks for them
+    assert [p.relative_to(out.resolve()).as_posix() for p in deps] == ["textured_objs/base.mtl", "images/tex.png"]
+    assert deps[0].read_bytes() == (src / "meshes" / "base.mtl").read_bytes()
+    assert deps[1].read_bytes() == (src / "images" / "tex.png").read_bytes()
+    h0 = asset.input_hash
+    (src / "meshes" / "base.mtl").write_text(cb.MTL + "Ks 0.1 0.1 0.1\n")
+    assert extract_asset(src).input_hash != h0, "the MTL beside the real file is part of the input"
