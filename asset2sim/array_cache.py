@@ -41,6 +41,7 @@ import io
 import json
 import math
 import os
+import sys
 import warnings
 import zipfile
 from pathlib import Path
@@ -161,18 +162,19 @@ def digest(*parts: bytes | str) -> str:
 
 @functools.lru_cache(maxsize=None)
 def source_digest(*modules: str) -> str:
-    """Digest of the source files of the named modules (``__file__`` of each,
-    imported): a cache key part that changes whenever that code changes.
+    """Digest of the source files of the named modules (``__file__`` of each;
+    the caller has imported them, this module imports nothing): a cache key
+    part that changes whenever that code changes.
 
     Raises:
-        ImportError: a module cannot be imported.
+        ImportError: a module is not imported or has no source file.
         OSError: a source file cannot be read.
     """
-    import importlib
-
     parts = []
     for name in modules:
-        mod = importlib.import_module(name)
+        mod = sys.modules.get(name)
+        if mod is None or not getattr(mod, "__file__", None):
+            raise ImportError(f"{name} is not an imported module with a source file")
         parts += [name, Path(mod.__file__).read_bytes()]
     return digest(*parts)
 

@@ -11,8 +11,7 @@ umask 022), as ``open()`` would: the temporary file is made with
 ``os.open(O_CREAT | O_EXCL, 0o666)``, not ``tempfile.mkstemp`` (always 0600).
 Temporary files are named ``.<name>.<random>.tmp`` beside their destination.
 
-An observer lets an owner of an output folder (``tasks.publish.
-output_folder``) hear of every destination before its temporary file is
+An observer lets an owner of an output folder (:mod:`asset2sim.output_folder`) hear of every destination before its temporary file is
 created (:func:`add_observer`), so a killed run leaves no file its owner
 does not know of.
 """

@@ -309,7 +309,7 @@ def _trash_can() -> DemoArticulation:
 
 
 #: The manipulation task of each demo category (the manifest's ``task``
-#: column; parsed by :func:`asset2sim.tasks.evaluation.task_spec.parse_task`):
+#: column; parsed by :func:`asset2sim.tasks.check.task_spec.parse_task`):
 #: the everyday use of the category's task part, as the dev manifest words it.
 CATEGORY_TASKS: dict[str, str] = {
     "Box": "close the box lid",

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import cli
-from asset2sim.catalog import ResultCatalog
+from asset2sim.flows.catalog import ResultCatalog
 from asset2sim.schemas.report import FAILURE_MODES
 
 GOAL_SECONDS = 2.0

@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from asset2sim.engines.base import quiet_stdout
     from asset2sim.tasks.check.third_party import CHECKERS, MJCF_PATH, run_checkers
-    from asset2sim.tasks.publish.export_mjcf import export_mjcf
+    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 
     names = args.checkers.split(",") if args.checkers else list(CHECKERS)
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))

@@ -290,7 +290,7 @@ def _run(args, work: Path) -> int:
     catalog = work / "catalog.yaml"
     catalog.write_text(json.dumps(config))  # JSON is YAML
     prepare_prefect_environment(work)
-    from asset2sim.catalog import ResultCatalog, load_catalog
+    from asset2sim.flows.catalog import ResultCatalog, load_catalog
     from asset2sim.flows.refine_flow import run_refine_flow
     from asset2sim.flows.stages import plan_run
 

@@ -65,7 +65,7 @@ KINDS = ("plain", "state", "size", "hinge", "closed", "mount")
 
 
 def _noun(category: str) -> str:
-    from asset2sim.tasks.interpret.prior_tables import load_priors
+    from asset2sim.prior_tables import load_priors
 
     cats = load_priors().categories
     prior = cats.get(category)

@@ -13,7 +13,7 @@ experiment at the budget a CPU allows, and scales with ``--steps``,
 
 1. For each manifest row (default: the first 9, the thesis set) and method,
    the method's asset is made in-process
-   (:func:`asset2sim.tasks.evaluation.baselines.run_method`: ``defaults``,
+   (:func:`asset2sim.tasks.benchmark.baselines.run_method`: ``defaults``,
    ``human`` where the row has GenSim2's reference, ``direct``, ``asset2sim``
    = :func:`asset2sim.tasks.refine.refine_asset`) under ``DIR/<method>/<id>/asset``
    (``--reuse`` keeps an asset already there).
@@ -160,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from asset2sim.tasks.evaluation.baselines import BaselineError, run_method
+    from asset2sim.tasks.benchmark.baselines import BaselineError, run_method
     from asset2sim.tasks.evaluation.learn_env import LearnConfig, TaskEnv, prepare_task, run_episode
     from asset2sim.tasks.ingest.partnet_mobility import read_manifest_rows
 

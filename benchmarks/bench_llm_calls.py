@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     from tests.fake_openai_server import FakeOpenAIServer
 
     from asset2sim.schemas.config import RefineConfig
-    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.synthesize import backends
     from asset2sim.tasks.synthesize import llm_estimator as le
     from asset2sim.tasks.synthesize.context import build_context
     from asset2sim.tasks.synthesize.llm_client import LLMError
@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
                     else:
                         with build_context(src, row["prompt"], category=row["category"] or None, asset_id=row["id"]) as ctx:
                             if method == "asset2sim":
-                                ov = estimate.get_estimator("openai", model="m", base_url=srv.url).estimate(ctx).overlay
+                                ov = backends.get_estimator("openai", model="m", base_url=srv.url).estimate(ctx).overlay
                             elif method == "direct":
                                 ov = le.direct_overlay(ctx, client)
                             else:

@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from asset2sim.engines.base import quiet_stdout
-    from asset2sim.tasks.publish.export_mjcf import export_mjcf
+    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 
     engines = args.engines.split(",")
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))

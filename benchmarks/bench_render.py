@@ -40,7 +40,7 @@ def _assets(paths: list[Path]) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from asset2sim.tasks.publish.render import SceneRenderer, render_contact_sheet, resolve_urdf, write_png
+    from asset2sim.tasks.geometry.render import SceneRenderer, render_contact_sheet, resolve_urdf, write_png
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("paths", nargs="*", type=Path, default=[DEFAULT_DATA])

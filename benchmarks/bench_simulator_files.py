@@ -94,9 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     from asset2sim.engines.loading import collision_pieces, read_initial_state, read_urdf
     from asset2sim.engines.mjcf import mujoco_messages, urdf_to_mjcf
     from asset2sim.tasks.check.parent_child import parent_child_penetration
-    from asset2sim.tasks.publish.collision_geometry import Piece, containment_depths, parent_child_depths
-    from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
-    from asset2sim.tasks.publish.write import read_root
+    from asset2sim.tasks.assemble.collision_geometry import Piece, containment_depths, parent_child_depths
+    from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
+    from asset2sim.tasks.assemble.write import read_root
 
     folders = [args.root] if (args.root / "mobility.urdf").is_file() else sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
     if args.ids:

@@ -25,8 +25,8 @@ from asset2sim.tasks.evaluation.closed_ends import compute_closed
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
 from asset2sim.tasks.evaluation.metric_defs import METRICS
-from asset2sim.tasks.evaluation.request_match import labelled_joints
-from asset2sim.tasks.evaluation.task_spec import parse_task
+from asset2sim.tasks.check.request_match import labelled_joints
+from asset2sim.tasks.check.task_spec import parse_task
 from asset2sim.tasks.ingest.partnet_mobility import read_manifest_rows
 
 DATASET = Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "partnet_mobility"

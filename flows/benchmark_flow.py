@@ -6,8 +6,8 @@ logged to MLflow.
     run_benchmark_flow("manifest.csv", ["defaults", "human"], "bench/")
 
 Prefect and MLflow are imported inside (the package imports without them).
-The work itself is :func:`asset2sim.tasks.evaluation.benchmark.run_benchmark` and
-:func:`asset2sim.tasks.evaluation.benchmark.write_benchmark_outputs`; the flow adds the
+The work itself is :func:`asset2sim.tasks.benchmark.benchmark.run_benchmark` and
+:func:`asset2sim.tasks.benchmark.benchmark.write_benchmark_outputs`; the flow adds the
 orchestration, the catalog and the tracking.
 """
 
@@ -85,7 +85,7 @@ def run_benchmark_flow(
 
     Args:
         manifest, methods, out, ids, seed, engines, reports: as
-            :func:`asset2sim.tasks.evaluation.benchmark.run_benchmark`.
+            :func:`asset2sim.tasks.benchmark.benchmark.run_benchmark`.
         catalog: Parquet file the records are appended to (default
             ``out/catalog.parquet``).
         tracking_uri: MLflow tracking URI (default ``sqlite:///<out>/mlflow.db``).
@@ -98,11 +98,7 @@ def run_benchmark_flow(
     """
     from prefect import flow, task
 
-    from asset2sim.tasks.evaluation.benchmark import (
-        benchmark_tables,
-        run_benchmark,
-        write_benchmark_outputs,
-    )
+    from asset2sim.tasks.benchmark.benchmark import benchmark_tables, run_benchmark, write_benchmark_outputs
 
     out = Path(out)
 

@@ -43,8 +43,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from asset2sim import catalog_fs
-from asset2sim.catalog import ResultCatalog, result_key
+from asset2sim.flows import catalog_fs
+from asset2sim.flows.catalog import ResultCatalog, result_key
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.publish.contract import Prepared, code_hash, run_hash
 

@@ -90,10 +90,11 @@ WARM_MODULES = (
     "pxr.Vt",
     "requests",
 )
-#: Project modules the server imports (the stage functions, the refine
-#: pipeline and the modules its stages import lazily: engines, priors, USD export).
+#: Project modules the server imports (the refine pipeline and the modules
+#: its stages import lazily: engines, priors, USD export); the stage functions
+#: (:mod:`asset2sim.flows.stages`, which imports this module) come as ``preload``
+#: from their callers.
 PROJECT_MODULES = (
-    "asset2sim.flows.stages",
     "asset2sim.tasks.refine",
     "asset2sim.tasks.evaluation.evaluate",
     "asset2sim.engines.pybullet_engine",
@@ -106,7 +107,7 @@ PROJECT_MODULES = (
 def warm_tables() -> list[str]:
     """Fill the per-process caches of the pipeline's tables before forking:
     call every module-level function of the loaded ``asset2sim.tasks``
-    modules that is a ``functools.lru_cache(maxsize=1)`` wrapper taking no
+    modules and of :mod:`asset2sim.prior_tables` that is a ``functools.lru_cache(maxsize=1)`` wrapper taking no
     argument (prior tables, mounting priors, category and label tables:
     YAML parsed and validated once, 0.2-0.3 s that each forked child paid
     again). Pure Python, no threads, safe before ``fork``. Returns the names
@@ -117,7 +118,7 @@ def warm_tables() -> list[str]:
 
     done = []
     for name, mod in sorted(sys.modules.items()):
-        if not name.startswith("asset2sim.tasks.") or mod is None:
+        if not (name.startswith("asset2sim.tasks.") or name == "asset2sim.prior_tables") or mod is None:
             continue
         for attr, fn in sorted(vars(mod).items()):
             info = getattr(fn, "cache_info", None)

@@ -20,9 +20,9 @@ Shape (DEVELOPERS.md, "Shape of the product")::
                        :mod:`asset2sim.flows.store`)
            each finished chain -> build_row -> one catalog row, appended atomically
            (and a progress event: asset2sim.flow_progress, the bar of `make flow`)
-      -> end of run (asset2sim.catalog_finish): the run's partition compacted
+      -> end of run (asset2sim.flows.catalog_finish): the run's partition compacted
          into one Parquet file; the run compared with the previous run of the
-         dataset (asset2sim.catalog_compare: verdict flips, pass-rate and
+         dataset (asset2sim.flows.catalog_compare: verdict flips, pass-rate and
          metric drift, judged by catalog.yaml results.regression)
       -> run summary + failure-mode plot + comparison + pass rate over runs
          -> MLflow run (regression.* tags, nested run per asset)
@@ -117,8 +117,9 @@ from prefect.cache_policies import NO_CACHE
 from prefect.context import FlowRunContext
 from prefect.futures import as_completed
 
-from asset2sim import catalog_compare, catalog_finish, flow_progress, queries, tracking
-from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flows import catalog_compare, catalog_finish, queries, tracking
+from asset2sim import flow_progress
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, server, stages
 from asset2sim.flows.forkserver import ready_server
@@ -314,6 +315,7 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
     from prefect_dask import DaskTaskRunner
 
     mods = tuple(sorted({m for m in (stages.stage_server_module(j) for j in jobs) if m is not None}))
+    mods = (stages.__name__, *mods) if mods else mods  # the stage functions the forked children run
     ctx = FlowRunContext.get()
     runner = getattr(ctx, "task_runner", None)
     if not mods or not isinstance(runner, DaskTaskRunner):

@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import __version__, array_cache, atomic
-from asset2sim.catalog import (
+from asset2sim.flows.catalog import (
     Catalog,
     CatalogError,
     ManifestEntry,
@@ -125,7 +125,7 @@ class AssetJob:
     stage's ``evaluation.json``, ``work_dir`` scratch of isolated stages); ``time_limit_seconds`` s over all stages of the asset;
     ``config`` the :class:`~asset2sim.schemas.config.RefineConfig` as a dict;
     ``finished`` the catalog rows of earlier finished runs keyed by
-    :func:`asset2sim.catalog.result_key` for this asset (empty when forced);
+    :func:`asset2sim.flows.catalog.result_key` for this asset (empty when forced);
     ``resumable`` the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
     dicts, newest first) of earlier runs that wrote no catalog row for this
     asset (empty when forced). With an output store (:mod:`asset2sim.flows.store`)
@@ -429,7 +429,7 @@ def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
     in the background meanwhile when the jobs run isolated in it."""
     for job in jobs[:1]:
         if (module := stage_server_module(job)) is not None:
-            start_soon((module,))
+            start_soon((__name__, module))
     out: list[Prepared | Exception] = []
     for job in jobs:
         try:
@@ -690,7 +690,7 @@ def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], ti
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
     if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
-        preload = (job.refine_function.split(":", 1)[0],)
+        preload = (__name__, job.refine_function.split(":", 1)[0])
         rec = asdict(run_forked(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
                                 memory_limit_mb=job.memory_limit_mb, preload=preload))
     elif job.isolation == "spawn":  # a fresh interpreter per call (imports paid every time)

@@ -5,14 +5,14 @@ a run's outputs go to ``<store>/<dataset>/<run>/<asset id>/`` (and the
 metrics stage's ``evaluation.json`` to ``<store>/<dataset>/<run>/_metrics/<asset id>/``)
 on any filesystem pyarrow or fsspec opens (``s3://bucket/prefix``,
 ``gs://...``, ``memory://...``, or a plain path), the same way the result
-catalog is opened (:func:`asset2sim.catalog_fs.open_location`; S3
+catalog is opened (:func:`asset2sim.flows.catalog_fs.open_location`; S3
 credentials and endpoint from the usual ``AWS_*`` environment or the URI's
 query). Workers need no shared disk: each refines into a local temporary
 folder (:func:`local_work_root`), and the publish stage uploads it.
 
 Atomicity (upload, then manifest): every file of the folder is uploaded
 first (one ``PUT`` each: a reader never sees part of an object), the
-completion marker (:data:`asset2sim.tasks.publish.output_folder.MARKER_NAME`,
+completion marker (:data:`asset2sim.output_folder.MARKER_NAME`,
 which lists every file of the folder with its SHA-256) last. A folder in the
 store is complete only when its marker is there and every file the marker
 lists exists (:func:`store_complete`): an upload cut off by a killed worker
@@ -34,8 +34,8 @@ import time
 from pathlib import Path
 
 from asset2sim import __version__
-from asset2sim.catalog_fs import Location, is_uri, open_location
-from asset2sim.tasks.publish.output_folder import MARKER_NAME
+from asset2sim.flows.catalog_fs import Location, is_uri, open_location
+from asset2sim.output_folder import MARKER_NAME
 
 #: Bytes per read when uploading (files are streamed, not held whole in memory).
 CHUNK_BYTES = 8 * 1024 * 1024

@@ -2,7 +2,7 @@
 
 :class:`CatalogRow` is the contract between the flow (which builds one row
 per asset per run, :func:`asset2sim.tasks.publish.contract.build_row`) and the
-catalog (:class:`asset2sim.catalog.ResultCatalog`, which writes and reads
+catalog (:class:`asset2sim.flows.catalog.ResultCatalog`, which writes and reads
 them). The Parquet schema is derived from the model's fields
 (:func:`arrow_schema`), so a column is declared once. Units are in the column
 names (``_mm``, ``_m``, ``_rad``, ``_kg``, ``_seconds``, ``_pct``); the
@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, field_validator
 #: (key :data:`SCHEMA_VERSION_KEY`). Columns are only ever added (nullable),
 #: never renamed, removed or retyped, so a reader of version N reads every
 #: file of versions <= N: a column a file lacks reads as null
-#: (:meth:`asset2sim.catalog.ResultCatalog.read`). History:
+#: (:meth:`asset2sim.flows.catalog.ResultCatalog.read`). History:
 #:
 #: - 1: the columns up to ``finished_at``;
 #: - 2: ``code_hash`` (SHA-256 of the package source, the skip key's code part,

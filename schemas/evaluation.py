@@ -2,7 +2,7 @@
 
 Made by :func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`; read by
 the flows (catalog rows), the benchmark records and
-:func:`asset2sim.tasks.publish.report_html.write_report`, which renders it.
+:func:`asset2sim.tasks.evaluation.report_html.write_report`, which renders it.
 """
 
 from __future__ import annotations

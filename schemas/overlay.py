@@ -28,6 +28,13 @@ SCHEMA_VERSION = "1.0"
 Vec3 = tuple[float, float, float]
 
 
+#: The overlay's uniform scale must lie in this range (dimensionless):
+#: :mod:`asset2sim.tasks.synthesize.validate_overlay` refuses a scale outside it
+#: (``OVL_SCALE_INVALID``) and the input validator derives its asset-size bound
+#: from it (``ASSET_SIZE_IMPLAUSIBLE``, :mod:`asset2sim.tasks.ingest.findings`).
+SCALE_RANGE: tuple[float, float] = (1e-4, 1e4)
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 

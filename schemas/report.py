@@ -122,7 +122,7 @@ class RefineReport(BaseModel):
     notes: list[str] = Field(default_factory=list)
     request: RequestFindings | None = None
     """Ignored word groups, warnings and every number of the request with what
-    the output achieved (:func:`asset2sim.tasks.interpret.request_apply.findings`)."""
+    the output achieved (:func:`asset2sim.tasks.synthesize.request_apply.findings`)."""
     mounting: RootMount | None = None
     """How the root was held in every check (``tasks.interpret.mounting``);
     None in reports written before it was recorded (free-standing)."""

@@ -46,7 +46,7 @@ OrderAxis = Literal["vertical", "left_right", "right_left", "front_back"]
 
 class StateTarget(BaseModel):
     """A state asked for in numbers or by a physical end, resolved against the
-    geometry after scaling (:mod:`asset2sim.tasks.interpret.request_apply`).
+    geometry after scaling (:mod:`asset2sim.tasks.synthesize.request_apply`).
 
     ``kind``: ``fraction`` (``value`` opening fraction 0..1 from the geometric
     closed end), ``angle`` (``value`` rad from the closed end), ``distance``

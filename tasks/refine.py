@@ -9,7 +9,7 @@ one small function per stage, and records wall time per stage):
 (``tasks.synthesize.context.build_context``), and a resting pose the request
 asks for (``tasks.state.pose``), 4. synthesize the overlay and the requested
 bands (``tasks.synthesize.estimate``) and validate it
-(``tasks.synthesize.validate_overlay``), 5. write (``tasks.publish.write``),
+(``tasks.synthesize.validate_overlay``), 5. write (``tasks.assemble.write``),
 6. refine the initial state (``tasks.state.refine_state``, ``tasks.state.collision``),
 7. post-check and escalation (``tasks.check.postcheck``), 8. report, extras
 (MJCF export, renders, HTML report) and a completion marker written last.
@@ -27,7 +27,8 @@ from pathlib import Path
 from typing import Callable
 
 from asset2sim import __version__, array_cache, atomic
-from asset2sim.engines.base import SessionOptions, open_session, quiet_stdout
+from asset2sim.engines.base import SessionOptions, quiet_stdout
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.evaluation import Evaluation
@@ -43,8 +44,12 @@ from asset2sim.tasks.geometry import urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.interpret import mounting, request, request_apply
-from asset2sim.tasks.publish import collision_geometry, export_mjcf, export_usd, output_folder, render, write
+from asset2sim.tasks.interpret import mounting, request
+from asset2sim.tasks.synthesize import request_apply
+from asset2sim.tasks.assemble import collision_geometry, export_mjcf, write
+from asset2sim.tasks.publish import export_usd
+from asset2sim import output_folder
+from asset2sim.tasks.geometry import render
 from asset2sim.tasks.publish.contract import (
     MARKER_NAME,
     REPORT_NAME,
@@ -52,8 +57,9 @@ from asset2sim.tasks.publish.contract import (
     run_hash,
     write_completion_marker,
 )
-from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, repair, stability
-from asset2sim.tasks.synthesize import estimate, validate_overlay
+from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, stability
+from asset2sim.tasks.check import repair
+from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
 
@@ -116,7 +122,7 @@ def refine_asset(
         overwrite: write into an output folder that holds files asset2sim did
             not write (they are kept unless the run writes the same path);
             without it such a folder is refused
-            (:mod:`asset2sim.tasks.publish.output_folder`).
+            (:mod:`asset2sim.output_folder`).
         extracted: the asset already read by
             :func:`asset2sim.tasks.ingest.extract.extract_asset_checked` for
             this ``asset_dir``, ``asset_id`` and ``category`` (description,
@@ -203,10 +209,10 @@ def _check_prompt(prompt: str) -> None:
         raise RefineError(str(exc), "invalid_input", exc.codes) from exc
 
 
-def _open_estimator(config: RefineConfig) -> estimate.Estimator:
+def _open_estimator(config: RefineConfig) -> estimator.Estimator:
     """The configured estimator; RefineError("estimator_failure") when it cannot be made."""
     try:
-        return estimate.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
+        return backends.get_estimator(config.estimator, **{k: v for k, v in (("model", config.model), ("base_url", config.base_url)) if v})
     except Exception as exc:
         raise RefineError(f"estimator {config.estimator!r} unavailable: {exc}", "estimator_failure", ["ESTIMATOR_UNAVAILABLE"]) from exc
 
@@ -325,7 +331,7 @@ class _Attempt:
     design: list[str] = field(default_factory=list)
     """What stability by design changed and why (``tasks.state.stability``)."""
     targets: dict = field(default_factory=dict)
-    """joint -> :class:`~asset2sim.tasks.interpret.request_apply.JointTarget` (numbers / ends the request asked)."""
+    """joint -> :class:`~asset2sim.tasks.synthesize.request_apply.JointTarget` (numbers / ends the request asked)."""
     rewritten: bool = False
     """Written again after another attempt: files that attempt wrote (collision
     pieces) may differ from those ``check`` measured."""
@@ -552,7 +558,7 @@ def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLo
 
 def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, out_dir: Path) -> list[str]:
     """The running clearance the writer gives sliding contacts between parts
-    (:func:`asset2sim.tasks.publish.collision_geometry.running_clearance`) in
+    (:func:`asset2sim.tasks.assemble.collision_geometry.running_clearance`) in
     the output as written with ``overlay``, ``state`` and the collision
     ``overrides`` (the pieces are the writer's cached ones: nothing is
     recomputed, no file changes), for ``state.collision_changes``."""
@@ -1020,7 +1026,7 @@ def _write_marker(owner: output_folder.OwnedFolder, input_hash: str, chash: str)
 def _start_output(asset: AssetDescription, out_dir: Path, overwrite: bool) -> output_folder.OwnedFolder:
     """Before (re)writing an output folder: remove the completion marker and
     the files earlier runs recorded, nothing else; refuse files asset2sim did
-    not write unless ``overwrite`` (:func:`asset2sim.tasks.publish.output_folder.start`).
+    not write unless ``overwrite`` (:func:`asset2sim.output_folder.start`).
     RefineError("invalid_input") with the ``OUTPUT_*`` code."""
     try:
         return output_folder.start(asset.source_dir, out_dir, overwrite=overwrite)
@@ -1060,7 +1066,7 @@ _UNWRITABLE = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None)
 
 def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
     """Raise ``OUTPUT_WRITE_FAILED`` (an
-    :class:`~asset2sim.tasks.publish.output_folder.OutputError` raised from
+    :class:`~asset2sim.output_folder.OutputError` raised from
     the OSError, so the command line prints ``OUTPUT_WRITE_FAILED [ENOSPC]``
     and the file) when ``exc``, or an exception it was raised from or while
     handling, is an OSError whose errno is in :data:`_UNWRITABLE`; return

@@ -1,14 +1,25 @@
-"""The package's import graph: no cycles, no guarded imports of its own modules.
+"""The package's import graph: no cycles, no guarded imports of its own
+modules, and the stages as layers in data-flow order.
 
 Every ``import`` / ``from ... import`` of an ``asset2sim`` module anywhere in a
 module (top level or inside a function) is an edge, so a cycle hidden behind a
-function-level import is still found. Lazy imports are for optional heavy
-third-party packages only.
+function-level import is still found. A module that imports by name
+(``importlib.import_module``, ``flows.isolation.import_target``) has an edge
+to every project module a string of it names (``"asset2sim.engines.fake"``,
+``"asset2sim.tasks.refine:refine_asset"``, an f-string prefix
+``f"asset2sim.commands.{name}"``: every module under it). Lazy imports are for
+optional heavy third-party packages only.
+
+The layers (:data:`LAYERS`), each importing only its own and earlier ones:
+the core (``asset2sim/`` and ``schemas/``), then the stages of ``tasks/`` in
+data-flow order, ``tasks/refine.py`` that chains them, ``tasks/benchmark/``
+above it, ``flows/``, and the command line.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import networkx as nx
@@ -57,7 +68,16 @@ def _edges(name: str, path: Path, modules: dict[str, Path]) -> list[tuple[str, s
                         if isinstance(n, (ast.Import, ast.ImportFrom)):
                             guarded_lines.add(n.lineno)
     out = []
+    by_name = any(isinstance(n, ast.Call) and _called_name(n) in _BY_NAME for n in ast.walk(tree))
     for node in ast.walk(tree):
+        if by_name and isinstance(node, ast.Constant) and isinstance(node.value, str):
+            for mod in _named_modules(node.value, modules):
+                if mod != name:
+                    out.append((mod, node.value, node.lineno, False))
+        if by_name and isinstance(node, ast.JoinedStr) and node.values and isinstance(node.values[0], ast.Constant):
+            prefix = str(node.values[0].value)
+            if prefix.startswith("asset2sim.") and prefix.endswith("."):
+                out += [(m, prefix, node.lineno, False) for m in modules if m.startswith(prefix) and m != name]
         targets: list[str] = []
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
@@ -70,6 +90,43 @@ def _edges(name: str, path: Path, modules: dict[str, Path]) -> list[tuple[str, s
             if mod and mod != name and not (name.startswith(mod + ".") or mod == name.rsplit(".", 1)[0] and path.name == "__init__.py"):
                 out.append((mod, t, node.lineno, node.lineno in guarded_lines))
     return out
+
+
+#: Functions that import a module named by a string.
+_BY_NAME = frozenset({"import_module", "import_target", "__import__"})
+_MODULE_TEXT = re.compile(r"asset2sim(\.[A-Za-z_][A-Za-z0-9_]*)+")
+
+
+def _called_name(call: ast.Call) -> str | None:
+    f = call.func
+    return f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else None
+
+
+def _named_modules(text: str, modules: dict[str, Path]) -> list[str]:
+    """Project modules a string names as a whole (``pkg.mod`` or ``pkg.mod:attr``)."""
+    head = text.split(":", 1)[0]
+    if not _MODULE_TEXT.fullmatch(head):
+        return []
+    mod = _resolve(head, modules)
+    return [mod] if mod is not None and (mod == head or head.startswith(mod + ".")) else []
+
+
+#: The layers in data-flow order (index = rank); a module may import only
+#: modules of its own or an earlier layer (:func:`_layer`).
+LAYERS = ["core", "ingest", "geometry", "interpret", "synthesize", "assemble", "state", "check", "evaluation",
+          "publish", "refine", "benchmark", "flows", "cli"]
+
+
+def _layer(module: str) -> str:
+    """The layer of a project module (see :data:`LAYERS`)."""
+    parts = module.split(".")
+    if module in ("asset2sim.cli", "asset2sim.__main__") or parts[:2] == ["asset2sim", "commands"]:
+        return "cli"
+    if parts[:2] == ["asset2sim", "flows"]:
+        return "flows"
+    if parts[:2] == ["asset2sim", "tasks"] and len(parts) >= 3:
+        return parts[2] if parts[2] in LAYERS else "refine" if parts[2] == "refine" else parts[2]
+    return "core"
 
 
 def _graph() -> tuple[nx.DiGraph, list[str]]:
@@ -99,6 +156,53 @@ def test_no_import_cycles():
     g, _ = _graph()
     cycles = [sorted(c) for c in nx.strongly_connected_components(g) if len(c) > 1]
     assert not cycles, "import cycles between the project's modules: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_every_module_belongs_to_a_layer():
+    unknown = sorted({_layer(m) for m in _modules()} - set(LAYERS))
+    assert not unknown, f"packages under tasks/ with no place in LAYERS: {unknown}"
+
+
+def test_stages_import_only_earlier_layers():
+    """The stage packages form a chain in data-flow order: no import against it."""
+    g, _ = _graph()
+    rank = {name: i for i, name in enumerate(LAYERS)}
+    against = sorted(f"{a} ({_layer(a)}) imports {b} ({_layer(b)})" for a, b in g.edges
+                     if rank.get(_layer(b), 0) > rank.get(_layer(a), 0))
+    assert not against, f"{len(against)} imports against the stage order:\n" + "\n".join(against)
+
+
+def test_no_cycles_between_packages():
+    """Collapsed to packages (``asset2sim.tasks.state``, ``asset2sim.engines``,
+    ``asset2sim.schemas`` ...), the graph has no loop either."""
+    g, _ = _graph()
+    modules = _modules()
+    pkg = {m: m if modules[m].name == "__init__.py" else m.rpartition(".")[0] for m in g.nodes}
+    pg = nx.DiGraph()
+    pg.add_edges_from((pkg[a], pkg[b]) for a, b in g.edges if pkg[a] != pkg[b] and not pkg[a].startswith(pkg[b] + ".")
+                      and not pkg[b].startswith(pkg[a] + "."))
+    cycles = [sorted(c) for c in nx.strongly_connected_components(pg) if len(c) > 1]
+    assert not cycles, "import loops between packages: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_import_by_name_is_an_edge(tmp_path):
+    """A registry that imports its plugins by name (the loop the estimator
+    registry once hid) is seen as an import."""
+    (tmp_path / "reg.py").write_text("import importlib\nPLUGINS = {'x': 'asset2sim.x.plugin'}\n"
+                                     "def get(n):\n    return importlib.import_module(PLUGINS[n])\n")
+    (tmp_path / "plugin.py").write_text("from asset2sim.x import reg\n")
+    (tmp_path / "cmds.py").write_text("import importlib\ndef run(n):\n    return importlib.import_module(f'asset2sim.x.{n}')\n")
+    modules = {"asset2sim.x.reg": tmp_path / "reg.py", "asset2sim.x.plugin": tmp_path / "plugin.py",
+               "asset2sim.x.cmds": tmp_path / "cmds.py"}
+    edges = {(name, mod) for name, path in modules.items() for mod, _t, _l, _g in _edges(name, path, modules)}
+    assert ("asset2sim.x.reg", "asset2sim.x.plugin") in edges and ("asset2sim.x.plugin", "asset2sim.x.reg") in edges
+    assert {("asset2sim.x.cmds", "asset2sim.x.reg"), ("asset2sim.x.cmds", "asset2sim.x.plugin")} <= edges
+
+
+def test_a_stage_importing_a_later_one_is_reported():
+    assert _layer("asset2sim.tasks.state.clearance") == "state" and _layer("asset2sim.tasks.refine") == "refine"
+    assert LAYERS.index(_layer("asset2sim.tasks.assemble.write")) > LAYERS.index(_layer("asset2sim.tasks.synthesize.estimate"))
+    assert _layer("asset2sim.output_folder") == "core" and _layer("asset2sim.flows.catalog") == "flows"
 
 
 def test_no_guarded_imports_of_own_modules():

@@ -24,8 +24,8 @@ import os
 from pathlib import Path
 from typing import Iterable
 
-from asset2sim.engines.base import known_engines
-from asset2sim.tasks.publish.output_folder import OutputError
+from asset2sim.engines.registry import known_engines
+from asset2sim.output_folder import OutputError
 
 OK = 0
 INVALID_INPUT = 1

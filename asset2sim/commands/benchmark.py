@@ -18,7 +18,7 @@ import math
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
-from asset2sim.tasks.evaluation.benchmark import (
+from asset2sim.tasks.benchmark.benchmark import (
     RESEARCH_NUMBERS,
     benchmark_tables,
     run_benchmark,

@@ -21,7 +21,7 @@ from asset2sim.commands._status import (
     parse_engines,
 )
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
-from asset2sim.tasks.publish import output_folder
+from asset2sim import output_folder
 
 NAME = "evaluate"
 HELP = "Evaluate an asset (any URDF): physical robustness, semantic accuracy, probes; writes evaluation.json and report.html."

@@ -34,14 +34,14 @@ from asset2sim.commands._status import (
     output_failure,
     parse_engines,
 )
-from asset2sim.engines.base import available_engines
+from asset2sim.engines.registry import available_engines
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.engines.mjcf import MjcfError
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
-from asset2sim.tasks.publish import output_folder
-from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
+from asset2sim import output_folder
+from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export_mjcf
 from asset2sim.tasks.publish.export_usd import UsdExportError, check_usd, export_usd
-from asset2sim.tasks.publish.write import read_root
+from asset2sim.tasks.assemble.write import read_root
 from asset2sim.urdf import UrdfError
 
 NAME = "export"

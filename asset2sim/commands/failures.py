@@ -2,7 +2,7 @@
 Parquet result catalog (``make failures``).
 
 Each query reads only the runs and columns it needs (one compacted file per
-run, :class:`asset2sim.catalog.ResultCatalog`), so it stays fast on a catalog
+run, :class:`asset2sim.flows.catalog.ResultCatalog`), so it stays fast on a catalog
 of a year of nightly runs (``benchmarks/bench_catalog.py``: 10^6 rows over
 365 runs)."""
 
@@ -11,14 +11,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from asset2sim import catalog_compare, queries
-from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
+from asset2sim.flows import catalog_compare, queries
+from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
 
 #: Columns the breakdown of a run reads (besides the --by columns): those of
-#: :func:`asset2sim.queries.status_counts`.
+#: :func:`asset2sim.flows.queries.status_counts`.
 BREAKDOWN_COLUMNS = queries.COUNT_COLUMNS
 #: Columns of the list of assets that did not pass all checks.
 FAILED_COLUMNS = ("asset_id", "category", "status", "failure_mode", "error")

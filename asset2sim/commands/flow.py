@@ -77,7 +77,7 @@ def _fmt(v, pct: bool = False) -> str:
 
 def run(args: argparse.Namespace) -> int:
     t0, t0_epoch = time.perf_counter(), time.time()
-    from asset2sim.catalog import CatalogError, load_catalog
+    from asset2sim.flows.catalog import CatalogError, load_catalog
     from asset2sim.flows.stages import prepare_prefect_environment
 
     try:
@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  outputs  {summary.get('output_store') or summary['output_dir']}")
     print(f"  catalog  {summary['catalog_root']}")
     if summary.get("mlflow_run_id"):
-        from asset2sim.tracking import resolve_tracking_uri
+        from asset2sim.flows.tracking import resolve_tracking_uri
 
         print(f"  MLflow   run {summary['mlflow_run_id']} in {resolve_tracking_uri(cat.project_root, cat.config.tracking.uri)}")
     elif summary.get("tracking_error"):

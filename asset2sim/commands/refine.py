@@ -27,7 +27,7 @@ from asset2sim.commands._status import (
 from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.request import RequestTooLong
-from asset2sim.tasks.publish.output_folder import OutputError
+from asset2sim.output_folder import OutputError
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
 

@@ -22,8 +22,8 @@ from asset2sim.commands._status import (
     output_failure,
     output_folder_failure,
 )
-from asset2sim.tasks.publish import output_folder
-from asset2sim.tasks.publish.render import (
+from asset2sim import output_folder
+from asset2sim.tasks.geometry.render import (
     VIEWS,
     RenderError,
     SceneRenderer,

@@ -10,7 +10,7 @@ position (``initial_state.json``). :func:`authored_physics` reads them;
 :func:`held_by_engines` loads the folder in each engine and reads the same
 quantities back from the engine's own data structures
 (:meth:`asset2sim.engines.base.SimSession.held_physics`, and for exported files
-:func:`asset2sim.engines.base.read_held_physics`: the MJCF in MuJoCo, the USD in
+:func:`asset2sim.engines.registry.read_held_physics`: the MJCF in MuJoCo, the USD in
 Newton's importer); :func:`compare_physics` names every quantity an engine
 dropped or rescaled. This catches the class of importer bug where a value is
 silently lost or converted (Isaac Sim's URDF importer drops ``<dynamics>``
@@ -37,14 +37,13 @@ from asset2sim.engines.base import (
     HeldLink,
     HeldPhysics,
     SessionOptions,
-    open_session,
     principal_moments,
-    read_held_physics,
 )
+from asset2sim.engines.registry import open_session, read_held_physics
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_initial_state, read_urdf
 from asset2sim.tasks.interpret.mounting import session_root_options
-from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
-from asset2sim.tasks.publish.write import read_root
+from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
+from asset2sim.tasks.assemble.write import read_root
 
 #: The exported files each engine's own importer reads back:
 #: (engine, format, path in the output folder).

@@ -45,7 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, open_session, quiet_stdout
+from asset2sim.engines.base import SessionOptions, SimSession, quiet_stdout
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay

@@ -12,7 +12,7 @@ included: PyBullet's ``getClosestPoints``, MuJoCo's ``mj_geomDistance``)
 for every joint's parent and child at the initial state and reports the
 deepest penetration, margins removed. The writer makes the output's
 collision pieces so that it stays within the SPEC's 2 mm tolerance
-(:func:`asset2sim.tasks.publish.collision_geometry.separate_parent_child`).
+(:func:`asset2sim.tasks.assemble.collision_geometry.separate_parent_child`).
 """
 
 from __future__ import annotations
@@ -20,11 +20,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from asset2sim import urdf
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.publish.collision_geometry import CONTAINMENT_TOLERANCE
+from asset2sim.tasks.assemble.collision_geometry import CONTAINMENT_TOLERANCE
 
 __all__ = ["CONTACT_MARGIN", "parent_child_penetration"]
 

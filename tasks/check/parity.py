@@ -26,12 +26,13 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics
-from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
+from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
 
-from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
+from asset2sim.engines.base import EngineUnavailable, SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.tasks.interpret.mounting import session_root_options
-from asset2sim.tasks.publish.write import read_root
+from asset2sim.tasks.assemble.write import read_root
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session
+from asset2sim.engines.base import SessionOptions, SimSession, Spring
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit

@@ -74,7 +74,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring, open_session
+from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
+from asset2sim.engines.registry import open_session
 from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit

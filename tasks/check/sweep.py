@@ -74,7 +74,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring, open_session
+from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult

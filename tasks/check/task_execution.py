@@ -68,7 +68,7 @@ Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
 
 Opening fractions f = d (q - q_c) / R (0 closed, 1 fully open; closed ends:
 ``docs/metrics.md`` section 4). Targets: the task's
-(:mod:`asset2sim.tasks.evaluation.task_spec`): close 0.05, open 0.6. A joint
+(:mod:`asset2sim.tasks.check.task_spec`): close 0.05, open 0.6. A joint
 whose initial state already meets the target is first set to the far side
 (close: f = 0.6, open: f = 0) and settled again, so every task moves its
 joint (an asset delivered closed is still asked to close).
@@ -82,7 +82,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, Spring, open_session, quiet_stdout
+from asset2sim.engines.base import SessionOptions, Spring, quiet_stdout
+from asset2sim.engines.registry import open_session
 from asset2sim.frames import axis_angle_matrix
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import MetricResult

@@ -7,7 +7,7 @@ asset, with the same definitions as the evaluation
 escalation keeps to (:func:`operating_limits`).
 
 The task is parsed as in the evaluation
-(:func:`asset2sim.tasks.evaluation.task_spec.parse_task`: its verb gives the
+(:func:`asset2sim.tasks.check.task_spec.parse_task`: its verb gives the
 direction and target, its part words the joints, over the asset's
 ``semantics.txt`` labels); the target must hold 1 s after release except
 where the request asks the part to move freely or a spring asked for (by the
@@ -27,8 +27,8 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operating, sweep, task_execution
 from asset2sim.tasks.check.postcheck import springs_of
 from asset2sim.tasks.check.force_ranges import force_metric
-from asset2sim.tasks.evaluation.asset_files import parse_urdf
-from asset2sim.tasks.evaluation.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
+from asset2sim.tasks.check.asset_files import parse_urdf
+from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import spring_expected
 
 #: The metrics this tier adds to the post-check.
@@ -77,11 +77,11 @@ def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str,
 def task_spec_for(text: str, urdf: Path | str, asset: AssetDescription, category: str | None,
                   task_joints: list[str], state: dict[str, float] | None = None,
                   closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
-    """The :class:`~asset2sim.tasks.evaluation.task_spec.TaskSpec` of ``text``
+    """The :class:`~asset2sim.tasks.check.task_spec.TaskSpec` of ``text``
     on the written asset ``urdf`` (labels from ``asset``'s semantics); with
     the initial ``state`` (joint -> rad or m) and the ``closed`` ends (joint
     -> (q_closed, direction, open range)), narrowed to the joints it has work
-    on (:func:`~asset2sim.tasks.evaluation.task_spec.with_work_to_do`)."""
+    on (:func:`~asset2sim.tasks.check.task_spec.with_work_to_do`)."""
     _, joints = parse_urdf(Path(urdf))
     semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
     spec = parse_task(text, joints, semantics, category, task_joints)

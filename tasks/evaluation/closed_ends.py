@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.tasks.evaluation.asset_files import JointInfo, clip_to_limits
+from asset2sim.tasks.check.asset_files import JointInfo, clip_to_limits
 from asset2sim.tasks.geometry.closed_state import link_hull_points
 from asset2sim.tasks.geometry.urdf_closed import aabb_extents, geometry_extents, measure_closed_ends
 from asset2sim.tasks.ingest.extract import extract_asset
@@ -110,7 +111,7 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
 
     Args:
         urdf: the evaluated URDF.
-        joints: its joints (:func:`asset2sim.tasks.evaluation.asset_files.parse_urdf`).
+        joints: its joints (:func:`asset2sim.tasks.check.asset_files.parse_urdf`).
         names: joints to report.
         extents_out: when given, the (3,) m AABB extents of the object with
             every joint at its closed end are appended to it.

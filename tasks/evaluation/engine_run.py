@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnavailable, SessionOptions, open_session
+from asset2sim.engines.base import EngineUnavailable, SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.mesh_io import MeshReadError
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
@@ -24,7 +25,7 @@ from asset2sim.tasks.check.postcheck import RestRecording, measure_rest_test, re
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.check.probes import OPEN_FAR_TARGET, run_probes
 from asset2sim.tasks.check.support import rolling_joints
-from asset2sim.tasks.evaluation.asset_files import LinkInfo
+from asset2sim.tasks.check.asset_files import LinkInfo
 from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
 from asset2sim.tasks.geometry.limits import subtrees
@@ -146,7 +147,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
     (the probes measured after a rest test and a restore differed by up to
     ~1e-3 relative from those measured without one). ``probe_joints`` /
     ``probe_actions``: what the probes try (a task,
-    :mod:`asset2sim.tasks.evaluation.task_spec`); default the task-relevant
+    :mod:`asset2sim.tasks.check.task_spec`); default the task-relevant
     joints, close and open. ``recorded``: kept in :attr:`EngineRun.recorded`
     for the manipulation metrics. Errors are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()

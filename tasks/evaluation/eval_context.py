@@ -1,10 +1,10 @@
 """What an evaluation knows before any simulator runs: the :class:`Context`.
 
 :func:`build_context` reads the evaluated URDF and its sidecars
-(:mod:`asset2sim.tasks.evaluation.asset_files`), the reference through the
+(:mod:`asset2sim.tasks.check.asset_files`), the reference through the
 PartNet-Mobility adapter
 (:func:`asset2sim.tasks.ingest.partnet_mobility.read_reference`), the request
-and the category prior (:mod:`asset2sim.tasks.evaluation.request_match`), and
+and the category prior (:mod:`asset2sim.tasks.check.request_match`), and
 states the scale of the evaluated asset and where it came from.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.request import RequestSpec
-from asset2sim.tasks.evaluation.asset_files import (
+from asset2sim.tasks.check.asset_files import (
     MOVABLE,
     EvaluationError,
     JointInfo,
@@ -32,12 +32,12 @@ from asset2sim.tasks.evaluation.asset_files import (
     read_semantics,
 )
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, infer_scale_from_geometry
-from asset2sim.tasks.evaluation.request_match import category_prior, parse_prompt, recognize_category
-from asset2sim.tasks.evaluation.task_spec import TaskSpec
+from asset2sim.tasks.check.request_match import category_prior, parse_prompt, recognize_category
+from asset2sim.tasks.check.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints
-from asset2sim.tasks.publish.output_folder import OutputError
-from asset2sim.tasks.publish.write import read_root
+from asset2sim.output_folder import OutputError
+from asset2sim.tasks.assemble.write import read_root
 
 
 @dataclass

@@ -10,8 +10,8 @@ present), runs every registered metric under the SPEC's conventions
 The stage, in the order it runs:
 
 - :mod:`~asset2sim.tasks.evaluation.eval_context`: the asset's files
-  (:mod:`~asset2sim.tasks.evaluation.asset_files`), the reference, the
-  request and category prior (:mod:`~asset2sim.tasks.evaluation.request_match`)
+  (:mod:`~asset2sim.tasks.check.asset_files`), the reference, the
+  request and category prior (:mod:`~asset2sim.tasks.check.request_match`)
   as one :class:`~asset2sim.tasks.evaluation.eval_context.Context`;
 - :mod:`~asset2sim.tasks.evaluation.closed_ends`: the closed ends and extents
   the evaluation computes itself;
@@ -41,7 +41,7 @@ from asset2sim.schemas.metrics import REST_TEST_METRICS
 from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.check.postcheck import RestRecording
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.evaluation.asset_files import EvaluationError, JointInfo, LinkInfo, find_urdf, parse_urdf
+from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo, LinkInfo, find_urdf, parse_urdf
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed, infer_scale_from_geometry
 from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine
 from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
@@ -60,7 +60,7 @@ from asset2sim.tasks.evaluation.metric_defs import (
     movable_joints,
     register_metric,
 )
-from asset2sim.tasks.evaluation.request_match import (
+from asset2sim.tasks.check.request_match import (
     category_prior,
     labelled_joints,
     parse_prompt,
@@ -68,8 +68,8 @@ from asset2sim.tasks.evaluation.request_match import (
     requested_joints,
     scaled_mass_range,
 )
-from asset2sim.tasks.evaluation.task_spec import parse_task, with_work_to_do
-from asset2sim.tasks.publish.report_html import write_report
+from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
+from asset2sim.tasks.evaluation.report_html import write_report
 
 __all__ = [
     "EVALUATION_VERSION",
@@ -181,7 +181,7 @@ def evaluate_asset(
             result equals a fresh rest test's (the simulation is
             deterministic). Otherwise it is ignored.
         views, views_state: renders of the object already taken
-            (:func:`asset2sim.tasks.publish.render.render_views`, view name ->
+            (:func:`asset2sim.tasks.geometry.render.render_views`, view name ->
             (H, W, 3) uint8) at the joint positions ``views_state`` (rad/m):
             ``report.html`` shows them when that is the evaluated initial
             state, else it renders its own.
@@ -195,7 +195,7 @@ def evaluate_asset(
             grades itself).
         task: the manipulation task ("close the microwave door", a
             manifest's ``task``): the probes try only its joints and
-            direction (:func:`asset2sim.tasks.evaluation.task_spec.parse_task`),
+            direction (:func:`asset2sim.tasks.check.task_spec.parse_task`),
             and a gripper executes it (``task_execution``,
             ``operating_force``: :mod:`asset2sim.tasks.check.task_execution`);
             None: the probes try every task-relevant joint, close and open,
@@ -357,7 +357,7 @@ def evaluate_refined(
 def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
                      views: dict[str, np.ndarray] | None = None) -> dict[str, Path]:
     """Write ``evaluation.json`` (and ``report.html``, rendering ``ev``:
-    :func:`asset2sim.tasks.publish.report_html.write_report`, with ``views``
+    :func:`asset2sim.tasks.evaluation.report_html.write_report`, with ``views``
     the renders at ``ev.initial_state`` when already taken) into ``out_dir``
     atomically.
 

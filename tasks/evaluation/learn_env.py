@@ -7,13 +7,13 @@ A `gymnasium <https://gymnasium.farama.org>`_ environment over any asset folder
 :func:`asset2sim.tasks.evaluation.eval_context.build_context` reads) and a
 task text ("close the box lid", a manifest's ``task`` column). It talks to
 physics only through the engine protocol
-(:func:`asset2sim.engines.base.open_session`), so it runs in every engine the
+(:func:`asset2sim.engines.registry.open_session`), so it runs in every engine the
 protocol answers; the benchmark uses PyBullet.
 
 Definitions (re-derivable; ``docs/metrics.md``):
 
 - **Task instance** (:func:`prepare_task`): the task is parsed by
-  :func:`asset2sim.tasks.evaluation.task_spec.parse_task` into joints and
+  :func:`asset2sim.tasks.check.task_spec.parse_task` into joints and
   actions; the closed ends are the evaluation's own
   (:func:`asset2sim.tasks.evaluation.closed_ends.compute_closed`, no method
   grades itself). Where the PartNet-Mobility reference
@@ -87,7 +87,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring, open_session, quiet_stdout
+from asset2sim.engines.base import SessionOptions, SimSession, Spring, quiet_stdout
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule
 from asset2sim.tasks.check.probes import (
@@ -103,7 +104,7 @@ from asset2sim.tasks.check.task_execution import TaskConfig, joint_frame_axis
 from asset2sim.tasks.check.task_tier import hold_required_by_label
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
 from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
-from asset2sim.tasks.evaluation.task_spec import parse_task
+from asset2sim.tasks.check.task_spec import parse_task
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
@@ -236,7 +237,7 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     Raises:
         LearnTaskError: no movable joint the task can act on (none parsed, or
             none with an opening range > 0).
-        asset2sim.tasks.evaluation.asset_files.EvaluationError: the asset
+        asset2sim.tasks.check.asset_files.EvaluationError: the asset
             cannot be read.
     """
     if start not in ("task", "asset"):
@@ -288,7 +289,7 @@ class LearnConfig:
     """Environment knobs (units on every field)."""
 
     engine: str = "pybullet"
-    """engine name (:func:`asset2sim.engines.base.open_session`)"""
+    """engine name (:func:`asset2sim.engines.registry.open_session`)"""
     action_repeat: int = 12
     """engine steps per action (12 x 1/240 s = 20 Hz control, a typical
     end-effector velocity-control rate)"""

@@ -50,7 +50,7 @@ from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
-from asset2sim.tasks.evaluation.request_match import requested_joints, scaled_mass_range
+from asset2sim.tasks.check.request_match import requested_joints, scaled_mass_range
 
 #: Largest ground penetration during the rest test that passes, m.
 GROUND_PENETRATION_TOL = 0.005

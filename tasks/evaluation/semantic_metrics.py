@@ -150,7 +150,7 @@ def mass_plausibility(
         total_mass: sum of the link masses the simulator uses, kg.
         mass_range: (low, high) kg plausible for an object of this category *at
             the asset's size* (the caller scales the category's range, see
-            :func:`asset2sim.tasks.evaluation.request_match.scaled_mass_range`), or None when no
+            :func:`asset2sim.tasks.check.request_match.scaled_mass_range`), or None when no
             prior exists (then ``passed`` is None).
         per_link: link -> {mass, source} for the report.
         category: for the report.

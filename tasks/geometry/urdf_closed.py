@@ -4,7 +4,7 @@ evaluation share.
 The evaluation grades every method against closed ends it measures itself on
 the method's output (:mod:`asset2sim.tasks.evaluation.closed_ends`). The
 output's collision pieces depend only on the meshes and the joint limits
-(:mod:`asset2sim.tasks.publish.collision_geometry`), so refine measures its
+(:mod:`asset2sim.tasks.assemble.collision_geometry`), so refine measures its
 own written output with the same function and places the requested state
 from that: where the output's pieces overlap a part's parent at every angle
 (faucet 148's handle inside its body's hull piece, 120-156 mm summed
@@ -34,7 +34,8 @@ from typing import Iterator
 import numpy as np
 
 from asset2sim import file_memo
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents
 from asset2sim.tasks.ingest.extract import extract_asset

@@ -19,9 +19,8 @@ from typing import Any, Iterable, Literal, Mapping
 from pydantic import BaseModel, ConfigDict, Field
 
 from asset2sim import safexml
-from asset2sim.schemas.overlay import ValidationIssue
-from asset2sim.tasks.interpret.prior_tables import MAX_PRIOR_DIM_M, load_priors
-from asset2sim.tasks.synthesize.validate_overlay import SCALE_RANGE
+from asset2sim.schemas.overlay import SCALE_RANGE, ValidationIssue
+from asset2sim.prior_tables import MAX_PRIOR_DIM_M, load_priors
 
 Severity = Literal["error", "warning", "info"]
 Action = Literal["refuse", "replace_with_estimate", "mass_from_area", "ignore"]
@@ -244,7 +243,7 @@ SEMANTIC_KINDS = frozenset({"hinge", "slider", "free", "heavy", "static", "junk"
 @functools.lru_cache(maxsize=1)
 def asset_size_range() -> tuple[float, float]:
     """The sizes (file units) an asset may have for refine to find an overlay
-    scale inside ``SCALE_RANGE`` of ``tasks.synthesize.validate_overlay``.
+    scale inside ``SCALE_RANGE`` of :mod:`asset2sim.schemas.overlay`.
 
     The size measure is the one the estimator scales by
     (``tasks.synthesize.estimate.choose_scale``): g = sqrt(e1 * e2), the

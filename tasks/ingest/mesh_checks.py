@@ -527,7 +527,7 @@ class MeshChecks(Recorder):
         through a symlink into another folder, a library missing beside the
         link but present beside the real file ``mesh`` is checked and
         recorded there (``MESH_MATERIAL_BESIDE_TARGET``, info: the output
-        copies it beside the mesh, :func:`asset2sim.tasks.publish.write.beside_link_target`)."""
+        copies it beside the mesh, :func:`asset2sim.tasks.assemble.write.beside_link_target`)."""
         assert self.folder is not None
         for name in scan.mtllibs:
             ref = resolve_mesh_reference(self.folder, name, base=mesh_dir, extensions=(), max_bytes=self.policy.max_mesh_bytes)

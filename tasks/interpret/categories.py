@@ -20,13 +20,7 @@ from dataclasses import dataclass
 from pydantic import Field
 
 from asset2sim.tasks.interpret.part_labels import body_label_tokens, canonical_label
-from asset2sim.tasks.interpret.prior_tables import (
-    GENERIC,
-    CategoryPrior,
-    PriorModel,
-    VariantPrior,
-    load_priors,
-)
+from asset2sim.prior_tables import GENERIC, CategoryPrior, PriorModel, VariantPrior, load_priors
 
 # Evidence weights of recognize_category (dimensionless scores).
 _W_REQUEST_HEAD = 4.0  # the object the request is about (first non-possessive mention)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import re
 
-from asset2sim.tasks.interpret.prior_tables import load_priors
+from asset2sim.prior_tables import load_priors
 
 #: Canonical labels of an object's main body (its material is the category's
 #: body material; a ``<category>_body`` label names the category).

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 from asset2sim.tasks.interpret.categories import category_prior
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
-from asset2sim.tasks.interpret.prior_tables import MaterialPrior, PartRole, load_priors
+from asset2sim.prior_tables import MaterialPrior, PartRole, load_priors
 
 
 def material(key: str) -> MaterialPrior:

@@ -5,7 +5,7 @@ source. The answers the estimator asks for live in one module per concern;
 this module gathers their public names in one place:
 
 - the tables, their models, loading and checks
-  (:mod:`~asset2sim.tasks.interpret.prior_tables`: :func:`load_priors`,
+  (:mod:`~asset2sim.prior_tables`: :func:`load_priors`,
   :func:`load_priors_from`, :class:`PriorsError`);
 - canonical part labels (:mod:`~asset2sim.tasks.interpret.part_labels`:
   :func:`canonical_label`);
@@ -50,7 +50,7 @@ from asset2sim.tasks.interpret.part_priors import (
     task_relevant_joints,
     task_relevant_rank,
 )
-from asset2sim.tasks.interpret.prior_tables import (
+from asset2sim.prior_tables import (
     GENERIC,
     GRASPABLE_WIDTH_M,
     SIZE_CLASSES,

@@ -41,7 +41,7 @@ closed and the second slightly open, low damping")`` recognises:
   states in numbers ("30 degrees", "10 cm", "60 % open", "two-thirds open")
   as a ``StateTarget``; physical ends ("lever up", "the switch off") as
   ``end`` targets decided later from the geometry
-  (:mod:`asset2sim.tasks.interpret.request_apply`); sizes in numbers
+  (:mod:`asset2sim.tasks.synthesize.request_apply`); sizes in numbers
   ("30 cm tall"); masses and materials per part; explicit damping /
   friction / stiffness; part counts ("two-drawer"); spatial ordinals
   (left/right/front/back); "the others". Contradictions are ``warnings``;
@@ -70,7 +70,7 @@ from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSp
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, phrase_regex, request_category, variant_mention
 from asset2sim.tasks.interpret.mounting import mounting_mentions
 from asset2sim.tasks.interpret.part_labels import canonical_label
-from asset2sim.tasks.interpret.prior_tables import load_priors
+from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret import request_values as rv
 
 _L = r"(?<![\w-])"

@@ -16,13 +16,7 @@ from collections.abc import Iterable
 
 from asset2sim.schemas.request import RequestSpec, SizeClass
 from asset2sim.tasks.interpret.categories import category_prior, find_variant
-from asset2sim.tasks.interpret.prior_tables import (
-    GRASPABLE_WIDTH_M,
-    SIZE_CLASSES,
-    Dims,
-    PriorModel,
-    load_priors,
-)
+from asset2sim.prior_tables import GRASPABLE_WIDTH_M, SIZE_CLASSES, Dims, PriorModel, load_priors
 from asset2sim.tasks.interpret.request import parse_request
 
 #: Smallest plausible total mass of any object, kg (a few grams: a USB stick,

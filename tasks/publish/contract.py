@@ -56,7 +56,7 @@ from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.publish.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OwnedFolder, read_record
+from asset2sim.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OwnedFolder, read_record
 
 REPORT_NAME = "report.json"
 #: The flow's record of an asset's job in its run's work folder
@@ -223,7 +223,7 @@ def output_files(out_dir: Path | str) -> list[str]:
 def write_completion_marker(out_dir: Path | str, input_hash: str, config_hash: str, owner: OwnedFolder | None = None) -> Path:
     """Write the completion marker (last, atomically): both hashes, the code
     version and the SHA-256 of every file of :func:`output_files`, or, with
-    ``owner`` (the run's :class:`~asset2sim.tasks.publish.output_folder.OwnedFolder`),
+    ``owner`` (the run's :class:`~asset2sim.output_folder.OwnedFolder`),
     of exactly the files the run wrote (:meth:`OwnedFolder.finish`, which
     raises ``OutputError`` and writes no marker when one of them is missing)."""
     out_dir = Path(out_dir)

@@ -30,7 +30,7 @@ What is written (``/<robot>`` is the default prim):
 - ``.../<link>/collisions/*``: the convex pieces every engine of asset2sim
   collides with (:func:`asset2sim.engines.loading.collision_pieces`: refine's
   outputs already hold closed, outward, >= 2 mm thick pieces, see
-  ``tasks/publish/collision_geometry.py``), each a ``UsdGeom.Mesh`` of its
+  ``tasks/assemble/collision_geometry.py``), each a ``UsdGeom.Mesh`` of its
   convex hull with ``CollisionAPI`` and ``MeshCollisionAPI``
   ``physics:approximation = "convexHull"`` and purpose ``guide``; box, sphere
   and cylinder collisions as ``Cube`` / ``Sphere`` / ``Cylinder``.
@@ -89,8 +89,8 @@ from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_ini
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.publish.export_mjcf import springs_from_overlay
-from asset2sim.tasks.publish.write import read_root
+from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
+from asset2sim.tasks.assemble.write import read_root
 from asset2sim.urdf import UrdfJoint, UrdfModel
 
 USD_DIR = "usd"

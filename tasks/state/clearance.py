@@ -32,9 +32,9 @@ pieces, link frame, m):
    - g (an affine squeeze of P along n that keeps its far face: the piece
    stays convex), never by more than half of P's width along n.
 
-Steps 1-3 are :func:`asset2sim.tasks.publish.collision_geometry.clear_sliding_contact`,
+Steps 1-3 are :func:`asset2sim.tasks.assemble.collision_geometry.clear_sliding_contact`,
 which the writer also runs at the modelled pose when it makes the pieces
-(:func:`~asset2sim.tasks.publish.collision_geometry.running_clearance`);
+(:func:`~asset2sim.tasks.assemble.collision_geometry.running_clearance`);
 this repair finds the contacts that appear at other states.
 
 The pieces of the changed links are returned (link frame, m, every piece of
@@ -51,12 +51,17 @@ from scipy.spatial import QhullError
 
 from asset2sim import atomic, file_names, mesh_io
 from asset2sim.schemas.asset import GeometryRef
-from asset2sim.tasks.publish.collision_geometry import RUNNING_CLEARANCE, clear_sliding_contact, joint_velocity, sat_gap
+from asset2sim.tasks.assemble.collision_geometry import (
+    RUNNING_CLEARANCE,
+    clear_sliding_contact,
+    joint_velocity,
+    sat_gap,
+)
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
 
 #: Running clearance (m), the sliding test and the squeeze are the writer's
-#: (:func:`asset2sim.tasks.publish.collision_geometry.clear_sliding_contact`),
+#: (:func:`asset2sim.tasks.assemble.collision_geometry.clear_sliding_contact`),
 #: which gives sliding contacts at the modelled pose their clearance when
 #: the pieces are made; this module repairs the contacts a blocked sweep finds
 #: at other states.

@@ -29,7 +29,7 @@ import numpy as np
 
 from asset2sim import array_cache, atomic, file_names
 from asset2sim.frames import rpy_matrix
-from asset2sim.engines.base import open_shape_world
+from asset2sim.engines.registry import open_shape_world
 from asset2sim.mesh_io import MeshCache, read_mesh
 from asset2sim.schemas.asset import AssetDescription, GeometryRef
 
@@ -186,7 +186,7 @@ def overlap_depths(world, shape_a: int, shape_b: int) -> list[float]:
 
 class _PieceWorld:
     """Every collision piece of some links as a separate static shape in a
-    private collision world (:func:`asset2sim.engines.base.open_shape_world`,
+    private collision world (:func:`asset2sim.engines.registry.open_shape_world`,
     PyBullet), posed as in ``session`` (scaled output), so the penetration
     between two links can be measured piece by piece."""
 
@@ -289,7 +289,7 @@ def improve_collisions(
     margins: :func:`overlap_depths`); at most ``max_decompositions`` CoACD
     calls (a count, so the result never depends on the machine's load). ``session``: PyBullet session
     of the scaled output at the refined state. Pieces are written to
-    ``out_dir/<folder>/`` (``tasks.publish.write.collision_folder`` picks a
+    ``out_dir/<folder>/`` (``tasks.assemble.write.collision_folder`` picks a
     name no input mesh uses). Returns (collision overrides for the writer,
     notes).
     """

@@ -58,7 +58,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.publish import write
+from asset2sim.tasks.assemble import write
 from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf

@@ -41,7 +41,7 @@ import numpy as np
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.interpret.part_labels import canonical_label
-from asset2sim.tasks.interpret.prior_tables import MaterialPrior, load_priors
+from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.state.balance import _com, _link_world, _signed_margin, measure_balance
 from asset2sim.tasks.synthesize import physics
 

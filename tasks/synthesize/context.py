@@ -2,7 +2,7 @@
 
 One builder, :func:`build_context`, used by the refine pipeline
 (:func:`asset2sim.tasks.refine.refine_asset`), the ``direct`` baseline
-(:func:`asset2sim.tasks.evaluation.baselines.make_direct`) and the model
+(:func:`asset2sim.tasks.benchmark.baselines.make_direct`) and the model
 estimators' benchmarks and baselines
 (:mod:`asset2sim.tasks.synthesize.llm_estimator`). It chains
 
@@ -46,7 +46,8 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.request import parse_request
 
-from asset2sim.engines.base import SessionOptions, SimSession, open_session
+from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.registry import open_session
 
 
 @dataclass
@@ -119,7 +120,7 @@ def kinematic_session(asset: AssetDescription, config: RefineConfig | None = Non
     conventions. The caller closes it (sessions are context managers).
 
     Raises:
-        as :func:`asset2sim.engines.base.open_session`.
+        as :func:`asset2sim.engines.registry.open_session`.
     """
     conventions = (config or RefineConfig()).sim
     return open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=conventions))

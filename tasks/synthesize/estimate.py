@@ -1,5 +1,5 @@
-"""Overlay synthesis (SPEC stage 2): the estimator protocol, its registry, and
-the offline estimator (the default; needs no network).
+"""Overlay synthesis (SPEC stage 2): the helpers every estimator shares
+(scale, state bands, plausible mass, joint dynamics from loads).
 
 An estimator turns an :class:`~asset2sim.tasks.synthesize.context.EstimationContext`
 (the extracted asset, its mesh analysis, the parsed request, the recognised
@@ -9,84 +9,24 @@ category and the geometric closed states; built by
 state band of every movable joint. Whatever produced it, the overlay is then
 validated mechanically (:mod:`asset2sim.tasks.synthesize.validate_overlay`).
 
-The offline estimator's knowledge is per category, per part label and per
-word of the request (``asset2sim/priors/*.yaml`` through
+The estimator protocol and registry are :mod:`.estimator`, the offline
+estimator :mod:`.offline`, the built-in backends :mod:`.backends`. The
+knowledge is per category, per part label and per word of the request (``asset2sim/priors/*.yaml`` through
 :mod:`asset2sim.tasks.interpret.priors`); the physics is in :mod:`asset2sim.tasks.synthesize.physics`.
 """
 
 from __future__ import annotations
 
-import importlib
-from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from dataclasses import dataclass
 
 import numpy as np
 
-from asset2sim import __version__
-from asset2sim.schemas.overlay import (
-    ContactMaterial,
-    EstimatorInfo,
-    JointDynamics,
-    LinkPhysics,
-    Overlay,
-    ValidationNotes,
-)
+from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.interpret import priors, request_apply
-from asset2sim.tasks.synthesize import physics
+from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
-
-
-@dataclass
-class Estimate:
-    """What an estimator returns: the overlay, the state band it chose for
-    every movable joint, and notes on how it read the request.
-
-    ``bands``: joint name -> band name (:data:`asset2sim.schemas.request.BAND_TARGET`),
-    every movable joint present; the refine stage turns them into the
-    requested state (:func:`state_from_bands`) and the allowed intervals of
-    the state search (:func:`band_intervals`).
-    """
-
-    overlay: Overlay
-    bands: dict[str, str]
-    notes: list[str] = field(default_factory=list)
-    targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)
-    """joint -> a number or end the request asked ("30 degrees", "lever up"),
-    resolved (:mod:`asset2sim.tasks.interpret.request_apply`); its interval
-    replaces the band's in the state search."""
-
-
-class Estimator(Protocol):
-    """Produces an overlay from a context."""
-
-    name: str
-
-    def estimate(self, ctx: EstimationContext) -> Estimate:
-        """Return the overlay (validated afterwards by the caller) and the bands."""
-
-
-_REGISTRY: dict[str, Callable[..., Estimator]] = {}
-
-
-def register_estimator(name: str, factory: Callable[..., Estimator]) -> None:
-    """Register ``factory(**settings) -> Estimator`` under ``name``."""
-    _REGISTRY[name] = factory
-
-
-def get_estimator(name: str, **settings) -> Estimator:
-    """Instantiate the estimator registered as ``name``.
-
-    Raises:
-        KeyError: unknown name (the message lists the known ones).
-    """
-    if name not in _REGISTRY:
-        # model backends register on import (litellm itself is imported only when a client is made)
-        importlib.import_module("asset2sim.tasks.synthesize.llm_estimator")
-    if name not in _REGISTRY:
-        raise KeyError(f"unknown estimator {name!r}; known: {sorted(_REGISTRY)}")
-    return _REGISTRY[name](**settings)
 
 
 # --------------------------------------------------------------------- helpers
@@ -95,13 +35,13 @@ def task_relevant_joints(ctx: EstimationContext) -> list[str]:
     drawer, screen ...; ``priors.part_role`` == "task"), ordered by the
     category's priority; every non-accessory movable joint when none
     qualifies, and all movable joints when even that is empty
-    (:func:`asset2sim.tasks.interpret.request_apply.task_relevant_joints`)."""
+    (:func:`asset2sim.tasks.synthesize.request_apply.task_relevant_joints`)."""
     return request_apply.task_relevant_joints(ctx)
 
 
 def requested_bands(ctx: EstimationContext, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
     """Band per movable joint from the request (joint -> band name), and notes
-    (warnings first): :func:`asset2sim.tasks.interpret.request_apply.resolve_states`
+    (warnings first): :func:`asset2sim.tasks.synthesize.request_apply.resolve_states`
     at ``scale`` (default :func:`choose_scale`). Joints not addressed are closed."""
     res = request_apply.resolve_states(ctx, choose_scale(ctx)[0] if scale is None else scale)
     return res.bands, res.warnings + res.notes
@@ -126,7 +66,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     handheld category is then capped so that at least two dimensions fit a
     parallel gripper (second-largest <= ``priors.GRASPABLE_WIDTH_M``). Sizes in
     numbers ("30 cm tall") decide alone
-    (:func:`asset2sim.tasks.interpret.request_apply.scale_from_sizes`).
+    (:func:`asset2sim.tasks.synthesize.request_apply.scale_from_sizes`).
     """
     sized = request_apply.scale_from_sizes(ctx)
     if sized is not None:
@@ -163,13 +103,16 @@ def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, f
     return priors.scale_mass_range(base_lo, base_hi, f)
 
 
-def _variant(ctx: EstimationContext) -> str | None:
+def request_variant(ctx: EstimationContext) -> str | None:
+    """The category variant the request names ("office cabinet"), or None."""
     v = priors.find_variant(ctx.category, ctx.request.text) if ctx.request.text else None
     return v.name if v is not None else None
 
 
-def _material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
-    m = (request_apply.requested_material(ctx, link) if link is not None else None) or priors.material_for(ctx.category, label, _variant(ctx))
+def link_material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
+    """The material of ``link`` (part label ``label``): the request's when it
+    names one for the link, else the category's prior for the label."""
+    m = (request_apply.requested_material(ctx, link) if link is not None else None) or priors.material_for(ctx.category, label, request_variant(ctx))
     return physics.MaterialChoice(
         name=m.name,
         density=float(m.density),
@@ -265,105 +208,11 @@ def joint_dynamics_for(
 CLOSED_HOLD_FRACTIONS = (0.0, 0.05, 0.10)
 
 
-# ------------------------------------------------------------ offline estimator
-class OfflineEstimator:
-    """Physical priors (data with sources) + geometry + kinematics; no network."""
-
-    name = "offline"
-
-    def __init__(self, **settings):
-        self.settings = settings
-
-    def estimate(self, ctx: EstimationContext) -> Estimate:
-        """The overlay from priors, geometry and kinematics, and the parsed
-        request's bands (:func:`requested_bands`)."""
-        s, size_note = choose_scale(ctx)
-        # ---- links
-        links: dict[str, LinkPhysics] = {}
-        mat_notes = []
-        for ln in ctx.asset.links:
-            geom = ctx.geometry.get(ln.name)
-            if geom is None:
-                continue
-            mat = _material(ctx, ln.semantic_label, ln.name)
-            links[ln.name] = physics.link_physics(geom, s, mat, source=f"geometry + {mat.name} prior")
-            mat_notes.append(f"{ln.name} ({ln.semantic_label or 'unlabelled'}): {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
-        total = sum(lp.mass for lp in links.values())
-        mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
-        lo, hi = plausible_mass_range(ctx, s)
-        links, req_mass_notes, mass_asked = request_apply.apply_masses(ctx, links, (lo, hi))
-        if req_mass_notes:
-            total = sum(lp.mass for lp in links.values())
-            mass_note += "; request: " + "; ".join(req_mass_notes) + f"; total {total:.4g} kg"
-        if total > 0 and not mass_asked and (total < lo or total > hi):
-            # into the plausible range, a margin inside its ends (10 %)
-            target = lo * 1.1 if total < lo else hi * 0.9
-            f = target / total
-            for name, lp in list(links.items()):
-                links[name] = lp.model_copy(
-                    update={
-                        "mass": lp.mass * f,
-                        "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-                        "source": lp.source + f"; x{f:.3g} to the category's plausible total mass",
-                    }
-                )
-            mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
-        # ---- state
-        prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
-        resolved = request_apply.resolve_states(ctx, s)
-        bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
-        state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
-        # ---- dynamics
-        relevant = set(task_relevant_joints(ctx))
-        choices = {}
-        for j in ctx.asset.movable_joints():
-            rel = j.name in relevant
-            label = ctx.asset.link(j.child).semantic_label
-            choices[j.name] = JointChoice(
-                damping_level=ctx.request.damping if rel else "moderate",
-                holds_position=ctx.request.holds_position and rel,
-                spring=rel and (ctx.request.spring or priors.spring_expected(ctx.category, label)),
-                stiff=ctx.request.stiff and rel,
-                free_moving=ctx.request.free_moving and rel,
-            )
-        joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
-        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, [n for n in task_relevant_joints(ctx)], state)
-        band_notes += dyn_notes
-        body_prior = priors.material_for(ctx.category, None, _variant(ctx))
-        body_mat = _material(ctx, None)
-        friction_coeff = float(body_prior.lateral_friction)
-        asked_state = bool(ctx.request.joint_states)
-        overlay = Overlay(
-            estimator=EstimatorInfo(name=self.name, model=None, version=__version__, queries=0),
-            scale=s,
-            category=ctx.category,
-            contact_material=ContactMaterial(
-                lateral_friction=friction_coeff,
-                restitution=float(body_prior.restitution),
-                note=f"{body_mat.name}: {body_prior.friction_source}",
-            ),
-            links=links,
-            joints=joints,
-            initial_joint_positions=state if asked_state else None,
-            notes=ValidationNotes(
-                size=size_note,
-                material="; ".join(mat_notes),
-                mass_arithmetic=mass_note,
-                other=[f"category: {ctx.category} ({ctx.category_reason})"]
-                + ["requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
-                + band_notes
-                + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),
-            ),
-        )
-        return Estimate(overlay=overlay, bands=bands, notes=band_notes, targets=resolved.targets)
-
-
-register_estimator("offline", OfflineEstimator)
 
 
 def band_intervals(bands: dict[str, str], intervals: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
     """Allowed opening-fraction interval per joint for its band; ``intervals``
-    (a number or end the request asked, :attr:`Estimate.intervals`) win."""
+    (a number or end the request asked, :attr:`asset2sim.tasks.synthesize.estimator.Estimate.targets`) win."""
     out = {name: BAND_INTERVAL[b] for name, b in bands.items()}
     out.update(intervals or {})
     return out

@@ -11,7 +11,7 @@ Registers two estimators with :mod:`asset2sim.tasks.synthesize.estimate`:
 Both check credentials when created (a missing key fails before any work).
 
 **Request.** Five renders of the input asset at its geometric closed state
-(front, back, left, right, perspective; :func:`asset2sim.tasks.publish.render.render_views`,
+(front, back, left, right, perspective; :func:`asset2sim.tasks.geometry.render.render_views`,
 PNG data URLs) and the structured description of the analysis stage
 (:func:`describe`: links with semantic labels, volumes, areas and extents at
 scale 1, joints with types, limits and closed ends, the category, the request
@@ -32,7 +32,7 @@ inertia comes from the scaled geometry; damping and friction from the joint
 loads (:func:`physics.joint_dynamics`); the state from the band through the
 geometric closed ends (:func:`estimate.state_from_bands`), and the refine
 pipeline still refines it in the simulator. The chosen bands are returned with
-the overlay (:class:`asset2sim.tasks.synthesize.estimate.Estimate`) for the
+the overlay (:class:`asset2sim.tasks.synthesize.estimator.Estimate`) for the
 refine stage.
 
 **Baselines** (SPEC): :func:`direct_overlay` (one call, five views, the
@@ -57,7 +57,7 @@ from asset2sim.schemas.model_reply import (
     ModelReply,
     reply_json_schema,
 )
-from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize import estimator
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.llm_baselines import IVW_TEMPERATURE, direct_overlay, ivw_overlay
 from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient
@@ -192,7 +192,7 @@ class LLMEstimator:
 
         return propose
 
-    def estimate(self, ctx: EstimationContext) -> estimate.Estimate:
+    def estimate(self, ctx: EstimationContext) -> estimator.Estimate:
         """Ask the model (once per asset and request) and build the overlay;
         the bands are the model's choice per movable joint.
 
@@ -234,7 +234,7 @@ class LLMEstimator:
         for i, errs in enumerate(history):
             other.append(f"model reply {i + 1} rejected and re-asked: " + "; ".join(errs[:5]))
         overlay = overlay.model_copy(update={"estimator": estimator_info(self.name, cfg.model, usage), "notes": overlay.notes.model_copy(update={"other": other})})
-        return estimate.Estimate(overlay=overlay, bands=dict(bands), notes=list(notes))
+        return estimator.Estimate(overlay=overlay, bands=dict(bands), notes=list(notes))
 
 
 class OpenAICompatibleEstimator(LLMEstimator):
@@ -244,5 +244,5 @@ class OpenAICompatibleEstimator(LLMEstimator):
     name = "openai"
 
 
-estimate.register_estimator("llm", LLMEstimator)
-estimate.register_estimator("openai", OpenAICompatibleEstimator)
+estimator.register_estimator("llm", LLMEstimator)
+estimator.register_estimator("openai", OpenAICompatibleEstimator)

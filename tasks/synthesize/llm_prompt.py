@@ -5,7 +5,7 @@
   with types, limits and closed ends, the category, the request text and what
   the request parser understood, the typical size and mass of the category);
 - :func:`render_closed_views`: the five views of the input asset at its
-  geometric closed state (:func:`asset2sim.tasks.publish.render.render_views`),
+  geometric closed state (:func:`asset2sim.tasks.geometry.render.render_views`),
   as PNG data URLs;
 - :func:`build_messages`: the system prompt (instructions and the reply's
   JSON schema) and the user message (description, then each view);
@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 
 from asset2sim.schemas.request import BAND_TARGET
-from asset2sim.tasks.interpret import request_apply
+from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.interpret.part_priors import material_for
 from asset2sim.tasks.interpret.size_priors import target_size
-from asset2sim.tasks.publish import render
+from asset2sim.tasks.geometry import render
 from asset2sim.tasks.synthesize import estimate
 from asset2sim.tasks.synthesize.context import EstimationContext
 

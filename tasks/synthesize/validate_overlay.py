@@ -42,15 +42,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
-from asset2sim.schemas.overlay import Inertia, JointDynamics, LinkPhysics, Overlay, ValidationIssue
+from asset2sim.schemas.overlay import SCALE_RANGE, Inertia, JointDynamics, LinkPhysics, Overlay, ValidationIssue
 from asset2sim.tasks.geometry.closed_state import subtree_links
 
 TRIANGLE_RTOL = 1e-9
 
 
-#: The overlay's uniform scale must lie in this range (dimensionless); the
-#: input validator derives its asset-size bound from it (ASSET_SIZE_IMPLAUSIBLE).
-SCALE_RANGE: tuple[float, float] = (1e-4, 1e4)
 _SCALE_TEXT = ", ".join(f"{x:.0e}".replace("e+0", "e").replace("e-0", "e-").replace("e+", "e") for x in SCALE_RANGE)  # "1e-4, 1e4"
 
 

@@ -20,7 +20,7 @@ from asset2sim import array_cache, atomic, urdf
 from asset2sim.array_cache import CacheWarning
 from asset2sim.schemas.asset import LinkGeometry
 from asset2sim.tasks.geometry import analyze as an
-from asset2sim.tasks.publish import collision_geometry as cg
+from asset2sim.tasks.assemble import collision_geometry as cg
 from tests.tasks.geometry.test_analyze import box_mesh, link_of, mesh_ref, write_obj
 from tests.tasks.state.test_clearance import write_stacked_drawers
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.catalog import (
+from asset2sim.flows.catalog import (
     ROW_COLUMNS,
     CatalogError,
     ResultCatalog,

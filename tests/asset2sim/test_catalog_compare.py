@@ -10,8 +10,9 @@ import json
 import pandas as pd
 import pytest
 
-from asset2sim import catalog_compare, catalog_finish, flow_progress
-from asset2sim.catalog import RegressionSettings, ResultCatalog, ResultsSettings
+from asset2sim.flows import catalog_compare, catalog_finish
+from asset2sim import flow_progress
+from asset2sim.flows.catalog import RegressionSettings, ResultCatalog, ResultsSettings
 from asset2sim.commands._progress import FlowProgress, eta_seconds
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.schemas.catalog import CatalogRow

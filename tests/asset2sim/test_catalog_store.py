@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim import catalog_fs
-from asset2sim.catalog import COMPACTED_NAME, CatalogConfig, ResultCatalog, load_catalog
+from asset2sim.flows import catalog_fs
+from asset2sim.flows.catalog import COMPACTED_NAME, CatalogConfig, ResultCatalog, load_catalog
 from asset2sim.schemas.catalog import SCHEMA_VERSION, SCHEMA_VERSION_KEY, CatalogRow, file_schema_version
 from asset2sim.tasks.publish import contract
 from tests.helpers import local_s3_server
@@ -85,7 +85,7 @@ def test_an_interrupted_compaction_counts_each_row_once(tmp_path):
         store.append_row("d", RUN1, _row(aid))
     # compacted file written, row files not yet removed (killed in between)
     table = store.read_table("d", RUN1).drop_columns(["dataset", "run"])
-    from asset2sim.catalog import _parquet_bytes
+    from asset2sim.flows.catalog import _parquet_bytes
 
     (Path(store.run_dir("d", RUN1)) / COMPACTED_NAME).write_bytes(_parquet_bytes(table))
     assert sorted(store.read("d", RUN1)["asset_id"]) == ["a1", "a2"]

@@ -222,7 +222,8 @@ def test_zero_pose_is_not_always_closed(dataset: Path):
 
 
 def test_loads_in_the_project_engine(dataset: Path):
-    from asset2sim.engines.base import SessionOptions, open_session
+    from asset2sim.engines.base import SessionOptions
+    from asset2sim.engines.registry import open_session
 
     for entry in DEMO_OBJECTS:
         session = open_session(

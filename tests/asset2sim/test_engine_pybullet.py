@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import SessionOptions, Spring, open_session
+from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.registry import open_session
 from tests.helpers import write_hinged_plate
 
 

@@ -13,7 +13,8 @@ import math
 
 import pytest
 
-from asset2sim.engines.base import SessionOptions, Spring, open_session
+from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.registry import open_session
 from asset2sim.engines.fake import write_contract_asset
 from asset2sim.frames import translation_matrix
 from asset2sim.tasks.check import metrics

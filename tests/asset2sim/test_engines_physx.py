@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import SessionOptions, available_engines, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import available_engines, open_session
 from asset2sim.engines.loading import BULLET_DEFAULT_MASS, read_urdf
 from asset2sim.engines.fake import write_contract_asset
 

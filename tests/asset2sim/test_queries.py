@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim import queries, tracking
-from asset2sim.catalog import ResultCatalog
+from asset2sim.flows import queries, tracking
+from asset2sim.flows.catalog import ResultCatalog
 
 T0 = datetime(2026, 3, 1, 2, 0, tzinfo=timezone.utc)
 

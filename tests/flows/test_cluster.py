@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
 try:
     from . import flowfakes  # type: ignore[no-redef]

@@ -9,7 +9,7 @@ import os
 
 import pandas as pd
 
-from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import driver_skip
 
 try:

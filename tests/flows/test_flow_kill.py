@@ -17,8 +17,8 @@ from pathlib import Path
 import psutil
 import pytest
 
-from asset2sim.catalog import ResultCatalog, load_catalog
-from asset2sim.tasks.publish.output_folder import MARKER_NAME
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
+from asset2sim.output_folder import MARKER_NAME
 
 try:
     from . import flowfakes  # type: ignore[no-redef]

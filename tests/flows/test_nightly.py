@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
 try:
     from .conftest import make_project

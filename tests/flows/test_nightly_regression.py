@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import yaml
 
-from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows.stages import flow_parameters
 
 try:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.catalog import CatalogError, ResultCatalog, load_catalog
+from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.publish.contract import JOB_RECORD_NAME

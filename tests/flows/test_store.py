@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import pytest
 
-from asset2sim.catalog import ResultCatalog, load_catalog
+from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import store
 from asset2sim.tasks.publish.contract import is_complete
-from asset2sim.tasks.publish.output_folder import MARKER_NAME
+from asset2sim.output_folder import MARKER_NAME
 from tests.helpers import local_s3_server
 
 try:

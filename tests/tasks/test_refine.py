@@ -11,7 +11,8 @@ import pytest
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim import atomic, demo_assets
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim.schemas.request import BAND_INTERVAL
-from asset2sim.tasks.evaluation.asset_files import parse_urdf
+from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.evaluation.closed_ends import compute_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.urdf_closed import measure_closed, replace_positions

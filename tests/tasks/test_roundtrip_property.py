@@ -5,7 +5,7 @@ Round trip: generate a valid model -> write it -> ``extract_asset`` (A) ->
 write it again with a writer -> ``extract_asset`` (B); A and B must describe
 the same model (names, tree, joint types, origins as transforms, axes, limits,
 effort, velocity, dynamics, geometry, inertials). Writers: yourdfpy's
-``write_xml_file`` and the pipeline's own ``asset2sim.tasks.publish.write.build_urdf``
+``write_xml_file`` and the pipeline's own ``asset2sim.tasks.assemble.write.build_urdf``
 (at scale 1, with an overlay carrying the given inertials).
 """
 
@@ -221,7 +221,7 @@ def test_roundtrip_through_yourdfpy_writer(model):
 def test_roundtrip_through_pipeline_writer(model):
     """``tasks.write.build_urdf`` at scale 1: the kinematic tree and geometry
     are unchanged; inertials and dynamics are the overlay's."""
-    write = pytest.importorskip("asset2sim.tasks.publish.write")
+    write = pytest.importorskip("asset2sim.tasks.assemble.write")
     from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay
 
     with tempfile.TemporaryDirectory() as tmp:

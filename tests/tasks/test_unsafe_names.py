@@ -88,7 +88,7 @@ def test_a_write_leaving_the_output_folder_through_dotdot_is_refused(tmp_path):
     """Defence in depth: even a writer that joined a raw name into a path is
     stopped by the output folder's owner before anything is created."""
     from asset2sim import atomic
-    from asset2sim.tasks.publish import output_folder as of
+    from asset2sim import output_folder as of
 
     box = demo_assets.build_box_with_lid(tmp_path / "in" / "box")
     out = tmp_path / "out"

@@ -1,6 +1,6 @@
 """URDF -> MJCF conversion under the SPEC's conventions, used by the MuJoCo
 engine (:mod:`asset2sim.engines.mujoco_engine`) and by ``asset2sim export
---format mjcf`` (:mod:`asset2sim.tasks.publish.export_mjcf`).
+--format mjcf`` (:mod:`asset2sim.tasks.assemble.export_mjcf`).
 
 The conversion (:func:`urdf_to_mjcf`) starts from MuJoCo's own URDF import
 (``MjSpec.from_string`` on a URDF carrying a ``<mujoco><compiler .../>``

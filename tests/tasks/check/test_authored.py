@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import available_engines
+from asset2sim.engines.registry import available_engines
 from asset2sim.engines.fake import write_contract_asset
 from asset2sim.tasks.check.authored import Tolerances, authored_physics, compare_physics, held_by_engines
 
@@ -61,7 +61,7 @@ def test_every_engine_holds_what_the_files_say(tmp_path):
 
 @pytest.mark.skipif("mujoco" not in available_engines(), reason="mujoco not installed")
 def test_the_exported_mjcf_holds_what_the_files_say(tmp_path):
-    from asset2sim.tasks.publish.export_mjcf import export_mjcf
+    from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 
     write_contract_asset(tmp_path, lid_angle=0.4, lid_stiffness=0.3, lid_spring_reference=0.2)
     export_mjcf(tmp_path)

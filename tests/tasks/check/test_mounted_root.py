@@ -11,7 +11,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.evaluation import eval_context
 from asset2sim.tasks.evaluation.engine_run import run_engine
-from asset2sim.tasks.publish import write
+from asset2sim.tasks.assemble import write
 from asset2sim.tasks.refine import refine_asset
 from tests.tasks.check.failure_assets import build_tall_faucet
 
@@ -84,7 +84,7 @@ def test_post_check_follows_the_overlay_root(mounted):
 
 def test_mjcf_check_refuses_a_free_joint_on_a_mounted_asset(faucet, tmp_path):
     pytest.importorskip("mujoco")
-    from asset2sim.tasks.publish.export_mjcf import ExportError, check_mjcf, export_mjcf
+    from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export_mjcf
 
     free = refine_asset(faucet, "A free-standing faucet.", tmp_path / "free", extras=False)
     xml = export_mjcf(free.out_dir)

@@ -17,7 +17,7 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operating, task_tier
 from asset2sim.tasks.check.gripper import GripperLimits
-from asset2sim.tasks.evaluation.task_spec import task_actions
+from asset2sim.tasks.check.task_spec import task_actions
 from asset2sim.tasks.check.probes import ProbeConfig
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset

@@ -11,9 +11,9 @@ from asset2sim.tasks.check.parent_child import parent_child_penetration
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.tasks.publish.write import write_output
+from asset2sim.tasks.assemble.write import write_output
 from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
-from tests.tasks.publish.test_collision_geometry import _asset, _box
+from tests.tasks.assemble.test_collision_geometry import _asset, _box
 
 
 def _nested(tmp_path):

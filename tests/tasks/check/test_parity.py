@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from asset2sim.engines import base
+from asset2sim.engines import base, registry
 from asset2sim.engines.fake import FakeBehaviour, fake_behaviour, write_contract_asset
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table, worst_case
 from tests.conftest import SHARED, needs_shared
@@ -141,14 +141,14 @@ import sys
 sys.modules['sapien'] = None
 sys.modules['mujoco'] = None
 from pathlib import Path
-from asset2sim.engines.base import available_engines
+from asset2sim.engines.registry import available_engines
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 assert 'physx' not in available_engines() and 'mujoco' not in available_engines(), available_engines()
 rows = {{r['engine']: r for r in parity_table(evaluate_engines(Path({str(tmp_path)!r}), ['pybullet', 'physx', 'mujoco']))}}
 assert rows['pybullet']['status'] == 'ok' and rows['pybullet']['rest_stability'] is True, rows['pybullet']
 for e, module in (('physx', 'sapien'), ('mujoco', 'mujoco')):
     assert rows[e]['status'] == 'skipped' and module in rows[e]['reason'], rows[e]
-from asset2sim.tasks.publish.export_mjcf import export_mjcf
+from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 try:
     export_mjcf(Path({str(tmp_path)!r}))
 except ImportError:
@@ -184,7 +184,7 @@ def _real_outputs():
 def test_real_outputs_run_in_every_installed_engine(out_dir):
     """A pipeline output loads and runs in every installed engine (parity rows
     with status ok and verdicts for both tests)."""
-    engines = [e for e in ("pybullet", "physx", "mujoco") if e in base.available_engines()]
+    engines = [e for e in ("pybullet", "physx", "mujoco") if e in registry.available_engines()]
     rows = parity_table(evaluate_engines(out_dir, engines))
     for r in rows:
         assert r["status"] == "ok", (r["engine"], r["reason"])

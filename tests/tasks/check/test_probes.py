@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import EngineUnsupported, SessionOptions, open_session
+from asset2sim.engines.base import EngineUnsupported, SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.check.probes import (
     MAX_PUSH_TIME,
@@ -374,7 +375,8 @@ def test_a_spring_the_part_prior_expects_may_return_the_close_probe_a_stray_one_
     """The rebound rule is the task check's hold rule: the same sprung drawer
     fails the close probe as a drawer (no spring expected) and passes, with a
     note, where its spring is one the joint is expected to have."""
-    from asset2sim.engines.base import SessionOptions, Spring, open_session
+    from asset2sim.engines.base import SessionOptions, Spring
+    from asset2sim.engines.registry import open_session
     from asset2sim.tasks.check.probes import run_probes
 
     urdf = drawer(tmp_path / "d", stiffness=200.0) / "mobility.urdf"
@@ -390,7 +392,8 @@ def test_a_turn_about_the_vertical_is_not_tipping(tmp_path):
     """SupportWatch's tilt is the up direction's angle from the vertical (as
     robust rest's topple): a flat object turned on the table by 0.9 rad has
     not tipped; one tilted by 0.1 rad has, whatever it was turned by."""
-    from asset2sim.engines.base import SessionOptions, open_session
+    from asset2sim.engines.base import SessionOptions
+    from asset2sim.engines.registry import open_session
     from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_to_xyzw
     from asset2sim.tasks.check.support import SupportWatch
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import SessionOptions, Spring, available_engines, open_session
+from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.registry import available_engines, open_session
 from asset2sim.engines.fake import write_contract_asset
 from asset2sim.tasks.check.force_ranges import (
     OperatingForcesError,

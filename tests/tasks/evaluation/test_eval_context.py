@@ -13,10 +13,10 @@ import pytest
 
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.evaluation.asset_files import EvaluationError, JointInfo, clip_to_limits
+from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo, clip_to_limits
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, closed_fallback, compute_closed
 from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
-from asset2sim.tasks.evaluation.request_match import (
+from asset2sim.tasks.check.request_match import (
     category_prior,
     labelled_joints,
     match_label,

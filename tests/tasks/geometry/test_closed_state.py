@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from asset2sim import demo_assets
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.tasks.geometry.closed_state import closed_positions, object_extents
 from asset2sim.tasks.ingest.extract import extract_asset
 from tests.conftest import SHARED, needs_shared

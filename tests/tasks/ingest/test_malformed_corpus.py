@@ -182,9 +182,9 @@ def test_huge_coordinates_print_no_numpy_warning(tmp_path):
 
 def test_size_bounds_derive_from_the_overlay_scale_range_and_the_priors():
     from asset2sim.tasks.ingest import findings
-    from asset2sim.tasks.interpret.prior_tables import MAX_PRIOR_DIM_M, load_priors
+    from asset2sim.prior_tables import MAX_PRIOR_DIM_M, load_priors
     from asset2sim.tasks.interpret.size_priors import target_size
-    from asset2sim.tasks.synthesize.validate_overlay import SCALE_RANGE
+    from asset2sim.schemas.overlay import SCALE_RANGE
 
     assert findings.MAX_COORDINATE == MAX_PRIOR_DIM_M / SCALE_RANGE[0] == vi.DEFAULT_POLICY.max_coordinate
     lo, hi = findings.asset_size_range()

@@ -42,9 +42,10 @@ import numpy as np
 import yaml
 
 from asset2sim.demo_assets import ensure_demo_dataset
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
-from asset2sim.tasks.interpret.prior_tables import load_priors
+from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.refine import RefineResult, refine_asset
 from asset2sim.tasks.synthesize.context import build_context

@@ -6,7 +6,7 @@ import pytest
 
 from asset2sim.tasks.interpret import mounting
 from asset2sim.tasks.interpret.categories import resolve_category
-from asset2sim.tasks.interpret.prior_tables import load_priors
+from asset2sim.prior_tables import load_priors
 
 
 def test_every_prior_entry_is_a_known_category_with_a_source():

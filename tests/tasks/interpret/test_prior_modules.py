@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.tasks.interpret import categories, part_labels, part_priors, prior_tables, priors, size_priors
+from asset2sim.tasks.interpret import categories, part_labels, part_priors, priors, size_priors
+from asset2sim import prior_tables
 from asset2sim.tasks.interpret.request import parse_request
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -37,7 +38,6 @@ def _own_imports(module: str) -> set[str]:
 @pytest.mark.parametrize(
     ("module", "allowed"),
     [
-        ("prior_tables", set()),
         ("part_labels", {"prior_tables"}),
         ("categories", {"prior_tables", "part_labels"}),
         ("request_values", {"part_labels"}),
@@ -51,6 +51,14 @@ def test_modules_import_only_the_layers_below(module: str, allowed: set[str]) ->
     """tables <- part labels <- categories <- request <- sizes, and the mounting
     words (a layer of their own, read by the request parser): no way back."""
     assert _own_imports(module) <= allowed
+
+
+def test_the_prior_tables_import_no_stage() -> None:
+    """The tables' loader is core (``asset2sim/prior_tables.py``): every
+    stage may read it, it reads none."""
+    tree = ast.parse((ROOT / "asset2sim" / "prior_tables.py").read_text())
+    own = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("asset2sim")}
+    assert own and not {m for m in own if m.startswith(("asset2sim.tasks", "asset2sim.flows"))}, own
 
 
 def test_body_label_tokens_name_the_object() -> None:

@@ -1,4 +1,4 @@
-"""What a parsed request does to an object (``tasks/interpret/request_apply.py``)
+"""What a parsed request does to an object (``tasks/synthesize/request_apply.py``)
 and what the report and the terminal say about it: ends decided from the
 geometry ("lever up"), numbers from the closed end, ordinals in space, parts
 the object lacks, contradictions, ignored word groups, the model prompt and
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from asset2sim.commands.refine import summary_lines
-from asset2sim.engines.base import SessionOptions, open_session
-from asset2sim.tasks.interpret import request_apply
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
+from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import estimate, llm_prompt
+from asset2sim.tasks.synthesize import backends, estimate, llm_prompt
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.interpret.request_assets import LEVER_TRAVEL, build_toaster
@@ -109,7 +110,7 @@ def test_the_model_prompt_carries_the_numbers_and_a_departing_overlay_is_flagged
         assert {p["label"]: p["material"] for p in rp["masses_and_materials"]}["lid"] == "glass"
         (j,) = d["joints"]
         assert abs(j["requested_opening_fraction"] * ctx.closed[j["name"]].open_range - np.radians(40)) < 1e-4
-        est = estimate.get_estimator("offline").estimate(ctx)
+        est = backends.get_estimator("offline").estimate(ctx)
         ov, _ = request_apply.check_against_request(ctx, est.overlay, est.targets)
         assert not [n for n in ov.notes.other if "departs from the request" in n]  # the offline overlay honours it
         bad = est.overlay.model_copy(update={"scale": est.overlay.scale * 1.5, "links": {

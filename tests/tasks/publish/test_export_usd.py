@@ -14,7 +14,7 @@ from asset2sim.engines.fake import write_contract_asset
 from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.overlay import Inertia
-from asset2sim.tasks.publish.export_mjcf import export_mjcf
+from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 from tests.conftest import SHARED
 
 pxr = pytest.importorskip("pxr")

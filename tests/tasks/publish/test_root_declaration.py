@@ -1,5 +1,5 @@
 """The root declaration of an output folder: initial_state.json "root", the
-URDF comment, read back by every check (tasks.publish.write)."""
+URDF comment, read back by every check (tasks.assemble.write)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import json
 import pytest
 
 from asset2sim.schemas.overlay import RootMount
-from asset2sim.tasks.publish import write
-from asset2sim.tasks.publish.output_folder import OutputError
+from asset2sim.tasks.assemble import write
+from asset2sim.output_folder import OutputError
 
 
 def test_record_of_a_mounted_root():

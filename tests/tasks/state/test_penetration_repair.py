@@ -93,7 +93,7 @@ def test_piece_overlaps_are_measured_net_of_the_engine_contact_margins():
     each), pieces 1 mm into each other overlap by 1 mm."""
     import numpy as np
 
-    from asset2sim.engines.base import open_shape_world
+    from asset2sim.engines.registry import open_shape_world
     from asset2sim.tasks.state.collision import overlap_depths
 
     world = open_shape_world("pybullet")

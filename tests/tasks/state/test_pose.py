@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
 from asset2sim.tasks.state import pose
 from asset2sim.tasks.geometry.closed_state import link_hull_points

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest.extract import extract_asset

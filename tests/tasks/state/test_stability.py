@@ -13,7 +13,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.publish import write
+from asset2sim.tasks.assemble import write
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.state import balance, stability
 from asset2sim.tasks.geometry.analyze import analyze_asset

@@ -7,7 +7,7 @@ import pytest
 
 from asset2sim.tasks.check import robust_rest
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.publish import write
+from asset2sim.tasks.assemble import write
 from asset2sim.tasks.refine import refine_asset
 from tests.tasks.check.failure_assets import build_edge_standing_case
 

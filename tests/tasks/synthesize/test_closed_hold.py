@@ -6,7 +6,8 @@ import pytest
 
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import build_context
-from asset2sim.tasks.synthesize.estimate import CLOSED_HOLD_FRACTIONS, OfflineEstimator
+from asset2sim.tasks.synthesize.estimate import CLOSED_HOLD_FRACTIONS
+from asset2sim.tasks.synthesize.offline import OfflineEstimator
 from tests.conftest import SHARED
 
 pytestmark = pytest.mark.skipif(not (SHARED / "102703").is_dir(), reason="PartNet-Mobility 102703 not available")

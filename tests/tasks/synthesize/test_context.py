@@ -11,7 +11,7 @@ import pytest
 from asset2sim import demo_assets
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize import backends, estimate, estimator
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context, interpret
 from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
 from tests.conftest import SHARED, needs_shared
@@ -43,8 +43,8 @@ def test_context_of_real_assets(asset_id, category, prompt):
         _check_context(ctx)
         assert ctx.category == category and ctx.asset.asset_id == asset_id
         assert ctx.request.text == prompt
-        result = estimate.get_estimator("offline").estimate(ctx)
-    assert isinstance(result, estimate.Estimate)
+        result = backends.get_estimator("offline").estimate(ctx)
+    assert isinstance(result, estimator.Estimate)
     assert set(result.bands) == {j.name for j in ctx.asset.movable_joints()}
     assert set(result.bands.values()) - {"closed"}, "the request opens a part"
     overlay, _ = validate_overlay(result.overlay, ctx.asset, ctx.geometry)
@@ -76,7 +76,7 @@ def test_demo_cabinet_context_finds_the_closed_drawers_and_orders_them_top_down(
     src = demo_assets.build_two_drawer_cabinet(tmp_path / entry.asset_id)
     with build_context(src, entry.prompt, category=entry.category) as ctx:
         _check_context(ctx)
-        result = estimate.get_estimator("offline").estimate(ctx)
+        result = backends.get_estimator("offline").estimate(ctx)
         bands, _ = estimate.requested_bands(ctx)
     for name, q in entry.closed_positions.items():
         assert ctx.closed[name].q_closed == pytest.approx(q, abs=1e-3)

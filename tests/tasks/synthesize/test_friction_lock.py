@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.tasks.synthesize.physics import FRICTION_LOCK_SHARE, JointLoad, joint_dynamics, max_stable_friction
 
 #: Inertia of the handle about its hinge (kg*m^2): a 47 g bar 5 cm from the axis.

@@ -287,12 +287,12 @@ def test_cli_missing_key_message(plate, tmp_path, capsys):
 
 
 def test_openai_estimator_prefixes_the_model_and_registers():
-    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.synthesize import backends
 
     assert le.model_string("openai", "m") == "openai/m"
     assert le.model_string("openai", "openai/gpt-4o") == "openai/gpt-4o"
     assert le.model_string("llm", "gemini/gemini-2.5-flash") == "gemini/gemini-2.5-flash"
-    est = estimate.get_estimator("openai", model="m", base_url="http://127.0.0.1:9/v1")
+    est = backends.get_estimator("openai", model="m", base_url="http://127.0.0.1:9/v1")
     assert est.name == "openai" and est.client.config.model == "openai/m"
 
 
@@ -346,7 +346,7 @@ def test_cli_refine_real_objects_with_the_fake_server(server, tmp_path):
 
 # ------------------------------------------------------------------ baselines
 def test_direct_baseline_is_one_call_applied_as_is(server, plate, tmp_path):
-    from asset2sim.tasks.publish import write
+    from asset2sim.tasks.assemble import write
 
     server.default = fake.valid_reply(lambda d: d["joints"][0]["damping"].update(value=7.5))
     with _ctx(plate) as ctx:
@@ -374,7 +374,7 @@ def _varying(server_state: dict):
 
 
 def test_ivw_baseline_is_25_calls_fused_by_inverse_variance(server, plate, tmp_path):
-    from asset2sim.tasks.publish import write
+    from asset2sim.tasks.assemble import write
 
     st: dict = {}
     server.default = _varying(st)
@@ -405,10 +405,10 @@ def test_ivw_skips_unusable_replies_and_fails_when_none(server, plate):
 
 def test_second_estimate_of_the_same_asset_reuses_the_reply(server, plate, monkeypatch):
     """The refine stage may estimate twice (another resting pose): one model call."""
-    from asset2sim.tasks.synthesize import estimate
+    from asset2sim.tasks.synthesize import backends
 
     monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", "off")  # the memo, not the disk cache
-    est = estimate.get_estimator("openai", model="m", base_url=server.url)
+    est = backends.get_estimator("openai", model="m", base_url=server.url)
     with _ctx(plate) as ctx:
         ea = est.estimate(ctx)
         ctx.root_rotation = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # lying on its side
@@ -427,7 +427,8 @@ def test_stalled_state_search_asks_the_model_and_keeps_only_improvements(tmp_pat
     """The arm passes through the post whatever the allowed (closed) band: the
     search stalls, the model is asked once for joint proposals, and a proposal
     is applied only if it lowers the objective (it never leaves the band)."""
-    from asset2sim.engines.base import SessionOptions, open_session
+    from asset2sim.engines.base import SessionOptions
+    from asset2sim.engines.registry import open_session
     from asset2sim.schemas.request import BAND_INTERVAL
     from asset2sim.tasks.synthesize import llm_estimator as le
     from asset2sim.tasks.geometry.closed_state import ClosedState

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from asset2sim.engines.base import SessionOptions, open_session
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.geometry.analyze import analyze_asset

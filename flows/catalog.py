@@ -1,0 +1,838 @@
+"""The pipeline's two catalogs: ``catalog.yaml`` (what to refine) and the
+Parquet result catalog (what came out).
+
+``catalog.yaml`` (:class:`CatalogConfig`) declares datasets (where the raw
+assets are, the manifest of requests, whether the project generates them), the
+estimator and its settings, run settings (workers, per-asset time limit,
+isolation), the schedule of the nightly run, the tracking store and where
+results go. Relative paths are relative to the folder of ``catalog.yaml`` (the
+*project root*).
+
+The result catalog (:class:`ResultCatalog`) is a tree of Parquet files
+partitioned Hive-style by dataset and run, on a local folder or any object
+store (``catalog_root: s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)::
+
+    <catalog_root>/dataset=<name>/run=<run_id>/<asset_id>.parquet   one row each, while the run is on
+    <catalog_root>/dataset=<name>/run=<run_id>/_compacted.parquet   the run's rows, once it ended
+    <catalog_root>/dataset=<name>/run=<run_id>/_run.json            run metadata
+
+Each row file is written atomically (a local temporary file renamed, or one
+object upload), so appending a row never leaves a half-written file and
+concurrent readers see either the old or the new state; the flow compacts a
+run's partition into one file when the run ends (``results.compact``), so
+queries over a year of nightly runs read a few hundred files. The row schema
+is :func:`~asset2sim.schemas.catalog.arrow_schema`, versioned (``SCHEMA_VERSION`` in
+:mod:`asset2sim.schemas.catalog`): old runs stay readable when columns are
+added. Units are in the column names (``_mm``, ``_m``, ``_rad``, ``_kg``,
+``_seconds``).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from asset2sim.flows import catalog_fs
+from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.ingest import partnet_mobility
+
+# --------------------------------------------------------------------------- config
+
+
+class CatalogError(ValueError):
+    """``catalog.yaml`` or a manifest is missing or invalid; the message names the file."""
+
+
+class DatasetConfig(BaseModel):
+    """One dataset of ``catalog.yaml``.
+
+    ``root``: folder holding one sub-folder per asset (relative to the project
+    root). ``manifest``: CSV with columns ``id`` and ``prompt`` (required),
+    ``category``, ``reference_scale``, ``time_limit_seconds`` (optional, the
+    last overrides the run's per-asset limit); default ``<root>/manifest.csv``.
+    ``generate``: ``demo`` builds the project's own demo assets into ``root``
+    on first use (:mod:`asset2sim.demo_assets`). ``reference``: measure the
+    reference metrics (scale deviation) against ``reference_gensim2.json`` in
+    the asset folders when present.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    root: str
+    manifest: str | None = None
+    generate: Literal["demo"] | None = None
+    reference: bool = False
+    description: str = ""
+
+
+class EstimatorSettings(BaseModel):
+    """Estimator and its settings; ``retries``/``retry_delay_seconds`` apply to
+    model calls only (a failing offline estimator is not retried)."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = "offline"
+    model: str | None = None
+    retries: int = Field(default=2, ge=0)
+    retry_delay_seconds: float = Field(default=10.0, ge=0.0)
+
+
+class RunSettings(BaseModel):
+    """How a flow run executes.
+
+    ``workers``: Dask workers of the local cluster (count; None = CPU count).
+    ``time_limit_seconds``: wall-time limit per asset (s), over all its stages.
+    ``isolation``: ``process`` runs each asset's stages in a child process that
+    is killed at the time limit (a crash or hang costs only that asset),
+    forked from a stage server each Dask worker starts once with the
+    pipeline imported (:mod:`asset2sim.flows.forkserver`); ``spawn`` the same
+    in a fresh Python per stage call (imports paid per asset);
+    ``memory_limit_mb``: address-space limit of that child process (MiB,
+    ``RLIMIT_AS``; None = no limit): an asset that needs more fails alone with
+    a memory error instead of taking the machine's memory from the others
+    (default 8192: a 1,000,000-triangle asset, the validator's cap, peaks near
+    3.3 GiB, ``benchmarks/bench_mesh_cap.py``);
+    ``none`` runs them in the Dask worker (Prefect's timeout, which cannot
+    interrupt a long native call). ``evaluate``: run the metrics stage
+    (``tasks.evaluate``: penetration, rest stability, oscillation, prompt
+    alignment, scale deviation) on each output. ``probes``: include the
+    scripted probes in it. ``extras``: write the MJCF export, renders and
+    HTML report of each asset (SPEC output). ``refine_function``: ``module:function`` with the
+    signature of :func:`asset2sim.tasks.refine.refine_asset`.
+    ``dask_host``: interface address the local Dask cluster listens on
+    (scheduler, nannies, workers, dashboard; default ``127.0.0.1``, loopback
+    only: ``0.0.0.0`` or a host's address opens them, unauthenticated, to
+    its network). ``dashboard``: serve the scheduler's dashboard (its
+    status, info and JSON pages, on a free port of ``dask_host``); ``false``
+    turns every HTTP page of the local cluster off. Both ignored with
+    ``--dask-address`` / ``DASK_ADDRESS``: an existing cluster listens where
+    it was started.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    workers: int | None = Field(default=2, ge=1)
+    time_limit_seconds: float = Field(default=1800.0, gt=0.0)
+    memory_limit_mb: int | None = Field(default=8192, ge=256)
+    isolation: Literal["process", "spawn", "none"] = "process"
+    evaluate: bool = True
+    probes: bool = False
+    extras: bool = True
+    refine_function: str = "asset2sim.tasks.refine:refine_asset"
+    dask_host: str = Field(default="127.0.0.1", min_length=1)
+    dashboard: bool = True
+
+
+class ScheduleSettings(BaseModel):
+    """The nightly deployment: cron expression, IANA time zone, dataset."""
+
+    model_config = ConfigDict(extra="forbid")
+    cron: str = "0 2 * * *"
+    timezone: str = "UTC"
+    dataset: str | None = None
+    deployment_name: str = "nightly"
+
+
+class TrackingSettings(BaseModel):
+    """MLflow: ``uri`` (None = ``MLFLOW_TRACKING_URI`` or ``sqlite:///<project>/mlflow.db``),
+    ``experiment`` name, ``artifact_root`` for new experiments (relative to
+    the project root), ``enabled``."""
+
+    model_config = ConfigDict(extra="forbid")
+    enabled: bool = True
+    uri: str | None = None
+    experiment: str = "asset2sim"
+    artifact_root: str = "mlruns"
+
+
+class RegressionSettings(BaseModel):
+    """When a run counts as a regression against the previous run of the
+    same dataset (:mod:`asset2sim.flows.catalog_compare`).
+
+    ``max_regressed_assets``: assets that passed all checks in the previous
+    run and no longer do (count); ``max_pass_rate_drop``: drop of the
+    all-checks pass rate over the assets both runs hold (fraction, 0-1);
+    ``max_metric_drift``: per compared metric column
+    (:data:`asset2sim.flows.catalog_compare.COMPARED_METRICS`), the largest allowed
+    worsening of its mean over the common assets (in the column's unit, e.g.
+    ``penetration_mm: 1.0``; rates as fractions); ``fail_flow``: ``asset2sim flow`` / ``make
+    flow`` exit with status 5 when a limit is exceeded (the run's rows are
+    written either way)."""
+
+    model_config = ConfigDict(extra="forbid")
+    max_regressed_assets: int = Field(default=0, ge=0)
+    max_pass_rate_drop: float = Field(default=0.0, ge=0.0, le=1.0)
+    max_metric_drift: dict[str, float] = Field(default_factory=dict)
+    fail_flow: bool = True
+
+
+class ResultsSettings(BaseModel):
+    """The result catalog's policies.
+
+    ``code_change``: ``rerun`` (default) redoes finished assets when the code
+    changed (the hash of the package source is part of the skip key,
+    :func:`asset2sim.tasks.publish.contract.code_hash`); ``keep`` reuses
+    results of earlier code as long as input and configuration match.
+    ``compact``: fold each run's row files into one Parquet file when the run
+    ends. ``regression``: :class:`RegressionSettings`."""
+
+    model_config = ConfigDict(extra="forbid")
+    code_change: Literal["rerun", "keep"] = "rerun"
+    compact: bool = True
+    regression: RegressionSettings = Field(default_factory=RegressionSettings)
+
+
+class CatalogConfig(BaseModel):
+    """Contents of ``catalog.yaml``. ``catalog_root`` is a path (relative to
+    the project root) or a URI (``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)."""
+
+    model_config = ConfigDict(extra="forbid")
+    version: int = 1
+    default_dataset: str
+    output_root: str = "data/refined"
+    catalog_root: str = "data/catalog"
+    output_store: str | None = None
+    """Where refined outputs are published (``s3://bucket/prefix``, any
+    pyarrow / fsspec URI, or a path): each worker refines into a local
+    temporary folder and uploads it (``asset2sim.flows.store``); None: the
+    outputs stay under ``output_root``, which the workers must share."""
+    datasets: dict[str, DatasetConfig]
+    estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
+    refine: dict[str, Any] = Field(default_factory=dict)
+    """Overrides of :class:`asset2sim.schemas.config.RefineConfig` fields."""
+    run: RunSettings = Field(default_factory=RunSettings)
+    schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
+    tracking: TrackingSettings = Field(default_factory=TrackingSettings)
+    results: ResultsSettings = Field(default_factory=ResultsSettings)
+
+
+@dataclass(frozen=True)
+class Catalog:
+    """A loaded ``catalog.yaml``: the validated config and the project root."""
+
+    path: Path
+    config: CatalogConfig
+
+    @property
+    def project_root(self) -> Path:
+        return self.path.parent
+
+    def resolve(self, rel: str | Path) -> Path:
+        """A path of the catalog, absolute (relative ones are relative to the project root)."""
+        p = Path(rel).expanduser()
+        return p if p.is_absolute() else (self.project_root / p).resolve()
+
+    def dataset(self, name: str | None = None) -> tuple[str, DatasetConfig]:
+        """``(name, config)`` of dataset ``name`` (default: ``default_dataset``).
+
+        Raises:
+            CatalogError: no such dataset.
+        """
+        name = name or self.config.default_dataset
+        if name not in self.config.datasets:
+            raise CatalogError(f"{self.path}: no dataset {name!r}; known: {sorted(self.config.datasets)}")
+        return name, self.config.datasets[name]
+
+    def dataset_root(self, name: str | None = None) -> Path:
+        return self.resolve(self.dataset(name)[1].root)
+
+    def manifest_path(self, name: str | None = None) -> Path:
+        ds = self.dataset(name)[1]
+        return self.resolve(ds.manifest) if ds.manifest else self.resolve(ds.root) / "manifest.csv"
+
+    @property
+    def output_root(self) -> Path:
+        return self.resolve(self.config.output_root)
+
+    @property
+    def catalog_root(self) -> Path | str:
+        """The result catalog's root: an absolute local path, or the URI as
+        written (``s3://bucket/prefix``)."""
+        root = self.config.catalog_root
+        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else self.resolve(root.removeprefix("file://"))
+
+    @property
+    def output_store(self) -> str | None:
+        """The output store: the URI as written, an absolute path for a
+        path (relative to the project root), or None (outputs under ``output_root``)."""
+        root = self.config.output_store
+        if not root:
+            return None
+        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else str(self.resolve(root.removeprefix("file://")))
+
+    def refine_config(self):
+        """The :class:`~asset2sim.schemas.config.RefineConfig` of this catalog
+        (estimator and model from ``estimator``, other fields from ``refine``).
+
+        Raises:
+            CatalogError: an unknown or invalid ``refine`` field.
+        """
+        fields = dict(self.config.refine)
+        fields.setdefault("estimator", self.config.estimator.name)
+        fields.setdefault("model", self.config.estimator.model)
+        try:
+            return RefineConfig(**fields)
+        except ValidationError as exc:
+            raise CatalogError(f"{self.path}: invalid 'refine' settings: {exc}") from exc
+
+
+def load_catalog(path: Path | str) -> Catalog:
+    """Read and validate ``catalog.yaml``.
+
+    Raises:
+        CatalogError: the file is missing, not YAML, or does not match
+            :class:`CatalogConfig` (the message names the field).
+    """
+    path = Path(path).expanduser().resolve()
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise CatalogError(f"{path}: cannot read the catalog: {exc}") from exc
+    except yaml.YAMLError as exc:
+        raise CatalogError(f"{path}: not valid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise CatalogError(f"{path}: expected a mapping at the top level")
+    try:
+        config = CatalogConfig.model_validate(data)
+    except ValidationError as exc:
+        raise CatalogError(f"{path}: {exc}") from exc
+    if config.default_dataset not in config.datasets:
+        raise CatalogError(f"{path}: default_dataset {config.default_dataset!r} is not among the datasets")
+    return Catalog(path=path, config=config)
+
+
+@dataclass(frozen=True)
+class ManifestEntry:
+    """One request of a manifest: asset id, prompt, the asset folder, optional
+    category, reference scale (dimensionless) and time limit (s), and the
+    1-based line of the manifest where its row starts."""
+
+    asset_id: str
+    prompt: str
+    asset_dir: Path
+    category: str | None = None
+    reference_scale: float | None = None
+    time_limit_seconds: float | None = None
+    line: int | None = None
+
+
+def _entry(r: partnet_mobility.ManifestRow) -> ManifestEntry:
+    return ManifestEntry(
+        asset_id=r.id,
+        prompt=r.prompt,
+        asset_dir=r.folder,
+        category=r.category or None,
+        reference_scale=r.reference_scale,
+        time_limit_seconds=r.time_limit_seconds,
+        line=r.line,
+    )
+
+
+def read_manifest_entries(
+    manifest: Path | str, root: Path | str
+) -> tuple[list[ManifestEntry], list[partnet_mobility.ManifestRowError]]:
+    """Usable entries of a manifest CSV and the typed errors of its bad rows
+    (:class:`~asset2sim.tasks.ingest.partnet_mobility.ManifestRowError`: line,
+    id when known, code, message), each in file order; asset folders under
+    ``root``. Parsed by
+    :func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`: a bad
+    row (too long for the CSV reader, a missing/unsafe/duplicate id, no
+    prompt column, an invalid number) never hides the others.
+
+    Raises:
+        CatalogError: the manifest is missing or unreadable, not UTF-8 text,
+            or has no ``id`` / ``prompt`` column.
+    """
+    manifest = Path(manifest)
+    try:
+        reading = partnet_mobility.read_manifest_rows(manifest, root)
+    except OSError as exc:
+        raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
+    except partnet_mobility.ManifestError as exc:
+        raise CatalogError(str(exc)) from exc
+    return [_entry(r) for r in reading.rows], list(reading.errors)
+
+
+def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
+    """Entries of a manifest CSV (columns ``id``, ``prompt``; optional
+    ``category``, ``reference_scale``, ``time_limit_seconds``), asset folders
+    under ``root``, all or nothing (:func:`read_manifest_entries` keeps the
+    good rows of a manifest with bad ones).
+
+    Raises:
+        CatalogError: missing file or columns, an empty/duplicate/unsafe id
+            (ids name folders and files: letters, digits, ``_.-``), or a
+            ``reference_scale`` / ``time_limit_seconds`` that is not a positive
+            number (the first bad row, naming the file and line).
+    """
+    entries, errors = read_manifest_entries(manifest, root)
+    if errors:
+        more = f" (and {len(errors) - 1} more bad row(s))" if len(errors) > 1 else ""
+        raise CatalogError(errors[0].message + more)
+    return entries
+
+
+# ----------------------------------------------------------------------- Parquet rows
+
+#: The Parquet schema of a row, derived from :class:`~asset2sim.schemas.catalog.CatalogRow`.
+_schema = arrow_schema
+
+#: The file a run's partition is compacted into (a name no asset id can take:
+#: ids start with a letter or digit).
+COMPACTED_NAME = "_compacted.parquet"
+RUN_INFO_NAME = "_run.json"
+
+_PART_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+
+
+def _check_part(kind: str, value: str) -> str:
+    if not _PART_RE.match(value or ""):
+        raise ValueError(f"invalid {kind} name {value!r} (letters, digits, '_.-' only)")
+    return value
+
+
+@dataclass(frozen=True)
+class Compaction:
+    """What :meth:`ResultCatalog.compact` did: rows in the compacted file,
+    loose row files folded in and removed, bytes of the compacted file,
+    wall time (s)."""
+
+    dataset: str
+    run: str
+    rows: int
+    files_removed: int
+    bytes: int
+    seconds: float
+
+
+@dataclass
+class _RunFiles:
+    compacted: Any = None  # FileInfo of the compacted file
+    loose: dict[str, Any] | None = None  # asset id -> FileInfo of its row file
+
+
+class ResultCatalog:
+    """The Parquet result catalog under ``root`` (a local folder or a URI such
+    as ``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`).
+
+    Layout, partitioned Hive-style by dataset and run::
+
+        <root>/dataset=<name>/run=<run_id>/<asset_id>.parquet   one row, while the run is on
+        <root>/dataset=<name>/run=<run_id>/_compacted.parquet   all rows, once the run ended
+        <root>/dataset=<name>/run=<run_id>/_run.json            run metadata
+
+    Rows land atomically, one file per asset (:meth:`append_row`); when a run
+    ends, :meth:`compact` folds its row files into one file sorted by asset id,
+    so a dataset holds one file per run however many assets it has (2,346
+    PartNet-Mobility objects a night add one file, not 2,346). A row file
+    next to the compacted file (a row written after compaction, e.g. the row
+    a later run restores for a killed run) replaces the compacted row of the
+    same asset; a compaction interrupted between writing the compacted file
+    and removing the row files leaves the same rows twice, which readers
+    count once. The row schema is versioned
+    (:data:`~asset2sim.schemas.catalog.SCHEMA_VERSION`, in each file's
+    metadata); files of older versions read with the newer columns null.
+    """
+
+    def __init__(self, root: Path | str):
+        self.location = catalog_fs.open_location(root)
+        self.root: Path | str = Path(self.location.base) if self.location.local else self.location.uri
+
+    # ------------------------------------------------------------------ paths
+
+    def _run_path(self, dataset: str, run: str) -> str:
+        return self.location.join(f"dataset={_check_part('dataset', dataset)}", f"run={_check_part('run', run)}")
+
+    def run_dir(self, dataset: str, run: str) -> Path | str:
+        """The run's partition: a local :class:`~pathlib.Path`, or a URI on an object store."""
+        p = self._run_path(dataset, run)
+        return Path(p) if self.location.local else self.location.display(p)
+
+    # ----------------------------------------------------------------- writing
+
+    def append_row(self, dataset: str, run: str, row: CatalogRow | dict[str, Any]) -> Path | str:
+        """Write one row (a :class:`~asset2sim.schemas.catalog.CatalogRow`, or a
+        dict with its keys; missing keys are null) atomically as
+        ``<asset_id>.parquet`` of the run's partition.
+
+        Writing the same asset again in the same run replaces its row.
+
+        Raises:
+            ValueError: unknown columns, a bad status, an invalid id/name, or a
+                value of the wrong type.
+            OSError: the filesystem refused the write.
+        """
+        if not isinstance(row, CatalogRow):
+            extra = set(row) - set(ROW_COLUMNS)
+            if extra:
+                raise ValueError(f"unknown catalog column(s): {sorted(extra)}")
+            if row.get("status") not in ROW_STATUSES:
+                raise ValueError(f"status must be one of {ROW_STATUSES}, got {row.get('status')!r}")
+            row = CatalogRow.model_validate(row)
+        aid = _check_part("asset", row.asset_id)
+        import pyarrow as pa
+
+        values = {name: [v] for name, v in row.model_dump().items()}
+        table = pa.Table.from_pydict(values, schema=_schema(with_version=True))
+        path = f"{self._run_path(dataset, run)}/{aid}.parquet"
+        catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
+        return Path(path) if self.location.local else self.location.display(path)
+
+    def write_run_info(self, dataset: str, run: str, info: dict[str, Any]) -> Path | str:
+        """Write the run's metadata ``_run.json`` atomically (replacing it)."""
+        path = f"{self._run_path(dataset, run)}/{RUN_INFO_NAME}"
+        catalog_fs.write_bytes(self.location, path, (json.dumps(info, indent=2, default=str) + "\n").encode())
+        return Path(path) if self.location.local else self.location.display(path)
+
+    def run_info(self, dataset: str, run: str) -> dict[str, Any] | None:
+        """The run's ``_run.json``; None when absent or unreadable."""
+        data = catalog_fs.read_bytes(self.location, f"{self._run_path(dataset, run)}/{RUN_INFO_NAME}")
+        try:
+            return None if data is None else json.loads(data)
+        except ValueError:
+            return None
+
+    def import_rows(self, dataset: str, run: str, table) -> Path | str:
+        """Write a whole run's rows at once as its compacted file (a
+        :class:`pyarrow.Table` with catalog columns; missing columns null,
+        cast to the current schema), replacing the partition's rows: for
+        importing results made elsewhere and for benchmarks.
+
+        Raises:
+            ValueError: a column the schema does not have, or a value that
+                cannot be cast to its column's type.
+        """
+        import pyarrow as pa
+
+        schema = _schema()
+        extra = [c for c in table.schema.names if c not in schema.names]
+        if extra:
+            raise ValueError(f"unknown catalog column(s): {sorted(extra)}")
+        cols = [table[c].cast(f.type) if c in table.schema.names else pa.nulls(table.num_rows, f.type)
+                for c, f in zip(schema.names, schema)]  # fmt: skip
+        table = pa.Table.from_arrays(cols, schema=schema).sort_by("asset_id")
+        for aid in table["asset_id"].unique().to_pylist():
+            _check_part("asset", aid)
+        path = f"{self._run_path(dataset, run)}/{COMPACTED_NAME}"
+        catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
+        for info in (self._run_files(dataset, run).loose or {}).values():
+            catalog_fs.delete_file(self.location, info.path)
+        return Path(path) if self.location.local else self.location.display(path)
+
+    def delete_row(self, dataset: str, run: str, asset_id: str) -> bool:
+        """Remove the row of ``asset_id`` from the run (its row file, and from
+        the compacted file, rewritten atomically without it). False when the
+        run held no such row."""
+        files = self._run_files(dataset, run)
+        removed = False
+        if asset_id in (files.loose or {}):
+            removed = catalog_fs.delete_file(self.location, files.loose[asset_id].path)
+        if files.compacted is not None:
+            import pyarrow.compute as pc
+
+            table = self._read_file(files.compacted.path)
+            keep = pc.invert(pc.equal(table["asset_id"], asset_id))
+            if table.num_rows and not pc.all(keep).as_py():
+                catalog_fs.write_bytes(self.location, files.compacted.path, _parquet_bytes(table.filter(keep)))
+                removed = True
+        return removed
+
+    def compact(self, dataset: str, run: str) -> Compaction:
+        """Fold the run's row files into its compacted file (rows sorted by
+        asset id; a row file wins over a compacted row of the same asset),
+        written atomically, then remove the row files folded in (each only if
+        it is unchanged since it was read: same size and modification time).
+
+        Raises:
+            OSError: the filesystem refused a write (the row files then stay:
+                nothing is lost).
+        """
+        import pyarrow as pa
+        import pyarrow.compute as pc
+
+        t0 = time.perf_counter()
+        files = self._run_files(dataset, run)
+        loose = dict(files.loose or {})
+        if not loose:
+            rows = 0 if files.compacted is None else self._read_file(files.compacted.path, ["asset_id"]).num_rows
+            size = 0 if files.compacted is None else int(files.compacted.size or 0)
+            return Compaction(dataset, run, rows, 0, size, time.perf_counter() - t0)
+        new = self._read_files([info.path for info in loose.values()])
+        if files.compacted is not None:
+            old = self._read_file(files.compacted.path)
+            old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
+            new = pa.concat_tables([old, new])
+        new = new.sort_by("asset_id")
+        data = _parquet_bytes(new)
+        path = f"{self._run_path(dataset, run)}/{COMPACTED_NAME}"
+        catalog_fs.write_bytes(self.location, path, data)
+        removed = 0
+        now = {i.base_name: i for i in catalog_fs.list_files(self.location, self._run_path(dataset, run))}
+        for info in loose.values():
+            cur = now.get(info.base_name)
+            if cur is not None and cur.size == info.size and cur.mtime == info.mtime:
+                removed += bool(catalog_fs.delete_file(self.location, info.path))
+        return Compaction(dataset, run, new.num_rows, removed, len(data), time.perf_counter() - t0)
+
+    # ----------------------------------------------------------------- reading
+
+    def runs(self, dataset: str | None = None) -> list[tuple[str, str]]:
+        """``(dataset, run)`` partitions present, sorted by dataset then run id
+        (run ids start with a UTC time stamp, so this is chronological)."""
+        return sorted(self._partitions(dataset))
+
+    def _partitions(self, dataset: str | None = None) -> dict[tuple[str, str], _RunFiles]:
+        """Every run partition (of ``dataset``) and its row files, from one
+        recursive listing (one paginated LIST on an object store)."""
+        import pyarrow.fs as pafs
+
+        if dataset is not None:
+            _check_part("dataset", dataset)
+            top = self.location.join(f"dataset={dataset}")
+        else:
+            top = self.location.base
+        out: dict[tuple[str, str], _RunFiles] = {}
+        base = self.location.base.rstrip("/")
+        for info in catalog_fs.list_files(self.location, top, recursive=True):
+            rel = info.path[len(base):].lstrip("/") if info.path.startswith(base) else info.path
+            bits = rel.split("/")
+            if len(bits) < 2 or not bits[0].startswith("dataset=") or not bits[1].startswith("run="):
+                continue
+            key = (bits[0].split("=", 1)[1], bits[1].split("=", 1)[1])
+            if not (_PART_RE.match(key[0]) and _PART_RE.match(key[1])):
+                continue
+            if len(bits) == 2:
+                if info.type == pafs.FileType.Directory:
+                    out.setdefault(key, _RunFiles(loose={}))
+                continue
+            if len(bits) != 3 or info.type != pafs.FileType.File:
+                continue
+            rf = out.setdefault(key, _RunFiles(loose={}))
+            name = bits[2]
+            if name == COMPACTED_NAME:
+                rf.compacted = info
+            elif name.endswith(".parquet") and _PART_RE.match(name) and not catalog_fs_temp(name):
+                rf.loose[name[: -len(".parquet")]] = info
+        return out
+
+    def _run_files(self, dataset: str, run: str) -> _RunFiles:
+        import pyarrow.fs as pafs
+
+        rf = _RunFiles(loose={})
+        for info in catalog_fs.list_files(self.location, self._run_path(dataset, run)):
+            if info.type != pafs.FileType.File:
+                continue
+            if info.base_name == COMPACTED_NAME:
+                rf.compacted = info
+            elif info.base_name.endswith(".parquet") and _PART_RE.match(info.base_name) and not catalog_fs_temp(info.base_name):
+                rf.loose[info.base_name[: -len(".parquet")]] = info
+        return rf
+
+    def _read_file(self, path: str, columns: list[str] | None = None):
+        """One Parquet file of the catalog as a table of the current schema
+        (columns the file lacks are null)."""
+        return self._read_files([path], columns)
+
+    def _read_files(self, paths: list[str], columns: list[str] | None = None):
+        """Parquet files of the catalog as one table of the current schema
+        (columns a file lacks are null), in one scan."""
+        import pyarrow.dataset as pads
+
+        dset = pads.dataset(paths, schema=_schema(), format="parquet", filesystem=self.location.fs)
+        return dset.to_table(columns=columns)
+
+    def recorded_assets(self, dataset: str, run: str) -> set[str]:
+        """Ids of the assets the run has a row for (row files and compacted file)."""
+        files = self._run_files(dataset, run)
+        ids = set(files.loose or {})
+        if files.compacted is not None:
+            ids |= set(self._read_file(files.compacted.path, ["asset_id"])["asset_id"].to_pylist())
+        return ids
+
+    def has_row(self, dataset: str, run: str, asset_id: str) -> bool:
+        """True when the run holds a row for ``asset_id``."""
+        return asset_id in self.recorded_assets(dataset, run)
+
+    def read_table(
+        self,
+        dataset: str | None = None,
+        run: str | Iterable[str] | None = None,
+        columns: Iterable[str] | None = None,
+        filter: Any = None,
+        limit: int | None = None,
+    ):
+        """Rows as a :class:`pyarrow.Table` with the partition columns
+        ``dataset`` and ``run`` (dictionary-encoded), in (dataset, run, asset
+        id) order unless a run mixes a compacted file with row files: of one
+        dataset, one run or a list of runs, only ``columns`` (plus the
+        partition columns), only the rows matching ``filter`` (a
+        :mod:`pyarrow.dataset` expression, pushed down to the Parquet reader),
+        at most ``limit`` rows (reading stops there). Each run is read from
+        its compacted file and its row files, each asset once (the row file wins).
+
+        Raises:
+            KeyError: a column the catalog does not have.
+        """
+        import pyarrow as pa
+        import pyarrow.compute as pc
+        import pyarrow.dataset as pads
+
+        runs = None if run is None else ({run} if isinstance(run, str) else set(run))
+        part_schema = _PARTITION_SCHEMA()
+        full = pa.unify_schemas([_schema(), part_schema])
+        cols = None if columns is None else list(dict.fromkeys([*columns, "dataset", "run"]))
+        if cols is not None:
+            unknown = [c for c in cols if c not in full.names]
+            if unknown:
+                raise KeyError(f"no catalog column(s) {unknown}; columns: {list(full.names)}")
+        plain: list[str] = []  # files read as they are
+        overlaid: list[tuple[Any, dict[str, Any]]] = []  # (compacted, loose) needing the row-file-wins rule
+        scanned: list[tuple[str, str]] = []
+        for (ds_name, run_id), rf in sorted(self._partitions(dataset).items()):
+            if runs is not None and run_id not in runs:
+                continue
+            scanned.append((ds_name, run_id))
+            loose = rf.loose or {}
+            if rf.compacted is not None and loose:
+                overlaid.append((rf.compacted, loose))
+            else:
+                plain += [rf.compacted.path] if rf.compacted is not None else [i.path for _, i in sorted(loose.items())]
+        out_schema = full if cols is None else pa.schema([full.field(c) for c in cols])
+
+        names: dict[str, set[str]] = {"dataset": set(), "run": set()}
+        for ds_name, run_id in scanned:
+            names["dataset"].add(ds_name)
+            names["run"].add(run_id)
+        partitioning = pads.partitioning(part_schema, flavor="hive",
+                                         dictionaries={k: pa.array(sorted(v), pa.string()) for k, v in names.items()})
+
+        def scan(paths: list[str], columns: list[str] | None = cols):
+            dset = pads.dataset(
+                paths, schema=full, format="parquet", filesystem=self.location.fs,
+                partitioning=partitioning, partition_base_dir=self.location.base,
+            )  # fmt: skip
+            if limit is not None:
+                return dset.head(int(limit), columns=columns, filter=filter)
+            return dset.to_table(columns=columns, filter=filter)
+
+        tables = [scan(plain)] if plain else []
+        with_ids = None if cols is None else list(dict.fromkeys([*cols, "asset_id"]))
+        for compacted, loose in overlaid:
+            # the compacted rows of the assets that have a row file (which wins)
+            old = scan([compacted.path], with_ids)
+            old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
+            tables += [old if cols is None else old.select(cols), scan([i.path for _, i in sorted(loose.items())])]
+        if not tables:
+            return out_schema.empty_table()
+        table = pa.concat_tables(tables)
+        if limit is not None:
+            table = table.slice(0, int(limit))
+        return table.replace_schema_metadata({b"asset2sim.sorted": b"1" if not overlaid else b"0"})
+
+    def read(
+        self,
+        dataset: str | None = None,
+        run: str | Iterable[str] | None = None,
+        columns: Iterable[str] | None = None,
+        filter: Any = None,
+    ):
+        """Rows (see :meth:`read_table`) as a pandas DataFrame sorted by
+        dataset, run and asset id; empty (with every asked column) when there
+        are none. ``dataset`` and ``run`` are plain strings."""
+        import pandas as pd
+        import pyarrow as pa
+
+        table = self.read_table(dataset, run, columns, filter)
+        if table.num_rows == 0:
+            return pd.DataFrame({n: pd.Series(dtype="object") for n in table.schema.names})
+        # files are scanned in (dataset, run) order and each holds its rows by
+        # asset id (compacted, or one row per file in name order): already
+        # sorted unless a run mixed a compacted file with row files
+        for i, name in enumerate(table.schema.names):
+            if name in ("dataset", "run") and pa.types.is_dictionary(table.schema.field(i).type):
+                table = table.set_column(i, name, table.column(i).cast(pa.string()))
+        if (table.schema.metadata or {}).get(b"asset2sim.sorted") != b"1":
+            keys = [k for k in ("dataset", "run", "asset_id") if k in table.schema.names]
+            table = table.sort_by([(k, "ascending") for k in keys])
+        return table.to_pandas()
+
+    def finished(self, dataset: str, code_hash: str | None = None) -> dict[str, dict[str, Any]]:
+        """Latest finished result per ``asset_id|input_hash|config_hash`` key of
+        ``dataset``: the row (dict) of the most recent run in which the asset
+        was done (or skipped, pointing at an earlier output). ``code_hash``:
+        only rows made by this code (:func:`asset2sim.tasks.publish.contract.code_hash`;
+        the ``code_change: rerun`` policy); None: any code."""
+        import pyarrow as pa
+        import pyarrow.dataset as pads
+
+        expr = pads.field("status").isin(["done", "skipped"])
+        if code_hash is not None:
+            expr = expr & (pads.field("code_hash") == code_hash)
+        # pass 1: the key columns only; the latest run of each key
+        keys = self.read_table(dataset, columns=["asset_id", "input_hash", "config_hash"], filter=expr)
+        out: dict[str, dict[str, Any]] = {}
+        if keys.num_rows == 0:
+            return out
+        keys = keys.set_column(keys.schema.get_field_index("run"), "run", keys["run"].cast(pa.string()))
+        kdf = keys.select(["asset_id", "input_hash", "config_hash", "run"]).to_pandas()
+        kdf["_key"] = kdf["asset_id"] + "|" + kdf["input_hash"].fillna("") + "|" + kdf["config_hash"].fillna("")
+        latest = kdf.sort_values("run", kind="stable").drop_duplicates("_key", keep="last")
+        # pass 2: whole rows, only of the runs that hold a latest result
+        rows = self.read(dataset, sorted(latest["run"].unique()), filter=expr)
+        rows = rows.assign(_key=rows["asset_id"] + "|" + rows["input_hash"].fillna("") + "|" + rows["config_hash"].fillna(""))
+        rows = rows.merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
+        for rec in rows.to_dict("records"):
+            rec = {k: _plain(v) for k, v in rec.items()}
+            out[result_key(rec["asset_id"], rec["input_hash"], rec["config_hash"])] = rec
+        return out
+
+
+def _PARTITION_SCHEMA():
+    """The partition columns (dictionary-encoded while scanning: one value per file)."""
+    import pyarrow as pa
+
+    return pa.schema([("dataset", pa.dictionary(pa.int32(), pa.string())), ("run", pa.dictionary(pa.int32(), pa.string()))])
+
+
+def catalog_fs_temp(name: str) -> bool:
+    """True for a temporary file of an atomic write (never a row)."""
+    return name.startswith(".") or name.endswith(".tmp")
+
+
+def _parquet_bytes(table) -> bytes:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), **(_schema(with_version=True).metadata or {})})
+    buf = pa.BufferOutputStream()
+    pq.write_table(table, buf, compression="zstd")
+    return buf.getvalue().to_pybytes()
+
+
+def _plain(v: Any) -> Any:
+    """A catalog value as plain JSON-able Python (NaN/NaT -> None, numpy
+    scalars -> Python, timestamps -> ISO text)."""
+    import pandas as pd
+
+    if v is None:
+        return None
+    if isinstance(v, pd.Timestamp):
+        return None if pd.isna(v) else v.isoformat()
+    try:
+        if pd.isna(v):
+            return None
+    except (TypeError, ValueError):
+        pass
+    if hasattr(v, "item"):
+        return v.item()
+    return v
+
+
+def result_key(asset_id: str, input_hash: str | None, config_hash: str | None) -> str:
+    """Key identifying a result: the same asset, input and configuration."""
+    return f"{asset_id}|{input_hash or ''}|{config_hash or ''}"

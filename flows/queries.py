@@ -1,0 +1,470 @@
+"""Questions people ask of the Parquet result catalog.
+
+Every function takes the DataFrame of :meth:`asset2sim.flows.catalog.ResultCatalog.read`
+(one row per asset per run, with the partition columns ``dataset`` and ``run``)
+and returns a small DataFrame or dict; nothing here prints. The aggregating
+ones (:func:`failure_modes`, :func:`run_summary`, :func:`pass_rates_over_time`,
+:func:`slowest_assets`, :func:`failed_assets`) also take the
+:class:`pyarrow.Table` of :meth:`~asset2sim.flows.catalog.ResultCatalog.read_table`
+and then aggregate in Arrow's C++ kernels before anything becomes a
+DataFrame: that is what keeps ``asset2sim failures`` under 2 s on 10^6 rows
+(``benchmarks/bench_catalog.py``).
+
+Definitions used throughout:
+
+- a row *passes all checks* when ``failure_mode == "none"`` (refined, rest
+  stable, not oscillating, penetration resolved);
+- ``stability_pass_rate`` / ``oscillation_pass_rate`` are over rows that have
+  that verdict (failed chains without a measurement are left out), all other
+  rates over every row of the run;
+- runs are ordered by their id, which starts with the UTC start time.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Iterable
+
+from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.schemas.report import FAILURE_MODES
+from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
+
+
+def _is_table(obj) -> bool:
+    """True for a :class:`pyarrow.Table` (not a pandas DataFrame)."""
+    return hasattr(obj, "schema") and hasattr(obj, "num_rows") and not hasattr(obj, "iloc")
+
+
+def _plain_strings(table, names=("dataset", "run")):
+    """``table`` with its dictionary-encoded partition columns as plain strings."""
+    import pyarrow as pa
+
+    for i, name in enumerate(table.schema.names):
+        if name in names and pa.types.is_dictionary(table.schema.field(i).type):
+            table = table.set_column(i, name, table.column(i).cast(pa.string()))
+    return table
+
+
+def _value_counts(arr) -> dict[Any, int]:
+    import pyarrow.compute as pc
+
+    return {d["values"]: int(d["counts"]) for d in pc.value_counts(arr).to_pylist()}
+
+
+def load(catalog_root: Path | str, dataset: str | None = None, run: str | None = None):
+    """Rows of the catalog at ``catalog_root`` (optionally one dataset / run)."""
+    return ResultCatalog(catalog_root).read(dataset, run)
+
+
+def runs(df) -> "Any":
+    """One line per (dataset, run): first start time, assets, done, skipped,
+    failed, sorted chronologically."""
+    import pandas as pd
+
+    if df.empty:
+        return pd.DataFrame(columns=["dataset", "run", "started_at", "assets", "done", "skipped", "failed"])
+    g = df.groupby(["dataset", "run"], sort=True)
+    out = g.agg(
+        started_at=("started_at", "min"),
+        assets=("asset_id", "count"),
+        done=("status", lambda s: int((s == "done").sum())),
+        skipped=("status", lambda s: int((s == "skipped").sum())),
+        failed=("status", lambda s: int((s == "failed").sum())),
+    ).reset_index()
+    return out.sort_values(["dataset", "run"]).reset_index(drop=True)
+
+
+def latest_run(df, dataset: str | None = None) -> str | None:
+    """Id of the most recent run (of ``dataset`` when given), None when empty."""
+    if dataset is not None:
+        df = df[df["dataset"] == dataset]
+    if df.empty:
+        return None
+    return str(sorted(df["run"].unique())[-1])
+
+
+def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = None):
+    """Counts of each failure mode (columns, the fixed vocabulary in order,
+    plus ``total``) per value of ``by`` (rows; e.g. ``category``, ``run``,
+    ``("run", "category")``), with a ``total`` row. ``run`` restricts to one run.
+
+    Raises:
+        KeyError: ``by`` names a column the catalog does not have.
+    """
+    import pandas as pd
+
+    import numpy as np
+
+    keys = [by] if isinstance(by, str) else list(by)
+    columns = df.schema.names if _is_table(df) else list(df.columns)
+    for k in keys:
+        if k not in columns:
+            raise KeyError(f"no catalog column {k!r}; columns: {list(columns)}")
+    if _is_table(df):
+        counts = _failure_counts_arrow(df, keys, run)
+    else:
+        if run is not None:
+            df = df[df["run"] == run]
+        d = pd.DataFrame({k: df[k].fillna("(unknown)").to_numpy() for k in keys})
+        d["failure_mode"] = pd.Categorical(df["failure_mode"].fillna(MISSING_FAILURE_MODE).to_numpy(), categories=list(FAILURE_MODES))
+        counts = d.groupby([*keys, "failure_mode"], observed=True, sort=True).size()
+    if len(counts) == 0:
+        return pd.DataFrame(columns=[*keys, *FAILURE_MODES, "total"]).set_index(keys)
+    table = counts.unstack("failure_mode", fill_value=0)
+    table = table.reindex(columns=list(FAILURE_MODES), fill_value=0)
+    table.columns = pd.Index([str(c) for c in table.columns], name="failure_mode")
+    table = table.loc[table.sum(axis=1) > 0].astype(np.int64)
+    table["total"] = table.sum(axis=1)
+    total = table.sum(axis=0).to_frame().T
+    total.index = pd.MultiIndex.from_tuples([("total",) * len(keys)], names=keys) if len(keys) > 1 else pd.Index(["total"], name=keys[0])
+    return pd.concat([table, total]).astype(int)
+
+
+def _failure_counts_arrow(table, keys: list[str], run: str | None):
+    """Rows per (keys..., failure mode) of an Arrow table, as a pandas Series
+    with a MultiIndex (missing key values as ``(unknown)``)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    table = _plain_strings(table)
+    if run is not None:
+        table = table.filter(pc.equal(table["run"], run))
+    cols = {}
+    for k in keys:
+        col = table[k]
+        if not pa.types.is_string(col.type):
+            col = col.cast(pa.string())
+        cols[k] = pc.fill_null(col, "(unknown)")
+    cols["failure_mode"] = pc.fill_null(table["failure_mode"], MISSING_FAILURE_MODE)
+    grouped = pa.table(cols).group_by([*keys, "failure_mode"]).aggregate([([], "count_all")]).to_pandas()
+    grouped = grouped.sort_values([*keys, "failure_mode"])
+    return grouped.set_index([*keys, "failure_mode"])["count_all"]
+
+
+def _as_rate(series):
+    """A nullable boolean column (object True/False/None) as floats 1/0/NaN, vectorised."""
+    return series.astype("boolean").astype("Float64").astype(float)
+
+
+def _bool_rate_parts(series):
+    """(count of True, count of non-null) of a nullable boolean column, as float Series."""
+    s = _as_rate(series)
+    return s.fillna(0.0), s.notna().astype(float)
+
+
+def _rate(series) -> float | None:
+    s = _as_rate(series).dropna()
+    if len(s) == 0:
+        return None
+    return float(s.mean())
+
+
+def _run_summary_arrow(t) -> dict[str, Any]:
+    """:func:`run_summary` of an Arrow table, in Arrow's kernels."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    n = int(t.num_rows)
+    st = _value_counts(t["status"]) if n else {}
+    out: dict[str, Any] = {"assets": n, "done": st.get("done", 0), "skipped": st.get("skipped", 0), "failed": st.get("failed", 0)}
+    if n == 0:
+        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None)
+        out["failure_modes"] = {m: 0 for m in FAILURE_MODES}
+        return out
+    modes = _value_counts(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE))
+    out["failure_modes"] = {m: modes.get(m, 0) for m in FAILURE_MODES}
+    out["pass_rate_all"] = modes.get("none", 0) / n
+
+    def mean(col, fill=None):
+        c = t[col] if fill is None else pc.fill_null(t[col], fill)
+        if pa.types.is_boolean(c.type):
+            c = c.cast(pa.float64())
+        v = pc.mean(c).as_py() if len(c) else None
+        return None if v is None else float(v)
+
+    out["stability_pass_rate"] = mean("rest_stable")
+    out["oscillation_pass_rate"] = mean("oscillation_pass")
+    out["penetration_mm_mean"] = mean("penetration_mm")
+    std = pc.stddev(t["penetration_mm"], ddof=0).as_py() if t["penetration_mm"].null_count < n else None
+    out["penetration_mm_std"] = None if std is None else float(std)
+    out["prompt_alignment_mean"] = mean("prompt_alignment")
+    worked = t.filter(pc.equal(t["status"], "done"))
+    q = pc.mean(pc.fill_null(worked["model_queries"], 0)).as_py() if worked.num_rows else 0.0
+    out["queries_per_asset"] = float(q or 0.0)
+    out["tokens_total"] = int(pc.sum(pc.fill_null(t["tokens"], 0)).as_py() or 0)
+    wall = t["wall_seconds"]
+    out["asset_seconds_total"] = float(pc.sum(wall).as_py() or 0.0)
+    out["asset_seconds_mean"] = mean("wall_seconds")
+    mx = pc.max(wall).as_py()
+    out["asset_seconds_max"] = None if mx is None else float(mx)
+    return out
+
+
+#: Columns :func:`status_counts` reads.
+COUNT_COLUMNS = ("status", "failure_mode")
+
+
+def status_counts(df) -> dict[str, Any]:
+    """The counting part of :func:`run_summary` (``assets``, ``done``,
+    ``skipped``, ``failed``, ``failure_modes``, ``pass_rate_all``), from the
+    columns :data:`COUNT_COLUMNS` alone; a DataFrame or an Arrow table."""
+    import pyarrow as pa
+    import pyarrow.compute  # noqa: F401  (pa.compute)
+
+    t = df if _is_table(df) else pa.Table.from_pandas(df[list(COUNT_COLUMNS)], preserve_index=False)
+    n = int(t.num_rows)
+    st = _value_counts(t["status"]) if n else {}
+    modes = _value_counts(pa.compute.fill_null(t["failure_mode"], MISSING_FAILURE_MODE)) if n else {}
+    return {
+        "assets": n, "done": st.get("done", 0), "skipped": st.get("skipped", 0), "failed": st.get("failed", 0),
+        "failure_modes": {m: modes.get(m, 0) for m in FAILURE_MODES},
+        "pass_rate_all": (modes.get("none", 0) / n) if n else None,
+    }  # fmt: skip
+
+
+def run_summary(df) -> dict[str, Any]:
+    """Numbers of one run's rows (pass rates as fractions in [0, 1], penetration
+    mm, seconds): what MLflow logs as the run's metrics."""
+    if _is_table(df):
+        return _run_summary_arrow(df)
+    n = int(len(df))
+    out: dict[str, Any] = {
+        "assets": n,
+        "done": int((df["status"] == "done").sum()) if n else 0,
+        "skipped": int((df["status"] == "skipped").sum()) if n else 0,
+        "failed": int((df["status"] == "failed").sum()) if n else 0,
+    }
+    if n == 0:
+        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None)
+        out["failure_modes"] = {m: 0 for m in FAILURE_MODES}
+        return out
+    modes = df["failure_mode"].fillna(MISSING_FAILURE_MODE)
+    out["failure_modes"] = {m: int((modes == m).sum()) for m in FAILURE_MODES}
+    out["pass_rate_all"] = float((modes == "none").mean())
+    out["stability_pass_rate"] = _rate(df["rest_stable"])
+    out["oscillation_pass_rate"] = _rate(df["oscillation_pass"])
+    pen = df["penetration_mm"].dropna().astype(float)
+    out["penetration_mm_mean"] = float(pen.mean()) if len(pen) else None
+    out["penetration_mm_std"] = float(pen.std(ddof=0)) if len(pen) else None
+    pa = df["prompt_alignment"].dropna().astype(float)
+    out["prompt_alignment_mean"] = float(pa.mean()) if len(pa) else None
+    worked = df[df["status"] == "done"]
+    out["queries_per_asset"] = float(worked["model_queries"].fillna(0).mean()) if len(worked) else 0.0
+    out["tokens_total"] = int(df["tokens"].fillna(0).sum())
+    wall = df["wall_seconds"].dropna().astype(float)
+    out["asset_seconds_total"] = float(wall.sum())
+    out["asset_seconds_mean"] = float(wall.mean()) if len(wall) else None
+    out["asset_seconds_max"] = float(wall.max()) if len(wall) else None
+    return out
+
+
+#: Columns :func:`pass_rates_over_time` reads.
+PASS_RATE_COLUMNS = ("status", "failure_mode", "rest_stable", "oscillation_pass", "penetration_mm", "started_at")
+
+
+def pass_rates_over_time(df, dataset: str | None = None):
+    """Per run (chronological): start time, assets, and the pass rates
+    (all checks, rest stability, oscillation) with mean penetration (mm).
+    Vectorised over all rows (one group-by), so a year of nightly runs of a
+    whole dataset (10^6 rows) takes well under a second."""
+    import pandas as pd
+
+    cols = ["dataset", "run", "started_at", "assets", "pass_rate_all", "stability_pass_rate",
+            "oscillation_pass_rate", "penetration_mm_mean", "failed"]  # fmt: skip
+    if _is_table(df):
+        return _pass_rates_arrow(df, dataset, cols)
+    if dataset is not None:
+        df = df[df["dataset"] == dataset]
+    if df.empty:
+        return pd.DataFrame(columns=cols)
+    st_ok, st_n = _bool_rate_parts(df["rest_stable"])
+    os_ok, os_n = _bool_rate_parts(df["oscillation_pass"])
+    pen = pd.to_numeric(df["penetration_mm"], errors="coerce")
+    d = pd.DataFrame({
+        "dataset": df["dataset"], "run": df["run"], "started_at": df["started_at"],
+        "pass": (df["failure_mode"].fillna(MISSING_FAILURE_MODE) == "none").astype(float),
+        "failed": (df["status"] == "failed").astype(int),
+        "st_ok": st_ok, "st_n": st_n, "os_ok": os_ok, "os_n": os_n,
+        "pen_sum": pen.fillna(0.0), "pen_n": pen.notna().astype(float),
+    })  # fmt: skip
+    g = d.groupby(["dataset", "run"], sort=True)
+    agg = g.agg(started_at=("started_at", "min"), assets=("pass", "size"), pass_rate_all=("pass", "mean"),
+                st_ok=("st_ok", "sum"), st_n=("st_n", "sum"), os_ok=("os_ok", "sum"), os_n=("os_n", "sum"),
+                pen_sum=("pen_sum", "sum"), pen_n=("pen_n", "sum"), failed=("failed", "sum")).reset_index()  # fmt: skip
+
+    def ratio(num, den):
+        return [None if n == 0 else float(x / n) for x, n in zip(agg[num], agg[den])]
+
+    agg["stability_pass_rate"] = ratio("st_ok", "st_n")
+    agg["oscillation_pass_rate"] = ratio("os_ok", "os_n")
+    agg["penetration_mm_mean"] = ratio("pen_sum", "pen_n")
+    agg["assets"] = agg["assets"].astype(int)
+    agg["failed"] = agg["failed"].astype(int)
+    return agg[cols]
+
+
+def _pass_rates_arrow(t, dataset: str | None, cols: list[str]):
+    """:func:`pass_rates_over_time` of an Arrow table: one group-by in Arrow."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    t = _plain_strings(t)
+    if dataset is not None:
+        t = t.filter(pc.equal(t["dataset"], dataset))
+    if t.num_rows == 0:
+        return pd.DataFrame(columns=cols)
+    work = pa.table({
+        "dataset": t["dataset"], "run": t["run"], "started_at": t["started_at"],
+        "pass": pc.equal(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE), "none").cast(pa.float64()),
+        "stable": t["rest_stable"].cast(pa.float64()), "osc": t["oscillation_pass"].cast(pa.float64()),
+        "pen": t["penetration_mm"], "failed": pc.equal(t["status"], "failed").cast(pa.int64()),
+    })  # fmt: skip
+    agg = work.group_by(["dataset", "run"]).aggregate([
+        ("started_at", "min"), ("pass", "count"), ("pass", "mean"), ("stable", "mean"),
+        ("osc", "mean"), ("pen", "mean"), ("failed", "sum"),
+    ]).to_pandas()  # fmt: skip
+    out = pd.DataFrame({
+        "dataset": agg["dataset"], "run": agg["run"], "started_at": agg["started_at_min"],
+        "assets": agg["pass_count"].astype(int), "pass_rate_all": agg["pass_mean"],
+        "stability_pass_rate": agg["stable_mean"].astype(object).where(agg["stable_mean"].notna(), None),
+        "oscillation_pass_rate": agg["osc_mean"].astype(object).where(agg["osc_mean"].notna(), None),
+        "penetration_mm_mean": agg["pen_mean"].astype(object).where(agg["pen_mean"].notna(), None),
+        "failed": agg["failed_sum"].astype(int),
+    })  # fmt: skip
+    return out.sort_values(["dataset", "run"]).reset_index(drop=True)[cols]
+
+
+#: Columns :func:`slowest_assets` reads.
+SLOWEST_COLUMNS = ("asset_id", "category", "status", "failure_mode", "wall_seconds", "stage_seconds")
+
+
+def slowest_assets(df, n: int = 10, run: str | None = None):
+    """The ``n`` rows with the longest wall time (s), with their slowest stage.
+    Skipped rows (no work done) are left out."""
+    import pandas as pd
+
+    if _is_table(df):
+        import pyarrow.compute as pc
+
+        t = _plain_strings(df)
+        if run is not None:
+            t = t.filter(pc.equal(t["run"], run))
+        t = t.filter(pc.invert(pc.equal(pc.fill_null(t["status"], ""), "skipped")))
+        t = t.filter(pc.is_valid(t["wall_seconds"]))
+        t = pc.take(t, pc.select_k_unstable(t, k=min(int(n), t.num_rows), sort_keys=[("wall_seconds", "descending")])) if t.num_rows else t
+        df = t.to_pandas()
+    if run is not None:
+        df = df[df["run"] == run]
+    df = df[df["status"] != "skipped"]
+    cols = ["dataset", "run", "asset_id", "category", "status", "failure_mode", "wall_seconds", "slowest_stage", "slowest_stage_seconds"]
+    if df.empty:
+        return pd.DataFrame(columns=cols)
+    wall = pd.to_numeric(df["wall_seconds"], errors="coerce")
+    d = df.loc[wall.nlargest(int(n)).index].copy()
+
+    def slowest(js: str | None) -> tuple[str | None, float | None]:
+        try:
+            stages = {k: float(v) for k, v in json.loads(js or "{}").items() if "." in k}
+        except ValueError:
+            return None, None
+        if not stages:
+            return None, None
+        k = max(stages, key=stages.get)
+        return k, stages[k]
+
+    pairs = [slowest(js) for js in d["stage_seconds"]]
+    d["slowest_stage"] = [p[0] for p in pairs]
+    d["slowest_stage_seconds"] = [p[1] for p in pairs]
+    return d[cols].reset_index(drop=True)
+
+
+def slowest_in_catalog(store: ResultCatalog, dataset: str | None = None, runs: str | list[str] | None = None, n: int = 10):
+    """:func:`slowest_assets` straight from the catalog in two passes: the
+    ``n``-th longest wall time from the numeric columns alone, then only the
+    rows at or above it with their text columns (the filter is pushed down to
+    the Parquet reader), so the stage timings of 10^6 rows are never decoded."""
+    import pyarrow.compute as pc
+    import pyarrow.dataset as pads
+
+    worked = ~(pads.field("status") == "skipped") & pads.field("wall_seconds").is_valid()
+    t = store.read_table(dataset, runs, columns=["status", "wall_seconds"], filter=worked)
+    if t.num_rows == 0:
+        return slowest_assets(store.read_table(dataset, runs, columns=[*SLOWEST_COLUMNS], limit=0), n)
+    idx = pc.select_k_unstable(t, k=min(int(n), t.num_rows), sort_keys=[("wall_seconds", "descending")])
+    threshold = pc.min(t["wall_seconds"].take(idx)).as_py()
+    top = store.read_table(dataset, runs, columns=[*SLOWEST_COLUMNS], filter=worked & (pads.field("wall_seconds") >= threshold))
+    return slowest_assets(top, n)
+
+
+#: Columns :func:`verdict_changes` reads.
+CHANGE_COLUMNS = ("asset_id", "category", "status", "failure_mode", "rest_stable", "oscillation_pass")
+
+
+def verdict_changes(df, run_a: str, run_b: str):
+    """Assets whose verdict differs between runs ``run_a`` and ``run_b``
+    (failure mode, rest stability or oscillation), or that are in only one of
+    them. Columns ``asset_id``, ``category``, ``<field>_a``, ``<field>_b``, ``change``.
+    One join of the two runs (vectorised).
+
+    Raises:
+        KeyError: a run id is not in the catalog.
+    """
+    import pandas as pd
+
+    present = set(df["run"].unique()) if not df.empty else set()
+    for r in (run_a, run_b):
+        if r not in present:
+            raise KeyError(f"run {r!r} is not in the catalog")
+    fields = ["failure_mode", "rest_stable", "oscillation_pass", "status"]
+    cols = ["asset_id", "category", *[f"{f}_{s}" for f in fields for s in ("a", "b")], "change"]
+    a = df[df["run"] == run_a][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last")
+    b = df[df["run"] == run_b][["asset_id", "category", *fields]].drop_duplicates("asset_id", keep="last")
+    m = a.merge(b, on="asset_id", how="outer", suffixes=("_a", "_b"), indicator=True)
+    if m.empty:
+        return pd.DataFrame(columns=cols)
+    m["category"] = m["category_b"].where(m["category_b"].notna(), m["category_a"])
+    change = pd.Series([""] * len(m), index=m.index, dtype=object)
+    change[m["_merge"] == "left_only"] = "only in " + run_a
+    change[m["_merge"] == "right_only"] = "only in " + run_b
+    both = m["_merge"] == "both"
+    parts = []
+    for f in ("failure_mode", "rest_stable", "oscillation_pass"):
+        xa, xb = m[f"{f}_a"], m[f"{f}_b"]
+        differ = both & ~((xa.isna() & xb.isna()) | (xa.astype(object) == xb.astype(object)).fillna(False).astype(bool))
+        parts.append((f, differ))
+    any_diff = parts[0][1] | parts[1][1] | parts[2][1]
+    for idx in m.index[any_diff]:
+        diffs = [f"{f}: {m.at[idx, f + '_a']} -> {m.at[idx, f + '_b']}" for f, differ in parts if differ[idx]]
+        change[idx] = ", ".join(diffs)
+    m["change"] = change
+    m = m[m["change"] != ""]
+    out = m[cols].sort_values("asset_id").reset_index(drop=True)
+    return out.astype(object).where(out.notna(), None)
+
+
+def failed_assets(df, run: str | None = None, limit: int | None = None):
+    """Rows of ``run`` that did not pass all checks (the first ``limit`` when
+    given), with their error (first line)."""
+    import pandas as pd
+
+    if _is_table(df):
+        import pyarrow.compute as pc
+
+        t = _plain_strings(df)
+        if run is not None:
+            t = t.filter(pc.equal(t["run"], run))
+        t = t.filter(pc.invert(pc.equal(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE), "none")))
+        df = (t.slice(0, int(limit)) if limit is not None else t).to_pandas()
+    if run is not None:
+        df = df[df["run"] == run]
+    d = df[df["failure_mode"].fillna(MISSING_FAILURE_MODE) != "none"]
+    cols = ["asset_id", "category", "status", "failure_mode", "error"]
+    if d.empty:
+        return pd.DataFrame(columns=cols)
+    if limit is not None:
+        d = d.head(int(limit))
+    d = d[cols].copy()
+    d["error"] = d["error"].fillna("").map(lambda e: e.splitlines()[0][:160] if e else "")
+    return d.reset_index(drop=True)

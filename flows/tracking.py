@@ -1,0 +1,255 @@
+"""Experiment tracking of flow runs with MLflow, and the run's artifacts.
+
+One MLflow run per flow run (experiment from ``catalog.yaml``, default
+``asset2sim``): parameters (dataset, estimator, model, configuration hash,
+workers, code version), metrics (pass rates, mean penetration, queries per
+asset, failure-mode counts ``failures_<mode>``, wall times), artifacts (the
+run's summary table ``summary.csv`` and failure-mode plot
+``failure_modes.png``), and one nested run per asset (tag
+``mlflow.parentRunId``) with its metrics and verdict tags.
+
+The tracking store is ``MLFLOW_TRACKING_URI`` when set, else the catalog's
+``tracking.uri``, else a SQLite database under the project,
+``sqlite:///<project>/mlflow.db``; new experiments keep their artifacts in
+``<project>/mlruns/<experiment>``. Browse with
+``mlflow ui --backend-store-uri sqlite:///mlflow.db``.
+
+MLflow and matplotlib are imported inside the functions that use them.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from asset2sim import atomic
+from asset2sim.flows.catalog import TrackingSettings
+from asset2sim.flows.queries import failure_modes, run_summary
+from asset2sim.schemas.report import FAILURE_MODES
+
+#: Columns of the run's summary table, in order.
+SUMMARY_COLUMNS = (
+    "asset_id", "category", "status", "failure_mode", "scale", "total_mass_kg", "penetration_mm",
+    "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment", "scale_deviation_pct",
+    "model_queries", "tokens", "wall_seconds", "initial_state", "out_dir", "error",
+)  # fmt: skip
+
+
+def default_tracking_uri(project_root: Path | str) -> str:
+    """``sqlite:///<absolute project root>/mlflow.db``."""
+    return "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
+
+
+def resolve_tracking_uri(project_root: Path | str, configured: str | None = None) -> str:
+    """``MLFLOW_TRACKING_URI`` if set, else ``configured``, else the project's SQLite store."""
+    return os.environ.get("MLFLOW_TRACKING_URI") or configured or default_tracking_uri(project_root)
+
+
+# ------------------------------------------------------------------------- artifacts
+
+
+def summary_table(df):
+    """The run's summary table (:data:`SUMMARY_COLUMNS`, sorted by asset id)."""
+    cols = [c for c in SUMMARY_COLUMNS if c in df.columns]
+    return df.sort_values("asset_id")[cols].reset_index(drop=True)
+
+
+def failure_mode_figure(df, title: str = ""):
+    """A matplotlib Figure: stacked bars of failure modes per category (assets).
+
+    ``none`` (all checks passed) is green; failure modes in the fixed vocabulary.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+
+    table = failure_modes(df, by="category")
+    table = table.drop(index="total", errors="ignore")
+    modes = [m for m in FAILURE_MODES if m in table.columns and table[m].sum() > 0]
+    fig = Figure(figsize=(max(5.0, 0.9 * len(table) + 2.5), 4.0), dpi=100)
+    ax = fig.add_subplot(1, 1, 1)
+    colors = {
+        "none": "#4caf50", "invalid_input": "#9e9e9e", "estimator_failure": "#795548",
+        "invalid_overlay": "#ff9800", "unresolved_penetration": "#e91e63", "unstable": "#f44336",
+        "oscillating": "#9c27b0", "timeout": "#3f51b5", "crash": "#212121",
+    }  # fmt: skip
+    bottom = [0] * len(table)
+    x = list(range(len(table)))
+    for m in modes:
+        vals = [int(v) for v in table[m]]
+        ax.bar(x, vals, bottom=bottom, label=m, color=colors.get(m))
+        bottom = [b + v for b, v in zip(bottom, vals)]
+    ax.set_xticks(x)
+    ax.set_xticklabels([str(i) for i in table.index], rotation=30, ha="right", fontsize=8)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("assets")
+    ax.set_title(title or "failure modes by category")
+    if modes:
+        ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    return fig
+
+
+def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, Path]:
+    """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
+    and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
+
+    out_dir = Path(out_dir)
+    table = summary_table(df)
+    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", table.to_csv(index=False))}
+    summary = run_summary(df)
+    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(summary))
+    fig = failure_mode_figure(df, title)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    paths["failure_modes.png"] = atomic.write_bytes(out_dir / "failure_modes.png", buf.getvalue())
+    return paths
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if hasattr(obj, "item"):  # numpy scalars
+        return _jsonable(obj.item())
+    return obj
+
+
+# --------------------------------------------------------------------------- MLflow
+
+
+def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
+    """MLflow metrics of a run summary: finite numbers only; failure-mode
+    counts as ``failures_<mode>``."""
+    out: dict[str, float] = {}
+    for k, v in summary.items():
+        if k == "failure_modes" and isinstance(v, dict):
+            for m, c in v.items():
+                out[f"failures_{m}"] = float(c)
+        elif isinstance(v, bool):
+            out[k] = float(v)
+        elif isinstance(v, (int, float)) and math.isfinite(float(v)):
+            out[k] = float(v)
+    return out
+
+
+def _asset_metrics(row: dict[str, Any]) -> dict[str, float]:
+    out = {}
+    for k in ("scale", "total_mass_kg", "penetration_mm", "d_pos_m", "d_ori_rad", "prompt_alignment",
+              "scale_deviation_pct", "model_queries", "tokens", "wall_seconds"):  # fmt: skip
+        v = row.get(k)
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(f):
+            out[k] = f
+    for k in ("rest_stable", "oscillation_pass"):
+        v = row.get(k)
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            continue
+        out[k] = float(bool(v))
+    out["all_checks_pass"] = float(row.get("failure_mode") == "none")
+    return out
+
+
+def log_flow_run(
+    df,
+    summary: dict[str, Any],
+    *,
+    params: dict[str, Any],
+    artifacts: dict[str, Path],
+    project_root: Path | str,
+    settings=None,
+    tags: dict[str, str] | None = None,
+    nested: bool = True,
+) -> str:
+    """Log one flow run (and a nested run per asset row of ``df``) to MLflow.
+
+    Args:
+        df: the run's catalog rows.
+        summary: :func:`asset2sim.flows.queries.run_summary` plus timings (s).
+        params: run parameters (stringified; values over 500 characters cut).
+        artifacts: name -> file to attach.
+        project_root: where the default SQLite store and artifacts live.
+        settings: :class:`asset2sim.flows.catalog.TrackingSettings` (or None for defaults).
+        tags: extra run tags.
+        nested: also create one nested run per asset.
+
+    Returns:
+        The MLflow run id.
+
+    Raises:
+        ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
+        mlflow.exceptions.MlflowException: the store refused a write.
+    """
+    from mlflow.entities import Metric, Param, RunTag
+    from mlflow.tracking import MlflowClient
+
+
+    settings = settings or TrackingSettings()
+    project_root = Path(project_root)
+    uri = resolve_tracking_uri(project_root, settings.uri)
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name(settings.experiment)
+    if exp is None:
+        art = (project_root / settings.artifact_root / settings.experiment.replace("/", "_")).resolve()
+        exp_id = client.create_experiment(settings.experiment, artifact_location=art.as_uri())
+    else:
+        exp_id = exp.experiment_id
+    import time
+
+    ts = int(time.time() * 1000)
+    run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
+    parent = client.create_run(exp_id, run_name=run_name, tags={"asset2sim.kind": "flow_run", **(tags or {})})
+    rid = parent.info.run_id
+    try:
+        client.log_batch(
+            rid,
+            metrics=[Metric(k, v, ts, 0) for k, v in flow_metrics(summary).items()],
+            params=[Param(k, str(v)[:500]) for k, v in params.items() if v is not None],
+            tags=[RunTag("failure_modes", json.dumps(summary.get("failure_modes", {}), sort_keys=True))],
+        )
+        for path in artifacts.values():
+            client.log_artifact(rid, str(path))
+        if nested and not df.empty:
+            for row in df.to_dict("records"):
+                child = client.create_run(
+                    exp_id,
+                    run_name=str(row["asset_id"]),
+                    tags={
+                        "mlflow.parentRunId": rid,
+                        "asset2sim.kind": "asset",
+                        "asset_id": str(row["asset_id"]),
+                        "category": str(row.get("category") or ""),
+                        "status": str(row.get("status") or ""),
+                        "failure_mode": str(row.get("failure_mode") or ""),
+                    },
+                )
+                client.log_batch(
+                    child.info.run_id,
+                    metrics=[Metric(k, v, ts, 0) for k, v in _asset_metrics(row).items()],
+                    params=[
+                        Param("prompt", str(row.get("prompt") or "")[:500]),
+                        Param("estimator", str(row.get("estimator") or "")),
+                        Param("input_hash", str(row.get("input_hash") or "")),
+                        Param("config_hash", str(row.get("config_hash") or "")),
+                    ],
+                )
+                client.set_terminated(child.info.run_id, "FINISHED")
+    except BaseException:
+        client.set_terminated(rid, "FAILED")
+        raise
+    client.set_terminated(rid, "FINISHED")
+    return rid

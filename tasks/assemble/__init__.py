@@ -1,0 +1,1 @@
+"""Stage package ``assemble`` of the refine data flow (see DEVELOPERS.md)."""

@@ -1,0 +1,268 @@
+"""Export an output folder to MJCF (MuJoCo), derived from the revised URDF.
+
+``mobility.urdf`` stays the source of truth; the MJCF is derived from it, from
+``overlay.json`` (joint stiffness and spring reference, which URDF cannot
+hold) and from ``initial_state.json`` (the keyframe). Layout, inside the
+output folder::
+
+    mjcf/mobility.xml          the MJCF (named after the URDF), meshdir=".."
+    mjcf/meshes/*.obj          convex pieces MuJoCo cannot take from the
+                               original files (OBJ files holding several
+                               groups, flat groups made 2 mm slabs)
+
+Original meshes are referenced where they are (``textured_objs/...``), so the
+folder stays self-contained and portable. A re-export removes the pieces of
+an earlier export that it no longer uses, but only files the product wrote:
+those the folder's ownership record or completion marker lists
+(:mod:`asset2sim.output_folder`); in a folder without either,
+nothing is removed. The conversion is
+:func:`asset2sim.engines.mjcf.urdf_to_mjcf` (MuJoCo's own URDF
+import, then the fixes listed in ``docs/simulators.md``); here the result is
+written atomically and checked by loading the written file with MuJoCo:
+total mass equal to the URDF's (1e-6 relative), every body's mass, COM and
+inertia tensor equal to the URDF link's, the keyframe ``initial`` equal to
+``initial_state.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import atomic, file_names
+from asset2sim.engines.base import Spring
+from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
+from asset2sim.frames import quat_wxyz_matrix
+from asset2sim import output_folder
+from asset2sim.tasks.assemble.write import read_root
+
+MJCF_DIR = "mjcf"
+URDF_NAME = "mobility.urdf"
+STATE_NAME = "initial_state.json"
+OVERLAY_NAME = "overlay.json"
+MASS_RTOL = 1e-6
+_DERIVED = re.compile(r".+__c\d+_g\d+\.obj$")
+
+
+class ExportError(RuntimeError):
+    """The export failed or did not check out (names the folder and the check)."""
+
+
+def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None = None) -> dict[str, Spring]:
+    """Joint springs of an output folder's ``overlay.json``: every joint with
+    stiffness > 0 (N*m/rad or N/m), about ``spring_reference`` (rad or m), or,
+    when the overlay has none, about the initial state (else 0). {} when the
+    folder has no overlay.
+
+    Raises:
+        ValueError: ``overlay.json`` is not a valid overlay.
+    """
+    from asset2sim.schemas.overlay import Overlay
+
+    p = Path(out_dir) / OVERLAY_NAME
+    if not p.is_file():
+        return {}
+    try:
+        overlay = Overlay.model_validate(json.loads(p.read_text()))
+    except Exception as exc:  # pydantic.ValidationError, JSONDecodeError
+        raise ValueError(f"{p}: not a valid overlay: {exc}") from exc
+    initial_state = initial_state or {}
+    out = {}
+    for name, dyn in overlay.joints.items():
+        if dyn.stiffness > 0:
+            ref = dyn.spring_reference if dyn.spring_reference is not None else initial_state.get(name, 0.0)
+            out[name] = Spring(stiffness=float(dyn.stiffness), reference=float(ref))
+    return out
+
+
+@dataclass
+class MjcfCheck:
+    """What the exported file compiled to: ``total_mass`` kg (MJCF) vs
+    ``urdf_mass`` kg, the keyframe's joint values vs ``initial_state.json``,
+    and per-body inertial differences (largest absolute, SI units)."""
+
+    total_mass: float
+    urdf_mass: float
+    keyframe: dict[str, float]
+    initial_state: dict[str, float]
+    max_com_error: float
+    max_inertia_error: float
+    notes: list[str] = field(default_factory=list)
+
+
+def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float], fixed_base: bool = False) -> MjcfCheck:
+    """Load ``xml_path`` with MuJoCo and compare it with the URDF.
+
+    ``fixed_base`` (a mounted asset, ``initial_state.json`` ``"root"``): the
+    model must have no free joint (the root is welded to the world).
+
+    Per body: mass, COM (link frame) and inertia tensor about the COM (link
+    axes) against the URDF link's ``<inertial>`` (a link without one must be
+    massless). Keyframe ``initial``: every movable joint's value against
+    ``initial_state`` (0 for joints it does not list).
+
+    Raises:
+        ExportError: MuJoCo cannot load the file, or a check fails (total mass
+            beyond 1e-6 relative, a body's inertial beyond 1e-9 absolute /
+            1e-6 relative, a keyframe value beyond 1e-12).
+    """
+    import mujoco
+
+    from asset2sim.engines.loading import read_urdf
+
+    try:
+        with mujoco_messages():
+            m = mujoco.MjModel.from_xml_path(str(xml_path))
+    except Exception as exc:
+        raise ExportError(f"MuJoCo cannot load the exported {xml_path}: {exc}") from exc
+    urdf = read_urdf(urdf_path)
+    urdf_mass = urdf.total_mass()
+    total = float(m.body_mass[1:].sum())
+    if not math.isclose(total, urdf_mass, rel_tol=MASS_RTOL, abs_tol=1e-12):
+        raise ExportError(f"{xml_path}: total mass {total!r} kg, the URDF's {urdf_mass!r} kg")
+    com_err = inertia_err = 0.0
+    for name, link in urdf.links.items():
+        bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid < 0:
+            raise ExportError(f"{xml_path}: no body for URDF link {name!r}")
+        mass = float(m.body_mass[bid])
+        if link.inertial is None:
+            if mass != 0.0:
+                raise ExportError(f"{xml_path}: body {name!r} weighs {mass} kg, the URDF link has no <inertial>")
+            continue
+        r = np.array(quat_wxyz_matrix(m.body_iquat[bid]))
+        tensor = r @ np.diag(m.body_inertia[bid]) @ r.T
+        want = link.inertial.inertia_in_link_axes()
+        dc = float(np.abs(m.body_ipos[bid] - link.inertial.com()).max())
+        di = float(np.abs(tensor - want).max())
+        scale = float(np.abs(want).max())
+        if not math.isclose(mass, link.inertial.mass, rel_tol=MASS_RTOL) or dc > 1e-9 + 1e-9 * float(np.abs(link.inertial.com()).max()) or di > 1e-12 + 1e-6 * scale:
+            raise ExportError(
+                f"{xml_path}: body {name!r} has mass {mass}, COM {m.body_ipos[bid]}, inertia {tensor.tolist()}; "
+                f"the URDF {link.inertial.mass}, {link.inertial.com()}, {want.tolist()}"
+            )
+        com_err, inertia_err = max(com_err, dc), max(inertia_err, di)
+    if fixed_base and any(int(t) == int(mujoco.mjtJoint.mjJNT_FREE) for t in m.jnt_type):
+        raise ExportError(f"{xml_path}: the asset is mounted (fixed root) but the MJCF has a free joint")
+    kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
+    if kid < 0:
+        raise ExportError(f"{xml_path}: no keyframe {KEYFRAME!r}")
+    qpos = m.key_qpos[kid]
+    key = {}
+    for j in urdf.movable_joints:
+        jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j.name)
+        if jid < 0:
+            raise ExportError(f"{xml_path}: no joint {j.name!r}")
+        key[j.name] = float(qpos[m.jnt_qposadr[jid]])
+        want = float(initial_state.get(j.name, 0.0))
+        if abs(key[j.name] - want) > 1e-12:
+            raise ExportError(f"{xml_path}: keyframe {j.name} = {key[j.name]!r}, {STATE_NAME} says {want!r}")
+    return MjcfCheck(
+        total_mass=total,
+        urdf_mass=urdf_mass,
+        keyframe=key,
+        initial_state=dict(initial_state),
+        max_com_error=com_err,
+        max_inertia_error=inertia_err,
+    )
+
+
+def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Path:
+    """Write ``out_dir/mjcf/<urdf stem>.xml`` (and its derived meshes) from
+    ``out_dir/mobility.urdf``, ``overlay.json`` and ``initial_state.json``.
+
+    Args:
+        out_dir: an output folder of the SPEC's contract.
+        visuals: include the visual meshes (non-colliding, group 2).
+        check: load the written file with MuJoCo and run :func:`check_mjcf`.
+
+    Returns:
+        The path of the MJCF file.
+
+    Raises:
+        FileNotFoundError: no ``mobility.urdf`` in ``out_dir``.
+        ImportError: MuJoCo is not installed (``pip install asset2sim[mujoco]``).
+        ValueError: invalid ``initial_state.json`` / ``overlay.json``.
+        UrdfError, MjcfError, ExportError: the URDF cannot be read, converted,
+            compiled, or the written file does not check out.
+    """
+    import mujoco  # noqa: F401  - the clear ImportError when the extra is missing
+
+    from asset2sim.engines.loading import read_initial_state
+
+    out_dir = Path(out_dir)
+    urdf = out_dir / URDF_NAME
+    if not urdf.is_file():
+        raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
+    initial = read_initial_state(out_dir)
+    springs = springs_from_overlay(out_dir, initial)
+    fixed = read_root(out_dir).fixed  # mounted: no free joint, the root welded where the file puts it
+    build = urdf_to_mjcf(
+        urdf,
+        initial_state=initial,
+        springs=springs,
+        fixed_base=fixed,
+        ground=not fixed,
+        missing_inertial="massless",
+        mesh_root=out_dir,
+        meshdir="..",
+        visuals=visuals,
+    )
+    target_dir = out_dir / MJCF_DIR
+    for rel, data in build.derived_meshes.items():
+        dst = file_names.join_inside(out_dir, rel)
+        if not (dst.is_file() and dst.read_bytes() == data):
+            atomic.write_bytes(dst, data)
+    _remove_stale_pieces(out_dir, set(build.derived_meshes))
+    xml_path = atomic.write_text(target_dir / f"{urdf.stem}.xml", _header(build.notes, fixed) + build.xml + "\n")
+    if check:
+        check_mjcf(xml_path, urdf, initial, fixed_base=fixed)
+    return xml_path
+
+
+def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> list[Path]:
+    """Remove the convex pieces (``mjcf/meshes/*__c<i>_g<j>.obj``) of an
+    earlier export that this one does not use (``keep``: paths relative to
+    ``out_dir``), but only those the product wrote: listed by the ownership
+    record or completion marker of the output folder around ``out_dir``
+    (:func:`asset2sim.output_folder.recorded_files`), lying in
+    that folder with no symlink on the way. Returns the removed files."""
+    mesh_dir = out_dir / MJCF_DIR / "meshes"
+    root = output_folder.product_folder(out_dir)
+    if root is None or not mesh_dir.is_dir() or mesh_dir.is_symlink():
+        return []
+    owned = output_folder.recorded_files(root)
+    keep_abs = {Path(os.path.abspath(out_dir / rel)) for rel in keep}
+    real_dir = mesh_dir.resolve()
+    gone = []
+    for p in sorted(mesh_dir.iterdir()):
+        if not _DERIVED.match(p.name) or p.is_symlink() or not p.is_file() or Path(os.path.abspath(p)) in keep_abs:
+            continue
+        try:
+            rel = (real_dir / p.name).relative_to(root).as_posix()
+        except ValueError:  # the meshes folder lies outside the product folder
+            continue
+        if rel in owned:
+            p.unlink(missing_ok=True)
+            gone.append(p)
+    return gone
+
+
+def _header(notes: list[str], fixed: bool = False) -> str:
+    text = (
+        "Written by asset2sim from mobility.urdf (the source of truth), overlay.json (springs) and "
+        "initial_state.json (keyframe 'initial'). Load with mujoco.MjModel.from_xml_path; "
+        + ("mj_resetDataKeyframe(model, data, 0) puts the object at its initial state. Mounted asset: the root is "
+           "fixed at the world origin (no free joint, no ground plane; initial_state.json \"root\")."
+           if fixed else
+           "mj_resetDataKeyframe(model, data, 0) puts the object on the ground at its initial state.")
+    )
+    if notes:
+        text += " Conversion notes: " + "; ".join(notes)
+    return "<!-- " + text.replace("--", "- -") + " -->\n"

@@ -1,0 +1,1 @@
+"""Stage package ``benchmark`` of the refine data flow (see DEVELOPERS.md)."""

@@ -1,0 +1,120 @@
+"""Which collision repairs refine's stage 7b tries, in order: the candidates,
+not the trial (refine writes each, clips the limits, post-checks the asset
+again and keeps a repair only when the check gets better while nothing that
+passed fails; ``tasks/refine.py`` ``_repair_sweep``; ``docs/metrics.md``,
+"Joint sweep" and "Parts held together").
+
+Two triggers, one candidate list each:
+
+- **sweep blocked** (:func:`sweep_repairs`): the joint sweep stops short
+  (:func:`asset2sim.tasks.check.sweep.blocked_positions`): the limit of a
+  joint carried by a moving part clipped against the carrying chain
+  (:mod:`asset2sim.tasks.geometry.limits`, step 6), then running clearance
+  for the sliding contacts (:mod:`asset2sim.tasks.state.clearance`), then
+  convex decomposition where a hull that bulges stops the part
+  (:mod:`asset2sim.tasks.check.stop_repair`);
+- **parts held together** (:func:`held_together_pairs`, then
+  :func:`clearance_repair` for :func:`asset2sim.tasks.state.clearance.touching_joints`):
+  the sweep passes but a tier of :data:`HELD_TOGETHER_TIERS` fails while the
+  PyBullet penetration metric reports link pairs in contact at the state (two
+  drawers touching along their runners move as one under the gripper; the
+  sweep holds the neighbour with a drive and does not see it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.state import clearance, collision
+from asset2sim.tasks.check import stop_repair
+from asset2sim.tasks.state.collision import CollisionPiece
+from asset2sim.urdf import UrdfModel
+
+#: Tiers whose failure, with parts in contact at the state, asks for running clearance.
+HELD_TOGETHER_TIERS: tuple[str, ...] = ("robust_rest", "task_execution", "probes")
+
+
+@dataclass(frozen=True)
+class CollisionRepair:
+    """One candidate repair: the writer's collision overrides to try."""
+
+    what: str
+    """its name in notes and escalation reasons"""
+    overrides: dict[str, list[CollisionPiece]]
+    """link -> collision pieces (link frame, m): every override so far plus this repair's"""
+    notes: list[str] = field(default_factory=list)
+    """what changed, before -> after, for the report"""
+    chain_open: bool = False
+    """clip the limits again against the carrying chain with the joints between open"""
+
+
+def held_together_pairs(metrics: list[MetricResult]) -> list[tuple[str, str]]:
+    """The link pairs (link_a, link_b) in contact at the state (the PyBullet
+    ``penetration`` metric's ``pairs``) when a tier of
+    :data:`HELD_TOGETHER_TIERS` failed in ``metrics``; else empty."""
+    if not any(m.name in HELD_TOGETHER_TIERS and m.passed is False for m in metrics):
+        return []
+    pen = next((m for m in metrics if m.name == "penetration" and m.engine == "pybullet"), None)
+    return [(p["link_a"], p["link_b"]) for p in ((pen.details.get("pairs") or []) if pen is not None else [])]
+
+
+def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], state: dict[str, float],
+                     overrides: dict[str, list[CollisionPiece]], scale: float, out_dir: Path,
+                     folder: str) -> CollisionRepair | None:
+    """Running clearance for the sliding contacts of ``joints`` (joint ->
+    position, rad or m) of the written ``model`` (file ``urdf``), other joints
+    at ``state``; the repaired pieces written under ``out_dir/folder`` at the
+    overlay's ``scale``. None when no sliding contact needs it.
+
+    Raises:
+        OSError: a collision file cannot be read or written.
+        ValueError: a repaired piece spans no volume (names its link).
+    """
+    rep = clearance.clearance_for_blocked(model, urdf, joints, state, limits.subtrees(model))
+    if not rep.pieces:
+        return None
+    return CollisionRepair("running clearance", {**overrides, **clearance.write_overrides(rep, scale, out_dir, folder)},
+                           list(rep.notes))
+
+
+def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_metric: MetricResult,
+                  blocked: dict[str, float], state: dict[str, float], overrides: dict[str, list[CollisionPiece]],
+                  scale: float, out_dir: Path, folder: str, config: RefineConfig) -> Iterator[CollisionRepair]:
+    """The candidate repairs of a blocked sweep, lazily, in order (module
+    docstring): each is computed only when the one before was not kept.
+
+    Args:
+        model: the written URDF (file ``urdf``, output scale).
+        asset: the input asset (its meshes are decomposed).
+        sweep_metric: the failing ``joint_sweep`` metric.
+        blocked: joint -> where the sweep stopped (rad or m).
+        state: joint -> initial position (rad or m).
+        overrides: the collision overrides written so far.
+        scale: the overlay's uniform scale; ``out_dir`` / ``folder``: where pieces are written.
+        config: ``convex_decomposition``, ``max_decompositions``, ``sim``.
+
+    Raises:
+        OSError: a collision file cannot be read or written.
+    """
+    if any(limits.chain_links(model, j) for j in blocked):
+        yield CollisionRepair("limits against the carrying chain", overrides, [], chain_open=True)
+    repair = clearance_repair(model, urdf, blocked, state, overrides, scale, out_dir, folder)
+    if repair is not None:
+        yield repair
+        return
+    if not config.convex_decomposition:
+        return
+    try:
+        dec, notes = stop_repair.decompose_for_blocked(
+            model, urdf, asset, sweep_metric, state, limits.subtrees(model), set(overrides), scale, out_dir,
+            folder, max_decompositions=config.max_decompositions, conventions=config.sim)
+    except collision.DecompositionUnavailable:
+        return
+    if dec:
+        yield CollisionRepair("convex decomposition", {**overrides, **dec}, notes)

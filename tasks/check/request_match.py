@@ -1,0 +1,190 @@
+"""The request and the category priors as the evaluation applies them.
+
+The prompt is parsed by :func:`asset2sim.tasks.interpret.request.parse_request`;
+the category is recognised, sized and weighed by the priors of
+:mod:`asset2sim.tasks.interpret` (``categories``, ``size_priors``,
+``part_priors``); the request's joint states are mapped to the evaluated
+URDF's joints by the semantic labels of the child links. None of these may
+stop an evaluation: a failure becomes a note or an empty prior.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from asset2sim.schemas.request import RequestSpec, StateTarget
+from asset2sim.tasks.check.asset_files import MOVABLE, JointInfo
+from asset2sim.tasks.interpret import categories, part_priors, size_priors
+from asset2sim.tasks.interpret.request import parse_request
+
+
+def parse_prompt(prompt: str | None) -> tuple[RequestSpec | None, str | None]:
+    """RequestSpec of ``prompt`` via :func:`asset2sim.tasks.interpret.request.parse_request`.
+
+    Returns:
+        (spec or None, error message or None); no prompt gives (None, None),
+        a parser failure (None, its message).
+    """
+    if not prompt:
+        return None, None
+    try:
+        return parse_request(prompt), None
+    except Exception as exc:  # a parser failure must not stop the evaluation
+        return None, f"request parser failed: {type(exc).__name__}: {exc}"
+
+
+def category_prior(category: str | None, spec: RequestSpec | None = None) -> dict[str, Any]:
+    """Size target and mass prior of a category
+    (:func:`asset2sim.tasks.interpret.size_priors.target_size`,
+    :func:`asset2sim.tasks.interpret.categories.category_prior`).
+
+    Args:
+        category: category name (canonical, model_cat or synonym).
+        spec: the parsed request (size words, variants such as "mini fridge").
+
+    Returns:
+        {} when no category is known or the priors have none for it, else
+        {"category", "target_dims" (m, largest first, size words applied),
+        "base_dims" (m, regular or the variant's), "factor", "variant",
+        "base_mass_range" (kg, for ``base_dims``), "note", "source"}.
+    """
+    if not category:
+        return {}
+    try:
+        t = size_priors.target_size(category, spec)
+        cat = categories.category_prior(category)
+        base_mass = cat.mass_range
+        if t.variant:
+            var = next((v for v in cat.variants if v.name == t.variant), None)
+            if var is not None:
+                base_mass = var.mass_range
+    except Exception:
+        return {}
+    return {
+        "category": t.category,
+        "target_dims": [float(x) for x in t.dims],
+        "base_dims": [float(x) for x in t.base_dims],
+        "factor": float(t.factor),
+        "variant": t.variant,
+        "base_mass_range": (float(base_mass[0]), float(base_mass[1])),
+        "note": t.note,
+        "source": f"asset2sim/priors/categories.yaml: {cat.dims_source}; {cat.mass_source}",
+    }
+
+
+def scaled_mass_range(prior: dict[str, Any], extents: Any) -> tuple[tuple[float, float] | None, float]:
+    """Plausible mass range (kg) for an object of the prior's category with
+    closed-state ``extents`` (3,) m: the base range scaled by
+    :func:`asset2sim.tasks.interpret.size_priors.scale_mass_range` (solid f^3 to
+    thin-walled f^2) with f the geometric mean of (extent / base dimension)
+    over the two largest dimensions, both sorted — the same size factor the
+    refine stage uses (``tasks.synthesize.estimate.plausible_mass_range``).
+    A factor that range rejects (not finite, not positive) scales the range
+    by f^3.
+
+    Returns:
+        (range or None without a base mass range, f).
+    """
+    if not prior or not prior.get("base_mass_range"):
+        return None, 1.0
+    lo, hi = prior["base_mass_range"]
+    f = 1.0
+    ext = None if extents is None else np.sort(np.asarray(extents, float).ravel())[::-1]
+    if ext is not None and len(ext) >= 2 and prior.get("base_dims") and float(ext[0]) > 0:
+        base = np.sort(np.asarray(prior["base_dims"], float))[::-1]
+        f = float(np.exp(np.mean(np.log(np.maximum(ext[:2], 1e-9) / base[:2]))))
+    try:
+        return size_priors.scale_mass_range(lo, hi, f), f
+    except Exception:
+        return (lo * f**3, hi * f**3), f
+
+
+def recognize_category(prompt: str | None, model_cat: str | None = None, labels: list[str] | None = None) -> str | None:
+    """Category from the request, ``model_cat`` and semantic labels via
+    :func:`asset2sim.tasks.interpret.categories.recognize_category`;
+    ``model_cat`` when that fails, None with neither prompt nor ``model_cat``."""
+    if not prompt and not model_cat:
+        return None
+    try:
+        m = categories.recognize_category(model_cat, labels or [], prompt or "")
+    except Exception:
+        return model_cat
+    return getattr(m, "name", None) or model_cat
+
+
+def match_label(label: str | None, wanted: str | None, category: str | None = None) -> bool:
+    """Whether the request's part word ``wanted`` names a link labelled
+    ``label``: :func:`asset2sim.tasks.interpret.part_priors.request_label_matches`
+    (canonical labels and the category's synonyms, e.g. a laptop's "lid" is
+    its ``screen``); when that fails, equal labels or ``wanted`` as one of the
+    ``_``-separated words of ``label``."""
+    if not label or not wanted:
+        return False
+    try:
+        return bool(part_priors.request_label_matches(category or "Generic", wanted, label))
+    except Exception:
+        pass
+    label, wanted = label.lower(), wanted.lower()
+    return wanted == label or wanted in label.split("_")
+
+
+def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
+                     centres: dict[str, np.ndarray], task_joints: list[str],
+                     category: str | None = None) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
+    """Map a RequestSpec's joint states to joints.
+
+    ``selector == "all"``: every task-relevant joint. ``label``: movable joints
+    whose child link's semantic label the request's word names
+    (:func:`match_label`), ordered top to bottom by the height of the child
+    link's AABB centre (``centres``: link -> (3,) m; then by x); ``ordinal``
+    picks one. A label that names no part falls back to the task-relevant
+    joints (the pipeline's convention,
+    :func:`asset2sim.tasks.interpret.part_priors.request_label_matches`); a
+    phrase that still maps to nothing is returned as unmatched. A later phrase
+    overrides an earlier one for the same joint.
+
+    Returns:
+        ([(joint, band, label, phrase, target)], [phrases that matched no
+        joint]); ``target`` is the joint state's
+        :class:`asset2sim.schemas.request.StateTarget` or None.
+    """
+    out, unmatched = [], []
+    if spec is None:
+        return out, unmatched
+    movable = [n for n, j in joints.items() if j.type in MOVABLE]
+    zero = np.zeros(3)
+    for js in spec.joint_states:
+        if js.selector == "all":
+            names = list(task_joints)
+        else:
+            names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
+            if not names:
+                names = [n for n in task_joints if n in movable]
+            names.sort(key=lambda n: (-float(centres.get(joints[n].child, zero)[2]), float(centres.get(joints[n].child, zero)[0])))
+            if js.ordinal is not None:
+                names = [names[js.ordinal]] if 0 <= js.ordinal < len(names) else []
+        if not names:
+            unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
+        for n in names:
+            out.append((n, js.band, semantics.get(joints[n].child, (None, None))[1], js.phrase, js.target))
+    dedup: dict[str, tuple[str, str, str | None, str, StateTarget | None]] = {}
+    for item in out:
+        dedup[item[0]] = item
+    return list(dedup.values()), unmatched
+
+
+def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
+                    category: str | None = None) -> list[str]:
+    """Movable joints the request's ``label`` joint states name
+    (:func:`match_label` on the child link's semantic label), in request then
+    file order, repeats kept; [] without a request."""
+    out: list[str] = []
+    if spec is None:
+        return out
+    movable = [n for n, j in joints.items() if j.type in MOVABLE]
+    for js in spec.joint_states:
+        if js.selector == "label":
+            out += [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
+    return out

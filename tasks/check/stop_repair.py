@@ -1,0 +1,124 @@
+"""Collision repair where the joint sweep stops inside the range against a
+hull that bulges: convex decomposition of the pieces in the way.
+
+A convex hull over a concave part fills its openings: a suitcase's U-shaped
+carry handle (one mesh, one hull) folds down onto the lid, and the hull of
+the handle's U, or the lid's hull over its recess, meets the other part
+before the handle lies flat (101668: the handle stops at 89 % of its range,
+the hulls 6 mm into each other at the raw limit). That is neither a sliding
+contact (:mod:`asset2sim.tasks.state.clearance` gives those running
+clearance) nor a limit beyond the geometry the scan of
+:mod:`asset2sim.tasks.geometry.limits` clips (it clips against the parent's
+rigid group and the carrying chain, not against a sibling, whose contact may
+be the hulls'). Refine stage 7b.
+
+Method, for every joint the sweep reports stopped short (``reached only
+...`` / ``closed back only ...``, :func:`asset2sim.tasks.check.sweep.blocked_positions`),
+other joints at the initial state, in a fixed-base, gravity-free PyBullet
+session of the written URDF:
+
+1. Sample :data:`SAMPLES` positions from where the drive stalled to the end
+   it was driven to; at each, the penetration (deepest point, m) of every
+   pair (a link the joint moves, a link it does not; parent-child pairs
+   excepted, as every engine skips them) is measured. The pair and position
+   of the deepest one are the stop (none deeper than :data:`MIN_DEPTH`: the
+   stall is not a contact; nothing to repair).
+2. At that position :func:`asset2sim.tasks.state.collision.improve_collisions`
+   works on the pair, piece by piece: small hinge hardware loses its
+   collision, concave pieces are replaced by their CoACD decomposition, each
+   change kept only if it lowers the pair's piece-wise penetration. Links the
+   earlier stages already replaced (state search, running clearance) are
+   left as they are.
+
+The caller writes the returned collision overrides, clips the limits again,
+sweeps again and keeps the repair only when the sweep improves and no
+metric that passed fails (``tasks/refine.py``, ``_repair_sweep``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.sweep import blocked_stops
+from asset2sim.tasks.state import collision
+from asset2sim.tasks.state.collision import CollisionPiece
+from asset2sim.urdf import UrdfModel
+
+#: Positions sampled from the stall to the end the drive aimed at.
+SAMPLES = 8
+#: Penetration (m) under which the stall is not a contact (PyBullet's 1 mm
+#: hull margin on each side: touching hulls report up to 2 mm).
+MIN_DEPTH = 0.0021
+
+
+def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str], others: list[str],
+                  adjacent: set[frozenset[str]], state: dict[str, float]) -> tuple[float, float, tuple[str, str] | None]:
+    """(depth m, position, (moving link, other link)) of the deepest pair
+    over :data:`SAMPLES` positions from ``stall`` to ``goal``."""
+    best = (0.0, stall, None)
+    for k in range(SAMPLES + 1):
+        q = stall + (goal - stall) * k / SAMPLES
+        session.set_joint_positions({**state, joint: q})
+        for a in sub:
+            for b in others:
+                if frozenset((a, b)) in adjacent:
+                    continue
+                d = session.link_distances(a, b, 0.0)
+                if d and -min(d) > best[0]:
+                    best = (-min(d), q, (a, b))
+    return best
+
+
+def decompose_for_blocked(model: UrdfModel, urdf: Path, asset: AssetDescription, metric: MetricResult,
+                          state: dict[str, float], subtrees: dict[str, list[str]], replaced: set[str], scale: float,
+                          out_dir: Path, folder: str, *, cache=None, max_decompositions: int = 32,
+                          conventions: SimConventions | None = None) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+    """Convex-decomposition repairs for the joints the ``joint_sweep``
+    ``metric`` found stopped short (see the module docstring).
+
+    Args:
+        model: the written URDF (file ``urdf``, at the output scale).
+        asset: the input asset (its collision meshes are decomposed).
+        state: joint -> initial position (rad or m), the other joints' state.
+        subtrees: joint -> the links it moves.
+        replaced: links whose collision pieces earlier stages already replaced (left alone).
+        scale: the overlay's uniform scale; ``out_dir`` / ``folder``: where pieces are written.
+
+    Returns:
+        (collision overrides link -> pieces for the writer, notes naming each change with before -> after).
+
+    Raises:
+        DecompositionUnavailable: CoACD is not installed.
+        EngineUnavailable: PyBullet is not installed.
+    """
+    stops = blocked_stops(metric)
+    if not stops:
+        return {}, []
+    adjacent = {frozenset((j.parent, j.child)) for j in model.joints}
+    overrides: dict[str, list[CollisionPiece]] = {}
+    notes: list[str] = []
+    opts = SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False,
+                          conventions=conventions or SimConventions())
+    with open_session("pybullet", urdf, opts) as session:
+        with_collision = [ln for ln in session.link_names if session.link_has_collision(ln)]
+        for name, (stall, goal) in stops.items():
+            if name not in session.joint_types:
+                continue
+            sub = [ln for ln in subtrees.get(name, [session.joint_child[name]]) if ln in with_collision]
+            others = [ln for ln in with_collision if ln not in sub]
+            depth, q, pair = _deepest_stop(session, stall, goal, name, sub, others, adjacent, state)
+            if pair is None or depth < MIN_DEPTH or set(pair) & (replaced | set(overrides)):
+                continue
+            session.set_joint_positions({**state, name: q})
+            new, dnotes = collision.improve_collisions(session, asset, [pair], scale, out_dir, cache=cache,
+                                                       max_decompositions=max_decompositions, folder=folder)
+            if new:
+                overrides.update(new)
+                notes += [f"{n} (sweep of {name} stopped by {pair[1]}: {depth * 1000:.3g} mm at {q:.4g})" for n in dnotes]
+        session.set_joint_positions(state)
+    return overrides, notes

@@ -1,0 +1,155 @@
+"""A manipulation task ("close the microwave door", the manifest's ``task``
+column or ``--task``) as joints, a direction and a target opening fraction.
+
+Parsing (re-derivable; ``docs/metrics.md``):
+
+1. The leading verb gives the action (:data:`VERBS`): ``close`` (close, shut,
+   press, push down, lower: towards the closed end, target opening fraction
+   :data:`~asset2sim.tasks.check.probes.CLOSE_TARGET`), ``open`` (open, pull,
+   lift, raise: target :data:`~asset2sim.tasks.check.probes.OPEN_TARGET`);
+   any other verb (turn, move, rotate, swing ...) or none: ``both``
+   directions.
+2. The words after the verb name the part with the request machinery
+   (:func:`asset2sim.tasks.interpret.request.parse_request` on "<words>
+   closed", so part words, category names and their synonyms are read exactly
+   as in a request): a part label ("door", "lid", "drawer", "handle") selects
+   the movable joints whose child link carries that semantic label
+   (:func:`asset2sim.tasks.check.request_match.labelled_joints`); a
+   whole-object phrase ("the stapler", "the laptop") selects every
+   task-relevant joint.
+3. Nothing matched (an unknown part, no semantics): every task-relevant joint,
+   both directions (the fallback is recorded in ``rule``).
+
+Ordinals ("the top drawer") are read but not used to pick one of several
+labelled joints: without the joints' heights every drawer is tried.
+
+4. Where the initial state is known (:func:`with_work_to_do`): a task with one
+   direction that names one part ("close the cabinet drawer", not "the
+   drawers", "every drawer", "both doors") and finds several joints acts on
+   those it has work on at the initial state (close: opening fraction above
+   the close target; open: below the open target), as a person asked to
+   "close the drawer" of a cabinet with one drawer open closes that one
+   (ManiSkill's drawer and door tasks likewise act on one target link). When
+   every joint or none has work, every one is kept (an asset delivered closed
+   is still asked to close: :mod:`asset2sim.tasks.check.task_execution`).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+
+from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
+from asset2sim.tasks.check.asset_files import JointInfo
+from asset2sim.tasks.check.request_match import labelled_joints, parse_prompt
+
+#: Leading verbs -> action ("close" / "open"); any other verb: both directions.
+VERBS: dict[str, str] = {
+    "close": "close", "shut": "close", "press": "close", "push down": "close", "lower": "close", "fold": "close",
+    "open": "open", "pull": "open", "pull out": "open", "lift": "open", "raise": "open", "unfold": "open",
+}
+
+
+@dataclass
+class TaskSpec:
+    """A parsed task. ``actions``: the probe actions (``close``, ``open`` or
+    both); ``targets``: action -> target opening fraction (0 closed, 1 fully
+    open); ``joints``: the movable joints it acts on; ``rule``: how they were
+    found."""
+
+    text: str
+    actions: tuple[str, ...]
+    targets: dict[str, float]
+    joints: list[str]
+    part: str | None = None
+    rule: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+def _verb(low: str) -> tuple[str | None, str]:
+    """(action or None, the words after the verb)."""
+    for verb in sorted(VERBS, key=len, reverse=True):
+        m = re.match(rf"\s*{re.escape(verb)}\b(.*)$", low)
+        if m:
+            return VERBS[verb], m.group(1).strip()
+    m = re.match(r"\s*(\w+)\b(.*)$", low)
+    return None, (m.group(2).strip() if m else low)
+
+
+def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
+               category: str | None, task_joints: list[str]) -> TaskSpec:
+    """The :class:`TaskSpec` of ``text`` for an asset (see the module docstring).
+
+    Args:
+        text: the task, e.g. "close the microwave door".
+        joints: the asset's joints (:func:`asset2sim.tasks.check.asset_files.parse_urdf`).
+        semantics: link -> (joint kind, label) (``semantics.txt``).
+        category: the asset's category (label synonyms are per category).
+        task_joints: the task-relevant joints (the fallback).
+
+    Returns:
+        The task spec; never raises on unknown words (fallback, see ``rule``).
+    """
+    low = " ".join(str(text or "").lower().split())
+    action, rest = _verb(low)
+    actions = (action,) if action else ("close", "open")
+    targets = {a: (CLOSE_TARGET if a == "close" else OPEN_TARGET) for a in actions}
+    spec, err = parse_prompt(f"{rest} closed") if rest else (None, None)
+    notes = [f"task words not parsed: {err}"] if err else []
+    if action is None:
+        notes.append(f"verb of {text!r} has no direction: both directions")
+    part = None
+    found: list[str] = []
+    if spec is not None:
+        labels = [js.label for js in spec.joint_states if js.selector == "label" and js.label]
+        part = labels[0] if labels else None
+        found = list(dict.fromkeys(labelled_joints(spec, joints, semantics, category)))
+        if any(js.ordinal is not None for js in spec.joint_states):
+            notes.append("ordinal read but not used: every joint with the label is tried")
+        if spec.ignored:
+            notes.append("task words not understood: " + "; ".join(spec.ignored))
+        if not labels and not spec.ignored and any(js.selector == "all" for js in spec.joint_states):
+            return TaskSpec(text, actions, targets, list(task_joints), None, "whole object: every task-relevant joint", notes)
+    if found:
+        return TaskSpec(text, actions, targets, found, part, f"part label {part!r} in semantics.txt", notes)
+    rule = "fallback: every task-relevant joint" + ("" if action else ", both directions")
+    if part:
+        notes.append(f"no movable joint's link is labelled {part!r}")
+    return TaskSpec(text, actions, targets, list(task_joints), part, rule, notes)
+
+
+def task_actions(text: str | None) -> tuple[str, ...]:
+    """The actions of a task's leading verb (:data:`VERBS`): ``("close",)``,
+    ``("open",)``, or both when the verb has no direction or there is no task."""
+    action, _ = _verb(" ".join(str(text or "").lower().split()))
+    return (action,) if action else ("close", "open")
+
+
+#: Words that make a task act on every joint of its part.
+_EVERY = re.compile(r"\b(?:all|every|each|both)\b")
+
+
+def with_work_to_do(spec: TaskSpec, fractions: dict[str, float]) -> TaskSpec:
+    """``spec`` narrowed to the joints it has work on (module docstring, rule
+    4). ``fractions``: joint -> opening fraction at the initial state (0
+    closed, 1 fully open); a joint missing from it counts as having work.
+    Returns ``spec`` itself when nothing is narrowed."""
+    low = " ".join(spec.text.lower().split())
+    if len(spec.actions) != 1 or len(spec.joints) < 2 or spec.rule.startswith("fallback") or _EVERY.search(low):
+        return spec
+    if spec.part and re.search(rf"\b{re.escape(spec.part.lower())}(?:s|es)\b", low):
+        return spec  # "close the drawers"
+    action = spec.actions[0]
+    target = spec.targets[action]
+
+    def todo(j: str) -> bool:
+        f = fractions.get(j)
+        return f is None or (f > target if action == "close" else f < target)
+
+    keep = [j for j in spec.joints if todo(j)]
+    if not keep or len(keep) == len(spec.joints):
+        return spec
+    left = [j for j in spec.joints if j not in keep]
+    note = (f"{', '.join(left)} already {'closed' if action == 'close' else 'open'} at the initial state: "
+            f"the task acts on {', '.join(keep)}")
+    return replace(spec, joints=keep, rule=spec.rule + "; the joints with work to do", notes=[*spec.notes, note])

@@ -1,0 +1,476 @@
+"""Self-contained HTML reports: one asset's evaluation, and the benchmark pages.
+
+Everything is inline (CSS, renders as PNG and figures as SVG, both base64
+``data:`` URIs), so a report opens offline from any folder. Text is
+HTML-escaped. The figures are SVG drawn by
+:mod:`asset2sim.tasks.evaluation.plots` without a plotting library.
+
+- :func:`render_report` / :func:`write_report`: ``report.html`` of one
+  :class:`asset2sim.schemas.evaluation.Evaluation`: renders of the object at its
+  initial state (:func:`asset2sim.tasks.geometry.render.render_views` when available,
+  else plots of its collision geometry), verdicts with thresholds, metric
+  details (penetrating link pairs, prompt-alignment reasons per joint, probes),
+  plots of root drift, joint trajectories and probes, and the physical
+  parameters as a table with value, unit and source.
+- :func:`render_benchmark_summary` and :func:`render_benchmark_index`: the
+  benchmark's thesis-layout table with the SPEC's research numbers, and one
+  colour-coded row per object and method.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from asset2sim.atomic import write_text
+from asset2sim.tasks.check.verdict import readiness
+from asset2sim.tasks.evaluation import plots
+from asset2sim.tasks.geometry.render import render_views
+
+CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px;color:#1d2430;max-width:1200px}
+h1{font-size:22px;margin-bottom:4px} h2{font-size:18px;margin-top:28px;border-bottom:1px solid #d0d6de;padding-bottom:4px}
+h3{font-size:15px;margin-bottom:6px}
+table{border-collapse:collapse;margin:8px 0;font-size:13px} th,td{border:1px solid #d0d6de;padding:4px 8px;text-align:left;vertical-align:top}
+th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums}
+.pass{background:#d9f2dd} .fail{background:#f9d6d5} .na{background:#eef0f3;color:#5b6574} .warn{background:#fff1cc}
+.badge{display:inline-block;padding:3px 10px;border-radius:12px;font-weight:600}
+.meta{color:#4a5565;font-size:13px} img{max-width:100%;border:1px solid #e2e6ec;margin:6px 0}
+.small{font-size:12px;color:#5b6574} code{background:#f1f4f8;padding:1px 4px;border-radius:3px}
+.views{display:flex;flex-wrap:wrap;gap:8px} .views figure{margin:0} .views img{max-width:280px}
+"""
+
+
+def esc(x: Any) -> str:
+    """HTML-escaped text of ``x``."""
+    return html.escape("" if x is None else str(x))
+
+
+def fmt(v: Any, digits: int = 4) -> str:
+    """Number formatting for tables (``-`` for None/NaN)."""
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        if not math.isfinite(float(v)):
+            return "-"
+        return f"{float(v):.{digits}g}"
+    return esc(v)
+
+
+def img_tag(png: bytes | None, alt: str) -> str:
+    """An ``<img>`` with the PNG inline (empty string for None)."""
+    if not png:
+        return ""
+    return f'<img alt="{esc(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}"/>'
+
+
+def svg_tag(svg: bytes | None, alt: str) -> str:
+    """An ``<img>`` with an SVG figure inline (:mod:`asset2sim.tasks.evaluation.plots`;
+    empty string for None). As an image, the figure's text cannot reach the page."""
+    if not svg:
+        return ""
+    return f'<img alt="{esc(alt)}" src="data:{plots.SVG_MIME};base64,{base64.b64encode(svg).decode()}"/>'
+
+
+def verdict_cell(passed: bool | None) -> str:
+    """A colour-coded table cell for a verdict."""
+    if passed is None:
+        return '<td class="na">reported</td>'
+    return '<td class="pass">pass</td>' if passed else '<td class="fail">FAIL</td>'
+
+
+def _array_png(arr: np.ndarray) -> bytes:
+    from PIL import Image
+
+    a = np.asarray(arr)
+    if a.dtype != np.uint8:
+        a = np.clip(a * (255.0 if a.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(a).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _renders(ev, views: dict[str, np.ndarray] | None = None) -> tuple[str, str]:
+    """(HTML of the object views, what they are); ``views`` the renders at
+    ``ev.initial_state`` when already taken, else rendered here."""
+    try:
+        if views is None:
+            views = render_views(Path(ev.urdf), dict(ev.initial_state))
+        figs = "".join(
+            f"<figure>{img_tag(_array_png(v), k)}<figcaption class='small'>{esc(k)}</figcaption></figure>"
+            for k, v in views.items()
+        )
+        return f"<div class='views'>{figs}</div>", "renders (asset2sim.tasks.geometry.render)"
+    except Exception as exc:  # fall back to the plot
+        note = f"render failed ({type(exc).__name__}: {exc}); "
+    run = next((r for r in ev._runs.values() if r.point_cloud), None)
+    svg = plots.plot_object(run.point_cloud) if run is not None else None
+    if svg is None:
+        return "<p class='small'>no geometry recorded</p>", note + "no plot"
+    return svg_tag(svg, "collision geometry"), note + "plot of the collision vertices per link"
+
+
+def _verdict_table(ev) -> str:
+    rows = []
+    for m in ev.metrics:
+        skipped = m.details.get("skipped") if isinstance(m.details, dict) else None
+        val = "-" if m.value is None else fmt(m.value)
+        extra = ""
+        if m.name == "rest_stability" and "D_ori_rad" in m.details:
+            extra = f"D_pos {fmt(m.details['D_pos_m'])} m, D_ori {fmt(m.details['D_ori_rad'])} rad"
+        elif skipped:
+            extra = f"skipped: {skipped}"
+        elif m.details.get("reason"):
+            extra = str(m.details["reason"])
+        elif m.details.get("failures"):
+            extra = "; ".join(m.details["failures"])
+        elif m.details.get("failing"):
+            extra = "failing: " + ", ".join(m.details["failing"])
+        elif m.details.get("reasons"):
+            extra = "; ".join(m.details["reasons"])
+        rows.append(
+            f"<tr><td>{esc(m.name)}</td><td>{esc(m.engine)}</td><td class='num'>{val}</td><td>{esc(m.unit)}</td>"
+            f"{verdict_cell(m.passed)}<td class='small'>{esc(m.threshold)}</td><td class='small'>{esc(extra)}</td></tr>"
+        )
+    return (
+        "<table><tr><th>metric</th><th>engine</th><th>value</th><th>unit</th><th>verdict</th><th>threshold</th>"
+        "<th>notes</th></tr>" + "".join(rows) + "</table>"
+    )
+
+
+def _penetration_details(ev) -> str:
+    out = []
+    for m in ev.metrics:
+        if m.name != "penetration" or not m.details.get("pairs"):
+            continue
+        rows = "".join(
+            f"<tr><td>{esc(p['link_a'])}</td><td>{esc(p['link_b'])}</td><td class='num'>{fmt(p['depth_mm'])}</td>"
+            f"<td class='num'>{fmt(p['max_depth_mm'])}</td><td class='num'>{p['points']}</td></tr>"
+            for p in m.details["pairs"]
+        )
+        out.append(
+            f"<h3>Penetrating link pairs ({esc(m.engine)})</h3><table><tr><th>link a</th><th>link b</th>"
+            f"<th>sum of depths (mm)</th><th>deepest point (mm)</th><th>points</th></tr>{rows}</table>"
+        )
+    return "".join(out) or "<p class='small'>no self-penetration at the initial state</p>"
+
+
+def _prompt_details(ev) -> str:
+    m = ev.metric("prompt_alignment")
+    if m is None or m.value is None:
+        reason = (m.details.get("reason") if m else None) or "not scored"
+        return f"<p class='small'>prompt alignment: {esc(reason)}</p>"
+    d = m.details
+    rows = []
+    size = d.get("size") or {}
+    rows.append(f"<tr><td>size</td><td>{esc(d.get('size_class') or 'regular (not stated)')}</td>"
+                f"<td class='num'>{fmt(size.get('score'))}</td><td class='small'>{esc(size.get('reason'))}</td></tr>")
+    for j in d.get("joints", []):
+        rows.append(f"<tr><td>joint {esc(j.get('joint'))} ({esc(j.get('label'))})</td><td>{esc(j.get('band'))}</td>"
+                    f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>")
+    if d.get("joint_state_score") is None:
+        rows.append(f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>")
+    return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>"
+            "<table><tr><th>part</th><th>requested</th><th>score</th><th>reason</th></tr>" + "".join(rows) + "</table>")
+
+
+def _probe_details(ev) -> str:
+    m = ev.metric("probes")
+    if m is None or not m.details.get("probes"):
+        return "<p class='small'>no probes run" + (f": {esc(m.details.get('skipped'))}" if m and m.details.get("skipped") else "") + "</p>"
+    rows = []
+    for p in m.details["probes"]:
+        unit = "m" if p["joint_type"] == "prismatic" else "rad"
+        eff_unit = "N" if p["joint_type"] == "prismatic" else "N*m"
+        cls = "pass" if p["success"] else "fail"
+        rows.append(
+            f"<tr><td>{esc(p['joint'])}</td><td>{esc(p['action'])}</td><td class='num'>{fmt(p['start'])} {unit}</td>"
+            f"<td class='num'>{fmt(p['target'])} {unit}</td><td>{fmt(p['reached'])}</td>"
+            f"<td class='num'>{fmt(p['peak_force'])} N</td><td class='num'>{fmt(p['peak_effort'])} {eff_unit}</td>"
+            f"<td class='num'>{fmt(p['root_displacement'] * 1000)} mm / {fmt(p['root_rotation'])} rad</td>"
+            f"<td>{fmt(p['rebound'])}</td><td>{fmt(p['kept_moving'])}</td>"
+            f"<td class='{cls}'>{esc(p['failure'] or 'ok')}</td><td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
+        )
+    return ("<table><tr><th>joint</th><th>probe</th><th>start</th><th>target</th><th>reached</th><th>peak force</th>"
+            "<th>peak torque/force</th><th>object moved</th><th>rebound</th><th>kept moving</th><th>verdict</th><th>notes</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def _joint_unit(jtype: str, what: str) -> str:
+    pri = jtype == "prismatic"
+    return {
+        "damping": "N*s/m" if pri else "N*m*s/rad",
+        "friction": "N" if pri else "N*m",
+        "stiffness": "N/m" if pri else "N*m/rad",
+        "position": "m" if pri else "rad",
+    }[what]
+
+
+def parameter_rows(ev) -> list[dict[str, Any]]:
+    """Every physical parameter of the evaluated asset with value, unit and
+    source: from ``overlay.json`` (and ``report.json``'s state refinement and
+    escalation rounds) when present, else from the URDF and the engine
+    defaults. Returns dicts {parameter, where, value, unit, source}."""
+    ctx = ev._context
+    rows: list[dict[str, Any]] = []
+    ov = ctx.overlay if ctx is not None else None
+    rep = ctx.report if ctx is not None else None
+    rows.append({"parameter": "scale", "where": "global", "value": ev.scale, "unit": "-", "source": ev.scale_source})
+    if ctx is None:
+        return rows
+    escal: dict[tuple[str, str], int] = {}
+    for rnd in (rep or {}).get("escalation", []) or []:
+        for j, ch in (rnd.get("changes") or {}).items():
+            for k in ch:
+                escal[(j, k)] = rnd.get("round", 0)
+    est = ((ov or {}).get("estimator") or {}).get("name")
+    if ov:
+        for ln, lp in (ov.get("links") or {}).items():
+            src = lp.get("source") or (f"estimator {est}" if est else "overlay")
+            rows.append({"parameter": "mass", "where": f"link {ln}", "value": lp.get("mass"), "unit": "kg", "source": src})
+            if lp.get("density") is not None:
+                rows.append({"parameter": "density", "where": f"link {ln}", "value": lp["density"], "unit": "kg/m^3", "source": src})
+            inertia = lp.get("inertia") or {}
+            rows.append({"parameter": "inertia (ixx, iyy, izz)", "where": f"link {ln}",
+                         "value": ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")), "unit": "kg*m^2", "source": src})
+            rows.append({"parameter": "center of mass", "where": f"link {ln}",
+                         "value": ", ".join(fmt(c) for c in lp.get("com", [])), "unit": "m", "source": src})
+            if lp.get("material"):
+                rows.append({"parameter": "material", "where": f"link {ln}", "value": lp["material"], "unit": "-", "source": src})
+        for jn, jd in (ov.get("joints") or {}).items():
+            jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
+            for k in ("damping", "friction", "stiffness"):
+                src = jd.get("source") or (f"estimator {est}" if est else "overlay")
+                if (jn, k) in escal:
+                    src = f"escalation round {escal[(jn, k)]}"
+                val = jd.get(k)
+                # the URDF written after escalation is what is simulated
+                if k in ("damping", "friction") and jn in ctx.joints:
+                    fv = getattr(ctx.joints[jn], k)
+                    if fv is not None and val is not None and abs(fv - val) > 1e-12:
+                        val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
+                rows.append({"parameter": k, "where": f"joint {jn}", "value": val, "unit": _joint_unit(jt, k), "source": src})
+    else:
+        run = next((r for r in ev._runs.values() if r.masses), None)
+        for ln, li in ctx.links.items():
+            m = run.masses.get(ln, {}).get("mass") if run else li.mass
+            src = "URDF <inertial>" if li.mass is not None else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"
+            rows.append({"parameter": "mass", "where": f"link {ln}", "value": m, "unit": "kg", "source": src})
+        for jn, jd in ctx.joints.items():
+            if jd.type not in ("revolute", "continuous", "prismatic"):
+                continue
+            for k in ("damping", "friction"):
+                v = getattr(jd, k)
+                rows.append({"parameter": k, "where": f"joint {jn}", "value": 0.0 if v is None else v,
+                             "unit": _joint_unit(jd.type, k), "source": "URDF <dynamics>" if v is not None else "engine default (0)"})
+            rows.append({"parameter": "stiffness", "where": f"joint {jn}", "value": 0.0, "unit": _joint_unit(jd.type, "stiffness"),
+                         "source": "none (URDF has no springs)"})
+    state_src = ev.initial_state_source
+    if rep and rep.get("state"):
+        state_src = f"refinement ({rep['state'].get('method', '')})"
+    elif ov and ov.get("initial_joint_positions"):
+        state_src = f"estimator {est}" if est else "overlay"
+    elif ctx.baseline and ctx.baseline.get("initial_state_rule"):
+        state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
+    for jn, q in ev.initial_state.items():
+        jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
+        rows.append({"parameter": "initial position", "where": f"joint {jn}", "value": q, "unit": _joint_unit(jt, "position"), "source": state_src})
+    for jn, jd in ctx.joints.items():
+        if jd.type in ("revolute", "prismatic"):
+            rows.append({"parameter": "limits", "where": f"joint {jn}", "value": f"[{fmt(jd.lower)}, {fmt(jd.upper)}]",
+                         "unit": _joint_unit(jd.type, "position"), "source": "URDF <limit>"})
+    return rows
+
+
+def _parameter_table(ev) -> str:
+    rows = "".join(
+        f"<tr><td>{esc(r['where'])}</td><td>{esc(r['parameter'])}</td><td class='num'>{fmt(r['value'])}</td>"
+        f"<td>{esc(r['unit'])}</td><td class='small'>{esc(r['source'])}</td></tr>"
+        for r in parameter_rows(ev)
+    )
+    return "<table><tr><th>where</th><th>parameter</th><th>value</th><th>unit</th><th>source</th></tr>" + rows + "</table>"
+
+
+def _badge(ev) -> str:
+    """The interaction-readiness verdict (:func:`asset2sim.tasks.check.verdict.readiness`,
+    the same the refine report, the terminal and the catalog show), with the
+    semantic checks that fail beside it."""
+    r = readiness(list(ev.metrics))
+    engine_errors = [f for f in ev.failures if f.startswith("engine@")]
+    other = [f for f in ev.failures if f not in r.failures and not f.startswith("engine@")]
+    if r.ready and not engine_errors:
+        html = f"<span class='badge pass'>{esc(r.line())}</span>"
+    else:
+        html = f"<span class='badge fail'>{esc(r.line() if not r.ready else 'NOT READY')}" + (
+            f"; {esc(', '.join(engine_errors))}" if engine_errors else "") + "</span>"
+    if other:
+        html += f" <span class='small'>other checks failing: {esc(', '.join(other))}</span>"
+    return html
+
+
+def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
+    """The HTML text of one evaluation's report (see module docstring);
+    ``views``: renders of the object at ``ev.initial_state`` (view name ->
+    (H, W, 3) uint8) already taken, None to render them here."""
+    ctx = ev._context
+    dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
+    settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
+    badge = _badge(ev)
+    views_html, views_what = _renders(ev, views)
+    sections = [
+        f"<h1>asset2sim evaluation: {esc(ev.asset_id)}</h1>",
+        f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
+        f"engines {esc(', '.join(ev.engines))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)}) &middot; "
+        f"evaluated in {fmt(ev.seconds, 3)} s</p>",
+        f"<p class='meta'>URDF <code>{esc(ev.urdf)}</code><br/>request: <i>{esc(ev.prompt or '-')}</i><br/>"
+        f"reference: <code>{esc(ev.reference or '-')}</code></p>",
+        f"<p>{badge}</p>",
+        "<h2>Object at its initial state</h2>",
+        f"<p class='small'>{esc(views_what)}; joints: "
+        + esc(", ".join(f"{k} = {fmt(v)}" for k, v in ev.initial_state.items()) or "none")
+        + f" ({esc(ev.initial_state_source)}); task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
+        views_html,
+        "<h2>Verdicts</h2>",
+        _verdict_table(ev),
+        "<h2>Penetration at the initial state</h2>",
+        _penetration_details(ev),
+        "<h2>Rest test</h2>",
+    ]
+    for eng, run in ev._runs.items():
+        if run.trace is None:
+            sections.append(f"<p class='small'>{esc(eng)}: {esc(run.error)}</p>")
+            continue
+        sections.append(f"<h3>{esc(eng)}</h3>")
+        sections.append(svg_tag(plots.plot_root_drift(run.root_series, run.trace, dt, settle_n), f"root drift {eng}"))
+        closed = {n: c["q_closed"] for n, c in ev.closed_positions.items()}
+        sections.append(svg_tag(plots.plot_joints(run.joint_series, run.trace.joint_types, dt, settle_n, closed), f"joints {eng}"))
+    sections += ["<h2>Prompt alignment</h2>", _prompt_details(ev), "<h2>Passive probes</h2>", _probe_details(ev)]
+    pb = ev._runs.get("pybullet")
+    if pb is not None and pb.probes:
+        sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
+    sections += ["<h2>Physical parameters</h2>", _parameter_table(ev)]
+    sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
+    sections.append("<p class='small'>Definitions, conventions and thresholds: docs/metrics.md. Simulation: PyBullet DIRECT, "
+                    "dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, self-collision except parent-child, inertia from file, root free.</p>")
+    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>asset2sim evaluation "
+            f"{esc(ev.asset_id)}</title><style>{CSS}</style></head><body>" + "\n".join(sections) + "</body></html>\n")
+
+
+def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None) -> Path:
+    """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path."""
+    return write_text(Path(path), render_report(ev, views))
+
+
+# ------------------------------------------------------------------ benchmark pages
+def _pm(mean: float | None, sd: float | None, digits: int = 3, pct: bool = False) -> str:
+    if mean is None:
+        return "-"
+    k = 100.0 if pct else 1.0
+    s = f"{mean * k:.{digits}g}"
+    if sd is not None:
+        s += f" &plusmn; {sd * k:.{digits}g}"
+    return s + ("%" if pct else "")
+
+
+def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], research: list[dict[str, str]],
+                             meta: dict[str, Any], chart: bytes | None = None) -> str:
+    """Thesis-layout tables per subset (``tables``: subset -> method -> row of
+    :func:`asset2sim.commands.benchmark` statistics) beside the SPEC's numbers."""
+    cols = [
+        ("penetration (mm, toilet+stapler)", "pen_ts"),
+        ("penetration (mm, all)", "pen"),
+        ("rest-stability pass", "rest"),
+        ("oscillation pass", "osc"),
+        ("probes pass", "probes"),
+        ("joint sweep pass", "sweep"),
+        ("robust rest pass", "robust"),
+        ("task success", "task"),
+        ("operating force plausible", "force"),
+        ("interaction-ready", "ready"),
+        ("scale dev. vs GenSim2", "scale"),
+        ("init. joint dev. (rad)", "init"),
+        ("prompt alignment", "prompt"),
+        ("all checks pass", "all"),
+        ("median eval. time (s)", "time"),
+    ]
+    parts = [f"<h1>asset2sim benchmark</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; methods "
+             f"{esc(', '.join(meta.get('methods', [])))} &middot; seed {esc(meta.get('seed'))} &middot; "
+             f"{esc(meta.get('rows'))} rows &middot; <a href='index.html'>per-object index</a></p>"]
+    for subset, rows in tables.items():
+        parts.append(f"<h2>{esc(subset)}</h2><table><tr><th>method</th>" + "".join(f"<th>{esc(c)}</th>" for c, _ in cols) + "</tr>")
+        for method, r in rows.items():
+            cells = [
+                _pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")),
+                _pm(r.get("pen_mean"), r.get("pen_sd")),
+                _pm(r.get("rest_stability_pass"), None, pct=True) + f" ({r.get('rest_n', 0)})",
+                _pm(r.get("oscillation_pass"), None, pct=True) + f" ({r.get('osc_n', 0)})",
+                _pm(r.get("probes_pass"), None, pct=True) + f" ({r.get('probes_n', 0)})",
+                _pm(r.get("sweep_pass"), None, pct=True) + f" ({r.get('sweep_n', 0)})",
+                _pm(r.get("robust_rest_pass"), None, pct=True) + f" ({r.get('robust_n', 0)})",
+                _pm(r.get("task_pass"), None, pct=True) + f" ({r.get('task_n', 0)})",
+                _pm(r.get("force_pass"), None, pct=True) + f" ({r.get('force_n', 0)})",
+                _pm(r.get("ready"), None, pct=True) + f" ({r.get('ready_n', 0)})",
+                _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
+                _pm(r.get("init_mean"), r.get("init_sd")),
+                _pm(r.get("prompt_mean"), None, pct=True),
+                _pm(r.get("all_pass"), None, pct=True),
+                fmt(r.get("median_seconds"), 3),
+            ]
+            err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
+            parts.append(f"<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
+        parts.append("</table>")
+    parts.append("<h2>Research numbers (SPEC, thesis 9-object set, Isaac Sim)</h2><table><tr>"
+                 + "".join(f"<th>{esc(k)}</th>" for k in research[0]) + "</tr>"
+                 + "".join("<tr>" + "".join(f"<td>{esc(v)}</td>" for v in r.values()) + "</tr>" for r in research)
+                 + "</table>")
+    if chart:
+        parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
+    parts.append("<p class='small'>Ours: PyBullet under the SPEC's conventions (docs/metrics.md); the research measured in "
+                 "Isaac Sim (PhysX). Penetration in mm is Phi summed over contact points; pass rates count assets that were "
+                 "produced; (n) is the number of assets with a verdict.</p>")
+    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>asset2sim benchmark</title>"
+            f"<style>{CSS}</style></head><body>" + "\n".join(parts) + "</body></html>\n")
+
+
+def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
+    """One row per object and method, colour-coded pass/fail, linking to each
+    ``report.html`` (relative links)."""
+    head = ["object", "category", "method", "all", "penetration (mm)", "rest", "oscillation", "ground", "divergence",
+            "joint hold", "probes", "mass (kg)", "scale dev. (%)", "init. dev.", "prompt", "time (s)", "report"]
+    rows = []
+    for r in records:
+        if r.get("error"):
+            rows.append(f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
+                        f"<td class='fail' colspan='{len(head) - 3}'>{esc(r['error'])}</td></tr>")
+            continue
+
+        def v(name: str) -> str:
+            p = r.get(f"{name}_pass")
+            cls = "na" if p is None else ("pass" if p else "fail")
+            return f"<td class='{cls}'>{fmt(r.get(name))}</td>"
+
+        link = f"<a href='{esc(r['report'])}'>report</a>" if r.get("report") else "-"
+        allcls = "pass" if r.get("all_pass") else "fail"
+        rows.append(
+            f"<tr><td>{esc(r['id'])}</td><td>{esc(r.get('category'))}</td><td>{esc(r['method'])}</td>"
+            f"<td class='{allcls}'>{'pass' if r.get('all_pass') else 'FAIL'}</td>"
+            + v("penetration") + v("rest_stability") + v("oscillation") + v("ground_penetration") + v("divergence")
+            + v("joint_hold") + v("probes") + v("total_mass")
+            + f"<td class='num'>{fmt(r.get('scale_deviation'))}</td><td class='num'>{fmt(r.get('initial_joint_deviation'))}</td>"
+            f"<td class='num'>{fmt(r.get('prompt_alignment'))}</td><td class='num'>{fmt(r.get('seconds'), 3)}</td><td>{link}</td></tr>"
+        )
+    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>asset2sim benchmark index</title>"
+            f"<style>{CSS}</style></head><body><h1>Benchmark index</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; "
+            "<a href='summary.html'>summary table</a> &middot; green pass, red fail, grey reported without threshold</p>"
+            "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table></body></html>\n")
+

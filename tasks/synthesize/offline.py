@@ -1,0 +1,118 @@
+"""The offline estimator (the default; needs no network): physical priors
+(data with sources) + geometry + kinematics; registered as ``offline``."""
+
+from __future__ import annotations
+
+from asset2sim import __version__
+from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysics, Overlay, ValidationNotes
+from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.synthesize import physics, request_apply
+from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.estimate import (
+    JointChoice,
+    choose_scale,
+    joint_dynamics_for,
+    link_material,
+    plausible_mass_range,
+    request_variant,
+    state_from_bands,
+    task_relevant_joints,
+)
+from asset2sim.tasks.synthesize.estimator import Estimate, register_estimator
+
+__all__ = ["OfflineEstimator"]
+
+
+class OfflineEstimator:
+    """Physical priors (data with sources) + geometry + kinematics; no network."""
+
+    name = "offline"
+
+    def __init__(self, **settings):
+        self.settings = settings
+
+    def estimate(self, ctx: EstimationContext) -> Estimate:
+        """The overlay from priors, geometry and kinematics, and the parsed
+        request's bands (:func:`requested_bands`)."""
+        s, size_note = choose_scale(ctx)
+        # ---- links
+        links: dict[str, LinkPhysics] = {}
+        mat_notes = []
+        for ln in ctx.asset.links:
+            geom = ctx.geometry.get(ln.name)
+            if geom is None:
+                continue
+            mat = link_material(ctx, ln.semantic_label, ln.name)
+            links[ln.name] = physics.link_physics(geom, s, mat, source=f"geometry + {mat.name} prior")
+            mat_notes.append(f"{ln.name} ({ln.semantic_label or 'unlabelled'}): {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
+        total = sum(lp.mass for lp in links.values())
+        mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {total:.4g} kg"
+        lo, hi = plausible_mass_range(ctx, s)
+        links, req_mass_notes, mass_asked = request_apply.apply_masses(ctx, links, (lo, hi))
+        if req_mass_notes:
+            total = sum(lp.mass for lp in links.values())
+            mass_note += "; request: " + "; ".join(req_mass_notes) + f"; total {total:.4g} kg"
+        if total > 0 and not mass_asked and (total < lo or total > hi):
+            # into the plausible range, a margin inside its ends (10 %)
+            target = lo * 1.1 if total < lo else hi * 0.9
+            f = target / total
+            for name, lp in list(links.items()):
+                links[name] = lp.model_copy(
+                    update={
+                        "mass": lp.mass * f,
+                        "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
+                        "source": lp.source + f"; x{f:.3g} to the category's plausible total mass",
+                    }
+                )
+            mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
+        # ---- state
+        prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
+        resolved = request_apply.resolve_states(ctx, s)
+        bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
+        state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
+        # ---- dynamics
+        relevant = set(task_relevant_joints(ctx))
+        choices = {}
+        for j in ctx.asset.movable_joints():
+            rel = j.name in relevant
+            label = ctx.asset.link(j.child).semantic_label
+            choices[j.name] = JointChoice(
+                damping_level=ctx.request.damping if rel else "moderate",
+                holds_position=ctx.request.holds_position and rel,
+                spring=rel and (ctx.request.spring or priors.spring_expected(ctx.category, label)),
+                stiff=ctx.request.stiff and rel,
+                free_moving=ctx.request.free_moving and rel,
+            )
+        joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
+        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, [n for n in task_relevant_joints(ctx)], state)
+        band_notes += dyn_notes
+        body_prior = priors.material_for(ctx.category, None, request_variant(ctx))
+        body_mat = link_material(ctx, None)
+        friction_coeff = float(body_prior.lateral_friction)
+        asked_state = bool(ctx.request.joint_states)
+        overlay = Overlay(
+            estimator=EstimatorInfo(name=self.name, model=None, version=__version__, queries=0),
+            scale=s,
+            category=ctx.category,
+            contact_material=ContactMaterial(
+                lateral_friction=friction_coeff,
+                restitution=float(body_prior.restitution),
+                note=f"{body_mat.name}: {body_prior.friction_source}",
+            ),
+            links=links,
+            joints=joints,
+            initial_joint_positions=state if asked_state else None,
+            notes=ValidationNotes(
+                size=size_note,
+                material="; ".join(mat_notes),
+                mass_arithmetic=mass_note,
+                other=[f"category: {ctx.category} ({ctx.category_reason})"]
+                + ["requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
+                + band_notes
+                + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),
+            ),
+        )
+        return Estimate(overlay=overlay, bands=bands, notes=band_notes, targets=resolved.targets)
+
+
+register_estimator("offline", OfflineEstimator)

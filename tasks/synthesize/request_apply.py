@@ -1,0 +1,694 @@
+"""Apply a parsed request (:class:`~asset2sim.schemas.request.RequestSpec`) to
+one object: which joints a phrase names, where "up", "on" and "30 degrees" put
+them, the scale a size in numbers asks for, masses, materials and explicit
+joint parameters. Used by the estimators (:mod:`asset2sim.tasks.synthesize.estimate`)
+and the validator of model overlays (:func:`check_overlay`).
+
+Rules (``docs/requests.md`` has the full grammar):
+
+- **Which joints.** A label names the movable joints whose moving link carries
+  that label (``priors.request_label_matches``); "all" the task-relevant ones.
+  A label the object lacks is a warning naming the label and the parts that
+  exist; the state is then applied to the task-relevant joints. An ordinal
+  picks among the targets in its order: vertical = top to bottom by the height
+  of the moving part's box center in the closed state, left_right / right_left
+  and front_back as seen by a viewer facing the object's front. Front is -x of
+  the asset's root frame (PartNet-Mobility's convention: the object frame's
+  +z front becomes -x through the base joint's rpy (pi/2, 0, -pi/2)); the
+  viewer's left is then +y.
+- **Numbers** are measured from the geometric closed end
+  (:mod:`asset2sim.tasks.geometry.closed_state`): a fraction of the opening
+  range, an angle (rad, revolute joints) or a distance (m at the output's
+  scale; prismatic joints directly; on a revolute joint the distance is the
+  gap at the moving part's farthest point from the axis, angle = d / r, the
+  arc length s = r theta). Beyond the limit: set to the limit, with a warning.
+- **Ends.** "up"/"raised"/"lifted" = the fraction at which the moving part's
+  box center is highest in world z over its travel, after the resting pose
+  (scale is uniform and positive, so it does not change which end is highest);
+  "down"/"lowered" the lowest. "on"/"off" of a toggle switch (labels switch,
+  toggle, rocker) are its high and low ends (the up-is-on convention of
+  vertically mounted toggle switches, NFPA 70 National Electrical Code 404.7);
+  of other parts (a faucet handle, a knob) "on" is fully open and "off" closed.
+  A part that moves less than :data:`FLAT_TRAVEL` of the object's size in
+  height has no up or down: warning, nominal band kept.
+
+Acceptance interval of a number: +-5 % of the number (as a fraction of the
+opening range; at least :data:`MIN_TOLERANCE`); of an end: +-:data:`END_TOLERANCE`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
+from asset2sim.schemas.request import (
+    BAND_INTERVAL,
+    BAND_TARGET,
+    JointStateRequest,
+    QuantityOutcome,
+    RequestFindings,
+    RequestSpec,
+    StateTarget,
+)
+from asset2sim.tasks.geometry.closed_state import links_aabb
+from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
+from asset2sim.prior_tables import MaterialPrior, load_priors
+from asset2sim.tasks.interpret.request_values import PART_RX
+
+if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
+    from asset2sim.tasks.synthesize.context import EstimationContext
+
+#: Relative tolerance of a numeric request (5 %, the issue's acceptance).
+NUMBER_TOLERANCE = 0.05
+#: Smallest half-width of a numeric target's interval (opening fraction).
+MIN_TOLERANCE = 0.005
+#: Half-width of an end target's interval (opening fraction).
+END_TOLERANCE = 0.02
+#: Height change over the travel, as a fraction of the object's largest
+#: extent, below which a part has no "up" or "down".
+FLAT_TRAVEL = 0.02
+#: Labels whose "on"/"off" are their high/low ends (toggle switches).
+TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
+#: Samples of the travel searched for the highest / lowest end.
+END_SAMPLES = 41
+
+
+@dataclass
+class JointTarget:
+    """What the request asks of one joint, resolved: band, target fraction
+    (None: the band's target), acceptance interval (opening fractions), and the
+    words and number it came from."""
+
+    joint: str
+    band: str
+    fraction: float | None = None
+    interval: tuple[float, float] | None = None
+    kind: str = "band"
+    asked: float | None = None
+    """The number asked (rad, m or fraction), None for bands and ends."""
+    phrase: str = ""
+    note: str = ""
+
+
+@dataclass
+class StateResolution:
+    """Bands of every movable joint, the targets of those a number or an end
+    names, notes and warnings."""
+
+    bands: dict[str, str]
+    targets: dict[str, JointTarget] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    addressed: set[str] = field(default_factory=set)
+    """joints a phrase of the request set (the others are closed by default)"""
+
+    @property
+    def intervals(self) -> dict[str, tuple[float, float]]:
+        """joint -> acceptance interval (opening fractions) of its target."""
+        return {n: t.interval for n, t in self.targets.items() if t.interval is not None}
+
+
+def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
+    """Movable joints whose moving part tasks manipulate, by the category's
+    priority (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`
+    on the asset's part labels; see
+    :func:`asset2sim.tasks.synthesize.estimate.task_relevant_joints`, which
+    calls this)."""
+    labelled = [(j.name, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()]
+    return priors.task_relevant_joints(ctx.category, labelled)[0]
+
+
+def object_parts(ctx: "EstimationContext") -> list[str]:
+    """Labels of the moving parts of the object (semantic labels, each once)."""
+    out: list[str] = []
+    for j in ctx.asset.movable_joints():
+        lab = ctx.asset.link(j.child).semantic_label or j.child
+        if lab not in out:
+            out.append(lab)
+    return out
+
+
+def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.ndarray]:
+    """joint -> (3,) world center (scale 1, resting pose applied) of the box
+    around its moving subtree at ``state`` (input units)."""
+    ctx.session.set_joint_positions(state)
+    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
+    out = {}
+    for n, links in ctx.subtrees.items():
+        box = links_aabb(ctx.session, links, ctx.hull_points)
+        c = np.zeros(3) if box is None else 0.5 * (box[0] + box[1])
+        out[n] = R @ c
+    return out
+
+
+def _order_key(order: str, c: np.ndarray) -> float:
+    """Sort key of a joint for an ordinal's order (ascending = first)."""
+    if order == "left_right":
+        return -float(c[1])
+    if order == "right_left":
+        return float(c[1])
+    if order == "front_back":
+        return float(c[0])
+    return -float(c[2])
+
+
+def _targets_of(ctx: "EstimationContext", jr: JointStateRequest, relevant: list[str], centers: dict[str, np.ndarray],
+                warnings: list[str]) -> list[str]:
+    if jr.selector == "all" or not jr.label:
+        targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
+    else:
+        targets = [j.name for j in ctx.asset.movable_joints()
+                   if priors.request_label_matches(ctx.category, jr.label, ctx.asset.link(j.child).semantic_label)]
+        if not targets:
+            targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
+            warnings.append(
+                f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but this {ctx.category} has no such part; "
+                f"its moving parts: {', '.join(object_parts(ctx)) or 'none'}; '{jr.phrase}' applied to the task-relevant joints {targets}"
+            )
+    if jr.ordinal is not None:
+        targets.sort(key=lambda n: _order_key(jr.order, centers.get(n, np.zeros(3))))
+        if -len(targets) <= jr.ordinal < len(targets):
+            targets = [targets[jr.ordinal]]
+        else:
+            warnings.append(f"WARNING: '{jr.phrase}' asks for {jr.label or 'part'} #{jr.ordinal + 1 if jr.ordinal >= 0 else jr.ordinal} "
+                            f"({jr.order}) but only {len(targets)} exist; ignored")
+            targets = []
+    return targets
+
+
+def _radius(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> float:
+    """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state``."""
+    ctx.session.set_joint_positions(state)
+    child = ctx.session.joint_child[joint]
+    p0, Rc = ctx.session.link_frame(child)
+    a = Rc @ np.asarray(ctx.session.joint_axis(joint), float)
+    a = a / max(np.linalg.norm(a), 1e-12)
+    r = 0.0
+    for ln in ctx.subtrees[joint]:
+        v = ctx.hull_points.get(ln)
+        if v is None:
+            continue
+        pos, R = ctx.session.link_frame(ln)
+        w = v @ R.T + pos - p0
+        perp = w - np.outer(w @ a, a)
+        r = max(r, float(np.linalg.norm(perp, axis=1).max()))
+    return r
+
+
+def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: dict[str, float]) -> tuple[float | None, str]:
+    """Opening fraction of the joint's highest (``high``) or lowest (``low``)
+    position in world z; None with a reason when the part moves flat."""
+    cs = ctx.closed[joint]
+    fr = np.linspace(0.0, 1.0, END_SAMPLES)
+    zs = []
+    for f in fr:
+        c = _centers_one(ctx, joint, {**closed_state, joint: cs.position(float(f))})
+        zs.append(c[2])
+    zs = np.asarray(zs)
+    size = float(np.max(ctx.closed_extents)) if len(ctx.closed_extents) else 1.0
+    if zs.max() - zs.min() < FLAT_TRAVEL * size:
+        return None, f"its height changes by {zs.max() - zs.min():.3g} (< {FLAT_TRAVEL:g} of the object's size) over the travel"
+    i = int(np.argmax(zs) if end == "high" else np.argmin(zs))
+    return float(fr[i]), f"{'highest' if end == 'high' else 'lowest'} position in world z at opening fraction {fr[i]:.3g}"
+
+
+def _centers_one(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> np.ndarray:
+    ctx.session.set_joint_positions(state)
+    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
+    box = links_aabb(ctx.session, ctx.subtrees[joint], ctx.hull_points)
+    return np.zeros(3) if box is None else R @ (0.5 * (box[0] + box[1]))
+
+
+def _fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scale: float, label: str,
+                  closed_state: dict[str, float]) -> tuple[float | None, str]:
+    """Opening fraction a target asks of one joint, and how it was decided."""
+    cs = ctx.closed[joint]
+    jt = ctx.asset.joint(joint).type
+    if target.kind == "fraction":
+        return float(target.value), f"{target.value:.3g} of the opening range"
+    if target.kind == "end":
+        end = target.end
+        canon = canonical_label(label) or label
+        if end in ("on", "off"):
+            if canon in TOGGLE_LABELS:
+                end = "high" if end == "on" else "low"
+            else:
+                return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
+        f, why = _end_fraction(ctx, joint, str(end), closed_state)
+        return f, why
+    if target.kind == "angle":
+        if jt == "prismatic":
+            return None, f"{np.degrees(target.value):.4g} degrees asked of a sliding joint (it moves in metres)"
+        return float(target.value) / max(cs.open_range, 1e-9), (
+            f"{np.degrees(target.value):.4g} deg from the closed end of a {np.degrees(cs.open_range):.4g} deg opening range")
+    # distance
+    if jt == "prismatic":
+        rng = cs.open_range * scale
+        return float(target.value) / max(rng, 1e-12), f"{target.value:.4g} m from the closed end of a {rng:.4g} m travel"
+    r = _radius(ctx, joint, closed_state) * scale
+    if r <= 0:
+        return None, "no geometry to measure a distance on"
+    ang = float(target.value) / r
+    return ang / max(cs.open_range, 1e-9), (
+        f"{target.value:.4g} m gap at the part's farthest point from the axis (r = {r:.4g} m): {np.degrees(ang):.4g} deg")
+
+
+def band_of(f: float) -> str:
+    """The band (``schemas.request.BAND_INTERVAL``) of opening fraction ``f``: the
+    one whose interval holds it with the nearest target, else the nearest target."""
+    inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
+    pool = inside or list(BAND_TARGET)
+    return min(pool, key=lambda b: abs(BAND_TARGET[b] - f))
+
+
+def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
+    """Band per movable joint and the targets of numbers and ends (see the
+    module docstring). ``scale``: the overlay's uniform scale (distances are
+    asked at the output's size). Joints not addressed are closed; a later
+    request for the same joint overrides an earlier one (the parser orders
+    general before specific)."""
+    res = StateResolution(bands={})
+    relevant = task_relevant_joints(ctx)
+    closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
+    need_centers = any(jr.ordinal is not None for jr in ctx.request.joint_states)
+    centers = _centers(ctx, closed_state) if need_centers else {}
+    for jr in ctx.request.joint_states:
+        targets = _targets_of(ctx, jr, relevant, centers, res.warnings)
+        for t in targets:
+            res.bands[t] = jr.band
+            res.addressed.add(t)
+            res.targets.pop(t, None)
+            if jr.target is None:
+                continue
+            label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
+            f, why = _fraction_for(ctx, t, jr.target, scale, label, closed_state)
+            if f is None:
+                res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' cannot be applied: {why}; the nominal band '{jr.band}' is used")
+                continue
+            if f > 1.0 + 1e-9 or f < -1e-9:
+                res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' is beyond the joint's limit ({why}, fraction {f:.3g}); set to the "
+                                    + ("limit" if f > 1 else "closed end"))
+                f = float(np.clip(f, 0.0, 1.0))
+            if jr.target.kind == "end":
+                tol = END_TOLERANCE
+            else:
+                tol = max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
+            interval = (max(0.0, f - tol), min(1.0, f + tol))
+            band = band_of(f)
+            res.bands[t] = band
+            res.targets[t] = JointTarget(joint=t, band=band, fraction=f, interval=interval, kind=jr.target.kind,
+                                         asked=jr.target.value, phrase=jr.phrase, note=why)
+            res.notes.append(f"{t} ({label}): '{jr.phrase}' -> opening fraction {f:.4g} ({why})")
+    for j in ctx.asset.movable_joints():
+        res.bands.setdefault(j.name, "closed")
+    res.warnings += count_warnings(ctx)
+    if closed_state:
+        ctx.session.set_joint_positions(closed_state)
+    return res
+
+
+def count_warnings(ctx: "EstimationContext") -> list[str]:
+    """A count of parts the request names ("two-drawer") that differs from the
+    object's movable parts with that label (labels without joints, such as a
+    toaster's slots, are not checked)."""
+    out = []
+    for label, n in ctx.request.part_counts.items():
+        if not PART_RX.fullmatch(label):
+            continue
+        have = [j.name for j in ctx.asset.movable_joints()
+                if priors.request_label_matches(ctx.category, label, ctx.asset.link(j.child).semantic_label)]
+        if len(have) != n:
+            out.append(f"WARNING: the request names {n} {label}(s) but this {ctx.category} has {len(have)} movable {label}(s)"
+                       + (f" ({', '.join(have)})" if have else f"; its moving parts: {', '.join(object_parts(ctx)) or 'none'}"))
+    return out
+
+
+def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
+    """``state`` (output units) with every resolved target's position."""
+    out = dict(state)
+    for n, t in res.targets.items():
+        if t.fraction is None:
+            continue
+        q = ctx.closed[n].position(t.fraction)
+        out[n] = q * scale if ctx.asset.joint(n).type == "prismatic" else q
+    return out
+
+
+# ------------------------------------------------------------------ size
+def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
+    """Uniform scale from the sizes in numbers ("30 cm tall", "60 cm wide"):
+    s = geometric mean over the sizes of value / closed extent along the named
+    dimension (height = z; width / depth = larger / smaller horizontal extent;
+    length / largest = the largest extent). None when the request gives none."""
+    sizes = ctx.request.sizes
+    if not sizes:
+        return None
+    ext = np.asarray(ctx.closed_extents, float)
+    if ctx.root_rotation is not None:
+        ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
+    horiz = sorted([ext[0], ext[1]], reverse=True)
+    along = {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
+    ratios = []
+    parts = []
+    for sz in sizes:
+        e = max(float(along[sz.dimension]), 1e-9)
+        ratios.append(sz.value / e)
+        parts.append(f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {sz.value / e:.4g}")
+    s = float(np.exp(np.mean(np.log(ratios))))
+    note = "size in numbers: " + "; ".join(parts) + f" -> s = {s:.4g}"
+    if len(ratios) > 1 and max(ratios) / min(ratios) > 1 + NUMBER_TOLERANCE:
+        note += (f"; WARNING: the sizes ask for different scales ({min(ratios):.4g}..{max(ratios):.4g}); one uniform scale "
+                 "cannot meet them all (geometric mean used)")
+    return s, note
+
+
+def size_residuals(ctx: "EstimationContext", scale: float) -> list[tuple[str, float, float]]:
+    """(phrase, asked m, obtained m) of every size in numbers at ``scale``."""
+    ext = np.asarray(ctx.closed_extents, float)
+    if ctx.root_rotation is not None:
+        ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
+    horiz = sorted([ext[0], ext[1]], reverse=True)
+    along = {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
+    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale) for sz in ctx.request.sizes]
+
+
+# ------------------------------------------------------------------ materials and masses
+def _is_body(ctx: "EstimationContext", link: str) -> bool:
+    moving = {ln for links in ctx.subtrees.values() for ln in links}
+    return link not in moving or (canonical_label(ctx.asset.link(link).semantic_label) in BODY_LABELS)
+
+
+def _matches(ctx: "EstimationContext", link: str, label: str | None) -> bool:
+    if label is None:
+        return True
+    if label == "body":
+        return _is_body(ctx, link)
+    return priors.request_label_matches(ctx.category, label, ctx.asset.link(link).semantic_label)
+
+
+def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
+    """The material the request names for ``link`` (``materials.yaml``): a
+    per-part entry wins over the body's, which wins over the whole object's."""
+    best: tuple[int, str] | None = None
+    for p in ctx.request.properties:
+        if p.material is None or not _matches(ctx, link, p.label):
+            continue
+        rank = 0 if p.label is None else (1 if p.label == "body" else 2)
+        if best is None or rank >= best[0]:
+            best = (rank, p.material)
+    return None if best is None else load_priors().materials[best[1]]
+
+
+def unmatched_properties(ctx: "EstimationContext") -> list[str]:
+    """Warnings for masses, materials and joint parameters naming a part the object lacks."""
+    out = []
+    links = [ln.name for ln in ctx.asset.links]
+    for p in ctx.request.properties:
+        if p.label not in (None, "body") and not any(_matches(ctx, ln, p.label) for ln in links):
+            out.append(f"WARNING: '{p.phrase}' names a '{p.label}' but this {ctx.category} has no such part; its moving parts: "
+                       f"{', '.join(object_parts(ctx)) or 'none'}; not applied")
+    for d in ctx.request.dynamics_values:
+        if d.label is not None and not any(priors.request_label_matches(ctx.category, d.label, ctx.asset.link(j.child).semantic_label)
+                                           for j in ctx.asset.movable_joints()):
+            out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but this {ctx.category} has no such part; its moving parts: "
+                       f"{', '.join(object_parts(ctx)) or 'none'}; applied to the task-relevant joints")
+    return out
+
+
+def _scaled(lp: LinkPhysics, f: float, why: str) -> LinkPhysics:
+    return lp.model_copy(update={
+        "mass": lp.mass * f,
+        "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
+        "source": lp.source + f"; x{f:.4g} {why}",
+    })
+
+
+def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> tuple[dict[str, LinkPhysics], list[str], bool]:
+    """Masses in numbers and mass words on the links (inertia scaled with the
+    mass, the center of mass unchanged). Per-part masses first (the links of
+    that part share it in proportion to their geometric masses), then the
+    whole object's mass (the other links scaled so the total is met), else
+    "heavy"/"light": the total set to 0.9 x the upper / 1.1 x the lower end of
+    the plausible range. Returns (links, notes, True when the request set the
+    total mass: the caller keeps it out of the plausible-range correction)."""
+    notes: list[str] = []
+    out = dict(links)
+    fixed: set[str] = set()
+    for p in ctx.request.properties:
+        if p.mass is None or p.label is None:
+            continue
+        names = [n for n in out if _matches(ctx, n, p.label)]
+        if not names:
+            continue
+        m = sum(out[n].mass for n in names)
+        f = p.mass / max(m, 1e-12)
+        for n in names:
+            out[n] = _scaled(out[n], f, f"to the requested {p.mass:g} kg of the {p.label} ('{p.phrase}')")
+        fixed.update(names)
+        notes.append(f"'{p.phrase}': {p.label} links {names} {m:.4g} -> {p.mass:.4g} kg")
+    total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    why = None
+    lo, hi = plausible
+    if total_req is None and ctx.request.mass_level is not None:
+        total_req = 0.9 * hi if ctx.request.mass_level == "heavy" else 1.1 * lo
+        why = f"'{ctx.request.mass_level}': {'0.9 x the upper' if ctx.request.mass_level == 'heavy' else '1.1 x the lower'} end of the plausible {lo:.3g}-{hi:.3g} kg"
+    if total_req is None:
+        return out, notes, bool(fixed)
+    fixed_mass = sum(out[n].mass for n in fixed)
+    free = [n for n in out if n not in fixed]
+    free_mass = sum(out[n].mass for n in free)
+    if not free or total_req <= fixed_mass:
+        notes.append(f"WARNING: the requested total {total_req:.4g} kg is not above the parts' requested masses ({fixed_mass:.4g} kg); total left at {sum(lp.mass for lp in out.values()):.4g} kg")
+        return out, notes, True
+    f = (total_req - fixed_mass) / max(free_mass, 1e-12)
+    for n in free:
+        out[n] = _scaled(out[n], f, f"to the requested total {total_req:.4g} kg")
+    notes.append((why or "requested total mass") + f": {fixed_mass + free_mass:.4g} -> {total_req:.4g} kg")
+    if not (lo <= total_req <= hi):
+        notes.append(f"note: the requested {total_req:.4g} kg is outside the plausible {lo:.3g}-{hi:.3g} kg for this {ctx.category}; kept as asked")
+    return out, notes, True
+
+
+# ------------------------------------------------------------------ joint parameters
+def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynamics], relevant: list[str],
+                          state: dict[str, float]) -> tuple[dict[str, JointDynamics], list[str]]:
+    """Explicit damping / friction / stiffness values on the joints they name
+    (a part label, else the task-relevant joints) whose motion fits the unit
+    (N*m*s/rad etc. on revolute joints, N*s/m etc. on prismatic ones; a value
+    without unit on both). A stiffness gets its spring reference at the
+    joint's initial state (``state``, output units)."""
+    notes: list[str] = []
+    out = dict(joints)
+    for d in ctx.request.dynamics_values:
+        names = relevant
+        if d.label is not None:
+            named = [j.name for j in ctx.asset.movable_joints()
+                     if priors.request_label_matches(ctx.category, d.label, ctx.asset.link(j.child).semantic_label)]
+            names = named or relevant
+        applied = []
+        for n in names:
+            if n not in out:
+                continue
+            linear = ctx.asset.joint(n).type == "prismatic"
+            if (d.motion == "rotational" and linear) or (d.motion == "linear" and not linear):
+                continue
+            upd: dict = {d.quantity: float(d.value), "source": out[n].source + f"; {d.quantity} {d.value:g} from the request ('{d.phrase}')"}
+            if d.quantity == "stiffness":
+                upd["spring_reference"] = float(state.get(n, 0.0)) if d.value > 0 else None
+            out[n] = out[n].model_copy(update=upd)
+            applied.append(n)
+        if applied:
+            notes.append(f"'{d.phrase}' set on {applied}")
+        else:
+            notes.append(f"WARNING: '{d.phrase}' fits no joint ({d.motion} unit; joints {names}); not applied")
+    return out, notes
+
+
+# ------------------------------------------------------------------ checks of an overlay
+def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResolution | None = None) -> list[str]:
+    """Where an overlay (any estimator's, a model's included) departs from the
+    parsed request: the total mass vs a mass in numbers (5 %), the scale vs
+    sizes in numbers (5 %), link materials vs named materials, explicit joint
+    parameters, and the initial positions vs resolved targets (their
+    intervals). Returns one line per departure (empty: consistent)."""
+    out: list[str] = []
+    total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    total = overlay.total_mass()
+    if total_req is not None and abs(total - total_req) > NUMBER_TOLERANCE * total_req:
+        out.append(f"total mass {total:.4g} kg but the request asks {total_req:.4g} kg")
+    for phrase, asked, got in size_residuals(ctx, overlay.scale):
+        if abs(got - asked) > NUMBER_TOLERANCE * asked:
+            out.append(f"'{phrase}': {got:.4g} m at scale {overlay.scale:.4g}, asked {asked:.4g} m")
+    for name, lp in overlay.links.items():
+        mat = requested_material(ctx, name) if name in ctx.geometry else None  # links with geometry only
+        if mat is not None and (lp.density is None or abs(lp.density - mat.density) > 1e-6 * mat.density):
+            out.append(f"link {name}: density {lp.density:g} kg/m^3 but the request names {mat.name} ({mat.density:g})")
+    for d in ctx.request.dynamics_values:
+        for n, jd in overlay.joints.items():
+            linear = ctx.asset.joint(n).type == "prismatic" if n in {j.name for j in ctx.asset.joints} else False
+            if (d.motion == "rotational" and linear) or (d.motion == "linear" and not linear):
+                continue
+            if d.label is None and n not in task_relevant_joints(ctx):
+                continue
+            if d.label is not None and not priors.request_label_matches(ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label):
+                continue
+            v = getattr(jd, d.quantity)
+            if abs(v - d.value) > NUMBER_TOLERANCE * max(d.value, 1e-12):
+                out.append(f"joint {n}: {d.quantity} {v:.4g} but the request asks {d.value:g} ('{d.phrase}')")
+    if res is not None and overlay.initial_joint_positions:
+        for n, t in res.targets.items():
+            if n not in overlay.initial_joint_positions or t.interval is None:
+                continue
+            q = overlay.initial_joint_positions[n]
+            cs = ctx.closed[n]
+            unit = overlay.scale if ctx.asset.joint(n).type == "prismatic" else 1.0
+            f = cs.fraction(q / unit)
+            if not (t.interval[0] - 1e-9 <= f <= t.interval[1] + 1e-9):
+                out.append(f"joint {n}: initial opening fraction {f:.3g} outside {t.interval[0]:.3g}..{t.interval[1]:.3g} asked by '{t.phrase}'")
+    return out
+
+
+def summary(spec: RequestSpec) -> list[str]:
+    """One line per thing the request asks beyond bands (sizes, masses,
+    materials, joint parameters) for the terminal and the report."""
+    out = []
+    if spec.sizes:
+        out.append("sizes: " + ", ".join(f"{s.dimension} {s.value:g} m" for s in spec.sizes))
+    for p in spec.properties:
+        what = ", ".join(x for x in ((f"{p.mass:g} kg" if p.mass is not None else ""), (p.material or "")) if x)
+        out.append(f"{p.label or 'object'}: {what}")
+    if spec.mass_level:
+        out.append(f"mass: {spec.mass_level}")
+    for d in spec.dynamics_values:
+        out.append(f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})")
+    return out
+
+
+def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
+             scale: float, total_mass: float, notes: list[str], overlay: Overlay | None = None,
+             escalation: list | None = None) -> RequestFindings:
+    """The report's account of the request: ignored word groups, warnings
+    (the parser's and the ``WARNING`` lines of ``notes``), what was asked
+    beyond bands, and every number with what the output has.
+
+    Args:
+        targets: resolved numbers / ends per joint (:func:`resolve_states`).
+        closed_out: joint -> closed state at the output's scale.
+        state: the final initial state (output units).
+        scale: the overlay's scale; total_mass: kg.
+        notes: the overlay's notes (warnings of the estimator are copied).
+        overlay: the final overlay (explicit joint parameters are compared with it).
+        escalation: the post-check's rounds (``EscalationRound``: ``round``,
+            ``reason``, ``changes``), to say why a parameter was changed.
+    """
+    warnings = list(ctx.request.warnings) + [n for n in notes if n.startswith("WARNING")]
+    q: list[QuantityOutcome] = []
+    for n, t in targets.items():
+        cs = closed_out.get(n)
+        if cs is None or n not in state or t.fraction is None:
+            continue
+        f = cs.fraction(state[n])
+        if t.kind == "end":
+            ok = abs(f - t.fraction) <= END_TOLERANCE + 1e-9
+            q.append(QuantityOutcome(what=f"{n} end", phrase=t.phrase, asked=t.fraction, achieved=f, unit="opening fraction",
+                                     within_tolerance=ok, why=t.note))
+            continue
+        if t.kind == "angle":
+            asked, got, unit = t.asked, f * cs.open_range, "rad"
+        elif t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
+            asked, got, unit = t.asked, f * cs.open_range, "m"
+        elif t.kind == "distance":
+            asked, got, unit = t.asked, (t.asked or 0.0) * f / max(t.fraction, 1e-12), "m"
+        else:
+            asked, got, unit = t.asked, f, "opening fraction"
+        ok = asked is not None and abs(got - asked) <= NUMBER_TOLERANCE * abs(asked) + 1e-9
+        why = t.note
+        if not ok:
+            if t.interval is not None and (t.interval[1] >= 1.0 - 1e-9 and f >= 1.0 - 1e-6 or t.fraction >= 1.0 - 1e-9):
+                why += "; the joint's limit is below the number"
+            else:
+                why += "; the state search moved it inside its interval to remove self-penetration"
+        q.append(QuantityOutcome(what=f"{n} {t.kind}", phrase=t.phrase, asked=asked, achieved=got, unit=unit, within_tolerance=ok, why=why))
+    for phrase, asked, got in size_residuals(ctx, scale):
+        ok = abs(got - asked) <= NUMBER_TOLERANCE * asked
+        q.append(QuantityOutcome(what="size", phrase=phrase, asked=asked, achieved=got, unit="m", within_tolerance=ok,
+                                 why="" if ok else "one uniform scale cannot meet every size asked"))
+    total_req = next((p for p in ctx.request.properties if p.mass is not None and p.label is None), None)
+    if total_req is not None:
+        ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
+        q.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
+                                 within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it"))
+    if overlay is not None:
+        q += _dynamics_outcomes(ctx, overlay, escalation or [])
+    return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q)
+
+
+def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: list) -> list[QuantityOutcome]:
+    """Explicit joint parameters asked vs the final overlay; a change is
+    explained by the post-check round that made it (or the validation)."""
+    out = []
+    relevant = task_relevant_joints(ctx)
+    for d in ctx.request.dynamics_values:
+        names = relevant
+        if d.label is not None:
+            names = [j.name for j in ctx.asset.movable_joints()
+                     if priors.request_label_matches(ctx.category, d.label, ctx.asset.link(j.child).semantic_label)] or relevant
+        for n in names:
+            jd = overlay.joints.get(n)
+            if jd is None:
+                continue
+            linear = ctx.asset.joint(n).type == "prismatic"
+            if (d.motion == "rotational" and linear) or (d.motion == "linear" and not linear):
+                continue
+            got = float(getattr(jd, d.quantity))
+            ok = abs(got - d.value) <= NUMBER_TOLERANCE * max(d.value, 1e-12)
+            why = ""
+            if not ok:
+                rounds = [r for r in escalation if n in (getattr(r, "changes", None) or {}) and d.quantity in r.changes[n]]
+                why = (f"raised by the post-check's escalation ({len(rounds)} rounds; round {rounds[-1].round}: {rounds[-1].reason})"
+                       if rounds else "changed by the overlay validation (stability bound of the simulator)")
+            unit = {"damping": "N*m*s/rad" if not linear else "N*s/m", "friction": "N*m" if not linear else "N",
+                    "stiffness": "N*m/rad" if not linear else "N/m"}[d.quantity]
+            out.append(QuantityOutcome(what=f"{n} {d.quantity}", phrase=d.phrase, asked=d.value, achieved=got, unit=unit,
+                                       within_tolerance=ok, why=why))
+    return out
+
+
+def prompt_fields(spec: RequestSpec) -> dict:
+    """The parts of a parsed request beyond bands, as JSON for a model's prompt
+    (sizes m, masses kg, materials as ``materials.yaml`` keys with their
+    density kg/m^3, explicit joint parameters in SI, warnings, ignored words)."""
+    mats = load_priors().materials
+    return {
+        "sizes_m": [s.model_dump() for s in spec.sizes],
+        "masses_and_materials": [
+            {**p.model_dump(), "density": None if p.material is None else mats[p.material].density} for p in spec.properties
+        ],
+        "mass_level": spec.mass_level,
+        "joint_parameters": [d.model_dump() for d in spec.dynamics_values],
+        "part_counts": dict(spec.part_counts),
+        "parser_warnings": list(spec.warnings),
+        "ignored_words": list(spec.ignored),
+    }
+
+
+def check_against_request(ctx: "EstimationContext", overlay: Overlay, targets: dict[str, JointTarget]) -> tuple[Overlay, dict[str, JointTarget]]:
+    """Check any estimator's validated overlay against the parsed request
+    (:func:`check_overlay`; a model estimator's included): every departure
+    becomes a ``WARNING`` line of the overlay's notes (the report lists it).
+    ``targets``: the estimator's resolved numbers / ends; when it gave none
+    (a model backend), they are resolved here at the overlay's scale so the
+    state search still keeps each joint within the number's interval.
+    Returns (overlay with the notes, targets)."""
+    if not targets:
+        targets = resolve_states(ctx, overlay.scale).targets
+    departures = check_overlay(ctx, overlay, StateResolution(bands={}, targets=targets))
+    if departures:
+        notes = overlay.notes.model_copy(update={"other": list(overlay.notes.other)
+                                                 + [f"WARNING: the overlay departs from the request: {d}" for d in departures]})
+        overlay = overlay.model_copy(update={"notes": notes})
+    return overlay, targets

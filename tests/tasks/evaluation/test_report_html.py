@@ -1,0 +1,144 @@
+"""report.html and the benchmark pages: self-contained, complete, escaped."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.evaluation.report_html import parameter_rows, render_benchmark_index, render_benchmark_summary
+
+
+def _drawer(folder: Path, with_overlay: bool) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    inert = '<inertial><mass value="{m}"/><inertia ixx="0.05" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial>'
+    box = '<collision><geometry><box size="{x} {y} {z}"/></geometry></collision><visual><geometry><box size="{x} {y} {z}"/></geometry></visual>'
+    (folder / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="cab">'
+        f'<link name="carcass">{inert.format(m=20)}{box.format(x=0.4, y=0.4, z=0.3)}</link>'
+        f'<link name="drawer">{inert.format(m=1)}{box.format(x=0.2, y=0.3, z=0.1)}</link>'
+        '<joint name="slide" type="prismatic"><parent link="carcass"/><child link="drawer"/><origin xyz="0.31 0 0"/>'
+        '<axis xyz="1 0 0"/><limit lower="0" upper="0.3"/><dynamics damping="2" friction="1"/></joint></robot>'
+    )
+    (folder / "initial_state.json").write_text(json.dumps({"initial_joint_positions": {"slide": 0.1}}))
+    if with_overlay:
+        (folder / "overlay.json").write_text(json.dumps({
+            "scale": 0.8, "category": "StorageFurniture", "estimator": {"name": "offline"},
+            "links": {"carcass": {"mass": 20, "inertia": {"ixx": 0.05, "iyy": 0.05, "izz": 0.05}, "com": [0, 0, 0],
+                                  "material": "MDF <wood>", "density": 700, "source": "geometry + MDF prior"}},
+            "joints": {"slide": {"damping": 2.0, "friction": 0.5, "stiffness": 0.0, "source": "estimator prior"}},
+        }))
+        (folder / "report.json").write_text(json.dumps({
+            "asset_id": "cab", "escalation": [{"round": 1, "changes": {"slide": {"friction": 1.0}}, "metrics": []}],
+            "state": {"method": "local search"},
+        }))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rep")
+    ev = evaluate_asset(_drawer(tmp / "cab", True), prompt="A small <cabinet> with its drawer slightly open & smooth.",
+                        out_dir=tmp / "out", write_report=True)
+    return ev, (tmp / "out" / "report.html").read_text()
+
+
+def test_report_is_self_contained(report):
+    _, html = report
+    assert html.startswith("<!DOCTYPE html>")
+    # no external resources: every src is inline data, no stylesheet or script links
+    srcs = re.findall(r'src="([^"]*)"', html)
+    assert srcs and all(s.startswith(("data:image/png;base64,", "data:image/svg+xml;base64,")) for s in srcs)
+    assert "<link " not in html and "<script" not in html and "http://" not in html and "https://" not in html
+
+
+def test_report_shows_views_plots_verdicts_probes_and_parameters(report):
+    ev, html = report
+    # object at its initial state (renders, or the geometry plot until they exist), rest test plots, probe plot
+    assert html.count("data:image/png;base64,") + html.count("data:image/svg+xml;base64,") >= 4
+    # the figures are SVG documents with the axes' units and the run's data drawn
+    figs = [base64.b64decode(s).decode() for s in re.findall(r'src="data:image/svg\+xml;base64,([^"]*)"', html)]
+    assert len(figs) >= 3 and all(f.startswith("<svg ") and "</svg>" in f for f in figs)
+    assert any("D_pos(t) (mm)" in f and "1 mm threshold" in f for f in figs)  # rest test
+    assert any("slide (m)" in f for f in figs)  # joint trajectory
+    assert any("root displacement (mm)" in f for f in figs)  # probes
+    assert all(f.count("<polyline") >= 1 for f in figs)
+    for section in ("Object at its initial state", "Verdicts", "Rest test", "Prompt alignment", "Passive probes",
+                    "Physical parameters"):
+        assert section in html
+    for m in ev.metrics:
+        assert f"<td>{m.name}</td>" in html
+    assert "D_pos &lt;= 0.001 m and D_ori &lt;= 0.01 rad" in html  # thresholds shown, escaped
+    assert "close" in html and "open" in html  # probe rows
+
+
+def test_report_escapes_user_text(report):
+    _, html = report
+    assert "A small &lt;cabinet&gt; with its drawer slightly open &amp; smooth." in html
+    assert "<cabinet>" not in html
+    assert "MDF &lt;wood&gt;" in html
+
+
+def test_parameter_table_has_value_unit_and_source(report):
+    ev, _ = report
+    rows = {(r["where"], r["parameter"]): r for r in parameter_rows(ev)}
+    assert rows[("global", "scale")]["value"] == 0.8 and rows[("global", "scale")]["source"] == "overlay.json"
+    assert rows[("link carcass", "mass")]["unit"] == "kg"
+    assert rows[("link carcass", "mass")]["source"] == "geometry + MDF prior"
+    assert rows[("joint slide", "damping")]["unit"] == "N*s/m"
+    assert rows[("joint slide", "damping")]["source"] == "estimator prior"
+    # friction was raised by escalation; the URDF value (1.0) is what is simulated
+    fr = rows[("joint slide", "friction")]
+    assert fr["value"] == 1.0 and fr["source"].startswith("escalation round 1") and fr["unit"] == "N"
+    assert rows[("joint slide", "initial position")]["source"].startswith("refinement")
+    assert rows[("joint slide", "initial position")]["unit"] == "m"
+
+
+def test_parameter_table_without_overlay_names_engine_defaults(tmp_path):
+    f = _drawer(tmp_path / "raw", False)
+    (f / "mobility.urdf").write_text((f / "mobility.urdf").read_text().replace(
+        '<inertial><mass value="1"/><inertia ixx="0.05" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial>', ""))
+    ev = evaluate_asset(f, probes=False)
+    rows = {(r["where"], r["parameter"]): r for r in parameter_rows(ev)}
+    assert rows[("link drawer", "mass")]["value"] == 1.0
+    assert rows[("link drawer", "mass")]["source"].startswith("engine default")
+    assert rows[("link carcass", "mass")]["source"] == "URDF <inertial>"
+    assert rows[("joint slide", "damping")]["source"] == "URDF <dynamics>"
+
+
+def test_benchmark_pages(tmp_path):
+    records = [
+        {"id": "1", "category": "Box", "method": "human", "error": None, "all_pass": True, "penetration": 1.0,
+         "penetration_pass": None, "rest_stability": 1e-4, "rest_stability_pass": True, "oscillation": 0.0,
+         "oscillation_pass": True, "report": "human/1/report.html", "seconds": 0.4},
+        {"id": "1", "category": "Box", "method": "defaults", "error": None, "all_pass": False, "rest_stability": 0.2,
+         "rest_stability_pass": False, "report": None},
+        {"id": "2", "category": "Box", "method": "direct", "error": "BaselineError: <boom>"},
+    ]
+    idx = render_benchmark_index(records, {"manifest": "m.csv"})
+    assert idx.count("<tr>") == 4  # header + 3 rows
+    assert "class='pass'>pass" in idx and "class='fail'>FAIL" in idx
+    assert "href='human/1/report.html'" in idx and "&lt;boom&gt;" in idx
+    tables = {"all rows": {"human": {"pen_ts_mean": 15.0, "pen_ts_sd": 2.0, "rest_stability_pass": 8 / 9, "rest_n": 9,
+                                     "oscillation_pass": 1.0, "osc_n": 9, "errors": 0}}}
+    from asset2sim.tasks.benchmark.benchmark import RESEARCH_NUMBERS
+
+    page = render_benchmark_summary(tables, RESEARCH_NUMBERS, {"manifest": "m.csv", "methods": ["human"], "seed": 0, "rows": 9})
+    assert "15 &plusmn; 2" in page and "88.9%" in page and "Human (GenSim2)" in page and "thesis method" in page
+
+
+def test_write_refine_report_evaluates_the_output_folder(tmp_path):
+    from types import SimpleNamespace
+
+    from asset2sim.tasks.evaluation.evaluate import evaluate_refined
+
+    f = _drawer(tmp_path / "cab", True)
+    path = evaluate_refined(f, SimpleNamespace(prompt="a cabinet with its drawer closed", category="StorageFurniture", task=None))["report"]
+    assert path == f / "report.html" and path.is_file()
+    data = json.loads((f / "evaluation.json").read_text())
+    assert data["method"] == "asset2sim" and data["prompt"] == "a cabinet with its drawer closed"
+    assert "asset2sim evaluation" in path.read_text()
