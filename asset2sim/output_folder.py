@@ -54,6 +54,17 @@ from typing import Any, Iterable, Iterator
 
 from asset2sim import atomic
 
+#: The files and folders of an output folder (the SPEC's contract and the
+#: extras), named here once; the writers and readers import them.
+URDF_NAME = "mobility.urdf"
+STATE_NAME = "initial_state.json"
+OVERLAY_NAME = "overlay.json"
+REPORT_NAME = "report.json"
+EVALUATION_NAME = "evaluation.json"
+REPORT_HTML_NAME = "report.html"
+MJCF_DIR = "mjcf"
+USD_DIR = "usd"
+VIEWS_DIR = "views"
 MARKER_NAME = ".asset2sim-complete.json"
 RECORD_NAME = ".asset2sim-owned.json"
 _BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})

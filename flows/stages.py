@@ -83,6 +83,7 @@ from asset2sim.tasks.publish.contract import (
     write_job_record,
 )
 from asset2sim.tasks.publish.contract import code_version as contract_code_version
+from asset2sim.output_folder import EVALUATION_NAME
 
 FLOW_NAME = "refine-dataset"
 SUBFLOW_NAME = "refine-assets"
@@ -600,7 +601,7 @@ def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, r
     the post-check. None otherwise (no file, unreadable, another request or
     reference)."""
     try:
-        ev = Evaluation.model_validate_json((Path(out_dir) / "evaluation.json").read_text())
+        ev = Evaluation.model_validate_json((Path(out_dir) / EVALUATION_NAME).read_text())
     except (OSError, ValueError):
         return None
     ref = str(Path(reference_dir).resolve()) if reference_dir else None
@@ -619,7 +620,7 @@ def measurement_from_refine(out_dir: str, prompt: str, category: str | None, ref
     if ev is None:
         return None
     if metrics_dir:
-        atomic.copy_file(Path(out_dir) / "evaluation.json", Path(metrics_dir) / "evaluation.json")
+        atomic.copy_file(Path(out_dir) / EVALUATION_NAME, Path(metrics_dir) / EVALUATION_NAME)
     return Measurement(
         columns=column_values(ev.metrics, "pybullet"),
         failures=list(ev.failures),

@@ -62,6 +62,7 @@ from asset2sim.tasks.check import repair
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.urdf import read_urdf
+from asset2sim.output_folder import URDF_NAME, VIEWS_DIR
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
@@ -1112,9 +1113,9 @@ def _write_extras(out_dir: Path, report: RefineReport, log: _StageLog, recording
     log.lap("extras_usd")
     views = None
     try:
-        views = render.render_views(out_dir / "mobility.urdf", report.initial_joint_positions, out_dir / "views",
+        views = render.render_views(out_dir / URDF_NAME, report.initial_joint_positions, out_dir / VIEWS_DIR,
                                     size=render.OUTPUT_VIEW_SIZE)
-        out["views"] = str(out_dir / "views")
+        out["views"] = str(out_dir / VIEWS_DIR)
     except Exception as exc:
         _raise_if_unwritable(exc, out_dir)
         report.notes.append(f"renders failed: {exc}")

@@ -43,6 +43,7 @@ from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export
 from asset2sim.tasks.publish.export_usd import UsdExportError, check_usd, export_usd
 from asset2sim.tasks.assemble.write import read_root
 from asset2sim.urdf import UrdfError
+from asset2sim.output_folder import URDF_NAME
 
 NAME = "export"
 HELP = "Export an output folder for other simulators (MJCF for MuJoCo, USD for Isaac Sim and Newton), optionally checking parity across engines."
@@ -93,7 +94,7 @@ def _export_errors(out: Path, folder: str, check_errors: tuple[type[Exception], 
 def run(args: argparse.Namespace) -> int:
     out = args.out
     parity = parse_engines(args.parity, "--parity") if args.parity else []
-    if not (out / "mobility.urdf").is_file():
+    if not (out / URDF_NAME).is_file():
         raise CommandError(INVALID_REQUEST, "NOT_AN_OUTPUT_FOLDER", out, "has no mobility.urdf (not an output folder)")
     if args.format == "usd":
         return _run_usd(args, out)
@@ -104,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     with _export_errors(out, "mjcf", (MjcfError, ExportError)):
         with output_folder.adopting(out):  # the MJCF files become the output folder's own
             path = export_mjcf(out, visuals=not args.no_visuals, check=False)
-        check = check_mjcf(path, out / "mobility.urdf", read_initial_state(out), fixed_base=read_root(out).fixed)
+        check = check_mjcf(path, out / URDF_NAME, read_initial_state(out), fixed_base=read_root(out).fixed)
     print(f"wrote       {path}")
     print(f"total mass  {check.total_mass:.6g} kg (URDF {check.urdf_mass:.6g} kg)")
     print(f"inertials   largest COM difference {check.max_com_error:.1e} m, tensor {check.max_inertia_error:.1e} kg*m^2")

@@ -50,6 +50,7 @@ from asset2sim.urdf import (
     UrdfModel,
     write_urdf,
 )
+from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME
 
 
 @dataclass
@@ -524,9 +525,9 @@ def write_contract_asset(
         model.links["latch"] = link("latch", latch_part)
         model.joints.append(UrdfJoint(name="latch_fixed", type="fixed", parent="body", child="latch"))
     urdf_text = write_urdf(model, comment=" initial joint positions: initial_state.json ")
-    urdf_path = atomic.write_bytes(out / "mobility.urdf", urdf_text)
+    urdf_path = atomic.write_bytes(out / URDF_NAME, urdf_text)
     state = {"lid_hinge": float(lid_angle), "post_slide": float(post_height)}
-    atomic.write_json(out / "initial_state.json", {"initial_joint_positions": state})
+    atomic.write_json(out / STATE_NAME, {"initial_joint_positions": state})
 
     def link_entry(m, com, inertia):
         return {
@@ -557,7 +558,7 @@ def write_contract_asset(
         },
         "initial_joint_positions": state,
     }
-    atomic.write_json(out / "overlay.json", overlay)
+    atomic.write_json(out / OVERLAY_NAME, overlay)
     masses = {"body": float(body[0]), "lid": float(lid[0]), "post": float(post[0])}
     if latch:
         masses["latch"] = float(latch_part[0])

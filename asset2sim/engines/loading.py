@@ -25,6 +25,7 @@ import numpy as np
 from asset2sim import file_memo, urdf
 from asset2sim.mesh_io import MeshReadError, hull_point_sets
 from asset2sim.urdf import SIMULATED_JOINT_TYPES, UrdfError, UrdfModel
+from asset2sim.output_folder import STATE_NAME
 
 #: What PyBullet 3.2.7 gives a link that has no ``<inertial>``: 1 kg, identity
 #: inertia (kg*m^2) at the link origin (Bullet's ``UrdfParser``; checked in
@@ -193,7 +194,7 @@ def read_initial_state(folder: Path) -> dict[str, float]:
     Raises:
         ValueError: the file exists but is not the contract's shape.
     """
-    p = Path(folder) / "initial_state.json"
+    p = Path(folder) / STATE_NAME
     if not p.is_file():
         return {}
     data = json.loads(p.read_text())

@@ -36,16 +36,13 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic, file_names
+from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, STATE_NAME, URDF_NAME
 from asset2sim.engines.base import Spring
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim import output_folder
 from asset2sim.tasks.assemble.write import read_root
 
-MJCF_DIR = "mjcf"
-URDF_NAME = "mobility.urdf"
-STATE_NAME = "initial_state.json"
-OVERLAY_NAME = "overlay.json"
 MASS_RTOL = 1e-6
 _DERIVED = re.compile(r".+__c\d+_g\d+\.obj$")
 

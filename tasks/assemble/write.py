@@ -29,11 +29,19 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.assemble import collision_geometry
-from asset2sim.output_folder import MARKER_NAME, RECORD_NAME, OutputError, check_location
+from asset2sim.output_folder import (
+    EVALUATION_NAME,
+    MARKER_NAME,
+    OVERLAY_NAME,
+    RECORD_NAME,
+    REPORT_HTML_NAME,
+    REPORT_NAME,
+    STATE_NAME,
+    URDF_NAME,
+    OutputError,
+    check_location,
+)
 
-URDF_NAME = "mobility.urdf"
-STATE_NAME = "initial_state.json"
-OVERLAY_NAME = "overlay.json"
 SEMANTICS_NAME = partnet_mobility.SEMANTICS_NAME
 
 
@@ -82,7 +90,7 @@ def mesh_dependencies(mesh_path: Path, asset_root: Path) -> list[Path]:
 
 
 #: output paths a copied input file may not take (the contract's own files)
-RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, "report.json", "report.html", MARKER_NAME, RECORD_NAME})
+RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, REPORT_NAME, REPORT_HTML_NAME, EVALUATION_NAME, MARKER_NAME, RECORD_NAME})
 
 
 def _reference_dirs(filename: str) -> list[str]:

@@ -56,6 +56,7 @@ from asset2sim.tasks.assemble import write
 from asset2sim.tasks.synthesize import backends, estimate
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.urdf import UrdfLimit, read_urdf, scale_model, write_urdf
+from asset2sim.output_folder import STATE_NAME, URDF_NAME
 
 __all__ = [
     "METHODS",
@@ -227,7 +228,7 @@ def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     """
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
-    src = row.folder / "mobility.urdf"
+    src = row.folder / partnet_mobility.URDF_NAMES[0]
     if not src.is_file():
         raise BaselineError(f"{row.id}: no mobility.urdf in {row.folder}")
     ref = partnet_mobility.read_reference(row.folder)
@@ -236,14 +237,14 @@ def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     if scale is None:
         scale = 1.0
         notes.append("no reference scale: raw scale 1.0")
-    urdf = scale_urdf(src, out_dir / "mobility.urdf", scale, header=f"asset2sim baseline 'defaults' of {row.id} at scale {scale}")
+    urdf = scale_urdf(src, out_dir / URDF_NAME, scale, header=f"asset2sim baseline 'defaults' of {row.id} at scale {scale}")
     joints = urdf_joints(urdf)
     state = {
         n: _clip(0.0, j["lower"], j["upper"])
         for n, j in joints.items()
         if j["type"] in ("revolute", "continuous", "prismatic")
     }
-    write_json(out_dir / "initial_state.json", {"initial_joint_positions": state})
+    write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
     notes.append("no <inertial>: PyBullet uses 1 kg and inertia diag(1,1,1) kg*m^2 per link; no <dynamics>: zero damping and friction")
     write_json(
         out_dir / "baseline.json",
@@ -287,12 +288,12 @@ def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
             hi = min(rng[1], file_joints[j]["upper"]) if file_joints[j]["upper"] is not None else rng[1]
             limits[j] = (lo, hi) if lo <= hi else rng
     urdf = scale_urdf(
-        ref.urdf, out_dir / "mobility.urdf", scale, joint_limits=limits,
+        ref.urdf, out_dir / URDF_NAME, scale, joint_limits=limits,
         header=f"asset2sim baseline 'human' (GenSim2 reference) of {row.id} at scale {scale}",
     )
     joints = urdf_joints(urdf)
     state = human_initial_state(joints, ref.task_joints, rng, scale)
-    write_json(out_dir / "initial_state.json", {"initial_joint_positions": state})
+    write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
     write_json(
         out_dir / "baseline.json",
         {

@@ -44,6 +44,7 @@ from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MAS
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
 from asset2sim.tasks.assemble.write import read_root
+from asset2sim.output_folder import URDF_NAME
 
 #: The exported files each engine's own importer reads back:
 #: (engine, format, path in the output folder).
@@ -132,7 +133,7 @@ def authored_physics(out_dir: Path) -> HeldPhysics:
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
     out_dir = Path(out_dir)
-    urdf_path = out_dir / "mobility.urdf"
+    urdf_path = out_dir / URDF_NAME
     if not urdf_path.is_file():
         raise FileNotFoundError(f"{urdf_path} does not exist (not an output folder?)")
     urdf = read_urdf(urdf_path)
@@ -249,7 +250,7 @@ def held_by_engines(out_dir: Path, engines: list[str], *, files: bool = True,
     results: list[AuthoredCheck] = []
     for engine in dict.fromkeys(engines):
         try:
-            session = open_session(engine, out_dir / "mobility.urdf", opts)
+            session = open_session(engine, out_dir / URDF_NAME, opts)
         except (EngineUnavailable, KeyError) as exc:
             results.append(AuthoredCheck(engine, "urdf", "skipped", reason=str(exc)))
             continue

@@ -33,6 +33,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.assemble.write import read_root
+from asset2sim.output_folder import URDF_NAME
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS
@@ -68,7 +69,7 @@ def evaluate_engine(
     """
 
     urdf_dir = Path(urdf_dir)
-    urdf = urdf_dir / "mobility.urdf"
+    urdf = urdf_dir / URDF_NAME
     if not urdf.is_file():
         raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
     results = _evaluate_engine(urdf_dir, urdf, engine, initial_state, conventions)

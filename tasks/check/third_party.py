@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from asset2sim.engines.loading import read_urdf
+from asset2sim.output_folder import URDF_NAME
 
-URDF_NAME = "mobility.urdf"
 MJCF_PATH = "mjcf/mobility.xml"
 #: Wall-clock limit for one run of a checker's command line (s).
 COMMAND_TIMEOUT = 300

@@ -36,7 +36,7 @@ from asset2sim.tasks.check.request_match import category_prior, parse_prompt, re
 from asset2sim.tasks.check.task_spec import TaskSpec
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.interpret.part_priors import task_relevant_joints
-from asset2sim.output_folder import OutputError
+from asset2sim.output_folder import OVERLAY_NAME, REPORT_NAME, STATE_NAME, OutputError
 from asset2sim.tasks.assemble.write import read_root
 
 
@@ -129,13 +129,13 @@ def _stated_scale(overlay: dict[str, Any] | None, report: dict[str, Any] | None,
     states one (``overlay.json``, ``report.json``, ``baseline.json``), else the
     geometry against the reference's raw ``mobility.urdf``, else unknown."""
     if overlay is not None and isinstance(overlay.get("scale"), (int, float)):
-        return float(overlay["scale"]), "overlay.json"
+        return float(overlay["scale"]), OVERLAY_NAME
     if report is not None and isinstance(report.get("scale"), (int, float)):
-        return float(report["scale"]), "report.json"
+        return float(report["scale"]), REPORT_NAME
     if baseline is not None and isinstance(baseline.get("scale"), (int, float)):
         return float(baseline["scale"]), "baseline.json"
-    if ref_dir is not None and (ref_dir / "mobility.urdf").is_file():
-        inferred = infer_scale_from_geometry(urdf, ref_dir / "mobility.urdf")
+    if ref_dir is not None and (ref_dir / partnet_mobility.URDF_NAMES[0]).is_file():
+        inferred = infer_scale_from_geometry(urdf, ref_dir / partnet_mobility.URDF_NAMES[0])
         if inferred is not None:
             return inferred, "geometry: largest AABB extent vs the raw mobility.urdf at q = 0"
     return None, "unknown"
@@ -197,15 +197,15 @@ def build_context(
     folder = urdf.parent
     links, joints = parse_urdf(urdf)
     notes: list[str] = []
-    overlay = read_json(folder / "overlay.json")
-    report = read_json(folder / "report.json")
+    overlay = read_json(folder / OVERLAY_NAME)
+    report = read_json(folder / REPORT_NAME)
     baseline = read_json(folder / "baseline.json")
-    st = read_json(folder / "initial_state.json")
+    st = read_json(folder / STATE_NAME)
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     if st is not None:
         raw = st.get("initial_joint_positions", st)
         initial = {k: float(v) for k, v in raw.items() if k in joints}
-        src = "initial_state.json"
+        src = STATE_NAME
     else:
         initial, src = {}, "none: 0 clipped to the limits"
     for n in movable:

@@ -70,6 +70,7 @@ from asset2sim.tasks.check.request_match import (
 )
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import write_report
+from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
 
 __all__ = [
     "EVALUATION_VERSION",
@@ -350,8 +351,8 @@ def evaluate_refined(
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
                    views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task,
-                   shown_urdf=None if shown is None else Path(shown) / "mobility.urdf")
-    return {"evaluation": out_dir / "evaluation.json", "report": out_dir / "report.html"}
+                   shown_urdf=None if shown is None else Path(shown) / URDF_NAME)
+    return {"evaluation": out_dir / EVALUATION_NAME, "report": out_dir / REPORT_HTML_NAME}
 
 
 def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
@@ -365,9 +366,9 @@ def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True
         {"evaluation": path, "report": path (when written)}.
     """
     out_dir = Path(out_dir)
-    paths = {"evaluation": write_json(out_dir / "evaluation.json", _jsonable(ev.model_dump(mode="json")))}
+    paths = {"evaluation": write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json")))}
     if report:
-        paths["report"] = write_report(ev, out_dir / "report.html", views=views)
+        paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views)
     return paths
 
 

@@ -56,9 +56,8 @@ from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OwnedFolder, read_record
+from asset2sim.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OVERLAY_NAME, REPORT_NAME, OwnedFolder, read_record
 
-REPORT_NAME = "report.json"
 #: The flow's record of an asset's job in its run's work folder
 #: (``<run>/.work/<asset id>/job.json``), written before the refine stage.
 JOB_RECORD_NAME = "job.json"
@@ -325,7 +324,7 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
     if report.model_tokens > 0:
         return int(report.model_tokens)
     try:
-        est = read_record(Path(out_dir) / "overlay.json").get("estimator", {})
+        est = read_record(Path(out_dir) / OVERLAY_NAME).get("estimator", {})
         if isinstance(est.get("tokens"), (int, float)) and est["tokens"] > 0:
             return int(est["tokens"])
     except (OSError, ValueError, AttributeError):

@@ -92,9 +92,8 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
 from asset2sim.tasks.assemble.write import read_root
 from asset2sim.urdf import UrdfJoint, UrdfModel
+from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
 
-USD_DIR = "usd"
-URDF_NAME = "mobility.urdf"
 #: Relative tolerance of a value read back from the USD: attributes are 32-bit
 #: floats (IEEE 754 binary32, 24-bit significand: 6e-8 relative rounding), and
 #: degree conversions add one more rounding.
@@ -587,7 +586,7 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
         cmp(f"link {name!r} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
         want = link.inertial.inertia_in_link_axes()
         cmp(f"link {name!r} inertia tensor (kg*m^2)", got.inertia, want, float(np.abs(want).max()))
-    overlay_path = out_dir / "overlay.json"
+    overlay_path = out_dir / OVERLAY_NAME
     if overlay_path.is_file():  # the overlay's own numbers, not only the URDF that carries them
         try:
             overlay = Overlay.model_validate_json(overlay_path.read_text())
