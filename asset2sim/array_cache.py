@@ -52,8 +52,8 @@ import numpy as np
 from asset2sim import atomic
 
 __all__ = [
-    "MAX_ENTRY_BYTES", "CacheWarning", "array_text", "cache_dir", "content_digest", "digest", "guard", "keep_out", "load",
-    "release", "source_digest", "store", "text_array",
+    "MAX_ENTRY_BYTES", "CacheWarning", "array_text", "cache_dir", "content_digest", "digest", "guard", "load",
+    "source_digest", "store", "text_array",
 ]
 
 _OFF = ("off", "none", "0")
@@ -108,15 +108,12 @@ def cache_dir() -> Path | None:
     return path
 
 
-def keep_out(*roots: Path | str | None) -> contextvars.Token:
-    """Keep the cache out of ``roots`` (folders, None skipped; symlinks
-    resolved) in the current context, besides the folders already kept out:
-    :func:`cache_dir` is None while it lies inside one of them. Undo with
-    :func:`release`; :func:`guard` does both.
-
-    Returns:
-        The token to hand to :func:`release`.
-    """
+@contextlib.contextmanager
+def guard(*roots: Path | str | None) -> Iterator[None]:
+    """Within the block the cache stays out of ``roots`` (folders, None
+    skipped; symlinks resolved), besides the folders already kept out in this
+    context: :func:`cache_dir` is None while it lies inside one of them, so
+    nothing is read from or written to it (a :class:`CacheWarning` says so)."""
     resolved = []
     for r in roots:
         if r is not None:
@@ -124,29 +121,11 @@ def keep_out(*roots: Path | str | None) -> contextvars.Token:
                 resolved.append(Path(r).expanduser().resolve())
             except (OSError, RuntimeError):  # a symlink loop: kept out as written
                 resolved.append(Path(os.path.abspath(r)))
-    return _FORBIDDEN.set(_FORBIDDEN.get() + tuple(resolved))
-
-
-def release(token: contextvars.Token) -> None:
-    """Undo the :func:`keep_out` that returned ``token``.
-
-    Raises:
-        ValueError: ``token`` was made in another context.
-        RuntimeError: ``token`` was used already.
-    """
-    _FORBIDDEN.reset(token)
-
-
-@contextlib.contextmanager
-def guard(*roots: Path | str | None) -> Iterator[None]:
-    """Within the block the cache stays out of ``roots`` (:func:`keep_out`):
-    a cache folder inside one of them is refused with a warning and nothing
-    is read from or written to it."""
-    token = keep_out(*roots)
+    token = _FORBIDDEN.set(_FORBIDDEN.get() + tuple(resolved))
     try:
         yield
     finally:
-        release(token)
+        _FORBIDDEN.reset(token)
 
 
 def digest(*parts: bytes | str) -> str:

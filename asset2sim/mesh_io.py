@@ -520,11 +520,13 @@ def _obj_mtl_names(mesh_path: Path) -> list[str]:
     return names
 
 
-def obj_material_files(mesh_path: Path, keep=lambda p: True) -> list[Path]:
+def obj_material_files(mesh_path: Path, keep=lambda p: True, skip_library=lambda name: False) -> list[Path]:
     """Files an OBJ mesh needs besides itself: its MTL libraries and their
     texture maps, as resolved absolute paths, in file order. Files that do not
     exist, or for which ``keep(path)`` is false, are skipped (an MTL skipped
-    is not read). A mesh that is not ``.obj`` or cannot be read has none."""
+    is not read), and so are the libraries whose name (as the ``mtllib``
+    statement writes it) ``skip_library(name)`` refuses. A mesh that is not
+    ``.obj`` or cannot be read has none."""
     deps: list[Path] = []
     if mesh_path.suffix.lower() != ".obj":
         return deps
@@ -533,6 +535,8 @@ def obj_material_files(mesh_path: Path, keep=lambda p: True) -> list[Path]:
     except OSError:
         return deps
     for name in names:
+        if skip_library(name):
+            continue
         mtl = (mesh_path.parent / name).resolve()
         if not (mtl.is_file() and keep(mtl)):
             continue

@@ -314,8 +314,7 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
     first call, which records the failure in that asset's row."""
     from prefect_dask import DaskTaskRunner
 
-    mods = tuple(sorted({m for m in (stages.stage_server_module(j) for j in jobs) if m is not None}))
-    mods = (stages.__name__, *mods) if mods else mods  # the stage functions the forked children run
+    mods = tuple(dict.fromkeys(m for j in jobs for m in stages.stage_server_modules(j)))
     ctx = FlowRunContext.get()
     runner = getattr(ctx, "task_runner", None)
     if not mods or not isinstance(runner, DaskTaskRunner):

@@ -416,10 +416,11 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
                        seconds=time.perf_counter() - t0, worker=_worker_name())
 
 
-def stage_server_module(job: AssetJob) -> str | None:
-    """The module a job's stage server imports before it forks (its refine
-    function's), or None when the job does not run isolated in one."""
-    return job.refine_function.split(":", 1)[0] if job.isolation == "process" else None
+def stage_server_modules(job: AssetJob) -> tuple[str, ...]:
+    """The modules a job's stage server imports before it forks (these stage
+    functions, which its forked children run, and the job's refine
+    function's), or () when the job does not run isolated in one."""
+    return (__name__, job.refine_function.split(":", 1)[0]) if job.isolation == "process" else ()
 
 
 def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
@@ -429,8 +430,8 @@ def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
     item of the list; the others go on. Starts this worker's stage server
     in the background meanwhile when the jobs run isolated in it."""
     for job in jobs[:1]:
-        if (module := stage_server_module(job)) is not None:
-            start_soon((__name__, module))
+        if modules := stage_server_modules(job):
+            start_soon(modules)
     out: list[Prepared | Exception] = []
     for job in jobs:
         try:
@@ -691,9 +692,8 @@ def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], ti
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
     if job.isolation == "process":  # a child forked from this worker's pre-imported stage server
-        preload = (__name__, job.refine_function.split(":", 1)[0])
         rec = asdict(run_forked(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
-                                memory_limit_mb=job.memory_limit_mb, preload=preload))
+                                memory_limit_mb=job.memory_limit_mb, preload=stage_server_modules(job)))
     elif job.isolation == "spawn":  # a fresh interpreter per call (imports paid every time)
         rec = asdict(run_isolated(target, kwargs, timeout=timeout, workdir=Path(job.work_dir) / name,
                                   memory_limit_mb=job.memory_limit_mb))

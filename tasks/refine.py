@@ -159,27 +159,25 @@ def refine_asset(
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
-    kept_out = array_cache.keep_out(asset.source_dir, out_dir, owner.root, reference)  # no cache entry in the input or output
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
-    try:
-        _announce_extract(asset, findings, log)
-        cache = analyze.MeshCache()
-        geometry = _analyze(asset, cache, log)
-        with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
-            ctx.task = task
-            pose_note = _interpret(ctx, log)
-            att, pose_note = _synthesize_and_check(ctx, est, config, work, cache, log, pose_note)
-        _remove_stale_collision(owner, asset, att.overrides)
-        _announce_post_check(att, log)
-        report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
-        atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
-        extra_paths = _extras(work, report, att, log, reference, shown=out_dir) if extras else {}
-        _write_marker(owner, asset.input_hash, chash)
-    except BaseException:
-        owner.abandon()
-        raise
-    finally:
-        array_cache.release(kept_out)
+    with array_cache.guard(asset.source_dir, out_dir, owner.root, reference):  # no cache entry in the input or output
+        try:
+            _announce_extract(asset, findings, log)
+            cache = analyze.MeshCache()
+            geometry = _analyze(asset, cache, log)
+            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
+                ctx.task = task
+                pose_note = _interpret(ctx, log)
+                att, pose_note = _synthesize_and_check(ctx, est, config, work, cache, log, pose_note)
+            _remove_stale_collision(owner, asset, att.overrides)
+            _announce_post_check(att, log)
+            report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
+            atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
+            extra_paths = _extras(work, report, att, log, reference, shown=out_dir) if extras else {}
+            _write_marker(owner, asset.input_hash, chash)
+        except BaseException:
+            owner.abandon()
+            raise
     extra_paths = {k: str(out_dir / Path(v).relative_to(work)) if Path(v).is_relative_to(work) else v for k, v in extra_paths.items()}
     return RefineResult(out_dir=out_dir, report=report, overlay=att.overlay, extras=extra_paths)
 

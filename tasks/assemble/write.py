@@ -235,29 +235,8 @@ def beside_link_target(lexical: Path, real: Path, asset_root: Path) -> list[Path
     validator reports the input's case as ``MESH_MATERIAL_BESIDE_TARGET``).
     Missing files, files outside ``asset_root`` and libraries that do exist
     beside the link (those are the input's own choice) are left out."""
-    if real.suffix.lower() != ".obj":
-        return []
-    try:
-        names = mesh_io.mtl_libraries(atomic.read_regular(real))
-    except OSError:
-        return []
-    out: list[Path] = []
-    for name in names:
-        if os.path.lexists(lexical.parent / name):
-            continue
-        mtl = (real.parent / name).resolve()
-        if not (mtl.is_file() and _inside(mtl, asset_root)):
-            continue
-        out.append(mtl)
-        try:
-            data = atomic.read_regular(mtl)
-        except OSError:
-            continue
-        for tname in mesh_io.mtl_texture_maps(data):
-            tex = (mtl.parent / tname).resolve()
-            if tex.is_file() and _inside(tex, asset_root):
-                out.append(tex)
-    return out
+    return mesh_io.obj_material_files(real, keep=lambda p: _inside(p, asset_root),
+                                      skip_library=lambda name: os.path.lexists(lexical.parent / name))
 
 
 def collision_folder(asset: AssetDescription) -> str:
