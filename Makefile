@@ -9,14 +9,14 @@ RUN ?=
 
 TIMEZONE ?=
 
-.PHONY: setup demo test test-all flow serve failures bench bench-eval bench-catalog clean
+.PHONY: setup demo test test-all test-lower check-install flow serve failures bench bench-eval bench-catalog clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
 
-setup: $(PY)  ## install asset2sim with every extra into .venv
-	$(PY) -m pip install --quiet -e ".[all]"
+setup: $(PY)  ## install asset2sim with every extra into .venv (the exact versions of constraints/ci.txt)
+	$(PY) -m pip install --quiet -e ".[all]" -c constraints/ci.txt
 
 demo: ## refine the built-in demo asset (no data needed)
 	$(VENV)/bin/asset2sim demo --out out/demo
@@ -26,6 +26,16 @@ test: ## the test suite CI runs (slow end-to-end runs excluded)
 
 test-all: ## every test, slow ones included
 	$(PY) -m pytest -q
+
+LOWER_VENV ?= .venv-lower
+test-lower: ## the test suite with the lowest versions pyproject.toml allows (constraints/lower.txt), in .venv-lower
+	$(PYTHON) -m venv $(LOWER_VENV)
+	$(LOWER_VENV)/bin/python -m pip install --quiet --upgrade pip setuptools wheel
+	$(LOWER_VENV)/bin/python -m pip install --quiet -e ".[all]" -c constraints/lower.txt
+	$(LOWER_VENV)/bin/python -m pytest -m "not slow" -q
+
+check-install: ## build the wheel and install it beside ManiSkill, robosuite and torch in fresh environments (long; network)
+	$(PY) benchmarks/check_install.py
 
 flow: ## refine the dataset catalog.yaml names (DATASET=..., WORKERS=...)
 	$(VENV)/bin/asset2sim flow --catalog $(CATALOG) $(if $(DATASET),--dataset $(DATASET)) --workers $(WORKERS)

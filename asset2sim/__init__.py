@@ -1,8 +1,40 @@
 """asset2sim: articulated-object assets in, interaction-ready simulation assets out.
 
-The package imports nothing heavy at import time: simulators other than the
-default, renderers and model clients are imported inside the code that needs
+The public API (:mod:`asset2sim.api`) is reached from here::
+
+    import asset2sim
+    result = asset2sim.refine("path/to/asset", "a slightly open stapler", "out/stapler")
+
+Its names are loaded on first use, so ``import asset2sim`` stays light:
+simulators, renderers and model clients are imported by the code that needs
 them.
 """
 
-__version__ = "0.1.0"
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.2.0"
+
+#: The public names, all defined in :mod:`asset2sim.api`.
+__all__ = [
+    "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides", "SimConventions",
+    "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
+]
+
+
+def __getattr__(name: str):
+    """A public name from :mod:`asset2sim.api`, imported on first use.
+
+    Raises:
+        AttributeError: not a public name (submodules import as usual).
+    """
+    if name in __all__:
+        value = getattr(importlib.import_module("asset2sim.api"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'asset2sim' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -14,7 +14,7 @@ thousand page faults.
 :func:`keep_freed_memory` sets the mmap threshold to 32 MiB (glibc's own
 upper bound for its dynamic threshold, ``DEFAULT_MMAP_THRESHOLD_MAX`` on
 64-bit) and the trim threshold to 256 MiB, so freed arrays are reused from
-the heap. Measured on the stage server (docs/pipeline.md, "Throughput"): a
+the heap. Measured on the stage server (docs/design/pipeline.md, "Throughput"): a
 synthetic 1-drawer cabinet's refine with extras took 2.12 s of CPU with
 Dask's setting, 2.01 s with glibc's defaults and 1.76 s with these (24
 thousand page faults instead of 140-200 thousand). The cost is memory held

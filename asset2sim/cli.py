@@ -15,7 +15,7 @@ One top-level handler (:func:`main`): an expected failure
 code and path and exits with its status; any other exception is an internal
 error: one line naming a log file that holds the traceback, exit status 70.
 ``--debug`` also prints the traceback. Statuses: :mod:`asset2sim.commands._status`
-and README.md ("Exit statuses").
+and docs/guide/outputs.md ("Exit statuses").
 """
 
 from __future__ import annotations
@@ -37,13 +37,14 @@ import traceback
 # The array work of a refine is on small matrices (a few thousand points
 # against a hull's planes), where OpenBLAS's threads add CPU time and no wall
 # time: toilet 102622 refined in 7.6 s either way, with 11.9 s of CPU with
-# threads and 7.3 s without (2 cores, docs/pipeline.md "Throughput").
+# threads and 7.3 s without (2 cores, docs/design/pipeline.md "Throughput").
 for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import asset2sim.commands as commands  # noqa: E402
 from asset2sim import __version__, allocator  # noqa: E402
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, CommandError  # noqa: E402
+from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
 
 
 def command_names() -> list[str]:
@@ -58,10 +59,12 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         prog="asset2sim",
         description="Turn articulated-object assets into interaction-ready simulation assets.",
         epilog="exit statuses: 0 done, 1 invalid input, 2 invalid request/overlay or usage, 3 written but not "
-        "interaction-ready, 4 output location problem, 70 internal error (see README.md)",
+        "interaction-ready, 4 output location problem, 70 internal error (see docs/guide/outputs.md)",
     )
     parser.add_argument("--version", action="version", version=f"asset2sim {__version__}")
     parser.add_argument("--debug", action="store_true", help="print the traceback of an error (also accepted after the command)")
+    parser.add_argument("--verbose", "-v", action="store_true",
+                        help="also show the simulators' start-up messages (PyBullet's build line, SAPIEN's renderer warnings)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in command_names():
         if only is not None and name != only:
@@ -70,6 +73,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of an error")
+        p.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
+                       help="also show the simulators' start-up messages")
         p.set_defaults(_run=module.run)
     return parser
 
@@ -112,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     debug = bool(getattr(args, "debug", False))
+    if getattr(args, "verbose", False):  # inherited by the worker processes a command starts
+        os.environ[STARTUP_MESSAGES] = "1"
     command = getattr(args, "command", None)
     try:
         return int(args._run(args) or 0)

@@ -16,7 +16,7 @@ One loader per format, pure array results (trimesh's ``exchange/`` layout):
   OBJ files (the renderer's per-material split).
 * :func:`mtl_libraries` / :func:`mtl_texture_maps` / :func:`obj_material_files`:
   the files an OBJ needs besides itself (MTL libraries and their texture
-  maps), for copying an asset.
+  maps), for copying an asset; defined in :mod:`asset2sim.mesh_materials`.
 
 Units are the file's (no scaling here); vertex coordinates are float64, face
 indices int64 and 0-based. Nothing here writes a file. OBJ format reference:
@@ -26,14 +26,20 @@ Appendix B1/B2 of the Advanced Visualizer manual.
 
 from __future__ import annotations
 
-import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import file_memo
+from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs besides itself
+    is_texture_statement,
+    mtl_libraries,
+    mtl_texture_maps,
+    obj_material_files,
+    obj_material_uses,
+    read_mtl,
+)
 
 __all__ = [
     "MeshCache",
@@ -46,8 +52,10 @@ __all__ = [
     "mtl_texture_maps",
     "obj_groups",
     "obj_material_files",
+    "obj_material_uses",
     "parse_vertex_lines",
     "read_mesh",
+    "read_mtl",
     "read_obj",
     "scan_obj_text",
 ]
@@ -436,117 +444,3 @@ def parse_vertex_lines(lines: list[str]) -> np.ndarray:
             if len(row) == 3:
                 rows.append(row)
         return np.array(rows, dtype=float).reshape(-1, 3)
-
-
-# ------------------------------------------------------------------ materials
-
-# [ \t] not \s around the keyword: a bare "mtllib" line must not take the next line as its name
-_MTLLIB = re.compile(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t\r]*$", re.M)
-_MAP = re.compile(rb"^[ \t]*(?:map_\w+|bump|disp|decal|refl)[ \t]+(?:-\S+[ \t]+\S+[ \t]+)*(\S.*?)[ \t\r]*$", re.M)
-
-
-def is_texture_statement(key: str) -> bool:
-    """Whether an MTL statement keyword names a texture file (``map_*``,
-    ``bump``, ``disp``, ``decal``, ``refl``; case-insensitive)."""
-    k = key.lower()
-    return k.startswith("map_") or k in ("bump", "disp", "decal", "refl")
-
-
-def mtl_libraries(obj_data: bytes) -> list[str]:
-    """The ``mtllib`` names of OBJ bytes, as written (relative to the OBJ's
-    folder), in file order. Only the lines that contain ``mtllib`` are
-    matched (a statement never spans lines): a line-anchored scan of a whole
-    17 MB mesh took 0.5 s."""
-    out: list[str] = []
-    pos = obj_data.find(b"mtllib")
-    while pos != -1:
-        start = obj_data.rfind(b"\n", 0, pos) + 1
-        end = obj_data.find(b"\n", pos)
-        end = len(obj_data) if end == -1 else end
-        m = _MTLLIB.match(obj_data, start, end)
-        if m is not None:
-            out.append(m.group(1).decode("utf-8", "replace"))
-        pos = obj_data.find(b"mtllib", end)
-    return out
-
-
-def mtl_texture_maps(mtl_data: bytes) -> list[str]:
-    """The texture file names of MTL bytes (``map_*``, ``bump``, ``disp``,
-    ``decal``, ``refl`` statements, options with one argument skipped), as
-    written (relative to the MTL's folder)."""
-    return [t.group(1).decode("utf-8", "replace") for t in _MAP.finditer(mtl_data)]
-
-
-def read_mtl(text: str) -> dict[str, list[str]]:
-    """Materials of MTL text: name (``newmtl``) -> its statement lines, each
-    stripped, in file order; blank lines, comments (``#``) and statements
-    before the first ``newmtl`` dropped. A repeated name continues its list.
-
-    Source: the Wavefront MTL format (Paul Bourke's MTL specification).
-    """
-    mats: dict[str, list[str]] = {}
-    current: list[str] | None = None
-    for raw in text.splitlines():
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        if line.split(maxsplit=1)[0] == "newmtl":
-            current = mats.setdefault(line[len("newmtl"):].strip(), [])
-        elif current is not None:
-            current.append(line)
-    return mats
-
-
-def obj_material_uses(obj_text: str) -> list[str]:
-    """The material names an OBJ's ``usemtl`` statements name, in file order."""
-    return [m.group(1) for m in re.finditer(r"^[ \t]*usemtl[ \t]+(.+?)[ \t\r]*$", obj_text, re.M)]
-
-
-#: ``mtllib`` names of OBJ files read in this process, by path, while the
-#: file is unchanged (:class:`asset2sim.file_memo.FileMemo`): a refine run
-#: asks for the same input meshes' materials at every write (a laptop's 118
-#: part meshes, 17 MB of OBJ text, scanned 5 times took 1.2 s).
-_MTL_NAMES: file_memo.FileMemo[list[str]] = file_memo.FileMemo(list, max_entries=8192)
-
-
-def _obj_mtl_names(mesh_path: Path) -> list[str]:
-    """:func:`mtl_libraries` of the OBJ file ``mesh_path``, read once per
-    file version (:data:`_MTL_NAMES`). Raises OSError when it cannot be read."""
-    names = _MTL_NAMES.get(str(mesh_path))
-    if names is None:
-        files = file_memo.identities([mesh_path])  # before reading
-        names = mtl_libraries(mesh_path.read_bytes())
-        _MTL_NAMES.put(str(mesh_path), files, names)
-    return names
-
-
-def obj_material_files(mesh_path: Path, keep=lambda p: True, skip_library=lambda name: False) -> list[Path]:
-    """Files an OBJ mesh needs besides itself: its MTL libraries and their
-    texture maps, as resolved absolute paths, in file order. Files that do not
-    exist, or for which ``keep(path)`` is false, are skipped (an MTL skipped
-    is not read), and so are the libraries whose name (as the ``mtllib``
-    statement writes it) ``skip_library(name)`` refuses. A mesh that is not
-    ``.obj`` or cannot be read has none."""
-    deps: list[Path] = []
-    if mesh_path.suffix.lower() != ".obj":
-        return deps
-    try:
-        names = _obj_mtl_names(mesh_path)
-    except OSError:
-        return deps
-    for name in names:
-        if skip_library(name):
-            continue
-        mtl = (mesh_path.parent / name).resolve()
-        if not (mtl.is_file() and keep(mtl)):
-            continue
-        deps.append(mtl)
-        try:
-            mdata = mtl.read_bytes()
-        except OSError:
-            continue
-        for tname in mtl_texture_maps(mdata):
-            tex = (mtl.parent / tname).resolve()
-            if tex.is_file() and keep(tex):
-                deps.append(tex)
-    return deps

@@ -37,7 +37,8 @@ decides which files are the product's and keeps that record on disk:
   (a killed run's staging folder is removed by the next run).
 
 Errors are :class:`OutputError` with a ``code`` (``OUTPUT_*``) and the
-``path`` concerned. ``tasks.assemble.write`` re-exports :class:`OutputError`.
+``path`` concerned (:mod:`asset2sim.output_paths`, with the location check);
+``tasks.assemble.write`` re-exports :class:`OutputError`.
 """
 
 from __future__ import annotations
@@ -53,6 +54,17 @@ from pathlib import Path, PurePosixPath
 from typing import Any, Iterable, Iterator
 
 from asset2sim import atomic
+from asset2sim.output_paths import (
+    MARKER_NAME,
+    RECORD_NAME,
+    OutputError,
+    _entries,
+    _prune_empty,
+    _remove_with_temps,
+    _safe_rel,
+    _within,
+    check_location,
+)
 
 #: The files and folders of an output folder (the SPEC's contract and the
 #: extras), named here once; the writers and readers import them.
@@ -65,108 +77,10 @@ REPORT_HTML_NAME = "report.html"
 MJCF_DIR = "mjcf"
 USD_DIR = "usd"
 VIEWS_DIR = "views"
-MARKER_NAME = ".asset2sim-complete.json"
-RECORD_NAME = ".asset2sim-owned.json"
 _BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})
 _MAX_LISTED = 5
 #: A bookkeeping file larger than this (bytes) is not one asset2sim wrote (a marker lists at most a few thousand files).
 MAX_RECORD_BYTES = 64 * 1024 * 1024
-
-#: codes of :class:`OutputError`
-CODES = {
-    "OUTPUT_IS_INPUT": "the output folder is the input folder",
-    "OUTPUT_INSIDE_INPUT": "the output folder lies inside the input folder (also through a symlink)",
-    "OUTPUT_CONTAINS_INPUT": "the output folder contains the input folder",
-    "OUTPUT_NOT_A_FOLDER": "the output path exists and is not a folder",
-    "OUTPUT_NOT_EMPTY": "the output folder holds files asset2sim did not write (use --overwrite)",
-    "OUTPUT_RECORD_NOT_A_FILE": "a bookkeeping file (.asset2sim-complete.json, .asset2sim-owned.json) is not a regular file (FIFO, folder, symlink ...)",
-    "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
-    "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",
-    "OUTPUT_PATH_ESCAPES": "a file would be written outside the output folder through '..' (a name used as a path)",
-    "OUTPUT_NAME_CONFLICT": "two different input files would be copied to one output path, or onto a file of the contract",
-    "OUTPUT_INCOMPLETE": "a file the run wrote is missing at the end (no completion marker written)",
-    "OUTPUT_OUTSIDE_INPUT": "a referenced file lies outside the asset folder",
-}
-
-
-class OutputError(ValueError):
-    """The output folder cannot be used or written as asked.
-
-    ``code``: one of :data:`CODES` (``OUTPUT_INVALID`` when not given);
-    ``path``: the file or folder concerned; ``codes``: ``[code]`` (the
-    attribute ``refine`` copies into its error)."""
-
-    def __init__(self, message: str, code: str = "OUTPUT_INVALID", path: Path | str | None = None):
-        super().__init__(message)
-        self.code = code
-        self.path = None if path is None else Path(path)
-        self.codes = [code]
-
-
-def _within(path: Path, root: Path) -> bool:
-    return path == root or root in path.parents
-
-
-def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:
-    """Resolve ``out_dir`` (symlinks followed) and refuse a location that would
-    mix output and input.
-
-    Args:
-        source_dir: the asset folder (read only).
-        out_dir: the requested output folder (need not exist).
-
-    Returns:
-        The resolved output folder.
-
-    Raises:
-        OutputError: ``OUTPUT_IS_INPUT``, ``OUTPUT_INSIDE_INPUT`` (also when a
-            symlink on the way leads into the input), ``OUTPUT_CONTAINS_INPUT``,
-            ``OUTPUT_NOT_A_FOLDER`` or ``OUTPUT_RECORD_NOT_A_FILE``.
-    """
-    given = Path(os.path.abspath(out_dir))
-    out = given.resolve()
-    src = Path(source_dir).resolve()
-    src_lex = Path(os.path.abspath(source_dir))
-    if out == src or given == src_lex:
-        raise OutputError(f"output folder {given} is the input folder {src}; choose another", "OUTPUT_IS_INPUT", given)
-    if _within(out, src) or _within(given, src_lex):
-        via = "" if _within(given, src_lex) else f" (it resolves to {out} through a symlink)"
-        raise OutputError(f"output folder {given} is inside the input folder {src}{via}; choose another", "OUTPUT_INSIDE_INPUT", given)
-    if _within(src, out) or _within(src_lex, given):
-        raise OutputError(f"output folder {given} contains the input folder {src}; choose a folder beside it", "OUTPUT_CONTAINS_INPUT", given)
-    if os.path.lexists(given) and not out.is_dir():
-        raise OutputError(f"output path {given} exists and is not a folder", "OUTPUT_NOT_A_FOLDER", given)
-    if out.is_dir():
-        check_bookkeeping(out)
-    return out
-
-
-def check_bookkeeping(out_dir: Path | str) -> None:
-    """Refuse an output folder whose completion marker or ownership record
-    exists but is not a regular file (``os.lstat``: nothing is opened, so a
-    FIFO cannot block; a symlink is refused too, asset2sim never writes one).
-
-    Raises:
-        OutputError: ``OUTPUT_RECORD_NOT_A_FILE`` naming the file.
-    """
-    for name in (MARKER_NAME, RECORD_NAME):
-        p = Path(out_dir) / name
-        try:
-            mode = os.lstat(p).st_mode
-        except FileNotFoundError:
-            continue
-        except OSError as exc:
-            raise OutputError(f"{p}: cannot be inspected ({exc.strerror})", "OUTPUT_RECORD_NOT_A_FILE", p) from exc
-        if not stat.S_ISREG(mode):
-            kind = _KINDS.get(stat.S_IFMT(mode), "special file")
-            raise OutputError(
-                f"{p}: a {kind}, not the regular file asset2sim writes there; remove it or choose another output folder",
-                "OUTPUT_RECORD_NOT_A_FILE", p,
-            )
-
-
-_KINDS = {stat.S_IFDIR: "folder", stat.S_IFIFO: "FIFO", stat.S_IFLNK: "symlink", stat.S_IFCHR: "character device",
-          stat.S_IFBLK: "block device", stat.S_IFSOCK: "socket"}
 
 
 def read_record(path: Path | str) -> Any:
@@ -180,17 +94,6 @@ def read_record(path: Path | str) -> Any:
         ValueError: not UTF-8 JSON.
     """
     return json.loads(atomic.read_regular(path, MAX_RECORD_BYTES).decode("utf-8"))
-
-
-def _safe_rel(rel: Any) -> str | None:
-    """A recorded relative path, or None when it is not one we could have
-    written (absolute, empty, with ``..``): such entries are ignored."""
-    if not isinstance(rel, str) or not rel or "\x00" in rel:
-        return None
-    p = PurePosixPath(rel)
-    if p.is_absolute() or any(part in ("..", ".", "") for part in p.parts) or rel.startswith("/"):
-        return None
-    return p.as_posix()
 
 
 def recorded_files(out_dir: Path | str) -> set[str]:
@@ -210,22 +113,6 @@ def recorded_files(out_dir: Path | str) -> set[str]:
             if safe is not None:
                 owned.add(safe)
     return owned
-
-
-def _entries(root: Path) -> list[str]:
-    """Relative POSIX paths of every non-directory entry under ``root``
-    (files, symlinks including symlinks to folders, FIFOs ...); symlinked
-    folders are not entered."""
-    out: list[str] = []
-    for folder, dirs, files in os.walk(root, followlinks=False):
-        base = Path(folder)
-        for name in files:
-            out.append((base / name).relative_to(root).as_posix())
-        for name in list(dirs):
-            if (base / name).is_symlink():
-                out.append((base / name).relative_to(root).as_posix())
-                dirs.remove(name)
-    return sorted(out)
 
 
 def foreign_files(out_dir: Path | str, owned: Iterable[str] | None = None) -> list[str]:
@@ -250,51 +137,6 @@ def foreign_files(out_dir: Path | str, owned: Iterable[str] | None = None) -> li
             continue
         out.append(rel)
     return out
-
-
-def _unlink_inside(root: Path, rel: str) -> bool:
-    """Remove ``root/rel`` only when its real parent folder is exactly
-    ``root/<parent of rel>`` (no symlink on the way that could lead into other
-    data) and it is not a folder. Returns True when something was removed."""
-    target = root / rel
-    try:
-        if target.parent.resolve() != root / PurePosixPath(rel).parent:
-            return False
-        if target.is_dir() and not target.is_symlink():
-            return False
-        target.unlink()
-        return True
-    except FileNotFoundError:
-        return False
-    except OSError:
-        return False
-
-
-def _remove_with_temps(root: Path, rel: str) -> None:
-    _unlink_inside(root, rel)
-    p = PurePosixPath(rel)
-    folder = root / p.parent
-    try:
-        if folder.resolve() != folder or not folder.is_dir():
-            return
-        names = os.listdir(folder)
-    except OSError:
-        return
-    for name in names:
-        if atomic.is_temp_of(name, p.name):
-            _unlink_inside(root, (p.parent / name).as_posix())
-
-
-def _prune_empty(root: Path, rels: Iterable[str]) -> None:
-    """Remove folders left empty by removing ``rels`` (never ``root``)."""
-    folders = sorted({p for rel in rels for p in PurePosixPath(rel).parents if p.as_posix() != "."}, key=lambda p: -len(p.parts))
-    for p in folders:
-        d = root / p
-        try:
-            if d.is_dir() and not d.is_symlink() and not any(d.iterdir()):
-                d.rmdir()
-        except OSError:
-            pass
 
 
 _ACTIVE: dict[Path, "OwnedFolder"] = {}

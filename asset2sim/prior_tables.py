@@ -11,7 +11,7 @@ every cross-reference (materials, labels, synonyms), raising
 :class:`PriorsError` naming the yaml file and key.
 
 Units: SI throughout: lengths m, masses kg, densities kg/m^3. Sources of the
-tables: see each yaml entry and ``docs/priors.md``.
+tables: see each yaml entry and ``docs/design/priors.md``.
 """
 
 from __future__ import annotations
@@ -330,7 +330,7 @@ def load_priors() -> Priors:
     """The packaged prior tables, validated once and cached.
 
     Raises :class:`PriorsError` naming the yaml file and key on bad data.
-    Sources: each yaml entry; summary in ``docs/priors.md``.
+    Sources: each yaml entry; summary in ``docs/design/priors.md``.
     """
     return _build(None)
 

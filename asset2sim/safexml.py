@@ -97,56 +97,47 @@ class SafeXMLError(ValueError):
 
 class XMLTooLarge(SafeXMLError):
     """The document exceeds ``max_bytes``."""
-
     code = "XML_TOO_LARGE"
 
 
 class XMLTokenTooLarge(SafeXMLError):
     """A single token (text, tag or attribute value) exceeds ``max_token_bytes``."""
-
     code = "XML_TOKEN_TOO_LARGE"
 
 
 class XMLTooDeep(SafeXMLError):
     """Element nesting exceeds ``max_depth``."""
-
     code = "XML_TOO_DEEP"
 
 
 class XMLTooManyElements(SafeXMLError):
     """The document has more than ``max_elements`` elements."""
-
     code = "XML_TOO_MANY_ELEMENTS"
 
 
 class XMLDTDForbidden(SafeXMLError):
     """The document has a document type declaration (``<!DOCTYPE``)."""
-
     code = "XML_DTD_FORBIDDEN"
 
 
 class XMLEntityForbidden(SafeXMLError):
     """The document declares an entity (billion laughs, quadratic blow-up)."""
-
     code = "XML_ENTITY_FORBIDDEN"
 
 
 class XMLExternalReferenceForbidden(SafeXMLError):
     """The document refers to an external DTD or an external entity (XXE)."""
-
     code = "XML_EXTERNAL_REFERENCE_FORBIDDEN"
 
 
 class XMLMalformed(SafeXMLError):
     """Not well-formed XML (expat's message and position are in the text)."""
-
     code = "XML_MALFORMED"
 
 
 class XMLNotAFile(SafeXMLError):
     """:func:`read_xml_file` was given something that is not a regular file
     (a directory, FIFO, device, socket) or that cannot be read."""
-
     code = "XML_NOT_A_FILE"
 
 
@@ -220,6 +211,19 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
             argument.
     """
     lim = limits or DEFAULT_LIMITS
+    data = _checked_bytes(data, source, lim)
+    parser = expat.ParserCreate()
+    # Never read external DTD subsets or parameter entities.
+    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    builder = ET.TreeBuilder(element_factory=SourceElement)
+    _install_guards(parser, builder, lim, source)
+    _parse(parser, data, source)
+    return builder.close()  # type: ignore[return-value]
+
+
+def _checked_bytes(data: bytes, source: str, lim: XMLLimits) -> bytes:
+    """``data`` as bytes, after the checks made before expat sees it (type,
+    size, longest token). Raises XMLMalformed, XMLTooLarge, XMLTokenTooLarge."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise XMLMalformed(f"expected bytes, got {type(data).__name__}", source=source)
     data = bytes(data)
@@ -227,16 +231,15 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
         raise XMLTooLarge(f"{len(data)} bytes > limit {lim.max_bytes}", source=source)
     run, at = _longest_run_without_markup(data)
     if run > lim.max_token_bytes:
-        raise XMLTokenTooLarge(
-            f"a token of {run} bytes (starting at byte {at}) > limit {lim.max_token_bytes}",
-            source=source,
-            line=_line_of(data, at),
-        )
+        raise XMLTokenTooLarge(f"a token of {run} bytes (starting at byte {at}) > limit {lim.max_token_bytes}",
+                               source=source, line=_line_of(data, at))
+    return data
 
-    parser = expat.ParserCreate()
-    # Never read external DTD subsets or parameter entities.
-    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
-    builder = ET.TreeBuilder(element_factory=SourceElement)
+
+def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str) -> None:
+    """Set expat handlers on ``parser`` that build the tree into ``builder``
+    and raise :class:`_Abort` at the first DTD, entity, external reference
+    or exceeded limit."""
     state = {"depth": 0, "elements": 0, "text": 0}
 
     def fail(cls: type[SafeXMLError], message: str) -> None:
@@ -296,20 +299,20 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
     parser.EndElementHandler = end
     parser.CharacterDataHandler = chars
     parser.buffer_text = True
+
+
+def _parse(parser, data: bytes, source: str) -> None:
+    """Feed the whole document to ``parser``; a handler's refusal is raised
+    as is, expat's and the decoder's errors as XMLMalformed."""
     try:
         parser.Parse(data, True)
     except _Abort as abort:
         raise abort.error from None
     except expat.ExpatError as exc:
-        raise XMLMalformed(
-            f"{expat.errors.messages[exc.code] if exc.code else exc} (line {exc.lineno}, column {exc.offset})",
-            source=source,
-            line=exc.lineno,
-        ) from None
+        raise XMLMalformed(f"{expat.errors.messages[exc.code] if exc.code else exc} (line {exc.lineno}, column {exc.offset})",
+                           source=source, line=exc.lineno) from None
     except (UnicodeError, ValueError) as exc:  # e.g. an unknown declared encoding
         raise XMLMalformed(str(exc), source=source) from None
-    root = builder.close()
-    return root  # type: ignore[return-value]
 
 
 def read_xml_file(path: Path | str, limits: XMLLimits | None = None) -> bytes:

@@ -17,7 +17,7 @@ then the medians.
 ``--links`` also prints every link's volume, volume / bounding-box volume and
 volume method.
 
-``--accuracy`` prints the numbers quoted in ``docs/mesh_analysis.md``:
+``--accuracy`` prints the numbers quoted in ``docs/design/mesh_analysis.md``:
 analytic shapes (voxel estimate vs exact, over random grid shifts and
 rotations), real links whose collision pieces are watertight (voxel estimate
 vs exact), and the reproducibility of the voxel estimate on every real

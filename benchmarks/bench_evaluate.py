@@ -9,7 +9,7 @@ per asset without the pipeline's start-up).
 
 ``--check`` also recomputes Phi, D_pos, D_ori, the rest-stability and
 oscillation verdicts and the ground penetration with :func:`independent_measure`:
-plain ``pybullet`` calls written from docs/metrics.md sections 2-3, sharing
+plain ``pybullet`` calls written from docs/design/metrics.md sections 2-3, sharing
 no code with ``asset2sim.engines`` or ``asset2sim.tasks.check.metrics``, and prints
 any disagreement (exit code 1 when there is one).
 """
@@ -47,7 +47,7 @@ def _quiet():
 
 
 def independent_measure(urdf: str | Path, initial_state: dict[str, float], springs: dict[str, tuple[float, float]] | None = None) -> dict:
-    """The SPEC's physical metrics from scratch (docs/metrics.md, sections 2-3).
+    """The SPEC's physical metrics from scratch (docs/design/metrics.md, sections 2-3).
 
     Args:
         urdf: URDF path.

@@ -272,14 +272,41 @@ def _own_cache(args, work: Path, name: str) -> None:
 
 
 def _run(args, work: Path) -> int:
-    from asset2sim.flows.stages import prepare_prefect_environment
+    from asset2sim.flows.catalog import load_catalog
 
+    rows = _generated(args, work)
+    catalog = _write_catalog(args, work)
+    # both sides start from an empty on-disk cache of their own (asset2sim.array_cache: CoACD, collision
+    # pieces, link analyses, keyed by content): the generated assets are the same for a seed, so an earlier run's
+    # entries would speed the flow up, and the flow's own entries the in-process side after it
+    _own_cache(args, work, "cache-flow")
+    print(f"load before the flow: {_load()}; on-disk cache {os.environ.get('ASSET2SIM_CACHE') or 'the default'}")
+    summary, cost = _timed_flow(catalog, args)
+    cat = load_catalog(catalog)
+    ft, occupancy = _print_flow(cat, summary, cost, args)
+    _side_by_side(args, work, cat, rows, ft, occupancy)
+    _print_rerun(catalog, args)
+    iso = isolation_cost(work / "iso")
+    print(f"isolation: stage server start-up {iso['server_start_s']:.2f} s once per worker; a call through it "
+          f"{1000 * iso['call_via_server_s']:.1f} ms against {1000 * iso['call_direct_s']:.2f} ms direct")
+    return 0
+
+
+def _generated(args, work: Path) -> list[dict]:
+    """:func:`generate` of ``--n`` assets under ``work/raw``, timed and described."""
     t0 = time.perf_counter()
     rows = generate(work / "raw", args.n, args.seed)
     gen_s = time.perf_counter() - t0
     drawers = [r["drawers"] for r in rows]
     print(f"generated {args.n} assets in {gen_s:.1f} s: drawers {min(drawers)}-{max(drawers)} "
           f"(joints = drawers), volume {min(r['size'] for r in rows)}-{max(r['size'] for r in rows)} units^3")
+    return rows
+
+
+def _write_catalog(args, work: Path) -> Path:
+    """``work/catalog.yaml`` of the generated dataset (tracking off); Prefect's environment set up under ``work``."""
+    from asset2sim.flows.stages import prepare_prefect_environment
+
     config = {
         "version": 1, "default_dataset": "synthetic", "output_root": "refined", "catalog_root": "catalog",
         "datasets": {"synthetic": {"root": "raw", "manifest": "raw/manifest.csv"}},
@@ -290,24 +317,35 @@ def _run(args, work: Path) -> int:
     catalog = work / "catalog.yaml"
     catalog.write_text(json.dumps(config))  # JSON is YAML
     prepare_prefect_environment(work)
-    from asset2sim.flows.catalog import ResultCatalog, load_catalog
-    from asset2sim.flows.refine_flow import run_refine_flow
-    from asset2sim.flows.stages import plan_run
+    return catalog
 
-    # both sides start from an empty on-disk cache of their own (asset2sim.array_cache: CoACD, collision
-    # pieces, link analyses, keyed by content): the generated assets are the same for a seed, so an earlier run's
-    # entries would speed the flow up, and the flow's own entries the in-process side after it
-    _own_cache(args, work, "cache-flow")
-    print(f"load before the flow: {_load()}; on-disk cache {os.environ.get('ASSET2SIM_CACHE') or 'the default'}")
+
+def _cpu_since(before, after) -> float:
+    """CPU seconds (user + system) between two ``resource.getrusage`` readings."""
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def _timed_flow(catalog: Path, args) -> tuple[dict, dict[str, float]]:
+    """The flow's run summary and its cost (s): ``wall``, ``driver_cpu``, ``kids_cpu`` (ended child processes),
+    ``prefect`` (start-up before the flow body)."""
+    from asset2sim.flows.refine_flow import run_refine_flow
+
     ru_self0, ru_kids0 = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     t0, t0_epoch = time.perf_counter(), time.time()
     summary = run_refine_flow(catalog, workers=args.workers)
     wall = time.perf_counter() - t0
     ru_self1, ru_kids1 = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    driver_cpu = (ru_self1.ru_utime - ru_self0.ru_utime) + (ru_self1.ru_stime - ru_self0.ru_stime)
-    kids_cpu = (ru_kids1.ru_utime - ru_kids0.ru_utime) + (ru_kids1.ru_stime - ru_kids0.ru_stime)
-    prefect_s = max(0.0, float(summary["flow_started_epoch"]) - t0_epoch)
-    cat = load_catalog(catalog)
+    cost = {"wall": wall, "driver_cpu": _cpu_since(ru_self0, ru_self1), "kids_cpu": _cpu_since(ru_kids0, ru_kids1),
+            "prefect": max(0.0, float(summary["flow_started_epoch"]) - t0_epoch)}
+    return summary, cost
+
+
+def _print_flow(cat, summary: dict, cost: dict[str, float], args) -> tuple[dict, float]:
+    """Print the flow's throughput, start-up, per-asset worker time and CPU; returns :func:`flow_times` of its rows
+    and the worker occupancy per asset (s)."""
+    from asset2sim.flows.catalog import ResultCatalog
+
+    wall, driver_cpu, kids_cpu = cost["wall"], cost["driver_cpu"], cost["kids_cpu"]
     df = ResultCatalog(cat.catalog_root).read("synthetic", summary["run"])
     worked = int(summary["done"]) + int(summary["failed"])
     assets_s = float(summary["assets_seconds"])
@@ -317,7 +355,7 @@ def _run(args, work: Path) -> int:
     occupancy = assets_s * args.workers / max(1, worked)
     print(f"flow: {summary['assets']} assets ({summary['done']} done, {summary['failed']} failed, "
           f"{summary['skipped']} skipped) in {wall:.1f} s wall; load after: {_load()}")
-    print(f"  start-up: Prefect {prefect_s:.1f} s, Dask {summary['dask_startup_seconds']:.1f} s "
+    print(f"  start-up: Prefect {cost['prefect']:.1f} s, Dask {summary['dask_startup_seconds']:.1f} s "
           f"(+ tear-down {summary['dask_teardown_seconds']:.1f} s), stage servers on every worker "
           f"{summary.get('stage_servers_seconds', 0.0):.1f} s; assets phase {assets_s:.1f} s; "
           f"summary {summary['tracking_seconds']:.1f} s")
@@ -335,51 +373,64 @@ def _run(args, work: Path) -> int:
     fails = df[df["status"] == "failed"]
     if len(fails):
         print("  failed: " + ", ".join(f"{a} ({m})" for a, m in zip(fails["asset_id"], fails["failure_mode"])))
+    return ft, occupancy
 
-    # side by side: the same stages in this process, on a sample spread over joint counts
+
+def _placed(jobs: list, work: Path, tag: str) -> list:
+    """Copies of ``jobs`` writing under ``work/tag``."""
+    import copy
+
+    jobs = [copy.deepcopy(j) for j in jobs]
+    for job in jobs:
+        job.out_dir = str(work / tag / job.asset_id)
+        job.metrics_dir = str(work / tag / "_metrics" / job.asset_id)
+        job.work_dir = str(work / tag / ".work" / job.asset_id)
+    return jobs
+
+
+def _side_by_side(args, work: Path, cat, rows: list[dict], ft: dict, occupancy: float) -> None:
+    """The same stages in this process, alone and ``--workers`` at a time, on a sample of ``--sample`` assets spread
+    over the manifest and over drawer counts (asset i has 1 + i % 6 drawers), against the flow's times ``ft``."""
+    from asset2sim.flows.stages import plan_run
+
     k = max(0, min(args.sample, len(rows)))
-    # spread over the manifest and over drawer counts (asset i has 1 + i % 6 drawers)
     sample_ids = list(dict.fromkeys(rows[min(len(rows) - 1, i * (len(rows) // max(1, k)) + i % 6)]["id"] for i in range(k)))
-    if sample_ids:
-        plan = plan_run(cat, "synthetic", "inprocess", ids=sample_ids, force=True)
-        import copy
+    if not sample_ids:
+        return
+    plan = plan_run(cat, "synthetic", "inprocess", ids=sample_ids, force=True)
+    # warm this process first (the flow's stage servers import everything before their first asset) on an
+    # asset outside the sample: caches keyed by an asset's files must not favour a sampled asset
+    _own_cache(args, work, "cache-inprocess")  # as cold as the flow's was
+    spare = [r["id"] for r in rows if r["id"] not in sample_ids][:1] or sample_ids[:1]
+    _timed_in_process(_placed(plan_run(cat, "synthetic", "inprocess", ids=spare, force=True).jobs, work, "inprocess-warmup")[0])
+    inproc = dict(_timed_in_process(j) for j in _placed(plan.jobs, work, "inprocess"))
+    _own_cache(args, work, "cache-concurrent")  # cold again for the 2-at-a-time side
+    conc = in_process_concurrent(_placed(plan.jobs, work, "inprocess-concurrent"), args.workers)
+    sample_ids = [a for a in sample_ids if a in ft and inproc[a][0] == inproc[a][0] and conc[a][0] == conc[a][0]]
+    flow_s = [ft[a][0] for a in sample_ids]
+    ip = [inproc[a][0] for a in sample_ids]
+    cc = [conc[a][0] for a in sample_ids]
+    f_cpu = [ft[a][1] for a in sample_ids]
+    i_cpu = [inproc[a][1] for a in sample_ids]
+    ratios = [f / i for f, i in zip(flow_s, ip)]
+    print(f"side by side on {len(sample_ids)} assets: in process alone {statistics.mean(ip):.2f} s mean, in process "
+          f"{args.workers} at a time {statistics.mean(cc):.2f} s mean, flow stages {statistics.mean(flow_s):.2f} s mean")
+    print(f"  overhead (flow stages / in process alone) {sum(flow_s) / sum(ip):.2f}x (per asset median "
+          f"{statistics.median(ratios):.2f}x); against in process {args.workers} at a time (the same share of the "
+          f"cores) {sum(flow_s) / sum(cc):.2f}x; worker occupancy per asset {occupancy / statistics.mean(ip):.2f}x "
+          f"of the in-process-alone mean, {occupancy / statistics.mean(cc):.2f}x of the {args.workers}-at-a-time mean "
+          f"(goal <= 1.3x)")
+    print(f"  CPU time of refine + metrics (user + system; what a loaded machine does not inflate): in process "
+          f"{statistics.mean(i_cpu):.2f} s mean, flow (isolated child) {statistics.mean(f_cpu):.2f} s mean: "
+          f"overhead {sum(f_cpu) / sum(i_cpu):.2f}x")
+    for a in sample_ids:
+        print(f"    {a}: in process alone {inproc[a][0]:.2f} s ({inproc[a][1]:.2f} s CPU), {args.workers} at a time "
+              f"{conc[a][0]:.2f} s, flow stages {ft[a][0]:.2f} s ({ft[a][1]:.2f} s CPU)")
 
-        def place(jobs, tag):
-            jobs = [copy.deepcopy(j) for j in jobs]
-            for job in jobs:
-                job.out_dir = str(work / tag / job.asset_id)
-                job.metrics_dir = str(work / tag / "_metrics" / job.asset_id)
-                job.work_dir = str(work / tag / ".work" / job.asset_id)
-            return jobs
 
-        # warm this process first (the flow's stage servers import everything before their first asset) on an
-        # asset outside the sample: caches keyed by an asset's files must not favour a sampled asset
-        _own_cache(args, work, "cache-inprocess")  # as cold as the flow's was
-        spare = [r["id"] for r in rows if r["id"] not in sample_ids][:1] or sample_ids[:1]
-        _timed_in_process(place(plan_run(cat, "synthetic", "inprocess", ids=spare, force=True).jobs, "inprocess-warmup")[0])
-        inproc = dict(_timed_in_process(j) for j in place(plan.jobs, "inprocess"))
-        _own_cache(args, work, "cache-concurrent")  # cold again for the 2-at-a-time side
-        conc = in_process_concurrent(place(plan.jobs, "inprocess-concurrent"), args.workers)
-        sample_ids = [a for a in sample_ids if a in ft and inproc[a][0] == inproc[a][0] and conc[a][0] == conc[a][0]]
-        flow_s = [ft[a][0] for a in sample_ids]
-        ip = [inproc[a][0] for a in sample_ids]
-        cc = [conc[a][0] for a in sample_ids]
-        f_cpu = [ft[a][1] for a in sample_ids]
-        i_cpu = [inproc[a][1] for a in sample_ids]
-        ratios = [f / i for f, i in zip(flow_s, ip)]
-        print(f"side by side on {len(sample_ids)} assets: in process alone {statistics.mean(ip):.2f} s mean, in process "
-              f"{args.workers} at a time {statistics.mean(cc):.2f} s mean, flow stages {statistics.mean(flow_s):.2f} s mean")
-        print(f"  overhead (flow stages / in process alone) {sum(flow_s) / sum(ip):.2f}x (per asset median "
-              f"{statistics.median(ratios):.2f}x); against in process {args.workers} at a time (the same share of the "
-              f"cores) {sum(flow_s) / sum(cc):.2f}x; worker occupancy per asset {occupancy / statistics.mean(ip):.2f}x "
-              f"of the in-process-alone mean, {occupancy / statistics.mean(cc):.2f}x of the {args.workers}-at-a-time mean "
-              f"(goal <= 1.3x)")
-        print(f"  CPU time of refine + metrics (user + system; what a loaded machine does not inflate): in process "
-              f"{statistics.mean(i_cpu):.2f} s mean, flow (isolated child) {statistics.mean(f_cpu):.2f} s mean: "
-              f"overhead {sum(f_cpu) / sum(i_cpu):.2f}x")
-        for a in sample_ids:
-            print(f"    {a}: in process alone {inproc[a][0]:.2f} s ({inproc[a][1]:.2f} s CPU), {args.workers} at a time "
-                  f"{conc[a][0]:.2f} s, flow stages {ft[a][0]:.2f} s ({ft[a][1]:.2f} s CPU)")
+def _print_rerun(catalog: Path, args) -> None:
+    """Run the flow again (every asset skipped) and print its wall time."""
+    from asset2sim.flows.refine_flow import run_refine_flow
 
     t0 = time.perf_counter()
     again = run_refine_flow(catalog, workers=args.workers)
@@ -388,11 +439,6 @@ def _run(args, work: Path) -> int:
           f"decided by the driver before any worker or server started (assets phase {again['assets_seconds']:.1f} s, "
           f"Dask start-up {again['dask_startup_seconds']:.1f} s, Prefect flow run: "
           f"{'yes' if again.get('flow_run_id') else 'none'}; goal <= 10 s)")
-
-    iso = isolation_cost(work / "iso")
-    print(f"isolation: stage server start-up {iso['server_start_s']:.2f} s once per worker; a call through it "
-          f"{1000 * iso['call_via_server_s']:.1f} ms against {1000 * iso['call_direct_s']:.2f} ms direct")
-    return 0
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ exponent and the N at which one asset would reach the flow's per-asset time
 limit (``catalog.yaml`` ``run.time_limit_seconds``) on this machine. The
 chosen cap (``tasks/ingest/findings.py`` ``MAX_MOVABLE_JOINTS``, checked in
 ``tasks/ingest/tree_checks.py``) and the
-measurement are recorded in ``docs/validation.md`` ("Joint cap").
+measurement are recorded in ``docs/design/validation.md`` ("Joint cap").
 
     .venv/bin/python benchmarks/bench_joint_cap.py                       # default sizes
     .venv/bin/python benchmarks/bench_joint_cap.py --shapes chain --joints 5 10 20 --timeout 600

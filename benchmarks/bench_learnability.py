@@ -131,22 +131,7 @@ def print_table(records: list[dict], out=sys.stdout) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--manifest", type=Path, default=DEFAULT_MANIFEST)
-    ap.add_argument("--ids", default="", help="comma-separated ids (default: the first 9 rows, the thesis set)")
-    ap.add_argument("--methods", default=DEFAULT_METHODS)
-    ap.add_argument("--steps", type=int, default=3000, help="environment steps of PPO training per run")
-    ap.add_argument("--seeds", default="0", help="comma-separated training seeds")
-    ap.add_argument("--eval-episodes", type=int, default=5)
-    ap.add_argument("--n-envs", type=int, default=2)
-    ap.add_argument("--n-steps", type=int, default=256, help="PPO rollout length per environment")
-    ap.add_argument("--max-run-seconds", type=float, default=0.0, help="wall-time cap per PPO run (0: none)")
-    ap.add_argument("--start", choices=("task", "asset"), default="task", help="task joint start (learn_env.prepare_task)")
-    ap.add_argument("--out", type=Path, default=ROOT / "out" / "bench_learnability")
-    ap.add_argument("--reuse", action="store_true", help="keep assets already made under --out")
-    ap.add_argument("--no-ppo", action="store_true", help="only the scripted and passive references")
-    ap.add_argument("--table", default="", help="only print the table of results.jsonl file(s), comma-separated")
-    args = ap.parse_args(argv)
+    args = _arguments().parse_args(argv)
     if args.table:
         recs = [json.loads(x) for f in args.table.split(",") for x in Path(f).read_text().splitlines() if x.strip()]
         print_table(recs)
@@ -154,24 +139,13 @@ def main(argv: list[str] | None = None) -> int:
 
     os.environ.setdefault("MPLBACKEND", "Agg")
     # third-party and project imports after argument parsing: --help and --table need none of them
-    import numpy as np
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from asset2sim.tasks.benchmark.baselines import BaselineError, run_method
-    from asset2sim.tasks.evaluation.learn_env import LearnConfig, TaskEnv, prepare_task, run_episode
-    from asset2sim.tasks.ingest.partnet_mobility import read_manifest_rows
+    from asset2sim.tasks.evaluation.learn_env import LearnConfig
 
     torch.set_num_threads(1)
-    reading = read_manifest_rows(args.manifest)
-    rows = sorted(reading.rows, key=lambda r: r.line or 0)
-    if args.ids:
-        want = [x.strip() for x in args.ids.split(",") if x.strip()]
-        rows = [r for r in rows if r.id in want]
-    else:
-        rows = rows[:9]
+    rows = _manifest_rows(args)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     args.out.mkdir(parents=True, exist_ok=True)
@@ -189,6 +163,51 @@ def main(argv: list[str] | None = None) -> int:
             f.write(json.dumps(rec) + "\n")
 
     # 1. every method's asset first (the pipeline's code is imported once, before any training)
+    assets = _make_assets(rows, methods, args)
+    # 2-4. per task, per method: scripted reference, then PPO per seed
+    for row in rows:
+        for m in methods:
+            _learn_task(row, m, assets[(row.id, m)], args, cfg, seeds, emit, PPO)
+    print(f"wall time {(time.perf_counter() - t_all) / 60:.1f} min; results in {results}", flush=True)
+    print_table(records)
+    return 0
+
+
+def _arguments() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--manifest", type=Path, default=DEFAULT_MANIFEST)
+    ap.add_argument("--ids", default="", help="comma-separated ids (default: the first 9 rows, the thesis set)")
+    ap.add_argument("--methods", default=DEFAULT_METHODS)
+    ap.add_argument("--steps", type=int, default=3000, help="environment steps of PPO training per run")
+    ap.add_argument("--seeds", default="0", help="comma-separated training seeds")
+    ap.add_argument("--eval-episodes", type=int, default=5)
+    ap.add_argument("--n-envs", type=int, default=2)
+    ap.add_argument("--n-steps", type=int, default=256, help="PPO rollout length per environment")
+    ap.add_argument("--max-run-seconds", type=float, default=0.0, help="wall-time cap per PPO run (0: none)")
+    ap.add_argument("--start", choices=("task", "asset"), default="task", help="task joint start (learn_env.prepare_task)")
+    ap.add_argument("--out", type=Path, default=ROOT / "out" / "bench_learnability")
+    ap.add_argument("--reuse", action="store_true", help="keep assets already made under --out")
+    ap.add_argument("--no-ppo", action="store_true", help="only the scripted and passive references")
+    ap.add_argument("--table", default="", help="only print the table of results.jsonl file(s), comma-separated")
+    return ap
+
+
+def _manifest_rows(args) -> list:
+    """The manifest rows to learn on: ``--ids``, else the first 9 in file order (the thesis set)."""
+    from asset2sim.tasks.ingest.partnet_mobility import read_manifest_rows
+
+    reading = read_manifest_rows(args.manifest)
+    rows = sorted(reading.rows, key=lambda r: r.line or 0)
+    if args.ids:
+        want = [x.strip() for x in args.ids.split(",") if x.strip()]
+        return [r for r in rows if r.id in want]
+    return rows[:9]
+
+
+def _make_assets(rows: list, methods: list[str], args) -> dict[tuple[str, str], Path | str]:
+    """Each method's asset of each row under ``--out``: (id, method) -> its folder, or the error that left it n/a."""
+    from asset2sim.tasks.benchmark.baselines import BaselineError, run_method
+
     assets: dict[tuple[str, str], Path | str] = {}
     for row in rows:
         for m in methods:
@@ -204,6 +223,74 @@ def main(argv: list[str] | None = None) -> int:
             except (BaselineError, KeyError) as exc:
                 assets[(row.id, m)] = f"{type(exc).__name__}: {exc}"
                 print(f"  asset {m:>9} {row.id}: n/a ({exc})", flush=True)
+    return assets
+
+
+def _learn_task(row, m: str, a: Path | str, args, cfg, seeds: list[int], emit, ppo) -> None:
+    """The row's task on method ``m``'s asset ``a`` (its folder, or why it is n/a): the scripted and passive
+    references, then ``ppo`` (stable-baselines3's ``PPO``) per seed; each record handed to ``emit``."""
+    from asset2sim.tasks.evaluation.learn_task import prepare_task
+
+    base = {"id": row.id, "category": row.category, "task": row.task, "method": m}
+    if isinstance(a, str):
+        emit(dict(base, kind="asset", error=a))
+        return
+    try:
+        task = prepare_task(a, row.task, reference=row.folder, category=row.category or None, start=args.start)
+    except Exception as exc:
+        emit(dict(base, kind="task", error=f"{type(exc).__name__}: {exc}"))
+        print(f"  {m:>9} {row.id}: task n/a ({exc})", flush=True)
+        return
+    base.update(joint=task.joint, action=task.action, start_fraction=task.start_fraction,
+                target_fraction=task.target_fraction)
+    _references(task, cfg, args, base, emit)
+    for seed in ([] if args.no_ppo else seeds):
+        _train_ppo(ppo, task, cfg, args, seed, base, emit)
+
+
+def _success_rate(outs: list[dict]) -> float:
+    """Successful episodes / episodes."""
+    return sum(bool(o["success"]) for o in outs) / len(outs)
+
+
+def _references(task, cfg, args, base: dict, emit) -> None:
+    """The scripted reference (success rate: the best of :data:`SCRIPTED_SPEEDS`) and the passive one (the gripper
+    holding still), ``--eval-episodes`` episodes each (reset seeds 10000 + i)."""
+    import numpy as np
+
+    from asset2sim.tasks.evaluation.learn_env import TaskEnv, run_episode
+
+    m, rid = base["method"], base["id"]
+    t0 = time.perf_counter()
+    env = TaskEnv(task, cfg)
+    try:
+        by_speed: dict[str, float] = {}
+        fails: list[str] = []
+        peak = 0.0
+        for sp in SCRIPTED_SPEEDS:
+            outs = [run_episode(env, lambda o: env.scripted_action(sp), seed=10000 + i) for i in range(args.eval_episodes)]
+            by_speed[str(sp)] = _success_rate(outs)
+            fails += [f"{sp}: {o['failure']}" for o in outs if not o["success"]]
+            peak = max([peak] + [o["peak_force_n"] for o in outs])
+        rate = max(by_speed.values())
+        emit(dict(base, kind="scripted", success_rate=rate, by_speed=by_speed,
+                  eval_episodes=args.eval_episodes * len(SCRIPTED_SPEEDS), engine_steps=env.sim_steps,
+                  failures=fails, peak_force_n=peak, seconds=time.perf_counter() - t0, grasp_rule=env.grasp_rule))
+        print(f"  {m:>9} {rid} scripted: {by_speed} ({time.perf_counter() - t0:.1f} s)", flush=True)
+        outs = [run_episode(env, lambda o: np.zeros(4), seed=10000 + i) for i in range(args.eval_episodes)]
+        emit(dict(base, kind="passive", success_rate=_success_rate(outs),
+                  eval_episodes=len(outs), failures=[o["failure"] for o in outs if not o["success"]],
+                  final_fractions=[o["fraction"] for o in outs]))
+    except Exception as exc:
+        emit(dict(base, kind="scripted", error=f"{type(exc).__name__}: {exc}"))
+    finally:
+        env.close()
+
+
+def _wall_limit(seconds: float):
+    """A stable-baselines3 callback that stops training after ``seconds`` s of wall time (0: never); ``stopped``
+    tells whether it did."""
+    from stable_baselines3.common.callbacks import BaseCallback
 
     class _WallLimit(BaseCallback):
         def __init__(self, seconds: float) -> None:
@@ -216,79 +303,46 @@ def main(argv: list[str] | None = None) -> int:
                 return False
             return True
 
-    # 2-4. per task, per method: scripted reference, then PPO per seed
-    for row in rows:
-        for m in methods:
-            base = {"id": row.id, "category": row.category, "task": row.task, "method": m}
-            a = assets[(row.id, m)]
-            if isinstance(a, str):
-                emit(dict(base, kind="asset", error=a))
-                continue
-            try:
-                task = prepare_task(a, row.task, reference=row.folder, category=row.category or None, start=args.start)
-            except Exception as exc:
-                emit(dict(base, kind="task", error=f"{type(exc).__name__}: {exc}"))
-                print(f"  {m:>9} {row.id}: task n/a ({exc})", flush=True)
-                continue
-            base.update(joint=task.joint, action=task.action, start_fraction=task.start_fraction,
-                        target_fraction=task.target_fraction)
-            t0 = time.perf_counter()
-            env = TaskEnv(task, cfg)
-            try:
-                by_speed: dict[str, float] = {}
-                fails: list[str] = []
-                peak = 0.0
-                for sp in SCRIPTED_SPEEDS:
-                    outs = [run_episode(env, lambda o: env.scripted_action(sp), seed=10000 + i) for i in range(args.eval_episodes)]
-                    by_speed[str(sp)] = sum(bool(o["success"]) for o in outs) / len(outs)
-                    fails += [f"{sp}: {o['failure']}" for o in outs if not o["success"]]
-                    peak = max([peak] + [o["peak_force_n"] for o in outs])
-                rate = max(by_speed.values())
-                emit(dict(base, kind="scripted", success_rate=rate, by_speed=by_speed,
-                          eval_episodes=args.eval_episodes * len(SCRIPTED_SPEEDS), engine_steps=env.sim_steps,
-                          failures=fails, peak_force_n=peak, seconds=time.perf_counter() - t0, grasp_rule=env.grasp_rule))
-                print(f"  {m:>9} {row.id} scripted: {by_speed} ({time.perf_counter() - t0:.1f} s)", flush=True)
-                outs = [run_episode(env, lambda o: np.zeros(4), seed=10000 + i) for i in range(args.eval_episodes)]
-                emit(dict(base, kind="passive", success_rate=sum(bool(o["success"]) for o in outs) / len(outs),
-                          eval_episodes=len(outs), failures=[o["failure"] for o in outs if not o["success"]],
-                          final_fractions=[o["fraction"] for o in outs]))
-            except Exception as exc:
-                emit(dict(base, kind="scripted", error=f"{type(exc).__name__}: {exc}"))
-            finally:
-                env.close()
-            for seed in ([] if args.no_ppo else seeds):
-                t0 = time.perf_counter()
-                envs = [TaskEnv(task, cfg) for _ in range(args.n_envs)]
-                venv = DummyVecEnv([(lambda e=e: e) for e in envs])
-                venv.seed(seed)
-                eval_env = TaskEnv(task, cfg)
-                try:
-                    model = PPO("MlpPolicy", venv, n_steps=args.n_steps, batch_size=64, n_epochs=10, learning_rate=3e-4,
-                                gamma=0.99, gae_lambda=0.95, ent_coef=0.0, seed=seed, device="cpu", verbose=0,
-                                policy_kwargs={"net_arch": [64, 64], "log_std_init": -1.0})
-                    cap = _WallLimit(args.max_run_seconds)
-                    model.learn(total_timesteps=args.steps, callback=cap)
-                    t_train = time.perf_counter() - t0
-                    outs = [run_episode(eval_env, lambda o: model.predict(o, deterministic=True)[0], seed=10000 + i)
-                            for i in range(args.eval_episodes)]
-                    rate = sum(bool(o["success"]) for o in outs) / len(outs)
-                    emit(dict(base, kind="ppo", seed=seed, success_rate=rate, eval_episodes=len(outs),
-                              env_steps=int(model.num_timesteps), engine_steps=int(sum(e.sim_steps for e in envs)),
-                              train_episodes=int(sum(e.episodes for e in envs)), train_seconds=t_train,
-                              stopped_early=cap.stopped, eval_seconds=time.perf_counter() - t0 - t_train,
-                              failures=[o["failure"] for o in outs if not o["success"]],
-                              final_fractions=[o["fraction"] for o in outs]))
-                    print(f"  {m:>9} {row.id} PPO seed {seed}: {rate:.2f} after {model.num_timesteps} steps "
-                          f"({t_train:.0f} s train{', stopped by the wall-time cap' if cap.stopped else ''})", flush=True)
-                except Exception as exc:
-                    emit(dict(base, kind="ppo", seed=seed, error=f"{type(exc).__name__}: {exc}"))
-                    print(f"  {m:>9} {row.id} PPO seed {seed}: error {exc}", flush=True)
-                finally:
-                    venv.close()
-                    eval_env.close()
-    print(f"wall time {(time.perf_counter() - t_all) / 60:.1f} min; results in {results}", flush=True)
-    print_table(records)
-    return 0
+    return _WallLimit(seconds)
+
+
+def _train_ppo(ppo, task, cfg, args, seed: int, base: dict, emit) -> None:
+    """PPO trained ``--steps`` environment steps (``--max-run-seconds`` cap) on ``--n-envs`` environments, then its
+    deterministic policy run ``--eval-episodes`` episodes (reset seeds 10000 + i)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from asset2sim.tasks.evaluation.learn_env import TaskEnv, run_episode
+
+    m, rid = base["method"], base["id"]
+    t0 = time.perf_counter()
+    envs = [TaskEnv(task, cfg) for _ in range(args.n_envs)]
+    venv = DummyVecEnv([(lambda e=e: e) for e in envs])
+    venv.seed(seed)
+    eval_env = TaskEnv(task, cfg)
+    try:
+        model = ppo("MlpPolicy", venv, n_steps=args.n_steps, batch_size=64, n_epochs=10, learning_rate=3e-4,
+                    gamma=0.99, gae_lambda=0.95, ent_coef=0.0, seed=seed, device="cpu", verbose=0,
+                    policy_kwargs={"net_arch": [64, 64], "log_std_init": -1.0})
+        cap = _wall_limit(args.max_run_seconds)
+        model.learn(total_timesteps=args.steps, callback=cap)
+        t_train = time.perf_counter() - t0
+        outs = [run_episode(eval_env, lambda o: model.predict(o, deterministic=True)[0], seed=10000 + i)
+                for i in range(args.eval_episodes)]
+        rate = _success_rate(outs)
+        emit(dict(base, kind="ppo", seed=seed, success_rate=rate, eval_episodes=len(outs),
+                  env_steps=int(model.num_timesteps), engine_steps=int(sum(e.sim_steps for e in envs)),
+                  train_episodes=int(sum(e.episodes for e in envs)), train_seconds=t_train,
+                  stopped_early=cap.stopped, eval_seconds=time.perf_counter() - t0 - t_train,
+                  failures=[o["failure"] for o in outs if not o["success"]],
+                  final_fractions=[o["fraction"] for o in outs]))
+        print(f"  {m:>9} {rid} PPO seed {seed}: {rate:.2f} after {model.num_timesteps} steps "
+              f"({t_train:.0f} s train{', stopped by the wall-time cap' if cap.stopped else ''})", flush=True)
+    except Exception as exc:
+        emit(dict(base, kind="ppo", seed=seed, error=f"{type(exc).__name__}: {exc}"))
+        print(f"  {m:>9} {rid} PPO seed {seed}: error {exc}", flush=True)
+    finally:
+        venv.close()
+        eval_env.close()
 
 
 if __name__ == "__main__":

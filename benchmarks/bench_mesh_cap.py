@@ -14,7 +14,7 @@ budget.
     .venv/bin/python benchmarks/bench_mesh_cap.py --faces 20000 80000 --no-extras
 
 Keep N <= ~200k on a shared 2-core machine (about a minute per point);
-extrapolate beyond. The numbers are recorded in ``docs/validation.md``
+extrapolate beyond. The numbers are recorded in ``docs/design/validation.md``
 ("Face cap").
 """
 

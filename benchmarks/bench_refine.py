@@ -58,22 +58,40 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{judge_floor(args.judge):.4f}")
         return 0
     if args.process_only:
-        rows = _rows(args)
-        print(f"load average before: {_load()}", flush=True)
-        results: list[dict] = []
-        _whole_process(rows, args, results)
-        print(f"load average after: {_load()}", flush=True)
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "summary_process.json").write_text(json.dumps(results, indent=1, default=float))
-        return 0 if all(e.get("process_exit") in (0, 3) for e in results) else 1
-
-    from asset2sim.schemas.request import BAND_INTERVAL
-    from asset2sim.tasks.refine import RefineError, refine_asset
-    from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
-
+        return _process_only(args)
     rows = _rows(args)
+    results = _refine_in_process(rows, args)
+    ok = [e for e in results if "error" not in e]
+    print()
+    if ok:
+        _print_totals(ok)
+    print(f"errors: {len(results) - len(ok)}")
+    if args.process:
+        _whole_process(rows, args, results)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "summary.json").write_text(json.dumps(results, indent=1, default=float))
+    return 0 if len(ok) == len(results) else 1
+
+
+def _process_only(args) -> int:
+    """``--process-only``: the whole-process timing alone, written to ``summary_process.json``; 1 when a process
+    exited with another status than 0 or 3."""
+    rows = _rows(args)
+    print(f"load average before: {_load()}", flush=True)
+    results: list[dict] = []
+    _whole_process(rows, args, results)
+    print(f"load average after: {_load()}", flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "summary_process.json").write_text(json.dumps(results, indent=1, default=float))
+    return 0 if all(e.get("process_exit") in (0, 3) for e in results) else 1
+
+
+def _refine_in_process(rows: list[dict], args) -> list[dict]:
+    """Refine each row in this process, printing one line per object; returns its entry (or its error)."""
+    from asset2sim.tasks.refine import RefineError, refine_asset
+
     results = []
-    for i, row in enumerate(rows):
+    for row in rows:
         src = args.manifest.parent / row["id"]
         t0 = time.perf_counter()
         try:
@@ -82,72 +100,81 @@ def main(argv: list[str] | None = None) -> int:
             results.append({"id": row["id"], "error": f"{exc.failure_mode}: {exc}", "seconds": time.perf_counter() - t0})
             print(f"{row['id']:>7} ERROR {exc.failure_mode}: {exc}", flush=True)
             continue
-        wall = time.perf_counter() - t0
-        r = res.report
-        ov = res.overlay
-        ref = {}
-        ref_path = src / "reference_gensim2.json"
-        if ref_path.is_file():
-            ref = json.loads(ref_path.read_text() or "{}")
-        s_ref = ref.get("scale") or (float(row["reference_scale"]) if row.get("reference_scale") else None)
-        landed = {}
-        for joint, band in r.requested_bands.items():
-            lo, hi = BAND_INTERVAL[band]
-            f = r.opening_fractions.get(joint)
-            landed[joint] = {"band": band, "fraction": f, "in_band": f is not None and lo - 1e-9 <= f <= hi + 1e-9}
-        tri_ok = all(inertia_problems(lp.inertia.matrix()) is None for lp in ov.links.values())
-        pen = r.metric("penetration").value
-        stab = r.metric("rest_stability")
-        osc = r.metric("oscillation")
-        entry = {
-            "id": row["id"],
-            "category": r.category,
-            "scale": r.scale,
-            "scale_ref": s_ref,
-            "scale_dev": abs(r.scale - s_ref) / s_ref if s_ref else None,
-            "mass": r.total_mass,
-            "penetration_mm": pen,
-            "stable": stab.passed,
-            "D_pos": stab.details.get("D_pos_m"),
-            "D_ori": stab.details.get("D_ori_rad"),
-            "oscillation_pass": osc.passed,
-            "triangle_ok": tri_ok,
-            "failure_mode": r.failure_mode,
-            "escalation_rounds": len(r.escalation) - 1,
-            "state": r.initial_joint_positions,
-            "closed": r.closed_positions,
-            "bands": landed,
-            "stage_seconds": r.stage_seconds,
-            "seconds": wall,
-        }
+        entry = _entry(row, src, res, time.perf_counter() - t0)
         results.append(entry)
-        print(
-            f"{row['id']:>7} {r.category:<16} s={r.scale:.4g} (ref {s_ref}) m={r.total_mass:.3g} kg "
-            f"pen={pen:.2f} mm stab={'P' if stab.passed else 'F'} osc={'P' if osc.passed else 'F'} "
-            f"esc={len(r.escalation) - 1} {wall:.2f}s  "
-            + " ".join(f"{k}:{v['band']}@{v['fraction']:.2f}{'' if v['in_band'] else '!'}" for k, v in landed.items())
-            + "  | " + " ".join(f"{k}={v:.2f}" for k, v in r.stage_seconds.items()),
-            flush=True,
-        )
-    ok = [e for e in results if "error" not in e]
-    print()
-    if ok:
-        stages = sorted({k for e in ok for k in e["stage_seconds"]})
-        print("stage totals (s): " + ", ".join(f"{k} {sum(e['stage_seconds'].get(k, 0) for e in ok):.2f}" for k in stages))
-        print(f"median refine time per object: {statistics.median(e['seconds'] for e in ok):.2f} s over {len(ok)} objects")
-        devs = [e["scale_dev"] for e in ok if e["scale_dev"] is not None]
-        if devs:
-            print(f"median scale deviation vs GenSim2: {100 * statistics.median(devs):.1f}% (n={len(devs)})")
-        print(f"rest stability {sum(bool(e['stable']) for e in ok)}/{len(ok)}, oscillation {sum(bool(e['oscillation_pass']) for e in ok)}/{len(ok)}, "
-              f"max penetration {max(e['penetration_mm'] for e in ok):.2f} mm, triangle inequality {sum(e['triangle_ok'] for e in ok)}/{len(ok)}")
-        bad = [(e["id"], j) for e in ok for j, v in e["bands"].items() if not v["in_band"]]
-        print(f"joint states outside their band: {len(bad)} {bad}")
-    print(f"errors: {len(results) - len(ok)}")
-    if args.process:
-        _whole_process(rows, args, results)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "summary.json").write_text(json.dumps(results, indent=1, default=float))
-    return 0 if len(ok) == len(results) else 1
+        _print_entry(entry)
+    return results
+
+
+def _entry(row: dict, src: Path, res, wall: float) -> dict:
+    """One object's figures from its refine result: scale against the reference (GenSim2's, else the manifest's),
+    mass (kg), penetration (mm), rest stability and oscillation, inertia triangle inequality, joint states against
+    their requested bands, stage times, ``wall`` (s)."""
+    from asset2sim.schemas.request import BAND_INTERVAL
+    from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
+
+    r = res.report
+    ov = res.overlay
+    ref = {}
+    ref_path = src / "reference_gensim2.json"
+    if ref_path.is_file():
+        ref = json.loads(ref_path.read_text() or "{}")
+    s_ref = ref.get("scale") or (float(row["reference_scale"]) if row.get("reference_scale") else None)
+    landed = {}
+    for joint, band in r.requested_bands.items():
+        lo, hi = BAND_INTERVAL[band]
+        f = r.opening_fractions.get(joint)
+        landed[joint] = {"band": band, "fraction": f, "in_band": f is not None and lo - 1e-9 <= f <= hi + 1e-9}
+    tri_ok = all(inertia_problems(lp.inertia.matrix()) is None for lp in ov.links.values())
+    stab = r.metric("rest_stability")
+    return {
+        "id": row["id"],
+        "category": r.category,
+        "scale": r.scale,
+        "scale_ref": s_ref,
+        "scale_dev": abs(r.scale - s_ref) / s_ref if s_ref else None,
+        "mass": r.total_mass,
+        "penetration_mm": r.metric("penetration").value,
+        "stable": stab.passed,
+        "D_pos": stab.details.get("D_pos_m"),
+        "D_ori": stab.details.get("D_ori_rad"),
+        "oscillation_pass": r.metric("oscillation").passed,
+        "triangle_ok": tri_ok,
+        "failure_mode": r.failure_mode,
+        "escalation_rounds": len(r.escalation) - 1,
+        "state": r.initial_joint_positions,
+        "closed": r.closed_positions,
+        "bands": landed,
+        "stage_seconds": r.stage_seconds,
+        "seconds": wall,
+    }
+
+
+def _print_entry(e: dict) -> None:
+    """One object's line: category, scale (reference), mass, penetration, stability, oscillation, escalation rounds,
+    wall time, joint states in their bands (``!`` outside) and stage times."""
+    print(
+        f"{e['id']:>7} {e['category']:<16} s={e['scale']:.4g} (ref {e['scale_ref']}) m={e['mass']:.3g} kg "
+        f"pen={e['penetration_mm']:.2f} mm stab={'P' if e['stable'] else 'F'} osc={'P' if e['oscillation_pass'] else 'F'} "
+        f"esc={e['escalation_rounds']} {e['seconds']:.2f}s  "
+        + " ".join(f"{k}:{v['band']}@{v['fraction']:.2f}{'' if v['in_band'] else '!'}" for k, v in e["bands"].items())
+        + "  | " + " ".join(f"{k}={v:.2f}" for k, v in e["stage_seconds"].items()),
+        flush=True,
+    )
+
+
+def _print_totals(ok: list[dict]) -> None:
+    """Stage totals, the median refine time and scale deviation, the check counts over the objects refined."""
+    stages = sorted({k for e in ok for k in e["stage_seconds"]})
+    print("stage totals (s): " + ", ".join(f"{k} {sum(e['stage_seconds'].get(k, 0) for e in ok):.2f}" for k in stages))
+    print(f"median refine time per object: {statistics.median(e['seconds'] for e in ok):.2f} s over {len(ok)} objects")
+    devs = [e["scale_dev"] for e in ok if e["scale_dev"] is not None]
+    if devs:
+        print(f"median scale deviation vs GenSim2: {100 * statistics.median(devs):.1f}% (n={len(devs)})")
+    print(f"rest stability {sum(bool(e['stable']) for e in ok)}/{len(ok)}, oscillation {sum(bool(e['oscillation_pass']) for e in ok)}/{len(ok)}, "
+          f"max penetration {max(e['penetration_mm'] for e in ok):.2f} mm, triangle inequality {sum(e['triangle_ok'] for e in ok)}/{len(ok)}")
+    bad = [(e["id"], j) for e in ok for j, v in e["bands"].items() if not v["in_band"]]
+    print(f"joint states outside their band: {len(bad)} {bad}")
 
 
 def judge_floor(urdf: Path, seconds: float = 3.0, timestep: float = 1.0 / 240.0) -> float:
@@ -187,10 +214,6 @@ def _rows(args) -> list[dict]:
 def _load() -> str:
     """The 1/5/15-minute load averages of this machine."""
     return " ".join(f"{x:.2f}" for x in os.getloadavg()) + f" ({os.cpu_count()} cores)"
-
-
-CORE_STAGES = ("extract", "analyze", "closed_state", "synthesize", "validate", "write", "shut_repair", "limits", "refine_state",
-               "post_check")
 
 
 def _whole_process(rows: list[dict], args, results: list[dict]) -> None:

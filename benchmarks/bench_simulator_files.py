@@ -89,95 +89,126 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--convert", action="store_true")
     args = ap.parse_args(argv)
 
-    import mujoco
-
-    from asset2sim.engines.loading import collision_pieces, read_initial_state, read_urdf
-    from asset2sim.engines.mjcf import mujoco_messages, urdf_to_mjcf
-    from asset2sim.tasks.check.parent_child import parent_child_penetration
-    from asset2sim.tasks.assemble.collision_geometry import Piece, containment_depths, parent_child_depths
-    from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
-    from asset2sim.tasks.assemble.write import read_root
-
     folders = [args.root] if (args.root / "mobility.urdf").is_file() else sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
     if args.ids:
         keep = set(args.ids.split(","))
         folders = [f for f in folders if f.name in keep]
     rows = []
     for f in folders:
-        urdf_path = f / "mobility.urdf"
-        row = {"id": f.name}
-        try:
-            with mujoco_messages():
-                mujoco.MjModel.from_xml_path(str(urdf_path))
-            row["urdf_mujoco"] = "ok"
-        except Exception as exc:
-            row["urdf_mujoco"] = str(exc).splitlines()[0][:120]
-        model = read_urdf(urdf_path)
-        state = read_initial_state(f)
-        pieces, notes = collision_pieces(model)
-        row["max_pieces_per_link"] = max((len(v) for v in pieces.values()), default=0)
-        row["flat_groups"] = sum("is flat" in n for n in notes)
-        # collision-only files (generated pieces) must be closed and wound outward
-        visual_files = {v.path.resolve() for ln in model.links.values() for v in ln.visuals if v.kind == "mesh" and v.path}
-        inside_out = sum(
-            1 for ln in model.links.values() for c in ln.collisions
-            if c.kind == "mesh" and c.path is not None and c.path.resolve() not in visual_files
-            and c.path.suffix.lower() == ".obj" and signed_volume(c.path) <= 0
-        )
-        row["inside_out"] = inside_out
-        hulls = {}
-        for name, plist in pieces.items():
-            hulls[name] = []
-            for p in plist:
-                if p.kind != "hull":
-                    continue
-                pts = p.points @ p.origin[:3, :3].T + p.origin[:3, 3]
-                try:
-                    hulls[name].append(Piece.of(pts))
-                except Exception:
-                    pass
-        depths = containment_depths(model, hulls, state)
-        worst = max(depths.items(), key=lambda kv: kv[1], default=(("", ""), 0.0))
-        row["contain_mm"] = round(worst[1] * 1000, 2)
-        row["contain_pair"] = "/".join(worst[0])
-        # the same pairs as an engine that collides them sees them: the hulls' penetration depth
-        # (separating axes), PyBullet's and MuJoCo's closest points with the margins removed
-        sat = parent_child_depths(model, hulls, state)
-        row["pc_sat_mm"] = round(max(sat.values(), default=0.0) * 1000, 2)
-        for e in ("pybullet", "mujoco"):
-            m = parent_child_penetration(urdf_path, state, e)
-            row[f"pc_{e}_mm"] = round(m.value, 2)
-            if e == "pybullet":
-                row["pc_pairs"] = m.details["pairs"]
-        row["fixed_limit_incomplete"] = sum(
-            1 for j in model.joints if j.type == "fixed" and j.limit is not None and (j.limit.effort is None or j.limit.velocity is None)
-        )
-        masses = [ln.inertial.mass for ln in model.links.values() if ln.inertial is not None and (ln.collisions or ln.visuals)]
-        row["min_link_mass_g"] = round(min(masses) * 1000, 3) if masses else None
-        row["min_mass_ratio"] = round(min(masses) / sum(masses), 5) if masses else None
-        xml = f / "mjcf" / "mobility.xml"
-        build = None
-        if args.convert or not xml.is_file():
-            try:
-                with tempfile.TemporaryDirectory():
-                    fixed = read_root(f).fixed  # a mounted asset converts as export_mjcf writes it: no free joint
-                    build = urdf_to_mjcf(urdf_path, initial_state=state, springs=springs_from_overlay(f, state), visuals=True,
-                                         fixed_base=fixed, ground=not fixed)
-                xml = None
-            except Exception as exc:
-                row["mjcf"] = f"convert failed: {str(exc)[:120]}"
-                rows.append(row)
-                continue
-        drop = drop_test(xml, build)
-        row["mjcf_compiles"] = drop["compiles"]
-        row["drop_max_contacts"] = drop["max_contacts"]
-        row["drop_warnings"] = ",".join(drop["warnings"])
-        row["drop_error"] = drop["error"]
-        row["arena_used_pct"] = round(100.0 * drop.get("arena_max_used_bytes", 0) / max(drop.get("arena_bytes", 0), 1), 2) if drop["compiles"] else None
-        row["root_free"] = drop.get("free")
-        row["drop_lowest_mm"] = None if drop["lowest_m"] is None or not math.isfinite(drop["lowest_m"]) else round(drop["lowest_m"] * 1000, 1)
+        row, state = _file_checks(f)
         rows.append(row)
-        print(json.dumps(row), flush=True)
+        if _mjcf_checks(f, state, row, args.convert):
+            print(json.dumps(row), flush=True)
+    _print_counts(rows)
+    return 0
+
+
+def _file_checks(f: Path) -> tuple[dict, dict]:
+    """The row of output folder ``f`` as far as its URDF goes: MuJoCo's importer, the collision pieces (count per
+    link, flat groups, inside-out files), penetration (:func:`_penetration_checks`), fixed-joint limits, the lightest
+    link; returns (row, initial state)."""
+    import mujoco
+
+    from asset2sim.engines.loading import collision_pieces, read_initial_state, read_urdf
+    from asset2sim.engines.mjcf import mujoco_messages
+
+    urdf_path = f / "mobility.urdf"
+    row = {"id": f.name}
+    try:
+        with mujoco_messages():
+            mujoco.MjModel.from_xml_path(str(urdf_path))
+        row["urdf_mujoco"] = "ok"
+    except Exception as exc:
+        row["urdf_mujoco"] = str(exc).splitlines()[0][:120]
+    model = read_urdf(urdf_path)
+    state = read_initial_state(f)
+    pieces, notes = collision_pieces(model)
+    row["max_pieces_per_link"] = max((len(v) for v in pieces.values()), default=0)
+    row["flat_groups"] = sum("is flat" in n for n in notes)
+    # collision-only files (generated pieces) must be closed and wound outward
+    visual_files = {v.path.resolve() for ln in model.links.values() for v in ln.visuals if v.kind == "mesh" and v.path}
+    inside_out = sum(
+        1 for ln in model.links.values() for c in ln.collisions
+        if c.kind == "mesh" and c.path is not None and c.path.resolve() not in visual_files
+        and c.path.suffix.lower() == ".obj" and signed_volume(c.path) <= 0
+    )
+    row["inside_out"] = inside_out
+    _penetration_checks(row, urdf_path, model, pieces, state)
+    row["fixed_limit_incomplete"] = sum(
+        1 for j in model.joints if j.type == "fixed" and j.limit is not None and (j.limit.effort is None or j.limit.velocity is None)
+    )
+    masses = [ln.inertial.mass for ln in model.links.values() if ln.inertial is not None and (ln.collisions or ln.visuals)]
+    row["min_link_mass_g"] = round(min(masses) * 1000, 3) if masses else None
+    row["min_mass_ratio"] = round(min(masses) / sum(masses), 5) if masses else None
+    return row, state
+
+
+def _penetration_checks(row: dict, urdf_path: Path, model, pieces: dict, state: dict) -> None:
+    """Into ``row``: the deepest child inside its parent's hull pieces at the initial state (mm, and the pair), and
+    the same pairs' penetration as an engine colliding them sees it (mm)."""
+    from asset2sim.tasks.check.parent_child import parent_child_penetration
+    from asset2sim.tasks.assemble.convex_pieces import Piece
+    from asset2sim.tasks.assemble.piece_penetration import containment_depths, parent_child_depths
+
+    hulls = {}
+    for name, plist in pieces.items():
+        hulls[name] = []
+        for p in plist:
+            if p.kind != "hull":
+                continue
+            pts = p.points @ p.origin[:3, :3].T + p.origin[:3, 3]
+            try:
+                hulls[name].append(Piece.of(pts))
+            except Exception:
+                pass
+    depths = containment_depths(model, hulls, state)
+    worst = max(depths.items(), key=lambda kv: kv[1], default=(("", ""), 0.0))
+    row["contain_mm"] = round(worst[1] * 1000, 2)
+    row["contain_pair"] = "/".join(worst[0])
+    # the same pairs as an engine that collides them sees them: the hulls' penetration depth
+    # (separating axes), PyBullet's and MuJoCo's closest points with the margins removed
+    sat = parent_child_depths(model, hulls, state)
+    row["pc_sat_mm"] = round(max(sat.values(), default=0.0) * 1000, 2)
+    for e in ("pybullet", "mujoco"):
+        m = parent_child_penetration(urdf_path, state, e)
+        row[f"pc_{e}_mm"] = round(m.value, 2)
+        if e == "pybullet":
+            row["pc_pairs"] = m.details["pairs"]
+
+
+def _mjcf_checks(f: Path, state: dict, row: dict, convert: bool) -> bool:
+    """Into ``row``: the MJCF's 5 cm drop (:func:`drop_test`; the ``mjcf/`` file, or the URDF converted in memory
+    with ``convert`` or without one). False when the conversion failed (``row["mjcf"]`` says why)."""
+    from asset2sim.engines.mjcf import urdf_to_mjcf
+    from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
+    from asset2sim.tasks.assemble.write import read_root
+
+    urdf_path = f / "mobility.urdf"
+    xml = f / "mjcf" / "mobility.xml"
+    build = None
+    if convert or not xml.is_file():
+        try:
+            with tempfile.TemporaryDirectory():
+                fixed = read_root(f).fixed  # a mounted asset converts as export_mjcf writes it: no free joint
+                build = urdf_to_mjcf(urdf_path, initial_state=state, springs=springs_from_overlay(f, state), visuals=True,
+                                     fixed_base=fixed, ground=not fixed)
+            xml = None
+        except Exception as exc:
+            row["mjcf"] = f"convert failed: {str(exc)[:120]}"
+            return False
+    drop = drop_test(xml, build)
+    row["mjcf_compiles"] = drop["compiles"]
+    row["drop_max_contacts"] = drop["max_contacts"]
+    row["drop_warnings"] = ",".join(drop["warnings"])
+    row["drop_error"] = drop["error"]
+    row["arena_used_pct"] = round(100.0 * drop.get("arena_max_used_bytes", 0) / max(drop.get("arena_bytes", 0), 1), 2) if drop["compiles"] else None
+    row["root_free"] = drop.get("free")
+    row["drop_lowest_mm"] = None if drop["lowest_m"] is None or not math.isfinite(drop["lowest_m"]) else round(drop["lowest_m"] * 1000, 1)
+    return True
+
+
+def _print_counts(rows: list[dict]) -> None:
+    """The counts over all output folders."""
     n = len(rows)
     print(f"\n{n} outputs")
     print(f"MuJoCo loads the URDF: {sum(r['urdf_mujoco'] == 'ok' for r in rows)}/{n}")
@@ -197,7 +228,6 @@ def main(argv: list[str] | None = None) -> int:
     print(f"fixed joints with an incomplete <limit>: {sum(r['fixed_limit_incomplete'] for r in rows)}")
     ms = [r["min_link_mass_g"] for r in rows if r["min_link_mass_g"] is not None]
     print(f"lightest link: {min(ms) if ms else None} g")
-    return 0
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Task execution and force plausibility (docs/metrics.md, ``task_execution``,
+"""Task execution and force plausibility (docs/design/metrics.md, ``task_execution``,
 ``operating_force``) on the assets a benchmark wrote, per method and row,
 without re-running the methods or the other metrics.
 

@@ -15,7 +15,7 @@ load (s), the child's peak resident memory (MiB, ``VmHWM``) and its exit
 status (a crash such as ``std::bad_alloc`` is reported, not raised). A
 least-squares line through the points gives MiB per megapixel and per MiB of
 file. The caps in ``tasks/ingest/findings.py`` (``MAX_TEXTURE_PIXELS``,
-``MAX_TEXTURE_BYTES``) and ``docs/validation.md`` ("Texture caps") come from
+``MAX_TEXTURE_BYTES``) and ``docs/design/validation.md`` ("Texture caps") come from
 this measurement.
 
     .venv/bin/python benchmarks/bench_texture_cap.py                       # default points

@@ -1,5 +1,5 @@
 """Run the malformed corpus through our validator, yourdfpy and MuJoCo; print a
-Markdown table of what each accepts (the table in ``docs/validation.md``).
+Markdown table of what each accepts (the table in ``docs/design/validation.md``).
 
 Usage::
 

@@ -2,31 +2,20 @@
 
 The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`,
 :func:`asset2sim.flows.stages.finished_in_store`) needs the asset's input
-hash: SHA-256 over every file the asset references, which the input stage
-(:func:`asset2sim.flows.stages.prepare_asset`) learns by reading and
-validating the asset (0.03-0.3 s per asset, on a worker). A rerun of a
-dataset whose inputs did not change would start Dask, its workers and a
-Prefect task per batch only to learn that everything is finished.
-
-Here the driver decides instead, from a small per-dataset *input index*
-kept in the catalog (``<catalog_root>/dataset=<name>/_inputs.json``): per
-asset the *fingerprint* of its folder when it was last read (every regular
-file under it: resolved path, size and modification time in ns; one
-``stat`` per file, no reading) and what the input stage found then (input
-hash, category, link and movable joint counts), with the code hash of the
-process that recorded it. When the folder's fingerprint, the manifest's
-category and the code hash are unchanged, every file is unchanged (as far
-as ``make``-style checks can tell), so the input stage would find the same
-input hash again; the driver then computes the configuration hashes itself
-and applies the same skip rule to the earlier catalog row (the output
-folder, or the output store's marker, still complete). A miss of any kind
-(no entry, a changed file, another code, an incomplete folder) hands the
-asset to the workers as before: the index can only save work, never change
-a decision the input stage would make.
-
-The index is rewritten (merged) at the end of each run with the entries of
-the assets the run read; two runs of one dataset at once may lose each
-other's entries (a cache miss on the next run, nothing worse).
+hash, which the input stage (:func:`asset2sim.flows.stages.prepare_asset`)
+learns by reading the asset on a worker. Here the driver decides instead,
+from a per-dataset *input index* in the catalog
+(``<catalog_root>/dataset=<name>/_inputs.json``): per asset the *fingerprint*
+of its folder when it was last read (every regular file under it: resolved
+path, size and modification time in ns; one ``stat`` per file, no reading),
+what the input stage found then (input hash, category, link and movable joint
+counts) and the code hash of the process that recorded it. When those are
+unchanged, the driver computes the configuration hashes itself and applies
+the same skip rule to the earlier catalog row. A miss of any kind hands the
+asset to the workers: the index can only save work, never change a decision
+the input stage would make. The index is merged at the end of each run (two
+runs of one dataset at once may lose each other's entries: a miss next time).
+docs/design/pipeline.md, "Skips decided by the driver", has the measurements.
 
 Nothing here imports Prefect or Dask.
 """

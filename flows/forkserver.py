@@ -75,10 +75,7 @@ WARM_MODULES = (
     "matplotlib.ticker",
     "PIL.Image",
     "PIL.ImageDraw",
-    # imported lazily by the post-check's PhysX run and the USD export: without
-    # them here every forked child paid 0.5-1 s of imports per asset
-    # (measured: a child of a server without them 4.7-7.1 s per synthetic
-    # cabinet, with them 4.7-5.0 s, the same refine in a warm process 4.4 s)
+    # imported lazily by the post-check's PhysX run and the USD export: else each forked child pays 0.5-1 s of imports
     "sapien",
     "sapien.physx",
     "pxr.Gf",
@@ -146,8 +143,6 @@ class StageServer:
     def __init__(self, preload: tuple[str, ...] = ()):
         self.preload = tuple(dict.fromkeys((*PROJECT_MODULES, *preload)))
         self.proc: subprocess.Popen | None = None
-        self.started_seconds = 0.0
-        self.calls = 0
         self.starts = 0
         self._buf = b""
         self._lock = threading.Lock()
@@ -164,7 +159,6 @@ class StageServer:
             RuntimeError: it exited before it was ready (its stderr is inherited).
         """
         self.close()
-        t0 = time.perf_counter()
         env = _child_env()
         env.setdefault("MPLBACKEND", "Agg")
         self.proc = _popen_from_owner_thread(
@@ -181,7 +175,6 @@ class StageServer:
         if msg is None or not msg.get("ready"):
             self.close()
             raise RuntimeError("the stage server exited before it was ready")
-        self.started_seconds = time.perf_counter() - t0
 
     def start_soon(self) -> None:
         """Start the server in a background thread unless it runs (a call
@@ -215,10 +208,7 @@ class StageServer:
         """Stop the server (SIGKILL of its process group; children end with it)."""
         if self.proc is None:
             return
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
+        _kill_group(self.proc.pid)
         try:
             self.proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
@@ -256,6 +246,13 @@ class StageServer:
         line, self._buf = self._buf.split(b"\n", 1)
         return json.loads(line)
 
+    def _read_in_time(self, timeout: float) -> dict[str, Any] | None:
+        """The next message, None at end of file or after ``timeout`` s."""
+        try:
+            return self._read(timeout)
+        except TimeoutError:
+            return None
+
     # --------------------------------------------------------------------- calls
 
     def call(self, target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
@@ -290,7 +287,6 @@ class StageServer:
                 started = True
                 if not self._send({"spec": str(spec)}):
                     raise RuntimeError("the stage server does not take calls")
-            self.calls += 1
             res = self._wait(t0, timeout, result_path, log)
             if started or waited > 0.05:  # paid once per worker (and after a lost server), not by the call
                 res.extra["server_start_seconds"] = t0 - t_start
@@ -302,24 +298,15 @@ class StageServer:
             return IsolatedResult(status="crash", error="the stage server died during the call",
                                   failure_mode="crash", seconds=time.perf_counter() - t0, log_tail=_tail(log))
 
-        try:
-            msg = self._read(timeout)
-        except TimeoutError:
-            msg = None
+        msg = self._read_in_time(timeout)
         if msg is None or "pid" not in msg:
             return lost()
         pid = int(msg["pid"])
         try:
             msg = self._read(max(0.0, timeout - (time.perf_counter() - t0)))
         except TimeoutError:
-            try:
-                os.killpg(pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
-            try:
-                rc_msg = self._read(10.0)
-            except TimeoutError:
-                rc_msg = None
+            _kill_group(pid)
+            rc_msg = self._read_in_time(10.0)
             if rc_msg is None:
                 self.close()
             return IsolatedResult(status="timeout", error=f"time limit of {timeout:.0f} s exceeded; child process killed",
@@ -342,6 +329,14 @@ class StageServer:
         return IsolatedResult(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
                               failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""),
                               returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
+
+
+def _kill_group(pid: int) -> None:
+    """SIGKILL the process group ``pid`` (gone already: nothing to do)."""
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
 
 
 _OWNER: dict[int, tuple[threading.Thread, queue.Queue]] = {}

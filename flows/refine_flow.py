@@ -27,23 +27,8 @@ Shape (DEVELOPERS.md, "Shape of the product")::
       -> run summary + failure-mode plot + comparison + pass rate over runs
          -> MLflow run (regression.* tags, nested run per asset)
 
-Each piece of work is done once per asset:
-
-- The asset is read (validated, extracted, hashed) once, by ``prepare``; the
-  typed description and its validation findings travel in the ``Prepared``
-  record to ``refine`` (as JSON into its child process under
-  ``isolation: process``), which does not read the asset again.
-- The rest test runs once per engine: in the post-check (again only for a
-  changed asset: an escalation round or a second resting pose). refine's
-  extras evaluate the written asset with that recording
-  (``tasks.check.postcheck.RestRecording``) and the manifest's reference, and
-  the HTML report renders that evaluation (with the renders refine took).
-- ``metrics`` then reads that typed ``Evaluation`` from the refined folder
-  (``flows.stages.refined_evaluation``: same prompt, category and reference)
-  instead of evaluating again, and copies it to ``_metrics/<asset>``. With
-  extras off (or a refine function that writes no evaluation) it evaluates
-  the asset itself, recording the post-check's rest-test metrics instead of
-  simulating them again.
+Each piece of work is done once per asset: the asset is read once, by ``prepare``; the rest test runs once per
+engine, in the post-check; ``metrics`` reads refine's evaluation (:mod:`asset2sim.flows.stages`).
 
 Nothing finished is done twice, nothing malformed stops the others:
 
@@ -226,49 +211,79 @@ def refine_assets(
     log = get_run_logger()
     flow_run_id = parent_flow_run_id or _current_flow_run_id()
     cluster_up = time.time()  # the Dask cluster is up once the body runs
-    store = ResultCatalog(catalog_root)
+    rec = _AssetRecorder(ResultCatalog(catalog_root), flow_run_id, log)
     chain_task = chain.with_options(
         retries=retries, retry_delay_seconds=retry_delay_seconds, retry_condition_fn=_retry_on_model_failure,
         timeout_seconds=None,
     )  # fmt: skip
-    rows = []
-    starts: dict[str, float] = {}
-    inputs: dict[str, driver_skip.InputEntry] = {}
+    all_jobs = [AssetJob(**j) for j in jobs]
+    servers_seconds = _ready_stage_servers(all_jobs, log)
+    body_started = time.time()  # the stage servers' start-up is not the assets'
+    prep_futures = _submit_prepares(all_jobs, batch_size, rec.starts)
+    chains = _submit_chains(prep_futures, chain_task, rec, fingerprints or {})
+    _record_chains(chains, rec)
+    return {"rows": rec.rows, "inputs": rec.inputs, "body_started": body_started, "body_seconds": time.time() - body_started,
+            "cluster_up": cluster_up, "servers_seconds": servers_seconds}
 
-    def record(job: AssetJob, prepared, refined, measured, exc: BaseException | None, published=None) -> None:
+
+@dataclasses.dataclass
+class _AssetRecorder:
+    """What :func:`refine_assets` records: each asset's catalog row as its chain ends (``rows``), its start
+    (``starts``: asset id -> epoch s) and its input index entry (``inputs``)."""
+
+    store: ResultCatalog
+    flow_run_id: str | None
+    log: Any
+    rows: list = dataclasses.field(default_factory=list)
+    starts: dict[str, float] = dataclasses.field(default_factory=dict)
+    inputs: dict[str, driver_skip.InputEntry] = dataclasses.field(default_factory=dict)
+
+    def record(self, job: AssetJob, prepared, refined, measured, exc: BaseException | None, published=None) -> None:
+        """Append the asset's catalog row; emit its progress event and log line."""
         publish_error = None
         if published is not None and published.status == "ok":  # the row points at the store
             refined.value.out_dir = published.value["out_uri"]
         elif published is not None and published.status == "error":
             publish_error = f"publish: {published.error}"
         if exc is None and prepared is not None and prepared.resume is not None and refined is not None and refined.status == "ok":
-            skipped = _record_resumed(store, job, prepared, refined, measured, starts[job.asset_id])
+            skipped = _record_resumed(self.store, job, prepared, refined, measured, self.starts[job.asset_id])
             if skipped is not None:
                 prepared, refined, measured = skipped, None, None
         row = build_row(
             job, prepared, refined, measured,
             error=publish_error if exc is None else f"{type(exc).__name__}: {exc}",
             failure_mode=None if exc is None else exception_failure_mode(exc, ModelCallFailure),
-            flow_run_id=flow_run_id, started_at=starts[job.asset_id], finished_at=time.time(),
+            flow_run_id=self.flow_run_id, started_at=self.starts[job.asset_id], finished_at=time.time(),
         )  # fmt: skip
         _add_isolation_times(row, refined, measured)
-        store.append_row(job.dataset, job.run_id, row)
-        rows.append(row)
-        flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
-                                         status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
-        log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
+        self.store.append_row(job.dataset, job.run_id, row)
+        self.rows.append(row)
+        _emit_finished(job, row)
+        self.log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
 
-    all_jobs = [AssetJob(**j) for j in jobs]
-    servers_seconds = _ready_stage_servers(all_jobs, log)
-    body_started = time.time()  # the stage servers' start-up is not the assets'
+
+def _emit_finished(job: AssetJob, row) -> None:
+    """The progress event of an asset whose row was written."""
+    flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
+                                     status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
+
+
+def _submit_prepares(jobs: list[AssetJob], batch_size: int, starts: dict[str, float]) -> dict:
+    """Submit one ``prepare`` task per batch of ``batch_size`` jobs, noting each job's start (epoch s) in ``starts``;
+    returns future -> batch."""
     prep_futures = {}
     size = max(1, int(batch_size))
-    for i in range(0, len(all_jobs), size):
-        batch = all_jobs[i:i + size]
+    for i in range(0, len(jobs), size):
+        batch = jobs[i:i + size]
         for job in batch:
             starts[job.asset_id] = time.time()
         prep_futures[prepare_many.submit(batch)] = batch
+    return prep_futures
 
+
+def _submit_chains(prep_futures: dict, chain_task, rec: _AssetRecorder, fingerprints: dict[str, str | None]) -> dict:
+    """As each prepare batch ends: record its input index entries, the row of each asset that ends there (failed,
+    skipped, invalid) and submit the ``refine-metrics`` chain of the others; returns future -> (job, prepared)."""
     # the time limit of a non-isolated stage is Prefect's (process isolation has its own)
     chains = {}
     for fut in as_completed(list(prep_futures)):
@@ -280,38 +295,34 @@ def refine_assets(
             if exc is not None:
                 prepared = None
             else:
-                entry = driver_skip.entry_for(job, prepared, (fingerprints or {}).get(job.asset_id))
+                entry = driver_skip.entry_for(job, prepared, fingerprints.get(job.asset_id))
                 if entry is not None:
-                    inputs[job.asset_id] = entry
+                    rec.inputs[job.asset_id] = entry
             if exc is not None or prepared is None or prepared.skip is not None or not prepared.ok:
-                record(job, prepared, None, None, exc)
+                rec.record(job, prepared, None, None, exc)
                 continue
             # a killed run's complete folder (prepared.resume): refine reads its report, metrics its evaluation
             limit = {} if job.isolation in ("process", "spawn") else {"timeout_seconds": job.time_limit_seconds}
             chains[chain_task.with_options(**limit).submit(job, prepared)] = (job, prepared)
+    return chains
 
+
+def _record_chains(chains: dict, rec: _AssetRecorder) -> None:
+    """Record each asset's row as its chain ends."""
     for cf in as_completed(list(chains)):
         job, prepared = chains[cf]
         res, exc = _outcome(cf)
         if exc is not None:
-            record(job, prepared, None, None, exc)
+            rec.record(job, prepared, None, None, exc)
         else:
-            record(job, prepared, res.refined, res.measured, res.error, res.published)
-    return {"rows": rows, "inputs": inputs, "body_started": body_started, "body_seconds": time.time() - body_started,
-            "cluster_up": cluster_up, "servers_seconds": servers_seconds}
+            rec.record(job, prepared, res.refined, res.measured, res.error, res.published)
 
 
 def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
-    """Start the stage server of every worker of the flow's Dask cluster
-    and wait until all are ready (:func:`asset2sim.flows.forkserver.ready_server`
-    through ``Client.run``), before the first asset is submitted: each
-    server's imports (about 2 s of CPU) are then start-up, reported apart,
-    not part of the assets phase where they ran beside the other workers'
-    first assets. A worker that joins later starts its server with its
-    first batch (:func:`asset2sim.flows.stages.prepare_batch`). Returns the
-    seconds waited (0 when no job runs in a stage server or the task runner
-    is not a Dask one); a server that cannot start is logged and left to the
-    first call, which records the failure in that asset's row."""
+    """Start the stage server of every worker of the flow's Dask cluster and wait until all are ready
+    (:func:`asset2sim.flows.forkserver.ready_server` through ``Client.run``), before the first asset: their imports
+    are start-up, not assets phase. Returns the seconds waited (0 when no job runs in a stage server or the task runner
+    is not a Dask one); a server that cannot start is logged and left to the first call, which records the failure."""
     from prefect_dask import DaskTaskRunner
 
     mods = tuple(dict.fromkeys(m for j in jobs for m in stages.stage_server_modules(j)))
@@ -328,18 +339,9 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
 
 
 @flow(name=FLOW_NAME, persist_result=False)
-def refine_dataset(
-    catalog: str = "catalog.yaml",
-    dataset: str | None = None,
-    workers: int | None = None,
-    dask_address: str | None = None,
-    ids: list[str] | None = None,
-    limit: int | None = None,
-    force: bool = False,
-    out: str | None = None,
-    dask_host: str | None = None,
-    dashboard: bool | None = None,
-) -> dict[str, Any]:
+def refine_dataset(catalog: str = "catalog.yaml", dataset: str | None = None, workers: int | None = None,
+                   dask_address: str | None = None, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
+                   out: str | None = None, dask_host: str | None = None, dashboard: bool | None = None) -> dict[str, Any]:
     """Refine every asset of ``dataset`` (default: the catalog's) as declared
     in ``catalog``, publishing the outputs to ``out`` (default: ``catalog.yaml``
     ``output_store``, else ``output_root``); ``dask_host`` / ``dashboard``:
@@ -388,21 +390,10 @@ def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, ou
     return DriverPlan(run_id=run_id, started=started, plan=plan, fingerprints=fps, skips=skips)
 
 
-def run_dataset(
-    log,
-    catalog: str = "catalog.yaml",
-    dataset: str | None = None,
-    workers: int | None = None,
-    dask_address: str | None = None,
-    *,
-    ids: list[str] | None = None,
-    limit: int | None = None,
-    force: bool = False,
-    out: str | None = None,
-    planned: DriverPlan | None = None,
-    dask_host: str | None = None,
-    dashboard: bool | None = None,
-) -> dict[str, Any]:
+def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, workers: int | None = None,
+                dask_address: str | None = None, *, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
+                out: str | None = None, planned: DriverPlan | None = None, dask_host: str | None = None,
+                dashboard: bool | None = None) -> dict[str, Any]:
     """The body of :func:`refine_dataset` (in a Prefect flow run, or, for a
     run that has nothing to dispatch, without one: :func:`run_refine_flow`);
     ``log`` the logger; ``planned`` a plan made already by :func:`plan_driver`;
@@ -417,68 +408,16 @@ def run_dataset(
     name, _ = cat.dataset(dataset)
     if planned is None:
         planned = plan_driver(cat, name, ids=ids, limit=limit, force=force, out=out)
-    started, run_id, plan = planned.started, planned.run_id, planned.plan
-    jobs = plan.jobs
-    address = dask_address or os.environ.get("DASK_ADDRESS") or None
-    n_workers = workers or cat.config.run.workers
-    store = ResultCatalog(cat.catalog_root)
-    info = _run_info(cat, name, run_id, started, jobs, n_workers, address)
-    info["assets"] = len(jobs) + len(plan.bad_rows)
-    store.write_run_info(name, run_id, info)
-    host = dask_host or cat.config.run.dask_host
-    dashboard = cat.config.run.dashboard if dashboard is None else bool(dashboard)
-    log.info("run %s: %d assets of dataset %s on %s", run_id, len(jobs), name,
-             address or f"a local Dask cluster ({n_workers} workers, listening on {host}, "
-                        f"dashboard {'on a free port' if dashboard else 'off'})")
-    flow_progress.emit(ProgressEvent("run_started", name, run_id, total=info["assets"]))
-    _record_bad_rows(store, cat, name, run_id, plan.bad_rows, info["flow_run_id"], info["code_version"])
-    for bad in plan.bad_rows:
-        log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
-    _record_driver_skips(store, jobs, planned.skips, info["flow_run_id"])
-    pending = planned.pending
-    if planned.skips:
-        log.info("%d of %d assets finished already (decided by the driver); %d to the workers",
-                 len(planned.skips), len(jobs), len(pending))
-    timing = _fan_out(cat, pending, n_workers, address, info["flow_run_id"], planned.fingerprints,
-                      host=host, dashboard=dashboard)
-    try:  # the input index: the next run's skip decisions (a cache: a failed write costs only a miss)
-        driver_skip.write_index(store, name, timing.pop("inputs", {}))
-    except (OSError, ValueError) as exc:
-        log.warning("input index not written: %s: %s", type(exc).__name__, exc)
-    timing["driver_skipped"] = len(planned.skips)
+    run = _start_run(log, cat, name, planned, workers, dask_address, dask_host, dashboard)
+    _record_without_workers(log, run, planned)
+    timing = _dispatch(log, run, planned)
     t_track = time.perf_counter()
-    flow_progress.emit(ProgressEvent("run_finished", name, run_id, total=info["assets"]))
-
-    run_out = cat.output_root / name / run_id
-    # end of run: compact the partition, compare with the previous run (catalog.yaml results:)
-    finish = catalog_finish.finish_run(store, name, run_id, run_out, cat.config.results)
-    for line in catalog_compare.comparison_lines(finish.comparison):
-        log.info("%s", line)
-    for err in finish.errors:
-        log.warning("%s", err)
-    df = store.read(name, run_id)
-    summary = queries.run_summary(df)
-    summary.update(dataset=name, run=run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing)
-    out_store = out or cat.output_store
-    summary["output_store"] = join_uri(out_store, name, run_id) if out_store else None
-    summary.update(finish.comparison.metrics_for_tracking())
-    summary["regression"] = catalog_compare.comparison_summary(finish.comparison)
-    summary["compaction"] = None if finish.compaction is None else dataclasses.asdict(finish.compaction)
-    artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{name} / {run_id}")
-    artifacts.update(finish.artifacts)
-    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
-        try:
-            upload_folder(run_out, summary["output_store"])
-        except (OSError, ValueError) as exc:
-            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
-    mlflow_run_id, tracking_error = _log_to_mlflow(cat, df, summary, info, artifacts, info["assets"], n_workers, address, run_id,
-                                                   extra_tags=finish.comparison.tags())
-    if tracking_error:
-        log.warning("MLflow tracking failed: %s", tracking_error)
-    if info["flow_run_id"]:  # in a Prefect flow run
-        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
+    flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
+    finish, run_out = _finish_partition(log, run)
+    summary, df = _run_summary(run, finish, run_out, out, timing)
+    artifacts, mlflow_run_id, tracking_error = _track(log, run, summary, finish, df, run_out)
     summary.update(
-        flow_run_id=info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
+        flow_run_id=run.info["flow_run_id"],  # None: recorded without a Prefect flow run (nothing was dispatched)
         mlflow_run_id=mlflow_run_id,
         tracking_error=tracking_error,
         tracking_seconds=time.perf_counter() - t_track,
@@ -486,21 +425,135 @@ def run_dataset(
         flow_started_epoch=body_started_epoch,
         artifacts={k: str(v) for k, v in artifacts.items()},
     )
-    info.update(
+    _write_finished_info(run, summary, mlflow_run_id)
+    _raise_on_regression(log, cat, summary)
+    return summary
+
+
+@dataclasses.dataclass
+class _Run:
+    """One run as :func:`run_dataset` resolved it: catalog, dataset ``name``, run id, result catalog ``store``,
+    ``info`` (its ``_run.json``), Dask scheduler ``address`` or local cluster (``n_workers``, ``host``, ``dashboard``)."""
+
+    cat: Any
+    name: str
+    run_id: str
+    store: ResultCatalog
+    info: dict[str, Any]
+    address: str | None
+    n_workers: int | None
+    host: str
+    dashboard: bool
+
+
+def _start_run(log, cat, name: str, planned: DriverPlan, workers, dask_address, dask_host, dashboard) -> _Run:
+    """The run resolved; its ``_run.json`` written (status ``running``), its start logged and announced."""
+    run_id, jobs = planned.run_id, planned.plan.jobs
+    address = dask_address or os.environ.get("DASK_ADDRESS") or None
+    n_workers = workers or cat.config.run.workers
+    store = ResultCatalog(cat.catalog_root)
+    info = _run_info(cat, name, run_id, planned.started, jobs, n_workers, address)
+    info["assets"] = len(jobs) + len(planned.plan.bad_rows)
+    store.write_run_info(name, run_id, info)
+    host = dask_host or cat.config.run.dask_host
+    dashboard = cat.config.run.dashboard if dashboard is None else bool(dashboard)
+    log.info("run %s: %d assets of dataset %s on %s", run_id, len(jobs), name,
+             address or f"a local Dask cluster ({n_workers} workers, listening on {host}, "
+                        f"dashboard {'on a free port' if dashboard else 'off'})")
+    flow_progress.emit(ProgressEvent("run_started", name, run_id, total=info["assets"]))
+    return _Run(cat, name, run_id, store, info, address, n_workers, host, dashboard)
+
+
+def _record_without_workers(log, run: _Run, planned: DriverPlan) -> None:
+    """The rows of the manifest's bad rows and of the assets the driver skips, before any worker starts."""
+    bad_rows = planned.plan.bad_rows
+    _record_bad_rows(run.store, run.cat, run.name, run.run_id, bad_rows, run.info["flow_run_id"], run.info["code_version"])
+    for bad in bad_rows:
+        log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
+    _record_driver_skips(run.store, planned.plan.jobs, planned.skips, run.info["flow_run_id"])
+
+
+def _dispatch(log, run: _Run, planned: DriverPlan) -> dict[str, Any]:
+    """The pending assets refined on Dask (:func:`_fan_out`) and the input index updated; returns the timings (s)
+    and ``driver_skipped``."""
+    pending = planned.pending
+    if planned.skips:
+        log.info("%d of %d assets finished already (decided by the driver); %d to the workers",
+                 len(planned.skips), len(planned.plan.jobs), len(pending))
+    timing = _fan_out(run, pending, planned.fingerprints)
+    try:  # the input index: the next run's skip decisions (a cache: a failed write costs only a miss)
+        driver_skip.write_index(run.store, run.name, timing.pop("inputs", {}))
+    except (OSError, ValueError) as exc:
+        log.warning("input index not written: %s: %s", type(exc).__name__, exc)
+    timing["driver_skipped"] = len(planned.skips)
+    return timing
+
+
+def _finish_partition(log, run: _Run) -> tuple[Any, Path]:
+    """End of run (catalog.yaml ``results:``): the partition compacted and compared with the previous run, the
+    comparison and errors logged; returns the :func:`asset2sim.flows.catalog_finish.finish_run` result and the
+    run's output folder."""
+    run_out = run.cat.output_root / run.name / run.run_id
+    finish = catalog_finish.finish_run(run.store, run.name, run.run_id, run_out, run.cat.config.results)
+    for line in catalog_compare.comparison_lines(finish.comparison):
+        log.info("%s", line)
+    for err in finish.errors:
+        log.warning("%s", err)
+    return finish, run_out
+
+
+def _run_summary(run: _Run, finish, run_out: Path, out: str | None, timing: dict[str, Any]) -> tuple[dict[str, Any], Any]:
+    """The run summary (counts, pass rates, paths, timings, comparison) and the run's catalog rows (DataFrame)."""
+    cat, name, run_id = run.cat, run.name, run.run_id
+    df = run.store.read(name, run_id)
+    summary = queries.run_summary(df)
+    summary.update(dataset=name, run=run_id, catalog_root=str(cat.catalog_root), output_dir=str(run_out), **timing)
+    out_store = out or cat.output_store
+    summary["output_store"] = join_uri(out_store, name, run_id) if out_store else None
+    summary.update(finish.comparison.metrics_for_tracking())
+    summary["regression"] = catalog_compare.comparison_summary(finish.comparison)
+    summary["compaction"] = None if finish.compaction is None else dataclasses.asdict(finish.compaction)
+    return summary, df
+
+
+def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -> tuple[dict[str, Any], str | None, str | None]:
+    """The run's report files written (and uploaded to the output store), the MLflow run and the Prefect summary
+    artifact; returns (artifacts, MLflow run id, tracking error)."""
+    artifacts = {} if df.empty else tracking.write_run_artifacts(df, run_out, title=f"{run.name} / {run.run_id}")
+    artifacts.update(finish.artifacts)
+    if summary["output_store"] and run_out.is_dir():  # the run's report files beside its assets in the store
+        try:
+            upload_folder(run_out, summary["output_store"])
+        except (OSError, ValueError) as exc:
+            log.warning("run artifacts not uploaded to %s: %s: %s", summary["output_store"], type(exc).__name__, exc)
+    mlflow_run_id, tracking_error = _log_to_mlflow(run, df, summary, artifacts, extra_tags=finish.comparison.tags())
+    if tracking_error:
+        log.warning("MLflow tracking failed: %s", tracking_error)
+    if run.info["flow_run_id"]:  # in a Prefect flow run
+        _prefect_summary_artifact(summary, finish.comparison, mlflow_run_id, log)
+    return artifacts, mlflow_run_id, tracking_error
+
+
+def _write_finished_info(run: _Run, summary: dict[str, Any], mlflow_run_id: str | None) -> None:
+    """The run's ``_run.json`` at its end (status ``finished``, regression verdict, scalar summary)."""
+    run.info.update(
         status="finished",
         finished_at=datetime.now(timezone.utc).isoformat(),
         mlflow_run_id=mlflow_run_id,
         regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
         summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
     )
-    store.write_run_info(name, run_id, info)
+    run.store.write_run_info(run.name, run.run_id, run.info)
+
+
+def _raise_on_regression(log, cat, summary: dict[str, Any]) -> None:
+    """Raises :class:`RegressionFailure` (the report logged) when the run regressed beyond ``catalog.yaml``
+    ``results.regression`` with ``fail_flow``: the nightly deployment's run then ends Failed."""
     regression = summary["regression"]
     if regression.get("exceeded") and cat.config.results.regression.fail_flow:
-        # the nightly deployment's run ends Failed with the report (catalog.yaml results.regression.fail_flow)
         report = "\n".join(["run regressed beyond catalog.yaml results.regression", *regression.get("lines", [])])
         log.error("%s", report)
         raise RegressionFailure(report, summary)
-    return summary
 
 
 # ------------------------------------------------------------------ flow helpers
@@ -520,13 +573,9 @@ def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows
 
 
 def _add_isolation_times(row, refined, measured) -> None:
-    """Add to the row's ``stage_seconds`` what the isolated stages measured
-    besides their wall time (:mod:`.forkserver`): ``cpu.refine`` /
-    ``cpu.metrics``, the CPU time (user + system, s) of the stage's child
-    process, and ``isolation.server_start``, the start of the worker's stage
-    server when this asset's call had to start it (included in the stage's
-    wall time; once per worker). Keys with a dot are not summed into
-    ``wall_seconds``."""
+    """Add to the row's ``stage_seconds`` what the isolated stages measured (:mod:`.forkserver`): ``cpu.refine`` /
+    ``cpu.metrics`` (CPU time of the stage's child, user + system, s) and ``isolation.server_start`` (s, when this
+    asset's call started the worker's stage server). Keys with a dot are not summed into ``wall_seconds``."""
     add: dict[str, float] = {}
     for name, rec in (("refine", refined), ("metrics", measured)):
         extra = (getattr(rec, "model_extra", None) or {}).get("extra") if rec is not None else None
@@ -561,18 +610,14 @@ def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict
 
     with ThreadPoolExecutor(max_workers=min(4, len(todo))) as pool:
         for job, row in pool.map(write, todo):  # progress events from this thread, in manifest order
-            flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
-                                             status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
+            _emit_finished(job, row)
 
 
 def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
                     started: float) -> Prepared | None:
-    """Write the catalog row an earlier, killed run owed for its complete
-    folder (``prepared.resume``) into that run's partition (unless it appeared
-    meanwhile), built from the folder's report and the measurement; return
-    the prepared record with that row as ``skip``, so this run records the
-    asset as skipped (nothing was refined). None when that row would not be
-    ``done`` (the measurement failed): this run then records the asset itself."""
+    """Write the catalog row an earlier, killed run owed for its complete folder (``prepared.resume``) into that
+    run's partition (unless there already); return the prepared record with that row as ``skip`` (this run records
+    the asset as skipped), or None when that row would not be ``done`` (this run then records the asset itself)."""
     known = {f.name for f in dataclasses.fields(AssetJob)}
     earlier = AssetJob(**{k: v for k, v in prepared.resume["job"].items() if k in known})
     info = store.run_info(earlier.dataset, earlier.run_id) or {}
@@ -629,30 +674,26 @@ def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJo
     }
 
 
-def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
-             fingerprints: dict[str, str | None] | None = None, *, host: str = "127.0.0.1",
-             dashboard: bool = True) -> dict[str, Any]:
-    """Run :func:`refine_assets` on a Dask task runner (nothing starts for no
-    jobs; a local cluster listens on ``host``, with its dashboard when
-    ``dashboard``: :func:`_dask_task_runner`); its timings (s):
-    ``dask_startup_seconds``, ``stage_servers_seconds``, ``assets_seconds``,
-    ``dask_teardown_seconds``, and ``inputs``: the input index entries of the
-    assets it read (:mod:`asset2sim.flows.driver_skip`)."""
+def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
+    """Run :func:`refine_assets` on a Dask task runner (:func:`_dask_task_runner`; nothing starts for no jobs);
+    returns its timings (s): ``dask_startup_seconds``, ``stage_servers_seconds``, ``assets_seconds``,
+    ``dask_teardown_seconds``, and ``inputs``: the input index entries of the assets it read."""
     timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0,
                               "dask_teardown_seconds": 0.0,
                               "inputs": {}}
     if not jobs:
         return timing
+    cat, n_workers, address = run.cat, run.n_workers, run.address
     t_fan, t_fan_epoch = time.perf_counter(), time.time()
-    sub = refine_assets.with_options(task_runner=_dask_task_runner(n_workers, address, host=host, dashboard=dashboard))
-    with _local_cluster_config(address, dashboard):
+    sub = refine_assets.with_options(task_runner=_dask_task_runner(n_workers, address, host=run.host, dashboard=run.dashboard))
+    with _local_cluster_config(address, run.dashboard):
         out = sub(
             [asdict(j) for j in jobs],
             str(cat.catalog_root),
             retries=cat.config.estimator.retries if cat.config.estimator.name != "offline" else 0,
             retry_delay_seconds=cat.config.estimator.retry_delay_seconds,
             batch_size=prepare_batch_size(len(jobs), n_workers if not address else None),
-            parent_flow_run_id=flow_run_id,
+            parent_flow_run_id=run.info["flow_run_id"],
             fingerprints={j.asset_id: (fingerprints or {}).get(j.asset_id) for j in jobs},
         )
     timing["inputs"] = out.get("inputs", {})
@@ -665,9 +706,9 @@ def _fan_out(cat, jobs: list[AssetJob], n_workers, address, flow_run_id,
     return timing
 
 
-def _log_to_mlflow(cat, df, summary, info, artifacts, n_assets: int, n_workers, address, run_id,
-                   extra_tags: dict[str, str] | None = None) -> tuple[str | None, str | None]:
+def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str] | None = None) -> tuple[str | None, str | None]:
     """Log the run to MLflow when tracking is enabled: (MLflow run id, error text)."""
+    cat, info, run_id, address = run.cat, run.info, run.run_id, run.address
     if not cat.config.tracking.enabled:
         return None, None
     try:
@@ -680,10 +721,10 @@ def _log_to_mlflow(cat, df, summary, info, artifacts, n_assets: int, n_workers, 
                 "estimator": cat.config.estimator.name,
                 "model": cat.config.estimator.model or "",
                 "config_hash": info["refine_config_hash"],
-                "workers": n_workers if not address else "",
+                "workers": run.n_workers if not address else "",
                 "dask_address": address or "",
                 "code_version": info["code_version"],
-                "assets": n_assets,
+                "assets": info["assets"],
             },
             artifacts=artifacts,
             project_root=cat.project_root,

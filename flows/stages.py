@@ -214,15 +214,8 @@ def flow_parameters(
     return params
 
 
-def plan_jobs(
-    cat: Catalog,
-    dataset: str,
-    run_id: str,
-    *,
-    ids: list[str] | None = None,
-    limit: int | None = None,
-    force: bool = False,
-) -> list[AssetJob]:
+def plan_jobs(cat: Catalog, dataset: str, run_id: str, *, ids: list[str] | None = None, limit: int | None = None,
+              force: bool = False) -> list[AssetJob]:
     """The jobs of a run (:func:`plan_run` without the manifest's bad rows).
 
     Raises:
@@ -622,13 +615,12 @@ def measurement_from_refine(out_dir: str, prompt: str, category: str | None, ref
         return None
     if metrics_dir:
         atomic.copy_file(Path(out_dir) / EVALUATION_NAME, Path(metrics_dir) / EVALUATION_NAME)
-    return Measurement(
-        columns=column_values(ev.metrics, "pybullet"),
-        failures=list(ev.failures),
-        seconds=time.perf_counter() - t0,
-        reused_post_check=True,
-        reused_evaluation=True,
-    )
+    return _measurement(ev, time.perf_counter() - t0, reused_post_check=True, reused_evaluation=True)
+
+
+def _measurement(ev: Evaluation, seconds: float, **flags: bool) -> Measurement:
+    """The catalog's PyBullet metric columns and the failures of ``ev``, measured in ``seconds`` s."""
+    return Measurement(columns=column_values(ev.metrics, "pybullet"), failures=list(ev.failures), seconds=seconds, **flags)
 
 
 def stage_metrics(
@@ -677,12 +669,7 @@ def stage_metrics(
             probes=probes,
             measured=measured,
         )
-    return Measurement(
-        columns=column_values(ev.metrics, "pybullet"),
-        failures=list(ev.failures),
-        seconds=float(ev.seconds),
-        reused_post_check=measured is not None,
-    ).model_dump(mode="json")
+    return _measurement(ev, float(ev.seconds), reused_post_check=measured is not None).model_dump(mode="json")
 
 
 def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
@@ -778,8 +765,7 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
         metrics_dir = prepared.resume["job"]["metrics_dir"]
         ev = refined_evaluation(metrics_dir, job.prompt, category, job.reference_dir)
         if ev is not None:
-            earlier = Measurement(columns=column_values(ev.metrics, "pybullet"), failures=list(ev.failures),
-                                  seconds=float(ev.seconds))
+            earlier = _measurement(ev, float(ev.seconds))
             return StageRecord(status="ok", value=earlier, seconds=earlier.seconds)
     reused = measurement_from_refine(value.out_dir or job.out_dir, job.prompt, category, job.reference_dir, metrics_dir)
     if reused is not None:  # nothing to simulate: no child process needed

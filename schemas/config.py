@@ -13,6 +13,8 @@ import json
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from asset2sim.schemas.request import RequestOverrides
+
 
 class SimConventions(BaseModel):
     """SPEC conventions for every simulator measurement."""
@@ -43,7 +45,7 @@ def default_engines() -> list[str]:
     ``sapien`` is installed (it is with ``make setup``), the engine of Isaac
     Sim, SAPIEN and ManiSkill; on the 21 dev objects PhysX adds about 0.2 s
     per post-check round plus 0.9 s of import once per process
-    (``docs/simulators.md``)."""
+    (``docs/design/simulators.md``)."""
     return ["pybullet", "physx"] if importlib.util.find_spec("sapien") is not None else ["pybullet"]
 
 
@@ -88,6 +90,10 @@ class RefineConfig(BaseModel):
     at most 4 times per refine (102990; 103275: 2); a repair that reaches
     the cap keeps the remaining meshes as their hulls and says so."""
     seed: int = 0
+    overrides: RequestOverrides = Field(default_factory=RequestOverrides)
+    """Typed values that win over the request's words (mass kg, size m,
+    scale, joint states, mounting, material;
+    :class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""

@@ -10,7 +10,7 @@ of :func:`catalog_columns`).
 
 A catalog column is taken from one field of a
 :class:`~asset2sim.schemas.report.MetricResult`: ``value``, ``passed`` or
-``details.<key>``. Definitions, conventions and thresholds: ``docs/metrics.md``
+``details.<key>``. Definitions, conventions and thresholds: ``docs/design/metrics.md``
 and the SPEC ("How quality is measured").
 """
 

@@ -6,9 +6,11 @@ object-specific: size words, state words, dynamics words and per-joint phrases.
 
 from __future__ import annotations
 
+import math
+import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 SizeClass = Literal["tiny", "very_small", "small", "regular", "large", "very_large"]
 StateBand = Literal["closed", "slightly_open", "quarter", "halfway", "mostly", "fully"]
@@ -53,7 +55,7 @@ class StateTarget(BaseModel):
     (``value`` m from the closed end, at the output's scale) or ``end``
     (``end``: ``high``/``low`` = the highest/lowest world-z position of the
     moving part over its travel after scaling and the resting pose; ``on``/
-    ``off`` = a toggle switch's high/low end, see ``docs/requests.md``).
+    ``off`` = a toggle switch's high/low end, see ``docs/guide/requests.md``).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -102,6 +104,7 @@ class JointStateRequest(BaseModel):
     """The state asked for one joint or a group of joints.
 
     ``selector`` says which joints: ``all`` (every task-relevant joint),
+    ``joint`` (the joint named ``joint``),
     ``label`` (joints whose moving link has semantic label ``label``, e.g.
     ``drawer``/``lid``/``door``), optionally narrowed by ``ordinal`` (0-based
     index among those joints, ordered top-to-bottom / front-to-back as the
@@ -109,8 +112,10 @@ class JointStateRequest(BaseModel):
     """
 
     model_config = ConfigDict(extra="forbid")
-    selector: Literal["all", "label"] = "all"
+    selector: Literal["all", "label", "joint"] = "all"
     label: str | None = None
+    joint: str | None = None
+    """The joint's name when ``selector`` is ``joint`` (an override names joints)."""
     ordinal: int | None = None
     band: StateBand
     """The band asked for; for a ``target`` the nominal band until the geometry
@@ -164,6 +169,12 @@ class RequestSpec(BaseModel):
     """Contradictions and numbers the parser could not use."""
     matched: list[str] = Field(default_factory=list)
     """Every phrase the parser recognised (for the report)."""
+    mount: Literal["fixed", "free"] | None = None
+    """The mounting an override gives (wins over the words and the category prior)."""
+    scale: float | None = Field(None, gt=0.0)
+    """The uniform scale an override gives (wins over sizes and size words)."""
+    overrides: list[str] = Field(default_factory=list)
+    """The overrides as the user gave them (``--mass 12 kg`` ...), for the report."""
     unused_words: list[str] = Field(default_factory=list)
     """Words of the request that no rule used (common function words, part
     labels and category names excepted), in order, each once: nothing is
@@ -203,3 +214,142 @@ class RequestFindings(BaseModel):
     warnings: list[str] = Field(default_factory=list)
     asked: list[str] = Field(default_factory=list)
     quantities: list[QuantityOutcome] = Field(default_factory=list)
+
+
+# ------------------------------------------------------------------ overrides
+#: Units an override may carry -> factor to SI (kg, m, rad).
+MASS_UNITS = {"kg": 1.0, "g": 1e-3}
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z°]*)\s*$")
+
+
+def parse_quantity(text: str | float | int, units: dict[str, float], what: str) -> float:
+    """A number with one of ``units`` ("12kg", "50 cm", "30deg") in SI; a
+    plain number (YAML, Python) is taken as SI already.
+
+    Raises:
+        ValueError: no number, a string without a unit ("unit missing"), or
+            a unit not in ``units``; the message names ``what``.
+    """
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        return float(text)
+    m = _QUANTITY.match(str(text))
+    if m is None:
+        raise ValueError(f"{what}: {text!r} is not a number with a unit ({', '.join(units)})")
+    value, unit = float(m.group(1)), m.group(2).replace("°", "deg").lower()
+    if not unit:
+        raise ValueError(f"{what}: unit missing in {text!r}; write e.g. {m.group(1)}{next(iter(units))} ({', '.join(units)})")
+    if unit not in units:
+        raise ValueError(f"{what}: unknown unit {unit!r} in {text!r} (use {', '.join(units)})")
+    return value * units[unit]
+
+
+class StateOverride(BaseModel):
+    """One joint's state given as an override: ``fraction`` (``value``, the
+    opening fraction 0..1 from the closed end), ``angle`` (``value`` rad from
+    the closed end), ``distance`` (``value`` m from the closed end, at the
+    output's size) or ``band`` (``band``: closed ... fully). ``text``: as the
+    user wrote it."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    kind: Literal["fraction", "angle", "distance", "band"]
+    value: float | None = None
+    band: StateBand | None = None
+    text: str = ""
+
+    @classmethod
+    def parse(cls, text: str | float | int, where: str = "state") -> "StateOverride":
+        """``"30deg"``, ``"0.5rad"``, ``"2cm"``, ``"0.4"`` (an opening fraction),
+        ``"halfway"`` / ``"slightly-open"`` (a band), or a number 0..1.
+
+        Raises:
+            ValueError: a number above 1 without a unit ("unit missing"), a
+                negative value, an unknown unit or word.
+        """
+        if isinstance(text, (int, float)) and not isinstance(text, bool):
+            text = repr(float(text))
+        raw = str(text).strip()
+        band = raw.lower().replace("-", "_").replace(" ", "_")
+        if band in BAND_TARGET:
+            return cls(kind="band", band=band, text=raw)
+        if band == "open":
+            return cls(kind="band", band="fully", text=raw)
+        m = _QUANTITY.match(raw)
+        if m is None:
+            raise ValueError(f"{where}: {raw!r} is neither a band ({', '.join(BAND_TARGET)}), an opening fraction 0-1, "
+                             f"an angle ({', '.join(ANGLE_UNITS)}) nor a distance ({', '.join(LENGTH_UNITS)})")
+        value, unit = float(m.group(1)), m.group(2).replace("°", "deg").lower()
+        if value < 0:
+            raise ValueError(f"{where}: {raw!r} is negative; states are measured from the closed end")
+        if not unit:
+            if value > 1.0:
+                raise ValueError(f"{where}: unit missing in {raw!r}: an opening fraction is 0-1; an angle needs deg or rad, "
+                                 "a distance m, cm or mm")
+            return cls(kind="fraction", value=value, text=raw)
+        if unit in ANGLE_UNITS:
+            return cls(kind="angle", value=value * ANGLE_UNITS[unit], text=raw)
+        if unit in LENGTH_UNITS:
+            return cls(kind="distance", value=value * LENGTH_UNITS[unit], text=raw)
+        raise ValueError(f"{where}: unknown unit {unit!r} in {raw!r} (angles: deg, rad; distances: m, cm, mm)")
+
+
+class RequestOverrides(BaseModel):
+    """Typed values that win over the request's words, the same in the
+    command line (``--mass 12kg``), the Python API and a configuration file
+    (``overrides:``). Strings carry units; plain numbers are SI.
+
+    ``mass``: total mass, kg. ``size``: the closed object's largest extent,
+    m. ``scale``: uniform scale of the input (dimensionless; wins over
+    ``size``). ``state``: joint name or part label -> :class:`StateOverride`.
+    ``mount``: ``fixed`` (the root held where the file puts it) or ``free``
+    (resting on the ground). ``material``: a ``materials.yaml`` key for the
+    whole object.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    mass: float | None = Field(None, gt=0.0)
+    size: float | None = Field(None, gt=0.0)
+    scale: float | None = Field(None, gt=0.0)
+    state: dict[str, StateOverride] = Field(default_factory=dict)
+    mount: Literal["fixed", "free"] | None = None
+    material: str | None = None
+
+    @field_validator("mass", mode="before")
+    @classmethod
+    def _mass(cls, v):
+        return None if v is None else parse_quantity(v, MASS_UNITS, "mass")
+
+    @field_validator("size", mode="before")
+    @classmethod
+    def _size(cls, v):
+        return None if v is None else parse_quantity(v, LENGTH_UNITS, "size")
+
+    @field_validator("state", mode="before")
+    @classmethod
+    def _state(cls, v):
+        if v is None:
+            return {}
+        if not isinstance(v, dict):
+            raise ValueError("state: expected a mapping of joint name or part label to a state")
+        return {str(k): s if isinstance(s, StateOverride) else StateOverride.model_validate(s) if isinstance(s, dict)
+                else StateOverride.parse(s, f"state {k}") for k, s in v.items()}
+
+    def given(self) -> list[str]:
+        """Each override as the report lists it (``--mass 12 kg`` ...)."""
+        out = []
+        if self.mass is not None:
+            out.append(f"--mass {self.mass:g} kg")
+        if self.size is not None:
+            out.append(f"--size {self.size:g} m")
+        if self.scale is not None:
+            out.append(f"--scale {self.scale:g}")
+        out += [f"--state {k}={s.text or s.value}" for k, s in self.state.items()]
+        if self.mount is not None:
+            out.append(f"--mount {self.mount}")
+        if self.material is not None:
+            out.append(f"--material {self.material}")
+        return out
+
+    def __bool__(self) -> bool:
+        return bool(self.given())

@@ -20,6 +20,7 @@ The library never prints: progress goes to the optional ``progress`` callback.
 from __future__ import annotations
 
 import errno
+import json
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -27,7 +28,8 @@ from pathlib import Path
 from typing import Callable
 
 from asset2sim import __version__, array_cache, atomic
-from asset2sim.engines.base import SessionOptions, quiet_stdout
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
@@ -44,9 +46,9 @@ from asset2sim.tasks.geometry import urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.interpret import mounting, request
+from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
-from asset2sim.tasks.assemble import collision_geometry, export_mjcf, write
+from asset2sim.tasks.assemble import collision_geometry, export_mjcf, footprint, sliding_clearance, write
 from asset2sim.tasks.publish import export_usd
 from asset2sim import output_folder
 from asset2sim.tasks.geometry import render
@@ -88,7 +90,20 @@ class RefineResult:
     report: RefineReport
     overlay: Overlay
     skipped: bool = False
+    """True when ``out_dir`` was already complete for this input and configuration (nothing recomputed)."""
     extras: dict[str, str] = field(default_factory=dict)
+    """What the extras wrote: name (``report_html``, ``mjcf`` ...) -> path."""
+
+    @property
+    def ready(self) -> bool:
+        """Interaction-ready: every check passed (``report.failure_mode == "none"``)."""
+        return self.report.failure_mode == "none"
+
+    def to_json(self) -> str:
+        """The result as JSON: ``out_dir``, ``ready``, ``skipped``, ``extras``,
+        ``report`` and ``overlay`` (their JSON forms, SI units)."""
+        return json.dumps({"out_dir": str(self.out_dir), "ready": self.ready, "skipped": self.skipped, "extras": dict(self.extras),
+                           "report": self.report.model_dump(mode="json"), "overlay": self.overlay.model_dump(mode="json")})
 
 
 def refine_asset(
@@ -155,6 +170,7 @@ def refine_asset(
     est = _open_estimator(config)  # first: a model backend without its key fails before any work
     log = _StageLog(progress)
     asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted)
+    _check_overrides(asset, config)
     chash = run_hash(asset.input_hash, config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
@@ -232,6 +248,15 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
         err.codes = list(getattr(exc, "codes", []) or [])
         raise err from exc
     return asset, findings
+
+
+def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
+    """``config.overrides`` fit the asset (every joint or part named exists, a state its joint's kind and range):
+    RefineError("invalid_input", [OVERRIDE_*]) before any work otherwise."""
+    try:
+        overrides.apply_overrides(RequestSpec(), config.overrides, asset)
+    except overrides.OverrideError as exc:
+        raise RefineError(f"{asset.urdf_path}: {exc}", "invalid_input", [exc.code]) from exc
 
 
 def _completed_result(out_dir: Path, log: _StageLog) -> RefineResult:
@@ -512,7 +537,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
         overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
-    overlay = overlay.model_copy(update={"mounting": mounting.resolve_mounting(ctx.category, ctx.request.text)})
+    overlay = overlay.model_copy(update={"mounting": mounting.resolve_mounting(ctx.category, ctx.request.text, ctx.request.mount)})
     s = overlay.scale
     overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
@@ -569,7 +594,7 @@ def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, 
 def _clearance_lines(notes: list[str]) -> list[str]:
     """The lines of the writer's collision notes on what it changed at the
     written state: running clearance and a levelled footprint."""
-    return [n for n in notes if collision_geometry.RUNNING_CLEARANCE_NOTE in n or collision_geometry.LEVEL_NOTE in n]
+    return [n for n in notes if sliding_clearance.RUNNING_CLEARANCE_NOTE in n or footprint.LEVEL_NOTE in n]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog,

@@ -899,7 +899,7 @@ def _cases() -> list[Case]:
           _model_case(lambda m: (_rename_link("lid", "a/b")(m), _rename_link("drawer", file_stem("a/b"))(m))),
           note="a crafted link named as another's safe file name: their files would share one name, refused"))
     add(C("faces_total_cap", "refine_agreement", "MESH_TOO_MANY_FACES", build_valid, policy={"max_total_faces": 30},
-          note="the per-asset face cap (1,000,000 by default; docs/validation.md) with a lowered cap"))
+          note="the per-asset face cap (1,000,000 by default; docs/design/validation.md) with a lowered cap"))
     # --- issue 11, second check (H14): sizes and textures refine or PyBullet cannot take
     add(C("mesh_coordinate_1e308", "refine_agreement", "MESH_COORDINATE_IMPLAUSIBLE",
           _files_case(_write("meshes/lid.obj", "v 1e308 0 0\nv -1e308 0 0\nv 0 1e308 0\nv 0 0 1e308\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")),

@@ -13,7 +13,8 @@ optional heavy third-party packages only.
 The layers (:data:`LAYERS`), each importing only its own and earlier ones:
 the core (``asset2sim/`` and ``schemas/``), then the stages of ``tasks/`` in
 data-flow order, ``tasks/refine.py`` that chains them, ``tasks/benchmark/``
-above it, ``flows/``, and the command line.
+above it, ``flows/``, the public API (``asset2sim.api``, whose names the
+package ``asset2sim`` lends on first use) and the command line.
 """
 
 from __future__ import annotations
@@ -114,7 +115,7 @@ def _named_modules(text: str, modules: dict[str, Path]) -> list[str]:
 #: The layers in data-flow order (index = rank); a module may import only
 #: modules of its own or an earlier layer (:func:`_layer`).
 LAYERS = ["core", "ingest", "geometry", "interpret", "synthesize", "assemble", "state", "check", "evaluation",
-          "publish", "refine", "benchmark", "flows", "cli"]
+          "publish", "refine", "benchmark", "flows", "api", "cli"]
 
 
 def _layer(module: str) -> str:
@@ -122,6 +123,8 @@ def _layer(module: str) -> str:
     parts = module.split(".")
     if module in ("asset2sim.cli", "asset2sim.__main__") or parts[:2] == ["asset2sim", "commands"]:
         return "cli"
+    if module in ("asset2sim", "asset2sim.api"):  # the public API: the package's names are asset2sim.api's
+        return "api"
     if parts[:2] == ["asset2sim", "flows"]:
         return "flows"
     if parts[:2] == ["asset2sim", "tasks"] and len(parts) >= 3:

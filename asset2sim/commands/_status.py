@@ -8,13 +8,13 @@ command uses to turn its failures into that line.
 | 0 | done (refine: written and interaction-ready) |
 | 1 | invalid input: the asset is refused or cannot be read (``evaluate``/``export``: a metric or check fails; ``render``: rendering failed) |
 | 2 | invalid request or overlay: usage error (unknown engine, view, code), request too long, estimator failed or its overlay is invalid; ``evaluate``/``export``/``render``: the input cannot be used |
-| 3 | written but not interaction-ready: a readiness tier fails (rest, penetration, joint sweep, robust rest, probes; ``tasks/check/verdict.py``, ``docs/metrics.md`` 3a); the terminal verdict, ``report.json`` ``failure_mode`` and ``report.html`` name it |
+| 3 | written but not interaction-ready: a readiness tier fails (rest, penetration, joint sweep, robust rest, probes; ``tasks/check/verdict.py``, ``docs/design/metrics.md`` 3a); the terminal verdict, ``report.json`` ``failure_mode`` and ``report.html`` name it |
 | 4 | output location problem (every command): inside / containing the input, not a folder, holds others' files, a bookkeeping file that is not a regular file, cannot be written (read-only, full) |
 | 5 | ``flow``: the run regressed against the previous run of its dataset beyond ``catalog.yaml`` ``results.regression`` (rows and artifacts written) |
 | 70 | internal error: a bug; the traceback is written to a log file whose path is printed |
 | 130 | interrupted (Ctrl-C) |
 
-The table is repeated in README.md (section "Exit statuses").
+The table is repeated in docs/guide/outputs.md (section "Exit statuses").
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
 """``asset2sim evaluate OUT``: evaluate any URDF asset, write evaluation.json
-and report.html, print a verdict table.
+and report.html (beside the asset by default, never into it unless ``--out``
+names it), print a verdict table.
 
 Exit code 0 when every metric with a verdict passes, 1 when one fails, 2 when
 the asset cannot be evaluated (or an engine is unknown), 4 when the output
@@ -10,6 +11,7 @@ location cannot be written; failures print one line
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from asset2sim.commands._status import (
@@ -33,7 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prompt", default=None, help="the request the asset should satisfy")
     p.add_argument("--category", default=None, help="object category (default: from the asset's files)")
     p.add_argument("--engines", default="pybullet", help="comma-separated engines (default: pybullet)")
-    p.add_argument("--out", type=Path, default=None, help="where to write evaluation.json and report.html (default: the asset folder)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="where to write evaluation.json and report.html (default: a folder beside the asset, ASSET-evaluation; "
+                        "never the asset folder itself unless named here)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--no-probes", action="store_true", help="skip the passive probes")
     p.add_argument("--task", default=None,
@@ -41,13 +45,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
+#: Terminal columns from which the verdict table shows each metric's threshold.
+WIDE_TABLE = 120
+
+
+def default_out(asset: Path) -> Path:
+    """Where ``evaluate`` writes without ``--out``: ``<folder>-evaluation``
+    beside the asset's folder (a refine output stays byte-equal and complete)."""
+    folder = asset if asset.is_dir() else asset.parent
+    return folder.parent / f"{folder.resolve().name}-evaluation"
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
 
-    console = Console(width=max(Console().width, 180))
-    out = args.out or (args.asset if args.asset.is_dir() else args.asset.parent)
+    # a terminal: its width (the threshold column wraps); a pipe or file: lines kept whole for grep
+    console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
+    out = args.out or default_out(args.asset)
     engines = tuple(parse_engines(args.engines))
     bad_out = output_folder_failure(out)
     if bad_out is not None:
@@ -74,14 +90,20 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "EVALUATION_INPUT_INVALID", args.asset,
                            str(exc)) from exc
     table = Table(title=f"{ev.asset_id} ({ev.category or 'no category'}): {'READY' if ev.passed else 'NOT READY'}")
-    for col in ("metric", "engine", "value", "unit", "verdict", "threshold"):
-        table.add_column(col)
+    wide = console.width >= WIDE_TABLE  # a narrow terminal gets the table without the thresholds' column
+    for col in ("metric", "engine", "value", "unit", "verdict"):
+        table.add_column(col, no_wrap=True)
+    if wide:
+        table.add_column("threshold")
     for m in ev.metrics:
         verdict = "-" if m.passed is None else ("[green]pass[/green]" if m.passed else "[red]FAIL[/red]")
         value = "-" if m.value is None else f"{m.value:.4g}"
-        table.add_row(m.name, m.engine, value, m.unit, verdict, m.threshold)
+        table.add_row(m.name, m.engine, value, m.unit, verdict, *([m.threshold] if wide else []))
     console.print(table)
+    if not wide:
+        console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
     for n in ev.notes:
         console.print(f"[dim]note: {n}[/dim]")
-    console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"))
+    console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"),
+                  soft_wrap=True)
     return 0 if ev.passed else 1

@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--parity",
         metavar="ENGINES",
         default=None,
-        help="also run the SPEC's physical tests in these engines, e.g. pybullet,physx,mujoco",
+        help="also run the physical checks (penetration, rest stability, oscillation) in these engines, e.g. pybullet,physx,mujoco",
     )
 
 

@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         dest="dask_address",
         default=None,
         help="existing Dask scheduler (`dask scheduler`, dask-jobqueue, dask-kubernetes), e.g. tcp://host:8786 "
-        "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/pipeline.md)",
+        "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/guide/pipeline.md)",
     )
     parser.add_argument(
         "--dask-host",

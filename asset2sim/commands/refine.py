@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from asset2sim.commands._status import (
     INVALID_INPUT,
     INVALID_REQUEST,
@@ -24,15 +26,18 @@ from asset2sim.commands._status import (
     output_failure,
     parse_engines,
 )
+from asset2sim.api import load_config
 from asset2sim.schemas.config import RefineConfig, default_engines
+from asset2sim.schemas.request import RequestOverrides
 from asset2sim.tasks import refine as refine_stage
+from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.output_folder import OutputError
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
 
 NAME = "refine"
-HELP = "Refine one asset for a natural-language request into an interaction-ready asset (output folder of the SPEC's contract)."
+HELP = "Refine one asset for a natural-language request into an interaction-ready asset (an output folder: docs/guide/outputs.md)."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -45,14 +50,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help='the manipulation task, e.g. "close the microwave door": the post-check executes it with a force- and '
              "speed-limited gripper (tiers task and force) and friction and damping are kept to what a real operating "
-             "force overcomes in its direction (docs/metrics.md)",
+             "force overcomes in its direction (docs/guide/metrics.md)",
     )
     parser.add_argument(
         "--estimator",
-        default="offline",
-        help="overlay estimator: offline (default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
+        default=None,
+        help="overlay estimator: offline (the default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
         "key from the provider's environment variable); openai (an OpenAI-compatible server: --base-url URL --model M). "
-        "See docs/model_backends.md",
+        "See docs/guide/model_backends.md",
     )
     parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
     parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
@@ -62,6 +67,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
              "reported (default: pybullet, and physx where SAPIEN is installed)",
     )
+    over = parser.add_argument_group("overrides", "typed values that win over the request's words (strings carry units)")
+    over.add_argument("--mass", default=None, help="total mass, e.g. 12kg or 500g")
+    over.add_argument("--size", default=None, help="largest extent of the closed object, e.g. 0.5m or 30cm")
+    over.add_argument("--scale", type=float, default=None, help="uniform scale of the input (wins over --size)")
+    over.add_argument("--state", action="append", default=[], metavar="NAME=VALUE",
+                      help="a joint (by joint name or part label) at an angle (30deg, 0.5rad), a distance (2cm), an opening "
+                           "fraction (0.4) or a band (closed, slightly_open, quarter, halfway, mostly, fully); repeatable")
+    over.add_argument("--mount", choices=("fixed", "free"), default=None, help="root fixed where the file puts it, or free on the ground")
+    over.add_argument("--material", default=None, help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
+    parser.add_argument("--config", type=Path, default=None,
+                        help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
+                             "flags given on the command line win over it")
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
     parser.add_argument(
         "--overwrite",
@@ -162,7 +179,7 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
         codes = [i.code for i in cause.issues if i.severity == "error" and not i.fixed]
     mode = exc.failure_mode
     code = join_codes(codes) or mode.upper()
-    status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, RequestTooLong) else INVALID_REQUEST
+    status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, (RequestTooLong, OverrideError)) else INVALID_REQUEST
     msg = str(exc)
     prefix = f"{args.asset}: "
     if msg.startswith(prefix):
@@ -176,6 +193,43 @@ def _os_failure(exc: OSError, args: argparse.Namespace) -> CommandError:
     return os_failure(exc, args.out, args.asset)
 
 
+def options(args: argparse.Namespace) -> RefineConfig:
+    """The run's :class:`RefineConfig`: ``--config``'s file (if any), then the
+    flags given on the command line (an override's flag replaces the file's
+    value for the same quantity; ``--state`` adds to the file's states).
+
+    Raises:
+        CommandError: the file or an override is invalid (``CONFIG_INVALID``,
+            ``OVERRIDE_INVALID``; status 2).
+    """
+    try:
+        base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
+    except (OSError, ValueError) as exc:
+        raise CommandError(INVALID_REQUEST, "CONFIG_INVALID", args.config, str(exc)) from exc
+    fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url)) if v is not None}
+    engines = getattr(args, "engines", None)
+    if engines or not getattr(args, "config", None):
+        listed = parse_engines(engines or ",".join(default_engines()))
+        fields["engines"] = ["pybullet"] + [e for e in listed if e != "pybullet"]
+    given = {k: getattr(args, k, None) for k in ("mass", "size", "scale", "mount", "material")}
+    state = {}
+    for item in getattr(args, "state", None) or []:
+        name, eq, value = item.partition("=")
+        if not eq or not name.strip() or not value.strip():
+            raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
+        state[name.strip()] = value.strip()
+    over = base.overrides.model_dump(exclude_none=True)
+    over.update({k: v for k, v in given.items() if v is not None})
+    if state:
+        over["state"] = {**over.get("state", {}), **state}
+    try:
+        return base.model_copy(update={**fields, "overrides": RequestOverrides.model_validate(over)})
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None,
+                           f"--{first['loc'][0] if first['loc'] else 'override'}: {first['msg'].removeprefix('Value error, ')}") from exc
+
+
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
 
@@ -186,8 +240,7 @@ def run(args: argparse.Namespace) -> int:
         elif not args.quiet:
             print(line, flush=True)
 
-    engines = ["pybullet"] + [e for e in parse_engines(getattr(args, "engines", None) or ",".join(default_engines())) if e != "pybullet"]
-    config = RefineConfig(estimator=args.estimator, model=args.model, base_url=args.base_url, engines=engines)
+    config = options(args)
     try:
         result = refine_stage.refine_asset(
             args.asset,

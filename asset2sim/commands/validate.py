@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     unknown = [c for c in args.error + args.allow if c not in CODES]
     if unknown:
         raise CommandError(INVALID_REQUEST, "CODE_UNKNOWN", None, f"--error/--allow: unknown code(s): {', '.join(unknown)} "
-                           "(docs/validation.md lists the codes)")
+                           "(docs/guide/validation.md lists the codes)")
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)

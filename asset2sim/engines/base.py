@@ -19,8 +19,6 @@ heavy engines are imported lazily by name.
 
 from __future__ import annotations
 
-import os
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Protocol
@@ -452,23 +450,3 @@ def register_file_reader(engine: str, fmt: str, reader: FileReader) -> None:
     _FILE_READERS[(engine, fmt)] = reader
 
 
-@contextmanager
-def quiet_stdout():
-    """Silence C-level prints of engines and renderers (Bullet's b3Warning ...)
-    on file descriptor 1 while the block runs: the library never prints.
-
-    Not reentrant-safe across threads (process-wide file descriptors); nested
-    use in one thread is fine."""
-    try:
-        fd = os.dup(1)
-    except OSError:  # no stdout
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(fd, 1)
-        os.close(fd)
-        os.close(devnull)

@@ -1,17 +1,13 @@
-"""The fake engine: a simulator without physics for fast tests.
+"""The fake engine: a simulator without physics for fast tests, pure numpy
+(no simulator is imported); what every engine loads from a URDF is in
+:mod:`asset2sim.engines.loading`, the test asset in
+:mod:`asset2sim.engines.contract_asset`.
 
-Two things live here, pure numpy (no simulator is imported); what every
-engine loads from a URDF is in :mod:`asset2sim.engines.loading`.
-
-1. :class:`FakeSession`: a deterministic :class:`~asset2sim.engines.base.SimSession`
-   without physics. Joints and root follow closed-form trajectories set by a
-   :class:`FakeBehaviour` (constant drift, sinusoidal oscillation, a
-   penetration that may depend on the joint positions), so metric and pipeline
-   tests run in milliseconds and can be made to pass or fail on purpose.
-2. :func:`write_contract_asset`: writes a small asset that satisfies the SPEC's
-   output contract (URDF + OBJ meshes, an ``<inertial>`` on every link,
-   ``<dynamics>`` on every movable joint, ``initial_state.json`` and
-   ``overlay.json``) for tests of engines, export and parity.
+:class:`FakeSession` is a deterministic :class:`~asset2sim.engines.base.SimSession`
+without physics. Joints and root follow closed-form trajectories set by a
+:class:`FakeBehaviour` (constant drift, sinusoidal oscillation, a penetration
+that may depend on the joint positions), so metric and pipeline tests run in
+milliseconds and can be made to pass or fail on purpose.
 
 Units: SI, radians; poses are 4x4 homogeneous matrices (m) unless stated.
 """
@@ -26,7 +22,6 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from asset2sim import atomic
 from asset2sim.engines.base import (
     ContactPair,
     EngineUnsupported,
@@ -38,19 +33,9 @@ from asset2sim.engines.base import (
     principal_moments,
     register_engine,
 )
-from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, read_urdf
-from asset2sim.frames import quat_wxyz_matrix, translation_matrix
-from asset2sim.urdf import (
-    UrdfDynamics,
-    UrdfGeometry,
-    UrdfInertial,
-    UrdfJoint,
-    UrdfLimit,
-    UrdfLink,
-    UrdfModel,
-    write_urdf,
-)
-from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, joint_tables, read_urdf
+from asset2sim.engines.session_defaults import SessionDefaults
+from asset2sim.frames import quat_wxyz_matrix
 
 
 @dataclass
@@ -99,7 +84,7 @@ def fake_behaviour(behaviour: FakeBehaviour | None = None, **changes) -> Iterato
         _DEFAULT_BEHAVIOUR = old
 
 
-class FakeSession(NoRootHold):
+class FakeSession(SessionDefaults, NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` without physics (see the
     module docstring). Deterministic: the same calls give the same numbers.
 
@@ -114,10 +99,7 @@ class FakeSession(NoRootHold):
         self.options = options
         self.behaviour = behaviour or _DEFAULT_BEHAVIOUR
         self.dt = options.conventions.timestep
-        self.joint_names = [j.name for j in self.model.movable_joints]
-        self.joint_types = {j.name: j.type for j in self.model.movable_joints}
-        self.joint_limits = {j.name: (j.lower, j.upper) for j in self.model.movable_joints}
-        self.joint_child = {j.name: j.child for j in self.model.movable_joints}
+        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.model)
         self.link_names = self.model.tree_order()
         self.steps = 0
         self._anchor = {n: (0.0, 0) for n in self.joint_names}  # value, step when set
@@ -289,9 +271,6 @@ class FakeSession(NoRootHold):
     def ground_penetration(self) -> float:
         return float(self.behaviour.ground_penetration)
 
-    def step_ground_penetration(self) -> float:
-        return self.ground_penetration()
-
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         if self.options.fixed_base:
             q = np.array([0.0, 0.0, 0.0, 1.0]) if self._root_q0 is None else self._root_q0.copy()
@@ -358,12 +337,6 @@ class FakeSession(NoRootHold):
     def close(self) -> None:
         pass
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
 
 def _open(urdf_path: Path, options: SessionOptions) -> FakeSession:
     return FakeSession(urdf_path, options)
@@ -372,207 +345,4 @@ def _open(urdf_path: Path, options: SessionOptions) -> FakeSession:
 register_engine("fake", _open)
 
 
-# ------------------------------------------------------ contract test asset
-def _box_obj(boxes: list[tuple[tuple[float, float, float], tuple[float, float, float]]], groups: bool = True) -> str:
-    """OBJ text of axis-aligned boxes given as (min corner, max corner), one
-    ``o`` group each (or one group for all when ``groups`` is False)."""
-    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
-    lines, off = [], 1
-    for k, (lo, hi) in enumerate(boxes):
-        if groups or k == 0:
-            lines.append(f"o piece_{k}")
-        for i in range(8):
-            x = hi[0] if i & 4 else lo[0]
-            y = hi[1] if i & 2 else lo[1]
-            z = hi[2] if i & 1 else lo[2]
-            lines.append(f"v {x!r} {y!r} {z!r}")
-        lines.extend(f"f {a + off} {b + off} {c + off}" for a, b, c in faces)
-        off += 8
-    return "\n".join(lines) + "\n"
-
-
-def _box_inertia(mass: float, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    d = hi - lo
-    return (lo + hi) / 2, mass / 12.0 * np.diag([d[1] ** 2 + d[2] ** 2, d[0] ** 2 + d[2] ** 2, d[0] ** 2 + d[1] ** 2])
-
-
-def _combine(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> tuple[float, np.ndarray, np.ndarray]:
-    """Mass, COM (3,), inertia about the COM (3, 3) of point-mass-shifted parts."""
-    m = sum(p[0] for p in parts)
-    com = sum(p[0] * p[1] for p in parts) / m
-    inertia = np.zeros((3, 3))
-    for mi, ci, ii in parts:
-        d = ci - com
-        inertia += ii + mi * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
-    return m, com, inertia
-
-
-@dataclass
-class ContractAsset:
-    """Paths and facts of an asset written by :func:`write_contract_asset`."""
-
-    root: Path
-    urdf: Path
-    initial_state: dict[str, float]
-    masses: dict[str, float]
-    lid_mass: float
-    lid_com_radius: float
-    """distance (m) of the lid's COM from the hinge axis, in the lid plane"""
-    post_overlap_at: float
-    """post position (m) above which the post's top pokes into the closed lid"""
-
-
-def write_contract_asset(
-    out_dir: Path,
-    *,
-    lid_angle: float = 0.0,
-    post_height: float = 0.0,
-    lid_damping: float = 0.02,
-    lid_friction: float = 0.02,
-    lid_stiffness: float = 0.0,
-    lid_spring_reference: float | None = None,
-    post_damping: float = 1.0,
-    post_friction: float = 2.0,
-    base_inertial: bool = True,
-    body_mass: float = 1.5,
-    lid_mass: float = 0.2,
-    latch: bool = False,
-) -> ContractAsset:
-    """Write a small box-with-lid asset that satisfies the SPEC output contract.
-
-    Links: ``base`` (root, a fixed joint to ``body``; an ``<inertial>`` only
-    when ``base_inertial``), ``body`` (an open box 0.30 x 0.20 x 0.12 m whose
-    five walls are five ``o`` groups of one OBJ), ``lid`` (0.30 x 0.20 x 0.01 m
-    plate on a revolute hinge along -x at the top back edge; ``lid_angle`` rad,
-    positive opens; limits [0, 2.0]) and ``post`` (a 0.02 x 0.02 x 0.10 m
-    square post standing in the box on a prismatic joint along +z, limits
-    [0, 0.05] m; at ``post_height`` > ``post_overlap_at`` its top pokes into
-    the closed lid, which is a sibling, so the two collide). With ``latch``
-    a ``latch`` link (a 0.30 x 0.03 x 0.01 m bar, 0.02 kg) is fixed to the
-    body across its front edge 1 mm above the closed lid: the lid is held
-    shut by geometry rigid with its parent (a blocked joint that no other
-    joint's position frees; a sibling link, since engines do not collide a
-    child with its own parent).
-
-    Masses kg, damping N*m*s/rad (lid) / N*s/m (post), friction N*m / N,
-    stiffness N*m/rad. Files: ``mobility.urdf``, ``textured_objs/*.obj``,
-    ``initial_state.json``, ``overlay.json``. Returns a :class:`ContractAsset`.
-    """
-    out = Path(out_dir)
-    L, W, H, t = 0.30, 0.20, 0.12, 0.01
-    walls = [
-        ((-L / 2, -W / 2, 0.0), (L / 2, W / 2, t)),
-        ((-L / 2, -W / 2, t), (-L / 2 + t, W / 2, H)),
-        ((L / 2 - t, -W / 2, t), (L / 2, W / 2, H)),
-        ((-L / 2 + t, -W / 2, t), (L / 2 - t, -W / 2 + t, H)),
-        ((-L / 2 + t, W / 2 - t, t), (L / 2 - t, W / 2, H)),
-    ]
-    # The lid frame sits on the hinge at the top back edge (y = +W/2, z = H);
-    # the plate extends towards -y, 0.5 mm above the walls, and the hinge axis
-    # is -x so that positive angles lift its front edge.
-    lid_lo, lid_hi = (-L / 2, -W, 0.0005), (L / 2, 0.0, 0.0005 + t)
-    post_lo, post_hi = (-0.01, -0.01, t), (0.01, 0.01, t + 0.10)
-    latch_lo, latch_hi = (-L / 2, -W / 2, H + 0.0015 + t), (L / 2, -W / 2 + 0.03, H + 0.0115 + t)
-    gap = H + 0.0005 - post_hi[2]  # post top to lid underside at q=0
-    atomic.write_text(out / "textured_objs" / "body.obj", _box_obj(walls))
-    atomic.write_text(out / "textured_objs" / "lid.obj", _box_obj([(lid_lo, lid_hi)]))
-    atomic.write_text(out / "textured_objs" / "post.obj", _box_obj([(post_lo, post_hi)]))
-    if latch:
-        atomic.write_text(out / "textured_objs" / "latch.obj", _box_obj([(latch_lo, latch_hi)]))
-
-    vol = [np.prod(np.subtract(hi, lo)) for lo, hi in walls]
-    body = _combine([(body_mass * v / sum(vol), *_box_inertia(body_mass * v / sum(vol), lo, hi)) for v, (lo, hi) in zip(vol, walls)])
-    lid = (lid_mass, *_box_inertia(lid_mass, lid_lo, lid_hi))
-    post_mass = 0.05
-    post = (post_mass, *_box_inertia(post_mass, post_lo, post_hi))
-    base = (0.01, np.zeros(3), np.diag([1e-5, 1e-5, 1e-5]))
-    latch_part = (0.02, *_box_inertia(0.02, latch_lo, latch_hi))
-
-    def link(name: str, parts, with_mesh: bool = True) -> UrdfLink:
-        ln = UrdfLink(name=name)
-        if parts is not None:
-            m, com, inertia = parts
-            ln.inertial = UrdfInertial(mass=float(m), origin=translation_matrix(com), inertia=np.asarray(inertia, float))
-        if with_mesh:
-            mesh = dict(kind="mesh", filename=f"textured_objs/{name}.obj", mesh_scale=np.ones(3))
-            ln.visuals.append(UrdfGeometry(**mesh))
-            ln.collisions.append(UrdfGeometry(**mesh))
-        return ln
-
-    def moving(name, jtype, child, origin, axis, upper, damping, friction) -> UrdfJoint:
-        return UrdfJoint(
-            name=name, type=jtype, parent="body", child=child, origin=translation_matrix(origin), axis_xyz=np.asarray(axis, float),
-            limit=UrdfLimit(lower=0.0, upper=upper, effort=1000.0, velocity=1000.0),
-            dynamics=UrdfDynamics(damping=float(damping), friction=float(friction)),
-        )
-
-    model = UrdfModel(
-        name="contract_box",
-        links={
-            "base": link("base", base if base_inertial else None, with_mesh=False),
-            "body": link("body", body),
-            "lid": link("lid", lid),
-            "post": link("post", post),
-        },
-        joints=[
-            UrdfJoint(name="root_fixed", type="fixed", parent="base", child="body"),
-            moving("lid_hinge", "revolute", "lid", (0.0, W / 2, H), (-1.0, 0.0, 0.0), 2.0, lid_damping, lid_friction),
-            moving("post_slide", "prismatic", "post", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.05, post_damping, post_friction),
-        ],
-    )
-    if latch:
-        model.links["latch"] = link("latch", latch_part)
-        model.joints.append(UrdfJoint(name="latch_fixed", type="fixed", parent="body", child="latch"))
-    urdf_text = write_urdf(model, comment=" initial joint positions: initial_state.json ")
-    urdf_path = atomic.write_bytes(out / URDF_NAME, urdf_text)
-    state = {"lid_hinge": float(lid_angle), "post_slide": float(post_height)}
-    atomic.write_json(out / STATE_NAME, {"initial_joint_positions": state})
-
-    def link_entry(m, com, inertia):
-        return {
-            "mass": float(m),
-            "inertia": {k: float(inertia[i, j]) for k, (i, j) in {"ixx": (0, 0), "ixy": (0, 1), "ixz": (0, 2), "iyy": (1, 1), "iyz": (1, 2), "izz": (2, 2)}.items()},
-            "com": [float(c) for c in com],
-            "source": "geometry",
-        }
-
-    links = {"body": link_entry(*body), "lid": link_entry(*lid), "post": link_entry(*post)}
-    if latch:
-        links["latch"] = link_entry(*latch_part)
-    if base_inertial:
-        links["base"] = link_entry(*base)
-    overlay = {
-        "schema_version": "1.0",
-        "estimator": {"name": "test-fixture", "queries": 0},
-        "scale": 1.0,
-        "links": links,
-        "joints": {
-            "lid_hinge": {
-                "damping": float(lid_damping),
-                "friction": float(lid_friction),
-                "stiffness": float(lid_stiffness),
-                "spring_reference": None if lid_spring_reference is None else float(lid_spring_reference),
-            },
-            "post_slide": {"damping": float(post_damping), "friction": float(post_friction), "stiffness": 0.0, "spring_reference": None},
-        },
-        "initial_joint_positions": state,
-    }
-    atomic.write_json(out / OVERLAY_NAME, overlay)
-    masses = {"body": float(body[0]), "lid": float(lid[0]), "post": float(post[0])}
-    if latch:
-        masses["latch"] = float(latch_part[0])
-    if base_inertial:
-        masses["base"] = float(base[0])
-    return ContractAsset(
-        root=out,
-        urdf=urdf_path,
-        initial_state=state,
-        masses=masses,
-        lid_mass=lid_mass,
-        lid_com_radius=W / 2,
-        post_overlap_at=float(gap),
-    )
-
-
-__all__ = ["ContractAsset", "FakeBehaviour", "FakeSession", "fake_behaviour", "write_contract_asset"]
+__all__ = ["FakeBehaviour", "FakeSession", "fake_behaviour"]

@@ -51,6 +51,25 @@ def read_urdf(path: Path | str) -> UrdfModel:
     return urdf.read_urdf(path, joint_types=SIMULATED_JOINT_TYPES)
 
 
+def joint_tables(model: UrdfModel) -> tuple[list[str], dict[str, str], dict[str, tuple[float, float]], dict[str, str]]:
+    """A session's joint tables of the model's movable joints, in file order:
+    names, name -> type, name -> (lower, upper) limits (rad or m), name -> child link."""
+    movable = model.movable_joints
+    return ([j.name for j in movable], {j.name: j.type for j in movable}, {j.name: (j.lower, j.upper) for j in movable},
+            {j.name: j.child for j in movable})
+
+
+def principal_axes(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal moments (3,) kg*m^2 and axes (3, 3) (columns, a proper
+    rotation, det = +1) of a symmetric inertia tensor (3, 3):
+    ``tensor = axes @ diag(moments) @ axes.T`` (numpy ``eigh``)."""
+    t = 0.5 * (np.asarray(tensor, float) + np.asarray(tensor, float).T)
+    w, v = np.linalg.eigh(t)
+    if np.linalg.det(v) < 0:
+        v[:, 2] = -v[:, 2]
+    return w, v
+
+
 # ------------------------------------------------------------ collision hulls
 #: Unscaled point sets of the collision meshes read in this process, by
 #: path, while the file is unchanged (:class:`asset2sim.file_memo.FileMemo`;
@@ -202,6 +221,3 @@ def read_initial_state(folder: Path) -> dict[str, float]:
     if not isinstance(q, dict):
         raise ValueError(f"{p}: expected {{'initial_joint_positions': {{joint: value}}}}")
     return {str(k): float(v) for k, v in q.items()}
-
-
-# ----------------------------------------------------------------- the fake

@@ -2,7 +2,7 @@
 
 The session compiles, in memory, the MJCF that :func:`asset2sim.engines.mjcf.urdf_to_mjcf`
 makes of the URDF (the same conversion ``asset2sim export --format mjcf``
-writes; what it changes is listed there and in ``docs/simulators.md``).
+writes; what it changes is listed there and in ``docs/design/simulators.md``).
 mujoco is imported only inside the functions that need it, and at the end of
 this module to register the engine.
 """
@@ -22,12 +22,14 @@ from asset2sim.engines.base import (
     HeldPhysics,
     NoRootHold,
     SessionOptions,
+    penetration_sum,
     register_engine,
     register_file_reader,
 )
-from asset2sim.engines.loading import read_urdf
+from asset2sim.engines.loading import joint_tables, read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
 from asset2sim.engines.mjcf.base import safe_name
+from asset2sim.engines.session_defaults import SessionDefaults
 
 
 def _mujoco():
@@ -37,7 +39,7 @@ def _mujoco():
 
 
 # ------------------------------------------------------------------ session
-class MuJoCoSession(NoRootHold):
+class MuJoCoSession(SessionDefaults, NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` in MuJoCo, compiled from
     :func:`urdf_to_mjcf` in memory (links without ``<inertial>`` get
     PyBullet's default, as in the reference engine).
@@ -73,9 +75,7 @@ class MuJoCoSession(NoRootHold):
         self.d = mujoco.MjData(self.m)
         self.urdf = read_urdf(urdf_path)
         self.joint_names = list(self.build.joint_names)
-        self.joint_types = {j.name: j.type for j in self.urdf.movable_joints}
-        self.joint_limits = {j.name: (j.lower, j.upper) for j in self.urdf.movable_joints}
-        self.joint_child = {j.name: j.child for j in self.urdf.movable_joints}
+        _, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
         self.link_names = [mujoco.mj_id2name(self.m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, self.m.nbody)]
         self._body = {n: b + 1 for b, n in enumerate(self.link_names)}
         self._geoms: dict[str, list[int]] = {n: [] for n in self.link_names}
@@ -286,23 +286,16 @@ class MuJoCoSession(NoRootHold):
             yield self.d.contact[i]
 
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
-        pairs: dict[tuple[str, str], ContactPair] = {}
-        total = 0.0
+        return penetration_sum(self._self_contacts())
+
+    def _self_contacts(self):
+        """(link, link, ``dist`` m) of each penetrating contact between two links (the ground's left out)."""
         for c in self._contacts():
             if c.geom1 == self._ground or c.geom2 == self._ground or c.dist >= 0.0:
                 continue
             a = self._mj.mj_id2name(self.m, self._mj.mjtObj.mjOBJ_BODY, int(self.m.geom_bodyid[c.geom1]))
             b = self._mj.mj_id2name(self.m, self._mj.mjtObj.mjOBJ_BODY, int(self.m.geom_bodyid[c.geom2]))
-            key = (a, b) if a <= b else (b, a)
-            cp = pairs.get(key)
-            if cp is None:
-                cp = pairs[key] = ContactPair(key[0], key[1], 0.0, 0.0, 0)
-            depth = -float(c.dist)
-            cp.depth += depth
-            cp.max_depth = max(cp.max_depth, depth)
-            cp.points += 1
-            total += depth
-        return total, sorted(pairs.values(), key=lambda c: -c.depth)
+            yield a, b, float(c.dist)
 
     def ground_penetration(self) -> float:
         """Deepest point (m) of the collision geoms below z = 0, from the
@@ -312,10 +305,6 @@ class MuJoCoSession(NoRootHold):
         self._mj.mj_kinematics(self.m, self.d)
         low = lowest_point(self.m, self.d)
         return max(0.0, -low) if math.isfinite(low) else 0.0
-
-    def step_ground_penetration(self) -> float:
-        """:meth:`ground_penetration` (from the geometry, no contact cache)."""
-        return self.ground_penetration()
 
     # ------------------------------------------------------------------ state
     def save_state(self) -> int:
@@ -355,12 +344,6 @@ class MuJoCoSession(NoRootHold):
     def close(self) -> None:
         self.d = None
         self.m = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def _named(m, kind, name: str) -> int:

@@ -10,26 +10,23 @@ engines do, so Newton collides the same convex pieces:
   ``<inertial>``: PyBullet's 1 kg and unit inertia, as the other engines);
 - shapes: one convex hull per piece (``add_shape_convex_hull``), boxes,
   spheres and cylinders as themselves, with density 0 (Newton's default
-  adds 1000 kg/m^3 of shape mass to each body: the contract asset's 1.5 kg
-  body became 3.156 kg); contact friction 0.25 on every shape and the ground
-  (the other engines' 0.25);
+  adds 1000 kg/m^3 of shape mass to each body); contact friction 0.25 on
+  every shape and the ground (the other engines' 0.25);
 - joints: revolute / prismatic with the URDF limits and Coulomb friction
   (``friction``, N*m or N), viscous damping and springs as a drive
   (``target_kd`` = damping, ``target_ke`` = stiffness, ``target_pos`` = the
   spring reference), fixed joints welded; the root free (``add_joint_free``)
   or fixed to the world, the parent-child pairs filtered;
-- solver: :class:`newton.solvers.SolverKamino` (Newton's articulated solver
-  with joint friction and limits as constraints; ``SolverMuJoCo`` needs
-  ``mujoco_warp``, which pins an older ``mujoco`` than the project's, and
-  ``SolverFeatherstone`` diverged on the test asset), timestep 1/240 s;
+- solver: :class:`newton.solvers.SolverKamino` (joint friction and limits as
+  constraints; why not Newton's other solvers: ``docs/design/simulators.md``), timestep 1/240 s;
 - placement: the root free, lowest collision vertex on z = 0.
 
 Only the queries the SPEC's rest-stability and oscillation tests need are
 answered (joints, root pose, stepping, penetration from Newton's contacts,
 ground penetration from the geometry); the others raise
 :class:`~asset2sim.engines.base.EngineUnsupported`. newton and warp are
-imported at the end of this module to register the engine (an optional
-extra: ``pip install 'asset2sim[newton]'``).
+looked up at the end of this module to register the engine, imported when a
+session opens (an optional extra: ``pip install 'asset2sim[newton]'``).
 """
 
 from __future__ import annotations
@@ -42,13 +39,10 @@ import numpy as np
 from asset2sim.engines.base import (
     ContactPair,
     EngineUnsupported,
-    HeldJoint,
-    HeldLink,
     HeldPhysics,
     NoRootHold,
     SessionOptions,
     penetration_sum,
-    principal_moments,
     register_engine,
     register_file_reader,
 )
@@ -59,8 +53,11 @@ from asset2sim.engines.loading import (
     BULLET_PLANE_FRICTION,
     CollisionPiece,
     collision_pieces,
+    joint_tables,
     read_urdf,
 )
+from asset2sim.engines.newton_model import held_physics_of_model, held_physics_of_usd, import_newton
+from asset2sim.engines.session_defaults import SessionDefaults
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 
@@ -69,22 +66,7 @@ from asset2sim.mesh_io import convex_hull_mesh
 CONTACT_FRICTION = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
 
 
-def _newton():
-    import warp as wp
-
-    wp.config.quiet = True
-    import newton
-
-    return wp, newton
-
-
-def _hull_triangles(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (k, 3) and outward-wound triangles (m, 3) of the convex hull of
-    ``points`` (n, 3): :func:`asset2sim.mesh_io.convex_hull_mesh`."""
-    return convex_hull_mesh(points)
-
-
-class NewtonSession(NoRootHold):
+class NewtonSession(SessionDefaults, NoRootHold):
     """A :class:`~asset2sim.engines.base.SimSession` in Newton on the CPU.
 
     ``notes``: what the reading of the URDF changed (flat pieces made slabs).
@@ -96,7 +78,7 @@ class NewtonSession(NoRootHold):
     engine = "newton"
 
     def __init__(self, urdf_path: Path, options: SessionOptions):
-        wp, newton = _newton()
+        wp, newton = import_newton()
         self._wp, self._nt = wp, newton
         self.options = options
         conv = options.conventions
@@ -104,15 +86,32 @@ class NewtonSession(NoRootHold):
         self.urdf = read_urdf(urdf_path)
         pieces, notes = collision_pieces(self.urdf)
         self.notes = list(notes)
-        self.joint_names = [j.name for j in self.urdf.movable_joints]
-        self.joint_types = {j.name: j.type for j in self.urdf.movable_joints}
-        self.joint_limits = {j.name: (j.lower, j.upper) for j in self.urdf.movable_joints}
-        self.joint_child = {j.name: j.child for j in self.urdf.movable_joints}
+        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
         self.link_names = self.urdf.tree_order()
         self._fixed = bool(options.fixed_base)
+        poses = self._placed_poses(pieces)
+        b = newton.ModelBuilder(gravity=(0.0, 0.0, conv.gravity if options.gravity else 0.0))
+        # density 0: Newton adds each shape's mass (default 1000 kg/m^3) to its body's; the file's inertials are the truth
+        cfg = newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION, density=0.0)
+        self._add_bodies(b, pieces, poses, cfg)
+        self._add_joints(b, poses)
+        if options.ground:
+            b.add_ground_plane(cfg=newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION))
+        self.model = b.finalize(device="cpu")
+        self._init_state()
+        self._size_contacts()
+        self.rebuilds = 0
+        self._build_solver()
+        self._ground_shape = self.model.shape_count - 1 if options.ground else -1
+        self._shape_body = self.model.shape_body.numpy()
+        self._link_of = {v: k for k, v in self._body.items()}
 
-        poses = self.urdf.link_poses(options.initial_state)
-        # the root free: lowest collision vertex on z = 0 (fixed: where the file puts it)
+    # ------------------------------------------------------------- building
+    def _placed_poses(self, pieces: dict[str, list[CollisionPiece]]) -> dict[str, np.ndarray]:
+        """Every link's pose (4, 4), m, at the initial state, the root free
+        lifted so the lowest collision vertex is on z = 0 (fixed: where the
+        file puts it); sets ``_points``, each link's collision vertices (k, 3) m."""
+        poses = self.urdf.link_poses(self.options.initial_state)
         self._points: dict[str, np.ndarray] = {}
         for name in self.link_names:
             pts = [self._piece_points(p) for p in pieces.get(name, [])]
@@ -123,11 +122,13 @@ class NewtonSession(NoRootHold):
             lift = -min(lows) if lows else 0.0
         root_pose = np.eye(4)
         root_pose[2, 3] = lift
-        poses = self.urdf.link_poses(options.initial_state, root_pose)
+        return self.urdf.link_poses(self.options.initial_state, root_pose)
 
-        b = newton.ModelBuilder(gravity=(0.0, 0.0, conv.gravity if options.gravity else 0.0))
-        # density 0: Newton adds each shape's mass (default 1000 kg/m^3) to its body's; the file's inertials are the truth
-        cfg = newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION, density=0.0)
+    def _add_bodies(self, b, pieces: dict[str, list[CollisionPiece]], poses: dict[str, np.ndarray], cfg) -> None:
+        """One body per link at its pose with the file's mass, COM and inertia
+        (PyBullet's default without ``<inertial>``) and its collision shapes;
+        sets ``_body`` (link -> body index)."""
+        wp = self._wp
         self._body: dict[str, int] = {}
         for name in self.link_names:
             link = self.urdf.links[name]
@@ -141,6 +142,13 @@ class NewtonSession(NoRootHold):
             self._body[name] = body
             for piece in pieces.get(name, []):
                 self._add_shape(b, body, piece, cfg)
+
+    def _add_joints(self, b, poses: dict[str, np.ndarray]) -> None:
+        """The root joint (fixed to the world or free), every URDF joint
+        (movable: limits, Coulomb friction, damping and spring as a drive;
+        fixed: welded) and the articulation; sets ``_joint_index`` (movable
+        joint -> Newton joint index)."""
+        wp = self._wp
         joints = []
         root = self.urdf.root
         if self._fixed:
@@ -152,7 +160,7 @@ class NewtonSession(NoRootHold):
             kw = dict(parent_xform=_wp_transform(wp, j.origin), label=j.name)
             parent, child = self._body[j.parent], self._body[j.child]
             if j.type in ("revolute", "continuous", "prismatic"):
-                spring = options.springs.get(j.name)
+                spring = self.options.springs.get(j.name)
                 lo, hi = j.lower, j.upper
                 dof = dict(
                     axis=wp.vec3(*map(float, j.axis)),
@@ -171,33 +179,32 @@ class NewtonSession(NoRootHold):
                 idx = b.add_joint_fixed(parent, child, **kw)
             joints.append(idx)
         b.add_articulation(joints)
-        if options.ground:
-            b.add_ground_plane(cfg=newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION))
-        self.model = b.finalize(device="cpu")
+
+    def _init_state(self) -> None:
+        """The movable joints' coordinate and DOF addresses (``_qadr``,
+        ``_dadr``), the initial joint positions, the two states, the control
+        and the bodies' poses (forward kinematics)."""
         qs = self.model.joint_q_start.numpy()
         ds = self.model.joint_qd_start.numpy()
         self._qadr = {n: int(qs[i]) for n, i in self._joint_index.items()}
         self._dadr = {n: int(ds[i]) for n, i in self._joint_index.items()}
         q = self.model.joint_q.numpy()
-        for n, v in options.initial_state.items():
+        for n, v in self.options.initial_state.items():
             if n in self._qadr:
                 q[self._qadr[n]] = float(v)
         self.model.joint_q.assign(q)
         self.state0, self.state1 = self.model.state(), self.model.state()
         self.control = self.model.control()
-        newton.eval_fk(self.model, self.model.joint_q, self.model.joint_qd, self.state0)
-        # contact capacity sized from the contacts the object makes (see CONTACT_CAPACITY_MIN)
-        self._query = newton.CollisionPipeline(self.model, publish_capacity=False)
+        self._nt.eval_fk(self.model, self.model.joint_q, self.model.joint_qd, self.state0)
+
+    def _size_contacts(self) -> None:
+        """The query collision pipeline and ``_capacity``, sized from the
+        contacts at the initial state (see :data:`CONTACT_CAPACITY_MIN`)."""
+        self._query = self._nt.CollisionPipeline(self.model, publish_capacity=False)
         self._query_contacts = self._query.contacts()
         self._query.collide(self.state0, self._query_contacts)
         self._capacity = _capacity_for(int(self._query_contacts.rigid_contact_count.numpy()[0]))
-        self.rebuilds = 0
-        self._build_solver()
-        self._ground_shape = self.model.shape_count - 1 if options.ground else -1
-        self._shape_body = self.model.shape_body.numpy()
-        self._link_of = {v: k for k, v in self._body.items()}
 
-    # ------------------------------------------------------------- building
     def _build_solver(self) -> None:
         """The stepping collision pipeline and the Kamino solver, both sized
         for ``self._capacity`` rigid contacts."""
@@ -229,7 +236,7 @@ class NewtonSession(NoRootHold):
         wp, newton = self._wp, self._nt
         xf = _wp_transform(wp, piece.origin)
         if piece.kind == "hull":
-            v, t = _hull_triangles(piece.points)
+            v, t = convex_hull_mesh(piece.points)
             b.add_shape_convex_hull(body, xform=xf, mesh=newton.Mesh(v.astype(np.float32), t.ravel().astype(np.int32)), cfg=cfg)
         elif piece.kind == "box":
             hx, hy, hz = (0.5 * float(s) for s in piece.size)
@@ -377,9 +384,6 @@ class NewtonSession(NoRootHold):
                 low = min(low, float((pts @ r.T + p)[:, 2].min()))
         return max(0.0, -low) if np.isfinite(low) else 0.0
 
-    def step_ground_penetration(self) -> float:
-        return self.ground_penetration()
-
     # ---------------------------------------------------------------- snapshots
     def save_state(self) -> int:
         raise EngineUnsupported("newton: save_state is not implemented")
@@ -414,98 +418,11 @@ class NewtonSession(NoRootHold):
         self.solver = None
         self.model = None
 
-    def __enter__(self):
-        return self
 
-    def __exit__(self, *exc):
-        self.close()
-
-
-def held_physics_of_model(model, joint_q: np.ndarray, bodies: dict[str, int], dofs: dict[str, tuple[int, int]],
-                          source: str) -> HeldPhysics:
-    """Per-body and per-joint physics of a finalized ``newton.Model``:
-    ``body_mass``, ``body_com`` (body frame = URDF link frame),
-    ``body_inertia`` (3, 3) -> principal moments; per DOF
-    ``joint_limit_lower/upper`` (Newton's +-1e6 or larger = unlimited -> inf),
-    ``joint_target_kd`` (damping), ``joint_friction``, ``joint_target_ke``
-    (stiffness) and ``joint_target_q`` (reference; None when ke = 0),
-    position ``joint_q``. ``bodies``: link -> body index; ``dofs``: joint ->
-    (q index, dof index)."""
-    mass, com, inertia = model.body_mass.numpy(), model.body_com.numpy(), model.body_inertia.numpy()
-    links = {n: HeldLink(mass=float(mass[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
-             for n, i in bodies.items()}
-    lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
-    kd, fr, ke = model.joint_target_kd.numpy(), model.joint_friction.numpy(), model.joint_target_ke.numpy()
-    tp = model.joint_target_q.numpy()  # per coordinate, like joint_q
-    joints = {}
-    for n, (qa, da) in dofs.items():
-        lo_v = float(lo[da]) if abs(float(lo[da])) < NEWTON_UNLIMITED else -np.inf
-        hi_v = float(hi[da]) if abs(float(hi[da])) < NEWTON_UNLIMITED else np.inf
-        k = float(ke[da])
-        joints[n] = HeldJoint(lower=lo_v, upper=hi_v, damping=float(kd[da]), friction=float(fr[da]), stiffness=k,
-                              reference=float(tp[qa]) if k != 0.0 else None, position=float(joint_q[qa]))
-    how = {"mass, com, inertia": "Model.body_mass, body_com, body_inertia", "limits": "joint_limit_lower/upper",
-           "damping, friction, spring": "joint_target_kd, joint_friction, joint_target_ke / joint_target_q",
-           "position": "joint_q"}
-    return HeldPhysics(engine="newton", source=source, links=links, joints=joints, how=how)
-
-
-#: Newton's default limit magnitude for an unlimited DOF (``ModelBuilder``'s
-#: 1e6) and above: read back as unlimited.
-NEWTON_UNLIMITED = 1e6
-
-
-def held_physics_of_usd(path: Path, links: list[str] | None = None, joints: list[str] | None = None) -> HeldPhysics:
-    """Load a USD written by ``asset2sim export --format usd`` with Newton's
-    own importer (``ModelBuilder.add_usd``, finalize on the CPU) and read back
-    what the model holds (:func:`held_physics_of_model`), by the URDF names
-    the export stores in ``asset2sim:name`` (read with ``pxr``). ``links`` and
-    ``joints`` are not needed (the names come from the file).
-
-    Raises:
-        ImportError: newton or usd-core is missing.
-        ValueError: a body or joint of the model has no ``asset2sim:name``.
-    """
-    from pxr import Usd
-
-    wp, newton = _newton()
-    stage = Usd.Stage.Open(str(path))
-    names = {}
-    for prim in stage.Traverse():
-        a = prim.GetAttribute("asset2sim:name")
-        if a and a.HasAuthoredValue():
-            names[str(prim.GetPath())] = str(a.Get())
-    b = newton.ModelBuilder()
-    b.add_usd(str(path))
-    model = b.finalize(device="cpu")
-    body_labels = list(b.body_label)
-    joint_labels = list(b.joint_label)
-    bodies = {}
-    for i, lab in enumerate(body_labels):
-        if lab not in names:
-            raise ValueError(f"{path}: Newton body {lab!r} has no asset2sim:name")
-        bodies[names[lab]] = i
-    qs, ds, jt = model.joint_q_start.numpy(), model.joint_qd_start.numpy(), model.joint_type.numpy()
-    movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
-    dofs = {}
-    for i, lab in enumerate(joint_labels):
-        if int(jt[i]) in movable:
-            if lab not in names:
-                raise ValueError(f"{path}: Newton joint {lab!r} has no asset2sim:name")
-            dofs[names[lab]] = (int(qs[i]), int(ds[i]))
-    return held_physics_of_model(model, model.joint_q.numpy(), bodies, dofs, source=f"usd ({Path(path).name}, add_usd)")
-
-
-#: Smallest rigid-contact capacity of the stepping pipeline and solver.
-#: Kamino on the CPU assembles dense contact operators over its whole
-#: capacity, so its cost grows with the capacity, not with the contacts made:
-#: the refined microwave 7236 (3 bodies, 21 shapes, 55 contacts at rest)
-#: costs 0.56 s per step at Newton's estimated capacity (1000) and 0.066 s
-#: at 64 (measured on this 2-core machine under load). The session sizes the
-#: capacity at CONTACT_CAPACITY_HEADROOM times the contacts at the initial
-#: state (at least this), and grows it (rebuilding the solver, which drops
-#: Kamino's warm start once) whenever a step fills it, so no contact is
-#: ever dropped.
+#: Smallest rigid-contact capacity of the stepping pipeline and solver: Kamino's CPU cost grows with the
+#: capacity, not with the contacts made (``docs/design/simulators.md``). The session sizes the capacity at
+#: CONTACT_CAPACITY_HEADROOM times the contacts at the initial state (at least this), and grows it
+#: (rebuilding the solver) whenever a step fills it, so no contact is ever dropped.
 CONTACT_CAPACITY_MIN = 64
 CONTACT_CAPACITY_HEADROOM = 4
 

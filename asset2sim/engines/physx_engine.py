@@ -7,7 +7,7 @@ reference engine), the same joint frames, and the same convex collision pieces
 (one hull per OBJ group, as PyBullet builds them). No render system is created
 and no visual shape is loaded (SAPIEN's renderer needs a Vulkan GPU).
 
-Conventions and how PhysX is made to follow them (``docs/simulators.md`` lists
+Conventions and how PhysX is made to follow them (``docs/design/simulators.md`` lists
 what stays different):
 
 - timestep 1/240 s, gravity -9.81 m/s^2 along z, a static plane at z = 0;
@@ -38,8 +38,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-import sapien
-from sapien import physx
+
+from asset2sim.engines.quiet import startup_quiet
+
+with startup_quiet():
+    import sapien
+    from sapien import physx
 
 from asset2sim.engines.base import (
     ContactPair,
@@ -58,8 +62,11 @@ from asset2sim.engines.loading import (
     BULLET_DEFAULT_MASS,
     BULLET_PLANE_FRICTION,
     collision_pieces,
+    joint_tables,
+    principal_axes,
     read_urdf,
 )
+from asset2sim.engines.session_defaults import SessionDefaults
 from asset2sim.frames import matrix_quat_wxyz
 
 #: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive that carries the
@@ -68,19 +75,11 @@ from asset2sim.frames import matrix_quat_wxyz
 FRICTION_DRIVE_DAMPING = 1.0e6
 #: Bullet's default linear and angular velocity damping of multibody links (1/s).
 BULLET_LINK_DAMPING = 0.04
-#: PhysX solver. SAPIEN's default, TGS, lets joints held by a force-limited
-#: drive creep under load when the root is free (a lid held by 0.5 N*m against
-#: 0.16 N*m: 2.6e-3 rad in 3 s; the lid of the refined suitcase 103755, held by
-#: 78 N*m: 0.08 rad in 3 s, so the case slides); PGS holds them, as Bullet's
-#: motors do.
+#: PhysX solver: PGS, as SAPIEN's default TGS lets joints held by a force-limited
+#: drive creep under load when the root is free; PGS holds them, as Bullet's motors do (``docs/design/simulators.md``).
 ENABLE_TGS = False
-#: Solver iterations of every articulation (position, velocity): ManiSkill 3's
-#: default ``SceneConfig`` (``solver_position_iterations = 15``,
-#: ``solver_velocity_iterations = 1``; SAPIEN's own default is 10 and 1), what
-#: a ManiSkill user simulates with. With 10 a free object resting on the plane
-#: creeps: the refined box 100221 a quarter open yaws 0.0045 rad/s and slides
-#: 0.6 mm/s (D_pos 1.36 mm, D_ori 0.0093 rad over the SPEC's 2 s test; PyBullet
-#: 4e-6 m); with 15, 0.32 mm and 0.0012 rad (``docs/simulators.md``).
+#: Solver iterations of every articulation (position, velocity): ManiSkill 3's default ``SceneConfig``; with
+#: SAPIEN's own (10, 1) a free object resting on the plane creeps (``docs/design/simulators.md``).
 SOLVER_ITERATIONS = (15, 1)
 
 
@@ -106,16 +105,29 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     return t
 
 
-def _principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Principal moments (3,) and a proper rotation (3, 3) whose columns are the axes."""
-    w, v = np.linalg.eigh(0.5 * (inertia + inertia.T))
-    if np.linalg.det(v) < 0:
-        v[:, 2] = -v[:, 2]
-    return w, v
+def new_scene(gravity: float = -9.81, timestep: float = 1.0 / 240.0) -> "sapien.Scene":
+    """A SAPIEN scene of its own CPU PhysX system as asset2sim's checks make
+    it: ``gravity`` m/s^2 along z, PGS (:data:`ENABLE_TGS`), time step
+    ``timestep`` s. SAPIEN's global scene configuration is left as it was."""
+    old = physx.get_scene_config()
+    cfg = physx.PhysxSceneConfig()
+    cfg.gravity = np.array([0.0, 0.0, gravity], np.float32)
+    cfg.enable_tgs = ENABLE_TGS
+    physx.set_scene_config(cfg)
+    try:
+        system = physx.PhysxCpuSystem()
+    finally:
+        physx.set_scene_config(old)
+    scene = sapien.Scene([system])
+    scene.set_timestep(timestep)
+    return scene
 
 
-class PhysXSession(NoRootHold):
-    """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3.
+class PhysXSession(SessionDefaults, NoRootHold):
+    """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3:
+    a CPU scene of its own, or (``scene``) the caller's ``sapien.Scene``,
+    whose gravity, time step and solver are left as they are; ``ground``
+    False: no plane is added to the caller's scene.
 
     ``notes``: what had to change for this asset (flat hulls, missing
     inertials, shapes PhysX could not cook).
@@ -128,127 +140,162 @@ class PhysXSession(NoRootHold):
 
     engine = "physx"
 
-    def __init__(self, urdf_path: Path, options: SessionOptions, missing_inertial: str = "bullet"):
+    def __init__(self, urdf_path: Path, options: SessionOptions, missing_inertial: str = "bullet", scene=None, ground: bool = True):
         self.options = options
-        conv = options.conventions
-        self.dt = conv.timestep
+        self.dt = options.conventions.timestep
         self.urdf = read_urdf(urdf_path)
         pieces, notes = collision_pieces(self.urdf)
         self.notes = list(notes)
+        self._owns_scene = scene is None
+        if scene is None:
+            self._make_scene()
+        else:
+            self.scene, self.system, self.dt = scene, scene.physx_system, float(scene.get_timestep())
+        self.ground = self._add_ground() if options.ground and (self._owns_scene or ground) else None
+        self._add_articulation(self._articulation_builder(urdf_path, missing_inertial), pieces, urdf_path)
+        self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
+        self.link_names = list(self.links)
+        self._states: dict[int, tuple] = {}
+        self._effort = None
+        self._passive_drives(urdf_path)
+        self.set_joint_positions(options.initial_state)
+        if options.ground and not options.fixed_base:
+            self.place_on_ground()
 
-        old = physx.get_scene_config()
-        cfg = physx.PhysxSceneConfig()
-        cfg.gravity = np.array([0.0, 0.0, conv.gravity if options.gravity else 0.0], np.float32)
-        cfg.enable_tgs = ENABLE_TGS
-        physx.set_scene_config(cfg)
-        try:
-            self.system = physx.PhysxCpuSystem()
-        finally:
-            physx.set_scene_config(old)
-        self.scene = sapien.Scene([self.system])
-        self.scene.set_timestep(self.dt)
+    # --------------------------------------------------------------- building
+    def _make_scene(self) -> None:
+        """``system`` and ``scene``: :func:`new_scene` with the session's gravity."""
+        conv = self.options.conventions
+        self.scene = new_scene(conv.gravity if self.options.gravity else 0.0, self.dt)
+        self.system = self.scene.physx_system
+
+    def _add_ground(self):
+        """The static ground plane z = 0 (its component), contact friction 0.25."""
         mu = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
+        ent = sapien.Entity()
+        ent.name = "ground"
+        comp = physx.PhysxRigidStaticComponent()
+        plane = physx.PhysxCollisionShapePlane(physx.PhysxMaterial(mu, mu, 0.0))
+        # PhysX planes face +x; turn the normal to +z.
+        plane.local_pose = sapien.Pose(q=[math.sqrt(0.5), 0.0, -math.sqrt(0.5), 0.0])
+        comp.attach(plane)
+        ent.add_component(comp)
+        self.scene.add_entity(ent)
+        self._ground_entity = ent
+        return comp
 
-        self.ground = None
-        if options.ground:
-            ent = sapien.Entity()
-            ent.name = "ground"
-            comp = physx.PhysxRigidStaticComponent()
-            plane = physx.PhysxCollisionShapePlane(physx.PhysxMaterial(mu, mu, 0.0))
-            # PhysX planes face +x; turn the normal to +z.
-            plane.local_pose = sapien.Pose(q=[math.sqrt(0.5), 0.0, -math.sqrt(0.5), 0.0])
-            comp.attach(plane)
-            ent.add_component(comp)
-            self.scene.add_entity(ent)
-            self.ground = comp
-
+    def _articulation_builder(self, urdf_path: Path, missing_inertial: str):
+        """SAPIEN's articulation builder with every link in tree order: its
+        joint (x along the URDF axis, the root free or fixed) and inertia."""
         builder = self.scene.create_articulation_builder()
         link_builders = {}
-        order = self.urdf.tree_order()
-        for name in order:
-            link = self.urdf.links[name]
+        for name in self.urdf.tree_order():
             pj = self.urdf.parent_joint(name)
             lb = builder.create_link_builder(link_builders[pj.parent] if pj else None)
             link_builders[name] = lb
             lb.set_name(name)
             lb.set_joint_name(pj.name if pj else "")
             if pj is None:
-                lb.set_joint_properties("fixed" if options.fixed_base else "undefined", [], sapien.Pose(), sapien.Pose())
+                lb.set_joint_properties("fixed" if self.options.fixed_base else "undefined", [], sapien.Pose(), sapien.Pose())
             else:
                 ax = _axis_frame(pj.axis)
                 kind = {"revolute": "revolute_unwrapped", "continuous": "revolute", "prismatic": "prismatic", "fixed": "fixed"}[pj.type]
                 limits = [] if pj.type == "fixed" else [[pj.lower, pj.upper]]
                 lb.set_joint_properties(kind, limits, _pose(pj.origin @ ax), _pose(ax), 0.0, 0.0)
-            ine = link.inertial
-            if ine is None:
-                if missing_inertial == "bullet":
-                    mass, com_pose, moments = BULLET_DEFAULT_MASS, sapien.Pose(), np.array(BULLET_DEFAULT_INERTIA)
-                    self.notes.append(f"link {name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
-                else:
-                    raise PhysXError(f"{urdf_path}: link {name!r} has no <inertial> (PhysX needs a mass)")
-            else:
-                moments, axes = _principal(ine.inertia_in_link_axes())
-                if ine.mass <= 0 or moments.min() <= 0:
-                    raise PhysXError(f"{urdf_path}: link {name!r} has mass {ine.mass} and principal moments {moments}: not positive")
-                t = np.eye(4)
-                t[:3, :3] = axes
-                t[:3, 3] = ine.com()
-                mass, com_pose = ine.mass, _pose(t)
+            mass, com_pose, moments = self._link_inertia(name, urdf_path, missing_inertial)
             lb.set_mass_and_inertia(float(mass), com_pose, np.asarray(moments, np.float32))
+        return builder
 
-        entities = builder.build_entities(fix_root_link=options.fixed_base)
+    def _add_articulation(self, builder, pieces: dict, urdf_path: Path) -> None:
+        """Build the articulation, cook each link's collision pieces and add it
+        to the scene; sets ``links`` (link -> component, tree order) and ``art``
+        (no sleeping, :data:`SOLVER_ITERATIONS`)."""
+        entities = builder.build_entities(fix_root_link=self.options.fixed_base)
         self.links = {}
-        self._shape_points: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         for ent in entities:
             comp = ent.find_component_by_type(physx.PhysxArticulationLinkComponent)
-            name = comp.name
-            self.links[name] = comp
-            lat = self.urdf.links[name].lateral_friction
-            lmu = (BULLET_DEFAULT_FRICTION if lat is None else lat) * BULLET_PLANE_FRICTION
-            mat = physx.PhysxMaterial(lmu, lmu, 0.0)
-            cooked = 0
-            for p in pieces[name]:
-                try:
-                    if p.kind == "hull":
-                        shape = physx.PhysxCollisionShapeConvexMesh(
-                            np.asarray(p.points, np.float32), np.ones(3, np.float32), mat
-                        )
-                        local = p.origin
-                    elif p.kind == "box":
-                        shape = physx.PhysxCollisionShapeBox(np.asarray(p.size, np.float32) / 2, mat)
-                        local = p.origin
-                    elif p.kind == "sphere":
-                        shape = physx.PhysxCollisionShapeSphere(float(p.radius), mat)
-                        local = p.origin
-                    else:  # cylinder: URDF axis z, PhysX axis x
-                        shape = physx.PhysxCollisionShapeCylinder(float(p.radius), float(p.length) / 2, mat)
-                        local = p.origin @ _axis_frame(np.array([0.0, 0.0, 1.0]))
-                except RuntimeError as exc:  # PhysX could not cook the hull
-                    self.notes.append(f"link {name!r} collision {p.collision} group {p.group}: PhysX could not cook it ({exc}); skipped")
-                    continue
-                shape.local_pose = _pose(local)
-                shape.set_collision_groups([1, 1, 0, 0])
-                shape.set_rest_offset(0.0)
-                comp.attach(shape)
-                cooked += 1
-            if pieces[name] and not cooked:
-                raise PhysXError(f"{urdf_path}: no collision shape of link {name!r} could be cooked by PhysX")
-            comp.set_linear_damping(BULLET_LINK_DAMPING)
-            comp.set_angular_damping(BULLET_LINK_DAMPING)
+            self.links[comp.name] = comp
+            self._attach_shapes(comp, pieces[comp.name], urdf_path)
         for ent in entities:
             self.scene.add_entity(ent)
+        self._entities = list(entities)
         self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
         self.art.set_sleep_threshold(0.0)
         self.art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
         self.art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
 
-        self.joint_names = [j.name for j in self.urdf.movable_joints]
-        self.joint_types = {j.name: j.type for j in self.urdf.movable_joints}
-        self.joint_child = {j.name: j.child for j in self.urdf.movable_joints}
-        self.link_names = list(self.links)
-        self._states: dict[int, tuple] = {}
-        self._effort = None
-        self.joint_limits = {j.name: (j.lower, j.upper) for j in self.urdf.movable_joints}
+    def _link_inertia(self, name: str, urdf_path: Path, missing_inertial: str):
+        """Mass (kg), COM pose with the principal axes (link frame) and
+        principal moments (3,) kg*m^2 of a link; without ``<inertial>``
+        PyBullet's 1 kg and unit inertia (``missing_inertial="bullet"``).
+
+        Raises:
+            PhysXError: no ``<inertial>`` (other ``missing_inertial``), or a
+                mass or principal moment that is not positive.
+        """
+        ine = self.urdf.links[name].inertial
+        if ine is None:
+            if missing_inertial != "bullet":
+                raise PhysXError(f"{urdf_path}: link {name!r} has no <inertial> (PhysX needs a mass)")
+            self.notes.append(f"link {name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
+            return BULLET_DEFAULT_MASS, sapien.Pose(), np.array(BULLET_DEFAULT_INERTIA)
+        moments, axes = principal_axes(ine.inertia_in_link_axes())
+        if ine.mass <= 0 or moments.min() <= 0:
+            raise PhysXError(f"{urdf_path}: link {name!r} has mass {ine.mass} and principal moments {moments}: not positive")
+        t = np.eye(4)
+        t[:3, :3] = axes
+        t[:3, 3] = ine.com()
+        return ine.mass, _pose(t), moments
+
+    def _attach_shapes(self, comp, pieces: list, urdf_path: Path) -> None:
+        """Cook a link's collision pieces into its component (a piece PhysX
+        cannot cook is skipped with a note), contact friction the link's
+        lateral friction x the plane's; Bullet's link velocity damping.
+
+        Raises:
+            PhysXError: the link has pieces and none could be cooked.
+        """
+        name = comp.name
+        lat = self.urdf.links[name].lateral_friction
+        lmu = (BULLET_DEFAULT_FRICTION if lat is None else lat) * BULLET_PLANE_FRICTION
+        mat = physx.PhysxMaterial(lmu, lmu, 0.0)
+        cooked = 0
+        for p in pieces:
+            try:
+                if p.kind == "hull":
+                    shape = physx.PhysxCollisionShapeConvexMesh(
+                        np.asarray(p.points, np.float32), np.ones(3, np.float32), mat
+                    )
+                    local = p.origin
+                elif p.kind == "box":
+                    shape = physx.PhysxCollisionShapeBox(np.asarray(p.size, np.float32) / 2, mat)
+                    local = p.origin
+                elif p.kind == "sphere":
+                    shape = physx.PhysxCollisionShapeSphere(float(p.radius), mat)
+                    local = p.origin
+                else:  # cylinder: URDF axis z, PhysX axis x
+                    shape = physx.PhysxCollisionShapeCylinder(float(p.radius), float(p.length) / 2, mat)
+                    local = p.origin @ _axis_frame(np.array([0.0, 0.0, 1.0]))
+            except RuntimeError as exc:  # PhysX could not cook the hull
+                self.notes.append(f"link {name!r} collision {p.collision} group {p.group}: PhysX could not cook it ({exc}); skipped")
+                continue
+            shape.local_pose = _pose(local)
+            shape.set_collision_groups([1, 1, 0, 0])
+            shape.set_rest_offset(0.0)
+            comp.attach(shape)
+            cooked += 1
+        if pieces and not cooked:
+            raise PhysXError(f"{urdf_path}: no collision shape of link {name!r} could be cooked by PhysX")
+        comp.set_linear_damping(BULLET_LINK_DAMPING)
+        comp.set_angular_damping(BULLET_LINK_DAMPING)
+
+    def _passive_drives(self, urdf_path: Path) -> None:
+        """Joint index tables and each movable joint's passive zero-velocity
+        drive (force limit = Coulomb friction, N*m or N), its damping and spring.
+
+        Raises:
+            PhysXError: PhysX built other joints than the URDF's movable ones.
+        """
         active = [j.name for j in self.art.active_joints]
         if sorted(active) != sorted(self.joint_names):
             raise PhysXError(f"{urdf_path}: PhysX built joints {active}, the URDF has {self.joint_names}")
@@ -269,13 +316,10 @@ class PhysXSession(NoRootHold):
             joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(pj.friction), "force")
             joint.set_drive_target(0.0)
             joint.set_drive_velocity_target(0.0)
-            sp = options.springs.get(pj.name)
+            sp = self.options.springs.get(pj.name)
             if sp is not None:
                 self._stiffness[i] = sp.stiffness
                 self._reference[i] = sp.reference
-        self.set_joint_positions(options.initial_state)
-        if options.ground and not options.fixed_base:
-            self.place_on_ground()
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
@@ -442,21 +486,11 @@ class PhysXSession(NoRootHold):
         PhysX reports contacts only from a simulation step, and generates them
         from the poses at the start of the step, so the state is saved, one
         step is taken, the contacts read and the state restored."""
-        pose = self.art.get_root_pose()
-        lin = np.asarray(self.art.get_root_linear_velocity(), np.float32).copy()
-        ang = np.asarray(self.art.get_root_angular_velocity(), np.float32).copy()
-        qpos = np.asarray(self.art.get_qpos(), np.float32).copy()
-        qvel = np.asarray(self.art.get_qvel(), np.float32).copy()
-        qf = np.asarray(self.art.get_qf(), np.float32).copy()
-        self.art.set_qf(np.zeros(len(qpos), np.float32))
+        state = self._state()
+        self.art.set_qf(np.zeros(len(state[3]), np.float32))
         self.scene.step()
         contacts = self.system.get_contacts()
-        self.art.set_root_pose(pose)
-        self.art.set_root_linear_velocity(lin)
-        self.art.set_root_angular_velocity(ang)
-        self.art.set_qpos(qpos)
-        self.art.set_qvel(qvel)
-        self.art.set_qf(qf)
+        self._set_state(state)
         return contacts
 
     def _link_name(self, comp) -> str | None:
@@ -484,17 +518,21 @@ class PhysXSession(NoRootHold):
         low = self.lowest_point()
         return max(0.0, -low) if math.isfinite(low) else 0.0
 
-    def step_ground_penetration(self) -> float:
-        """:meth:`ground_penetration` (from the geometry, no contact cache)."""
-        return self.ground_penetration()
-
     # ------------------------------------------------------------------ state
     def save_state(self) -> int:
         """Snapshot root pose and velocities, joint positions, velocities and
         forces, and the pending joint efforts (PhysX keeps no contact cache
         across ``set_qpos``)."""
         handle = max(self._states, default=0) + 1
-        self._states[handle] = (
+        self._states[handle] = self._state()
+        return handle
+
+    def restore_state(self, handle: int) -> None:
+        self._set_state(self._states[handle])
+
+    def _state(self) -> tuple:
+        """Root pose, root velocities, joint positions, velocities and forces (float32 copies), pending efforts."""
+        return (
             self.art.get_root_pose(),
             np.asarray(self.art.get_root_linear_velocity(), np.float32).copy(),
             np.asarray(self.art.get_root_angular_velocity(), np.float32).copy(),
@@ -503,10 +541,10 @@ class PhysXSession(NoRootHold):
             np.asarray(self.art.get_qf(), np.float32).copy(),
             None if self._effort is None else self._effort.copy(),
         )
-        return handle
 
-    def restore_state(self, handle: int) -> None:
-        pose, lin, ang, qpos, qvel, qf, effort = self._states[handle]
+    def _set_state(self, state: tuple) -> None:
+        """Return to a :meth:`_state`."""
+        pose, lin, ang, qpos, qvel, qf, effort = state
         self.art.set_root_pose(pose)
         self.art.set_root_linear_velocity(lin)
         self.art.set_root_angular_velocity(ang)
@@ -520,19 +558,10 @@ class PhysXSession(NoRootHold):
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
-        """Advance n steps: before each, the passive drives' force limits
-        (friction + damping * |qdot|) and the spring forces are set."""
+        """Advance n steps: before each, :meth:`apply_passive_forces`."""
         springs = bool(np.any(self._stiffness))
-        viscous = bool(np.any(self._damping))
         for _ in range(int(n)):
-            if viscous or self._drive:
-                qd = np.abs(np.asarray(self.art.get_qvel(), float))
-                for i, joint in enumerate(self._joints):
-                    if self._damping[i] > 0 or i in self._drive:
-                        self._set_drive(i, float(qd[i]))
-            if springs:
-                q = np.asarray(self.art.get_qpos(), float)
-                self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))
+            self.apply_passive_forces()
             if self._effort is not None:
                 base = np.asarray(self.art.get_qf(), float) if springs else np.zeros(len(self._joints))
                 self.art.set_qf((base + self._effort).astype(np.float32))
@@ -542,6 +571,20 @@ class PhysXSession(NoRootHold):
                     self.art.set_qf(np.zeros(len(self._joints), np.float32))
                 continue
             self.scene.step()
+
+    def apply_passive_forces(self) -> None:
+        """For the next ``scene.step()``: each joint drive's force limit
+        (friction + damping * |qdot|, N or N*m) and the springs' joint forces
+        ``-k (q - q_ref)`` (PhysX has no joint spring or viscous joint
+        friction of this form; :meth:`step` calls this before every step)."""
+        if bool(np.any(self._damping)) or self._drive:
+            qd = np.abs(np.asarray(self.art.get_qvel(), float))
+            for i, _joint in enumerate(self._joints):
+                if self._damping[i] > 0 or i in self._drive:
+                    self._set_drive(i, float(qd[i]))
+        if bool(np.any(self._stiffness)):
+            q = np.asarray(self.art.get_qpos(), float)
+            self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))
 
     def held_physics(self) -> HeldPhysics:
         """What PhysX holds: each link's ``get_mass``, ``get_cmass_local_pose``
@@ -576,21 +619,21 @@ class PhysXSession(NoRootHold):
         return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how=how)
 
     def close(self) -> None:
+        """Drop the session's own scene; from a caller's scene, remove what
+        the session added (the articulation, its ground)."""
         if getattr(self, "scene", None) is not None:
+            if not self._owns_scene:
+                for ent in [*getattr(self, "_entities", []), getattr(self, "_ground_entity", None)]:
+                    if ent is not None:
+                        self.scene.remove_entity(ent)
             self.scene = None
             self.system = None
             self.art = None
             self.links = {}
 
-    def __enter__(self):
-        return self
 
-    def __exit__(self, *exc):
-        self.close()
-
-
-def _open(urdf_path: Path, options: SessionOptions) -> PhysXSession:
-    return PhysXSession(urdf_path, options)
+def _open(urdf_path: Path, options: SessionOptions, scene=None, ground: bool = True) -> PhysXSession:
+    return PhysXSession(urdf_path, options, scene=scene, ground=ground)
 
 
 register_engine("physx", _open)

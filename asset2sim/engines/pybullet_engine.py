@@ -12,10 +12,6 @@ force is ``<dynamics friction>`` (Coulomb friction, SPEC).
 
 from __future__ import annotations
 
-import os
-import sys
-import threading
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -28,78 +24,51 @@ from asset2sim.engines.base import (
     HeldPhysics,
     SessionOptions,
     penetration_sum,
-    quiet_stdout,
     register_engine,
     register_shape_world,
     register_viewer,
 )
+from asset2sim.engines.quiet import quiet_fds, quiet_stdout, startup_quiet
+from asset2sim.engines.session_defaults import SessionDefaults
 
 _TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
 
 
-_QUIET_LOCK = threading.Lock()
-
-
-@contextmanager
-def quiet_fds():
-    """Silence Bullet's C-level prints (build time, b3Warning) on fd 1 and 2.
-
-    Process-wide (file descriptors), so serialized by a lock: two threads
-    swapping fd 1 at once could otherwise leave stdout pointing at /dev/null.
-    """
-    with _QUIET_LOCK:
-        for stream in (sys.stdout, sys.stderr):  # what Python buffered goes out first
-            try:
-                stream.flush()
-            except Exception:
-                pass
-        saved = []
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-        except OSError:  # pragma: no cover
-            yield
-            return
-        try:
-            for fd in (1, 2):
-                try:
-                    saved.append((fd, os.dup(fd)))
-                    os.dup2(devnull, fd)
-                except OSError:
-                    pass
-            yield
-        finally:
-            for fd, dup in saved:
-                os.dup2(dup, fd)
-                os.close(dup)
-            os.close(devnull)
-
-
 def _bullet():
-    import pybullet
+    with startup_quiet():  # its build-time line
+        import pybullet
 
     return pybullet
 
 
-class PyBulletSession:
-    """A :class:`~asset2sim.engines.base.SimSession` in PyBullet DIRECT mode."""
+class PyBulletSession(SessionDefaults):
+    """A :class:`~asset2sim.engines.base.SimSession` in PyBullet: its own
+    DIRECT client, or (``client``) the caller's, whose gravity and time step
+    are left as they are; ``ground`` False: no plane is added to the
+    caller's world (the object is still put with its lowest point on z = 0)."""
 
     engine = "pybullet"
 
-    def __init__(self, urdf_path: Path, options: SessionOptions):
+    def __init__(self, urdf_path: Path, options: SessionOptions, client: int | None = None, ground: bool = True):
         p = _bullet()
         self._p = p
         self.options = options
         self._root_hold: int | None = None  # hold_root's constraint
         conv = options.conventions
-        with quiet_stdout():
-            self.cid = p.connect(p.DIRECT)
+        self._owns_client = client is None
+        if client is None:
+            with quiet_stdout():
+                self.cid = p.connect(p.DIRECT)
+        else:
+            self.cid = int(client)
+        self.body = None
         try:
-            p.setTimeStep(conv.timestep, physicsClientId=self.cid)
-            p.setGravity(0, 0, conv.gravity if options.gravity else 0.0, physicsClientId=self.cid)
+            if self._owns_client:
+                p.setTimeStep(conv.timestep, physicsClientId=self.cid)
+                p.setGravity(0, 0, conv.gravity if options.gravity else 0.0, physicsClientId=self.cid)
             self.plane = None
-            if options.ground:
-                shape = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.cid)
-                self.plane = p.createMultiBody(0, shape, physicsClientId=self.cid)
+            if options.ground and ground:
+                self.plane = self._add_plane()
             flags = (
                 p.URDF_USE_SELF_COLLISION
                 | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
@@ -117,7 +86,7 @@ class PyBulletSession:
                     physicsClientId=self.cid,
                 )
         except Exception as exc:
-            p.disconnect(self.cid)
+            self._release()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
         self.base_link = p.getBodyInfo(self.body, physicsClientId=self.cid)[0].decode()
         self._link_by_index: dict[int, str] = {-1: self.base_link}
@@ -157,7 +126,21 @@ class PyBulletSession:
         self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}
         self.set_joint_positions(options.initial_state)
         if options.ground and not options.fixed_base:
-            self.place_on_ground()
+            if self.plane is None:  # the caller's floor: a plane only while the exact distances are measured
+                self.plane = self._add_plane()
+                try:
+                    self.place_on_ground()
+                finally:
+                    p.removeBody(self.plane, physicsClientId=self.cid)
+                    self.plane = None
+            else:
+                self.place_on_ground()
+
+    def _add_plane(self) -> int:
+        """A static plane at z = 0 (body id)."""
+        p = self._p
+        shape = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.cid)
+        return p.createMultiBody(0, shape, physicsClientId=self.cid)
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
@@ -341,20 +324,25 @@ class PyBulletSession:
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
+        for _ in range(n):
+            self.apply_passive_forces()
+            self._p.stepSimulation(physicsClientId=self.cid)
+
+    def apply_passive_forces(self) -> None:
+        """Each joint spring's torque (N*m) or force (N), ``-k (q - q_ref)``
+        at the current position, for the next ``stepSimulation`` (Bullet has
+        no joint spring; :meth:`step` calls this before every step)."""
         p = self._p
         springs = self.options.springs
-        for _ in range(n):
-            if springs:
-                q = self.joint_positions()
-                for name, spring in springs.items():
-                    j = self._index.get(name)
-                    if j is None:
-                        continue
-                    tau = -spring.stiffness * (q[name] - spring.reference)
-                    p.setJointMotorControl2(
-                        self.body, j, p.TORQUE_CONTROL, force=tau, physicsClientId=self.cid
-                    )
-            p.stepSimulation(physicsClientId=self.cid)
+        if not springs:
+            return
+        q = self.joint_positions()
+        for name, spring in springs.items():
+            j = self._index.get(name)
+            if j is None:
+                continue
+            tau = -spring.stiffness * (q[name] - spring.reference)
+            p.setJointMotorControl2(self.body, j, p.TORQUE_CONTROL, force=tau, physicsClientId=self.cid)
 
     def apply_joint_effort(self, name: str, effort: float) -> None:
         """Apply a generalized force (N*m or N) to a joint for the next step."""
@@ -453,21 +441,27 @@ class PyBulletSession:
         return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how=how, welded_to_world=welded)
 
     def close(self) -> None:
+        """Disconnect the session's own client; in a caller's client, remove
+        what the session added (the body, its plane, the root hold)."""
         if self.cid is not None:
             try:
-                self._p.disconnect(self.cid)
+                self._release()
             finally:
                 self.cid = None
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+    def _release(self) -> None:
+        p = self._p
+        if self._owns_client:
+            p.disconnect(self.cid)
+            return
+        self.release_root()
+        for body in (self.body, self.plane):
+            if body is not None:
+                p.removeBody(body, physicsClientId=self.cid)
 
     def __del__(self):  # pragma: no cover - best effort
         try:
-            if getattr(self, "cid", None) is not None:
+            if getattr(self, "cid", None) is not None and self._owns_client:
                 self._p.disconnect(self.cid)
         except Exception:
             pass
@@ -629,8 +623,8 @@ class PyBulletViewer:
             pass
 
 
-def _open(urdf_path: Path, options: SessionOptions) -> PyBulletSession:
-    return PyBulletSession(urdf_path, options)
+def _open(urdf_path: Path, options: SessionOptions, client: int | None = None, ground: bool = True) -> PyBulletSession:
+    return PyBulletSession(urdf_path, options, client, ground)
 
 
 register_engine("pybullet", _open)

@@ -25,6 +25,7 @@ from asset2sim.engines.base import (
     SimSession,
     Viewer,
 )
+from asset2sim.engines.quiet import startup_quiet
 
 __all__ = ["available_engines", "known_engines", "open_session", "open_shape_world", "open_viewer", "read_held_physics"]
 
@@ -89,22 +90,27 @@ def _factory(name: str) -> EngineFactory:
             raise KeyError(f"unknown engine {name!r}; known: {sorted(set(_ENGINES) | set(_LAZY))}")
         for package in _REQUIRES.get(name, ()):
             try:
-                importlib.import_module(package)
+                with startup_quiet():
+                    importlib.import_module(package)
             except ImportError as exc:  # optional extra missing
                 raise EngineUnavailable(f"engine {name!r} is not installed ({exc})") from exc
         importlib.import_module(module)
     return _ENGINES[name]
 
 
-def open_session(engine: str, urdf_path: Path | str, options: SessionOptions | None = None) -> SimSession:
+def open_session(engine: str, urdf_path: Path | str, options: SessionOptions | None = None, **attach) -> SimSession:
     """Open a :class:`SimSession` of ``urdf_path`` in ``engine``.
+
+    ``attach``: the caller's world to load into instead of a new one the
+    session owns (PyBullet: ``client`` id and ``ground``; PhysX: ``scene``).
 
     Raises:
         KeyError: unknown engine name.
         EngineUnavailable: the engine's package is not installed.
         RuntimeError: the engine failed to load the file.
+        TypeError: the engine cannot attach to a caller's world.
     """
-    return _factory(engine)(Path(urdf_path), options or SessionOptions())
+    return _factory(engine)(Path(urdf_path), options or SessionOptions(), **attach)
 
 
 def open_shape_world(engine: str = "pybullet") -> ShapeWorld:

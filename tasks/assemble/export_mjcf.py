@@ -17,7 +17,7 @@ those the folder's ownership record or completion marker lists
 (:mod:`asset2sim.output_folder`); in a folder without either,
 nothing is removed. The conversion is
 :func:`asset2sim.engines.mjcf.urdf_to_mjcf` (MuJoCo's own URDF
-import, then the fixes listed in ``docs/simulators.md``); here the result is
+import, then the fixes listed in ``docs/design/simulators.md``); here the result is
 written atomically and checked by loading the written file with MuJoCo:
 total mass equal to the URDF's (1e-6 relative), every body's mass, COM and
 inertia tensor equal to the URDF link's, the keyframe ``initial`` equal to

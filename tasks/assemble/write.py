@@ -14,33 +14,19 @@ written atomically; the input folder is never written.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass, field
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, frames, mesh_io, urdf
+from asset2sim import atomic, frames, urdf
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.assemble import collision_geometry
-from asset2sim.output_folder import (
-    EVALUATION_NAME,
-    MARKER_NAME,
-    OVERLAY_NAME,
-    RECORD_NAME,
-    REPORT_HTML_NAME,
-    REPORT_NAME,
-    STATE_NAME,
-    URDF_NAME,
-    OutputError,
-    check_location,
-)
+from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
+from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
 
 SEMANTICS_NAME = partnet_mobility.SEMANTICS_NAME
 
@@ -72,327 +58,17 @@ def check_output_folder(asset: AssetDescription, out_dir: Path) -> Path:
     return check_location(asset.source_dir, out_dir)
 
 
-def _inside(path: Path, root: Path, *, resolved: bool = False) -> bool:
-    """True when ``path`` lies inside ``root`` after resolving symlinks
-    (``resolved``: both are resolved already)."""
-    try:
-        (path if resolved else path.resolve()).relative_to(root if resolved else root.resolve())
-        return True
-    except ValueError:
-        return False
-
-
-def mesh_dependencies(mesh_path: Path, asset_root: Path) -> list[Path]:
-    """Files an OBJ mesh needs besides itself (MTL libraries and their texture
-    maps), as absolute paths inside ``asset_root``; missing or outside files are
-    skipped (visual only). Parsing: :func:`asset2sim.mesh_io.obj_material_files`."""
-    return mesh_io.obj_material_files(mesh_path, keep=lambda p: _inside(p, asset_root))
-
-
-#: output paths a copied input file may not take (the contract's own files)
-RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, REPORT_NAME, REPORT_HTML_NAME, EVALUATION_NAME, MARKER_NAME, RECORD_NAME})
-
-
-def _reference_dirs(filename: str) -> list[str]:
-    """Folders (relative POSIX paths) that must exist in the output for the
-    path ``filename`` as written to open there: every folder the path walks
-    through, also those it leaves again with ``..`` (``dir/../m.obj`` needs
-    ``dir``)."""
-    out: list[str] = []
-    cur: list[str] = []
-    for part in PurePosixPath(filename).parts[:-1]:
-        if part in ("", "."):
-            continue
-        if part == "..":
-            if cur:
-                cur.pop()
-            continue
-        cur.append(part)
-        out.append("/".join(cur))
-    return out
-
-
-#: Results of :func:`mesh_copies` kept per process (a refine writes its
-#: output several times; a long-lived stage server serves many assets):
-#: key -> (files it read, their stamps and their folders', copies). Bounded.
-_COPIES_CACHE: OrderedDict[tuple, tuple[list[Path], tuple, dict[str, Path]]] = OrderedDict()
-_COPIES_CACHE_SIZE = 32
-_COPIES_LOCK = threading.Lock()
-
-
-def _copies_key(asset: AssetDescription) -> tuple:
-    meshes = tuple(
-        (str(g.path), g.filename)
-        for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh" and g.path is not None
-    )  # fmt: skip
-    return str(asset.source_dir), str(asset.urdf_path), meshes
-
-
-def _stamps(files: list[Path]) -> tuple:
-    """(path, size, modification time ns, inode) of each file and of each
-    folder holding one (a file added, removed or renamed there changes the
-    folder's time); None for a path that cannot be read."""
-    out = []
-    for p in sorted({str(f) for f in files} | {str(Path(f).parent) for f in files}):
-        try:
-            st = os.stat(p)
-            out.append((p, st.st_size, st.st_mtime_ns, st.st_ino))
-        except OSError:
-            out.append((p, None, None, None))
-    return tuple(out)
-
-
-def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
-    """What :func:`copy_meshes` copies: output path (relative, POSIX, exactly
-    where the output URDF, the copied OBJ and MTL files will look for it) ->
-    the real input file. A mesh reached through a symlink inside the asset
-    folder is copied as a regular file at the referenced path; MTL files and
-    textures are placed relative to their mesh as the mesh looks for them
-    (an MTL that lies beside a symlinked mesh's real file and not beside the
-    link is placed beside the copy: :func:`beside_link_target`).
-
-    Finding the MTL libraries and textures reads every OBJ file (16-80 ms per
-    PartNet-Mobility asset, asked for 5-11 times per refine), so the answer
-    is kept per process, keyed by the asset's mesh references and checked
-    against the size, modification time and inode of every file it read and
-    of the folders holding them (an edited, added or replaced file computes
-    it again).
-
-    Raises:
-        OutputError: ``OUTPUT_OUTSIDE_INPUT`` (a file outside the asset
-            folder), ``OUTPUT_NAME_CONFLICT`` (two different input files for
-            one output path, or an input file named like a contract file).
-    """
-    key = _copies_key(asset)
-    with _COPIES_LOCK:
-        hit = _COPIES_CACHE.get(key)
-    if hit is not None and _stamps(hit[0]) == hit[1]:
-        return dict(hit[2])
-    read = [g.path for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh" and g.path is not None]
-    # the paths as written too: a library added beside a symlinked mesh changes where its material comes from
-    read += [asset.urdf_path.parent / g.filename for ln in asset.links for g in ln.visuals + ln.collisions
-             if g.kind == "mesh" and g.path is not None and g.filename]
-    copies = _mesh_copies(asset)
-    files = [*read, *copies.values()]
-    entry = (files, _stamps(files), dict(copies))
-    with _COPIES_LOCK:
-        _COPIES_CACHE[key] = entry
-        _COPIES_CACHE.move_to_end(key)
-        while len(_COPIES_CACHE) > _COPIES_CACHE_SIZE:
-            _COPIES_CACHE.popitem(last=False)
-    return copies
-
-
-def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
-    root = asset.source_dir.resolve()
-    base = asset.urdf_path.parent
-    copies: dict[str, Path] = {}
-
-    def add(rel: str, src: Path) -> None:  # src resolved
-        if not _inside(src, root, resolved=True):
-            raise OutputError(f"mesh {src} lies outside the asset folder {root}", "OUTPUT_OUTSIDE_INPUT", src)
-        rel = PurePosixPath(os.path.normpath(rel).replace(os.sep, "/")).as_posix()
-        if rel.startswith("../") or rel in ("..", ".") or rel.startswith("/"):
-            raise OutputError(f"{src} would be copied to {rel!r}, outside the output folder", "OUTPUT_OUTSIDE_INPUT", src)
-        if rel in RESERVED_NAMES:
-            raise OutputError(f"input file {src} would be copied onto the output's own {rel}", "OUTPUT_NAME_CONFLICT", src)
-        if copies.get(rel, src) != src:
-            raise OutputError(f"input files {copies[rel]} and {src} would both be copied to {rel}", "OUTPUT_NAME_CONFLICT", src)
-        copies[rel] = src
-
-    for ln in asset.links:
-        for g in ln.visuals + ln.collisions:
-            if g.kind != "mesh" or g.path is None:
-                continue
-            src = g.path.resolve()
-            rel = os.path.normpath(g.filename) if g.filename else os.path.relpath(src, root)
-            add(rel, src)
-            lexical = base / rel
-            lookup = os.path.realpath(lexical.parent)
-            deps = [(dep, lookup) for dep in mesh_dependencies(lexical, root)]
-            if str(src.parent) != lookup:  # a symlink into another folder
-                deps += [(dep, str(src.parent)) for dep in beside_link_target(lexical, src, root)]
-            for dep, folder in deps:
-                dep = dep.resolve()
-                dep_rel = os.path.normpath(os.path.join(os.path.dirname(rel), os.path.relpath(dep, folder)))
-                add(dep_rel if not dep_rel.startswith("..") else os.path.relpath(dep, root), dep)
-    return copies
-
-
-def beside_link_target(lexical: Path, real: Path, asset_root: Path) -> list[Path]:
-    """The material files of an OBJ reached through a symlink into another
-    folder (``lexical``: the path as the URDF writes it; ``real``: the file
-    it leads to) that lie beside the real file and not beside the link: each
-    ``mtllib`` the OBJ names that does not exist relative to the link's
-    folder but does relative to the real file's, with the texture maps it
-    names (relative to it), as resolved paths inside ``asset_root``.
-
-    The mesh's author put them beside the real OBJ; a loader opening the
-    link looks beside the link and draws the mesh without them. The output
-    copies the OBJ as a regular file at the link's path, so
-    :func:`mesh_copies` places these files relative to that copy as they lie
-    relative to the real file, and the copy finds its material (the
-    validator reports the input's case as ``MESH_MATERIAL_BESIDE_TARGET``).
-    Missing files, files outside ``asset_root`` and libraries that do exist
-    beside the link (those are the input's own choice) are left out."""
-    return mesh_io.obj_material_files(real, keep=lambda p: _inside(p, asset_root),
-                                      skip_library=lambda name: os.path.lexists(lexical.parent / name))
-
-
 def collision_folder(asset: AssetDescription) -> str:
     """Output folder name for generated collision pieces (convex
     decomposition) that no copied input file uses: ``collision``, or
     ``collision_1``, ``collision_2`` ... when the asset's own meshes live in
     a folder of that name."""
-    taken = set(mesh_copies(asset))
-    for ln in asset.links:
-        for g in ln.visuals + ln.collisions:
-            if g.kind == "mesh" and g.filename:
-                taken.update(_reference_dirs(g.filename))
+    taken = taken_paths(asset)
     for i in range(10_000):
         name = "collision" if i == 0 else f"collision_{i}"
         if not any(t == name or t.startswith(name + "/") for t in taken):
             return name
     raise OutputError(f"{asset.source_dir}: no free folder name for collision pieces", "OUTPUT_NAME_CONFLICT", asset.source_dir)
-
-
-_URI = ("file:", "http:", "https:", "ftp:", "package:", "data:")
-
-
-def reference_leaves_folder(ref: str, file_rel: str) -> bool:
-    """True when the path ``ref``, written in the output file ``file_rel``
-    (relative POSIX path inside the output folder), would be opened outside
-    the output folder: absolute, a URI (``file://``, ``package://`` ...), a
-    drive or NUL, or a relative path whose ``..`` leave the folder."""
-    r = ref.strip().strip('"')
-    if not r or "\x00" in r or r.startswith(("/", "\\")) or r.lower().startswith(_URI) or "://" in r:
-        return True
-    if len(r) > 1 and r[1] == ":":  # C:\x
-        return True
-    joined = os.path.normpath(os.path.join(os.path.dirname(file_rel), r.replace("\\", "/")))
-    return joined == ".." or joined.startswith("../") or os.path.isabs(joined)
-
-
-def _drop_outside_references(data: bytes, file_rel: str, names_of) -> tuple[bytes, list[str]]:
-    """``data`` with every line that names a file outside the output folder
-    (:func:`reference_leaves_folder`) replaced by a comment; ``names_of(line)``
-    gives the file names a line names (``mesh_io.mtl_texture_maps`` for an
-    MTL, ``mesh_io.mtl_libraries`` for an OBJ). Returns (bytes, dropped
-    statement keywords)."""
-    out: list[bytes] = []
-    dropped: list[str] = []
-    for line in data.splitlines(keepends=True):
-        names = names_of(line)
-        if names and any(reference_leaves_folder(n, file_rel) for n in names):
-            key = line.split(maxsplit=1)[0].decode("utf-8", "replace")
-            dropped.append(key)
-            end = b"\r\n" if line.endswith(b"\r\n") else (b"\n" if line.endswith(b"\n") else b"")
-            out.append(f"# asset2sim: a {key} statement naming a file outside the asset folder was dropped".encode() + end)
-        else:
-            out.append(line)
-    return b"".join(out), dropped
-
-
-def material_references(asset: AssetDescription, copies: dict[str, Path] | None = None) -> dict[str, str]:
-    """The copied files that name other files: output path -> ``"obj"`` (its
-    ``mtllib`` statements) or ``"mtl"`` (its texture statements), for the
-    OBJ meshes of the URDF and the MTL libraries they name (as the copies of
-    :func:`mesh_copies` place them)."""
-    copies = mesh_copies(asset) if copies is None else copies
-    kinds: dict[str, str] = {}
-    for ln in asset.links:
-        for g in ln.visuals + ln.collisions:
-            if g.kind != "mesh" or g.path is None or not g.filename:
-                continue
-            rel = PurePosixPath(os.path.normpath(g.filename).replace(os.sep, "/")).as_posix()
-            if rel not in copies or PurePosixPath(rel).suffix.lower() != ".obj":
-                continue
-            kinds[rel] = "obj"
-            try:
-                names = mesh_io.mtl_libraries(atomic.read_regular(copies[rel]))
-            except OSError:
-                continue
-            for name in names:
-                if reference_leaves_folder(name, rel):
-                    continue
-                mtl_rel = PurePosixPath(os.path.normpath(os.path.join(os.path.dirname(rel), name))).as_posix()
-                if mtl_rel in copies:
-                    kinds.setdefault(mtl_rel, "mtl")
-    return kinds
-
-
-def copied_bytes(src: Path, rel: str, kind: str | None) -> bytes:
-    """What the output holds at ``rel`` for the input file ``src``: its bytes,
-    for an OBJ (``kind="obj"``) or MTL (``"mtl"``) with every ``mtllib`` /
-    texture statement that names a file outside the asset folder (absolute,
-    URI, ``..`` leaving it) replaced by a comment, so the output never makes a
-    simulator (PyBullet, SAPIEN, MuJoCo) open a file outside it; the
-    validator reports such statements (``MESH_MATERIAL_OUTSIDE``)."""
-    data = atomic.read_regular(src)
-    edited = _edited_copy(data, rel, kind)
-    return data if edited is None else edited
-
-
-def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
-    """:func:`copied_bytes` of ``data`` when a statement was dropped, else None."""
-    if kind not in ("obj", "mtl"):
-        return None
-    if kind == "obj" and b"mtllib" not in data:  # fast path for large meshes
-        return None
-    new, dropped = _drop_outside_references(data, rel, mesh_io.mtl_libraries if kind == "obj" else mesh_io.mtl_texture_maps)
-    return new if dropped else None
-
-
-def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
-    """Copy every mesh the URDF references (and its MTL/textures) into
-    ``out_dir`` at the paths of :func:`mesh_copies` (regular files, never
-    links), creating the folders a referenced path walks through.
-
-    OBJ and MTL copies lose the statements that name files outside the asset
-    folder (:func:`copied_bytes`); every other file is copied byte for byte.
-
-    Returns the destination paths. Files already present with the same
-    content (and not symlinks) are not rewritten; they are announced to the
-    atomic writer's observers as kept (:func:`asset2sim.atomic.announce`).
-
-    Raises:
-        OutputError: see :func:`mesh_copies`.
-        OSError: a file cannot be read or written.
-    """
-    copies = mesh_copies(asset)
-    kinds = material_references(asset, copies)
-    out_dir = Path(out_dir)
-    out: list[Path] = []
-    todo: list[tuple[Path, Path]] = []
-    edited: list[tuple[Path, bytes]] = []
-    kept: list[Path] = []
-    for rel, src in sorted(copies.items()):
-        dst = out_dir / rel
-        data = _edited_copy(atomic.read_regular(src), rel, kinds[rel]) if rel in kinds else None  # None: a plain copy
-        size = len(data) if data is not None else src.stat().st_size
-        same = (
-            dst.is_file() and not dst.is_symlink() and dst.stat().st_size == size
-            and atomic.sha256_file(dst) == (atomic.sha256_file(src) if data is None else hashlib.sha256(data).hexdigest())
-        )
-        if same:
-            kept.append(dst)
-        elif data is None:
-            todo.append((src, dst))
-        else:
-            edited.append((dst, data))
-        out.append(dst)
-    # every destination announced at once: an output folder's owner records them
-    # in one write of its record instead of one per edited file
-    atomic.announce([*kept, *(d for _, d in todo), *(d for d, _ in edited)])
-    atomic.copy_files(todo)
-    for dst, data in edited:
-        atomic.write_bytes(dst, data)
-    for ln in asset.links:
-        for g in ln.visuals + ln.collisions:
-            if g.kind == "mesh" and g.filename:
-                for d in _reference_dirs(g.filename):
-                    (out_dir / d).mkdir(parents=True, exist_ok=True)
-    return out
 
 
 def build_urdf(
@@ -426,7 +102,7 @@ def build_urdf(
     :func:`asset2sim.tasks.assemble.collision_geometry.convex_collisions`,
     written into the folder (every engine loads them; a free-standing
     object's footprint levelled,
-    :func:`asset2sim.tasks.assemble.collision_geometry.level_footprint`);
+    :func:`asset2sim.tasks.assemble.footprint.level_footprint`);
     their notes (what the pieces changed) are appended to
     ``collision_notes`` when given.
 
@@ -439,23 +115,42 @@ def build_urdf(
     model = urdf.read_urdf(asset.urdf_path, mode="lenient")
     model.extensions = []
     model.name = model.name or ""
-    overrides = collision_overrides or {}
+    _replace_collisions(model, collision_overrides or {})
+    urdf.scale_model(model, s, joints=False, inertials=False)
+    _set_inertials(model, overlay)
+    if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
+        _rotate_root(model, asset.root_link, root_rotation)
+    urdf.scale_model(model, s, geometry=False, inertials=False)
+    _set_joints(model, overlay)
+    urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
+    if collision_out is not None:
+        free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
+        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free)
+        if collision_notes is not None:
+            collision_notes.extend(notes)
+    return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))
+
+
+def _replace_collisions(model: urdf.UrdfModel, overrides: dict) -> None:
+    """Drop every link's ``<contact>``; the mesh collisions of each link in ``overrides`` (link -> pieces) become its
+    pieces' meshes."""
     for link in model.links.values():
         link.contact = {}
         pieces = overrides.get(link.name)
         if pieces:
             kept = [c for c in link.collisions if c.kind != "mesh"]
             for piece in pieces:
-                kept.append(
-                    urdf.UrdfGeometry(
-                        kind="mesh",
-                        origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
-                        filename=piece.filename,
-                        mesh_scale=np.asarray(piece.source.scale, float),
-                    )
-                )
+                kept.append(urdf.UrdfGeometry(kind="mesh", origin=frames.pose_matrix(piece.source.origin.xyz, piece.source.origin.rpy),
+                                              filename=piece.filename, mesh_scale=np.asarray(piece.source.scale, float)))
             link.collisions = kept
-    urdf.scale_model(model, s, joints=False, inertials=False)
+
+
+def _set_inertials(model: urdf.UrdfModel, overlay: Overlay) -> None:
+    """Every link's ``<inertial>`` from ``overlay`` (none on a link without geometry or overlay entry).
+
+    Raises:
+        OutputError: the overlay lacks a link that has geometry.
+    """
     for link in model.links.values():
         lp = overlay.links.get(link.name)
         if lp is None:
@@ -464,18 +159,29 @@ def build_urdf(
             link.inertial = None
             continue
         link.inertial = urdf.UrdfInertial(mass=float(lp.mass), origin=frames.translation_matrix(lp.com), inertia=lp.inertia.matrix())
-    if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
-        T = np.eye(4)
-        T[:3, :3] = np.asarray(root_rotation, float)
-        for joint in model.children(asset.root_link):
-            joint.origin = T @ joint.origin
-        root = model.links.get(asset.root_link)
-        if root is not None:
-            for elem in root.visuals + root.collisions:
-                elem.origin = T @ elem.origin
-            if root.inertial is not None:
-                root.inertial.origin = T @ root.inertial.origin
-    urdf.scale_model(model, s, geometry=False, inertials=False)
+
+
+def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) -> None:
+    """Bake the (3, 3) ``rotation`` into the root link's geometry and inertial and the joints hanging from it."""
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(rotation, float)
+    for joint in model.children(root_link):
+        joint.origin = T @ joint.origin
+    root = model.links.get(root_link)
+    if root is not None:
+        for elem in root.visuals + root.collisions:
+            elem.origin = T @ elem.origin
+        if root.inertial is not None:
+            root.inertial.origin = T @ root.inertial.origin
+
+
+def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> None:
+    """Every joint without ``<mimic>``, ``<calibration>``, ``<safety_controller>`` and with an explicit axis; every
+    movable one with the overlay's ``<dynamics>`` and limits and a complete ``<limit>`` (effort, velocity 1000).
+
+    Raises:
+        OutputError: the overlay lacks a movable joint.
+    """
     for joint in model.joints:
         joint.mimic = joint.calibration = joint.safety_controller = None
         if joint.axis_xyz is None:
@@ -495,14 +201,12 @@ def build_urdf(
                 joint.limit.lower = float(dyn.lower)
             if dyn.upper is not None:
                 joint.limit.upper = float(dyn.upper)
-    urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
-    if collision_out is not None:
-        free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
-        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free)
-        if collision_notes is not None:
-            collision_notes.extend(notes)
+
+
+def _urdf_comment(s: float, overlay: Overlay) -> str:
+    """The URDF's comment: the scale ``s`` baked in, where the state, the springs and the notes are, how the root is held."""
     springs = {n: (d.stiffness, d.spring_reference) for n, d in overlay.joints.items() if d.stiffness > 0}
-    comment = (
+    return (
         f" Written by asset2sim. Uniform scale {s!r} is baked in (mesh scale, origins, prismatic limits, inertials); "
         f"load at scale 1.0. Initial joint positions (rad / m): see {STATE_NAME} (URDF has no field for them). "
         f"Joint stiffness, spring references and the reasoning notes: see {OVERLAY_NAME}"
@@ -510,7 +214,6 @@ def build_urdf(
         + ". "
         + root_sentence(overlay.mounting)
     )
-    return urdf.write_urdf(model, comment=comment)
 
 
 def write_output(

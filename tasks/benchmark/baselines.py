@@ -20,7 +20,7 @@ saying how it was made (``method``, ``scale``, rules used, notes).
   values times the scale). Initial state: the lower end of
   ``joint_position_range`` (prismatic times the scale), else 0, clipped to the
   limits, which is exactly the reference state the evaluation compares
-  against (see ``docs/metrics.md`` for why).
+  against (see ``docs/design/metrics.md`` for why).
 - ``direct``: one estimator call applied as is (no validation, no state
   refinement, no post-check), on the refine pipeline's estimation context
   (``asset2sim.tasks.synthesize.context``) through the estimator registry
@@ -52,7 +52,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks import refine
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, read_manifest
-from asset2sim.tasks.assemble import write
+from asset2sim.tasks.assemble import copied_meshes, write
 from asset2sim.tasks.synthesize import backends, estimate
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.urdf import UrdfLimit, read_urdf, scale_model, write_urdf
@@ -160,7 +160,7 @@ def scale_urdf(
                 g.filename = str(mesh_src)
     dst_dir = Path(dst).parent
     for mesh_src in sorted(to_copy):
-        for f in [mesh_src] + write.mesh_dependencies(mesh_src, src.parent):
+        for f in [mesh_src] + copied_meshes.mesh_dependencies(mesh_src, src.parent):
             out = dst_dir / f.relative_to(src.parent)
             if not (out.is_file() and sha256_file(out) == sha256_file(f)):
                 copy_file(f, out)

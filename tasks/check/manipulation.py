@@ -7,7 +7,7 @@ as the asset declares: skipped for a mounted asset) and returns their
 :class:`~asset2sim.schemas.report.MetricResult` s; :func:`joints_not_held`
 names the joints robust rest found leaving their state, which escalation
 gives more friction and damping (never a different state). Definitions:
-``docs/metrics.md``.
+``docs/design/metrics.md``.
 """
 
 from __future__ import annotations

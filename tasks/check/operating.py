@@ -7,16 +7,16 @@ makes parts nobody can open (a laptop screen needing 4 N*m, a drawer needing
 bounds the friction by what the probe (:mod:`asset2sim.tasks.check.probes`),
 the evaluation's stand-in for a hand or a robot's gripper, can apply.
 
-Definitions (SI units; ``docs/metrics.md``, section "Operable friction"):
+Definitions (SI units; ``docs/design/metrics.md``, section "Operable friction"):
 
 - Operating force F_max = max(``min_force``, ``force_factor`` * M g): the
-  probe's force limit (:class:`asset2sim.tasks.check.probes.ProbeConfig`;
+  probe's force limit (:class:`asset2sim.tasks.check.pusher.ProbeConfig`;
   ``min_force`` 22.2 N = 5 lbf, the 2010 ADA Standards for Accessible Design,
   section 309.4, the largest force an operable part may need), M the total
   mass of the object (kg), g = 9.81 m/s^2.
 - Lever r (revolute joints): the distance from the joint axis to where the
   probe pushes: the corner of the child link's box farthest from the axis
-  (:func:`asset2sim.tasks.check.probes._push_geometry` uses the world box of
+  (:func:`asset2sim.tasks.check.pusher.push_geometry` uses the world box of
   the engine; here the box in the link's own frame,
   :class:`asset2sim.schemas.asset.LinkGeometry`, times the overlay's scale).
   Operating effort E = F_max r (N*m); prismatic joints: E = F_max (N).
@@ -40,19 +40,24 @@ Definitions (SI units; ``docs/metrics.md``, section "Operable friction"):
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, quiet_stdout
+from asset2sim.engines.base import SimSession
+from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
-from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.check.force_ranges import operating_range
-from asset2sim.tasks.check.gripper import GripperLimits, contact_point_rule, grasp_side
-from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, ProbeConfig
+from asset2sim.schemas.overlay import JointDynamics, Overlay
+from asset2sim.tasks.check.blockers import fixed_root_options
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side, joint_frame_axis, subtree
+from asset2sim.tasks.check.force_ranges import ForceRange, operating_range
+from asset2sim.tasks.check.gripper import GripperLimits
+from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
+from asset2sim.tasks.check.pusher import ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import max_stable_friction
 from asset2sim.urdf import UrdfModel, read_urdf
@@ -142,16 +147,10 @@ def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, ge
         KeyError: a joint of ``overlay`` is not in ``asset``.
     """
     caps: dict[str, float] = {}
-    for name, d in overlay.joints.items():
-        jd = asset.joint(name)
-        if jd.type not in ("revolute", "continuous", "prismatic"):
-            continue
-        sub_mass = sum(overlay.links[ln].mass for ln in subtree_links(asset, jd.child) if ln in overlay.links)
-        load = sub_mass * GRAVITY * (1.0 if jd.type == "prismatic" else com_lever(overlay, asset, name))
-        cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry, config) - load
+    for name, d, sub_mass, lever, floor in _movable(overlay, before, asset):
+        cap = OPERABLE_SHARE * operating_effort(overlay, asset, name, geometry, config) - sub_mass * GRAVITY * lever
         if d.inertia_axis:  # above it the engine's friction motor locks the joint (a light handle)
             cap = min(cap, max_stable_friction(d.inertia_axis))
-        floor = before.joints[name].friction if name in before.joints else d.friction
         caps[name] = float(max(cap, floor))
     return caps
 
@@ -164,22 +163,27 @@ def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
     """
-    floors: dict[str, float] = {}
+    return {name: float(base + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
+            for name, _, sub_mass, lever, base in _movable(overlay, before, asset)}
+
+
+def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iterator[tuple[str, JointDynamics, float, float, float]]:
+    """(joint, its dynamics, the mass its subtree moves, kg, the lever to its
+    child's center of mass, m (1 for prismatic), its friction in ``before``,
+    N*m or N) per movable joint of ``overlay``. Raises KeyError as the callers."""
     for name, d in overlay.joints.items():
         jd = asset.joint(name)
         if jd.type not in ("revolute", "continuous", "prismatic"):
             continue
         sub_mass = sum(overlay.links[ln].mass for ln in subtree_links(asset, jd.child) if ln in overlay.links)
         lever = 1.0 if jd.type == "prismatic" else com_lever(overlay, asset, name)
-        base = before.joints[name].friction if name in before.joints else d.friction
-        floors[name] = float(base + TILT_MARGIN * sub_mass * GRAVITY * lever * np.sin(abs(tilt)))
-    return floors
+        yield name, d, sub_mass, lever, (before.joints[name].friction if name in before.joints else d.friction)
 
 
 # ------------------------------------------------------------------ operating budget
 #: Coulomb friction between a free object and the ground (dimensionless): the
 #: SPEC ground friction of task execution (PyBullet's default lateral friction
-#: 0.5 of the link times the plane's 0.5; ``docs/metrics.md``, "task_execution" 1),
+#: 0.5 of the link times the plane's 0.5; ``docs/design/metrics.md``, "task_execution" 1),
 #: or 0.5 x the ``<contact><lateral_friction>`` a link writes.
 GROUND_FRICTION = 0.25
 #: Share of the allowed operating force that friction, damping at the
@@ -228,25 +232,11 @@ class OperatingBudget:
     state, 0 where the request asks the parts to move freely"""
 
 
-def _subtree(model: UrdfModel, link: str) -> list[str]:
-    out, stack = [], [link]
-    while stack:
-        n = stack.pop()
-        if n in out:
-            continue
-        out.append(n)
-        stack.extend(j.child for j in model.children(n))
-    return out
-
-
 def _gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
     """Generalised gravity force Q on ``joint`` (N m or N; > 0 pushes q up)
     of the links ``links`` at the session's state: a . sum((c_i - o) x m_i g)
     (revolute) or a . sum(m_i g) (prismatic), c_i the centres of mass."""
-    child = session.joint_child[joint]
-    o, R = session.link_frame(child)
-    a = np.asarray(R, float) @ np.asarray(session.joint_axis(joint), float)
-    a = a / max(float(np.linalg.norm(a)), 1e-12)
+    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     g = np.array([0.0, 0.0, -GRAVITY])
     q = 0.0
     for ln in links:
@@ -288,10 +278,10 @@ def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overla
     """The operating budget of every movable joint of ``closed`` in the written
     asset ``urdf`` at ``state``: how much friction and damping the task's
     gripper (:mod:`asset2sim.tasks.check.task_execution`) can overcome with a
-    real operating force. Definitions (``docs/metrics.md``, "Operable friction"):
+    real operating force. Definitions (``docs/design/metrics.md``, "Operable friction"):
 
-    - Grasp as the task: the side (:func:`~asset2sim.tasks.check.gripper.grasp_side`),
-      the contact point (:func:`~asset2sim.tasks.check.gripper.contact_point_rule`),
+    - Grasp as the task: the side (:func:`~asset2sim.tasks.check.contact_points.grasp_side`),
+      the contact point (:func:`~asset2sim.tasks.check.contact_points.contact_point_rule`),
       its lever r from the axis (revolute).
     - Path: the task's actions (close / open) from the state (or the far side
       where the state already meets the target) to the target fraction,
@@ -339,95 +329,146 @@ def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overla
     model = read_urdf(urdf, mode="lenient")
     mu = ground_friction(model)
     out: dict[str, OperatingBudget] = {}
-    opts = SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=dict(state),
-                          conventions=conventions or SimConventions())
     with quiet_stdout():
-        session = open_session(engine, urdf, opts)
+        session = open_session(engine, urdf, fixed_root_options(state, conventions))
     try:
         total = sum(float(m) for m in session.link_masses().values())
         for name, (qc, d, rng) in closed.items():
             if name not in session.joint_child or name not in overlay.joints or not rng > 0:
                 continue
-            jtype = session.joint_types[name]
-            if jtype not in ("revolute", "continuous", "prismatic"):
+            if session.joint_types[name] not in ("revolute", "continuous", "prismatic"):
                 continue
-            session.set_joint_positions(dict(state))
-            side = grasp_side(session, name, model, root_fixed=not free)
-            link, point, rule = contact_point_rule(session, name, model, opening_direction=d, side=side)
+            grasp = _grasp(session, model, name, d, state, free)
             child = session.joint_child[name]
-            moving = _subtree(model, child)
-            if side == "parent":  # the gripper moves the rest of the object: same relative motion
-                moving = [ln for ln in session.link_names if ln not in moving]
-            rng_, where = operating_range(category, labels.get(child) if side == "child" else None)
-            f_state = float(d * (state.get(name, qc) - qc) / rng)
-            lever = None
-            best: tuple[float, float, str] | None = None  # (budget, force, bound)
-            q_state = None
-            for action in actions:
-                s_motion = (-d if action == "close" else d) * (1.0 if side == "child" else -1.0)
-                for f in _task_path(f_state, action):
-                    session.set_joint_positions({**state, name: qc + d * f * rng})
-                    o, R = session.link_frame(child)
-                    a = np.asarray(R, float) @ np.asarray(session.joint_axis(name), float)
-                    a = a / max(float(np.linalg.norm(a)), 1e-12)
-                    lo, Rl = session.link_frame(link)
-                    p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(point, float)
-                    if jtype == "prismatic":
-                        t = a
-                    else:
-                        rv = (p - o) - float((p - o) @ a) * a
-                        lever = max(float(np.linalg.norm(rv)), 1e-3)
-                        t = np.cross(a, p - o)
-                    nt = max(float(np.linalg.norm(t)), 1e-12)
-                    force, bound = float("inf"), ""
-                    if rng_.force_n is not None:
-                        force, bound = rng_.force_n[1], f"force range of {where}"
-                    if rng_.torque_nm is not None and lever is not None and rng_.torque_nm[1] / lever < force:
-                        force, bound = rng_.torque_nm[1] / lever, f"torque range of {where}"
-                    hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
-                    horiz = float(np.linalg.norm(t[:2])) / nt
-                    down = max(0.0, -s_motion * float(t[2]) / nt)  # a push with a downward part loads the ground more
-                    if free and ground and abs(float(t[2])) / nt < vertical_share and horiz - mu * down > 0:
-                        fg = mu * total * GRAVITY / (horiz - mu * down)
-                        if fg < force:
-                            force, bound = fg, f"ground friction mu={mu:g} of the free object (M={total:.3g} kg)"
-                    qg = _gravity_force(session, model, name, moving)
-                    if q_state is None:
-                        q_state = abs(_state_gravity(session, model, name, moving, state))
-                    b = hand + qg * s_motion
-                    if best is None or b < best[0]:
-                        best = (b, best[1] if best else float("inf"), best[2] if best else "")
-                    if force < best[1]:
-                        best = (best[0], force, bound)
+            rng_, where = operating_range(category, labels.get(child) if grasp.side == "child" else None)
+            best, lever, q_state = _tightest(session, model, name, (qc, d, rng), state, actions, grasp, rng_, where,
+                                             (mu, total) if free and ground else None, vertical_share)
             session.set_joint_positions(dict(state))
-            if best is None:
-                continue
-            budget, force, bound = best
-            speed = lim.max_speed_m_s / lever if lever is not None else lim.max_speed_m_s
-            fcap = FRICTION_SHARE * max(budget, 0.0)
-            dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
-            conflict = ""
-            floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
-            if fcap < floor:
-                conflict = (f"{name}: the operating budget {max(budget, 0.0):.3g} {'N' if jtype == 'prismatic' else 'N m'} "
-                            f"({bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
-                fcap = floor
-            inertia = overlay.joints[name].inertia_axis
-            if inertia:
-                fcap = min(fcap, max_stable_friction(inertia))
-            out[name] = OperatingBudget(joint=name, joint_type=jtype, link=link, rule=rule, lever=lever, force_n=float(force),
-                                        bound=bound, budget=float(budget), speed=float(speed),
-                                        gravity_state=float(q_state or 0.0), friction_cap=float(fcap),
-                                        damping_cap=float(dcap), conflict=conflict, hold_floor=float(floor))
+            if best is not None:
+                out[name] = _budget(name, session.joint_types[name], grasp, lever, best, q_state, lim, free_moving,
+                                    overlay.joints[name].inertia_axis)
     finally:
         session.close()
     return out
 
 
-def _state_gravity(session: SimSession, model: UrdfModel, joint: str, links: list[str], state: dict[str, float]) -> float:
-    """:func:`_gravity_force` at ``state`` (the session is left there)."""
+@dataclass(frozen=True)
+class _Grasp:
+    """Where the task's gripper grasps a joint: ``side`` and ``rule`` of
+    :func:`~asset2sim.tasks.check.contact_points.contact_point_rule`, the
+    grasp ``point`` (3,) m in ``link``'s frame, and the links it moves."""
+
+    side: str
+    link: str
+    point: np.ndarray
+    rule: str
+    moving: list[str]
+
+
+def _grasp(session: SimSession, model: UrdfModel, joint: str, direction: float, state: dict[str, float],
+           free: bool) -> _Grasp:
+    """The task's grasp of ``joint`` at ``state`` (the session is set there)."""
     session.set_joint_positions(dict(state))
-    return _gravity_force(session, model, joint, links)
+    side = grasp_side(session, joint, model, root_fixed=not free)
+    link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
+    moving = subtree(model, session.joint_child[joint])
+    if side == "parent":  # the gripper moves the rest of the object: same relative motion
+        moving = [ln for ln in session.link_names if ln not in moving]
+    return _Grasp(side, link, point, rule, moving)
+
+
+def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
+              state: dict[str, float], actions: tuple[str, ...], grasp: _Grasp, rng_: ForceRange, where: str,
+              ground: tuple[float, float] | None, vertical_share: float
+              ) -> tuple[tuple[float, float, str] | None, float | None, float | None]:
+    """Over the samples of the task's paths (:func:`_task_path`): ((smallest
+    budget B, N m or N; smallest allowed force F, N; what bounds that F), the
+    grasp point's lever at the last sample, m (None: prismatic), |Q| at
+    ``state``, N m or N); (None, None, None) without samples. ``ground``:
+    (mu, the whole mass M kg) where the ground bound applies, else None."""
+    qc, d, rng = closed
+    prismatic = session.joint_types[joint] == "prismatic"
+    f_state = float(d * (state.get(joint, qc) - qc) / rng)
+    lever = None
+    best: tuple[float, float, str] | None = None  # (budget, force, bound)
+    q_state = None
+    for action in actions:
+        s_motion = (-d if action == "close" else d) * (1.0 if grasp.side == "child" else -1.0)
+        for f in _task_path(f_state, action):
+            session.set_joint_positions({**state, joint: qc + d * f * rng})
+            t, nt, lever = _grasp_motion(session, joint, grasp, prismatic)
+            force, bound = _range_force(rng_, where, lever)
+            hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
+            fg = _ground_force(t, nt, s_motion, *ground, vertical_share) if ground is not None else None
+            if fg is not None and fg < force:
+                force, bound = fg, f"ground friction mu={ground[0]:g} of the free object (M={ground[1]:.3g} kg)"
+            qg = _gravity_force(session, model, joint, grasp.moving)
+            if q_state is None:
+                session.set_joint_positions(dict(state))
+                q_state = abs(_gravity_force(session, model, joint, grasp.moving))
+            b = hand + qg * s_motion
+            if best is None or b < best[0]:
+                best = (b, best[1] if best else float("inf"), best[2] if best else "")
+            if force < best[1]:
+                best = (best[0], force, bound)
+    return best, lever, q_state
+
+
+def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool) -> tuple[np.ndarray, float, float | None]:
+    """(direction t (3,) of the grasp point's motion as q grows, |t| (at
+    least 1e-12), the grasp point's distance from the axis, at least 1e-3 m
+    (None: prismatic)) at the session's state."""
+    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
+    lo, Rl = session.link_frame(grasp.link)
+    p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(grasp.point, float)
+    if prismatic:
+        return a, max(float(np.linalg.norm(a)), 1e-12), None
+    rv = (p - o) - float((p - o) @ a) * a
+    t = np.cross(a, p - o)
+    return t, max(float(np.linalg.norm(t)), 1e-12), max(float(np.linalg.norm(rv)), 1e-3)
+
+
+def _range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
+    """(the upper end of the force range of ``where``, or of its torque
+    range / ``lever`` where smaller, N (inf without either); what set it)."""
+    force, bound = float("inf"), ""
+    if rng_.force_n is not None:
+        force, bound = rng_.force_n[1], f"force range of {where}"
+    if rng_.torque_nm is not None and lever is not None and rng_.torque_nm[1] / lever < force:
+        force, bound = rng_.torque_nm[1] / lever, f"torque range of {where}"
+    return force, bound
+
+
+def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float, vertical_share: float) -> float | None:
+    """mu M g / (h - mu v), N: the force along the motion ``s_motion`` ``t`` (|t| =
+    ``nt``) whose horizontal share h the ground friction ``mu`` of the free
+    object of ``total`` mass M (kg) still resists, v its downward share; None
+    where the gripper presses or lifts (``vertical_share``) or h <= mu v."""
+    horiz = float(np.linalg.norm(t[:2])) / nt
+    down = max(0.0, -s_motion * float(t[2]) / nt)  # a push with a downward part loads the ground more
+    if abs(float(t[2])) / nt < vertical_share and horiz - mu * down > 0:
+        return mu * total * GRAVITY / (horiz - mu * down)
+    return None
+
+
+def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str],
+            q_state: float | None, lim: GripperLimits, free_moving: bool, inertia: float | None) -> OperatingBudget:
+    """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`)."""
+    budget, force, bound = best
+    speed = lim.max_speed_m_s / lever if lever is not None else lim.max_speed_m_s
+    fcap = FRICTION_SHARE * max(budget, 0.0)
+    dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
+    conflict = ""
+    floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
+    if fcap < floor:
+        conflict = (f"{name}: the operating budget {max(budget, 0.0):.3g} {'N' if jtype == 'prismatic' else 'N m'} "
+                    f"({bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
+        fcap = floor
+    if inertia:
+        fcap = min(fcap, max_stable_friction(inertia))
+    return OperatingBudget(joint=name, joint_type=jtype, link=grasp.link, rule=grasp.rule, lever=lever, force_n=float(force),
+                           bound=bound, budget=float(budget), speed=float(speed), gravity_state=float(q_state or 0.0),
+                           friction_cap=float(fcap), damping_cap=float(dcap), conflict=conflict, hold_floor=float(floor))
 
 
 def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tuple[Overlay, list[str]]:

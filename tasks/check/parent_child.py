@@ -25,14 +25,14 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.assemble.collision_geometry import CONTAINMENT_TOLERANCE
+from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE
 
 __all__ = ["CONTACT_MARGIN", "parent_child_penetration"]
 
 #: Distance (m) an engine's closest-point query reports for two convex
 #: pieces that touch, per engine: PyBullet's convex hulls carry a 1 mm
 #: collision margin each, so touching hulls read -2 mm (measured,
-#: docs/simulators.md "Contact margins"); MuJoCo's ``mj_geomDistance`` and
+#: docs/design/simulators.md "Contact margins"); MuJoCo's ``mj_geomDistance`` and
 #: the fake engine use the geometry itself.
 CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0, "fake": 0.0}
 

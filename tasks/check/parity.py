@@ -14,7 +14,7 @@ rows, :func:`worst_case` into the verdict over all engines that ran (what
 Penetration values are each engine's own contact query and are not equal
 across engines even for the same geometry (PyBullet adds its 1 mm collision
 margin per shape and reports few points per pair; PhysX and MuJoCo report up
-to four points per touching face pair); see ``docs/simulators.md``.
+to four points per touching face pair); see ``docs/design/simulators.md``.
 """
 
 from __future__ import annotations

@@ -8,18 +8,13 @@ would, while **the other hand holds the body**: by default
 (``ProbeConfig.hold_body``) the equal and opposite force acts on the root link
 at the same point, so the push is internal to the object; and a body light
 enough for a hand to lift (weight <= ``ProbeConfig.hold_force``, 22.2 N, the
-ADA's 5 lbf below) is gripped: the root is held where it settled by a
+ADA's 5 lbf: ``pusher``) is gripped: the root is held where it settled by a
 bounded hold (``SimSession.hold_root``: a fixed constraint to the world of at
 most that force) through the push and the observation after release, as when
 a person holds a USB stick while swivelling its cover or a pocket knife while
-opening its blade. Why the grip as well as the reaction: the reaction cancels
-the push but not the forces from outside the object that the part's motion
-brings (the ground's friction on a cover dragged over the table) nor the
-reaction to the part's angular momentum (a blade swung about a vertical
-axis yaws the handle); on light objects they slid or turned the body 5 mm /
-0.05 rad while the part moved freely (``tests/tasks/check/test_probes.py``, a
-USB-sized swivel: 5 g stick, 15 g cover; generated USB stick and pocket
-knife of the unseen-category runs). A heavier object stands on its own and
+opening its blade (the reaction alone cancels the push but not the ground's
+friction on a cover dragged over the table nor the reaction to a blade's
+angular momentum, which slid or turned light bodies). A heavier object stands on its own and
 a hand only steadies it: the reaction alone, so a part that drags on the
 floor and pulls the body along still fails (a door modelled flush with the
 floor: ``tasks.state.ground_clearance``). The object counts as moved when
@@ -32,49 +27,10 @@ note).
 ``hold_body=False`` gives the external push (the pusher alone; the object's
 ground friction must resist it).
 
-Definitions (re-derivable; see ``docs/metrics.md``):
+Definitions (re-derivable; see ``docs/design/metrics.md``):
 
-- Push point c: for a revolute joint the corner of the moving link's collision
-  AABB (world, m) farthest from the axis (where a hand or a gripper opens a
-  lid, a door or a handle: the issue's "point of the moving link farthest
-  from the axis"); for a prismatic joint the AABB's centre. For a
-  revolute joint with axis a (unit, world) through the link frame origin o, the
-  lever r = (c - o) - ((c - o).a) a; the push direction is +-(a x r)/|a x r|
-  and the generalised torque is F |r|. For a prismatic joint the direction is
-  +-a. The sign points from the current position towards the target.
-- Force law (a hand moving at v_des, coupled to the part by a spring-damper,
-  the impedance model of a hand or a gripper): the hand runs ahead of the push
-  point by s, s_{k+1} = clip(s_k + (v_des - v) dt, 0, F_max / k), and pushes
-  with F = clip(k s + c (v_des - v), 0, F_max); v the speed of the push point
-  along the direction (m/s), v_des = ``push_speed``. A stuck joint sees the
-  force ramp to F_max in F_max / (k v_des) s; a free one is pushed at about
-  v_des without overshoot.
-- Stiffness k = min(F_max / (v_des * ramp_time), m_eff omega^2) and damping
-  c = 2 sqrt(k m_eff) (critical damping of the hand-part spring), omega =
-  ``PUSHER_OMEGA_DT`` / dt: the spring acts explicitly on the engine's step dt,
-  and a stiffness set by the whole object's weight made a light part (a
-  toilet's flush lever, 5 g of effective mass on a 50 kg toilet) jump 0.14 rad
-  in one step, slam into its stop and bounce back. With omega dt = 0.25 and
-  critical damping the step is stable for an effective mass up to 4 times below
-  m_eff (explicit step of a spring-damper: |z| < 1 for the characteristic
-  polynomial z^2 - (2 - a) z + (1 - a + b), a = c dt / m, b = k dt^2 / m, iff
-  b < a < 2 + b / 2; Jury's criterion, e.g. Franklin, Powell & Workman,
-  *Digital Control of Dynamic Systems*, 3rd ed. 1998, section 4.5). m_eff is a
-  lower bound of the part's effective mass at the push point: for a revolute
-  joint (I_min + m d^2) / r^2 summed over the links rigid with the child (I_min
-  the smallest principal moment about the link's COM, d the COM's distance
-  from the axis, r the lever: the parallel-axis theorem with the smallest
-  moment), for a prismatic joint their mass.
-- F_max = max(``min_force``, ``force_factor`` * m_total * g) (N); ``min_force``
-  = 22.2 N (5 lbf), the largest force the 2010 ADA Standards for Accessible
-  Design (section 309.4, operable parts) allow a control to need: any hand can
-  apply it, so a light object's part that needs up to this much is operable.
-  A stuck part sees the force ramp at k v_des: a light part's bounded
-  stiffness ramps slower than ``ramp_time``, and the push lasts at least
-  until ``min_force`` is reached (ramp below), so every part is pushed with
-  at least the ADA force before it counts as not moving (within the push
-  cap ``max_push_time``: a part lighter than about 1 g at the push point
-  ramps longer than that, and its probe's note says the cap cut it).
+- The pusher: its push point c, force law, force limit F_max and how long
+  it pushes (then it releases for ``release_time`` s): :mod:`asset2sim.tasks.check.pusher`.
 - Targets as opening fractions f (0 closed, 1 fully open, from the geometric
   closed end): close -> f = 0.05, reached at f <= 0.10; open -> f = 0.6,
   reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55);
@@ -82,15 +38,6 @@ Definitions (re-derivable; see ``docs/metrics.md``):
   that stop.
 - The object first settles freely for ``settle_time`` s; the push starts from
   there (root pose and joint position at that moment are the references).
-- Push for at most max(``push_time``, ramp + 1.5 * travel / ``push_speed``)
-  s, ramp = max(``ramp_time``, ``min_force`` / (k v_des)), travel the distance the
-  push point covers to the target
-  (|q_target - q0| times the lever; m), so a long lid pushed at its far corner
-  has time to arrive (the pusher stops early once the object slid or tipped),
-  but never longer than ``max_push_time`` (30 s, :data:`MAX_PUSH_TIME`:
-  bounds the probe's cost when a part lies far from its axis or is very
-  light; a note says when the cap cut the push), then release (no force) for
-  ``release_time`` s.
 - Object moved: during the push the object's footprint point (the point below
   the root's origin at the object's lowest height at the start, carried with
   the root) moved horizontally > ``slide_tol`` (m, slid: a tall object that
@@ -121,16 +68,15 @@ Definitions (re-derivable; see ``docs/metrics.md``):
 
 from __future__ import annotations
 
-from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnsupported
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, blocking_link, joints_between
+from asset2sim.tasks.check.pusher import ProbeConfig, Pusher, push_budget, push_geometry, pusher_for, root_held, total_mass
 from asset2sim.tasks.check.support import SupportWatch
-from asset2sim.tasks.check.sweep import SHUT_IN_FRACTION, blocking_link, joints_between
 from asset2sim.tasks.geometry.limits import rigid_group, subtrees
 from asset2sim.urdf import UrdfModel
 
@@ -144,67 +90,9 @@ REBOUND_FRACTION = 0.05
 #: (the engine's soft limit) comes back 0.7 mm: 11 % of its range, no spring.
 REBOUND_FLOOR_REVOLUTE = 0.01
 REBOUND_FLOOR_PRISMATIC = 0.001
-#: Push time allowed per unit of travel time at ``push_speed`` (dimensionless).
-TRAVEL_TIME_MARGIN = 1.5
 #: Shares of the way to their open ends that the joints shutting a part in
 #: are lifted to, in turn, when that part is probed again (module docstring).
 CLEARING_SHARES = (0.25, 0.5, 0.75, 1.0)
-#: Longest push of one probe, s of simulated time, whatever the travel and the
-#: force ramp ask (``ProbeConfig.max_push_time``). The asked time grows with
-#: the lever (travel = opening x lever) and with 1 / the part's effective mass
-#: (the ramp of the bounded pusher stiffness): an asset whose parts lie far
-#: from their joint axes (mesh ``scale`` 1e-4 on a stapler, the joint origins
-#: left in file units: a 95 m lever on a 0.18 m part) asked up to 924 s per
-#: probe (222,000 engine steps), and the evaluation behind its HTML report
-#: took 10.7 - 17.2 s instead of 1.2 s.
-#: The largest household part needs far less: a "very large" door (the
-#: Door prior 2.1 x 0.9 m times 1.7: 3.6 m tall, 1.5 m wide, so a lever of
-#: about 1.5 m) opened 1.57 rad travels 2.4 m, 1 + 1.5 x 2.4 / 0.25 = 15 s;
-#: twice that is the cap. The 12 dev objects' probes reach their targets
-#: within 3.1 s. A push cut by the cap says so in the probe's notes.
-MAX_PUSH_TIME = 30.0
-#: omega dt of the pusher's spring against the part's effective mass (module
-#: docstring, "Stiffness"): a quarter of the explicit step's stability limit.
-PUSHER_OMEGA_DT = 0.25
-
-
-@dataclass
-class ProbeConfig:
-    """Probe knobs (units on every field)."""
-
-    settle_time: float = 0.25
-    """free settling before the push, s"""
-    push_time: float = 2.0
-    """longest push, s, unless the travel needs longer (module docstring)"""
-    max_push_time: float = MAX_PUSH_TIME
-    """longest push whatever the travel and the ramp ask, s (module docstring):
-    bounds a probe's cost (:data:`MAX_PUSH_TIME`)"""
-    release_time: float = 0.75
-    """observation after release, s"""
-    push_speed: float = 0.25
-    """desired speed of the push point, m/s"""
-    ramp_time: float = 1.0
-    """time for a stuck pusher to reach F_max, s"""
-    force_factor: float = 2.0
-    """F_max = force_factor * total weight (dimensionless) ..."""
-    min_force: float = 22.2
-    """... but at least this, N (ADA 2010 section 309.4: 5 lbf)"""
-    slide_tol: float = 0.005
-    """root displacement that counts as the object sliding, m"""
-    tip_tol: float = 0.05
-    """root rotation that counts as tipping, rad"""
-    hold_body: bool = True
-    """the other hand holds the body: the push's reaction acts on the root at
-    the push point, and a body that weighs at most ``hold_force`` is gripped
-    (module docstring); False: an external push only"""
-    hold_force: float = 22.2
-    """the other hand's force, N: a body weighing at most this is held in
-    place by a hold of at most this force (the ADA's 5 lbf, as ``min_force``:
-    a hand that applies it can lift such a body)"""
-    settle_velocity_revolute: float = 0.05
-    """|q_dot| after release that counts as still moving, rad/s"""
-    settle_velocity_prismatic: float = 0.005
-    """... for prismatic joints, m/s"""
 
 
 @dataclass
@@ -240,49 +128,7 @@ class ProbeResult:
 
     def summary(self) -> dict[str, Any]:
         """JSON-able dict without the trace."""
-        d = {k: v for k, v in self.__dict__.items() if k != "trace"}
-        return d
-
-
-
-
-def _push_geometry(session, joint: str) -> tuple[np.ndarray, np.ndarray, float | None]:
-    """Push point (3,) m, unit direction (3,) that increases q, lever (m) or None."""
-    link = session.joint_child[joint]
-    axis_local = session.joint_axis(joint)
-    o, R = session.link_frame(link)
-    a = R @ axis_local
-    a /= max(np.linalg.norm(a), 1e-12)
-    lo, hi = session.link_aabb(link)
-    c = 0.5 * (lo + hi)
-    if session.joint_types[joint] == "prismatic":
-        return c, a, None
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    rr = (corners - o) - np.outer((corners - o) @ a, a)
-    # The point of the moving link farthest from the axis (its box's far
-    # corner), where a hand or a gripper opens a lid, a door or a handle.
-    k = int(np.argmax(np.linalg.norm(rr, axis=1)))
-    c, r = corners[k], rr[k]
-    lever = float(np.linalg.norm(r))
-    t = np.cross(a, r)
-    t /= max(np.linalg.norm(t), 1e-12)
-    return c, t, max(lever, 1e-4)
-
-
-def push_budget(cfg: ProbeConfig, ramp: float, travel: float) -> tuple[float, float]:
-    """(allowed, asked) push time of one probe, s: asked = max(``push_time``,
-    ``ramp`` + ``TRAVEL_TIME_MARGIN`` x ``travel`` / ``push_speed``) (``ramp``
-    the force ramp's time, s; ``travel`` the distance the push point covers
-    to the target, m); allowed = asked capped at ``max_push_time`` (never
-    below ``push_time``), which bounds a probe's engine steps whatever the
-    part's lever and effective mass (:data:`MAX_PUSH_TIME`)."""
-    asked = max(cfg.push_time, ramp + TRAVEL_TIME_MARGIN * travel / cfg.push_speed)
-    return min(asked, max(cfg.max_push_time, cfg.push_time)), asked
-
-
-def total_mass(session) -> float:
-    """Sum of the masses the engine uses for every link of the body, kg."""
-    return float(sum(session.link_masses().values()))
+        return {k: v for k, v in self.__dict__.items() if k != "trace"}
 
 
 def moved_links(session, joint: str, model: UrdfModel | None = None) -> list[str]:
@@ -293,58 +139,6 @@ def moved_links(session, joint: str, model: UrdfModel | None = None) -> list[str
         if links:
             return [ln for ln in links if ln in session.link_names]
     return [session.joint_child[joint]]
-
-
-def effective_mass(session, joint: str, model: UrdfModel | None = None) -> float:
-    """Lower bound (kg) of the effective mass of ``joint``'s part at the probe's
-    push point: for a revolute joint sum (I_min + m d^2) / r^2 over the links
-    rigid with the child (module docstring), for a prismatic joint their mass;
-    at least 1e-4 kg. From the session's own masses and principal moments
-    (:meth:`SimSession.held_physics`) and the current link frames.
-
-    Raises:
-        KeyError: unknown joint.
-    """
-    child = session.joint_child[joint]
-    rigid = [ln for ln in (rigid_group(model, child) if model is not None else {child}) if ln in session.link_names]
-    held = session.held_physics().links
-    _, _, lever = _push_geometry(session, joint)
-    if lever is None:
-        return max(sum(held[ln].mass for ln in rigid if ln in held), 1e-4)
-    o, R = session.link_frame(child)
-    a = R @ np.asarray(session.joint_axis(joint), float)
-    a /= max(float(np.linalg.norm(a)), 1e-12)
-    inertia = 0.0
-    for ln in rigid:
-        h = held.get(ln)
-        if h is None or not h.mass > 0:
-            continue
-        p, Rl = session.link_frame(ln)
-        c = np.asarray(p, float) + np.asarray(Rl, float) @ np.asarray(h.com, float) - np.asarray(o, float)
-        d2 = float(c @ c - (c @ a) ** 2)
-        inertia += float(np.min(h.principal)) + h.mass * max(d2, 0.0)
-    return max(inertia / lever**2, 1e-4)
-
-
-@contextmanager
-def _root_held(session, max_force: float | None, notes: list[str]):
-    """The other hand grips the body for the push and the observation after
-    release: :meth:`~asset2sim.engines.base.SimSession.hold_root` with the
-    hand's force ``max_force`` (N), released on exit; None: the body is not
-    gripped. An engine without a bounded root hold gets the push's
-    reaction on the root only (a note in ``notes``)."""
-    held = False
-    if max_force is not None:
-        try:
-            session.hold_root(max_force)
-            held = True
-        except EngineUnsupported as exc:
-            notes.append(f"the root is not held ({exc}): the push's reaction on the root only")
-    try:
-        yield
-    finally:
-        if held:
-            session.release_root()
 
 
 def probe_joint(
@@ -388,138 +182,178 @@ def probe_joint(
         ValueError: unknown action or non-positive ``open_range``.
         KeyError: unknown joint.
     """
-    if action not in ("close", "open"):
-        raise ValueError(f"probe action must be 'close' or 'open', got {action!r}")
-    if not open_range > 0:
-        raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
+    _check_probe(session, joint, action, open_range)
     cfg = config or ProbeConfig()
-    if joint not in session.joint_child:
-        raise KeyError(joint)
-    link = session.joint_child[joint]
     dt = session.options.conventions.timestep
-    jtype = session.joint_types[joint]
-    prismatic = jtype == "prismatic"
 
     def frac(q: float) -> float:
         return float(direction * (q - closed) / open_range)
-
-    def qpos() -> tuple[float, float]:
-        return session.joint_state(joint)
 
     # Let the object come to rest on the ground first, so drift of an object
     # that is unstable by itself is not taken for the push moving it.
     for _ in range(int(round(cfg.settle_time / dt))):
         session.step(1)
-    q0, _ = qpos()
+    q0, _ = session.joint_state(joint)
     f0 = frac(q0)
+    f_target, reached_if, notes = _target(action, f0, open_range, floor_stop)
+    q_target = closed + direction * f_target * open_range
+    sign = 1.0 if q_target >= q0 else -1.0  # +1 when the target needs q to increase
+    weight = total_mass(session) * abs(session.options.conventions.gravity)
+    hand = pusher_for(session, joint, cfg, weight, model)
+    # Sliding is measured where the object stands (the footprint point, carried with the root).
+    watch = SupportWatch(session, session.link_names[0])
+    _, _, lever0 = push_geometry(session, joint)
+    travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
+    push_s, asked_s = push_budget(cfg, hand.ramp, travel)
+    n_push = int(round(push_s / dt))
+    run = _Run(reached=reached_if(f0))
+    run.t_reach = 0.0 if run.reached else None
+    # A body a hand can lift is gripped by the other hand; a heavier one is only steadied (module docstring).
+    gripped = cfg.hold_body and weight <= cfg.hold_force
+    with root_held(session, cfg.hold_force if gripped else None, notes):
+        _push(session, joint, hand, sign, cfg, n_push, reached_if, frac, watch, run)
+        _release(session, joint, int(round(cfg.release_time / dt)), frac, watch, run)
+    q_end, qd_end = session.joint_state(joint)
+    f_end = frac(q_end)
+    if not run.reached and push_s < asked_s and run.steps >= n_push:
+        notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
+                     f"push point, lever {lever0 if lever0 is not None else 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
+                     f"{asked_s:.0f} s")
+    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, q_end, qd_end,
+                                    holds_position, returns, notes)
+    return ProbeResult(
+        joint=joint, joint_type=session.joint_types[joint], action=action, start=q0, target=float(q_target), start_fraction=f0,
+        target_fraction=f_target, reached=bool(run.reached), time_to_reach=run.t_reach, peak_force=float(run.peak_force),
+        peak_effort=float(run.peak_effort), lever_arm=run.lever, max_force=float(hand.f_max),
+        root_displacement=float(run.max_disp), root_rotation=float(run.max_rot), slid=bool(run.max_disp > cfg.slide_tol),
+        tipped=bool(run.max_rot > cfg.tip_tol), release_fraction=float(run.f_rel),
+        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(rebound), kept_moving=bool(kept),
+        success=not failure, failure=failure, notes=notes, trace=run.trace,
+    )
+
+
+def _check_probe(session, joint: str, action: str, open_range: float) -> None:
+    """Raises :func:`probe_joint`'s ValueError (action, ``open_range``) or KeyError (joint)."""
+    if action not in ("close", "open"):
+        raise ValueError(f"probe action must be 'close' or 'open', got {action!r}")
+    if not open_range > 0:
+        raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
+    if joint not in session.joint_child:
+        raise KeyError(joint)
+
+
+def _target(action: str, f0: float, open_range: float, floor_stop: float | None
+            ) -> tuple[float, Callable[[float], bool], list[str]]:
+    """(target opening fraction, whether a fraction has reached it, notes) of
+    a probe that starts at opening fraction ``f0`` (module docstring, "Targets")."""
     if action == "close":
         f_target, reached_if = CLOSE_TARGET, (lambda f: f <= CLOSE_REACHED)
     elif f0 < OPEN_REACHED:
         f_target, reached_if = OPEN_TARGET, (lambda f: f >= OPEN_REACHED)
     else:
         f_target, reached_if = OPEN_FAR_TARGET, (lambda f: f >= OPEN_FAR_REACHED)
-    stop_notes: list[str] = []
+    notes: list[str] = []
     if action == "open" and floor_stop is not None and floor_stop / open_range < f_target:
         f_target = max(floor_stop / open_range, 0.0)  # the floor stops the part before the target
         reached_if = (lambda f, at=f_target * OPEN_REACHED / OPEN_TARGET: f >= at)
-        stop_notes.append(f"the floor stops it {f_target:.0%} open (the object resting as it is): the open probe's target")
-    q_target = closed + direction * f_target * open_range
-    # +1 when the target needs q to increase.
-    sign = 1.0 if q_target >= q0 else -1.0
-    weight = total_mass(session) * abs(session.options.conventions.gravity)
-    f_max = max(cfg.min_force, cfg.force_factor * weight)
-    m_eff = effective_mass(session, joint, model)
-    stiffness = min(f_max / (cfg.push_speed * cfg.ramp_time), m_eff * (PUSHER_OMEGA_DT / dt) ** 2)
-    damping = 2.0 * float(np.sqrt(stiffness * m_eff))
-    ramp = max(cfg.ramp_time, cfg.min_force / (stiffness * cfg.push_speed))
-    # Sliding is measured where the object stands (the footprint point, carried with the root).
-    watch = SupportWatch(session, session.link_names[0])
-    # The push may last as long as the travel needs at the push speed (with
-    # the force ramp and a 50 % margin), at least ``push_time``: a pusher at
-    # a long lid's far corner has a longer arc to cover than at its centre.
-    _, _, lever0 = _push_geometry(session, joint)
-    travel = abs(q_target - q0) * (lever0 if lever0 is not None else 1.0)
-    push_s, asked_s = push_budget(cfg, ramp, travel)
-    n_push = int(round(push_s / dt))
-    n_rel = int(round(cfg.release_time / dt))
-    tr: dict[str, list[float]] = {"t": [], "q": [], "force": [], "root_disp": [], "phase": []}
-    force = lead = 0.0  # lead: how far the hand runs ahead of the push point, m
-    peak_force = peak_effort = 0.0
-    lever_used: float | None = None
-    reached = reached_if(f0)
-    t_reach = 0.0 if reached else None
-    max_disp = max_rot = 0.0
-    k = 0
-    hold_notes: list[str] = []
-    # A body a hand can lift (its weight within the hand's force) is gripped
-    # by the other hand; a heavier one stands on its own, steadied only
-    # against the push (module docstring).
-    gripped = cfg.hold_body and weight <= cfg.hold_force
-    with _root_held(session, cfg.hold_force if gripped else None, hold_notes):
-        while not reached and k < n_push:
-            c, t_dir, lever = _push_geometry(session, joint)
-            d = sign * t_dir
-            q, qd = qpos()
-            # speed of the push point along d
-            v = sign * qd * (lever if lever is not None else 1.0)
-            lead = float(np.clip(lead + (cfg.push_speed - v) * dt, 0.0, f_max / stiffness))
-            force = float(np.clip(stiffness * lead + damping * (cfg.push_speed - v), 0.0, f_max))
-            session.apply_link_force(link, force * d, c)
-            if cfg.hold_body and link != session.link_names[0]:
-                session.apply_link_force(session.link_names[0], -force * d, c)  # the holding hand's reaction
-            session.step(1)
-            k += 1
-            peak_force = max(peak_force, force)
-            eff = force * (lever if lever is not None else 1.0)
-            if eff >= peak_effort:
-                peak_effort, lever_used = eff, lever
-            q, qd = qpos()
-            xy, rot = watch.current()
-            disp = float(np.linalg.norm(xy))
-            max_disp, max_rot = max(max_disp, disp), max(max_rot, rot)
-            tr["t"].append(k * dt)
-            tr["q"].append(q)
-            tr["force"].append(force)
-            tr["root_disp"].append(disp)
-            tr["phase"].append(0.0)
-            if not np.isfinite(q):
-                break
-            if reached_if(frac(q)):
-                reached, t_reach = True, k * dt
-            elif max_disp > cfg.slide_tol or max_rot > cfg.tip_tol:
-                break  # the object moves instead of the joint: the pusher stops
-        q_rel, _ = qpos()
-        f_rel = frac(q_rel)
-        f_min = f_maxv = f_rel
-        for i in range(n_rel):
-            session.step(1)
-            q, qd = qpos()
-            f = frac(q)
-            f_min, f_maxv = min(f_min, f), max(f_maxv, f)
-            tr["t"].append((k + i + 1) * dt)
-            tr["q"].append(q)
-            tr["force"].append(0.0)
-            tr["root_disp"].append(float(np.linalg.norm(watch.current()[0])))
-            tr["phase"].append(1.0)
-    q_end, qd_end = qpos()
-    f_end = frac(q_end)
+        notes.append(f"the floor stops it {f_target:.0%} open (the object resting as it is): the open probe's target")
+    return f_target, reached_if, notes
+
+
+@dataclass
+class _Run:
+    """What a probe's push and release recorded (opening fractions, m, rad, N, N*m or N, s)."""
+
+    reached: bool
+    t_reach: float | None = None
+    steps: int = 0  # engine steps pushed
+    peak_force: float = 0.0
+    peak_effort: float = 0.0
+    lever: float | None = None  # the lever at the peak effort
+    max_disp: float = 0.0
+    max_rot: float = 0.0
+    f_rel: float = 0.0  # opening fraction at release, and its smallest and largest after
+    f_low: float = 0.0
+    f_high: float = 0.0
+    trace: dict[str, list[float]] = field(default_factory=lambda: {"t": [], "q": [], "force": [], "root_disp": [], "phase": []})
+
+    def record(self, t: float, q: float, force: float, disp: float, phase: float) -> None:
+        """One step of the trace (phase 0 push, 1 release)."""
+        for key, x in zip(("t", "q", "force", "root_disp", "phase"), (t, q, force, disp, phase)):
+            self.trace[key].append(x)
+
+
+def _push(session, joint: str, hand: Pusher, sign: float, cfg: ProbeConfig, n_push: int,
+          reached_if: Callable[[float], bool], frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
+    """Push ``joint``'s part towards the target (``sign`` +1: q increases) for
+    at most ``n_push`` steps, until it reaches the target or the object slid
+    or tipped (the pusher stops), recording into ``run``."""
+    link, root = session.joint_child[joint], session.link_names[0]
+    dt = session.options.conventions.timestep
+    lead = 0.0  # how far the hand runs ahead of the push point, m
+    while not run.reached and run.steps < n_push:
+        c, t_dir, lever = push_geometry(session, joint)
+        d = sign * t_dir
+        q, qd = session.joint_state(joint)
+        v = sign * qd * (lever if lever is not None else 1.0)  # speed of the push point along d
+        lead, force = hand.step(lead, v, dt)
+        session.apply_link_force(link, force * d, c)
+        if cfg.hold_body and link != root:
+            session.apply_link_force(root, -force * d, c)  # the holding hand's reaction
+        session.step(1)
+        run.steps += 1
+        run.peak_force = max(run.peak_force, force)
+        eff = force * (lever if lever is not None else 1.0)
+        if eff >= run.peak_effort:
+            run.peak_effort, run.lever = eff, lever
+        q, qd = session.joint_state(joint)
+        xy, rot = watch.current()
+        disp = float(np.linalg.norm(xy))
+        run.max_disp, run.max_rot = max(run.max_disp, disp), max(run.max_rot, rot)
+        run.record(run.steps * dt, q, force, disp, 0.0)
+        if not np.isfinite(q):
+            break
+        if reached_if(frac(q)):
+            run.reached, run.t_reach = True, run.steps * dt
+        elif run.max_disp > cfg.slide_tol or run.max_rot > cfg.tip_tol:
+            break  # the object moves instead of the joint: the pusher stops
+
+
+def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
+    """Observe ``n_rel`` steps with no force: the opening fraction at release
+    and its extremes after, recorded into ``run``."""
+    dt = session.options.conventions.timestep
+    q_rel, _ = session.joint_state(joint)
+    run.f_rel = run.f_low = run.f_high = frac(q_rel)
+    for i in range(n_rel):
+        session.step(1)
+        q, qd = session.joint_state(joint)
+        f = frac(q)
+        run.f_low, run.f_high = min(run.f_low, f), max(run.f_high, f)
+        run.record((run.steps + i + 1) * dt, q, 0.0, float(np.linalg.norm(watch.current()[0])), 1.0)
+
+
+def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, q_end: float, qd_end: float,
+           holds_position: bool, returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
+    """(rebound, kept moving, failure: "" on success) of a probe (module
+    docstring), with the notes on what is allowed appended to ``notes``."""
     # "towards the start": for close the start is more open (larger f).
     tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
     if action == "close":
-        rebound = f_maxv - f_rel > tol
-        kept = f_rel - f_min > tol
+        rebound = run.f_high - run.f_rel > tol
+        kept = run.f_rel - run.f_low > tol
     else:
-        rebound = f_rel - f_min > tol
-        kept = f_maxv - f_rel > tol
+        rebound = run.f_rel - run.f_low > tol
+        kept = run.f_high - run.f_rel > tol
     vlim = cfg.settle_velocity_prismatic if prismatic else cfg.settle_velocity_revolute
     if abs(qd_end) > vlim:
         kept = True
-    slid = max_disp > cfg.slide_tol
-    tipped = max_rot > cfg.tip_tol
+    slid = run.max_disp > cfg.slide_tol
+    tipped = run.max_rot > cfg.tip_tol
     failure = ""
     if not np.isfinite(q_end):
         failure = "diverged"
-    elif not reached:
+    elif not run.reached:
         failure = "target not reached" + (" (the object moved instead)" if slid or tipped else "")
     elif slid or tipped:
         failure = "the object " + ("slid" if slid else "tipped") + " instead of the joint moving"
@@ -527,44 +361,13 @@ def probe_joint(
         failure = "springs back after release"
     elif action == "open" and rebound and holds_position:
         failure = "does not hold the open position after release"
-    notes = stop_notes + hold_notes
-    if not reached and push_s < asked_s and k >= n_push:
-        notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
-                     f"push point, lever {lever0 if lever0 is not None else 0.0:.3g} m) and the force ramp ({ramp:.3g} s) asked "
-                     f"{asked_s:.0f} s")
     if action == "open" and rebound and not holds_position:
         notes.append("falls back after release (allowed: the request does not ask it to hold)")
     if action == "close" and rebound and returns:
         notes.append("springs back after release (allowed: a spring its part prior or the request expects returns it)")
     if kept:
         notes.append("keeps moving after release")
-    return ProbeResult(
-        joint=joint,
-        joint_type=jtype,
-        action=action,
-        start=q0,
-        target=float(q_target),
-        start_fraction=f0,
-        target_fraction=f_target,
-        reached=bool(reached),
-        time_to_reach=t_reach,
-        peak_force=float(peak_force),
-        peak_effort=float(peak_effort),
-        lever_arm=lever_used,
-        max_force=float(f_max),
-        root_displacement=float(max_disp),
-        root_rotation=float(max_rot),
-        slid=bool(slid),
-        tipped=bool(tipped),
-        release_fraction=float(f_rel),
-        final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"),
-        rebound=bool(rebound),
-        kept_moving=bool(kept),
-        success=not failure,
-        failure=failure,
-        notes=notes,
-        trace=tr,
-    )
+    return rebound, kept, failure
 
 
 def run_probes(
@@ -609,9 +412,7 @@ def run_probes(
                           floor_stop=(floor_stops or {}).get(name))
                 r = probe_joint(session, name, **kw)
                 if model is not None and _shut_in(r):
-                    retry = _probe_cleared(session, r, joints, model, sid, kw)
-                    if retry is not None:
-                        r = retry
+                    r = _probe_cleared(session, r, joints, model, sid, kw) or r
                 out.append(r)
         session.restore_state(sid)
     finally:
@@ -654,17 +455,15 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
                 ends[k] = (now[k], hi if abs(hi - now[k]) >= abs(now[k] - lo) else lo)
     if not ends:
         return None
-    # the other hand lifts them only as far as needed (a stapler whose top is
-    # swung fully back tips over): a quarter of the way to their open ends,
-    # then half, three quarters, all the way; held there by a zero-velocity
-    # drive limited to the probe's force at their lever
+    # the other hand lifts them only as far as needed (a stapler whose top is swung fully back tips
+    # over), held there by a zero-velocity drive limited to the probe's force at their lever
     f_max = first.max_force
     for share in CLEARING_SHARES:
         opened = {k: q + share * (end - q) for k, (q, end) in ends.items()}
         session.restore_state(sid)
         session.set_joint_positions(opened)
         for k in opened:
-            _, _, lever = _push_geometry(session, k)
+            _, _, lever = push_geometry(session, k)
             session.drive_joint(k, 0.0, f_max * (lever if lever is not None else 1.0))
         try:
             retry = probe_joint(session, name, **kw)
@@ -679,10 +478,8 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
 
 
 def probes_metric(results: list[ProbeResult], *, engine: str = "pybullet") -> MetricResult:
-    """Aggregate probes: value = number of failed probes; passes iff none failed.
-
-    ``passed`` is None when there was nothing to probe.
-    """
+    """Aggregate probes: value = number of failed probes; passes iff none
+    failed (``passed`` None when there was nothing to probe)."""
     failed = [r for r in results if not r.success]
     return MetricResult(
         name="probes",

@@ -1,7 +1,7 @@
 """Which collision repairs refine's stage 7b tries, in order: the candidates,
 not the trial (refine writes each, clips the limits, post-checks the asset
 again and keeps a repair only when the check gets better while nothing that
-passed fails; ``tasks/refine.py`` ``_repair_sweep``; ``docs/metrics.md``,
+passed fails; ``tasks/refine.py`` ``_repair_sweep``; ``docs/design/metrics.md``,
 "Joint sweep" and "Parts held together").
 
 Two triggers, one candidate list each:

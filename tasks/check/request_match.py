@@ -158,6 +158,8 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     for js in spec.joint_states:
         if js.selector == "all":
             names = list(task_joints)
+        elif js.selector == "joint":  # an override names the joint itself
+            names = [js.joint] if js.joint in movable else []
         else:
             names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
             if not names:

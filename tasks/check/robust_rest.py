@@ -2,7 +2,7 @@
 the small disturbances of being put down by a hand or a robot?
 
 Definition (SPEC, "Interaction under manipulation"; issue 15; written so
-anyone can re-derive it, see ``docs/metrics.md``). The object is loaded as
+anyone can re-derive it, see ``docs/design/metrics.md``). The object is loaded as
 for the SPEC rest test (root free, lowest collision point on the ground,
 joints at the initial state, passive joints) and saved; each **trial**
 starts from that saved placement:
@@ -270,19 +270,33 @@ def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, floa
     session = open_session(engine, urdf, SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}),
                                                         conventions=conv))
     try:
-        _, q_ref = session.root_pose()
         rolling = support.rolling_joints(session, subtrees(read_urdf(urdf, mode="lenient")))
-        saved = session.save_state()
-        for name in cfg.trials:
-            session.restore_state(saved)
-            try:
-                run.trials.append(run_trial(session, name, initial_state, q_ref, conv, cfg, rolling))
-            except EngineUnsupported as exc:
-                run.trials.append(Trial(name=name, passed=None, failure=f"skipped: {exc}"))
-        session.discard_state(saved)
+        run.trials = run_trials(session, initial_state, conv, cfg, rolling)
     finally:
         session.close()
     return run
+
+
+def run_trials(session: SimSession, initial_state: dict[str, float], conventions: SimConventions | None = None,
+               config: RobustRestConfig | None = None, rolling: list[str] | tuple[str, ...] = ()) -> list[Trial]:
+    """Every trial of ``config`` on an open session, each from the placement
+    the session has now (saved once, restored before each trial; the
+    session is left at the last trial's end). ``rolling``: as
+    :func:`run_trial`. A disturbance the engine cannot perform is a skipped
+    trial (``passed`` None)."""
+    cfg = config or RobustRestConfig()
+    conv = conventions or SimConventions()
+    _, q_ref = session.root_pose()
+    saved = session.save_state()
+    trials = []
+    for name in cfg.trials:
+        session.restore_state(saved)
+        try:
+            trials.append(run_trial(session, name, initial_state, q_ref, conv, cfg, rolling))
+        except EngineUnsupported as exc:
+            trials.append(Trial(name=name, passed=None, failure=f"skipped: {exc}"))
+    session.discard_state(saved)
+    return trials
 
 
 def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = None) -> MetricResult:

@@ -2,7 +2,7 @@
 the probes (:mod:`asset2sim.tasks.check.probes`), the gripper task
 (:mod:`asset2sim.tasks.check.task_execution`) and the learning environment
 (:mod:`asset2sim.tasks.evaluation.learn_env`); definition in
-``docs/metrics.md`` (probes: "slid").
+``docs/design/metrics.md`` (probes: "slid").
 
 Sliding is measured where the object stands: the **footprint point**, below
 the carrying link's origin at the object's lowest height (the lowest corner
@@ -92,7 +92,7 @@ def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:
     object holds (a cart nudged or tilted rolls; a wheel turns with the
     ground under it) and a finger does not operate them (the object is
     rolled), so robust rest does not grade their drift and the probes do not
-    push them (``docs/metrics.md``). Revolute and prismatic parts touching
+    push them (``docs/design/metrics.md``). Revolute and prismatic parts touching
     the ground (a pedal, a foot, a lid folded down) are not rolling.
 
     Args:

@@ -2,7 +2,7 @@
 through its range and back?
 
 Definition (SPEC, "Interaction under manipulation"; issue 15; written so
-anyone can re-derive it, see ``docs/metrics.md``):
+anyone can re-derive it, see ``docs/design/metrics.md``):
 
 - The object is loaded with its **root fixed** (a mounted object, or a robot's
   second hand holding the body), gravity off and no ground, so the only
@@ -10,17 +10,12 @@ anyone can re-derive it, see ``docs/metrics.md``):
   the object's self-collision geometry. The other movable joints are held
   at the initial state (a zero-velocity drive with force limit
   :data:`HOLD_FORCE`: the second hand or fixture holding the rest of the
-  object), so each joint is tested on its own: without gravity a
-  spring-loaded part balanced by its weight at rest (a stapler's lid, 102990)
-  springs away if left passive and carries the swept part with it, and in
-  PyBullet a spring torque on a passive joint held by its friction motor
-  stalled the velocity drive of the swept joint at a force-independent
-  position (103275: 95 % short; reproduced with raw PyBullet calls). With the
-  others held only the swept joint's own spring is applied (a held joint's
-  spring load is taken by the hold). Exception: PyBullet applies a spring by
-  torque control every step, which leaves the holds of the other joints
-  drifting, so in PyBullet the others stay passive while a joint with a
-  spring is swept.
+  object), so each joint is tested on its own (left passive, a spring-loaded
+  part balanced by its weight at rest springs away without gravity and
+  carries the swept part with it: a stapler's lid, 102990); only the swept
+  joint's own spring is applied. Exception: PyBullet applies springs by
+  torque control every step, which leaves the holds drifting, so there the
+  others stay passive while a joint with a spring is swept.
 - Each movable joint is teleported to its geometric closed end q_c
   (:mod:`asset2sim.tasks.geometry.closed_state`, opening direction d, largest
   opening R) and driven by a force-limited **position controller built on a
@@ -59,9 +54,11 @@ anyone can re-derive it, see ``docs/metrics.md``):
   before it shuts the lid, and then at their open ends, as it lifts the lid
   before the seat; a part stopped part-way by another (a seat raised into
   the lid held a quarter open) is swept again with the joints between at
-  their open ends. The first of these sweeps that passes counts, and
-  ``range_note`` names what was moved. A part stopped by its own parent's
-  geometry is not.
+  their open ends; a part opened, then stopped on the way back or pushed
+  into such a link (a lid shut onto a seat held slightly open), with the
+  joints between at their closed ends. The first of these sweeps that passes
+  counts, and ``range_note`` names what was moved. A part stopped by its own
+  parent's geometry is not.
 
 Continuous joints are swept over pi (their closed end is a convention).
 """
@@ -74,13 +71,14 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
+from asset2sim.engines.base import SimSession, Spring
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, held_ranges, joints_between
+from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.geometry import limits
-from asset2sim.tasks.geometry.closed_state import tree_path
 from asset2sim.urdf import UrdfModel, read_urdf
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
@@ -91,9 +89,8 @@ DIVERGED_SPEED_REVOLUTE = 100.0
 DIVERGED_SPEED_PRISMATIC = 10.0
 #: Standard gravity, m/s^2 (the SPEC's).
 G = 9.81
-#: Force limit (N*m or N) of the zero-velocity drive that holds the joints not
-#: swept: far above any part's operating force (a second hand or the fixture
-#: holding the rest of the object), so they do not yield.
+#: Force limit (N*m or N) of the zero-velocity drive that holds the joints not swept: far
+#: above any part's operating force (a second hand or a fixture holding the rest), so they do not yield.
 HOLD_FORCE = 1000.0
 
 
@@ -159,9 +156,7 @@ def joint_subtrees(model: UrdfModel) -> dict[str, list[str]]:
 def _lever(session: SimSession, joint: str, links: list[str]) -> float:
     """Largest distance (m) of the collision vertices of ``links`` from the
     axis of ``joint`` at the current state (1e-3 m at least)."""
-    o, R = session.link_frame(session.joint_child[joint])
-    a = R @ session.joint_axis(joint)
-    a = a / max(np.linalg.norm(a), 1e-12)
+    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     best = 1e-3
     for ln in links:
         v = session.link_collision_vertices(ln)
@@ -206,8 +201,7 @@ def damping_caps(urdf: Path | str, closed: dict[str, tuple[float, float, float]]
     :attr:`SweepConfig.time_limit` (s), R the range of ``closed`` (joint ->
     (q_closed, direction, R), rad or m). Under damping alone the drive moves
     the part at E / c, so a damping above c_max makes a free part fail the
-    sweep as if it were blocked (a drawer escalated to 3,900 N s/m for robust
-    rest crawls 0.63 m in 3 s). Measured in a fixed-root, gravity-free
+    sweep as if it were blocked. Measured in a fixed-root, gravity-free
     PyBullet session (masses and collision vertices as the sweep reads them).
     Joints with no range are left out.
 
@@ -218,9 +212,7 @@ def damping_caps(urdf: Path | str, closed: dict[str, tuple[float, float, float]]
     model = read_urdf(urdf)
     subtrees = joint_subtrees(model)
     caps: dict[str, float] = {}
-    opts = SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}), fixed_base=True,
-                          gravity=False, ground=False, conventions=conventions or SimConventions())
-    with open_session("pybullet", urdf, opts) as session:
+    with open_session("pybullet", urdf, fixed_root_options(initial_state, conventions, springs)) as session:
         for name, (qc, _, rng) in closed.items():
             if name not in session.joint_types or not rng > 0:
                 continue
@@ -300,10 +292,8 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
             best = max(best, f) if goal == q_far else min(best, f)
         return best, (n * dt if done(f) else None)
 
-    # PyBullet applies springs by torque control every step, which left the
-    # zero-velocity holds of other joints drifting (102990: a held joint ran
-    # 1.3 rad while the swept lid's spring acted): with a spring in the
-    # session the other joints stay passive
+    # PyBullet applies springs by torque control, which made the holds of the other
+    # joints drift (102990): with a spring in the session the others stay passive
     hold = cfg.hold_others and not (session.options.springs and session.engine == "pybullet")
     held = [o for o in session.joint_types if o != joint] if hold else []
     try:
@@ -312,9 +302,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     finally:
         for o in [joint, *held]:
             session.release_joint(o)
-    failure = []
-    if diverged:
-        failure.append("diverged")
+    failure = ["diverged"] if diverged else []
     if t_out is None and not diverged:
         failure.append(f"reached only {out:.0%} of the range opening")
     if t_back is None and not diverged:
@@ -338,121 +326,14 @@ class SweepRun:
     """joint -> why it was not swept"""
 
 
-def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
-    """The ranges the sweep can demand with the other joints held at
-    ``state``: each joint's (q_closed, direction, range) of ``closed`` (rad
-    or m) cut where its moving part meets a link of the chain that carries
-    it, beyond its parent's rigid group (a stapler's magazine, hinged on the
-    top, meets the base: how far depends on the held top, not on a limit;
-    :func:`asset2sim.tasks.geometry.limits.geometric_limits` with
-    ``against="held"``). Siblings and other branches in the way are not cut
-    away (the sweep reports them), nor is the closing side; the URDF limit
-    against the part's own stops is refine's business. Measured in a PyBullet session (closest-point
-    queries; the same for every engine, like the closed ends). Returns
-    (closed tuples, joint -> note for the joints whose range was cut)."""
-    out = dict(closed)
-    notes = {}
-    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False,
-                                                       conventions=conventions or SimConventions())) as s:
-        # any contact ends the range (1 mm, no stop confirmation):
-        # the drive stalls at it, and a held part is never a hinge artefact of the parent
-        clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held", confirm_stops=False)
-    for name, c in clips.items():
-        if c.clipped:
-            out[name] = (c.q_closed, c.direction, c.open_range)
-            notes[name] = "held parts in the way: " + "; ".join(c.notes)
-    return out, notes
-
-
-#: Opening fraction under which a part whose drive stalls counts as shut in
-#: by another part (:func:`_sweep_clearing`): the free fraction under which
-#: :mod:`asset2sim.tasks.geometry.limits` calls a part blocked at its closed end.
-SHUT_IN_FRACTION = limits.MIN_FREE_FRACTION
-#: Distance (m) within which a link counts as touching the swept part where
-#: its drive stalled (:func:`blocking_link`): the 1 mm of the limits scan.
-BLOCK_DISTANCE = 0.001
-
-
-def blocking_link(session: SimSession, links: list[str], exclude: set[str]) -> str | None:
-    """The link (not in ``links`` nor ``exclude``) nearest to, or deepest
-    into, the links ``links`` at the session's current state, when within
-    :data:`BLOCK_DISTANCE` m; None when none is."""
-    sub = set(links)
-    best, who = BLOCK_DISTANCE, None
-    for a in links:
-        if not session.link_has_collision(a):
-            continue
-        for b in session.link_names:
-            if b in sub or b in exclude or not session.link_has_collision(b):
-                continue
-            d = session.link_distances(a, b, BLOCK_DISTANCE)
-            if d and min(d) <= best:
-                best, who = min(d), b
-    return who
-
-
-def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
-    """Movable joints on the kinematic-tree path between links ``a`` and
-    ``b`` (either order), nearest to ``b`` first
-    (:func:`asset2sim.tasks.geometry.closed_state.tree_path`)."""
-    from_a, from_b = tree_path(model.joints, a, b)
-    return [j.name for j in from_b + from_a[::-1] if j.type in ("revolute", "prismatic", "continuous")]
-
-
-class _Blocker:
-    """:func:`blocking_link` at a state, in the session when its engine
-    answers closest-point queries, else in a PyBullet session of the same
-    URDF (opened once, on first use; PhysX answers none), so every engine
-    moves the same parts out of the way."""
-
-    def __init__(self, session: SimSession, urdf: Path | str, conventions: SimConventions):
-        self.session, self.urdf, self.conventions = session, urdf, conventions
-        self._pybullet: SimSession | None = None
-
-    def __call__(self, state: dict[str, float], links: list[str], exclude: set[str]) -> str | None:
-        try:
-            self.session.set_joint_positions(state)
-            return blocking_link(self.session, links, exclude)
-        except EngineUnsupported:
-            pass
-        if self._pybullet is None:
-            self._pybullet = open_session("pybullet", self.urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False,
-                                                                                ground=False, conventions=self.conventions))
-        self._pybullet.set_joint_positions(state)
-        return blocking_link(self._pybullet, links, exclude)
-
-    def close(self) -> None:
-        if self._pybullet is not None:
-            self._pybullet.close()
-            self._pybullet = None
-
-
 def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],
                     links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int,
-                    blocker: _Blocker) -> JointSweep:
-    """:func:`sweep_joint` of ``name``; when its drive stalls against a link
-    that another movable joint places, or the part is pushed into such a
-    link deeper than the sweep allows, sweep again with the joints between
-    the part and that link moved out of the way:
-
-    - shut in (stalled before :data:`SHUT_IN_FRACTION` of the range: a
-      sibling closed over it, a toilet's lid on its seat; a part between a
-      held top and the base, a stapler's magazine under its closed top; a
-      sibling raised under its closed end, a lid shut onto the seat held a
-      quarter open): those joints at their closed ends (a hand lowers the
-      seat before it shuts the lid), then at their open ends (it lifts the
-      lid before the seat);
-    - stopped part-way (a seat raised into the lid held a quarter open):
-      those joints at their open ends (the hand lifts the lid first);
-    - opened, then stopped on the way back, or pushed through, by such a
-      link (a lid shut onto a seat held slightly open, a raised post under a
-      lid): those joints at their closed ends (the hand lowers the seat
-      before it shuts the lid).
-
-    The first such sweep that passes is kept; its ``range_note`` says what
-    was moved. A link rigid with the joint's parent (the part's own stop:
-    a limit beyond the geometry, the sweep's finding) moves nothing."""
+                    blocker: Blocker) -> JointSweep:
+    """:func:`sweep_joint` of ``name``, swept again with the joints between
+    the part and a link in its way moved out of the way (module docstring;
+    the retries: :func:`_clearing_ends`). Returns the first retry that
+    passes (its ``range_note`` says what was moved), else the first sweep.
+    A link rigid with the joint's parent (the part's own stop) moves nothing."""
     qc, d, rng = closed[name]
     first = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
                         initial_state=initial_state, config=cfg)
@@ -476,15 +357,7 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
         return first
     between = [k for k in joints_between(model, jd.child, who)
                if k != name and k in closed and k in session.joint_types and closed[k][2] > 0]
-    # opened, then stopped or pushed on the way back: closed ends; shut in: closed ends,
-    # then open ends; stopped part-way out: open ends (see the docstring)
-    if opened:
-        ends: tuple[tuple[float, str], ...] = ((0.0, "closed"),)
-    elif first.reached_open < SHUT_IN_FRACTION:
-        ends = ((0.0, "closed"), (1.0, "open"))
-    else:
-        ends = ((1.0, "open"),)
-    for end, word in ends:
+    for end, word in _clearing_ends(first):
         moved = {k: closed[k][0] + end * closed[k][1] * closed[k][2] for k in between}
         if not moved or all(abs(moved[k] - initial_state.get(k, closed[k][0])) < 1e-9 for k in moved):
             continue
@@ -497,6 +370,15 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
             second.range_note = f"{who} is in the way {where}; swept with {', '.join(sorted(moved))} {word}"
             return second
     return first
+
+
+def _clearing_ends(first: JointSweep) -> tuple[tuple[float, str], ...]:
+    """(share of the way to the open end, its name) of each retry of ``first``, in turn (module docstring)."""
+    if first.time_open is not None:
+        return ((0.0, "closed"),)
+    if first.reached_open < SHUT_IN_FRACTION:
+        return ((0.0, "closed"), (1.0, "open"))
+    return ((1.0, "open"),)
 
 
 def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],
@@ -518,17 +400,14 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
     notes: dict[str, str] = {}
     if cfg.hold_others and closed:
         closed, notes = held_ranges(urdf, closed, initial_state, conv)
-    # with the others held, only the swept joint's own spring acts (a held
-    # joint's spring load is taken by the hold): one session per spring set
+    # a held joint's spring load is taken by its hold: one session per set of acting springs
     groups: dict[tuple[str, ...], list[str]] = {}
     for name in closed:
         key = ((name,) if name in springs else ()) if cfg.hold_others else tuple(sorted(springs))
         groups.setdefault(key, []).append(name)
     for key, names in groups.items():
-        opts = SessionOptions(initial_state=dict(initial_state), springs={n: springs[n] for n in key}, fixed_base=True,
-                              gravity=False, ground=False, conventions=conv)
-        session = open_session(engine, urdf, opts)
-        blocker = _Blocker(session, urdf, conv)
+        session = open_session(engine, urdf, fixed_root_options(initial_state, conv, {n: springs[n] for n in key}))
+        blocker = Blocker(session, urdf, conv)
         try:
             saved = session.save_state()
             for name in names:

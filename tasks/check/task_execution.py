@@ -2,7 +2,7 @@
 performs the task of the manifest row on the free object (issue 15, Build 3;
 SPEC, "Interaction under manipulation").
 
-Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
+Definitions (re-derivable; ``docs/design/metrics.md``, "task_execution"):
 
 1. Session: SPEC conventions (timestep 1/240 s, gravity, a ground plane; the
    root **free**, resting on the ground; a mounted asset keeps its root fixed
@@ -16,7 +16,7 @@ Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
    ``approach_distance / max_speed`` s (a floating gripper without collision
    shapes: nothing touches the object); the root pose at the grasp is the
    reference of sliding and tipping.
-3. Grasp at the contact point (:func:`asset2sim.tasks.check.gripper.contact_point_rule`:
+3. Grasp at the contact point (:func:`asset2sim.tasks.check.contact_points.contact_point_rule`:
    a handle when a geometry element is named so, else the middle of the
    moving link's far edge from the axis, a drawer's front) with a bounded-force
    attachment (:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`, the
@@ -28,9 +28,8 @@ Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
    q_des going from the start q0 to q_target = q_c + d f_target R at the
    gripper's top speed (v_max / r rad/s at lever r; v_max m/s), ramped up
    over ``accel_time`` s and down at the same rate before the target (a
-   trapezoidal speed profile: an arm decelerates; stopping the commanded
-   motion at once made the gripper brake the part's momentum within a step,
-   7.5 N peaks on a laptop screen that needed 2 N to move). While the grasp point's direction of motion is
+   trapezoidal speed profile: an arm decelerates; an abrupt stop would brake
+   the part's momentum within a step). While the grasp point's direction of motion is
    within 60 deg of vertical (``vertical_share``) the gripper presses or
    lifts vertically only (the attachment's force projected on world z, the
    finger sliding along the part): as a person closes a lid or presses a
@@ -67,7 +66,7 @@ Definitions (re-derivable; ``docs/metrics.md``, "task_execution"):
    operating forces of the category and part.
 
 Opening fractions f = d (q - q_c) / R (0 closed, 1 fully open; closed ends:
-``docs/metrics.md`` section 4). Targets: the task's
+``docs/design/metrics.md`` section 4). Targets: the task's
 (:mod:`asset2sim.tasks.check.task_spec`): close 0.05, open 0.6. A joint
 whose initial state already meets the target is first set to the far side
 (close: f = 0.6, open: f = 0) and settled again, so every task moves its
@@ -78,69 +77,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, Spring, quiet_stdout
+from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
-from asset2sim.frames import axis_angle_matrix
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule, grasp_side
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side
+from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
+from asset2sim.tasks.check.gripper_motion import Motion, TaskConfig, move_joint
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
 
-_UP = np.array([0.0, 0.0, 1.0])
 #: Opening fraction a close task starts from when the delivered state is already closed.
 FAR_SIDE_OPEN = OPEN_TARGET
-
-#: |q_dot| below which a joint counts as stopped: rad/s (revolute), m/s (prismatic).
-STOPPED_REVOLUTE, STOPPED_PRISMATIC = 0.05, 0.005
-
-
-@dataclass(frozen=True)
-class TaskConfig:
-    """Knobs of task execution (units on every field)."""
-
-    settle_time: float = 0.5
-    """free settling before the approach, s"""
-    approach_distance: float = 0.05
-    """stand-off the gripper covers before the grasp, m (time only: it has no shapes)"""
-    accel_time: float = 0.2
-    """time to ramp the commanded joint speed up to the gripper's top speed, s"""
-    travel_margin: float = 1.5
-    """time allowed per unit of travel time at top speed (dimensionless)"""
-    extra_time: float = 1.0
-    """time after the commanded motion ends to reach the target, s"""
-    hold_time: float = 1.0
-    """wait after release, s"""
-    reach_tol: float = 0.05
-    """opening-fraction tolerance on the target's side (dimensionless)"""
-    slide_tol: float = 0.005
-    """footprint displacement that counts as sliding, m"""
-    tip_tol: float = 0.05
-    """root rotation that counts as tipping, rad"""
-    vertical_share: float = 0.5
-    """the gripper presses or lifts vertically (a push along world z) while the
-    vertical component of the grasp point's direction of motion is at least
-    this share of it (dimensionless; 0.5: within 60 deg of vertical), else it
-    drives the full attachment along the joint's motion"""
-    from_far_side: bool = True
-    """a joint whose initial state already meets the task's target is first
-    set to the far side (close: opening fraction 0.6; open: the closed end)
-    and settled again, so that every task moves its joint; False: such an
-    attempt succeeds without motion"""
-    retry_speed_shares: tuple[float, ...] = (0.5, 0.25)
-    """shares of the gripper's top speed at which an attempt is made again,
-    in order, from a fresh session, when the free object slid or tipped under
-    the gripper (dimensionless): the top speed is a limit, not a required
-    speed; a robot (or a person) that pushes the object away does it again
-    more slowly, and the joint damping's share of the force falls with the
-    speed. Empty: one attempt at top speed"""
-    limits: GripperLimits = field(default_factory=GripperLimits)
 
 
 @dataclass
@@ -209,14 +164,6 @@ class TaskRun:
     config: TaskConfig = field(default_factory=TaskConfig)
 
 
-def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.ndarray]:
-    """Origin o (3,) m of ``link``'s frame (the joint's frame when ``link`` is
-    its child) and the joint's unit axis a (3,) in world coordinates."""
-    o, R = session.link_frame(link)
-    a = np.asarray(R, float) @ np.asarray(session.joint_axis(joint), float)
-    return np.asarray(o, float), a / max(float(np.linalg.norm(a)), 1e-12)
-
-
 def execute_task(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
                  target_fraction: float | None = None, config: TaskConfig | None = None,
                  model: UrdfModel | None = None, hold_required: bool = True, root_fixed: bool = False,
@@ -233,7 +180,7 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         target_fraction: the task's target opening fraction; None: close 0.05,
             open 0.6 (0.9 when the joint starts beyond 0.55).
         config: knobs.
-        model: the URDF model (handles, :func:`~asset2sim.tasks.check.gripper.handle_points`).
+        model: the URDF model (handles, :func:`~asset2sim.tasks.check.contact_points.handle_points`).
         hold_required: the target must still be reached 1 s after release.
         root_fixed: the session's root is fixed (mounted): the child side is
             always the one moved.
@@ -244,6 +191,53 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         ValueError: unknown action, non-positive ``open_range``, ``speed_share`` outside (0, 1].
         KeyError: unknown joint.
     """
+    _check_task(session, joint, action, open_range, speed_share)
+    cfg = config or TaskConfig()
+    dt = float(session.options.conventions.timestep)
+    prismatic = session.joint_types[joint] == "prismatic"
+    if target_fraction is None:
+        target_fraction = CLOSE_TARGET if action == "close" else OPEN_TARGET
+
+    def frac(q: float) -> float:
+        return float(direction * (q - closed) / open_range)
+
+    def reached(f: float) -> bool:
+        return f <= target_fraction + cfg.reach_tol if action == "close" else f >= target_fraction - cfg.reach_tol
+
+    notes: list[str] = []
+    q0, f0, started_from = _settle(session, joint, action, closed, direction, open_range, cfg, frac, reached, notes)
+    side = grasp_side(session, joint, model, root_fixed=root_fixed)
+    link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
+    # Sliding and tipping of the link that carries the object.
+    watch = SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
+    q_target = closed + direction * target_fraction * open_range
+    if reached(f0):
+        m = Motion(moved=False, f_rel=f0, f_end=f0, held_ok=True)
+        notes.append("at the target before the motion: nothing to move")
+    else:
+        # Moving the parent side by -dq about the joint gives the same relative motion dq.
+        m = move_joint(session, joint, BoundedGrasp(session, link, point, cfg.limits), 1.0 if side == "child" else -1.0, q0,
+                       q_target, cfg, speed_share, frac, reached, watch, notes)
+    slid = watch.slide > cfg.slide_tol
+    tipped = watch.tilt > cfg.tip_tol
+    ok_reached = reached(m.f_rel) if np.isfinite(m.f_rel) else False
+    failure = _task_failure(m, slid, tipped, ok_reached, cfg.limits, hold_required, notes)
+    return TaskAttempt(
+        joint=joint, joint_type=session.joint_types[joint], action=action, link=link, side=side, contact_rule=rule,
+        contact_point=[float(x) for x in point], started_from=started_from, start_fraction=f0, target_fraction=float(target_fraction),
+        reached=bool(ok_reached), release_fraction=float(m.f_rel), final_fraction=float(m.f_end) if np.isfinite(m.f_end) else float("nan"),
+        held=bool(m.held_ok), hold_required=bool(hold_required), peak_force_n=float(m.peak_force),
+        peak_operating_force_n=float(m.peak_op),
+        peak_torque_nm=None if prismatic or not m.moved else float(m.peak_tau),
+        peak_axial_force_n=float(m.peak_ax) if prismatic and m.moved else None, lever_m=m.lever,
+        root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
+        force_limited=bool(m.force_limited), moved=m.moved, seconds_simulated=m.steps * dt, success=not failure,
+        failure=failure, notes=notes, speed_share=float(speed_share),
+    )
+
+
+def _check_task(session, joint: str, action: str, open_range: float, speed_share: float) -> None:
+    """Raises :func:`execute_task`'s ValueError or KeyError for bad arguments."""
     if action not in ("close", "open"):
         raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
     if not open_range > 0:
@@ -252,164 +246,46 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         raise KeyError(f"joint {joint!r} is not a movable joint of the session")
     if not 0.0 < speed_share <= 1.0:
         raise ValueError(f"joint {joint!r}: speed_share must be in (0, 1], got {speed_share!r}")
-    cfg = config or TaskConfig()
-    lim = cfg.limits
+
+
+def _settle(session, joint: str, action: str, closed: float, direction: float, open_range: float, cfg: TaskConfig,
+            frac: Callable[[float], float], reached: Callable[[float], bool], notes: list[str]) -> tuple[float, float, str]:
+    """Settle and approach (module docstring, step 2), from the far side where
+    the joint is already at the target (``TaskConfig.from_far_side``, with a
+    note). Returns (q0, rad or m; its opening fraction; where it started)."""
     dt = float(session.options.conventions.timestep)
-    jtype = session.joint_types[joint]
-    prismatic = jtype == "prismatic"
-    stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
-
-    def frac(q: float) -> float:
-        return float(direction * (q - closed) / open_range)
-
-    n_settle = int(round((cfg.settle_time + cfg.approach_distance / lim.max_speed_m_s) / dt))
+    n_settle = int(round((cfg.settle_time + cfg.approach_distance / cfg.limits.max_speed_m_s) / dt))
     session.step(n_settle)
     q0, _ = session.joint_state(joint)
-    f0 = frac(q0)
-    if target_fraction is None:
-        target_fraction = CLOSE_TARGET if action == "close" else OPEN_TARGET
+    if not (reached(frac(q0)) and cfg.from_far_side):
+        return q0, frac(q0), "initial state"
+    # The delivered state already does the task: start from the far side so
+    # that every task moves its joint (close from open, open from closed).
+    f_from = FAR_SIDE_OPEN if action == "close" else 0.0
+    session.set_joint_positions({joint: closed + direction * f_from * open_range})
+    session.step(n_settle)
+    q0, _ = session.joint_state(joint)
+    started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
+    notes.append(started_from)
+    return q0, frac(q0), started_from
 
-    def reached(f: float) -> bool:
-        return f <= target_fraction + cfg.reach_tol if action == "close" else f >= target_fraction - cfg.reach_tol
 
-    notes: list[str] = []
-    started_from = "initial state"
-    if reached(f0) and cfg.from_far_side:
-        # The delivered state already does the task: start from the far side so
-        # that every task moves its joint (close from open, open from closed).
-        f_from = FAR_SIDE_OPEN if action == "close" else 0.0
-        session.set_joint_positions({joint: closed + direction * f_from * open_range})
-        session.step(n_settle)
-        q0, _ = session.joint_state(joint)
-        f0 = frac(q0)
-        started_from = f"far side (opening fraction {f_from:g}): the initial state was already at the target"
-        notes.append(started_from)
-
-    side = grasp_side(session, joint, model, root_fixed=root_fixed)
-    link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
-    # Moving the parent side by -dq about the joint gives the same relative motion dq.
-    side_sign = 1.0 if side == "child" else -1.0
-    # Sliding and tipping of the link that carries the object.
-    watch = SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
-    q_target = closed + direction * target_fraction * open_range
-    steps = 0
-    peak_tau = peak_ax = peak_op = 0.0
-    lever = None
-    force_limited = False
-    if reached(f0):
-        f_rel = f_end = f0
-        moved = False
-        peak_force = 0.0
-        held_ok = True
-        notes.append("at the target before the motion: nothing to move")
-    else:
-        moved = True
-        grasp = BoundedGrasp(session, link, point, lim)
-        o, a = joint_frame_axis(session, joint, link)
-        p = grasp.grasp_point_world()
-        v_cmd = lim.max_speed_m_s * speed_share
-        if not prismatic:
-            r_vec = (p - o) - float((p - o) @ a) * a
-            lever = max(float(np.linalg.norm(r_vec)), 1e-3)
-            qdot_max = v_cmd / lever
-        else:
-            qdot_max = v_cmd
-        travel = abs(q_target - q0) * (lever if lever is not None else 1.0)
-        n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
-        sgn = 1.0 if q_target >= q0 else -1.0
-        decel = qdot_max / cfg.accel_time
-        q_des = q0
-        done = False
-        pushed_steps = 0
-        for k in range(n_move):
-            # trapezoidal speed profile: ramped up over accel_time, and down at the same rate
-            # before the target (an arm decelerates; an abrupt stop would brake the part's momentum in one step)
-            speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
-            speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
-            q_des = q_des + sgn * speed * dt
-            if sgn * (q_des - q_target) > 0:
-                q_des = q_target
-            q, _ = session.joint_state(joint)
-            o, a = joint_frame_axis(session, joint, link)
-            p = grasp.grasp_point_world()
-            if prismatic:
-                target = p + a * side_sign * (q_des - q)
-            else:
-                target = o + axis_angle_matrix(a, side_sign * (q_des - q)) @ (p - o)
-            # Press or lift vertically where that moves the part well enough:
-            # it loads the object onto the ground instead of pushing it sideways.
-            t_dir = a if prismatic else np.cross(a, p - o)
-            nt = float(np.linalg.norm(t_dir))
-            push = nt > 0 and abs(float(t_dir[2])) >= cfg.vertical_share * nt
-            if push:
-                # the vertical stretch that moves the part as far along its path
-                # as the target asks: (progress along the tangent) / t_z
-                t_hat = t_dir / nt
-                target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
-            F = grasp.step_towards(target, dt, direction=_UP if push else None)
-            pushed_steps += int(push)
-            if prismatic:
-                peak_ax = max(peak_ax, abs(float(F @ a)))
-                peak_op = peak_ax
-            else:
-                tau = abs(float(a @ np.cross(p - o, F)))
-                peak_tau = max(peak_tau, tau)
-                r_now = float(np.linalg.norm((p - o) - float((p - o) @ a) * a))
-                peak_op = max(peak_op, tau / max(r_now, 1e-3))
-            if float(np.linalg.norm(F)) >= lim.max_force_n * (1 - 1e-9):
-                force_limited = True
-            session.step(1)
-            steps += 1
-            q, qd = session.joint_state(joint)
-            slide, tilt = watch.update()
-            if not np.isfinite(q):
-                break
-            if slide > cfg.slide_tol or tilt > cfg.tip_tol:
-                break  # the object moves instead of the joint: the gripper stops
-            if q_des == q_target and reached(frac(q)) and abs(qd) < stopped:
-                done = True
-                break
-        peak_force = grasp.peak_force_n
-        grasp.release()
-        if pushed_steps:
-            notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
-        q_rel, _ = session.joint_state(joint)
-        f_rel = frac(q_rel)
-        if not done and reached(f_rel):
-            notes.append("target reached but the joint was still moving at the time limit")
-        for _ in range(int(round(cfg.hold_time / dt))):
-            session.step(1)
-            steps += 1
-            watch.update()
-        q_end, _ = session.joint_state(joint)
-        f_end = frac(q_end)
-        held_ok = reached(f_end) if np.isfinite(f_end) else False
-    slid = watch.slide > cfg.slide_tol
-    tipped = watch.tilt > cfg.tip_tol
-    ok_reached = reached(f_rel) if np.isfinite(f_rel) else False
+def _task_failure(m: Motion, slid: bool, tipped: bool, ok_reached: bool, lim: GripperLimits, hold_required: bool,
+                  notes: list[str]) -> str:
+    """Why the attempt failed ("" when it succeeded; module docstring, step 6),
+    with a note where the target is not held but need not be."""
     failure = ""
-    if not np.isfinite(f_end):
+    if not np.isfinite(m.f_end):
         failure = "diverged"
     elif slid or tipped:
         failure = "the object " + ("slid" if slid else "tipped") + (" before the target was reached" if not ok_reached else "")
     elif not ok_reached:
-        failure = "target not reached" + (f" (gripper at its {lim.max_force_n:g} N limit)" if force_limited else "")
-    elif not held_ok and hold_required:
+        failure = "target not reached" + (f" (gripper at its {lim.max_force_n:g} N limit)" if m.force_limited else "")
+    elif not m.held_ok and hold_required:
         failure = "target not held 1 s after release"
-    if not held_ok and not hold_required and not failure:
+    if not m.held_ok and not hold_required and not failure:
         notes.append("does not hold the target after release (allowed: the joint moves freely or returns by its spring by design)")
-    return TaskAttempt(
-        joint=joint, joint_type=jtype, action=action, link=link, side=side, contact_rule=rule,
-        contact_point=[float(x) for x in point], started_from=started_from, start_fraction=f0, target_fraction=float(target_fraction),
-        reached=bool(ok_reached), release_fraction=float(f_rel), final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"),
-        held=bool(held_ok), hold_required=bool(hold_required), peak_force_n=float(peak_force),
-        peak_operating_force_n=float(peak_op),
-        peak_torque_nm=None if prismatic or not moved else float(peak_tau),
-        peak_axial_force_n=float(peak_ax) if prismatic and moved else None, lever_m=lever,
-        root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
-        force_limited=bool(force_limited), moved=moved, seconds_simulated=steps * dt, success=not failure,
-        failure=failure, notes=notes, speed_share=float(speed_share),
-    )
+    return failure
 
 
 def run_task(engine: str, urdf: Path | str, joints: dict[str, tuple[float, float, float]], *,

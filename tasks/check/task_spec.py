@@ -1,7 +1,7 @@
 """A manipulation task ("close the microwave door", the manifest's ``task``
 column or ``--task``) as joints, a direction and a target opening fraction.
 
-Parsing (re-derivable; ``docs/metrics.md``):
+Parsing (re-derivable; ``docs/design/metrics.md``):
 
 1. The leading verb gives the action (:data:`VERBS`): ``close`` (close, shut,
    press, push down, lower: towards the closed end, target opening fraction

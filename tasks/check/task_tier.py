@@ -2,7 +2,7 @@
 was given (``refine --task``, the manifest's ``task`` column) on the written
 asset, with the same definitions as the evaluation
 (:mod:`asset2sim.tasks.check.task_execution`,
-:mod:`asset2sim.tasks.check.force_ranges`; ``docs/metrics.md``,
+:mod:`asset2sim.tasks.check.force_ranges`; ``docs/design/metrics.md``,
 "task_execution" and "operating_force"), and the operating limits
 escalation keeps to (:func:`operating_limits`).
 

@@ -21,7 +21,7 @@ files refine writes.
 All four are optional (extra ``checkers``); a missing one raises
 :class:`CheckerUnavailable`. Tool findings are reported as the tool gives
 them; which are false alarms for an articulated object is said in
-``docs/simulators.md``.
+``docs/design/simulators.md``.
 """
 
 from __future__ import annotations

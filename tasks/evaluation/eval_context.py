@@ -200,23 +200,8 @@ def build_context(
     overlay = read_json(folder / OVERLAY_NAME)
     report = read_json(folder / REPORT_NAME)
     baseline = read_json(folder / "baseline.json")
-    st = read_json(folder / STATE_NAME)
-    movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    if st is not None:
-        raw = st.get("initial_joint_positions", st)
-        initial = {k: float(v) for k, v in raw.items() if k in joints}
-        src = STATE_NAME
-    else:
-        initial, src = {}, "none: 0 clipped to the limits"
-    for n in movable:
-        if n not in initial:
-            initial[n] = clip_to_limits(0.0, joints[n].lower, joints[n].upper)
-    try:
-        root_fixed = read_root(folder).fixed
-    except OutputError as exc:
-        raise EvaluationError(str(exc)) from exc
-    if root_fixed:
-        notes.append("root fixed as initial_state.json declares (mounted asset): every simulation holds it, no ground plane")
+    initial, src = _initial_state(read_json(folder / STATE_NAME), joints)
+    root_fixed = _root_fixed(folder, notes)
     ref_dir = Path(reference).resolve() if reference is not None else None
     if ref_dir is not None and not ref_dir.is_dir():
         raise EvaluationError(f"reference {ref_dir}: no such folder")
@@ -234,47 +219,58 @@ def build_context(
         notes.append(req_err)
     ref_info = partnet_mobility.read_reference(ref_dir) if ref_dir is not None else None
     scale, scale_src = _stated_scale(overlay, report, baseline, urdf, ref_dir)
+    springs = _springs(overlay, joints, initial)
+    ref_state, rule = ({}, "")
+    if ref_info is not None and ref_info.urdf is not None:
+        ref_state, rule = _reference_state(ref_info, joints, scale)
+    return Context(
+        urdf=urdf, folder=folder, asset_id=(report or {}).get("asset_id") or (baseline or {}).get("asset_id") or folder.name,
+        links=links, joints=joints, initial_state=initial, initial_state_source=src, overlay=overlay, report=report,
+        baseline=baseline, semantics=semantics, category=cat, prompt=prompt, request=spec, request_error=req_err,
+        reference_dir=ref_dir, reference_scale=ref_info.scale if ref_info is not None else None, reference_state=ref_state,
+        reference_rule=rule, scale=scale, scale_source=scale_src, task_joints=[], closed={},
+        springs=springs, prior=category_prior(cat, spec), conventions=conventions or SimConventions(),
+        sag_tol_revolute=RefineConfig().sag_tolerance_revolute, sag_tol_prismatic=RefineConfig().sag_tolerance_prismatic,
+        notes=notes, root_fixed=root_fixed,
+    )
+
+
+def _initial_state(st: dict[str, Any] | None, joints: dict[str, JointInfo]) -> tuple[dict[str, float], str]:
+    """joint -> initial position (rad/m) from ``initial_state.json`` (``st``), every other movable joint at 0
+    clipped to its limits; and where it came from."""
+    if st is not None:
+        raw = st.get("initial_joint_positions", st)
+        initial = {k: float(v) for k, v in raw.items() if k in joints}
+        src = STATE_NAME
+    else:
+        initial, src = {}, "none: 0 clipped to the limits"
+    for n in [n for n, j in joints.items() if j.type in MOVABLE]:
+        if n not in initial:
+            initial[n] = clip_to_limits(0.0, joints[n].lower, joints[n].upper)
+    return initial, src
+
+
+def _root_fixed(folder: Path, notes: list[str]) -> bool:
+    """Whether ``initial_state.json`` declares the root fixed (a mounted asset: noted into ``notes``).
+    Raises EvaluationError: the declaration cannot be read."""
+    try:
+        root_fixed = read_root(folder).fixed
+    except OutputError as exc:
+        raise EvaluationError(str(exc)) from exc
+    if root_fixed:
+        notes.append("root fixed as initial_state.json declares (mounted asset): every simulation holds it, no ground plane")
+    return root_fixed
+
+
+def _springs(overlay: dict[str, Any] | None, joints: dict[str, JointInfo], initial: dict[str, float]) -> dict[str, Spring]:
+    """joint -> the overlay's spring (stiffness > 0; reference position rad/m, else the initial position)."""
     springs: dict[str, Spring] = {}
     for jn, jd in ((overlay or {}).get("joints") or {}).items():
         k = float(jd.get("stiffness") or 0.0)
         if k > 0 and jn in joints:
             ref_q = jd.get("spring_reference")
             springs[jn] = Spring(k, float(ref_q) if ref_q is not None else initial.get(jn, 0.0))
-    ref_state, rule = ({}, "")
-    if ref_info is not None and ref_info.urdf is not None:
-        ref_state, rule = _reference_state(ref_info, joints, scale)
-    return Context(
-        urdf=urdf,
-        folder=folder,
-        asset_id=(report or {}).get("asset_id") or (baseline or {}).get("asset_id") or folder.name,
-        links=links,
-        joints=joints,
-        initial_state=initial,
-        initial_state_source=src,
-        overlay=overlay,
-        report=report,
-        baseline=baseline,
-        semantics=semantics,
-        category=cat,
-        prompt=prompt,
-        request=spec,
-        request_error=req_err,
-        reference_dir=ref_dir,
-        reference_scale=ref_info.scale if ref_info is not None else None,
-        reference_state=ref_state,
-        reference_rule=rule,
-        scale=scale,
-        scale_source=scale_src,
-        task_joints=[],
-        closed={},
-        springs=springs,
-        prior=category_prior(cat, spec),
-        conventions=conventions or SimConventions(),
-        sag_tol_revolute=RefineConfig().sag_tolerance_revolute,
-        sag_tol_prismatic=RefineConfig().sag_tolerance_prismatic,
-        notes=notes,
-        root_fixed=root_fixed,
-    )
+    return springs
 
 
 def hold_required(ctx: Context, joints: list[str]) -> dict[str, bool]:

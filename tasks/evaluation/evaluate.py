@@ -21,7 +21,7 @@ The stage, in the order it runs:
 - :mod:`~asset2sim.tasks.evaluation.metric_defs`: the metric registry and the
   metrics (physical robustness per engine, semantic accuracy, behaviour).
 
-Definitions, conventions and thresholds are in ``docs/metrics.md``. The names
+Definitions, conventions and thresholds are in ``docs/design/metrics.md``. The names
 of those modules that callers use are importable from here too.
 """
 
@@ -121,26 +121,12 @@ def _closed_ends(ctx: Context, joints: list[str]) -> None:
 
 
 def evaluate_asset(
-    urdf_dir_or_path: Path | str,
-    *,
-    reference: Path | str | None = None,
-    prompt: str | None = None,
-    engines: tuple[str, ...] | list[str] = ("pybullet",),
-    seed: int = 0,
-    category: str | None = None,
-    method: str | None = None,
-    out_dir: Path | str | None = None,
-    write_report: bool = False,
-    probes: bool = True,
-    conventions: SimConventions | None = None,
-    measured: list[MetricResult] | None = None,
-    recording: RestRecording | None = None,
-    views: dict[str, np.ndarray] | None = None,
-    views_state: dict[str, float] | None = None,
-    checks: list[MetricResult] | None = None,
-    task: str | None = None,
-    recorded: RecordedRuns | None = None,
-    shown_urdf: Path | str | None = None,
+    urdf_dir_or_path: Path | str, *, reference: Path | str | None = None, prompt: str | None = None,
+    engines: tuple[str, ...] | list[str] = ("pybullet",), seed: int = 0, category: str | None = None, method: str | None = None,
+    out_dir: Path | str | None = None, write_report: bool = False, probes: bool = True, conventions: SimConventions | None = None,
+    measured: list[MetricResult] | None = None, recording: RestRecording | None = None, views: dict[str, np.ndarray] | None = None,
+    views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None, task: str | None = None,
+    recorded: RecordedRuns | None = None, shown_urdf: Path | str | None = None,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -219,44 +205,76 @@ def evaluate_asset(
         EvaluationError: the asset or reference cannot be read.
         ValueError: ``write_report`` without ``out_dir``; no engine given.
     """
+    _check_arguments(write_report, out_dir, engines)
+    t0 = time.perf_counter()
+    ctx = build_context(urdf_dir_or_path, reference=reference, prompt=prompt, category=category, conventions=conventions)
+    need_closed = _joints_to_close(ctx)
+    _set_task(ctx, task, need_closed)
+    reuse_engine = engines[0] if measured is not None else None
+    runs = _run_engines(ctx, engines, need_closed, probes=probes, keep_geometry=write_report, reuse_engine=reuse_engine,
+                        recording=recording, recorded=recorded)
+    results = _metric_results(ctx, runs, probes=probes, measured=measured, reuse_engine=reuse_engine, checks=checks)
+    ev = _evaluation(ctx, runs, results, engines=engines, method=method, prompt=prompt, seed=seed, shown_urdf=shown_urdf, t0=t0)
+    if out_dir is not None:
+        same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
+        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None)
+    return ev
+
+
+def _check_arguments(write_report: bool, out_dir: Path | str | None, engines: tuple[str, ...] | list[str]) -> None:
+    """Raises ValueError: ``write_report`` without ``out_dir``; no engine given."""
     if write_report and out_dir is None:
         raise ValueError("write_report needs out_dir")
     if not engines:
         raise ValueError("at least one engine is needed")
-    t0 = time.perf_counter()
-    ctx = build_context(urdf_dir_or_path, reference=reference, prompt=prompt, category=category, conventions=conventions)
-    # joints that matter: the task's, plus those the request names
+
+
+def _joints_to_close(ctx: Context) -> list[str]:
+    """The joints whose closed ends the evaluation needs: the task-relevant ones (set into ``ctx.task_joints``, their
+    rule noted), those the request names, then every movable joint (the joint sweep drives every one)."""
     pre_req = labelled_joints(ctx.request, ctx.joints, ctx.semantics, ctx.category)
     ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, pre_req, ctx.category, ctx.semantics)
     ctx.notes.append(f"task-relevant joints: {', '.join(ctx.task_joints) or 'none'} ({tj_rule})")
-    need_closed = list(dict.fromkeys(ctx.task_joints + pre_req))
-    if ctx.request is not None and any(js.selector == "all" for js in ctx.request.joint_states):
-        need_closed = list(dict.fromkeys(need_closed + ctx.task_joints))
-    need_closed = list(dict.fromkeys(need_closed + movable_joints(ctx)))  # the joint sweep drives every one
+    return list(dict.fromkeys(ctx.task_joints + pre_req + movable_joints(ctx)))
+
+
+def _set_task(ctx: Context, task: str | None, need_closed: list[str]) -> None:
+    """``task`` parsed into ``ctx.task`` (None without a task: task execution is not run) and noted; of a task on
+    several joints only those with work to do at the initial state (:func:`with_work_to_do`, the closed ends first)."""
     tspec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints) if task else None
     if tspec is not None and len(tspec.joints) > 1:
-        # which of the task's joints have work to do at the initial state (task_spec.with_work_to_do): the closed ends first
         if need_closed and not ctx.closed:
             _closed_ends(ctx, need_closed)
         tspec = with_work_to_do(tspec, {n: c.fraction(ctx.initial_state[n]) for n, c in ctx.closed.items()
                                         if n in ctx.initial_state and c.open_range > 0})
-    ctx.task = tspec  # task execution (metric_defs: task_execution, operating_force) runs only with a task
+    ctx.task = tspec
     if tspec is not None:
         ctx.notes.append(f"task {task!r}: {', '.join(tspec.actions)} {', '.join(tspec.joints) or 'no joint'} ({tspec.rule})"
                          + "".join(f"; {n}" for n in tspec.notes))
+
+
+def _run_engines(ctx: Context, engines: tuple[str, ...] | list[str], need_closed: list[str], *, probes: bool, keep_geometry: bool,
+                 reuse_engine: str | None, recording: RestRecording | None, recorded: RecordedRuns | None) -> dict[str, EngineRun]:
+    """engine -> its :class:`EngineRun`, in the order of ``engines``; errors noted. PyBullet runs first and computes
+    the closed ends of ``need_closed`` (else they are computed after the runs); ``reuse_engine`` runs no rest test."""
     runs: dict[str, EngineRun] = {}
-    order = sorted(engines, key=lambda e: e != "pybullet")  # PyBullet first: it computes the closed ends
-    reuse_engine = engines[0] if measured is not None else None
-    for e in order:
+    tspec = ctx.task
+    for e in sorted(engines, key=lambda e: e != "pybullet"):
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
-        runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=write_report, closed_for=pending,
+        runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=keep_geometry, closed_for=pending,
                              rest_test=e != reuse_engine, recording=recording, recorded=recorded,
                              **({} if tspec is None else {"probe_joints": tspec.joints, "probe_actions": tspec.actions}))
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:
         _closed_ends(ctx, need_closed)
-    runs = {e: runs[e] for e in engines}
+    return {e: runs[e] for e in engines}
+
+
+def _metric_results(ctx: Context, runs: dict[str, EngineRun], *, probes: bool, measured: list[MetricResult] | None,
+                    reuse_engine: str | None, checks: list[MetricResult] | None) -> list[MetricResult]:
+    """Every registered metric's results in registry order (``reuse_engine``'s rest-test metrics taken from
+    ``measured``), then those of ``checks`` the evaluation did not measure itself (same name and engine)."""
     results: list[MetricResult] = []
     for spec in METRICS.values():
         if spec.name == "probes" and not probes:
@@ -264,47 +282,40 @@ def evaluate_asset(
         if reuse_engine is not None and spec.name in REST_TEST_METRICS:
             results += [m for m in measured if m.name == spec.name and m.engine == reuse_engine]
             others = {e: r for e, r in runs.items() if e != reuse_engine}
-            try:
-                results += spec.fn(ctx, others) if others else []
-            except Exception as exc:
-                results.append(MetricResult(name=spec.name, value=None, unit="", passed=False,
-                                            details={"error": f"{type(exc).__name__}: {exc}"}, engine="none"))
-            continue
-        try:
-            results += spec.fn(ctx, runs)
-        except Exception as exc:  # one broken metric must not hide the others
-            results.append(MetricResult(name=spec.name, value=None, unit="", passed=False,
-                                        details={"error": f"{type(exc).__name__}: {exc}"}, engine="none"))
+            results += _apply(spec, ctx, others) if others else []
+        else:
+            results += _apply(spec, ctx, runs)
     if checks:
         have = {(m.name, m.engine) for m in results}
         results += [m for m in checks if (m.name, m.engine) not in have]
+    return results
+
+
+def _apply(spec: MetricSpec, ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """``spec``'s results, or one failed result naming the error: one broken metric must not hide the others."""
+    try:
+        return list(spec.fn(ctx, runs))
+    except Exception as exc:
+        return [MetricResult(name=spec.name, value=None, unit="", passed=False, details={"error": f"{type(exc).__name__}: {exc}"},
+                             engine="none")]
+
+
+def _evaluation(ctx: Context, runs: dict[str, EngineRun], results: list[MetricResult], *, engines: tuple[str, ...] | list[str],
+                method: str | None, prompt: str | None, seed: int, shown_urdf: Path | str | None, t0: float) -> Evaluation:
+    """The :class:`Evaluation` (``seconds`` since ``t0``, :func:`time.perf_counter`), with ``runs`` and ``ctx`` attached."""
     failures = [f"{m.name}@{m.engine}" for m in results if m.passed is False]
     ev = Evaluation(
-        asset_id=ctx.asset_id,
-        urdf=str(shown_urdf or ctx.urdf),
-        method=method or (ctx.baseline or {}).get("method") or ("asset2sim" if ctx.overlay else None),
-        prompt=prompt,
-        reference=str(ctx.reference_dir) if ctx.reference_dir else None,
-        category=ctx.category,
-        scale=ctx.scale,
-        scale_source=ctx.scale_source,
-        engines=list(engines),
-        seed=seed,
-        initial_state=ctx.initial_state,
-        initial_state_source=ctx.initial_state_source,
-        task_joints=ctx.task_joints,
+        asset_id=ctx.asset_id, urdf=str(shown_urdf or ctx.urdf),
+        method=method or (ctx.baseline or {}).get("method") or ("asset2sim" if ctx.overlay else None), prompt=prompt,
+        reference=str(ctx.reference_dir) if ctx.reference_dir else None, category=ctx.category, scale=ctx.scale,
+        scale_source=ctx.scale_source, engines=list(engines), seed=seed, initial_state=ctx.initial_state,
+        initial_state_source=ctx.initial_state_source, task_joints=ctx.task_joints,
         closed_positions={n: {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range} for n, c in ctx.closed.items()},
-        metrics=results,
-        passed=not failures and all(r.error is None for r in runs.values()),
-        failures=failures + [f"engine@{e}" for e, r in runs.items() if r.error],
-        notes=ctx.notes,
-        seconds=time.perf_counter() - t0,
+        metrics=results, passed=not failures and all(r.error is None for r in runs.values()),
+        failures=failures + [f"engine@{e}" for e, r in runs.items() if r.error], notes=ctx.notes, seconds=time.perf_counter() - t0,
     )
     ev._runs = runs
     ev._context = ctx
-    if out_dir is not None:
-        same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
-        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None)
     return ev
 
 

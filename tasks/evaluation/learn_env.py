@@ -10,9 +10,9 @@ physics only through the engine protocol
 (:func:`asset2sim.engines.registry.open_session`), so it runs in every engine the
 protocol answers; the benchmark uses PyBullet.
 
-Definitions (re-derivable; ``docs/metrics.md``):
+Definitions (re-derivable; ``docs/design/metrics.md``):
 
-- **Task instance** (:func:`prepare_task`): the task is parsed by
+- **Task instance** (:func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`): the task is parsed by
   :func:`asset2sim.tasks.check.task_spec.parse_task` into joints and
   actions; the closed ends are the evaluation's own
   (:func:`asset2sim.tasks.evaluation.closed_ends.compute_closed`, no method
@@ -32,7 +32,7 @@ Definitions (re-derivable; ``docs/metrics.md``):
   :func:`asset2sim.tasks.interpret.mounting.session_root_options`), gravity,
   passive joints, initial state from ``initial_state.json`` except the task
   joint, which starts at the common start of its action
-  (:func:`common_start`: a close task half open, a revolute part at most
+  (:func:`~asset2sim.tasks.evaluation.learn_task.common_start`: a close task half open, a revolute part at most
   45 deg open, an open task closed; the same motion is asked of every
   method, and no method gets a task its initial state already satisfies;
   ``start="asset"`` keeps the asset's state). It first settles for at least
@@ -79,32 +79,20 @@ torch) is the extra ``learn`` (``pip install -e ".[learn]"``).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring, quiet_stdout
+from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
-from asset2sim.schemas.config import SimConventions
-from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point_rule
-from asset2sim.tasks.check.probes import (
-    CLOSE_REACHED,
-    CLOSE_TARGET,
-    OPEN_FAR_REACHED,
-    OPEN_FAR_TARGET,
-    OPEN_REACHED,
-    OPEN_TARGET,
-)
+from asset2sim.tasks.check.contact_points import contact_point_rule, joint_frame_axis
+from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.support import SupportWatch
-from asset2sim.tasks.check.task_execution import TaskConfig, joint_frame_axis
-from asset2sim.tasks.check.task_tier import hold_required_by_label
-from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
-from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
-from asset2sim.tasks.check.task_spec import parse_task
+from asset2sim.tasks.check.task_execution import TaskConfig
+from asset2sim.tasks.evaluation.learn_task import LearnTask
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
@@ -114,174 +102,8 @@ OBS_DIM = 13
 #: Action length (see the module docstring): gripper velocity (3,), press flag.
 ACTION_DIM = 4
 
-#: Common start of the task joint per action, opening fraction
-#: (:func:`prepare_task` ``start="task"``): a close task starts half open, an open
-#: task at the closed end, so the same motion is asked of every method.
-START_FRACTION: dict[str, float] = {"close": 0.5, "open": 0.0}
-
-#: Largest opening of a revolute task joint at the common start of a close
-#: task, rad: half of a wide range (a box lid's 183 deg, a stapler's 147 deg)
-#: stands the part near vertical, where its motion is horizontal and closing
-#: it pushes a light object sideways. At 45 deg a level lid's far edge moves
-#: about 70 % vertically, above the task-execution check's press threshold
-#: (``vertical_share`` 0.5, reached at 60 deg), with a margin for lids whose
-#: closed pose is not level (100221's edge moved 34 % vertically at 60 deg)
-#: and for the reset noise: the same start is a press for every method.
-START_MAX_ANGLE = math.radians(45.0)
-
 #: World up, the direction of a press (action component 4 > 0).
 _UP = np.array([0.0, 0.0, 1.0])
-
-
-class LearnTaskError(ValueError):
-    """The task cannot be set up on this asset (names the asset, the task and why)."""
-
-
-@dataclass
-class LearnTask:
-    """One task instance on one asset (module docstring, "Task instance").
-
-    Positions rad or m; fractions dimensionless (0 closed, 1 fully open).
-    """
-
-    urdf: Path
-    task: str
-    joint: str
-    joint_type: str
-    action: str
-    """``close`` or ``open``"""
-    closed: ClosedEnd
-    target_fraction: float
-    reach_fraction: float
-    """f <= this (close) or f >= this (open) counts as reached"""
-    hold_required: bool
-    """the target must still be reached after release (False for a joint that
-    returns by the spring its part prior expects, a stapler's arm: the rule of
-    :func:`asset2sim.tasks.check.task_tier.hold_required_by_label`)"""
-    initial_state: dict[str, float]
-    springs: dict[str, Spring]
-    root_fixed: bool
-    conventions: SimConventions
-    start_fraction: float
-    """the task joint's opening fraction at the start of an episode"""
-    start: str = "task"
-    """``task`` (the common start) or ``asset`` (the initial state)"""
-    candidates: list[str] = field(default_factory=list)
-    """the task's joints (the parse; those the reference keeps movable when it names any)"""
-    rule: str = ""
-    notes: list[str] = field(default_factory=list)
-
-    def reached(self, fraction: float) -> bool:
-        """Whether ``fraction`` satisfies the task's reach threshold."""
-        if self.action == "close":
-            return fraction <= self.reach_fraction
-        return fraction >= self.reach_fraction
-
-    def fraction(self, q: float) -> float:
-        """Opening fraction of the task joint at ``q`` (rad or m)."""
-        return self.closed.fraction(q)
-
-
-def common_start(action: str, joint_type: str, open_range: float) -> float:
-    """The common start of a task joint, opening fraction: an open task at the
-    closed end (0); a close task half open (:data:`START_FRACTION`), a
-    revolute joint at most :data:`START_MAX_ANGLE` open (``open_range`` rad,
-    or m for a prismatic joint).
-
-    Raises:
-        ValueError: ``action`` is not ``close`` or ``open``.
-    """
-    if action not in START_FRACTION:
-        raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
-    f = START_FRACTION[action]
-    if action == "close" and joint_type != "prismatic" and open_range > 0:
-        f = min(f, START_MAX_ANGLE / open_range)
-    return f
-
-
-def targets_for(action: str, start_fraction: float) -> tuple[float, float]:
-    """(target fraction, reach threshold) of an action from a start fraction,
-    the probes' (:mod:`asset2sim.tasks.check.probes`).
-
-    Raises:
-        ValueError: ``action`` is not ``close`` or ``open``.
-    """
-    if action == "close":
-        return CLOSE_TARGET, CLOSE_REACHED
-    if action == "open":
-        return (OPEN_TARGET, OPEN_REACHED) if start_fraction < OPEN_REACHED else (OPEN_FAR_TARGET, OPEN_FAR_REACHED)
-    raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
-
-
-def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None = None,
-                 category: str | None = None, conventions: SimConventions | None = None,
-                 start: str = "task") -> LearnTask:
-    """The :class:`LearnTask` of ``task`` on the asset folder (or URDF) ``asset``.
-
-    Args:
-        asset: an asset folder (``mobility.urdf`` with ``initial_state.json``
-            and its other sidecars) or a URDF path.
-        task: the task text ("close the box lid").
-        reference: the PartNet-Mobility folder with ``reference_gensim2.urdf``
-            (its movable joints are the task-relevant joints), or None.
-        category: the category when the folder does not state it.
-        conventions: simulation conventions (default the SPEC's).
-        start: ``task`` (the common start :data:`START_FRACTION`) or
-            ``asset`` (the asset's initial state for the task joint too;
-            a method whose initial state already satisfies the task then
-            gets a task already done).
-
-    Returns:
-        The task instance (module docstring).
-
-    Raises:
-        LearnTaskError: no movable joint the task can act on (none parsed, or
-            none with an opening range > 0).
-        asset2sim.tasks.check.asset_files.EvaluationError: the asset
-            cannot be read.
-    """
-    if start not in ("task", "asset"):
-        raise ValueError(f"start must be 'task' or 'asset', got {start!r}")
-    ctx = build_context(asset, reference=reference, prompt=None, category=category, conventions=conventions)
-    ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, [], ctx.category, ctx.semantics)
-    spec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints)
-    if not spec.joints:
-        raise LearnTaskError(f"{ctx.urdf}: task {task!r} names no movable joint ({spec.rule})")
-    # Where the reference names the task's joint (GenSim2 keeps only it movable), every method acts on it.
-    candidates = [j for j in spec.joints if j in ctx.task_joints] or list(spec.joints)
-    with quiet_stdout():
-        closed, cnotes = compute_closed(ctx.urdf, ctx.joints, candidates)
-    best: tuple[float, str, str] | None = None
-    for j in candidates:
-        c = closed[j]
-        if not c.open_range > 0:
-            continue
-        for action in spec.actions:
-            f0 = c.fraction(ctx.initial_state.get(j, 0.0)) if start == "asset" else \
-                common_start(action, ctx.joints[j].type, c.open_range)
-            target, _ = targets_for(action, f0)
-            gap = abs(target - f0)
-            if best is None or gap > best[0]:
-                best = (gap, j, action)
-    if best is None:
-        raise LearnTaskError(f"{ctx.urdf}: task {task!r}: none of {candidates} can open (range 0)")
-    _, joint, action = best
-    c = closed[joint]
-    jtype = ctx.joints[joint].type
-    f0 = c.fraction(ctx.initial_state.get(joint, 0.0)) if start == "asset" else common_start(action, jtype, c.open_range)
-    target, reach = targets_for(action, f0)
-    notes = list(spec.notes) + cnotes + [f"task-relevant joints: {tj_rule}"]
-    label = (ctx.semantics.get(ctx.joints[joint].child) or (None, None))[1]
-    hold = hold_required_by_label({joint: label}, ctx.springs, ctx.category, free_moving=False,
-                                  spring_requested=False)[joint]
-    if not hold:
-        notes.append(f"{joint} returns by its spring by design ({ctx.category} {label}): the target need not hold after release")
-    return LearnTask(
-        urdf=ctx.urdf, task=task, joint=joint, joint_type=jtype, action=action, closed=c,
-        target_fraction=target, reach_fraction=reach, hold_required=hold, initial_state=dict(ctx.initial_state),
-        springs=dict(ctx.springs), root_fixed=ctx.root_fixed, conventions=ctx.conventions,
-        start_fraction=f0, start=start, candidates=candidates, rule=spec.rule, notes=notes,
-    )
 
 
 @dataclass
@@ -332,7 +154,7 @@ class TaskEnv(gym.Env):
     """The learning environment of one :class:`LearnTask` (module docstring).
 
     Args:
-        task: the task instance (:func:`prepare_task`).
+        task: the task instance (:func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`).
         config: knobs.
 
     The simulator session is opened at the first :meth:`reset` and kept until
@@ -514,14 +336,13 @@ class TaskEnv(gym.Env):
         stretch = float(np.linalg.norm(self.grasp.gripper_point - self.grasp.grasp_point_world()))
         reward -= cfg.stretch_weight * stretch * self.grasp.stiffness / cfg.limits.max_force_n
         self._f_prev = f
-        moved = self._watch.slide > cfg.slide_tol or self._watch.tilt > cfg.tip_tol
+        moved = self._moved()
         if not np.isfinite(f) or moved or t.reached(f):
             self.episodes += 1
         if not np.isfinite(f):
             return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, "diverged")
         if moved:
-            why = "the object slid" if self._watch.slide > cfg.slide_tol else "the object tipped"
-            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, why)
+            return self._obs(), float(reward - cfg.moved_penalty), True, False, self._info(False, moved)
         if t.reached(f):
             ok, why = self._hold()
             if ok:
@@ -532,6 +353,12 @@ class TaskEnv(gym.Env):
             self.episodes += 1
         return self._obs(), float(reward), False, truncated, self._info(False, "time limit" if truncated else "")
 
+    def _moved(self) -> str:
+        """Why the object counts as moved since reset: "the object slid", "the object tipped", or "" (within the tolerances)."""
+        if self._watch.slide > self.config.slide_tol:
+            return "the object slid"
+        return "the object tipped" if self._watch.tilt > self.config.tip_tol else ""
+
     def _hold(self) -> tuple[bool, str]:
         """Release and watch :attr:`LearnConfig.hold_time` s: (held, failure)."""
         cfg = self.config
@@ -540,10 +367,9 @@ class TaskEnv(gym.Env):
             self._engine_step()
             self._watch.update()
         f, _ = self.joint_fraction()
-        if self._watch.slide > cfg.slide_tol:
-            return False, "the object slid after release"
-        if self._watch.tilt > cfg.tip_tol:
-            return False, "the object tipped after release"
+        moved = self._moved()
+        if moved:
+            return False, f"{moved} after release"
         if self.task.hold_required and not self.task.reached(f):
             return False, "target not held after release"
         return True, ""

@@ -29,7 +29,7 @@ interaction under manipulation (per engine, each in sessions of its own)
     (:mod:`asset2sim.tasks.check.force_ranges`: its peak force against real
     operating forces).
 
-Definitions, conventions and thresholds are in ``docs/metrics.md``.
+Definitions, conventions and thresholds are in ``docs/design/metrics.md``.
 """
 
 from __future__ import annotations
@@ -105,56 +105,43 @@ def _skip(name: str, unit: str, engine: str, reason: str) -> MetricResult:
     return MetricResult(name=name, value=None, unit=unit, passed=None, threshold="", details={"skipped": reason}, engine=engine)
 
 
+def _per_engine(runs: dict[str, EngineRun], name: str, unit: str, measure: Callable[[str, EngineRun], MetricResult],
+                missing: Callable[[EngineRun], bool] = lambda r: r.trace is None) -> list[MetricResult]:
+    """``measure(engine, run)`` of every engine in ``runs``; skipped (the run's error, else "not measured") where ``missing(run)``."""
+    return [_skip(name, unit, e, r.error or "not measured") if missing(r) else measure(e, r) for e, r in runs.items()]
+
+
 @register_metric("penetration")
 def _m_penetration(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    return [r.penetration if r.penetration is not None else _skip("penetration", "mm", e, r.error or "not measured") for e, r in runs.items()]
+    return _per_engine(runs, "penetration", "mm", lambda e, r: r.penetration, lambda r: r.penetration is None)
 
 
 @register_metric("ground_penetration")
 def _m_ground(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    out = []
-    for e, r in runs.items():
-        if r.ground_series is None:
-            out.append(_skip("ground_penetration", "mm", e, r.error or "not measured"))
-            continue
-        g = r.ground_series
-        finite = g[np.isfinite(g)]
-        worst = float(np.max(finite)) if len(finite) else 0.0
-        at = int(np.argmax(finite)) if len(finite) else 0
-        out.append(
-            MetricResult(
-                name="ground_penetration",
-                value=worst * 1000.0,
-                unit="mm",
-                passed=bool(worst <= GROUND_PENETRATION_TOL and len(finite) == len(g)),
-                threshold=f"<= {GROUND_PENETRATION_TOL * 1000:g} mm at every step of the rest test",
-                details={"worst_step": at, "worst_time_s": (at + 1) * ctx.conventions.timestep, "steps": int(len(g))},
-                engine=e,
-            )
-        )
-    return out
+    return _per_engine(runs, "ground_penetration", "mm", lambda e, r: _ground_result(ctx, e, r.ground_series),
+                       lambda r: r.ground_series is None)
+
+
+def _ground_result(ctx: Context, engine: str, g: np.ndarray) -> MetricResult:
+    """``ground_penetration`` (mm) of one engine from its ground penetration per rest-test step ``g`` (K,) m."""
+    finite = g[np.isfinite(g)]
+    worst = float(np.max(finite)) if len(finite) else 0.0
+    at = int(np.argmax(finite)) if len(finite) else 0
+    return MetricResult(name="ground_penetration", value=worst * 1000.0, unit="mm",
+                        passed=bool(worst <= GROUND_PENETRATION_TOL and len(finite) == len(g)),
+                        threshold=f"<= {GROUND_PENETRATION_TOL * 1000:g} mm at every step of the rest test",
+                        details={"worst_step": at, "worst_time_s": (at + 1) * ctx.conventions.timestep, "steps": int(len(g))},
+                        engine=engine)
 
 
 @register_metric("rest_stability")
 def _m_rest(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    out = []
-    for e, r in runs.items():
-        if r.trace is None:
-            out.append(_skip("rest_stability", "m", e, r.error or "not measured"))
-        else:
-            out.append(spec_metrics.rest_stability(r.trace, ctx.conventions, engine=e))
-    return out
+    return _per_engine(runs, "rest_stability", "m", lambda e, r: spec_metrics.rest_stability(r.trace, ctx.conventions, engine=e))
 
 
 @register_metric("oscillation")
 def _m_osc(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    out = []
-    for e, r in runs.items():
-        if r.trace is None:
-            out.append(_skip("oscillation", "joints", e, r.error or "not measured"))
-        else:
-            out.append(spec_metrics.oscillation(r.trace, ctx.conventions, engine=e))
-    return out
+    return _per_engine(runs, "oscillation", "joints", lambda e, r: spec_metrics.oscillation(r.trace, ctx.conventions, engine=e))
 
 
 def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_types: dict[str, str],
@@ -205,73 +192,48 @@ def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_type
 
 @register_metric("divergence")
 def _m_div(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    out = []
-    for e, r in runs.items():
-        if r.trace is None or r.root_series is None:
-            out.append(_skip("divergence", "", e, r.error or "not measured"))
-            continue
-        largest = float(np.max(r.extents)) if r.extents is not None else 0.0
-        d = divergence_check(r.root_series, r.joint_series, r.trace.joint_types, ctx.conventions.timestep, largest)
-        d["nan"] = d["nan"] or r.trace.diverged
-        d["diverged"] = d["diverged"] or r.trace.diverged
-        out.append(
-            MetricResult(
-                name="divergence",
-                value=float(d["diverged"]),
-                unit="flag",
-                passed=not d["diverged"],
-                threshold=(
-                    f"finite, root speed <= {EXPLOSION_ROOT_SPEED} m/s, joint speed <= {EXPLOSION_JOINT_SPEED_REVOLUTE} rad/s "
-                    f"({EXPLOSION_JOINT_SPEED_PRISMATIC} m/s), root travel <= max({EXPLOSION_TRAVEL_MIN} m, "
-                    f"{EXPLOSION_TRAVEL_FACTOR} x largest extent)"
-                ),
-                details=d,
-                engine=e,
-            )
-        )
-    return out
+    return _per_engine(runs, "divergence", "", lambda e, r: _divergence_result(ctx, e, r),
+                       lambda r: r.trace is None or r.root_series is None)
+
+
+def _divergence_result(ctx: Context, engine: str, r: EngineRun) -> MetricResult:
+    """``divergence`` of one engine's rest test (:func:`divergence_check`, or the trace's own divergence)."""
+    largest = float(np.max(r.extents)) if r.extents is not None else 0.0
+    d = divergence_check(r.root_series, r.joint_series, r.trace.joint_types, ctx.conventions.timestep, largest)
+    d["nan"] = d["nan"] or r.trace.diverged
+    d["diverged"] = d["diverged"] or r.trace.diverged
+    threshold = (f"finite, root speed <= {EXPLOSION_ROOT_SPEED} m/s, joint speed <= {EXPLOSION_JOINT_SPEED_REVOLUTE} rad/s "
+                 f"({EXPLOSION_JOINT_SPEED_PRISMATIC} m/s), root travel <= max({EXPLOSION_TRAVEL_MIN} m, "
+                 f"{EXPLOSION_TRAVEL_FACTOR} x largest extent)")
+    return MetricResult(name="divergence", value=float(d["diverged"]), unit="flag", passed=not d["diverged"], threshold=threshold,
+                        details=d, engine=engine)
 
 
 @register_metric("joint_hold")
 def _m_hold(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    out = []
-    for e, r in runs.items():
-        if r.trace is None:
-            out.append(_skip("joint_hold", "rad", e, r.error or "not measured"))
+    return _per_engine(runs, "joint_hold", "rad", lambda e, r: _hold_result(ctx, e, r))
+
+
+def _hold_result(ctx: Context, engine: str, r: EngineRun) -> MetricResult:
+    """``joint_hold`` of one engine: the largest drift (rad or m) of the task joints over settle + test."""
+    drift = spec_metrics.joint_drift(r.trace)
+    per, failing = {}, []
+    for n in ctx.task_joints:
+        if n not in drift:
             continue
-        drift = spec_metrics.joint_drift(r.trace)
-        per, failing = {}, []
-        for n in ctx.task_joints:
-            if n not in drift:
-                continue
-            pri = ctx.joints[n].type == "prismatic"
-            tol = ctx.sag_tol_prismatic if pri else ctx.sag_tol_revolute
-            q_end = float(r.trace.joints[n][-1])
-            c = ctx.closed.get(n)
-            per[n] = {
-                "drift": drift[n],
-                "unit": "m" if pri else "rad",
-                "tolerance": tol,
-                "q_initial": ctx.initial_state.get(n),
-                "q_end": q_end,
-                "fraction_initial": c.fraction(ctx.initial_state.get(n, 0.0)) if c else None,
-                "fraction_end": c.fraction(q_end) if c else None,
-                "failed": drift[n] > tol,
-            }
-            if drift[n] > tol:
-                failing.append(n)
-        out.append(
-            MetricResult(
-                name="joint_hold",
-                value=float(max([v["drift"] for v in per.values()], default=0.0)),
-                unit="rad/m",
-                passed=(not failing) if per else None,
-                threshold=f"largest |q(t) - q_initial| <= {ctx.sag_tol_revolute} rad / {ctx.sag_tol_prismatic} m over settle + test",
-                details={"joints": per, "failing": failing},
-                engine=e,
-            )
-        )
-    return out
+        pri = ctx.joints[n].type == "prismatic"
+        tol = ctx.sag_tol_prismatic if pri else ctx.sag_tol_revolute
+        q_end = float(r.trace.joints[n][-1])
+        c = ctx.closed.get(n)
+        per[n] = {"drift": drift[n], "unit": "m" if pri else "rad", "tolerance": tol, "q_initial": ctx.initial_state.get(n),
+                  "q_end": q_end, "fraction_initial": c.fraction(ctx.initial_state.get(n, 0.0)) if c else None,
+                  "fraction_end": c.fraction(q_end) if c else None, "failed": drift[n] > tol}
+        if drift[n] > tol:
+            failing.append(n)
+    return MetricResult(name="joint_hold", value=float(max([v["drift"] for v in per.values()], default=0.0)), unit="rad/m",
+                        passed=(not failing) if per else None,
+                        threshold=f"largest |q(t) - q_initial| <= {ctx.sag_tol_revolute} rad / {ctx.sag_tol_prismatic} m over settle + test",
+                        details={"joints": per, "failing": failing}, engine=engine)
 
 
 @register_metric("scale_deviation")
@@ -317,8 +279,7 @@ def _m_mass(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         total = sum(v["mass"] for v in r.masses.values())
         per = r.masses
     largest, where = _largest_extent(ctx, runs)
-    rfirst = _first_run(runs)
-    extents = ctx.closed_extents if ctx.closed_extents is not None else (rfirst.extents if rfirst is not None else None)
+    extents = ctx.closed_extents if ctx.closed_extents is not None else (r.extents if r is not None else None)
     rng, f = scaled_mass_range(ctx.prior, extents)
     m = sem.mass_plausibility(total, rng, per_link=per, category=ctx.category)
     m.details.update({"size_factor_vs_prior": f, "largest_extent_m": largest, "extent_state": where,
@@ -347,21 +308,11 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         checks.append(sem.JointStateCheck(name, band, c.fraction(q) if c else None, label, phrase, target,
                                           c.direction * (q - c.q_closed) if c else None, ctx.joints[name].type))
     dims = ctx.prior.get("base_dims")
-    m = sem.prompt_alignment(
-        size_requested=spec.size_class is not None,
-        largest_extent=largest,
-        typical_largest=dims[0] if dims else None,
-        size_factor=float(ctx.prior.get("factor", 1.0)),
-        joint_checks=checks,
-        state_requested=bool(spec.joint_states),
-        unmatched_requests=unmatched,
-        text=ctx.prompt,
-    )
-    m.details["size_class"] = spec.size_class
-    m.details["category"] = ctx.category
-    m.details["variant"] = ctx.prior.get("variant")
-    m.details["extent_state"] = where
-    m.details["prior_note"] = ctx.prior.get("note")
+    m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest, typical_largest=dims[0] if dims else None,
+                             size_factor=float(ctx.prior.get("factor", 1.0)), joint_checks=checks,
+                             state_requested=bool(spec.joint_states), unmatched_requests=unmatched, text=ctx.prompt)
+    m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": ctx.prior.get("variant"),
+                      "extent_state": where, "prior_note": ctx.prior.get("note")})
     return [m]
 
 
@@ -378,38 +329,26 @@ def _m_probes(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
 # ------------------------------------------------ interaction under manipulation
 def movable_joints(ctx: Context) -> list[str]:
     """Revolute, continuous and prismatic joints of the evaluated URDF, in file order."""
-    return [n for n, j in ctx.joints.items() if j.type in ("revolute", "continuous", "prismatic")]
+    return ctx.movable
 
 
 @register_metric("joint_sweep")
 def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.sweep` in every engine that loaded the asset
     (its own fixed-root session), closed ends from ``ctx.closed``."""
-    out = []
     closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in movable_joints(ctx)}
-    for e, r in runs.items():
-        if r.error:
-            out.append(_skip("joint_sweep", unit_of("joint_sweep"), e, r.error))
-            continue
-        run = recorded_runs.sweep_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                      recorded=r.recorded)
-        out.append(sweep.sweep_metric(run))
-    return out
+    return _per_engine(runs, "joint_sweep", unit_of("joint_sweep"), lambda e, r: sweep.sweep_metric(
+        recorded_runs.sweep_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                recorded=r.recorded)), lambda r: bool(r.error))
 
 
 @register_metric("robust_rest")
 def _m_robust(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.robust_rest` in every engine that loaded the
     asset, the root as the asset declares (``ctx.root_fixed``: skipped)."""
-    out = []
-    for e, r in runs.items():
-        if r.error:
-            out.append(_skip("robust_rest", unit_of("robust_rest"), e, r.error))
-            continue
-        run = recorded_runs.robust_rest_run(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                            fixed_base=ctx.root_fixed, recorded=r.recorded)
-        out.append(robust_rest.robust_rest_metric(run))
-    return out
+    return _per_engine(runs, "robust_rest", unit_of("robust_rest"), lambda e, r: robust_rest.robust_rest_metric(
+        recorded_runs.robust_rest_run(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                      fixed_base=ctx.root_fixed, recorded=r.recorded)), lambda r: bool(r.error))
 
 
 def _task_joints(ctx: Context) -> dict[str, tuple[float, float, float]]:

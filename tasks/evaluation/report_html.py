@@ -47,6 +47,12 @@ th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums
 """
 
 
+def _page(title: str, body: str) -> str:
+    """A whole HTML document: ``title`` (HTML text), the CSS, ``body`` (HTML)."""
+    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>{title}</title><style>{CSS}</style></head>"
+            f"<body>{body}</body></html>\n")
+
+
 def esc(x: Any) -> str:
     """HTML-escaped text of ``x``."""
     return html.escape("" if x is None else str(x))
@@ -216,6 +222,11 @@ def _joint_unit(jtype: str, what: str) -> str:
     }[what]
 
 
+def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
+    """One row of :func:`parameter_rows`."""
+    return {"parameter": parameter, "where": where, "value": value, "unit": unit, "source": source}
+
+
 def parameter_rows(ev) -> list[dict[str, Any]]:
     """Every physical parameter of the evaluated asset with value, unit and
     source: from ``overlay.json`` (and ``report.json``'s state refinement and
@@ -225,7 +236,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     ov = ctx.overlay if ctx is not None else None
     rep = ctx.report if ctx is not None else None
-    rows.append({"parameter": "scale", "where": "global", "value": ev.scale, "unit": "-", "source": ev.scale_source})
+    rows.append(_param("scale", "global", ev.scale, "-", ev.scale_source))
     if ctx is None:
         return rows
     escal: dict[tuple[str, str], int] = {}
@@ -237,16 +248,15 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
     if ov:
         for ln, lp in (ov.get("links") or {}).items():
             src = lp.get("source") or (f"estimator {est}" if est else "overlay")
-            rows.append({"parameter": "mass", "where": f"link {ln}", "value": lp.get("mass"), "unit": "kg", "source": src})
+            rows.append(_param("mass", f"link {ln}", lp.get("mass"), "kg", src))
             if lp.get("density") is not None:
-                rows.append({"parameter": "density", "where": f"link {ln}", "value": lp["density"], "unit": "kg/m^3", "source": src})
+                rows.append(_param("density", f"link {ln}", lp["density"], "kg/m^3", src))
             inertia = lp.get("inertia") or {}
-            rows.append({"parameter": "inertia (ixx, iyy, izz)", "where": f"link {ln}",
-                         "value": ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")), "unit": "kg*m^2", "source": src})
-            rows.append({"parameter": "center of mass", "where": f"link {ln}",
-                         "value": ", ".join(fmt(c) for c in lp.get("com", [])), "unit": "m", "source": src})
+            rows.append(_param("inertia (ixx, iyy, izz)", f"link {ln}", ", ".join(fmt(inertia.get(k)) for k in ("ixx", "iyy", "izz")),
+                               "kg*m^2", src))
+            rows.append(_param("center of mass", f"link {ln}", ", ".join(fmt(c) for c in lp.get("com", [])), "m", src))
             if lp.get("material"):
-                rows.append({"parameter": "material", "where": f"link {ln}", "value": lp["material"], "unit": "-", "source": src})
+                rows.append(_param("material", f"link {ln}", lp["material"], "-", src))
         for jn, jd in (ov.get("joints") or {}).items():
             jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
             for k in ("damping", "friction", "stiffness"):
@@ -259,22 +269,21 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
                     fv = getattr(ctx.joints[jn], k)
                     if fv is not None and val is not None and abs(fv - val) > 1e-12:
                         val, src = fv, src + " (URDF value differs from overlay; URDF shown)"
-                rows.append({"parameter": k, "where": f"joint {jn}", "value": val, "unit": _joint_unit(jt, k), "source": src})
+                rows.append(_param(k, f"joint {jn}", val, _joint_unit(jt, k), src))
     else:
         run = next((r for r in ev._runs.values() if r.masses), None)
         for ln, li in ctx.links.items():
             m = run.masses.get(ln, {}).get("mass") if run else li.mass
             src = "URDF <inertial>" if li.mass is not None else "engine default (1 kg, inertia diag(1,1,1) kg*m^2)"
-            rows.append({"parameter": "mass", "where": f"link {ln}", "value": m, "unit": "kg", "source": src})
+            rows.append(_param("mass", f"link {ln}", m, "kg", src))
         for jn, jd in ctx.joints.items():
             if jd.type not in ("revolute", "continuous", "prismatic"):
                 continue
             for k in ("damping", "friction"):
                 v = getattr(jd, k)
-                rows.append({"parameter": k, "where": f"joint {jn}", "value": 0.0 if v is None else v,
-                             "unit": _joint_unit(jd.type, k), "source": "URDF <dynamics>" if v is not None else "engine default (0)"})
-            rows.append({"parameter": "stiffness", "where": f"joint {jn}", "value": 0.0, "unit": _joint_unit(jd.type, "stiffness"),
-                         "source": "none (URDF has no springs)"})
+                rows.append(_param(k, f"joint {jn}", 0.0 if v is None else v, _joint_unit(jd.type, k),
+                                   "URDF <dynamics>" if v is not None else "engine default (0)"))
+            rows.append(_param("stiffness", f"joint {jn}", 0.0, _joint_unit(jd.type, "stiffness"), "none (URDF has no springs)"))
     state_src = ev.initial_state_source
     if rep and rep.get("state"):
         state_src = f"refinement ({rep['state'].get('method', '')})"
@@ -284,11 +293,11 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
         state_src = f"baseline rule: {ctx.baseline['initial_state_rule']}"
     for jn, q in ev.initial_state.items():
         jt = ctx.joints[jn].type if jn in ctx.joints else "revolute"
-        rows.append({"parameter": "initial position", "where": f"joint {jn}", "value": q, "unit": _joint_unit(jt, "position"), "source": state_src})
+        rows.append(_param("initial position", f"joint {jn}", q, _joint_unit(jt, "position"), state_src))
     for jn, jd in ctx.joints.items():
         if jd.type in ("revolute", "prismatic"):
-            rows.append({"parameter": "limits", "where": f"joint {jn}", "value": f"[{fmt(jd.lower)}, {fmt(jd.upper)}]",
-                         "unit": _joint_unit(jd.type, "position"), "source": "URDF <limit>"})
+            rows.append(_param("limits", f"joint {jn}", f"[{fmt(jd.lower)}, {fmt(jd.upper)}]", _joint_unit(jd.type, "position"),
+                               "URDF <limit>"))
     return rows
 
 
@@ -360,10 +369,9 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
     sections += ["<h2>Physical parameters</h2>", _parameter_table(ev)]
     sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
-    sections.append("<p class='small'>Definitions, conventions and thresholds: docs/metrics.md. Simulation: PyBullet DIRECT, "
+    sections.append("<p class='small'>Definitions, conventions and thresholds: docs/guide/metrics.md. Simulation: PyBullet DIRECT, "
                     "dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, self-collision except parent-child, inertia from file, root free.</p>")
-    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>asset2sim evaluation "
-            f"{esc(ev.asset_id)}</title><style>{CSS}</style></head><body>" + "\n".join(sections) + "</body></html>\n")
+    return _page(f"asset2sim evaluation {esc(ev.asset_id)}", "\n".join(sections))
 
 
 def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None) -> Path:
@@ -380,6 +388,12 @@ def _pm(mean: float | None, sd: float | None, digits: int = 3, pct: bool = False
     if sd is not None:
         s += f" &plusmn; {sd * k:.{digits}g}"
     return s + ("%" if pct else "")
+
+
+#: The summary's pass-rate columns: (statistic, count of assets with a verdict), in column order.
+_PASS_RATES = (("rest_stability_pass", "rest_n"), ("oscillation_pass", "osc_n"), ("probes_pass", "probes_n"),
+               ("sweep_pass", "sweep_n"), ("robust_rest_pass", "robust_n"), ("task_pass", "task_n"), ("force_pass", "force_n"),
+               ("ready", "ready_n"))
 
 
 def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], research: list[dict[str, str]],
@@ -409,23 +423,11 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
     for subset, rows in tables.items():
         parts.append(f"<h2>{esc(subset)}</h2><table><tr><th>method</th>" + "".join(f"<th>{esc(c)}</th>" for c, _ in cols) + "</tr>")
         for method, r in rows.items():
-            cells = [
-                _pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")),
-                _pm(r.get("pen_mean"), r.get("pen_sd")),
-                _pm(r.get("rest_stability_pass"), None, pct=True) + f" ({r.get('rest_n', 0)})",
-                _pm(r.get("oscillation_pass"), None, pct=True) + f" ({r.get('osc_n', 0)})",
-                _pm(r.get("probes_pass"), None, pct=True) + f" ({r.get('probes_n', 0)})",
-                _pm(r.get("sweep_pass"), None, pct=True) + f" ({r.get('sweep_n', 0)})",
-                _pm(r.get("robust_rest_pass"), None, pct=True) + f" ({r.get('robust_n', 0)})",
-                _pm(r.get("task_pass"), None, pct=True) + f" ({r.get('task_n', 0)})",
-                _pm(r.get("force_pass"), None, pct=True) + f" ({r.get('force_n', 0)})",
-                _pm(r.get("ready"), None, pct=True) + f" ({r.get('ready_n', 0)})",
-                _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
-                _pm(r.get("init_mean"), r.get("init_sd")),
-                _pm(r.get("prompt_mean"), None, pct=True),
-                _pm(r.get("all_pass"), None, pct=True),
-                fmt(r.get("median_seconds"), 3),
-            ]
+            cells = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
+                     *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
+                     _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
+                     _pm(r.get("init_mean"), r.get("init_sd")), _pm(r.get("prompt_mean"), None, pct=True),
+                     _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3)]
             err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
             parts.append(f"<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
         parts.append("</table>")
@@ -435,11 +437,10 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
                  + "</table>")
     if chart:
         parts.append("<h2>Pass rates</h2>" + svg_tag(chart, "pass rates"))
-    parts.append("<p class='small'>Ours: PyBullet under the SPEC's conventions (docs/metrics.md); the research measured in "
+    parts.append("<p class='small'>Ours: PyBullet under the conventions of docs/guide/metrics.md; the research measured in "
                  "Isaac Sim (PhysX). Penetration in mm is Phi summed over contact points; pass rates count assets that were "
                  "produced; (n) is the number of assets with a verdict.</p>")
-    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>asset2sim benchmark</title>"
-            f"<style>{CSS}</style></head><body>" + "\n".join(parts) + "</body></html>\n")
+    return _page("asset2sim benchmark", "\n".join(parts))
 
 
 def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
@@ -469,8 +470,7 @@ def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) 
             + f"<td class='num'>{fmt(r.get('scale_deviation'))}</td><td class='num'>{fmt(r.get('initial_joint_deviation'))}</td>"
             f"<td class='num'>{fmt(r.get('prompt_alignment'))}</td><td class='num'>{fmt(r.get('seconds'), 3)}</td><td>{link}</td></tr>"
         )
-    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>asset2sim benchmark index</title>"
-            f"<style>{CSS}</style></head><body><h1>Benchmark index</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; "
-            "<a href='summary.html'>summary table</a> &middot; green pass, red fail, grey reported without threshold</p>"
-            "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table></body></html>\n")
+    return _page("asset2sim benchmark index", f"<h1>Benchmark index</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; "
+                 "<a href='summary.html'>summary table</a> &middot; green pass, red fail, grey reported without threshold</p>"
+                 "<table><tr>" + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr>" + "".join(rows) + "</table>")
 

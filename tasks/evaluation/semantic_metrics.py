@@ -2,7 +2,7 @@
 
 Plain functions over numbers, so they can be re-derived by hand and tested
 without a simulator. Definitions (SPEC, "How quality is measured", "Semantic
-accuracy"; the exact conventions are in ``docs/metrics.md``):
+accuracy"; the exact conventions are in ``docs/design/metrics.md``):
 
 - **Scale deviation** |s - s_ref| / s_ref (dimensionless, reported in %), where
   s is the uniform scale of the evaluated asset relative to the *raw* input
@@ -27,7 +27,7 @@ accuracy"; the exact conventions are in ``docs/metrics.md``):
     (``schemas.request.BAND_INTERVAL``): inside scores 1, within 0.1 of it
     0.5, else 0; the joint half is the mean over requested joints.
   * a joint asked in numbers or by an end (``RequestSpec`` joint state with a
-    ``target``, ``docs/requests.md``) is graded against the number instead of
+    ``target``, ``docs/guide/requests.md``) is graded against the number instead of
     its nominal band, by :func:`target_score`: the opening o = direction *
     (q - q_closed) (rad or m) or the fraction f against the asked value,
     within 5 % of it (the request issue's tolerance; at least 0.5 deg,
@@ -59,6 +59,12 @@ SIZE_HALF_RATIO = 2.25
 BAND_HALF_MARGIN = 0.10
 
 
+def _result(name: str, value: float | None, unit: str, threshold: str, details: dict[str, Any],
+            passed: bool | None = None) -> MetricResult:
+    """A semantic metric's result (``engine="none"``; ``passed`` None: reported without a threshold)."""
+    return MetricResult(name=name, value=value, unit=unit, passed=passed, threshold=threshold, details=details, engine="none")
+
+
 def scale_deviation(scale: float | None, reference_scale: float | None, *, scale_source: str = "") -> MetricResult:
     """|s - s_ref| / s_ref in percent.
 
@@ -80,15 +86,7 @@ def scale_deviation(scale: float | None, reference_scale: float | None, *, scale
         details["reason"] = "the reference has no scale"
     else:
         value = abs(float(scale) - float(reference_scale)) / float(reference_scale) * 100.0
-    return MetricResult(
-        name="scale_deviation",
-        value=value,
-        unit="%",
-        passed=None,
-        threshold="reported: |s - s_ref| / s_ref (no SPEC threshold)",
-        details=details,
-        engine="none",
-    )
+    return _result("scale_deviation", value, "%", "reported: |s - s_ref| / s_ref (no SPEC threshold)", details)
 
 
 def initial_joint_deviation(
@@ -126,15 +124,8 @@ def initial_joint_deviation(
     units = {v["unit"] for v in per.values()}
     unit = units.pop() if len(units) == 1 else ("mixed" if units else "rad")
     value = float(np.mean([v["deviation"] for v in per.values()])) if per else None
-    return MetricResult(
-        name="initial_joint_deviation",
-        value=value,
-        unit=unit,
-        passed=None,
-        threshold="reported: |q - q_ref| of the task-relevant joint (no SPEC threshold)",
-        details={"joints": per, "skipped": skipped},
-        engine="none",
-    )
+    return _result("initial_joint_deviation", value, unit, "reported: |q - q_ref| of the task-relevant joint (no SPEC threshold)",
+                   {"joints": per, "skipped": skipped})
 
 
 def mass_plausibility(
@@ -172,15 +163,7 @@ def mass_plausibility(
     else:
         details["reason"] = "no mass prior for the category"
         threshold = "no prior for the category"
-    return MetricResult(
-        name="total_mass",
-        value=float(total_mass),
-        unit="kg",
-        passed=passed,
-        threshold=threshold,
-        details=details,
-        engine="none",
-    )
+    return _result("total_mass", float(total_mass), "kg", threshold, details, passed)
 
 
 def size_score(largest_extent: float, typical_largest: float, size_factor: float = 1.0) -> tuple[float, str, float]:
@@ -378,12 +361,4 @@ def prompt_alignment(
         details["joint_state_score"] = None
         details["joint_state_reason"] = "the request asks for no joint state"
     value = float(np.mean(halves)) if halves else None
-    return MetricResult(
-        name="prompt_alignment",
-        value=value,
-        unit="fraction",
-        passed=None,
-        threshold="reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0",
-        details=details,
-        engine="none",
-    )
+    return _result("prompt_alignment", value, "fraction", "reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0", details)

@@ -53,13 +53,19 @@ def nice_number(x: float, round_: bool) -> float:
     return nf * 10 ** e
 
 
-def nice_ticks(lo: float, hi: float, n: int = 5) -> tuple[float, float, list[float]]:
-    """(axis low, axis high, tick values) covering [lo, hi] with about ``n`` ticks."""
+def _usable(lo: float, hi: float) -> tuple[float, float]:
+    """[lo, hi] made drawable: [0, 1] when not finite, widened by half of |lo| (else 0.5) each side when empty."""
     if not (math.isfinite(lo) and math.isfinite(hi)):
         lo, hi = 0.0, 1.0
     if hi - lo <= 1e-12 * max(1.0, abs(lo), abs(hi)):
         pad = 0.5 * abs(lo) if lo != 0 else 0.5
         lo, hi = lo - pad, hi + pad
+    return lo, hi
+
+
+def nice_ticks(lo: float, hi: float, n: int = 5) -> tuple[float, float, list[float]]:
+    """(axis low, axis high, tick values) covering [lo, hi] with about ``n`` ticks."""
+    lo, hi = _usable(lo, hi)
     step = nice_number(nice_number(hi - lo, False) / max(n - 1, 1), True)
     a, b = math.floor(lo / step) * step, math.ceil(hi / step) * step
     k = int(round((b - a) / step))
@@ -69,11 +75,7 @@ def nice_ticks(lo: float, hi: float, n: int = 5) -> tuple[float, float, list[flo
 def axis_range(lo: float, hi: float, margin: float = 0.04, n: int = 8) -> tuple[float, float, list[float]]:
     """(axis low, axis high, ticks): the data span [lo, hi] widened by
     ``margin`` of its width on each side, with the nice ticks inside it."""
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        lo, hi = 0.0, 1.0
-    if hi - lo <= 1e-12 * max(1.0, abs(lo), abs(hi)):
-        pad = 0.5 * abs(lo) if lo != 0 else 0.5
-        lo, hi = lo - pad, hi + pad
+    lo, hi = _usable(lo, hi)
     d = (hi - lo) * margin
     lo, hi = lo - d, hi + d
     _, _, ticks = nice_ticks(lo, hi, n)
@@ -209,15 +211,61 @@ class _Canvas:
                           f'stroke-width="{width}"{d}{o}/>')
 
 
+@dataclass
+class _Axes:
+    """A panel's plot area (x, y, width, height px) and its axes: x, left y and right y (low, high, ticks)."""
+
+    ax: float
+    ay: float
+    aw: float
+    ah: float
+    xlo: float
+    xhi: float
+    xt: list[float]
+    ylo: float
+    yhi: float
+    yt: list[float]
+    rlo: float = 0.0
+    rhi: float = 1.0
+    rt: list[float] = field(default_factory=list)
+
+    def px(self, x):
+        """Data x -> px."""
+        return self.ax + (np.asarray(x, float) - self.xlo) / (self.xhi - self.xlo) * self.aw
+
+    def py(self, y, r=False):
+        """Data y (on the right-hand axis with ``r``) -> px."""
+        lo, hi = (self.rlo, self.rhi) if r else (self.ylo, self.yhi)
+        return self.ay + self.ah - (np.asarray(y, float) - lo) / (hi - lo) * self.ah
+
+
 def _panel_svg(cv: _Canvas, p: Panel, x0: float, y0: float, w: float, h: float, clip_id: str) -> None:
     """Draw panel ``p`` in the cell (x0, y0, w, h) px."""
     twin = any(s.right for s in p.series) or any(hl[4] for hl in p.hlines)
+    a = _axes(p, x0, y0, w, h, twin)
+    cv.parts.append(f'<rect x="{a.ax:.1f}" y="{a.ay:.1f}" width="{a.aw:.1f}" height="{a.ah:.1f}" fill="#fff" stroke="#333" stroke-width="0.8"/>')
+    _ticks(cv, p, a, twin)
+    cv.parts.append(f'<clipPath id="{clip_id}"><rect x="{a.ax:.1f}" y="{a.ay:.1f}" width="{a.aw:.1f}" height="{a.ah:.1f}"/></clipPath>'
+                    f'<g clip-path="url(#{clip_id})">')
+    _bars(cv, p, a)
+    for s in p.series:
+        _series(cv, s, a)
+    for y, col, dash, _, r in p.hlines:
+        yy = float(a.py(y, r))
+        cv.line(a.ax, yy, a.ax + a.aw, yy, col, 0.9, dash)
+    for x, col, dash, _ in p.vlines:
+        xx = float(a.px(x))
+        cv.line(xx, a.ay, xx, a.ay + a.ah, col, 0.9, dash)
+    cv.parts.append("</g>")
+    _labels(cv, p, a, x0, y0, twin)
+    _legend(cv, p, a)
+
+
+def _axes(p: Panel, x0: float, y0: float, w: float, h: float, twin: bool) -> _Axes:
+    """The plot area inside the cell (x0, y0, w, h) px, its margins left for the labels, and the axes of ``p``'s data."""
     ml, mr, mt, mb = 62.0, (62.0 if twin else 14.0), (22.0 if p.title else 10.0), 40.0
     ax, ay, aw, ah = x0 + ml, y0 + mt, max(w - ml - mr, 20.0), max(h - mt - mb, 20.0)
-    bars = bool(p.bar_groups)
-    left = [s for s in p.series if not s.right]
-    right = [s for s in p.series if s.right]
-    if bars:
+    if p.bar_groups:
         xlo, xhi, xt = -0.5, len(p.bar_groups) - 0.5, []
         ylo, yhi, yt = nice_ticks(*(p.ylim or _span([np.asarray(v) for _, v, _ in p.bar_series], [0.0])))
         if p.ylim:
@@ -225,7 +273,7 @@ def _panel_svg(cv: _Canvas, p: Panel, x0: float, y0: float, w: float, h: float, 
             yt = [t for t in yt if ylo - 1e-9 <= t <= yhi + 1e-9]
     else:
         xlo, xhi, xt = axis_range(*_span([s.x for s in p.series], [v[0] for v in p.vlines]))
-        ylo, yhi, yt = axis_range(*_span([s.y for s in left], [hl[0] for hl in p.hlines if not hl[4]]))
+        ylo, yhi, yt = axis_range(*_span([s.y for s in p.series if not s.right], [hl[0] for hl in p.hlines if not hl[4]]))
         if p.equal_aspect:  # same m per px on both axes: widen the narrower span about its centre
             sx, sy = (xhi - xlo) / aw, (yhi - ylo) / ah
             if sx > sy:
@@ -236,107 +284,108 @@ def _panel_svg(cv: _Canvas, p: Panel, x0: float, y0: float, w: float, h: float, 
                 c = 0.5 * (xlo + xhi)
                 xlo, xhi = c - 0.5 * sy * aw, c + 0.5 * sy * aw
                 _, _, xt = axis_range(xlo, xhi, 0.0)
-    rlo, rhi, rt = axis_range(*_span([s.y for s in right], [hl[0] for hl in p.hlines if hl[4]])) if twin else (0.0, 1.0, [])
-
-    def px(x):
-        return ax + (np.asarray(x, float) - xlo) / (xhi - xlo) * aw
-
-    def py(y, r=False):
-        lo, hi = (rlo, rhi) if r else (ylo, yhi)
-        return ay + ah - (np.asarray(y, float) - lo) / (hi - lo) * ah
-
-    cv.parts.append(f'<rect x="{ax:.1f}" y="{ay:.1f}" width="{aw:.1f}" height="{ah:.1f}" fill="#fff" stroke="#333" stroke-width="0.8"/>')
-    ystep = yt[1] - yt[0] if len(yt) > 1 else 1.0
-    for t in yt:
-        yy = float(py(t))
-        cv.line(ax, yy, ax + aw, yy, "#b0b0b0", 0.6, opacity=0.5)
-        cv.line(ax - 4, yy, ax, yy, "#333", 0.8)
-        cv.text(ax - 6, yy + 4, tick_label(t, ystep), 10, "end")
-    if bars:
-        for i, g in enumerate(p.bar_groups):
-            cv.text(float(px(i)), ay + ah + 14, g, 10)
-    else:
-        xstep = xt[1] - xt[0] if len(xt) > 1 else 1.0
-        for t in xt:
-            xx = float(px(t))
-            cv.line(xx, ay, xx, ay + ah, "#b0b0b0", 0.6, opacity=0.5)
-            cv.line(xx, ay + ah, xx, ay + ah + 4, "#333", 0.8)
-            cv.text(xx, ay + ah + 14, tick_label(t, xstep), 10)
+    a = _Axes(ax, ay, aw, ah, xlo, xhi, xt, ylo, yhi, yt)
     if twin:
-        rstep = rt[1] - rt[0] if len(rt) > 1 else 1.0
-        for t in rt:
-            yy = float(py(t, True))
-            cv.line(ax + aw, yy, ax + aw + 4, yy, "#333", 0.8)
-            cv.text(ax + aw + 6, yy + 4, tick_label(t, rstep), 10, "start")
-    cv.parts.append(f'<clipPath id="{clip_id}"><rect x="{ax:.1f}" y="{ay:.1f}" width="{aw:.1f}" height="{ah:.1f}"/></clipPath>'
-                    f'<g clip-path="url(#{clip_id})">')
-    if bars:
-        n = max(len(p.bar_series), 1)
-        bw = 0.8 / n
-        for j, (_, vals, col) in enumerate(p.bar_series):
-            for i, v in enumerate(vals):
-                x1 = float(px(i - 0.4 + j * bw))
-                x2 = float(px(i - 0.4 + (j + 1) * bw))
-                y1, y2 = float(py(max(v, ylo))), float(py(max(ylo, 0.0)))
-                cv.parts.append(f'<rect x="{x1:.1f}" y="{min(y1, y2):.1f}" width="{x2 - x1:.1f}" height="{abs(y2 - y1):.1f}" fill="{col}"/>')
-    for s in p.series:
-        if s.scatter:
-            ok = np.flatnonzero(np.isfinite(s.x) & np.isfinite(s.y))
-            ok = ok[:: max(1, -(-len(ok) // MAX_SCATTER))]  # an even stride through the points
-            xs, ys = px(s.x[ok]), py(s.y[ok])
-            # one path of tiny squares: far smaller than one <circle> per point
-            d = "".join(f"M{a:.0f} {b:.0f}h{s.size:g}v{s.size:g}h-{s.size:g}z" for a, b in
-                        _unique_px(xs, ys))
-            cv.parts.append(f'<path d="{d}" fill="{s.colour}"/>')
-            continue
-        xr, yr = reduce_series(s.x, s.y, int(aw))
-        xs, ys = px(xr), py(yr, s.right)
-        ok = np.isfinite(xs) & np.isfinite(ys)
-        segs, cur = [], []
-        for a, b, g in zip(xs, ys, ok):
-            if g:
-                cur.append(f"{a:.1f},{b:.1f}")
-            elif cur:
-                segs.append(cur)
-                cur = []
-        if cur:
+        a.rlo, a.rhi, a.rt = axis_range(*_span([s.y for s in p.series if s.right], [hl[0] for hl in p.hlines if hl[4]]))
+    return a
+
+
+def _ticks(cv: _Canvas, p: Panel, a: _Axes, twin: bool) -> None:
+    """Grid lines, ticks and tick labels of the left axis, the x axis (group names under bars) and, with ``twin``, the right axis."""
+    ystep, xstep, rstep = (t[1] - t[0] if len(t) > 1 else 1.0 for t in (a.yt, a.xt, a.rt))  # tick spacings
+    for t in a.yt:
+        yy = float(a.py(t))
+        cv.line(a.ax, yy, a.ax + a.aw, yy, "#b0b0b0", 0.6, opacity=0.5)
+        cv.line(a.ax - 4, yy, a.ax, yy, "#333", 0.8)
+        cv.text(a.ax - 6, yy + 4, tick_label(t, ystep), 10, "end")
+    if p.bar_groups:
+        for i, g in enumerate(p.bar_groups):
+            cv.text(float(a.px(i)), a.ay + a.ah + 14, g, 10)
+    else:
+        for t in a.xt:
+            xx = float(a.px(t))
+            cv.line(xx, a.ay, xx, a.ay + a.ah, "#b0b0b0", 0.6, opacity=0.5)
+            cv.line(xx, a.ay + a.ah, xx, a.ay + a.ah + 4, "#333", 0.8)
+            cv.text(xx, a.ay + a.ah + 14, tick_label(t, xstep), 10)
+    if twin:
+        for t in a.rt:
+            yy = float(a.py(t, True))
+            cv.line(a.ax + a.aw, yy, a.ax + a.aw + 4, yy, "#333", 0.8)
+            cv.text(a.ax + a.aw + 6, yy + 4, tick_label(t, rstep), 10, "start")
+
+
+def _bars(cv: _Canvas, p: Panel, a: _Axes) -> None:
+    """``p``'s grouped bars: 0.8 of each group's width shared by its bars, from max(0, axis low) up."""
+    if not p.bar_groups:
+        return
+    bw = 0.8 / max(len(p.bar_series), 1)
+    for j, (_, vals, col) in enumerate(p.bar_series):
+        for i, v in enumerate(vals):
+            x1 = float(a.px(i - 0.4 + j * bw))
+            x2 = float(a.px(i - 0.4 + (j + 1) * bw))
+            y1, y2 = float(a.py(max(v, a.ylo))), float(a.py(max(a.ylo, 0.0)))
+            cv.parts.append(f'<rect x="{x1:.1f}" y="{min(y1, y2):.1f}" width="{x2 - x1:.1f}" height="{abs(y2 - y1):.1f}" fill="{col}"/>')
+
+
+def _series(cv: _Canvas, s: _Series, a: _Axes) -> None:
+    """One series: a path of dots, or polylines (reduced to the plot's width, broken at non-finite points)."""
+    if s.scatter:
+        ok = np.flatnonzero(np.isfinite(s.x) & np.isfinite(s.y))
+        ok = ok[:: max(1, -(-len(ok) // MAX_SCATTER))]  # an even stride through the points
+        xs, ys = a.px(s.x[ok]), a.py(s.y[ok])
+        # one path of tiny squares: far smaller than one <circle> per point
+        d = "".join(f"M{x:.0f} {y:.0f}h{s.size:g}v{s.size:g}h-{s.size:g}z" for x, y in _unique_px(xs, ys))
+        cv.parts.append(f'<path d="{d}" fill="{s.colour}"/>')
+        return
+    xr, yr = reduce_series(s.x, s.y, int(a.aw))
+    xs, ys = a.px(xr), a.py(yr, s.right)
+    segs, cur = [], []
+    for x, y, g in zip(xs, ys, np.isfinite(xs) & np.isfinite(ys)):
+        if g:
+            cur.append(f"{x:.1f},{y:.1f}")
+        elif cur:
             segs.append(cur)
-        d = f' stroke-dasharray="{s.dash}"' if s.dash else ""
-        for seg in segs:
-            cv.parts.append(f'<polyline points="{" ".join(seg)}" fill="none" stroke="{s.colour}" stroke-width="{s.width}"'
-                            f' stroke-linejoin="round"{d}/>')
-    for y, col, dash, _, r in p.hlines:
-        yy = float(py(y, r))
-        cv.line(ax, yy, ax + aw, yy, col, 0.9, dash)
-    for x, col, dash, _ in p.vlines:
-        xx = float(px(x))
-        cv.line(xx, ay, xx, ay + ah, col, 0.9, dash)
-    cv.parts.append("</g>")
+            cur = []
+    if cur:
+        segs.append(cur)
+    d = f' stroke-dasharray="{s.dash}"' if s.dash else ""
+    for seg in segs:
+        cv.parts.append(f'<polyline points="{" ".join(seg)}" fill="none" stroke="{s.colour}" stroke-width="{s.width}"'
+                        f' stroke-linejoin="round"{d}/>')
+
+
+def _labels(cv: _Canvas, p: Panel, a: _Axes, x0: float, y0: float, twin: bool) -> None:
+    """The panel's title and axis labels (the right one only with ``twin``)."""
     if p.title:
-        cv.text(ax + aw / 2, y0 + 15, p.title, 11)
+        cv.text(a.ax + a.aw / 2, y0 + 15, p.title, 11)
     if p.xlabel:
-        cv.text(ax + aw / 2, ay + ah + 31, p.xlabel, 11)
+        cv.text(a.ax + a.aw / 2, a.ay + a.ah + 31, p.xlabel, 11)
     if p.ylabel:
-        cv.text(x0 + 13, ay + ah / 2, p.ylabel, 11, rotate=True)
+        cv.text(x0 + 13, a.ay + a.ah / 2, p.ylabel, 11, rotate=True)
     if p.ylabel_right and twin:
-        cv.text(ax + aw + 52, ay + ah / 2, p.ylabel_right, 11, rotate=True)
+        cv.text(a.ax + a.aw + 52, a.ay + a.ah / 2, p.ylabel_right, 11, rotate=True)
+
+
+def _legend(cv: _Canvas, p: Panel, a: _Axes) -> None:
+    """A legend box of every labelled series, reference line and bar series, in the corner ``p.legend`` names."""
     entries = [(s.label, s.colour, s.dash, s.scatter) for s in p.series if s.label]
     entries += [(lab, col, dash, False) for _, col, dash, lab, _ in p.hlines if lab]
     entries += [(lab, col, dash, False) for _, col, dash, lab in p.vlines if lab]
     entries += [(lab, col, "", True) for lab, _, col in p.bar_series]
-    if entries and p.legend:
-        lw = 34 + 6.2 * max(len(e[0]) for e in entries)
-        lx = ax + aw - lw - 6 if p.legend == "upper right" else ax + 6
-        ly = ay + 6
-        cv.parts.append(f'<rect x="{lx:.1f}" y="{ly:.1f}" width="{lw:.1f}" height="{14 * len(entries) + 6}" fill="#fff" '
-                        f'fill-opacity="0.85" stroke="#ccc" stroke-width="0.6"/>')
-        for k, (lab, col, dash, dot) in enumerate(entries):
-            yy = ly + 12 + 14 * k
-            if dot:
-                cv.parts.append(f'<rect x="{lx + 8:.1f}" y="{yy - 7:.1f}" width="14" height="8" fill="{col}"/>')
-            else:
-                cv.line(lx + 6, yy - 3, lx + 26, yy - 3, col, 1.4, dash)
-            cv.text(lx + 30, yy, lab, 10, "start")
+    if not (entries and p.legend):
+        return
+    lw = 34 + 6.2 * max(len(e[0]) for e in entries)
+    lx = a.ax + a.aw - lw - 6 if p.legend == "upper right" else a.ax + 6
+    ly = a.ay + 6
+    cv.parts.append(f'<rect x="{lx:.1f}" y="{ly:.1f}" width="{lw:.1f}" height="{14 * len(entries) + 6}" fill="#fff" '
+                    f'fill-opacity="0.85" stroke="#ccc" stroke-width="0.6"/>')
+    for k, (lab, col, dash, dot) in enumerate(entries):
+        yy = ly + 12 + 14 * k
+        if dot:
+            cv.parts.append(f'<rect x="{lx + 8:.1f}" y="{yy - 7:.1f}" width="14" height="8" fill="{col}"/>')
+        else:
+            cv.line(lx + 6, yy - 3, lx + 26, yy - 3, col, 1.4, dash)
+        cv.text(lx + 30, yy, lab, 10, "start")
 
 
 def _unique_px(xs: np.ndarray, ys: np.ndarray) -> list[tuple[float, float]]:

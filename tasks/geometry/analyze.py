@@ -14,7 +14,7 @@ Which geometry
     visual OBJ pieces themselves or a convex decomposition of them
     (``new_objs/``), whose union is the solid the simulator sees.
 
-How (details and measured accuracy in ``docs/mesh_analysis.md``)
+How (details and measured accuracy in ``docs/design/mesh_analysis.md``)
     All pieces (meshes and box/cylinder/sphere primitives, each placed by its
     ``origin`` and ``scale``) are combined into one triangle soup.
 
@@ -348,7 +348,7 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
             watertight = True
             if solid.overlap_candidates:
                 union = voxel_properties(v, f, **vox_kw)
-                # the voxel estimate's error is ~1-3% (docs/mesh_analysis.md)
+                # the voxel estimate's error is ~1-3% (docs/design/mesh_analysis.md)
                 if union.volume < 0.95 * solid.volume:
                     notes.append(
                         f"closed parts overlap: sum of part volumes {solid.volume:.4g} m^3, "

@@ -301,8 +301,7 @@ def closed_positions(
             measured_at[name] = others
             jd = asset.joint(name)
             lo, hi = session.joint_limits[name]
-            continuous = not (np.isfinite(lo) and np.isfinite(hi))
-            if continuous:
+            if not (np.isfinite(lo) and np.isfinite(hi)):
                 # no stops, so no closed end: keep the modelled pose (0)
                 result[name] = ClosedState(
                     joint=name, q_closed=0.0, direction=1.0, open_range=float(np.pi),
@@ -310,66 +309,79 @@ def closed_positions(
                 )
                 state[name] = 0.0
                 continue
-            sub = subtree_links(asset, jd.child)
-            subset = set(sub)
-            union_links = [jd.parent] + sub
-            screen = _PairScreen(session, subset)
-            session.set_joint_positions(state)
-
-            def measure(q: float) -> tuple[float, float, float]:
-                session.set_joint_positions({name: q})
-                return (
-                    _aabb_volume(session, union_links, points),
-                    _aabb_volume(session, sub, points),
-                    _subtree_phi(session, subset, screen),
-                )
-
-            def pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
-                # score: union box / its minimum x (own box / its minimum)^OWN_WEIGHT
-                score = (vals[:, 0] / vals[:, 0].min()) * (vals[:, 1] / vals[:, 1].min()) ** OWN_WEIGHT
-                phi = vals[:, 2]
-                ties = np.flatnonzero(score <= score.min() * (1.0 + tol))
-                size = float(vals[:, 0].min()) ** (1.0 / 3.0)
-                ties = ties[phi[ties] <= phi[ties].min() + PHI_TIE_FRACTION * size]
-                # rest against the parent: the tie farthest from the open end
-                return int(ties[np.argmax(np.abs(qv[ties] - q_open))])
-
-            qs = np.linspace(lo, hi, coarse)
-            vals = np.array([measure(q) for q in qs])
-            c = vals[:, 0]
-            cmin = c.min()
-            ratio = float(c.max() / max(cmin, 1e-12))
-            notes = []
-            modelled = _modelled_end(qs, vals, ratio, tie_tol)
-            if modelled is not None:
-                q_closed = modelled
-                notes.append("compactness does not change over the range (a knob, a sash sliding in its frame): "
-                             "no geometric closed end; the limit nearest the modelled pose 0 is used")
-            else:
-                q_open = float(qs[int(np.argmax(c))])
-                best = pick(qs, vals, tie_tol, q_open)
-                a = qs[max(best - 1, 0)]
-                b = qs[min(best + 1, coarse - 1)]
-                qf = np.linspace(a, b, fine)
-                vf = np.array([measure(q) for q in qf])
-                q_closed = float(qf[pick(qf, vf, tie_tol, q_open)])
-                if ratio < 1.0 + tie_tol:
-                    notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
-            up, down = hi - q_closed, q_closed - lo
-            direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
-            result[name] = ClosedState(
-                joint=name,
-                q_closed=q_closed,
-                direction=direction,
-                open_range=max(rng, 0.0),
-                lower=float(session.joint_limits[name][0]),
-                upper=float(session.joint_limits[name][1]),
-                compactness_ratio=ratio,
-                notes=notes,
-            )
-            state[name] = q_closed
+            result[name] = _joint_closed_state(session, asset, jd, state, points, coarse, fine, tie_tol)
+            state[name] = result[name].q_closed
     session.set_joint_positions(state)
     return result
+
+
+def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray],
+                        coarse: int, fine: int, tie_tol: float) -> ClosedState:
+    """Steps 1-4 of the module docstring for the bounded joint ``jd``, the
+    other joints at ``state``."""
+    name = jd.name
+    lo, hi = session.joint_limits[name]
+    sub = subtree_links(asset, jd.child)
+    subset = set(sub)
+    union_links = [jd.parent] + sub
+    screen = _PairScreen(session, subset)
+    session.set_joint_positions(state)
+
+    def measure(q: float) -> tuple[float, float, float]:
+        session.set_joint_positions({name: q})
+        return (
+            _aabb_volume(session, union_links, points),
+            _aabb_volume(session, sub, points),
+            _subtree_phi(session, subset, screen),
+        )
+
+    qs = np.linspace(lo, hi, coarse)
+    vals = np.array([measure(q) for q in qs])
+    c = vals[:, 0]
+    cmin = c.min()
+    ratio = float(c.max() / max(cmin, 1e-12))
+    notes = []
+    modelled = _modelled_end(qs, vals, ratio, tie_tol)
+    if modelled is not None:
+        q_closed = modelled
+        notes.append("compactness does not change over the range (a knob, a sash sliding in its frame): "
+                     "no geometric closed end; the limit nearest the modelled pose 0 is used")
+    else:
+        q_open = float(qs[int(np.argmax(c))])
+        best = _pick(qs, vals, tie_tol, q_open)
+        a = qs[max(best - 1, 0)]
+        b = qs[min(best + 1, coarse - 1)]
+        qf = np.linspace(a, b, fine)
+        vf = np.array([measure(q) for q in qf])
+        q_closed = float(qf[_pick(qf, vf, tie_tol, q_open)])
+        if ratio < 1.0 + tie_tol:
+            notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
+    up, down = hi - q_closed, q_closed - lo
+    direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
+    return ClosedState(
+        joint=name,
+        q_closed=q_closed,
+        direction=direction,
+        open_range=max(rng, 0.0),
+        lower=float(session.joint_limits[name][0]),
+        upper=float(session.joint_limits[name][1]),
+        compactness_ratio=ratio,
+        notes=notes,
+    )
+
+
+def _pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
+    """Index of the closed state among samples ``qv`` with ``vals`` (n, 3)
+    (parent+subtree box, subtree box, penetration): steps 2-3 of the module
+    docstring, ``tol`` the relative tie tolerance."""
+    # score: union box / its minimum x (own box / its minimum)^OWN_WEIGHT
+    score = (vals[:, 0] / vals[:, 0].min()) * (vals[:, 1] / vals[:, 1].min()) ** OWN_WEIGHT
+    phi = vals[:, 2]
+    ties = np.flatnonzero(score <= score.min() * (1.0 + tol))
+    size = float(vals[:, 0].min()) ** (1.0 / 3.0)
+    ties = ties[phi[ties] <= phi[ties].min() + PHI_TIE_FRACTION * size]
+    # rest against the parent: the tie farthest from the open end
+    return int(ties[np.argmax(np.abs(qv[ties] - q_open))])
 
 
 def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float, tie_tol: float) -> float | None:

@@ -57,7 +57,8 @@ gravity-free session at the output scale):
 tol = :data:`EXCESS_TOLERANCE` (1 mm) decides whether the closed end is
 pressed into another link (the sweep returns there and allows 5 mm) and
 where a stop begins; the end is then put at the stop's onset (:data:`ONSET_TOLERANCE`), because the force-limited drive of
-the sweep stalls where the contact begins.
+the sweep stalls where the contact begins. The scans and their constants are in
+:mod:`asset2sim.tasks.geometry.penetration_scan`.
 """
 
 from __future__ import annotations
@@ -67,28 +68,27 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.geometry.penetration_scan import (
+    EXCESS_TOLERANCE,
+    SCAN_SAMPLES,
+    collision_pairs,
+    contact_onset,
+    depth_scan,
+    free_end,
+    pair_depths,
+)
 from asset2sim.urdf import UrdfModel
 
-#: Deepest penetration increase (m) over the baseline that ends the free range:
-#: about where a force-limited drive stalls against the contact (the sweep
-#: must reach 95 % of the clipped range).
-EXCESS_TOLERANCE = 0.001
 #: Excess (m) a contact must reach somewhere on the way to be a stop: the
 #: sweep's 5 mm self-penetration bound (an overlap that never gets deeper is
 #: the hulls', not a limit's: toilet 102703's seat grows 5.7 -> 8.1 mm over
 #: its whole 1.69 rad in the body's hinge piece, suitcase 103755's lid
 #: 4.3 -> 7.6 mm; a plain 1 mm tolerance clipped them at 0.32 and 0.43 rad).
 STOP_DEPTH = 0.005
-#: Excess (m) under which a contact has not yet begun (:func:`contact_onset`).
-ONSET_TOLERANCE = 0.0002
 #: Farthest a clipped far end is moved back from the tolerance crossing to
 #: the contact's onset, as a fraction of the opening range (the 5 % the sweep
 #: allows stay free of the contact).
 BACK_OFF_FRACTION = 0.1
-#: Samples over the raw range on each side of the closed end.
-SCAN_SAMPLES = 48
-#: Bisection halvings between the last free and the first blocked sample.
-BISECTIONS = 7
 #: A side is clipped only when the geometric end is inside the raw range by
 #: more than this fraction of the opening range (smaller differences are noise).
 MIN_CLIP_FRACTION = 0.01
@@ -150,84 +150,6 @@ def rigid_group(model: UrdfModel, link: str) -> set[str]:
     return out
 
 
-def _pairs(session, sub: list[str], against: set[str] | None = None) -> list[tuple[str, str]]:
-    subset = set(sub)
-    a = [n for n in sub if session.link_has_collision(n)]
-    b = [n for n in session.link_names if n not in subset and session.link_has_collision(n) and (against is None or n in against)]
-    return [(x, y) for x in a for y in b]
-
-
-def _depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
-    """Deepest penetration (m, >= 0) of each pair at the current state."""
-    out = np.zeros(len(pairs))
-    for i, (x, y) in enumerate(pairs):
-        d = session.link_distances(x, y, 0.0)
-        if d:
-            out[i] = max(0.0, -min(d))
-    return out
-
-
-def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
-             tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
-    """Scan ``joint`` from ``q_from`` to ``q_to`` (rad or m): the first
-    sample whose penetration excess over ``baseline`` ((P,) m, one per pair
-    of ``pairs``) reaches ``stop_depth`` (m; ``tol`` when None) is in a stop;
-    walking back from it, the last sample with excess <= ``tol`` (m), refined
-    by bisection, is the free end. Returns (free end, the link run into), or
-    (``q_to``, None) when no sample reaches ``stop_depth`` (an overlap that
-    never gets that deep is the hulls', not a stop). Other joints stay where
-    the session has them."""
-    stop = tol if stop_depth is None else max(stop_depth, tol)
-    qs = [q_from + (q_to - q_from) * k / samples for k in range(samples + 1)]
-    exc_max: list[float] = []
-    hit = None
-    for k, q in enumerate(qs):
-        session.set_joint_positions({joint: q})
-        exc = _depths(session, pairs) - baseline
-        exc_max.append(float(exc.max(initial=0.0)))
-        if k > 0 and exc_max[-1] >= stop:
-            hit = k
-            break
-    if hit is None:
-        return float(q_to), None
-    k = hit
-    while k > 0 and exc_max[k - 1] > tol:
-        k -= 1
-    if k == 0:
-        return float(q_from), None
-    lo, hi = qs[k - 1], qs[k]
-    session.set_joint_positions({joint: hi})
-    e = _depths(session, pairs) - baseline
-    worst = pairs[int(np.argmax(e))][1]
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        session.set_joint_positions({joint: mid})
-        e = _depths(session, pairs) - baseline
-        if float(e.max(initial=0.0)) > tol:
-            hi, worst = mid, pairs[int(np.argmax(e))][1]
-        else:
-            lo = mid
-    return float(lo), worst
-
-
-def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
-                  max_back: float, onset: float = ONSET_TOLERANCE, steps: int = 8) -> float:
-    """Where the contact that ends the free range at ``q_end`` begins: the
-    first of ``steps`` positions from ``q_end`` back towards ``q_free`` (rad
-    or m), at most ``max_back`` away, whose penetration excess over
-    ``baseline`` is <= ``onset`` m; ``q_end`` moved back by ``max_back`` when
-    none is (the drive of the sweep stalls where the contact force balances
-    it, before the excess reaches the scan's tolerance)."""
-    sgn = 1.0 if q_free > q_end else -1.0
-    back = min(max_back, abs(q_free - q_end))
-    for k in range(1, steps + 1):
-        q = q_end + sgn * back * k / steps
-        session.set_joint_positions({joint: q})
-        if float((_depths(session, pairs) - baseline).max(initial=0.0)) <= onset:
-            return float(q)
-    return float(q_end + sgn * back)
-
-
 def chain_links(model: UrdfModel, joint: str) -> set[str]:
     """The links of the chain that carries ``joint`` beyond its parent's
     rigid group (:func:`rigid_group`): its ancestors, posed by the movable
@@ -251,7 +173,7 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
     the link run into, the joints opened); (``far_raw``, None, ...) when the
     chain does not end the range or the part cannot open from ``q_close``
     even then. The session is left at ``state`` with ``name`` at ``q_close``."""
-    pairs = _pairs(session, sub, chain_links(model, name) - set(sub))
+    pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
     if not pairs:
         return float(far_raw), None, []
     parent_of = {j.child: j for j in model.joints}
@@ -267,15 +189,10 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
         return float(far_raw), None, []
     try:
         session.set_joint_positions({**state, **opened, name: q_close})
-        lo, hi = sorted((q_close, far_raw))
-        qs = np.unique(np.concatenate([np.linspace(lo, hi, samples + 1), [q_close]]))
-        depth = []
-        for q in qs:
-            session.set_joint_positions({name: q})
-            depth.append(_depths(session, pairs))
-        base = np.array(depth).min(axis=0)
+        _, depth = depth_scan(session, name, pairs, *sorted((q_close, far_raw)), q_close, samples)
+        base = depth.min(axis=0)
         session.set_joint_positions({name: q_close})
-        if float((_depths(session, pairs) - base).max(initial=0.0)) > tol:
+        if float((pair_depths(session, pairs) - base).max(initial=0.0)) > tol:
             return float(far_raw), None, []  # not free at its closed end even with the chain open: the sweep's finding
         far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples, STOP_DEPTH)
         if who is None or abs(far - q_close) < MIN_FREE_FRACTION * range_:
@@ -333,109 +250,164 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         if not (np.isfinite(lo) and np.isfinite(hi)):
             continue
         session.set_joint_positions({**state, name: qc})
-        jd = model.joint(name)
         sub = subs.get(name, [session.joint_child[name]])
-        stops = rigid_group(model, jd.parent) - set(sub)
         if against == "stops":
-            pairs = _pairs(session, sub, stops)
+            pairs = collision_pairs(session, sub, rigid_group(model, model.joint(name).parent) - set(sub))
         else:  # the links of the chain that carries the joint: its ancestors beyond the parent's rigid group
-            chain, ln = set(), parent_of.get(jd.parent)
-            while ln is not None:
-                chain |= rigid_group(model, ln)
-                ln = parent_of.get(ln)
-            pairs = _pairs(session, sub, chain - stops - set(sub))
-        clip = LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
-                         q_closed=float(qc), direction=float(d), open_range=float(rng))
-        out[name] = clip
-        if not pairs:
-            continue
-        # baseline: each pair's least depth over the raw range (overlaps present everywhere are the hulls')
-        qs = np.unique(np.concatenate([np.linspace(lo, hi, samples + 1), [qc]]))
-        depth = []
-        for q in qs:
-            session.set_joint_positions({name: q})
-            depth.append(_depths(session, pairs))
-        depth = np.array(depth)
-        far_raw = hi if d > 0 else lo
-        back_raw = lo if d > 0 else hi
-        k_c = int(np.flatnonzero(qs == qc)[0])
+            pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
+        out[name] = _raw_clip(name, lo, hi, qc, d, rng)
+        if pairs:
+            scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs, tol, samples, STOP_DEPTH if confirm_stops else None)
+            out[name] = scan.clip(out[name], model, sub, parent_of, closed, state, against == "stops", chain_open)
+    session.set_joint_positions(state)
+    return out
+
+
+def _raw_clip(name: str, lo: float, hi: float, qc: float, d: float, rng: float, **kw) -> LimitClip:
+    """A :class:`LimitClip` that keeps the raw limits [``lo``, ``hi``]."""
+    return LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
+                     q_closed=float(qc), direction=float(d), open_range=float(rng), **kw)
+
+
+def _limit_note(side: str, raw: float, new: float, tail: str) -> str:
+    """The note of one clipped limit (``side``: "upper" or "lower")."""
+    return f"{side} limit {raw:.4g} -> {new:.4g} ({abs(raw - new):.3g} clipped{tail}"
+
+
+@dataclass
+class _JointScan:
+    """The scans of one joint (raw limits ``lo``, ``hi``, closed end ``qc``,
+    opening direction ``d`` +-1 and range ``rng``, rad or m) against
+    ``pairs``; ``base`` their baseline depths (P,) m once measured."""
+
+    session: object
+    name: str
+    lo: float
+    hi: float
+    qc: float
+    d: float
+    rng: float
+    pairs: list[tuple[str, str]]
+    tol: float
+    samples: int
+    stop_depth: float | None
+    base: np.ndarray | None = None
+
+    def free_end(self, q_from: float, q_to: float, stop_depth: float | None = None,
+                 samples: int | None = None) -> tuple[float, str | None]:
+        """:func:`free_end` of the joint from ``q_from`` towards ``q_to``."""
+        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base, self.tol,
+                        self.samples if samples is None else samples, stop_depth)
+
+    def onset(self, q_end: float, q_free: float) -> float:
+        """:func:`contact_onset`, at most ``BACK_OFF_FRACTION`` of the range back from ``q_end``."""
+        return contact_onset(self.session, self.name, q_end, q_free, self.pairs, self.base, BACK_OFF_FRACTION * self.rng)
+
+    def clips(self, raw: float, end: float) -> bool:
+        """Whether ``end`` lies inside the raw limit ``raw`` by more than ``MIN_CLIP_FRACTION`` of the range."""
+        return abs(raw - end) > MIN_CLIP_FRACTION * self.rng
+
+    def clip(self, clip: LimitClip, model: UrdfModel, sub: list[str], parent_of: dict[str, str],
+             closed: dict[str, tuple[float, float, float]], state: dict[str, float], stops: bool,
+             chain_open: bool) -> LimitClip:
+        """Steps 1-6 of the module docstring: ``clip`` with the clipped
+        limits, or the raw limits with a note when the part is blocked or
+        the initial state lies outside the free range."""
+        qs, depth = depth_scan(self.session, self.name, self.pairs, self.lo, self.hi, self.qc, self.samples)
+        k_c = int(np.flatnonzero(qs == self.qc)[0])
         # baseline: a parent-child pair's depth at the closed end (a parent hull
         # filling the closed part's cavity: the hulls', not the limit's); any
         # other pair's least depth over the range (the sweep measures those
         # pairs: a closed end pressed into a sibling is not closed)
-        adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in pairs])
-        base = np.where(adjacent, depth[k_c], depth.min(axis=0))
-        free = (depth - base).max(axis=1) <= tol
-        q_close = float(qc)
-        if not free[k_c] and against == "stops":  # a held part in the way of shutting is the sweep's finding
-            # the closed end itself pushes into another link: first free sample towards the opening side
-            step = 1 if d > 0 else -1
-            k = k_c
-            while 0 <= k < len(qs) and not free[k]:
-                k += step
-            if not 0 <= k < len(qs):
-                clip.notes.append("penetrates other links over its whole range: collision geometry, limit kept")
-                continue
-            q_close, who_c = free_end(session, name, float(qs[k]), qc, pairs, base, tol, samples=4)
-            clip.notes.append(f"closed end {qc:.4g} -> {q_close:.4g}: at {qc:.4g} it runs into {who_c}")
-        session.set_joint_positions({name: q_close})
-        stop_depth = STOP_DEPTH if confirm_stops else None
-        far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples, stop_depth)
+        adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in self.pairs])
+        self.base = np.where(adjacent, depth[k_c], depth.min(axis=0))
+        q_close = self.closed_end(clip, qs, depth, k_c) if stops else float(self.qc)
+        if q_close is None:
+            return clip
+        far_raw, back_raw = (self.hi, self.lo) if self.d > 0 else (self.lo, self.hi)
+        self.session.set_joint_positions({self.name: q_close})
+        far, who = self.free_end(q_close, far_raw, self.stop_depth)
         span = abs(far - q_close)
-        if span < MIN_FREE_FRACTION * rng:
-            clip.notes.append(f"blocked at its closed end by {who} (free {span:.3g} of {rng:.3g}): collision geometry, limit kept")
+        if span < MIN_FREE_FRACTION * self.rng:
+            clip.notes.append(f"blocked at its closed end by {who} (free {span:.3g} of {self.rng:.3g}): collision geometry, limit kept")
             clip.blocked_by = who
             clip.notes = clip.notes[-1:]
-            continue
-        onset_done = False
-        if against == "stops" and chain_open:
-            far_c, who_c, opened = _chain_far_end(session, model, name, sub, closed, state, q_close, far_raw, tol,
-                                                  samples, rng)
-            nearer = (far_c - far) * d < 0
-            if who_c is not None and nearer and abs(far_raw - far_c) > MIN_CLIP_FRACTION * rng:
-                if abs(far_raw - far) > MIN_CLIP_FRACTION * rng:  # the parent's stop, at its onset, may still be nearer
-                    far_s = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * rng)
-                    if (far_s - far_c) * d < 0:
-                        far_c, who_c, opened = far_s, who, []
-                far, who, onset_done = far_c, who_c, True
-                span = abs(far - q_close)
-                clip.blocked_by = who
-                clip.notes.append(f"{'upper' if d > 0 else 'lower'} limit {far_raw:.4g} -> {far:.4g} "
-                                  f"({abs(far_raw - far):.3g} clipped): runs into {who}"
-                                  + (f" even with {', '.join(opened)} open" if opened else ""))
-        if onset_done:  # the chain's end (step 6), already at its onset
-            pass
-        elif abs(far_raw - far) > MIN_CLIP_FRACTION * rng:
-            far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * rng)
-            span = abs(far - q_close)
-            clip.blocked_by = who
-            clip.notes.append(f"{'upper' if d > 0 else 'lower'} limit {far_raw:.4g} -> {far:.4g} "
-                              f"({abs(far_raw - far):.3g} clipped): runs into {who}")
-        else:
-            far = float(far_raw)
-        back = float(back_raw)
-        if q_close != qc:
-            back = q_close
-            clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {back:.4g} "
-                              f"({abs(back_raw - back):.3g} clipped): the new closed end")
-        elif against == "stops" and abs(back_raw - qc) > MIN_CLIP_FRACTION * rng:
-            session.set_joint_positions({name: qc})
-            b, who_b = free_end(session, name, qc, back_raw, pairs, base, tol, samples, stop_depth)
-            if abs(back_raw - b) > MIN_CLIP_FRACTION * rng:
-                back = b = contact_onset(session, name, b, qc, pairs, base, BACK_OFF_FRACTION * rng)
-                clip.notes.append(f"{'lower' if d > 0 else 'upper'} limit {back_raw:.4g} -> {b:.4g} "
-                                  f"({abs(back_raw - b):.3g} clipped, beyond the closed end): runs into {who_b}")
-        clip.lower, clip.upper = (back, far) if d > 0 else (far, back)
+            return clip
+        chain_end = None
+        if stops and chain_open:
+            chain_end = _chain_far_end(self.session, model, self.name, sub, closed, state, q_close, far_raw, self.tol,
+                                       self.samples, self.rng)
+        far, who = self.far_end(clip, far, who, q_close, far_raw, chain_end)
+        back = self.back_end(clip, q_close, back_raw, stops)
+        clip.lower, clip.upper = (back, far) if self.d > 0 else (far, back)
         clip.q_closed, clip.open_range = q_close, abs(far - q_close)
-        q0 = state.get(name)
+        q0 = state.get(self.name)
         if q0 is not None and not clip.lower <= q0 <= clip.upper:
             # the refined state lies beyond the free range: the hulls, not the limit, disagree; keep the raw limit
-            out[name] = LimitClip(joint=name, raw_lower=float(lo), raw_upper=float(hi), lower=float(lo), upper=float(hi),
-                                  q_closed=float(qc), direction=float(d), open_range=float(rng), blocked_by=who,
-                                  notes=[f"not clipped: the initial state {q0:.4g} lies beyond the free range "
-                                         f"[{clip.lower:.4g}, {clip.upper:.4g}] (hull overlap, not the limit)"])
-    session.set_joint_positions(state)
-    return out
+            return _raw_clip(self.name, self.lo, self.hi, self.qc, self.d, self.rng, blocked_by=who,
+                             notes=[f"not clipped: the initial state {q0:.4g} lies beyond the free range "
+                                    f"[{clip.lower:.4g}, {clip.upper:.4g}] (hull overlap, not the limit)"])
+        return clip
+
+    def closed_end(self, clip: LimitClip, qs: np.ndarray, depth: np.ndarray, k_c: int) -> float | None:
+        """``qc``, or where the part first comes free towards the opening side
+        when ``qc`` pushes into another link; None when it never does (rad or m)."""
+        free = (depth - self.base).max(axis=1) <= self.tol
+        if free[k_c]:
+            return float(self.qc)
+        # the closed end itself pushes into another link: first free sample towards the opening side
+        step = 1 if self.d > 0 else -1
+        k = k_c
+        while 0 <= k < len(qs) and not free[k]:
+            k += step
+        if not 0 <= k < len(qs):
+            clip.notes.append("penetrates other links over its whole range: collision geometry, limit kept")
+            return None
+        q_close, who_c = self.free_end(float(qs[k]), self.qc, samples=4)
+        clip.notes.append(f"closed end {self.qc:.4g} -> {q_close:.4g}: at {self.qc:.4g} it runs into {who_c}")
+        return q_close
+
+    def far_end(self, clip: LimitClip, far: float, who: str | None, q_close: float, far_raw: float,
+                chain_end: tuple[float, str | None, list[str]] | None) -> tuple[float, str | None]:
+        """The limit on the opening side (rad or m) and the link run into:
+        the carrying chain's end (step 6, :func:`_chain_far_end`) when
+        nearer, else the free end ``far`` at its contact's onset when it
+        clips ``far_raw``, else ``far_raw``."""
+        side = "upper" if self.d > 0 else "lower"
+        if chain_end is not None:
+            far_c, who_c, opened = chain_end
+            if who_c is not None and (far_c - far) * self.d < 0 and self.clips(far_raw, far_c):
+                if self.clips(far_raw, far):  # the parent's stop, at its onset, may still be nearer
+                    far_s = self.onset(far, q_close)
+                    if (far_s - far_c) * self.d < 0:
+                        far_c, who_c, opened = far_s, who, []
+                clip.blocked_by = who_c
+                clip.notes.append(_limit_note(side, far_raw, far_c, f"): runs into {who_c}"
+                                              + (f" even with {', '.join(opened)} open" if opened else "")))
+                return far_c, who_c  # the chain's end, already at its onset
+        if self.clips(far_raw, far):
+            far = self.onset(far, q_close)
+            clip.blocked_by = who
+            clip.notes.append(_limit_note(side, far_raw, far, f"): runs into {who}"))
+            return far, who
+        return float(far_raw), who
+
+    def back_end(self, clip: LimitClip, q_close: float, back_raw: float, stops: bool) -> float:
+        """The limit beyond the closed end (rad or m): the new closed end when
+        it moved, else (``stops`` only) the free end towards ``back_raw`` at
+        its contact's onset when it clips ``back_raw``, else ``back_raw``."""
+        side = "lower" if self.d > 0 else "upper"
+        back = float(back_raw)
+        if q_close != self.qc:
+            back = q_close
+            clip.notes.append(_limit_note(side, back_raw, back, "): the new closed end"))
+        elif stops and self.clips(back_raw, self.qc):
+            self.session.set_joint_positions({self.name: self.qc})
+            b, who_b = self.free_end(self.qc, back_raw, self.stop_depth)
+            if self.clips(back_raw, b):
+                back = b = self.onset(b, self.qc)
+                clip.notes.append(_limit_note(side, back_raw, b, f", beyond the closed end): runs into {who_b}"))
+        return back
 
 
 def apply_clips(overlay: Overlay, clips: dict[str, LimitClip]) -> tuple[Overlay, list[str]]:

@@ -8,7 +8,7 @@ camera is fitted per view to the object's *visual* vertices at that state, so
 a 0.05 m stapler and a 2 m cabinet fill the image the same way.
 
 View convention (checked on the 21 PartNet-Mobility objects, see
-``docs/renders.md``): after the base joint's rotation, PartNet-Mobility objects
+``docs/design/renders.md``): after the base joint's rotation, PartNet-Mobility objects
 face **-x**: drawers slide out along -x, doors and lids open toward -x, the
 lock of a chest, the user's side of a laptop, the spout of a faucet are at -x.
 
@@ -110,7 +110,7 @@ OUTPUT_VIEW_SIZE: tuple[int, int] = (192, 192)
 """(width, height) px of the views ``asset2sim refine`` writes into an output
 folder (``views/``, shown in ``report.html``): drawn at 384 x 384
 (``supersample`` 2) and box-filtered, about 0.56 of the drawing time of
-256 x 256 (``docs/renders.md``, "Time"). ``asset2sim render`` keeps 256 x 256."""
+256 x 256 (``docs/design/renders.md``, "Time"). ``asset2sim render`` keeps 256 x 256."""
 
 BACKENDS: tuple[str, ...] = ("auto", "tiny")
 
@@ -197,9 +197,9 @@ class SceneRenderer:
         size: (width, height) of the output images, pixels.
         backend: ``"auto"`` or ``"tiny"``: PyBullet's TinyRenderer on the CPU
             (PyBullet's EGL/OpenGL path was evaluated and rejected, see
-            ``docs/renders.md``).
+            ``docs/design/renders.md``).
         supersample: render this many times larger and box-filter down (1 = off).
-        shadows: cast shadows (slower; see ``docs/renders.md``).
+        shadows: cast shadows (slower; see ``docs/design/renders.md``).
 
     Raises:
         FileNotFoundError: URDF or a visual mesh missing.

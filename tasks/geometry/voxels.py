@@ -2,7 +2,7 @@
 sub-voxel weights.
 
 Part of the mesh-analysis stage (:mod:`asset2sim.tasks.geometry.analyze`,
-whose module docstring describes the method and ``docs/mesh_analysis.md`` its
+whose module docstring describes the method and ``docs/design/mesh_analysis.md`` its
 measured accuracy). Lengths in the mesh's units (m at scale 1).
 """
 
@@ -230,8 +230,7 @@ def voxelize(
             pts *= 255.0
             samples.append((flat.astype(np.int32), (pts + 0.5).astype(np.uint8)))
     surf = grid.reshape(tuple(dims))
-    closed = _dilate(surf, iters)
-    closed = _erode(closed, iters)
+    closed = _morph(_morph(surf, iters, np.logical_or), iters, np.logical_and)
     closed |= surf
     labels, _ = ndi.label(~closed)  # 6-connectivity for the outside
     filled = labels != labels[0, 0, 0]
@@ -412,10 +411,12 @@ def voxel_properties(
     return SolidMoments(total * h**3, com + ref, cov, "voxel_fill", notes, h)
 
 
-def _dilate(grid: np.ndarray, iters: int) -> np.ndarray:
-    """Binary dilation by a 3x3x3 cube, ``iters`` times (separable: a
-    1-voxel OR along each axis in turn). Cells beyond the border count as
-    empty."""
+def _morph(grid: np.ndarray, iters: int, op) -> np.ndarray:
+    """Binary dilation (``op`` = np.logical_or) or erosion (np.logical_and)
+    of ``grid`` by a 3x3x3 cube, ``iters`` times, separably: a 1-voxel OR /
+    AND along each axis in turn. Cells beyond the border are left out, so
+    they count as empty for dilation and as full for erosion (which never
+    eats in from the grid boundary)."""
     out = grid.copy()
     for _ in range(iters):
         for ax in range(3):
@@ -423,22 +424,7 @@ def _dilate(grid: np.ndarray, iters: int) -> np.ndarray:
             a = [slice(None)] * 3
             b = [slice(None)] * 3
             a[ax], b[ax] = slice(1, None), slice(0, -1)
-            out[tuple(a)] |= src[tuple(b)]
-            out[tuple(b)] |= src[tuple(a)]
-    return out
-
-
-def _erode(grid: np.ndarray, iters: int) -> np.ndarray:
-    """Binary erosion by a 3x3x3 cube, ``iters`` times (separable AND along
-    each axis). Cells beyond the border count as full, so erosion never eats
-    in from the grid boundary."""
-    out = grid.copy()
-    for _ in range(iters):
-        for ax in range(3):
-            src = out.copy()
-            a = [slice(None)] * 3
-            b = [slice(None)] * 3
-            a[ax], b[ax] = slice(1, None), slice(0, -1)
-            out[tuple(a)] &= src[tuple(b)]
-            out[tuple(b)] &= src[tuple(a)]
+            for dst, shifted in ((tuple(a), tuple(b)), (tuple(b), tuple(a))):
+                view = out[dst]
+                op(view, src[shifted], out=view)
     return out

@@ -42,10 +42,10 @@ from asset2sim.schemas.asset import (
 from asset2sim.tasks.ingest import validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
-from asset2sim.urdf import UrdfError, UrdfGeometry, parse_urdf_bytes
+from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, parse_urdf_bytes
 
 if TYPE_CHECKING:  # pragma: no cover
-    from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy
+    from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, ValidationResult
 
 
 #: How many error findings the AssetError message lists (all are in ``.findings``).
@@ -132,66 +132,13 @@ def extract_asset_checked(
     except UrdfError as exc:
         raise AssetError(f"{urdf}: the validated URDF could not be read: {exc}") from exc
     assert robot is not None
-    sem = result.semantics
-    links: list[LinkDesc] = []
-    for ln in robot.links.values():
-        where = f"{urdf.name}: link {ln.name!r}"
-        visuals = [g for v in ln.visuals if (g := _geometry(v, "visual", result.mesh_paths, where))]
-        collisions = [g for c in ln.collisions if (g := _geometry(c, "collision", result.mesh_paths, where))]
-        given = None
-        if ln.inertial is not None and ln.inertial.mass is not None and ln.name not in result.replace_inertials:
-            I = np.asarray(ln.inertial.inertia if ln.inertial.inertia is not None else np.zeros((3, 3)), float)
-            given = GivenInertial(
-                mass=float(ln.inertial.mass),
-                origin=_origin(ln.inertial.origin),
-                inertia=tuple(tuple(float(x) for x in row) for row in I),  # type: ignore[arg-type]
-            )
-        kind, label = sem.get(ln.name, (None, None))
-        links.append(
-            LinkDesc(
-                name=ln.name,
-                visuals=visuals,
-                collisions=collisions,
-                semantic_label=label,
-                semantic_joint=kind,
-                given_inertial=given,
-            )
-        )
-    joints: list[JointDesc] = []
-    for jt in robot.joints:
-        lim = jt.limit
-        dyn = jt.dynamics
-        axis = tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0)))
-        jtype = jt.type
-        lower = upper = None
-        if lim is not None and jtype in ("revolute", "prismatic"):
-            lower = None if lim.lower is None else float(lim.lower)
-            upper = None if lim.upper is None else float(lim.upper)
-        joints.append(
-            JointDesc(
-                name=jt.name,
-                type=jtype,
-                parent=jt.parent,
-                child=jt.child,
-                origin=_origin(jt.origin),
-                axis=axis,
-                lower=lower,
-                upper=upper,
-                effort=None if lim is None or lim.effort is None else float(lim.effort),
-                velocity=None if lim is None or lim.velocity is None else float(lim.velocity),
-                damping=None if dyn is None or dyn.damping is None else float(dyn.damping),
-                friction=None if dyn is None or dyn.friction is None else float(dyn.friction),
-            )
-        )
+    links = [_link(ln, result, urdf) for ln in robot.links.values()]
+    joints = [_joint(jt) for jt in robot.joints]
     children = {j.child for j in joints}
     roots = [ln.name for ln in links if ln.name not in children]
     if len(roots) != 1:  # validation refuses this; defensive
         raise AssetError(f"{urdf}: expected exactly one root link, found {roots or 'none'}")
-    files = [urdf] + sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path})
-    files += [Path(os.path.realpath(p)) for p in result.extra_files]
-    # every file the asset references: MTL libraries and texture maps too, so
-    # an edited texture changes the hash and is never skipped as complete
-    files += [Path(os.path.realpath(p)) for p in result.material_files]
+    files = _input_files(urdf, links, result)
     # the files' identities before they are hashed (asset2sim.file_memo): the folder too, whose listing found the URDF
     read = file_memo.identities(([folder] if Path(asset).is_dir() else []) + files)
     desc = AssetDescription(
@@ -208,6 +155,62 @@ def extract_asset_checked(
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)
+
+
+def _link(ln: UrdfLink, result: "ValidationResult", urdf: Path) -> LinkDesc:
+    """The description of one link of the model: geometry, semantics and the
+    given inertial (None when validation marked it for replacement)."""
+    where = f"{urdf.name}: link {ln.name!r}"
+    visuals = [g for v in ln.visuals if (g := _geometry(v, "visual", result.mesh_paths, where))]
+    collisions = [g for c in ln.collisions if (g := _geometry(c, "collision", result.mesh_paths, where))]
+    given = None
+    if ln.inertial is not None and ln.inertial.mass is not None and ln.name not in result.replace_inertials:
+        I = np.asarray(ln.inertial.inertia if ln.inertial.inertia is not None else np.zeros((3, 3)), float)
+        given = GivenInertial(
+            mass=float(ln.inertial.mass),
+            origin=_origin(ln.inertial.origin),
+            inertia=tuple(tuple(float(x) for x in row) for row in I),  # type: ignore[arg-type]
+        )
+    kind, label = result.semantics.get(ln.name, (None, None))
+    return LinkDesc(name=ln.name, visuals=visuals, collisions=collisions, semantic_label=label, semantic_joint=kind,
+                    given_inertial=given)
+
+
+def _float_or_none(obj, attr: str) -> float | None:
+    """``float(obj.attr)``; None when ``obj`` or the value is None."""
+    value = None if obj is None else getattr(obj, attr)
+    return None if value is None else float(value)
+
+
+def _joint(jt: UrdfJoint) -> JointDesc:
+    """The description of one joint of the model (limits on revolute and
+    prismatic joints only; axis (1, 0, 0) when not given)."""
+    lim, dyn = jt.limit, jt.dynamics
+    bounded = jt.type in ("revolute", "prismatic")
+    return JointDesc(
+        name=jt.name,
+        type=jt.type,
+        parent=jt.parent,
+        child=jt.child,
+        origin=_origin(jt.origin),
+        axis=tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0))),
+        lower=_float_or_none(lim, "lower") if bounded else None,
+        upper=_float_or_none(lim, "upper") if bounded else None,
+        effort=_float_or_none(lim, "effort"),
+        velocity=_float_or_none(lim, "velocity"),
+        damping=_float_or_none(dyn, "damping"),
+        friction=_float_or_none(dyn, "friction"),
+    )
+
+
+def _input_files(urdf: Path, links: list[LinkDesc], result: "ValidationResult") -> list[Path]:
+    """Every file the asset references, for the input hash: the URDF, its
+    meshes, semantics.txt and meta.json, and the MTL libraries and texture
+    maps (an edited texture changes the hash and is never skipped as complete)."""
+    files = [urdf] + sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path})
+    files += [Path(os.path.realpath(p)) for p in result.extra_files]
+    files += [Path(os.path.realpath(p)) for p in result.material_files]
+    return files
 
 
 def _copy_extracted(value: tuple[AssetDescription, list["Finding"]]) -> tuple[AssetDescription, list["Finding"]]:

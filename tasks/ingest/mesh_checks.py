@@ -1,262 +1,31 @@
-"""Mesh contents and the mesh checks of the validator.
+"""The mesh checks of the validator.
 
-:func:`scan_mesh_file` reads one mesh strictly and reports its defects: OBJ
-through :func:`asset2sim.mesh_io.read_obj` (the reader every later stage
-uses, so validation reads exactly what refine reads) with the checks a
-strict reader adds (records, index 0, indices out of range, face cap before
-parsing), binary and ASCII STL by a vectorized reader, DAE through
-``trimesh`` after the hardened XML parser. :class:`MeshChecks` is the
-validator's mixin that resolves every ``<mesh>`` reference of the URDF, scans
-each file once, adds the per-use severities, the link flatness rule, the
-face caps and the OBJ's MTL libraries and texture maps.
+:class:`MeshChecks` is the validator's mixin that resolves every ``<mesh>``
+reference of the URDF, scans each file once
+(:func:`asset2sim.tasks.ingest.mesh_scan.scan_mesh_file`), adds the per-use
+severities, the link flatness rule, the face caps and the OBJ's MTL
+libraries and texture maps; beside it the bounding boxes of geometry at the
+zero pose and the texture caps.
 """
 
 from __future__ import annotations
 
-import io
 import math
 import os
-import re
 import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from PIL import Image, UnidentifiedImageError
 
-from asset2sim import atomic, mesh_io, safexml
-from asset2sim.tasks.ingest.findings import MAX_COORDINATE, MeshUse, Recorder, asset_size_range
+from asset2sim import atomic, mesh_materials
+from asset2sim.tasks.ingest.findings import MeshUse, Recorder, asset_size_range
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, file_kind, read_regular, resolve_mesh_reference
+from asset2sim.tasks.ingest.mesh_scan import MeshScan, is_flat, scan_mesh_file
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfModel
 
-__all__ = ["MeshChecks", "MeshScan", "geometry_corners", "scan_mesh_file", "texture_problem", "zero_pose_bounds"]
-
-
-@dataclass
-class MeshScan:
-    """What a strict read of one mesh file found (file units, scale 1).
-
-    ``defects`` maps mesh-content codes to messages. ``n_vertices``,
-    ``n_faces`` (triangles after fan triangulation of valid faces), ``area``
-    (m^2, finite faces only), ``flat`` (all used vertices within 1e-9 of the
-    extent of a plane), ``moments``: (count, sum (3,), sum of outer products
-    (3, 3)) of the used vertices, to decide flatness of a whole link.
-    ``bounds``: (2, 3) lower and upper corner of the used finite vertices.
-    ``mtllibs`` the ``mtllib`` names of an OBJ.
-    """
-
-    n_vertices: int = 0
-    n_faces: int = 0
-    area: float = 0.0
-    flat: bool = False
-    defects: dict[str, str] = field(default_factory=dict)
-    moments: tuple[int, np.ndarray, np.ndarray] | None = None
-    mtllibs: list[str] = field(default_factory=list)
-    bounds: np.ndarray | None = None
-
-
-class _TooManyFaces(Exception):
-    def __init__(self, count: int, max_faces: int, what: str = "triangles"):
-        super().__init__(f"{count} {what} > cap {max_faces}")
-        self.count = count
-
-
-class _Unparsable(Exception):
-    def __init__(self, message: str, mtllibs: list[str]):
-        super().__init__(message)
-        self.mtllibs = mtllibs
-
-
-_OBJ_NOT_RECORD = re.compile(rb"^[ \t]*([^A-Za-z#\s][^\r\n]{0,39})", re.M)
-
-
-def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str], list[str]]:
-    """An OBJ as refine reads it (:func:`asset2sim.mesh_io.read_obj`) plus the
-    strict checks: the face cap on the record count before parsing, lines
-    that are no OBJ record, indices out of range or before the start, face
-    records the reader skipped (index 0, < 3 vertices). Returns (vertices
-    (N, 3), triangles (M, 3) 0-based without the bad ones, defects, mtllib
-    names)."""
-    defects: dict[str, str] = {}
-    approx_faces = data.count(b"\nf ") + data.count(b"\nf\t") + (1 if data[:2] in (b"f ", b"f\t") else 0)
-    if approx_faces > max_faces:
-        raise _TooManyFaces(approx_faces, max_faces, "face records")
-    mtllibs = [m for m in mesh_io.mtl_libraries(data) if m.strip()]
-    bad_rec = _OBJ_NOT_RECORD.search(data)
-    if bad_rec is not None:
-        # every OBJ record starts with a keyword (v, f, vt, vn, o, g, s, usemtl, l, ...)
-        lineno = data.count(b"\n", 0, bad_rec.start()) + 1
-        defects["MESH_MALFORMED"] = f"line {lineno}: not an OBJ record: {bad_rec.group(1)!r}"
-    try:
-        v, f, notes = mesh_io.read_obj(data, "OBJ")
-    except mesh_io.MeshReadError as exc:  # refine could not read it either: nothing more to check
-        raise _Unparsable(defects.get("MESH_MALFORMED") or str(exc), mtllibs) from None
-    if len(f) > max_faces:
-        raise _TooManyFaces(len(f), max_faces)
-    bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
-    if bad.any() or notes:
-        what = [f"{int(bad.sum())} face(s) index vertices outside the {len(v)} defined"] if bad.any() else []
-        defects["MESH_BAD_INDEX"] = "; ".join(what + [n.replace("OBJ: ", "") for n in notes])
-    return v, f[~bad], defects, mtllibs
-
-
-
-def _scan_stl(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str]]:
-    defects: dict[str, str] = {}
-    if len(data) >= 84:
-        n = int.from_bytes(data[80:84], "little")
-        if 84 + 50 * n == len(data):
-            if n > max_faces:
-                raise _TooManyFaces(n, max_faces)
-            dt = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
-            tri = np.frombuffer(data, dtype=dt, count=n, offset=84)["v"].astype(np.float64)
-            v = tri.reshape(-1, 3)
-            return v, np.arange(len(v)).reshape(-1, 3), defects
-    head = data[:512].lstrip().lower()
-    if not head.startswith(b"solid"):
-        defects["MESH_MALFORMED"] = "neither a binary STL (size != 84 + 50 n) nor an ASCII STL"
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects
-    if data.count(b"facet") // 2 > max_faces:
-        raise _TooManyFaces(data.count(b"facet") // 2, max_faces, "facets (about)")
-    coords = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
-    try:
-        v = np.array(coords, dtype=np.float64).reshape(-1, 3)
-    except ValueError:
-        defects["MESH_MALFORMED"] = "an ASCII STL vertex is not numeric"
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects
-    if len(v) % 3:
-        defects["MESH_MALFORMED"] = f"{len(v)} vertices is not a whole number of triangles"
-        v = v[: len(v) - len(v) % 3]
-    return v, np.arange(len(v)).reshape(-1, 3), defects
-
-
-def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> tuple[np.ndarray, np.ndarray, dict[str, str]]:
-    if ext == ".dae":
-        safexml.parse_xml_bytes(data, source=source)  # DAE is XML: refuse DTDs/entities first
-    import trimesh
-
-    loaded = trimesh.load(io.BytesIO(data), file_type=ext[1:], force="mesh", process=False, skip_materials=True)
-    v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
-    f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
-    if len(f) > max_faces:
-        raise _TooManyFaces(len(f), max_faces)
-    defects: dict[str, str] = {}
-    bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
-    if bad.any():
-        defects["MESH_BAD_INDEX"] = f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"
-    return v, f[~bad], defects
-
-
-
-def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000,
-                   max_coordinate: float = MAX_COORDINATE) -> MeshScan:
-    """Strictly read one mesh file and report its defects.
-
-    OBJ by :func:`asset2sim.mesh_io.read_obj`, the reader of every later
-    stage (polygons fan-triangulated, negative relative indices, forward
-    references), with strict checks on top; STL (binary and ASCII) by this
-    module; PLY, OFF, GLB, GLTF and DAE by ``trimesh`` (DAE first checked by
-    :func:`asset2sim.safexml.parse_xml_bytes`). Which formats an asset may
-    use is the validator's decision (``ValidationPolicy.mesh_extensions``).
-
-    Args:
-        path: a regular file (resolve it with :func:`resolve_mesh_reference`).
-        max_bytes: size cap, bytes.
-        max_faces: triangle cap.
-        max_coordinate: |coordinate| cap of the used vertices, file units;
-            checked (by comparison only) before any arithmetic on them, so
-            1e308 overflows nothing and prints no numpy warning.
-
-    Returns:
-        A :class:`MeshScan`; ``defects`` may hold MESH_MALFORMED,
-        MESH_TOO_MANY_FACES, MESH_NO_FACES, MESH_NONFINITE_VERTEX,
-        MESH_COORDINATE_IMPLAUSIBLE, MESH_BAD_INDEX, MESH_ZERO_AREA,
-        MESH_ZERO_VOLUME. Never raises for a bad file; OSError when the file
-        cannot be read.
-    """
-    path = Path(path)
-    scan = MeshScan()
-    data = read_regular(path, max_bytes)
-    ext = path.suffix.lower()
-    try:
-        if ext == ".obj":
-            v, f, defects, scan.mtllibs = _scan_obj(data, max_faces)
-        elif ext == ".stl":
-            v, f, defects = _scan_stl(data, max_faces)
-        else:
-            v, f, defects = _scan_trimesh(data, ext, max_faces, str(path))
-    except _TooManyFaces as exc:  # counted in the asset's total all the same
-        scan.defects["MESH_TOO_MANY_FACES"] = str(exc)
-        scan.n_faces = exc.count
-        return scan
-    except _Unparsable as exc:
-        scan.defects["MESH_MALFORMED"] = str(exc)
-        scan.mtllibs = exc.mtllibs
-        return scan
-    except safexml.SafeXMLError as exc:
-        scan.defects["MESH_MALFORMED"] = f"unsafe or malformed XML: {exc.code}: {exc.detail}"
-        return scan
-    except Exception as exc:  # trimesh / numpy raise many types on garbage
-        scan.defects["MESH_MALFORMED"] = f"cannot parse ({type(exc).__name__}: {str(exc)[:200]})"
-        return scan
-    scan.defects.update(defects)
-    scan.n_vertices, scan.n_faces = len(v), len(f)
-    if len(f) == 0:
-        scan.defects.setdefault("MESH_NO_FACES", "no (valid) face")
-        return scan
-    used = np.unique(f)
-    uv = v[used]
-    finite = np.isfinite(uv).all(axis=1)
-    if not finite.all():
-        scan.defects["MESH_NONFINITE_VERTEX"] = f"{int((~finite).sum())} used vertex(es) with NaN or infinite coordinates"
-        goodf = np.isfinite(v[f]).all(axis=(1, 2))
-        f = f[goodf]
-        uv = uv[finite]
-        if len(f) == 0:
-            return scan
-    far = np.abs(uv) > max_coordinate  # a comparison: no overflow, no warning
-    if far.any():
-        worst = float(np.abs(uv).max())
-        scan.defects["MESH_COORDINATE_IMPLAUSIBLE"] = (
-            f"{int(far.any(axis=1).sum())} used vertex(es) beyond +-{max_coordinate:g} file units (largest |coordinate| "
-            f"{worst:.3g}): no overlay scale can make this a household object; check the mesh's units")
-        return scan
-    tri = v[f]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area2 = np.linalg.norm(cross, axis=1)
-    ext3 = uv.max(axis=0) - uv.min(axis=0)
-    diag = float(np.linalg.norm(ext3))
-    scan.area = float(area2.sum() / 2.0)
-    if diag == 0.0 or scan.area <= 1e-14 * diag * diag:
-        scan.defects["MESH_ZERO_AREA"] = f"all {len(f)} faces are degenerate (total area {scan.area:.3g})"
-        return scan
-    n = len(uv)
-    s1 = uv.sum(axis=0)
-    s2 = uv.T @ uv
-    scan.moments = (n, s1, s2)
-    scan.bounds = np.stack([uv.min(axis=0), uv.max(axis=0)])
-    if _is_flat(n, s1, s2):
-        scan.flat = True
-        scan.defects["MESH_ZERO_VOLUME"] = "all vertices lie in one plane (zero volume)"
-    return scan
-
-
-def _is_flat(n: int, s1: np.ndarray, s2: np.ndarray) -> bool:
-    """Vertices whose scatter has a zero direction (relative 1e-9 of the extent).
-    False when the moments are not finite (an implausible size, refused by
-    ASSET_SIZE_IMPLAUSIBLE; nothing to say about flatness)."""
-    if n < 4:
-        return True
-    if not (np.isfinite(s1).all() and np.isfinite(s2).all()):
-        return False
-    with np.errstate(over="ignore", invalid="ignore"):
-        mean = s1 / n
-        cov = s2 / n - np.outer(mean, mean)
-    if not np.isfinite(cov).all():
-        return False
-    lam = np.linalg.eigvalsh(0.5 * (cov + cov.T))
-    return bool(lam[2] <= 0 or math.sqrt(max(lam[0], 0.0)) <= 1e-9 * math.sqrt(lam[2]))
+__all__ = ["MeshChecks", "geometry_corners", "texture_problem", "zero_pose_bounds"]
 
 
 def _transform_moments(mom, origin, scale):
@@ -264,10 +33,9 @@ def _transform_moments(mom, origin, scale):
     n, s1, s2 = mom
     a = origin[:3, :3] @ np.diag(scale)
     t = origin[:3, 3]
-    with np.errstate(over="ignore", invalid="ignore"):  # huge scales or origins: non-finite, see _is_flat
+    with np.errstate(over="ignore", invalid="ignore"):  # huge scales or origins: non-finite, see is_flat
         as1 = a @ s1
         return n, as1 + n * t, a @ s2 @ a.T + np.outer(as1, t) + np.outer(t, as1) + n * np.outer(t, t)
-
 
 
 def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -494,14 +262,14 @@ class MeshChecks(Recorder):
                         mom = _transform_moments(scan.moments, g.origin, g.scale)
                         link_moments = mom if link_moments is None else (
                             link_moments[0] + mom[0], link_moments[1] + mom[1], link_moments[2] + mom[2])
-            if link_mass_geoms and not link_has_volume and link_moments is not None and _is_flat(*link_moments):
+            if link_mass_geoms and not link_has_volume and link_moments is not None and is_flat(*link_moments):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "
                          "mass must come from the surface area (shell), not the volume",
                          line=ln.line, link=lname, action="mass_from_area", role=mass_role)
         self.texture_totals()
         if total_faces > pol.max_total_faces:
             self.add("MESH_TOO_MANY_FACES", f"{total_faces} triangles over all meshes > cap {pol.max_total_faces} "
-                     "(the bound that keeps one asset's refine within the flow's time and memory limits; docs/validation.md)",
+                     "(the bound that keeps one asset's refine within the flow's time and memory limits; docs/design/validation.md)",
                      file=self.urdf_rel, total_faces=total_faces, cap=pol.max_total_faces)
 
     def _format_problem(self, fname: str, real: Path) -> str | None:
@@ -523,7 +291,7 @@ class MeshChecks(Recorder):
     def materials(self, mesh: Path, mesh_dir: Path, scan: MeshScan, link: str | None) -> None:
         """The ``mtllib`` files of an OBJ (relative to ``mesh_dir``, the OBJ's
         folder as written) and the texture maps they name
-        (:func:`asset2sim.mesh_io.mtl_texture_maps`). For an OBJ reached
+        (:func:`asset2sim.mesh_materials.mtl_texture_maps`). For an OBJ reached
         through a symlink into another folder, a library missing beside the
         link but present beside the real file ``mesh`` is checked and
         recorded there (``MESH_MATERIAL_BESIDE_TARGET``, info: the output
@@ -550,7 +318,7 @@ class MeshChecks(Recorder):
             except OSError:
                 continue
             mtl_dir = Path(os.path.dirname(os.path.join(str(lib_dir), name)))
-            for tname in mesh_io.mtl_texture_maps(data):
+            for tname in mesh_materials.mtl_texture_maps(data):
                 tex = resolve_mesh_reference(self.folder, tname, base=mtl_dir, extensions=())
                 if self._material_ref(tex, mtl_dir, ref.path, link):
                     assert tex.path is not None
@@ -580,7 +348,7 @@ class MeshChecks(Recorder):
         if size > pol.max_total_texture_bytes or pixels > pol.max_total_texture_pixels:
             self.add("TEXTURE_TOO_LARGE", f"the textures of the asset total {size} bytes and {pixels} pixels > caps "
                      f"{pol.max_total_texture_bytes} bytes, {pol.max_total_texture_pixels} pixels (PyBullet loads them all; "
-                     "docs/validation.md, Texture caps)", total_bytes=size, total_pixels=pixels)
+                     "docs/design/validation.md, Texture caps)", total_bytes=size, total_pixels=pixels)
 
     def _material_ref(self, ref: MeshReference, base: Path, owner: Path, link: str | None) -> bool:
         """Record one MTL or texture reference; True when it is a usable file

@@ -11,6 +11,8 @@ after the meshes were scanned, prismatic travel against the object's size.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from asset2sim import file_names
@@ -45,7 +47,6 @@ def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, iz
     return None, vals
 
 
-
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy ixz iyy iyz izz
 
 #: Joint types of the URDF specification refine refuses (``JOINT_TYPE_UNSUPPORTED``),
@@ -54,7 +55,7 @@ _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy i
 #: prismatic, fixed): its closed-state and state search, limits, written
 #: initial state and post-check move one coordinate per joint, and its
 #: engines read only those types. Measured on a stapler with one such joint
-#: (docs/validation.md, "Joint types").
+#: (docs/design/validation.md, "Joint types").
 _UNSUPPORTED_JOINT_TYPES: dict[str, str] = {
     "floating": "a part with 6 free degrees of freedom is not an articulation refine can set or check (it models "
                 "revolute, continuous, prismatic and fixed joints); PyBullet silently loads a floating joint as fixed, "
@@ -66,6 +67,19 @@ _UNSUPPORTED_JOINT_TYPES: dict[str, str] = {
               "prismatic, and fixed joints); SAPIEN's URDF loader builds no planar joint, PyBullet and MuJoCo make it "
               "three coordinates. Write the motion meant as a prismatic or revolute joint, or type=\"fixed\"",
 }
+
+
+@dataclass
+class _Tree:
+    """The kinematic tree as the joints give it: ``has_parent`` child link ->
+    the names of its parent joints; ``first_parent`` / ``children`` the edges
+    of each child's first joint between known links; ``touched`` the links
+    some joint names."""
+
+    children: dict[str, list[str]]
+    has_parent: dict[str, list[str]] = field(default_factory=dict)
+    first_parent: dict[str, str] = field(default_factory=dict)
+    touched: set[str] = field(default_factory=set)
 
 
 class TreeChecks(Recorder):
@@ -96,6 +110,24 @@ class TreeChecks(Recorder):
         if not links:
             self.add("URDF_NO_LINKS", "the robot has no <link>")
             return set(), None
+        self._caps(model)
+        seen = self._first_by_name(links, "link")
+        jseen = self._first_by_name(joints, "joint")
+        self._file_names(seen)
+        names = list(seen)
+        tree = _Tree(children={n: [] for n in names})
+        for j in joints:
+            if self._connect(j, seen, tree):
+                self._joint_support(j, jseen)
+        roots = self._parents_and_orphans(tree, names, seen)
+        self._cycles(tree, names, roots, seen)
+        root = self._root(tree, names, roots)
+        moving = {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}
+        return moving, root
+
+    def _caps(self, model: UrdfModel) -> None:
+        """The link cap and the movable-joint cap."""
+        links = model.link_elements
         if len(links) > self.policy.max_links:
             self.add("URDF_TOO_MANY_LINKS", f"{len(links)} links > cap {self.policy.max_links}: PyBullet, which refine "
                      f"runs, loads at most {self.policy.max_links} links per body", links=len(links), cap=self.policy.max_links)
@@ -105,71 +137,77 @@ class TreeChecks(Recorder):
                      f"refine's closed-state, state search and rest tests grow with the number of joints; with every "
                      f"link touching (worst case, benchmarks/bench_joint_cap.py) it may not finish within the flow's "
                      f"per-asset time limit, which then ends it", joints=len(movable), cap=self.policy.max_movable_joints)
-        seen: dict[str, UrdfLink] = {}
-        for ln in links:
-            if not ln.name:
+
+    def _first_by_name(self, items: list, kind: str) -> dict:
+        """``kind`` ("link" or "joint") elements by name, the first of each
+        name; the others are ``LINK_NAME_DUPLICATE`` / ``JOINT_NAME_DUPLICATE``."""
+        seen: dict = {}
+        for it in items:
+            if not it.name:
                 continue
-            if ln.name in seen:
-                self.add("LINK_NAME_DUPLICATE", f"link {ln.name!r} is defined again (first at line {seen[ln.name].line})", line=ln.line, link=ln.name)
+            if it.name in seen:
+                self.add(f"{kind.upper()}_NAME_DUPLICATE", f"{kind} {it.name!r} is defined again (first at line "
+                         f"{seen[it.name].line})", line=it.line, **{kind: it.name})
             else:
-                seen[ln.name] = ln
-        jseen: dict[str, UrdfJoint] = {}
-        for j in joints:
-            if not j.name:
-                continue
-            if j.name in jseen:
-                self.add("JOINT_NAME_DUPLICATE", f"joint {j.name!r} is defined again (first at line {jseen[j.name].line})", line=j.line, joint=j.name)
-            else:
-                jseen[j.name] = j
-        self._file_names(seen)
-        names = list(seen)
-        has_parent: dict[str, list[str]] = {}
-        children: dict[str, list[str]] = {n: [] for n in names}
-        first_parent: dict[str, str] = {}
-        touched: set[str] = set()
-        for j in joints:
-            jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
-            ok = True
-            if parent is not None and parent not in seen:
-                self.add("JOINT_PARENT_UNKNOWN", f"parent {parent!r} is not a link", line=j.line, joint=jname)
-                ok = False
-            if child is not None and child not in seen:
-                self.add("JOINT_CHILD_UNKNOWN", f"child {child!r} is not a link", line=j.line, joint=jname)
-                ok = False
-            if parent is not None and parent == child:
-                self.add("JOINT_SELF_LOOP", f"parent and child are both {parent!r}", line=j.line, joint=jname, link=child)
-                touched.add(parent)
-                continue
-            for n in (parent, child):
-                if n in seen:
-                    touched.add(n)
-            if child in seen:
-                has_parent.setdefault(child, []).append(jname or "?")
-            if ok and parent and child:
-                if child not in first_parent:
-                    first_parent[child] = parent
-                    children[parent].append(child)
-            leader = None if j.mimic is None else j.mimic.joint
-            if leader is not None and (leader not in jseen or leader == jname):
-                self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={leader!r}> names no other joint", line=j.line, joint=jname)
-            elif leader is not None:
-                self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={leader!r}>: coupled joints are not modelled (the "
-                         "state search, the post-check simulators and the writer treat every joint as free), so the "
-                         "coupling would be lost; refused rather than dropped", line=j.line, joint=jname, leader=leader)
-            if j.type in _UNSUPPORTED_JOINT_TYPES:
-                self.add("JOINT_TYPE_UNSUPPORTED", f"a {j.type} joint between {parent!r} and {child!r}: "
-                         f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
-        for child, js in has_parent.items():
+                seen[it.name] = it
+        return seen
+
+    def _connect(self, j: UrdfJoint, seen: dict[str, UrdfLink], tree: _Tree) -> bool:
+        """Record joint ``j`` in ``tree``; unknown parent or child links and a
+        self loop are reported. False for a self loop."""
+        jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
+        ok = True
+        if parent is not None and parent not in seen:
+            self.add("JOINT_PARENT_UNKNOWN", f"parent {parent!r} is not a link", line=j.line, joint=jname)
+            ok = False
+        if child is not None and child not in seen:
+            self.add("JOINT_CHILD_UNKNOWN", f"child {child!r} is not a link", line=j.line, joint=jname)
+            ok = False
+        if parent is not None and parent == child:
+            self.add("JOINT_SELF_LOOP", f"parent and child are both {parent!r}", line=j.line, joint=jname, link=child)
+            tree.touched.add(parent)
+            return False
+        for n in (parent, child):
+            if n in seen:
+                tree.touched.add(n)
+        if child in seen:
+            tree.has_parent.setdefault(child, []).append(jname or "?")
+        if ok and parent and child:
+            if child not in tree.first_parent:
+                tree.first_parent[child] = parent
+                tree.children[parent].append(child)
+        return True
+
+    def _joint_support(self, j: UrdfJoint, jseen: dict[str, UrdfJoint]) -> None:
+        """Mimic joints and joint types refine does not model."""
+        jname = joint_name(j.name)
+        leader = None if j.mimic is None else j.mimic.joint
+        if leader is not None and (leader not in jseen or leader == jname):
+            self.add("JOINT_MIMIC_UNKNOWN", f"<mimic joint={leader!r}> names no other joint", line=j.line, joint=jname)
+        elif leader is not None:
+            self.add("JOINT_MIMIC_UNSUPPORTED", f"<mimic joint={leader!r}>: coupled joints are not modelled (the "
+                     "state search, the post-check simulators and the writer treat every joint as free), so the "
+                     "coupling would be lost; refused rather than dropped", line=j.line, joint=jname, leader=leader)
+        if j.type in _UNSUPPORTED_JOINT_TYPES:
+            self.add("JOINT_TYPE_UNSUPPORTED", f"a {j.type} joint between {link_name(j.parent)!r} and {link_name(j.child)!r}: "
+                     f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
+
+    def _parents_and_orphans(self, tree: _Tree, names: list[str], seen: dict[str, UrdfLink]) -> list[str]:
+        """Links with several parents and links no joint names; returns the
+        links without a parent joint (root candidates), in link order."""
+        for child, js in tree.has_parent.items():
             if len(js) > 1:
                 self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
                          line=seen[child].line, link=child, joints=js)
-        roots = [n for n in names if n not in has_parent]
+        roots = [n for n in names if n not in tree.has_parent]
         if len(names) > 1:
             for n in roots:
-                if n not in touched:
+                if n not in tree.touched:
                     self.add("LINK_ORPHAN", f"link {n!r} is connected by no joint", line=seen[n].line, link=n)
-        connected_roots = [n for n in roots if n in touched or len(names) == 1]
-        # reachability and cycles
+        return roots
+
+    def _cycles(self, tree: _Tree, names: list[str], roots: list[str], seen: dict[str, UrdfLink]) -> None:
+        """``TREE_CYCLE`` for each cycle of first parents that no root reaches."""
         reached: set[str] = set()
         stack = list(roots)
         while stack:
@@ -177,36 +215,37 @@ class TreeChecks(Recorder):
             if n in reached:
                 continue
             reached.add(n)
-            stack.extend(children.get(n, []))
+            stack.extend(tree.children.get(n, []))
         reported: set[str] = set()
         for n in names:
-            if n in reached or n in reported or n not in first_parent:
+            if n in reached or n in reported or n not in tree.first_parent:
                 continue
             path: list[str] = []
             cur = n
             pos: dict[str, int] = {}
-            while cur in first_parent and cur not in pos and cur not in reported:
+            while cur in tree.first_parent and cur not in pos and cur not in reported:
                 pos[cur] = len(path)
                 path.append(cur)
-                cur = first_parent[cur]
+                cur = tree.first_parent[cur]
             if cur in pos:
                 cyc = path[pos[cur]:]
                 self.add("TREE_CYCLE", f"joints form a cycle through links {' -> '.join(cyc + [cyc[0]])}",
                          line=seen[cyc[0]].line, link=cyc[0], links=cyc)
             reported.update(path)
+
+    def _root(self, tree: _Tree, names: list[str], roots: list[str]) -> str | None:
+        """The one root link, or None with ``TREE_NO_ROOT`` / ``TREE_MULTIPLE_ROOTS``."""
+        connected_roots = [n for n in roots if n in tree.touched or len(names) == 1]
         if not roots:
             self.add("TREE_NO_ROOT", "every link has a parent joint: there is no root link")
-            root = None
-        elif len(connected_roots) > 1:
+            return None
+        if len(connected_roots) > 1:
             self.add("TREE_MULTIPLE_ROOTS", f"several links have no parent: {', '.join(map(repr, connected_roots))}", roots=connected_roots)
-            root = None
-        elif len(roots) > 1 and not connected_roots:
+            return None
+        if len(roots) > 1 and not connected_roots:
             self.add("TREE_MULTIPLE_ROOTS", f"no joint connects the links {', '.join(map(repr, roots))}", roots=roots)
-            root = None
-        else:
-            root = connected_roots[0] if connected_roots else roots[0]
-        moving = {j.child for j in joints if j.child and j.type in MOVABLE_TYPES}
-        return moving, root
+            return None
+        return connected_roots[0] if connected_roots else roots[0]
 
     # -- inertials
     def inertials(self, model: UrdfModel, moving: set[str]) -> None:

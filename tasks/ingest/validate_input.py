@@ -5,7 +5,7 @@ of :class:`Finding` (code, severity, file, line, link or joint, message,
 action, values). It never raises on bad input and never writes. A
 :class:`ValidationPolicy` decides each finding's severity (what is an error);
 :func:`errors` picks the findings that refuse the asset. The codes and what
-each checks are tabulated in ``docs/validation.md`` (generated from
+each checks are tabulated in ``docs/guide/validation.md`` (generated from
 :data:`CODES`).
 
 What is checked, in order (later checks run on what the earlier ones could
@@ -58,7 +58,7 @@ A URDF whose links have no ``<visual>`` or ``<collision>`` at all is refused
 (``ASSET_NO_GEOMETRY``): there is nothing to size, weigh or collide.
 
 Whatever is accepted, ``asset2sim refine`` can read without a traceback or a
-hang (``docs/validation.md``, "Agreement with refine"). The checks live in
+hang (``docs/design/validation.md``, "Agreement with refine"). The checks live in
 :mod:`~asset2sim.tasks.ingest.findings` (codes, policy, result),
 :mod:`~asset2sim.tasks.ingest.urdf_checks`,
 :mod:`~asset2sim.tasks.ingest.tree_checks`,
@@ -77,6 +77,7 @@ import stat
 from pathlib import Path
 
 from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.finding_codes import CodeInfo, codes_markdown_table
 from asset2sim.tasks.ingest.findings import (
     CODES,
     DEFAULT_POLICY,
@@ -91,18 +92,17 @@ from asset2sim.tasks.ingest.findings import (
     SEMANTIC_KINDS,
     SIMULATOR_MESH_EXTENSIONS,
     Action,
-    CodeInfo,
     Finding,
     MeshUse,
     Severity,
     ValidationPolicy,
     ValidationResult,
-    codes_markdown_table,
     errors,
     has_errors,
 )
-from asset2sim.tasks.ingest.mesh_checks import MeshChecks, MeshScan, scan_mesh_file
+from asset2sim.tasks.ingest.mesh_checks import MeshChecks
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, inside, read_regular, resolve_mesh_reference
+from asset2sim.tasks.ingest.mesh_scan import MeshScan, scan_mesh_file
 from asset2sim.tasks.ingest.tree_checks import TreeChecks, check_inertia
 from asset2sim.tasks.ingest.urdf_checks import UrdfChecks
 from asset2sim.urdf import NumberError, parse_number_list

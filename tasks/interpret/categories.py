@@ -7,7 +7,7 @@ requests mention categories in free text (:func:`find_category_mentions`,
 weighs the request words, ``meta.json``'s ``model_cat`` and the semantic labels
 to pick one, with the ``Generic`` fallback for thin evidence.
 
-Never raises on unknown names. Sources: ``categories.yaml``, ``docs/priors.md``.
+Never raises on unknown names. Sources: ``categories.yaml``, ``docs/design/priors.md``.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import functools
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from pydantic import Field
 
@@ -252,32 +252,51 @@ def recognize_category(
 
     Never raises on unknown names; ``semantic_labels`` may contain None.
     """
-    pri = load_priors()
-    scores: dict[str, float] = {}
-    why: dict[str, list[str]] = {}
-
-    def add(cat: str, w: float, msg: str) -> None:
-        scores[cat] = scores.get(cat, 0.0) + w
-        why.setdefault(cat, []).append(msg)
-
+    ev = _Evidence()
     text = request_text or ""
-    head_cat, head = request_category(text)
-    if head is not None and head_cat is not None:
-        w = _W_REQUEST_OTHER if (head.weak or head.possessive) else _W_REQUEST_HEAD
-        add(head_cat, w, f"request names {head.phrase!r}")
-    for m in find_category_mentions(text):
-        if m.category == head_cat or m.possessive:
-            continue  # "with its door" names a part, not the object
-        if m.category in why and any("request" in r for r in why[m.category]):
-            continue
-        add(m.category, _W_REQUEST_OTHER, f"request also mentions {m.phrase!r}")
-
+    _request_evidence(ev, text)
     if model_cat:
         mc = resolve_category(model_cat)
         if mc is not None and mc != GENERIC:
-            add(mc, _W_MODEL_CAT, f"model_cat {model_cat!r}")
-
+            ev.add(mc, _W_MODEL_CAT, f"model_cat {model_cat!r}")
     labels = sorted({lab for lab in semantic_labels if lab})
+    _label_evidence(ev, labels)
+    if not ev.scores or max(ev.scores.values()) < _MIN_SCORE:
+        return _generic_match(ev, model_cat, labels)
+    return _best_match(ev, text)
+
+
+@dataclass
+class _Evidence:
+    """Evidence score (dimensionless) per candidate category and the reasons for it."""
+
+    scores: dict[str, float] = field(default_factory=dict)
+    why: dict[str, list[str]] = field(default_factory=dict)
+
+    def add(self, cat: str, w: float, msg: str) -> None:
+        self.scores[cat] = self.scores.get(cat, 0.0) + w
+        self.why.setdefault(cat, []).append(msg)
+
+
+def _request_evidence(ev: _Evidence, text: str) -> None:
+    """The object the request is about (:data:`_W_REQUEST_HEAD`, or :data:`_W_REQUEST_OTHER` when weak or
+    possessive) and each other category it mentions (:data:`_W_REQUEST_OTHER`)."""
+    head_cat, head = request_category(text)
+    if head is not None and head_cat is not None:
+        w = _W_REQUEST_OTHER if (head.weak or head.possessive) else _W_REQUEST_HEAD
+        ev.add(head_cat, w, f"request names {head.phrase!r}")
+    for m in find_category_mentions(text):
+        if m.category == head_cat or m.possessive:
+            continue  # "with its door" names a part, not the object
+        if m.category in ev.why and any("request" in r for r in ev.why[m.category]):
+            continue
+        ev.add(m.category, _W_REQUEST_OTHER, f"request also mentions {m.phrase!r}")
+
+
+def _label_evidence(ev: _Evidence, labels: list[str]) -> None:
+    """Body labels naming a category (:data:`_W_BODY_LABEL` once per category) and characteristic part
+    labels (``part_evidence``, summed per category, at most :data:`_W_PART_CAP`)."""
+    pri = load_priors()
     tokens = _lookup_tables()[1]
     body_hit: set[str] = set()
     part_sum: dict[str, float] = {}
@@ -287,7 +306,7 @@ def recognize_category(
             cat = tokens.get(_simple(tok))
             if cat and cat not in body_hit and cat != GENERIC:
                 body_hit.add(cat)
-                add(cat, _W_BODY_LABEL, f"label {lab!r}")
+                ev.add(cat, _W_BODY_LABEL, f"label {lab!r}")
         canon = canonical_label(lab)
         if canon is None:
             continue
@@ -297,22 +316,29 @@ def recognize_category(
                 part_sum[name] = part_sum.get(name, 0.0) + w
                 part_why.setdefault(name, []).append(canon)
     for name, s in part_sum.items():
-        add(name, min(_W_PART_CAP, s), f"part labels {part_why[name]}")
+        ev.add(name, min(_W_PART_CAP, s), f"part labels {part_why[name]}")
 
-    variant_text = text
-    if not scores or max(scores.values()) < _MIN_SCORE:
-        reason = "no usable evidence"
-        if model_cat:
-            reason += f" (model_cat {model_cat!r} unknown)"
-        if labels:
-            reason += f"; labels {labels}"
-        return CategoryMatch(
-            name=GENERIC,
-            prior=pri.categories[GENERIC],
-            confidence=0.0,
-            reason=reason + "; using the generic fallback",
-            scores={k: round(v, 3) for k, v in scores.items()},
-        )
+
+def _generic_match(ev: _Evidence, model_cat: str | None, labels: list[str]) -> CategoryMatch:
+    """The ``Generic`` fallback (confidence 0) with the reason the evidence was not enough."""
+    reason = "no usable evidence"
+    if model_cat:
+        reason += f" (model_cat {model_cat!r} unknown)"
+    if labels:
+        reason += f"; labels {labels}"
+    return CategoryMatch(
+        name=GENERIC,
+        prior=load_priors().categories[GENERIC],
+        confidence=0.0,
+        reason=reason + "; using the generic fallback",
+        scores={k: round(v, 3) for k, v in ev.scores.items()},
+    )
+
+
+def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
+    """The best-scoring category (ties: request evidence, then model_cat, then the name), its confidence
+    (best / total) * min(1, best / 3), the reasons for it and against the others, and its variant in ``text``."""
+    scores, why = ev.scores, ev.why
 
     def rank(name: str) -> tuple[float, bool, bool, str]:
         has_req = any("request" in r for r in why.get(name, []))
@@ -322,20 +348,16 @@ def recognize_category(
     best = max(scores, key=rank)
     total = sum(scores.values())
     conf = (scores[best] / total) * min(1.0, scores[best] / 3.0)
-    others = sorted(
-        ((n, s) for n, s in scores.items() if n != best), key=lambda t: -t[1]
-    )
+    others = sorted(((n, s) for n, s in scores.items() if n != best), key=lambda t: -t[1])
     reason = f"{best}: " + ", ".join(why[best])
     if others:
-        reason += "; against: " + ", ".join(
-            f"{n} ({s:.1f}: {', '.join(why[n])})" for n, s in others
-        )
+        reason += "; against: " + ", ".join(f"{n} ({s:.1f}: {', '.join(why[n])})" for n, s in others)
     return CategoryMatch(
         name=best,
-        prior=pri.categories[best],
+        prior=load_priors().categories[best],
         confidence=round(max(0.0, min(1.0, conf)), 3),
         reason=reason,
-        variant=find_variant(best, variant_text),
+        variant=find_variant(best, text),
         scores={k: round(v, 3) for k, v in scores.items()},
     )
 

@@ -157,9 +157,17 @@ def mounting_mentions(text: str) -> list[tuple[int, str, str]]:
     return hits
 
 
-def resolve_mounting(category: str | None, text: str) -> RootMount:
-    """The request's mounting when it names one (:func:`request_mounting`),
-    else the category prior (:func:`category_mounting`)."""
+def resolve_mounting(category: str | None, text: str, override: str | None = None) -> RootMount:
+    """The mounting an override gives (``fixed``: the category prior's kind
+    when it is mounted, else wall-mounted; ``free``), else the request's when
+    it names one (:func:`request_mounting`), else the category prior
+    (:func:`category_mounting`)."""
+    if override == "free":
+        return RootMount(kind=FREE, fixed=False, source="given by the user: --mount free")
+    if override == "fixed":
+        prior = category_mounting(category)
+        kind = prior.kind if prior.fixed else "wall-mounted"
+        return RootMount(kind=kind, fixed=True, source=f"given by the user: --mount fixed -> {kind}")
     return request_mounting(text, category) or category_mounting(category)
 
 

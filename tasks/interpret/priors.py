@@ -24,7 +24,7 @@ Units: SI throughout: lengths m, masses kg, densities kg/m^3. Nothing here is
 object-specific; unknown categories and labels fall back to the ``Generic``
 category and to the per-label defaults of ``labels.yaml``.
 
-Sources of the tables: see each yaml entry and ``docs/priors.md``.
+Sources of the tables: see each yaml entry and ``docs/design/priors.md``.
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ closed and the second slightly open, low damping")`` recognises:
   friction / stiffness; part counts ("two-drawer"); spatial ordinals
   (left/right/front/back); "the others". Contradictions are ``warnings``;
   groups of unused words are ``ignored``. The full grammar:
-  ``docs/requests.md``.
+  ``docs/guide/requests.md``.
 - **category**: the object the request is about (first category word that is not
   "its <part>"), canonical name from ``categories.yaml`` (e.g. "purse" -> Bag,
   "mini fridge" -> Refrigerator).
@@ -115,19 +115,7 @@ def _compile(table: list[tuple[str, object, str]]) -> list[tuple[re.Pattern[str]
 
 def _scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[_Hit]:
     """Non-overlapping matches of a pattern table: leftmost first, then longest."""
-    hits = [
-        _Hit(m.start(), m.end(), m.group(0), val, flag)
-        for pat, val, flag in table
-        for m in pat.finditer(text)
-    ]
-    hits.sort(key=lambda h: (h.start, -(h.end - h.start)))
-    out: list[_Hit] = []
-    last = -1
-    for h in hits:
-        if h.start >= last:
-            out.append(h)
-            last = h.end
-    return out
+    return rv.leftmost_longest([_Hit(m.start(), m.end(), m.group(0), val, flag) for pat, val, flag in table for m in pat.finditer(text)])
 
 
 _OPEN = r"open(?:ed)?"
@@ -228,9 +216,7 @@ _VERB_BEFORE = re.compile(
     r"(?:\bto|\bcan|\bcould|\bwill|\bwould|\bshould|\bmust|\bplease|\blet me|\band|\bor|\bto be able to)\s+$"
 )
 
-_PART_WORDS = rv.PART_WORDS
-_PART_RX = re.compile(_L + r"(?:" + _PART_WORDS + r")" + _R)
-_PART_WORD = re.compile(r"(?:" + _PART_WORDS + r")")
+_PART_WORD = re.compile(r"(?:" + rv.PART_WORDS + r")")
 _NUM_AFTER = re.compile(
     r"\s*(?:#|no\.?\s*|numbers?\s*)?(\d{1,2}(?:\s*(?:,\s*(?:and\s+)?|and\s+|or\s+|&\s*)\d{1,2})*)\b"
 )
@@ -245,7 +231,7 @@ _ORDINALS = _compile(
         (r"top(?:most)?|upper(?:most)?|highest", 0, ""),
         (r"bottom(?:most)?|lowest|lower|last", -1, ""),
         (r"every|all|each|both", None, "quant"),
-        # spatial words: the flag is the order they count in (docs/requests.md)
+        # spatial words: the flag is the order they count in (docs/guide/requests.md)
         (r"left(?:most|[- ]hand)?", 0, "left_right"),
         (r"right(?:most|[- ]hand)?", 0, "right_left"),
         (r"front(?:most)?", 0, "front_back"),
@@ -379,25 +365,19 @@ def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
     and the numeric states of :func:`request_values.state_quantities` (value
     (band, StateTarget)). A bare "up"/"down"/"on"/"off" counts only right
     after a part noun ("its lever up", "the switch is on")."""
-    hits = _scan(low, _STATE_TABLE)
-    hits += [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
-    hits.sort(key=lambda h: (h.start, -(h.end - h.start)))
-    out: list[_Hit] = []
-    last = -1
-    for h in hits:
-        if h.start < last:
-            continue
-        if h.flag == "bare":
-            if _VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]):
-                continue
-        if h.flag == "end" and _BARE_END.fullmatch(h.text):
-            if not _END_LEAD.search(low[max(0, h.start - 40): h.start]) or _negated(low, h.start):
-                continue
-            if h.text.endswith(("on", "off")) and not _END_TAIL.match(low, h.end):
-                continue  # "a door on a plastic body": a preposition
-        out.append(h)
-        last = h.end
-    return out
+    hits = _scan(low, _STATE_TABLE) + [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
+    return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
+
+
+def _is_state(low: str, h: _Hit) -> bool:
+    """False for a bare "open" that is a verb ("to open the lid") and a bare end word without a part noun before it."""
+    if h.flag == "bare":
+        return not (_VERB_AFTER.match(low, h.end) or _VERB_BEFORE.search(low[max(0, h.start - 20): h.start]))
+    if h.flag == "end" and _BARE_END.fullmatch(h.text):
+        if not _END_LEAD.search(low[max(0, h.start - 40): h.start]) or _negated(low, h.start):
+            return False
+        return not (h.text.endswith(("on", "off")) and not _END_TAIL.match(low, h.end))  # "a door on a plastic body": a preposition
+    return True
 
 
 def _band_and_target(value: object) -> tuple[str, StateTarget | None]:
@@ -438,7 +418,7 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
         joined = prev is not None and prev.flag != "quant" and _ORD_JOIN.match(low, prev.end, o.start) is not None
         chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
-    for m in _PART_RX.finditer(low):
+    for m in rv.PART_RX.finditer(low):
         label = canonical_label(m.group(0)) or m.group(0)
         ordinals: list[tuple[int, str]] = []
         quant = False
@@ -585,123 +565,36 @@ def parse_request(text: str) -> RequestSpec:
     if not isinstance(text, str):
         raise TypeError(f"request must be a string, got {type(text).__name__}")
     check_request_length(text)
-    low = (
-        text.lower()
-        .replace("\u2019", "'")
-        .replace("\u2018", "'")
-        .replace("\u2013", "-")
-        .replace("\u2014", " ")
-    )
-    matched: list[tuple[int, str]] = []
-
+    low = _normalized(text)
     mentions = find_category_mentions(low)
+    mention_starts = [m.start for m in mentions]
     hint, head = request_category(low)
-    if head is not None:
-        matched.append((head.start, head.phrase))
-
+    head_starts = [head.start] if head is not None else []  # the object itself ("a wooden door")
+    matched: list[tuple[int, str]] = [(head.start, head.phrase)] if head is not None else []
     tokens = _Tokens(low)
     size_class, factor, size_phrase, size_hits, size_against = _parse_size(low, mentions, tokens)
-    matched += [(h.start, h.text) for h in size_hits + size_against]
-
-    mention_starts = [m.start for m in mentions]
-    warnings: list[str] = []
-    if size_against:
-        warnings.append(f"contradiction: size words {size_phrase!r} and " + ", ".join(repr(h.text) for h in size_against)
-                        + f" point opposite ways; '{size_class}' (the first direction) is used")
+    warnings = [f"contradiction: size words {size_phrase!r} and " + ", ".join(repr(h.text) for h in size_against)
+                + f" point opposite ways; '{size_class}' (the first direction) is used"] if size_against else []
     numeric, sizes, size_warn, verbs = rv.state_quantities(low, mention_starts)
-    warnings += size_warn
     joint_states, band_hits, contradictions = _joint_states(low, tokens, numeric)
-    warnings += contradictions
-    matched += [(h.start, h.text) for h in band_hits]
-    matched += [(f.start, f.text) for f in sizes + verbs]
+    warnings += size_warn + contradictions
     if sizes and size_class is not None:
         warnings.append(f"size words ({size_phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
-    head_starts = [head.start] if head is not None else []  # the object itself ("a wooden door")
     mass_found = rv.masses(low, head_starts)
     material_found = rv.materials(low, mention_starts, head_starts)
     level_found = rv.mass_levels(low, mention_starts)
     dyn_found, dyn_warn = rv.dynamics_values(low, head_starts)
     warnings += dyn_warn
-    matched += [(f.start, f.text) for f in mass_found + material_found + level_found + dyn_found]
     properties = _merge_properties([f.value for f in mass_found + material_found], warnings)  # type: ignore[misc]
-    mass_level = level_found[-1].value if level_found else None
-    if len({f.value for f in level_found}) > 1:
-        warnings.append("contradiction: " + " and ".join(f"'{f.text}'" for f in level_found) + f" for the mass; '{level_found[-1].text}' is used")
-    if mass_level is not None and any(p.mass is not None and p.label is None for p in properties):
-        warnings.append(f"'{level_found[-1].text}' and a mass in numbers: the number is used")
-    level_spans = [(f.start, f.end) for f in level_found]
+    mass_level = _mass_level(level_found, properties, warnings)
     counts = rv.part_counts(low)
-    matched += [(f.start, f.text) for f in counts]
-    matched += [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
-
-    damping = "moderate"
-    strong_set = False
-    holds = False
-    spring = False
-    stiff = False
-    free = False
-    for h in _scan(low, _DYN_TABLE):
-        kind, val = h.value  # type: ignore[misc]
-        if any(a <= h.start < b for a, b in level_spans) and not _part_soon(low, h.end):
-            continue  # "a heavy box": a mass, not a dynamics word ("a heavy door": both)
-        neg = _negated(low, h.start)
-        if kind == "spring":
-            spring = not neg
-            matched.append((h.start, ("no " if neg else "") + h.text))
-            continue
-        if neg:
-            matched.append((h.start, "not " + h.text))
-            continue
-        matched.append((h.start, h.text))
-        if kind == "hold":
-            holds = True
-        elif kind == "stiff":
-            stiff = True
-        elif kind == "free":
-            free = True
-            if not strong_set:
-                damping = "low"
-        elif kind == "heavy":
-            stiff = True
-            if not strong_set:
-                damping = "high"
-        elif kind == "damping":
-            if h.flag == "strong":
-                damping = str(val)
-                strong_set = True
-            elif not strong_set:
-                damping = str(val)
-
-    if stiff and free:
-        warnings.append("contradiction: both stiff and moving freely are asked; both are applied (friction x4 over the floor, then no extra floor)")
-    levels = {str(h.value[1]) for h in _scan(low, _DYN_TABLE) if h.flag == "strong" and not _negated(low, h.start)}
-    if len(levels) > 1:
-        warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
-    pose = None
-    for h in _scan(low, _POSE_TABLE):
-        if not _negated(low, h.start):
-            pose = h.value
-            matched.append((h.start, h.text))
-
-    if hint is not None:  # a variant of the category ("kitchen faucet") is understood, not ignored
-        try:
-            var = variant_mention(hint, low)
-        except KeyError:
-            var = None
-        if var is not None:  # every phrase of it ("under-desk office cabinet": two phrases of one variant)
-            for ph in var[2].phrases:
-                for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low):
-                    matched.append((m.start(), m.group(0)))
-    for pos, _, phrase in mounting_mentions(low):  # "free-standing", "mounted on the wall": the mounting's words (tasks.interpret.mounting)
-        matched.append((pos, phrase))
+    found: list = size_hits + size_against + band_hits + sizes + verbs + mass_found + material_found + level_found + dyn_found + counts
+    matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
+    damping, holds, spring, stiff, free = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings)
+    pose = _pose_word(low, matched)
+    matched += _variant_phrases(hint, low)
+    matched += [(pos, phrase) for pos, _, phrase in mounting_mentions(low)]  # "free-standing", "mounted on the wall" (tasks.interpret.mounting)
     unused, groups = _unused_words(low, matched, mentions)
-    seen: set[tuple[int, str]] = set()
-    ordered = []
-    for pos, ph in sorted(matched, key=lambda t: t[0]):
-        if (pos, ph) not in seen:
-            seen.add((pos, ph))
-            ordered.append(" ".join(ph.split()))
-
     return RequestSpec(
         text=text,
         category_hint=hint,
@@ -722,9 +615,91 @@ def parse_request(text: str) -> RequestSpec:
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
         ignored=groups,
         warnings=warnings,
-        matched=ordered,
+        matched=_in_text_order(matched),
         unused_words=unused,
     )
+
+
+def _normalized(text: str) -> str:
+    """``text`` lower-cased, typographic quotes and dashes made plain."""
+    return text.lower().replace("\u2019", "'").replace("\u2018", "'").replace("\u2013", "-").replace("\u2014", " ")
+
+
+def _mass_level(level_found: list[rv.Found], properties: list[PartProperty], warnings: list[str]) -> object:
+    """The last mass word's level ("heavy"/"light"; None without one); two levels, or a level beside a mass
+    in numbers, are warned."""
+    mass_level = level_found[-1].value if level_found else None
+    if len({f.value for f in level_found}) > 1:
+        warnings.append("contradiction: " + " and ".join(f"'{f.text}'" for f in level_found) + f" for the mass; '{level_found[-1].text}' is used")
+    if mass_level is not None and any(p.mass is not None and p.label is None for p in properties):
+        warnings.append(f"'{level_found[-1].text}' and a mass in numbers: the number is used")
+    return mass_level
+
+
+def _dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
+                    warnings: list[str]) -> tuple[str, bool, bool, bool, bool]:
+    """(damping level, holds position, spring, stiff, free moving) from the dynamics words: explicit damping
+    phrases ("strong") win over cues such as "smooth" or "heavy". Phrases go to ``matched`` ("no "/"not "
+    before a negated one), contradictions to ``warnings``."""
+    damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
+    hits = _scan(low, _DYN_TABLE)
+    for h in hits:
+        kind, val = h.value  # type: ignore[misc]
+        if any(a <= h.start < b for a, b in level_spans) and not _part_soon(low, h.end):
+            continue  # "a heavy box": a mass, not a dynamics word ("a heavy door": both)
+        neg = _negated(low, h.start)
+        if kind == "spring":
+            spring = not neg
+            matched.append((h.start, ("no " if neg else "") + h.text))
+            continue
+        matched.append((h.start, ("not " if neg else "") + h.text))
+        if neg:
+            continue
+        holds |= kind == "hold"
+        stiff |= kind in ("stiff", "heavy")
+        free |= kind == "free"
+        if kind in ("free", "heavy", "damping") and (h.flag == "strong" or not strong_set):
+            damping = str(val)
+            strong_set = strong_set or h.flag == "strong"
+    if stiff and free:
+        warnings.append("contradiction: both stiff and moving freely are asked; both are applied (friction x4 over the floor, then no extra floor)")
+    levels = {str(h.value[1]) for h in hits if h.flag == "strong" and not _negated(low, h.start)}  # type: ignore[index]
+    if len(levels) > 1:
+        warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
+    return damping, holds, spring, stiff, free
+
+
+def _pose_word(low: str, matched: list[tuple[int, str]]) -> object:
+    """The last pose word not negated (None without one); each such word goes to ``matched``."""
+    pose = None
+    for h in _scan(low, _POSE_TABLE):
+        if not _negated(low, h.start):
+            pose = h.value
+            matched.append((h.start, h.text))
+    return pose
+
+
+def _variant_phrases(hint: str | None, low: str) -> list[tuple[int, str]]:
+    """Every phrase of the category's variant that the request names ("kitchen faucet"; "under-desk office
+    cabinet": two phrases of one variant), so they count as understood, not ignored."""
+    try:
+        var = variant_mention(hint, low) if hint is not None else None
+    except KeyError:
+        var = None
+    if var is None:
+        return []
+    return [(m.start(), m.group(0)) for ph in var[2].phrases for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low)]
+
+
+def _in_text_order(matched: list[tuple[int, str]]) -> list[str]:
+    """The matched phrases by position (stable), each (position, phrase) once, whitespace collapsed."""
+    seen: set[tuple[int, str]] = set()
+    ordered = []
+    for pos, ph in sorted(matched, key=lambda t: t[0]):
+        if (pos, ph) not in seen:
+            seen.add((pos, ph))
+            ordered.append(" ".join(ph.split()))
+    return ordered
 
 
 def _part_soon(text: str, i: int) -> bool:

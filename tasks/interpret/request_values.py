@@ -90,7 +90,7 @@ def _factor(units: list[tuple[str, float]], text: str) -> float:
 
 
 #: A unit right after a number ("drawer 10 cm" is a distance, not drawer number 10).
-UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + "|".join(f"(?:{u})" for u, _ in _ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS) + r")(?![\w])")
+UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + _unit_rx(_ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS) + r")(?![\w])")
 
 _QTY = r"(?P<num>" + NUM + r")\s*-?\s*(?P<unit>{units})(?![\w])"
 _ANGLE_RX = re.compile(_L + _QTY.format(units=_unit_rx(_ANGLE_UNITS)))
@@ -226,11 +226,12 @@ def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], 
         else:
             warnings.append(f"'{m.group(0)}' is a length but neither a size (tall/wide/deep/long) nor a state (open/out): not used")
     states.sort(key=lambda f: f.start)
-    return _no_overlap(states), sizes, warnings, verbs
+    return leftmost_longest(states), sizes, warnings, verbs
 
 
-def _no_overlap(found: list[Found]) -> list[Found]:
-    out: list[Found] = []
+def leftmost_longest(found: list) -> list:
+    """The findings (anything with ``start`` and ``end``) that do not overlap: leftmost first, then longest."""
+    out: list = []
     last = -1
     for f in sorted(found, key=lambda f: (f.start, -(f.end - f.start))):
         if f.start >= last:
@@ -358,7 +359,7 @@ def materials(low: str, mention_starts: list[int], head_starts: list[int] | None
         for m in rx.finditer(low):
             hits.append(Found(m.start(), m.end(), m.group(0), key))
     out: list[Found] = []
-    for h in _no_overlap(hits):
+    for h in leftmost_longest(hits):
         made_of = _MADE_OF.match(h.text) is not None
         label, end = (None, h.end) if made_of else _part_after(low, h.end, mention_starts=head_starts)
         if made_of:
@@ -382,13 +383,11 @@ _DYN_UNITS = [
     ("friction", "linear", r"n"),
 ]
 _DYN_NAME = r"(?P<q>damping|friction|stiffness|spring (?:constant|stiffness|rate))(?: coefficient)?"
+_DYN_UNIT = "|".join(f"(?:{u})" for _q, _m, u in _DYN_UNITS)
 _DYN_RX = re.compile(
-    _L + _DYN_NAME + r"(?:\s+(?:of|=|is|at|to|about|around)|\s*[:=])*\s*(?P<num>" + NUM + r")\s*(?P<unit>"
-    + "|".join(f"(?:{u})" for _q, _m, u in _DYN_UNITS) + r")?(?![\w/])"
+    _L + _DYN_NAME + r"(?:\s+(?:of|=|is|at|to|about|around)|\s*[:=])*\s*(?P<num>" + NUM + r")\s*(?P<unit>" + _DYN_UNIT + r")?(?![\w/])"
 )
-_DYN_RX_AFTER = re.compile(
-    _L + r"(?P<num>" + NUM + r")\s*(?P<unit>" + "|".join(f"(?:{u})" for _q, _m, u in _DYN_UNITS) + r")\s+(?:of\s+)?" + _DYN_NAME + _R
-)
+_DYN_RX_AFTER = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?P<unit>" + _DYN_UNIT + r")\s+(?:of\s+)?" + _DYN_NAME + _R)
 
 
 def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[list[Found], list[str]]:
@@ -415,7 +414,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
                                  + " or ".join(u for qq, _mm, u in _DYN_UNITS if qq == q).replace("\\s*", " ") + "); used as a number without unit")
             label = _part_before(low, m.start(), mention_starts=mention_starts)
             out.append(Found(m.start(), m.end(), m.group(0), DynamicsValue(quantity=q, value=v, motion=motion, label=label if label != "body" else None, phrase=m.group(0))))
-    return _no_overlap(out), warns
+    return leftmost_longest(out), warns
 
 
 _COUNT_WORDS = {"one": 1, "single": 1, "two": 2, "double": 2, "twin": 2, "three": 3, "triple": 3, "four": 4, "five": 5, "six": 6}

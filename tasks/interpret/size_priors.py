@@ -6,7 +6,7 @@ dimensions times the size class factor); :func:`mass_range` and
 :func:`scale_mass_range` scale mass ranges with size (solid f^3 to thin-walled
 f^2); :func:`gripper_limit_factor` and :func:`fits_gripper` check handheld
 objects against a parallel gripper's stroke. Sources: ``size_classes.yaml``,
-``categories.yaml``, ``docs/priors.md``.
+``categories.yaml``, ``docs/design/priors.md``.
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def mass_range(category: str, size_class: str | None = None, variant: str | None
     The regular-size range of categories.yaml (or the variant's, whose own size
     class is taken into account) scaled by :func:`scale_mass_range` with the
     size factor of the class. Unknown categories use ``Generic``. Raises
-    ``KeyError`` for an unknown size class. Table: docs/priors.md.
+    ``KeyError`` for an unknown size class. Table: docs/design/priors.md.
     """
     cat = category_prior(category)
     var = cat.variant(variant) if variant else None

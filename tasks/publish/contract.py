@@ -463,90 +463,21 @@ def build_row(
     :func:`asset2sim.tasks.check.verdict.asset_failure_mode`'s.
     """
     prepared = prepared or Prepared(worker=None)
-    now = time.time()
-    row = CatalogRow(
-        asset_id=job.asset_id,
-        status="failed",
-        category=prepared.category or job.category,
-        prompt=job.prompt,
-        estimator=job.config.get("estimator"),
-        model=job.config.get("model"),
-        reference_scale=job.reference_scale,
-        input_hash=prepared.input_hash,
-        config_hash=prepared.config_hash,
-        refine_config_hash=prepared.refine_config_hash,
-        code_version=job.code_version,
-        code_hash=code_hash(),
-        flow_run_id=flow_run_id,
-        worker=(refined.worker if refined is not None else None) or prepared.worker,
-        started_at=_utc(started_at or now),
-        finished_at=_utc(finished_at or now),
-        source_run=job.run_id,
-    )
+    row = _row_head(job, prepared, refined, flow_run_id, started_at, finished_at)
     stages: dict[str, float] = {}
     if prepared.seconds is not None:
         stages["prepare"] = round(float(prepared.seconds), 4)
-
-    prev = prepared.skip
-    if prev is not None:  # reuse an earlier finished result
-        for col in REUSED_COLUMNS:
-            setattr(row, col, prev.get(col))
-        row.status = "skipped"
-        row.source_run = prev.get("source_run") or prev.get("run")
-        row.model_queries = 0  # nothing was asked in this run
-        row.tokens = 0
-        row.stage_seconds = json.dumps(stages)
-        row.wall_seconds = sum(stages.values())
-        return row
-
+    if prepared.skip is not None:  # reuse an earlier finished result
+        return _reused_row(row, prepared.skip, stages)
     errors: list[str] = []
     input_failure = None
     if not prepared.ok and prepared.seconds is not None:
         input_failure = prepared.failure_mode or "invalid_input"
         errors.append(f"prepare: {prepared.error or ''}")
     refine_status = refined.status if refined is not None else None
-    refine_mode = None
-    if refined is not None and refined.status == "ok":
-        value: RefineOutput = refined.value
-        report = value.report
-        row.out_dir = value.out_dir or job.out_dir
-        stages["refine"] = round(float(refined.seconds or 0.0), 4)
-        for k, v in report.stage_seconds.items():
-            stages[f"refine.{k}"] = round(float(v), 4)
-        row.scale = report.scale
-        row.total_mass_kg = report.total_mass
-        row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
-        row.model_queries = int(report.model_queries or 0)
-        # the hash the refine function wrote into its completion marker
-        row.refine_config_hash = report.config_hash or row.refine_config_hash
-        row.tokens = value.tokens
-        row.estimator = report.estimator or row.estimator
-        row.model = report.model or row.model
-        row.category = report.category or row.category
-        refine_mode = report.failure_mode
-        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation"))
-        row.penetration_mm = post.get("penetration_mm")
-        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass"):
-            if col in post:
-                setattr(row, col, post[col])
-    elif refined is not None and refined.status in FAILED_STATUSES:
-        stages["refine"] = round(float(refined.seconds or 0.0), 4)
-        refine_mode = refined.failure_mode
-        errors.append(f"refine: {refined.error_type} {refined.error}".strip())
-        if refined.status == "crash" and refined.log_tail:
-            errors.append(refined.log_tail[-600:])
-
+    refine_mode = _add_refined(row, job, refined, stages, errors)
     measured_status = measured.status if measured is not None else None
-    cols: dict[str, Any] = {}
-    measured_failures: list[str] | None = None
-    if measured is not None and measured.status == "ok":
-        m: Measurement = measured.value
-        stages["metrics"] = round(float(measured.seconds or 0.0), 4)
-        cols = m.columns
-        measured_failures = list(m.failures)
-        for col, v in cols.items():
-            if v is not None:
-                setattr(row, col, v)
+    cols, measured_failures = _add_measured(row, measured, stages)
     verdict = asset_failure_mode(
         input_failure=input_failure,
         refine_status=refine_status,
@@ -576,6 +507,96 @@ def build_row(
     row.stage_seconds = json.dumps(stages, sort_keys=True)
     row.wall_seconds = round(sum(v for k, v in stages.items() if "." not in k), 4)
     return row
+
+
+def _row_head(job: Any, prepared: Prepared, refined: StageRecord | None, flow_run_id: str | None,
+              started_at: float | None, finished_at: float | None) -> CatalogRow:
+    """A ``failed`` row with the job's and the input stage's columns; times
+    epoch s (now when not given)."""
+    now = time.time()
+    return CatalogRow(
+        asset_id=job.asset_id,
+        status="failed",
+        category=prepared.category or job.category,
+        prompt=job.prompt,
+        estimator=job.config.get("estimator"),
+        model=job.config.get("model"),
+        reference_scale=job.reference_scale,
+        input_hash=prepared.input_hash,
+        config_hash=prepared.config_hash,
+        refine_config_hash=prepared.refine_config_hash,
+        code_version=job.code_version,
+        code_hash=code_hash(),
+        flow_run_id=flow_run_id,
+        worker=(refined.worker if refined is not None else None) or prepared.worker,
+        started_at=_utc(started_at or now),
+        finished_at=_utc(finished_at or now),
+        source_run=job.run_id,
+    )
+
+
+def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float]) -> CatalogRow:
+    """``row`` made the ``skipped`` row of the earlier finished row ``prev``
+    (:data:`REUSED_COLUMNS`); this run asked the model nothing."""
+    for col in REUSED_COLUMNS:
+        setattr(row, col, prev.get(col))
+    row.status = "skipped"
+    row.source_run = prev.get("source_run") or prev.get("run")
+    row.model_queries = 0  # nothing was asked in this run
+    row.tokens = 0
+    row.stage_seconds = json.dumps(stages)
+    row.wall_seconds = sum(stages.values())
+    return row
+
+
+def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages: dict[str, float], errors: list[str]) -> str | None:
+    """The refine stage's columns into ``row``, its seconds into ``stages``
+    and its errors into ``errors``; returns its failure mode (None: it did
+    not finish)."""
+    if refined is not None and refined.status == "ok":
+        value: RefineOutput = refined.value
+        report = value.report
+        row.out_dir = value.out_dir or job.out_dir
+        stages["refine"] = round(float(refined.seconds or 0.0), 4)
+        for k, v in report.stage_seconds.items():
+            stages[f"refine.{k}"] = round(float(v), 4)
+        row.scale = report.scale
+        row.total_mass_kg = report.total_mass
+        row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
+        row.model_queries = int(report.model_queries or 0)
+        # the hash the refine function wrote into its completion marker
+        row.refine_config_hash = report.config_hash or row.refine_config_hash
+        row.tokens = value.tokens
+        row.estimator = report.estimator or row.estimator
+        row.model = report.model or row.model
+        row.category = report.category or row.category
+        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation"))
+        row.penetration_mm = post.get("penetration_mm")
+        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass"):
+            if col in post:
+                setattr(row, col, post[col])
+        return report.failure_mode
+    if refined is not None and refined.status in FAILED_STATUSES:
+        stages["refine"] = round(float(refined.seconds or 0.0), 4)
+        errors.append(f"refine: {refined.error_type} {refined.error}".strip())
+        if refined.status == "crash" and refined.log_tail:
+            errors.append(refined.log_tail[-600:])
+        return refined.failure_mode
+    return None
+
+
+def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[str, float]) -> tuple[dict[str, Any], list[str] | None]:
+    """The metrics stage's columns into ``row`` and its seconds into
+    ``stages`` when it ran; returns its columns and failed metrics
+    (``{}``, None when it did not run)."""
+    if measured is None or measured.status != "ok":
+        return {}, None
+    m: Measurement = measured.value
+    stages["metrics"] = round(float(measured.seconds or 0.0), 4)
+    for col, v in m.columns.items():
+        if v is not None:
+            setattr(row, col, v)
+    return m.columns, list(m.failures)
 
 
 # ------------------------------------------------------------------ manifest rows

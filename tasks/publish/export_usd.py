@@ -85,7 +85,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic
-from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_initial_state, read_urdf
+from asset2sim.engines.loading import CollisionPiece, collision_pieces, principal_axes, read_initial_state, read_urdf
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
 from asset2sim.schemas.overlay import Overlay
@@ -98,8 +98,7 @@ from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
 #: floats (IEEE 754 binary32, 24-bit significand: 6e-8 relative rounding), and
 #: degree conversions add one more rounding.
 FLOAT_RTOL = 1e-6
-#: Absolute floor for quantities that may be 0 (COM components, off-diagonal
-#: inertia): 1e-6 of the largest value of the same quantity.
+#: Degrees per radian (UsdPhysics angles, limits and angular gains are per degree).
 DEG = 180.0 / math.pi
 
 
@@ -111,23 +110,10 @@ class UsdExportError(RuntimeError):
 def _pxr():
     """Import pxr lazily (``usd-core``, an optional extra)."""
     try:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics  # noqa: F401
+        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
     except ImportError as exc:
         raise ImportError(f"OpenUSD is not installed ({exc}); install the extra: pip install 'asset2sim[usd]'") from exc
-    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
-
     return Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
-
-
-def principal_axes(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Principal moments (3,) kg*m^2 and axes (3, 3) (columns, a proper
-    rotation, det = +1) of a symmetric inertia tensor (3, 3):
-    ``tensor = axes @ diag(moments) @ axes.T`` (numpy ``eigh``)."""
-    t = 0.5 * (np.asarray(tensor, float) + np.asarray(tensor, float).T)
-    w, v = np.linalg.eigh(t)
-    if np.linalg.det(v) < 0:
-        v[:, 2] = -v[:, 2]
-    return w, v
 
 
 def _axis_frame(axis: np.ndarray) -> np.ndarray:
@@ -138,12 +124,6 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
     y /= np.linalg.norm(y)
     z = np.cross(x, y)
     return np.column_stack([x, y, z])
-
-
-def _hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (k, 3) and outward-wound triangles (m, 3) of the convex hull
-    of ``points`` (n, 3): :func:`asset2sim.mesh_io.convex_hull_mesh`."""
-    return convex_hull_mesh(points)
 
 
 def _transform(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -193,7 +173,7 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
         UrdfError: the URDF or a collision mesh cannot be read.
         UsdExportError: the written file does not check out.
     """
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    _pxr()  # ImportError first, without usd-core
     out_dir = Path(out_dir)
     urdf_path = out_dir / URDF_NAME
     if not urdf_path.is_file():
@@ -203,7 +183,20 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
     springs = springs_from_overlay(out_dir, initial)
     fixed = read_root(out_dir).fixed
     pieces, notes = collision_pieces(model)
+    stage, root_path = _new_stage(model)
+    link_paths = _write_links(stage, root_path, model, initial, pieces, visuals, notes)
+    joint_paths = _write_joints(stage, root_path, model, link_paths, initial, springs, fixed)
+    target = _save(stage, out_dir / USD_DIR / f"{urdf_path.stem}.usd")
+    build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
+    if check:
+        check_usd(target, out_dir)
+    return build
 
+
+def _new_stage(model: UrdfModel):
+    """An in-memory stage (z up, m, kg) and the path of its default prim
+    ``/<robot>``, an Xform with the ArticulationRootAPI."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -218,44 +211,67 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
         "(joint positions, mounting). SI units; revolute limits, drive gains and joint states in degrees as "
         "UsdPhysics prescribes; Coulomb joint friction in newton:friction / asset2sim:friction (N*m or N)."
     )
+    return stage, root_path
 
+
+def _write_links(stage, root_path, model: UrdfModel, initial: dict[str, float], pieces: dict[str, list[CollisionPiece]],
+                 visuals: bool, notes: list[str]) -> dict[str, str]:
+    """Every link as a rigid body under ``root_path``, posed at the initial
+    state, with its visuals (``visuals``) and collision pieces; returns URDF
+    link name -> prim path."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
     link_names = _names(model.tree_order(), Tf.MakeValidIdentifier)
-    joint_names = _names([j.name for j in model.joints], Tf.MakeValidIdentifier)
     poses = model.link_poses(initial)
     link_paths: dict[str, str] = {}
     for name in model.tree_order():
-        link = model.links[name]
         path = root_path.AppendChild(link_names[name])
         link_paths[name] = str(path)
-        xf = UsdGeom.Xform.Define(stage, path)
-        pose = poses[name]
-        xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, pose[:3, 3])))
-        w, x, y, z = (float(v) for v in matrix_quat_wxyz(pose[:3, :3]))
-        xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(w, x, y, z))
-        prim = xf.GetPrim()
-        prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
-        UsdPhysics.RigidBodyAPI.Apply(prim)
-        mass_api = UsdPhysics.MassAPI.Apply(prim)
-        if link.inertial is not None and link.inertial.mass is not None:
-            mass_api.CreateMassAttr(float(link.inertial.mass))
-            mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
-            moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
-            mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
-            qw, qx, qy, qz = (float(v) for v in matrix_quat_wxyz(axes))
-            mass_api.CreatePrincipalAxesAttr(Gf.Quatf(qw, qx, qy, qz))
-        else:
-            notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
-        if link.lateral_friction is not None:
-            mat_path = path.AppendChild("physics_material")
-            UsdGeom.Scope.Define(stage, mat_path)
-            mat = UsdPhysics.MaterialAPI.Apply(stage.GetPrimAtPath(mat_path))
-            mat.CreateStaticFrictionAttr(float(link.lateral_friction))
-            mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
-            mat.CreateRestitutionAttr(float(link.restitution or 0.0))
+        _write_body(stage, path, model, name, poses[name], notes)
         if visuals:
             _write_visuals(stage, path, model, name, notes)
         _write_collisions(stage, path, pieces.get(name, []))
+    return link_paths
 
+
+def _write_body(stage, path, model: UrdfModel, name: str, pose: np.ndarray, notes: list[str]) -> None:
+    """Link ``name``'s Xform at ``pose`` (4, 4) with RigidBodyAPI, MassAPI
+    (mass kg, COM m, principal moments kg*m^2 and axes) and a physics
+    material when the URDF gives a lateral friction."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    link = model.links[name]
+    xf = UsdGeom.Xform.Define(stage, path)
+    xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, pose[:3, 3])))
+    w, x, y, z = (float(v) for v in matrix_quat_wxyz(pose[:3, :3]))
+    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(w, x, y, z))
+    prim = xf.GetPrim()
+    prim.CreateAttribute("asset2sim:name", Sdf.ValueTypeNames.String, custom=True).Set(name)
+    UsdPhysics.RigidBodyAPI.Apply(prim)
+    mass_api = UsdPhysics.MassAPI.Apply(prim)
+    if link.inertial is not None and link.inertial.mass is not None:
+        mass_api.CreateMassAttr(float(link.inertial.mass))
+        mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.inertial.com())))
+        moments, axes = principal_axes(link.inertial.inertia_in_link_axes())
+        mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
+        qw, qx, qy, qz = (float(v) for v in matrix_quat_wxyz(axes))
+        mass_api.CreatePrincipalAxesAttr(Gf.Quatf(qw, qx, qy, qz))
+    else:
+        notes.append(f"link {name!r} has no <inertial>: physics:mass not authored (computed from colliders)")
+    if link.lateral_friction is not None:
+        mat_path = path.AppendChild("physics_material")
+        UsdGeom.Scope.Define(stage, mat_path)
+        mat = UsdPhysics.MaterialAPI.Apply(stage.GetPrimAtPath(mat_path))
+        mat.CreateStaticFrictionAttr(float(link.lateral_friction))
+        mat.CreateDynamicFrictionAttr(float(link.lateral_friction))
+        mat.CreateRestitutionAttr(float(link.restitution or 0.0))
+
+
+def _write_joints(stage, root_path, model: UrdfModel, link_paths: dict[str, str], initial: dict[str, float], springs: dict,
+                  fixed: bool) -> dict[str, str]:
+    """Every URDF joint under ``/<robot>/joints`` and, for a ``fixed`` root,
+    a FixedJoint from the world to the root link; returns URDF joint name ->
+    prim path."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics = _pxr()
+    joint_names = _names([j.name for j in model.joints], Tf.MakeValidIdentifier)
     joints_scope = root_path.AppendChild("joints")
     UsdGeom.Scope.Define(stage, joints_scope)
     joint_paths: dict[str, str] = {}
@@ -271,8 +287,12 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
         fj.CreateLocalRot0Attr(Gf.Quatf(1, 0, 0, 0))
         fj.CreateLocalPos1Attr(Gf.Vec3f(0, 0, 0))
         fj.CreateLocalRot1Attr(Gf.Quatf(1, 0, 0, 0))
+    return joint_paths
 
-    target = out_dir / USD_DIR / f"{urdf_path.stem}.usd"
+
+def _save(stage, target: Path) -> Path:
+    """Write the stage as one binary layer to ``target`` atomically (exported
+    to a temporary file beside it first); returns ``target``."""
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(suffix=".usd", dir=target.parent)
     os.close(fd)
@@ -281,10 +301,7 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
         atomic.write_bytes(target, Path(tmp).read_bytes())
     finally:
         Path(tmp).unlink(missing_ok=True)
-    build = UsdBuild(path=target, links=link_paths, joints=joint_paths, fixed_root=fixed, notes=notes)
-    if check:
-        check_usd(target, out_dir)
-    return build
+    return target
 
 
 def _write_visuals(stage, link_path, model: UrdfModel, link: str, notes: list[str]) -> None:
@@ -357,7 +374,7 @@ def _write_collisions(stage, link_path, pieces: list[CollisionPiece]) -> None:
     for k, piece in enumerate(pieces):
         p = scope.AppendChild(f"piece_{k}")
         if piece.kind == "hull":
-            verts, tris = _hull_mesh(_transform(piece.points, piece.origin))
+            verts, tris = convex_hull_mesh(_transform(piece.points, piece.origin))
             g = UsdGeom.Mesh.Define(stage, p)
             _set_mesh(g, verts, tris)
             g.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
@@ -566,6 +583,11 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
         if not all(_close(float(g), float(w), scale) for g, w in zip(got.ravel(), want.ravel())):
             raise UsdExportError(f"{path}: {what} is {got.tolist()} in the USD, {want.tolist()} in {out_dir}")
 
+    def cmp_inertial(what: str, got: UsdLink, mass: float, com: np.ndarray, inertia: np.ndarray) -> None:
+        cmp(f"{what} mass (kg)", got.mass, mass, abs(mass))
+        cmp(f"{what} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
+        cmp(f"{what} inertia tensor (kg*m^2)", got.inertia, inertia, float(np.abs(inertia).max()))
+
     if not usd.articulation_root:
         raise UsdExportError(f"{path}: the default prim has no PhysicsArticulationRootAPI")
     if usd.fixed_root != fixed:
@@ -581,11 +603,7 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
             continue
         if got.mass is None or got.com is None or got.inertia is None:
             raise UsdExportError(f"{path}: link {name!r} lacks mass, COM or inertia in the USD")
-        cmp(f"link {name!r} mass (kg)", got.mass, link.inertial.mass, abs(link.inertial.mass))
-        com = link.inertial.com()
-        cmp(f"link {name!r} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
-        want = link.inertial.inertia_in_link_axes()
-        cmp(f"link {name!r} inertia tensor (kg*m^2)", got.inertia, want, float(np.abs(want).max()))
+        cmp_inertial(f"link {name!r}", got, link.inertial.mass, link.inertial.com(), link.inertial.inertia_in_link_axes())
     overlay_path = out_dir / OVERLAY_NAME
     if overlay_path.is_file():  # the overlay's own numbers, not only the URDF that carries them
         try:
@@ -596,11 +614,7 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
             got = usd.links.get(name)
             if got is None or got.mass is None or got.com is None or got.inertia is None:
                 raise UsdExportError(f"{path}: overlay link {name!r} has no mass, COM or inertia in the USD")
-            cmp(f"overlay link {name!r} mass (kg)", got.mass, lp.mass, abs(lp.mass))
-            com = np.asarray(lp.com, float)
-            cmp(f"overlay link {name!r} center of mass (m)", got.com, com, max(float(np.abs(com).max()), 1e-3))
-            want = lp.inertia.matrix()
-            cmp(f"overlay link {name!r} inertia tensor (kg*m^2)", got.inertia, want, float(np.abs(want).max()))
+            cmp_inertial(f"overlay link {name!r}", got, lp.mass, np.asarray(lp.com, float), lp.inertia.matrix())
         for name, jd in overlay.joints.items():
             got = usd.joints.get(name)
             if got is None:

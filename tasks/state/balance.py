@@ -223,11 +223,10 @@ def measure_balance(urdf: Path | str, overlay: Overlay, state: dict[str, float])
 def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Balance:
     """:func:`measure_balance` from the link frames and world collision points of one state."""
     allp = np.vstack(list(pts.values())) if pts else np.zeros((0, 3))
+    com = _com(overlay, frames)
     if not len(allp):
-        com = _com(overlay, frames)
         return Balance(com, np.zeros((0, 2)), -np.inf, 0.0)
     height = float(allp[:, 2].max() - allp[:, 2].min())
-    com = _com(overlay, frames)
     poly = support_polygon(allp, max(1e-3, 0.005 * height), com)
     h = max(float(com[2] - allp[:, 2].min()), 0.0)
     area = 0.5 * abs(float(np.dot(poly[:, 0], np.roll(poly[:, 1], -1)) - np.dot(poly[:, 1], np.roll(poly[:, 0], -1)))) if len(poly) >= 3 else 0.0

@@ -8,33 +8,20 @@ convex pieces touch, every engine's contact margin (PyBullet: about 1 mm per
 convex hull, so touching hulls report 2 mm of penetration) turns the touch
 into an interference, and the penetration recovery presses the faces together:
 friction then holds the part, and the force-limited drive of the joint sweep
-(:mod:`asset2sim.tasks.check.sweep`) cannot move it (stapler 103275: 0 % of
-the body's range; the same drive passes once the pair is not collided).
+(:mod:`asset2sim.tasks.check.sweep`) cannot move it (stapler 103275).
 
 Method, for every joint the sweep reports blocked (``reached only ...`` or
 ``closed back only ...``), at the state where it stopped (other joints at the
 sweep's start state), with the written collision pieces (the writer's convex
-pieces, link frame, m):
-
-1. For each convex piece P of a link the joint moves and each piece Q of a
-   link it does not move (parent-child pairs excepted: every engine skips
-   them, SPEC), the separating-axis test over the face normals of both hulls
-   (Gottschalk, Lin and Manocha, "OBBTree", SIGGRAPH 1996; the face-normal
-   axes of the SAT for convex polyhedra) gives the gap g (m, negative when
-   they overlap) and the axis n (from P to Q) of least overlap. P and Q are
-   in contact when g < :data:`CLEARANCE`.
-2. The contact is a **sliding** one when n is nearly perpendicular to the
-   motion of P's contact face: |n . t| < :data:`SLIDING_COS` with t the unit
-   velocity direction of the face centre (a x r for a revolute joint with
-   axis a through o, r = centre - o; a for a prismatic one). A contact along
-   the motion is a stop (the limit's business, :mod:`asset2sim.tasks.geometry.limits`).
-3. P's face towards Q is moved back along n by delta = :data:`CLEARANCE`
-   - g (an affine squeeze of P along n that keeps its far face: the piece
-   stays convex), never by more than half of P's width along n.
-
-Steps 1-3 are :func:`asset2sim.tasks.assemble.collision_geometry.clear_sliding_contact`,
-which the writer also runs at the modelled pose when it makes the pieces
-(:func:`~asset2sim.tasks.assemble.collision_geometry.running_clearance`);
+pieces, link frame, m): each piece P of a link the joint moves in contact
+with a piece Q of a link it does not move (parent-child pairs excepted: every
+engine skips them, SPEC) by a **sliding** contact (the contact normal nearly
+perpendicular to P's motion; a contact along the motion is a stop, the
+limit's business) has its face towards Q moved back to the running
+clearance: :func:`asset2sim.tasks.assemble.sliding_clearance.clear_sliding_contact`
+(separating-axis test, sliding test, squeeze), which the writer also runs at
+the modelled pose when it makes the pieces
+(:func:`~asset2sim.tasks.assemble.sliding_clearance.running_clearance`);
 this repair finds the contacts that appear at other states.
 
 The pieces of the changed links are returned (link frame, m, every piece of
@@ -51,7 +38,7 @@ from scipy.spatial import QhullError
 
 from asset2sim import atomic, file_names, mesh_io
 from asset2sim.schemas.asset import GeometryRef
-from asset2sim.tasks.assemble.collision_geometry import (
+from asset2sim.tasks.assemble.sliding_clearance import (
     RUNNING_CLEARANCE,
     clear_sliding_contact,
     joint_velocity,
@@ -60,11 +47,7 @@ from asset2sim.tasks.assemble.collision_geometry import (
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
 
-#: Running clearance (m), the sliding test and the squeeze are the writer's
-#: (:func:`asset2sim.tasks.assemble.collision_geometry.clear_sliding_contact`),
-#: which gives sliding contacts at the modelled pose their clearance when
-#: the pieces are made; this module repairs the contacts a blocked sweep finds
-#: at other states.
+#: Running clearance (m): the writer's (:func:`asset2sim.tasks.assemble.sliding_clearance.clear_sliding_contact`).
 CLEARANCE = RUNNING_CLEARANCE
 __all__ = ["CLEARANCE", "ClearanceRepair", "clearance_for_blocked", "link_pieces", "sat_gap", "touching_joints",
            "write_overrides", "write_piece_overrides"]

@@ -175,11 +175,7 @@ def overlap_depths(world, shape_a: int, shape_b: int) -> list[float]:
     """Penetration depths (m, > 0) of the closest points of two shapes of a
     :class:`asset2sim.engines.base.ShapeWorld`, net of the world's contact
     margins (``world.contact_margin``): touching surfaces are not an
-    overlap. Counted with the margins, each touching pair of pieces added
-    2 mm (PyBullet) to a sum, whatever the object's size: a decomposition of
-    a small object into more pieces looked worse than its single hull
-    (stapler 103275 at 0.3 of its size kept one hull of its arm, 1.35 mm
-    into the base, and its joints jammed)."""
+    overlap (with them, a small object's decomposition looked worse than its hull)."""
     m = float(world.contact_margin)
     return [-(x + m) for x in world.distances(shape_a, shape_b, 0.0) if x + m < 0]
 
@@ -219,15 +215,18 @@ class _PieceWorld:
 
     def replace(self, key: tuple[str, int], pieces: list[np.ndarray]) -> list[int]:
         """Swap the bodies of ``key`` for ``pieces`` (vertex arrays); returns the old ids."""
-        old = self.bodies[key]
-        for b in old:
-            self.world.set_pose(b, [1e3, 1e3, 1e3], [0, 0, 0, 1])
+        old = self._park(key)
         self.bodies[key] = [self._body(v, self.refs[key]) for v in pieces]
         return old
 
-    def restore(self, key: tuple[str, int], old: list[int]) -> None:
+    def _park(self, key: tuple[str, int]) -> list[int]:
+        """Move the bodies of ``key`` 1 km away; returns their ids."""
         for b in self.bodies[key]:
             self.world.set_pose(b, [1e3, 1e3, 1e3], [0, 0, 0, 1])
+        return self.bodies[key]
+
+    def restore(self, key: tuple[str, int], old: list[int]) -> None:
+        self._park(key)
         Rw, tw = self.poses[key]
         for b in old:
             self.world.set_pose(b, tw, self._rot.from_matrix(Rw).as_quat())
@@ -296,66 +295,89 @@ def improve_collisions(
     cache = cache or MeshCache()
     links = sorted({ln for pair in pairs for ln in pair})
     world = _PieceWorld(session, asset, links, scale, cache)
-    notes: list[str] = []
-    changed: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]] | None] = {}
-    tried: set[tuple[str, int]] = set()
-    decompositions = 0
     try:
-        area = {}
+        rep = _Repair(world, cache, links, max_decompositions)
+        for _pass in range(2):  # a second pass: a change on one side can make another one useful
+            tried: set[tuple[str, int]] = set()
+            for a, b in pairs:
+                rep.improve_pair(a, b, tried)
+    finally:
+        world.close()
+    return _write_pieces(asset, rep.changed, out_dir, folder), rep.notes
+
+
+class _Repair:
+    """The greedy repair's state: the kept changes (``changed``: (link,
+    collision index) -> convex pieces, None when removed), ``notes`` and the
+    CoACD calls made."""
+
+    def __init__(self, world: _PieceWorld, cache, links: list[str], max_decompositions: int):
+        self.world, self.cache, self.max_decompositions = world, cache, max_decompositions
+        self.area = {}  # (link, k) -> surface area of the piece (input units, mesh scale applied)
         for (ln, k), g in world.refs.items():
             v, f, _ = cache.get(g.path)
             tri = np.asarray(v, float)[np.asarray(f, int)] * np.asarray(g.scale, float)
-            area[(ln, k)] = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
-        link_area = {ln: sum(a for (l2, _), a in area.items() if l2 == ln) for ln in links}
-        passes = [pairs, pairs]  # a second pass: a change on one side can make another one useful
-        for n_pass, (a, b) in ((n, pr) for n, prs in enumerate(passes) for pr in prs):
-            if n_pass != getattr(world, "_pass", -1):
-                world._pass = n_pass
-                tried.clear()
-            before = world.penetration(a, b)
-            if before <= IMPROVEMENT_EPS:
-                continue  # this pair no longer overlaps: spend no budget on it
-            cands = []
-            for ln, other in ((a, b), (b, a)):
-                for key in [k for k in world.refs if k[0] == ln]:
-                    depth = world.overlapping(key, other)
-                    if depth > 0:
-                        cands.append((depth, key, other))
-            cands.sort(key=lambda c: -c[0])
-            for _, key, other in cands:
-                if key in changed or key in tried or before <= IMPROVEMENT_EPS:
-                    continue
-                tried.add(key)
-                ln = key[0]
-                g = world.refs[key]
-                n_link = sum(1 for k2 in world.refs if k2[0] == ln and changed.get(k2, 0) is not None)
-                if area[key] < PIN_AREA_FRACTION * max(link_area[ln], 1e-12) and n_link > 1:
-                    old = world.replace(key, [])
-                    after = world.penetration(a, b)
-                    if after < before - IMPROVEMENT_EPS:
-                        changed[key] = None
-                        notes.append(f"{ln}: collision of {g.filename} (hinge hardware, {100 * area[key] / link_area[ln]:.1f} % of the link's surface) removed: it overlapped {other} ({before * 1000:.3g} -> {after * 1000:.3g} mm)")
-                        before = after
-                    else:
-                        world.restore(key, old)
-                    continue
-                if convexity_ratio(g.path, cache) < 1.05:
-                    continue
-                if decompositions >= max_decompositions:
-                    notes.append(f"decomposition budget of {max_decompositions} CoACD calls spent; {g.filename} of {ln} kept as its hull")
-                    continue
-                decompositions += 1
-                pieces = decompose_mesh(g.path)
-                old = world.replace(key, [pv for pv, _ in pieces])
-                after = world.penetration(a, b)
-                if after < before - IMPROVEMENT_EPS:
-                    changed[key] = pieces
-                    notes.append(f"{ln}: {g.filename} replaced by {len(pieces)} convex pieces (CoACD): overlap with {other} {before * 1000:.3g} -> {after * 1000:.3g} mm")
+            self.area[(ln, k)] = float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+        self.link_area = {ln: sum(a for (l2, _), a in self.area.items() if l2 == ln) for ln in links}
+        self.changed: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]] | None] = {}
+        self.notes: list[str] = []
+        self.decompositions = 0
+
+    def improve_pair(self, a: str, b: str, tried: set[tuple[str, int]]) -> None:
+        """Each piece of ``a`` or ``b`` not yet ``tried`` that overlaps the
+        other link, deepest first: a small one loses its collision, a concave
+        one is decomposed; each change kept only if it lowers the overlap."""
+        world = self.world
+        before = world.penetration(a, b)
+        if before <= IMPROVEMENT_EPS:
+            return  # this pair no longer overlaps: spend no budget on it
+        cands = []
+        for ln, other in ((a, b), (b, a)):
+            for key in [k for k in world.refs if k[0] == ln]:
+                depth = world.overlapping(key, other)
+                if depth > 0:
+                    cands.append((depth, key, other))
+        cands.sort(key=lambda c: -c[0])
+        for _, key, other in cands:
+            if key in self.changed or key in tried or before <= IMPROVEMENT_EPS:
+                continue
+            tried.add(key)
+            ln, g, area = key[0], world.refs[key], self.area[key]
+            n_link = sum(1 for k2 in world.refs if k2[0] == ln and self.changed.get(k2, 0) is not None)
+            if area < PIN_AREA_FRACTION * max(self.link_area[ln], 1e-12) and n_link > 1:
+                after = self._try(key, [], None, a, b, before)
+                if after is not None:
+                    self.notes.append(f"{ln}: collision of {g.filename} (hinge hardware, {100 * area / self.link_area[ln]:.1f} % of the link's surface) removed: it overlapped {other} ({before * 1000:.3g} -> {after * 1000:.3g} mm)")
                     before = after
-                else:
-                    world.restore(key, old)
-    finally:
-        world.close()
+                continue
+            if convexity_ratio(g.path, self.cache) < 1.05:
+                continue
+            if self.decompositions >= self.max_decompositions:
+                self.notes.append(f"decomposition budget of {self.max_decompositions} CoACD calls spent; {g.filename} of {ln} kept as its hull")
+                continue
+            self.decompositions += 1
+            pieces = decompose_mesh(g.path)
+            after = self._try(key, [pv for pv, _ in pieces], pieces, a, b, before)
+            if after is not None:
+                self.notes.append(f"{ln}: {g.filename} replaced by {len(pieces)} convex pieces (CoACD): overlap with {other} {before * 1000:.3g} -> {after * 1000:.3g} mm")
+                before = after
+
+    def _try(self, key: tuple[str, int], bodies: list[np.ndarray], change, a: str, b: str, before: float) -> float | None:
+        """The penetration (m) of ``a`` and ``b`` with the bodies of ``key``
+        swapped for ``bodies`` (vertex arrays), recorded as ``change`` when it
+        is lower than ``before`` by :data:`IMPROVEMENT_EPS`; else None, the old bodies restored."""
+        old = self.world.replace(key, bodies)
+        after = self.world.penetration(a, b)
+        if after < before - IMPROVEMENT_EPS:
+            self.changed[key] = change
+            return after
+        self.world.restore(key, old)
+        return None
+
+
+def _write_pieces(asset: AssetDescription, changed: dict, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
+    """Write the kept decompositions as OBJ files ``out_dir/folder/<link>_<k>_<i>.obj``;
+    returns link -> its collision pieces (a removed piece left out, the others as they were)."""
     out: dict[str, list[CollisionPiece]] = {}
     for ln in sorted({k[0] for k in changed}):
         pieces_out: list[CollisionPiece] = []
@@ -370,4 +392,4 @@ def improve_collisions(
             elif g.kind == "mesh" and g.filename:
                 pieces_out.append(CollisionPiece(filename=g.filename, source=g))
         out[ln] = pieces_out
-    return out, notes
+    return out

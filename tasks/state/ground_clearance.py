@@ -8,10 +8,8 @@ does. Real ones clear the floor (a refrigerator stands on levelling feet
 under a toe grille, a countertop microwave on rubber feet, a cabinet on a
 plinth or feet), so the door swings and the drawer slides without touching
 the floor. In a simulator the flush part carries part of the object's weight
-(refrigerator 11178: its lower door carried 266 N of the 700 N weight) and,
-when it is opened, drags on the ground with the ground's friction: the body
-is pulled along and rocks (the door probe failed with the refrigerator
-sliding 5 mm at a 59 N push; the generated microwave the same at 11 N).
+and, when it is opened, drags on the ground with the ground's friction: the
+body is pulled along and rocks (refrigerator 11178, the generated microwave).
 
 Method (the written URDF, at the refined state, root resting pose applied,
 z up; collision pieces as the writer wrote them):
@@ -22,17 +20,12 @@ z up; collision pieces as the writer wrote them):
    on parts that move (wheels, legs, a suitcase on its casters) is left as
    it is. So is a part of an object lower than :data:`THIN_OBJECT`
    clearances whose own floor contact spans at least :data:`SUPPORT_AREA`
-   of the body's (a half of a pair of pliers lying flat: the object lies
-   on the floor as a whole, that part is half of what it lies on, not a
-   door over a floor; raised, a 8.9 mm pair of pliers lay on one half and
-   tilted 0.052 rad when the other was opened); a smaller part of such an
-   object (a lighter's lid, the lighter lying on its side: 0.41 of the
-   body's contact) is raised as a door is.
+   of the body's (a half of a pair of pliers lying flat: that part is half
+   of what the object lies on, not a door over a floor); a smaller part of
+   such an object (a lighter's lid) is raised as a door is.
 2. A piece P of a link moved by joint j *drags* on the ground when its
-   lowest vertex is less than :data:`GROUND_CLEARANCE` above z_g (an object
-   whose bottom is not flat rocks onto a door that ends a few mm above its
-   lowest point: refrigerator 11178, 4.4 mm) and j moves it along
-   the ground: a revolute (not continuous) joint whose axis is within
+   lowest vertex is less than :data:`GROUND_CLEARANCE` above z_g and j
+   moves it along the ground: a revolute (not continuous) joint whose axis is within
    :data:`SLIDE_ANGLE` of vertical (a side-hinged door) or a prismatic joint
    whose axis is within :data:`SLIDE_ANGLE` of horizontal (a drawer). A
    horizontal hinge lifts its part off the floor or rolls it (a wheel), it
@@ -60,20 +53,17 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
-from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel, read_urdf
 
 __all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
-           "floor_stops", "ground_clearance", "write_overrides"]
+           "floor_stops", "ground_clearance"]
 
 #: Floor clearance (m) given to a moving part that rests on or near the
 #: ground: the levelling feet of refrigerators and the rubber feet of
 #: countertop appliances lift their doors about 1 cm and more off the floor
 #: (manufacturers' installation instructions and dimension drawings show the
 #: door bottom above the toe grille / feet). 5 mm was not enough: refrigerator
-#: 11178 stands on three corners of its uneven bottom and rocks 0.5 deg onto a
-#: door that ends 4.4 mm above its lowest point (0.9 m away), and the fully
-#: open door then dragged on the floor when closed.
+#: 11178 rocks 0.5 deg on its uneven bottom onto a door 4.4 mm up, which dragged.
 GROUND_CLEARANCE = 0.01
 #: Distance (m) above the ground within which a vertex counts as resting on it.
 CONTACT_BAND = 0.0015
@@ -149,21 +139,16 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     Raises:
         OSError: a collision file cannot be read.
     """
-    root = Path(urdf).parent
+    scene = _FloorScene(model, urdf)
     poses = model.link_poses(state)
-    world: dict[str, list[np.ndarray]] = {}
-    local: dict[str, list[np.ndarray]] = {}
-    for ln in model.links:
-        local[ln] = link_pieces(model, root, ln)
-        T = poses[ln]
-        world[ln] = [P @ T[:3, :3].T + T[:3, 3] for P in local[ln]]
-    lows = {ln: min(float(W[:, 2].min()) for W in ws) for ln, ws in world.items() if ws}
+    world = scene.posed(poses)
+    lows = {ln: min(float(W[:, 2].min()) for W in ws) for ln, ws in world.items()}
     rep = GroundClearance()
     if not lows:
         return rep
     z_g = min(lows.values())
     top = max(float(W[:, 2].max()) for ws in world.values() for W in ws)
-    mover = _moving_joint(model)
+    mover = scene.mover
     body_low = [lows[ln] for ln in lows if mover.get(ln) is None]
     if not body_low or min(body_low) > z_g + CONTACT_BAND:
         return rep  # the object stands on parts that move (wheels, legs): their contact is the support
@@ -171,7 +156,7 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     body_area = _floor_area([W for ln, ws in world.items() if mover.get(ln) is None for W in ws], z_g) if thin else 0.0
     for ln, ws in world.items():
         j = mover.get(ln)
-        if j is None or not ws:
+        if j is None:
             continue
         if thin and _floor_area(ws, z_g) >= SUPPORT_AREA * body_area:
             continue  # half of what a flat-lying object lies on: part of its support
@@ -179,7 +164,7 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
             continue
         R = poses[ln][:3, :3]
         n = R.T @ np.array([0.0, 0.0, -1.0])  # the ground side, link frame
-        own = [P.copy() for P in local[ln]]
+        own = [P.copy() for P in scene.local[ln]]
         changed = False
         for i, W in enumerate(ws):
             zmin = float(W[:, 2].min())
@@ -199,19 +184,6 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
         if changed:
             rep.pieces[ln] = own
     return rep
-
-
-def write_overrides(rep: GroundClearance, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
-    """Write the pieces as OBJ files ``out_dir/folder/<link>_ground<i>.obj``
-    (:func:`asset2sim.tasks.state.clearance.write_piece_overrides`) and return
-    the writer's collision overrides (link -> pieces; every mesh collision of
-    the link is replaced).
-
-    Raises:
-        ValueError: a piece spans no volume, naming its link.
-        OSError: a file cannot be written.
-    """
-    return write_piece_overrides(rep.pieces, scale, out_dir, folder, "ground")
 
 
 def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: Path, urdf: Path, state: dict[str, float],
@@ -240,7 +212,7 @@ def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: P
     rep = ground_clearance(read_urdf(urdf), urdf, new_state)
     new = overrides
     if rep.pieces:
-        new = {**overrides, **write_overrides(rep, overlay.scale, out_dir, write.collision_folder(asset))}
+        new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, out_dir, write.collision_folder(asset), "ground")}
     if rep.pieces or state_notes:
         write.write_output(asset, overlay, out_dir, new_state, copy=False, collision_overrides=new, root_rotation=root_rotation)
     return new_state, new, state_notes, rep.notes
@@ -265,13 +237,16 @@ class _FloorScene:
         root = Path(urdf).parent
         self.model = model
         self.local = {ln: link_pieces(model, root, ln) for ln in model.links}
-        mover = _moving_joint(model)
-        self.body = [ln for ln in model.links if mover.get(ln) is None]
+        self.mover = _moving_joint(model)
+        self.body = [ln for ln in model.links if self.mover.get(ln) is None]
+
+    def posed(self, poses: dict[str, np.ndarray]) -> dict[str, list[np.ndarray]]:
+        """link -> its pieces (k, 3) in the root frame (m) at the link ``poses`` (4, 4); links without pieces left out."""
+        return {ln: [P @ poses[ln][:3, :3].T + poses[ln][:3, 3] for P in ps] for ln, ps in self.local.items() if ps}
 
     def world_at(self, q: dict[str, float]) -> dict[str, list[np.ndarray]]:
-        """link -> its pieces (k, 3) in the root frame (m) at joint positions ``q``."""
-        poses = self.model.link_poses(q)
-        return {ln: [P @ poses[ln][:3, :3].T + poses[ln][:3, 3] for P in ps] for ln, ps in self.local.items() if ps}
+        """:meth:`posed` at joint positions ``q``."""
+        return self.posed(self.model.link_poses(q))
 
     def subtree(self, joint) -> list[str]:
         """The links ``joint`` (a URDF joint) moves: its child and every link below."""
@@ -299,9 +274,7 @@ def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, flo
     A pedal pressed "fully open" or a lid folded down past the body's bottom
     reaches below the floor the body stands on: placed on the ground, the
     object then stands on that part and its weight pushes the part back
-    (trash can 102181: the fully pressed foot pad 1.6 mm below the body,
-    pushed back 0.03-0.05 rad whatever its friction). On a real floor the part
-    stops at the floor. For each movable joint j whose subtree's lowest
+    (trash can 102181's foot pad). On a real floor the part stops at the floor. For each movable joint j whose subtree's lowest
     collision vertex is below the body's lowest (links no movable joint
     moves) plus :data:`FLOOR_GAP`, while at its closed end the subtree is
     above it, q_j is moved towards the closed end (bisection on the opening,
@@ -328,14 +301,8 @@ def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, flo
         q_closed = closed[j.name][0]
         if scene.lowest({**out, j.name: q_closed}, sub) < floor:
             continue  # the part reaches the floor even closed: it is part of the support
-        lo, hi = 0.0, 1.0  # fraction of the way from q_closed to the state's q
-        q_state = out[j.name]
-        for _ in range(30):
-            mid = 0.5 * (lo + hi)
-            if scene.lowest({**out, j.name: q_closed + mid * (q_state - q_closed)}, sub) >= floor:
-                lo = mid
-            else:
-                hi = mid
+        q_state = out[j.name]  # bisected: the fraction of the way from q_closed to the state's q
+        lo = _last_clear(lambda f: scene.lowest({**out, j.name: q_closed + f * (q_state - q_closed)}, sub) >= floor, 0.0, 1.0)
         q_new = q_closed + lo * (q_state - q_closed)
         notes.append(f"{j.name}: opening limited by the floor, {q_state:.4g} -> {q_new:.4g} "
                      f"({'m' if j.type == 'prismatic' else 'rad'}): at the requested state {j.child} reached "
@@ -398,10 +365,14 @@ def floor_stops(model: UrdfModel, urdf: Path | str, state: dict[str, float],
             if clear(o):
                 good = o
                 continue
-            bad = o
-            for _ in range(30):
-                mid = 0.5 * (good + bad)
-                good, bad = (mid, bad) if clear(mid) else (good, mid)
-            out[name] = float(good)
+            out[name] = float(_last_clear(clear, good, o))
             break
     return out
+
+
+def _last_clear(clear, good: float, bad: float) -> float:
+    """``good`` after 30 halvings of [good, bad], each keeping ``clear(good)`` true."""
+    for _ in range(30):
+        mid = 0.5 * (good + bad)
+        good, bad = (mid, bad) if clear(mid) else (good, mid)
+    return good

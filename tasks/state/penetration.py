@@ -72,8 +72,6 @@ class StatePenetration:
         self._penetrating: set[int] = set()
         self._last: np.ndarray | None = None
         self._screen = getattr(session, "engine", None) in CONSERVATIVE_AABB_ENGINES
-        self.queries = 0
-        """distance queries made so far (pairs actually sent to the engine)"""
 
     def __call__(self, q: dict[str, float]) -> tuple[float, list[ContactPair]]:
         """Phi (m) and the penetrating pairs, deepest first, at the session's
@@ -98,11 +96,7 @@ class StatePenetration:
             else:
                 touch = np.ones(len(stale), bool)
             for p, t in zip(stale.tolist(), touch.tolist()):
-                if t:
-                    self.queries += 1
-                    d = self.session.link_distances(*self.pairs[p], 0.0)
-                else:
-                    d = []
+                d = self.session.link_distances(*self.pairs[p], 0.0) if t else []
                 self._points[p] = d
                 if any(x < 0.0 for x in d):
                     self._penetrating.add(p)

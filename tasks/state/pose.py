@@ -41,13 +41,8 @@ def resting_rotation(
     box = links_aabb(session, names, hull_points)
     if box is None:
         return np.eye(3), "no geometry: pose unchanged"
-    lo, hi = box
-    ext = hi - lo
-    center = 0.5 * (lo + hi)
-    up_hint = np.zeros(3)
-    mov = links_aabb(session, moving_links, hull_points) if moving_links else None
-    if mov is not None:
-        up_hint = 0.5 * (mov[0] + mov[1]) - center
+    ext = box[1] - box[0]
+    up_hint = _up_hint(session, moving_links, hull_points, box)
     k = int(np.argmin(ext))
     if k == 2:
         if up_hint[2] >= 0:
@@ -56,16 +51,17 @@ def resting_rotation(
         return R, "turned upside down so the moving parts face up"
     # rotate about the horizontal axis perpendicular to axis k so that axis k maps to +z or -z
     other = 1 - k  # the remaining horizontal axis (k in {0, 1})
-    best = None
-    for angle in (np.pi / 2, -np.pi / 2):
-        R = axis_rotation(other, angle)
-        z = R @ up_hint
-        score = z[2]
-        if best is None or score > best[0]:
-            best = (score, R, angle)
-    _, R, angle = best
-    axis_name = "xyz"[other]
-    return R, f"laid on its largest face: rotated {np.degrees(angle):+.0f} deg about the root {axis_name} axis (smallest extent {ext[k]:.3g} along {'xyz'[k]} -> z, moving parts up)"
+    angle = max((np.pi / 2, -np.pi / 2), key=lambda a: (axis_rotation(other, a) @ up_hint)[2])  # the first on a tie
+    return axis_rotation(other, angle), (f"laid on its largest face: rotated {np.degrees(angle):+.0f} deg about the root {'xyz'[other]} "
+                                         f"axis (smallest extent {ext[k]:.3g} along {'xyz'[k]} -> z, moving parts up)")
+
+
+def _up_hint(session, moving_links: list[str], hull_points: dict[str, np.ndarray], box) -> np.ndarray:
+    """From the centre of the whole object's box (lo, hi) to the centre of the moving links' box (3,), m; zero without either."""
+    mov = links_aabb(session, moving_links, hull_points) if moving_links else None
+    if mov is None or box is None:
+        return np.zeros(3)
+    return 0.5 * (mov[0] + mov[1]) - 0.5 * (box[0] + box[1])
 
 
 #: The six axis-aligned resting orientations tried by :func:`most_stable_rotation`.
@@ -155,11 +151,7 @@ def most_stable_rotation(
     Returns (rotation, note) or (None, reason) when no candidate qualifies or
     the best is the modelled orientation."""
 
-    mov = links_aabb(session, moving_links, hull_points) if moving_links else None
-    allbox = links_aabb(session, [ln.name for ln in asset.links], hull_points)
-    up = np.zeros(3)
-    if mov is not None and allbox is not None:
-        up = 0.5 * (mov[0] + mov[1]) - 0.5 * (allbox[0] + allbox[1])
+    up = _up_hint(session, moving_links, hull_points, links_aabb(session, [ln.name for ln in asset.links], hull_points))
     margin0, size = static_margin(session, asset, links, state, scale, hull_points, np.eye(3))
     if size <= 0:
         return None, "no geometry"

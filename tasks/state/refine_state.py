@@ -142,135 +142,165 @@ def refine_initial_state(
     box = allowed_intervals({n: closed[n] for n in names}, fractions)
     q_req = {n: box[n].clip(requested.get(n, closed[n].q_closed)) for n in names}
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
-    evals = 0
-
-    if hasattr(session, "self_penetration_fresh"):
-        # the same Phi as the engine's fresh query, re-queried only for moved pairs
-        fresh = StatePenetration(session, asset, names)
-        penetration = lambda q: fresh(q)  # noqa: E731
-    else:
-        penetration = lambda q: session.self_penetration()  # noqa: E731
-
-    def objective(q: dict[str, float]) -> tuple[float, float]:
-        nonlocal evals
-        evals += 1
-        session.set_joint_positions(q)
-        phi, _ = penetration(q)
-        reg = sum(((q[n] - q_req[n]) / scale[n]) ** 2 for n in names)
-        return phi + lam * reg, phi
-
-    best_q = dict(q_req)
-    best_f, best_phi = objective(best_q)
-    phi_req = best_phi
-    method = ["requested state"]
-    session.set_joint_positions(best_q)
-    _, pairs0 = penetration(best_q)
+    s = _Search(session, asset, names, box, q_req, scale, lam, tolerance, max_evaluations)
+    phi_req = s.best_phi
     worst = [
         {"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
-        for c in pairs0[:5]
+        for c in s.pairs_at_best()[:5]
     ]
-
-    def focus_joints() -> list[str]:
-        session.set_joint_positions(best_q)
-        _, pairs = penetration(best_q)
-        out: list[str] = []
-        for c in pairs[:3]:
-            for j in path_joints(asset, c.link_a, c.link_b):
-                if j in box and box[j].width > 0 and j not in out:
-                    out.append(j)
-        return out
-
-    def budget() -> bool:
-        return evals < max_evaluations and best_phi > tolerance
-
-    # 1. focus joints: line searches, accept only improvements
-    for _round in range(6):
-        if not budget():
-            break
-        focus = focus_joints()
-        if not focus:
-            break
-        improved = False
-        for j in focus:
-            if not budget():
-                break
-            for q in np.linspace(box[j].lo, box[j].hi, 25):
-                cand = {**best_q, j: float(q)}
-                f, phi = objective(cand)
-                if f < best_f - 1e-12:
-                    best_q, best_f, best_phi, improved = cand, f, phi, True
-        if improved:
-            method.append("focus-joint line search")
-        else:
-            break
-    # 2. perturbations of the focus joints (all movable joints when none)
-    if budget():
-        focus = focus_joints() or [n for n in names if box[n].width > 0]
-        n_pert = min(400, max_evaluations - evals)
-        improved = False
-        for _ in range(n_pert):
-            if not budget():
-                break
-            cand = dict(best_q)
-            for j in focus:
-                sigma = 0.25 * box[j].width
-                cand[j] = box[j].clip(best_q[j] + rng.normal(0.0, sigma))
-            f, phi = objective(cand)
-            if f < best_f - 1e-12:
-                best_q, best_f, best_phi, improved = cand, f, phi, True
-        if improved:
-            method.append("random perturbations")
-    # 3. local pattern search around the best state
-    if budget():
-        movable = [n for n in names if box[n].width > 0]
-        steps = {n: 0.25 * box[n].width for n in movable}
-        improved_any = False
-        while budget() and movable and max(steps.values()) > 1e-4 * max(box[n].width for n in movable):
-            improved = False
-            for j in movable:
-                for sgn in (1.0, -1.0):
-                    if not budget():
-                        break
-                    cand = {**best_q, j: box[j].clip(best_q[j] + sgn * steps[j])}
-                    f, phi = objective(cand)
-                    if f < best_f - 1e-12:
-                        best_q, best_f, best_phi, improved = cand, f, phi, True
-            if improved:
-                improved_any = True
-            else:
-                steps = {n: v * 0.5 for n, v in steps.items()}
-        if improved_any:
-            method.append("local pattern search")
-    # 4. when the search stalls: ask the proposer (a model), accept only improvements
-    model_queries = 0
-    if proposer is not None and best_phi > tolerance:
-        session.set_joint_positions(best_q)
-        _, pairs = penetration(best_q)
-        worst_now = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth} for c in pairs[:5]]
-        try:
-            proposals, model_queries = proposer(dict(best_q), worst_now, {n: (box[n].lo, box[n].hi) for n in names})
-        except Exception as exc:  # a failed model call must not lose the search result
-            proposals, method = [], method + [f"model proposals failed: {type(exc).__name__}"]
-        accepted = 0
-        for prop in proposals:
-            cand = dict(best_q)
-            for n, v in prop.items():
-                if n in box:
-                    cand[n] = box[n].clip(float(v))
-            f, phi = objective(cand)
-            if f < best_f - 1e-12:
-                best_q, best_f, best_phi = cand, f, phi
-                accepted += 1
-        method.append(f"model proposals ({len(proposals)} asked, {accepted} accepted)")
-    session.set_joint_positions(best_q)
+    _line_search_focus_joints(s)
+    _perturb_focus_joints(s, rng)
+    _pattern_search(s)
+    model_queries = _ask_proposer(s, proposer) if proposer is not None and s.best_phi > tolerance else 0
+    session.set_joint_positions(s.best_q)
     return StateRefinement(
         requested={k: float(v) for k, v in q_req.items()},
-        result={k: float(v) for k, v in best_q.items()},
+        result={k: float(v) for k, v in s.best_q.items()},
         phi_requested=float(phi_req),
-        phi_result=float(best_phi),
-        evaluations=evals,
-        method=" -> ".join(method),
+        phi_result=float(s.best_phi),
+        evaluations=s.evals,
+        method=" -> ".join(s.method),
         worst_pairs=worst,
         seconds=time.perf_counter() - t0,
         model_queries=model_queries,
     )
+
+
+class _Search:
+    """The search's state: the best candidate so far (``best_q``, objective
+    ``best_f`` in m, ``best_phi`` in m), the evaluations made and the phases
+    that improved (``method``). Starts by evaluating ``q_req``."""
+
+    def __init__(self, session, asset: AssetDescription, names: list[str], box: dict[str, Interval],
+                 q_req: dict[str, float], scale: dict[str, float], lam: float, tolerance: float, max_evaluations: int):
+        self.session, self.names, self.box, self.q_req, self.scale = session, names, box, q_req, scale
+        self.lam, self.tolerance, self.max_evaluations = lam, tolerance, max_evaluations
+        self.asset = asset
+        self.evals = 0
+        if hasattr(session, "self_penetration_fresh"):
+            # the same Phi as the engine's fresh query, re-queried only for moved pairs
+            self.penetration = StatePenetration(session, asset, names)
+        else:
+            self.penetration = lambda q: session.self_penetration()  # noqa: E731
+        self.best_q = dict(q_req)
+        self.best_f, self.best_phi = self.objective(self.best_q)
+        self.method = ["requested state"]
+
+    def objective(self, q: dict[str, float]) -> tuple[float, float]:
+        """(objective, Phi), both m, at ``q`` (counts one evaluation)."""
+        self.evals += 1
+        self.session.set_joint_positions(q)
+        phi, _ = self.penetration(q)
+        reg = sum(((q[n] - self.q_req[n]) / self.scale[n]) ** 2 for n in self.names)
+        return phi + self.lam * reg, phi
+
+    def accept(self, cand: dict[str, float]) -> bool:
+        """Evaluate ``cand``; True (and it becomes the best) when it lowers the objective."""
+        f, phi = self.objective(cand)
+        if f < self.best_f - 1e-12:
+            self.best_q, self.best_f, self.best_phi = cand, f, phi
+            return True
+        return False
+
+    def budget(self) -> bool:
+        return self.evals < self.max_evaluations and self.best_phi > self.tolerance
+
+    def pairs_at_best(self) -> list:
+        """Penetrating link pairs at the best state, deepest first."""
+        self.session.set_joint_positions(self.best_q)
+        return self.penetration(self.best_q)[1]
+
+    def focus_joints(self) -> list[str]:
+        """Movable joints on the paths between the links of the 3 worst pairs at the best state."""
+        out: list[str] = []
+        for c in self.pairs_at_best()[:3]:
+            for j in path_joints(self.asset, c.link_a, c.link_b):
+                if j in self.box and self.box[j].width > 0 and j not in out:
+                    out.append(j)
+        return out
+
+    def movable(self) -> list[str]:
+        return [n for n in self.names if self.box[n].width > 0]
+
+
+def _line_search_focus_joints(s: _Search) -> None:
+    """Phase 1: up to 6 rounds of 25-point line searches of each focus joint over its interval."""
+    for _round in range(6):
+        if not s.budget():
+            break
+        focus = s.focus_joints()
+        if not focus:
+            break
+        improved = False
+        for j in focus:
+            if not s.budget():
+                break
+            for q in np.linspace(s.box[j].lo, s.box[j].hi, 25):
+                improved |= s.accept({**s.best_q, j: float(q)})
+        if improved:
+            s.method.append("focus-joint line search")
+        else:
+            break
+
+
+def _perturb_focus_joints(s: _Search, rng: np.random.Generator) -> None:
+    """Phase 2: up to 400 Gaussian perturbations (sigma a quarter of the
+    interval) of the focus joints (all movable joints when none)."""
+    if not s.budget():
+        return
+    focus = s.focus_joints() or s.movable()
+    improved = False
+    for _ in range(min(400, s.max_evaluations - s.evals)):
+        if not s.budget():
+            break
+        cand = dict(s.best_q)
+        for j in focus:
+            sigma = 0.25 * s.box[j].width
+            cand[j] = s.box[j].clip(s.best_q[j] + rng.normal(0.0, sigma))
+        improved |= s.accept(cand)
+    if improved:
+        s.method.append("random perturbations")
+
+
+def _pattern_search(s: _Search) -> None:
+    """Phase 3: coordinate pattern search around the best state, steps from a
+    quarter of each interval halved while nothing improves."""
+    if not s.budget():
+        return
+    movable = s.movable()
+    steps = {n: 0.25 * s.box[n].width for n in movable}
+    improved_any = False
+    while s.budget() and movable and max(steps.values()) > 1e-4 * max(s.box[n].width for n in movable):
+        improved = False
+        for j in movable:
+            for sgn in (1.0, -1.0):
+                if not s.budget():
+                    break
+                improved |= s.accept({**s.best_q, j: s.box[j].clip(s.best_q[j] + sgn * steps[j])})
+        if improved:
+            improved_any = True
+        else:
+            steps = {n: v * 0.5 for n, v in steps.items()}
+    if improved_any:
+        s.method.append("local pattern search")
+
+
+def _ask_proposer(s: _Search, proposer) -> int:
+    """Phase 4, when the search stalls: the proposer's states (clipped to the
+    intervals), each kept only if it improves; returns its model queries."""
+    worst_now = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth} for c in s.pairs_at_best()[:5]]
+    model_queries = 0
+    try:
+        proposals, model_queries = proposer(dict(s.best_q), worst_now, {n: (s.box[n].lo, s.box[n].hi) for n in s.names})
+    except Exception as exc:  # a failed model call must not lose the search result
+        proposals = []
+        s.method.append(f"model proposals failed: {type(exc).__name__}")
+    accepted = 0
+    for prop in proposals:
+        cand = dict(s.best_q)
+        for n, v in prop.items():
+            if n in s.box:
+                cand[n] = s.box[n].clip(float(v))
+        accepted += s.accept(cand)
+    s.method.append(f"model proposals ({len(proposals)} asked, {accepted} accepted)")
+    return model_queries

@@ -34,6 +34,7 @@ opening within the bands) is measured by :mod:`asset2sim.tasks.state.balance`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.state.balance import _com, _link_world, _signed_margin, measure_balance
+from asset2sim.tasks.state.balance import Balance, _com, _link_world, _signed_margin, measure_balance
 from asset2sim.tasks.synthesize import physics
 
 __all__ = ["PART_MASS_FRACTION", "design_for_stability", "envelope_masses"]
@@ -171,6 +172,38 @@ def design_for_stability(
     bal = measure_balance(urdf, overlay, state)
     if bal.stable or len(bal.support) < 3:
         return overlay, []
+    moved, parts = _opened_links(asset, category)
+    body = [ln for ln in overlay.links if ln not in moved]
+    m_body = sum(overlay.links[ln].mass for ln in body)
+    floors, reasons, pf = _mass_floors(overlay, parts, moved, urdf, state, geometry)
+    light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
+    kept = _why_kept(overlay, bal, category, floors, light, m_body, pf)
+    if kept is not None:
+        return overlay, kept
+    frames, _ = _link_world(Path(urdf), state)
+    span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
+    masses_for = partial(_masses, overlay, light, body, floors, m_body, span)
+    t = _smallest_transfer(lambda x: _signed_margin(bal.support, _com(overlay, frames, masses_for(x))[:2]), bal.required)
+    if t is None:
+        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
+                         "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
+    new = masses_for(t)
+    ov = _with_masses(overlay, new, light + body)
+    after = _signed_margin(bal.support, _com(ov, frames)[:2])
+    total = overlay.total_mass()
+    m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
+    change = (
+        f"stability by design: at the requested state the centre of mass was {bal.margin * 1000:.3g} mm from the support's edge "
+        f"(needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to {', '.join(body)} "
+        f"(opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, " + "; ".join(reasons) + "); "
+        f"margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
+    )
+    return ov, [change]
+
+
+def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[str], dict[str, PartFraction]]:
+    """(the links a movable joint moves, link -> the sourced fraction of the
+    opened part it belongs to: the child of a joint with a covered label and its subtree)."""
     movable = [j for j in asset.joints if j.type in ("revolute", "prismatic", "continuous")]
     moved: set[str] = set()
     for j in movable:
@@ -182,10 +215,16 @@ def design_for_stability(
         if pf is not None:
             for ln in _subtree(asset, j.child):
                 parts[ln] = pf
-    body = [ln for ln in overlay.links if ln not in moved]
+    return moved, parts
+
+
+def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], urdf: Path | str, state: dict[str, float],
+                 geometry: dict[str, LinkGeometry] | None) -> tuple[dict[str, float], list[str], PartFraction | None]:
+    """(link -> the least mass it may take, kg; the reasons; the sourced
+    fraction used or None): the covered parts down to the lowest sourced
+    fraction, the other opened links down to their envelope shell mass."""
     total = overlay.total_mass()
-    m_body = sum(overlay.links[ln].mass for ln in body)
-    floors: dict[str, float] = {}  # link -> the least mass it may take
+    floors: dict[str, float] = {}
     reasons: list[str] = []
     table = [ln for ln in overlay.links if ln in parts]
     pf = min((parts[ln] for ln in table), key=lambda p: p.lo) if table else None
@@ -201,42 +240,57 @@ def design_for_stability(
         floors.update({ln: env[ln] for ln in env_links})
         reasons.append("envelope shell mass (outer area x wall thickness x density) of "
                        + ", ".join(f"{ln} {env[ln]:.3g} kg" for ln in env_links))
-    light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
-    m_part = sum(overlay.links[ln].mass for ln in floors)
+    return floors, reasons, pf
+
+
+def _why_kept(overlay: Overlay, bal: Balance, category: str | None, floors: dict[str, float], light: list[str], m_body: float,
+              pf: PartFraction | None) -> list[str] | None:
+    """The notes when no mass can move (no floor, no body mass, no opened
+    link above its floor); None when some can."""
+    total = overlay.total_mass()
     if not floors or m_body <= 0 or total <= 0:
         if bal.margin >= 0:  # inside, only closer to the edge than asked: nothing to say without a sourced ratio
-            return overlay, []
-        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge at the requested state "
-                         f"(needs >= {bal.required * 1000:.3g} mm inside); no part-mass ratio of {category} to move within"]
+            return []
+        return [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge at the requested state "
+                f"(needs >= {bal.required * 1000:.3g} mm inside); no part-mass ratio of {category} to move within"]
     if not light:
-        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; the opened parts already weigh "
-                         f"{m_part / total:.0%} of the object, the lower end of the "
-                         + ("sourced range" if pf is not None else "physical range") + (f" ({pf.lo:.0%})" if pf is not None else "")
-                         + ": masses kept"]
-    frames, _ = _link_world(Path(urdf), state)
-    span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
+        m_part = sum(overlay.links[ln].mass for ln in floors)
+        return [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; the opened parts already weigh "
+                f"{m_part / total:.0%} of the object, the lower end of the "
+                + ("sourced range" if pf is not None else "physical range") + (f" ({pf.lo:.0%})" if pf is not None else "")
+                + ": masses kept"]
+    return None
 
-    def masses_for(t: float) -> dict[str, float]:
-        out = {ln: lp.mass for ln, lp in overlay.links.items()}
-        for ln in light:
-            out[ln] -= t * (out[ln] - floors[ln])
-        for ln in body:
-            out[ln] *= (m_body + t * span) / m_body
-        return out
 
-    def margin(t: float) -> float:
-        return _signed_margin(bal.support, _com(overlay, frames, masses_for(t))[:2])
+def _masses(overlay: Overlay, light: list[str], body: list[str], floors: dict[str, float], m_body: float, span: float,
+            t: float) -> dict[str, float]:
+    """link -> mass (kg) with each ``light`` link the fraction ``t`` of the
+    way down to its floor and the ``body`` scaled up by the ``t * span`` kg they lost."""
+    out = {ln: lp.mass for ln, lp in overlay.links.items()}
+    for ln in light:
+        out[ln] -= t * (out[ln] - floors[ln])
+    for ln in body:
+        out[ln] *= (m_body + t * span) / m_body
+    return out
 
-    if margin(1.0) < bal.required:
-        return overlay, [f"centre of mass {bal.margin * 1000:.3g} mm from the support's edge; even with the opened parts at "
-                         "the lower end of their range (" + "; ".join(reasons) + ") it stays outside: masses kept"]
+
+def _smallest_transfer(margin, required: float) -> float | None:
+    """The smallest fraction t in [0, 1] with ``margin(t)`` (m) >= ``required``
+    (40 halvings), None when even t = 1 falls short."""
+    if margin(1.0) < required:
+        return None
     lo, hi = 0.0, 1.0
     for _ in range(40):  # the margin is monotone in the transfer along this segment
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if margin(mid) >= bal.required else (mid, hi)
-    new = masses_for(hi)
+        lo, hi = (lo, mid) if margin(mid) >= required else (mid, hi)
+    return hi
+
+
+def _with_masses(overlay: Overlay, new: dict[str, float], links: list[str]) -> Overlay:
+    """A copy of ``overlay`` with the masses ``new`` (kg) for ``links``, their
+    inertia scaled alike and the factor noted in their source."""
     ov = overlay.model_copy(deep=True)
-    for ln in light + body:
+    for ln in links:
         lp = ov.links[ln]
         f = new[ln] / lp.mass
         ov.links[ln] = lp.model_copy(update={
@@ -244,13 +298,4 @@ def design_for_stability(
             "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
             "source": lp.source + f"; mass x{f:.3g} for stability by design",
         })
-    after = _signed_margin(bal.support, _com(ov, frames)[:2])
-    moved_kg = hi * span
-    m_after = sum(new[ln] for ln in floors)
-    change = (
-        f"stability by design: at the requested state the centre of mass was {bal.margin * 1000:.3g} mm from the support's edge "
-        f"(needs >= {bal.required * 1000:.3g} mm inside); moved {moved_kg:.3g} kg from {', '.join(light)} to {', '.join(body)} "
-        f"(opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, " + "; ".join(reasons) + "); "
-        f"margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
-    )
-    return ov, [change]
+    return ov

@@ -32,7 +32,7 @@ from typing import Any, Iterator
 import numpy as np
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.schemas.request import RequestSpec
+from asset2sim.schemas.request import RequestOverrides, RequestSpec
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import (
     ClosedState,
@@ -44,6 +44,7 @@ from asset2sim.tasks.geometry.closed_state import (
 )
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret.categories import recognize_category
+from asset2sim.tasks.interpret.overrides import apply_overrides
 from asset2sim.tasks.interpret.request import parse_request
 
 from asset2sim.engines.base import SessionOptions, SimSession
@@ -93,14 +94,20 @@ class Interpretation:
     category_reason: str
 
 
-def interpret(asset: AssetDescription, prompt: str, category: str | None = None) -> Interpretation:
+def interpret(asset: AssetDescription, prompt: str, category: str | None = None,
+              overrides: RequestOverrides | None = None) -> Interpretation:
     """Parse ``prompt`` and recognise the category of ``asset``.
 
     ``category`` (e.g. a manifest column) wins over the asset's own; the
     semantic labels of the links and the prompt's words decide otherwise
     (:func:`asset2sim.tasks.interpret.categories.recognize_category`).
+    ``overrides`` win over the prompt's words
+    (:func:`asset2sim.tasks.interpret.overrides.apply_overrides`).
+
+    Raises:
+        OverrideError: an override does not fit the asset.
     """
-    spec = parse_request(prompt)
+    spec = apply_overrides(parse_request(prompt), overrides, asset)
     labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
     match = recognize_category(category or asset.category, labels, prompt)
     return Interpretation(spec, getattr(match, "name", None) or str(match), getattr(match, "reason", ""))
@@ -146,8 +153,8 @@ def build_context(
         source: an extracted asset, or its folder / URDF file (extracted here
             with ``asset_id`` and ``category``).
         prompt: the request text.
-        config: pipeline knobs; only ``config.sim`` (simulator conventions) is
-            used here (default :class:`RefineConfig`).
+        config: pipeline knobs; ``config.sim`` (simulator conventions) and
+            ``config.overrides`` are used here (default :class:`RefineConfig`).
         category: overrides the asset's own category.
         asset_id: identifier when ``source`` is a path (default folder name).
         geometry: the analysis stage's result when the caller ran it already.
@@ -161,12 +168,13 @@ def build_context(
         asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read.
         asset2sim.tasks.geometry.analyze.MeshAnalysisError: a link with
             geometry has no usable geometry.
+        OverrideError: an override of ``config.overrides`` does not fit the asset.
     """
     asset = source if isinstance(source, AssetDescription) else extract.extract_asset(source, asset_id=asset_id, category=category)
     cache = cache if cache is not None else analyze.MeshCache()
     if geometry is None:
         geometry = analyze.analyze_asset(asset, cache=cache)
-    meaning = interpret(asset, prompt, category)
+    meaning = interpret(asset, prompt, category, (config or RefineConfig()).overrides)
     with kinematic_session(asset, config) as kin:
         hull = link_hull_points(asset, cache=cache)
         closed = closed_positions(kin, asset, hull_points=hull)

@@ -145,7 +145,7 @@ def joint_dynamics_for(
 ) -> dict[str, JointDynamics]:
     """Damping, friction and stiffness of every movable joint from the scaled
     masses and the kinematics at ``state`` (output units), shaped by the
-    qualitative ``choices`` (see ``docs/refine.md``, "Joint dynamics").
+    qualitative ``choices`` (see ``docs/design/refine.md``, "Joint dynamics").
 
     Friction holds the largest gravity load within 5 % of the range around the
     state, or over the whole range when the joint must hold its position, and

@@ -5,7 +5,7 @@
   parameter by inverse-variance weighting (:mod:`asset2sim.tasks.synthesize.ivw`).
 
 Neither re-asks, validates, computes physics or refines the state: they are
-what asset2sim is compared against (``docs/metrics.md``).
+what asset2sim is compared against (``docs/design/metrics.md``).
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ from asset2sim.tasks.synthesize import estimate, physics, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.llm_errors import ReplyInvalid
 from asset2sim.tasks.synthesize.llm_usage import Usage
+from asset2sim.tasks.synthesize.request_apply import scaled_link
 
 MASS_AGREEMENT = 3.0
 """Largest factor between the geometric total mass and the model's own
@@ -32,39 +33,29 @@ estimate before the links are rescaled to the nearer bound (dimensionless)."""
 
 def check_reply_names(ctx: EstimationContext, reply: ModelReply) -> list[str]:
     """Problems with the names in a reply: unknown or duplicated links and joints."""
-    errors = []
-    links = {ln.name for ln in ctx.asset.links}
     movable = {j.name for j in ctx.asset.movable_joints()}
+    return (_name_errors("links.{}.link", [lr.link for lr in reply.links], {ln.name for ln in ctx.asset.links},
+                         f"is not a link of the asset; links are {sorted(ctx.geometry)}")
+            + _name_errors("joints.{}.joint", [jr.joint for jr in reply.joints], movable,
+                           f"is not a movable joint of the asset; movable joints are {sorted(movable)}"))
+
+
+def _name_errors(where: str, names: list[str], known: set[str], unknown: str) -> list[str]:
+    """One error per name not in ``known`` (``unknown`` says why) and per repeated name; ``where`` has a slot for the index."""
+    errors = []
     seen: set[str] = set()
-    for i, lr in enumerate(reply.links):
-        if lr.link not in links:
-            errors.append(f"links.{i}.link: {lr.link!r} is not a link of the asset; links are {sorted(ctx.geometry)}")
-        elif lr.link in seen:
-            errors.append(f"links.{i}.link: {lr.link!r} appears twice")
-        seen.add(lr.link)
-    seen = set()
-    for i, jr in enumerate(reply.joints):
-        if jr.joint not in movable:
-            errors.append(f"joints.{i}.joint: {jr.joint!r} is not a movable joint of the asset; movable joints are {sorted(movable)}")
-        elif jr.joint in seen:
-            errors.append(f"joints.{i}.joint: {jr.joint!r} appears twice")
-        seen.add(jr.joint)
+    for i, n in enumerate(names):
+        if n not in known:
+            errors.append(f"{where.format(i)}: {n!r} {unknown}")
+        elif n in seen:
+            errors.append(f"{where.format(i)}: {n!r} appears twice")
+        seen.add(n)
     return errors
 
 
 def _prior_material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoice:
     m = material_for(ctx.category, label)
     return physics.MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness), source=m.source)
-
-
-def _scaled_link(lp: LinkPhysics, f: float, why: str) -> LinkPhysics:
-    return lp.model_copy(
-        update={
-            "mass": lp.mass * f,
-            "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-            "source": lp.source + why,
-        }
-    )
 
 
 def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> tuple[Overlay, dict[str, str], list[str]]:
@@ -86,77 +77,14 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
     if errors:
         raise ReplyInvalid(errors)
     s = float(reply.scale.value)
-    notes: list[str] = []
-    # ---- links: material from the model, mass and inertia from the geometry
     by_link = {lr.link: lr for lr in reply.links}
-    links: dict[str, LinkPhysics] = {}
-    mat_notes, missing = [], []
-    for ln in ctx.asset.links:
-        geom = ctx.geometry.get(ln.name)
-        if geom is None:
-            continue
-        lr = by_link.get(ln.name)
-        if lr is None:
-            mat = _prior_material(ctx, ln.semantic_label)
-            missing.append(ln.name)
-            src = f"geometry + {mat.name} (offline prior; no model entry)"
-        else:
-            mat = physics.MaterialChoice(name=lr.material, density=lr.density, shell=lr.shell, wall_thickness=lr.wall_thickness, source="model")
-            src = f"geometry + {mat.name} (model)"
-        try:
-            links[ln.name] = physics.link_physics(geom, s, mat, source=src)
-        except ValueError as exc:
-            errors.append(f"links: {exc}")
-            continue
-        mat_notes.append(f"{ln.name}: {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
-    if errors:
-        raise ReplyInvalid(errors)
-    if missing:
-        notes.append(f"the model gave no material for {missing}; offline priors used")
-    geo_total = sum(lp.mass for lp in links.values())
-    model_total = sum(by_link[n].mass.value for n in links if n in by_link)
-    geo_known = sum(links[n].mass for n in links if n in by_link)
-    mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {geo_total:.4g} kg from the geometry (m = v*rho*s^3*eta)"
-    if model_total > 0 and geo_known > 0:
-        ratio = geo_known / model_total
-        mass_note += f"; the model estimated {model_total:.4g} kg for those links (ratio {ratio:.3g})"
-        if ratio > MASS_AGREEMENT or ratio < 1.0 / MASS_AGREEMENT:
-            target = model_total * (MASS_AGREEMENT if ratio > MASS_AGREEMENT else 1.0 / MASS_AGREEMENT)
-            f = target / geo_known
-            links = {n: _scaled_link(lp, f, f"; x{f:.3g} to within {MASS_AGREEMENT:g}x of the model's mass estimate") for n, lp in links.items()}
-            mass_note += f"; more than {MASS_AGREEMENT:g}x apart: every link scaled by {f:.3g}"
-    # ---- state: the model's band per joint through the geometric closed ends
-    parsed, _ = estimate.requested_bands(ctx)
-    by_joint = {jr.joint: jr for jr in reply.joints}
-    movable = ctx.asset.movable_joints()
-    prismatic = {j.name for j in movable if j.type == "prismatic"}
-    bands: dict[str, str] = {}
-    for j in movable:
-        jr = by_joint.get(j.name)
-        bands[j.name] = jr.band if jr is not None else parsed.get(j.name, "closed")
-        if jr is None:
-            notes.append(f"{j.name}: no model entry; the request parser's band {bands[j.name]!r} and dynamics words used")
-        elif jr.band != parsed.get(j.name, "closed"):
-            notes.append(f"{j.name}: the model chose band {jr.band!r}, the request parser read {parsed.get(j.name, 'closed')!r}; the model's band used")
-    state = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
-    # ---- dynamics from the loads, with the model's qualitative choices
-    relevant = set(estimate.task_relevant_joints(ctx))
-    choices: dict[str, estimate.JointChoice] = {}
-    for j in movable:
-        jr = by_joint.get(j.name)
-        rq = ctx.request
-        is_rel = j.name in relevant
-        if jr is not None:
-            choices[j.name] = estimate.JointChoice(jr.damping_level, jr.holds_position, jr.spring, jr.stiff, jr.free_moving)
-        else:
-            choices[j.name] = estimate.JointChoice(
-                rq.damping if is_rel else "moderate",
-                rq.holds_position and is_rel,
-                rq.spring and is_rel,
-                rq.stiff and is_rel,
-                rq.free_moving and is_rel,
-            )
-    joints = estimate.joint_dynamics_for(ctx, links, state, s, choices, source=f"{name} physics (model choices)")
+    links, mat_notes, missing = _link_physics(ctx, by_link, s)
+    notes = [f"the model gave no material for {missing}; offline priors used"] if missing else []
+    links, mass_note = _within_model_mass(links, by_link)
+    bands, band_notes = _bands(ctx, reply)
+    notes += band_notes
+    state = estimate.state_from_bands(ctx.closed, bands, s, {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"})
+    joints = estimate.joint_dynamics_for(ctx, links, state, s, _joint_choices(ctx, reply), source=f"{name} physics (model choices)")
     asked_state = bool(ctx.request.joint_states) or any(b != "closed" for b in bands.values())
     if reply.category.strip().lower() != str(ctx.category).lower():
         notes.append(f"the model calls it {reply.category!r}; the pipeline's category {ctx.category!r} is kept")
@@ -180,6 +108,91 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
     except validate_overlay.OverlayInvalid as exc:
         raise ReplyInvalid([f"{i.code} at {i.where}: {i.message}" for i in exc.issues if i.severity == "error" and not i.fixed]) from None
     return overlay, bands, notes
+
+
+def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> tuple[dict[str, LinkPhysics], list[str], list[str]]:
+    """Physics of every link with geometry at scale ``s``: mass and inertia from the geometry and the model's
+    material, or the offline prior's without a model entry. Returns (links, material notes, links without entry).
+
+    Raises:
+        ReplyInvalid: a link whose mass cannot be computed.
+    """
+    links: dict[str, LinkPhysics] = {}
+    mat_notes, missing, errors = [], [], []
+    for ln in ctx.asset.links:
+        geom = ctx.geometry.get(ln.name)
+        if geom is None:
+            continue
+        lr = by_link.get(ln.name)
+        if lr is None:
+            mat = _prior_material(ctx, ln.semantic_label)
+            missing.append(ln.name)
+            src = f"geometry + {mat.name} (offline prior; no model entry)"
+        else:
+            mat = physics.MaterialChoice(name=lr.material, density=lr.density, shell=lr.shell, wall_thickness=lr.wall_thickness, source="model")
+            src = f"geometry + {mat.name} (model)"
+        try:
+            links[ln.name] = physics.link_physics(geom, s, mat, source=src)
+        except ValueError as exc:
+            errors.append(f"links: {exc}")
+            continue
+        mat_notes.append(f"{ln.name}: {mat.name}, {mat.density:g} kg/m^3, {'shell t=' + format(mat.wall_thickness, 'g') + ' m' if mat.shell else 'solid'}")
+    if errors:
+        raise ReplyInvalid(errors)
+    return links, mat_notes, missing
+
+
+def _within_model_mass(links: dict[str, LinkPhysics], by_link: dict) -> tuple[dict[str, LinkPhysics], str]:
+    """The links scaled to within :data:`MASS_AGREEMENT` of the model's own mass estimate for the links it
+    names (unchanged when within), and the mass arithmetic note (kg)."""
+    geo_total = sum(lp.mass for lp in links.values())
+    model_total = sum(by_link[n].mass.value for n in links if n in by_link)
+    geo_known = sum(links[n].mass for n in links if n in by_link)
+    mass_note = " + ".join(f"{lp.mass:.4g}" for lp in links.values()) + f" = {geo_total:.4g} kg from the geometry (m = v*rho*s^3*eta)"
+    if model_total > 0 and geo_known > 0:
+        ratio = geo_known / model_total
+        mass_note += f"; the model estimated {model_total:.4g} kg for those links (ratio {ratio:.3g})"
+        if ratio > MASS_AGREEMENT or ratio < 1.0 / MASS_AGREEMENT:
+            target = model_total * (MASS_AGREEMENT if ratio > MASS_AGREEMENT else 1.0 / MASS_AGREEMENT)
+            f = target / geo_known
+            links = {n: scaled_link(lp, f, f"; x{f:.3g} to within {MASS_AGREEMENT:g}x of the model's mass estimate") for n, lp in links.items()}
+            mass_note += f"; more than {MASS_AGREEMENT:g}x apart: every link scaled by {f:.3g}"
+    return links, mass_note
+
+
+def _bands(ctx: EstimationContext, reply: ModelReply) -> tuple[dict[str, str], list[str]]:
+    """The model's band per movable joint (the request parser's without a model entry), and notes where
+    the two differ or the model gave none."""
+    parsed, _ = estimate.requested_bands(ctx)
+    by_joint = {jr.joint: jr for jr in reply.joints}
+    bands: dict[str, str] = {}
+    notes = []
+    for j in ctx.asset.movable_joints():
+        jr = by_joint.get(j.name)
+        bands[j.name] = jr.band if jr is not None else parsed.get(j.name, "closed")
+        if jr is None:
+            notes.append(f"{j.name}: no model entry; the request parser's band {bands[j.name]!r} and dynamics words used")
+        elif jr.band != parsed.get(j.name, "closed"):
+            notes.append(f"{j.name}: the model chose band {jr.band!r}, the request parser read {parsed.get(j.name, 'closed')!r}; the model's band used")
+    return bands, notes
+
+
+def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, estimate.JointChoice]:
+    """The model's qualitative dynamics per movable joint; without a model entry the request's dynamics
+    words on a task-relevant joint, moderate damping and nothing else on the others."""
+    relevant = set(estimate.task_relevant_joints(ctx))
+    by_joint = {jr.joint: jr for jr in reply.joints}
+    rq = ctx.request
+    choices: dict[str, estimate.JointChoice] = {}
+    for j in ctx.asset.movable_joints():
+        jr = by_joint.get(j.name)
+        rel = j.name in relevant
+        if jr is not None:
+            choices[j.name] = estimate.JointChoice(jr.damping_level, jr.holds_position, jr.spring, jr.stiff, jr.free_moving)
+        else:
+            choices[j.name] = estimate.JointChoice(rq.damping if rel else "moderate", rq.holds_position and rel, rq.spring and rel,
+                                                   rq.stiff and rel, rq.free_moving and rel)
+    return choices
 
 
 def estimator_info(name: str, model: str, usage: Usage) -> EstimatorInfo:

@@ -4,33 +4,14 @@ them, the scale a size in numbers asks for, masses, materials and explicit
 joint parameters. Used by the estimators (:mod:`asset2sim.tasks.synthesize.estimate`)
 and the validator of model overlays (:func:`check_overlay`).
 
-Rules (``docs/requests.md`` has the full grammar):
+Rules (``docs/guide/requests.md`` has the full grammar):
 
-- **Which joints.** A label names the movable joints whose moving link carries
-  that label (``priors.request_label_matches``); "all" the task-relevant ones.
-  A label the object lacks is a warning naming the label and the parts that
-  exist; the state is then applied to the task-relevant joints. An ordinal
-  picks among the targets in its order: vertical = top to bottom by the height
-  of the moving part's box center in the closed state, left_right / right_left
-  and front_back as seen by a viewer facing the object's front. Front is -x of
-  the asset's root frame (PartNet-Mobility's convention: the object frame's
-  +z front becomes -x through the base joint's rpy (pi/2, 0, -pi/2)); the
-  viewer's left is then +y.
-- **Numbers** are measured from the geometric closed end
-  (:mod:`asset2sim.tasks.geometry.closed_state`): a fraction of the opening
-  range, an angle (rad, revolute joints) or a distance (m at the output's
-  scale; prismatic joints directly; on a revolute joint the distance is the
-  gap at the moving part's farthest point from the axis, angle = d / r, the
-  arc length s = r theta). Beyond the limit: set to the limit, with a warning.
-- **Ends.** "up"/"raised"/"lifted" = the fraction at which the moving part's
-  box center is highest in world z over its travel, after the resting pose
-  (scale is uniform and positive, so it does not change which end is highest);
-  "down"/"lowered" the lowest. "on"/"off" of a toggle switch (labels switch,
-  toggle, rocker) are its high and low ends (the up-is-on convention of
-  vertically mounted toggle switches, NFPA 70 National Electrical Code 404.7);
-  of other parts (a faucet handle, a knob) "on" is fully open and "off" closed.
-  A part that moves less than :data:`FLAT_TRAVEL` of the object's size in
-  height has no up or down: warning, nominal band kept.
+- **Which joints** a label, "all" or an ordinal names:
+  :mod:`asset2sim.tasks.synthesize.named_parts`.
+- **Numbers and ends** ("30 degrees", "up", "on") are opening fractions
+  decided from the geometry (:mod:`asset2sim.tasks.synthesize.opening_fractions`).
+  Beyond the limit: set to the limit, with a warning. A part without an up or
+  down: warning, nominal band kept.
 
 Acceptance interval of a number: +-5 % of the number (as a fraction of the
 opening range; at least :data:`MIN_TOLERANCE`); of an end: +-:data:`END_TOLERANCE`.
@@ -47,17 +28,14 @@ from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.schemas.request import (
     BAND_INTERVAL,
     BAND_TARGET,
-    JointStateRequest,
     QuantityOutcome,
     RequestFindings,
     RequestSpec,
-    StateTarget,
 )
-from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.tasks.interpret import priors
-from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.interpret.request_values import PART_RX
+from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, state_targets, unit_fits
+from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.tasks.synthesize.context import EstimationContext
@@ -68,13 +46,6 @@ NUMBER_TOLERANCE = 0.05
 MIN_TOLERANCE = 0.005
 #: Half-width of an end target's interval (opening fraction).
 END_TOLERANCE = 0.02
-#: Height change over the travel, as a fraction of the object's largest
-#: extent, below which a part has no "up" or "down".
-FLAT_TRAVEL = 0.02
-#: Labels whose "on"/"off" are their high/low ends (toggle switches).
-TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
-#: Samples of the travel searched for the highest / lowest end.
-END_SAMPLES = 41
 
 
 @dataclass
@@ -122,139 +93,11 @@ def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
     return priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
-def object_parts(ctx: "EstimationContext") -> list[str]:
-    """Labels of the moving parts of the object (semantic labels, each once)."""
-    out: list[str] = []
-    for j in ctx.asset.movable_joints():
-        lab = ctx.asset.link(j.child).semantic_label or j.child
-        if lab not in out:
-            out.append(lab)
-    return out
-
-
 def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.ndarray]:
-    """joint -> (3,) world center (scale 1, resting pose applied) of the box
+    """joint -> (3,) world center (m, scale 1, resting pose applied) of the box
     around its moving subtree at ``state`` (input units)."""
     ctx.session.set_joint_positions(state)
-    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
-    out = {}
-    for n, links in ctx.subtrees.items():
-        box = links_aabb(ctx.session, links, ctx.hull_points)
-        c = np.zeros(3) if box is None else 0.5 * (box[0] + box[1])
-        out[n] = R @ c
-    return out
-
-
-def _order_key(order: str, c: np.ndarray) -> float:
-    """Sort key of a joint for an ordinal's order (ascending = first)."""
-    if order == "left_right":
-        return -float(c[1])
-    if order == "right_left":
-        return float(c[1])
-    if order == "front_back":
-        return float(c[0])
-    return -float(c[2])
-
-
-def _targets_of(ctx: "EstimationContext", jr: JointStateRequest, relevant: list[str], centers: dict[str, np.ndarray],
-                warnings: list[str]) -> list[str]:
-    if jr.selector == "all" or not jr.label:
-        targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
-    else:
-        targets = [j.name for j in ctx.asset.movable_joints()
-                   if priors.request_label_matches(ctx.category, jr.label, ctx.asset.link(j.child).semantic_label)]
-        if not targets:
-            targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
-            warnings.append(
-                f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but this {ctx.category} has no such part; "
-                f"its moving parts: {', '.join(object_parts(ctx)) or 'none'}; '{jr.phrase}' applied to the task-relevant joints {targets}"
-            )
-    if jr.ordinal is not None:
-        targets.sort(key=lambda n: _order_key(jr.order, centers.get(n, np.zeros(3))))
-        if -len(targets) <= jr.ordinal < len(targets):
-            targets = [targets[jr.ordinal]]
-        else:
-            warnings.append(f"WARNING: '{jr.phrase}' asks for {jr.label or 'part'} #{jr.ordinal + 1 if jr.ordinal >= 0 else jr.ordinal} "
-                            f"({jr.order}) but only {len(targets)} exist; ignored")
-            targets = []
-    return targets
-
-
-def _radius(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> float:
-    """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state``."""
-    ctx.session.set_joint_positions(state)
-    child = ctx.session.joint_child[joint]
-    p0, Rc = ctx.session.link_frame(child)
-    a = Rc @ np.asarray(ctx.session.joint_axis(joint), float)
-    a = a / max(np.linalg.norm(a), 1e-12)
-    r = 0.0
-    for ln in ctx.subtrees[joint]:
-        v = ctx.hull_points.get(ln)
-        if v is None:
-            continue
-        pos, R = ctx.session.link_frame(ln)
-        w = v @ R.T + pos - p0
-        perp = w - np.outer(w @ a, a)
-        r = max(r, float(np.linalg.norm(perp, axis=1).max()))
-    return r
-
-
-def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: dict[str, float]) -> tuple[float | None, str]:
-    """Opening fraction of the joint's highest (``high``) or lowest (``low``)
-    position in world z; None with a reason when the part moves flat."""
-    cs = ctx.closed[joint]
-    fr = np.linspace(0.0, 1.0, END_SAMPLES)
-    zs = []
-    for f in fr:
-        c = _centers_one(ctx, joint, {**closed_state, joint: cs.position(float(f))})
-        zs.append(c[2])
-    zs = np.asarray(zs)
-    size = float(np.max(ctx.closed_extents)) if len(ctx.closed_extents) else 1.0
-    if zs.max() - zs.min() < FLAT_TRAVEL * size:
-        return None, f"its height changes by {zs.max() - zs.min():.3g} (< {FLAT_TRAVEL:g} of the object's size) over the travel"
-    i = int(np.argmax(zs) if end == "high" else np.argmin(zs))
-    return float(fr[i]), f"{'highest' if end == 'high' else 'lowest'} position in world z at opening fraction {fr[i]:.3g}"
-
-
-def _centers_one(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> np.ndarray:
-    ctx.session.set_joint_positions(state)
-    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
-    box = links_aabb(ctx.session, ctx.subtrees[joint], ctx.hull_points)
-    return np.zeros(3) if box is None else R @ (0.5 * (box[0] + box[1]))
-
-
-def _fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scale: float, label: str,
-                  closed_state: dict[str, float]) -> tuple[float | None, str]:
-    """Opening fraction a target asks of one joint, and how it was decided."""
-    cs = ctx.closed[joint]
-    jt = ctx.asset.joint(joint).type
-    if target.kind == "fraction":
-        return float(target.value), f"{target.value:.3g} of the opening range"
-    if target.kind == "end":
-        end = target.end
-        canon = canonical_label(label) or label
-        if end in ("on", "off"):
-            if canon in TOGGLE_LABELS:
-                end = "high" if end == "on" else "low"
-            else:
-                return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
-        f, why = _end_fraction(ctx, joint, str(end), closed_state)
-        return f, why
-    if target.kind == "angle":
-        if jt == "prismatic":
-            return None, f"{np.degrees(target.value):.4g} degrees asked of a sliding joint (it moves in metres)"
-        return float(target.value) / max(cs.open_range, 1e-9), (
-            f"{np.degrees(target.value):.4g} deg from the closed end of a {np.degrees(cs.open_range):.4g} deg opening range")
-    # distance
-    if jt == "prismatic":
-        rng = cs.open_range * scale
-        return float(target.value) / max(rng, 1e-12), f"{target.value:.4g} m from the closed end of a {rng:.4g} m travel"
-    r = _radius(ctx, joint, closed_state) * scale
-    if r <= 0:
-        return None, "no geometry to measure a distance on"
-    ang = float(target.value) / r
-    return ang / max(cs.open_range, 1e-9), (
-        f"{target.value:.4g} m gap at the part's farthest point from the axis (r = {r:.4g} m): {np.degrees(ang):.4g} deg")
+    return {n: box_center(ctx, n) for n in ctx.subtrees}
 
 
 def band_of(f: float) -> str:
@@ -277,7 +120,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     need_centers = any(jr.ordinal is not None for jr in ctx.request.joint_states)
     centers = _centers(ctx, closed_state) if need_centers else {}
     for jr in ctx.request.joint_states:
-        targets = _targets_of(ctx, jr, relevant, centers, res.warnings)
+        targets = state_targets(ctx, jr, relevant, centers, res.warnings)
         for t in targets:
             res.bands[t] = jr.band
             res.addressed.add(t)
@@ -285,7 +128,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
             if jr.target is None:
                 continue
             label = ctx.asset.link(ctx.asset.joint(t).child).semantic_label or ""
-            f, why = _fraction_for(ctx, t, jr.target, scale, label, closed_state)
+            f, why = fraction_for(ctx, t, jr.target, scale, label, closed_state)
             if f is None:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' cannot be applied: {why}; the nominal band '{jr.band}' is used")
                 continue
@@ -293,10 +136,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' is beyond the joint's limit ({why}, fraction {f:.3g}); set to the "
                                     + ("limit" if f > 1 else "closed end"))
                 f = float(np.clip(f, 0.0, 1.0))
-            if jr.target.kind == "end":
-                tol = END_TOLERANCE
-            else:
-                tol = max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
+            tol = END_TOLERANCE if jr.target.kind == "end" else max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
             interval = (max(0.0, f - tol), min(1.0, f + tol))
             band = band_of(f)
             res.bands[t] = band
@@ -309,22 +149,6 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     if closed_state:
         ctx.session.set_joint_positions(closed_state)
     return res
-
-
-def count_warnings(ctx: "EstimationContext") -> list[str]:
-    """A count of parts the request names ("two-drawer") that differs from the
-    object's movable parts with that label (labels without joints, such as a
-    toaster's slots, are not checked)."""
-    out = []
-    for label, n in ctx.request.part_counts.items():
-        if not PART_RX.fullmatch(label):
-            continue
-        have = [j.name for j in ctx.asset.movable_joints()
-                if priors.request_label_matches(ctx.category, label, ctx.asset.link(j.child).semantic_label)]
-        if len(have) != n:
-            out.append(f"WARNING: the request names {n} {label}(s) but this {ctx.category} has {len(have)} movable {label}(s)"
-                       + (f" ({', '.join(have)})" if have else f"; its moving parts: {', '.join(object_parts(ctx)) or 'none'}"))
-    return out
 
 
 def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
@@ -342,16 +166,14 @@ def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: S
 def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
     """Uniform scale from the sizes in numbers ("30 cm tall", "60 cm wide"):
     s = geometric mean over the sizes of value / closed extent along the named
-    dimension (height = z; width / depth = larger / smaller horizontal extent;
-    length / largest = the largest extent). None when the request gives none."""
+    dimension (:func:`_extents`); the scale an override gives, as given.
+    None when the request gives none."""
+    if ctx.request.scale is not None:
+        return float(ctx.request.scale), f"scale given by the user: --scale {ctx.request.scale:g}"
     sizes = ctx.request.sizes
     if not sizes:
         return None
-    ext = np.asarray(ctx.closed_extents, float)
-    if ctx.root_rotation is not None:
-        ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
-    horiz = sorted([ext[0], ext[1]], reverse=True)
-    along = {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
+    along = _extents(ctx)
     ratios = []
     parts = []
     for sz in sizes:
@@ -368,34 +190,27 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
 
 def size_residuals(ctx: "EstimationContext", scale: float) -> list[tuple[str, float, float]]:
     """(phrase, asked m, obtained m) of every size in numbers at ``scale``."""
+    along = _extents(ctx)
+    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale) for sz in ctx.request.sizes]
+
+
+def _extents(ctx: "EstimationContext") -> dict:
+    """The closed object's extent (m, scale 1) along each size dimension: height = world z; width / depth =
+    larger / smaller horizontal extent; length / largest = the largest extent."""
     ext = np.asarray(ctx.closed_extents, float)
     if ctx.root_rotation is not None:
         ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
     horiz = sorted([ext[0], ext[1]], reverse=True)
-    along = {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
-    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale) for sz in ctx.request.sizes]
+    return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
 
 
 # ------------------------------------------------------------------ materials and masses
-def _is_body(ctx: "EstimationContext", link: str) -> bool:
-    moving = {ln for links in ctx.subtrees.values() for ln in links}
-    return link not in moving or (canonical_label(ctx.asset.link(link).semantic_label) in BODY_LABELS)
-
-
-def _matches(ctx: "EstimationContext", link: str, label: str | None) -> bool:
-    if label is None:
-        return True
-    if label == "body":
-        return _is_body(ctx, link)
-    return priors.request_label_matches(ctx.category, label, ctx.asset.link(link).semantic_label)
-
-
 def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
     """The material the request names for ``link`` (``materials.yaml``): a
     per-part entry wins over the body's, which wins over the whole object's."""
     best: tuple[int, str] | None = None
     for p in ctx.request.properties:
-        if p.material is None or not _matches(ctx, link, p.label):
+        if p.material is None or not link_named(ctx, link, p.label):
             continue
         rank = 0 if p.label is None else (1 if p.label == "body" else 2)
         if best is None or rank >= best[0]:
@@ -408,22 +223,22 @@ def unmatched_properties(ctx: "EstimationContext") -> list[str]:
     out = []
     links = [ln.name for ln in ctx.asset.links]
     for p in ctx.request.properties:
-        if p.label not in (None, "body") and not any(_matches(ctx, ln, p.label) for ln in links):
+        if p.label not in (None, "body") and not any(link_named(ctx, ln, p.label) for ln in links):
             out.append(f"WARNING: '{p.phrase}' names a '{p.label}' but this {ctx.category} has no such part; its moving parts: "
-                       f"{', '.join(object_parts(ctx)) or 'none'}; not applied")
+                       f"{moving_parts(ctx)}; not applied")
     for d in ctx.request.dynamics_values:
-        if d.label is not None and not any(priors.request_label_matches(ctx.category, d.label, ctx.asset.link(j.child).semantic_label)
-                                           for j in ctx.asset.movable_joints()):
+        if d.label is not None and not joints_named(ctx, d.label):
             out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but this {ctx.category} has no such part; its moving parts: "
-                       f"{', '.join(object_parts(ctx)) or 'none'}; applied to the task-relevant joints")
+                       f"{moving_parts(ctx)}; applied to the task-relevant joints")
     return out
 
 
-def _scaled(lp: LinkPhysics, f: float, why: str) -> LinkPhysics:
+def scaled_link(lp: LinkPhysics, f: float, note: str) -> LinkPhysics:
+    """``lp`` with mass and inertia tensor times ``f`` (center of mass unchanged), ``note`` added to its source."""
     return lp.model_copy(update={
         "mass": lp.mass * f,
         "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-        "source": lp.source + f"; x{f:.4g} {why}",
+        "source": lp.source + note,
     })
 
 
@@ -441,13 +256,13 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
     for p in ctx.request.properties:
         if p.mass is None or p.label is None:
             continue
-        names = [n for n in out if _matches(ctx, n, p.label)]
+        names = [n for n in out if link_named(ctx, n, p.label)]
         if not names:
             continue
         m = sum(out[n].mass for n in names)
         f = p.mass / max(m, 1e-12)
         for n in names:
-            out[n] = _scaled(out[n], f, f"to the requested {p.mass:g} kg of the {p.label} ('{p.phrase}')")
+            out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested {p.mass:g} kg of the {p.label} ('{p.phrase}')")
         fixed.update(names)
         notes.append(f"'{p.phrase}': {p.label} links {names} {m:.4g} -> {p.mass:.4g} kg")
     total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
@@ -466,7 +281,7 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
         return out, notes, True
     f = (total_req - fixed_mass) / max(free_mass, 1e-12)
     for n in free:
-        out[n] = _scaled(out[n], f, f"to the requested total {total_req:.4g} kg")
+        out[n] = scaled_link(out[n], f, f"; x{f:.4g} to the requested total {total_req:.4g} kg")
     notes.append((why or "requested total mass") + f": {fixed_mass + free_mass:.4g} -> {total_req:.4g} kg")
     if not (lo <= total_req <= hi):
         notes.append(f"note: the requested {total_req:.4g} kg is outside the plausible {lo:.3g}-{hi:.3g} kg for this {ctx.category}; kept as asked")
@@ -484,17 +299,10 @@ def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynam
     notes: list[str] = []
     out = dict(joints)
     for d in ctx.request.dynamics_values:
-        names = relevant
-        if d.label is not None:
-            named = [j.name for j in ctx.asset.movable_joints()
-                     if priors.request_label_matches(ctx.category, d.label, ctx.asset.link(j.child).semantic_label)]
-            names = named or relevant
+        names = joints_of(ctx, d, relevant)
         applied = []
         for n in names:
-            if n not in out:
-                continue
-            linear = ctx.asset.joint(n).type == "prismatic"
-            if (d.motion == "rotational" and linear) or (d.motion == "linear" and not linear):
+            if n not in out or not unit_fits(d, ctx.asset.joint(n).type == "prismatic"):
                 continue
             upd: dict = {d.quantity: float(d.value), "source": out[n].source + f"; {d.quantity} {d.value:g} from the request ('{d.phrase}')"}
             if d.quantity == "stiffness":
@@ -530,7 +338,7 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     for d in ctx.request.dynamics_values:
         for n, jd in overlay.joints.items():
             linear = ctx.asset.joint(n).type == "prismatic" if n in {j.name for j in ctx.asset.joints} else False
-            if (d.motion == "rotational" and linear) or (d.motion == "linear" and not linear):
+            if not unit_fits(d, linear):
                 continue
             if d.label is None and n not in task_relevant_joints(ctx):
                 continue
@@ -554,8 +362,9 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
 
 def summary(spec: RequestSpec) -> list[str]:
     """One line per thing the request asks beyond bands (sizes, masses,
-    materials, joint parameters) for the terminal and the report."""
-    out = []
+    materials, joint parameters) for the terminal and the report; first the
+    overrides, as the user gave them."""
+    out = [f"given by the user: {o}" for o in spec.overrides]
     if spec.sizes:
         out.append("sizes: " + ", ".join(f"{s.dimension} {s.value:g} m" for s in spec.sizes))
     for p in spec.properties:
@@ -633,16 +442,12 @@ def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: l
     out = []
     relevant = task_relevant_joints(ctx)
     for d in ctx.request.dynamics_values:
-        names = relevant
-        if d.label is not None:
-            names = [j.name for j in ctx.asset.movable_joints()
-                     if priors.request_label_matches(ctx.category, d.label, ctx.asset.link(j.child).semantic_label)] or relevant
-        for n in names:
+        for n in joints_of(ctx, d, relevant):
             jd = overlay.joints.get(n)
             if jd is None:
                 continue
             linear = ctx.asset.joint(n).type == "prismatic"
-            if (d.motion == "rotational" and linear) or (d.motion == "linear" and not linear):
+            if not unit_fits(d, linear):
                 continue
             got = float(getattr(jd, d.quantity))
             ok = abs(got - d.value) <= NUMBER_TOLERANCE * max(d.value, 1e-12)

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from asset2sim.schemas.asset import AssetDescription, LinkGeometry
+from asset2sim.schemas.asset import AssetDescription, JointDesc, LinkDesc, LinkGeometry
 from asset2sim.schemas.overlay import SCALE_RANGE, Inertia, JointDynamics, LinkPhysics, Overlay, ValidationIssue
 from asset2sim.tasks.geometry.closed_state import subtree_links
 
@@ -79,31 +79,19 @@ class ValidationPolicy:
             raise OverlayInvalid(issues)
 
 
-#: Lightest a link may be, as a fraction of the object's total mass. Every
-#: engine here solves contacts iteratively (PyBullet's and PhysX's
-#: Gauss-Seidel, MuJoCo's PGS/Newton); a body much lighter than the bodies it
-#: touches is pushed by their contact impulses far more than it resists
-#: them, and iterative solvers converge slowly on such large mass ratios
-#: (Erleben, "Velocity-based shock propagation for multibody dynamics
-#: animation", ACM TOG 2007, on the mass-ratio problem; NVIDIA PhysX SDK
-#: guide, "Rigid Body Dynamics: mass ratios", advises keeping the ratio of
-#: interacting masses small). A 1:1000 floor keeps a knob, a key or a hinge
-#: pin of a dev object as it is (the lightest dev link is 0.024 % of its
-#: object: suitcase 101668's 0.9 g handle part is raised to 3.6 g) while a
-#: 0.05 g link on a kilogram object is raised to 1 g.
+#: Lightest a link may be, as a fraction of the object's total mass: every engine here solves contacts
+#: iteratively (PyBullet's and PhysX's Gauss-Seidel, MuJoCo's PGS/Newton), which converges slowly on large
+#: mass ratios (Erleben, "Velocity-based shock propagation for multibody dynamics animation", ACM TOG 2007;
+#: NVIDIA PhysX SDK guide, "Rigid Body Dynamics: mass ratios"). E.g. suitcase 101668's 0.9 g handle part
+#: (0.024 % of its object) is raised to 3.6 g.
 MIN_LINK_MASS_FRACTION = 1e-3
 
 
 def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None) -> None:
-    """Raise every link lighter than :data:`MIN_LINK_MASS_FRACTION` of the
-    overlay's total mass to that floor, its inertia tensor scaled by the same
-    factor (same shape and density distribution); ``OVL_MASS_TOO_SMALL``
-    warning per link (fixed). With ``asset``, the dynamics of every movable
-    joint whose moving subtree got heavier follow its mass (friction, damping
-    and inertia about the axis times the subtree's mass ratio r): the friction
-    was derived from the gravity load of the lighter part (a toilet's flush
-    lever raised from 30 g to 50 g fell open against the friction set for 30
-    g; the load scales with the mass, the lever arm unchanged)."""
+    """Raise every link lighter than :data:`MIN_LINK_MASS_FRACTION` of the overlay's total mass to that
+    floor, its inertia tensor scaled by the same factor; ``OVL_MASS_TOO_SMALL`` warning per link (fixed).
+    With ``asset``, friction, damping and inertia about the axis of every movable joint whose moving subtree
+    got heavier are multiplied by the subtree's mass ratio (the friction was derived from its gravity load)."""
     before = {n: lp.mass for n, lp in ov.links.items()}
     masses = {n: lp.mass for n, lp in ov.links.items() if math.isfinite(lp.mass) and lp.mass > 0}
     total = sum(masses.values())
@@ -187,10 +175,10 @@ def box_inertia(mass: float, extents: np.ndarray) -> np.ndarray:
     return np.diag([mass * (y * y + z * z), mass * (x * x + z * z), mass * (x * x + y * y)]) / 12.0
 
 
-def _conservative_volume(geom: LinkGeometry, s: float) -> float:
-    """Material volume (m^3) for fills: the enclosed volume, or a 3 mm shell
-    over the surface when that is larger (open surfaces enclose nothing)."""
-    return max(geom.volume * s**3, geom.area * s**2 * 0.003)
+def _fill_mass(geom: LinkGeometry, s: float) -> float:
+    """Mass (kg) of a conservative fill at scale ``s``: 1000 kg/m^3 on the enclosed volume, or on a 3 mm shell
+    over the surface when that is larger (open surfaces enclose nothing); at least 1e-6 kg."""
+    return max(max(geom.volume * s**3, geom.area * s**2 * 0.003) * 1000.0, 1e-6)
 
 
 def conservative_dynamics(joint_type: str) -> JointDynamics:
@@ -254,131 +242,147 @@ def validate_overlay(
         policy.check(issues)
         return ov, issues
 
+    movable = {j.name: j for j in asset.movable_joints()}
+    _drop_unknown_names(ov, asset, movable, add)
+    total_known = sum(lp.mass for lp in ov.links.values() if math.isfinite(lp.mass) and lp.mass > 0)
+    for ln in asset.links:
+        lp = ov.links.get(ln.name)
+        if lp is None:
+            _fill_link(ov, ln, geometry.get(ln.name), s, total_known, fill_missing, add)
+        else:
+            _check_link(ov, ln.name, lp, geometry.get(ln.name), s, add)
+    _raise_light_links(ov, add, asset)
+    limits = scaled_limits(asset, s)
+    for name, jd in movable.items():
+        _check_joint(ov, name, jd.type, limits[name], fill_missing, add)
+    if ov.initial_joint_positions is not None:
+        ov.initial_joint_positions = _checked_state(ov.initial_joint_positions, movable, limits, add)
+    policy.check(issues)
+    return ov, issues
+
+
+def _drop_unknown_names(ov: Overlay, asset: AssetDescription, movable: dict[str, JointDesc], add) -> None:
+    """Drop the links the asset lacks (error) and the joints that are not movable (warning for a fixed joint, else error)."""
     link_names = {ln.name for ln in asset.links}
     for name in list(ov.links):
         if name not in link_names:
             add("OVL_UNKNOWN_LINK", "error", name, f"overlay names link {name!r}, which {asset.urdf_path.name} does not have")
             del ov.links[name]
-    movable = {j.name: j for j in asset.movable_joints()}
     for name in list(ov.joints):
         if name not in movable:
             sev = "warning" if any(j.name == name for j in asset.joints) else "error"
             add("OVL_UNKNOWN_JOINT", sev, name, f"overlay gives dynamics for {name!r}, which is not a movable joint; dropped", fixed=sev == "warning")
             del ov.joints[name]
 
-    # ---- links
-    total_known = sum(lp.mass for lp in ov.links.values() if math.isfinite(lp.mass) and lp.mass > 0)
-    for ln in asset.links:
-        geom = geometry.get(ln.name)
-        lp = ov.links.get(ln.name)
-        if lp is None:
-            if not fill_missing:
-                if ln.has_geometry:
-                    add("OVL_LINK_MISSING", "error", ln.name, "link has geometry but no mass/inertia in the overlay")
-                continue
-            if geom is not None:
-                density = 1000.0
-                mass = max(_conservative_volume(geom, s) * density, 1e-6)
-                inertia = geometry_inertia(geom, mass, s, hollow=False)
-                ov.links[ln.name] = LinkPhysics(
-                    mass=mass,
-                    inertia=Inertia.from_matrix(inertia),
-                    com=tuple(c * s for c in geom.com),
-                    material="unknown (conservative fill: 1000 kg/m^3 solid)",
-                    density=density,
-                    hollow_fraction=1.0,
-                    source="validator fill from geometry",
-                )
-                if ln.has_geometry:
-                    add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry; filled from geometry: {mass:.4g} kg", fixed=True)
-            else:
-                mass = max(1e-3 * total_known, 1e-4)
-                i = mass * 1e-4 * s**2
-                ov.links[ln.name] = LinkPhysics(
-                    mass=mass,
-                    inertia=Inertia(ixx=i, iyy=i, izz=i),
-                    com=(0.0, 0.0, 0.0),
-                    material="none (link without geometry)",
-                    source="validator placeholder for a link without geometry",
-                )
-                if ln.has_geometry:
-                    add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry and no geometry analysis; placeholder {mass:.3g} kg", fixed=True)
-            continue
-        # mass
-        if not (math.isfinite(lp.mass) and lp.mass > 0):
-            if geom is not None:
-                mass = max(_conservative_volume(geom, s) * 1000.0, 1e-6)
-                add("OVL_MASS_INVALID", "warning", ln.name, f"mass {lp.mass!r} is not > 0; replaced by {mass:.4g} kg from geometry", fixed=True)
-                lp = lp.model_copy(update={"mass": mass, "source": lp.source + "; mass fixed by validator"})
-            else:
-                add("OVL_MASS_INVALID", "error", ln.name, f"mass {lp.mass!r} is not a finite value > 0")
-                continue
-        # inertia
-        prob = inertia_problems(lp.inertia.matrix())
-        if prob is not None:
-            ev = np.linalg.eigvalsh(np.nan_to_num(0.5 * (lp.inertia.matrix() + lp.inertia.matrix().T))).tolist()
-            if geom is not None:
-                hollow = (lp.hollow_fraction or 1.0) < 1.0
-                new = geometry_inertia(geom, lp.mass, s, hollow)
-                add("OVL_INERTIA_INVALID", "warning", ln.name, f"inertia {prob} (eigenvalues {ev}); replaced by the scaled geometry's inertia", fixed=True)
-                lp = lp.model_copy(update={"inertia": Inertia.from_matrix(new), "source": lp.source + "; inertia fixed by validator"})
-            else:
-                add("OVL_INERTIA_INVALID", "error", ln.name, f"inertia {prob} (eigenvalues {ev})")
-        # com
-        com = np.asarray(lp.com, float)
+
+def _fill_link(ov: Overlay, ln: LinkDesc, geom: LinkGeometry | None, s: float, total_known: float, fill_missing: bool, add) -> None:
+    """Fill the entry of a link the overlay misses: from its geometry (:func:`_fill_mass`, inertia of the scaled
+    geometry), else a placeholder of 0.1 % of ``total_known`` (kg, at least 1e-4 kg) with a small isotropic
+    inertia. Without ``fill_missing``, a link with geometry is an error."""
+    if not fill_missing:
+        if ln.has_geometry:
+            add("OVL_LINK_MISSING", "error", ln.name, "link has geometry but no mass/inertia in the overlay")
+        return
+    if geom is not None:
+        density = 1000.0
+        mass = _fill_mass(geom, s)
+        ov.links[ln.name] = LinkPhysics(
+            mass=mass,
+            inertia=Inertia.from_matrix(geometry_inertia(geom, mass, s, hollow=False)),
+            com=tuple(c * s for c in geom.com),
+            material="unknown (conservative fill: 1000 kg/m^3 solid)",
+            density=density,
+            hollow_fraction=1.0,
+            source="validator fill from geometry",
+        )
+        if ln.has_geometry:
+            add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry; filled from geometry: {mass:.4g} kg", fixed=True)
+        return
+    mass = max(1e-3 * total_known, 1e-4)
+    i = mass * 1e-4 * s**2
+    ov.links[ln.name] = LinkPhysics(
+        mass=mass,
+        inertia=Inertia(ixx=i, iyy=i, izz=i),
+        com=(0.0, 0.0, 0.0),
+        material="none (link without geometry)",
+        source="validator placeholder for a link without geometry",
+    )
+    if ln.has_geometry:
+        add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry and no geometry analysis; placeholder {mass:.3g} kg", fixed=True)
+
+
+def _check_link(ov: Overlay, name: str, lp: LinkPhysics, geom: LinkGeometry | None, s: float, add) -> None:
+    """Check a link's mass, inertia and COM; with geometry, invalid values are replaced by the scaled
+    geometry's (warnings, fixed), without it they are errors (a link with an invalid mass is left as it is)."""
+    if not (math.isfinite(lp.mass) and lp.mass > 0):
+        if geom is None:
+            add("OVL_MASS_INVALID", "error", name, f"mass {lp.mass!r} is not a finite value > 0")
+            return
+        mass = _fill_mass(geom, s)
+        add("OVL_MASS_INVALID", "warning", name, f"mass {lp.mass!r} is not > 0; replaced by {mass:.4g} kg from geometry", fixed=True)
+        lp = lp.model_copy(update={"mass": mass, "source": lp.source + "; mass fixed by validator"})
+    prob = inertia_problems(lp.inertia.matrix())
+    if prob is not None:
+        ev = np.linalg.eigvalsh(np.nan_to_num(0.5 * (lp.inertia.matrix() + lp.inertia.matrix().T))).tolist()
         if geom is not None:
-            lo = np.asarray(geom.bbox_min) * s
-            hi = np.asarray(geom.bbox_max) * s
-            slack = 0.1 * float(np.linalg.norm(hi - lo))
-            if not np.all(np.isfinite(com)) or np.any(com < lo - slack) or np.any(com > hi + slack):
-                add("OVL_COM_OUTSIDE", "warning", ln.name, f"center of mass {com.tolist()} m lies outside the link's scaled bounding box; replaced by the geometry's", fixed=True)
-                lp = lp.model_copy(update={"com": tuple(c * s for c in geom.com)})
-        elif not np.all(np.isfinite(com)):
-            add("OVL_COM_OUTSIDE", "error", ln.name, "center of mass is not finite")
-        ov.links[ln.name] = lp
+            new = geometry_inertia(geom, lp.mass, s, (lp.hollow_fraction or 1.0) < 1.0)
+            add("OVL_INERTIA_INVALID", "warning", name, f"inertia {prob} (eigenvalues {ev}); replaced by the scaled geometry's inertia", fixed=True)
+            lp = lp.model_copy(update={"inertia": Inertia.from_matrix(new), "source": lp.source + "; inertia fixed by validator"})
+        else:
+            add("OVL_INERTIA_INVALID", "error", name, f"inertia {prob} (eigenvalues {ev})")
+    com = np.asarray(lp.com, float)
+    if geom is not None:
+        lo = np.asarray(geom.bbox_min) * s
+        hi = np.asarray(geom.bbox_max) * s
+        slack = 0.1 * float(np.linalg.norm(hi - lo))
+        if not np.all(np.isfinite(com)) or np.any(com < lo - slack) or np.any(com > hi + slack):
+            add("OVL_COM_OUTSIDE", "warning", name, f"center of mass {com.tolist()} m lies outside the link's scaled bounding box; replaced by the geometry's", fixed=True)
+            lp = lp.model_copy(update={"com": tuple(c * s for c in geom.com)})
+    elif not np.all(np.isfinite(com)):
+        add("OVL_COM_OUTSIDE", "error", name, "center of mass is not finite")
+    ov.links[name] = lp
 
-    _raise_light_links(ov, add, asset)
 
-    # ---- joints
-    limits = scaled_limits(asset, s)
-    state = dict(ov.initial_joint_positions or {})
-    for name, jd in movable.items():
-        dyn = ov.joints.get(name)
-        if dyn is None:
-            if fill_missing:
-                ov.joints[name] = conservative_dynamics(jd.type)
-                add("OVL_JOINT_MISSING", "warning", name, "no dynamics in the overlay; conservative values filled", fixed=True)
-            else:
-                add("OVL_JOINT_MISSING", "error", name, "movable joint without dynamics")
+def _check_joint(ov: Overlay, name: str, joint_type: str, limits: tuple[float, float], fill_missing: bool, add) -> None:
+    """Fill missing dynamics (:func:`conservative_dynamics`), flag negative or non-finite ones, and put a spring's
+    reference inside ``limits`` (output units): the initial state, else 0 projected onto the limits."""
+    dyn = ov.joints.get(name)
+    if dyn is None:
+        if fill_missing:
+            ov.joints[name] = conservative_dynamics(joint_type)
+            add("OVL_JOINT_MISSING", "warning", name, "no dynamics in the overlay; conservative values filled", fixed=True)
+        else:
+            add("OVL_JOINT_MISSING", "error", name, "movable joint without dynamics")
+        return
+    bad = [k for k in ("damping", "friction", "stiffness") if not (math.isfinite(getattr(dyn, k)) and getattr(dyn, k) >= 0)]
+    if bad:
+        add("OVL_DYNAMICS_NEGATIVE", "error", name, f"{', '.join(bad)} must be finite and >= 0 (got " + ", ".join(f"{k}={getattr(dyn, k)!r}" for k in bad) + ")")
+        return
+    if dyn.stiffness > 0:
+        lo, hi = limits
+        ref = dyn.spring_reference
+        if ref is None or not math.isfinite(ref) or not (lo <= ref <= hi):
+            new_ref = (ov.initial_joint_positions or {}).get(name, float(np.clip(0.0, lo, hi)))
+            add("OVL_SPRING_REFERENCE", "warning", name, f"spring reference {ref!r} missing or outside limits [{lo}, {hi}]; set to {new_ref}", fixed=True)
+            ov.joints[name] = dyn.model_copy(update={"spring_reference": new_ref})
+
+
+def _checked_state(state: dict[str, float], movable: dict[str, JointDesc], limits: dict[str, tuple[float, float]], add) -> dict[str, float]:
+    """The initial state without joints that are not movable or positions that are not finite, every position
+    projected onto its scaled limits (m for prismatic joints, else rad)."""
+    out = {}
+    for name, q in state.items():
+        if name not in movable:
+            add("OVL_STATE_UNKNOWN_JOINT", "warning", name, "initial state for a joint that is not movable; dropped", fixed=True)
             continue
-        bad = [k for k in ("damping", "friction", "stiffness") if not (math.isfinite(getattr(dyn, k)) and getattr(dyn, k) >= 0)]
-        if bad:
-            add("OVL_DYNAMICS_NEGATIVE", "error", name, f"{', '.join(bad)} must be finite and >= 0 (got " + ", ".join(f"{k}={getattr(dyn, k)!r}" for k in bad) + ")")
+        if not math.isfinite(q):
+            add("OVL_STATE_OUT_OF_LIMITS", "error", name, f"initial position {q!r} is not finite")
             continue
-        if dyn.stiffness > 0:
-            lo, hi = limits[name]
-            ref = dyn.spring_reference
-            if ref is None or not math.isfinite(ref) or not (lo <= ref <= hi):
-                new_ref = state.get(name, float(np.clip(0.0, lo, hi)))
-                add("OVL_SPRING_REFERENCE", "warning", name, f"spring reference {ref!r} missing or outside limits [{lo}, {hi}]; set to {new_ref}", fixed=True)
-                ov.joints[name] = dyn.model_copy(update={"spring_reference": new_ref})
-
-    if ov.initial_joint_positions is not None:
-        fixed_state = {}
-        for name, q in ov.initial_joint_positions.items():
-            if name not in movable:
-                add("OVL_STATE_UNKNOWN_JOINT", "warning", name, "initial state for a joint that is not movable; dropped", fixed=True)
-                continue
-            if not math.isfinite(q):
-                add("OVL_STATE_OUT_OF_LIMITS", "error", name, f"initial position {q!r} is not finite")
-                continue
-            lo, hi = limits[name]
-            if q < lo or q > hi:
-                qn = float(np.clip(q, lo, hi))
-                unit = "m" if movable[name].type == "prismatic" else "rad"
-                add("OVL_STATE_OUT_OF_LIMITS", "warning", name, f"initial position {q} {unit} outside limits [{lo}, {hi}] (output units); projected to {qn}", fixed=True)
-                q = qn
-            fixed_state[name] = q
-        ov.initial_joint_positions = fixed_state
-    policy.check(issues)
-    return ov, issues
+        lo, hi = limits[name]
+        if q < lo or q > hi:
+            qn = float(np.clip(q, lo, hi))
+            unit = "m" if movable[name].type == "prismatic" else "rad"
+            add("OVL_STATE_OUT_OF_LIMITS", "warning", name, f"initial position {q} {unit} outside limits [{lo}, {hi}] (output units); projected to {qn}", fixed=True)
+            q = qn
+        out[name] = q
+    return out

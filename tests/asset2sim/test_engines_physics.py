@@ -15,7 +15,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import open_session
-from asset2sim.engines.fake import write_contract_asset
+from asset2sim.engines.contract_asset import write_contract_asset
 from asset2sim.frames import translation_matrix
 from asset2sim.tasks.check import metrics
 from asset2sim.urdf import UrdfGeometry, read_urdf, write_urdf
@@ -167,7 +167,7 @@ def test_viscous_damping_sets_the_closing_speed(tmp_path, engine):
     closes within 0.5 s. c = 2: quasi-static closing at about tau/c = 0.08
     rad/s, i.e. 0.04 rad in 0.5 s. PhysX and MuJoCo stay close to that;
     PyBullet applies much less damping once c*dt/I > 1 (measured 0.33 rad),
-    which ``docs/simulators.md`` records, but still far less than the free
+    which ``docs/design/simulators.md`` records, but still far less than the free
     fall (0.6 rad)."""
     fast = write_contract_asset(tmp_path / "fast", lid_angle=0.6, lid_friction=0.0, lid_damping=0.1)
     slow = write_contract_asset(tmp_path / "slow", lid_angle=0.6, lid_friction=0.0, lid_damping=2.0)

@@ -25,7 +25,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.ingest.validate_input import validate_asset
 from asset2sim import output_folder as of
-from asset2sim.tasks.assemble import write
+from asset2sim.tasks.assemble import copied_meshes, write
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
 from tests import corpus_builder as cb
 
@@ -258,7 +258,7 @@ def test_meshes_in_a_folder_named_collision_are_kept(tmp_path):
     src = _collision_named_asset(tmp_path / "in" / "robot")
     asset = extract_asset(src)
     assert write.collision_folder(asset) == "collision_1"
-    assert set(write.mesh_copies(asset)) == {"collision/base.obj", "collision/base.mtl", "images/tex.png", "collision/lid.obj", "collision/drawer.stl"}
+    assert set(copied_meshes.mesh_copies(asset)) == {"collision/base.obj", "collision/base.mtl", "images/tex.png", "collision/lid.obj", "collision/drawer.stl"}
     before = outside_hashes(tmp_path, tmp_path / "out")
     res = refine_asset(src, "a cabinet with the drawer slightly open", tmp_path / "out", extras=False)
     out = res.out_dir
@@ -283,7 +283,7 @@ def test_symlinked_and_dotdot_mesh_paths_are_copied_where_referenced(tmp_path):
     text = text.replace('"meshes/drawer.stl"', '"sub/../meshes/drawer.stl"')
     urdf.write_text(text)
     asset = extract_asset(src)
-    copies = write.mesh_copies(asset)
+    copies = copied_meshes.mesh_copies(asset)
     assert {"alias/base.obj", "alias/base.mtl", "meshes/lid.obj", "meshes/drawer.stl", "meshes/base.obj"} <= set(copies)
     before = outside_hashes(tmp_path, tmp_path / "out")
     res = refine_asset(src, "a cabinet with the lid closed", tmp_path / "out", extras=False)
@@ -434,7 +434,7 @@ def test_files_evaluate_writes_into_a_refined_folder_are_the_products(tmp_path, 
 
     out = tmp_path / "out"
     refine_asset(box, PROMPT, out, extras=False)
-    assert main(["evaluate", str(out), "--no-probes", "--no-report"]) in (0, 1)
+    assert main(["evaluate", str(out), "--out", str(out), "--no-probes", "--no-report"]) in (0, 1)  # asked to write into it
     assert (out / "evaluation.json").is_file()
     assert "evaluation.json" in of.recorded_files(out) and of.foreign_files(out) == []
     with of.adopting(tmp_path / "elsewhere") as owner:  # not an output folder: nothing recorded
@@ -546,4 +546,4 @@ def test_output_mtl_and_obj_never_reference_files_outside(tmp_path):
      ("file:///x", False), ("package://p/x.png", False), ("C:\\x.png", False), ("../..", False)],
 )
 def test_reference_leaves_folder(ref, inside):
-    assert write.reference_leaves_folder(ref, "meshes/base.mtl") is (not inside)
+    assert copied_meshes.reference_leaves_folder(ref, "meshes/base.mtl") is (not inside)

@@ -12,7 +12,7 @@ import pytest
 
 from tests.conftest import SHARED
 from asset2sim import urdf
-from asset2sim.engines.fake import write_contract_asset
+from asset2sim.engines.contract_asset import write_contract_asset
 
 DATASET = SHARED
 REAL = sorted(DATASET.glob("*/mobility.urdf")) + sorted(DATASET.glob("*/reference_gensim2.urdf"))

@@ -9,7 +9,9 @@ input tree's hashes never change. Temporary files of the atomic writer
 (``.<name>.<random>.tmp``) left by a kill are tolerated and counted (they are
 not output files).
 
-The default run kills 4 times; ``-m slow`` runs the issue's 20 kills.
+Each kill comes a random time after a random progress line of the run (so the
+machine's load does not decide whether it lands before the end). The default
+run kills 4 times; ``-m slow`` runs the issue's 20 kills.
 """
 
 from __future__ import annotations
@@ -42,24 +44,45 @@ def _assets(root: Path) -> dict[str, Path]:
     return {"box_lid": demo_assets.build_box_with_lid(root / "in" / "box_lid"), "corpus": cb.build_valid(root / "in" / "corpus")}
 
 
-def _cmd(asset: Path, out: Path, prompt: str, force: bool) -> list[str]:
-    cmd = [sys.executable, "-m", "asset2sim", "refine", str(asset), "--out", str(out), "--prompt", prompt, "--quiet"]
+def _cmd(asset: Path, out: Path, prompt: str, force: bool, quiet: bool = True) -> list[str]:
+    cmd = [sys.executable, "-m", "asset2sim", "refine", str(asset), "--out", str(out), "--prompt", prompt] + (["--quiet"] if quiet else [])
     return cmd + (["--force"] if force else [])
 
 
-def _run(asset: Path, out: Path, prompt: str, force: bool = True, kill_after: float | None = None) -> int | None:
-    """Run refine in its own process group; SIGKILL the group after
-    ``kill_after`` s. Returns the exit code (negative when killed)."""
+def _popen(asset: Path, out: Path, prompt: str, force: bool, quiet: bool) -> subprocess.Popen:
     env = dict(os.environ, MPLBACKEND="Agg", PYTHONHASHSEED="0")
-    proc = subprocess.Popen(
-        _cmd(asset, out, prompt, force), stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, env=env
-    )
-    if kill_after is None:
+    return subprocess.Popen(_cmd(asset, out, prompt, force, quiet), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True, env=env)
+
+
+def _progress_lines(asset: Path, out: Path, prompt: str) -> int:
+    """A complete ``--force`` run; returns how many progress lines (``[  1.23s] stage ...``) it printed."""
+    proc = _popen(asset, out, prompt, force=True, quiet=False)
+    stdout, err = proc.communicate(timeout=600)
+    assert proc.returncode == 0, err.decode(errors="replace")[-2000:]
+    return sum(1 for line in stdout.decode(errors="replace").splitlines() if line.startswith("["))
+
+
+def _run(asset: Path, out: Path, prompt: str, force: bool = True, kill_at: tuple[int, float] | None = None) -> int | None:
+    """Run refine in its own process group; with ``kill_at`` = (k, d), SIGKILL
+    the group d s after its k-th progress line (k = 0: d s after the start):
+    moments anchored to the run's own progress, so the machine's load does
+    not decide whether a kill comes before the end. Returns the exit code
+    (negative when killed)."""
+    proc = _popen(asset, out, prompt, force, quiet=kill_at is None)
+    if kill_at is None:
         _out, err = proc.communicate(timeout=600)
         assert proc.returncode == 0, err.decode(errors="replace")[-2000:]
         return proc.returncode
+    k, delay = kill_at
+    seen = 0
+    while seen < k:
+        line = proc.stdout.readline()
+        if not line:  # the run ended first
+            break
+        seen += line.startswith(b"[")
     try:
-        proc.wait(timeout=kill_after)
+        proc.wait(timeout=delay)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=60)
@@ -127,29 +150,29 @@ def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
     assets = _assets(tmp_path)
     before = {k: atomic.tree_hashes(a) for k, a in assets.items()}
     outs = {k: tmp_path / "out" / k for k in assets}
-    # one complete run per asset, then a second, warm one (caches filled, as the killed runs find them) gives the
-    # duration to sample kill moments from: a cold first run is slower and most kills would come too late
-    durations = {}
+    # one complete run per asset, then a second, warm one (caches filled, as the killed runs find them) counts the
+    # progress lines and their mean gap: a kill comes a random time after a random progress line
+    lines, gaps = {}, {}
     for k, a in assets.items():
         _run(a, outs[k], PROMPTS[k], force=False)
         counts = check_output_complete(outs[k], a)
         assert counts.get("marker_valid") == 1, counts
         t = time.perf_counter()
-        _run(a, outs[k], PROMPTS[k], force=True)
-        durations[k] = time.perf_counter() - t
+        lines[k] = _progress_lines(a, outs[k], PROMPTS[k])
+        gaps[k] = (time.perf_counter() - t) / max(lines[k], 1)
     rng = random.Random(seed)
     log = []
     names = sorted(assets)
     for i in range(n_kills):
         k = names[i % len(names)]
         out = outs[k] if i % 4 != 3 else tmp_path / "fresh" / f"{k}_{i}"  # some runs start from an empty folder
-        at = rng.uniform(0.0, 1.1 * durations[k])
+        at = (rng.randrange(lines[k]), rng.uniform(0.0, gaps[k]))
         old = i % 4 != 3 and check_output_complete(out, assets[k]).get("marker_valid") == 1
-        rc = _run(assets[k], out, PROMPTS[k], force=True, kill_after=at)
+        rc = _run(assets[k], out, PROMPTS[k], force=True, kill_at=at)
         counts = check_output_complete(out, assets[k])
         if old:  # --force over a complete output: a kill leaves the old output or the complete new one
             assert counts.get("marker_valid") == 1, (k, at, rc, counts)
-        log.append((k, round(at, 2), rc, counts))
+        log.append((k, (at[0], round(at[1], 2)), rc, counts))
         assert atomic.tree_hashes(assets[k]) == before[k], f"input {k} changed"
     print("\n".join(map(str, log)))
     assert sum(1 for e in log if e[2] == -signal.SIGKILL) >= n_kills // 2, "most runs should have been killed mid-way"
@@ -180,7 +203,7 @@ def test_refine_refuses_output_inside_input(tmp_path):
     (tmp_path / "link_into_input").symlink_to(asset / "meshes")
     for out in (asset, asset / "out", asset / "meshes" / "deeper", tmp_path / "link_into_input" / "x"):
         proc = subprocess.run(_cmd(asset, out, "open", force=False), capture_output=True, timeout=300)
-        assert proc.returncode == 4, (out, proc.stderr[-500:])  # output location problem (README, exit statuses)
+        assert proc.returncode == 4, (out, proc.stderr[-500:])  # output location problem (docs/guide/outputs.md, exit statuses)
         assert proc.stderr.startswith(b"asset2sim refine: OUTPUT_"), proc.stderr[-500:]
         assert atomic.tree_hashes(asset) == before
     assert not (asset / "out").exists() and not (asset / "meshes" / "deeper").exists()

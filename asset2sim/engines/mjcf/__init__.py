@@ -5,7 +5,7 @@ engine (:mod:`asset2sim.engines.mujoco_engine`) and by ``asset2sim export
 The conversion (:func:`urdf_to_mjcf`) starts from MuJoCo's own URDF import
 (``MjSpec.from_string`` on a URDF carrying a ``<mujoco><compiler .../>``
 extension, then ``to_xml``) and fixes what that import drops or changes; each
-fix is listed in ``docs/simulators.md``:
+fix is listed in ``docs/design/simulators.md``:
 
 - numbers: MuJoCo writes 6 significant digits; every pose, axis, range,
   inertial and dynamics value is rewritten at full precision from the URDF

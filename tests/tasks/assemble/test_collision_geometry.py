@@ -16,7 +16,8 @@ from asset2sim.mesh_io import read_mesh
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.tasks.assemble import collision_geometry as cg
+from asset2sim.tasks.assemble import collision_geometry as cg, containment_cuts as cc, convex_pieces as cp, footprint as fp
+from asset2sim.tasks.assemble import joint_sweep as js, parent_child_separation as pcs, piece_penetration as pp, sliding_clearance as sc
 from asset2sim.tasks.assemble.write import write_output
 from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
 from tests.conftest import SHARED, needs_shared
@@ -90,18 +91,18 @@ def _signed_volume(path: Path) -> float:
 
 def test_solid_points_grows_flat_sets_and_drops_lines():
     square = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
-    grown = cg.solid_points(square)
-    assert np.ptp(grown[:, 2]) == pytest.approx(cg.MIN_THICKNESS)
-    assert cg.solid_points(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], float)) is None
+    grown = cp.solid_points(square)
+    assert np.ptp(grown[:, 2]) == pytest.approx(cp.MIN_THICKNESS)
+    assert cp.solid_points(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], float)) is None
     thin = np.vstack([square, [[0.5, 0.5, 0.0005]]])  # 0.5 mm: thin, not flat: unchanged
-    assert np.array_equal(cg.solid_points(thin), thin)
+    assert np.array_equal(cp.solid_points(thin), thin)
 
 
 def test_piece_files_are_closed_and_wound_outward(tmp_path):
     rng = np.random.default_rng(3)
-    piece = cg.Piece.of(rng.normal(size=(60, 3)))
+    piece = cp.Piece.of(rng.normal(size=(60, 3)))
     p = tmp_path / "p.obj"
-    p.write_bytes(cg.piece_obj(piece))
+    p.write_bytes(cp.piece_obj(piece))
     v, f, _ = read_mesh(p)
     assert _signed_volume(p) == pytest.approx(piece.volume, rel=1e-9)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -110,9 +111,9 @@ def test_piece_files_are_closed_and_wound_outward(tmp_path):
 
 
 def test_merge_keeps_every_point_and_respects_the_limit():
-    cubes = [cg.Piece.of(_box([i * 0.011, j * 0.011, 0], [i * 0.011 + 0.01, j * 0.011 + 0.01, 0.01])[0])
+    cubes = [cp.Piece.of(_box([i * 0.011, j * 0.011, 0], [i * 0.011 + 0.01, j * 0.011 + 0.01, 0.01])[0])
              for i in range(6) for j in range(5)]
-    merged = cg.merge_pieces(cubes, 4)
+    merged = cp.merge_pieces(cubes, 4)
     assert len(merged) == 4
     every = np.vstack([c.points for c in cubes])
     inside = np.zeros(len(every), bool)
@@ -124,14 +125,14 @@ def test_merge_keeps_every_point_and_respects_the_limit():
 def test_merge_does_not_swallow_another_link():
     """Two rows of cubes with another link's point between them: the rows
     merge among themselves, never across the point."""
-    row_a = [cg.Piece.of(_box([i * 0.02, 0, 0], [i * 0.02 + 0.015, 0.01, 0.01])[0]) for i in range(5)]
-    row_b = [cg.Piece.of(_box([i * 0.02, 0.03, 0], [i * 0.02 + 0.015, 0.04, 0.01])[0]) for i in range(5)]
+    row_a = [cp.Piece.of(_box([i * 0.02, 0, 0], [i * 0.02 + 0.015, 0.01, 0.01])[0]) for i in range(5)]
+    row_b = [cp.Piece.of(_box([i * 0.02, 0.03, 0], [i * 0.02 + 0.015, 0.04, 0.01])[0]) for i in range(5)]
     other = np.array([[0.05, 0.02, 0.005]])
-    merged = cg.merge_pieces(row_a + row_b, 2, others=other)
+    merged = cp.merge_pieces(row_a + row_b, 2, others=other)
     assert len(merged) == 2
-    assert all(cg.depth_inside(other, m) == 0.0 for m in merged)
-    unguarded = cg.merge_pieces(row_a + row_b, 1)
-    assert cg.depth_inside(other, unguarded[0]) > 0.004  # the test can fail: one hull holds the point
+    assert all(cp.depth_inside(other, m) == 0.0 for m in merged)
+    unguarded = cp.merge_pieces(row_a + row_b, 1)
+    assert cp.depth_inside(other, unguarded[0]) > 0.004  # the test can fail: one hull holds the point
 
 
 def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
@@ -143,14 +144,14 @@ def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
     lid = [_box([0, 0, 0.03], [0.1, 0.06, 0.04])]
     out = _write(_asset(tmp_path, blocks + [plate], lid), tmp_path / "out")
     files = _collision_files(out.urdf)
-    assert 1 <= len(files["body"]) <= cg.MAX_PIECES_PER_LINK and len(files["lid"]) == 1
+    assert 1 <= len(files["body"]) <= cp.MAX_PIECES_PER_LINK and len(files["lid"]) == 1
     for paths in files.values():
         for p in paths:
             assert p.parent.name.startswith("collision")
             v, f, _ = read_mesh(p)
             assert _signed_volume(p) > 0
             sv = np.linalg.svd(v - v.mean(axis=0), compute_uv=False)
-            assert np.ptp((v - v.mean(axis=0)) @ np.linalg.svd(v - v.mean(axis=0))[2][2]) >= cg.FLAT_WIDTH
+            assert np.ptp((v - v.mean(axis=0)) @ np.linalg.svd(v - v.mean(axis=0))[2][2]) >= cp.FLAT_WIDTH
             assert sv[2] > 0
     model = urdf.read_urdf(out.urdf)
     assert model.joint("fix").limit is None
@@ -175,11 +176,11 @@ def test_parent_is_cut_around_a_child_inside_its_hull(tmp_path):
     (folder / "textured_objs" / "body.obj").write_text(_obj([(v, f)], groups=False))  # one group: one hull
     model = urdf.read_urdf(folder / "mobility.urdf")
     before, _ = cg.link_pieces(model, lambda g: g.path, {}, decompose=False)
-    assert cg.containment_depths(model, before, {})[("body", "lid")] > 0.015
+    assert pp.containment_depths(model, before, {})[("body", "lid")] > 0.015
     out = _write(folder, tmp_path / "out")
     written = urdf.read_urdf(out.urdf)
     after, _ = cg.link_pieces(written, lambda g: g.path, {"hinge": 0.0}, decompose=False)
-    assert cg.containment_depths(written, after, {"hinge": 0.0})[("body", "lid")] <= cg.CONTAINMENT_TOLERANCE
+    assert pp.containment_depths(written, after, {"hinge": 0.0})[("body", "lid")] <= cp.CONTAINMENT_TOLERANCE
 
 
 @needs_shared
@@ -189,9 +190,9 @@ def test_laptop_9912_has_few_pieces_and_loads_in_mujoco(tmp_path):
     mujoco = pytest.importorskip("mujoco")
     out = _write(SHARED / "9912", tmp_path / "out", {"joint_1": -1.5})
     files = _collision_files(out.urdf)
-    assert max(len(v) for v in files.values()) <= cg.MAX_PIECES_PER_LINK
+    assert max(len(v) for v in files.values()) <= cp.MAX_PIECES_PER_LINK
     m = mujoco.MjModel.from_xml_path(str(out.urdf))
-    assert m.ngeom <= 2 * cg.MAX_PIECES_PER_LINK
+    assert m.ngeom <= 2 * cp.MAX_PIECES_PER_LINK
     # the MJCF dropped from 5 cm: few contacts, no MuJoCo warning (arena / stack overflow)
     from asset2sim.engines.mjcf import urdf_to_mjcf
 
@@ -205,7 +206,7 @@ def test_laptop_9912_has_few_pieces_and_loads_in_mujoco(tmp_path):
         mujoco.mj_step(mj, d)
         most = max(most, d.ncon)
     assert all(w.number == 0 for w in d.warning)
-    assert 0 < most <= 4 * cg.MAX_PIECES_PER_LINK  # it was 372 with the 118 part meshes
+    assert 0 < most <= 4 * cp.MAX_PIECES_PER_LINK  # it was 372 with the 118 part meshes
     assert d.qpos[2] > -0.01  # still above the floor
 
 
@@ -262,7 +263,7 @@ def _plates_and_blade(tmp_path: Path) -> Path:
 
 
 def _blade_depth(model: urdf.UrdfModel, pieces: dict, q: float) -> float:
-    return cg.containment_depths(model, pieces, {"hinge": q})[("body", "blade")]
+    return pp.containment_depths(model, pieces, {"hinge": q})[("body", "blade")]
 
 
 def groups_of(model: urdf.UrdfModel) -> dict:
@@ -279,14 +280,14 @@ def test_merge_keeps_the_swept_volume_of_a_joint_free(tmp_path):
     folder = _plates_and_blade(tmp_path)
     model = urdf.read_urdf(folder / "mobility.urdf")
     pieces, notes = cg.link_pieces(model, lambda g: g.path, {"hinge": 1.5708})
-    assert len(pieces["body"]) == cg.MAX_PIECES_PER_LINK
+    assert len(pieces["body"]) == cp.MAX_PIECES_PER_LINK
     assert any("merged" in n for n in notes)
     assert _blade_depth(model, groups_of(model), 1.5708) == 0.0
     for q in np.linspace(0.0, 1.5708, 7):
-        assert _blade_depth(model, pieces, q) <= cg.CONTAINMENT_TOLERANCE, q
+        assert _blade_depth(model, pieces, q) <= cp.CONTAINMENT_TOLERANCE, q
     # the test can fail: merging across the narrow gap (what a guard at the initial state allows) holds the blade
     groups = groups_of(model)
-    unguarded = {**groups, "body": cg.merge_pieces(groups["body"], cg.MAX_PIECES_PER_LINK)}
+    unguarded = {**groups, "body": cp.merge_pieces(groups["body"], cp.MAX_PIECES_PER_LINK)}
     assert _blade_depth(model, unguarded, 0.0) > 0.004
 
 
@@ -309,7 +310,7 @@ def test_pieces_do_not_depend_on_the_initial_state(tmp_path):
     assert [p.points.tobytes() for p in a["body"]] == [p.points.tobytes() for p in b["body"]]
     hinge = model.joint("hinge")
     for q in np.linspace(hinge.lower, hinge.upper, 9):
-        assert cg.containment_depths(model, a, {"hinge": float(q)})[("body", "lid")] <= cg.CONTAINMENT_TOLERANCE + 5e-4, q
+        assert pp.containment_depths(model, a, {"hinge": float(q)})[("body", "lid")] <= cp.CONTAINMENT_TOLERANCE + 5e-4, q
 
 
 def test_a_piece_overlapped_by_a_child_is_trimmed_by_the_overlap():
@@ -318,15 +319,15 @@ def test_a_piece_overlapped_by_a_child_is_trimmed_by_the_overlap():
     trimmed on its inner face just enough that no drawer vertex sits deeper
     than half the tolerance; a part that no move of one face by at most half
     the piece's width frees is not trimmed."""
-    panel = cg.Piece.of(_box([0.0, 0.0, 0.0], [0.02, 0.3, 0.2])[0])
+    panel = cp.Piece.of(_box([0.0, 0.0, 0.0], [0.02, 0.3, 0.2])[0])
     drawer = _box([0.017, 0.0, 0.05], [0.2, 0.25, 0.15])[0]
     swept = np.vstack([drawer - [0.0, q, 0.0] for q in np.linspace(0.0, 0.2, 9)])
-    assert cg.depth_inside(swept, panel) == pytest.approx(0.003)
-    trimmed = cg.shave_piece(panel, swept)
-    assert cg.depth_inside(swept, trimmed) <= 0.5 * cg.CONTAINMENT_TOLERANCE + 1e-9
+    assert cp.depth_inside(swept, panel) == pytest.approx(0.003)
+    trimmed = cc.shave_piece(panel, swept)
+    assert cp.depth_inside(swept, trimmed) <= 0.5 * cp.CONTAINMENT_TOLERANCE + 1e-9
     assert np.ptp(trimmed.points, axis=0) == pytest.approx([0.018, 0.3, 0.2])  # only the inner face moved, by 2 mm
     across = np.array([[0.005, 0.15, 0.1], [0.015, 0.15, 0.1]])  # a part across the panel's middle
-    assert cg.shave_piece(panel, across) is None
+    assert cc.shave_piece(panel, across) is None
 
 
 def test_a_child_overlapping_a_panel_over_its_slide_is_kept_out(tmp_path):
@@ -349,21 +350,21 @@ def test_a_child_overlapping_a_panel_over_its_slide_is_kept_out(tmp_path):
     model = urdf.read_urdf(d / "mobility.urdf")
     raw = groups_of(model)
     for q in (0.0, 0.1, 0.2):
-        assert cg.containment_depths(model, raw, {"slide": q})[("carcass", "drawer")] > 0.0029  # the test can fail
+        assert pp.containment_depths(model, raw, {"slide": q})[("carcass", "drawer")] > 0.0029  # the test can fail
     pieces, notes = cg.link_pieces(model, lambda g: g.path, {"slide": 0.0})
     for q in np.linspace(0.0, 0.2, 9):
-        assert cg.containment_depths(model, pieces, {"slide": float(q)})[("carcass", "drawer")] <= cg.CONTAINMENT_TOLERANCE
+        assert pp.containment_depths(model, pieces, {"slide": float(q)})[("carcass", "drawer")] <= cp.CONTAINMENT_TOLERANCE
 
 
 def test_slivers_and_duplicates_left_by_cuts_are_dropped():
     """A cut can leave a duplicate of a piece and a 0.1 mm flake on its cut
     plane (PyBullet collided such a flake 2 mm deep); both go, the pieces
     with volume stay."""
-    a = cg.Piece.of(_box([0, 0, 0], [0.1, 0.05, 0.02])[0])
-    b = cg.Piece.of(_box([0.1, 0, 0], [0.2, 0.05, 0.02])[0])
-    dup = cg.Piece.of(_box([0.01, 0.01, 0.0], [0.05, 0.04, 0.02])[0])  # inside a
-    flake = cg.Piece.of(_box([0.1, 0.0, 0.0], [0.1016, 0.0015, 0.0001])[0])  # 0.24 mm^3
-    kept = cg.drop_slivers([a, dup, flake, b])
+    a = cp.Piece.of(_box([0, 0, 0], [0.1, 0.05, 0.02])[0])
+    b = cp.Piece.of(_box([0.1, 0, 0], [0.2, 0.05, 0.02])[0])
+    dup = cp.Piece.of(_box([0.01, 0.01, 0.0], [0.05, 0.04, 0.02])[0])  # inside a
+    flake = cp.Piece.of(_box([0.1, 0.0, 0.0], [0.1016, 0.0015, 0.0001])[0])  # 0.24 mm^3
+    kept = cp.drop_slivers([a, dup, flake, b])
     assert [k is a or k is b for k in kept] == [True, True]
 
 
@@ -371,18 +372,18 @@ def test_penetration_depth_is_the_smallest_separating_overlap():
     """Two boxes overlapping 5 mm along x (and 40 mm along y, z): depth 5 mm
     along x; apart: 0; a slab crossing a rotated slab edge to edge (no vertex
     of either inside the other) still reads its depth."""
-    a = cg.Piece.of(_box([0, 0, 0], [0.1, 0.1, 0.1])[0])
-    b = cg.Piece.of(_box([0.095, 0.03, 0.03], [0.2, 0.07, 0.07])[0])
-    d, n = cg.penetration_depth(a, b)
+    a = cp.Piece.of(_box([0, 0, 0], [0.1, 0.1, 0.1])[0])
+    b = cp.Piece.of(_box([0.095, 0.03, 0.03], [0.2, 0.07, 0.07])[0])
+    d, n = pp.penetration_depth(a, b)
     assert d == pytest.approx(0.005, abs=1e-9)
     assert np.allclose(np.abs(n), [1, 0, 0])
-    far = cg.Piece.of(_box([0.15, 0, 0], [0.2, 0.1, 0.1])[0])
-    assert cg.penetration_depth(a, far)[0] == 0.0
+    far = cp.Piece.of(_box([0.15, 0, 0], [0.2, 0.1, 0.1])[0])
+    assert pp.penetration_depth(a, far)[0] == 0.0
     bar = _box([-0.1, -0.005, -0.005], [0.1, 0.005, 0.005])[0]  # along x
     R = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]], float)  # along y, 8 mm lower: crossing by 2 mm
-    cross = cg.Piece.of(bar @ R.T + [0, 0, 0.008])
-    assert cg.depth_inside(cross.points, cg.Piece.of(bar)) == 0.0 and cg.depth_inside(bar, cross) == 0.0
-    assert cg.penetration_depth(cg.Piece.of(bar), cross)[0] == pytest.approx(0.002, abs=1e-9)
+    cross = cp.Piece.of(bar @ R.T + [0, 0, 0.008])
+    assert cp.depth_inside(cross.points, cp.Piece.of(bar)) == 0.0 and cp.depth_inside(bar, cross) == 0.0
+    assert pp.penetration_depth(cp.Piece.of(bar), cross)[0] == pytest.approx(0.002, abs=1e-9)
 
 
 def _post_in_lid(tmp_path: Path) -> Path:
@@ -404,19 +405,19 @@ def test_a_child_that_starts_around_its_parent_is_separated(tmp_path):
     folder = _post_in_lid(tmp_path)
     model = urdf.read_urdf(folder / "mobility.urdf")
     before, _ = cg.link_pieces(model, lambda g: g.path, {}, decompose=False)
-    assert cg.containment_depths(model, before, {"hinge": 0.0})[("body", "lid")] == 0.0  # no lid vertex inside the body
-    assert cg.parent_child_depths(model, before, {"hinge": 0.0})[("body", "lid")] > 0.015
+    assert pp.containment_depths(model, before, {"hinge": 0.0})[("body", "lid")] == 0.0  # no lid vertex inside the body
+    assert pp.parent_child_depths(model, before, {"hinge": 0.0})[("body", "lid")] > 0.015
     assert parent_child_penetration(folder / "mobility.urdf", {"hinge": 0.0}).value > 15.0
     out = _write(folder, tmp_path / "out")
     m = parent_child_penetration(out.urdf, {"hinge": 0.0})
-    assert m.passed and m.value <= cg.CONTAINMENT_TOLERANCE * 1000
+    assert m.passed and m.value <= cp.CONTAINMENT_TOLERANCE * 1000
     written = urdf.read_urdf(out.urdf)
     after, _ = cg.link_pieces(written, lambda g: g.path, {}, decompose=False)
     for q in np.linspace(0.0, 1.5, 7):
-        assert cg.parent_child_depths(written, after, {"hinge": float(q)})[("body", "lid")] <= cg.CONTAINMENT_TOLERANCE + 1e-9
+        assert pp.parent_child_depths(written, after, {"hinge": float(q)})[("body", "lid")] <= cp.CONTAINMENT_TOLERANCE + 1e-9
     assert sum(p.volume for p in after["lid"]) == pytest.approx(0.06 * 0.06 * 0.03, rel=1e-6)  # the post was cut, not the lid
     mujoco = pytest.importorskip("mujoco")
-    assert parent_child_penetration(out.urdf, {"hinge": 0.0}, engine="mujoco").value <= cg.CONTAINMENT_TOLERANCE * 1000
+    assert parent_child_penetration(out.urdf, {"hinge": 0.0}, engine="mujoco").value <= cp.CONTAINMENT_TOLERANCE * 1000
     assert mujoco.MjModel.from_xml_path(str(out.urdf)).ngeom >= 2
 
 
@@ -436,16 +437,16 @@ def test_a_child_sliding_through_its_parent_keeps_the_overlap_and_notes_its_dept
   <joint name="slide" type="prismatic"><parent link="body"/><child link="slider"/><axis xyz="0 0 1"/>
     <limit lower="0" upper="0.05"/></joint>
 </robot>""")
-    body = cg.Piece.of(_box([0.0, 0.0, 0.0], [0.01, 0.1, 0.02])[0])  # along y, 20 mm high
-    slider = cg.Piece.of(_box([-0.03, 0.045, -0.01], [0.04, 0.055, 0.015])[0])  # along x, across the body
+    body = cp.Piece.of(_box([0.0, 0.0, 0.0], [0.01, 0.1, 0.02])[0])  # along y, 20 mm high
+    slider = cp.Piece.of(_box([-0.03, 0.045, -0.01], [0.04, 0.055, 0.015])[0])  # along x, across the body
     joint = model.joint("slide")
-    d0, n0 = cg.penetration_depth(body, cg._transformed(slider, cg._joint_motion(joint, 0.0)))
-    d1, n1 = cg.penetration_depth(body, cg._transformed(slider, cg._joint_motion(joint, 0.02)))
+    d0, n0 = pp.penetration_depth(body, pp._transformed(slider, js._joint_motion(joint, 0.0)))
+    d1, n1 = pp.penetration_depth(body, pp._transformed(slider, js._joint_motion(joint, 0.02)))
     assert d0 == pytest.approx(0.015) and d1 == pytest.approx(0.01)
     assert np.allclose(n0, -n1) and abs(n0[2]) == pytest.approx(1.0)  # the situation: the direction flips
     pieces = {"body": [body], "slider": [slider]}
     notes: list[str] = []
-    cg.separate_parent_child(model, pieces, notes)
+    pcs.separate_parent_child(model, pieces, notes)
     assert [p is body for p in pieces["body"]] == [True] and [p is slider for p in pieces["slider"]] == [True]  # nothing cut
     (note,) = notes
     m = re.search(r"up to ([0-9.]+) mm .*; 1 overlap\(s\) of a link's last piece held whole inside another kept \(([0-9.]+) mm\)", note)
@@ -464,12 +465,12 @@ def test_sliding_contacts_between_parts_are_given_running_clearance(tmp_path):
     model = urdf.read_urdf(urdf_path)
     pieces, notes = cg.link_pieces(model, lambda g: urdf_path.parent / str(g.filename))
     (lower,), (upper,) = pieces["lower"], pieces["upper"]
-    assert lower.points[:, 2].min() == pytest.approx(0.005) and lower.points[:, 2].max() == pytest.approx(0.025 - cg.RUNNING_CLEARANCE)
+    assert lower.points[:, 2].min() == pytest.approx(0.005) and lower.points[:, 2].max() == pytest.approx(0.025 - sc.RUNNING_CLEARANCE)
     assert np.ptp(lower.points[:, 0]) == pytest.approx(0.06) and np.ptp(lower.points[:, 1]) == pytest.approx(0.04)
     assert upper.points[:, 2].min() == pytest.approx(0.025) and upper.points[:, 2].max() == pytest.approx(0.045)
-    g, _ = cg.sat_gap(lower.points, upper.points)
-    assert g >= cg.RUNNING_CLEARANCE - 1e-12
-    clear = [n for n in notes if cg.RUNNING_CLEARANCE_NOTE in n]
+    g, _ = sc.sat_gap(lower.points, upper.points)
+    assert g >= sc.RUNNING_CLEARANCE - 1e-12
+    clear = [n for n in notes if sc.RUNNING_CLEARANCE_NOTE in n]
     assert len(clear) == 1 and "'lower'" in clear[0] and "'slide_lower'" in clear[0]
 
 
@@ -485,8 +486,8 @@ def test_a_stop_along_the_motion_keeps_its_contact(tmp_path):
     (slider,) = pieces["slider"]
     assert np.ptp(slider.points[:, 0]) == pytest.approx(0.06)
     assert slider.points[:, 0].max() == pytest.approx(0.03)
-    assert np.ptp(slider.points[:, 1]) == pytest.approx(2 * W - 2 * cg.RUNNING_CLEARANCE)
-    assert len([n for n in notes if cg.RUNNING_CLEARANCE_NOTE in n]) == 2
+    assert np.ptp(slider.points[:, 1]) == pytest.approx(2 * W - 2 * sc.RUNNING_CLEARANCE)
+    assert len([n for n in notes if sc.RUNNING_CLEARANCE_NOTE in n]) == 2
 
 
 def test_clear_sliding_contact_leaves_deep_overlaps_and_stops():
@@ -495,12 +496,12 @@ def test_clear_sliding_contact_leaves_deep_overlaps_and_stops():
     ``deepest`` is left to the state search."""
     a = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
     along_x = lambda c: np.array([1.0, 0.0, 0.0])  # noqa: E731
-    pts, used, g = cg.clear_sliding_contact(a, a + [0.0, 1.0, 0.0], along_x)
-    assert g == pytest.approx(0.0) and used == pytest.approx(cg.RUNNING_CLEARANCE)
-    assert pts[:, 1].max() == pytest.approx(1.0 - cg.RUNNING_CLEARANCE) and pts[:, 1].min() == pytest.approx(0.0)
-    assert cg.clear_sliding_contact(a, a + [1.0, 0.0, 0.0], along_x) is None  # a stop
-    assert cg.clear_sliding_contact(a, a + [0.0, 1.1, 0.0], along_x) is None  # apart
-    assert cg.clear_sliding_contact(a, a + [0.0, 0.9, 0.0], along_x, deepest=0.05) is None  # 0.1 m deep
+    pts, used, g = sc.clear_sliding_contact(a, a + [0.0, 1.0, 0.0], along_x)
+    assert g == pytest.approx(0.0) and used == pytest.approx(sc.RUNNING_CLEARANCE)
+    assert pts[:, 1].max() == pytest.approx(1.0 - sc.RUNNING_CLEARANCE) and pts[:, 1].min() == pytest.approx(0.0)
+    assert sc.clear_sliding_contact(a, a + [1.0, 0.0, 0.0], along_x) is None  # a stop
+    assert sc.clear_sliding_contact(a, a + [0.0, 1.1, 0.0], along_x) is None  # apart
+    assert sc.clear_sliding_contact(a, a + [0.0, 0.9, 0.0], along_x, deepest=0.05) is None  # 0.1 m deep
 
 
 def test_pieces_are_kept_on_disk_by_content_and_code(tmp_path, monkeypatch):
@@ -599,7 +600,7 @@ def test_a_free_standing_body_stands_on_every_foot(tmp_path):
     assert _foot_bottoms(plain["body"]) == pytest.approx([0.0006, 0.0, 0.0, 0.0], abs=1e-9)
     level, notes = cg.link_pieces(model, path, {"hinge": 0.0}, level=True)
     assert _foot_bottoms(level["body"]) == pytest.approx([0.0, 0.0, 0.0, 0.0], abs=1e-9)
-    (line,) = [n for n in notes if cg.LEVEL_NOTE in n]
+    (line,) = [n for n in notes if fp.LEVEL_NOTE in n]
     assert "'body'" in line and "0.6 mm" in line
     assert [p.points.tolist() for p in level["lid"]] == [p.points.tolist() for p in plain["lid"]]  # a moving link is left alone
 
@@ -610,7 +611,7 @@ def test_a_foot_far_off_the_ground_is_not_levelled(tmp_path):
     model = urdf.read_urdf(folder / "mobility.urdf")
     level, notes = cg.link_pieces(model, lambda g: folder / str(g.filename), {"hinge": 0.0}, level=True)
     assert _foot_bottoms(level["body"]) == pytest.approx([0.003, 0.0, 0.0, 0.0], abs=1e-9)
-    assert not [n for n in notes if cg.LEVEL_NOTE in n]
+    assert not [n for n in notes if fp.LEVEL_NOTE in n]
 
 
 def _feet_on_the_ground(urdf_path: Path) -> int:

@@ -142,7 +142,7 @@ def test_mesh_reached_through_a_symlink_keeps_its_material(tmp_path):
     MTL changes the input hash."""
     from asset2sim import mesh_io
     from asset2sim.tasks.ingest.validate_input import validate_asset
-    from asset2sim.tasks.assemble import write
+    from asset2sim.tasks.assemble import copied_meshes
     from tests import corpus_builder as cb
 
     src = cb.build_valid(tmp_path / "in")
@@ -157,7 +157,7 @@ def test_mesh_reached_through_a_symlink_keeps_its_material(tmp_path):
     assert hint.severity == "info" and "textured_objs" in hint.message and "meshes/base.mtl" in hint.message
     asset = extract_asset(src)
     out = tmp_path / "out"
-    write.copy_meshes(asset, out)
+    copied_meshes.copy_meshes(asset, out)
     obj = out / "textured_objs" / "a.obj"
     assert obj.is_file() and not obj.is_symlink()
     deps = mesh_io.obj_material_files(obj)  # as a loader of the output looks for them

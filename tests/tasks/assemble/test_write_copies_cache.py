@@ -11,7 +11,7 @@ import pytest
 
 from asset2sim import demo_assets
 from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.tasks.assemble import write
+from asset2sim.tasks.assemble import copied_meshes
 from tests.conftest import SHARED
 
 
@@ -28,12 +28,12 @@ def _bump(path):
 
 def test_cached_answer_equals_a_fresh_one_and_follows_edits(cabinet):
     asset = extract_asset(cabinet)
-    first = write.mesh_copies(asset)
-    assert first == write._mesh_copies(asset)
-    again = write.mesh_copies(asset)
+    first = copied_meshes.mesh_copies(asset)
+    assert first == copied_meshes._mesh_copies(asset)
+    again = copied_meshes.mesh_copies(asset)
     assert again == first and again is not first  # a copy: callers may not change the cache
     again.clear()
-    assert write.mesh_copies(asset) == first
+    assert copied_meshes.mesh_copies(asset) == first
 
     # an OBJ gains an MTL library with a texture: both must be copied now
     obj = sorted(p for p in first.values() if p.suffix == ".obj")[0]
@@ -41,15 +41,15 @@ def test_cached_answer_equals_a_fresh_one_and_follows_edits(cabinet):
     (obj.parent / "added_lib.mtl").write_text("newmtl m\nmap_Kd added_tex.png\n")
     (obj.parent / "added_tex.png").write_bytes(b"\x89PNG")
     _bump(obj)
-    edited = write.mesh_copies(asset)
-    assert edited == write._mesh_copies(asset)
+    edited = copied_meshes.mesh_copies(asset)
+    assert edited == copied_meshes._mesh_copies(asset)
     assert any(k.endswith("added_lib.mtl") for k in edited) and any(k.endswith("added_tex.png") for k in edited)
 
     # the MTL loses its texture line: the texture is no longer copied
     mtl = next(v for k, v in edited.items() if k.endswith("added_lib.mtl"))
     mtl.write_text("newmtl m\n")
     _bump(mtl)
-    assert not any(k.endswith("added_tex.png") for k in write.mesh_copies(asset))
+    assert not any(k.endswith("added_tex.png") for k in copied_meshes.mesh_copies(asset))
 
 
 def test_cache_on_a_real_asset_is_identical(tmp_path):
@@ -58,10 +58,10 @@ def test_cache_on_a_real_asset_is_identical(tmp_path):
         pytest.skip("PartNet-Mobility object 100221 not available")
     shutil.copytree(src, tmp_path / "a")
     asset = extract_asset(tmp_path / "a")
-    fresh = write._mesh_copies(asset)
+    fresh = copied_meshes._mesh_copies(asset)
     assert len(fresh) > 50
-    assert write.mesh_copies(asset) == fresh
-    assert write.mesh_copies(asset) == fresh  # from the cache
+    assert copied_meshes.mesh_copies(asset) == fresh
+    assert copied_meshes.mesh_copies(asset) == fresh  # from the cache
     victim = sorted(p for p in fresh.values() if p.suffix == ".mtl")[0]
     victim.unlink()  # a removed MTL is no longer copied
-    assert write.mesh_copies(asset) == write._mesh_copies(asset) != fresh
+    assert copied_meshes.mesh_copies(asset) == copied_meshes._mesh_copies(asset) != fresh

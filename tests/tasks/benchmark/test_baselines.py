@@ -202,7 +202,7 @@ def test_human_baseline_stability_on_the_thesis_set(shared_dataset, tmp_path):
     """The research saw 8 of 9 GenSim2 assets stable (Isaac Sim). Under the
     SPEC's PyBullet conventions with PyBullet's defaults for the missing
     inertials 7 of 9 are: the two staplers' and suitcases' cases are explained
-    in docs/metrics.md (self-penetration of the stapler's hulls; the COM of
+    in docs/design/metrics.md (self-penetration of the stapler's hulls; the COM of
     every link at its link frame origin tips the suitcase)."""
     from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from asset2sim.engines import base, registry
-from asset2sim.engines.fake import FakeBehaviour, fake_behaviour, write_contract_asset
+from asset2sim.engines.contract_asset import write_contract_asset
+from asset2sim.engines.fake import FakeBehaviour, fake_behaviour
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table, worst_case
 from tests.conftest import SHARED, needs_shared
 
@@ -116,7 +117,7 @@ def test_a_chest_resting_still_in_pybullet_rests_still_in_physx(tmp_path):
     """With SAPIEN's default 10 solver iterations the refined treasure chest
     (lid a quarter open) crept on the plane in PhysX (D_pos 1.36 mm, D_ori
     0.0093 rad over the 2 s test) while PyBullet measured 4e-6 m; with
-    ManiSkill 3's 15 it rests in both (docs/simulators.md)."""
+    ManiSkill 3's 15 it rests in both (docs/design/simulators.md)."""
     pytest.importorskip("sapien")
     from asset2sim.tasks.refine import refine_asset
 

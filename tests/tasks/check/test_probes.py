@@ -12,14 +12,11 @@ from asset2sim.engines.base import EngineUnsupported, SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.check.probes import (
-    MAX_PUSH_TIME,
-    TRAVEL_TIME_MARGIN,
-    ProbeConfig,
     probe_joint,
     probes_metric,
-    push_budget,
     run_probes,
 )
+from asset2sim.tasks.check.pusher import MAX_PUSH_TIME, TRAVEL_TIME_MARGIN, ProbeConfig, push_budget
 from asset2sim.urdf import read_urdf
 
 

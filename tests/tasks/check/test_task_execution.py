@@ -11,7 +11,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import available_engines, open_session
-from asset2sim.engines.fake import write_contract_asset
+from asset2sim.engines.contract_asset import write_contract_asset
 from asset2sim.tasks.check.force_ranges import (
     OperatingForcesError,
     force_metric,
@@ -19,7 +19,8 @@ from asset2sim.tasks.check.force_ranges import (
     operating_range,
     parse_operating_forces,
 )
-from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits, contact_point, contact_point_rule, grasp_side
+from asset2sim.tasks.check.contact_points import contact_point, contact_point_rule, grasp_side
+from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.task_execution import TaskConfig, run_task, task_metric
 from asset2sim.urdf import read_urdf
 

@@ -327,7 +327,7 @@ def _independent():
 
 @pytest.mark.parametrize("case", ["spheres", "rolling", "resting", "ringing", "damped", "soft", "spring"])
 def test_independent_reimplementation_agrees(tmp_path, case):
-    """docs/metrics.md re-implemented with plain pybullet calls gives the same
+    """docs/design/metrics.md re-implemented with plain pybullet calls gives the same
     numbers and verdicts as evaluate_asset (pass and fail cases)."""
     bench = _independent()
     springs = None
@@ -387,6 +387,23 @@ def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
     assert not (tmp_path / "o2" / "report.html").exists()
     assert "ground_penetration" in capsys.readouterr().out
     assert main(["evaluate", str(tmp_path / "missing")]) == 2
+
+
+def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys):
+    """``asset2sim evaluate OUT`` without ``--out`` writes beside OUT: every
+    file of OUT stays byte-equal and the next identical refine is skipped."""
+    from asset2sim import atomic
+    from asset2sim.cli import main
+    from asset2sim.tasks.refine import refine_asset
+
+    out = tmp_path / "box"
+    refine_asset(demo_root / "box_lid", "a box with its lid slightly open", out, extras=False)
+    before = atomic.tree_hashes(out)
+    assert main(["evaluate", str(out), "--no-probes"]) in (0, 1)
+    assert atomic.tree_hashes(out) == before
+    assert (tmp_path / "box-evaluation" / "evaluation.json").is_file() and (tmp_path / "box-evaluation" / "report.html").is_file()
+    assert str(tmp_path / "box-evaluation" / "evaluation.json") in capsys.readouterr().out
+    assert refine_asset(demo_root / "box_lid", "a box with its lid slightly open", out, extras=False).skipped
 
 
 # ------------------------------------------------ the rest test once per engine

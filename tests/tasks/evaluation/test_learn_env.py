@@ -14,13 +14,15 @@ from asset2sim.tasks.check.gripper import GripperLimits  # noqa: E402
 from asset2sim.tasks.evaluation.learn_env import (  # noqa: E402
     ACTION_DIM,
     OBS_DIM,
-    START_FRACTION,
-    START_MAX_ANGLE,
     LearnConfig,
     TaskEnv,
+    run_episode,
+)
+from asset2sim.tasks.evaluation.learn_task import (  # noqa: E402
+    START_FRACTION,
+    START_MAX_ANGLE,
     common_start,
     prepare_task,
-    run_episode,
     targets_for,
 )
 

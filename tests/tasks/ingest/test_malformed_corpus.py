@@ -158,7 +158,7 @@ def test_face_cap_counts_visual_only_meshes(tmp_path):
 
 
 def test_default_caps_are_documented():
-    doc = (ROOT / "docs" / "validation.md").read_text()
+    doc = (ROOT / "docs" / "design" / "validation.md").read_text()
     pol = vi.DEFAULT_POLICY
     assert pol.max_total_faces == vi.MAX_TOTAL_FACES and f"{vi.MAX_TOTAL_FACES:,}" in doc
     assert pol.max_links == vi.MAX_LINKS == 128

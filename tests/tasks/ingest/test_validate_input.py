@@ -259,7 +259,7 @@ def test_cli_validate_exit_codes_and_output(tmp_path, capsys):
 
 
 def test_docs_list_every_code():
-    doc = (ROOT / "docs" / "validation.md").read_text()
+    doc = (ROOT / "docs" / "guide" / "validation.md").read_text()
     missing = [c for c in vi.CODES if f"`{c}`" not in doc]
     assert missing == []
 

@@ -473,7 +473,7 @@ def test_missing_and_malformed_files(tmp_path: Path) -> None:
 
 
 def test_docs_list_every_category() -> None:
-    doc = (ROOT / "docs" / "priors.md").read_text()
+    doc = (ROOT / "docs" / "design" / "priors.md").read_text()
     for name in P.load_priors().categories:
         assert f"| {name} " in doc, name
     for key in P.load_priors().materials:
@@ -481,7 +481,7 @@ def test_docs_list_every_category() -> None:
 
 
 def _fmt_mass(x: float) -> str:
-    """The number format of docs/priors.md's mass table."""
+    """The number format of docs/design/priors.md's mass table."""
     if x >= 100:
         return f"{x:.0f}"
     if x >= 10:
@@ -494,7 +494,7 @@ def _fmt_mass(x: float) -> str:
 
 
 def test_docs_mass_table_equals_mass_range() -> None:
-    doc = (ROOT / "docs" / "priors.md").read_text()
+    doc = (ROOT / "docs" / "design" / "priors.md").read_text()
     section = doc.split("## Plausible total mass per category and size class (kg)")[1].split("\n## ")[0]
     rows = {
         cells[0]: cells[1:]

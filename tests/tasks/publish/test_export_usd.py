@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.fake import write_contract_asset
+from asset2sim.engines.contract_asset import write_contract_asset
 from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.overlay import Inertia
@@ -252,7 +252,7 @@ def test_refined_dev_objects_export(asset_id, prompt, tmp_path):
 
 
 # ------------------------------------------------------------ docs snippets
-DOC = Path(__file__).resolve().parents[3] / "docs" / "simulators.md"
+DOC = Path(__file__).resolve().parents[3] / "docs" / "guide" / "simulators.md"
 
 
 def _doc_snippets() -> list[str]:
@@ -261,7 +261,7 @@ def _doc_snippets() -> list[str]:
 
 
 def test_docs_snippets_load_an_output(contract):
-    """Every loading snippet of docs/simulators.md whose simulator is
+    """Every loading snippet of docs/guide/simulators.md whose simulator is
     installed here runs on a real output folder (USD and MJCF exported)."""
     import importlib.util
 

@@ -1,0 +1,356 @@
+"""The Python API: what ``import asset2sim`` offers.
+
+Refine an asset, evaluate or validate one, export an output folder to MJCF or
+USD, and load an output into PyBullet, SAPIEN (PhysX) or MuJoCo exactly as
+asset2sim verified it::
+
+    import asset2sim
+
+    result = asset2sim.refine("path/to/103275", "a slightly open stapler", "out/stapler")
+    print(result.ready, result.report.failure_mode)
+    robot = asset2sim.load_pybullet("out/stapler", client)   # client = pybullet.connect(...)
+
+Every function here is a thin, typed front of the stages (``asset2sim.tasks``);
+the command line (``asset2sim refine`` ...) calls the same stages. Units: SI,
+radians (revolute) and metres (prismatic) for joint positions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import ValidationError
+
+from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.loading import read_initial_state
+from asset2sim.engines.registry import open_session
+from asset2sim.output_folder import URDF_NAME
+from asset2sim.schemas.config import RefineConfig, SimConventions
+from asset2sim.schemas.evaluation import Evaluation
+from asset2sim.schemas.request import RequestOverrides
+from asset2sim.tasks.assemble.export_mjcf import export_mjcf, springs_from_overlay
+from asset2sim.tasks.assemble.write import read_root
+from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, validate_asset
+from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.tasks.publish.export_usd import export_usd
+from asset2sim.tasks.refine import RefineError, RefineResult, refine_asset
+
+__all__ = [
+    "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides", "SimConventions",
+    "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
+]
+
+
+def load_config(config: RefineConfig | Mapping[str, Any] | str | Path | None) -> RefineConfig:
+    """A :class:`RefineConfig` from itself, a mapping of its fields, or a YAML
+    file of them (``estimator: offline``, ``sim: {timestep: 0.004}`` ...);
+    None gives the defaults.
+
+    Raises:
+        FileNotFoundError: the YAML file does not exist.
+        ValueError: the file is not YAML or not a mapping, or a field is
+            unknown or invalid (the message names the file and the field).
+    """
+    if config is None:
+        return RefineConfig()
+    if isinstance(config, RefineConfig):
+        return config
+    source = "the configuration"
+    if isinstance(config, (str, Path)):
+        path = Path(config)
+        source = str(path)
+        try:
+            config = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not YAML: {exc}") from exc
+        if config is None:
+            config = {}
+    if not isinstance(config, Mapping):
+        raise ValueError(f"{source}: expected a mapping of RefineConfig fields, got {type(config).__name__}")
+    try:
+        return RefineConfig.model_validate(dict(config))
+    except ValidationError as exc:
+        fields = "; ".join(f"{'.'.join(str(x) for x in e['loc']) or 'value'}: {e['msg']}" for e in exc.errors())
+        raise ValueError(f"{source}: {fields}") from exc
+
+
+def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str, Any]) -> RequestOverrides:
+    """``base`` with the fields ``more`` sets replacing its own (``state``
+    entries added, a joint named in both taking ``more``'s).
+
+    Raises:
+        ValueError: a value of ``more`` is invalid (the message names the field).
+    """
+    given = more.model_dump(exclude_none=True, exclude_defaults=True) if isinstance(more, RequestOverrides) else dict(more)
+    merged = base.model_dump(exclude_none=True)
+    state = {**merged.get("state", {}), **dict(given.pop("state", None) or {})}
+    merged.update(given)
+    if state:
+        merged["state"] = state
+    try:
+        return RequestOverrides.model_validate(merged)
+    except ValidationError as exc:
+        raise ValueError("overrides: " + "; ".join(f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}" for e in exc.errors())) from exc
+
+
+def refine(
+    asset: str | Path,
+    prompt: str = "",
+    out_dir: str | Path = "out",
+    *,
+    config: RefineConfig | Mapping[str, Any] | str | Path | None = None,
+    overrides: RequestOverrides | Mapping[str, Any] | None = None,
+    task: str | None = None,
+    category: str | None = None,
+    force: bool = False,
+    overwrite: bool = False,
+    extras: bool = True,
+    progress: Callable[[str, str], None] | None = None,
+) -> RefineResult:
+    """Refine one articulated asset for a natural-language request.
+
+    Writes ``out_dir`` (``mobility.urdf``, meshes, ``initial_state.json``,
+    ``overlay.json``, ``report.json`` and, with ``extras``, ``report.html``,
+    the MJCF export and renders); the same as ``asset2sim refine``.
+
+    Args:
+        asset: a PartNet-Mobility-style folder (``mobility.urdf`` + meshes) or a
+            URDF file. Never modified.
+        prompt: the request, e.g. "a slightly open stapler" ("" = the
+            category's defaults: typical size, closed).
+        out_dir: the output folder (created; must not be inside the input).
+        config: :class:`RefineConfig`, a mapping of its fields or a YAML file
+            (:func:`load_config`).
+        overrides: values that win over the prompt's words, as
+            :class:`RequestOverrides` or a mapping of its fields: ``mass``
+            ("12kg" or kg), ``size`` ("0.5m" or m: the closed object's largest
+            extent), ``scale``, ``state`` ({joint name or part label: "30deg",
+            "2cm", 0.4 (opening fraction) or "halfway"}), ``mount`` ("fixed" or
+            "free"), ``material`` (a ``materials.yaml`` key). They replace the
+            configuration's own ``overrides`` field by field (``state`` adds).
+        task: a manipulation task ("close the microwave door") the check
+            executes with a force-limited gripper.
+        category: overrides the asset's own category.
+        force: redo even when ``out_dir`` is complete for this input and
+            configuration (otherwise the recorded result is returned).
+        overwrite: write into a folder that holds files asset2sim did not write.
+        extras: also write report.html, the MJCF export and renders.
+        progress: called with (stage, message) as the run goes.
+
+    Returns:
+        :class:`RefineResult`: ``out_dir``, ``report`` (a pydantic
+        :class:`~asset2sim.schemas.report.RefineReport`; ``report.failure_mode``
+        is "none" when every check passed), ``overlay``, ``ready`` and
+        :meth:`RefineResult.to_json`.
+
+    Raises:
+        RefineError: the input, the request, an override (codes
+            ``OVERRIDE_*``: unknown joint or part, wrong kind, beyond the
+            joint's range, unknown material) or the output folder was refused,
+            or the estimator failed (``failure_mode`` and ``codes`` say which).
+        ValueError: ``config`` or ``overrides`` is invalid (a unit missing or
+            unknown, a negative value, an unknown field).
+    """
+    cfg = load_config(config)
+    if overrides:
+        cfg = cfg.model_copy(update={"overrides": merge_overrides(cfg.overrides, overrides)})
+    return refine_asset(asset, prompt, out_dir, cfg, task=task, category=category, progress=progress,
+                        skip_if_complete=not force, overwrite=overwrite, extras=extras)
+
+
+def evaluate(
+    asset: str | Path,
+    *,
+    prompt: str | None = None,
+    task: str | None = None,
+    reference: str | Path | None = None,
+    engines: tuple[str, ...] | list[str] = ("pybullet",),
+    category: str | None = None,
+    probes: bool = True,
+    write_to: str | Path | None = None,
+) -> Evaluation:
+    """Evaluate any articulated URDF asset (a refine output or not) with every
+    metric: rest stability, penetration (mm), oscillation, the probes and,
+    when given, prompt alignment and the task.
+
+    Nothing is written unless ``write_to`` names a folder (``evaluation.json``
+    and ``report.html`` go there); a refine output is never changed.
+
+    Args:
+        asset: a folder holding one URDF (``initial_state.json``,
+            ``overlay.json`` beside it are used) or a URDF file.
+        prompt: the request to score prompt alignment against (None: skipped).
+        task: the manipulation task the probes try.
+        reference: a PartNet-Mobility folder with ``reference_gensim2.json``.
+        engines: simulators to measure in (``pybullet``, ``physx``, ``mujoco``);
+            unavailable ones are recorded as skipped.
+        category: overrides the category found beside the asset.
+        probes: run the passive probes.
+        write_to: folder for ``evaluation.json`` and ``report.html``.
+
+    Returns:
+        :class:`~asset2sim.schemas.evaluation.Evaluation` (pydantic;
+        ``passed``, ``metrics``, ``model_dump_json()``).
+
+    Raises:
+        EvaluationError: the asset cannot be evaluated (no URDF, unreadable).
+        OutputError: ``write_to`` cannot be written.
+    """
+    return evaluate_asset(asset, reference=reference, prompt=prompt, engines=tuple(engines), category=category,
+                          out_dir=write_to, write_report=write_to is not None, probes=probes, task=task)
+
+
+def validate(asset: str | Path, policy: ValidationPolicy | None = None) -> list[Finding]:
+    """The validation findings of an input asset (safe XML, kinematic tree,
+    numbers, inertials, mesh paths and contents), as ``asset2sim validate``.
+
+    Args:
+        asset: an asset folder or a URDF file. Never modified.
+        policy: severities and caps (default: the product's).
+
+    Returns:
+        :class:`~asset2sim.schemas.report.Finding` list (``code``,
+        ``severity``, ``file``, ``where``, ``message``); the asset is refused
+        iff one has severity ``error``. Never raises for bad input.
+    """
+    return validate_asset(asset, policy)
+
+
+def export(out_dir: str | Path, format: str = "mjcf", *, visuals: bool = True) -> Path:
+    """Export a refine output folder to MJCF (``OUT/mjcf/mobility.xml``:
+    springs, friction loss, the initial state as keyframe ``initial``) or USD
+    with UsdPhysics (``OUT/usd/mobility.usd``), and check the file reads back
+    with the same masses, inertias and state.
+
+    Args:
+        out_dir: a folder written by :func:`refine`.
+        format: ``"mjcf"`` (needs ``mujoco``) or ``"usd"`` (needs ``usd-core``).
+        visuals: include the visual meshes.
+
+    Returns:
+        The path of the written file.
+
+    Raises:
+        ValueError: unknown format, or ``out_dir`` is not an output folder.
+        ImportError: the format's package is not installed.
+        ExportError / UsdExportError: the export did not read back the same.
+    """
+    out = _output_folder(out_dir)
+    if format == "mjcf":
+        return export_mjcf(out, visuals=visuals)
+    if format == "usd":
+        return export_usd(out, visuals=visuals).path
+    raise ValueError(f"unknown export format {format!r} (mjcf or usd)")
+
+
+def _output_folder(out_dir: str | Path) -> Path:
+    out = Path(out_dir)
+    if not (out / URDF_NAME).is_file():
+        raise ValueError(f"{out}: has no {URDF_NAME} (not an asset2sim output folder)")
+    return out
+
+
+def verified_options(out_dir: str | Path, conventions: SimConventions | None = None) -> SessionOptions:
+    """The :class:`~asset2sim.engines.base.SessionOptions` asset2sim's checks
+    open an output folder with: the initial state (rad / m) of
+    ``initial_state.json``, the joint springs of ``overlay.json`` (N*m/rad or
+    N/m about their reference), the root fixed when the object is mounted
+    (no ground) or free on a ground plane at z = 0.
+
+    Raises:
+        ValueError: not an output folder, or its ``overlay.json`` is invalid.
+    """
+    out = _output_folder(out_dir)
+    state = read_initial_state(out)
+    return SessionOptions(initial_state=state, springs=springs_from_overlay(out, state),
+                          conventions=conventions or SimConventions(), **session_root_options(read_root(out).fixed))
+
+
+def _load(engine: str, out_dir: str | Path, **attach) -> SimSession:
+    out = _output_folder(out_dir)
+    return open_session(engine, out / URDF_NAME, verified_options(out), **attach)
+
+
+def load_pybullet(out_dir: str | Path, client: int | None = None, *, ground: bool = True) -> SimSession:
+    """Load a refine output into PyBullet as asset2sim verified it.
+
+    Applies the conventions the output's checks ran under: self-collision
+    between non-adjacent links, inertia from the file, each joint's
+    ``<dynamics friction>`` as a zero-target velocity motor of that force
+    (N or N*m), the initial state of ``initial_state.json``, the root welded
+    to the world when the object is mounted, else its lowest collision point
+    put on z = 0. Springs (``overlay.json``; URDF has none) act through
+    ``session.step()``; when stepping yourself, call
+    ``session.apply_passive_forces()`` before each ``pybullet.stepSimulation``.
+
+    Args:
+        out_dir: a folder written by :func:`refine`.
+        client: a PyBullet physics client id (``pybullet.connect``) to load
+            into; its gravity and time step stay yours (the checks used
+            -9.81 m/s^2 and 1/240 s). None: a new DIRECT client with those.
+        ground: add a plane at z = 0 (the checks' floor); False when your
+            world has its own floor there.
+
+    Returns:
+        The session (:class:`asset2sim.engines.base.SimSession`): ``cid`` the
+        client, ``body`` the body id, ``joint_positions()``, ``step(n)``,
+        ``close()`` (removes the body; disconnects only a client it made).
+
+    Raises:
+        ValueError: not an output folder.
+        RuntimeError: PyBullet cannot load the URDF.
+    """
+    return _load("pybullet", out_dir, **({} if client is None else {"client": client, "ground": ground}))
+
+
+def load_sapien(out_dir: str | Path, scene: Any = None, *, ground: bool = True) -> SimSession:
+    """Load a refine output into SAPIEN 3 (PhysX) as asset2sim verified it:
+    the collision pieces cooked as convex meshes, each joint's friction
+    (N or N*m) plus damping times its speed as a passive drive's force
+    limit, springs as joint forces ``-k (q - q_ref)``, the initial state,
+    the root fixed when mounted, else its lowest point put on z = 0.
+    Friction, damping and springs act through ``session.step()``; when
+    stepping yourself, call ``session.apply_passive_forces()`` before each
+    ``scene.step()``.
+
+    Args:
+        out_dir: a folder written by :func:`refine`.
+        scene: a ``sapien.Scene`` with a PhysX system to load into; its
+            gravity and time step stay yours (the checks used -9.81 m/s^2 and
+            1/240 s). None: a new CPU scene with those.
+        ground: add a plane at z = 0 (the checks' floor, friction 0.25);
+            False when your scene has its own floor there.
+
+    Returns:
+        The session: ``scene``, ``art`` (the ``PhysxArticulation``),
+        ``step(n)``, ``joint_positions()``, ``close()`` (removes what it
+        added to a scene you gave).
+
+    Raises:
+        ValueError: not an output folder.
+        EngineUnavailable: SAPIEN is not installed (``pip install 'asset2sim[physx]'``).
+    """
+    return _load("physx", out_dir, **({} if scene is None else {"scene": scene, "ground": ground}))
+
+
+def load_mujoco(out_dir: str | Path) -> SimSession:
+    """Load a refine output into MuJoCo as asset2sim verified it: compiled
+    from the URDF through the product's converter (``frictionloss``,
+    ``damping``, ``stiffness`` / ``springref`` on each joint, the initial
+    state as keyframe ``initial``, the root fixed when mounted, a ground
+    plane at z = 0 otherwise).
+
+    Returns:
+        The session: ``m`` (``mujoco.MjModel``), ``d`` (``mujoco.MjData``,
+        at the keyframe), ``build.xml`` (the MJCF text); ``mujoco.mj_step(m,
+        d)`` steps it as ``session.step()`` does.
+
+    Raises:
+        ValueError: not an output folder.
+        EngineUnavailable: MuJoCo is not installed (``pip install 'asset2sim[mujoco]'``).
+    """
+    return _load("mujoco", out_dir)

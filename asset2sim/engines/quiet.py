@@ -1,0 +1,101 @@
+"""Quiet simulators: C-level prints and import-time warnings kept out of
+the product's output (the library never prints; ``asset2sim --verbose``
+shows the start-up messages)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from contextlib import contextmanager
+
+#: Serializes the swaps of the process-wide file descriptors between threads
+#: (re-entrant: nested use in one thread is fine).
+_LOCK = threading.RLock()
+
+
+#: Environment variable: "1" shows the simulators' start-up messages
+#: (``asset2sim --verbose``); otherwise :func:`startup_quiet` hides them.
+STARTUP_MESSAGES = "ASSET2SIM_STARTUP_MESSAGES"
+#: Start of the import-time warnings :func:`startup_quiet` hides: SAPIEN's
+#: renderer probe (asset2sim never renders with SAPIEN).
+STARTUP_WARNINGS = ("Failed to find system libvulkan",)
+
+
+@contextmanager
+def startup_quiet():
+    """Hide a simulator's import-time messages (PyBullet's build-time line on
+    fd 2, the warnings of :data:`STARTUP_WARNINGS`) unless
+    :data:`STARTUP_MESSAGES` is "1"."""
+    import warnings
+
+    if os.environ.get(STARTUP_MESSAGES) == "1":
+        yield
+        return
+    with warnings.catch_warnings(), _quiet_fds((1, 2)):
+        for text in STARTUP_WARNINGS:
+            warnings.filterwarnings("ignore", message=text)
+        yield
+
+
+@contextmanager
+def quiet_stdout():
+    """Silence C-level prints of engines and renderers (Bullet's b3Warning ...)
+    on file descriptor 1 while the block runs: the library never prints.
+
+    Process-wide (file descriptors): threads take turns; nested use in one
+    thread is fine."""
+    with _quiet_fds((1,)):
+        yield
+
+
+@contextmanager
+def quiet_fds():
+    """Silence C-level prints on fd 1 and 2 (Bullet's b3Warning ...) while the block runs."""
+    with _quiet_fds((1, 2)):
+        yield
+
+
+@contextmanager
+def _quiet_fds(fds: tuple[int, ...]):
+    """File descriptors ``fds`` sent to /dev/null while the block runs (the
+    C library's and Python's buffers flushed on both sides)."""
+    with _LOCK:
+        yield from _swapped(fds)
+
+
+def _swapped(fds: tuple[int, ...]):
+    """The swap itself (a generator for :func:`_quiet_fds`)."""
+    saved = []
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):  # no stream, closed
+            pass
+    for fd in fds:
+        try:
+            saved.append((fd, os.dup(fd)))
+        except OSError:  # no such descriptor
+            pass
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    _flush_c_stdout()  # what C code buffered before the block goes out
+    try:
+        for fd, _ in saved:
+            os.dup2(devnull, fd)
+        yield
+    finally:
+        _flush_c_stdout()  # what it buffered inside (a pipe's stdout is block-buffered) goes to /dev/null
+        for fd, dup in saved:
+            os.dup2(dup, fd)
+            os.close(dup)
+        os.close(devnull)
+
+
+def _flush_c_stdout() -> None:
+    """``fflush(stdout)`` of the C library (its buffer outlives a dup2 of fd 1)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # pragma: no cover - no C library symbols
+        pass

@@ -1,0 +1,312 @@
+"""Convex collision pieces: the hull of a point set (:class:`Piece`), never
+flat, written as an OBJ wound outward, at most a few per link (the greedy
+hierarchical merge of Mamou and Ghorbel, "A simple and efficient approach for
+3D mesh approximate convex decomposition", ICIP 2009: :func:`merge_pieces`)."""
+
+from __future__ import annotations
+
+import hashlib
+import heapq
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from asset2sim import mesh_io
+from asset2sim.engines.loading import FLAT_HULL_THICKNESS
+
+#: Most convex pieces a link's collision keeps: MuJoCo makes one contact per
+#: colliding geom pair, so contacts grow with the pieces (laptop 9912's 118
+#: part meshes overflowed its arena in a 5 cm drop); the hulls asked of CoACD
+#: per mesh (:data:`asset2sim.tasks.state.collision.COACD_SETTINGS`), enough
+#: for a drawer or a cabinet with shelves to keep its hollow.
+MAX_PIECES_PER_LINK = 16
+
+#: Most pieces a link keeps when merging further would make a piece hold
+#: another link over the joints' ranges (a parent cut around its child).
+MAX_PIECES_HARD = 32
+
+#: Thinnest convex piece written, m: the 2 mm slab every engine here takes
+#: (PyBullet inflates a flat hull by its 1 mm margin per side; PhysX cannot
+#: cook a flat hull and MuJoCo refuses it).
+MIN_THICKNESS = FLAT_HULL_THICKNESS
+
+#: Width (m) under which a piece counts as flat and is grown to
+#: :data:`MIN_THICKNESS`: far above Qhull's precision (MuJoCo's "coplanar
+#: vertices" refusal, PhysX's failed cooking), far below any modelled wall.
+FLAT_WIDTH = 1e-4
+
+#: Depth (m) a child may sit inside its parent's collision pieces before the
+#: parent is cut: the SPEC's 2 mm penetration tolerance.
+CONTAINMENT_TOLERANCE = 0.002
+
+#: Relative tolerance (of a piece's size) under which a point counts as
+#: inside a hull (numerical noise of Qhull's plane equations).
+_INSIDE_EPS = 1e-9
+
+
+class CollisionGeometryError(RuntimeError):
+    """A link's collision geometry cannot be made into convex pieces (names the link and file)."""
+
+
+@dataclass
+class Piece:
+    """A convex piece in the link frame: ``points`` (k, 3) m (hull vertices),
+    ``equations`` (f, 4) outward planes (n, d with n.x + d <= 0 inside),
+    ``volume`` m^3; ``sources`` the mesh files it came from."""
+
+    points: np.ndarray
+    equations: np.ndarray
+    volume: float
+    sources: tuple[str, ...] = ()
+    _support: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _edges: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def support(self) -> np.ndarray:
+        """:func:`support_points` of the piece (computed once)."""
+        if self._support is None:
+            self._support = support_points(self.points)
+        return self._support
+
+    @classmethod
+    def of(cls, points: np.ndarray, sources: tuple[str, ...] = ()) -> "Piece":
+        """The hull of ``points`` (k, 3) m (Qhull once per distinct point
+        array in this process: :data:`_HULLS`; the arrays are shared, never
+        modified).
+
+        Raises:
+            QhullError, ValueError: the points span no volume.
+        """
+        hit = _memo(_HULLS, _HULLS_MAX, points, _hull)
+        return cls(hit[0], hit[1], hit[2], sources)
+
+
+def _hull(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(vertices (k, 3) m, outward planes (f, 4), volume m^3) of the hull of ``pts``."""
+    hull = ConvexHull(pts)
+    return hull.points[hull.vertices], hull.equations, float(hull.volume)
+
+
+def _memo(cache: dict, most: int, points: np.ndarray, make: Callable[[np.ndarray], object]):
+    """``make`` of ``points`` (as contiguous floats), kept in ``cache`` by
+    (shape, SHA-1 of the points); the oldest entry dropped beyond ``most``."""
+    pts = np.ascontiguousarray(points, dtype=float)
+    key = (pts.shape, hashlib.sha1(pts.tobytes()).digest())
+    hit = cache.get(key)
+    if hit is None:
+        hit = make(pts)
+        if len(cache) >= most:
+            cache.pop(next(iter(cache)))
+        cache[key] = hit
+    return hit
+
+
+#: Hulls (:func:`_hull`) and OBJ bytes (:func:`piece_obj`) made in this
+#: process: a refine run builds the same pieces at every write (state search,
+#: post-check, escalation rounds), the greedy merge tries the same pairs again.
+_HULLS: dict[tuple, tuple[np.ndarray, np.ndarray, float]] = {}
+_HULLS_MAX = 5000
+_OBJS: dict[tuple, bytes] = {}
+
+
+def solid_points(points: np.ndarray, thickness: float = MIN_THICKNESS, flat: float = None) -> np.ndarray | None:
+    """``points`` (k, 3) m, grown to ``thickness`` m along their thinnest
+    principal direction (both sides equally) when they are thinner than
+    ``flat`` m (default :data:`FLAT_WIDTH`); None when they span no area
+    (fewer than 3 points, or all on a line)."""
+    flat = FLAT_WIDTH if flat is None else flat
+    p = np.asarray(points, float)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if len(p) < 3:
+        return None
+    c = p.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+    scale = max(float(sv[0]), 1e-12)
+    if len(sv) < 2 or sv[1] <= 1e-9 * scale:
+        return None
+    n = vt[2] if vt.shape[0] == 3 else np.cross(vt[0], vt[1])
+    n = n / np.linalg.norm(n)
+    width = float(np.ptp(p @ n))
+    if width >= min(flat, thickness):
+        return p
+    h = 0.5 * (thickness - width)
+    return np.vstack([p + h * n, p - h * n])
+
+
+def solid_piece(points: np.ndarray, sources: tuple[str, ...] = ()) -> Piece | None:
+    """The :class:`Piece` of :func:`solid_points` of ``points`` (k, 3) m, or
+    None when they span no area or no volume."""
+    solid = solid_points(points)
+    if solid is None:
+        return None
+    try:
+        return Piece.of(solid, sources)
+    except (QhullError, ValueError):
+        return None
+
+
+def _sphere_directions(n: int = 100) -> np.ndarray:
+    """``n`` unit vectors (n, 3) spread evenly over the sphere (Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    phi = np.arccos(1 - 2 * i / n)
+    theta = np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=1)
+
+
+_DIRECTIONS = _sphere_directions()
+
+
+def support_points(points: np.ndarray) -> np.ndarray:
+    """The extreme points (<= 100, 3) of ``points`` (k, 3) along 100 evenly
+    spread directions: their hull is inside the hull of ``points`` and close
+    to it (within the polytope approximation error of 100 support directions)."""
+    p = np.asarray(points, float)
+    if len(p) <= len(_DIRECTIONS):
+        return p
+    return p[np.unique(np.argmax(p @ _DIRECTIONS.T, axis=0))]
+
+
+def piece_obj(piece: Piece) -> bytes:
+    """OBJ bytes of ``piece``: its hull vertices and triangles wound so that
+    every face normal (right-hand rule) points outward (made once per
+    distinct point array in this process, :data:`_OBJS`)."""
+    return _memo(_OBJS, 4096, piece.points, mesh_io.hull_obj)
+
+
+def depth_inside(points: np.ndarray, piece: Piece) -> float:
+    """Largest depth (m, >= 0) of any of ``points`` (k, 3) inside ``piece``
+    (distance to the nearest face plane of a point inside the hull)."""
+    if len(points) == 0:
+        return 0.0
+    lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
+    points = points[np.all((points > lo) & (points < hi), axis=1)]  # only points in the box can be inside
+    if len(points) == 0:
+        return 0.0
+    d = np.max(points @ piece.equations[:, :3].T + piece.equations[:, 3], axis=1)
+    return float(max(0.0, -d.min()))
+
+
+def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = None, neighbours: int = 8,
+                 *, free_only: bool = False) -> list[Piece]:
+    """At most ``limit`` pieces: the pair whose merged hull adds the least
+    volume (``vol(hull(A u B)) - vol(A) - vol(B)``, m^3) is merged first,
+    among each piece's ``neighbours`` nearest pieces (by centre). A merge that
+    would newly contain any of ``others`` (k, 3) m (other links' vertices in
+    this link's frame) costs more than any merge that does not; with
+    ``free_only`` such merges are never made (merging stops before one)."""
+    pieces = list(pieces)
+    if len(pieces) <= limit:
+        return pieces
+    others = np.zeros((0, 3)) if others is None else np.asarray(others, float)
+    others = others[np.argsort(others[:, 0], kind="stable")]  # by x: a box's points are one slice of it
+    xs = others[:, 0]
+    alive = {i: p for i, p in enumerate(pieces)}
+    nxt = len(pieces)
+    penalty = 1.0 + sum(p.volume for p in pieces) * 1e6
+
+    def cost(a: Piece, b: Piece) -> tuple[float, Piece | None]:
+        try:  # on support points (an inner approximation of each hull): Qhull's time grows with the points
+            m = Piece.of(np.vstack([a.support, b.support]))
+        except (QhullError, ValueError):
+            return float("inf"), None
+        c = m.volume - a.volume - b.volume
+        if len(others):
+            lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+            band = others[np.searchsorted(xs, lo[0], "left"):np.searchsorted(xs, hi[0], "right")]
+            near = band[np.all((band[:, 1:] >= lo[1:]) & (band[:, 1:] <= hi[1:]), axis=1)]
+            size = float(np.ptp(m.points, axis=0).max())
+            if len(near):
+                inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
+                if inside_m.any():
+                    before = np.zeros(len(near), bool)
+                    for p in (a, b):
+                        before |= np.max(near @ p.equations[:, :3].T + p.equations[:, 3], axis=1) < -_INSIDE_EPS * size
+                    if (inside_m & ~before).any():
+                        c += penalty
+        return c, m
+
+    def centre(p: Piece) -> np.ndarray:
+        return p.points.mean(axis=0)
+
+    heap: list[tuple[float, int, int]] = []
+    merged: dict[tuple[int, int], Piece] = {}
+
+    def push_for(i: int) -> None:
+        ids = [j for j in alive if j != i]
+        if not ids:
+            return
+        cs = np.array([centre(alive[j]) for j in ids])
+        order = np.argsort(np.linalg.norm(cs - centre(alive[i]), axis=1))[:neighbours]
+        for o in order:
+            j = ids[int(o)]
+            key = (min(i, j), max(i, j))
+            if key in merged:
+                continue
+            c, m = cost(alive[key[0]], alive[key[1]])
+            if m is not None:
+                merged[key] = m
+                heapq.heappush(heap, (c, key[0], key[1]))
+
+    for i in list(alive):
+        push_for(i)
+    while len(alive) > limit and heap:
+        c, i, j = heapq.heappop(heap)
+        if i not in alive or j not in alive:
+            continue
+        if free_only and c >= penalty:
+            break
+        merged.pop((i, j))
+        a, b = alive.pop(i), alive.pop(j)
+        alive[nxt] = Piece.of(np.vstack([a.points, b.points]), a.sources + tuple(s for s in b.sources if s not in a.sources))
+        push_for(nxt)
+        nxt += 1
+    if len(alive) > limit and not free_only:  # no neighbour pair could merge: merge everything left into the limit by order
+        rest = list(alive.values())
+        while len(rest) > limit:
+            a, b = rest.pop(), rest.pop()
+            rest.append(Piece.of(np.vstack([a.points, b.points]), a.sources + b.sources))
+        return rest
+    return list(alive.values())
+
+
+def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:
+    """``piece`` cut by the half-space ``normal . x + offset <= 0`` (m): the
+    hull of its vertices inside the half-space and of the points where its
+    edges cross the plane; None when nothing with volume is left."""
+    verts, tris = mesh_io.convex_hull_mesh(piece.points)
+    s = verts @ normal + offset
+    keep = [verts[s <= 0]]
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    a, b = edges[:, 0], edges[:, 1]
+    cross = (s[a] > 0) != (s[b] > 0)
+    if cross.any():
+        t = s[a[cross]] / (s[a[cross]] - s[b[cross]])
+        keep.append(verts[a[cross]] + t[:, None] * (verts[b[cross]] - verts[a[cross]]))
+    return solid_piece(np.vstack(keep), piece.sources)
+
+
+#: Volume (m^3) under which a piece a cut or trim left is a sliver and is
+#: dropped: 1 mm^3. PyBullet collides the 0.1 mm flakes cuts leave on a cut
+#: plane as 2 mm deep contacts (its convex margin; stapler 103275).
+MIN_PIECE_VOLUME = 1e-9
+
+
+def drop_slivers(pieces: list[Piece]) -> list[Piece]:
+    """``pieces`` without slivers (volume < :data:`MIN_PIECE_VOLUME`) and
+    without pieces whose every vertex lies inside another piece (a
+    duplicate adds no volume); the largest piece is always kept."""
+    if len(pieces) <= 1:
+        return list(pieces)
+    order = sorted(range(len(pieces)), key=lambda i: -pieces[i].volume)
+    kept: list[Piece] = []
+    for i in order:
+        p = pieces[i]
+        if kept and p.volume < MIN_PIECE_VOLUME:
+            continue
+        size = float(np.ptp(p.points, axis=0).max())
+        if any(np.all(p.points @ q.equations[:, :3].T + q.equations[:, 3] <= 1e-9 * max(size, 1e-9)) for q in kept):
+            continue
+        kept.append(p)
+    return [p for p in pieces if any(p is k for k in kept)]

@@ -1,0 +1,327 @@
+"""The input's meshes copied into the output folder: every mesh the URDF
+references, with the MTL libraries and textures it names, placed where the
+output URDF and the copied files look for them (regular files, never links);
+OBJ and MTL copies lose the statements naming files outside the asset folder."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+from collections import OrderedDict
+from pathlib import Path, PurePosixPath
+
+from asset2sim import atomic, mesh_io
+from asset2sim.output_folder import (EVALUATION_NAME, MARKER_NAME, OVERLAY_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME,
+                                     STATE_NAME, URDF_NAME, OutputError)
+from asset2sim.schemas.asset import AssetDescription
+
+
+def _inside(path: Path, root: Path, *, resolved: bool = False) -> bool:
+    """True when ``path`` lies inside ``root`` after resolving symlinks
+    (``resolved``: both are resolved already)."""
+    try:
+        (path if resolved else path.resolve()).relative_to(root if resolved else root.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def mesh_dependencies(mesh_path: Path, asset_root: Path) -> list[Path]:
+    """Files an OBJ mesh needs besides itself (MTL libraries and their texture
+    maps), as absolute paths inside ``asset_root``; missing or outside files are
+    skipped (visual only). Parsing: :func:`asset2sim.mesh_io.obj_material_files`."""
+    return mesh_io.obj_material_files(mesh_path, keep=lambda p: _inside(p, asset_root))
+
+
+#: output paths a copied input file may not take (the contract's own files)
+RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, REPORT_NAME, REPORT_HTML_NAME, EVALUATION_NAME, MARKER_NAME, RECORD_NAME})
+
+
+def _walked_dirs(asset: AssetDescription) -> list[str]:
+    """:func:`_reference_dirs` of every mesh reference of ``asset``, in order."""
+    return [d for g in _meshes(asset) if g.filename for d in _reference_dirs(g.filename)]
+
+
+def _reference_dirs(filename: str) -> list[str]:
+    """Folders (relative POSIX paths) that must exist in the output for the
+    path ``filename`` as written to open there: every folder the path walks
+    through, also those it leaves again with ``..`` (``dir/../m.obj`` needs
+    ``dir``)."""
+    out: list[str] = []
+    cur: list[str] = []
+    for part in PurePosixPath(filename).parts[:-1]:
+        if part in ("", "."):
+            continue
+        if part == "..":
+            if cur:
+                cur.pop()
+            continue
+        cur.append(part)
+        out.append("/".join(cur))
+    return out
+
+
+#: Results of :func:`mesh_copies` kept per process (a refine writes its
+#: output several times; a long-lived stage server serves many assets):
+#: key -> (files it read, their stamps and their folders', copies). Bounded.
+_COPIES_CACHE: OrderedDict[tuple, tuple[list[Path], tuple, dict[str, Path]]] = OrderedDict()
+_COPIES_CACHE_SIZE = 32
+_COPIES_LOCK = threading.Lock()
+
+
+def _meshes(asset: AssetDescription) -> list:
+    """The mesh geometries (visual and collision) of ``asset``'s links, in order."""
+    return [g for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh"]
+
+
+def _copies_key(asset: AssetDescription) -> tuple:
+    meshes = tuple((str(g.path), g.filename) for g in _meshes(asset) if g.path is not None)
+    return str(asset.source_dir), str(asset.urdf_path), meshes
+
+
+def _stamps(files: list[Path]) -> tuple:
+    """(path, size, modification time ns, inode) of each file and of each
+    folder holding one (a file added, removed or renamed there changes the
+    folder's time); None for a path that cannot be read."""
+    out = []
+    for p in sorted({str(f) for f in files} | {str(Path(f).parent) for f in files}):
+        try:
+            st = os.stat(p)
+            out.append((p, st.st_size, st.st_mtime_ns, st.st_ino))
+        except OSError:
+            out.append((p, None, None, None))
+    return tuple(out)
+
+
+def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
+    """What :func:`copy_meshes` copies: output path (relative, POSIX, exactly
+    where the output URDF, the copied OBJ and MTL files will look for it) ->
+    the real input file. A mesh reached through a symlink inside the asset
+    folder is copied as a regular file at the referenced path; MTL files and
+    textures are placed relative to their mesh as the mesh looks for them
+    (an MTL that lies beside a symlinked mesh's real file and not beside the
+    link is placed beside the copy: :func:`beside_link_target`).
+
+    Finding the MTL libraries and textures reads every OBJ file (16-80 ms per
+    PartNet-Mobility asset, asked for 5-11 times per refine), so the answer
+    is kept per process, checked against the size, modification time and
+    inode of every file it read and of the folders holding them.
+
+    Raises:
+        OutputError: ``OUTPUT_OUTSIDE_INPUT`` (a file outside the asset
+            folder), ``OUTPUT_NAME_CONFLICT`` (two different input files for
+            one output path, or an input file named like a contract file).
+    """
+    key = _copies_key(asset)
+    with _COPIES_LOCK:
+        hit = _COPIES_CACHE.get(key)
+    if hit is not None and _stamps(hit[0]) == hit[1]:
+        return dict(hit[2])
+    read = [g.path for g in _meshes(asset) if g.path is not None]
+    # the paths as written too: a library added beside a symlinked mesh changes where its material comes from
+    read += [asset.urdf_path.parent / g.filename for g in _meshes(asset) if g.path is not None and g.filename]
+    copies = _mesh_copies(asset)
+    files = [*read, *copies.values()]
+    entry = (files, _stamps(files), dict(copies))
+    with _COPIES_LOCK:
+        _COPIES_CACHE[key] = entry
+        _COPIES_CACHE.move_to_end(key)
+        while len(_COPIES_CACHE) > _COPIES_CACHE_SIZE:
+            _COPIES_CACHE.popitem(last=False)
+    return copies
+
+
+def _mesh_copies(asset: AssetDescription) -> dict[str, Path]:
+    root = asset.source_dir.resolve()
+    base = asset.urdf_path.parent
+    copies: dict[str, Path] = {}
+
+    def add(rel: str, src: Path) -> None:  # src resolved
+        if not _inside(src, root, resolved=True):
+            raise OutputError(f"mesh {src} lies outside the asset folder {root}", "OUTPUT_OUTSIDE_INPUT", src)
+        rel = PurePosixPath(os.path.normpath(rel).replace(os.sep, "/")).as_posix()
+        if rel.startswith("../") or rel in ("..", ".") or rel.startswith("/"):
+            raise OutputError(f"{src} would be copied to {rel!r}, outside the output folder", "OUTPUT_OUTSIDE_INPUT", src)
+        if rel in RESERVED_NAMES:
+            raise OutputError(f"input file {src} would be copied onto the output's own {rel}", "OUTPUT_NAME_CONFLICT", src)
+        if copies.get(rel, src) != src:
+            raise OutputError(f"input files {copies[rel]} and {src} would both be copied to {rel}", "OUTPUT_NAME_CONFLICT", src)
+        copies[rel] = src
+
+    for g in _meshes(asset):
+        if g.path is None:
+            continue
+        src = g.path.resolve()
+        rel = os.path.normpath(g.filename) if g.filename else os.path.relpath(src, root)
+        add(rel, src)
+        lexical = base / rel
+        lookup = os.path.realpath(lexical.parent)
+        deps = [(dep, lookup) for dep in mesh_dependencies(lexical, root)]
+        if str(src.parent) != lookup:  # a symlink into another folder
+            deps += [(dep, str(src.parent)) for dep in beside_link_target(lexical, src, root)]
+        for dep, folder in deps:
+            dep = dep.resolve()
+            dep_rel = os.path.normpath(os.path.join(os.path.dirname(rel), os.path.relpath(dep, folder)))
+            add(dep_rel if not dep_rel.startswith("..") else os.path.relpath(dep, root), dep)
+    return copies
+
+
+def beside_link_target(lexical: Path, real: Path, asset_root: Path) -> list[Path]:
+    """The material files of an OBJ reached through a symlink into another
+    folder (``lexical``: the path as the URDF writes it; ``real``: the file
+    it leads to) that lie beside the real file and not beside the link: each
+    ``mtllib`` the OBJ names that does not exist relative to the link's
+    folder but does relative to the real file's, with the texture maps it
+    names (relative to it), as resolved paths inside ``asset_root``.
+
+    The mesh's author put them beside the real OBJ; a loader opening the
+    link looks beside the link and draws the mesh without them. The output
+    copies the OBJ as a regular file at the link's path, so
+    :func:`mesh_copies` places these files relative to that copy as they lie
+    relative to the real file, and the copy finds its material. Missing
+    files, files outside ``asset_root`` and libraries that do exist beside
+    the link are left out."""
+    return mesh_io.obj_material_files(real, keep=lambda p: _inside(p, asset_root),
+                                      skip_library=lambda name: os.path.lexists(lexical.parent / name))
+
+
+_URI = ("file:", "http:", "https:", "ftp:", "package:", "data:")
+
+
+def reference_leaves_folder(ref: str, file_rel: str) -> bool:
+    """True when the path ``ref``, written in the output file ``file_rel``
+    (relative POSIX path inside the output folder), would be opened outside
+    the output folder: absolute, a URI (``file://``, ``package://`` ...), a
+    drive or NUL, or a relative path whose ``..`` leave the folder."""
+    r = ref.strip().strip('"')
+    if not r or "\x00" in r or r.startswith(("/", "\\")) or r.lower().startswith(_URI) or "://" in r:
+        return True
+    if len(r) > 1 and r[1] == ":":  # C:\x
+        return True
+    joined = os.path.normpath(os.path.join(os.path.dirname(file_rel), r.replace("\\", "/")))
+    return joined == ".." or joined.startswith("../") or os.path.isabs(joined)
+
+
+def _drop_outside_references(data: bytes, file_rel: str, names_of) -> tuple[bytes, list[str]]:
+    """``data`` with every line that names a file outside the output folder
+    (:func:`reference_leaves_folder`) replaced by a comment; ``names_of(line)``
+    gives the file names a line names (``mesh_io.mtl_texture_maps`` for an
+    MTL, ``mesh_io.mtl_libraries`` for an OBJ). Returns (bytes, dropped
+    statement keywords)."""
+    out: list[bytes] = []
+    dropped: list[str] = []
+    for line in data.splitlines(keepends=True):
+        names = names_of(line)
+        if names and any(reference_leaves_folder(n, file_rel) for n in names):
+            key = line.split(maxsplit=1)[0].decode("utf-8", "replace")
+            dropped.append(key)
+            end = b"\r\n" if line.endswith(b"\r\n") else (b"\n" if line.endswith(b"\n") else b"")
+            out.append(f"# asset2sim: a {key} statement naming a file outside the asset folder was dropped".encode() + end)
+        else:
+            out.append(line)
+    return b"".join(out), dropped
+
+
+def material_references(asset: AssetDescription, copies: dict[str, Path] | None = None) -> dict[str, str]:
+    """The copied files that name other files: output path -> ``"obj"`` (its
+    ``mtllib`` statements) or ``"mtl"`` (its texture statements), for the
+    OBJ meshes of the URDF and the MTL libraries they name (as the copies of
+    :func:`mesh_copies` place them)."""
+    copies = mesh_copies(asset) if copies is None else copies
+    kinds: dict[str, str] = {}
+    for g in _meshes(asset):
+        if g.path is None or not g.filename:
+            continue
+        rel = PurePosixPath(os.path.normpath(g.filename).replace(os.sep, "/")).as_posix()
+        if rel not in copies or PurePosixPath(rel).suffix.lower() != ".obj":
+            continue
+        kinds[rel] = "obj"
+        try:
+            names = mesh_io.mtl_libraries(atomic.read_regular(copies[rel]))
+        except OSError:
+            continue
+        for name in names:
+            if reference_leaves_folder(name, rel):
+                continue
+            mtl_rel = PurePosixPath(os.path.normpath(os.path.join(os.path.dirname(rel), name))).as_posix()
+            if mtl_rel in copies:
+                kinds.setdefault(mtl_rel, "mtl")
+    return kinds
+
+
+def copied_bytes(src: Path, rel: str, kind: str | None) -> bytes:
+    """What the output holds at ``rel`` for the input file ``src``: its bytes,
+    for an OBJ (``kind="obj"``) or MTL (``"mtl"``) with every ``mtllib`` /
+    texture statement that names a file outside the asset folder (absolute,
+    URI, ``..`` leaving it) replaced by a comment, so the output never makes a
+    simulator (PyBullet, SAPIEN, MuJoCo) open a file outside it; the
+    validator reports such statements (``MESH_MATERIAL_OUTSIDE``)."""
+    data = atomic.read_regular(src)
+    edited = _edited_copy(data, rel, kind)
+    return data if edited is None else edited
+
+
+def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
+    """:func:`copied_bytes` of ``data`` when a statement was dropped, else None."""
+    if kind not in ("obj", "mtl"):
+        return None
+    if kind == "obj" and b"mtllib" not in data:  # fast path for large meshes
+        return None
+    new, dropped = _drop_outside_references(data, rel, mesh_io.mtl_libraries if kind == "obj" else mesh_io.mtl_texture_maps)
+    return new if dropped else None
+
+
+def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
+    """Copy every mesh the URDF references (and its MTL/textures) into
+    ``out_dir`` at the paths of :func:`mesh_copies` (regular files, never
+    links), creating the folders a referenced path walks through.
+
+    OBJ and MTL copies lose the statements that name files outside the asset
+    folder (:func:`copied_bytes`); every other file is copied byte for byte.
+
+    Returns the destination paths. Files already present with the same
+    content (and not symlinks) are not rewritten; they are announced to the
+    atomic writer's observers as kept (:func:`asset2sim.atomic.announce`).
+
+    Raises:
+        OutputError: see :func:`mesh_copies`.
+        OSError: a file cannot be read or written.
+    """
+    copies = mesh_copies(asset)
+    kinds = material_references(asset, copies)
+    out_dir = Path(out_dir)
+    out: list[Path] = []
+    todo: list[tuple[Path, Path]] = []
+    edited: list[tuple[Path, bytes]] = []
+    kept: list[Path] = []
+    for rel, src in sorted(copies.items()):
+        dst = out_dir / rel
+        data = _edited_copy(atomic.read_regular(src), rel, kinds[rel]) if rel in kinds else None  # None: a plain copy
+        size = len(data) if data is not None else src.stat().st_size
+        same = (
+            dst.is_file() and not dst.is_symlink() and dst.stat().st_size == size
+            and atomic.sha256_file(dst) == (atomic.sha256_file(src) if data is None else hashlib.sha256(data).hexdigest())
+        )
+        if same:
+            kept.append(dst)
+        elif data is None:
+            todo.append((src, dst))
+        else:
+            edited.append((dst, data))
+        out.append(dst)
+    # every destination announced at once: an output folder's owner records them
+    # in one write of its record instead of one per edited file
+    atomic.announce([*kept, *(d for _, d in todo), *(d for d, _ in edited)])
+    atomic.copy_files(todo)
+    for dst, data in edited:
+        atomic.write_bytes(dst, data)
+    for d in _walked_dirs(asset):
+        (out_dir / d).mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def taken_paths(asset: AssetDescription) -> set[str]:
+    """Output paths (relative, POSIX) the copies of :func:`mesh_copies` take and the folders the asset's mesh references
+    walk through: where nothing else may be written."""
+    return set(mesh_copies(asset)) | set(_walked_dirs(asset))

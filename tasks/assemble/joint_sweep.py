@@ -1,0 +1,139 @@
+"""The joints swept over their ranges: the positions sampled, the child's
+pose at each, and the volume a child (or every other link) sweeps in a link's
+frame, so that the pieces hold for every state of the object."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from asset2sim import urdf
+from asset2sim.frames import axis_angle_matrix
+from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, Piece
+
+#: Largest motion (m) of a child's vertex between two neighbouring swept
+#: positions (:func:`sweep_positions`): the containment tolerance, so a hull
+#: clear of every sampled position holds none in between deeper than about
+#: that; at most :data:`MAX_SWEEP_SAMPLES` positions (a cut's time grows with them).
+SWEEP_STEP = CONTAINMENT_TOLERANCE
+MAX_SWEEP_SAMPLES = 48
+
+
+def sweep_positions(joint: urdf.UrdfJoint, reach: float, step: float = SWEEP_STEP) -> np.ndarray:
+    """Positions (n,) rad or m spread evenly over ``joint``'s whole range
+    (its limits; a continuous joint over a full turn), at most ``step`` m of
+    motion apart for a point ``reach`` m from a revolute axis (a prismatic
+    joint moves every point by the travel), n <= :data:`MAX_SWEEP_SAMPLES`;
+    [0] for a fixed joint or an empty range."""
+    if joint.type == "fixed":
+        return np.zeros(1)
+    if joint.type == "continuous":
+        lo, hi = -np.pi, np.pi
+    else:
+        lo, hi = float(joint.lower), float(joint.upper)
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        return np.array([0.0 if not np.isfinite(lo) else lo])
+    travel = (hi - lo) * (1.0 if joint.type == "prismatic" else max(reach, 1e-9))
+    n = int(np.clip(np.ceil(travel / max(step, 1e-9)) + 1, 2, MAX_SWEEP_SAMPLES))
+    return np.linspace(lo, hi, n)
+
+
+def _positions_for(joint: urdf.UrdfJoint, local: np.ndarray) -> np.ndarray:
+    """:func:`sweep_positions` of ``joint`` for points ``local`` (k, 3) m in its child's frame (reach: their distance
+    from the axis, which turns the child frame about the axis through its origin)."""
+    reach = float(np.max(np.linalg.norm(np.cross(local, joint.axis), axis=1), initial=0.0)) if joint.type in ("revolute", "continuous") else 0.0
+    return sweep_positions(joint, reach)
+
+
+def _joint_motion(joint: urdf.UrdfJoint, q: float) -> np.ndarray:
+    """(4, 4) parent -> child transform of ``joint`` at position ``q`` (rad
+    or m): its origin, then the rotation about or translation along its axis,
+    as :meth:`asset2sim.urdf.UrdfModel.link_poses` composes it."""
+    m = np.eye(4)
+    if joint.type in ("revolute", "continuous"):
+        m[:3, :3] = axis_angle_matrix(joint.axis, float(q))
+    elif joint.type == "prismatic":
+        m[:3, 3] = joint.axis * float(q)
+    return joint.origin @ m
+
+
+def reference_state(model: urdf.UrdfModel) -> dict[str, float]:
+    """Joint -> 0 clipped to its limits (rad or m; 0 for a joint without
+    finite limits): the pose the other joints hold while one is swept."""
+    ref = {}
+    for j in model.movable_joints:
+        lo, hi = j.lower, j.upper
+        ref[j.name] = float(np.clip(0.0, lo, hi)) if np.isfinite(lo) and np.isfinite(hi) else 0.0
+    return ref
+
+
+def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
+                       support: bool = False) -> dict[str, np.ndarray]:
+    """Vertices of every child link's pieces, and of the links below it
+    (their :attr:`Piece.support` points with ``support``; the joints below
+    at :func:`reference_state`), in ``link``'s frame at every position of
+    :func:`sweep_positions` of the joint between them: the volume the child
+    sweeps over its whole range (a latch carried by a lid included), for
+    every state of the object. Child -> (k, 3) m."""
+    out = {}
+    poses = model.link_poses(reference_state(model))
+    for j in model.children(link):
+        inv = np.linalg.inv(poses[j.child])
+        pts, stack = [], [j.child]
+        while stack:
+            ln = stack.pop()
+            stack.extend(c.child for c in model.children(ln))
+            T = inv @ poses[ln]
+            pts += [(p.support if support else p.points) @ T[:3, :3].T + T[:3, 3] for p in pieces.get(ln, [])]
+        if not pts:
+            continue
+        local = np.vstack(pts)
+        sets = []
+        for q in _positions_for(j, local):
+            T = _joint_motion(j, q)
+            sets.append(local @ T[:3, :3].T + T[:3, 3])
+        out[j.child] = np.vstack(sets)
+    return out
+
+
+#: Positions per movable joint at which other links are kept out of a link's
+#: merged pieces (:func:`merge_pieces`), evenly over the joint's range.
+GUARD_SAMPLES = 9
+
+
+def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
+                       samples: int = GUARD_SAMPLES) -> np.ndarray | None:
+    """Support points (:attr:`Piece.support`) of every other link's pieces in
+    ``link``'s frame, with the movable joints at their reference (0 clipped
+    to the limits) and each joint in turn at ``samples`` positions over its
+    range: the volume the other links sweep one joint at a time (k, 3) m, or
+    None when no other link has pieces. Independent of the initial state."""
+    ref = reference_state(model)
+    local = {o: np.vstack([p.support for p in pieces[o]]) for o in model.links if o != link and pieces.get(o)}
+    if not local:
+        return None
+    states = [ref]
+    for j in model.movable_joints:
+        qs = sweep_positions(j, 1.0)
+        qs = qs[np.unique(np.linspace(0, len(qs) - 1, min(samples, len(qs))).round().astype(int))]
+        states += [{**ref, j.name: float(q)} for q in qs]
+    seen: dict[str, list[np.ndarray]] = {o: [] for o in local}
+    out = []
+    for st in states:
+        poses = model.link_poses(st)
+        inv = np.linalg.inv(poses[link])
+        for o, pts in local.items():
+            T = inv @ poses[o]
+            if any(np.allclose(T, U, atol=1e-9) for U in seen[o]):
+                continue
+            seen[o].append(T)
+            out.append(pts @ T[:3, :3].T + T[:3, 3])
+    return np.vstack(out)
+
+
+def _joint_transforms(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint) -> tuple[list[np.ndarray], int]:
+    """(4, 4) parent-frame poses of ``joint``'s child link at every position of
+    :func:`sweep_positions` over its range (reach: the child's pieces), in
+    order, and the index of the one nearest :func:`reference_state`."""
+    qs = _positions_for(joint, np.vstack([p.points for p in pieces[joint.child]]))
+    ref = reference_state(model).get(joint.name, 0.0)
+    return [_joint_motion(joint, q) for q in qs], int(np.argmin(np.abs(qs - ref)))

@@ -1,0 +1,222 @@
+"""Parent and child separated: the overlap of a child's pieces with its
+parent's, at the pose the meshes were modelled in and wherever the joint
+carries it, cut off one of the two pieces (:func:`separate_parent_child`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from asset2sim import urdf
+from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, Piece, clip_piece
+from asset2sim.tasks.assemble.joint_sweep import _joint_motion, _joint_transforms, reference_state
+from asset2sim.tasks.assemble.piece_penetration import _boxes_apart, _transformed, penetration_depth
+
+#: Overlap (m) along the separating direction that :func:`separate_parent_child`
+#: leaves between a parent's and its child's pieces: touching (0). Engines
+#: with a contact margin read touching hulls as penetrating by the margin
+#: (PyBullet: 1 mm per hull, so -2 mm for a touching pair).
+SEPARATION_GAP = 0.0
+
+
+def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) -> list[int]:
+    """Indices of the ``n`` positions (ordered over the range) whose depth
+    (m, ``depth(i)``) the joint carries from its reference position ``ref``:
+    the run of depths above ``tolerance`` m that contains ``ref`` (empty
+    when the reference position is clear). A depth reached only after the
+    child moved clear is a stop (the child runs into its parent), left to
+    the limit scan. ``depth`` is asked only for ``ref`` and the run's
+    neighbours (one position for a pair clear at the reference)."""
+    if depth(ref) <= tolerance:
+        return []
+    lo = hi = ref
+    while lo > 0 and depth(lo - 1) > tolerance:
+        lo -= 1
+    while hi < n - 1 and depth(hi + 1) > tolerance:
+        hi += 1
+    return list(range(lo, hi + 1))
+
+
+def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str],
+                          tolerance: float = CONTAINMENT_TOLERANCE, state: dict[str, float] | None = None) -> None:
+    """Clip, in place, the pieces of every parent and child link so that no
+    child piece penetrates a parent piece deeper than ``tolerance`` m
+    (:func:`penetration_depth`, the depth an engine colliding the pair
+    reports) at the joint's reference position (:func:`reference_state`,
+    0 clipped to the limits: the pose the meshes were modelled in) and at
+    every position the overlap is carried to from there
+    (:func:`sweep_positions` over the range, :func:`_carried`), so the
+    pieces stay independent of the initial state. An overlap the child
+    only runs into after moving clear of its parent is a stop: it is kept,
+    and the limit scan (:mod:`asset2sim.tasks.geometry.limits`) clips the
+    joint's range before it. With ``state`` (joint -> rad or m), only that
+    state is separated (what :func:`link_pieces` does last for the initial
+    state it writes: an overlap the joint was written into). The
+    parent-child pairs every engine here skips
+    (the SPEC's exclusion) then also work where they are collided (a fixed
+    object, a robot's finger between them, a simulator without the
+    exclusion). Each overlap is removed along its separating direction by
+    cutting one of the two pieces (:func:`clip_piece`), up to :data:`SEPARATION_GAP`; the cut is
+    the resolution of any other penetration (move apart along the
+    minimum-translation direction) applied to the geometry, since a
+    parent and its child cannot move apart. Per pair of pieces, every
+    position's cut goes to the same piece, as one of two cuts: the side of
+    the piece beyond the plane taken off, or a slot (the band the other
+    piece spans along the direction taken out, :func:`_slot`, at most
+    :data:`SLOT_PIECES` parts and :data:`MAX_PIECES_HARD` per link: a latch's
+    shaft through a lid leaves the lid in pieces around it). Of the four
+    (two pieces, two cuts) the one that removes the smallest share of its
+    link's volume is made (a small piece of one link held whole in
+    another's hull, a dishwasher's rail inside its rack's, is removed
+    rather than the rack's hull cut around it; a microwave's thin door is
+    not eaten away around its frame); a link's last piece is never removed
+    (such an overlap is kept and noted). Cuts only remove volume, so an
+    overlap resolved stays resolved."""
+    for joint in model.joints:
+        P, C = pieces.get(joint.parent), pieces.get(joint.child)
+        if P and C:
+            _separate_joint(model, pieces, joint, P, C, tolerance, state, notes)
+
+
+def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint: urdf.UrdfJoint, P: list[Piece | None],
+                    C: list[Piece | None], tolerance: float, state: dict[str, float] | None, notes: list[str]) -> None:
+    """Cut, in place, the pieces ``P`` of ``joint``'s parent and ``C`` of its child apart (:func:`separate_parent_child`),
+    pair by pair; a note when they overlapped."""
+    if state is None:
+        transforms, ref = _joint_transforms(model, pieces, joint)
+    else:
+        transforms, ref = [_joint_motion(joint, float(state.get(joint.name, reference_state(model).get(joint.name, 0.0))))], 0
+    sizes = {"p": sum(p.volume for p in P), "c": sum(c.volume for c in C)}
+    before = after = 0.0
+    cut, kept = {"p": set(), "c": set()}, 0
+    i = 0
+    while i < len(P):
+        k = 0
+        while k < len(C) and P[i] is not None:
+            overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref, tolerance)
+            if overlap is not None:
+                depth, deepest, cuts = overlap
+                before = max(before, depth)
+                options = (_cut_options("p", P[i], sizes["p"], _others(P, i), *cuts["p"], MAX_PIECES_HARD - len(P), tolerance)
+                           + _cut_options("c", C[k], sizes["c"], _others(C, k), *cuts["c"], MAX_PIECES_HARD - len(C), tolerance))
+                if not options:
+                    kept, after = kept + 1, max(after, deepest)
+                else:
+                    _, _, which, parts = min(options, key=lambda o: (o[0], o[1]))
+                    target, idx = (P, i) if which == "p" else (C, k)
+                    target[idx] = parts[0] if parts else None
+                    target.extend(parts[1:])
+                    cut[which].add(idx)
+            k += 1
+        i += 1
+    gone = sum(p is None for p in P) + sum(c is None for c in C)
+    P[:] = [p for p in P if p is not None]
+    C[:] = [c for c in C if c is not None]
+    if before > 0.0:
+        notes.append(_separation_note(joint, before, after, len(cut["p"]), len(cut["c"]), kept, gone, state is None))
+
+
+def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, tolerance: float) -> tuple[float, float, dict] | None:
+    """Parent piece ``a`` and child piece ``b`` (child frame) at the child poses ``transforms`` (4, 4) the overlap is
+    carried to from ``ref`` (:func:`_carried`): None when they are clear at ``ref``, else (deepest carried depth m,
+    deepest depth measured m, ``"p"`` / ``"c"`` -> (half-spaces, slots) that cut that piece off the other, in its frame)."""
+    found: dict[int, tuple[float, np.ndarray]] = {}
+
+    def depth_at(t: int) -> float:
+        """The pair's depth (m) at position ``t`` (kept in ``found``)."""
+        if t not in found:
+            T = transforms[t]
+            found[t] = (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), tolerance)
+        return found[t][0]
+
+    carried = _carried(depth_at, len(transforms), ref, tolerance)
+    if not carried:
+        return None
+    planes_p, planes_c, slots_p, slots_c = [], [], [], []
+    depth = 0.0
+    for t in carried:
+        T, (d, n) = transforms[t], found[t]
+        c = _transformed(b, T)
+        depth = max(depth, d)
+        # a on the low side along n: keep n.x <= min(c.n) + gap, or c above max(a.n) - gap
+        lo_c, hi_p = float((c.points @ n).min()), float((a.points @ n).max())
+        planes_p.append((n, -(lo_c + SEPARATION_GAP)))
+        nc = T[:3, :3].T @ n  # the same direction in the child frame
+        planes_c.append((-nc, hi_p - SEPARATION_GAP - float(n @ T[:3, 3])))
+        # or a slot: the band the other piece spans along n taken out (two pieces left)
+        slots_p.append((n, lo_c + SEPARATION_GAP, float((c.points @ n).max()) - SEPARATION_GAP, c))
+        shift = float(n @ T[:3, 3])
+        slots_c.append((nc, float((a.points @ n).min()) - shift + SEPARATION_GAP, hi_p - shift - SEPARATION_GAP,
+                        _transformed(a, np.linalg.inv(T))))
+    # the positions not carried read <= tolerance, so the deepest measured is the deepest carried
+    return depth, max(d for d, _ in found.values()), {"p": (planes_p, slots_p), "c": (planes_c, slots_c)}
+
+
+def _cut_options(which: str, piece: Piece, size: float, others: bool, planes: list, slots: list, room: int,
+                 tolerance: float) -> list[tuple[float, int, str, list[Piece]]]:
+    """The cuts of ``piece`` (of link ``which``, whose pieces hold ``size`` m^3; ``others``: it has other pieces) that
+    clear the pair: every half-space of ``planes`` (:func:`_clip_all`), or the ``slots`` (:func:`_slot`, ``room``
+    pieces to spare), each (share of the link's volume removed, parts left, ``which``, parts)."""
+    out = []
+    for parts in ([_clip_all(piece, planes)], _slot(piece, slots, tolerance, min(SLOT_PIECES, 1 + max(room, 0)))):
+        if parts is None:
+            continue
+        parts = [q for q in parts if q is not None]
+        if not parts and not others:  # a link's last piece is never removed
+            continue
+        out.append(((piece.volume - sum(q.volume for q in parts)) / size, len(parts), which, parts))
+    return out
+
+
+def _separation_note(joint: urdf.UrdfJoint, before: float, after: float, n_p: int, n_c: int, kept: int, gone: int,
+                     swept: bool) -> str:
+    """The note on ``joint``: overlap ``before`` m, ``n_p`` / ``n_c`` pieces cut, ``gone`` removed whole, ``kept``
+    overlaps kept (``after`` m); ``swept``: from the reference position on (else at the initial state)."""
+    what = ", ".join(x for x in (f"{n_p} of {joint.parent!r}'s pieces" if n_p else "", f"{n_c} of {joint.child!r}'s" if n_c else "") if x)
+    return (f"joint {joint.name!r}: {joint.child!r} penetrated its parent {joint.parent!r} up to {before * 1000:.3g} mm "
+            + ("from its reference position on" if swept else "at the initial state") + f"; cut {what or 'nothing'}"
+            + (f" ({gone} removed whole)" if gone else "")
+            + (f"; {kept} overlap(s) of a link's last piece held whole inside another kept ({after * 1000:.3g} mm)" if kept else ""))
+
+
+def _clip_all(piece: Piece, planes: list[tuple[np.ndarray, float]]) -> Piece | None:
+    """``piece`` cut by every half-space ``n . x + offset <= 0`` of ``planes``
+    (:func:`clip_piece` in turn); None when nothing with volume is left."""
+    for n, off in planes:
+        if piece is None:
+            return None
+        if float((piece.points @ n).max()) + off <= 0.0:
+            continue
+        piece = clip_piece(piece, n, off)
+    return piece
+
+
+#: Most pieces :func:`_slot` leaves of one piece.
+SLOT_PIECES = 4
+
+
+def _slot(piece: Piece, slots: list[tuple[np.ndarray, float, float, Piece]], tolerance: float, most: int) -> list[Piece] | None:
+    """``piece`` with, for each slot (n (3,) unit, lo, hi m, other piece), the
+    band ``lo < n . x < hi`` taken out of every part that still penetrates
+    the other piece deeper than ``tolerance`` m (each such part becomes the
+    two parts beyond the band): a shaft through a lid leaves the lid in
+    pieces around it rather than one side of the lid. None when more than
+    ``most`` parts would be left."""
+    parts = [piece]
+    for n, lo, hi, other in slots:
+        out = []
+        for q in parts:
+            if penetration_depth(q, other, tolerance)[0] <= tolerance:
+                out.append(q)
+                continue
+            out += [x for x in (clip_piece(q, n, -lo), clip_piece(q, -n, hi)) if x is not None]
+        parts = out
+        if len(parts) > most:
+            return None
+    return parts
+
+
+def _others(pieces: list[Piece | None], i: int) -> bool:
+    """Whether ``pieces`` holds a piece besides the ``i``-th (removed ones are None)."""
+    return any(p is not None for j, p in enumerate(pieces) if j != i)

@@ -1,0 +1,181 @@
+"""Running clearance: two links that are not parent and child and touch where
+they slide past each other (two drawers stacked in a cabinet, two doors
+meeting in the middle) get the moving piece's face moved back
+:data:`RUNNING_CLEARANCE` from its neighbour at the modelled pose, so the
+engines' contact margins do not read the touch as 2 mm of penetration whose
+recovery and friction hold the part. A contact along the motion (a stop) is
+kept."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from asset2sim import urdf
+from asset2sim.tasks.assemble.convex_pieces import Piece
+from asset2sim.tasks.assemble.joint_sweep import reference_state
+from asset2sim.tasks.geometry import limits
+
+#: Words every note of :func:`running_clearance` (and of the state stage's
+#: clearance repair) carries, by which a caller picks them out of the pieces' notes.
+RUNNING_CLEARANCE_NOTE = "running clearance"
+#: Running clearance (m) given to a sliding contact between two links that
+#: are not parent and child: PyBullet's two 1 mm hull margins (touching
+#: hulls report 2 mm of penetration; see
+#: :data:`asset2sim.engines.loading.FLAT_HULL_THICKNESS`) plus 0.5 mm.
+RUNNING_CLEARANCE = 0.0025
+#: |cos| between a contact normal and the motion of the moving piece's
+#: contact face below which the contact slides (60 deg or more); above it
+#: the contact is a stop, the limit's business (:mod:`asset2sim.tasks.geometry.limits`).
+SLIDING_COS = 0.5
+#: A squeeze never takes more than this fraction of a piece's width along the contact normal.
+MAX_SQUEEZE = 0.5
+#: Deepest overlap (m) :func:`running_clearance` treats as parts modelled
+#: touching (PartNet-Mobility's zero-clearance fits overlap by rounding); a
+#: deeper one is a penetration the state search resolves.
+TOUCHING_OVERLAP = 0.0005
+
+
+def sat_gap(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
+    """Separating-axis test of two convex point sets (k, 3), (l, 3) m over the
+    face normals of both hulls (Gottschalk, Lin and Manocha, "OBBTree",
+    SIGGRAPH 1996: the face-normal axes of the SAT for convex polyhedra).
+    Returns (gap g m, unit axis n from p to q): g > 0 they are apart by at
+    least g; g <= 0 they overlap by at most -g along n.
+
+    Raises:
+        ValueError: a set spans no volume.
+    """
+    try:
+        hp, hq = ConvexHull(p), ConvexHull(q)
+    except (QhullError, ValueError) as exc:
+        raise ValueError("a convex piece spans no volume") from exc
+    axes = np.vstack([hp.equations[:, :3], hq.equations[:, :3]])
+    axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    sp, sq = p @ axes.T, q @ axes.T  # (k, A), (l, A)
+    ahead = sq.min(axis=0) - sp.max(axis=0)  # q beyond p along +axis
+    behind = sp.min(axis=0) - sq.max(axis=0)  # q before p
+    gaps = np.maximum(ahead, behind)
+    i = int(np.argmax(gaps))
+    n = axes[i] if ahead[i] >= behind[i] else -axes[i]
+    return float(gaps[i]), n
+
+
+def squeeze(p: np.ndarray, n: np.ndarray, delta: float) -> tuple[np.ndarray, float]:
+    """Move the face of ``p`` (k, 3) m towards the unit direction ``n`` back
+    by ``delta`` m (at most :data:`MAX_SQUEEZE` of its width along ``n``),
+    keeping the face towards -n: an affine squeeze along ``n``, so a convex
+    piece stays convex. Returns (points (k, 3) m, delta used m)."""
+    s = p @ n
+    lo, w = float(s.min()), float(np.ptp(s))
+    d = min(delta, MAX_SQUEEZE * w)
+    if w <= 0 or d <= 0:
+        return p, 0.0
+    return p - np.outer((s - lo) * (d / w), n), d
+
+
+def clear_sliding_contact(p: np.ndarray, q: np.ndarray, velocity: Callable[[np.ndarray], np.ndarray],
+                          deepest: float = np.inf) -> tuple[np.ndarray, float, float] | None:
+    """Running clearance of a moving convex piece ``p`` (k, 3) m against a
+    piece ``q`` (l, 3) m of a link it moves past, both in one frame.
+
+    1. :func:`sat_gap` gives the gap g and the axis n (from p to q) of least
+       overlap; p and q are in contact when g < :data:`RUNNING_CLEARANCE`
+       (and g > -``deepest``: a deeper overlap is left to the state search).
+    2. The contact slides when n is nearly perpendicular to the motion of
+       p's contact face: |n . t| < :data:`SLIDING_COS` |t|, with t =
+       ``velocity(c)`` (3,) the direction the joint moves the face centre c
+       (3,) m (a x (c - o) for a revolute joint with axis a through o; a for
+       a prismatic one). A contact along the motion is a stop.
+    3. p's face towards q is moved back along n by
+       :data:`RUNNING_CLEARANCE` - g (:func:`squeeze`): the gap becomes the
+       clearance.
+
+    Returns (squeezed p (k, 3) m, squeeze used m, gap g m), or None when
+    the two are not in sliding contact (or the squeeze would move nothing).
+
+    Raises:
+        ValueError: a piece spans no volume.
+    """
+    g, n = sat_gap(p, q)
+    if g >= RUNNING_CLEARANCE - 1e-9 or g <= -deepest:  # (rounding of a piece already given clearance)
+        return None
+    s = p @ n
+    face = p[s >= s.max() - 1e-3].mean(axis=0)
+    t = np.asarray(velocity(face), float)
+    norm = float(np.linalg.norm(t))
+    if norm > 1e-9 and abs(float(n @ t)) / norm >= SLIDING_COS:
+        return None
+    out, used = squeeze(p, n, RUNNING_CLEARANCE - g)
+    return (out, used, g) if used > 0 else None
+
+
+def joint_velocity(joint: urdf.UrdfJoint, T: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """The direction (3,) in which ``joint`` moves a point (3,) m given in
+    the frame ``T`` (4, 4) (the joint's child frame at its pose is the
+    identity): its axis for a prismatic joint, axis x (point - origin) for a
+    revolute or continuous one (the child frame's origin lies on the axis),
+    both expressed in ``T``'s frame. For :func:`clear_sliding_contact`."""
+    R, t = T[:3, :3], T[:3, 3]
+    axis = R @ np.asarray(joint.axis, float)
+    if joint.type == "prismatic":
+        return lambda c: axis
+    return lambda c: np.cross(axis, np.asarray(c, float) - t)
+
+
+def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> None:
+    """Give running clearance, in place, to every sliding contact between a
+    link a movable joint moves and a link it does not move (parent-child
+    pairs excepted: every engine here skips them, SPEC), measured at
+    :func:`reference_state` (the pose the meshes were modelled in, with zero
+    clearance): two drawers stacked in a cabinet, two doors meeting in the
+    middle (drawers jammed by their neighbours: ManiSkill issues #1205, #1156).
+    Each moving piece in contact (gap below :data:`RUNNING_CLEARANCE`, overlap
+    at most :data:`TOUCHING_OVERLAP`) along a face that slides is squeezed back
+    (:func:`clear_sliding_contact`); stops and deeper overlaps are left. The
+    first joint in file order that moves a piece squeezes it, once per pair
+    of pieces (:data:`MAX_SQUEEZE` would halve a thin piece at every pass).
+    Notes name each change."""
+    poses = model.link_poses(reference_state(model))
+    done: set[tuple[str, int, str, int]] = set()
+    parent_of = {j.child: j.parent for j in model.joints}
+    boxes = {ln: [(p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]) for p in pl] for ln, pl in pieces.items()}
+    subtrees = limits.subtrees(model)
+    for joint in model.movable_joints:
+        moved = subtrees[joint.name]
+        for ln in moved:
+            if not pieces.get(ln):
+                continue
+            inv = np.linalg.inv(poses[ln])
+            velocity = joint_velocity(joint, inv @ poses[joint.child])
+            for other in model.links:
+                if other in moved or not pieces.get(other) or parent_of.get(ln) == other or parent_of.get(other) == ln:
+                    continue
+                To = inv @ poses[other]
+                for k, Q in enumerate(pieces[other]):
+                    qw = boxes[other][k]
+                    for i, P in enumerate(pieces[ln]):
+                        pw = boxes[ln][i]
+                        if (ln, i, other, k) in done:
+                            continue
+                        if np.any(np.minimum(pw.max(axis=0), qw.max(axis=0)) + RUNNING_CLEARANCE
+                                  < np.maximum(pw.min(axis=0), qw.min(axis=0))):
+                            continue  # bounding boxes apart by more than the clearance
+                        try:
+                            hit = clear_sliding_contact(P.points, Q.points @ To[:3, :3].T + To[:3, 3], velocity,
+                                                        deepest=TOUCHING_OVERLAP)
+                        except ValueError:
+                            continue
+                        if hit is None:
+                            continue
+                        pts, used, g = hit
+                        done.add((ln, i, other, k))
+                        try:
+                            pieces[ln][i] = Piece.of(pts, P.sources)
+                        except (QhullError, ValueError):
+                            continue
+                        boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+                        notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
+                                     f"{other!r} (gap {g * 1000:.2g} mm, sliding along {joint.name!r})")

@@ -1,0 +1,114 @@
+"""What blocks a moving part: the link in its way, the movable joints that
+place that link, and the ranges that parts held in place leave a joint.
+
+Shared by the joint sweep (:func:`asset2sim.tasks.check.sweep.run_sweep`) and
+the probes (:func:`asset2sim.tasks.check.probes.run_probes`), which move the
+parts in the way before they try a shut-in part again.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
+from asset2sim.engines.registry import open_session
+from asset2sim.schemas.config import SimConventions
+from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.geometry.closed_state import tree_path
+from asset2sim.urdf import UrdfModel, read_urdf
+
+
+def fixed_root_options(state: dict[str, float], conventions: SimConventions | None = None,
+                       springs: dict[str, Spring] | None = None) -> SessionOptions:
+    """Options of a session with the root fixed, gravity off and no ground
+    (the sweep's), at joint positions ``state`` (rad or m), with ``springs``."""
+    return SessionOptions(initial_state=dict(state), springs=dict(springs or {}), fixed_base=True, gravity=False,
+                          ground=False, conventions=conventions or SimConventions())
+
+
+def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
+                conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
+    """The ranges the sweep can demand with the other joints held at
+    ``state``: each joint's (q_closed, direction, range) of ``closed`` (rad
+    or m) cut where its moving part meets a link of the chain that carries
+    it, beyond its parent's rigid group (a stapler's magazine, hinged on the
+    top, meets the base: how far depends on the held top, not on a limit;
+    :func:`asset2sim.tasks.geometry.limits.geometric_limits` with
+    ``against="held"``). Siblings and other branches in the way are not cut
+    away (the sweep reports them), nor is the closing side; the URDF limit
+    against the part's own stops is refine's business. Measured in a PyBullet session (closest-point
+    queries; the same for every engine, like the closed ends). Returns
+    (closed tuples, joint -> note for the joints whose range was cut)."""
+    out = dict(closed)
+    notes = {}
+    with open_session("pybullet", urdf, fixed_root_options(state, conventions)) as s:
+        # any contact ends the range (1 mm, no stop confirmation):
+        # the drive stalls at it, and a held part is never a hinge artefact of the parent
+        clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held", confirm_stops=False)
+    for name, c in clips.items():
+        if c.clipped:
+            out[name] = (c.q_closed, c.direction, c.open_range)
+            notes[name] = "held parts in the way: " + "; ".join(c.notes)
+    return out, notes
+
+
+#: Opening fraction under which a part whose drive stalls counts as shut in
+#: by another part (:func:`asset2sim.tasks.check.sweep._sweep_clearing`): the free fraction under which
+#: :mod:`asset2sim.tasks.geometry.limits` calls a part blocked at its closed end.
+SHUT_IN_FRACTION = limits.MIN_FREE_FRACTION
+#: Distance (m) within which a link counts as touching the swept part where
+#: its drive stalled (:func:`blocking_link`): the 1 mm of the limits scan.
+BLOCK_DISTANCE = 0.001
+
+
+def blocking_link(session: SimSession, links: list[str], exclude: set[str]) -> str | None:
+    """The link (not in ``links`` nor ``exclude``) nearest to, or deepest
+    into, the links ``links`` at the session's current state, when within
+    :data:`BLOCK_DISTANCE` m; None when none is."""
+    sub = set(links)
+    best, who = BLOCK_DISTANCE, None
+    for a in links:
+        if not session.link_has_collision(a):
+            continue
+        for b in session.link_names:
+            if b in sub or b in exclude or not session.link_has_collision(b):
+                continue
+            d = session.link_distances(a, b, BLOCK_DISTANCE)
+            if d and min(d) <= best:
+                best, who = min(d), b
+    return who
+
+
+def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
+    """Movable joints on the kinematic-tree path between links ``a`` and
+    ``b`` (either order), nearest to ``b`` first
+    (:func:`asset2sim.tasks.geometry.closed_state.tree_path`)."""
+    from_a, from_b = tree_path(model.joints, a, b)
+    return [j.name for j in from_b + from_a[::-1] if j.type in ("revolute", "prismatic", "continuous")]
+
+
+class Blocker:
+    """:func:`blocking_link` at a state, in the session when its engine
+    answers closest-point queries, else in a PyBullet session of the same
+    URDF (opened once, on first use; PhysX answers none), so every engine
+    moves the same parts out of the way."""
+
+    def __init__(self, session: SimSession, urdf: Path | str, conventions: SimConventions):
+        self.session, self.urdf, self.conventions = session, urdf, conventions
+        self._pybullet: SimSession | None = None
+
+    def __call__(self, state: dict[str, float], links: list[str], exclude: set[str]) -> str | None:
+        try:
+            self.session.set_joint_positions(state)
+            return blocking_link(self.session, links, exclude)
+        except EngineUnsupported:
+            pass
+        if self._pybullet is None:
+            self._pybullet = open_session("pybullet", self.urdf, fixed_root_options(state, self.conventions))
+        self._pybullet.set_joint_positions(state)
+        return blocking_link(self._pybullet, links, exclude)
+
+    def close(self) -> None:
+        if self._pybullet is not None:
+            self._pybullet.close()
+            self._pybullet = None

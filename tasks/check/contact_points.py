@@ -1,0 +1,292 @@
+"""Where the floating gripper (:mod:`asset2sim.tasks.check.gripper`) grasps a
+part, and which side of a joint it moves: the contact point rules (a handle,
+the far edge, the front; :func:`contact_point_rule`) over the URDF's collision
+geometry when the model is given, else over the engine's
+(``link_collision_vertices`` / ``link_aabb``), and the side (:func:`grasp_side`).
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim.mesh_io import MeshReadError, read_mesh
+from asset2sim.tasks.interpret.part_labels import canonical_label
+from asset2sim.urdf import UrdfGeometry, UrdfModel
+
+#: Canonical part labels a gripper grasps when a link carries a geometry element so named.
+HANDLE_LABELS: frozenset[str] = frozenset({"handle", "knob", "lever", "button"})
+
+#: Share of the largest distance from the axis within which collision
+#: vertices count as the far edge (their mean is the contact point).
+FAR_EDGE_SHARE = 0.9
+
+#: A side of a joint whose lowest point is this much (m) below the other's carries the object (:func:`grasp_side`).
+SUPPORT_TOL = 0.003
+
+_ELEMENT_SUFFIX = re.compile(r"[-_]?\d+$")
+
+
+def element_label(name: str | None) -> str | None:
+    """Canonical part label of a URDF geometry element's name
+    (PartNet-Mobility names elements ``<part>-<id>``: ``handle-18`` ->
+    ``handle``), or None."""
+    if not name:
+        return None
+    return canonical_label(_ELEMENT_SUFFIX.sub("", name.strip()))
+
+
+@functools.lru_cache(maxsize=256)
+def _mesh_vertices(path: str) -> np.ndarray:
+    """Finite vertices (n, 3) of a mesh file, file units (read-only; (0, 3) when unreadable)."""
+    try:
+        v, _, _ = read_mesh(Path(path))
+    except MeshReadError:
+        return np.zeros((0, 3))
+    v = np.asarray(v, float)
+    v = v[np.all(np.isfinite(v), axis=1)]
+    v.setflags(write=False)
+    return v
+
+
+def geometry_points(g: UrdfGeometry) -> np.ndarray:
+    """Points (k, 3) m of a geometry element in its link's frame: a mesh's
+    vertices (scaled), a box's corners, a sphere's or cylinder's centre;
+    k = 0 when unreadable."""
+    if g.kind == "mesh" and g.path is not None:
+        v = _mesh_vertices(str(g.path)) * g.scale
+    elif g.kind == "box" and g.size is not None:
+        h = 0.5 * np.asarray(g.size, float)
+        v = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1]) for z in (-h[2], h[2])])
+    elif g.kind in ("sphere", "cylinder") and g.radius is not None:
+        v = np.zeros((1, 3))
+    else:
+        return np.zeros((0, 3))
+    return v @ g.origin[:3, :3].T + g.origin[:3, 3]
+
+
+def subtree(model: UrdfModel, link: str) -> list[str]:
+    """``link`` and every link below it in ``model``, depth first (each once)."""
+    out, stack = [], [link]
+    while stack:
+        n = stack.pop()
+        if n in out:
+            continue
+        out.append(n)
+        stack.extend(j.child for j in model.children(n))
+    return out
+
+
+def rigid_group(model: UrdfModel, link: str, exclude: str | None = None) -> list[str]:
+    """``link`` and every link joined to it by fixed joints (up and down the
+    tree), never entering ``exclude`` (a link whose subtree is left out)."""
+    out, stack = [], [link]
+    while stack:
+        name = stack.pop()
+        if name in out or name == exclude:
+            continue
+        out.append(name)
+        stack.extend(j.child for j in model.children(name) if j.type == "fixed")
+        pj = model.parent_joint(name)
+        if pj is not None and pj.type == "fixed":
+            stack.append(pj.parent)
+    return out
+
+
+def link_points(model: UrdfModel, link: str) -> np.ndarray:
+    """Collision points (k, 3) m of ``link`` in its own frame (visual
+    points where it has no collision element), from the URDF's geometry."""
+    ln = model.links.get(link)
+    if ln is None:
+        return np.zeros((0, 3))
+    pts = [geometry_points(g) for g in (ln.collisions or ln.visuals)]
+    pts = [p for p in pts if len(p)]
+    return np.concatenate(pts) if pts else np.zeros((0, 3))
+
+
+def handle_points(model: UrdfModel, link: str) -> np.ndarray:
+    """Points (k, 3) m, in ``link``'s frame, of the geometry elements of
+    ``link`` named as a handle (:data:`HANDLE_LABELS`, :func:`element_label`):
+    collision elements so named, else visual elements so named
+    (PartNet-Mobility names visuals only); k = 0 when there is none.
+
+    Raises:
+        KeyError: ``link`` is not in the model.
+    """
+    if link not in model.links:
+        raise KeyError(f"link {link!r} is not in the URDF {model.path or model.name!r}")
+    ln = model.links[link]
+    els = [g for g in ln.collisions if element_label(g.name) in HANDLE_LABELS] or \
+          [g for g in ln.visuals if element_label(g.name) in HANDLE_LABELS]
+    pts = [p for p in (geometry_points(g) for g in els) if len(p)]
+    return np.concatenate(pts) if pts else np.zeros((0, 3))
+
+
+def _session_points(session, link: str) -> np.ndarray:
+    """The engine's collision vertices (k, 3) of ``link`` (the protocol says
+    link frame), else the corners of its engine AABB in the link frame."""
+    v = np.asarray(session.link_collision_vertices(link), float).reshape(-1, 3)
+    if len(v):
+        return v
+    lo, hi = session.link_aabb(link)
+    o, R = session.link_frame(link)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    return (corners - np.asarray(o, float)) @ np.asarray(R, float)
+
+
+def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.ndarray]:
+    """Origin o (3,) m of ``link``'s frame (the joint's frame when ``link`` is
+    its child) and the joint's unit axis a (3,) in world coordinates."""
+    o, R = session.link_frame(link)
+    a = np.asarray(R, float) @ np.asarray(session.joint_axis(joint), float)
+    return np.asarray(o, float), a / max(float(np.linalg.norm(a)), 1e-12)
+
+
+def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[str]:
+    """Links of the session that move rigidly with one side of ``joint``:
+    ``child`` its child link and the links fixed to it; ``parent`` its parent
+    link and the links fixed to that (without the child's side). Without a
+    model: the child link alone (``parent`` raises).
+
+    Raises:
+        ValueError: ``side`` is not child / parent, or ``parent`` without a model.
+    """
+    if side not in ("child", "parent"):
+        raise ValueError(f"side must be 'child' or 'parent', got {side!r}")
+    child = session.joint_child[joint]
+    if model is None or child not in model.links:
+        if side == "parent":
+            raise ValueError(f"joint {joint!r}: the parent side needs the URDF model")
+        return [child]
+    if side == "child":
+        return [ln for ln in rigid_group(model, child) if ln in session.link_names]
+    parent = model.joint(joint).parent
+    return [ln for ln in rigid_group(model, parent, exclude=child) if ln in session.link_names]
+
+
+def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, opening_direction: float = 1.0,
+                       side: str = "child") -> tuple[str, np.ndarray, str]:
+    """Where a gripper grasps the part that ``joint`` moves.
+
+    Rules (re-derivable; ``docs/design/metrics.md``), over the links of the grasped
+    side (:func:`side_links`: the child link and the links fixed to it, or
+    the parent's side when the child carries the object):
+
+    1. A handle: a geometry element of one of them named as a handle
+       (:func:`handle_points`; needs ``model``): the centre of the handle's
+       bounding box.
+    2. Else a revolute joint: the mean of the side's collision points whose
+       distance from the joint axis is at least :data:`FAR_EDGE_SHARE` of the
+       largest (the middle of the far edge of a lid or door: the point of the
+       moving link farthest from the axis, where the lever is longest), on
+       the link holding the farthest point.
+    3. Else a prismatic joint: the centre of the link's points' bounding box
+       moved along the axis to the link's extreme in the opening direction
+       (the front of a drawer).
+
+    Points come from the URDF's collision geometry when ``model`` is given
+    (exact, in the link frame), else from the engine
+    (``link_collision_vertices``, else the link's AABB corners). The joint
+    axis passes through the child link's frame origin (URDF).
+
+    Args:
+        session: a :class:`asset2sim.engines.base.SimSession`.
+        joint: a movable joint of the session.
+        model: the session's URDF model, or None.
+        opening_direction: +1 / -1, the sign of q that opens the joint (rule 3).
+        side: ``child`` or ``parent`` (needs ``model``).
+
+    Returns:
+        ``(link, point_link (3,) m in that link's frame, rule)`` with rule
+        ``handle``, ``far edge`` or ``front``.
+
+    Raises:
+        KeyError: ``joint`` is not a movable joint of the session.
+        ValueError: the side has no geometry to grasp; bad ``side``.
+    """
+    if joint not in session.joint_child:
+        raise KeyError(f"joint {joint!r} is not a movable joint of the session")
+    links = side_links(session, joint, model, side)
+    if model is not None:
+        for ln in links:
+            if ln in model.links:
+                h = handle_points(model, ln)
+                if len(h):
+                    return ln, 0.5 * (h.min(axis=0) + h.max(axis=0)), "handle"
+    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
+    best: tuple[float, str, np.ndarray, np.ndarray] | None = None  # (reach, link, local points, world points)
+    for ln in links:
+        v = link_points(model, ln) if model is not None else _session_points(session, ln)
+        if not len(v):
+            continue
+        lo, R = session.link_frame(ln)
+        w = v @ np.asarray(R, float).T + np.asarray(lo, float)
+        if session.joint_types[joint] == "prismatic":
+            reach = float(np.max((w - o) @ a * (1.0 if opening_direction >= 0 else -1.0)))
+        else:
+            rel = w - o
+            reach = float(np.max(np.linalg.norm(rel - np.outer(rel @ a, a), axis=1)))
+        if best is None or reach > best[0]:
+            best = (reach, ln, v, w)
+    if best is None:
+        raise ValueError(f"joint {joint!r}: links {links} have no collision geometry to grasp")
+    _, link, v, w = best
+    _, R = session.link_frame(link)
+    a_l = np.asarray(R, float).T @ a  # the axis in the grasped link's frame
+    o_l = np.asarray(R, float).T @ (o - np.asarray(session.link_frame(link)[0], float))
+    if session.joint_types[joint] == "prismatic":
+        sgn = 1.0 if opening_direction >= 0 else -1.0
+        c = 0.5 * (v.min(axis=0) + v.max(axis=0))
+        c = c + a_l * sgn * (float((v @ a_l * sgn).max()) - sgn * float(c @ a_l))
+        return link, c, "front"
+    rel = v - o_l
+    r = np.linalg.norm(rel - np.outer(rel @ a_l, a_l), axis=1)
+    far = v[r >= FAR_EDGE_SHARE * float(r.max())]
+    return link, far.mean(axis=0), "far edge"
+
+
+def contact_point(session, joint: str, model: UrdfModel | None = None, *, opening_direction: float = 1.0
+                  ) -> tuple[str, np.ndarray]:
+    """``(link, point_link (3,) m)`` of :func:`contact_point_rule` on the
+    joint's child side (same arguments and errors), without the rule's name."""
+    link, point, _ = contact_point_rule(session, joint, model, opening_direction=opening_direction)
+    return link, point
+
+
+def lowest_point(session, links: list[str], model: UrdfModel | None) -> float:
+    """Lowest world z (m) of the collision points of ``links`` at the
+    session's state (URDF geometry when ``model`` is given, else the engine's
+    AABBs); +inf when none has geometry."""
+    z = float("inf")
+    for ln in links:
+        v = link_points(model, ln) if model is not None else np.zeros((0, 3))
+        if len(v):
+            o, R = session.link_frame(ln)
+            z = min(z, float(np.min(v @ np.asarray(R, float)[2] + float(o[2]))))
+        elif session.link_has_collision(ln):
+            z = min(z, float(session.link_aabb(ln)[0][2]))
+    return z
+
+
+def grasp_side(session, joint: str, model: UrdfModel | None, *, root_fixed: bool = False,
+               support_tol: float = SUPPORT_TOL) -> str:
+    """Which side of ``joint`` the gripper moves: ``child`` (the part the
+    joint moves: a lid, a door, a drawer), or ``parent`` when the child's
+    side carries the object (its lowest point within ``support_tol`` m of
+    the object's lowest point while the parent's side is higher by more than
+    ``support_tol``): a stapler whose base plate is the URDF child is pressed
+    by its top, a laptop whose base is the child is closed by its screen; the
+    joint's relative motion is the same. A mounted object (root fixed) and a
+    session without a model: always ``child``."""
+    if root_fixed or model is None:
+        return "child"
+    child = side_links(session, joint, model, "child")
+    sub = set(subtree(model, session.joint_child[joint]))  # the child's whole subtree rests with it
+    z_child = lowest_point(session, [ln for ln in session.link_names if ln in sub] or child, model)
+    z_rest = lowest_point(session, [ln for ln in session.link_names if ln not in sub], model)
+    if not np.isfinite(z_child) or not np.isfinite(z_rest):
+        return "child"
+    return "parent" if z_child + support_tol < z_rest else "child"

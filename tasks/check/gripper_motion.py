@@ -1,0 +1,193 @@
+"""How the task's gripper moves the joint it grasps
+(:mod:`asset2sim.tasks.check.task_execution`, steps 4 and 5 of its
+definitions): the commanded position on a trapezoidal speed profile, the
+gripper led along the joint's motion (pressing or lifting vertically where
+that motion is near vertical), the peak forces, the release and the wait; and
+the knobs of task execution (:class:`TaskConfig`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from asset2sim.frames import axis_angle_matrix
+from asset2sim.tasks.check.contact_points import joint_frame_axis
+from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
+from asset2sim.tasks.check.support import SupportWatch
+
+_UP = np.array([0.0, 0.0, 1.0])
+#: |q_dot| below which a joint counts as stopped: rad/s (revolute), m/s (prismatic).
+STOPPED_REVOLUTE, STOPPED_PRISMATIC = 0.05, 0.005
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Knobs of task execution (units on every field)."""
+
+    settle_time: float = 0.5
+    """free settling before the approach, s"""
+    approach_distance: float = 0.05
+    """stand-off the gripper covers before the grasp, m (time only: it has no shapes)"""
+    accel_time: float = 0.2
+    """time to ramp the commanded joint speed up to the gripper's top speed, s"""
+    travel_margin: float = 1.5
+    """time allowed per unit of travel time at top speed (dimensionless)"""
+    extra_time: float = 1.0
+    """time after the commanded motion ends to reach the target, s"""
+    hold_time: float = 1.0
+    """wait after release, s"""
+    reach_tol: float = 0.05
+    """opening-fraction tolerance on the target's side (dimensionless)"""
+    slide_tol: float = 0.005
+    """footprint displacement that counts as sliding, m"""
+    tip_tol: float = 0.05
+    """root rotation that counts as tipping, rad"""
+    vertical_share: float = 0.5
+    """the gripper presses or lifts vertically while the vertical component of the grasp
+    point's direction of motion is at least this share of it (dimensionless; 0.5: 60 deg)"""
+    from_far_side: bool = True
+    """a joint already at the task's target is first set to the far side (close: opening
+    fraction 0.6; open: the closed end); False: such an attempt succeeds without motion"""
+    retry_speed_shares: tuple[float, ...] = (0.5, 0.25)
+    """shares of the gripper's top speed at which an attempt under which the free object
+    slid or tipped is made again, in turn, from a fresh session (dimensionless; the module
+    docstring of :mod:`asset2sim.tasks.check.task_execution`). Empty: one attempt"""
+    limits: GripperLimits = field(default_factory=GripperLimits)
+
+
+@dataclass
+class Motion:
+    """What a task's motion recorded (opening fractions; N, N m; m)."""
+
+    moved: bool
+    f_rel: float = 0.0  # opening fraction at release, and after hold_time
+    f_end: float = 0.0
+    held_ok: bool = False
+    steps: int = 0  # engine steps simulated from the grasp on
+    peak_force: float = 0.0
+    peak_tau: float = 0.0
+    peak_ax: float = 0.0
+    peak_op: float = 0.0
+    lever: float | None = None
+    force_limited: bool = False
+
+
+def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, cfg: TaskConfig,
+          speed_share: float, frac: Callable[[float], float], reached: Callable[[float], bool], watch: SupportWatch,
+          notes: list[str]) -> Motion:
+    """Lead the grasped joint from ``q0`` to ``q_target`` (rad or m), release
+    and wait ``hold_time`` (module docstring, steps 4-5); ``side_sign`` -1
+    where the gripper moves the parent side."""
+    dt = float(session.options.conventions.timestep)
+    prismatic = session.joint_types[joint] == "prismatic"
+    m = Motion(moved=True)
+    o, a = joint_frame_axis(session, joint, grasp.link)
+    p = grasp.grasp_point_world()
+    v_cmd = cfg.limits.max_speed_m_s * speed_share
+    if not prismatic:
+        r_vec = (p - o) - float((p - o) @ a) * a
+        m.lever = max(float(np.linalg.norm(r_vec)), 1e-3)
+        qdot_max = v_cmd / m.lever
+    else:
+        qdot_max = v_cmd
+    travel = abs(q_target - q0) * (m.lever if m.lever is not None else 1.0)
+    n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
+    done, pushed_steps = _lead(session, joint, grasp, side_sign, q0, q_target, qdot_max, n_move, cfg, frac, reached, watch, m)
+    m.peak_force = grasp.peak_force_n
+    grasp.release()
+    if pushed_steps:
+        notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
+    q_rel, _ = session.joint_state(joint)
+    m.f_rel = frac(q_rel)
+    if not done and reached(m.f_rel):
+        notes.append("target reached but the joint was still moving at the time limit")
+    for _ in range(int(round(cfg.hold_time / dt))):
+        session.step(1)
+        m.steps += 1
+        watch.update()
+    q_end, _ = session.joint_state(joint)
+    m.f_end = frac(q_end)
+    m.held_ok = reached(m.f_end) if np.isfinite(m.f_end) else False
+    return m
+
+
+def _lead(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, qdot_max: float,
+          n_move: int, cfg: TaskConfig, frac: Callable[[float], float], reached: Callable[[float], bool],
+          watch: SupportWatch, m: Motion) -> tuple[bool, int]:
+    """Lead the gripper along the joint's motion for at most ``n_move`` steps,
+    the commanded q_des from ``q0`` to ``q_target`` at up to ``qdot_max``
+    (rad/s or m/s; module docstring, step 4), recording the peaks into ``m``.
+    Returns (the joint reached the target and stopped, steps pressed or lifted vertically)."""
+    dt = float(session.options.conventions.timestep)
+    prismatic = session.joint_types[joint] == "prismatic"
+    stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
+    sgn = 1.0 if q_target >= q0 else -1.0
+    decel = qdot_max / cfg.accel_time
+    q_des = q0
+    pushed_steps = 0
+    for k in range(n_move):
+        # trapezoidal speed profile: ramped up over accel_time, and down at the same rate
+        # before the target (an arm decelerates; an abrupt stop would brake the part's momentum in one step)
+        speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
+        speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
+        q_des = q_des + sgn * speed * dt
+        if sgn * (q_des - q_target) > 0:
+            q_des = q_target
+        q, _ = session.joint_state(joint)
+        o, a = joint_frame_axis(session, joint, grasp.link)
+        p = grasp.grasp_point_world()
+        target, push = _gripper_target(o, a, p, side_sign * (q_des - q), prismatic, cfg.vertical_share)
+        F = grasp.step_towards(target, dt, direction=_UP if push else None)
+        pushed_steps += int(push)
+        _record_peaks(m, F, o, a, p, prismatic)
+        if float(np.linalg.norm(F)) >= cfg.limits.max_force_n * (1 - 1e-9):
+            m.force_limited = True
+        session.step(1)
+        m.steps += 1
+        q, qd = session.joint_state(joint)
+        slide, tilt = watch.update()
+        if not np.isfinite(q):
+            break
+        if slide > cfg.slide_tol or tilt > cfg.tip_tol:
+            break  # the object moves instead of the joint: the gripper stops
+        if q_des == q_target and reached(frac(q)) and abs(qd) < stopped:
+            return True, pushed_steps
+    return False, pushed_steps
+
+
+def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, prismatic: bool,
+                    vertical_share: float) -> tuple[np.ndarray, bool]:
+    """(where the gripper is led, world (3,) m; whether it presses or lifts
+    vertically): the grasp point ``p`` moved by ``dq`` (rad or m) about or
+    along the joint axis ``a`` through ``o``, or, where the motion is near
+    vertical (``vertical_share``), the vertical stretch that moves the part as far."""
+    if prismatic:
+        target = p + a * dq
+    else:
+        target = o + axis_angle_matrix(a, dq) @ (p - o)
+    # Press or lift vertically where that moves the part well enough:
+    # it loads the object onto the ground instead of pushing it sideways.
+    t_dir = a if prismatic else np.cross(a, p - o)
+    nt = float(np.linalg.norm(t_dir))
+    push = nt > 0 and abs(float(t_dir[2])) >= vertical_share * nt
+    if push:
+        # the vertical stretch that moves the part as far along its path
+        # as the target asks: (progress along the tangent) / t_z
+        t_hat = t_dir / nt
+        target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
+    return target, push
+
+
+def _record_peaks(m: Motion, F: np.ndarray, o: np.ndarray, a: np.ndarray, p: np.ndarray, prismatic: bool) -> None:
+    """Raise ``m``'s peaks with the gripper's force ``F`` (3,) N at the grasp point ``p``."""
+    if prismatic:
+        m.peak_ax = max(m.peak_ax, abs(float(F @ a)))
+        m.peak_op = m.peak_ax
+    else:
+        tau = abs(float(a @ np.cross(p - o, F)))
+        m.peak_tau = max(m.peak_tau, tau)
+        r_now = float(np.linalg.norm((p - o) - float((p - o) @ a) * a))
+        m.peak_op = max(m.peak_op, tau / max(r_now, 1e-3))

@@ -1,0 +1,115 @@
+"""Penetration scans along one joint, for the geometric limits
+(:mod:`asset2sim.tasks.geometry.limits`): the link pairs that can collide, their
+depths, the free end of a range (:func:`free_end`) and where the contact that
+ends it begins (:func:`contact_onset`). Depths in m, positions in rad or m;
+``session`` is a :class:`~asset2sim.engines.base.SimSession` answering
+``link_distances``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Deepest penetration increase (m) over the baseline that ends the free range:
+#: about where a force-limited drive stalls against the contact (the sweep
+#: must reach 95 % of the clipped range).
+EXCESS_TOLERANCE = 0.001
+#: Excess (m) under which a contact has not yet begun (:func:`contact_onset`).
+ONSET_TOLERANCE = 0.0002
+#: Samples over the raw range on each side of the closed end.
+SCAN_SAMPLES = 48
+#: Bisection halvings between the last free and the first blocked sample.
+BISECTIONS = 7
+
+
+def collision_pairs(session, sub: list[str], against: set[str] | None = None) -> list[tuple[str, str]]:
+    """(link of ``sub``, other link) pairs, both with collision geometry,
+    the other one in ``against`` when given; session link order."""
+    subset = set(sub)
+    a = [n for n in sub if session.link_has_collision(n)]
+    b = [n for n in session.link_names if n not in subset and session.link_has_collision(n) and (against is None or n in against)]
+    return [(x, y) for x in a for y in b]
+
+
+def pair_depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
+    """Deepest penetration (m, >= 0) of each pair at the current state."""
+    out = np.zeros(len(pairs))
+    for i, (x, y) in enumerate(pairs):
+        d = session.link_distances(x, y, 0.0)
+        if d:
+            out[i] = max(0.0, -min(d))
+    return out
+
+
+def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
+             tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
+    """Scan ``joint`` from ``q_from`` to ``q_to`` (rad or m): the first
+    sample whose penetration excess over ``baseline`` ((P,) m, one per pair
+    of ``pairs``) reaches ``stop_depth`` (m; ``tol`` when None) is in a stop;
+    walking back from it, the last sample with excess <= ``tol`` (m), refined
+    by bisection, is the free end. Returns (free end, the link run into), or
+    (``q_to``, None) when no sample reaches ``stop_depth`` (an overlap that
+    never gets that deep is the hulls', not a stop). Other joints stay where
+    the session has them."""
+    stop = tol if stop_depth is None else max(stop_depth, tol)
+    qs = [q_from + (q_to - q_from) * k / samples for k in range(samples + 1)]
+    exc_max: list[float] = []
+    hit = None
+    for k, q in enumerate(qs):
+        session.set_joint_positions({joint: q})
+        exc = pair_depths(session, pairs) - baseline
+        exc_max.append(float(exc.max(initial=0.0)))
+        if k > 0 and exc_max[-1] >= stop:
+            hit = k
+            break
+    if hit is None:
+        return float(q_to), None
+    k = hit
+    while k > 0 and exc_max[k - 1] > tol:
+        k -= 1
+    if k == 0:
+        return float(q_from), None
+    lo, hi = qs[k - 1], qs[k]
+    session.set_joint_positions({joint: hi})
+    e = pair_depths(session, pairs) - baseline
+    worst = pairs[int(np.argmax(e))][1]
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        session.set_joint_positions({joint: mid})
+        e = pair_depths(session, pairs) - baseline
+        if float(e.max(initial=0.0)) > tol:
+            hi, worst = mid, pairs[int(np.argmax(e))][1]
+        else:
+            lo = mid
+    return float(lo), worst
+
+
+def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
+                  max_back: float, onset: float = ONSET_TOLERANCE, steps: int = 8) -> float:
+    """Where the contact that ends the free range at ``q_end`` begins: the
+    first of ``steps`` positions from ``q_end`` back towards ``q_free`` (rad
+    or m), at most ``max_back`` away, whose penetration excess over
+    ``baseline`` is <= ``onset`` m; ``q_end`` moved back by ``max_back`` when
+    none is (the drive of the sweep stalls where the contact force balances
+    it, before the excess reaches the scan's tolerance)."""
+    sgn = 1.0 if q_free > q_end else -1.0
+    back = min(max_back, abs(q_free - q_end))
+    for k in range(1, steps + 1):
+        q = q_end + sgn * back * k / steps
+        session.set_joint_positions({joint: q})
+        if float((pair_depths(session, pairs) - baseline).max(initial=0.0)) <= onset:
+            return float(q)
+    return float(q_end + sgn * back)
+
+
+def depth_scan(session, joint: str, pairs: list[tuple[str, str]], lo: float, hi: float, q_extra: float,
+               samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (n,): ``samples`` + 1 over [``lo``, ``hi``] and ``q_extra``,
+    sorted and unique (rad or m); the depth (n, P) m of each pair at each
+    (:func:`pair_depths`; other joints where the session has them)."""
+    qs = np.unique(np.concatenate([np.linspace(lo, hi, samples + 1), [q_extra]]))
+    depth = []
+    for q in qs:
+        session.set_joint_positions({joint: q})
+        depth.append(pair_depths(session, pairs))
+    return qs, np.array(depth)

@@ -1,0 +1,249 @@
+"""Strict reading of one mesh file: :func:`scan_mesh_file` and its :class:`MeshScan`.
+
+OBJ through :func:`asset2sim.mesh_io.read_obj` (the reader every later stage
+uses, so validation reads exactly what refine reads) with the checks a
+strict reader adds (records, index 0, indices out of range, face cap before
+parsing), binary and ASCII STL by a vectorized reader, DAE through
+``trimesh`` after the hardened XML parser. Used by the validator's mesh
+checks (:mod:`asset2sim.tasks.ingest.mesh_checks`).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import mesh_io, mesh_materials, safexml
+from asset2sim.tasks.ingest.findings import MAX_COORDINATE
+from asset2sim.tasks.ingest.mesh_paths import read_regular
+
+__all__ = ["MeshScan", "is_flat", "scan_mesh_file"]
+
+
+@dataclass
+class MeshScan:
+    """What a strict read of one mesh file found (file units, scale 1).
+
+    ``defects`` maps mesh-content codes to messages. ``n_vertices``,
+    ``n_faces`` (triangles after fan triangulation of valid faces), ``area``
+    (m^2, finite faces only), ``flat`` (all used vertices within 1e-9 of the
+    extent of a plane), ``moments``: (count, sum (3,), sum of outer products
+    (3, 3)) of the used vertices, to decide flatness of a whole link.
+    ``bounds``: (2, 3) lower and upper corner of the used finite vertices.
+    ``mtllibs`` the ``mtllib`` names of an OBJ.
+    """
+
+    n_vertices: int = 0
+    n_faces: int = 0
+    area: float = 0.0
+    flat: bool = False
+    defects: dict[str, str] = field(default_factory=dict)
+    moments: tuple[int, np.ndarray, np.ndarray] | None = None
+    mtllibs: list[str] = field(default_factory=list)
+    bounds: np.ndarray | None = None
+
+
+class _TooManyFaces(Exception):
+    def __init__(self, count: int, max_faces: int, what: str = "triangles"):
+        super().__init__(f"{count} {what} > cap {max_faces}")
+        self.count = count
+
+
+class _Unparsable(Exception):
+    def __init__(self, message: str, mtllibs: list[str]):
+        super().__init__(message)
+        self.mtllibs = mtllibs
+
+
+_OBJ_NOT_RECORD = re.compile(rb"^[ \t]*([^A-Za-z#\s][^\r\n]{0,39})", re.M)
+
+
+def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str], list[str]]:
+    """An OBJ as refine reads it (:func:`asset2sim.mesh_io.read_obj`) plus the
+    strict checks: the face cap on the record count before parsing, lines
+    that are no OBJ record, indices out of range or before the start, face
+    records the reader skipped (index 0, < 3 vertices). Returns (vertices
+    (N, 3), triangles (M, 3) 0-based without the bad ones, defects, mtllib
+    names)."""
+    defects: dict[str, str] = {}
+    approx_faces = data.count(b"\nf ") + data.count(b"\nf\t") + (1 if data[:2] in (b"f ", b"f\t") else 0)
+    if approx_faces > max_faces:
+        raise _TooManyFaces(approx_faces, max_faces, "face records")
+    mtllibs = [m for m in mesh_materials.mtl_libraries(data) if m.strip()]
+    bad_rec = _OBJ_NOT_RECORD.search(data)
+    if bad_rec is not None:
+        # every OBJ record starts with a keyword (v, f, vt, vn, o, g, s, usemtl, l, ...)
+        lineno = data.count(b"\n", 0, bad_rec.start()) + 1
+        defects["MESH_MALFORMED"] = f"line {lineno}: not an OBJ record: {bad_rec.group(1)!r}"
+    try:
+        v, f, notes = mesh_io.read_obj(data, "OBJ")
+    except mesh_io.MeshReadError as exc:  # refine could not read it either: nothing more to check
+        raise _Unparsable(defects.get("MESH_MALFORMED") or str(exc), mtllibs) from None
+    if len(f) > max_faces:
+        raise _TooManyFaces(len(f), max_faces)
+    bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
+    if bad.any() or notes:
+        what = [f"{int(bad.sum())} face(s) index vertices outside the {len(v)} defined"] if bad.any() else []
+        defects["MESH_BAD_INDEX"] = "; ".join(what + [n.replace("OBJ: ", "") for n in notes])
+    return v, f[~bad], defects, mtllibs
+
+
+def _scan_stl(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str]]:
+    defects: dict[str, str] = {}
+    if len(data) >= 84:
+        n = int.from_bytes(data[80:84], "little")
+        if 84 + 50 * n == len(data):
+            if n > max_faces:
+                raise _TooManyFaces(n, max_faces)
+            dt = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+            tri = np.frombuffer(data, dtype=dt, count=n, offset=84)["v"].astype(np.float64)
+            v = tri.reshape(-1, 3)
+            return v, np.arange(len(v)).reshape(-1, 3), defects
+    head = data[:512].lstrip().lower()
+    if not head.startswith(b"solid"):
+        defects["MESH_MALFORMED"] = "neither a binary STL (size != 84 + 50 n) nor an ASCII STL"
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects
+    if data.count(b"facet") // 2 > max_faces:
+        raise _TooManyFaces(data.count(b"facet") // 2, max_faces, "facets (about)")
+    coords = re.findall(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)", data)
+    try:
+        v = np.array(coords, dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        defects["MESH_MALFORMED"] = "an ASCII STL vertex is not numeric"
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), defects
+    if len(v) % 3:
+        defects["MESH_MALFORMED"] = f"{len(v)} vertices is not a whole number of triangles"
+        v = v[: len(v) - len(v) % 3]
+    return v, np.arange(len(v)).reshape(-1, 3), defects
+
+
+def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> tuple[np.ndarray, np.ndarray, dict[str, str]]:
+    if ext == ".dae":
+        safexml.parse_xml_bytes(data, source=source)  # DAE is XML: refuse DTDs/entities first
+    import trimesh
+
+    loaded = trimesh.load(io.BytesIO(data), file_type=ext[1:], force="mesh", process=False, skip_materials=True)
+    v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
+    f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    if len(f) > max_faces:
+        raise _TooManyFaces(len(f), max_faces)
+    defects: dict[str, str] = {}
+    bad = np.any((f < 0) | (f >= len(v)), axis=1) if len(f) else np.zeros(0, bool)
+    if bad.any():
+        defects["MESH_BAD_INDEX"] = f"{int(bad.sum())} face(s) index beyond the {len(v)} vertices"
+    return v, f[~bad], defects
+
+
+def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000,
+                   max_coordinate: float = MAX_COORDINATE) -> MeshScan:
+    """Strictly read one mesh file and report its defects.
+
+    OBJ by :func:`asset2sim.mesh_io.read_obj`, the reader of every later
+    stage (polygons fan-triangulated, negative relative indices, forward
+    references), with strict checks on top; STL (binary and ASCII) by this
+    module; PLY, OFF, GLB, GLTF and DAE by ``trimesh`` (DAE first checked by
+    :func:`asset2sim.safexml.parse_xml_bytes`). Which formats an asset may
+    use is the validator's decision (``ValidationPolicy.mesh_extensions``).
+
+    Args:
+        path: a regular file (resolve it with :func:`resolve_mesh_reference`).
+        max_bytes: size cap, bytes.
+        max_faces: triangle cap.
+        max_coordinate: |coordinate| cap of the used vertices, file units;
+            checked (by comparison only) before any arithmetic on them, so
+            1e308 overflows nothing and prints no numpy warning.
+
+    Returns:
+        A :class:`MeshScan`; ``defects`` may hold MESH_MALFORMED,
+        MESH_TOO_MANY_FACES, MESH_NO_FACES, MESH_NONFINITE_VERTEX,
+        MESH_COORDINATE_IMPLAUSIBLE, MESH_BAD_INDEX, MESH_ZERO_AREA,
+        MESH_ZERO_VOLUME. Never raises for a bad file; OSError when the file
+        cannot be read.
+    """
+    path = Path(path)
+    scan = MeshScan()
+    data = read_regular(path, max_bytes)
+    ext = path.suffix.lower()
+    try:
+        if ext == ".obj":
+            v, f, defects, scan.mtllibs = _scan_obj(data, max_faces)
+        elif ext == ".stl":
+            v, f, defects = _scan_stl(data, max_faces)
+        else:
+            v, f, defects = _scan_trimesh(data, ext, max_faces, str(path))
+    except _TooManyFaces as exc:  # counted in the asset's total all the same
+        scan.defects["MESH_TOO_MANY_FACES"] = str(exc)
+        scan.n_faces = exc.count
+        return scan
+    except _Unparsable as exc:
+        scan.defects["MESH_MALFORMED"] = str(exc)
+        scan.mtllibs = exc.mtllibs
+        return scan
+    except safexml.SafeXMLError as exc:
+        scan.defects["MESH_MALFORMED"] = f"unsafe or malformed XML: {exc.code}: {exc.detail}"
+        return scan
+    except Exception as exc:  # trimesh / numpy raise many types on garbage
+        scan.defects["MESH_MALFORMED"] = f"cannot parse ({type(exc).__name__}: {str(exc)[:200]})"
+        return scan
+    scan.defects.update(defects)
+    scan.n_vertices, scan.n_faces = len(v), len(f)
+    if len(f) == 0:
+        scan.defects.setdefault("MESH_NO_FACES", "no (valid) face")
+        return scan
+    used = np.unique(f)
+    uv = v[used]
+    finite = np.isfinite(uv).all(axis=1)
+    if not finite.all():
+        scan.defects["MESH_NONFINITE_VERTEX"] = f"{int((~finite).sum())} used vertex(es) with NaN or infinite coordinates"
+        goodf = np.isfinite(v[f]).all(axis=(1, 2))
+        f = f[goodf]
+        uv = uv[finite]
+        if len(f) == 0:
+            return scan
+    far = np.abs(uv) > max_coordinate  # a comparison: no overflow, no warning
+    if far.any():
+        worst = float(np.abs(uv).max())
+        scan.defects["MESH_COORDINATE_IMPLAUSIBLE"] = (
+            f"{int(far.any(axis=1).sum())} used vertex(es) beyond +-{max_coordinate:g} file units (largest |coordinate| "
+            f"{worst:.3g}): no overlay scale can make this a household object; check the mesh's units")
+        return scan
+    tri = v[f]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    ext3 = uv.max(axis=0) - uv.min(axis=0)
+    diag = float(np.linalg.norm(ext3))
+    scan.area = float(area2.sum() / 2.0)
+    if diag == 0.0 or scan.area <= 1e-14 * diag * diag:
+        scan.defects["MESH_ZERO_AREA"] = f"all {len(f)} faces are degenerate (total area {scan.area:.3g})"
+        return scan
+    n = len(uv)
+    s1 = uv.sum(axis=0)
+    s2 = uv.T @ uv
+    scan.moments = (n, s1, s2)
+    scan.bounds = np.stack([uv.min(axis=0), uv.max(axis=0)])
+    if is_flat(n, s1, s2):
+        scan.flat = True
+        scan.defects["MESH_ZERO_VOLUME"] = "all vertices lie in one plane (zero volume)"
+    return scan
+
+
+def is_flat(n: int, s1: np.ndarray, s2: np.ndarray) -> bool:
+    """Vertices whose scatter has a zero direction (relative 1e-9 of the extent).
+    False when the moments are not finite (an implausible size, refused by
+    ASSET_SIZE_IMPLAUSIBLE; nothing to say about flatness)."""
+    if n < 4:
+        return True
+    if not (np.isfinite(s1).all() and np.isfinite(s2).all()):
+        return False
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = s1 / n
+        cov = s2 / n - np.outer(mean, mean)
+    if not np.isfinite(cov).all():
+        return False
+    lam = np.linalg.eigvalsh(0.5 * (cov + cov.T))
+    return bool(lam[2] <= 0 or math.sqrt(max(lam[0], 0.0)) <= 1e-9 * math.sqrt(lam[2]))

@@ -1,0 +1,110 @@
+"""The joints and links a request's part words name on one object (used by
+:mod:`asset2sim.tasks.synthesize.request_apply`).
+
+A label names the movable joints whose moving link carries that label
+(``priors.request_label_matches``); "all" the task-relevant ones. A label the
+object lacks is a warning naming the label and the parts that exist; the state
+is then applied to the task-relevant joints. An ordinal picks among the
+targets in its order: vertical = top to bottom by the height of the moving
+part's box center in the closed state, left_right / right_left and front_back
+as seen by a viewer facing the object's front. Front is -x of the asset's root
+frame (PartNet-Mobility's convention: the object frame's +z front becomes -x
+through the base joint's rpy (pi/2, 0, -pi/2)); the viewer's left is then +y.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from asset2sim.schemas.request import DynamicsValue, JointStateRequest
+from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
+from asset2sim.tasks.interpret.request_values import PART_RX
+
+if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
+    from asset2sim.tasks.synthesize.context import EstimationContext
+
+
+def moving_parts(ctx: "EstimationContext") -> str:
+    """Labels of the moving parts of the object (semantic labels, else link names), each once, comma-separated; "none" without any."""
+    return ", ".join(dict.fromkeys(ctx.asset.link(j.child).semantic_label or j.child for j in ctx.asset.movable_joints())) or "none"
+
+
+def joints_named(ctx: "EstimationContext", label: str) -> list[str]:
+    """Movable joints whose moving link carries ``label`` (``priors.request_label_matches``)."""
+    return [j.name for j in ctx.asset.movable_joints() if priors.request_label_matches(ctx.category, label, ctx.asset.link(j.child).semantic_label)]
+
+
+def joints_of(ctx: "EstimationContext", d: DynamicsValue, relevant: list[str]) -> list[str]:
+    """The joints an explicit joint parameter names: its label's, else (no label, or no such part) ``relevant``."""
+    return (joints_named(ctx, d.label) if d.label is not None else []) or relevant
+
+
+def unit_fits(d: DynamicsValue, linear: bool) -> bool:
+    """Whether a joint parameter's unit fits a prismatic (``linear``) or revolute joint (a value without unit fits both)."""
+    return not ((d.motion == "rotational" and linear) or (d.motion == "linear" and not linear))
+
+
+def link_named(ctx: "EstimationContext", link: str, label: str | None) -> bool:
+    """Whether a property's label names ``link``: None the whole object, "body" a link that no joint moves or
+    that carries a body label, any other label by ``priors.request_label_matches``."""
+    if label is None:
+        return True
+    if label == "body":
+        moving = {ln for links in ctx.subtrees.values() for ln in links}
+        return link not in moving or (canonical_label(ctx.asset.link(link).semantic_label) in BODY_LABELS)
+    return priors.request_label_matches(ctx.category, label, ctx.asset.link(link).semantic_label)
+
+
+def _order_key(order: str, c: np.ndarray) -> float:
+    """Sort key of a joint for an ordinal's order (ascending = first)."""
+    if order == "left_right":
+        return -float(c[1])
+    if order == "right_left":
+        return float(c[1])
+    if order == "front_back":
+        return float(c[0])
+    return -float(c[2])
+
+
+def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: list[str], centers: dict[str, np.ndarray],
+                  warnings: list[str]) -> list[str]:
+    """The joints a state request names: its label's (else the task-relevant ``relevant`` ones but continuous
+    joints, warned), an ordinal's pick among them by ``centers`` (joint -> (3,) box center, m); warnings appended."""
+    if jr.selector == "joint":  # an override names the joint itself
+        return [jr.joint] if jr.joint in relevant or any(j.name == jr.joint for j in ctx.asset.movable_joints()) else []
+    named = jr.selector != "all" and bool(jr.label)
+    targets = joints_named(ctx, str(jr.label)) if named else []
+    if not targets:
+        targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
+        if named:
+            warnings.append(
+                f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but this {ctx.category} has no such part; "
+                f"its moving parts: {moving_parts(ctx)}; '{jr.phrase}' applied to the task-relevant joints {targets}"
+            )
+    if jr.ordinal is not None:
+        targets.sort(key=lambda n: _order_key(jr.order, centers.get(n, np.zeros(3))))
+        if -len(targets) <= jr.ordinal < len(targets):
+            targets = [targets[jr.ordinal]]
+        else:
+            warnings.append(f"WARNING: '{jr.phrase}' asks for {jr.label or 'part'} #{jr.ordinal + 1 if jr.ordinal >= 0 else jr.ordinal} "
+                            f"({jr.order}) but only {len(targets)} exist; ignored")
+            targets = []
+    return targets
+
+
+def count_warnings(ctx: "EstimationContext") -> list[str]:
+    """A count of parts the request names ("two-drawer") that differs from the
+    object's movable parts with that label (labels without joints, such as a
+    toaster's slots, are not checked)."""
+    out = []
+    for label, n in ctx.request.part_counts.items():
+        if not PART_RX.fullmatch(label):
+            continue
+        have = joints_named(ctx, label)
+        if len(have) != n:
+            out.append(f"WARNING: the request names {n} {label}(s) but this {ctx.category} has {len(have)} movable {label}(s)"
+                       + (f" ({', '.join(have)})" if have else f"; its moving parts: {moving_parts(ctx)}"))
+    return out

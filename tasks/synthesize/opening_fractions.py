@@ -1,0 +1,119 @@
+"""The opening fraction a request's number or end asks of one joint, decided
+from the geometry (used by :func:`asset2sim.tasks.synthesize.request_apply.resolve_states`).
+
+- **Numbers** are measured from the geometric closed end
+  (:mod:`asset2sim.tasks.geometry.closed_state`): a fraction of the opening
+  range, an angle (rad, revolute joints) or a distance (m at the output's
+  scale; prismatic joints directly; on a revolute joint the distance is the
+  gap at the moving part's farthest point from the axis, angle = d / r, the
+  arc length s = r theta).
+- **Ends.** "up"/"raised"/"lifted" = the fraction at which the moving part's
+  box center is highest in world z over its travel, after the resting pose
+  (scale is uniform and positive, so it does not change which end is highest);
+  "down"/"lowered" the lowest. "on"/"off" of a toggle switch (labels switch,
+  toggle, rocker) are its high and low ends (the up-is-on convention of
+  vertically mounted toggle switches, NFPA 70 National Electrical Code 404.7);
+  of other parts (a faucet handle, a knob) "on" is fully open and "off" closed.
+  A part that moves less than :data:`FLAT_TRAVEL` of the object's size in
+  height has no up or down.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from asset2sim.schemas.request import StateTarget
+from asset2sim.tasks.geometry.closed_state import links_aabb
+from asset2sim.tasks.interpret.part_labels import canonical_label
+
+if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
+    from asset2sim.tasks.synthesize.context import EstimationContext
+
+#: Height change over the travel, as a fraction of the object's largest
+#: extent, below which a part has no "up" or "down".
+FLAT_TRAVEL = 0.02
+#: Labels whose "on"/"off" are their high/low ends (toggle switches).
+TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
+#: Samples of the travel searched for the highest / lowest end.
+END_SAMPLES = 41
+
+
+def box_center(ctx: "EstimationContext", joint: str) -> np.ndarray:
+    """(3,) world center (m, scale 1, resting pose applied) of the box around the joint's moving subtree
+    at the session's current joint positions; zeros without geometry."""
+    R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
+    box = links_aabb(ctx.session, ctx.subtrees[joint], ctx.hull_points)
+    return np.zeros(3) if box is None else R @ (0.5 * (box[0] + box[1]))
+
+
+def _radius(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> float:
+    """Largest distance (m, scale 1) of the joint's moving hull points from its axis at ``state``."""
+    ctx.session.set_joint_positions(state)
+    child = ctx.session.joint_child[joint]
+    p0, Rc = ctx.session.link_frame(child)
+    a = Rc @ np.asarray(ctx.session.joint_axis(joint), float)
+    a = a / max(np.linalg.norm(a), 1e-12)
+    r = 0.0
+    for ln in ctx.subtrees[joint]:
+        v = ctx.hull_points.get(ln)
+        if v is None:
+            continue
+        pos, R = ctx.session.link_frame(ln)
+        w = v @ R.T + pos - p0
+        perp = w - np.outer(w @ a, a)
+        r = max(r, float(np.linalg.norm(perp, axis=1).max()))
+    return r
+
+
+def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: dict[str, float]) -> tuple[float | None, str]:
+    """Opening fraction of the joint's highest (``high``) or lowest (``low``)
+    position in world z; None with a reason when the part moves flat."""
+    cs = ctx.closed[joint]
+    fr = np.linspace(0.0, 1.0, END_SAMPLES)
+    zs = []
+    for f in fr:
+        ctx.session.set_joint_positions({**closed_state, joint: cs.position(float(f))})
+        zs.append(box_center(ctx, joint)[2])
+    zs = np.asarray(zs)
+    size = float(np.max(ctx.closed_extents)) if len(ctx.closed_extents) else 1.0
+    if zs.max() - zs.min() < FLAT_TRAVEL * size:
+        return None, f"its height changes by {zs.max() - zs.min():.3g} (< {FLAT_TRAVEL:g} of the object's size) over the travel"
+    i = int(np.argmax(zs) if end == "high" else np.argmin(zs))
+    return float(fr[i]), f"{'highest' if end == 'high' else 'lowest'} position in world z at opening fraction {fr[i]:.3g}"
+
+
+def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scale: float, label: str,
+                 closed_state: dict[str, float]) -> tuple[float | None, str]:
+    """Opening fraction ``target`` asks of ``joint`` (a part labelled ``label``), and how it was decided;
+    None with the reason when it cannot be applied. ``scale``: the output's uniform scale (distances are
+    in m at it); ``closed_state``: every joint's closed position (input units)."""
+    cs = ctx.closed[joint]
+    jt = ctx.asset.joint(joint).type
+    if target.kind == "fraction":
+        return float(target.value), f"{target.value:.3g} of the opening range"
+    if target.kind == "end":
+        end = target.end
+        canon = canonical_label(label) or label
+        if end in ("on", "off"):
+            if canon in TOGGLE_LABELS:
+                end = "high" if end == "on" else "low"
+            else:
+                return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
+        return _end_fraction(ctx, joint, str(end), closed_state)
+    if target.kind == "angle":
+        if jt == "prismatic":
+            return None, f"{np.degrees(target.value):.4g} degrees asked of a sliding joint (it moves in metres)"
+        return float(target.value) / max(cs.open_range, 1e-9), (
+            f"{np.degrees(target.value):.4g} deg from the closed end of a {np.degrees(cs.open_range):.4g} deg opening range")
+    # distance
+    if jt == "prismatic":
+        rng = cs.open_range * scale
+        return float(target.value) / max(rng, 1e-12), f"{target.value:.4g} m from the closed end of a {rng:.4g} m travel"
+    r = _radius(ctx, joint, closed_state) * scale
+    if r <= 0:
+        return None, "no geometry to measure a distance on"
+    ang = float(target.value) / r
+    return ang / max(cs.open_range, 1e-9), (
+        f"{target.value:.4g} m gap at the part's farthest point from the axis (r = {r:.4g} m): {np.degrees(ang):.4g} deg")
