@@ -66,6 +66,7 @@ def test_overrides_win_over_the_words(stapler):
     out = apply_overrides(spec, ov, stapler)
     masses = [p.mass for p in out.properties if p.label is None and p.mass is not None]
     assert masses == [0.6] and out.mass_level is None
+    assert [p.material for p in out.properties if p.label is None and p.material] == ["steel_sheet"]
     assert [(s.dimension, s.value) for s in out.sizes] == [("largest", 0.2)]
     last = out.joint_states[-1]
     assert (last.selector, last.joint, last.target.kind) == ("joint", "joint_1", "angle")
