@@ -25,17 +25,14 @@ import yaml
 from pydantic import ValidationError
 
 from asset2sim.engines.base import SessionOptions, SimSession
-from asset2sim.engines.loading import read_initial_state
 from asset2sim.engines.registry import open_session
 from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.request import RequestOverrides
-from asset2sim.tasks.assemble.export_mjcf import export_mjcf, springs_from_overlay
-from asset2sim.tasks.assemble.write import read_root
+from asset2sim.tasks.assemble.export_mjcf import export_mjcf, output_session_options
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, validate_asset
-from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.publish.export_usd import export_usd
 from asset2sim.tasks.refine import RefineError, RefineResult, refine_asset
 
@@ -74,8 +71,12 @@ def load_config(config: RefineConfig | Mapping[str, Any] | str | Path | None) ->
     try:
         return RefineConfig.model_validate(dict(config))
     except ValidationError as exc:
-        fields = "; ".join(f"{'.'.join(str(x) for x in e['loc']) or 'value'}: {e['msg']}" for e in exc.errors())
-        raise ValueError(f"{source}: {fields}") from exc
+        raise ValueError(f"{source}: {_field_errors(exc)}") from exc
+
+
+def _field_errors(exc: ValidationError) -> str:
+    """``field: message; ...`` of a pydantic validation error, one line."""
+    return "; ".join(f"{'.'.join(str(x) for x in e['loc']) or 'value'}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors())
 
 
 def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str, Any]) -> RequestOverrides:
@@ -94,7 +95,7 @@ def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str
     try:
         return RequestOverrides.model_validate(merged)
     except ValidationError as exc:
-        raise ValueError("overrides: " + "; ".join(f"{'.'.join(str(x) for x in e['loc'])}: {e['msg']}" for e in exc.errors())) from exc
+        raise ValueError(f"overrides: {_field_errors(exc)}") from exc
 
 
 def refine(
@@ -259,15 +260,13 @@ def verified_options(out_dir: str | Path, conventions: SimConventions | None = N
     open an output folder with: the initial state (rad / m) of
     ``initial_state.json``, the joint springs of ``overlay.json`` (N*m/rad or
     N/m about their reference), the root fixed when the object is mounted
-    (no ground) or free on a ground plane at z = 0.
+    (no ground) or free on a ground plane at z = 0
+    (:func:`asset2sim.tasks.assemble.export_mjcf.output_session_options`).
 
     Raises:
         ValueError: not an output folder, or its ``overlay.json`` is invalid.
     """
-    out = _output_folder(out_dir)
-    state = read_initial_state(out)
-    return SessionOptions(initial_state=state, springs=springs_from_overlay(out, state),
-                          conventions=conventions or SimConventions(), **session_root_options(read_root(out).fixed))
+    return output_session_options(_output_folder(out_dir), conventions=conventions)
 
 
 def _load(engine: str, out_dir: str | Path, **attach) -> SimSession:

@@ -14,8 +14,6 @@ import sys
 import time
 from pathlib import Path
 
-from pydantic import ValidationError
-
 from asset2sim.commands._status import (
     INVALID_INPUT,
     INVALID_REQUEST,
@@ -26,9 +24,8 @@ from asset2sim.commands._status import (
     output_failure,
     parse_engines,
 )
-from asset2sim.api import load_config
+from asset2sim.api import load_config, merge_overrides
 from asset2sim.schemas.config import RefineConfig, default_engines
-from asset2sim.schemas.request import RequestOverrides
 from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
@@ -211,23 +208,18 @@ def options(args: argparse.Namespace) -> RefineConfig:
     if engines or not getattr(args, "config", None):
         listed = parse_engines(engines or ",".join(default_engines()))
         fields["engines"] = ["pybullet"] + [e for e in listed if e != "pybullet"]
-    given = {k: getattr(args, k, None) for k in ("mass", "size", "scale", "mount", "material")}
+    given = {k: v for k in ("mass", "size", "scale", "mount", "material") if (v := getattr(args, k, None)) is not None}
     state = {}
     for item in getattr(args, "state", None) or []:
         name, eq, value = item.partition("=")
         if not eq or not name.strip() or not value.strip():
             raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, f"--state {item!r}: write NAME=VALUE, e.g. lid=30deg")
         state[name.strip()] = value.strip()
-    over = base.overrides.model_dump(exclude_none=True)
-    over.update({k: v for k, v in given.items() if v is not None})
-    if state:
-        over["state"] = {**over.get("state", {}), **state}
     try:
-        return base.model_copy(update={**fields, "overrides": RequestOverrides.model_validate(over)})
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None,
-                           f"--{first['loc'][0] if first['loc'] else 'override'}: {first['msg'].removeprefix('Value error, ')}") from exc
+        overrides = merge_overrides(base.overrides, {**given, **({"state": state} if state else {})})
+    except ValueError as exc:
+        raise CommandError(INVALID_REQUEST, "OVERRIDE_INVALID", None, str(exc)) from exc
+    return base.model_copy(update={**fields, "overrides": overrides})
 
 
 def run(args: argparse.Namespace) -> int:

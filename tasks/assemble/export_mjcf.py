@@ -37,11 +37,14 @@ import numpy as np
 
 from asset2sim import atomic, file_names
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, STATE_NAME, URDF_NAME
-from asset2sim.engines.base import Spring
+from asset2sim.engines.base import SessionOptions, Spring
+from asset2sim.engines.loading import read_initial_state
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim import output_folder
+from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.assemble.write import read_root
+from asset2sim.tasks.interpret.mounting import session_root_options
 
 MASS_RTOL = 1e-6
 _DERIVED = re.compile(r".+__c\d+_g\d+\.obj$")
@@ -76,6 +79,24 @@ def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None =
             ref = dyn.spring_reference if dyn.spring_reference is not None else initial_state.get(name, 0.0)
             out[name] = Spring(stiffness=float(dyn.stiffness), reference=float(ref))
     return out
+
+
+def output_session_options(out_dir: Path | str, initial_state: dict[str, float] | None = None,
+                           conventions: SimConventions | None = None) -> SessionOptions:
+    """The :class:`~asset2sim.engines.base.SessionOptions` every check (and
+    the public loaders) open an output folder with: ``initial_state`` (rad
+    or m; default ``initial_state.json``), the springs of ``overlay.json``
+    (:func:`springs_from_overlay`), ``conventions`` (default
+    :class:`SimConventions`) and the root as the folder declares it (fixed
+    without a ground when mounted, :func:`session_root_options`).
+
+    Raises:
+        ValueError: ``initial_state.json`` or ``overlay.json`` is invalid.
+    """
+    out_dir = Path(out_dir)
+    state = read_initial_state(out_dir) if initial_state is None else dict(initial_state)
+    return SessionOptions(initial_state=state, springs=springs_from_overlay(out_dir, state), conventions=conventions or SimConventions(),
+                          **session_root_options(read_root(out_dir).fixed))
 
 
 @dataclass

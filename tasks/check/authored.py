@@ -36,14 +36,11 @@ from asset2sim.engines.base import (
     HeldJoint,
     HeldLink,
     HeldPhysics,
-    SessionOptions,
     principal_moments,
 )
 from asset2sim.engines.registry import open_session, read_held_physics
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_initial_state, read_urdf
-from asset2sim.tasks.interpret.mounting import session_root_options
-from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
-from asset2sim.tasks.assemble.write import read_root
+from asset2sim.tasks.assemble.export_mjcf import output_session_options, springs_from_overlay
 from asset2sim.output_folder import URDF_NAME
 
 #: The exported files each engine's own importer reads back:
@@ -244,9 +241,7 @@ def held_by_engines(out_dir: Path, engines: list[str], *, files: bool = True,
     """
     out_dir = Path(out_dir)
     authored = authored_physics(out_dir)
-    state = read_initial_state(out_dir)
-    springs = springs_from_overlay(out_dir, state)
-    opts = SessionOptions(initial_state=state, springs=springs, **session_root_options(read_root(out_dir).fixed))
+    opts = output_session_options(out_dir)
     results: list[AuthoredCheck] = []
     for engine in dict.fromkeys(engines):
         try:

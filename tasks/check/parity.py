@@ -26,12 +26,10 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import SPEC_METRICS, unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics
-from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
+from asset2sim.tasks.assemble.export_mjcf import output_session_options
 
-from asset2sim.engines.base import EngineUnavailable, SessionOptions
+from asset2sim.engines.base import EngineUnavailable
 from asset2sim.engines.registry import open_session
-from asset2sim.engines.loading import read_initial_state
-from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.assemble.write import read_root
 from asset2sim.output_folder import URDF_NAME
 
@@ -81,13 +79,10 @@ def evaluate_engine(
 
 def _evaluate_engine(urdf_dir: Path, urdf: Path, engine: str, initial_state: dict[str, float] | None,
                      conventions: SimConventions | None) -> list[MetricResult]:
-    conv = conventions or SimConventions()
-    state = read_initial_state(urdf_dir) if initial_state is None else dict(initial_state)
-    springs = springs_from_overlay(urdf_dir, state)
+    options = output_session_options(urdf_dir, initial_state, conventions)  # the root as the folder declares it
+    conv = options.conventions
     try:
-        # the root as the folder declares it (initial_state.json "root": fixed when mounted)
-        session = open_session(engine, urdf, SessionOptions(initial_state=state, springs=springs, conventions=conv,
-                                                            **session_root_options(read_root(urdf_dir).fixed)))
+        session = open_session(engine, urdf, options)
     except EngineUnavailable as exc:
         return _not_run(engine, "skipped", str(exc), None)
     except KeyError as exc:

@@ -162,10 +162,8 @@ def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
     assert cg.referenced_files(out.urdf) == {str(Path(p).relative_to(out.root).as_posix()) for ps in files.values() for p in ps}
 
 
-def test_parent_is_cut_around_a_child_inside_its_hull(tmp_path):
-    """An open tray (one concave mesh) holding a block: the tray's hull holds
-    the block 20 mm deep; the written pieces of the tray hold it no deeper
-    than the tolerance."""
+def _tray_with_block(tmp_path):
+    """An open tray (one concave mesh, one hull) holding a block on a hinge: (folder, its URDF model)."""
     t = 0.004
     walls = [_box([0, 0, 0], [0.1, 0.1, t]), _box([0, 0, 0], [t, 0.1, 0.05]), _box([0.1 - t, 0, 0], [0.1, 0.1, 0.05]),
              _box([0, 0, 0], [0.1, t, 0.05]), _box([0, 0.1 - t, 0], [0.1, 0.1, 0.05])]
@@ -175,6 +173,14 @@ def test_parent_is_cut_around_a_child_inside_its_hull(tmp_path):
     folder = _asset(tmp_path, [(v, f)], block)
     (folder / "textured_objs" / "body.obj").write_text(_obj([(v, f)], groups=False))  # one group: one hull
     model = urdf.read_urdf(folder / "mobility.urdf")
+    return folder, model
+
+
+def test_parent_is_cut_around_a_child_inside_its_hull(tmp_path):
+    """An open tray (one concave mesh) holding a block: the tray's hull holds
+    the block 20 mm deep; the written pieces of the tray hold it no deeper
+    than the tolerance."""
+    folder, model = _tray_with_block(tmp_path)
     before, _ = cg.link_pieces(model, lambda g: g.path, {}, decompose=False)
     assert pp.containment_depths(model, before, {})[("body", "lid")] > 0.015
     out = _write(folder, tmp_path / "out")
@@ -296,15 +302,7 @@ def test_pieces_do_not_depend_on_the_initial_state(tmp_path):
     different initial states are the same, and the block sits no deeper than
     the tolerance inside the tray's pieces anywhere over its range (cutting
     the tray around the block at one state only left other states inside)."""
-    t = 0.004
-    walls = [_box([0, 0, 0], [0.1, 0.1, t]), _box([0, 0, 0], [t, 0.1, 0.05]), _box([0.1 - t, 0, 0], [0.1, 0.1, 0.05]),
-             _box([0, 0, 0], [0.1, t, 0.05]), _box([0, 0.1 - t, 0], [0.1, 0.1, 0.05])]
-    v = np.vstack([w[0] for w in walls])
-    f = np.vstack([w[1] + 8 * i for i, w in enumerate(walls)])
-    block = [_box([0.03, 0.03, 0.01], [0.07, 0.07, 0.03])]
-    folder = _asset(tmp_path, [(v, f)], block)
-    (folder / "textured_objs" / "body.obj").write_text(_obj([(v, f)], groups=False))  # one group: one hull
-    model = urdf.read_urdf(folder / "mobility.urdf")
+    folder, model = _tray_with_block(tmp_path)
     a, _ = cg.link_pieces(model, lambda g: g.path, {"hinge": 0.0})
     b, _ = cg.link_pieces(model, lambda g: g.path, {"hinge": 0.4})
     assert [p.points.tobytes() for p in a["body"]] == [p.points.tobytes() for p in b["body"]]
