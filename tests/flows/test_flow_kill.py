@@ -66,12 +66,19 @@ def test_flow_killed_after_k_of_n_redoes_n_minus_k(tmp_path, prefect_server):
         stderr=subprocess.DEVNULL,
     )
     deadline = time.time() + 420
+    seen: dict[int, tuple[float, str]] = {}
     try:
         while time.time() < deadline and proc.poll() is None and not _asset_rows(cat_root):
+            _descendants(proc.pid, seen)
             time.sleep(0.1)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=60)
+    # the stage processes (in sessions of their own) end with their lifeline a moment later: what the killed
+    # run finished is read once they are gone, as the rerun finds it
+    deadline = time.time() + 20
+    while time.time() < deadline and _alive(seen):
+        time.sleep(0.2)
     rows = _asset_rows(cat_root)
     if not rows:
         pytest.fail("the killed run finished no asset within the time allowed")
