@@ -66,19 +66,19 @@ def test_flow_killed_after_k_of_n_redoes_n_minus_k(tmp_path, prefect_server):
         stderr=subprocess.DEVNULL,
     )
     deadline = time.time() + 420
-    seen: dict[int, tuple[float, str]] = {}
     try:
         while time.time() < deadline and proc.poll() is None and not _asset_rows(cat_root):
-            _descendants(proc.pid, seen)
             time.sleep(0.1)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=60)
-    # the stage processes (in sessions of their own) end with their lifeline a moment later: what the killed
-    # run finished is read once they are gone, as the rerun finds it
-    deadline = time.time() + 20
-    while time.time() < deadline and _alive(seen):
+    # the stage processes (sessions of their own, forked at any moment) end with their lifeline a moment later,
+    # and one may finish its asset meanwhile: what the killed run finished is read once every process working
+    # in the project is gone, as the rerun finds it
+    deadline = time.time() + 30
+    while time.time() < deadline and _working_in(root):
         time.sleep(0.2)
+    assert not _working_in(root), "the killed run's processes outlived their lifeline"
     rows = _asset_rows(cat_root)
     if not rows:
         pytest.fail("the killed run finished no asset within the time allowed")
@@ -102,6 +102,18 @@ def test_flow_killed_after_k_of_n_redoes_n_minus_k(tmp_path, prefect_server):
     # the killed run's catalog now holds a row for every asset it finished
     killed_rows = ResultCatalog(cat.catalog_root).read("gen", killed_run).to_dict("records")
     assert {r["asset_id"] for r in killed_rows if r["status"] == "done"} == finished_first
+
+
+def _working_in(folder: Path) -> list[int]:
+    """Processes other than this one whose working folder is ``folder`` or inside it."""
+    out = []
+    for p in psutil.process_iter():
+        try:
+            if p.pid != os.getpid() and p.status() != psutil.STATUS_ZOMBIE and Path(p.cwd()).is_relative_to(folder):
+                out.append(p.pid)
+        except (psutil.Error, OSError):
+            pass
+    return out
 
 
 def _descendants(pid: int, seen: dict[int, tuple[float, str]]) -> None:
