@@ -1,13 +1,7 @@
 """asset2sim: articulated-object assets in, interaction-ready simulation assets out.
 
-The public API (:mod:`asset2sim.api`) is reached from here::
-
-    import asset2sim
-    result = asset2sim.refine("path/to/asset", "a slightly open stapler", "out/stapler")
-
-Its names are loaded on first use, so ``import asset2sim`` stays light:
-simulators, renderers and model clients are imported by the code that needs
-them.
+The public API (:mod:`asset2sim.api`, e.g. ``asset2sim.refine(asset, request,
+out_dir)``) is reached from here, loaded on first use so the import stays light.
 """
 
 from __future__ import annotations
@@ -24,11 +18,7 @@ __all__ = [
 
 
 def __getattr__(name: str):
-    """A public name from :mod:`asset2sim.api`, imported on first use.
-
-    Raises:
-        AttributeError: not a public name (submodules import as usual).
-    """
+    """A public name from :mod:`asset2sim.api`, imported on first use (else AttributeError)."""
     if name in __all__:
         value = getattr(importlib.import_module("asset2sim.api"), name)
         globals()[name] = value

@@ -10,8 +10,7 @@ asset2sim verified it::
     print(result.ready, result.report.failure_mode)
     robot = asset2sim.load_pybullet("out/stapler", client)   # client = pybullet.connect(...)
 
-Every function here is a thin, typed front of the stages (``asset2sim.tasks``);
-the command line (``asset2sim refine`` ...) calls the same stages. Units: SI,
+The command line calls the same stages (``asset2sim.tasks``). Units: SI,
 radians (revolute) and metres (prismatic) for joint positions.
 """
 
@@ -44,8 +43,7 @@ __all__ = [
 
 def load_config(config: RefineConfig | Mapping[str, Any] | str | Path | None) -> RefineConfig:
     """A :class:`RefineConfig` from itself, a mapping of its fields, or a YAML
-    file of them (``estimator: offline``, ``sim: {timestep: 0.004}`` ...);
-    None gives the defaults.
+    file of them; None gives the defaults.
 
     Raises:
         FileNotFoundError: the YAML file does not exist.
@@ -80,12 +78,8 @@ def _field_errors(exc: ValidationError) -> str:
 
 
 def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str, Any]) -> RequestOverrides:
-    """``base`` with the fields ``more`` sets replacing its own (``state``
-    entries added, a joint named in both taking ``more``'s).
-
-    Raises:
-        ValueError: a value of ``more`` is invalid (the message names the field).
-    """
+    """``base`` with the fields ``more`` sets replacing its own (``state`` entries added). Raises ValueError
+    naming the field when a value of ``more`` is invalid."""
     given = more.model_dump(exclude_none=True, exclude_defaults=True) if isinstance(more, RequestOverrides) else dict(more)
     merged = base.model_dump(exclude_none=True)
     state = {**merged.get("state", {}), **dict(given.pop("state", None) or {})}
@@ -98,20 +92,11 @@ def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str
         raise ValueError(f"overrides: {_field_errors(exc)}") from exc
 
 
-def refine(
-    asset: str | Path,
-    prompt: str = "",
-    out_dir: str | Path = "out",
-    *,
-    config: RefineConfig | Mapping[str, Any] | str | Path | None = None,
-    overrides: RequestOverrides | Mapping[str, Any] | None = None,
-    task: str | None = None,
-    category: str | None = None,
-    force: bool = False,
-    overwrite: bool = False,
-    extras: bool = True,
-    progress: Callable[[str, str], None] | None = None,
-) -> RefineResult:
+def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
+           config: RefineConfig | Mapping[str, Any] | str | Path | None = None,
+           overrides: RequestOverrides | Mapping[str, Any] | None = None, task: str | None = None,
+           category: str | None = None, force: bool = False, overwrite: bool = False, extras: bool = True,
+           progress: Callable[[str, str], None] | None = None) -> RefineResult:
     """Refine one articulated asset for a natural-language request.
 
     Writes ``out_dir`` (``mobility.urdf``, meshes, ``initial_state.json``,
@@ -163,23 +148,13 @@ def refine(
                         skip_if_complete=not force, overwrite=overwrite, extras=extras)
 
 
-def evaluate(
-    asset: str | Path,
-    *,
-    prompt: str | None = None,
-    task: str | None = None,
-    reference: str | Path | None = None,
-    engines: tuple[str, ...] | list[str] = ("pybullet",),
-    category: str | None = None,
-    probes: bool = True,
-    write_to: str | Path | None = None,
-) -> Evaluation:
+def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None = None,
+             reference: str | Path | None = None, engines: tuple[str, ...] | list[str] = ("pybullet",),
+             category: str | None = None, probes: bool = True, write_to: str | Path | None = None) -> Evaluation:
     """Evaluate any articulated URDF asset (a refine output or not) with every
     metric: rest stability, penetration (mm), oscillation, the probes and,
-    when given, prompt alignment and the task.
-
-    Nothing is written unless ``write_to`` names a folder (``evaluation.json``
-    and ``report.html`` go there); a refine output is never changed.
+    when given, prompt alignment and the task. Nothing is written unless
+    ``write_to`` names a folder.
 
     Args:
         asset: a folder holding one URDF (``initial_state.json``,
@@ -256,16 +231,9 @@ def _output_folder(out_dir: str | Path) -> Path:
 
 
 def verified_options(out_dir: str | Path, conventions: SimConventions | None = None) -> SessionOptions:
-    """The :class:`~asset2sim.engines.base.SessionOptions` asset2sim's checks
-    open an output folder with: the initial state (rad / m) of
-    ``initial_state.json``, the joint springs of ``overlay.json`` (N*m/rad or
-    N/m about their reference), the root fixed when the object is mounted
-    (no ground) or free on a ground plane at z = 0
-    (:func:`asset2sim.tasks.assemble.export_mjcf.output_session_options`).
-
-    Raises:
-        ValueError: not an output folder, or its ``overlay.json`` is invalid.
-    """
+    """The :class:`~asset2sim.engines.base.SessionOptions` asset2sim's checks open an output folder with
+    (:func:`asset2sim.tasks.assemble.export_mjcf.output_session_options`). Raises ValueError when it is not
+    an output folder or its ``overlay.json`` is invalid."""
     return output_session_options(_output_folder(out_dir), conventions=conventions)
 
 
@@ -277,12 +245,8 @@ def _load(engine: str, out_dir: str | Path, **attach) -> SimSession:
 def load_pybullet(out_dir: str | Path, client: int | None = None, *, ground: bool = True) -> SimSession:
     """Load a refine output into PyBullet as asset2sim verified it.
 
-    Applies the conventions the output's checks ran under: self-collision
-    between non-adjacent links, inertia from the file, each joint's
-    ``<dynamics friction>`` as a zero-target velocity motor of that force
-    (N or N*m), the initial state of ``initial_state.json``, the root welded
-    to the world when the object is mounted, else its lowest collision point
-    put on z = 0. Springs (``overlay.json``; URDF has none) act through
+    Joint friction (N or N*m) becomes a zero-target velocity motor, the root
+    is welded when mounted, else put on z = 0. Springs act through
     ``session.step()``; when stepping yourself, call
     ``session.apply_passive_forces()`` before each ``pybullet.stepSimulation``.
 
@@ -307,11 +271,7 @@ def load_pybullet(out_dir: str | Path, client: int | None = None, *, ground: boo
 
 
 def load_sapien(out_dir: str | Path, scene: Any = None, *, ground: bool = True) -> SimSession:
-    """Load a refine output into SAPIEN 3 (PhysX) as asset2sim verified it:
-    the collision pieces cooked as convex meshes, each joint's friction
-    (N or N*m) plus damping times its speed as a passive drive's force
-    limit, springs as joint forces ``-k (q - q_ref)``, the initial state,
-    the root fixed when mounted, else its lowest point put on z = 0.
+    """Load a refine output into SAPIEN 3 (PhysX) as asset2sim verified it.
     Friction, damping and springs act through ``session.step()``; when
     stepping yourself, call ``session.apply_passive_forces()`` before each
     ``scene.step()``.
@@ -337,11 +297,8 @@ def load_sapien(out_dir: str | Path, scene: Any = None, *, ground: bool = True) 
 
 
 def load_mujoco(out_dir: str | Path) -> SimSession:
-    """Load a refine output into MuJoCo as asset2sim verified it: compiled
-    from the URDF through the product's converter (``frictionloss``,
-    ``damping``, ``stiffness`` / ``springref`` on each joint, the initial
-    state as keyframe ``initial``, the root fixed when mounted, a ground
-    plane at z = 0 otherwise).
+    """Load a refine output into MuJoCo as asset2sim verified it (the initial
+    state as keyframe ``initial``, a ground plane at z = 0 when not mounted).
 
     Returns:
         The session: ``m`` (``mujoco.MjModel``), ``d`` (``mujoco.MjData``,

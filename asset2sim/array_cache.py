@@ -1,34 +1,13 @@
 """On-disk cache of computed arrays, keyed by a digest of everything they
-were computed from.
+were computed from (:func:`digest`), the computing code's source included
+(:func:`source_digest`).
 
-The costly geometry of a refine (CoACD decompositions, the writer's convex
-collision pieces) depends only on mesh bytes, a few numbers and the code
-that computes it, so a rerun of the same asset (a nightly refinement after a
-code change elsewhere, a benchmark, another request at the same scale) can
-load it instead of computing it again: the converters of Isaac Lab hash their
-inputs and skip unchanged work the same way. Callers build the digest
-(:func:`digest`) from every input, including the source of the code that
-computes the value (:func:`source_digest`), so a change to that code is a
-miss, never a stale hit.
-
-Entries are ``<cache>/<kind>/<digest>.npz`` (numpy's ``savez``, no pickles),
-written atomically with the mode of the umask (:mod:`asset2sim.atomic`). The
-folder is ``$ASSET2SIM_CACHE``, else ``~/.cache/asset2sim``; ``off``,
-``none`` or ``0`` turns the cache off. The cache is an optimisation only: an
-entry that cannot be written is not written.
-
-An entry proves itself: beside its arrays it holds its kind, its key and the
-SHA-256 of its arrays (:func:`content_digest`), and :func:`load` checks them
-all before returning anything. An entry whose zip directory declares more
-than :data:`MAX_ENTRY_BYTES` (checked before anything is inflated), that
-cannot be read, that was stored under another kind or key (copied or moved
-between file names), whose arrays do not match their digest, or that holds
-NaN or infinite numbers is rejected: a :class:`CacheWarning` names it, the
-file is deleted and the caller computes the value again and stores it anew.
-
-:func:`guard` keeps the cache out of given folders (a refine's input and
-output): while it holds, a cache folder inside one of them is refused with a
-warning and the cache is off, so nothing is written into an input or output.
+Entries are ``<cache>/<kind>/<digest>.npz`` (``savez``, no pickles), written
+atomically; the folder is ``$ASSET2SIM_CACHE`` (``off``, ``none`` or ``0``:
+no cache), else ``~/.cache/asset2sim``. Each entry carries its kind, key and
+:func:`content_digest`; :func:`load` rejects (with a :class:`CacheWarning`,
+deleting it) an entry that does not prove itself. :func:`guard` keeps the
+cache out of given folders (a refine's input and output).
 """
 
 from __future__ import annotations
@@ -58,14 +37,8 @@ __all__ = [
 
 _OFF = ("off", "none", "0")
 
-#: Largest entry :func:`load` reads and :func:`store` writes: the sum of its
-#: members' uncompressed sizes in bytes, as the zip directory declares them
-#: (checked before anything is inflated; the file on disk may hold at most
-#: twice as much). The largest entries the refines of the 21 dev objects
-#: wrote measure 0.72 MB (``pieces``), 35 kB (``coacd``) and 1.2 kB
-#: (``analysis``) uncompressed: 64 MiB is ~90x the largest and bounds what a
-#: crafted entry can make a refine allocate (a 9 MB deflated entry that
-#: inflated to 2 GiB once took one to 6.35 GB).
+#: Largest entry :func:`load` reads and :func:`store` writes: its members'
+#: uncompressed bytes as the zip directory declares them (twice that on disk).
 MAX_ENTRY_BYTES = 64 << 20
 
 #: The member that carries an entry's proof (JSON: format, kind, key, sha256).
@@ -84,10 +57,8 @@ class CacheWarning(UserWarning):
 
 
 def cache_dir() -> Path | None:
-    """The cache folder (``$ASSET2SIM_CACHE``, else ``~/.cache/asset2sim``),
-    or None when ``$ASSET2SIM_CACHE`` is ``off`` / ``none`` / ``0``, or when
-    the folder (symlinks resolved) lies inside a folder a :func:`guard` in
-    force keeps it out of (a :class:`CacheWarning` once per pair of folders)."""
+    """The cache folder, or None when turned off or inside a folder a
+    :func:`guard` keeps it out of (a :class:`CacheWarning` once per pair)."""
     root = os.environ.get("ASSET2SIM_CACHE")
     if root is not None and root.strip().lower() in _OFF:
         return None
@@ -110,10 +81,8 @@ def cache_dir() -> Path | None:
 
 @contextlib.contextmanager
 def guard(*roots: Path | str | None) -> Iterator[None]:
-    """Within the block the cache stays out of ``roots`` (folders, None
-    skipped; symlinks resolved), besides the folders already kept out in this
-    context: :func:`cache_dir` is None while it lies inside one of them, so
-    nothing is read from or written to it (a :class:`CacheWarning` says so)."""
+    """Within the block the cache is off while it lies inside one of ``roots``
+    (None skipped; symlinks resolved), besides those already kept out."""
     resolved = []
     for r in roots:
         if r is not None:
@@ -141,9 +110,7 @@ def digest(*parts: bytes | str) -> str:
 
 @functools.lru_cache(maxsize=None)
 def source_digest(*modules: str) -> str:
-    """Digest of the source files of the named modules (``__file__`` of each;
-    the caller has imported them, this module imports nothing): a cache key
-    part that changes whenever that code changes.
+    """Digest of the source files of the named (imported) modules.
 
     Raises:
         ImportError: a module is not imported or has no source file.
@@ -165,8 +132,7 @@ def _path(kind: str, key: str) -> Path | None:
 
 def content_digest(arrays: dict[str, np.ndarray]) -> str:
     """SHA-256 hex digest of ``arrays`` (name -> array): in name order each
-    name, dtype, shape and bytes (C order), so that any change to an array,
-    its type or its shape, a renamed, added or missing array changes it."""
+    name, dtype, shape and bytes (C order)."""
     parts: list[bytes | str] = []
     for name in sorted(arrays):
         a = np.asarray(arrays[name])
@@ -187,11 +153,8 @@ class _Rejected(Exception):
 
 
 def _check_directory(data: bytes) -> None:
-    """Refuse an entry whose zip directory declares more than
-    :data:`MAX_ENTRY_BYTES` uncompressed, or whose ``.npy`` headers declare
-    more array bytes than their member holds or object arrays, before any
-    array is inflated (a member is only ever inflated up to its declared
-    size: zipfile stops there)."""
+    """Refuse, before inflating anything, an entry declaring more than
+    :data:`MAX_ENTRY_BYTES`, object arrays, or arrays larger than their member."""
     with zipfile.ZipFile(io.BytesIO(data)) as zf:
         infos = zf.infolist()
         total = sum(i.file_size for i in infos)
@@ -214,8 +177,7 @@ def _check_directory(data: bytes) -> None:
 
 def _read_proven(path: Path, kind: str, key: str) -> dict[str, np.ndarray]:
     """The arrays of the entry at ``path`` once it proved to be ``kind`` /
-    ``key``'s (see :func:`load`); _Rejected otherwise, FileNotFoundError when
-    it is gone."""
+    ``key``'s; _Rejected otherwise, FileNotFoundError when it is gone."""
     try:
         size = path.stat().st_size
         if size > 2 * MAX_ENTRY_BYTES:
@@ -250,13 +212,9 @@ def _read_proven(path: Path, kind: str, key: str) -> dict[str, np.ndarray]:
 
 def load(kind: str, key: str) -> dict[str, np.ndarray] | None:
     """The arrays stored under ``kind`` / ``key`` (name -> array), or None
-    when there is no entry (or the cache is off) or the entry does not prove
-    itself: its zip directory declares more than :data:`MAX_ENTRY_BYTES`
-    uncompressed, it cannot be read (truncated, not an npz, a pickle), its
-    proof names another kind or key or is missing, its arrays do not match
-    its content digest, or it holds NaN or infinite numbers. A rejected
-    entry is deleted and named in a :class:`CacheWarning`; the caller
-    computes the value again and :func:`store` writes it anew."""
+    when there is none, the cache is off, or the entry does not prove itself
+    (too large, unreadable, another kind or key, altered arrays, NaN or
+    infinite numbers): then it is deleted and named in a :class:`CacheWarning`."""
     path = _path(kind, key)
     if path is None or not path.is_file():
         return None
@@ -274,11 +232,9 @@ def load(kind: str, key: str) -> dict[str, np.ndarray] | None:
 
 
 def store(kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
-    """Store ``arrays`` (name -> array; no object arrays) under ``kind`` /
-    ``key`` with their proof (kind, key, :func:`content_digest`), atomically
-    (replacing an entry there); nothing when the cache is off or cannot be
-    written, or when :func:`load` would reject the entry (NaN or infinite
-    numbers, more than :data:`MAX_ENTRY_BYTES`).
+    """Store ``arrays`` (name -> array) under ``kind`` / ``key`` with their
+    proof, atomically; nothing when the cache is off or cannot be written, or
+    when :func:`load` would reject the entry.
 
     Raises:
         ValueError: an array is named ``__cache__`` (the proof's name).
@@ -303,8 +259,7 @@ def store(kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
 
 
 def text_array(text: str) -> np.ndarray:
-    """``text`` as a uint8 array (UTF-8), to store beside arrays (JSON
-    metadata, a serialised model) without pickles."""
+    """``text`` as a uint8 array (UTF-8), to store beside arrays."""
     return np.frombuffer(text.encode(), dtype=np.uint8)
 
 

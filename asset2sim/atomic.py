@@ -1,24 +1,14 @@
-"""Atomic file output and content hashing.
+"""Atomic file output, reading regular files only, and content hashing.
 
-Every output file of asset2sim is written through :func:`write_bytes` /
-:func:`write_text` / :func:`write_json` / :func:`copy_file`: a temporary file
-in the same folder, ``fsync``, then ``os.replace`` (atomic on POSIX), then an
-``fsync`` of the folder. A run killed at any moment leaves each output file
-either absent or complete.
-
-Files are created with mode ``0o666`` minus the process umask (0644 under
-umask 022), as ``open()`` would: the temporary file is made with
-``os.open(O_CREAT | O_EXCL, 0o666)``, not ``tempfile.mkstemp`` (always 0600).
-Temporary files are named ``.<name>.<random>.tmp`` beside their destination.
-
-An observer lets an owner of an output folder (:mod:`asset2sim.output_folder`) hear of every destination before its temporary file is
-created (:func:`add_observer`), so a killed run leaves no file its owner
-does not know of.
+Every output file is written as a temporary ``.<name>.<random>.tmp`` beside
+it, ``fsync``, ``os.replace``, then an ``fsync`` of the folder: a run killed at
+any moment leaves each file absent or complete. Files get mode ``0o666`` minus
+the umask, as ``open()`` gives. Observers (:func:`add_observer`) hear of every
+destination before anything is created.
 """
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import hashlib
 import json
@@ -28,7 +18,7 @@ import secrets
 import stat
 import threading
 from pathlib import Path
-from typing import Any, BinaryIO, Callable, Iterable, Iterator
+from typing import Any, BinaryIO, Callable, Iterable
 
 Observer = Callable[[list[Path]], None]
 """observer(destinations): called before any of ``destinations`` is created;
@@ -39,10 +29,8 @@ _OBSERVERS_LOCK = threading.Lock()
 
 
 def add_observer(observer: Observer) -> None:
-    """Call ``observer`` with the destination paths of every atomic write (any
-    thread) before anything is created; adding the same observer twice keeps
-    one. An exception raised by the observer aborts that write before any
-    temporary file exists."""
+    """Call ``observer`` with the destinations of every atomic write (any
+    thread) before anything is created (once, however often added)."""
     with _OBSERVERS_LOCK:
         if observer not in _OBSERVERS:
             _OBSERVERS.append(observer)
@@ -53,16 +41,6 @@ def remove_observer(observer: Observer) -> None:
     with _OBSERVERS_LOCK:
         if observer in _OBSERVERS:
             _OBSERVERS.remove(observer)
-
-
-@contextlib.contextmanager
-def observe(observer: Observer) -> Iterator[None]:
-    """:func:`add_observer` for the duration of a ``with`` block."""
-    add_observer(observer)
-    try:
-        yield
-    finally:
-        remove_observer(observer)
 
 
 def _announce(paths: list[Path]) -> None:
@@ -87,8 +65,7 @@ def temp_name(path: Path | str) -> str:
 
 def is_temp_of(name: str, target: str) -> bool:
     """True when file ``name`` is a temporary file of the destination named
-    ``target`` (same folder), as :func:`temp_name` makes them (also the
-    ``mkstemp`` names of earlier versions: ``.<target>.<8 chars>.tmp``)."""
+    ``target`` (same folder): ``.<target>.<1-32 word characters>.tmp``."""
     prefix = f".{target}."
     if not (name.startswith(prefix) and name.endswith(".tmp")):
         return False
@@ -97,8 +74,7 @@ def is_temp_of(name: str, target: str) -> bool:
 
 
 def _create_temp(path: Path) -> tuple[int, str]:
-    """Create a new empty temporary file beside ``path`` with mode 0o666 minus
-    the umask; returns (fd, name)."""
+    """A new empty temporary file beside ``path``: (fd, name)."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0)
     for _ in range(100):
         tmp = str(path.parent / temp_name(path))
@@ -123,8 +99,7 @@ def _fsync_dir(folder: Path) -> None:
 
 
 def _replace(tmp: str, path: Path) -> None:
-    """``os.replace(tmp, path)``; an error names the destination, not the
-    temporary file (e.g. ``IsADirectoryError`` for ``path``)."""
+    """``os.replace(tmp, path)``; an error names the destination."""
     try:
         os.replace(tmp, path)
     except OSError as exc:
@@ -137,11 +112,7 @@ _AT_FDCWD = -100  # fcntl.h
 
 def _renameat2_exchange(a: Path, b: Path) -> bool:
     """Linux's ``renameat2(a, b, RENAME_EXCHANGE)`` through libc; False when
-    libc or the filesystem does not offer it (then nothing was changed).
-
-    Raises:
-        OSError: the exchange was refused for another reason (names ``b``).
-    """
+    not offered (nothing changed). Raises OSError naming ``b`` otherwise."""
     import ctypes
 
     try:
@@ -158,14 +129,9 @@ def _renameat2_exchange(a: Path, b: Path) -> bool:
 
 
 def exchange_folders(a: Path | str, b: Path | str) -> None:
-    """Swap two folders of one filesystem: afterwards ``b`` holds what ``a``
-    held and ``a`` what ``b`` held.
-
-    On Linux this is one atomic ``renameat2(RENAME_EXCHANGE)``: at every
-    moment ``b`` is either the old or the new folder (how a complete output
-    replaces an earlier complete one). Where the kernel, libc or filesystem
-    lacks it, three renames through ``.<b>.asset2sim-previous`` beside ``b``
-    (then ``b`` is missing for the instant between two renames).
+    """Swap two folders of one filesystem: one atomic
+    ``renameat2(RENAME_EXCHANGE)`` on Linux, else three renames through
+    ``.<b>.asset2sim-previous`` beside ``b``.
 
     Raises:
         OSError: either folder is missing, they lie on different
@@ -233,11 +199,8 @@ def write_json(path: Path | str, obj: Any, indent: int = 2) -> Path:
 
 
 def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
-    """Copy many files atomically each: every destination is first written as a
-    temporary file beside it, then one ``os.sync()`` flushes them all, then each
-    is renamed into place. A kill at any moment leaves every destination absent
-    or complete (one sync instead of one fsync per file: meshes come by the
-    hundred)."""
+    """Copy many files, each atomically: all written as temporary files, one
+    ``os.sync()``, then each renamed into place. Returns the destinations."""
     pairs = [(src, Path(dst)) for src, dst in pairs]
     if pairs:
         _announce([dst for _, dst in pairs])
@@ -271,19 +234,16 @@ def copy_file(src: Path | str, dst: Path | str) -> Path:
 
 class NotRegularFileError(OSError):
     """A path that must be a regular file is a FIFO, device, socket or folder
-    (``errno`` EINVAL, or EISDIR for a folder); raised before anything is read,
-    so a FIFO never blocks the reader."""
+    (``errno`` EINVAL, or EISDIR for a folder)."""
 
 
 def _open_regular(path: Path | str, follow_symlinks: bool = True) -> int:
-    """A read-only descriptor of ``path`` after checking, on the open
-    descriptor, that it is a regular file. The open itself cannot block
-    (``O_NONBLOCK``: a FIFO opens at once, and is then refused).
+    """A read-only descriptor of ``path``, checked on the descriptor to be a
+    regular file (``O_NONBLOCK``: a FIFO cannot block the open).
 
     Raises:
         NotRegularFileError: not a regular file.
-        OSError: it cannot be opened (``ELOOP`` for a symlink when
-            ``follow_symlinks`` is False).
+        OSError: it cannot be opened (``ELOOP``: a symlink, ``follow_symlinks`` False).
     """
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
     if not follow_symlinks:
@@ -301,31 +261,17 @@ def _open_regular(path: Path | str, follow_symlinks: bool = True) -> int:
 
 
 def open_regular(path: Path | str) -> BinaryIO:
-    """``path`` opened for binary reading once it is known, on the open
-    descriptor, to be a regular file (a FIFO never blocks the open); e.g. for
-    reading an image header without reading the file.
-
-    Raises:
-        NotRegularFileError: not a regular file.
-        OSError: it cannot be opened.
-    """
+    """``path`` opened for binary reading once :func:`_open_regular` checked it."""
     return os.fdopen(_open_regular(path), "rb")
 
 
 def read_regular(path: Path | str, max_bytes: int | None = None, *, follow_symlinks: bool = True) -> bytes:
-    """The bytes of ``path``, which must be a regular file: checked on the open
-    descriptor before reading, so a FIFO, a device or a socket put where a file
-    was expected is refused at once instead of blocking or streaming without end.
-
-    Args:
-        path: the file.
-        max_bytes: refuse a larger file (bytes); None: no cap.
-        follow_symlinks: False refuses a symlink (``ELOOP``).
+    """The bytes of ``path``, which must be a regular file (checked before
+    reading), at most ``max_bytes``; ``follow_symlinks`` False refuses a symlink.
 
     Raises:
         NotRegularFileError: not a regular file.
-        OSError: it cannot be opened or read, or it has more than ``max_bytes``
-            bytes (``EFBIG``).
+        OSError: unreadable, a symlink (``ELOOP``) or over ``max_bytes`` (``EFBIG``).
     """
     fd = _open_regular(path, follow_symlinks)
     with os.fdopen(fd, "rb") as fh:
@@ -337,20 +283,8 @@ def read_regular(path: Path | str, max_bytes: int | None = None, *, follow_symli
     return data
 
 
-def read_regular_text(path: Path | str, max_bytes: int | None = None) -> str:
-    """:func:`read_regular` decoded as UTF-8 (``UnicodeDecodeError``, a
-    ``ValueError``, when it is not)."""
-    return read_regular(path, max_bytes).decode("utf-8")
-
-
 def sha256_file(path: Path | str, chunk: int = 1 << 20) -> str:
-    """Hex sha256 of a regular file's bytes.
-
-    Raises:
-        NotRegularFileError: ``path`` is a FIFO, device, socket or folder
-            (never blocks on it).
-        OSError: it cannot be read.
-    """
+    """Hex sha256 of a regular file's bytes (NotRegularFileError, OSError)."""
     h = hashlib.sha256()
     with os.fdopen(_open_regular(path), "rb") as fh:
         while True:
@@ -362,9 +296,8 @@ def sha256_file(path: Path | str, chunk: int = 1 << 20) -> str:
 
 
 def sha256_files(paths: Iterable[Path | str], root: Path | str | None = None) -> str:
-    """Hex sha256 over several files: their names (relative to ``root`` when
-    given) and contents, in sorted order, so the hash does not depend on the
-    order given."""
+    """Hex sha256 over several files' names (relative to ``root`` when given)
+    and contents, in sorted order."""
     h = hashlib.sha256()
     items = []
     for p in paths:
@@ -380,8 +313,7 @@ def sha256_files(paths: Iterable[Path | str], root: Path | str | None = None) ->
 
 
 def tree_hashes(root: Path | str) -> dict[str, str]:
-    """sha256 of every regular file under ``root`` keyed by relative path
-    (used by tests to prove an input tree was not written)."""
+    """sha256 of every regular file under ``root`` keyed by relative path."""
     root = Path(root)
     out = {}
     for p in sorted(root.rglob("*")):

@@ -1,21 +1,11 @@
 """The ``asset2sim`` command line.
 
-Subcommands live in :mod:`asset2sim.commands`, one module each, named as the
-command and defining ``NAME`` (str, the module's name), ``HELP`` (str),
-``add_arguments(parser)`` and ``run(args) -> int`` (the exit code). They are
-discovered at start-up, so a command is added by adding a module. Only the
-module of the command given is imported (``asset2sim refine`` does not pay
-for the imports of ``flow`` or ``benchmark``); ``asset2sim --help`` and a
-command line without a known command import them all to list them. The
-library itself never prints or exits; only these command modules talk to the
-terminal.
-
-One top-level handler (:func:`main`): an expected failure
-(:class:`asset2sim.commands._status.CommandError`) prints one line with its
-code and path and exits with its status; any other exception is an internal
-error: one line naming a log file that holds the traceback, exit status 70.
-``--debug`` also prints the traceback. Statuses: :mod:`asset2sim.commands._status`
-and docs/guide/outputs.md ("Exit statuses").
+Subcommands are the modules of :mod:`asset2sim.commands`, each defining
+``NAME``, ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``; only
+the module of the command given is imported. :func:`main` turns a
+:class:`asset2sim.commands._status.CommandError` into one line and its status,
+any other exception into one line naming a log of the traceback (status 70).
+Statuses: docs/guide/outputs.md ("Exit statuses").
 """
 
 from __future__ import annotations
@@ -32,12 +22,8 @@ import threading
 import time
 import traceback
 
-# One BLAS thread unless the environment says otherwise, set before numpy is
-# imported (as Dask's nanny does for its workers: distributed.nanny.pre-spawn-environ).
-# The array work of a refine is on small matrices (a few thousand points
-# against a hull's planes), where OpenBLAS's threads add CPU time and no wall
-# time: toilet 102622 refined in 7.6 s either way, with 11.9 s of CPU with
-# threads and 7.3 s without (2 cores, docs/design/pipeline.md "Throughput").
+# One BLAS thread unless the environment says otherwise, set before numpy is imported
+# (small matrices: threads add CPU time, no wall time; docs/design/pipeline.md "Throughput").
 for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
@@ -80,9 +66,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
 
 def requested_command(argv: list[str]) -> str | None:
-    """The subcommand ``argv`` names when it is a known one and comes before
-    any option that could take a value (``--debug`` may precede it); else None
-    (then every command's module is imported to parse or to list them)."""
+    """The known subcommand ``argv`` names before any option but ``--debug``, else None."""
     for arg in argv:
         if arg == "--debug":
             continue
@@ -108,8 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
     allocator.keep_freed_memory()  # freed arrays reused, not faulted in again (asset2sim.allocator)
-    # asset2sim compiles and simulates MJCF but never renders with MuJoCo: without an OpenGL back-end its
-    # import skips GLFW and the GL context (0.12 s per process here); a value the user set is kept
+    # never renders with MuJoCo: no OpenGL back-end spares its import GLFW and a GL context (a user's value is kept)
     os.environ.setdefault("MUJOCO_GL", "disable")
     parser = build_parser(only=requested_command(argv))
     args = parser.parse_args(argv)
@@ -159,16 +142,10 @@ def run() -> None:
 
 
 def fast_exit(code: int) -> None:
-    """End the process with ``code`` after everything a normal exit does for
-    the outside world (the ``atexit`` handlers, logging's flush among them;
-    Python's and C's standard streams flushed) but without tearing down the
-    interpreter's modules: with numpy, SciPy, trimesh, PyBullet, SAPIEN,
-    MuJoCo and OpenUSD loaded that teardown only frees memory the system
-    takes back anyway and took 0.28-0.30 s of a 3 s ``refine`` (microwave
-    7236, ``benchmarks/bench_refine.py``). Falls back to :func:`sys.exit`
-    when a thread other than the main one that the interpreter would wait
-    for is still running, or when this Python has no ``atexit._run_exitfuncs``.
-    Every output file is already complete (atomic writes, ``asset2sim.atomic``)."""
+    """End the process with ``code`` after the ``atexit`` handlers and flushing
+    Python's and C's standard streams, without tearing down the interpreter's
+    modules; :func:`sys.exit` while a non-daemon thread runs or without
+    ``atexit._run_exitfuncs``."""
     run_exitfuncs = getattr(atexit, "_run_exitfuncs", None)
     waiting = [t for t in threading.enumerate() if t is not threading.main_thread() and t.is_alive() and not t.daemon]
     if run_exitfuncs is None or waiting:

@@ -1,13 +1,7 @@
 """Box-built geometry of the demo objects (:mod:`asset2sim.demo_assets`) and
-its OBJ / MTL text.
-
-An object is a tree of :class:`DemoLink` s joined by :class:`DemoJoint` s; a
-link is made of :class:`Part` s (one OBJ file each), a part of axis-aligned
-:class:`Box` pieces in the object frame (y up, +z front, x across; object
-units), optionally moved by a rigid :class:`Pose` (a part modelled away from
-its closed pose). Every piece is convex and pieces of one OBJ share no vertex,
-so a loader that merges duplicate vertices still sees closed (watertight)
-pieces. Text is deterministic: fixed float formatting, no time stamps.
+its OBJ / MTL text: :class:`DemoLink` s of :class:`Part` s (one OBJ each) made
+of axis-aligned :class:`Box` pieces in the object frame (y up, +z front),
+optionally moved by a rigid :class:`Pose`.
 """
 
 from __future__ import annotations
@@ -34,42 +28,13 @@ class Box:
 
     def corners(self) -> np.ndarray:
         """(8, 3) corners; index = xbit + 2*ybit + 4*zbit."""
-        out = np.empty((8, 3))
-        for i in range(8):
-            out[i] = [
-                self.hi[0] if i & 1 else self.lo[0],
-                self.hi[1] if i & 2 else self.lo[1],
-                self.hi[2] if i & 4 else self.lo[2],
-            ]
-        return out
+        return np.array([[self.hi[k] if i >> k & 1 else self.lo[k] for k in range(3)] for i in range(8)], dtype=float)
 
 
-# Quads of a box (corner indices) with their outward normals, each split into
-# two triangles wound counter-clockwise seen from outside (checked in _faces).
-_QUADS: tuple[tuple[tuple[int, int, int, int], Vec3], ...] = (
-    ((0, 4, 6, 2), (-1.0, 0.0, 0.0)),
-    ((1, 3, 7, 5), (1.0, 0.0, 0.0)),
-    ((0, 1, 5, 4), (0.0, -1.0, 0.0)),
-    ((2, 6, 7, 3), (0.0, 1.0, 0.0)),
-    ((0, 2, 3, 1), (0.0, 0.0, -1.0)),
-    ((4, 5, 7, 6), (0.0, 0.0, 1.0)),
-)
-
-
-def _faces() -> list[tuple[int, int, int]]:
-    """12 triangles of a unit box with outward (right-handed) winding."""
-    unit = Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)).corners()
-    tris = []
-    for quad, normal in _QUADS:
-        for tri in ((quad[0], quad[1], quad[2]), (quad[0], quad[2], quad[3])):
-            a, b, c = unit[list(tri)]
-            if float(np.dot(np.cross(b - a, c - a), normal)) < 0:
-                tri = (tri[0], tri[2], tri[1])
-            tris.append(tri)
-    return tris
-
-
-_BOX_FACES = _faces()
+#: The quads of a box (corner indices; faces -x, +x, -y, +y, -z, +z), wound
+#: counter-clockwise seen from outside, and their 12 triangles.
+_QUADS = ((0, 4, 6, 2), (1, 3, 7, 5), (0, 1, 5, 4), (2, 6, 7, 3), (0, 2, 3, 1), (4, 5, 7, 6))
+_BOX_FACES = [tri for q in _QUADS for tri in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))]
 
 
 @dataclass(frozen=True)
@@ -155,8 +120,7 @@ def fmt_number(x: float) -> str:
     v = round(float(x), 9) + 0.0
     if v == 0.0:
         return "0"
-    s = f"{v:.9g}"
-    return s
+    return f"{v:.9g}"
 
 
 def _vec(v) -> str:
@@ -196,11 +160,7 @@ def mtl_text(color: Vec3) -> str:
 
 
 def box_xyz(x0, x1, y0, y1, z0, z1) -> Box:
-    """The box x0..x1, y0..y1, z0..z1 (object units).
-
-    Raises:
-        ValueError: an empty or inverted range.
-    """
+    """The box x0..x1, y0..y1, z0..z1 (object units); ValueError when empty."""
     return Box((x0, y0, z0), (x1, y1, z1))
 
 

@@ -1,13 +1,7 @@
 """The five demo objects (:data:`DEMO_OBJECTS`) built from boxes
 (:mod:`asset2sim.demo_geometry`), each with its category, manifest prompt and
-the closed joint positions tests check against.
-
-Conventions (PartNet-Mobility's, see :mod:`asset2sim.demo_assets`): geometry in
-the object frame (y up, +z front, x across) at the zero pose of every joint,
-roughly unit size; the body link hangs from ``base`` by a fixed joint with
-``rpy = (pi/2, 0, -pi/2)``; a moving link's joint origin is its hinge point
-(0 for sliders). Moving parts keep a clearance of at least 0.005 units from
-their parent in the closed state.
+closed joint positions. Moving parts keep at least 0.005 units from their
+parent in the closed state.
 """
 
 from __future__ import annotations
@@ -30,6 +24,16 @@ _METAL = (0.75, 0.76, 0.78)
 _GREEN = (0.3, 0.5, 0.35)
 
 
+def _demo(asset_id: str, category: str, links: list[DemoLink], joints: list[DemoJoint]) -> DemoArticulation:
+    """The articulation ``demo_<asset_id>``."""
+    return DemoArticulation(asset_id=asset_id, category=category, robot_name=f"demo_{asset_id}", links=links, joints=joints)
+
+
+def _base_joint(name: str, body: str) -> DemoJoint:
+    """PartNet-Mobility's fixed joint ``base`` -> ``body`` (y-up object frame to z-up)."""
+    return DemoJoint(name, "fixed", "base", body, rpy=_PARTNET_BASE_RPY)
+
+
 def _box_with_lid() -> DemoArticulation:
     # Body: x [-0.5, 0.5], y [-0.3, 0.22], z [-0.35, 0.35], walls 0.03.
     body = open_box(-0.5, 0.5, -0.3, 0.22, -0.35, 0.35, 0.03, "box_body", _WOOD)
@@ -40,25 +44,12 @@ def _box_with_lid() -> DemoArticulation:
         Part("lid_top-6", [box_xyz(-0.525, 0.525, 0.225, 0.255, -0.35, 0.375)], _WOOD),
         Part("lid_skirt-7", [box_xyz(-0.525, -0.505, 0.18, 0.225, -0.35, 0.375)], _WOOD),
         Part("lid_skirt-8", [box_xyz(0.505, 0.525, 0.18, 0.225, -0.35, 0.375)], _WOOD),
-        Part(
-            "lid_lip-9",
-            [box_xyz(-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), box_xyz(-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)],
-            _METAL,
-        ),
+        Part("lid_lip-9", [box_xyz(-0.505, 0.505, 0.18, 0.225, 0.355, 0.375), box_xyz(-0.08, 0.08, 0.19, 0.21, 0.375, 0.405)], _METAL),
     ]
-    return DemoArticulation(
-        asset_id="box_lid",
-        category="Box",
-        robot_name="demo_box_lid",
-        links=[
-            DemoLink("link_0", "hinge", "rotation_lid", lid),
-            DemoLink("link_1", "free", "box_body", body),
-        ],
-        joints=[
-            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=-0.5, upper=1.9),
-            DemoJoint("joint_1", "fixed", "base", "link_1", rpy=_PARTNET_BASE_RPY),
-        ],
-    )
+    return _demo("box_lid", "Box", [DemoLink("link_0", "hinge", "rotation_lid", lid), DemoLink("link_1", "free", "box_body", body)], [
+        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=-0.5, upper=1.9),
+        _base_joint("joint_1", "link_1"),
+    ])
 
 
 def _drawer(front_y: tuple[float, float], box_y: tuple[float, float], n: int) -> list[Part]:
@@ -75,15 +66,11 @@ def _drawer(front_y: tuple[float, float], box_y: tuple[float, float], n: int) ->
         Part(f"drawer_back-{n + 4}", [box_xyz(-0.44, 0.44, by0 + 0.02, by1, -0.36, -0.34)], _WOOD),
     ]
     ym = 0.5 * (y0 + y1)
-    handle = Part(
-        f"handle-{n + 5}",
-        [
-            box_xyz(-0.16, -0.13, ym - 0.015, ym + 0.015, 0.435, 0.475),
-            box_xyz(0.13, 0.16, ym - 0.015, ym + 0.015, 0.435, 0.475),
-            box_xyz(-0.165, 0.165, ym - 0.015, ym + 0.015, 0.47, 0.495),
-        ],
-        _METAL,
-    )
+    handle = Part(f"handle-{n + 5}", [
+        box_xyz(-0.16, -0.13, ym - 0.015, ym + 0.015, 0.435, 0.475),
+        box_xyz(0.13, 0.16, ym - 0.015, ym + 0.015, 0.435, 0.475),
+        box_xyz(-0.165, 0.165, ym - 0.015, ym + 0.015, 0.47, 0.495),
+    ], _METAL)
     return [front, *box, handle]
 
 
@@ -104,21 +91,13 @@ def _cabinet_two_drawers() -> DemoArticulation:
     top = _drawer((0.02, 0.545), (0.03, 0.465), 10)
     bottom = _drawer((-0.545, -0.02), (-0.51, -0.1), 20)
     slide = (0.0, 0.0, 1.0)
-    return DemoArticulation(
-        asset_id="cabinet_2drawer",
-        category="StorageFurniture",
-        robot_name="demo_cabinet_2drawer",
-        links=[
-            DemoLink("link_0", "slider", "drawer", top),
-            DemoLink("link_1", "slider", "drawer", bottom),
-            DemoLink("link_2", "heavy", "furniture_body", body),
-        ],
-        joints=[
-            DemoJoint("joint_0", "prismatic", "link_2", "link_0", axis=slide, lower=0.0, upper=0.5),
-            DemoJoint("joint_1", "prismatic", "link_2", "link_1", axis=slide, lower=0.0, upper=0.5),
-            DemoJoint("joint_2", "fixed", "base", "link_2", rpy=_PARTNET_BASE_RPY),
-        ],
-    )
+    links = [DemoLink("link_0", "slider", "drawer", top), DemoLink("link_1", "slider", "drawer", bottom),
+             DemoLink("link_2", "heavy", "furniture_body", body)]
+    return _demo("cabinet_2drawer", "StorageFurniture", links, [
+        DemoJoint("joint_0", "prismatic", "link_2", "link_0", axis=slide, lower=0.0, upper=0.5),
+        DemoJoint("joint_1", "prismatic", "link_2", "link_1", axis=slide, lower=0.0, upper=0.5),
+        _base_joint("joint_2", "link_2"),
+    ])
 
 
 #: Angle (rad) at which the laptop screen is modelled (open), measured from closed.
@@ -130,38 +109,16 @@ def _laptop_base() -> list[Part]:
     with feet, rim, deck, keyboard and touchpad."""
     return [
         Part("base_bottom-1", [box_xyz(-0.55, 0.55, -0.05, -0.04, -0.38, 0.38)], _GREY),
-        Part(
-            "base_rim-2",
-            [
-                box_xyz(-0.55, 0.55, -0.04, -0.01, 0.37, 0.38),
-                box_xyz(-0.55, 0.55, -0.04, -0.01, -0.38, -0.37),
-            ],
-            _GREY,
-        ),
-        Part(
-            "base_rim-3",
-            [
-                box_xyz(-0.55, -0.54, -0.04, -0.01, -0.37, 0.37),
-                box_xyz(0.54, 0.55, -0.04, -0.01, -0.37, 0.37),
-            ],
-            _GREY,
-        ),
+        Part("base_rim-2", [box_xyz(-0.55, 0.55, -0.04, -0.01, 0.37, 0.38), box_xyz(-0.55, 0.55, -0.04, -0.01, -0.38, -0.37)], _GREY),
+        Part("base_rim-3", [box_xyz(-0.55, -0.54, -0.04, -0.01, -0.37, 0.37), box_xyz(0.54, 0.55, -0.04, -0.01, -0.37, 0.37)], _GREY),
         Part("base_deck-4", [box_xyz(-0.55, 0.55, -0.01, 0.0, -0.38, 0.38)], _GREY),
-        Part(
-            "keyboard-5",
-            [box_xyz(-0.45, 0.45, 0.0, 0.004, -0.3, 0.02), box_xyz(-0.12, 0.12, 0.0, 0.002, 0.1, 0.3)],
-            _DARK,
-        ),
-        Part(
-            "feet-6",
-            [
-                box_xyz(-0.5, -0.44, -0.056, -0.05, -0.33, -0.27),
-                box_xyz(0.44, 0.5, -0.056, -0.05, -0.33, -0.27),
-                box_xyz(-0.5, -0.44, -0.056, -0.05, 0.27, 0.33),
-                box_xyz(0.44, 0.5, -0.056, -0.05, 0.27, 0.33),
-            ],
-            _DARK,
-        ),
+        Part("keyboard-5", [box_xyz(-0.45, 0.45, 0.0, 0.004, -0.3, 0.02), box_xyz(-0.12, 0.12, 0.0, 0.002, 0.1, 0.3)], _DARK),
+        Part("feet-6", [
+            box_xyz(-0.5, -0.44, -0.056, -0.05, -0.33, -0.27),
+            box_xyz(0.44, 0.5, -0.056, -0.05, -0.33, -0.27),
+            box_xyz(-0.5, -0.44, -0.056, -0.05, 0.27, 0.33),
+            box_xyz(0.44, 0.5, -0.056, -0.05, 0.27, 0.33),
+        ], _DARK),
     ]
 
 
@@ -172,47 +129,23 @@ def _laptop_screen(hinge: tuple[float, float, float]) -> list[Part]:
     pose = Pose(axis=(-1.0, 0.0, 0.0), angle=LAPTOP_MODEL_OPENING, pivot=hinge)
     return [
         Part("screen_cover-7", [box_xyz(-0.55, 0.55, 0.03, 0.04, -0.38, 0.38)], _GREY, pose),
-        Part(
-            "bezel-8",
-            [
-                box_xyz(-0.55, -0.51, 0.01, 0.03, -0.38, 0.38),
-                box_xyz(0.51, 0.55, 0.01, 0.03, -0.38, 0.38),
-                box_xyz(-0.52, 0.52, 0.01, 0.03, 0.34, 0.38),
-                box_xyz(-0.52, 0.52, 0.01, 0.03, -0.38, -0.34),
-            ],
-            _DARK,
-            pose,
-        ),
+        Part("bezel-8", [
+            box_xyz(-0.55, -0.51, 0.01, 0.03, -0.38, 0.38),
+            box_xyz(0.51, 0.55, 0.01, 0.03, -0.38, 0.38),
+            box_xyz(-0.52, 0.52, 0.01, 0.03, 0.34, 0.38),
+            box_xyz(-0.52, 0.52, 0.01, 0.03, -0.38, -0.34),
+        ], _DARK, pose),
         Part("display-9", [box_xyz(-0.51, 0.51, 0.015, 0.03, -0.34, 0.34)], _GLASS, pose),
     ]
 
 
 def _laptop() -> DemoArticulation:
     hinge = (0.0, 0.025, -0.38)  # x axis through y = 0.025, z = -0.38
-    base = _laptop_base()
-    screen = _laptop_screen(hinge)
-    return DemoArticulation(
-        asset_id="laptop",
-        category="Laptop",
-        robot_name="demo_laptop",
-        links=[
-            DemoLink("link_0", "free", "laptop_base", base),
-            DemoLink("link_1", "hinge", "screen", screen),
-        ],
-        joints=[
-            DemoJoint("joint_0", "fixed", "base", "link_0", rpy=_PARTNET_BASE_RPY),
-            DemoJoint(
-                "joint_1",
-                "revolute",
-                "link_0",
-                "link_1",
-                origin=hinge,
-                axis=(-1.0, 0.0, 0.0),
-                lower=-LAPTOP_MODEL_OPENING,
-                upper=0.35,
-            ),
-        ],
-    )
+    links = [DemoLink("link_0", "free", "laptop_base", _laptop_base()), DemoLink("link_1", "hinge", "screen", _laptop_screen(hinge))]
+    return _demo("laptop", "Laptop", links, [
+        _base_joint("joint_0", "link_0"),
+        DemoJoint("joint_1", "revolute", "link_0", "link_1", origin=hinge, axis=(-1.0, 0.0, 0.0), lower=-LAPTOP_MODEL_OPENING, upper=0.35),
+    ])
 
 
 def _microwave() -> DemoArticulation:
@@ -226,21 +159,12 @@ def _microwave() -> DemoArticulation:
         Part("frame-4", [box_xyz(0.6 - t, 0.6, -0.35 + t, 0.35 - t, -0.4, 0.4)], _WHITE),
         Part("frame-5", [box_xyz(-0.6 + t, 0.6 - t, -0.35 + t, 0.35 - t, -0.4, -0.4 + t)], _WHITE),
         Part("frame-6", [box_xyz(0.25, 0.25 + t, -0.35 + t, 0.35 - t, -0.4 + t, 0.4)], _WHITE),
-        Part(
-            "control_panel-7",
-            [box_xyz(0.25 + t, 0.6 - t, -0.35 + t, 0.35 - t, 0.37, 0.4), box_xyz(0.36, 0.48, 0.12, 0.2, 0.4, 0.42)],
-            _DARK,
-        ),
+        Part("control_panel-7", [box_xyz(0.25 + t, 0.6 - t, -0.35 + t, 0.35 - t, 0.37, 0.4), box_xyz(0.36, 0.48, 0.12, 0.2, 0.4, 0.42)],
+             _DARK),
     ]
     # Turntable tray: a fixed (static) child link resting inside the cavity.
     tray_center = (-0.16, -0.3, 0.0)
-    tray = [
-        Part(
-            "tray-8",
-            [box_xyz(-0.4, 0.08, -0.31, -0.3, -0.24, 0.24), box_xyz(-0.2, -0.12, -0.314, -0.31, -0.04, 0.04)],
-            _GLASS,
-        ),
-    ]
+    tray = [Part("tray-8", [box_xyz(-0.4, 0.08, -0.31, -0.3, -0.24, 0.24), box_xyz(-0.2, -0.12, -0.314, -0.31, -0.04, 0.04)], _GLASS)]
     # Door (closed at 0): frame pieces around a recessed window, handle on the
     # free edge; hinge on the left at the body's front-left edge.
     hinge = (-0.6, 0.0, 0.405)
@@ -250,31 +174,19 @@ def _microwave() -> DemoArticulation:
         Part("door_frame-11", [box_xyz(-0.6, -0.5, -0.25, 0.25, 0.405, 0.445)], _WHITE),
         Part("door_frame-12", [box_xyz(0.145, 0.245, -0.25, 0.25, 0.405, 0.445)], _WHITE),
         Part("window-13", [box_xyz(-0.5, 0.145, -0.25, 0.25, 0.415, 0.435)], _GLASS),
-        Part(
-            "handle-14",
-            [
-                box_xyz(0.18, 0.22, -0.2, -0.16, 0.445, 0.485),
-                box_xyz(0.18, 0.22, 0.16, 0.2, 0.445, 0.485),
-                box_xyz(0.175, 0.225, -0.205, 0.205, 0.48, 0.505),
-            ],
-            _METAL,
-        ),
+        Part("handle-14", [
+            box_xyz(0.18, 0.22, -0.2, -0.16, 0.445, 0.485),
+            box_xyz(0.18, 0.22, 0.16, 0.2, 0.445, 0.485),
+            box_xyz(0.175, 0.225, -0.205, 0.205, 0.48, 0.505),
+        ], _METAL),
     ]
-    return DemoArticulation(
-        asset_id="microwave",
-        category="Microwave",
-        robot_name="demo_microwave",
-        links=[
-            DemoLink("link_0", "hinge", "door", door),
-            DemoLink("link_1", "static", "tray", tray),
-            DemoLink("link_2", "heavy", "microwave_body", body),
-        ],
-        joints=[
-            DemoJoint("joint_0", "revolute", "link_2", "link_0", origin=hinge, axis=(0.0, -1.0, 0.0), lower=0.0, upper=1.75),
-            DemoJoint("joint_1", "fixed", "link_2", "link_1", origin=tray_center),
-            DemoJoint("joint_2", "fixed", "base", "link_2", rpy=_PARTNET_BASE_RPY),
-        ],
-    )
+    links = [DemoLink("link_0", "hinge", "door", door), DemoLink("link_1", "static", "tray", tray),
+             DemoLink("link_2", "heavy", "microwave_body", body)]
+    return _demo("microwave", "Microwave", links, [
+        DemoJoint("joint_0", "revolute", "link_2", "link_0", origin=hinge, axis=(0.0, -1.0, 0.0), lower=0.0, upper=1.75),
+        DemoJoint("joint_1", "fixed", "link_2", "link_1", origin=tray_center),
+        _base_joint("joint_2", "link_2"),
+    ])
 
 
 def _trash_can() -> DemoArticulation:
@@ -287,30 +199,16 @@ def _trash_can() -> DemoArticulation:
         Part("lid-7", [box_xyz(-0.375, 0.375, 0.505, 0.535, -0.35, 0.37)], _GREEN),
         Part("lid_skirt-8", [box_xyz(-0.375, -0.355, 0.47, 0.505, -0.35, 0.37)], _GREEN),
         Part("lid_skirt-9", [box_xyz(0.355, 0.375, 0.47, 0.505, -0.35, 0.37)], _GREEN),
-        Part(
-            "lid_lip-10",
-            [box_xyz(-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), box_xyz(-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)],
-            _DARK,
-        ),
+        Part("lid_lip-10", [box_xyz(-0.355, 0.355, 0.46, 0.505, 0.355, 0.37), box_xyz(-0.06, 0.06, 0.47, 0.49, 0.37, 0.4)], _DARK),
     ]
-    return DemoArticulation(
-        asset_id="trash_can",
-        category="TrashCan",
-        robot_name="demo_trash_can",
-        links=[
-            DemoLink("link_0", "hinge", "lid", lid),
-            DemoLink("link_1", "free", "trashcan_body", body),
-        ],
-        joints=[
-            DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(1.0, 0.0, 0.0), lower=-1.9, upper=0.0),
-            DemoJoint("joint_1", "fixed", "base", "link_1", rpy=_PARTNET_BASE_RPY),
-        ],
-    )
+    return _demo("trash_can", "TrashCan", [DemoLink("link_0", "hinge", "lid", lid), DemoLink("link_1", "free", "trashcan_body", body)], [
+        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(1.0, 0.0, 0.0), lower=-1.9, upper=0.0),
+        _base_joint("joint_1", "link_1"),
+    ])
 
 
-#: The manipulation task of each demo category (the manifest's ``task``
-#: column; parsed by :func:`asset2sim.tasks.check.task_spec.parse_task`):
-#: the everyday use of the category's task part, as the dev manifest words it.
+#: The manipulation task of each demo category (the manifest's ``task`` column),
+#: worded as the dev manifest words it.
 CATEGORY_TASKS: dict[str, str] = {
     "Box": "close the box lid",
     "StorageFurniture": "close the cabinet drawer",
@@ -340,40 +238,13 @@ class DemoObject:
 
 
 DEMO_OBJECTS: tuple[DemoObject, ...] = (
-    DemoObject(
-        "box_lid",
-        "Box",
-        "A small box with its lid slightly open. Low damping hinge.",
-        _box_with_lid,
-        {"joint_0": 0.0},
-    ),
-    DemoObject(
-        "cabinet_2drawer",
-        "StorageFurniture",
-        "A small two-drawer cabinet with the first drawer closed and the second slightly open, "
-        "with low damping sliding joints.",
-        _cabinet_two_drawers,
-        {"joint_0": 0.0, "joint_1": 0.0},
-    ),
-    DemoObject(
-        "laptop",
-        "Laptop",
-        "I want a slightly open laptop. Low damping for smooth operation.",
-        _laptop,
-        {"joint_1": -LAPTOP_MODEL_OPENING},
-    ),
-    DemoObject(
-        "microwave",
-        "Microwave",
-        "A microwave with its door halfway open. Low damping for hinge-like behavior.",
-        _microwave,
-        {"joint_0": 0.0},
-    ),
-    DemoObject(
-        "trash_can",
-        "TrashCan",
-        "A very small trash can with its lid closed. The lid hinge holds its position.",
-        _trash_can,
-        {"joint_0": 0.0},
-    ),
+    DemoObject("box_lid", "Box", "A small box with its lid slightly open. Low damping hinge.", _box_with_lid, {"joint_0": 0.0}),
+    DemoObject("cabinet_2drawer", "StorageFurniture", "A small two-drawer cabinet with the first drawer closed and the second slightly "
+               "open, with low damping sliding joints.", _cabinet_two_drawers, {"joint_0": 0.0, "joint_1": 0.0}),
+    DemoObject("laptop", "Laptop", "I want a slightly open laptop. Low damping for smooth operation.", _laptop,
+               {"joint_1": -LAPTOP_MODEL_OPENING}),
+    DemoObject("microwave", "Microwave", "A microwave with its door halfway open. Low damping for hinge-like behavior.", _microwave,
+               {"joint_0": 0.0}),
+    DemoObject("trash_can", "TrashCan", "A very small trash can with its lid closed. The lid hinge holds its position.", _trash_can,
+               {"joint_0": 0.0}),
 )

@@ -1,25 +1,9 @@
 """Names from an input turned into file names: the one place where that happens.
 
-A link name of a URDF (or any other name an input declares) is data: it may
-hold ``/``, ``..``, control characters, a NUL, non-ASCII text or thousands of
-characters. Every file asset2sim names after an input's name (collision
-pieces of a link, derived meshes of an export) takes its stem from
-:func:`file_stem`, and every such path is joined through :func:`join_inside`,
-which refuses any result outside its folder.
-
-The mapping:
-
-- a *clean* name (ASCII letters, digits, ``_``, ``-`` and ``.``; starting with
-  a letter, digit or ``_``; at most :data:`MAX_CLEAN` characters) is its own
-  stem, so PartNet-Mobility's ``link_0`` gives ``link_0``;
-- any other name gives ``<sanitised prefix>-<first 10 hex of its SHA-256>``:
-  the prefix keeps the name recognisable, the digest keeps two different
-  names apart (``a/b`` and ``a_b`` no longer share files).
-
-Two names of one asset whose stems coincide (only a crafted asset can do
-that) are refused at validation (``LINK_FILE_NAMES_CLASH``,
-:mod:`asset2sim.tasks.ingest.tree_checks`), which also reports every link
-whose files are named differently from it (``LINK_NAME_NOT_A_FILE_NAME``).
+An input's names are data (``/``, ``..``, NUL, any length): every file named
+after one takes its stem from :func:`file_stem` (a clean name is its own stem,
+any other ``<sanitised prefix>-<10 hex of its SHA-256>``) and is joined
+through :func:`join_inside`, which refuses any path outside its folder.
 """
 
 from __future__ import annotations
@@ -32,9 +16,7 @@ from typing import Iterable
 
 __all__ = ["MAX_CLEAN", "UnsafePath", "clashes", "file_stem", "is_clean", "join_inside"]
 
-#: Longest name used as a stem unchanged (characters). Stems are joined with
-#: suffixes (``_hull12_<12 hex>.obj``); 64 keeps every file name far below the
-#: 255-byte limit of ext4, APFS and NTFS.
+#: Longest name used as a stem unchanged (characters; far below the 255-byte file-name limit with suffixes).
 MAX_CLEAN = 64
 _CLEAN = re.compile(rf"[A-Za-z0-9_][A-Za-z0-9_.\-]{{0,{MAX_CLEAN - 1}}}")
 _UNSAFE_CHARS = re.compile(r"[^A-Za-z0-9_\-]+")
@@ -50,23 +32,16 @@ class UnsafePath(ValueError):
 
 
 def is_clean(name: str) -> bool:
-    """True when ``name`` is used as a file-name stem unchanged (see the module docstring)."""
+    """True when ``name`` is its own stem: ASCII letters, digits, ``_``, ``-``
+    and ``.``, starting with one of the first three, at most :data:`MAX_CLEAN` characters."""
     return isinstance(name, str) and _CLEAN.fullmatch(name) is not None and ".." not in name
 
 
 def file_stem(name: str) -> str:
-    """The file-name stem for ``name`` (a link or other input name).
-
-    Args:
-        name: any string an input declares.
-
-    Returns:
-        ``name`` itself when :func:`is_clean`; else the name with every run of
-        characters other than ASCII letters, digits, ``_`` and ``-`` made one
-        ``_`` (at most 32 characters kept), ``-`` and the first 10 hex digits
-        of the SHA-256 of its UTF-8 bytes (surrogates escaped). Never empty,
-        never holds a path separator or ``..``.
-    """
+    """The file-name stem for ``name``: itself when :func:`is_clean`; else
+    the name with every run of other characters than ASCII letters, digits,
+    ``_`` and ``-`` made one ``_`` (32 characters kept), ``-`` and the first 10
+    hex digits of the SHA-256 of its UTF-8 bytes."""
     if is_clean(name):
         return name
     raw = str(name).encode("utf-8", "surrogatepass")
@@ -75,8 +50,7 @@ def file_stem(name: str) -> str:
 
 
 def clashes(names: Iterable[str]) -> dict[str, list[str]]:
-    """Stems that two or more of ``names`` share: stem -> those names (input
-    order). Empty for every real asset; a crafted one can reach it."""
+    """Stems that two or more of ``names`` share: stem -> those names (input order)."""
     by_stem: dict[str, list[str]] = {}
     for n in names:
         by_stem.setdefault(file_stem(n), []).append(n)
@@ -84,15 +58,8 @@ def clashes(names: Iterable[str]) -> dict[str, list[str]]:
 
 
 def join_inside(folder: Path | str, rel: str) -> Path:
-    """``folder / rel``, refused unless it lies inside ``folder`` (lexically:
-    no absolute part, no ``..``; and after resolving the symlinks that exist).
-
-    Args:
-        folder: the folder the file belongs in (e.g. the output folder).
-        rel: a relative POSIX path built by the product (``collision/x.obj``).
-
-    Returns:
-        The joined path (not resolved).
+    """``folder / rel`` (not resolved), refused unless it lies inside
+    ``folder`` lexically and after resolving existing symlinks.
 
     Raises:
         UnsafePath: ``rel`` is absolute, empty, holds ``..`` or a NUL, or the

@@ -1,12 +1,6 @@
-"""Progress events of a flow run, for whoever shows them.
-
-The flow (:mod:`asset2sim.flows.refine_flow`) announces a run's start (with
-the number of assets), each asset's catalog row as soon as it is written
-(status done / skipped / failed, failure mode, seconds) and the run's end;
-listeners registered in the same process receive them (``asset2sim flow``
-draws a live progress bar, :mod:`asset2sim.commands._progress`). With no
-listener (the nightly deployment) nothing happens. A listener that raises
-is dropped from that event and never disturbs the run; nothing here prints.
+"""Progress events of a flow run (start, each asset's row, end) for the
+listeners of this process (``asset2sim flow``'s progress bar); a listener
+that raises never disturbs the run.
 """
 
 from __future__ import annotations
@@ -40,32 +34,20 @@ _listeners: list[Listener] = []
 _lock = threading.Lock()
 
 
-def add_listener(listener: Listener) -> None:
-    """Receive every later event of this process."""
-    with _lock:
-        _listeners.append(listener)
-
-
-def remove_listener(listener: Listener) -> None:
-    """Stop receiving events (no error when not registered)."""
-    with _lock:
-        if listener in _listeners:
-            _listeners.remove(listener)
-
-
 @contextlib.contextmanager
 def listening(listener: Listener) -> Iterator[None]:
     """Receive events while the block runs."""
-    add_listener(listener)
+    with _lock:
+        _listeners.append(listener)
     try:
         yield
     finally:
-        remove_listener(listener)
+        with _lock:
+            _listeners.remove(listener)
 
 
 def emit(event: ProgressEvent) -> None:
-    """Hand ``event`` to every listener; a listener's exception is swallowed
-    (progress display must never fail a run)."""
+    """Hand ``event`` to every listener; a listener's exception is swallowed."""
     with _lock:
         targets = list(_listeners)
     for fn in targets:

@@ -1,19 +1,11 @@
 """Frames: rotations, rigid transforms and quaternions, in one place.
 
-Conventions (every function here, and every caller in the project):
-
-- Angles in radians, lengths in metres (or the asset's units before scaling).
-- URDF roll-pitch-yaw ``rpy`` (3,): fixed (extrinsic) axes X, then Y, then Z,
-  i.e. ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (URDF specification, ``<origin>``;
-  the same as ``trimesh.transformations.euler_matrix(r, p, y, "sxyz")`` and
-  ``scipy.spatial.transform.Rotation.from_euler("xyz", rpy)``).
-- Rotation matrices (3, 3) act on column vectors: ``x_parent = R @ x_child``.
-  Homogeneous transforms (4, 4): ``T[:3, :3] = R``, ``T[:3, 3] = t``.
-- Quaternions come in two orders, always named in the function name:
-  ``wxyz`` (scalar first: MuJoCo, SAPIEN, MJCF ``quat``) and ``xyzw``
-  (scalar last: PyBullet, ``scipy``'s ``as_quat``). Both are unit, Hamilton.
-
-Nothing here imports a simulator; the functions are pure numpy / math.
+Conventions of the whole project: angles rad, lengths m (or the asset's
+units); URDF ``rpy`` (3,) about fixed axes X, Y, Z, ``R = Rz(yaw) @ Ry(pitch)
+@ Rx(roll)`` (as scipy's ``Rotation.from_euler("xyz", rpy)``); rotations (3, 3)
+act on column vectors, ``x_parent = R @ x_child``; transforms (4, 4) hold
+``R`` and ``t``; unit Hamilton quaternions in the order the function name says:
+``wxyz`` (MuJoCo, SAPIEN, MJCF) or ``xyzw`` (PyBullet, scipy).
 """
 
 from __future__ import annotations
@@ -24,17 +16,8 @@ from typing import Iterable
 import numpy as np
 
 __all__ = [
-    "axis_angle_matrix",
-    "axis_rotation",
-    "matrix_quat_wxyz",
-    "matrix_rpy",
-    "pose_matrix",
-    "quat_angle",
-    "quat_wxyz_matrix",
-    "quat_wxyz_to_xyzw",
-    "quat_xyzw_to_wxyz",
-    "rpy_matrix",
-    "translation_matrix",
+    "axis_angle_matrix", "axis_rotation", "matrix_quat_wxyz", "matrix_rpy", "pose_matrix", "quat_angle",
+    "quat_wxyz_matrix", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz", "rpy_matrix", "translation_matrix"
 ]
 
 #: Threshold of ``cos(pitch)`` under which :func:`matrix_rpy` treats the
@@ -43,35 +26,20 @@ _GIMBAL_EPS = float(np.finfo(float).eps) * 4.0
 
 
 def rpy_matrix(rpy: Iterable[float]) -> np.ndarray:
-    """Rotation matrix (3, 3) of URDF roll-pitch-yaw ``rpy`` (3,) rad.
-
-    ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (fixed axes X, Y, Z; URDF
-    specification, ``<origin rpy>``), written out in closed form.
-
-    Raises:
-        ValueError: ``rpy`` does not hold three numbers.
-    """
+    """Rotation matrix (3, 3) of URDF roll-pitch-yaw ``rpy`` (3,) rad, in closed
+    form (ValueError: not three numbers)."""
     r, p, y = (float(v) for v in rpy)
     cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
 
 
 def matrix_rpy(r: np.ndarray) -> np.ndarray:
     """URDF roll-pitch-yaw (3,) rad of a rotation matrix ``r`` (3, 3) (or the
-    rotation block of a (4, 4) transform); the inverse of :func:`rpy_matrix`.
-
-    Pitch lies in [-pi/2, pi/2], roll and yaw in (-pi, pi]. At gimbal lock
-    (``cos(pitch)`` below 4 machine eps) yaw is 0 and the whole turn about Z
-    goes into roll. Same algorithm, operation for operation, as
-    ``trimesh.transformations.euler_from_matrix(r, "sxyz")`` (Gohlke's
-    ``transformations.py``, after Shoemake, Graphics Gems IV).
-    """
+    rotation block of a (4, 4) transform), inverse of :func:`rpy_matrix`: pitch in
+    [-pi/2, pi/2], yaw 0 at gimbal lock. Operation for operation as trimesh's
+    ``euler_from_matrix(r, "sxyz")`` (Gohlke, after Shoemake, Graphics Gems IV)."""
     m = np.asarray(r, dtype=np.float64)[:3, :3]
     cy = np.sqrt(m[0, 0] * m[0, 0] + m[1, 0] * m[1, 0])
     if cy > _GIMBAL_EPS:
@@ -102,13 +70,8 @@ def pose_matrix(xyz: Iterable[float] = (0.0, 0.0, 0.0), rpy: Iterable[float] = (
 
 
 def axis_angle_matrix(axis: Iterable[float], angle: float) -> np.ndarray:
-    """Rotation (3, 3) of ``angle`` rad about ``axis`` (3,) (normalised here),
-    right-handed: Rodrigues' formula ``I + sin(a) K + (1 - cos(a)) K^2`` with
-    ``K`` the cross-product matrix of the unit axis.
-
-    Raises:
-        ZeroDivisionError / produces NaN: a zero ``axis`` (the caller checks).
-    """
+    """Rotation (3, 3) of ``angle`` rad about ``axis`` (3,) (normalised here; NaN
+    for a zero axis): Rodrigues' ``I + sin(a) K + (1 - cos(a)) K^2``."""
     a = np.asarray(axis, float)
     a = a / np.linalg.norm(a)
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
@@ -128,11 +91,7 @@ def axis_rotation(axis: int, angle: float) -> np.ndarray:
 
 def matrix_quat_wxyz(r: np.ndarray) -> np.ndarray:
     """Unit quaternion (4,) **w, x, y, z** of a rotation matrix ``r`` (3, 3),
-    sign chosen so that ``w >= 0``.
-
-    Shepperd's method (largest of trace and diagonal as pivot), as in
-    Eigen / MuJoCo's ``mju_mat2Quat``.
-    """
+    ``w >= 0``: Shepperd's method, as MuJoCo's ``mju_mat2Quat``."""
     r = np.asarray(r, float)
     tr = r[0, 0] + r[1, 1] + r[2, 2]
     if tr > 0:
@@ -156,13 +115,9 @@ def quat_wxyz_matrix(q: Iterable[float]) -> np.ndarray:
     """Rotation matrix (3, 3) of a unit quaternion ``q`` (4,) **w, x, y, z**
     (standard Hamilton formula; ``q`` is assumed normalised)."""
     w, x, y, z = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 def quat_xyzw_to_wxyz(q: Iterable[float]) -> np.ndarray:

@@ -1,27 +1,12 @@
 """Mesh files: the one reader every stage uses.
 
-One loader per format, pure array results (trimesh's ``exchange/`` layout):
-
-* :func:`read_mesh`: vertices (N, 3) and triangle faces (M, 3) of any mesh
-  file, without materials or textures. OBJ is read by a vectorized parser
-  (``v`` and ``f`` records only) that falls back to a line parser for
-  polygons, negative indices and comments; other formats (STL, PLY, OFF, GLB,
-  DAE ...) go through ``trimesh.load`` (:func:`load_trimesh`).
-  :class:`MeshCache` memoises it by path for one asset.
-* :func:`obj_groups`: the vertex sets of an OBJ's ``o`` / ``g`` groups, the
-  pieces whose convex hulls PyBullet collides with; :func:`hull_point_sets`
-  extends it to every format.
-* :func:`scan_obj_text`: an OBJ as lines (vertex data, faces per ``usemtl``
-  material with absolute indices, ``mtllib`` names) for tools that rewrite
-  OBJ files (the renderer's per-material split).
-* :func:`mtl_libraries` / :func:`mtl_texture_maps` / :func:`obj_material_files`:
-  the files an OBJ needs besides itself (MTL libraries and their texture
-  maps), for copying an asset; defined in :mod:`asset2sim.mesh_materials`.
-
-Units are the file's (no scaling here); vertex coordinates are float64, face
-indices int64 and 0-based. Nothing here writes a file. OBJ format reference:
-Wavefront "Object Files (.obj)" and "Material Library File (.mtl)",
-Appendix B1/B2 of the Advanced Visualizer manual.
+:func:`read_mesh` gives vertices (N, 3) float64 and triangles (M, 3) int64
+(0-based, file units) of any mesh file: OBJ by a vectorized parser with a
+line-parser fallback, other formats through :func:`load_trimesh`.
+:func:`obj_groups` / :func:`hull_point_sets` give the point sets whose convex
+hulls a simulator collides with; :func:`scan_obj_text` an OBJ as lines for
+tools that rewrite it. The MTL helpers of :mod:`asset2sim.mesh_materials` are
+re-exported. Format: Wavefront OBJ / MTL (Advanced Visualizer manual, B1/B2).
 """
 
 from __future__ import annotations
@@ -42,30 +27,14 @@ from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs be
 )
 
 __all__ = [
-    "MeshCache",
-    "MeshReadError",
-    "ObjText",
-    "hull_point_sets",
-    "is_texture_statement",
-    "load_trimesh",
-    "mtl_libraries",
-    "mtl_texture_maps",
-    "obj_groups",
-    "obj_material_files",
-    "obj_material_uses",
-    "parse_vertex_lines",
-    "read_mesh",
-    "read_mtl",
-    "read_obj",
-    "scan_obj_text",
+    "MeshCache", "MeshReadError", "ObjText", "hull_point_sets", "is_texture_statement", "load_trimesh", "mtl_libraries",
+    "mtl_texture_maps", "obj_groups", "obj_material_files", "obj_material_uses", "parse_vertex_lines", "read_mesh",
+    "read_mtl", "read_obj", "scan_obj_text"
 ]
 
 
 class MeshReadError(ValueError):
     """A mesh file is missing or cannot be parsed (the message names the file)."""
-
-
-# ------------------------------------------------------------------ OBJ arrays
 
 
 def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
@@ -131,8 +100,8 @@ def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Line-by-line OBJ reader: polygons (fan-triangulated), negative indices,
-    vertex colours, comments. Raises MeshReadError on malformed records."""
+    """Line-by-line OBJ reader (polygons, negative indices, comments); MeshReadError
+    on malformed records."""
     verts: list[tuple[float, float, float]] = []
     faces: list[tuple[int, int, int]] = []
     bad = 0
@@ -166,14 +135,11 @@ def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray,
 
 
 def read_obj(data: bytes, where: str = "<obj>") -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Triangle mesh of OBJ bytes: ``(vertices (N, 3) float64, faces (M, 3)
-    int64, notes)``; polygons are fan-triangulated, negative (relative)
-    indices resolved, texture / normal indices and materials ignored.
-    Indices are not validated (may be out of range) and vertices may be NaN.
+    """``(vertices (N, 3) float64, faces (M, 3) int64, notes)`` of OBJ bytes,
+    polygons fan-triangulated, not validated (as :func:`read_mesh`).
 
     Raises:
-        MeshReadError: a malformed ``v`` or ``f`` record (names ``where`` and
-            the line).
+        MeshReadError: a malformed ``v`` or ``f`` record (names ``where`` and the line).
     """
     fast = _parse_obj_fast(data)
     if fast is not None:
@@ -182,11 +148,7 @@ def read_obj(data: bytes, where: str = "<obj>") -> tuple[np.ndarray, np.ndarray,
 
 
 def load_trimesh(path: Path | str, *, skip_materials: bool = False):
-    """``trimesh.load(path, force="mesh", process=False)``: a
-    :class:`trimesh.Trimesh` of any format trimesh reads (vertices in file
-    units, no merging or reordering). ``skip_materials`` skips MTL/texture
-    loading. Exceptions of trimesh propagate unchanged (they are many types).
-    """
+    """``trimesh.load(path, force="mesh", process=False)`` (trimesh's exceptions propagate)."""
     import trimesh  # about 1 s to import; only non-OBJ files and primitives need it
 
     if skip_materials:
@@ -195,12 +157,8 @@ def load_trimesh(path: Path | str, *, skip_materials: bool = False):
 
 
 def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Read a triangle mesh file without materials or textures.
-
-    Returns ``(vertices (N, 3) float64, faces (M, 3) int64, notes)`` in the
-    file's units, faces indexing ``vertices`` (not yet validated: indices may
-    be out of range and vertices may be NaN; the analysis cleans them). OBJ
-    by :func:`read_obj`; other formats via :func:`load_trimesh`.
+    """``(vertices (N, 3) float64, faces (M, 3) int64, notes)`` of a mesh file
+    in its units, not validated (indices may be out of range, vertices NaN).
 
     Raises:
         MeshReadError: the file is missing or cannot be parsed (message names
@@ -219,9 +177,8 @@ def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
 
 
 class MeshCache:
-    """Meshes read by :func:`read_mesh`, keyed by path (one asset; several
-    links of some assets reference the same files). Arrays are shared and
-    read-only; a failed read is remembered and raised again."""
+    """Meshes read by :func:`read_mesh`, keyed by path: arrays shared and
+    read-only, a failed read remembered and raised again."""
 
     def __init__(self) -> None:
         self._store: dict[Path, tuple[np.ndarray, np.ndarray, list[str]] | MeshReadError] = {}
@@ -247,17 +204,10 @@ class MeshCache:
         return len(self._store)
 
 
-# ------------------------------------------------------------------ OBJ groups
-
-
 def obj_groups(path: Path | str) -> list[np.ndarray]:
-    """Point sets (k, 3) of an OBJ file, one per ``o``/``g`` group that has
-    faces, holding the vertices its faces use (sorted by index, file units,
-    unscaled), in file order.
-
-    This is how PyBullet's URDF importer builds collision shapes from an OBJ
-    (one convex hull per tinyobj shape), verified in
-    ``tests/asset2sim/test_engines_fake.py``.
+    """Point sets (k, 3) of an OBJ file, one per ``o``/``g`` group with faces:
+    the vertices its faces use (sorted by index, file units), in file order;
+    PyBullet collides with one convex hull per such group.
 
     Raises:
         MeshReadError: the file cannot be read or a face names a missing vertex.
@@ -305,9 +255,8 @@ def obj_groups(path: Path | str) -> list[np.ndarray]:
 
 
 def hull_point_sets(path: Path | str) -> list[np.ndarray]:
-    """Point sets (k, 3), file units, whose convex hulls a simulator collides
-    with for the mesh ``path``: :func:`obj_groups` for OBJ, else one set of all
-    vertices (:func:`load_trimesh`).
+    """Point sets (k, 3) whose convex hulls a simulator collides with:
+    :func:`obj_groups` for OBJ, else all vertices in one set.
 
     Raises:
         MeshReadError: the mesh cannot be read.
@@ -323,12 +272,8 @@ def hull_point_sets(path: Path | str) -> list[np.ndarray]:
 
 
 def convex_hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The convex hull of ``points`` (n, 3) as a triangle mesh: vertices
-    (k, 3) (the hull's vertices in the order of their index in ``points``) and
-    triangles (m, 3) into them, each wound so its normal points outward
-    (scipy's Qhull; a facet whose winding disagrees with its outward plane
-    normal is turned). The one hull-to-mesh routine of the package: the
-    collision pieces, the MJCF and USD exports and the Newton engine use it.
+    """The convex hull of ``points`` (n, 3) (scipy's Qhull): vertices (k, 3) in
+    the order of their index in ``points`` and triangles (m, 3) wound outward.
 
     Raises:
         scipy.spatial.QhullError: fewer than 4 points not in one plane.
@@ -351,11 +296,8 @@ def convex_hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def hull_obj(points: np.ndarray) -> bytes:
-    """OBJ bytes of the convex hull of ``points`` (n, 3), in the points' units
-    (m where they are): the vertices written exactly (``repr`` of each float)
-    and triangles wound outward (:func:`convex_hull_mesh`). The one hull-to-OBJ
-    writer: collision pieces, the state search's repairs and the MJCF export
-    use it.
+    """OBJ bytes of :func:`convex_hull_mesh` of ``points`` (n, 3), vertices
+    written exactly (``repr``).
 
     Raises:
         scipy.spatial.QhullError: fewer than 4 points not in one plane.
@@ -367,18 +309,11 @@ def hull_obj(points: np.ndarray) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-# ------------------------------------------------------------------ OBJ as text
-
-
 @dataclass
 class ObjText:
-    """An OBJ file as lines, for tools that rewrite it.
-
-    ``vertex_lines``: the ``v`` records; ``data_lines``: every ``v``/``vt``/
-    ``vn`` (and other ``v...``) record in file order; ``faces``: ``usemtl``
-    material (``None`` before any, or for an empty name) -> its ``f`` records,
-    negative indices made absolute; ``mtllibs``: the ``mtllib`` names.
-    """
+    """An OBJ file as lines: ``vertex_lines`` the ``v`` records, ``data_lines``
+    every ``v...`` record, ``faces`` ``usemtl`` material (None before any) ->
+    its ``f`` records with absolute indices, ``mtllibs`` the ``mtllib`` names."""
 
     vertex_lines: list[str] = field(default_factory=list)
     data_lines: list[str] = field(default_factory=list)

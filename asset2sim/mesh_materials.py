@@ -1,16 +1,7 @@
 """The files an OBJ mesh needs besides itself: its MTL libraries and their texture maps.
 
-* :func:`mtl_libraries`: the ``mtllib`` names of OBJ bytes;
-  :func:`obj_material_uses` the ``usemtl`` names of OBJ text.
-* :func:`read_mtl`: the materials of MTL text; :func:`mtl_texture_maps` and
-  :func:`is_texture_statement`: the texture maps it names.
-* :func:`obj_material_files`: the MTL libraries and texture maps an OBJ file
-  needs, resolved, for copying an asset.
-
-Names are as written (relative to the OBJ's or MTL's folder). Re-exported by
-:mod:`asset2sim.mesh_io`. Format reference: Wavefront "Object Files (.obj)"
-and "Material Library File (.mtl)", Appendix B1/B2 of the Advanced
-Visualizer manual.
+Names are as written (relative to the OBJ's or MTL's folder); re-exported by
+:mod:`asset2sim.mesh_io`. Format: Wavefront OBJ / MTL (Advanced Visualizer manual, B1/B2).
 """
 
 from __future__ import annotations
@@ -35,10 +26,8 @@ def is_texture_statement(key: str) -> bool:
 
 
 def mtl_libraries(obj_data: bytes) -> list[str]:
-    """The ``mtllib`` names of OBJ bytes, as written (relative to the OBJ's
-    folder), in file order. Only the lines that contain ``mtllib`` are
-    matched (a statement never spans lines): a line-anchored scan of a whole
-    17 MB mesh took 0.5 s."""
+    """The ``mtllib`` names of OBJ bytes, in file order (only lines holding
+    ``mtllib`` are matched: a scan of the whole file is slow)."""
     out: list[str] = []
     pos = obj_data.find(b"mtllib")
     while pos != -1:
@@ -54,18 +43,14 @@ def mtl_libraries(obj_data: bytes) -> list[str]:
 
 def mtl_texture_maps(mtl_data: bytes) -> list[str]:
     """The texture file names of MTL bytes (``map_*``, ``bump``, ``disp``,
-    ``decal``, ``refl`` statements, options with one argument skipped), as
-    written (relative to the MTL's folder)."""
+    ``decal``, ``refl``; options with one argument skipped)."""
     return [t.group(1).decode("utf-8", "replace") for t in _MAP.finditer(mtl_data)]
 
 
 def read_mtl(text: str) -> dict[str, list[str]]:
-    """Materials of MTL text: name (``newmtl``) -> its statement lines, each
-    stripped, in file order; blank lines, comments (``#``) and statements
-    before the first ``newmtl`` dropped. A repeated name continues its list.
-
-    Source: the Wavefront MTL format (Paul Bourke's MTL specification).
-    """
+    """Materials of MTL text: name (``newmtl``) -> its stripped statement
+    lines in file order (blank lines, comments and statements before the
+    first ``newmtl`` dropped; a repeated name continues its list)."""
     mats: dict[str, list[str]] = {}
     current: list[str] | None = None
     for raw in text.splitlines():
@@ -84,16 +69,13 @@ def obj_material_uses(obj_text: str) -> list[str]:
     return [m.group(1) for m in re.finditer(r"^[ \t]*usemtl[ \t]+(.+?)[ \t\r]*$", obj_text, re.M)]
 
 
-#: ``mtllib`` names of OBJ files read in this process, by path, while the
-#: file is unchanged (:class:`asset2sim.file_memo.FileMemo`): a refine run
-#: asks for the same input meshes' materials at every write (a laptop's 118
-#: part meshes, 17 MB of OBJ text, scanned 5 times took 1.2 s).
+#: ``mtllib`` names of OBJ files read in this process, by path, while unchanged.
 _MTL_NAMES: file_memo.FileMemo[list[str]] = file_memo.FileMemo(list, max_entries=8192)
 
 
 def _obj_mtl_names(mesh_path: Path) -> list[str]:
-    """:func:`mtl_libraries` of the OBJ file ``mesh_path``, read once per
-    file version (:data:`_MTL_NAMES`). Raises OSError when it cannot be read."""
+    """:func:`mtl_libraries` of the OBJ file ``mesh_path``, read once per file
+    version; OSError when unreadable."""
     names = _MTL_NAMES.get(str(mesh_path))
     if names is None:
         files = file_memo.identities([mesh_path])  # before reading
@@ -103,12 +85,9 @@ def _obj_mtl_names(mesh_path: Path) -> list[str]:
 
 
 def obj_material_files(mesh_path: Path, keep=lambda p: True, skip_library=lambda name: False) -> list[Path]:
-    """Files an OBJ mesh needs besides itself: its MTL libraries and their
-    texture maps, as resolved absolute paths, in file order. Files that do not
-    exist, or for which ``keep(path)`` is false, are skipped (an MTL skipped
-    is not read), and so are the libraries whose name (as the ``mtllib``
-    statement writes it) ``skip_library(name)`` refuses. A mesh that is not
-    ``.obj`` or cannot be read has none."""
+    """The MTL libraries and their texture maps an OBJ mesh needs, resolved, in
+    file order; missing files, those ``keep(path)`` refuses and libraries
+    ``skip_library(name)`` refuses skipped. None for a non-OBJ or unreadable mesh."""
     deps: list[Path] = []
     if mesh_path.suffix.lower() != ".obj":
         return deps

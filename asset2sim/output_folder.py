@@ -1,44 +1,14 @@
 """The output folder owns only what it wrote.
 
-An output folder of ``refine`` holds the files of the SPEC's contract, the
-copied meshes and the extras, and possibly files of its user. This module
-decides which files are the product's and keeps that record on disk:
-
-- **where**: :func:`check_location` refuses an output folder that is the input
-  folder, lies inside it, contains it, or resolves into it through symlinks,
-  a path that exists but is not a folder (a file, ``/dev/null``), and a
-  folder whose bookkeeping file (below) is not a regular file (a FIFO there
-  would block the reader forever).
-- **reading**: every file this module or the skip rule reads back from an
-  output folder (the bookkeeping files, ``report.json``, ``overlay.json``) is
-  read through :func:`asset2sim.atomic.read_regular`, which checks on the open
-  descriptor that it is a regular file before reading: never a hang.
-- **what is ours**: while a run writes, ``.asset2sim-owned.json`` lists every
-  file the run is about to write (updated *before* each file's temporary file
-  is created, through :func:`asset2sim.atomic.add_observer`), so a run killed
-  at any moment leaves no file its successor does not know it owns. When the
-  run finishes, the completion marker ``.asset2sim-complete.json`` lists the
-  files with their sha256 and the ownership record is removed.
-- **rewrite**: :func:`start` removes exactly the files a previous run recorded
-  (and the temporary files of those), never anything else; a folder holding
-  files the product did not write is refused unless ``overwrite=True`` (those
-  files are then left alone unless the run writes the same path).
-- **later writers**: ``evaluate``, ``export`` and ``render`` writing into a
-  finished output folder record their files too (:func:`adopting`), so a
-  later rewrite removes them and does not take them for a user's files.
-- **finish**: :meth:`OwnedFolder.finish` writes the completion marker only when
-  every file the run wrote exists (a write that failed, e.g. on a full disk,
-  leaves no marker, so a rerun redoes the asset).
-- **old or new**: a rerun over a *complete* earlier output (its marker is
-  there and the folder holds nothing else) writes into a staging folder
-  ``.<name>.asset2sim-next`` beside it and, once complete, swaps the two in
-  one atomic rename (:func:`asset2sim.atomic.exchange_folders`); a run
-  refused, failed or killed before that leaves the earlier output as it was
-  (a killed run's staging folder is removed by the next run).
-
-Errors are :class:`OutputError` with a ``code`` (``OUTPUT_*``) and the
-``path`` concerned (:mod:`asset2sim.output_paths`, with the location check);
-``tasks.assemble.write`` re-exports :class:`OutputError`.
+:func:`start` begins a (re)write of an output folder: it checks the location
+(:func:`check_location`), removes exactly the files an earlier run recorded,
+refuses other files unless ``overwrite``, and records every atomic write in
+``.asset2sim-owned.json`` before the file is created. :meth:`OwnedFolder.finish`
+writes the completion marker ``.asset2sim-complete.json`` (the files with their
+sha256); a rerun over a complete output writes a staging folder and swaps it
+in. :func:`adopting` records the files later writers add. Bookkeeping files
+are read through :func:`read_record` (regular files only). Errors are
+:class:`OutputError` (``code`` ``OUTPUT_*``, ``path``).
 """
 
 from __future__ import annotations
@@ -66,8 +36,7 @@ from asset2sim.output_paths import (
     check_location,
 )
 
-#: The files and folders of an output folder (the SPEC's contract and the
-#: extras), named here once; the writers and readers import them.
+#: The files and folders of an output folder (the SPEC's contract and the extras).
 URDF_NAME = "mobility.urdf"
 STATE_NAME = "initial_state.json"
 OVERLAY_NAME = "overlay.json"
@@ -84,44 +53,31 @@ MAX_RECORD_BYTES = 64 * 1024 * 1024
 
 
 def read_record(path: Path | str) -> Any:
-    """The JSON of a bookkeeping file (or of ``report.json`` and the like) of
-    an output folder, read only when it is a regular file of at most
-    :data:`MAX_RECORD_BYTES` (:func:`asset2sim.atomic.read_regular`: a FIFO
-    never blocks).
-
-    Raises:
-        OSError: missing, not a regular file, too large, unreadable.
-        ValueError: not UTF-8 JSON.
-    """
+    """The JSON of a file of an output folder, read only when it is a regular file of at most
+    :data:`MAX_RECORD_BYTES`. Raises OSError (missing, not a regular file, too large) or ValueError (not UTF-8 JSON)."""
     return json.loads(atomic.read_regular(path, MAX_RECORD_BYTES).decode("utf-8"))
 
 
+def _listed(path: Path) -> set[str]:
+    """The safe relative paths the ``files`` of bookkeeping file ``path`` lists (none when unreadable)."""
+    try:
+        data = read_record(path)
+    except (OSError, ValueError):
+        return set()
+    entries = data.get("files") if isinstance(data, dict) else None
+    return {r for r in (_safe_rel(x) for x in entries or []) if r is not None}
+
+
 def recorded_files(out_dir: Path | str) -> set[str]:
-    """Relative paths (POSIX) the product recorded as its own in ``out_dir``:
-    the ownership record of an unfinished run plus the files of the completion
-    marker. Unreadable records count as empty; unsafe entries are ignored."""
-    out = Path(out_dir)
-    owned: set[str] = set()
-    for name, key in ((RECORD_NAME, "files"), (MARKER_NAME, "files")):
-        try:
-            data = read_record(out / name)
-        except (OSError, ValueError):
-            continue
-        entries = data.get(key) if isinstance(data, dict) else None
-        for rel in entries or []:
-            safe = _safe_rel(rel)
-            if safe is not None:
-                owned.add(safe)
-    return owned
+    """Relative paths (POSIX) the ownership record and the completion marker of ``out_dir`` list; unreadable
+    records count as empty, unsafe entries are ignored."""
+    return _listed(Path(out_dir) / RECORD_NAME) | _listed(Path(out_dir) / MARKER_NAME)
 
 
 def foreign_files(out_dir: Path | str, owned: Iterable[str] | None = None) -> list[str]:
-    """Entries of ``out_dir`` the product did not write: not in ``owned``
-    (default :func:`recorded_files`), not the bookkeeping files, not a
-    temporary file of an owned path. Sorted relative paths."""
+    """Sorted relative paths of ``out_dir`` the product did not write: not in ``owned`` (default
+    :func:`recorded_files`), not bookkeeping, not a temporary file of an owned path."""
     root = Path(out_dir)
-    if not root.is_dir():
-        return []
     owned = set(recorded_files(root) if owned is None else owned)
     tmp_targets: dict[str, set[str]] = {}
     for rel in owned:
@@ -144,8 +100,7 @@ _ACTIVE_LOCK = threading.Lock()
 
 
 def _dispatch(paths: list[Path]) -> None:
-    """The atomic writer's observer: hands each destination to the owned
-    folder it lies in."""
+    """The atomic writer's observer: hands each destination to the owned folders."""
     with _ACTIVE_LOCK:
         owners = list(_ACTIVE.values())
     for owner in owners:
@@ -154,10 +109,8 @@ def _dispatch(paths: list[Path]) -> None:
 
 @dataclass
 class OwnedFolder:
-    """An output folder during one run: ``root`` (resolved), ``given`` (as
-    asked, absolute), ``source`` (the resolved input folder, None when not
-    known) and ``files``,
-    the relative paths this run has written or is writing."""
+    """An output folder during one run: ``root`` (resolved), ``given`` (as asked, absolute), ``source`` (the
+    resolved input folder, None when not known) and ``files``, the relative paths this run writes."""
 
     root: Path
     given: Path
@@ -169,9 +122,8 @@ class OwnedFolder:
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def _rel(self, path: Path) -> str | None:
-        """Relative path of a destination inside this folder, or None when it
-        lies elsewhere. Raises OutputError when it lies here by name but a
-        symlink leads it out."""
+        """Relative path of a destination inside this folder, or None when it lies elsewhere. Raises
+        OutputError when it lies here by name but a symlink leads it out."""
         ap = Path(os.path.abspath(path))
         parent = ap.parent.resolve()
         self._refuse_dotdot_escape(Path(path), parent)
@@ -180,16 +132,12 @@ class OwnedFolder:
                 raise OutputError(f"{ap} would be written into the input folder {self.source}", "OUTPUT_SYMLINK_ESCAPES", ap)
             return (parent / ap.name).relative_to(self.root).as_posix()
         if _within(ap, self.given) or _within(ap, self.root):
-            raise OutputError(
-                f"{ap} would be written through a symlink to {parent}, outside the output folder {self.given}",
-                "OUTPUT_SYMLINK_ESCAPES", ap,
-            )
+            raise OutputError(f"{ap} would be written through a symlink to {parent}, outside the output folder {self.given}",
+                              "OUTPUT_SYMLINK_ESCAPES", ap)
         return None
 
     def _refuse_dotdot_escape(self, path: Path, parent: Path) -> None:
-        """Refuse a path that starts in this folder and leaves it through
-        ``..`` (``out/collision/../../x.obj``, a name from an input used as a
-        path): such a write never happens, whatever wrote it."""
+        """Refuse a path that starts in this folder and leaves it through ``..`` (``out/collision/../../x.obj``)."""
         parts = path.parts
         if ".." not in parts:
             return
@@ -213,75 +161,38 @@ class OwnedFolder:
     def _save(self) -> None:
         atomic.write_json(self.root / RECORD_NAME, {"version": 1, "files": sorted(self.files)})
 
-    def record(self, paths: Iterable[Path | str]) -> None:
-        """Record files of this folder as the run's own (absolute paths or
-        paths relative to the folder) without writing them, e.g. copies kept
-        because their content is already right."""
-        self._observe([p if Path(p).is_absolute() else self.root / p for p in paths])
-
-    def remove_unreferenced(self, folder: str, keep: Iterable[str]) -> list[str]:
-        """Remove the files this run wrote under ``folder`` (relative, e.g.
-        ``collision``) that are not in ``keep`` (relative paths). Files it did
-        not write are never touched. Returns the removed relative paths."""
-        prefix = PurePosixPath(folder).as_posix().rstrip("/") + "/"
-        keep = {PurePosixPath(k).as_posix() for k in keep}
-        gone = [rel for rel in sorted(self.files) if rel.startswith(prefix) and rel not in keep]
-        for rel in gone:
-            _remove_with_temps(self.root, rel)
-        with self._lock:
-            self.files.difference_update(gone)
-            self._save()
-        _prune_empty(self.root, gone)
-        return gone
-
     def finish(self, marker: dict[str, Any]) -> dict[str, str]:
-        """Write the completion marker: ``marker`` plus ``files`` (relative
-        path -> sha256 of every file this run wrote), then drop the ownership
-        record. Stops observing writes.
+        """Write the completion marker: ``marker`` plus ``files`` (relative path -> sha256 of every file this
+        run wrote), drop the ownership record, stop observing writes, and swap a staged run in.
 
         Raises:
-            OutputError: ``OUTPUT_INCOMPLETE`` when a file the run wrote is
-                missing (e.g. its write failed on a full disk); no marker is
-                written, the ownership record stays.
+            OutputError: ``OUTPUT_INCOMPLETE`` when a file the run wrote is missing (no marker is written), or
+                ``OUTPUT_WRITE_FAILED`` when a staged run cannot be swapped in.
         """
         try:
             missing = sorted(rel for rel in self.files if not (self.root / rel).is_file())
             if missing:
-                raise OutputError(
-                    f"{self.given}: {len(missing)} file(s) the run wrote are missing ({', '.join(missing[:_MAX_LISTED])}); "
-                    "the output is incomplete, no completion marker written",
-                    "OUTPUT_INCOMPLETE", self.given / missing[0],
-                )
+                raise OutputError(f"{self.given}: {len(missing)} file(s) the run wrote are missing ({', '.join(missing[:_MAX_LISTED])}); "
+                                  "the output is incomplete, no completion marker written", "OUTPUT_INCOMPLETE", self.given / missing[0])
             hashes = {rel: atomic.sha256_file(self.root / rel) for rel in sorted(self.files)}
             atomic.write_json(self.root / MARKER_NAME, {**marker, "files": hashes})
             (self.root / RECORD_NAME).unlink(missing_ok=True)
         finally:
             self.close()
-        if self.final is not None:
-            self._swap_in()
+        if self.final is not None:  # exchange the staging folder with the earlier output, then delete that
+            staging, final = self.root, self.final
+            try:
+                atomic.exchange_folders(staging, final)
+            except OSError as exc:
+                shutil.rmtree(staging, ignore_errors=True)
+                raise _write_failed(self.given, exc) from exc
+            shutil.rmtree(staging, ignore_errors=True)
+            self.root, self.final = final, None
         return hashes
 
-    def _swap_in(self) -> None:
-        """A staged run, complete: exchange the staging folder with the earlier
-        output, then delete the earlier output (now at the staging path).
-
-        Raises:
-            OutputError: ``OUTPUT_WRITE_FAILED`` when the exchange fails (the
-                earlier output is then untouched).
-        """
-        staging, final = self.root, self.final
-        try:
-            atomic.exchange_folders(staging, final)
-        except OSError as exc:
-            shutil.rmtree(staging, ignore_errors=True)
-            raise _write_failed(self.given, exc) from exc
-        shutil.rmtree(staging, ignore_errors=True)
-        self.root, self.final = final, None
-
     def write_path(self, path: Path | str) -> Path:
-        """Where this run writes ``path`` (a path in the output folder as the
-        user named it): the same path for a run in place, its counterpart in
-        the staging folder for a staged run."""
+        """Where this run writes ``path`` (named in the output folder as given): its counterpart in the staging
+        folder for a staged run."""
         if self.final is None:
             return Path(path)
         ap = Path(os.path.abspath(path))
@@ -291,14 +202,11 @@ class OwnedFolder:
         return Path(path)
 
     def abandon(self) -> None:
-        """End a run that failed or was refused: stop observing writes, remove
-        the files it wrote (with their temporary files), the ownership record
-        and the folder when this run created it and it is left empty, so the
-        folder holds what it held before the run (a staged run's earlier
-        output was never touched). A file that cannot be removed stays
-        recorded for the next run."""
+        """End a run that failed or was refused: stop observing writes and remove what it wrote (the
+        staging folder, or its files, the ownership record and the folder it created); a file that cannot be
+        removed stays recorded."""
         self.close()
-        if self.final is not None:  # staged: the earlier output was never touched
+        if self.final is not None:
             shutil.rmtree(self.root, ignore_errors=True)
             return
         for rel in sorted(self.files):
@@ -310,10 +218,8 @@ class OwnedFolder:
         else:
             (self.root / RECORD_NAME).unlink(missing_ok=True)
             if self.created:
-                try:
+                with contextlib.suppress(OSError):  # not empty: someone else's file appeared
                     self.root.rmdir()
-                except OSError:  # not empty: someone else's file appeared
-                    pass
 
     def close(self) -> None:
         """Stop observing writes (the ownership record stays on disk)."""
@@ -325,18 +231,12 @@ class OwnedFolder:
 
 
 def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = False) -> OwnedFolder:
-    """Begin a (re)write of ``out_dir`` for the asset in ``source_dir``.
-
-    Checks the location (:func:`check_location`), refuses files the product
-    did not write unless ``overwrite``, then removes the completion marker and
-    every file a previous run recorded (with their temporary files), and from
-    here on records every atomic write into the folder (any thread of this
-    process) until :meth:`OwnedFolder.finish` or :meth:`OwnedFolder.close`.
+    """Begin a (re)write of ``out_dir`` for the asset in ``source_dir`` (module docstring); records every
+    atomic write into the folder until :meth:`OwnedFolder.finish` or :meth:`OwnedFolder.close`.
 
     Raises:
-        OutputError: a refused location, ``OUTPUT_NOT_EMPTY`` naming the
-            first files the product did not write, or ``OUTPUT_WRITE_FAILED``
-            when the folder cannot be created or written.
+        OutputError: a refused location, ``OUTPUT_NOT_EMPTY`` naming the first files the product did not
+            write, ``OUTPUT_NAME_CONFLICT`` (staging path taken) or ``OUTPUT_WRITE_FAILED``.
     """
     root = check_location(source_dir, out_dir)
     given = Path(os.path.abspath(out_dir))
@@ -346,12 +246,9 @@ def start(source_dir: Path | str, out_dir: Path | str, *, overwrite: bool = Fals
         previous = recorded_files(root)
         foreign = foreign_files(root, previous)
         if foreign and not overwrite:
-            raise OutputError(
-                f"output folder {given} holds {len(foreign)} file(s) asset2sim did not write "
-                f"({', '.join(foreign[:_MAX_LISTED])}{', ...' if len(foreign) > _MAX_LISTED else ''}); "
-                "choose an empty or new folder, or allow writing beside them",
-                "OUTPUT_NOT_EMPTY", given / foreign[0],
-            )
+            raise OutputError(f"output folder {given} holds {len(foreign)} file(s) asset2sim did not write "
+                              f"({', '.join(foreign[:_MAX_LISTED])}{', ...' if len(foreign) > _MAX_LISTED else ''}); "
+                              "choose an empty or new folder, or allow writing beside them", "OUTPUT_NOT_EMPTY", given / foreign[0])
         staged = _start_staged(root, given, src, previous, foreign)
         if staged is not None:
             return staged
@@ -384,32 +281,21 @@ STAGING_SUFFIX = ".asset2sim-next"
 
 
 def staging_folder(root: Path) -> Path:
-    """The staging folder of output folder ``root``: ``.<name>.asset2sim-next`` beside it."""
+    """``.<name>.asset2sim-next`` beside ``root``."""
     return root.parent / f".{root.name}{STAGING_SUFFIX}"
 
 
-def _complete(root: Path) -> bool:
-    """``root`` holds a readable completion marker listing files."""
-    try:
-        data = read_record(root / MARKER_NAME)
-    except (OSError, ValueError):
-        return False
-    return isinstance(data, dict) and isinstance(data.get("files"), dict)
-
-
 def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreign: list[str]) -> "OwnedFolder | None":
-    """A rerun over a complete earlier output that holds only the product's
-    files: an :class:`OwnedFolder` writing a fresh staging folder beside it
-    (swapped in by :meth:`OwnedFolder.finish`). None when the folder is not
-    such an output, or no staging folder can be made beside it (e.g. a
-    read-only parent): then the run rewrites the folder in place.
-
-    Raises:
-        OutputError: ``OUTPUT_NAME_CONFLICT`` when the staging path is taken
-            by something asset2sim did not make (a file, a symlink, a folder
-            of other files).
-    """
-    if foreign or not previous or not _complete(root):
+    """An :class:`OwnedFolder` writing a fresh staging folder beside a complete output holding only the
+    product's files; None (rewrite in place) when it is not one or no staging folder can be made. Raises
+    ``OUTPUT_NAME_CONFLICT`` when the staging path is taken by something asset2sim did not make."""
+    if foreign or not previous:
+        return None
+    try:
+        marker = read_record(root / MARKER_NAME)
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(marker, dict) and isinstance(marker.get("files"), dict)):  # not a complete output
         return None
     staging = staging_folder(root)
     if os.path.lexists(staging):
@@ -436,15 +322,14 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
 
 
 def _write_failed(given: Path, exc: OSError) -> OutputError:
-    """``OUTPUT_WRITE_FAILED`` for an OSError met while preparing the folder."""
+    """``OUTPUT_WRITE_FAILED`` for an OSError."""
     where = exc.filename or given
     return OutputError(f"output folder {given} cannot be created or written ({exc.strerror or exc})", "OUTPUT_WRITE_FAILED", where)
 
 
 def product_folder(path: Path | str) -> Path | None:
-    """The output folder of asset2sim that ``path`` is (or lies in): the
-    nearest folder, ``path`` included, holding a completion marker or an
-    ownership record; None when there is none."""
+    """The nearest folder, ``path`` included, holding a completion marker or an ownership record; None when
+    there is none."""
     p = Path(os.path.abspath(path))
     for folder in (p, *p.parents):
         if (folder / MARKER_NAME).is_file() or (folder / RECORD_NAME).is_file():
@@ -454,21 +339,14 @@ def product_folder(path: Path | str) -> Path | None:
 
 @contextlib.contextmanager
 def adopting(path: Path | str) -> Iterator[OwnedFolder | None]:
-    """While the block runs, every atomic write into the asset2sim output
-    folder around ``path`` (:func:`product_folder`) is added to its ownership
-    record (before the file is created), so a later rewrite removes it
-    instead of refusing the folder. Nothing happens when ``path`` is not in
-    such a folder. Yields the :class:`OwnedFolder` or None."""
+    """While the block runs, record every atomic write into the output folder around ``path``
+    (:func:`product_folder`) in its ownership record. Yields the :class:`OwnedFolder`, or None when ``path``
+    is in no such folder."""
     root = product_folder(path)
     if root is None:
         yield None
         return
-    try:
-        data = read_record(root / RECORD_NAME)
-        files = {r for r in (_safe_rel(x) for x in data.get("files", [])) if r is not None}
-    except (OSError, ValueError, AttributeError):
-        files = set()
-    owner = OwnedFolder(root=root, given=root, source=None, files=files)
+    owner = OwnedFolder(root=root, given=root, source=None, files=_listed(root / RECORD_NAME))
     with _ACTIVE_LOCK:
         previous = _ACTIVE.get(root)
         _ACTIVE[root] = owner

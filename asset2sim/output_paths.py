@@ -57,15 +57,8 @@ def _within(path: Path, root: Path) -> bool:
 
 
 def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:
-    """Resolve ``out_dir`` (symlinks followed) and refuse a location that would
-    mix output and input.
-
-    Args:
-        source_dir: the asset folder (read only).
-        out_dir: the requested output folder (need not exist).
-
-    Returns:
-        The resolved output folder.
+    """The resolved output folder ``out_dir`` (need not exist), refused where
+    it would mix output and the input ``source_dir``.
 
     Raises:
         OutputError: ``OUTPUT_IS_INPUT``, ``OUTPUT_INSIDE_INPUT`` (also when a
@@ -92,8 +85,7 @@ def check_location(source_dir: Path | str, out_dir: Path | str) -> Path:
 
 def check_bookkeeping(out_dir: Path | str) -> None:
     """Refuse an output folder whose completion marker or ownership record
-    exists but is not a regular file (``os.lstat``: nothing is opened, so a
-    FIFO cannot block; a symlink is refused too, asset2sim never writes one).
+    exists but is not a regular file (``os.lstat``; symlinks refused too).
 
     Raises:
         OutputError: ``OUTPUT_RECORD_NOT_A_FILE`` naming the file.
@@ -130,9 +122,8 @@ def _safe_rel(rel: Any) -> str | None:
 
 
 def _entries(root: Path) -> list[str]:
-    """Relative POSIX paths of every non-directory entry under ``root``
-    (files, symlinks including symlinks to folders, FIFOs ...); symlinked
-    folders are not entered."""
+    """Relative POSIX paths of every non-folder entry under ``root``, symlinks
+    to folders included (not entered)."""
     out: list[str] = []
     for folder, dirs, files in os.walk(root, followlinks=False):
         base = Path(folder)
@@ -146,9 +137,8 @@ def _entries(root: Path) -> list[str]:
 
 
 def _unlink_inside(root: Path, rel: str) -> bool:
-    """Remove ``root/rel`` only when its real parent folder is exactly
-    ``root/<parent of rel>`` (no symlink on the way that could lead into other
-    data) and it is not a folder. Returns True when something was removed."""
+    """Remove ``root/rel`` unless it is a folder or a symlink lies on the way;
+    True when something was removed."""
     target = root / rel
     try:
         if target.parent.resolve() != root / PurePosixPath(rel).parent:

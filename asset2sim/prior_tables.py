@@ -1,17 +1,7 @@
-"""The prior tables as data: their models, loading and cross-checks.
-
-The numbers live in ``asset2sim/priors/*.yaml`` (package data), each with its
-source: ``materials.yaml`` (density, shell or solid, wall thickness, contact
-friction), ``labels.yaml`` (part-label canonicalisation and per-label
-defaults), ``size_classes.yaml`` (linear size factors) and
-``categories.yaml`` (per-category dimensions, mass ranges, materials, part
-roles, variants). This module defines their pydantic models, loads them
-(:func:`load_priors`, cached; :func:`load_priors_from` a folder) and checks
-every cross-reference (materials, labels, synonyms), raising
-:class:`PriorsError` naming the yaml file and key.
-
-Units: SI throughout: lengths m, masses kg, densities kg/m^3. Sources of the
-tables: see each yaml entry and ``docs/design/priors.md``.
+"""The prior tables of ``asset2sim/priors/*.yaml`` (materials, labels, size
+classes, categories): their models, loading (:func:`load_priors`) and
+cross-checks, raising :class:`PriorsError` naming the yaml file and key.
+Units SI (m, kg, kg/m^3); sources in each yaml entry and ``docs/design/priors.md``.
 """
 
 from __future__ import annotations
@@ -26,10 +16,8 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 
 from asset2sim.schemas.request import SizeClass
 
-#: Largest object width (m) a robot's parallel gripper is assumed to close on.
-#: Source: Franka Emika Hand datasheet, stroke 80 mm (2 x 40 mm); Robotiq 2F-85
-#: datasheet, stroke 85 mm; 0.075 m leaves ~5-10 mm of approach margin. A
-#: handheld object keeps at least two of its three dimensions within it.
+#: Largest object width (m) a parallel gripper is assumed to close on (Franka
+#: Hand stroke 80 mm, Robotiq 2F-85 85 mm, less approach margin).
 GRASPABLE_WIDTH_M: float = 0.075
 
 #: Canonical name of the fallback category.
@@ -44,9 +32,6 @@ class PriorsError(ValueError):
     """Bad prior data; the message names the yaml file and the key."""
 
 
-# --------------------------------------------------------------------------- models
-
-
 class PriorModel(BaseModel):
     """Base of the prior models: no extra fields, immutable, finite numbers."""
 
@@ -54,13 +39,9 @@ class PriorModel(BaseModel):
 
 
 class MaterialPrior(PriorModel):
-    """One material (``materials.yaml``).
-
-    ``density`` kg/m^3; ``shell`` True for hollow molded/sheet/panel parts
-    (mass = area * wall_thickness * density); ``wall_thickness`` m;
-    ``lateral_friction`` dry Coulomb coefficient for contacts; ``restitution``
-    0..1. ``*_source`` fields cite the references.
-    """
+    """One material: ``density`` kg/m^3, ``shell`` (mass = area *
+    wall_thickness * density), ``wall_thickness`` m, ``lateral_friction``
+    (Coulomb), ``restitution`` 0..1, ``*_source`` the references."""
 
     key: str = ""
     name: str = Field(min_length=1)
@@ -76,10 +57,7 @@ class MaterialPrior(PriorModel):
     @property
     def source(self) -> str:
         """All sources of this entry in one string."""
-        return (
-            f"density: {self.density_source}; wall: {self.wall_thickness_source}; "
-            f"friction: {self.friction_source}"
-        )
+        return f"density: {self.density_source}; wall: {self.wall_thickness_source}; friction: {self.friction_source}"
 
 
 class SizeClassPrior(PriorModel):
@@ -136,12 +114,9 @@ MassRange = Annotated[tuple[float, float], AfterValidator(_check_mass)]
 
 
 class VariantPrior(PriorModel):
-    """A sub-type of a category named by request words (e.g. ``mini fridge``).
-
-    ``dims`` m sorted [longest, middle, shortest]; ``size_class`` is the size
-    class these dims already represent relative to the category; ``mass_range``
-    kg for that size.
-    """
+    """A sub-type of a category named by request words (``mini fridge``):
+    ``dims`` m sorted longest first, the ``size_class`` they represent, and
+    ``mass_range`` kg for that size."""
 
     name: str = Field(min_length=1)
     phrases: list[str] = Field(min_length=1)
@@ -154,11 +129,8 @@ class VariantPrior(PriorModel):
 
 
 class CategoryPrior(PriorModel):
-    """Priors of one category (``categories.yaml``); see that file's header.
-
-    ``dims`` m sorted [longest, middle, shortest] of a regular-size object in
-    its closed state; ``mass_range`` kg of a regular-size object.
-    """
+    """Priors of one category (see ``categories.yaml``'s header): ``dims`` m
+    sorted longest first and ``mass_range`` kg of a regular-size closed object."""
 
     name: str = ""
     synonyms: list[str] = Field(default_factory=list)
@@ -186,10 +158,8 @@ class CategoryPrior(PriorModel):
         if self.spring_labels and len(self.spring_source) < 10:
             raise ValueError("spring_labels given without a spring_source")
         if self.handheld and self.dims[1] > GRASPABLE_WIDTH_M + 1e-9:
-            raise ValueError(
-                f"handheld but the middle dimension {self.dims[1]} m exceeds the "
-                f"gripper limit GRASPABLE_WIDTH_M = {GRASPABLE_WIDTH_M} m"
-            )
+            raise ValueError(f"handheld but the middle dimension {self.dims[1]} m exceeds the "
+                             f"gripper limit GRASPABLE_WIDTH_M = {GRASPABLE_WIDTH_M} m")
         for k, w in self.part_evidence.items():
             if not (0.0 < w <= 1.0):
                 raise ValueError(f"part_evidence[{k!r}] must be in (0, 1], got {w}")
@@ -197,10 +167,7 @@ class CategoryPrior(PriorModel):
 
     def variant(self, name: str) -> VariantPrior | None:
         """The variant called ``name`` (case-insensitive), or None."""
-        for v in self.variants:
-            if v.name.lower() == name.lower():
-                return v
-        return None
+        return next((v for v in self.variants if v.name.lower() == name.lower()), None)
 
 
 class Priors(PriorModel):
@@ -210,11 +177,6 @@ class Priors(PriorModel):
     materials: dict[str, MaterialPrior]
     labels: LabelTable
     categories: dict[str, CategoryPrior]
-
-
-# --------------------------------------------------------------------------- loading
-
-_FILES = ("materials.yaml", "labels.yaml", "size_classes.yaml", "categories.yaml")
 
 
 def _read_yaml(directory: Path | None, fname: str) -> Any:
@@ -242,9 +204,7 @@ def _fmt_validation(fname: str, prefix: str, exc: ValidationError) -> str:
     return "; ".join(lines)
 
 
-def _validate_entry(
-    model: type[BaseModel], fname: str, where: str, data: Any, **extra: Any
-) -> Any:
+def _validate_entry(model: type[BaseModel], fname: str, where: str, data: Any, **extra: Any) -> Any:
     if not isinstance(data, dict):
         raise PriorsError(f"{fname}: {where}: entry must be a mapping, got {type(data).__name__}")
     try:
@@ -255,22 +215,14 @@ def _validate_entry(
 
 def _build(directory: Path | None) -> Priors:
     raw_mat = _read_yaml(directory, "materials.yaml")
-    materials = {
-        k: _validate_entry(MaterialPrior, "materials.yaml", k, v, key=k) for k, v in raw_mat.items()
-    }
+    materials = {k: _validate_entry(MaterialPrior, "materials.yaml", k, v, key=k) for k, v in raw_mat.items()}
     raw_sc = _read_yaml(directory, "size_classes.yaml")
-    size_classes = {
-        k: _validate_entry(SizeClassPrior, "size_classes.yaml", k, v) for k, v in raw_sc.items()
-    }
+    size_classes = {k: _validate_entry(SizeClassPrior, "size_classes.yaml", k, v) for k, v in raw_sc.items()}
     if set(size_classes) != set(SIZE_CLASSES):
-        raise PriorsError(
-            f"size_classes.yaml: keys must be exactly {list(SIZE_CLASSES)}, got {sorted(size_classes)}"
-        )
+        raise PriorsError(f"size_classes.yaml: keys must be exactly {list(SIZE_CLASSES)}, got {sorted(size_classes)}")
     facs = [size_classes[c].factor for c in SIZE_CLASSES]
     if any(b <= a for a, b in zip(facs, facs[1:])) or size_classes["regular"].factor != 1.0:
-        raise PriorsError(
-            "size_classes.yaml: factors must increase from tiny to very_large with regular = 1.0"
-        )
+        raise PriorsError("size_classes.yaml: factors must increase from tiny to very_large with regular = 1.0")
     labels = _validate_entry(LabelTable, "labels.yaml", "", _read_yaml(directory, "labels.yaml"))
     for lab, lp in labels.labels.items():
         if lp.material not in materials:
@@ -280,17 +232,13 @@ def _build(directory: Path | None) -> Priors:
             raise PriorsError(f"labels.yaml: aliases.{alias}: target {target!r} is not a label")
 
     raw_cat = _read_yaml(directory, "categories.yaml")
-    categories = {
-        k: _validate_entry(CategoryPrior, "categories.yaml", k, v, name=k) for k, v in raw_cat.items()
-    }
+    categories = {k: _validate_entry(CategoryPrior, "categories.yaml", k, v, name=k) for k, v in raw_cat.items()}
     if GENERIC not in categories:
         raise PriorsError(f"categories.yaml: the fallback category {GENERIC!r} is missing")
     seen_syn: dict[str, str] = {}
     for name, cat in categories.items():
         where = f"categories.yaml: {name}"
-        mats = [("body_material", cat.body_material)] + [
-            (f"part_materials.{k}", m) for k, m in cat.part_materials.items()
-        ]
+        mats = [("body_material", cat.body_material)] + [(f"part_materials.{k}", m) for k, m in cat.part_materials.items()]
         for i, var in enumerate(cat.variants):
             if var.body_material is not None:
                 mats.append((f"variants.{i}.body_material", var.body_material))
@@ -298,8 +246,7 @@ def _build(directory: Path | None) -> Priors:
         for key, mat in mats:
             if mat not in materials:
                 raise PriorsError(f"{where}.{key}: unknown material {mat!r} (not in materials.yaml)")
-        label_refs: list[tuple[str, str]] = []
-        label_refs += [(f"part_materials.{k}", k) for k in cat.part_materials]
+        label_refs = [(f"part_materials.{k}", k) for k in cat.part_materials]
         label_refs += [("spring_labels", k) for k in cat.spring_labels]
         label_refs += [("task_relevant", k) for k in cat.task_relevant]
         label_refs += [("accessories", k) for k in cat.accessories]
@@ -310,35 +257,23 @@ def _build(directory: Path | None) -> Priors:
             label_refs += [(f"variants.{i}.part_materials.{k}", k) for k in var.part_materials]
         for key, lab in label_refs:
             if lab not in labels.labels:
-                raise PriorsError(
-                    f"{where}.{key}: {lab!r} is not a canonical label of labels.yaml"
-                )
+                raise PriorsError(f"{where}.{key}: {lab!r} is not a canonical label of labels.yaml")
         for syn in cat.synonyms:
             s = syn.lstrip("~").strip().lower()
             if not s:
                 raise PriorsError(f"{where}.synonyms: empty synonym")
             if s in seen_syn and seen_syn[s] != name:
-                raise PriorsError(
-                    f"{where}.synonyms: {s!r} is also a synonym of {seen_syn[s]} (ambiguous)"
-                )
+                raise PriorsError(f"{where}.synonyms: {s!r} is also a synonym of {seen_syn[s]} (ambiguous)")
             seen_syn[s] = name
     return Priors(size_classes=size_classes, materials=materials, labels=labels, categories=categories)
 
 
 @functools.lru_cache(maxsize=1)
 def load_priors() -> Priors:
-    """The packaged prior tables, validated once and cached.
-
-    Raises :class:`PriorsError` naming the yaml file and key on bad data.
-    Sources: each yaml entry; summary in ``docs/design/priors.md``.
-    """
+    """The packaged prior tables, validated once and cached (:class:`PriorsError` on bad data)."""
     return _build(None)
 
 
 def load_priors_from(directory: str | Path) -> Priors:
-    """Load and validate the four prior yaml files from ``directory`` (not cached).
-
-    Used to check edited tables. Raises :class:`PriorsError` (file and key in
-    the message) on missing files or bad data.
-    """
+    """The prior tables of ``directory``, validated, not cached (:class:`PriorsError`)."""
     return _build(Path(directory))

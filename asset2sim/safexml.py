@@ -1,26 +1,11 @@
-"""Hardened XML parsing for untrusted assets (URDF, and any other XML we read).
+"""Hardened XML parsing for untrusted assets.
 
-:func:`parse_xml_bytes` parses with the standard library's expat parser and
-refuses, before or while parsing, everything an untrusted file could use to
-exhaust memory or time or to read other files:
-
-- any document type declaration (``<!DOCTYPE``): no DTD is ever read, so no
-  entity is ever declared or expanded (billion laughs, quadratic blow-up) and
-  no external entity or external DTD is ever fetched (XXE);
-- files larger than :attr:`XMLLimits.max_bytes`;
-- any single token (text run, tag with its attributes, attribute value) longer
-  than :attr:`XMLLimits.max_token_bytes`, checked by a linear scan of the bytes
-  before expat buffers anything;
-- element nesting deeper than :attr:`XMLLimits.max_depth`;
-- more than :attr:`XMLLimits.max_elements` elements.
-
-Every refusal is an instance of :class:`SafeXMLError` (a ``ValueError``) with a
-stable ``code`` (``XML_...``), the ``source`` it came from and, when known, the
-line. The result is an :class:`xml.etree.ElementTree.Element` tree whose
-elements carry ``sourceline`` (1-based line of the start tag).
-
-Comments and processing instructions are dropped; namespaces are not
-processed (a prefixed tag keeps its ``prefix:name`` spelling).
+:func:`parse_xml_bytes` parses with expat and refuses any ``<!DOCTYPE`` (so no
+entity is declared or expanded and nothing external is fetched), and anything
+beyond the :class:`XMLLimits` (size, token length, depth, element count).
+Refusals are :class:`SafeXMLError` with a stable ``code``, ``source`` and line.
+Elements carry ``sourceline``; comments and processing instructions are
+dropped; namespaces are not processed.
 """
 
 from __future__ import annotations
@@ -35,31 +20,16 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
-    "XMLLimits",
-    "SourceElement",
-    "SafeXMLError",
-    "XMLTooLarge",
-    "XMLTokenTooLarge",
-    "XMLTooDeep",
-    "XMLTooManyElements",
-    "XMLDTDForbidden",
-    "XMLEntityForbidden",
-    "XMLExternalReferenceForbidden",
-    "XMLMalformed",
-    "XMLNotAFile",
-    "parse_xml_bytes",
-    "read_xml_file",
-    "parse_xml_file",
+    "XMLLimits", "SourceElement", "SafeXMLError", "XMLTooLarge", "XMLTokenTooLarge", "XMLTooDeep", "XMLTooManyElements",
+    "XMLDTDForbidden", "XMLEntityForbidden", "XMLExternalReferenceForbidden", "XMLMalformed", "XMLNotAFile",
+    "parse_xml_bytes", "read_xml_file", "parse_xml_file"
 ]
 
 
 @dataclass(frozen=True)
 class XMLLimits:
-    """Caps applied while parsing (all counts are bytes or elements).
-
-    Defaults are far above any real URDF (the 21 PartNet-Mobility objects:
-    at most 35 kB, depth 5, 958 elements) and far below what hurts.
-    """
+    """Caps applied while parsing (bytes or elements); defaults far above any
+    real URDF and far below what hurts."""
 
     max_bytes: int = 16 * 1024 * 1024
     """Whole document, bytes."""
@@ -96,48 +66,38 @@ class SafeXMLError(ValueError):
 
 
 class XMLTooLarge(SafeXMLError):
-    """The document exceeds ``max_bytes``."""
     code = "XML_TOO_LARGE"
 
 
 class XMLTokenTooLarge(SafeXMLError):
-    """A single token (text, tag or attribute value) exceeds ``max_token_bytes``."""
     code = "XML_TOKEN_TOO_LARGE"
 
 
 class XMLTooDeep(SafeXMLError):
-    """Element nesting exceeds ``max_depth``."""
     code = "XML_TOO_DEEP"
 
 
 class XMLTooManyElements(SafeXMLError):
-    """The document has more than ``max_elements`` elements."""
     code = "XML_TOO_MANY_ELEMENTS"
 
 
 class XMLDTDForbidden(SafeXMLError):
-    """The document has a document type declaration (``<!DOCTYPE``)."""
     code = "XML_DTD_FORBIDDEN"
 
 
 class XMLEntityForbidden(SafeXMLError):
-    """The document declares an entity (billion laughs, quadratic blow-up)."""
     code = "XML_ENTITY_FORBIDDEN"
 
 
 class XMLExternalReferenceForbidden(SafeXMLError):
-    """The document refers to an external DTD or an external entity (XXE)."""
     code = "XML_EXTERNAL_REFERENCE_FORBIDDEN"
 
 
 class XMLMalformed(SafeXMLError):
-    """Not well-formed XML (expat's message and position are in the text)."""
     code = "XML_MALFORMED"
 
 
 class XMLNotAFile(SafeXMLError):
-    """:func:`read_xml_file` was given something that is not a regular file
-    (a directory, FIFO, device, socket) or that cannot be read."""
     code = "XML_NOT_A_FILE"
 
 
@@ -146,10 +106,7 @@ _SCAN_CHUNK = 1 << 22  # 4 MiB: bounds the scan's temporary memory
 
 
 def _longest_run_without_markup(data: bytes) -> tuple[int, int]:
-    """Longest run of bytes containing neither ``<`` nor ``>``.
-
-    Returns (length, start offset). Linear time, O(4 MiB) extra memory.
-    """
+    """(length, start offset) of the longest run of bytes without ``<`` or ``>``."""
     arr = np.frombuffer(data, dtype=np.uint8)
     n = arr.size
     best, best_at = 0, 0
@@ -184,31 +141,14 @@ class _Abort(Exception):
 
 
 def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | None = None) -> SourceElement:
-    """Parse untrusted XML bytes into an ElementTree, refusing anything unsafe.
-
-    Args:
-        data: the whole document (any encoding expat supports: UTF-8, UTF-16,
-            ISO-8859-1, US-ASCII; declared or with a BOM).
-        source: what the bytes are, for messages (usually the file path).
-        limits: caps; default :data:`DEFAULT_LIMITS`.
-
-    Returns:
-        The root element (a :class:`SourceElement`, with ``sourceline``).
+    """The root :class:`SourceElement` of untrusted XML ``data`` (any encoding
+    expat supports), ``source`` naming it in messages.
 
     Raises:
-        XMLTooLarge: ``len(data) > limits.max_bytes`` (checked first, O(1)).
-        XMLTokenTooLarge: a run without ``<``/``>``, an attribute value or a
-            text node longer than ``limits.max_token_bytes``.
-        XMLDTDForbidden: a ``<!DOCTYPE`` without entity declarations.
-        XMLEntityForbidden: an internal entity declaration (refused at the
-            declaration, before any expansion).
-        XMLExternalReferenceForbidden: an external DTD (``SYSTEM``/``PUBLIC``
-            identifier) or an external entity declaration.
-        XMLTooDeep: nesting deeper than ``limits.max_depth``.
-        XMLTooManyElements: more than ``limits.max_elements`` elements.
-        XMLMalformed: not well-formed (includes undefined entities, NUL
-            characters, duplicate attributes); also raised for a non-bytes
-            argument.
+        XMLTooLarge, XMLTokenTooLarge, XMLTooDeep, XMLTooManyElements: beyond ``limits``.
+        XMLDTDForbidden, XMLEntityForbidden, XMLExternalReferenceForbidden: a
+            ``<!DOCTYPE``, an entity declaration, an external DTD or entity.
+        XMLMalformed: not well-formed, or not bytes.
     """
     lim = limits or DEFAULT_LIMITS
     data = _checked_bytes(data, source, lim)
@@ -222,8 +162,7 @@ def parse_xml_bytes(data: bytes, source: str = "<bytes>", limits: XMLLimits | No
 
 
 def _checked_bytes(data: bytes, source: str, lim: XMLLimits) -> bytes:
-    """``data`` as bytes, after the checks made before expat sees it (type,
-    size, longest token). Raises XMLMalformed, XMLTooLarge, XMLTokenTooLarge."""
+    """``data`` as bytes once type, size and longest token are checked."""
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise XMLMalformed(f"expected bytes, got {type(data).__name__}", source=source)
     data = bytes(data)
@@ -237,9 +176,8 @@ def _checked_bytes(data: bytes, source: str, lim: XMLLimits) -> bytes:
 
 
 def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str) -> None:
-    """Set expat handlers on ``parser`` that build the tree into ``builder``
-    and raise :class:`_Abort` at the first DTD, entity, external reference
-    or exceeded limit."""
+    """Expat handlers that build the tree into ``builder`` and raise
+    :class:`_Abort` at the first DTD, entity, external reference or exceeded limit."""
     state = {"depth": 0, "elements": 0, "text": 0}
 
     def fail(cls: type[SafeXMLError], message: str) -> None:
@@ -302,8 +240,7 @@ def _install_guards(parser, builder: ET.TreeBuilder, lim: XMLLimits, source: str
 
 
 def _parse(parser, data: bytes, source: str) -> None:
-    """Feed the whole document to ``parser``; a handler's refusal is raised
-    as is, expat's and the decoder's errors as XMLMalformed."""
+    """Feed the document to ``parser``; expat's and decoding errors raise XMLMalformed."""
     try:
         parser.Parse(data, True)
     except _Abort as abort:
@@ -316,11 +253,8 @@ def _parse(parser, data: bytes, source: str) -> None:
 
 
 def read_xml_file(path: Path | str, limits: XMLLimits | None = None) -> bytes:
-    """Read a file for :func:`parse_xml_bytes` without hanging or over-reading.
-
-    Opens with ``O_NONBLOCK`` (a FIFO cannot block the open), checks with
-    ``fstat`` that it is a regular file, and reads at most ``max_bytes + 1``
-    bytes.
+    """Read a regular file for :func:`parse_xml_bytes` without blocking on a
+    FIFO or reading more than ``max_bytes + 1`` bytes.
 
     Raises:
         XMLNotAFile: missing, unreadable, or not a regular file.

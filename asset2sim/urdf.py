@@ -1,49 +1,20 @@
 """The URDF model: one set of dataclasses, one reader, one writer.
 
-Every stage, engine, exporter and the evaluator reads and writes URDF through
-this module (no other module parses or builds URDF XML):
+Every module reads and writes URDF through here: :func:`read_urdf` /
+:func:`parse_urdf_bytes` give a :class:`UrdfModel` (XML by
+:mod:`asset2sim.safexml`), :func:`write_urdf` gives its bytes (``read -> write
+-> read`` gives an equal model), :func:`scale_model` bakes in a uniform scale.
 
-- :func:`read_urdf` / :func:`parse_urdf_bytes` turn a file (or the exact bytes
-  the input validation read) into a :class:`UrdfModel`. The XML is parsed by
-  :mod:`asset2sim.safexml` (no DTD, no entities, size and depth caps). One
-  ``_parse_<element>`` function per URDF element, mirrored by one
-  ``_write_<element>`` function, as yourdfpy does.
-- :func:`write_urdf` turns a model back into bytes. Numbers are written as
-  Python's shortest round-trip ``repr`` (the default :class:`UrdfStyle`, the
-  layout yourdfpy + lxml wrote before), or with the number format and element
-  order of PartNet-Mobility files (:data:`PARTNET_STYLE`, the demo generator).
-  ``read -> write -> read`` gives an equal model.
-- :func:`scale_model` bakes a uniform scale into a model.
+Reading modes: ``"strict"`` (default: finite decimal numbers, one tree over
+all links, the elements each joint and geometry needs; the first problem
+raises :class:`UrdfError` naming file, line and link or joint), ``"lenient"``
+(raw third-party files: ``float`` numbers, structure unchecked) and
+``"collect"`` (input validation: every problem goes to ``on_problem`` as a
+:class:`Problem`, in the validator's order, and reading goes on).
 
-Reading modes (``mode``):
-
-``"strict"`` (default)
-    Every number must be a finite decimal literal with the right count
-    (:func:`parse_number_list`); the joints must form one tree over all links;
-    revolute/prismatic joints need ``<limit>``; movable joints a non-zero
-    axis; ``<inertial>`` needs ``<mass>`` and ``<inertia>``; every
-    ``<visual>``/``<collision>`` one box, cylinder, sphere or mesh. The first
-    problem raises :class:`UrdfError` naming the file, line and link or joint.
-``"lenient"``
-    For grading raw third-party files (PartNet-Mobility, GenSim2 references):
-    numbers are read with ``float`` (NaN and infinities pass), structure is
-    not checked, unknown geometry tags are kept; only a number that does not
-    parse, or an unparseable file, raises :class:`UrdfError`.
-``"collect"``
-    For input validation: nothing raises for the content; every problem is
-    handed to ``on_problem`` as a :class:`Problem` (stable ``code``, message,
-    line, link or joint) and reading goes on with what could be read. The
-    input validation (:mod:`asset2sim.tasks.ingest.urdf_checks`) reads
-    through it and checks the model: ``UrdfModel.link_elements`` keeps every
-    ``<link>`` element (unnamed and repeated ones), ``UrdfLimit.unreadable``
-    the limit attributes that did not parse, ``UrdfMaterial.texture_line``
-    where a texture is named; problems come in the validator's order (a
-    link's visuals, its collisions, the visuals' materials, its inertial).
-
-Units: lengths in the file's units (metres nominally), angles rad, mass kg,
-inertia kg*m^2 (about the center of mass, in the ``<inertial><origin>`` frame),
-damping N*m*s/rad or N*s/m, friction N*m or N. Poses are (4, 4) homogeneous
-matrices, ``rpy`` as in :mod:`asset2sim.frames` (fixed axes X, Y, Z).
+Units: lengths in the file's units, angles rad, mass kg, inertia kg*m^2 about
+the COM in the ``<inertial><origin>`` frame, damping N*m*s/rad or N*s/m,
+friction N*m or N. Poses are (4, 4) matrices, ``rpy`` as in :mod:`asset2sim.frames`.
 """
 
 from __future__ import annotations
@@ -63,29 +34,10 @@ from asset2sim import file_memo, safexml
 from asset2sim.frames import axis_angle_matrix, matrix_rpy, pose_matrix
 
 __all__ = [
-    "GEOMETRY_KINDS",
-    "JOINT_TYPES",
-    "MOVABLE",
-    "NumberError",
-    "PARTNET_STYLE",
-    "Problem",
-    "SIMULATED_JOINT_TYPES",
-    "UrdfDynamics",
-    "UrdfError",
-    "UrdfGeometry",
-    "UrdfInertial",
-    "UrdfJoint",
-    "UrdfLimit",
-    "UrdfLink",
-    "UrdfMaterial",
-    "UrdfMimic",
-    "UrdfModel",
-    "UrdfStyle",
-    "parse_number_list",
-    "parse_urdf_bytes",
-    "read_urdf",
-    "scale_model",
-    "write_urdf",
+    "GEOMETRY_KINDS", "JOINT_TYPES", "MOVABLE", "NumberError", "PARTNET_STYLE", "Problem", "SIMULATED_JOINT_TYPES",
+    "UrdfDynamics", "UrdfError", "UrdfGeometry", "UrdfInertial", "UrdfJoint", "UrdfLimit", "UrdfLink", "UrdfMaterial",
+    "UrdfMimic", "UrdfModel", "UrdfStyle", "parse_number_list", "parse_urdf_bytes", "read_urdf", "scale_model",
+    "write_urdf"
 ]
 
 #: Joint types of the URDF specification.
@@ -100,9 +52,6 @@ GEOMETRY_KINDS = ("box", "cylinder", "sphere", "mesh")
 _MOVING_TYPES = frozenset({"revolute", "continuous", "prismatic", "floating", "planar"})
 
 Mode = Literal["strict", "lenient", "collect"]
-
-
-# ----------------------------------------------------------------------------- errors
 
 
 class UrdfError(ValueError):
@@ -152,14 +101,8 @@ _INF = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "1.#inf", "
 
 
 def parse_number_list(text: str | None, count: int | tuple[int, ...]) -> tuple[float, ...]:
-    """Strictly parse a whitespace-separated list of decimal numbers.
-
-    Args:
-        text: the attribute value.
-        count: the required number of values, or a tuple of allowed counts.
-
-    Returns:
-        The values as floats (all finite).
+    """The finite floats of ``text``, a whitespace-separated list of decimal
+    numbers, ``count`` of them (or one of a tuple of allowed counts).
 
     Raises:
         NumberError: with code NUMBER_EMPTY (empty or blank), NUMBER_NAN,
@@ -205,9 +148,6 @@ def _parse_number_list_lenient(text: str | None, count: int | tuple[int, ...]) -
     return tuple(out)
 
 
-# ----------------------------------------------------------------------------- the model
-
-
 class _ArrayEq:
     """``==`` over the dataclass fields that take part in comparison, arrays
     compared with :func:`numpy.array_equal`."""
@@ -235,10 +175,8 @@ def _eye() -> np.ndarray:
 
 @dataclass(eq=False)
 class UrdfMaterial(_ArrayEq):
-    """``<material>``: ``name``; ``rgba`` (4,) in [0, 1] from ``<color>``;
-    ``texture`` the ``<texture filename>`` as written (the first
-    ``<texture>``, as PyBullet reads it); ``line`` / ``texture_line`` the
-    source lines of ``<material>`` and ``<texture>``."""
+    """``<material>``: ``rgba`` (4,) in [0, 1], ``texture`` the first
+    ``<texture filename>`` (as PyBullet reads it), and their source lines."""
 
     name: str | None = None
     rgba: np.ndarray | None = None
@@ -249,10 +187,8 @@ class UrdfMaterial(_ArrayEq):
 
 @dataclass(eq=False)
 class UrdfInertial(_ArrayEq):
-    """``<inertial>``: ``mass`` kg, ``origin`` (4, 4) center-of-mass frame in
-    the link frame, ``inertia`` (3, 3) kg*m^2 about the center of mass in that
-    frame's axes. ``mass`` / ``inertia`` are None only when the file lacks
-    them (possible outside mode ``"strict"``)."""
+    """``<inertial>``: ``mass`` kg, ``origin`` (4, 4) COM frame in the link
+    frame, ``inertia`` (3, 3) kg*m^2 about the COM in that frame's axes."""
 
     mass: float | None
     origin: np.ndarray = field(default_factory=_eye)
@@ -271,17 +207,10 @@ class UrdfInertial(_ArrayEq):
 
 @dataclass(eq=False)
 class UrdfGeometry(_ArrayEq):
-    """A ``<visual>`` or ``<collision>`` element.
-
-    ``kind`` mesh / box / cylinder / sphere (lenient reading keeps other tags;
-    None when collect-mode reading found no usable ``<geometry>``);
-    ``origin`` (4, 4) in the link frame; ``name`` the element's name
-    attribute. Mesh: ``filename`` as written, ``path`` resolved against the
-    URDF's folder (``package://`` and ``file://`` prefixes stripped; not
-    written), ``mesh_scale`` as written (1 or 3 values, None when absent;
-    :attr:`scale` is always (3,)). ``size`` (3,) m of a box, ``radius`` /
-    ``length`` m of a cylinder or sphere. ``material`` of a visual.
-    """
+    """A ``<visual>`` or ``<collision>``: ``kind`` mesh / box / cylinder /
+    sphere (None when unreadable), ``origin`` (4, 4) in the link frame. Mesh:
+    ``filename`` as written, ``path`` resolved (not written), ``mesh_scale``
+    as written (1 or 3 values). ``size`` (3,) m, ``radius`` / ``length`` m."""
 
     kind: str | None
     origin: np.ndarray = field(default_factory=_eye)
@@ -307,9 +236,8 @@ class UrdfGeometry(_ArrayEq):
 
 @dataclass(eq=False)
 class UrdfLink(_ArrayEq):
-    """A link: ``inertial`` (None when the file has none), ``visuals`` and
-    ``collisions`` in file order, and the PyBullet ``<contact>`` extension as
-    ``contact`` (child tag -> ``value``, e.g. ``lateral_friction``)."""
+    """A link: ``inertial``, ``visuals`` and ``collisions`` in file order, and
+    PyBullet's ``<contact>`` extension (child tag -> ``value``)."""
 
     name: str
     inertial: UrdfInertial | None = None
@@ -364,17 +292,9 @@ class UrdfMimic(_ArrayEq):
 
 @dataclass(eq=False)
 class UrdfJoint(_ArrayEq):
-    """A joint. ``type`` as written; ``origin`` (4, 4) child frame in the
-    parent frame; ``axis_xyz`` (3,) as written (None when absent); ``limit``,
-    ``dynamics``, ``mimic``, ``calibration`` and ``safety_controller``
-    (attribute -> value) as written.
-
-    The simulators' reading is given by properties: :attr:`axis` (unit,
-    default +x), :attr:`lower` / :attr:`upper` (rad or m; +-inf for
-    continuous and other joints without range; a missing attribute of a
-    revolute/prismatic ``<limit>`` is 0 as in the URDF specification),
-    :attr:`damping` / :attr:`friction` (0 when absent), :attr:`has_dynamics`.
-    """
+    """A joint as written: ``origin`` (4, 4) child frame in the parent frame,
+    ``axis_xyz`` (3,) or None. The properties give the simulators' reading
+    (unit axis, limits with the URDF defaults, damping and friction 0 when absent)."""
 
     name: str
     type: str
@@ -430,11 +350,9 @@ class UrdfJoint(_ArrayEq):
 
 @dataclass(eq=False)
 class UrdfModel(_ArrayEq):
-    """A URDF robot. ``links`` by name in file order, ``joints`` in file
-    order, top-level ``materials``, ``extensions`` (other top-level elements
-    such as ``<mujoco>`` or ``<gazebo>``, kept verbatim), ``root`` the link
-    without a parent joint (None when there is not exactly one), ``path`` the
-    file it was read from."""
+    """A URDF robot: ``links`` by name and ``joints`` in file order, top-level
+    ``materials``, ``extensions`` (other top-level elements, kept verbatim),
+    ``root`` the one link without a parent joint (else None), ``path``."""
 
     name: str
     links: dict[str, UrdfLink] = field(default_factory=dict)
@@ -442,9 +360,7 @@ class UrdfModel(_ArrayEq):
     materials: list[UrdfMaterial] = field(default_factory=list)
     extensions: list[ET.Element] = field(default_factory=list, compare=False)
     link_elements: list[UrdfLink] = field(default_factory=list, compare=False, repr=False)
-    """Every ``<link>`` element in file order, unnamed (``name == ""``) and
-    repeated ones included (:attr:`links` keeps the first of each name);
-    empty for a model built in code. Input validation grades them all."""
+    """Every ``<link>`` element read, unnamed and repeated ones included."""
     root: str | None = None
     path: Path | None = field(default=None, compare=False)
 
@@ -454,11 +370,7 @@ class UrdfModel(_ArrayEq):
         return [j for j in self.joints if j.type in MOVABLE]
 
     def joint(self, name: str) -> UrdfJoint:
-        """The joint called ``name``.
-
-        Raises:
-            KeyError: no such joint.
-        """
+        """The joint called ``name`` (KeyError when none)."""
         for j in self.joints:
             if j.name == name:
                 return j
@@ -466,10 +378,7 @@ class UrdfModel(_ArrayEq):
 
     def parent_joint(self, link: str) -> UrdfJoint | None:
         """The joint whose child is ``link`` (None for the root)."""
-        for j in self.joints:
-            if j.child == link:
-                return j
-        return None
+        return next((j for j in self.joints if j.child == link), None)
 
     def children(self, link: str) -> list[UrdfJoint]:
         """Joints whose parent is ``link``, in file order."""
@@ -499,7 +408,7 @@ class UrdfModel(_ArrayEq):
 
     def link_poses(self, q: dict[str, float] | None = None, root_pose: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """World pose (4, 4) of every link for joint positions ``q`` (rad or m,
-        missing joints at 0) and the root link pose ``root_pose`` (identity)."""
+        default 0) and the root pose ``root_pose`` (default identity)."""
         q = q or {}
         poses = {self.root: np.eye(4) if root_pose is None else np.asarray(root_pose, float)}
         for name in self.tree_order():
@@ -515,14 +424,10 @@ class UrdfModel(_ArrayEq):
         return poses
 
 
-# ----------------------------------------------------------------------------- reading
-
-
 class _Reader:
     """One pass over a parsed ``<robot>`` element (see the module docstring for the modes)."""
 
-    #: Problems that refuse the file in mode "strict" (the others are remarks
-    #: that validation grades: an axis of length 2, lower == upper, ...).
+    #: Problems that refuse the file in mode "strict" (the others are remarks).
     STRICT_FATAL = frozenset({
         "URDF_ROOT_NOT_ROBOT", "LINK_NAME_MISSING", "LINK_NAME_DUPLICATE", "JOINT_NAME_MISSING", "JOINT_TYPE_MISSING",
         "JOINT_TYPE_INVALID", "JOINT_TYPE_UNSUPPORTED", "JOINT_PARENT_MISSING", "JOINT_CHILD_MISSING", "JOINT_PARENT_UNKNOWN",
@@ -542,7 +447,6 @@ class _Reader:
         self.joint_types = tuple(joint_types)
         self.on_problem = on_problem
 
-    # -- problems
     def problem(self, code: str, message: str, *, line: int | None = None, link: str | None = None,
                 joint: str | None = None, **values) -> None:
         if self.mode == "collect":
@@ -551,7 +455,6 @@ class _Reader:
         elif self.mode == "strict" and code in self.STRICT_FATAL:
             raise UrdfError(message, code=code, source=self.source, line=line, link=link, joint=joint)
 
-    # -- numbers
     def nums(self, el, attr: str, count, *, default=None, link=None, joint=None, required=False):
         """Parse ``el.get(attr)`` (``count`` values); ``default`` when absent
         (a problem when ``required``); None after a problem in mode collect."""
@@ -580,9 +483,8 @@ class _Reader:
         return None if v is None else float(v[0])
 
     def _parse_origin(self, parent, *, link=None, joint=None) -> tuple[np.ndarray, bool]:
-        """(4, 4) pose of ``parent``'s ``<origin>`` (identity when absent) and
-        whether it read cleanly. Negative zeros are cleared, as in the
-        matrices yourdfpy composed before."""
+        """(4, 4) pose of ``parent``'s ``<origin>`` (identity when absent, no
+        negative zeros) and whether it read cleanly."""
         o = parent.find("origin")
         if o is None:
             return np.eye(4), True
@@ -591,7 +493,6 @@ class _Reader:
         ok = xyz is not None and rpy is not None
         return pose_matrix(xyz or (0.0, 0.0, 0.0), rpy or (0.0, 0.0, 0.0)) + 0.0, ok
 
-    # -- elements
     def _parse_material(self, el, link: str | None) -> UrdfMaterial:
         mat = UrdfMaterial(name=el.get("name"), line=_line(el))
         c = el.find("color")
@@ -851,24 +752,16 @@ def _line(el) -> int | None:
 
 
 def resolve_mesh_path(filename: str, base: Path) -> Path:
-    """Absolute path of a mesh reference: ``package://`` and ``file://``
-    prefixes stripped, then relative to ``base`` (the URDF's folder).
-    Nothing is checked (input validation decides what is acceptable)."""
+    """Absolute path of a mesh reference relative to ``base`` (``package://``
+    and ``file://`` stripped; unchecked)."""
     rel = filename[len("package://"):] if filename.startswith("package://") else filename
     rel = rel[len("file://"):] if rel.startswith("file://") else rel
     return (Path(base) / rel).resolve()
 
 
-def parse_urdf_bytes(
-    data: bytes,
-    *,
-    source: str = "<bytes>",
-    base: Path | str | None = None,
-    mode: Mode = "strict",
-    joint_types: Iterable[str] = JOINT_TYPES,
-    on_problem: Callable[[Problem], None] | None = None,
-    limits: safexml.XMLLimits | None = None,
-) -> UrdfModel | None:
+def parse_urdf_bytes(data: bytes, *, source: str = "<bytes>", base: Path | str | None = None, mode: Mode = "strict",
+                     joint_types: Iterable[str] = JOINT_TYPES, on_problem: Callable[[Problem], None] | None = None,
+                     limits: safexml.XMLLimits | None = None) -> UrdfModel | None:
     """Read URDF bytes into a :class:`UrdfModel`.
 
     Args:
@@ -905,21 +798,12 @@ def parse_urdf_bytes(
         return None
 
 
-def read_urdf(
-    path: Path | str,
-    *,
-    mode: Mode = "strict",
-    joint_types: Iterable[str] = JOINT_TYPES,
-    on_problem: Callable[[Problem], None] | None = None,
-    limits: safexml.XMLLimits | None = None,
-) -> UrdfModel:
+def read_urdf(path: Path | str, *, mode: Mode = "strict", joint_types: Iterable[str] = JOINT_TYPES,
+              on_problem: Callable[[Problem], None] | None = None, limits: safexml.XMLLimits | None = None) -> UrdfModel:
     """Read a URDF file into a :class:`UrdfModel` (mesh paths resolved against
-    its folder). Arguments as for :func:`parse_urdf_bytes`.
-
-    A file this process read before with the same arguments (and no
-    ``on_problem``), unchanged since (same device, inode, size and mtime:
-    :mod:`asset2sim.file_memo`), is not parsed again: the caller gets its own
-    copy of the model read then (:data:`_READ_MEMO`).
+    its folder). Arguments as for :func:`parse_urdf_bytes`. An unchanged file
+    read before with the same arguments (no ``on_problem``) is not parsed
+    again: the caller gets its own copy (:data:`_READ_MEMO`).
 
     Raises:
         UrdfError: the file cannot be read (missing, not a regular file, too
@@ -950,28 +834,16 @@ def read_urdf(
     return model
 
 
-#: Models read by :func:`read_urdf` in this process, by (absolute path, mode,
-#: joint types, XML limits), while the file is unchanged
-#: (:class:`asset2sim.file_memo.FileMemo`; every caller gets its own copy). A
-#: refine run reads its written URDF 20-40 times between two writes (engines,
-#: checks, exports, evaluation): 10-20 ms each for a PartNet-Mobility object
-#: with a hundred part meshes.
+#: Models read by :func:`read_urdf`, by (absolute path, mode, joint types, XML limits).
 _READ_MEMO: file_memo.FileMemo[UrdfModel] = file_memo.FileMemo(lambda m: clone_model(m), max_entries=32)
 
-#: The model's own classes: copied field by field by :func:`clone_model`.
 _MODEL_CLASSES: tuple[type, ...] = (UrdfMaterial, UrdfInertial, UrdfGeometry, UrdfLink, UrdfLimit, UrdfDynamics, UrdfMimic,
                                     UrdfJoint, UrdfModel)
 
 
 def clone_model(model: UrdfModel) -> UrdfModel:
-    """An independent copy of ``model``: what :func:`copy.deepcopy` gives
-    (every array, list, dict and model object new; objects reached twice,
-    such as a link in both :attr:`UrdfModel.links` and
-    :attr:`UrdfModel.link_elements`, copied once and shared as before; the
-    ``<gazebo>``-style extension elements deep-copied), about 4 times faster
-    for a model of a hundred links: the memo of :func:`read_urdf` copies
-    every model it stores and gives out (a refine run: 0.3 s of deepcopy
-    for a 6-drawer cabinet)."""
+    """An independent copy of ``model``, as :func:`copy.deepcopy` makes it
+    (objects reached twice copied once) but faster."""
     memo: dict[int, object] = {}
 
     def clone(x):
@@ -1007,9 +879,6 @@ def clone_model(model: UrdfModel) -> UrdfModel:
     return clone(model)
 
 
-# ----------------------------------------------------------------------------- writing
-
-
 def _repr_number(x: float) -> str:
     return repr(float(x))
 
@@ -1025,18 +894,10 @@ def _partnet_number(x: float) -> str:
 
 @dataclass(frozen=True)
 class UrdfStyle:
-    """How :func:`write_urdf` lays a model out (never what it says).
-
-    ``number`` formats every float (default: Python's shortest round-trip
-    ``repr``); ``indent`` one nesting level; ``declaration`` the first line;
-    ``partnet_order``: PartNet-Mobility's order (each link followed by the
-    joint whose child it is; ``<origin>`` before ``<geometry>``; joint
-    children origin, axis, child, parent, limit;
-    ``rpy`` before ``xyz`` and left out when zero; limit attributes lower,
-    upper, effort, velocity) instead of yourdfpy's (geometry, origin;
-    parent, child, origin, axis, limit, dynamics; effort, velocity, lower,
-    upper).
-    """
+    """How :func:`write_urdf` lays a model out (never what it says):
+    ``number`` formats every float, ``indent`` one level, ``declaration`` the
+    first line; ``partnet_order`` PartNet-Mobility's element and attribute
+    order (each link followed by its parent joint) instead of yourdfpy's."""
 
     number: Callable[[float], str] = _repr_number
     indent: str = "  "
@@ -1226,17 +1087,10 @@ def _write_joint(out: _Out, depth: int, j: UrdfJoint) -> None:
 
 
 def write_urdf(model: UrdfModel, *, style: UrdfStyle = DEFAULT_STYLE, comment: str | None = None) -> bytes:
-    """The URDF document (UTF-8 bytes) of ``model``.
-
-    Layout: ``style.declaration``, then ``<robot name>`` holding ``comment``
-    (as an XML comment, ``--`` written ``- -``), the extensions, the links
-    (inertial, visuals, collisions, contact), the joints (with
-    ``style.partnet_order`` each after its child link) and the top-level
-    materials, one element per line indented by ``style.indent``. Origins are
-    written from their (4, 4) matrices: ``xyz`` the translation and ``rpy``
-    :func:`asset2sim.frames.matrix_rpy` of the rotation. Pure: nothing is
-    written to disk (use :mod:`asset2sim.atomic`).
-    """
+    """The URDF document (UTF-8 bytes) of ``model``: ``<robot>`` holding
+    ``comment`` (an XML comment), the extensions, links, joints and top-level
+    materials, one element per line. Origins are written as ``xyz`` and
+    :func:`asset2sim.frames.matrix_rpy` of their (4, 4) matrices."""
     out = _Out(style)
     out.lines.append(style.declaration)
     out.open(0, "robot", (("name", model.name),))
@@ -1261,9 +1115,6 @@ def write_urdf(model: UrdfModel, *, style: UrdfStyle = DEFAULT_STYLE, comment: s
     return ("\n".join(out.lines) + "\n").encode("utf-8")
 
 
-# ----------------------------------------------------------------------------- operations
-
-
 def _scale_translation(m: np.ndarray, s: float) -> np.ndarray:
     out = np.array(m, float)
     out[:3, 3] *= s
@@ -1277,13 +1128,10 @@ LIMITED_TYPES = ("revolute", "prismatic", "continuous")
 
 
 def conform_limits(model: UrdfModel, effort: float, velocity: float) -> list[str]:
-    """Make every ``<limit>`` of ``model`` (in place) one that every URDF
-    parser accepts: a joint whose type has no limits (fixed, floating,
-    planar) loses its ``<limit>`` (ROS's ``urdf_parser_py`` refuses one
-    without ``effort`` and ``velocity``, and no simulator reads it); a
-    revolute or prismatic joint gets a ``<limit>`` if it has none, and every
-    limited joint missing ``effort`` (N*m or N) / ``velocity`` (rad/s or m/s)
-    gets the values given. Returns notes naming each joint changed."""
+    """Make every ``<limit>`` of ``model`` (in place) one every URDF parser
+    accepts: joints of types without limits lose theirs, revolute and
+    prismatic joints get one, and missing ``effort`` (N*m or N) / ``velocity``
+    (rad/s or m/s) get the values given. Returns a note per dropped limit."""
     notes: list[str] = []
     for j in model.joints:
         if j.type not in LIMITED_TYPES:
@@ -1304,17 +1152,9 @@ def conform_limits(model: UrdfModel, effort: float, velocity: float) -> list[str
 
 def scale_model(model: UrdfModel, s: float, *, geometry: bool = True, joints: bool = True,
                 inertials: bool = True) -> UrdfModel:
-    """Bake a uniform scale ``s`` (> 0, dimensionless) into ``model`` in place.
-
-    ``geometry``: every visual and collision origin's translation, mesh
-    scales (written as three values), box sizes, cylinder and sphere radii
-    and lengths. ``joints``: joint origin translations and prismatic limits
-    (m). ``inertials``: the center of mass, and the inertia tensors times
-    ``s**2`` (the mass is kept: a scaled copy of a given inertial). Revolute
-    limits (rad), damping and friction are never changed.
-
-    Returns:
-        ``model`` (for chaining).
+    """Bake a uniform scale ``s`` (> 0) into ``model`` in place and return it:
+    ``geometry`` origins and sizes, ``joints`` origins and prismatic limits,
+    ``inertials`` COM and inertia (times ``s**2``; mass kept).
 
     Raises:
         ValueError: ``s`` is not a finite number > 0.

@@ -26,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--checkers", default="")
     args = ap.parse_args(argv)
 
-    from asset2sim.engines.base import quiet_stdout
+    from asset2sim.engines.quiet import quiet_stdout
     from asset2sim.tasks.check.third_party import CHECKERS, MJCF_PATH, run_checkers
     from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 

@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-export", action="store_true", help="do not (re)write mjcf/ and usd/")
     args = ap.parse_args(argv)
 
-    from asset2sim.engines.base import quiet_stdout
+    from asset2sim.engines.quiet import quiet_stdout
     from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 
     engines = args.engines.split(",")

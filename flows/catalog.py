@@ -1,30 +1,10 @@
-"""The pipeline's two catalogs: ``catalog.yaml`` (what to refine) and the
-Parquet result catalog (what came out).
-
-``catalog.yaml`` (:class:`CatalogConfig`) declares datasets (where the raw
-assets are, the manifest of requests, whether the project generates them), the
-estimator and its settings, run settings (workers, per-asset time limit,
-isolation), the schedule of the nightly run, the tracking store and where
-results go. Relative paths are relative to the folder of ``catalog.yaml`` (the
-*project root*).
-
-The result catalog (:class:`ResultCatalog`) is a tree of Parquet files
-partitioned Hive-style by dataset and run, on a local folder or any object
-store (``catalog_root: s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)::
-
-    <catalog_root>/dataset=<name>/run=<run_id>/<asset_id>.parquet   one row each, while the run is on
-    <catalog_root>/dataset=<name>/run=<run_id>/_compacted.parquet   the run's rows, once it ended
-    <catalog_root>/dataset=<name>/run=<run_id>/_run.json            run metadata
-
-Each row file is written atomically (a local temporary file renamed, or one
-object upload), so appending a row never leaves a half-written file and
-concurrent readers see either the old or the new state; the flow compacts a
-run's partition into one file when the run ends (``results.compact``), so
-queries over a year of nightly runs read a few hundred files. The row schema
-is :func:`~asset2sim.schemas.catalog.arrow_schema`, versioned (``SCHEMA_VERSION`` in
-:mod:`asset2sim.schemas.catalog`): old runs stay readable when columns are
-added. Units are in the column names (``_mm``, ``_m``, ``_rad``, ``_kg``,
-``_seconds``).
+"""The pipeline's two catalogs: ``catalog.yaml`` (what to refine,
+:class:`CatalogConfig`; relative paths are relative to its folder, the
+*project root*) and the Parquet result catalog (what came out,
+:class:`ResultCatalog`), on a local folder or an object store
+(:mod:`asset2sim.flows.catalog_fs`). Row schema:
+:func:`~asset2sim.schemas.catalog.arrow_schema`, versioned; units are in the
+column names. docs/design/pipeline.md explains the layout and compaction.
 """
 
 from __future__ import annotations
@@ -52,17 +32,11 @@ class CatalogError(ValueError):
 
 
 class DatasetConfig(BaseModel):
-    """One dataset of ``catalog.yaml``.
-
-    ``root``: folder holding one sub-folder per asset (relative to the project
-    root). ``manifest``: CSV with columns ``id`` and ``prompt`` (required),
-    ``category``, ``reference_scale``, ``time_limit_seconds`` (optional, the
-    last overrides the run's per-asset limit); default ``<root>/manifest.csv``.
-    ``generate``: ``demo`` builds the project's own demo assets into ``root``
-    on first use (:mod:`asset2sim.demo_assets`). ``reference``: measure the
-    reference metrics (scale deviation) against ``reference_gensim2.json`` in
-    the asset folders when present.
-    """
+    """One dataset of ``catalog.yaml``: ``root`` (one sub-folder per asset),
+    ``manifest`` (CSV with ``id``, ``prompt`` and optional ``category``,
+    ``reference_scale``, ``time_limit_seconds``; default ``<root>/manifest.csv``),
+    ``generate: demo`` (build the demo assets into ``root`` on first use),
+    ``reference`` (measure scale deviation against the assets' references)."""
 
     model_config = ConfigDict(extra="forbid")
     root: str
@@ -84,36 +58,16 @@ class EstimatorSettings(BaseModel):
 
 
 class RunSettings(BaseModel):
-    """How a flow run executes.
-
-    ``workers``: Dask workers of the local cluster (count; None = CPU count).
-    ``time_limit_seconds``: wall-time limit per asset (s), over all its stages.
-    ``isolation``: ``process`` runs each asset's stages in a child process that
-    is killed at the time limit (a crash or hang costs only that asset),
-    forked from a stage server each Dask worker starts once with the
-    pipeline imported (:mod:`asset2sim.flows.forkserver`); ``spawn`` the same
-    in a fresh Python per stage call (imports paid per asset);
-    ``memory_limit_mb``: address-space limit of that child process (MiB,
-    ``RLIMIT_AS``; None = no limit): an asset that needs more fails alone with
-    a memory error instead of taking the machine's memory from the others
-    (default 8192: a 1,000,000-triangle asset, the validator's cap, peaks near
-    3.3 GiB, ``benchmarks/bench_mesh_cap.py``);
-    ``none`` runs them in the Dask worker (Prefect's timeout, which cannot
-    interrupt a long native call). ``evaluate``: run the metrics stage
-    (``tasks.evaluate``: penetration, rest stability, oscillation, prompt
-    alignment, scale deviation) on each output. ``probes``: include the
-    scripted probes in it. ``extras``: write the MJCF export, renders and
-    HTML report of each asset (SPEC output). ``refine_function``: ``module:function`` with the
-    signature of :func:`asset2sim.tasks.refine.refine_asset`.
-    ``dask_host``: interface address the local Dask cluster listens on
-    (scheduler, nannies, workers, dashboard; default ``127.0.0.1``, loopback
-    only: ``0.0.0.0`` or a host's address opens them, unauthenticated, to
-    its network). ``dashboard``: serve the scheduler's dashboard (its
-    status, info and JSON pages, on a free port of ``dask_host``); ``false``
-    turns every HTTP page of the local cluster off. Both ignored with
-    ``--dask-address`` / ``DASK_ADDRESS``: an existing cluster listens where
-    it was started.
-    """
+    """How a flow run executes: ``workers`` (local Dask workers; None = CPU
+    count); ``time_limit_seconds`` per asset (s, all stages); ``isolation``:
+    ``process`` (each stage in a child forked from a per-worker stage server,
+    :mod:`asset2sim.flows.forkserver`, killed at the limit), ``spawn`` (a fresh
+    Python per stage) or ``none`` (in the worker); ``memory_limit_mb`` of that
+    child (MiB, ``RLIMIT_AS``; None = none); ``evaluate`` (the metrics stage),
+    ``probes``, ``extras`` (MJCF, renders, HTML report); ``refine_function``
+    (``module:function`` like :func:`asset2sim.tasks.refine.refine_asset`);
+    ``dask_host`` (where the local cluster listens; default loopback only) and
+    ``dashboard`` (false: no HTTP pages), both ignored with a Dask address."""
 
     model_config = ConfigDict(extra="forbid")
     workers: int | None = Field(default=2, ge=1)
@@ -140,8 +94,7 @@ class ScheduleSettings(BaseModel):
 
 class TrackingSettings(BaseModel):
     """MLflow: ``uri`` (None = ``MLFLOW_TRACKING_URI`` or ``sqlite:///<project>/mlflow.db``),
-    ``experiment`` name, ``artifact_root`` for new experiments (relative to
-    the project root), ``enabled``."""
+    ``experiment``, ``artifact_root`` of new experiments, ``enabled``."""
 
     model_config = ConfigDict(extra="forbid")
     enabled: bool = True
@@ -151,18 +104,11 @@ class TrackingSettings(BaseModel):
 
 
 class RegressionSettings(BaseModel):
-    """When a run counts as a regression against the previous run of the
-    same dataset (:mod:`asset2sim.flows.catalog_compare`).
-
-    ``max_regressed_assets``: assets that passed all checks in the previous
-    run and no longer do (count); ``max_pass_rate_drop``: drop of the
-    all-checks pass rate over the assets both runs hold (fraction, 0-1);
-    ``max_metric_drift``: per compared metric column
-    (:data:`asset2sim.flows.catalog_compare.COMPARED_METRICS`), the largest allowed
-    worsening of its mean over the common assets (in the column's unit, e.g.
-    ``penetration_mm: 1.0``; rates as fractions); ``fail_flow``: ``asset2sim flow`` / ``make
-    flow`` exit with status 5 when a limit is exceeded (the run's rows are
-    written either way)."""
+    """When a run counts as a regression against the previous run
+    (:mod:`asset2sim.flows.catalog_compare`): ``max_regressed_assets`` (count),
+    ``max_pass_rate_drop`` over the common assets (fraction), ``max_metric_drift``
+    per compared metric column (its unit; rates as fractions); ``fail_flow``:
+    the flow then fails (exit status 5)."""
 
     model_config = ConfigDict(extra="forbid")
     max_regressed_assets: int = Field(default=0, ge=0)
@@ -172,14 +118,9 @@ class RegressionSettings(BaseModel):
 
 
 class ResultsSettings(BaseModel):
-    """The result catalog's policies.
-
-    ``code_change``: ``rerun`` (default) redoes finished assets when the code
-    changed (the hash of the package source is part of the skip key,
-    :func:`asset2sim.tasks.publish.contract.code_hash`); ``keep`` reuses
-    results of earlier code as long as input and configuration match.
-    ``compact``: fold each run's row files into one Parquet file when the run
-    ends. ``regression``: :class:`RegressionSettings`."""
+    """The result catalog's policies: ``code_change`` (``rerun``: a change of
+    the package source redoes finished assets; ``keep``: reuse them),
+    ``compact`` (one Parquet file per run once it ended), ``regression``."""
 
     model_config = ConfigDict(extra="forbid")
     code_change: Literal["rerun", "keep"] = "rerun"
@@ -196,15 +137,10 @@ class CatalogConfig(BaseModel):
     default_dataset: str
     output_root: str = "data/refined"
     catalog_root: str = "data/catalog"
-    output_store: str | None = None
-    """Where refined outputs are published (``s3://bucket/prefix``, any
-    pyarrow / fsspec URI, or a path): each worker refines into a local
-    temporary folder and uploads it (``asset2sim.flows.store``); None: the
-    outputs stay under ``output_root``, which the workers must share."""
+    output_store: str | None = None  # a URI or path the workers upload to (asset2sim.flows.store); None: output_root
     datasets: dict[str, DatasetConfig]
     estimator: EstimatorSettings = Field(default_factory=EstimatorSettings)
-    refine: dict[str, Any] = Field(default_factory=dict)
-    """Overrides of :class:`asset2sim.schemas.config.RefineConfig` fields."""
+    refine: dict[str, Any] = Field(default_factory=dict)  # RefineConfig fields
     run: RunSettings = Field(default_factory=RunSettings)
     schedule: ScheduleSettings = Field(default_factory=ScheduleSettings)
     tracking: TrackingSettings = Field(default_factory=TrackingSettings)
@@ -226,6 +162,10 @@ class Catalog:
         """A path of the catalog, absolute (relative ones are relative to the project root)."""
         p = Path(rel).expanduser()
         return p if p.is_absolute() else (self.project_root / p).resolve()
+
+    def _location(self, root: str) -> Path | str:
+        """``root`` as written when it is a URI other than ``file://``, else resolved as a path."""
+        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else self.resolve(root.removeprefix("file://"))
 
     def dataset(self, name: str | None = None) -> tuple[str, DatasetConfig]:
         """``(name, config)`` of dataset ``name`` (default: ``default_dataset``).
@@ -251,19 +191,13 @@ class Catalog:
 
     @property
     def catalog_root(self) -> Path | str:
-        """The result catalog's root: an absolute local path, or the URI as
-        written (``s3://bucket/prefix``)."""
-        root = self.config.catalog_root
-        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else self.resolve(root.removeprefix("file://"))
+        """The result catalog's root: an absolute local path, or the URI as written."""
+        return self._location(self.config.catalog_root)
 
     @property
     def output_store(self) -> str | None:
-        """The output store: the URI as written, an absolute path for a
-        path (relative to the project root), or None (outputs under ``output_root``)."""
-        root = self.config.output_store
-        if not root:
-            return None
-        return root if catalog_fs.is_uri(root) and not root.startswith("file://") else str(self.resolve(root.removeprefix("file://")))
+        """The output store: the URI as written, an absolute path, or None (outputs under ``output_root``)."""
+        return str(self._location(self.config.output_store)) if self.config.output_store else None
 
     def refine_config(self):
         """The :class:`~asset2sim.schemas.config.RefineConfig` of this catalog
@@ -308,9 +242,8 @@ def load_catalog(path: Path | str) -> Catalog:
 
 @dataclass(frozen=True)
 class ManifestEntry:
-    """One request of a manifest: asset id, prompt, the asset folder, optional
-    category, reference scale (dimensionless) and time limit (s), and the
-    1-based line of the manifest where its row starts."""
+    """One request of a manifest: asset id, prompt, asset folder, optional
+    category, reference scale and time limit (s), and its 1-based line."""
 
     asset_id: str
     prompt: str
@@ -321,28 +254,12 @@ class ManifestEntry:
     line: int | None = None
 
 
-def _entry(r: partnet_mobility.ManifestRow) -> ManifestEntry:
-    return ManifestEntry(
-        asset_id=r.id,
-        prompt=r.prompt,
-        asset_dir=r.folder,
-        category=r.category or None,
-        reference_scale=r.reference_scale,
-        time_limit_seconds=r.time_limit_seconds,
-        line=r.line,
-    )
-
-
 def read_manifest_entries(
     manifest: Path | str, root: Path | str
 ) -> tuple[list[ManifestEntry], list[partnet_mobility.ManifestRowError]]:
-    """Usable entries of a manifest CSV and the typed errors of its bad rows
-    (:class:`~asset2sim.tasks.ingest.partnet_mobility.ManifestRowError`: line,
-    id when known, code, message), each in file order; asset folders under
-    ``root``. Parsed by
-    :func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`: a bad
-    row (too long for the CSV reader, a missing/unsafe/duplicate id, no
-    prompt column, an invalid number) never hides the others.
+    """Usable entries of a manifest CSV (asset folders under ``root``) and the
+    typed errors of its bad rows (:class:`~asset2sim.tasks.ingest.partnet_mobility.ManifestRowError`),
+    each in file order (:func:`asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`).
 
     Raises:
         CatalogError: the manifest is missing or unreadable, not UTF-8 text,
@@ -355,20 +272,17 @@ def read_manifest_entries(
         raise CatalogError(f"{manifest}: cannot read the manifest: {exc}") from exc
     except partnet_mobility.ManifestError as exc:
         raise CatalogError(str(exc)) from exc
-    return [_entry(r) for r in reading.rows], list(reading.errors)
+    entries = [ManifestEntry(r.id, r.prompt, r.folder, r.category or None, r.reference_scale, r.time_limit_seconds, r.line)
+               for r in reading.rows]
+    return entries, list(reading.errors)
 
 
 def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]:
-    """Entries of a manifest CSV (columns ``id``, ``prompt``; optional
-    ``category``, ``reference_scale``, ``time_limit_seconds``), asset folders
-    under ``root``, all or nothing (:func:`read_manifest_entries` keeps the
-    good rows of a manifest with bad ones).
+    """:func:`read_manifest_entries`, all or nothing.
 
     Raises:
-        CatalogError: missing file or columns, an empty/duplicate/unsafe id
-            (ids name folders and files: letters, digits, ``_.-``), or a
-            ``reference_scale`` / ``time_limit_seconds`` that is not a positive
-            number (the first bad row, naming the file and line).
+        CatalogError: as :func:`read_manifest_entries`, or the first bad row
+            (naming the file and line).
     """
     entries, errors = read_manifest_entries(manifest, root)
     if errors:
@@ -415,28 +329,24 @@ class _RunFiles:
     compacted: Any = None  # FileInfo of the compacted file
     loose: dict[str, Any] | None = None  # asset id -> FileInfo of its row file
 
+    def add(self, name: str, info) -> None:
+        """Record file ``info`` named ``name`` when it is the compacted file or a row file."""
+        if name == COMPACTED_NAME:
+            self.compacted = info
+        elif name.endswith(".parquet") and _PART_RE.match(name) and not catalog_fs_temp(name):
+            self.loose[name[: -len(".parquet")]] = info
+
 
 class ResultCatalog:
     """The Parquet result catalog under ``root`` (a local folder or a URI such
-    as ``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`).
-
-    Layout, partitioned Hive-style by dataset and run::
+    as ``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)::
 
         <root>/dataset=<name>/run=<run_id>/<asset_id>.parquet   one row, while the run is on
         <root>/dataset=<name>/run=<run_id>/_compacted.parquet   all rows, once the run ended
         <root>/dataset=<name>/run=<run_id>/_run.json            run metadata
 
-    Rows land atomically, one file per asset (:meth:`append_row`); when a run
-    ends, :meth:`compact` folds its row files into one file sorted by asset id,
-    so a dataset holds one file per run however many assets it has (2,346
-    PartNet-Mobility objects a night add one file, not 2,346). A row file
-    next to the compacted file (a row written after compaction, e.g. the row
-    a later run restores for a killed run) replaces the compacted row of the
-    same asset; a compaction interrupted between writing the compacted file
-    and removing the row files leaves the same rows twice, which readers
-    count once. The row schema is versioned
-    (:data:`~asset2sim.schemas.catalog.SCHEMA_VERSION`, in each file's
-    metadata); files of older versions read with the newer columns null.
+    A row file beside the compacted file replaces the compacted row of its
+    asset; files of older schema versions read with the newer columns null.
     """
 
     def __init__(self, root: Path | str):
@@ -458,9 +368,7 @@ class ResultCatalog:
     def append_row(self, dataset: str, run: str, row: CatalogRow | dict[str, Any]) -> Path | str:
         """Write one row (a :class:`~asset2sim.schemas.catalog.CatalogRow`, or a
         dict with its keys; missing keys are null) atomically as
-        ``<asset_id>.parquet`` of the run's partition.
-
-        Writing the same asset again in the same run replaces its row.
+        ``<asset_id>.parquet`` of the run's partition (replacing an earlier one).
 
         Raises:
             ValueError: unknown columns, a bad status, an invalid id/name, or a
@@ -498,10 +406,9 @@ class ResultCatalog:
             return None
 
     def import_rows(self, dataset: str, run: str, table) -> Path | str:
-        """Write a whole run's rows at once as its compacted file (a
-        :class:`pyarrow.Table` with catalog columns; missing columns null,
-        cast to the current schema), replacing the partition's rows: for
-        importing results made elsewhere and for benchmarks.
+        """Write a whole run's rows (a :class:`pyarrow.Table` with catalog
+        columns; missing ones null) as its compacted file, replacing the
+        partition's rows.
 
         Raises:
             ValueError: a column the schema does not have, or a value that
@@ -535,7 +442,7 @@ class ResultCatalog:
         if files.compacted is not None:
             import pyarrow.compute as pc
 
-            table = self._read_file(files.compacted.path)
+            table = self._read_files([files.compacted.path])
             keep = pc.invert(pc.equal(table["asset_id"], asset_id))
             if table.num_rows and not pc.all(keep).as_py():
                 catalog_fs.write_bytes(self.location, files.compacted.path, _parquet_bytes(table.filter(keep)))
@@ -543,14 +450,12 @@ class ResultCatalog:
         return removed
 
     def compact(self, dataset: str, run: str) -> Compaction:
-        """Fold the run's row files into its compacted file (rows sorted by
-        asset id; a row file wins over a compacted row of the same asset),
-        written atomically, then remove the row files folded in (each only if
-        it is unchanged since it was read: same size and modification time).
+        """Fold the run's row files into its compacted file (sorted by asset
+        id; a row file wins), then remove the row files folded in that are
+        unchanged since they were read (size and modification time).
 
         Raises:
-            OSError: the filesystem refused a write (the row files then stay:
-                nothing is lost).
+            OSError: the filesystem refused a write (the row files then stay).
         """
         import pyarrow as pa
         import pyarrow.compute as pc
@@ -559,12 +464,12 @@ class ResultCatalog:
         files = self._run_files(dataset, run)
         loose = dict(files.loose or {})
         if not loose:
-            rows = 0 if files.compacted is None else self._read_file(files.compacted.path, ["asset_id"]).num_rows
+            rows = 0 if files.compacted is None else self._read_files([files.compacted.path], ["asset_id"]).num_rows
             size = 0 if files.compacted is None else int(files.compacted.size or 0)
             return Compaction(dataset, run, rows, 0, size, time.perf_counter() - t0)
         new = self._read_files([info.path for info in loose.values()])
         if files.compacted is not None:
-            old = self._read_file(files.compacted.path)
+            old = self._read_files([files.compacted.path])
             old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
             new = pa.concat_tables([old, new])
         new = new.sort_by("asset_id")
@@ -582,13 +487,11 @@ class ResultCatalog:
     # ----------------------------------------------------------------- reading
 
     def runs(self, dataset: str | None = None) -> list[tuple[str, str]]:
-        """``(dataset, run)`` partitions present, sorted by dataset then run id
-        (run ids start with a UTC time stamp, so this is chronological)."""
+        """``(dataset, run)`` partitions present, sorted (chronologically within a dataset)."""
         return sorted(self._partitions(dataset))
 
     def _partitions(self, dataset: str | None = None) -> dict[tuple[str, str], _RunFiles]:
-        """Every run partition (of ``dataset``) and its row files, from one
-        recursive listing (one paginated LIST on an object store)."""
+        """Every run partition (of ``dataset``) and its row files, from one recursive listing."""
         import pyarrow.fs as pafs
 
         if dataset is not None:
@@ -610,14 +513,8 @@ class ResultCatalog:
                 if info.type == pafs.FileType.Directory:
                     out.setdefault(key, _RunFiles(loose={}))
                 continue
-            if len(bits) != 3 or info.type != pafs.FileType.File:
-                continue
-            rf = out.setdefault(key, _RunFiles(loose={}))
-            name = bits[2]
-            if name == COMPACTED_NAME:
-                rf.compacted = info
-            elif name.endswith(".parquet") and _PART_RE.match(name) and not catalog_fs_temp(name):
-                rf.loose[name[: -len(".parquet")]] = info
+            if len(bits) == 3 and info.type == pafs.FileType.File:
+                out.setdefault(key, _RunFiles(loose={})).add(bits[2], info)
         return out
 
     def _run_files(self, dataset: str, run: str) -> _RunFiles:
@@ -625,22 +522,12 @@ class ResultCatalog:
 
         rf = _RunFiles(loose={})
         for info in catalog_fs.list_files(self.location, self._run_path(dataset, run)):
-            if info.type != pafs.FileType.File:
-                continue
-            if info.base_name == COMPACTED_NAME:
-                rf.compacted = info
-            elif info.base_name.endswith(".parquet") and _PART_RE.match(info.base_name) and not catalog_fs_temp(info.base_name):
-                rf.loose[info.base_name[: -len(".parquet")]] = info
+            if info.type == pafs.FileType.File:
+                rf.add(info.base_name, info)
         return rf
 
-    def _read_file(self, path: str, columns: list[str] | None = None):
-        """One Parquet file of the catalog as a table of the current schema
-        (columns the file lacks are null)."""
-        return self._read_files([path], columns)
-
     def _read_files(self, paths: list[str], columns: list[str] | None = None):
-        """Parquet files of the catalog as one table of the current schema
-        (columns a file lacks are null), in one scan."""
+        """Parquet files of the catalog as one table of the current schema (missing columns null)."""
         import pyarrow.dataset as pads
 
         dset = pads.dataset(paths, schema=_schema(), format="parquet", filesystem=self.location.fs)
@@ -651,7 +538,7 @@ class ResultCatalog:
         files = self._run_files(dataset, run)
         ids = set(files.loose or {})
         if files.compacted is not None:
-            ids |= set(self._read_file(files.compacted.path, ["asset_id"])["asset_id"].to_pylist())
+            ids |= set(self._read_files([files.compacted.path], ["asset_id"])["asset_id"].to_pylist())
         return ids
 
     def has_row(self, dataset: str, run: str, asset_id: str) -> bool:
@@ -667,13 +554,10 @@ class ResultCatalog:
         limit: int | None = None,
     ):
         """Rows as a :class:`pyarrow.Table` with the partition columns
-        ``dataset`` and ``run`` (dictionary-encoded), in (dataset, run, asset
-        id) order unless a run mixes a compacted file with row files: of one
-        dataset, one run or a list of runs, only ``columns`` (plus the
-        partition columns), only the rows matching ``filter`` (a
-        :mod:`pyarrow.dataset` expression, pushed down to the Parquet reader),
-        at most ``limit`` rows (reading stops there). Each run is read from
-        its compacted file and its row files, each asset once (the row file wins).
+        ``dataset`` and ``run`` (dictionary-encoded): of one dataset, one run
+        or a list of runs, only ``columns`` (plus the partition columns), only
+        the rows matching ``filter`` (a :mod:`pyarrow.dataset` expression), at
+        most ``limit`` rows; each asset of a run once (the row file wins).
 
         Raises:
             KeyError: a column the catalog does not have.
@@ -704,10 +588,7 @@ class ResultCatalog:
                 plain += [rf.compacted.path] if rf.compacted is not None else [i.path for _, i in sorted(loose.items())]
         out_schema = full if cols is None else pa.schema([full.field(c) for c in cols])
 
-        names: dict[str, set[str]] = {"dataset": set(), "run": set()}
-        for ds_name, run_id in scanned:
-            names["dataset"].add(ds_name)
-            names["run"].add(run_id)
+        names = {"dataset": {d for d, _ in scanned}, "run": {r for _, r in scanned}}
         partitioning = pads.partitioning(part_schema, flavor="hive",
                                          dictionaries={k: pa.array(sorted(v), pa.string()) for k, v in names.items()})
 
@@ -745,28 +626,20 @@ class ResultCatalog:
         dataset, run and asset id; empty (with every asked column) when there
         are none. ``dataset`` and ``run`` are plain strings."""
         import pandas as pd
-        import pyarrow as pa
 
         table = self.read_table(dataset, run, columns, filter)
         if table.num_rows == 0:
             return pd.DataFrame({n: pd.Series(dtype="object") for n in table.schema.names})
-        # files are scanned in (dataset, run) order and each holds its rows by
-        # asset id (compacted, or one row per file in name order): already
-        # sorted unless a run mixed a compacted file with row files
-        for i, name in enumerate(table.schema.names):
-            if name in ("dataset", "run") and pa.types.is_dictionary(table.schema.field(i).type):
-                table = table.set_column(i, name, table.column(i).cast(pa.string()))
-        if (table.schema.metadata or {}).get(b"asset2sim.sorted") != b"1":
+        table = plain_strings(table)
+        if (table.schema.metadata or {}).get(b"asset2sim.sorted") != b"1":  # files scanned in order: sorted already
             keys = [k for k in ("dataset", "run", "asset_id") if k in table.schema.names]
             table = table.sort_by([(k, "ascending") for k in keys])
         return table.to_pandas()
 
     def finished(self, dataset: str, code_hash: str | None = None) -> dict[str, dict[str, Any]]:
         """Latest finished result per ``asset_id|input_hash|config_hash`` key of
-        ``dataset``: the row (dict) of the most recent run in which the asset
-        was done (or skipped, pointing at an earlier output). ``code_hash``:
-        only rows made by this code (:func:`asset2sim.tasks.publish.contract.code_hash`;
-        the ``code_change: rerun`` policy); None: any code."""
+        ``dataset``: the row (dict) of the latest run in which the asset was
+        done or skipped; ``code_hash``: only rows made by this code (None: any)."""
         import pyarrow as pa
         import pyarrow.dataset as pads
 
@@ -799,6 +672,16 @@ def _PARTITION_SCHEMA():
     return pa.schema([("dataset", pa.dictionary(pa.int32(), pa.string())), ("run", pa.dictionary(pa.int32(), pa.string()))])
 
 
+def plain_strings(table, names=("dataset", "run")):
+    """``table`` with its dictionary-encoded partition columns as plain strings."""
+    import pyarrow as pa
+
+    for i, name in enumerate(table.schema.names):
+        if name in names and pa.types.is_dictionary(table.schema.field(i).type):
+            table = table.set_column(i, name, table.column(i).cast(pa.string()))
+    return table
+
+
 def catalog_fs_temp(name: str) -> bool:
     """True for a temporary file of an atomic write (never a row)."""
     return name.startswith(".") or name.endswith(".tmp")
@@ -819,8 +702,6 @@ def _plain(v: Any) -> Any:
     scalars -> Python, timestamps -> ISO text)."""
     import pandas as pd
 
-    if v is None:
-        return None
     if isinstance(v, pd.Timestamp):
         return None if pd.isna(v) else v.isoformat()
     try:
@@ -828,9 +709,7 @@ def _plain(v: Any) -> Any:
             return None
     except (TypeError, ValueError):
         pass
-    if hasattr(v, "item"):
-        return v.item()
-    return v
+    return v.item() if hasattr(v, "item") else v
 
 
 def result_key(asset_id: str, input_hash: str | None, config_hash: str | None) -> str:

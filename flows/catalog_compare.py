@@ -1,30 +1,14 @@
-"""A run compared with the previous run of the same dataset: assets whose
-verdict flipped, pass-rate drift and per-metric drift, judged against the
-limits of ``catalog.yaml`` (``results.regression``,
-:class:`asset2sim.flows.catalog.RegressionSettings`).
+"""A run compared with the previous run of its dataset (the latest earlier
+run id holding rows), judged against ``catalog.yaml`` ``results.regression``
+(:class:`asset2sim.flows.catalog.RegressionSettings`).
 
-Definitions:
-
-- the *previous run* is the latest run of the dataset whose id sorts before
-  this run's (run ids start with the UTC start time) and that holds rows;
-- an asset *passes* when its failure mode is ``none`` (all checks passed);
-  it *regressed* when it passed in the previous run and does not now, it
-  *improved* in the other direction, and *changed* when it failed both times
-  with different failure modes;
-- the pass-rate drift and the metric drifts are over the assets both runs
-  hold (so a run over a subset, ``--ids``, is compared like for like); the
-  pass rates of each whole run are reported beside them;
-- a metric's drift is ``mean(this run) - mean(previous run)`` over the common
-  assets where both have a value; its *worsening* is that drift for metrics
-  where lower is better (penetration, drift of position and orientation,
-  scale deviation, wall time) and minus it where higher is better (prompt
-  alignment, the rest-stability and oscillation pass rates).
-
-A run is a *regression* when more assets regressed than
-``max_regressed_assets``, the common-asset pass rate dropped by more than
-``max_pass_rate_drop``, or a metric worsened by more than its
-``max_metric_drift`` limit. Nothing here prints; :func:`comparison_lines`
-gives the text the command prints.
+An asset *passes* when its failure mode is ``none``; it *regressed* when it
+passed before and does not now, *improved* the other way, *changed* when it
+failed both times differently. Pass-rate and metric drifts are over the
+assets both runs hold; a metric's drift is ``mean(this) - mean(previous)``
+over the common assets with both values, its *worsening* that drift where
+lower is better and minus it where higher is better. A run is a regression
+when any limit is exceeded. :func:`comparison_lines` gives the text.
 """
 
 from __future__ import annotations

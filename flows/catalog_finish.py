@@ -1,12 +1,6 @@
 """The end of a flow run in the result catalog: compact the run's partition,
-compare the run with the previous run of its dataset, and write the
-comparison's artifacts (``comparison.json``, ``verdict_flips.csv``,
-``pass_rate_over_runs.png``) beside the run's outputs.
-
-Called once by the flow after the last asset's row is written
-(:func:`asset2sim.flows.refine_flow.refine_dataset`); each step that fails
-is recorded in :attr:`RunFinish.errors` and never loses a row (a failed
-compaction leaves the row files, which readers read as before).
+compare the run with the previous one and write the comparison's artifacts;
+a step that fails is recorded in :attr:`RunFinish.errors` and loses no row.
 """
 
 from __future__ import annotations

@@ -1,26 +1,8 @@
-"""Where the Parquet result catalog lives: a local folder or any object store
-or remote filesystem that pyarrow or fsspec can open.
-
-``catalog_root`` in ``catalog.yaml`` is either a path (relative to the
-project root) or a URI:
-
-- ``s3://bucket/prefix`` (Amazon S3 or any S3-compatible store: MinIO, Ceph,
-  moto), ``gs://bucket/prefix``, ``hdfs://...``: pyarrow's own C++
-  filesystems (:func:`pyarrow.fs.FileSystem.from_uri`). Credentials and the
-  endpoint come from the usual environment (``AWS_ACCESS_KEY_ID``,
-  ``AWS_SECRET_ACCESS_KEY``, ``AWS_DEFAULT_REGION``, ``AWS_ENDPOINT_URL`` for
-  an S3-compatible server) or from the URI's query
-  (``s3://bucket/prefix?endpoint_override=http://127.0.0.1:9000&region=us-east-1``,
-  the parameters pyarrow documents for ``S3FileSystem.from_uri``);
-- any other scheme fsspec knows (``memory://``, ``abfs://``, ...): the fsspec
-  filesystem wrapped for pyarrow (:class:`pyarrow.fs.FSSpecHandler`).
-
-Atomic writes: on a local folder a file is written to a temporary name,
-fsynced and renamed (:mod:`asset2sim.atomic`); on an object store a single
-``PUT`` of the whole object is atomic (a reader sees the old object, the new
-one or none, never a part), so the object is written in one upload.
-
-pyarrow is imported inside the functions (the package imports without it).
+"""Where the Parquet result catalog lives: a local folder, or a URI that
+pyarrow (``s3://``, ``gs://``, ``hdfs://``: :func:`pyarrow.fs.FileSystem.from_uri`,
+credentials from the usual ``AWS_*`` environment or the URI's query) or
+fsspec (``memory://``, ``abfs://``, ...) opens. A write is atomic: a renamed
+temporary file locally, one whole-object upload on an object store.
 """
 
 from __future__ import annotations
@@ -66,7 +48,7 @@ class Location:
 
 
 def open_location(root: str | Path) -> Location:
-    """Open the catalog root ``root`` (a local path or a URI, see the module docstring).
+    """Open the catalog root ``root`` (a local path or a URI).
 
     Raises:
         ValueError: a URI whose scheme neither pyarrow nor fsspec can open
@@ -98,8 +80,7 @@ def open_location(root: str | Path) -> Location:
 
 
 def write_bytes(loc: Location, path: str, data: bytes) -> None:
-    """Write ``data`` as the file ``path`` of ``loc`` atomically (see the
-    module docstring), creating parent folders where the filesystem has them."""
+    """Write ``data`` as the file ``path`` of ``loc`` atomically, creating parent folders where the filesystem has them."""
     if loc.local:
         atomic.write_bytes(Path(path), data)
         return

@@ -1,23 +1,12 @@
 """Skip decisions in the driver, before any worker starts.
 
-The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`,
-:func:`asset2sim.flows.stages.finished_in_store`) needs the asset's input
-hash, which the input stage (:func:`asset2sim.flows.stages.prepare_asset`)
-learns by reading the asset on a worker. Here the driver decides instead,
-from a per-dataset *input index* in the catalog
-(``<catalog_root>/dataset=<name>/_inputs.json``): per asset the *fingerprint*
-of its folder when it was last read (every regular file under it: resolved
-path, size and modification time in ns; one ``stat`` per file, no reading),
-what the input stage found then (input hash, category, link and movable joint
-counts) and the code hash of the process that recorded it. When those are
-unchanged, the driver computes the configuration hashes itself and applies
-the same skip rule to the earlier catalog row. A miss of any kind hands the
-asset to the workers: the index can only save work, never change a decision
-the input stage would make. The index is merged at the end of each run (two
-runs of one dataset at once may lose each other's entries: a miss next time).
-docs/design/pipeline.md, "Skips decided by the driver", has the measurements.
-
-Nothing here imports Prefect or Dask.
+A per-dataset *input index* in the catalog (``dataset=<name>/_inputs.json``)
+records per asset the fingerprint of its folder (:func:`input_fingerprint`),
+what the input stage found (input hash, category, link and joint counts) and
+the code hash that found it. Where those still match, the driver computes the
+configuration hashes itself and applies the skip rule to the earlier row;
+any miss hands the asset to the workers. docs/design/pipeline.md, "Skips
+decided by the driver", has the reasoning and measurements.
 """
 
 from __future__ import annotations
@@ -45,11 +34,9 @@ INDEX_VERSION = 1
 
 @dataclass
 class InputEntry:
-    """What the input stage found for one asset folder with ``fingerprint``
-    (:func:`input_fingerprint`): ``input_hash``, ``category`` (the
-    prepared record's: the manifest's ``job_category``, else the asset's),
-    ``links`` and ``movable_joints`` counts; ``code_hash`` of the code that
-    read it."""
+    """What the input stage found for the asset folder with ``fingerprint``
+    (``job_category``: the manifest's category then) and the ``code_hash`` of
+    the code that read it."""
 
     fingerprint: str
     input_hash: str
@@ -63,9 +50,8 @@ class InputEntry:
 def input_fingerprint(asset_dir: Path | str) -> str | None:
     """Fingerprint of an asset folder: SHA-256 (hex) over the sorted
     (resolved path, size in bytes, modification time in ns) of every regular
-    file under it, symlinks followed to their targets. None when the folder
-    cannot be listed. One ``stat`` per file; contents are not read (the
-    rule ``make`` and ``rsync`` use: an edit changes the modification time)."""
+    file under it (symlinks followed; contents not read). None when the
+    folder cannot be listed."""
     root = Path(asset_dir)
     items = []
     try:
@@ -115,8 +101,7 @@ def read_index(store: ResultCatalog, dataset: str) -> dict[str, InputEntry]:
 
 
 def write_index(store: ResultCatalog, dataset: str, entries: dict[str, InputEntry]) -> None:
-    """Merge ``entries`` into the dataset's input index (read, update,
-    written atomically). Nothing to do for no entries.
+    """Merge ``entries`` into the dataset's input index (written atomically).
 
     Raises:
         OSError: the catalog's filesystem refused the write.
@@ -192,10 +177,8 @@ def decide_skips(
         config_hash_of: ``(job, refine_config_hash) -> flow config hash``
             (``asset2sim.flows.stages.job_config_hash``).
         finished_check: the skip rule, ``(row, input_hash) -> row or None``
-            (``asset2sim.flows.stages.finished_in_store``: checks that the
-            output folder or store folder is still complete).
-        threads: the completeness checks run in a thread pool (hashing
-            output files and listing a store release the GIL).
+            (``asset2sim.flows.stages.finished_in_store``).
+        threads: size of the thread pool of the completeness checks.
     """
     code = code_hash()
     todo = [j for j in jobs if j.finished and j.asset_id in index]

@@ -1,44 +1,21 @@
 """Per-worker pre-imported stage processes: isolation paid once per worker.
 
-:func:`asset2sim.flows.isolation.run_isolated` starts a fresh Python for each
-call, which pays the imports of the refine pipeline (numpy, scipy, trimesh,
-pybullet, mujoco, matplotlib and the project's own modules: several seconds
-on a busy machine) for every asset. Here each Dask worker process keeps one
-long-lived *stage server*: a child Python that imports all of that once and
-then, per call, ``fork()``\\ s a copy of itself (copy-on-write: a few
-milliseconds) that runs the call. The isolation of each asset is unchanged:
+Each Dask worker keeps one long-lived *stage server*, a child Python that
+imports the refine pipeline once and then ``fork()``\\ s a copy of itself per
+call. Each call keeps :func:`asset2sim.flows.isolation.run_isolated`'s
+contract: its own process group (a native crash kills only it: ``crash``),
+SIGKILL at ``timeout`` (``timeout``), ``RLIMIT_AS`` of ``memory_limit_mb``;
+the child ends with the server and the server with its worker
+(:mod:`asset2sim.flows.lifeline`). A server that died is restarted on the
+next call (the call it served is a ``crash``).
 
-- the forked child is its own process (and process group): a segmentation
-  fault or ``abort()`` in a simulator kills only it (status ``crash``, the
-  signal recorded);
-- the caller waits at most ``timeout`` seconds, then SIGKILLs the child's
-  process group (status ``timeout``);
-- the child sets ``RLIMIT_AS`` to ``memory_limit_mb`` before it runs the
-  call (a ``MemoryError`` / ``std::bad_alloc`` costs only this asset);
-- the child asks for SIGKILL when the server ends, and the server asks for
-  SIGKILL when the worker that started it ends
-  (:func:`asset2sim.flows.lifeline.set_parent_death_signal`), so a killed
-  Dask worker leaves no stage process behind.
-
-A server that died (killed from outside) is restarted on the next call; the
-call it was serving is recorded as a ``crash``.
-
-Protocol (one JSON object per line): the worker writes ``{"spec": path}``
-(the same ``spec.json`` as :func:`run_isolated`: ``target``, ``kwargs``,
-``result``, ``memory_limit_mb``, ``log``) to the server's stdin; the server
-answers ``{"pid": n}`` when the child runs and ``{"rc": n, "cpu": s}`` when
-it ended (``rc`` < 0: killed by signal ``-rc``, the :mod:`subprocess`
-convention; ``cpu`` its CPU time, user + system, from ``wait4``). The
-result's ``extra`` carries ``cpu_seconds`` and, for the call that had to
-start (or restart) the server, ``server_start_seconds``.
-The server's own stdout is redirected away from the protocol pipe, so
-nothing a module prints on import can break it.
-
-Measured cost (``benchmarks/bench_flow_synthetic.py`` prints it): the
-server's start-up (the imports) once per worker; per call a ``fork`` and a
-few pipe messages.
-
-Nothing here imports Prefect, Dask or MLflow.
+Protocol, one JSON object per line: the worker writes ``{"spec": path}``
+(``spec.json`` as for ``run_isolated``); the server answers ``{"pid": n}``
+when the child runs and ``{"rc": n, "cpu": s}`` when it ended (``rc`` < 0:
+killed by signal ``-rc``; ``cpu``: user + system s from ``wait4``). The
+server's own stdout is redirected away from the protocol pipe.
+docs/design/pipeline.md, "Isolation at a cost paid once per worker", has the
+measurements.
 """
 
 from __future__ import annotations
@@ -56,12 +33,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from asset2sim import allocator, atomic
-from asset2sim.flows.isolation import IsolatedResult, _child_env, _tail, run_child_spec
+from asset2sim import allocator
+from asset2sim.flows.isolation import IsolatedResult, _child_env, _read_result, _tail, _timed_out, _write_spec, run_child_spec
 from asset2sim.flows.lifeline import set_parent_death_signal
 
-#: Modules the server imports before it forks anything (heavy third-party
-#: packages the refine pipeline imports lazily; missing ones are skipped).
+#: Heavy third-party modules the server imports before it forks (missing ones skipped).
 WARM_MODULES = (
     "numpy",
     "scipy.spatial",
@@ -75,7 +51,6 @@ WARM_MODULES = (
     "matplotlib.ticker",
     "PIL.Image",
     "PIL.ImageDraw",
-    # imported lazily by the post-check's PhysX run and the USD export: else each forked child pays 0.5-1 s of imports
     "sapien",
     "sapien.physx",
     "pxr.Gf",
@@ -87,10 +62,7 @@ WARM_MODULES = (
     "pxr.Vt",
     "requests",
 )
-#: Project modules the server imports (the refine pipeline and the modules
-#: its stages import lazily: engines, priors, USD export); the stage functions
-#: (:mod:`asset2sim.flows.stages`, which imports this module) come as ``preload``
-#: from their callers.
+#: Project modules the server imports (the stage functions come as ``preload``).
 PROJECT_MODULES = (
     "asset2sim.tasks.refine",
     "asset2sim.tasks.evaluation.evaluate",
@@ -102,14 +74,10 @@ PROJECT_MODULES = (
 
 
 def warm_tables() -> list[str]:
-    """Fill the per-process caches of the pipeline's tables before forking:
-    call every module-level function of the loaded ``asset2sim.tasks``
-    modules and of :mod:`asset2sim.prior_tables` that is a ``functools.lru_cache(maxsize=1)`` wrapper taking no
-    argument (prior tables, mounting priors, category and label tables:
-    YAML parsed and validated once, 0.2-0.3 s that each forked child paid
-    again). Pure Python, no threads, safe before ``fork``. Returns the names
-    called; one that raises is skipped (the call that needs it fails in its
-    child as it would have)."""
+    """Fill the per-process table caches before forking: call every
+    module-level ``functools.lru_cache(maxsize=1)`` function without arguments
+    of the loaded ``asset2sim.tasks`` modules and :mod:`asset2sim.prior_tables`
+    (one that raises is skipped). Returns the names called."""
     import functools
     import inspect
 
@@ -177,9 +145,7 @@ class StageServer:
             raise RuntimeError("the stage server exited before it was ready")
 
     def start_soon(self) -> None:
-        """Start the server in a background thread unless it runs (a call
-        made meanwhile waits for it): its imports overlap the worker's other
-        work, e.g. reading the assets of a batch."""
+        """Start the server in a background thread unless it runs (a call made meanwhile waits for it)."""
         if self.alive():
             return
 
@@ -270,14 +236,8 @@ class StageServer:
         t_start = time.perf_counter()
         with self._lock:
             waited = time.perf_counter() - t_start  # a start begun by start_soon()
-            workdir = Path(workdir)
-            workdir.mkdir(parents=True, exist_ok=True)
-            result_path, log = workdir / "result.json", workdir / "child.log"
-            if result_path.exists():
-                result_path.unlink()
-            spec = workdir / "spec.json"
-            atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path),
-                                     "memory_limit_mb": memory_limit_mb, "log": str(log)})
+            spec, result_path, log = _write_spec(workdir, target, kwargs, memory_limit_mb=memory_limit_mb,
+                                                 log=str(Path(workdir) / "child.log"))
             started = not self.alive()
             if started:
                 self.start()
@@ -309,26 +269,11 @@ class StageServer:
             rc_msg = self._read_in_time(10.0)
             if rc_msg is None:
                 self.close()
-            return IsolatedResult(status="timeout", error=f"time limit of {timeout:.0f} s exceeded; child process killed",
-                                  failure_mode="timeout", returncode=None if rc_msg is None else rc_msg.get("rc"),
-                                  seconds=time.perf_counter() - t0, log_tail=_tail(log))
+            return _timed_out(timeout, None if rc_msg is None else rc_msg.get("rc"), time.perf_counter() - t0, log)
         if msg is None or "rc" not in msg:
             return lost()
-        rc = int(msg["rc"])
-        seconds = time.perf_counter() - t0
         extra = {} if msg.get("cpu") is None else {"cpu_seconds": float(msg["cpu"])}
-        try:
-            data = json.loads(result_path.read_text())
-        except (OSError, ValueError):
-            sig = -rc if rc < 0 else None
-            what = f"killed by signal {sig} ({signal.Signals(sig).name})" if sig else f"exited with code {rc}"
-            return IsolatedResult(status="crash", error=f"child process {what} without a result", failure_mode="crash",
-                                  returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
-        if data.get("ok"):
-            return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds, extra=extra)
-        return IsolatedResult(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
-                              failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""),
-                              returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
+        return _read_result(result_path, int(msg["rc"]), time.perf_counter() - t0, log, extra)
 
 
 def _kill_group(pid: int) -> None:
@@ -344,11 +289,8 @@ _OWNER_LOCK = threading.Lock()
 
 
 def _popen_from_owner_thread(args: list[str], **kwargs) -> subprocess.Popen:
-    """``subprocess.Popen(args, **kwargs)`` run by one long-lived thread of
-    this process. The server's parent-death signal fires when the *thread*
-    that forked it ends (Linux ``PR_SET_PDEATHSIG``), and a Dask worker may
-    retire the pool thread that ran a task; a thread that lives as long as
-    the process keeps the server alive until the process itself ends."""
+    """``subprocess.Popen(args, **kwargs)`` run by one thread living as long as
+    this process (``PR_SET_PDEATHSIG`` fires when the forking *thread* ends)."""
     with _OWNER_LOCK:
         owner = _OWNER.get(os.getpid())
         if owner is None or not owner[0].is_alive():
@@ -380,8 +322,7 @@ _SERVERS_LOCK = threading.Lock()
 
 
 def worker_server(preload: tuple[str, ...] = ()) -> StageServer:
-    """This process's stage server (one per process: a Dask worker keeps
-    its own for its lifetime; a forked copy of this process gets a new one)."""
+    """This process's stage server (one per process id)."""
     with _SERVERS_LOCK:
         srv = _SERVERS.get(os.getpid())
         if srv is None:
@@ -408,8 +349,7 @@ def start_soon(preload: tuple[str, ...] = ()) -> None:
 
 def ready_server(preload: tuple[str, ...] = ()) -> float:
     """Start this process's stage server with ``preload`` imported and wait
-    until it is ready (the flow runs it on every Dask worker before the
-    first asset). Returns the seconds waited.
+    until it is ready; returns the seconds waited.
 
     Raises:
         RuntimeError: the server exited before it was ready.
@@ -419,11 +359,10 @@ def ready_server(preload: tuple[str, ...] = ()) -> float:
 
 def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
                memory_limit_mb: int | None = None, preload: tuple[str, ...] = ()) -> IsolatedResult:
-    """Call ``target(**kwargs)`` in a child forked from this process's
-    pre-imported stage server (:func:`worker_server`), with the contract of
-    :func:`asset2sim.flows.isolation.run_isolated` (same statuses, time and
-    memory limit, ``spec.json`` / ``result.json`` / ``child.log`` in ``workdir``).
-    ``preload``: modules the server should import (used when it starts)."""
+    """Call ``target(**kwargs)`` in a child forked from this process's stage
+    server (:func:`worker_server`), with the contract of
+    :func:`asset2sim.flows.isolation.run_isolated`; ``preload``: modules the
+    server should import."""
     srv = _server_with(preload)  # a new refine function: restarted with it imported
     return srv.call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
 

@@ -1,25 +1,14 @@
-"""Run one function call in a child process with a hard wall-time limit.
-
-The refine flow runs each asset's stages through :func:`run_isolated` so that a
-native crash (a segmentation fault in a simulator or mesh library) or a hang
-costs only that asset: the child is killed at the time limit and the Dask
-worker that waited for it carries on with the next asset.
+"""Run one function call in a child process with a hard wall-time limit, so
+that a native crash or a hang costs only that asset.
 
 Protocol: the parent writes ``spec.json`` (``target`` = ``module:function``,
 ``kwargs`` JSON, ``result`` path) into a work folder and starts
 ``python -m asset2sim.flows.isolation spec.json`` in a new session with the
-parent's ``sys.path`` prepended to ``PYTHONPATH`` (same imports as the
-parent). The child calls ``target(**kwargs)``, which must return a JSON-able
-dict, and writes ``{"ok": true, "value": ...}`` or ``{"ok": false, "error":
-..., "error_type": ..., "failure_mode": ..., "traceback": ...}`` atomically to
-the result path. Its stdout/stderr go to ``child.log`` in the work folder.
-
-The child ends with the process that started it, killed or not: its first
-act is to ask for SIGKILL when that parent (pid ``parent`` of the spec) ends
-(:func:`asset2sim.flows.lifeline.set_parent_death_signal`), so a Dask worker
-that dies (with the flow's driver) leaves no stage process behind.
-
-Nothing here imports Prefect, Dask or MLflow.
+parent's ``sys.path`` on ``PYTHONPATH``. The child asks for SIGKILL when that
+parent ends (:mod:`asset2sim.flows.lifeline`), calls ``target(**kwargs)``
+(which returns a JSON-able dict) and writes ``{"ok": true, "value": ...}`` or
+``{"ok": false, "error", "error_type", "failure_mode", "traceback"}``
+atomically to the result path; its output goes to ``child.log``.
 """
 
 from __future__ import annotations
@@ -45,15 +34,9 @@ Status = Literal["ok", "error", "timeout", "crash"]
 
 @dataclass
 class IsolatedResult:
-    """Outcome of :func:`run_isolated`.
-
-    ``status``: ``ok`` (``value`` holds the return value), ``error`` (the
-    function raised: ``error``, ``error_type``, ``failure_mode`` when the
-    exception had one, ``traceback``), ``timeout`` (killed at the limit) or
-    ``crash`` (the child died without a result: ``returncode`` < 0 is the
-    signal). ``seconds``: wall time of the child (s). ``log_tail``: the last
-    lines of its output.
-    """
+    """Outcome of :func:`run_isolated`: ``status`` ``ok`` (``value``), ``error``
+    (the function raised), ``timeout`` or ``crash`` (no result; ``returncode``
+    < 0: the signal); ``seconds``: wall time (s); ``log_tail``: its last output lines."""
 
     status: Status
     value: Any = None
@@ -125,16 +108,11 @@ def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir
     process group) after ``timeout`` seconds.
 
     Args:
-        target: ``module:function`` importable by the child (the parent's
-            ``sys.path`` is passed on).
+        target: ``module:function`` importable by the child.
         kwargs: JSON-able keyword arguments.
         timeout: wall-time limit, s (> 0).
-        workdir: folder for ``spec.json``, ``result.json`` and ``child.log``
-            (created; kept for inspection).
-        memory_limit_mb: address-space limit of the child, MiB
-            (``RLIMIT_AS``), None for none. An allocation beyond it fails in
-            the child (a ``MemoryError``: status ``error``; a native
-            ``std::bad_alloc``: status ``crash``) and costs only this call.
+        workdir: folder for ``spec.json``, ``result.json`` and ``child.log`` (created, kept).
+        memory_limit_mb: address-space limit of the child, MiB (``RLIMIT_AS``), None for none.
 
     Returns:
         :class:`IsolatedResult` (errors of the function are in it, not raised).
@@ -145,15 +123,7 @@ def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir
     """
     if not timeout > 0:
         raise ValueError(f"timeout must be > 0 s, got {timeout}")
-    workdir = Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
-    result_path = workdir / "result.json"
-    if result_path.exists():
-        result_path.unlink()
-    spec = workdir / "spec.json"
-    atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path), "parent": os.getpid(),
-                             "memory_limit_mb": memory_limit_mb})
-    log = workdir / "child.log"
+    spec, result_path, log = _write_spec(workdir, target, kwargs, parent=os.getpid(), memory_limit_mb=memory_limit_mb)
     t0 = time.perf_counter()
     with open(log, "wb") as fh:
         proc = subprocess.Popen(
@@ -168,43 +138,47 @@ def run_isolated(target: str, kwargs: dict[str, Any], *, timeout: float, workdir
             rc = proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             _kill_group(proc)
-            return IsolatedResult(
-                status="timeout",
-                error=f"time limit of {timeout:.0f} s exceeded; child process killed",
-                failure_mode="timeout",
-                returncode=proc.returncode,
-                seconds=time.perf_counter() - t0,
-                log_tail=_tail(log),
-            )
+            return _timed_out(timeout, proc.returncode, time.perf_counter() - t0, log)
         except BaseException:
             _kill_group(proc)
             raise
-    seconds = time.perf_counter() - t0
+    return _read_result(result_path, rc, time.perf_counter() - t0, log)
+
+
+def _write_spec(workdir: Path | str, target: str, kwargs: dict[str, Any], **more: Any) -> tuple[Path, Path, Path]:
+    """``workdir`` made, its old result removed and ``spec.json`` written (``target``, ``kwargs``, result path,
+    ``more``); returns the paths of the spec, the result and the child's log."""
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    result_path = workdir / "result.json"
+    if result_path.exists():
+        result_path.unlink()
+    spec = workdir / "spec.json"
+    atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path), **more})
+    return spec, result_path, workdir / "child.log"
+
+
+def _timed_out(timeout: float, rc: int | None, seconds: float, log: Path) -> IsolatedResult:
+    """The record of a child killed at its time limit of ``timeout`` s."""
+    return IsolatedResult(status="timeout", error=f"time limit of {timeout:.0f} s exceeded; child process killed",
+                          failure_mode="timeout", returncode=rc, seconds=seconds, log_tail=_tail(log))
+
+
+def _read_result(result_path: Path, rc: int | None, seconds: float, log: Path, extra: dict[str, Any] | None = None) -> IsolatedResult:
+    """The record of a child that ended with ``rc`` after ``seconds`` s, from its result file (``crash`` without one)."""
+    extra = {} if extra is None else extra
     try:
         data = json.loads(result_path.read_text())
     except (OSError, ValueError):
         sig = -rc if rc is not None and rc < 0 else None
         what = f"killed by signal {sig} ({signal.Signals(sig).name})" if sig else f"exited with code {rc}"
-        return IsolatedResult(
-            status="crash",
-            error=f"child process {what} without a result",
-            failure_mode="crash",
-            returncode=rc,
-            seconds=seconds,
-            log_tail=_tail(log),
-        )
+        return IsolatedResult(status="crash", error=f"child process {what} without a result", failure_mode="crash",
+                              returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
     if data.get("ok"):
-        return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds)
-    return IsolatedResult(
-        status="error",
-        error=data.get("error", ""),
-        error_type=data.get("error_type", ""),
-        failure_mode=data.get("failure_mode"),
-        traceback=data.get("traceback", ""),
-        returncode=rc,
-        seconds=seconds,
-        log_tail=_tail(log),
-    )
+        return IsolatedResult(status="ok", value=data.get("value"), returncode=rc, seconds=seconds, extra=extra)
+    return IsolatedResult(status="error", error=data.get("error", ""), error_type=data.get("error_type", ""),
+                          failure_mode=data.get("failure_mode"), traceback=data.get("traceback", ""),
+                          returncode=rc, seconds=seconds, log_tail=_tail(log), extra=extra)
 
 
 def _kill_group(proc: subprocess.Popen) -> None:
@@ -230,12 +204,10 @@ def _child_main(argv: list[str]) -> int:
 
 
 def run_child_spec(spec: dict[str, Any]) -> None:
-    """The body of an isolated call in its child process (a spawned one here,
-    a forked one in :mod:`asset2sim.flows.forkserver`): set the address-space
-    limit ``spec["memory_limit_mb"]`` (MiB; RLIMIT_AS), run
-    :func:`call_target` on ``spec["target"]`` and ``spec["kwargs"]``, write its
-    record atomically as JSON to ``spec["result"]`` (a record that is not
-    JSON-able is written as a ``TypeError`` failure).
+    """The body of an isolated call in its (spawned or forked) child: the
+    address-space limit ``spec["memory_limit_mb"]`` (MiB), :func:`call_target`
+    of ``spec["target"]`` and ``spec["kwargs"]``, its record written
+    atomically as JSON to ``spec["result"]``.
 
     Raises:
         OSError: the result file cannot be written.

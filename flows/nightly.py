@@ -1,23 +1,10 @@
 """The nightly refinement: a Prefect deployment of the ``refine-dataset`` flow
-on a cron schedule.
-
-The deployment runs the same flow with the same parameters as ``make flow``
-(:func:`asset2sim.flows.refine_flow.flow_parameters`: catalog path, dataset,
-workers, Dask address); only the dataset defaults to ``schedule.dataset`` of
-``catalog.yaml``. Schedule settings come from ``catalog.yaml``'s ``schedule``
-section, overridden by the environment (``ASSET2SIM_CRON``,
-``ASSET2SIM_TIMEZONE``) and then by explicit arguments. The time zone is an
-IANA name (``UTC``, ``Europe/Berlin``); the cron expression is evaluated in it
-(daylight-saving changes included).
-
-``make serve`` calls :func:`serve_nightly`: it registers the deployment with
-the Prefect server at ``PREFECT_API_URL`` (starting a local ``prefect server``
-under the project when none is configured, since schedules need a server's
-scheduler; it ends with the serving process, killed or not) and serves it
-until interrupted, so scheduled runs execute in that process. The deployment's entrypoint is the module path
-``asset2sim.flows.refine_flow.refine_dataset``.
-
-Prefect is imported inside the functions.
+on a cron schedule, with the parameters of ``make flow``
+(:func:`asset2sim.flows.stages.flow_parameters`; the dataset defaults to
+``schedule.dataset``). Schedule: argument, else environment
+(``ASSET2SIM_CRON``, ``ASSET2SIM_TIMEZONE``), else ``catalog.yaml``
+``schedule``; the cron expression is evaluated in the IANA time zone.
+``make serve`` registers and serves it (:func:`serve_nightly`).
 """
 
 from __future__ import annotations

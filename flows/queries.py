@@ -1,23 +1,14 @@
 """Questions people ask of the Parquet result catalog.
 
 Every function takes the DataFrame of :meth:`asset2sim.flows.catalog.ResultCatalog.read`
-(one row per asset per run, with the partition columns ``dataset`` and ``run``)
-and returns a small DataFrame or dict; nothing here prints. The aggregating
-ones (:func:`failure_modes`, :func:`run_summary`, :func:`pass_rates_over_time`,
-:func:`slowest_assets`, :func:`failed_assets`) also take the
-:class:`pyarrow.Table` of :meth:`~asset2sim.flows.catalog.ResultCatalog.read_table`
-and then aggregate in Arrow's C++ kernels before anything becomes a
-DataFrame: that is what keeps ``asset2sim failures`` under 2 s on 10^6 rows
-(``benchmarks/bench_catalog.py``).
-
-Definitions used throughout:
-
-- a row *passes all checks* when ``failure_mode == "none"`` (refined, rest
-  stable, not oscillating, penetration resolved);
-- ``stability_pass_rate`` / ``oscillation_pass_rate`` are over rows that have
-  that verdict (failed chains without a measurement are left out), all other
-  rates over every row of the run;
-- runs are ordered by their id, which starts with the UTC start time.
+(one row per asset per run, with ``dataset`` and ``run``) and returns a small
+DataFrame or dict; the aggregating ones other than :func:`run_summary` also
+take the :class:`pyarrow.Table` of
+:meth:`~asset2sim.flows.catalog.ResultCatalog.read_table` and aggregate in
+Arrow (``benchmarks/bench_catalog.py``). A row *passes all checks* when
+``failure_mode == "none"``; ``stability_pass_rate`` / ``oscillation_pass_rate``
+are over the rows with that verdict, other rates over every row; runs are
+ordered by id (UTC start time first).
 """
 
 from __future__ import annotations
@@ -26,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Any, Iterable
 
-from asset2sim.flows.catalog import ResultCatalog
+from asset2sim.flows.catalog import ResultCatalog, plain_strings
 from asset2sim.schemas.report import FAILURE_MODES
 from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
 
@@ -34,16 +25,6 @@ from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
 def _is_table(obj) -> bool:
     """True for a :class:`pyarrow.Table` (not a pandas DataFrame)."""
     return hasattr(obj, "schema") and hasattr(obj, "num_rows") and not hasattr(obj, "iloc")
-
-
-def _plain_strings(table, names=("dataset", "run")):
-    """``table`` with its dictionary-encoded partition columns as plain strings."""
-    import pyarrow as pa
-
-    for i, name in enumerate(table.schema.names):
-        if name in names and pa.types.is_dictionary(table.schema.field(i).type):
-            table = table.set_column(i, name, table.column(i).cast(pa.string()))
-    return table
 
 
 def _value_counts(arr) -> dict[Any, int]:
@@ -57,24 +38,6 @@ def load(catalog_root: Path | str, dataset: str | None = None, run: str | None =
     return ResultCatalog(catalog_root).read(dataset, run)
 
 
-def runs(df) -> "Any":
-    """One line per (dataset, run): first start time, assets, done, skipped,
-    failed, sorted chronologically."""
-    import pandas as pd
-
-    if df.empty:
-        return pd.DataFrame(columns=["dataset", "run", "started_at", "assets", "done", "skipped", "failed"])
-    g = df.groupby(["dataset", "run"], sort=True)
-    out = g.agg(
-        started_at=("started_at", "min"),
-        assets=("asset_id", "count"),
-        done=("status", lambda s: int((s == "done").sum())),
-        skipped=("status", lambda s: int((s == "skipped").sum())),
-        failed=("status", lambda s: int((s == "failed").sum())),
-    ).reset_index()
-    return out.sort_values(["dataset", "run"]).reset_index(drop=True)
-
-
 def latest_run(df, dataset: str | None = None) -> str | None:
     """Id of the most recent run (of ``dataset`` when given), None when empty."""
     if dataset is not None:
@@ -85,9 +48,9 @@ def latest_run(df, dataset: str | None = None) -> str | None:
 
 
 def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = None):
-    """Counts of each failure mode (columns, the fixed vocabulary in order,
-    plus ``total``) per value of ``by`` (rows; e.g. ``category``, ``run``,
-    ``("run", "category")``), with a ``total`` row. ``run`` restricts to one run.
+    """Counts of each failure mode (columns in vocabulary order, plus
+    ``total``) per value of ``by`` (e.g. ``category``, ``("run", "category")``),
+    with a ``total`` row; ``run``: one run only.
 
     Raises:
         KeyError: ``by`` names a column the catalog does not have.
@@ -127,7 +90,7 @@ def _failure_counts_arrow(table, keys: list[str], run: str | None):
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    table = _plain_strings(table)
+    table = plain_strings(table)
     if run is not None:
         table = table.filter(pc.equal(table["run"], run))
     cols = {}
@@ -160,47 +123,6 @@ def _rate(series) -> float | None:
     return float(s.mean())
 
 
-def _run_summary_arrow(t) -> dict[str, Any]:
-    """:func:`run_summary` of an Arrow table, in Arrow's kernels."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    n = int(t.num_rows)
-    st = _value_counts(t["status"]) if n else {}
-    out: dict[str, Any] = {"assets": n, "done": st.get("done", 0), "skipped": st.get("skipped", 0), "failed": st.get("failed", 0)}
-    if n == 0:
-        out.update(pass_rate_all=None, stability_pass_rate=None, oscillation_pass_rate=None)
-        out["failure_modes"] = {m: 0 for m in FAILURE_MODES}
-        return out
-    modes = _value_counts(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE))
-    out["failure_modes"] = {m: modes.get(m, 0) for m in FAILURE_MODES}
-    out["pass_rate_all"] = modes.get("none", 0) / n
-
-    def mean(col, fill=None):
-        c = t[col] if fill is None else pc.fill_null(t[col], fill)
-        if pa.types.is_boolean(c.type):
-            c = c.cast(pa.float64())
-        v = pc.mean(c).as_py() if len(c) else None
-        return None if v is None else float(v)
-
-    out["stability_pass_rate"] = mean("rest_stable")
-    out["oscillation_pass_rate"] = mean("oscillation_pass")
-    out["penetration_mm_mean"] = mean("penetration_mm")
-    std = pc.stddev(t["penetration_mm"], ddof=0).as_py() if t["penetration_mm"].null_count < n else None
-    out["penetration_mm_std"] = None if std is None else float(std)
-    out["prompt_alignment_mean"] = mean("prompt_alignment")
-    worked = t.filter(pc.equal(t["status"], "done"))
-    q = pc.mean(pc.fill_null(worked["model_queries"], 0)).as_py() if worked.num_rows else 0.0
-    out["queries_per_asset"] = float(q or 0.0)
-    out["tokens_total"] = int(pc.sum(pc.fill_null(t["tokens"], 0)).as_py() or 0)
-    wall = t["wall_seconds"]
-    out["asset_seconds_total"] = float(pc.sum(wall).as_py() or 0.0)
-    out["asset_seconds_mean"] = mean("wall_seconds")
-    mx = pc.max(wall).as_py()
-    out["asset_seconds_max"] = None if mx is None else float(mx)
-    return out
-
-
 #: Columns :func:`status_counts` reads.
 COUNT_COLUMNS = ("status", "failure_mode")
 
@@ -225,9 +147,7 @@ def status_counts(df) -> dict[str, Any]:
 
 def run_summary(df) -> dict[str, Any]:
     """Numbers of one run's rows (pass rates as fractions in [0, 1], penetration
-    mm, seconds): what MLflow logs as the run's metrics."""
-    if _is_table(df):
-        return _run_summary_arrow(df)
+    mm, seconds) of a DataFrame: what MLflow logs as the run's metrics."""
     n = int(len(df))
     out: dict[str, Any] = {
         "assets": n,
@@ -264,10 +184,8 @@ PASS_RATE_COLUMNS = ("status", "failure_mode", "rest_stable", "oscillation_pass"
 
 
 def pass_rates_over_time(df, dataset: str | None = None):
-    """Per run (chronological): start time, assets, and the pass rates
-    (all checks, rest stability, oscillation) with mean penetration (mm).
-    Vectorised over all rows (one group-by), so a year of nightly runs of a
-    whole dataset (10^6 rows) takes well under a second."""
+    """Per run (chronological): start time, assets, the pass rates (all
+    checks, rest stability, oscillation) and mean penetration (mm)."""
     import pandas as pd
 
     cols = ["dataset", "run", "started_at", "assets", "pass_rate_all", "stability_pass_rate",
@@ -310,7 +228,7 @@ def _pass_rates_arrow(t, dataset: str | None, cols: list[str]):
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    t = _plain_strings(t)
+    t = plain_strings(t)
     if dataset is not None:
         t = t.filter(pc.equal(t["dataset"], dataset))
     if t.num_rows == 0:
@@ -348,7 +266,7 @@ def slowest_assets(df, n: int = 10, run: str | None = None):
     if _is_table(df):
         import pyarrow.compute as pc
 
-        t = _plain_strings(df)
+        t = plain_strings(df)
         if run is not None:
             t = t.filter(pc.equal(t["run"], run))
         t = t.filter(pc.invert(pc.equal(pc.fill_null(t["status"], ""), "skipped")))
@@ -382,9 +300,8 @@ def slowest_assets(df, n: int = 10, run: str | None = None):
 
 def slowest_in_catalog(store: ResultCatalog, dataset: str | None = None, runs: str | list[str] | None = None, n: int = 10):
     """:func:`slowest_assets` straight from the catalog in two passes: the
-    ``n``-th longest wall time from the numeric columns alone, then only the
-    rows at or above it with their text columns (the filter is pushed down to
-    the Parquet reader), so the stage timings of 10^6 rows are never decoded."""
+    ``n``-th longest wall time from the numeric columns, then only the rows
+    at or above it with their text columns."""
     import pyarrow.compute as pc
     import pyarrow.dataset as pads
 
@@ -403,10 +320,9 @@ CHANGE_COLUMNS = ("asset_id", "category", "status", "failure_mode", "rest_stable
 
 
 def verdict_changes(df, run_a: str, run_b: str):
-    """Assets whose verdict differs between runs ``run_a`` and ``run_b``
-    (failure mode, rest stability or oscillation), or that are in only one of
+    """Assets whose verdict (failure mode, rest stability or oscillation)
+    differs between runs ``run_a`` and ``run_b``, or that are in only one of
     them. Columns ``asset_id``, ``category``, ``<field>_a``, ``<field>_b``, ``change``.
-    One join of the two runs (vectorised).
 
     Raises:
         KeyError: a run id is not in the catalog.
@@ -452,7 +368,7 @@ def failed_assets(df, run: str | None = None, limit: int | None = None):
     if _is_table(df):
         import pyarrow.compute as pc
 
-        t = _plain_strings(df)
+        t = plain_strings(df)
         if run is not None:
             t = t.filter(pc.equal(t["run"], run))
         t = t.filter(pc.invert(pc.equal(pc.fill_null(t["failure_mode"], MISSING_FAILURE_MODE), "none")))

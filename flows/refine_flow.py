@@ -1,86 +1,25 @@
 """The dataset refinement flow: ``catalog.yaml`` in, refined assets, Parquet
 catalog rows and an MLflow run out.
 
-Shape (DEVELOPERS.md, "Shape of the product")::
+``refine_dataset`` (the Prefect flow, in the driver) plans the run
+(:func:`plan_driver`: jobs, manifest rows that cannot be used, skips the
+driver decides, :mod:`asset2sim.flows.driver_skip`), then ``refine_assets``
+(a subflow on a DaskTaskRunner, not started when nothing is left) runs per
+asset ``prepare`` (batched) and ``refine-metrics`` (refine, metrics and, with
+an output store, publish: :func:`asset2sim.flows.stages.refine_chain`) and
+appends each asset's catalog row as its chain ends. At the end the run's
+partition is compacted and compared with the previous run
+(:mod:`asset2sim.flows.catalog_finish`), the run summary, plots and an MLflow
+run written; a run regressed beyond ``results.regression`` with
+``fail_flow`` ends Failed (:class:`RegressionFailure`, raised after
+everything is recorded).
 
-    refine_dataset (Prefect flow, driver process)
-      load catalog.yaml -> plan_jobs (demo assets generated if needed, manifest)
-      -> skips decided by the driver (asset2sim.flows.driver_skip: unchanged
-         input folder, earlier result still complete): their rows at once
-      -> refine_assets (Prefect subflow on a DaskTaskRunner; not started
-         when nothing is left)
-           per asset, a chain of stages on Dask workers in two Prefect tasks,
-           ``prepare`` (a batch of assets per task) and ``refine-metrics``:
-             prepare  (read the asset: input hash, skip when finished)
-             refine   (synthesize -> refine state -> write -> post-check
-                       -> extras: export, renders, evaluation + HTML report)
-             metrics  (stability, prompt alignment, scale deviation)
-             publish  (only with an output store, ``--out s3://...``: upload
-                       the worker's local folder, completion marker last;
-                       :mod:`asset2sim.flows.store`)
-           each finished chain -> build_row -> one catalog row, appended atomically
-           (and a progress event: asset2sim.flow_progress, the bar of `make flow`)
-      -> end of run (asset2sim.flows.catalog_finish): the run's partition compacted
-         into one Parquet file; the run compared with the previous run of the
-         dataset (asset2sim.flows.catalog_compare: verdict flips, pass-rate and
-         metric drift, judged by catalog.yaml results.regression)
-      -> run summary + failure-mode plot + comparison + pass rate over runs
-         -> MLflow run (regression.* tags, nested run per asset)
-
-Each piece of work is done once per asset: the asset is read once, by ``prepare``; the rest test runs once per
-engine, in the post-check; ``metrics`` reads refine's evaluation (:mod:`asset2sim.flows.stages`).
-
-Nothing finished is done twice, nothing malformed stops the others:
-
-- A flow killed after an asset's folder was completed (completion marker
-  written) but before its catalog row: the next run finds the folder through
-  the job record the killed run left in its work folder
-  (``flows.stages.unrecorded_jobs``, ``tasks.publish.contract.resumable_output``:
-  same input, same flow configuration, folder still complete), writes the
-  missing row into the killed run's partition from the folder's typed report
-  (and the killed run's measurement when it had made one) and records the
-  asset as skipped: no refine.
-- A manifest row that cannot be used (a field over the CSV field limit, a
-  missing, unsafe or duplicate id, no prompt column, an invalid number)
-  becomes a failed row with failure mode ``invalid_manifest_row`` before the
-  fan-out; the other rows run. A manifest that is not a CSV with ``id`` and
-  ``prompt`` columns still stops the run before it starts.
-- A run regressed beyond ``catalog.yaml`` ``results.regression`` (with
-  ``fail_flow``) ends in state Failed with the regression report
-  (:class:`RegressionFailure`, raised after everything is recorded): the
-  nightly deployment's run fails; ``run_refine_flow`` still returns the summary.
-- The processes of a run end with its driver, killed or not: the temporary
-  Prefect server is started here (:func:`prefect_api_for_run`) through
-  :mod:`asset2sim.flows.lifeline` (SIGKILL when the driver ends), Dask's
-  local workers exit when the driver does, and each isolated stage process
-  gets SIGKILL when its Dask worker ends (:mod:`.isolation`).
-
-The flow wires; the stages decide. The stage functions are plain functions
-of :mod:`asset2sim.flows.stages`; hashing, the skip rule and the catalog row
-are :mod:`asset2sim.tasks.publish.contract`'s; the failure mode is
-:mod:`asset2sim.tasks.check.verdict`'s. This module imports Prefect at the top
-(Prefect is an optional extra; nothing in the core imports this module).
-
-Failure handling: every stage returns a record instead of raising, so a failed
-asset never stops the others; a Prefect retry happens only when a model-backed
-estimator failed (``estimator_failure`` with an estimator other than
-``offline``): that is the only failure a retry can fix. Each asset has a
-wall-time limit over all its stages; with ``isolation: process`` (default)
-stages run in a child process killed at the limit, forked from a stage
-server each Dask worker starts once with the pipeline imported
-(:mod:`.forkserver`; ``spawn``: a fresh Python per call, :mod:`.isolation`), so
-hangs and native crashes become ``timeout`` / ``crash`` rows.
-
-Dask: a local cluster with ``workers`` processes by default; an existing
-scheduler when ``dask_address`` (parameter) or ``DASK_ADDRESS`` (environment)
-is given. The local cluster's scheduler, nannies, workers and dashboard
-listen on ``catalog.yaml`` ``run.dask_host`` (default ``127.0.0.1``, loopback
-only; ``asset2sim flow --dask-host``); ``run.dashboard: false``
-(``--no-dashboard``) turns its dashboard and other HTTP pages off. The
-temporary Prefect server listens on 127.0.0.1 (:mod:`.server`). Workers of a
-local cluster are pointed at the driver's Prefect API (``PREFECT_API_URL``);
-workers of a remote cluster need a Prefect server they can reach (set
-``PREFECT_API_URL`` on them).
+Every stage returns a record instead of raising, so a failed asset never
+stops the others; Prefect retries a chain only on :class:`ModelCallFailure`.
+The flow wires; the stages (:mod:`asset2sim.flows.stages`), the contract
+(:mod:`asset2sim.tasks.publish.contract`) and the verdict decide.
+docs/design/pipeline.md has the reasoning (resuming killed runs,
+isolation, listening addresses). Imports Prefect at the top.
 """
 
 from __future__ import annotations
@@ -109,29 +48,12 @@ from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, server, stages
 from asset2sim.flows.forkserver import ready_server
 from asset2sim.flows.store import join_uri, upload_folder
-from asset2sim.flows.stages import (  # re-exported: the flow's public names
-    FLOW_NAME,
-    SUBFLOW_NAME,
-    AssetJob,
-    BadManifestRow,
-    ModelCallFailure,
-    RegressionFailure,
-    code_version,
-    default_prefect_home,
-    flow_parameters,
-    make_run_id,
-    plan_jobs,
-    plan_run,
-    prepare_prefect_environment,
-)
+from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, BadManifestRow, ModelCallFailure, RegressionFailure,
+                                    code_version, flow_parameters, make_run_id, plan_run)
 from asset2sim.tasks.check.verdict import exception_failure_mode
 from asset2sim.tasks.publish.contract import Prepared, build_manifest_row, build_row
 
-__all__ = [
-    "FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "code_version", "default_prefect_home", "flow_parameters",
-    "make_run_id", "plan_jobs", "plan_run", "prepare_prefect_environment", "refine_assets", "refine_dataset",
-    "run_refine_flow",
-]  # fmt: skip
+__all__ = ["FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset", "run_refine_flow"]
 
 
 # ------------------------------------------------------------------------- tasks
@@ -139,8 +61,7 @@ __all__ = [
 prepare_many = task(stages.prepare_batch, name="prepare", cache_policy=NO_CACHE, persist_result=False)
 chain = task(stages.refine_chain, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
 
-#: Largest batch of assets one prepare task reads (a rerun's skip decisions
-#: cost one task per batch, not per asset).
+#: Largest batch of assets one prepare task reads.
 PREPARE_BATCH_MAX = 25
 
 
@@ -154,10 +75,8 @@ def _retry_on_model_failure(task, task_run, state) -> bool:
     """Prefect ``retry_condition_fn``: retry only :class:`ModelCallFailure`."""
     try:
         state.result(raise_on_failure=True)
-    except ModelCallFailure:
-        return True
-    except Exception:
-        return False
+    except Exception as exc:
+        return isinstance(exc, ModelCallFailure)
     return False
 
 
@@ -191,17 +110,11 @@ def refine_assets(
     batch_size: int = 1,
     fingerprints: dict[str, str | None] | None = None,
 ) -> dict[str, Any]:
-    """Fan out one ``prepare -> refine -> metrics (-> publish)`` chain per
-    asset on the flow's task runner and append each asset's catalog row
-    (under ``catalog_root``) as soon as its chain ends. Two tasks per asset
-    at most: ``prepare`` (``batch_size`` assets per task: the skip decision)
-    and ``refine-metrics`` (:func:`asset2sim.flows.stages.refine_chain`,
-    only for assets not skipped); each Prefect task costs a few calls to
-    the Prefect API, paid per task.
-
-    ``fingerprints``: asset id -> folder fingerprint taken by the driver
-    before the run (:func:`asset2sim.flows.driver_skip.input_fingerprint`),
-    recorded with what the input stage found.
+    """Fan out ``prepare`` (``batch_size`` assets per task) and
+    ``refine-metrics`` (:func:`asset2sim.flows.stages.refine_chain`) per asset
+    on the flow's task runner and append each asset's catalog row under
+    ``catalog_root`` as its chain ends. ``fingerprints``: asset id -> folder
+    fingerprint taken by the driver (:mod:`asset2sim.flows.driver_skip`).
 
     Returns:
         ``{"rows": [CatalogRow, ...], "inputs": {asset id: InputEntry},
@@ -319,10 +232,9 @@ def _record_chains(chains: dict, rec: _AssetRecorder) -> None:
 
 
 def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
-    """Start the stage server of every worker of the flow's Dask cluster and wait until all are ready
-    (:func:`asset2sim.flows.forkserver.ready_server` through ``Client.run``), before the first asset: their imports
-    are start-up, not assets phase. Returns the seconds waited (0 when no job runs in a stage server or the task runner
-    is not a Dask one); a server that cannot start is logged and left to the first call, which records the failure."""
+    """Start the stage server of every Dask worker (:func:`asset2sim.flows.forkserver.ready_server`) before the first
+    asset; returns the seconds waited (0 without stage servers or a Dask runner). A failure is logged and left to the
+    first call."""
     from prefect_dask import DaskTaskRunner
 
     mods = tuple(dict.fromkeys(m for j in jobs for m in stages.stage_server_modules(j)))
@@ -342,22 +254,17 @@ def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
 def refine_dataset(catalog: str = "catalog.yaml", dataset: str | None = None, workers: int | None = None,
                    dask_address: str | None = None, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
                    out: str | None = None, dask_host: str | None = None, dashboard: bool | None = None) -> dict[str, Any]:
-    """Refine every asset of ``dataset`` (default: the catalog's) as declared
-    in ``catalog``, publishing the outputs to ``out`` (default: ``catalog.yaml``
-    ``output_store``, else ``output_root``); ``dask_host`` / ``dashboard``:
-    where the local Dask cluster listens and whether it serves its dashboard
-    (default: ``catalog.yaml`` ``run.dask_host`` / ``run.dashboard``); returns
-    the run summary (see :func:`run_refine_flow`)."""
+    """Refine every asset of ``dataset`` as declared in ``catalog`` (arguments
+    as :func:`run_refine_flow`); returns the run summary."""
     return run_dataset(get_run_logger(), catalog, dataset, workers, dask_address, ids=ids, limit=limit,
                        force=force, out=out, dask_host=dask_host, dashboard=dashboard)
 
 
 @dataclasses.dataclass
 class DriverPlan:
-    """A run planned by the driver before any Prefect flow or Dask cluster
-    starts: the run's id and start, its :class:`~asset2sim.flows.stages.RunPlan`,
-    the folder fingerprints of its assets and the assets the driver skips
-    (:mod:`asset2sim.flows.driver_skip`: asset id -> prepared record)."""
+    """A run planned by the driver before Prefect or Dask start: id, start,
+    :class:`~asset2sim.flows.stages.RunPlan`, folder fingerprints and the
+    skips the driver decided (asset id -> prepared record)."""
 
     run_id: str
     started: datetime
@@ -373,9 +280,9 @@ class DriverPlan:
 
 def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None,
                 started: datetime | None = None) -> DriverPlan:
-    """Plan a run of dataset ``name`` and decide in this process which assets
-    are finished already (:func:`asset2sim.flows.driver_skip.decide_skips`:
-    unchanged input folder, earlier result still complete); none when ``force``.
+    """Plan a run of dataset ``name`` and decide here which assets are
+    finished already (:func:`asset2sim.flows.driver_skip.decide_skips`; none
+    when ``force``).
 
     Raises:
         CatalogError: as :func:`asset2sim.flows.stages.plan_run`.
@@ -394,15 +301,9 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
                 dask_address: str | None = None, *, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
                 out: str | None = None, planned: DriverPlan | None = None, dask_host: str | None = None,
                 dashboard: bool | None = None) -> dict[str, Any]:
-    """The body of :func:`refine_dataset` (in a Prefect flow run, or, for a
-    run that has nothing to dispatch, without one: :func:`run_refine_flow`);
-    ``log`` the logger; ``planned`` a plan made already by :func:`plan_driver`;
-    ``dask_host`` / ``dashboard``: the local cluster's listening address and
-    dashboard (None: ``catalog.yaml`` ``run.dask_host`` / ``run.dashboard``).
-
-    Assets the driver can skip (:mod:`asset2sim.flows.driver_skip`) get
-    their rows here; only the others go to the Dask workers, and with none
-    left no Dask cluster and no Prefect task starts."""
+    """The body of :func:`refine_dataset`, also run without a Prefect flow run
+    when nothing is left to dispatch; ``planned``: a plan made already by
+    :func:`plan_driver`. With no pending asset no Dask cluster starts."""
     t0, body_started_epoch = time.perf_counter(), time.time()
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
@@ -561,8 +462,7 @@ def _raise_on_regression(log, cat, summary: dict[str, Any]) -> None:
 
 def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows: list[BadManifestRow],
                      flow_run_id: str | None, version: str) -> None:
-    """One failed catalog row (``invalid_manifest_row``) per manifest row that
-    cannot be used, written before any asset runs."""
+    """One failed row (``invalid_manifest_row``) per manifest row that cannot be used."""
     config = cat.refine_config().model_dump(mode="json")
     for bad in bad_rows:
         row = build_manifest_row(bad.error, asset_id=bad.asset_id, run_id=run_id, config=config,
@@ -573,9 +473,8 @@ def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows
 
 
 def _add_isolation_times(row, refined, measured) -> None:
-    """Add to the row's ``stage_seconds`` what the isolated stages measured (:mod:`.forkserver`): ``cpu.refine`` /
-    ``cpu.metrics`` (CPU time of the stage's child, user + system, s) and ``isolation.server_start`` (s, when this
-    asset's call started the worker's stage server). Keys with a dot are not summed into ``wall_seconds``."""
+    """Add to the row's ``stage_seconds`` the isolated stages' ``cpu.refine`` / ``cpu.metrics`` (CPU s of the
+    child) and ``isolation.server_start`` (s)."""
     add: dict[str, float] = {}
     for name, rec in (("refine", refined), ("metrics", measured)):
         extra = (getattr(rec, "model_extra", None) or {}).get("extra") if rec is not None else None
@@ -594,8 +493,7 @@ def _add_isolation_times(row, refined, measured) -> None:
 def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict[str, Prepared],
                          flow_run_id: str | None) -> None:
     """The catalog row of each asset the driver skipped (``skips``: asset id
-    -> prepared record with the earlier row), written before any worker
-    starts (a few threads: each row is one atomic file write)."""
+    -> prepared record), written by a few threads."""
     todo = [job for job in jobs if job.asset_id in skips]
     if not todo:
         return
@@ -615,9 +513,8 @@ def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict
 
 def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
                     started: float) -> Prepared | None:
-    """Write the catalog row an earlier, killed run owed for its complete folder (``prepared.resume``) into that
-    run's partition (unless there already); return the prepared record with that row as ``skip`` (this run records
-    the asset as skipped), or None when that row would not be ``done`` (this run then records the asset itself)."""
+    """Write the row a killed run owed for its complete folder (``prepared.resume``) into its partition; return
+    ``prepared`` with that row as ``skip``, or None when that row would not be ``done``."""
     known = {f.name for f in dataclasses.fields(AssetJob)}
     earlier = AssetJob(**{k: v for k, v in prepared.resume["job"].items() if k in known})
     info = store.run_info(earlier.dataset, earlier.run_id) or {}
@@ -633,9 +530,8 @@ def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, ref
 
 
 def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:
-    """A markdown artifact on the Prefect flow run (shown in the Prefect UI)
-    with the run's counts, the regression check and the MLflow run id, so
-    both UIs show the same run. Best effort: a failure is logged, not raised."""
+    """A markdown artifact on the Prefect flow run: counts, regression check,
+    MLflow run id. A failure is logged, not raised."""
     try:
         from prefect.artifacts import create_markdown_artifact
 
@@ -739,11 +635,8 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
 def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "127.0.0.1",
                       dashboard: bool = True):
     """A DaskTaskRunner: the scheduler at ``address``, else a local cluster of
-    ``workers`` single-threaded worker processes that report to this
-    process's Prefect API. Its scheduler, nannies and workers listen on
-    ``host`` (``catalog.yaml`` ``run.dask_host``; default loopback only), and
-    so does its dashboard, on a free port, when ``dashboard`` (else
-    ``dashboard_address`` None: see :func:`_local_cluster_config`)."""
+    ``workers`` single-threaded processes reporting to this process's Prefect
+    API, listening on ``host`` (dashboard on a free port when ``dashboard``)."""
     from prefect_dask import DaskTaskRunner
 
     if address:
@@ -772,12 +665,8 @@ def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "
 
 @contextlib.contextmanager
 def _local_cluster_config(address: str | None, dashboard: bool):
-    """Dask configuration while a local cluster (no ``address``) starts and
-    runs: without ``dashboard``, no HTTP routes on its scheduler and workers
-    (``dashboard_address=None`` alone leaves the scheduler's info pages, JSON
-    API and metrics; distributed always opens the scheduler's HTTP port,
-    which then answers 404 to everything). The nannies pass the configuration
-    to the worker processes they start."""
+    """Dask configuration for a local cluster: without ``dashboard``, no HTTP
+    routes on its scheduler and workers (the scheduler's port then answers 404)."""
     if address or dashboard:
         yield
         return
@@ -788,12 +677,8 @@ def _local_cluster_config(address: str | None, dashboard: bool):
 
 
 def _prefect_api_url() -> str | None:
-    """The Prefect API this process talks to, for the local cluster's workers.
-
-    With no ``PREFECT_API_URL`` configured, Prefect runs a temporary local
-    server for this process; without its address each worker process would
-    start a server of its own. None when no address can be found.
-    """
+    """The Prefect API this process talks to (its temporary server when none is
+    configured), for the local cluster's workers; None when there is none."""
     try:
         from prefect.settings import PREFECT_API_URL
 
@@ -826,30 +711,17 @@ def run_refine_flow(
     dask_host: str | None = None,
     dashboard: bool | None = None,
 ) -> dict[str, Any]:
-    """Run :func:`refine_dataset` in this process (what ``make flow`` does);
+    """Run :func:`refine_dataset` in this process (what ``make flow`` does).
     ``out``: the output store (``s3://bucket/prefix``, :mod:`.store`);
     ``dask_host`` / ``dashboard``: where the local Dask cluster listens and
-    whether it serves its dashboard (None: ``catalog.yaml`` ``run.dask_host``,
-    default 127.0.0.1, / ``run.dashboard``).
+    whether it serves its dashboard (None: ``catalog.yaml`` ``run``). Call
+    from a ``__main__``-guarded program (Dask starts worker processes).
 
-    Returns the run summary (counts, pass rates, failure modes, paths, MLflow
-    run id, timings in s: ``dask_startup_seconds``, ``stage_servers_seconds``
-    (every worker's stage server started before the first asset),
-    ``assets_seconds`` (the fan-out with the cluster and servers up), ``dask_teardown_seconds``,
-    ``tracking_seconds`` (summary, plot, MLflow), ``flow_body_seconds``, and
-    ``flow_started_epoch``). A run that regressed beyond ``catalog.yaml``
-    (``results.regression``, ``fail_flow``) ends as a Failed flow run
-    (:class:`RegressionFailure`, what a nightly deployment shows); its
-    summary is still returned here (``summary["regression"]["exceeded"]``),
-    for the caller's exit status. Call from a ``__main__``-guarded program:
-    the local Dask cluster starts worker processes.
-
-    With no Prefect server configured (``PREFECT_API_URL`` unset) the run is
-    planned here first; when the driver finds every asset finished already
-    (:mod:`asset2sim.flows.driver_skip`) the run is recorded (skipped rows,
-    compaction, comparison, MLflow) without a Prefect flow run, a temporary
-    server or a Dask cluster (``summary["driver_skipped"]``, no
-    ``prefect.flow_run_id``): a rerun of a finished dataset takes seconds.
+    Returns the run summary: counts, pass rates, failure modes, paths, MLflow
+    run id and timings (s); a regressed run's summary too (its flow run ends
+    Failed, ``summary["regression"]["exceeded"]``). With no Prefect server
+    configured and nothing left to dispatch, the run is recorded without a
+    Prefect flow run, server or Dask cluster.
 
     Raises:
         CatalogError: invalid catalog or manifest (before any asset runs).
@@ -878,8 +750,7 @@ def run_refine_flow(
 
 
 def _prefect_api_configured() -> bool:
-    """True when ``PREFECT_API_URL`` names a Prefect server (else a run
-    starts a temporary one)."""
+    """True when ``PREFECT_API_URL`` names a Prefect server."""
     from prefect.settings import PREFECT_API_URL
 
     return bool(PREFECT_API_URL.value())
@@ -887,11 +758,10 @@ def _prefect_api_configured() -> bool:
 
 @contextlib.contextmanager
 def prefect_api_for_run(project_root: Path | str):
-    """The Prefect API one flow run in this process talks to: the configured
-    ``PREFECT_API_URL`` when there is one, else a temporary server started
-    here (:func:`asset2sim.flows.server.start_local_server`, ``ephemeral``)
-    that ends with this process, killed or not, and is stopped when the block
-    ends. Yields the API URL. Call from the main thread.
+    """Yield the Prefect API URL of one flow run: the configured
+    ``PREFECT_API_URL``, else a temporary server
+    (:func:`asset2sim.flows.server.start_local_server`) stopped when the block
+    ends. Call from the main thread.
 
     Raises:
         RuntimeError: the temporary server did not start (its log is
@@ -921,8 +791,7 @@ def prefect_api_for_run(project_root: Path | str):
 
 
 def _drain_prefect_workers() -> None:
-    """Send what Prefect's background log and event workers still hold to
-    the server before it stops."""
+    """Flush Prefect's background log and event workers before the server stops."""
     try:
         from prefect.events.worker import EventsWorker
         from prefect.logging.handlers import APILogWorker

@@ -26,17 +26,12 @@ def _free_port() -> int:
 
 def start_local_server(project_root: Path | str, port: int | None = None, timeout: float = 120.0, *,
                        ephemeral: bool = False):
-    """Start a Prefect server bound to 127.0.0.1, state under
-    ``<project>/.prefect`` (unless ``PREFECT_HOME`` is set), log in
-    ``<project>/.prefect/server.log``; wait until its API answers. The server gets SIGKILL when this process ends, killed or
-    not (:mod:`asset2sim.flows.lifeline`); call from the main thread.
-
-    ``ephemeral`` False: ``prefect server start`` (scheduler and other
-    services included, what ``serve`` needs). True: the API alone, as
-    Prefect's temporary server runs it (``uvicorn`` on
-    ``prefect.server.api.server:create_app``, UI off), what one flow run needs.
-
-    Returns ``(process, api_url)``; the caller stops the process.
+    """Start a Prefect server bound to 127.0.0.1 (state under
+    ``<project>/.prefect`` unless ``PREFECT_HOME`` is set, log
+    ``server.log`` there) and wait until its API answers; it gets SIGKILL
+    when this process ends (call from the main thread). ``ephemeral``: the
+    API alone (uvicorn, UI off), as one flow run needs; else ``prefect server
+    start`` with its services, as ``serve`` needs. Returns ``(process, api_url)``.
 
     Raises:
         RuntimeError: the server did not answer within ``timeout`` s (its log

@@ -1,35 +1,16 @@
-"""The refine flow's per-asset stages as plain functions (no Prefect here).
+"""The refine flow's per-asset stages as plain functions (no Prefect, Dask or
+MLflow here); :mod:`asset2sim.flows.refine_flow` wraps them in Prefect tasks.
 
-``flows.refine_flow`` wraps them in Prefect tasks; each is a plain, typed,
-testable function:
-
-- :func:`plan_run` (:func:`plan_jobs`): ``catalog.yaml`` and the manifest ->
-  one :class:`AssetJob` per usable manifest row, one :class:`BadManifestRow`
-  per row that cannot be used (recorded as a failed catalog row, the others
-  run), and per asset the job records of earlier runs that wrote no catalog
-  row for it (a killed flow's finished work, :func:`unrecorded_jobs`);
-- :func:`prepare_asset` (input stage): read (validate and extract) the asset,
-  once, for its input hash and the skip decision
-  (:func:`asset2sim.tasks.publish.contract.finished_result`), or find a
-  complete folder of a killed run to record instead of refining
-  (:func:`asset2sim.tasks.publish.contract.resumable_output`); the extracted
-  description and its findings travel on in the
-  :class:`~asset2sim.tasks.publish.contract.Prepared` record;
-- :func:`refine_stage`: the refine function (``tasks.refine.refine_asset``:
-  synthesize, refine state, write, post-check, extras) in an isolated child
-  process inside the asset's time limit, given the extracted asset (as JSON
-  across the process boundary) and the reference for the extras' evaluation;
-- :func:`metrics_stage`: the catalog's metric columns. When refine's extras
-  wrote ``evaluation.json`` for this prompt, category and reference
-  (:func:`refined_evaluation`), that typed Evaluation is read; otherwise
-  (extras off, or a refine function that writes none) the stability metrics
-  are evaluated (``tasks.evaluation.evaluate``), recording the post-check's
-  rest-test measurement instead of running it again when the engine and
-  conventions match (:func:`reusable_rest_test`).
-
-Each stage returns a :class:`~asset2sim.tasks.publish.contract.StageRecord`;
-:func:`asset2sim.tasks.publish.contract.build_row` turns them into the
-asset's catalog row. Nothing here imports Prefect, Dask or MLflow.
+:func:`plan_run` turns ``catalog.yaml`` and the manifest into one
+:class:`AssetJob` per usable row (and a :class:`BadManifestRow` per row that
+cannot be used); :func:`prepare_asset` reads the asset once and decides the
+skip (or finds a killed run's complete folder to record); :func:`refine_stage`
+runs the refine function isolated within the asset's time limit;
+:func:`metrics_stage` reads refine's ``evaluation.json`` when it matches, else
+evaluates (reusing the post-check's rest test when allowed); with an output
+store :func:`publish_stage` uploads the folders. Each returns a
+:class:`~asset2sim.tasks.publish.contract.StageRecord`;
+:func:`asset2sim.tasks.publish.contract.build_row` makes the catalog row.
 """
 
 from __future__ import annotations
@@ -69,6 +50,7 @@ from asset2sim.tasks.publish.contract import (
     JOB_RECORD_NAME,
     JobRecord,
     Measurement,
+    code_version,
     Prepared,
     RefineOutput,
     StageRecord,
@@ -82,18 +64,14 @@ from asset2sim.tasks.publish.contract import (
     skip_code_hash,
     write_job_record,
 )
-from asset2sim.tasks.publish.contract import code_version as contract_code_version
 from asset2sim.output_folder import EVALUATION_NAME
 
 FLOW_NAME = "refine-dataset"
 SUBFLOW_NAME = "refine-assets"
-#: Per run, ``<output_root>/<dataset>/<run>/_metrics/<asset id>/evaluation.json``
-#: holds the metrics stage's measurement (beside, not inside, the refined folder).
+#: ``<output_root>/<dataset>/<run>/_metrics/<asset id>/`` holds the metrics stage's ``evaluation.json``.
 METRICS_DIRNAME = "_metrics"
 DEFAULT_REFINE_FUNCTION = "asset2sim.tasks.refine:refine_asset"
-
-#: Failure modes a retry cannot fix are recorded at once; this one is retried
-#: when the estimator calls a model.
+#: The one failure mode retried (when the estimator calls a model).
 RETRYABLE_FAILURE = "estimator_failure"
 
 
@@ -104,11 +82,9 @@ class ModelCallFailure(RuntimeError):
 
 
 class RegressionFailure(RuntimeError):
-    """The run regressed beyond ``catalog.yaml`` ``results.regression`` with
-    ``fail_flow`` on: raised at the very end of the flow (everything is
-    recorded by then), so the flow run's state, the nightly deployment's
-    included, is Failed with the regression report as its message.
-    ``summary``: the run summary the flow would have returned."""
+    """The run regressed beyond ``results.regression`` with ``fail_flow``:
+    raised at the end of the flow (everything recorded), so its flow run is
+    Failed. ``summary``: the run summary the flow would have returned."""
 
     def __init__(self, report: str, summary: dict[str, Any]):
         super().__init__(report)
@@ -122,17 +98,13 @@ class RegressionFailure(RuntimeError):
 class AssetJob:
     """Everything one asset's task chain needs (JSON-able, shipped to workers).
 
-    Paths absolute (``out_dir`` the refined folder, ``metrics_dir`` the metrics
-    stage's ``evaluation.json``, ``work_dir`` scratch of isolated stages); ``time_limit_seconds`` s over all stages of the asset;
-    ``config`` the :class:`~asset2sim.schemas.config.RefineConfig` as a dict;
-    ``finished`` the catalog rows of earlier finished runs keyed by
-    :func:`asset2sim.flows.catalog.result_key` for this asset (empty when forced);
-    ``resumable`` the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
-    dicts, newest first) of earlier runs that wrote no catalog row for this
-    asset (empty when forced). With an output store (:mod:`asset2sim.flows.store`)
-    ``out_dir`` / ``metrics_dir`` / ``work_dir`` are local temporary folders
-    of the worker and ``out_uri`` / ``metrics_uri`` where the publish stage
-    uploads them (None: the outputs stay in ``out_dir``).
+    Paths absolute (``work_dir``: scratch of isolated stages);
+    ``time_limit_seconds`` s over all stages; ``config`` the
+    :class:`~asset2sim.schemas.config.RefineConfig` as a dict; ``finished``
+    earlier finished rows by :func:`asset2sim.flows.catalog.result_key` and
+    ``resumable`` job records of killed runs (newest first), both empty when
+    forced; ``out_uri`` / ``metrics_uri``: where the publish stage uploads the
+    local folders (None: no output store).
     """
 
     dataset: str
@@ -163,9 +135,8 @@ class AssetJob:
 
 @dataclass
 class BadManifestRow:
-    """A manifest row of a run that cannot be used: ``asset_id`` its catalog
-    id (:func:`asset2sim.tasks.publish.contract.manifest_row_id`), ``error``
-    the reader's typed error (line, id as written, code, message)."""
+    """A manifest row that cannot be used: its catalog id
+    (:func:`asset2sim.tasks.publish.contract.manifest_row_id`) and the reader's typed error."""
 
     asset_id: str
     error: ManifestRowError
@@ -173,17 +144,10 @@ class BadManifestRow:
 
 @dataclass
 class RunPlan:
-    """What a run works on: ``jobs`` (usable manifest rows) and ``bad_rows``
-    (rows recorded as failed without running), each in manifest order."""
+    """A run's ``jobs`` and ``bad_rows`` (recorded as failed), each in manifest order."""
 
     jobs: list[AssetJob]
     bad_rows: list[BadManifestRow] = field(default_factory=list)
-
-
-def code_version() -> str:
-    """The code that produced a result (:func:`asset2sim.tasks.publish.contract.code_version`:
-    the package version plus the git commit, or the hash of the package source)."""
-    return contract_code_version()
 
 
 def make_run_id(now: datetime | None = None) -> str:
@@ -199,10 +163,9 @@ def flow_parameters(
     dask_address: str | None = None,
     out: str | None = None,
 ) -> dict[str, Any]:
-    """The parameters ``make flow`` passes to :data:`refine_dataset` (and the
-    nightly deployment stores): the catalog as an absolute path, the dataset,
-    workers, Dask scheduler address and output store (None = catalog/environment
-    defaults; ``out`` only when given)."""
+    """The parameters ``make flow`` passes to ``refine_dataset`` (and the
+    nightly deployment stores): the catalog as an absolute path, dataset,
+    workers, Dask address and, when given, output store ``out``."""
     params = {
         "catalog": str(Path(catalog).expanduser().resolve()),
         "dataset": dataset,
@@ -235,16 +198,11 @@ def plan_run(
     out_store: str | None = None,
 ) -> RunPlan:
     """The work of a run: one job per usable manifest row and one
-    :class:`BadManifestRow` per row that cannot be used (optionally only
-    ``ids``, at most ``limit`` rows of both kinds in manifest order), with
-    earlier finished results and unrecorded finished work for the skip
-    decision (none when ``force``). ``out_store``: publish the outputs there
-    (:mod:`asset2sim.flows.store`; default ``catalog.yaml`` ``output_store``);
-    with a store, the work of a killed run that wrote no catalog row is not
-    looked for (it is redone; its folder in the store has no row pointing at it).
-
-    Generates the demo assets first when the dataset says ``generate: demo``
-    and they are missing or outdated.
+    :class:`BadManifestRow` per other row (only ``ids``, at most ``limit``
+    rows, in manifest order), with earlier finished results and a killed run's
+    unrecorded work for the skip decision (none when ``force``; the latter not
+    with an output store). ``out_store``: default ``catalog.yaml``
+    ``output_store``. Generates the demo assets first for ``generate: demo``.
 
     Raises:
         CatalogError: a manifest that is missing, not UTF-8 text or without
@@ -277,12 +235,8 @@ def plan_run(
     run_out = (store_mod.local_work_root() if store else cat.output_root) / name / run_id
     version = code_version()
     jobs = []
-    for e in ordered:
-        if isinstance(e, BadManifestRow):
-            continue
-        ref_dir = None
-        if ds.reference and partnet_mobility.has_reference(e.asset_dir):
-            ref_dir = str(e.asset_dir)
+    for e in [it for it in ordered if not isinstance(it, BadManifestRow)]:
+        ref_dir = str(e.asset_dir) if ds.reference and partnet_mobility.has_reference(e.asset_dir) else None
         jobs.append(
             AssetJob(
                 dataset=name,
@@ -297,13 +251,9 @@ def plan_run(
                 reference_scale=e.reference_scale,
                 reference_dir=ref_dir,
                 config=config,
-                refine_function=settings.refine_function,
-                evaluate=settings.evaluate,
-                probes=settings.probes,
-                extras=settings.extras,
-                isolation=settings.isolation,
+                **{k: getattr(settings, k) for k in ("refine_function", "evaluate", "probes", "extras", "isolation",
+                                                     "memory_limit_mb")},
                 time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
-                memory_limit_mb=settings.memory_limit_mb,
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
                 resumable=unrecorded.get(e.asset_id, []),
                 code_version=version,
@@ -322,9 +272,7 @@ def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> di
     """Per asset id, the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
     dicts, newest run first) that earlier runs of ``dataset`` (all but
     ``run_id``) left in their work folders without writing the asset's
-    catalog row: work of a flow killed between finishing an asset and
-    recording it. Lists two folders per run (outputs' ``.work`` and the
-    catalog partition) and reads only the records of unrecorded assets."""
+    catalog row (a flow killed between finishing an asset and recording it)."""
     store = ResultCatalog(cat.catalog_root)
     base = cat.output_root / dataset
     out: dict[str, list[dict[str, Any]]] = {}
@@ -360,8 +308,7 @@ def _worker_name() -> str:
 
 
 def job_config_hash(job: AssetJob, refine_hash: str) -> str:
-    """The catalog configuration hash of ``job``'s result
-    (:func:`asset2sim.tasks.publish.contract.flow_config_hash` of its settings)."""
+    """The catalog configuration hash of ``job``'s result (:func:`asset2sim.tasks.publish.contract.flow_config_hash`)."""
     return flow_config_hash(
         refine_hash,
         refine_function=job.refine_function,
@@ -374,9 +321,8 @@ def job_config_hash(job: AssetJob, refine_hash: str) -> str:
 
 
 def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
-    """The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`)
-    for a row whose output is a local folder or a folder in an output store
-    (:func:`asset2sim.flows.store.store_complete`, read from the store)."""
+    """The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`) for a row whose output is a local
+    folder or a folder in an output store (:func:`asset2sim.flows.store.store_complete`)."""
     if row is not None and store_mod.is_store_uri(row.get("out_dir")):
         return row if store_mod.store_complete(row["out_dir"], input_hash, row.get("refine_config_hash") or "") else None
     return finished_result(row, input_hash)
@@ -385,11 +331,9 @@ def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, 
 def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | None = None) -> StageRecord:
     """Publish stage: with an output store (``job.out_uri``), upload the
     refined folder (completion marker last) and the metrics folder, then
-    delete the worker's local copies; ``skipped`` without a store or without
-    an output. ``value``: ``{"out_uri", "files", "bytes"}``.
-
-    Never raises for a store that refuses the upload: status ``error`` with
-    the reason (the asset's row is then failed)."""
+    delete the worker's local copies; ``skipped`` without a store or an
+    output. ``value``: ``{"out_uri", "files", "bytes"}``; a refused upload is
+    status ``error`` (never raised)."""
     if job.out_uri is None or refined is None or refined.status != "ok":
         return StageRecord(status="skipped", seconds=0.0)
     t0 = time.perf_counter()
@@ -410,18 +354,14 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
 
 
 def stage_server_modules(job: AssetJob) -> tuple[str, ...]:
-    """The modules a job's stage server imports before it forks (these stage
-    functions, which its forked children run, and the job's refine
-    function's), or () when the job does not run isolated in one."""
+    """The modules a job's stage server imports before it forks (these stage functions and the refine function's),
+    () when the job does not run in one."""
     return (__name__, job.refine_function.split(":", 1)[0]) if job.isolation == "process" else ()
 
 
 def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
-    """:func:`prepare_asset` for several jobs in one call (one task of the
-    flow's task runner instead of one per asset: a rerun of finished assets
-    pays the orchestration once per batch). An exception of one job is its
-    item of the list; the others go on. Starts this worker's stage server
-    in the background meanwhile when the jobs run isolated in it."""
+    """:func:`prepare_asset` for several jobs (an exception is that job's item),
+    starting this worker's stage server in the background meanwhile."""
     for job in jobs[:1]:
         if modules := stage_server_modules(job):
             start_soon(modules)
@@ -436,9 +376,8 @@ def prepare_batch(jobs: list[AssetJob]) -> list[Prepared | Exception]:
 
 @dataclass
 class ChainResult:
-    """The stage records of one asset's chain after prepare: ``refined``,
-    ``measured`` (None when metrics raised), ``published`` (None without an
-    output store) and ``error`` the exception that stopped metrics or publish."""
+    """The stage records of one asset's chain after prepare (None when not
+    made) and ``error``, the exception that stopped metrics or publish."""
 
     refined: StageRecord
     measured: StageRecord | None = None
@@ -447,8 +386,7 @@ class ChainResult:
 
 
 def refine_chain(job: AssetJob, prepared: Prepared) -> ChainResult:
-    """refine -> metrics -> publish of one asset in one call (one task of
-    the flow: the orchestration's cost is paid once per asset, not per stage).
+    """refine -> metrics -> publish of one asset in one call (one task of the flow).
 
     Raises:
         ModelCallFailure: from the refine stage (the flow retries the chain).
@@ -465,21 +403,16 @@ def refine_chain(job: AssetJob, prepared: Prepared) -> ChainResult:
 
 
 def prepare_asset(job: AssetJob) -> Prepared:
-    """Input stage: validate and read the asset, hash input and
-    configuration, decide whether an earlier result can be reused.
-
-    When no catalog row allows a skip, an earlier run's complete folder for
-    the same input and flow configuration that has no catalog row (a killed
-    flow's finished work, ``job.resumable``) is taken instead
-    (``resume``). Otherwise the job record is written into ``job.work_dir``
-    (:data:`~asset2sim.tasks.publish.contract.JOB_RECORD_NAME`) before the
-    refine stage, so a later run can find this run's finished folder.
+    """Input stage: read the asset, hash input and configuration, and decide
+    whether an earlier result (``skip``) or a killed run's complete folder
+    without a row (``resume``, from ``job.resumable``) can be reused; else
+    write the job record into ``job.work_dir`` so a later run can find this
+    run's folder.
 
     Returns:
         The :class:`~asset2sim.tasks.publish.contract.Prepared` record with
-        the extracted description and its validation findings (``ok`` False
-        with ``failure_mode`` ``invalid_input`` and ``error`` for an asset
-        that cannot be read). Never raises for a bad asset.
+        the extracted description and findings (``ok`` False, ``invalid_input``,
+        for an asset that cannot be read: never raises for a bad asset).
 
     Raises:
         OSError: the job record cannot be written.
@@ -523,16 +456,12 @@ def stage_refine(
     reference_dir: str | None = None,
 ) -> dict[str, Any]:
     """Run the refine function on one asset (in whichever process calls it).
-
-    ``extracted``: the prepare stage's reading of the asset as JSON
-    (``{"asset": AssetDescription, "findings": [Finding, ...]}``), handed to
-    a refine function that takes ``extracted`` so it does not read the asset
-    again; ``reference_dir``: the reference folder for its extras'
-    evaluation (a refine function that takes ``reference``).
+    ``extracted``: the prepare stage's reading as JSON (``{"asset", "findings"}``),
+    ``reference_dir``: for the extras' evaluation; each passed to a refine
+    function that takes it.
 
     Returns:
-        A :class:`~asset2sim.tasks.publish.contract.RefineOutput` as JSON
-        (it crosses the isolation boundary as JSON).
+        A :class:`~asset2sim.tasks.publish.contract.RefineOutput` as JSON.
 
     Raises:
         Whatever the refine function raises (``RefineError`` carries
@@ -549,10 +478,7 @@ def stage_refine(
 
     kwargs: dict[str, Any] = {"category": category, "progress": say}
     params = inspect.signature(fn).parameters
-    if "asset_id" in params:
-        kwargs["asset_id"] = asset_id
-    if "extras" in params:
-        kwargs["extras"] = extras
+    kwargs.update({k: v for k, v in (("asset_id", asset_id), ("extras", extras)) if k in params})
     if extracted is not None and "extracted" in params:
         kwargs["extracted"] = (
             AssetDescription.model_validate(extracted["asset"]),
@@ -573,11 +499,8 @@ def stage_refine(
 
 
 def reusable_rest_test(report: RefineReport, config: dict[str, Any], engine: str = "pybullet") -> list[MetricResult] | None:
-    """The post-check's rest-test measurement in ``engine``
-    (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`) when the metrics
-    stage may record it instead of measuring again: the refine run used the
-    SPEC conventions the evaluation uses, and every rest-test metric of
-    ``engine`` is in the report. None otherwise."""
+    """The post-check's rest-test metrics in ``engine`` (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`)
+    when the metrics stage may record them: SPEC conventions and every one in the report. None otherwise."""
     if RefineConfig(**config).sim != SimConventions():
         return None
     found = {m.name: m for m in report.metrics if m.engine == engine and m.name in REST_TEST_METRICS}
@@ -587,13 +510,8 @@ def reusable_rest_test(report: RefineReport, config: dict[str, Any], engine: str
 
 
 def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, reference_dir: str | None) -> Evaluation | None:
-    """The typed :class:`~asset2sim.tasks.evaluation.evaluate.Evaluation`
-    refine's extras wrote into the refined folder (``evaluation.json``), when
-    it is the evaluation the metrics stage would make: PyBullet only, the
-    same prompt, category and reference (resolved path, or none). It then
-    holds every metric of the catalog row, the rest-test ones measured by
-    the post-check. None otherwise (no file, unreadable, another request or
-    reference)."""
+    """The :class:`~asset2sim.tasks.evaluation.evaluate.Evaluation` in ``out_dir`` (``evaluation.json``) when it is
+    the one the metrics stage would make (PyBullet only, same prompt, category and reference); else None."""
     try:
         ev = Evaluation.model_validate_json((Path(out_dir) / EVALUATION_NAME).read_text())
     except (OSError, ValueError):
@@ -606,9 +524,8 @@ def refined_evaluation(out_dir: str | Path, prompt: str, category: str | None, r
 
 def measurement_from_refine(out_dir: str, prompt: str, category: str | None, reference_dir: str | None,
                             metrics_dir: str | None) -> Measurement | None:
-    """The metrics stage's measurement from refine's evaluation
-    (:func:`refined_evaluation`), copied into ``metrics_dir`` when given;
-    None when there is none to reuse. Reads and copies a file only."""
+    """The measurement of refine's evaluation (:func:`refined_evaluation`), copied into ``metrics_dir`` when given;
+    None when there is none to reuse."""
     t0 = time.perf_counter()
     ev = refined_evaluation(out_dir, prompt, category, reference_dir)
     if ev is None:
@@ -633,16 +550,11 @@ def stage_metrics(
     post_check: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Stability metrics of a refined asset (``asset2sim.tasks.evaluation.evaluate``,
-    PyBullet, SPEC conventions); writes ``evaluation.json`` into
-    ``metrics_dir`` when given. The refined folder itself is never touched
-    (its completion marker covers every file in it).
-
-    When refine's extras already evaluated the folder for this prompt,
-    category and reference (:func:`refined_evaluation`), that evaluation is
-    read and copied to ``metrics_dir``: nothing is simulated here.
-    Otherwise the asset is evaluated; ``post_check``: the post-check's
-    rest-test metrics (JSON of :class:`~asset2sim.schemas.report.MetricResult`,
-    :func:`reusable_rest_test`), recorded instead of running the rest test again.
+    PyBullet, SPEC conventions), ``evaluation.json`` written into
+    ``metrics_dir`` when given (never into the refined folder). Refine's
+    matching evaluation (:func:`refined_evaluation`) is reused when there is
+    one; ``post_check``: rest-test metrics as JSON (:func:`reusable_rest_test`)
+    recorded instead of running the rest test again.
 
     Returns:
         A :class:`~asset2sim.tasks.publish.contract.Measurement` as JSON:
@@ -673,8 +585,7 @@ def stage_metrics(
 
 
 def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], timeout: float) -> StageRecord:
-    """Run a stage function per the job's isolation; a uniform record
-    (``status`` ok/error/timeout/crash, ``value`` the JSON it returned)."""
+    """Run a stage function per the job's isolation; a uniform record (``value``: the JSON it returned)."""
     t0 = time.perf_counter()
     if timeout <= 0:
         return StageRecord(status="timeout", error=f"no time left for stage {name}", failure_mode="timeout", seconds=0.0)
@@ -692,13 +603,8 @@ def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], ti
 
 
 def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
-    """Refine stage: synthesize, refine state, write and post-check one asset
-    (the refine function), inside the asset's time limit.
-
-    With ``prepared.resume`` (an earlier run's complete folder) nothing is
-    refined: the value is read from that folder's ``report.json``
-    (:func:`~asset2sim.tasks.publish.contract.refined_output`), ``seconds``
-    the refine time its report records.
+    """Refine stage: the refine function on one asset within its time limit
+    (for ``prepared.resume``, the earlier folder's ``report.json`` instead).
 
     Returns:
         The stage record, ``value`` a :class:`~asset2sim.tasks.publish.contract.RefineOutput`;
@@ -724,14 +630,8 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
         "refine",
         "asset2sim.flows.stages:stage_refine",
         {
-            "asset_dir": job.asset_dir,
-            "prompt": job.prompt,
-            "out_dir": job.out_dir,
-            "config": job.config,
-            "category": job.category,
-            "asset_id": job.asset_id,
-            "refine_function": job.refine_function,
-            "extras": job.extras,
+            **{k: getattr(job, k) for k in ("asset_dir", "prompt", "out_dir", "config", "category", "asset_id",
+                                            "refine_function", "extras")},
             "extracted": None if prepared.asset is None else {
                 "asset": prepared.asset.model_dump(mode="json"),
                 "findings": [f.model_dump(mode="json") for f in prepared.findings],
@@ -749,13 +649,10 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
 
 
 def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> StageRecord:
-    """Metrics stage: the metric columns of the refined output, inside what
-    is left of the asset's time limit: read from refine's evaluation when it
-    matches (:func:`refined_evaluation`), else evaluated, recording the
-    post-check's rest test when :func:`reusable_rest_test` allows.
-    ``skipped`` when there is no output or ``job.evaluate`` is off. For an
-    earlier run's folder (``prepared.resume``) that run's metrics folder is
-    used: its ``evaluation.json`` when the metrics stage had written it."""
+    """Metrics stage: the metric columns of the refined output within what is
+    left of the time limit (:func:`stage_metrics`; for ``prepared.resume``
+    the earlier run's measurement when it made one). ``skipped`` without an
+    output or with ``job.evaluate`` off."""
     if refined.status != "ok" or not job.evaluate:
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value
@@ -796,15 +693,14 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
 
 
 def default_prefect_home(project_root: Path | str) -> Path:
-    """Where the CLI keeps Prefect's local state (``<project>/.prefect``), so
-    runs of this project do not share a SQLite database with other projects."""
+    """Where the CLI keeps Prefect's local state: ``<project>/.prefect``."""
     return Path(project_root) / ".prefect"
 
 
 def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
-    """Environment defaults for Prefect, to apply *before* Prefect is imported:
-    ``PREFECT_HOME`` under the project, analytics off, a longer start-up
-    timeout of the temporary server. Existing variables win. Returns what was set."""
+    """Environment defaults for Prefect, set before it is imported unless
+    already set (home under the project, analytics off, a longer start-up
+    timeout); returns what was set."""
     defaults = {
         "PREFECT_HOME": str(default_prefect_home(project_root)),
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",

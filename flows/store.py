@@ -1,28 +1,12 @@
 """Refined outputs on object storage: the output store of a flow run.
 
-With ``output_store`` in ``catalog.yaml`` (or ``asset2sim flow --out URI``)
-a run's outputs go to ``<store>/<dataset>/<run>/<asset id>/`` (and the
-metrics stage's ``evaluation.json`` to ``<store>/<dataset>/<run>/_metrics/<asset id>/``)
-on any filesystem pyarrow or fsspec opens (``s3://bucket/prefix``,
-``gs://...``, ``memory://...``, or a plain path), the same way the result
-catalog is opened (:func:`asset2sim.flows.catalog_fs.open_location`; S3
-credentials and endpoint from the usual ``AWS_*`` environment or the URI's
-query). Workers need no shared disk: each refines into a local temporary
-folder (:func:`local_work_root`), and the publish stage uploads it.
-
-Atomicity (upload, then manifest): every file of the folder is uploaded
-first (one ``PUT`` each: a reader never sees part of an object), the
-completion marker (:data:`asset2sim.output_folder.MARKER_NAME`,
-which lists every file of the folder with its SHA-256) last. A folder in the
-store is complete only when its marker is there and every file the marker
-lists exists (:func:`store_complete`): an upload cut off by a killed worker
-leaves a folder without a marker, which the skip rule never takes, and the
-asset's next attempt uploads it again over the same keys.
-
-The skip rule reads the store: a catalog row whose ``out_dir`` is a store
-URI is a finished result when :func:`store_complete` holds for its input
-and refine configuration (file presence from one listing, not a download:
-a rerun of finished assets stays a listing per asset).
+With ``output_store`` (or ``asset2sim flow --out URI``) a run's outputs go
+to ``<store>/<dataset>/<run>/<asset id>/`` (metrics to ``.../_metrics/<asset
+id>/``) on any filesystem :func:`asset2sim.flows.catalog_fs.open_location`
+opens. Workers refine into a local folder (:func:`local_work_root`) and the
+publish stage uploads it, the completion marker last; a store folder is
+complete only when its marker is there and every file it lists exists
+(:func:`store_complete`, one listing), which is what the skip rule reads.
 """
 
 from __future__ import annotations

@@ -1,20 +1,10 @@
 """Experiment tracking of flow runs with MLflow, and the run's artifacts.
 
-One MLflow run per flow run (experiment from ``catalog.yaml``, default
-``asset2sim``): parameters (dataset, estimator, model, configuration hash,
-workers, code version), metrics (pass rates, mean penetration, queries per
-asset, failure-mode counts ``failures_<mode>``, wall times), artifacts (the
-run's summary table ``summary.csv`` and failure-mode plot
-``failure_modes.png``), and one nested run per asset (tag
-``mlflow.parentRunId``) with its metrics and verdict tags.
-
-The tracking store is ``MLFLOW_TRACKING_URI`` when set, else the catalog's
-``tracking.uri``, else a SQLite database under the project,
+One MLflow run per flow run (parameters, metrics, ``summary.csv``,
+``failure_modes.png``) with one nested run per asset. The store is
+``MLFLOW_TRACKING_URI``, else ``tracking.uri``, else
 ``sqlite:///<project>/mlflow.db``; new experiments keep their artifacts in
-``<project>/mlruns/<experiment>``. Browse with
-``mlflow ui --backend-store-uri sqlite:///mlflow.db``.
-
-MLflow and matplotlib are imported inside the functions that use them.
+``<project>/mlruns/<experiment>``.
 """
 
 from __future__ import annotations
@@ -177,18 +167,10 @@ def log_flow_run(
 ) -> str:
     """Log one flow run (and a nested run per asset row of ``df``) to MLflow.
 
-    Args:
-        df: the run's catalog rows.
-        summary: :func:`asset2sim.flows.queries.run_summary` plus timings (s).
-        params: run parameters (stringified; values over 500 characters cut).
-        artifacts: name -> file to attach.
-        project_root: where the default SQLite store and artifacts live.
-        settings: :class:`asset2sim.flows.catalog.TrackingSettings` (or None for defaults).
-        tags: extra run tags.
-        nested: also create one nested run per asset.
-
-    Returns:
-        The MLflow run id.
+    ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s);
+    ``params`` stringified (cut at 500 characters); ``artifacts``: name -> file;
+    ``project_root``: where the default store lives; ``settings``:
+    :class:`asset2sim.flows.catalog.TrackingSettings`. Returns the MLflow run id.
 
     Raises:
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
@@ -196,7 +178,6 @@ def log_flow_run(
     """
     from mlflow.entities import Metric, Param, RunTag
     from mlflow.tracking import MlflowClient
-
 
     settings = settings or TrackingSettings()
     project_root = Path(project_root)

@@ -1,9 +1,6 @@
-"""Structured description of an input asset (the output of the extraction stage).
-
-Everything here is in the asset's own units and frames, *before* any scale is
-applied: lengths in the file's units (PartNet-Mobility: roughly unit-size,
-metres nominally), angles in radians. Poses follow URDF: ``xyz`` (3,) in
-metres and ``rpy`` (3,) roll-pitch-yaw in radians, fixed-axis X-Y-Z.
+"""Structured description of an input asset (the output of the extraction
+stage), in the asset's own units and frames before any scale: lengths in the
+file's units, angles rad, poses as URDF ``xyz`` (3,) and ``rpy`` (3,).
 """
 
 from __future__ import annotations
@@ -104,10 +101,6 @@ class JointDesc(BaseModel):
     def is_movable(self) -> bool:
         return self.type in ("revolute", "continuous", "prismatic")
 
-    @property
-    def is_angular(self) -> bool:
-        return self.type in ("revolute", "continuous")
-
 
 class AssetDescription(BaseModel):
     """Everything the extraction stage knows about one input asset."""
@@ -141,23 +134,14 @@ class AssetDescription(BaseModel):
         return [j for j in self.joints if j.is_movable]
 
     def parent_joint(self, link_name: str) -> JointDesc | None:
-        for joint in self.joints:
-            if joint.child == link_name:
-                return joint
-        return None
+        return next((joint for joint in self.joints if joint.child == link_name), None)
 
 
 class LinkGeometry(BaseModel):
-    """Mesh analysis of one link at scale 1, in the link frame.
-
-    ``volume`` m^3 (enclosed volume: exact for watertight meshes, otherwise the
-    robust estimate named by ``volume_method``), ``area`` m^2 (total surface
-    area), ``bbox_min``/``bbox_max`` (3,) m, ``com`` (3,) m (of the enclosed
-    solid), ``inertia_solid`` and ``inertia_shell`` (3, 3) kg*m^2 per kg of mass
-    about ``com`` for a uniformly filled solid and for a thin uniform shell.
-    Scaling by a uniform factor s multiplies lengths by s, ``area`` by s^2,
-    ``volume`` by s^3 and the per-kg inertias by s^2.
-    """
+    """Mesh analysis of one link at scale 1, in the link frame: ``volume`` m^3
+    (exact when watertight, else by ``volume_method``), ``area`` m^2, bounding
+    box and ``com`` (3,) m, ``inertia_solid`` / ``inertia_shell`` (3, 3)
+    kg*m^2 per kg about ``com`` (filled solid, thin shell)."""
 
     model_config = ConfigDict(extra="forbid")
     link: str

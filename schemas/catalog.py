@@ -1,12 +1,7 @@
-"""One row of the Parquet result catalog, as a typed model.
-
-:class:`CatalogRow` is the contract between the flow (which builds one row
-per asset per run, :func:`asset2sim.tasks.publish.contract.build_row`) and the
-catalog (:class:`asset2sim.flows.catalog.ResultCatalog`, which writes and reads
-them). The Parquet schema is derived from the model's fields
-(:func:`arrow_schema`), so a column is declared once. Units are in the column
-names (``_mm``, ``_m``, ``_rad``, ``_kg``, ``_seconds``, ``_pct``); the
-metric columns are those of :func:`asset2sim.schemas.metrics.catalog_columns`.
+"""One row of the Parquet result catalog (:class:`CatalogRow`), the contract
+between the flow and :class:`asset2sim.flows.catalog.ResultCatalog`; the
+Parquet schema is derived from its fields (:func:`arrow_schema`). Units are in
+the column names (``_mm``, ``_m``, ``_rad``, ``_kg``, ``_seconds``, ``_pct``).
 """
 
 from __future__ import annotations
@@ -19,36 +14,21 @@ from typing import Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, field_validator
 
-#: Version of the row schema, written into every Parquet file's metadata
-#: (key :data:`SCHEMA_VERSION_KEY`). Columns are only ever added (nullable),
-#: never renamed, removed or retyped, so a reader of version N reads every
-#: file of versions <= N: a column a file lacks reads as null
-#: (:meth:`asset2sim.flows.catalog.ResultCatalog.read`). History:
-#:
-#: - 1: the columns up to ``finished_at``;
-#: - 2: ``code_hash`` (SHA-256 of the package source, the skip key's code part,
-#:   :func:`asset2sim.tasks.publish.contract.code_hash`).
+#: Version of the row schema in every Parquet file's metadata; columns are only
+#: ever added (nullable), so a reader of version N reads every older file
+#: (version 2 added ``code_hash``).
 SCHEMA_VERSION = 2
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
-#: The columns each schema version added (version 1: all of its columns).
-SCHEMA_ADDED: dict[int, tuple[str, ...]] = {2: ("code_hash",)}
 
 RowStatus = Literal["done", "skipped", "failed"]
 ROW_STATUSES: tuple[str, ...] = RowStatus.__args__  # type: ignore[attr-defined]
 
 
 class CatalogRow(BaseModel):
-    """One asset's result in one flow run (partition columns ``dataset`` and
-    ``run`` come from the folder names).
-
-    ``status``: ``done`` (worked on in this run), ``skipped`` (an earlier
-    finished result reused; ``source_run`` names it), ``failed``;
-    ``failure_mode`` from :data:`asset2sim.schemas.report.FAILURE_MODES`;
-    ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON {stage: s};
-    ``code_version`` the human-readable code version (package version and git
-    commit), ``code_hash`` the hash of the package source the skip rule compares.
-    Non-finite floats are stored as null.
-    """
+    """One asset's result in one flow run (``dataset`` and ``run`` are the
+    partition folders): ``status`` done, skipped (``source_run`` reused) or
+    failed; ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON
+    {stage: s}; ``code_hash`` what the skip rule compares. Non-finite floats are null."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
@@ -119,10 +99,8 @@ def _arrow_type(annotation):
 
 
 def arrow_schema(with_version: bool = False):
-    """The Parquet (pyarrow) schema of :class:`CatalogRow`, field for field:
-    str -> string, float -> float64, int -> int64, bool -> bool,
-    datetime -> timestamp(us, UTC); every column nullable. ``with_version``:
-    with :data:`SCHEMA_VERSION` in the schema metadata (what the writer stores)."""
+    """The Parquet (pyarrow) schema of :class:`CatalogRow`, every column
+    nullable; ``with_version``: :data:`SCHEMA_VERSION` in its metadata."""
     import pyarrow as pa
 
     schema = pa.schema([(name, _arrow_type(f.annotation)) for name, f in CatalogRow.model_fields.items()])

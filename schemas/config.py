@@ -42,10 +42,7 @@ class SimConventions(BaseModel):
 
 def default_engines() -> list[str]:
     """The post-check's default engines: PyBullet, and PhysX (SAPIEN 3) when
-    ``sapien`` is installed (it is with ``make setup``), the engine of Isaac
-    Sim, SAPIEN and ManiSkill; on the 21 dev objects PhysX adds about 0.2 s
-    per post-check round plus 0.9 s of import once per process
-    (``docs/design/simulators.md``)."""
+    ``sapien`` is installed (``docs/design/simulators.md``)."""
     return ["pybullet", "physx"] if importlib.util.find_spec("sapien") is not None else ["pybullet"]
 
 
@@ -67,10 +64,8 @@ class RefineConfig(BaseModel):
     max_state_evaluations: int = 4000
     """Budget of contact queries during state refinement (count)."""
     max_escalation_rounds: int = 5
-    """Post-check rounds changing damping/friction (count): escalation and
-    relief, bracketed by what each round measured
-    (:mod:`asset2sim.tasks.check.dynamics_search`: a joint in conflict
-    between robust rest and the task needs a round or two of bisection)."""
+    """Post-check rounds changing damping/friction (count;
+    :mod:`asset2sim.tasks.check.dynamics_search`)."""
     escalation_factor: float = 3.0
     """Multiplier on damping/friction per escalation round (dimensionless)."""
     sag_tolerance_revolute: float = 0.02
@@ -80,20 +75,13 @@ class RefineConfig(BaseModel):
     convex_decomposition: bool = True
     """Allow CoACD decomposition of collision meshes whose hulls always overlap."""
     engines: list[str] = Field(default_factory=lambda: default_engines())
-    """Engines the post-check must pass in (worst case over them); PyBullet is
-    always first (state refinement and escalation run there). Default:
-    :func:`default_engines` (PyBullet, and PhysX where SAPIEN is installed)."""
+    """Engines the post-check must pass in (worst case); PyBullet first."""
     max_decompositions: int = Field(32, ge=0)
-    """CoACD decompositions one collision repair may try (a count of calls,
-    never seconds, so the same input gives the same files on a loaded or a
-    quiet machine). The 21 dev rows with their manifest requests call CoACD
-    at most 4 times per refine (102990; 103275: 2); a repair that reaches
-    the cap keeps the remaining meshes as their hulls and says so."""
+    """CoACD decompositions one collision repair may try (a count, never
+    seconds: same input, same files); beyond it meshes keep their hulls."""
     seed: int = 0
     overrides: RequestOverrides = Field(default_factory=RequestOverrides)
-    """Typed values that win over the request's words (mass kg, size m,
-    scale, joint states, mounting, material;
-    :class:`~asset2sim.schemas.request.RequestOverrides`)."""
+    """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""

@@ -1,9 +1,4 @@
-"""The evaluation of one asset as handed over: the contents of ``evaluation.json``.
-
-Made by :func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`; read by
-the flows (catalog rows), the benchmark records and
-:func:`asset2sim.tasks.evaluation.report_html.write_report`, which renders it.
-"""
+"""The evaluation of one asset: the contents of ``evaluation.json``."""
 
 from __future__ import annotations
 
@@ -18,19 +13,10 @@ EVALUATION_VERSION = "1"
 
 
 class Evaluation(BaseModel):
-    """Contents of ``evaluation.json``.
-
-    ``metrics``: every metric result (one per engine for the simulator metrics).
-    ``passed``: every metric that has a verdict passed. ``failures``: names of
-    the failed metrics (``name@engine``). ``scale`` dimensionless (relative to
-    the raw input); ``initial_state`` rad/m; ``seconds`` wall time of the
-    evaluation without report writing.
-
-    Not serialised: the raw measurements per engine (``_runs``, engine ->
-    :class:`asset2sim.tasks.evaluation.engine_run.EngineRun`) and the context
-    (``_context``, :class:`asset2sim.tasks.evaluation.eval_context.Context`)
-    the report draws from.
-    """
+    """Contents of ``evaluation.json``: ``metrics`` (one per engine for the
+    simulator metrics), ``passed`` (every verdict passed), ``failures``
+    (``name@engine``), ``initial_state`` rad/m, ``seconds`` wall time. Not
+    serialised: ``_runs`` (engine -> EngineRun) and ``_context``, for the report."""
 
     model_config = ConfigDict(extra="forbid")
     version: str = EVALUATION_VERSION
@@ -59,7 +45,4 @@ class Evaluation(BaseModel):
     def metric(self, name: str, engine: str | None = None) -> MetricResult | None:
         """The first metric called ``name`` (of ``engine`` when given; a
         metric of engine ``"none"`` matches any engine)."""
-        for m in self.metrics:
-            if m.name == name and (engine is None or m.engine in (engine, "none")):
-                return m
-        return None
+        return next((m for m in self.metrics if m.name == name and (engine is None or m.engine in (engine, "none"))), None)

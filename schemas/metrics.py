@@ -1,17 +1,7 @@
 """The metric registry's table: every metric's name, unit, group and the
-catalog columns it fills.
-
-One table serves the post-check (:mod:`asset2sim.tasks.check.postcheck`), the
-evaluation (:mod:`asset2sim.tasks.evaluation.metric_defs` attaches a function to
-each name with ``register_metric``), cross-simulator parity
-(:mod:`asset2sim.tasks.check.parity`: the :data:`SPEC_METRICS`) and the
-Parquet catalog (:class:`asset2sim.schemas.catalog.CatalogRow`: the columns
-of :func:`catalog_columns`).
-
-A catalog column is taken from one field of a
-:class:`~asset2sim.schemas.report.MetricResult`: ``value``, ``passed`` or
-``details.<key>``. Definitions, conventions and thresholds: ``docs/design/metrics.md``
-and the SPEC ("How quality is measured").
+catalog columns it fills (each from a :class:`~asset2sim.schemas.report.MetricResult`
+field: ``value``, ``passed`` or ``details.<key>``), shared by the post-check,
+the evaluation, parity and the catalog. Definitions: ``docs/design/metrics.md``.
 """
 
 from __future__ import annotations
@@ -27,14 +17,9 @@ MetricGroup = Literal["physical", "semantic", "behaviour", "check"]
 
 @dataclass(frozen=True)
 class MetricInfo:
-    """One metric of the registry.
-
-    ``unit`` of ``MetricResult.value``; ``group``: ``physical`` (measured in a
-    simulator, per engine), ``semantic`` (against the request or a
-    reference), ``behaviour`` (probes), ``check`` (refine's own post-check
-    checks, not SPEC metrics); ``columns``: catalog column -> field of the
-    result (``value``, ``passed`` or ``details.<key>``); ``description`` one line.
-    """
+    """One metric: ``unit`` of its value; ``group`` physical (per engine),
+    semantic, behaviour or check (refine's own, not SPEC); ``columns``
+    catalog column -> result field."""
 
     name: str
     unit: str
@@ -87,11 +72,7 @@ REST_TEST_METRICS: tuple[str, ...] = SPEC_METRICS
 
 
 def unit(name: str) -> str:
-    """Unit of metric ``name``'s value.
-
-    Raises:
-        KeyError: not a registered metric.
-    """
+    """Unit of metric ``name``'s value (KeyError: not registered)."""
     return METRIC_INFO[name].unit
 
 
@@ -119,12 +100,8 @@ def _field(m: MetricResult, source: str) -> Any:
 def column_values(metrics: Iterable[MetricResult], engine: str | None = "pybullet",
                   names: Iterable[str] | None = None) -> dict[str, Any]:
     """Catalog column values of ``metrics`` (first result per name, of
-    ``engine`` or engine-less ``none`` when given; only ``names`` when given).
-
-    A metric absent from ``metrics`` contributes no key; a present one gives
-    every column of :data:`METRIC_INFO` (None for a missing or non-finite
-    number). Numbers are floats, verdicts booleans or None.
-    """
+    ``engine`` or ``none`` when given, only ``names`` when given): every column
+    of a present metric, None for a missing or non-finite number."""
     wanted = None if names is None else set(names)
     seen: set[str] = set()
     out: dict[str, Any] = {}

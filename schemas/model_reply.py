@@ -1,27 +1,12 @@
 """What a model backend must answer: the reply schema (SPEC stage 2).
 
-A model's reply is a *prior*, not the overlay itself: the asset2sim estimator
-(:mod:`asset2sim.tasks.synthesize.llm_estimator`) turns the per-link material choice into
-mass through the geometry (m = v * rho * s^3 * eta), computes inertia from the
-scaled geometry, derives joint dynamics from physics using the model's
-qualitative choices (damping level, holds position, spring, stiff, free
-moving) and the state from the model's band per joint through the geometric
-closed ends. The numeric estimates with standard deviations (link mass,
-damping, friction, stiffness, joint position) are what the ``direct`` and
-``ivw`` baselines apply (IVW fuses them by inverse-variance weighting).
-
-Kept consistent with :mod:`asset2sim.schemas.overlay` (same units, same
-field names where the meaning is the same; lists of named entries instead of
-dicts so that the JSON schema is accepted by structured-output APIs, which
-need a fixed set of properties). :func:`reply_json_schema` is the schema sent
-as the structured-output constraint (``response_format`` ``json_schema``);
-parsing a reply with :class:`ModelReply` enforces the same rules plus the
-ones a JSON schema cannot say (finite numbers, bounded text lengths).
-
-Units (SI, radians; values refer to the *output* asset, scale applied):
-scale dimensionless; density kg/m^3; wall thickness m; mass kg; revolute
-damping N*m*s/rad, friction N*m, stiffness N*m/rad, position rad; prismatic
-damping N*s/m, friction N, stiffness N/m, position m.
+A reply is a *prior*: the estimator (:mod:`asset2sim.tasks.synthesize.llm_estimator`)
+derives the overlay from its qualitative choices through the geometry; the
+``direct`` and ``ivw`` baselines apply its numeric estimates. Entries are
+lists, not dicts, as structured-output APIs need fixed properties;
+:func:`reply_json_schema` is the schema sent, and :class:`ModelReply` also
+checks what a JSON schema cannot say. Units as :mod:`asset2sim.schemas.overlay`
+(output asset): density kg/m^3, wall thickness m, mass kg.
 """
 
 from __future__ import annotations
@@ -34,7 +19,6 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from asset2sim.schemas.request import DampingLevel, StateBand
 
 REPLY_SCHEMA_NAME = "asset2sim_overlay_reply"
-REPLY_SCHEMA_VERSION = "1.0"
 
 #: Longest free-text field accepted (characters); longer replies are rejected.
 MAX_TEXT = 2000
@@ -76,14 +60,9 @@ class LinkReply(_Strict):
     mass: Estimate
     """kg; the model's own estimate of this link's mass at the requested size (mass.value > 0)."""
 
-    @field_validator("link")
+    @field_validator("link", "material")
     @classmethod
     def _name(cls, v: str) -> str:
-        return _short(v, MAX_NAME)
-
-    @field_validator("material")
-    @classmethod
-    def _mat(cls, v: str) -> str:
         return _short(v, MAX_NAME)
 
     @field_validator("mass")
@@ -172,9 +151,7 @@ class ModelReply(_Strict):
         return v
 
 
-#: JSON-schema keywords kept in the schema sent to APIs (the subset that
-#: OpenAI strict structured outputs and Gemini's response schema accept;
-#: everything else is checked when the reply is parsed).
+#: JSON-schema keywords OpenAI strict structured outputs and Gemini accept.
 _KEEP = {
     "type", "properties", "required", "additionalProperties", "items", "enum", "description",
     "$defs", "$ref", "anyOf", "minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum", "maxItems",
@@ -225,8 +202,7 @@ class JointProposalReply(_Strict):
 def reply_json_schema(model: type[BaseModel] | None = None) -> dict[str, Any]:
     """The JSON schema of ``model`` (default :class:`ModelReply`) as sent to
     model APIs: every property required, no additional properties, only
-    keywords structured-output APIs accept (titles and defaults dropped).
-    Pure; returns a fresh dict."""
+    :data:`_KEEP` keywords. A fresh dict."""
     schema = _prune(copy.deepcopy((model or ModelReply).model_json_schema()))
 
     def close(node: Any) -> None:

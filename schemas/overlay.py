@@ -1,18 +1,9 @@
 """The physics overlay: the only thing an estimator may produce (SPEC, stage 2).
 
-All values refer to the *output* asset, i.e. after the uniform scale ``scale``
-is baked in. Units (SI, radians):
-
-- mass kg; inertia kg*m^2 about the link's center of mass, axes of the link
-  frame; center of mass m in the link frame.
-- revolute / continuous joints: damping N*m*s/rad, friction N*m, stiffness
-  N*m/rad, spring reference rad.
-- prismatic joints: damping N*s/m, friction N, stiffness N/m, spring
-  reference m.
-- initial joint positions rad (revolute) or m (prismatic).
-
-The JSON schema of :class:`Overlay` (``Overlay.model_json_schema()``) is also
-what model backends are asked to answer in.
+Values refer to the *output* asset (scale baked in), SI and radians: mass kg,
+inertia kg*m^2 about the COM in link axes, COM m in the link frame; revolute
+damping N*m*s/rad, friction N*m, stiffness N*m/rad; prismatic N*s/m, N, N/m;
+joint positions rad or m.
 """
 
 from __future__ import annotations
@@ -28,10 +19,8 @@ SCHEMA_VERSION = "1.0"
 Vec3 = tuple[float, float, float]
 
 
-#: The overlay's uniform scale must lie in this range (dimensionless):
-#: :mod:`asset2sim.tasks.synthesize.validate_overlay` refuses a scale outside it
-#: (``OVL_SCALE_INVALID``) and the input validator derives its asset-size bound
-#: from it (``ASSET_SIZE_IMPLAUSIBLE``, :mod:`asset2sim.tasks.ingest.findings`).
+#: The overlay's uniform scale must lie in this range (``OVL_SCALE_INVALID``;
+#: the input validator's ``ASSET_SIZE_IMPLAUSIBLE`` bound derives from it).
 SCALE_RANGE: tuple[float, float] = (1e-4, 1e4)
 
 
@@ -51,28 +40,15 @@ class Inertia(_Strict):
 
     def matrix(self) -> np.ndarray:
         """The tensor as a (3, 3) float array."""
-        return np.array(
-            [
-                [self.ixx, self.ixy, self.ixz],
-                [self.ixy, self.iyy, self.iyz],
-                [self.ixz, self.iyz, self.izz],
-            ],
-            dtype=float,
-        )
+        return np.array([[self.ixx, self.ixy, self.ixz], [self.ixy, self.iyy, self.iyz], [self.ixz, self.iyz, self.izz]], dtype=float)
 
     @classmethod
     def from_matrix(cls, m: np.ndarray) -> "Inertia":
         """Build from a (3, 3) array; the upper triangle is used (symmetrized)."""
         m = np.asarray(m, dtype=float)
         s = 0.5 * (m + m.T)
-        return cls(
-            ixx=float(s[0, 0]),
-            ixy=float(s[0, 1]),
-            ixz=float(s[0, 2]),
-            iyy=float(s[1, 1]),
-            iyz=float(s[1, 2]),
-            izz=float(s[2, 2]),
-        )
+        return cls(ixx=float(s[0, 0]), ixy=float(s[0, 1]), ixz=float(s[0, 2]), iyy=float(s[1, 1]), iyz=float(s[1, 2]),
+                   izz=float(s[2, 2]))
 
 
 class ContactMaterial(_Strict):
@@ -115,9 +91,8 @@ class JointDynamics(_Strict):
     """Inertia of the moving subtree about / along the axis (kg*m^2 or kg), when
     known: bounds the damping a simulator integrates stably (c <= I / dt)."""
     lower: float | None = None
-    """Clipped lower limit (rad, or m at the output scale) when the raw limit
-    lets the part pass into other links (``tasks.geometry.limits``); None: the
-    raw limit (scaled) is kept."""
+    """Clipped lower limit (rad or m, output scale) when the raw one lets the
+    part pass into other links (``tasks.geometry.limits``); None: raw limit kept."""
     upper: float | None = None
     """Clipped upper limit (rad or m at the output scale); None: raw limit kept."""
     limit_source: str = ""
@@ -155,12 +130,8 @@ MountingKind = Literal["free-standing", "counter-mounted", "wall-mounted", "floo
 
 
 class RootMount(_Strict):
-    """How the asset is held in the world (``tasks.interpret.mounting``).
-
-    ``fixed``: the root link is fixed in every simulation (mounted); False:
-    free on the ground (the SPEC's convention). ``source``: the category
-    prior or the request words that decided it.
-    """
+    """How the asset is held (``tasks.interpret.mounting``): ``fixed`` root in
+    every simulation, else free on the ground; ``source`` what decided it."""
 
     kind: MountingKind = "free-standing"
     fixed: bool = False
@@ -200,12 +171,8 @@ Severity = Literal["error", "warning", "info"]
 
 
 class ValidationIssue(_Strict):
-    """One finding of a validator.
-
-    ``code`` is a stable identifier (e.g. ``OVL_MASS_NONPOSITIVE``), ``where``
-    names the link, joint or ``global``, ``severity`` is the validator's
-    default, which a policy may override.
-    """
+    """One finding of a validator: stable ``code``, ``where`` (link, joint or
+    ``global``), ``severity`` (the default a policy may override)."""
 
     code: str
     severity: Severity

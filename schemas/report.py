@@ -11,22 +11,9 @@ from asset2sim.schemas.request import RequestFindings
 
 #: Fixed vocabulary of per-asset failure modes (pipeline catalog, reports).
 FailureMode = Literal[
-    "none",
-    "invalid_input",
-    "estimator_failure",
-    "invalid_overlay",
-    "unresolved_penetration",
-    "unstable",
-    "oscillating",
-    "joint_not_held",
-    "blocked_joint",
-    "not_robust_at_rest",
-    "probe_failed",
-    "task_failed",
-    "implausible_force",
-    "timeout",
-    "crash",
-    "invalid_manifest_row",
+    "none", "invalid_input", "estimator_failure", "invalid_overlay", "unresolved_penetration", "unstable", "oscillating",
+    "joint_not_held", "blocked_joint", "not_robust_at_rest", "probe_failed", "task_failed", "implausible_force", "timeout",
+    "crash", "invalid_manifest_row",
 ]
 FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
 
@@ -75,9 +62,8 @@ class StateRefinement(BaseModel):
     model_queries: int = 0
     """Model calls made by the state search (joint proposals when it stalled)."""
     room_made: dict[str, float] = Field(default_factory=dict)
-    """joint -> opening fraction of each joint the request did not address
-    (closed by default) that the search opened because a part the request
-    opened penetrated its part (:func:`asset2sim.tasks.state.refine_state.joints_in_the_way`)."""
+    """joint -> opening fraction of each joint the request left closed that the
+    search opened to make room (:func:`asset2sim.tasks.state.refine_state.joints_in_the_way`)."""
 
 
 class RefineReport(BaseModel):
@@ -121,21 +107,15 @@ class RefineReport(BaseModel):
     stage_seconds: dict[str, float] = Field(default_factory=dict)
     notes: list[str] = Field(default_factory=list)
     request: RequestFindings | None = None
-    """Ignored word groups, warnings and every number of the request with what
-    the output achieved (:func:`asset2sim.tasks.synthesize.request_apply.findings`)."""
+    """The request's findings (:func:`asset2sim.tasks.synthesize.request_apply.findings`)."""
     mounting: RootMount | None = None
     """How the root was held in every check (``tasks.interpret.mounting``);
     None in reports written before it was recorded (free-standing)."""
     readiness: dict[str, bool | None] = Field(default_factory=dict)
     """Interaction-readiness per tier (``tasks.check.verdict.TIERS``): True
-    pass, False fail, None not measured; ``failure_mode`` is the first
-    failing tier's mode. The terminal, ``report.html`` and the catalog show
-    this verdict."""
+    pass, False fail, None not measured; ``failure_mode`` is the first failing tier's."""
     design_changes: list[str] = Field(default_factory=list)
     """What stability by design changed and why (``tasks.state.stability``)."""
 
     def metric(self, name: str) -> MetricResult | None:
-        for m in self.metrics:
-            if m.name == name:
-                return m
-        return None
+        return next((m for m in self.metrics if m.name == name), None)

@@ -19,24 +19,13 @@ DampingLevel = Literal["low", "moderate", "high"]
 #: Target opening fraction per band: |q - q_closed| / (largest opening from q_closed).
 #: "slightly open" aims low in its band (a slightly open stapler or laptop is a
 #: few tens of degrees open, not a third of a 200-degree range).
-BAND_TARGET: dict[str, float] = {
-    "closed": 0.0,
-    "slightly_open": 0.12,
-    "quarter": 0.25,
-    "halfway": 0.5,
-    "mostly": 0.75,
-    "fully": 1.0,
-}
+BAND_TARGET: dict[str, float] = {"closed": 0.0, "slightly_open": 0.12, "quarter": 0.25, "halfway": 0.5, "mostly": 0.75, "fully": 1.0}
 
 #: Acceptance interval per band (fractions of the opening range), from the
 #: refine issue's definition of "lands in its band".
 BAND_INTERVAL: dict[str, tuple[float, float]] = {
-    "closed": (0.0, 0.03),
-    "slightly_open": (0.05, 0.35),
-    "quarter": (0.15, 0.35),
-    "halfway": (0.35, 0.65),
-    "mostly": (0.6, 0.9),
-    "fully": (0.85, 1.0),
+    "closed": (0.0, 0.03), "slightly_open": (0.05, 0.35), "quarter": (0.15, 0.35), "halfway": (0.35, 0.65),
+    "mostly": (0.6, 0.9), "fully": (0.85, 1.0),
 }
 
 
@@ -47,16 +36,10 @@ OrderAxis = Literal["vertical", "left_right", "right_left", "front_back"]
 
 
 class StateTarget(BaseModel):
-    """A state asked for in numbers or by a physical end, resolved against the
-    geometry after scaling (:mod:`asset2sim.tasks.synthesize.request_apply`).
-
-    ``kind``: ``fraction`` (``value`` opening fraction 0..1 from the geometric
-    closed end), ``angle`` (``value`` rad from the closed end), ``distance``
-    (``value`` m from the closed end, at the output's scale) or ``end``
-    (``end``: ``high``/``low`` = the highest/lowest world-z position of the
-    moving part over its travel after scaling and the resting pose; ``on``/
-    ``off`` = a toggle switch's high/low end, see ``docs/guide/requests.md``).
-    """
+    """A state in numbers or by a physical end, resolved against the scaled
+    geometry: ``kind`` ``fraction`` (``value`` 0..1 from the closed end),
+    ``angle`` (rad), ``distance`` (m, output scale) or ``end`` (``high`` /
+    ``low`` world z of the moving part, ``on`` / ``off`` a toggle's ends)."""
 
     model_config = ConfigDict(extra="forbid")
     kind: TargetKind
@@ -65,9 +48,8 @@ class StateTarget(BaseModel):
 
 
 class SizeTarget(BaseModel):
-    """A size in numbers: ``value`` m along ``dimension`` (height = world z of
-    the closed object; width/depth = larger/smaller horizontal extent; length or
-    largest = the largest extent)."""
+    """A size in numbers: ``value`` m along ``dimension`` (height: world z of
+    the closed object; width / depth: larger / smaller horizontal extent)."""
 
     model_config = ConfigDict(extra="forbid")
     dimension: Dimension
@@ -87,10 +69,9 @@ class PartProperty(BaseModel):
 
 
 class DynamicsValue(BaseModel):
-    """An explicit joint parameter: ``quantity`` damping (N*m*s/rad or N*s/m),
-    friction (N*m or N) or stiffness (N*m/rad or N/m); ``motion`` says which
-    joints the unit fits (``rotational``, ``linear`` or ``any`` when no unit
-    was given); ``label`` the part named, None for the task-relevant joints."""
+    """An explicit joint damping, friction or stiffness (SI units of the joint
+    type); ``motion`` the joints its unit fits; ``label`` the part (None: the
+    task-relevant joints)."""
 
     model_config = ConfigDict(extra="forbid")
     quantity: Literal["damping", "friction", "stiffness"]
@@ -101,15 +82,9 @@ class DynamicsValue(BaseModel):
 
 
 class JointStateRequest(BaseModel):
-    """The state asked for one joint or a group of joints.
-
-    ``selector`` says which joints: ``all`` (every task-relevant joint),
-    ``joint`` (the joint named ``joint``),
-    ``label`` (joints whose moving link has semantic label ``label``, e.g.
-    ``drawer``/``lid``/``door``), optionally narrowed by ``ordinal`` (0-based
-    index among those joints, ordered top-to-bottom / front-to-back as the
-    refine stage defines).
-    """
+    """The state asked for one joint or a group: ``selector`` ``all`` (the
+    task-relevant joints), ``joint`` (named ``joint``) or ``label`` (moving
+    links labelled ``label``), narrowed by ``ordinal`` (0-based, in ``order``)."""
 
     model_config = ConfigDict(extra="forbid")
     selector: Literal["all", "label", "joint"] = "all"
@@ -118,14 +93,11 @@ class JointStateRequest(BaseModel):
     """The joint's name when ``selector`` is ``joint`` (an override names joints)."""
     ordinal: int | None = None
     band: StateBand
-    """The band asked for; for a ``target`` the nominal band until the geometry
-    resolves it (the nearest band of a fraction; ``fully``/``closed`` for a
-    high/low end)."""
+    """The band asked for (for a ``target``: nominal until the geometry resolves it)."""
     target: StateTarget | None = None
     """A number or a physical end ("30 degrees", "lever up"); wins over ``band``."""
     order: OrderAxis = "vertical"
-    """How ``ordinal`` counts: top to bottom (default), left to right, right to
-    left or front to back, as seen by a viewer facing the object's front."""
+    """How ``ordinal`` counts, seen facing the object's front."""
     phrase: str = ""
     """The words of the request this came from."""
 
@@ -176,15 +148,12 @@ class RequestSpec(BaseModel):
     overrides: list[str] = Field(default_factory=list)
     """The overrides as the user gave them (``--mass 12 kg`` ...), for the report."""
     unused_words: list[str] = Field(default_factory=list)
-    """Words of the request that no rule used (common function words, part
-    labels and category names excepted), in order, each once: nothing is
-    silently ignored; the report lists them."""
+    """Words of the request no rule used (function words, part labels and
+    category names excepted), in order, each once."""
 
     @property
     def understood(self) -> bool:
-        """False for a non-empty request of which no word was recognised
-        (e.g. one in a language other than English): refine then uses the
-        category's defaults and says so."""
+        """False for a non-empty request of which no word was recognised."""
         return bool(self.matched) or not self.text.strip()
 
 
@@ -204,10 +173,8 @@ class QuantityOutcome(BaseModel):
 
 
 class RequestFindings(BaseModel):
-    """The report's account of the request (``report.json`` ``request``):
-    word groups no rule used, warnings (contradictions, parts the object lacks,
-    numbers beyond a limit), what was asked beyond bands and every number with
-    what the output achieved."""
+    """The report's account of the request: unused word groups, warnings,
+    what was asked beyond bands and every number with what was achieved."""
 
     model_config = ConfigDict(extra="forbid")
     ignored: list[str] = Field(default_factory=list)
@@ -216,7 +183,6 @@ class RequestFindings(BaseModel):
     quantities: list[QuantityOutcome] = Field(default_factory=list)
 
 
-# ------------------------------------------------------------------ overrides
 #: Units an override may carry -> factor to SI (kg, m, rad).
 MASS_UNITS = {"kg": 1.0, "g": 1e-3}
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -225,13 +191,8 @@ _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z
 
 
 def parse_quantity(text: str | float | int, units: dict[str, float], what: str) -> float:
-    """A number with one of ``units`` ("12kg", "50 cm", "30deg") in SI; a
-    plain number (YAML, Python) is taken as SI already.
-
-    Raises:
-        ValueError: no number, a string without a unit ("unit missing"), or
-            a unit not in ``units``; the message names ``what``.
-    """
+    """A number with one of ``units`` ("12kg", "50 cm") in SI; a plain number
+    is SI already. ValueError (naming ``what``): no number, no unit or an unknown one."""
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         return float(text)
     m = _QUANTITY.match(str(text))
@@ -246,11 +207,8 @@ def parse_quantity(text: str | float | int, units: dict[str, float], what: str) 
 
 
 class StateOverride(BaseModel):
-    """One joint's state given as an override: ``fraction`` (``value``, the
-    opening fraction 0..1 from the closed end), ``angle`` (``value`` rad from
-    the closed end), ``distance`` (``value`` m from the closed end, at the
-    output's size) or ``band`` (``band``: closed ... fully). ``text``: as the
-    user wrote it."""
+    """One joint's state as an override: ``fraction`` (0..1), ``angle`` (rad)
+    or ``distance`` (m) from the closed end, or a ``band``; ``text`` as written."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     kind: Literal["fraction", "angle", "distance", "band"]
@@ -260,13 +218,8 @@ class StateOverride(BaseModel):
 
     @classmethod
     def parse(cls, text: str | float | int, where: str = "state") -> "StateOverride":
-        """``"30deg"``, ``"0.5rad"``, ``"2cm"``, ``"0.4"`` (an opening fraction),
-        ``"halfway"`` / ``"slightly-open"`` (a band), or a number 0..1.
-
-        Raises:
-            ValueError: a number above 1 without a unit ("unit missing"), a
-                negative value, an unknown unit or word.
-        """
+        """``"30deg"``, ``"2cm"``, ``"0.4"`` (a fraction), ``"halfway"`` (a band).
+        ValueError: a unitless number above 1, a negative value, an unknown unit or word."""
         if isinstance(text, (int, float)) and not isinstance(text, bool):
             text = repr(float(text))
         raw = str(text).strip()
@@ -295,17 +248,10 @@ class StateOverride(BaseModel):
 
 
 class RequestOverrides(BaseModel):
-    """Typed values that win over the request's words, the same in the
-    command line (``--mass 12kg``), the Python API and a configuration file
-    (``overrides:``). Strings carry units; plain numbers are SI.
-
-    ``mass``: total mass, kg. ``size``: the closed object's largest extent,
-    m. ``scale``: uniform scale of the input (dimensionless; wins over
-    ``size``). ``state``: joint name or part label -> :class:`StateOverride`.
-    ``mount``: ``fixed`` (the root held where the file puts it) or ``free``
-    (resting on the ground). ``material``: a ``materials.yaml`` key for the
-    whole object.
-    """
+    """Typed values that win over the request's words (command line, API,
+    configuration file; strings carry units, numbers are SI): ``mass`` kg,
+    ``size`` m (largest extent), ``scale`` (wins over ``size``), ``state``
+    (joint or part label -> :class:`StateOverride`), ``mount``, ``material``."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     mass: float | None = Field(None, gt=0.0)

@@ -1,20 +1,8 @@
 """Refine one asset end to end: a folder and a request in, the SPEC's output
-folder out, verified in PyBullet.
-
-Stages (each a plain function of its own module; this module chains them,
-one small function per stage, and records wall time per stage):
-
-1. extract (``tasks.ingest.extract``), 2. analyze (``tasks.geometry.analyze``),
-3. request, category and the geometric closed states, the estimation context
-(``tasks.synthesize.context.build_context``), and a resting pose the request
-asks for (``tasks.state.pose``), 4. synthesize the overlay and the requested
-bands (``tasks.synthesize.estimate``) and validate it
-(``tasks.synthesize.validate_overlay``), 5. write (``tasks.assemble.write``),
-6. refine the initial state (``tasks.state.refine_state``, ``tasks.state.collision``),
-7. post-check and escalation (``tasks.check.postcheck``), 8. report, extras
-(MJCF export, renders, HTML report) and a completion marker written last.
-
-The library never prints: progress goes to the optional ``progress`` callback.
+folder out, verified in PyBullet. The stages (extract, analyze, interpret,
+synthesize, write, refine the state, post-check, report and extras) are
+chained one small function each, with wall time per stage; progress goes to
+the optional ``progress`` callback (the library never prints).
 """
 
 from __future__ import annotations
@@ -27,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
-from asset2sim import __version__, array_cache, atomic
+from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
@@ -37,33 +25,22 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
-from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, robust_rest, sweep, task_tier
+from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
-from asset2sim.tasks.geometry import analyze
-from asset2sim.tasks.geometry import limits
-from asset2sim.tasks.geometry import urdf_closed
+from asset2sim.tasks.geometry import analyze, limits, render, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
-from asset2sim.tasks.assemble import collision_geometry, export_mjcf, footprint, sliding_clearance, write
-from asset2sim.tasks.publish import export_usd
-from asset2sim import output_folder
-from asset2sim.tasks.geometry import render
-from asset2sim.tasks.publish.contract import (
-    MARKER_NAME,
-    REPORT_NAME,
-    is_complete,
-    run_hash,
-    write_completion_marker,
-)
+from asset2sim.tasks.assemble import export_mjcf, footprint, sliding_clearance, write
+from asset2sim.tasks.assemble.candidate import Candidate, Workspace
+from asset2sim.tasks.publish import export_usd, output
+from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
 from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, stability
-from asset2sim.tasks.check import repair
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
-from asset2sim.urdf import read_urdf
 from asset2sim.output_folder import URDF_NAME, VIEWS_DIR
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
@@ -89,10 +66,8 @@ class RefineResult:
     out_dir: Path
     report: RefineReport
     overlay: Overlay
-    skipped: bool = False
-    """True when ``out_dir`` was already complete for this input and configuration (nothing recomputed)."""
-    extras: dict[str, str] = field(default_factory=dict)
-    """What the extras wrote: name (``report_html``, ``mjcf`` ...) -> path."""
+    skipped: bool = False  # ``out_dir`` was already complete for this input and configuration (nothing recomputed)
+    extras: dict[str, str] = field(default_factory=dict)  # what the extras wrote: name (``html``, ``mjcf`` ...) -> path
 
     @property
     def ready(self) -> bool:
@@ -135,34 +110,26 @@ def refine_asset(
         skip_if_complete: return the existing result when the completion
             marker matches the input and configuration hashes.
         extras: also write exports (MJCF), renders and the HTML report.
-        overwrite: write into an output folder that holds files asset2sim did
-            not write (they are kept unless the run writes the same path);
-            without it such a folder is refused
-            (:mod:`asset2sim.output_folder`).
-        extracted: the asset already read by
+        overwrite: write into an output folder holding files asset2sim did
+            not write (kept unless the run writes the same path); without it
+            such a folder is refused (:mod:`asset2sim.output_folder`).
+        extracted: (description, findings) already read by
             :func:`asset2sim.tasks.ingest.extract.extract_asset_checked` for
-            this ``asset_dir``, ``asset_id`` and ``category`` (description,
-            validation findings), e.g. by the flow's prepare stage; it is
-            then not read again. None: read here.
+            these arguments (the flow's prepare stage); None: read here.
         reference: PartNet-Mobility folder with the reference (GenSim2) for
-            the extras' evaluation (scale deviation, initial joint deviation,
-            task-relevant joints); None: evaluated without one.
-        task: the manipulation task ("close the microwave door"): the
-            post-check executes it with the gripper (tiers ``task`` and
-            ``force``, :mod:`asset2sim.tasks.check.task_tier`) and the
-            operating budget of friction and damping follows its direction
-            (:func:`asset2sim.tasks.check.operating.operating_budgets`); None:
-            both directions, no task tier.
+            the extras' evaluation; None: evaluated without one.
+        task: the manipulation task ("close the microwave door"), executed
+            with the gripper in the post-check (:mod:`asset2sim.tasks.check.task_tier`);
+            the operating budget follows its direction. None: no task tier.
 
     Returns:
         :class:`RefineResult`; ``report.failure_mode`` is "none" when every
         check passed, else the first failing check's mode (the output is still
-        written: the report shows the evidence).
+        written).
 
     Raises:
         RefineError: input invalid, estimator failure or invalid overlay
-            (``failure_mode`` says which); nothing but partial-free atomic files
-            are left in ``out_dir``.
+            (``failure_mode`` says which); no partial file is left in ``out_dir``.
     """
     config = config or RefineConfig()
     out_dir = Path(out_dir)
@@ -181,16 +148,16 @@ def refine_asset(
             _announce_extract(asset, findings, log)
             cache = analyze.MeshCache()
             geometry = _analyze(asset, cache, log)
-            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx:
+            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, Workspace(asset) as ws:
                 ctx.task = task
                 pose_note = _interpret(ctx, log)
-                att, pose_note = _synthesize_and_check(ctx, est, config, work, cache, log, pose_note)
-            _remove_stale_collision(owner, asset, att.overrides)
+                att, pose_note = _synthesize_and_check(ctx, est, config, ws, cache, log, pose_note)
+                output.publish(att.candidate, ws, work)  # the output folder's files, written once
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
             atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
             extra_paths = _extras(work, report, att, log, reference, shown=out_dir) if extras else {}
-            _write_marker(owner, asset.input_hash, chash)
+            write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except BaseException:
             owner.abandon()
             raise
@@ -234,25 +201,21 @@ def _open_estimator(config: RefineConfig) -> estimator.Estimator:
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
              extracted: tuple[AssetDescription, list[Finding]] | None = None) -> tuple[AssetDescription, list[Finding]]:
-    """Stage 1: the checked asset and its validation findings (``extracted``
-    when the caller has read them already); the output folder checked
-    against it. RefineError("invalid_input") with the codes."""
+    """Stage 1: the checked asset and its validation findings (``extracted`` when
+    already read); the output folder checked against it. RefineError("invalid_input") with the codes."""
     try:
         if extracted is None:
             asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
         else:
             asset, findings = extracted[0], list(extracted[1])
-        write.check_output_folder(asset, out_dir)
-    except (extract.AssetError, write.OutputError) as exc:
-        err = RefineError(str(exc), "invalid_input")
-        err.codes = list(getattr(exc, "codes", []) or [])
-        raise err from exc
+        output_folder.check_location(asset.source_dir, out_dir)
+    except (extract.AssetError, output_folder.OutputError) as exc:
+        raise RefineError(str(exc), "invalid_input", getattr(exc, "codes", None)) from exc
     return asset, findings
 
 
 def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
-    """``config.overrides`` fit the asset (every joint or part named exists, a state its joint's kind and range):
-    RefineError("invalid_input", [OVERRIDE_*]) before any work otherwise."""
+    """RefineError("invalid_input", [OVERRIDE_*]) unless ``config.overrides`` fit the asset."""
     try:
         overrides.apply_overrides(RequestSpec(), config.overrides, asset)
     except overrides.OverrideError as exc:
@@ -290,9 +253,8 @@ def _moving_links(ctx: EstimationContext) -> list[str]:
 
 
 def _interpret(ctx: EstimationContext, log: _StageLog) -> str:
-    """Stage 3 (after :func:`build_context`): the resting pose the request's
-    words ask for ("lying flat", "sideways") into ``ctx.root_rotation``.
-    Returns the pose note ("" when none was asked)."""
+    """Stage 3: the resting pose the request asks for ("lying flat", "sideways") into
+    ``ctx.root_rotation``. Returns the pose note ("" when none was asked)."""
     spec = ctx.request
     pose_note = ""
     if spec.pose_hint in ("lying_flat", "sideways"):
@@ -306,10 +268,8 @@ def _interpret(ctx: EstimationContext, log: _StageLog) -> str:
 
 
 def request_notes(spec: RequestSpec) -> list[str]:
-    """What the report and the terminal say about the words of a request that
-    were not used: a warning when none was understood (the category's
-    defaults are used: size, closed state, moderate damping), else the list of
-    unused words. Empty when every word was used."""
+    """The report's and the terminal's lines on the request's unused words: a warning when none was
+    understood (the category's defaults are used), else the unused words; empty when every word was used."""
     if not spec.understood:
         return [f"WARNING: request not understood (English words only; none recognised): {spec.text[:120]!r}; "
                 "refined with the category's defaults (typical size, closed, moderate damping)"]
@@ -328,12 +288,9 @@ class _Synthesis:
     issues: list
     bands: dict[str, str]
     prismatic: set[str]
-    closed_out: dict[str, ClosedState]
-    """Closed ends at the overlay's scale."""
-    requested: dict[str, float]
-    """Requested joint positions (output units)."""
-    targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)
-    """Numbers / ends the request asked, resolved per joint (their intervals replace the bands')."""
+    closed_out: dict[str, ClosedState]  # at the overlay's scale
+    requested: dict[str, float]  # joint positions, output units
+    targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)  # numbers / ends the request asked
 
 
 @dataclass
@@ -352,32 +309,27 @@ class _Attempt:
     root_rotation: object
     check: postcheck.PostCheck
     rounds: list[EscalationRound]
-    design: list[str] = field(default_factory=list)
-    """What stability by design changed and why (``tasks.state.stability``)."""
-    targets: dict = field(default_factory=dict)
-    """joint -> :class:`~asset2sim.tasks.synthesize.request_apply.JointTarget` (numbers / ends the request asked)."""
-    rewritten: bool = False
-    """Written again after another attempt: files that attempt wrote (collision
-    pieces) may differ from those ``check`` measured."""
+    design: list[str] = field(default_factory=list)  # what stability by design changed and why
+    targets: dict = field(default_factory=dict)  # joint -> request_apply.JointTarget
+    rewritten: bool = False  # loaded again after another attempt: its files may differ from those ``check`` measured
 
-    def rewrite(self, out_dir: Path) -> None:
-        """Write this attempt's files again (after another attempt overwrote them)."""
+    @property
+    def candidate(self) -> Candidate:
+        return Candidate(self.asset, self.overlay, self.state, self.overrides, self.root_rotation)
+
+    def rewrite(self, ws: Workspace) -> None:
+        """Load this attempt into the workspace again (after another attempt replaced it)."""
         self.rewritten = True
-        write.write_output(
-            self.asset, self.overlay, out_dir, self.state, copy=False,
-            collision_overrides=self.overrides, root_rotation=self.root_rotation,
-        )
+        ws.load(self.candidate)
 
 
-def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog, pose_note: str) -> tuple[_Attempt, str]:
-    """Stages 4-7 once; when the object is unstable as modelled, or a
-    robust-rest disturbance topples it, and the request named no pose, once
-    more resting on its stablest face (kept only if better in simulation).
-    Returns (attempt, pose note)."""
-    att = _attempt(ctx, est, config, out_dir, cache, log)
+def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: _StageLog, pose_note: str) -> tuple[_Attempt, str]:
+    """Stages 4-7 once; when the object is unstable or toppled as modelled and the request named no
+    pose, a steadier opening, else once more on its stablest face (kept only if better). Returns (attempt, pose note)."""
+    att = _attempt(ctx, est, config, ws, cache, log)
     if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
         return att, pose_note
-    steadier = _steadier_state(ctx, est, config, out_dir, cache, log, att)
+    steadier = _steadier_state(ctx, est, config, ws, cache, log, att)
     if steadier is not None:
         return steadier, pose_note
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
@@ -387,36 +339,24 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, out
     why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
     log.say("post_check", f"{why}; {note}")
     ctx.root_rotation = R
-    second = _attempt(ctx, est, config, out_dir, cache, log)
+    second = _attempt(ctx, est, config, ws, cache, log)
     if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
     ctx.root_rotation = None
-    att.rewrite(out_dir)  # the first attempt stays the result
+    att.rewrite(ws)  # the first attempt stays the result
     return att, f"{note}; not better in simulation, kept as modelled"
 
 
-def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
+def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: _StageLog,
                     att: _Attempt) -> _Attempt | None:
-    """Stability by design through the opening: when the first attempt
-    (``att``) stood unsteadily (unstable, or toppled by a robust-rest
-    disturbance), the opened joints placed where, within their requested
-    bands (or the interval a number asked), the object stands steadiest
-    (:func:`asset2sim.tasks.state.balance.steadiest_fractions`), when that
-    alone gives it the static margin stability by design asks; when it
-    was statically steady already and a drop or tilt toppled it anyway (the
-    static margin cannot tell the openings apart: stapler 102990 "fully
-    open" has 14.6-16.5 mm over its whole band, and topples at 0.98-1.0 of
-    its range, not at 0.9), the least opening each band allows
-    (:func:`_least_openings`). Stages 4-7 run once more from there; kept only when that attempt passes
-    every check (else the resting-pose retry of :func:`_synthesize_and_check`
-    still runs, from the first attempt). The request is
-    never contradicted: a band allows the whole interval, its target is a
-    default. Returns the kept attempt (its design notes say what moved and
-    why) or None (the first attempt's files written back)."""
+    """Stability by design through the opening after an unsteady attempt ``att``: the opened joints where,
+    within their bands, the object stands steadiest (:func:`asset2sim.tasks.state.balance.steadiest_fractions`),
+    or, when statically steady yet toppled, the least opening each band allows. Stages 4-7 run once more from
+    there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = balance.steadiest_fractions(out_dir / write.URDF_NAME, att.overlay, att.state, att.closed_out, intervals)
+        fractions, before, after = balance.steadiest_fractions(ws.urdf, att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None
@@ -427,8 +367,6 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
                 + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
                 f" (asked >= {after.required * 1000:.3g} mm)")
     elif att.check.stable and before.stable:
-        # statically steady, yet a drop or tilt toppled it: the static margin cannot rank the openings;
-        # the least opening the bands allow is the one nearest the closed configuration
         fractions = _least_openings(att, intervals)
         if not fractions:
             return None
@@ -439,52 +377,43 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, out_dir: 
     else:  # the opening alone does not make it steady: the resting pose may
         return None
     log.say("stability", note)
-    second = _attempt(ctx, est, config, out_dir, cache, log, fractions=fractions)
+    second = _attempt(ctx, est, config, ws, cache, log, fractions=fractions)
     if second.check.passed and not second.check.topples:
         second.design = [note, *second.design]
         return second
     log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
-    att.rewrite(out_dir)
+    att.rewrite(ws)
     return None
 
 
 def _least_openings(att: _Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:
-    """Joint -> the lower end of its allowed opening-fraction interval, for
-    the joints the attempt opened (interval's lower end > 0) past that end
-    by more than 0.01 of the range (dimensionless fractions)."""
-    out = {}
-    for name, (lo, hi) in intervals.items():
-        cs = att.closed_out.get(name)
-        if cs is None or name not in att.state or not 0 < lo < hi:
-            continue
-        if cs.fraction(att.state[name]) > lo + 0.01:
-            out[name] = float(lo)
-    return out
+    """Joint -> the lower end of its opening-fraction interval, for the joints the attempt opened past
+    that end (> 0) by more than 0.01 of the range."""
+    return {name: float(lo) for name, (lo, hi) in intervals.items() if att.closed_out.get(name) is not None and name in att.state
+            and 0 < lo < hi and att.closed_out[name].fraction(att.state[name]) > lo + 0.01}
 
 
 def _at_fractions(closed: dict[str, ClosedState], fractions: dict[str, float]) -> dict[str, float]:
-    """Joint -> position (rad or m) at each opening fraction of ``fractions``
-    (joints without a closed state are left out)."""
+    """Joint -> position (rad or m) at each opening fraction (joints without a closed state left out)."""
     return {n: closed[n].position(f) for n, f in fractions.items() if n in closed}
 
 
-def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
+def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: _StageLog,
              fractions: dict[str, float] | None = None) -> _Attempt:
-    """Stages 4-7 for the context's current resting pose (``ctx.root_rotation``);
-    ``fractions`` (joint -> opening fraction) replace the requested state of
-    those joints (:func:`_steadier_state`)."""
+    """Stages 4-7 for the current ``ctx.root_rotation``; ``fractions`` (joint -> opening fraction)
+    replace the requested state of those joints."""
     syn = _synthesize(ctx, est, config, log)
     if fractions:
         syn = replace(syn, requested={**syn.requested, **_at_fractions(syn.closed_out, fractions)})
-    urdf, first_clear = _write(ctx, syn, out_dir, log)
-    shut, shut_notes = _shut_repair(ctx, syn, urdf, config, out_dir, cache, log)
-    syn = _closed_on_output(ctx, syn, urdf, out_dir, log, shut)
+    urdf, first_clear = _write(ctx, syn, ws, log)
+    shut, shut_notes = _shut_repair(ctx, syn, urdf, config, ws, cache, log)
+    syn = _closed_on_output(ctx, syn, urdf, ws, log, shut)
     closed_raw = syn.closed_out
-    clipped = _clip_synthesis(ctx, syn, urdf, config, out_dir, log, shut, fractions)
+    clipped = _clip_synthesis(ctx, syn, urdf, config, ws, log, shut, fractions)
     if clipped is not syn:  # clipped limits change the pieces and the range the closed end is found in: measured once more
-        clipped = _closed_on_output(ctx, clipped, urdf, out_dir, log, shut)
+        clipped = _closed_on_output(ctx, clipped, urdf, ws, log, shut)
     syn = clipped
-    st, overrides = _refine_state(ctx, est, syn, urdf, config, out_dir, cache, log, shut)
+    st, overrides = _refine_state(ctx, est, syn, urdf, config, ws, cache, log, shut)
     st.collision_changes = shut_notes + list(st.collision_changes)
     state = dict(st.result)
     room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "
@@ -494,12 +423,12 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
         for line in room:
             log.say("refine_state", line)
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
-        ctx.asset, syn.overlay, out_dir, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
+        ctx.asset, syn.overlay, ws.root, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
     st.collision_changes = list(st.collision_changes) + lifted
     if overrides is not shut:  # the state search changed the collision pieces: the limits are clipped again on them (stage 6b)
         unclipped = limits.strip_clips(syn.overlay)
-        write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
-        reclipped, closed_re = _clip_limits(unclipped, closed_raw, state, urdf, config, log)
+        ws.load(Candidate(ctx.asset, unclipped, state, overrides, ctx.root_rotation))
+        reclipped, closed_re = _clip_limits(unclipped, closed_raw, state, ws, config, log)
         syn = replace(syn, overlay=reclipped, closed_out=closed_re)
     balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
     design = floored + design
@@ -507,24 +436,21 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, out_dir: Path, c
         log.say("stability", line)
     design = room + design
     closed_out = syn.closed_out
-    overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, out_dir, log,
+    overlay, check, rounds = _post_check(ctx, balanced, state, overrides, urdf, config, ws, log,
                                          closed=manipulation.closed_tuples(closed_out))
     overlay, check, rounds, overrides, closed_out = _repair_sweep(
-        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, out_dir, log)
+        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, ws, log)
     # the clearance of the first pieces (carried on by pieces a repair rewrote from them) and of the final ones
-    clear = list(dict.fromkeys(first_clear + _clearance_notes(ctx, overlay, state, overrides, out_dir)))
+    clear = list(dict.fromkeys(first_clear + _clearance_notes(ctx, overlay, state, overrides, ws)))
     st.collision_changes = clear + list(st.collision_changes)
-    return _Attempt(
-        asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
-        st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds, design=design,
-        targets=syn.targets,
-    )
+    return _Attempt(asset=ctx.asset, overlay=overlay, issues=syn.issues, bands=syn.bands, prismatic=syn.prismatic, closed_out=closed_out,
+                    st=st, state=state, overrides=overrides, root_rotation=ctx.root_rotation, check=check, rounds=rounds,
+                    design=design, targets=syn.targets)
 
 
 def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLog) -> _Synthesis:
-    """Stage 4: the estimator's overlay and bands, the overlay validated and
-    the requested state at its scale. RefineError("estimator_failure" or
-    "invalid_overlay")."""
+    """Stage 4: the estimator's overlay (validated) and bands, the requested state at its scale.
+    RefineError("estimator_failure" or "invalid_overlay")."""
     asset = ctx.asset
     prismatic = {j.name for j in asset.movable_joints() if j.type == "prismatic"}
     try:
@@ -541,8 +467,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
     s = overlay.scale
     overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
-    if overlay.initial_joint_positions:
-        requested.update(overlay.initial_joint_positions)
+    requested.update(overlay.initial_joint_positions or {})
     log.say("synthesize", f"{overlay.estimator.name}: scale {s:.4g}, total mass {overlay.total_mass():.4g} kg, {len(issues)} validation findings")
     log.lap("validate")
     return _Synthesis(overlay, issues, bands, prismatic, _scaled_closed(ctx.closed, s, prismatic), requested, targets)
@@ -550,78 +475,53 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
 
 def _scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
     """Closed ends at ``scale`` (prismatic positions and ranges times ``scale``)."""
-    out = {}
-    for n, cs in closed.items():
-        if n in prismatic:
-            out[n] = ClosedState(
-                joint=n,
-                q_closed=cs.q_closed * scale,
-                direction=cs.direction,
-                open_range=cs.open_range * scale,
-                lower=cs.lower * scale,
-                upper=cs.upper * scale,
-                compactness_ratio=cs.compactness_ratio,
-                notes=cs.notes,
-            )
-        else:
-            out[n] = cs
-    return out
+    return {n: replace(cs, q_closed=cs.q_closed * scale, open_range=cs.open_range * scale, lower=cs.lower * scale,
+                       upper=cs.upper * scale) if n in prismatic else cs for n, cs in closed.items()}
 
 
-def _write(ctx: EstimationContext, syn: _Synthesis, out_dir: Path, log: _StageLog) -> tuple[Path, list[str]]:
-    """Stage 5: the output folder at the requested state (meshes copied once;
-    later writes only rewrite the small files). Returns (the URDF path, the
-    running clearance the writer gave sliding contacts, its notes)."""
-    paths = write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, root_rotation=ctx.root_rotation)
-    clear = _clearance_lines(paths.collision_notes)
+def _write(ctx: EstimationContext, syn: _Synthesis, ws: Workspace, log: _StageLog) -> tuple[Path, list[str]]:
+    """Stage 5: the candidate at the requested state loaded into the workspace.
+    Returns (the URDF path, the writer's clearance notes)."""
+    urdf = ws.load(Candidate(ctx.asset, syn.overlay, syn.requested, {}, ctx.root_rotation))
+    clear = _clearance_lines(ws.collision_notes)
     for line in clear:
         log.say("write", line)
     log.lap("write")
-    return paths.urdf, clear
+    return urdf, clear
 
 
-def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, out_dir: Path) -> list[str]:
-    """The running clearance the writer gives sliding contacts between parts
-    (:func:`asset2sim.tasks.assemble.collision_geometry.running_clearance`) in
-    the output as written with ``overlay``, ``state`` and the collision
-    ``overrides`` (the pieces are the writer's cached ones: nothing is
-    recomputed, no file changes), for ``state.collision_changes``."""
+def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, ws: Workspace) -> list[str]:
+    """The writer's clearance notes for the output as written with ``overlay``, ``state`` and
+    ``overrides`` (cached pieces: nothing recomputed, no file changes)."""
     notes: list[str] = []
-    write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (out_dir, state), notes)
+    write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (ws.root, state), notes)
     return _clearance_lines(notes)
 
 
 def _clearance_lines(notes: list[str]) -> list[str]:
-    """The lines of the writer's collision notes on what it changed at the
-    written state: running clearance and a levelled footprint."""
+    """The writer's collision notes on running clearance and a levelled footprint."""
     return [n for n in notes if sliding_clearance.RUNNING_CLEARANCE_NOTE in n or footprint.LEVEL_NOTE in n]
 
 
-def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache, log: _StageLog,
+def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: _StageLog,
                   base: dict | None = None) -> tuple[StateRefinement, dict]:
-    """Stage 6: state refinement on the written (scaled) asset, with the
-    estimator's joint proposer when it has one; ``base``: the collision
-    overrides the asset is written with (:func:`_shut_repair`). Returns
-    (refinement, collision overrides: ``base`` and what the state search changed)."""
+    """Stage 6: state refinement on the written asset (with the estimator's joint proposer when it has
+    one); ``base``: the collision overrides written. Returns (refinement, collision overrides)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, overrides = _refine_state_with_decomposition(
-        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, out_dir, cache, log.say, proposer=proposer,
+        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, ws, cache, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
-        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed, base=base,
-    )
+        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed, base=base)
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
     return st, overrides
 
 
-def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_dir: Path, log: _StageLog,
+def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, ws: Workspace, log: _StageLog,
                       overrides: dict | None = None) -> _Synthesis:
-    """Stage 5a: the closed ends measured on the written output with the
-    evaluation's own measurement (:mod:`asset2sim.tasks.geometry.urdf_closed`;
-    the output's collision pieces depend only on the meshes and the limits),
-    the requested state and the overlay's initial positions moved onto them
-    (opening fraction kept; the opening for a number of degrees / metres) and
-    the output rewritten (with the collision ``overrides``). Unchanged when the measurement fails."""
+    """Stage 5a: the closed ends measured on the written output (:mod:`asset2sim.tasks.geometry.urdf_closed`),
+    the requested state and the overlay's initial positions moved onto them and the candidate loaded again
+    (with the collision ``overrides``). Unchanged when the measurement fails."""
     try:
         measured = urdf_closed.measure_closed(urdf)
     except Exception as exc:
@@ -640,86 +540,63 @@ def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, out_d
     for n in moved:
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
-    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
+    ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
     return replace(syn, overlay=overlay, closed_out=new, requested=requested)
 
 
-def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
+def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, log: _StageLog,
                     overrides: dict | None = None, fractions: dict[str, float] | None = None) -> _Synthesis:
-    """Stage 5b: the limits clipped to what the geometry allows
-    (:func:`_clip_limits`, other joints at the requested state) before the
-    state search, the requested state recomputed from the bands over the
-    clipped ranges (a "half open" lid is half of the range it can open;
-    ``fractions``, joint -> opening fraction chosen by stability by design,
-    :func:`_steadier_state`, win over the bands' targets), and
-    the output rewritten (with the collision ``overrides``). Returns the synthesis with the clipped overlay,
-    closed ends and requested state (unchanged when nothing was clipped)."""
-    overlay, closed_out = _clip_limits(syn.overlay, syn.closed_out, syn.requested, urdf, config, log)
+    """Stage 5b: the limits clipped to the geometry before the state search, the requested state
+    recomputed from the bands over the clipped ranges (``fractions`` win over the bands' targets) and the
+    candidate loaded again (with the collision ``overrides``). ``syn`` itself when nothing was clipped."""
+    overlay, closed_out = _clip_limits(syn.overlay, syn.closed_out, syn.requested, ws, config, log)
     if overlay is syn.overlay:
         return syn
     s = overlay.scale
     unscaled = _scaled_closed(closed_out, 1.0 / s, syn.prismatic)
     requested = estimate.state_from_bands(unscaled, syn.bands, s, syn.prismatic)
-    if overlay.initial_joint_positions:
-        requested.update(overlay.initial_joint_positions)
+    requested.update(overlay.initial_joint_positions or {})
     requested.update(_at_fractions(closed_out, fractions or {}))
-    write.write_output(ctx.asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
+    ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
     return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested)
 
 
-def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], urdf: Path, config: RefineConfig,
+def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], ws: Workspace, config: RefineConfig,
                  log: _StageLog, chain_open: bool = False) -> tuple[Overlay, dict[str, ClosedState]]:
-    """Stage 6b: joint limits clipped to what the geometry allows at the
-    refined state (:mod:`asset2sim.tasks.geometry.limits`; the writer writes
-    them, the sweep measures against them; ``chain_open``: also against the
-    carrying chain with the joints between open, step 6). Returns (overlay, closed ends)."""
-    with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
+    """Stage 6b: joint limits clipped to what the geometry allows at ``state`` (:mod:`asset2sim.tasks.geometry.limits`;
+    ``chain_open``: also against the carrying chain opened). Returns (overlay, closed ends)."""
+    with open_session("pybullet", ws.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                        conventions=config.sim)) as sess:
-        clips = limits.geometric_limits(sess, read_urdf(urdf), manipulation.closed_tuples(closed_out), state,
+        clips = limits.geometric_limits(sess, ws.model(), manipulation.closed_tuples(closed_out), state,
                                         chain_open=chain_open)
-    if not any(c.clipped for c in clips.values()):
-        log.lap("limits")
-        return overlay, closed_out
-    overlay, notes = limits.apply_clips(overlay, clips)
-    for line in notes:
-        log.say("limits", line)
+    if any(c.clipped for c in clips.values()):
+        overlay, notes = limits.apply_clips(overlay, clips)
+        for line in notes:
+            log.say("limits", line)
+        closed_out = limits.clipped_closed(closed_out, clips)
     log.lap("limits")
-    return overlay, limits.clipped_closed(closed_out, clips)
+    return overlay, closed_out
 
 
 def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
-                  state: dict[str, float], urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog):
-    """Stage 7b: collision repairs where the post-check shows a part held by
-    its neighbours' collision pieces, each written, the limits clipped again
-    from ``unclipped`` (the overlay before stage 6b) and ``closed_raw``
-    (contacts changed) and the asset post-checked again; a repair is kept iff
-    it makes the check better while no metric that passed fails (else the
-    files are written back and the next is tried):
-
-    - the joint sweep stops short: the repairs of :func:`_sweep_repairs` in
-      turn (limits against the carrying chain, running clearance, convex
-      decomposition); better = a better :func:`~asset2sim.tasks.check.sweep.sweep_score`;
-    - the sweep passes but a manipulation tier (robust rest, the task, the
-      probes) fails while the penetration metric reports parts in contact at
-      the state (two drawers touching along their runners move together:
-      the sweep holds the neighbour with a drive, robust rest and the gripper
-      do not): running clearance for the sliding contacts between the
-      joints' parts (:func:`asset2sim.tasks.state.clearance.touching_joints`);
-      better = fewer failing metrics.
-
-    ``result``: (overlay, check, rounds, collision overrides, closed ends) so
-    far, returned unchanged or replaced; notes go to ``st.collision_changes``."""
+                  state: dict[str, float], urdf: Path, config: RefineConfig, ws: Workspace, log: _StageLog):
+    """Stage 7b: collision repairs where the post-check shows a part held by its neighbours' pieces: a
+    blocked joint sweep (:func:`asset2sim.tasks.check.repair.sweep_repairs`, better = a better sweep score)
+    or parts held together (running clearance, better = fewer failing tiers). Each repair is loaded, the
+    limits clipped again from ``unclipped`` and ``closed_raw``, and post-checked; the first that is better
+    while no passed metric fails is kept. ``result``: (overlay, check, rounds, collision overrides, closed
+    ends), returned unchanged or replaced; notes go to ``st.collision_changes``."""
     overlay, check, rounds, overrides, closed_out = result
     sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
     blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
     pairs = [] if blocked else repair.held_together_pairs(check.metrics)
     if not blocked and not pairs:
         return result  # the common case: nothing read, nothing simulated
-    model = read_urdf(urdf)
+    model = ws.model()
     folder = write.collision_folder(ctx.asset)
     if blocked:
         label = "sweep blocked"
-        repairs = repair.sweep_repairs(model, urdf, ctx.asset, sw, blocked, state, overrides, unclipped.scale, out_dir,
+        repairs = repair.sweep_repairs(model, urdf, ctx.asset, sw, blocked, state, overrides, unclipped.scale, ws.root,
                                        folder, config)
 
         def better(chk2) -> bool:
@@ -727,17 +604,16 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
     else:
         label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
-        one = repair.clearance_repair(model, urdf, touching, state, overrides, unclipped.scale, out_dir, folder) if touching else None
+        one = repair.clearance_repair(model, urdf, touching, state, overrides, unclipped.scale, ws.root, folder) if touching else None
         repairs = iter([one] if one is not None else [])
 
         def better(chk2) -> bool:
             return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
     passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
     for rep in repairs:
-        write.write_output(ctx.asset, unclipped, out_dir, state, copy=False, collision_overrides=rep.overrides,
-                           root_rotation=ctx.root_rotation)
-        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, urdf, config, log, chain_open=rep.chain_open)
-        ov2, check2, rounds2 = _post_check(ctx, clipped, state, rep.overrides, urdf, config, out_dir, log,
+        ws.load(Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation))
+        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, ws, config, log, chain_open=rep.chain_open)
+        ov2, check2, rounds2 = _post_check(ctx, clipped, state, rep.overrides, urdf, config, ws, log,
                                            closed=manipulation.closed_tuples(closed2))
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
         if better(check2) and not lost:
@@ -751,22 +627,20 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
         log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
                                 f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
                                 "the asset kept as it was")
-        write.write_output(ctx.asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=ctx.root_rotation)
+        ws.load(Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation))
     return result
 
 
-def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, out_dir: Path, log: _StageLog,
+def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, ws: Workspace, log: _StageLog,
                 closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
-    """Stage 7: write the refined state, post-check it (with ``closed``, the
-    closed ends at the output scale: the joint sweep and robust rest too),
-    and escalate damping and friction (rewrite, re-check) up to
-    ``config.max_escalation_rounds`` times while it fails. Returns (final
-    overlay, last check, rounds)."""
+    """Stage 7: post-check the refined state (``closed``: closed ends at the output scale, for the sweep and
+    robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while it
+    fails. Returns (final overlay, last check, rounds)."""
     asset, root_rotation = ctx.asset, ctx.root_rotation
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
-    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+    ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
     n = 0
     spec = task_tier.task_spec_for(ctx.task, urdf, asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
@@ -780,16 +654,14 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         log.say("post_check", line)
     if bounded != overlay:
         overlay = bounded
-        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+        ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
     caps, dcaps = lim.friction_caps, lim.damping_caps
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
-    def escalated(chk: postcheck.PostCheck) -> bool:
-        """This loop escalates ``chk`` into another round (the post-check then skips the sweep)."""
+    def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
         return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps)[1])
 
-    def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:
-        """The task tier appended to ``chk`` when refine was given a task."""
+    def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
                 "pybullet", urdf, state, postcheck.springs_of(overlay), config.sim, closed, spec, asset, ctx.category,
@@ -813,7 +685,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
         if not changes:
             break
-        write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+        ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
         check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
         search.record(overlay, check.metrics)
@@ -821,14 +693,12 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
     earlier = best != len(tried) - 1
     sweep_skipped = postcheck.sweep_not_run(check.metrics)  # an escalation round: the sweep (and the other engines) not run
-    if earlier or sweep_skipped:
-        # the rounds ended worse than an earlier round (that round's setting), or on a round whose sweep
-        # was skipped for an escalation that did not come: checked again, the sweep included
+    if earlier or sweep_skipped:  # checked again, the sweep included
         reason = (f"round {best} failed the fewest tiers: its friction and damping kept" if earlier
                   else "the last round's setting checked again with the joint sweep")
         if earlier:
             overlay = tried[best][0]
-            write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+            ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
         check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, recorded=recorded))
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
@@ -837,47 +707,27 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
 
 
 def _phi_at(urdf: Path, state: dict[str, float], config: RefineConfig) -> float:
-    """Phi (m, the SPEC's self-penetration) of the written URDF with its
-    joints at ``state`` (joint -> rad or m)."""
+    """Phi (m, the SPEC's self-penetration) of ``urdf`` at ``state`` (joint -> rad or m)."""
     with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                        conventions=config.sim)) as sess:
         return float(sess.self_penetration_fresh()[0])
 
 
-def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, out_dir: Path, cache,
+def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache,
                  log: _StageLog) -> tuple[dict, list[str]]:
-    """Stage 5 (after :func:`_write`, before stage 5a): collision pieces that let the object
-    shut. When the request opens a joint and the modelled closed
-    configuration (every joint at its closed end) overlaps deeper than the
-    tolerance on the written pieces, the state search with its collision
-    repair runs as for a request of the closed state
-    (:func:`_refine_state_with_decomposition`, every band "closed"), before
-    the closed ends and limits are measured on the pieces, and the pieces it
-    repaired are kept for the requested state. Without it an open request
-    kept hulls that overlap when shut: the limit scan cut the closed end
-    where they met and the requested state was placed from that end (stapler
-    102990 "fully open": closed end -0.22 -> 0.81 rad and its joint sweep
-    failed; stapler 103275 "a quarter open": its closed end flipped to the far
-    limit, the state placed at 0.82 of the range).
-
-    Returns (collision overrides, notes for ``state.collision_changes``):
-    ({}, []) when the request opens nothing or the closed configuration is
-    clear, ({}, notes) when the repair kept the pieces; the output is then
-    as written.
-    """
+    """Stage 5 (before 5a): collision pieces that let the object shut. When the request opens a joint and the
+    closed configuration overlaps beyond the tolerance, the state search with its collision repair runs as for
+    a closed request. Returns (collision overrides, notes for ``state.collision_changes``); ({}, []) when not run."""
     closed = {n: c.q_closed for n, c in syn.closed_out.items()}
     opened = [n for n, c in syn.closed_out.items()
               if abs(c.fraction(syn.requested.get(n, c.q_closed))) > BAND_INTERVAL["closed"][1]]
-    if not (config.convex_decomposition and opened):
+    if not (config.convex_decomposition and opened and _phi_at(urdf, closed, config) > config.penetration_tolerance):
         return {}, []
-    if not _phi_at(urdf, closed, config) > config.penetration_tolerance:
-        return {}, []
-    write.write_output(ctx.asset, syn.overlay, out_dir, closed, copy=False, root_rotation=ctx.root_rotation)
+    ws.load(Candidate(ctx.asset, syn.overlay, closed, {}, ctx.root_rotation))
     shut, overrides = _refine_state_with_decomposition(
         ctx.asset, syn.overlay, syn.closed_out, {n: "closed" for n in syn.closed_out}, closed, urdf, ctx.root_rotation,
-        config, out_dir, cache, log.say)
-    write.write_output(ctx.asset, syn.overlay, out_dir, syn.requested, copy=False, collision_overrides=overrides,
-                       root_rotation=ctx.root_rotation)
+        config, ws, cache, log.say)
+    ws.load(Candidate(ctx.asset, syn.overlay, syn.requested, overrides, ctx.root_rotation))
     head = (f"closed configuration (the request opens {', '.join(opened)}): Phi {shut.phi_requested * 1000:.3g} -> "
             f"{shut.phi_result * 1000:.3g} mm" + ("" if overrides else "; collision pieces kept"))
     log.say("shut_repair", head)
@@ -885,28 +735,20 @@ def _shut_repair(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: Re
     return overrides, [head + (":" if shut.collision_changes else "")] + list(shut.collision_changes)
 
 
-def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, out_dir, mesh_cache, say, proposer=None, intervals=None,
+def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, ws, mesh_cache, say, proposer=None, intervals=None,
                                      addressed: Callable[[], set[str]] | None = None, base: dict | None = None):
-    """State refinement; when a part the request opened penetrates one the
-    request left closed by default (``addressed()``: the joints the request
-    set, asked only then), a second search with those parts free over their whole range
-    (kept only if it lowers Phi; :attr:`StateRefinement.room_made`); when
-    hull overlaps keep Phi above tolerance, CoACD decomposition of the
-    colliding pieces and another search (kept only if it lowers Phi).
-    ``base``: collision overrides the asset is written with; the pieces
-    changed here replace those of the same links.
-    Returns (StateRefinement, collision overrides)."""
+    """State refinement; then, each kept only if it lowers Phi: a search with the parts the request left
+    closed (not in ``addressed()``) free where an opened part penetrates them, and CoACD decomposition of the
+    colliding pieces with another search. ``base``: the collision overrides written (the pieces changed here
+    replace those of the same links). Returns (StateRefinement, collision overrides)."""
     fractions = estimate.band_intervals(bands, intervals)
     s = overlay.scale
 
     def search(start: dict[str, float]):
         with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
             return refine_state.refine_initial_state(
-                sess, asset, closed_out, start, fractions,
-                tolerance=config.penetration_tolerance, lam=config.state_lambda,
-                max_evaluations=config.max_state_evaluations, seed=config.seed,
-                proposer=proposer,
-            )
+                sess, asset, closed_out, start, fractions, tolerance=config.penetration_tolerance, lam=config.state_lambda,
+                max_evaluations=config.max_state_evaluations, seed=config.seed, proposer=proposer)
 
     st = search(requested)
     in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \
@@ -931,10 +773,9 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
     links = sorted({ln for pair in deep for ln in pair})
     sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
     try:
-        overrides, dnotes = collision.improve_collisions(
-            sess, asset, deep, s, out_dir, cache=mesh_cache, max_decompositions=config.max_decompositions,
-            folder=write.collision_folder(asset),
-        )
+        overrides, dnotes = collision.improve_collisions(sess, asset, deep, s, ws.root, cache=mesh_cache,
+                                                         max_decompositions=config.max_decompositions,
+                                                         folder=write.collision_folder(asset))
     except (collision.DecompositionUnavailable, ValueError) as exc:
         say("refine_state", f"collision improvement skipped: {exc}")
         st.collision_changes = [f"collision improvement skipped: {exc}"]
@@ -946,14 +787,14 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
         return st, base
     overrides = {**base, **overrides}
     before = st
-    write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
+    ws.load(Candidate(asset, overlay, requested, overrides, root_rotation))
     st = search(requested)
     st.evaluations += before.evaluations
     st.model_queries += before.model_queries
     st.phi_requested = before.phi_requested
     if st.phi_result >= before.phi_result:
         # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
-        write.write_output(asset, overlay, out_dir, requested, copy=False, collision_overrides=base, root_rotation=root_rotation)
+        ws.load(Candidate(asset, overlay, requested, base, root_rotation))
         before.evaluations = st.evaluations
         before.model_queries = st.model_queries
         before.collision_changes = [
@@ -968,16 +809,14 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
 
 # ---------------------------------------------------------- 8: report, extras, marker
 def _announce_post_check(att: _Attempt, log: _StageLog) -> None:
-    check = att.check
-    pen = check.metric("penetration")
-    stab = check.metric("rest_stability")
-    osc = check.metric("oscillation")
+    pen, stab, osc = (att.check.metric(n) for n in ("penetration", "rest_stability", "oscillation"))
     log.say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
 
 
 def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt, findings: list, pose_note: str, times: dict[str, float]) -> RefineReport:
     """``report.json``'s model from the final attempt."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
+    metrics = att.check.metrics + [m for res in att.check.engine_results.values() for m in res]
     return RefineReport(
         asset_id=asset.asset_id,
         source=str(asset.source_dir),
@@ -989,7 +828,7 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         config_hash=chash,
         estimator=overlay.estimator.name,
         model=overlay.estimator.model,
-        model_queries=overlay.estimator.queries + (st.model_queries if st is not None else 0),
+        model_queries=overlay.estimator.queries + st.model_queries,
         model_tokens=overlay.estimator.tokens,
         model_cost_usd=overlay.estimator.cost_usd,
         model_seconds=overlay.estimator.seconds,
@@ -1000,12 +839,12 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         requested_bands=att.bands,
         opening_fractions={n_: abs(c.fraction(state[n_])) for n_, c in closed_out.items() if n_ in state},
         state=st,
-        metrics=att.check.metrics + [m for res in att.check.engine_results.values() for m in res],
+        metrics=metrics,
         parity=_parity_rows(att.check),
         escalation=att.rounds,
-        validation=[_finding_dict(f) for f in findings] + [i.model_dump() for i in att.issues],
+        validation=[f.to_issue().model_dump() for f in findings] + [i.model_dump() for i in att.issues],
         failure_mode=post_check_failure_mode(att.check),
-        readiness=readiness(att.check.metrics + [m for res in att.check.engine_results.values() for m in res]).tiers,
+        readiness=readiness(metrics).tiers,
         stage_seconds=times,
         notes=request_notes(ctx.request) + list(overlay.notes.other)
         + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else [])
@@ -1025,46 +864,13 @@ def mounting_note(overlay: Overlay) -> str:
     return f"root: mounted ({m.kind}), fixed in every check (rest, oscillation, probes, evaluation), no ground plane; {m.source}"
 
 
-def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None = None,
-            shown: Path | None = None) -> dict[str, str]:
-    """Exports, renders and the HTML report, then ``report.json`` again with
-    their notes and the final stage times. The evaluation records the final
-    post-check's rest test (when it measured the files as they are now)
-    instead of simulating it again. ``shown``: the output folder as the user
-    named it, recorded in the evaluation when ``out_dir`` is a staging folder.
-    Returns name -> path."""
-    recording = None if att.rewritten else att.check.recording
-    with quiet_stdout():  # engines and renderers print from C; the library must not
-        paths = _write_extras(out_dir, report, log, recording, reference, recorded=att.check.recorded, shown=shown)
-    report.stage_seconds = log.times
-    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
-    return paths
-
-
-def _write_marker(owner: output_folder.OwnedFolder, input_hash: str, chash: str) -> None:
-    """The completion marker, written last and only when every file the run
-    wrote exists (:func:`asset2sim.tasks.publish.contract.write_completion_marker`)."""
-    write_completion_marker(owner.root, input_hash, chash, owner=owner)
-
-
 def _start_output(asset: AssetDescription, out_dir: Path, overwrite: bool) -> output_folder.OwnedFolder:
-    """Before (re)writing an output folder: remove the completion marker and
-    the files earlier runs recorded, nothing else; refuse files asset2sim did
-    not write unless ``overwrite`` (:func:`asset2sim.output_folder.start`).
-    RefineError("invalid_input") with the ``OUTPUT_*`` code."""
+    """The output folder claimed (:func:`asset2sim.output_folder.start`); RefineError("invalid_input") with
+    the ``OUTPUT_*`` code when refused."""
     try:
         return output_folder.start(asset.source_dir, out_dir, overwrite=overwrite)
     except output_folder.OutputError as exc:
         raise RefineError(str(exc), "invalid_input", exc.codes) from exc
-
-
-def _finding_dict(f) -> dict:
-    """A validation finding of the extraction stage as a JSON-able dict."""
-    if hasattr(f, "to_issue"):
-        return f.to_issue().model_dump()
-    if hasattr(f, "model_dump"):
-        return f.model_dump(mode="json")
-    return dict(vars(f))
 
 
 def _parity_rows(check) -> list[dict]:
@@ -1075,28 +881,14 @@ def _parity_rows(check) -> list[dict]:
     return parity.parity_table({"pybullet": base, **check.engine_results})
 
 
-def _remove_stale_collision(owner: output_folder.OwnedFolder, asset: AssetDescription, overrides: dict) -> None:
-    """Delete the collision pieces this run wrote that the final URDF does not
-    reference (only files of the run, never copied input meshes)."""
-    used = {p_.filename for pcs in overrides.values() for p_ in pcs}
-    used |= collision_geometry.referenced_files(owner.root / write.URDF_NAME)
-    owner.remove_unreferenced(write.collision_folder(asset), used)
-
-
 #: errno values of an OSError that says nothing more can be written to the
 #: output folder: a full disk, an exhausted quota, a read-only file system.
 _UNWRITABLE = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS) if e is not None)
 
 
 def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
-    """Raise ``OUTPUT_WRITE_FAILED`` (an
-    :class:`~asset2sim.output_folder.OutputError` raised from
-    the OSError, so the command line prints ``OUTPUT_WRITE_FAILED [ENOSPC]``
-    and the file) when ``exc``, or an exception it was raised from or while
-    handling, is an OSError whose errno is in :data:`_UNWRITABLE`; return
-    otherwise. An optional output that fails for such a cause must not become
-    a note: the HTML report missing on a full disk ended the run as
-    ``OUTPUT_INCOMPLETE``, naming the file instead of the cause."""
+    """Raise ``OUTPUT_WRITE_FAILED`` (an :class:`~asset2sim.output_folder.OutputError`) when ``exc`` or an
+    exception in its chain is an OSError whose errno is in :data:`_UNWRITABLE`; return otherwise."""
     seen: set[int] = set()
     cur: BaseException | None = exc
     while cur is not None and id(cur) not in seen:
@@ -1108,51 +900,50 @@ def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
         cur = cur.__cause__ or cur.__context__
 
 
-def _write_extras(out_dir: Path, report: RefineReport, log: _StageLog, recording: postcheck.RestRecording | None = None,
-                  reference: Path | str | None = None, recorded: postcheck.RecordedRuns | None = None,
-                  shown: Path | None = None) -> dict[str, str]:
-    """Optional outputs: MJCF export, renders, evaluation and HTML report
-    (the renders reused in it). Each failure (an engine or renderer
-    unavailable included) is a note in the report, never the loss of the
-    refined asset, except a full disk, a quota or a read-only file system
-    (:func:`_raise_if_unwritable`: ``OUTPUT_WRITE_FAILED``). Wall time per part
-    in ``log`` (``extras_mjcf``, ``extras_usd``, ``extras_render``, ``extras_report``)."""
+def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None,
+            shown: Path) -> dict[str, str]:
+    """Optional outputs: MJCF and USD exports, renders, evaluation and HTML report (the renders reused in
+    it), then ``report.json`` again with their notes and the final stage times. Each failure (an engine or
+    renderer unavailable included) is a note in the report, never the loss of the refined asset, except a
+    full disk, a quota or a read-only file system (``OUTPUT_WRITE_FAILED``). The evaluation reuses the final
+    post-check's rest test when it measured the files as they are now; ``shown``: the output folder as the
+    user named it (``out_dir`` may be a staging folder). Returns name -> path."""
+    recording = None if att.rewritten else att.check.recording
+    if recording is not None:  # measured on the workspace's files; publish wrote the same bytes here
+        recording = replace(recording, urdf=(out_dir / URDF_NAME).resolve())
     out: dict[str, str] = {}
-    try:
-        out["mjcf"] = str(export_mjcf.export_mjcf(out_dir))
-    except ImportError as exc:  # MuJoCo not installed
-        report.notes.append(f"MJCF export skipped: {exc}")
-    except Exception as exc:  # export must not lose the refined asset
-        _raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"MJCF export failed: {exc}")
-    log.lap("extras_mjcf")
-    try:
-        out["usd"] = str(export_usd.export_usd(out_dir).path)
-    except ImportError as exc:  # usd-core (pxr) not installed
-        report.notes.append(f"USD export skipped: {exc}")
-    except Exception as exc:  # export must not lose the refined asset
-        _raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"USD export failed: {exc}")
-    log.lap("extras_usd")
-    views = None
-    try:
-        views = render.render_views(out_dir / URDF_NAME, report.initial_joint_positions, out_dir / VIEWS_DIR,
-                                    size=render.OUTPUT_VIEW_SIZE)
-        out["views"] = str(out_dir / VIEWS_DIR)
-    except Exception as exc:
-        _raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"renders failed: {exc}")
-    log.lap("extras_render")
-    try:
-        paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=recorded,
-                                          views=views, views_state=report.initial_joint_positions,
-                                          checks=list(report.metrics) if recording is not None else None,
-                                          shown=shown)
-        out["html"] = str(paths["report"])
-        ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
-        combine_verdict(report, ev.metrics)  # report.json says what report.html says
-    except Exception as exc:
-        _raise_if_unwritable(exc, out_dir)
-        report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
-    log.lap("extras_report")
+    with quiet_stdout():  # engines and renderers print from C; the library must not
+        for key, make, what in (("mjcf", lambda: export_mjcf.export_mjcf(out_dir), "MJCF export"),
+                                ("usd", lambda: export_usd.export_usd(out_dir).path, "USD export")):
+            try:
+                out[key] = str(make())
+            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed
+                report.notes.append(f"{what} skipped: {exc}")
+            except Exception as exc:  # export must not lose the refined asset
+                _raise_if_unwritable(exc, out_dir)
+                report.notes.append(f"{what} failed: {exc}")
+            log.lap(f"extras_{key}")
+        views = None
+        try:
+            views = render.render_views(out_dir / URDF_NAME, report.initial_joint_positions, out_dir / VIEWS_DIR,
+                                        size=render.OUTPUT_VIEW_SIZE)
+            out["views"] = str(out_dir / VIEWS_DIR)
+        except Exception as exc:
+            _raise_if_unwritable(exc, out_dir)
+            report.notes.append(f"renders failed: {exc}")
+        log.lap("extras_render")
+        try:
+            paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=att.check.recorded,
+                                              views=views, views_state=report.initial_joint_positions,
+                                              checks=list(report.metrics) if recording is not None else None,
+                                              shown=shown)
+            out["html"] = str(paths["report"])
+            ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
+            combine_verdict(report, ev.metrics)  # report.json says what report.html says
+        except Exception as exc:
+            _raise_if_unwritable(exc, out_dir)
+            report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
+        log.lap("extras_report")
+    report.stage_seconds = log.times
+    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
     return out

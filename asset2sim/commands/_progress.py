@@ -1,13 +1,7 @@
-"""The live progress of ``asset2sim flow`` (``make flow``) in the terminal:
-a per-asset progress bar with the counts of done / skipped / failed assets,
-elapsed time and an ETA (rich), or one line per asset when the output is
-not a terminal (a log, CI). Fed by :mod:`asset2sim.flow_progress` events.
-
-While the bar is drawn, console log handlers (Prefect's, Dask's through it)
-show warnings and errors only: their INFO lines (a task finished, a worker
-registered) would be written across the bar, and the bar says the same; the
-Prefect server and UI still receive every log line. They are restored when
-the bar stops."""
+"""The live progress of ``asset2sim flow``: a rich progress bar (counts,
+elapsed time, ETA), or one line per asset when the output is not a terminal.
+While the bar is drawn, console log handlers show warnings and errors only
+(their INFO lines would be written across the bar)."""
 
 from __future__ import annotations
 
@@ -20,10 +14,9 @@ from asset2sim.flow_progress import ProgressEvent
 
 
 def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = None) -> float | None:
-    """Seconds left at the average rate so far (s per finished asset); None
-    before the first asset. Skipped assets finish in moments and would make
-    the rate look better than it is: with ``worked`` (assets done or failed)
-    the rate is over those, and the assets left are assumed to need work."""
+    """Seconds left at the average rate so far; None before the first asset.
+    With ``worked`` (assets done or failed) the rate is over those (skipped
+    assets take moments)."""
     if finished <= 0 or finished >= total:
         return 0.0 if finished >= total else None
     n = worked if worked else finished
@@ -31,10 +24,8 @@ def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = 
 
 
 class FlowProgress:
-    """A listener of :mod:`asset2sim.flow_progress` that shows the run's progress.
-
-    ``live``: draw a rich progress bar (default: when stdout is a terminal);
-    otherwise print one line per asset."""
+    """A listener of :mod:`asset2sim.flow_progress`: a bar when ``live``
+    (default: stdout is a terminal), else one line per asset."""
 
     def __init__(self, live: bool | None = None, stream: Any = None):
         self.stream = stream or sys.stdout
@@ -75,28 +66,13 @@ class FlowProgress:
 
     def _start_bar(self, ev: ProgressEvent) -> None:
         from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
         self.close()
-        self._progress = Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("[green]done {task.fields[done]}[/] [cyan]skipped {task.fields[skipped]}[/] "
-                       "[red]failed {task.fields[failed]}[/]"),
-            TimeElapsedColumn(),
-            TextColumn("ETA"),
-            TimeRemainingColumn(),
-            console=Console(file=self.stream),
-            transient=False,
-        )
+        counts = TextColumn("[green]done {task.fields[done]}[/] [cyan]skipped {task.fields[skipped]}[/] "
+                            "[red]failed {task.fields[failed]}[/]")
+        self._progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), counts, TimeElapsedColumn(),
+                                  TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=self.stream), transient=False)
         self._quiet_console_logs()
         self._progress.start()
         self._task = self._progress.add_task(ev.dataset, total=max(1, ev.total), **self.counts)

@@ -1,20 +1,7 @@
-"""Exit statuses of the ``asset2sim`` command line and the expected-failure
-exception the commands raise (the top-level handler in :mod:`asset2sim.cli`
-prints it as one line and exits with its status), with the helpers every
-command uses to turn its failures into that line.
-
-| status | meaning |
-|---|---|
-| 0 | done (refine: written and interaction-ready) |
-| 1 | invalid input: the asset is refused or cannot be read (``evaluate``/``export``: a metric or check fails; ``render``: rendering failed) |
-| 2 | invalid request or overlay: usage error (unknown engine, view, code), request too long, estimator failed or its overlay is invalid; ``evaluate``/``export``/``render``: the input cannot be used |
-| 3 | written but not interaction-ready: a readiness tier fails (rest, penetration, joint sweep, robust rest, probes; ``tasks/check/verdict.py``, ``docs/design/metrics.md`` 3a); the terminal verdict, ``report.json`` ``failure_mode`` and ``report.html`` name it |
-| 4 | output location problem (every command): inside / containing the input, not a folder, holds others' files, a bookkeeping file that is not a regular file, cannot be written (read-only, full) |
-| 5 | ``flow``: the run regressed against the previous run of its dataset beyond ``catalog.yaml`` ``results.regression`` (rows and artifacts written) |
-| 70 | internal error: a bug; the traceback is written to a log file whose path is printed |
-| 130 | interrupted (Ctrl-C) |
-
-The table is repeated in docs/guide/outputs.md (section "Exit statuses").
+"""Exit statuses of the ``asset2sim`` command line (their meaning:
+docs/guide/outputs.md, "Exit statuses"), the expected-failure exception the
+commands raise (:mod:`asset2sim.cli` prints it as one line and exits with its
+status) and the helpers that turn failures into it.
 """
 
 from __future__ import annotations
@@ -38,10 +25,8 @@ INTERRUPTED = 130
 
 
 class CommandError(Exception):
-    """An expected failure of a command: ``status`` (one of the constants
-    above), ``code`` (an upper-case identifier such as ``OUTPUT_INSIDE_INPUT``
-    or a validation code; several distinct codes joined by ``,``), ``path``
-    (the file or folder concerned) and a message."""
+    """An expected failure of a command: ``status``, ``code`` (upper case, such
+    as ``OUTPUT_INSIDE_INPUT``; several joined by ``,``), ``path`` and a message."""
 
     def __init__(self, status: int, code: str, path: Path | str | None, message: str):
         super().__init__(message)
@@ -71,12 +56,8 @@ def join_codes(codes: Iterable[str]) -> str:
 
 def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
     """The engine names of a comma-separated option value (order kept,
-    duplicates dropped). A known engine that is not installed is kept (the
-    command reports it as skipped).
-
-    Raises:
-        CommandError: status 2, ``ENGINE_UNKNOWN``, naming the known engines.
-    """
+    duplicates dropped, uninstalled ones kept; CommandError status 2
+    ``ENGINE_UNKNOWN``: an unknown name)."""
     names = list(dict.fromkeys(e.strip() for e in (text or "").split(",") if e.strip()))
     known = known_engines()
     unknown = [n for n in names if n not in known]
@@ -87,8 +68,7 @@ def parse_engines(text: str | None, option: str = "--engines") -> list[str]:
 
 
 def _inside(path: str | os.PathLike | None, folder: Path | str) -> bool:
-    """True when ``path`` is ``folder`` or lies in it, compared both as
-    written (absolute) and with symlinks resolved (``/proc/self`` ...)."""
+    """True when ``path`` is ``folder`` or lies in it, as written or with symlinks resolved."""
     if path is None:
         return False
     p = os.fsdecode(path)
@@ -105,10 +85,8 @@ def errno_name(exc: OSError) -> str:
 
 def os_failure(exc: OSError, out: Path | str | None, inp: Path | str | None, input_status: int = INVALID_INPUT,
                input_code: str = "INPUT_READ_FAILED") -> CommandError:
-    """An OSError of a command: under the output folder ``out`` (read-only,
-    full disk, permissions) or a disk-full / read-only error -> status 4
-    ``OUTPUT_WRITE_FAILED [ERRNO]``; else the input could not be read ->
-    ``input_status`` with ``input_code [ERRNO]``."""
+    """An OSError of a command: under ``out`` or a full / read-only disk ->
+    status 4 ``OUTPUT_WRITE_FAILED [ERRNO]``; else ``input_status`` ``input_code [ERRNO]``."""
     name = errno_name(exc)
     paths = [exc.filename, exc.filename2]
     full = exc.errno in (errno.ENOSPC, errno.EROFS, getattr(errno, "EDQUOT", -1))
@@ -118,8 +96,7 @@ def os_failure(exc: OSError, out: Path | str | None, inp: Path | str | None, inp
 
 
 def output_folder_failure(out: Path | str) -> CommandError | None:
-    """``OUTPUT_NOT_A_FOLDER`` (status 4) when ``out`` exists and is not a
-    folder (a file, ``/dev/null``); None otherwise."""
+    """``OUTPUT_NOT_A_FOLDER`` (status 4) when ``out`` exists and is not a folder, else None."""
     if os.path.lexists(out) and not os.path.isdir(out):
         return CommandError(OUTPUT_LOCATION, "OUTPUT_NOT_A_FOLDER", out, "exists and is not a folder")
     return None
@@ -130,8 +107,7 @@ _HINTS = {"OUTPUT_NOT_EMPTY": "pass --overwrite to do so"}
 
 
 def output_failure(exc: OutputError, out: Path | str) -> CommandError:
-    """Status 4 with the output error's own code (``OUTPUT_WRITE_FAILED [ERRNO]``
-    when an OSError caused it) and the path concerned."""
+    """Status 4 with the output error's code (``[ERRNO]`` added when an OSError caused it) and path."""
     code = exc.code
     if isinstance(exc.__cause__, OSError):
         code = f"{code} [{errno_name(exc.__cause__)}]"

@@ -1,13 +1,7 @@
 """``asset2sim benchmark manifest.csv``: run methods on every manifest row,
-evaluate each result, and write the thesis table (CSV + JSON + HTML), a
-per-object index page and a Parquet file of all records (method a column).
-
-Prints the table for the thesis set (first 9 rows) and for all rows, the
-SPEC's research numbers, and the median evaluation time per asset (the
-evaluation alone: no method run, no report writing, no interpreter start-up).
-``--compare previous/results.json`` checks that a second run gave the same
-numbers (timings excluded). Exit code 0, or 1 when ``--compare`` finds a
-difference.
+evaluate each result, write the thesis table (CSV, JSON, HTML, Parquet) and an
+index page, print the tables. Exit status 1 when ``--compare`` finds a
+difference from an earlier run (timings excluded), else 0.
 """
 
 from __future__ import annotations
@@ -18,12 +12,7 @@ import math
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
-from asset2sim.tasks.benchmark.benchmark import (
-    RESEARCH_NUMBERS,
-    benchmark_tables,
-    run_benchmark,
-    write_benchmark_outputs,
-)
+from asset2sim.tasks.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
@@ -105,7 +94,6 @@ def _print_table(console, title: str, summary: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
-
 
     console = Console(width=max(Console().width, 180))
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]

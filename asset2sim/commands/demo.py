@@ -26,19 +26,6 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="asset2sim-demo-") as tmp:
         src = demo_assets.build_box_with_lid(Path(tmp) / "demo_box")
         print(f"built demo asset {src}")
-        ns = argparse.Namespace(
-            asset=src,
-            prompt=args.prompt,
-            out=args.out,
-            category=None,
-            task=args.task,
-            estimator="offline",
-            model=None,
-            base_url=None,
-            force=True,
-            no_extras=args.no_extras,
-            quiet=False,
-            engines="pybullet",
-            overwrite=False,
-        )
+        ns = argparse.Namespace(asset=src, prompt=args.prompt, out=args.out, category=None, task=args.task, estimator="offline", model=None,
+                                base_url=None, force=True, no_extras=args.no_extras, quiet=False, engines="pybullet", overwrite=False)
         return refine_cmd.run(ns)

@@ -1,11 +1,8 @@
-"""``asset2sim evaluate OUT``: evaluate any URDF asset, write evaluation.json
-and report.html (beside the asset by default, never into it unless ``--out``
-names it), print a verdict table.
+"""``asset2sim evaluate ASSET``: evaluate any URDF asset, write evaluation.json
+and report.html (beside the asset unless ``--out``), print a verdict table.
 
-Exit code 0 when every metric with a verdict passes, 1 when one fails, 2 when
-the asset cannot be evaluated (or an engine is unknown), 4 when the output
-location cannot be written; failures print one line
-``asset2sim evaluate: CODE: PATH: message`` (:mod:`asset2sim.commands._status`).
+Exit status: 0 every metric with a verdict passes, 1 one fails, 2 the asset
+cannot be evaluated, 4 the output cannot be written.
 """
 
 from __future__ import annotations
@@ -14,14 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from asset2sim.commands._status import (
-    INVALID_REQUEST,
-    CommandError,
-    os_failure,
-    output_failure,
-    output_folder_failure,
-    parse_engines,
-)
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
 from asset2sim import output_folder
 
@@ -50,8 +40,7 @@ WIDE_TABLE = 120
 
 
 def default_out(asset: Path) -> Path:
-    """Where ``evaluate`` writes without ``--out``: ``<folder>-evaluation``
-    beside the asset's folder (a refine output stays byte-equal and complete)."""
+    """Where ``evaluate`` writes without ``--out``: ``<folder>-evaluation`` beside the asset's folder."""
     folder = asset if asset.is_dir() else asset.parent
     return folder.parent / f"{folder.resolve().name}-evaluation"
 
@@ -59,7 +48,6 @@ def default_out(asset: Path) -> Path:
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
-
 
     # a terminal: its width (the threshold column wraps); a pipe or file: lines kept whole for grep
     console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
@@ -70,18 +58,9 @@ def run(args: argparse.Namespace) -> int:
         raise bad_out
     try:
         with output_folder.adopting(out):  # into a refined folder: its files become the product's
-            ev = evaluate_asset(
-                args.asset,
-                reference=args.reference,
-                prompt=args.prompt,
-                engines=engines,
-                seed=args.seed,
-                category=args.category,
-                out_dir=out,
-                write_report=not args.no_report,
-                probes=not args.no_probes,
-                task=getattr(args, "task", None),
-            )
+            ev = evaluate_asset(args.asset, reference=args.reference, prompt=args.prompt, engines=engines, seed=args.seed,
+                                category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
+                                task=getattr(args, "task", None))
     except output_folder.OutputError as exc:
         raise output_failure(exc, out) from exc
     except OSError as exc:

@@ -1,22 +1,8 @@
-"""``asset2sim export OUT --format mjcf|usd``: derive simulator files from an output folder.
-
-``--format usd`` writes ``OUT/usd/mobility.usd`` (OpenUSD with UsdPhysics, for
-Isaac Sim / Isaac Lab and Newton; :mod:`asset2sim.tasks.publish.export_usd`),
-reads it back and compares every link's mass, COM and inertia and every
-joint's limits, damping, friction, stiffness and initial position with the
-folder's files (needs ``usd-core``).
-
-Writes ``OUT/mjcf/mobility.xml`` (and ``OUT/mjcf/meshes/``) from
-``OUT/mobility.urdf``, ``overlay.json`` and ``initial_state.json``, loads the
-written file with MuJoCo and checks masses, inertias and the keyframe.
-``--parity ENGINES`` then runs the SPEC's penetration, rest-stability and
-oscillation tests in those engines and prints them side by side.
-
-Exit status: 0 when the export checks out (and, with ``--parity``, every
-engine that ran passes), 1 when a check or a parity verdict fails, 2 when the
-folder cannot be exported (missing files, MuJoCo not installed, unknown
-engine), 4 when its ``mjcf/`` folder cannot be written; failures print one
-line ``asset2sim export: CODE: PATH: message``.
+"""``asset2sim export OUT --format mjcf|usd``: write ``OUT/mjcf/mobility.xml``
+or ``OUT/usd/mobility.usd``, read it back and check it against the folder's
+files; ``--parity ENGINES`` also runs the physical checks in those engines.
+Exit status: 0 checked (and parity passes), 1 a check or parity verdict
+fails, 2 the folder cannot be exported, 4 the output cannot be written.
 """
 
 from __future__ import annotations
@@ -26,14 +12,7 @@ import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
-from asset2sim.commands._status import (
-    INVALID_INPUT,
-    INVALID_REQUEST,
-    CommandError,
-    os_failure,
-    output_failure,
-    parse_engines,
-)
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, os_failure, output_failure, parse_engines
 from asset2sim.engines.registry import available_engines
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.engines.mjcf import MjcfError
@@ -55,12 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", type=Path, help="output folder (mobility.urdf, initial_state.json, overlay.json)")
     parser.add_argument("--format", "-f", choices=FORMATS, default="mjcf", help="export format (default: mjcf)")
     parser.add_argument("--no-visuals", action="store_true", help="collision geometry only (no visual meshes)")
-    parser.add_argument(
-        "--parity",
-        metavar="ENGINES",
-        default=None,
-        help="also run the physical checks (penetration, rest stability, oscillation) in these engines, e.g. pybullet,physx,mujoco",
-    )
+    parser.add_argument("--parity", metavar="ENGINES", default=None, help=(
+        "also run the physical checks (penetration, rest stability, oscillation) in these engines, e.g. pybullet,physx,mujoco"))
 
 
 def _fmt(v, spec: str = ".3g") -> str:
@@ -73,10 +48,7 @@ def _fmt(v, spec: str = ".3g") -> str:
 
 @contextlib.contextmanager
 def _export_errors(out: Path, folder: str, check_errors: tuple[type[Exception], ...]) -> Iterator[None]:
-    """An export's failures as :class:`CommandError` naming the file: the
-    output folder's own errors, a bad URDF (its code), a missing or invalid
-    input, an unreadable file (``out/folder``), and the export's read-back
-    check failing (``check_errors``, ``EXPORT_CHECK_FAILED``)."""
+    """An export's failures as :class:`CommandError` naming the file (``check_errors``: ``EXPORT_CHECK_FAILED``)."""
     try:
         yield
     except output_folder.OutputError as exc:
@@ -124,11 +96,9 @@ def run(args: argparse.Namespace) -> int:
                 continue
             notes = "; ".join(r["engine_notes"][:2]) + (" ..." if len(r["engine_notes"]) > 2 else "")
             fail = f" ({', '.join(r['failing_joints'])})" if r["failing_joints"] else ""
-            print(
-                f"{r['engine']:<10} {_fmt(r['penetration_mm'], '.3f'):>9} {_fmt(r['max_depth_mm'], '.3f'):>10} "
-                f"{_fmt(r['rest_stability']):>5} {_fmt(r['D_pos_m'], '.1e'):>9} {_fmt(r['D_ori_rad'], '.1e'):>9} "
-                f"{_fmt(r['oscillation']):>5}{fail}  {notes}"
-            )
+            print(f"{r['engine']:<10} {_fmt(r['penetration_mm'], '.3f'):>9} {_fmt(r['max_depth_mm'], '.3f'):>10} "
+                  f"{_fmt(r['rest_stability']):>5} {_fmt(r['D_pos_m'], '.1e'):>9} {_fmt(r['D_ori_rad'], '.1e'):>9} "
+                  f"{_fmt(r['oscillation']):>5}{fail}  {notes}")
             if r["rest_stability"] is False or r["oscillation"] is False:
                 status = 1
     return status

@@ -1,10 +1,5 @@
 """``asset2sim failures``: failure-mode breakdowns and other questions of the
-Parquet result catalog (``make failures``).
-
-Each query reads only the runs and columns it needs (one compacted file per
-run, :class:`asset2sim.flows.catalog.ResultCatalog`), so it stays fast on a catalog
-of a year of nightly runs (``benchmarks/bench_catalog.py``: 10^6 rows over
-365 runs)."""
+Parquet result catalog; each query reads only the runs and columns it needs."""
 
 from __future__ import annotations
 
@@ -17,8 +12,7 @@ from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 NAME = "failures"
 HELP = "Print the failure-mode breakdown of the latest run (or --run) from the Parquet catalog, and other catalog queries."
 
-#: Columns the breakdown of a run reads (besides the --by columns): those of
-#: :func:`asset2sim.flows.queries.status_counts`.
+#: Columns the breakdown of a run reads besides the --by columns.
 BREAKDOWN_COLUMNS = queries.COUNT_COLUMNS
 #: Columns of the list of assets that did not pass all checks.
 FAILED_COLUMNS = ("asset_id", "category", "status", "failure_mode", "error")
@@ -35,15 +29,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--slowest", type=int, default=0, metavar="N",
                         help="the N slowest assets of the run (--run; 'all': of every run)")
     parser.add_argument("--changes", nargs=2, metavar=("RUN_A", "RUN_B"), help="assets whose verdict changed between two runs")
-    parser.add_argument("--compare", action="store_true",
-                        help="the run (--run, default latest) against the previous run of its dataset: "
-                             "verdict flips, pass-rate and metric drift (the flow's regression check)")
+    parser.add_argument("--compare", action="store_true", help=(
+        "the run (--run, default latest) against the previous run of its dataset: "
+        "verdict flips, pass-rate and metric drift (the flow's regression check)"))
 
 
 def format_table(table) -> str:
     """A DataFrame of counts (index: one or more key levels) as fixed-width
-    text, like ``DataFrame.to_string`` but in time linear in its size (a
-    breakdown by run and category of a year of runs has ~17,000 lines)."""
+    text, like ``DataFrame.to_string`` but in time linear in its size."""
     names = [str(n) if n is not None else "" for n in table.index.names]
     keys = [k if isinstance(k, tuple) else (k,) for k in table.index]
     cols = [str(c) for c in table.columns]
@@ -77,9 +70,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"the catalog {cat.catalog_root} has no rows" + (f" for dataset {args.dataset!r}" if args.dataset else "")
               + "; run `make flow` first")
         return 1
-    pd.set_option("display.width", 200)
-    pd.set_option("display.max_columns", 30)
-    pd.set_option("display.max_colwidth", 80)
+    pd.set_option("display.width", 200, "display.max_columns", 30, "display.max_colwidth", 80)
 
     if args.changes:
         df = store.read(args.dataset, list(args.changes), columns=[*queries.CHANGE_COLUMNS])

@@ -1,14 +1,7 @@
-"""``asset2sim flow``: refine a dataset of ``catalog.yaml`` with the Prefect flow
-(``make flow``), or register and serve the nightly deployment (``--serve``,
-``make serve``).
-
-While the flow runs, a live progress bar (one step per asset, counts of done /
-skipped / failed, elapsed time and ETA; one line per asset when the output is
-not a terminal, ``--no-progress`` for none). At the end, the run summary and
-the regression check against the previous run of the dataset; the exit
-status is 5 (:data:`asset2sim.commands._status.REGRESSION`) when the run
-regressed beyond the limits of ``catalog.yaml`` (``results.regression``,
-``fail_flow: true``), else 0."""
+"""``asset2sim flow``: refine a dataset of ``catalog.yaml`` with the Prefect
+flow (with a progress bar, then the run summary and the regression check), or
+register and serve the nightly deployment (``--serve``). Exit status 5 when
+the run regressed beyond ``catalog.yaml`` ``results.regression`` (``fail_flow``), else 0."""
 
 from __future__ import annotations
 
@@ -34,31 +27,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--catalog", type=Path, default=Path("catalog.yaml"), help="catalog file (default catalog.yaml)")
     parser.add_argument("--dataset", default=None, help="dataset of the catalog (default: its default_dataset)")
     parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
-    parser.add_argument(
-        "--dask-address",
-        "--scheduler",
-        dest="dask_address",
-        default=None,
-        help="existing Dask scheduler (`dask scheduler`, dask-jobqueue, dask-kubernetes), e.g. tcp://host:8786 "
-        "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/guide/pipeline.md)",
-    )
-    parser.add_argument(
-        "--dask-host",
-        default=None,
-        help="interface the local Dask cluster (scheduler, workers, dashboard) listens on "
-        "(default: catalog run.dask_host, 127.0.0.1: this machine only)",
-    )
-    parser.add_argument(
-        "--no-dashboard",
-        action="store_true",
-        help="no Dask dashboard (nor other HTTP pages) on the local cluster (default: catalog run.dashboard)",
-    )
-    parser.add_argument(
-        "--out",
-        default=None,
-        help="output store: s3://bucket/prefix or any pyarrow/fsspec URI or path; workers refine locally and upload "
-        "(default: catalog output_store, else output_root)",
-    )
+    parser.add_argument("--dask-address", "--scheduler", dest="dask_address", default=None, help=(
+        "existing Dask scheduler (`dask scheduler`, dask-jobqueue, dask-kubernetes), e.g. tcp://host:8786 "
+        "(default: $DASK_ADDRESS, else a local cluster); its workers need PREFECT_API_URL (docs/guide/pipeline.md)"))
+    parser.add_argument("--dask-host", default=None, help=(
+        "interface the local Dask cluster (scheduler, workers, dashboard) listens on "
+        "(default: catalog run.dask_host, 127.0.0.1: this machine only)"))
+    parser.add_argument("--no-dashboard", action="store_true",
+                        help="no Dask dashboard (nor other HTTP pages) on the local cluster (default: catalog run.dashboard)")
+    parser.add_argument("--out", default=None, help=(
+        "output store: s3://bucket/prefix or any pyarrow/fsspec URI or path; workers refine locally and upload "
+        "(default: catalog output_store, else output_root)"))
     parser.add_argument("--ids", default=None, help="comma-separated asset ids to run (default: all)")
     parser.add_argument("--limit", type=int, default=None, help="run at most this many assets")
     parser.add_argument("--force", action="store_true", help="redo assets even when a finished result exists")
@@ -89,9 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if args.serve:
         return _serve(args, cat)
     live = not getattr(args, "no_progress", False) and sys.stdout.isatty()
-    if live:
-        # the bar replaces Prefect's INFO lines in the terminal (this process and the
-        # Dask workers it starts, which inherit the environment); the Prefect UI keeps them
+    if live:  # the bar replaces Prefect's INFO lines in the terminal (here and in the workers)
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "WARNING")
     from asset2sim.flows.refine_flow import run_refine_flow  # imports Prefect: after its environment is set
 
@@ -102,20 +79,16 @@ def run(args: argparse.Namespace) -> int:
             if not getattr(args, "no_progress", False):
                 stack.enter_context(listening(progress))
             stack.callback(progress.close)
-            summary = run_refine_flow(
-                cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
-                out=getattr(args, "out", None), dask_host=getattr(args, "dask_host", None),
-                dashboard=False if getattr(args, "no_dashboard", False) else None,
-            )
+            summary = run_refine_flow(cat.path, args.dataset, args.workers, args.dask_address, ids=ids, limit=args.limit, force=args.force,
+                                      out=getattr(args, "out", None), dask_host=getattr(args, "dask_host", None),
+                                      dashboard=False if getattr(args, "no_dashboard", False) else None)
     except CatalogError as exc:
         print(f"error: {exc}")
         return 2
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
     dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
-    servers_s = float(summary.get("stage_servers_seconds") or 0.0)
-    assets_s = float(summary.get("assets_seconds") or 0.0)
-    tracking_s = float(summary.get("tracking_seconds") or 0.0)
+    servers_s, assets_s, tracking_s = (float(summary.get(f"{k}_seconds") or 0.0) for k in ("stage_servers", "assets", "tracking"))
     worked = int(summary.get("done", 0)) + int(summary.get("failed", 0))
     print(f"run {summary['run']} of dataset {summary['dataset']}: {summary['assets']} assets "
           f"({summary['done']} done, {summary['skipped']} skipped, {summary['failed']} failed)")
@@ -170,14 +143,8 @@ def _serve(args: argparse.Namespace, cat) -> int:
         os.environ["PREFECT_API_URL"] = url
         print(f"Prefect server at {url} (UI: {url[:-4]}); log in {cat.project_root / '.prefect' / 'server.log'}")
     try:
-        deployment = nightly.build_nightly_deployment(
-            cat.path,
-            dataset=args.dataset,
-            workers=args.workers,
-            dask_address=args.dask_address,
-            cron=sched.cron,
-            timezone=sched.timezone,
-        )
+        deployment = nightly.build_nightly_deployment(cat.path, dataset=args.dataset, workers=args.workers, dask_address=args.dask_address,
+                                                      cron=sched.cron, timezone=sched.timezone)
         from prefect.settings import PREFECT_API_URL, temporary_settings
 
         with temporary_settings({PREFECT_API_URL: os.environ["PREFECT_API_URL"]}):

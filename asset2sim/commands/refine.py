@@ -1,10 +1,8 @@
 """``asset2sim refine ASSET --prompt P --out OUT``: refine one asset.
 
-Exit status (:mod:`asset2sim.commands._status`): 0 written and
-interaction-ready, 1 invalid input, 2 invalid request (too long), estimator
-failure or invalid overlay, 3 written but not interaction-ready, 4 output
-location problem (inside or containing the input, not a folder, holding files
-asset2sim did not write without ``--overwrite``, not writable, disk full).
+Exit status: 0 written and interaction-ready, 1 invalid input, 2 invalid
+request, estimator failure or invalid overlay, 3 written but not
+interaction-ready, 4 output location problem.
 """
 
 from __future__ import annotations
@@ -14,16 +12,8 @@ import sys
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (
-    INVALID_INPUT,
-    INVALID_REQUEST,
-    NOT_READY,
-    CommandError,
-    join_codes,
-    os_failure,
-    output_failure,
-    parse_engines,
-)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, join_codes, os_failure, output_failure,
+                                        parse_engines)
 from asset2sim.api import load_config, merge_overrides
 from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
@@ -42,28 +32,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--prompt", "-p", default="", help='the request, e.g. "I want a slightly open stapler."')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
     parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")
-    parser.add_argument(
-        "--task",
-        default=None,
-        help='the manipulation task, e.g. "close the microwave door": the post-check executes it with a force- and '
-             "speed-limited gripper (tiers task and force) and friction and damping are kept to what a real operating "
-             "force overcomes in its direction (docs/guide/metrics.md)",
-    )
-    parser.add_argument(
-        "--estimator",
-        default=None,
-        help="overlay estimator: offline (the default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
+    parser.add_argument("--task", default=None, help=(
+        'the manipulation task, e.g. "close the microwave door": the post-check executes it with a force- and '
+        "speed-limited gripper (tiers task and force) and friction and damping are kept to what a real operating "
+        "force overcomes in its direction (docs/guide/metrics.md)"))
+    parser.add_argument("--estimator", default=None, help=(
+        "overlay estimator: offline (the default, no network); llm (any litellm model, e.g. --model gemini/gemini-2.5-flash, "
         "key from the provider's environment variable); openai (an OpenAI-compatible server: --base-url URL --model M). "
-        "See docs/guide/model_backends.md",
-    )
+        "See docs/guide/model_backends.md"))
     parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
     parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
-    parser.add_argument(
-        "--engines",
-        default=None,
-        help="comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
-             "reported (default: pybullet, and physx where SAPIEN is installed)",
-    )
+    parser.add_argument("--engines", default=None, help=(
+        "comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
+        "reported (default: pybullet, and physx where SAPIEN is installed)"))
     over = parser.add_argument_group("overrides", "typed values that win over the request's words (strings carry units)")
     over.add_argument("--mass", default=None, help="total mass, e.g. 12kg or 500g")
     over.add_argument("--size", default=None, help="largest extent of the closed object, e.g. 0.5m or 30cm")
@@ -77,11 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
-    parser.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)",
-    )
+    parser.add_argument("--overwrite", action="store_true", help=(
+        "write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)"))
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
     parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
 
@@ -89,11 +67,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
-    pen = r.metric("penetration")
-    stab = r.metric("rest_stability")
-    osc = r.metric("oscillation")
+    pen, stab, osc = r.metric("penetration"), r.metric("rest_stability"), r.metric("oscillation")
     state = ", ".join(f"{k}={v:.4g}" for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
-    lines = [
+    stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
+                                                     f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
+                                                     f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad)")
+    return [
         f"asset        {r.asset_id} ({r.category})",
         f"output       {result.out_dir}",
         f"scale        {r.scale:.4g}",
@@ -101,11 +80,7 @@ def summary_lines(result) -> list[str]:
         f"initial state {state}  (rad / m)",
     ] + ([f"task         {r.task}"] if r.task else []) + [
         f"penetration  {pen.value:.3f} mm" if pen and pen.value is not None else "penetration  n/a",
-        (
-            f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad)"
-            if stab
-            else "stability    n/a"
-        ),
+        stability,
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
@@ -116,12 +91,10 @@ def summary_lines(result) -> list[str]:
     ] + request_lines(r.request) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
-    return lines
 
 
 def request_lines(found) -> list[str]:
-    """The request's account in the summary: numbers asked vs achieved,
-    warnings, and the word groups no rule used (``report.request``)."""
+    """The request's lines of the summary: numbers asked vs achieved, warnings, words no rule used."""
     if found is None:
         return []
     out = [f"request      {a}" for a in found.asked]
@@ -137,17 +110,14 @@ def request_lines(found) -> list[str]:
 
 
 def _tiers(report) -> str:
-    """`` (rest pass, sweep pass, robust_rest FAIL, probes n/a)``: the
-    report's readiness tiers (:func:`asset2sim.tasks.check.verdict.readiness`),
-    the same verdict report.html and the catalog show."""
+    """`` (rest pass, sweep pass, robust_rest FAIL, probes n/a)``: the report's readiness tiers."""
     if not report.readiness:
         return ""
     return " (" + ", ".join(f"{t} {'pass' if v else ('FAIL' if v is False else 'n/a')}" for t, v in report.readiness.items()) + ")"
 
 
 def _manipulation_line(report) -> str:
-    """Joint sweep, robust rest and (with a task) task execution and operating
-    force of the post-check, one line."""
+    """Joint sweep, robust rest, task execution and operating force of the post-check, one line."""
     parts = []
     for name, label in (("joint_sweep", "sweep"), ("robust_rest", "robust rest"), ("task_execution", "task"),
                         ("operating_force", "force")):
@@ -161,13 +131,9 @@ def _manipulation_line(report) -> str:
 
 
 def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
-    """The one-line failure of a refine run: status, code(s) and path.
-
-    Output location: status 4 with the ``OUTPUT_*`` code; a request over the
-    cap: 2 ``REQUEST_TOO_LONG``; a refused input: 1 with the distinct
-    validation codes; an invalid overlay: 2 with its fatal ``OVL_*`` codes;
-    an estimator failure: 2 with ``ESTIMATOR_*``. The failure mode (the
-    flow's vocabulary) starts the message."""
+    """The one-line failure of a refine run: status, code(s) (validation,
+    fatal ``OVL_*``, ``ESTIMATOR_*``, ``OUTPUT_*`` ...) and path; the failure
+    mode starts the message."""
     cause = exc.__cause__
     if isinstance(cause, OutputError):
         return output_failure(cause, args.out)
@@ -184,21 +150,9 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}")
 
 
-def _os_failure(exc: OSError, args: argparse.Namespace) -> CommandError:
-    """An OSError of a refine run: under the output folder (read-only, full
-    disk, permissions) -> status 4, else the input could not be read -> 1."""
-    return os_failure(exc, args.out, args.asset)
-
-
 def options(args: argparse.Namespace) -> RefineConfig:
-    """The run's :class:`RefineConfig`: ``--config``'s file (if any), then the
-    flags given on the command line (an override's flag replaces the file's
-    value for the same quantity; ``--state`` adds to the file's states).
-
-    Raises:
-        CommandError: the file or an override is invalid (``CONFIG_INVALID``,
-            ``OVERRIDE_INVALID``; status 2).
-    """
+    """The run's :class:`RefineConfig`: ``--config``'s file, then the flags
+    given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``)."""
     try:
         base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
     except (OSError, ValueError) as exc:
@@ -234,24 +188,15 @@ def run(args: argparse.Namespace) -> int:
 
     config = options(args)
     try:
-        result = refine_stage.refine_asset(
-            args.asset,
-            args.prompt,
-            args.out,
-            config,
-            category=args.category,
-            task=getattr(args, "task", None) or None,
-            progress=progress,
-            skip_if_complete=not args.force,
-            extras=not args.no_extras,
-            overwrite=getattr(args, "overwrite", False),
-        )
+        result = refine_stage.refine_asset(args.asset, args.prompt, args.out, config, category=args.category,
+                                           task=getattr(args, "task", None) or None, progress=progress, skip_if_complete=not args.force,
+                                           extras=not args.no_extras, overwrite=getattr(args, "overwrite", False))
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
     except OutputError as exc:  # e.g. an output file missing at the end: no completion marker
         raise output_failure(exc, args.out) from exc
     except OSError as exc:
-        raise _os_failure(exc, args) from exc
+        raise os_failure(exc, args.out, args.asset) from exc
     for line in summary_lines(result):
         print(line)
     return 0 if result.report.failure_mode == "none" else NOT_READY

@@ -1,10 +1,8 @@
 """``asset2sim render ASSET [--state initial_state.json] --out views/``: write
 textured PNG views of an asset at a joint state.
 
-Exit code 0 when every view was written, 2 on bad input (missing asset or
-state file, unknown joint or view), 1 when rendering fails, 4 when the output
-folder cannot be used (a file, ``/dev/null``, read-only); failures print one
-line ``asset2sim render: CODE: PATH: message``.
+Exit status: 0 every view written, 1 rendering failed, 2 bad input, 4 the
+output folder cannot be used.
 """
 
 from __future__ import annotations
@@ -13,25 +11,11 @@ import argparse
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (
-    INVALID_INPUT,
-    INVALID_REQUEST,
-    OUTPUT_LOCATION,
-    CommandError,
-    errno_name,
-    output_failure,
-    output_folder_failure,
-)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, OUTPUT_LOCATION, CommandError, errno_name, output_failure,
+                                        output_folder_failure)
 from asset2sim import output_folder
-from asset2sim.tasks.geometry.render import (
-    VIEWS,
-    RenderError,
-    SceneRenderer,
-    read_joint_state,
-    render_contact_sheet,
-    resolve_urdf,
-    write_png,
-)
+from asset2sim.tasks.geometry.render import (VIEWS, RenderError, SceneRenderer, read_joint_state, render_contact_sheet, resolve_urdf,
+                                             write_png)
 
 NAME = "render"
 HELP = "Render textured views (front, back, left, right, perspective; optionally top) of an asset at a joint state to PNGs."
@@ -39,27 +23,16 @@ HELP = "Render textured views (front, back, left, right, perspective; optionally
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
-    parser.add_argument(
-        "--state",
-        type=Path,
-        default=None,
-        help='initial_state.json ({"initial_joint_positions": {joint: value}}, rad or m); default: all joints at zero',
-    )
+    parser.add_argument("--state", type=Path, default=None,
+                        help='initial_state.json ({"initial_joint_positions": {joint: value}}, rad or m); default: all joints at zero')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder for <view>.png")
-    parser.add_argument(
-        "--views",
-        default="front,back,left,right,perspective",
-        help="comma-separated views among front, back, left, right, perspective, top (default: the first five)",
-    )
+    parser.add_argument("--views", default="front,back,left,right,perspective",
+                        help="comma-separated views among front, back, left, right, perspective, top (default: the first five)")
     parser.add_argument("--size", type=int, nargs=2, default=(256, 256), metavar=("W", "H"), help="pixels (default 256 256)")
     parser.add_argument("--backend", default="auto", help="renderer: auto or tiny (PyBullet TinyRenderer, CPU)")
     parser.add_argument("--shadows", action="store_true", help="cast shadows (slower)")
-    parser.add_argument(
-        "--sheet",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="also write contact_sheet.png with every view labelled (default on)",
-    )
+    parser.add_argument("--sheet", action=argparse.BooleanOptionalAction, default=True,
+                        help="also write contact_sheet.png with every view labelled (default on)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -16,9 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=None, help="local Dask workers (default: catalog run.workers)")
     parser.add_argument("--dask-address", default=None, help="existing Dask scheduler (default: $DASK_ADDRESS at run time)")
     parser.add_argument("--cron", default=None, help="cron expression (default: $ASSET2SIM_CRON, else catalog schedule.cron)")
-    parser.add_argument(
-        "--timezone", default=None, help="IANA time zone (default: $ASSET2SIM_TIMEZONE, else catalog schedule.timezone)"
-    )
+    parser.add_argument("--timezone", default=None, help="IANA time zone (default: $ASSET2SIM_TIMEZONE, else catalog schedule.timezone)")
     parser.add_argument("--register-only", action="store_true", help="register the deployment and exit")
 
 

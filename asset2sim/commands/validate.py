@@ -1,8 +1,5 @@
-"""``asset2sim validate ASSET``: every finding about an input asset, then a verdict.
-
-Prints one line per finding (severity, code, file:line, link or joint,
-message), then a summary. Exit status: 0 when no finding is an error, 1 when
-the asset is refused, 2 for usage errors (argparse).
+"""``asset2sim validate ASSET``: one line per finding about an input asset,
+then a verdict. Exit status: 0 no error, 1 refused, 2 usage errors.
 """
 
 from __future__ import annotations
@@ -12,12 +9,7 @@ import json
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError
-from asset2sim.tasks.ingest.validate_input import (
-    CODES,
-    ValidationPolicy,
-    has_errors,
-    validate_asset,
-)
+from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
 
 NAME = "validate"
 HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh paths and contents); exit 1 on errors."
@@ -29,20 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strict", action="store_true", help="treat warnings as errors")
     parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (no info)")
     parser.add_argument("--paths-only", action="store_true", help="check mesh paths but do not read mesh contents (faster)")
-    parser.add_argument(
-        "--error",
-        metavar="CODE",
-        action="append",
-        default=[],
-        help="make this code an error (repeatable), e.g. --error JOINT_LIMIT_EQUAL",
-    )
-    parser.add_argument(
-        "--allow",
-        metavar="CODE",
-        action="append",
-        default=[],
-        help="downgrade this code to a warning (repeatable)",
-    )
+    parser.add_argument("--error", metavar="CODE", action="append", default=[],
+                        help="make this code an error (repeatable), e.g. --error JOINT_LIMIT_EQUAL")
+    parser.add_argument("--allow", metavar="CODE", action="append", default=[], help="downgrade this code to a warning (repeatable)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,20 +1,6 @@
-"""Simulator protocol and registry.
-
-An *engine* opens a :class:`SimSession` on a URDF under the SPEC's measurement
-conventions ("How quality is measured"):
-
-- timestep 1/240 s, gravity -9.81 m/s^2 along z, a ground plane at z = 0;
-- self-collision on except between a link and its parent;
-- inertia taken from the file;
-- the root free (not fixed), placed so its lowest collision point touches the
-  ground, joints at the initial state;
-- passive joints: Coulomb friction as a zero-target-velocity motor whose maximum
-  force is ``<dynamics friction>``, viscous damping ``<dynamics damping>``, and a
-  spring torque -k (q - q_s) applied each step where the overlay has one.
-
-Metrics (``asset2sim.tasks.check.metrics``) only use this protocol, so the same
-definitions run in every engine. Engines register with :func:`register_engine`;
-heavy engines are imported lazily by name.
+"""Simulator protocol and registry: an engine opens a :class:`SimSession` on a
+URDF under the SPEC's measurement conventions ("How quality is measured";
+``docs/design/simulators.md``) and registers with :func:`register_engine`.
 """
 
 from __future__ import annotations
@@ -30,10 +16,8 @@ from asset2sim.schemas.config import SimConventions
 
 @dataclass(frozen=True)
 class Spring:
-    """A joint spring: torque/force -stiffness * (q - reference) each step.
-
-    ``stiffness`` N*m/rad or N/m, ``reference`` rad or m.
-    """
+    """A joint spring: torque/force -stiffness * (q - reference) each step;
+    ``stiffness`` N*m/rad or N/m, ``reference`` rad or m."""
 
     stiffness: float
     reference: float
@@ -41,11 +25,8 @@ class Spring:
 
 @dataclass
 class ContactPair:
-    """Penetration between two links of the same body.
-
-    ``depth`` m: sum over the pair's contact points of max(0, -separation);
-    ``max_depth`` m: the deepest point.
-    """
+    """Penetration between two links of the same body: ``depth`` m, the sum of
+    max(0, -separation) over its points; ``max_depth`` m, the deepest point."""
 
     link_a: str
     link_b: str
@@ -56,13 +37,9 @@ class ContactPair:
 
 @dataclass
 class SessionOptions:
-    """How to open a session.
-
-    ``initial_state``: joint name -> position (rad or m). ``springs``: joint name
-    -> :class:`Spring`. ``fixed_base``: pin the root (used only by state
-    refinement, never by the SPEC's metrics). ``gravity``: False disables it
-    (contact queries only).
-    """
+    """How to open a session: ``initial_state`` joint -> rad or m; ``springs``
+    joint -> :class:`Spring`; ``fixed_base`` pins the root; ``gravity`` False
+    disables it."""
 
     initial_state: dict[str, float] = field(default_factory=dict)
     springs: dict[str, Spring] = field(default_factory=dict)
@@ -85,11 +62,9 @@ class HeldLink:
 
 @dataclass
 class HeldJoint:
-    """A movable joint as an engine holds it (SI: rad or m): ``lower`` /
-    ``upper`` limits (+-inf when unlimited), viscous ``damping`` (N*m*s/rad or
-    N*s/m), Coulomb ``friction`` (N*m or N), spring ``stiffness`` (N*m/rad or
-    N/m) and ``reference`` (rad or m; None without a spring), ``position`` the
-    initial joint position."""
+    """A movable joint as an engine holds it (SI, rad or m): limits (+-inf:
+    unlimited), viscous ``damping``, Coulomb ``friction``, spring ``stiffness``
+    and ``reference`` (None without a spring), initial ``position``."""
 
     lower: float
     upper: float
@@ -102,12 +77,9 @@ class HeldJoint:
 
 @dataclass
 class HeldPhysics:
-    """What an engine holds after loading a file, read back from the engine's
-    own data structures (not from the file), by URDF link and joint name.
-
-    ``source``: the file the engine loaded (URDF, MJCF, USD); ``how``: where
-    each quantity was read (engine API / attribute names), for the report.
-    """
+    """What an engine holds after loading a file (URDF, MJCF, USD: ``source``),
+    read back from the engine, by URDF link and joint name; ``how``: where each
+    quantity was read, for the report."""
 
     engine: str
     source: str
@@ -115,9 +87,7 @@ class HeldPhysics:
     joints: dict[str, HeldJoint]
     how: dict[str, str] = field(default_factory=dict)
     welded_to_world: list[str] = field(default_factory=list)
-    """Links the engine welds to the world (a fixed root): their mass and
-    inertia take no part in the simulation and some engines do not keep them
-    (PyBullet stores 0 kg for a fixed base)."""
+    """Links welded to the world (a fixed root): their mass may not be kept."""
 
 
 def principal_moments(tensor: np.ndarray) -> np.ndarray:
@@ -132,13 +102,9 @@ class EngineUnsupported(NotImplementedError):
 
 
 class SimSession(Protocol):
-    """One loaded asset in one engine.
-
-    Stages talk to a simulator only through these attributes and methods
-    (as dm_control's tasks talk to ``Physics``); an engine that cannot answer
-    a query raises :class:`EngineUnsupported`. Positions m, angles rad,
-    quaternions x, y, z, w, every pose in the world frame.
-    """
+    """One loaded asset in one engine; a query the engine cannot answer raises
+    :class:`EngineUnsupported`. Positions m, angles rad, quaternions x, y, z,
+    w, every pose in the world frame."""
 
     engine: str
     options: SessionOptions
@@ -162,33 +128,20 @@ class SimSession(Protocol):
         """Current joint velocities (rad/s or m/s)."""
 
     def joint_state(self, joint: str) -> tuple[float, float]:
-        """Position (rad or m) and velocity (rad/s or m/s) of one movable joint.
-
-        Raises:
-            KeyError: not a movable joint.
-        """
+        """Position (rad or m) and velocity (rad/s or m/s) of one movable joint
+        (KeyError: not a movable joint)."""
 
     def joint_axis(self, joint: str) -> np.ndarray:
-        """Axis (3,) of a movable joint in its child link's frame, as the
-        engine holds it (world axis: ``link_frame(joint_child[joint])[1] @ axis``).
-
-        Raises:
-            KeyError: not a movable joint.
-        """
+        """Axis (3,) of a movable joint in its child link's frame (KeyError:
+        not a movable joint)."""
 
     def apply_joint_effort(self, joint: str, effort: float) -> None:
         """Generalized force (N*m or N) on a joint for the next step."""
 
     def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
         """Drive a movable joint towards ``velocity`` (rad/s or m/s) with a
-        motor whose effort is at most ``max_force`` (N*m or N, >= 0), as a
-        robot's force-limited velocity controller; the drive acts on every
-        following step until :meth:`release_joint`. The joint's own Coulomb
-        friction stays a load the drive must overcome (PyBullet and PhysX: the
-        passive friction motor's limit becomes ``max_force + friction``;
-        MuJoCo: ``frictionloss`` stays and the drive adds a clipped force).
-        Position control is this drive with ``velocity`` recomputed each step
-        from the position error (:mod:`asset2sim.tasks.check.sweep`).
+        motor of at most ``max_force`` (N*m or N, >= 0) on every step until
+        :meth:`release_joint`; the joint's Coulomb friction stays a load.
 
         Raises:
             KeyError: not a movable joint.
@@ -196,26 +149,16 @@ class SimSession(Protocol):
         """
 
     def release_joint(self, joint: str) -> None:
-        """End :meth:`drive_joint`: the joint is passive again (Coulomb
-        friction, damping, spring). Raises KeyError: not a movable joint."""
+        """End :meth:`drive_joint` (KeyError: not a movable joint)."""
 
     # --------------------------------------------------------------- links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """World position (3,) m and rotation matrix (3, 3) of the link's URDF
-        frame (the child frame of its parent joint) at the current state.
-
-        Raises:
-            KeyError: unknown link.
-        """
+        """World position (3,) m and rotation (3, 3) of the link's URDF frame
+        (KeyError: unknown link)."""
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """The engine's axis-aligned bounding box of a link's collision
-        shapes, world, (lo (3,), hi (3,)) m. PyBullet: its broadphase AABB
-        (loose for rotated hulls); PhysX: bounds of the cooked hull points.
-
-        Raises:
-            KeyError: unknown link.
-        """
+        """The engine's world bounding box (lo (3,), hi (3,)) m of a link's
+        collision shapes (KeyError: unknown link)."""
 
     def link_has_collision(self, link: str) -> bool:
         """Whether the link carries at least one collision shape."""
@@ -228,14 +171,9 @@ class SimSession(Protocol):
         """Mass (kg) the engine uses for every link (defaults included)."""
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        """Signed distances (m, negative = penetration) of the closest points
-        between the collision shapes of two links of the body, every pair
-        within ``max_distance``, parent-child pairs included. Independent of
-        cached contacts.
-
-        Raises:
-            KeyError: unknown link.
-        """
+        """Signed closest-point distances (m, < 0: penetration) between two
+        links' collision shapes within ``max_distance``, parent-child pairs
+        included, independent of cached contacts (KeyError: unknown link)."""
 
     def apply_link_force(self, link: str, force: np.ndarray, point: np.ndarray) -> None:
         """External force (3,) N at a world point (3,) m on a link, for the
@@ -250,22 +188,12 @@ class SimSession(Protocol):
 
     def set_root_velocity(self, linear: np.ndarray, angular: np.ndarray) -> None:
         """Set the root's linear (3,) m/s and angular (3,) rad/s velocity,
-        world frame (a nudge); joint velocities are kept.
-
-        Raises:
-            EngineUnsupported: fixed base, or an engine without dynamics.
-        """
+        world frame (EngineUnsupported: fixed base, or no dynamics)."""
 
     def hold_root(self, max_force: float) -> None:
-        """Hold the root at its current pose as a hand grips a body: a fixed
-        constraint to the world whose force is at most ``max_force`` (N; the
-        engine applies the same bound, as N*m, to its torque rows), acting on
-        every following step until :meth:`release_root`. A no-op on a
-        fixed-base session (its root is already held).
-
-        Raises:
-            EngineUnsupported: the engine has no bounded constraints.
-        """
+        """Hold the root at its current pose by a fixed constraint of at most
+        ``max_force`` (N, and N*m on its torque rows) until :meth:`release_root`;
+        a no-op on a fixed base (EngineUnsupported: no bounded constraints)."""
 
     def release_root(self) -> None:
         """End :meth:`hold_root` (no-op when the root is not held)."""
@@ -279,18 +207,15 @@ class SimSession(Protocol):
         """Deepest penetration of any link into the ground plane, m (>= 0)."""
 
     def step_ground_penetration(self) -> float:
-        """Deepest ground penetration (m, >= 0) among the contacts the last
-        step generated, without a new collision query (PyBullet: a query
-        would refresh its contact manifolds and change the next steps);
-        engines without step contacts answer :meth:`ground_penetration`."""
+        """Deepest ground penetration (m, >= 0) among the last step's contacts,
+        without a new collision query."""
 
     # ------------------------------------------------------------ dynamics
     def step(self, n: int = 1) -> None:
         """Advance n timesteps, applying springs each step."""
 
     def save_state(self) -> int:
-        """Snapshot the simulation state (poses, velocities, contacts the
-        engine caches); returns a handle for :meth:`restore_state`."""
+        """Snapshot the simulation state; returns a handle for :meth:`restore_state`."""
 
     def restore_state(self, handle: int) -> None:
         """Return to a snapshot of :meth:`save_state`."""
@@ -299,43 +224,45 @@ class SimSession(Protocol):
         """Free a snapshot."""
 
     def held_physics(self) -> HeldPhysics:
-        """Every link's mass, COM and principal moments and every movable
-        joint's limits, damping, friction, spring and position as the engine
-        holds them (read from the engine, for the authored-equals-simulated
-        check, ``asset2sim.tasks.check.authored``)."""
+        """Every link's and movable joint's physics as the engine holds them."""
 
     def close(self) -> None:
         """Release the engine's resources."""
 
 
-class NoRootHold:
-    """:meth:`SimSession.hold_root` / :meth:`SimSession.release_root` of an
-    engine without a bounded root constraint (every engine but PyBullet; the
-    probes, which hold the root, run in PyBullet): a no-op on a fixed base,
-    else :class:`EngineUnsupported`. Mixed into the engine's session class,
-    which has ``engine`` and ``options``."""
+class SessionDefaults:
+    """Mixed into every session class: a context manager that closes it;
+    ``step_ground_penetration`` = ``ground_penetration`` (no contact cache);
+    ``hold_root`` / ``release_root`` of an engine without a bounded root
+    constraint (a no-op on a fixed base, else :class:`EngineUnsupported`)."""
 
     engine: str
     options: SessionOptions
 
+    def step_ground_penetration(self) -> float:
+        return self.ground_penetration()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
     def hold_root(self, max_force: float) -> None:
-        """Raises :class:`EngineUnsupported` unless the base is fixed (then a no-op)."""
         if self.options.fixed_base:
             return
         raise EngineUnsupported(f"{self.engine}: no bounded root hold")
 
     def release_root(self) -> None:
-        """Nothing to release: :meth:`hold_root` holds nothing here."""
+        pass
 
 
 class ShapeWorld(Protocol):
-    """Free static convex shapes in a private collision world (no articulation,
-    no dynamics): distance queries between pieces of geometry."""
+    """Free static convex shapes in a private collision world: distance queries."""
 
     contact_margin: float
-    """Distance (m) the world reports between two convex shapes whose
-    surfaces touch, as a penetration: the engine's collision margins of
-    both shapes (PyBullet: 1 mm each, -2 mm reported for touching hulls)."""
+    """Distance (m) reported as penetration between two touching convex shapes
+    (the engine's collision margins; PyBullet: 2 mm)."""
 
     def add_convex(self, vertices: np.ndarray, scale: np.ndarray, position: np.ndarray, orientation: np.ndarray) -> int:
         """Add the convex hull of ``vertices`` (k, 3), scaled per axis by
@@ -375,27 +302,19 @@ class Viewer(Protocol):
 
     def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
         """RGBA (height, width, 4) uint8 and segmentation (height, width) int
-        (< 0 where no body) of the scene from ``camera`` (eye, target, up (3,)
-        m; fov_deg, near, far) under ``light`` (direction (3,), color (3,),
-        distance m, shadow bool, ambient, diffuse, specular coefficients)."""
+        (< 0: no body) from ``camera`` (eye, target, up (3,) m; fov_deg, near,
+        far) under ``light`` (direction, color, distance, shadow, ambient,
+        diffuse, specular)."""
 
     def close(self) -> None:
         """Release the viewer."""
 
 
 def penetration_sum(points: Iterable[tuple[str, str, float]]) -> tuple[float, list[ContactPair]]:
-    """Phi and its per-pair parts from signed contact distances.
-
-    Args:
-        points: ``(link_a, link_b, separation)`` per contact point, separation
-            in m (< 0: penetration), in the engine's order (the sum is taken
-            in that order).
-
-    Returns:
-        ``(Phi, pairs)``: Phi (m) = sum of max(0, -separation) (SPEC,
-        "Refine the initial state"); one :class:`ContactPair` per unordered
-        link pair with a penetrating point, deepest total first.
-    """
+    """``(Phi, pairs)`` of ``(link_a, link_b, separation m)`` contact points
+    (summed in the given order): Phi (m) = sum of max(0, -separation) (SPEC,
+    "Refine the initial state"); one :class:`ContactPair` per penetrating
+    unordered link pair, deepest total first."""
     pairs: dict[tuple[str, str], ContactPair] = {}
     total = 0.0
     for a, b, d in points:
@@ -413,18 +332,15 @@ def penetration_sum(points: Iterable[tuple[str, str, float]]) -> tuple[float, li
 
 
 EngineFactory = Callable[[Path, SessionOptions], SimSession]
-
-ShapeWorldFactory = Callable[[], ShapeWorld]
-ViewerFactory = Callable[[Path], Viewer]
-
-#: ``reader(path, links, joints) -> HeldPhysics``: load an exported file
-#: (MJCF, USD) with the engine's own importer and read back what it holds.
+#: ``reader(path, links, joints) -> HeldPhysics`` of an exported file (MJCF, USD).
 FileReader = Callable[[Path, list[str], list[str]], HeldPhysics]
 
 _ENGINES: dict[str, EngineFactory] = {}
 _FILE_READERS: dict[tuple[str, str], FileReader] = {}
-_SHAPE_WORLDS: dict[str, ShapeWorldFactory] = {}
-_VIEWERS: dict[str, ViewerFactory] = {}
+_SHAPE_WORLDS: dict[str, Callable[[], ShapeWorld]] = {}
+_VIEWERS: dict[str, Callable[[Path], Viewer]] = {}
+
+
 class EngineUnavailable(RuntimeError):
     """The engine's Python package is not installed (an optional extra)."""
 
@@ -434,19 +350,18 @@ def register_engine(name: str, factory: EngineFactory) -> None:
     _ENGINES[name] = factory
 
 
-def register_shape_world(name: str, factory: ShapeWorldFactory) -> None:
+def register_shape_world(name: str, factory: Callable[[], ShapeWorld]) -> None:
     """Register ``factory() -> ShapeWorld`` under the engine name ``name``."""
     _SHAPE_WORLDS[name] = factory
 
 
-def register_viewer(name: str, factory: ViewerFactory) -> None:
+def register_viewer(name: str, factory: Callable[[Path], Viewer]) -> None:
     """Register ``factory(urdf_path) -> Viewer`` under the engine name ``name``."""
     _VIEWERS[name] = factory
 
 
 def register_file_reader(engine: str, fmt: str, reader: FileReader) -> None:
-    """Register how ``engine`` loads an exported file of format ``fmt``
-    (``"mjcf"``, ``"usd"``) and reads back what it holds."""
+    """Register ``engine``'s :data:`FileReader` of format ``fmt`` (``"mjcf"``, ``"usd"``)."""
     _FILE_READERS[(engine, fmt)] = reader
 
 

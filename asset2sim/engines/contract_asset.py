@@ -1,10 +1,5 @@
 """A small asset that satisfies the SPEC's output contract, for tests of
-engines, export and parity: :func:`write_contract_asset` writes a box with a
-lid and a post (URDF + OBJ meshes, an ``<inertial>`` on every link,
-``<dynamics>`` on every movable joint, ``initial_state.json`` and
-``overlay.json``). Pure numpy: no simulator is imported here.
-
-Units: SI, radians.
+engines, export and parity (:func:`write_contract_asset`). Units SI, radians.
 """
 
 from __future__ import annotations
@@ -34,9 +29,7 @@ def _box_obj(boxes: list[Box]) -> str:
     for k, (lo, hi) in enumerate(boxes):
         lines.append(f"o piece_{k}")
         for i in range(8):
-            x = hi[0] if i & 4 else lo[0]
-            y = hi[1] if i & 2 else lo[1]
-            z = hi[2] if i & 1 else lo[2]
+            x, y, z = (hi[a] if i & bit else lo[a] for a, bit in ((0, 4), (1, 2), (2, 1)))
             lines.append(f"v {x!r} {y!r} {z!r}")
         lines.extend(f"f {a + off} {b + off} {c + off}" for a, b, c in faces)
         off += 8
@@ -76,41 +69,24 @@ class ContractAsset:
     """post position (m) above which the post's top pokes into the closed lid"""
 
 
-def write_contract_asset(
-    out_dir: Path,
-    *,
-    lid_angle: float = 0.0,
-    post_height: float = 0.0,
-    lid_damping: float = 0.02,
-    lid_friction: float = 0.02,
-    lid_stiffness: float = 0.0,
-    lid_spring_reference: float | None = None,
-    post_damping: float = 1.0,
-    post_friction: float = 2.0,
-    base_inertial: bool = True,
-    body_mass: float = 1.5,
-    lid_mass: float = 0.2,
-    latch: bool = False,
-) -> ContractAsset:
+def write_contract_asset(out_dir: Path, *, lid_angle: float = 0.0, post_height: float = 0.0, lid_damping: float = 0.02,
+                         lid_friction: float = 0.02, lid_stiffness: float = 0.0, lid_spring_reference: float | None = None,
+                         post_damping: float = 1.0, post_friction: float = 2.0, base_inertial: bool = True, body_mass: float = 1.5,
+                         lid_mass: float = 0.2, latch: bool = False) -> ContractAsset:
     """Write a small box-with-lid asset that satisfies the SPEC output contract.
 
-    Links: ``base`` (root, a fixed joint to ``body``; an ``<inertial>`` only
-    when ``base_inertial``), ``body`` (an open box 0.30 x 0.20 x 0.12 m whose
-    five walls are five ``o`` groups of one OBJ), ``lid`` (0.30 x 0.20 x 0.01 m
-    plate on a revolute hinge along -x at the top back edge; ``lid_angle`` rad,
-    positive opens; limits [0, 2.0]) and ``post`` (a 0.02 x 0.02 x 0.10 m
-    square post standing in the box on a prismatic joint along +z, limits
-    [0, 0.05] m; at ``post_height`` > ``post_overlap_at`` its top pokes into
-    the closed lid, which is a sibling, so the two collide). With ``latch``
-    a ``latch`` link (a 0.30 x 0.03 x 0.01 m bar, 0.02 kg) is fixed to the
-    body across its front edge 1 mm above the closed lid: the lid is held
-    shut by geometry rigid with its parent (a blocked joint that no other
-    joint's position frees; a sibling link, since engines do not collide a
-    child with its own parent).
+    Links: ``base`` (root, fixed to ``body``; an ``<inertial>`` only when
+    ``base_inertial``), ``body`` (an open 0.30 x 0.20 x 0.12 m box, five walls
+    as five ``o`` groups of one OBJ), ``lid`` (a 0.01 m plate hinged along -x
+    at the top back edge, ``lid_angle`` rad opens it, limits [0, 2.0]) and
+    ``post`` (0.02 x 0.02 x 0.10 m, prismatic along +z, limits [0, 0.05] m;
+    above ``post_overlap_at`` it pokes into the closed lid). ``latch``: a
+    0.30 x 0.03 x 0.01 m bar of 0.02 kg fixed to the body 1 mm above the
+    closed lid, holding it shut.
 
-    Masses kg, damping N*m*s/rad (lid) / N*s/m (post), friction N*m / N,
-    stiffness N*m/rad. Files: ``mobility.urdf``, ``textured_objs/*.obj``,
-    ``initial_state.json``, ``overlay.json``. Returns a :class:`ContractAsset`.
+    Masses kg, damping N*m*s/rad / N*s/m, friction N*m / N, stiffness N*m/rad.
+    Files: ``mobility.urdf``, ``textured_objs/*.obj``, ``initial_state.json``,
+    ``overlay.json``. Returns a :class:`ContractAsset`.
     """
     out = Path(out_dir)
     boxes = _boxes(latch)
@@ -130,8 +106,7 @@ def write_contract_asset(
 
 
 def _boxes(latch: bool) -> dict[str, list[Box]]:
-    """Each meshed link's boxes (min corner, max corner) m in its link frame:
-    the body's five walls, the lid, the post and (``latch``) the latch bar."""
+    """Each meshed link's boxes (min corner, max corner) m in its link frame."""
     L, W, H, t = _L, _W, _H, _T
     walls = [
         ((-L / 2, -W / 2, 0.0), (L / 2, W / 2, t)),
@@ -140,9 +115,7 @@ def _boxes(latch: bool) -> dict[str, list[Box]]:
         ((-L / 2 + t, -W / 2, t), (L / 2 - t, -W / 2 + t, H)),
         ((-L / 2 + t, W / 2 - t, t), (L / 2 - t, W / 2, H)),
     ]
-    # The lid frame sits on the hinge at the top back edge (y = +W/2, z = H);
-    # the plate extends towards -y, 0.5 mm above the walls, and the hinge axis
-    # is -x so that positive angles lift its front edge.
+    # the lid frame is on the hinge (y = +W/2, z = H); the plate extends to -y, 0.5 mm above the walls
     boxes = {"body": walls, "lid": [((-L / 2, -W, 0.0005), (L / 2, 0.0, 0.0005 + t))], "post": [((-0.01, -0.01, t), (0.01, 0.01, t + 0.10))]}
     if latch:
         boxes["latch"] = [((-L / 2, -W / 2, H + 0.0015 + t), (L / 2, -W / 2 + 0.03, H + 0.0115 + t))]
@@ -150,8 +123,7 @@ def _boxes(latch: bool) -> dict[str, list[Box]]:
 
 
 def _inertials(boxes: dict[str, list[Box]], body_mass: float, lid_mass: float) -> dict[str, Inertial]:
-    """Link -> (mass kg, COM (3,) m, inertia (3, 3) kg*m^2) of solid boxes (the
-    base a 10 g point-like part), in the order the overlay lists them."""
+    """Link -> (mass kg, COM (3,) m, inertia (3, 3) kg*m^2) of solid boxes (the base: 10 g), in overlay order."""
     walls = boxes["body"]
     vol = [np.prod(np.subtract(hi, lo)) for lo, hi in walls]
     out = {
@@ -166,8 +138,7 @@ def _inertials(boxes: dict[str, list[Box]], body_mass: float, lid_mass: float) -
 
 
 def _link(name: str, parts: Inertial | None, with_mesh: bool = True) -> UrdfLink:
-    """A link with an ``<inertial>`` (unless ``parts`` is None) and its box
-    mesh ``textured_objs/<name>.obj`` as visual and collision."""
+    """A link with an ``<inertial>`` (unless ``parts`` is None) and its box mesh as visual and collision."""
     ln = UrdfLink(name=name)
     if parts is not None:
         m, com, inertia = parts
@@ -181,30 +152,20 @@ def _link(name: str, parts: Inertial | None, with_mesh: bool = True) -> UrdfLink
 
 def _moving(name, jtype, child, origin, axis, upper, damping, friction) -> UrdfJoint:
     """A movable joint from ``body`` to ``child``, limits [0, ``upper``] (rad or m)."""
-    return UrdfJoint(
-        name=name, type=jtype, parent="body", child=child, origin=translation_matrix(origin), axis_xyz=np.asarray(axis, float),
-        limit=UrdfLimit(lower=0.0, upper=upper, effort=1000.0, velocity=1000.0),
-        dynamics=UrdfDynamics(damping=float(damping), friction=float(friction)),
-    )
+    return UrdfJoint(name=name, type=jtype, parent="body", child=child, origin=translation_matrix(origin), axis_xyz=np.asarray(axis, float),
+                     limit=UrdfLimit(lower=0.0, upper=upper, effort=1000.0, velocity=1000.0),
+                     dynamics=UrdfDynamics(damping=float(damping), friction=float(friction)))
 
 
 def _model(inertials: dict[str, Inertial], lid: tuple[float, float], post: tuple[float, float]) -> UrdfModel:
-    """The URDF model (a latch when ``inertials`` has one; the base without
-    ``<inertial>`` when it has none); ``lid``, ``post``: (damping, friction)."""
-    model = UrdfModel(
-        name="contract_box",
-        links={
-            "base": _link("base", inertials.get("base"), with_mesh=False),
-            "body": _link("body", inertials["body"]),
-            "lid": _link("lid", inertials["lid"]),
-            "post": _link("post", inertials["post"]),
-        },
-        joints=[
-            UrdfJoint(name="root_fixed", type="fixed", parent="base", child="body"),
-            _moving("lid_hinge", "revolute", "lid", (0.0, _W / 2, _H), (-1.0, 0.0, 0.0), 2.0, *lid),
-            _moving("post_slide", "prismatic", "post", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.05, *post),
-        ],
-    )
+    """The URDF model (a latch and a base inertial when ``inertials`` has them); ``lid``, ``post``: (damping, friction)."""
+    links = {"base": _link("base", inertials.get("base"), with_mesh=False)}
+    links.update({n: _link(n, inertials[n]) for n in ("body", "lid", "post")})
+    model = UrdfModel(name="contract_box", links=links, joints=[
+        UrdfJoint(name="root_fixed", type="fixed", parent="base", child="body"),
+        _moving("lid_hinge", "revolute", "lid", (0.0, _W / 2, _H), (-1.0, 0.0, 0.0), 2.0, *lid),
+        _moving("post_slide", "prismatic", "post", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.05, *post),
+    ])
     if "latch" in inertials:
         model.links["latch"] = _link("latch", inertials["latch"])
         model.joints.append(UrdfJoint(name="latch_fixed", type="fixed", parent="body", child="latch"))
@@ -219,14 +180,8 @@ def _joint_entry(damping: float, friction: float, stiffness: float, reference: f
 
 def _overlay(inertials: dict[str, Inertial], joints: dict[str, dict], state: dict[str, float]) -> dict:
     """``overlay.json`` of the asset: every link with an ``<inertial>``, the joints' dynamics, the initial state."""
-    links = {
-        name: {
-            "mass": float(m),
-            "inertia": {k: float(inertia[i, j]) for k, (i, j) in {"ixx": (0, 0), "ixy": (0, 1), "ixz": (0, 2), "iyy": (1, 1), "iyz": (1, 2), "izz": (2, 2)}.items()},
-            "com": [float(c) for c in com],
-            "source": "geometry",
-        }
-        for name, (m, com, inertia) in inertials.items()
-    }
+    keys = {"ixx": (0, 0), "ixy": (0, 1), "ixz": (0, 2), "iyy": (1, 1), "iyz": (1, 2), "izz": (2, 2)}
+    links = {name: {"mass": float(m), "inertia": {k: float(inertia[i, j]) for k, (i, j) in keys.items()}, "com": [float(c) for c in com],
+                    "source": "geometry"} for name, (m, com, inertia) in inertials.items()}
     return {"schema_version": "1.0", "estimator": {"name": "test-fixture", "queries": 0}, "scale": 1.0, "links": links,
             "joints": joints, "initial_joint_positions": state}

@@ -1,15 +1,7 @@
-"""The fake engine: a simulator without physics for fast tests, pure numpy
-(no simulator is imported); what every engine loads from a URDF is in
-:mod:`asset2sim.engines.loading`, the test asset in
-:mod:`asset2sim.engines.contract_asset`.
-
-:class:`FakeSession` is a deterministic :class:`~asset2sim.engines.base.SimSession`
-without physics. Joints and root follow closed-form trajectories set by a
-:class:`FakeBehaviour` (constant drift, sinusoidal oscillation, a penetration
-that may depend on the joint positions), so metric and pipeline tests run in
-milliseconds and can be made to pass or fail on purpose.
-
-Units: SI, radians; poses are 4x4 homogeneous matrices (m) unless stated.
+"""The fake engine for fast tests (pure numpy): :class:`FakeSession`, a
+deterministic :class:`~asset2sim.engines.base.SimSession` without physics whose
+joints and root follow closed-form trajectories set by a :class:`FakeBehaviour`,
+so tests can be made to pass or fail on purpose. Units SI, radians.
 """
 
 from __future__ import annotations
@@ -22,38 +14,22 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from asset2sim.engines.base import (
-    ContactPair,
-    EngineUnsupported,
-    HeldJoint,
-    HeldLink,
-    HeldPhysics,
-    NoRootHold,
-    SessionOptions,
-    principal_moments,
-    register_engine,
-)
-from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, joint_tables, read_urdf
-from asset2sim.engines.session_defaults import SessionDefaults
+from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+                                    SessionOptions, principal_moments, register_engine)
+from asset2sim.engines.loading import BOX_CORNERS, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, joint_tables, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 
 
 @dataclass
 class FakeBehaviour:
-    """What a :class:`FakeSession` does, all closed-form in time t (s) since
-    the joint was last set.
-
-    - ``penetration``: Phi (m), a constant or a function of the joint positions
-      (dict -> m), attributed to ``pair`` (default: the first two links that
-      are not parent and child, else the first two links).
-    - ``root_velocity`` (3,) m/s and ``root_yaw_rate`` rad/s: constant drift
-      of the root (zero with ``fixed_base``).
-    - ``joint_drift``: joint -> rad/s or m/s (``"*"`` for all joints).
-    - ``joint_oscillation``: joint -> (amplitude, frequency): q += a sin(2 pi f t),
-      a in rad or m (half the peak-to-peak), f in Hz (``"*"`` for all joints).
-    - ``ground_penetration`` m.
-    - ``springs_pull``: when True (default) a joint with a spring relaxes to its
-      reference with time constant ``spring_time_constant`` s instead of drifting.
+    """What a :class:`FakeSession` does, closed-form in the time t (s) since a joint was set:
+    ``penetration`` Phi (m, or a function of the joint positions) on ``pair``
+    (default: the first two links that are not parent and child); a constant
+    root drift ``root_velocity`` (3,) m/s and ``root_yaw_rate`` rad/s (none
+    with ``fixed_base``); ``joint_drift`` joint -> rad/s or m/s and
+    ``joint_oscillation`` joint -> (amplitude rad or m, frequency Hz) (``"*"``:
+    all joints); ``ground_penetration`` m; with ``springs_pull`` a sprung joint
+    relaxes to its reference (time constant ``spring_time_constant`` s).
     Positions are clipped to the joint limits.
     """
 
@@ -84,13 +60,8 @@ def fake_behaviour(behaviour: FakeBehaviour | None = None, **changes) -> Iterato
         _DEFAULT_BEHAVIOUR = old
 
 
-class FakeSession(SessionDefaults, NoRootHold):
-    """A :class:`~asset2sim.engines.base.SimSession` without physics (see the
-    module docstring). Deterministic: the same calls give the same numbers.
-
-    Raises (constructor):
-        UrdfError: the URDF cannot be read.
-    """
+class FakeSession(SessionDefaults):
+    """A session without physics (see the module docstring; UrdfError: the URDF cannot be read)."""
 
     engine = "fake"
 
@@ -139,8 +110,7 @@ class FakeSession(SessionDefaults, NoRootHold):
         return {n: self._value(n) for n in self.joint_names}
 
     def joint_state(self, joint: str) -> tuple[float, float]:
-        """Position and the backward difference over the last step (0 right
-        after the joint was set)."""
+        """Position and the backward difference over the last step (0 right after a set)."""
         q = self._value(joint)
         if self.steps - self._anchor[joint][1] < 1:
             return q, 0.0
@@ -155,36 +125,29 @@ class FakeSession(SessionDefaults, NoRootHold):
         return np.asarray(self.model.parent_joint(self.joint_child[joint]).axis, float).copy()
 
     def apply_joint_effort(self, joint: str, effort: float) -> None:
-        """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
         raise EngineUnsupported("fake: no dynamics; joint efforts are not modelled")
 
     def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
-        """Kinematic drive: from now the joint moves at ``velocity`` (rad/s or
-        m/s, clipped at its limits) instead of the behaviour's drift; the fake
-        has no forces, so ``max_force`` is not modelled."""
+        """Kinematic: from now the joint moves at ``velocity`` (clipped at its limits); ``max_force`` is not modelled."""
         if joint not in self._anchor:
             raise KeyError(joint)
         self._anchor[joint] = (self._value(joint), self.steps)
         self._driven[joint] = float(velocity)
 
     def release_joint(self, joint: str) -> None:
-        """The joint follows the behaviour again from where it is."""
         if joint not in self._anchor:
             raise KeyError(joint)
         self._anchor[joint] = (self._value(joint), self.steps)
         self._driven.pop(joint, None)
 
     def set_root_velocity(self, linear, angular) -> None:
-        """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
         raise EngineUnsupported("fake: no dynamics; root velocities are not modelled")
 
     def apply_link_force(self, link: str, force, point) -> None:
-        """Raises :class:`EngineUnsupported`: the fake has no dynamics."""
         raise EngineUnsupported("fake: no dynamics; external forces are not modelled")
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """Forward kinematics of the URDF at the current joint positions and root pose."""
         if link not in self.model.links:
             raise KeyError(link)
         pos, orn = self.root_pose()
@@ -208,7 +171,7 @@ class FakeSession(SessionDefaults, NoRootHold):
                     else:
                         h = (np.asarray(p.size, float) / 2 if p.kind == "box"
                              else np.array([p.radius, p.radius, p.radius if p.kind == "sphere" else p.length / 2]))
-                        v = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+                        v = BOX_CORNERS * h
                     pts.append(v @ p.origin[:3, :3].T + p.origin[:3, 3])
                 self._points[name] = np.concatenate(pts) if pts else np.zeros((0, 3))
         if link not in self.model.links:
@@ -219,8 +182,6 @@ class FakeSession(SessionDefaults, NoRootHold):
         return self._local_points(link).copy()
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of the link's collision points at the current state (its
-        origin when it has none)."""
         pos, R = self.link_frame(link)
         v = self._local_points(link)
         if not len(v):
@@ -233,10 +194,8 @@ class FakeSession(SessionDefaults, NoRootHold):
 
     def link_masses(self) -> dict[str, float]:
         """The file's masses; PyBullet's 1 kg for a link without ``<inertial>``."""
-        return {
-            name: BULLET_DEFAULT_MASS if link.inertial is None else float(link.inertial.mass)
-            for name, link in ((n, self.model.links[n]) for n in self.link_names)
-        }
+        links = self.model.links
+        return {n: BULLET_DEFAULT_MASS if links[n].inertial is None else float(links[n].inertial.mass) for n in self.link_names}
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
         """The behaviour's penetration, for its pair only: [-Phi] or []."""
@@ -281,22 +240,17 @@ class FakeSession(SessionDefaults, NoRootHold):
         yaw = np.array([0.0, 0.0, math.sin(half), math.cos(half)])
         if self._root_q0 is None:
             return pos, yaw
-        x, y, z, w = self._root_q0  # yaw (about world z) after the set orientation
-        sz, cz = yaw[2], yaw[3]
-        return pos, np.array([cz * x - sz * y, cz * y + sz * x, cz * z + sz * w, cz * w - sz * z])
+        return pos, _yawed(self._root_q0, yaw[2], yaw[3])  # yaw (about world z) after the set orientation
 
     def set_root_pose(self, pos, orn) -> None:
-        """Put the root at ``pos`` (3,) m, ``orn`` (4,) xyzw now; the behaviour's
-        drift continues from there."""
+        """The behaviour's drift continues from here."""
         t = 0.0 if self.options.fixed_base else self.steps * self.dt
         self._root0 = np.asarray(pos, float) - np.asarray(self.behaviour.root_velocity, float) * t
         q = np.asarray(orn, float)
         self._root_q0 = q / np.linalg.norm(q)
         if not self.options.fixed_base and self.behaviour.root_yaw_rate:
             half = 0.5 * self.behaviour.root_yaw_rate * t  # undo the yaw already accumulated
-            x, y, z, w = self._root_q0
-            sz, cz = -math.sin(half), math.cos(half)
-            self._root_q0 = np.array([cz * x - sz * y, cz * y + sz * x, cz * z + sz * w, cz * w - sz * z])
+            self._root_q0 = _yawed(self._root_q0, -math.sin(half), math.cos(half))
 
     def save_state(self) -> int:
         handle = max(self._states, default=0) + 1
@@ -316,9 +270,7 @@ class FakeSession(SessionDefaults, NoRootHold):
         self.steps += int(n)
 
     def held_physics(self) -> HeldPhysics:
-        """The file's values (the fake engine holds the URDF it read; links
-        without ``<inertial>``: PyBullet's 1 kg, unit inertia), springs from
-        the options, positions the current ones."""
+        """The file's values (PyBullet's default without ``<inertial>``), the options' springs."""
         links = {}
         for name in self.link_names:
             ine = self.model.links[name].inertial
@@ -338,11 +290,13 @@ class FakeSession(SessionDefaults, NoRootHold):
         pass
 
 
-def _open(urdf_path: Path, options: SessionOptions) -> FakeSession:
-    return FakeSession(urdf_path, options)
+def _yawed(q: np.ndarray, sz: float, cz: float) -> np.ndarray:
+    """Quaternion ``q`` (xyzw) turned about world z by twice the angle of sine ``sz``, cosine ``cz``."""
+    x, y, z, w = q
+    return np.array([cz * x - sz * y, cz * y + sz * x, cz * z + sz * w, cz * w - sz * z])
 
 
-register_engine("fake", _open)
+register_engine("fake", FakeSession)
 
 
 __all__ = ["FakeBehaviour", "FakeSession", "fake_behaviour"]

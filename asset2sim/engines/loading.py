@@ -1,17 +1,6 @@
-"""What every engine loads from a URDF: the one reading the PyBullet,
-PhysX, MuJoCo and fake engines share, so they see the same inertials, frames
-and collision hulls.
-
-- :func:`read_urdf`: :func:`asset2sim.urdf.read_urdf` (strict) limited to the
-  joint types the engines build;
-- :func:`mesh_hulls` / :func:`collision_pieces`: the point sets whose convex
-  hulls PyBullet collides with (one hull per OBJ ``o``/``g`` group), flat
-  hulls thickened;
-- :func:`read_initial_state`: ``initial_state.json`` beside a URDF;
-- Bullet's defaults for links without inertials and for contact friction,
-  which the other engines copy so that every engine simulates the same file.
-
-Pure numpy: no simulator is imported here. Units SI, radians.
+"""What every engine loads from a URDF, so that all see the same inertials,
+frames and collision hulls (PyBullet's: one per OBJ group), and Bullet's
+defaults the other engines copy. Pure numpy; units SI, radians.
 """
 
 from __future__ import annotations
@@ -27,36 +16,34 @@ from asset2sim.mesh_io import MeshReadError, hull_point_sets
 from asset2sim.urdf import SIMULATED_JOINT_TYPES, UrdfError, UrdfModel
 from asset2sim.output_folder import STATE_NAME
 
-#: What PyBullet 3.2.7 gives a link that has no ``<inertial>``: 1 kg, identity
-#: inertia (kg*m^2) at the link origin (Bullet's ``UrdfParser``; checked in
-#: ``tests/asset2sim/test_engines_fake.py``).
+#: What PyBullet 3.2.7 gives a link without ``<inertial>``: 1 kg, identity
+#: inertia (kg*m^2) at the link origin (Bullet's ``UrdfParser``).
 BULLET_DEFAULT_MASS = 1.0
 BULLET_DEFAULT_INERTIA = (1.0, 1.0, 1.0)
-#: PyBullet's default lateral friction of a link and of its ground plane; the
-#: contact friction is their product (Bullet multiplies), 0.25.
+#: PyBullet's default lateral friction of a link and of its ground plane (contact friction: the product).
 BULLET_DEFAULT_FRICTION = 0.5
 BULLET_PLANE_FRICTION = 0.5
+#: The eight corners (8, 3) of the box [-1, 1]^3.
+BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
 def read_urdf(path: Path | str) -> UrdfModel:
-    """The engines' reading of a URDF file: :func:`asset2sim.urdf.read_urdf`
-    in mode strict, limited to the joint types the engines build (revolute,
-    continuous, prismatic, fixed).
-
-    Raises:
-        UrdfError: unreadable XML, a malformed number, an unsupported joint
-            type, a joint naming a missing link, or not exactly one root link
-            (names the file, line and link or joint).
-    """
+    """:func:`asset2sim.urdf.read_urdf` (strict) limited to the joint types the
+    engines build (UrdfError naming the file, line and link or joint)."""
     return urdf.read_urdf(path, joint_types=SIMULATED_JOINT_TYPES)
 
 
 def joint_tables(model: UrdfModel) -> tuple[list[str], dict[str, str], dict[str, tuple[float, float]], dict[str, str]]:
-    """A session's joint tables of the model's movable joints, in file order:
-    names, name -> type, name -> (lower, upper) limits (rad or m), name -> child link."""
+    """Names, types, (lower, upper) limits and child links of the movable joints, in file order."""
     movable = model.movable_joints
     return ([j.name for j in movable], {j.name: j.type for j in movable}, {j.name: (j.lower, j.upper) for j in movable},
             {j.name: j.child for j in movable})
+
+
+def link_friction(model: UrdfModel, link: str) -> float:
+    """PyBullet's contact friction of a link on the ground plane: its lateral friction x the plane's."""
+    lat = model.links[link].lateral_friction
+    return (BULLET_DEFAULT_FRICTION if lat is None else lat) * BULLET_PLANE_FRICTION
 
 
 def principal_axes(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -70,23 +57,14 @@ def principal_axes(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return w, v
 
 
-# ------------------------------------------------------------ collision hulls
-#: Unscaled point sets of the collision meshes read in this process, by
-#: path, while the file is unchanged (:class:`asset2sim.file_memo.FileMemo`;
-#: the arrays are shared and never modified: callers get scaled copies).
+#: Unscaled point sets of the collision meshes by path, while the file is unchanged (shared, never modified).
 _HULLS: file_memo.FileMemo[list[np.ndarray]] = file_memo.FileMemo(list, max_entries=4096)
 
 
 def mesh_hulls(path: Path, scale=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
-    """Point sets (k, 3), m, whose convex hulls PyBullet uses for a collision
-    mesh ``path`` scaled by ``scale`` (3,): one per OBJ group; other formats
-    (STL, ...) as one set of all vertices (:func:`asset2sim.mesh_io.hull_point_sets`),
-    read once per file version (:data:`_HULLS`). Sets with fewer than 4
-    points or no volume are kept: engines decide what to do with them.
-
-    Raises:
-        UrdfError: the mesh cannot be read.
-    """
+    """Point sets (k, 3) m whose convex hulls PyBullet uses for collision mesh
+    ``path`` scaled by ``scale`` (3,): one per OBJ group (other formats: one),
+    degenerate ones kept (UrdfError: the mesh cannot be read)."""
     path = Path(path)
     groups = _HULLS.get(str(path))
     if groups is None:
@@ -112,24 +90,18 @@ def hull_is_solid(points: np.ndarray, tol: float = 1e-9) -> bool:
     return bool(sv[-1] > tol * max(1.0, sv[0]))
 
 
-#: Thickness (m) given to a collision hull whose points are coplanar: PyBullet
-#: keeps such a hull and inflates it by its 1 mm collision margin on each side,
-#: PhysX cannot cook it and MuJoCo refuses it, so both get a 2 mm slab instead.
+#: Thickness (m) of the slab made of a coplanar hull (PyBullet inflates one by its 1 mm margin per side).
 FLAT_HULL_THICKNESS = 0.002
 
 
 @dataclass
 class CollisionPiece:
-    """One convex collision shape of a link, as PyBullet builds it.
-
-    ``kind``: ``hull`` (``points`` (k, 3) m in the collision frame, scale
-    applied), ``box`` (``size`` (3,) full extents m), ``sphere`` (``radius``),
-    ``cylinder`` (``radius``, ``length`` along z). ``origin`` (4, 4) collision
-    frame in the link frame. ``collision`` index of the URDF ``<collision>``,
-    ``group`` index of the OBJ group; ``source`` the mesh file; ``whole_file``
-    True when the hull is the whole (single-group) file unchanged, so exports
-    may reference the file itself; ``thickened`` True for a coplanar group made
-    a slab of :data:`FLAT_HULL_THICKNESS`.
+    """One convex collision shape of a link, as PyBullet builds it: ``kind``
+    ``hull`` (``points`` (k, 3) m, scaled), ``box`` (``size`` (3,) m),
+    ``sphere`` (``radius``) or ``cylinder`` (``radius``, ``length`` along z);
+    ``origin`` (4, 4) in the link frame; ``collision`` / ``group`` the
+    ``<collision>`` and OBJ group indices; ``whole_file``: the hull is the
+    single-group file ``source`` unchanged; ``thickened``: a coplanar group made a slab.
     """
 
     link: str
@@ -160,22 +132,16 @@ def _thicken(points: np.ndarray, thickness: float) -> np.ndarray | None:
 
 
 def collision_pieces(model: UrdfModel, flat_thickness: float = FLAT_HULL_THICKNESS) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
-    """Every link's convex collision pieces (PyBullet's convention: one hull
-    per OBJ group), and notes on what had to change: coplanar groups become
-    slabs ``flat_thickness`` m thick, groups spanning no area are dropped.
-
-    Raises:
-        UrdfError: a mesh cannot be read.
-    """
+    """Every link's convex collision pieces (one hull per OBJ group) and notes:
+    coplanar groups become slabs ``flat_thickness`` m thick, groups spanning
+    no area are dropped (UrdfError: a mesh cannot be read)."""
     out: dict[str, list[CollisionPiece]] = {}
     notes: list[str] = []
     for name, link in model.links.items():
         pieces: list[CollisionPiece] = []
         for k, c in enumerate(link.collisions):
             if c.kind != "mesh":
-                pieces.append(
-                    CollisionPiece(name, k, 0, c.kind, c.origin, size=c.size, radius=c.radius, length=c.length)
-                )
+                pieces.append(CollisionPiece(name, k, 0, c.kind, c.origin, size=c.size, radius=c.radius, length=c.length))
                 continue
             groups = mesh_hulls(c.path, c.scale)
             for g, pts in enumerate(groups):
@@ -185,34 +151,17 @@ def collision_pieces(model: UrdfModel, flat_thickness: float = FLAT_HULL_THICKNE
                     if slab is None:
                         notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) spans no area: dropped")
                         continue
-                    notes.append(
-                        f"link {name!r} collision {k} group {g} ({c.filename}) is flat: made a {flat_thickness * 1000:g} mm slab"
-                    )
+                    notes.append(f"link {name!r} collision {k} group {g} ({c.filename}) is flat: made a {flat_thickness * 1000:g} mm slab")
                     pts, thick = slab, True
-                pieces.append(
-                    CollisionPiece(
-                        name,
-                        k,
-                        g,
-                        "hull",
-                        c.origin,
-                        points=pts,
-                        source=c.path,
-                        scale=np.asarray(c.scale, float),
-                        whole_file=len(groups) == 1 and not thick,
-                        thickened=thick,
-                    )
-                )
+                pieces.append(CollisionPiece(name, k, g, "hull", c.origin, points=pts, source=c.path, scale=np.asarray(c.scale, float),
+                                             whole_file=len(groups) == 1 and not thick, thickened=thick))
         out[name] = pieces
     return out, notes
 
 
 def read_initial_state(folder: Path) -> dict[str, float]:
-    """``initial_state.json`` of an output folder: joint -> rad or m ({} when absent).
-
-    Raises:
-        ValueError: the file exists but is not the contract's shape.
-    """
+    """``initial_state.json`` of an output folder: joint -> rad or m ({} when
+    absent; ValueError: not the contract's shape)."""
     p = Path(folder) / STATE_NAME
     if not p.is_file():
         return {}

@@ -1,10 +1,6 @@
-"""MuJoCo engine under the SPEC's conventions; see :mod:`.base`.
-
-The session compiles, in memory, the MJCF that :func:`asset2sim.engines.mjcf.urdf_to_mjcf`
-makes of the URDF (the same conversion ``asset2sim export --format mjcf``
-writes; what it changes is listed there and in ``docs/design/simulators.md``).
-mujoco is imported only inside the functions that need it, and at the end of
-this module to register the engine.
+"""MuJoCo engine under the SPEC's conventions; see :mod:`.base`. The session
+compiles, in memory, the MJCF :func:`asset2sim.engines.mjcf.urdf_to_mjcf`
+makes of the URDF (what ``asset2sim export --format mjcf`` writes).
 """
 
 from __future__ import annotations
@@ -14,64 +10,38 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (
-    ContactPair,
-    EngineUnsupported,
-    HeldJoint,
-    HeldLink,
-    HeldPhysics,
-    NoRootHold,
-    SessionOptions,
-    penetration_sum,
-    register_engine,
-    register_file_reader,
-)
-from asset2sim.engines.loading import joint_tables, read_urdf
+from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+                                    SessionOptions, penetration_sum, register_engine, register_file_reader)
+from asset2sim.engines.loading import BOX_CORNERS, joint_tables, read_urdf
 from asset2sim.engines.mjcf import GROUND, KEYFRAME, MjcfError, lowest_point, mujoco_messages, urdf_to_mjcf
-from asset2sim.engines.mjcf.base import safe_name
-from asset2sim.engines.session_defaults import SessionDefaults
+from asset2sim.engines.mjcf.base import load_mujoco as _mujoco, mesh_vertices, safe_name
 
 
-def _mujoco():
-    import mujoco
+def _compile(load, path) -> object:
+    """``load()`` (an ``MjModel``) with MuJoCo's messages collected (MjcfError naming ``path``)."""
+    try:
+        with mujoco_messages():
+            return load()
+    except Exception as exc:
+        raise MjcfError(f"MuJoCo could not compile {path}: {exc}") from exc
 
-    return mujoco
 
-
-# ------------------------------------------------------------------ session
-class MuJoCoSession(SessionDefaults, NoRootHold):
+class MuJoCoSession(SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in MuJoCo, compiled from
-    :func:`urdf_to_mjcf` in memory (links without ``<inertial>`` get
-    PyBullet's default, as in the reference engine).
-
-    ``notes``: what the conversion changed for this asset.
-
-    Raises (constructor):
-        UrdfError, MjcfError: the URDF cannot be read or compiled.
-    """
+    :func:`urdf_to_mjcf` in memory (links without ``<inertial>``: PyBullet's
+    default); ``notes``: what the conversion changed (UrdfError, MjcfError)."""
 
     engine = "mujoco"
 
-    def __init__(self, urdf_path: Path, options: SessionOptions, missing_inertial: str = "bullet"):
+    def __init__(self, urdf_path: Path, options: SessionOptions):
         mujoco = _mujoco()
         self._mj = mujoco
         self.options = options
-        self.build = urdf_to_mjcf(
-            urdf_path,
-            initial_state=options.initial_state,
-            springs=options.springs,
-            missing_inertial=missing_inertial,
-            fixed_base=options.fixed_base,
-            ground=options.ground,
-            gravity=options.gravity,
-            conventions=options.conventions,
-        )
+        self.build = urdf_to_mjcf(urdf_path, initial_state=options.initial_state, springs=options.springs, missing_inertial="bullet",
+                                  fixed_base=options.fixed_base, ground=options.ground, gravity=options.gravity,
+                                  conventions=options.conventions)
         self.notes = list(self.build.notes)
-        try:
-            with mujoco_messages():
-                self.m = mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets())
-        except Exception as exc:
-            raise MjcfError(f"MuJoCo could not compile {urdf_path}: {exc}") from exc
+        self.m = _compile(lambda: mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets()), urdf_path)
         self.d = mujoco.MjData(self.m)
         self.urdf = read_urdf(urdf_path)
         self.joint_names = list(self.build.joint_names)
@@ -86,14 +56,10 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         self._state_sig = mujoco.mjtState.mjSTATE_INTEGRATION
         self._states: dict[int, np.ndarray] = {}
         self._applied = False
-        self._drive: dict[str, tuple[float, float]] = {}
-        """joint -> (target velocity, force limit) of :meth:`drive_joint`"""
-        self._qadr = {}
-        self._dadr = {}
-        for n in self.joint_names:
-            jid = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_JOINT, n)
-            self._qadr[n] = int(self.m.jnt_qposadr[jid])
-            self._dadr[n] = int(self.m.jnt_dofadr[jid])
+        self._drive: dict[str, tuple[float, float]] = {}  # joint -> (target velocity, force limit)
+        jids = {n: mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in self.joint_names}
+        self._qadr = {n: int(self.m.jnt_qposadr[j]) for n, j in jids.items()}
+        self._dadr = {n: int(self.m.jnt_dofadr[j]) for n, j in jids.items()}
         self._ground = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, GROUND) if options.ground else -1
         self._root = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_BODY, self.urdf.root)
         self._free = not options.fixed_base
@@ -122,33 +88,25 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         return float(self.d.qpos[self._qadr[joint]]), float(self.d.qvel[self._dadr[joint]])
 
     def joint_axis(self, joint: str) -> np.ndarray:
-        """The joint's axis (3,) in the child body frame (``jnt_axis``, the URDF's)."""
         jid = self._mj.mj_name2id(self.m, self._mj.mjtObj.mjOBJ_JOINT, joint)
         if joint not in self._qadr or jid < 0:
             raise KeyError(joint)
         return np.array(self.m.jnt_axis[jid], float)
 
     def apply_joint_effort(self, joint: str, effort: float) -> None:
-        """Generalized force (N*m or N) on a joint for the next step (``qfrc_applied``)."""
         self.d.qfrc_applied[self._dadr[joint]] += float(effort)
         self._applied = True
 
     def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
-        """A force-limited velocity drive computed before each step:
-        tau = clip(f_c sign(velocity) + c velocity + 0.5 * I_eff * (velocity - qdot) / dt,
-        +-(max_force + f_c + |c velocity|)) in ``qfrc_applied`` (f_c the joint's
-        ``frictionloss``, c its damping: the loads the drive carries, as in
-        PyBullet and PhysX), I_eff = 1 / (M^-1)_ii the joint's effective inertia
-        (``mj_solveM``), so the explicit controller removes half the velocity
-        error per step and stays stable whatever the inertia (gain below the
-        explicit-Euler bound 2 I_eff / dt). ``frictionloss`` and damping stay
-        loads on the joint."""
+        """A force-limited velocity drive in ``qfrc_applied`` before each step:
+        tau = clip(f_c sign(v) + c v + 0.5 * I_eff * (v - qdot) / dt, +-(max_force + f_c + |c v|))
+        (f_c ``frictionloss``, c damping, I_eff = 1 / (M^-1)_ii from ``mj_solveM``:
+        half the velocity error removed per step, stable for any inertia)."""
         if joint not in self._dadr:
             raise KeyError(joint)
         self._drive[joint] = (float(velocity), float(max(max_force, 0.0)))
 
     def release_joint(self, joint: str) -> None:
-        """End the drive of :meth:`drive_joint`."""
         if joint not in self._dadr:
             raise KeyError(joint)
         self._drive.pop(joint, None)
@@ -163,8 +121,6 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
             x = np.zeros(self.m.nv)
             mj.mj_solveM(self.m, self.d, x.reshape(1, -1), e.reshape(1, -1))
             inertia = 1.0 / max(float(x[i]), 1e-12)
-            # feed-forward of the joint's own friction and damping at the target
-            # speed (loads the limit covers, as in PyBullet and PhysX) + feedback
             load = float(self.m.dof_frictionloss[i]) * float(np.sign(v)) + float(self.m.dof_damping[i]) * v
             limit = fmax + float(self.m.dof_frictionloss[i]) + abs(float(self.m.dof_damping[i]) * v)
             tau = float(np.clip(load + 0.5 * inertia * (v - float(self.d.qvel[i])) / dt, -limit, limit))
@@ -172,11 +128,7 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         self._applied = True
 
     def set_root_velocity(self, linear, angular) -> None:
-        """Root (free joint) velocity: linear world frame, angular given in
-        the world frame (MuJoCo holds it in the body frame).
-
-        Raises:
-            EngineUnsupported: fixed base."""
+        """World-frame velocities (MuJoCo holds the angular one in the body frame)."""
         if not self._free:
             raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
         w, x, y, z = self.d.qpos[3:7]
@@ -188,8 +140,6 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """The body frame (``xpos``, ``xmat``): the converter puts each body in
-        its URDF link frame, the inertia separately."""
         b = self._body[link]
         self._mj.mj_kinematics(self.m, self.d)
         return np.array(self.d.xpos[b], float), np.array(self.d.xmat[b], float).reshape(3, 3)
@@ -198,24 +148,20 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         """Mesh vertices (or the corners of the geom's local box) (k, 3), body frame."""
         m = self.m
         if m.geom_type[g] == self._mj.mjtGeom.mjGEOM_MESH:
-            mid = m.geom_dataid[g]
-            a, n = m.mesh_vertadr[mid], m.mesh_vertnum[mid]
-            v = np.asarray(m.mesh_vert[a:a + n], float)
+            v = np.asarray(mesh_vertices(m, g), float)
         else:
             c, h = np.asarray(m.geom_aabb[g][:3], float), np.asarray(m.geom_aabb[g][3:], float)
-            v = c + np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+            v = c + BOX_CORNERS * h
         R = np.zeros(9)
         self._mj.mju_quat2Mat(R, np.asarray(m.geom_quat[g], float))
         return v @ R.reshape(3, 3).T + np.asarray(m.geom_pos[g], float)
 
     def link_collision_vertices(self, link: str) -> np.ndarray:
-        """Vertices (k, 3) m of the link's colliding mesh geoms, link frame."""
         out = [self._geom_points(g) for g in self._geoms[link] if self.m.geom_type[g] == self._mj.mjtGeom.mjGEOM_MESH]
         return np.concatenate(out) if out else np.zeros((0, 3))
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of the colliding geoms' mesh vertices (box corners for
-        primitives) at the current state; the body origin when it has none."""
+        """Bounds of the colliding geoms' points; the body origin when it has none."""
         pos, R = self.link_frame(link)
         pts = [self._geom_points(g) for g in self._geoms[link]]
         if not pts:
@@ -230,8 +176,7 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         return {n: float(self.m.body_mass[b]) for n, b in self._body.items()}
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        """``mj_geomDistance`` for every pair of colliding geoms of the two
-        links: one signed distance per geom pair, kept when below ``max_distance``."""
+        """``mj_geomDistance`` of every pair of the links' colliding geoms."""
         mj = self._mj
         mj.mj_kinematics(self.m, self.d)
         out = []
@@ -243,8 +188,7 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         return out
 
     def apply_link_force(self, link: str, force, point) -> None:
-        """Force at a world point as force + torque about the body's center of
-        mass (``xfrc_applied``), for the next step."""
+        """As force + torque about the body's COM (``xfrc_applied``)."""
         b = self._body[link]
         self._mj.mj_kinematics(self.m, self.d)
         f = np.asarray(force, float)
@@ -254,11 +198,7 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         self._applied = True
 
     def set_root_pose(self, pos, orn_xyzw) -> None:
-        """Teleport the root (free joint) and zero its velocity.
-
-        Raises:
-            EngineUnsupported: the base is fixed (the root has no joint).
-        """
+        """Teleport the root and zero its velocity (EngineUnsupported: fixed base)."""
         if not self._free:
             raise EngineUnsupported("mujoco: the root of a fixed-base session cannot be moved")
         x, y, z, w = (float(v) for v in orn_xyzw)
@@ -268,29 +208,20 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
         self._mj.mj_forward(self.m, self.d)
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        if self._free:
-            pos = np.array(self.d.qpos[0:3], float)
-            w, x, y, z = self.d.qpos[3:7]
-        else:
-            pos = np.array(self.d.xpos[self._root], float)
-            w, x, y, z = self.d.xquat[self._root]
+        d = self.d
+        pos, (w, x, y, z) = (d.qpos[0:3], d.qpos[3:7]) if self._free else (d.xpos[self._root], d.xquat[self._root])
         q = np.array([x, y, z, w], float)
         n = np.linalg.norm(q)
-        return pos, (q / n if n > 0 else q)
+        return np.array(pos, float), (q / n if n > 0 else q)
 
     # ---------------------------------------------------------------- contact
-    def _contacts(self):
-        mj = self._mj
-        mj.mj_forward(self.m, self.d)
-        for i in range(self.d.ncon):
-            yield self.d.contact[i]
-
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         return penetration_sum(self._self_contacts())
 
     def _self_contacts(self):
         """(link, link, ``dist`` m) of each penetrating contact between two links (the ground's left out)."""
-        for c in self._contacts():
+        self._mj.mj_forward(self.m, self.d)
+        for c in (self.d.contact[i] for i in range(self.d.ncon)):
             if c.geom1 == self._ground or c.geom2 == self._ground or c.dist >= 0.0:
                 continue
             a = self._mj.mj_id2name(self.m, self._mj.mjtObj.mjOBJ_BODY, int(self.m.geom_bodyid[c.geom1]))
@@ -298,8 +229,7 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
             yield a, b, float(c.dist)
 
     def ground_penetration(self) -> float:
-        """Deepest point (m) of the collision geoms below z = 0, from the
-        geometry itself (exact for hulls on a plane; no contact query)."""
+        """Deepest point (m) of the collision geoms below z = 0, from the geometry."""
         if self._ground < 0:
             return 0.0
         self._mj.mj_kinematics(self.m, self.d)
@@ -308,8 +238,6 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
 
     # ------------------------------------------------------------------ state
     def save_state(self) -> int:
-        """``mj_getState`` with ``mjSTATE_INTEGRATION`` (time, qpos, qvel,
-        warm start, applied forces)."""
         mj = self._mj
         state = np.empty(mj.mj_stateSize(self.m, self._state_sig))
         mj.mj_getState(self.m, self.d, state, self._state_sig)
@@ -337,8 +265,6 @@ class MuJoCoSession(SessionDefaults, NoRootHold):
                 self._applied = False
 
     def held_physics(self) -> HeldPhysics:
-        """What MuJoCo's compiled model holds (:func:`held_physics_of_model`),
-        joint positions from the session's ``qpos``."""
         return held_physics_of_model(self.m, self.d.qpos, list(self.urdf.links), self.joint_names, source="urdf (converted in memory)")
 
     def close(self) -> None:
@@ -352,18 +278,9 @@ def _named(m, kind, name: str) -> int:
 
 
 def held_physics_of_model(m, qpos: np.ndarray, links: list[str], joints: list[str], source: str) -> HeldPhysics:
-    """Per-body and per-joint physics of a compiled ``mujoco.MjModel`` ``m``,
-    by URDF link and joint name (the MJCF name is the URDF name, or its
-    :func:`safe_name`):
-    ``body_mass``, ``body_ipos`` (COM in the body frame, which is the URDF
-    link frame in our MJCF), ``body_inertia`` (principal moments),
-    ``jnt_range`` (unlimited: +-inf), ``dof_damping``, ``dof_frictionloss``,
-    ``jnt_stiffness`` and ``qpos_spring`` (reference; None when the stiffness
-    is 0), positions from ``qpos`` (nq,).
-
-    Raises:
-        KeyError: a link or joint has no MuJoCo body or joint of its name.
-    """
+    """Per-body and per-joint physics of a compiled ``mujoco.MjModel`` by URDF
+    link and joint name (or its :func:`safe_name`), positions from ``qpos`` (nq,)
+    (KeyError: a link or joint has no MuJoCo body or joint of its name)."""
     mujoco = _mujoco()
     held_links = {}
     for name in links:
@@ -388,28 +305,15 @@ def held_physics_of_model(m, qpos: np.ndarray, links: list[str], joints: list[st
 
 
 def held_physics_of_mjcf(path: Path, links: list[str], joints: list[str]) -> HeldPhysics:
-    """Load an MJCF file (``mujoco.MjModel.from_xml_path``) and read back what
-    MuJoCo holds (:func:`held_physics_of_model`), joint positions from the
-    keyframe :data:`KEYFRAME` (``initial``; ``qpos0`` without one).
-
-    Raises:
-        MjcfError: MuJoCo cannot compile the file.
-        KeyError: a link or joint is not in the model.
-    """
+    """:func:`held_physics_of_model` of an MJCF file, positions from the keyframe
+    :data:`KEYFRAME` (``qpos0`` without one) (MjcfError: it does not compile;
+    KeyError: a link or joint is not in the model)."""
     mujoco = _mujoco()
-    try:
-        with mujoco_messages():
-            m = mujoco.MjModel.from_xml_path(str(path))
-    except Exception as exc:
-        raise MjcfError(f"MuJoCo could not compile {path}: {exc}") from exc
+    m = _compile(lambda: mujoco.MjModel.from_xml_path(str(path)), path)
     kid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, KEYFRAME)
     qpos = np.array(m.key_qpos[kid], float) if kid >= 0 else np.array(m.qpos0, float)
     return held_physics_of_model(m, qpos, links, joints, source=f"mjcf ({Path(path).name}, keyframe {KEYFRAME!r})")
 
 
-def _open(urdf_path: Path, options: SessionOptions) -> MuJoCoSession:
-    return MuJoCoSession(urdf_path, options)
-
-
-register_engine("mujoco", _open)
+register_engine("mujoco", MuJoCoSession)
 register_file_reader("mujoco", "mjcf", held_physics_of_mjcf)

@@ -1,32 +1,9 @@
-"""Newton engine (NVIDIA Warp, runs on the CPU) under the SPEC's conventions;
-see :mod:`.base`.
-
-The session builds Newton bodies from the one reading of the URDF every
-engine shares (:func:`asset2sim.engines.loading.read_urdf`,
-:func:`~asset2sim.engines.loading.collision_pieces`), as the PhysX and MuJoCo
-engines do, so Newton collides the same convex pieces:
-
-- bodies: the file's mass, COM and inertia tensor (links without
-  ``<inertial>``: PyBullet's 1 kg and unit inertia, as the other engines);
-- shapes: one convex hull per piece (``add_shape_convex_hull``), boxes,
-  spheres and cylinders as themselves, with density 0 (Newton's default
-  adds 1000 kg/m^3 of shape mass to each body); contact friction 0.25 on
-  every shape and the ground (the other engines' 0.25);
-- joints: revolute / prismatic with the URDF limits and Coulomb friction
-  (``friction``, N*m or N), viscous damping and springs as a drive
-  (``target_kd`` = damping, ``target_ke`` = stiffness, ``target_pos`` = the
-  spring reference), fixed joints welded; the root free (``add_joint_free``)
-  or fixed to the world, the parent-child pairs filtered;
-- solver: :class:`newton.solvers.SolverKamino` (joint friction and limits as
-  constraints; why not Newton's other solvers: ``docs/design/simulators.md``), timestep 1/240 s;
-- placement: the root free, lowest collision vertex on z = 0.
-
-Only the queries the SPEC's rest-stability and oscillation tests need are
-answered (joints, root pose, stepping, penetration from Newton's contacts,
-ground penetration from the geometry); the others raise
-:class:`~asset2sim.engines.base.EngineUnsupported`. newton and warp are
-looked up at the end of this module to register the engine, imported when a
-session opens (an optional extra: ``pip install 'asset2sim[newton]'``).
+"""Newton engine (NVIDIA Warp, on the CPU, solver Kamino) under the SPEC's
+conventions, built from the URDF reading every engine shares
+(:mod:`asset2sim.engines.loading`; ``docs/design/simulators.md``). Only the
+queries the rest-stability and oscillation tests need are answered; the others
+raise :class:`~asset2sim.engines.base.EngineUnsupported`. newton and warp (an
+optional extra) are imported when a session opens or a USD is read back.
 """
 
 from __future__ import annotations
@@ -36,44 +13,32 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (
-    ContactPair,
-    EngineUnsupported,
-    HeldPhysics,
-    NoRootHold,
-    SessionOptions,
-    penetration_sum,
-    register_engine,
-    register_file_reader,
-)
-from asset2sim.engines.loading import (
-    BULLET_DEFAULT_FRICTION,
-    BULLET_DEFAULT_INERTIA,
-    BULLET_DEFAULT_MASS,
-    BULLET_PLANE_FRICTION,
-    CollisionPiece,
-    collision_pieces,
-    joint_tables,
-    read_urdf,
-)
-from asset2sim.engines.newton_model import held_physics_of_model, held_physics_of_usd, import_newton
-from asset2sim.engines.session_defaults import SessionDefaults
+from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+                                    SessionOptions, penetration_sum, principal_moments, register_engine, register_file_reader)
+from asset2sim.engines.loading import (BOX_CORNERS, BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS,
+                                       BULLET_PLANE_FRICTION, CollisionPiece, collision_pieces, joint_tables, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import convex_hull_mesh
 
-#: Contact friction coefficient on every shape and the ground (PyBullet's
-#: 0.5 x 0.5 product, what the other engines use).
+#: Contact friction on every shape and the ground (PyBullet's 0.5 x 0.5).
 CONTACT_FRICTION = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
+#: Newton's default limit magnitude for an unlimited DOF (``ModelBuilder``'s 1e6) and above: read back as unlimited.
+NEWTON_UNLIMITED = 1e6
 
 
-class NewtonSession(SessionDefaults, NoRootHold):
-    """A :class:`~asset2sim.engines.base.SimSession` in Newton on the CPU.
+def import_newton():
+    """``(warp, newton)``, warp told to be quiet (ImportError: either is missing)."""
+    import warp as wp
 
-    ``notes``: what the reading of the URDF changed (flat pieces made slabs).
+    wp.config.quiet = True
+    import newton
 
-    Raises (constructor):
-        UrdfError: the URDF or a collision mesh cannot be read.
-    """
+    return wp, newton
+
+
+class NewtonSession(SessionDefaults):
+    """A :class:`~asset2sim.engines.base.SimSession` in Newton on the CPU;
+    ``notes``: flat pieces made slabs (UrdfError: the URDF or a mesh cannot be read)."""
 
     engine = "newton"
 
@@ -91,7 +56,7 @@ class NewtonSession(SessionDefaults, NoRootHold):
         self._fixed = bool(options.fixed_base)
         poses = self._placed_poses(pieces)
         b = newton.ModelBuilder(gravity=(0.0, 0.0, conv.gravity if options.gravity else 0.0))
-        # density 0: Newton adds each shape's mass (default 1000 kg/m^3) to its body's; the file's inertials are the truth
+        # density 0: Newton would add each shape's mass to its body's
         cfg = newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION, density=0.0)
         self._add_bodies(b, pieces, poses, cfg)
         self._add_joints(b, poses)
@@ -108,9 +73,8 @@ class NewtonSession(SessionDefaults, NoRootHold):
 
     # ------------------------------------------------------------- building
     def _placed_poses(self, pieces: dict[str, list[CollisionPiece]]) -> dict[str, np.ndarray]:
-        """Every link's pose (4, 4), m, at the initial state, the root free
-        lifted so the lowest collision vertex is on z = 0 (fixed: where the
-        file puts it); sets ``_points``, each link's collision vertices (k, 3) m."""
+        """Every link's pose (4, 4) at the initial state, a free root lifted so
+        the lowest collision vertex is on z = 0; sets ``_points`` (k, 3) per link."""
         poses = self.urdf.link_poses(self.options.initial_state)
         self._points: dict[str, np.ndarray] = {}
         for name in self.link_names:
@@ -125,9 +89,7 @@ class NewtonSession(SessionDefaults, NoRootHold):
         return self.urdf.link_poses(self.options.initial_state, root_pose)
 
     def _add_bodies(self, b, pieces: dict[str, list[CollisionPiece]], poses: dict[str, np.ndarray], cfg) -> None:
-        """One body per link at its pose with the file's mass, COM and inertia
-        (PyBullet's default without ``<inertial>``) and its collision shapes;
-        sets ``_body`` (link -> body index)."""
+        """One body per link with the file's inertial and its shapes; sets ``_body`` (link -> index)."""
         wp = self._wp
         self._body: dict[str, int] = {}
         for name in self.link_names:
@@ -144,10 +106,8 @@ class NewtonSession(SessionDefaults, NoRootHold):
                 self._add_shape(b, body, piece, cfg)
 
     def _add_joints(self, b, poses: dict[str, np.ndarray]) -> None:
-        """The root joint (fixed to the world or free), every URDF joint
-        (movable: limits, Coulomb friction, damping and spring as a drive;
-        fixed: welded) and the articulation; sets ``_joint_index`` (movable
-        joint -> Newton joint index)."""
+        """The root joint, every URDF joint (damping and spring as a drive) and
+        the articulation; sets ``_joint_index`` (movable joint -> Newton index)."""
         wp = self._wp
         joints = []
         root = self.urdf.root
@@ -162,18 +122,11 @@ class NewtonSession(SessionDefaults, NoRootHold):
             if j.type in ("revolute", "continuous", "prismatic"):
                 spring = self.options.springs.get(j.name)
                 lo, hi = j.lower, j.upper
-                dof = dict(
-                    axis=wp.vec3(*map(float, j.axis)),
-                    friction=float(j.friction),
-                    target_kd=float(j.damping),
-                    target_ke=float(spring.stiffness) if spring else 0.0,
-                    target_pos=float(spring.reference) if spring else 0.0,
-                    target_vel=0.0,
-                    limit_lower=float(lo) if np.isfinite(lo) else None,
-                    limit_upper=float(hi) if np.isfinite(hi) else None,
-                )
                 add = b.add_joint_prismatic if j.type == "prismatic" else b.add_joint_revolute
-                idx = add(parent, child, **kw, **dof)
+                idx = add(parent, child, **kw, axis=wp.vec3(*map(float, j.axis)), friction=float(j.friction), target_kd=float(j.damping),
+                          target_ke=float(spring.stiffness) if spring else 0.0, target_pos=float(spring.reference) if spring else 0.0,
+                          target_vel=0.0, limit_lower=float(lo) if np.isfinite(lo) else None,
+                          limit_upper=float(hi) if np.isfinite(hi) else None)
                 self._joint_index[j.name] = idx
             else:
                 idx = b.add_joint_fixed(parent, child, **kw)
@@ -181,9 +134,7 @@ class NewtonSession(SessionDefaults, NoRootHold):
         b.add_articulation(joints)
 
     def _init_state(self) -> None:
-        """The movable joints' coordinate and DOF addresses (``_qadr``,
-        ``_dadr``), the initial joint positions, the two states, the control
-        and the bodies' poses (forward kinematics)."""
+        """Joint addresses (``_qadr``, ``_dadr``), initial positions, states, control and body poses."""
         qs = self.model.joint_q_start.numpy()
         ds = self.model.joint_qd_start.numpy()
         self._qadr = {n: int(qs[i]) for n, i in self._joint_index.items()}
@@ -198,16 +149,14 @@ class NewtonSession(SessionDefaults, NoRootHold):
         self._nt.eval_fk(self.model, self.model.joint_q, self.model.joint_qd, self.state0)
 
     def _size_contacts(self) -> None:
-        """The query collision pipeline and ``_capacity``, sized from the
-        contacts at the initial state (see :data:`CONTACT_CAPACITY_MIN`)."""
+        """The query collision pipeline and ``_capacity`` from the initial contacts."""
         self._query = self._nt.CollisionPipeline(self.model, publish_capacity=False)
         self._query_contacts = self._query.contacts()
         self._query.collide(self.state0, self._query_contacts)
         self._capacity = _capacity_for(int(self._query_contacts.rigid_contact_count.numpy()[0]))
 
     def _build_solver(self) -> None:
-        """The stepping collision pipeline and the Kamino solver, both sized
-        for ``self._capacity`` rigid contacts."""
+        """The stepping collision pipeline and the Kamino solver for ``_capacity`` contacts."""
         newton = self._nt
         self.model.rigid_contact_max = self._capacity
         self._pipeline = newton.CollisionPipeline(self.model, rigid_contact_max=self._capacity)
@@ -221,9 +170,7 @@ class NewtonSession(SessionDefaults, NoRootHold):
         if piece.kind == "hull":
             return _apply(o, piece.points)
         if piece.kind == "box":
-            h = 0.5 * np.asarray(piece.size, float)
-            corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
-            return _apply(o, corners)
+            return _apply(o, BOX_CORNERS * (0.5 * np.asarray(piece.size, float)))
         r = float(piece.radius)
         if piece.kind == "sphere":
             return _apply(o, np.array([[0, 0, -r], [0, 0, r], [r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0]], float))
@@ -247,7 +194,10 @@ class NewtonSession(SessionDefaults, NoRootHold):
             b.add_shape_cylinder(body, xform=xf, radius=float(piece.radius), half_height=0.5 * float(piece.length), cfg=cfg)
 
     # ------------------------------------------------------------------ joints
-    def _refresh(self) -> None:
+    def _refresh(self, jq: np.ndarray, jd: np.ndarray) -> None:
+        """Set the state's joint coordinates and velocities, and the bodies' poses."""
+        self.state0.joint_q.assign(jq)
+        self.state0.joint_qd.assign(jd)
         self._nt.eval_fk(self.model, self.state0.joint_q, self.state0.joint_qd, self.state0)
 
     def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
@@ -257,9 +207,7 @@ class NewtonSession(SessionDefaults, NoRootHold):
                 jq[self._qadr[name]] = float(v)
                 if zero_velocity:
                     jd[self._dadr[name]] = 0.0
-        self.state0.joint_q.assign(jq)
-        self.state0.joint_qd.assign(jd)
-        self._refresh()
+        self._refresh(jq, jd)
 
     def joint_positions(self) -> dict[str, float]:
         jq = self.state0.joint_q.numpy()
@@ -273,23 +221,12 @@ class NewtonSession(SessionDefaults, NoRootHold):
         return float(self.state0.joint_q.numpy()[self._qadr[joint]]), float(self.state0.joint_qd.numpy()[self._dadr[joint]])
 
     def joint_axis(self, joint: str) -> np.ndarray:
-        """The URDF axis (3,) in the child frame (the joint frame is the child's)."""
         if joint not in self._qadr:
             raise KeyError(joint)
         return np.asarray(self.urdf.joint(joint).axis, float)
 
-    def apply_joint_effort(self, joint: str, effort: float) -> None:
-        raise EngineUnsupported("newton: apply_joint_effort is not implemented")
-
-    def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
-        raise EngineUnsupported("newton: drive_joint is not implemented")
-
-    def release_joint(self, joint: str) -> None:
-        raise EngineUnsupported("newton: release_joint is not implemented")
-
     # ------------------------------------------------------------------- links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """The body's pose: Newton's body frame is the URDF link frame."""
         t = self.state0.body_q.numpy()[self._body[link]]
         x, y, z, w = (float(v) for v in t[3:7])
         return np.array(t[:3], float), np.array(quat_wxyz_matrix([w, x, y, z]))
@@ -299,10 +236,9 @@ class NewtonSession(SessionDefaults, NoRootHold):
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         pts = self._points[link]
-        if not len(pts):
-            p, _ = self.link_frame(link)
-            return p.copy(), p.copy()
         p, r = self.link_frame(link)
+        if not len(pts):
+            return p.copy(), p.copy()
         w = pts @ r.T + p
         return w.min(axis=0), w.max(axis=0)
 
@@ -313,12 +249,6 @@ class NewtonSession(SessionDefaults, NoRootHold):
         m = self.model.body_mass.numpy()
         return {n: float(m[i]) for n, i in self._body.items()}
 
-    def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        raise EngineUnsupported("newton: link_distances is not implemented")
-
-    def apply_link_force(self, link: str, force, point) -> None:
-        raise EngineUnsupported("newton: apply_link_force is not implemented")
-
     # -------------------------------------------------------------------- root
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         t = self.state0.body_q.numpy()[self._body[self.urdf.root]]
@@ -327,38 +257,23 @@ class NewtonSession(SessionDefaults, NoRootHold):
         return np.array(t[:3], float), (q / n if n > 0 else q)
 
     def set_root_pose(self, pos, orn_xyzw) -> None:
-        """Teleport the root (free joint) and zero its velocity.
-
-        Raises:
-            EngineUnsupported: the root is fixed.
-        """
+        """Teleport the root and zero its velocity (EngineUnsupported: fixed root)."""
         if self._fixed:
             raise EngineUnsupported("newton: the root of a fixed-base session cannot be moved")
         jq, jd = self.state0.joint_q.numpy(), self.state0.joint_qd.numpy()
         jq[0:3] = np.asarray(pos, float)
         jq[3:7] = np.asarray(orn_xyzw, float)
         jd[0:6] = 0.0
-        self.state0.joint_q.assign(jq)
-        self.state0.joint_qd.assign(jd)
-        self._refresh()
-
-    def set_root_velocity(self, linear, angular) -> None:
-        raise EngineUnsupported("newton: set_root_velocity is not implemented")
+        self._refresh(jq, jd)
 
     # ----------------------------------------------------------------- contact
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
-        """Phi from Newton's narrow phase at the current state: separation
-        n . (p1 - p0) - (thickness0 + thickness1) per contact point."""
+        """Phi from Newton's narrow phase: separation n . (p1 - p0) - (margin0 + margin1) per point."""
         c = self._query_contacts
         self._query.collide(self.state0, c)
         count = int(c.rigid_contact_count.numpy()[0])
-        s0 = c.rigid_contact_shape0.numpy()[:count]
-        s1 = c.rigid_contact_shape1.numpy()[:count]
-        p0 = c.rigid_contact_point0.numpy()[:count]
-        p1 = c.rigid_contact_point1.numpy()[:count]
-        nrm = c.rigid_contact_normal.numpy()[:count]
-        m0 = c.rigid_contact_margin0.numpy()[:count]
-        m1 = c.rigid_contact_margin1.numpy()[:count]
+        s0, s1, p0, p1, nrm, m0, m1 = (getattr(c, f"rigid_contact_{field}").numpy()[:count]
+                                       for field in ("shape0", "shape1", "point0", "point1", "normal", "margin0", "margin1"))
         bq = self.state0.body_q.numpy()
         points = []
         for k in range(count):
@@ -367,9 +282,7 @@ class NewtonSession(SessionDefaults, NoRootHold):
             ba, bb = int(self._shape_body[s0[k]]), int(self._shape_body[s1[k]])
             if ba < 0 or bb < 0:
                 continue
-            wa = _body_point(bq[ba], p0[k])
-            wb = _body_point(bq[bb], p1[k])
-            d = float(np.dot(nrm[k], wb - wa)) - float(m0[k]) - float(m1[k])
+            d = float(np.dot(nrm[k], _body_point(bq[bb], p1[k]) - _body_point(bq[ba], p0[k]))) - float(m0[k]) - float(m1[k])
             points.append((self._link_of[ba], self._link_of[bb], d))
         return penetration_sum(points)
 
@@ -383,16 +296,6 @@ class NewtonSession(SessionDefaults, NoRootHold):
                 p, r = self.link_frame(name)
                 low = min(low, float((pts @ r.T + p)[:, 2].min()))
         return max(0.0, -low) if np.isfinite(low) else 0.0
-
-    # ---------------------------------------------------------------- snapshots
-    def save_state(self) -> int:
-        raise EngineUnsupported("newton: save_state is not implemented")
-
-    def restore_state(self, handle: int) -> None:
-        raise EngineUnsupported("newton: restore_state is not implemented")
-
-    def discard_state(self, handle: int) -> None:
-        raise EngineUnsupported("newton: discard_state is not implemented")
 
     # ----------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
@@ -409,8 +312,6 @@ class NewtonSession(SessionDefaults, NoRootHold):
             self.state0, self.state1 = self.state1, self.state0
 
     def held_physics(self) -> HeldPhysics:
-        """What Newton's finalized model holds (:func:`held_physics_of_model`),
-        joint positions from the current state."""
         dofs = {n: (self._qadr[n], self._dadr[n]) for n in self._qadr}
         return held_physics_of_model(self.model, self.state0.joint_q.numpy(), self._body, dofs, source="urdf")
 
@@ -419,17 +320,25 @@ class NewtonSession(SessionDefaults, NoRootHold):
         self.model = None
 
 
-#: Smallest rigid-contact capacity of the stepping pipeline and solver: Kamino's CPU cost grows with the
-#: capacity, not with the contacts made (``docs/design/simulators.md``). The session sizes the capacity at
-#: CONTACT_CAPACITY_HEADROOM times the contacts at the initial state (at least this), and grows it
-#: (rebuilding the solver) whenever a step fills it, so no contact is ever dropped.
+def _unsupported(query: str):
+    def method(self, *args, **kwargs):
+        raise EngineUnsupported(f"newton: {query} is not implemented")
+    return method
+
+
+for _query in ("apply_joint_effort", "drive_joint", "release_joint", "link_distances", "apply_link_force", "set_root_velocity",
+               "save_state", "restore_state", "discard_state"):
+    setattr(NewtonSession, _query, _unsupported(_query))
+
+#: Smallest rigid-contact capacity of the stepping pipeline and solver (Kamino's CPU cost grows with the
+#: capacity); the session sizes it at CONTACT_CAPACITY_HEADROOM x the initial contacts and grows it
+#: (rebuilding the solver) whenever a step fills it, so no contact is dropped.
 CONTACT_CAPACITY_MIN = 64
 CONTACT_CAPACITY_HEADROOM = 4
 
 
 def _capacity_for(n_contacts: int) -> int:
-    """Rigid-contact capacity for ``n_contacts`` contacts: headroom x the
-    count, rounded up to a power of two, at least :data:`CONTACT_CAPACITY_MIN`."""
+    """Headroom x ``n_contacts``, rounded up to a power of two, at least :data:`CONTACT_CAPACITY_MIN`."""
     need = max(CONTACT_CAPACITY_MIN, CONTACT_CAPACITY_HEADROOM * int(n_contacts))
     return 1 << (need - 1).bit_length()
 
@@ -448,14 +357,70 @@ def _wp_transform(wp, pose: np.ndarray):
     return wp.transform(wp.vec3(*map(float, pose[:3, 3])), wp.quat(x, y, z, w))
 
 
-def _open(urdf_path: Path, options: SessionOptions) -> NewtonSession:
-    return NewtonSession(urdf_path, options)
+def held_physics_of_model(model, joint_q: np.ndarray, bodies: dict[str, int], dofs: dict[str, tuple[int, int]],
+                          source: str) -> HeldPhysics:
+    """Per-body and per-joint physics of a finalized ``newton.Model`` (limits
+    of +-:data:`NEWTON_UNLIMITED` or more read as unlimited; reference None
+    without stiffness). ``bodies``: link -> body index; ``dofs``: joint ->
+    (q index, dof index)."""
+    mass, com, inertia = model.body_mass.numpy(), model.body_com.numpy(), model.body_inertia.numpy()
+    links = {n: HeldLink(mass=float(mass[i]), com=np.array(com[i], float), principal=principal_moments(inertia[i]))
+             for n, i in bodies.items()}
+    lo, hi = model.joint_limit_lower.numpy(), model.joint_limit_upper.numpy()
+    kd, fr, ke = model.joint_target_kd.numpy(), model.joint_friction.numpy(), model.joint_target_ke.numpy()
+    tp = model.joint_target_q.numpy()  # per coordinate, like joint_q
+    joints = {}
+    for n, (qa, da) in dofs.items():
+        lo_v = float(lo[da]) if abs(float(lo[da])) < NEWTON_UNLIMITED else -np.inf
+        hi_v = float(hi[da]) if abs(float(hi[da])) < NEWTON_UNLIMITED else np.inf
+        k = float(ke[da])
+        joints[n] = HeldJoint(lower=lo_v, upper=hi_v, damping=float(kd[da]), friction=float(fr[da]), stiffness=k,
+                              reference=float(tp[qa]) if k != 0.0 else None, position=float(joint_q[qa]))
+    how = {"mass, com, inertia": "Model.body_mass, body_com, body_inertia", "limits": "joint_limit_lower/upper",
+           "damping, friction, spring": "joint_target_kd, joint_friction, joint_target_ke / joint_target_q",
+           "position": "joint_q"}
+    return HeldPhysics(engine="newton", source=source, links=links, joints=joints, how=how)
 
 
-# Registering needs the packages: without them this module raises ImportError
-# and the registry reports the engine as unavailable (an optional extra).
-# Looked up, not imported: importing newton and warp takes seconds, and
-# ``available_engines()`` asks every engine.
+def held_physics_of_usd(path: Path, links: list[str] | None = None, joints: list[str] | None = None) -> HeldPhysics:
+    """Load a USD of ``asset2sim export --format usd`` with Newton's importer
+    (``ModelBuilder.add_usd``) and read back what it holds, by the URDF names
+    stored in ``asset2sim:name`` (``links`` and ``joints`` are not needed).
+
+    Raises:
+        ImportError: newton or usd-core is missing.
+        ValueError: a body or joint of the model has no ``asset2sim:name``.
+    """
+    from pxr import Usd
+
+    wp, newton = import_newton()
+    stage = Usd.Stage.Open(str(path))
+    names = {}
+    for prim in stage.Traverse():
+        a = prim.GetAttribute("asset2sim:name")
+        if a and a.HasAuthoredValue():
+            names[str(prim.GetPath())] = str(a.Get())
+    b = newton.ModelBuilder()
+    b.add_usd(str(path))
+    model = b.finalize(device="cpu")
+    bodies = {}
+    for i, lab in enumerate(b.body_label):
+        if lab not in names:
+            raise ValueError(f"{path}: Newton body {lab!r} has no asset2sim:name")
+        bodies[names[lab]] = i
+    qs, ds, jt = model.joint_q_start.numpy(), model.joint_qd_start.numpy(), model.joint_type.numpy()
+    movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
+    dofs = {}
+    for i, lab in enumerate(b.joint_label):
+        if int(jt[i]) in movable:
+            if lab not in names:
+                raise ValueError(f"{path}: Newton joint {lab!r} has no asset2sim:name")
+            dofs[names[lab]] = (int(qs[i]), int(ds[i]))
+    return held_physics_of_model(model, model.joint_q.numpy(), bodies, dofs, source=f"usd ({Path(path).name}, add_usd)")
+
+
+# Registering needs the packages (else ImportError: the engine is unavailable);
+# looked up, not imported: importing newton and warp takes seconds.
 def _installed(package: str) -> bool:
     try:
         return importlib.util.find_spec(package) is not None
@@ -467,5 +432,5 @@ for _package in ("newton", "warp", "scipy"):
     if not _installed(_package):
         raise ImportError(f"No module named {_package!r} (pip install 'asset2sim[newton]')")
 
-register_engine("newton", _open)
+register_engine("newton", NewtonSession)
 register_file_reader("newton", "usd", held_physics_of_usd)

@@ -1,35 +1,7 @@
-"""PhysX engine (SAPIEN 3 on the CPU, physics only) under the SPEC's conventions.
-
-The articulation is built from the same reading of the URDF as the MuJoCo
-engine (:func:`asset2sim.engines.loading.read_urdf`): the same inertials (a link
-without ``<inertial>`` gets PyBullet's 1 kg and unit inertia, as in the
-reference engine), the same joint frames, and the same convex collision pieces
-(one hull per OBJ group, as PyBullet builds them). No render system is created
-and no visual shape is loaded (SAPIEN's renderer needs a Vulkan GPU).
-
-Conventions and how PhysX is made to follow them (``docs/design/simulators.md`` lists
-what stays different):
-
-- timestep 1/240 s, gravity -9.81 m/s^2 along z, a static plane at z = 0;
-- self-collision on; PhysX never collides a link with its parent (the same
-  rule as ``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``);
-- the root free, placed so the lowest point of its cooked hulls touches z = 0;
-- passive joints: one zero-target-velocity joint drive per joint, stiff
-  (damping :data:`FRICTION_DRIVE_DAMPING`) and force-limited to
-  ``friction + damping * |qdot|`` (re-set before every step). It stops the
-  joint when it can, so it never pushes it backwards: Coulomb friction
-  ``<dynamics friction>`` plus viscous damping ``<dynamics damping>`` that stays
-  stable however large the damping is relative to the inertia (an explicit
-  torque -c*qdot diverges once c*dt/I > 2). PhysX's own joint "friction" is a
-  coefficient on the joint's constraint force and is set to 0;
-- springs -k (q - q_s) as explicit joint forces each step (what PyBullet does);
-- contact friction 0.25 for every pair (PyBullet multiplies the link's 0.5 by
-  the plane's 0.5), restitution 0; link velocity damping 0.04 (Bullet's
-  default); no sleeping; PGS with ManiSkill 3's solver iterations
-  (:data:`SOLVER_ITERATIONS`).
-
-sapien is imported only here; without it the registry reports the engine as
-unavailable.
+"""PhysX engine (SAPIEN 3 on the CPU, physics only) under the SPEC's
+conventions, built from the URDF reading every engine shares
+(:mod:`asset2sim.engines.loading`); how each convention is met and what stays
+different: ``docs/design/simulators.md``.
 """
 
 from __future__ import annotations
@@ -45,41 +17,20 @@ with startup_quiet():
     import sapien
     from sapien import physx
 
-from asset2sim.engines.base import (
-    ContactPair,
-    EngineUnsupported,
-    HeldJoint,
-    HeldLink,
-    HeldPhysics,
-    NoRootHold,
-    SessionOptions,
-    penetration_sum,
-    register_engine,
-)
-from asset2sim.engines.loading import (
-    BULLET_DEFAULT_FRICTION,
-    BULLET_DEFAULT_INERTIA,
-    BULLET_DEFAULT_MASS,
-    BULLET_PLANE_FRICTION,
-    collision_pieces,
-    joint_tables,
-    principal_axes,
-    read_urdf,
-)
-from asset2sim.engines.session_defaults import SessionDefaults
+from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
+                                    SessionOptions, penetration_sum, register_engine)
+from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
+                                       collision_pieces, joint_tables, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz
 
-#: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive that carries the
-#: passive joint forces: large enough that the drive acts as a velocity
-#: constraint clamped at its force limit (friction + damping * |qdot|).
+#: Damping (N*m*s/rad or N*s/m) of the zero-velocity drive carrying the passive
+#: joint forces: a velocity constraint clamped at friction + damping * |qdot|.
 FRICTION_DRIVE_DAMPING = 1.0e6
 #: Bullet's default linear and angular velocity damping of multibody links (1/s).
 BULLET_LINK_DAMPING = 0.04
-#: PhysX solver: PGS, as SAPIEN's default TGS lets joints held by a force-limited
-#: drive creep under load when the root is free; PGS holds them, as Bullet's motors do (``docs/design/simulators.md``).
+#: PGS, not SAPIEN's default TGS (``docs/design/simulators.md``).
 ENABLE_TGS = False
-#: Solver iterations of every articulation (position, velocity): ManiSkill 3's default ``SceneConfig``; with
-#: SAPIEN's own (10, 1) a free object resting on the plane creeps (``docs/design/simulators.md``).
+#: Solver iterations (position, velocity): ManiSkill 3's default ``SceneConfig``.
 SOLVER_ITERATIONS = (15, 1)
 
 
@@ -106,9 +57,8 @@ def _axis_frame(axis: np.ndarray) -> np.ndarray:
 
 
 def new_scene(gravity: float = -9.81, timestep: float = 1.0 / 240.0) -> "sapien.Scene":
-    """A SAPIEN scene of its own CPU PhysX system as asset2sim's checks make
-    it: ``gravity`` m/s^2 along z, PGS (:data:`ENABLE_TGS`), time step
-    ``timestep`` s. SAPIEN's global scene configuration is left as it was."""
+    """A SAPIEN scene of its own CPU PhysX system: ``gravity`` m/s^2 along z,
+    PGS, time step ``timestep`` s (SAPIEN's global configuration kept)."""
     old = physx.get_scene_config()
     cfg = physx.PhysxSceneConfig()
     cfg.gravity = np.array([0.0, 0.0, gravity], np.float32)
@@ -123,24 +73,15 @@ def new_scene(gravity: float = -9.81, timestep: float = 1.0 / 240.0) -> "sapien.
     return scene
 
 
-class PhysXSession(SessionDefaults, NoRootHold):
+class PhysXSession(SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3:
-    a CPU scene of its own, or (``scene``) the caller's ``sapien.Scene``,
-    whose gravity, time step and solver are left as they are; ``ground``
-    False: no plane is added to the caller's scene.
-
-    ``notes``: what had to change for this asset (flat hulls, missing
-    inertials, shapes PhysX could not cook).
-
-    Raises (constructor):
-        UrdfError: the URDF cannot be read.
-        PhysXError: an inertia tensor is not positive definite or a link
-            ends up without any shape PhysX can cook while it has collisions.
-    """
+    a CPU scene of its own, or (``scene``) the caller's, left as it is
+    (``ground`` False: no plane added to it); ``notes``: what had to change
+    (UrdfError; PhysXError: a mass or moment not positive, a link with no cookable shape)."""
 
     engine = "physx"
 
-    def __init__(self, urdf_path: Path, options: SessionOptions, missing_inertial: str = "bullet", scene=None, ground: bool = True):
+    def __init__(self, urdf_path: Path, options: SessionOptions, scene=None, ground: bool = True):
         self.options = options
         self.dt = options.conventions.timestep
         self.urdf = read_urdf(urdf_path)
@@ -148,11 +89,12 @@ class PhysXSession(SessionDefaults, NoRootHold):
         self.notes = list(notes)
         self._owns_scene = scene is None
         if scene is None:
-            self._make_scene()
+            self.scene = new_scene(options.conventions.gravity if options.gravity else 0.0, self.dt)
+            self.system = self.scene.physx_system
         else:
             self.scene, self.system, self.dt = scene, scene.physx_system, float(scene.get_timestep())
         self.ground = self._add_ground() if options.ground and (self._owns_scene or ground) else None
-        self._add_articulation(self._articulation_builder(urdf_path, missing_inertial), pieces, urdf_path)
+        self._add_articulation(self._articulation_builder(urdf_path), pieces, urdf_path)
         self.joint_names, self.joint_types, self.joint_limits, self.joint_child = joint_tables(self.urdf)
         self.link_names = list(self.links)
         self._states: dict[int, tuple] = {}
@@ -163,12 +105,6 @@ class PhysXSession(SessionDefaults, NoRootHold):
             self.place_on_ground()
 
     # --------------------------------------------------------------- building
-    def _make_scene(self) -> None:
-        """``system`` and ``scene``: :func:`new_scene` with the session's gravity."""
-        conv = self.options.conventions
-        self.scene = new_scene(conv.gravity if self.options.gravity else 0.0, self.dt)
-        self.system = self.scene.physx_system
-
     def _add_ground(self):
         """The static ground plane z = 0 (its component), contact friction 0.25."""
         mu = BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION
@@ -184,9 +120,8 @@ class PhysXSession(SessionDefaults, NoRootHold):
         self._ground_entity = ent
         return comp
 
-    def _articulation_builder(self, urdf_path: Path, missing_inertial: str):
-        """SAPIEN's articulation builder with every link in tree order: its
-        joint (x along the URDF axis, the root free or fixed) and inertia."""
+    def _articulation_builder(self, urdf_path: Path):
+        """SAPIEN's articulation builder: every link's joint (x along the URDF axis) and inertia."""
         builder = self.scene.create_articulation_builder()
         link_builders = {}
         for name in self.urdf.tree_order():
@@ -202,14 +137,12 @@ class PhysXSession(SessionDefaults, NoRootHold):
                 kind = {"revolute": "revolute_unwrapped", "continuous": "revolute", "prismatic": "prismatic", "fixed": "fixed"}[pj.type]
                 limits = [] if pj.type == "fixed" else [[pj.lower, pj.upper]]
                 lb.set_joint_properties(kind, limits, _pose(pj.origin @ ax), _pose(ax), 0.0, 0.0)
-            mass, com_pose, moments = self._link_inertia(name, urdf_path, missing_inertial)
+            mass, com_pose, moments = self._link_inertia(name, urdf_path)
             lb.set_mass_and_inertia(float(mass), com_pose, np.asarray(moments, np.float32))
         return builder
 
     def _add_articulation(self, builder, pieces: dict, urdf_path: Path) -> None:
-        """Build the articulation, cook each link's collision pieces and add it
-        to the scene; sets ``links`` (link -> component, tree order) and ``art``
-        (no sleeping, :data:`SOLVER_ITERATIONS`)."""
+        """Build the articulation with its collision shapes into the scene (``links``, ``art``)."""
         entities = builder.build_entities(fix_root_link=self.options.fixed_base)
         self.links = {}
         for ent in entities:
@@ -224,19 +157,11 @@ class PhysXSession(SessionDefaults, NoRootHold):
         self.art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
         self.art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
 
-    def _link_inertia(self, name: str, urdf_path: Path, missing_inertial: str):
-        """Mass (kg), COM pose with the principal axes (link frame) and
-        principal moments (3,) kg*m^2 of a link; without ``<inertial>``
-        PyBullet's 1 kg and unit inertia (``missing_inertial="bullet"``).
-
-        Raises:
-            PhysXError: no ``<inertial>`` (other ``missing_inertial``), or a
-                mass or principal moment that is not positive.
-        """
+    def _link_inertia(self, name: str, urdf_path: Path):
+        """Mass (kg), COM pose on the principal axes and principal moments (3,)
+        kg*m^2 of a link (PyBullet's default without ``<inertial>``)."""
         ine = self.urdf.links[name].inertial
         if ine is None:
-            if missing_inertial != "bullet":
-                raise PhysXError(f"{urdf_path}: link {name!r} has no <inertial> (PhysX needs a mass)")
             self.notes.append(f"link {name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
             return BULLET_DEFAULT_MASS, sapien.Pose(), np.array(BULLET_DEFAULT_INERTIA)
         moments, axes = principal_axes(ine.inertia_in_link_axes())
@@ -248,31 +173,21 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return ine.mass, _pose(t), moments
 
     def _attach_shapes(self, comp, pieces: list, urdf_path: Path) -> None:
-        """Cook a link's collision pieces into its component (a piece PhysX
-        cannot cook is skipped with a note), contact friction the link's
-        lateral friction x the plane's; Bullet's link velocity damping.
-
-        Raises:
-            PhysXError: the link has pieces and none could be cooked.
-        """
+        """Cook a link's collision pieces into its component (uncookable ones
+        skipped with a note) with PyBullet's contact friction and link damping."""
         name = comp.name
-        lat = self.urdf.links[name].lateral_friction
-        lmu = (BULLET_DEFAULT_FRICTION if lat is None else lat) * BULLET_PLANE_FRICTION
+        lmu = link_friction(self.urdf, name)
         mat = physx.PhysxMaterial(lmu, lmu, 0.0)
         cooked = 0
         for p in pieces:
+            local = p.origin
             try:
                 if p.kind == "hull":
-                    shape = physx.PhysxCollisionShapeConvexMesh(
-                        np.asarray(p.points, np.float32), np.ones(3, np.float32), mat
-                    )
-                    local = p.origin
+                    shape = physx.PhysxCollisionShapeConvexMesh(np.asarray(p.points, np.float32), np.ones(3, np.float32), mat)
                 elif p.kind == "box":
                     shape = physx.PhysxCollisionShapeBox(np.asarray(p.size, np.float32) / 2, mat)
-                    local = p.origin
                 elif p.kind == "sphere":
                     shape = physx.PhysxCollisionShapeSphere(float(p.radius), mat)
-                    local = p.origin
                 else:  # cylinder: URDF axis z, PhysX axis x
                     shape = physx.PhysxCollisionShapeCylinder(float(p.radius), float(p.length) / 2, mat)
                     local = p.origin @ _axis_frame(np.array([0.0, 0.0, 1.0]))
@@ -290,23 +205,15 @@ class PhysXSession(SessionDefaults, NoRootHold):
         comp.set_angular_damping(BULLET_LINK_DAMPING)
 
     def _passive_drives(self, urdf_path: Path) -> None:
-        """Joint index tables and each movable joint's passive zero-velocity
-        drive (force limit = Coulomb friction, N*m or N), its damping and spring.
-
-        Raises:
-            PhysXError: PhysX built other joints than the URDF's movable ones.
-        """
+        """Joint tables and each movable joint's passive zero-velocity drive
+        (PhysXError: PhysX built other joints than the URDF's movable ones)."""
         active = [j.name for j in self.art.active_joints]
         if sorted(active) != sorted(self.joint_names):
             raise PhysXError(f"{urdf_path}: PhysX built joints {active}, the URDF has {self.joint_names}")
         self._index = {n: i for i, n in enumerate(active)}
         self._joints = list(self.art.active_joints)
-        self._friction = np.zeros(len(active))
-        self._damping = np.zeros(len(active))
-        self._stiffness = np.zeros(len(active))
-        self._drive: dict[int, tuple[float, float]] = {}
-        """joint index -> (target velocity, force limit beyond friction) of :meth:`drive_joint`"""
-        self._reference = np.zeros(len(active))
+        self._friction, self._damping, self._stiffness, self._reference = (np.zeros(len(active)) for _ in range(4))
+        self._drive: dict[int, tuple[float, float]] = {}  # joint index -> (target velocity, force limit beyond friction)
         for pj in self.urdf.movable_joints:
             i = self._index[pj.name]
             self._damping[i] = pj.damping
@@ -348,43 +255,34 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return float(self.art.get_qpos()[i]), float(self.art.get_qvel()[i])
 
     def joint_axis(self, joint: str) -> np.ndarray:
-        """The URDF axis (3,) of the joint (PhysX moves the joint along/about
-        the x axis of a frame built on it)."""
+        """The URDF axis (3,) (PhysX's joint x axis is built on it)."""
         if joint not in self._index:
             raise KeyError(joint)
         return np.asarray(self.urdf.parent_joint(self.joint_child[joint]).axis, float).copy()
 
     def apply_joint_effort(self, joint: str, effort: float) -> None:
-        """Generalized force (N*m or N) on a joint for the next step (added to
-        the spring forces)."""
+        """Added to the spring forces of the next step."""
         if self._effort is None:
             self._effort = np.zeros(len(self._joints))
         self._effort[self._index[joint]] += float(effort)
 
     def drive_joint(self, joint: str, velocity: float, max_force: float) -> None:
-        """The passive zero-velocity drive gets velocity target ``velocity``
-        and force limit ``max_force + friction (+ damping * |qdot|)``."""
+        """The passive drive gets target ``velocity``, force limit ``max_force + friction (+ damping * |qdot|)``."""
         i = self._index[joint]
         self._drive[i] = (float(velocity), float(max(max_force, 0.0)))
         self._set_drive(i, abs(float(self.art.get_qvel()[i])))
 
     def release_joint(self, joint: str) -> None:
-        """Back to the passive drive (velocity target 0)."""
         i = self._index[joint]
         self._drive.pop(i, None)
         self._set_drive(i, abs(float(self.art.get_qvel()[i])))
 
     def _set_drive(self, i: int, qd_abs: float) -> None:
-        """Drive i's force limit and velocity target (passive or driven)."""
         v, extra = self._drive.get(i, (0.0, 0.0))
         self._joints[i].set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self._friction[i] + self._damping[i] * qd_abs + extra), "force")
         self._joints[i].set_drive_velocity_target(v)
 
     def set_root_velocity(self, linear, angular) -> None:
-        """Root linear and angular velocity (world frame).
-
-        Raises:
-            EngineUnsupported: fixed base."""
         if self.options.fixed_base:
             raise EngineUnsupported("physx: the root of a fixed-base session cannot be moved")
         self.art.set_root_linear_velocity(np.asarray(linear, np.float32))
@@ -392,8 +290,6 @@ class PhysXSession(SessionDefaults, NoRootHold):
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """The link component's pose: PhysX builds each link in its URDF frame
-        (the child frame of its joint), the center of mass separately."""
         t = self.links[link].get_pose().to_transformation_matrix().astype(float)
         return t[:3, 3].copy(), t[:3, :3].copy()
 
@@ -408,8 +304,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return np.concatenate(out) if out else np.zeros((0, 3))
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of the cooked hull vertices at the current pose (PhysX's own
-        tight box for boxes, spheres and cylinders)."""
+        """Bounds of the cooked hull vertices (PhysX's tight box for primitives)."""
         comp = self.links[link]
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         v = self.link_collision_vertices(link)
@@ -432,17 +327,10 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return {name: float(comp.get_mass()) for name, comp in self.links.items()}
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        """Not available: SAPIEN exposes no closest-point query between the
-        shapes of an articulation (its contacts come only from a step and skip
-        parent-child pairs).
-
-        Raises:
-            EngineUnsupported: always.
-        """
+        """SAPIEN has no closest-point query between an articulation's shapes."""
         raise EngineUnsupported("physx: no closest-point query between links (use pybullet or mujoco)")
 
     def apply_link_force(self, link: str, force, point) -> None:
-        """``add_force_at_point`` (world frame); PhysX clears it after the step."""
         self.links[link].add_force_at_point(np.asarray(force, np.float32), np.asarray(point, np.float32))
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -472,7 +360,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return low
 
     def place_on_ground(self) -> float:
-        """Translate the root so the lowest collision point touches z = 0; returns the shift (m)."""
+        """Lift the root so the lowest collision point touches z = 0; returns the shift (m)."""
         low = self.lowest_point()
         if not math.isfinite(low):
             return 0.0
@@ -482,10 +370,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
 
     # ---------------------------------------------------------------- contact
     def _probe_contacts(self):
-        """Contacts PhysX generates at the current state, without changing it:
-        PhysX reports contacts only from a simulation step, and generates them
-        from the poses at the start of the step, so the state is saved, one
-        step is taken, the contacts read and the state restored."""
+        """Contacts at the current state (PhysX makes them only in a step): one step, then the state restored."""
         state = self._state()
         self.art.set_qf(np.zeros(len(state[3]), np.float32))
         self.scene.step()
@@ -494,10 +379,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return contacts
 
     def _link_name(self, comp) -> str | None:
-        for name, c in self.links.items():
-            if c is comp:
-                return name
-        return None
+        return next((name for name, c in self.links.items() if c is comp), None)
 
     def self_penetration(self) -> tuple[float, list[ContactPair]]:
         return penetration_sum(self._contact_separations())
@@ -511,8 +393,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
                 yield a, b, float(pt.separation)
 
     def ground_penetration(self) -> float:
-        """Deepest point (m) of the cooked collision shapes below z = 0, from
-        the geometry itself (exact for hulls on a plane; no simulation step)."""
+        """Deepest point (m) of the cooked shapes below z = 0, from the geometry (no step)."""
         if self.ground is None:
             return 0.0
         low = self.lowest_point()
@@ -520,9 +401,6 @@ class PhysXSession(SessionDefaults, NoRootHold):
 
     # ------------------------------------------------------------------ state
     def save_state(self) -> int:
-        """Snapshot root pose and velocities, joint positions, velocities and
-        forces, and the pending joint efforts (PhysX keeps no contact cache
-        across ``set_qpos``)."""
         handle = max(self._states, default=0) + 1
         self._states[handle] = self._state()
         return handle
@@ -532,33 +410,23 @@ class PhysXSession(SessionDefaults, NoRootHold):
 
     def _state(self) -> tuple:
         """Root pose, root velocities, joint positions, velocities and forces (float32 copies), pending efforts."""
-        return (
-            self.art.get_root_pose(),
-            np.asarray(self.art.get_root_linear_velocity(), np.float32).copy(),
-            np.asarray(self.art.get_root_angular_velocity(), np.float32).copy(),
-            np.asarray(self.art.get_qpos(), np.float32).copy(),
-            np.asarray(self.art.get_qvel(), np.float32).copy(),
-            np.asarray(self.art.get_qf(), np.float32).copy(),
-            None if self._effort is None else self._effort.copy(),
-        )
+        a = self.art
+        arrays = (a.get_root_linear_velocity, a.get_root_angular_velocity, a.get_qpos, a.get_qvel, a.get_qf)
+        return (a.get_root_pose(), *(np.asarray(get(), np.float32).copy() for get in arrays),
+                None if self._effort is None else self._effort.copy())
 
     def _set_state(self, state: tuple) -> None:
-        """Return to a :meth:`_state`."""
-        pose, lin, ang, qpos, qvel, qf, effort = state
-        self.art.set_root_pose(pose)
-        self.art.set_root_linear_velocity(lin)
-        self.art.set_root_angular_velocity(ang)
-        self.art.set_qpos(qpos)
-        self.art.set_qvel(qvel)
-        self.art.set_qf(qf)
-        self._effort = None if effort is None else effort.copy()
+        a = self.art
+        for put, value in zip((a.set_root_pose, a.set_root_linear_velocity, a.set_root_angular_velocity, a.set_qpos, a.set_qvel, a.set_qf),
+                              state):
+            put(value)
+        self._effort = None if state[6] is None else state[6].copy()
 
     def discard_state(self, handle: int) -> None:
         self._states.pop(handle, None)
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
-        """Advance n steps: before each, :meth:`apply_passive_forces`."""
         springs = bool(np.any(self._stiffness))
         for _ in range(int(n)):
             self.apply_passive_forces()
@@ -573,10 +441,8 @@ class PhysXSession(SessionDefaults, NoRootHold):
             self.scene.step()
 
     def apply_passive_forces(self) -> None:
-        """For the next ``scene.step()``: each joint drive's force limit
-        (friction + damping * |qdot|, N or N*m) and the springs' joint forces
-        ``-k (q - q_ref)`` (PhysX has no joint spring or viscous joint
-        friction of this form; :meth:`step` calls this before every step)."""
+        """For the next ``scene.step()``: each drive's force limit (friction +
+        damping * |qdot|) and the springs' joint forces ``-k (q - q_ref)``."""
         if bool(np.any(self._damping)) or self._drive:
             qd = np.abs(np.asarray(self.art.get_qvel(), float))
             for i, _joint in enumerate(self._joints):
@@ -587,13 +453,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
             self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))
 
     def held_physics(self) -> HeldPhysics:
-        """What PhysX holds: each link's ``get_mass``, ``get_cmass_local_pose``
-        (COM in the link frame) and ``get_inertia`` (principal moments); each
-        joint's ``get_limits``, its drive's force limit at rest (the Coulomb
-        friction, see the module notes), the damping the session adds to
-        that limit (``friction + damping * |qdot|``), the spring the session
-        applies as a joint force and ``get_qpos``. PhysX's own joint friction
-        coefficient (``get_friction``) is reported under ``how`` (0 here)."""
+        """Links and joints from PhysX's getters; friction is the drive's force limit at rest."""
         links = {}
         for name, comp in self.links.items():
             links[name] = HeldLink(mass=float(comp.get_mass()), com=np.array(comp.get_cmass_local_pose().p, float),
@@ -619,8 +479,7 @@ class PhysXSession(SessionDefaults, NoRootHold):
         return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how=how)
 
     def close(self) -> None:
-        """Drop the session's own scene; from a caller's scene, remove what
-        the session added (the articulation, its ground)."""
+        """Drop its own scene; from a caller's, remove what the session added."""
         if getattr(self, "scene", None) is not None:
             if not self._owns_scene:
                 for ent in [*getattr(self, "_entities", []), getattr(self, "_ground_entity", None)]:
@@ -632,8 +491,4 @@ class PhysXSession(SessionDefaults, NoRootHold):
             self.links = {}
 
 
-def _open(urdf_path: Path, options: SessionOptions, scene=None, ground: bool = True) -> PhysXSession:
-    return PhysXSession(urdf_path, options, scene=scene, ground=ground)
-
-
-register_engine("physx", _open)
+register_engine("physx", PhysXSession)

@@ -1,13 +1,6 @@
 """PyBullet (Bullet) engine under the SPEC's conventions; see :mod:`.base`.
-
-Each session owns its own DIRECT-mode physics client, so sessions are
-independent and can live side by side in one process.
-
-Verified behaviour of PyBullet 3.2.7 that this module relies on (see
-``tests/asset2sim/test_engines.py``): ``<dynamics damping>`` from the URDF is
-applied by Bullet as viscous joint damping; every joint starts with a velocity
-motor of non-zero force, which we replace by a zero-target-velocity motor whose
-force is ``<dynamics friction>`` (Coulomb friction, SPEC).
+Coulomb friction is a zero-target-velocity motor of force ``<dynamics friction>``;
+Bullet applies ``<dynamics damping>`` itself.
 """
 
 from __future__ import annotations
@@ -16,20 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (
-    ContactPair,
-    EngineUnsupported,
-    HeldJoint,
-    HeldLink,
-    HeldPhysics,
-    SessionOptions,
-    penetration_sum,
-    register_engine,
-    register_shape_world,
-    register_viewer,
-)
+from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
+                                    penetration_sum, register_engine, register_shape_world, register_viewer)
 from asset2sim.engines.quiet import quiet_fds, quiet_stdout, startup_quiet
-from asset2sim.engines.session_defaults import SessionDefaults
 
 _TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
 
@@ -39,6 +21,20 @@ def _bullet():
         import pybullet
 
     return pybullet
+
+
+def _joint_infos(p, body: int, cid: int) -> list:
+    return [p.getJointInfo(body, j, physicsClientId=cid) for j in range(p.getNumJoints(body, physicsClientId=cid))]
+
+
+def _link_frame(p, body: int, idx: int, cid: int) -> tuple[np.ndarray, np.ndarray]:
+    """World position (3,) and rotation (3, 3) of link ``idx`` (-1: the base)."""
+    if idx < 0:
+        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=cid)
+    else:
+        st = p.getLinkState(body, idx, computeForwardKinematics=True, physicsClientId=cid)
+        pos, orn = st[4], st[5]
+    return np.array(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
 
 
 class PyBulletSession(SessionDefaults):
@@ -69,22 +65,11 @@ class PyBulletSession(SessionDefaults):
             self.plane = None
             if options.ground and ground:
                 self.plane = self._add_plane()
-            flags = (
-                p.URDF_USE_SELF_COLLISION
-                | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
-                | p.URDF_USE_INERTIA_FROM_FILE
-                # visual meshes take no part in the dynamics and this session
-                # never draws (PybulletRenderer does): not loading them saves
-                # most of loadURDF (laptop 9912: 0.24-0.33 s -> 0.09-0.13 s)
-                | p.URDF_IGNORE_VISUAL_SHAPES
-            )
+            # visual shapes are never drawn here: not loading them saves most of loadURDF
+            flags = (p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | p.URDF_USE_INERTIA_FROM_FILE
+                     | p.URDF_IGNORE_VISUAL_SHAPES)
             with quiet_stdout():
-                self.body = p.loadURDF(
-                    str(urdf_path),
-                    useFixedBase=options.fixed_base,
-                    flags=flags,
-                    physicsClientId=self.cid,
-                )
+                self.body = p.loadURDF(str(urdf_path), useFixedBase=options.fixed_base, flags=flags, physicsClientId=self.cid)
         except Exception as exc:
             self._release()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
@@ -97,8 +82,7 @@ class PyBulletSession(SessionDefaults):
         self.joint_types: dict[str, str] = {}
         self.joint_limits: dict[str, tuple[float, float]] = {}
         self.joint_child: dict[str, str] = {}
-        for j in range(p.getNumJoints(self.body, physicsClientId=self.cid)):
-            info = p.getJointInfo(self.body, j, physicsClientId=self.cid)
+        for j, info in enumerate(_joint_infos(p, self.body, self.cid)):
             name = info[1].decode()
             self._link_by_index[j] = info[12].decode()
             jtype = _TYPES.get(info[2], "other")
@@ -113,15 +97,7 @@ class PyBulletSession(SessionDefaults):
             self.joint_limits[name] = (lo, hi)
             self.joint_child[name] = info[12].decode()
             self._friction[name] = float(info[7])
-            # Coulomb friction: zero-target-velocity motor with max force = <dynamics friction>.
-            p.setJointMotorControl2(
-                self.body,
-                j,
-                p.VELOCITY_CONTROL,
-                targetVelocity=0.0,
-                force=float(info[7]),
-                physicsClientId=self.cid,
-            )
+            self._motor(name, 0.0, float(info[7]))  # Coulomb friction
         self.link_names: list[str] = list(self._link_by_index.values())
         self._link_index = {name: idx for idx, name in reversed(list(self._link_by_index.items()))}
         self.set_joint_positions(options.initial_state)
@@ -137,7 +113,6 @@ class PyBulletSession(SessionDefaults):
                 self.place_on_ground()
 
     def _add_plane(self) -> int:
-        """A static plane at z = 0 (body id)."""
         p = self._p
         shape = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.cid)
         return p.createMultiBody(0, shape, physicsClientId=self.cid)
@@ -152,19 +127,18 @@ class PyBulletSession(SessionDefaults):
             vel = 0.0 if zero_velocity else p.getJointState(self.body, j, physicsClientId=self.cid)[1]
             p.resetJointState(self.body, j, float(value), vel, physicsClientId=self.cid)
 
-    def joint_positions(self) -> dict[str, float]:
-        p = self._p
+    def _joint_field(self, k: int) -> dict[str, float]:
+        """Field ``k`` (0 position, 1 velocity) of every movable joint's state."""
         if not self._index:
             return {}
-        states = p.getJointStates(self.body, list(self._index.values()), physicsClientId=self.cid)
-        return {name: float(s[0]) for name, s in zip(self._index, states)}
+        states = self._p.getJointStates(self.body, list(self._index.values()), physicsClientId=self.cid)
+        return {name: float(s[k]) for name, s in zip(self._index, states)}
+
+    def joint_positions(self) -> dict[str, float]:
+        return self._joint_field(0)
 
     def joint_velocities(self) -> dict[str, float]:
-        p = self._p
-        if not self._index:
-            return {}
-        states = p.getJointStates(self.body, list(self._index.values()), physicsClientId=self.cid)
-        return {name: float(s[1]) for name, s in zip(self._index, states)}
+        return self._joint_field(1)
 
     def joint_state(self, joint: str) -> tuple[float, float]:
         s = self._p.getJointState(self.body, self._index[joint], physicsClientId=self.cid)
@@ -181,15 +155,7 @@ class PyBulletSession(SessionDefaults):
 
     # ------------------------------------------------------------------ links
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        p = self._p
-        idx = self.link_index(link)
-        if idx < 0:
-            pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
-        else:
-            st = p.getLinkState(self.body, idx, computeForwardKinematics=True, physicsClientId=self.cid)
-            pos, orn = st[4], st[5]
-        R = np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
-        return np.array(pos, float), R
+        return _link_frame(self._p, self.body, self.link_index(link), self.cid)
 
     def link_aabb(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self._p.getAABB(self.body, self.link_index(link), physicsClientId=self.cid)
@@ -202,8 +168,7 @@ class PyBulletSession(SessionDefaults):
         return self._has_collision[idx]
 
     def link_collision_vertices(self, link: str) -> np.ndarray:
-        """Vertices (k, 3) m of the link's collision mesh, link frame
-        (``getMeshData``; empty when Bullet returns none)."""
+        """``getMeshData`` of the link, link frame (empty when Bullet returns none)."""
         try:
             n, verts = self._p.getMeshData(self.body, self.link_index(link), physicsClientId=self.cid)
         except Exception:
@@ -214,27 +179,17 @@ class PyBulletSession(SessionDefaults):
 
     def link_masses(self) -> dict[str, float]:
         p = self._p
-        return {
-            name: float(p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)[0])
-            for idx, name in self._link_by_index.items()
-        }
+        return {name: float(p.getDynamicsInfo(self.body, idx, physicsClientId=self.cid)[0]) for idx, name in self._link_by_index.items()}
 
     def link_distances(self, link_a: str, link_b: str, max_distance: float = 0.0) -> list[float]:
-        pts = self._p.getClosestPoints(
-            self.body, self.body, max_distance, self.link_index(link_a), self.link_index(link_b), physicsClientId=self.cid
-        )
+        pts = self._p.getClosestPoints(self.body, self.body, max_distance, self.link_index(link_a), self.link_index(link_b),
+                                       physicsClientId=self.cid)
         return [pt[8] for pt in pts]
 
     def apply_link_force(self, link: str, force, point) -> None:
         p = self._p
-        p.applyExternalForce(
-            self.body,
-            self.link_index(link),
-            np.asarray(force, float).tolist(),
-            np.asarray(point, float).tolist(),
-            p.WORLD_FRAME,
-            physicsClientId=self.cid,
-        )
+        p.applyExternalForce(self.body, self.link_index(link), np.asarray(force, float).tolist(), np.asarray(point, float).tolist(),
+                             p.WORLD_FRAME, physicsClientId=self.cid)
 
     def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
         pos, orn = self._p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
@@ -245,19 +200,14 @@ class PyBulletSession(SessionDefaults):
         self._p.resetBaseVelocity(self.body, [0, 0, 0], [0, 0, 0], physicsClientId=self.cid)
 
     def place_on_ground(self) -> float:
-        """Translate the root so the lowest collision point touches z = 0.
-
-        Returns the vertical shift applied (m).
-        """
+        """Translate the root so the lowest collision point touches z = 0;
+        returns the vertical shift (m): by the AABBs, then refined by the closest
+        points to the plane (Bullet's AABBs of rotated hulls are loose)."""
         p = self._p
-        lo = min(
-            p.getAABB(self.body, link, physicsClientId=self.cid)[0][2] for link in self._link_by_index
-        )
+        lo = min(p.getAABB(self.body, link, physicsClientId=self.cid)[0][2] for link in self._link_by_index)
         pos, orn = self.root_pose()
         shift = -lo
         self.set_root_pose(pos + np.array([0.0, 0.0, shift]), orn)
-        # Refine with exact signed distances to the plane: Bullet's AABBs of
-        # rotated hulls are loose (up to tens of cm above the true lowest point).
         if self.plane is not None:
             p.performCollisionDetection(physicsClientId=self.cid)
             hi = max(p.getAABB(self.body, link, physicsClientId=self.cid)[1][2] for link in self._link_by_index)
@@ -276,51 +226,37 @@ class PyBulletSession(SessionDefaults):
         return self._penetration_of(p.getContactPoints(self.body, self.body, physicsClientId=self.cid))
 
     def _penetration_of(self, points) -> tuple[float, list[ContactPair]]:
-        """Phi (m) and per-pair sums of Bullet contact/closest points (fields 3/4:
-        link indices, 8: signed distance)."""
+        """Phi of Bullet contact/closest points (fields 3/4: link indices, 8: signed distance)."""
         names = self._link_by_index
         return penetration_sum((names[pt[3]], names[pt[4]], pt[8]) for pt in points)
 
     def self_penetration_fresh(self) -> tuple[float, list[ContactPair]]:
-        """Phi (m) like :meth:`self_penetration`, but from ``getClosestPoints``
-        per link pair (parent-child pairs excluded, as the SPEC's flags do), so
-        the value cannot depend on contact points Bullet cached at earlier
-        states of the same session (its persistent manifolds do). Equal to
-        :meth:`self_penetration` in a fresh session; used by searches that
-        query many states in one session."""
+        """Phi (m) like :meth:`self_penetration`, from ``getClosestPoints`` per
+        non-adjacent link pair, so it cannot depend on contacts Bullet cached
+        at earlier states of the session."""
         p = self._p
         cache = self.__dict__.setdefault("_pairs_cache", None)
         if cache is None:
             with_shape = [i for i in self._link_by_index if p.getCollisionShapeData(self.body, i, physicsClientId=self.cid)]
-            parent = {j: p.getJointInfo(self.body, j, physicsClientId=self.cid)[16] for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))}
-            cache = [
-                (a, b)
-                for a in with_shape
-                for b in with_shape
-                if a < b and parent.get(b) != a and parent.get(a) != b
-            ]
+            parent = {j: info[16] for j, info in enumerate(_joint_infos(p, self.body, self.cid))}
+            cache = [(a, b) for a in with_shape for b in with_shape if a < b and parent.get(b) != a and parent.get(a) != b]
             self._pairs_cache = cache
         points = []
         for a, b in cache:
             points.extend(p.getClosestPoints(self.body, self.body, 0.0, a, b, physicsClientId=self.cid))
         return self._penetration_of(points)
 
-    def ground_penetration(self) -> float:
+    def ground_penetration(self, detect: bool = True) -> float:
         if self.plane is None:
             return 0.0
-        p = self._p
-        p.performCollisionDetection(physicsClientId=self.cid)
-        pts = p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
+        if detect:
+            self._p.performCollisionDetection(physicsClientId=self.cid)
+        pts = self._p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
         return float(max([0.0] + [-pt[8] for pt in pts]))
 
     def step_ground_penetration(self) -> float:
-        """Deepest ground penetration (m) among the contact points the last
-        step left (no ``performCollisionDetection``: it would refresh Bullet's
-        manifolds and change the following steps)."""
-        if self.plane is None:
-            return 0.0
-        pts = self._p.getContactPoints(self.body, self.plane, physicsClientId=self.cid)
-        return float(max([0.0] + [-pt[8] for pt in pts]))
+        """The last step's contacts (a new detection would refresh Bullet's manifolds)."""
+        return self.ground_penetration(detect=False)
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
@@ -329,9 +265,7 @@ class PyBulletSession(SessionDefaults):
             self._p.stepSimulation(physicsClientId=self.cid)
 
     def apply_passive_forces(self) -> None:
-        """Each joint spring's torque (N*m) or force (N), ``-k (q - q_ref)``
-        at the current position, for the next ``stepSimulation`` (Bullet has
-        no joint spring; :meth:`step` calls this before every step)."""
+        """Each joint spring's torque ``-k (q - q_ref)`` for the next ``stepSimulation``."""
         p = self._p
         springs = self.options.springs
         if not springs:
@@ -345,30 +279,21 @@ class PyBulletSession(SessionDefaults):
             p.setJointMotorControl2(self.body, j, p.TORQUE_CONTROL, force=tau, physicsClientId=self.cid)
 
     def apply_joint_effort(self, name: str, effort: float) -> None:
-        """Apply a generalized force (N*m or N) to a joint for the next step."""
-        self._p.setJointMotorControl2(
-            self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort), physicsClientId=self.cid
-        )
+        self._p.setJointMotorControl2(self.body, self._index[name], self._p.TORQUE_CONTROL, force=float(effort), physicsClientId=self.cid)
+
+    def _motor(self, name: str, velocity: float, force: float) -> None:
+        self._p.setJointMotorControl2(self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=velocity, force=force,
+                                      physicsClientId=self.cid)
 
     def drive_joint(self, name: str, velocity: float, max_force: float) -> None:
-        """The joint's velocity motor (the passive friction motor) gets target
-        ``velocity`` and maximum force ``max_force + <dynamics friction>``."""
-        self._p.setJointMotorControl2(
-            self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=float(velocity),
-            force=float(max(max_force, 0.0) + self._friction[name]), physicsClientId=self.cid,
-        )
+        """The passive friction motor gets target ``velocity`` and force ``max_force + friction``."""
+        self._motor(name, float(velocity), float(max(max_force, 0.0) + self._friction[name]))
 
     def release_joint(self, name: str) -> None:
-        """Back to the passive zero-target-velocity friction motor."""
-        self._p.setJointMotorControl2(
-            self.body, self._index[name], self._p.VELOCITY_CONTROL, targetVelocity=0.0,
-            force=self._friction[name], physicsClientId=self.cid,
-        )
+        self._motor(name, 0.0, self._friction[name])
 
     def hold_root(self, max_force: float) -> None:
-        """``createConstraint(JOINT_FIXED)`` from the root to the world at the
-        root's current pose, ``changeConstraint(maxForce=max_force)``
-        (Bullet bounds every row of the constraint by it)."""
+        """A ``JOINT_FIXED`` constraint to the world at the current pose, every row bounded by ``max_force``."""
         if self.options.fixed_base:
             return
         self.release_root()
@@ -379,22 +304,16 @@ class PyBulletSession(SessionDefaults):
         p.changeConstraint(self._root_hold, maxForce=float(max(max_force, 0.0)), physicsClientId=self.cid)
 
     def release_root(self) -> None:
-        """``removeConstraint`` of :meth:`hold_root`'s constraint."""
         if self._root_hold is not None:
             self._p.removeConstraint(self._root_hold, physicsClientId=self.cid)
             self._root_hold = None
 
     def set_root_velocity(self, linear, angular) -> None:
-        """``resetBaseVelocity`` (world frame).
-
-        Raises:
-            EngineUnsupported: fixed base."""
         if self.options.fixed_base:
             raise EngineUnsupported("pybullet: the root of a fixed-base session cannot be moved")
         self._p.resetBaseVelocity(self.body, [float(v) for v in linear], [float(v) for v in angular], physicsClientId=self.cid)
 
     def save_state(self) -> int:
-        """``saveState``: Bullet's in-memory snapshot (contact manifolds included)."""
         return self._p.saveState(physicsClientId=self.cid)
 
     def restore_state(self, handle: int) -> None:
@@ -404,23 +323,13 @@ class PyBulletSession(SessionDefaults):
         self._p.removeState(handle, physicsClientId=self.cid)
 
     def link_index(self, link_name: str) -> int:
-        """Bullet's link index (-1 for the root) of a link name.
-
-        Raises:
-            KeyError: unknown link.
-        """
+        """Bullet's link index (-1 for the root) of a link (KeyError: unknown link)."""
         try:
             return self._link_index[link_name]
         except KeyError:
             raise KeyError(link_name) from None
 
     def held_physics(self) -> HeldPhysics:
-        """What Bullet holds: ``getDynamicsInfo`` (mass, local inertia
-        diagonal = principal moments, local inertial position = COM in the
-        link frame) and ``getJointInfo`` (limits, ``jointDamping``,
-        ``jointFriction``, which the session's friction motor uses as its
-        force); springs are the session's (Bullet has none; applied as a
-        torque each step); positions ``getJointState``."""
         p = self._p
         links = {}
         for idx, name in self._link_by_index.items():
@@ -441,8 +350,7 @@ class PyBulletSession(SessionDefaults):
         return HeldPhysics(engine=self.engine, source="urdf", links=links, joints=joints, how=how, welded_to_world=welded)
 
     def close(self) -> None:
-        """Disconnect the session's own client; in a caller's client, remove
-        what the session added (the body, its plane, the root hold)."""
+        """Disconnect its own client; in a caller's, remove what the session added."""
         if self.cid is not None:
             try:
                 self._release()
@@ -468,13 +376,10 @@ class PyBulletSession(SessionDefaults):
 
 
 class PyBulletShapeWorld:
-    """A :class:`~asset2sim.engines.base.ShapeWorld`: static convex mesh
-    bodies in a private DIRECT-mode client (no gravity, no stepping)."""
+    """A :class:`~asset2sim.engines.base.ShapeWorld`: static convex mesh bodies in a private DIRECT client."""
 
     engine = "pybullet"
-    #: Two touching convex mesh shapes report -2 mm: Bullet's default
-    #: collision margin of a convex hull, 1 mm, on each (measured: two unit
-    #: hulls 0, 0.5, 1, 2, 3 mm apart report -2, -1.5, -1, 0, 1 mm).
+    #: Bullet's default convex hull collision margin, 1 mm, on each of two touching shapes.
     contact_margin = 0.002
 
     def __init__(self):
@@ -484,19 +389,14 @@ class PyBulletShapeWorld:
 
     def add_convex(self, vertices, scale, position, orientation) -> int:
         p = self._p
-        shape = p.createCollisionShape(
-            p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
-            meshScale=np.asarray(scale, float).tolist(), physicsClientId=self.cid,
-        )
-        return p.createMultiBody(
-            0, shape, basePosition=np.asarray(position, float).tolist(),
-            baseOrientation=np.asarray(orientation, float).tolist(), physicsClientId=self.cid,
-        )
+        shape = p.createCollisionShape(p.GEOM_MESH, vertices=np.asarray(vertices, float).tolist(),
+                                       meshScale=np.asarray(scale, float).tolist(), physicsClientId=self.cid)
+        return p.createMultiBody(0, shape, basePosition=np.asarray(position, float).tolist(),
+                                 baseOrientation=np.asarray(orientation, float).tolist(), physicsClientId=self.cid)
 
     def set_pose(self, shape: int, position, orientation) -> None:
-        self._p.resetBasePositionAndOrientation(
-            shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist(), physicsClientId=self.cid
-        )
+        self._p.resetBasePositionAndOrientation(shape, np.asarray(position, float).tolist(), np.asarray(orientation, float).tolist(),
+                                                physicsClientId=self.cid)
 
     def distances(self, shape_a: int, shape_b: int, max_distance: float = 0.0) -> list[float]:
         return [pt[8] for pt in self._p.getClosestPoints(shape_a, shape_b, max_distance, physicsClientId=self.cid)]
@@ -508,41 +408,28 @@ class PyBulletShapeWorld:
 
 
 class PyBulletViewer:
-    """A :class:`~asset2sim.engines.base.Viewer`: the URDF loaded with a fixed
-    base and MTL colours into a private DIRECT-mode client, drawn by Bullet's
-    TinyRenderer on the CPU.
-
-    Raises (constructor):
-        RuntimeError: Bullet could not load the file.
-    """
+    """A :class:`~asset2sim.engines.base.Viewer`: the URDF (fixed base, MTL
+    colours) in a private DIRECT client, drawn by TinyRenderer on the CPU
+    (RuntimeError: Bullet could not load the file)."""
 
     engine = "pybullet"
 
     def __init__(self, urdf_path: Path):
-        with quiet_fds():  # the import prints PyBullet's build time
-            p = _bullet()
-        self._p = p
         self.cid = None
-        with quiet_fds():
-            cid = p.connect(p.DIRECT)
-        self.cid = cid
+        with quiet_fds():  # the import prints PyBullet's build time
+            self._p = p = _bullet()
+            self.cid = cid = p.connect(p.DIRECT)
         try:
             with quiet_fds():
-                self.body = p.loadURDF(
-                    str(urdf_path),
-                    basePosition=[0, 0, 0],
-                    useFixedBase=True,
-                    flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
-                    physicsClientId=cid,
-                )
+                self.body = p.loadURDF(str(urdf_path), basePosition=[0, 0, 0], useFixedBase=True, flags=p.URDF_USE_MATERIAL_COLORS_FROM_MTL,
+                                       physicsClientId=cid)
         except Exception as exc:
             self.close()
             raise RuntimeError(f"PyBullet could not load {urdf_path}: {exc}") from exc
         self._links: dict[int, str] = {-1: p.getBodyInfo(self.body, physicsClientId=cid)[0].decode()}
         self._joints: dict[str, int] = {}
         self.joint_names: list[str] = []
-        for j in range(p.getNumJoints(self.body, physicsClientId=cid)):
-            info = p.getJointInfo(self.body, j, physicsClientId=cid)
+        for j, info in enumerate(_joint_infos(p, self.body, cid)):
             self._links[j] = info[12].decode()
             name = info[1].decode()
             self._joints[name] = j
@@ -552,8 +439,6 @@ class PyBulletViewer:
         self._index = {name: idx for idx, name in reversed(list(self._links.items()))}
 
     def visual_colors(self) -> list[tuple[str, int, tuple[float, float, float, float]]]:
-        """(link, shape index within the link, rgba) of every visual shape,
-        in ``getVisualShapeData`` order."""
         out = []
         counts: dict[int, int] = {}
         for row in self._p.getVisualShapeData(self.body, physicsClientId=self.cid):
@@ -571,37 +456,16 @@ class PyBulletViewer:
             self._p.resetJointState(self.body, self._joints[name], float(value), 0.0, physicsClientId=self.cid)
 
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
-        p = self._p
-        idx = self._index[link]
-        if idx == -1:
-            pos, orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.cid)
-        else:
-            st = p.getLinkState(self.body, idx, computeForwardKinematics=True, physicsClientId=self.cid)
-            pos, orn = st[4], st[5]
-        return np.asarray(pos, float), np.array(p.getMatrixFromQuaternion(orn), float).reshape(3, 3)
+        return _link_frame(self._p, self.body, self._index[link], self.cid)
 
     def draw(self, width: int, height: int, camera: dict, light: dict) -> tuple[np.ndarray, np.ndarray]:
         p = self._p
-        view = p.computeViewMatrix(
-            np.asarray(camera["eye"], float).tolist(), np.asarray(camera["target"], float).tolist(),
-            np.asarray(camera["up"], float).tolist(), physicsClientId=self.cid,
-        )
+        view = p.computeViewMatrix(*(np.asarray(camera[k], float).tolist() for k in ("eye", "target", "up")), physicsClientId=self.cid)
         proj = p.computeProjectionMatrixFOV(camera["fov_deg"], width / height, camera["near"], camera["far"], physicsClientId=self.cid)
-        res = p.getCameraImage(
-            width,
-            height,
-            view,
-            proj,
-            lightDirection=np.asarray(light["direction"], float).tolist(),
-            lightColor=list(light["color"]),
-            lightDistance=light["distance"],
-            shadow=int(light["shadow"]),
-            lightAmbientCoeff=light["ambient"],
-            lightDiffuseCoeff=light["diffuse"],
-            lightSpecularCoeff=light["specular"],
-            renderer=p.ER_TINY_RENDERER,
-            physicsClientId=self.cid,
-        )
+        res = p.getCameraImage(width, height, view, proj, lightDirection=np.asarray(light["direction"], float).tolist(),
+                               lightColor=list(light["color"]), lightDistance=light["distance"], shadow=int(light["shadow"]),
+                               lightAmbientCoeff=light["ambient"], lightDiffuseCoeff=light["diffuse"],
+                               lightSpecularCoeff=light["specular"], renderer=p.ER_TINY_RENDERER, physicsClientId=self.cid)
         if res is None or len(res) < 5:
             raise RuntimeError("PyBullet returned no image")
         rgba = np.asarray(res[2], dtype=np.uint8).reshape(height, width, 4)
@@ -623,10 +487,6 @@ class PyBulletViewer:
             pass
 
 
-def _open(urdf_path: Path, options: SessionOptions, client: int | None = None, ground: bool = True) -> PyBulletSession:
-    return PyBulletSession(urdf_path, options, client, ground)
-
-
-register_engine("pybullet", _open)
+register_engine("pybullet", PyBulletSession)
 register_shape_world("pybullet", PyBulletShapeWorld)
 register_viewer("pybullet", PyBulletViewer)

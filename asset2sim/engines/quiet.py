@@ -1,6 +1,5 @@
-"""Quiet simulators: C-level prints and import-time warnings kept out of
-the product's output (the library never prints; ``asset2sim --verbose``
-shows the start-up messages)."""
+"""Quiet simulators: C-level prints and import-time warnings kept out of the
+product's output (``asset2sim --verbose`` shows the start-up messages)."""
 
 from __future__ import annotations
 
@@ -9,24 +8,18 @@ import sys
 import threading
 from contextlib import contextmanager
 
-#: Serializes the swaps of the process-wide file descriptors between threads
-#: (re-entrant: nested use in one thread is fine).
+#: Serializes the swaps of the process-wide file descriptors between threads (re-entrant).
 _LOCK = threading.RLock()
-
-
-#: Environment variable: "1" shows the simulators' start-up messages
-#: (``asset2sim --verbose``); otherwise :func:`startup_quiet` hides them.
+#: Environment variable: "1" shows the simulators' start-up messages (``asset2sim --verbose``).
 STARTUP_MESSAGES = "ASSET2SIM_STARTUP_MESSAGES"
-#: Start of the import-time warnings :func:`startup_quiet` hides: SAPIEN's
-#: renderer probe (asset2sim never renders with SAPIEN).
+#: Start of the import-time warnings :func:`startup_quiet` hides (SAPIEN's renderer probe).
 STARTUP_WARNINGS = ("Failed to find system libvulkan",)
 
 
 @contextmanager
 def startup_quiet():
-    """Hide a simulator's import-time messages (PyBullet's build-time line on
-    fd 2, the warnings of :data:`STARTUP_WARNINGS`) unless
-    :data:`STARTUP_MESSAGES` is "1"."""
+    """Hide a simulator's import-time messages on fd 1 and 2 and the warnings
+    of :data:`STARTUP_WARNINGS` unless :data:`STARTUP_MESSAGES` is "1"."""
     import warnings
 
     if os.environ.get(STARTUP_MESSAGES) == "1":
@@ -38,57 +31,44 @@ def startup_quiet():
         yield
 
 
-@contextmanager
 def quiet_stdout():
-    """Silence C-level prints of engines and renderers (Bullet's b3Warning ...)
-    on file descriptor 1 while the block runs: the library never prints.
-
-    Process-wide (file descriptors): threads take turns; nested use in one
-    thread is fine."""
-    with _quiet_fds((1,)):
-        yield
+    """Silence C-level prints (Bullet's b3Warning ...) on fd 1 while the block
+    runs; process-wide: threads take turns, nesting is fine."""
+    return _quiet_fds((1,))
 
 
-@contextmanager
 def quiet_fds():
-    """Silence C-level prints on fd 1 and 2 (Bullet's b3Warning ...) while the block runs."""
-    with _quiet_fds((1, 2)):
-        yield
+    """Silence C-level prints on fd 1 and 2 while the block runs."""
+    return _quiet_fds((1, 2))
 
 
 @contextmanager
 def _quiet_fds(fds: tuple[int, ...]):
-    """File descriptors ``fds`` sent to /dev/null while the block runs (the
-    C library's and Python's buffers flushed on both sides)."""
+    """File descriptors ``fds`` sent to /dev/null while the block runs (C and Python buffers flushed on both sides)."""
     with _LOCK:
-        yield from _swapped(fds)
-
-
-def _swapped(fds: tuple[int, ...]):
-    """The swap itself (a generator for :func:`_quiet_fds`)."""
-    saved = []
-    for stream in (sys.stdout, sys.stderr):
+        saved = []
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, OSError, ValueError):  # no stream, closed
+                pass
+        for fd in fds:
+            try:
+                saved.append((fd, os.dup(fd)))
+            except OSError:  # no such descriptor
+                pass
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        _flush_c_stdout()  # what C code buffered before the block goes out
         try:
-            stream.flush()
-        except (AttributeError, OSError, ValueError):  # no stream, closed
-            pass
-    for fd in fds:
-        try:
-            saved.append((fd, os.dup(fd)))
-        except OSError:  # no such descriptor
-            pass
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    _flush_c_stdout()  # what C code buffered before the block goes out
-    try:
-        for fd, _ in saved:
-            os.dup2(devnull, fd)
-        yield
-    finally:
-        _flush_c_stdout()  # what it buffered inside (a pipe's stdout is block-buffered) goes to /dev/null
-        for fd, dup in saved:
-            os.dup2(dup, fd)
-            os.close(dup)
-        os.close(devnull)
+            for fd, _ in saved:
+                os.dup2(devnull, fd)
+            yield
+        finally:
+            _flush_c_stdout()  # what it buffered inside (a pipe's stdout is block-buffered) goes to /dev/null
+            for fd, dup in saved:
+                os.dup2(dup, fd)
+                os.close(dup)
+            os.close(devnull)
 
 
 def _flush_c_stdout() -> None:

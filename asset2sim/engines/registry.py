@@ -1,9 +1,5 @@
-"""Which engines exist and how one is opened: the engine modules
-(``pybullet_engine``, ``physx_engine``, ``mujoco_engine``, ``newton_engine``,
-``fake``) are imported on first use, each registering its factories with
-:mod:`asset2sim.engines.base` (which holds the protocols and the
-registries), so an engine whose package is not installed costs nothing
-until asked for. Stages open sessions, shape worlds and viewers here.
+"""Which engines exist and how one is opened: each engine module is imported
+on first use and registers its factories with :mod:`asset2sim.engines.base`.
 """
 
 from __future__ import annotations
@@ -11,48 +7,26 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from asset2sim.engines.base import (
-    _ENGINES,
-    _FILE_READERS,
-    _SHAPE_WORLDS,
-    _VIEWERS,
-    EngineFactory,
-    EngineUnavailable,
-    EngineUnsupported,
-    HeldPhysics,
-    SessionOptions,
-    ShapeWorld,
-    SimSession,
-    Viewer,
-)
+from asset2sim.engines.base import (_ENGINES, _FILE_READERS, _SHAPE_WORLDS, _VIEWERS, EngineFactory, EngineUnavailable, EngineUnsupported,
+                                    HeldPhysics, SessionOptions, ShapeWorld, SimSession, Viewer)
 from asset2sim.engines.quiet import startup_quiet
 
 __all__ = ["available_engines", "known_engines", "open_session", "open_shape_world", "open_viewer", "read_held_physics"]
 
-_LAZY: dict[str, str] = {
-    "pybullet": "asset2sim.engines.pybullet_engine",
-    "physx": "asset2sim.engines.physx_engine",
-    "mujoco": "asset2sim.engines.mujoco_engine",
-    "newton": "asset2sim.engines.newton_engine",
-    "fake": "asset2sim.engines.fake",
-}
-#: The third-party packages each engine module needs (its optional extra):
-#: when one does not import, the engine is unavailable; the project's own
-#: module is then imported unguarded, so an error in it is never mistaken
-#: for a missing extra.
-_REQUIRES: dict[str, tuple[str, ...]] = {
-    "pybullet": ("pybullet",),
-    "physx": ("sapien",),
-    "mujoco": ("mujoco",),
-    "newton": ("newton", "warp", "scipy"),
-    "fake": (),
+#: Engine -> (its module, the third-party packages it needs: its optional extra); the module itself is
+#: imported unguarded, so its errors are never mistaken for a missing extra.
+_LAZY: dict[str, tuple[str, tuple[str, ...]]] = {
+    "pybullet": ("asset2sim.engines.pybullet_engine", ("pybullet",)),
+    "physx": ("asset2sim.engines.physx_engine", ("sapien",)),
+    "mujoco": ("asset2sim.engines.mujoco_engine", ("mujoco",)),
+    "newton": ("asset2sim.engines.newton_engine", ("newton", "warp", "scipy")),
+    "fake": ("asset2sim.engines.fake", ()),
 }
 
 
 def read_held_physics(engine: str, fmt: str, path: Path | str, links: list[str], joints: list[str]) -> HeldPhysics:
     """Load ``path`` (format ``fmt``) with ``engine``'s own importer and read
-    back every link's and joint's physics (:class:`HeldPhysics`), by the URDF
-    names ``links`` and ``joints``.
+    back its physics (:class:`HeldPhysics`) by the URDF names ``links`` and ``joints``.
 
     Raises:
         KeyError: unknown engine name.
@@ -60,10 +34,15 @@ def read_held_physics(engine: str, fmt: str, path: Path | str, links: list[str],
         EngineUnsupported: the engine has no reader for ``fmt``.
         Exception: whatever the engine raises when the file does not load.
     """
+    return _lookup(engine, _FILE_READERS, (engine, fmt), f"has no {fmt} reader")(Path(path), list(links), list(joints))
+
+
+def _lookup(engine: str, table: dict, key, missing: str):
+    """``table[key]`` once ``engine`` is loaded (EngineUnsupported ``engine ... missing`` without it)."""
     _factory(engine)
-    if (engine, fmt) not in _FILE_READERS:
-        raise EngineUnsupported(f"engine {engine!r} has no {fmt} reader")
-    return _FILE_READERS[(engine, fmt)](Path(path), list(links), list(joints))
+    if key not in table:
+        raise EngineUnsupported(f"engine {engine!r} {missing}")
+    return table[key]
 
 
 def known_engines() -> list[str]:
@@ -74,7 +53,7 @@ def known_engines() -> list[str]:
 def available_engines() -> list[str]:
     """Names of engines that can be opened here (their packages import)."""
     out = []
-    for name in sorted(set(_ENGINES) | set(_LAZY)):
+    for name in known_engines():
         try:
             _factory(name)
         except EngineUnavailable:
@@ -85,10 +64,10 @@ def available_engines() -> list[str]:
 
 def _factory(name: str) -> EngineFactory:
     if name not in _ENGINES:
-        module = _LAZY.get(name)
-        if module is None:
-            raise KeyError(f"unknown engine {name!r}; known: {sorted(set(_ENGINES) | set(_LAZY))}")
-        for package in _REQUIRES.get(name, ()):
+        if name not in _LAZY:
+            raise KeyError(f"unknown engine {name!r}; known: {known_engines()}")
+        module, packages = _LAZY[name]
+        for package in packages:
             try:
                 with startup_quiet():
                     importlib.import_module(package)
@@ -99,10 +78,8 @@ def _factory(name: str) -> EngineFactory:
 
 
 def open_session(engine: str, urdf_path: Path | str, options: SessionOptions | None = None, **attach) -> SimSession:
-    """Open a :class:`SimSession` of ``urdf_path`` in ``engine``.
-
-    ``attach``: the caller's world to load into instead of a new one the
-    session owns (PyBullet: ``client`` id and ``ground``; PhysX: ``scene``).
+    """Open a :class:`SimSession` of ``urdf_path`` in ``engine``; ``attach``: the
+    caller's world to load into (PyBullet: ``client`` and ``ground``; PhysX: ``scene``).
 
     Raises:
         KeyError: unknown engine name.
@@ -121,10 +98,7 @@ def open_shape_world(engine: str = "pybullet") -> ShapeWorld:
         EngineUnavailable: the engine's package is not installed.
         EngineUnsupported: the engine has no shape world.
     """
-    _factory(engine)
-    if engine not in _SHAPE_WORLDS:
-        raise EngineUnsupported(f"engine {engine!r} has no free-shape collision world")
-    return _SHAPE_WORLDS[engine]()
+    return _lookup(engine, _SHAPE_WORLDS, engine, "has no free-shape collision world")()
 
 
 def open_viewer(engine: str, urdf_path: Path | str) -> Viewer:
@@ -136,7 +110,4 @@ def open_viewer(engine: str, urdf_path: Path | str) -> Viewer:
         EngineUnsupported: the engine cannot draw images.
         RuntimeError: the engine could not load the file.
     """
-    _factory(engine)
-    if engine not in _VIEWERS:
-        raise EngineUnsupported(f"engine {engine!r} cannot draw images")
-    return _VIEWERS[engine](Path(urdf_path))
+    return _lookup(engine, _VIEWERS, engine, "cannot draw images")(Path(urdf_path))

@@ -1,31 +1,10 @@
 """Output collision geometry that every engine takes.
 
-Every simulator collides a moving mesh through convex shapes: PyBullet one
-hull per OBJ group, PhysX one cooked hull per mesh, MuJoCo one hull per mesh
-file (and it refuses flat ones), Drake one hull per file. The input's visual
-part meshes make poor collision files: flat groups that MuJoCo's URDF
-importer refuses, degenerate groups, faces wound inside-out, and links made
-of a hundred small parts (a laptop's keys) that become a hundred geoms and
-hundreds of contacts.
-
-:func:`convex_collisions` replaces the mesh collisions of every link of a
-written URDF model by a few closed convex pieces (:func:`link_pieces`),
-written as OBJ files in the link frame (scale and collision origin baked in):
-the hull of each OBJ group of the link's collision meshes (the hull PyBullet
-collided with before), never flat, wound outward, at most a few per link
-(:mod:`~asset2sim.tasks.assemble.convex_pieces`); a parent cut around the
-volume its child sweeps inside it
-(:mod:`~asset2sim.tasks.assemble.containment_cuts`), a child's overlap with
-its parent cut off one of them
-(:mod:`~asset2sim.tasks.assemble.parent_child_separation`), running clearance
-for sliding contacts (:mod:`~asset2sim.tasks.assemble.sliding_clearance`), a
-free-standing object's footprint levelled
-(:mod:`~asset2sim.tasks.assemble.footprint`). Parts are never moved.
-
-The pieces depend on the geometry and the joint limits only, never on the
-initial state: the state search, the limit scan, the post-check and the
-evaluation's closed ends all measure the same collision geometry whatever
-state the file was written at.
+:func:`convex_collisions` replaces the mesh collisions of every link of a URDF
+model by a few closed convex pieces (:func:`link_pieces`: the hull of each OBJ
+group, parents cut around their children, merged, separated, with running
+clearance), written as OBJ files in the link frame. ``docs/design/simulators.md``
+explains why.
 """
 
 from __future__ import annotations
@@ -52,16 +31,14 @@ from asset2sim.tasks.assemble.sliding_clearance import running_clearance
 
 
 def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> tuple[list[Piece], int]:
-    """Pieces of every mesh collision of ``link`` (one per OBJ group, in the
-    link frame, :func:`solid_points` applied)."""
+    """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame) and the number of groups."""
     out: list[Piece] = []
     n = 0
     for k, c in enumerate(link.collisions):
         if c.kind != "mesh":
             continue
-        path = mesh_path(c)
         try:
-            groups = mesh_hulls(path, c.scale)
+            groups = mesh_hulls(mesh_path(c), c.scale)
         except urdf.UrdfError as exc:
             raise CollisionGeometryError(f"link {link.name!r} collision {k} ({c.filename}): {exc}") from exc
         for g, pts in enumerate(groups):
@@ -81,28 +58,18 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> tuple[lis
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
                 level: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
-    """The convex pieces of every link's mesh collisions (link frame, m).
+    """The convex pieces of every link's mesh collisions (link frame, m), cached in this process and on disk.
 
-    The pieces depend on the joint limits, not on the state: a parent is cut
-    around the volume its child sweeps over the joint's range
-    (:func:`swept_child_points`), merges are guarded against the other links
-    over their ranges (:func:`swept_other_points`), a child's overlap with its
-    parent is cut from the reference position on (:func:`separate_parent_child`);
-    only what ``state`` puts a child into its parent (a stop it was written
-    into) is cut last, for that state.
+    The pieces depend on the joint limits (the ranges swept); only what ``state`` puts a child into its
+    parent is cut last, for that state.
 
     Args:
-        model: a URDF model (scale baked in; its joint limits are the ranges swept).
+        model: a URDF model (scale baked in).
         mesh_path: ``UrdfGeometry -> Path`` of a collision mesh's file.
-        state: joint -> rad or m, the initial state: what a child still
-            penetrates of its parent there is cut (:func:`separate_parent_child`
-            with ``state``; the only state-dependent step), and a note when
-            a child still sits inside its parent there.
+        state: joint -> rad or m, the initial state (None: nothing state-dependent).
         limit: most pieces per link.
-        decompose: decompose a parent piece that contains its child
-            (:func:`split_surface`; else only a note).
-        level: the object is free-standing: its footprint at ``state`` is
-            made planar (:func:`level_footprint`; needs ``state``).
+        decompose: cut a parent piece that contains its child (else only a note).
+        level: the object is free-standing: its footprint at ``state`` is made planar.
 
     Returns:
         (link -> pieces, notes).
@@ -111,20 +78,16 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         CollisionGeometryError: a collision mesh cannot be read.
     """
     key = _cache_key(model, mesh_path, limit, decompose)
-    hit = _cached_pieces(key, model, mesh_path, limit, decompose)
-    if state is None:  # nothing depends on a state
-        return {k: list(v) for k, v in hit[0].items()}, list(hit[1])
-    skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
-    done = _STATE_CACHE.get(skey)
-    if done is None:
-        done = _remember(_STATE_CACHE, skey, _state_pieces(model, hit, state, decompose, level))
+    done = _cached_pieces(key, model, mesh_path, limit, decompose)
+    if state is not None:
+        skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
+        done = _STATE_CACHE.get(skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
 def _cached_pieces(key: str, model: urdf.UrdfModel, mesh_path, limit: int,
                    decompose: bool) -> tuple[dict[str, list[Piece]], list[str]]:
-    """:func:`link_pieces`' state-independent (pieces, notes): from this process's cache (``key``), the disk's, or made
-    (:func:`_made_pieces`) and kept in both."""
+    """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache, else made."""
     hit = _PIECE_CACHE.get(key)
     if hit is not None:
         return hit
@@ -139,12 +102,9 @@ def _cached_pieces(key: str, model: urdf.UrdfModel, mesh_path, limit: int,
 
 
 def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> tuple[dict[str, list[Piece]], list[str]]:
-    """(link -> pieces, notes) before any state: the groups' hulls, parents cut around their children, merged to
-    ``limit``, parents and children separated, running clearance, slivers dropped."""
+    """(link -> pieces, notes) before any state."""
     notes: list[str] = []
-    pieces: dict[str, list[Piece]] = {}
-    for name, link in model.links.items():
-        pieces[name], _ = _group_pieces(link, mesh_path, notes)
+    pieces = {name: _group_pieces(link, mesh_path, notes)[0] for name, link in model.links.items()}
     _resolve_containment(model, pieces, mesh_path, notes, decompose, limit)
     for name in model.links:
         if len(pieces[name]) > limit:
@@ -159,8 +119,8 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
 
 def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str, limit: int, decompose: bool,
                 notes: list[str]) -> None:
-    """Merge the pieces of link ``name`` (in place) down to ``limit``, guarded against the other links over the joints'
-    ranges; a merge the limit forced that holds a child again is trimmed (``decompose``)."""
+    """Merge the pieces of link ``name`` (in place) down to ``limit``, guarded against the other links; a merge
+    that holds a child again is trimmed (``decompose``)."""
     n = len(pieces[name])
     guard = [x for x in (swept_other_points(model, pieces, name),
                          *swept_child_points(model, pieces, name, support=True).values()) if x is not None]
@@ -181,10 +141,9 @@ def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str
 
 def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list[str]], state: dict[str, float],
                   decompose: bool, level: bool) -> tuple[dict[str, list[Piece]], list[str]]:
-    """(link -> pieces, notes) of ``hit`` at the initial ``state``: what a child still penetrates of its parent there
-    cut, the footprint levelled (``level``), a note per child left inside its parent."""
+    """(link -> pieces, notes) of ``hit`` at the initial ``state``."""
     pieces, notes = {k: list(v) for k, v in hit[0].items()}, list(hit[1])
-    if decompose:  # what the initial state still holds: a stop the joint was written into
+    if decompose:
         separate_parent_child(model, pieces, notes, state=state)
         for name in model.links:
             pieces[name] = drop_slivers(pieces[name])
@@ -197,12 +156,9 @@ def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list
     return pieces, notes
 
 
-#: Pieces made in this process, by :func:`_cache_key` (a refine run writes the
-#: same URDF several times: state search, post-check, escalation rounds).
+#: Pieces made in this process, by :func:`_cache_key`.
 _PIECE_CACHE: dict[str, tuple[dict[str, list[Piece]], list[str]]] = {}
-
-#: What :func:`link_pieces` returned, by (:func:`_cache_key`, initial state):
-#: a refine run writes one state several times (post-check, escalation rounds).
+#: What :func:`link_pieces` returned, by (:func:`_cache_key`, initial state).
 _STATE_CACHE: dict[tuple, tuple[dict[str, list[Piece]], list[str]]] = {}
 
 
@@ -214,8 +170,7 @@ def _remember(cache: dict, key, hit: tuple[dict[str, list[Piece]], list[str]]) -
     return hit
 
 
-#: Modules whose source the pieces depend on: a change to any of them makes
-#: every on-disk entry of :func:`link_pieces` a miss.
+#: Modules whose source the pieces depend on (part of the on-disk key).
 PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.assemble.containment_cuts",
                "asset2sim.tasks.assemble.convex_pieces", "asset2sim.tasks.assemble.footprint", "asset2sim.tasks.assemble.joint_sweep",
                "asset2sim.tasks.assemble.parent_child_separation", "asset2sim.tasks.assemble.piece_penetration",
@@ -224,14 +179,11 @@ PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.a
 
 
 def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str | None:
-    """:func:`_model_digest` with the collision meshes' bytes (not their
-    paths: an output folder's copy of a mesh hits the entry its input made)
-    and the source of :data:`PIECES_CODE`: the on-disk key. None when a mesh
-    cannot be read (no disk cache: the computation raises its own error) or
-    the code's source cannot."""
+    """The on-disk key: :func:`_model_digest` with the collision meshes' bytes and the source of
+    :data:`PIECES_CODE`; None when either cannot be read."""
     try:
         code = array_cache.source_digest(*PIECES_CODE)
-    except (ImportError, OSError, TypeError):  # no source beside the bytecode: no disk cache
+    except (ImportError, OSError, TypeError):
         return None
 
     def content(path: Path) -> bytes | None:
@@ -244,24 +196,18 @@ def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
 
 
 def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
-    """Write :func:`link_pieces`' state-independent result to the on-disk
-    cache (:mod:`asset2sim.array_cache`, kind ``pieces``): per piece its
-    vertices, planes and volume; the links, sources and notes as JSON."""
+    """Write :func:`link_pieces`' state-independent result to the on-disk cache (kind ``pieces``)."""
     pieces, notes = hit
+    links = {name: [list(p.sources) for p in plist] for name, plist in pieces.items()}
     arrays: dict[str, np.ndarray] = {}
-    links, n = {}, 0
-    for name, plist in pieces.items():
-        links[name] = [list(p.sources) for p in plist]
-        for p in plist:
-            arrays[f"p{n}"], arrays[f"e{n}"], arrays[f"v{n}"] = p.points, p.equations, np.array(p.volume)
-            n += 1
+    for n, p in enumerate(p for plist in pieces.values() for p in plist):
+        arrays[f"p{n}"], arrays[f"e{n}"], arrays[f"v{n}"] = p.points, p.equations, np.array(p.volume)
     arrays["meta"] = array_cache.text_array(json.dumps({"links": links, "notes": notes}))
     array_cache.store("pieces", key, arrays)
 
 
 def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]], list[str]] | None:
-    """What :func:`_store_pieces` wrote under ``key``, or None (no entry, an
-    unreadable one, or one whose links are not ``model``'s)."""
+    """What :func:`_store_pieces` wrote under ``key``, or None (none, unreadable, or other links)."""
     data = array_cache.load("pieces", key)
     if data is None:
         return None
@@ -271,12 +217,9 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
             return None
         pieces, n = {}, 0
         for name, sources in meta["links"].items():
-            plist = []
-            for src in sources:
-                plist.append(Piece(np.asarray(data[f"p{n}"], float), np.asarray(data[f"e{n}"], float), float(data[f"v{n}"]),
-                                   tuple(str(x) for x in src)))
-                n += 1
-            pieces[name] = plist
+            pieces[name] = [Piece(np.asarray(data[f"p{i}"], float), np.asarray(data[f"e{i}"], float), float(data[f"v{i}"]),
+                                  tuple(str(x) for x in src)) for i, src in enumerate(sources, n)]
+            n += len(sources)
         return pieces, [str(x) for x in meta["notes"]]
     except (KeyError, ValueError, TypeError, UnicodeDecodeError):
         return None
@@ -284,10 +227,8 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
 
 def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
                   mesh_id: Callable[[Path], bytes | None], prefix: str = "") -> str | None:
-    """Digest of everything :func:`link_pieces` reads: every collision
-    (``mesh_id`` of its mesh file, origin, scale, primitive sizes), every
-    joint's frame, axis, type and limits, the piece limit and the
-    decomposition switch, after ``prefix``. None when ``mesh_id`` gives None."""
+    """Digest of everything :func:`link_pieces` reads (each mesh as ``mesh_id`` of its file), after ``prefix``;
+    None when ``mesh_id`` gives None."""
     parts: list[bytes | str] = [prefix, repr((limit, decompose))]
     for name, link in model.links.items():
         parts.append(name)
@@ -306,9 +247,7 @@ def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
 
 
 def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str:
-    """:func:`_model_digest` with each mesh file's identity (resolved path,
-    modification time in ns, size; the path alone when it cannot be
-    read): the in-process key."""
+    """The in-process key: :func:`_model_digest` with each mesh file's resolved path, mtime and size."""
 
     def identity(path: Path) -> bytes:
         try:
@@ -322,20 +261,16 @@ def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) ->
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
                       mesh_base: Path | None = None, *, decompose: bool = True, level: bool = False) -> list[str]:
-    """Replace the mesh collisions of every link of ``model`` (in place) by
-    the convex pieces of :func:`link_pieces`, written as OBJ files
-    ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; named by
-    their content, so an unchanged piece is not rewritten). Primitive
-    collisions (box, sphere, cylinder) stay.
+    """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
+    written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
+    rewritten). Primitive collisions stay.
 
     Args:
         out_dir: the output folder.
         folder: folder (relative to ``out_dir``) of the pieces.
         state: the initial state (joint -> rad or m).
-        mesh_base: folder that relative collision filenames without a
-            resolved ``path`` are relative to (default ``out_dir``).
-        level: the object is free-standing: its body's footprint at
-            ``state`` is made planar (:func:`level_footprint`).
+        mesh_base: folder of relative collision filenames without a ``path`` (default ``out_dir``).
+        level: the object is free-standing: its footprint at ``state`` is made planar.
 
     Returns:
         notes (what changed).
@@ -366,18 +301,3 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
             kept.append(urdf.UrdfGeometry(kind="mesh", filename=rel, path=dst))
         link.collisions = kept
     return notes
-
-
-def referenced_files(urdf_path: Path) -> set[str]:
-    """Filenames (as written) of the collision meshes a written URDF
-    references ({} when there is no file), so a clean-up of the collision
-    folder keeps them.
-
-    Raises:
-        UrdfError: the URDF cannot be read.
-    """
-    urdf_path = Path(urdf_path)
-    if not urdf_path.is_file():
-        return set()
-    model = urdf.read_urdf(urdf_path, mode="lenient")
-    return {str(c.filename) for link in model.links.values() for c in link.collisions if c.kind == "mesh" and c.filename}

@@ -1,12 +1,10 @@
 """Parents cut around their children: where a parent's hull holds the volume
 a child sweeps over its joint's range deeper than
 :data:`~asset2sim.tasks.assemble.convex_pieces.CONTAINMENT_TOLERANCE`, the
-parent's mesh, densely sampled, is halved across its longest extent where a
-piece's hull still holds the child (a binary space partition as in the
-BSP-tree decompositions of Naylor, "Binary space partitioning trees as an
-alternative representation of polytopes", CAD 1990), kept only when the
-child then sits less deep; pieces that still hold it are trimmed. Well under
-a second where CoACD took 215 s (toilet 102703's bowl)."""
+parent's densely sampled mesh is split by a greedy binary space partition
+(Naylor, "Binary space partitioning trees as an alternative representation
+of polytopes", CAD 1990), kept only when the child then sits less deep;
+pieces that still hold it are trimmed."""
 
 from __future__ import annotations
 
@@ -37,19 +35,15 @@ def surface_samples(triangles: np.ndarray, spacing: float) -> np.ndarray:
     return np.unique(np.vstack(out), axis=0)
 
 
-#: Where a point set may be cut, as fractions of its extent along each axis
-#: of the link frame: near the ends a cut peels a wall off a hollow part, in
-#: the middle it halves a long one.
+#: Where a point set may be cut, as fractions of its extent along each axis of the link frame.
 CUT_FRACTIONS = (0.04, 0.1, 0.2, 0.35, 0.5, 0.65, 0.8, 0.9, 0.96)
 
 
 def facets(triangles: np.ndarray, gap: float) -> list[np.ndarray]:
     """The triangles (m, 3, 3) grouped into facets: by the axis direction
-    (+-x, +-y, +-z) their normal is closest to, then, within a direction,
-    into layers along that axis separated by more than ``gap`` m (the inner
-    face of one wall and the outer face of the opposite wall face the same
-    way). Each facet is nearly flat across the axis it faces, so its hull
-    hugs it; returns the facets' triangles (largest first)."""
+    (+-x, +-y, +-z) their normal is closest to, then into layers along that
+    axis separated by more than ``gap`` m; returns the facets' triangles
+    (largest first)."""
     tri = np.asarray(triangles, float)
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     good = np.linalg.norm(n, axis=1) > 0
@@ -73,25 +67,19 @@ def facets(triangles: np.ndarray, gap: float) -> list[np.ndarray]:
     return sorted(out, key=len, reverse=True)
 
 
-#: Points of a set that :func:`split_surface` measures a candidate cut with,
-#: and child vertices it keeps out (even subsamples: time grows with both).
+#: Points of a set that :func:`split_surface` measures a cut with, and child vertices it keeps out (subsamples).
 MEASURE_SAMPLES = 1000
 PROBE_POINTS = 1500
 
 
 def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, budget: int, spacing: float) -> list[np.ndarray]:
-    """Split surface samples ``points`` (k, 3) m into point sets whose hulls
-    hold none of ``keep_out`` (j, 3) m deeper than ``tolerance`` m.
-
-    Greedy binary space partition: the set whose hull holds a point deepest
-    is cut by the plane (normal along an axis of the frame, at one of
-    :data:`CUT_FRACTIONS` of the set's extent) after which the deeper of the
-    two halves holds ``keep_out`` least deep (ties: the smaller summed hull
-    volume; the planes through the keep-out point held deepest are tried as
-    well); points within ``spacing`` of the plane go to both halves, so
-    neighbouring hulls overlap and leave no gap. Stops when no hull holds a
-    point deeper than ``tolerance``, when ``budget`` sets exist, or when no
-    cut helps. Returns the point sets."""
+    """Split surface samples ``points`` (k, 3) m into at most ``budget`` point
+    sets whose hulls hold none of ``keep_out`` (j, 3) m deeper than
+    ``tolerance`` m: the set holding a point deepest is cut by the axis plane
+    (at :data:`CUT_FRACTIONS` of its extent, or through that point) after
+    which the deeper half holds ``keep_out`` least deep (ties: less hull
+    volume); points within ``spacing`` m of the plane go to both halves.
+    Stops when no cut helps. Returns the point sets."""
     def hull_of(p: np.ndarray) -> Piece | None:
         return solid_piece(p[:: max(1, len(p) // MEASURE_SAMPLES)])  # an even subsample guides the cut; the pieces keep every point
 
@@ -100,7 +88,6 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
         return (0.0, 0.0) if piece is None else (depth_inside(keep_out, piece), piece.volume)
 
     def deepest(p: np.ndarray) -> np.ndarray | None:
-        """The keep-out point held deepest by the hull of ``p`` (3,), or None."""
         piece = hull_of(p)
         if piece is None or not len(keep_out):
             return None
@@ -137,9 +124,8 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
 
 
 def _split_pieces(link: urdf.UrdfLink, source: str, mesh_path, keep_out: np.ndarray, budget: int) -> list[Piece]:
-    """Pieces of the collision mesh ``source`` of ``link`` (link frame) cut
-    by :func:`split_surface` so that they hold none of ``keep_out`` (k, 3)
-    deeper than :data:`CONTAINMENT_TOLERANCE`, at most ``budget`` pieces.
+    """Pieces of the collision mesh ``source`` of ``link`` (link frame) cut by :func:`split_surface` around
+    ``keep_out`` (k, 3) m, at most ``budget`` pieces.
 
     Raises:
         CollisionGeometryError: the mesh cannot be read.
@@ -180,15 +166,12 @@ def _split_pieces(link: urdf.UrdfLink, source: str, mesh_path, keep_out: np.ndar
     return best
 
 
-#: Surface sampling of a parent mesh cut around its child: samples at most
-#: 1/24 of the mesh's largest extent apart (4 mm on a 10 cm part), at most
-#: :data:`MAX_SPLIT_SAMPLES` of them (time grows with the samples).
+#: Surface samples of a parent mesh cut around its child: 1/24 of its largest extent apart, at most MAX_SPLIT_SAMPLES.
 SPLIT_RESOLUTION = 24
 MAX_SPLIT_SAMPLES = 8000
 
 
-#: Largest part of a parent piece's width (along the face moved) that
-#: :func:`shave_piece` may take off: the piece keeps at least half of itself.
+#: Largest part of a parent piece's width (along the face moved) that :func:`shave_piece` may take off.
 MAX_SHAVE_FRACTION = 0.5
 
 
@@ -196,10 +179,8 @@ def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT
                 max_fraction: float = MAX_SHAVE_FRACTION) -> Piece | None:
     """``piece`` with the face that needs the least move moved inwards just
     far enough that none of ``points`` (k, 3) m held deeper than
-    ``tolerance`` m sits deeper than half of it (overlapping meshes: a
-    drawer's side 3 mm into its carcass's panel). None when that move exceeds
-    ``max_fraction`` of the piece's width along the face's normal (the part
-    sits within the piece)."""
+    ``tolerance`` m sits deeper than half of it; None when that move exceeds
+    ``max_fraction`` of the piece's width along the face's normal."""
     if not len(points):
         return piece
     d = points @ piece.equations[:, :3].T + piece.equations[:, 3]  # (k, f), <= 0 inside
@@ -216,9 +197,7 @@ def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT
 
 
 def probe_points(points: np.ndarray, pieces: list[Piece], n: int = PROBE_POINTS) -> np.ndarray:
-    """At most ``n`` of ``points`` (k, 3) m that guide a cut of ``pieces``:
-    those inside any of the pieces, the deepest half of ``n`` first, then an
-    even subsample of the rest."""
+    """At most ``n`` of ``points`` (k, 3) m inside any of ``pieces``: the deepest ``n // 2``, then an even subsample."""
     depth = np.zeros(len(points))
     for p in pieces:
         depth = np.maximum(depth, -np.max(points @ p.equations[:, :3].T + p.equations[:, 3], axis=1))
@@ -233,10 +212,8 @@ def probe_points(points: np.ndarray, pieces: list[Piece], n: int = PROBE_POINTS)
 def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit: int) -> None:
     """Cut, in place, the parent pieces that contain a child deeper than
     :data:`CONTAINMENT_TOLERANCE` anywhere over the child's joint range
-    (:func:`swept_child_points`; :func:`_split_pieces`, kept only when the
-    children then sit less deep), around every child of a parent at once
-    (toilet 102703's lid and seat); pieces that still hold a child
-    (overlapping meshes) are trimmed (:func:`_trim`)."""
+    (:func:`_split_pieces` around all children at once, kept only when they
+    then sit less deep); pieces that still hold a child are trimmed (:func:`_trim`)."""
     for parent in list(pieces):
         swept = swept_child_points(model, pieces, parent, support=True)
         if not swept:
@@ -269,10 +246,8 @@ def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit
 
 
 def _trim(pieces: dict[str, list[Piece]], parent: str, child: str, pts: np.ndarray, depth: float, notes: list[str]) -> None:
-    """Trim the pieces of ``parent`` that hold any of ``pts`` (the swept
-    vertices of its children ``child``, names for the notes, (k, 3) m)
-    deeper than :data:`CONTAINMENT_TOLERANCE` (:func:`shave_piece`), kept
-    when the children then sit less deep than ``depth`` m."""
+    """Trim the pieces of ``parent`` that hold any of ``pts`` (k, 3) m, the swept vertices of its children ``child``,
+    deeper than :data:`CONTAINMENT_TOLERANCE` (:func:`shave_piece`), kept when they then sit less deep than ``depth`` m."""
     shaved = [shave_piece(p, pts) if depth_inside(pts, p) > CONTAINMENT_TOLERANCE else p for p in pieces[parent]]
     shaved = [q if q is not None else p for p, q in zip(pieces[parent], shaved)]
     after = max((depth_inside(pts, p) for p in shaved), default=0.0)

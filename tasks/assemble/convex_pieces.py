@@ -16,33 +16,17 @@ from scipy.spatial import ConvexHull, QhullError
 from asset2sim import mesh_io
 from asset2sim.engines.loading import FLAT_HULL_THICKNESS
 
-#: Most convex pieces a link's collision keeps: MuJoCo makes one contact per
-#: colliding geom pair, so contacts grow with the pieces (laptop 9912's 118
-#: part meshes overflowed its arena in a 5 cm drop); the hulls asked of CoACD
-#: per mesh (:data:`asset2sim.tasks.state.collision.COACD_SETTINGS`), enough
-#: for a drawer or a cabinet with shelves to keep its hollow.
+#: Most convex pieces a link's collision keeps (MuJoCo's contacts grow with them).
 MAX_PIECES_PER_LINK = 16
-
-#: Most pieces a link keeps when merging further would make a piece hold
-#: another link over the joints' ranges (a parent cut around its child).
+#: Most pieces a link keeps when merging further would make a piece hold another link over the joints' ranges.
 MAX_PIECES_HARD = 32
-
-#: Thinnest convex piece written, m: the 2 mm slab every engine here takes
-#: (PyBullet inflates a flat hull by its 1 mm margin per side; PhysX cannot
-#: cook a flat hull and MuJoCo refuses it).
+#: Thinnest convex piece written, m (the slab every engine here takes).
 MIN_THICKNESS = FLAT_HULL_THICKNESS
-
-#: Width (m) under which a piece counts as flat and is grown to
-#: :data:`MIN_THICKNESS`: far above Qhull's precision (MuJoCo's "coplanar
-#: vertices" refusal, PhysX's failed cooking), far below any modelled wall.
+#: Width (m) under which a piece counts as flat and is grown to :data:`MIN_THICKNESS`.
 FLAT_WIDTH = 1e-4
-
-#: Depth (m) a child may sit inside its parent's collision pieces before the
-#: parent is cut: the SPEC's 2 mm penetration tolerance.
+#: Depth (m) a child may sit inside its parent's collision pieces before the parent is cut: the SPEC's tolerance.
 CONTAINMENT_TOLERANCE = 0.002
-
-#: Relative tolerance (of a piece's size) under which a point counts as
-#: inside a hull (numerical noise of Qhull's plane equations).
+#: Relative tolerance (of a piece's size) under which a point counts as inside a hull (Qhull's noise).
 _INSIDE_EPS = 1e-9
 
 
@@ -72,9 +56,7 @@ class Piece:
 
     @classmethod
     def of(cls, points: np.ndarray, sources: tuple[str, ...] = ()) -> "Piece":
-        """The hull of ``points`` (k, 3) m (Qhull once per distinct point
-        array in this process: :data:`_HULLS`; the arrays are shared, never
-        modified).
+        """The hull of ``points`` (k, 3) m (memoised per distinct point array in :data:`_HULLS`; arrays shared).
 
         Raises:
             QhullError, ValueError: the points span no volume.
@@ -103,9 +85,7 @@ def _memo(cache: dict, most: int, points: np.ndarray, make: Callable[[np.ndarray
     return hit
 
 
-#: Hulls (:func:`_hull`) and OBJ bytes (:func:`piece_obj`) made in this
-#: process: a refine run builds the same pieces at every write (state search,
-#: post-check, escalation rounds), the greedy merge tries the same pairs again.
+#: Hulls (:func:`_hull`) and OBJ bytes (:func:`piece_obj`) made in this process (a refine builds the same pieces often).
 _HULLS: dict[tuple, tuple[np.ndarray, np.ndarray, float]] = {}
 _HULLS_MAX = 5000
 _OBJS: dict[tuple, bytes] = {}
@@ -159,9 +139,8 @@ _DIRECTIONS = _sphere_directions()
 
 
 def support_points(points: np.ndarray) -> np.ndarray:
-    """The extreme points (<= 100, 3) of ``points`` (k, 3) along 100 evenly
-    spread directions: their hull is inside the hull of ``points`` and close
-    to it (within the polytope approximation error of 100 support directions)."""
+    """The extreme points (<= 100, 3) of ``points`` (k, 3) along 100 evenly spread directions: an inner
+    approximation of their hull."""
     p = np.asarray(points, float)
     if len(p) <= len(_DIRECTIONS):
         return p
@@ -169,9 +148,7 @@ def support_points(points: np.ndarray) -> np.ndarray:
 
 
 def piece_obj(piece: Piece) -> bytes:
-    """OBJ bytes of ``piece``: its hull vertices and triangles wound so that
-    every face normal (right-hand rule) points outward (made once per
-    distinct point array in this process, :data:`_OBJS`)."""
+    """OBJ bytes of ``piece``'s hull, every face normal pointing outward (memoised in :data:`_OBJS`)."""
     return _memo(_OBJS, 4096, piece.points, mesh_io.hull_obj)
 
 
@@ -287,9 +264,7 @@ def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:
     return solid_piece(np.vstack(keep), piece.sources)
 
 
-#: Volume (m^3) under which a piece a cut or trim left is a sliver and is
-#: dropped: 1 mm^3. PyBullet collides the 0.1 mm flakes cuts leave on a cut
-#: plane as 2 mm deep contacts (its convex margin; stapler 103275).
+#: Volume (m^3) under which a piece a cut or trim left is a sliver and is dropped: 1 mm^3.
 MIN_PIECE_VOLUME = 1e-9
 
 

@@ -44,10 +44,8 @@ def _walked_dirs(asset: AssetDescription) -> list[str]:
 
 
 def _reference_dirs(filename: str) -> list[str]:
-    """Folders (relative POSIX paths) that must exist in the output for the
-    path ``filename`` as written to open there: every folder the path walks
-    through, also those it leaves again with ``..`` (``dir/../m.obj`` needs
-    ``dir``)."""
+    """Folders (relative POSIX paths) that must exist in the output for the path ``filename`` as written to open
+    there: every folder the path walks through (``dir/../m.obj`` needs ``dir``)."""
     out: list[str] = []
     cur: list[str] = []
     for part in PurePosixPath(filename).parts[:-1]:
@@ -62,9 +60,7 @@ def _reference_dirs(filename: str) -> list[str]:
     return out
 
 
-#: Results of :func:`mesh_copies` kept per process (a refine writes its
-#: output several times; a long-lived stage server serves many assets):
-#: key -> (files it read, their stamps and their folders', copies). Bounded.
+#: Results of :func:`mesh_copies` kept per process: key -> (files it read, their and their folders' stamps, copies).
 _COPIES_CACHE: OrderedDict[tuple, tuple[list[Path], tuple, dict[str, Path]]] = OrderedDict()
 _COPIES_CACHE_SIZE = 32
 _COPIES_LOCK = threading.Lock()
@@ -97,16 +93,11 @@ def _stamps(files: list[Path]) -> tuple:
 def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     """What :func:`copy_meshes` copies: output path (relative, POSIX, exactly
     where the output URDF, the copied OBJ and MTL files will look for it) ->
-    the real input file. A mesh reached through a symlink inside the asset
-    folder is copied as a regular file at the referenced path; MTL files and
-    textures are placed relative to their mesh as the mesh looks for them
-    (an MTL that lies beside a symlinked mesh's real file and not beside the
-    link is placed beside the copy: :func:`beside_link_target`).
-
-    Finding the MTL libraries and textures reads every OBJ file (16-80 ms per
-    PartNet-Mobility asset, asked for 5-11 times per refine), so the answer
-    is kept per process, checked against the size, modification time and
-    inode of every file it read and of the folders holding them.
+    the real input file. A mesh reached through a symlink is copied as a
+    regular file at the referenced path; MTL files and textures are placed
+    relative to their mesh as it looks for them (:func:`beside_link_target`).
+    The answer is kept per process, checked against the stamps of every file
+    it read and of their folders.
 
     Raises:
         OutputError: ``OUTPUT_OUTSIDE_INPUT`` (a file outside the asset
@@ -171,17 +162,10 @@ def beside_link_target(lexical: Path, real: Path, asset_root: Path) -> list[Path
     """The material files of an OBJ reached through a symlink into another
     folder (``lexical``: the path as the URDF writes it; ``real``: the file
     it leads to) that lie beside the real file and not beside the link: each
-    ``mtllib`` the OBJ names that does not exist relative to the link's
-    folder but does relative to the real file's, with the texture maps it
-    names (relative to it), as resolved paths inside ``asset_root``.
-
-    The mesh's author put them beside the real OBJ; a loader opening the
-    link looks beside the link and draws the mesh without them. The output
-    copies the OBJ as a regular file at the link's path, so
-    :func:`mesh_copies` places these files relative to that copy as they lie
-    relative to the real file, and the copy finds its material. Missing
-    files, files outside ``asset_root`` and libraries that do exist beside
-    the link are left out."""
+    ``mtllib`` found only relative to the real file, with its texture maps,
+    as resolved paths inside ``asset_root`` (missing ones left out).
+    :func:`mesh_copies` places them beside the copy as they lie beside the
+    real file."""
     return mesh_io.obj_material_files(real, keep=lambda p: _inside(p, asset_root),
                                       skip_library=lambda name: os.path.lexists(lexical.parent / name))
 
@@ -250,20 +234,9 @@ def material_references(asset: AssetDescription, copies: dict[str, Path] | None 
     return kinds
 
 
-def copied_bytes(src: Path, rel: str, kind: str | None) -> bytes:
-    """What the output holds at ``rel`` for the input file ``src``: its bytes,
-    for an OBJ (``kind="obj"``) or MTL (``"mtl"``) with every ``mtllib`` /
-    texture statement that names a file outside the asset folder (absolute,
-    URI, ``..`` leaving it) replaced by a comment, so the output never makes a
-    simulator (PyBullet, SAPIEN, MuJoCo) open a file outside it; the
-    validator reports such statements (``MESH_MATERIAL_OUTSIDE``)."""
-    data = atomic.read_regular(src)
-    edited = _edited_copy(data, rel, kind)
-    return data if edited is None else edited
-
-
 def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
-    """:func:`copied_bytes` of ``data`` when a statement was dropped, else None."""
+    """``data`` of an OBJ (``kind="obj"``) or MTL (``"mtl"``) copied to ``rel`` with every ``mtllib`` / texture
+    statement naming a file outside the asset folder replaced by a comment; None when nothing was dropped."""
     if kind not in ("obj", "mtl"):
         return None
     if kind == "obj" and b"mtllib" not in data:  # fast path for large meshes
@@ -275,14 +248,10 @@ def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
 def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
     """Copy every mesh the URDF references (and its MTL/textures) into
     ``out_dir`` at the paths of :func:`mesh_copies` (regular files, never
-    links), creating the folders a referenced path walks through.
-
-    OBJ and MTL copies lose the statements that name files outside the asset
-    folder (:func:`copied_bytes`); every other file is copied byte for byte.
-
-    Returns the destination paths. Files already present with the same
-    content (and not symlinks) are not rewritten; they are announced to the
-    atomic writer's observers as kept (:func:`asset2sim.atomic.announce`).
+    links; OBJ and MTL as :func:`_edited_copy`), creating the folders a
+    referenced path walks through. Files already present with the same
+    content are not rewritten (announced as kept, :func:`asset2sim.atomic.announce`).
+    Returns the destination paths.
 
     Raises:
         OutputError: see :func:`mesh_copies`.

@@ -1,27 +1,9 @@
-"""Export an output folder to MJCF (MuJoCo), derived from the revised URDF.
-
-``mobility.urdf`` stays the source of truth; the MJCF is derived from it, from
-``overlay.json`` (joint stiffness and spring reference, which URDF cannot
-hold) and from ``initial_state.json`` (the keyframe). Layout, inside the
-output folder::
-
-    mjcf/mobility.xml          the MJCF (named after the URDF), meshdir=".."
-    mjcf/meshes/*.obj          convex pieces MuJoCo cannot take from the
-                               original files (OBJ files holding several
-                               groups, flat groups made 2 mm slabs)
-
-Original meshes are referenced where they are (``textured_objs/...``), so the
-folder stays self-contained and portable. A re-export removes the pieces of
-an earlier export that it no longer uses, but only files the product wrote:
-those the folder's ownership record or completion marker lists
-(:mod:`asset2sim.output_folder`); in a folder without either,
-nothing is removed. The conversion is
-:func:`asset2sim.engines.mjcf.urdf_to_mjcf` (MuJoCo's own URDF
-import, then the fixes listed in ``docs/design/simulators.md``); here the result is
-written atomically and checked by loading the written file with MuJoCo:
-total mass equal to the URDF's (1e-6 relative), every body's mass, COM and
-inertia tensor equal to the URDF link's, the keyframe ``initial`` equal to
-``initial_state.json``.
+"""Export an output folder to MJCF (MuJoCo), derived from ``mobility.urdf`` (the source of truth),
+``overlay.json`` (springs) and ``initial_state.json`` (the keyframe) by
+:func:`asset2sim.engines.mjcf.urdf_to_mjcf`. Written as ``mjcf/<urdf stem>.xml`` (meshdir "..", the
+original meshes referenced where they are) and ``mjcf/meshes/*.obj`` (convex pieces MuJoCo cannot take
+from the original files), then checked by loading the written file with MuJoCo (:func:`check_mjcf`).
+A re-export removes the pieces it no longer uses, only those the folder records as the product's.
 """
 
 from __future__ import annotations
@@ -30,19 +12,19 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, file_names
+from asset2sim import atomic, file_names, output_folder
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, STATE_NAME, URDF_NAME
 from asset2sim.engines.base import SessionOptions, Spring
-from asset2sim.engines.loading import read_initial_state
+from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
 from asset2sim.frames import quat_wxyz_matrix
-from asset2sim import output_folder
 from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble.write import read_root
 from asset2sim.tasks.interpret.mounting import session_root_options
 
@@ -55,16 +37,12 @@ class ExportError(RuntimeError):
 
 
 def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None = None) -> dict[str, Spring]:
-    """Joint springs of an output folder's ``overlay.json``: every joint with
-    stiffness > 0 (N*m/rad or N/m), about ``spring_reference`` (rad or m), or,
-    when the overlay has none, about the initial state (else 0). {} when the
-    folder has no overlay.
+    """Joint springs of an output folder's ``overlay.json``: every joint with stiffness > 0 (N*m/rad or N/m),
+    about ``spring_reference`` (rad or m), else about the initial state (else 0). {} without an overlay.
 
     Raises:
         ValueError: ``overlay.json`` is not a valid overlay.
     """
-    from asset2sim.schemas.overlay import Overlay
-
     p = Path(out_dir) / OVERLAY_NAME
     if not p.is_file():
         return {}
@@ -83,12 +61,9 @@ def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None =
 
 def output_session_options(out_dir: Path | str, initial_state: dict[str, float] | None = None,
                            conventions: SimConventions | None = None) -> SessionOptions:
-    """The :class:`~asset2sim.engines.base.SessionOptions` every check (and
-    the public loaders) open an output folder with: ``initial_state`` (rad
-    or m; default ``initial_state.json``), the springs of ``overlay.json``
-    (:func:`springs_from_overlay`), ``conventions`` (default
-    :class:`SimConventions`) and the root as the folder declares it (fixed
-    without a ground when mounted, :func:`session_root_options`).
+    """The :class:`~asset2sim.engines.base.SessionOptions` every check and the public loaders open an output
+    folder with: ``initial_state`` (rad or m; default ``initial_state.json``), the springs of
+    ``overlay.json``, ``conventions`` (default :class:`SimConventions`) and the root as the folder declares it.
 
     Raises:
         ValueError: ``initial_state.json`` or ``overlay.json`` is invalid.
@@ -111,19 +86,13 @@ class MjcfCheck:
     initial_state: dict[str, float]
     max_com_error: float
     max_inertia_error: float
-    notes: list[str] = field(default_factory=list)
 
 
 def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float], fixed_base: bool = False) -> MjcfCheck:
-    """Load ``xml_path`` with MuJoCo and compare it with the URDF.
-
-    ``fixed_base`` (a mounted asset, ``initial_state.json`` ``"root"``): the
-    model must have no free joint (the root is welded to the world).
-
-    Per body: mass, COM (link frame) and inertia tensor about the COM (link
-    axes) against the URDF link's ``<inertial>`` (a link without one must be
-    massless). Keyframe ``initial``: every movable joint's value against
-    ``initial_state`` (0 for joints it does not list).
+    """Load ``xml_path`` with MuJoCo and compare it with the URDF: per body mass, COM (link frame) and
+    inertia tensor about the COM (link axes) against the link's ``<inertial>`` (none: massless); the
+    keyframe ``initial`` against ``initial_state`` (0 for joints it does not list); with ``fixed_base``
+    (a mounted asset), no free joint.
 
     Raises:
         ExportError: MuJoCo cannot load the file, or a check fails (total mass
@@ -131,8 +100,6 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float],
             1e-6 relative, a keyframe value beyond 1e-12).
     """
     import mujoco
-
-    from asset2sim.engines.loading import read_urdf
 
     try:
         with mujoco_messages():
@@ -181,14 +148,8 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float],
         want = float(initial_state.get(j.name, 0.0))
         if abs(key[j.name] - want) > 1e-12:
             raise ExportError(f"{xml_path}: keyframe {j.name} = {key[j.name]!r}, {STATE_NAME} says {want!r}")
-    return MjcfCheck(
-        total_mass=total,
-        urdf_mass=urdf_mass,
-        keyframe=key,
-        initial_state=dict(initial_state),
-        max_com_error=com_err,
-        max_inertia_error=inertia_err,
-    )
+    return MjcfCheck(total_mass=total, urdf_mass=urdf_mass, keyframe=key, initial_state=dict(initial_state),
+                     max_com_error=com_err, max_inertia_error=inertia_err)
 
 
 def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Path:
@@ -212,8 +173,6 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     """
     import mujoco  # noqa: F401  - the clear ImportError when the extra is missing
 
-    from asset2sim.engines.loading import read_initial_state
-
     out_dir = Path(out_dir)
     urdf = out_dir / URDF_NAME
     if not urdf.is_file():
@@ -221,44 +180,30 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     initial = read_initial_state(out_dir)
     springs = springs_from_overlay(out_dir, initial)
     fixed = read_root(out_dir).fixed  # mounted: no free joint, the root welded where the file puts it
-    build = urdf_to_mjcf(
-        urdf,
-        initial_state=initial,
-        springs=springs,
-        fixed_base=fixed,
-        ground=not fixed,
-        missing_inertial="massless",
-        mesh_root=out_dir,
-        meshdir="..",
-        visuals=visuals,
-    )
-    target_dir = out_dir / MJCF_DIR
+    build = urdf_to_mjcf(urdf, initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed,
+                         missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals)
     for rel, data in build.derived_meshes.items():
         dst = file_names.join_inside(out_dir, rel)
         if not (dst.is_file() and dst.read_bytes() == data):
             atomic.write_bytes(dst, data)
     _remove_stale_pieces(out_dir, set(build.derived_meshes))
-    xml_path = atomic.write_text(target_dir / f"{urdf.stem}.xml", _header(build.notes, fixed) + build.xml + "\n")
+    xml_path = atomic.write_text(out_dir / MJCF_DIR / f"{urdf.stem}.xml", _header(build.notes, fixed) + build.xml + "\n")
     if check:
         check_mjcf(xml_path, urdf, initial, fixed_base=fixed)
     return xml_path
 
 
-def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> list[Path]:
-    """Remove the convex pieces (``mjcf/meshes/*__c<i>_g<j>.obj``) of an
-    earlier export that this one does not use (``keep``: paths relative to
-    ``out_dir``), but only those the product wrote: listed by the ownership
-    record or completion marker of the output folder around ``out_dir``
-    (:func:`asset2sim.output_folder.recorded_files`), lying in
-    that folder with no symlink on the way. Returns the removed files."""
+def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> None:
+    """Remove the convex pieces (``mjcf/meshes/*__c<i>_g<j>.obj``) of an earlier export not in ``keep``
+    (paths relative to ``out_dir``) that the output folder's records list as the product's, lying in it
+    with no symlink on the way."""
     mesh_dir = out_dir / MJCF_DIR / "meshes"
     root = output_folder.product_folder(out_dir)
     if root is None or not mesh_dir.is_dir() or mesh_dir.is_symlink():
-        return []
+        return
     owned = output_folder.recorded_files(root)
     keep_abs = {Path(os.path.abspath(out_dir / rel)) for rel in keep}
     real_dir = mesh_dir.resolve()
-    gone = []
     for p in sorted(mesh_dir.iterdir()):
         if not _DERIVED.match(p.name) or p.is_symlink() or not p.is_file() or Path(os.path.abspath(p)) in keep_abs:
             continue
@@ -268,8 +213,6 @@ def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> list[Path]:
             continue
         if rel in owned:
             p.unlink(missing_ok=True)
-            gone.append(p)
-    return gone
 
 
 def _header(notes: list[str], fixed: bool = False) -> str:

@@ -1,8 +1,6 @@
 """A free-standing object's footprint made planar, so it stands on every foot
 (:func:`level_footprint`): a bottom whose corners differ by a fraction of a
-millimetre stands on three of them, and PyBullet keeps it creeping on a
-diagonal for seconds (laptop 9912 after a 5 deg tilt: robust rest failed).
-Real objects stand on feet made coplanar."""
+millimetre stands on three of them and creeps in PyBullet."""
 
 from __future__ import annotations
 
@@ -14,15 +12,10 @@ from asset2sim.tasks.assemble.convex_pieces import Piece
 from asset2sim.tasks.geometry import limits
 
 #: Height (m) above the lowest collision point within which the body's
-#: vertices are taken to stand on the ground: PartNet-Mobility's bottoms are
-#: modelled to about this (laptop 9912's corners span 0.49 mm), PyBullet's
-#: contact margin of one shape.
+#: vertices are taken to stand on the ground (PyBullet's contact margin of one shape) ...
 LEVEL_TOLERANCE = 1e-3
-
-#: ... at most this fraction of the object's largest horizontal extent (a
-#: 5 cm object gets 0.25 mm).
+#: ... at most this fraction of the object's largest horizontal extent.
 LEVEL_FRACTION = 0.005
-
 #: The words of :func:`level_footprint`'s notes (the report picks them out).
 LEVEL_NOTE = "footprint levelled"
 
@@ -30,15 +23,11 @@ LEVEL_NOTE = "footprint levelled"
 def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state: dict[str, float],
                     notes: list[str]) -> None:
     """Make the footprint of a free-standing object's body planar, in place:
-    at ``state`` (joint -> rad or m; the root frame upright as written, z
-    up), every collision vertex of the body (the links no movable joint
-    moves) lower than the lowest collision point of the object plus
-    ``min(LEVEL_TOLERANCE, LEVEL_FRACTION * largest horizontal extent)`` is
-    moved straight down onto the plane of that lowest point (each piece is
-    the hull of its moved vertices: it only grows, downward). Moving links
-    (a lid resting on the floor, wheels) are left as they are. A note names
-    each link changed and the largest move.
-    """
+    at ``state`` (joint -> rad or m; z up), every collision vertex of the
+    links no movable joint moves lower than the object's lowest collision
+    point plus ``min(LEVEL_TOLERANCE, LEVEL_FRACTION * largest horizontal
+    extent)`` is moved straight down onto that point's plane (pieces only
+    grow, downward). A note names each link changed and the largest move."""
     poses = model.link_poses(state)
     body = limits.rigid_group(model, model.root)  # the links no movable joint moves
     world = {ln: [p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3] for p in pl] for ln, pl in pieces.items() if pl}
@@ -52,8 +41,7 @@ def level_footprint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], state
         if ln not in body:
             continue
         R, t = poses[ln][:3, :3], poses[ln][:3, 3]
-        lift = 0.0
-        count = 0
+        lift, count = 0.0, 0
         for i, w in enumerate(ws):
             sel = w[:, 2] < zmin + tol
             low = w[sel, 2] - zmin

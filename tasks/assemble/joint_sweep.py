@@ -10,10 +10,8 @@ from asset2sim import urdf
 from asset2sim.frames import axis_angle_matrix
 from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, Piece
 
-#: Largest motion (m) of a child's vertex between two neighbouring swept
-#: positions (:func:`sweep_positions`): the containment tolerance, so a hull
-#: clear of every sampled position holds none in between deeper than about
-#: that; at most :data:`MAX_SWEEP_SAMPLES` positions (a cut's time grows with them).
+#: Largest motion (m) of a child's vertex between two neighbouring swept positions (:func:`sweep_positions`),
+#: at most :data:`MAX_SWEEP_SAMPLES` positions.
 SWEEP_STEP = CONTAINMENT_TOLERANCE
 MAX_SWEEP_SAMPLES = 48
 
@@ -71,9 +69,7 @@ def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
     """Vertices of every child link's pieces, and of the links below it
     (their :attr:`Piece.support` points with ``support``; the joints below
     at :func:`reference_state`), in ``link``'s frame at every position of
-    :func:`sweep_positions` of the joint between them: the volume the child
-    sweeps over its whole range (a latch carried by a lid included), for
-    every state of the object. Child -> (k, 3) m."""
+    :func:`sweep_positions` of the joint between them: child -> (k, 3) m."""
     out = {}
     poses = model.link_poses(reference_state(model))
     for j in model.children(link):
@@ -95,18 +91,16 @@ def swept_child_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], li
     return out
 
 
-#: Positions per movable joint at which other links are kept out of a link's
-#: merged pieces (:func:`merge_pieces`), evenly over the joint's range.
+#: Positions per movable joint at which other links are kept out of a link's merged pieces.
 GUARD_SAMPLES = 9
 
 
 def swept_other_points(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], link: str,
                        samples: int = GUARD_SAMPLES) -> np.ndarray | None:
     """Support points (:attr:`Piece.support`) of every other link's pieces in
-    ``link``'s frame, with the movable joints at their reference (0 clipped
-    to the limits) and each joint in turn at ``samples`` positions over its
-    range: the volume the other links sweep one joint at a time (k, 3) m, or
-    None when no other link has pieces. Independent of the initial state."""
+    ``link``'s frame (k, 3) m, with the joints at :func:`reference_state` and
+    each in turn at ``samples`` positions over its range; None when no other
+    link has pieces."""
     ref = reference_state(model)
     local = {o: np.vstack([p.support for p in pieces[o]]) for o in model.links if o != link and pieces.get(o)}
     if not local:

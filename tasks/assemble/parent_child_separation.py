@@ -13,21 +13,16 @@ from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, MAX_PI
 from asset2sim.tasks.assemble.joint_sweep import _joint_motion, _joint_transforms, reference_state
 from asset2sim.tasks.assemble.piece_penetration import _boxes_apart, _transformed, penetration_depth
 
-#: Overlap (m) along the separating direction that :func:`separate_parent_child`
-#: leaves between a parent's and its child's pieces: touching (0). Engines
-#: with a contact margin read touching hulls as penetrating by the margin
-#: (PyBullet: 1 mm per hull, so -2 mm for a touching pair).
+#: Overlap (m) along the separating direction that :func:`separate_parent_child` leaves between a parent's and its
+#: child's pieces: touching.
 SEPARATION_GAP = 0.0
 
 
 def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) -> list[int]:
     """Indices of the ``n`` positions (ordered over the range) whose depth
     (m, ``depth(i)``) the joint carries from its reference position ``ref``:
-    the run of depths above ``tolerance`` m that contains ``ref`` (empty
-    when the reference position is clear). A depth reached only after the
-    child moved clear is a stop (the child runs into its parent), left to
-    the limit scan. ``depth`` is asked only for ``ref`` and the run's
-    neighbours (one position for a pair clear at the reference)."""
+    the run of depths above ``tolerance`` m that contains ``ref`` (empty when
+    it is clear; a depth reached after moving clear is a stop)."""
     if depth(ref) <= tolerance:
         return []
     lo = hi = ref
@@ -42,37 +37,17 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
                           tolerance: float = CONTAINMENT_TOLERANCE, state: dict[str, float] | None = None) -> None:
     """Clip, in place, the pieces of every parent and child link so that no
     child piece penetrates a parent piece deeper than ``tolerance`` m
-    (:func:`penetration_depth`, the depth an engine colliding the pair
-    reports) at the joint's reference position (:func:`reference_state`,
-    0 clipped to the limits: the pose the meshes were modelled in) and at
-    every position the overlap is carried to from there
-    (:func:`sweep_positions` over the range, :func:`_carried`), so the
-    pieces stay independent of the initial state. An overlap the child
-    only runs into after moving clear of its parent is a stop: it is kept,
-    and the limit scan (:mod:`asset2sim.tasks.geometry.limits`) clips the
-    joint's range before it. With ``state`` (joint -> rad or m), only that
-    state is separated (what :func:`link_pieces` does last for the initial
-    state it writes: an overlap the joint was written into). The
-    parent-child pairs every engine here skips
-    (the SPEC's exclusion) then also work where they are collided (a fixed
-    object, a robot's finger between them, a simulator without the
-    exclusion). Each overlap is removed along its separating direction by
-    cutting one of the two pieces (:func:`clip_piece`), up to :data:`SEPARATION_GAP`; the cut is
-    the resolution of any other penetration (move apart along the
-    minimum-translation direction) applied to the geometry, since a
-    parent and its child cannot move apart. Per pair of pieces, every
-    position's cut goes to the same piece, as one of two cuts: the side of
-    the piece beyond the plane taken off, or a slot (the band the other
-    piece spans along the direction taken out, :func:`_slot`, at most
-    :data:`SLOT_PIECES` parts and :data:`MAX_PIECES_HARD` per link: a latch's
-    shaft through a lid leaves the lid in pieces around it). Of the four
-    (two pieces, two cuts) the one that removes the smallest share of its
-    link's volume is made (a small piece of one link held whole in
-    another's hull, a dishwasher's rail inside its rack's, is removed
-    rather than the rack's hull cut around it; a microwave's thin door is
-    not eaten away around its frame); a link's last piece is never removed
-    (such an overlap is kept and noted). Cuts only remove volume, so an
-    overlap resolved stays resolved."""
+    (:func:`penetration_depth`) at the joint's reference position
+    (:func:`reference_state`) and at every position the overlap is carried
+    to from there (:func:`_carried`; an overlap met only after moving clear
+    is a stop, left to the limit scan); with ``state`` (joint -> rad or m),
+    at that state only. Each overlap is removed along its separating
+    direction by cutting one of the two pieces (:func:`clip_piece`, up to
+    :data:`SEPARATION_GAP`): the side beyond the plane, or a slot
+    (:func:`_slot`, at most :data:`SLOT_PIECES` parts and
+    :data:`MAX_PIECES_HARD` per link), whichever of the four removes the
+    smallest share of its link's volume; a link's last piece is never
+    removed (such an overlap is kept and noted)."""
     for joint in model.joints:
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
         if P and C:
@@ -199,9 +174,7 @@ SLOT_PIECES = 4
 def _slot(piece: Piece, slots: list[tuple[np.ndarray, float, float, Piece]], tolerance: float, most: int) -> list[Piece] | None:
     """``piece`` with, for each slot (n (3,) unit, lo, hi m, other piece), the
     band ``lo < n . x < hi`` taken out of every part that still penetrates
-    the other piece deeper than ``tolerance`` m (each such part becomes the
-    two parts beyond the band): a shaft through a lid leaves the lid in
-    pieces around it rather than one side of the lid. None when more than
+    the other piece deeper than ``tolerance`` m; None when more than
     ``most`` parts would be left."""
     parts = [piece]
     for n, lo, hi, other in slots:

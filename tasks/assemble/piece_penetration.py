@@ -83,21 +83,12 @@ def penetration_depth(a: Piece, b: Piece, lower_bound: float = 0.0) -> tuple[flo
     """Penetration depth (m, >= 0) of two convex pieces in one frame and the
     direction (3,) unit along which ``b`` moves that far to separate from
     ``a`` (zero vector when they do not overlap): the smallest overlap of
-    their projections over the separating-axis candidates of two convex
-    polyhedra, the face normals of both and the cross products of their
-    edge directions (Gottschalk, Lin and Manocha, "OBBTree", SIGGRAPH 1996;
-    Ericson, "Real-Time Collision Detection", 2005, sec. 5.2.1). The
-    overlap along any direction bounds the depth from above, so the minimum
-    over these candidates is the depth (what MuJoCo's ``mj_geomDistance``
-    reports as a negative distance; PyBullet adds its margins). Edge
-    directions come from the hull of the support points
-    (:func:`_edge_directions`) and candidates are ranked on the support
-    points (:func:`_least_overlap`), so the result may read slightly deeper
-    than exact, never shallower.
-
-    ``lower_bound``: when the face normals already bound the depth at or
-    below it (m), the edge axes are not tried (the result is then an upper
-    bound, <= ``lower_bound``)."""
+    their projections over the face normals of both and the cross products
+    of their edge directions (Gottschalk, Lin and Manocha, "OBBTree",
+    SIGGRAPH 1996; Ericson, "Real-Time Collision Detection", 2005, sec.
+    5.2.1). Edges and ranking use the support points, so the result may read
+    slightly deeper than exact, never shallower. ``lower_bound``: when the
+    face normals bound the depth at or below it (m), edge axes are skipped."""
     lo = np.maximum(a.points.min(axis=0), b.points.min(axis=0))
     hi = np.minimum(a.points.max(axis=0), b.points.max(axis=0))
     if np.any(hi <= lo):

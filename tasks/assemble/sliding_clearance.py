@@ -1,9 +1,8 @@
 """Running clearance: two links that are not parent and child and touch where
-they slide past each other (two drawers stacked in a cabinet, two doors
-meeting in the middle) get the moving piece's face moved back
-:data:`RUNNING_CLEARANCE` from its neighbour at the modelled pose, so the
-engines' contact margins do not read the touch as 2 mm of penetration whose
-recovery and friction hold the part. A contact along the motion (a stop) is
+they slide past each other (drawers stacked in a cabinet, doors meeting in the
+middle) get the moving piece's face moved back :data:`RUNNING_CLEARANCE` from
+its neighbour at the modelled pose, so contact margins do not read the touch
+as penetration that holds the part. A contact along the motion (a stop) is
 kept."""
 
 from __future__ import annotations
@@ -18,23 +17,15 @@ from asset2sim.tasks.assemble.convex_pieces import Piece
 from asset2sim.tasks.assemble.joint_sweep import reference_state
 from asset2sim.tasks.geometry import limits
 
-#: Words every note of :func:`running_clearance` (and of the state stage's
-#: clearance repair) carries, by which a caller picks them out of the pieces' notes.
+#: Words every note of :func:`running_clearance` (and of the state stage's clearance repair) carries.
 RUNNING_CLEARANCE_NOTE = "running clearance"
-#: Running clearance (m) given to a sliding contact between two links that
-#: are not parent and child: PyBullet's two 1 mm hull margins (touching
-#: hulls report 2 mm of penetration; see
-#: :data:`asset2sim.engines.loading.FLAT_HULL_THICKNESS`) plus 0.5 mm.
+#: Running clearance (m) of a sliding contact: PyBullet's two 1 mm hull margins plus 0.5 mm.
 RUNNING_CLEARANCE = 0.0025
-#: |cos| between a contact normal and the motion of the moving piece's
-#: contact face below which the contact slides (60 deg or more); above it
-#: the contact is a stop, the limit's business (:mod:`asset2sim.tasks.geometry.limits`).
+#: |cos| between a contact normal and the motion of the moving face below which the contact slides (else a stop).
 SLIDING_COS = 0.5
 #: A squeeze never takes more than this fraction of a piece's width along the contact normal.
 MAX_SQUEEZE = 0.5
-#: Deepest overlap (m) :func:`running_clearance` treats as parts modelled
-#: touching (PartNet-Mobility's zero-clearance fits overlap by rounding); a
-#: deeper one is a penetration the state search resolves.
+#: Deepest overlap (m) :func:`running_clearance` treats as parts modelled touching (deeper: the state search's).
 TOUCHING_OVERLAP = 0.0005
 
 
@@ -79,19 +70,12 @@ def squeeze(p: np.ndarray, n: np.ndarray, delta: float) -> tuple[np.ndarray, flo
 def clear_sliding_contact(p: np.ndarray, q: np.ndarray, velocity: Callable[[np.ndarray], np.ndarray],
                           deepest: float = np.inf) -> tuple[np.ndarray, float, float] | None:
     """Running clearance of a moving convex piece ``p`` (k, 3) m against a
-    piece ``q`` (l, 3) m of a link it moves past, both in one frame.
-
-    1. :func:`sat_gap` gives the gap g and the axis n (from p to q) of least
-       overlap; p and q are in contact when g < :data:`RUNNING_CLEARANCE`
-       (and g > -``deepest``: a deeper overlap is left to the state search).
-    2. The contact slides when n is nearly perpendicular to the motion of
-       p's contact face: |n . t| < :data:`SLIDING_COS` |t|, with t =
-       ``velocity(c)`` (3,) the direction the joint moves the face centre c
-       (3,) m (a x (c - o) for a revolute joint with axis a through o; a for
-       a prismatic one). A contact along the motion is a stop.
-    3. p's face towards q is moved back along n by
-       :data:`RUNNING_CLEARANCE` - g (:func:`squeeze`): the gap becomes the
-       clearance.
+    piece ``q`` (l, 3) m of a link it moves past, both in one frame: with the
+    gap g and axis n of :func:`sat_gap`, when -``deepest`` < g <
+    :data:`RUNNING_CLEARANCE` and the contact slides (|n . t| <
+    :data:`SLIDING_COS` |t|, t = ``velocity(c)`` (3,) at the contact face's
+    centre c), p's face towards q is moved back along n by
+    :data:`RUNNING_CLEARANCE` - g (:func:`squeeze`).
 
     Returns (squeezed p (k, 3) m, squeeze used m, gap g m), or None when
     the two are not in sliding contact (or the squeeze would move nothing).
@@ -113,11 +97,9 @@ def clear_sliding_contact(p: np.ndarray, q: np.ndarray, velocity: Callable[[np.n
 
 
 def joint_velocity(joint: urdf.UrdfJoint, T: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """The direction (3,) in which ``joint`` moves a point (3,) m given in
-    the frame ``T`` (4, 4) (the joint's child frame at its pose is the
-    identity): its axis for a prismatic joint, axis x (point - origin) for a
-    revolute or continuous one (the child frame's origin lies on the axis),
-    both expressed in ``T``'s frame. For :func:`clear_sliding_contact`."""
+    """The direction (3,) in which ``joint`` moves a point (3,) m given in the
+    frame where its child frame is ``T`` (4, 4): the axis (prismatic), or axis
+    x (point - origin) (revolute, continuous)."""
     R, t = T[:3, :3], T[:3, 3]
     axis = R @ np.asarray(joint.axis, float)
     if joint.type == "prismatic":
@@ -128,16 +110,11 @@ def joint_velocity(joint: urdf.UrdfJoint, T: np.ndarray) -> Callable[[np.ndarray
 def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> None:
     """Give running clearance, in place, to every sliding contact between a
     link a movable joint moves and a link it does not move (parent-child
-    pairs excepted: every engine here skips them, SPEC), measured at
-    :func:`reference_state` (the pose the meshes were modelled in, with zero
-    clearance): two drawers stacked in a cabinet, two doors meeting in the
-    middle (drawers jammed by their neighbours: ManiSkill issues #1205, #1156).
-    Each moving piece in contact (gap below :data:`RUNNING_CLEARANCE`, overlap
-    at most :data:`TOUCHING_OVERLAP`) along a face that slides is squeezed back
-    (:func:`clear_sliding_contact`); stops and deeper overlaps are left. The
-    first joint in file order that moves a piece squeezes it, once per pair
-    of pieces (:data:`MAX_SQUEEZE` would halve a thin piece at every pass).
-    Notes name each change."""
+    pairs excepted), measured at :func:`reference_state`: each moving piece in
+    contact with an overlap of at most :data:`TOUCHING_OVERLAP` along a face
+    that slides is squeezed back (:func:`clear_sliding_contact`) by the first
+    joint in file order that moves it, once per pair of pieces. Notes name
+    each change."""
     poses = model.link_poses(reference_state(model))
     done: set[tuple[str, int, str, int]] = set()
     parent_of = {j.child: j.parent for j in model.joints}

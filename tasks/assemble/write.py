@@ -1,14 +1,9 @@
-"""Writer: the output folder of the SPEC's contract.
+"""Writer: the files of the SPEC's output folder.
 
-``mobility.urdf`` with the scale baked in (mesh ``scale`` attributes, joint and
-geometry origins, primitive sizes, prismatic limits, inertials), an
-``<inertial>`` on every link (mass > 0, valid inertia tensor, COM origin),
-``<dynamics damping friction>`` on every movable joint, a comment pointing to
-``initial_state.json`` / ``overlay.json``; ``semantics.txt`` with the input's
-part labels (PartNet-Mobility's format, link names unchanged) when it had
-any, so the output names its parts without the input beside it; meshes (with their MTL files and
-textures) copied inside the folder under the same relative paths. Floats are
-written at full precision (Python's shortest round-trip repr). Every file is
+``mobility.urdf`` with the scale baked in, the overlay's inertials and joint
+dynamics; ``initial_state.json``, ``overlay.json``, ``semantics.txt`` (the
+input's part labels, when it had any) and the meshes (with MTL files and
+textures) under their relative paths. Floats at full precision; every file
 written atomically; the input folder is never written.
 """
 
@@ -28,8 +23,6 @@ from asset2sim.tasks.assemble import collision_geometry
 from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
 from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
 
-SEMANTICS_NAME = partnet_mobility.SEMANTICS_NAME
-
 
 @dataclass
 class OutputPaths:
@@ -39,30 +32,14 @@ class OutputPaths:
     urdf: Path
     initial_state: Path
     overlay: Path
-    semantics: Path | None = None
-    """``semantics.txt``, None when the input had no part labels."""
-    collision_notes: list[str] = field(default_factory=list)
-    """What the writer's convex collision pieces changed
-    (:func:`asset2sim.tasks.assemble.collision_geometry.link_pieces`' notes)."""
-
-
-def check_output_folder(asset: AssetDescription, out_dir: Path) -> Path:
-    """Resolve ``out_dir`` (symlinks followed) and refuse the input folder,
-    anything inside it, a folder containing it and a path that is not a
-    folder (:func:`asset2sim.output_folder.check_location`).
-
-    Raises:
-        OutputError: with ``code`` OUTPUT_IS_INPUT, OUTPUT_INSIDE_INPUT,
-            OUTPUT_CONTAINS_INPUT or OUTPUT_NOT_A_FOLDER and the ``path``.
-    """
-    return check_location(asset.source_dir, out_dir)
+    semantics: Path | None = None  # None when the input had no part labels
+    collision_notes: list[str] = field(default_factory=list)  # what the writer's convex collision pieces changed
+    urdf_bytes: bytes = b""  # the bytes written to ``urdf``
 
 
 def collision_folder(asset: AssetDescription) -> str:
-    """Output folder name for generated collision pieces (convex
-    decomposition) that no copied input file uses: ``collision``, or
-    ``collision_1``, ``collision_2`` ... when the asset's own meshes live in
-    a folder of that name."""
+    """Output folder name for generated collision pieces that no copied input file uses: ``collision``,
+    else ``collision_1``, ``collision_2`` ..."""
     taken = taken_paths(asset)
     for i in range(10_000):
         name = "collision" if i == 0 else f"collision_{i}"
@@ -79,32 +56,18 @@ def build_urdf(
     collision_out: tuple[Path, dict[str, float]] | None = None,
     collision_notes: list[str] | None = None,
 ) -> bytes:
-    """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``.
+    """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``: scale baked in, the overlay's
+    inertial on every link that has one, ``<dynamics>`` and a complete ``<limit>`` (effort and velocity 1000
+    when absent) on every movable joint, an explicit ``<axis>`` on every joint and a comment pointing to
+    ``initial_state.json`` and ``overlay.json``; the input's ``<contact>``, ``<mimic>``, ``<calibration>``,
+    ``<safety_controller>`` and vendor extensions are left out.
 
-    The input URDF is read by :func:`asset2sim.urdf.read_urdf` (it was
-    validated at extraction), changed on the model and written by
-    :func:`asset2sim.urdf.write_urdf`: scale baked in
-    (:func:`asset2sim.urdf.scale_model`), the overlay's inertial on every link
-    that has one (a link with geometry must), ``<dynamics>`` and a complete
-    ``<limit>`` (effort and velocity 1000 when absent) on every movable
-    joint, an explicit ``<axis>`` on every joint, and a comment pointing to
-    ``initial_state.json`` and ``overlay.json``. As the yourdfpy writer used
-    before, the output leaves out the input's ``<contact>``, ``<mimic>``,
-    ``<calibration>``, ``<safety_controller>`` and vendor extensions.
-
-    ``collision_overrides``: link -> list of
-    :class:`asset2sim.tasks.state.collision.CollisionPiece` replacing the link's
-    mesh collisions (convex decomposition), paths relative to the output.
-    ``root_rotation``: (3, 3) rotation baked into the root link's geometry and
-    the joints that hang from it (a requested resting pose, ``tasks.pose``).
-    ``collision_out``: (output folder, initial state): the mesh collisions
-    become the convex pieces of
-    :func:`asset2sim.tasks.assemble.collision_geometry.convex_collisions`,
-    written into the folder (every engine loads them; a free-standing
-    object's footprint levelled,
-    :func:`asset2sim.tasks.assemble.footprint.level_footprint`);
-    their notes (what the pieces changed) are appended to
-    ``collision_notes`` when given.
+    ``collision_overrides``: link -> list of :class:`asset2sim.tasks.state.collision.CollisionPiece`
+    replacing the link's mesh collisions (paths relative to the output). ``root_rotation``: (3, 3)
+    rotation baked into the root link's geometry and the joints hanging from it. ``collision_out``:
+    (output folder, initial state): the mesh collisions become the convex pieces of
+    :func:`asset2sim.tasks.assemble.collision_geometry.convex_collisions`, written into the folder (a
+    free-standing object's footprint levelled); their notes are appended to ``collision_notes`` when given.
 
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
@@ -132,8 +95,7 @@ def build_urdf(
 
 
 def _replace_collisions(model: urdf.UrdfModel, overrides: dict) -> None:
-    """Drop every link's ``<contact>``; the mesh collisions of each link in ``overrides`` (link -> pieces) become its
-    pieces' meshes."""
+    """Drop every link's ``<contact>``; the mesh collisions of each link in ``overrides`` become its pieces."""
     for link in model.links.values():
         link.contact = {}
         pieces = overrides.get(link.name)
@@ -146,11 +108,7 @@ def _replace_collisions(model: urdf.UrdfModel, overrides: dict) -> None:
 
 
 def _set_inertials(model: urdf.UrdfModel, overlay: Overlay) -> None:
-    """Every link's ``<inertial>`` from ``overlay`` (none on a link without geometry or overlay entry).
-
-    Raises:
-        OutputError: the overlay lacks a link that has geometry.
-    """
+    """Every link's ``<inertial>`` from ``overlay``; OutputError when it lacks a link that has geometry."""
     for link in model.links.values():
         lp = overlay.links.get(link.name)
         if lp is None:
@@ -177,11 +135,7 @@ def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) ->
 
 def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> None:
     """Every joint without ``<mimic>``, ``<calibration>``, ``<safety_controller>`` and with an explicit axis; every
-    movable one with the overlay's ``<dynamics>`` and limits and a complete ``<limit>`` (effort, velocity 1000).
-
-    Raises:
-        OutputError: the overlay lacks a movable joint.
-    """
+    movable one with a ``<limit>`` and the overlay's ``<dynamics>`` and limits (OutputError when it lacks one)."""
     for joint in model.joints:
         joint.mimic = joint.calibration = joint.safety_controller = None
         if joint.axis_xyz is None:
@@ -191,12 +145,8 @@ def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> None:
             if dyn is None:
                 raise OutputError(f"overlay has no dynamics for joint {joint.name!r} (validate the overlay first)")
             joint.dynamics = urdf.UrdfDynamics(damping=float(dyn.damping), friction=float(dyn.friction))
-            if joint.limit is None:
+            if joint.limit is None:  # effort and velocity filled by urdf.conform_limits
                 joint.limit = urdf.UrdfLimit()
-            if joint.limit.effort is None:
-                joint.limit.effort = 1000.0
-            if joint.limit.velocity is None:
-                joint.limit.velocity = 1000.0
             if dyn.lower is not None:  # clipped to what the geometry allows (tasks.geometry.limits)
                 joint.limit.lower = float(dyn.lower)
             if dyn.upper is not None:
@@ -226,44 +176,40 @@ def write_output(
     collision_overrides: dict | None = None,
     root_rotation: np.ndarray | None = None,
 ) -> OutputPaths:
-    """Write (or rewrite) the output folder: meshes, ``mobility.urdf``,
-    ``initial_state.json``, ``overlay.json`` and (when the input labelled
-    parts) ``semantics.txt``. Atomic per file.
+    """Write (or rewrite) the output folder: meshes, ``mobility.urdf``, ``initial_state.json``,
+    ``overlay.json`` and (when the input labelled parts) ``semantics.txt``.
 
     Args:
         initial_state: joint -> position in output units (rad or m).
-        copy: copy the meshes and write ``semantics.txt`` (skip when only
-            dynamics or the state changed).
+        copy: copy the meshes and write ``semantics.txt``.
         collision_overrides, root_rotation: see :func:`build_urdf`.
 
     Raises:
         OutputError: output folder inside the input, or an incomplete overlay.
     """
-    out = check_output_folder(asset, out_dir)
+    out = check_location(asset.source_dir, out_dir)
     out.mkdir(parents=True, exist_ok=True)
     labels = part_labels(asset)
-    sem = out / SEMANTICS_NAME
+    sem = out / partnet_mobility.SEMANTICS_NAME
     if copy:  # what comes from the input, once: later writes change only the dynamics and the state
         copy_meshes(asset, out)
         if labels:
             atomic.write_bytes(sem, partnet_mobility.format_semantics(labels).encode())
     notes: list[str] = []
-    urdf = atomic.write_bytes(out / URDF_NAME, build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state), notes))
+    data = build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state), notes)
+    urdf = atomic.write_bytes(out / URDF_NAME, data)
     state = atomic.write_json(out / STATE_NAME, {
         "initial_joint_positions": {k: float(v) for k, v in initial_state.items()},
         ROOT_KEY: root_record(overlay.mounting),
     })
     ovl = atomic.write_json(out / OVERLAY_NAME, overlay.model_dump(mode="json"))
     return OutputPaths(root=out, urdf=urdf, initial_state=state, overlay=ovl, semantics=sem if labels else None,
-                       collision_notes=notes)
+                       collision_notes=notes, urdf_bytes=data)
 
 
 def part_labels(asset: AssetDescription) -> dict[str, partnet_mobility.Semantics]:
-    """link -> (joint kind, part label) of the asset's links that
-    ``semantics.txt`` labelled, in link order ({} for an unlabelled URDF).
-    The evaluation and the task tier find parts (``lid``, ``drawer``) by
-    these labels; links whose name or label the format cannot express
-    (whitespace in the name) are left out."""
+    """link -> (joint kind, part label) of the asset's labelled links, in link order; links whose name or
+    label the format cannot express (whitespace) are left out."""
     out: dict[str, partnet_mobility.Semantics] = {}
     for ln in asset.links:
         if ln.semantic_label and ln.semantic_joint and ln.name.split() == [ln.name] and ln.semantic_joint.split() == [ln.semantic_joint]:
@@ -276,13 +222,10 @@ ROOT_KEY = "root"
 
 
 def root_record(mount: RootMount | None) -> dict:
-    """The ``"root"`` entry of ``initial_state.json`` for a mounting (None:
-    free-standing): ``{"fixed": bool, "mounting": kind, "pose": ...,
-    "source": ...}``. A fixed root's ``pose`` is the root link frame in the
-    world, ``{"xyz": [0, 0, 0] m, "quat_xyzw": [0, 0, 0, 1]}`` (the file's
-    frame: the mount holds it there, no ground plane); a free root's pose is
-    null: the SPEC places it with its lowest collision point on the ground
-    at z = 0 and lets it settle."""
+    """The ``"root"`` entry of ``initial_state.json`` for a mounting (None: free-standing):
+    ``{"fixed": bool, "mounting": kind, "pose": ..., "source": ...}``. A fixed root's ``pose`` is the root
+    link frame in the world, ``{"xyz": [0, 0, 0] m, "quat_xyzw": [0, 0, 0, 1]}``; a free root's is null
+    (the SPEC rests it on the ground at z = 0)."""
     mount = mount or RootMount()
     pose = {"xyz": [0.0, 0.0, 0.0], "quat_xyzw": [0.0, 0.0, 0.0, 1.0]} if mount.fixed else None
     return {"fixed": bool(mount.fixed), "mounting": mount.kind, "pose": pose, "source": mount.source}
@@ -298,9 +241,8 @@ def root_sentence(mount: RootMount | None) -> str:
 
 
 def read_root(folder: Path | str) -> RootMount:
-    """The root declaration of an output folder's ``initial_state.json``
-    (:func:`root_record`); free-standing when the file or its ``"root"`` entry
-    is absent (outputs of other tools, earlier versions).
+    """The root declaration of an output folder's ``initial_state.json`` (:func:`root_record`);
+    free-standing when the file or its ``"root"`` entry is absent.
 
     Raises:
         OutputError: ``"root"`` is present but not the shape

@@ -1,42 +1,8 @@
-"""Baseline methods for the benchmark (SPEC, "Baselines the product can reproduce").
-
-Each method turns one manifest row (a PartNet-Mobility folder, its request and
-GenSim2's reference) into an asset folder that :func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`
-can evaluate: ``mobility.urdf``, ``initial_state.json`` and a ``baseline.json``
-saying how it was made (``method``, ``scale``, rules used, notes).
-
-- ``defaults``: the raw ``mobility.urdf`` at the reference scale with the
-  simulator's defaults for what the file lacks. Nothing physical is added: in
-  PyBullet a link without ``<inertial>`` gets mass 1 kg, an inertia diagonal of
-  (1, 1, 1) kg*m^2 and its COM at the link frame (Bullet's URDF importer,
-  ``BulletUrdfImporter.cpp``), and ``URDF_USE_INERTIA_FROM_FILE`` keeps those
-  defaults since the file has none; a joint without ``<dynamics>`` has zero
-  damping and friction. Initial state: 0 clipped to each joint's limits (what
-  the simulator loads). With no reference scale the raw scale 1.0 is used.
-- ``human``: ``reference_gensim2.urdf`` (GenSim2's hand-curated copy, every joint
-  but the task's frozen) at ``reference_gensim2.json``'s ``scale`` (1.0 when
-  absent, SAPIEN's default) and, when given, ``joint_position_range``
-  intersected with the file's limits as the task joint's limits (prismatic
-  values times the scale). Initial state: the lower end of
-  ``joint_position_range`` (prismatic times the scale), else 0, clipped to the
-  limits, which is exactly the reference state the evaluation compares
-  against (see ``docs/design/metrics.md`` for why).
-- ``direct``: one estimator call applied as is (no validation, no state
-  refinement, no post-check), on the refine pipeline's estimation context
-  (``asset2sim.tasks.synthesize.context``) through the estimator registry
-  (``asset2sim.tasks.synthesize.estimate``).
-- ``asset2sim``: the full pipeline, :func:`asset2sim.tasks.refine.refine_asset`.
-
-Methods are looked up by name (:func:`run_method`, :func:`register_method`);
-running them all on a manifest, evaluating and tabulating the results is
-:mod:`asset2sim.tasks.benchmark.benchmark`.
-
-Scaling bakes a uniform factor s into a URDF copy: mesh ``scale`` attributes,
-primitive sizes, every ``<origin xyz>`` (visual, collision, inertial, joint),
-prismatic limits; inertia tensors are multiplied by s^2 with masses kept
-(SAPIEN's loader scale does the same to geometry and keeps masses). Mesh paths
-inside the source folder are copied (with their MTL files and textures) so a
-baseline folder is self-contained, as the SPEC's output contract asks.
+"""Baseline methods for the benchmark (SPEC, "Baselines the product can reproduce";
+docs/design/metrics.md, section 5): ``defaults``, ``human``, ``direct``,
+``asset2sim``, each turning one manifest row into an asset folder
+(``mobility.urdf``, ``initial_state.json``, ``baseline.json``); looked up by
+name (:func:`run_method`, :func:`register_method`).
 """
 
 from __future__ import annotations
@@ -59,7 +25,6 @@ from asset2sim.urdf import UrdfLimit, read_urdf, scale_model, write_urdf
 from asset2sim.output_folder import STATE_NAME, URDF_NAME
 
 __all__ = [
-    "METHODS",
     "BaselineError",
     "BaselineResult",
     "ManifestRow",
@@ -75,9 +40,6 @@ __all__ = [
     "scale_urdf",
     "urdf_joints",
 ]
-
-METHODS = ("defaults", "human", "direct", "asset2sim")
-
 
 class BaselineError(RuntimeError):
     """A baseline could not be produced (message names the asset and why)."""
@@ -98,46 +60,16 @@ class BaselineResult:
 
 
 # ---------------------------------------------------------------- URDF scaling
-def _inside(path: Path, root: Path) -> bool:
-    try:
-        path.resolve().relative_to(root.resolve())
-        return True
-    except ValueError:
-        return False
+def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: dict[str, tuple[float, float]] | None = None,
+               header: str = "", copy_meshes: bool = True) -> Path:
+    """Write a copy of URDF ``src`` with the uniform scale ``scale`` (> 0) baked in
+    (:func:`asset2sim.urdf.scale_model`: mesh scales, primitive sizes, origins,
+    prismatic limits, inertia x s^2, masses kept) to ``dst``; returns ``dst``.
 
-
-def scale_urdf(
-    src: Path | str,
-    dst: Path | str,
-    scale: float,
-    *,
-    joint_limits: dict[str, tuple[float, float]] | None = None,
-    header: str = "",
-    copy_meshes: bool = True,
-) -> Path:
-    """Write a copy of URDF ``src`` with the uniform scale ``scale`` baked in
-    (:func:`asset2sim.urdf.scale_model` on the lenient reading of the file,
-    written by :func:`asset2sim.urdf.write_urdf`).
-
-    Args:
-        src: input URDF; relative mesh paths are resolved against its folder.
-        dst: output URDF path (written atomically).
-        scale: s > 0, dimensionless.
-        joint_limits: joint -> (lower, upper) in the *input* units, replacing
-            the file's limits (prismatic values are then scaled).
-        header: a comment placed at the top of ``<robot>``.
-        copy_meshes: copy every mesh inside ``src``'s folder (with its MTL and
-            textures) to the same relative path beside ``dst`` and keep the
-            path relative (a self-contained folder); else write absolute paths.
-
-    Returns:
-        ``dst``.
-
-    Raises:
-        ValueError: s <= 0 or not finite; ``package://`` mesh paths; a joint
-            of ``joint_limits`` not in the file.
-        UrdfError: ``src`` cannot be read (a ``ValueError`` too).
-    """
+    ``joint_limits``: joint -> (lower, upper), input units, replacing the file's;
+    ``header``: a comment atop ``<robot>``; ``copy_meshes``: copy the meshes inside
+    ``src``'s folder beside ``dst`` (relative paths), else absolute paths.
+    Raises ValueError: bad scale, ``package://`` mesh paths, an unknown joint; UrdfError: ``src`` unreadable."""
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be a finite number > 0, got {scale}")
     src = Path(src).resolve()
@@ -153,7 +85,7 @@ def scale_urdf(
             if fname.startswith("file://"):
                 fname = fname[len("file://") :]
             mesh_src = (src.parent / fname).resolve()
-            if copy_meshes and _inside(mesh_src, src.parent):
+            if copy_meshes and mesh_src.is_relative_to(src.parent):
                 to_copy.add(mesh_src)
                 g.filename = mesh_src.relative_to(src.parent).as_posix()
             else:
@@ -179,12 +111,8 @@ def scale_urdf(
 
 
 def urdf_joints(urdf: Path | str) -> dict[str, dict[str, Any]]:
-    """Joint name -> {type, lower, upper} (limits as written, rad or m; None
-    when absent) of a URDF, read by :func:`asset2sim.urdf.read_urdf` (lenient).
-
-    Raises:
-        UrdfError: unreadable XML or a malformed number.
-    """
+    """Joint name -> {type, lower, upper} (rad or m; None when absent) of a URDF (lenient reading).
+    Raises UrdfError: unreadable XML or a malformed number."""
     out = {}
     for joint in read_urdf(urdf, mode="lenient").joints:
         lim = joint.limit
@@ -200,15 +128,10 @@ def _clip(q: float, lo: float | None, hi: float | None) -> float:
     return float(q)
 
 
-def human_initial_state(
-    joints: dict[str, dict[str, Any]], task_joints: list[str], rng: tuple[float, float] | None, scale: float
-) -> dict[str, float]:
-    """The human baseline's initial state (output units).
-
-    The task joint(s) start at the lower end of ``rng`` (file units; prismatic
-    times ``scale``), other joints at 0; all clipped to their limits (output
-    units).
-    """
+def human_initial_state(joints: dict[str, dict[str, Any]], task_joints: list[str], rng: tuple[float, float] | None,
+                        scale: float) -> dict[str, float]:
+    """The human baseline's initial state (output units): the task joints at the lower
+    end of ``rng`` (prismatic times ``scale``), others at 0, clipped to the limits."""
     out = {}
     for name, j in joints.items():
         if j["type"] not in ("revolute", "continuous", "prismatic"):
@@ -222,10 +145,7 @@ def human_initial_state(
 
 def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     """``defaults`` baseline for one manifest row (module docstring).
-
-    Raises:
-        BaselineError: no ``mobility.urdf`` in the row's folder.
-    """
+    Raises BaselineError: no ``mobility.urdf`` in the row's folder."""
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     src = row.folder / partnet_mobility.URDF_NAMES[0]
@@ -239,34 +159,18 @@ def make_defaults(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
         notes.append("no reference scale: raw scale 1.0")
     urdf = scale_urdf(src, out_dir / URDF_NAME, scale, header=f"asset2sim baseline 'defaults' of {row.id} at scale {scale}")
     joints = urdf_joints(urdf)
-    state = {
-        n: _clip(0.0, j["lower"], j["upper"])
-        for n, j in joints.items()
-        if j["type"] in ("revolute", "continuous", "prismatic")
-    }
+    state = {n: _clip(0.0, j["lower"], j["upper"]) for n, j in joints.items() if j["type"] in ("revolute", "continuous", "prismatic")}
     write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
     notes.append("no <inertial>: PyBullet uses 1 kg and inertia diag(1,1,1) kg*m^2 per link; no <dynamics>: zero damping and friction")
-    write_json(
-        out_dir / "baseline.json",
-        {
-            "method": "defaults",
-            "asset_id": row.id,
-            "source": str(src),
-            "scale": scale,
-            "category": row.category,
-            "initial_state_rule": "0 clipped to the joint limits",
-            "notes": notes,
-        },
-    )
+    write_json(out_dir / "baseline.json", {"method": "defaults", "asset_id": row.id, "source": str(src), "scale": scale,
+                                           "category": row.category, "initial_state_rule": "0 clipped to the joint limits",
+                                           "notes": notes})
     return BaselineResult("defaults", row.id, out_dir, scale, state, time.perf_counter() - t0, 0, notes)
 
 
 def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
     """``human`` baseline (GenSim2's reference) for one manifest row.
-
-    Raises:
-        BaselineError: no ``reference_gensim2.urdf`` in the row's folder.
-    """
+    Raises BaselineError: no ``reference_gensim2.urdf`` in the row's folder."""
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     ref = partnet_mobility.read_reference(row.folder)
@@ -287,46 +191,22 @@ def make_human(row: ManifestRow, out_dir: Path | str) -> BaselineResult:
             lo = max(rng[0], file_joints[j]["lower"]) if file_joints[j]["lower"] is not None else rng[0]
             hi = min(rng[1], file_joints[j]["upper"]) if file_joints[j]["upper"] is not None else rng[1]
             limits[j] = (lo, hi) if lo <= hi else rng
-    urdf = scale_urdf(
-        ref.urdf, out_dir / URDF_NAME, scale, joint_limits=limits,
-        header=f"asset2sim baseline 'human' (GenSim2 reference) of {row.id} at scale {scale}",
-    )
+    urdf = scale_urdf(ref.urdf, out_dir / URDF_NAME, scale, joint_limits=limits,
+                      header=f"asset2sim baseline 'human' (GenSim2 reference) of {row.id} at scale {scale}")
     joints = urdf_joints(urdf)
     state = human_initial_state(joints, ref.task_joints, rng, scale)
     write_json(out_dir / STATE_NAME, {"initial_joint_positions": state})
-    write_json(
-        out_dir / "baseline.json",
-        {
-            "method": "human",
-            "asset_id": row.id,
-            "source": str(ref.urdf),
-            "scale": scale,
-            "category": row.category,
-            "joint_position_range": list(rng) if rng else None,
-            "task_joints": ref.task_joints,
-            "initial_state_rule": "lower end of joint_position_range (else 0) clipped to the limits",
-            "notes": notes,
-        },
-    )
+    write_json(out_dir / "baseline.json", {
+        "method": "human", "asset_id": row.id, "source": str(ref.urdf), "scale": scale, "category": row.category,
+        "joint_position_range": list(rng) if rng else None, "task_joints": ref.task_joints,
+        "initial_state_rule": "lower end of joint_position_range (else 0) clipped to the limits", "notes": notes})
     return BaselineResult("human", row.id, out_dir, scale, state, time.perf_counter() - t0, 0, notes)
 
 
 def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimator: str = "offline") -> BaselineResult:
-    """``direct`` baseline: one estimator call, its overlay written as is.
-
-    The same context as :func:`asset2sim.tasks.refine.refine_asset` builds
-    (:func:`asset2sim.tasks.synthesize.context.build_context`: extract,
-    analyze, request, category, closed ends), then one ``estimate`` call of
-    the registered ``estimator``
-    (:func:`asset2sim.tasks.synthesize.backends.get_estimator`) and
-    :func:`asset2sim.tasks.assemble.write.write_output` with the state the
-    estimator's bands imply; no overlay validation, no state refinement, no
-    post-check or escalation.
-
-    Raises:
-        BaselineError: a stage failed (the message names it; an overlay the
-            writer cannot write counts as the method failing on this asset).
-    """
+    """``direct`` baseline: refine's estimation context, one ``estimate`` call of ``estimator``, its overlay written as is
+    with the state its bands imply (no validation, state refinement, post-check or escalation). Raises BaselineError: a
+    stage failed (the message names it)."""
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     try:
@@ -340,30 +220,17 @@ def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimat
         write.write_output(ctx.asset, overlay, out_dir, state)
     except Exception as exc:
         raise BaselineError(f"{row.id}: direct ({estimator}) failed: {type(exc).__name__}: {exc}") from exc
-    write_json(
-        out_dir / "baseline.json",
-        {
-            "method": "direct",
-            "asset_id": row.id,
-            "source": str(row.folder),
-            "scale": overlay.scale,
-            "category": ctx.category,
-            "estimator": overlay.estimator.name,
-            "initial_state_rule": "the estimator's requested bands, unrefined",
-            "notes": ["one estimator call; no validation, no state refinement, no post-check"],
-        },
-    )
+    write_json(out_dir / "baseline.json", {
+        "method": "direct", "asset_id": row.id, "source": str(row.folder), "scale": overlay.scale, "category": ctx.category,
+        "estimator": overlay.estimator.name, "initial_state_rule": "the estimator's requested bands, unrefined",
+        "notes": ["one estimator call; no validation, no state refinement, no post-check"]})
     return BaselineResult("direct", row.id, out_dir, overlay.scale, state, time.perf_counter() - t0,
                           int(overlay.estimator.queries or (0 if estimator == "offline" else 1)))
 
 
 def make_asset2sim(row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> BaselineResult:
-    """``asset2sim``: the full pipeline (:func:`asset2sim.tasks.refine.refine_asset`
-    with the row's task, no extras: the benchmark writes its own report).
-
-    Raises:
-        BaselineError: the refine pipeline failed.
-    """
+    """``asset2sim``: :func:`asset2sim.tasks.refine.refine_asset` with the row's task, no extras.
+    Raises BaselineError: the refine pipeline failed."""
     t0 = time.perf_counter()
     out_dir = Path(out_dir)
     try:
@@ -387,8 +254,7 @@ _REGISTRY: dict[str, MethodFn] = {
 
 
 def register_method(name: str, fn: MethodFn) -> None:
-    """Register ``fn(row, out_dir, seed=0) -> BaselineResult`` as a method
-    (e.g. ``ivw`` when model backends exist)."""
+    """Register ``fn(row, out_dir, seed=0) -> BaselineResult`` as method ``name``."""
     _REGISTRY[name] = fn
 
 
@@ -398,12 +264,7 @@ def available_methods() -> list[str]:
 
 
 def run_method(method: str, row: ManifestRow, out_dir: Path | str, *, seed: int = 0) -> BaselineResult:
-    """Produce ``method``'s asset for ``row`` in ``out_dir``.
-
-    Raises:
-        KeyError: unknown method.
-        BaselineError: the method could not produce the asset.
-    """
+    """Produce ``method``'s asset for ``row`` in ``out_dir``; KeyError: unknown method, BaselineError: not produced."""
     if method not in _REGISTRY:
         raise KeyError(f"unknown method {method!r}; known: {sorted(_REGISTRY)}")
     return _REGISTRY[method](row, Path(out_dir), seed=seed)

@@ -1,12 +1,7 @@
-"""The benchmark: every method on every manifest row, evaluated, tabulated.
-
-:func:`run_benchmark` makes each method's asset
-(:func:`asset2sim.tasks.benchmark.baselines.run_method`) and evaluates it
-(:func:`asset2sim.tasks.evaluation.evaluate.evaluate_asset`); each result
-becomes one flat record (:func:`evaluation_record`). :func:`summarize` and
-:func:`benchmark_tables` give the thesis tables (mean and sample sd, pass
-rates) that :func:`write_benchmark_outputs` writes beside the SPEC's numbers
-to beat (:data:`RESEARCH_NUMBERS`).
+"""The benchmark: every method on every manifest row, evaluated
+(:func:`run_benchmark`), flattened (:func:`evaluation_record`), tabulated
+(:func:`summarize`, :func:`benchmark_tables`) and written beside the SPEC's
+numbers to beat (:func:`write_benchmark_outputs`, :data:`RESEARCH_NUMBERS`).
 """
 
 from __future__ import annotations
@@ -37,19 +32,16 @@ RESEARCH_NUMBERS: list[dict[str, str]] = [
      "oscillation pass": "100%", "scale dev. vs GenSim2": "32.73 +- 16.51%", "init. joint dev. (rad)": "0.40 +- 0.48", "prompt alignment": "97.2%"},
 ]
 
-#: Metrics flattened into one benchmark record: name -> column prefix.
+#: Metrics flattened into one benchmark record (their names are the column prefixes).
 RECORD_METRICS = ("penetration", "ground_penetration", "rest_stability", "oscillation", "divergence", "joint_hold",
                   "scale_deviation", "initial_joint_deviation", "total_mass", "prompt_alignment", "probes",
                   "joint_sweep", "robust_rest", "task_execution", "operating_force")
 
 
 def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: str = "pybullet") -> dict[str, Any]:
-    """One flat benchmark record (JSON/CSV-able) of an evaluation: for each
-    metric of :data:`RECORD_METRICS` its value (``<name>``) and verdict
-    (``<name>_pass``, None without threshold), plus D_pos/D_ori, all_pass and
-    the evaluation time (s); ``ready`` (interaction-ready on every tier in
-    every evaluated engine, :func:`asset2sim.tasks.check.verdict.readiness`),
-    its failures and ``tier_<name>`` verdicts."""
+    """One flat benchmark record of an evaluation: each :data:`RECORD_METRICS` value (``<name>``) and verdict
+    (``<name>_pass``), D_pos/D_ori, ``ready`` (:func:`asset2sim.tasks.check.verdict.readiness` over every engine), its
+    failures and ``tier_<name>`` verdicts, all_pass, time (s)."""
     rec: dict[str, Any] = {"id": row.id, "category": row.category, "method": method, "error": None}
     for name in RECORD_METRICS:
         m = ev.metric(name, engine)
@@ -85,14 +77,9 @@ def _rate(vals: list[Any]) -> tuple[float | None, int]:
 
 
 def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, dict[str, Any]]:
-    """The thesis table for a set of records: per method mean and sample sd
-    (ddof = 1) of penetration (mm; all rows and Toilet+Stapler rows), scale
-    deviation (%), initial joint deviation; pass rates (fraction) of rest
-    stability, oscillation, probes, joint sweep, robust rest, task success
-    and force plausibility (PyBullet),
-    interaction-readiness (every tier, every evaluated engine) and all checks
-    over the assets with a verdict; mean prompt alignment; median evaluation time (s); count of
-    assets the method failed to produce (``errors``)."""
+    """The thesis table per method: mean and sample sd (ddof = 1) of penetration (mm; all and Toilet+Stapler rows), scale
+    deviation (%), initial joint deviation; pass rates over the assets with a verdict; mean prompt alignment; median
+    evaluation time (s); ``errors``: assets not produced."""
     out: dict[str, dict[str, Any]] = {}
     for m in methods:
         rs = [r for r in records if r["method"] == m]
@@ -119,45 +106,19 @@ def summarize(records: list[dict[str, Any]], methods: list[str]) -> dict[str, di
     return out
 
 
-def run_benchmark(
-    manifest: Path | str,
-    methods: list[str],
-    out_dir: Path | str,
-    *,
-    rows: list[str] | None = None,
-    seed: int = 0,
-    engines: tuple[str, ...] = ("pybullet",),
-    reports: bool = True,
-    progress: Callable[[str, str, str], None] | None = None,
-) -> list[dict[str, Any]]:
-    """Run every method on every manifest row and evaluate each result.
+def run_benchmark(manifest: Path | str, methods: list[str], out_dir: Path | str, *, rows: list[str] | None = None, seed: int = 0,
+                  engines: tuple[str, ...] = ("pybullet",), reports: bool = True,
+                  progress: Callable[[str, str, str], None] | None = None) -> list[dict[str, Any]]:
+    """Run every method on every manifest row and evaluate each result into
+    ``out_dir/<method>/<id>/`` (``asset/``, ``evaluation.json``, ``report.html``).
+    A row that cannot be read, produced or evaluated becomes a record with
+    ``error`` set (``id`` its id or ``line <n>``); the others go on.
 
-    Layout: ``out_dir/<method>/<id>/asset/`` the method's asset,
-    ``out_dir/<method>/<id>/evaluation.json`` and ``report.html``. A row that
-    a method cannot produce, or that fails to evaluate, or a manifest row that
-    cannot be read (:func:`~asset2sim.tasks.ingest.partnet_mobility.read_manifest_rows`:
-    ``id`` its id or ``line <n>``), becomes a record with ``error`` set; the
-    others go on.
-
-    Args:
-        manifest: ``manifest.csv``.
-        methods: method names (:func:`available_methods`).
-        out_dir: benchmark folder.
-        rows: restrict to these ids (manifest order kept).
-        seed: passed to the methods and recorded.
-        engines: evaluation engines.
-        reports: write each ``report.html``.
-        progress: callback(method, id, message).
-
-    Returns:
-        The records (:func:`evaluation_record` plus ``method_seconds``,
-        ``report``, ``thesis_set``), in manifest order per method.
-
-    Raises:
-        KeyError: an unknown method.
-        ManifestError / OSError: the manifest is not a CSV with ``id`` and
-            ``prompt`` columns, or cannot be read.
-    """
+    ``rows``: restrict to these ids; ``seed``: passed to the methods;
+    ``reports``: write each ``report.html``; ``progress``: callback(method, id,
+    message). Returns the records (:func:`evaluation_record` plus
+    ``method_seconds``, ``report``, ``thesis_set``), manifest order per method.
+    Raises KeyError: an unknown method. ManifestError / OSError: the manifest cannot be read."""
     known = available_methods()
     for m in methods:
         if m not in known:
@@ -209,12 +170,9 @@ def run_benchmark(
 
 
 def benchmark_tables(records: list[dict[str, Any]], methods: list[str]) -> dict[str, dict[str, dict[str, Any]]]:
-    """The thesis tables: {"thesis set (first 9 manifest rows)": ..., "all rows": ...}
-    (:func:`summarize` of each subset)."""
-    return {
-        "thesis set (first 9 manifest rows)": summarize([r for r in records if r.get("thesis_set")], methods),
-        "all rows": summarize(records, methods),
-    }
+    """:func:`summarize` of the thesis set (first 9 manifest rows) and of all rows."""
+    return {"thesis set (first 9 manifest rows)": summarize([r for r in records if r.get("thesis_set")], methods),
+            "all rows": summarize(records, methods)}
 
 
 def _json_clean(obj: Any) -> Any:
@@ -229,16 +187,9 @@ def _json_clean(obj: Any) -> Any:
 
 def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], out_dir: Path | str,
                             meta: dict[str, Any]) -> dict[str, Path]:
-    """Write the benchmark's files into ``out_dir`` atomically:
-    ``results.json``/``.csv``/``.parquet`` (one record per object and method,
-    ``method`` a column), ``summary.json``/``.csv``/``.html`` (the thesis
-    tables beside :data:`RESEARCH_NUMBERS`) and ``index.html`` (one
-    colour-coded row per object and method).
-
-    Returns:
-        name -> path of every file written (``results.parquet`` is skipped,
-        with ``meta['parquet_error']`` set, when pyarrow cannot write it).
-    """
+    """Write ``results.json``/``.csv``/``.parquet`` (one record per object and method), ``summary.json``/``.csv``/``.html``
+    and ``index.html`` into ``out_dir`` atomically; returns name -> path (``results.parquet`` skipped,
+    ``meta['parquet_error']`` set, when it cannot be written)."""
     import pandas as pd  # heavy; only the benchmark's tables need it
 
     out_dir = Path(out_dir)

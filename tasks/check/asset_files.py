@@ -1,9 +1,5 @@
-"""The evaluated asset's files as the evaluation reads them.
-
-Any URDF is graded (a refined output, a baseline, a raw PartNet-Mobility or
-GenSim2 reference file), so the URDF is read by :func:`asset2sim.urdf.read_urdf`
-in lenient mode and the PartNet-Mobility sidecars through their adapter
-(:mod:`asset2sim.tasks.ingest.partnet_mobility`).
+"""The evaluated asset's files as the evaluation reads them: any URDF (read
+leniently) and the PartNet-Mobility sidecars through their adapter.
 """
 
 from __future__ import annotations
@@ -51,9 +47,7 @@ class LinkInfo:
 
 
 def find_urdf(path: Path | str) -> Path:
-    """The URDF of ``path`` (:func:`asset2sim.tasks.ingest.partnet_mobility.find_urdf`: the file
-    itself, else ``mobility.urdf``, else the only ``*.urdf`` not named
-    ``reference_*``).
+    """The URDF of ``path`` (:func:`asset2sim.tasks.ingest.partnet_mobility.find_urdf`).
 
     Raises:
         EvaluationError: nothing (or several candidates) found.
@@ -65,12 +59,8 @@ def find_urdf(path: Path | str) -> Path:
 
 
 def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
-    """Links and joints of a URDF as written, read by :func:`asset2sim.urdf.read_urdf`
-    in lenient mode (raw PartNet-Mobility and GenSim2 reference files are graded too).
-
-    Returns:
-        (link name -> :class:`LinkInfo`, joint name -> :class:`JointInfo`), in
-        file order (a name written twice keeps its first place and last entry).
+    """Links and joints of a URDF as written (lenient read): (link name ->
+    :class:`LinkInfo`, joint name -> :class:`JointInfo`), in file order.
 
     Raises:
         EvaluationError: unreadable XML or a malformed number (names the file,
@@ -80,29 +70,20 @@ def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
         model = read_urdf(urdf, mode="lenient")
     except UrdfError as exc:
         raise EvaluationError(f"unreadable URDF: {exc}") from exc
-    links = {
-        name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))
-        for name, ln in model.links.items()
-    }
+    links = {name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))
+             for name, ln in model.links.items()}
     joints = {}
     for jt in model.joints:
         lim, dyn = jt.limit, jt.dynamics
         joints[jt.name] = JointInfo(
-            name=jt.name,
-            type=jt.type,
-            parent=jt.parent,
-            child=jt.child,
-            lower=None if lim is None else lim.lower,
-            upper=None if lim is None else lim.upper,
-            damping=None if dyn is None else dyn.damping,
-            friction=None if dyn is None else dyn.friction,
-        )
+            name=jt.name, type=jt.type, parent=jt.parent, child=jt.child,
+            lower=None if lim is None else lim.lower, upper=None if lim is None else lim.upper,
+            damping=None if dyn is None else dyn.damping, friction=None if dyn is None else dyn.friction)
     return links, joints
 
 
 def read_json(path: Path) -> dict[str, Any] | None:
-    """A JSON sidecar (``overlay.json``, ``report.json``, ``baseline.json``,
-    ``initial_state.json``): None when the file is absent or holds no object.
+    """A JSON sidecar: None when the file is absent or holds no object.
 
     Raises:
         EvaluationError: the file exists but is not readable JSON.
@@ -117,9 +98,7 @@ def read_json(path: Path) -> dict[str, Any] | None:
 
 
 def read_semantics(folder: Path) -> dict[str, tuple[str, str]]:
-    """``semantics.txt`` as link -> (joint kind, label)
-    (:func:`asset2sim.tasks.ingest.partnet_mobility.read_semantics`);
-    a missing or malformed file reads as empty (evaluation works on any URDF)."""
+    """``semantics.txt`` as link -> (joint kind, label); empty when missing or malformed."""
     try:
         return partnet_mobility.read_semantics(folder)
     except AssetError:
@@ -127,14 +106,12 @@ def read_semantics(folder: Path) -> dict[str, tuple[str, str]]:
 
 
 def read_category(folder: Path) -> str | None:
-    """``meta.json``'s ``model_cat`` of ``folder``, or None
-    (:func:`asset2sim.tasks.ingest.partnet_mobility.read_category`)."""
+    """``meta.json``'s ``model_cat`` of ``folder``, or None."""
     return partnet_mobility.read_category(folder)
 
 
 def clip_to_limits(q: float, lo: float | None, hi: float | None) -> float:
-    """``q`` (rad or m) clipped to [lo, hi]; a missing or non-finite bound
-    does not clip."""
+    """``q`` (rad or m) clipped to [lo, hi]; a missing or non-finite bound does not clip."""
     if lo is not None and math.isfinite(lo):
         q = max(q, lo)
     if hi is not None and math.isfinite(hi):

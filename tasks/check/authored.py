@@ -1,25 +1,10 @@
 """Authored equals simulated: what each engine holds after loading an output
 equals what the output's files say.
 
-The files of an output folder say, per link, the mass, center of mass and
-inertia tensor (``mobility.urdf`` ``<inertial>``, written from
-``overlay.json``), per movable joint the limits, viscous damping and Coulomb
-friction (``<limit>``, ``<dynamics>``), the spring (``overlay.json``
-stiffness and reference: :func:`springs_from_overlay`) and the initial
-position (``initial_state.json``). :func:`authored_physics` reads them;
-:func:`held_by_engines` loads the folder in each engine and reads the same
-quantities back from the engine's own data structures
-(:meth:`asset2sim.engines.base.SimSession.held_physics`, and for exported files
-:func:`asset2sim.engines.registry.read_held_physics`: the MJCF in MuJoCo, the USD in
-Newton's importer); :func:`compare_physics` names every quantity an engine
-dropped or rescaled. This catches the class of importer bug where a value is
-silently lost or converted (Isaac Sim's URDF importer drops ``<dynamics>``
-and converts gains per degree: IsaacSim issues #841, #842).
-
-Tolerances (:class:`Tolerances`) are set by the engines' number formats:
-PhysX, Newton and USD store binary32 (relative resolution 2^-24 = 6e-8 per
-value, more after PhysX's and Newton's float32 eigen-decomposition of the
-inertia tensor), PyBullet and MuJoCo binary64.
+:func:`authored_physics` reads the files; :func:`held_by_engines` loads the
+folder in each engine (and the exported MJCF / USD with their importers) and
+reads the same quantities back; :func:`compare_physics` names every quantity
+an engine dropped or rescaled (the importer bugs of IsaacSim issues #841, #842).
 """
 
 from __future__ import annotations
@@ -30,21 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (
-    EngineUnavailable,
-    EngineUnsupported,
-    HeldJoint,
-    HeldLink,
-    HeldPhysics,
-    principal_moments,
-)
+from asset2sim.engines.base import EngineUnavailable, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, principal_moments
 from asset2sim.engines.registry import open_session, read_held_physics
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, read_initial_state, read_urdf
 from asset2sim.tasks.assemble.export_mjcf import output_session_options, springs_from_overlay
 from asset2sim.output_folder import URDF_NAME
 
-#: The exported files each engine's own importer reads back:
-#: (engine, format, path in the output folder).
+#: The exported files each engine's own importer reads back: (engine, format, path in the output folder).
 EXPORTED_FILES: tuple[tuple[str, str, str], ...] = (
     ("mujoco", "mjcf", "mjcf/mobility.xml"),
     ("newton", "usd", "usd/mobility.usd"),
@@ -53,17 +30,13 @@ EXPORTED_FILES: tuple[tuple[str, str, str], ...] = (
 
 @dataclass(frozen=True)
 class Tolerances:
-    """How close a held value must be to the authored one.
+    """How close a held value must be to the authored one (PhysX, Newton and USD
+    store float32, PyBullet and MuJoCo float64).
 
-    ``rel``: relative, for mass, principal moments (against the link's
-    largest moment), damping, friction and stiffness: 1e-5, about 170 float32
-    ulps (PhysX's and Newton's float32 diagonalisation of a tensor whose
-    moments span 3 decades loses about 1e-6 of the largest moment).
-    ``length``: absolute for COM components, prismatic limits, positions and
-    spring references, m or rad: 1e-6 (float32 of a 1 m value is 6e-8;
-    PhysX's qpos of a 1.5 rad joint 1.2e-7).
-    ``floor``: absolute below which a damping, friction or stiffness
-    difference is ignored (1e-9 N*m*s/rad, N*m, N*m/rad).
+    ``rel``: relative, for mass, principal moments (against the link's largest),
+    damping, friction and stiffness: about 170 float32 ulps. ``length``:
+    absolute for COM, limits, positions and spring references, m or rad.
+    ``floor``: absolute below which a damping, friction or stiffness difference is ignored.
     """
 
     rel: float = 1e-5
@@ -73,10 +46,8 @@ class Tolerances:
 
 @dataclass
 class Mismatch:
-    """One quantity an engine holds differently from the files: ``item``
-    ``link NAME`` / ``joint NAME``, ``quantity`` (mass, com, principal
-    moments, lower, upper, damping, friction, stiffness, reference,
-    position, missing), the ``held`` and ``authored`` values."""
+    """One quantity (``quantity``) of ``item`` (``link NAME`` / ``joint NAME``) an
+    engine holds differently from the files."""
 
     item: str
     quantity: str
@@ -89,15 +60,10 @@ class Mismatch:
 
 @dataclass
 class AuthoredCheck:
-    """The comparison for one engine and one loaded file.
-
-    ``status``: ``ok`` (compared; ``mismatches`` may still be non-empty),
-    ``skipped`` (package or exported file missing), ``error`` (the file
-    did not load); ``reason`` says why; ``max_error`` per quantity family
-    (mass, com, inertia, limits, damping, friction, stiffness, position) is
-    the largest difference in units of its tolerance (<= 1 passes);
-    ``notes``: what was not compared and why (a link welded to the world).
-    """
+    """The comparison for one engine and one loaded file: ``status`` ``ok``,
+    ``skipped`` or ``error`` (``reason`` says why); ``max_error`` per quantity
+    family the largest difference in units of its tolerance (<= 1 passes);
+    ``notes`` what was not compared."""
 
     engine: str
     source: str
@@ -119,11 +85,8 @@ class AuthoredCheck:
 
 
 def authored_physics(out_dir: Path) -> HeldPhysics:
-    """What an output folder's files say, as a :class:`HeldPhysics`
-    (``engine`` = ``"files"``): ``mobility.urdf`` inertials (link without
-    ``<inertial>``: PyBullet's 1 kg and unit inertia, what every engine here
-    gives it), limits, damping and friction; springs from ``overlay.json``;
-    positions from ``initial_state.json``.
+    """What an output folder's files say, as a :class:`HeldPhysics` (``engine``
+    ``"files"``; a link without ``<inertial>``: PyBullet's 1 kg and unit inertia).
 
     Raises:
         FileNotFoundError: no ``mobility.urdf``.
@@ -154,19 +117,17 @@ def authored_physics(out_dir: Path) -> HeldPhysics:
 
 def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | None = None) -> AuthoredCheck:
     """Compare what an engine holds with what the files say, every link and
-    movable joint of ``authored``; see :class:`Tolerances`. A link or joint
-    the engine lacks is a ``missing`` mismatch. Unlimited limits (inf) must
-    be unlimited in both. The mass and inertia of links the engine welds to
-    the world (``held.welded_to_world``: PyBullet's fixed base) are not
-    compared, with a note.
-    """
+    movable joint of ``authored`` (a missing one is a ``missing`` mismatch;
+    links welded to the world are not compared, with a note)."""
     tol = tol or Tolerances()
     out = AuthoredCheck(engine=held.engine, source=held.source, status="ok", links=len(authored.links),
                         joints=len(authored.joints), how=dict(held.how))
     worst: dict[str, float] = {}
 
-    def note(family: str, err: float) -> None:
+    def note(family: str, err: float, item: str, quantity: str, held_value, authored_value) -> None:
         worst[family] = max(worst.get(family, 0.0), float(err))
+        if err > 1.0:
+            out.mismatches.append(Mismatch(item, quantity, held_value, authored_value))
 
     for name, a in authored.links.items():
         h = held.links.get(name)
@@ -177,19 +138,13 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
             out.notes.append(f"link {name}: welded to the world, mass and inertia not simulated "
                              f"({held.engine} holds {h.mass:g} kg, files say {a.mass:g} kg); not compared")
             continue
-        e = abs(h.mass - a.mass) / (tol.rel * max(abs(a.mass), 1e-300))
-        note("mass", e)
-        if e > 1.0:
-            out.mismatches.append(Mismatch(f"link {name}", "mass (kg)", h.mass, a.mass))
+        item = f"link {name}"
+        note("mass", abs(h.mass - a.mass) / (tol.rel * max(abs(a.mass), 1e-300)), item, "mass (kg)", h.mass, a.mass)
         e = float(np.abs(np.asarray(h.com) - a.com).max()) / (tol.length + tol.rel * float(np.abs(a.com).max()))
-        note("com", e)
-        if e > 1.0:
-            out.mismatches.append(Mismatch(f"link {name}", "center of mass (m)", np.round(h.com, 9).tolist(), np.round(a.com, 9).tolist()))
+        note("com", e, item, "center of mass (m)", np.round(h.com, 9).tolist(), np.round(a.com, 9).tolist())
         scale = float(np.abs(a.principal).max())
         e = float(np.abs(np.sort(h.principal) - a.principal).max()) / (tol.rel * max(scale, 1e-300))
-        note("inertia", e)
-        if e > 1.0:
-            out.mismatches.append(Mismatch(f"link {name}", "principal moments (kg*m^2)", np.sort(h.principal).tolist(), a.principal.tolist()))
+        note("inertia", e, item, "principal moments (kg*m^2)", np.sort(h.principal).tolist(), a.principal.tolist())
     for name, a in authored.joints.items():
         h = held.joints.get(name)
         if h is None:
@@ -201,39 +156,24 @@ def compare_physics(held: HeldPhysics, authored: HeldPhysics, tol: Tolerances | 
                 e = 0.0 if hv == av else math.inf
             else:
                 e = abs(hv - av) / (tol.length + tol.rel * abs(av))
-            note("limits", e)
-            if e > 1.0:
-                out.mismatches.append(Mismatch(f"joint {name}", f"{q} limit", hv, av))
+            note("limits", e, f"joint {name}", f"{q} limit", hv, av)
         for q in ("damping", "friction", "stiffness"):
             hv, av = getattr(h, q), getattr(a, q)
-            e = abs(hv - av) / (tol.floor + tol.rel * abs(av))
-            note(q, e)
-            if e > 1.0:
-                out.mismatches.append(Mismatch(f"joint {name}", q, hv, av))
+            note(q, abs(hv - av) / (tol.floor + tol.rel * abs(av)), f"joint {name}", q, hv, av)
         if a.reference is not None and a.stiffness != 0.0:
             e = math.inf if h.reference is None else abs(h.reference - a.reference) / (tol.length + tol.rel * abs(a.reference))
-            note("position", e)
-            if e > 1.0:
-                out.mismatches.append(Mismatch(f"joint {name}", "spring reference", h.reference, a.reference))
+            note("position", e, f"joint {name}", "spring reference", h.reference, a.reference)
         e = abs(h.position - a.position) / (tol.length + tol.rel * abs(a.position))
-        note("position", e)
-        if e > 1.0:
-            out.mismatches.append(Mismatch(f"joint {name}", "initial position", h.position, a.position))
+        note("position", e, f"joint {name}", "initial position", h.position, a.position)
     out.max_error = worst
     return out
 
 
 def held_by_engines(out_dir: Path, engines: list[str], *, files: bool = True,
                     tol: Tolerances | None = None) -> list[AuthoredCheck]:
-    """Load ``out_dir`` in each engine (as :func:`asset2sim.tasks.check.parity.evaluate_engine`
-    does: the URDF, initial state, springs, the folder's mounting; no step)
-    and compare what it holds with the files (:func:`compare_physics`). With
-    ``files``, also each exported file with its engine's own importer
-    (:data:`EXPORTED_FILES`: the MJCF in MuJoCo, the USD in Newton) when the
-    folder has it and the engine is in ``engines``.
-
-    Returns one :class:`AuthoredCheck` per (engine, file); a missing package
-    or file is ``skipped``, a load error ``error``.
+    """Load ``out_dir`` in each engine (no step) and compare what it holds with
+    the files; with ``files`` also each of :data:`EXPORTED_FILES` with its
+    engine's importer. One :class:`AuthoredCheck` per (engine, file).
 
     Raises:
         FileNotFoundError: no ``mobility.urdf``.

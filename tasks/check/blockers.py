@@ -1,9 +1,6 @@
 """What blocks a moving part: the link in its way, the movable joints that
-place that link, and the ranges that parts held in place leave a joint.
-
-Shared by the joint sweep (:func:`asset2sim.tasks.check.sweep.run_sweep`) and
-the probes (:func:`asset2sim.tasks.check.probes.run_probes`), which move the
-parts in the way before they try a shut-in part again.
+place that link, and the ranges that parts held in place leave a joint
+(shared by the joint sweep and the probes).
 """
 
 from __future__ import annotations
@@ -20,30 +17,22 @@ from asset2sim.urdf import UrdfModel, read_urdf
 
 def fixed_root_options(state: dict[str, float], conventions: SimConventions | None = None,
                        springs: dict[str, Spring] | None = None) -> SessionOptions:
-    """Options of a session with the root fixed, gravity off and no ground
-    (the sweep's), at joint positions ``state`` (rad or m), with ``springs``."""
+    """Options of a session with the root fixed, gravity off and no ground (the sweep's) at ``state``."""
     return SessionOptions(initial_state=dict(state), springs=dict(springs or {}), fixed_base=True, gravity=False,
                           ground=False, conventions=conventions or SimConventions())
 
 
 def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
                 conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
-    """The ranges the sweep can demand with the other joints held at
-    ``state``: each joint's (q_closed, direction, range) of ``closed`` (rad
-    or m) cut where its moving part meets a link of the chain that carries
-    it, beyond its parent's rigid group (a stapler's magazine, hinged on the
-    top, meets the base: how far depends on the held top, not on a limit;
-    :func:`asset2sim.tasks.geometry.limits.geometric_limits` with
-    ``against="held"``). Siblings and other branches in the way are not cut
-    away (the sweep reports them), nor is the closing side; the URDF limit
-    against the part's own stops is refine's business. Measured in a PyBullet session (closest-point
-    queries; the same for every engine, like the closed ends). Returns
-    (closed tuples, joint -> note for the joints whose range was cut)."""
+    """The ranges the sweep can demand with the other joints held at ``state``:
+    each joint's (q_closed, direction, range) of ``closed`` (rad or m) cut where
+    its moving part meets a link of the chain that carries it
+    (:func:`asset2sim.tasks.geometry.limits.geometric_limits`, ``against="held"``,
+    in PyBullet). Returns (closed tuples, joint -> note for the joints cut)."""
     out = dict(closed)
     notes = {}
     with open_session("pybullet", urdf, fixed_root_options(state, conventions)) as s:
-        # any contact ends the range (1 mm, no stop confirmation):
-        # the drive stalls at it, and a held part is never a hinge artefact of the parent
+        # any contact ends the range (1 mm, no stop confirmation): the drive stalls at it
         clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held", confirm_stops=False)
     for name, c in clips.items():
         if c.clipped:
@@ -52,19 +41,15 @@ def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]],
     return out, notes
 
 
-#: Opening fraction under which a part whose drive stalls counts as shut in
-#: by another part (:func:`asset2sim.tasks.check.sweep._sweep_clearing`): the free fraction under which
-#: :mod:`asset2sim.tasks.geometry.limits` calls a part blocked at its closed end.
+#: Opening fraction under which a part whose drive stalls counts as shut in by another part.
 SHUT_IN_FRACTION = limits.MIN_FREE_FRACTION
-#: Distance (m) within which a link counts as touching the swept part where
-#: its drive stalled (:func:`blocking_link`): the 1 mm of the limits scan.
+#: Distance (m) within which a link counts as touching the part where its drive stalled.
 BLOCK_DISTANCE = 0.001
 
 
 def blocking_link(session: SimSession, links: list[str], exclude: set[str]) -> str | None:
-    """The link (not in ``links`` nor ``exclude``) nearest to, or deepest
-    into, the links ``links`` at the session's current state, when within
-    :data:`BLOCK_DISTANCE` m; None when none is."""
+    """The link (not in ``links`` nor ``exclude``) nearest to, or deepest into,
+    ``links`` now, when within :data:`BLOCK_DISTANCE` m; else None."""
     sub = set(links)
     best, who = BLOCK_DISTANCE, None
     for a in links:
@@ -80,18 +65,14 @@ def blocking_link(session: SimSession, links: list[str], exclude: set[str]) -> s
 
 
 def joints_between(model: UrdfModel, a: str, b: str) -> list[str]:
-    """Movable joints on the kinematic-tree path between links ``a`` and
-    ``b`` (either order), nearest to ``b`` first
-    (:func:`asset2sim.tasks.geometry.closed_state.tree_path`)."""
+    """Movable joints on the tree path between links ``a`` and ``b``, nearest to ``b`` first."""
     from_a, from_b = tree_path(model.joints, a, b)
     return [j.name for j in from_b + from_a[::-1] if j.type in ("revolute", "prismatic", "continuous")]
 
 
 class Blocker:
-    """:func:`blocking_link` at a state, in the session when its engine
-    answers closest-point queries, else in a PyBullet session of the same
-    URDF (opened once, on first use; PhysX answers none), so every engine
-    moves the same parts out of the way."""
+    """:func:`blocking_link` at a state, in the session, or in a PyBullet session
+    of the same URDF where its engine answers no closest-point queries."""
 
     def __init__(self, session: SimSession, urdf: Path | str, conventions: SimConventions):
         self.session, self.urdf, self.conventions = session, urdf, conventions

@@ -1,8 +1,5 @@
-"""Where the floating gripper (:mod:`asset2sim.tasks.check.gripper`) grasps a
-part, and which side of a joint it moves: the contact point rules (a handle,
-the far edge, the front; :func:`contact_point_rule`) over the URDF's collision
-geometry when the model is given, else over the engine's
-(``link_collision_vertices`` / ``link_aabb``), and the side (:func:`grasp_side`).
+"""Where the floating gripper grasps a part (:func:`contact_point_rule`) and
+which side of a joint it moves (:func:`grasp_side`).
 """
 
 from __future__ import annotations
@@ -20,8 +17,7 @@ from asset2sim.urdf import UrdfGeometry, UrdfModel
 #: Canonical part labels a gripper grasps when a link carries a geometry element so named.
 HANDLE_LABELS: frozenset[str] = frozenset({"handle", "knob", "lever", "button"})
 
-#: Share of the largest distance from the axis within which collision
-#: vertices count as the far edge (their mean is the contact point).
+#: Share of the largest distance from the axis within which collision vertices count as the far edge.
 FAR_EDGE_SHARE = 0.9
 
 #: A side of a joint whose lowest point is this much (m) below the other's carries the object (:func:`grasp_side`).
@@ -31,9 +27,7 @@ _ELEMENT_SUFFIX = re.compile(r"[-_]?\d+$")
 
 
 def element_label(name: str | None) -> str | None:
-    """Canonical part label of a URDF geometry element's name
-    (PartNet-Mobility names elements ``<part>-<id>``: ``handle-18`` ->
-    ``handle``), or None."""
+    """Canonical part label of a geometry element's name (``handle-18`` -> ``handle``), or None."""
     if not name:
         return None
     return canonical_label(_ELEMENT_SUFFIX.sub("", name.strip()))
@@ -53,9 +47,8 @@ def _mesh_vertices(path: str) -> np.ndarray:
 
 
 def geometry_points(g: UrdfGeometry) -> np.ndarray:
-    """Points (k, 3) m of a geometry element in its link's frame: a mesh's
-    vertices (scaled), a box's corners, a sphere's or cylinder's centre;
-    k = 0 when unreadable."""
+    """Points (k, 3) m of a geometry element in its link's frame: mesh vertices,
+    box corners, a sphere's or cylinder's centre; k = 0 when unreadable."""
     if g.kind == "mesh" and g.path is not None:
         v = _mesh_vertices(str(g.path)) * g.scale
     elif g.kind == "box" and g.size is not None:
@@ -97,8 +90,7 @@ def rigid_group(model: UrdfModel, link: str, exclude: str | None = None) -> list
 
 
 def link_points(model: UrdfModel, link: str) -> np.ndarray:
-    """Collision points (k, 3) m of ``link`` in its own frame (visual
-    points where it has no collision element), from the URDF's geometry."""
+    """Collision points (k, 3) m of ``link`` in its frame (visual ones without collisions)."""
     ln = model.links.get(link)
     if ln is None:
         return np.zeros((0, 3))
@@ -108,10 +100,8 @@ def link_points(model: UrdfModel, link: str) -> np.ndarray:
 
 
 def handle_points(model: UrdfModel, link: str) -> np.ndarray:
-    """Points (k, 3) m, in ``link``'s frame, of the geometry elements of
-    ``link`` named as a handle (:data:`HANDLE_LABELS`, :func:`element_label`):
-    collision elements so named, else visual elements so named
-    (PartNet-Mobility names visuals only); k = 0 when there is none.
+    """Points (k, 3) m, in ``link``'s frame, of its collision (else visual)
+    elements named as a handle (:data:`HANDLE_LABELS`); k = 0 when none.
 
     Raises:
         KeyError: ``link`` is not in the model.
@@ -126,8 +116,7 @@ def handle_points(model: UrdfModel, link: str) -> np.ndarray:
 
 
 def _session_points(session, link: str) -> np.ndarray:
-    """The engine's collision vertices (k, 3) of ``link`` (the protocol says
-    link frame), else the corners of its engine AABB in the link frame."""
+    """The engine's collision vertices (k, 3) of ``link``, else its AABB corners, in the link frame."""
     v = np.asarray(session.link_collision_vertices(link), float).reshape(-1, 3)
     if len(v):
         return v
@@ -146,10 +135,8 @@ def joint_frame_axis(session, joint: str, link: str) -> tuple[np.ndarray, np.nda
 
 
 def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[str]:
-    """Links of the session that move rigidly with one side of ``joint``:
-    ``child`` its child link and the links fixed to it; ``parent`` its parent
-    link and the links fixed to that (without the child's side). Without a
-    model: the child link alone (``parent`` raises).
+    """Links of the session rigid with one ``side`` of ``joint`` (``child`` /
+    ``parent``, the latter without the child's side); without a model the child link alone.
 
     Raises:
         ValueError: ``side`` is not child / parent, or ``parent`` without a model.
@@ -169,39 +156,17 @@ def side_links(session, joint: str, model: UrdfModel | None, side: str) -> list[
 
 def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, opening_direction: float = 1.0,
                        side: str = "child") -> tuple[str, np.ndarray, str]:
-    """Where a gripper grasps the part that ``joint`` moves.
+    """Where a gripper grasps the part that ``joint`` moves, over the links of
+    the grasped ``side`` (:func:`side_links`; ``docs/design/metrics.md``):
 
-    Rules (re-derivable; ``docs/design/metrics.md``), over the links of the grasped
-    side (:func:`side_links`: the child link and the links fixed to it, or
-    the parent's side when the child carries the object):
+    1. a handle (:func:`handle_points`, needs ``model``): its bounding box's centre;
+    2. revolute: the mean of the collision points at least :data:`FAR_EDGE_SHARE`
+       of the largest distance from the axis (the far edge), on the link holding the farthest point;
+    3. prismatic: the bounding box's centre moved to the link's extreme in
+       ``opening_direction`` (+-1; a drawer's front).
 
-    1. A handle: a geometry element of one of them named as a handle
-       (:func:`handle_points`; needs ``model``): the centre of the handle's
-       bounding box.
-    2. Else a revolute joint: the mean of the side's collision points whose
-       distance from the joint axis is at least :data:`FAR_EDGE_SHARE` of the
-       largest (the middle of the far edge of a lid or door: the point of the
-       moving link farthest from the axis, where the lever is longest), on
-       the link holding the farthest point.
-    3. Else a prismatic joint: the centre of the link's points' bounding box
-       moved along the axis to the link's extreme in the opening direction
-       (the front of a drawer).
-
-    Points come from the URDF's collision geometry when ``model`` is given
-    (exact, in the link frame), else from the engine
-    (``link_collision_vertices``, else the link's AABB corners). The joint
-    axis passes through the child link's frame origin (URDF).
-
-    Args:
-        session: a :class:`asset2sim.engines.base.SimSession`.
-        joint: a movable joint of the session.
-        model: the session's URDF model, or None.
-        opening_direction: +1 / -1, the sign of q that opens the joint (rule 3).
-        side: ``child`` or ``parent`` (needs ``model``).
-
-    Returns:
-        ``(link, point_link (3,) m in that link's frame, rule)`` with rule
-        ``handle``, ``far edge`` or ``front``.
+    Points from the URDF's collision geometry with ``model``, else from the
+    engine. Returns ``(link, point (3,) m in that link's frame, rule)``.
 
     Raises:
         KeyError: ``joint`` is not a movable joint of the session.
@@ -250,16 +215,13 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
 
 def contact_point(session, joint: str, model: UrdfModel | None = None, *, opening_direction: float = 1.0
                   ) -> tuple[str, np.ndarray]:
-    """``(link, point_link (3,) m)`` of :func:`contact_point_rule` on the
-    joint's child side (same arguments and errors), without the rule's name."""
+    """``(link, point_link (3,) m)`` of :func:`contact_point_rule` on the child side."""
     link, point, _ = contact_point_rule(session, joint, model, opening_direction=opening_direction)
     return link, point
 
 
 def lowest_point(session, links: list[str], model: UrdfModel | None) -> float:
-    """Lowest world z (m) of the collision points of ``links`` at the
-    session's state (URDF geometry when ``model`` is given, else the engine's
-    AABBs); +inf when none has geometry."""
+    """Lowest world z (m) of ``links``' collision points (URDF geometry with ``model``, else AABBs); +inf without."""
     z = float("inf")
     for ln in links:
         v = link_points(model, ln) if model is not None else np.zeros((0, 3))
@@ -273,14 +235,9 @@ def lowest_point(session, links: list[str], model: UrdfModel | None) -> float:
 
 def grasp_side(session, joint: str, model: UrdfModel | None, *, root_fixed: bool = False,
                support_tol: float = SUPPORT_TOL) -> str:
-    """Which side of ``joint`` the gripper moves: ``child`` (the part the
-    joint moves: a lid, a door, a drawer), or ``parent`` when the child's
-    side carries the object (its lowest point within ``support_tol`` m of
-    the object's lowest point while the parent's side is higher by more than
-    ``support_tol``): a stapler whose base plate is the URDF child is pressed
-    by its top, a laptop whose base is the child is closed by its screen; the
-    joint's relative motion is the same. A mounted object (root fixed) and a
-    session without a model: always ``child``."""
+    """Which side of ``joint`` the gripper moves: ``parent`` when the child's
+    side carries the object (its lowest point more than ``support_tol`` m
+    below the rest's), else ``child`` (always with a fixed root or no model)."""
     if root_fixed or model is None:
         return "child"
     child = side_links(session, joint, model, "child")

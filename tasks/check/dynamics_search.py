@@ -1,56 +1,26 @@
-"""The friction and damping of a joint between the two tiers that pull them
-apart: robust rest wants them high (the state held through a drop, tilts and
-a nudge), the task wants them low (a real operating force, a free object
-that does not slide under the gripper). Refine's post-check (stage 7)
-alternates relief (:func:`asset2sim.tasks.check.task_tier.relieve`) and
-escalation (:func:`asset2sim.tasks.check.postcheck.escalate`); each is a
-model of one tier and, on its own, undoes the other's last step (a stapler
-lid escalated past the force where the body slides, then relieved below
-where it held; a laptop screen left 1 % short of holding because the
-modelled operating budget was spent while the measured operating torque
-still had room).
+"""The friction and damping of a joint bracketed between the two tiers that
+pull them apart: robust rest wants them high, the task wants them low. Refine's
+post-check alternates relief (:func:`asset2sim.tasks.check.task_tier.relieve`)
+and escalation (:func:`asset2sim.tasks.check.postcheck.escalate`);
+:class:`DynamicsSearch` turns their proposals into a bracketed search
+(``docs/design/metrics.md``, "Interaction under manipulation").
 
-:class:`DynamicsSearch` remembers, per joint, what each post-check round
-measured at which setting (friction f, damping c) and turns the two models'
-proposals into a bracketed search:
+Per joint it records **weak** (the strongest setting robust rest did not
+hold), **strong** (the weakest at which the task failed by force) and **good**
+(the latest at which both passed), ordered by the operating cost f + c w (w
+the gripper's top speed at the grasp point; 1 without a budget). For each
+joint a round changes, or that robust rest did not hold (:meth:`DynamicsSearch.settle`):
 
-- **weak**: the strongest setting at which robust rest did not hold the
-  joint (a trial's ``failing_joints``);
-- **strong**: the weakest setting at which the task failed on the joint by
-  force (its ``operating_force`` attempt outside the range, or the free
-  object slid or tipped under the gripper while the part moved and the peak
-  operating force exceeded the budget's allowed force: relief's criterion;
-  a tip at a lower force is the object's balance, not the joint's);
-- **good**: the latest setting at which the joint was held and its task
-  passed, in a round where both tiers ran.
-
-Settings are ordered by their operating cost f + c w (w the gripper's top
-speed at the grasp point, rad/s or m/s, from the operating budget; 1 where
-no budget is known), the resistance the task's gripper meets at its top
-speed. For each joint a round's proposal changes, or that robust rest did
-not hold and neither model changed (:meth:`DynamicsSearch.settle`):
-
-1. A proposal that reaches a known bound (up to ``strong``, down to
-   ``weak``), or a joint stuck at its caps with a ``strong`` bound, goes
-   back to the joint's ``good`` setting when there is one.
-2. Where robust rest failed at a setting at least as strong as one where
-   the task failed by force, there is no bracket: the models' proposal
-   stands (and the round failing the fewest tiers is kept at the end,
-   :func:`fewest_failures`).
-3. Otherwise a proposal reaching a bound becomes the midpoint of ``weak``
-   and ``strong`` when both are known (a bisection: each round halves the
-   interval in which both tiers can hold), else the midpoint of the current
-   setting and the bound; a stuck joint with a ``strong`` bound the same.
-4. A stuck joint without a ``strong`` bound whose task passed with a
-   measured peak operating force F_peak below the budget's allowed force F
-   (:class:`asset2sim.tasks.check.operating.OperatingBudget` ``force_n``)
-   gets its friction raised by the measured headroom
-   (BUDGET_SHARE F - F_peak) r (revolute, r the grasp lever) or
-   (BUDGET_SHARE F - F_peak) (prismatic), and its cap with it. The caps are
-   models; the task's measurement is the evidence.
-
-Nothing here changes a state, a mass or a joint's stiffness; a joint with no
-conflict (no ``strong`` bound) escalates as before.
+1. A proposal reaching a known bound, or a joint stuck at its caps with a
+   ``strong`` bound, goes back to ``good`` when there is one.
+2. Where ``weak`` is at least as strong as ``strong`` there is no bracket:
+   the proposal stands (:func:`fewest_failures` picks the round at the end).
+3. Otherwise a proposal reaching a bound becomes the midpoint of ``weak`` and
+   ``strong`` when both are known (bisection), else of the current setting
+   and the bound; a stuck joint with a ``strong`` bound the same.
+4. A stuck joint without a ``strong`` bound whose task passed below the
+   budget's allowed force F gets its friction (and cap) raised by the
+   measured headroom (BUDGET_SHARE F - F_peak) r (prismatic: without r).
 """
 
 from __future__ import annotations
@@ -64,10 +34,7 @@ from asset2sim.tasks.check import operating, task_tier
 #: Settings whose operating costs differ by less than this share are the same
 #: setting (dimensionless): a bracket this narrow is not split again.
 SAME_SHARE = 0.02
-#: Smallest measured headroom worth a round, as a share of the joint's
-#: friction (dimensionless): robust rest's drift falls about as 1 / friction^2
-#: after an impact (:data:`asset2sim.tasks.check.manipulation.HOLD_EXPONENT_IMPACT`),
-#: so 1 % more friction takes about 2 % off the drift.
+#: Smallest measured headroom worth a round, as a share of the joint's friction (dimensionless).
 HEADROOM_MIN_SHARE = 0.01
 
 
@@ -89,7 +56,7 @@ class Setting:
 
 @dataclass
 class JointRecord:
-    """What the rounds measured for one joint (:mod:`module docstring <asset2sim.tasks.check.dynamics_search>`)."""
+    """What the rounds measured for one joint (module docstring)."""
 
     weak: Setting | None = None
     strong: Setting | None = None
@@ -114,12 +81,8 @@ class RoundOutcome:
 
 
 def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget] | None = None) -> RoundOutcome:
-    """The per-joint outcome of a post-check round's ``metrics``
-    (``robust_rest``, ``task_execution`` and ``operating_force`` details).
-    A task counts against a joint's setting as relief counts it
-    (:func:`asset2sim.tasks.check.task_tier.force_excess`): a tip or slide at
-    a force below the budget's allowed force (``budgets``) is the object's
-    balance, not the joint's resistance."""
+    """The per-joint outcome of a post-check round's ``metrics``; a task counts
+    against a joint as relief counts it (:func:`~asset2sim.tasks.check.task_tier.force_excess`)."""
     out = RoundOutcome()
     seen: set[str] = set()
     for m in metrics:
@@ -142,15 +105,9 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
 
 
 class DynamicsSearch:
-    """Bracketed search of each joint's friction and damping over the
-    post-check rounds (module docstring).
-
-    Args:
-        budgets: joint -> operating budget of the task's gripper
-            (:func:`asset2sim.tasks.check.operating.operating_budgets`); joints
-            without one are ordered by friction + damping x 1 and get no
-            measured-headroom step.
-    """
+    """Bracketed search of each joint's friction and damping over the post-check
+    rounds (module docstring); ``budgets``: joint -> the task gripper's
+    operating budget (joints without one get no measured-headroom step)."""
 
     def __init__(self, budgets: dict[str, operating.OperatingBudget] | None = None):
         self.budgets = dict(budgets or {})
@@ -195,13 +152,9 @@ class DynamicsSearch:
 
     def settle(self, before: Overlay, proposal: Overlay, changes: dict[str, dict[str, float]],
                caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], list[str]]:
-        """Apply the rules of the module docstring to a round's ``proposal``
-        (relief's or escalation's overlay made from ``before``, the overlay of
-        the round just recorded, with its ``changes``).
-
-        Args:
-            caps: joint -> friction cap escalation keeps to (N m or N); a
-                measured-headroom step raises it (in place).
+        """Apply the rules of the module docstring to a round's ``proposal`` (made
+        from ``before``, the round just recorded, with its ``changes``);
+        ``caps``: joint -> friction cap (N m or N), raised in place by a headroom step.
 
         Returns:
             (overlay, joint -> {"friction", "damping"} changed from ``before``, notes).
@@ -260,7 +213,7 @@ class DynamicsSearch:
         return b is not None and b.joint_type == "prismatic"
 
     def _inside(self, joint: str, rec: JointRecord, cur: Setting, bound: Setting, what: str) -> tuple[Setting, str]:
-        """The setting rule 3 of the module docstring puts a joint at, between the current setting and a known ``bound``."""
+        """The setting rule 3 of the module docstring puts a joint at."""
         b = f"{what} friction {bound.friction:.3g}, damping {bound.damping:.3g}"
         if rec.weak is not None and rec.strong is not None:
             if self._same(joint, rec.weak, rec.strong):
@@ -277,7 +230,5 @@ def failing_tiers(metrics: list[MetricResult]) -> int:
 
 
 def fewest_failures(rounds: list[list[MetricResult]]) -> int:
-    """Index of the round (its metrics) with the fewest failing metrics, the
-    latest of equals: where no setting satisfies both tiers, refine keeps the
-    setting that fails the fewest rather than the last one tried."""
+    """Index of the round (its metrics) with the fewest failing metrics, the latest of equals."""
     return min(range(len(rounds)), key=lambda i: (failing_tiers(rounds[i]), -i))

@@ -1,14 +1,6 @@
 """Real operating forces per category and part label, and the force
-plausibility check of task execution (``operating_force``).
-
-The table is data: ``asset2sim/priors/operating_forces.yaml`` (every range
-with its sources: the 2010 ADA Standards for Accessible Design 309.4,
-404.2.9, 604.6, 606.4, 804.6, 811.4; MIL-STD-1472E; hinge manufacturers'
-torque formula; ranges no source states directly are marked ``estimate``).
-:func:`operating_range` looks a part up (category, canonical part label ->
-the category's ``default`` -> the table's ``default``) and
-:func:`force_metric` compares the peak force and torque a task execution
-measured (:mod:`asset2sim.tasks.check.task_execution`) with it.
+plausibility check of task execution (``operating_force``). The table, with a
+source for every range, is ``asset2sim/priors/operating_forces.yaml``.
 """
 
 from __future__ import annotations
@@ -31,10 +23,8 @@ class OperatingForcesError(ValueError):
 
 
 class ForceRange(BaseModel):
-    """A part's real operating range: ``force_n`` (lo, hi) N at the hand /
-    grasp point and/or ``torque_nm`` (lo, hi) N m about the joint axis;
-    ``sources`` keys of the table's ``sources``; ``estimate`` when no source
-    states it directly (``note`` says how it was derived)."""
+    """A part's real operating range: ``force_n`` (lo, hi) N and/or ``torque_nm``
+    (lo, hi) N m about the axis; ``sources`` keys of the table's ``sources``."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     force_n: tuple[float, float] | None = None
@@ -99,9 +89,7 @@ def load_operating_forces() -> OperatingForces:
 
 def operating_range(category: str | None, label: str | None, table: OperatingForces | None = None
                     ) -> tuple[ForceRange, str]:
-    """The range of a part: (range, where it came from:
-    ``<category>.<label>``, ``<category>.default`` or ``default``).
-    ``label`` is canonicalised (:func:`~asset2sim.tasks.interpret.part_labels.canonical_label`)."""
+    """(range of the part, where from: ``<category>.<label>``, ``<category>.default`` or ``default``)."""
     t = table or load_operating_forces()
     cat = t.categories.get(category or "")
     lab = canonical_label(label) if label else None
@@ -121,23 +109,11 @@ def _inside(v: float | None, r: tuple[float, float] | None) -> bool | None:
 
 def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str | None],
                  table: OperatingForces | None = None) -> MetricResult:
-    """``operating_force``: are the peak operating forces of a task execution
-    inside the real ranges of the category and part?
-
-    For every attempt in which the gripper moved a joint, its peak operating
-    force (N: the force along the part's motion, torque / lever or the axial
-    force; :class:`~asset2sim.tasks.check.task_execution.TaskAttempt`) and,
-    for a revolute joint, its peak torque about the axis (N m) are
-    compared with :func:`operating_range` of the category and the canonical
-    label of the joint's moving link (``link_labels``: link -> semantic
-    label, e.g. from ``semantics.txt``; the grasped child link; a grasp of
-    the parent's side takes the category's default). An
-    attempt passes iff each range the entry gives contains the measurement.
-
-    Returns:
-        value = the largest peak operating force (N); ``passed`` None when no attempt
-        moved a joint; details per attempt (range, where from, sources,
-        estimate).
+    """``operating_force``: the peak operating force (N) and torque (N m) of
+    every attempt that moved a joint, against :func:`operating_range` of the
+    category and the grasped child link's label (``link_labels``: link ->
+    semantic label; a parent-side grasp takes the category's default). Value:
+    the largest peak operating force; ``passed`` None when nothing moved.
     """
     t = table or load_operating_forces()
     rows = []
@@ -145,8 +121,6 @@ def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str 
     for a in run.attempts:
         if not a.moved:
             continue
-        # The part operated: the grasped child link's label; a parent-side grasp
-        # (the child carries the object) takes the category's default.
         label = link_labels.get(a.link) if a.side == "child" else None
         r, where = operating_range(category, label, t)
         f_ok = _inside(a.peak_operating_force_n, r.force_n)
@@ -167,12 +141,8 @@ def force_metric(run: TaskRun, category: str | None, link_labels: dict[str, str 
                 what.append(f"torque {tau:.2f} N m outside {r.torque_nm[0]:g}-{r.torque_nm[1]:g} N m")
             bad.append(f"{a.joint} {a.action}: {', '.join(what)} ({where})")
     return MetricResult(
-        name="operating_force",
-        value=max((r["peak_operating_force_n"] for r in rows), default=None),
-        unit="N",
+        name="operating_force", value=max((r["peak_operating_force_n"] for r in rows), default=None), unit="N",
         passed=(not bad) if rows else None,
         threshold="the task's peak operating force (and torque about the axis) inside the real operating range of the "
                   "category and part (asset2sim/priors/operating_forces.yaml)",
-        details={"attempts": rows, "failures": bad, "category": category},
-        engine=run.engine,
-    )
+        details={"attempts": rows, "failures": bad, "category": category}, engine=run.engine)

@@ -1,48 +1,18 @@
 """A floating, force- and speed-limited parallel gripper as a bounded-force attachment.
 
-Grasping in physics simulation is commonly modelled not by finger contacts
-but by an attachment between the gripper and the grasped part: a weld
-constraint, a kinematic "sticky" grasp, or a spring-damper whose force is
-bounded (ManiSkill's and robosuite's grasp checks, PyBullet's
-``createConstraint`` with ``maxForce``, MuJoCo ``weld`` equality constraints
-with soft ``solref``). This module uses the bounded spring-damper form, the one
-that keeps the gripper's force limit physical: the gripper point ``g`` (the
-point between the fingers) is moved by the arm no faster than
-``max_speed_m_s``; the grasped part is pulled towards it by
+The gripper point ``g`` moves no faster than ``max_speed_m_s``; the grasped
+part is pulled towards it at the grasp point ``p`` (fixed in the grasped link) by
 
     F = clip_{|F| <= F_max}( k (g - p) + c (v_g - v_p) )
 
-applied at the grasp point ``p`` (a point fixed in the grasped link, moved
-with it), ``k`` = ``grasp_stiffness_n_m``, ``c`` = ``grasp_damping_n_s_m``,
-``F_max`` = ``max_force_n``, ``v_p`` the grasp point's velocity (finite
-difference of its world position between calls), ``v_g`` the gripper point's.
-A part that resists more than ``F_max`` (a lid too stiff, an object whose
-body slides) makes the gripper stall: ``g`` is kept within ``F_max / k`` of
-``p`` (the spring cannot stretch further at the force limit), as an
-impedance-controlled arm stops advancing when its force saturates.
+(the bounded spring-damper grasp model of simulation benchmarks), ``v_p`` the
+finite difference of ``p`` between calls; ``g`` stays within ``F_max / k`` of
+``p`` (the gripper stalls). Call :meth:`BoundedGrasp.step_towards` once per engine step.
 
-A push or pull along one direction (``step_towards(..., direction=d)``: the
-force projected on d, the finger sliding along the part across it) models a
-fingertip pressing on a surface instead of a grasp.
-
-The gripper is floating (no arm kinematics, no reaction on a robot base) and
-talks to physics only through the engine protocol
-(:class:`asset2sim.engines.base.SimSession`: ``link_frame``,
-``apply_link_force``, ``link_masses``; where it grasps:
-:mod:`asset2sim.tasks.check.contact_points`); it never steps the session
-itself: call :meth:`BoundedGrasp.step_towards` once per engine step, then
-``session.step(1)``.
-
-Integration bound: the spring acts explicitly on the engine's step ``dt``, so
-the stiffness and damping used are capped at ``m_eff / dt^2`` and
-``m_eff / dt`` (omega dt <= 1 and c dt / m <= 1: half of the stability
-limits of an explicit step, omega dt < 2 for a harmonic oscillator under the
-symplectic Euler / Stormer-Verlet step, Hairer, Lubich & Wanner, *Geometric
-Numerical Integration*, 2nd ed. 2006, ch. I, and c dt / m < 2 for explicit
-Euler on viscous damping) with
-``m_eff`` one third of the grasped link's mass (the effective mass of a
-uniform plate at the far edge of its hinge, m L^2/3 / L^2). The cap is
-recorded (:attr:`BoundedGrasp.stiffness`).
+k and c are capped at ``m_eff / dt^2`` and ``m_eff / dt`` (half the stability
+limits of an explicit step: omega dt < 2, Hairer, Lubich & Wanner, *Geometric
+Numerical Integration*, 2nd ed. 2006, ch. I; c dt / m < 2 for explicit Euler),
+``m_eff`` a third of the grasped link's mass (a uniform plate at its far edge).
 """
 
 from __future__ import annotations
@@ -63,21 +33,13 @@ class GripperLimits:
     Defaults and their sources:
 
     - ``max_force_n`` = 70 N: the Franka Emika Panda hand's continuous grasp
-      force (70 N, 140 N maximum; Franka Emika, *Panda Datasheet*, 2019,
-      "Hand"); a two-finger friction grasp with finger friction 0.5 transmits
-      at most 2 * 0.5 * 70 N = 70 N tangentially. It lies within the
-      Robotiq 2F-85's grip force range (20-235 N; Robotiq, *2F-85 & 2F-140
-      Instruction Manual*, specifications) and below the 140 N quasi-static
-      limit for hands and fingers of ISO/TS 15066:2016, Table A.2.
-    - ``max_speed_m_s`` = 0.25 m/s: the reduced speed of collaborative
-      operation, tool centre point at most 250 mm/s (ISO 10218-1:2011,
-      clause 5.6); the Panda's Cartesian limit is 1.7 m/s (datasheet).
+      force (Franka Emika, *Panda Datasheet*, 2019, "Hand"); within the
+      Robotiq 2F-85's 20-235 N and below ISO/TS 15066:2016 Table A.2's 140 N.
+    - ``max_speed_m_s`` = 0.25 m/s: reduced speed of collaborative operation
+      (ISO 10218-1:2011, clause 5.6).
     - ``grasp_stiffness_n_m`` = 2000 N/m, ``grasp_damping_n_s_m`` = 40 N s/m:
-      an estimate in the range of Cartesian impedance control of
-      collaborative arms (translational stiffness of order 10^2 - 3 * 10^3 N/m
-      in Franka's ``franka_ros`` Cartesian impedance example and KUKA LBR iiwa
-      Cartesian impedance mode, whose limit is 5000 N/m; KUKA Sunrise.OS
-      manual); damping about critical for a 0.2 kg part (2 sqrt(k m) = 40 N s/m).
+      an estimate within collaborative arms' Cartesian impedance ranges
+      (``franka_ros``; KUKA Sunrise.OS manual); about critical for a 0.2 kg part.
     """
 
     max_force_n: float = 70.0
@@ -95,15 +57,8 @@ class GripperLimits:
 
 
 class BoundedGrasp:
-    """A grasp of ``link`` at ``point_link`` by a floating gripper (module docstring).
-
-    Args:
-        session: a :class:`asset2sim.engines.base.SimSession`.
-        link: the grasped link (any link of the session).
-        point_link: grasp point (3,) m in the link's URDF frame.
-        limits: the gripper's limits.
-
-    The gripper point starts at the grasp point (the fingers close on it).
+    """A grasp of ``link`` at ``point_link`` ((3,) m, link frame) by a floating
+    gripper with ``limits`` (module docstring); the gripper point starts at the grasp point.
 
     Raises:
         KeyError: unknown link.
@@ -131,10 +86,7 @@ class BoundedGrasp:
         """world position (3,) m of the gripper point"""
         self._released = False
         self._peak = 0.0
-        self.last_force = np.zeros(3)
-        """the force (3,) N applied at the last call"""
 
-    # ------------------------------------------------------------------ state
     def grasp_point_world(self) -> np.ndarray:
         """The grasp point moved with the link, world (3,) m."""
         o, R = self.session.link_frame(self.link)
@@ -145,29 +97,11 @@ class BoundedGrasp:
         """Largest |F| applied so far, N."""
         return self._peak
 
-    @property
-    def released(self) -> bool:
-        """Whether :meth:`release` was called."""
-        return self._released
-
-    # ---------------------------------------------------------------- control
     def step_towards(self, target_world: np.ndarray, dt: float, direction: np.ndarray | None = None) -> np.ndarray:
         """Move the gripper point towards ``target_world`` (3,) m by at most
-        ``max_speed_m_s * dt`` and apply the bounded spring-damper force on
-        the grasped link for the next engine step.
-
-        Args:
-            target_world: where the gripper should go, world (3,) m.
-            dt: the time until the next call, s (the engine's timestep when
-                called every step).
-            direction: None: the full attachment (force in any direction);
-                a vector (3,): a push or pull along it only (a fingertip
-                pressing on a surface it slides along: the force is the
-                attachment's force projected on the unit direction, and the
-                gripper point keeps up with the grasp point across it).
-
-        Returns:
-            The force (3,) N applied at the grasp point (|F| <= ``max_force_n``).
+        ``max_speed_m_s * dt`` (``dt`` s until the next call) and apply the
+        bounded force on the grasped link for the next engine step; returns it
+        ((3,) N). ``direction`` (3,): push or pull along it only.
 
         Raises:
             RuntimeError: the grasp was released.
@@ -220,10 +154,8 @@ class BoundedGrasp:
             force = np.zeros(3)
             fn = 0.0
         self._peak = max(self._peak, fn)
-        self.last_force = force
         return force
 
     def release(self) -> None:
         """Open the fingers: no force from now on."""
         self._released = True
-        self.last_force = np.zeros(3)

@@ -1,9 +1,8 @@
-"""How the task's gripper moves the joint it grasps
-(:mod:`asset2sim.tasks.check.task_execution`, steps 4 and 5 of its
-definitions): the commanded position on a trapezoidal speed profile, the
-gripper led along the joint's motion (pressing or lifting vertically where
-that motion is near vertical), the peak forces, the release and the wait; and
-the knobs of task execution (:class:`TaskConfig`).
+"""How the task's gripper moves the joint it grasps (steps 4 and 5 of
+:mod:`asset2sim.tasks.check.task_execution`): q_des on a trapezoidal speed
+profile, the gripper led along the joint's motion (pressing or lifting
+vertically where that motion is within 60 deg of vertical), the peak forces,
+the release and the wait; and the knobs of task execution (:class:`TaskConfig`).
 """
 
 from __future__ import annotations
@@ -46,15 +45,11 @@ class TaskConfig:
     tip_tol: float = 0.05
     """root rotation that counts as tipping, rad"""
     vertical_share: float = 0.5
-    """the gripper presses or lifts vertically while the vertical component of the grasp
-    point's direction of motion is at least this share of it (dimensionless; 0.5: 60 deg)"""
+    """the gripper presses or lifts vertically while |t_z| >= this share of |t| (0.5: 60 deg)"""
     from_far_side: bool = True
-    """a joint already at the task's target is first set to the far side (close: opening
-    fraction 0.6; open: the closed end); False: such an attempt succeeds without motion"""
+    """a joint already at the target is first set to the far side; False: it succeeds without motion"""
     retry_speed_shares: tuple[float, ...] = (0.5, 0.25)
-    """shares of the gripper's top speed at which an attempt under which the free object
-    slid or tipped is made again, in turn, from a fresh session (dimensionless; the module
-    docstring of :mod:`asset2sim.tasks.check.task_execution`). Empty: one attempt"""
+    """shares of the top speed at which an attempt under which the object slid or tipped is made again"""
     limits: GripperLimits = field(default_factory=GripperLimits)
 
 
@@ -78,9 +73,8 @@ class Motion:
 def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, cfg: TaskConfig,
           speed_share: float, frac: Callable[[float], float], reached: Callable[[float], bool], watch: SupportWatch,
           notes: list[str]) -> Motion:
-    """Lead the grasped joint from ``q0`` to ``q_target`` (rad or m), release
-    and wait ``hold_time`` (module docstring, steps 4-5); ``side_sign`` -1
-    where the gripper moves the parent side."""
+    """Lead the grasped joint from ``q0`` to ``q_target`` (rad or m), release and
+    wait ``hold_time``; ``side_sign`` -1 where the gripper moves the parent side."""
     dt = float(session.options.conventions.timestep)
     prismatic = session.joint_types[joint] == "prismatic"
     m = Motion(moved=True)
@@ -117,9 +111,8 @@ def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: f
 def _lead(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, qdot_max: float,
           n_move: int, cfg: TaskConfig, frac: Callable[[float], float], reached: Callable[[float], bool],
           watch: SupportWatch, m: Motion) -> tuple[bool, int]:
-    """Lead the gripper along the joint's motion for at most ``n_move`` steps,
-    the commanded q_des from ``q0`` to ``q_target`` at up to ``qdot_max``
-    (rad/s or m/s; module docstring, step 4), recording the peaks into ``m``.
+    """Lead the gripper for at most ``n_move`` steps, q_des from ``q0`` to ``q_target``
+    at up to ``qdot_max`` (rad/s or m/s), recording the peaks into ``m``.
     Returns (the joint reached the target and stopped, steps pressed or lifted vertically)."""
     dt = float(session.options.conventions.timestep)
     prismatic = session.joint_types[joint] == "prismatic"
@@ -129,8 +122,7 @@ def _lead(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float,
     q_des = q0
     pushed_steps = 0
     for k in range(n_move):
-        # trapezoidal speed profile: ramped up over accel_time, and down at the same rate
-        # before the target (an arm decelerates; an abrupt stop would brake the part's momentum in one step)
+        # trapezoidal speed profile: ramped up over accel_time, and down at the same rate before the target
         speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
         speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
         q_des = q_des + sgn * speed * dt
@@ -160,22 +152,18 @@ def _lead(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float,
 
 def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, prismatic: bool,
                     vertical_share: float) -> tuple[np.ndarray, bool]:
-    """(where the gripper is led, world (3,) m; whether it presses or lifts
-    vertically): the grasp point ``p`` moved by ``dq`` (rad or m) about or
-    along the joint axis ``a`` through ``o``, or, where the motion is near
-    vertical (``vertical_share``), the vertical stretch that moves the part as far."""
+    """(where the gripper is led, world (3,) m; whether it presses or lifts vertically):
+    ``p`` moved by ``dq`` about or along the axis ``a`` through ``o``, or, where the
+    motion is near vertical, the vertical stretch that moves the part as far."""
     if prismatic:
         target = p + a * dq
     else:
         target = o + axis_angle_matrix(a, dq) @ (p - o)
-    # Press or lift vertically where that moves the part well enough:
-    # it loads the object onto the ground instead of pushing it sideways.
     t_dir = a if prismatic else np.cross(a, p - o)
     nt = float(np.linalg.norm(t_dir))
     push = nt > 0 and abs(float(t_dir[2])) >= vertical_share * nt
     if push:
-        # the vertical stretch that moves the part as far along its path
-        # as the target asks: (progress along the tangent) / t_z
+        # (progress along the tangent) / t_z
         t_hat = t_dir / nt
         target = p + _UP * (float((target - p) @ t_hat) / float(t_hat[2]))
     return target, push

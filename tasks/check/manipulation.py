@@ -1,13 +1,6 @@
-"""The post-check's manipulation tiers: the joint sweep and robust rest of the
-written asset in the post-check's engine (refine stage 7).
-
-:func:`measure_manipulation` runs :mod:`asset2sim.tasks.check.sweep` (root
-fixed by definition) and :mod:`asset2sim.tasks.check.robust_rest` (the root
-as the asset declares: skipped for a mounted asset) and returns their
-:class:`~asset2sim.schemas.report.MetricResult` s; :func:`joints_not_held`
-names the joints robust rest found leaving their state, which escalation
-gives more friction and damping (never a different state). Definitions:
-``docs/design/metrics.md``.
+"""The post-check's manipulation tiers (refine stage 7): the joint sweep and
+robust rest of the written asset, the joints robust rest found leaving their
+state and the friction factor escalation gives them (``docs/design/metrics.md``).
 """
 
 from __future__ import annotations
@@ -30,21 +23,11 @@ def measure_manipulation(engine: str, urdf: Path | str, initial_state: dict[str,
                          conventions: SimConventions, closed: dict[str, tuple[float, float, float]],
                          fixed_base: bool = False, *, recorded: RecordedRuns | None = None,
                          sweep_needed: Callable[[MetricResult], str | None] | None = None) -> list[MetricResult]:
-    """Joint sweep and robust rest of ``urdf`` in ``engine`` (robust rest first).
-
-    Args:
-        closed: joint -> (q_closed rad or m, opening direction +-1, open range rad or m)
-            of every movable joint (the refine run's closed ends at the output scale).
-        fixed_base: the asset declares its root fixed (robust rest skipped).
-        recorded: runs taken from / recorded into it by the digest of their
-            inputs (:mod:`asset2sim.tasks.check.recorded_runs`).
-        sweep_needed: given the robust-rest result, the reason the sweep is
-            not needed (the post-check's round fails and is escalated
-            whatever the sweep says), or None to run it; the sweep is then
-            recorded as not run (``passed`` None, ``details["not_run"]``).
-
-    Returns:
-        [joint_sweep, robust_rest] results (``details["root"]`` says how the root was held).
+    """[joint_sweep, robust_rest] of ``urdf`` in ``engine`` (robust rest run first;
+    skipped where ``fixed_base``). ``closed``: joint -> (q_closed, direction,
+    open range), rad or m; ``recorded``: runs taken from / recorded into it;
+    ``sweep_needed(robust_rest)``: why the sweep is not needed (then recorded
+    as not run, ``details["not_run"]``), or None to run it.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
@@ -64,15 +47,9 @@ def measure_manipulation(engine: str, urdf: Path | str, initial_state: dict[str,
 
 
 def joints_not_held(metrics: list[MetricResult]) -> list[str]:
-    """Joints that left their state in any robust-rest trial of ``metrics``
-    and, when one did, the joints that came within a margin of leaving it
-    (drift above :data:`HOLD_TARGET_SHARE` of their tolerance in some
-    trial), first-seen order. The trials are chaotic where parts are coupled:
-    a cabinet's two drawers share the impact of landing after a tilt, and
-    raising one drawer's friction moved the other from 1.6 mm to 3.2 mm of
-    drift (19179, tolerance 2 mm) at the same friction; escalating the joints
-    near their tolerance with those beyond it keeps one round from undoing
-    another."""
+    """Joints that left their state in any robust-rest trial of ``metrics`` and,
+    when one did, those whose drift exceeded :data:`HOLD_TARGET_SHARE` of their
+    tolerance in some trial (coupled parts' drift varies between rounds), first-seen order."""
     failing_: list[str] = []
     near: list[str] = []
     for m in metrics:
@@ -89,18 +66,10 @@ def joints_not_held(metrics: list[MetricResult]) -> list[str]:
     return list(dict.fromkeys(failing_ + near))
 
 
-#: Share of a joint's tolerance that escalation aims its drift at
-#: (:func:`hold_factor`): the drift of coupled parts varies about 2x from one
-#: round to the next at the same friction (see :func:`joints_not_held`), so
-#: escalation aims at half the tolerance, not at the tolerance.
+#: Share of a joint's tolerance that escalation aims its drift at (:func:`hold_factor`).
 HOLD_TARGET_SHARE = 0.5
-#: Exponents of :func:`hold_factor`. Two loads make a joint leave
-#: its state under robust rest: an impact (the drop, the nudge), whose travel
-#: falls about as 1 / friction^2 (the kinetic energy I w0^2 / 2 an impact
-#: gives the part is spent by the friction torque over the travel; measured on
-#: the demo box's lid: 0.152 / 0.052 / 0.025 / 0.016 rad at 0.32 / 0.6 / 1.0 /
-#: 1.3 N*m), and a static slope load (a tilt; a side-hinged door sized for no
-#: gravity torque when level), which needs friction about proportional to it.
+#: Exponents of :func:`hold_factor`: an impact's travel (drop, nudge) falls about
+#: as 1 / friction^2, a slope load (tilt) needs friction about proportional to it.
 HOLD_EXPONENT_IMPACT = 0.5
 HOLD_EXPONENT_SLOPE = 1.0
 #: Smallest friction step of :func:`hold_factor`.
@@ -108,14 +77,10 @@ HOLD_MIN_STEP = 1.2
 
 
 def hold_factor(metrics: list[MetricResult], joint: str, largest: float) -> float:
-    """Factor on the friction (and damping) of ``joint`` that should make it
-    hold through robust rest: the largest over the trials of ``metrics`` of
-    (drift / (HOLD_TARGET_SHARE * tolerance)) ** e (e = HOLD_EXPONENT_IMPACT
-    for the drop and the nudge, HOLD_EXPONENT_SLOPE for the tilts), between
-    HOLD_MIN_STEP and ``largest`` (the post-check passes the escalation
-    factor squared: a side-hinged door may need 8x for a 5 deg slope), so
-    escalation raises friction as far as the disturbances need (a lid that
-    still opens with a hand's force) instead of by a fixed factor."""
+    """Factor on the friction (and damping) of ``joint`` that should make it hold
+    through robust rest: the largest over the trials of (drift /
+    (HOLD_TARGET_SHARE tolerance)) ** e (e HOLD_EXPONENT_IMPACT for the drop
+    and the nudge, HOLD_EXPONENT_SLOPE for the tilts), between HOLD_MIN_STEP and ``largest``."""
     best = HOLD_MIN_STEP
     for m in metrics:
         if m.name != "robust_rest":
@@ -136,7 +101,5 @@ def failing(metrics: list[MetricResult]) -> list[str]:
 
 
 def closed_tuples(closed: dict) -> dict[str, tuple[float, float, float]]:
-    """joint -> (q_closed, direction, open_range) of closed ends
-    (:class:`~asset2sim.tasks.geometry.closed_state.ClosedState` or the
-    evaluation's ``ClosedEnd``: any object with those attributes), rad or m."""
+    """joint -> (q_closed, direction, open_range), rad or m, of closed-end objects with those attributes."""
     return {n: (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in closed.items()}

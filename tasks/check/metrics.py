@@ -1,28 +1,15 @@
 """Physical-robustness metrics with the SPEC's definitions, in any engine.
 
-Definitions (SPEC, "How quality is measured"; written so anyone can re-derive
-them):
+Definitions (SPEC, "How quality is measured"; ``docs/design/metrics.md``):
 
-- **Penetration** Phi at the initial state: after placing the object (root free,
-  lowest collision point on the ground, joints at the initial state) and before
-  any step, Phi = sum over *self*-contact points p (contacts between two links
-  of the object, never with the ground; parent-child pairs excluded by the
-  self-collision flags) of max(0, -separation(p)). Reported in mm. No pass
-  threshold in the SPEC; the refine pipeline aims at <= tolerance.
-- **Rest stability**: step T_set = 1 s (240 steps at 1/240 s), record the root
-  link pose (position p0, orientation q0), step T_test = 2 s more recording the
-  root pose after every step. D_pos = max_t ||p_t - p0|| (m), D_ori = max_t
-  angle(q0, q_t) (rad, angle of the relative rotation). Pass iff D_pos <= 1e-3
-  m and D_ori <= 1e-2 rad. A non-finite pose fails (divergence).
-- **Oscillation** during the same T_test: for each movable joint, the position
-  sequence q_0..q_N (N = 480 steps), the step-to-step motion d_i = q_i -
-  q_{i-1}; a *sign change* is a pair of consecutive non-zero d with opposite
-  signs (exact zeros are skipped). Amplitude = max(q) - min(q) over T_test
-  (peak to peak). A joint fails iff sign changes >= 3 and amplitude > 0.05 rad
-  (revolute/continuous) or > 0.005 m (prismatic). The metric passes iff no
-  joint fails.
-
-Each metric returns a :class:`~asset2sim.schemas.report.MetricResult`.
+- **Penetration** Phi at the initial state, before any step: the sum over
+  self-contact points (parent-child pairs excluded) of max(0, -separation), mm.
+- **Rest stability**: settle T_set, then over T_test D_pos = max ||p_t - p0||
+  (m) and D_ori = max angle(q0, q_t) (rad); pass iff both within the SPEC's
+  tolerances and nothing diverges.
+- **Oscillation** during T_test: a joint fails iff its step-to-step motion
+  changes sign (exact zeros skipped) at least ``oscillation_sign_changes``
+  times and its peak-to-peak amplitude exceeds ``oscillation_amp_*``.
 """
 
 from __future__ import annotations
@@ -40,12 +27,9 @@ from asset2sim.schemas.report import MetricResult
 
 @dataclass
 class RestTrace:
-    """Recording of one rest test.
-
-    ``t`` (N,) s since the end of settling; ``root_pos`` (N, 3) m; ``root_quat``
-    (N, 4) xyzw; ``joints`` name -> (N,) rad or m; ``settle_joints`` name -> (M,)
-    during settling; ``p0``/``q0`` the root pose at the end of settling.
-    """
+    """Recording of one rest test: ``t`` (N,) s since the end of settling;
+    ``root_pos`` (N, 3) m; ``root_quat`` (N, 4) xyzw; ``joints`` name -> (N,) rad or m;
+    ``settle_joints`` name -> (M,) during settling; ``p0``/``q0`` the root pose after settling."""
 
     t: np.ndarray
     root_pos: np.ndarray
@@ -58,55 +42,30 @@ class RestTrace:
     initial_joints: dict[str, float] = field(default_factory=dict)
     diverged: bool = False
     initial_root_pos: np.ndarray | None = None
-    """Root position (3,) m as placed, before settling."""
     initial_root_quat: np.ndarray | None = None
-    """Root orientation (4,) xyzw as placed, before settling."""
+    """Root pose (3,) m and (4,) xyzw as placed, before settling."""
 
 
 def penetration(session: SimSession) -> MetricResult:
-    """Phi at the session's current state, in mm, with the colliding link pairs.
-
-    ``details.pairs``: list of {link_a, link_b, depth_mm, max_depth_mm, points}.
-    """
+    """Phi at the session's current state, mm, with the colliding link pairs (``details.pairs``)."""
     phi, pairs = session.self_penetration()
     return MetricResult(
-        name="penetration",
-        value=phi * 1000.0,
-        unit=unit("penetration"),
-        passed=None,
+        name="penetration", value=phi * 1000.0, unit=unit("penetration"), passed=None,
         threshold="reported (no SPEC threshold)",
-        details={
-            "pairs": [
-                {
-                    "link_a": c.link_a,
-                    "link_b": c.link_b,
-                    "depth_mm": c.depth * 1000.0,
-                    "max_depth_mm": c.max_depth * 1000.0,
-                    "points": c.points,
-                }
-                for c in pairs
-            ]
-        },
-        engine=session.engine,
-    )
+        details={"pairs": [{"link_a": c.link_a, "link_b": c.link_b, "depth_mm": c.depth * 1000.0,
+                            "max_depth_mm": c.max_depth * 1000.0, "points": c.points} for c in pairs]},
+        engine=session.engine)
 
 
-#: Length of the windows in which a disturbed object's settling is watched, s
-#: (:func:`run_rest_test` with ``recovery_time``).
+#: Length of the windows in which a disturbed object's settling is watched, s.
 RECOVERY_WINDOW = 0.25
 
 
 def run_rest_test(session: SimSession, conventions: SimConventions | None = None, recovery_time: float = 0.0) -> RestTrace:
-    """Settle T_set, then record T_test (SPEC). Steps the session in place.
-
-    ``recovery_time`` (s, >= 0): for an object that was just disturbed
-    (robust rest's drop, tilts and nudge), settling may go on after T_set in
-    windows of :data:`RECOVERY_WINDOW` s, up to ``recovery_time`` s more,
-    until a window in which the root moved less than half the SPEC's
-    stability tolerances (``stability_pos_tol`` m, ``stability_ori_tol``
-    rad) from where the window began; T_test is recorded after that. The
-    settle series (``settle_joints``) cover the whole settling. 0: the SPEC
-    rest test exactly.
+    """Settle T_set, then record T_test (SPEC), stepping the session in place.
+    ``recovery_time`` (s): settling may go on in windows of
+    :data:`RECOVERY_WINDOW` s, up to that much more, until a window in which
+    the root moved less than half the stability tolerances; 0: the SPEC test exactly.
     """
     conv = conventions or SimConventions()
     n_set = int(round(conv.settle_time / conv.timestep))
@@ -157,53 +116,28 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
             pos, quat = pos[: i + 1], quat[: i + 1]
             joints = {n: v[: i + 1] for n, v in joints.items()}
             break
-    t = np.arange(len(pos)) * conv.timestep
     return RestTrace(
-        t=t,
-        root_pos=pos,
-        root_quat=quat,
-        joints=joints,
-        joint_types=dict(session.joint_types),
-        p0=np.asarray(p0, float),
-        q0=np.asarray(q0, float),
-        settle_joints=settle,
-        initial_joints=initial,
-        diverged=diverged or not (np.all(np.isfinite(p0)) and np.all(np.isfinite(q0))),
-        initial_root_pos=np.asarray(r0_pos, float),
-        initial_root_quat=np.asarray(r0_quat, float),
-    )
+        t=np.arange(len(pos)) * conv.timestep, root_pos=pos, root_quat=quat, joints=joints,
+        joint_types=dict(session.joint_types), p0=np.asarray(p0, float), q0=np.asarray(q0, float), settle_joints=settle,
+        initial_joints=initial, diverged=diverged or not (np.all(np.isfinite(p0)) and np.all(np.isfinite(q0))),
+        initial_root_pos=np.asarray(r0_pos, float), initial_root_quat=np.asarray(r0_quat, float))
 
 
 def rest_stability(trace: RestTrace, conventions: SimConventions | None = None, engine: str = "pybullet") -> MetricResult:
     """D_pos (m) and D_ori (rad) of a :class:`RestTrace`; value is D_pos in m."""
     conv = conventions or SimConventions()
+    threshold = f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad"
     if trace.diverged:
-        return MetricResult(
-            name="rest_stability",
-            value=None,
-            unit=unit("rest_stability"),
-            passed=False,
-            threshold=f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad",
-            details={"diverged": True},
-            engine=engine,
-        )
+        return MetricResult(name="rest_stability", value=None, unit=unit("rest_stability"), passed=False,
+                            threshold=threshold, details={"diverged": True}, engine=engine)
     d_pos = float(np.max(np.linalg.norm(trace.root_pos - trace.p0, axis=1)))
     d_ori = float(max(quat_angle(trace.q0, q) for q in trace.root_quat))
     passed = d_pos <= conv.stability_pos_tol and d_ori <= conv.stability_ori_tol
-    return MetricResult(
-        name="rest_stability",
-        value=d_pos,
-        unit=unit("rest_stability"),
-        passed=passed,
-        threshold=f"D_pos <= {conv.stability_pos_tol} m and D_ori <= {conv.stability_ori_tol} rad",
-        details={"D_pos_m": d_pos, "D_ori_rad": d_ori, "diverged": False},
-        engine=engine,
-    )
+    return MetricResult(name="rest_stability", value=d_pos, unit=unit("rest_stability"), passed=passed, threshold=threshold,
+                        details={"D_pos_m": d_pos, "D_ori_rad": d_ori, "diverged": False}, engine=engine)
 
 
-#: Largest root rotation during settling, rad, before the object counts as
-#: having fallen over (not a SPEC metric: the SPEC measures after settling,
-#: which misses an object that topples in its first second).
+#: Largest root rotation during settling, rad, before the object counts as fallen over (not a SPEC metric).
 SETTLE_TILT_LIMIT = 0.05
 
 
@@ -215,15 +149,9 @@ def settle_tilt(trace: RestTrace, engine: str = "pybullet") -> MetricResult:
                             threshold=f"<= {SETTLE_TILT_LIMIT} rad", details={"diverged": trace.diverged})
     tilt = quat_angle(trace.initial_root_quat, trace.q0)
     drop = float(np.linalg.norm(trace.p0 - trace.initial_root_pos))
-    return MetricResult(
-        name="settle_tilt",
-        value=tilt,
-        unit=unit("settle_tilt"),
-        passed=tilt <= SETTLE_TILT_LIMIT,
-        threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (asset2sim check, not SPEC)",
-        details={"tilt_rad": tilt, "displacement_m": drop},
-        engine=engine,
-    )
+    return MetricResult(name="settle_tilt", value=tilt, unit=unit("settle_tilt"), passed=tilt <= SETTLE_TILT_LIMIT,
+                        threshold=f"root rotation while settling <= {SETTLE_TILT_LIMIT} rad (asset2sim check, not SPEC)",
+                        details={"tilt_rad": tilt, "displacement_m": drop}, engine=engine)
 
 
 def count_sign_changes(q: np.ndarray) -> int:
@@ -252,27 +180,15 @@ def oscillation(trace: RestTrace, conventions: SimConventions | None = None, eng
         prismatic = trace.joint_types.get(name) == "prismatic"
         limit = conv.oscillation_amp_prismatic if prismatic else conv.oscillation_amp_revolute
         failed = changes >= conv.oscillation_sign_changes and amp > limit
-        per_joint[name] = {
-            "sign_changes": changes,
-            "amplitude": amp,
-            "unit": "m" if prismatic else "rad",
-            "amplitude_limit": limit,
-            "failed": failed,
-        }
+        per_joint[name] = {"sign_changes": changes, "amplitude": amp, "unit": "m" if prismatic else "rad",
+                           "amplitude_limit": limit, "failed": failed}
         if failed:
             failing.append(name)
     return MetricResult(
-        name="oscillation",
-        value=float(len(failing)),
-        unit=unit("oscillation"),
-        passed=not failing and not trace.diverged,
-        threshold=(
-            f"no joint with >= {conv.oscillation_sign_changes} sign changes and peak-to-peak amplitude > "
-            f"{conv.oscillation_amp_revolute} rad / {conv.oscillation_amp_prismatic} m"
-        ),
-        details={"joints": per_joint, "failing": failing},
-        engine=engine,
-    )
+        name="oscillation", value=float(len(failing)), unit=unit("oscillation"), passed=not failing and not trace.diverged,
+        threshold=(f"no joint with >= {conv.oscillation_sign_changes} sign changes and peak-to-peak amplitude > "
+                   f"{conv.oscillation_amp_revolute} rad / {conv.oscillation_amp_prismatic} m"),
+        details={"joints": per_joint, "failing": failing}, engine=engine)
 
 
 def joint_drift(trace: RestTrace) -> dict[str, float]:

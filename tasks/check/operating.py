@@ -1,41 +1,14 @@
-"""How hard a joint may be to operate: the friction escalation may not exceed.
+"""How hard a joint may be to operate: the bounds escalation
+(:func:`asset2sim.tasks.check.postcheck.escalate`) keeps friction and damping
+to. Definitions: ``docs/design/metrics.md``, "Operable friction".
 
-Escalation (:func:`asset2sim.tasks.check.postcheck.escalate`) raises joint
-friction until the requested state holds through robust rest. Unbounded, it
-makes parts nobody can open (a laptop screen needing 4 N*m, a drawer needing
-130 N): the state holds, the asset is useless for manipulation. This module
-bounds the friction by what the probe (:mod:`asset2sim.tasks.check.probes`),
-the evaluation's stand-in for a hand or a robot's gripper, can apply.
-
-Definitions (SI units; ``docs/design/metrics.md``, section "Operable friction"):
-
-- Operating force F_max = max(``min_force``, ``force_factor`` * M g): the
-  probe's force limit (:class:`asset2sim.tasks.check.pusher.ProbeConfig`;
-  ``min_force`` 22.2 N = 5 lbf, the 2010 ADA Standards for Accessible Design,
-  section 309.4, the largest force an operable part may need), M the total
-  mass of the object (kg), g = 9.81 m/s^2.
-- Lever r (revolute joints): the distance from the joint axis to where the
-  probe pushes: the corner of the child link's box farthest from the axis
-  (:func:`asset2sim.tasks.check.pusher.push_geometry` uses the world box of
-  the engine; here the box in the link's own frame,
-  :class:`asset2sim.schemas.asset.LinkGeometry`, times the overlay's scale).
-  Operating effort E = F_max r (N*m); prismatic joints: E = F_max (N).
-- Gravity load L: the weight of the moving subtree m_s g times the distance
-  from the axis to the child link's center of mass (revolute, the worst case:
-  that lever horizontal) or m_s g (prismatic, a vertical slide's worst case).
-- Friction cap = min(``OPERABLE_SHARE`` * E - L, the friction above which
-  the engine's friction motor locks the joint,
-  :func:`asset2sim.tasks.synthesize.physics.max_stable_friction`: F dt / I
-  beyond Bullet's joint speed clamp), at least the joint's friction before
-  escalation (escalation never lowers a value).
-- Tilt floor: a joint that robust rest's tilts move needs friction for the
-  extra gravity load a tilt by theta adds: at least the friction before
-  escalation plus ``TILT_MARGIN`` m_s g r sin(theta) (revolute, r the lever
-  to the child's center of mass; the change of m_s g r cos(phi) when phi
-  moves by theta is at most m_s g r sin(theta)) or ``TILT_MARGIN`` m_s g
-  sin(theta) (prismatic, a horizontal slide tilted by theta). Escalation by
-  factors alone never reaches it from a friction near zero (a horizontal
-  drawer's or handle's estimate).
+- Probe's cap (no task): friction <= ``OPERABLE_SHARE`` E - L, E = F_max r the
+  probe's operating effort (:func:`operating_effort`; prismatic E = F_max), L the
+  moving subtree's weight times the lever to the child's center of mass; at
+  most ``max_stable_friction``, at least the friction before escalation.
+- Tilt floor: the friction before escalation plus ``TILT_MARGIN`` m_s g r
+  sin(theta) (prismatic: ``TILT_MARGIN`` m_s g sin(theta)).
+- Operating budget (with a task): :func:`operating_budgets`.
 """
 
 from __future__ import annotations
@@ -65,26 +38,15 @@ from asset2sim.urdf import UrdfModel, read_urdf
 GRAVITY = 9.81
 """m/s^2"""
 TILT_MARGIN = 2.0
-"""Safety factor on the tilt's extra gravity load (dimensionless): static
-friction must also stop the motion the tilt has already started."""
+"""Safety factor on the tilt's extra gravity load (dimensionless)."""
 OPERABLE_SHARE = 0.7
-"""Share of the operating effort that friction plus gravity may take
-(dimensionless): the rest is the margin the probe needs to accelerate the part
-and to cover the difference between its push point (the child link's box
-centre) and the center of mass used here."""
+"""Share of the operating effort that friction plus gravity may take (dimensionless)."""
 
 
 def operating_effort(overlay: Overlay, asset: AssetDescription, joint: str, geometry: dict[str, LinkGeometry],
                      config: ProbeConfig | None = None) -> float:
-    """Largest effort the probe applies to ``joint``: F_max r (N*m) for a
-    revolute joint, F_max (N) for a prismatic one (module docstring).
-
-    Args:
-        overlay: the overlay (link masses kg, ``scale``).
-        asset: the description of the same asset (joint axes, tree).
-        joint: a movable joint of ``asset``.
-        geometry: link -> :class:`LinkGeometry` (boxes at scale 1, link frame).
-        config: the probe's force limits (default :class:`ProbeConfig`).
+    """Largest effort the probe applies to ``joint``: F_max r (N*m), prismatic
+    F_max (N); ``geometry``: link -> boxes at scale 1 in the link frame.
 
     Raises:
         KeyError: ``joint`` is not in ``asset``.
@@ -109,8 +71,7 @@ def _off_axis(points: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 
 def push_lever(overlay: Overlay, asset: AssetDescription, joint: str, geometry: dict[str, LinkGeometry]) -> float:
-    """Distance (m) from ``joint``'s axis to the probe's push point on its
-    child link (module docstring); 0 when the child has no geometry.
+    """Distance (m) from ``joint``'s axis to its child's farthest box corner; 0 without geometry.
 
     Raises:
         KeyError: ``joint`` is not in ``asset``.
@@ -124,9 +85,7 @@ def push_lever(overlay: Overlay, asset: AssetDescription, joint: str, geometry: 
 
 
 def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
-    """Distance (m) from ``joint``'s axis to its child link's center of mass
-    (the overlay's, link frame = joint frame, URDF convention); 0 when the
-    child has no physics in the overlay.
+    """Distance (m) from ``joint``'s axis to its child link's center of mass (the overlay's); 0 without one.
 
     Raises:
         KeyError: ``joint`` is not in ``asset``.
@@ -139,9 +98,8 @@ def com_lever(overlay: Overlay, asset: AssetDescription, joint: str) -> float:
 
 def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry],
                   config: ProbeConfig | None = None) -> dict[str, float]:
-    """Largest joint friction (N*m or N) escalation may set, per movable joint
-    of ``overlay`` (module docstring): ``OPERABLE_SHARE`` * E - L, but at
-    least the friction of ``before`` (the overlay before any escalation).
+    """Probe's friction cap (N*m or N) per movable joint of ``overlay``
+    (module docstring), at least the friction of ``before`` (before escalation).
 
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
@@ -156,9 +114,8 @@ def friction_caps(overlay: Overlay, before: Overlay, asset: AssetDescription, ge
 
 
 def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt: float) -> dict[str, float]:
-    """Friction (N*m or N) a movable joint of ``overlay`` needs to hold
-    through a tilt of ``tilt`` rad (module docstring, "Tilt floor"), from the
-    friction of ``before`` (the overlay before escalation).
+    """Tilt floor (N*m or N) per movable joint of ``overlay`` for a tilt of
+    ``tilt`` rad (module docstring), from the friction of ``before``.
 
     Raises:
         KeyError: a joint of ``overlay`` is not in ``asset``.
@@ -168,9 +125,8 @@ def tilt_floors(overlay: Overlay, before: Overlay, asset: AssetDescription, tilt
 
 
 def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iterator[tuple[str, JointDynamics, float, float, float]]:
-    """(joint, its dynamics, the mass its subtree moves, kg, the lever to its
-    child's center of mass, m (1 for prismatic), its friction in ``before``,
-    N*m or N) per movable joint of ``overlay``. Raises KeyError as the callers."""
+    """(joint, dynamics, subtree mass kg, lever to the child's COM m (1 prismatic),
+    friction in ``before``) per movable joint of ``overlay``."""
     for name, d in overlay.joints.items():
         jd = asset.joint(name)
         if jd.type not in ("revolute", "continuous", "prismatic"):
@@ -180,21 +136,13 @@ def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iter
         yield name, d, sub_mass, lever, (before.joints[name].friction if name in before.joints else d.friction)
 
 
-# ------------------------------------------------------------------ operating budget
-#: Coulomb friction between a free object and the ground (dimensionless): the
-#: SPEC ground friction of task execution (PyBullet's default lateral friction
-#: 0.5 of the link times the plane's 0.5; ``docs/design/metrics.md``, "task_execution" 1),
-#: or 0.5 x the ``<contact><lateral_friction>`` a link writes.
+#: Coulomb friction between a free object and the ground: the SPEC ground friction of task execution.
 GROUND_FRICTION = 0.25
-#: Share of the allowed operating force that friction, damping at the
-#: gripper's top speed and gravity may take (dimensionless); the rest covers
-#: accelerating the part and the gripper's tracking transients.
+#: Share of the allowed operating force that friction, damping at top speed and gravity may take.
 BUDGET_SHARE = 0.95
-#: Share of the budget left after gravity that friction may take; the rest is
-#: damping at the gripper's top speed (dimensionless).
+#: Share of the budget that friction may take; the rest is damping at the gripper's top speed.
 FRICTION_SHARE = 0.75
-#: Friction never capped below this multiple of the gravity load at the
-#: requested state (dimensionless): below it the state does not hold at all.
+#: Friction never capped below this multiple of the gravity load at the requested state.
 HOLD_MARGIN = 1.2
 #: Opening fractions sampled along a task's path (per path, including ends).
 PATH_SAMPLES = 5
@@ -202,8 +150,7 @@ PATH_SAMPLES = 5
 
 @dataclass(frozen=True)
 class OperatingBudget:
-    """How hard one joint may be to operate by the task's gripper (SI units;
-    module docstring of :func:`operating_budgets`)."""
+    """How hard one joint may be to operate by the task's gripper (SI units; :func:`operating_budgets`)."""
 
     joint: str
     joint_type: str
@@ -228,14 +175,12 @@ class OperatingBudget:
     conflict: str = ""
     """non-empty where the budget cannot hold the requested state (the friction cap is then the hold floor)"""
     hold_floor: float = 0.0
-    """friction (N m or N) below which the requested state does not hold: HOLD_MARGIN |Q| at the
-    state, 0 where the request asks the parts to move freely"""
+    """friction (N m or N) below which the requested state does not hold (0 for parts moving freely)"""
 
 
 def _gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
-    """Generalised gravity force Q on ``joint`` (N m or N; > 0 pushes q up)
-    of the links ``links`` at the session's state: a . sum((c_i - o) x m_i g)
-    (revolute) or a . sum(m_i g) (prismatic), c_i the centres of mass."""
+    """Generalised gravity force Q (N m or N; > 0 pushes q up) of ``links`` on ``joint``:
+    a . sum((c_i - o) x m_i g), prismatic a . sum(m_i g)."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     g = np.array([0.0, 0.0, -GRAVITY])
     q = 0.0
@@ -251,17 +196,15 @@ def _gravity_force(session: SimSession, model: UrdfModel, joint: str, links: lis
 
 
 def ground_friction(model: UrdfModel) -> float:
-    """Ground friction mu of ``model`` on the SPEC ground plane
-    (:data:`GROUND_FRICTION`, or 0.5 x the smallest ``<contact><lateral_friction>``
-    a link writes: PyBullet multiplies it by the plane's 0.5)."""
+    """Ground friction mu of ``model``: :data:`GROUND_FRICTION`, or 0.5 x the smallest
+    ``<contact><lateral_friction>`` a link writes (PyBullet's plane has 0.5)."""
     vals = [0.5 * float(lk.contact["lateral_friction"]) for lk in model.links.values()
             if "lateral_friction" in (lk.contact or {})]
     return float(min(vals)) if vals else GROUND_FRICTION
 
 
 def _task_path(f_state: float, action: str) -> np.ndarray:
-    """Opening fractions a task moves the joint through (task_execution's start
-    rule: a joint already at the target starts from the far side)."""
+    """Opening fractions a task moves the joint through (from the far side when already at the target)."""
     if action == "close":
         start = f_state if f_state > CLOSE_TARGET + 0.05 else OPEN_TARGET
         return np.linspace(start, CLOSE_TARGET, PATH_SAMPLES)
@@ -277,50 +220,18 @@ def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overla
                       vertical_share: float = 0.5) -> dict[str, OperatingBudget]:
     """The operating budget of every movable joint of ``closed`` in the written
     asset ``urdf`` at ``state``: how much friction and damping the task's
-    gripper (:mod:`asset2sim.tasks.check.task_execution`) can overcome with a
-    real operating force. Definitions (``docs/design/metrics.md``, "Operable friction"):
-
-    - Grasp as the task: the side (:func:`~asset2sim.tasks.check.contact_points.grasp_side`),
-      the contact point (:func:`~asset2sim.tasks.check.contact_points.contact_point_rule`),
-      its lever r from the axis (revolute).
-    - Path: the task's actions (close / open) from the state (or the far side
-      where the state already meets the target) to the target fraction,
-      :data:`PATH_SAMPLES` fractions each.
-    - Allowed operating force at each sample: F = min(the category/part's
-      force range's upper end, its torque range's upper end / r
-      (:func:`asset2sim.tasks.check.force_ranges.operating_range`), and, for a
-      free object whose grasp point moves within 60 deg of horizontal (the
-      gripper pushes along the path; nearer vertical it presses or lifts),
-      mu M g / (h - mu v): the force whose horizontal part h F the ground
-      friction mu (M g + v F) still resists (mu :func:`ground_friction`, M the
-      whole mass, h the horizontal and v the downward share of the motion
-      direction)).
-    - Gravity against the motion L_g = -Q s (Q :func:`_gravity_force` of the
-      moving subtree, s the sign of the motion; negative where gravity helps).
-    - Budget B = min over samples of (BUDGET_SHARE F_h r - L_g) (prismatic:
-      F_h instead of F_h r), F_h the hand's bound (the ranges) only: the
-      ground bound is not modelled into the caps (where gravity or a spring
-      moves the part the gripper guides rather than pushes, which this model
-      does not see: stapler 102990 closed from the far side at 2.4 N without
-      sliding where mu M g = 1.1 N); ``force_n`` (the tightest F, ground
-      included) is what :func:`asset2sim.tasks.check.task_tier.relieve`
-      compares a measured slide with. Friction cap = FRICTION_SHARE B, damping cap =
-      (1 - FRICTION_SHARE) B / w, w = v_max / r rad/s (prismatic v_max m/s),
-      v_max the gripper's top speed; the friction cap is at most
-      :func:`~asset2sim.tasks.synthesize.physics.max_stable_friction` and,
-      unless the request asks the part to move freely, at least HOLD_MARGIN
-      |Q| at the state (``conflict`` says so where the budget is smaller).
-
-    Args:
-        urdf: the written asset; ``state``: its joint positions (rad or m).
-        overlay: its overlay (``inertia_axis`` of the joints).
-        closed: joint -> (q_closed, opening direction +-1, open range), output units.
-        category, labels: the category and link -> semantic label (force ranges).
-        actions: the task's actions (both without a task).
-        free: the root is free on the ground (False: mounted, no ground bound).
-        ground: apply the ground bound to a free object (False: the other
-            hand holds the body, as the probes do).
-        free_moving: the request asks the parts to move freely (no hold floor).
+    gripper can overcome with a real operating force (``docs/design/metrics.md``,
+    "Operable friction"). Grasped as the task grasps; over :data:`PATH_SAMPLES`
+    fractions of each action's path, the allowed force F = min(the force
+    range's upper end, the torque range's / r, and for a free object pushed
+    within 60 deg of horizontal mu M g / (h - mu v)); budget B = min over the
+    samples of BUDGET_SHARE F_h r - L_g (F_h the ranges' bound only, L_g = -Q s
+    gravity against the motion; prismatic without r); friction cap =
+    FRICTION_SHARE B (at most ``max_stable_friction``, at least HOLD_MARGIN |Q|
+    at the state unless ``free_moving``), damping cap = (1 - FRICTION_SHARE) B / w.
+    ``closed``: joint -> (q_closed, direction +-1, open range); ``labels``: link
+    -> semantic label; ``free``: root free (no ground bound when mounted);
+    ``ground``: apply the ground bound to a free object.
 
     Raises:
         EngineUnavailable; whatever loading ``urdf`` raises.
@@ -354,9 +265,7 @@ def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overla
 
 @dataclass(frozen=True)
 class _Grasp:
-    """Where the task's gripper grasps a joint: ``side`` and ``rule`` of
-    :func:`~asset2sim.tasks.check.contact_points.contact_point_rule`, the
-    grasp ``point`` (3,) m in ``link``'s frame, and the links it moves."""
+    """Where the task's gripper grasps a joint (``point`` (3,) m in ``link``'s frame) and the links it moves."""
 
     side: str
     link: str
@@ -381,11 +290,9 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
               state: dict[str, float], actions: tuple[str, ...], grasp: _Grasp, rng_: ForceRange, where: str,
               ground: tuple[float, float] | None, vertical_share: float
               ) -> tuple[tuple[float, float, str] | None, float | None, float | None]:
-    """Over the samples of the task's paths (:func:`_task_path`): ((smallest
-    budget B, N m or N; smallest allowed force F, N; what bounds that F), the
-    grasp point's lever at the last sample, m (None: prismatic), |Q| at
-    ``state``, N m or N); (None, None, None) without samples. ``ground``:
-    (mu, the whole mass M kg) where the ground bound applies, else None."""
+    """((smallest budget B, smallest allowed force F N, what bounds F), the lever
+    at the last sample m or None, |Q| at ``state``) over the task's paths.
+    ``ground``: (mu, whole mass kg) where the ground bound applies."""
     qc, d, rng = closed
     prismatic = session.joint_types[joint] == "prismatic"
     f_state = float(d * (state.get(joint, qc) - qc) / rng)
@@ -415,9 +322,8 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
 
 
 def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool) -> tuple[np.ndarray, float, float | None]:
-    """(direction t (3,) of the grasp point's motion as q grows, |t| (at
-    least 1e-12), the grasp point's distance from the axis, at least 1e-3 m
-    (None: prismatic)) at the session's state."""
+    """(direction t (3,) of the grasp point's motion as q grows, |t| >= 1e-12,
+    lever >= 1e-3 m or None for prismatic) at the session's state."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     lo, Rl = session.link_frame(grasp.link)
     p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(grasp.point, float)
@@ -429,8 +335,7 @@ def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: boo
 
 
 def _range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
-    """(the upper end of the force range of ``where``, or of its torque
-    range / ``lever`` where smaller, N (inf without either); what set it)."""
+    """(upper end of the force range, or of the torque range / ``lever`` where smaller, N; what set it)."""
     force, bound = float("inf"), ""
     if rng_.force_n is not None:
         force, bound = rng_.force_n[1], f"force range of {where}"
@@ -440,10 +345,8 @@ def _range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[flo
 
 
 def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float, vertical_share: float) -> float | None:
-    """mu M g / (h - mu v), N: the force along the motion ``s_motion`` ``t`` (|t| =
-    ``nt``) whose horizontal share h the ground friction ``mu`` of the free
-    object of ``total`` mass M (kg) still resists, v its downward share; None
-    where the gripper presses or lifts (``vertical_share``) or h <= mu v."""
+    """mu M g / (h - mu v), N: the push along ``s_motion`` ``t`` (|t| = ``nt``) the
+    ground friction still resists; None where the gripper presses or lifts or h <= mu v."""
     horiz = float(np.linalg.norm(t[:2])) / nt
     down = max(0.0, -s_motion * float(t[2]) / nt)  # a push with a downward part loads the ground more
     if abs(float(t[2])) / nt < vertical_share and horiz - mu * down > 0:
@@ -472,10 +375,8 @@ def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tup
 
 
 def bound_overlay(overlay: Overlay, budgets: dict[str, OperatingBudget]) -> tuple[Overlay, list[str]]:
-    """``overlay`` with every joint's friction and damping lowered to its
-    operating budget's caps where above them (friction never below the hold
-    floor: :func:`operating_budgets`). Returns (overlay, notes, one per change
-    and per conflict)."""
+    """``overlay`` with every joint's friction and damping lowered to its budget's
+    caps where above them. Returns (overlay, notes, one per change and per conflict)."""
     ov = overlay.model_copy(deep=True)
     notes: list[str] = []
     for name, b in budgets.items():

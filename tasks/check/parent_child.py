@@ -1,18 +1,8 @@
-"""Parent-child penetration at the initial state, with the pair collided.
-
-The SPEC's penetration Phi skips a link and its parent (PyBullet's
-``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``; PhysX articulations and
-MuJoCo's parent filter do the same), so a part that starts inside its
-parent's collision hull (a toilet seat inside the convex hull of the bowl)
-is invisible to it, and decisive once the pair does collide: an object
-mounted in a scene whose simulator does not skip the pair, a robot's
-finger between them. :func:`parent_child_penetration` asks the engine's own
-closest-point query (``SimSession.link_distances``, parent-child pairs
-included: PyBullet's ``getClosestPoints``, MuJoCo's ``mj_geomDistance``)
-for every joint's parent and child at the initial state and reports the
-deepest penetration, margins removed. The writer makes the output's
-collision pieces so that it stays within the SPEC's 2 mm tolerance
-(:func:`asset2sim.tasks.assemble.collision_geometry.separate_parent_child`).
+"""Parent-child penetration at the initial state, with the pair collided: the
+SPEC's Phi skips a link and its parent, so a part starting inside its
+parent's hull is invisible to it. :func:`parent_child_penetration` asks the
+engine's closest-point query (``SimSession.link_distances``) for every
+joint's parent and child and reports the deepest penetration, margins removed.
 """
 
 from __future__ import annotations
@@ -29,11 +19,8 @@ from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE
 
 __all__ = ["CONTACT_MARGIN", "parent_child_penetration"]
 
-#: Distance (m) an engine's closest-point query reports for two convex
-#: pieces that touch, per engine: PyBullet's convex hulls carry a 1 mm
-#: collision margin each, so touching hulls read -2 mm (measured,
-#: docs/design/simulators.md "Contact margins"); MuJoCo's ``mj_geomDistance`` and
-#: the fake engine use the geometry itself.
+#: Distance (m) an engine's closest-point query reports for two touching convex pieces
+#: (PyBullet: 1 mm hull margin each; ``docs/design/simulators.md``, "Contact margins").
 CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0, "fake": 0.0}
 
 
@@ -41,14 +28,9 @@ def parent_child_penetration(urdf_path: Path | str, initial_state: dict[str, flo
                              conventions: SimConventions | None = None,
                              tolerance: float = CONTAINMENT_TOLERANCE) -> MetricResult:
     """Deepest penetration (mm) of a child link's collision shapes into its
-    parent's at ``initial_state`` (joint -> rad or m), measured by
-    ``engine``'s closest-point query with the pair collided; the engine's
-    contact margin (:data:`CONTACT_MARGIN`) removed. Passes when it is at
-    most ``tolerance`` m (the SPEC's 2 mm penetration tolerance).
-    ``details["pairs"]``: "parent/child" -> mm for every pair that penetrates.
-    An engine without a closest-point query between links (PhysX, Newton:
-    not in :data:`CONTACT_MARGIN`) is replaced by PyBullet (said in
-    ``engine``).
+    parent's at ``initial_state`` (joint -> rad or m), :data:`CONTACT_MARGIN`
+    removed; passes at most ``tolerance`` m. ``details["pairs"]``: "parent/child"
+    -> mm. Engines not in :data:`CONTACT_MARGIN` are replaced by PyBullet.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
@@ -70,12 +52,7 @@ def parent_child_penetration(urdf_path: Path | str, initial_state: dict[str, flo
     finally:
         session.close()
     worst = max(pairs.values(), default=0.0)
-    return MetricResult(
-        name="parent_child_penetration",
-        value=worst,
-        unit=unit("parent_child_penetration"),
-        passed=worst <= tolerance * 1000.0,
-        threshold=f"<= {tolerance * 1000:g} mm (parent-child pairs collided; the SPEC's Phi skips them)",
-        details={"pairs": pairs, "margin_removed_mm": margin * 1000.0},
-        engine=engine,
-    )
+    return MetricResult(name="parent_child_penetration", value=worst, unit=unit("parent_child_penetration"),
+                        passed=worst <= tolerance * 1000.0,
+                        threshold=f"<= {tolerance * 1000:g} mm (parent-child pairs collided; the SPEC's Phi skips them)",
+                        details={"pairs": pairs, "margin_removed_mm": margin * 1000.0}, engine=engine)

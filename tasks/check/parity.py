@@ -1,20 +1,8 @@
-"""Cross-simulator parity: the SPEC's physical-robustness metrics in several engines.
-
-:func:`evaluate_engines` opens the output folder's ``mobility.urdf`` in each
-requested engine under the same conventions (``asset2sim.engines.base``: the
-initial state from ``initial_state.json``, springs from ``overlay.json``, root
-free and placed on the ground) and runs :mod:`asset2sim.tasks.check.metrics`'
-penetration (at the initial state, before any step), rest stability and
-oscillation (one rest test). Engines whose package is missing are listed as
-skipped with the reason; an engine that cannot load the asset fails its
-metrics with the error. :func:`parity_table` turns the results into report
-rows, :func:`worst_case` into the verdict over all engines that ran (what
-``refine --engines`` checks).
-
-Penetration values are each engine's own contact query and are not equal
-across engines even for the same geometry (PyBullet adds its 1 mm collision
-margin per shape and reports few points per pair; PhysX and MuJoCo report up
-to four points per touching face pair); see ``docs/design/simulators.md``.
+"""Cross-simulator parity: the SPEC's physical-robustness metrics (penetration,
+rest stability, oscillation) of an output folder in several engines under the
+same conventions (``docs/design/simulators.md``). A missing engine is skipped,
+one that cannot load the asset fails; :func:`parity_table` gives report rows,
+:func:`worst_case` the verdict over every engine that ran.
 """
 
 from __future__ import annotations
@@ -38,34 +26,20 @@ METRICS = SPEC_METRICS
 
 
 def _not_run(engine: str, key: str, reason: str, passed: bool | None) -> list[MetricResult]:
-    return [
-        MetricResult(name=n, value=None, unit=unit(n), passed=None if n == "penetration" else passed, details={key: reason}, engine=engine)
-        for n in METRICS
-    ]
+    return [MetricResult(name=n, value=None, unit=unit(n), passed=None if n == "penetration" else passed, details={key: reason},
+                         engine=engine) for n in METRICS]
 
 
-def evaluate_engine(
-    urdf_dir: Path,
-    engine: str,
-    *,
-    initial_state: dict[str, float] | None = None,
-    conventions: SimConventions | None = None,
-) -> list[MetricResult]:
-    """The three metrics of one output folder in one engine.
-
-    ``initial_state`` (joint -> rad or m) overrides ``initial_state.json``.
-    Returns penetration (mm; ``details.engine_notes`` lists what the engine had
-    to change for this asset), rest stability and oscillation. A missing
-    package gives ``details.skipped`` and ``passed=None``; a load or run error
-    gives ``details.error`` and ``passed=False``. ``details.root`` says how
-    the root was held (the folder's declaration: "fixed (mounted)" or
-    "free (on the ground)").
+def evaluate_engine(urdf_dir: Path, engine: str, *, initial_state: dict[str, float] | None = None,
+                    conventions: SimConventions | None = None) -> list[MetricResult]:
+    """[penetration (mm), rest stability, oscillation] of one output folder in one
+    engine (``initial_state`` overrides the folder's); a missing package gives
+    ``details.skipped``, a load or run error ``details.error`` and ``passed`` False.
 
     Raises:
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
-
     urdf_dir = Path(urdf_dir)
     urdf = urdf_dir / URDF_NAME
     if not urdf.is_file():
@@ -96,8 +70,7 @@ def _evaluate_engine(urdf_dir: Path, urdf: Path, engine: str, initial_state: dic
         trace = metrics.run_rest_test(session, conv)
         rest = metrics.rest_stability(trace, conv, engine=engine)
         osc = metrics.oscillation(trace, conv, engine=engine)
-        drift = metrics.joint_drift(trace)
-        rest.details["joint_drift"] = drift
+        rest.details["joint_drift"] = metrics.joint_drift(trace)
         return [pen, rest, osc]
     except Exception as exc:  # an engine error mid-run fails the asset in that engine
         return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)
@@ -105,15 +78,9 @@ def _evaluate_engine(urdf_dir: Path, urdf: Path, engine: str, initial_state: dic
         session.close()
 
 
-def evaluate_engines(
-    urdf_dir: Path,
-    engines: list[str],
-    *,
-    initial_state: dict[str, float] | None = None,
-    conventions: SimConventions | None = None,
-) -> dict[str, list[MetricResult]]:
-    """:func:`evaluate_engine` for each of ``engines`` (in order, duplicates
-    dropped): engine -> [penetration, rest_stability, oscillation].
+def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[str, float] | None = None,
+                     conventions: SimConventions | None = None) -> dict[str, list[MetricResult]]:
+    """:func:`evaluate_engine` for each of ``engines`` (duplicates dropped): engine -> its metrics.
 
     Raises:
         FileNotFoundError, ValueError: as :func:`evaluate_engine`.
@@ -126,21 +93,11 @@ def evaluate_engines(
 
 
 def _get(results: list[MetricResult], name: str) -> MetricResult | None:
-    for m in results:
-        if m.name == name:
-            return m
-    return None
+    return next((m for m in results if m.name == name), None)
 
 
 def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]:
-    """One row per engine for reports and the catalog.
-
-    Keys: ``engine``; ``status`` (``ok``, ``skipped``, ``error``); ``reason``;
-    ``penetration_mm`` (Phi) and ``max_depth_mm`` (deepest point) and
-    ``penetration_points``; ``rest_stability`` (True/False/None) with
-    ``D_pos_m`` and ``D_ori_rad``; ``oscillation`` (True/False/None) with
-    ``failing_joints``; ``engine_notes``.
-    """
+    """One row per engine for reports and the catalog (``status`` ``ok``, ``skipped`` or ``error``)."""
     rows = []
     for engine, res in results.items():
         pen, rest, osc = _get(res, "penetration"), _get(res, "rest_stability"), _get(res, "oscillation")
@@ -151,33 +108,25 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
             elif m is not None and "error" in m.details:
                 status, reason = "error", m.details["error"]
         pairs = pen.details.get("pairs", []) if pen is not None else []
-        rows.append(
-            {
-                "engine": engine,
-                "status": status,
-                "reason": reason,
-                "penetration_mm": pen.value if pen is not None else None,
-                "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" else None,
-                "penetration_points": sum(p["points"] for p in pairs) if status == "ok" else None,
-                "rest_stability": rest.passed if rest is not None else None,
-                "D_pos_m": rest.details.get("D_pos_m") if rest is not None else None,
-                "D_ori_rad": rest.details.get("D_ori_rad") if rest is not None else None,
-                "oscillation": osc.passed if osc is not None else None,
-                "failing_joints": list(osc.details.get("failing", [])) if osc is not None else [],
-                "engine_notes": list(pen.details.get("engine_notes", [])) if pen is not None else [],
-            }
-        )
+        rows.append({
+            "engine": engine, "status": status, "reason": reason,
+            "penetration_mm": pen.value if pen is not None else None,
+            "max_depth_mm": max((p["max_depth_mm"] for p in pairs), default=0.0) if status == "ok" else None,
+            "penetration_points": sum(p["points"] for p in pairs) if status == "ok" else None,
+            "rest_stability": rest.passed if rest is not None else None,
+            "D_pos_m": rest.details.get("D_pos_m") if rest is not None else None,
+            "D_ori_rad": rest.details.get("D_ori_rad") if rest is not None else None,
+            "oscillation": osc.passed if osc is not None else None,
+            "failing_joints": list(osc.details.get("failing", [])) if osc is not None else [],
+            "engine_notes": list(pen.details.get("engine_notes", [])) if pen is not None else [],
+        })
     return rows
 
 
 def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
-    """The verdict over every engine that ran (skipped engines ignored):
-    penetration = the largest Phi (mm); rest stability and oscillation pass
-    only if they pass in every engine (an engine error fails).
-    ``details.per_engine`` keeps each engine's value and verdict, and for
-    penetration the deepest point (``max_depth_mm``), the number to compare
-    across engines (Phi counts a different number of points per engine);
-    ``engine`` is ``"worst"``.
+    """The verdict over every engine that ran (``engine`` ``"worst"``): the
+    largest Phi (mm); rest stability and oscillation pass only if they pass in
+    every engine. ``details.per_engine`` keeps each engine's value and verdict.
     """
     out = []
     for name in METRICS:
@@ -193,11 +142,7 @@ def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
             out.append(MetricResult(name=name, value=None, unit=unit(name), passed=None, details={"skipped": "no engine ran"}, engine="worst"))
             continue
         values = [v["value"] for v in per.values() if v["value"] is not None]
-        if name == "penetration":
-            passed = None
-            value = max(values) if values else None
-        else:
-            passed = all(v["passed"] is True for v in per.values())
-            value = max(values) if values else None
+        value = max(values) if values else None
+        passed = None if name == "penetration" else all(v["passed"] is True for v in per.values())
         out.append(MetricResult(name=name, value=value, unit=unit(name), passed=passed, details={"per_engine": per}, engine="worst"))
     return out

@@ -1,12 +1,7 @@
-"""Post-check and escalation (refine stage 7).
-
-The written asset is loaded under the SPEC's conventions and its penetration,
-rest stability and oscillation are measured (``tasks.metrics``); in addition
-each joint's *sag* — the largest departure from its initial position during
-settling and the test — is compared with ``RefineConfig.sag_tolerance_*``. A
-joint that oscillates or sags gets its damping and friction multiplied by
-``RefineConfig.escalation_factor`` (bounded: at most ``max_escalation_rounds``
-rounds); every round is recorded.
+"""Post-check and escalation (refine stage 7): the SPEC metrics of the written
+asset plus each joint's sag (largest departure from its initial position,
+against ``RefineConfig.sag_tolerance_*``); a joint that oscillates or sags
+gets its damping and friction multiplied by ``escalation_factor``.
 """
 
 from __future__ import annotations
@@ -30,8 +25,7 @@ from asset2sim.tasks.synthesize.physics import max_stable_damping
 
 
 class _StepRecorder:
-    """Wraps a session; records the root position (m) and the ground
-    penetration the step's own contacts left (m) after every step."""
+    """Wraps a session; records the root position and the step's ground penetration (m) after every step."""
 
     def __init__(self, session: SimSession):
         self._s = session
@@ -52,13 +46,9 @@ class _StepRecorder:
 class RestRecording:
     """One SPEC rest test recorded step by step, with what it was run on.
 
-    ``trace``: the SPEC recording (:class:`~asset2sim.tasks.check.metrics.RestTrace`);
     ``root_series`` (K, 3) m root position after every step of settling and
-    test (K = M + N - 1 steps); ``ground_series`` (K,) m deepest ground
-    penetration after every step; ``joint_series`` joint -> (K,) rad or m
-    (settling then test). ``engine``, ``urdf`` (resolved path),
-    ``initial_state`` (rad/m), ``springs`` and ``conventions``: the
-    simulation it belongs to (:meth:`matches`).
+    test; ``ground_series`` (K,) m deepest ground penetration; ``joint_series``
+    joint -> (K,) rad or m. The other fields identify the simulation (:meth:`matches`).
     """
 
     trace: metrics.RestTrace
@@ -75,54 +65,29 @@ class RestRecording:
 
     def matches(self, engine: str, urdf: Path | str, initial_state: dict[str, float],
                 springs: dict[str, Spring], conventions: SimConventions, fixed_base: bool = False) -> bool:
-        """True when this recording is the rest test of exactly that
-        simulation: same engine, URDF file, initial state, springs,
-        conventions (floats compared exactly) and root (fixed or free)."""
-        return (
-            self.fixed_base == bool(fixed_base)
-            and self.engine == engine
-            and self.urdf == Path(urdf).resolve()
-            and dict(self.initial_state) == dict(initial_state)
-            and dict(self.springs) == dict(springs)
-            and self.conventions == conventions
-        )
+        """True when this recording is the rest test of exactly that simulation (floats compared exactly)."""
+        return (self.fixed_base == bool(fixed_base) and self.engine == engine and self.urdf == Path(urdf).resolve()
+                and dict(self.initial_state) == dict(initial_state) and dict(self.springs) == dict(springs)
+                and self.conventions == conventions)
 
 
 def record_rest_test(session: SimSession, conventions: SimConventions, urdf: Path | str,
                      initial_state: dict[str, float], springs: dict[str, Spring]) -> RestRecording:
-    """Run the SPEC rest test (:func:`asset2sim.tasks.check.metrics.run_rest_test`)
-    on ``session`` in place, recording root position and ground penetration
-    after every step. ``urdf``, ``initial_state`` and ``springs`` are the
-    options ``session`` was opened with (recorded for :meth:`RestRecording.matches`).
-
-    Returns:
-        The :class:`RestRecording`.
-    """
+    """Run the SPEC rest test on ``session`` in place, recording every step;
+    ``urdf``, ``initial_state`` and ``springs``: the options it was opened with."""
     rec = _StepRecorder(session)
     trace = metrics.run_rest_test(rec, conventions)
     return RestRecording(
-        trace=trace,
-        root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)),
-        ground_series=np.array(rec.ground),
+        trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
         joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
-        engine=session.engine,
-        urdf=Path(urdf).resolve(),
-        initial_state=dict(initial_state),
-        springs=dict(springs),
-        conventions=conventions,
-        fixed_base=bool(session.options.fixed_base),
-    )
+        engine=session.engine, urdf=Path(urdf).resolve(), initial_state=dict(initial_state), springs=dict(springs),
+        conventions=conventions, fixed_base=bool(session.options.fixed_base))
 
 
 def measure_rest_test(engine: str, urdf: Path | str, initial_state: dict[str, float], springs: dict[str, Spring],
                       conventions: SimConventions, fixed_base: bool = False) -> tuple[MetricResult, RestRecording]:
-    """Open ``engine`` on ``urdf`` at ``initial_state`` (SPEC conventions,
-    ``springs``; the root fixed where ``fixed_base``, a mounted asset:
-    :func:`asset2sim.tasks.interpret.mounting.session_root_options`), measure the penetration at the initial state first (in the
-    fresh session), then record the rest test (:func:`record_rest_test`).
-
-    Returns:
-        (penetration :class:`~asset2sim.schemas.report.MetricResult` in mm, the :class:`RestRecording`).
+    """(penetration in mm, :class:`RestRecording`) of ``urdf`` in a fresh session
+    of ``engine`` at ``initial_state`` (the root fixed where ``fixed_base``).
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
@@ -149,14 +114,11 @@ class PostCheck:
     engine_results: dict[str, list[MetricResult]] = field(default_factory=dict)
     """Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation]."""
     recording: RestRecording | None = None
-    """The rest test step by step (reused by the evaluation of the same files)."""
     recorded: RecordedRuns = field(default_factory=RecordedRuns)
-    """The manipulation tiers' runs by the digest of their inputs (reused by
-    the evaluation of the same files, :mod:`asset2sim.tasks.check.recorded_runs`)."""
+    """The manipulation tiers' runs, reused by the evaluation of the same files."""
 
     def engine_failures(self) -> tuple[bool, list[str]]:
-        """(any other engine unstable, joints oscillating in another engine);
-        skipped engines are ignored."""
+        """(any other engine unstable, joints oscillating in another engine)."""
         unstable, joints = False, []
         for res in self.engine_results.values():
             for m in res:
@@ -176,11 +138,7 @@ class PostCheck:
 
     @property
     def topples(self) -> bool:
-        """A robust-rest trial (a 2 cm drop, a 5 deg tilt, a nudge) toppled the
-        object: its up direction ended more than
-        :attr:`~asset2sim.tasks.check.robust_rest.RobustRestConfig.topple_tol`
-        (rad) off the vertical. Statically at rest, but on an edge a hand's
-        placement tips it over."""
+        """A robust-rest trial toppled the object (:func:`~asset2sim.tasks.check.robust_rest.toppled`)."""
         return any(robust_rest.toppled(m) for m in self.metrics if m.name == "robust_rest")
 
     @property
@@ -191,49 +149,23 @@ class PostCheck:
 
 def springs_of(overlay: Overlay) -> dict[str, Spring]:
     """Springs (stiffness > 0) of an overlay as engine options."""
-    return {
-        n: Spring(stiffness=d.stiffness, reference=float(d.spring_reference or 0.0))
-        for n, d in overlay.joints.items()
-        if d.stiffness > 0
-    }
+    return {n: Spring(stiffness=d.stiffness, reference=float(d.spring_reference or 0.0))
+            for n, d in overlay.joints.items() if d.stiffness > 0}
 
 
-def run_post_check(
-    urdf_path: Path,
-    initial_state: dict[str, float],
-    overlay: Overlay,
-    config: RefineConfig,
-    engine: str = "pybullet",
-    closed: dict[str, tuple[float, float, float]] | None = None,
-    *,
-    escalated: Callable[[PostCheck], bool] | None = None,
-    recorded: RecordedRuns | None = None,
-) -> PostCheck:
-    """Measure penetration, rest stability, oscillation and sag of the written
-    asset in ``engine`` (SPEC conventions), and the SPEC metrics in every other
-    engine of ``config.engines`` (``tasks.parity``; missing engines skipped).
-    The root is as the overlay declares (``overlay.mounting``): fixed for a
-    mounted asset, else free on the ground; every metric says which
-    (``details["root"]``). With ``closed`` (joint -> (q_closed, direction,
-    open range), rad or m) the manipulation tiers too: joint sweep and robust
-    rest in ``engine`` (:mod:`asset2sim.tasks.check.manipulation`).
+def run_post_check(urdf_path: Path, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
+                   engine: str = "pybullet", closed: dict[str, tuple[float, float, float]] | None = None, *,
+                   escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None) -> PostCheck:
+    """Penetration, rest stability, oscillation and sag of the written asset in
+    ``engine`` (the root as ``overlay.mounting`` declares, said in
+    ``details["root"]``), the SPEC metrics in every other engine of
+    ``config.engines``, and with ``closed`` (joint -> (q_closed, direction,
+    open range), rad or m) robust rest and the joint sweep.
 
-    Tiers run cheapest first: the rest test (and other engines), then robust
-    rest, then the joint sweep. ``escalated(check)``: the caller's escalation
-    loop says whether it escalates ``check`` into another round (it must
-    decide from what :func:`escalate` reads, which is never the sweep); when
-    the check already fails without the sweep and ``escalated`` says so, the
-    sweep is not run: the round is escalated whatever the sweep says, only the
-    last round's sweep is reported, and an escalation round records it as not
-    run (``passed`` None, ``details["not_run"]``). When ``engine``'s own
-    tiers already fail and are escalated, the other engines are not run in
-    that round either (``engine_results`` empty): they are run in every round
-    that is not escalated on ``engine``'s tiers alone, the last included, so
-    a joint that fails only in another engine is escalated a round later.
-    Robust rest always runs every trial: escalation sizes each joint's friction from the worst drift
-    over all trials (:func:`~asset2sim.tasks.check.manipulation.hold_factor`).
-    ``recorded``: manipulation runs taken from / recorded into it (a new
-    record when None; :attr:`PostCheck.recorded`)."""
+    ``escalated(check)``: whether the caller escalates ``check``; a check that
+    fails and is escalated without the sweep records it as not run, and without
+    the other engines when ``engine``'s own tiers fail so. ``recorded``:
+    manipulation runs taken from / recorded into it."""
     conv = config.sim
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
     pen, recording = measure_rest_test(engine, urdf_path, initial_state, springs_of(overlay), conv, fixed_base=fixed)
@@ -241,20 +173,12 @@ def run_post_check(
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
     drift = metrics.joint_drift(trace)
-    sagging = []
-    for name, d in drift.items():
-        tol = config.sag_tolerance_prismatic if trace.joint_types.get(name) == "prismatic" else config.sag_tolerance_revolute
-        if d > tol:
-            sagging.append(name)
+    sagging = [name for name, d in drift.items() if d > (config.sag_tolerance_prismatic if trace.joint_types.get(name) == "prismatic"
+                                                         else config.sag_tolerance_revolute)]
     sag_metric = MetricResult(
-        name="state_hold",
-        value=max(drift.values()) if drift else 0.0,
-        unit=unit("state_hold"),
-        passed=not sagging,
+        name="state_hold", value=max(drift.values()) if drift else 0.0, unit=unit("state_hold"), passed=not sagging,
         threshold=f"every joint within {config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m of its initial state",
-        details={"drift": drift, "sagging": sagging},
-        engine=engine,
-    )
+        details={"drift": drift, "sagging": sagging}, engine=engine)
     tilt = metrics.settle_tilt(trace, engine=engine)
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
     engine_results: dict[str, list[MetricResult]] = {}
@@ -267,9 +191,9 @@ def run_post_check(
             parity_done = True
 
     nested = parent_child.parent_child_penetration(urdf_path, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
-    for m in (pen, stab, osc, sag_metric, tilt, nested):
-        m.details["root"] = root_label(fixed)
     base = [pen, stab, osc, sag_metric, tilt, nested]
+    for m in base:
+        m.details["root"] = root_label(fixed)
     recorded = recorded if recorded is not None else RecordedRuns()
 
     def partial_escalated(rr: MetricResult) -> bool:
@@ -313,22 +237,11 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
              friction_caps: dict[str, float] | None = None,
              tilt_floors: dict[str, float] | None = None,
              damping_caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], str]:
-    """Raise damping and friction of the joints that oscillate or sag (all
-    joints when the root is unstable and no joint is singled out).
-
-    ``friction_caps`` (joint -> N*m or N, :func:`asset2sim.tasks.check.operating.friction_caps`):
-    friction never rises above what a hand or the probe can still overcome;
-    ``tilt_floors`` (joint -> N*m or N, :func:`asset2sim.tasks.check.operating.tilt_floors`):
-    a joint robust rest does not hold gets at least this friction (then the
-    cap applies);
-    a joint at its cap gets the rest of the factor as damping only (damping
-    resists the drop's and the nudge's transients without making the part
-    harder to move slowly), up to ``damping_caps`` (joint -> N m s/rad or
-    N s/m: what the task's gripper still overcomes at its top speed,
-    :func:`asset2sim.tasks.check.task_tier.operating_limits`, and what the
-    joint sweep's drive still moves through the range in time,
-    :func:`asset2sim.tasks.check.sweep.damping_caps`; never below the damping
-    before).
+    """Raise damping and friction of the joints that oscillate, sag or are not
+    held by robust rest (all joints when the root is unstable and no joint is
+    singled out). ``friction_caps`` (joint -> N*m or N) bound the friction,
+    ``tilt_floors`` (N*m or N) raise that of a joint robust rest does not hold,
+    ``damping_caps`` (N m s/rad or N s/m) bound the damping (never below the values before).
 
     Returns (new overlay, changes joint -> {parameter: new value}, reason).
     """
@@ -373,13 +286,7 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
             damping = max(dcap, d.damping)
         if friction == d.friction and damping == d.damping:
             continue
-        new = d.model_copy(
-            update={
-                "damping": damping,
-                "friction": friction,
-                "source": d.source + note,
-            }
-        )
+        new = d.model_copy(update={"damping": damping, "friction": friction, "source": d.source + note})
         ov.joints[name] = new
         changes[name] = {"damping": new.damping, "friction": new.friction}
     return ov, changes, "; ".join(reason)

@@ -1,69 +1,18 @@
 """Passive behaviour probes: a scripted pusher tries to close / open a joint.
+Definition: ``docs/design/metrics.md``, "Behaviour: passive probes".
 
-The cheap stand-in for the thesis's policies (SPEC, "Behavioral fidelity"). A
-probe runs in a simulator session (PyBullet in the evaluation) under the SPEC's conventions (root free on the ground,
-or fixed where the output folder declares the asset mounted: ``initial_state.json``
-"root", ``tasks.interpret.mounting``; gravity, passive joints) and applies a force on the moving link, as a finger
-would, while **the other hand holds the body**: by default
-(``ProbeConfig.hold_body``) the equal and opposite force acts on the root link
-at the same point, so the push is internal to the object; and a body light
-enough for a hand to lift (weight <= ``ProbeConfig.hold_force``, 22.2 N, the
-ADA's 5 lbf: ``pusher``) is gripped: the root is held where it settled by a
-bounded hold (``SimSession.hold_root``: a fixed constraint to the world of at
-most that force) through the push and the observation after release, as when
-a person holds a USB stick while swivelling its cover or a pocket knife while
-opening its blade (the reaction alone cancels the push but not the ground's
-friction on a cover dragged over the table nor the reaction to a blade's
-angular momentum, which slid or turned light bodies). A heavier object stands on its own and
-a hand only steadies it: the reaction alone, so a part that drags on the
-floor and pulls the body along still fails (a door modelled flush with the
-floor: ``tasks.state.ground_clearance``). The object counts as moved when
-it slides or tips anyway (the grip overpowered). Whether a *free* object
-can be operated with a realistic force without sliding or tipping (a heavy
-lid opened past the body's footprint) is the task-execution metric's
-question (root free, one gripper); whether it rests at its requested state,
-the rest tiers'. An engine without a bounded hold gets the reaction only (a
-note).
-``hold_body=False`` gives the external push (the pusher alone; the object's
-ground friction must resist it).
-
-Definitions (re-derivable; see ``docs/design/metrics.md``):
-
-- The pusher: its push point c, force law, force limit F_max and how long
-  it pushes (then it releases for ``release_time`` s): :mod:`asset2sim.tasks.check.pusher`.
-- Targets as opening fractions f (0 closed, 1 fully open, from the geometric
-  closed end): close -> f = 0.05, reached at f <= 0.10; open -> f = 0.6,
-  reached at f >= 0.55 (f = 0.9 / 0.85 when the joint starts beyond 0.55);
-  an open target beyond where the floor stops the part (``floor_stop``) is
-  that stop.
-- The object first settles freely for ``settle_time`` s; the push starts from
-  there (root pose and joint position at that moment are the references).
-- Object moved: during the push the object's footprint point (the point below
-  the root's origin at the object's lowest height at the start, carried with
-  the root) moved horizontally > ``slide_tol`` (m, slid: a tall object that
-  rocks a little does not count as sliding) or
-  rotated > ``tip_tol`` (rad, tipped).
-- Rebound: after release the fraction moved back towards the start by >
-  max(0.05, floor / range), floor the SPEC's rest tolerance (0.01 rad, 1 mm:
-  ``REBOUND_FLOOR_*``); kept moving: moved on beyond the target by as much or
-  ends with |q_dot| > 0.05 rad/s (0.005 m/s).
-- A part shut in by another (an open probe stalls before
-  ``SHUT_IN_FRACTION`` of its range without the object moving, and the link
-  it touches there is placed by other movable joints: a stapler's magazine
-  under its closed top, a toilet seat under its lid) is probed again with the
-  joints between them lifted towards their open ends, only as far as needed
-  (``CLEARING_SHARES`` of the way, in turn) and held there (a zero-velocity
-  drive limited to the probe's force at their lever), as a hand lifts the top
-  first (the
-  joint sweep's rule, :func:`asset2sim.tasks.check.sweep._sweep_clearing`);
-  the retry is kept when it succeeds, with a note. Needs the URDF model.
-- A probe succeeds iff the target is reached without the object moving and, for
-  a close probe, without rebound (a drawer that springs back), unless the
-  joint's spring is one its part prior or the request expects (it returns
-  by design: a toaster's carriage lever pushed down, a stapler's arm; the
-  task-execution check's rule, :func:`asset2sim.tasks.check.task_tier.hold_required_by_label`).
-  An open probe's rebound (a lid that falls shut) fails only when the
-  request asks the joint to hold its position.
+The object (root as the output folder declares it) settles; the pusher
+(:mod:`asset2sim.tasks.check.pusher`) pushes the moving link while the other
+hand holds the body (the reaction on the root; a body weighing at most
+``ProbeConfig.hold_force`` is gripped by a bounded root hold). Targets
+(opening fraction f): close f = 0.05, reached at f <= 0.10; open f = 0.6,
+reached at f >= 0.55 (0.9 / 0.85 when starting beyond 0.55; capped where the floor stops the part).
+A probe succeeds iff the target is reached without the object sliding or
+tipping (:class:`~asset2sim.tasks.check.support.SupportWatch`) and a close
+probe does not rebound after release (unless the joint's spring returns it
+by design); an open probe's rebound fails only when the request asks the
+joint to hold. A part shut in by another is probed again with the joints
+between lifted towards their open ends (``CLEARING_SHARES``, in turn).
 """
 
 from __future__ import annotations
@@ -85,13 +34,10 @@ OPEN_TARGET, OPEN_REACHED = 0.6, 0.55
 OPEN_FAR_TARGET, OPEN_FAR_REACHED = 0.9, 0.85
 REBOUND_FRACTION = 0.05
 #: Smallest motion after release that counts as a rebound or as moving on, rad
-#: / m: the SPEC's rest-stability tolerances (D_ori <= 0.01 rad, D_pos <= 1 mm;
-#: ``tasks.check.metrics``). A 6 mm toilet button pressed 0.3 mm into its stop
-#: (the engine's soft limit) comes back 0.7 mm: 11 % of its range, no spring.
+#: / m: the SPEC's rest-stability tolerances (D_ori <= 0.01 rad, D_pos <= 1 mm).
 REBOUND_FLOOR_REVOLUTE = 0.01
 REBOUND_FLOOR_PRISMATIC = 0.001
-#: Shares of the way to their open ends that the joints shutting a part in
-#: are lifted to, in turn, when that part is probed again (module docstring).
+#: Shares of the way to their open ends that the joints shutting a part in are lifted to, in turn.
 CLEARING_SHARES = (0.25, 0.5, 0.75, 1.0)
 
 
@@ -132,8 +78,7 @@ class ProbeResult:
 
 
 def moved_links(session, joint: str, model: UrdfModel | None = None) -> list[str]:
-    """The links ``joint`` moves (its child and every link below) by the URDF
-    ``model``; the child link alone without a model."""
+    """The links ``joint`` moves by the URDF ``model``; the child link alone without a model."""
     if model is not None:
         links = subtrees(model).get(joint)
         if links:
@@ -141,56 +86,28 @@ def moved_links(session, joint: str, model: UrdfModel | None = None) -> list[str
     return [session.joint_child[joint]]
 
 
-def probe_joint(
-    session,
-    joint: str,
-    *,
-    closed: float,
-    direction: float,
-    open_range: float,
-    action: str,
-    config: ProbeConfig | None = None,
-    holds_position: bool = False,
-    model: UrdfModel | None = None,
-    returns: bool = False,
-    floor_stop: float | None = None,
-) -> ProbeResult:
-    """Run one probe on ``joint`` of a session from its current state.
-
-    Args:
-        session: a :class:`asset2sim.engines.base.SimSession` (root free, on the ground); it is stepped in place.
-        joint: movable joint name.
-        closed: q_closed, rad or m; ``direction`` +1/-1 the opening direction;
-            ``open_range`` > 0 the largest opening from q_closed (rad or m).
-        action: ``close`` or ``open``.
-        config: probe knobs.
-        holds_position: the request asks the joint to hold its position (an
-            open probe that falls back then fails).
-        model: the session's URDF model (the mass the joint moves and the
-            links rigid with its child); None: the child link alone.
-        returns: the joint's spring is one its part prior or the request
-            expects (:func:`asset2sim.tasks.check.task_tier.hold_required_by_label`):
-            a close probe's rebound is its design (a toaster's carriage
-            lever, a stapler's arm), noted, not a failure.
-        floor_stop: opening (rad or m from ``closed``) at which the floor
-            stops the part with the object resting as it is
-            (:func:`asset2sim.tasks.state.ground_clearance.floor_stops`);
-            an open probe's target is capped there (reached at
-            ``OPEN_REACHED / OPEN_TARGET`` of it), with a note. None: no stop.
+def probe_joint(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
+                config: ProbeConfig | None = None, holds_position: bool = False, model: UrdfModel | None = None,
+                returns: bool = False, floor_stop: float | None = None) -> ProbeResult:
+    """Run one probe (``action`` ``close`` / ``open``) on ``joint`` of a session
+    (stepped in place) from its current state: ``closed`` q_c and ``open_range``
+    > 0 (rad or m), ``direction`` +-1. ``holds_position``: an open probe that
+    falls back fails; ``model``: the URDF (links rigid with the child);
+    ``returns``: a close probe's rebound is by design; ``floor_stop``: opening
+    (rad or m) where the floor stops the part, capping an open probe's target.
 
     Raises:
         ValueError: unknown action or non-positive ``open_range``.
         KeyError: unknown joint.
     """
-    _check_probe(session, joint, action, open_range)
+    check_action(session, joint, action, open_range)
     cfg = config or ProbeConfig()
     dt = session.options.conventions.timestep
 
     def frac(q: float) -> float:
         return float(direction * (q - closed) / open_range)
 
-    # Let the object come to rest on the ground first, so drift of an object
-    # that is unstable by itself is not taken for the push moving it.
+    # settle first: the drift of an object unstable by itself is not the push's
     for _ in range(int(round(cfg.settle_time / dt))):
         session.step(1)
     q0, _ = session.joint_state(joint)
@@ -208,7 +125,7 @@ def probe_joint(
     n_push = int(round(push_s / dt))
     run = _Run(reached=reached_if(f0))
     run.t_reach = 0.0 if run.reached else None
-    # A body a hand can lift is gripped by the other hand; a heavier one is only steadied (module docstring).
+    # a body a hand can lift is gripped by the other hand; a heavier one is only steadied
     gripped = cfg.hold_body and weight <= cfg.hold_force
     with root_held(session, cfg.hold_force if gripped else None, notes):
         _push(session, joint, hand, sign, cfg, n_push, reached_if, frac, watch, run)
@@ -228,24 +145,22 @@ def probe_joint(
         root_displacement=float(run.max_disp), root_rotation=float(run.max_rot), slid=bool(run.max_disp > cfg.slide_tol),
         tipped=bool(run.max_rot > cfg.tip_tol), release_fraction=float(run.f_rel),
         final_fraction=float(f_end) if np.isfinite(f_end) else float("nan"), rebound=bool(rebound), kept_moving=bool(kept),
-        success=not failure, failure=failure, notes=notes, trace=run.trace,
-    )
+        success=not failure, failure=failure, notes=notes, trace=run.trace)
 
 
-def _check_probe(session, joint: str, action: str, open_range: float) -> None:
-    """Raises :func:`probe_joint`'s ValueError (action, ``open_range``) or KeyError (joint)."""
+def check_action(session, joint: str, action: str, open_range: float, what: str = "probe", unknown: str | None = None) -> None:
+    """Raises ValueError (``action`` not close / open, ``open_range`` <= 0) or KeyError (``unknown`` or the joint)."""
     if action not in ("close", "open"):
-        raise ValueError(f"probe action must be 'close' or 'open', got {action!r}")
+        raise ValueError(f"{what} action must be 'close' or 'open', got {action!r}")
     if not open_range > 0:
         raise ValueError(f"joint {joint!r}: open_range must be > 0, got {open_range}")
     if joint not in session.joint_child:
-        raise KeyError(joint)
+        raise KeyError(joint if unknown is None else unknown)
 
 
 def _target(action: str, f0: float, open_range: float, floor_stop: float | None
             ) -> tuple[float, Callable[[float], bool], list[str]]:
-    """(target opening fraction, whether a fraction has reached it, notes) of
-    a probe that starts at opening fraction ``f0`` (module docstring, "Targets")."""
+    """(target opening fraction, whether a fraction has reached it, notes) of a probe starting at ``f0``."""
     if action == "close":
         f_target, reached_if = CLOSE_TARGET, (lambda f: f <= CLOSE_REACHED)
     elif f0 < OPEN_REACHED:
@@ -285,9 +200,8 @@ class _Run:
 
 def _push(session, joint: str, hand: Pusher, sign: float, cfg: ProbeConfig, n_push: int,
           reached_if: Callable[[float], bool], frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
-    """Push ``joint``'s part towards the target (``sign`` +1: q increases) for
-    at most ``n_push`` steps, until it reaches the target or the object slid
-    or tipped (the pusher stops), recording into ``run``."""
+    """Push ``joint``'s part towards the target (``sign`` +1: q increases) for at
+    most ``n_push`` steps, until reached or the object slid or tipped."""
     link, root = session.joint_child[joint], session.link_names[0]
     dt = session.options.conventions.timestep
     lead = 0.0  # how far the hand runs ahead of the push point, m
@@ -320,8 +234,7 @@ def _push(session, joint: str, hand: Pusher, sign: float, cfg: ProbeConfig, n_pu
 
 
 def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
-    """Observe ``n_rel`` steps with no force: the opening fraction at release
-    and its extremes after, recorded into ``run``."""
+    """Observe ``n_rel`` steps with no force: the opening fraction at release and its extremes after."""
     dt = session.options.conventions.timestep
     q_rel, _ = session.joint_state(joint)
     run.f_rel = run.f_low = run.f_high = frac(q_rel)
@@ -335,8 +248,7 @@ def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], wa
 
 def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, q_end: float, qd_end: float,
            holds_position: bool, returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
-    """(rebound, kept moving, failure: "" on success) of a probe (module
-    docstring), with the notes on what is allowed appended to ``notes``."""
+    """(rebound, kept moving, failure: "" on success) of a probe; notes what is allowed."""
     # "towards the start": for close the start is more open (larger f).
     tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
     if action == "close":
@@ -370,36 +282,17 @@ def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, ru
     return rebound, kept, failure
 
 
-def run_probes(
-    session,
-    joints: dict[str, tuple[float, float, float]],
-    *,
-    actions: tuple[str, ...] = ("close", "open"),
-    config: ProbeConfig | None = None,
-    holds_position: bool = False,
-    model: UrdfModel | None = None,
-    returns: set[str] | frozenset[str] = frozenset(),
-    floor_stops: dict[str, float] | None = None,
-) -> list[ProbeResult]:
-    """Probe every joint of ``joints`` with every action, each from the
-    session's state at call time (saved and restored with the session's
-    ``save_state``/``restore_state``; PyBullet: ``saveState``/``restoreState``).
-
-    Args:
-        session: a session at the initial state on the ground.
-        joints: joint -> (q_closed, direction, open_range).
-        actions: which probes.
-        config, holds_position: see :func:`probe_joint`.
-        model: the session's URDF model: the mass a joint moves, and a part
-            shut in by another is probed again with that one open (module
-            docstring); None: neither.
-        returns: joints whose spring returns them by design (see :func:`probe_joint`).
-        floor_stops: joint -> opening where the floor stops it (``floor_stop``
-            of :func:`probe_joint`); joints not in it have no stop.
+def run_probes(session, joints: dict[str, tuple[float, float, float]], *, actions: tuple[str, ...] = ("close", "open"),
+               config: ProbeConfig | None = None, holds_position: bool = False, model: UrdfModel | None = None,
+               returns: set[str] | frozenset[str] = frozenset(), floor_stops: dict[str, float] | None = None
+               ) -> list[ProbeResult]:
+    """Probe every joint of ``joints`` (joint -> (q_closed, direction,
+    open_range)) with every action, each from the session's state at call
+    time (saved and restored). ``model``: also retry a part shut in by
+    another; ``returns``, ``floor_stops``: per joint, as :func:`probe_joint`.
 
     Returns:
-        One :class:`ProbeResult` per joint and action, in order. The session is
-        left at the saved state.
+        One :class:`ProbeResult` per joint and action, in order; the session is left at the saved state.
     """
     sid = session.save_state()
     out = []
@@ -428,10 +321,9 @@ def _shut_in(r: ProbeResult) -> bool:
 
 def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, float, float]], model: UrdfModel, sid: int,
                    kw: dict) -> ProbeResult | None:
-    """The open probe of ``name`` again with the joints between its part and
-    the link it stalled against lifted towards their open ends (module docstring); None
-    when no other movable joint places that link or the retry fails too. The
-    session must be where the first probe left it."""
+    """The open probe again with the joints between its part and the link it
+    stalled against lifted towards their open ends; None when no other movable
+    joint places that link or every retry fails. The session must be where the first probe left it."""
     name = first.joint
     jd = next((j for j in model.joints if j.name == name), None)
     if jd is None:
@@ -455,8 +347,7 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
                 ends[k] = (now[k], hi if abs(hi - now[k]) >= abs(now[k] - lo) else lo)
     if not ends:
         return None
-    # the other hand lifts them only as far as needed (a stapler whose top is swung fully back tips
-    # over), held there by a zero-velocity drive limited to the probe's force at their lever
+    # lifted only as far as needed, held by a zero-velocity drive limited to the probe's force at their lever
     f_max = first.max_force
     for share in CLEARING_SHARES:
         opened = {k: q + share * (end - q) for k, (q, end) in ends.items()}
@@ -478,20 +369,12 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
 
 
 def probes_metric(results: list[ProbeResult], *, engine: str = "pybullet") -> MetricResult:
-    """Aggregate probes: value = number of failed probes; passes iff none
-    failed (``passed`` None when there was nothing to probe)."""
+    """Aggregate probes: value = failed probes; passes iff none failed (None with nothing probed)."""
     failed = [r for r in results if not r.success]
     return MetricResult(
-        name="probes",
-        value=float(len(failed)),
-        unit="failed probes",
-        passed=(not failed) if results else None,
+        name="probes", value=float(len(failed)), unit="failed probes", passed=(not failed) if results else None,
         threshold="every close/open probe reaches its target, the body steadied by the other hand (gripped when it "
         "weighs at most 22.2 N), without the object sliding (> 5 mm) or tipping (> 0.05 rad) and a closed joint "
         "does not spring back",
-        details={
-            "probes": [r.summary() for r in results],
-            "failures": [f"{r.joint} {r.action}: {r.failure}" for r in failed],
-        },
-        engine=engine,
-    )
+        details={"probes": [r.summary() for r in results], "failures": [f"{r.joint} {r.action}: {r.failure}" for r in failed]},
+        engine=engine)

@@ -1,24 +1,11 @@
-"""Which collision repairs refine's stage 7b tries, in order: the candidates,
-not the trial (refine writes each, clips the limits, post-checks the asset
-again and keeps a repair only when the check gets better while nothing that
-passed fails; ``tasks/refine.py`` ``_repair_sweep``; ``docs/design/metrics.md``,
-"Joint sweep" and "Parts held together").
+"""Which collision repairs refine's stage 7b tries, in order (``tasks/refine.py``
+keeps one only when the check improves). Two triggers:
 
-Two triggers, one candidate list each:
-
-- **sweep blocked** (:func:`sweep_repairs`): the joint sweep stops short
-  (:func:`asset2sim.tasks.check.sweep.blocked_positions`): the limit of a
-  joint carried by a moving part clipped against the carrying chain
-  (:mod:`asset2sim.tasks.geometry.limits`, step 6), then running clearance
-  for the sliding contacts (:mod:`asset2sim.tasks.state.clearance`), then
-  convex decomposition where a hull that bulges stops the part
-  (:mod:`asset2sim.tasks.check.stop_repair`);
-- **parts held together** (:func:`held_together_pairs`, then
-  :func:`clearance_repair` for :func:`asset2sim.tasks.state.clearance.touching_joints`):
-  the sweep passes but a tier of :data:`HELD_TOGETHER_TIERS` fails while the
-  PyBullet penetration metric reports link pairs in contact at the state (two
-  drawers touching along their runners move as one under the gripper; the
-  sweep holds the neighbour with a drive and does not see it).
+- **sweep blocked** (:func:`sweep_repairs`): limits clipped against the
+  carrying chain, then running clearance (:mod:`asset2sim.tasks.state.clearance`),
+  then convex decomposition (:mod:`asset2sim.tasks.check.stop_repair`);
+- **parts held together** (:func:`held_together_pairs`, :func:`clearance_repair`):
+  a tier of :data:`HELD_TOGETHER_TIERS` fails while link pairs are in contact at the state.
 """
 
 from __future__ import annotations
@@ -55,9 +42,8 @@ class CollisionRepair:
 
 
 def held_together_pairs(metrics: list[MetricResult]) -> list[tuple[str, str]]:
-    """The link pairs (link_a, link_b) in contact at the state (the PyBullet
-    ``penetration`` metric's ``pairs``) when a tier of
-    :data:`HELD_TOGETHER_TIERS` failed in ``metrics``; else empty."""
+    """The link pairs in contact at the state (PyBullet ``penetration`` pairs)
+    when a tier of :data:`HELD_TOGETHER_TIERS` failed in ``metrics``; else empty."""
     if not any(m.name in HELD_TOGETHER_TIERS and m.passed is False for m in metrics):
         return []
     pen = next((m for m in metrics if m.name == "penetration" and m.engine == "pybullet"), None)
@@ -67,10 +53,9 @@ def held_together_pairs(metrics: list[MetricResult]) -> list[tuple[str, str]]:
 def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], state: dict[str, float],
                      overrides: dict[str, list[CollisionPiece]], scale: float, out_dir: Path,
                      folder: str) -> CollisionRepair | None:
-    """Running clearance for the sliding contacts of ``joints`` (joint ->
-    position, rad or m) of the written ``model`` (file ``urdf``), other joints
-    at ``state``; the repaired pieces written under ``out_dir/folder`` at the
-    overlay's ``scale``. None when no sliding contact needs it.
+    """Running clearance for the sliding contacts of ``joints`` (joint -> position,
+    rad or m) of the written ``model``, other joints at ``state``; pieces written
+    under ``out_dir/folder`` at ``scale``. None when no contact needs it.
 
     Raises:
         OSError: a collision file cannot be read or written.
@@ -86,18 +71,11 @@ def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], sta
 def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_metric: MetricResult,
                   blocked: dict[str, float], state: dict[str, float], overrides: dict[str, list[CollisionPiece]],
                   scale: float, out_dir: Path, folder: str, config: RefineConfig) -> Iterator[CollisionRepair]:
-    """The candidate repairs of a blocked sweep, lazily, in order (module
-    docstring): each is computed only when the one before was not kept.
-
-    Args:
-        model: the written URDF (file ``urdf``, output scale).
-        asset: the input asset (its meshes are decomposed).
-        sweep_metric: the failing ``joint_sweep`` metric.
-        blocked: joint -> where the sweep stopped (rad or m).
-        state: joint -> initial position (rad or m).
-        overrides: the collision overrides written so far.
-        scale: the overlay's uniform scale; ``out_dir`` / ``folder``: where pieces are written.
-        config: ``convex_decomposition``, ``max_decompositions``, ``sim``.
+    """The candidate repairs of a blocked sweep, lazily, in order (each computed
+    only when the one before was not kept). ``blocked``: joint -> where the
+    sweep stopped (rad or m); ``overrides``: the collision overrides so far;
+    the rest as :func:`clearance_repair` and
+    :func:`~asset2sim.tasks.check.stop_repair.decompose_for_blocked`.
 
     Raises:
         OSError: a collision file cannot be read or written.

@@ -1,11 +1,6 @@
-"""The request and the category priors as the evaluation applies them.
-
-The prompt is parsed by :func:`asset2sim.tasks.interpret.request.parse_request`;
-the category is recognised, sized and weighed by the priors of
-:mod:`asset2sim.tasks.interpret` (``categories``, ``size_priors``,
-``part_priors``); the request's joint states are mapped to the evaluated
-URDF's joints by the semantic labels of the child links. None of these may
-stop an evaluation: a failure becomes a note or an empty prior.
+"""The request and the category priors as the evaluation applies them; the
+request's joint states mapped to joints by their child links' semantic
+labels. None of these may stop an evaluation: a failure becomes a note or an empty prior.
 """
 
 from __future__ import annotations
@@ -21,12 +16,7 @@ from asset2sim.tasks.interpret.request import parse_request
 
 
 def parse_prompt(prompt: str | None) -> tuple[RequestSpec | None, str | None]:
-    """RequestSpec of ``prompt`` via :func:`asset2sim.tasks.interpret.request.parse_request`.
-
-    Returns:
-        (spec or None, error message or None); no prompt gives (None, None),
-        a parser failure (None, its message).
-    """
+    """(RequestSpec of ``prompt`` or None, the parser's error or None)."""
     if not prompt:
         return None, None
     try:
@@ -36,19 +26,9 @@ def parse_prompt(prompt: str | None) -> tuple[RequestSpec | None, str | None]:
 
 
 def category_prior(category: str | None, spec: RequestSpec | None = None) -> dict[str, Any]:
-    """Size target and mass prior of a category
-    (:func:`asset2sim.tasks.interpret.size_priors.target_size`,
-    :func:`asset2sim.tasks.interpret.categories.category_prior`).
-
-    Args:
-        category: category name (canonical, model_cat or synonym).
-        spec: the parsed request (size words, variants such as "mini fridge").
-
-    Returns:
-        {} when no category is known or the priors have none for it, else
-        {"category", "target_dims" (m, largest first, size words applied),
-        "base_dims" (m, regular or the variant's), "factor", "variant",
-        "base_mass_range" (kg, for ``base_dims``), "note", "source"}.
+    """Size target and mass prior of ``category`` with the request ``spec``'s
+    size words: {"category", "target_dims" (m, largest first), "base_dims" (m),
+    "factor", "variant", "base_mass_range" (kg), "note", "source"}, or {} without a prior.
     """
     if not category:
         return {}
@@ -62,27 +42,16 @@ def category_prior(category: str | None, spec: RequestSpec | None = None) -> dic
                 base_mass = var.mass_range
     except Exception:
         return {}
-    return {
-        "category": t.category,
-        "target_dims": [float(x) for x in t.dims],
-        "base_dims": [float(x) for x in t.base_dims],
-        "factor": float(t.factor),
-        "variant": t.variant,
-        "base_mass_range": (float(base_mass[0]), float(base_mass[1])),
-        "note": t.note,
-        "source": f"asset2sim/priors/categories.yaml: {cat.dims_source}; {cat.mass_source}",
-    }
+    return {"category": t.category, "target_dims": [float(x) for x in t.dims], "base_dims": [float(x) for x in t.base_dims],
+            "factor": float(t.factor), "variant": t.variant, "base_mass_range": (float(base_mass[0]), float(base_mass[1])),
+            "note": t.note, "source": f"asset2sim/priors/categories.yaml: {cat.dims_source}; {cat.mass_source}"}
 
 
 def scaled_mass_range(prior: dict[str, Any], extents: Any) -> tuple[tuple[float, float] | None, float]:
-    """Plausible mass range (kg) for an object of the prior's category with
-    closed-state ``extents`` (3,) m: the base range scaled by
-    :func:`asset2sim.tasks.interpret.size_priors.scale_mass_range` (solid f^3 to
-    thin-walled f^2) with f the geometric mean of (extent / base dimension)
-    over the two largest dimensions, both sorted — the same size factor the
-    refine stage uses (``tasks.synthesize.estimate.plausible_mass_range``).
-    A factor that range rejects (not finite, not positive) scales the range
-    by f^3.
+    """Plausible mass range (kg) for closed-state ``extents`` (3,) m: the base
+    range scaled by :func:`~asset2sim.tasks.interpret.size_priors.scale_mass_range`
+    with f the geometric mean of extent / base dimension over the two largest
+    (f^3 where that rejects f).
 
     Returns:
         (range or None without a base mass range, f).
@@ -102,9 +71,7 @@ def scaled_mass_range(prior: dict[str, Any], extents: Any) -> tuple[tuple[float,
 
 
 def recognize_category(prompt: str | None, model_cat: str | None = None, labels: list[str] | None = None) -> str | None:
-    """Category from the request, ``model_cat`` and semantic labels via
-    :func:`asset2sim.tasks.interpret.categories.recognize_category`;
-    ``model_cat`` when that fails, None with neither prompt nor ``model_cat``."""
+    """Category from the request, ``model_cat`` and ``labels``; ``model_cat`` when that fails."""
     if not prompt and not model_cat:
         return None
     try:
@@ -115,11 +82,9 @@ def recognize_category(prompt: str | None, model_cat: str | None = None, labels:
 
 
 def match_label(label: str | None, wanted: str | None, category: str | None = None) -> bool:
-    """Whether the request's part word ``wanted`` names a link labelled
-    ``label``: :func:`asset2sim.tasks.interpret.part_priors.request_label_matches`
-    (canonical labels and the category's synonyms, e.g. a laptop's "lid" is
-    its ``screen``); when that fails, equal labels or ``wanted`` as one of the
-    ``_``-separated words of ``label``."""
+    """Whether the request's part word ``wanted`` names a link labelled ``label``
+    (:func:`~asset2sim.tasks.interpret.part_priors.request_label_matches`; when
+    that fails, equal labels or ``wanted`` as a ``_``-separated word of ``label``)."""
     if not label or not wanted:
         return False
     try:
@@ -133,23 +98,11 @@ def match_label(label: str | None, wanted: str | None, category: str | None = No
 def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                      centres: dict[str, np.ndarray], task_joints: list[str],
                      category: str | None = None) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
-    """Map a RequestSpec's joint states to joints.
-
-    ``selector == "all"``: every task-relevant joint. ``label``: movable joints
-    whose child link's semantic label the request's word names
-    (:func:`match_label`), ordered top to bottom by the height of the child
-    link's AABB centre (``centres``: link -> (3,) m; then by x); ``ordinal``
-    picks one. A label that names no part falls back to the task-relevant
-    joints (the pipeline's convention,
-    :func:`asset2sim.tasks.interpret.part_priors.request_label_matches`); a
-    phrase that still maps to nothing is returned as unmatched. A later phrase
-    overrides an earlier one for the same joint.
-
-    Returns:
-        ([(joint, band, label, phrase, target)], [phrases that matched no
-        joint]); ``target`` is the joint state's
-        :class:`asset2sim.schemas.request.StateTarget` or None.
-    """
+    """([(joint, band, label, phrase, target)], [phrases that matched no joint])
+    of a RequestSpec's joint states: ``all`` every task-relevant joint, ``joint``
+    the one named, ``label`` the movable joints whose child's label the word
+    names (else the task-relevant ones), top to bottom by ``centres`` (link ->
+    (3,) m), ``ordinal`` picking one; a later phrase overrides an earlier one."""
     out, unmatched = [], []
     if spec is None:
         return out, unmatched
@@ -179,9 +132,7 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
 
 def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                     category: str | None = None) -> list[str]:
-    """Movable joints the request's ``label`` joint states name
-    (:func:`match_label` on the child link's semantic label), in request then
-    file order, repeats kept; [] without a request."""
+    """Movable joints the request's ``label`` joint states name, in request then file order (repeats kept)."""
     out: list[str] = []
     if spec is None:
         return out

@@ -1,68 +1,14 @@
 """Robust rest: does the object come back to rest, with its joints held, after
-the small disturbances of being put down by a hand or a robot?
+the small disturbances of being put down? Definition: ``docs/design/metrics.md``, "robust_rest".
 
-Definition (SPEC, "Interaction under manipulation"; issue 15; written so
-anyone can re-derive it, see ``docs/design/metrics.md``). The object is loaded as
-for the SPEC rest test (root free, lowest collision point on the ground,
-joints at the initial state, passive joints) and saved; each **trial**
-starts from that saved placement:
-
-- ``drop``: the root lifted by :attr:`RobustRestConfig.drop_height` (2 cm) and
-  released;
-- ``tilt+x``, ``tilt-x``, ``tilt+y``, ``tilt-y``: the object rotated by
-  :attr:`RobustRestConfig.tilt` (5 deg) about the world x / y axis through the
-  centre of its footprint (the point below the middle of its bounding box on
-  the ground), then moved up or down so that its lowest collision point
-  touches z = 0 (the engine's exact placement on the ground where it has one,
-  ``place_on_ground``: PyBullet's ``getMeshData`` vertices are not in the
-  link frame for refined, scaled assets, and placing by them put the tilted
-  generated laptop several cm into or above the ground (up to 8.4 cm), from
-  where it was thrown or fell on its edge and toppled; a check bug, not the
-  asset's), and released;
-- ``nudge``: the root given a horizontal velocity of
-  :attr:`RobustRestConfig.nudge_speed` (0.05 m/s along world x, a light bump
-  of a hand) on the ground.
-
-After the disturbance the SPEC rest test runs (settle T_set = 1 s, test
-T_test = 2 s, :func:`asset2sim.tasks.check.metrics.run_rest_test`), with
-settling allowed to go on while the disturbed object still moves, up to
-:attr:`RobustRestConfig.recovery_time` (3 s) more, until a quarter second
-in which its root moved less than half the SPEC's stability tolerances.
-The SPEC's T_set is for an object put down at rest; a disturbed object comes
-back to rest in a time its shape sets. A tall cabinet (6 drawers) tilted
-5 deg about the axis across its depth rocks on its front and back edges,
-each impact keeping about 3/4 of the swing's amplitude (PyBullet), and stops
-at 2.4 s (a trash can whose open lid puts its centre of mass near the edge
-of its footprint: 1.6 s). A rigid block rocks so (Housner 1963, "The
-behavior of inverted pendulum structures during earthquakes", BSSA 53(2):
-each impact keeps r = (1 - 3/2 sin^2 alpha)^2 of the energy, alpha the
-block's slenderness angle; 0.73 at 18 deg). The object must still
-come back to rest and stay there for the whole T_test, and its joints must
-hold through the whole settling.
-
-A trial **passes** iff
-
-1. it comes back to rest: D_pos <= 1e-3 m and D_ori <= 1e-2 rad over T_test
-   (:func:`asset2sim.tasks.check.metrics.rest_stability`), nothing diverges;
-2. it did not topple: the body's "up" (the world z axis of the undisturbed
-   placement, carried in the root frame) ends within
-   :attr:`RobustRestConfig.topple_tol` (0.05 rad) of the world z axis (yaw,
-   a turn about the vertical, is not toppling);
-3. joints held: every movable joint (but the wheels and casters the object
-   rolls on: continuous joints whose part rests on the ground,
-   :func:`asset2sim.tasks.check.support.rolling_joints`; their drift is
-   recorded, not graded) stays within
-   :attr:`RobustRestConfig.joint_tol_revolute` (0.02 rad) or
-   :attr:`RobustRestConfig.joint_tol_prismatic` (2 mm) of its initial state at
-   every step of settling and test (positions clipped to the joint's limits:
-   an engine's soft limit lets a joint pressed against it pass it by a few
-   mm, which no real object does).
-
-The metric passes iff every trial passes. A trial the engine cannot perform
-(the fake engine has no root velocity; a fixed root cannot be moved) is
-recorded as skipped; with the root fixed as the asset declares (a mounted
-fixture) the metric is skipped (``passed`` None): a mounted object is not
-put down (its joints' hold is the rest test's ``joint_hold``).
+Each trial (:data:`TRIALS`: a drop, four tilts about the footprint's centre, a
+nudge) starts from the saved placement of the SPEC rest test and is followed
+by the rest test, settling extended by up to ``recovery_time`` while the
+object still moves. A trial passes iff the object comes back to rest, its up
+direction ends within ``topple_tol`` of the vertical, and every movable joint
+but the wheels it rolls on stays within ``joint_tol_*`` of its initial state
+at every step (clipped to its limits). A trial the engine cannot perform is
+skipped, and so is the metric for a root fixed as the asset declares.
 """
 
 from __future__ import annotations
@@ -103,11 +49,9 @@ class RobustRestConfig:
     joint_tol_prismatic: float = 0.002
     """... of a prismatic joint, m (SPEC: 2 mm)"""
     topple_tol: float = 0.05
-    """largest change of the body's up direction, rad
-    (:data:`asset2sim.tasks.check.metrics.SETTLE_TILT_LIMIT`)"""
+    """largest change of the body's up direction, rad"""
     recovery_time: float = 3.0
-    """settling allowed after T_set while the disturbed object still moves, s
-    (:func:`asset2sim.tasks.check.metrics.run_rest_test`)"""
+    """settling allowed after T_set while the disturbed object still moves, s"""
     trials: tuple[str, ...] = TRIALS
 
 
@@ -125,8 +69,7 @@ class Trial:
     """joint -> its tolerance (rad or m)"""
     failing_joints: list[str] = field(default_factory=list)
     rolling: list[str] = field(default_factory=list)
-    """joints the object rolls on (:func:`asset2sim.tasks.check.support.rolling_joints`):
-    their drift is recorded, not graded (no tolerance)"""
+    """joints the object rolls on: their drift is recorded, not graded"""
     diverged: bool = False
     failure: str = ""
 
@@ -136,17 +79,15 @@ class Trial:
 
 
 def world_vertices(session: SimSession) -> np.ndarray:
-    """Collision vertices (k, 3) of every link in the world, m (the corners of
-    the engine's link AABBs for links whose vertices the engine keeps none)."""
+    """Collision vertices (k, 3) of every link in the world, m (:func:`~asset2sim.tasks.check.support.link_world_vertices`)."""
     pts = [support.link_world_vertices(session, ln) for ln in session.link_names]
     return np.concatenate(pts) if pts else np.zeros((0, 3))
 
 
 def tilt_pose(session: SimSession, axis: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
-    """Root pose (position (3,) m, quaternion (4,) xyzw) of the object turned
-    by ``angle`` (rad) about world ``axis`` (3,) through the centre of its
-    footprint, then shifted vertically so its lowest collision vertex is at
-    z = 0. Does not move the session (it is moved and put back)."""
+    """Root pose (position (3,) m, quaternion (4,) xyzw) of the object turned by
+    ``angle`` (rad) about world ``axis`` (3,) through the centre of its
+    footprint, shifted so its lowest collision vertex is at z = 0."""
     pos, quat = session.root_pose()
     pts = world_vertices(session)
     if not len(pts):
@@ -163,9 +104,7 @@ def tilt_pose(session: SimSession, axis: np.ndarray, angle: float) -> tuple[np.n
 
 
 def _up_change(q_ref: np.ndarray, q_now: np.ndarray) -> float:
-    """Angle (rad) between world z and the body's reference up direction
-    (world z of the reference orientation ``q_ref``, carried by the body) at
-    ``q_now`` (quaternions xyzw)."""
+    """Angle (rad) between world z and the body's up direction (world z at ``q_ref``) at ``q_now`` (xyzw)."""
     R0 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_ref))
     R1 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_now))
     up = R1 @ (R0.T @ np.array([0.0, 0.0, 1.0]))
@@ -192,17 +131,15 @@ def _disturb(session: SimSession, name: str, cfg: RobustRestConfig) -> None:
 
 def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q_ref: np.ndarray,
               conventions: SimConventions, config: RobustRestConfig, rolling: list[str] | tuple[str, ...] = ()) -> Trial:
-    """Disturb the session (at the saved placement) by trial ``name``, run the
-    SPEC rest test and grade it (see the module docstring). ``rolling``:
-    joints whose drift is not graded (wheels on the ground).
+    """Disturb the session by trial ``name``, run the rest test and grade it
+    (module docstring). ``rolling``: joints whose drift is not graded.
 
     Raises:
         EngineUnsupported: the engine cannot perform the disturbance.
         ValueError: unknown trial.
     """
-    cfg = config
-    _disturb(session, name, cfg)
-    trace = metrics.run_rest_test(session, conventions, recovery_time=cfg.recovery_time)
+    _disturb(session, name, config)
+    trace = metrics.run_rest_test(session, conventions, recovery_time=config.recovery_time)
     stab = metrics.rest_stability(trace, conventions, engine=session.engine)
     drift: dict[str, float] = {}
     tols: dict[str, float] = {}
@@ -217,7 +154,7 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
         drift[j] = d
         if j in rolling:
             continue
-        tol = tols[j] = cfg.joint_tol_prismatic if trace.joint_types.get(j) == "prismatic" else cfg.joint_tol_revolute
+        tol = tols[j] = config.joint_tol_prismatic if trace.joint_types.get(j) == "prismatic" else config.joint_tol_revolute
         if not d <= tol:
             failing.append(j)
     diverged = trace.diverged
@@ -227,15 +164,14 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
         why.append("diverged")
     elif not stab.passed:
         why.append(f"not at rest (D_pos {stab.details['D_pos_m']:.2g} m, D_ori {stab.details['D_ori_rad']:.2g} rad)")
-    if topple is not None and topple > cfg.topple_tol:
+    if topple is not None and topple > config.topple_tol:
         why.append(f"toppled ({topple:.2f} rad)")
     if failing:
         why.append("joints not held: " + ", ".join(f"{j} {drift[j]:.3g}" for j in failing))
     return Trial(
         name=name, passed=not why, d_pos=stab.details.get("D_pos_m"), d_ori=stab.details.get("D_ori_rad"),
         topple=topple, joint_drift=drift, joint_tolerance=tols, failing_joints=failing, rolling=[j for j in trace.joints if j in rolling],
-        diverged=diverged, failure="; ".join(why),
-    )
+        diverged=diverged, failure="; ".join(why))
 
 
 @dataclass
@@ -251,12 +187,8 @@ class RobustRestRun:
 def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, float],
                     springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                     config: RobustRestConfig | None = None, fixed_base: bool = False) -> RobustRestRun:
-    """Every trial of ``config`` in one session of ``engine`` opened as for
-    the SPEC rest test (the placement saved once, restored before each trial).
-
-    Args:
-        fixed_base: the asset declares its root fixed (a mounted fixture):
-            nothing is put down, the metric is skipped.
+    """Every trial of ``config`` in one session of ``engine`` opened as for the
+    SPEC rest test. ``fixed_base``: the root is fixed as declared: skipped.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
@@ -279,11 +211,8 @@ def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, floa
 
 def run_trials(session: SimSession, initial_state: dict[str, float], conventions: SimConventions | None = None,
                config: RobustRestConfig | None = None, rolling: list[str] | tuple[str, ...] = ()) -> list[Trial]:
-    """Every trial of ``config`` on an open session, each from the placement
-    the session has now (saved once, restored before each trial; the
-    session is left at the last trial's end). ``rolling``: as
-    :func:`run_trial`. A disturbance the engine cannot perform is a skipped
-    trial (``passed`` None)."""
+    """Every trial of ``config`` on an open session, each from its present
+    placement; a disturbance the engine cannot perform is skipped (``passed`` None)."""
     cfg = config or RobustRestConfig()
     conv = conventions or SimConventions()
     _, q_ref = session.root_pose()
@@ -300,16 +229,12 @@ def run_trials(session: SimSession, initial_state: dict[str, float], conventions
 
 
 def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = None) -> MetricResult:
-    """The ``robust_rest`` :class:`~asset2sim.schemas.report.MetricResult`:
-    value = number of failed trials; passes iff none failed (None when every
-    trial was skipped)."""
+    """The ``robust_rest`` metric: value = failed trials; passes iff none failed (None when all were skipped)."""
     cfg = config or RobustRestConfig()
     done = [t for t in run.trials if t.passed is not None]
     failed = [t for t in done if not t.passed]
     return MetricResult(
-        name="robust_rest",
-        value=float(len(failed)) if done else None,
-        unit=unit("robust_rest"),
+        name="robust_rest", value=float(len(failed)) if done else None, unit=unit("robust_rest"),
         passed=(not failed) if done else None,
         threshold=(f"after a {cfg.drop_height * 100:g} cm drop, {math.degrees(cfg.tilt):g} deg tilts about x and y and a "
                    f"{cfg.nudge_speed:g} m/s nudge: at rest (D_pos <= 1e-3 m, D_ori <= 1e-2 rad), up within "
@@ -317,16 +242,12 @@ def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = Non
         details={"trials": {t.name: t.summary() for t in run.trials},
                  "failures": [f"{t.name}: {t.failure}" for t in failed],
                  "skipped": run.skipped or [t.name for t in run.trials if t.passed is None]},
-        engine=run.engine,
-    )
+        engine=run.engine)
 
 
 def toppled(metric: MetricResult, config: RobustRestConfig | None = None) -> bool:
-    """Whether a trial of a ``robust_rest`` metric (made by
-    :func:`robust_rest_metric`) toppled the object: its up direction ended
-    more than :attr:`RobustRestConfig.topple_tol` (rad) off the vertical.
-    False for a skipped metric or trial and for a diverged one (no topple
-    measured).
+    """Whether a trial of a ``robust_rest`` metric toppled the object (up
+    direction more than ``topple_tol`` rad off the vertical); False when none measured it.
 
     Raises:
         ValueError: ``metric`` is not a ``robust_rest`` metric.

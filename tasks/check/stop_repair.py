@@ -1,38 +1,12 @@
 """Collision repair where the joint sweep stops inside the range against a
-hull that bulges: convex decomposition of the pieces in the way.
+hull that bulges (a convex hull filling a concave part's opening): convex
+decomposition of the pieces in the way (refine stage 7b).
 
-A convex hull over a concave part fills its openings: a suitcase's U-shaped
-carry handle (one mesh, one hull) folds down onto the lid, and the hull of
-the handle's U, or the lid's hull over its recess, meets the other part
-before the handle lies flat (101668: the handle stops at 89 % of its range,
-the hulls 6 mm into each other at the raw limit). That is neither a sliding
-contact (:mod:`asset2sim.tasks.state.clearance` gives those running
-clearance) nor a limit beyond the geometry the scan of
-:mod:`asset2sim.tasks.geometry.limits` clips (it clips against the parent's
-rigid group and the carrying chain, not against a sibling, whose contact may
-be the hulls'). Refine stage 7b.
-
-Method, for every joint the sweep reports stopped short (``reached only
-...`` / ``closed back only ...``, :func:`asset2sim.tasks.check.sweep.blocked_positions`),
-other joints at the initial state, in a fixed-base, gravity-free PyBullet
-session of the written URDF:
-
-1. Sample :data:`SAMPLES` positions from where the drive stalled to the end
-   it was driven to; at each, the penetration (deepest point, m) of every
-   pair (a link the joint moves, a link it does not; parent-child pairs
-   excepted, as every engine skips them) is measured. The pair and position
-   of the deepest one are the stop (none deeper than :data:`MIN_DEPTH`: the
-   stall is not a contact; nothing to repair).
-2. At that position :func:`asset2sim.tasks.state.collision.improve_collisions`
-   works on the pair, piece by piece: small hinge hardware loses its
-   collision, concave pieces are replaced by their CoACD decomposition, each
-   change kept only if it lowers the pair's piece-wise penetration. Links the
-   earlier stages already replaced (state search, running clearance) are
-   left as they are.
-
-The caller writes the returned collision overrides, clips the limits again,
-sweeps again and keeps the repair only when the sweep improves and no
-metric that passed fails (``tasks/refine.py``, ``_repair_sweep``).
+For every joint the sweep reports stopped short, :data:`SAMPLES` positions
+from the stall to the end it was driven to (fixed-base, gravity-free PyBullet)
+give the deepest pair (moving link, other link; parent-child excepted);
+deeper than :data:`MIN_DEPTH`, :func:`asset2sim.tasks.state.collision.improve_collisions`
+works on that pair there. The caller keeps the repair only when the check improves.
 """
 
 from __future__ import annotations
@@ -51,8 +25,7 @@ from asset2sim.urdf import UrdfModel
 
 #: Positions sampled from the stall to the end the drive aimed at.
 SAMPLES = 8
-#: Penetration (m) under which the stall is not a contact (PyBullet's 1 mm
-#: hull margin on each side: touching hulls report up to 2 mm).
+#: Penetration (m) under which the stall is not a contact (PyBullet's 1 mm hull margin on each side).
 MIN_DEPTH = 0.0021
 
 
@@ -78,19 +51,10 @@ def decompose_for_blocked(model: UrdfModel, urdf: Path, asset: AssetDescription,
                           state: dict[str, float], subtrees: dict[str, list[str]], replaced: set[str], scale: float,
                           out_dir: Path, folder: str, *, cache=None, max_decompositions: int = 32,
                           conventions: SimConventions | None = None) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
-    """Convex-decomposition repairs for the joints the ``joint_sweep``
-    ``metric`` found stopped short (see the module docstring).
-
-    Args:
-        model: the written URDF (file ``urdf``, at the output scale).
-        asset: the input asset (its collision meshes are decomposed).
-        state: joint -> initial position (rad or m), the other joints' state.
-        subtrees: joint -> the links it moves.
-        replaced: links whose collision pieces earlier stages already replaced (left alone).
-        scale: the overlay's uniform scale; ``out_dir`` / ``folder``: where pieces are written.
-
-    Returns:
-        (collision overrides link -> pieces for the writer, notes naming each change with before -> after).
+    """(collision overrides link -> pieces, notes) repairing the joints the
+    ``joint_sweep`` ``metric`` found stopped short (module docstring). ``model``:
+    the written URDF (file ``urdf``); ``state``: joint -> initial position (rad
+    or m); ``replaced``: links left alone; pieces under ``out_dir`` / ``folder``.
 
     Raises:
         DecompositionUnavailable: CoACD is not installed.

@@ -1,20 +1,11 @@
 """Did the object slide or tip while it was being operated? One measure for
-the probes (:mod:`asset2sim.tasks.check.probes`), the gripper task
-(:mod:`asset2sim.tasks.check.task_execution`) and the learning environment
-(:mod:`asset2sim.tasks.evaluation.learn_env`); definition in
-``docs/design/metrics.md`` (probes: "slid").
+the probes, the gripper task and the learning environment
+(``docs/design/metrics.md``, probes: "slid").
 
-Sliding is measured where the object stands: the **footprint point**, below
-the carrying link's origin at the object's lowest height (the lowest corner
-of every link's bounding box) when the watch starts, carried rigidly with
-that link; its horizontal displacement is the slide (a tall fridge rocking
-0.3 deg moves its root origin 1 cm without sliding; rocking lifts the point,
-it does not move it sideways). Tipping is the angle between the world
-vertical and the carrying link's up direction (the world vertical at the
-start, carried with the link), as robust rest measures toppling: a turn
-about the vertical is not tipping (a pair of scissors lying flat turns on
-the table as one blade is opened against the other: 0.95 rad of turn, no
-tilt and 0.7 mm of slide; counted as "tipped", its probes failed).
+The slide is the horizontal displacement of the footprint point (below the
+carrying link's origin at the object's lowest height when the watch starts,
+carried rigidly with that link); the tip is the angle between the world
+vertical and the carrying link's up direction (a turn about the vertical is not tipping).
 """
 
 from __future__ import annotations
@@ -23,14 +14,8 @@ import numpy as np
 
 
 class SupportWatch:
-    """Slide (m) and tip (rad) of the link ``link`` of ``session`` (a
-    :class:`~asset2sim.engines.base.SimSession`) since construction: the
-    root, or the joint's child when a gripper moves the parent side.
-
-    Attributes:
-        slide: largest horizontal footprint displacement seen by :meth:`update`, m.
-        tilt: largest tilt of the up direction seen by :meth:`update`, rad.
-    """
+    """Slide (m) and tip (rad) of ``link`` of ``session`` since construction;
+    ``slide`` and ``tilt`` are the largest seen by :meth:`update`."""
 
     def __init__(self, session, link: str) -> None:
         self.session, self.link = session, link
@@ -43,9 +28,7 @@ class SupportWatch:
         self.slide = self.tilt = 0.0
 
     def current(self) -> tuple[np.ndarray, float]:
-        """(horizontal footprint displacement (2,) m, tilt of the up
-        direction from the vertical, rad) now; the tilt is inf when the
-        engine reports a non-finite orientation."""
+        """(horizontal footprint displacement (2,) m, tilt rad, inf when non-finite) now."""
         p, R = self.session.link_frame(self.link)
         R = np.asarray(R, float)
         moved = np.asarray(p, float) + R @ self.foot_local - self.foot0
@@ -54,8 +37,7 @@ class SupportWatch:
         return moved[:2], t
 
     def update(self) -> tuple[float, float]:
-        """Fold the present slide and tip into the running maxima; returns
-        (:attr:`slide` m, :attr:`tilt` rad)."""
+        """Fold the present slide and tip into the running maxima; returns (slide, tilt)."""
         xy, t = self.current()
         s = float(np.linalg.norm(xy))
         self.slide = max(self.slide, s) if np.isfinite(s) else float("inf")
@@ -63,17 +45,14 @@ class SupportWatch:
         return self.slide, self.tilt
 
 
-#: Height (m) above the object's lowest collision point within which a link
-#: counts as resting on the ground (:func:`rolling_joints`): PyBullet's 1 mm
-#: collision margin on each of the two shapes plus 1 mm.
+#: Height (m) above the object's lowest collision point within which a link rests on the ground
+#: (PyBullet's 1 mm margin on each shape plus 1 mm).
 GROUND_CONTACT_GAP = 0.003
 
 
 def link_world_vertices(session, link: str) -> np.ndarray:
-    """Collision vertices (k, 3) of ``link`` in the world, m: the engine's
-    collision vertices carried by the link frame, or the 8 corners of its
-    AABB where the engine keeps none; (0, 3) for a link without collision
-    geometry."""
+    """Collision vertices (k, 3) of ``link`` in the world, m (its AABB corners
+    where the engine keeps none; (0, 3) without collision geometry)."""
     if not session.link_has_collision(link):
         return np.zeros((0, 3))
     v = session.link_collision_vertices(link)
@@ -85,23 +64,8 @@ def link_world_vertices(session, link: str) -> np.ndarray:
 
 
 def rolling_joints(session, moved: dict[str, list[str]]) -> list[str]:
-    """Continuous joints of ``session`` whose moving part rests on the ground
-    where the session stands now (a link of the part within
-    :data:`GROUND_CONTACT_GAP` of the object's lowest collision point): the
-    wheels and casters the object rolls on. Their angle is not a state the
-    object holds (a cart nudged or tilted rolls; a wheel turns with the
-    ground under it) and a finger does not operate them (the object is
-    rolled), so robust rest does not grade their drift and the probes do not
-    push them (``docs/design/metrics.md``). Revolute and prismatic parts touching
-    the ground (a pedal, a foot, a lid folded down) are not rolling.
-
-    Args:
-        moved: movable joint -> the links it moves
-            (:func:`asset2sim.tasks.geometry.limits.subtrees`).
-
-    Returns:
-        Joint names, in ``moved``'s order.
-    """
+    """Continuous joints whose moving part (``moved``: joint -> its links) rests on the
+    ground now (within :data:`GROUND_CONTACT_GAP`): the wheels the object rolls on."""
     low = {ln: float(v[:, 2].min()) if len(v) else np.inf
            for ln, v in ((ln, link_world_vertices(session, ln)) for ln in session.link_names)}
     finite = [z for z in low.values() if np.isfinite(z)]

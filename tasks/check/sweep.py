@@ -1,66 +1,14 @@
 """Joint sweep (physical executability): can every movable joint be driven
-through its range and back?
+through its range and back? Definition: ``docs/design/metrics.md``, "joint_sweep".
 
-Definition (SPEC, "Interaction under manipulation"; issue 15; written so
-anyone can re-derive it, see ``docs/design/metrics.md``):
-
-- The object is loaded with its **root fixed** (a mounted object, or a robot's
-  second hand holding the body), gravity off and no ground, so the only
-  resistance a joint meets is its own Coulomb friction, damping, spring and
-  the object's self-collision geometry. The other movable joints are held
-  at the initial state (a zero-velocity drive with force limit
-  :data:`HOLD_FORCE`: the second hand or fixture holding the rest of the
-  object), so each joint is tested on its own (left passive, a spring-loaded
-  part balanced by its weight at rest springs away without gravity and
-  carries the swept part with it: a stapler's lid, 102990); only the swept
-  joint's own spring is applied. Exception: PyBullet applies springs by
-  torque control every step, which leaves the holds drifting, so there the
-  others stay passive while a joint with a spring is swept.
-- Each movable joint is teleported to its geometric closed end q_c
-  (:mod:`asset2sim.tasks.geometry.closed_state`, opening direction d, largest
-  opening R) and driven by a force-limited **position controller built on a
-  velocity drive** (:meth:`asset2sim.engines.base.SimSession.drive_joint`):
-  every step the target velocity is v = clip(k_p (q_goal - q), -v_max, v_max)
-  with k_p = :attr:`SweepConfig.position_gain` (1/s) and v_max = R /
-  :attr:`SweepConfig.traverse_time` (a full traverse in about 1 s, like a
-  robot opening a drawer or lid at a moderate speed); first to the far end
-  q_c + d R, then back to q_c.
-- Force limit (beyond the joint's own friction, which the engines add):
-  E = f_w m_sub g L + k R, with m_sub the mass of the links the joint moves
-  (kg), L (m) the largest distance of their collision vertices from the joint
-  axis (revolute; L = 1 for prismatic, E in N), g = 9.81 m/s^2, k the joint's
-  spring stiffness, f_w = :attr:`SweepConfig.weight_factor`. So the drive can
-  lift the moving part's own weight f_w times over (the scale a hand or
-  gripper applies) but cannot push a link through a hull that blocks it.
-  Viscous damping is not in the limit (the protocol does not expose it): a
-  well-damped joint moves slower than v_max, which the 3 s limit (3x the
-  nominal traverse) allows; refine's escalation keeps damping under
-  :func:`damping_caps`, where the damped speed still covers the range in time.
-- Each way, the drive runs until the opening fraction f = d (q - q_c) / R
-  reaches >= 0.95 (out) or <= 0.05 (back), at most
-  :attr:`SweepConfig.time_limit` s. The self-penetration (deepest self-contact
-  point, m) and non-finite or exploding motion (|q_dot| > 100 rad/s or 10 m/s)
-  are watched at every step.
-- A joint **passes** iff >= 95 % of the range is reached both ways, the
-  deepest self-contact point stays below :attr:`SweepConfig.max_penetration`
-  (5 mm) throughout and nothing diverges. The metric passes iff every swept
-  joint passes (``passed`` None when the object has no movable joint).
-
-- A part shut in by another (its drive stalls before 5 % of the range
-  against a link that another movable joint places: a toilet's seat under
-  its closed lid, a stapler's magazine under its closed top, a lid whose
-  closed end lies inside the seat held a quarter open) is swept again with
-  the joints between the two at their closed ends, as a hand lowers the seat
-  before it shuts the lid, and then at their open ends, as it lifts the lid
-  before the seat; a part stopped part-way by another (a seat raised into
-  the lid held a quarter open) is swept again with the joints between at
-  their open ends; a part opened, then stopped on the way back or pushed
-  into such a link (a lid shut onto a seat held slightly open), with the
-  joints between at their closed ends. The first of these sweeps that passes
-  counts, and ``range_note`` names what was moved. A part stopped by its own
-  parent's geometry is not.
-
-Continuous joints are swept over pi (their closed end is a convention).
+Root fixed, gravity off, no ground; the other movable joints held at the
+initial state (drive limit :data:`HOLD_FORCE`). Each joint is driven from its
+closed end q_c to q_c + d R and back, v = clip(k_p (q_goal - q), -v_max,
+v_max), v_max = R / traverse_time, force limit :func:`effort_limit`. A joint
+passes iff >= 95 % of the range is reached both ways in time, the deepest
+self-contact stays below ``max_penetration`` and nothing diverges; a part
+stopped by a link another movable joint places is swept again with the
+joints between moved out of the way (:func:`_sweep_clearing`).
 """
 
 from __future__ import annotations
@@ -147,15 +95,12 @@ class JointSweep:
         return d
 
 
-def joint_subtrees(model: UrdfModel) -> dict[str, list[str]]:
-    """Movable joint -> the links it moves (its child and everything below):
-    :func:`asset2sim.tasks.geometry.limits.subtrees`."""
-    return limits.subtrees(model)
+#: Movable joint -> the links it moves (its child and everything below).
+joint_subtrees = limits.subtrees
 
 
 def _lever(session: SimSession, joint: str, links: list[str]) -> float:
-    """Largest distance (m) of the collision vertices of ``links`` from the
-    axis of ``joint`` at the current state (1e-3 m at least)."""
+    """Largest distance (m, >= 1e-3) of ``links``' collision vertices from ``joint``'s axis."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     best = 1e-3
     for ln in links:
@@ -173,10 +118,9 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
 
 
 def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
-    """E = f_w m_sub g L + k R (N*m or N; see the module docstring): the
-    masses the engine uses, L from the links' collision vertices (their AABB
-    corners where the engine keeps none), k from the session's springs,
-    ``open_range`` R (rad or m)."""
+    """Drive force limit E = f_w m_sub g L + k R (N*m or N): m_sub the engine's
+    masses of ``links``, L their largest distance from the axis (1 for
+    prismatic), k the session's spring stiffness, R = ``open_range`` (rad or m)."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
     lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
@@ -185,9 +129,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
     return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
 
 
-#: Speed margin of :func:`damping_caps` (dimensionless): the damped speed
-#: E / c must cover the range this many times over in the time limit (the
-#: drive also accelerates the part and works against sliding contacts).
+#: Speed margin of :func:`damping_caps`: the damped speed E / c covers the range this many times in the time limit.
 DAMPED_SPEED_MARGIN = 2.0
 
 
@@ -195,15 +137,11 @@ def damping_caps(urdf: Path | str, closed: dict[str, tuple[float, float, float]]
                  springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                  config: SweepConfig | None = None) -> dict[str, float]:
     """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
-    the sweep's drive still traverses the joint's range in time:
-    c_max = E T / (``DAMPED_SPEED_MARGIN`` R), E the drive's force limit
-    (:func:`effort_limit`, N m or N, at the joint's closed end), T =
-    :attr:`SweepConfig.time_limit` (s), R the range of ``closed`` (joint ->
-    (q_closed, direction, R), rad or m). Under damping alone the drive moves
-    the part at E / c, so a damping above c_max makes a free part fail the
-    sweep as if it were blocked. Measured in a fixed-root, gravity-free
-    PyBullet session (masses and collision vertices as the sweep reads them).
-    Joints with no range are left out.
+    the sweep's drive still traverses the range in time: c_max = E T /
+    (``DAMPED_SPEED_MARGIN`` R), E :func:`effort_limit` at the closed end, T
+    :attr:`SweepConfig.time_limit`, R the range of ``closed`` (joint ->
+    (q_closed, direction, R), rad or m). Measured in a fixed-root,
+    gravity-free PyBullet session; joints with no range are left out.
 
     Raises:
         EngineUnavailable: PyBullet is not installed; whatever loading ``urdf`` raises.
@@ -233,17 +171,10 @@ def _deepest(session: SimSession) -> tuple[float, tuple[str, str] | None]:
 
 def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: float, open_range: float,
                 links: list[str], initial_state: dict[str, float], config: SweepConfig | None = None) -> JointSweep:
-    """Sweep one joint out and back in a fixed-root session (see the module
-    docstring). The session is stepped in place; other joints are put back to
-    ``initial_state`` first.
-
-    Args:
-        session: a :class:`~asset2sim.engines.base.SimSession` opened with
-            ``fixed_base=True`` (gravity off, no ground: :func:`run_sweep`).
-        joint: movable joint; ``closed`` q_c (rad or m), ``direction`` +-1 the
-            opening direction, ``open_range`` R > 0 (rad or m).
-        links: the links the joint moves (:func:`joint_subtrees`).
-        initial_state: joint -> position (rad or m) of the other joints.
+    """Sweep one joint out and back in a fixed-root, gravity-free session
+    (stepped in place; the other joints are put back to ``initial_state``,
+    rad or m, first). ``closed`` q_c and ``open_range`` R > 0 (rad or m),
+    ``direction`` +-1; ``links``: the links the joint moves.
 
     Raises:
         KeyError: unknown joint. ValueError: ``open_range`` <= 0.
@@ -292,8 +223,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
             best = max(best, f) if goal == q_far else min(best, f)
         return best, (n * dt if done(f) else None)
 
-    # PyBullet applies springs by torque control, which made the holds of the other
-    # joints drift (102990): with a spring in the session the others stay passive
+    # PyBullet applies springs by torque control, which makes the holds drift: the others stay passive
     hold = cfg.hold_others and not (session.options.springs and session.engine == "pybullet")
     held = [o for o in session.joint_types if o != joint] if hold else []
     try:
@@ -312,8 +242,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     return JointSweep(
         joint=joint, joint_type=jtype, q_closed=float(closed), q_far=float(q_far), open_range=float(open_range),
         effort_limit=limit, reached_open=float(out), reached_closed=float(back), time_open=t_out, time_close=t_back,
-        max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure),
-    )
+        max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure))
 
 
 @dataclass
@@ -329,11 +258,9 @@ class SweepRun:
 def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: dict[str, tuple[float, float, float]],
                     links: list[str], initial_state: dict[str, float], cfg: SweepConfig, saved: int,
                     blocker: Blocker) -> JointSweep:
-    """:func:`sweep_joint` of ``name``, swept again with the joints between
-    the part and a link in its way moved out of the way (module docstring;
-    the retries: :func:`_clearing_ends`). Returns the first retry that
-    passes (its ``range_note`` says what was moved), else the first sweep.
-    A link rigid with the joint's parent (the part's own stop) moves nothing."""
+    """:func:`sweep_joint` of ``name``; when a link another movable joint places
+    stops it, swept again with the joints between moved (:func:`_clearing_ends`).
+    Returns the first retry that passes (``range_note`` says what moved), else the first sweep."""
     qc, d, rng = closed[name]
     first = sweep_joint(session, name, closed=qc, direction=d, open_range=rng, links=links,
                         initial_state=initial_state, config=cfg)
@@ -373,7 +300,7 @@ def _sweep_clearing(session: SimSession, model: UrdfModel, name: str, closed: di
 
 
 def _clearing_ends(first: JointSweep) -> tuple[tuple[float, str], ...]:
-    """(share of the way to the open end, its name) of each retry of ``first``, in turn (module docstring)."""
+    """(share of the way to the open end, its name) of each retry of ``first``, in turn."""
     if first.time_open is not None:
         return ((0.0, "closed"),)
     if first.reached_open < SHUT_IN_FRACTION:
@@ -385,8 +312,7 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
     """Sweep every joint of ``closed`` (joint -> (q_closed, direction,
-    open_range), rad or m) in a fresh fixed-root, gravity-free, ground-free
-    session of ``engine`` (one session; the state is restored before each joint).
+    open_range), rad or m) in fresh fixed-root, gravity-free sessions of ``engine``.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
@@ -437,30 +363,23 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
 
 
 def sweep_metric(run: SweepRun, config: SweepConfig | None = None) -> MetricResult:
-    """The ``joint_sweep`` :class:`~asset2sim.schemas.report.MetricResult`:
-    value = number of joints that fail; passes iff none fails (None when no
-    joint was swept)."""
+    """The ``joint_sweep`` metric: value = failing joints; passes iff none fails (None when none was swept)."""
     cfg = config or SweepConfig()
     failing = [j.joint for j in run.joints if not j.passed]
     return MetricResult(
-        name="joint_sweep",
-        value=float(len(failing)),
-        unit=unit("joint_sweep"),
-        passed=(not failing) if run.joints else None,
+        name="joint_sweep", value=float(len(failing)), unit=unit("joint_sweep"), passed=(not failing) if run.joints else None,
         threshold=(f"root fixed; every movable joint driven (force-limited) from its closed end to >= "
                    f"{cfg.reach_fraction:.0%} open and back to <= {1 - cfg.reach_fraction:.0%} within "
                    f"{cfg.time_limit:g} s each way, deepest self-contact < {cfg.max_penetration * 1000:g} mm, no divergence"),
         details={"joints": {j.joint: j.summary() for j in run.joints}, "failing": failing,
                  "failures": [f"{j.joint}: {j.failure}" for j in run.joints if not j.passed], "skipped": run.skipped},
-        engine=run.engine,
-    )
+        engine=run.engine)
 
 
 def blocked_stops(metric: MetricResult) -> dict[str, tuple[float, float]]:
-    """Joint -> (position where the sweep of ``metric`` (a ``joint_sweep``
-    result) stalled, position it was driven to), rad or m: on the way out
-    (towards ``q_far``) when the far end was not reached, else on the way
-    back (towards ``q_closed``). Joints that passed, diverged or only
+    """Joint -> (position where the ``joint_sweep`` ``metric`` stalled, position
+    it was driven to), rad or m: on the way out when the far end was not
+    reached, else on the way back. Joints that passed, diverged or only
     penetrated are left out."""
     out = {}
     for name, j in (metric.details.get("joints") or {}).items():
@@ -478,16 +397,14 @@ def blocked_stops(metric: MetricResult) -> dict[str, tuple[float, float]]:
 
 
 def blocked_positions(metric: MetricResult) -> dict[str, float]:
-    """Joint -> the position (rad or m) where the sweep of ``metric`` stopped
-    short (the first element of :func:`blocked_stops`)."""
+    """Joint -> the position (rad or m) where the sweep stopped short (:func:`blocked_stops`)."""
     return {name: stall for name, (stall, _goal) in blocked_stops(metric).items()}
 
 
 def sweep_score(metric: MetricResult) -> tuple[float, float]:
-    """Order of two ``joint_sweep`` results of the same asset, lower is
-    better: (failing joints, summed shortfall of the failing joints: 0.95 -
-    reached opening plus reached closing - 0.05, each >= 0, rounded to 0.01
-    so noise does not count). A non-finite reach counts as the whole range."""
+    """Sort key of ``joint_sweep`` results, lower is better: (failing joints,
+    summed shortfall of the failing joints, each way >= 0, non-finite = 1,
+    rounded to 0.01)."""
     short = 0.0
     for j in (metric.details.get("joints") or {}).values():
         if j["passed"]:

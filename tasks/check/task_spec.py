@@ -1,37 +1,16 @@
 """A manipulation task ("close the microwave door", the manifest's ``task``
-column or ``--task``) as joints, a direction and a target opening fraction.
+column or ``--task``) as joints, a direction and a target opening fraction
+(``docs/design/metrics.md``, "Behaviour: passive probes").
 
-Parsing (re-derivable; ``docs/design/metrics.md``):
-
-1. The leading verb gives the action (:data:`VERBS`): ``close`` (close, shut,
-   press, push down, lower: towards the closed end, target opening fraction
-   :data:`~asset2sim.tasks.check.probes.CLOSE_TARGET`), ``open`` (open, pull,
-   lift, raise: target :data:`~asset2sim.tasks.check.probes.OPEN_TARGET`);
-   any other verb (turn, move, rotate, swing ...) or none: ``both``
-   directions.
-2. The words after the verb name the part with the request machinery
-   (:func:`asset2sim.tasks.interpret.request.parse_request` on "<words>
-   closed", so part words, category names and their synonyms are read exactly
-   as in a request): a part label ("door", "lid", "drawer", "handle") selects
-   the movable joints whose child link carries that semantic label
+1. The leading verb gives the action (:data:`VERBS`): ``close`` (target
+   :data:`~asset2sim.tasks.check.probes.CLOSE_TARGET`) or ``open`` (target
+   :data:`~asset2sim.tasks.check.probes.OPEN_TARGET`); any other verb or none: both.
+2. The words after it are parsed as the request "<words> closed": a part
+   label selects the movable joints whose child link carries it
    (:func:`asset2sim.tasks.check.request_match.labelled_joints`); a
-   whole-object phrase ("the stapler", "the laptop") selects every
-   task-relevant joint.
-3. Nothing matched (an unknown part, no semantics): every task-relevant joint,
-   both directions (the fallback is recorded in ``rule``).
-
-Ordinals ("the top drawer") are read but not used to pick one of several
-labelled joints: without the joints' heights every drawer is tried.
-
-4. Where the initial state is known (:func:`with_work_to_do`): a task with one
-   direction that names one part ("close the cabinet drawer", not "the
-   drawers", "every drawer", "both doors") and finds several joints acts on
-   those it has work on at the initial state (close: opening fraction above
-   the close target; open: below the open target), as a person asked to
-   "close the drawer" of a cabinet with one drawer open closes that one
-   (ManiSkill's drawer and door tasks likewise act on one target link). When
-   every joint or none has work, every one is kept (an asset delivered closed
-   is still asked to close: :mod:`asset2sim.tasks.check.task_execution`).
+   whole-object phrase selects every task-relevant joint.
+3. Nothing matched: every task-relevant joint, both directions. Ordinals are not used.
+4. :func:`with_work_to_do`: a one-direction task naming one part acts on the joints it has work on.
 """
 
 from __future__ import annotations
@@ -52,10 +31,8 @@ VERBS: dict[str, str] = {
 
 @dataclass
 class TaskSpec:
-    """A parsed task. ``actions``: the probe actions (``close``, ``open`` or
-    both); ``targets``: action -> target opening fraction (0 closed, 1 fully
-    open); ``joints``: the movable joints it acts on; ``rule``: how they were
-    found."""
+    """A parsed task: ``actions`` (``close``, ``open`` or both), ``targets`` action
+    -> target opening fraction, the movable ``joints`` it acts on and the ``rule`` that found them."""
 
     text: str
     actions: tuple[str, ...]
@@ -78,17 +55,9 @@ def _verb(low: str) -> tuple[str | None, str]:
 
 def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                category: str | None, task_joints: list[str]) -> TaskSpec:
-    """The :class:`TaskSpec` of ``text`` for an asset (see the module docstring).
-
-    Args:
-        text: the task, e.g. "close the microwave door".
-        joints: the asset's joints (:func:`asset2sim.tasks.check.asset_files.parse_urdf`).
-        semantics: link -> (joint kind, label) (``semantics.txt``).
-        category: the asset's category (label synonyms are per category).
-        task_joints: the task-relevant joints (the fallback).
-
-    Returns:
-        The task spec; never raises on unknown words (fallback, see ``rule``).
+    """The :class:`TaskSpec` of ``text`` for an asset's ``joints`` and
+    ``semantics`` (link -> (joint kind, label)); ``task_joints`` the fallback.
+    Never raises on unknown words.
     """
     low = " ".join(str(text or "").lower().split())
     action, rest = _verb(low)
@@ -119,8 +88,7 @@ def parse_task(text: str, joints: dict[str, JointInfo], semantics: dict[str, tup
 
 
 def task_actions(text: str | None) -> tuple[str, ...]:
-    """The actions of a task's leading verb (:data:`VERBS`): ``("close",)``,
-    ``("open",)``, or both when the verb has no direction or there is no task."""
+    """The actions of a task's leading verb (:data:`VERBS`); both without a direction or a task."""
     action, _ = _verb(" ".join(str(text or "").lower().split()))
     return (action,) if action else ("close", "open")
 
@@ -130,10 +98,8 @@ _EVERY = re.compile(r"\b(?:all|every|each|both)\b")
 
 
 def with_work_to_do(spec: TaskSpec, fractions: dict[str, float]) -> TaskSpec:
-    """``spec`` narrowed to the joints it has work on (module docstring, rule
-    4). ``fractions``: joint -> opening fraction at the initial state (0
-    closed, 1 fully open); a joint missing from it counts as having work.
-    Returns ``spec`` itself when nothing is narrowed."""
+    """``spec`` narrowed to the joints it has work on (module docstring, rule 4);
+    ``fractions``: joint -> opening fraction at the initial state (missing: has work)."""
     low = " ".join(spec.text.lower().split())
     if len(spec.actions) != 1 or len(spec.joints) < 2 or spec.rule.startswith("fallback") or _EVERY.search(low):
         return spec

@@ -1,17 +1,9 @@
 """The task tier of refine's post-check: the gripper executes the task refine
-was given (``refine --task``, the manifest's ``task`` column) on the written
-asset, with the same definitions as the evaluation
-(:mod:`asset2sim.tasks.check.task_execution`,
-:mod:`asset2sim.tasks.check.force_ranges`; ``docs/design/metrics.md``,
-"task_execution" and "operating_force"), and the operating limits
-escalation keeps to (:func:`operating_limits`).
-
-The task is parsed as in the evaluation
-(:func:`asset2sim.tasks.check.task_spec.parse_task`: its verb gives the
-direction and target, its part words the joints, over the asset's
-``semantics.txt`` labels); the target must hold 1 s after release except
-where the request asks the part to move freely or a spring asked for (by the
-request or the category's part prior) returns it by design.
+was given (``refine --task``) on the written asset with the evaluation's
+definitions (:mod:`asset2sim.tasks.check.task_execution`,
+:mod:`asset2sim.tasks.check.force_ranges`), the operating limits escalation
+keeps to (:func:`operating_limits`) and the relief of a task that needed
+more than a real force (:func:`relieve`).
 """
 
 from __future__ import annotations
@@ -33,10 +25,7 @@ from asset2sim.tasks.interpret.part_priors import spring_expected
 
 #: The metrics this tier adds to the post-check.
 TASK_METRICS: tuple[str, ...] = ("task_execution", "operating_force")
-#: Smallest share of its friction a joint keeps in one relief round
-#: (:func:`relieve`): part of a measured excess may be the part's inertia or
-#: contact friction, which lowering joint friction does not remove, so one
-#: round never takes more than half of it (the next round measures again).
+#: Smallest share of its friction a joint keeps in one relief round (:func:`relieve`).
 RELIEF_MIN_SHARE = 0.5
 
 
@@ -47,13 +36,10 @@ def link_labels(asset: AssetDescription) -> dict[str, str | None]:
 
 def hold_required_by_label(joint_labels: dict[str, str | None], springs: dict[str, Spring], category: str | None,
                            *, free_moving: bool, spring_requested: bool) -> dict[str, bool]:
-    """joint -> whether the task's target must hold after release, for the
-    task's joints ``joint_labels`` (joint -> semantic label of its child
-    link): not where the request asks the parts to move freely, nor for a
-    joint with a spring the request or the category's part prior
-    (:func:`~asset2sim.tasks.interpret.part_priors.spring_expected`) asks for
-    (it returns by design). The one rule of refine's task tier and the
-    evaluation's task metric."""
+    """joint -> whether the task's target must hold after release, for
+    ``joint_labels`` (joint -> its child link's semantic label): not where the
+    parts move freely, nor for a joint with a spring the request or the
+    category's part prior (:func:`~asset2sim.tasks.interpret.part_priors.spring_expected`) asks for."""
     out = {}
     for n, label in joint_labels.items():
         sprung = n in springs and (spring_requested or spring_expected(category or "", label))
@@ -77,11 +63,9 @@ def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str,
 def task_spec_for(text: str, urdf: Path | str, asset: AssetDescription, category: str | None,
                   task_joints: list[str], state: dict[str, float] | None = None,
                   closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
-    """The :class:`~asset2sim.tasks.check.task_spec.TaskSpec` of ``text``
-    on the written asset ``urdf`` (labels from ``asset``'s semantics); with
-    the initial ``state`` (joint -> rad or m) and the ``closed`` ends (joint
-    -> (q_closed, direction, open range)), narrowed to the joints it has work
-    on (:func:`~asset2sim.tasks.check.task_spec.with_work_to_do`)."""
+    """The ``TaskSpec`` of ``text`` on the written asset ``urdf`` (labels from
+    ``asset``); with ``state`` and ``closed`` (joint -> (q_closed, direction,
+    open range)) narrowed to the joints it has work on."""
     _, joints = parse_urdf(Path(urdf))
     semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
     spec = parse_task(text, joints, semantics, category, task_joints)
@@ -95,15 +79,8 @@ def run_task_tier(engine: str, urdf: Path | str, state: dict[str, float], spring
                   conventions: SimConventions, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
                   asset: AssetDescription, category: str | None, *, fixed_base: bool, free_moving: bool,
                   spring_requested: bool) -> list[MetricResult]:
-    """``task_execution`` and ``operating_force`` of the written asset in
-    ``engine`` (fresh sessions, the root as declared).
-
-    Args:
-        closed: joint -> (q_closed, direction, open range) at the output scale.
-        spec: the parsed task (:func:`task_spec_for`).
-
-    Returns:
-        [task_execution, operating_force].
+    """[``task_execution``, ``operating_force``] of the written asset in
+    ``engine``; ``closed``: joint -> (q_closed, direction, open range) at the output scale.
 
     Raises:
         EngineUnavailable; whatever loading ``urdf`` raises.
@@ -135,19 +112,11 @@ def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay
                      geometry: dict[str, LinkGeometry], closed: dict[str, tuple[float, float, float]] | None, *,
                      category: str | None, task: str | None, free_moving: bool,
                      conventions: SimConventions | None = None, joints: list[str] | None = None) -> OperatingLimits:
-    """Friction and damping caps of every movable joint: with a task, the
-    operating budget of the task's gripper
-    (:func:`asset2sim.tasks.check.operating.operating_budgets`, the task's
-    direction) where the closed ends are known; without a task (nothing
-    executes it, and the probes push with the other hand holding the body and
-    a force of max(22.2 N, 2 M g)) the probe's cap
-    (:func:`asset2sim.tasks.check.operating.friction_caps`). Damping caps:
-    the task's where there is one, and, where the closed ends are known, at
-    most what the joint sweep's drive still moves through the range in time
-    (:func:`asset2sim.tasks.check.sweep.damping_caps`).
-    ``joints``: the task's joints (:func:`task_spec_for`); the others (a
-    stapler's base plate, a suitcase's handle) keep the probe's cap: the task
-    does not operate them.
+    """Friction and damping caps of every movable joint: the task gripper's
+    operating budget (:func:`~asset2sim.tasks.check.operating.operating_budgets`)
+    for the task's ``joints`` where the closed ends are known, else the probe's
+    cap (:func:`~asset2sim.tasks.check.operating.friction_caps`); damping at
+    most what the joint sweep's drive still moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
 
     Raises:
         EngineUnavailable; whatever loading ``urdf`` raises.
@@ -168,11 +137,9 @@ def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay
 
 
 def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget]) -> tuple[dict[str, float], dict[str, str]]:
-    """Joints whose task in ``metrics`` needed more than a real operating force, with the measured excess
-    (N m or N, :func:`relieve`'s definition) and why: an ``operating_force`` attempt outside its range, or a
-    task attempt in which the part moved and the free object slid or tipped at a peak operating force above
-    the budget's allowed force (``budgets``: :func:`asset2sim.tasks.check.operating.operating_budgets`).
-    The one criterion of relief and of :mod:`asset2sim.tasks.check.dynamics_search`."""
+    """Joints whose task needed more than a real operating force -> the measured excess (N m or N), and why:
+    an ``operating_force`` attempt outside its range, or a moved part under which the free object slid or
+    tipped at a peak operating force above the budget's allowed force."""
     excess: dict[str, float] = {}
     why: dict[str, str] = {}
     for m in metrics:
@@ -205,20 +172,10 @@ def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.Opera
 
 
 def relieve(overlay: Overlay, metrics: list[MetricResult], limits: OperatingLimits) -> tuple[Overlay, dict[str, dict[str, float]], str]:
-    """Lower the friction (then the damping) of joints whose task needed more
-    than a real operating force: the ``operating_force`` attempts outside their
-    range, and the attempts in which the free object slid while the gripper
-    pushed, by the measured excess (revolute: the excess torque, the larger of
-    peak torque - the range's torque and (peak operating force - the range's
-    force) x lever; prismatic: the excess force; a slide: the peak operating
-    force above the budget's ground bound), divided by :data:`~asset2sim.tasks.check.operating.BUDGET_SHARE`,
-    at most down to :data:`RELIEF_MIN_SHARE` of the friction in one round.
-    Resistance the budget did not foresee (a drawer's contact friction on its
-    runners, the part's inertia) is measured, not modelled. Friction never goes
-    below the budget's hold floor (the requested state must still hold);
-    what is left of the excess comes off the damping at the gripper's top
-    speed. ``limits``' caps are lowered to the new values, so escalation does
-    not raise them again.
+    """Lower the friction (then the damping at top speed) of joints whose task
+    needed more than a real operating force by the excess (:func:`force_excess`)
+    / ``BUDGET_SHARE``, at most down to :data:`RELIEF_MIN_SHARE` of the friction
+    per round and never below the hold floor; ``limits``' caps are lowered with them.
 
     Returns:
         (new overlay, joint -> {"friction", "damping"} changed, reason); no

@@ -1,27 +1,9 @@
-"""Third-party checkers on an output folder: what other tools say about the
-files refine writes.
-
-- ``urdf_parser_py`` (ROS's URDF parser, PyPI ``urdf-parser-py==0.0.4``):
-  :func:`check_urdf_parser_py` parses ``mobility.urdf``; its non-fatal
-  complaints (it writes them to stderr by default) are collected too.
-- ``urdf-validator`` (PyPI ``urdf-validator==1.6.0``, command
-  ``urdf_validate``): :func:`check_urdf_validator` runs it and reads its
-  JSON report (``overall_status``, ``critical_issues``, ``warnings``).
-- ``mjcf-doctor`` (PyPI ``mjcf-doctor==0.2.1``): :func:`check_mjcf_doctor`
-  runs ``mjcf-doctor check --json`` on ``mjcf/mobility.xml`` (errors,
-  warnings, finding codes).
-- Drake (PyPI ``drake``; 1.51.1 is the newest that installs here on Python
-  3.11, about 170 MB): :func:`check_drake` parses the URDF into a
-  ``MultibodyPlant``, finalizes it, checks every body's spatial inertia with
-  ``SpatialInertia.IsPhysicallyValid`` and reads each joint's damping back;
-  Drake's parser warnings are collected (it warns that joint friction is not
-  supported: ``MultibodyPlant`` has no Coulomb joint friction, so a lid held
-  by friction alone falls in Drake).
-
-All four are optional (extra ``checkers``); a missing one raises
-:class:`CheckerUnavailable`. Tool findings are reported as the tool gives
-them; which are false alarms for an articulated object is said in
-``docs/design/simulators.md``.
+"""Third-party checkers on an output folder: ``urdf_parser_py`` (PyPI
+``urdf-parser-py``), ``urdf-validator`` (command ``urdf_validate``),
+``mjcf-doctor`` (on ``mjcf/mobility.xml``) and Drake (``MultibodyPlant``:
+inertia validity, damping read back). All are optional (extra ``checkers``);
+a missing one raises :class:`CheckerUnavailable`. Findings are reported as
+the tool gives them; false alarms are discussed in ``docs/design/simulators.md``.
 """
 
 from __future__ import annotations
@@ -50,9 +32,7 @@ class CheckerUnavailable(RuntimeError):
 
 @dataclass
 class CheckerResult:
-    """One checker on one file: ``errors`` (the tool's errors / critical
-    issues / exceptions, as text), ``warnings`` (its warnings), ``details``
-    (tool-specific numbers)."""
+    """One checker on one file: ``errors`` and ``warnings`` as text, ``details`` tool-specific."""
 
     tool: str
     file: str
@@ -82,11 +62,8 @@ def _command(name: str) -> str:
 
 
 def check_urdf_parser_py(urdf: Path) -> CheckerResult:
-    """Parse ``urdf`` with ``urdf_parser_py.urdf.URDF.from_xml_string``.
-
-    Errors: the ``ParseError`` it raises (e.g. a ``<limit>`` without
-    ``effort``/``velocity``); warnings: the messages its ``on_error`` hook
-    receives for elements it skips.
+    """Parse ``urdf`` with ``urdf_parser_py``: errors the exception it raises,
+    warnings what its ``on_error`` hook receives.
 
     Raises:
         CheckerUnavailable: urdf-parser-py is not installed.
@@ -110,10 +87,8 @@ def check_urdf_parser_py(urdf: Path) -> CheckerResult:
 
 
 def check_urdf_validator(urdf: Path) -> CheckerResult:
-    """Run ``urdf_validate URDF --output-dir TMP`` and read its JSON report.
-
-    Errors: ``critical_issues`` and a non-PASS schema, or a crash; warnings:
-    ``warnings``; details: ``overall_status``, per-section statuses.
+    """Run ``urdf_validate`` and read its JSON report (errors: critical issues,
+    a non-PASS schema or a crash).
 
     Raises:
         CheckerUnavailable: urdf-validator is not installed.
@@ -139,9 +114,7 @@ def check_urdf_validator(urdf: Path) -> CheckerResult:
 
 
 def check_mjcf_doctor(xml: Path) -> CheckerResult:
-    """Run ``mjcf-doctor check --json XML`` (static rules and a 2 s
-    simulation); errors and warnings are its ERROR and WARN findings as
-    ``code subject: message``.
+    """Run ``mjcf-doctor check --json XML``; its ERROR and WARN findings as ``code subject: message``.
 
     Raises:
         CheckerUnavailable: mjcf-doctor is not installed.
@@ -179,18 +152,9 @@ class _Collect(logging.Handler):
 
 
 def check_drake(urdf: Path) -> CheckerResult:
-    """Parse ``urdf`` with Drake (``Parser(plant).AddModels``), finalize the
-    ``MultibodyPlant`` and check every body's spatial inertia
-    (``SpatialInertia.IsPhysicallyValid`` about the body origin, and
-    ``RotationalInertia.CouldBePhysicallyValid`` about the COM: positive mass,
-    principal moments positive and satisfying the triangle inequality; Drake's
-    parser only warns about an invalid one). Errors: the parse/finalize
-    exception, each body whose spatial inertia is not valid (and Drake's
-    warning about it),
-    each joint whose damping Drake holds differently from the URDF
-    (1e-9 relative); warnings: Drake's parser warnings (joint friction is
-    not supported). Details: bodies, joints, joints whose friction Drake
-    ignores.
+    """Parse ``urdf`` into a Drake ``MultibodyPlant``. Errors: the exception, each body
+    whose spatial inertia is not physically valid, each joint whose damping Drake
+    holds differently; warnings: Drake's parser warnings.
 
     Raises:
         CheckerUnavailable: drake is not installed.
@@ -261,8 +225,7 @@ CHECKERS = {
 
 def run_checkers(out_dir: Path, names: list[str] | None = None) -> dict[str, CheckerResult | str]:
     """Every checker of :data:`CHECKERS` (or ``names``) on an output folder:
-    name -> :class:`CheckerResult`, or a string saying why it did not run
-    (not installed, file missing).
+    name -> :class:`CheckerResult`, or why it did not run.
 
     Raises:
         KeyError: an unknown checker name.

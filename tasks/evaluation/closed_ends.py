@@ -1,11 +1,6 @@
-"""Geometry the evaluation measures itself: closed ends, extents, scale.
-
-Every method is graded against closed ends computed here from its own
-geometry (:func:`asset2sim.tasks.geometry.closed_state.closed_positions`), so
-no method grades itself; the object's extents are those of the box bounding
-its links' convex-hull vertices
-(:func:`asset2sim.tasks.geometry.closed_state.object_extents`), Bullet's link
-AABBs being only the fallback.
+"""Geometry the evaluation measures itself, so no method grades itself:
+closed ends, extents (of the links' convex-hull vertices, Bullet's AABBs the
+fallback), scale.
 """
 
 from __future__ import annotations
@@ -30,8 +25,7 @@ __all__ = ["ClosedEnd", "aabb_extents", "closed_fallback", "compute_closed", "ge
 
 @dataclass
 class ClosedEnd:
-    """Closed end of a joint: q_closed (rad/m), opening direction +-1, the
-    largest opening from q_closed (rad/m) and where it came from."""
+    """Closed end of a joint: q_closed (rad/m), direction +-1, open range (rad/m), source."""
 
     q_closed: float
     direction: float
@@ -39,8 +33,7 @@ class ClosedEnd:
     source: str
 
     def fraction(self, q: float) -> float:
-        """Opening fraction of position ``q`` (rad/m): 0 closed, 1 fully
-        open (0 when the joint cannot open)."""
+        """Opening fraction of ``q`` (rad/m): 0 closed, 1 fully open (0 when it cannot open)."""
         if self.open_range <= 0:
             return 0.0
         return float(self.direction * (q - self.q_closed) / self.open_range)
@@ -57,9 +50,7 @@ def closed_fallback(j: JointInfo) -> ClosedEnd:
 
 
 def hull_points(desc: AssetDescription) -> dict[str, np.ndarray] | None:
-    """Convex-hull vertices per link (link -> (N, 3) m, link frame) via
-    :func:`asset2sim.tasks.geometry.closed_state.link_hull_points`, or None
-    when they cannot be computed."""
+    """link -> convex-hull vertices (N, 3) m, link frame (``link_hull_points``), or None when they cannot be computed."""
     try:
         return link_hull_points(desc)
     except Exception:
@@ -67,15 +58,8 @@ def hull_points(desc: AssetDescription) -> dict[str, np.ndarray] | None:
 
 
 def infer_scale_from_geometry(urdf: Path, raw_urdf: Path) -> float | None:
-    """Uniform scale of ``urdf`` relative to ``raw_urdf`` from geometry.
-
-    Both are loaded in PyBullet (fixed base, no gravity, joints at 0 clipped to
-    their limits); s = largest extent of the box bounding the evaluated
-    asset's collision hull vertices / that of the raw asset
-    (:func:`geometry_extents`). Used only when no ``overlay.json``,
-    ``report.json`` or ``baseline.json`` states the scale. Returns None when
-    either cannot be measured.
-    """
+    """Uniform scale of ``urdf`` relative to ``raw_urdf``: the ratio of their largest geometry extents
+    (:func:`geometry_extents`, fixed base, joints at 0 clipped to the limits); None when either cannot be measured."""
     exts = []
     for path in (urdf, raw_urdf):
         try:
@@ -98,27 +82,10 @@ def infer_scale_from_geometry(urdf: Path, raw_urdf: Path) -> float | None:
 
 def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
                    extents_out: list | None = None) -> tuple[dict[str, ClosedEnd], list[str]]:
-    """Closed end of each joint in ``names`` (rad or m, the URDF's units).
-
-    Source: :func:`asset2sim.tasks.geometry.urdf_closed.measure_closed_ends`
-    (:func:`asset2sim.tasks.geometry.closed_state.closed_positions` in a fresh
-    fixed-base, gravity-free PyBullet session, once per geometry in a
-    process; computed here for every method alike, so no method grades
-    itself; refine places its requested state from the same measurement of
-    its own output); else (extraction or the
-    search failing, or a joint it gives no opening) the limit nearest 0,
-    opening towards the other limit (:func:`closed_fallback`).
-
-    Args:
-        urdf: the evaluated URDF.
-        joints: its joints (:func:`asset2sim.tasks.check.asset_files.parse_urdf`).
-        names: joints to report.
-        extents_out: when given, the (3,) m AABB extents of the object with
-            every joint at its closed end are appended to it.
-
-    Returns:
-        (joint -> :class:`ClosedEnd`, notes).
-    """
+    """Closed end of each joint in ``names`` (the URDF's units) by
+    :func:`asset2sim.tasks.geometry.urdf_closed.measure_closed_ends`, else (failure, or no opening) :func:`closed_fallback`.
+    ``joints``: the URDF's (``parse_urdf``); ``extents_out``: when given, the (3,) m extents with every joint closed are
+    appended. Returns (joint -> :class:`ClosedEnd`, notes)."""
     notes: list[str] = []
     out: dict[str, ClosedEnd] = {}
     if not names:

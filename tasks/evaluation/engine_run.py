@@ -1,11 +1,5 @@
-"""One engine's raw measurements of the evaluated asset: :func:`run_engine`.
-
-Each engine is opened once; penetration at the initial state, extents, masses
-and (PyBullet) the probes are measured in that session, and the SPEC's rest
-test is taken from the post-check's recording when it matches, else simulated
-(:mod:`asset2sim.tasks.check.postcheck`). The metrics
-(:mod:`asset2sim.tasks.evaluation.metric_defs`) only read the resulting
-:class:`EngineRun`.
+"""One engine's raw measurements of the evaluated asset (:func:`run_engine`),
+read by the metrics (:mod:`asset2sim.tasks.evaluation.metric_defs`).
 """
 
 from __future__ import annotations
@@ -42,24 +36,16 @@ class EngineRun:
     error: str | None = None
     penetration: MetricResult | None = None
     trace: spec_metrics.RestTrace | None = None
-    ground_series: np.ndarray | None = None
-    """(K,) m: deepest ground penetration after each recorded step (settle + test)."""
-    root_series: np.ndarray | None = None
-    """(K, 3) m: root position after each step (settle + test)."""
+    ground_series: np.ndarray | None = None  # (K,) m deepest ground penetration per step (settle + test)
+    root_series: np.ndarray | None = None  # (K, 3) m root position per step (settle + test)
     joint_series: dict[str, np.ndarray] = field(default_factory=dict)
-    extents: np.ndarray | None = None
-    """(3,) m: AABB of every link with collision at the initial state."""
+    extents: np.ndarray | None = None  # (3,) m AABB of the links with collision at the initial state
     link_centres: dict[str, np.ndarray] = field(default_factory=dict)
     masses: dict[str, dict[str, Any]] = field(default_factory=dict)
     probes: list[Any] = field(default_factory=list)
-    point_cloud: dict[str, np.ndarray] = field(default_factory=dict)
-    """link -> (N, 3) m collision vertices in the world at the initial state (report)."""
+    point_cloud: dict[str, np.ndarray] = field(default_factory=dict)  # link -> (N, 3) m world collision vertices
     seconds: float = 0.0
-    recorded: RecordedRuns | None = None
-    """Manipulation-tier runs already simulated on these inputs (the refine
-    post-check's): the joint sweep and robust rest metrics take a run from it
-    when the digest of their inputs matches, else simulate
-    (:mod:`asset2sim.tasks.check.recorded_runs`)."""
+    recorded: RecordedRuns | None = None  # the post-check's manipulation runs, reused when their inputs match
 
 
 def link_centres(session) -> dict[str, np.ndarray]:
@@ -72,8 +58,7 @@ def link_centres(session) -> dict[str, np.ndarray]:
 
 
 def link_masses(session, links: dict[str, LinkInfo]) -> dict[str, dict[str, Any]]:
-    """Link -> {"mass" (kg, as the engine loaded it), "source"} (the file's
-    ``<inertial>``, else the engine's default)."""
+    """Link -> {"mass" (kg, as the engine loaded it), "source"} (the file's ``<inertial>``, else the engine's default)."""
     out = {}
     for name, m in session.link_masses().items():
         li = links.get(name)
@@ -98,14 +83,9 @@ def point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
 
 
 def _floor_stops(model, ctx: Context, targets: dict[str, tuple[float, float, float]]) -> dict[str, float]:
-    """Where the floor stops the probed parts (joint -> opening from the
-    closed end, rad or m), the object resting on its body at the initial
-    state (:func:`~asset2sim.tasks.state.ground_clearance.floor_stops`: a
-    suitcase standing on its edge whose lid opens downwards cannot be opened
-    further in place; the refine writes such a state at the floor with a
-    design note); only stops before the open probe's target. A collision
-    file that cannot be read gives no stops (the engine loaded what it
-    could). Notes go to ``ctx.notes``."""
+    """joint -> opening (rad or m) where the floor stops a probed part before the
+    open probe's target (:func:`~asset2sim.tasks.state.ground_clearance.floor_stops`);
+    none when a collision file cannot be read. Notes go to ``ctx.notes``."""
     try:
         stops = floor_stops(model, ctx.urdf, dict(ctx.initial_state), targets)
     except (OSError, MeshReadError) as exc:
@@ -123,33 +103,29 @@ def _floor_stops(model, ctx: Context, targets: dict[str, tuple[float, float, flo
     return out
 
 
+def set_closed_ends(ctx: Context, joints: list[str]) -> None:
+    """The closed ends of ``joints`` into ``ctx.closed`` (with their extents and notes), in a fresh
+    session (:func:`compute_closed`: contact manifolds cached in a used one would change its tie-breaks)."""
+    ext: list = []
+    ctx.closed, cnotes = compute_closed(ctx.urdf, ctx.joints, joints, extents_out=ext)
+    ctx.closed_extents = ext[0] if ext else None
+    ctx.notes += cnotes
+
+
 def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
                closed_for: list[str] | None = None, rest_test: bool = True,
                recording: RestRecording | None = None, probe_joints: list[str] | None = None,
                probe_actions: tuple[str, ...] = ("close", "open"), recorded: RecordedRuns | None = None) -> EngineRun:
     """Open ``engine`` on the asset and take every raw measurement once:
-    penetration at the initial state, extents, masses, the SPEC rest test with
-    per-step root/ground recording, and (PyBullet) the probes from the initial
-    state. ``closed_for``: joints whose closed end is computed in this
-    (PyBullet) session into ``ctx.closed`` before anything is stepped.
-    ``rest_test=False``: no rest test (its measurement was taken elsewhere,
-    e.g. by the post-check); ``trace`` and the series stay None.
-    ``recording``: the post-check's step-by-step rest test
-    (:class:`~asset2sim.tasks.check.postcheck.RestRecording`); when it
-    :meth:`~asset2sim.tasks.check.postcheck.RestRecording.matches` this
-    engine, URDF, initial state, springs and conventions, its trace and
-    series are recorded and the rest test is not simulated again. With
-    probes, a rest test still to be simulated runs in a session of its own
-    (:func:`~asset2sim.tasks.check.postcheck.measure_rest_test`, as in the
-    post-check), so the probes start from a session that was never stepped
-    whether or not the rest test was reused: Bullet's ``restoreState`` puts
-    back poses and velocities but not everything a rest test leaves behind
-    (the probes measured after a rest test and a restore differed by up to
-    ~1e-3 relative from those measured without one). ``probe_joints`` /
-    ``probe_actions``: what the probes try (a task,
-    :mod:`asset2sim.tasks.check.task_spec`); default the task-relevant
-    joints, close and open. ``recorded``: kept in :attr:`EngineRun.recorded`
-    for the manipulation metrics. Errors are caught into ``EngineRun.error``."""
+    penetration at the initial state, extents, masses, the rest test with
+    per-step recording, and (PyBullet) the probes from the unstepped initial state.
+
+    ``closed_for``: joints whose closed ends are computed into ``ctx.closed``;
+    ``rest_test=False``: none (``trace`` and series stay None); ``recording``:
+    the post-check's rest test, used when it matches; ``probe_joints`` /
+    ``probe_actions``: what the probes try (default the task-relevant joints,
+    close and open); ``recorded``: kept for the manipulation metrics. Errors
+    are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()
     run = EngineRun(engine, recorded=recorded)
     try:
@@ -186,12 +162,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
             run.ground_series = recording.ground_series
             run.joint_series = recording.joint_series
         if pyb and closed_for is not None:
-            # In a fresh fixed-base session: contact manifolds cached here would
-            # change the closed ends' penetration tie-breaks.
-            ext: list = []
-            ctx.closed, cnotes = compute_closed(ctx.urdf, ctx.joints, closed_for, extents_out=ext)
-            ctx.closed_extents = ext[0] if ext else None
-            ctx.notes += cnotes
+            set_closed_ends(ctx, closed_for)
         if pyb and probes and saved is not None:
             session.restore_state(saved)
             model = read_urdf(ctx.urdf, mode="lenient")

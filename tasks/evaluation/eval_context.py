@@ -1,11 +1,6 @@
-"""What an evaluation knows before any simulator runs: the :class:`Context`.
-
-:func:`build_context` reads the evaluated URDF and its sidecars
-(:mod:`asset2sim.tasks.check.asset_files`), the reference through the
-PartNet-Mobility adapter
-(:func:`asset2sim.tasks.ingest.partnet_mobility.read_reference`), the request
-and the category prior (:mod:`asset2sim.tasks.check.request_match`), and
-states the scale of the evaluated asset and where it came from.
+"""What an evaluation knows before any simulator runs: the :class:`Context`
+(:func:`build_context`: the URDF and its sidecars, the reference, the request,
+the category prior, the scale and its source).
 """
 
 from __future__ import annotations
@@ -42,13 +37,8 @@ from asset2sim.tasks.assemble.write import read_root
 
 @dataclass
 class Context:
-    """Everything the metrics need besides the simulator runs.
-
-    Joint positions rad/m, scale dimensionless (relative to the raw input),
-    ``closed`` filled by the evaluation once the closed ends are computed,
-    ``task_joints`` once the task-relevant joints are chosen
-    (:func:`task_joints`).
-    """
+    """Everything the metrics need besides the simulator runs. Joint positions rad/m, scale relative to the raw input;
+    ``closed`` and ``task_joints`` are filled in by the evaluation."""
 
     urdf: Path
     folder: Path
@@ -79,14 +69,9 @@ class Context:
     sag_tol_revolute: float
     sag_tol_prismatic: float
     notes: list[str] = field(default_factory=list)
-    closed_extents: np.ndarray | None = None
-    """(3,) m: AABB of the object with every joint at its closed end (file frame)."""
-    root_fixed: bool = False
-    """The folder declares a mounted asset (``initial_state.json`` ``"root"``):
-    every simulation holds the root fixed."""
-    task: TaskSpec | None = None
-    """The manipulation task given to the evaluation (``--task``, the
-    manifest's ``task``), parsed; None: no task (task execution not run)."""
+    closed_extents: np.ndarray | None = None  # (3,) m AABB with every joint at its closed end
+    root_fixed: bool = False  # a mounted asset: every simulation holds the root fixed
+    task: TaskSpec | None = None  # the parsed manipulation task; None: task execution not run
 
     @property
     def movable(self) -> list[str]:
@@ -96,19 +81,10 @@ class Context:
 
 def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, requested: list[str],
                 category: str | None = None, semantics: dict[str, tuple[str, str]] | None = None) -> tuple[list[str], str]:
-    """The task-relevant joints and the rule that chose them: the movable
-    joints of the reference's ``reference_gensim2.urdf`` present here; else
-    the movable joints the request names (``requested``); else, when the
-    asset labels its parts (``semantics``: link -> (joint kind, label)) and
-    its ``category`` is known, the joints refine itself treats as
-    task-relevant (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`,
-    so a refined output is evaluated on the joints it was refined for);
-    else every movable joint.
-
-    Raises:
-        ValueError: the reference's JSON is malformed.
-        asset2sim.urdf.UrdfError: its URDF cannot be parsed.
-    """
+    """The task-relevant joints and the rule that chose them: the reference's movable joints present here; else those the
+    request names (``requested``); else, with part labels (``semantics``: link -> (kind, label)) and a ``category``,
+    refine's own choice (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`); else every movable joint.
+    Raises ValueError / asset2sim.urdf.UrdfError: the reference's JSON / URDF is malformed."""
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     if reference_dir is not None:
         ref = partnet_mobility.read_reference(reference_dir)
@@ -125,9 +101,7 @@ def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, reques
 
 def _stated_scale(overlay: dict[str, Any] | None, report: dict[str, Any] | None, baseline: dict[str, Any] | None,
                   urdf: Path, ref_dir: Path | None) -> tuple[float | None, str]:
-    """Scale of the evaluated asset and its source: the first sidecar that
-    states one (``overlay.json``, ``report.json``, ``baseline.json``), else the
-    geometry against the reference's raw ``mobility.urdf``, else unknown."""
+    """(scale, source): the first sidecar stating one, else geometry against the reference's raw URDF, else unknown."""
     if overlay is not None and isinstance(overlay.get("scale"), (int, float)):
         return float(overlay["scale"]), OVERLAY_NAME
     if report is not None and isinstance(report.get("scale"), (int, float)):
@@ -143,14 +117,9 @@ def _stated_scale(overlay: dict[str, Any] | None, report: dict[str, Any] | None,
 
 def _reference_state(ref: partnet_mobility.GenSim2Reference, joints: dict[str, JointInfo], scale: float | None
                      ) -> tuple[dict[str, float], str]:
-    """The reference state of the task joints in the evaluated asset's units:
-    the lower end of ``joint_position_range`` (else 0) clipped to
-    ``reference_gensim2.urdf``'s limits, prismatic values times the evaluated
-    scale (else the reference scale, else 1). Returns (state, the rule).
-
-    Raises:
-        EvaluationError: the reference URDF cannot be read.
-    """
+    """(reference state of the task joints, rule): the lower end of ``joint_position_range``
+    (else 0) clipped to the reference's limits, prismatic values times the scale (else the
+    reference's, else 1). Raises EvaluationError: the reference URDF cannot be read."""
     state: dict[str, float] = {}
     _, ref_joints = parse_urdf(ref.urdf)
     rng = ref.joint_position_range
@@ -162,37 +131,15 @@ def _reference_state(ref: partnet_mobility.GenSim2Reference, joints: dict[str, J
         if jr.type == "prismatic":
             q *= scale if scale is not None else (ref.scale or 1.0)
         state[n] = q
-    rule = ("lower end of joint_position_range" if rng is not None else "0") + (
-        " clipped to reference_gensim2.urdf's limits (prismatic x the evaluated scale)"
-    )
-    return state, rule
+    return state, (("lower end of joint_position_range" if rng is not None else "0")
+                   + " clipped to reference_gensim2.urdf's limits (prismatic x the evaluated scale)")
 
 
-def build_context(
-    asset: Path | str,
-    *,
-    reference: Path | str | None = None,
-    prompt: str | None = None,
-    category: str | None = None,
-    conventions: SimConventions | None = None,
-) -> Context:
-    """Read the asset and its sidecars, the reference and the request.
-
-    Args:
-        asset: asset folder or URDF file (:func:`find_urdf`).
-        reference: PartNet-Mobility folder with GenSim2's reference, or None.
-        prompt: the request, or None.
-        category: overrides the category of the sidecars, ``meta.json`` and
-            the request.
-        conventions: SPEC conventions (default :class:`SimConventions`).
-
-    Returns:
-        The :class:`Context` with ``task_joints`` and ``closed`` still empty.
-
-    Raises:
-        EvaluationError: no URDF, unreadable URDF/JSON, a reference folder that
-            does not exist.
-    """
+def build_context(asset: Path | str, *, reference: Path | str | None = None, prompt: str | None = None,
+                  category: str | None = None, conventions: SimConventions | None = None) -> Context:
+    """Read the asset (folder or URDF file) and its sidecars, the reference and the request (``category`` overrides theirs);
+    ``task_joints`` and ``closed`` stay empty. Raises EvaluationError: no URDF, unreadable URDF/JSON, a missing reference
+    folder."""
     urdf = find_urdf(asset).resolve()
     folder = urdf.parent
     links, joints = parse_urdf(urdf)
@@ -206,14 +153,9 @@ def build_context(
     if ref_dir is not None and not ref_dir.is_dir():
         raise EvaluationError(f"reference {ref_dir}: no such folder")
     semantics = read_semantics(folder) or (read_semantics(ref_dir) if ref_dir else {})
-    cat = (
-        category
-        or (overlay or {}).get("category")
-        or (report or {}).get("category")
-        or (baseline or {}).get("category")
-        or recognize_category(prompt, read_category(folder) or (read_category(ref_dir) if ref_dir else None),
-                              [lab for _, lab in semantics.values()])
-    )
+    cat = (category or (overlay or {}).get("category") or (report or {}).get("category") or (baseline or {}).get("category")
+           or recognize_category(prompt, read_category(folder) or (read_category(ref_dir) if ref_dir else None),
+                                 [lab for _, lab in semantics.values()]))
     spec, req_err = parse_prompt(prompt)
     if req_err:
         notes.append(req_err)
@@ -236,8 +178,7 @@ def build_context(
 
 
 def _initial_state(st: dict[str, Any] | None, joints: dict[str, JointInfo]) -> tuple[dict[str, float], str]:
-    """joint -> initial position (rad/m) from ``initial_state.json`` (``st``), every other movable joint at 0
-    clipped to its limits; and where it came from."""
+    """(joint -> initial position rad/m from ``st``, other movable joints 0 clipped to the limits; its source)."""
     if st is not None:
         raw = st.get("initial_joint_positions", st)
         initial = {k: float(v) for k, v in raw.items() if k in joints}
@@ -251,8 +192,7 @@ def _initial_state(st: dict[str, Any] | None, joints: dict[str, JointInfo]) -> t
 
 
 def _root_fixed(folder: Path, notes: list[str]) -> bool:
-    """Whether ``initial_state.json`` declares the root fixed (a mounted asset: noted into ``notes``).
-    Raises EvaluationError: the declaration cannot be read."""
+    """Whether ``initial_state.json`` declares the root fixed (noted); EvaluationError when unreadable."""
     try:
         root_fixed = read_root(folder).fixed
     except OutputError as exc:
@@ -263,7 +203,7 @@ def _root_fixed(folder: Path, notes: list[str]) -> bool:
 
 
 def _springs(overlay: dict[str, Any] | None, joints: dict[str, JointInfo], initial: dict[str, float]) -> dict[str, Spring]:
-    """joint -> the overlay's spring (stiffness > 0; reference position rad/m, else the initial position)."""
+    """joint -> the overlay's spring (stiffness > 0; reference rad/m, else the initial position)."""
     springs: dict[str, Spring] = {}
     for jn, jd in ((overlay or {}).get("joints") or {}).items():
         k = float(jd.get("stiffness") or 0.0)
@@ -274,11 +214,8 @@ def _springs(overlay: dict[str, Any] | None, joints: dict[str, JointInfo], initi
 
 
 def hold_required(ctx: Context, joints: list[str]) -> dict[str, bool]:
-    """joint -> whether ``joints`` of the context's asset must hold where an
-    operation leaves them (:func:`asset2sim.tasks.check.task_tier.hold_required_by_label`
-    with the context's part labels, springs, category and request): not a
-    joint whose spring the part prior or the request expects (it returns by
-    design), nor any where the request asks the parts to move freely."""
+    """joint -> whether it must hold where an operation leaves it
+    (:func:`asset2sim.tasks.check.task_tier.hold_required_by_label` with the context's labels, springs, request)."""
     from asset2sim.tasks.check.task_tier import hold_required_by_label
 
     labels = {n: ((ctx.semantics.get(ctx.joints[n].child) or (None, None))[1] if n in ctx.joints else None)

@@ -1,28 +1,7 @@
-"""Evaluate any URDF asset: the interaction-readiness protocol as one task.
-
-:func:`evaluate_asset` loads a URDF (with ``initial_state.json`` beside it when
-present), runs every registered metric under the SPEC's conventions
-(``asset2sim.engines.base``) and returns an
-:class:`~asset2sim.schemas.evaluation.Evaluation`; it writes
-``evaluation.json`` and a self-contained ``report.html`` when asked
-(:func:`write_evaluation`). :func:`evaluate_refined` is refine's extra step.
-
-The stage, in the order it runs:
-
-- :mod:`~asset2sim.tasks.evaluation.eval_context`: the asset's files
-  (:mod:`~asset2sim.tasks.check.asset_files`), the reference, the
-  request and category prior (:mod:`~asset2sim.tasks.check.request_match`)
-  as one :class:`~asset2sim.tasks.evaluation.eval_context.Context`;
-- :mod:`~asset2sim.tasks.evaluation.closed_ends`: the closed ends and extents
-  the evaluation computes itself;
-- :mod:`~asset2sim.tasks.evaluation.engine_run`: one session per engine,
-  every raw measurement once (the SPEC's rest test is run once per engine, or
-  taken from the post-check's recording, and shared by the rest-test metrics);
-- :mod:`~asset2sim.tasks.evaluation.metric_defs`: the metric registry and the
-  metrics (physical robustness per engine, semantic accuracy, behaviour).
-
-Definitions, conventions and thresholds are in ``docs/design/metrics.md``. The names
-of those modules that callers use are importable from here too.
+"""Evaluate any URDF asset: the interaction-readiness protocol as one task
+(:func:`evaluate_asset`; :func:`evaluate_refined` is refine's extra step).
+Context, closed ends, one run per engine, the metric registry: the sibling
+modules. Definitions: ``docs/design/metrics.md``.
 """
 
 from __future__ import annotations
@@ -36,88 +15,22 @@ import numpy as np
 
 from asset2sim.atomic import write_json
 from asset2sim.schemas.config import SimConventions
-from asset2sim.schemas.evaluation import EVALUATION_VERSION, Evaluation
+from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.metrics import REST_TEST_METRICS
 from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.check.postcheck import RestRecording
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo, LinkInfo, find_urdf, parse_urdf
-from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed, infer_scale_from_geometry
-from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine
+from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo
+from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine, set_closed_ends
 from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
-from asset2sim.tasks.evaluation.metric_defs import (
-    EXPLOSION_JOINT_SPEED_PRISMATIC,
-    EXPLOSION_JOINT_SPEED_REVOLUTE,
-    EXPLOSION_ROOT_SPEED,
-    EXPLOSION_TRAVEL_FACTOR,
-    EXPLOSION_TRAVEL_MIN,
-    GROUND_PENETRATION_TOL,
-    METRICS,
-    MetricFn,
-    MetricSpec,
-    divergence_check,
-    metric_names,
-    movable_joints,
-    register_metric,
-)
-from asset2sim.tasks.check.request_match import (
-    category_prior,
-    labelled_joints,
-    parse_prompt,
-    recognize_category,
-    requested_joints,
-    scaled_mass_range,
-)
+from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergence_check, metric_names
+from asset2sim.tasks.check.request_match import labelled_joints, requested_joints
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import write_report
 from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
 
-__all__ = [
-    "EVALUATION_VERSION",
-    "EXPLOSION_JOINT_SPEED_PRISMATIC",
-    "EXPLOSION_JOINT_SPEED_REVOLUTE",
-    "EXPLOSION_ROOT_SPEED",
-    "EXPLOSION_TRAVEL_FACTOR",
-    "EXPLOSION_TRAVEL_MIN",
-    "GROUND_PENETRATION_TOL",
-    "METRICS",
-    "ClosedEnd",
-    "Context",
-    "EngineRun",
-    "Evaluation",
-    "EvaluationError",
-    "JointInfo",
-    "LinkInfo",
-    "MetricFn",
-    "MetricSpec",
-    "build_context",
-    "category_prior",
-    "compute_closed",
-    "divergence_check",
-    "evaluate_asset",
-    "evaluate_refined",
-    "find_urdf",
-    "infer_scale_from_geometry",
-    "metric_names",
-    "parse_prompt",
-    "parse_urdf",
-    "recognize_category",
-    "register_metric",
-    "requested_joints",
-    "run_engine",
-    "scaled_mass_range",
-    "write_evaluation",
-]
-
-
-# ------------------------------------------------------------------ entry point
-def _closed_ends(ctx: Context, joints: list[str]) -> None:
-    """The closed ends of ``joints`` into ``ctx.closed`` (with their extents
-    and notes), in a fresh session (:func:`compute_closed`)."""
-    ext: list = []
-    ctx.closed, cnotes = compute_closed(ctx.urdf, ctx.joints, joints, extents_out=ext)
-    ctx.closed_extents = ext[0] if ext else None
-    ctx.notes += cnotes
+__all__ = ["METRICS", "Evaluation", "EvaluationError", "JointInfo", "divergence_check", "evaluate_asset", "evaluate_refined",
+           "metric_names", "requested_joints", "write_evaluation"]
 
 
 def evaluate_asset(
@@ -131,75 +44,18 @@ def evaluate_asset(
     """Evaluate one asset with every registered metric.
 
     Args:
-        urdf_dir_or_path: asset folder (``mobility.urdf`` or one ``*.urdf``) or
-            a URDF file; ``initial_state.json``, ``overlay.json``,
-            ``report.json``, ``baseline.json``, ``semantics.txt`` beside it are
-            used when present.
-        reference: PartNet-Mobility folder with ``reference_gensim2.json`` /
-            ``reference_gensim2.urdf`` (reference scale, task joint, reference
-            state); None skips the reference metrics.
-        prompt: the request; None skips prompt alignment.
-        engines: engine names (``asset2sim.engines``); unavailable ones are
-            recorded as skipped metrics.
-        seed: recorded for reproducibility; every measurement here is
-            deterministic (PyBullet DIRECT mode, fixed step), so it changes
-            nothing today.
-        category: overrides the category found in the sidecars.
-        method: name recorded in the evaluation (benchmark).
-        out_dir: where ``evaluation.json`` (always, when given) and
-            ``report.html`` (when ``write_report``) go.
-        write_report: write ``report.html`` into ``out_dir``.
-        probes: run the passive probes.
-        conventions: SPEC conventions (default :class:`SimConventions`).
-        measured: results of the rest-test metrics
-            (:data:`asset2sim.schemas.metrics.REST_TEST_METRICS`) already
-            measured in the first engine under the same conventions and
-            initial state (the refine post-check): recorded as they are, and
-            that engine's rest test is not run again (the probes start from
-            the unstepped initial state either way, :func:`run_engine`); the
-            metrics that need its per-step trace (ground penetration,
-            divergence, joint hold) are then recorded as skipped.
-        recording: the post-check's rest test of this asset, step by step
-            (:class:`~asset2sim.tasks.check.postcheck.RestRecording`): when it
-            matches an engine's simulation (engine, URDF, initial state,
-            springs, conventions) every rest-test metric of that engine
-            (ground penetration, divergence and joint hold included) is
-            computed from it and the rest test is not simulated again; the
-            result equals a fresh rest test's (the simulation is
-            deterministic). Otherwise it is ignored.
-        views, views_state: renders of the object already taken
-            (:func:`asset2sim.tasks.geometry.render.render_views`, view name ->
-            (H, W, 3) uint8) at the joint positions ``views_state`` (rad/m):
-            ``report.html`` shows them when that is the evaluated initial
-            state, else it renders its own.
-        checks: results the refine post-check already measured on these
-            same files (its report's metrics): every one the evaluation does
-            not measure itself (same name and engine: ``state_hold``,
-            ``settle_tilt``, other engines' rest tests) is recorded as it is,
-            so ``report.html``'s verdict is the refine report's
-            (:func:`asset2sim.tasks.check.verdict.readiness`). The evaluation
-            measures everything else itself (its own closed ends: no method
-            grades itself).
-        task: the manipulation task ("close the microwave door", a
-            manifest's ``task``): the probes try only its joints and
-            direction (:func:`asset2sim.tasks.check.task_spec.parse_task`),
-            and a gripper executes it (``task_execution``,
-            ``operating_force``: :mod:`asset2sim.tasks.check.task_execution`);
-            None: the probes try every task-relevant joint, close and open,
-            and task execution is not run.
-        recorded: the post-check's joint sweep and robust rest runs
-            (:class:`~asset2sim.tasks.check.recorded_runs.RecordedRuns`): a
-            run whose inputs (URDF bytes and meshes, initial state, springs,
-            conventions, root, configuration and, for the sweep, the
-            evaluation's own closed ends) hash the same is taken from it
-            instead of simulated again (the simulations are deterministic);
-            any difference re-runs it.
-        shown_urdf: the URDF path recorded in the evaluation (and its HTML
-            report) instead of the evaluated file's, e.g. where a staged
-            refine's output will lie once swapped in (None: the evaluated one).
-
-    Returns:
-        The :class:`Evaluation`.
+        urdf_dir_or_path: asset folder or URDF file (sidecars beside it used when present).
+        reference: GenSim2's reference folder (None: no reference metrics); prompt: the request.
+        engines: engine names (unavailable ones: skipped metrics); seed, method: recorded.
+        out_dir: where ``evaluation.json`` and (``write_report``) ``report.html`` go.
+        measured: the first engine's rest-test metrics already measured (the post-check's):
+            recorded as they are, that engine's rest test not run again.
+        recording: the post-check's rest test (``RestRecording``), reused where it matches.
+        views, views_state: renders already taken (view -> (H, W, 3) uint8) at ``views_state`` (rad/m).
+        checks: the post-check's results: those not measured here (same name and engine) are recorded.
+        task: the manipulation task the probes and ``task_execution`` try (None: no task execution).
+        recorded: the post-check's sweep and robust-rest runs (``RecordedRuns``), reused when inputs match.
+        shown_urdf: the URDF path recorded instead of the evaluated one.
 
     Raises:
         EvaluationError: the asset or reference cannot be read.
@@ -235,7 +91,7 @@ def _joints_to_close(ctx: Context) -> list[str]:
     pre_req = labelled_joints(ctx.request, ctx.joints, ctx.semantics, ctx.category)
     ctx.task_joints, tj_rule = task_joints(ctx.joints, ctx.reference_dir, pre_req, ctx.category, ctx.semantics)
     ctx.notes.append(f"task-relevant joints: {', '.join(ctx.task_joints) or 'none'} ({tj_rule})")
-    return list(dict.fromkeys(ctx.task_joints + pre_req + movable_joints(ctx)))
+    return list(dict.fromkeys(ctx.task_joints + pre_req + ctx.movable))
 
 
 def _set_task(ctx: Context, task: str | None, need_closed: list[str]) -> None:
@@ -244,7 +100,7 @@ def _set_task(ctx: Context, task: str | None, need_closed: list[str]) -> None:
     tspec = parse_task(task, ctx.joints, ctx.semantics, ctx.category, ctx.task_joints) if task else None
     if tspec is not None and len(tspec.joints) > 1:
         if need_closed and not ctx.closed:
-            _closed_ends(ctx, need_closed)
+            set_closed_ends(ctx, need_closed)
         tspec = with_work_to_do(tspec, {n: c.fraction(ctx.initial_state[n]) for n, c in ctx.closed.items()
                                         if n in ctx.initial_state and c.open_range > 0})
     ctx.task = tspec
@@ -267,7 +123,7 @@ def _run_engines(ctx: Context, engines: tuple[str, ...] | list[str], need_closed
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:
-        _closed_ends(ctx, need_closed)
+        set_closed_ends(ctx, need_closed)
     return {e: runs[e] for e in engines}
 
 
@@ -319,45 +175,15 @@ def _evaluation(ctx: Context, runs: dict[str, EngineRun], results: list[MetricRe
     return ev
 
 
-def evaluate_refined(
-    out_dir: Path | str,
-    report: RefineReport,
-    *,
-    recording: RestRecording | None = None,
-    reference: Path | str | None = None,
-    views: dict[str, np.ndarray] | None = None,
-    views_state: dict[str, float] | None = None,
-    checks: list[MetricResult] | None = None,
-    recorded: RecordedRuns | None = None,
-    shown: Path | str | None = None,
-) -> dict[str, Path]:
-    """Evaluate a refined output folder (PyBullet, SPEC conventions, probes)
-    and write ``evaluation.json`` and ``report.html`` beside its
-    ``report.json`` (refine's extras).
-
-    Args:
-        out_dir: the refined output folder.
-        report: its :class:`~asset2sim.schemas.report.RefineReport` (the
-            run's ``prompt``, ``category`` and ``task`` are used).
-        recording: the final post-check's rest test
-            (:class:`~asset2sim.tasks.check.postcheck.RestRecording`), reused
-            when it matches (see :func:`evaluate_asset`).
-        reference: the reference folder (GenSim2), None for none.
-        views: the renders refine wrote (view -> (H, W, 3) uint8), taken at
-            ``views_state`` (rad/m); used in ``report.html`` when that is the
-            evaluated initial state, else the report renders its own.
-        checks: the post-check's results of these files (see :func:`evaluate_asset`).
-        recorded: the post-check's manipulation runs (see :func:`evaluate_asset`).
-        shown: the output folder as its user will find it, recorded as the
-            evaluated URDF's folder when ``out_dir`` is the staging folder a
-            rerun swaps in at its end (None: ``out_dir``).
-
-    Returns:
-        {"evaluation": path, "report": path}.
-
-    Raises:
-        EvaluationError: the folder cannot be read.
-    """
+def evaluate_refined(out_dir: Path | str, report: RefineReport, *, recording: RestRecording | None = None,
+                     reference: Path | str | None = None, views: dict[str, np.ndarray] | None = None,
+                     views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None,
+                     recorded: RecordedRuns | None = None, shown: Path | str | None = None) -> dict[str, Path]:
+    """Evaluate a refined output folder and write ``evaluation.json`` and ``report.html`` beside its ``report.json``
+    (refine's extras); the report's ``prompt``, ``category`` and ``task`` are used, the other arguments as in
+    :func:`evaluate_asset`. ``shown``: the output folder as its user will find it (the staging folder of a rerun is swapped
+    in later; None: ``out_dir``). Returns {"evaluation": path, "report": path}. Raises EvaluationError: the folder cannot be
+    read."""
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
@@ -368,14 +194,8 @@ def evaluate_refined(
 
 def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
                      views: dict[str, np.ndarray] | None = None) -> dict[str, Path]:
-    """Write ``evaluation.json`` (and ``report.html``, rendering ``ev``:
-    :func:`asset2sim.tasks.evaluation.report_html.write_report`, with ``views``
-    the renders at ``ev.initial_state`` when already taken) into ``out_dir``
-    atomically.
-
-    Returns:
-        {"evaluation": path, "report": path (when written)}.
-    """
+    """Write ``evaluation.json`` (and, with ``report``, ``report.html``; ``views`` the renders at ``ev.initial_state`` when
+    taken) into ``out_dir`` atomically; returns {"evaluation": path, "report": path (when written)}."""
     out_dir = Path(out_dir)
     paths = {"evaluation": write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json")))}
     if report:

@@ -1,80 +1,14 @@
-"""A learning environment per manipulation task: can a policy learn to do it
-on this asset? (issue 15, "Learnability benchmark"; SPEC, "Behavioral
-fidelity, learning feasibility": the thesis trained PPO on 9 tasks.)
+"""A gymnasium learning environment per manipulation task: can a policy learn
+it on this asset? (SPEC, "Behavioral fidelity, learning feasibility".)
 
-A `gymnasium <https://gymnasium.farama.org>`_ environment over any asset folder
-(a refined output, a baseline's asset: anything
-:func:`asset2sim.tasks.evaluation.eval_context.build_context` reads) and a
-task text ("close the box lid", a manifest's ``task`` column). It talks to
-physics only through the engine protocol
-(:func:`asset2sim.engines.registry.open_session`), so it runs in every engine the
-protocol answers; the benchmark uses PyBullet.
-
-Definitions (re-derivable; ``docs/design/metrics.md``):
-
-- **Task instance** (:func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`): the task is parsed by
-  :func:`asset2sim.tasks.check.task_spec.parse_task` into joints and
-  actions; the closed ends are the evaluation's own
-  (:func:`asset2sim.tasks.evaluation.closed_ends.compute_closed`, no method
-  grades itself). Where the PartNet-Mobility reference
-  (``reference_gensim2.urdf``) keeps some of the parsed joints movable, only
-  those are candidates (every method then acts on the same joint: "close
-  the cabinet drawer" on GenSim2's drawer). Of every (joint, action) pair the
-  one whose target is farthest from its start fraction (see "World") is the
-  instance, the first in file order on a tie (with ``start="asset"`` a "close
-  the drawer" task acts on the open drawer; a both-ways task such as "move
-  the bag handle" moves the handle the way it can go farthest). Targets and reach
-  thresholds are the probes'
-  (:mod:`asset2sim.tasks.check.probes`): close -> f <= 0.10; open -> f >= 0.55
-  (f >= 0.85 when the joint starts beyond 0.55).
-- **World**: the object as its folder declares (free on the ground under the
-  SPEC's conventions, or mounted: root fixed,
-  :func:`asset2sim.tasks.interpret.mounting.session_root_options`), gravity,
-  passive joints, initial state from ``initial_state.json`` except the task
-  joint, which starts at the common start of its action
-  (:func:`~asset2sim.tasks.evaluation.learn_task.common_start`: a close task half open, a revolute part at most
-  45 deg open, an open task closed; the same motion is asked of every
-  method, and no method gets a task its initial state already satisfies;
-  ``start="asset"`` keeps the asset's state). It first settles for at least
-  :attr:`LearnConfig.settle_time` and until at rest (every joint and the root
-  still, at most :attr:`LearnConfig.settle_max_time`); every episode starts from that settled
-  snapshot, with the task joint moved by a uniform random offset of at most
-  :attr:`LearnConfig.reset_noise` opening fraction (kept inside the limits).
-- **Agent**: a floating, force- and speed-limited gripper attached to the
-  task link's contact point (handle, else the far edge of a revolute part,
-  else the front of a drawer), the bounded-force grasp of
-  :mod:`asset2sim.tasks.check.gripper` (:class:`~asset2sim.tasks.check.gripper.GripperLimits`:
-  70 N, 0.25 m/s by default; a bounded-force attachment is the standard
-  stand-in for finger contacts, see that module).
-- **Action** (4,) in [-1, 1]: the gripper point's velocity (3,) in units of
-  the speed limit, world frame, clipped to the unit ball (so |v| <= max
-  speed), and a press flag: > 0, the gripper presses or lifts along world z
-  only, its finger sliding along the part (the task-execution check's
-  vertical press: it loads the object onto the ground instead of pushing it
-  sideways); <= 0, the full bounded-force grasp. Held for
-  :attr:`LearnConfig.action_repeat` engine steps (1/240 s each).
-- **Observation** (13,), float32: opening fraction f of the task joint;
-  f - f_target; joint velocity / open range (1/s); gripper point minus grasp
-  point (3,) / L; grasp point minus its position at reset (3,) / L, L the
-  characteristic length (revolute: the grasp point's distance from the axis;
-  prismatic: the open range); the object's footprint slide (2,) /
-  slide tolerance; root rotation / tip tolerance; time / episode length.
-- **Reward** (the thesis's staged reward with its reach and contact stages
-  given by the attachment): joint progress w_p (|f_prev - f*| - |f - f*|) /
-  max(|f_0 - f*|, 0.05) (f_0 at reset), minus w_s |g - p| F_max^-1 k (the grasp spring's pull as a
-  share of the force limit: pulling against a stuck part), minus w_m and end
-  of the episode when the object slid or tipped, plus w_b on success.
-- **Success**: the target fraction is reached, the object has not slid
-  (footprint > 5 mm horizontally, as the probes measure it) or tipped
-  (> 0.05 rad) during the episode and, after the gripper releases, the
-  target is still held for :attr:`LearnConfig.hold_time` s (the
-  task-execution check's definition; waived, as there, for a joint that
-  returns by the spring its part prior expects: a stapler's arm) without
-  the object moving. The episode
-  ends at success, at a slide or tip, or after :attr:`LearnConfig.episode_time`.
-
-``gymnasium`` is the optional extra ``gym`` (in ``all``); PPO (stable-baselines3,
-torch) is the extra ``learn`` (``pip install -e ".[learn]"``).
+Task instance: :func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`;
+agent: a force- and speed-limited gripper at the task link's contact point
+(:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`); action (4,) in
+[-1, 1]: gripper velocity in units of the speed limit and a press flag;
+observation (13,) float32; reward: progress towards the target, a stretch
+penalty, a slide/tip penalty, a success bonus. Definitions (world, action,
+observation, reward, success): docs/design/metrics.md, design notes.
+``gymnasium`` is the optional extra ``gym``; PPO is the extra ``learn``.
 """
 
 from __future__ import annotations
@@ -96,70 +30,36 @@ from asset2sim.tasks.evaluation.learn_task import LearnTask
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
-#: Observation length (see the module docstring).
-OBS_DIM = 13
-
-#: Action length (see the module docstring): gripper velocity (3,), press flag.
-ACTION_DIM = 4
-
-#: World up, the direction of a press (action component 4 > 0).
-_UP = np.array([0.0, 0.0, 1.0])
+OBS_DIM = 13  # observation length (module docstring)
+ACTION_DIM = 4  # action length: gripper velocity (3,), press flag
+_UP = np.array([0.0, 0.0, 1.0])  # world up, the direction of a press
 
 
 @dataclass
 class LearnConfig:
     """Environment knobs (units on every field)."""
 
-    engine: str = "pybullet"
-    """engine name (:func:`asset2sim.engines.registry.open_session`)"""
-    action_repeat: int = 12
-    """engine steps per action (12 x 1/240 s = 20 Hz control, a typical
-    end-effector velocity-control rate)"""
-    episode_time: float = 3.0
-    """longest episode, s of simulated time"""
-    settle_time: float = 0.25
-    """shortest free settling before the snapshot every episode starts from, s (the probes')"""
-    settle_max_time: float = 3.0
-    """longest settling, s: after :attr:`settle_time` it goes on until every
-    joint is slower than :attr:`rest_joint_speed` and the root moved less than
-    :attr:`rest_root_speed` over a control period (a spring-driven part, a
-    stapler's arm, is still moving after 0.25 s)"""
-    rest_joint_speed: tuple[float, float] = (0.05, 0.005)
-    """joint speed below which a joint is at rest: revolute rad/s, prismatic m/s
-    (the task-execution check's "stopped")"""
-    rest_root_speed: float = 0.005
-    """root speed below which the object is at rest, m/s"""
-    hold_time: float = 1.0
-    """after success the gripper releases and the target must hold this long, s
-    (the task-execution check's 1 s)"""
-    reset_noise: float = 0.02
-    """largest random offset of the task joint at reset, opening fraction"""
-    slide_tol: float = 0.005
-    """footprint slide that counts as the object sliding, m (the probes')"""
-    tip_tol: float = 0.05
-    """root rotation that counts as tipping, rad (the probes')"""
-    progress_weight: float = 10.0
-    """w_p: reward for moving the whole way from the start to the target"""
-    stretch_weight: float = 0.05
-    """w_s: penalty per step for pulling at the force limit"""
-    moved_penalty: float = 5.0
-    """w_m: penalty when the object slides or tips"""
-    success_bonus: float = 10.0
-    """w_b: bonus on success"""
-    limits: GripperLimits = field(default_factory=GripperLimits)
-    """the gripper's force and speed limits"""
+    engine: str = "pybullet"  # engine name (open_session)
+    action_repeat: int = 12  # engine steps per action (12 x 1/240 s = 20 Hz control)
+    episode_time: float = 3.0  # longest episode, s
+    settle_time: float = 0.25  # shortest settling before the snapshot, s (the probes')
+    settle_max_time: float = 3.0  # longest settling, s: until joints and root are at rest
+    rest_joint_speed: tuple[float, float] = (0.05, 0.005)  # joint at rest below: revolute rad/s, prismatic m/s
+    rest_root_speed: float = 0.005  # root at rest below, m/s
+    hold_time: float = 1.0  # after success, released, the target must hold this long, s
+    reset_noise: float = 0.02  # largest random offset of the task joint at reset, opening fraction
+    slide_tol: float = 0.005  # footprint slide that counts as sliding, m (the probes')
+    tip_tol: float = 0.05  # root rotation that counts as tipping, rad (the probes')
+    progress_weight: float = 10.0  # w_p: reward for moving the whole way to the target
+    stretch_weight: float = 0.05  # w_s: penalty per step for pulling at the force limit
+    moved_penalty: float = 5.0  # w_m: penalty when the object slides or tips
+    success_bonus: float = 10.0  # w_b: bonus on success
+    limits: GripperLimits = field(default_factory=GripperLimits)  # the gripper's force and speed limits
 
 
 class TaskEnv(gym.Env):
-    """The learning environment of one :class:`LearnTask` (module docstring).
-
-    Args:
-        task: the task instance (:func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`).
-        config: knobs.
-
-    The simulator session is opened at the first :meth:`reset` and kept until
-    :meth:`close`; episodes restore its settled snapshot.
-    """
+    """The learning environment of one :class:`LearnTask` (module docstring); the
+    session opens at the first :meth:`reset` and lives until :meth:`close`."""
 
     metadata = {"render_modes": []}
 
@@ -183,21 +83,14 @@ class TaskEnv(gym.Env):
         self._f_prev = 0.0
         self._f_start = 0.0
         self._p_reset = np.zeros(3)
-        self._watch: SupportWatch | None = None
-        """slide and tip of the object since reset"""
-        self.sim_steps = 0
-        """engine steps taken since the environment was made (the budget)"""
-        self.episodes = 0
-        """episodes ended (terminated or truncated) since the environment was made"""
+        self._watch: SupportWatch | None = None  # slide and tip since reset
+        self.sim_steps = 0  # engine steps since the environment was made (the budget)
+        self.episodes = 0  # episodes ended since the environment was made
 
     # ---------------------------------------------------------------- session
     @property
     def session(self) -> SimSession:
-        """The open session (opened at the first :meth:`reset`).
-
-        Raises:
-            RuntimeError: before the first reset.
-        """
+        """The open session; RuntimeError before the first :meth:`reset`."""
         if self._session is None:
             raise RuntimeError("TaskEnv: call reset() first")
         return self._session
@@ -306,14 +199,8 @@ class TaskEnv(gym.Env):
         self.sim_steps += 1
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict]:
-        """Move the gripper for ``action_repeat`` engine steps: ``action``
-        (4,) is the velocity (3,) x max speed (clipped to the unit ball) and
-        the press flag (> 0: a vertical press or lift; module docstring);
-        returns (observation, reward, terminated, truncated, info).
-
-        Raises:
-            ValueError: ``action`` does not have 4 components.
-        """
+        """Move the gripper for ``action_repeat`` engine steps with ``action`` (4,) (module docstring); returns
+        (observation, reward, terminated, truncated, info). Raises ValueError: ``action`` does not have 4 components."""
         cfg = self.config
         a = np.nan_to_num(np.asarray(action, float).reshape(-1), nan=0.0)
         if a.shape != (ACTION_DIM,):
@@ -354,7 +241,7 @@ class TaskEnv(gym.Env):
         return self._obs(), float(reward), False, truncated, self._info(False, "time limit" if truncated else "")
 
     def _moved(self) -> str:
-        """Why the object counts as moved since reset: "the object slid", "the object tipped", or "" (within the tolerances)."""
+        """Why the object counts as moved since reset ("the object slid", "the object tipped"), else ""."""
         if self._watch.slide > self.config.slide_tol:
             return "the object slid"
         return "the object tipped" if self._watch.tilt > self.config.tip_tol else ""
@@ -376,19 +263,10 @@ class TaskEnv(gym.Env):
 
     # ------------------------------------------------------------ reference
     def scripted_action(self, speed: float = 0.5, vertical_share: float = TaskConfig.vertical_share) -> np.ndarray:
-        """A hand-written policy (the feasibility reference, not learned), the
-        task-execution check's motion
-        (:func:`asset2sim.tasks.check.task_execution.execute_task`): along the
-        grasp point's direction of motion towards the target (revolute: the
-        tangent a x r at the grasp point; prismatic: +-a) at ``speed`` times
-        the speed limit, plus a correction of the stretch; where that
-        direction is within acos(``vertical_share``) of vertical (60 deg) a
-        vertical press or lift instead (component 4 > 0), at the vertical
-        speed that moves the part as far along its path.
-
-        Returns:
-            The action (4,): velocity in the unit ball, press flag in [-1, 1].
-        """
+        """A hand-written policy (the feasibility reference), the task-execution check's motion: along the grasp point's
+        path towards the target at ``speed`` x the speed limit plus a stretch correction; a vertical press or lift where
+        that path is within acos(``vertical_share``) of vertical. Returns the action (4,): velocity in the unit ball, press
+        flag in [-1, 1]."""
         s, t = self.session, self.task
         o, a = joint_frame_axis(s, t.joint, s.joint_child[t.joint])
         q, _ = s.joint_state(t.joint)

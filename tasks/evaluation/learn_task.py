@@ -1,7 +1,5 @@
-"""The task instance of a learning environment: which joint of an asset a task
-text acts on, from which opening fraction to which target (definitions in
-:mod:`asset2sim.tasks.evaluation.learn_env`'s docstring, "Task instance" and
-"World"). Needs no ``gymnasium``.
+"""The task instance of a learning environment: which joint a task text acts
+on, from which opening fraction to which target. Needs no ``gymnasium``.
 """
 
 from __future__ import annotations
@@ -26,19 +24,11 @@ from asset2sim.tasks.check.task_tier import hold_required_by_label
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
 
-#: Common start of the task joint per action, opening fraction
-#: (:func:`prepare_task` ``start="task"``): a close task starts half open, an open
-#: task at the closed end, so the same motion is asked of every method.
+#: Common start of the task joint per action, opening fraction (``start="task"``).
 START_FRACTION: dict[str, float] = {"close": 0.5, "open": 0.0}
 
 #: Largest opening of a revolute task joint at the common start of a close
-#: task, rad: half of a wide range (a box lid's 183 deg, a stapler's 147 deg)
-#: stands the part near vertical, where its motion is horizontal and closing
-#: it pushes a light object sideways. At 45 deg a level lid's far edge moves
-#: about 70 % vertically, above the task-execution check's press threshold
-#: (``vertical_share`` 0.5, reached at 60 deg), with a margin for lids whose
-#: closed pose is not level (100221's edge moved 34 % vertically at 60 deg)
-#: and for the reset noise: the same start is a press for every method.
+#: task, rad (docs/design/metrics.md, "Learnability").
 START_MAX_ANGLE = math.radians(45.0)
 
 
@@ -48,35 +38,24 @@ class LearnTaskError(ValueError):
 
 @dataclass
 class LearnTask:
-    """One task instance on one asset (:mod:`~asset2sim.tasks.evaluation.learn_env`, "Task instance").
-
-    Positions rad or m; fractions dimensionless (0 closed, 1 fully open).
-    """
+    """One task instance on one asset. Positions rad or m; fractions 0 closed, 1 fully open."""
 
     urdf: Path
     task: str
     joint: str
     joint_type: str
-    action: str
-    """``close`` or ``open``"""
+    action: str  # "close" or "open"
     closed: ClosedEnd
     target_fraction: float
-    reach_fraction: float
-    """f <= this (close) or f >= this (open) counts as reached"""
-    hold_required: bool
-    """the target must still be reached after release (False for a joint that
-    returns by the spring its part prior expects, a stapler's arm: the rule of
-    :func:`asset2sim.tasks.check.task_tier.hold_required_by_label`)"""
+    reach_fraction: float  # f <= this (close) or f >= this (open) counts as reached
+    hold_required: bool  # the target must still hold after release (not for a joint sprung by design)
     initial_state: dict[str, float]
     springs: dict[str, Spring]
     root_fixed: bool
     conventions: SimConventions
-    start_fraction: float
-    """the task joint's opening fraction at the start of an episode"""
-    start: str = "task"
-    """``task`` (the common start) or ``asset`` (the initial state)"""
-    candidates: list[str] = field(default_factory=list)
-    """the task's joints (the parse; those the reference keeps movable when it names any)"""
+    start_fraction: float  # the task joint's opening fraction at the start of an episode
+    start: str = "task"  # "task" (the common start) or "asset" (the initial state)
+    candidates: list[str] = field(default_factory=list)  # the task's joints (the reference's when it names any)
     rule: str = ""
     notes: list[str] = field(default_factory=list)
 
@@ -92,14 +71,8 @@ class LearnTask:
 
 
 def common_start(action: str, joint_type: str, open_range: float) -> float:
-    """The common start of a task joint, opening fraction: an open task at the
-    closed end (0); a close task half open (:data:`START_FRACTION`), a
-    revolute joint at most :data:`START_MAX_ANGLE` open (``open_range`` rad,
-    or m for a prismatic joint).
-
-    Raises:
-        ValueError: ``action`` is not ``close`` or ``open``.
-    """
+    """The common start of a task joint, opening fraction (:data:`START_FRACTION`; a revolute close task at most
+    :data:`START_MAX_ANGLE` open, ``open_range`` rad or m). Raises ValueError: ``action`` is not ``close`` or ``open``."""
     if action not in START_FRACTION:
         raise ValueError(f"task action must be 'close' or 'open', got {action!r}")
     f = START_FRACTION[action]
@@ -109,12 +82,8 @@ def common_start(action: str, joint_type: str, open_range: float) -> float:
 
 
 def targets_for(action: str, start_fraction: float) -> tuple[float, float]:
-    """(target fraction, reach threshold) of an action from a start fraction,
-    the probes' (:mod:`asset2sim.tasks.check.probes`).
-
-    Raises:
-        ValueError: ``action`` is not ``close`` or ``open``.
-    """
+    """(target fraction, reach threshold) of an action from a start fraction (the probes').
+    Raises ValueError: ``action`` is not ``close`` or ``open``."""
     if action == "close":
         return CLOSE_TARGET, CLOSE_REACHED
     if action == "open":
@@ -125,30 +94,10 @@ def targets_for(action: str, start_fraction: float) -> tuple[float, float]:
 def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None = None,
                  category: str | None = None, conventions: SimConventions | None = None,
                  start: str = "task") -> LearnTask:
-    """The :class:`LearnTask` of ``task`` on the asset folder (or URDF) ``asset``.
-
-    Args:
-        asset: an asset folder (``mobility.urdf`` with ``initial_state.json``
-            and its other sidecars) or a URDF path.
-        task: the task text ("close the box lid").
-        reference: the PartNet-Mobility folder with ``reference_gensim2.urdf``
-            (its movable joints are the task-relevant joints), or None.
-        category: the category when the folder does not state it.
-        conventions: simulation conventions (default the SPEC's).
-        start: ``task`` (the common start :data:`START_FRACTION`) or
-            ``asset`` (the asset's initial state for the task joint too;
-            a method whose initial state already satisfies the task then
-            gets a task already done).
-
-    Returns:
-        The task instance (:mod:`~asset2sim.tasks.evaluation.learn_env`, "Task instance").
-
-    Raises:
-        LearnTaskError: no movable joint the task can act on (none parsed, or
-            none with an opening range > 0).
-        asset2sim.tasks.check.asset_files.EvaluationError: the asset
-            cannot be read.
-    """
+    """The :class:`LearnTask` of ``task`` ("close the box lid") on the asset folder or URDF ``asset``: of the task's joints
+    (the ``reference``'s movable ones when it names any) and actions, the pair whose target lies farthest from its start.
+    ``start``: ``task`` (the common start) or ``asset`` (the initial state). Raises LearnTaskError (no movable joint with a
+    range > 0 to act on) or EvaluationError (unreadable asset)."""
     if start not in ("task", "asset"):
         raise ValueError(f"start must be 'task' or 'asset', got {start!r}")
     ctx = build_context(asset, reference=reference, prompt=None, category=category, conventions=conventions)
@@ -183,8 +132,8 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
 
 def _farthest(ctx: Context, closed: dict[str, ClosedEnd], candidates: list[str], actions: tuple[str, ...] | list[str],
               start: str) -> tuple[float, str, str, float] | None:
-    """(gap, joint, action, start fraction) of the (joint, action) pair whose target fraction is farthest from its
-    start, the first in file order on a tie; None when no candidate has an opening range > 0."""
+    """(gap, joint, action, start fraction) of the pair whose target is farthest from its start (first on a tie);
+    None when no candidate has an opening range > 0."""
     best: tuple[float, str, str, float] | None = None
     for j in candidates:
         c = closed[j]

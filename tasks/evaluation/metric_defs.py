@@ -1,35 +1,7 @@
-"""The evaluation's metrics: the registry and one function per metric.
-
-Each metric is ``fn(context, runs) -> [MetricResult]`` over the
-:class:`~asset2sim.tasks.evaluation.eval_context.Context` and the raw
-measurements of each engine
-(:class:`~asset2sim.tasks.evaluation.engine_run.EngineRun`), registered with
-:func:`register_metric` under its name in
-:data:`asset2sim.schemas.metrics.METRIC_INFO` (group and description come from
-that table). :data:`METRICS` holds them in evaluation order:
-
-physical robustness (per engine)
-    ``penetration`` (Phi at the initial state, mm, link pairs; from
-    :mod:`asset2sim.tasks.check.metrics`), ``ground_penetration`` (mm),
-    ``rest_stability`` and ``oscillation`` (:mod:`asset2sim.tasks.check.metrics`),
-    ``divergence`` (NaN or explosion), ``joint_hold`` (a requested state that
-    sags, a lid that snaps shut).
-semantic accuracy
-    ``scale_deviation``, ``initial_joint_deviation``, ``total_mass``
-    (:mod:`asset2sim.tasks.evaluation.semantic_metrics`), ``prompt_alignment``.
-behaviour
-    ``probes`` (:mod:`asset2sim.tasks.check.probes`, PyBullet only).
-interaction under manipulation (per engine, each in sessions of its own)
-    ``joint_sweep`` (:mod:`asset2sim.tasks.check.sweep`: root fixed, every
-    movable joint driven through its range and back) and ``robust_rest``
-    (:mod:`asset2sim.tasks.check.robust_rest`: drop, tilts, nudge);
-    with a task (``ctx.task``) ``task_execution``
-    (:mod:`asset2sim.tasks.check.task_execution`: a force- and speed-limited
-    gripper performs it on the free object) and ``operating_force``
-    (:mod:`asset2sim.tasks.check.force_ranges`: its peak force against real
-    operating forces).
-
-Definitions, conventions and thresholds are in ``docs/design/metrics.md``.
+"""The evaluation's metrics: ``fn(context, runs) -> [MetricResult]`` per metric,
+registered with :func:`register_metric` into :data:`METRICS` in evaluation
+order (group and description from :data:`asset2sim.schemas.metrics.METRIC_INFO`).
+Definitions: ``docs/design/metrics.md``.
 """
 
 from __future__ import annotations
@@ -82,9 +54,8 @@ METRICS: dict[str, MetricSpec] = {}
 
 
 def register_metric(name: str, group: str | None = None, description: str | None = None) -> Callable[[MetricFn], MetricFn]:
-    """Decorator registering ``fn(context, runs) -> list[MetricResult]`` for
-    metric ``name``; ``group`` and ``description`` default to the registry
-    table's (:data:`asset2sim.schemas.metrics.METRIC_INFO`)."""
+    """Decorator registering ``fn(context, runs) -> list[MetricResult]`` for metric ``name``; ``group`` and ``description``
+    default to the registry table's (:data:`asset2sim.schemas.metrics.METRIC_INFO`)."""
     info = METRIC_INFO.get(name)
 
     def deco(fn: MetricFn) -> MetricFn:
@@ -146,19 +117,9 @@ def _m_osc(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
 
 def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_types: dict[str, str],
                      dt: float, largest_extent: float) -> dict[str, Any]:
-    """Divergence of one run: non-finite values or an explosion.
-
-    Args:
-        root: (K, 3) m root positions per step (settle + test); the first row
-            is compared with the rest for travel.
-        joints: joint -> (K,) positions per step.
-        joint_types: joint -> type.
-        dt: timestep s; largest_extent: m.
-
-    Returns:
-        {diverged, nan, reasons, peak_root_speed (m/s), root_travel (m),
-        peak_joint_speed {joint: rad/s or m/s}}.
-    """
+    """Divergence (non-finite values or an explosion) of one run: ``root`` (K, 3) m
+    and ``joints`` (joint -> (K,)) per step, ``dt`` s, ``largest_extent`` m. Returns
+    {diverged, nan, reasons, peak_root_speed m/s, root_travel m, travel_limit, peak_joint_speed}."""
     reasons = []
     nan = not (np.all(np.isfinite(root)) and all(np.all(np.isfinite(v)) for v in joints.values()))
     if nan:
@@ -179,15 +140,8 @@ def divergence_check(root: np.ndarray, joints: dict[str, np.ndarray], joint_type
         lim = EXPLOSION_JOINT_SPEED_PRISMATIC if joint_types.get(n) == "prismatic" else EXPLOSION_JOINT_SPEED_REVOLUTE
         if v > lim:
             reasons.append(f"joint {n} speed {v:.3g} > {lim}")
-    return {
-        "diverged": bool(reasons),
-        "nan": bool(nan),
-        "reasons": reasons,
-        "peak_root_speed": speed,
-        "root_travel": travel,
-        "travel_limit": travel_lim,
-        "peak_joint_speed": peak,
-    }
+    return {"diverged": bool(reasons), "nan": bool(nan), "reasons": reasons, "peak_root_speed": speed, "root_travel": travel,
+            "travel_limit": travel_lim, "peak_joint_speed": peak}
 
 
 @register_metric("divergence")
@@ -327,16 +281,11 @@ def _m_probes(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
 
 
 # ------------------------------------------------ interaction under manipulation
-def movable_joints(ctx: Context) -> list[str]:
-    """Revolute, continuous and prismatic joints of the evaluated URDF, in file order."""
-    return ctx.movable
-
-
 @register_metric("joint_sweep")
 def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.sweep` in every engine that loaded the asset
     (its own fixed-root session), closed ends from ``ctx.closed``."""
-    closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in movable_joints(ctx)}
+    closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in ctx.movable}
     return _per_engine(runs, "joint_sweep", unit_of("joint_sweep"), lambda e, r: sweep.sweep_metric(
         recorded_runs.sweep_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
                                 recorded=r.recorded)), lambda r: bool(r.error))
@@ -359,10 +308,9 @@ def _task_joints(ctx: Context) -> dict[str, tuple[float, float, float]]:
 
 @register_metric("task_execution")
 def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
-    """:mod:`asset2sim.tasks.check.task_execution` in every engine that
-    loaded the asset (fresh sessions, the root as declared), and from the same
-    run the ``operating_force`` check (:mod:`asset2sim.tasks.check.force_ranges`).
-    Without a task (``ctx.task`` None) both are skipped."""
+    """:mod:`asset2sim.tasks.check.task_execution` in every engine that loaded the asset (fresh sessions, the root as
+    declared), and from the same run the ``operating_force`` check (:mod:`asset2sim.tasks.check.force_ranges`). Without a
+    task (``ctx.task`` None) both are skipped."""
     out = []
     labels = {link: lab for link, (_, lab) in ctx.semantics.items()}
     for e, r in runs.items():

@@ -1,10 +1,7 @@
-"""Figures for the evaluation report and the benchmark pages, as SVG text.
-
-Drawn by :mod:`asset2sim.tasks.evaluation.svg_chart` (no plotting library is
-imported: a report's figures cost milliseconds, not the seconds a matplotlib
-import and draw took). Units on every axis; time in s since the start of
-settling unless stated. Each function returns the SVG document as UTF-8
-bytes, or None when there is nothing to draw.
+"""Figures for the evaluation report and the benchmark pages, drawn by
+:mod:`asset2sim.tasks.evaluation.svg_chart`: each returns an SVG document as
+UTF-8 bytes, or None when there is nothing to draw. Time in s since the start
+of settling unless stated.
 """
 
 from __future__ import annotations
@@ -16,8 +13,7 @@ import numpy as np
 from asset2sim.frames import quat_angle
 from asset2sim.tasks.evaluation.svg_chart import Panel, figure_svg
 
-SVG_MIME = "image/svg+xml"
-"""The media type of every figure here (for ``data:`` URIs)."""
+SVG_MIME = "image/svg+xml"  # the media type of every figure here (``data:`` URIs)
 
 
 def _svg(rows: list[list[Panel]], width: float, row_height: float, title: str = "") -> bytes:
@@ -25,12 +21,8 @@ def _svg(rows: list[list[Panel]], width: float, row_height: float, title: str = 
 
 
 def plot_object(point_cloud: dict[str, np.ndarray], title: str = "") -> bytes | None:
-    """Front (x-z), side (y-z) and top (x-y) views of the collision vertices
-    per link, m, world frame at the initial state. None without points.
-
-    Args:
-        point_cloud: link -> (N, 3) m.
-    """
+    """Front (x-z), side (y-z) and top (x-y) views of the collision vertices per
+    link (``point_cloud``: link -> (N, 3) m, world, initial state); None without points."""
     pts = {k: np.asarray(v, float) for k, v in point_cloud.items() if len(v)}
     if not pts:
         return None
@@ -47,15 +39,9 @@ def plot_object(point_cloud: dict[str, np.ndarray], title: str = "") -> bytes | 
 
 
 def plot_root_drift(root_series: np.ndarray, trace, dt: float, settle_steps: int) -> bytes:
-    """Root displacement |p(t) - p(0)| (mm) over settle + test, and during the
-    test the SPEC's |p - p0| (mm) and rotation angle (rad) from the pose at
-    the end of settling.
-
-    Args:
-        root_series: (K, 3) m per step.
-        trace: :class:`asset2sim.tasks.check.metrics.RestTrace`.
-        dt: timestep s; settle_steps: steps in T_set.
-    """
+    """Root displacement |p(t) - p(0)| (mm) over settle + test (``root_series``
+    (K, 3) m), and the test's |p - p0| (mm) and rotation (rad) from the ``trace``
+    (:class:`asset2sim.tasks.check.metrics.RestTrace`); ``dt`` s, ``settle_steps`` in T_set."""
     a = Panel(title="root drift, settle + test", xlabel="time (s)", ylabel="root displacement from start (mm)")
     root_series = np.asarray(root_series, float)
     if len(root_series):
@@ -75,8 +61,7 @@ def plot_root_drift(root_series: np.ndarray, trace, dt: float, settle_steps: int
 
 def plot_joints(joint_series: dict[str, np.ndarray], joint_types: dict[str, str], dt: float, settle_steps: int,
                 closed: dict[str, float] | None = None) -> bytes | None:
-    """Each movable joint's position over settle + test (rad or m). None
-    without joints."""
+    """Each movable joint's position over settle + test (rad or m). None without joints."""
     if not joint_series:
         return None
     rows = []
@@ -94,9 +79,8 @@ def plot_joints(joint_series: dict[str, np.ndarray], joint_types: dict[str, str]
 
 
 def plot_probes(probes: list[Any]) -> bytes | None:
-    """Per probe: joint position (rad or m) and pusher force (N) over time, with
-    the target and the release moment; root displacement (mm). None without
-    probes."""
+    """Per probe: joint position (rad or m) and pusher force (N) over time, with the target and the release moment; root
+    displacement (mm). None without probes."""
     if not probes:
         return None
     rows = []

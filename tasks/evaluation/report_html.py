@@ -1,20 +1,7 @@
-"""Self-contained HTML reports: one asset's evaluation, and the benchmark pages.
-
-Everything is inline (CSS, renders as PNG and figures as SVG, both base64
-``data:`` URIs), so a report opens offline from any folder. Text is
-HTML-escaped. The figures are SVG drawn by
-:mod:`asset2sim.tasks.evaluation.plots` without a plotting library.
-
-- :func:`render_report` / :func:`write_report`: ``report.html`` of one
-  :class:`asset2sim.schemas.evaluation.Evaluation`: renders of the object at its
-  initial state (:func:`asset2sim.tasks.geometry.render.render_views` when available,
-  else plots of its collision geometry), verdicts with thresholds, metric
-  details (penetrating link pairs, prompt-alignment reasons per joint, probes),
-  plots of root drift, joint trajectories and probes, and the physical
-  parameters as a table with value, unit and source.
-- :func:`render_benchmark_summary` and :func:`render_benchmark_index`: the
-  benchmark's thesis-layout table with the SPEC's research numbers, and one
-  colour-coded row per object and method.
+"""Self-contained HTML reports (CSS, PNG renders and SVG figures inline as
+``data:`` URIs; text HTML-escaped): one asset's evaluation
+(:func:`render_report`, :func:`write_report`) and the benchmark pages
+(:func:`render_benchmark_summary`, :func:`render_benchmark_index`).
 """
 
 from __future__ import annotations
@@ -81,8 +68,7 @@ def img_tag(png: bytes | None, alt: str) -> str:
 
 
 def svg_tag(svg: bytes | None, alt: str) -> str:
-    """An ``<img>`` with an SVG figure inline (:mod:`asset2sim.tasks.evaluation.plots`;
-    empty string for None). As an image, the figure's text cannot reach the page."""
+    """An ``<img>`` with an SVG figure inline (empty string for None)."""
     if not svg:
         return ""
     return f'<img alt="{esc(alt)}" src="data:{plots.SVG_MIME};base64,{base64.b64encode(svg).decode()}"/>'
@@ -107,8 +93,7 @@ def _array_png(arr: np.ndarray) -> bytes:
 
 
 def _renders(ev, views: dict[str, np.ndarray] | None = None) -> tuple[str, str]:
-    """(HTML of the object views, what they are); ``views`` the renders at
-    ``ev.initial_state`` when already taken, else rendered here."""
+    """(HTML of the object views, what they are); ``views``: renders already taken, else rendered here."""
     try:
         if views is None:
             views = render_views(Path(ev.urdf), dict(ev.initial_state))
@@ -214,12 +199,8 @@ def _probe_details(ev) -> str:
 
 def _joint_unit(jtype: str, what: str) -> str:
     pri = jtype == "prismatic"
-    return {
-        "damping": "N*s/m" if pri else "N*m*s/rad",
-        "friction": "N" if pri else "N*m",
-        "stiffness": "N/m" if pri else "N*m/rad",
-        "position": "m" if pri else "rad",
-    }[what]
+    return {"damping": "N*s/m" if pri else "N*m*s/rad", "friction": "N" if pri else "N*m",
+            "stiffness": "N/m" if pri else "N*m/rad", "position": "m" if pri else "rad"}[what]
 
 
 def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> dict[str, Any]:
@@ -228,17 +209,13 @@ def _param(parameter: str, where: str, value: Any, unit: str, source: str) -> di
 
 
 def parameter_rows(ev) -> list[dict[str, Any]]:
-    """Every physical parameter of the evaluated asset with value, unit and
-    source: from ``overlay.json`` (and ``report.json``'s state refinement and
-    escalation rounds) when present, else from the URDF and the engine
-    defaults. Returns dicts {parameter, where, value, unit, source}."""
+    """Every physical parameter of the evaluated asset as {parameter, where, value, unit, source}: from ``overlay.json``
+    (and ``report.json``) when present, else from the URDF and the engine defaults."""
     ctx = ev._context
-    rows: list[dict[str, Any]] = []
-    ov = ctx.overlay if ctx is not None else None
-    rep = ctx.report if ctx is not None else None
-    rows.append(_param("scale", "global", ev.scale, "-", ev.scale_source))
+    rows = [_param("scale", "global", ev.scale, "-", ev.scale_source)]
     if ctx is None:
         return rows
+    ov, rep = ctx.overlay, ctx.report
     escal: dict[tuple[str, str], int] = {}
     for rnd in (rep or {}).get("escalation", []) or []:
         for j, ch in (rnd.get("changes") or {}).items():
@@ -311,9 +288,8 @@ def _parameter_table(ev) -> str:
 
 
 def _badge(ev) -> str:
-    """The interaction-readiness verdict (:func:`asset2sim.tasks.check.verdict.readiness`,
-    the same the refine report, the terminal and the catalog show), with the
-    semantic checks that fail beside it."""
+    """The interaction-readiness verdict (:func:`asset2sim.tasks.check.verdict.readiness`)
+    with the other failing checks beside it."""
     r = readiness(list(ev.metrics))
     engine_errors = [f for f in ev.failures if f.startswith("engine@")]
     other = [f for f in ev.failures if f not in r.failures and not f.startswith("engine@")]
@@ -328,9 +304,8 @@ def _badge(ev) -> str:
 
 
 def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
-    """The HTML text of one evaluation's report (see module docstring);
-    ``views``: renders of the object at ``ev.initial_state`` (view name ->
-    (H, W, 3) uint8) already taken, None to render them here."""
+    """The HTML text of one evaluation's report; ``views``: renders at
+    ``ev.initial_state`` (view -> (H, W, 3) uint8) already taken, None to render here."""
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
@@ -398,30 +373,16 @@ _PASS_RATES = (("rest_stability_pass", "rest_n"), ("oscillation_pass", "osc_n"),
 
 def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], research: list[dict[str, str]],
                              meta: dict[str, Any], chart: bytes | None = None) -> str:
-    """Thesis-layout tables per subset (``tables``: subset -> method -> row of
-    :func:`asset2sim.commands.benchmark` statistics) beside the SPEC's numbers."""
-    cols = [
-        ("penetration (mm, toilet+stapler)", "pen_ts"),
-        ("penetration (mm, all)", "pen"),
-        ("rest-stability pass", "rest"),
-        ("oscillation pass", "osc"),
-        ("probes pass", "probes"),
-        ("joint sweep pass", "sweep"),
-        ("robust rest pass", "robust"),
-        ("task success", "task"),
-        ("operating force plausible", "force"),
-        ("interaction-ready", "ready"),
-        ("scale dev. vs GenSim2", "scale"),
-        ("init. joint dev. (rad)", "init"),
-        ("prompt alignment", "prompt"),
-        ("all checks pass", "all"),
-        ("median eval. time (s)", "time"),
-    ]
+    """Thesis-layout tables per subset (``tables``: subset -> method -> row) beside the SPEC's numbers."""
+    cols = ["penetration (mm, toilet+stapler)", "penetration (mm, all)", "rest-stability pass", "oscillation pass",
+            "probes pass", "joint sweep pass", "robust rest pass", "task success", "operating force plausible",
+            "interaction-ready", "scale dev. vs GenSim2", "init. joint dev. (rad)", "prompt alignment", "all checks pass",
+            "median eval. time (s)"]
     parts = [f"<h1>asset2sim benchmark</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; methods "
              f"{esc(', '.join(meta.get('methods', [])))} &middot; seed {esc(meta.get('seed'))} &middot; "
              f"{esc(meta.get('rows'))} rows &middot; <a href='index.html'>per-object index</a></p>"]
     for subset, rows in tables.items():
-        parts.append(f"<h2>{esc(subset)}</h2><table><tr><th>method</th>" + "".join(f"<th>{esc(c)}</th>" for c, _ in cols) + "</tr>")
+        parts.append(f"<h2>{esc(subset)}</h2><table><tr><th>method</th>" + "".join(f"<th>{esc(c)}</th>" for c in cols) + "</tr>")
         for method, r in rows.items():
             cells = [_pm(r.get("pen_ts_mean"), r.get("pen_ts_sd")), _pm(r.get("pen_mean"), r.get("pen_sd")),
                      *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
@@ -444,8 +405,7 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
 
 
 def render_benchmark_index(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
-    """One row per object and method, colour-coded pass/fail, linking to each
-    ``report.html`` (relative links)."""
+    """One colour-coded row per object and method, linking to each ``report.html``."""
     head = ["object", "category", "method", "all", "penetration (mm)", "rest", "oscillation", "ground", "divergence",
             "joint hold", "probes", "mass (kg)", "scale dev. (%)", "init. dev.", "prompt", "time (s)", "report"]
     rows = []

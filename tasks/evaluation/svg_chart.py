@@ -1,17 +1,9 @@
-"""Small SVG charts for the HTML reports: line, scatter and bar panels with
-axes, ticks, grid, reference lines, legends and an optional right-hand axis.
+"""Small SVG charts for the HTML reports (no plotting library): line, scatter
+and bar panels with axes, ticks, grid, reference lines, legends and an
+optional right-hand axis, as a standalone SVG document.
 
-Written as text in a few milliseconds (no plotting library is imported), so
-``report.html`` costs nothing noticeable beside the simulation it shows. The
-output is a standalone SVG document (UTF-8 text), embedded in the report as a
-``data:image/svg+xml`` image. Long series are reduced to at most four points
-(first, minimum, maximum, last) per horizontal pixel column, which draws the
-same picture as the full series at the chart's size.
-
-Tick positions follow Heckbert's "nice numbers" (P. S. Heckbert, "Nice
-Numbers for Graph Labels", Graphics Gems, Academic Press 1990, pp. 61-63).
-Colours are the Tableau 10 palette (the categorical palette matplotlib calls
-``tab10``).
+Ticks follow Heckbert's "nice numbers" (Graphics Gems, 1990, pp. 61-63);
+colours are the Tableau 10 palette (matplotlib's ``tab10``).
 """
 
 from __future__ import annotations
@@ -22,12 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+#: Tableau 10 (``C0`` .. ``C9``).
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
-"""Tableau 10 (``C0`` .. ``C9``)."""
 
 DASHES = {"-": "", "--": "6,4", ":": "1.5,3", "-.": "6,3,1.5,3"}
-MAX_SCATTER = 1500
-"""Most points drawn per scatter series (an even stride through the rest)."""
+MAX_SCATTER = 1500  # most points drawn per scatter series (an even stride)
 FONT = "font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif"
 
 
@@ -96,9 +87,8 @@ def tick_label(v: float, step: float) -> str:
 
 
 def reduce_series(x: np.ndarray, y: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
-    """At most four points per column of ``columns`` equal x intervals: the
-    first, the lowest, the highest and the last (in x order), so the drawn
-    envelope is that of the full series. x: (N,), y: (N,)."""
+    """At most four points (first, lowest, highest, last) per column of ``columns``
+    equal x intervals: the same drawn envelope. x, y: (N,)."""
     n = len(x)
     if n <= 4 * columns or n < 2:
         return x, y
@@ -132,17 +122,15 @@ class _Series:
 
 @dataclass
 class Panel:
-    """One set of axes. Add data with :meth:`line`, :meth:`scatter`,
-    :meth:`hline`, :meth:`vline`, :meth:`bars`; then lay panels out with
-    :func:`figure_svg`."""
+    """One set of axes: add data with :meth:`line`, :meth:`scatter`, :meth:`hline`,
+    :meth:`vline`, :meth:`bars`; lay panels out with :func:`figure_svg`."""
 
     title: str = ""
     xlabel: str = ""
     ylabel: str = ""
     ylabel_right: str = ""
     equal_aspect: bool = False
-    legend: str | None = "upper right"
-    """"upper right", "upper left" or None."""
+    legend: str | None = "upper right"  # "upper right", "upper left" or None
     series: list[_Series] = field(default_factory=list)
     hlines: list[tuple[float, str, str, str | None, bool]] = field(default_factory=list)
     vlines: list[tuple[float, str, str, str | None]] = field(default_factory=list)
@@ -398,8 +386,7 @@ def _unique_px(xs: np.ndarray, ys: np.ndarray) -> list[tuple[float, float]]:
 
 
 def figure_svg(rows: list[list[Panel]], width: float = 1000.0, row_height: float = 300.0, title: str = "") -> str:
-    """An SVG document of ``rows`` of panels (each row split evenly across
-    ``width`` px, ``row_height`` px high) under an optional ``title``."""
+    """An SVG document of ``rows`` of panels (each row split evenly across ``width`` px, ``row_height`` px high)."""
     top = 26.0 if title else 0.0
     height = top + row_height * len(rows)
     cv = _Canvas()

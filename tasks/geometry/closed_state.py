@@ -1,43 +1,18 @@
-"""Find the geometric *closed* end of every movable joint.
+"""The geometric *closed* end of every movable joint (``docs/design/refine.md``, "Closed state").
 
-PartNet-Mobility's zero pose is often half open and a lid's range can extend
-both ways from closed, so "closed" is found from the geometry, never assumed
-to be 0 or the lower limit.
+Per joint, other joints at their reference state, in a fixed-base, gravity-free session:
 
-Method (per joint j, all in a fixed-base, gravity-free PyBullet session of the
-asset, other joints at their reference state):
+1. score(q) = (c / min c) x (o / min o)^``OWN_WEIGHT``, c the volume of the root-frame box bounding
+   the joint's parent and moving subtree, o that of the subtree alone;
+2. sample ``coarse`` states over the range, keep those within ``tie_tol`` of the best score and,
+   among them, those whose penetration with the rest exceeds the least by at most
+   ``PHI_TIE_FRACTION`` of the object size;
+3. take the tie farthest from the open end (the part rests against its parent);
+4. refine with ``fine`` samples between the neighbouring coarse samples.
 
-1. Compactness c_j(q) = volume of the axis-aligned box (root frame) bounding
-   the joint's parent link and every link of its moving subtree, at q (the
-   moving part "rests against its parent" where this is small; parent +
-   subtree only, so other open parts cannot mask the change), and o_j(q) =
-   volume of the box bounding the moving subtree alone (a closed lid, door or
-   screen lies aligned with its body; a lid pushed *into* an open box is
-   compact but tilted). Score = (c_j / min c_j) x (o_j / min o_j)^w with
-   w = ``OWN_WEIGHT`` = 0.25: the parent+subtree box dominates, the subtree's
-   own box breaks near-ties (real links often carry extra pieces that make
-   their own box a poor signal on its own).
-2. Sample q over the joint range (``coarse`` samples) and keep the states
-   within ``tie_tol`` (relative) of the best score; among them drop those
-   whose penetration between the subtree and the rest (parent included, hull
-   based) exceeds the ties' least by more than ``PHI_TIE_FRACTION`` of the
-   object size (a drawer pushed through the back of its carcass is as compact
-   as a closed one, but penetrates; small differences are hull-overlap noise).
-3. Among remaining ties take the one farthest from the open end: the part
-   rests against its parent (a toilet lid on its seat, a drawer pushed home).
-4. Refine with ``fine`` samples between the neighbouring coarse samples.
-
-A joint whose motion leaves the parent+subtree box within ``tie_tol`` of its
-smallest over the whole range (a knob, a sash sliding in its frame, a button
-pressed into its body) has no geometric closed end: the limit nearest the
-modelled pose 0 is used, as for a continuous joint (unless the part
-penetrates the rest there: then steps 2-4 decide).
-
-The opening direction is towards the farther limit from q_closed, and the
-opening range is that distance. Continuous joints have no stops and so no
-closed end: their modelled pose 0 is kept (opening range pi for the measure). The measure used by
-the state bands is f(q) = direction * (q - q_closed) / range, in [0, 1] inside
-the range on the opening side.
+A joint whose parent+subtree box stays within ``tie_tol`` of its smallest over the range takes the
+limit nearest the modelled pose 0 (unless it penetrates there); continuous joints keep 0. The
+opening direction points to the farther limit; f(q) = direction * (q - q_closed) / open_range.
 """
 
 from __future__ import annotations
@@ -51,12 +26,10 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.frames import rpy_matrix
 from asset2sim.mesh_io import MeshCache
 
+#: Exponent of the moving subtree's own-box ratio in the closed-state score.
 OWN_WEIGHT = 0.25
-"""Exponent of the moving subtree's own-box ratio in the closed-state score."""
-
+#: Penetration above the ties' least, as a fraction of the object size, that excludes a tie.
 PHI_TIE_FRACTION = 0.05
-"""Penetration (m) above the ties' least, as a fraction of the object size, that
-excludes a tie (hull overlaps make small differences meaningless)."""
 
 
 @dataclass
@@ -65,14 +38,11 @@ class ClosedState:
 
     joint: str
     q_closed: float
-    direction: float
-    """+1 when opening increases q, -1 when it decreases q."""
-    open_range: float
-    """Largest opening the range allows from q_closed (rad or m, > 0)."""
+    direction: float  # +1 when opening increases q, -1 when it decreases q
+    open_range: float  # largest opening the range allows from q_closed (rad or m)
     lower: float
     upper: float
-    compactness_ratio: float = 1.0
-    """max/min compactness over the range (1 = the joint changes nothing)."""
+    compactness_ratio: float = 1.0  # max/min compactness over the range (1 = the joint changes nothing)
     notes: list[str] = field(default_factory=list)
 
     def fraction(self, q: float) -> float:
@@ -101,12 +71,9 @@ def subtree_links(asset: AssetDescription, link: str) -> list[str]:
 
 
 def tree_path(joints: Sequence, link_a: str, link_b: str) -> tuple[list, list]:
-    """The joints on the kinematic-tree path between two links: (those from
-    ``link_a`` up to the nearest common ancestor, nearest ``link_a`` first;
-    those from ``link_b`` up to it, nearest ``link_b`` first). ``joints``: any
-    joint records with ``parent`` and ``child`` link names (a URDF model's or
-    an :class:`AssetDescription`'s); links in separate trees give each whole
-    chain to its root."""
+    """The joints (records with ``parent`` and ``child``) on the tree path between two links: (those
+    from ``link_a`` up to the nearest common ancestor, nearest first; the same from ``link_b``);
+    links in separate trees give each whole chain to its root."""
     parent = {j.child: j for j in joints}
 
     def chain(link: str) -> list[str]:
@@ -134,11 +101,9 @@ def default_reference(session) -> dict[str, float]:
 
 
 def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarray]:
-    """Convex-hull vertices (N, 3) of every link's collision geometry (visual
-    when it has none), in the link frame at scale 1 — the points whose
-    transformed extremes give exact bounding boxes at any state (Bullet's own
-    AABBs of rotated hulls are loose). ``cache``: an
-    :class:`asset2sim.mesh_io.MeshCache` shared with the analysis stage."""
+    """Convex-hull vertices (N, 3) of every link's collision geometry (else visual), link frame, scale 1:
+    exact bounding boxes at any state (Bullet's AABBs of rotated hulls are loose). ``cache``: a
+    :class:`asset2sim.mesh_io.MeshCache`."""
     from scipy.spatial import ConvexHull, QhullError
 
     cache = cache if cache is not None else MeshCache()
@@ -178,11 +143,8 @@ def link_hull_points(asset: AssetDescription, cache=None) -> dict[str, np.ndarra
 
 
 def links_aabb(session, names: list[str], points: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
-    """World axis-aligned box (lo (3,), hi (3,)), m, of the links ``names`` at
-    the session's current state, from their collision hull points
-    (``points``: link -> (k, 3) in the link frame; exact, unlike the engines'
-    loose AABBs of rotated hulls). None when no link has points.
-    """
+    """World axis-aligned box (lo (3,), hi (3,)), m, of the links ``names`` at the current state, from
+    ``points`` (link -> hull points (k, 3) in the link frame); None when no link has points."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for name in names:
@@ -205,23 +167,14 @@ def _aabb_volume(session, names: list[str], points: dict[str, np.ndarray]) -> fl
     return float(np.prod(np.maximum(box[1] - box[0], 1e-9)))
 
 
-#: Engines whose ``link_aabb`` encloses the link's collision shape with its
-#: collision margin at the current state (Bullet's ``getAABB``), so that two
-#: links whose boxes are apart cannot report a negative distance.
+#: Engines whose ``link_aabb`` encloses the collision shape with its margin (boxes apart: no penetration).
 CONSERVATIVE_AABB_ENGINES = ("pybullet",)
 
 
 class _PairScreen:
-    """The (subtree link, other link) pairs of one joint whose penetration can
-    be non-zero at the session's current state.
-
-    With an engine of :data:`CONSERVATIVE_AABB_ENGINES` the pairs whose
-    engine boxes are disjoint are dropped (a broad phase: their signed
-    distance is >= 0, so they add nothing to the penetration); the pairs kept
-    are queried in the same order as without the screen, so the sum is the
-    same float. Costs one box query per link instead of one distance query
-    per pair.
-    """
+    """The (subtree link, other link) pairs of one joint whose penetration can be non-zero now: with an
+    engine of :data:`CONSERVATIVE_AABB_ENGINES` pairs with disjoint boxes are dropped (the others keep
+    their order, so the sum is the same float)."""
 
     def __init__(self, session, subset: set[str]):
         self.session = session
@@ -243,12 +196,8 @@ class _PairScreen:
         return [(self.sub[i], self.rest[k]) for i, k in zip(*np.nonzero(overlap))]
 
 
-def _subtree_phi(session, subset: set[str], screen: _PairScreen | None = None) -> float:
-    """Penetration (m) between the moving subtree and every other link,
-    parent included (the SPEC's self-collision filter excludes parent-child
-    pairs, but a lid pushed through its own body is not closed).
-    ``screen``: the joint's :class:`_PairScreen` (built when None)."""
-    screen = screen if screen is not None else _PairScreen(session, subset)
+def _subtree_phi(session, screen: _PairScreen) -> float:
+    """Penetration (m) between the moving subtree and every other link, parent included."""
     total = 0.0
     for a, b in screen.pairs():
         for d in session.link_distances(a, b, 0.0):
@@ -257,40 +206,26 @@ def _subtree_phi(session, subset: set[str], screen: _PairScreen | None = None) -
     return total
 
 
-def closed_positions(
-    session,
-    asset: AssetDescription,
-    *,
-    reference: dict[str, float] | None = None,
-    coarse: int = 41,
-    fine: int = 21,
-    tie_tol: float = 0.03,
-    passes: int = 2,
-    hull_points: dict[str, np.ndarray] | None = None,
-) -> dict[str, ClosedState]:
-    """Closed end of every movable joint of ``session`` (a PyBullet session of
-    ``asset`` opened with ``fixed_base=True``).
+def closed_positions(session, asset: AssetDescription, *, reference: dict[str, float] | None = None, coarse: int = 41,
+                     fine: int = 21, tie_tol: float = 0.03, passes: int = 2,
+                     hull_points: dict[str, np.ndarray] | None = None) -> dict[str, ClosedState]:
+    """Closed end of every movable joint of ``session`` (a fixed-base session of ``asset``).
 
     Args:
-        session: a :class:`asset2sim.engines.base.SimSession` (the pipeline
-            uses PyBullet; any engine answering ``link_frame`` and
-            ``link_distances``).
+        session: a :class:`asset2sim.engines.base.SimSession` answering ``link_frame`` and ``link_distances``.
         asset: the description of the same URDF (for the kinematic tree).
         reference: starting state of the other joints (default 0 clipped).
-        coarse, fine: samples over the range and in the refinement window.
-        tie_tol: relative compactness tolerance for ties (dimensionless).
+        coarse, fine, tie_tol: samples over the range and in the refinement window; relative tie tolerance.
         passes: passes over all joints; later passes hold the others closed.
         hull_points: :func:`link_hull_points` of the asset (computed when None).
 
-    Returns:
-        joint name -> :class:`ClosedState`. The session is left at the closed state.
+    Returns joint name -> :class:`ClosedState`; the session is left at the closed state.
     """
     state = dict(reference or default_reference(session))
     result: dict[str, ClosedState] = {}
     points = link_hull_points(asset) if hull_points is None else hull_points
     names = list(session.joint_names)
-    # joint -> the other joints' state its result was measured at: a later
-    # pass at the same state would measure the same values (skipped)
+    # joint -> the other joints' state its result was measured at (a later pass there is skipped)
     measured_at: dict[str, dict[str, float]] = {}
     for _ in range(max(1, passes)):
         for name in names:
@@ -303,10 +238,8 @@ def closed_positions(
             lo, hi = session.joint_limits[name]
             if not (np.isfinite(lo) and np.isfinite(hi)):
                 # no stops, so no closed end: keep the modelled pose (0)
-                result[name] = ClosedState(
-                    joint=name, q_closed=0.0, direction=1.0, open_range=float(np.pi),
-                    lower=-np.inf, upper=np.inf, notes=["continuous joint: no closed end; the modelled pose 0 is used"],
-                )
+                result[name] = ClosedState(joint=name, q_closed=0.0, direction=1.0, open_range=float(np.pi), lower=-np.inf,
+                                           upper=np.inf, notes=["continuous joint: no closed end; the modelled pose 0 is used"])
                 state[name] = 0.0
                 continue
             result[name] = _joint_closed_state(session, asset, jd, state, points, coarse, fine, tie_tol)
@@ -317,23 +250,17 @@ def closed_positions(
 
 def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray],
                         coarse: int, fine: int, tie_tol: float) -> ClosedState:
-    """Steps 1-4 of the module docstring for the bounded joint ``jd``, the
-    other joints at ``state``."""
+    """Steps 1-4 of the module docstring for the bounded joint ``jd``, the others at ``state``."""
     name = jd.name
     lo, hi = session.joint_limits[name]
     sub = subtree_links(asset, jd.child)
-    subset = set(sub)
     union_links = [jd.parent] + sub
-    screen = _PairScreen(session, subset)
+    screen = _PairScreen(session, set(sub))
     session.set_joint_positions(state)
 
     def measure(q: float) -> tuple[float, float, float]:
         session.set_joint_positions({name: q})
-        return (
-            _aabb_volume(session, union_links, points),
-            _aabb_volume(session, sub, points),
-            _subtree_phi(session, subset, screen),
-        )
+        return _aabb_volume(session, union_links, points), _aabb_volume(session, sub, points), _subtree_phi(session, screen)
 
     qs = np.linspace(lo, hi, coarse)
     vals = np.array([measure(q) for q in qs])
@@ -358,23 +285,14 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
             notes.append("compactness does not change over the range; closed end taken at the least-penetrating state")
     up, down = hi - q_closed, q_closed - lo
     direction, rng = (1.0, float(up)) if up >= down else (-1.0, float(down))
-    return ClosedState(
-        joint=name,
-        q_closed=q_closed,
-        direction=direction,
-        open_range=max(rng, 0.0),
-        lower=float(session.joint_limits[name][0]),
-        upper=float(session.joint_limits[name][1]),
-        compactness_ratio=ratio,
-        notes=notes,
-    )
+    return ClosedState(joint=name, q_closed=q_closed, direction=direction, open_range=max(rng, 0.0),
+                       lower=float(session.joint_limits[name][0]), upper=float(session.joint_limits[name][1]),
+                       compactness_ratio=ratio, notes=notes)
 
 
 def _pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
-    """Index of the closed state among samples ``qv`` with ``vals`` (n, 3)
-    (parent+subtree box, subtree box, penetration): steps 2-3 of the module
-    docstring, ``tol`` the relative tie tolerance."""
-    # score: union box / its minimum x (own box / its minimum)^OWN_WEIGHT
+    """Index of the closed state among samples ``qv`` with ``vals`` (n, 3) (parent+subtree box, subtree
+    box, penetration): steps 1-3 of the module docstring, ``tol`` the relative tie tolerance."""
     score = (vals[:, 0] / vals[:, 0].min()) * (vals[:, 1] / vals[:, 1].min()) ** OWN_WEIGHT
     phi = vals[:, 2]
     ties = np.flatnonzero(score <= score.min() * (1.0 + tol))
@@ -385,14 +303,9 @@ def _pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
 
 
 def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float, tie_tol: float) -> float | None:
-    """The closed end of a joint whose motion leaves the object as compact
-    as it is (``ratio`` = largest / smallest parent+subtree box over the
-    samples ``qs`` below 1 + ``tie_tol``): the limit nearest the modelled
-    pose 0 (as for a continuous joint, and as the evaluation's fallback),
-    unless the subtree penetrates the rest there by more than
-    ``PHI_TIE_FRACTION`` of the object's size beyond the least-penetrating
-    sample (then None: the geometric search decides). ``vals`` (n, 3):
-    (parent+subtree box, subtree box, penetration) per sample."""
+    """The limit nearest the modelled pose 0 when ``ratio`` (largest / smallest parent+subtree box) is
+    below 1 + ``tie_tol`` and the part does not penetrate there by ``PHI_TIE_FRACTION`` of the object's
+    size beyond the least; else None. ``vals`` as for :func:`_pick`."""
     if not ratio < 1.0 + tie_tol:
         return None
     i = 0 if abs(qs[0]) <= abs(qs[-1]) else len(qs) - 1
@@ -403,8 +316,7 @@ def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float, tie_tol: float
 
 
 def object_extents(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray] | None = None) -> np.ndarray:
-    """Extents (3,) of the axis-aligned box bounding every link at ``state``
-    (root frame of a fixed-base session; the asset's units)."""
+    """Extents (3,) of the root-frame box bounding every link at ``state`` (the asset's units)."""
     points = link_hull_points(asset) if hull_points is None else hull_points
     session.set_joint_positions(state)
     box = links_aabb(session, [ln.name for ln in asset.links], points)

@@ -1,64 +1,22 @@
-"""Joint limits clipped to what the geometry allows (issue 13; checked by the
-joint sweep of issue 15, :mod:`asset2sim.tasks.check.sweep`).
+"""Joint limits clipped to what the geometry allows (``docs/design/metrics.md``, before the post-check).
 
-A raw PartNet-Mobility limit can let a part swing or slide *into* its parent
-or a sibling (a stapler arm through its base, a lid through its box). The
-sweep drives each joint from its geometric closed end to 95 % of its range,
-so such a range cannot be reached without penetration. This module finds the
-geometric ends by a collision-aware scan, like
-:mod:`asset2sim.tasks.geometry.closed_state` finds the closed end.
+Per movable joint j (closed end q_c, opening direction d, range R; other joints at the sweep's start
+state; fixed-base, gravity-free session at the output scale):
 
-Method (per movable joint j with closed end q_c, opening direction d and
-range R, other joints at the state the sweep starts from, a fixed-base,
-gravity-free session at the output scale):
+1. pairs (link of j's moving subtree, other link with collision geometry); baseline b_p: the pair's
+   depth at q_c (parent-child) or its least over the raw range (other pairs);
+2. excess e(q) = max_p (depth_p(q) - b_p), m; a closed end with e > tol moves to the first free state;
+3. from q_c towards each raw limit (:data:`SCAN_SAMPLES` samples), the first sample with
+   e >= :data:`STOP_DEPTH` is in a stop; the last sample before it with e <= tol, refined by
+   bisection, ends the free range;
+4. a refined initial state outside the free range keeps the limit (hull overlap, noted);
+5. a limit inside the raw range by more than :data:`MIN_CLIP_FRACTION` of R becomes the free end,
+   moved back to the contact's onset (:func:`contact_onset`); free less than :data:`MIN_FREE_FRACTION`
+   of R: blocked, the limit is kept;
+6. (``chain_open``) the far end is also scanned against the chain that carries j beyond its parent's
+   rigid group, the movable joints between at their open ends; a nearer end becomes the limit.
 
-1. Pairs: (link of j's moving subtree, any other link with collision
-   geometry), the parent included. Baseline b_p = the deepest penetration
-   (m, >= 0) of pair p at q_c for a parent-child pair (a parent hull filling
-   a door's cavity is the collision geometry's, not the limit's), and its
-   least over the raw range for any other pair (the pairs the sweep
-   measures; an overlap present everywhere, e.g. a part touching a wall it
-   slides along, is the hulls'). A closed end where the excess (2.) is above
-   tol moves to the first free state towards the opening side.
-2. Excess e(q) = max_p (depth_p(q) - b_p), m.
-3. Opening side: sample q = q_c + d R k / n, k = 1..n (n =
-   :data:`SCAN_SAMPLES`); the first sample with e >= :data:`STOP_DEPTH`
-   (5 mm, the sweep's bound: a stop) and, walking back from it, the last
-   sample with e <= tol ends the free range (overlaps that never get 5 mm
-   deeper are the hulls'); bisection (:data:`BISECTIONS` halvings) between it and the previous
-   sample gives the geometric far end q_g. Closing side: the same from q_c
-   towards the other raw limit.
-4. When the refined initial state of j lies outside the free range found,
-   the scan disagrees with a state the state search accepted (hull overlap):
-   the limit is kept and a note says so.
-5. The limit on that side becomes q_g when it lies inside the raw range by
-   more than :data:`MIN_CLIP_FRACTION` of R, moved back to where the contact
-   begins (excess <= :data:`ONSET_TOLERANCE`, at most
-   :data:`BACK_OFF_FRACTION` of R back; :func:`contact_onset`): a
-   force-limited drive stalls where the contact force balances it. When the free range is less than
-   :data:`MIN_FREE_FRACTION` of R the part is blocked at its closed end: the
-   collision geometry (not the limit) is wrong, and the limit is kept (the
-   sweep reports the block).
-
-6. A part hinged on a moving part (a stapler's magazine on its top arm,
-   102990) can also meet the links of the chain that carries it beyond its
-   parent's rigid group (the base): how far depends on the joints between.
-   With those joints at their open ends (the most room the mechanism
-   gives: a hand lifts the top before the magazine swings down to the base)
-   the far end is scanned against the chain as in 3. (baseline: each pair's
-   least depth over the raw range in that state); when it ends the range
-   before the far end of 5., it becomes the limit: beyond it the part meets
-   the chain in every state the mechanism reaches (the magazine's raw limit,
-   2.83 rad from the top arm, swings it through the base whatever the top
-   does; the joint sweep demanded that range and failed). A part that cannot
-   open even then is left to the sweep. Only on request (``chain_open``):
-   refine runs it where the joint sweep stopped short (stage 7b).
-
-tol = :data:`EXCESS_TOLERANCE` (1 mm) decides whether the closed end is
-pressed into another link (the sweep returns there and allows 5 mm) and
-where a stop begins; the end is then put at the stop's onset (:data:`ONSET_TOLERANCE`), because the force-limited drive of
-the sweep stalls where the contact begins. The scans and their constants are in
-:mod:`asset2sim.tasks.geometry.penetration_scan`.
+tol = :data:`EXCESS_TOLERANCE`; the scans are in :mod:`asset2sim.tasks.geometry.penetration_scan`.
 """
 
 from __future__ import annotations
@@ -79,21 +37,13 @@ from asset2sim.tasks.geometry.penetration_scan import (
 )
 from asset2sim.urdf import UrdfModel
 
-#: Excess (m) a contact must reach somewhere on the way to be a stop: the
-#: sweep's 5 mm self-penetration bound (an overlap that never gets deeper is
-#: the hulls', not a limit's: toilet 102703's seat grows 5.7 -> 8.1 mm over
-#: its whole 1.69 rad in the body's hinge piece, suitcase 103755's lid
-#: 4.3 -> 7.6 mm; a plain 1 mm tolerance clipped them at 0.32 and 0.43 rad).
+#: Excess (m) a contact must reach on the way to be a stop: the sweep's 5 mm self-penetration bound.
 STOP_DEPTH = 0.005
-#: Farthest a clipped far end is moved back from the tolerance crossing to
-#: the contact's onset, as a fraction of the opening range (the 5 % the sweep
-#: allows stay free of the contact).
+#: Farthest a clipped far end is moved back to the contact's onset, as a fraction of the opening range.
 BACK_OFF_FRACTION = 0.1
-#: A side is clipped only when the geometric end is inside the raw range by
-#: more than this fraction of the opening range (smaller differences are noise).
+#: A side is clipped only when the geometric end is inside the raw range by more than this fraction of it.
 MIN_CLIP_FRACTION = 0.01
-#: Below this fraction of the raw opening range the part is blocked at its
-#: closed end: a collision-geometry defect, the limit is kept.
+#: Below this fraction of the raw opening range the part is blocked at its closed end; the limit is kept.
 MIN_FREE_FRACTION = 0.05
 
 
@@ -108,10 +58,8 @@ class LimitClip:
     upper: float
     q_closed: float
     direction: float
-    open_range: float
-    """opening range from q_closed to the (clipped) far end, rad or m"""
-    blocked_by: str | None = None
-    """the link the moving part runs into on the opening side (None: free)"""
+    open_range: float  # from q_closed to the (clipped) far end, rad or m
+    blocked_by: str | None = None  # the link the moving part runs into on the opening side (None: free)
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -134,9 +82,7 @@ def subtrees(model: UrdfModel) -> dict[str, list[str]]:
 
 
 def rigid_group(model: UrdfModel, link: str) -> set[str]:
-    """``link`` and every link joined to it by fixed joints only (either way):
-    the links that keep their pose relative to ``link`` whatever the movable
-    joints do."""
+    """``link`` and every link joined to it by fixed joints only (either way)."""
     out, stack = {link}, [link]
     while stack:
         ln = stack.pop()
@@ -151,9 +97,8 @@ def rigid_group(model: UrdfModel, link: str) -> set[str]:
 
 
 def chain_links(model: UrdfModel, joint: str) -> set[str]:
-    """The links of the chain that carries ``joint`` beyond its parent's
-    rigid group (:func:`rigid_group`): its ancestors, posed by the movable
-    joints between (a stapler's base for the magazine hinged on the top)."""
+    """The ancestors of ``joint``'s parent beyond its :func:`rigid_group` (a stapler's base for the
+    magazine hinged on the top)."""
     parent_of = {j.child: j.parent for j in model.joints}
     jd = model.joint(joint)
     chain, ln = set(), parent_of.get(jd.parent)
@@ -166,13 +111,9 @@ def chain_links(model: UrdfModel, joint: str) -> set[str]:
 def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed: dict[str, tuple[float, float, float]],
                    state: dict[str, float], q_close: float, far_raw: float, tol: float, samples: int,
                    range_: float) -> tuple[float, str | None, list[str]]:
-    """Step 6 of the module docstring: the far end of ``name`` against the
-    links of its carrying chain (:func:`chain_links`) with the movable joints
-    between (those of ``closed`` above its parent) at their open ends, moved
-    back to the contact's onset (:func:`contact_onset`). Returns (far end,
-    the link run into, the joints opened); (``far_raw``, None, ...) when the
-    chain does not end the range or the part cannot open from ``q_close``
-    even then. The session is left at ``state`` with ``name`` at ``q_close``."""
+    """Step 6 of the module docstring: (far end at the contact's onset, the link run into, the joints
+    opened), or (``far_raw``, None, []) when the chain does not end the range or the part cannot open
+    from ``q_close`` even then. The session is left at ``state`` with ``name`` at ``q_close``."""
     pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
     if not pairs:
         return float(far_raw), None, []
@@ -209,32 +150,17 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
     """Geometric limits of every joint of ``closed`` (see the module docstring).
 
     Args:
-        session: a fixed-base :class:`~asset2sim.engines.base.SimSession` of
-            the URDF ``model`` (any engine answering ``link_distances``).
-        model: the same URDF (kinematic tree).
+        session, model: a fixed-base :class:`~asset2sim.engines.base.SimSession` of the URDF ``model``.
         closed: joint -> (q_closed, direction +-1, open range), rad or m, at the session's scale.
         state: joint -> position (rad or m) the other joints hold (the sweep's start state).
         tol: penetration excess (m) above which a closed end is pressed into another link.
-        confirm_stops: a contact ends the range only when it is a stop (its
-            excess reaches :data:`STOP_DEPTH` further on, :func:`free_end`);
-            the end is then put at the contact's onset. False: any contact.
+        confirm_stops: a contact ends the range only when its excess reaches :data:`STOP_DEPTH`
+            further on (the end then at the contact's onset); False: any contact.
         samples: samples over the raw range.
-        against: ``"stops"``: only the links rigid with the joint's parent
-            (:func:`rigid_group`), whose geometry stops the part in every
-            state of the other joints (the URDF limit), and on the opening
-            side the links of the carrying chain with the joints between
-            open (step 6, with ``chain_open``); ``"held"``: only the
-            links of the chain that carries the joint beyond its parent's
-            rigid group (its ancestors, posed by the held joints between:
-            a stapler's base for the magazine hinged on the top), the range
-            the joint sweep can demand with them held at ``state``; the far
-            end only (a part that cannot shut is the sweep's finding), and
-            siblings and other branches are not cut away (a part in the way
-            is the sweep's finding too).
-        chain_open: with ``against="stops"``, step 6 too (refine's repair
-            of a sweep that stopped short, ``tasks/refine.py``: the scan is
-            not run on every asset, whose later stages would then start from
-            other ranges).
+        against: ``"stops"``: the links rigid with the joint's parent (:func:`rigid_group`), and step 6
+            with ``chain_open``; ``"held"``: only the links of :func:`chain_links`, posed by the joints
+            between held at ``state``, the far end only.
+        chain_open: with ``against="stops"``, step 6 too (refine's repair of a sweep that stopped short).
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
@@ -276,9 +202,8 @@ def _limit_note(side: str, raw: float, new: float, tail: str) -> str:
 
 @dataclass
 class _JointScan:
-    """The scans of one joint (raw limits ``lo``, ``hi``, closed end ``qc``,
-    opening direction ``d`` +-1 and range ``rng``, rad or m) against
-    ``pairs``; ``base`` their baseline depths (P,) m once measured."""
+    """The scans of one joint (raw limits, closed end ``qc``, direction ``d``, range ``rng``, rad or m)
+    against ``pairs``; ``base`` their baseline depths (P,) m once measured."""
 
     session: object
     name: str
@@ -310,15 +235,10 @@ class _JointScan:
     def clip(self, clip: LimitClip, model: UrdfModel, sub: list[str], parent_of: dict[str, str],
              closed: dict[str, tuple[float, float, float]], state: dict[str, float], stops: bool,
              chain_open: bool) -> LimitClip:
-        """Steps 1-6 of the module docstring: ``clip`` with the clipped
-        limits, or the raw limits with a note when the part is blocked or
-        the initial state lies outside the free range."""
+        """Steps 1-6 of the module docstring: ``clip`` with the clipped limits, or the raw limits with a note."""
         qs, depth = depth_scan(self.session, self.name, self.pairs, self.lo, self.hi, self.qc, self.samples)
         k_c = int(np.flatnonzero(qs == self.qc)[0])
-        # baseline: a parent-child pair's depth at the closed end (a parent hull
-        # filling the closed part's cavity: the hulls', not the limit's); any
-        # other pair's least depth over the range (the sweep measures those
-        # pairs: a closed end pressed into a sibling is not closed)
+        # baseline: a parent-child pair's depth at the closed end; any other pair's least over the range
         adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in self.pairs])
         self.base = np.where(adjacent, depth[k_c], depth.min(axis=0))
         q_close = self.closed_end(clip, qs, depth, k_c) if stops else float(self.qc)
@@ -350,8 +270,7 @@ class _JointScan:
         return clip
 
     def closed_end(self, clip: LimitClip, qs: np.ndarray, depth: np.ndarray, k_c: int) -> float | None:
-        """``qc``, or where the part first comes free towards the opening side
-        when ``qc`` pushes into another link; None when it never does (rad or m)."""
+        """``qc``, or where the part first comes free towards the opening side; None when it never does."""
         free = (depth - self.base).max(axis=1) <= self.tol
         if free[k_c]:
             return float(self.qc)
@@ -369,10 +288,8 @@ class _JointScan:
 
     def far_end(self, clip: LimitClip, far: float, who: str | None, q_close: float, far_raw: float,
                 chain_end: tuple[float, str | None, list[str]] | None) -> tuple[float, str | None]:
-        """The limit on the opening side (rad or m) and the link run into:
-        the carrying chain's end (step 6, :func:`_chain_far_end`) when
-        nearer, else the free end ``far`` at its contact's onset when it
-        clips ``far_raw``, else ``far_raw``."""
+        """(limit on the opening side, the link run into): the chain's end (step 6) when nearer, else
+        ``far`` at its contact's onset when it clips ``far_raw``, else ``far_raw``."""
         side = "upper" if self.d > 0 else "lower"
         if chain_end is not None:
             far_c, who_c, opened = chain_end
@@ -393,9 +310,8 @@ class _JointScan:
         return float(far_raw), who
 
     def back_end(self, clip: LimitClip, q_close: float, back_raw: float, stops: bool) -> float:
-        """The limit beyond the closed end (rad or m): the new closed end when
-        it moved, else (``stops`` only) the free end towards ``back_raw`` at
-        its contact's onset when it clips ``back_raw``, else ``back_raw``."""
+        """The limit beyond the closed end: the new closed end when it moved, else (``stops`` only) the
+        free end towards ``back_raw`` at its contact's onset when it clips, else ``back_raw``."""
         side = "lower" if self.d > 0 else "upper"
         back = float(back_raw)
         if q_close != self.qc:
@@ -411,9 +327,8 @@ class _JointScan:
 
 
 def apply_clips(overlay: Overlay, clips: dict[str, LimitClip]) -> tuple[Overlay, list[str]]:
-    """The overlay with the clipped limits of ``clips`` in its joints'
-    ``lower`` / ``upper`` (and ``limit_source``), plus one note per clipped
-    joint (also added to ``overlay.notes.other``). Joints not clipped are unchanged."""
+    """The overlay with the clipped limits of ``clips`` (``lower`` / ``upper``, ``limit_source``) and one
+    note per clipped joint (also in ``overlay.notes.other``)."""
     ov = overlay.model_copy(deep=True)
     notes = []
     for name, c in clips.items():
@@ -433,8 +348,7 @@ def apply_clips(overlay: Overlay, clips: dict[str, LimitClip]) -> tuple[Overlay,
 
 
 def clipped_closed(closed: dict, clips: dict[str, LimitClip]) -> dict:
-    """``closed`` (joint -> :class:`~asset2sim.tasks.geometry.closed_state.ClosedState`)
-    with the clipped joints' limits and opening range."""
+    """``closed`` (joint -> ``ClosedState``) with the clipped joints' limits and opening range."""
     out = dict(closed)
     for name, c in clips.items():
         if name in out and c.clipped:
@@ -443,8 +357,7 @@ def clipped_closed(closed: dict, clips: dict[str, LimitClip]) -> dict:
 
 
 def strip_clips(overlay: Overlay) -> Overlay:
-    """The overlay without clipped limits (every joint's ``lower`` /
-    ``upper`` None, ``limit_source`` empty): the raw limits are written again."""
+    """The overlay without clipped limits: the raw limits are written again."""
     ov = overlay.model_copy(deep=True)
     for name, dyn in ov.joints.items():
         if dyn.lower is not None or dyn.upper is not None or dyn.limit_source:

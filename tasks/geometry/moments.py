@@ -1,11 +1,6 @@
-"""Exact moments of triangle surfaces and closed meshes, and inertia helpers.
-
-Part of the mesh-analysis stage (:mod:`asset2sim.tasks.geometry.analyze`).
-Surface: area, centroid and second moment of each triangle (Eberly,
-"Polyhedral Mass Properties", 2002). Closed, consistently oriented meshes:
-volume, center of mass and second moment by the divergence theorem over
-signed tetrahedra (Tonon, J. Math. Stat. 1(1), 2004). Lengths in the mesh's
-units (m at scale 1), inertia per kg.
+"""Exact moments of triangle surfaces (Eberly, "Polyhedral Mass Properties", 2002) and of closed
+meshes (signed tetrahedra, Tonon, J. Math. Stat. 1(1), 2004), and inertia helpers, for
+:mod:`asset2sim.tasks.geometry.analyze`. Lengths in the mesh's units (m at scale 1), inertia per kg.
 """
 
 from __future__ import annotations
@@ -15,14 +10,8 @@ from typing import Iterable
 
 import numpy as np
 
-__all__ = [
-    "REGULARIZATION",
-    "SolidMoments",
-    "inertia_from_second_moment",
-    "regularize_inertia",
-    "surface_properties",
-    "watertight_properties",
-]
+__all__ = ["REGULARIZATION", "SolidMoments", "inertia_from_second_moment", "regularize_inertia", "surface_properties",
+           "watertight_properties"]
 
 #: Relative size of the isotropic inertia regularisation.
 REGULARIZATION = 1e-6
@@ -38,15 +27,10 @@ def inertia_from_second_moment(second: np.ndarray) -> np.ndarray:
 
 
 def regularize_inertia(inertia: np.ndarray, scale_m2: float, rel: float = REGULARIZATION) -> tuple[np.ndarray, bool]:
-    """Make a per-kg inertia tensor (3, 3) m^2 symmetric positive definite with
-    a strict triangle inequality of principal moments.
-
-    When the smallest principal moment is below ``rel`` x the largest, or the
-    triangle inequality I_a + I_b >= I_c holds with a margin below ``rel`` x the
-    largest (flat or line-like geometry), an isotropic term ``rel * trace``
-    is added (``rel * scale_m2`` when the trace is below ``rel * scale_m2``;
-    ``scale_m2`` m^2, e.g. the squared link size). Returns
-    ``(inertia, changed)``.
+    """``(inertia, changed)``: a per-kg inertia tensor (3, 3) m^2 symmetrized and, when its smallest
+    principal moment or the margin of the triangle inequality is below ``rel`` x the largest (flat or
+    line-like geometry), plus ``rel * trace`` x Id (``rel * scale_m2`` when the trace is below that;
+    ``scale_m2`` m^2, e.g. the squared link size).
     """
     i = 0.5 * (inertia + inertia.T)
     ev = np.linalg.eigvalsh(i)
@@ -65,17 +49,11 @@ def _triangles(vertices: np.ndarray, faces: np.ndarray, ref: np.ndarray) -> Iter
 
 
 def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Exact area moments of a triangle surface.
+    """Exact area moments of a triangle surface: vertices (N, 3) m, faces (M, 3) int (valid).
 
-    Args:
-        vertices: (N, 3) m. faces: (M, 3) int, valid indices.
-
-    Returns:
-        ``(area m^2, centroid (3,) m, C (3, 3) m^2)`` with C the per-unit-area
-        second moment about the centroid, integral of (x-c)(x-c)^T dA / area.
-        Per triangle: integral of x x^T dA = A/12 (sum_i v_i v_i^T + s s^T),
-        s = v0 + v1 + v2 (Eberly 2002). Area 0 gives centroid = vertex mean
-        and C = 0.
+    Returns ``(area m^2, centroid (3,) m, C (3, 3) m^2)``, C = integral of (x-c)(x-c)^T dA / area, per
+    triangle integral of x x^T dA = A/12 (sum_i v_i v_i^T + s s^T), s = v0 + v1 + v2 (Eberly 2002).
+    Area 0 gives the mean of the used vertices and C = 0.
     """
     ref = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0)) if len(vertices) else np.zeros(3)
     area = 0.0
@@ -117,8 +95,7 @@ def _is_closed_oriented(fm: np.ndarray, nv: int) -> bool:
 
 @dataclass
 class SolidMoments:
-    """Volume (m^3), center of mass (3,) m and per-kg central second moment
-    (3, 3) m^2 of a solid, with how they were obtained."""
+    """Volume (m^3), center of mass (3,) m and per-kg central second moment (3, 3) m^2 of a solid."""
 
     volume: float
     com: np.ndarray
@@ -126,9 +103,7 @@ class SolidMoments:
     method: str
     notes: list[str] = field(default_factory=list)
     pitch: float = 0.0
-    overlap_candidates: bool = False
-    """Closed components with positive volume whose bounding boxes overlap:
-    their union may be smaller than the sum of their volumes."""
+    overlap_candidates: bool = False  # closed components whose bounding boxes overlap
 
 
 def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: float | None = None) -> SolidMoments | None:
@@ -139,18 +114,11 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: fl
             distance, m (default 1e-9 x the longest extent).
 
     Returns:
-        ``SolidMoments`` (method ``watertight_exact``) when the surface has
-        every edge in exactly two faces with opposite orientation, either as
-        indexed or with coincident vertices merged (faces that collapse in
-        the merge are ignored for the test); ``None`` otherwise. Per
-        connected component the signed volume is integrated over tetrahedra
-        (reference point, v0, v1, v2)
-        (Tonon 2004: integral of x x^T dV = V/20 (sum_i p_i p_i^T + s s^T));
-        a component with negative volume that is not inside another
-        component's bounding box is inside-out and is flipped (noted).
-        ``overlap_candidates`` is set when closed components with positive
-        volume have overlapping bounding boxes (their union may be smaller
-        than the sum; :func:`analyze_link` checks it).
+        ``SolidMoments`` (method ``watertight_exact``) when every edge is in exactly two faces with
+        opposite orientation, as indexed or with coincident vertices merged; else ``None``. Per
+        component, integral of x x^T dV = V/20 (sum_i p_i p_i^T + s s^T) over signed tetrahedra (Tonon
+        2004); an inside-out component is flipped (noted). ``overlap_candidates``: closed components
+        with overlapping bounding boxes (their union may be smaller than the sum).
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -159,9 +127,7 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: fl
     size = float(np.max(hi - lo))
     if size <= 0:
         return None
-    # topology as indexed first (meshes that share vertices, including
-    # closed parts that touch), else with coincident vertices merged
-    # (polygon soups whose triangles each have their own vertices)
+    # topology as indexed first, else with coincident vertices merged (polygon soups)
     fm, nv = faces, len(vertices)
     if not _is_closed_oriented(fm, nv):
         fm, nv = _merge_vertices(vertices, faces, merge_tol or 1e-9 * size)

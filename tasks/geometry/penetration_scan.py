@@ -1,18 +1,12 @@
-"""Penetration scans along one joint, for the geometric limits
-(:mod:`asset2sim.tasks.geometry.limits`): the link pairs that can collide, their
-depths, the free end of a range (:func:`free_end`) and where the contact that
-ends it begins (:func:`contact_onset`). Depths in m, positions in rad or m;
-``session`` is a :class:`~asset2sim.engines.base.SimSession` answering
-``link_distances``.
+"""Penetration scans along one joint for :mod:`asset2sim.tasks.geometry.limits`. Depths in m, positions
+in rad or m; ``session`` a :class:`~asset2sim.engines.base.SimSession` answering ``link_distances``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-#: Deepest penetration increase (m) over the baseline that ends the free range:
-#: about where a force-limited drive stalls against the contact (the sweep
-#: must reach 95 % of the clipped range).
+#: Deepest penetration increase (m) over the baseline that ends the free range.
 EXCESS_TOLERANCE = 0.001
 #: Excess (m) under which a contact has not yet begun (:func:`contact_onset`).
 ONSET_TOLERANCE = 0.0002
@@ -43,14 +37,10 @@ def pair_depths(session, pairs: list[tuple[str, str]]) -> np.ndarray:
 
 def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
              tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, stop_depth: float | None = None) -> tuple[float, str | None]:
-    """Scan ``joint`` from ``q_from`` to ``q_to`` (rad or m): the first
-    sample whose penetration excess over ``baseline`` ((P,) m, one per pair
-    of ``pairs``) reaches ``stop_depth`` (m; ``tol`` when None) is in a stop;
-    walking back from it, the last sample with excess <= ``tol`` (m), refined
-    by bisection, is the free end. Returns (free end, the link run into), or
-    (``q_to``, None) when no sample reaches ``stop_depth`` (an overlap that
-    never gets that deep is the hulls', not a stop). Other joints stay where
-    the session has them."""
+    """(free end, the link run into) of ``joint`` from ``q_from`` towards ``q_to``: the first sample whose
+    excess over ``baseline`` ((P,) m) reaches ``stop_depth`` (``tol`` when None) is in a stop; the last
+    sample before it with excess <= ``tol``, refined by bisection, is the free end. (``q_to``, None)
+    when no sample reaches ``stop_depth``."""
     stop = tol if stop_depth is None else max(stop_depth, tol)
     qs = [q_from + (q_to - q_from) * k / samples for k in range(samples + 1)]
     exc_max: list[float] = []
@@ -86,12 +76,8 @@ def free_end(session, joint: str, q_from: float, q_to: float, pairs: list[tuple[
 
 def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[tuple[str, str]], baseline: np.ndarray,
                   max_back: float, onset: float = ONSET_TOLERANCE, steps: int = 8) -> float:
-    """Where the contact that ends the free range at ``q_end`` begins: the
-    first of ``steps`` positions from ``q_end`` back towards ``q_free`` (rad
-    or m), at most ``max_back`` away, whose penetration excess over
-    ``baseline`` is <= ``onset`` m; ``q_end`` moved back by ``max_back`` when
-    none is (the drive of the sweep stalls where the contact force balances
-    it, before the excess reaches the scan's tolerance)."""
+    """Where the contact ending the free range at ``q_end`` begins: the first of ``steps`` positions back
+    towards ``q_free``, at most ``max_back`` away, with excess <= ``onset`` m; else ``q_end`` moved ``max_back`` back."""
     sgn = 1.0 if q_free > q_end else -1.0
     back = min(max_back, abs(q_free - q_end))
     for k in range(1, steps + 1):
@@ -104,9 +90,8 @@ def contact_onset(session, joint: str, q_end: float, q_free: float, pairs: list[
 
 def depth_scan(session, joint: str, pairs: list[tuple[str, str]], lo: float, hi: float, q_extra: float,
                samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """Positions (n,): ``samples`` + 1 over [``lo``, ``hi``] and ``q_extra``,
-    sorted and unique (rad or m); the depth (n, P) m of each pair at each
-    (:func:`pair_depths`; other joints where the session has them)."""
+    """Positions (n,) (``samples`` + 1 over [``lo``, ``hi``] and ``q_extra``, sorted, unique) and the
+    depth (n, P) m of each pair at each."""
     qs = np.unique(np.concatenate([np.linspace(lo, hi, samples + 1), [q_extra]]))
     depth = []
     for q in qs:

@@ -1,60 +1,11 @@
-"""Textured multi-view renders of an articulated object, headless on a CPU.
+"""Textured multi-view renders of an articulated object, headless on a CPU (PyBullet's
+``ER_TINY_RENDERER``), root fixed at the origin in the base link frame, z up; PartNet-Mobility
+objects face -x. Each view's camera is fitted to the visual vertices at the requested state.
+Frames, views, drawing and timings: ``docs/design/renders.md``.
 
-The object is loaded from its URDF with its OBJ/MTL/texture files, its root is
-fixed at the origin in the URDF's base link frame (z up), the joints are set to
-the requested state and each view is drawn by PyBullet's software renderer
-(``ER_TINY_RENDERER``: pip package only, no GPU, no display, no EGL). The
-camera is fitted per view to the object's *visual* vertices at that state, so
-a 0.05 m stapler and a 2 m cabinet fill the image the same way.
-
-View convention (checked on the 21 PartNet-Mobility objects, see
-``docs/design/renders.md``): after the base joint's rotation, PartNet-Mobility objects
-face **-x**: drawers slide out along -x, doors and lids open toward -x, the
-lock of a chest, the user's side of a laptop, the spout of a faucet are at -x.
-
-=============  ==========================================  ======================
-view           camera (direction from the object)          image "up"
-=============  ==========================================  ======================
-front          -x (looks along +x), 20 deg above            +z
-back           +x (looks along -x), 20 deg above            +z
-left           -y, the object's own left side, 20 deg above +z
-right          +y, the object's own right side, 20 deg abv. +z
-perspective    front-left (-x, -y), 30 deg above            +z
-top            +z (looks down)                              +x (front at bottom)
-=============  ==========================================  ======================
-
-"left"/"right" are the object's own sides (it faces -x with z up, so its left
-is -y): in the front view the object's left side is on the image's right.
-
-What is done beyond a plain ``loadURDF`` + ``getCameraImage``:
-
-1. PyBullet draws one material per OBJ file; PartNet-Mobility OBJs often
-   switch materials inside one object (``usemtl``: wood inside, metal
-   outside), and PyBullet then draws them white. Such OBJs are split into one
-   OBJ per material in a temporary folder (inputs are never written), and a
-   render-only copy of the URDF (no collision or inertial elements, absolute
-   mesh paths) is loaded with ``URDF_USE_MATERIAL_COLORS_FROM_MTL`` so ``Kd``
-   colors are used. Faces without any material get the visual's URDF
-   ``<material>`` color (else :data:`DEFAULT_COLOR`).
-2. Textures larger than the rendered image are downscaled (area filter), as
-   the renderer samples them nearest-neighbour without mipmaps.
-3. The renderer has no anti-aliasing and a fixed background: views are drawn
-   ``supersample`` (2) times larger, the segmentation mask composites the
-   object over :data:`BACKGROUND`, and the result is box-filtered down.
-4. Black materials (``Kd 0 0 0`` is common) are lifted to
-   :data:`ALBEDO_FLOOR` so their shading still shows the shape.
-
-Lighting: one directional light from the camera's upper left (fixed relative
-to each camera, so every view is lit alike), intensity ``AMBIENT + DIFFUSE *
-cos + SPECULAR``; optional cast shadows (``shadows=True``, slower).
-
-Modules: :mod:`~asset2sim.tasks.geometry.render_scene` (URDF -> render-only
-URDF and visual points per link), :mod:`~asset2sim.tasks.geometry.render_meshes`
-(OBJ split per material, colored OBJs, downscaled textures),
-:mod:`~asset2sim.tasks.geometry.render_camera` (named views, fitted cameras),
-:mod:`~asset2sim.tasks.geometry.render_images` (PNG files, contact sheets);
-this module draws (:class:`SceneRenderer`) and is the entry point
-(:func:`render_views`). Their public names are importable from here too.
+:mod:`.render_scene` makes the render-only URDF, :mod:`.render_meshes` drawable meshes,
+:mod:`.render_camera` the cameras, :mod:`.render_images` the files; this module draws
+(:class:`SceneRenderer`) and is the entry point (:func:`render_views`).
 """
 
 from __future__ import annotations
@@ -72,64 +23,34 @@ import numpy as np
 
 from asset2sim.engines.registry import open_viewer
 from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.tasks.geometry.render_camera import FILL, FOV_DEG, VIEWS, Camera, ViewSpec, fit_camera, view_spec
+from asset2sim.tasks.geometry.render_camera import FILL, VIEWS, Camera, ViewSpec, fit_camera, view_spec
 from asset2sim.tasks.geometry.render_images import BACKGROUND, render_contact_sheet, write_png
 from asset2sim.tasks.geometry.render_meshes import DEFAULT_COLOR
 from asset2sim.tasks.geometry.render_scene import prepare_scene
 
 __all__ = [
-    "ALBEDO_FLOOR",
-    "AMBIENT",
-    "BACKENDS",
-    "BACKGROUND",
-    "DEFAULT_COLOR",
-    "DEFAULT_VIEWS",
-    "OUTPUT_VIEW_SIZE",
-    "DIFFUSE",
-    "FILL",
-    "FOV_DEG",
-    "SPECULAR",
-    "VIEWS",
-    "Camera",
-    "RenderError",
-    "RenderTimings",
-    "SceneRenderer",
-    "ViewSpec",
-    "fit_camera",
-    "read_joint_state",
-    "render_contact_sheet",
-    "render_views",
-    "resolve_urdf",
-    "write_png",
+    "ALBEDO_FLOOR", "AMBIENT", "BACKENDS", "BACKGROUND", "DEFAULT_COLOR", "DEFAULT_VIEWS", "OUTPUT_VIEW_SIZE", "DIFFUSE",
+    "FILL", "SPECULAR", "VIEWS", "Camera", "RenderError", "RenderTimings", "SceneRenderer", "ViewSpec", "fit_camera",
+    "read_joint_state", "render_contact_sheet", "render_views", "resolve_urdf", "write_png",
 ]
 
+#: The five views of the SPEC's extraction stage.
 DEFAULT_VIEWS: tuple[str, ...] = ("front", "back", "left", "right", "perspective")
-"""The five views of the SPEC's extraction stage."""
-
+#: (width, height) px of the views ``asset2sim refine`` writes (``views/``); ``asset2sim render`` keeps 256 x 256.
 OUTPUT_VIEW_SIZE: tuple[int, int] = (192, 192)
-"""(width, height) px of the views ``asset2sim refine`` writes into an output
-folder (``views/``, shown in ``report.html``): drawn at 384 x 384
-(``supersample`` 2) and box-filtered, about 0.56 of the drawing time of
-256 x 256 (``docs/design/renders.md``, "Time"). ``asset2sim render`` keeps 256 x 256."""
-
 BACKENDS: tuple[str, ...] = ("auto", "tiny")
-
+#: Light coefficients (intensity = ambient + diffuse * cos + specular).
 AMBIENT, DIFFUSE, SPECULAR = 0.38, 0.68, 0.1
-"""Light coefficients of the renderer (intensity = ambient + diffuse * cos + specular)."""
-
+#: Every diffuse color c is drawn as f + (1 - f) c with this f, so black materials still show shading.
 ALBEDO_FLOOR = 0.22
-"""Every diffuse color c is drawn as f + (1 - f) c with this f, so black
-materials still show shading (see :meth:`SceneRenderer._lift_dark_colors`)."""
 
 
 class RenderError(RuntimeError):
     """The renderer could not load or draw the asset (message names the file)."""
 
 
-# ------------------------------------------------------------------ utilities
 def resolve_urdf(asset: Path | str) -> Path:
-    """The URDF of ``asset``: the file itself, or ``mobility.urdf`` (else the only
-    ``*.urdf`` not named ``reference_*``) in a folder
+    """The URDF of ``asset``: the file itself, or the one of a folder
     (:func:`asset2sim.tasks.ingest.partnet_mobility.urdf_candidates`).
 
     Raises:
@@ -172,11 +93,9 @@ def read_joint_state(path: Path | str) -> dict[str, float]:
     return out
 
 
-# ------------------------------------------------------------------ renderer
 @dataclass
 class RenderTimings:
-    """Wall times, s: ``prepare`` (URDF/OBJ preparation), ``load`` (PyBullet
-    load), ``views`` name -> list of times of each render of that view."""
+    """Wall times, s: ``prepare``, ``load`` (PyBullet) and ``views`` (name -> time of each render)."""
 
     prepare: float = 0.0
     load: float = 0.0
@@ -195,11 +114,9 @@ class SceneRenderer:
     Args:
         urdf_path: the URDF; its meshes are resolved relative to it.
         size: (width, height) of the output images, pixels.
-        backend: ``"auto"`` or ``"tiny"``: PyBullet's TinyRenderer on the CPU
-            (PyBullet's EGL/OpenGL path was evaluated and rejected, see
-            ``docs/design/renders.md``).
+        backend: ``"auto"`` or ``"tiny"``: PyBullet's TinyRenderer on the CPU.
         supersample: render this many times larger and box-filter down (1 = off).
-        shadows: cast shadows (slower; see ``docs/design/renders.md``).
+        shadows: cast shadows (slower).
 
     Raises:
         FileNotFoundError: URDF or a visual mesh missing.
@@ -207,15 +124,8 @@ class SceneRenderer:
         RenderError: PyBullet could not load the asset.
     """
 
-    def __init__(
-        self,
-        urdf_path: Path | str,
-        *,
-        size: tuple[int, int] = (256, 256),
-        backend: str = "auto",
-        supersample: int = 2,
-        shadows: bool = False,
-    ):
+    def __init__(self, urdf_path: Path | str, *, size: tuple[int, int] = (256, 256), backend: str = "auto",
+                 supersample: int = 2, shadows: bool = False):
         w, h = (int(v) for v in size)
         if w < 8 or h < 8 or w > 8192 or h > 8192:
             raise ValueError(f"image size must be within 8..8192 pixels, got {size}")
@@ -243,7 +153,6 @@ class SceneRenderer:
             self.close()
             raise
 
-    # ---------------------------------------------------------------- setup
     def _load(self) -> None:
         try:
             self._viewer = open_viewer("pybullet", self._prep.urdf)
@@ -253,20 +162,14 @@ class SceneRenderer:
         self.joint_names: list[str] = list(self._viewer.joint_names)
 
     def _lift_dark_colors(self) -> None:
-        """Raise each visual's diffuse color to at least :data:`ALBEDO_FLOOR`
-        (c' = f + (1 - f) c), so black materials (Kd 0 0 0 is common in
-        PartNet-Mobility) still show their shading instead of a flat silhouette."""
+        """Draw each visual's diffuse color c as f + (1 - f) c, f = :data:`ALBEDO_FLOOR`."""
         f = ALBEDO_FLOOR
-        if f <= 0:
-            return
         for link, k, rgba in self._viewer.visual_colors():
             lifted = [f + (1 - f) * c for c in rgba[:3]] + [rgba[3]]
             self._viewer.set_visual_color(link, k, lifted)
 
-    # ---------------------------------------------------------------- state
     def set_joint_positions(self, q: Mapping[str, float] | None) -> None:
-        """Set joints (rad or m) by name; joints not named keep their position
-        (initially zero). Values outside the limits are drawn as given.
+        """Set joints (rad or m) by name; others keep their position (initially zero); limits not applied.
 
         Raises:
             KeyError: a name that is not a movable joint of the URDF.
@@ -276,9 +179,7 @@ class SceneRenderer:
             return
         for name, value in q.items():
             if name not in self.joint_names:
-                raise KeyError(
-                    f"{self.urdf_path}: no movable joint named {name!r}; movable joints: {self.joint_names}"
-                )
+                raise KeyError(f"{self.urdf_path}: no movable joint named {name!r}; movable joints: {self.joint_names}")
             v = float(value)
             if not math.isfinite(v):
                 raise ValueError(f"joint {name!r}: position {value!r} is not finite")
@@ -295,7 +196,6 @@ class SceneRenderer:
             out.append(local @ R.T + pos)
         return np.concatenate(out)
 
-    # --------------------------------------------------------------- render
     def camera(self, view: str | ViewSpec) -> Camera:
         """The fitted camera of ``view`` at the current joint state.
 
@@ -334,12 +234,9 @@ class SceneRenderer:
         dist = float(np.linalg.norm(cam.eye - cam.target))
         try:
             rgba, seg = self._viewer.draw(
-                W,
-                H,
-                {"eye": cam.eye, "target": cam.target, "up": cam.up, "fov_deg": cam.fov_deg, "near": cam.near, "far": cam.far},
+                W, H, {"eye": cam.eye, "target": cam.target, "up": cam.up, "fov_deg": cam.fov_deg, "near": cam.near, "far": cam.far},
                 {"direction": light, "color": (1.0, 1.0, 1.0), "distance": dist * 4, "shadow": self.shadows,
-                 "ambient": AMBIENT, "diffuse": DIFFUSE, "specular": SPECULAR},
-            )
+                 "ambient": AMBIENT, "diffuse": DIFFUSE, "specular": SPECULAR})
         except RuntimeError as exc:
             raise RenderError(f"{self.urdf_path}: {exc}") from exc
         alpha = (seg >= 0).astype(np.float32)
@@ -350,7 +247,6 @@ class SceneRenderer:
             comp = comp.reshape(h, s, w, s, 3).mean(axis=(1, 3))
         return np.clip(np.rint(comp), 0, 255).astype(np.uint8)
 
-    # -------------------------------------------------------------- cleanup
     def close(self) -> None:
         """Disconnect from PyBullet and delete the temporary files."""
         if self._viewer is not None:
@@ -373,34 +269,22 @@ class SceneRenderer:
             pass
 
 
-# ---------------------------------------------------------------- public API
-def render_views(
-    urdf_path: Path | str,
-    joint_positions: Mapping[str, float] | None = None,
-    out_dir: Path | str | None = None,
-    *,
-    views: Iterable[str] = DEFAULT_VIEWS,
-    size: tuple[int, int] = (256, 256),
-    backend: str = "auto",
-    supersample: int = 2,
-    shadows: bool = False,
-) -> dict[str, np.ndarray]:
+def render_views(urdf_path: Path | str, joint_positions: Mapping[str, float] | None = None,
+                 out_dir: Path | str | None = None, *, views: Iterable[str] = DEFAULT_VIEWS,
+                 size: tuple[int, int] = (256, 256), backend: str = "auto", supersample: int = 2,
+                 shadows: bool = False) -> dict[str, np.ndarray]:
     """Render ``views`` of the object at ``joint_positions``.
 
     Args:
         urdf_path: the URDF (meshes resolved relative to it).
-        joint_positions: joint name -> position, rad (revolute/continuous) or m
-            (prismatic); joints not named stay at zero. ``None``: all zero.
-        out_dir: when given, each view is also written (atomically) to
-            ``out_dir/<view>.png``.
+        joint_positions: joint name -> position, rad or m; joints not named stay at zero.
+        out_dir: when given, each view is also written (atomically) to ``out_dir/<view>.png``.
         views: names from :data:`VIEWS` (default the five of the SPEC).
         size: (width, height) in pixels.
-        backend: ``"auto"`` or ``"tiny"`` (see :class:`SceneRenderer`).
-        supersample, shadows: see :class:`SceneRenderer`.
+        backend, supersample, shadows: see :class:`SceneRenderer`.
 
     Returns:
-        view name -> RGB image, uint8 array of shape (height, width, 3), in the
-        order of ``views``.
+        view name -> RGB image (height, width, 3) uint8, in the order of ``views``.
 
     Raises:
         FileNotFoundError: the URDF or one of its visual meshes is missing.

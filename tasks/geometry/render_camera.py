@@ -1,6 +1,5 @@
-"""Named views and cameras fitted to an object's points, for
-:mod:`asset2sim.tasks.geometry.render` (view convention in its docstring:
-PartNet-Mobility objects face -x, z up)."""
+"""Named views (PartNet-Mobility objects face -x, z up) and cameras fitted to an object's points, for
+:mod:`asset2sim.tasks.geometry.render`."""
 
 from __future__ import annotations
 
@@ -13,11 +12,8 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ViewSpec:
-    """Where a named view's camera sits, seen from the object's center.
-
-    ``azimuth_deg``: angle in the xy plane from +x toward +y of the direction
-    object -> camera; ``elevation_deg``: angle above the xy plane (90 = top).
-    """
+    """Where a named view's camera sits, seen from the object's center: ``azimuth_deg`` in the xy plane
+    from +x toward +y, ``elevation_deg`` above it (90 = top)."""
 
     name: str
     azimuth_deg: float
@@ -29,24 +25,14 @@ class ViewSpec:
         return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
 
 
-VIEWS: dict[str, ViewSpec] = {
-    v.name: v
-    for v in (
-        ViewSpec("front", 180.0, 20.0),
-        ViewSpec("back", 0.0, 20.0),
-        ViewSpec("left", -90.0, 20.0),
-        ViewSpec("right", 90.0, 20.0),
-        ViewSpec("perspective", -135.0, 30.0),
-        ViewSpec("top", 180.0, 90.0),
-    )
-}
-"""Named views (see :mod:`asset2sim.tasks.geometry.render` for the convention)."""
-
+#: Named views ("left"/"right" are the object's own sides).
+VIEWS: dict[str, ViewSpec] = {v.name: v for v in (
+    ViewSpec("front", 180.0, 20.0), ViewSpec("back", 0.0, 20.0), ViewSpec("left", -90.0, 20.0),
+    ViewSpec("right", 90.0, 20.0), ViewSpec("perspective", -135.0, 30.0), ViewSpec("top", 180.0, 90.0))}
+#: Vertical field of view of every camera, degrees.
 FOV_DEG = 35.0
-"""Vertical field of view of every camera, degrees."""
-
+#: Fraction of the image's half-size that the object's farthest point reaches.
 FILL = 0.88
-"""Fraction of the image's half-size that the object's farthest point reaches."""
 
 
 @dataclass(frozen=True)
@@ -62,20 +48,11 @@ class Camera:
     far: float
 
 
-def fit_camera(
-    points: np.ndarray,
-    direction: np.ndarray,
-    *,
-    up: Sequence[float] = (0.0, 0.0, 1.0),
-    aspect: float = 1.0,
-    fov_deg: float = FOV_DEG,
-    fill: float = FILL,
-) -> Camera:
-    """The camera looking at ``points`` (N, 3) m from ``direction`` (3,) (unit,
-    object -> camera) that frames them: every point inside ``fill`` of the
-    image's half-extent, the projected extent centered. Works at any scale.
-
-    ``aspect`` is width / height; ``fov_deg`` the vertical field of view.
+def fit_camera(points: np.ndarray, direction: np.ndarray, *, up: Sequence[float] = (0.0, 0.0, 1.0), aspect: float = 1.0,
+               fov_deg: float = FOV_DEG, fill: float = FILL) -> Camera:
+    """The camera looking at ``points`` (N, 3) m from ``direction`` (3,) (object -> camera) with every
+    point inside ``fill`` of the image's half-extent, the projected extent centered; ``aspect`` is
+    width / height, ``fov_deg`` the vertical field of view.
 
     Raises:
         ValueError: no points or a non-finite point.

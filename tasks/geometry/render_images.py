@@ -1,5 +1,4 @@
-"""Rendered images to files and contact sheets: PNG writing (atomic) and a
-labelled grid of views (:func:`render_contact_sheet`)."""
+"""Rendered images to PNG files (atomic) and contact sheets (a labelled grid of views)."""
 
 from __future__ import annotations
 
@@ -12,9 +11,8 @@ import numpy as np
 
 from asset2sim.atomic import write_bytes
 
+#: RGB of the background behind the object (light blue-grey: white and black objects both stand out).
 BACKGROUND: tuple[int, int, int] = (236, 238, 242)
-"""RGB of the background behind the object (a light blue-grey, so white and
-black objects both stand out)."""
 
 
 def write_png(path: Path | str, image: np.ndarray) -> Path:
@@ -30,18 +28,11 @@ def write_png(path: Path | str, image: np.ndarray) -> Path:
     return write_bytes(path, buf.getvalue())
 
 
-def render_contact_sheet(
-    images: Mapping[str, np.ndarray],
-    *,
-    columns: int | None = None,
-    title: str | None = None,
-) -> np.ndarray:
-    """One RGB image (H, W, 3) uint8 with every view in a grid, each labelled
-    with its name above it (and an optional ``title`` line on top).
-
-    ``columns`` defaults to all views in one row up to 3, else ceil(n / 2)
-    columns (5 views -> 3 + 2). Views of different sizes are padded to the
-    largest.
+def render_contact_sheet(images: Mapping[str, np.ndarray], *, columns: int | None = None,
+                         title: str | None = None) -> np.ndarray:
+    """One RGB image (H, W, 3) uint8 with every view in a grid, each labelled with its name (and an
+    optional ``title`` line on top); ``columns`` default: n up to 3, else ceil(n / 2). Views of
+    different sizes are padded to the largest.
 
     Raises:
         ValueError: no images, or an image that is not (H, W, 3|4) uint8.

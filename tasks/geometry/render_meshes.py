@@ -1,15 +1,7 @@
-"""Mesh files made drawable by PyBullet's renderer, written into a work folder
-(inputs are never written); used by :mod:`asset2sim.tasks.geometry.render_scene`.
-
-- PyBullet draws one material per OBJ file: an OBJ whose faces switch
-  materials (``usemtl``) is split into one OBJ (+ MTL) per material
-  (:func:`split_obj`); faces without a material get one colored MTL
-  (:func:`colored_obj`), as PyBullet draws them black otherwise.
-- Textures larger than the rendered image are downscaled with an area filter
-  (:class:`TextureLinks`): the software renderer samples them
-  nearest-neighbour without mipmaps.
-- Other formats than OBJ / STL are converted to OBJ with trimesh
-  (:func:`convert_other_mesh`).
+"""Mesh files made drawable by PyBullet's renderer, written into a work folder (inputs are never
+written): OBJs split per material (:func:`split_obj`), material-less faces colored
+(:func:`colored_obj`), large textures downscaled (:class:`TextureLinks`), other formats converted
+(:func:`convert_other_mesh`). Used by :mod:`asset2sim.tasks.geometry.render_scene`.
 """
 
 from __future__ import annotations
@@ -24,19 +16,15 @@ import numpy as np
 
 from asset2sim import mesh_io
 
+#: RGBA of mesh faces with neither an MTL material nor a URDF ``<material>``.
 DEFAULT_COLOR: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0)
-"""RGBA of mesh faces with neither an MTL material nor a URDF ``<material>``."""
 
 
 @dataclass
 class DrawableMesh:
-    """What the renderer needs from one mesh file.
-
-    ``vertices`` (N, 3) in the file's units; ``parts``: files to load that carry
-    their own material (the original file when it has exactly one); ``bare``:
-    a file with the faces that have no (known) material, colored later from the
-    URDF; ``bare_text``: its contents when it still has to be written per color.
-    """
+    """What the renderer needs from one mesh file: ``vertices`` (N, 3) in the file's units, ``parts``
+    files that carry their own material, ``bare`` a file of the faces without a known material (or
+    ``bare_text``, its contents still to be written per color)."""
 
     vertices: np.ndarray
     parts: list[Path]
@@ -45,12 +33,8 @@ class DrawableMesh:
 
 
 class TextureLinks:
-    """Texture files made reachable from the work folder, by a plain relative
-    name (PyBullet resolves texture names relative to the MTL's folder and does
-    not accept absolute paths). Textures larger than ``max_side`` pixels are
-    stored downscaled (area filter): the software renderer samples textures
-    nearest-neighbour without mipmaps, so a 3000 px screen texture drawn on
-    200 px aliases into stripes. Smaller ones are symlinked (or copied)."""
+    """Texture files made reachable from the work folder by a relative name (PyBullet takes no absolute
+    texture paths); those larger than ``max_side`` pixels downscaled (area filter), others linked."""
 
     def __init__(self, work: Path, max_side: int):
         self.folder = work / "textures"
@@ -91,9 +75,8 @@ class TextureLinks:
 
 
 def read_mtl(path: Path, textures: TextureLinks) -> tuple[dict[str, list[str]], bool]:
-    """(material name -> its lines with textures linked into the work folder,
-    whether a texture was downscaled). Missing textures are dropped; an
-    unreadable MTL gives no materials."""
+    """(material name -> its lines with textures linked into the work folder, whether a texture was
+    downscaled); missing textures dropped, an unreadable MTL gives none."""
     changed = False
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
@@ -118,16 +101,10 @@ def read_mtl(path: Path, textures: TextureLinks) -> tuple[dict[str, list[str]], 
 
 
 def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> DrawableMesh:
-    """Read the OBJ ``path`` and make it drawable by PyBullet with its materials.
-
-    PyBullet draws one material per OBJ file, so a file whose faces use several
-    materials is written again as one OBJ (+ MTL) per material into ``work``
-    (names start with ``tag``). Face indices are made absolute and every split
-    file carries all vertex data (unused vertices are harmless), so the split
-    files draw exactly the original faces. Faces without a known material go
-    to :attr:`DrawableMesh.bare`. A file whose textures had to be downscaled (see
-    :class:`TextureLinks`) is rewritten too.
-    """
+    """The OBJ ``path`` made drawable with its materials: PyBullet draws one material per OBJ, so a file
+    with several (or downscaled textures) is written again as one OBJ (+ MTL) per material into
+    ``work`` (names start with ``tag``), each with all vertex data; faces without a known material go
+    to :attr:`DrawableMesh.bare_text`."""
     scan = mesh_io.scan_obj_text(path.read_text(encoding="utf-8", errors="replace"))
     data_lines, faces, mtllibs = scan.data_lines, scan.faces, scan.mtllibs
     vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
@@ -160,19 +137,12 @@ def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> Drawa
 
 
 def colored_obj(info: DrawableMesh, source: Path, rgba: Sequence[float], work: Path, tag: str) -> Path:
-    """An OBJ of ``info``'s material-less faces with one material of color ``rgba``.
-
-    PyBullet (with ``URDF_USE_MATERIAL_COLORS_FROM_MTL``) draws an OBJ without
-    a material black, so the URDF's ``<material>`` color (or
-    :data:`DEFAULT_COLOR`) is written into an MTL instead.
-    """
-    if info.bare_text is None:
-        text = "\n".join(
-            ln for ln in source.read_text(encoding="utf-8", errors="replace").splitlines()
-            if not ln.startswith(("mtllib", "usemtl"))
-        ) + "\n"
-    else:
-        text = info.bare_text
+    """An OBJ of ``info``'s material-less faces with one material of color ``rgba`` (PyBullet draws them
+    black otherwise)."""
+    text = info.bare_text
+    if text is None:
+        lines = source.read_text(encoding="utf-8", errors="replace").splitlines()
+        text = "\n".join(ln for ln in lines if not ln.startswith(("mtllib", "usemtl"))) + "\n"
     r, g, b = (min(1.0, max(0.0, float(c))) for c in rgba[:3])
     (work / f"{tag}.mtl").write_text(f"newmtl color\nKd {r:.4f} {g:.4f} {b:.4f}\n", encoding="utf-8")
     out = work / f"{tag}.obj"
@@ -181,9 +151,7 @@ def colored_obj(info: DrawableMesh, source: Path, rgba: Sequence[float], work: P
 
 
 def convert_other_mesh(mesh_file: Path, work: Path, tag: str, notes: list[str]) -> DrawableMesh:
-    """A non-OBJ visual mesh: STL is drawn by PyBullet as is (in the URDF's
-    color); other formats (DAE, PLY, GLB ...) are converted to OBJ with trimesh
-    (geometry only, colored from the URDF).
+    """A non-OBJ visual mesh: STL as is; other formats converted to OBJ with trimesh (geometry only).
 
     Raises:
         ValueError: trimesh cannot read the file.

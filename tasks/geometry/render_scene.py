@@ -1,10 +1,5 @@
-"""URDF -> render scene: the render-only copy of a URDF that PyBullet's
-renderer loads, and the visual points of each link that cameras are fitted to.
-
-The copy has no ``<collision>`` or ``<inertial>`` (so the root link frame is
-the body frame PyBullet places at the origin), absolute mesh paths, and each
-visual mesh replaced by drawable work files
-(:mod:`asset2sim.tasks.geometry.render_meshes`).
+"""URDF -> render scene: the render-only copy of a URDF that PyBullet's renderer loads, and the
+visual points of each link that cameras are fitted to.
 """
 
 from __future__ import annotations
@@ -23,6 +18,7 @@ from asset2sim.tasks.geometry.render_meshes import (
     split_obj,
 )
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfLink, UrdfMaterial, UrdfModel, read_urdf, write_urdf
+
 
 def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path:
     """Absolute path of a URDF mesh reference (relative, absolute, file://, package://)."""
@@ -79,9 +75,8 @@ def visual_rgba(vis: UrdfGeometry, named: dict[str, tuple[float, ...]]) -> tuple
 
 @dataclass
 class RenderScene:
-    """What :func:`prepare_scene` made: ``urdf`` the render-only URDF,
-    ``link_points`` link -> visual points (N, 3) in the link frame, m, and
-    ``notes`` (what was changed so the asset draws)."""
+    """What :func:`prepare_scene` made: ``urdf`` the render-only URDF, ``link_points`` link -> visual
+    points (N, 3) in the link frame, m, and ``notes`` (what was changed so the asset draws)."""
 
     urdf: Path
     link_points: dict[str, np.ndarray]
@@ -89,10 +84,8 @@ class RenderScene:
 
 
 class _VisualFiles:
-    """The drawable work files of the visuals' meshes: each mesh file prepared
-    once (:func:`split_obj` for OBJ, :func:`convert_other_mesh` for others,
-    tagged ``m0000``, ``m0001`` ... in order of first use) and each (mesh,
-    color) pair of material-less faces colored once (``k0000`` ...)."""
+    """The drawable work files of the visuals' meshes: each mesh file prepared once (tags ``m0000`` ...
+    in order of first use), each (mesh, color) of material-less faces colored once (``k0000`` ...)."""
 
     def __init__(self, work: Path, textures: TextureLinks, notes: list[str]):
         self.work = work
@@ -116,9 +109,8 @@ class _VisualFiles:
         return info
 
     def files(self, vis: UrdfGeometry, mesh_file: Path, named: dict[str, tuple[float, ...]]) -> tuple[DrawableMesh, list[Path]]:
-        """(prepared mesh, files that draw visual ``vis`` of ``mesh_file``): the
-        per-material parts, plus the material-less faces in the visual's
-        ``<material>`` color (else :data:`DEFAULT_COLOR`)."""
+        """(prepared mesh, files that draw visual ``vis`` of ``mesh_file``: the per-material parts and the
+        material-less faces in the visual's ``<material>`` color, else :data:`DEFAULT_COLOR`)."""
         info = self.mesh(mesh_file)
         files = list(info.parts)
         if info.bare is not None or info.bare_text is not None:
@@ -132,12 +124,7 @@ class _VisualFiles:
 
 
 def _read_model(urdf_path: Path) -> UrdfModel:
-    """The URDF model, read leniently.
-
-    Raises:
-        FileNotFoundError: no such file.
-        ValueError: not a parseable URDF.
-    """
+    """The URDF model, read leniently; FileNotFoundError (no such file) or ValueError (unparseable)."""
     if not urdf_path.is_file():
         raise FileNotFoundError(f"no such URDF: {urdf_path}")
     try:
@@ -152,8 +139,7 @@ def _all_materials(model: UrdfModel) -> list[UrdfMaterial]:
 
 
 def _named_colors(model: UrdfModel) -> dict[str, tuple[float, ...]]:
-    """Material name -> RGBA of its first definition with a color (URDF
-    materials are global by name)."""
+    """Material name -> RGBA of its first definition with a color (URDF materials are global by name)."""
     named: dict[str, tuple[float, ...]] = {}
     for mat in _all_materials(model):
         if mat.name and mat.rgba is not None and mat.name not in named:
@@ -161,17 +147,10 @@ def _named_colors(model: UrdfModel) -> dict[str, tuple[float, ...]]:
     return named
 
 
-def _prepare_link(
-    urdf_path: Path,
-    urdf_dir: Path,
-    lname: str,
-    link: UrdfLink,
-    meshes: _VisualFiles,
-    named: dict[str, tuple[float, ...]],
-) -> np.ndarray | None:
-    """Strip ``link``'s collisions and inertial, replace its mesh visuals by
-    their drawable files; returns its visual points (N, 3) in the link frame,
-    m, or None when it has none.
+def _prepare_link(urdf_path: Path, urdf_dir: Path, lname: str, link: UrdfLink, meshes: _VisualFiles,
+                  named: dict[str, tuple[float, ...]]) -> np.ndarray | None:
+    """Strip ``link``'s collisions and inertial, replace its mesh visuals by their drawable files;
+    returns its visual points (N, 3) in the link frame, m, or None when it has none.
 
     Raises:
         FileNotFoundError: a visual mesh is missing.
@@ -203,8 +182,7 @@ def _prepare_link(
 
 
 def _link_material_textures(model: UrdfModel, urdf_dir: Path, textures: TextureLinks) -> None:
-    """Point each ``<material><texture filename=...>`` that exists at its link
-    in the work folder (clones of one material share it)."""
+    """Point each existing ``<material><texture filename=...>`` at its link in the work folder."""
     for mat in {id(m): m for m in _all_materials(model)}.values():
         if mat.texture:
             src = resolve_mesh_path(mat.texture, urdf_dir)
@@ -213,13 +191,10 @@ def _link_material_textures(model: UrdfModel, urdf_dir: Path, textures: TextureL
 
 
 def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> RenderScene:
-    """Write the render-only URDF into ``work`` and collect visual points per link.
-
-    The copy has no ``<collision>`` or ``<inertial>`` (so the root link frame is
-    the body frame PyBullet places at the origin), absolute mesh paths, and
-    each visual mesh replaced by the files of :func:`split_obj`; textures
-    larger than ``texture_max`` pixels are downscaled. A URDF without any
-    ``<visual>`` has its collision shapes drawn.
+    """Write the render-only URDF into ``work`` and collect visual points per link: no ``<collision>`` or
+    ``<inertial>`` (the root link frame is the body frame), each visual mesh replaced by drawable
+    files, textures above ``texture_max`` pixels downscaled; without any ``<visual>`` the collision
+    shapes are drawn.
 
     Raises:
         FileNotFoundError: the URDF or one of its visual meshes is missing.

@@ -1,11 +1,5 @@
-"""Link surfaces: a link's geometry elements combined into one triangle soup.
-
-Part of the mesh-analysis stage (:mod:`asset2sim.tasks.geometry.analyze`,
-whose module docstring describes the method). Each ``<collision>`` (or
-``<visual>``) element is read (:mod:`asset2sim.mesh_io`) or tessellated (box,
-cylinder, sphere), cleaned (out-of-range and repeated indices, NaN vertices
-dropped with a note) and placed in the link frame as URDF does:
-x_link = R(rpy) @ (scale * x_mesh) + xyz (:func:`asset2sim.frames.rpy_matrix`).
+"""A link's geometry elements combined into one triangle soup in the link frame, for
+:mod:`asset2sim.tasks.geometry.analyze`.
 """
 
 from __future__ import annotations
@@ -30,7 +24,6 @@ class _PieceError(Exception):
     """One geometry element could not be used (reason in the message)."""
 
 
-
 def _primitive_mesh(ref: GeometryRef, where: str) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
@@ -53,17 +46,12 @@ def _primitive_mesh(ref: GeometryRef, where: str) -> tuple[np.ndarray, np.ndarra
 
 @dataclass
 class LinkSurface:
-    """The combined, cleaned triangle surface of one link in the link frame.
-
-    ``vertices`` (N, 3) m, ``faces`` (M, 3) int64 (valid, finite, no repeated
-    index), ``piece`` (M,) index into ``sources`` of each face, ``sources``
-    one label per usable geometry element (file path or primitive kind),
-    ``role`` "collision" or "visual", ``notes`` what was dropped and why.
-    """
+    """The combined, cleaned triangle surface of one link in the link frame: ``vertices`` (N, 3) m,
+    ``faces`` (M, 3) int64, ``sources`` one label per usable element, ``role`` "collision" or
+    "visual", ``notes`` what was dropped and why."""
 
     vertices: np.ndarray
     faces: np.ndarray
-    piece: np.ndarray
     sources: list[str]
     kinds: list[str]
     refs: list[GeometryRef]
@@ -82,9 +70,7 @@ def _clean_piece(v: np.ndarray, f: np.ndarray, where: str, notes: list[str]) -> 
     finite = np.all(np.isfinite(v), axis=1)
     if not finite.all():
         badf = ~np.all(finite[f], axis=1)
-        notes.append(
-            f"{where}: dropped {int((~finite).sum())} non-finite vertices and the {int(badf.sum())} faces using them"
-        )
+        notes.append(f"{where}: dropped {int((~finite).sum())} non-finite vertices and the {int(badf.sum())} faces using them")
         f = f[~badf]
     rep = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
     if rep.any():
@@ -100,26 +86,17 @@ def _clean_piece(v: np.ndarray, f: np.ndarray, where: str, notes: list[str]) -> 
     return v, f
 
 
-def link_surface(
-    link: LinkDesc,
-    *,
-    prefer: Literal["collision", "visual"] = "collision",
-    cache: MeshCache | None = None,
-) -> LinkSurface | None:
+def link_surface(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "collision",
+                 cache: MeshCache | None = None) -> LinkSurface | None:
     """Combine a link's geometry into one triangle surface in the link frame.
 
-    Uses ``link.collisions`` when non-empty, else ``link.visuals`` (swapped by
-    ``prefer="visual"``). Each element is placed as URDF does:
-    x_link = R(rpy) @ (scale * x_mesh) + xyz. A mirroring scale (negative
-    determinant) has its face winding flipped so outward normals stay outward.
-    Elements that cannot be used (unreadable file, no valid faces) are skipped
-    with a note; NaN vertices and bad faces are dropped with a note.
-
+    Uses ``link.collisions`` when non-empty, else ``link.visuals`` (swapped by ``prefer="visual"``),
+    each placed as URDF does, x_link = R(rpy) @ (scale * x_mesh) + xyz (a mirroring scale flips the
+    winding). Unusable elements are skipped, bad vertices and faces dropped, with a note.
     Returns ``None`` when the link has no geometry elements.
 
     Raises:
-        MeshAnalysisError: no element of the link is usable (names the link
-            and every file with its reason).
+        MeshAnalysisError: no element of the link is usable (names the link and every file with its reason).
     """
     first, second = (link.collisions, link.visuals) if prefer == "collision" else (link.visuals, link.collisions)
     refs = first or second
@@ -127,7 +104,7 @@ def link_surface(
         return None
     role = refs[0].role
     cache = cache if cache is not None else MeshCache()
-    verts, faces, piece, sources, kinds, used, notes, failures = [], [], [], [], [], [], [], []
+    verts, faces, sources, kinds, used, notes, failures = [], [], [], [], [], [], []
     offset = 0
     for i, ref in enumerate(refs):
         label = str(ref.path) if ref.kind == "mesh" else f"{ref.kind} #{i}"
@@ -156,23 +133,12 @@ def link_surface(
             continue
         verts.append(vt)
         faces.append(f + offset)
-        piece.append(np.full(len(f), len(sources), np.int32))
         sources.append(label)
         kinds.append(ref.kind)
         used.append(ref)
         offset += len(vt)
     if not verts:
-        raise MeshAnalysisError(
-            f"link {link.name!r}: no usable {role} geometry: " + "; ".join(failures)
-        )
+        raise MeshAnalysisError(f"link {link.name!r}: no usable {role} geometry: " + "; ".join(failures))
     notes = failures + notes
-    return LinkSurface(
-        vertices=np.concatenate(verts),
-        faces=np.concatenate(faces),
-        piece=np.concatenate(piece),
-        sources=sources,
-        kinds=kinds,
-        refs=used,
-        role=role,
-        notes=notes,
-    )
+    return LinkSurface(vertices=np.concatenate(verts), faces=np.concatenate(faces), sources=sources, kinds=kinds,
+                       refs=used, role=role, notes=notes)

@@ -1,24 +1,10 @@
-"""Closed ends measured on a written URDF: the one measurement refine and the
-evaluation share.
+"""Closed ends measured on a written URDF: the one measurement refine and the evaluation share
+(:mod:`asset2sim.tasks.evaluation.closed_ends`), so a request is graded against the closed ends of the
+output's own collision pieces, from which refine placed it.
 
-The evaluation grades every method against closed ends it measures itself on
-the method's output (:mod:`asset2sim.tasks.evaluation.closed_ends`). The
-output's collision pieces depend only on the meshes and the joint limits
-(:mod:`asset2sim.tasks.assemble.collision_geometry`), so refine measures its
-own written output with the same function and places the requested state
-from that: where the output's pieces overlap a part's parent at every angle
-(faucet 148's handle inside its body's hull piece, 120-156 mm summed
-penetration over the whole range), the closed end found on the input meshes
-and the one found on the output pieces can differ, and the request would be
-graded against an end it was not placed from.
-
-:func:`closed_session` is the measurement (extract the URDF, a fresh
-fixed-base, gravity-free PyBullet session without ground, the links'
-convex-hull points, :func:`asset2sim.tasks.geometry.closed_state.closed_positions`
-with its defaults); :func:`measure_closed_ends` gives its result and the
-object's extents at the closed ends, once per geometry in a process;
-:func:`replace_positions` moves joint positions from one set of closed ends to
-another, keeping what the request asked of each joint.
+:func:`closed_session` measures; :func:`measure_closed_ends` gives its result and the object's extents
+there, once per geometry in a process; :func:`replace_positions` moves joint positions from one set of
+closed ends to another.
 """
 
 from __future__ import annotations
@@ -46,26 +32,19 @@ from asset2sim.urdf import UrdfError, clone_model, read_urdf, write_urdf
 class UrdfClosed:
     """A URDF's closed ends and what they were measured with."""
 
-    session: object
-    """The PyBullet session (fixed base, no gravity, no ground), left at the closed state."""
+    session: object  # PyBullet, fixed base, no gravity, no ground; left at the closed state
     asset: AssetDescription
-    hull: dict[str, np.ndarray] | None
-    """Convex-hull points per link (link frame, m), None when they could not be computed."""
-    closed: dict[str, ClosedState]
-    """joint -> closed end (rad or m, the URDF's units)."""
+    hull: dict[str, np.ndarray] | None  # convex-hull points per link (link frame, m); None when they failed
+    closed: dict[str, ClosedState]  # joint -> closed end (rad or m)
 
 
 @contextmanager
 def closed_session(urdf: Path) -> Iterator[UrdfClosed]:
-    """Closed ends of every movable joint of ``urdf``, measured in a fresh
-    fixed-base, gravity-free PyBullet session without ground, every other
-    joint at 0 clipped to its limits (:func:`closed_positions` with its
-    defaults); the session stays open inside the ``with`` block.
+    """Closed ends of every movable joint of ``urdf`` (:func:`closed_positions` with its defaults) in a
+    fresh fixed-base, gravity-free PyBullet session without ground, open inside the ``with`` block.
 
     Raises:
-        asset2sim.tasks.ingest.extract.AssetError: ``urdf`` cannot be read.
-        Whatever the engine or the hull computation raises (the caller decides
-        the fallback).
+        asset2sim.tasks.ingest.extract.AssetError: ``urdf`` cannot be read; and whatever the engine raises.
     """
     desc = extract_asset(urdf)
     s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
@@ -84,22 +63,14 @@ def closed_session(urdf: Path) -> Iterator[UrdfClosed]:
 class ClosedMeasurement:
     """What :func:`measure_closed_ends` measured on a URDF."""
 
-    closed: dict[str, ClosedState]
-    """joint -> closed end (rad or m, the URDF's units), every movable joint."""
-    extents: np.ndarray
-    """(3,) m: extents of the box bounding the object with every joint at its
-    closed end (:func:`geometry_extents`)."""
+    closed: dict[str, ClosedState]  # joint -> closed end (rad or m), every movable joint
+    extents: np.ndarray  # (3,) m, the object's box with every joint at its closed end (geometry_extents)
 
 
 def measure_closed_ends(urdf: Path) -> ClosedMeasurement:
-    """The closed ends of ``urdf`` (:func:`closed_session`) and the object's
-    extents there, measured once per geometry in this process: the result
-    depends on the links' collision and visual geometry, inertial frames and
-    the joints' frames, axes, types and limits, not on joint friction and
-    damping (the measurement is kinematic), so a refine run's own measurement
-    of its output (:func:`measure_closed`) is reused by the evaluation of the
-    same output after escalation rewrote only the dynamics
-    (:data:`_MEASURED`; each caller gets its own copy).
+    """The closed ends of ``urdf`` (:func:`closed_session`) and the object's extents there, measured once
+    per geometry (not joint dynamics: the measurement is kinematic) in this process (:data:`_MEASURED`;
+    each caller gets its own copy).
 
     Raises:
         as :func:`closed_session`.
@@ -118,9 +89,7 @@ def measure_closed_ends(urdf: Path) -> ClosedMeasurement:
 
 
 def measure_closed(urdf: Path) -> dict[str, ClosedState]:
-    """joint -> closed end of ``urdf`` (:func:`measure_closed_ends`), only the
-    joints with an opening range > 0 (the others have no geometric closed end
-    to place a state from).
+    """joint -> closed end of ``urdf`` (:func:`measure_closed_ends`), the joints with an opening range > 0.
 
     Raises:
         as :func:`closed_session`.
@@ -128,18 +97,13 @@ def measure_closed(urdf: Path) -> dict[str, ClosedState]:
     return {n: c for n, c in measure_closed_ends(urdf).closed.items() if c.open_range > 0}
 
 
-#: :func:`measure_closed_ends` results by :func:`_geometry_key`, while the
-#: mesh files they were measured with are unchanged
-#: (:class:`asset2sim.file_memo.FileMemo`): a 6-drawer cabinet's
-#: measurement takes 0.3 s, and refine and its evaluation measure the same
-#: geometry.
+#: :func:`measure_closed_ends` results by :func:`_geometry_key` while the mesh files are unchanged.
 _MEASURED: file_memo.FileMemo[ClosedMeasurement] = file_memo.FileMemo(copy.deepcopy, max_entries=16)
 
 
 def _geometry_key(urdf: Path) -> tuple[str | None, tuple]:
-    """(digest of the URDF's folder and of the model with every joint's
-    ``<dynamics>`` left out, identities of its mesh files), or (None, ()) when
-    the URDF cannot be read (the measurement then raises what it raises)."""
+    """(digest of the URDF's folder and of the model without joint ``<dynamics>``, identities of its mesh
+    files), or (None, ()) when the URDF cannot be read."""
     try:
         model = clone_model(read_urdf(urdf))
     except (UrdfError, OSError):
@@ -153,9 +117,8 @@ def _geometry_key(urdf: Path) -> tuple[str | None, tuple]:
 
 
 def aabb_extents(session) -> np.ndarray:
-    """Extents (3,) m of the union of the engine's link AABBs over the links
-    with collision geometry (loose; see :func:`geometry_extents`); zeros when
-    no link has collision geometry."""
+    """Extents (3,) m of the union of the engine's (loose) AABBs of the links with collision geometry;
+    zeros when there is none."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for name in session.link_names:
         if not session.link_has_collision(name):
@@ -169,13 +132,9 @@ def aabb_extents(session) -> np.ndarray:
 
 def geometry_extents(session, desc: AssetDescription | None, state: dict[str, float],
                      hull: dict[str, np.ndarray] | None) -> np.ndarray:
-    """Extents (3,) m of the box bounding the links' collision hull vertices at
-    ``state`` (rad/m) (:func:`asset2sim.tasks.geometry.closed_state.object_extents`).
-    Bullet's own AABBs are loose for a link whose inertia tensor has
-    off-diagonal terms (the shape sits rotated in the principal-axes frame and
-    its box is re-bounded: 0.67 m instead of 0.39 m for a refined toilet), so
-    they are only the fallback (:func:`aabb_extents` with the joints set to
-    ``state``), used without hull points or when the hull box fails."""
+    """Extents (3,) m of the box bounding the links' collision hull vertices at ``state`` (rad/m)
+    (:func:`~asset2sim.tasks.geometry.closed_state.object_extents`); without hull points or when that
+    fails, :func:`aabb_extents` at ``state`` (Bullet's AABBs are loose for rotated inertia frames)."""
     try:
         if hull is not None:
             return np.asarray(object_extents(session, state, desc, hull), float)
@@ -187,13 +146,9 @@ def geometry_extents(session, desc: AssetDescription | None, state: dict[str, fl
 
 def replace_positions(state: dict[str, float], old: dict[str, ClosedState], new: dict[str, ClosedState],
                       keep_opening: set[str] = frozenset()) -> dict[str, float]:
-    """``state`` (rad / m) with every joint in both ``old`` and ``new`` moved
-    from the closed end ``old`` to ``new``: its opening fraction is kept
-    (f = old.fraction(q), q' = new.position(f)), or for the joints in
-    ``keep_opening`` (a number of degrees / metres asked from the closed end)
-    its opening d (q - q_closed) in the opening direction; clipped to the new
-    limits.
-    """
+    """``state`` (rad / m) with every joint in both ``old`` and ``new`` moved from closed end ``old`` to
+    ``new``, keeping its opening fraction, or for ``keep_opening`` joints its opening d (q - q_closed);
+    clipped to the new limits."""
     out = dict(state)
     for n, q in state.items():
         a, b = old.get(n), new.get(n)

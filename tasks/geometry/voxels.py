@@ -1,9 +1,6 @@
-"""Voxel volume of polygon soups: surface sampling, gap closing, flood fill and
-sub-voxel weights.
-
-Part of the mesh-analysis stage (:mod:`asset2sim.tasks.geometry.analyze`,
-whose module docstring describes the method and ``docs/design/mesh_analysis.md`` its
-measured accuracy). Lengths in the mesh's units (m at scale 1).
+"""Voxel volume of polygon soups (surface sampling, gap closing, flood fill, sub-voxel weights) for
+:mod:`asset2sim.tasks.geometry.analyze`; method and accuracy in ``docs/design/mesh_analysis.md``.
+Lengths in the mesh's units (m at scale 1).
 """
 
 from __future__ import annotations
@@ -16,28 +13,16 @@ import numpy as np
 
 from asset2sim.tasks.geometry.moments import FACE_BATCH, SolidMoments
 
-__all__ = [
-    "CLOSE_GAPS",
-    "LAYER_CORRECTION",
-    "MAX_VOXELS",
-    "SAMPLE_SPACING",
-    "VOXELS_PER_AXIS",
-    "VoxelGrid",
-    "grid_pitch",
-    "mean_size",
-    "voxel_properties",
-    "voxelize",
-]
+__all__ = ["CLOSE_GAPS", "LAYER_CORRECTION", "MAX_VOXELS", "SAMPLE_SPACING", "VOXELS_PER_AXIS", "VoxelGrid", "grid_pitch",
+           "mean_size", "voxel_properties", "voxelize"]
 
 #: Default number of voxels along the link's length scale (:func:`mean_size`).
 VOXELS_PER_AXIS = 96
-#: Default cap on the total number of grid cells (bounds memory: about 20
-#: bytes per cell at the peak, plus 7 bytes per surface sample).
+#: Default cap on the total number of grid cells (peak memory about 20 bytes per cell).
 MAX_VOXELS = 3_000_000
 #: Default gap closing, as a fraction of the link's length scale (:func:`mean_size`).
 CLOSE_GAPS = 0.02
-#: Outside part of a cell per exposed face when sub-voxel positions are off
-#: (see :mod:`asset2sim.tasks.geometry.analyze`).
+#: Outside part of a cell per exposed face when sub-voxel positions are off.
 LAYER_CORRECTION = 0.5
 #: Surface sampling spacing, in voxel pitches.
 SAMPLE_SPACING = 0.5
@@ -46,23 +31,11 @@ _CHUNK_POINTS = 1 << 21  # lattice points per rasterization batch (48 MB of floa
 
 
 def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
-    """Points (P, 3) covering triangles (T, 3, 3) with spacing <= ``spacing``.
-
-    Triangles whose edges are all <= spacing give their vertices. Larger ones
-    are sampled in rows parallel to their longest edge: k2 = ceil(height /
-    spacing) + 1 rows from the base to the apex, each row split into
-    segments <= spacing. The count is ~ area / spacing^2 even for slivers.
-    Yielded in batches of about ``_CHUNK_POINTS`` points, in the dtype of
-    ``tri``.
-    """
-    edges = np.stack(
-        [
-            np.linalg.norm(tri[:, 2] - tri[:, 1], axis=1),
-            np.linalg.norm(tri[:, 0] - tri[:, 2], axis=1),
-            np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1),
-        ],
-        axis=1,
-    )  # edge i is opposite vertex i
+    """Points (P, 3) covering triangles (T, 3, 3) with spacing <= ``spacing``, in batches of about
+    ``_CHUNK_POINTS``: small triangles give their vertices, larger ones rows parallel to their longest
+    edge (ceil(height / spacing) + 1 rows, each split into segments <= spacing)."""
+    edges = np.stack([np.linalg.norm(tri[:, 2] - tri[:, 1], axis=1), np.linalg.norm(tri[:, 0] - tri[:, 2], axis=1),
+                      np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1)], axis=1)  # edge i is opposite vertex i
     small = edges.max(axis=1) <= spacing
     if small.any():
         yield tri[small].reshape(-1, 3)
@@ -106,18 +79,15 @@ def _surface_points(tri: np.ndarray, spacing: float) -> Iterable[np.ndarray]:
 
 
 def mean_size(ext: np.ndarray) -> float:
-    """The length scale of a link for voxelization (m): the geometric mean of
-    its bounding-box extents (3,), each taken at least 1/16 of the longest,
-    so elongated and flat links get finer voxels than a cube of the same
-    longest extent."""
+    """The length scale (m) of a link for voxelization: the geometric mean of its bounding-box
+    extents (3,), each taken at least 1/16 of the longest."""
     size = float(np.max(ext))
     return float(np.prod(np.maximum(ext, size / 16.0))) ** (1.0 / 3.0)
 
 
 def grid_pitch(ext: np.ndarray, voxels_per_axis: int, max_voxels: int, pad: int) -> float:
-    """Voxel pitch (m) for extents ``ext`` (3,) m: :func:`mean_size` /
-    ``voxels_per_axis``, grown by 5 % steps until the padded grid (``pad``
-    cells on each side) has at most ``max_voxels`` cells."""
+    """Voxel pitch (m) for extents ``ext`` (3,) m: :func:`mean_size` / ``voxels_per_axis``, grown by 5 %
+    steps until the grid padded by ``pad`` cells each side has at most ``max_voxels`` cells."""
     h = mean_size(ext) / voxels_per_axis
     for _ in range(60):
         cells = np.prod(np.ceil(ext / h) + 2 * pad + 2)
@@ -129,17 +99,11 @@ def grid_pitch(ext: np.ndarray, voxels_per_axis: int, max_voxels: int, pad: int)
 
 @dataclass
 class VoxelGrid:
-    """A voxelized link: ``surface`` and ``filled`` boolean grids (nx, ny, nz),
-    cell (i, j, k) spanning ``origin + pitch * [i, i+1) x ...`` (m);
-    ``closing`` the number of 3x3x3 closing iterations applied.
-
-    With sub-voxel statistics (``None`` otherwise), for the S cells holding
-    surface samples: ``cells`` (S,) their flat indices (sorted), ``mean``
-    (S, 3) the mean in-cell position of their samples (cell units, 0..1),
-    ``thickness`` (S, 3) the spread of the samples along each axis that the
-    other two axes do not explain, 2 sqrt(var(x_k | x_i, x_j)) (cell units:
-    ~0 for one plane of any orientation, the distance between two parallel
-    surfaces crossing the cell)."""
+    """A voxelized link: ``surface`` and ``filled`` boolean grids (nx, ny, nz), cell (i, j, k) spanning
+    ``origin + pitch * [i, i+1) x ...`` (m); ``closing`` the 3x3x3 closing iterations applied.
+    Sub-voxel statistics (else ``None``) of the S surface cells: ``cells`` (S,) sorted flat indices,
+    ``mean`` (S, 3) mean in-cell sample position and ``thickness`` (S, 3) 2 sqrt(var(x_k | x_i, x_j))
+    of the samples (cell units)."""
 
     surface: np.ndarray
     filled: np.ndarray
@@ -151,37 +115,22 @@ class VoxelGrid:
     thickness: np.ndarray | None = None
 
 
-def voxelize(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    *,
-    voxels_per_axis: int = VOXELS_PER_AXIS,
-    max_voxels: int = MAX_VOXELS,
-    close_gaps: float = CLOSE_GAPS,
-    sample_spacing: float = SAMPLE_SPACING,
-    grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    subvoxel: bool = True,
-) -> VoxelGrid:
+def voxelize(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = VOXELS_PER_AXIS, max_voxels: int = MAX_VOXELS,
+             close_gaps: float = CLOSE_GAPS, sample_spacing: float = SAMPLE_SPACING,
+             grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0), subvoxel: bool = True) -> VoxelGrid:
     """Voxelize a triangle soup and fill what it encloses.
 
     Args:
         vertices: (N, 3) m. faces: (M, 3) int, valid.
-        voxels_per_axis: voxels along the longest extent (pitch = size / this,
-            coarser when the grid would exceed ``max_voxels`` cells).
-        close_gaps: gaps up to this fraction of the link's length scale
-            (:func:`mean_size`) are closed (morphological closing with a
-            3x3x3 cube, one iteration per 2 voxels of gap, at least one).
-        sample_spacing: surface sampling distance in pitches (<= 0.5 keeps
-            the marked surface free of 6-connected holes before closing).
-        grid_shift: (3,) shift of the grid against the geometry, in pitches,
-            each in [0, 1) (for robustness studies; results should not depend
-            on it beyond the method's noise).
-        subvoxel: record per-cell sample statistics (``VoxelGrid.cells``,
-            ``mean``, ``thickness``).
+        voxels_per_axis: voxels along the length scale (:func:`grid_pitch`, at most ``max_voxels`` cells).
+        close_gaps: gaps up to this fraction of the length scale (:func:`mean_size`) are closed
+            (3x3x3 closing, one iteration per 2 voxels of gap, at least one).
+        sample_spacing: surface sampling distance in pitches (<= 0.5 leaves no 6-connected holes).
+        grid_shift: (3,) shift of the grid against the geometry, in pitches, each in [0, 1).
+        subvoxel: record per-cell sample statistics (``VoxelGrid.cells``, ``mean``, ``thickness``).
 
     Returns:
-        :class:`VoxelGrid`; the surface is padded by closing + 2 empty cells
-        and the bounding box's extreme faces sit on cell centers.
+        :class:`VoxelGrid`, padded by closing + 2 empty cells, the bounding box's extreme faces on cell centers.
 
     Raises:
         ValueError: all vertices coincide.
@@ -198,8 +147,7 @@ def voxelize(
     iters = max(1, int(math.ceil(close_gaps * mean_size(ext) / (2.0 * h) - 1e-9)))
     pad = iters + 2
     h = grid_pitch(ext, voxels_per_axis, max_voxels, pad)
-    # faces at the extremes of the bounding box sit on voxel centers, so
-    # axis-aligned outer faces get exactly half a voxel of inflation
+    # the bounding box's extreme faces on voxel centers: half a voxel of inflation
     dims = np.ceil(ext / h).astype(np.int64) + 2 * pad + 2
     origin = lo - (pad + 0.5 - np.asarray(grid_shift, np.float64)) * h
     ncell = int(np.prod(dims))
@@ -237,8 +185,7 @@ def voxelize(
     del labels, closed
     stats: tuple = (None, None, None)
     if subvoxel:
-        # statistics only where the weights need them: cells with an exposed
-        # face (mean position), cells exposed on both sides of an axis (spread)
+        # statistics where the weights need them: exposed cells (mean), cells exposed both ways (spread)
         exposed = np.zeros(filled.shape, bool)
         thin = np.zeros(filled.shape, bool)
         for up, down in _exposures(filled):
@@ -250,15 +197,10 @@ def voxelize(
 
 
 def _exposures(filled: np.ndarray) -> Iterable[tuple[np.ndarray, np.ndarray]]:
-    """Per axis, (up, down): filled cells whose +axis / -axis neighbour is
-    empty (boolean grids of the shape of ``filled``; the grid is padded, so
-    border cells are empty)."""
+    """Per axis, (up, down): the filled cells whose +axis / -axis neighbour is empty."""
     for ax in range(3):
-        lo_sl = [slice(None)] * 3
-        hi_sl = [slice(None)] * 3
-        lo_sl[ax] = slice(0, -1)
-        hi_sl[ax] = slice(1, None)
-        lo_sl, hi_sl = tuple(lo_sl), tuple(hi_sl)
+        lo_sl = tuple(slice(0, -1) if k == ax else slice(None) for k in range(3))
+        hi_sl = tuple(slice(1, None) if k == ax else slice(None) for k in range(3))
         up = np.zeros(filled.shape, bool)
         down = np.zeros(filled.shape, bool)
         up[lo_sl] = filled[lo_sl] & ~filled[hi_sl]
@@ -266,14 +208,10 @@ def _exposures(filled: np.ndarray) -> Iterable[tuple[np.ndarray, np.ndarray]]:
         yield up, down
 
 
-def _cell_statistics(
-    wanted: np.ndarray, thin: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per wanted surface cell (flat mask ``wanted``): flat index (S,), mean
-    in-cell sample position (S, 3) and, for cells also in ``thin``, the
-    unexplained spread along each axis (S, 3; 0 elsewhere), see
-    :class:`VoxelGrid`. ``samples``: (cell (P,) int32, in-cell position *
-    255 (P, 3) uint8)."""
+def _cell_statistics(wanted: np.ndarray, thin: np.ndarray,
+                     samples: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:class:`VoxelGrid`'s ``cells``, ``mean`` and ``thickness`` (0 outside ``thin``) of the cells of the
+    flat mask ``wanted``; ``samples``: (cell (P,) int32, in-cell position * 255 (P, 3) uint8)."""
     cells = np.flatnonzero(wanted)
     n = cells.size
     cell_id = np.cumsum(wanted, dtype=np.int32) - 1
@@ -319,53 +257,24 @@ def _cell_statistics(
     return cells, mean.T.astype(np.float32), thickness.T.astype(np.float32)
 
 
-def voxel_properties(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    *,
-    voxels_per_axis: int = VOXELS_PER_AXIS,
-    max_voxels: int = MAX_VOXELS,
-    close_gaps: float = CLOSE_GAPS,
-    layer_correction: float = LAYER_CORRECTION,
-    sample_spacing: float = SAMPLE_SPACING,
-    grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    subvoxel: bool = True,
-) -> SolidMoments:
+def voxel_properties(vertices: np.ndarray, faces: np.ndarray, *, voxels_per_axis: int = VOXELS_PER_AXIS,
+                     max_voxels: int = MAX_VOXELS, close_gaps: float = CLOSE_GAPS, layer_correction: float = LAYER_CORRECTION,
+                     sample_spacing: float = SAMPLE_SPACING, grid_shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                     subvoxel: bool = True) -> SolidMoments:
     """Solid enclosed by a triangle soup (any topology), by voxelization.
 
-    Args:
-        vertices: (N, 3) m. faces: (M, 3) int, valid.
-        voxels_per_axis, max_voxels, close_gaps, sample_spacing, grid_shift:
-            see :func:`voxelize`.
-        subvoxel: weight the cells at the surface by the mean position of
-            their surface samples (default); else each filled cell counts
-            w = 1 - layer_correction * exposed_faces (see module doc).
-        layer_correction: outside part of a cell per exposed face when
-            ``subvoxel`` is False.
+    Args: as for :func:`voxelize`; ``subvoxel``: weight the surface cells by the mean position of their
+    samples, else each filled cell counts w = 1 - layer_correction * exposed_faces.
 
-    Returns:
-        ``SolidMoments`` (method ``voxel_fill``, ``pitch`` m). Cell weights
-        are clipped to [0, 1]. Volume is sum(w) * pitch^3; com and second moment are weighted voxel moments,
-        each voxel a uniform cube (pitch^2/12 per axis). Volume 0 when
-        nothing is enclosed (then com is the bounding-box center).
-
-    Raises:
-        ValueError: all vertices coincide.
+    Returns ``SolidMoments`` (method ``voxel_fill``, ``pitch`` m): volume sum(w) * pitch^3 (w in [0, 1]),
+    com and second moment of the weighted cells (uniform cubes); volume 0 when nothing is enclosed.
+    Raises ValueError when all vertices coincide.
     """
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    vg = voxelize(
-        vertices,
-        faces,
-        voxels_per_axis=voxels_per_axis,
-        max_voxels=max_voxels,
-        close_gaps=close_gaps,
-        sample_spacing=sample_spacing,
-        grid_shift=grid_shift,
-        subvoxel=subvoxel,
-    )
+    vg = voxelize(vertices, faces, voxels_per_axis=voxels_per_axis, max_voxels=max_voxels, close_gaps=close_gaps,
+                  sample_spacing=sample_spacing, grid_shift=grid_shift, subvoxel=subvoxel)
     filled, h, origin, iters, dims = vg.filled, vg.pitch, vg.origin, vg.closing, vg.filled.shape
-    # weight of every cell: 0 outside; inside, 1 minus the part of the cell
-    # beyond the surface on each exposed face (see module doc)
+    # weight: 0 outside; inside, 1 minus the part of the cell beyond the surface on each exposed face
     weight = np.ones(filled.shape, np.float32)
     flat_weight = weight.reshape(-1)
     for ax, (up, down) in enumerate(_exposures(filled)):
@@ -412,11 +321,8 @@ def voxel_properties(
 
 
 def _morph(grid: np.ndarray, iters: int, op) -> np.ndarray:
-    """Binary dilation (``op`` = np.logical_or) or erosion (np.logical_and)
-    of ``grid`` by a 3x3x3 cube, ``iters`` times, separably: a 1-voxel OR /
-    AND along each axis in turn. Cells beyond the border are left out, so
-    they count as empty for dilation and as full for erosion (which never
-    eats in from the grid boundary)."""
+    """Binary dilation (``op`` = np.logical_or) or erosion (np.logical_and) of ``grid`` by a 3x3x3 cube,
+    ``iters`` times, separably; cells beyond the border count as empty, resp. full."""
     out = grid.copy()
     for _ in range(iters):
         for ax in range(3):

@@ -11,11 +11,8 @@ __all__ = ["AssetError"]
 
 
 class AssetError(ValueError):
-    """The asset cannot be read; the message names the file and the element.
-
-    ``findings`` holds every validation finding of severity ``error`` (empty
-    when the error did not come from validation); ``codes`` their codes.
-    """
+    """The asset cannot be read; the message names the file and the element. ``findings``: every
+    validation error (empty when not from validation); ``codes`` their codes."""
 
     def __init__(self, message: str, findings: Sequence["Finding"] = ()):
         super().__init__(message)

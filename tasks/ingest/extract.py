@@ -1,23 +1,10 @@
 """Extraction stage: an asset folder (or URDF file) in, an :class:`AssetDescription` out.
 
-Validation runs first (:mod:`asset2sim.tasks.ingest.validate_input`: hardened XML,
-strict numbers, kinematic tree, inertials, mesh paths and mesh contents); an
-asset with any finding of severity ``error`` is refused with an
-:class:`AssetError` that carries every finding. Then the validated URDF bytes
-(never the file a second time) are read by :mod:`asset2sim.urdf` (links, joints, types,
-axes, limits, origins, visual and collision geometry), with the
-PartNet-Mobility extras when present: ``semantics.txt`` (``link_name
-joint_kind semantic_label`` per line) and ``meta.json`` (``model_cat``). Any
-URDF with meshes works without the extras.
-
-Given inertials that validation marks ``replace_with_estimate`` (mass <= 0 on
-a moving link, inertia not positive definite or violating the triangle
-inequality, incomplete) are left out of the description
-(``given_inertial=None``), so later stages estimate them; they are never
-"balanced". :func:`extract_asset_checked` also returns the findings, for the
-report. ``input_hash`` covers every file the asset references: the URDF, its
-meshes, their MTL libraries and texture maps, the URDF's ``<texture>`` files,
-``semantics.txt`` and ``meta.json``.
+Validation runs first (:mod:`asset2sim.tasks.ingest.validate_input`); an asset with any error
+finding is refused with an :class:`AssetError` carrying every finding. The validated URDF bytes
+are then read by :mod:`asset2sim.urdf`, with ``semantics.txt`` and ``meta.json`` when present.
+Given inertials that validation marks ``replace_with_estimate`` are left out
+(``given_inertial=None``). ``input_hash`` covers every file the asset references.
 """
 
 from __future__ import annotations
@@ -86,36 +73,24 @@ def _refusal_message(asset: Path | str, errs: list["Finding"]) -> str:
     return f"{asset}: {len(errs)} validation error(s):\n  " + "\n  ".join(lines) + more
 
 
-def extract_asset_checked(
-    asset: Path | str,
-    *,
-    asset_id: str | None = None,
-    category: str | None = None,
-    policy: "ValidationPolicy | None" = None,
-) -> tuple[AssetDescription, list["Finding"]]:
+def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, category: str | None = None,
+                          policy: "ValidationPolicy | None" = None) -> tuple[AssetDescription, list["Finding"]]:
     """Validate, then read an asset; also return every validation finding.
 
     Args:
         asset: folder with ``mobility.urdf`` (or one ``*.urdf``), or a URDF file.
         asset_id: identifier to record; default the folder name.
         category: overrides ``meta.json``'s ``model_cat`` when given.
-        policy: validation policy (what is an error, caps); default
-            :data:`asset2sim.tasks.ingest.validate_input.DEFAULT_POLICY`.
-
-    With the default policy, an asset this process extracted before with
-    the same arguments, whose folder and referenced files are unchanged since
-    (:mod:`asset2sim.file_memo`), is not validated again: the caller gets its
-    own copy of the result (:data:`_EXTRACT_MEMO`).
+        policy: validation policy; default ``validate_input.DEFAULT_POLICY`` (then the result is
+            memoized while the files are unchanged, :data:`_EXTRACT_MEMO`).
 
     Returns:
-        ``(description, findings)``: lengths in the file's units, angles in
-        radians; findings of every severity (warnings and infos included), for
-        ``report.json``.
+        ``(description, findings)``: lengths in the file's units, angles in radians; findings of every
+        severity, for ``report.json``.
 
     Raises:
-        AssetError: validation found errors (``.findings`` has them all and the
-            message lists them with code, file, line, link or joint), or
-            the shared URDF reader cannot read the validated bytes.
+        AssetError: validation found errors (``.findings`` has them all; the message lists them), or
+            the URDF reader cannot read the validated bytes.
     """
     key = (os.path.realpath(asset), asset_id, category) if policy is None else None
     if key is not None and (hit := _EXTRACT_MEMO.get(key)) is not None:
@@ -142,35 +117,24 @@ def extract_asset_checked(
     # the files' identities before they are hashed (asset2sim.file_memo): the folder too, whose listing found the URDF
     read = file_memo.identities(([folder] if Path(asset).is_dir() else []) + files)
     desc = AssetDescription(
-        asset_id=asset_id or (folder.name if urdf.name in URDF_NAMES else urdf.stem),
-        source_dir=folder,
-        urdf_path=urdf,
-        robot_name=robot.name or urdf.stem,
-        links=links,
-        joints=joints,
-        root_link=roots[0],
-        category=category or result.category,
-        input_hash=sha256_files(files, root=None),
-    )
+        asset_id=asset_id or (folder.name if urdf.name in URDF_NAMES else urdf.stem), source_dir=folder, urdf_path=urdf,
+        robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=roots[0],
+        category=category or result.category, input_hash=sha256_files(files, root=None))
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)
 
 
 def _link(ln: UrdfLink, result: "ValidationResult", urdf: Path) -> LinkDesc:
-    """The description of one link of the model: geometry, semantics and the
-    given inertial (None when validation marked it for replacement)."""
+    """The description of one link: geometry, semantics and the given inertial (None when replaced)."""
     where = f"{urdf.name}: link {ln.name!r}"
     visuals = [g for v in ln.visuals if (g := _geometry(v, "visual", result.mesh_paths, where))]
     collisions = [g for c in ln.collisions if (g := _geometry(c, "collision", result.mesh_paths, where))]
     given = None
     if ln.inertial is not None and ln.inertial.mass is not None and ln.name not in result.replace_inertials:
         I = np.asarray(ln.inertial.inertia if ln.inertial.inertia is not None else np.zeros((3, 3)), float)
-        given = GivenInertial(
-            mass=float(ln.inertial.mass),
-            origin=_origin(ln.inertial.origin),
-            inertia=tuple(tuple(float(x) for x in row) for row in I),  # type: ignore[arg-type]
-        )
+        given = GivenInertial(mass=float(ln.inertial.mass), origin=_origin(ln.inertial.origin),
+                              inertia=tuple(tuple(float(x) for x in row) for row in I))  # type: ignore[arg-type]
     kind, label = result.semantics.get(ln.name, (None, None))
     return LinkDesc(name=ln.name, visuals=visuals, collisions=collisions, semantic_label=label, semantic_joint=kind,
                     given_inertial=given)
@@ -183,30 +147,20 @@ def _float_or_none(obj, attr: str) -> float | None:
 
 
 def _joint(jt: UrdfJoint) -> JointDesc:
-    """The description of one joint of the model (limits on revolute and
-    prismatic joints only; axis (1, 0, 0) when not given)."""
+    """The description of one joint (limits on revolute and prismatic joints only; axis default (1, 0, 0))."""
     lim, dyn = jt.limit, jt.dynamics
     bounded = jt.type in ("revolute", "prismatic")
     return JointDesc(
-        name=jt.name,
-        type=jt.type,
-        parent=jt.parent,
-        child=jt.child,
-        origin=_origin(jt.origin),
+        name=jt.name, type=jt.type, parent=jt.parent, child=jt.child, origin=_origin(jt.origin),
         axis=tuple(float(v) for v in (jt.axis_xyz if jt.axis_xyz is not None else (1.0, 0.0, 0.0))),
-        lower=_float_or_none(lim, "lower") if bounded else None,
-        upper=_float_or_none(lim, "upper") if bounded else None,
-        effort=_float_or_none(lim, "effort"),
-        velocity=_float_or_none(lim, "velocity"),
-        damping=_float_or_none(dyn, "damping"),
-        friction=_float_or_none(dyn, "friction"),
-    )
+        lower=_float_or_none(lim, "lower") if bounded else None, upper=_float_or_none(lim, "upper") if bounded else None,
+        effort=_float_or_none(lim, "effort"), velocity=_float_or_none(lim, "velocity"),
+        damping=_float_or_none(dyn, "damping"), friction=_float_or_none(dyn, "friction"))
 
 
 def _input_files(urdf: Path, links: list[LinkDesc], result: "ValidationResult") -> list[Path]:
-    """Every file the asset references, for the input hash: the URDF, its
-    meshes, semantics.txt and meta.json, and the MTL libraries and texture
-    maps (an edited texture changes the hash and is never skipped as complete)."""
+    """Every file the asset references, for the input hash: the URDF, its meshes, semantics.txt,
+    meta.json, the MTL libraries and texture maps."""
     files = [urdf] + sorted({g.path for ln in links for g in ln.visuals + ln.collisions if g.path})
     files += [Path(os.path.realpath(p)) for p in result.extra_files]
     files += [Path(os.path.realpath(p)) for p in result.material_files]
@@ -218,29 +172,16 @@ def _copy_extracted(value: tuple[AssetDescription, list["Finding"]]) -> tuple[As
     return desc.model_copy(deep=True), [f.model_copy(deep=True) for f in findings]
 
 
-#: What :func:`extract_asset_checked` returned with the default policy, by
-#: (real path, asset id, category), while the folder and every file the
-#: asset references are unchanged (:class:`asset2sim.file_memo.FileMemo`;
-#: each caller gets its own copy). A refine run reads its written output again
-#: in the closed-end measurements and the evaluation (0.03-0.25 s each).
+#: What :func:`extract_asset_checked` returned with the default policy, by (real path, asset id,
+#: category), while the folder and the files it references are unchanged (each caller gets a copy).
 _EXTRACT_MEMO = file_memo.FileMemo(_copy_extracted, max_entries=16)
 
 
 def extract_asset(asset: Path | str, *, asset_id: str | None = None, category: str | None = None) -> AssetDescription:
-    """Validate, then read an asset folder (or a URDF path) into an :class:`AssetDescription`.
-
-    Args:
-        asset: folder with ``mobility.urdf`` (or one ``*.urdf``), or a URDF file.
-        asset_id: identifier to record; default the folder name.
-        category: overrides ``meta.json``'s ``model_cat`` when given.
-
-    Returns:
-        The description; lengths in the file's units, angles in radians.
+    """The description of :func:`extract_asset_checked` (lengths in the file's units, angles in radians).
 
     Raises:
-        AssetError: any validation error (unsafe or malformed XML, bad numbers,
-            broken kinematic tree, unsafe or missing mesh paths, meshes
-            unusable for collision or mass, ...); ``.findings`` lists them all
-            and the message names the file, line and link or joint of each.
+        AssetError: any validation error; ``.findings`` lists them all, the message names the file,
+            line and link or joint of each.
     """
     return extract_asset_checked(asset, asset_id=asset_id, category=category)[0]

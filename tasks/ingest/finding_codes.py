@@ -1,10 +1,5 @@
-"""Finding codes: every code the validator can emit, with its default severity.
-
-:data:`CODES` (stable identifiers, never renamed; tabulated in
-``docs/guide/validation.md`` by :func:`codes_markdown_table`) and
-:data:`MESH_USE_DEPENDENT`, the mesh-content codes whose severity depends on
-how the mesh is used. Findings and the policy that applies these severities
-are in :mod:`asset2sim.tasks.ingest.findings`.
+"""Finding codes: every code the validator can emit (stable identifiers, never renamed), with its
+default severity; tabulated in ``docs/guide/validation.md`` by :func:`codes_markdown_table`.
 """
 
 from __future__ import annotations
@@ -150,9 +145,8 @@ CODES: dict[str, CodeInfo] = {
 }
 
 #: Mesh-content codes whose default severity is downgraded where the mesh is only drawn.
-MESH_USE_DEPENDENT = frozenset(
-    {"MESH_MALFORMED", "MESH_NO_FACES", "MESH_NONFINITE_VERTEX", "MESH_BAD_INDEX", "MESH_ZERO_AREA", "MESH_TOO_MANY_FACES"}
-)
+MESH_USE_DEPENDENT = frozenset({"MESH_MALFORMED", "MESH_NO_FACES", "MESH_NONFINITE_VERTEX", "MESH_BAD_INDEX",
+                                "MESH_ZERO_AREA", "MESH_TOO_MANY_FACES"})
 
 
 def codes_markdown_table() -> str:

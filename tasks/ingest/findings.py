@@ -1,10 +1,5 @@
-"""Findings, the validation policy, its caps and the result of a run.
-
-The vocabulary of :mod:`asset2sim.tasks.ingest.validate_input` beside the
-codes (:mod:`asset2sim.tasks.ingest.finding_codes`): :class:`Finding`,
-:class:`ValidationPolicy` (what is an error, the caps),
-:class:`ValidationResult`, and :class:`Recorder`, the base of the
-validator's check mixins (adds findings with the policy's severity).
+"""Findings, the validation policy and its caps, the result of a run, and :class:`Recorder`, the base
+of the validator's check mixins (codes: :mod:`asset2sim.tasks.ingest.finding_codes`).
 """
 
 from __future__ import annotations
@@ -26,66 +21,29 @@ Action = Literal["refuse", "replace_with_estimate", "mass_from_area", "ignore"]
 MeshUse = Literal["collision", "mass", "visual"]
 
 __all__ = [
-    "Action",
-    "CODES",
-    "DEFAULT_POLICY",
-    "Finding",
-    "IMAGE_EXTENSIONS",
-    "JOINT_TYPES",
-    "MAX_COORDINATE",
-    "MAX_LINKS",
-    "MAX_MOVABLE_JOINTS",
-    "MAX_REVOLUTE_LIMIT",
-    "MAX_TEXTURE_BYTES",
-    "MAX_TEXTURE_PIXELS",
-    "MAX_TOTAL_TEXTURE_BYTES",
-    "MAX_TOTAL_TEXTURE_PIXELS",
-    "MAX_TOTAL_FACES",
-    "MESH_EXTENSIONS",
-    "MESH_USE_DEPENDENT",
-    "MOVABLE_TYPES",
-    "MeshUse",
-    "Recorder",
-    "SEMANTIC_KINDS",
-    "SIMULATOR_MESH_EXTENSIONS",
-    "Severity",
-    "ValidationPolicy",
-    "ValidationResult",
-    "asset_size_range",
-    "errors",
-    "has_errors",
+    "Action", "CODES", "DEFAULT_POLICY", "Finding", "IMAGE_EXTENSIONS", "JOINT_TYPES", "MAX_COORDINATE", "MAX_LINKS",
+    "MAX_MOVABLE_JOINTS", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
+    "MAX_TOTAL_TEXTURE_PIXELS", "MAX_TOTAL_FACES", "MESH_EXTENSIONS", "MESH_USE_DEPENDENT", "MOVABLE_TYPES", "MeshUse",
+    "Recorder", "SEMANTIC_KINDS", "SIMULATOR_MESH_EXTENSIONS", "Severity", "ValidationPolicy", "ValidationResult",
+    "asset_size_range", "errors", "has_errors",
 ]
 
 
 MESH_EXTENSIONS = frozenset({".obj", ".stl", ".ply", ".off", ".glb", ".gltf", ".dae"})
 #: Mesh formats PyBullet's URDF importer loads (refine loads the input URDF in PyBullet).
 SIMULATOR_MESH_EXTENSIONS = frozenset({".obj", ".stl", ".dae"})
-#: PyBullet loads at most this many links (base included); measured: 128 load, 129 give an invalid body.
+#: PyBullet loads at most this many links (base included).
 MAX_LINKS = 128
-#: Movable (revolute, continuous, prismatic) joints per asset: refine's time grows about as N^2 in the worst
-#: case (every link pair in contact), so a bound on N bounds one asset's time (benchmarks/bench_joint_cap.py,
-#: docs/design/validation.md "Joint cap").
+#: Movable joints per asset (refine's time grows about as N^2; docs/design/validation.md "Joint cap").
 MAX_MOVABLE_JOINTS = 32
 #: |revolute limit| above this (rad, two turns) cannot be meant as a stop.
 MAX_REVOLUTE_LIMIT = 4.0 * math.pi
-#: Total triangles per asset: refine's time and memory grow linearly (benchmarks/bench_mesh_cap.py, docs/design/validation.md).
+#: Total triangles per asset (refine's time and memory grow linearly; docs/design/validation.md "Face cap").
 MAX_TOTAL_FACES = 1_000_000
-#: |vertex coordinate| of a mesh file above this (file units) cannot be meant:
-#: even at the smallest overlay scale refine accepts (SCALE_RANGE[0] = 1e-4) the
-#: vertex would lie more than MAX_PRIOR_DIM_M = 20 m (the largest dimension any
-#: prior may give a household object) from its link's frame. 2e5. Checked
-#: before any arithmetic on the vertices (1e308 would overflow).
+#: |vertex coordinate| (file units) beyond which a vertex lies more than MAX_PRIOR_DIM_M (20 m) from its
+#: link even at the smallest overlay scale (SCALE_RANGE[0]): 2e5.
 MAX_COORDINATE = MAX_PRIOR_DIM_M / SCALE_RANGE[0]
-#: Texture caps, from benchmarks/bench_texture_cap.py (PyBullet 3.2.x loading
-#: object 103275 with one texture replaced; docs/design/validation.md "Texture caps"):
-#: PyBullet's importer reads a texture file whole and holds about 2 bytes per
-#: byte of file (256 MiB: +510 MiB, 0.5 s per load; 1 GiB: +2.0 GiB, 3.1 s;
-#: 2 GiB: std::bad_alloc, the process dies), and decodes every texture at
-#: every load, about 8.6 MiB and 29 ms per megapixel (8192 x 8192: +577 MiB,
-#: 1.3 s; 16384 x 16384: +2.3 GiB, 7.7 s). Per file: 256 MiB (an 8192 x 8192
-#: PNG fits), 8192 x 8192 pixels; per asset: 1 GiB and 4 x 8192 x 8192
-#: pixels, about 2.3 GiB and 8 s per load at most, within the per-asset
-#: memory budget (8 GiB, benchmarks/bench_mesh_cap.py) beside the face cap.
+#: Texture caps per file and per asset (PyBullet's memory and time per load; docs/design/validation.md "Texture caps").
 MAX_TEXTURE_BYTES = 256 * 1024 * 1024
 MAX_TEXTURE_PIXELS = 8192 * 8192
 MAX_TOTAL_TEXTURE_BYTES = 1024 * 1024 * 1024
@@ -98,24 +56,9 @@ SEMANTIC_KINDS = frozenset({"hinge", "slider", "free", "heavy", "static", "junk"
 
 @functools.lru_cache(maxsize=1)
 def asset_size_range() -> tuple[float, float]:
-    """The sizes (file units) an asset may have for refine to find an overlay
-    scale inside ``SCALE_RANGE`` of :mod:`asset2sim.schemas.overlay`.
-
-    The size measure is the one the estimator scales by
-    (``tasks.synthesize.estimate.choose_scale``): g = sqrt(e1 * e2), the
-    geometric mean of the two largest extents of the object's bounding box.
-    Refine's scale is s = G / g for a target G = sqrt(d1 * d2) of the
-    category's (or a named variant's) dimensions times a size-class factor
-    (``tasks.interpret.size_priors.target_size``). Over every category,
-    variant and size class of the priors, G lies in [G_min, G_max]; some
-    request can give s in [s_min, s_max] only when
-    g in [G_min / s_max, G_max / s_min]. With the shipped priors:
-    about [1.0e-6, 2.3e4] (USB stick "tiny" .. door "very large").
-    The handheld gripper cap only lowers s and is category-specific: not
-    part of this (request-independent) bound.
-
-    Returns:
-        (lowest, highest) g in file units.
+    """(lowest, highest) size g = sqrt(e1 * e2) (the two largest extents, file units) for which some
+    category, variant and size class of the priors gives an overlay scale s = G / g inside
+    ``SCALE_RANGE``: [G_min / s_max, G_max / s_min] (docs/design/validation.md "Size bounds").
     """
     pri = load_priors()
     factors = [sc.factor for sc in pri.size_classes.values()]
@@ -131,18 +74,10 @@ def asset_size_range() -> tuple[float, float]:
     return min(targets) / hi, max(targets) / lo
 
 
-# ----------------------------------------------------------------------------- findings & policy
-
-
 class Finding(BaseModel):
-    """One problem (or remark) about an input asset.
-
-    ``file`` is relative to the asset folder when inside it (``mobility.urdf``,
-    ``textured_objs/x.obj``), else as written; ``line`` 1-based in the URDF;
-    ``link``/``joint`` name the element (``None`` for file-level findings);
-    ``action`` what the pipeline does about it; ``values`` the numbers behind
-    it (e.g. ``eigenvalues`` in kg*m^2).
-    """
+    """One problem (or remark) about an input asset: ``file`` relative to the asset folder when inside
+    it, ``line`` 1-based, ``link``/``joint`` the element (``None`` for file-level findings), ``action``
+    what the pipeline does about it, ``values`` the numbers behind it (e.g. ``eigenvalues`` kg*m^2)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
     code: str
@@ -172,13 +107,8 @@ class Finding(BaseModel):
     def to_issue(self) -> ValidationIssue:
         """As the overlay schema's :class:`ValidationIssue` (for report.json)."""
         loc = f"{self.file}:{self.line}" if self.line else self.file
-        return ValidationIssue(
-            code=self.code,
-            severity=self.severity,
-            where=self.where if self.where != "global" else loc,
-            message=f"{loc}: {self.message}",
-            fixed=self.action in ("replace_with_estimate", "mass_from_area"),
-        )
+        return ValidationIssue(code=self.code, severity=self.severity, where=self.where if self.where != "global" else loc,
+                               message=f"{loc}: {self.message}", fixed=self.action in ("replace_with_estimate", "mass_from_area"))
 
 
 @dataclass(frozen=True)
@@ -186,37 +116,21 @@ class ValidationPolicy:
     """Decides each finding's severity, hence what refuses an asset, and the caps.
 
     Attributes:
-        overrides: code -> severity, applied last (e.g. ``{"JOINT_LIMIT_EQUAL":
-            "error"}`` or ``{"INERTIA_NOT_POSITIVE_DEFINITE": "error"}`` to
-            refuse instead of replacing).
-        visual_mesh_defects: severity of mesh-content defects
-            (:data:`MESH_USE_DEPENDENT`) on meshes used only for drawing.
+        overrides: code -> severity, applied last (e.g. ``{"JOINT_LIMIT_EQUAL": "error"}``).
+        visual_mesh_defects: severity of :data:`MESH_USE_DEPENDENT` defects on meshes only drawn.
         warnings_as_errors: every warning refuses the asset.
         xml: caps of the XML parser.
-        max_mesh_bytes: per mesh file, bytes.
-        max_mesh_faces: per mesh file, triangles (polygons fan-triangulated).
-        max_total_faces: over all distinct mesh files of the asset (the
-            time and memory bound of one refine, :data:`MAX_TOTAL_FACES`).
-        mesh_extensions: mesh suffixes recognised (lower case, with the dot);
-            others are ``MESH_EXTENSION_UNSUPPORTED``.
-        simulator_mesh_extensions: the formats refine can load; a
-            recognised mesh of another format is ``MESH_FORMAT_UNSUPPORTED``.
-        max_links: links per URDF (:data:`MAX_LINKS`).
-        max_movable_joints: revolute, continuous and prismatic joints per
-            URDF (:data:`MAX_MOVABLE_JOINTS`).
-        max_coordinate: |vertex coordinate| of a mesh file, file units
-            (:data:`MAX_COORDINATE`).
-        asset_size_range: (lowest, highest) size of the object, file units,
-            as :func:`asset_size_range` measures it; None: that function's
-            value (derived from the priors and the overlay's scale range).
-        max_texture_bytes: per texture file (MTL maps, URDF ``<texture>``), bytes.
-        max_texture_pixels: width x height per texture (image header).
-        max_total_texture_bytes, max_total_texture_pixels: the same over
-            every distinct texture map the asset's MTL files name.
+        max_mesh_bytes, max_mesh_faces: per mesh file, bytes and triangles.
+        max_total_faces: triangles over all distinct mesh files of the asset.
+        mesh_extensions: mesh suffixes recognised (lower case, with the dot).
+        simulator_mesh_extensions: the formats refine can load.
+        max_links, max_movable_joints: per URDF.
+        max_coordinate: |vertex coordinate| of a mesh file, file units.
+        asset_size_range: (lowest, highest) object size, file units; None: :func:`asset_size_range`.
+        max_texture_bytes, max_texture_pixels: per texture file, bytes and width x height.
+        max_total_texture_bytes, max_total_texture_pixels: the same over every distinct texture map.
         max_revolute_limit: |lower| and |upper| of a revolute joint, rad.
-        max_prismatic_travel: |lower| and |upper| of a prismatic joint as a
-            multiple of the object's size (the diagonal of the bounding box of
-            all geometry at the zero configuration).
+        max_prismatic_travel: |lower| and |upper| of a prismatic joint / the object's diagonal at the zero pose.
         check_mesh_contents: read meshes (False: paths only, much faster).
         max_extra_bytes: cap for semantics.txt and meta.json, bytes.
     """
@@ -244,8 +158,7 @@ class ValidationPolicy:
     max_extra_bytes: int = 1024 * 1024
 
     def severity(self, code: str, use: MeshUse | None = None) -> Severity:
-        """The severity of ``code`` under this policy (``use``: how the mesh
-        the finding is about is used, for mesh-content codes).
+        """The severity of ``code`` under this policy (``use``: how the mesh is used, for mesh-content codes).
 
         Raises:
             KeyError: unknown code.
@@ -257,10 +170,6 @@ class ValidationPolicy:
         if self.warnings_as_errors and sev == "warning":
             sev = "error"
         return sev
-
-    def is_error(self, finding: Finding) -> bool:
-        """True when the finding refuses the asset."""
-        return finding.severity == "error"
 
 
 DEFAULT_POLICY = ValidationPolicy()
@@ -278,19 +187,11 @@ def has_errors(findings: Iterable[Finding]) -> bool:
 
 @dataclass
 class ValidationResult:
-    """Everything :func:`run_validation` learned.
-
-    ``findings`` in discovery order; ``urdf`` the URDF path (None when not
-    found); ``folder`` the asset folder; ``urdf_bytes`` the exact bytes that
-    were validated (parse these, not the file again); ``mesh_paths`` URDF
-    filename -> real path for every acceptable reference;
-    ``replace_inertials`` links whose given inertial must be replaced by an
-    estimate; ``semantics`` link -> (joint_kind, label); ``category`` from
-    meta.json; ``extra_files`` semantics.txt and meta.json when read;
-    ``material_files`` the real paths of the MTL files and texture maps the
-    OBJ meshes name and of the URDF's ``<texture>`` files (those inside the
-    folder that exist), for the input hash.
-    """
+    """Everything :func:`run_validation` learned: ``findings`` in discovery order, ``urdf_bytes`` the
+    exact bytes validated (parse these, not the file again), ``mesh_paths`` URDF filename -> real path
+    of every acceptable reference, ``replace_inertials`` links whose given inertial an estimate must
+    replace, ``semantics`` link -> (joint_kind, label), ``category`` from meta.json, ``extra_files``
+    and ``material_files`` (MTL files, texture maps) for the input hash."""
 
     findings: list[Finding]
     folder: Path | None
@@ -307,14 +208,9 @@ class ValidationResult:
     def errors(self) -> list[Finding]:
         return errors(self.findings)
 
-    @property
-    def ok(self) -> bool:
-        return not has_errors(self.findings)
-
 
 class Recorder:
-    """Holds the findings of one run and adds them with the policy's severity
-    (base of the check mixins of :mod:`asset2sim.tasks.ingest.validate_input`)."""
+    """Holds the findings of one run and adds them with the policy's severity."""
 
     def __init__(self, asset: Path, policy: ValidationPolicy):
         self.asset = asset
@@ -324,36 +220,13 @@ class Recorder:
         self.urdf_rel = str(asset)
         self.result = ValidationResult(findings=self.findings, folder=None)
 
-    # -- recording
-    def add(
-        self,
-        code: str,
-        message: str,
-        *,
-        file: str | None = None,
-        line: int | None = None,
-        link: str | None = None,
-        joint: str | None = None,
-        use: MeshUse | None = None,
-        action: Action | None = None,
-        **values: Any,
-    ) -> None:
+    def add(self, code: str, message: str, *, file: str | None = None, line: int | None = None, link: str | None = None,
+            joint: str | None = None, use: MeshUse | None = None, action: Action | None = None, **values: Any) -> None:
         sev = self.policy.severity(code, use)
         if action is None:
             action = "refuse" if sev == "error" else None
-        self.findings.append(
-            Finding(
-                code=code,
-                severity=sev,
-                message=message,
-                file=file if file is not None else self.urdf_rel,
-                line=line,
-                link=link,
-                joint=joint,
-                action=action,
-                values=values,
-            )
-        )
+        self.findings.append(Finding(code=code, severity=sev, message=message, file=file if file is not None else self.urdf_rel,
+                                     line=line, link=link, joint=joint, action=action, values=values))
 
     def rel(self, path: Path | str) -> str:
         if self.folder is None:

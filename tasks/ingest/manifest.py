@@ -1,11 +1,8 @@
 """``manifest.csv`` of a PartNet-Mobility dataset root: one row per object folder.
 
-Columns ``id``, ``prompt`` (required), ``category``, ``task``,
-``gensim2_task``, ``reference_scale``, ``reference_joint_range`` (JSON
-``[lo, hi]``), ``time_limit_seconds``. :func:`read_manifest_rows` reads it
-row by row (a bad row is reported with its line and a code and does not hide
-the others); :func:`read_manifest` all or nothing. Part of the dataset
-adapter :mod:`asset2sim.tasks.ingest.partnet_mobility`, which re-exports it.
+Columns ``id``, ``prompt`` (required), ``category``, ``task``, ``gensim2_task``, ``reference_scale``,
+``reference_joint_range`` (JSON ``[lo, hi]``), ``time_limit_seconds``. Re-exported by
+:mod:`asset2sim.tasks.ingest.partnet_mobility`.
 """
 
 from __future__ import annotations
@@ -18,17 +15,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = [
-    "FILE_ERROR_CODES",
-    "ROW_ERROR_CODES",
-    "ManifestError",
-    "ManifestReading",
-    "ManifestRow",
-    "ManifestRowError",
-    "is_valid_id",
-    "read_manifest",
-    "read_manifest_rows",
-]
+__all__ = ["FILE_ERROR_CODES", "ROW_ERROR_CODES", "ManifestError", "ManifestReading", "ManifestRow", "ManifestRowError",
+           "is_valid_id", "read_manifest", "read_manifest_rows"]
 
 #: Codes of a manifest row that cannot be used (:class:`ManifestRowError`).
 ROW_ERROR_CODES = {
@@ -49,16 +37,13 @@ FILE_ERROR_CODES = {
     "MANIFEST_BAD_HEADER": "the header line is not valid CSV",
     "MANIFEST_MISSING_COLUMNS": "the header lacks the id or prompt column",
 }
-#: How much of a row's first line is read again to find the id of a row the
-#: CSV reader refused (characters; below the CSV field limit).
+#: Characters of a refused row's first line read again to find its id (below the CSV field limit).
 _ID_PREFIX_CHARS = 4096
 
 
 class ManifestError(ValueError):
-    """The manifest cannot be used at all (names the file and, for a row of
-    the strict :func:`read_manifest`, the line). ``code``: one of
-    :data:`FILE_ERROR_CODES` or, from :func:`read_manifest`, of
-    :data:`ROW_ERROR_CODES`; ``path``: the manifest."""
+    """The manifest cannot be used at all (names the file, and the line for :func:`read_manifest`);
+    ``code`` from :data:`FILE_ERROR_CODES` (or :data:`ROW_ERROR_CODES`), ``path`` the manifest."""
 
     def __init__(self, message: str, code: str = "MANIFEST_INVALID", path: Path | str | None = None):
         super().__init__(message)
@@ -68,14 +53,8 @@ class ManifestError(ValueError):
 
 @dataclass
 class ManifestRow:
-    """One row of ``manifest.csv``.
-
-    ``id`` the object folder's name; ``category`` "" when not given;
-    ``reference_scale`` dimensionless (> 0) or None; ``reference_joint_range``
-    (lo, hi) in file units (rad or m) or None; ``time_limit_seconds`` s (> 0)
-    or None; ``folder`` the object folder (``<root>/<id>``); ``line`` the
-    1-based line of the file where the row starts (None when not read from a file).
-    """
+    """One row of ``manifest.csv``: ``id`` the object folder's name, ``reference_joint_range`` (lo, hi)
+    rad or m, ``time_limit_seconds`` s, ``folder`` ``<root>/<id>``, ``line`` where the row starts."""
 
     id: str
     category: str
@@ -91,13 +70,9 @@ class ManifestRow:
 
 @dataclass(frozen=True)
 class ManifestRowError:
-    """A manifest row that cannot be used; the other rows are unaffected.
-
-    ``line``: 1-based line of the file where the row starts; ``id``: the
-    row's id as written when it could be read (it may itself be the problem:
-    check :func:`is_valid_id`), else None; ``code``: one of
-    :data:`ROW_ERROR_CODES`; ``message``: names the file, line and id.
-    """
+    """A manifest row that cannot be used: ``line`` where it starts, ``id`` as written (None when
+    unreadable; it may itself be the problem), ``code`` from :data:`ROW_ERROR_CODES`, ``message``
+    naming the file, line and id."""
 
     line: int
     id: str | None
@@ -107,8 +82,7 @@ class ManifestRowError:
 
 @dataclass
 class ManifestReading:
-    """What :func:`read_manifest_rows` found: the usable ``rows`` and the
-    ``errors`` of the others, each in file order; ``path`` the manifest."""
+    """What :func:`read_manifest_rows` found: the usable ``rows`` and the ``errors`` of the others."""
 
     path: Path
     rows: list[ManifestRow] = field(default_factory=list)
@@ -120,8 +94,7 @@ _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
 
 
 def is_valid_id(text: str | None) -> bool:
-    """Whether ``text`` is a usable asset id (letters, digits, ``_.-``, not
-    starting with ``.``, ``_`` or ``-``)."""
+    """Whether ``text`` is a usable asset id (letters, digits, ``_.-``, starting with a letter or digit)."""
     return bool(text) and _ID_RE.match(text) is not None
 
 
@@ -162,8 +135,7 @@ def _joint_range(where: str, rec: dict) -> tuple[float, float] | None:
 
 
 class _Lines:
-    """Iterator over the physical lines of a text that keeps the lines of
-    the record being parsed (for the id of a record the CSV reader refuses)."""
+    """Iterator over the lines of a text that keeps those of the record being parsed."""
 
     def __init__(self, text: str):
         self._it = iter(io.StringIO(text))
@@ -179,8 +151,7 @@ class _Lines:
 
 
 def _id_of_refused(first_line: str, id_col: int) -> str | None:
-    """The id field of a record the CSV reader refused, read from the start of
-    its first line when it ends there (a field cut by the prefix is not used)."""
+    """The id field of a record the CSV reader refused, from the start of its first line (None when cut)."""
     try:
         fields = next(csv.reader([first_line[:_ID_PREFIX_CHARS].rstrip("\r\n")]))
     except (csv.Error, StopIteration):
@@ -190,27 +161,14 @@ def _id_of_refused(first_line: str, id_col: int) -> str | None:
 
 
 def read_manifest_rows(path: Path | str, root: Path | str | None = None) -> ManifestReading:
-    """Read a manifest CSV (UTF-8, a byte-order mark allowed) row by row: the
-    usable rows and a typed error for each row that is not, in file order;
-    object folders under ``root`` (default: the manifest's folder). A bad row
-    never hides the others.
-
-    A row is refused (:class:`ManifestRowError`, codes in
-    :data:`ROW_ERROR_CODES`) for: a field longer than the CSV field limit
-    (``csv.field_size_limit()``, 131072 characters by default) or other CSV
-    damage; no id, an unsafe id (letters, digits, ``_.-`` only) or an id an
-    earlier row already used (also an earlier refused row); a row that ends
-    before the ``prompt`` column; fields beyond the header (non-empty); a
-    ``reference_scale`` or ``time_limit_seconds`` that is not a positive
-    number; a ``reference_joint_range`` that is not ``[lo, hi]``. An empty
-    prompt is a usable row (as for ``asset2sim refine``). Blank lines are skipped.
+    """Read a manifest CSV (UTF-8, a byte-order mark allowed) row by row: the usable rows and a
+    :class:`ManifestRowError` (:data:`ROW_ERROR_CODES`) for each other, in file order; object folders
+    under ``root`` (default: the manifest's folder). A bad row never hides the others; an id used by
+    an earlier row (refused or not) is a duplicate; an empty prompt is usable; blank lines are skipped.
 
     Raises:
         FileNotFoundError / OSError: the manifest cannot be read.
-        ManifestError: the whole file is unusable: not UTF-8 text
-            (``MANIFEST_NOT_TEXT``), a header that is not CSV
-            (``MANIFEST_BAD_HEADER``), or no ``id`` / ``prompt`` column
-            (``MANIFEST_MISSING_COLUMNS``).
+        ManifestError: the whole file is unusable (:data:`FILE_ERROR_CODES`).
     """
     path = Path(path)
     base = path.parent if root is None else Path(root)
@@ -282,31 +240,20 @@ def _row(path: Path, base: Path, line: int, header: list[str], fields: list[str]
         raise _RowError("MANIFEST_EXTRA_FIELDS", f"{where}: {len(fields)} fields for {len(header)} columns "
                         "(a comma in an unquoted prompt?)")
     rec = dict(zip(header, fields))
+    text = {k: (rec.get(k) or "").strip() for k in ("category", "prompt", "task", "gensim2_task")}
     return ManifestRow(
-        id=rid,
-        category=(rec.get("category") or "").strip(),
-        prompt=(rec.get("prompt") or "").strip(),
-        task=(rec.get("task") or "").strip(),
-        gensim2_task=(rec.get("gensim2_task") or "").strip(),
-        reference_scale=_positive(where, rec, "reference_scale", "MANIFEST_INVALID_REFERENCE_SCALE"),
+        id=rid, **text, reference_scale=_positive(where, rec, "reference_scale", "MANIFEST_INVALID_REFERENCE_SCALE"),
         reference_joint_range=_joint_range(where, rec),
-        time_limit_seconds=_positive(where, rec, "time_limit_seconds", "MANIFEST_INVALID_TIME_LIMIT"),
-        folder=base / rid,
-        line=line,
-    )
+        time_limit_seconds=_positive(where, rec, "time_limit_seconds", "MANIFEST_INVALID_TIME_LIMIT"), folder=base / rid,
+        line=line)
 
 
 def read_manifest(path: Path | str, root: Path | str | None = None) -> list[ManifestRow]:
-    """Rows of a manifest CSV, in file order, all or nothing: the strict form
-    of :func:`read_manifest_rows` for callers that cannot use part of a
-    manifest. The refine flow and the benchmark use :func:`read_manifest_rows`
-    (a bad row fails that asset alone).
+    """Rows of a manifest CSV, in file order, all or nothing (the strict :func:`read_manifest_rows`).
 
     Raises:
         FileNotFoundError / OSError: the manifest cannot be read.
-        ManifestError: the file is unusable (see :func:`read_manifest_rows`),
-            or the first refused row (its ``code`` from
-            :data:`ROW_ERROR_CODES`; the message names the file, line and id).
+        ManifestError: the file is unusable, or the first refused row (its code and message).
     """
     reading = read_manifest_rows(path, root)
     if reading.errors:

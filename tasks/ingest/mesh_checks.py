@@ -1,11 +1,6 @@
-"""The mesh checks of the validator.
-
-:class:`MeshChecks` is the validator's mixin that resolves every ``<mesh>``
-reference of the URDF, scans each file once
-(:func:`asset2sim.tasks.ingest.mesh_scan.scan_mesh_file`), adds the per-use
-severities, the link flatness rule, the face caps and the OBJ's MTL
-libraries and texture maps; beside it the bounding boxes of geometry at the
-zero pose and the texture caps.
+"""The mesh checks of the validator (:class:`MeshChecks`): mesh references and contents (each file
+scanned once), the link flatness rule, the face caps, MTL libraries and texture maps; the bounding
+boxes of geometry at the zero pose and the texture caps.
 """
 
 from __future__ import annotations
@@ -44,15 +39,8 @@ def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def geometry_corners(g: UrdfGeometry, bounds: np.ndarray | None = None) -> np.ndarray | None:
-    """Corners (8, 3) of a ``<visual>``/``<collision>``'s bounding box in its
-    link's frame (file units; mesh scale and origin applied), or None when
-    unknown (``g`` not completely read, or a mesh without ``bounds``).
-
-    Args:
-        g: the geometry as :mod:`asset2sim.urdf` read it.
-        bounds: (2, 3) lower and upper corner of a mesh's vertices (file
-            units, scale 1; :attr:`MeshScan.bounds`); unused for primitives.
-    """
+    """Corners (8, 3) of a geometry's bounding box in its link's frame (file units; scale and origin
+    applied), or None when unknown; ``bounds``: (2, 3) corners of a mesh's vertices at scale 1."""
     if not g.complete:
         return None
     if g.kind == "mesh":
@@ -72,13 +60,9 @@ def geometry_corners(g: UrdfGeometry, bounds: np.ndarray | None = None) -> np.nd
 
 
 def zero_pose_bounds(model: UrdfModel, root: str | None, mesh_bounds: dict[int, np.ndarray]) -> np.ndarray | None:
-    """Lower and upper corner (2, 3) of the axis-aligned bounding box of every
-    ``<visual>`` and ``<collision>`` geometry placed by forward kinematics at
-    the zero configuration (file units, root link frame; mesh bounds from
-    the mesh scan, ``mesh_bounds`` by ``id`` of the geometry). None when the
-    tree is broken (no root, a link reached twice), some geometry's size is
-    unknown, or there is no geometry. Huge numbers give non-finite corners,
-    without a numpy warning."""
+    """Lower and upper corner (2, 3) of the box bounding every geometry at the zero configuration (file
+    units, root link frame; ``mesh_bounds`` by ``id`` of the geometry). None when the tree is broken,
+    some size is unknown or there is no geometry."""
     if root is None:
         return None
     by_parent: dict[str, list] = {}
@@ -111,18 +95,13 @@ def zero_pose_bounds(model: UrdfModel, root: str | None, mesh_bounds: dict[int, 
 
 
 def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
-    """(file size in bytes, width, height in pixels) of a texture map, read
-    without decoding it: the size by ``os.stat``, the dimensions from the
-    image header (``PIL.Image.open`` is lazy), the file opened only when it
-    is a regular file (:func:`asset2sim.atomic.open_regular`); a file above
-    ``max_bytes`` is not opened (width and height -1).
+    """(file size in bytes, width, height in pixels) of a texture map from the image header, nothing
+    decoded; a file above ``max_bytes`` is not opened (width and height -1).
 
     Raises:
         OSError: it cannot be inspected or is not a regular file.
-        ValueError: PIL cannot identify it as an image
-            (``PIL.UnidentifiedImageError``, a truncated header).
-        PIL.Image.DecompressionBombError: the header claims more pixels
-            than PIL's own limit (``Image.MAX_IMAGE_PIXELS`` x 2).
+        ValueError: PIL cannot identify it as an image.
+        PIL.Image.DecompressionBombError: the header claims more than twice PIL's pixel limit.
     """
     size = os.stat(path).st_size
     if size > max_bytes:
@@ -138,13 +117,8 @@ def texture_header(path: Path, max_bytes: int) -> tuple[int, int, int]:
 
 
 def texture_problem(path: Path, max_bytes: int, max_pixels: int) -> tuple[str, str] | None:
-    """Why a texture map cannot be loaded safely (None: it can): above the
-    file-size cap, not an image PIL can identify, or above the pixel cap
-    (width x height from the header, :func:`texture_header`).
-
-    Returns:
-        (code, message): ``TEXTURE_TOO_LARGE`` or ``TEXTURE_UNREADABLE``.
-    """
+    """Why a texture map cannot be loaded safely, (``TEXTURE_TOO_LARGE`` or ``TEXTURE_UNREADABLE``,
+    message); None when it can."""
     try:
         size, w, h = texture_header(path, max_bytes)
     except Image.DecompressionBombError as exc:
@@ -165,19 +139,14 @@ class MeshChecks(Recorder):
 
     def __init__(self, asset: Path, policy):
         super().__init__(asset, policy)
-        #: (2, 3) vertex bounds (file units, scale 1) of each scanned mesh geometry, by ``id`` of its UrdfGeometry
+        # (2, 3) vertex bounds (file units, scale 1) of each scanned mesh geometry, by id of its UrdfGeometry
         self.mesh_bounds: dict[int, np.ndarray] = {}
         self._textures_seen: set[Path] = set()
         self._texture_totals = [0, 0]  # bytes, pixels of the accepted texture maps
 
     def asset_size(self, model: UrdfModel, root: str | None) -> None:
-        """``ASSET_SIZE_IMPLAUSIBLE`` when the object's size g = sqrt(e1 * e2)
-        (the two largest extents of :func:`zero_pose_bounds`, file units) is
-        not finite or lies outside ``policy.asset_size_range`` (default
-        :func:`asset2sim.tasks.ingest.findings.asset_size_range`: the sizes
-        for which some category and size class give an overlay scale that
-        ``tasks.synthesize.validate_overlay`` accepts). Skipped when the size
-        is unknown (broken tree, unread mesh)."""
+        """``ASSET_SIZE_IMPLAUSIBLE`` when the object's size g = sqrt(e1 * e2) (:func:`zero_pose_bounds`)
+        is not finite or outside the policy's :func:`asset_size_range`; skipped when unknown."""
         box = zero_pose_bounds(model, root, self.mesh_bounds)
         if box is None:
             return
@@ -193,10 +162,8 @@ class MeshChecks(Recorder):
                      "meshes and of the mesh scale", size=g, extents=[float(x) for x in ext], size_range=[lo, hi])
 
     def meshes(self, links: list[UrdfLink]) -> None:
-        """Resolve, scan and check every ``<mesh>`` of ``links`` (every
-        ``<link>`` element of the model, :attr:`asset2sim.urdf.UrdfModel.link_elements`);
-        record ``mesh_paths``, ``material_files`` and each mesh geometry's
-        bounds in ``mesh_bounds`` (by ``id`` of the geometry)."""
+        """Resolve, scan and check every ``<mesh>`` of ``links``; record ``mesh_paths``,
+        ``material_files`` and ``mesh_bounds``."""
         assert self.folder is not None
         pol = self.policy
         scans: dict[Path, MeshScan | str] = {}
@@ -260,8 +227,7 @@ class MeshChecks(Recorder):
                     link_mass_geoms += 1
                     if scan.moments is not None:
                         mom = _transform_moments(scan.moments, g.origin, g.scale)
-                        link_moments = mom if link_moments is None else (
-                            link_moments[0] + mom[0], link_moments[1] + mom[1], link_moments[2] + mom[2])
+                        link_moments = mom if link_moments is None else tuple(a + b for a, b in zip(link_moments, mom))
             if link_mass_geoms and not link_has_volume and link_moments is not None and is_flat(*link_moments):
                 self.add("LINK_ZERO_VOLUME", f"all {mass_role} geometry of the link lies in one plane: zero volume; "
                          "mass must come from the surface area (shell), not the volume",
@@ -273,10 +239,8 @@ class MeshChecks(Recorder):
                      file=self.urdf_rel, total_faces=total_faces, cap=pol.max_total_faces)
 
     def _format_problem(self, fname: str, real: Path) -> str | None:
-        """Why refine cannot load this mesh file (None: it can). PyBullet,
-        which loads the input URDF, picks the reader by the name's suffix as
-        written; this validator by the real file's suffix: both must be a
-        format of ``policy.simulator_mesh_extensions`` and the same."""
+        """Why refine cannot load this mesh file (None: it can): the suffix as written (PyBullet's choice)
+        and the real file's must be the same format of ``policy.simulator_mesh_extensions``."""
         written = os.path.splitext(fname)[1].lower()
         actual = real.suffix.lower()
         allowed = self.policy.simulator_mesh_extensions
@@ -289,13 +253,9 @@ class MeshChecks(Recorder):
         return None
 
     def materials(self, mesh: Path, mesh_dir: Path, scan: MeshScan, link: str | None) -> None:
-        """The ``mtllib`` files of an OBJ (relative to ``mesh_dir``, the OBJ's
-        folder as written) and the texture maps they name
-        (:func:`asset2sim.mesh_materials.mtl_texture_maps`). For an OBJ reached
-        through a symlink into another folder, a library missing beside the
-        link but present beside the real file ``mesh`` is checked and
-        recorded there (``MESH_MATERIAL_BESIDE_TARGET``, info: the output
-        copies it beside the mesh, :func:`asset2sim.tasks.assemble.write.beside_link_target`)."""
+        """The ``mtllib`` files of an OBJ (relative to ``mesh_dir``, its folder as written) and their
+        texture maps; a library found only beside the real file of a symlinked OBJ is used from there
+        (``MESH_MATERIAL_BESIDE_TARGET``)."""
         assert self.folder is not None
         for name in scan.mtllibs:
             ref = resolve_mesh_reference(self.folder, name, base=mesh_dir, extensions=(), max_bytes=self.policy.max_mesh_bytes)
@@ -325,8 +285,7 @@ class MeshChecks(Recorder):
                     self.texture_file(tex.path, tname, self.rel(ref.path), link=link)
 
     def texture_file(self, path: Path, name: str, owner: str, *, line: int | None = None, link: str | None = None) -> None:
-        """The texture caps on one texture map (:func:`texture_problem`), each
-        real file checked once; ``owner`` the file that names it (relative)."""
+        """The texture caps on one texture map, each real file once; ``owner`` the file that names it."""
         if path in self._textures_seen:
             return
         self._textures_seen.add(path)
@@ -341,8 +300,7 @@ class MeshChecks(Recorder):
         self._texture_totals[1] += w * h
 
     def texture_totals(self) -> None:
-        """The per-asset texture caps (bytes and pixels over every distinct
-        texture map the MTL files name): PyBullet holds them all at once."""
+        """The per-asset texture caps (bytes and pixels over every distinct texture map)."""
         pol = self.policy
         size, pixels = self._texture_totals
         if size > pol.max_total_texture_bytes or pixels > pol.max_total_texture_pixels:
@@ -351,8 +309,7 @@ class MeshChecks(Recorder):
                      "docs/design/validation.md, Texture caps)", total_bytes=size, total_pixels=pixels)
 
     def _material_ref(self, ref: MeshReference, base: Path, owner: Path, link: str | None) -> bool:
-        """Record one MTL or texture reference; True when it is a usable file
-        inside the folder (kept in ``result.material_files``)."""
+        """Record one MTL or texture reference; True when it is a usable file inside the folder."""
         orel = self.rel(owner)
         if ref.code is None:
             assert ref.path is not None

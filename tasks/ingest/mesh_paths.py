@@ -1,11 +1,5 @@
-"""Safe resolution of the paths an asset names, and reading what they name.
-
-:func:`resolve_mesh_reference` decides, with ``stat`` only (nothing is
-opened, so a FIFO cannot block), whether a path written in a URDF, an OBJ's
-``mtllib`` or an MTL texture statement is a regular file inside the asset
-folder, and the same path the operating system (hence PyBullet, which reads
-the input) would open. :func:`read_regular` reads such a file without
-blocking and without following a symlink swapped in after the check.
+"""Safe resolution of the paths an asset names (``stat`` only: a FIFO cannot block) and reading what
+they name without blocking or following a symlink swapped in after the check.
 """
 
 from __future__ import annotations
@@ -24,11 +18,8 @@ __all__ = ["MeshReference", "file_kind", "inside", "read_regular", "resolve_mesh
 
 @dataclass(frozen=True)
 class MeshReference:
-    """Outcome of resolving one ``<mesh filename=...>``.
-
-    ``path`` is the real (symlink-free, absolute) path when acceptable, else
-    None and ``code``/``message`` say why. ``size`` bytes when known.
-    """
+    """Outcome of resolving one ``<mesh filename=...>``: ``path`` the real path when acceptable, else
+    None and ``code``/``message`` say why; ``size`` bytes when known."""
 
     filename: str
     path: Path | None
@@ -46,26 +37,18 @@ def inside(path: str, root: str) -> bool:
     return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
 
 
+_KINDS = ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"),
+          (stat.S_ISSOCK, "socket"), (stat.S_ISDIR, "directory"), (stat.S_ISREG, "regular file"))
+
+
 def _kind(mode: int) -> str:
-    return (
-        "FIFO" if stat.S_ISFIFO(mode)
-        else "character device" if stat.S_ISCHR(mode)
-        else "block device" if stat.S_ISBLK(mode)
-        else "socket" if stat.S_ISSOCK(mode)
-        else "directory" if stat.S_ISDIR(mode)
-        else "regular file" if stat.S_ISREG(mode)
-        else "special file"
-    )
+    return next((name for test, name in _KINDS if test(mode)), "special file")
 
 
 def file_kind(filename: str, base: Path | str) -> str | None:
-    """What ``filename`` (absolute, or relative to ``base``) names when opened,
-    symlinks followed, if it is a FIFO, a device, a socket or another special
-    file: ``"FIFO"``, ``"character device"``, ... ; None for a regular file,
-    a directory, a missing path, a URI or a string with NUL. Only ``os.stat``
-    is used (nothing is opened, so a FIFO cannot block). Wherever the path
-    leads (inside the asset folder or not), a reader of the input would block
-    on it or read without end."""
+    """``"FIFO"``, ``"character device"``, ... when ``filename`` (absolute, or relative to ``base``) names
+    a special file, symlinks followed; None for a regular file, a directory, a missing path, a URI or
+    a string with NUL (``os.stat`` only)."""
     if not filename or "\x00" in filename or _URI.match(filename):
         return None
     try:
@@ -77,35 +60,21 @@ def file_kind(filename: str, base: Path | str) -> str | None:
     return _kind(st.st_mode)
 
 
-def resolve_mesh_reference(
-    folder: Path | str,
-    filename: str | None,
-    *,
-    base: Path | str | None = None,
-    extensions: Iterable[str] = MESH_EXTENSIONS,
-    max_bytes: int | None = None,
-) -> MeshReference:
-    """Resolve a mesh path written in a URDF (or an OBJ's ``mtllib``) safely.
+def resolve_mesh_reference(folder: Path | str, filename: str | None, *, base: Path | str | None = None,
+                           extensions: Iterable[str] = MESH_EXTENSIONS, max_bytes: int | None = None) -> MeshReference:
+    """Resolve a mesh path written in a URDF (or an OBJ's ``mtllib``) safely, ``os.stat`` only.
 
-    Checks, in this order (the first failure is returned): filename present;
-    no NUL or control character; not a URI; not absolute (``/x``, ``\\x``,
-    ``C:\\x``); the lexically normalized path stays in ``folder``; the real
-    path (symlinks resolved) stays in the real ``folder``; it exists; it is not
-    a directory; it is a regular file (no FIFO, device, socket); its suffix is
-    in ``extensions`` (when non-empty); its size is <= ``max_bytes``; the path
-    as written opens (``dir/../x`` needs ``dir``, which normalization hides). Only
-    ``os.stat`` is used: nothing is opened, so a FIFO cannot block.
+    Checks, in order (the first failure is returned): present; no NUL or control character; not a
+    URI; not absolute; inside ``folder`` lexically and with symlinks resolved; exists; a regular file;
+    opens as written (``dir/../x`` needs ``dir``); suffix in ``extensions``; size <= ``max_bytes``.
 
     Args:
-        folder: the asset folder.
-        filename: the string as written.
-        base: folder the path is relative to (default ``folder``; the OBJ's
-            folder for ``mtllib``).
+        folder: the asset folder. filename: the string as written.
+        base: folder the path is relative to (default ``folder``; the OBJ's folder for ``mtllib``).
         extensions: accepted suffixes, lower case with the dot; empty: any.
         max_bytes: size cap in bytes (None: none).
 
-    Returns:
-        A :class:`MeshReference` (never raises for bad input).
+    Returns a :class:`MeshReference` (never raises for bad input).
     """
     fname = filename if filename is not None else ""
     if not fname.strip():
@@ -150,19 +119,15 @@ def resolve_mesh_reference(
         for name in (fname, real):
             suf = os.path.splitext(name)[1].lower()
             if suf not in exts:
-                return MeshReference(
-                    fname, None, "MESH_EXTENSION_UNSUPPORTED",
-                    f"{os.path.basename(name)!r} does not end in a mesh extension ({', '.join(sorted(exts))})",
-                )
+                return MeshReference(fname, None, "MESH_EXTENSION_UNSUPPORTED",
+                                     f"{os.path.basename(name)!r} does not end in a mesh extension ({', '.join(sorted(exts))})")
     if max_bytes is not None and st.st_size > max_bytes:
         return MeshReference(fname, None, "MESH_TOO_LARGE", f"{fname!r} has {st.st_size} bytes > cap {max_bytes}", st.st_size)
     return MeshReference(fname, Path(real), None, "", st.st_size)
 
 
-
 def read_regular(path: Path, max_bytes: int) -> bytes:
-    """Read a file that was checked to be regular, re-checking on the open
-    descriptor (no blocking on a FIFO swapped in, no symlink followed)."""
+    """Read a file checked to be regular, re-checking on the open descriptor (no FIFO, no symlink)."""
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     fd = os.open(str(path), flags)
     try:

@@ -1,12 +1,4 @@
-"""Strict reading of one mesh file: :func:`scan_mesh_file` and its :class:`MeshScan`.
-
-OBJ through :func:`asset2sim.mesh_io.read_obj` (the reader every later stage
-uses, so validation reads exactly what refine reads) with the checks a
-strict reader adds (records, index 0, indices out of range, face cap before
-parsing), binary and ASCII STL by a vectorized reader, DAE through
-``trimesh`` after the hardened XML parser. Used by the validator's mesh
-checks (:mod:`asset2sim.tasks.ingest.mesh_checks`).
-"""
+"""Strict reading of one mesh file for the validator's mesh checks: :func:`scan_mesh_file`."""
 
 from __future__ import annotations
 
@@ -27,21 +19,13 @@ __all__ = ["MeshScan", "is_flat", "scan_mesh_file"]
 
 @dataclass
 class MeshScan:
-    """What a strict read of one mesh file found (file units, scale 1).
-
-    ``defects`` maps mesh-content codes to messages. ``n_vertices``,
-    ``n_faces`` (triangles after fan triangulation of valid faces), ``area``
-    (m^2, finite faces only), ``flat`` (all used vertices within 1e-9 of the
-    extent of a plane), ``moments``: (count, sum (3,), sum of outer products
-    (3, 3)) of the used vertices, to decide flatness of a whole link.
-    ``bounds``: (2, 3) lower and upper corner of the used finite vertices.
-    ``mtllibs`` the ``mtllib`` names of an OBJ.
-    """
+    """What a strict read of one mesh file found (file units, scale 1): ``defects`` code -> message,
+    ``n_vertices``, ``n_faces`` triangles, ``area``, ``moments`` (count, sum (3,), sum of outer products (3, 3)) and
+    ``bounds`` (2, 3) of the used vertices, an OBJ's ``mtllibs``."""
 
     n_vertices: int = 0
     n_faces: int = 0
     area: float = 0.0
-    flat: bool = False
     defects: dict[str, str] = field(default_factory=dict)
     moments: tuple[int, np.ndarray, np.ndarray] | None = None
     mtllibs: list[str] = field(default_factory=list)
@@ -64,12 +48,8 @@ _OBJ_NOT_RECORD = re.compile(rb"^[ \t]*([^A-Za-z#\s][^\r\n]{0,39})", re.M)
 
 
 def _scan_obj(data: bytes, max_faces: int) -> tuple[np.ndarray, np.ndarray, dict[str, str], list[str]]:
-    """An OBJ as refine reads it (:func:`asset2sim.mesh_io.read_obj`) plus the
-    strict checks: the face cap on the record count before parsing, lines
-    that are no OBJ record, indices out of range or before the start, face
-    records the reader skipped (index 0, < 3 vertices). Returns (vertices
-    (N, 3), triangles (M, 3) 0-based without the bad ones, defects, mtllib
-    names)."""
+    """An OBJ as refine reads it (:func:`asset2sim.mesh_io.read_obj`) plus strict checks (face cap before
+    parsing, non-records, bad indices, skipped faces): (vertices, valid triangles, defects, mtllibs)."""
     defects: dict[str, str] = {}
     approx_faces = data.count(b"\nf ") + data.count(b"\nf\t") + (1 if data[:2] in (b"f ", b"f\t") else 0)
     if approx_faces > max_faces:
@@ -141,29 +121,17 @@ def _scan_trimesh(data: bytes, ext: str, max_faces: int, source: str) -> tuple[n
 
 def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: int = 2_000_000,
                    max_coordinate: float = MAX_COORDINATE) -> MeshScan:
-    """Strictly read one mesh file and report its defects.
-
-    OBJ by :func:`asset2sim.mesh_io.read_obj`, the reader of every later
-    stage (polygons fan-triangulated, negative relative indices, forward
-    references), with strict checks on top; STL (binary and ASCII) by this
-    module; PLY, OFF, GLB, GLTF and DAE by ``trimesh`` (DAE first checked by
-    :func:`asset2sim.safexml.parse_xml_bytes`). Which formats an asset may
-    use is the validator's decision (``ValidationPolicy.mesh_extensions``).
+    """Strictly read one mesh file and report its defects: OBJ by :func:`asset2sim.mesh_io.read_obj`
+    (the reader of every later stage) with strict checks on top, STL by this module, other formats by
+    ``trimesh`` (DAE first through :func:`asset2sim.safexml.parse_xml_bytes`).
 
     Args:
         path: a regular file (resolve it with :func:`resolve_mesh_reference`).
-        max_bytes: size cap, bytes.
-        max_faces: triangle cap.
-        max_coordinate: |coordinate| cap of the used vertices, file units;
-            checked (by comparison only) before any arithmetic on them, so
-            1e308 overflows nothing and prints no numpy warning.
+        max_bytes, max_faces: size cap (bytes) and triangle cap.
+        max_coordinate: |coordinate| cap of the used vertices, file units (compared before any arithmetic).
 
     Returns:
-        A :class:`MeshScan`; ``defects`` may hold MESH_MALFORMED,
-        MESH_TOO_MANY_FACES, MESH_NO_FACES, MESH_NONFINITE_VERTEX,
-        MESH_COORDINATE_IMPLAUSIBLE, MESH_BAD_INDEX, MESH_ZERO_AREA,
-        MESH_ZERO_VOLUME. Never raises for a bad file; OSError when the file
-        cannot be read.
+        A :class:`MeshScan` (never raises for a bad file); OSError when the file cannot be read.
     """
     path = Path(path)
     scan = MeshScan()
@@ -227,15 +195,12 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
     scan.moments = (n, s1, s2)
     scan.bounds = np.stack([uv.min(axis=0), uv.max(axis=0)])
     if is_flat(n, s1, s2):
-        scan.flat = True
         scan.defects["MESH_ZERO_VOLUME"] = "all vertices lie in one plane (zero volume)"
     return scan
 
 
 def is_flat(n: int, s1: np.ndarray, s2: np.ndarray) -> bool:
-    """Vertices whose scatter has a zero direction (relative 1e-9 of the extent).
-    False when the moments are not finite (an implausible size, refused by
-    ASSET_SIZE_IMPLAUSIBLE; nothing to say about flatness)."""
+    """Vertices whose scatter has a zero direction (relative 1e-9 of the extent); False for non-finite moments."""
     if n < 4:
         return True
     if not (np.isfinite(s1).all() and np.isfinite(s2).all()):

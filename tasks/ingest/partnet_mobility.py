@@ -1,29 +1,12 @@
-"""PartNet-Mobility: every convention of the dataset's folders, in one adapter.
+"""PartNet-Mobility (Xiang et al., "SAPIEN", CVPR 2020): every convention of the dataset's folders,
+in one adapter; the rest of the pipeline never opens a dataset side file itself.
 
-The rest of the pipeline sees only what this module returns (typed rows and
-records); it never opens a dataset side file itself. A PartNet-Mobility object
-folder (Xiang et al., "SAPIEN: A SimulAted Part-based Interactive
-ENvironment", CVPR 2020) holds:
-
-``mobility.urdf``
-    the articulated object (:func:`find_urdf`; a folder without it may hold
-    one other ``*.urdf``, files named ``reference_*`` never count).
-``semantics.txt``
-    one ``link_name joint_kind semantic_label`` line per link
-    (:func:`read_semantics`, :func:`iter_semantics`); joint kinds hinge,
-    slider, free, heavy, static, junk.
-``meta.json``
-    annotation metadata; ``model_cat`` is the object category
-    (:func:`read_category`).
-``reference_gensim2.json`` / ``reference_gensim2.urdf``
-    GenSim2's hand-curated copy (Hua et al., "GenSim2", CoRL 2024): the
-    ``scale`` it loads the object at, the task joint's
-    ``joint_position_range`` and a URDF whose only movable joints are the
-    task's (:func:`read_reference`).
-
-A dataset root holds one folder per object id and ``manifest.csv``, read by
-:mod:`asset2sim.tasks.ingest.manifest` (re-exported here:
-:func:`read_manifest_rows`; :func:`read_manifest` all or nothing).
+An object folder holds ``mobility.urdf`` (:func:`find_urdf`), ``semantics.txt`` (one
+``link_name joint_kind semantic_label`` line per link, :func:`read_semantics`), ``meta.json``
+(``model_cat``: the category, :func:`read_category`) and possibly GenSim2's reference (Hua et al.,
+"GenSim2", CoRL 2024: ``reference_gensim2.json`` / ``.urdf``, :func:`read_reference`). A dataset root
+holds one folder per object id and ``manifest.csv`` (:mod:`asset2sim.tasks.ingest.manifest`,
+re-exported here).
 """
 
 from __future__ import annotations
@@ -37,46 +20,14 @@ from typing import Any, Iterator, NamedTuple
 
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.manifest import (  # manifest.csv, re-exported: this module is the dataset's one adapter
-    FILE_ERROR_CODES,
-    ROW_ERROR_CODES,
-    ManifestError,
-    ManifestReading,
-    ManifestRow,
-    ManifestRowError,
-    is_valid_id,
-    read_manifest,
-    read_manifest_rows,
-)
+    ROW_ERROR_CODES, ManifestError, ManifestRow, ManifestRowError, is_valid_id, read_manifest, read_manifest_rows)
 from asset2sim.urdf import MOVABLE, read_urdf
 
 __all__ = [
-    "FILE_ERROR_CODES",
-    "META_NAME",
-    "MANIFEST_NAME",
-    "REFERENCE_JSON",
-    "REFERENCE_URDF",
-    "ROW_ERROR_CODES",
-    "SEMANTICS_NAME",
-    "URDF_NAMES",
-    "GenSim2Reference",
-    "ManifestError",
-    "ManifestReading",
-    "ManifestRow",
-    "ManifestRowError",
-    "Semantics",
-    "SemanticsLine",
-    "find_urdf",
-    "format_semantics",
-    "has_reference",
-    "iter_semantics",
-    "meta_category",
-    "read_category",
-    "is_valid_id",
-    "read_manifest",
-    "read_manifest_rows",
-    "read_reference",
-    "read_semantics",
-    "urdf_candidates",
+    "META_NAME", "MANIFEST_NAME", "REFERENCE_JSON", "REFERENCE_URDF", "ROW_ERROR_CODES", "SEMANTICS_NAME", "URDF_NAMES",
+    "GenSim2Reference", "ManifestError", "ManifestRow", "ManifestRowError", "Semantics", "SemanticsLine", "find_urdf",
+    "format_semantics", "has_reference", "iter_semantics", "meta_category", "read_category", "is_valid_id", "read_manifest",
+    "read_manifest_rows", "read_reference", "read_semantics", "urdf_candidates",
 ]
 
 #: URDF names looked up first in an object folder, in order.
@@ -97,13 +48,9 @@ def _is_regular(path: Path) -> bool:
         return False
 
 
-# ------------------------------------------------------------------ the URDF
-
-
 def urdf_candidates(folder: Path) -> list[Path]:
-    """The URDF files that may be the object of ``folder``: ``[mobility.urdf]``
-    when that name exists (as anything, even a broken link), else every
-    ``*.urdf`` not named ``reference_*``, sorted. Nothing is opened.
+    """The URDF files that may be the object of ``folder``: ``[mobility.urdf]`` when that name exists
+    (as anything), else every ``*.urdf`` not named ``reference_*``, sorted. Nothing is opened.
 
     Raises:
         OSError: the folder cannot be listed.
@@ -116,10 +63,8 @@ def urdf_candidates(folder: Path) -> list[Path]:
 
 
 def find_urdf(asset: Path | str) -> Path:
-    """The URDF of an asset: the path itself if it is a file, else
-    ``mobility.urdf`` in the folder, else the only ``*.urdf`` there (files
-    named ``reference_*`` excluded). Only regular files qualify (a FIFO named
-    ``mobility.urdf`` is never opened).
+    """The URDF of an asset: the path itself if it is a file, else the one :func:`urdf_candidates` finds;
+    only regular files qualify.
 
     Raises:
         AssetError: no (or several candidate) URDF files, or not a regular file.
@@ -141,23 +86,17 @@ def find_urdf(asset: Path | str) -> Path:
     return asset
 
 
-# ------------------------------------------------------------------ semantics.txt
-
-
 class Semantics(NamedTuple):
     """One link's entry of ``semantics.txt`` (a tuple ``(joint_kind, label)``)."""
 
-    joint_kind: str
-    """hinge, slider, free, heavy, static or junk (as written)."""
-    label: str
-    """Part label, e.g. ``lid``, ``drawer``, ``door`` (may contain spaces)."""
+    joint_kind: str  # hinge, slider, free, heavy, static or junk (as written)
+    label: str  # part label, e.g. ``lid``, ``drawer``, ``door`` (may contain spaces)
 
 
 @dataclass(frozen=True)
 class SemanticsLine:
-    """One non-blank line of ``semantics.txt``: ``lineno`` 1-based, ``text``
-    as written; ``link`` and ``entry`` are None when the line is malformed
-    (fewer than three fields)."""
+    """One non-blank line of ``semantics.txt`` (``lineno`` 1-based); ``link`` and ``entry`` None when
+    it has fewer than three fields."""
 
     lineno: int
     text: str
@@ -166,9 +105,8 @@ class SemanticsLine:
 
 
 def iter_semantics(text: str) -> Iterator[SemanticsLine]:
-    """The non-blank lines of ``semantics.txt`` text, in order, parsed as
-    ``link_name joint_kind semantic_label...`` (the label is the rest of the
-    line, whitespace runs joined by one space)."""
+    """The non-blank lines of ``semantics.txt`` text, parsed as ``link_name joint_kind semantic_label...``
+    (the label the rest of the line, whitespace runs joined by one space)."""
     for i, line in enumerate(text.splitlines(), 1):
         parts = line.split()
         if not parts:
@@ -180,9 +118,7 @@ def iter_semantics(text: str) -> Iterator[SemanticsLine]:
 
 
 def read_semantics(folder: Path) -> dict[str, Semantics]:
-    """``semantics.txt`` of ``folder`` as link -> :class:`Semantics`
-    ``(joint_kind, label)``; {} when absent. A link named twice keeps its
-    last line.
+    """``semantics.txt`` of ``folder`` as link -> :class:`Semantics` ({} when absent; the last line of a link wins).
 
     Raises:
         AssetError: a line that is not ``link joint_kind label``, or
@@ -202,15 +138,12 @@ def read_semantics(folder: Path) -> dict[str, Semantics]:
 
 
 def format_semantics(entries: dict[str, Semantics]) -> str:
-    """``semantics.txt`` text for link -> :class:`Semantics`, one
-    ``link_name joint_kind semantic_label`` line per link in the given order
-    (the writer of :func:`iter_semantics`: ``iter_semantics(format_semantics(e))``
-    gives ``e`` back).
+    """``semantics.txt`` text for link -> :class:`Semantics`, one line per link in the given order
+    (the inverse of :func:`iter_semantics`).
 
     Raises:
-        ValueError: a link name or joint kind that is empty or contains
-            whitespace, or a label that is empty or spans lines (the format
-            cannot express them); the message names the link.
+        ValueError: a link name or joint kind empty or with whitespace, or a label empty or spanning
+            lines; the message names the link.
     """
     lines = []
     for link, (kind, label) in entries.items():
@@ -225,19 +158,14 @@ def format_semantics(entries: dict[str, Semantics]) -> str:
     return "".join(lines)
 
 
-# ------------------------------------------------------------------ meta.json
-
-
 def meta_category(meta: Any) -> str | None:
-    """``model_cat`` of a parsed ``meta.json`` (None when ``meta`` is not an
-    object or the field is missing or empty)."""
+    """``model_cat`` of a parsed ``meta.json``; None when not an object or the field is missing or empty."""
     cat = meta.get("model_cat") if isinstance(meta, dict) else None
     return str(cat) if cat else None
 
 
 def read_category(folder: Path) -> str | None:
-    """``model_cat`` of ``folder/meta.json``; None when absent, unreadable,
-    not JSON or not a regular file."""
+    """``model_cat`` of ``folder/meta.json``; None when absent, unreadable, not JSON or not a regular file."""
     path = Path(folder) / META_NAME
     if not _is_regular(path):
         return None
@@ -248,19 +176,11 @@ def read_category(folder: Path) -> str | None:
     return meta_category(meta)
 
 
-# ------------------------------------------------------------------ GenSim2 reference
-
-
 @dataclass(frozen=True)
 class GenSim2Reference:
-    """GenSim2's reference of one object folder.
-
-    ``scale``: dimensionless load scale (None when ``reference_gensim2.json``
-    is missing or has none); ``joint_position_range``: (lo, hi) of the task
-    joint in file units (rad or m), or None; ``urdf``: path of
-    ``reference_gensim2.urdf`` or None; ``task_joints``: its movable
-    (revolute, continuous, prismatic) joints, in file order.
-    """
+    """GenSim2's reference of one object folder: load ``scale``, the task joint's
+    ``joint_position_range`` (rad or m), ``reference_gensim2.urdf`` and its movable ``task_joints``
+    in file order; None / empty where missing."""
 
     scale: float | None = None
     joint_position_range: tuple[float, float] | None = None
@@ -274,8 +194,7 @@ def has_reference(folder: Path | str) -> bool:
 
 
 def read_reference(folder: Path | str) -> GenSim2Reference:
-    """GenSim2's reference of a PartNet-Mobility folder (all fields empty
-    when the folder has none).
+    """GenSim2's reference of a PartNet-Mobility folder (all fields empty when it has none).
 
     Raises:
         ValueError: ``reference_gensim2.json`` is not JSON, or a range value

@@ -1,12 +1,6 @@
-"""The kinematic-tree checks of the validator: structure, inertials, joint travel.
-
-:class:`TreeChecks` works on the :class:`asset2sim.urdf.UrdfModel` the URDF
-checks (:mod:`asset2sim.tasks.ingest.urdf_checks`) read, every ``<link>``
-element included (``link_elements``): unique names, parents and
-children, self loops, several parents, cycles, orphans, exactly one root,
-the link cap, mimic joints, joint types refine does not model (floating,
-planar); the given inertials (:func:`check_inertia`); and,
-after the meshes were scanned, prismatic travel against the object's size.
+"""The kinematic-tree checks of the validator (:class:`TreeChecks`): structure (names, parents,
+cycles, orphans, one root, caps, mimic and unsupported joints), the given inertials
+(:func:`check_inertia`) and prismatic travel against the object's size.
 """
 
 from __future__ import annotations
@@ -25,16 +19,10 @@ __all__ = ["TreeChecks", "check_inertia"]
 
 
 def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, izz: float) -> tuple[str | None, list[float]]:
-    """Check a URDF inertia tensor (kg*m^2, about the COM).
-
-    Returns:
-        ``(code, eigenvalues)``: code None when the tensor is symmetric
-        positive definite and its principal moments satisfy the triangle
-        inequality (each <= the sum of the other two, relative tolerance
-        1e-9 of the trace); else ``INERTIA_NOT_POSITIVE_DEFINITE`` (smallest
-        eigenvalue <= 1e-12 x largest, or largest <= 0) or
-        ``INERTIA_TRIANGLE_INEQUALITY``. Eigenvalues ascending, kg*m^2.
-        The tensor is never modified ("balanced").
+    """Check a URDF inertia tensor (kg*m^2, about the COM): ``(code, eigenvalues ascending)``, code None
+    when positive definite (smallest eigenvalue > 1e-12 x largest) with the triangle inequality
+    (tolerance 1e-9 of the trace), else ``INERTIA_NOT_POSITIVE_DEFINITE`` or
+    ``INERTIA_TRIANGLE_INEQUALITY``.
     """
     m = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], float)
     lam = np.linalg.eigvalsh(m)
@@ -49,12 +37,7 @@ def check_inertia(ixx: float, ixy: float, ixz: float, iyy: float, iyz: float, iz
 
 _INERTIA_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # ixx ixy ixz iyy iyz izz
 
-#: Joint types of the URDF specification refine refuses (``JOINT_TYPE_UNSUPPORTED``),
-#: with why and what to write instead. Refine carries the others through
-#: (:data:`asset2sim.urdf.SIMULATED_JOINT_TYPES`: revolute, continuous,
-#: prismatic, fixed): its closed-state and state search, limits, written
-#: initial state and post-check move one coordinate per joint, and its
-#: engines read only those types. Measured on a stapler with one such joint
+#: Joint types refine refuses (``JOINT_TYPE_UNSUPPORTED``), with why and what to write instead
 #: (docs/design/validation.md, "Joint types").
 _UNSUPPORTED_JOINT_TYPES: dict[str, str] = {
     "floating": "a part with 6 free degrees of freedom is not an articulation refine can set or check (it models "
@@ -71,10 +54,8 @@ _UNSUPPORTED_JOINT_TYPES: dict[str, str] = {
 
 @dataclass
 class _Tree:
-    """The kinematic tree as the joints give it: ``has_parent`` child link ->
-    the names of its parent joints; ``first_parent`` / ``children`` the edges
-    of each child's first joint between known links; ``touched`` the links
-    some joint names."""
+    """The tree as the joints give it: ``has_parent`` child -> its parent joints' names,
+    ``first_parent`` / ``children`` the edges of each child's first joint, ``touched`` the links named."""
 
     children: dict[str, list[str]]
     has_parent: dict[str, list[str]] = field(default_factory=dict)
@@ -87,11 +68,8 @@ class TreeChecks(Recorder):
 
     mesh_bounds: dict[int, np.ndarray]  # set by MeshChecks (mesh vertex bounds by id of the geometry)
 
-    # -- names that become file names
     def _file_names(self, links: dict[str, UrdfLink]) -> None:
-        """Link names are data: one that is not a clean file name is reported
-        with the name its files get (:func:`asset2sim.file_names.file_stem`);
-        two links whose files would share a name are refused."""
+        """Link names that are not clean file names (with the name their files get), and clashes."""
         for name, ln in links.items():
             if not file_names.is_clean(name):
                 self.add("LINK_NAME_NOT_A_FILE_NAME", f"not a safe file name; files made for it are "
@@ -100,12 +78,8 @@ class TreeChecks(Recorder):
             self.add("LINK_FILE_NAMES_CLASH", f"links {', '.join(map(repr, same))} would give their files one name "
                      f"{stem!r}; rename one", line=links[same[1]].line, link=same[1])
 
-    # -- structure
     def structure(self, model: UrdfModel) -> tuple[set[str], str | None]:
-        """Names, parents and children, cycles, orphans, the root, the link
-        cap, the movable-joint cap, mimic joints and floating or planar
-        joints of ``model`` (every ``<link>`` element).
-        Returns (moving links, root)."""
+        """The structure checks of ``model`` (every ``<link>`` element); returns (moving links, root)."""
         links, joints = model.link_elements, model.joints
         if not links:
             self.add("URDF_NO_LINKS", "the robot has no <link>")
@@ -139,8 +113,7 @@ class TreeChecks(Recorder):
                      f"per-asset time limit, which then ends it", joints=len(movable), cap=self.policy.max_movable_joints)
 
     def _first_by_name(self, items: list, kind: str) -> dict:
-        """``kind`` ("link" or "joint") elements by name, the first of each
-        name; the others are ``LINK_NAME_DUPLICATE`` / ``JOINT_NAME_DUPLICATE``."""
+        """``kind`` ("link" or "joint") elements by name, the first of each; the others are duplicates."""
         seen: dict = {}
         for it in items:
             if not it.name:
@@ -153,8 +126,7 @@ class TreeChecks(Recorder):
         return seen
 
     def _connect(self, j: UrdfJoint, seen: dict[str, UrdfLink], tree: _Tree) -> bool:
-        """Record joint ``j`` in ``tree``; unknown parent or child links and a
-        self loop are reported. False for a self loop."""
+        """Record joint ``j`` in ``tree``, reporting unknown links and a self loop (then False)."""
         jname, parent, child = joint_name(j.name), link_name(j.parent), link_name(j.child)
         ok = True
         if parent is not None and parent not in seen:
@@ -193,8 +165,7 @@ class TreeChecks(Recorder):
                      f"{_UNSUPPORTED_JOINT_TYPES[j.type]}", line=j.line, joint=jname, type=j.type)
 
     def _parents_and_orphans(self, tree: _Tree, names: list[str], seen: dict[str, UrdfLink]) -> list[str]:
-        """Links with several parents and links no joint names; returns the
-        links without a parent joint (root candidates), in link order."""
+        """Links with several parents and orphans; returns the links without a parent joint, in order."""
         for child, js in tree.has_parent.items():
             if len(js) > 1:
                 self.add("LINK_MULTIPLE_PARENTS", f"link {child!r} is the child of joints {', '.join(map(repr, js))}",
@@ -247,12 +218,9 @@ class TreeChecks(Recorder):
             return None
         return connected_roots[0] if connected_roots else roots[0]
 
-    # -- inertials
     def inertials(self, model: UrdfModel, moving: set[str]) -> None:
-        """The given ``<inertial>`` of every named ``<link>`` element: mass >
-        0 on moving links, inertia tensor positive definite with the triangle
-        inequality (:func:`check_inertia`); invalid or incomplete ones go to
-        ``result.replace_inertials``."""
+        """The given ``<inertial>`` of every named link (mass > 0 when moving, :func:`check_inertia`);
+        invalid or incomplete ones go to ``result.replace_inertials``."""
         for ln in model.link_elements:
             ine = ln.inertial
             if ine is None or not ln.name:
@@ -284,25 +252,19 @@ class TreeChecks(Recorder):
             if bad:
                 self.result.replace_inertials.add(ln.name)
 
-    # -- joint travel against the object's size (after the meshes were scanned)
     def joint_travel(self, model: UrdfModel, root: str | None) -> None:
-        """Prismatic limits beyond ``policy.max_prismatic_travel`` x the
-        object's size: the diagonal of the bounding box of every geometry
-        placed by forward kinematics at the zero configuration (file units;
-        mesh bounds from the mesh scan, ``mesh_bounds``). Skipped when the
-        tree is broken or some size is unknown."""
+        """Prismatic limits beyond ``policy.max_prismatic_travel`` x the diagonal of :func:`zero_pose_bounds`
+        (after the mesh scan); skipped when that is unknown."""
         box = zero_pose_bounds(model, root, self.mesh_bounds)
         if box is None or not np.isfinite(box).all():
             return
-        joints = model.joints
         size = float(np.linalg.norm(box[1] - box[0]))
         cap = self.policy.max_prismatic_travel * size
-        for j in joints:
+        for j in model.joints:
             lim = j.limit
             if j.type != "prismatic" or lim is None or lim.lower is None or lim.upper is None or size <= 0:
                 continue
-            travel = max(abs(lim.lower), abs(lim.upper))
-            if travel > cap:
+            if max(abs(lim.lower), abs(lim.upper)) > cap:
                 self.add("JOINT_LIMIT_IMPLAUSIBLE", f"prismatic limits [{lim.lower!r}, {lim.upper!r}] go beyond the object's "
                          f"size {size:.4g} (diagonal of its bounding box, file units): the part would leave the object; "
                          "check the units of the limits and of the meshes", line=lim.line, joint=joint_name(j.name),

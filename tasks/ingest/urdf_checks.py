@@ -1,16 +1,6 @@
-"""The URDF checks of the validator: encoding, elements, numbers, limits.
-
-:class:`UrdfChecks` reads the URDF's bytes once, checks their encoding
-(:func:`encoding_problem`) and reads them with the one URDF reader,
-:func:`asset2sim.urdf.parse_urdf_bytes` in mode ``"collect"``: every problem
-the reader meets (XML, numbers parsed strictly by
-:func:`asset2sim.urdf.parse_number_list`, names, joint types, parent and
-child, axis, limits, dynamics, geometry, inertials) becomes a finding with
-the reader's code, line and link or joint. On the model it then checks
-what is the validator's own: the ``<texture>`` files, and revolute limits
-within the policy's cap (+-4 pi). The tree and mesh checks read the same
-model (:mod:`asset2sim.tasks.ingest.tree_checks`,
-:mod:`asset2sim.tasks.ingest.mesh_checks`).
+"""The URDF checks of the validator (:class:`UrdfChecks`): the encoding, every problem the URDF reader
+(:func:`asset2sim.urdf.parse_urdf_bytes`, mode ``"collect"``) meets as a finding, ``<texture>``
+files and revolute limits.
 """
 
 from __future__ import annotations
@@ -38,15 +28,8 @@ def _bom_problem(data: bytes) -> str | None:
 
 
 def encoding_problem(data: bytes) -> str | None:
-    """Why URDF bytes are not UTF-8 as every URDF reader expects (None: they are).
-
-    Accepted: UTF-8 with or without a byte-order mark; any declared encoding
-    when every byte is ASCII (then all encodings agree). Refused: a UTF-16 or
-    UTF-32 byte-order mark or NUL bytes (UTF-16/32 without one), bytes that
-    are not valid UTF-8, and a declared encoding other than UTF-8/ASCII with
-    non-ASCII bytes (names would differ between this validator and PyBullet,
-    which reads the bytes as UTF-8).
-    """
+    """Why URDF bytes are not UTF-8 as every URDF reader expects (None: they are): a UTF-16/32 byte-order
+    mark or NUL bytes, invalid UTF-8, or another declared encoding with non-ASCII bytes."""
     bom = _bom_problem(data)
     if bom is not None:
         return bom
@@ -66,8 +49,7 @@ def encoding_problem(data: bytes) -> str | None:
 
 
 def link_name(name: str) -> str | None:
-    """A link or joint name of the model as findings carry it: None for a
-    missing or empty name (the reader keeps ``""``)."""
+    """A link or joint name as findings carry it: None for a missing or empty name."""
     return name or None
 
 
@@ -78,15 +60,9 @@ class UrdfChecks(Recorder):
     """Reading the URDF, and the checks of its elements (mixin of the validator)."""
 
     def read(self, urdf: Path) -> UrdfModel | None:
-        """Read ``urdf`` once (:mod:`asset2sim.safexml` caps), check its
-        encoding, read it with :func:`asset2sim.urdf.parse_urdf_bytes` (mode
-        ``"collect"``: every problem becomes a finding) and check textures and
-        revolute limits. Sets ``result.urdf_bytes``.
-
-        Returns:
-            The model, or None when nothing more can be checked (unreadable
-            file, XML refused, encoding not UTF-8, root not ``<robot>``).
-        """
+        """Read ``urdf`` once, check its encoding, parse it (every problem a finding), check textures and
+        revolute limits; sets ``result.urdf_bytes``. Returns the model, or None when nothing more can
+        be checked."""
         try:
             data = safexml.read_xml_file(urdf, self.policy.xml)
         except safexml.SafeXMLError as exc:
@@ -126,8 +102,7 @@ class UrdfChecks(Recorder):
             self.add(p.code, p.message, line=p.line, link=p.link, joint=p.joint, **p.values)
 
     def texture(self, mat: UrdfMaterial, link: str | None) -> None:
-        """A ``<texture filename>`` must be a safe relative path to an image
-        inside the folder (kept in ``result.material_files``)."""
+        """A ``<texture filename>`` must be a safe relative path to an image inside the folder."""
         fname = mat.texture
         if fname is None:
             return
@@ -145,10 +120,8 @@ class UrdfChecks(Recorder):
                      line=mat.texture_line, link=link, reason=ref.code)
 
     def revolute_limits(self, model: UrdfModel) -> None:
-        """Revolute limits within ``policy.max_revolute_limit`` rad (two
-        turns): larger stops are degrees written as radians or a free joint.
-        A missing ``lower``/``upper`` is 0 (URDF default); an unreadable one
-        skips the joint (its number finding was recorded)."""
+        """Revolute limits within ``policy.max_revolute_limit`` rad (a missing one is 0, an unreadable one
+        skips the joint)."""
         cap = self.policy.max_revolute_limit
         for j in model.joints:
             lim = j.limit

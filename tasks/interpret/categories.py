@@ -1,13 +1,6 @@
-"""Which category an asset is: names, request mentions and recognition.
-
-A category (``categories.yaml``) is named by its canonical name, PartNet's
-``model_cat`` or a synonym (:func:`resolve_category`, :func:`category_prior`);
-requests mention categories in free text (:func:`find_category_mentions`,
-:func:`request_category`, :func:`find_variant`); :func:`recognize_category`
-weighs the request words, ``meta.json``'s ``model_cat`` and the semantic labels
-to pick one, with the ``Generic`` fallback for thin evidence.
-
-Never raises on unknown names. Sources: ``categories.yaml``, ``docs/design/priors.md``.
+"""Which category an asset is (``categories.yaml``): names and synonyms, request
+mentions, and :func:`recognize_category` weighing request words, ``model_cat``
+and semantic labels (``Generic`` for thin evidence; ``docs/design/priors.md``).
 """
 
 from __future__ import annotations
@@ -32,12 +25,8 @@ _MIN_SCORE = 0.5  # below this the Generic fallback is returned
 
 
 class CategoryMatch(PriorModel):
-    """Result of :func:`recognize_category`.
-
-    ``confidence`` in [0, 1]; ``reason`` explains the evidence; ``scores`` the
-    evidence score per candidate category; ``variant`` the sub-type named by
-    the request, if any.
-    """
+    """Result of :func:`recognize_category`: ``confidence`` in [0, 1], the evidence ``reason`` and ``scores``,
+    and the ``variant`` the request names."""
 
     name: str
     prior: CategoryPrior
@@ -70,22 +59,14 @@ def _lookup_tables() -> tuple[dict[str, str], dict[str, str]]:
 
 
 def resolve_category(name: str | None) -> str | None:
-    """Canonical category for a category name, model_cat or synonym, else None.
-
-    Case and punctuation are ignored (``trash can`` -> ``TrashCan``,
-    ``fridge`` -> ``Refrigerator``).
-    """
+    """Canonical category for a name, model_cat or synonym (case and punctuation ignored), else None."""
     if not name:
         return None
     return _lookup_tables()[0].get(_simple(name))
 
 
 def category_prior(name: str, strict: bool = False) -> CategoryPrior:
-    """The prior of category ``name`` (canonical name, model_cat or synonym).
-
-    Unknown names give the ``Generic`` fallback, or raise ``KeyError`` when
-    ``strict``. Sources: ``categories.yaml``.
-    """
+    """The prior of category ``name``; unknown names give ``Generic``, or ``KeyError`` when ``strict``."""
     canon = resolve_category(name)
     if canon is None:
         if strict:
@@ -96,9 +77,7 @@ def category_prior(name: str, strict: bool = False) -> CategoryPrior:
 
 @dataclass(frozen=True)
 class CategoryMention:
-    """A category named in a request: character span, the words, the category,
-    whether the word is ambiguous (weak) and whether it reads as a part of
-    another object (``its door``)."""
+    """A category named in a request: span, words, category, ambiguous (weak), a part of another object."""
 
     start: int
     end: int
@@ -113,8 +92,7 @@ _WORD_R = r"(?![\w-])"
 
 
 def phrase_regex(phrase: str, plural: bool = False) -> str:
-    """Regex source matching ``phrase`` as whole words (hyphenated compounds are
-    one word; internal spaces match any whitespace; optional plural ``s``/``es``)."""
+    """Regex source matching ``phrase`` as whole words (any whitespace inside; optional plural)."""
     body = r"\s+".join(re.escape(w) for w in phrase.split())
     if plural:
         body += r"(?:s|es)?"
@@ -132,8 +110,7 @@ def _mention_regex() -> tuple[re.Pattern[str], dict[str, tuple[str, bool]]]:
             phrase_to.setdefault(s, (name, weak))
     alts = sorted(phrase_to, key=lambda p: (-len(p), p))
     src = "|".join(f"(?:{phrase_regex(p, plural=True)})" for p in alts)
-    # the same matches, tried only where a word starts with a first letter of
-    # some phrase (the alternation is otherwise tried at every character)
+    # tried only where a word starts with some phrase's first letter
     first = "".join(re.escape(c) for c in sorted({p[0] for p in alts}))
     return re.compile(f"{_WORD_L}(?=[{first}])(?:{src})"), phrase_to
 
@@ -143,10 +120,7 @@ _BACKWARD = re.compile(r"[.,;:!?()]|[a-z']+")
 
 
 def _last_words(rev: str, pos: int, n: int = 2) -> list[str]:
-    """The last ``n`` words (``[a-z']+``) of the clause that ends where
-    ``rev[pos:]`` (the text reversed) begins, in text order: the same as
-    ``re.findall(r"[a-z']+", re.split(r"[.,;:!?()]", text[:i])[-1])[-n:]``,
-    but reading only back to the n-th word or the clause mark."""
+    """The last ``n`` words of the clause ending where ``rev[pos:]`` (the text reversed) begins, in text order."""
     words: list[str] = []
     for t in _BACKWARD.finditer(rev, pos):
         w = t.group(0)
@@ -159,11 +133,8 @@ def _last_words(rev: str, pos: int, n: int = 2) -> list[str]:
 
 
 def find_category_mentions(text: str) -> list[CategoryMention]:
-    """Every category synonym in ``text`` (lower-cased), left to right, longest
-    match first (``microwave oven`` before ``oven``, ``desk lamp`` before
-    ``desk``). A mention preceded within two words by its/their/his/her is
-    marked ``possessive`` (a part of the object: "with its door"), and so is one
-    followed by "of a <category>" ("the door of a microwave")."""
+    """Every category synonym in ``text``, left to right, longest first; ``possessive`` after its/their/his/her
+    within two words ("with its door") or before "of a <category>" ("the door of a microwave")."""
     low = text.lower()
     rx, phrase_to = _mention_regex()
     out: list[CategoryMention] = []
@@ -193,8 +164,7 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
 
 
 def request_category(text: str) -> tuple[str | None, CategoryMention | None]:
-    """The category a request is about: its first strong, non-possessive
-    mention, else its first mention of any kind; (None, None) if none."""
+    """(category, mention) a request is about: the first strong non-possessive mention, else the first."""
     mentions = find_category_mentions(text)
     for m in mentions:
         if not m.weak and not m.possessive:
@@ -205,16 +175,13 @@ def request_category(text: str) -> tuple[str | None, CategoryMention | None]:
 
 
 def find_variant(category: str, text: str) -> VariantPrior | None:
-    """The variant of ``category`` named earliest in ``text`` (longest phrase
-    wins at a position), or None."""
+    """The variant of ``category`` named earliest in ``text``, or None."""
     found = variant_mention(category, text)
     return found[2] if found else None
 
 
 def variant_mention(category: str, text: str) -> tuple[int, int, VariantPrior] | None:
-    """Where ``text`` names a variant of ``category`` ("kitchen faucet",
-    "mini fridge"): (start, end, variant) in character offsets of ``text``,
-    the earliest mention (longest phrase at a position), or None.
+    """(start, end, variant) of the earliest variant of ``category`` in ``text`` (longest first), or None.
 
     Raises:
         KeyError: ``category`` is not in categories.yaml.
@@ -235,22 +202,9 @@ def variant_mention(category: str, text: str) -> tuple[int, int, VariantPrior] |
 def recognize_category(
     model_cat: str | None, semantic_labels: Iterable[str | None], request_text: str = ""
 ) -> CategoryMatch:
-    """Recognise the category of an asset from all the evidence.
-
-    Evidence (scores, dimensionless): the object the request is about (its first
-    strong non-possessive category word, 4.0; other category words 1.0),
-    ``model_cat`` (2.5), a body label naming a category (``suitcase_body``,
-    1.0) and characteristic part labels (``part_evidence`` of
-    categories.yaml, summed, at most 1.0). The request outweighs model_cat plus
-    a body label, since it says what the user wants the asset to be (e.g. a
-    Suitcase-filed asset requested as a "purse" gives Bag; Table-filed drawer
-    cabinets requested as a "cabinet" give StorageFurniture). Best score below
-    0.5 gives the ``Generic`` fallback with confidence 0.
-
-    ``confidence`` = (best / sum of all scores) * min(1, best / 3): 1 when
-    several sources agree, lower with conflicts or thin evidence.
-
-    Never raises on unknown names; ``semantic_labels`` may contain None.
+    """Recognise the category of an asset: scores for the request's object (4.0; other mentions 1.0),
+    ``model_cat`` (2.5), a body label (1.0) and part labels (at most 1.0); below 0.5 ``Generic``.
+    ``confidence`` = (best / total) * min(1, best / 3). Never raises; ``semantic_labels`` may hold None.
     """
     ev = _Evidence()
     text = request_text or ""
@@ -279,8 +233,7 @@ class _Evidence:
 
 
 def _request_evidence(ev: _Evidence, text: str) -> None:
-    """The object the request is about (:data:`_W_REQUEST_HEAD`, or :data:`_W_REQUEST_OTHER` when weak or
-    possessive) and each other category it mentions (:data:`_W_REQUEST_OTHER`)."""
+    """Evidence of the request's object and of each other category it mentions."""
     head_cat, head = request_category(text)
     if head is not None and head_cat is not None:
         w = _W_REQUEST_OTHER if (head.weak or head.possessive) else _W_REQUEST_HEAD
@@ -294,8 +247,7 @@ def _request_evidence(ev: _Evidence, text: str) -> None:
 
 
 def _label_evidence(ev: _Evidence, labels: list[str]) -> None:
-    """Body labels naming a category (:data:`_W_BODY_LABEL` once per category) and characteristic part
-    labels (``part_evidence``, summed per category, at most :data:`_W_PART_CAP`)."""
+    """Evidence of body labels naming a category and of characteristic part labels."""
     pri = load_priors()
     tokens = _lookup_tables()[1]
     body_hit: set[str] = set()
@@ -326,18 +278,12 @@ def _generic_match(ev: _Evidence, model_cat: str | None, labels: list[str]) -> C
         reason += f" (model_cat {model_cat!r} unknown)"
     if labels:
         reason += f"; labels {labels}"
-    return CategoryMatch(
-        name=GENERIC,
-        prior=load_priors().categories[GENERIC],
-        confidence=0.0,
-        reason=reason + "; using the generic fallback",
-        scores={k: round(v, 3) for k, v in ev.scores.items()},
-    )
+    return CategoryMatch(name=GENERIC, prior=load_priors().categories[GENERIC], confidence=0.0,
+                         reason=reason + "; using the generic fallback", scores={k: round(v, 3) for k, v in ev.scores.items()})
 
 
 def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
-    """The best-scoring category (ties: request evidence, then model_cat, then the name), its confidence
-    (best / total) * min(1, best / 3), the reasons for it and against the others, and its variant in ``text``."""
+    """The best-scoring category (ties: request evidence, model_cat, name) with reasons and variant."""
     scores, why = ev.scores, ev.why
 
     def rank(name: str) -> tuple[float, bool, bool, str]:
@@ -352,12 +298,6 @@ def _best_match(ev: _Evidence, text: str) -> CategoryMatch:
     reason = f"{best}: " + ", ".join(why[best])
     if others:
         reason += "; against: " + ", ".join(f"{n} ({s:.1f}: {', '.join(why[n])})" for n, s in others)
-    return CategoryMatch(
-        name=best,
-        prior=load_priors().categories[best],
-        confidence=round(max(0.0, min(1.0, conf)), 3),
-        reason=reason,
-        variant=find_variant(best, text),
-        scores={k: round(v, 3) for k, v in scores.items()},
-    )
+    return CategoryMatch(name=best, prior=load_priors().categories[best], confidence=round(max(0.0, min(1.0, conf)), 3), reason=reason,
+                         variant=find_variant(best, text), scores={k: round(v, 3) for k, v in scores.items()})
 

@@ -1,20 +1,9 @@
-"""How an asset is held in the world: free-standing or mounted.
-
-A faucet is fastened to a sink deck, a door hangs in its frame, a switch sits
-in a wall box: simulator users load such assets with a fixed root
-(PyBullet ``useFixedBase``, SAPIEN ``fix_root_link``, MJCF without a free
-joint). The per-category prior lives in ``asset2sim/priors/mounting.yaml``
-(each entry with its source: plumbing, electrical and fenestration codes and
-manufacturers' installation guides); categories not listed there are
-free-standing (the SPEC's convention: root free, resting on the ground). The
-request can override the prior: "a free-standing faucet", "mounted on the
-wall", "a built-in dishwasher" (:func:`request_mounting`, a small parser of
-its own over the request text).
-
-The decision is a :class:`asset2sim.schemas.overlay.RootMount` carried by the
-overlay; the output folder declares it (``initial_state.json`` ``"root"``,
-the URDF comment) and every check opens the asset with the root as declared
-(:func:`session_root_options`).
+"""How an asset is held in the world: free-standing or mounted (a faucet on its
+deck, a switch in a wall box: loaded with a fixed root). The per-category prior
+is ``asset2sim/priors/mounting.yaml`` (each entry with its source; unlisted
+categories are free-standing, the SPEC's convention); the request's words can
+override it. The decision is a :class:`~asset2sim.schemas.overlay.RootMount`
+that every check honours (:func:`session_root_options`).
 """
 
 from __future__ import annotations
@@ -77,24 +66,21 @@ def load_mounting_priors() -> dict[str, MountingPrior]:
     """The packaged mounting prior: canonical category -> :class:`MountingPrior`.
 
     Raises:
-        MountingError: the yaml is malformed, a kind is unknown or a source is
-            missing (the message names ``mounting.yaml`` and the category).
+        MountingError: malformed yaml, an unknown kind or a missing source (naming the file and category).
     """
     text = resources.files("asset2sim.priors").joinpath(_FILE).read_text(encoding="utf-8")
     return _parse_table(yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)), _FILE)  # libyaml when built in
 
 
 def category_mounting(category: str | None) -> RootMount:
-    """The prior of ``category`` (canonical name, e.g. "Faucet"); a category
-    without an entry (or None) is free-standing."""
+    """The prior of ``category`` (canonical name); without an entry (or None) free-standing."""
     prior = load_mounting_priors().get(category or "")
     if prior is None:
         return RootMount(kind="free-standing", fixed=False, source=f"category prior: {category or 'unknown category'} is free-standing (SPEC convention)")
     return RootMount(kind=prior.kind, fixed=prior.kind != FREE, source=f"category prior ({category}): {prior.kind}; {prior.source.strip()}")
 
 
-# Request words. Hyphen, space or nothing between compound parts ("wall-mounted",
-# "wall mounted", "freestanding"). Order does not matter: the last mention wins.
+# Request words; hyphen, space or nothing inside compounds; the last mention wins.
 _ART = r"(?:(?:a|an|the|its|his|her|their|my|our|your)\s+)?"
 _J = r"[-\s]?"
 _PATTERNS: list[tuple[str, str]] = [
@@ -117,18 +103,8 @@ _COMPILED = [(re.compile(p), kind) for p, kind in _PATTERNS]
 
 
 def request_mounting(text: str, category: str | None = None) -> RootMount | None:
-    """The mounting a request asks for, or None when it says nothing about it.
-
-    Recognised (English, case-insensitive): free-standing words
-    ("free-standing", "freestanding", "standalone", "portable", "not mounted",
-    "standing on the floor"), "wall-mounted" / "mounted on the wall" / "on the
-    wall", "counter-mounted" / "built-in" / "under-counter", "floor-mounted" /
-    "bolted to the floor", "in a frame", and a bare "mounted" / "installed" /
-    "fixed in place" (then the kind is the category prior's when that is
-    mounted, else "wall-mounted"). When several are present the last mention
-    in the text wins; a span already covered by an earlier (more specific)
-    pattern is not matched again.
-    """
+    """The mounting a request asks for (the last mention wins), or None. A bare "mounted" / "installed" /
+    "fixed in place" takes the category prior's kind when that is mounted, else "wall-mounted"."""
     hits = mounting_mentions(text)
     if not hits:
         return None
@@ -140,11 +116,8 @@ def request_mounting(text: str, category: str | None = None) -> RootMount | None
 
 
 def mounting_mentions(text: str) -> list[tuple[int, str, str]]:
-    """Every mounting phrase of a request (:func:`request_mounting`'s
-    patterns; a span already covered by an earlier, more specific pattern is
-    not matched again): (start index in the lower-cased text, kind, the
-    phrase as written in lower case), in pattern order. The request parser
-    counts these words as understood."""
+    """(start, kind, phrase) of every mounting phrase in the lower-cased text, in pattern order; a span an
+    earlier (more specific) pattern covers is not matched again."""
     low = (text or "").lower()
     taken: list[tuple[int, int]] = []
     hits: list[tuple[int, str, str]] = []
@@ -158,10 +131,8 @@ def mounting_mentions(text: str) -> list[tuple[int, str, str]]:
 
 
 def resolve_mounting(category: str | None, text: str, override: str | None = None) -> RootMount:
-    """The mounting an override gives (``fixed``: the category prior's kind
-    when it is mounted, else wall-mounted; ``free``), else the request's when
-    it names one (:func:`request_mounting`), else the category prior
-    (:func:`category_mounting`)."""
+    """The mounting an override gives (``fixed``: the prior's kind when mounted, else wall-mounted; ``free``),
+    else the request's, else the category prior."""
     if override == "free":
         return RootMount(kind=FREE, fixed=False, source="given by the user: --mount free")
     if override == "fixed":
@@ -172,10 +143,6 @@ def resolve_mounting(category: str | None, text: str, override: str | None = Non
 
 
 def session_root_options(fixed: bool) -> dict[str, bool]:
-    """Keyword options of :class:`asset2sim.engines.base.SessionOptions` for a
-    root as declared: mounted -> ``fixed_base=True, ground=False`` (the mount
-    holds the root where the file puts it: no floor under a wall switch or a
-    faucet on its deck; a ground plane at z = 0 would cut through links placed
-    below the root's origin); free -> ``{}`` (the SPEC's convention: root
-    free, resting on the ground)."""
+    """``SessionOptions`` keywords for a root as declared: mounted -> fixed base, no ground (the mount holds it
+    where the file puts it); free -> ``{}`` (resting on the ground)."""
     return {"fixed_base": True, "ground": False} if fixed else {}

@@ -1,14 +1,7 @@
-"""Typed overrides applied to a parsed request: they win over its words.
-
-:class:`~asset2sim.schemas.request.RequestOverrides` (``--mass 12kg``,
-``--size 0.5m``, ``--scale 0.8``, ``--state lid=30deg``, ``--mount fixed``,
-``--material steel_sheet``) are checked against the asset (every joint or
-part named exists, a state fits the joint's kind and range, a material is a
-``materials.yaml`` key) and merged into the
-:class:`~asset2sim.schemas.request.RequestSpec`: what the words said about
-the same quantity is dropped, the override's entry added (a state after the
-words' states, so it wins for its joints), and each override recorded in
-``spec.overrides`` as the user gave it (the report lists them).
+"""Typed overrides (``--mass``, ``--size``, ``--scale``, ``--state``, ``--mount``,
+``--material``) checked against the asset and merged into a parsed request:
+they replace what the words said about the same quantity (a state after the
+words' states) and are recorded in ``spec.overrides`` as given.
 """
 
 from __future__ import annotations
@@ -23,9 +16,8 @@ __all__ = ["OverrideError", "apply_overrides"]
 
 
 class OverrideError(ValueError):
-    """An override that does not fit the asset; ``code`` says why
-    (``OVERRIDE_UNKNOWN_JOINT``, ``OVERRIDE_WRONG_KIND``,
-    ``OVERRIDE_OUT_OF_LIMITS``, ``OVERRIDE_UNKNOWN_MATERIAL``)."""
+    """An override that does not fit the asset; ``code``: ``OVERRIDE_UNKNOWN_JOINT``, ``_WRONG_KIND``,
+    ``_OUT_OF_LIMITS`` or ``_UNKNOWN_MATERIAL``."""
 
     def __init__(self, message: str, code: str):
         super().__init__(message)
@@ -33,13 +25,11 @@ class OverrideError(ValueError):
 
 
 def apply_overrides(spec: RequestSpec, overrides: RequestOverrides | None, asset: AssetDescription) -> RequestSpec:
-    """``spec`` with ``overrides`` winning over its words (see the module docstring).
+    """``spec`` with ``overrides`` winning over its words.
 
     Raises:
-        OverrideError: a state names no movable joint or part label of
-            ``asset`` (the message lists both), an angle for a prismatic joint
-            or a distance for a revolute one, an angle beyond the joint's
-            range (rad, upper - lower), or an unknown material.
+        OverrideError: a state naming no movable joint or part of ``asset``, an angle for a prismatic joint or
+            a distance for a revolute one, an angle beyond the joint's range, or an unknown material.
     """
     if not overrides:
         return spec

@@ -1,11 +1,5 @@
-"""Canonical part labels: ``rotation_lid`` -> ``lid``, ``drawers`` -> ``drawer``.
-
-PartNet-Mobility's semantic labels name the same part many ways; the rules
-that map them onto the canonical labels of ``labels.yaml`` (aliases, prefixes
-to strip, plural ``s``, the last known word) are data in that file. Every
-other prior lookup (materials, part roles, category evidence, the request's
-part words) goes through :func:`canonical_label`.
-"""
+"""Canonical part labels (``rotation_lid`` -> ``lid``, ``drawers`` -> ``drawer``)
+by the rules of ``labels.yaml``; every other prior lookup goes through them."""
 
 from __future__ import annotations
 
@@ -14,8 +8,7 @@ import re
 
 from asset2sim.prior_tables import load_priors
 
-#: Canonical labels of an object's main body (its material is the category's
-#: body material; a ``<category>_body`` label names the category).
+#: Canonical labels of an object's main body.
 BODY_LABELS = frozenset({"body", "base", "frame"})
 
 
@@ -25,13 +18,8 @@ def _norm_token(s: str) -> str:
 
 @functools.lru_cache(maxsize=4096)
 def canonical_label(label: str | None) -> str | None:
-    """Canonical part label of a PartNet-Mobility semantic label.
-
-    ``rotation_lid`` -> ``lid``, ``stapler_body`` -> ``body``, ``door_frame``
-    -> ``frame``, ``foot_pad`` -> ``foot``, ``drawers`` -> ``drawer``. Rules in
-    ``labels.yaml``. Unknown labels are returned normalised (lower case, ``_``);
-    None or blank gives None.
-    """
+    """Canonical part label of a semantic label (``stapler_body`` -> ``body``); unknown labels normalised
+    (lower case, ``_``); None or blank gives None."""
     if label is None or not label.strip():
         return None
     table = load_priors().labels

@@ -1,13 +1,6 @@
-"""What a part is made of and what it is for.
-
-:func:`material_for` gives a part's default material (density, shell or
-solid, wall thickness, contact friction); :func:`part_role`,
-:func:`task_relevant_rank` and :func:`spring_expected` say whether a part is
-what tasks act on, the body, an accessory, or spring-returned;
-:func:`request_label_matches` says whether a request's part word names a link.
-The category's lists in ``categories.yaml`` win over the per-label defaults of
-``labels.yaml``; unknown categories use ``Generic``.
-"""
+"""What a part is made of and what it is for: the category's lists in
+``categories.yaml`` win over the per-label defaults of ``labels.yaml``; unknown
+categories use ``Generic``."""
 
 from __future__ import annotations
 
@@ -29,14 +22,8 @@ def material(key: str) -> MaterialPrior:
 def material_for(
     category: str, semantic_label: str | None, variant: str | None = None
 ) -> MaterialPrior:
-    """The default material of a part (density kg/m^3, shell, wall m, friction).
-
-    Lookup order: the variant's and then the category's ``part_materials`` for
-    the canonical label; body/base/frame (and a missing label) -> the
-    variant's or category's ``body_material``; else the label's default in
-    ``labels.yaml``; unknown labels -> the category's body material. Unknown
-    categories use ``Generic``. Sources: materials.yaml, categories.yaml.
-    """
+    """The default material of a part: the variant's, then the category's ``part_materials``; body labels
+    (and None) the body material; else the label's default in ``labels.yaml``, else the body material."""
     cat = category_prior(category)
     var = cat.variant(variant) if variant else None
     canon = canonical_label(semantic_label)
@@ -56,12 +43,7 @@ def material_for(
 
 
 def part_role(category: str, semantic_label: str | None) -> PartRole:
-    """Role of a part: ``task`` (its joint state is what a task/request acts on),
-    ``body``, ``accessory`` or ``other``.
-
-    The category's ``task_relevant`` and ``accessories`` lists win over the
-    per-label defaults of labels.yaml; body/base/frame labels are ``body``.
-    """
+    """Role of a part: ``task`` (what tasks act on), ``body``, ``accessory`` or ``other``."""
     canon = canonical_label(semantic_label)
     if canon is None:
         return "other"
@@ -76,16 +58,14 @@ def part_role(category: str, semantic_label: str | None) -> PartRole:
     if lp is None:
         return "other"
     if lp.role == "task" and cat.task_relevant:
-        # the category names its task parts; a generic 'task' label not in the
-        # list (e.g. a toilet's pump lid) is secondary
+        # a generic 'task' label the category's list lacks is secondary
         return "other"
     return lp.role
 
 
 def task_relevant_rank(category: str, semantic_label: str | None) -> int | None:
-    """Priority (0 = highest) of a part among the category's task-relevant
-    labels, or None if it is not task-relevant. For ``Generic`` (no list) the
-    labels.yaml ``task`` role gives rank 0."""
+    """Priority (0 = highest) among the category's task-relevant labels (without a list: the ``task`` role
+    ranks 0), or None."""
     canon = canonical_label(semantic_label)
     if canon is None:
         return None
@@ -100,9 +80,7 @@ def task_relevant_rank(category: str, semantic_label: str | None) -> int | None:
 
 
 def spring_expected(category: str, semantic_label: str | None) -> bool:
-    """True when a joint moving this part naturally has a return spring (stapler
-    top arm, toaster lever, push buttons). Sources: ``spring_source`` of
-    categories.yaml and the header of labels.yaml."""
+    """True when a joint moving this part naturally has a return spring (a toaster lever, push buttons)."""
     canon = canonical_label(semantic_label)
     if canon is None:
         return False
@@ -114,11 +92,8 @@ def spring_expected(category: str, semantic_label: str | None) -> bool:
 
 
 def request_label_matches(category: str, request_label: str | None, semantic_label: str | None) -> bool:
-    """Whether a part word of a request (``JointStateRequest.label``) names a link
-    with this semantic label: equal canonical labels, or a category
-    ``label_synonyms`` entry (a faucet's "handle" is labelled ``switch``, a
-    laptop's "lid" is its ``screen``). When no joint matches, callers should fall
-    back to the category's task-relevant joints."""
+    """Whether a request's part word names a link with this label: equal canonical labels, or a category
+    ``label_synonyms`` entry (a laptop's "lid" is its ``screen``)."""
     a = canonical_label(request_label)
     b = canonical_label(semantic_label)
     if a is None or b is None:
@@ -130,14 +105,8 @@ def request_label_matches(category: str, request_label: str | None, semantic_lab
 
 
 def task_relevant_joints(category: str, joint_labels: Sequence[tuple[str, str | None]]) -> tuple[list[str], str]:
-    """The joints whose moving part tasks manipulate, and the rule that chose
-    them, from ``joint_labels`` ((movable joint, its child link's part label
-    or None), in the asset's order): the joints of the category's
-    task-relevant parts (:func:`task_relevant_rank`, or labels.yaml's
-    ``task`` role) ordered by the category's priority; else every joint
-    whose part is neither ``body`` nor ``accessory``; else every joint. One
-    rule for refine (which states it sets and tasks it checks) and for the
-    evaluation of any output that carries its part labels."""
+    """(joints whose part tasks manipulate, the rule) from ``joint_labels`` ((joint, part label or None)):
+    the task-relevant parts by priority; else every joint of neither body nor accessory; else every joint."""
     ranked = []
     for name, label in joint_labels:
         rank = task_relevant_rank(category, label)

@@ -1,61 +1,14 @@
-"""Parse a natural-language request into a :class:`RequestSpec`.
+"""Parse a natural-language request into a :class:`RequestSpec`: size words
+(the most extreme wins; factors in ``asset2sim/priors/size_classes.yaml``),
+state words per joint or group of joints (part nouns, ordinals, quantifiers,
+elided nouns), dynamics and pose words, numbers, masses and materials
+(:mod:`.request_values`), mounting words and the category. Contradictions are
+``warnings``, groups of unused words ``ignored``; ``matched`` lists the
+recognised phrases in text order. The grammar: ``docs/guide/requests.md``.
 
-``parse_request("I want a very small two-drawer cabinet with the first drawer
-closed and the second slightly open, low damping")`` recognises:
-
-- **size words** -> ``size_class`` and ``size_factor`` (linear multiplier on
-  the category's typical size; factors and their sources in
-  ``asset2sim/priors/size_classes.yaml``: tiny 0.3, very_small 0.5, small
-  0.75, regular 1.0, large 1.3, very_large 1.7). When several size words occur,
-  the most extreme one wins ("very small, personal" -> very_small).
-  Words: tiny/miniature/pocket-sized -> tiny; very small/extra small/for a
-  baby/toddler/toy -> very_small; small/mini/compact/personal/carry-on/
-  cabinet-sized/for a child/child-sized -> small; regular/standard size/normal
-  size/full-size -> regular; large/big -> large; very large/huge/giant ->
-  very_large. Ambiguous words ("little", "standard", "normal") count only right
-  before a category word ("a little box", not "a little open").
-- **state words** -> a :data:`StateBand` per joint or group of joints:
-  closed/shut/turned off/not open -> closed; slightly open/ajar/a bit open/
-  cracked open -> slightly_open; a quarter open -> quarter; halfway/half open/
-  partly open/not closed -> halfway; mostly open/almost fully open/three
-  quarters/not fully open -> mostly; fully open/all the way/wide open/turned on
-  -> fully. A bare "open" ("with its lid open") -> mostly (clearly open, not
-  necessarily at the limit); "open the door" (a verb) is not a state.
-- **per-joint phrases**: the part word a state refers to (the nearest part noun
-  before it in the same sentence, or right after it: "slightly open rotational
-  lid"), with ordinals first..fifth / 1st..5th / "drawer 2" (0-based
-  ``ordinal``), top/upper (0: the first in the refine stage's top-to-bottom
-  order) and bottom/lowest/last (-1: the last one, Python-style), quantifiers
-  every/all/each/both (no ordinal), and elided nouns ("the first drawer closed
-  and the second slightly open" -> drawer 0 closed, drawer 1 slightly_open).
-  No part word -> ``selector="all"`` (every task-relevant joint).
-- **dynamics words**: low damping/smooth/moving freely -> damping low
-  (``free_moving`` for freely/low friction); high damping/well-damped/heavy ->
-  damping high ("heavy" also ``stiff``); explicit damping phrases win over
-  cues like "smooth"/"heavy"; holds its position/stays where it is ->
-  ``holds_position``; spring/springy/spring-loaded/returns/self-closing ->
-  ``spring`` ("no spring" -> False); stiff/hard to move -> ``stiff``.
-- **pose words**: lying flat -> lying_flat; resting sideways/on its side ->
-  sideways; upright -> upright.
-- **numbers and materials** (:mod:`asset2sim.tasks.interpret.request_values`):
-  states in numbers ("30 degrees", "10 cm", "60 % open", "two-thirds open")
-  as a ``StateTarget``; physical ends ("lever up", "the switch off") as
-  ``end`` targets decided later from the geometry
-  (:mod:`asset2sim.tasks.synthesize.request_apply`); sizes in numbers
-  ("30 cm tall"); masses and materials per part; explicit damping /
-  friction / stiffness; part counts ("two-drawer"); spatial ordinals
-  (left/right/front/back); "the others". Contradictions are ``warnings``;
-  groups of unused words are ``ignored``. The full grammar:
-  ``docs/guide/requests.md``.
-- **category**: the object the request is about (first category word that is not
-  "its <part>"), canonical name from ``categories.yaml`` (e.g. "purse" -> Bag,
-  "mini fridge" -> Refrigerator).
-
-``matched`` lists every recognised phrase in text order. Pure function; never
-raises on a string of at most :data:`MAX_REQUEST_CHARS` characters (a longer
-one raises :class:`RequestTooLong`). Time and memory grow linearly with the
-length (every lookup between phrases is a binary search over positions found
-once; ``benchmarks/bench_request.py`` prints the timings).
+Pure; linear in the length (lookups between phrases are binary searches over
+positions found once); never raises on a string of at most
+:data:`MAX_REQUEST_CHARS` characters.
 """
 
 from __future__ import annotations
@@ -76,14 +29,12 @@ from asset2sim.tasks.interpret import request_values as rv
 _L = r"(?<![\w-])"
 _R = r"(?![\w-])"
 
-#: Longest request accepted (characters): 64 KiB, hundreds of times a real
-#: request; parsing it takes well under a second (benchmarks/bench_request.py).
+#: Longest request accepted (characters): 64 KiB, hundreds of times a real request.
 MAX_REQUEST_CHARS = 65_536
 
 
 class RequestTooLong(ValueError):
-    """The request is longer than :data:`MAX_REQUEST_CHARS` (``code``
-    ``REQUEST_TOO_LONG``; ``length`` and ``limit`` in characters)."""
+    """The request is longer than :data:`MAX_REQUEST_CHARS` (``code`` ``REQUEST_TOO_LONG``)."""
 
     code = "REQUEST_TOO_LONG"
 
@@ -119,8 +70,7 @@ def _scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[_
 
 
 _OPEN = r"open(?:ed)?"
-#: Verbs of a part's motion that a degree word may follow ("pulled out halfway",
-#: "lifted a quarter of the way"): the degree is the state, not the verb's end.
+#: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
 _MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
           r"turned|rotated|unfolded|folded)")
 _SZ = r"[- ]?siz(?:ed?|es)"
@@ -296,9 +246,7 @@ _TOKEN = re.compile(r"[\w'-]+|[,;:]")
 
 
 class _Tokens:
-    """Word runs (``[\\w'-]+``) and clause marks (``[,;:]``) of a text, found
-    once, so the tokens of any slice are counted by binary search: O(log n)
-    instead of O(slice length)."""
+    """Word runs and clause marks of a text, found once, so a slice's tokens are counted by binary search."""
 
     def __init__(self, text: str):
         self.starts: list[int] = []
@@ -309,9 +257,7 @@ class _Tokens:
         self.marks = [m.start() for m in _MARK.finditer(text)]
 
     def count(self, a: int, b: int) -> int:
-        """Number of tokens (``re.findall(r"[\\w'-]+|[,;:]", text[a:b])``):
-        runs starting in [a, b), the tail of a run cut at ``a``, and the marks
-        in [a, b)."""
+        """Number of tokens (``re.findall(r"[\\w'-]+|[,;:]", text[a:b])``)."""
         if b <= a:
             return 0
         i = bisect_left(self.starts, a)
@@ -331,9 +277,7 @@ def _size_factors() -> dict[str, float]:
 
 
 def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit], list[_Hit]]:
-    """Size class, factor, the size phrase, the size words used, and the size
-    words pointing the other way from the first one (a contradiction: "a small
-    large box" -> small, and "large" is reported)."""
+    """Size class, factor, phrase, the size words used, and those pointing the other way from the first one."""
     used: list[_Hit] = []
     mention_starts = [m.start for m in mentions]  # left to right
     for h in _scan(low, _SIZE_TABLE):
@@ -361,10 +305,7 @@ _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:is|are|was|were|set|
 
 
 def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
-    """State phrases left to right, not overlapping: the state table's words
-    and the numeric states of :func:`request_values.state_quantities` (value
-    (band, StateTarget)). A bare "up"/"down"/"on"/"off" counts only right
-    after a part noun ("its lever up", "the switch is on")."""
+    """State phrases left to right, not overlapping: the state table's words and the ``numeric`` states."""
     hits = _scan(low, _STATE_TABLE) + [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
     return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
 
@@ -406,12 +347,10 @@ _ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
 
 
 def _parts(low: str, tokens: _Tokens) -> list[_Part]:
-    """Part nouns with their ordinals ("the first and second drawers", "top
-    drawer", "drawer 2") or quantifier ("every drawer")."""
+    """Part nouns with their ordinals ("the first and second drawers", "drawer 2") or quantifier."""
     ords = _scan(low, _ORDINALS)  # left to right, not overlapping: ends ascend too
     ord_ends = [o.end for o in ords]
-    # enumerations: "the first, second and third drawers": chain[j] is the
-    # first ordinal of the run ending at ords[j] (joined by , and or &)
+    # enumerations ("the first, second and third drawers"): chain[j] is the first ordinal of the run ending at ords[j]
     chain: list[int] = []
     for j, o in enumerate(ords):
         prev = ords[j - 1] if j else None
@@ -447,8 +386,7 @@ _FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "thei
 
 
 def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> _Part | None:
-    """A part noun right after a state ("slightly open rotational lid"): at most one
-    modifier word between, no clause break. ``part_at``: part nouns by start."""
+    """A part noun (``part_at``: by start) right after a state, at most one modifier word between."""
     for i, t in enumerate(_TOKEN.finditer(low, end, limit)):
         if i >= 2:
             break
@@ -466,11 +404,8 @@ _OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(
 
 
 def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = None) -> tuple[list[JointStateRequest], list[_Hit], list[str]]:
-    """Joint-state requests, the state hits used and warnings (contradictions).
-
-    Order of the result: requests for every joint first, then per-label ones,
-    then those naming one part ("the top drawer open and the others closed":
-    the specific request wins whatever the word order)."""
+    """Joint-state requests (every joint first, then per label, then one part: the specific one wins), the
+    state hits used and warnings (contradictions)."""
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
     ords = [o for o in _scan(low, _ORDINALS) if o.flag == ""]
@@ -532,8 +467,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
                 result.append(make("label" if last_label is not None else "all", last_label, int(o.value), "vertical", b, phrase))  # type: ignore[arg-type]
                 continue
             result.append(make("all", None, None, "vertical", b, b.text))
-    # one request per target: a later phrase overrides an earlier one; a
-    # different state for the same target is a contradiction (warned)
+    # one request per target: a later phrase overrides an earlier one; a different state is warned
     warnings: list[str] = []
     dedup: dict[tuple, JointStateRequest] = {}
     for js in result:
@@ -551,11 +485,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
 
 
 def parse_request(text: str) -> RequestSpec:
-    """Parse a request into a :class:`~asset2sim.schemas.request.RequestSpec`.
-
-    ``text`` any string (may be empty). Size factors: dimensionless multipliers
-    on the category's typical dimensions (``size_classes.yaml``, with sources).
-    See the module docstring for the vocabulary. Time linear in ``len(text)``.
+    """Parse a request (any string, may be empty) into a :class:`~asset2sim.schemas.request.RequestSpec`.
 
     Raises:
         TypeError: ``text`` is not a string.
@@ -596,27 +526,12 @@ def parse_request(text: str) -> RequestSpec:
     matched += [(pos, phrase) for pos, _, phrase in mounting_mentions(low)]  # "free-standing", "mounted on the wall" (tasks.interpret.mounting)
     unused, groups = _unused_words(low, matched, mentions)
     return RequestSpec(
-        text=text,
-        category_hint=hint,
-        size_class=size_class,  # type: ignore[arg-type]
-        size_factor=factor,
-        size_phrase=size_phrase,
-        joint_states=joint_states,
-        damping=damping,  # type: ignore[arg-type]
-        holds_position=holds,
-        spring=spring,
-        stiff=stiff,
-        free_moving=free,
-        pose_hint=pose,  # type: ignore[arg-type]
-        sizes=[f.value for f in sizes],  # type: ignore[misc]
-        mass_level=mass_level,  # type: ignore[arg-type]
-        properties=properties,
-        dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
+        text=text, category_hint=hint, size_class=size_class, size_factor=factor, size_phrase=size_phrase,  # type: ignore[arg-type]
+        joint_states=joint_states, damping=damping, holds_position=holds, spring=spring, stiff=stiff,  # type: ignore[arg-type]
+        free_moving=free, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
+        sizes=[f.value for f in sizes], dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
-        ignored=groups,
-        warnings=warnings,
-        matched=_in_text_order(matched),
-        unused_words=unused,
+        ignored=groups, warnings=warnings, matched=_in_text_order(matched), unused_words=unused,
     )
 
 
@@ -626,8 +541,7 @@ def _normalized(text: str) -> str:
 
 
 def _mass_level(level_found: list[rv.Found], properties: list[PartProperty], warnings: list[str]) -> object:
-    """The last mass word's level ("heavy"/"light"; None without one); two levels, or a level beside a mass
-    in numbers, are warned."""
+    """The last mass word's level (None without one); two levels, or one beside a number, are warned."""
     mass_level = level_found[-1].value if level_found else None
     if len({f.value for f in level_found}) > 1:
         warnings.append("contradiction: " + " and ".join(f"'{f.text}'" for f in level_found) + f" for the mass; '{level_found[-1].text}' is used")
@@ -638,9 +552,8 @@ def _mass_level(level_found: list[rv.Found], properties: list[PartProperty], war
 
 def _dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
                     warnings: list[str]) -> tuple[str, bool, bool, bool, bool]:
-    """(damping level, holds position, spring, stiff, free moving) from the dynamics words: explicit damping
-    phrases ("strong") win over cues such as "smooth" or "heavy". Phrases go to ``matched`` ("no "/"not "
-    before a negated one), contradictions to ``warnings``."""
+    """(damping level, holds position, spring, stiff, free moving) from the dynamics words (explicit damping
+    phrases win over cues); phrases go to ``matched``, contradictions to ``warnings``."""
     damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
     hits = _scan(low, _DYN_TABLE)
     for h in hits:
@@ -680,8 +593,7 @@ def _pose_word(low: str, matched: list[tuple[int, str]]) -> object:
 
 
 def _variant_phrases(hint: str | None, low: str) -> list[tuple[int, str]]:
-    """Every phrase of the category's variant that the request names ("kitchen faucet"; "under-desk office
-    cabinet": two phrases of one variant), so they count as understood, not ignored."""
+    """Every phrase of the category's variant that the request names, so they count as understood."""
     try:
         var = variant_mention(hint, low) if hint is not None else None
     except KeyError:
@@ -714,9 +626,7 @@ def _part_soon(text: str, i: int) -> bool:
 
 
 def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[PartProperty]:
-    """One :class:`PartProperty` per label (None = whole object): mass and
-    material of the same part merged; two different values for one part are a
-    contradiction (warned; the later one is used)."""
+    """One :class:`PartProperty` per label (None = whole object); two values for one part are warned."""
     out: dict[str | None, PartProperty] = {}
     for p in props:
         old = out.get(p.label)
@@ -735,8 +645,7 @@ def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[Pa
     return list(out.values())
 
 
-#: Function words of English requests that carry no physical meaning ("I want
-#: a ... with its ..."); they are not reported as unused.
+#: Function words of English requests, never reported as unused.
 _FUNCTION_WORDS = frozenset(
     "a an the i i'd i'm me my we our you your it its it's their them his her this that these those "
     "want wants need needs would like please give make made get have has having be is are was were being "
@@ -750,12 +659,8 @@ _SELECTOR_AFTER = re.compile(r"\s+(?:[\w'-]+\s+){0,2}?(?:" + rv.PART_WORDS + r"|
 
 
 def _unused_words(low: str, matched: list[tuple[int, str]], mentions) -> tuple[list[str], list[str]]:
-    """Words of ``low`` (the lower-cased request) outside every recognised
-    phrase and category mention that are neither function words nor known
-    part labels (``labels.yaml``), in order, each once; and the groups of
-    such words: runs of them joined only by function words, within one clause
-    ("a rubber duck on top" -> "rubber duck on top"), each once. Linear in
-    ``len(low)`` (spans are merged once, words visited once)."""
+    """Words outside every recognised phrase and mention that are neither function words nor part labels,
+    in order, each once; and their groups within one clause ("rubber duck on top"), each once."""
     spans = []
     for pos, phrase in matched:
         for prefix in ("no ", "not "):

@@ -1,24 +1,8 @@
-"""Numbers, units, masses, materials and explicit joint parameters in a request.
-
-Used by :func:`asset2sim.tasks.interpret.request.parse_request`; every function
-here reads the lower-cased request and returns typed findings with their
-character spans (so the parser can report what it used and what it did not).
-
-Units (converted to SI, radians):
-
-- angles: degrees (``deg``, ``degree(s)``, ``°``) x pi/180, radians (``rad``);
-- lengths: ``mm`` 1e-3, ``cm`` 1e-2, ``m``/``metre(s)``/``meter(s)`` 1,
-  ``in``/``inch(es)``/``"`` 0.0254, ``ft``/``foot``/``feet`` 0.3048 (NIST
-  SP 811, Appendix B: exact definitions of the inch and the foot);
-- masses: ``g`` 1e-3, ``kg``/``kilo(gram)s`` 1, ``lb``/``pound(s)`` 0.45359237,
-  ``oz``/``ounce(s)`` 0.028349523125 (NIST SP 811, Appendix B, exact);
-- fractions: ``%``/``percent`` /100, "a third" 1/3, "two-thirds" 2/3,
-  "N/M" N/M;
-- joint parameters: damping N*m*s/rad (rotational) or N*s/m (linear),
-  friction N*m or N, stiffness N*m/rad or N/m.
-
-Pure functions, linear in the length of the text (a fixed set of regular
-expressions, each scanned once).
+"""Numbers, units, masses, materials and explicit joint parameters in a request:
+each function reads the lower-cased request and returns typed findings with
+their character spans. Values in SI and radians; the inch, foot, pound and
+ounce factors are the exact ones of NIST SP 811, Appendix B. Linear in the
+length of the text.
 """
 
 from __future__ import annotations
@@ -33,8 +17,7 @@ from asset2sim.tasks.interpret.part_labels import canonical_label
 _L = r"(?<![\w.-])"
 _R = r"(?![\w-])"
 
-#: Part nouns a request may name (singular and plural); the parser's per-part
-#: phrases and the per-part masses, materials and joint parameters use them.
+#: Part nouns a request may name (singular and plural).
 PART_WORDS = (
     r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
     r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
@@ -156,16 +139,9 @@ def _near_category(low: str, end: int, mention_starts: list[int], max_words: int
 
 
 def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], list[Found], list[str], list[Found]]:
-    """Numeric joint states and numeric sizes.
-
-    Returns (states, sizes, warnings, verbs): ``verbs`` the state verbs a
-    number refers back to ("open the drawer 10 cm"); ``states`` hold ``(band, StateTarget)``
-    values (angles always; lengths next to a state word such as open/out/
-    pulled/at; percentages; "a third"/"two-thirds"/"N/M" next to open);
-    ``sizes`` hold :class:`SizeTarget` (a length followed by tall/high/wide/
-    deep/long/across, preceded by height/width/depth/length, or right before
-    the object's name: "a 1.8 m fridge" -> largest dimension); ``warnings``
-    name lengths that are neither.
+    """(states, sizes, warnings, verbs) in numbers: ``states`` (band, StateTarget) values (angles, lengths by
+    a state word, percentages, fractions by open), ``sizes`` SizeTarget (a length with a dimension word, or
+    before the object's name: largest), ``warnings`` for lengths that are neither, ``verbs`` a number refers to.
     """
     states: list[Found] = []
     sizes: list[Found] = []
@@ -244,9 +220,8 @@ _WEIGHS_BEFORE = re.compile(r"(?:weighs?|weighing|weight(?: of| is|:)?|mass(?: o
 
 
 def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int] | None = None) -> str | None:
-    """The part noun closest before ``pos`` within ``max_words`` words and no
-    clause mark; None when that noun names the object itself (a category
-    mention: "a door with stiffness 5 N m/rad" is about the whole door)."""
+    """The part noun closest before ``pos`` within ``max_words`` words of the clause; None when it is a
+    category mention (the object itself)."""
     w0 = max(0, pos - 60)
     window = low[w0: pos]
     cut = max((m.end() for m in re.finditer(r"[,;:.!?]", window)), default=0)
@@ -262,9 +237,7 @@ def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[in
 
 
 def _part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
-    """The part (or body) noun within ``max_words`` words after ``end``: (label,
-    end of the noun); label None when the noun names the object itself (a
-    category mention: "a wooden door")."""
+    """(label, end) of the part or body noun within ``max_words`` words after ``end``; None for a category mention."""
     for s, e, w in _next_words(low, end, max_words):
         if PART_RX.fullmatch(w):
             return (None if mention_starts and s in mention_starts else (canonical_label(w) or w)), e
@@ -276,8 +249,7 @@ def _part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int
 
 
 def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
-    """Masses in numbers: "weighs 2 kg", "500 g", "a 300 g lid" (per part when a
-    part noun follows the number or precedes "weighs"). Values ``PartProperty``."""
+    """Masses in numbers ("weighs 2 kg", "a 300 g lid": per part), values ``PartProperty``."""
     out: list[Found] = []
     for m in _MASS_RX.finditer(low):
         v = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
@@ -302,26 +274,19 @@ _MASS_LEVEL_BEFORE = re.compile(r"(?:is|it's|feels?|be|and|but|,)\s+$")
 
 
 def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
-    """"a heavy box", "it is light", "lightweight": value ``"heavy"``/``"light"``.
-    "heavy"/"light" before a part or joint word ("a heavy hinge", "light
-    damping") are dynamics words, not masses."""
+    """Mass words ("a heavy box", "lightweight"): ``"heavy"`` / ``"light"``; not before a part or joint word."""
     out: list[Found] = []
     for m in _MASS_LEVEL_RX.finditer(low):
         w = m.group("w")
-        level = "heavy" if w.startswith("heav") else "light"
-        if w.endswith("weight") or _near_category(low, m.end(), mention_starts, 2):
-            out.append(Found(m.start(), m.end(), m.group(0), level))
-            continue
         nxt = _next_words(low, m.end(), 1)
-        if _MASS_LEVEL_BEFORE.search(low[max(0, m.start() - 12): m.start()]) and (not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "but", "to"}):
-            out.append(Found(m.start(), m.end(), m.group(0), level))
+        if (w.endswith("weight") or _near_category(low, m.end(), mention_starts, 2)
+                or _MASS_LEVEL_BEFORE.search(low[max(0, m.start() - 12): m.start()])
+                and (not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "but", "to"})):
+            out.append(Found(m.start(), m.end(), m.group(0), "heavy" if w.startswith("heav") else "light"))
     return out
 
 
-#: Request words -> ``materials.yaml`` key. Household "metal" parts are
-#: painted or stainless sheet; "wood"/"wooden" solid wood; "plastic" ABS (the
-#: common injection-molding plastic of appliance parts). Sources of the
-#: numbers: ``asset2sim/priors/materials.yaml``.
+#: Request words -> ``materials.yaml`` key ("metal": sheet steel, "plastic": ABS).
 MATERIAL_WORDS: dict[str, str] = {
     r"wood(?:en)?|timber|oak|pine|walnut|maple|beech": "solid_wood",
     r"plywood": "plywood",
@@ -349,11 +314,8 @@ _MADE_OF = re.compile(r"(?:made (?:of|from|out of)|in) ")
 
 
 def materials(low: str, mention_starts: list[int], head_starts: list[int] | None = None) -> list[Found]:
-    """Material words: per part when a part noun follows ("a metal door"), the
-    body when a body word follows ("a plastic body"), the whole object before
-    the object's name or after "made of". ``mention_starts``: every category
-    mention; ``head_starts``: the mention of the object the request is about
-    (a part noun there names the whole object). Values ``PartProperty``."""
+    """Material words as ``PartProperty``: per part or body when its noun follows, the whole object before the
+    object's name (``mention_starts``; ``head_starts``: the object's own mention) or after "made of"."""
     hits: list[Found] = []
     for rx, key in _MATERIAL_RX:
         for m in rx.finditer(low):
@@ -391,10 +353,8 @@ _DYN_RX_AFTER = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?P<unit>" + _DYN_UNIT
 
 
 def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[list[Found], list[str]]:
-    """Explicit joint parameters ("damping 0.5 N m s/rad", "friction of 0.2",
-    "2 N/m stiffness"): values :class:`DynamicsValue` (per part when a part
-    noun precedes the name within four words). Warnings when the unit does not
-    fit the quantity ("damping 2 N m")."""
+    """Explicit joint parameters ("damping 0.5 N m s/rad") as :class:`DynamicsValue`, per part when a part noun
+    precedes; warnings when the unit does not fit the quantity."""
     out: list[Found] = []
     warns: list[str] = []
     for rx in (_DYN_RX, _DYN_RX_AFTER):
@@ -425,8 +385,7 @@ _COUNT_RX = re.compile(
 
 
 def part_counts(low: str) -> list[Found]:
-    """Counts of parts ("a two-drawer cabinet", "a double-door fridge", "a
-    two-slot toaster"): value (canonical label, count)."""
+    """Counts of parts ("a two-drawer cabinet"): value (canonical label, count)."""
     out = []
     for m in _COUNT_RX.finditer(low):
         n = m.group("n")
@@ -436,9 +395,7 @@ def part_counts(low: str) -> list[Found]:
     return out
 
 
-#: Words that name the kind of joint or motion ("a rotational lid", "sliding
-#: joints", "hinge-like behavior", "smooth operation"): understood, no effect
-#: on the numbers (the asset's joints decide their kind).
+#: Words naming the kind of joint or motion ("sliding joints"): understood, no effect.
 DESCRIPTOR_RX = re.compile(
     _L + r"(?:(?:rotational|rotating|rotary|revolute|hinged|hinge[- ]like|pivoting|swinging|sliding|prismatic|linear|telescopic)"
     r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling)" + _R

@@ -1,13 +1,5 @@
-"""How big and how heavy an object of a category and size class is.
-
-:func:`target_size` gives the dimensions (m) and mass range (kg) an output
-asset should have for a request (the category's or the named variant's
-dimensions times the size class factor); :func:`mass_range` and
-:func:`scale_mass_range` scale mass ranges with size (solid f^3 to thin-walled
-f^2); :func:`gripper_limit_factor` and :func:`fits_gripper` check handheld
-objects against a parallel gripper's stroke. Sources: ``size_classes.yaml``,
-``categories.yaml``, ``docs/design/priors.md``.
-"""
+"""How big and how heavy an object of a category and size class is (m, kg;
+``size_classes.yaml``, ``categories.yaml``, ``docs/design/priors.md``)."""
 
 from __future__ import annotations
 
@@ -19,19 +11,13 @@ from asset2sim.tasks.interpret.categories import category_prior, find_variant
 from asset2sim.prior_tables import GRASPABLE_WIDTH_M, SIZE_CLASSES, Dims, PriorModel, load_priors
 from asset2sim.tasks.interpret.request import parse_request
 
-#: Smallest plausible total mass of any object, kg (a few grams: a USB stick,
-#: a pen refill). Floor for the scaled mass ranges.
+#: Smallest plausible total mass of any object, kg: the floor of the scaled mass ranges.
 MASS_FLOOR_KG: float = 0.001
 
 
 class SizeTarget(PriorModel):
-    """The size and mass an output asset should have (:func:`target_size`).
-
-    ``dims`` m sorted [longest, middle, shortest] = ``base_dims * factor``;
-    ``factor`` dimensionless; ``mass_range`` kg; ``gripper_limit_factor`` the
-    largest factor on ``dims`` that keeps a handheld object graspable (None
-    when not handheld).
-    """
+    """The size and mass an output asset should have: ``dims`` m = ``base_dims * factor``, ``mass_range`` kg,
+    ``gripper_limit_factor`` the largest factor keeping a handheld object graspable (else None)."""
 
     category: str
     variant: str | None = None
@@ -47,10 +33,7 @@ class SizeTarget(PriorModel):
 
 
 def size_factor(size_class: str | None) -> float:
-    """Linear size factor of a size class (None -> 1.0), dimensionless.
-
-    Source: size_classes.yaml. Raises ``KeyError`` for an unknown class.
-    """
+    """Linear size factor of a size class (None -> 1.0); ``KeyError`` for an unknown class."""
     if size_class is None:
         return 1.0
     sc = load_priors().size_classes
@@ -60,15 +43,8 @@ def size_factor(size_class: str | None) -> float:
 
 
 def scale_mass_range(lo: float, hi: float, factor: float) -> tuple[float, float]:
-    """Mass range (kg) of an object whose linear size is ``factor`` times one of
-    mass ``lo..hi`` kg.
-
-    Solid objects scale with volume (factor^3), thin-walled ones whose wall
-    thickness does not change with size scale with area (factor^2); the range
-    spans both: smaller -> [lo f^3, hi f^2], larger -> [lo f^2, hi f^3], with
-    the floor ``MASS_FLOOR_KG``. Monotone non-decreasing in ``factor``.
-    Raises ``ValueError`` for a non-positive factor.
-    """
+    """Mass range (kg) of an object ``factor`` times the size of one of ``lo..hi`` kg, spanning solid (f^3)
+    and thin-walled (f^2) scaling, floored at ``MASS_FLOOR_KG``; ``ValueError`` for a non-positive factor."""
     if not (factor > 0.0 and math.isfinite(factor)):
         raise ValueError(f"size factor must be positive and finite, got {factor}")
     if factor <= 1.0:
@@ -81,13 +57,8 @@ def scale_mass_range(lo: float, hi: float, factor: float) -> tuple[float, float]
 
 
 def mass_range(category: str, size_class: str | None = None, variant: str | None = None) -> tuple[float, float]:
-    """Plausible total mass (kg) of an object of ``category`` in ``size_class``.
-
-    The regular-size range of categories.yaml (or the variant's, whose own size
-    class is taken into account) scaled by :func:`scale_mass_range` with the
-    size factor of the class. Unknown categories use ``Generic``. Raises
-    ``KeyError`` for an unknown size class. Table: docs/design/priors.md.
-    """
+    """Plausible total mass (kg) of ``category`` (or its variant) in ``size_class``; ``KeyError`` for an
+    unknown size class."""
     cat = category_prior(category)
     var = cat.variant(variant) if variant else None
     if var is not None:
@@ -100,9 +71,7 @@ def mass_range(category: str, size_class: str | None = None, variant: str | None
 
 
 def gripper_limit_factor(dims: Iterable[float]) -> float:
-    """Largest uniform factor on ``dims`` (m, any order, 3 values) that keeps two
-    of them within ``GRASPABLE_WIDTH_M``. Raises ``ValueError`` unless 3
-    positive values are given."""
+    """Largest uniform factor on 3 ``dims`` (m) keeping two within ``GRASPABLE_WIDTH_M``; else ``ValueError``."""
     d = sorted(float(x) for x in dims)
     if len(d) != 3 or d[0] <= 0.0:
         raise ValueError(f"dims must be 3 positive lengths in m, got {d}")
@@ -110,23 +79,14 @@ def gripper_limit_factor(dims: Iterable[float]) -> float:
 
 
 def fits_gripper(dims: Iterable[float]) -> bool:
-    """True when at least two of the 3 dimensions (m) are within
-    ``GRASPABLE_WIDTH_M`` (the object can be grasped whole)."""
+    """True when at least two of the 3 dimensions (m) are within ``GRASPABLE_WIDTH_M``."""
     return gripper_limit_factor(dims) >= 1.0 - 1e-9
 
 
 def target_size(category: str, request: RequestSpec | str | None = None) -> SizeTarget:
-    """Target dimensions and mass range for an output asset.
-
-    ``request`` is a parsed :class:`~asset2sim.schemas.request.RequestSpec`,
-    raw request text (parsed here) or None. If the request names a variant of
-    the category (``mini fridge``, ``carry-on``, ``jewelry box``) its dims are
-    the base and the size words are applied relative to the variant's own size
-    class, never enlarging it by a smaller word ("mini fridge" is already a
-    small refrigerator; "very small jewelry box" is 0.5/0.75 of a jewelry box).
-    Otherwise base = the category's dims times the size class factor. For
-    handheld categories the note warns when the result no longer fits the
-    gripper. Units: m, kg.
+    """Target dimensions and mass range for ``request`` (parsed, text or None): a named variant's dims with the
+    size words relative to its own size class (never enlarged by a smaller word), else the category's dims
+    times the size factor; the note warns when a handheld result no longer fits the gripper.
     """
     if isinstance(request, str):
         request = parse_request(request)
@@ -160,20 +120,8 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
     if cat.handheld:
         glf = gripper_limit_factor(dims)
         if glf < 1.0:
-            notes.append(
-                f"handheld but the middle dimension {sorted(dims)[1]:.3f} m exceeds the gripper "
-                f"limit {GRASPABLE_WIDTH_M} m (largest graspable factor {glf:.3g})"
-            )
-    return SizeTarget(
-        category=cat.name,
-        variant=var.name if var else None,
-        size_class=size_class,
-        base_dims=base,
-        factor=f,
-        dims=dims,  # type: ignore[arg-type]
-        mass_range=mr,
-        body_material=body,
-        handheld=cat.handheld,
-        gripper_limit_factor=glf,
-        note="; ".join(notes),
-    )
+            notes.append(f"handheld but the middle dimension {sorted(dims)[1]:.3f} m exceeds the gripper "
+                         f"limit {GRASPABLE_WIDTH_M} m (largest graspable factor {glf:.3g})")
+    return SizeTarget(category=cat.name, variant=var.name if var else None, size_class=size_class, base_dims=base, factor=f,
+                      dims=dims, mass_range=mr, body_material=body, handheld=cat.handheld,  # type: ignore[arg-type]
+                      gripper_limit_factor=glf, note="; ".join(notes))

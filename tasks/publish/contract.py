@@ -1,36 +1,8 @@
-"""The output contract's bookkeeping: hashes, the completion marker, the skip
-rule, and the catalog row of a flow run, in one place.
-
-An output folder is *complete* for an input and a configuration when its
-completion marker (:data:`MARKER_NAME`, written last) names both hashes and
-the code version, and every file it lists still has its recorded SHA-256
-(hashing inputs once in one place, as Isaac Lab's asset converters do in
-their base class). ``tasks.refine`` writes and checks the marker; the flow
-reuses a finished result only when the catalog holds a row for the same
-asset, input hash and flow configuration hash *and* the folder is still
-complete (:func:`finished_result`).
-
-The completion marker is also the flow's record of finished work: a flow
-killed after an asset's folder was completed but before its catalog row was
-written left a *job record* (:data:`JOB_RECORD_NAME`, :class:`JobRecord`,
-written by the flow before the refine stage) beside a complete folder;
-:func:`resumable_output` finds such a folder for the same input and flow
-configuration, and the flow writes the missing row from the folder's typed
-report (:func:`refined_output`) instead of refining again.
-
-Catalog rows (:class:`asset2sim.schemas.catalog.CatalogRow`) are built from
-typed stage results by :func:`build_row`.
-
-The code is part of the skip key: :func:`code_hash` hashes the package
-version and the package's source files (Python modules and the data tables
-shipped with them), and every row records it (``code_hash``) beside a
-readable :func:`code_version` (the git commit when the package runs from a
-checkout). With ``results.code_change: rerun`` (``catalog.yaml``, default) a
-finished result is reused only when its row has the current code hash
-(:func:`skip_code_hash`), so any change to the source reruns finished assets
-once; ``keep`` reuses results of earlier code. The source hash, not the git
-commit, is the key: a commit that changes only documentation or tests
-reruns nothing, and an uncommitted change to the source does.
+"""The output contract's bookkeeping: the code and configuration hashes, the
+completion marker (:func:`is_complete`), the flow's skip rule
+(:func:`finished_result`) and job records (:func:`resumable_output`), the
+stage records and the catalog row of a flow run (:func:`build_row`).
+``docs/design/pipeline.md`` explains the skip key.
 """
 
 from __future__ import annotations
@@ -58,15 +30,9 @@ from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_i
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OVERLAY_NAME, REPORT_NAME, OwnedFolder, read_record
 
-#: The flow's record of an asset's job in its run's work folder
-#: (``<run>/.work/<asset id>/job.json``), written before the refine stage.
+#: The flow's record of an asset's job in its run's work folder (``<run>/.work/<asset id>/job.json``).
 JOB_RECORD_NAME = "job.json"
-
-
-# --------------------------------------------------------------------------- hashes
-
-#: Sub-packages of ``asset2sim`` whose sources make up the code (they may live
-#: outside the ``asset2sim`` folder: ``package-dir`` in pyproject.toml).
+#: Sub-packages of ``asset2sim`` whose sources make up the code (``package-dir`` in pyproject.toml).
 CODE_PACKAGES = ("asset2sim", "asset2sim.tasks", "asset2sim.schemas", "asset2sim.flows")
 #: File suffixes of the package source that change results (modules and the data tables shipped with them).
 CODE_SUFFIXES = (".py", ".yaml", ".yml", ".json", ".csv", ".txt")
@@ -87,12 +53,9 @@ def _package_dirs() -> list[Path]:
 
 @functools.lru_cache(maxsize=1)
 def code_hash() -> str:
-    """Hash of the code that makes results (hex, 16): SHA-256 over the
-    package version and every source file of the package (:data:`CODE_SUFFIXES`
-    under the folders of :data:`CODE_PACKAGES`, nested sub-packages included,
-    ``__pycache__`` left out), each as its path relative to its package
-    folder and its bytes, in sorted order. Computed once per process
-    (about 250 files, a few milliseconds)."""
+    """Hash of the code that makes results (hex, 16): SHA-256 over the package version and, in sorted order,
+    the relative path and bytes of every :data:`CODE_SUFFIXES` file under the folders of :data:`CODE_PACKAGES`
+    (``__pycache__`` left out). Computed once per process."""
     h = hashlib.sha256(__version__.encode())
     dirs = _package_dirs()
     files: list[tuple[str, Path]] = []
@@ -112,10 +75,9 @@ def code_hash() -> str:
 
 @functools.lru_cache(maxsize=1)
 def code_version() -> str:
-    """The code version as people read it (PEP 440 local version):
-    ``<version>+g<commit>`` when the package runs from a clean git checkout,
-    ``<version>+g<commit>.dirty.<code hash 8>`` with uncommitted changes to
-    tracked files, ``<version>+src.<code hash 12>`` without git. Computed once per process."""
+    """The readable code version (PEP 440 local): ``<version>+g<commit>`` from a clean git checkout,
+    ``<version>+g<commit>.dirty.<code hash 8>`` with uncommitted changes, ``<version>+src.<code hash 12>``
+    without git."""
     src = Path(asset2sim.__file__).resolve().parent.parent
     try:
         sha = subprocess.run(["git", "-C", str(src), "rev-parse", "--short", "HEAD"],
@@ -131,13 +93,8 @@ def code_version() -> str:
 
 
 def skip_code_hash(code_change: str) -> str | None:
-    """The code hash finished results must have to be reused under the
-    ``results.code_change`` policy of ``catalog.yaml``: :func:`code_hash`
-    for ``rerun``, None (any code) for ``keep``.
-
-    Raises:
-        ValueError: an unknown policy.
-    """
+    """The code hash reused results must have under ``results.code_change`` of ``catalog.yaml``:
+    :func:`code_hash` for ``rerun``, None (any) for ``keep``. Raises ValueError for another policy."""
     if code_change == "rerun":
         return code_hash()
     if code_change == "keep":
@@ -150,49 +107,24 @@ def _hash16(blob: dict[str, Any]) -> str:
 
 
 def run_hash(input_hash: str, config: RefineConfig, prompt: str, category: str | None) -> str:
-    """Configuration hash of one refine run (hex, 16): SHA-256 of the
-    configuration's own hash, the prompt, the category override and the code
-    version. ``input_hash`` is recorded beside it, not inside."""
+    """Configuration hash of one refine run (hex, 16): SHA-256 of the configuration's own hash, the prompt,
+    the category override and the package version (``input_hash`` is not part of it)."""
     return _hash16({"config": config.config_hash(), "prompt": prompt, "category": category, "version": __version__})
 
 
-def flow_config_hash(
-    refine_hash: str,
-    *,
-    refine_function: str,
-    evaluate: bool,
-    probes: bool,
-    extras: bool,
-    reference: bool,
-    reference_scale: float | None,
-) -> str:
-    """Configuration hash of one asset's result in the catalog (hex, 16): the
-    refine run hash (:func:`run_hash`) plus the flow settings that change the
-    result (refine function, metrics stage and probes, extras, whether a
-    reference is measured, the reference scale)."""
-    return _hash16(
-        {
-            "refine": refine_hash,
-            "refine_function": refine_function,
-            "evaluate": evaluate,
-            "probes": probes,
-            "extras": extras,
-            "reference": reference,
-            "reference_scale": reference_scale,
-        }
-    )
-
-
-# ---------------------------------------------------------------------- completion
+def flow_config_hash(refine_hash: str, *, refine_function: str, evaluate: bool, probes: bool, extras: bool,
+                     reference: bool, reference_scale: float | None) -> str:
+    """Configuration hash of one asset's result in the catalog (hex, 16): :func:`run_hash` plus the flow
+    settings that change the result."""
+    return _hash16({"refine": refine_hash, "refine_function": refine_function, "evaluate": evaluate, "probes": probes,
+                    "extras": extras, "reference": reference, "reference_scale": reference_scale})
 
 
 def is_complete(out_dir: Path | str, input_hash: str, config_hash: str) -> bool:
-    """True when ``out_dir`` holds a completion marker for exactly this input
-    and configuration (and this code version), and every file it lists exists
-    with its recorded SHA-256."""
-    marker = Path(out_dir) / MARKER_NAME
+    """True when ``out_dir`` holds a completion marker for exactly this input, configuration and version,
+    and every file it lists has its recorded SHA-256."""
     try:
-        data = read_record(marker)  # a regular file only: a FIFO there never blocks
+        data = read_record(Path(out_dir) / MARKER_NAME)
     except (OSError, ValueError):
         return False
     if not isinstance(data, dict) or not isinstance(data.get("files", {}), dict):
@@ -210,8 +142,7 @@ def is_complete(out_dir: Path | str, input_hash: str, config_hash: str) -> bool:
 
 
 def output_files(out_dir: Path | str) -> list[str]:
-    """Files of an output folder the marker covers (relative, sorted): every
-    file except the marker itself and temporary files of atomic writes."""
+    """Files of an output folder (relative, sorted) except the marker and temporary files."""
     out_dir = Path(out_dir)
     return sorted(
         str(p.relative_to(out_dir)) for p in out_dir.rglob("*")
@@ -220,30 +151,20 @@ def output_files(out_dir: Path | str) -> list[str]:
 
 
 def write_completion_marker(out_dir: Path | str, input_hash: str, config_hash: str, owner: OwnedFolder | None = None) -> Path:
-    """Write the completion marker (last, atomically): both hashes, the code
-    version and the SHA-256 of every file of :func:`output_files`, or, with
-    ``owner`` (the run's :class:`~asset2sim.output_folder.OwnedFolder`),
-    of exactly the files the run wrote (:meth:`OwnedFolder.finish`, which
-    raises ``OutputError`` and writes no marker when one of them is missing)."""
+    """Write the completion marker: both hashes, the version and the SHA-256 of every file of
+    :func:`output_files` or, with ``owner``, of the files the run wrote (:meth:`OwnedFolder.finish`: raises
+    ``OutputError`` when one is missing)."""
     out_dir = Path(out_dir)
+    head = {"input_hash": input_hash, "config_hash": config_hash, "version": __version__}
     if owner is not None:
-        owner.finish({"input_hash": input_hash, "config_hash": config_hash, "version": __version__})
+        owner.finish(head)
         return out_dir / MARKER_NAME
-    return atomic.write_json(
-        out_dir / MARKER_NAME,
-        {
-            "input_hash": input_hash,
-            "config_hash": config_hash,
-            "version": __version__,
-            "files": {f: atomic.sha256_file(out_dir / f) for f in output_files(out_dir)},
-        },
-    )
+    return atomic.write_json(out_dir / MARKER_NAME, {**head, "files": {f: atomic.sha256_file(out_dir / f) for f in output_files(out_dir)}})
 
 
 def finished_result(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
-    """The skip rule: ``row`` (an earlier catalog row for the same asset,
-    input and flow configuration, or None) when its output folder is still
-    complete for ``input_hash`` and the row's refine configuration hash, else None."""
+    """The skip rule: ``row`` (an earlier catalog row for the same asset, input and flow configuration, or
+    None) when its output folder is still complete for ``input_hash``, else None."""
     if row is None:
         return None
     out = row.get("out_dir")
@@ -252,15 +173,9 @@ def finished_result(row: dict[str, Any] | None, input_hash: str) -> dict[str, An
     return row if is_complete(Path(out), input_hash, row.get("refine_config_hash") or "") else None
 
 
-# ----------------------------------------------------------------- resuming a flow
-
-
 class JobRecord(BaseModel):
-    """What a flow run set out to do for one asset (:data:`JOB_RECORD_NAME`
-    in its work folder): the job (``asset2sim.flows.stages.AssetJob`` as a
-    dict, without its earlier results), the input hash and both
-    configuration hashes (flow: :func:`flow_config_hash`, refine:
-    :func:`run_hash`, the one the completion marker holds)."""
+    """What a flow run set out to do for one asset: the job (``AssetJob`` as a dict), the input hash and
+    both configuration hashes (:func:`flow_config_hash`, :func:`run_hash`)."""
 
     model_config = ConfigDict(extra="ignore")
     job: dict[str, Any]
@@ -284,11 +199,8 @@ def read_job_record(work_dir: Path | str) -> JobRecord | None:
 
 def resumable_output(candidates: list[dict[str, Any]], input_hash: str, config_hash: str,
                      refine_config_hash: str) -> JobRecord | None:
-    """The first of ``candidates`` (:class:`JobRecord` dicts of earlier runs
-    that wrote no catalog row for the asset, newest first) whose flow
-    configuration hash and input hash are these and whose output folder is
-    complete for them (:func:`is_complete` with the refine configuration
-    hash): finished work a killed flow did not record. None when there is none."""
+    """The first of ``candidates`` (:class:`JobRecord` dicts of earlier runs without a catalog row, newest
+    first) with these hashes whose output folder is complete: finished work a killed flow did not record."""
     for cand in candidates:
         try:
             rec = JobRecord.model_validate(cand)
@@ -303,22 +215,16 @@ def resumable_output(candidates: list[dict[str, Any]], input_hash: str, config_h
 
 
 def refined_output(out_dir: Path | str) -> "RefineOutput":
-    """The refine stage's value for a complete output folder, read from its
-    typed ``report.json`` (nothing is refined): ``skipped`` True, model
-    tokens as the report (or overlay) records them.
-
-    Raises:
-        OSError / ValueError: no readable ``report.json`` of the report schema.
-    """
+    """The refine stage's value (``skipped``) for a complete output folder, from its ``report.json``.
+    Raises OSError or ValueError when there is no readable report."""
     out_dir = Path(out_dir)
     report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, MAX_RECORD_BYTES))
     return RefineOutput(report=report, out_dir=str(out_dir), skipped=True, tokens=report_tokens(report, out_dir))
 
 
 def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
-    """Model tokens used: 0 when no model was queried, else the report's
-    ``model_tokens`` (or the overlay's estimator ``tokens``) when positive,
-    else None (the model API did not say)."""
+    """Model tokens used: 0 when no model was queried, else the report's (or the overlay's) count when
+    positive, else None."""
     if int(report.model_queries or 0) == 0:
         return 0
     if report.model_tokens > 0:
@@ -332,21 +238,10 @@ def report_tokens(report: RefineReport, out_dir: Path | str) -> int | None:
     return None
 
 
-# ---------------------------------------------------------------------- stage records
-
-
 class Prepared(BaseModel):
-    """What the flow's input stage found for one asset.
-
-    ``ok``: the asset was read; ``input_hash`` of its files; ``config_hash``
-    (:func:`flow_config_hash`) and ``refine_config_hash`` (:func:`run_hash`);
-    ``category`` (manifest's, else the asset's); ``skip``: the earlier catalog
-    row to reuse; ``resume``: an earlier run's complete folder without a
-    catalog row, to record instead of refining; ``seconds`` wall time; on failure ``failure_mode`` and ``error``.
-    ``asset`` and ``findings``: the extracted description and its validation
-    findings (:func:`asset2sim.tasks.ingest.extract.extract_asset_checked`),
-    handed to the refine stage so the asset is read once (:meth:`extracted`).
-    """
+    """What the flow's input stage found for one asset: ``skip`` the earlier catalog row to reuse, ``resume``
+    an earlier run's :class:`JobRecord` whose complete folder to record, ``asset`` and ``findings`` handed to
+    the refine stage (:meth:`extracted`); ``seconds`` wall time."""
 
     model_config = ConfigDict(extra="forbid")
     ok: bool = False
@@ -360,23 +255,19 @@ class Prepared(BaseModel):
     movable_joints: int | None = None
     skip: dict[str, Any] | None = None
     resume: dict[str, Any] | None = None
-    """An earlier run's :class:`JobRecord` (dict) whose complete folder this
-    run records instead of refining (:func:`resumable_output`)."""
     failure_mode: str | None = None
     error: str | None = None
     asset: AssetDescription | None = None
     findings: list[Finding] = Field(default_factory=list)
 
     def extracted(self) -> tuple[AssetDescription, list[Finding]] | None:
-        """``(asset, findings)`` for ``refine_asset(extracted=...)``; None when
-        the asset was not read."""
+        """``(asset, findings)`` for ``refine_asset(extracted=...)``; None when the asset was not read."""
         return None if self.asset is None else (self.asset, list(self.findings))
 
 
 class RefineOutput(BaseModel):
-    """The refine stage's value: the typed report, the folder, whether the
-    refine function reused a complete folder, its progress messages
-    ``[stage, message, t_s]`` and the model tokens used (None: unknown)."""
+    """The refine stage's value: the report, the folder, whether a complete folder was reused, progress
+    ``[stage, message, t_s]`` and the model tokens (None: unknown)."""
 
     model_config = ConfigDict(extra="forbid")
     report: RefineReport
@@ -387,10 +278,8 @@ class RefineOutput(BaseModel):
 
 
 class Measurement(BaseModel):
-    """The metrics stage's value: the catalog's metric columns
-    (:func:`asset2sim.schemas.metrics.column_values`), the failed metrics
-    (``name@engine``), wall time (s) and whether the post-check's rest test
-    was reused (``reused_post_check``) or the whole evaluation (``reused_evaluation``)."""
+    """The metrics stage's value: the catalog's metric columns, the failed metrics (``name@engine``), wall
+    time (s) and whether the post-check's rest test or the refine's ``evaluation.json`` was reused."""
 
     model_config = ConfigDict(extra="forbid")
     columns: dict[str, Any] = Field(default_factory=dict)
@@ -398,13 +287,11 @@ class Measurement(BaseModel):
     seconds: float = 0.0
     reused_post_check: bool = False
     reused_evaluation: bool = False
-    """The refined folder's ``evaluation.json`` (refine's extras) was read instead of evaluating."""
 
 
 class StageRecord(BaseModel):
-    """One stage's outcome (``flows.isolation``'s record): ``status`` ok /
-    skipped / error / timeout / crash; ``value`` the stage's typed value when
-    ok; ``seconds`` wall time; error fields when it failed."""
+    """One stage's outcome: ``status`` ok / skipped / error / timeout / crash, ``value`` when ok,
+    ``seconds`` wall time, error fields when it failed."""
 
     model_config = ConfigDict(extra="allow")
     status: str
@@ -417,15 +304,11 @@ class StageRecord(BaseModel):
     worker: str | None = None
 
 
-# ------------------------------------------------------------------------------ rows
-
-
 def _utc(ts: float | None) -> datetime | None:
     return None if ts is None else datetime.fromtimestamp(ts, timezone.utc)
 
 
-#: Columns a skipped row copies from the finished row it reuses (``code_hash``:
-#: the code that made the reused output, so a later ``rerun`` policy sees it).
+#: Columns a skipped row copies from the finished row it reuses.
 REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
@@ -433,34 +316,21 @@ REUSED_COLUMNS = (
 )  # fmt: skip
 
 
-def build_row(
-    job: Any,
-    prepared: Prepared | None,
-    refined: StageRecord | None,
-    measured: StageRecord | None,
-    *,
-    error: str | None = None,
-    failure_mode: str | None = None,
-    flow_run_id: str | None = None,
-    started_at: float | None = None,
-    finished_at: float | None = None,
-) -> CatalogRow:
+def build_row(job: Any, prepared: Prepared | None, refined: StageRecord | None, measured: StageRecord | None, *,
+              error: str | None = None, failure_mode: str | None = None, flow_run_id: str | None = None,
+              started_at: float | None = None, finished_at: float | None = None) -> CatalogRow:
     """One catalog row from the typed stage records of an asset.
 
     Args:
-        job: the asset's job (``asset2sim.flows.stages.AssetJob``: asset id,
-            prompt, category, config dict, reference scale, run id, code
-            version, output folder, ``evaluate``).
+        job: the asset's ``asset2sim.flows.stages.AssetJob``.
         prepared: the input stage's record (None: it did not finish).
         refined: the refine stage's record; ``value`` a :class:`RefineOutput`.
         measured: the metrics stage's record; ``value`` a :class:`Measurement`.
-        error, failure_mode: an exception that stopped the chain outside the
-            stages (a killed worker, a Prefect time-out, retries exhausted).
+        error, failure_mode: an exception that stopped the chain outside the stages.
         flow_run_id: Prefect flow run; started_at, finished_at: epoch s.
 
-    Verdict columns come from the metrics stage when it ran, else from the
-    refine post-check; the failure mode is
-    :func:`asset2sim.tasks.check.verdict.asset_failure_mode`'s.
+    Verdict columns come from the metrics stage when it ran, else from the refine post-check; the failure
+    mode is :func:`asset2sim.tasks.check.verdict.asset_failure_mode`'s.
     """
     prepared = prepared or Prepared(worker=None)
     row = _row_head(job, prepared, refined, flow_run_id, started_at, finished_at)
@@ -479,15 +349,9 @@ def build_row(
     measured_status = measured.status if measured is not None else None
     cols, measured_failures = _add_measured(row, measured, stages)
     verdict = asset_failure_mode(
-        input_failure=input_failure,
-        refine_status=refine_status,
-        refine_mode=refine_mode,
-        measured_status=measured_status,
-        rest_stable=cols.get("rest_stable"),
-        oscillation_pass=cols.get("oscillation_pass"),
-        chain_error_mode=(failure_mode or "crash") if error else None,
-        measured_failures=measured_failures,
-    )
+        input_failure=input_failure, refine_status=refine_status, refine_mode=refine_mode, measured_status=measured_status,
+        rest_stable=cols.get("rest_stable"), oscillation_pass=cols.get("oscillation_pass"),
+        chain_error_mode=(failure_mode or "crash") if error else None, measured_failures=measured_failures)
     errors += verdict.errors
     if measured is not None and measured.status in FAILED_STATUSES:
         stages["metrics"] = round(float(measured.seconds or 0.0), 4)
@@ -511,38 +375,24 @@ def build_row(
 
 def _row_head(job: Any, prepared: Prepared, refined: StageRecord | None, flow_run_id: str | None,
               started_at: float | None, finished_at: float | None) -> CatalogRow:
-    """A ``failed`` row with the job's and the input stage's columns; times
-    epoch s (now when not given)."""
+    """A ``failed`` row with the job's and the input stage's columns (times default to now)."""
     now = time.time()
     return CatalogRow(
-        asset_id=job.asset_id,
-        status="failed",
-        category=prepared.category or job.category,
-        prompt=job.prompt,
-        estimator=job.config.get("estimator"),
-        model=job.config.get("model"),
-        reference_scale=job.reference_scale,
-        input_hash=prepared.input_hash,
-        config_hash=prepared.config_hash,
-        refine_config_hash=prepared.refine_config_hash,
-        code_version=job.code_version,
-        code_hash=code_hash(),
-        flow_run_id=flow_run_id,
+        asset_id=job.asset_id, status="failed", category=prepared.category or job.category, prompt=job.prompt,
+        estimator=job.config.get("estimator"), model=job.config.get("model"), reference_scale=job.reference_scale,
+        input_hash=prepared.input_hash, config_hash=prepared.config_hash, refine_config_hash=prepared.refine_config_hash,
+        code_version=job.code_version, code_hash=code_hash(), flow_run_id=flow_run_id,
         worker=(refined.worker if refined is not None else None) or prepared.worker,
-        started_at=_utc(started_at or now),
-        finished_at=_utc(finished_at or now),
-        source_run=job.run_id,
-    )
+        started_at=_utc(started_at or now), finished_at=_utc(finished_at or now), source_run=job.run_id)
 
 
 def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float]) -> CatalogRow:
-    """``row`` made the ``skipped`` row of the earlier finished row ``prev``
-    (:data:`REUSED_COLUMNS`); this run asked the model nothing."""
+    """``row`` made the ``skipped`` row reusing the finished row ``prev``."""
     for col in REUSED_COLUMNS:
         setattr(row, col, prev.get(col))
     row.status = "skipped"
     row.source_run = prev.get("source_run") or prev.get("run")
-    row.model_queries = 0  # nothing was asked in this run
+    row.model_queries = 0
     row.tokens = 0
     row.stage_seconds = json.dumps(stages)
     row.wall_seconds = sum(stages.values())
@@ -550,9 +400,7 @@ def _reused_row(row: CatalogRow, prev: dict[str, Any], stages: dict[str, float])
 
 
 def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages: dict[str, float], errors: list[str]) -> str | None:
-    """The refine stage's columns into ``row``, its seconds into ``stages``
-    and its errors into ``errors``; returns its failure mode (None: it did
-    not finish)."""
+    """Add the refine stage's columns, seconds and errors; returns its failure mode (None: not finished)."""
     if refined is not None and refined.status == "ok":
         value: RefineOutput = refined.value
         report = value.report
@@ -564,7 +412,6 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         row.total_mass_kg = report.total_mass
         row.initial_state = json.dumps(report.initial_joint_positions or {}, sort_keys=True)
         row.model_queries = int(report.model_queries or 0)
-        # the hash the refine function wrote into its completion marker
         row.refine_config_hash = report.config_hash or row.refine_config_hash
         row.tokens = value.tokens
         row.estimator = report.estimator or row.estimator
@@ -586,9 +433,8 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
 
 
 def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[str, float]) -> tuple[dict[str, Any], list[str] | None]:
-    """The metrics stage's columns into ``row`` and its seconds into
-    ``stages`` when it ran; returns its columns and failed metrics
-    (``{}``, None when it did not run)."""
+    """Add the metrics stage's columns and seconds; returns its columns and failed metrics ({}, None when it
+    did not run)."""
     if measured is None or measured.status != "ok":
         return {}, None
     m: Measurement = measured.value
@@ -599,14 +445,9 @@ def _add_measured(row: CatalogRow, measured: StageRecord | None, stages: dict[st
     return m.columns, list(m.failures)
 
 
-# ------------------------------------------------------------------ manifest rows
-
-
 def manifest_row_id(error: ManifestRowError, taken: set[str]) -> str:
-    """The catalog ``asset_id`` of a manifest row that cannot be used: its id
-    when that is a usable id no other row of the run takes, else
-    ``manifest-line-<line>`` (made unique against ``taken``). Adds the
-    result to ``taken``."""
+    """The catalog ``asset_id`` of an unusable manifest row: its id when usable and free, else
+    ``manifest-line-<line>`` (unique against ``taken``, to which it is added)."""
     rid = error.id if is_valid_id(error.id) and error.code != "MANIFEST_DUPLICATE_ID" else None
     if rid is None or rid in taken:
         base = rid = f"manifest-line-{error.line}"
@@ -618,35 +459,14 @@ def manifest_row_id(error: ManifestRowError, taken: set[str]) -> str:
     return rid
 
 
-def build_manifest_row(
-    error: ManifestRowError,
-    *,
-    asset_id: str,
-    run_id: str,
-    config: dict[str, Any],
-    code_version: str,
-    flow_run_id: str | None = None,
-    at: float | None = None,
-) -> CatalogRow:
-    """The failed catalog row of a manifest row that cannot be used (no
-    stage ran): failure mode from :func:`asset2sim.tasks.check.verdict.asset_failure_mode`
-    (``invalid_manifest_row``), the row's code and message as the error,
-    ``asset_id`` from :func:`manifest_row_id`; ``at`` epoch s."""
+def build_manifest_row(error: ManifestRowError, *, asset_id: str, run_id: str, config: dict[str, Any], code_version: str,
+                       flow_run_id: str | None = None, at: float | None = None) -> CatalogRow:
+    """The failed catalog row of an unusable manifest row (``invalid_manifest_row``, its code and message as
+    the error); ``at`` epoch s."""
     verdict = asset_failure_mode(manifest_error=f"{error.code}: {error.message}")
     when = _utc(at if at is not None else time.time())
     return CatalogRow(
-        asset_id=asset_id,
-        status="failed",
-        failure_mode=verdict.failure_mode,
-        error="\n".join(verdict.errors),
-        estimator=config.get("estimator"),
-        model=config.get("model"),
-        code_version=code_version,
-        code_hash=code_hash(),
-        flow_run_id=flow_run_id,
-        started_at=when,
-        finished_at=when,
-        source_run=run_id,
-        wall_seconds=0.0,
-        stage_seconds=json.dumps({}),
-    )
+        asset_id=asset_id, status="failed", failure_mode=verdict.failure_mode, error="\n".join(verdict.errors),
+        estimator=config.get("estimator"), model=config.get("model"), code_version=code_version, code_hash=code_hash(),
+        flow_run_id=flow_run_id, started_at=when, finished_at=when, source_run=run_id, wall_seconds=0.0,
+        stage_seconds=json.dumps({}))

@@ -1,77 +1,20 @@
 """Export an output folder to OpenUSD with UsdPhysics (Isaac Sim / Isaac Lab,
-Newton, any UsdPhysics reader).
+Newton, any UsdPhysics reader): ``usd/mobility.usd``, one self-contained
+binary layer derived from ``mobility.urdf`` (the source of truth),
+``overlay.json`` (springs) and ``initial_state.json`` (joint positions,
+mounting).
 
-``mobility.urdf`` stays the source of truth; the USD is derived from it, from
-``overlay.json`` (springs: stiffness and reference, which URDF cannot hold)
-and ``initial_state.json`` (joint positions, the root's mounting). Layout,
-inside the output folder::
-
-    usd/mobility.usd     one self-contained binary (crate) layer: every mesh
-                         is a UsdGeom.Mesh prim inside it, no external files
-
-What is written (``/<robot>`` is the default prim):
-
-- ``/<robot>``: ``UsdGeom.Xform`` with ``UsdPhysics.ArticulationRootAPI``;
-  stage metadata ``metersPerUnit = 1``, ``kilogramsPerUnit = 1``,
-  ``upAxis = Z``; no physics scene (the user's scene gives gravity and the
-  time step).
-- ``/<robot>/<link>`` per URDF link, flat (as Isaac Sim's URDF importer lays
-  them out), posed at the initial state (root link at the world origin):
-  ``UsdPhysics.RigidBodyAPI`` and ``UsdPhysics.MassAPI`` with
-  ``physics:mass`` (kg), ``physics:centerOfMass`` (m, link frame),
-  ``physics:diagonalInertia`` (kg*m^2, the eigenvalues of the URDF inertia
-  tensor about the COM) and ``physics:principalAxes`` (the rotation whose
-  columns are the eigenvectors, a proper rotation: det = +1). A link without
-  ``<inertial>`` gets mass 0 and no inertia (UsdPhysics: "computed from the
-  colliders"), and the check says so.
-- ``.../<link>/visuals/*``: the visual meshes as ``UsdGeom.Mesh`` (points in
-  the link frame, the URDF's origin and mesh scale applied; colour from the
-  URDF material's rgba); no textures.
-- ``.../<link>/collisions/*``: the convex pieces every engine of asset2sim
-  collides with (:func:`asset2sim.engines.loading.collision_pieces`: refine's
-  outputs already hold closed, outward, >= 2 mm thick pieces, see
-  ``tasks/assemble/collision_geometry.py``), each a ``UsdGeom.Mesh`` of its
-  convex hull with ``CollisionAPI`` and ``MeshCollisionAPI``
-  ``physics:approximation = "convexHull"`` and purpose ``guide``; box, sphere
-  and cylinder collisions as ``Cube`` / ``Sphere`` / ``Cylinder``.
-- ``/<robot>/joints/<joint>``: ``UsdPhysics.RevoluteJoint`` /
-  ``PrismaticJoint`` / ``FixedJoint`` (continuous: revolute without limits),
-  ``physics:axis = "X"`` with the joint frames rotated so that X is the URDF
-  axis; limits in the units UsdPhysics prescribes: **degrees** for revolute,
-  metres for prismatic.
-- Passive dynamics (the units conversions Isaac Sim's URDF importer gets
-  wrong or drops, IsaacSim issues #841, #842):
-
-  ======================  ==========================================================
-  URDF / overlay (SI)     USD
-  ======================  ==========================================================
-  damping c (N*m*s/rad)   ``drive:angular:physics:damping`` = c * pi/180 (per degree/s),
-                          ``targetVelocity`` 0: a viscous drive (PhysX's way)
-  damping c (N*s/m)       ``drive:linear:physics:damping`` = c
-  stiffness k (N*m/rad)   ``drive:angular:physics:stiffness`` = k * pi/180 (per degree),
-                          ``targetPosition`` = spring reference in degrees
-  friction f (N*m or N)   ``newton:friction`` (NewtonJointAPI, SI; what Newton's USD
-                          importer reads) and ``asset2sim:friction``; PhysX's
-                          ``physxJoint:jointFriction`` is a coefficient on the joint's
-                          constraint force, not a torque, so it is not authored
-  ======================  ==========================================================
-
-  The drive is ``type = "force"`` with no force limit; a joint without
-  damping and spring gets no drive. Every joint also carries the SI values
-  as ``asset2sim:damping``, ``asset2sim:friction``, ``asset2sim:stiffness``,
-  ``asset2sim:springReference`` for readers that want them.
-- Initial state: ``PhysicsJointStateAPI:angular`` / ``:linear``
-  (``state:angular:physics:position`` in degrees, velocity 0; PhysX /
-  Isaac), the same value as ``newton:angular:position`` /
-  ``newton:linear:position`` (what Newton's importer reads by default), and
-  the link poses themselves.
-- Mounting (``initial_state.json`` ``"root"``): a fixed asset gets a
-  ``FixedJoint`` ``/<robot>/joints/root_joint`` from the world
-  (``physics:body0`` empty) to the root link; a free one none.
-
-USD stores these attributes as 32-bit floats (``float``, ``float3``,
-``quatf``): :func:`check_usd` compares with relative tolerance
-:data:`FLOAT_RTOL`.
+``/<robot>`` (default prim, ArticulationRootAPI; z up, m, kg; no physics
+scene) holds one rigid body per link, flat and posed at the initial state
+(MassAPI: mass, COM, principal moments and axes), its visual meshes and its
+convex collision pieces (:func:`asset2sim.engines.loading.collision_pieces`,
+``convexHull``, purpose ``guide``), and ``joints/``: revolute (limits, gains
+and states per **degree**), prismatic and fixed joints with X along the URDF
+axis, a force drive for damping and springs, Coulomb friction in
+``newton:friction``, the SI values as ``asset2sim:*``, and for a fixed root a
+``root_joint`` from the world. docs/design/simulators.md, "USD export", has
+the table of unit conversions. Attributes are binary32: :func:`check_usd`
+compares with relative tolerance :data:`FLOAT_RTOL`.
 """
 
 from __future__ import annotations
@@ -94,9 +37,7 @@ from asset2sim.tasks.assemble.write import read_root
 from asset2sim.urdf import UrdfJoint, UrdfModel
 from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
 
-#: Relative tolerance of a value read back from the USD: attributes are 32-bit
-#: floats (IEEE 754 binary32, 24-bit significand: 6e-8 relative rounding), and
-#: degree conversions add one more rounding.
+#: Relative tolerance of a value read back from the USD (binary32: 6e-8 relative, plus a degree conversion).
 FLOAT_RTOL = 1e-6
 #: Degrees per radian (UsdPhysics angles, limits and angular gains are per degree).
 DEG = 180.0 / math.pi
@@ -158,8 +99,7 @@ class UsdBuild:
 
 def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> UsdBuild:
     """Write ``out_dir/usd/<urdf stem>.usd`` from ``mobility.urdf``,
-    ``overlay.json`` and ``initial_state.json`` (see the module docstring for
-    what is written and the unit conversions).
+    ``overlay.json`` and ``initial_state.json`` (module docstring).
 
     Args:
         out_dir: an output folder of the SPEC's contract.
@@ -549,17 +489,11 @@ class UsdCheck:
 
 def check_usd(path: Path, out_dir: Path) -> UsdCheck:
     """Authored equals intended: read ``path`` back (:func:`read_usd`) and
-    compare every link's mass, COM and inertia tensor with ``mobility.urdf``
-    (the overlay's values as written) and every movable joint's limits,
-    damping, Coulomb friction, stiffness, spring reference and initial
-    position with the URDF, ``overlay.json`` and ``initial_state.json``.
-
-    Tolerance: :data:`FLOAT_RTOL` relative (USD stores binary32), against the
-    larger of the value and the largest value of the same quantity on that
-    link (COM: the largest |component| or 1 mm; inertia: the largest moment).
-
-    Every link and joint ``overlay.json`` lists is also compared with the
-    overlay's own numbers (mass, COM, inertia; damping, friction, stiffness).
+    compare every link's mass, COM and inertia tensor and every movable
+    joint's limits, damping, Coulomb friction, stiffness, spring reference and
+    initial position with ``mobility.urdf``, ``overlay.json`` (its own numbers
+    too) and ``initial_state.json``, to :data:`FLOAT_RTOL` relative to the
+    quantity's scale on that link or joint (COM: at least 1 mm).
 
     Raises:
         ValueError: ``overlay.json`` is not a valid overlay.
@@ -619,9 +553,8 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
             got = usd.joints.get(name)
             if got is None:
                 raise UsdExportError(f"{path}: overlay joint {name!r} is not in the USD")
-            cmp(f"overlay joint {name!r} damping", got.damping, jd.damping, abs(jd.damping))
-            cmp(f"overlay joint {name!r} friction", got.friction, jd.friction, abs(jd.friction))
-            cmp(f"overlay joint {name!r} stiffness", got.stiffness, jd.stiffness, abs(jd.stiffness))
+            for q in ("damping", "friction", "stiffness"):
+                cmp(f"overlay joint {name!r} {q}", getattr(got, q), getattr(jd, q), abs(getattr(jd, q)))
     for j in model.movable_joints:
         got = usd.joints.get(j.name)
         if got is None:

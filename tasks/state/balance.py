@@ -1,14 +1,9 @@
-"""Static balance of a written asset on the ground: the support polygon, the
-centre of mass (COM) against it, the margin a free-standing object needs,
-and the opening within the requested bands at which it stands steadiest.
+"""Static balance of a written asset on the ground: support polygon, centre of
+mass (COM) against it, the margin required, the steadiest opening in the bands.
 
-Statics (rigid bodies on a plane under gravity -z): the object rests iff the
-vertical projection of its COM lies inside the convex hull of its contact
-points (the support polygon); e.g. Featherstone & Orin, "Dynamics", Springer
-Handbook of Robotics (2008) section 2.9 / the zero-moment-point condition of
-Vukobratovic & Borovac, "Zero-moment point - thirty five years of its life",
-IJHR 1(1) 2004 (the static case: ZMP = COM projection). Stability by design
-(:mod:`asset2sim.tasks.state.stability`) acts on what this measures.
+An object rests iff the COM's vertical projection lies inside the support
+polygon (Featherstone & Orin, Springer Handbook of Robotics 2008, sec. 2.9;
+the static zero-moment-point condition, Vukobratovic & Borovac, IJHR 2004).
 """
 
 from __future__ import annotations
@@ -32,32 +27,22 @@ __all__ = ["BAND_SAMPLES", "MARGIN_GAIN", "SUPPORT_MARGIN_FRACTION", "TILT_RECOV
            "steadiest_fractions", "support_polygon"]
 
 
-#: Tilt (rad) from which the object must fall back onto its support: the COM
-#: must lie at least h * tan(TILT_RECOVERY_RAD) inside the support's edge (h:
-#: COM height above the support), the static tipping angle being
-#: atan(margin / h) (Featherstone & Orin 2008, statics of a rigid body on a
-#: plane). Twice the 5 deg tilt of the robust-rest trials
-#: (``tasks.check.robust_rest``), which must also survive a 2 cm drop and a
-#: nudge; see :data:`SUPPORT_MARGIN_FRACTION` for low, wide objects.
+#: Tilt (rad) the object must recover from: the COM lies at least
+#: h * tan(TILT_RECOVERY_RAD) inside the support's edge (h: COM height; the
+#: static tipping angle is atan(margin / h)). Twice the robust-rest trials' 5 deg.
 TILT_RECOVERY_RAD = math.radians(10.0)
 
 
 #: Margin (fraction of the support polygon's square-root area) the COM must
-#: keep inside its edge whatever its height: measured on the generated tipping
-#: laptop (``tests/tasks/check/failure_assets.py``, COM 6 cm high), a margin of
-#: 11 mm (h tan 10 deg, 5 % of sqrt-area) still toppled it on the robust-rest
-#: drop and backward tilt, 24 mm (10 %) passed every trial.
+#: keep inside its edge whatever its height (docs/design/metrics.md).
 SUPPORT_MARGIN_FRACTION = 0.10
 
 
 @dataclass
 class Balance:
-    """Static balance at one state (world = the written URDF's frame, z up).
-
-    ``com`` (3,) m; ``support`` (K, 2) m support polygon (counter-clockwise);
-    ``margin`` m signed distance of the COM's projection to the polygon's
-    edge (positive inside); ``required`` m the margin asked for.
-    """
+    """Static balance at one state (the written URDF's frame, z up): ``com`` (3,) m;
+    ``support`` (K, 2) m, counter-clockwise; ``margin`` m, signed distance of the
+    COM's projection to the polygon's edge (positive inside); ``required`` m."""
 
     com: np.ndarray
     support: np.ndarray
@@ -70,8 +55,7 @@ class Balance:
 
 
 def _hull2d(points: np.ndarray) -> np.ndarray:
-    """Convex hull (K, 2) counter-clockwise of points (N, 2) (Andrew's
-    monotone chain, Comp. Geom. Theory Appl. 1979)."""
+    """Convex hull (K, 2) counter-clockwise of points (N, 2) (Andrew's monotone chain, Comp. Geom. Theory Appl. 1979)."""
     pts = np.unique(np.round(np.asarray(points, float), 9), axis=0)
     if len(pts) < 3:
         return pts
@@ -93,9 +77,8 @@ def _hull2d(points: np.ndarray) -> np.ndarray:
 
 
 def _signed_margin(poly: np.ndarray, p: np.ndarray) -> float:
-    """Signed distance (m) of point ``p`` (2,) to the edge of the convex
-    polygon ``poly`` (K, 2, counter-clockwise): positive inside. A degenerate
-    polygon (K < 3) gives minus the distance to its points."""
+    """Signed distance (m) of ``p`` (2,) to the edge of the CCW convex polygon
+    ``poly`` (K, 2), positive inside; K < 3: minus the distance to its points."""
     if len(poly) < 3:
         return -float(np.min(np.linalg.norm(poly - p, axis=1))) if len(poly) else -np.inf
     d = np.inf
@@ -106,26 +89,15 @@ def _signed_margin(poly: np.ndarray, p: np.ndarray) -> float:
     return d
 
 
-#: Largest angle (rad) between a bottom face of the convex hull and the
-#: ground for the object to settle onto it without counting as fallen
-#: (``tasks.check.metrics.SETTLE_TILT_LIMIT``).
+#: Largest angle (rad) between a bottom hull face and the ground for the object
+#: to settle onto it (``tasks.check.metrics.SETTLE_TILT_LIMIT``).
 SETTLE_FACE_ANGLE = 0.05
 
 
 def support_polygon(points: np.ndarray, tol: float, com: np.ndarray | None = None) -> np.ndarray:
-    """Support polygon (K, 2) m of collision points (N, 3) resting on the
-    ground (meshes' bottoms are rarely exactly flat, so the object settles on
-    a face of the points' 3-D convex hull):
-
-    - the face the vertical line through ``com`` (3,) leaves the hull by,
-      when its outward normal is within :data:`SETTLE_FACE_ANGLE` of straight
-      down (the object tilts onto it and rests there);
-    - else (no ``com``, or that face is steep: the object rolls off it) the
-      largest such near-horizontal face;
-    - else the points within ``tol`` of the lowest one;
-
-    as the 2-D convex hull of the points within ``tol`` m of the face's plane.
-    Empty (0, 2) when there are no points."""
+    """Support polygon (K, 2) m of collision points (N, 3) on the ground: the 2-D hull of the points within ``tol`` m of the
+    hull face the vertical through ``com`` (3,) exits by, when within :data:`SETTLE_FACE_ANGLE` of straight down; else of
+    the largest such face; else of the points within ``tol`` of the lowest. (0, 2) without points."""
     pts = np.asarray(points, float)
     if not len(pts):
         return np.zeros((0, 2))
@@ -164,8 +136,7 @@ def support_polygon(points: np.ndarray, tol: float, com: np.ndarray | None = Non
 
 
 def _link_world(urdf: Path, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
-    """Link frames (position (3,), rotation (3, 3)) at ``state`` and every
-    link's collision hull points in the world (N, 3), from the written URDF."""
+    """Link frames (position (3,), rotation (3, 3)) and world collision hull points (N, 3) per link at ``state``."""
     model = read_urdf(urdf)
     pieces, _ = collision_pieces(model)
     with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
@@ -173,8 +144,7 @@ def _link_world(urdf: Path, state: dict[str, float]) -> tuple[dict, dict[str, np
 
 
 def _world_at(session, pieces: dict, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
-    """:func:`_link_world` in an open fixed-base ``session`` of the URDF whose
-    collision ``pieces`` (link -> pieces) are given, its joints set to ``state``."""
+    """:func:`_link_world` in an open fixed-base ``session``, ``pieces``: link -> collision pieces."""
     session.set_joint_positions(dict(state))
     frames = {ln: session.link_frame(ln) for ln in session.link_names}
     pts: dict[str, np.ndarray] = {}
@@ -206,22 +176,14 @@ def _com(overlay: Overlay, frames: dict, masses: dict[str, float] | None = None)
 
 
 def measure_balance(urdf: Path | str, overlay: Overlay, state: dict[str, float]) -> Balance:
-    """Static balance of the written asset ``urdf`` (scale baked in) at
-    ``state`` (rad or m) with the overlay's link masses and COMs. The contact
-    band is 1 mm or 0.5 % of the object's height, whichever is larger; the
-    margin asked for is the largest of 2 mm (the SPEC's 1 mm rest tolerance
-    and PyBullet's contact slop), :data:`SUPPORT_MARGIN_FRACTION` of the
-    support polygon's square-root area and h * tan(:data:`TILT_RECOVERY_RAD`)
-    (h: the COM's height above the support).
-
-    Raises:
-        whatever loading the URDF raises.
-    """
+    """Static balance of the written asset ``urdf`` (scale baked in) at ``state`` (rad or m) with the overlay's masses and
+    COMs. Contact band: max(1 mm, 0.5 % of the height); required margin: max(2 mm, :data:`SUPPORT_MARGIN_FRACTION` x
+    sqrt(support area), h tan(:data:`TILT_RECOVERY_RAD`)), h the COM height. Raises whatever loading the URDF raises."""
     return _balance(overlay, *_link_world(Path(urdf), state))
 
 
 def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Balance:
-    """:func:`measure_balance` from the link frames and world collision points of one state."""
+    """:func:`measure_balance` from one state's link frames and world collision points."""
     allp = np.vstack(list(pts.values())) if pts else np.zeros((0, 3))
     com = _com(overlay, frames)
     if not len(allp):
@@ -233,45 +195,25 @@ def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Bala
     return Balance(com, poly, _signed_margin(poly, com[:2]), max(2e-3, SUPPORT_MARGIN_FRACTION * np.sqrt(area), h * np.tan(TILT_RECOVERY_RAD)))
 
 
-#: Opening fractions tried per joint across its allowed interval by
-#: :func:`steadiest_fractions` (both ends included).
+#: Opening fractions tried per joint by :func:`steadiest_fractions` (ends included).
 BAND_SAMPLES = 9
-#: Smallest gain of static margin (m) for which :func:`steadiest_fractions`
-#: moves a joint within its interval: 2 mm, the SPEC's 1 mm rest tolerance
-#: and PyBullet's contact slop (as :func:`measure_balance`'s least margin).
+#: Least gain of static margin (m) for which :func:`steadiest_fractions` moves a joint.
 MARGIN_GAIN = 2e-3
 
 
 def steadiest_fractions(urdf: Path | str, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
                         intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], Balance, Balance]:
-    """The opening fractions, within what the request allows, at which a
-    free-standing object stands steadiest: for each joint of ``intervals``
-    (joint -> allowed opening-fraction interval (lo, hi), the requested
-    band's, dimensionless) that is opened (lo > 0), ``samples`` fractions
-    evenly over its interval with the other joints as found so far, keeping
-    the one with the largest static margin (:func:`measure_balance`'s signed
-    distance of the COM's projection to the support's edge) when it beats
-    the margin before by at least :data:`MARGIN_GAIN`. A fraction at which
-    the object's lowest point drops more than 1 mm (an opened part reaching
-    below the body: the support would change) is not used. Statics: see the
-    module docstring.
+    """The opening fractions within the requested bands at which a free-standing
+    object stands steadiest: for each opened joint of ``intervals`` (joint ->
+    allowed fraction interval (lo, hi), lo > 0), ``samples`` fractions over it,
+    the others as found so far, keeping the largest static margin when it gains
+    at least :data:`MARGIN_GAIN`; fractions that lower the object's bottom by
+    more than 1 mm are skipped.
 
-    Args:
-        urdf: the written URDF (scale baked in).
-        overlay: the overlay it was written from (masses, COMs).
-        state: joint -> rad or m, the refined state.
-        closed: joint -> :class:`~asset2sim.tasks.geometry.closed_state.ClosedState`
-            in the URDF's units (its ``position(fraction)``).
-        intervals: see above.
-        samples: fractions per joint (>= 2).
-
-    Returns:
-        (joint -> fraction for the joints moved, :class:`Balance` before,
-        :class:`Balance` after); ({}, b, b) for a mounted asset or when
-        nothing gains.
-
-    Raises:
-        whatever loading the URDF raises.
+    ``urdf``: the written URDF of ``overlay``; ``state``: joint -> rad or m;
+    ``closed``: joint -> ``ClosedState`` in the URDF's units. Returns (joint ->
+    fraction moved, :class:`Balance` before, after); ({}, b, b) for a mounted
+    asset or when nothing gains.
     """
     model = read_urdf(Path(urdf))
     pieces, _ = collision_pieces(model)

@@ -1,31 +1,7 @@
-"""Collision repair where the joint sweep is blocked: running clearance for
-parts modelled with none.
-
-PartNet-Mobility parts often fit with zero clearance: a stapler's magazine
-between the two walls of its base, a drawer between its runners, a hinge
-leaf against its bracket. Real parts slide there; in a simulator the two
-convex pieces touch, every engine's contact margin (PyBullet: about 1 mm per
-convex hull, so touching hulls report 2 mm of penetration) turns the touch
-into an interference, and the penetration recovery presses the faces together:
-friction then holds the part, and the force-limited drive of the joint sweep
-(:mod:`asset2sim.tasks.check.sweep`) cannot move it (stapler 103275).
-
-Method, for every joint the sweep reports blocked (``reached only ...`` or
-``closed back only ...``), at the state where it stopped (other joints at the
-sweep's start state), with the written collision pieces (the writer's convex
-pieces, link frame, m): each piece P of a link the joint moves in contact
-with a piece Q of a link it does not move (parent-child pairs excepted: every
-engine skips them, SPEC) by a **sliding** contact (the contact normal nearly
-perpendicular to P's motion; a contact along the motion is a stop, the
-limit's business) has its face towards Q moved back to the running
-clearance: :func:`asset2sim.tasks.assemble.sliding_clearance.clear_sliding_contact`
-(separating-axis test, sliding test, squeeze), which the writer also runs at
-the modelled pose when it makes the pieces
-(:func:`~asset2sim.tasks.assemble.sliding_clearance.running_clearance`);
-this repair finds the contacts that appear at other states.
-
-The pieces of the changed links are returned (link frame, m, every piece of
-the link, changed or not) for the writer's collision overrides.
+"""Collision repair where the joint sweep is blocked: each collision piece of a
+blocked joint's links in sliding contact with a piece it does not move gets
+running clearance (:func:`asset2sim.tasks.assemble.sliding_clearance.clear_sliding_contact`),
+written as the writer's collision overrides.
 """
 
 from __future__ import annotations
@@ -63,15 +39,9 @@ class ClearanceRepair:
 
 
 def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
-    """Vertices (k, 3) m of each mesh collision of ``link`` in the link frame
-    (collision origin and mesh scale applied; one piece per file: the
-    writer's convex pieces are one hull per file), read with
-    :func:`asset2sim.mesh_io.read_obj`.
-
-    Raises:
-        OSError: a collision file cannot be read.
-        asset2sim.mesh_io.MeshReadError: a malformed record in a collision file.
-    """
+    """Vertices (k, 3) m of each mesh collision of ``link`` (one piece per file),
+    link frame, collision origin and mesh scale applied. Raises OSError (a collision
+    file cannot be read) or asset2sim.mesh_io.MeshReadError (a malformed record)."""
     out = []
     for c in model.links[link].collisions:
         if c.kind != "mesh" or not c.filename:
@@ -87,14 +57,9 @@ def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
 
 def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float], state: dict[str, float],
                           subtrees: dict[str, list[str]]) -> ClearanceRepair:
-    """Clearance repairs for the joints in ``blocked`` (joint -> the position,
-    rad or m, where the sweep stopped) of the written URDF ``model`` (file
-    ``urdf``, its collision files beside it), other joints at ``state``.
-    ``subtrees``: joint -> the links it moves. See the module docstring.
-
-    Raises:
-        OSError: a collision file cannot be read.
-    """
+    """Clearance repairs for the joints in ``blocked`` (joint -> rad or m where the sweep stopped) of the written URDF
+    ``model`` (file ``urdf``), other joints at ``state``; ``subtrees``: joint -> the links it moves. Raises OSError: a
+    collision file cannot be read."""
     root = Path(urdf).parent
     rep = ClearanceRepair()
     cache: dict[str, list[np.ndarray]] = {}
@@ -141,19 +106,9 @@ def clearance_for_blocked(model: UrdfModel, urdf: Path, blocked: dict[str, float
 
 def touching_joints(model: UrdfModel, pairs: list[tuple[str, str]], state: dict[str, float],
                     subtrees: dict[str, list[str]]) -> dict[str, float]:
-    """The movable joints between two links that touch at ``state``: joint ->
-    its position in ``state`` (rad or m), for every joint that moves exactly
-    one link of a pair in ``pairs`` ((link_a, link_b), e.g. the pairs of the
-    penetration metric, which PyBullet reports while hulls are within its
-    margins) and not the other, so that their relative motion is that joint's
-    (two drawers of one cabinet: each drawer's joint). ``subtrees``: joint ->
-    the links it moves. Fixed joints and joints missing from ``state`` are
-    skipped. Input for :func:`clearance_for_blocked`, which gives running
-    clearance only where the contact slides along that motion.
-
-    Raises:
-        KeyError: a link of ``pairs`` is not in ``model`` (naming it).
-    """
+    """joint -> its position in ``state`` (rad or m) for every non-fixed joint of ``state`` that moves exactly one link of a
+    touching pair in ``pairs`` ((link_a, link_b)); ``subtrees``: joint -> the links it moves. Input for
+    :func:`clearance_for_blocked`. Raises KeyError: a link of ``pairs`` is not in ``model`` (naming it)."""
     out: dict[str, float] = {}
     for a, b in pairs:
         for ln in (a, b):
@@ -169,29 +124,15 @@ def touching_joints(model: UrdfModel, pairs: list[tuple[str, str]], state: dict[
 
 
 def write_overrides(rep: ClearanceRepair, scale: float, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
-    """Write the repaired pieces as OBJ files ``out_dir/folder/<link>_clear<i>.obj``
-    (:func:`write_piece_overrides`) and return the writer's collision overrides.
-
-    Raises:
-        ValueError: a piece spans no volume, naming its link.
-        OSError: a file cannot be written.
-    """
+    """:func:`write_piece_overrides` of the repaired pieces (``<link>_clear<i>.obj``)."""
     return write_piece_overrides(rep.pieces, scale, out_dir, folder, "clear")
 
 
 def write_piece_overrides(pieces: dict[str, list[np.ndarray]], scale: float, out_dir: Path, folder: str,
                           stem: str) -> dict[str, list[CollisionPiece]]:
-    """Write convex collision pieces as OBJ files ``out_dir/folder/<link><stem><i>.obj``
-    (outward-wound hulls, :func:`asset2sim.mesh_io.hull_obj`; at the input's
-    units: the points (k, 3), m, are divided by the overlay ``scale``, which the
-    writer multiplies back) and return the writer's collision overrides (link ->
-    pieces; every mesh collision of the link is replaced). The one writer of the
-    state stage's repaired pieces (running clearance, ground clearance).
-
-    Raises:
-        ValueError: a piece spans no volume (scipy's QhullError), naming its link.
-        OSError: a file cannot be written.
-    """
+    """Write convex pieces (link -> (k, 3) m) as hull OBJ files ``out_dir/folder/<link>_<stem><i>.obj`` at the input's units
+    (divided by ``scale``); returns the writer's collision overrides (link -> pieces). Raises ValueError (a piece spans no
+    volume, naming its link) or OSError (a file cannot be written)."""
     out: dict[str, list[CollisionPiece]] = {}
     for ln, plist in pieces.items():
         safe = file_names.file_stem(ln)

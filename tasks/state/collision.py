@@ -1,21 +1,7 @@
-"""Collision geometry improvement by approximate convex decomposition.
-
-Simulators collide each mesh through its convex hull (PyBullet, PhysX and
-MuJoCo all do for moving bodies). Two parts whose hulls always overlap — a
-stapler's arm sitting in the hinge tower of its base, a hinge pin through
-both — make zero penetration impossible in any joint state, and the
-depenetration impulses then shake the object. When state refinement cannot
-bring the penetration score below tolerance, :func:`improve_collisions` works
-piece by piece on the links of the worst pairs: small overlapping pieces
-(hinge hardware) lose their collision, concave ones are replaced by a CoACD
-decomposition (Wei et al., "Approximate Convex Decomposition for 3D Meshes
-with Collision-Aware Concavity and Tree Search", SIGGRAPH 2022; the ``coacd``
-package) written under ``collision/`` in the output folder, each change kept
-only if it lowers the overlap. Visual meshes are untouched; the report lists
-every change.
-
-Decompositions are cached on disk by the sha256 of the mesh file and the
-settings (:mod:`asset2sim.array_cache`: ``ASSET2SIM_CACHE`` or ``~/.cache/asset2sim``), so reruns are fast.
+"""Collision geometry improvement by approximate convex decomposition
+(:func:`improve_collisions`): small overlapping pieces lose their collision,
+concave ones are replaced by a CoACD decomposition (Wei et al., SIGGRAPH 2022),
+cached by mesh hash and settings (:mod:`asset2sim.array_cache`).
 """
 
 from __future__ import annotations
@@ -33,9 +19,8 @@ from asset2sim.engines.registry import open_shape_world
 from asset2sim.mesh_io import MeshCache, read_mesh
 from asset2sim.schemas.asset import AssetDescription, GeometryRef
 
-#: CoACD settings: concavity threshold (dimensionless, fraction of the mesh
-#: size), at most this many hulls per mesh, and reduced search effort (the
-#: library's defaults take minutes per mesh on 2 cores).
+#: CoACD settings: concavity threshold (fraction of the mesh size), most hulls
+#: per mesh, reduced search effort (the defaults take minutes per mesh).
 COACD_SETTINGS = {
     "threshold": 0.05,
     "max_convex_hull": 16,
@@ -46,9 +31,8 @@ COACD_SETTINGS = {
 }
 
 
-#: A collision piece smaller than this fraction of its link's collision surface
-#: that overlaps another link is treated as hinge hardware (a pin through the
-#: other part) and loses its collision (its visual stays).
+#: A collision piece below this fraction of its link's collision surface that
+#: overlaps another link is hinge hardware and loses its collision.
 PIN_AREA_FRACTION = 0.05
 
 
@@ -62,12 +46,8 @@ class DecompositionUnavailable(RuntimeError):
 
 @dataclass
 class CollisionPiece:
-    """One convex piece replacing (part of) a collision mesh.
-
-    ``filename`` relative to the output folder; ``origin``/``scale`` copied from
-    the original ``<collision>`` element (scale at the input's units; the
-    writer multiplies by the overlay scale).
-    """
+    """One convex piece replacing (part of) a collision mesh: ``filename`` relative to the output folder; ``source`` the
+    original collision (origin, scale at the input's units)."""
 
     filename: str
     source: GeometryRef
@@ -80,13 +60,8 @@ def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
 
 
 def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Convex pieces [(vertices (N, 3), faces (M, 3))] of the mesh at ``path``
-    (file units), from the cache or CoACD.
-
-    Raises:
-        DecompositionUnavailable: coacd is not installed.
-        ValueError: the mesh cannot be read.
-    """
+    """Convex pieces [(vertices (N, 3), faces (M, 3))] of the mesh at ``path`` (file units), from the cache or CoACD. Raises
+    DecompositionUnavailable (no coacd) or ValueError (the mesh cannot be read)."""
     digest = hashlib.sha256(path.read_bytes() + json.dumps({**COACD_SETTINGS, "refit": 1}, sort_keys=True).encode()).hexdigest()
     data = array_cache.load("coacd", digest)
     if data is not None:
@@ -114,15 +89,8 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def refit_pieces(vertices: np.ndarray, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Refit convex pieces to the original surface.
-
-    CoACD remeshes non-manifold input on a voxel grid first, which inflates
-    its pieces by up to a voxel (about 2 mm on a 10 cm part at the settings
-    here). Each original vertex (N, 3) is assigned to the piece it lies
-    deepest inside (largest negative plane distance), and each piece becomes
-    the convex hull of its assigned original vertices, which hugs the real
-    geometry; a piece with too few assigned vertices is kept as CoACD made it.
-    """
+    """Refit convex pieces to the original surface: each vertex (N, 3) goes to the piece it lies deepest inside, each piece
+    becomes the hull of its vertices (kept as CoACD made it when they span no volume)."""
     from scipy.spatial import ConvexHull, QhullError
 
     v = np.asarray(vertices, float)
@@ -173,18 +141,14 @@ def convexity_ratio(path: Path, cache=None) -> float:
 
 def overlap_depths(world, shape_a: int, shape_b: int) -> list[float]:
     """Penetration depths (m, > 0) of the closest points of two shapes of a
-    :class:`asset2sim.engines.base.ShapeWorld`, net of the world's contact
-    margins (``world.contact_margin``): touching surfaces are not an
-    overlap (with them, a small object's decomposition looked worse than its hull)."""
+    :class:`asset2sim.engines.base.ShapeWorld`, net of ``world.contact_margin``."""
     m = float(world.contact_margin)
     return [-(x + m) for x in world.distances(shape_a, shape_b, 0.0) if x + m < 0]
 
 
 class _PieceWorld:
-    """Every collision piece of some links as a separate static shape in a
-    private collision world (:func:`asset2sim.engines.registry.open_shape_world`,
-    PyBullet), posed as in ``session`` (scaled output), so the penetration
-    between two links can be measured piece by piece."""
+    """Every collision piece of ``links`` as a static shape in a private PyBullet
+    collision world, posed as in ``session``, to measure penetration piece by piece."""
 
     def __init__(self, session, asset: AssetDescription, links: list[str], scale: float, cache):
         from scipy.spatial.transform import Rotation
@@ -209,9 +173,7 @@ class _PieceWorld:
 
     def _body(self, vertices: np.ndarray, g: GeometryRef) -> int:
         Rw, tw = self.poses[next(key for key, ref in self.refs.items() if ref is g)]
-        return self.world.add_convex(
-            vertices, np.asarray(g.scale, float) * self.scale, tw, self._rot.from_matrix(Rw).as_quat()
-        )
+        return self.world.add_convex(vertices, np.asarray(g.scale, float) * self.scale, tw, self._rot.from_matrix(Rw).as_quat())
 
     def replace(self, key: tuple[str, int], pieces: list[np.ndarray]) -> list[int]:
         """Swap the bodies of ``key`` for ``pieces`` (vertex arrays); returns the old ids."""
@@ -233,8 +195,7 @@ class _PieceWorld:
         self.bodies[key] = old
 
     def penetration(self, a: str, b: str) -> float:
-        """Sum over piece pairs of the deepest penetration, m (net of the
-        contact margins, :func:`overlap_depths`)."""
+        """Sum over piece pairs of the deepest penetration, m (net of the contact margins, :func:`overlap_depths`)."""
         total = 0.0
         for (la, _), ids_a in self.bodies.items():
             if la != a:
@@ -265,33 +226,14 @@ class _PieceWorld:
         self.world.close()
 
 
-def improve_collisions(
-    session,
-    asset: AssetDescription,
-    pairs: list[tuple[str, str]],
-    scale: float,
-    out_dir: Path,
-    *,
-    cache=None,
-    max_decompositions: int = 32,
-    folder: str = "collision",
-) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
-    """Greedy, piece by piece, for link pairs whose hulls keep penetrating:
-
-    - a small piece (< ``PIN_AREA_FRACTION`` of its link's collision surface,
-      e.g. a hinge pin) that overlaps the other link loses its collision;
-    - a larger, concave piece (:func:`convexity_ratio` >= 1.05) is replaced by
-      its CoACD decomposition;
-
-    each change is kept only if it lowers the pair's piece-wise penetration
-    (sum over piece pairs of the deepest point, net of the engine's contact
-    margins: :func:`overlap_depths`); at most ``max_decompositions`` CoACD
-    calls (a count, so the result never depends on the machine's load). ``session``: PyBullet session
-    of the scaled output at the refined state. Pieces are written to
-    ``out_dir/<folder>/`` (``tasks.assemble.write.collision_folder`` picks a
-    name no input mesh uses). Returns (collision overrides for the writer,
-    notes).
-    """
+def improve_collisions(session, asset: AssetDescription, pairs: list[tuple[str, str]], scale: float, out_dir: Path, *,
+                       cache=None, max_decompositions: int = 32,
+                       folder: str = "collision") -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+    """Greedy, piece by piece, for link pairs whose hulls keep penetrating: a small piece (< :data:`PIN_AREA_FRACTION` of
+    its link's surface) that overlaps the other link loses its collision; a concave one (:func:`convexity_ratio` >= 1.05) is
+    replaced by its CoACD decomposition (at most ``max_decompositions`` calls). Each change is kept only if it lowers the
+    pair's piece-wise penetration (:func:`overlap_depths`). ``session``: PyBullet session of the scaled output at the
+    refined state. Pieces go to ``out_dir/<folder>/``. Returns (collision overrides, notes)."""
     cache = cache or MeshCache()
     links = sorted({ln for pair in pairs for ln in pair})
     world = _PieceWorld(session, asset, links, scale, cache)
@@ -307,9 +249,8 @@ def improve_collisions(
 
 
 class _Repair:
-    """The greedy repair's state: the kept changes (``changed``: (link,
-    collision index) -> convex pieces, None when removed), ``notes`` and the
-    CoACD calls made."""
+    """The greedy repair's state: ``changed`` ((link, collision index) -> convex
+    pieces, None when removed), ``notes``, CoACD calls made."""
 
     def __init__(self, world: _PieceWorld, cache, links: list[str], max_decompositions: int):
         self.world, self.cache, self.max_decompositions = world, cache, max_decompositions
@@ -324,9 +265,7 @@ class _Repair:
         self.decompositions = 0
 
     def improve_pair(self, a: str, b: str, tried: set[tuple[str, int]]) -> None:
-        """Each piece of ``a`` or ``b`` not yet ``tried`` that overlaps the
-        other link, deepest first: a small one loses its collision, a concave
-        one is decomposed; each change kept only if it lowers the overlap."""
+        """Each untried piece of ``a`` or ``b`` overlapping the other link, deepest first."""
         world = self.world
         before = world.penetration(a, b)
         if before <= IMPROVEMENT_EPS:
@@ -363,9 +302,8 @@ class _Repair:
                 before = after
 
     def _try(self, key: tuple[str, int], bodies: list[np.ndarray], change, a: str, b: str, before: float) -> float | None:
-        """The penetration (m) of ``a`` and ``b`` with the bodies of ``key``
-        swapped for ``bodies`` (vertex arrays), recorded as ``change`` when it
-        is lower than ``before`` by :data:`IMPROVEMENT_EPS`; else None, the old bodies restored."""
+        """Penetration (m) of ``a`` and ``b`` with ``key``'s bodies swapped for ``bodies``,
+        kept as ``change`` when it beats ``before``; else None, the old bodies restored."""
         old = self.world.replace(key, bodies)
         after = self.world.penetration(a, b)
         if after < before - IMPROVEMENT_EPS:
@@ -376,8 +314,7 @@ class _Repair:
 
 
 def _write_pieces(asset: AssetDescription, changed: dict, out_dir: Path, folder: str) -> dict[str, list[CollisionPiece]]:
-    """Write the kept decompositions as OBJ files ``out_dir/folder/<link>_<k>_<i>.obj``;
-    returns link -> its collision pieces (a removed piece left out, the others as they were)."""
+    """Write the kept decompositions as ``out_dir/folder/<link>_<k>_<i>.obj``; returns link -> its pieces."""
     out: dict[str, list[CollisionPiece]] = {}
     for ln in sorted({k[0] for k in changed}):
         pieces_out: list[CollisionPiece] = []

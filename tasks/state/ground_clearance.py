@@ -1,43 +1,7 @@
 """Ground clearance: moving parts of a free-standing object that rest on the
-floor.
-
-PartNet-Mobility models the doors of refrigerators, microwaves and cabinets,
-and the bottom drawers of cabinets, flush with the body's bottom face: at
-rest the door's lowest edge lies on the ground plane exactly as the body's
-does. Real ones clear the floor (a refrigerator stands on levelling feet
-under a toe grille, a countertop microwave on rubber feet, a cabinet on a
-plinth or feet), so the door swings and the drawer slides without touching
-the floor. In a simulator the flush part carries part of the object's weight
-and, when it is opened, drags on the ground with the ground's friction: the
-body is pulled along and rocks (refrigerator 11178, the generated microwave).
-
-Method (the written URDF, at the refined state, root resting pose applied,
-z up; collision pieces as the writer wrote them):
-
-1. The ground is the lowest collision vertex over every link, z_g. The body
-   (the links no movable joint moves) must itself reach the ground (its
-   lowest vertex within :data:`CONTACT_BAND` of z_g): an object that stands
-   on parts that move (wheels, legs, a suitcase on its casters) is left as
-   it is. So is a part of an object lower than :data:`THIN_OBJECT`
-   clearances whose own floor contact spans at least :data:`SUPPORT_AREA`
-   of the body's (a half of a pair of pliers lying flat: that part is half
-   of what the object lies on, not a door over a floor); a smaller part of
-   such an object (a lighter's lid) is raised as a door is.
-2. A piece P of a link moved by joint j *drags* on the ground when its
-   lowest vertex is less than :data:`GROUND_CLEARANCE` above z_g and j
-   moves it along the ground: a revolute (not continuous) joint whose axis is within
-   :data:`SLIDE_ANGLE` of vertical (a side-hinged door) or a prismatic joint
-   whose axis is within :data:`SLIDE_ANGLE` of horizontal (a drawer). A
-   horizontal hinge lifts its part off the floor or rolls it (a wheel), it
-   does not drag it.
-3. P's bottom face is raised by delta = z_g + :data:`GROUND_CLEARANCE` -
-   min_z(P) (an affine squeeze of P along the world vertical that keeps its
-   top face, so the piece stays convex), never by more than
-   :data:`MAX_SQUEEZE` of P's height. Visual meshes, masses and the state are
-   unchanged.
-
-The pieces of the changed links are written beside the URDF as the writer's
-collision overrides (link -> every mesh collision of the link).
+floor (method: docs/design/metrics.md, "Ground clearance and floor-limited
+openings"). A collision piece that drags on the ground is raised to
+:data:`GROUND_CLEARANCE` above it by an affine squeeze that keeps its top face.
 """
 
 from __future__ import annotations
@@ -52,32 +16,23 @@ from scipy.spatial import ConvexHull, QhullError
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble import write
+from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
 from asset2sim.urdf import UrdfModel, read_urdf
 
 __all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
            "floor_stops", "ground_clearance"]
 
-#: Floor clearance (m) given to a moving part that rests on or near the
-#: ground: the levelling feet of refrigerators and the rubber feet of
-#: countertop appliances lift their doors about 1 cm and more off the floor
-#: (manufacturers' installation instructions and dimension drawings show the
-#: door bottom above the toe grille / feet). 5 mm was not enough: refrigerator
-#: 11178 rocks 0.5 deg on its uneven bottom onto a door 4.4 mm up, which dragged.
+#: Floor clearance (m) of a moving part near the ground: levelling and rubber
+#: feet lift appliance doors about 1 cm off the floor (manufacturers' drawings).
 GROUND_CLEARANCE = 0.01
 #: Distance (m) above the ground within which a vertex counts as resting on it.
 CONTACT_BAND = 0.0015
-#: An object whose height above the ground is below this many
-#: :data:`GROUND_CLEARANCE` lies on the floor as a whole (module docstring,
-#: step 1): 2, i.e. 2 cm.
+#: An object lower than this many :data:`GROUND_CLEARANCE` lies on the floor as a whole.
 THIN_OBJECT = 2.0
-#: Area of a moving part's floor contact, as a share of the body's, from
-#: which the part of a thin object is part of its support (module
-#: docstring, step 1): half (a generated pair of pliers' moving half 1.18,
-#: a USB stick's cover 1.34, a lighter's lid 0.41).
+#: Share of the body's floor contact area from which a thin object's part is support.
 SUPPORT_AREA = 0.5
-#: Largest angle (rad) between a hinge axis and the vertical (or a slide axis
-#: and the horizontal) for the joint to move its part along the ground.
+#: Largest angle (rad) of a hinge axis from vertical (a slide axis from horizontal) to move along the ground.
 SLIDE_ANGLE = math.radians(30.0)
 #: A squeeze never takes more than this fraction of a piece's height.
 MAX_SQUEEZE = 0.5
@@ -107,9 +62,8 @@ def _moving_joint(model: UrdfModel) -> dict[str, object]:
 
 
 def _floor_area(pieces: list[np.ndarray], z_g: float) -> float:
-    """Area (m^2) of the 2-D convex hull of the vertices of ``pieces``
-    ((k, 3) m, world) within :data:`CONTACT_BAND` of the ground ``z_g``; 0
-    when they span none."""
+    """Area (m^2) of the 2-D hull of the vertices of ``pieces`` ((k, 3) m) within
+    :data:`CONTACT_BAND` of the ground ``z_g``; 0 when they span none."""
     pts = [W[W[:, 2] <= z_g + CONTACT_BAND, :2] for W in pieces]
     pts = np.vstack(pts) if pts else np.zeros((0, 2))
     if len(pts) < 3:
@@ -121,7 +75,7 @@ def _floor_area(pieces: list[np.ndarray], z_g: float) -> float:
 
 
 def _drags(joint, R_parent_joint: np.ndarray) -> bool:
-    """The joint moves its part along the ground (module docstring, step 2)."""
+    """The joint moves its part along the ground: a hinge near vertical, a slide near horizontal."""
     a = R_parent_joint @ np.asarray(joint.axis, float)
     az = abs(float(a[2])) / max(float(np.linalg.norm(a)), 1e-12)
     if joint.type == "revolute":
@@ -132,13 +86,8 @@ def _drags(joint, R_parent_joint: np.ndarray) -> bool:
 
 
 def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]) -> GroundClearance:
-    """Floor clearance for the moving parts of the written URDF ``model``
-    (file ``urdf``, its collision files beside it) at ``state`` (rad or m)
-    that rest on the ground (module docstring).
-
-    Raises:
-        OSError: a collision file cannot be read.
-    """
+    """Floor clearance for the moving parts of the written URDF ``model`` (file ``urdf``) at ``state`` (rad or m) that rest
+    on the ground (module docstring). Raises OSError: a collision file cannot be read."""
     scene = _FloorScene(model, urdf)
     poses = model.link_poses(state)
     world = scene.posed(poses)
@@ -189,21 +138,13 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
 def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: Path, urdf: Path, state: dict[str, float],
                            overrides: dict, closed: dict[str, tuple[float, float, float]],
                            root_rotation=None) -> tuple[dict[str, float], dict, list[str], list[str]]:
-    """Refine's step after the state search (nothing for a mounted asset,
-    which has no ground): write the output with ``overrides``; limit the
-    opening of parts the floor stops (:func:`floor_limited_state`); raise the
-    collision pieces of moving parts that drag on the floor
-    (:func:`ground_clearance`); write the output again when anything changed.
+    """Refine's step after the state search (nothing for a mounted asset): write
+    the output with ``overrides``, apply :func:`floor_limited_state` and
+    :func:`ground_clearance`, write again when anything changed. ``closed``:
+    joint -> (q_closed, direction, open_range), rad or m.
 
-    Args:
-        closed: joint -> (q_closed, direction, open_range), rad or m.
-
-    Returns:
-        (state, collision overrides, state notes, collision notes): the
-        inputs themselves and empty notes when nothing changed.
-
-    Raises:
-        OSError: a collision file cannot be read or written.
+    Returns (state, collision overrides, state notes, collision notes).
+    Raises OSError: a collision file cannot be read or written.
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
         return state, overrides, [], []
@@ -218,9 +159,8 @@ def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: P
     return new_state, new, state_notes, rep.notes
 
 
-#: Gap (m) a moving part keeps above the body's lowest point when the floor
-#: limits its opening (:func:`floor_limited_state`): PyBullet's 1 mm hull
-#: margin plus 1 mm.
+#: Gap (m) a moving part keeps above the body's lowest point where the floor
+#: limits its opening: PyBullet's 1 mm hull margin plus 1 mm.
 FLOOR_GAP = 0.002
 
 
@@ -230,8 +170,7 @@ def _lowest(world: dict[str, list[np.ndarray]], links) -> float:
 
 
 class _FloorScene:
-    """The collision pieces of a URDF posed by joint positions, with the floor
-    its body stands on (the body: links no movable joint moves)."""
+    """A URDF's collision pieces posed by joint positions, and the floor its body stands on."""
 
     def __init__(self, model: UrdfModel, urdf: Path | str):
         root = Path(urdf).parent
@@ -239,61 +178,34 @@ class _FloorScene:
         self.local = {ln: link_pieces(model, root, ln) for ln in model.links}
         self.mover = _moving_joint(model)
         self.body = [ln for ln in model.links if self.mover.get(ln) is None]
+        self.subtrees = subtrees(model)  # movable joint -> the links it moves
 
     def posed(self, poses: dict[str, np.ndarray]) -> dict[str, list[np.ndarray]]:
         """link -> its pieces (k, 3) in the root frame (m) at the link ``poses`` (4, 4); links without pieces left out."""
         return {ln: [P @ poses[ln][:3, :3].T + poses[ln][:3, 3] for P in ps] for ln, ps in self.local.items() if ps}
 
-    def world_at(self, q: dict[str, float]) -> dict[str, list[np.ndarray]]:
-        """:meth:`posed` at joint positions ``q``."""
-        return self.posed(self.model.link_poses(q))
-
-    def subtree(self, joint) -> list[str]:
-        """The links ``joint`` (a URDF joint) moves: its child and every link below."""
-        sub, stack = [], [joint.child]
-        while stack:
-            ln = stack.pop()
-            sub.append(ln)
-            stack.extend(c.child for c in self.model.children(ln))
-        return sub
-
     def floor(self, q: dict[str, float]) -> float:
-        """Height (m, root frame) a moving part keeps above: the body's lowest
-        point at ``q`` plus :data:`FLOOR_GAP`."""
-        return _lowest(self.world_at(q), self.body) + FLOOR_GAP
+        """The body's lowest point (m, root frame) at ``q`` plus :data:`FLOOR_GAP`."""
+        return _lowest(self.posed(self.model.link_poses(q)), self.body) + FLOOR_GAP
 
     def lowest(self, q: dict[str, float], links) -> float:
         """Lowest point (m, root frame) of ``links`` at ``q``; inf without pieces."""
-        return _lowest(self.world_at(q), links)
+        return _lowest(self.posed(self.model.link_poses(q)), links)
 
 
 def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, float],
                         closed: dict[str, tuple[float, float, float]]) -> tuple[dict[str, float], list[str]]:
-    """The opening of parts that the floor stops, at ``state`` (rad or m).
-
-    A pedal pressed "fully open" or a lid folded down past the body's bottom
-    reaches below the floor the body stands on: placed on the ground, the
-    object then stands on that part and its weight pushes the part back
-    (trash can 102181's foot pad). On a real floor the part stops at the floor. For each movable joint j whose subtree's lowest
-    collision vertex is below the body's lowest (links no movable joint
-    moves) plus :data:`FLOOR_GAP`, while at its closed end the subtree is
-    above it, q_j is moved towards the closed end (bisection on the opening,
-    30 halvings) to the most open position whose subtree keeps that gap; the
-    other joints stay at ``state``. ``closed``: joint -> (q_closed,
-    direction, open_range).
-
-    Returns (state, notes): ``state`` itself and no notes when nothing moved.
-
-    Raises:
-        OSError: a collision file cannot be read.
-    """
+    """The opening of parts the floor stops, at ``state`` (rad or m): a joint whose subtree reaches below the body's lowest
+    point plus :data:`FLOOR_GAP`, but not at its closed end, is bisected (30 halvings) back to the most open position that
+    keeps the gap. ``closed``: joint -> (q_closed, direction, open_range). Returns (state, notes): ``state`` itself when
+    nothing moved. Raises OSError: a collision file cannot be read."""
     scene = _FloorScene(model, urdf)
     out = dict(state)
     notes: list[str] = []
     for j in model.joints:
         if j.type not in ("revolute", "prismatic") or j.name not in closed or j.name not in out:
             continue
-        sub = scene.subtree(j)
+        sub = scene.subtrees[j.name]
         floor = scene.floor(out)
         low = scene.lowest(out, sub)
         if not np.isfinite(floor) or low >= floor:
@@ -312,36 +224,16 @@ def floor_limited_state(model: UrdfModel, urdf: Path | str, state: dict[str, flo
     return (out, notes) if notes else (state, [])
 
 
-#: Openings sampled along a joint's range when looking for where the floor
-#: stops its part (:func:`floor_stops`), before bisecting the first step
-#: that reaches the floor.
+#: Openings sampled along a range by :func:`floor_stops` before bisecting.
 FLOOR_SAMPLES = 32
 
 
 def floor_stops(model: UrdfModel, urdf: Path | str, state: dict[str, float],
                 closed: dict[str, tuple[float, float, float]]) -> dict[str, float]:
-    """Where the floor stops the opening of parts, with the object resting on
-    its body at ``state`` (rad or m).
-
-    For each movable joint j of ``closed`` (joint -> (q_closed, direction,
-    open_range)) whose subtree is above the floor at its closed end (the
-    body's lowest point plus :data:`FLOOR_GAP`, as in
-    :func:`floor_limited_state`; a part below it even closed is part of the
-    support): the opening o (from q_closed along ``direction``, 0 < o <=
-    open_range) at which the subtree first reaches the floor, the other
-    joints at ``state``: :data:`FLOOR_SAMPLES` openings along the range, then
-    30 halvings of the first step that reaches it. A suitcase standing on
-    its back edge whose lid opens downwards, a lid folded down past the
-    body's bottom: on a real floor the part stops there, so an operation
-    cannot open it further with the object resting as it is.
-
-    Returns:
-        joint -> o (rad or m) for the joints the floor stops before their
-        open end; 0 when the part touches the floor right away.
-
-    Raises:
-        OSError: a collision file cannot be read.
-    """
+    """Where the floor stops the opening of parts, the object resting on its body at ``state`` (rad or m): for each joint of
+    ``closed`` (joint -> (q_closed, direction, open_range)) clear of the floor when closed, the opening o at which its
+    subtree first reaches the floor (:data:`FLOOR_SAMPLES` samples, then 30 halvings). Returns joint -> o (rad or m) for the
+    joints the floor stops before their open end. Raises OSError: a collision file cannot be read."""
     scene = _FloorScene(model, urdf)
     joints = {j.name: j for j in model.joints}
     floor = scene.floor(state)
@@ -352,7 +244,7 @@ def floor_stops(model: UrdfModel, urdf: Path | str, state: dict[str, float],
         j = joints.get(name)
         if j is None or j.type not in ("revolute", "prismatic") or not open_range > 0:
             continue
-        sub = scene.subtree(j)
+        sub = scene.subtrees[j.name]
 
         def clear(o: float) -> bool:
             return scene.lowest({**state, name: q_closed + direction * o}, sub) >= floor

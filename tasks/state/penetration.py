@@ -1,21 +1,6 @@
-"""Self-penetration of a fixed-base session, recomputed only where the state changed.
-
-The state search (:mod:`asset2sim.tasks.state.refine_state`) asks for the
-SPEC's self-penetration score Phi(q) (m) thousands of times, and most
-candidates change one joint. Phi is a sum over the link pairs of the
-self-collision filter (links with collision geometry, parent-child pairs
-excluded: ``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``) of the penetration of
-each pair's closest points. A link's pose depends only on the positions of
-the joints above it, so a pair whose two links have the same ancestor joint
-positions as at its last query sits exactly where it sat (the engine's
-forward kinematics is recomputed from the joint positions), and its points
-are reused. Pairs whose engine boxes are disjoint (engines of
-:data:`asset2sim.tasks.geometry.closed_state.CONSERVATIVE_AABB_ENGINES`, whose
-boxes include the collision margin) have no penetrating point and are not
-queried. The result is the same float, and the same pairs in the same order,
-as :meth:`asset2sim.engines.pybullet_engine.PyBulletSession.self_penetration_fresh`;
-the number of distance queries per candidate falls from all pairs (N^2 / 2 for
-N links) to the pairs that moved and whose boxes touch.
+"""Self-penetration of a fixed-base session, re-queried only for link pairs that
+moved and whose engine boxes touch; equal to the engine's fresh query
+(:meth:`asset2sim.engines.pybullet_engine.PyBulletSession.self_penetration_fresh`).
 """
 
 from __future__ import annotations
@@ -28,17 +13,8 @@ from asset2sim.tasks.geometry.closed_state import CONSERVATIVE_AABB_ENGINES
 
 
 class StatePenetration:
-    """Phi (m) and per-pair penetration of ``session`` at a given joint state.
-
-    Args:
-        session: a fixed-base session (PyBullet in the pipeline) answering
-            ``link_names``, ``link_has_collision``, ``link_distances`` and
-            ``link_aabb``.
-        asset: the description of the session's URDF (kinematic tree; the
-            link names are the session's).
-        joints: the joints whose positions the caller sets (every other
-            joint must keep its position while this object is used).
-    """
+    """Phi (m) and per-pair penetration of the fixed-base ``session`` (of ``asset``'s
+    URDF) at a joint state; ``joints``: those the caller sets (the others must not move)."""
 
     def __init__(self, session, asset: AssetDescription, joints: list[str]):
         self.session = session
@@ -57,12 +33,8 @@ class StatePenetration:
                 if joint_of[link] in col:
                     moves[col[joint_of[link]], row[n]] = True
                 link = parent_of[link]
-        pairs = [
-            (i, k)
-            for i, a in enumerate(shaped)
-            for k, b in enumerate(shaped)
-            if i < k and parent_of.get(b) != a and parent_of.get(a) != b
-        ]
+        pairs = [(i, k) for i, a in enumerate(shaped) for k, b in enumerate(shaped)
+                 if i < k and parent_of.get(b) != a and parent_of.get(a) != b]
         self.pairs: list[tuple[str, str]] = [(shaped[i], shaped[k]) for i, k in pairs]
         self._ia = np.array([i for i, _ in pairs], int)
         self._ib = np.array([k for _, k in pairs], int)
@@ -74,9 +46,7 @@ class StatePenetration:
         self._screen = getattr(session, "engine", None) in CONSERVATIVE_AABB_ENGINES
 
     def __call__(self, q: dict[str, float]) -> tuple[float, list[ContactPair]]:
-        """Phi (m) and the penetrating pairs, deepest first, at the session's
-        current state, which must be ``q`` (joint -> rad or m, every joint
-        given at construction) on top of the unchanged others."""
+        """Phi (m) and the penetrating pairs, deepest first, at the session's current state, which must be ``q``."""
         now = np.array([q[j] for j in self.joints], float)
         if self._last is None:
             stale = np.arange(len(self.pairs))

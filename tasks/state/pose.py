@@ -1,12 +1,7 @@
-"""Resting pose requested by words ("lying flat", "resting sideways").
-
-The URDF has no field for a resting orientation, so it is baked into the
-asset: the joints that hang from the root link (and the root's own geometry)
-are rotated by a fixed rotation R, which turns the whole object. R puts the
-object's smallest closed-state extent along z (the largest face down); of the
-two 90-degree rotations that do so, the one that brings the task-relevant
-moving parts up (their bounding-box center above the body's) is taken, so a
-suitcase lying flat has its lid on top.
+"""Resting pose requested by words ("lying flat", "resting sideways"), baked
+into the asset as a fixed rotation R of the root: R puts the smallest
+closed-state extent along z, moving parts up (a suitcase lying flat has its
+lid on top).
 """
 
 from __future__ import annotations
@@ -18,24 +13,11 @@ from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.frames import axis_rotation
 
 
-def resting_rotation(
-    session,
-    asset: AssetDescription,
-    state: dict[str, float],
-    hull_points: dict[str, np.ndarray],
-    moving_links: list[str],
-) -> tuple[np.ndarray, str]:
-    """Rotation (3, 3) of the root that lays the object on its largest face,
-    moving parts up, and a note. Identity when the smallest extent is already
-    vertical (and the moving parts are up).
-
-    Args:
-        session: fixed-base PyBullet session of the input asset.
-        state: joint positions of the closed state (input units).
-        hull_points: :func:`asset2sim.tasks.geometry.closed_state.link_hull_points`.
-        moving_links: links moved by the task-relevant joints.
-    """
-
+def resting_rotation(session, asset: AssetDescription, state: dict[str, float], hull_points: dict[str, np.ndarray],
+                     moving_links: list[str]) -> tuple[np.ndarray, str]:
+    """(rotation (3, 3) of the root laying the object on its largest face, moving parts up; note), identity when already so.
+    ``session``: fixed-base session of the input asset; ``state``: the closed state (input units); ``hull_points``:
+    ``link_hull_points``; ``moving_links``: links the task-relevant joints move."""
     names = [ln.name for ln in asset.links]
     session.set_joint_positions(state)
     box = links_aabb(session, names, hull_points)
@@ -47,8 +29,7 @@ def resting_rotation(
     if k == 2:
         if up_hint[2] >= 0:
             return np.eye(3), "smallest extent already vertical: pose unchanged"
-        R = axis_rotation(0, np.pi)
-        return R, "turned upside down so the moving parts face up"
+        return axis_rotation(0, np.pi), "turned upside down so the moving parts face up"
     # rotate about the horizontal axis perpendicular to axis k so that axis k maps to +z or -z
     other = 1 - k  # the remaining horizontal axis (k in {0, 1})
     angle = max((np.pi / 2, -np.pi / 2), key=lambda a: (axis_rotation(other, a) @ up_hint)[2])  # the first on a tie
@@ -83,23 +64,11 @@ MIN_MARGIN_FRACTION = 0.02
 SUPPORT_BAND_FRACTION = 0.02
 
 
-def static_margin(
-    session,
-    asset: AssetDescription,
-    links: dict,
-    state: dict[str, float],
-    scale: float,
-    hull_points: dict[str, np.ndarray],
-    rotation: np.ndarray,
-) -> tuple[float, float]:
-    """Static stability of the object resting on a plane.
-
-    Returns (margin m, largest extent m): the signed distance from the ground
-    projection of the total center of mass to the boundary of the support
-    polygon (convex hull of the points within 0.5 % of the size above the
-    lowest point, ``SUPPORT_BAND_FRACTION``), positive inside. ``links``: name -> LinkPhysics (scaled);
-    ``state`` in input units; ``rotation`` (3, 3) of the root.
-    """
+def static_margin(session, asset: AssetDescription, links: dict, state: dict[str, float], scale: float,
+                  hull_points: dict[str, np.ndarray], rotation: np.ndarray) -> tuple[float, float]:
+    """(margin m, largest extent m) of the object resting on a plane: the signed distance of the COM's projection to the
+    support polygon's edge (points within :data:`SUPPORT_BAND_FRACTION` of the size above the lowest), positive inside.
+    ``links``: name -> LinkPhysics (scaled); ``state`` input units; ``rotation`` (3, 3) of the root."""
     from scipy.spatial import ConvexHull, QhullError
 
     session.set_joint_positions(state)
@@ -132,24 +101,12 @@ def static_margin(
     return margin, size
 
 
-def most_stable_rotation(
-    session,
-    asset: AssetDescription,
-    links: dict,
-    state: dict[str, float],
-    scale: float,
-    hull_points: dict[str, np.ndarray],
-    moving_links: list[str],
-    *,
-    exclude_modelled: bool = False,
-) -> tuple[np.ndarray | None, str]:
-    """The axis-aligned resting orientation that clearly stands at ``state``
-    (margin >
-    ``MIN_MARGIN_FRACTION`` x size), preferring those that keep the moving
-    parts up, then the largest margin. With ``exclude_modelled`` the modelled
-    orientation is not a candidate (the simulator already saw it fail).
-    Returns (rotation, note) or (None, reason) when no candidate qualifies or
-    the best is the modelled orientation."""
+def most_stable_rotation(session, asset: AssetDescription, links: dict, state: dict[str, float], scale: float,
+                         hull_points: dict[str, np.ndarray], moving_links: list[str], *,
+                         exclude_modelled: bool = False) -> tuple[np.ndarray | None, str]:
+    """The axis-aligned resting orientation that clearly stands at ``state`` (margin > :data:`MIN_MARGIN_FRACTION` x size),
+    moving parts up first, then the largest margin; ``exclude_modelled`` drops the modelled one. Returns (rotation, note),
+    or (None, reason) when none qualifies or the best is the modelled one."""
 
     up = _up_hint(session, moving_links, hull_points, links_aabb(session, [ln.name for ln in asset.links], hull_points))
     margin0, size = static_margin(session, asset, links, state, scale, hull_points, np.eye(3))

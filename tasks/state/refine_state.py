@@ -1,30 +1,11 @@
-"""State refinement in the simulator (SPEC stage 3).
+"""State refinement in the simulator (SPEC stage 3): within each joint's allowed
+interval (requested band within its limits), minimise
 
-Solves, within each joint's allowed interval,
+    Phi(q) + lambda * sum_j ((q_j - q_req_j) / R_j)^2
 
-    min_q  Phi(q) + lambda * sum_j ((q_j - q_req_j) / R_j)^2
-
-where Phi(q) (m) is the self-penetration score of the SPEC measured in
-PyBullet (sum over self-contact points of max(0, -separation); queried per link pair
-with ``getClosestPoints`` so that no value depends on contact points Bullet
-cached at earlier states of the session; pairs that did not move since
-their last query are not re-queried: :mod:`~asset2sim.tasks.state.penetration`), q_req the
-requested state projected onto the intervals, R_j the joint's opening range
-(so deviations are measured as fractions of the range) and lambda (m) the
-trade-off (``RefineConfig.state_lambda``). The allowed interval of a joint is
-its requested band (``schemas.request.BAND_INTERVAL``, as opening fractions
-from the geometric closed end) intersected with its limits, so the search
-never drifts to a state that contradicts the request.
-
-Search, in the order the SPEC describes: start from q_req; while Phi >
-tolerance: group penetrations by link pair, map the worst pairs to the joints
-on the kinematic path between the two links (focus joints), line-search each
-focus joint over its interval and accept only decreases of the objective;
-then random perturbations of the focus joints; then a coordinate pattern
-search with shrinking steps around the best state. The lowest-objective state
-found is returned. A contact query after setting joint states costs tens of
-microseconds here, so thousands of candidates are affordable
-(``RefineConfig.max_state_evaluations``).
+Phi (m) the self-penetration score, q_req the requested state, R_j the
+joint's opening range, lambda (m) the trade-off: line searches of the joints
+on the worst pairs' paths, random perturbations, a pattern search.
 """
 
 from __future__ import annotations
@@ -55,9 +36,7 @@ class Interval:
         return float(min(max(q, self.lo), self.hi))
 
 
-def allowed_intervals(
-    closed: dict[str, ClosedState], fractions: dict[str, tuple[float, float]]
-) -> dict[str, Interval]:
+def allowed_intervals(closed: dict[str, ClosedState], fractions: dict[str, tuple[float, float]]) -> dict[str, Interval]:
     """Positions allowed per joint: the band's opening fractions mapped through
     the closed state and clipped to the limits (``closed`` in output units)."""
     out = {}
@@ -70,19 +49,10 @@ def allowed_intervals(
 
 def joints_in_the_way(asset: AssetDescription, worst_pairs: list[dict], bands: dict[str, str], addressed: set[str],
                       tolerance: float) -> list[str]:
-    """Joints the request did not address (``addressed``: the joints a phrase
-    of the request set; the others are closed by default, band "closed") on
-    the kinematic path of a link pair that penetrates deeper than
-    ``tolerance`` (m) and on whose path the request opened a joint (band
-    other than "closed"): the parts in the way of a requested opening. A
-    toilet's seat asked fully open lies through the lid closed by default; a
-    person who opens the seat has opened the lid first. First-seen order.
-
-    Args:
-        worst_pairs: :attr:`~asset2sim.schemas.report.StateRefinement.worst_pairs`
-            (``link_a``, ``link_b``, ``depth_m`` in m).
-        bands: joint -> band name of the search.
-    """
+    """Joints the request did not address (``addressed``) and left closed, on the kinematic path of a link pair penetrating
+    deeper than ``tolerance`` (m) on which the request opened a joint: the parts in the way of a requested opening (a
+    toilet's lid in the way of its seat), first-seen order. ``worst_pairs``: ``StateRefinement.worst_pairs``; ``bands``:
+    joint -> band name."""
     out: list[str] = []
     for pair in worst_pairs:
         if not float(pair["depth_m"]) > tolerance:
@@ -95,46 +65,26 @@ def joints_in_the_way(asset: AssetDescription, worst_pairs: list[dict], bands: d
 
 
 def path_joints(asset: AssetDescription, link_a: str, link_b: str) -> list[str]:
-    """Movable joints on the kinematic path between two links (from
-    ``link_a`` up, then from ``link_b`` up:
-    :func:`asset2sim.tasks.geometry.closed_state.tree_path`)."""
+    """Movable joints on the kinematic path between two links (from ``link_a`` up, then from ``link_b`` up)."""
     from_a, from_b = tree_path(asset.joints, link_a, link_b)
     return [j.name for j in from_a + from_b if j.is_movable]
 
 
-def refine_initial_state(
-    session,
-    asset: AssetDescription,
-    closed: dict[str, ClosedState],
-    requested: dict[str, float],
-    fractions: dict[str, tuple[float, float]],
-    *,
-    tolerance: float = 1e-4,
-    lam: float = 0.05,
-    max_evaluations: int = 4000,
-    seed: int = 0,
-    proposer=None,
-) -> StateRefinement:
-    """Lowest-objective state near ``requested`` (see module docstring).
+def refine_initial_state(session, asset: AssetDescription, closed: dict[str, ClosedState], requested: dict[str, float],
+                         fractions: dict[str, tuple[float, float]], *, tolerance: float = 1e-4, lam: float = 0.05,
+                         max_evaluations: int = 4000, seed: int = 0, proposer=None) -> StateRefinement:
+    """Lowest-objective state near ``requested`` (module docstring) as a
+    :class:`~asset2sim.schemas.report.StateRefinement` (Phi in m).
 
     Args:
-        session: fixed-base PyBullet session of the *output* (scaled) URDF.
-        asset: the input description (kinematic tree, link names).
-        closed: closed states in output units (prismatic in metres).
-        requested: joint -> requested position (output units).
+        session: fixed-base PyBullet session of the output (scaled) URDF.
+        closed, requested: closed states and joint -> requested position, output units.
         fractions: joint -> allowed opening-fraction interval (band).
-        tolerance: Phi (m) at which the search stops.
-        lam: lambda (m per squared fraction of range).
-        max_evaluations: budget of contact queries.
-        seed: random seed of the perturbation phase.
-        proposer: optional ``proposer(state, worst_pairs, intervals) ->
-            (list of {joint: value}, queries)`` asked once when the local search
-            stalls above ``tolerance`` (a model backend); each proposal is
-            clipped to the intervals and accepted only if it lowers the
-            objective.
-
-    Returns:
-        :class:`~asset2sim.schemas.report.StateRefinement` (Phi in m).
+        tolerance: Phi (m) at which the search stops; lam: lambda (m per squared fraction of range).
+        max_evaluations: budget of contact queries; seed: of the perturbation phase.
+        proposer: optional ``proposer(state, worst_pairs, intervals) -> (list of
+            {joint: value}, queries)``, asked once when the search stalls above
+            ``tolerance``; proposals are clipped and kept only if they improve.
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -144,32 +94,22 @@ def refine_initial_state(
     scale = {n: max(closed[n].open_range, 1e-9) for n in names}
     s = _Search(session, asset, names, box, q_req, scale, lam, tolerance, max_evaluations)
     phi_req = s.best_phi
-    worst = [
-        {"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
-        for c in s.pairs_at_best()[:5]
-    ]
+    worst = [{"link_a": c.link_a, "link_b": c.link_b, "depth_m": c.depth, "max_depth_m": c.max_depth, "points": c.points}
+             for c in s.pairs_at_best()[:5]]
     _line_search_focus_joints(s)
     _perturb_focus_joints(s, rng)
     _pattern_search(s)
     model_queries = _ask_proposer(s, proposer) if proposer is not None and s.best_phi > tolerance else 0
     session.set_joint_positions(s.best_q)
-    return StateRefinement(
-        requested={k: float(v) for k, v in q_req.items()},
-        result={k: float(v) for k, v in s.best_q.items()},
-        phi_requested=float(phi_req),
-        phi_result=float(s.best_phi),
-        evaluations=s.evals,
-        method=" -> ".join(s.method),
-        worst_pairs=worst,
-        seconds=time.perf_counter() - t0,
-        model_queries=model_queries,
-    )
+    return StateRefinement(requested={k: float(v) for k, v in q_req.items()}, result={k: float(v) for k, v in s.best_q.items()},
+                           phi_requested=float(phi_req), phi_result=float(s.best_phi), evaluations=s.evals,
+                           method=" -> ".join(s.method), worst_pairs=worst, seconds=time.perf_counter() - t0,
+                           model_queries=model_queries)
 
 
 class _Search:
-    """The search's state: the best candidate so far (``best_q``, objective
-    ``best_f`` in m, ``best_phi`` in m), the evaluations made and the phases
-    that improved (``method``). Starts by evaluating ``q_req``."""
+    """The search's state: the best candidate (``best_q``, ``best_f``, ``best_phi``,
+    m), evaluations made, phases that improved (``method``)."""
 
     def __init__(self, session, asset: AssetDescription, names: list[str], box: dict[str, Interval],
                  q_req: dict[str, float], scale: dict[str, float], lam: float, tolerance: float, max_evaluations: int):

@@ -1,34 +1,7 @@
-"""Stability by design: keep the centre of mass over the support at the
-requested state, within the request's constraints.
-
-An open laptop screen, an open oven door or a fully opened lid moves the
-centre of mass (COM) of a free-standing object backwards or forwards; when it
-leaves the support polygon the object tips over whatever the damping. Before
-the post-check, :func:`design_for_stability` measures the static balance of
-the written asset at its refined state and, when the COM lies outside the
-support (or within a small margin of its edge), moves mass from the parts
-that opened to the body they hang on, bounded by the sourced part-mass
-fractions of :data:`PART_MASS_FRACTION` (a laptop's base holds the battery,
-keyboard and mainboard: it outweighs the screen). The total mass, the scale
-and the requested state are never changed (the request fixes them); the
-inertia tensor of each changed link is scaled with its mass (same geometry,
-same COM in the link frame). Every change is reported with its reason.
-
-Where no sourced fraction covers an opened part, its mass may go down to its
-**envelope shell mass** (:func:`envelope_masses`): for a part of a shell
-material (sheet metal, molded plastic, panels: ``materials.yaml`` ``shell``)
-the material lies on its outer surface, m = A_env t rho (thin-shell mass,
-Roark's Formulas for Stress and Strain, 8th ed., thin-walled members), A_env
-the area of the convex hull of its collision geometry (its outer envelope), t
-and rho the material's wall thickness and density, times the factor the
-estimate applied to the link (the plausible-mass scaling). The estimate's area
-is the mesh's, which counts both faces of a modelled wall and every inner
-face; where it saturates the hollow fraction a sheet part becomes solid (a
-stapler's sheet-steel arm 3 times its envelope mass), so the envelope mass is
-the physical lower end of the part's mass. Needs the links' geometry.
-
-The balance itself (support polygon, COM, the margin asked, the steadiest
-opening within the bands) is measured by :mod:`asset2sim.tasks.state.balance`.
+"""Stability by design: keep the centre of mass (COM) over the support at the
+requested state by moving mass from opened parts to the body, down to the
+sourced part-mass fractions (:data:`PART_MASS_FRACTION`) or the envelope
+shell mass m = A_env t rho (Roark's Formulas for Stress and Strain, 8th ed.).
 """
 
 from __future__ import annotations
@@ -41,6 +14,7 @@ import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.state.balance import Balance, _com, _link_world, _signed_margin, measure_balance
@@ -51,8 +25,7 @@ __all__ = ["PART_MASS_FRACTION", "design_for_stability", "envelope_masses"]
 
 @dataclass(frozen=True)
 class PartFraction:
-    """Share of the whole object's mass one part may carry (``lo`` .. ``hi``),
-    with its source."""
+    """Share of the whole object's mass one part may carry (``lo`` .. ``hi``), with its source."""
 
     lo: float
     hi: float
@@ -85,16 +58,9 @@ PART_MASS_FRACTION: dict[tuple[str, str], PartFraction] = {
 
 def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
                     geometry: dict[str, LinkGeometry]) -> dict[str, float]:
-    """Envelope shell mass (kg) of every link of ``overlay`` made of a shell
-    material (module docstring): A_env t rho times the factor the estimate
-    applied to the link (its mass over the geometric mass
-    :func:`asset2sim.tasks.synthesize.physics.link_physics` gives for its
-    ``geometry`` and material: the plausible-range scaling, a validator's
-    raise, a requested mass), capped at the link's mass. A_env is the
-    convex-hull area of its collision points ``points`` (link -> (N, 3) m,
-    world, scale baked in). Links of solid or unknown materials, or without
-    geometry or a hull, are left out.
-    """
+    """Envelope shell mass (kg) of every shell-material link of ``overlay``: A_env t rho times the link's mass over its
+    geometric mass (:func:`asset2sim.tasks.synthesize.physics.link_physics`), capped at its mass; A_env the hull area of
+    ``points`` (link -> (N, 3) m, world). Links of other materials, or without geometry or hull, are left out."""
     from scipy.spatial import ConvexHull, QhullError
 
     by_name: dict[str, MaterialPrior] = {m.name: m for m in load_priors().materials.values()}
@@ -119,53 +85,19 @@ def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
     return out
 
 
-def _subtree(asset: AssetDescription, link: str) -> set[str]:
-    out, todo = {link}, [link]
-    while todo:
-        cur = todo.pop()
-        for j in asset.joints:
-            if j.parent == cur and j.child not in out:
-                out.add(j.child)
-                todo.append(j.child)
-    return out
+def design_for_stability(urdf: Path | str, asset: AssetDescription, overlay: Overlay, state: dict[str, float],
+                         category: str | None, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[str]]:
+    """Make a free-standing object balance at ``state`` by its part masses: the
+    smallest transfer from the opened parts (each linearly towards its floor:
+    the sourced lower fraction, else the envelope shell mass) to the body
+    (links no joint moves, scaled up alike) that gives the required margin.
+    A mounted or already balanced asset is returned unchanged.
 
-
-def design_for_stability(
-    urdf: Path | str,
-    asset: AssetDescription,
-    overlay: Overlay,
-    state: dict[str, float],
-    category: str | None,
-    geometry: dict[str, LinkGeometry] | None = None,
-) -> tuple[Overlay, list[str]]:
-    """Make a free-standing object balance at ``state`` by its part masses.
-
-    When the COM's projection is outside the support polygon (or closer to its
-    edge than :class:`~asset2sim.tasks.state.balance.Balance`'s required margin), mass is moved from the
-    links of the opened parts that :data:`PART_MASS_FRACTION` covers (the
-    child link of a movable joint with that label, and its subtree) to the
-    links that are moved by no joint (the body), each side scaled
-    proportionally, down to the part's sourced lower fraction at most, and
-    from the other opened parts of shell materials down to their envelope
-    shell mass (module docstring; each opened link moves linearly towards its
-    floor, the body scaled up alike); the smallest transfer that balances the
-    object is used. Total mass, scale and
-    state are unchanged. A mounted asset (``overlay.mounting.fixed``) and an
-    object already balanced are returned unchanged.
-
-    Args:
-        urdf: the written URDF (scale baked in, the resting pose applied).
-        asset: the input's description (tree and semantic labels).
-        overlay: the overlay the URDF was written from.
-        state: joint -> rad or m, the refined initial state.
-        category: canonical category (the key of :data:`PART_MASS_FRACTION`).
-        geometry: link -> :class:`LinkGeometry` (scale 1): opened parts no
-            sourced fraction covers may go down to their envelope shell mass
-            (:func:`envelope_masses`); None: only the sourced fractions.
-
-    Returns:
-        (overlay, changes): the new overlay (the same object when nothing
-        changed) and what changed and why (empty when nothing did).
+    ``urdf``: the written URDF (scale baked in, pose applied) of ``overlay``;
+    ``state``: joint -> rad or m; ``category``: key of :data:`PART_MASS_FRACTION`;
+    ``geometry``: link -> :class:`LinkGeometry` (scale 1) for the envelope shell
+    masses (None: only the sourced fractions). Returns (overlay, changes): the
+    same overlay and no changes when nothing changed.
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
         return overlay, []
@@ -192,37 +124,31 @@ def design_for_stability(
     after = _signed_margin(bal.support, _com(ov, frames)[:2])
     total = overlay.total_mass()
     m_part, m_after = sum(overlay.links[ln].mass for ln in floors), sum(new[ln] for ln in floors)
-    change = (
-        f"stability by design: at the requested state the centre of mass was {bal.margin * 1000:.3g} mm from the support's edge "
-        f"(needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to {', '.join(body)} "
-        f"(opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, " + "; ".join(reasons) + "); "
-        f"margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"
-    )
-    return ov, [change]
+    return ov, [f"stability by design: at the requested state the centre of mass was {bal.margin * 1000:.3g} mm from the support's "
+                f"edge (needs >= {bal.required * 1000:.3g} mm inside); moved {t * span:.3g} kg from {', '.join(light)} to "
+                f"{', '.join(body)} (opened parts {m_part / total:.0%} -> {m_after / total:.0%} of {total:.3g} kg, "
+                + "; ".join(reasons) + f"); margin now {after * 1000:.3g} mm; total mass, scale and state unchanged"]
 
 
 def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[str], dict[str, PartFraction]]:
-    """(the links a movable joint moves, link -> the sourced fraction of the
-    opened part it belongs to: the child of a joint with a covered label and its subtree)."""
+    """(links a movable joint moves, link -> the sourced fraction of its opened part)."""
     movable = [j for j in asset.joints if j.type in ("revolute", "prismatic", "continuous")]
     moved: set[str] = set()
     for j in movable:
-        moved |= _subtree(asset, j.child)
+        moved |= set(subtree_links(asset, j.child))
     labels = {ln.name: canonical_label(ln.semantic_label) for ln in asset.links}
     parts: dict[str, PartFraction] = {}
     for j in movable:
         pf = PART_MASS_FRACTION.get((category or "", labels.get(j.child) or ""))
         if pf is not None:
-            for ln in _subtree(asset, j.child):
+            for ln in subtree_links(asset, j.child):
                 parts[ln] = pf
     return moved, parts
 
 
 def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], urdf: Path | str, state: dict[str, float],
                  geometry: dict[str, LinkGeometry] | None) -> tuple[dict[str, float], list[str], PartFraction | None]:
-    """(link -> the least mass it may take, kg; the reasons; the sourced
-    fraction used or None): the covered parts down to the lowest sourced
-    fraction, the other opened links down to their envelope shell mass."""
+    """(link -> least mass, kg; reasons; the sourced fraction used or None)."""
     total = overlay.total_mass()
     floors: dict[str, float] = {}
     reasons: list[str] = []
@@ -245,8 +171,7 @@ def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[st
 
 def _why_kept(overlay: Overlay, bal: Balance, category: str | None, floors: dict[str, float], light: list[str], m_body: float,
               pf: PartFraction | None) -> list[str] | None:
-    """The notes when no mass can move (no floor, no body mass, no opened
-    link above its floor); None when some can."""
+    """The notes when no mass can move; None when some can."""
     total = overlay.total_mass()
     if not floors or m_body <= 0 or total <= 0:
         if bal.margin >= 0:  # inside, only closer to the edge than asked: nothing to say without a sourced ratio
@@ -264,8 +189,7 @@ def _why_kept(overlay: Overlay, bal: Balance, category: str | None, floors: dict
 
 def _masses(overlay: Overlay, light: list[str], body: list[str], floors: dict[str, float], m_body: float, span: float,
             t: float) -> dict[str, float]:
-    """link -> mass (kg) with each ``light`` link the fraction ``t`` of the
-    way down to its floor and the ``body`` scaled up by the ``t * span`` kg they lost."""
+    """link -> mass (kg), each ``light`` link ``t`` of the way to its floor, the ``body`` scaled up by ``t * span`` kg."""
     out = {ln: lp.mass for ln, lp in overlay.links.items()}
     for ln in light:
         out[ln] -= t * (out[ln] - floors[ln])
@@ -275,8 +199,7 @@ def _masses(overlay: Overlay, light: list[str], body: list[str], floors: dict[st
 
 
 def _smallest_transfer(margin, required: float) -> float | None:
-    """The smallest fraction t in [0, 1] with ``margin(t)`` (m) >= ``required``
-    (40 halvings), None when even t = 1 falls short."""
+    """Smallest t in [0, 1] with ``margin(t)`` >= ``required`` (40 halvings); None when t = 1 falls short."""
     if margin(1.0) < required:
         return None
     lo, hi = 0.0, 1.0
@@ -287,8 +210,7 @@ def _smallest_transfer(margin, required: float) -> float | None:
 
 
 def _with_masses(overlay: Overlay, new: dict[str, float], links: list[str]) -> Overlay:
-    """A copy of ``overlay`` with the masses ``new`` (kg) for ``links``, their
-    inertia scaled alike and the factor noted in their source."""
+    """A copy of ``overlay`` with masses ``new`` (kg) for ``links``, inertia scaled alike, noted in the source."""
     ov = overlay.model_copy(deep=True)
     for ln in links:
         lp = ov.links[ln]

@@ -1,25 +1,6 @@
-"""The estimation context: what stages 1-4 hand to overlay synthesis.
-
-One builder, :func:`build_context`, used by the refine pipeline
-(:func:`asset2sim.tasks.refine.refine_asset`), the ``direct`` baseline
-(:func:`asset2sim.tasks.benchmark.baselines.make_direct`) and the model
-estimators' benchmarks and baselines
-(:mod:`asset2sim.tasks.synthesize.llm_estimator`). It chains
-
-1. extract (:func:`asset2sim.tasks.ingest.extract.extract_asset`; skipped when
-   an :class:`~asset2sim.schemas.asset.AssetDescription` is given),
-2. analyze (:func:`asset2sim.tasks.geometry.analyze.analyze_asset`; skipped
-   when the geometry is given),
-3. request and category (:func:`asset2sim.tasks.interpret.request.parse_request`,
-   :func:`asset2sim.tasks.interpret.categories.recognize_category`),
-4. the geometric closed states in a kinematic PyBullet session
-   (:mod:`asset2sim.tasks.geometry.closed_state`): closed ends, the closed
-   object's extents, the links each movable joint moves and the height of
-   each moving subtree,
-
-and yields an :class:`EstimationContext`. The kinematic session (fixed base,
-no gravity, no ground) stays open while the ``with`` block runs (estimators
-compute joint loads in it) and is closed when it ends, also on errors.
+"""The estimation context: what stages 1-4 (extract, analyze, request and
+category, geometric closed states) hand to overlay synthesis, built by
+:func:`build_context` for the refine pipeline, the baselines and benchmarks.
 """
 
 from __future__ import annotations
@@ -34,14 +15,7 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import RequestOverrides, RequestSpec
 from asset2sim.tasks.geometry import analyze
-from asset2sim.tasks.geometry.closed_state import (
-    ClosedState,
-    closed_positions,
-    link_hull_points,
-    links_aabb,
-    object_extents,
-    subtree_links,
-)
+from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, links_aabb, object_extents, subtree_links
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.overrides import apply_overrides
@@ -61,14 +35,11 @@ class EstimationContext:
     category: str
     category_reason: str
     closed: dict[str, ClosedState]
-    """Closed ends at scale 1 (prismatic in input units)."""
     closed_extents: np.ndarray
-    """(3,) extents of the whole object in its closed state, root frame, scale 1."""
+    """(3,) extents of the closed object, root frame (closed ends and extents at scale 1, input units)."""
     session: Any
-    """Fixed-base, gravity-free PyBullet session of the input asset (kinematics);
-    open only inside :func:`build_context`'s ``with`` block."""
+    """Fixed-base, gravity-free PyBullet session of the input asset; open only inside :func:`build_context`."""
     subtrees: dict[str, list[str]]
-    """joint -> links moved by it."""
     joint_heights: dict[str, float] = field(default_factory=dict)
     """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
     hull_points: dict[str, np.ndarray] = field(default_factory=dict)
@@ -96,13 +67,8 @@ class Interpretation:
 
 def interpret(asset: AssetDescription, prompt: str, category: str | None = None,
               overrides: RequestOverrides | None = None) -> Interpretation:
-    """Parse ``prompt`` and recognise the category of ``asset``.
-
-    ``category`` (e.g. a manifest column) wins over the asset's own; the
-    semantic labels of the links and the prompt's words decide otherwise
-    (:func:`asset2sim.tasks.interpret.categories.recognize_category`).
-    ``overrides`` win over the prompt's words
-    (:func:`asset2sim.tasks.interpret.overrides.apply_overrides`).
+    """Parse ``prompt`` (``overrides`` win over its words) and recognise the category of ``asset``
+    (``category`` wins over the asset's own; else labels and words decide).
 
     Raises:
         OverrideError: an override does not fit the asset.
@@ -114,51 +80,31 @@ def interpret(asset: AssetDescription, prompt: str, category: str | None = None,
 
 
 def subtree_height(session: SimSession, links: list[str], hull_points: dict[str, np.ndarray]) -> float:
-    """z (m at the session's scale) of the center of the world-frame
-    axis-aligned box around ``links``' hull points at the session's current
-    state; 0 when none of them has geometry."""
+    """z (m) of the center of the world box around ``links``' hull points at the current state; 0 without geometry."""
     box = links_aabb(session, links, hull_points)
     return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
 
 
 def kinematic_session(asset: AssetDescription, config: RefineConfig | None = None) -> SimSession:
-    """A fixed-base, gravity-free PyBullet session of the input asset without
-    a ground plane (contact and pose queries only), with ``config.sim``'s
-    conventions. The caller closes it (sessions are context managers).
-
-    Raises:
-        as :func:`asset2sim.engines.registry.open_session`.
-    """
+    """A fixed-base, gravity-free PyBullet session of the input asset without ground, ``config.sim``'s
+    conventions; the caller closes it. Raises as :func:`asset2sim.engines.registry.open_session`."""
     conventions = (config or RefineConfig()).sim
     return open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=conventions))
 
 
 @contextlib.contextmanager
-def build_context(
-    source: AssetDescription | Path | str,
-    prompt: str,
-    config: RefineConfig | None = None,
-    *,
-    category: str | None = None,
-    asset_id: str | None = None,
-    geometry: dict[str, LinkGeometry] | None = None,
-    cache: analyze.MeshCache | None = None,
-    settings: dict[str, Any] | None = None,
-) -> Iterator[EstimationContext]:
-    """The estimation context of an asset for ``prompt`` (stages 1-4; see the
-    module docstring), as a context manager: the kinematic session inside
-    ``ctx.session`` is closed when the ``with`` block ends.
+def build_context(source: AssetDescription | Path | str, prompt: str, config: RefineConfig | None = None, *, category: str | None = None,
+                  asset_id: str | None = None, geometry: dict[str, LinkGeometry] | None = None, cache: analyze.MeshCache | None = None,
+                  settings: dict[str, Any] | None = None) -> Iterator[EstimationContext]:
+    """The estimation context of an asset for ``prompt``, as a context manager: ``ctx.session`` is closed
+    when the ``with`` block ends, also on errors.
 
     Args:
-        source: an extracted asset, or its folder / URDF file (extracted here
-            with ``asset_id`` and ``category``).
+        source: an extracted asset, or its folder / URDF file (extracted with ``asset_id`` and ``category``).
         prompt: the request text.
-        config: pipeline knobs; ``config.sim`` (simulator conventions) and
-            ``config.overrides`` are used here (default :class:`RefineConfig`).
+        config: ``config.sim`` and ``config.overrides`` are used (default :class:`RefineConfig`).
         category: overrides the asset's own category.
-        asset_id: identifier when ``source`` is a path (default folder name).
-        geometry: the analysis stage's result when the caller ran it already.
-        cache: mesh cache shared with the caller's other stages (a new one by default).
+        geometry, cache: the analysis result and mesh cache when the caller has them.
         settings: estimator knobs stored in ``ctx.settings``.
 
     Yields:
@@ -166,8 +112,7 @@ def build_context(
 
     Raises:
         asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read.
-        asset2sim.tasks.geometry.analyze.MeshAnalysisError: a link with
-            geometry has no usable geometry.
+        asset2sim.tasks.geometry.analyze.MeshAnalysisError: a link with geometry has no usable geometry.
         OverrideError: an override of ``config.overrides`` does not fit the asset.
     """
     asset = source if isinstance(source, AssetDescription) else extract.extract_asset(source, asset_id=asset_id, category=category)
@@ -181,17 +126,6 @@ def build_context(
         extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
         heights = {n: subtree_height(kin, links, hull) for n, links in subtrees.items()}
-        yield EstimationContext(
-            asset=asset,
-            geometry=geometry,
-            request=meaning.request,
-            category=meaning.category,
-            category_reason=meaning.category_reason,
-            closed=closed,
-            closed_extents=extents,
-            session=kin,
-            subtrees=subtrees,
-            joint_heights=heights,
-            hull_points=hull,
-            settings=dict(settings or {}),
-        )
+        yield EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
+                                category_reason=meaning.category_reason, closed=closed, closed_extents=extents, session=kin,
+                                subtrees=subtrees, joint_heights=heights, hull_points=hull, settings=dict(settings or {}))

@@ -1,19 +1,6 @@
-"""Overlay synthesis (SPEC stage 2): the helpers every estimator shares
-(scale, state bands, plausible mass, joint dynamics from loads).
-
-An estimator turns an :class:`~asset2sim.tasks.synthesize.context.EstimationContext`
-(the extracted asset, its mesh analysis, the parsed request, the recognised
-category and the geometric closed states; built by
-:func:`asset2sim.tasks.synthesize.context.build_context`) into an
-:class:`Estimate`: the :class:`~asset2sim.schemas.overlay.Overlay` and the
-state band of every movable joint. Whatever produced it, the overlay is then
-validated mechanically (:mod:`asset2sim.tasks.synthesize.validate_overlay`).
-
-The estimator protocol and registry are :mod:`.estimator`, the offline
-estimator :mod:`.offline`, the built-in backends :mod:`.backends`. The
-knowledge is per category, per part label and per word of the request (``asset2sim/priors/*.yaml`` through
-:mod:`asset2sim.tasks.interpret.priors`); the physics is in :mod:`asset2sim.tasks.synthesize.physics`.
-"""
+"""Overlay synthesis (SPEC stage 2): the helpers every estimator shares (scale,
+state bands, plausible mass, joint dynamics from loads). The protocol and
+registry are :mod:`.estimator`, the physics :mod:`.physics`."""
 
 from __future__ import annotations
 
@@ -29,20 +16,13 @@ from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
 
-# --------------------------------------------------------------------- helpers
 def task_relevant_joints(ctx: EstimationContext) -> list[str]:
-    """Movable joints whose moving part is what tasks manipulate (lid, door,
-    drawer, screen ...; ``priors.part_role`` == "task"), ordered by the
-    category's priority; every non-accessory movable joint when none
-    qualifies, and all movable joints when even that is empty
-    (:func:`asset2sim.tasks.synthesize.request_apply.task_relevant_joints`)."""
+    """Movable joints whose moving part tasks manipulate (:func:`request_apply.task_relevant_joints`)."""
     return request_apply.task_relevant_joints(ctx)
 
 
 def requested_bands(ctx: EstimationContext, scale: float | None = None) -> tuple[dict[str, str], list[str]]:
-    """Band per movable joint from the request (joint -> band name), and notes
-    (warnings first): :func:`asset2sim.tasks.synthesize.request_apply.resolve_states`
-    at ``scale`` (default :func:`choose_scale`). Joints not addressed are closed."""
+    """(joint -> band, notes with warnings first) from the request at ``scale`` (default :func:`choose_scale`)."""
     res = request_apply.resolve_states(ctx, choose_scale(ctx)[0] if scale is None else scale)
     return res.bands, res.warnings + res.notes
 
@@ -57,17 +37,9 @@ def state_from_bands(closed: dict[str, ClosedState], bands: dict[str, str], scal
 
 
 def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
-    """Uniform scale s so that the closed object's extents match the target
-    real-world dimensions (``priors.target_size``: the category's or the named
-    variant's typical dimensions times the request's size factor).
-
-    s is the geometric mean of the ratios of the two largest sorted dimensions
-    (the smallest is the least reliable: thickness of lids, screens); a
-    handheld category is then capped so that at least two dimensions fit a
-    parallel gripper (second-largest <= ``priors.GRASPABLE_WIDTH_M``). Sizes in
-    numbers ("30 cm tall") decide alone
-    (:func:`asset2sim.tasks.synthesize.request_apply.scale_from_sizes`).
-    """
+    """(uniform scale s, note): sizes in numbers decide alone; else s is the geometric mean of the ratios
+    of the two largest sorted target dimensions (``priors.target_size``) to the closed extents, capped for
+    handheld categories so two dimensions fit ``priors.GRASPABLE_WIDTH_M``."""
     sized = request_apply.scale_from_sizes(ctx)
     if sized is not None:
         return sized
@@ -89,10 +61,8 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
 
 
 def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, float]:
-    """Plausible total mass (kg) for the object *as sized*: the category's (or
-    the named variant's) regular mass range scaled to the actual size factor
-    f = geometric mean of (scaled closed extents / regular dims) over the two
-    largest dimensions (``priors.scale_mass_range``: f^2..f^3)."""
+    """Plausible total mass (kg) as sized: the regular mass range scaled (``priors.scale_mass_range``) by f,
+    the geometric mean of scaled closed extents / regular dims over the two largest dimensions."""
     target = priors.target_size(ctx.category, ctx.request)
     cat = priors.category_prior(ctx.category)
     var = cat.variant(target.variant) if target.variant else None
@@ -110,22 +80,14 @@ def request_variant(ctx: EstimationContext) -> str | None:
 
 
 def link_material(ctx: EstimationContext, label: str | None, link: str | None = None) -> physics.MaterialChoice:
-    """The material of ``link`` (part label ``label``): the request's when it
-    names one for the link, else the category's prior for the label."""
+    """The material the request names for ``link``, else the category's prior for ``label``."""
     m = (request_apply.requested_material(ctx, link) if link is not None else None) or priors.material_for(ctx.category, label, request_variant(ctx))
-    return physics.MaterialChoice(
-        name=m.name,
-        density=float(m.density),
-        shell=bool(m.shell),
-        wall_thickness=float(m.wall_thickness),
-        source=m.source,
-    )
+    return physics.material_choice(m)
 
 
 @dataclass
 class JointChoice:
-    """Qualitative dynamics choices for one joint (from request words, priors
-    or a model reply); :func:`joint_dynamics_for` turns them into numbers."""
+    """Qualitative dynamics choices for one joint; :func:`joint_dynamics_for` turns them into numbers."""
 
     damping_level: str = "moderate"
     holds_position: bool = False
@@ -134,26 +96,14 @@ class JointChoice:
     free_moving: bool = False
 
 
-def joint_dynamics_for(
-    ctx: EstimationContext,
-    links: dict[str, LinkPhysics],
-    state: dict[str, float],
-    scale: float,
-    choices: dict[str, JointChoice],
-    *,
-    source: str,
-) -> dict[str, JointDynamics]:
-    """Damping, friction and stiffness of every movable joint from the scaled
-    masses and the kinematics at ``state`` (output units), shaped by the
-    qualitative ``choices`` (see ``docs/design/refine.md``, "Joint dynamics").
+def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+                       choices: dict[str, JointChoice], *, source: str) -> dict[str, JointDynamics]:
+    """Damping, friction and stiffness of every movable joint from the scaled masses and the kinematics at
+    ``state`` (output units), shaped by ``choices`` (``docs/design/refine.md``, "Joint dynamics").
 
-    Friction holds the largest gravity load within 5 % of the range around the
-    state, or over the whole range when the joint must hold its position, and
-    the load at :data:`CLOSED_HOLD_FRACTIONS` where gravity pushes the part
-    open there (a closed part stays closed); a
-    spring gets k = max(3 x 1.5 x hold / range, 2 k_g) and the reference
-    q_s = q - tau_g / k so that it holds the state (equilibrium of
-    -k (q - q_s) + tau_g = 0), friction then only 10 % of the load.
+    Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
+    holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
+    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
@@ -174,9 +124,7 @@ def joint_dynamics_for(
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             hold = max(hold, abs(ld[name].gravity_load))
-        # A part stays shut once closed: where gravity pushes it open near its
-        # closed end (a lever hanging open), friction holds that too; a load
-        # towards the closed end rests on the stop.
+        # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f in CLOSED_HOLD_FRACTIONS:
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
@@ -189,30 +137,17 @@ def joint_dynamics_for(
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
             spring = (k, ref)
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
-        out[name] = physics.joint_dynamics(
-            loads[name],
-            hold,
-            prismatic=name in prismatic,
-            damping_level=ch.damping_level,
-            stiff=ch.stiff,
-            free_moving=ch.free_moving,
-            spring=spring,
-            source=source,
-        )
+        out[name] = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
+                                           free_moving=ch.free_moving, spring=spring, source=source)
     return out
 
 
-#: Opening fractions near the closed end where friction also holds a joint
-#: that gravity pushes open (:func:`joint_dynamics_from_loads`): a part closed
-#: by a hand (the probes release a closed part at f <= 0.10) stays closed.
+#: Opening fractions near the closed end where friction also holds a joint gravity pushes open (probes release at <= 0.10).
 CLOSED_HOLD_FRACTIONS = (0.0, 0.05, 0.10)
 
 
-
-
 def band_intervals(bands: dict[str, str], intervals: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
-    """Allowed opening-fraction interval per joint for its band; ``intervals``
-    (a number or end the request asked, :attr:`asset2sim.tasks.synthesize.estimator.Estimate.targets`) win."""
+    """Allowed opening-fraction interval per joint for its band; ``intervals`` (asked numbers or ends) win."""
     out = {name: BAND_INTERVAL[b] for name, b in bands.items()}
     out.update(intervals or {})
     return out

@@ -1,20 +1,8 @@
-"""Inverse-variance weighting (IVW) of N estimates with reported uncertainties.
-
-The ``ivw`` baseline (SPEC, "Baselines"): several model calls each report a
-value and a standard deviation per parameter; the fused value is the
-fixed-effect inverse-variance weighted mean
-
-    w_i = 1 / sigma_i^2,   x_hat = sum(w_i x_i) / sum(w_i),   sigma_hat = (sum w_i)^(-1/2)
-
-(e.g. Hartung, Knapp & Sinha, *Statistical Meta-Analysis with Applications*,
-Wiley 2008, ch. 4; Cochran, Biometrics 10 (1954) 101-129). The fused standard
-deviation assumes independent estimates, which repeated queries of one model
-are not: it is a lower bound, reported for information only.
-
-``log_space=True`` fuses ln x with sigma_ln = sigma / x (first-order delta
-method) for strictly positive quantities whose errors are multiplicative
-(scale, mass) and returns exp of the fused log and the delta-method sigma.
-Units: whatever the estimates are in (the result has the same unit).
+"""Inverse-variance weighting (IVW) of estimates with reported uncertainties (the
+``ivw`` baseline): w_i = 1 / sigma_i^2, x_hat = sum(w_i x_i) / sum(w_i),
+sigma_hat = (sum w_i)^(-1/2) (Hartung, Knapp & Sinha, Statistical Meta-Analysis
+with Applications, 2008, ch. 4), a lower bound for correlated estimates.
+``log_space`` fuses ln x with sigma / x (delta method). Units: the inputs'.
 """
 
 from __future__ import annotations
@@ -26,8 +14,7 @@ from typing import Iterable, Mapping
 
 @dataclass(frozen=True)
 class Fused:
-    """A fused estimate: ``value`` and ``std`` in the unit of the inputs,
-    ``n`` estimates used, ``weights`` their normalized weights (sum 1, input order)."""
+    """A fused estimate: ``value``, ``std``, ``n`` estimates and their normalized ``weights`` (input order)."""
 
     value: float
     std: float
@@ -36,17 +23,8 @@ class Fused:
 
 
 def fuse(estimates: Iterable[tuple[float, float]], *, log_space: bool = False, min_std: float = 0.0) -> Fused:
-    """Fuse (value, std) pairs by inverse-variance weighting.
-
-    Args:
-        estimates: (value, one standard deviation) pairs, same unit.
-        log_space: fuse ln(value) (values must be > 0); see the module docstring.
-        min_std: floor applied to every std before weighting (same unit as the
-            values; relative to the value when ``log_space``), so that one
-            over-confident estimate cannot take all the weight. 0 = no floor.
-
-    Returns:
-        :class:`Fused`.
+    """Fuse (value, std) pairs by inverse-variance weighting; ``min_std`` floors every std (relative with
+    ``log_space``) so one over-confident estimate cannot take all the weight.
 
     Raises:
         ValueError: no estimates; a value or std not finite; std <= 0 (after the

@@ -1,12 +1,6 @@
-"""The SPEC's model baselines: the model's numbers applied as they are.
-
-- :func:`direct_overlay`: one call with the five views;
-- :func:`ivw_overlay`: each of 5 views asked 5 times, the numbers fused per
-  parameter by inverse-variance weighting (:mod:`asset2sim.tasks.synthesize.ivw`).
-
-Neither re-asks, validates, computes physics or refines the state: they are
-what asset2sim is compared against (``docs/design/metrics.md``).
-"""
+"""The SPEC's model baselines, the model's numbers applied as they are (no re-ask,
+validation, physics or state refinement): ``direct`` (one call, five views) and
+``ivw`` (5 views x 5 calls, inverse-variance fused)."""
 
 from __future__ import annotations
 
@@ -26,59 +20,34 @@ IVW_TEMPERATURE = 1.0
 """Sampling temperature of the IVW baseline's repeated queries (independent samples)."""
 
 
-def _numeric_overlay(
-    ctx: EstimationContext,
-    name: str,
-    model: str,
-    usage: Usage,
-    scale: float,
-    link_mass: dict[str, tuple[float, bool]],
-    joint_values: dict[str, dict[str, float]],
-    contact: tuple[float, float],
-    notes: list[str],
-) -> Overlay:
-    """An overlay from the model's numbers as they are (no validation): masses
-    and dynamics as given, inertia of the scaled geometry at that mass (shell
-    or solid tensor as the model said; URDF needs a tensor and the reply has
-    none), COM of the scaled geometry; links the reply misses stay missing."""
+def _numeric_overlay(ctx: EstimationContext, name: str, model: str, usage: Usage, scale: float, link_mass: dict[str, tuple[float, bool]],
+                     joint_values: dict[str, dict[str, float]], contact: tuple[float, float], notes: list[str]) -> Overlay:
+    """An overlay from the model's numbers as they are (no validation); inertia and COM of the scaled
+    geometry at the given mass (shell or solid tensor as the model said)."""
     links = {}
     for ln, (mass, shell) in link_mass.items():
         g = ctx.geometry.get(ln)
         if g is None:
             continue
-        links[ln] = LinkPhysics(
-            mass=float(mass),
-            inertia=Inertia.from_matrix(validate_overlay.geometry_inertia(g, float(mass), scale, shell)),
-            com=tuple(float(c) * scale for c in g.com),
-            source=f"{name}: model mass, geometry inertia",
-        )
+        inertia = Inertia.from_matrix(validate_overlay.geometry_inertia(g, float(mass), scale, shell))
+        links[ln] = LinkPhysics(mass=float(mass), inertia=inertia, com=tuple(float(c) * scale for c in g.com),
+                                source=f"{name}: model mass, geometry inertia")
     joints = {}
     state = {}
     for jn, v in joint_values.items():
-        joints[jn] = JointDynamics(
-            damping=float(v["damping"]),
-            friction=float(v["friction"]),
-            stiffness=float(v["stiffness"]),
-            spring_reference=float(v["position"]) if v["stiffness"] > 0 else None,
-            source=f"{name}: model values",
-        )
+        joints[jn] = JointDynamics(damping=float(v["damping"]), friction=float(v["friction"]), stiffness=float(v["stiffness"]),
+                                   spring_reference=float(v["position"]) if v["stiffness"] > 0 else None, source=f"{name}: model values")
         state[jn] = float(v["position"])
     return Overlay(
-        estimator=estimator_info(name, model, usage),
-        scale=float(scale),
-        category=ctx.category,
+        estimator=estimator_info(name, model, usage), scale=float(scale), category=ctx.category,
         contact_material=ContactMaterial(lateral_friction=max(0.0, contact[0]), restitution=min(1.0, max(0.0, contact[1])), note=f"model ({name})"),
-        links=links,
-        joints=joints,
-        initial_joint_positions=state or None,
+        links=links, joints=joints, initial_joint_positions=state or None,
         notes=ValidationNotes(size=f"{name}: s = {scale:.4g}", other=notes + [f"model {model}: {usage.summary()}"]),
     )
 
 
 def direct_overlay(ctx: EstimationContext, client: LLMClient) -> Overlay:
-    """``direct`` baseline: one call with the five views; the reply's numbers
-    (scale, link masses, damping, friction, stiffness, joint positions) applied
-    as they are: no re-ask, no validation, no physics, no state refinement.
+    """``direct`` baseline: one call with the five views, the reply's numbers applied as they are.
 
     Raises:
         ModelCallError: the call failed.
@@ -90,25 +59,15 @@ def direct_overlay(ctx: EstimationContext, client: LLMClient) -> Overlay:
     answer = client.ask(build_messages(describe(ctx), images, schema), ModelReply, schema=schema, schema_name=REPLY_SCHEMA_NAME, max_reasks=0)
     r = answer.reply
     return _numeric_overlay(
-        ctx,
-        "direct",
-        cfg.model,
-        answer.usage,
-        r.scale.value,
-        {lr.link: (lr.mass.value, lr.shell) for lr in r.links},
+        ctx, "direct", cfg.model, answer.usage, r.scale.value, {lr.link: (lr.mass.value, lr.shell) for lr in r.links},
         {jr.joint: {k: getattr(jr, k).value for k in ("damping", "friction", "stiffness", "position")} for jr in r.joints},
-        (r.lateral_friction, r.restitution),
-        render_notes + ["direct: one model call applied as is (no validation, no refinement)"],
-    )
+        (r.lateral_friction, r.restitution), render_notes + ["direct: one model call applied as is (no validation, no refinement)"])
 
 
 def ivw_overlay(ctx: EstimationContext, client: LLMClient, n_views: int = 5, n_calls: int = 5) -> Overlay:
-    """``ivw`` baseline: ``n_calls`` independent calls for each of the first
-    ``n_views`` views (one image per call, temperature :data:`IVW_TEMPERATURE`),
-    each reply's numbers with their reported std fused per parameter by
-    inverse-variance weighting (:func:`asset2sim.tasks.synthesize.ivw.fuse`): scale, link
-    masses, joint damping, friction, stiffness and positions. Unusable replies
-    and failed calls are skipped (noted); no re-asks, no validation, no physics.
+    """``ivw`` baseline: ``n_calls`` calls for each of the first ``n_views`` views (one image each,
+    temperature :data:`IVW_TEMPERATURE`), numbers fused per parameter by inverse-variance weighting;
+    unusable replies and failed calls are skipped (noted).
 
     Raises:
         ValueError: ``n_views`` not in 1..5 or ``n_calls`` < 1.
@@ -163,15 +122,8 @@ def ivw_overlay(ctx: EstimationContext, client: LLMClient, n_views: int = 5, n_c
             d[k] = max(0.0, d[k])
     contact = (float(np.mean([r.lateral_friction for r in replies])), float(np.mean([r.restitution for r in replies])))
     return _numeric_overlay(
-        ctx,
-        "ivw",
-        cfg.model,
-        usage,
-        scale.value,
-        {ln: (f.value, sum(shells[ln]) * 2 > len(shells[ln])) for ln, f in fused_mass.items()},
-        joint_values,
-        contact,
-        render_notes
+        ctx, "ivw", cfg.model, usage, scale.value, {ln: (f.value, sum(shells[ln]) * 2 > len(shells[ln])) for ln, f in fused_mass.items()},
+        joint_values, contact, render_notes
         + [f"ivw: {len(replies)} usable replies of {len(views) * n_calls} calls ({n_views} views x {n_calls}); scale {scale.value:.4g} +- {scale.std:.3g}"]
         + [f"skipped: {f}" for f in failures[:10]],
     )

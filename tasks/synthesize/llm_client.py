@@ -1,50 +1,9 @@
-"""The one place that calls model APIs (through litellm).
-
-Everything a model backend needs from the network lives here:
-
-- **calls** through ``litellm.completion`` (any provider: ``gemini/...``,
-  ``openai/...``, ``anthropic/...``, a local OpenAI-compatible server through
-  ``base_url``), each with a timeout; litellm's and the OpenAI SDK's own
-  retries are switched off (``max_retries=0``, ``num_retries=0``) so that
-- **network faults are retried here and only here**: timeouts, dropped
-  connections, HTTP 408/409/425/429/5xx/529 are retried up to
-  ``max_attempts`` tries per call with exponential backoff
-  (``backoff_s * 2**k``, capped at ``max_backoff_s``) that honours the
-  server's ``Retry-After`` / ``retry-after-ms`` header (waiting at least that
-  long; a wait longer than ``max_retry_after_s`` fails at once). Other errors
-  (400, 401, 403, 404, ...) fail at once.
-- **an on-disk reply cache** keyed by the sha256 of (model, messages with
-  their images, JSON schema, sampling parameters): a rerun makes no calls.
-  Only replies that parsed into the reply schema are stored (a transient
-  garbled reply is asked again on the next run). Each record holds its key
-  and the sha256 of what is read back (:func:`record_digest`); a record
-  larger than :meth:`LLMClient.cache_record_cap`, unreadable, stored under
-  another key (copied or moved) or altered is rejected with an
-  :class:`~asset2sim.array_cache.CacheWarning`, deleted, and the reply is
-  asked again and stored anew.
-- **strict JSON parsing** (:func:`parse_json_strict`): non-finite numbers
-  (``NaN``, ``Infinity``, ``1e999``), duplicate keys and anything but one JSON
-  object are rejected; the schema model then rejects extra and missing fields
-  and out-of-range values.
-- **re-asking** (:meth:`LLMClient.ask`): an unusable reply (prose, truncated,
-  refused, too large, failing the schema or the caller's validator) is asked
-  again with the list of problems, at most ``max_reasks`` (2) times.
-- **accounting** (:class:`Usage`): calls, HTTP attempts, cache hits, tokens,
-  cost in USD when litellm's cost table knows the model, wall time.
-
-litellm is imported only inside the functions that need it; the package
-imports without it. Settings come from :class:`ClientConfig` (environment
-variables ``ASSET2SIM_LLM_*`` for operational knobs, see
-:meth:`ClientConfig.from_env`). API keys are read from the providers' usual
-environment variables by litellm and are never stored, logged or hashed.
-
-This module holds :class:`LLMClient` (the cache, the retry loop, re-asking);
-the pieces it is built from live beside it and their public names are
-importable from here too: settings :mod:`~asset2sim.tasks.synthesize.llm_config`,
-errors :mod:`~asset2sim.tasks.synthesize.llm_errors`, litellm and fault
-classification :mod:`~asset2sim.tasks.synthesize.llm_transport`, strict reply
-parsing :mod:`~asset2sim.tasks.synthesize.llm_reply`, accounting
-:mod:`~asset2sim.tasks.synthesize.llm_usage`.
+"""The one place that calls model APIs (through litellm): :class:`LLMClient`
+with timeouts, network faults retried here only (litellm's own retries off),
+an on-disk reply cache whose records carry their key and digest, strict reply
+parsing and re-asking, and accounting. litellm is imported on first use; API
+keys come from the providers' environment variables and are never stored or
+hashed. Design and settings: ``docs/design/model_backends.md``.
 """
 
 from __future__ import annotations
@@ -59,89 +18,33 @@ from pathlib import Path
 from typing import Any, Callable
 
 from asset2sim import array_cache, atomic
-from asset2sim.tasks.synthesize.llm_config import ClientConfig, default_cache_dir, with_overrides
-from asset2sim.tasks.synthesize.llm_errors import (
-    LLMError,
-    LLMUnavailable,
-    MissingCredentials,
-    ModelCallError,
-    ReplyError,
-    ReplyInvalid,
-)
-from asset2sim.tasks.synthesize.llm_reply import (
-    excerpt,
-    parse_json_strict,
-    parse_reply,
-    pydantic_errors,
-    reask_text,
-)
-from asset2sim.tasks.synthesize.llm_transport import (
-    FORBIDDEN_LITELLM,
-    NO_KEY,
-    RETRYABLE_STATUS,
-    classify,
-    import_litellm,
-    retry_after_s,
-    short_error,
-)
+from asset2sim.tasks.synthesize.llm_config import ClientConfig, with_overrides
+from asset2sim.tasks.synthesize.llm_errors import LLMError, LLMUnavailable, MissingCredentials, ModelCallError, ReplyError, ReplyInvalid
+from asset2sim.tasks.synthesize.llm_reply import excerpt, parse_json_strict, parse_reply, reask_text
+from asset2sim.tasks.synthesize.llm_transport import NO_KEY, classify, import_litellm, retry_after_s, short_error
 from asset2sim.tasks.synthesize.llm_usage import M, Answer, Completion, T, Usage
 
 CACHE_FORMAT = 1
 
-#: Slack (bytes) of a reply record beyond its content: the key, digest, model
-#: name, finish reason and JSON punctuation (:meth:`LLMClient.cache_record_cap`).
+#: Slack (bytes) of a reply record beyond its content: key, digest, model, finish reason, punctuation.
 RECORD_OVERHEAD_BYTES = 64 << 10
 
 
 def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str:
-    """sha256 (hex) of what a cached reply record gives back (its key, model,
-    content and finish reason), as canonical JSON: stored in the record and
-    checked when it is read.
-
-    Raises:
-        TypeError: a value is not JSON-serialisable.
-    """
+    """sha256 (hex) of a reply record's key, model, content and finish reason as canonical JSON."""
     blob = json.dumps({"key": key, "model": model, "content": content, "finish_reason": finish_reason},
                       sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-__all__ = [
-    "CACHE_FORMAT",
-    "FORBIDDEN_LITELLM",
-    "NO_KEY",
-    "RETRYABLE_STATUS",
-    "Answer",
-    "ClientConfig",
-    "Completion",
-    "LLMClient",
-    "LLMError",
-    "LLMUnavailable",
-    "MissingCredentials",
-    "ModelCallError",
-    "ReplyError",
-    "ReplyInvalid",
-    "Usage",
-    "classify",
-    "default_cache_dir",
-    "import_litellm",
-    "parse_json_strict",
-    "parse_reply",
-    "pydantic_errors",
-    "reask_text",
-    "retry_after_s",
-    "with_overrides",
-]
+#: The client's own names and the pieces' names callers import from here.
+__all__ = ["CACHE_FORMAT", "NO_KEY", "ClientConfig", "LLMClient", "LLMError", "LLMUnavailable", "MissingCredentials", "ModelCallError",
+           "ReplyError", "ReplyInvalid", "import_litellm", "parse_json_strict", "parse_reply", "retry_after_s", "with_overrides"]
 
 
 class LLMClient:
-    """Calls one model through litellm with retries, timeouts, a reply cache and
-    accounting (see the module docstring).
-
-    ``sleep`` is the function used to wait between retries (tests may pass a
-    recording one). Thread-safe for concurrent calls (the cache writes are
-    atomic; ``usage`` is updated under a lock).
-    """
+    """Calls one model through litellm (see the module docstring); ``sleep`` waits between retries.
+    Thread-safe: cache writes are atomic, ``usage`` is updated under a lock."""
 
     def __init__(self, config: ClientConfig, *, sleep: Callable[[float], None] = time.sleep):
         self.config = config
@@ -149,14 +52,8 @@ class LLMClient:
         self._sleep = sleep
         self._lock = threading.Lock()
 
-    # ---------------------------------------------------------- credentials
     def check_credentials(self) -> None:
-        """Fail early when the provider needs a key that is not set.
-
-        With ``base_url`` (a local or self-hosted server) no key is needed.
-        Otherwise litellm's ``validate_environment`` names the provider's
-        variables (``GEMINI_API_KEY``/``GOOGLE_API_KEY``, ``OPENAI_API_KEY``,
-        ``ANTHROPIC_API_KEY`` ...).
+        """Fail early when the provider needs a key that is not set (none with ``base_url``).
 
         Raises:
             LLMUnavailable: litellm missing.
@@ -181,23 +78,11 @@ class LLMClient:
                 "(or give --base-url for a local server that needs none)"
             )
 
-    # -------------------------------------------------------------- caching
     def cache_key(self, messages: list[dict[str, Any]], schema: dict[str, Any] | None, temperature: float | None) -> str:
-        """sha256 (hex) of the model, the messages (text and image data), the
-        schema and the sampling parameters. The key and base URL are not part
-        of it."""
-        blob = json.dumps(
-            {
-                "format": CACHE_FORMAT,
-                "model": self.config.model,
-                "messages": messages,
-                "schema": schema,
-                "temperature": temperature,
-                "max_tokens": self.config.max_tokens,
-            },
-            sort_keys=True,
-            separators=(",", ":"),
-        ).encode()
+        """sha256 (hex) of the model, messages, schema and sampling parameters (not the key or base URL)."""
+        blob = json.dumps({"format": CACHE_FORMAT, "model": self.config.model, "messages": messages, "schema": schema,
+                           "temperature": temperature, "max_tokens": self.config.max_tokens},
+                          sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()
 
     def _cache_path(self, key: str) -> Path | None:
@@ -205,19 +90,13 @@ class LLMClient:
         return None if d is None else Path(d) / key[:2] / f"{key}.json"
 
     def cache_record_cap(self) -> int:
-        """Largest reply record read back, bytes: replies longer than
-        ``max_reply_chars`` are never stored, and JSON writes a character in
-        at most 12 bytes (an escaped surrogate pair), plus
-        :data:`RECORD_OVERHEAD_BYTES`."""
+        """Largest reply record read back, bytes: 12 bytes per character of ``max_reply_chars`` (an escaped
+        surrogate pair) plus :data:`RECORD_OVERHEAD_BYTES`."""
         return 12 * self.config.max_reply_chars + RECORD_OVERHEAD_BYTES
 
     def cache_get(self, key: str) -> dict[str, Any] | None:
-        """The cached reply record for ``key``, or None: missing, or rejected
-        (larger than :meth:`cache_record_cap`, unreadable, not a record of
-        this format, stored under another key, or its content and finish
-        reason not matching its :func:`record_digest`); a rejected record is
-        deleted and named in a :class:`~asset2sim.array_cache.CacheWarning`,
-        so the reply is asked again and stored anew."""
+        """The cached reply record for ``key``, or None when missing or rejected (too large, unreadable,
+        another format or key, digest mismatch); a rejected record is deleted with a ``CacheWarning``."""
         p = self._cache_path(key)
         if p is None or not p.is_file():
             return None
@@ -247,42 +126,19 @@ class LLMClient:
         return None
 
     def cache_put(self, key: str, completion: Completion) -> None:
-        """Store a reply (atomically); does nothing without a cache folder.
-
-        Raises:
-            OSError: the cache folder cannot be written.
-        """
+        """Store a reply atomically (nothing without a cache folder); OSError when it cannot be written."""
         p = self._cache_path(key)
         if p is None:
             return
-        atomic.write_json(
-            p,
-            {
-                "format": CACHE_FORMAT,
-                "key": key,
-                "sha256": record_digest(key, self.config.model, completion.content, completion.finish_reason),
-                "model": self.config.model,
-                "content": completion.content,
-                "finish_reason": completion.finish_reason,
-                "created": time.time(),
-                "tokens": completion.usage.total_tokens,
-            },
-        )
+        atomic.write_json(p, {"format": CACHE_FORMAT, "key": key,
+                              "sha256": record_digest(key, self.config.model, completion.content, completion.finish_reason),
+                              "model": self.config.model, "content": completion.content, "finish_reason": completion.finish_reason,
+                              "created": time.time(), "tokens": completion.usage.total_tokens})
 
-    # ----------------------------------------------------------------- calls
-    def complete(
-        self,
-        messages: list[dict[str, Any]],
-        *,
-        schema: dict[str, Any] | None = None,
-        schema_name: str = "reply",
-        temperature: float | None | str = "config",
-    ) -> Completion:
-        """One model reply for ``messages`` (OpenAI chat format, images as
-        ``image_url`` data URLs), from the cache when present.
-
-        ``schema`` is sent as ``response_format`` ``json_schema`` (strict);
-        ``temperature`` "config" uses :attr:`ClientConfig.temperature`.
+    def complete(self, messages: list[dict[str, Any]], *, schema: dict[str, Any] | None = None, schema_name: str = "reply",
+                 temperature: float | None | str = "config") -> Completion:
+        """One model reply for ``messages`` (OpenAI chat format), from the cache when present. ``schema``
+        goes as a strict ``json_schema`` response format; ``temperature`` "config" is the config's.
 
         Raises:
             LLMUnavailable: litellm missing.
@@ -298,15 +154,8 @@ class LLMClient:
             return Completion(rec["content"], rec.get("finish_reason"), None, True, key, u)
         litellm = import_litellm()
         cfg = self.config
-        kwargs: dict[str, Any] = dict(
-            model=cfg.model,
-            messages=messages,
-            timeout=cfg.timeout_s,
-            max_retries=0,
-            num_retries=0,
-            max_tokens=cfg.max_tokens,
-            drop_params=True,
-        )
+        kwargs: dict[str, Any] = dict(model=cfg.model, messages=messages, timeout=cfg.timeout_s, max_retries=0, num_retries=0,
+                                      max_tokens=cfg.max_tokens, drop_params=True)
         if cfg.base_url:
             kwargs["api_base"] = cfg.base_url
         if cfg.api_key:
@@ -339,16 +188,12 @@ class LLMClient:
                     ra = retry_after_s(exc)
                     if ra is not None:
                         if ra > cfg.max_retry_after_s:
-                            raise ModelCallError(
-                                f"model {cfg.model}: {last}; the server asks to retry after {ra:.0f} s, more than the {cfg.max_retry_after_s:.0f} s allowed",
-                                u.attempts,
-                                status,
-                            ) from None
+                            raise ModelCallError(f"model {cfg.model}: {last}; the server asks to retry after {ra:.0f} s, more than the "
+                                                 f"{cfg.max_retry_after_s:.0f} s allowed", u.attempts, status) from None
                         wait = max(wait, ra)
                     self._sleep(wait)
                     continue
-                comp = self._completion_from(resp, key, u, litellm)
-                return comp
+                return self._completion_from(resp, key, u, litellm)
             raise ModelCallError(f"model {cfg.model}: {last}; gave up after {u.attempts} attempts", u.attempts, status)
         finally:
             u.seconds = time.monotonic() - t0
@@ -362,9 +207,7 @@ class LLMClient:
             msg = choice.message
         except (AttributeError, IndexError, TypeError):
             return Completion("", None, None, False, key, u)
-        content = getattr(msg, "content", None)
-        if content is None:
-            content = ""
+        content = getattr(msg, "content", None) or ""
         if not isinstance(content, str):  # some providers return parts
             content = "".join(p.get("text", "") if isinstance(p, dict) else str(p) for p in content)
         refusal = getattr(msg, "refusal", None)
@@ -384,24 +227,11 @@ class LLMClient:
             u.cost_usd = None
         return Completion(content, finish, refusal, False, key, u)
 
-    # ------------------------------------------------------------- asking
-    def ask(
-        self,
-        messages: list[dict[str, Any]],
-        reply_model: type[M],
-        *,
-        schema: dict[str, Any] | None = None,
-        schema_name: str = "reply",
-        accept: Callable[[M], T] | None = None,
-        max_reasks: int = 2,
-        temperature: float | None | str = "config",
-    ) -> Answer[M, T]:
-        """Ask until a reply parses strictly into ``reply_model`` and
-        ``accept(reply)`` returns (it raises :class:`ReplyInvalid` to reject);
-        re-ask at most ``max_reasks`` times, each time with the problems found.
-
-        Replies that parse into ``reply_model`` are cached (also when
-        ``accept`` rejects them, so a rerun replays the same exchange).
+    def ask(self, messages: list[dict[str, Any]], reply_model: type[M], *, schema: dict[str, Any] | None = None, schema_name: str = "reply",
+            accept: Callable[[M], T] | None = None, max_reasks: int = 2, temperature: float | None | str = "config") -> Answer[M, T]:
+        """Ask until a reply parses strictly into ``reply_model`` and ``accept(reply)`` returns (it raises
+        :class:`ReplyInvalid` to reject), re-asking at most ``max_reasks`` times with the problems. Parsed
+        replies are cached even when rejected, so a rerun replays the exchange.
 
         Raises:
             ModelCallError: the network failed (see :meth:`complete`).

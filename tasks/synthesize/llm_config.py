@@ -1,9 +1,4 @@
-"""Settings of a model client (:class:`ClientConfig`), from code or the environment.
-
-Operational knobs come from ``ASSET2SIM_LLM_*`` environment variables
-(:meth:`ClientConfig.from_env`); API keys are never stored here unless given
-explicitly, and then never hashed or printed (``repr=False``).
-"""
+"""Settings of a model client (:class:`ClientConfig`), from code or ``ASSET2SIM_LLM_*`` variables."""
 
 from __future__ import annotations
 
@@ -28,8 +23,7 @@ def _env_float(name: str, default: float) -> float:
 
 
 def default_cache_dir() -> Path:
-    """``$ASSET2SIM_LLM_CACHE_DIR``, else ``$XDG_CACHE_HOME/asset2sim/llm``,
-    else ``~/.cache/asset2sim/llm``."""
+    """``$ASSET2SIM_LLM_CACHE_DIR``, else ``$XDG_CACHE_HOME/asset2sim/llm``, else ``~/.cache/asset2sim/llm``."""
     env = os.environ.get("ASSET2SIM_LLM_CACHE_DIR")
     if env:
         return Path(env).expanduser()
@@ -39,24 +33,11 @@ def default_cache_dir() -> Path:
 
 @dataclass(frozen=True)
 class ClientConfig:
-    """Settings of one :class:`LLMClient`.
-
-    Attributes:
-        model: litellm model string, ``provider/name`` (``gemini/gemini-2.5-flash``).
-        base_url: API base of an OpenAI-compatible or local server (no key needed).
-        api_key: explicit key (else the provider's environment variable is used;
-            with ``base_url`` and no key a placeholder is sent). Never hashed.
-        timeout_s: per-attempt timeout, s.
-        max_attempts: HTTP tries per call (1 + retries), >= 1.
-        backoff_s: delay before the first retry, s (doubled each retry).
-        max_backoff_s: cap on the computed backoff, s.
-        max_retry_after_s: longest server-requested wait that is honoured, s;
-            a longer ``Retry-After`` fails the call at once.
-        max_reply_chars: longest reply accepted, characters.
-        max_tokens: completion token limit sent with each call.
-        temperature: sampling temperature (None: the provider's default).
-        cache_dir: reply cache folder; None disables the cache.
-        render_size: (width, height) pixels of the views sent to the model.
+    """Settings of one ``LLMClient``: ``model`` (litellm ``provider/name``), ``base_url`` (a local server),
+    ``api_key`` (else the provider's variable; never hashed), per-attempt ``timeout_s``, ``max_attempts`` HTTP
+    tries per call, ``backoff_s`` doubling up to ``max_backoff_s``, the longest ``Retry-After`` honoured
+    (``max_retry_after_s``), ``max_reply_chars``, ``max_tokens``, ``temperature`` (None: the provider's),
+    ``cache_dir`` (None: no cache) and the ``render_size`` of the views (pixels). Times in s.
     """
 
     model: str
@@ -83,13 +64,8 @@ class ClientConfig:
 
     @classmethod
     def from_env(cls, model: str, base_url: str | None = None, **overrides) -> "ClientConfig":
-        """Config for ``model`` with knobs from the environment:
-        ``ASSET2SIM_LLM_TIMEOUT_S`` (120), ``ASSET2SIM_LLM_MAX_ATTEMPTS`` (4),
-        ``ASSET2SIM_LLM_BACKOFF_S`` (2), ``ASSET2SIM_LLM_MAX_BACKOFF_S`` (60),
-        ``ASSET2SIM_LLM_MAX_RETRY_AFTER_S`` (300), ``ASSET2SIM_LLM_MAX_REPLY_CHARS``
-        (1e6), ``ASSET2SIM_LLM_MAX_TOKENS`` (16384), ``ASSET2SIM_LLM_RENDER_SIZE``
-        (384), ``ASSET2SIM_LLM_CACHE_DIR`` (:func:`default_cache_dir`; ``off``
-        disables the cache). Keyword ``overrides`` win.
+        """Config for ``model`` with knobs from ``ASSET2SIM_LLM_*`` variables (names and defaults below;
+        ``ASSET2SIM_LLM_CACHE_DIR=off`` disables the cache); keyword ``overrides`` win.
 
         Raises:
             ValueError: a malformed environment value.

@@ -1,9 +1,4 @@
-"""Errors of the model backends (:mod:`asset2sim.tasks.synthesize.llm_client`).
-
-One base class, :class:`LLMError`, so callers can catch every model-backend
-failure at once; the subclasses say whether litellm is missing, a key is
-missing, the network failed, or the replies were unusable.
-"""
+"""Errors of the model backends; :class:`LLMError` catches them all."""
 
 from __future__ import annotations
 
@@ -21,8 +16,7 @@ class MissingCredentials(LLMError):
 
 
 class ModelCallError(LLMError):
-    """A call failed: a non-retryable API error, or retries exhausted.
-    ``attempts`` HTTP tries were made; ``status`` is the last HTTP status or None."""
+    """A call failed (not retryable, or retries exhausted) after ``attempts`` tries; ``status``: the last HTTP status."""
 
     def __init__(self, message: str, attempts: int, status: int | None = None):
         super().__init__(message)
@@ -31,8 +25,7 @@ class ModelCallError(LLMError):
 
 
 class ReplyInvalid(LLMError):
-    """One reply is unusable; ``errors`` lists the problems (sent back to the
-    model when re-asking)."""
+    """One reply is unusable; ``errors`` lists the problems (sent back when re-asking)."""
 
     def __init__(self, errors: list[str]):
         self.errors = [str(e) for e in errors] or ["unusable reply"]
@@ -40,8 +33,7 @@ class ReplyInvalid(LLMError):
 
 
 class ReplyError(LLMError):
-    """Every reply (first answer and re-asks) was unusable; ``history`` holds
-    the problems of each attempt."""
+    """Every reply (re-asks included) was unusable; ``history`` holds each attempt's problems."""
 
     def __init__(self, message: str, history: list[list[str]]):
         super().__init__(message)

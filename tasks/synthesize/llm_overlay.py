@@ -1,18 +1,7 @@
 """A model's reply turned into an overlay: the reply is a prior, not the answer.
-
-The model picks the scale, a material (density, shell or solid, wall
-thickness) per link, and per joint a state band and qualitative dynamics
-(damping level, holds position, spring, stiff, free moving). Mass then follows
-the geometry (m = v rho s^3 eta, or A s^2 t rho for open shells;
-:func:`asset2sim.tasks.synthesize.physics.link_physics`), kept within a factor
-:data:`MASS_AGREEMENT` of the model's own mass estimate; inertia comes from the
-scaled geometry; damping and friction from the joint loads
-(:func:`asset2sim.tasks.synthesize.physics.joint_dynamics`); the state from
-the band through the geometric closed ends
-(:func:`asset2sim.tasks.synthesize.estimate.state_from_bands`). The overlay is
-checked with the offline estimator's validator
-(:func:`asset2sim.tasks.synthesize.validate_overlay.validate_overlay`).
-"""
+The model's scale, materials, bands and qualitative dynamics go through the
+same physics and validator as the offline estimator
+(``docs/design/model_backends.md``)."""
 
 from __future__ import annotations
 
@@ -53,25 +42,12 @@ def _name_errors(where: str, names: list[str], known: set[str], unknown: str) ->
     return errors
 
 
-def _prior_material(ctx: EstimationContext, label: str | None) -> physics.MaterialChoice:
-    m = material_for(ctx.category, label)
-    return physics.MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness), source=m.source)
-
-
 def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str = "llm", model: str | None = None) -> tuple[Overlay, dict[str, str], list[str]]:
-    """The asset2sim overlay from a model reply (the reply is a prior; see the
-    module docstring), validated with :func:`validate_overlay.validate_overlay`.
-
-    Links without a reply entry get the offline prior's material, joints
-    without one the request parser's band and dynamics words (both noted).
-
-    Returns:
-        (overlay, band per movable joint, notes). ``overlay.estimator`` has no
-        usage yet (the caller fills it).
+    """(overlay, band per movable joint, notes) from a model reply, validated; links and joints the reply
+    misses get the offline prior's material and the parser's band and words (noted). No usage info yet.
 
     Raises:
-        ReplyInvalid: unknown or duplicated names, a link whose mass cannot be
-            computed, or an overlay the validator rejects (messages name them).
+        ReplyInvalid: unknown or duplicated names, a link without a computable mass, a rejected overlay.
     """
     errors = check_reply_names(ctx, reply)
     if errors:
@@ -89,13 +65,9 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
     if reply.category.strip().lower() != str(ctx.category).lower():
         notes.append(f"the model calls it {reply.category!r}; the pipeline's category {ctx.category!r} is kept")
     overlay = Overlay(
-        estimator=EstimatorInfo(name=name, model=model, version=__version__),
-        scale=s,
-        category=ctx.category,
+        estimator=EstimatorInfo(name=name, model=model, version=__version__), scale=s, category=ctx.category,
         contact_material=ContactMaterial(lateral_friction=reply.lateral_friction, restitution=reply.restitution, note=f"model ({name})"),
-        links=links,
-        joints=joints,
-        initial_joint_positions=state if asked_state else None,
+        links=links, joints=joints, initial_joint_positions=state if asked_state else None,
         notes=ValidationNotes(
             size=f"model: s = {s:.4g} +- {reply.scale.std:.3g}; {reply.notes.size}",
             material="; ".join(mat_notes) + (f" | model: {reply.notes.material}" if reply.notes.material else ""),
@@ -111,12 +83,8 @@ def overlay_from_reply(ctx: EstimationContext, reply: ModelReply, *, name: str =
 
 
 def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> tuple[dict[str, LinkPhysics], list[str], list[str]]:
-    """Physics of every link with geometry at scale ``s``: mass and inertia from the geometry and the model's
-    material, or the offline prior's without a model entry. Returns (links, material notes, links without entry).
-
-    Raises:
-        ReplyInvalid: a link whose mass cannot be computed.
-    """
+    """(links, material notes, links without entry) at scale ``s``: geometry with the model's material, else
+    the offline prior's; ReplyInvalid for a link whose mass cannot be computed."""
     links: dict[str, LinkPhysics] = {}
     mat_notes, missing, errors = [], [], []
     for ln in ctx.asset.links:
@@ -125,7 +93,7 @@ def _link_physics(ctx: EstimationContext, by_link: dict, s: float) -> tuple[dict
             continue
         lr = by_link.get(ln.name)
         if lr is None:
-            mat = _prior_material(ctx, ln.semantic_label)
+            mat = physics.material_choice(material_for(ctx.category, ln.semantic_label))
             missing.append(ln.name)
             src = f"geometry + {mat.name} (offline prior; no model entry)"
         else:
@@ -196,14 +164,6 @@ def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, estim
 
 
 def estimator_info(name: str, model: str, usage: Usage) -> EstimatorInfo:
-    """The overlay's estimator record: ``name``, ``model``, the package
-    version and what the calls cost (``usage``: calls, tokens, USD, s)."""
-    return EstimatorInfo(
-        name=name,
-        model=model,
-        version=__version__,
-        queries=usage.calls,
-        tokens=usage.total_tokens,
-        cost_usd=usage.cost_usd,
-        seconds=round(usage.seconds, 3),
-    )
+    """The overlay's estimator record: name, model, package version and what ``usage`` cost."""
+    return EstimatorInfo(name=name, model=model, version=__version__, queries=usage.calls, tokens=usage.total_tokens,
+                         cost_usd=usage.cost_usd, seconds=round(usage.seconds, 3))

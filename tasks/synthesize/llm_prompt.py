@@ -1,18 +1,7 @@
-"""What a model-backed estimator sends: the description, the views, the messages.
-
-- :func:`describe`: the structured description of the analysis stage
-  (links with semantic labels, volumes, areas and extents at scale 1, joints
-  with types, limits and closed ends, the category, the request text and what
-  the request parser understood, the typical size and mass of the category);
-- :func:`render_closed_views`: the five views of the input asset at its
-  geometric closed state (:func:`asset2sim.tasks.geometry.render.render_views`),
-  as PNG data URLs;
-- :func:`build_messages`: the system prompt (instructions and the reply's
-  JSON schema) and the user message (description, then each view);
-- :func:`proposal_messages`: the request for alternative joint states when
-  the simulator's state search stalls.
-
-Lengths in m, angles in rad, all at scale 1 in the input asset's frames.
+"""What a model-backed estimator sends: the structured description, the five
+closed-state views as PNG data URLs, the chat messages, and the request for
+alternative joint states when the state search stalls. Lengths in m, angles in
+rad, at scale 1 in the input asset's frames (``docs/design/model_backends.md``).
 """
 
 from __future__ import annotations
@@ -47,18 +36,8 @@ def _r(x: float, n: int = 5) -> float:
 
 
 def describe(ctx: EstimationContext) -> dict[str, Any]:
-    """The structured description sent to the model (JSON-able; lengths in m
-    and angles in rad, all at scale 1 in the input asset's frames; prismatic
-    values in the input's units, which the scale multiplies).
-
-    Contents: category (and why), the request text and what the request parser
-    understood, the closed object's extents, the typical real dimensions and
-    mass range of the category for this request (priors), every link (semantic
-    label, joint kind, volume, area, extents, the offline prior's material)
-    and every movable joint (type, parent, child and its label, axis, limits,
-    closed end, opening direction and range, whether tasks act on it, the band
-    the parser read for it).
-    """
+    """The structured description sent to the model (JSON-able; m and rad at scale 1; prismatic values in
+    the input's units): category, request and its parse, extents, typical size and mass, links, movable joints."""
     asset = ctx.asset
     req = ctx.request
     target = target_size(ctx.category, req)
@@ -78,16 +57,10 @@ def describe(ctx: EstimationContext) -> dict[str, Any]:
         }
         if g is not None:
             mat = material_for(ctx.category, ln.semantic_label)
-            entry.update(
-                {
-                    "volume_m3": _r(g.volume),
-                    "volume_method": g.volume_method,
-                    "watertight": g.watertight,
-                    "area_m2": _r(g.area),
-                    "extents_m": [_r(e) for e in g.extents],
-                    "typical_material": {"name": mat.name, "density": mat.density, "shell": mat.shell, "wall_thickness": mat.wall_thickness},
-                }
-            )
+            entry.update({"volume_m3": _r(g.volume), "volume_method": g.volume_method, "watertight": g.watertight, "area_m2": _r(g.area),
+                          "extents_m": [_r(e) for e in g.extents],
+                          "typical_material": {"name": mat.name, "density": mat.density, "shell": mat.shell,
+                                               "wall_thickness": mat.wall_thickness}})
         links.append(entry)
     joints = []
     for j in asset.movable_joints():
@@ -108,13 +81,7 @@ def describe(ctx: EstimationContext) -> dict[str, Any]:
             "height_m": _r(ctx.joint_heights.get(j.name, 0.0)),
         }
         if cs is not None:
-            entry.update(
-                {
-                    "closed_position": _r(cs.q_closed),
-                    "opening_direction": int(cs.direction),
-                    "opening_range": _r(cs.open_range),
-                }
-            )
+            entry.update({"closed_position": _r(cs.q_closed), "opening_direction": int(cs.direction), "opening_range": _r(cs.open_range)})
         joints.append(entry)
     return {
         "asset_id": asset.asset_id,
@@ -174,8 +141,7 @@ How your answer is used and what each field means (SI units, angles in radians):
 
 
 def system_prompt(schema: dict[str, Any]) -> str:
-    """The system message: instructions plus the JSON schema (also sent as
-    ``response_format``, repeated here for servers that ignore it)."""
+    """The system message: instructions plus the JSON schema (for servers that ignore ``response_format``)."""
     return SYSTEM_PROMPT + "\nJSON schema:\n" + json.dumps(schema, separators=(",", ":"))
 
 
@@ -189,12 +155,8 @@ def png_data_url(image: np.ndarray) -> str:
 
 
 def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, size: tuple[int, int] = (384, 384)) -> tuple[dict[str, str], list[str]]:
-    """Render ``views`` of the input asset at its geometric closed state.
-
-    Returns:
-        (view -> PNG data URL, notes). A render failure is not fatal: the
-        request then carries the description only and the note says why.
-    """
+    """(view -> PNG data URL, notes) of the input asset at its geometric closed state; a render failure
+    leaves the views out and the note says why."""
     q = {n: float(cs.q_closed) for n, cs in ctx.closed.items()}
     try:
         images = render.render_views(ctx.asset.urdf_path, q, views=views, size=size)
@@ -204,8 +166,7 @@ def render_closed_views(ctx: EstimationContext, views: tuple[str, ...] = VIEWS, 
 
 
 def build_messages(description: dict[str, Any], images: dict[str, str], schema: dict[str, Any], *, extra: str = "") -> list[dict[str, Any]]:
-    """OpenAI-format chat messages: the system prompt (with the schema) and one
-    user message with the description and each view (name, then image)."""
+    """OpenAI-format messages: the system prompt and one user message with the description and each view."""
     parts: list[dict[str, Any]] = [
         {
             "type": "text",
@@ -229,14 +190,9 @@ def proposal_messages(
     intervals: dict[str, tuple[float, float]],
     schema: dict[str, Any],
 ) -> list[dict[str, Any]]:
-    """OpenAI-format chat messages asking for alternative initial states when
-    the simulator's state search stalls: the instructions with ``schema``
-    (:class:`~asset2sim.schemas.model_reply.JointProposalReply`'s JSON schema),
-    then :data:`PROPOSAL_MARK` and the summary: category, request, every joint
-    of ``state`` that has an allowed interval (type, part label, current
-    value, ``intervals[joint]`` = (low, high); rad for revolute, m for
-    prismatic) and the colliding link ``pairs`` (``link_a``, ``link_b``,
-    ``depth_m`` penetration in m). Values rounded to 1e-6."""
+    """OpenAI-format messages asking for alternative initial states: instructions with ``schema``, then
+    :data:`PROPOSAL_MARK` and a summary of every joint of ``state`` with an interval in ``intervals`` (rad or
+    m) and the colliding link ``pairs`` (``depth_m`` in m), values rounded to 1e-6."""
     labels = {j.name: ctx.asset.link(j.child).semantic_label for j in ctx.asset.movable_joints()}
     types = {j.name: j.type for j in ctx.asset.movable_joints()}
     text = (

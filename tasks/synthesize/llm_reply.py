@@ -1,12 +1,4 @@
-"""Strict parsing of model replies, and the message that asks again.
-
-:func:`parse_json_strict` accepts exactly one JSON object: non-finite numbers
-(``NaN``, ``Infinity``, ``1e999``), duplicate keys, prose and truncated
-documents are rejected (one Markdown code fence around the whole reply is
-tolerated); :func:`parse_reply` then validates it against the reply's pydantic
-model in strict mode. Problems come back as :class:`ReplyInvalid` with one line
-each, which :func:`reask_text` turns into the follow-up message.
-"""
+"""Strict parsing of model replies (:class:`ReplyInvalid`, one line per problem), and the message that asks again."""
 
 from __future__ import annotations
 
@@ -44,8 +36,7 @@ def _finite_float(text: str) -> float:
 
 
 def _strip_fence(text: str) -> str:
-    """Remove one Markdown code fence around the whole text (```json ... ```),
-    which many models add although asked not to; anything else is kept."""
+    """Remove one Markdown code fence (```json ... ```) around the whole text."""
     t = text.strip()
     if t.startswith("```") and t.endswith("```") and len(t) >= 6:
         first_nl = t.find("\n")
@@ -55,15 +46,10 @@ def _strip_fence(text: str) -> str:
 
 
 def parse_json_strict(text: str) -> dict[str, Any]:
-    """Parse one JSON object strictly.
-
-    Rejects: anything but a single JSON object (prose, several values, a
-    truncated document), duplicate keys at any depth, ``NaN`` / ``Infinity`` /
-    numbers that overflow to infinity. One Markdown code fence around the whole
-    reply is tolerated.
+    """Parse exactly one JSON object (one Markdown fence around it tolerated).
 
     Raises:
-        ReplyInvalid: with one message naming the problem and its position.
+        ReplyInvalid: prose, several values, truncation, duplicate keys, NaN / Infinity / overflowing numbers.
     """
     t = _strip_fence(text)
     dec = json.JSONDecoder(object_pairs_hook=_no_duplicates, parse_constant=_no_constant, parse_float=_finite_float)
@@ -108,12 +94,7 @@ def _jsonable(x: Any) -> bool:
 
 
 def parse_reply(text: str, model_cls: type[M]) -> M:
-    """Strictly parse ``text`` into ``model_cls`` (strict JSON, then the pydantic
-    model in strict mode: no type coercion, extra fields forbidden by the model).
-
-    Raises:
-        ReplyInvalid: every problem found.
-    """
+    """Strict JSON, then ``model_cls`` in pydantic strict mode; ReplyInvalid lists every problem."""
     obj = parse_json_strict(text)
     try:
         return model_cls.model_validate(obj, strict=True)

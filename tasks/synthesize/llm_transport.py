@@ -1,15 +1,6 @@
-"""The network side of model calls: litellm itself and fault classification.
-
-- :func:`import_litellm`: litellm imported on first use (the package imports
-  without it), quieted, and refused in a forbidden version;
-- :func:`classify`: whether an exception raised by a call is worth retrying
-  (timeouts, dropped connections, HTTP 408/409/425/429/5xx/529) or fails at
-  once (400, 401, 403, 404, content policy, context window ...);
-- :func:`retry_after_s`: the wait a server asked for (``retry-after-ms`` or
-  ``Retry-After`` in seconds or as an HTTP date).
-
-The retry loop that uses them is :meth:`asset2sim.tasks.synthesize.llm_client.LLMClient.complete`.
-"""
+"""The network side of model calls: litellm imported on first use (refused in a
+forbidden version), faults classified as retryable or not, and the wait a
+server asks for. The retry loop is ``LLMClient.complete``."""
 
 from __future__ import annotations
 
@@ -26,19 +17,14 @@ FORBIDDEN_LITELLM = {"1.107.0"}
 #: HTTP statuses worth retrying (rate limit, overload, transient server faults).
 RETRYABLE_STATUS = {408, 409, 425, 429, 500, 502, 503, 504, 529}
 
-#: Placeholder key for local servers that need none (the OpenAI SDK refuses an
-#: empty key even when the server ignores it).
+#: Placeholder key for local servers that need none (the OpenAI SDK refuses an empty key).
 NO_KEY = "no-key-needed"
 
 _LITELLM_LOCK = threading.Lock()
 
 
 def import_litellm():
-    """Import and quiet litellm (local cost table, no debug prints).
-
-    Raises:
-        LLMUnavailable: litellm is missing or a forbidden version.
-    """
+    """Import and quiet litellm (local cost table, no debug prints); LLMUnavailable when missing or forbidden."""
     with _LITELLM_LOCK:
         os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")  # no network fetch of the cost table
         try:
@@ -59,22 +45,14 @@ def import_litellm():
 
 
 def retry_after_s(exc: BaseException) -> float | None:
-    """Seconds the server asked to wait (``retry-after-ms`` or ``Retry-After``
-    in seconds or as an HTTP date), from a litellm / OpenAI SDK exception."""
-    headers = None
-    for attr in ("litellm_response_headers", "headers"):
-        h = getattr(exc, attr, None)
-        if h:
-            headers = h
-            break
-    if headers is None:
-        resp = getattr(exc, "response", None)
-        headers = getattr(resp, "headers", None)
+    """Seconds a litellm / OpenAI SDK exception's server asked to wait (``retry-after-ms``, or ``Retry-After``
+    in seconds or as an HTTP date), or None."""
+    headers = (getattr(exc, "litellm_response_headers", None) or getattr(exc, "headers", None)
+               or getattr(getattr(exc, "response", None), "headers", None))
     if not headers:
         return None
-    try:
-        get = headers.get
-    except AttributeError:
+    get = getattr(headers, "get", None)
+    if get is None:
         return None
     ms = get("retry-after-ms") or get("Retry-After-Ms")
     if ms:
@@ -93,14 +71,11 @@ def retry_after_s(exc: BaseException) -> float | None:
         when = email.utils.parsedate_to_datetime(ra)
     except (TypeError, ValueError):
         return None
-    if when is None:
-        return None
     return max(0.0, when.timestamp() - time.time())
 
 
 def status_of(exc: BaseException) -> int | None:
-    """HTTP status of a litellm / OpenAI SDK exception (``status_code`` on it
-    or on its ``response``), or None."""
+    """HTTP status of an exception (``status_code`` on it or its ``response``), or None."""
     s = getattr(exc, "status_code", None)
     if isinstance(s, int):
         return s

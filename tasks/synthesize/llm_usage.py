@@ -10,14 +10,14 @@ from pydantic import BaseModel
 M = TypeVar("M", bound=BaseModel)
 
 
+_COUNTS = ("calls", "attempts", "cached", "prompt_tokens", "completion_tokens", "total_tokens")
+
+
 @dataclass
 class Usage:
-    """What calls cost. ``calls``: model replies received over the network
-    (re-asks included, cache hits and failed HTTP tries excluded);
-    ``attempts``: HTTP tries; ``cached``: replies served from the cache;
-    tokens as reported by the API (0 when unknown); ``cost_usd``: sum of the
-    costs litellm knows (None when it knows none); ``seconds``: wall time in
-    calls, retries and backoff included."""
+    """What calls cost: ``calls`` replies received over the network (re-asks included, cache hits not),
+    ``attempts`` HTTP tries, ``cached`` cache hits, tokens as the API reports them, ``cost_usd`` as far as
+    litellm knows (None: unknown), ``seconds`` of wall time, retries included."""
 
     calls: int = 0
     attempts: int = 0
@@ -30,12 +30,8 @@ class Usage:
 
     def add(self, other: "Usage") -> None:
         """Add ``other``'s counts, tokens, cost and time to these."""
-        self.calls += other.calls
-        self.attempts += other.attempts
-        self.cached += other.cached
-        self.prompt_tokens += other.prompt_tokens
-        self.completion_tokens += other.completion_tokens
-        self.total_tokens += other.total_tokens
+        for k in _COUNTS:
+            setattr(self, k, getattr(self, k) + getattr(other, k))
         if other.cost_usd is not None:
             self.cost_usd = (self.cost_usd or 0.0) + other.cost_usd
         self.seconds += other.seconds
@@ -46,19 +42,8 @@ class Usage:
 
     def since(self, before: "Usage") -> "Usage":
         """What was added after the snapshot ``before`` (cost None when none known)."""
-        cost = None
-        if self.cost_usd is not None:
-            cost = self.cost_usd - (before.cost_usd or 0.0)
-        return Usage(
-            calls=self.calls - before.calls,
-            attempts=self.attempts - before.attempts,
-            cached=self.cached - before.cached,
-            prompt_tokens=self.prompt_tokens - before.prompt_tokens,
-            completion_tokens=self.completion_tokens - before.completion_tokens,
-            total_tokens=self.total_tokens - before.total_tokens,
-            cost_usd=cost,
-            seconds=self.seconds - before.seconds,
-        )
+        cost = None if self.cost_usd is None else self.cost_usd - (before.cost_usd or 0.0)
+        return Usage(**{k: getattr(self, k) - getattr(before, k) for k in _COUNTS}, cost_usd=cost, seconds=self.seconds - before.seconds)
 
     def summary(self) -> str:
         """One line: calls, attempts, cache hits, tokens, cost, seconds."""
@@ -72,9 +57,7 @@ class Usage:
 
 @dataclass
 class Completion:
-    """One reply: ``content`` (text, "" when none), ``finish_reason``,
-    ``refusal`` text if the model refused, ``cached`` True when served from
-    disk, ``key`` the cache key, ``usage`` of this call."""
+    """One reply: text ("" when none), finish reason, refusal, whether cached, cache key, usage."""
 
     content: str
     finish_reason: str | None
@@ -89,9 +72,7 @@ T = TypeVar("T")
 
 @dataclass
 class Answer(Generic[M, T]):
-    """Result of :meth:`LLMClient.ask`: the parsed ``reply``, what the caller's
-    ``accept`` made of it (``value``), the problems of the rejected attempts
-    (``history``) and the ``usage`` of the whole exchange."""
+    """Result of ``LLMClient.ask``: the ``reply``, ``accept``'s ``value``, the rejected attempts' problems, usage."""
 
     reply: M
     value: T

@@ -1,15 +1,8 @@
-"""The joints and links a request's part words name on one object (used by
-:mod:`asset2sim.tasks.synthesize.request_apply`).
-
-A label names the movable joints whose moving link carries that label
-(``priors.request_label_matches``); "all" the task-relevant ones. A label the
-object lacks is a warning naming the label and the parts that exist; the state
-is then applied to the task-relevant joints. An ordinal picks among the
-targets in its order: vertical = top to bottom by the height of the moving
-part's box center in the closed state, left_right / right_left and front_back
-as seen by a viewer facing the object's front. Front is -x of the asset's root
-frame (PartNet-Mobility's convention: the object frame's +z front becomes -x
-through the base joint's rpy (pi/2, 0, -pi/2)); the viewer's left is then +y.
+"""The joints and links a request's part words name on one object: a label its
+movable joints (``priors.request_label_matches``), "all" or a missing label the
+task-relevant ones (warned). Ordinals count top to bottom by the moving part's
+box center, or left / right / front / back as seen facing the front, which is
+-x of the root frame (PartNet-Mobility's base rpy (pi/2, 0, -pi/2)), left +y.
 """
 
 from __future__ import annotations
@@ -28,7 +21,7 @@ if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
 
 
 def moving_parts(ctx: "EstimationContext") -> str:
-    """Labels of the moving parts of the object (semantic labels, else link names), each once, comma-separated; "none" without any."""
+    """The moving parts' labels (else link names), each once, comma-separated; "none" without any."""
     return ", ".join(dict.fromkeys(ctx.asset.link(j.child).semantic_label or j.child for j in ctx.asset.movable_joints())) or "none"
 
 
@@ -48,8 +41,7 @@ def unit_fits(d: DynamicsValue, linear: bool) -> bool:
 
 
 def link_named(ctx: "EstimationContext", link: str, label: str | None) -> bool:
-    """Whether a property's label names ``link``: None the whole object, "body" a link that no joint moves or
-    that carries a body label, any other label by ``priors.request_label_matches``."""
+    """Whether a property's label names ``link``: None everything, "body" an unmoved or body-labelled link."""
     if label is None:
         return True
     if label == "body":
@@ -71,8 +63,8 @@ def _order_key(order: str, c: np.ndarray) -> float:
 
 def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: list[str], centers: dict[str, np.ndarray],
                   warnings: list[str]) -> list[str]:
-    """The joints a state request names: its label's (else the task-relevant ``relevant`` ones but continuous
-    joints, warned), an ordinal's pick among them by ``centers`` (joint -> (3,) box center, m); warnings appended."""
+    """The joints a state request names (else the non-continuous ``relevant`` ones, warned), an ordinal
+    picking among them by ``centers`` (joint -> (3,) box center, m); warnings appended."""
     if jr.selector == "joint":  # an override names the joint itself
         return [jr.joint] if jr.joint in relevant or any(j.name == jr.joint for j in ctx.asset.movable_joints()) else []
     named = jr.selector != "all" and bool(jr.label)
@@ -96,9 +88,7 @@ def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: lis
 
 
 def count_warnings(ctx: "EstimationContext") -> list[str]:
-    """A count of parts the request names ("two-drawer") that differs from the
-    object's movable parts with that label (labels without joints, such as a
-    toaster's slots, are not checked)."""
+    """Warnings for part counts ("two-drawer") that differ from the movable parts with that label."""
     out = []
     for label, n in ctx.request.part_counts.items():
         if not PART_RX.fullmatch(label):

@@ -8,16 +8,8 @@ from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysic
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import (
-    JointChoice,
-    choose_scale,
-    joint_dynamics_for,
-    link_material,
-    plausible_mass_range,
-    request_variant,
-    state_from_bands,
-    task_relevant_joints,
-)
+from asset2sim.tasks.synthesize.estimate import (JointChoice, choose_scale, joint_dynamics_for, link_material, plausible_mass_range,
+                                                 request_variant, state_from_bands, task_relevant_joints)
 from asset2sim.tasks.synthesize.estimator import Estimate, register_estimator
 
 __all__ = ["OfflineEstimator"]
@@ -56,14 +48,8 @@ class OfflineEstimator:
             # into the plausible range, a margin inside its ends (10 %)
             target = lo * 1.1 if total < lo else hi * 0.9
             f = target / total
-            for name, lp in list(links.items()):
-                links[name] = lp.model_copy(
-                    update={
-                        "mass": lp.mass * f,
-                        "inertia": lp.inertia.model_copy(update={k: getattr(lp.inertia, k) * f for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}),
-                        "source": lp.source + f"; x{f:.3g} to the category's plausible total mass",
-                    }
-                )
+            note = f"; x{f:.3g} to the category's plausible total mass"
+            links = {name: request_apply.scaled_link(lp, f, note) for name, lp in links.items()}
             mass_note += f"; outside the plausible {lo:g}-{hi:g} kg for {ctx.category} ({ctx.request.size_class or 'regular'}): every link scaled by {f:.3g} to {target:g} kg"
         # ---- state
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
@@ -76,36 +62,23 @@ class OfflineEstimator:
         for j in ctx.asset.movable_joints():
             rel = j.name in relevant
             label = ctx.asset.link(j.child).semantic_label
-            choices[j.name] = JointChoice(
-                damping_level=ctx.request.damping if rel else "moderate",
-                holds_position=ctx.request.holds_position and rel,
-                spring=rel and (ctx.request.spring or priors.spring_expected(ctx.category, label)),
-                stiff=ctx.request.stiff and rel,
-                free_moving=ctx.request.free_moving and rel,
-            )
+            choices[j.name] = JointChoice(damping_level=ctx.request.damping if rel else "moderate",
+                                          holds_position=ctx.request.holds_position and rel,
+                                          spring=rel and (ctx.request.spring or priors.spring_expected(ctx.category, label)),
+                                          stiff=ctx.request.stiff and rel, free_moving=ctx.request.free_moving and rel)
         joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
-        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, [n for n in task_relevant_joints(ctx)], state)
+        joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, task_relevant_joints(ctx), state)
         band_notes += dyn_notes
         body_prior = priors.material_for(ctx.category, None, request_variant(ctx))
         body_mat = link_material(ctx, None)
-        friction_coeff = float(body_prior.lateral_friction)
         asked_state = bool(ctx.request.joint_states)
         overlay = Overlay(
-            estimator=EstimatorInfo(name=self.name, model=None, version=__version__, queries=0),
-            scale=s,
-            category=ctx.category,
-            contact_material=ContactMaterial(
-                lateral_friction=friction_coeff,
-                restitution=float(body_prior.restitution),
-                note=f"{body_mat.name}: {body_prior.friction_source}",
-            ),
-            links=links,
-            joints=joints,
-            initial_joint_positions=state if asked_state else None,
+            estimator=EstimatorInfo(name=self.name, model=None, version=__version__, queries=0), scale=s, category=ctx.category,
+            contact_material=ContactMaterial(lateral_friction=float(body_prior.lateral_friction), restitution=float(body_prior.restitution),
+                                             note=f"{body_mat.name}: {body_prior.friction_source}"),
+            links=links, joints=joints, initial_joint_positions=state if asked_state else None,
             notes=ValidationNotes(
-                size=size_note,
-                material="; ".join(mat_notes),
-                mass_arithmetic=mass_note,
+                size=size_note, material="; ".join(mat_notes), mass_arithmetic=mass_note,
                 other=[f"category: {ctx.category} ({ctx.category_reason})"]
                 + ["requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
                 + band_notes

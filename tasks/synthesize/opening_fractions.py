@@ -1,21 +1,10 @@
-"""The opening fraction a request's number or end asks of one joint, decided
-from the geometry (used by :func:`asset2sim.tasks.synthesize.request_apply.resolve_states`).
-
-- **Numbers** are measured from the geometric closed end
-  (:mod:`asset2sim.tasks.geometry.closed_state`): a fraction of the opening
-  range, an angle (rad, revolute joints) or a distance (m at the output's
-  scale; prismatic joints directly; on a revolute joint the distance is the
-  gap at the moving part's farthest point from the axis, angle = d / r, the
-  arc length s = r theta).
-- **Ends.** "up"/"raised"/"lifted" = the fraction at which the moving part's
-  box center is highest in world z over its travel, after the resting pose
-  (scale is uniform and positive, so it does not change which end is highest);
-  "down"/"lowered" the lowest. "on"/"off" of a toggle switch (labels switch,
-  toggle, rocker) are its high and low ends (the up-is-on convention of
-  vertically mounted toggle switches, NFPA 70 National Electrical Code 404.7);
-  of other parts (a faucet handle, a knob) "on" is fully open and "off" closed.
-  A part that moves less than :data:`FLAT_TRAVEL` of the object's size in
-  height has no up or down.
+"""The opening fraction a request's number or end asks of one joint, from the
+geometry. Numbers count from the geometric closed end (a revolute joint's
+distance is the gap at the farthest point from the axis, angle = d / r). "up" /
+"down" are the highest / lowest box center in world z over the travel; "on" /
+"off" of a toggle switch its high / low end (NFPA 70 NEC 404.7), of other parts
+fully open / closed. A part whose height changes less than :data:`FLAT_TRAVEL`
+of the object's size has no up or down.
 """
 
 from __future__ import annotations
@@ -31,8 +20,7 @@ from asset2sim.tasks.interpret.part_labels import canonical_label
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.tasks.synthesize.context import EstimationContext
 
-#: Height change over the travel, as a fraction of the object's largest
-#: extent, below which a part has no "up" or "down".
+#: Height change over the travel (fraction of the largest extent) below which a part has no "up" or "down".
 FLAT_TRAVEL = 0.02
 #: Labels whose "on"/"off" are their high/low ends (toggle switches).
 TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
@@ -41,8 +29,7 @@ END_SAMPLES = 41
 
 
 def box_center(ctx: "EstimationContext", joint: str) -> np.ndarray:
-    """(3,) world center (m, scale 1, resting pose applied) of the box around the joint's moving subtree
-    at the session's current joint positions; zeros without geometry."""
+    """(3,) world center (m, scale 1, resting pose applied) of the joint's moving subtree's box; zeros without geometry."""
     R = np.asarray(ctx.root_rotation, float) if ctx.root_rotation is not None else np.eye(3)
     box = links_aabb(ctx.session, ctx.subtrees[joint], ctx.hull_points)
     return np.zeros(3) if box is None else R @ (0.5 * (box[0] + box[1]))
@@ -68,8 +55,7 @@ def _radius(ctx: "EstimationContext", joint: str, state: dict[str, float]) -> fl
 
 
 def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: dict[str, float]) -> tuple[float | None, str]:
-    """Opening fraction of the joint's highest (``high``) or lowest (``low``)
-    position in world z; None with a reason when the part moves flat."""
+    """Opening fraction of the joint's highest / lowest position in world z; None and why when it moves flat."""
     cs = ctx.closed[joint]
     fr = np.linspace(0.0, 1.0, END_SAMPLES)
     zs = []
@@ -86,9 +72,8 @@ def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: 
 
 def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scale: float, label: str,
                  closed_state: dict[str, float]) -> tuple[float | None, str]:
-    """Opening fraction ``target`` asks of ``joint`` (a part labelled ``label``), and how it was decided;
-    None with the reason when it cannot be applied. ``scale``: the output's uniform scale (distances are
-    in m at it); ``closed_state``: every joint's closed position (input units)."""
+    """(opening fraction ``target`` asks of ``joint``, how it was decided), None with the reason when it cannot
+    be applied; distances in m at ``scale``, ``closed_state`` in input units."""
     cs = ctx.closed[joint]
     jt = ctx.asset.joint(joint).type
     if target.kind == "fraction":

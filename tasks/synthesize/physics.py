@@ -1,28 +1,13 @@
-"""Physical reasoning shared by every estimator: mass from geometry, inertia
-from the scaled geometry, joint loads from kinematics, and joint dynamics
-derived from those loads.
+"""Physics shared by every estimator: mass and inertia from the scaled geometry,
+joint loads from kinematics, joint dynamics from those loads. Formulas (SI):
 
-Formulas and their sources:
-
-- Mass (SPEC): m = v * rho * s^3 * eta, with v the enclosed volume at scale 1
-  (m^3), rho the material density (kg/m^3), s the uniform scale and eta the
-  hollow fraction. For shell parts (molded plastic, sheet metal) the material
-  volume is the surface area times the wall thickness t, so
-  eta = min(1, A s^2 t / (v s^3)) (thin-shell approximation, e.g. Roark's
-  Formulas for Stress and Strain, 8th ed., thin-walled members).
-- Inertia: the per-kg inertia tensor of the geometry (solid or thin shell)
-  times m times s^2 (inertia scales with mass x length^2).
-- Gravity load on a joint: tau_g = ((c - p) x (M g)) . a for a revolute joint
-  (c: subtree COM, p: a point on the axis, a: unit axis), F_g = M g . a for a
-  prismatic one (Newton-Euler statics).
-- Damping for a target damping ratio zeta of the joint treated as a
-  second-order system I qdd + c qd + k q = 0: c = 2 zeta sqrt(I k)
-  (e.g. Ogata, System Dynamics, 4th ed., ch. 8), with k the larger of the
-  gravity stiffness |d tau_g / d q|, the spring stiffness and I w0^2, where
-  w0 = 2 pi f0 is a floor frequency (joints without a restoring load still get
-  damping proportional to their inertia).
-- Friction that holds a state against gravity: f = safety x max |tau_g| over
-  the states to hold (Coulomb friction must exceed the static load).
+- mass (SPEC) m = v rho s^3 eta; shell parts eta = min(1, A s^2 t / (v s^3))
+  (thin-shell approximation, Roark's Formulas for Stress and Strain, 8th ed.);
+- inertia: the geometry's per-kg tensor times m s^2;
+- gravity load: tau_g = ((c - p) x M g) . a (revolute), F_g = M g . a (prismatic);
+- damping c = 2 zeta sqrt(I k) of I qdd + c qd + k q = 0 (Ogata, System
+  Dynamics, 4th ed., ch. 8), k = max(|d tau_g / d q|, spring, I (2 pi f0)^2);
+- holding friction f = safety x max |tau_g| over the states to hold.
 """
 
 from __future__ import annotations
@@ -37,9 +22,7 @@ from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia
 G = 9.81
 """Standard gravity, m/s^2."""
 
-#: Target damping ratio per requested damping level (dimensionless). "low" is
-#: clearly underdamped but settles within a few cycles; "moderate" near the
-#: textbook 0.7 compromise; "high" overdamped ("heavy, well-damped hinge").
+#: Target damping ratio per requested damping level (dimensionless): underdamped, the textbook 0.7, overdamped.
 DAMPING_RATIO = {"low": 0.3, "moderate": 0.7, "high": 1.5}
 
 #: Floor natural frequency f0 (Hz) for joints with no restoring load.
@@ -62,17 +45,19 @@ class MaterialChoice:
     source: str = ""
 
 
+def material_choice(m) -> MaterialChoice:
+    """A prior's material (``MaterialPrior``) as a :class:`MaterialChoice`."""
+    return MaterialChoice(name=m.name, density=float(m.density), shell=bool(m.shell), wall_thickness=float(m.wall_thickness),
+                          source=m.source)
+
+
 def is_open_shell(geom: LinkGeometry) -> bool:
-    """True when the link's surface encloses (almost) no volume (an open bin,
-    a lone plate): its material volume is area x wall thickness whatever the
-    material (see ``tasks.analyze``: ``volume_method`` ends in ``open_shell``)."""
+    """True when the link's surface encloses (almost) no volume (an open bin, a lone plate)."""
     return "open_shell" in geom.volume_method or geom.volume <= 0.0
 
 
 def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) -> float | None:
-    """eta in m = v rho s^3 eta: 1 for solid parts, min(1, A s^2 t / (v s^3))
-    for shell parts (dimensionless, in (0, 1]); None for an open shell (no
-    enclosed volume: m = A s^2 t rho)."""
+    """eta in m = v rho s^3 eta: 1 solid, min(1, A s^2 t / (v s^3)) shell; None for an open shell (m = A s^2 t rho)."""
     if is_open_shell(geom):
         return None
     if not material.shell:
@@ -83,12 +68,8 @@ def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) 
 
 
 def link_physics(geom: LinkGeometry, scale: float, material: MaterialChoice, source: str = "geometry") -> LinkPhysics:
-    """Mass (kg), inertia (kg*m^2 about the COM) and COM (m, link frame) of a
-    link from its scale-1 geometry, the scale and its material.
-
-    Closed surfaces: m = v rho s^3 eta (SPEC), eta from :func:`hollow_fraction`.
-    Open surfaces (no enclosed volume): m = A s^2 t rho, the thin-shell mass.
-    Shell parts use the thin-shell inertia, solid parts the filled-solid one.
+    """Mass (kg), inertia (kg*m^2 about the COM) and COM (m, link frame) of a link from its scale-1
+    geometry, the scale and its material (:func:`hollow_fraction`; shell parts take the thin-shell inertia).
 
     Raises:
         ValueError: non-positive density, or no volume and no area.
@@ -109,28 +90,16 @@ def link_physics(geom: LinkGeometry, scale: float, material: MaterialChoice, sou
         hollow = eta < 0.999
     if not (mass > 0):
         raise ValueError(f"link {geom.link!r}: zero volume and area; cannot compute a mass")
-
     inertia = geometry_inertia(geom, mass, scale, hollow)
-    return LinkPhysics(
-        mass=float(mass),
-        inertia=Inertia.from_matrix(inertia),
-        com=tuple(float(c) * scale for c in geom.com),
-        material=material.name,
-        density=float(material.density),
-        hollow_fraction=None if eta is None else float(eta),
-        source=f"{source}: {formula}",
-    )
+    return LinkPhysics(mass=float(mass), inertia=Inertia.from_matrix(inertia), com=tuple(float(c) * scale for c in geom.com),
+                       material=material.name, density=float(material.density), hollow_fraction=None if eta is None else float(eta),
+                       source=f"{source}: {formula}")
 
 
 @dataclass
 class JointLoad:
-    """Mechanics of one joint's moving subtree at a state (output units).
-
-    ``mass`` kg; ``inertia_axis`` kg*m^2 (revolute) or kg (prismatic) about /
-    along the axis; ``gravity_load`` N*m or N (signed along the joint axis,
-    i.e. positive pushes q up); ``gravity_stiffness`` |d load / d q| (N*m/rad or
-    N/m).
-    """
+    """Mechanics of one joint's moving subtree at a state: ``mass`` kg; ``inertia_axis`` kg*m^2 or kg;
+    ``gravity_load`` N*m or N along the axis (positive pushes q up); ``gravity_stiffness`` |d load / d q|."""
 
     joint: str
     mass: float
@@ -139,28 +108,12 @@ class JointLoad:
     gravity_stiffness: float
 
 
-def joint_loads(
-    session,
-    asset: AssetDescription,
-    links: dict[str, LinkPhysics],
-    state: dict[str, float],
-    scale: float,
-    subtrees: dict[str, list[str]],
-    *,
-    gravity: float = -G,
-    dq: float | None = None,
-    root_rotation: np.ndarray | None = None,
-) -> dict[str, JointLoad]:
-    """Gravity load, gravity stiffness and inertia about the axis of every
-    movable joint at ``state`` (output units: prismatic positions in metres).
-
-    ``session`` is a fixed-base PyBullet session of the *unscaled* input asset
-    (root at the origin, z up); its kinematics are scaled by ``scale`` here.
-    ``links`` holds the scaled physics (COM in the scaled link frame).
-    ``root_rotation`` (3, 3): the resting-pose rotation the output will carry
-    (gravity is expressed in the input's root frame as R^T g).
-    """
-    gvec = np.array([0.0, 0.0, gravity])
+def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+                subtrees: dict[str, list[str]], *, root_rotation: np.ndarray | None = None) -> dict[str, JointLoad]:
+    """:class:`JointLoad` of every joint of ``subtrees`` at ``state`` (output units). ``session``: a
+    fixed-base session of the unscaled input asset, its kinematics scaled by ``scale`` here; ``links``: the
+    scaled physics; ``root_rotation`` (3, 3): the resting pose (gravity R^T g in the root frame)."""
+    gvec = np.array([0.0, 0.0, -G])
     if root_rotation is not None:
         gvec = np.asarray(root_rotation, float).T @ gvec
     out: dict[str, JointLoad] = {}
@@ -208,7 +161,7 @@ def joint_loads(
         lo, hi = session.joint_limits[name]
         if session.joint_types[name] == "prismatic":
             lo, hi = lo * scale, hi * scale
-        step = dq if dq is not None else (0.02 if session.joint_types[name] != "prismatic" else 0.002)
+        step = 0.02 if session.joint_types[name] != "prismatic" else 0.002
         M, inertia, load = load_at(name, state)
         qa = max(q0 - step, lo) if np.isfinite(lo) else q0 - step
         qb = min(q0 + step, hi) if np.isfinite(hi) else q0 + step
@@ -228,39 +181,23 @@ TIMESTEP = 1.0 / 240.0
 
 
 def max_stable_damping(inertia_axis: float, timestep: float = TIMESTEP) -> float:
-    """Largest viscous damping (N*m*s/rad or N*s/m) a semi-implicit integrator
-    takes without overshooting in one step: c dt / I <= 1, i.e. c <= I / dt
-    (the velocity decay factor of one step stays in [0, 1]). Higher values
-    make light parts explode in PyBullet."""
+    """Largest viscous damping (N*m*s/rad or N*s/m) a semi-implicit integrator takes without overshooting
+    in one step: c <= I / dt."""
     return float(max(inertia_axis, 0.0) / timestep)
 
 
-#: Largest joint speed Bullet's multibodies allow, rad/s or m/s
-#: (``btMultiBody::m_maxCoordinateVelocity`` = 100 in its constructor,
-#: bullet3 src/BulletDynamics/Featherstone/btMultiBody.cpp; PyBullet's
-#: ``changeDynamics(maxJointVelocity=...)``).
+#: Largest joint speed Bullet's multibodies allow, rad/s or m/s (``btMultiBody::m_maxCoordinateVelocity`` = 100,
+#: bullet3 src/BulletDynamics/Featherstone/btMultiBody.cpp).
 MAX_JOINT_SPEED = 100.0
-#: Share of the locking bound I v_max / dt that joint friction may take
-#: (:func:`max_stable_friction`): the joint moved freely at 0.88 of it and
-#: locked at 1.06 (measurements in that function's docstring).
+#: Share of the locking bound I v_max / dt that joint friction may take (measured: free at 0.88, locked at
+#: 1.06; ``docs/design/metrics.md``).
 FRICTION_LOCK_SHARE = 0.8
 
 
 def max_stable_friction(inertia_axis: float, timestep: float = TIMESTEP) -> float:
-    """Largest joint friction (N*m or N) the engines' friction motor takes
-    without locking the joint: FRICTION_LOCK_SHARE * I v_max / dt (I the
-    inertia about the axis, kg*m^2, or the moving mass, kg; v_max =
-    :data:`MAX_JOINT_SPEED`; dt the timestep, s).
-
-    PyBullet models Coulomb joint friction as a zero-target-velocity motor
-    whose impulse per step is at most F dt; when F dt / I exceeds the joint
-    speed clamp v_max, the motor holds the joint against any effort.
-    Measured on the 47 g handle of suitcase 103755 (I = 4.7e-5 kg*m^2,
-    dt = 1/240 s; bound I v_max / dt = 1.13 N*m): locked at friction 1.2 and
-    1.48 N*m under efforts up to 100 N*m, free at 1.0 N*m under an effort of
-    1.5 N*m. Escalation therefore never raises friction above this (a light
-    handle whose friction escalated to 1.48 N*m could not be opened by any
-    force)."""
+    """Largest joint friction (N*m or N) the engines' friction motor takes without locking the joint:
+    FRICTION_LOCK_SHARE * I v_max / dt (I about the axis, kg*m^2, or the moving mass, kg); see
+    ``docs/design/metrics.md`` for the measurement."""
     return float(FRICTION_LOCK_SHARE * max(inertia_axis, 0.0) * MAX_JOINT_SPEED / timestep)
 
 
@@ -272,17 +209,8 @@ def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: 
     return float(2.0 * zeta * np.sqrt(max(load.inertia_axis, 0.0) * k_eff))
 
 
-def joint_dynamics(
-    load_at_state: JointLoad,
-    hold_load: float,
-    *,
-    prismatic: bool,
-    damping_level: str = "moderate",
-    stiff: bool = False,
-    free_moving: bool = False,
-    spring: tuple[float, float] | None = None,
-    source: str = "physics",
-) -> JointDynamics:
+def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: bool, damping_level: str = "moderate", stiff: bool = False,
+                   free_moving: bool = False, spring: tuple[float, float] | None = None, source: str = "physics") -> JointDynamics:
     """Damping, friction and stiffness of one joint from its loads.
 
     Args:
@@ -294,12 +222,9 @@ def joint_dynamics(
         free_moving: "moves freely": no extra friction floor.
         spring: (stiffness, reference) when a spring is intended.
 
-    The friction floor is a Coulomb coefficient of 0.05 on the moving mass's
-    weight (prismatic, N; typical of drawer slides, e.g. Engineering ToolBox
-    friction coefficients for lubricated sliding) or that force at a 1 cm pin
-    radius (revolute, N*m). Friction never exceeds :func:`max_stable_friction`
-    (the engine's friction motor would lock the joint), damping never
-    :func:`max_stable_damping`.
+    Friction floor: Coulomb coefficient 0.05 on the moving weight (prismatic, N; lubricated drawer slides,
+    Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m). Friction and damping are capped by
+    :func:`max_stable_friction` and :func:`max_stable_damping`.
     """
     zeta = DAMPING_RATIO.get(damping_level, DAMPING_RATIO["moderate"])
     k = spring[0] if spring else 0.0
@@ -317,10 +242,7 @@ def joint_dynamics(
     if load_at_state.inertia_axis > 0:  # above it the engine's friction motor locks the joint
         friction = min(friction, max_stable_friction(load_at_state.inertia_axis))
     return JointDynamics(
-        damping=float(c),
-        friction=float(friction),
-        stiffness=float(k),
-        spring_reference=float(spring[1]) if spring else None,
+        damping=float(c), friction=float(friction), stiffness=float(k), spring_reference=float(spring[1]) if spring else None,
         inertia_axis=float(load_at_state.inertia_axis),
         source=(
             f"{source}: zeta={zeta} ({damping_level}), I_axis={load_at_state.inertia_axis:.4g}, "

@@ -1,20 +1,8 @@
-"""Apply a parsed request (:class:`~asset2sim.schemas.request.RequestSpec`) to
-one object: which joints a phrase names, where "up", "on" and "30 degrees" put
-them, the scale a size in numbers asks for, masses, materials and explicit
-joint parameters. Used by the estimators (:mod:`asset2sim.tasks.synthesize.estimate`)
-and the validator of model overlays (:func:`check_overlay`).
-
-Rules (``docs/guide/requests.md`` has the full grammar):
-
-- **Which joints** a label, "all" or an ordinal names:
-  :mod:`asset2sim.tasks.synthesize.named_parts`.
-- **Numbers and ends** ("30 degrees", "up", "on") are opening fractions
-  decided from the geometry (:mod:`asset2sim.tasks.synthesize.opening_fractions`).
-  Beyond the limit: set to the limit, with a warning. A part without an up or
-  down: warning, nominal band kept.
-
-Acceptance interval of a number: +-5 % of the number (as a fraction of the
-opening range; at least :data:`MIN_TOLERANCE`); of an end: +-:data:`END_TOLERANCE`.
+"""Apply a parsed request to one object: the joints a phrase names
+(:mod:`.named_parts`), the opening fractions numbers and ends ask
+(:mod:`.opening_fractions`; beyond the limit: the limit, warned), the scale of
+sizes in numbers, masses, materials and explicit joint parameters, and the
+checks of an overlay against the request (``docs/guide/requests.md``).
 """
 
 from __future__ import annotations
@@ -25,13 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
-from asset2sim.schemas.request import (
-    BAND_INTERVAL,
-    BAND_TARGET,
-    QuantityOutcome,
-    RequestFindings,
-    RequestSpec,
-)
+from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, QuantityOutcome, RequestFindings, RequestSpec
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, state_targets, unit_fits
@@ -50,9 +32,7 @@ END_TOLERANCE = 0.02
 
 @dataclass
 class JointTarget:
-    """What the request asks of one joint, resolved: band, target fraction
-    (None: the band's target), acceptance interval (opening fractions), and the
-    words and number it came from."""
+    """What the request asks of one joint, resolved: band, target and acceptance interval (opening fractions)."""
 
     joint: str
     band: str
@@ -67,8 +47,7 @@ class JointTarget:
 
 @dataclass
 class StateResolution:
-    """Bands of every movable joint, the targets of those a number or an end
-    names, notes and warnings."""
+    """Bands of every movable joint, the targets of numbers and ends, notes and warnings."""
 
     bands: dict[str, str]
     targets: dict[str, JointTarget] = field(default_factory=dict)
@@ -77,43 +56,30 @@ class StateResolution:
     addressed: set[str] = field(default_factory=set)
     """joints a phrase of the request set (the others are closed by default)"""
 
-    @property
-    def intervals(self) -> dict[str, tuple[float, float]]:
-        """joint -> acceptance interval (opening fractions) of its target."""
-        return {n: t.interval for n, t in self.targets.items() if t.interval is not None}
-
 
 def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
-    """Movable joints whose moving part tasks manipulate, by the category's
-    priority (:func:`asset2sim.tasks.interpret.part_priors.task_relevant_joints`
-    on the asset's part labels; see
-    :func:`asset2sim.tasks.synthesize.estimate.task_relevant_joints`, which
-    calls this)."""
+    """Movable joints whose moving part tasks manipulate, by the category's priority (``priors.task_relevant_joints``)."""
     labelled = [(j.name, ctx.asset.link(j.child).semantic_label) for j in ctx.asset.movable_joints()]
     return priors.task_relevant_joints(ctx.category, labelled)[0]
 
 
 def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.ndarray]:
-    """joint -> (3,) world center (m, scale 1, resting pose applied) of the box
-    around its moving subtree at ``state`` (input units)."""
+    """joint -> (3,) world center (m, scale 1) of its moving subtree's box at ``state`` (input units)."""
     ctx.session.set_joint_positions(state)
     return {n: box_center(ctx, n) for n in ctx.subtrees}
 
 
 def band_of(f: float) -> str:
-    """The band (``schemas.request.BAND_INTERVAL``) of opening fraction ``f``: the
-    one whose interval holds it with the nearest target, else the nearest target."""
+    """The band of opening fraction ``f``: of those whose interval holds it (else all), the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
     pool = inside or list(BAND_TARGET)
     return min(pool, key=lambda b: abs(BAND_TARGET[b] - f))
 
 
 def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
-    """Band per movable joint and the targets of numbers and ends (see the
-    module docstring). ``scale``: the overlay's uniform scale (distances are
-    asked at the output's size). Joints not addressed are closed; a later
-    request for the same joint overrides an earlier one (the parser orders
-    general before specific)."""
+    """Band per movable joint and the targets of numbers and ends at the overlay's ``scale``; joints not
+    addressed are closed, a later request for a joint overrides an earlier one. Acceptance: +-5 % of a number
+    (at least :data:`MIN_TOLERANCE`), +-:data:`END_TOLERANCE` of an end."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
@@ -162,12 +128,9 @@ def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: S
     return out
 
 
-# ------------------------------------------------------------------ size
 def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
-    """Uniform scale from the sizes in numbers ("30 cm tall", "60 cm wide"):
-    s = geometric mean over the sizes of value / closed extent along the named
-    dimension (:func:`_extents`); the scale an override gives, as given.
-    None when the request gives none."""
+    """(scale, note) of an override, else the geometric mean over the sizes in numbers of value / closed
+    extent along the named dimension; None without either."""
     if ctx.request.scale is not None:
         return float(ctx.request.scale), f"scale given by the user: --scale {ctx.request.scale:g}"
     sizes = ctx.request.sizes
@@ -195,8 +158,7 @@ def size_residuals(ctx: "EstimationContext", scale: float) -> list[tuple[str, fl
 
 
 def _extents(ctx: "EstimationContext") -> dict:
-    """The closed object's extent (m, scale 1) along each size dimension: height = world z; width / depth =
-    larger / smaller horizontal extent; length / largest = the largest extent."""
+    """The closed extent (m, scale 1) per size dimension: height z, width / depth the larger / smaller horizontal."""
     ext = np.asarray(ctx.closed_extents, float)
     if ctx.root_rotation is not None:
         ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
@@ -204,10 +166,8 @@ def _extents(ctx: "EstimationContext") -> dict:
     return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
 
 
-# ------------------------------------------------------------------ materials and masses
 def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
-    """The material the request names for ``link`` (``materials.yaml``): a
-    per-part entry wins over the body's, which wins over the whole object's."""
+    """The material the request names for ``link``: a part's over the body's over the whole object's."""
     best: tuple[int, str] | None = None
     for p in ctx.request.properties:
         if p.material is None or not link_named(ctx, link, p.label):
@@ -243,13 +203,9 @@ def scaled_link(lp: LinkPhysics, f: float, note: str) -> LinkPhysics:
 
 
 def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausible: tuple[float, float]) -> tuple[dict[str, LinkPhysics], list[str], bool]:
-    """Masses in numbers and mass words on the links (inertia scaled with the
-    mass, the center of mass unchanged). Per-part masses first (the links of
-    that part share it in proportion to their geometric masses), then the
-    whole object's mass (the other links scaled so the total is met), else
-    "heavy"/"light": the total set to 0.9 x the upper / 1.1 x the lower end of
-    the plausible range. Returns (links, notes, True when the request set the
-    total mass: the caller keeps it out of the plausible-range correction)."""
+    """Masses in numbers and words on the links (inertia scaled alike): per-part masses first, then the total
+    (other links scaled), else "heavy" / "light" at 0.9 x the upper / 1.1 x the lower plausible end. Returns
+    (links, notes, whether the request set the total mass)."""
     notes: list[str] = []
     out = dict(links)
     fixed: set[str] = set()
@@ -288,14 +244,10 @@ def apply_masses(ctx: "EstimationContext", links: dict[str, LinkPhysics], plausi
     return out, notes, True
 
 
-# ------------------------------------------------------------------ joint parameters
 def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynamics], relevant: list[str],
                           state: dict[str, float]) -> tuple[dict[str, JointDynamics], list[str]]:
-    """Explicit damping / friction / stiffness values on the joints they name
-    (a part label, else the task-relevant joints) whose motion fits the unit
-    (N*m*s/rad etc. on revolute joints, N*s/m etc. on prismatic ones; a value
-    without unit on both). A stiffness gets its spring reference at the
-    joint's initial state (``state``, output units)."""
+    """Explicit damping / friction / stiffness on the joints they name (else ``relevant``) whose motion fits
+    the unit; a stiffness gets its spring reference at ``state`` (output units)."""
     notes: list[str] = []
     out = dict(joints)
     for d in ctx.request.dynamics_values:
@@ -316,13 +268,9 @@ def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynam
     return out, notes
 
 
-# ------------------------------------------------------------------ checks of an overlay
 def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResolution | None = None) -> list[str]:
-    """Where an overlay (any estimator's, a model's included) departs from the
-    parsed request: the total mass vs a mass in numbers (5 %), the scale vs
-    sizes in numbers (5 %), link materials vs named materials, explicit joint
-    parameters, and the initial positions vs resolved targets (their
-    intervals). Returns one line per departure (empty: consistent)."""
+    """One line per departure of an overlay from the request: total mass and sizes (5 %), materials, explicit
+    joint parameters, initial positions vs the targets' intervals."""
     out: list[str] = []
     total_req = next((p.mass for p in ctx.request.properties if p.mass is not None and p.label is None), None)
     total = overlay.total_mass()
@@ -361,9 +309,7 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
 
 
 def summary(spec: RequestSpec) -> list[str]:
-    """One line per thing the request asks beyond bands (sizes, masses,
-    materials, joint parameters) for the terminal and the report; first the
-    overrides, as the user gave them."""
+    """One line per override, then per thing the request asks beyond bands (sizes, masses, materials, ...)."""
     out = [f"given by the user: {o}" for o in spec.overrides]
     if spec.sizes:
         out.append("sizes: " + ", ".join(f"{s.dimension} {s.value:g} m" for s in spec.sizes))
@@ -380,20 +326,9 @@ def summary(spec: RequestSpec) -> list[str]:
 def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
              scale: float, total_mass: float, notes: list[str], overlay: Overlay | None = None,
              escalation: list | None = None) -> RequestFindings:
-    """The report's account of the request: ignored word groups, warnings
-    (the parser's and the ``WARNING`` lines of ``notes``), what was asked
-    beyond bands, and every number with what the output has.
-
-    Args:
-        targets: resolved numbers / ends per joint (:func:`resolve_states`).
-        closed_out: joint -> closed state at the output's scale.
-        state: the final initial state (output units).
-        scale: the overlay's scale; total_mass: kg.
-        notes: the overlay's notes (warnings of the estimator are copied).
-        overlay: the final overlay (explicit joint parameters are compared with it).
-        escalation: the post-check's rounds (``EscalationRound``: ``round``,
-            ``reason``, ``changes``), to say why a parameter was changed.
-    """
+    """The report's account of the request: ignored words, warnings (the parser's and ``notes``' ``WARNING``
+    lines), what was asked, and every number against the output (``closed_out`` at the output's scale,
+    ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters)."""
     warnings = list(ctx.request.warnings) + [n for n in notes if n.startswith("WARNING")]
     q: list[QuantityOutcome] = []
     for n, t in targets.items():
@@ -437,8 +372,7 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
 
 
 def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: list) -> list[QuantityOutcome]:
-    """Explicit joint parameters asked vs the final overlay; a change is
-    explained by the post-check round that made it (or the validation)."""
+    """Explicit joint parameters asked vs the final overlay, a change explained by its post-check round."""
     out = []
     relevant = task_relevant_joints(ctx)
     for d in ctx.request.dynamics_values:
@@ -464,31 +398,20 @@ def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: l
 
 
 def prompt_fields(spec: RequestSpec) -> dict:
-    """The parts of a parsed request beyond bands, as JSON for a model's prompt
-    (sizes m, masses kg, materials as ``materials.yaml`` keys with their
-    density kg/m^3, explicit joint parameters in SI, warnings, ignored words)."""
+    """The parts of a parsed request beyond bands, as JSON for a model's prompt (SI; materials with density)."""
     mats = load_priors().materials
     return {
         "sizes_m": [s.model_dump() for s in spec.sizes],
-        "masses_and_materials": [
-            {**p.model_dump(), "density": None if p.material is None else mats[p.material].density} for p in spec.properties
-        ],
-        "mass_level": spec.mass_level,
-        "joint_parameters": [d.model_dump() for d in spec.dynamics_values],
-        "part_counts": dict(spec.part_counts),
-        "parser_warnings": list(spec.warnings),
-        "ignored_words": list(spec.ignored),
+        "masses_and_materials": [{**p.model_dump(), "density": None if p.material is None else mats[p.material].density}
+                                 for p in spec.properties],
+        "mass_level": spec.mass_level, "joint_parameters": [d.model_dump() for d in spec.dynamics_values],
+        "part_counts": dict(spec.part_counts), "parser_warnings": list(spec.warnings), "ignored_words": list(spec.ignored),
     }
 
 
 def check_against_request(ctx: "EstimationContext", overlay: Overlay, targets: dict[str, JointTarget]) -> tuple[Overlay, dict[str, JointTarget]]:
-    """Check any estimator's validated overlay against the parsed request
-    (:func:`check_overlay`; a model estimator's included): every departure
-    becomes a ``WARNING`` line of the overlay's notes (the report lists it).
-    ``targets``: the estimator's resolved numbers / ends; when it gave none
-    (a model backend), they are resolved here at the overlay's scale so the
-    state search still keeps each joint within the number's interval.
-    Returns (overlay with the notes, targets)."""
+    """(overlay, targets): every :func:`check_overlay` departure added as a ``WARNING`` note; ``targets``
+    resolved here at the overlay's scale when the estimator gave none (a model backend)."""
     if not targets:
         targets = resolve_states(ctx, overlay.scale).targets
     departures = check_overlay(ctx, overlay, StateResolution(bands={}, targets=targets))

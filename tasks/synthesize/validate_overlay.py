@@ -1,37 +1,21 @@
-"""Mechanical validation of an overlay (SPEC stage 2, whatever produced it).
-
-:func:`validate_overlay` checks every rule of the SPEC and returns a corrected
-copy plus the list of named :class:`~asset2sim.schemas.overlay.ValidationIssue`;
-a :class:`ValidationPolicy` decides which issues make the overlay unusable.
-
-Rules (codes):
+"""Mechanical validation of an overlay (SPEC stage 2, whatever produced it):
+:func:`validate_overlay` returns a corrected copy and the named issues; a
+:class:`ValidationPolicy` decides which are fatal. Codes (fixed ones are warnings):
 
 - ``OVL_SCALE_INVALID``: scale not finite or outside [1e-4, 1e4] (error).
-- ``OVL_UNKNOWN_LINK`` / ``OVL_UNKNOWN_JOINT``: names not in the asset (error; dropped).
-- ``OVL_LINK_MISSING``: a link with geometry has no entry; filled conservatively
-  from the geometry (density 1000 kg/m^3 on the enclosed volume or a 3 mm shell
-  over the surface, whichever is larger;
-  inertia from the scaled geometry) or, without geometry, 0.1% of the total
-  mass with a small isotropic inertia (warning, fixed).
-- ``OVL_MASS_INVALID``: mass not finite or <= 0 (error unless geometry allows a fill).
-- ``OVL_MASS_TOO_SMALL``: a link lighter than ``MIN_LINK_MASS_FRACTION`` of the
-  object's mass; raised to it, inertia scaled alike (warning, fixed).
-- ``OVL_INERTIA_INVALID``: inertia not finite, not positive definite, or its
-  principal moments violate the triangle inequality I1 + I2 >= I3 (with
-  relative tolerance 1e-9); replaced by the inertia of the scaled geometry at
-  the link's mass when geometry exists (warning, fixed), else error. Never
-  silently "balanced".
-- ``OVL_COM_OUTSIDE``: COM not finite or farther than 10% of the link's
-  diagonal outside its scaled bounding box; replaced by the geometry's COM.
-- ``OVL_JOINT_MISSING``: a movable joint without dynamics; filled with
-  conservative values (warning, fixed) — see :func:`conservative_dynamics`.
+- ``OVL_UNKNOWN_LINK`` / ``OVL_UNKNOWN_JOINT``: names not in the asset (dropped).
+- ``OVL_LINK_MISSING``: filled from the geometry (1000 kg/m^3, volume or 3 mm
+  shell), else 0.1 % of the total mass.
+- ``OVL_MASS_INVALID``: mass not finite or <= 0 (fixed from geometry, else error).
+- ``OVL_MASS_TOO_SMALL``: below ``MIN_LINK_MASS_FRACTION`` of the total; raised.
+- ``OVL_INERTIA_INVALID``: not finite, not positive definite or violating
+  I1 + I2 >= I3 (rtol 1e-9); replaced by the scaled geometry's, else error.
+- ``OVL_COM_OUTSIDE``: COM farther than 10 % of the diagonal outside the box.
+- ``OVL_JOINT_MISSING``: filled by :func:`conservative_dynamics`.
 - ``OVL_DYNAMICS_NEGATIVE``: damping, friction or stiffness < 0 or not finite (error).
-- ``OVL_SPRING_REFERENCE``: stiffness > 0 without a spring reference inside the
-  (scaled) limits; set to the initial state or the closed end (warning, fixed).
-- ``OVL_STATE_UNKNOWN_JOINT``, ``OVL_STATE_OUT_OF_LIMITS``: initial state names a
-  joint that is not movable (dropped, warning) or lies outside the scaled limits
-  (projected onto them, warning). Prismatic limits and positions are compared
-  in output units (input limits x scale).
+- ``OVL_SPRING_REFERENCE``: stiffness > 0 without a reference inside the limits.
+- ``OVL_STATE_UNKNOWN_JOINT`` / ``OVL_STATE_OUT_OF_LIMITS``: dropped / projected
+  onto the limits (prismatic in output units, input limits x scale).
 """
 
 from __future__ import annotations
@@ -62,16 +46,12 @@ class OverlayInvalid(ValueError):
 
 @dataclass
 class ValidationPolicy:
-    """Which issues are fatal: any unfixed issue whose severity is in
-    ``fatal_severities`` or whose code is in ``fatal_codes``."""
+    """Fatal: any unfixed issue whose severity is in ``fatal_severities``."""
 
     fatal_severities: set[str] = field(default_factory=lambda: {"error"})
-    fatal_codes: set[str] = field(default_factory=set)
 
     def is_fatal(self, issue: ValidationIssue) -> bool:
-        if issue.fixed:
-            return False
-        return issue.severity in self.fatal_severities or issue.code in self.fatal_codes
+        return not issue.fixed and issue.severity in self.fatal_severities
 
     def check(self, issues: list[ValidationIssue]) -> None:
         """Raise :class:`OverlayInvalid` when any issue is fatal."""
@@ -79,19 +59,14 @@ class ValidationPolicy:
             raise OverlayInvalid(issues)
 
 
-#: Lightest a link may be, as a fraction of the object's total mass: every engine here solves contacts
-#: iteratively (PyBullet's and PhysX's Gauss-Seidel, MuJoCo's PGS/Newton), which converges slowly on large
-#: mass ratios (Erleben, "Velocity-based shock propagation for multibody dynamics animation", ACM TOG 2007;
-#: NVIDIA PhysX SDK guide, "Rigid Body Dynamics: mass ratios"). E.g. suitcase 101668's 0.9 g handle part
-#: (0.024 % of its object) is raised to 3.6 g.
+#: Lightest a link may be, as a fraction of the object's total mass: iterative contact solvers converge slowly
+#: on large mass ratios (Erleben, ACM TOG 2007; NVIDIA PhysX SDK guide, "Rigid Body Dynamics: mass ratios").
 MIN_LINK_MASS_FRACTION = 1e-3
 
 
 def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None) -> None:
-    """Raise every link lighter than :data:`MIN_LINK_MASS_FRACTION` of the overlay's total mass to that
-    floor, its inertia tensor scaled by the same factor; ``OVL_MASS_TOO_SMALL`` warning per link (fixed).
-    With ``asset``, friction, damping and inertia about the axis of every movable joint whose moving subtree
-    got heavier are multiplied by the subtree's mass ratio (the friction was derived from its gravity load)."""
+    """Raise links below :data:`MIN_LINK_MASS_FRACTION` of the total to that floor (inertia alike); with
+    ``asset``, joints whose moving subtree got heavier get friction, damping and axis inertia times its ratio."""
     before = {n: lp.mass for n, lp in ov.links.items()}
     masses = {n: lp.mass for n, lp in ov.links.items() if math.isfinite(lp.mass) and lp.mass > 0}
     total = sum(masses.values())
@@ -133,12 +108,8 @@ def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None) 
 
 
 def inertia_problems(m: np.ndarray) -> str | None:
-    """Why a (3, 3) inertia tensor (kg*m^2) is not physically valid, or None.
-
-    Checks finiteness, symmetry, positive definiteness and the triangle
-    inequality of principal moments (each <= sum of the other two), e.g.
-    Featherstone, Rigid Body Dynamics Algorithms (2008), sec. 2.13.
-    """
+    """Why a (3, 3) inertia tensor (kg*m^2) is not finite, symmetric, positive definite and within the
+    triangle inequality of principal moments (Featherstone, Rigid Body Dynamics Algorithms, 2.13), or None."""
     m = np.asarray(m, float)
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         return "not a finite 3x3 tensor"
@@ -153,9 +124,8 @@ def inertia_problems(m: np.ndarray) -> str | None:
 
 
 def geometry_inertia(geom: LinkGeometry, mass: float, scale: float, hollow: bool) -> np.ndarray:
-    """Inertia (3, 3) kg*m^2 about the COM of a link of ``mass`` kg whose
-    geometry is scaled by ``scale``: per-kg tensor x mass x scale^2 (shell tensor
-    when ``hollow``), made valid by a tiny isotropic term if degenerate."""
+    """Inertia (3, 3) kg*m^2 about the COM: per-kg tensor (shell when ``hollow``) x mass x scale^2, made valid
+    by a tiny isotropic term (else the bounding box's) if degenerate."""
     per_kg = np.asarray(geom.inertia_shell if hollow else geom.inertia_solid, float)
     m = per_kg * mass * scale**2
     m = 0.5 * (m + m.T)
@@ -169,30 +139,25 @@ def geometry_inertia(geom: LinkGeometry, mass: float, scale: float, hollow: bool
 
 
 def box_inertia(mass: float, extents: np.ndarray) -> np.ndarray:
-    """Inertia (3, 3) of a solid box of ``mass`` kg and ``extents`` (3,) m
-    about its center (standard formula, I_xx = m (y^2 + z^2) / 12)."""
+    """Inertia (3, 3) of a solid box of ``mass`` kg and ``extents`` (3,) m about its center."""
     x, y, z = np.asarray(extents, float)
     return np.diag([mass * (y * y + z * z), mass * (x * x + z * z), mass * (x * x + y * y)]) / 12.0
 
 
 def _fill_mass(geom: LinkGeometry, s: float) -> float:
-    """Mass (kg) of a conservative fill at scale ``s``: 1000 kg/m^3 on the enclosed volume, or on a 3 mm shell
-    over the surface when that is larger (open surfaces enclose nothing); at least 1e-6 kg."""
+    """Mass (kg) of a conservative fill: 1000 kg/m^3 on the larger of the volume and a 3 mm shell; >= 1e-6 kg."""
     return max(max(geom.volume * s**3, geom.area * s**2 * 0.003) * 1000.0, 1e-6)
 
 
 def conservative_dynamics(joint_type: str) -> JointDynamics:
-    """Dynamics for a joint the overlay misses: moderate damping and a small
-    friction (revolute: 0.05 N*m*s/rad, 0.02 N*m; prismatic: 1 N*s/m, 0.5 N),
-    values that keep small household parts from ringing without locking them."""
+    """Dynamics for a joint the overlay misses: moderate damping and a small friction."""
     if joint_type == "prismatic":
         return JointDynamics(damping=1.0, friction=0.5, stiffness=0.0, source="conservative default")
     return JointDynamics(damping=0.05, friction=0.02, stiffness=0.0, source="conservative default")
 
 
 def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[float, float]]:
-    """Limits of movable joints in output units (prismatic x scale); continuous
-    joints get (-inf, inf)."""
+    """Limits of movable joints in output units (prismatic x scale); continuous joints (-inf, inf)."""
     out = {}
     for j in asset.movable_joints():
         if j.type == "continuous" or j.lower is None or j.upper is None:
@@ -204,26 +169,10 @@ def scaled_limits(asset: AssetDescription, scale: float) -> dict[str, tuple[floa
     return out
 
 
-def validate_overlay(
-    overlay: Overlay,
-    asset: AssetDescription,
-    geometry: dict[str, LinkGeometry] | None = None,
-    *,
-    policy: ValidationPolicy | None = None,
-    fill_missing: bool = True,
-) -> tuple[Overlay, list[ValidationIssue]]:
-    """Check ``overlay`` against the SPEC rules for ``asset``.
-
-    Args:
-        overlay: candidate overlay (not modified).
-        asset: the extracted asset.
-        geometry: link -> LinkGeometry at scale 1 (enables fills and fixes).
-        policy: decides which unfixed issues are fatal (default: errors).
-        fill_missing: fill links/joints the overlay misses.
-
-    Returns:
-        (corrected overlay, issues). Corrections are listed as issues with
-        ``fixed=True``.
+def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry] | None = None, *,
+                     policy: ValidationPolicy | None = None) -> tuple[Overlay, list[ValidationIssue]]:
+    """(corrected copy of ``overlay``, issues) by the SPEC rules for ``asset``; ``geometry`` (link -> scale-1
+    geometry) enables fills and fixes; ``policy`` (default: errors fatal).
 
     Raises:
         OverlayInvalid: when the policy finds a fatal issue.
@@ -248,13 +197,13 @@ def validate_overlay(
     for ln in asset.links:
         lp = ov.links.get(ln.name)
         if lp is None:
-            _fill_link(ov, ln, geometry.get(ln.name), s, total_known, fill_missing, add)
+            _fill_link(ov, ln, geometry.get(ln.name), s, total_known, add)
         else:
             _check_link(ov, ln.name, lp, geometry.get(ln.name), s, add)
     _raise_light_links(ov, add, asset)
     limits = scaled_limits(asset, s)
     for name, jd in movable.items():
-        _check_joint(ov, name, jd.type, limits[name], fill_missing, add)
+        _check_joint(ov, name, jd.type, limits[name], add)
     if ov.initial_joint_positions is not None:
         ov.initial_joint_positions = _checked_state(ov.initial_joint_positions, movable, limits, add)
     policy.check(issues)
@@ -275,45 +224,26 @@ def _drop_unknown_names(ov: Overlay, asset: AssetDescription, movable: dict[str,
             del ov.joints[name]
 
 
-def _fill_link(ov: Overlay, ln: LinkDesc, geom: LinkGeometry | None, s: float, total_known: float, fill_missing: bool, add) -> None:
-    """Fill the entry of a link the overlay misses: from its geometry (:func:`_fill_mass`, inertia of the scaled
-    geometry), else a placeholder of 0.1 % of ``total_known`` (kg, at least 1e-4 kg) with a small isotropic
-    inertia. Without ``fill_missing``, a link with geometry is an error."""
-    if not fill_missing:
-        if ln.has_geometry:
-            add("OVL_LINK_MISSING", "error", ln.name, "link has geometry but no mass/inertia in the overlay")
-        return
+def _fill_link(ov: Overlay, ln: LinkDesc, geom: LinkGeometry | None, s: float, total_known: float, add) -> None:
+    """Fill a missing link from its geometry, else 0.1 % of ``total_known`` (>= 1e-4 kg)."""
     if geom is not None:
-        density = 1000.0
         mass = _fill_mass(geom, s)
-        ov.links[ln.name] = LinkPhysics(
-            mass=mass,
-            inertia=Inertia.from_matrix(geometry_inertia(geom, mass, s, hollow=False)),
-            com=tuple(c * s for c in geom.com),
-            material="unknown (conservative fill: 1000 kg/m^3 solid)",
-            density=density,
-            hollow_fraction=1.0,
-            source="validator fill from geometry",
-        )
+        ov.links[ln.name] = LinkPhysics(mass=mass, inertia=Inertia.from_matrix(geometry_inertia(geom, mass, s, hollow=False)),
+                                        com=tuple(c * s for c in geom.com), material="unknown (conservative fill: 1000 kg/m^3 solid)",
+                                        density=1000.0, hollow_fraction=1.0, source="validator fill from geometry")
         if ln.has_geometry:
             add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry; filled from geometry: {mass:.4g} kg", fixed=True)
         return
     mass = max(1e-3 * total_known, 1e-4)
     i = mass * 1e-4 * s**2
-    ov.links[ln.name] = LinkPhysics(
-        mass=mass,
-        inertia=Inertia(ixx=i, iyy=i, izz=i),
-        com=(0.0, 0.0, 0.0),
-        material="none (link without geometry)",
-        source="validator placeholder for a link without geometry",
-    )
+    ov.links[ln.name] = LinkPhysics(mass=mass, inertia=Inertia(ixx=i, iyy=i, izz=i), com=(0.0, 0.0, 0.0),
+                                    material="none (link without geometry)", source="validator placeholder for a link without geometry")
     if ln.has_geometry:
         add("OVL_LINK_MISSING", "warning", ln.name, f"no overlay entry and no geometry analysis; placeholder {mass:.3g} kg", fixed=True)
 
 
 def _check_link(ov: Overlay, name: str, lp: LinkPhysics, geom: LinkGeometry | None, s: float, add) -> None:
-    """Check a link's mass, inertia and COM; with geometry, invalid values are replaced by the scaled
-    geometry's (warnings, fixed), without it they are errors (a link with an invalid mass is left as it is)."""
+    """Check a link's mass, inertia and COM: replaced by the scaled geometry's when it exists, else errors."""
     if not (math.isfinite(lp.mass) and lp.mass > 0):
         if geom is None:
             add("OVL_MASS_INVALID", "error", name, f"mass {lp.mass!r} is not a finite value > 0")
@@ -343,16 +273,13 @@ def _check_link(ov: Overlay, name: str, lp: LinkPhysics, geom: LinkGeometry | No
     ov.links[name] = lp
 
 
-def _check_joint(ov: Overlay, name: str, joint_type: str, limits: tuple[float, float], fill_missing: bool, add) -> None:
-    """Fill missing dynamics (:func:`conservative_dynamics`), flag negative or non-finite ones, and put a spring's
-    reference inside ``limits`` (output units): the initial state, else 0 projected onto the limits."""
+def _check_joint(ov: Overlay, name: str, joint_type: str, limits: tuple[float, float], add) -> None:
+    """Fill missing dynamics, flag negative ones, and put a spring's reference inside ``limits`` (the initial
+    state, else 0 projected onto the limits)."""
     dyn = ov.joints.get(name)
     if dyn is None:
-        if fill_missing:
-            ov.joints[name] = conservative_dynamics(joint_type)
-            add("OVL_JOINT_MISSING", "warning", name, "no dynamics in the overlay; conservative values filled", fixed=True)
-        else:
-            add("OVL_JOINT_MISSING", "error", name, "movable joint without dynamics")
+        ov.joints[name] = conservative_dynamics(joint_type)
+        add("OVL_JOINT_MISSING", "warning", name, "no dynamics in the overlay; conservative values filled", fixed=True)
         return
     bad = [k for k in ("damping", "friction", "stiffness") if not (math.isfinite(getattr(dyn, k)) and getattr(dyn, k) >= 0)]
     if bad:
@@ -368,8 +295,7 @@ def _check_joint(ov: Overlay, name: str, joint_type: str, limits: tuple[float, f
 
 
 def _checked_state(state: dict[str, float], movable: dict[str, JointDesc], limits: dict[str, tuple[float, float]], add) -> dict[str, float]:
-    """The initial state without joints that are not movable or positions that are not finite, every position
-    projected onto its scaled limits (m for prismatic joints, else rad)."""
+    """The initial state without unknown joints or non-finite positions, projected onto the scaled limits."""
     out = {}
     for name, q in state.items():
         if name not in movable:

@@ -10,8 +10,8 @@ import pytest
 from asset2sim.engines import mjcf
 from asset2sim.engines.loading import BULLET_DEFAULT_FRICTION, BULLET_PLANE_FRICTION, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import DERIVED_MESH_DIR, num_text, relative_to, safe_name, vec_text
-from asset2sim.engines.mjcf.contacts import contact_policy, link_friction
-from asset2sim.engines.mjcf.meshes import hull_obj, mesh_assets
+from asset2sim.engines.mjcf.convert import hull_obj, mesh_assets
+from asset2sim.engines.mjcf.rewrite import contact_policy, link_friction
 from asset2sim.engines.mjcf.visuals import mtl_colour
 
 

@@ -209,19 +209,6 @@ def test_finish_refuses_a_missing_file_and_writes_no_marker(tmp_path, box):
     assert not (out / MARKER_NAME).exists() and (out / of.RECORD_NAME).exists()
 
 
-def test_remove_unreferenced_touches_only_the_runs_pieces(tmp_path, box):
-    out = tmp_path / "out"
-    (out / "collision").mkdir(parents=True)
-    (out / "collision" / "user.obj").write_text("user's")
-    owner = of.start(box, out, overwrite=True)
-    for name in ("a_0_0.obj", "a_0_1.obj"):
-        atomic.write_text(out / "collision" / name, "v 0 0 0\n")
-    gone = owner.remove_unreferenced("collision", {"collision/a_0_1.obj"})
-    assert gone == ["collision/a_0_0.obj"]
-    assert sorted(p.name for p in (out / "collision").iterdir()) == ["a_0_1.obj", "user.obj"]
-    owner.close()
-
-
 # ----------------------------------------------------------------------------- refine
 
 

@@ -196,7 +196,7 @@ def test_force_and_subsets_when_planning_a_run(first_run):
     """``--force`` plans without earlier results (everything is redone);
     ``--ids`` / ``--limit`` select assets; unknown ids are refused."""
     from asset2sim.flows.catalog import CatalogError
-    from asset2sim.flows.refine_flow import plan_jobs
+    from asset2sim.flows.stages import plan_jobs
 
     catalog, summary, _ = first_run
     cat = load_catalog(catalog)

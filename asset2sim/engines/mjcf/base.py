@@ -1,19 +1,22 @@
-"""Names, numbers and paths as the MJCF converter writes them, and its error.
-
-Numbers are written at full precision (shortest round-trip text), where
-MuJoCo's own ``to_xml`` writes 6 significant digits.
-"""
+"""Names, numbers (full precision, where MuJoCo's ``to_xml`` writes 6 digits)
+and paths as the MJCF converter writes them, its error, and MuJoCo itself
+(imported on first use): its messages, compiling the converted MJCF with the
+root on the ground, the lowest point of a model."""
 
 from __future__ import annotations
 
+import contextlib
+import math
+import warnings
 from pathlib import Path
 
 import numpy as np
+from lxml import etree
 
+from asset2sim.engines.loading import BOX_CORNERS
 from asset2sim.frames import matrix_quat_wxyz
 
-#: Folder (relative to the MJCF file's meshdir, the asset folder) of the convex
-#: pieces the exporter writes.
+#: Folder (relative to the MJCF's meshdir, the asset folder) of the convex pieces the exporter writes.
 DERIVED_MESH_DIR = "mjcf/meshes"
 #: Name of the keyframe that holds the initial state.
 KEYFRAME = "initial"
@@ -21,17 +24,9 @@ KEYFRAME = "initial"
 FREE_JOINT = "root_free"
 #: Name of the ground plane geom.
 GROUND = "ground"
-#: MuJoCo's friction (contact friction and joint ``frictionloss``) is a soft
-#: constraint that lets a loaded joint creep; the no-slip post-processing
-#: removes that, so friction holds as Coulomb friction does in Bullet and
-#: PhysX (a lid held by 0.5 N*m against 0.16 N*m of gravity creeps 0.2 rad in
-#: 3 s without it, 0 with it).
+#: No-slip iterations: MuJoCo's soft friction would let a loaded joint creep (``docs/design/simulators.md``).
 NOSLIP_ITERATIONS = 10
-#: Friction cones: elliptic with impratio 10 (MuJoCo's advice for resting and
-#: manipulated objects). With the default pyramidal cones, the no-slip pass
-#: made the refined laptop 9748 walk 1 mm and the faucet 148 rock 2.3 mm
-#: during the rest test (both still in PyBullet and PhysX); elliptic cones
-#: keep them still (3e-9 m, 2e-6 m).
+#: impratio of the elliptic friction cones (MuJoCo's advice for manipulation).
 IMPRATIO = 10.0
 
 
@@ -40,11 +35,9 @@ class MjcfError(RuntimeError):
 
 
 def num_text(x: float) -> str:
-    """Shortest round-trip text of a float."""
+    """Shortest round-trip text of a float (``0`` for zero)."""
     x = float(x)
-    if x == 0.0:
-        return "0"
-    return repr(x)
+    return "0" if x == 0.0 else repr(x)
 
 
 def vec_text(v) -> str:
@@ -53,14 +46,12 @@ def vec_text(v) -> str:
 
 
 def safe_name(name: str) -> str:
-    """``name`` with every character other than letters, digits, ``-_.`` as ``_``
-    (for MJCF element names and file names)."""
+    """``name`` with every character other than letters, digits, ``-_.`` as ``_``."""
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name)
 
 
 def relative_to(path: Path, root: Path) -> str | None:
-    """POSIX path of ``path`` relative to ``root`` (both resolved), or None when
-    it is outside ``root``."""
+    """POSIX path of ``path`` relative to ``root`` (both resolved); None outside it."""
     try:
         return path.resolve().relative_to(root.resolve()).as_posix()
     except ValueError:
@@ -75,3 +66,103 @@ def quat_text(r: np.ndarray) -> str:
 def close(a, b, tol: float) -> bool:
     """Whether arrays ``a`` and ``b`` agree to ``tol``, absolute and relative."""
     return bool(np.allclose(np.asarray(a, float), np.asarray(b, float), atol=tol, rtol=tol))
+
+
+def load_mujoco():
+    """The ``mujoco`` module (ImportError: not installed)."""
+    import mujoco
+
+    return mujoco
+
+
+@contextlib.contextmanager
+def mujoco_messages():
+    """Collect MuJoCo's warnings (list of str) instead of letting MuJoCo print
+    them, append them to ``MUJOCO_LOG.TXT`` or raise Python warnings."""
+    mujoco = load_mujoco()
+    collected: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda msg: collected.append(str(msg)))
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            yield collected
+        collected.extend(str(w.message) for w in caught)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def compile_xml(xml: str, assets: dict[str, bytes], urdf_path: Path, notes: list[str] | None = None):
+    """Compile the MJCF text ``xml`` with the mesh ``assets`` (relative path
+    -> bytes), MuJoCo's warnings added to ``notes``; returns the ``MjModel``
+    (MjcfError naming the URDF: MuJoCo refuses it)."""
+    mujoco = load_mujoco()
+    try:
+        with mujoco_messages() as caught:
+            compiled = mujoco.MjModel.from_xml_string(xml, assets=assets)
+    except Exception as exc:
+        raise MjcfError(f"{urdf_path}: the converted MJCF does not compile: {exc}") from exc
+    if notes is not None:
+        notes.extend(mujoco_warnings(caught))
+    return compiled
+
+
+def place_on_ground(root, root_body, assets: dict[str, bytes], initial_state: dict[str, float], fixed_base: bool,
+                     urdf_path: Path, notes: list[str]):
+    """Compile ``root`` and lift the root so the lowest collision point touches
+    z = 0 at the initial state; returns (``MjModel``, keyframe qpos (nq,), height m)."""
+    mujoco = load_mujoco()
+    compiled = compile_xml(etree.tostring(root, encoding="unicode"), assets, urdf_path, notes)
+    qpos = compiled.qpos0.copy()
+    for name, value in initial_state.items():
+        jid = mujoco.mj_name2id(compiled, mujoco.mjtObj.mjOBJ_JOINT, name)
+        qpos[compiled.jnt_qposadr[jid]] = float(value)
+    height = 0.0
+    if not fixed_base:
+        data = mujoco.MjData(compiled)
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(compiled, data)
+        low = lowest_point(compiled, data)
+        height = -low if math.isfinite(low) else 0.0
+        qpos[2] += height
+        root_body.set("pos", vec_text([0.0, 0.0, height]))
+        root_body.set("quat", "1 0 0 0")
+    return compiled, qpos, height
+
+
+def mujoco_warnings(caught: list[str]) -> list[str]:
+    """MuJoCo's warnings as notes (texture-coordinate complaints dropped)."""
+    return [f"MuJoCo: {text}" for text in caught if "texture coordinate" not in text]
+
+
+def mesh_vertices(m, g: int):
+    """The vertices (k, 3) of mesh geom ``g`` of model ``m``, in the geom frame (MuJoCo's array)."""
+    mid = m.geom_dataid[g]
+    return m.mesh_vert[m.mesh_vertadr[mid]:m.mesh_vertadr[mid] + m.mesh_vertnum[mid]]
+
+
+def lowest_point(m, d) -> float:
+    """Lowest z (m) of any colliding geom but the ground for the kinematics in
+    ``d`` (``+inf`` when there is none)."""
+    mujoco = load_mujoco()
+    low = math.inf
+    for g in range(m.ngeom):
+        gt = m.geom_type[g]
+        if gt == mujoco.mjtGeom.mjGEOM_PLANE or (m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0):
+            continue
+        pos, mat = d.geom_xpos[g], d.geom_xmat[g].reshape(3, 3)
+        size = m.geom_size[g]
+        if gt == mujoco.mjtGeom.mjGEOM_MESH:
+            low = min(low, float((pos[2] + mesh_vertices(m, g) @ mat[2]).min()))
+        elif gt == mujoco.mjtGeom.mjGEOM_BOX:
+            corners = BOX_CORNERS * size
+            low = min(low, float((pos[2] + corners @ mat[2]).min()))
+        elif gt == mujoco.mjtGeom.mjGEOM_SPHERE:
+            low = min(low, float(pos[2] - size[0]))
+        elif gt == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            axis = mat[:, 2]
+            radial = size[0] * math.sqrt(max(0.0, 1 - axis[2] ** 2))
+            low = min(low, float(pos[2] - abs(axis[2]) * size[1] - radial))
+        else:  # capsule, ellipsoid: bounding sphere (not produced from URDF)
+            low = min(low, float(pos[2] - m.geom_rbound[g]))
+    return low

@@ -1,9 +1,9 @@
-"""The URDF -> MJCF conversion (:func:`urdf_to_mjcf`) as named steps over
-MuJoCo's own import; see :mod:`asset2sim.engines.mjcf` for what each step
-fixes."""
+"""The URDF -> MJCF conversion (:func:`urdf_to_mjcf`) as named steps over MuJoCo's own import: the
+convex pieces' mesh assets, the URDF handed to MuJoCo's importer, then the rewrites of :mod:`.rewrite`."""
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,36 +11,122 @@ import numpy as np
 from lxml import etree
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_urdf
-from asset2sim.engines.mjcf.base import KEYFRAME, MjcfError, vec_text
-from asset2sim.engines.mjcf.compiler import compile_xml, load_mujoco, place_on_ground
-from asset2sim.engines.mjcf.contacts import set_contacts
-from asset2sim.engines.mjcf.importer import import_skeleton, urdf_for_import
-from asset2sim.engines.mjcf.meshes import MeshAssets, mesh_assets
-from asset2sim.engines.mjcf.rewrite import (
-    add_root_and_ground,
-    place_bodies,
-    rename_meshes,
-    set_geoms,
-    set_inertial,
-    set_joints,
-    set_options,
-)
+from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
+from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
+                                         num_text, place_on_ground, relative_to, safe_name, vec_text)
+from asset2sim.engines.mjcf.rewrite import (add_root_and_ground, place_bodies, rename_meshes, set_contacts, set_geoms, set_inertial,
+                                            set_joints, set_options)
 from asset2sim.engines.mjcf.visuals import add_visuals
+from asset2sim.file_names import file_stem
+from asset2sim.frames import translation_matrix
+from asset2sim.mesh_io import convex_hull_mesh
 from asset2sim.schemas.config import SimConventions
-from asset2sim.urdf import UrdfModel
+from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel, UrdfStyle, write_urdf
+
+
+def hull_obj(points: np.ndarray) -> bytes:
+    """OBJ bytes of the convex hull of ``points`` (k, 3) m, faces outward."""
+    verts, tris = convex_hull_mesh(points)
+    lines = [f"v {vec_text(v)}" for v in verts]
+    lines += [f"f {i} {j} {k}" for i, j, k in tris + 1]
+    return ("\n".join(lines) + "\n").encode()
+
+
+@dataclass
+class MeshAssets:
+    """Mesh files of the convex pieces: ``derived`` path -> OBJ bytes written
+    anew; ``files`` path -> source file referenced as it is; ``names`` /
+    ``scales`` piece key (link, collision, group) -> import name / scale (3,)
+    or None; ``virtual`` import name -> (path, scale); ``import_assets`` import name -> bytes."""
+
+    derived: dict[str, bytes] = field(default_factory=dict)
+    files: dict[str, Path] = field(default_factory=dict)
+    names: dict[tuple, str] = field(default_factory=dict)
+    scales: dict[tuple, np.ndarray | None] = field(default_factory=dict)
+    virtual: dict[str, tuple[str, np.ndarray | None]] = field(default_factory=dict)
+    import_assets: dict[str, bytes] = field(default_factory=dict)
+
+
+def mesh_assets(pieces: dict[str, list[CollisionPiece]], mesh_root: Path) -> MeshAssets:
+    """One mesh per convex piece: the original file when a hull is a whole
+    single-group file inside ``mesh_root``, else the hull written as OBJ
+    under :data:`DERIVED_MESH_DIR`."""
+    out = MeshAssets()
+    for name, plist in pieces.items():
+        for p in plist:
+            if p.kind != "hull":
+                continue
+            key = (name, p.collision, p.group)
+            rel = relative_to(p.source, mesh_root) if p.whole_file else None
+            if rel is not None:
+                out.files[rel] = p.source
+                data = p.source.read_bytes()
+                scale = None if np.allclose(p.scale, 1.0) else np.asarray(p.scale, float)
+            else:
+                rel = f"{DERIVED_MESH_DIR}/{file_stem(name)}__c{p.collision}_g{p.group}.obj"
+                data = hull_obj(p.points)
+                out.derived[rel] = data
+                scale = None
+            vname = f"piece{len(out.virtual)}.obj"
+            out.virtual[vname] = (rel, scale)
+            out.names[key] = vname
+            out.scales[key] = scale
+            out.import_assets[vname] = data
+    return out
+
+
+def urdf_for_import(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], mesh_names: dict[tuple, str],
+                    mesh_scales: dict[tuple, np.ndarray | None], missing_inertial: str) -> str:
+    """A URDF equivalent to ``model`` whose collisions are the convex pieces
+    (mesh files named as in ``mesh_names``), inertias in the link axes, with
+    MuJoCo's ``<mujoco><compiler/>`` extension."""
+    mujoco_ext = ET.Element("mujoco")
+    ET.SubElement(mujoco_ext, "compiler", {
+        "angle": "radian", "strippath": "false", "discardvisual": "true", "fusestatic": "false",
+        "balanceinertia": "false", "inertiafromgeom": "false", "boundmass": "0", "boundinertia": "0",
+    })
+    out = UrdfModel(name=safe_name(model.name), extensions=[mujoco_ext])
+    for name, link in model.links.items():
+        ln = UrdfLink(name=name)
+        ine = link.inertial
+        if ine is None and missing_inertial == "bullet":
+            ln.inertial = UrdfInertial(mass=BULLET_DEFAULT_MASS, inertia=np.diag(np.asarray(BULLET_DEFAULT_INERTIA, float)))
+        elif ine is not None:
+            ln.inertial = UrdfInertial(mass=ine.mass, origin=translation_matrix(ine.com()), inertia=ine.inertia_in_link_axes())
+        for p in pieces[name]:
+            if p.kind == "hull":
+                key = (name, p.collision, p.group)
+                ln.collisions.append(UrdfGeometry(kind="mesh", origin=p.origin, filename=mesh_names[key], mesh_scale=mesh_scales[key]))
+            else:
+                ln.collisions.append(UrdfGeometry(kind=p.kind, origin=p.origin, size=p.size, radius=p.radius, length=p.length))
+        out.links[name] = ln
+    for j in model.joints:
+        out.joints.append(UrdfJoint(
+            name=j.name, type=j.type, parent=j.parent, child=j.child, origin=j.origin, axis_xyz=j.axis,
+            limit=UrdfLimit(lower=j.lower, upper=j.upper, effort=0.0, velocity=0.0) if j.type in ("revolute", "prismatic") else None,
+            dynamics=None if j.type == "fixed" else UrdfDynamics(damping=j.damping, friction=j.friction)))
+    return write_urdf(out, style=UrdfStyle(number=num_text)).decode("utf-8")
+
+
+def import_skeleton(urdf_text: str, assets: dict[str, bytes], urdf_path: Path, notes: list[str]):
+    """MuJoCo's own URDF import: (``MjSpec``, root element of its MJCF) (MjcfError: refused)."""
+    mujoco = load_mujoco()
+    try:
+        with mujoco_messages() as caught:
+            spec = mujoco.MjSpec.from_string(urdf_text, assets=assets)
+            skeleton = spec.to_xml()
+    except Exception as exc:  # mujoco raises ValueError with its message
+        raise MjcfError(f"MuJoCo could not import {urdf_path}: {exc}") from exc
+    notes.extend(mujoco_warnings(caught))
+    return spec, etree.fromstring(skeleton.encode())
 
 
 @dataclass
 class MjcfBuild:
-    """An MJCF document and what it needs.
-
-    ``xml`` the MJCF text; ``derived_meshes`` relative path (from ``meshdir``)
-    -> OBJ bytes of convex pieces the exporter must write; ``mesh_files``
-    relative path -> absolute source file of meshes referenced as they are;
-    ``initial_qpos`` (nq,) of the keyframe; ``joint_names`` movable joints in
-    qpos order; ``notes`` what the conversion changed for this asset;
-    ``root_height`` m the root was lifted to touch the ground.
+    """An MJCF text and what it needs: ``derived_meshes`` path (from ``meshdir``)
+    -> OBJ bytes to write; ``mesh_files`` path -> source file referenced as it
+    is; ``initial_qpos`` (nq,) of the keyframe; ``joint_names`` movable joints
+    in qpos order; ``notes`` what changed; ``root_height`` m the root was lifted.
     """
 
     xml: str
@@ -58,48 +144,28 @@ class MjcfBuild:
         return out
 
 
-def urdf_to_mjcf(
-    urdf_path: Path | str,
-    *,
-    initial_state: dict[str, float] | None = None,
-    springs: dict[str, Spring] | None = None,
-    missing_inertial: str = "massless",
-    fixed_base: bool = False,
-    ground: bool = True,
-    gravity: bool = True,
-    conventions: SimConventions | None = None,
-    mesh_root: Path | None = None,
-    meshdir: str = ".",
-    visuals: bool = False,
-) -> MjcfBuild:
+def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
+                 missing_inertial: str = "massless", fixed_base: bool = False, ground: bool = True, gravity: bool = True,
+                 conventions: SimConventions | None = None, mesh_root: Path | None = None, meshdir: str = ".",
+                 visuals: bool = False) -> MjcfBuild:
     """Convert a URDF into MJCF under the SPEC's conventions.
 
     Args:
-        initial_state: joint -> rad or m, stored in the keyframe ``initial``
-            (other joints at 0).
-        springs: joint -> :class:`Spring` (stiffness N*m/rad or N/m, reference
-            rad or m), written as joint ``stiffness`` and ``springref``.
-        missing_inertial: what a link without ``<inertial>`` weighs:
-            ``"massless"`` (the file's truth; MuJoCo accepts it only for links
-            welded to a massive one) or ``"bullet"`` (PyBullet's 1 kg and unit
-            inertia, for parity with the reference engine).
+        initial_state: joint -> rad or m, in the keyframe ``initial`` (other joints at 0).
+        springs: joint -> :class:`Spring`, written as joint ``stiffness`` and ``springref``.
+        missing_inertial: a link without ``<inertial>`` is ``"massless"`` (the
+            file's truth) or gets PyBullet's 1 kg and unit inertia (``"bullet"``).
         fixed_base: no free joint; the root stays at the world origin.
         ground / gravity: add the ground plane / gravity -9.81 m/s^2 along z.
-        mesh_root: folder the MJCF's ``meshdir`` points at; meshes of the URDF
-            inside it are referenced relative to it (default: the URDF's folder).
+        mesh_root: folder the MJCF's ``meshdir`` points at (default: the URDF's folder).
         meshdir: the ``meshdir`` written in the MJCF (relative to the MJCF file).
-        visuals: also write the URDF's visual meshes as non-colliding geoms
-            (group 2, colour from the MTL ``Kd``; collision geoms go to group 3).
-
-    Returns:
-        :class:`MjcfBuild`.
+        visuals: also write the visual meshes as non-colliding geoms (group 2;
+            collision geoms go to group 3).
 
     Raises:
         UrdfError: the URDF cannot be read.
-        MjcfError: MuJoCo cannot import or compile the result, or read a value
-            differently from the URDF.
-        ValueError: ``missing_inertial`` is not one of the two policies, or an
-            initial state names an unknown joint.
+        MjcfError: MuJoCo cannot import or compile the result, or reads a value differently.
+        ValueError: an unknown ``missing_inertial`` policy, or an initial state naming an unknown joint.
     """
     mujoco = load_mujoco()
     if missing_inertial not in ("massless", "bullet"):
@@ -135,28 +201,15 @@ def urdf_to_mjcf(
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)
     xml = _with_keyframe(root, qpos)
-    if visuals:  # the visual meshes were not in ``compiled``: the file as written must compile too
+    if visuals:  # the file as written must compile too
         compile_xml(xml, final_assets, urdf_path)
-    # Only the root's pose and the keyframe changed since ``compiled``.
     order = [mujoco.mj_id2name(compiled, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(compiled.njnt)]
-    joint_names = [n for n in order if n in movable]
-    return MjcfBuild(
-        xml=xml,
-        derived_meshes=meshes.derived,
-        mesh_files=meshes.files,
-        initial_qpos=qpos,
-        joint_names=joint_names,
-        notes=notes,
-        root_height=height,
-    )
+    return MjcfBuild(xml=xml, derived_meshes=meshes.derived, mesh_files=meshes.files, initial_qpos=qpos,
+                     joint_names=[n for n in order if n in movable], notes=notes, root_height=height)
 
 
 def _movable_joints(model: UrdfModel, initial_state: dict[str, float], urdf_path: Path) -> dict:
-    """Movable joints of ``model`` by name.
-
-    Raises:
-        ValueError: ``initial_state`` names a joint that is not one of them.
-    """
+    """Movable joints by name (ValueError: ``initial_state`` names another joint)."""
     movable = {j.name: j for j in model.movable_joints}
     unknown = sorted(set(initial_state) - set(movable))
     if unknown:
@@ -164,26 +217,12 @@ def _movable_joints(model: UrdfModel, initial_state: dict[str, float], urdf_path
     return movable
 
 
-def _rewrite_bodies(
-    worldbody,
-    model: UrdfModel,
-    spec,
-    pieces: dict[str, list[CollisionPiece]],
-    meshes: MeshAssets,
-    file_to_mesh: dict[str, str],
-    springs: dict[str, Spring],
-    missing_inertial: str,
-    visuals: bool,
-    movable: dict,
-    urdf_path: Path,
-    notes: list[str],
-) -> dict:
+def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], meshes: MeshAssets,
+                    file_to_mesh: dict[str, str], springs: dict[str, Spring], missing_inertial: str, visuals: bool, movable: dict,
+                    urdf_path: Path, notes: list[str]) -> dict:
     """Rewrite every body of the import (pose, inertial, joint, collision
-    geoms) from the URDF; returns body name -> element.
-
-    Raises:
-        MjcfError: the import's bodies or movable joints are not the URDF's,
-            or one of the per-body checks fails.
+    geoms) from the URDF; returns body name -> element (MjcfError: the
+    import's bodies or joints are not the URDF's, or a per-body check fails).
     """
     bodies = {b.get("name"): b for b in worldbody.iter("body")}
     if set(bodies) != set(model.links):
@@ -202,8 +241,7 @@ def _rewrite_bodies(
 
 
 def _with_keyframe(root, qpos: np.ndarray) -> str:
-    """The MJCF text of ``root`` with the keyframe :data:`KEYFRAME` holding
-    ``qpos`` (nq,), indented by two spaces."""
+    """The MJCF text of ``root`` (indented by two spaces) with the keyframe :data:`KEYFRAME` = ``qpos`` (nq,)."""
     key = etree.SubElement(etree.SubElement(root, "keyframe"), "key", name=KEYFRAME)
     key.set("qpos", vec_text(qpos))
     etree.indent(root, space="  ")

@@ -1,7 +1,5 @@
-"""Rewrites of MuJoCo's import at full precision, after checking MuJoCo read
-the URDF's values: compiler / option / default elements, mesh assets, body
-poses, inertials, joints, collision geoms, the free root joint and the ground.
-"""
+"""Rewrites of MuJoCo's import at full precision, after checking MuJoCo read the URDF's values, and the
+``<pair>`` / ``<exclude>`` elements that make MuJoCo collide PyBullet's link pairs."""
 
 from __future__ import annotations
 
@@ -12,78 +10,110 @@ import numpy as np
 from lxml import etree
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.loading import (
-    BULLET_DEFAULT_FRICTION,
-    BULLET_DEFAULT_INERTIA,
-    BULLET_DEFAULT_MASS,
-    BULLET_PLANE_FRICTION,
-    CollisionPiece,
-)
-from asset2sim.engines.mjcf.base import (
-    FREE_JOINT,
-    GROUND,
-    IMPRATIO,
-    NOSLIP_ITERATIONS,
-    MjcfError,
-    close,
-    num_text,
-    quat_text,
-    safe_name,
-    vec_text,
-)
-from asset2sim.engines.mjcf.contacts import link_friction
+from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
+                                       CollisionPiece, link_friction)
+from asset2sim.engines.mjcf.base import (FREE_JOINT, GROUND, IMPRATIO, NOSLIP_ITERATIONS, MjcfError, close, num_text, quat_text, safe_name,
+                                         vec_text)
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import UrdfModel
 
 
+def contact_policy(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], free: bool) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
+    """Make MuJoCo collide exactly PyBullet's link pairs (all with shapes but a
+    link and its parent), given MuJoCo's ``filterBodyPair`` (drops welded
+    bodies and, unless welded to the world, a weld group's parent). Returns
+    (pairs to restore with ``<pair>``, pairs to remove with ``<exclude>``).
+    """
+    world = ""
+    weld: dict[str, str] = {}
+    for name in model.tree_order():
+        pj = model.parent_joint(name)
+        if pj is None:
+            weld[name] = name if free else world
+        else:
+            weld[name] = weld[pj.parent] if pj.type == "fixed" else name
+
+    def weld_parent(w: str) -> str:
+        if w == world:
+            return world
+        pj = model.parent_joint(w)
+        return world if pj is None else weld[pj.parent]
+
+    def mujoco_filters(a: str, b: str) -> bool:
+        wa, wb = weld[a], weld[b]
+        if wa == wb:
+            return True
+        return wa != world and wb != world and (wa == weld_parent(wb) or wb == weld_parent(wa))
+
+    adjacent = model.adjacent_pairs()
+    names = [n for n in model.tree_order() if pieces.get(n)]
+    restore, exclude = [], []
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            bullet = frozenset((a, b)) not in adjacent
+            filtered = mujoco_filters(a, b)
+            if bullet and filtered:
+                restore.append((a, b))
+            elif not bullet and not filtered:
+                exclude.append((a, b))
+    return restore, exclude
+
+
+def set_contacts(root, model: UrdfModel, pieces: dict[str, list[CollisionPiece]], fixed_base: bool, notes: list[str]) -> None:
+    """Replace ``<contact>`` by the ``<pair>``s and ``<exclude>``s of :func:`contact_policy`."""
+    contact = etree.Element("contact")
+    pairs, excludes = contact_policy(model, pieces, free=not fixed_base)
+    for a, b in pairs:
+        f = num_text(max(link_friction(model, a), link_friction(model, b)))
+        for pa in pieces[a]:
+            for pb in pieces[b]:
+                etree.SubElement(contact, "pair", geom1=f"{safe_name(a)}__c{pa.collision}_g{pa.group}",
+                                 geom2=f"{safe_name(b)}__c{pb.collision}_g{pb.group}", condim="3", friction=f"{f} {f} 0.005 0.0001 0.0001")
+    for a, b in excludes:
+        etree.SubElement(contact, "exclude", body1=a, body2=b)
+    if pairs:
+        notes.append("MuJoCo filters contacts between bodies welded by fixed joints and their parents; "
+                     f"explicit <pair>s restore PyBullet's pairs {[f'{a}/{b}' for a, b in pairs]}")
+    if excludes:
+        notes.append(f"<exclude>s remove parent/child pairs MuJoCo would collide: {[f'{a}/{b}' for a, b in excludes]}")
+    for old in root.findall("contact"):
+        root.remove(old)
+    if len(contact):
+        root.append(contact)
+
+
 def set_options(root, conv: SimConventions, gravity: bool, meshdir: str) -> None:
-    """``<compiler>``, ``<option>`` and ``<default>`` as the first three
-    children of ``root`` (timestep, gravity, no-slip, elliptic cones, contact
-    friction as PyBullet combines it)."""
+    """``<compiler>``, ``<option>`` and ``<default>`` as the first three children of ``root``."""
     comp = root.find("compiler")
     if comp is None:
         comp = etree.SubElement(root, "compiler")
-    for k in list(comp.attrib):
-        del comp.attrib[k]
-    comp.set("angle", "radian")
-    comp.set("meshdir", meshdir)
-    comp.set("autolimits", "true")
-    comp.set("inertiafromgeom", "false")
-    comp.set("balanceinertia", "false")
-    comp.set("boundmass", "0")
-    comp.set("boundinertia", "0")
-    comp.set("fusestatic", "false")
-    comp.set("discardvisual", "false")
+    comp.attrib.clear()
+    for k, v in (("angle", "radian"), ("meshdir", meshdir), ("autolimits", "true"), ("inertiafromgeom", "false"),
+                 ("balanceinertia", "false"), ("boundmass", "0"), ("boundinertia", "0"), ("fusestatic", "false"),
+                 ("discardvisual", "false")):
+        comp.set(k, v)
     root.remove(comp)
     root.insert(0, comp)
     opt = etree.Element("option")
-    opt.set("timestep", num_text(conv.timestep))
-    opt.set("gravity", f"0 0 {num_text(conv.gravity if gravity else 0.0)}")
-    opt.set("integrator", "implicitfast")
-    opt.set("noslip_iterations", str(NOSLIP_ITERATIONS))
-    opt.set("cone", "elliptic")  # with pyramidal cones the no-slip pass makes resting bodies walk
-    opt.set("impratio", num_text(IMPRATIO))
+    for k, v in (("timestep", num_text(conv.timestep)), ("gravity", f"0 0 {num_text(conv.gravity if gravity else 0.0)}"),
+                 ("integrator", "implicitfast"), ("noslip_iterations", str(NOSLIP_ITERATIONS)), ("cone", "elliptic"),
+                 ("impratio", num_text(IMPRATIO))):
+        opt.set(k, v)
     for old in root.findall("option"):
         root.remove(old)
     root.insert(1, opt)
     default = etree.Element("default")
-    dg = etree.SubElement(default, "geom")
-    dg.set("condim", "3")
-    dg.set("friction", f"{num_text(BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION)} 0.005 0.0001")
-    dj = etree.SubElement(default, "joint")
-    dj.set("armature", "0")
+    etree.SubElement(default, "geom", condim="3", friction=f"{num_text(BULLET_DEFAULT_FRICTION * BULLET_PLANE_FRICTION)} 0.005 0.0001")
+    etree.SubElement(default, "joint", armature="0")
     for old in root.findall("default"):
         root.remove(old)
     root.insert(2, default)
 
 
 def rename_meshes(root, virtual: dict[str, tuple[str, np.ndarray | None]], urdf_path: Path) -> tuple[dict[str, str], set[str]]:
-    """Give the import's ``<mesh>`` assets their final file, scale and a
-    unique name; returns (import name -> mesh asset name, names used).
-
-    Raises:
-        MjcfError: the import produced a mesh that is not one of the pieces.
-    """
+    """Give the import's ``<mesh>`` assets their final file, scale and a unique
+    name; returns (import name -> mesh asset name, names used) (MjcfError: an
+    unknown mesh)."""
     file_to_mesh: dict[str, str] = {}
     used: set[str] = set()
     for mesh in root.iter("mesh"):
@@ -109,12 +139,8 @@ def rename_meshes(root, virtual: dict[str, tuple[str, np.ndarray | None]], urdf_
 
 
 def place_bodies(model: UrdfModel, spec, bodies: dict, urdf_path: Path) -> None:
-    """Body poses at full precision from the joint origins (after checking
-    MuJoCo placed each body where the URDF does, to 2e-5 relative).
-
-    Raises:
-        MjcfError: a body placed elsewhere.
-    """
+    """Body poses at full precision from the joint origins (MjcfError: MuJoCo
+    placed a body elsewhere, beyond 2e-5 relative)."""
     tol = 2e-5
     for jnt in model.joints:
         b = bodies[jnt.child]
@@ -148,13 +174,8 @@ def set_inertial(b, link, missing_inertial: str, notes: list[str]) -> None:
 
 
 def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf_path: Path) -> list[str]:
-    """Rewrite the body's joint at full precision (axis, range, damping,
-    ``frictionloss``, spring) after checking MuJoCo read the URDF's values;
-    returns the joint names written.
-
-    Raises:
-        MjcfError: an unexpected joint, or another axis / damping / friction.
-    """
+    """Rewrite the body's joint at full precision; returns the joint names
+    written (MjcfError: an unexpected joint, or another axis / damping / friction)."""
     pj = model.parent_joint(link.name)
     names = []
     for je in b.findall("joint"):
@@ -187,12 +208,9 @@ def set_joints(b, link, model: UrdfModel, spec, springs: dict[str, Spring], urdf
 
 
 def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh: dict[tuple, str], visuals: bool, urdf_path: Path) -> None:
-    """Name and place the body's collision geoms (one per piece), with their
-    mesh asset (``geom_mesh``: piece key -> mesh asset name) and friction.
-
-    Raises:
-        MjcfError: MuJoCo made another number of geoms than pieces.
-    """
+    """Name and place the body's collision geoms (one per piece) with their
+    mesh (``geom_mesh``: piece key -> mesh name) and friction (MjcfError:
+    another number of geoms than pieces)."""
     geoms = b.findall("geom")
     if len(geoms) != len(plist):
         raise MjcfError(f"{urdf_path}: MuJoCo made {len(geoms)} geoms for link {link.name!r}, expected {len(plist)}")
@@ -210,14 +228,11 @@ def set_geoms(b, link, model: UrdfModel, plist: list[CollisionPiece], geom_mesh:
 
 
 def add_root_and_ground(root_body, worldbody, fixed_base: bool, ground: bool) -> None:
-    """A free joint on the root body (unless ``fixed_base``) and the ground
-    plane geom :data:`GROUND` (friction: MuJoCo takes the larger, the link's)."""
+    """A free joint on the root body (unless ``fixed_base``) and the ground plane :data:`GROUND`."""
     if not fixed_base:
         fj = etree.Element("freejoint", name=FREE_JOINT)
         idx = 1 if root_body.find("inertial") is not None and list(root_body).index(root_body.find("inertial")) == 0 else 0
         root_body.insert(idx, fj)
     if ground:
-        plane = etree.Element("geom", name=GROUND, type="plane", size="0 0 1")
-        plane.set("friction", "0 0.005 0.0001")  # MuJoCo takes the larger friction: the link's
-        plane.set("rgba", "0.8 0.8 0.8 1")
-        worldbody.insert(0, plane)
+        # friction 0: MuJoCo takes the larger friction, the link's
+        worldbody.insert(0, etree.Element("geom", name=GROUND, type="plane", size="0 0 1", friction="0 0.005 0.0001", rgba="0.8 0.8 0.8 1"))

@@ -1,6 +1,4 @@
-"""Visual meshes as non-colliding MJCF geoms (group 2), coloured from the MTL
-``Kd`` / ``d`` of the material each OBJ uses.
-"""
+"""Visual meshes as non-colliding MJCF geoms (group 2), coloured from the MTL ``Kd`` / ``d``."""
 
 from __future__ import annotations
 
@@ -10,22 +8,17 @@ import numpy as np
 from lxml import etree
 
 from asset2sim import mesh_io
-from asset2sim.engines.mjcf.base import (
-    num_text,
-    quat_text,
-    relative_to,
-    safe_name,
-    vec_text,
-)
+from asset2sim.engines.mjcf.base import num_text, quat_text, relative_to, safe_name, vec_text
+
+GREY = "0.7 0.7 0.7 1"
 
 
 def mtl_colour(obj: Path) -> str:
-    """``rgba`` text of the first material an OBJ uses (MTL ``Kd`` and ``d``),
-    grey when there is none."""
+    """``rgba`` text of the first material an OBJ uses (MTL ``Kd`` and ``d``), grey when there is none."""
     try:
         text = obj.read_text(errors="replace")
     except OSError:
-        return "0.7 0.7 0.7 1"
+        return GREY
     uses = mesh_io.obj_material_uses(text)
     for lib in mesh_io.mtl_libraries(text.encode("utf-8", "replace")):
         try:
@@ -43,18 +36,15 @@ def mtl_colour(obj: Path) -> str:
             except ValueError:
                 continue
             return vec_text(rgb + [alpha])
-    return "0.7 0.7 0.7 1"
+    return GREY
 
 
-#: Fewest distinct vertices MuJoCo compiles a mesh from ("at least 4
-#: vertices required", MuJoCo 3's mesh compiler).
+#: Fewest distinct vertices MuJoCo compiles a mesh from (MuJoCo 3's mesh compiler).
 MIN_MESH_VERTICES = 4
 
 
 def visual_mesh_problem(path: Path) -> str:
-    """Why MuJoCo would refuse ``path`` as a visual mesh ("" when it takes
-    it): unreadable, no faces, fewer than :data:`MIN_MESH_VERTICES` distinct
-    vertices (a single triangle), or a format MuJoCo does not read."""
+    """Why MuJoCo would refuse ``path`` as a visual mesh ("" when it takes it)."""
     if path.suffix.lower() not in (".obj", ".stl", ".msh"):
         return f"is a {path.suffix} file (MuJoCo reads OBJ, STL and MSH)"
     try:
@@ -73,22 +63,15 @@ def visual_mesh_problem(path: Path) -> str:
 def add_visuals(body, link, mesh_root: Path, asset_el, files: dict, assets: dict, used: set, notes: list) -> None:
     """Append ``link``'s visuals to ``body`` as non-colliding geoms (group 2)."""
     for k, v in enumerate(link.visuals):
-        g = etree.SubElement(body, "geom", name=f"{safe_name(link.name)}__v{k}")
-        g.set("pos", vec_text(v.origin[:3, 3]))
-        g.set("quat", quat_text(v.origin[:3, :3]))
-        g.set("contype", "0")
-        g.set("conaffinity", "0")
-        g.set("group", "2")
+        g = etree.SubElement(body, "geom", name=f"{safe_name(link.name)}__v{k}", pos=vec_text(v.origin[:3, 3]),
+                             quat=quat_text(v.origin[:3, :3]), contype="0", conaffinity="0", group="2")
         if v.kind == "mesh":
             rel = relative_to(v.path, mesh_root) if v.path is not None and v.path.is_file() else None
-            if rel is None:
-                body.remove(g)
-                notes.append(f"link {link.name!r} visual {k} ({v.filename}) is missing or outside the asset folder: not exported")
-                continue
-            why = visual_mesh_problem(v.path)
+            why = "is missing or outside the asset folder" if rel is None else visual_mesh_problem(v.path)
             if why:
                 body.remove(g)
-                notes.append(f"link {link.name!r} visual {k} ({v.filename}) {why}: not exported (MuJoCo refuses it)")
+                notes.append(f"link {link.name!r} visual {k} ({v.filename}) {why}: not exported"
+                             + ("" if rel is None else " (MuJoCo refuses it)"))
                 continue
             name = f"{safe_name(link.name)}__v{k}"
             while name in used:

@@ -159,7 +159,7 @@ def test_written_collisions_are_few_closed_convex_pieces_mujoco_loads(tmp_path):
     mujoco = pytest.importorskip("mujoco")
     m = mujoco.MjModel.from_xml_path(str(out.urdf))
     assert m.ngeom == len(files["body"]) + len(files["lid"])
-    assert cg.referenced_files(out.urdf) == {str(Path(p).relative_to(out.root).as_posix()) for ps in files.values() for p in ps}
+    assert {str(c.filename) for ln in model.links.values() for c in ln.collisions if c.kind == "mesh"} == {str(Path(p).relative_to(out.root).as_posix()) for ps in files.values() for p in ps}
 
 
 def _tray_with_block(tmp_path):

@@ -1,0 +1,145 @@
+"""The working asset: one candidate output held in memory, and the scratch
+folder the engines load candidates from.
+
+A refine tries several candidates (the synthesized overlay, clipped limits,
+repaired collision pieces, escalated damping) before it publishes one. Each is
+a frozen :class:`Candidate`; the stages hand candidates over, never the output
+folder. Engines load files, so :class:`Workspace` writes the candidate an
+engine is to load into a scratch folder of its own (outside the output
+folder, removed when the refine ends); the output folder is written once, by
+:func:`asset2sim.tasks.publish.output.publish`, from the final candidate.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from asset2sim import urdf
+from asset2sim.output_folder import URDF_NAME
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.assemble import write
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate output: the asset with ``overlay`` applied, its joints at
+    ``state`` (joint -> rad or m, output units), the mesh collisions of the
+    links in ``collision_overrides`` replaced by their convex pieces (link ->
+    :class:`asset2sim.tasks.state.collision.CollisionPiece` tuple, paths
+    relative to the folder the candidate is written into) and the (3, 3)
+    ``root_rotation`` of a requested resting pose (None: as modelled)."""
+
+    asset: AssetDescription
+    overlay: Overlay
+    state: Mapping[str, float]
+    collision_overrides: Mapping[str, tuple] = field(default_factory=dict)
+    root_rotation: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "state", MappingProxyType({k: float(v) for k, v in self.state.items()}))
+        object.__setattr__(self, "collision_overrides",
+                           MappingProxyType({k: tuple(v) for k, v in (self.collision_overrides or {}).items()}))
+
+    def with_(self, **changes) -> "Candidate":
+        """A copy with ``changes`` (field name -> value)."""
+        return Candidate(**{**{f: getattr(self, f) for f in ("asset", "overlay", "state", "collision_overrides", "root_rotation")},
+                            **changes})
+
+    def overrides(self) -> dict:
+        """``collision_overrides`` as the writer takes them (link -> list of pieces)."""
+        return {k: list(v) for k, v in self.collision_overrides.items()}
+
+    def write_into(self, folder: Path, *, copy: bool) -> write.OutputPaths:
+        """Write this candidate's files into ``folder``
+        (:func:`asset2sim.tasks.assemble.write.write_output`; meshes copied
+        when ``copy``).
+
+        Raises:
+            OutputError: ``folder`` inside the input, or an incomplete overlay.
+        """
+        return write.write_output(self.asset, self.overlay, folder, dict(self.state), copy=copy,
+                                  collision_overrides=self.overrides(), root_rotation=self.root_rotation)
+
+
+#: Name prefix of a workspace folder, followed by the process id of the refine that owns it.
+SCRATCH_PREFIX = "asset2sim-candidates-"
+
+
+def _remove_orphans(parent: Path) -> None:
+    """Remove the workspace folders in ``parent`` that this user's processes left when killed (their
+    owner's process id names no running process); never a symlink or another user's folder."""
+    for entry in parent.glob(f"{SCRATCH_PREFIX}*-*"):
+        pid = entry.name[len(SCRATCH_PREFIX):].split("-", 1)[0]
+        try:
+            st = entry.lstat()
+            if not (pid.isdigit() and stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid()):
+                continue
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(entry, ignore_errors=True)
+        except OSError:  # gone meanwhile, or a process of another user holds that id
+            continue
+
+
+class Workspace:
+    """The scratch folder a refine's engine sessions load candidates from:
+    a fresh temporary folder (meshes copied into it once), removed by
+    :meth:`close`. Only engines read what is written here."""
+
+    def __init__(self, asset: AssetDescription):
+        self.asset = asset
+        _remove_orphans(Path(tempfile.gettempdir()))
+        self.root = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")).resolve()
+        self._copied = False
+        self.loaded: Candidate | None = None
+        self.collision_notes: list[str] = []
+        self._model: urdf.UrdfModel | None = None
+
+    @property
+    def urdf(self) -> Path:
+        """The scratch URDF of the candidate loaded last."""
+        return self.root / URDF_NAME
+
+    def load(self, candidate: Candidate) -> Path:
+        """Write ``candidate`` into the scratch folder for the engines to load.
+        Returns the scratch URDF; :attr:`collision_notes` holds what the
+        writer's convex pieces changed."""
+        paths = candidate.write_into(self.root, copy=not self._copied)
+        self._copied = True
+        self.loaded = candidate
+        self.collision_notes = list(paths.collision_notes)
+        self._model = urdf.parse_urdf_bytes(paths.urdf_bytes, source=str(paths.urdf), base=self.root)
+        self._model.path = paths.urdf
+        return paths.urdf
+
+    def model(self) -> urdf.UrdfModel:
+        """The loaded candidate's URDF model as the engines read it (parsed
+        from the bytes written, mesh paths in the scratch folder); a copy the
+        caller may change.
+
+        Raises:
+            RuntimeError: nothing was loaded yet.
+        """
+        if self._model is None:
+            raise RuntimeError("no candidate loaded into the workspace")
+        return urdf.clone_model(self._model)
+
+    def close(self) -> None:
+        """Remove the scratch folder."""
+        shutil.rmtree(self.root, ignore_errors=True)
+
+    def __enter__(self) -> "Workspace":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
