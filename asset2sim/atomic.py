@@ -43,19 +43,15 @@ def remove_observer(observer: Observer) -> None:
             _OBSERVERS.remove(observer)
 
 
-def _announce(paths: list[Path]) -> None:
-    with _OBSERVERS_LOCK:
-        observers = list(_OBSERVERS)
-    for obs in observers:
-        obs(paths)
-
-
 def announce(paths: Iterable[Path | str]) -> None:
     """Tell the observers that ``paths`` belong to the current write although
     they are kept as they are (e.g. a copy whose content is already right)."""
     paths = [Path(p) for p in paths]
     if paths:
-        _announce(paths)
+        with _OBSERVERS_LOCK:
+            observers = list(_OBSERVERS)
+        for obs in observers:
+            obs(paths)
 
 
 def temp_name(path: Path | str) -> str:
@@ -83,6 +79,14 @@ def _create_temp(path: Path) -> tuple[int, str]:
         except FileExistsError:
             continue
     raise FileExistsError(f"no free temporary name beside {path}")
+
+
+def _unlink_quietly(names: Iterable[str]) -> None:
+    for name in names:
+        try:
+            os.unlink(name)
+        except OSError:
+            pass
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -157,7 +161,7 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
         OSError: the folder cannot be written (the error names ``path``).
     """
     path = Path(path)
-    _announce([path])
+    announce([path])
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = _create_temp(path)
     try:
@@ -167,10 +171,7 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
             os.fsync(fh.fileno())
         _replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        _unlink_quietly([tmp])
         raise
     _fsync_dir(path.parent)
     return path
@@ -202,8 +203,7 @@ def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
     """Copy many files, each atomically: all written as temporary files, one
     ``os.sync()``, then each renamed into place. Returns the destinations."""
     pairs = [(src, Path(dst)) for src, dst in pairs]
-    if pairs:
-        _announce([dst for _, dst in pairs])
+    announce(dst for _, dst in pairs)
     staged: list[tuple[str, Path]] = []
     try:
         for src, dst in pairs:
@@ -218,11 +218,7 @@ def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
         for folder in {dst.parent for _, dst in staged}:
             _fsync_dir(folder)
     except BaseException:
-        for tmp, _ in staged:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+        _unlink_quietly(tmp for tmp, _ in staged)
         raise
     return [dst for _, dst in staged]
 
@@ -299,12 +295,8 @@ def sha256_files(paths: Iterable[Path | str], root: Path | str | None = None) ->
     """Hex sha256 over several files' names (relative to ``root`` when given)
     and contents, in sorted order."""
     h = hashlib.sha256()
-    items = []
-    for p in paths:
-        p = Path(p)
-        name = str(p.relative_to(root)) if root is not None else str(p)
-        items.append((name, p))
-    for name, p in sorted(set(items)):
+    items = {(str(p.relative_to(root)) if root is not None else str(p), p) for p in map(Path, paths)}
+    for name, p in sorted(items):
         h.update(name.encode())
         h.update(b"\0")
         h.update(sha256_file(p).encode())
@@ -315,8 +307,4 @@ def sha256_files(paths: Iterable[Path | str], root: Path | str | None = None) ->
 def tree_hashes(root: Path | str) -> dict[str, str]:
     """sha256 of every regular file under ``root`` keyed by relative path."""
     root = Path(root)
-    out = {}
-    for p in sorted(root.rglob("*")):
-        if p.is_file() and not p.is_symlink():
-            out[str(p.relative_to(root))] = sha256_file(p)
-    return out
+    return {str(p.relative_to(root)): sha256_file(p) for p in sorted(root.rglob("*")) if p.is_file() and not p.is_symlink()}

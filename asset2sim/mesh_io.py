@@ -151,9 +151,8 @@ def load_trimesh(path: Path | str, *, skip_materials: bool = False):
     """``trimesh.load(path, force="mesh", process=False)`` (trimesh's exceptions propagate)."""
     import trimesh  # about 1 s to import; only non-OBJ files and primitives need it
 
-    if skip_materials:
-        return trimesh.load(str(path), force="mesh", process=False, skip_materials=True)
-    return trimesh.load(str(path), force="mesh", process=False)
+    extra = {"skip_materials": True} if skip_materials else {}
+    return trimesh.load(str(path), force="mesh", process=False, **extra)
 
 
 def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -223,8 +222,6 @@ def obj_groups(path: Path | str) -> list[np.ndarray]:
         if not line or line[0] not in "vfog":
             continue
         parts = line.split()
-        if not parts:
-            continue
         tag = parts[0]
         if tag == "v":
             try:

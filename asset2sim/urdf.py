@@ -461,22 +461,20 @@ class _Reader:
         text = el.get(attr)
         if text is None:
             if required and self.mode != "lenient":
-                msg = f"<{el.tag}> has no {attr}="
-                if self.mode == "collect":
-                    self.problem("NUMBER_EMPTY", msg, line=_line(el), link=link, joint=joint)
-                    return None
-                raise UrdfError(msg, code="NUMBER_EMPTY", source=self.source, line=_line(el), link=link, joint=joint)
+                return self._bad_number("NUMBER_EMPTY", f"<{el.tag}> has no {attr}=", el, link, joint)
             return default
         try:
             if self.mode == "lenient":
                 return _parse_number_list_lenient(text, count)
             return parse_number_list(text, count)
         except NumberError as exc:
-            msg = f"<{el.tag} {attr}={text[:60]!r}>: {exc}"
-            if self.mode == "collect":
-                self.problem(exc.code, msg, line=_line(el), link=link, joint=joint, attribute=attr)
-                return None
-            raise UrdfError(msg, code=exc.code, source=self.source, line=_line(el), link=link, joint=joint) from None
+            return self._bad_number(exc.code, f"<{el.tag} {attr}={text[:60]!r}>: {exc}", el, link, joint, attribute=attr)
+
+    def _bad_number(self, code: str, message: str, el, link, joint, **values) -> None:
+        """Mode collect: report the problem (the number reads as None); else raise UrdfError."""
+        if self.mode != "collect":
+            raise UrdfError(message, code=code, source=self.source, line=_line(el), link=link, joint=joint) from None
+        self.problem(code, message, line=_line(el), link=link, joint=joint, **values)
 
     def num(self, el, attr: str, **kw) -> float | None:
         v = self.nums(el, attr, 1, **kw)
@@ -541,11 +539,9 @@ class _Reader:
                         self.problem("MESH_SCALE_NEGATIVE", f"mesh scale {s.get('scale')!r} mirrors the mesh", line=_line(s), link=link)
         else:
             spec = {"box": (("size", 3),), "cylinder": (("radius", 1), ("length", 1)), "sphere": (("radius", 1),)}.get(s.tag)
+            required = spec is not None
             if spec is None:  # lenient: an unknown shape keeps whatever sizes it has
                 spec = tuple((a, 3 if a == "size" else 1) for a in ("size", "radius", "length") if s.get(a) is not None)
-                required = False
-            else:
-                required = True
             for attr, n in spec:
                 v = self.nums(s, attr, n, link=link, required=required)
                 if v is None:
@@ -700,13 +696,11 @@ class _Reader:
                             line=_line(root))
         if not root.get("name"):
             self.problem("URDF_ROBOT_NAME_MISSING", "<robot> has no name", line=_line(root))
-        model = UrdfModel(name=root.get("name") or "")
         link_list = [self._parse_link(el) for el in root.findall("link")]
         joints = [self._parse_joint(el) for el in root.findall("joint")]
-        for el in root.findall("material"):
-            model.materials.append(self._parse_material(el, None))
+        model = UrdfModel(name=root.get("name") or "", joints=joints, link_elements=link_list,
+                          materials=[self._parse_material(el, None) for el in root.findall("material")])
         model.extensions = [el for el in root if isinstance(el.tag, str) and el.tag not in ("link", "joint", "material")]
-        model.link_elements = link_list
         for ln in link_list:
             if not ln.name:
                 continue
@@ -715,7 +709,6 @@ class _Reader:
                     self.problem("LINK_NAME_DUPLICATE", f"link {ln.name!r} is defined again", line=ln.line, link=ln.name)
                 continue
             model.links[ln.name] = ln
-        model.joints = joints
         if self.mode == "strict":
             self._check_tree(model)
         else:
@@ -920,10 +913,8 @@ class _Out:
 
     def __init__(self, style: UrdfStyle):
         self.style = style
+        self.fmt = style.number
         self.lines: list[str] = []
-
-    def fmt(self, x: float) -> str:
-        return self.style.number(x)
 
     def vec(self, v) -> str:
         return " ".join(self.fmt(x) for x in np.asarray(v, float).ravel())
@@ -1007,9 +998,8 @@ def _write_geometry(out: _Out, depth: int, role: str, g: UrdfGeometry) -> None:
     def body(d: int) -> None:
         if out.style.partnet_order:
             _write_origin(out, d, g.origin)
-            _write_shape(out, d, g)
-        else:
-            _write_shape(out, d, g)
+        _write_shape(out, d, g)
+        if not out.style.partnet_order:
             _write_origin(out, d, g.origin)
         if role == "visual" and g.material is not None:
             _write_material(out, d, g.material)
@@ -1169,10 +1159,9 @@ def scale_model(model: UrdfModel, s: float, *, geometry: bool = True, joints: bo
                 g.mesh_scale = g.scale * s
             if g.size is not None:
                 g.size = np.asarray(g.size, float) * s
-            if g.radius is not None:
-                g.radius = float(g.radius) * s
-            if g.length is not None:
-                g.length = float(g.length) * s
+            for attr in ("radius", "length"):
+                if getattr(g, attr) is not None:
+                    setattr(g, attr, float(getattr(g, attr)) * s)
         if inertials and link.inertial is not None:
             link.inertial.origin = _scale_translation(link.inertial.origin, s)
             if link.inertial.inertia is not None:
@@ -1180,9 +1169,8 @@ def scale_model(model: UrdfModel, s: float, *, geometry: bool = True, joints: bo
     for j in model.joints if joints else ():
         j.origin = _scale_translation(j.origin, s)
         if j.type == "prismatic" and j.limit is not None:
-            if j.limit.lower is not None:
-                j.limit.lower = float(j.limit.lower) * s
-            if j.limit.upper is not None:
-                j.limit.upper = float(j.limit.upper) * s
+            for attr in ("lower", "upper"):
+                if getattr(j.limit, attr) is not None:
+                    setattr(j.limit, attr, float(getattr(j.limit, attr)) * s)
     return model
 

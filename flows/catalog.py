@@ -333,7 +333,7 @@ class _RunFiles:
         """Record file ``info`` named ``name`` when it is the compacted file or a row file."""
         if name == COMPACTED_NAME:
             self.compacted = info
-        elif name.endswith(".parquet") and _PART_RE.match(name) and not catalog_fs_temp(name):
+        elif name.endswith(".parquet") and _PART_RE.match(name):
             self.loose[name[: -len(".parquet")]] = info
 
 
@@ -680,11 +680,6 @@ def plain_strings(table, names=("dataset", "run")):
         if name in names and pa.types.is_dictionary(table.schema.field(i).type):
             table = table.set_column(i, name, table.column(i).cast(pa.string()))
     return table
-
-
-def catalog_fs_temp(name: str) -> bool:
-    """True for a temporary file of an atomic write (never a row)."""
-    return name.startswith(".") or name.endswith(".tmp")
 
 
 def _parquet_bytes(table) -> bytes:

@@ -1,21 +1,9 @@
-"""Per-worker pre-imported stage processes: isolation paid once per worker.
+"""Per-worker stage servers: a child Python that imports the refine pipeline
+once and forks a child per call, with :func:`asset2sim.flows.isolation.run_isolated`'s contract.
 
-Each Dask worker keeps one long-lived *stage server*, a child Python that
-imports the refine pipeline once and then ``fork()``\\ s a copy of itself per
-call. Each call keeps :func:`asset2sim.flows.isolation.run_isolated`'s
-contract: its own process group (a native crash kills only it: ``crash``),
-SIGKILL at ``timeout`` (``timeout``), ``RLIMIT_AS`` of ``memory_limit_mb``;
-the child ends with the server and the server with its worker
-(:mod:`asset2sim.flows.lifeline`). A server that died is restarted on the
-next call (the call it served is a ``crash``).
-
-Protocol, one JSON object per line: the worker writes ``{"spec": path}``
-(``spec.json`` as for ``run_isolated``); the server answers ``{"pid": n}``
-when the child runs and ``{"rc": n, "cpu": s}`` when it ended (``rc`` < 0:
-killed by signal ``-rc``; ``cpu``: user + system s from ``wait4``). The
-server's own stdout is redirected away from the protocol pipe.
-docs/design/pipeline.md, "Isolation at a cost paid once per worker", has the
-measurements.
+Protocol, one JSON object per line: the worker writes ``{"spec": path}``; the
+server answers ``{"pid": n}`` when the child runs and ``{"rc": n, "cpu": s}``
+when it ended (``rc`` < 0: killed by signal ``-rc``; ``cpu``: user + system s).
 """
 
 from __future__ import annotations
@@ -74,10 +62,8 @@ PROJECT_MODULES = (
 
 
 def warm_tables() -> list[str]:
-    """Fill the per-process table caches before forking: call every
-    module-level ``functools.lru_cache(maxsize=1)`` function without arguments
-    of the loaded ``asset2sim.tasks`` modules and :mod:`asset2sim.prior_tables`
-    (one that raises is skipped). Returns the names called."""
+    """Call every argument-less ``lru_cache(maxsize=1)`` function of the loaded ``asset2sim.tasks`` modules and
+    :mod:`asset2sim.prior_tables` (one that raises is skipped); returns the names called."""
     import functools
     import inspect
 
@@ -100,13 +86,8 @@ def warm_tables() -> list[str]:
 
 
 class StageServer:
-    """One pre-imported stage server (a child process of this one).
-
-    Args:
-        preload: module names the server imports at start (besides
-            :data:`WARM_MODULES` and :data:`PROJECT_MODULES`; one that fails
-            to import is skipped: the call that needs it fails in its child).
-    """
+    """One pre-imported stage server (a child process); ``preload``: further modules it imports (besides
+    :data:`WARM_MODULES` and :data:`PROJECT_MODULES`; one that fails to import is skipped)."""
 
     def __init__(self, preload: tuple[str, ...] = ()):
         self.preload = tuple(dict.fromkeys((*PROJECT_MODULES, *preload)))
@@ -115,17 +96,11 @@ class StageServer:
         self._buf = b""
         self._lock = threading.Lock()
 
-    # ------------------------------------------------------------------ lifecycle
-
     def alive(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
 
     def start(self) -> None:
-        """Start the server and wait until its imports are done.
-
-        Raises:
-            RuntimeError: it exited before it was ready (its stderr is inherited).
-        """
+        """Start the server and wait until its imports are done; RuntimeError when it exited before."""
         self.close()
         env = _child_env()
         env.setdefault("MPLBACKEND", "Agg")
@@ -158,12 +133,8 @@ class StageServer:
         threading.Thread(target=run, name="asset2sim-stage-server-start", daemon=True).start()
 
     def ensure_started(self) -> float:
-        """Start the server unless it runs, waiting for a start begun by
-        :meth:`start_soon`. Returns the seconds waited.
-
-        Raises:
-            RuntimeError: it exited before it was ready.
-        """
+        """Start the server unless it runs (or wait for :meth:`start_soon`'s start); returns the seconds waited.
+        RuntimeError: it exited before it was ready."""
         t0 = time.perf_counter()
         with self._lock:
             if not self.alive():
@@ -185,8 +156,6 @@ class StageServer:
             except (OSError, AttributeError):
                 pass
         self.proc = None
-
-    # ---------------------------------------------------------------------- I/O
 
     def _send(self, obj: dict[str, Any]) -> bool:
         try:
@@ -219,18 +188,10 @@ class StageServer:
         except TimeoutError:
             return None
 
-    # --------------------------------------------------------------------- calls
-
     def call(self, target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
              memory_limit_mb: int | None = None) -> IsolatedResult:
-        """:func:`asset2sim.flows.isolation.run_isolated`'s contract, in a
-        child forked from this server (started or restarted when needed).
-
-        Raises:
-            ValueError: ``timeout`` <= 0 or ``kwargs`` not JSON-able.
-            OSError: the work folder cannot be written.
-            RuntimeError: the server cannot start.
-        """
+        """:func:`asset2sim.flows.isolation.run_isolated`'s contract, in a child forked from this server (started
+        when needed). Raises ValueError (``timeout`` <= 0, ``kwargs`` not JSON-able), OSError, RuntimeError (no server)."""
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout}")
         t_start = time.perf_counter()
@@ -331,8 +292,7 @@ def worker_server(preload: tuple[str, ...] = ()) -> StageServer:
 
 
 def _server_with(preload: tuple[str, ...]) -> StageServer:
-    """This process's stage server, restarted on its next start when it
-    lacks a module of ``preload``."""
+    """This process's stage server, restarted on its next start when it lacks a module of ``preload``."""
     srv = worker_server(preload)
     for mod in preload:
         if mod not in srv.preload:
@@ -342,37 +302,26 @@ def _server_with(preload: tuple[str, ...]) -> StageServer:
 
 
 def start_soon(preload: tuple[str, ...] = ()) -> None:
-    """Start this process's stage server (:func:`worker_server`) in the
-    background if it does not run yet."""
+    """Start this process's stage server (:func:`worker_server`) in the background unless it runs."""
     _server_with(preload).start_soon()
 
 
 def ready_server(preload: tuple[str, ...] = ()) -> float:
-    """Start this process's stage server with ``preload`` imported and wait
-    until it is ready; returns the seconds waited.
-
-    Raises:
-        RuntimeError: the server exited before it was ready.
-    """
+    """Start this process's stage server with ``preload`` imported and wait until it is ready; returns the seconds
+    waited. RuntimeError: the server exited before it was ready."""
     return _server_with(tuple(preload)).ensure_started()
 
 
 def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: Path | str,
                memory_limit_mb: int | None = None, preload: tuple[str, ...] = ()) -> IsolatedResult:
-    """Call ``target(**kwargs)`` in a child forked from this process's stage
-    server (:func:`worker_server`), with the contract of
-    :func:`asset2sim.flows.isolation.run_isolated`; ``preload``: modules the
-    server should import."""
+    """``target(**kwargs)`` in a child forked from this process's stage server (:meth:`StageServer.call`);
+    ``preload``: modules the server should import."""
     srv = _server_with(preload)  # a new refine function: restarted with it imported
     return srv.call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
 
 
-# ------------------------------------------------------------------------ server side
-
-
 def _run_child(spec_path: str, out_fd: int) -> None:
-    """In the forked child: own process group, end with the server, output to
-    the log, memory limit, the call, the result file; never returns."""
+    """In the forked child: own process group, output to the log, the call; never returns."""
     code = 0
     try:
         os.close(out_fd)

@@ -195,14 +195,6 @@ def _kill_group(proc: subprocess.Popen) -> None:
         pass
 
 
-def _child_main(argv: list[str]) -> int:
-    spec = json.loads(Path(argv[0]).read_text())
-    if spec.get("parent") is not None:  # end with the process that waits for this one
-        set_parent_death_signal(signal.SIGKILL, expected_parent=int(spec["parent"]))
-    run_child_spec(spec)
-    return 0
-
-
 def run_child_spec(spec: dict[str, Any]) -> None:
     """The body of an isolated call in its (spawned or forked) child: the
     address-space limit ``spec["memory_limit_mb"]`` (MiB), :func:`call_target`
@@ -224,4 +216,7 @@ def run_child_spec(spec: dict[str, Any]) -> None:
 
 
 if __name__ == "__main__":  # the child process
-    sys.exit(_child_main(sys.argv[1:]))
+    _spec = json.loads(Path(sys.argv[1]).read_text())
+    if _spec.get("parent") is not None:  # end with the process that waits for this one
+        set_parent_death_signal(signal.SIGKILL, expected_parent=int(_spec["parent"]))
+    run_child_spec(_spec)

@@ -1,14 +1,11 @@
 """Questions people ask of the Parquet result catalog.
 
 Every function takes the DataFrame of :meth:`asset2sim.flows.catalog.ResultCatalog.read`
-(one row per asset per run, with ``dataset`` and ``run``) and returns a small
-DataFrame or dict; the aggregating ones other than :func:`run_summary` also
-take the :class:`pyarrow.Table` of
-:meth:`~asset2sim.flows.catalog.ResultCatalog.read_table` and aggregate in
-Arrow (``benchmarks/bench_catalog.py``). A row *passes all checks* when
-``failure_mode == "none"``; ``stability_pass_rate`` / ``oscillation_pass_rate``
-are over the rows with that verdict, other rates over every row; runs are
-ordered by id (UTC start time first).
+(one row per asset per run, with ``dataset`` and ``run``); the aggregating ones other than
+:func:`run_summary` also take the Arrow table of :meth:`~asset2sim.flows.catalog.ResultCatalog.read_table`.
+A row *passes all checks* when ``failure_mode == "none"``; ``stability_pass_rate`` /
+``oscillation_pass_rate`` are over the rows with that verdict, other rates over every row;
+runs are ordered by id (UTC start time first).
 """
 
 from __future__ import annotations
@@ -55,9 +52,8 @@ def failure_modes(df, by: str | Iterable[str] = "category", run: str | None = No
     Raises:
         KeyError: ``by`` names a column the catalog does not have.
     """
-    import pandas as pd
-
     import numpy as np
+    import pandas as pd
 
     keys = [by] if isinstance(by, str) else list(by)
     columns = df.schema.names if _is_table(df) else list(df.columns)
@@ -118,9 +114,7 @@ def _bool_rate_parts(series):
 
 def _rate(series) -> float | None:
     s = _as_rate(series).dropna()
-    if len(s) == 0:
-        return None
-    return float(s.mean())
+    return float(s.mean()) if len(s) else None
 
 
 #: Columns :func:`status_counts` reads.

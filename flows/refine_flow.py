@@ -1,25 +1,9 @@
 """The dataset refinement flow: ``catalog.yaml`` in, refined assets, Parquet
-catalog rows and an MLflow run out.
-
-``refine_dataset`` (the Prefect flow, in the driver) plans the run
-(:func:`plan_driver`: jobs, manifest rows that cannot be used, skips the
-driver decides, :mod:`asset2sim.flows.driver_skip`), then ``refine_assets``
-(a subflow on a DaskTaskRunner, not started when nothing is left) runs per
-asset ``prepare`` (batched) and ``refine-metrics`` (refine, metrics and, with
-an output store, publish: :func:`asset2sim.flows.stages.refine_chain`) and
-appends each asset's catalog row as its chain ends. At the end the run's
-partition is compacted and compared with the previous run
-(:mod:`asset2sim.flows.catalog_finish`), the run summary, plots and an MLflow
-run written; a run regressed beyond ``results.regression`` with
-``fail_flow`` ends Failed (:class:`RegressionFailure`, raised after
-everything is recorded).
-
-Every stage returns a record instead of raising, so a failed asset never
-stops the others; Prefect retries a chain only on :class:`ModelCallFailure`.
-The flow wires; the stages (:mod:`asset2sim.flows.stages`), the contract
-(:mod:`asset2sim.tasks.publish.contract`) and the verdict decide.
-docs/design/pipeline.md has the reasoning (resuming killed runs,
-isolation, listening addresses). Imports Prefect at the top.
+catalog rows and an MLflow run out. ``refine_dataset`` plans the run in the
+driver, ``refine_assets`` (a subflow on a DaskTaskRunner) runs each asset's
+stages (:mod:`asset2sim.flows.stages`) and appends its catalog row; a run
+regressed beyond ``results.regression`` with ``fail_flow`` raises
+:class:`RegressionFailure` after everything is recorded. Imports Prefect.
 """
 
 from __future__ import annotations
@@ -55,8 +39,6 @@ from asset2sim.tasks.publish.contract import Prepared, build_manifest_row, build
 
 __all__ = ["FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset", "run_refine_flow"]
 
-
-# ------------------------------------------------------------------------- tasks
 
 prepare_many = task(stages.prepare_batch, name="prepare", cache_policy=NO_CACHE, persist_result=False)
 chain = task(stages.refine_chain, name="refine-metrics", cache_policy=NO_CACHE, persist_result=False)
@@ -95,9 +77,6 @@ def _current_flow_run_id() -> str | None:
         return str(flow_run.id) if flow_run.id else None
     except Exception:
         return None
-
-
-# ------------------------------------------------------------------------- flows
 
 
 @flow(name=SUBFLOW_NAME, persist_result=False, validate_parameters=False)
@@ -232,9 +211,8 @@ def _record_chains(chains: dict, rec: _AssetRecorder) -> None:
 
 
 def _ready_stage_servers(jobs: list[AssetJob], log) -> float:
-    """Start the stage server of every Dask worker (:func:`asset2sim.flows.forkserver.ready_server`) before the first
-    asset; returns the seconds waited (0 without stage servers or a Dask runner). A failure is logged and left to the
-    first call."""
+    """Start every Dask worker's stage server before the first asset (a failure is logged); returns the seconds
+    waited (0 without stage servers or a Dask runner)."""
     from prefect_dask import DaskTaskRunner
 
     mods = tuple(dict.fromkeys(m for j in jobs for m in stages.stage_server_modules(j)))
@@ -262,9 +240,7 @@ def refine_dataset(catalog: str = "catalog.yaml", dataset: str | None = None, wo
 
 @dataclasses.dataclass
 class DriverPlan:
-    """A run planned by the driver before Prefect or Dask start: id, start,
-    :class:`~asset2sim.flows.stages.RunPlan`, folder fingerprints and the
-    skips the driver decided (asset id -> prepared record)."""
+    """A run planned by the driver before Prefect or Dask start (``skips``: asset id -> prepared record)."""
 
     run_id: str
     started: datetime
@@ -280,13 +256,8 @@ class DriverPlan:
 
 def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None,
                 started: datetime | None = None) -> DriverPlan:
-    """Plan a run of dataset ``name`` and decide here which assets are
-    finished already (:func:`asset2sim.flows.driver_skip.decide_skips`; none
-    when ``force``).
-
-    Raises:
-        CatalogError: as :func:`asset2sim.flows.stages.plan_run`.
-    """
+    """Plan a run of dataset ``name`` and decide which assets are finished already (none when ``force``).
+    Raises CatalogError as :func:`asset2sim.flows.stages.plan_run`."""
     started = started or datetime.now(timezone.utc)
     run_id = make_run_id(started)
     plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)
@@ -301,9 +272,8 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
                 dask_address: str | None = None, *, ids: list[str] | None = None, limit: int | None = None, force: bool = False,
                 out: str | None = None, planned: DriverPlan | None = None, dask_host: str | None = None,
                 dashboard: bool | None = None) -> dict[str, Any]:
-    """The body of :func:`refine_dataset`, also run without a Prefect flow run
-    when nothing is left to dispatch; ``planned``: a plan made already by
-    :func:`plan_driver`. With no pending asset no Dask cluster starts."""
+    """The body of :func:`refine_dataset`, also run without a Prefect flow run when nothing is left to dispatch;
+    ``planned``: a plan made already by :func:`plan_driver`."""
     t0, body_started_epoch = time.perf_counter(), time.time()
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
@@ -391,9 +361,8 @@ def _dispatch(log, run: _Run, planned: DriverPlan) -> dict[str, Any]:
 
 
 def _finish_partition(log, run: _Run) -> tuple[Any, Path]:
-    """End of run (catalog.yaml ``results:``): the partition compacted and compared with the previous run, the
-    comparison and errors logged; returns the :func:`asset2sim.flows.catalog_finish.finish_run` result and the
-    run's output folder."""
+    """Compact the run's partition and compare it with the previous run (logged); returns the
+    :func:`asset2sim.flows.catalog_finish.finish_run` result and the run's output folder."""
     run_out = run.cat.output_root / run.name / run.run_id
     finish = catalog_finish.finish_run(run.store, run.name, run.run_id, run_out, run.cat.config.results)
     for line in catalog_compare.comparison_lines(finish.comparison):
@@ -457,9 +426,6 @@ def _raise_on_regression(log, cat, summary: dict[str, Any]) -> None:
         raise RegressionFailure(report, summary)
 
 
-# ------------------------------------------------------------------ flow helpers
-
-
 def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows: list[BadManifestRow],
                      flow_run_id: str | None, version: str) -> None:
     """One failed row (``invalid_manifest_row``) per manifest row that cannot be used."""
@@ -473,8 +439,7 @@ def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows
 
 
 def _add_isolation_times(row, refined, measured) -> None:
-    """Add to the row's ``stage_seconds`` the isolated stages' ``cpu.refine`` / ``cpu.metrics`` (CPU s of the
-    child) and ``isolation.server_start`` (s)."""
+    """Add the isolated stages' ``cpu.refine`` / ``cpu.metrics`` and ``isolation.server_start`` (s) to ``stage_seconds``."""
     add: dict[str, float] = {}
     for name, rec in (("refine", refined), ("metrics", measured)):
         extra = (getattr(rec, "model_extra", None) or {}).get("extra") if rec is not None else None
@@ -492,8 +457,7 @@ def _add_isolation_times(row, refined, measured) -> None:
 
 def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict[str, Prepared],
                          flow_run_id: str | None) -> None:
-    """The catalog row of each asset the driver skipped (``skips``: asset id
-    -> prepared record), written by a few threads."""
+    """The catalog row of each asset the driver skipped (``skips``: asset id -> prepared record)."""
     todo = [job for job in jobs if job.asset_id in skips]
     if not todo:
         return
@@ -530,8 +494,7 @@ def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, ref
 
 
 def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id: str | None, log) -> None:
-    """A markdown artifact on the Prefect flow run: counts, regression check,
-    MLflow run id. A failure is logged, not raised."""
+    """A markdown artifact on the Prefect flow run (a failure is logged, not raised)."""
     try:
         from prefect.artifacts import create_markdown_artifact
 
@@ -571,9 +534,8 @@ def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJo
 
 
 def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
-    """Run :func:`refine_assets` on a Dask task runner (:func:`_dask_task_runner`; nothing starts for no jobs);
-    returns its timings (s): ``dask_startup_seconds``, ``stage_servers_seconds``, ``assets_seconds``,
-    ``dask_teardown_seconds``, and ``inputs``: the input index entries of the assets it read."""
+    """Run :func:`refine_assets` on a Dask task runner (nothing starts for no jobs); returns its timings (s) and
+    ``inputs``, the input index entries of the assets it read."""
     timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0,
                               "dask_teardown_seconds": 0.0,
                               "inputs": {}}
@@ -634,9 +596,8 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
 
 def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "127.0.0.1",
                       dashboard: bool = True):
-    """A DaskTaskRunner: the scheduler at ``address``, else a local cluster of
-    ``workers`` single-threaded processes reporting to this process's Prefect
-    API, listening on ``host`` (dashboard on a free port when ``dashboard``)."""
+    """A DaskTaskRunner: the scheduler at ``address``, else a local cluster of ``workers`` single-threaded
+    processes listening on ``host`` (dashboard on a free port when ``dashboard``)."""
     from prefect_dask import DaskTaskRunner
 
     if address:
@@ -665,8 +626,7 @@ def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "
 
 @contextlib.contextmanager
 def _local_cluster_config(address: str | None, dashboard: bool):
-    """Dask configuration for a local cluster: without ``dashboard``, no HTTP
-    routes on its scheduler and workers (the scheduler's port then answers 404)."""
+    """Dask configuration for a local cluster: without ``dashboard``, no HTTP routes on scheduler and workers."""
     if address or dashboard:
         yield
         return
@@ -677,8 +637,7 @@ def _local_cluster_config(address: str | None, dashboard: bool):
 
 
 def _prefect_api_url() -> str | None:
-    """The Prefect API this process talks to (its temporary server when none is
-    configured), for the local cluster's workers; None when there is none."""
+    """The Prefect API this process talks to (its temporary server when none is configured), or None."""
     try:
         from prefect.settings import PREFECT_API_URL
 
@@ -695,9 +654,6 @@ def _prefect_api_url() -> str | None:
     return str(url) if url else None
 
 
-# --------------------------------------------------------------------------- driver
-
-
 def run_refine_flow(
     catalog: str | Path = "catalog.yaml",
     dataset: str | None = None,
@@ -711,21 +667,10 @@ def run_refine_flow(
     dask_host: str | None = None,
     dashboard: bool | None = None,
 ) -> dict[str, Any]:
-    """Run :func:`refine_dataset` in this process (what ``make flow`` does).
-    ``out``: the output store (``s3://bucket/prefix``, :mod:`.store`);
-    ``dask_host`` / ``dashboard``: where the local Dask cluster listens and
-    whether it serves its dashboard (None: ``catalog.yaml`` ``run``). Call
-    from a ``__main__``-guarded program (Dask starts worker processes).
-
-    Returns the run summary: counts, pass rates, failure modes, paths, MLflow
-    run id and timings (s); a regressed run's summary too (its flow run ends
-    Failed, ``summary["regression"]["exceeded"]``). With no Prefect server
-    configured and nothing left to dispatch, the run is recorded without a
-    Prefect flow run, server or Dask cluster.
-
-    Raises:
-        CatalogError: invalid catalog or manifest (before any asset runs).
-    """
+    """Run :func:`refine_dataset` in this process (what ``make flow`` does; call from a ``__main__``-guarded
+    program). ``out``: the output store (``s3://bucket/prefix``); ``dask_host`` / ``dashboard``: the local Dask
+    cluster's listening host and dashboard (None: ``catalog.yaml`` ``run``). Returns the run summary (also of a
+    regressed run). Raises CatalogError: invalid catalog or manifest (before any asset runs)."""
     params = flow_parameters(catalog, dataset, workers, dask_address, out)
     params.update({k: v for k, v in (("dask_host", dask_host), ("dashboard", dashboard)) if v is not None})
     cat = load_catalog(params["catalog"])  # fail early, before the flow starts
@@ -758,15 +703,8 @@ def _prefect_api_configured() -> bool:
 
 @contextlib.contextmanager
 def prefect_api_for_run(project_root: Path | str):
-    """Yield the Prefect API URL of one flow run: the configured
-    ``PREFECT_API_URL``, else a temporary server
-    (:func:`asset2sim.flows.server.start_local_server`) stopped when the block
-    ends. Call from the main thread.
-
-    Raises:
-        RuntimeError: the temporary server did not start (its log is
-            ``<project>/.prefect/server.log``).
-    """
+    """Yield the Prefect API URL of one flow run: the configured ``PREFECT_API_URL``, else a temporary server stopped
+    when the block ends (main thread only). RuntimeError: it did not start (log: ``<project>/.prefect/server.log``)."""
     from prefect.settings import (
         PREFECT_API_URL,
         PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS,

@@ -1,16 +1,7 @@
 """The refine flow's per-asset stages as plain functions (no Prefect, Dask or
-MLflow here); :mod:`asset2sim.flows.refine_flow` wraps them in Prefect tasks.
-
-:func:`plan_run` turns ``catalog.yaml`` and the manifest into one
-:class:`AssetJob` per usable row (and a :class:`BadManifestRow` per row that
-cannot be used); :func:`prepare_asset` reads the asset once and decides the
-skip (or finds a killed run's complete folder to record); :func:`refine_stage`
-runs the refine function isolated within the asset's time limit;
-:func:`metrics_stage` reads refine's ``evaluation.json`` when it matches, else
-evaluates (reusing the post-check's rest test when allowed); with an output
-store :func:`publish_stage` uploads the folders. Each returns a
-:class:`~asset2sim.tasks.publish.contract.StageRecord`;
-:func:`asset2sim.tasks.publish.contract.build_row` makes the catalog row.
+MLflow here): :func:`plan_run`, then per asset :func:`prepare_asset`,
+:func:`refine_stage`, :func:`metrics_stage` and :func:`publish_stage`, each
+returning a :class:`~asset2sim.tasks.publish.contract.StageRecord`.
 """
 
 from __future__ import annotations
@@ -82,30 +73,20 @@ class ModelCallFailure(RuntimeError):
 
 
 class RegressionFailure(RuntimeError):
-    """The run regressed beyond ``results.regression`` with ``fail_flow``:
-    raised at the end of the flow (everything recorded), so its flow run is
-    Failed. ``summary``: the run summary the flow would have returned."""
+    """The run regressed beyond ``results.regression`` with ``fail_flow`` (raised at the end of the flow);
+    ``summary``: the run summary the flow would have returned."""
 
     def __init__(self, report: str, summary: dict[str, Any]):
         super().__init__(report)
         self.summary = summary
 
 
-# ----------------------------------------------------------------------------- jobs
-
-
 @dataclass
 class AssetJob:
-    """Everything one asset's task chain needs (JSON-able, shipped to workers).
-
-    Paths absolute (``work_dir``: scratch of isolated stages);
-    ``time_limit_seconds`` s over all stages; ``config`` the
-    :class:`~asset2sim.schemas.config.RefineConfig` as a dict; ``finished``
-    earlier finished rows by :func:`asset2sim.flows.catalog.result_key` and
-    ``resumable`` job records of killed runs (newest first), both empty when
-    forced; ``out_uri`` / ``metrics_uri``: where the publish stage uploads the
-    local folders (None: no output store).
-    """
+    """Everything one asset's task chain needs (JSON-able, shipped to workers): absolute paths,
+    ``time_limit_seconds`` s over all stages, ``config`` a RefineConfig dict, ``finished`` earlier rows by
+    :func:`asset2sim.flows.catalog.result_key`, ``resumable`` killed runs' job records (newest first),
+    ``out_uri`` / ``metrics_uri`` upload targets (None: no output store)."""
 
     dataset: str
     run_id: str
@@ -135,8 +116,7 @@ class AssetJob:
 
 @dataclass
 class BadManifestRow:
-    """A manifest row that cannot be used: its catalog id
-    (:func:`asset2sim.tasks.publish.contract.manifest_row_id`) and the reader's typed error."""
+    """A manifest row that cannot be used: its catalog id and the reader's typed error."""
 
     asset_id: str
     error: ManifestRowError
@@ -163,9 +143,7 @@ def flow_parameters(
     dask_address: str | None = None,
     out: str | None = None,
 ) -> dict[str, Any]:
-    """The parameters ``make flow`` passes to ``refine_dataset`` (and the
-    nightly deployment stores): the catalog as an absolute path, dataset,
-    workers, Dask address and, when given, output store ``out``."""
+    """The parameters ``make flow`` passes to ``refine_dataset`` (the catalog as an absolute path; ``out`` when given)."""
     params = {
         "catalog": str(Path(catalog).expanduser().resolve()),
         "dataset": dataset,
@@ -179,11 +157,7 @@ def flow_parameters(
 
 def plan_jobs(cat: Catalog, dataset: str, run_id: str, *, ids: list[str] | None = None, limit: int | None = None,
               force: bool = False) -> list[AssetJob]:
-    """The jobs of a run (:func:`plan_run` without the manifest's bad rows).
-
-    Raises:
-        CatalogError: as :func:`plan_run`.
-    """
+    """The jobs of a run (:func:`plan_run` without the manifest's bad rows; raises as it does)."""
     return plan_run(cat, dataset, run_id, ids=ids, limit=limit, force=force).jobs
 
 
@@ -197,17 +171,12 @@ def plan_run(
     force: bool = False,
     out_store: str | None = None,
 ) -> RunPlan:
-    """The work of a run: one job per usable manifest row and one
-    :class:`BadManifestRow` per other row (only ``ids``, at most ``limit``
-    rows, in manifest order), with earlier finished results and a killed run's
-    unrecorded work for the skip decision (none when ``force``; the latter not
-    with an output store). ``out_store``: default ``catalog.yaml``
-    ``output_store``. Generates the demo assets first for ``generate: demo``.
+    """One job per usable manifest row and one :class:`BadManifestRow` per other row (only ``ids``, at most
+    ``limit`` rows, in manifest order), with earlier results and killed runs' work for the skip decision (none when
+    ``force``). ``out_store``: default ``catalog.yaml`` ``output_store``.
 
     Raises:
-        CatalogError: a manifest that is missing, not UTF-8 text or without
-            ``id`` / ``prompt`` column; an unknown dataset; an id in ``ids``
-            that no manifest row has.
+        CatalogError: a missing or unreadable manifest, an unknown dataset, an id in ``ids`` no row has.
     """
     name, ds = cat.dataset(dataset)
     root = cat.dataset_root(name)
@@ -269,10 +238,8 @@ def _manifest_line(item: ManifestEntry | BadManifestRow) -> int:
 
 
 def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Per asset id, the job records (:class:`~asset2sim.tasks.publish.contract.JobRecord`
-    dicts, newest run first) that earlier runs of ``dataset`` (all but
-    ``run_id``) left in their work folders without writing the asset's
-    catalog row (a flow killed between finishing an asset and recording it)."""
+    """Per asset id, the job records (JobRecord dicts, newest run first) that earlier runs of ``dataset`` (all but
+    ``run_id``) left in their work folders without writing the asset's catalog row."""
     store = ResultCatalog(cat.catalog_root)
     base = cat.output_root / dataset
     out: dict[str, list[dict[str, Any]]] = {}
@@ -298,9 +265,6 @@ def unrecorded_jobs(cat: Catalog, dataset: str, run_id: str | None = None) -> di
             if rec.job.get("asset_id") == folder.name and rec.job.get("run_id") == run:
                 out.setdefault(folder.name, []).append(rec.model_dump(mode="json"))
     return out
-
-
-# --------------------------------------------------------------------------- stages
 
 
 def _worker_name() -> str:
@@ -329,11 +293,8 @@ def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, 
 
 
 def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | None = None) -> StageRecord:
-    """Publish stage: with an output store (``job.out_uri``), upload the
-    refined folder (completion marker last) and the metrics folder, then
-    delete the worker's local copies; ``skipped`` without a store or an
-    output. ``value``: ``{"out_uri", "files", "bytes"}``; a refused upload is
-    status ``error`` (never raised)."""
+    """Publish stage: upload the refined and metrics folders to ``job.out_uri`` / ``job.metrics_uri`` and delete
+    the local copies; ``value``: ``{"out_uri", "files", "bytes"}``; a refused upload is status ``error``."""
     if job.out_uri is None or refined is None or refined.status != "ok":
         return StageRecord(status="skipped", seconds=0.0)
     t0 = time.perf_counter()
@@ -403,20 +364,9 @@ def refine_chain(job: AssetJob, prepared: Prepared) -> ChainResult:
 
 
 def prepare_asset(job: AssetJob) -> Prepared:
-    """Input stage: read the asset, hash input and configuration, and decide
-    whether an earlier result (``skip``) or a killed run's complete folder
-    without a row (``resume``, from ``job.resumable``) can be reused; else
-    write the job record into ``job.work_dir`` so a later run can find this
-    run's folder.
-
-    Returns:
-        The :class:`~asset2sim.tasks.publish.contract.Prepared` record with
-        the extracted description and findings (``ok`` False, ``invalid_input``,
-        for an asset that cannot be read: never raises for a bad asset).
-
-    Raises:
-        OSError: the job record cannot be written.
-    """
+    """Input stage: read and hash the asset and decide whether an earlier result (``skip``) or a killed run's
+    folder (``resume``) can be reused; else write the job record into ``job.work_dir``. Returns the Prepared
+    record (``ok`` False, ``invalid_input``, for an unreadable asset). Raises OSError: record not written."""
     t0 = time.perf_counter()
     rec = Prepared(worker=_worker_name())
     try:
@@ -455,18 +405,8 @@ def stage_refine(
     extracted: dict[str, Any] | None = None,
     reference_dir: str | None = None,
 ) -> dict[str, Any]:
-    """Run the refine function on one asset (in whichever process calls it).
-    ``extracted``: the prepare stage's reading as JSON (``{"asset", "findings"}``),
-    ``reference_dir``: for the extras' evaluation; each passed to a refine
-    function that takes it.
-
-    Returns:
-        A :class:`~asset2sim.tasks.publish.contract.RefineOutput` as JSON.
-
-    Raises:
-        Whatever the refine function raises (``RefineError`` carries
-        ``failure_mode``).
-    """
+    """Run the refine function on one asset; ``extracted`` (``{"asset", "findings"}`` JSON) and ``reference_dir``
+    go to a refine function that takes them. Returns a RefineOutput as JSON; raises what the function raises."""
     import inspect
 
     fn = import_target(refine_function)
@@ -549,17 +489,12 @@ def stage_metrics(
     metrics_dir: str | None = None,
     post_check: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """Stability metrics of a refined asset (``asset2sim.tasks.evaluation.evaluate``,
-    PyBullet, SPEC conventions), ``evaluation.json`` written into
-    ``metrics_dir`` when given (never into the refined folder). Refine's
-    matching evaluation (:func:`refined_evaluation`) is reused when there is
-    one; ``post_check``: rest-test metrics as JSON (:func:`reusable_rest_test`)
-    recorded instead of running the rest test again.
+    """PyBullet stability metrics of a refined asset (``evaluation.json`` into ``metrics_dir`` when given), reusing
+    refine's matching evaluation; ``post_check``: rest-test metrics JSON recorded instead of rerunning the test.
 
     Returns:
-        A :class:`~asset2sim.tasks.publish.contract.Measurement` as JSON:
-        the catalog's metric columns (``penetration_mm`` mm, ``rest_stable``,
-        ``d_pos_m`` m, ``d_ori_rad`` rad, ``oscillation_pass``,
+        A :class:`~asset2sim.tasks.publish.contract.Measurement` as JSON: the catalog's metric columns
+        (``penetration_mm`` mm, ``rest_stable``, ``d_pos_m`` m, ``d_ori_rad`` rad, ``oscillation_pass``,
         ``prompt_alignment`` 0..1, ``scale_deviation_pct`` %), failures, seconds.
 
     Raises:
@@ -603,16 +538,8 @@ def _run_stage(job: AssetJob, name: str, target: str, kwargs: dict[str, Any], ti
 
 
 def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
-    """Refine stage: the refine function on one asset within its time limit
-    (for ``prepared.resume``, the earlier folder's ``report.json`` instead).
-
-    Returns:
-        The stage record, ``value`` a :class:`~asset2sim.tasks.publish.contract.RefineOutput`;
-        ``skipped`` when ``prepared`` says so or the asset was invalid.
-
-    Raises:
-        ModelCallFailure: a model-backed estimator failed (Prefect retries it).
-    """
+    """Refine stage within the asset's time limit (for ``prepared.resume``, the earlier ``report.json``); ``value`` a
+    RefineOutput. Raises ModelCallFailure: a model-backed estimator failed (Prefect retries it)."""
     if not prepared.ok or prepared.skip is not None:
         return StageRecord(status="skipped", seconds=0.0)
     if prepared.resume is not None:
@@ -649,10 +576,8 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
 
 
 def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> StageRecord:
-    """Metrics stage: the metric columns of the refined output within what is
-    left of the time limit (:func:`stage_metrics`; for ``prepared.resume``
-    the earlier run's measurement when it made one). ``skipped`` without an
-    output or with ``job.evaluate`` off."""
+    """Metrics stage (:func:`stage_metrics`) within what is left of the time limit; for ``prepared.resume`` the
+    earlier run's measurement when it made one."""
     if refined.status != "ok" or not job.evaluate:
         return StageRecord(status="skipped", seconds=0.0)
     value: RefineOutput = refined.value
@@ -689,18 +614,14 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
     return rec
 
 
-# ------------------------------------------------------------------------- Prefect env
-
-
 def default_prefect_home(project_root: Path | str) -> Path:
     """Where the CLI keeps Prefect's local state: ``<project>/.prefect``."""
     return Path(project_root) / ".prefect"
 
 
 def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
-    """Environment defaults for Prefect, set before it is imported unless
-    already set (home under the project, analytics off, a longer start-up
-    timeout); returns what was set."""
+    """Set Prefect's environment defaults (home under the project, analytics off, a longer start-up timeout) where
+    unset, before Prefect is imported; returns what was set."""
     defaults = {
         "PREFECT_HOME": str(default_prefect_home(project_root)),
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",

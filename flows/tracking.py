@@ -13,6 +13,7 @@ import io
 import json
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -29,14 +30,9 @@ SUMMARY_COLUMNS = (
 )  # fmt: skip
 
 
-def default_tracking_uri(project_root: Path | str) -> str:
-    """``sqlite:///<absolute project root>/mlflow.db``."""
-    return "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
-
-
 def resolve_tracking_uri(project_root: Path | str, configured: str | None = None) -> str:
     """``MLFLOW_TRACKING_URI`` if set, else ``configured``, else the project's SQLite store."""
-    return os.environ.get("MLFLOW_TRACKING_URI") or configured or default_tracking_uri(project_root)
+    return os.environ.get("MLFLOW_TRACKING_URI") or configured or "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
 
 
 # ------------------------------------------------------------------------- artifacts
@@ -49,15 +45,12 @@ def summary_table(df):
 
 
 def failure_mode_figure(df, title: str = ""):
-    """A matplotlib Figure: stacked bars of failure modes per category (assets).
-
-    ``none`` (all checks passed) is green; failure modes in the fixed vocabulary.
-    """
+    """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
-
+    from matplotlib.ticker import MaxNLocator
 
     table = failure_modes(df, by="category")
     table = table.drop(index="total", errors="ignore")
@@ -77,8 +70,6 @@ def failure_mode_figure(df, title: str = ""):
         bottom = [b + v for b, v in zip(bottom, vals)]
     ax.set_xticks(x)
     ax.set_xticklabels([str(i) for i in table.index], rotation=30, ha="right", fontsize=8)
-    from matplotlib.ticker import MaxNLocator
-
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("assets")
     ax.set_title(title or "failure modes by category")
@@ -91,7 +82,6 @@ def failure_mode_figure(df, title: str = ""):
 def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, Path]:
     """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
-
     out_dir = Path(out_dir)
     table = summary_table(df)
     paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", table.to_csv(index=False))}
@@ -189,8 +179,6 @@ def log_flow_run(
         exp_id = client.create_experiment(settings.experiment, artifact_location=art.as_uri())
     else:
         exp_id = exp.experiment_id
-    import time
-
     ts = int(time.time() * 1000)
     run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
     parent = client.create_run(exp_id, run_name=run_name, tags={"asset2sim.kind": "flow_run", **(tags or {})})

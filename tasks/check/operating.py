@@ -32,11 +32,9 @@ from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
-from asset2sim.tasks.synthesize.physics import max_stable_friction
+from asset2sim.tasks.synthesize.physics import G as GRAVITY, max_stable_friction
 from asset2sim.urdf import UrdfModel, read_urdf
 
-GRAVITY = 9.81
-"""m/s^2"""
 TILT_MARGIN = 2.0
 """Safety factor on the tilt's extra gravity load (dimensionless)."""
 OPERABLE_SHARE = 0.7
@@ -220,15 +218,9 @@ def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overla
                       vertical_share: float = 0.5) -> dict[str, OperatingBudget]:
     """The operating budget of every movable joint of ``closed`` in the written
     asset ``urdf`` at ``state``: how much friction and damping the task's
-    gripper can overcome with a real operating force (``docs/design/metrics.md``,
-    "Operable friction"). Grasped as the task grasps; over :data:`PATH_SAMPLES`
-    fractions of each action's path, the allowed force F = min(the force
-    range's upper end, the torque range's / r, and for a free object pushed
-    within 60 deg of horizontal mu M g / (h - mu v)); budget B = min over the
-    samples of BUDGET_SHARE F_h r - L_g (F_h the ranges' bound only, L_g = -Q s
-    gravity against the motion; prismatic without r); friction cap =
-    FRICTION_SHARE B (at most ``max_stable_friction``, at least HOLD_MARGIN |Q|
-    at the state unless ``free_moving``), damping cap = (1 - FRICTION_SHARE) B / w.
+    gripper can overcome with a real operating force. Definition (grasp, path
+    samples, allowed force, budget B, friction and damping caps):
+    ``docs/design/metrics.md``, "Operable friction".
     ``closed``: joint -> (q_closed, direction +-1, open range); ``labels``: link
     -> semantic label; ``free``: root free (no ground bound when mounted);
     ``ground``: apply the ground bound to a free object.

@@ -1,14 +1,6 @@
 """Joint sweep (physical executability): can every movable joint be driven
-through its range and back? Definition: ``docs/design/metrics.md``, "joint_sweep".
-
-Root fixed, gravity off, no ground; the other movable joints held at the
-initial state (drive limit :data:`HOLD_FORCE`). Each joint is driven from its
-closed end q_c to q_c + d R and back, v = clip(k_p (q_goal - q), -v_max,
-v_max), v_max = R / traverse_time, force limit :func:`effort_limit`. A joint
-passes iff >= 95 % of the range is reached both ways in time, the deepest
-self-contact stays below ``max_penetration`` and nothing diverges; a part
-stopped by a link another movable joint places is swept again with the
-joints between moved out of the way (:func:`_sweep_clearing`).
+through its range and back? Definition (session, drive law, pass rule, the
+clearing re-sweep :func:`_sweep_clearing`): ``docs/design/metrics.md``, "joint_sweep".
 """
 
 from __future__ import annotations
@@ -27,6 +19,7 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, held_ranges, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.synthesize.physics import G
 from asset2sim.urdf import UrdfModel, read_urdf
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
@@ -35,8 +28,6 @@ REACH_FRACTION = 0.95
 #: divergence metric, :mod:`asset2sim.tasks.evaluation.metric_defs`).
 DIVERGED_SPEED_REVOLUTE = 100.0
 DIVERGED_SPEED_PRISMATIC = 10.0
-#: Standard gravity, m/s^2 (the SPEC's).
-G = 9.81
 #: Force limit (N*m or N) of the zero-velocity drive that holds the joints not swept: far
 #: above any part's operating force (a second hand or a fixture holding the rest), so they do not yield.
 HOLD_FORCE = 1000.0

@@ -60,18 +60,16 @@ def fmt(v: Any, digits: int = 4) -> str:
     return esc(v)
 
 
-def img_tag(png: bytes | None, alt: str) -> str:
-    """An ``<img>`` with the PNG inline (empty string for None)."""
+def img_tag(png: bytes | None, alt: str, mime: str = "image/png") -> str:
+    """An ``<img>`` with the PNG (or other ``mime`` image) inline (empty string for None)."""
     if not png:
         return ""
-    return f'<img alt="{esc(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}"/>'
+    return f'<img alt="{esc(alt)}" src="data:{mime};base64,{base64.b64encode(png).decode()}"/>'
 
 
 def svg_tag(svg: bytes | None, alt: str) -> str:
     """An ``<img>`` with an SVG figure inline (empty string for None)."""
-    if not svg:
-        return ""
-    return f'<img alt="{esc(alt)}" src="data:{plots.SVG_MIME};base64,{base64.b64encode(svg).decode()}"/>'
+    return img_tag(svg, alt, plots.SVG_MIME)
 
 
 def verdict_cell(passed: bool | None) -> str:

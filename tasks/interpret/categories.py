@@ -140,8 +140,7 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
     out: list[CategoryMention] = []
     rev = low[::-1]  # words before a mention are read backwards: linear in len(text)
     for m in rx.finditer(low):
-        words = " ".join(m.group(0).split())
-        key = words
+        key = " ".join(m.group(0).split())
         if key not in phrase_to:
             for suf in ("es", "s"):
                 if key.endswith(suf) and key[: -len(suf)] in phrase_to:
@@ -150,8 +149,7 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
         if key not in phrase_to:  # pragma: no cover - regex built from the keys
             continue
         cat, weak = phrase_to[key]
-        before = _last_words(rev, len(low) - m.start())
-        possessive = any(w in _POSSESSIVES for w in before)
+        possessive = any(w in _POSSESSIVES for w in _last_words(rev, len(low) - m.start()))
         out.append(CategoryMention(m.start(), m.end(), m.group(0), cat, weak, possessive))
     # "the door of a microwave": a mention followed by "of <det>" and another
     # mention within three words names a part of that other object
@@ -181,11 +179,7 @@ def find_variant(category: str, text: str) -> VariantPrior | None:
 
 
 def variant_mention(category: str, text: str) -> tuple[int, int, VariantPrior] | None:
-    """(start, end, variant) of the earliest variant of ``category`` in ``text`` (longest first), or None.
-
-    Raises:
-        KeyError: ``category`` is not in categories.yaml.
-    """
+    """(start, end, variant) of the earliest variant of ``category`` (unknown: ``Generic``) in ``text`` (longest first), or None."""
     if not text:
         return None
     cat = category_prior(category)

@@ -1,19 +1,12 @@
-"""Parse a natural-language request into a :class:`RequestSpec`: size words
-(the most extreme wins; factors in ``asset2sim/priors/size_classes.yaml``),
-state words per joint or group of joints (part nouns, ordinals, quantifiers,
-elided nouns), dynamics and pose words, numbers, masses and materials
-(:mod:`.request_values`), mounting words and the category. Contradictions are
-``warnings``, groups of unused words ``ignored``; ``matched`` lists the
-recognised phrases in text order. The grammar: ``docs/guide/requests.md``.
-
-Pure; linear in the length (lookups between phrases are binary searches over
-positions found once); never raises on a string of at most
-:data:`MAX_REQUEST_CHARS` characters.
+"""Parse a natural-language request into a :class:`RequestSpec` (grammar: ``docs/guide/requests.md``;
+numbers, masses and materials: :mod:`.request_values`). Pure, linear in the length; never raises on a
+string of at most :data:`MAX_REQUEST_CHARS` characters.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import re
 from bisect import bisect_left, bisect_right
@@ -249,11 +242,9 @@ class _Tokens:
     """Word runs and clause marks of a text, found once, so a slice's tokens are counted by binary search."""
 
     def __init__(self, text: str):
-        self.starts: list[int] = []
-        self.ends: list[int] = []
-        for m in _RUN.finditer(text):
-            self.starts.append(m.start())
-            self.ends.append(m.end())
+        runs = list(_RUN.finditer(text))
+        self.starts = [m.start() for m in runs]
+        self.ends = [m.end() for m in runs]
         self.marks = [m.start() for m in _MARK.finditer(text)]
 
     def count(self, a: int, b: int) -> int:
@@ -387,14 +378,11 @@ _FWD_STOP = {"and", "with", "but", "or", "while", "its", "the", "a", "an", "thei
 
 def _forward_part(low: str, end: int, limit: int, part_at: dict[int, _Part]) -> _Part | None:
     """A part noun (``part_at``: by start) right after a state, at most one modifier word between."""
-    for i, t in enumerate(_TOKEN.finditer(low, end, limit)):
-        if i >= 2:
-            break
-        word = t.group(0)
+    for t in itertools.islice(_TOKEN.finditer(low, end, limit), 2):
         p = part_at.get(t.start())
         if p is not None:
             return p
-        if word in _FWD_STOP or word in {",", ";", ":"}:
+        if t.group(0) in _FWD_STOP or t.group(0) in {",", ";", ":"}:
             return None
     return None
 
@@ -594,10 +582,7 @@ def _pose_word(low: str, matched: list[tuple[int, str]]) -> object:
 
 def _variant_phrases(hint: str | None, low: str) -> list[tuple[int, str]]:
     """Every phrase of the category's variant that the request names, so they count as understood."""
-    try:
-        var = variant_mention(hint, low) if hint is not None else None
-    except KeyError:
-        var = None
+    var = variant_mention(hint, low) if hint is not None else None
     if var is None:
         return []
     return [(m.start(), m.group(0)) for ph in var[2].phrases for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low)]
@@ -605,13 +590,7 @@ def _variant_phrases(hint: str | None, low: str) -> list[tuple[int, str]]:
 
 def _in_text_order(matched: list[tuple[int, str]]) -> list[str]:
     """The matched phrases by position (stable), each (position, phrase) once, whitespace collapsed."""
-    seen: set[tuple[int, str]] = set()
-    ordered = []
-    for pos, ph in sorted(matched, key=lambda t: t[0]):
-        if (pos, ph) not in seen:
-            seen.add((pos, ph))
-            ordered.append(" ".join(ph.split()))
-    return ordered
+    return [" ".join(ph.split()) for _pos, ph in dict.fromkeys(sorted(matched, key=lambda t: t[0]))]
 
 
 def _part_soon(text: str, i: int) -> bool:

@@ -7,6 +7,7 @@ length of the text.
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from dataclasses import dataclass
@@ -40,9 +41,7 @@ NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_
 def number_value(text: str) -> float:
     """The value of a number matched by :data:`NUM` ("30", "0.5", "two")."""
     t = text.strip()
-    if t in _WORD_NUMBERS:
-        return float(_WORD_NUMBERS[t])
-    return float(t)
+    return float(_WORD_NUMBERS.get(t, t))
 
 
 _ANGLE_UNITS = [(r"°|deg(?:rees?|s)?", math.pi / 180.0), (r"rad(?:ians?|s)?", 1.0)]
@@ -119,18 +118,14 @@ def _band_of_fraction(f: float) -> str:
 
 
 def _next_words(low: str, end: int, n: int) -> list[tuple[int, int, str]]:
-    out = []
-    for m in re.finditer(r"[\w'-]+|[,;:.!?]", low[end: end + 80]):
-        out.append((end + m.start(), end + m.end(), m.group(0)))
-        if len(out) >= n:
-            break
-    return out
+    """(start, end, word) of the first ``n`` (at least one) words or clause marks after ``end``."""
+    runs = itertools.islice(re.finditer(r"[\w'-]+|[,;:.!?]", low[end: end + 80]), max(n, 1))
+    return [(end + m.start(), end + m.end(), m.group(0)) for m in runs]
 
 
 def _near_category(low: str, end: int, mention_starts: list[int], max_words: int = 2) -> bool:
     """A category mention starts within ``max_words`` words after ``end``."""
-    words = _next_words(low, end, max_words + 1)
-    for s, _e, w in words:
+    for s, _e, w in _next_words(low, end, max_words + 1):
         if s in mention_starts:
             return True
         if w in {",", ";", ":", ".", "!", "?"}:
@@ -167,11 +162,7 @@ def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], 
         s, e = widen(m)
         if s == m.start() and e == m.end():
             continue  # "a third" without open/out next to it is not a state
-        fr = m.group("frac")
-        if m.group("n"):
-            f = int(m.group("n")) / int(m.group("d"))
-        else:
-            f = 2 / 3 if fr.startswith(("two", "2")) else 1 / 3
+        f = int(m.group("n")) / int(m.group("d")) if m.group("n") else (2 / 3 if m.group("frac").startswith(("two", "2")) else 1 / 3)
         states.append(Found(s, e, low[s:e].strip(), (_band_of_fraction(f), StateTarget(kind="fraction", value=f))))
     for m in _LENGTH_RX.finditer(low):
         v = number_value(m.group("num")) * _factor(_LENGTH_UNITS, m.group("unit"))
@@ -181,13 +172,11 @@ def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], 
             continue  # "two in a row", "a 2 in 1 laptop": a preposition
         after = _DIM_AFTER.match(low[m.end():])
         before = _DIM_BEFORE.search(low[max(0, m.start() - 40): m.start()])
-        if after:
-            e = m.end() + len(after.group(0))
-            sizes.append(Found(m.start(), e, low[m.start():e].strip(), SizeTarget(dimension=_DIM_NAMES[after.group("dim")], value=v, phrase=low[m.start():e].strip())))
-            continue
-        if before:
-            s = m.start() - len(before.group(0))
-            sizes.append(Found(s, m.end(), low[s:m.end()].strip(), SizeTarget(dimension=_DIM_NAMES[before.group("dim")], value=v, phrase=low[s:m.end()].strip())))
+        if after or before:
+            s = m.start() if after else m.start() - len(before.group(0))
+            e = m.end() + len(after.group(0)) if after else m.end()
+            phrase = low[s:e].strip()
+            sizes.append(Found(s, e, phrase, SizeTarget(dimension=_DIM_NAMES[(after or before).group("dim")], value=v, phrase=phrase)))
             continue
         s, e = widen(m)
         w0 = max(0, m.start() - 60)
@@ -316,10 +305,7 @@ _MADE_OF = re.compile(r"(?:made (?:of|from|out of)|in) ")
 def materials(low: str, mention_starts: list[int], head_starts: list[int] | None = None) -> list[Found]:
     """Material words as ``PartProperty``: per part or body when its noun follows, the whole object before the
     object's name (``mention_starts``; ``head_starts``: the object's own mention) or after "made of"."""
-    hits: list[Found] = []
-    for rx, key in _MATERIAL_RX:
-        for m in rx.finditer(low):
-            hits.append(Found(m.start(), m.end(), m.group(0), key))
+    hits = [Found(m.start(), m.end(), m.group(0), key) for rx, key in _MATERIAL_RX for m in rx.finditer(low)]
     out: list[Found] = []
     for h in leftmost_longest(hits):
         made_of = _MADE_OF.match(h.text) is not None
@@ -365,8 +351,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
             motion = "any"
             unit = m.group("unit")
             if unit:
-                fit = [(qq, mm) for qq, mm, u in _DYN_UNITS if re.fullmatch(u, unit)]
-                same = [mm for qq, mm in fit if qq == q]
+                same = [mm for qq, mm, u in _DYN_UNITS if re.fullmatch(u, unit) and qq == q]
                 if same:
                     motion = same[0]
                 else:

@@ -1,20 +1,7 @@
 """Export an output folder to OpenUSD with UsdPhysics (Isaac Sim / Isaac Lab,
-Newton, any UsdPhysics reader): ``usd/mobility.usd``, one self-contained
-binary layer derived from ``mobility.urdf`` (the source of truth),
-``overlay.json`` (springs) and ``initial_state.json`` (joint positions,
-mounting).
-
-``/<robot>`` (default prim, ArticulationRootAPI; z up, m, kg; no physics
-scene) holds one rigid body per link, flat and posed at the initial state
-(MassAPI: mass, COM, principal moments and axes), its visual meshes and its
-convex collision pieces (:func:`asset2sim.engines.loading.collision_pieces`,
-``convexHull``, purpose ``guide``), and ``joints/``: revolute (limits, gains
-and states per **degree**), prismatic and fixed joints with X along the URDF
-axis, a force drive for damping and springs, Coulomb friction in
-``newton:friction``, the SI values as ``asset2sim:*``, and for a fixed root a
-``root_joint`` from the world. docs/design/simulators.md, "USD export", has
-the table of unit conversions. Attributes are binary32: :func:`check_usd`
-compares with relative tolerance :data:`FLOAT_RTOL`.
+Newton): ``usd/mobility.usd``, one self-contained binary layer derived from
+``mobility.urdf``, ``overlay.json`` (springs) and ``initial_state.json``.
+Prim layout and unit conversions: docs/design/simulators.md, "USD export".
 """
 
 from __future__ import annotations
@@ -488,12 +475,9 @@ class UsdCheck:
 
 
 def check_usd(path: Path, out_dir: Path) -> UsdCheck:
-    """Authored equals intended: read ``path`` back (:func:`read_usd`) and
-    compare every link's mass, COM and inertia tensor and every movable
-    joint's limits, damping, Coulomb friction, stiffness, spring reference and
-    initial position with ``mobility.urdf``, ``overlay.json`` (its own numbers
-    too) and ``initial_state.json``, to :data:`FLOAT_RTOL` relative to the
-    quantity's scale on that link or joint (COM: at least 1 mm).
+    """Read ``path`` back (:func:`read_usd`) and compare every link's inertial and every movable joint's values with
+    ``mobility.urdf``, ``overlay.json`` and ``initial_state.json``, to :data:`FLOAT_RTOL` relative to the quantity's
+    scale on that link or joint (COM: at least 1 mm).
 
     Raises:
         ValueError: ``overlay.json`` is not a valid overlay.

@@ -72,8 +72,7 @@ def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.
 def band_of(f: float) -> str:
     """The band of opening fraction ``f``: of those whose interval holds it (else all), the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
-    pool = inside or list(BAND_TARGET)
-    return min(pool, key=lambda b: abs(BAND_TARGET[b] - f))
+    return min(inside or list(BAND_TARGET), key=lambda b: abs(BAND_TARGET[b] - f))
 
 
 def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
@@ -83,8 +82,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
-    need_centers = any(jr.ordinal is not None for jr in ctx.request.joint_states)
-    centers = _centers(ctx, closed_state) if need_centers else {}
+    centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
     for jr in ctx.request.joint_states:
         targets = state_targets(ctx, jr, relevant, centers, res.warnings)
         for t in targets:
@@ -137,12 +135,9 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
     if not sizes:
         return None
     along = _extents(ctx)
-    ratios = []
-    parts = []
-    for sz in sizes:
-        e = max(float(along[sz.dimension]), 1e-9)
-        ratios.append(sz.value / e)
-        parts.append(f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {sz.value / e:.4g}")
+    extents = [max(float(along[sz.dimension]), 1e-9) for sz in sizes]
+    ratios = [sz.value / e for sz, e in zip(sizes, extents)]
+    parts = [f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {sz.value / e:.4g}" for sz, e in zip(sizes, extents)]
     s = float(np.exp(np.mean(np.log(ratios))))
     note = "size in numbers: " + "; ".join(parts) + f" -> s = {s:.4g}"
     if len(ratios) > 1 and max(ratios) / min(ratios) > 1 + NUMBER_TOLERANCE:
@@ -341,10 +336,8 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
             q.append(QuantityOutcome(what=f"{n} end", phrase=t.phrase, asked=t.fraction, achieved=f, unit="opening fraction",
                                      within_tolerance=ok, why=t.note))
             continue
-        if t.kind == "angle":
-            asked, got, unit = t.asked, f * cs.open_range, "rad"
-        elif t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
-            asked, got, unit = t.asked, f * cs.open_range, "m"
+        if t.kind == "angle" or t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
+            asked, got, unit = t.asked, f * cs.open_range, "rad" if t.kind == "angle" else "m"
         elif t.kind == "distance":
             asked, got, unit = t.asked, (t.asked or 0.0) * f / max(t.fraction, 1e-12), "m"
         else:
