@@ -50,11 +50,6 @@ class Candidate:
         object.__setattr__(self, "collision_overrides",
                            MappingProxyType({k: tuple(v) for k, v in (self.collision_overrides or {}).items()}))
 
-    def with_(self, **changes) -> "Candidate":
-        """A copy with ``changes`` (field name -> value)."""
-        return Candidate(**{**{f: getattr(self, f) for f in ("asset", "overlay", "state", "collision_overrides", "root_rotation")},
-                            **changes})
-
     def overrides(self) -> dict:
         """``collision_overrides`` as the writer takes them (link -> list of pieces)."""
         return {k: list(v) for k, v in self.collision_overrides.items()}
@@ -101,8 +96,8 @@ class Workspace:
         _remove_orphans(Path(tempfile.gettempdir()))
         self.root = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")).resolve()
         self._copied = False
-        self.loaded: Candidate | None = None
         self.collision_notes: list[str] = []
+        self._written: tuple[bytes, Path] | None = None  # the loaded URDF's bytes and path, parsed on demand
         self._model: urdf.UrdfModel | None = None
 
     @property
@@ -116,10 +111,8 @@ class Workspace:
         writer's convex pieces changed."""
         paths = candidate.write_into(self.root, copy=not self._copied)
         self._copied = True
-        self.loaded = candidate
         self.collision_notes = list(paths.collision_notes)
-        self._model = urdf.parse_urdf_bytes(paths.urdf_bytes, source=str(paths.urdf), base=self.root)
-        self._model.path = paths.urdf
+        self._written, self._model = (paths.urdf_bytes, paths.urdf), None
         return paths.urdf
 
     def model(self) -> urdf.UrdfModel:
@@ -130,8 +123,12 @@ class Workspace:
         Raises:
             RuntimeError: nothing was loaded yet.
         """
-        if self._model is None:
+        if self._written is None:
             raise RuntimeError("no candidate loaded into the workspace")
+        if self._model is None:
+            data, path = self._written
+            self._model = urdf.parse_urdf_bytes(data, source=str(path), base=self.root)
+            self._model.path = path
         return urdf.clone_model(self._model)
 
     def close(self) -> None:

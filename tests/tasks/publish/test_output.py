@@ -78,7 +78,7 @@ def test_publish_copies_the_repaired_pieces_and_refuses_names_that_leave(refined
         paths = output.publish(cand, ws, target)
         assert (target / "collision" / "repaired_0_0.obj").read_text() == CUBE_OBJ
         assert paths.urdf.read_bytes() == ws.urdf.read_bytes()
-        leaving = cand.with_(collision_overrides={link.name: [dataclasses.replace(piece, filename="../escaped.obj")]})
+        leaving = dataclasses.replace(cand, collision_overrides={link.name: [dataclasses.replace(piece, filename="../escaped.obj")]})
         with pytest.raises(OutputError):
             output.publish(leaving, ws, tmp_path / "pub2")
         assert not (tmp_path / "escaped.obj").exists()
@@ -96,7 +96,7 @@ def test_a_candidate_is_frozen_and_the_workspace_model_is_the_file_as_read(refin
         cand.state["x"] = 1.0
     state.clear()  # the candidate took its own copy
     assert dict(cand.state) == dict(res.report.initial_joint_positions)
-    moved = cand.with_(state={k: 0.0 for k in cand.state})
+    moved = dataclasses.replace(cand, state={k: 0.0 for k in cand.state})
     assert set(moved.state.values()) == {0.0} and cand.state != moved.state
     with Workspace(asset) as ws:
         with pytest.raises(RuntimeError):
