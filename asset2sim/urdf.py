@@ -36,7 +36,7 @@ from asset2sim.frames import axis_angle_matrix, matrix_rpy, pose_matrix
 __all__ = [
     "GEOMETRY_KINDS", "JOINT_TYPES", "MOVABLE", "NumberError", "PARTNET_STYLE", "Problem", "SIMULATED_JOINT_TYPES",
     "UrdfDynamics", "UrdfError", "UrdfGeometry", "UrdfInertial", "UrdfJoint", "UrdfLimit", "UrdfLink", "UrdfMaterial",
-    "UrdfMimic", "UrdfModel", "UrdfStyle", "parse_number_list", "parse_urdf_bytes", "read_urdf", "scale_model",
+    "UrdfMimic", "UrdfModel", "UrdfSource", "UrdfStyle", "model_of", "path_of", "parse_number_list", "parse_urdf_bytes", "read_urdf", "scale_model",
     "write_urdf"
 ]
 
@@ -825,6 +825,35 @@ def read_urdf(path: Path | str, *, mode: Mode = "strict", joint_types: Iterable[
     if key is not None:
         _READ_MEMO.put(key, files, model)
     return model
+
+
+#: A URDF as a file or as a model already in memory (whose ``path`` is the file it was written to):
+#: what a stage measures, so that a refine hands its candidate's model over instead of the stage
+#: reading back the file the refine wrote.
+UrdfSource = UrdfModel | Path | str
+
+
+def model_of(source: UrdfSource, *, mode: Mode = "strict") -> UrdfModel:
+    """The model of ``source``: a copy of a :class:`UrdfModel`, or :func:`read_urdf` of a file
+    (``mode`` as there; a model is taken as it is).
+
+    Raises:
+        UrdfError: as :func:`read_urdf`.
+    """
+    return clone_model(source) if isinstance(source, UrdfModel) else read_urdf(source, mode=mode)
+
+
+def path_of(source: UrdfSource) -> Path:
+    """The file of ``source`` (an engine loads it): a model's ``path``, or the path given.
+
+    Raises:
+        UrdfError: a model that was never read from or written to a file (``URDF_NO_FILE``).
+    """
+    if isinstance(source, UrdfModel):
+        if source.path is None:
+            raise UrdfError("the URDF model has no file an engine could load", code="URDF_NO_FILE", source=source.name)
+        return Path(source.path)
+    return Path(source)
 
 
 #: Models read by :func:`read_urdf`, by (absolute path, mode, joint types, XML limits).

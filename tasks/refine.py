@@ -356,7 +356,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = balance.steadiest_fractions(ws.urdf, att.overlay, att.state, att.closed_out, intervals)
+        fractions, before, after = balance.steadiest_fractions(ws.model(), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None
@@ -423,14 +423,14 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, c
         for line in room:
             log.say("refine_state", line)
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
-        ctx.asset, syn.overlay, ws.root, urdf, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
+        ctx.asset, syn.overlay, ws, state, overrides, manipulation.closed_tuples(syn.closed_out), ctx.root_rotation)
     st.collision_changes = list(st.collision_changes) + lifted
     if overrides is not shut:  # the state search changed the collision pieces: the limits are clipped again on them (stage 6b)
         unclipped = limits.strip_clips(syn.overlay)
         ws.load(Candidate(ctx.asset, unclipped, state, overrides, ctx.root_rotation))
         reclipped, closed_re = _clip_limits(unclipped, closed_raw, state, ws, config, log)
         syn = replace(syn, overlay=reclipped, closed_out=closed_re)
-    balanced, design = stability.design_for_stability(urdf, ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
+    balanced, design = stability.design_for_stability(ws.model(), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
     design = floored + design
     for line in design:
         log.say("stability", line)
@@ -523,7 +523,7 @@ def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, ws: W
     the requested state and the overlay's initial positions moved onto them and the candidate loaded again
     (with the collision ``overrides``). Unchanged when the measurement fails."""
     try:
-        measured = urdf_closed.measure_closed(urdf)
+        measured = urdf_closed.measure_closed(ws.model())
     except Exception as exc:
         log.say("closed_state", f"closed ends not measured on the output ({type(exc).__name__}: {exc}); the input's are used")
         return syn
@@ -643,10 +643,10 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
     n = 0
-    spec = task_tier.task_spec_for(ctx.task, urdf, asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
+    spec = task_tier.task_spec_for(ctx.task, ws.model(), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
-    lim = task_tier.operating_limits(urdf, state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
+    lim = task_tier.operating_limits(ws.model(), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, conventions=config.sim,
                                      joints=spec.joints if spec is not None else None)
     bounded, notes = operating.bound_overlay(overlay, lim.budgets)
@@ -664,12 +664,12 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
-                "pybullet", urdf, state, postcheck.springs_of(overlay), config.sim, closed, spec, asset, ctx.category,
+                "pybullet", ws.model(), state, postcheck.springs_of(overlay), config.sim, closed, spec, asset, ctx.category,
                 fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
                 free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring)]
         return chk
 
-    check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
+    check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     search = dynamics_search.DynamicsSearch(lim.budgets)  # relief and escalation bracketed by what each round measured
     search.record(overlay, check.metrics)
@@ -686,7 +686,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         if not changes:
             break
         ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-        check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
+        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
         search.record(overlay, check.metrics)
         tried.append((overlay, check))
@@ -699,7 +699,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         if earlier:
             overlay = tried[best][0]
             ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-        check = with_task(postcheck.run_post_check(urdf, state, overlay, config, closed=closed, recorded=recorded))
+        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, recorded=recorded))
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")

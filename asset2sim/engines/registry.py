@@ -10,6 +10,7 @@ from pathlib import Path
 from asset2sim.engines.base import (_ENGINES, _FILE_READERS, _SHAPE_WORLDS, _VIEWERS, EngineFactory, EngineUnavailable, EngineUnsupported,
                                     HeldPhysics, SessionOptions, ShapeWorld, SimSession, Viewer)
 from asset2sim.engines.quiet import startup_quiet
+from asset2sim.urdf import UrdfSource, path_of
 
 __all__ = ["available_engines", "known_engines", "open_session", "open_shape_world", "open_viewer", "read_held_physics"]
 
@@ -77,8 +78,8 @@ def _factory(name: str) -> EngineFactory:
     return _ENGINES[name]
 
 
-def open_session(engine: str, urdf_path: Path | str, options: SessionOptions | None = None, **attach) -> SimSession:
-    """Open a :class:`SimSession` of ``urdf_path`` in ``engine``; ``attach``: the
+def open_session(engine: str, urdf_path: UrdfSource, options: SessionOptions | None = None, **attach) -> SimSession:
+    """Open a :class:`SimSession` of ``urdf_path`` (a file, or a model loaded from its ``path``) in ``engine``; ``attach``: the
     caller's world to load into (PyBullet: ``client`` and ``ground``; PhysX: ``scene``).
 
     Raises:
@@ -87,7 +88,7 @@ def open_session(engine: str, urdf_path: Path | str, options: SessionOptions | N
         RuntimeError: the engine failed to load the file.
         TypeError: the engine cannot attach to a caller's world.
     """
-    return _factory(engine)(Path(urdf_path), options or SessionOptions(), **attach)
+    return _factory(engine)(path_of(urdf_path), options or SessionOptions(), **attach)
 
 
 def open_shape_world(engine: str = "pybullet") -> ShapeWorld:

@@ -12,7 +12,7 @@ from typing import Any
 
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.urdf import UrdfError, read_urdf
+from asset2sim.urdf import UrdfError, UrdfSource, model_of
 
 #: Joint types that move (the others are fixed).
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -58,8 +58,8 @@ def find_urdf(path: Path | str) -> Path:
         raise EvaluationError(str(exc)) from exc
 
 
-def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
-    """Links and joints of a URDF as written (lenient read): (link name ->
+def parse_urdf(urdf: UrdfSource) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
+    """Links and joints of a URDF as written (a file read leniently, or a model): (link name ->
     :class:`LinkInfo`, joint name -> :class:`JointInfo`), in file order.
 
     Raises:
@@ -67,7 +67,7 @@ def parse_urdf(urdf: Path) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
             line and link or joint).
     """
     try:
-        model = read_urdf(urdf, mode="lenient")
+        model = model_of(urdf, mode="lenient")
     except UrdfError as exc:
         raise EvaluationError(f"unreadable URDF: {exc}") from exc
     links = {name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))

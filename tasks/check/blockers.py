@@ -5,14 +5,13 @@ place that link, and the ranges that parts held in place leave a joint
 
 from __future__ import annotations
 
-from pathlib import Path
 
 from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import tree_path
-from asset2sim.urdf import UrdfModel, read_urdf
+from asset2sim.urdf import UrdfModel, UrdfSource, model_of
 
 
 def fixed_root_options(state: dict[str, float], conventions: SimConventions | None = None,
@@ -22,7 +21,7 @@ def fixed_root_options(state: dict[str, float], conventions: SimConventions | No
                           ground=False, conventions=conventions or SimConventions())
 
 
-def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
+def held_ranges(urdf: UrdfSource, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
                 conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
     """The ranges the sweep can demand with the other joints held at ``state``:
     each joint's (q_closed, direction, range) of ``closed`` (rad or m) cut where
@@ -33,7 +32,7 @@ def held_ranges(urdf: Path | str, closed: dict[str, tuple[float, float, float]],
     notes = {}
     with open_session("pybullet", urdf, fixed_root_options(state, conventions)) as s:
         # any contact ends the range (1 mm, no stop confirmation): the drive stalls at it
-        clips = limits.geometric_limits(s, read_urdf(urdf), closed, state, against="held", confirm_stops=False)
+        clips = limits.geometric_limits(s, model_of(urdf), closed, state, against="held", confirm_stops=False)
     for name, c in clips.items():
         if c.clipped:
             out[name] = (c.q_closed, c.direction, c.open_range)
@@ -74,7 +73,7 @@ class Blocker:
     """:func:`blocking_link` at a state, in the session, or in a PyBullet session
     of the same URDF where its engine answers no closest-point queries."""
 
-    def __init__(self, session: SimSession, urdf: Path | str, conventions: SimConventions):
+    def __init__(self, session: SimSession, urdf: UrdfSource, conventions: SimConventions):
         self.session, self.urdf, self.conventions = session, urdf, conventions
         self._pybullet: SimSession | None = None
 

@@ -6,7 +6,6 @@ state and the friction factor escalation gives them (``docs/design/metrics.md``)
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
@@ -14,12 +13,13 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
+from asset2sim.urdf import UrdfSource
 
 #: The metrics this module adds to the post-check.
 MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "robust_rest")
 
 
-def measure_manipulation(engine: str, urdf: Path | str, initial_state: dict[str, float], springs: dict[str, Spring],
+def measure_manipulation(engine: str, urdf: UrdfSource, initial_state: dict[str, float], springs: dict[str, Spring],
                          conventions: SimConventions, closed: dict[str, tuple[float, float, float]],
                          fixed_base: bool = False, *, recorded: RecordedRuns | None = None,
                          sweep_needed: Callable[[MetricResult], str | None] | None = None) -> list[MetricResult]:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -33,7 +32,7 @@ from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import G as GRAVITY, max_stable_friction
-from asset2sim.urdf import UrdfModel, read_urdf
+from asset2sim.urdf import UrdfModel, UrdfSource, model_of
 
 TILT_MARGIN = 2.0
 """Safety factor on the tilt's extra gravity load (dimensionless)."""
@@ -210,7 +209,7 @@ def _task_path(f_state: float, action: str) -> np.ndarray:
     return np.linspace(start, OPEN_TARGET, PATH_SAMPLES)
 
 
-def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overlay,
+def operating_budgets(urdf: UrdfSource, state: dict[str, float], overlay: Overlay,
                       closed: dict[str, tuple[float, float, float]], *, category: str | None,
                       labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
                       free: bool = True, ground: bool = True, free_moving: bool = False, engine: str = "pybullet",
@@ -229,7 +228,7 @@ def operating_budgets(urdf: Path | str, state: dict[str, float], overlay: Overla
         EngineUnavailable; whatever loading ``urdf`` raises.
     """
     lim = limits or GripperLimits()
-    model = read_urdf(urdf, mode="lenient")
+    model = model_of(urdf, mode="lenient")
     mu = ground_friction(model)
     out: dict[str, OperatingBudget] = {}
     with quiet_stdout():

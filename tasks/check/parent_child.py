@@ -7,7 +7,6 @@ joint's parent and child and reports the deepest penetration, margins removed.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 from asset2sim import urdf
 from asset2sim.engines.base import SessionOptions
@@ -24,7 +23,7 @@ __all__ = ["CONTACT_MARGIN", "parent_child_penetration"]
 CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0, "fake": 0.0}
 
 
-def parent_child_penetration(urdf_path: Path | str, initial_state: dict[str, float], engine: str = "pybullet",
+def parent_child_penetration(urdf_path: urdf.UrdfSource, initial_state: dict[str, float], engine: str = "pybullet",
                              conventions: SimConventions | None = None,
                              tolerance: float = CONTAINMENT_TOLERANCE) -> MetricResult:
     """Deepest penetration (mm) of a child link's collision shapes into its
@@ -37,7 +36,7 @@ def parent_child_penetration(urdf_path: Path | str, initial_state: dict[str, flo
     """
     engine = engine if engine in CONTACT_MARGIN else "pybullet"
     margin = CONTACT_MARGIN[engine]
-    model = urdf.read_urdf(urdf_path, mode="lenient")
+    model = urdf.model_of(urdf_path, mode="lenient")
     session = open_session(engine, urdf_path, SessionOptions(initial_state=dict(initial_state), gravity=False, ground=False,
                                                              conventions=conventions or SimConventions()))
     pairs: dict[str, float] = {}

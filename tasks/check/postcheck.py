@@ -22,6 +22,7 @@ from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, r
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
+from asset2sim.urdf import UrdfSource, path_of
 
 
 class _StepRecorder:
@@ -63,15 +64,15 @@ class RestRecording:
     fixed_base: bool = False
     """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
 
-    def matches(self, engine: str, urdf: Path | str, initial_state: dict[str, float],
+    def matches(self, engine: str, urdf: UrdfSource, initial_state: dict[str, float],
                 springs: dict[str, Spring], conventions: SimConventions, fixed_base: bool = False) -> bool:
         """True when this recording is the rest test of exactly that simulation (floats compared exactly)."""
-        return (self.fixed_base == bool(fixed_base) and self.engine == engine and self.urdf == Path(urdf).resolve()
+        return (self.fixed_base == bool(fixed_base) and self.engine == engine and self.urdf == path_of(urdf).resolve()
                 and dict(self.initial_state) == dict(initial_state) and dict(self.springs) == dict(springs)
                 and self.conventions == conventions)
 
 
-def record_rest_test(session: SimSession, conventions: SimConventions, urdf: Path | str,
+def record_rest_test(session: SimSession, conventions: SimConventions, urdf: UrdfSource,
                      initial_state: dict[str, float], springs: dict[str, Spring]) -> RestRecording:
     """Run the SPEC rest test on ``session`` in place, recording every step;
     ``urdf``, ``initial_state`` and ``springs``: the options it was opened with."""
@@ -80,11 +81,11 @@ def record_rest_test(session: SimSession, conventions: SimConventions, urdf: Pat
     return RestRecording(
         trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
         joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
-        engine=session.engine, urdf=Path(urdf).resolve(), initial_state=dict(initial_state), springs=dict(springs),
+        engine=session.engine, urdf=path_of(urdf).resolve(), initial_state=dict(initial_state), springs=dict(springs),
         conventions=conventions, fixed_base=bool(session.options.fixed_base))
 
 
-def measure_rest_test(engine: str, urdf: Path | str, initial_state: dict[str, float], springs: dict[str, Spring],
+def measure_rest_test(engine: str, urdf: UrdfSource, initial_state: dict[str, float], springs: dict[str, Spring],
                       conventions: SimConventions, fixed_base: bool = False) -> tuple[MetricResult, RestRecording]:
     """(penetration in mm, :class:`RestRecording`) of ``urdf`` in a fresh session
     of ``engine`` at ``initial_state`` (the root fixed where ``fixed_base``).
@@ -153,7 +154,7 @@ def springs_of(overlay: Overlay) -> dict[str, Spring]:
             for n, d in overlay.joints.items() if d.stiffness > 0}
 
 
-def run_post_check(urdf_path: Path, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
+def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
                    engine: str = "pybullet", closed: dict[str, tuple[float, float, float]] | None = None, *,
                    escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None) -> PostCheck:
     """Penetration, rest stability, oscillation and sag of the written asset in
@@ -187,7 +188,7 @@ def run_post_check(urdf_path: Path, initial_state: dict[str, float], overlay: Ov
     def run_parity() -> None:
         nonlocal engine_results, parity_done
         if not parity_done:
-            engine_results = parity.evaluate_engines(Path(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
+            engine_results = parity.evaluate_engines(path_of(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
             parity_done = True
 
     nested = parent_child.parent_child_penetration(urdf_path, initial_state, engine, conv)  # the pairs the SPEC's Phi skips

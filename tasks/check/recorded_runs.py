@@ -18,23 +18,19 @@ from asset2sim import atomic, file_memo
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check import robust_rest, sweep
-from asset2sim.urdf import UrdfError, read_urdf
+from asset2sim.urdf import UrdfModel, UrdfSource, model_of, write_urdf
 
 
-def _mesh_identities(urdf: Path) -> list[tuple[str, str] | str]:
-    """(filename as written, sha256 of the bytes) of every mesh file ``urdf`` references, in file order (the
+def _mesh_identities(model: UrdfModel) -> list[tuple[str, str] | str]:
+    """(filename as written, sha256 of the bytes) of every mesh file ``model`` references, in file order (the
     filename alone when unreadable): the same for a candidate in the refine's scratch folder and the output it
     publishes."""
-    try:
-        model = read_urdf(urdf, mode="lenient")
-    except (UrdfError, OSError, ValueError) as exc:
-        return [f"unreadable: {type(exc).__name__}: {exc}"]
     out: list[tuple[str, str] | str] = []
     for link in model.links.values():
         for g in [*link.collisions, *link.visuals]:
             if g.kind != "mesh" or not g.filename:
                 continue
-            p = Path(g.path) if g.path is not None else urdf.parent / str(g.filename)
+            p = Path(g.path) if g.path is not None else Path(model.path or ".").parent / str(g.filename)
             key = str(p.resolve())
             digest = _MESH_DIGESTS.get(key)
             if digest is None:
@@ -53,20 +49,23 @@ def _mesh_identities(urdf: Path) -> list[tuple[str, str] | str]:
 _MESH_DIGESTS: file_memo.FileMemo[str] = file_memo.FileMemo(lambda d: d, max_entries=4096)
 
 
-def input_digest(tier: str, engine: str, urdf: Path | str, initial_state: dict[str, float],
+def input_digest(tier: str, engine: str, urdf: UrdfSource, initial_state: dict[str, float],
                  springs: dict[str, Spring] | None, conventions: SimConventions, fixed_base: bool,
                  config: Any, closed: dict[str, tuple[float, float, float]] | None = None) -> str:
     """SHA-256 (hex) of everything a manipulation tier (``tier``) reads: the
-    engine, the URDF's bytes and its meshes' identities, ``initial_state`` and
+    engine, the URDF (its model as written) and its meshes' identities, ``initial_state`` and
     ``springs`` (order-free), the conventions, the root, the tier's dataclass
     ``config`` and the sweep's ``closed`` ends in order. Floats enter by
-    ``repr`` (exact). Raises OSError when ``urdf`` cannot be read.
+    ``repr`` (exact).
+
+    Raises:
+        UrdfError: ``urdf`` cannot be read.
     """
-    urdf = Path(urdf).resolve()
+    model = model_of(urdf, mode="lenient")
     h = hashlib.sha256()
     h.update(repr((tier, engine, bool(fixed_base))).encode())
-    h.update(urdf.read_bytes())
-    h.update(repr(_mesh_identities(urdf)).encode())
+    h.update(write_urdf(model))
+    h.update(repr(_mesh_identities(model)).encode())
     h.update(repr(sorted((str(k), float(v)) for k, v in initial_state.items())).encode())
     h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference)) for k, s in (springs or {}).items())).encode())
     h.update(conventions.model_dump_json().encode())
@@ -98,7 +97,7 @@ class RecordedRuns:
         self.runs[key] = copy.deepcopy(run)
 
 
-def sweep_run(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],
+def sweep_run(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: sweep.SweepConfig | None = None, *,
               recorded: RecordedRuns | None = None) -> sweep.SweepRun:
@@ -121,7 +120,7 @@ def _recorded(recorded: RecordedRuns | None, simulate, *key_args) -> Any:
     return run
 
 
-def robust_rest_run(engine: str, urdf: Path | str, initial_state: dict[str, float],
+def robust_rest_run(engine: str, urdf: UrdfSource, initial_state: dict[str, float],
                     springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                     config: robust_rest.RobustRestConfig | None = None, fixed_base: bool = False, *,
                     recorded: RecordedRuns | None = None) -> robust_rest.RobustRestRun:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,7 +27,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics, support
 from asset2sim.tasks.geometry.limits import subtrees
-from asset2sim.urdf import read_urdf
+from asset2sim.urdf import UrdfSource, model_of
 
 #: The trials, in order.
 TRIALS: tuple[str, ...] = ("drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudge")
@@ -184,7 +183,7 @@ class RobustRestRun:
     """why the whole metric was skipped (fixed root)"""
 
 
-def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, float],
+def run_robust_rest(engine: str, urdf: UrdfSource, initial_state: dict[str, float],
                     springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                     config: RobustRestConfig | None = None, fixed_base: bool = False) -> RobustRestRun:
     """Every trial of ``config`` in one session of ``engine`` opened as for the
@@ -202,7 +201,7 @@ def run_robust_rest(engine: str, urdf: Path | str, initial_state: dict[str, floa
     session = open_session(engine, urdf, SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}),
                                                         conventions=conv))
     try:
-        rolling = support.rolling_joints(session, subtrees(read_urdf(urdf, mode="lenient")))
+        rolling = support.rolling_joints(session, subtrees(model_of(urdf, mode="lenient")))
         run.trials = run_trials(session, initial_state, conv, cfg, rolling)
     finally:
         session.close()

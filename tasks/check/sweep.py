@@ -6,7 +6,6 @@ clearing re-sweep :func:`_sweep_clearing`): ``docs/design/metrics.md``, "joint_s
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,7 +19,7 @@ from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
-from asset2sim.urdf import UrdfModel, read_urdf
+from asset2sim.urdf import UrdfModel, UrdfSource, model_of
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
 REACH_FRACTION = 0.95
@@ -124,7 +123,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
 DAMPED_SPEED_MARGIN = 2.0
 
 
-def damping_caps(urdf: Path | str, closed: dict[str, tuple[float, float, float]], initial_state: dict[str, float],
+def damping_caps(urdf: UrdfSource, closed: dict[str, tuple[float, float, float]], initial_state: dict[str, float],
                  springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                  config: SweepConfig | None = None) -> dict[str, float]:
     """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
@@ -138,7 +137,7 @@ def damping_caps(urdf: Path | str, closed: dict[str, tuple[float, float, float]]
         EngineUnavailable: PyBullet is not installed; whatever loading ``urdf`` raises.
     """
     cfg = config or SweepConfig()
-    model = read_urdf(urdf)
+    model = model_of(urdf)
     subtrees = joint_subtrees(model)
     caps: dict[str, float] = {}
     with open_session("pybullet", urdf, fixed_root_options(initial_state, conventions, springs)) as session:
@@ -299,7 +298,7 @@ def _clearing_ends(first: JointSweep) -> tuple[tuple[float, str], ...]:
     return ((1.0, "open"),)
 
 
-def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, float, float]],
+def run_sweep(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
     """Sweep every joint of ``closed`` (joint -> (q_closed, direction,
@@ -310,7 +309,7 @@ def run_sweep(engine: str, urdf: Path | str, closed: dict[str, tuple[float, floa
     """
     cfg = config or SweepConfig()
     conv = conventions or SimConventions()
-    model = read_urdf(urdf)
+    model = model_of(urdf)
     subtrees = joint_subtrees(model)
     run = SweepRun(engine)
     springs = dict(springs or {})

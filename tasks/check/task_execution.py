@@ -14,7 +14,6 @@ and peak operating force (torque / lever).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -30,7 +29,7 @@ from asset2sim.tasks.check.gripper_motion import Motion, TaskConfig, move_joint
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, check_action
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.interpret.mounting import session_root_options
-from asset2sim.urdf import UrdfError, UrdfModel, read_urdf
+from asset2sim.urdf import UrdfError, UrdfModel, UrdfSource, model_of
 
 #: Opening fraction a close task starts from when the delivered state is already closed.
 FAR_SIDE_OPEN = OPEN_TARGET
@@ -199,7 +198,7 @@ def _task_failure(m: Motion, slid: bool, tipped: bool, ok_reached: bool, lim: Gr
     return failure
 
 
-def run_task(engine: str, urdf: Path | str, joints: dict[str, tuple[float, float, float]], *,
+def run_task(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float, float]], *,
              actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
              initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
              conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
@@ -216,7 +215,7 @@ def run_task(engine: str, urdf: Path | str, joints: dict[str, tuple[float, float
     cfg = config or TaskConfig()
     conv = conventions or SimConventions()
     try:
-        model = read_urdf(urdf, mode="lenient")
+        model = model_of(urdf, mode="lenient")
     except (UrdfError, OSError):
         model = None
     run = TaskRun(engine=engine, root="fixed (mounted)" if fixed_base else "free (on the ground)", task=task, config=cfg)

@@ -9,7 +9,6 @@ more than a real force (:func:`relieve`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
@@ -22,6 +21,7 @@ from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import spring_expected
+from asset2sim.urdf import UrdfSource
 
 #: The metrics this tier adds to the post-check.
 TASK_METRICS: tuple[str, ...] = ("task_execution", "operating_force")
@@ -60,13 +60,13 @@ def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str,
     return hold_required_by_label(named, springs, category, free_moving=free_moving, spring_requested=spring_requested)
 
 
-def task_spec_for(text: str, urdf: Path | str, asset: AssetDescription, category: str | None,
+def task_spec_for(text: str, urdf: UrdfSource, asset: AssetDescription, category: str | None,
                   task_joints: list[str], state: dict[str, float] | None = None,
                   closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
     """The ``TaskSpec`` of ``text`` on the written asset ``urdf`` (labels from
     ``asset``); with ``state`` and ``closed`` (joint -> (q_closed, direction,
     open range)) narrowed to the joints it has work on."""
-    _, joints = parse_urdf(Path(urdf))
+    _, joints = parse_urdf(urdf)
     semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
     spec = parse_task(text, joints, semantics, category, task_joints)
     if state is not None and closed:
@@ -75,7 +75,7 @@ def task_spec_for(text: str, urdf: Path | str, asset: AssetDescription, category
     return spec
 
 
-def run_task_tier(engine: str, urdf: Path | str, state: dict[str, float], springs: dict[str, Spring],
+def run_task_tier(engine: str, urdf: UrdfSource, state: dict[str, float], springs: dict[str, Spring],
                   conventions: SimConventions, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
                   asset: AssetDescription, category: str | None, *, fixed_base: bool, free_moving: bool,
                   spring_requested: bool) -> list[MetricResult]:
@@ -108,7 +108,7 @@ class OperatingLimits:
     notes: list[str] = field(default_factory=list)
 
 
-def operating_limits(urdf: Path | str, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
+def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
                      geometry: dict[str, LinkGeometry], closed: dict[str, tuple[float, float, float]] | None, *,
                      category: str | None, task: str | None, free_moving: bool,
                      conventions: SimConventions | None = None, joints: list[str] | None = None) -> OperatingLimits:

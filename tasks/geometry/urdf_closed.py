@@ -14,7 +14,6 @@ import hashlib
 import os
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -24,8 +23,8 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents
-from asset2sim.tasks.ingest.extract import extract_asset
-from asset2sim.urdf import UrdfError, clone_model, read_urdf, write_urdf
+from asset2sim.tasks.ingest.extract import describe_model, extract_asset
+from asset2sim.urdf import UrdfError, UrdfModel, UrdfSource, model_of, path_of, write_urdf
 
 
 @dataclass
@@ -39,14 +38,15 @@ class UrdfClosed:
 
 
 @contextmanager
-def closed_session(urdf: Path) -> Iterator[UrdfClosed]:
-    """Closed ends of every movable joint of ``urdf`` (:func:`closed_positions` with its defaults) in a
+def closed_session(urdf: UrdfSource) -> Iterator[UrdfClosed]:
+    """Closed ends of every movable joint of ``urdf`` (a file, or a model in memory:
+    :func:`~asset2sim.tasks.ingest.extract.describe_model`) (:func:`closed_positions` with its defaults) in a
     fresh fixed-base, gravity-free PyBullet session without ground, open inside the ``with`` block.
 
     Raises:
         asset2sim.tasks.ingest.extract.AssetError: ``urdf`` cannot be read; and whatever the engine raises.
     """
-    desc = extract_asset(urdf)
+    desc = describe_model(urdf) if isinstance(urdf, UrdfModel) else extract_asset(urdf)
     s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
     try:
         try:
@@ -67,7 +67,7 @@ class ClosedMeasurement:
     extents: np.ndarray  # (3,) m, the object's box with every joint at its closed end (geometry_extents)
 
 
-def measure_closed_ends(urdf: Path) -> ClosedMeasurement:
+def measure_closed_ends(urdf: UrdfSource) -> ClosedMeasurement:
     """The closed ends of ``urdf`` (:func:`closed_session`) and the object's extents there, measured once
     per geometry (not joint dynamics: the measurement is kinematic) in this process (:data:`_MEASURED`;
     each caller gets its own copy).
@@ -88,7 +88,7 @@ def measure_closed_ends(urdf: Path) -> ClosedMeasurement:
     return out
 
 
-def measure_closed(urdf: Path) -> dict[str, ClosedState]:
+def measure_closed(urdf: UrdfSource) -> dict[str, ClosedState]:
     """joint -> closed end of ``urdf`` (:func:`measure_closed_ends`), the joints with an opening range > 0.
 
     Raises:
@@ -101,18 +101,18 @@ def measure_closed(urdf: Path) -> dict[str, ClosedState]:
 _MEASURED: file_memo.FileMemo[ClosedMeasurement] = file_memo.FileMemo(copy.deepcopy, max_entries=16)
 
 
-def _geometry_key(urdf: Path) -> tuple[str | None, tuple]:
+def _geometry_key(urdf: UrdfSource) -> tuple[str | None, tuple]:
     """(digest of the URDF's folder and of the model without joint ``<dynamics>``, identities of its mesh
     files), or (None, ()) when the URDF cannot be read."""
     try:
-        model = clone_model(read_urdf(urdf))
+        model = model_of(urdf)
     except (UrdfError, OSError):
         return None, ()
     meshes = sorted({str(g.path) for link in model.links.values() for g in (*link.collisions, *link.visuals)
                      if g.kind == "mesh" and g.path is not None})
     for j in model.joints:
         j.dynamics = None
-    h = hashlib.sha256(os.path.abspath(Path(urdf).parent).encode() + b"\0" + write_urdf(model))
+    h = hashlib.sha256(os.path.abspath(path_of(urdf).parent).encode() + b"\0" + write_urdf(model))
     return h.hexdigest(), file_memo.identities(meshes)
 
 

@@ -29,7 +29,7 @@ from asset2sim.schemas.asset import (
 from asset2sim.tasks.ingest import validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
-from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, parse_urdf_bytes
+from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
 
 if TYPE_CHECKING:  # pragma: no cover
     from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, ValidationResult
@@ -107,7 +107,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     except UrdfError as exc:
         raise AssetError(f"{urdf}: the validated URDF could not be read: {exc}") from exc
     assert robot is not None
-    links = [_link(ln, result, urdf) for ln in robot.links.values()]
+    links = [_link(ln, result.mesh_paths, result.semantics, result.replace_inertials, urdf) for ln in robot.links.values()]
     joints = [_joint(jt) for jt in robot.joints]
     children = {j.child for j in joints}
     roots = [ln.name for ln in links if ln.name not in children]
@@ -125,19 +125,42 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     return desc, list(result.findings)
 
 
-def _link(ln: UrdfLink, result: "ValidationResult", urdf: Path) -> LinkDesc:
-    """The description of one link: geometry, semantics and the given inertial (None when replaced)."""
+def _link(ln: UrdfLink, mesh_paths: dict[str, Path], semantics: dict, replace: set[str], urdf: Path) -> LinkDesc:
+    """The description of one link: geometry (mesh filename -> ``mesh_paths``), semantics (link -> (joint
+    kind, label)) and the given inertial (None for the links in ``replace``)."""
     where = f"{urdf.name}: link {ln.name!r}"
-    visuals = [g for v in ln.visuals if (g := _geometry(v, "visual", result.mesh_paths, where))]
-    collisions = [g for c in ln.collisions if (g := _geometry(c, "collision", result.mesh_paths, where))]
+    visuals = [g for v in ln.visuals if (g := _geometry(v, "visual", mesh_paths, where))]
+    collisions = [g for c in ln.collisions if (g := _geometry(c, "collision", mesh_paths, where))]
     given = None
-    if ln.inertial is not None and ln.inertial.mass is not None and ln.name not in result.replace_inertials:
+    if ln.inertial is not None and ln.inertial.mass is not None and ln.name not in replace:
         I = np.asarray(ln.inertial.inertia if ln.inertial.inertia is not None else np.zeros((3, 3)), float)
         given = GivenInertial(mass=float(ln.inertial.mass), origin=_origin(ln.inertial.origin),
                               inertia=tuple(tuple(float(x) for x in row) for row in I))  # type: ignore[arg-type]
-    kind, label = result.semantics.get(ln.name, (None, None))
+    kind, label = semantics.get(ln.name, (None, None))
     return LinkDesc(name=ln.name, visuals=visuals, collisions=collisions, semantic_label=label, semantic_joint=kind,
                     given_inertial=given)
+
+
+def describe_model(model: UrdfModel) -> AssetDescription:
+    """The description of a URDF model held in memory (a refine's candidate, its
+    ``path`` the scratch file engines load), as :func:`extract_asset` gives it for
+    that file: geometry and joints of ``model`` (mesh paths as the model resolved
+    them, lengths in its units, angles in radians); no semantic labels, category
+    or input hash (a file's own come from its folder, which a model has not).
+
+    Raises:
+        AssetError: a mesh the model did not resolve, or not exactly one root link.
+    """
+    urdf = Path(model.path or f"{model.name}.urdf")
+    meshes = {str(g.filename): Path(g.path) for ln in model.links.values() for g in (*ln.visuals, *ln.collisions)
+              if g.kind == "mesh" and g.path is not None}
+    links = [_link(ln, meshes, {}, set(), urdf) for ln in model.links.values()]
+    children = {j.child for j in model.joints}
+    roots = [ln.name for ln in links if ln.name not in children]
+    if len(roots) != 1:
+        raise AssetError(f"{urdf}: expected exactly one root link, found {roots or 'none'}")
+    return AssetDescription(asset_id=urdf.parent.name, source_dir=urdf.parent, urdf_path=urdf, robot_name=model.name or urdf.stem,
+                            links=links, joints=[_joint(j) for j in model.joints], root_link=roots[0])
 
 
 def _float_or_none(obj, attr: str) -> float | None:

@@ -16,9 +16,10 @@ from scipy.spatial import ConvexHull, QhullError
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble import write
+from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.state.clearance import link_pieces, write_piece_overrides
-from asset2sim.urdf import UrdfModel, read_urdf
+from asset2sim.urdf import UrdfModel
 
 __all__ = ["CONTACT_BAND", "FLOOR_GAP", "GROUND_CLEARANCE", "SUPPORT_AREA", "THIN_OBJECT", "GroundClearance", "apply_ground_clearance", "floor_limited_state",
            "floor_stops", "ground_clearance"]
@@ -135,27 +136,28 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     return rep
 
 
-def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, out_dir: Path, urdf: Path, state: dict[str, float],
+def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, ws: Workspace, state: dict[str, float],
                            overrides: dict, closed: dict[str, tuple[float, float, float]],
                            root_rotation=None) -> tuple[dict[str, float], dict, list[str], list[str]]:
-    """Refine's step after the state search (nothing for a mounted asset): write
-    the output with ``overrides``, apply :func:`floor_limited_state` and
-    :func:`ground_clearance`, write again when anything changed. ``closed``:
-    joint -> (q_closed, direction, open_range), rad or m.
+    """Refine's step after the state search (nothing for a mounted asset): load
+    the candidate with ``overrides`` into ``ws``, apply :func:`floor_limited_state`
+    and :func:`ground_clearance` to its model, load it again when anything
+    changed. ``closed``: joint -> (q_closed, direction, open_range), rad or m.
 
-    Returns (state, collision overrides, state notes, collision notes).
+    Returns (state, collision overrides (``overrides`` itself when unchanged),
+    state notes, collision notes).
     Raises OSError: a collision file cannot be read or written.
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
         return state, overrides, [], []
-    write.write_output(asset, overlay, out_dir, state, copy=False, collision_overrides=overrides, root_rotation=root_rotation)
-    new_state, state_notes = floor_limited_state(read_urdf(urdf), urdf, state, closed)
-    rep = ground_clearance(read_urdf(urdf), urdf, new_state)
+    urdf = ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+    new_state, state_notes = floor_limited_state(ws.model(), urdf, state, closed)
+    rep = ground_clearance(ws.model(), urdf, new_state)
     new = overrides
     if rep.pieces:
-        new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, out_dir, write.collision_folder(asset), "ground")}
+        new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, ws.root, write.collision_folder(asset), "ground")}
     if rep.pieces or state_notes:
-        write.write_output(asset, overlay, out_dir, new_state, copy=False, collision_overrides=new, root_rotation=root_rotation)
+        ws.load(Candidate(asset, overlay, new_state, new, root_rotation))
     return new_state, new, state_notes, rep.notes
 
 

@@ -279,3 +279,16 @@ def test_clone_is_an_independent_copy_that_keeps_shared_objects_shared(tmp_path)
         twin.joints[0].origin[0, 3] += 1.0
         twin.links[next(iter(twin.links))].collisions.clear()
         assert twin != model and urdf.write_urdf(model) == urdf.write_urdf(copy.deepcopy(model)), path
+
+
+def test_a_source_is_a_file_or_a_model_in_memory(tmp_path):
+    """model_of gives a copy of a model (the caller's stays as it was) or
+    reads a file; path_of gives the file an engine loads."""
+    from asset2sim.engines.contract_asset import write_contract_asset
+
+    a = write_contract_asset(tmp_path / "a", lid_angle=0.4)
+    read = urdf.read_urdf(a.urdf)
+    copy = urdf.model_of(read)
+    copy.joints[0].name = "renamed"
+    assert read.joints[0].name != "renamed" and urdf.model_of(a.urdf) == read
+    assert urdf.path_of(read) == a.urdf == urdf.path_of(str(a.urdf))

@@ -141,3 +141,28 @@ def test_suitcase_buttons_close_unpressed():
         for j in ("joint_0", "joint_1"):
             assert m.closed[j].q_closed == 0.0 and m.closed[j].open_range == pytest.approx(0.012, abs=1e-4)
         assert m.closed["joint_2"].compactness_ratio > 1.5  # the lid: found from the geometry
+
+
+@needs_shared
+def test_a_model_in_memory_is_described_and_closed_as_its_file(tmp_path):
+    """A refine hands its candidate's model to the closed-end measurement
+    (no file read back): describe_model gives extract_asset's geometry and
+    joints for the same URDF (labels aside), and the closed ends measured from
+    the model equal those measured from the file, memo off."""
+    from asset2sim import urdf as urdf_mod
+    from asset2sim.tasks.geometry import urdf_closed
+    from asset2sim.tasks.ingest.extract import describe_model
+
+    urdf = SHARED / "101668" / "mobility.urdf"
+    from_file = extract_asset(urdf)
+    model = urdf_mod.read_urdf(urdf)
+    described = describe_model(model)
+    assert described.joints == from_file.joints and described.root_link == from_file.root_link
+    assert [(ln.name, ln.visuals, ln.collisions) for ln in described.links] == \
+        [(ln.name, ln.visuals, ln.collisions) for ln in from_file.links]
+    with urdf_closed.closed_session(urdf) as by_file, urdf_closed.closed_session(model) as by_model:
+        assert by_model.closed == by_file.closed and by_model.closed["joint_2"].open_range > 0
+    nameless = urdf_mod.clone_model(model)
+    nameless.path = None
+    with pytest.raises(urdf_mod.UrdfError, match="no file an engine could load"):
+        urdf_mod.path_of(nameless)

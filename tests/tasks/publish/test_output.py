@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import traceback
 from pathlib import Path
 
 import pytest
 
-from asset2sim import demo_assets, urdf
+from asset2sim import demo_assets, safexml, urdf
 from asset2sim.output_paths import OutputError
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
@@ -25,12 +26,15 @@ CUBE_OBJ = "".join(f"v {x} {y} {z}\n" for x in (0, 0.01) for y in (0, 0.01) for 
 @pytest.fixture(scope="module")
 def refined(demo_root, tmp_path_factory):
     """box_lid refined (its damping escalates once: several candidates) with every
-    call of the writer and the output folder's content when publish began recorded."""
+    call of the writer, the output folder's content when publish began and the
+    code that read a file of the workspace (the memos of read URDFs and
+    extracted assets off, so that every read reaches the file) recorded."""
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "box_lid")
     out = tmp_path_factory.mktemp("published") / "out"
     calls: list[Path] = []
     at_publish: list[list[str]] = []
-    real_write, real_publish = write.write_output, output.publish
+    scratch_readers: list[Path] = []
+    real_write, real_publish, real_read = write.write_output, output.publish, safexml.read_xml_file
 
     def counting_write(asset, overlay, out_dir, *a, **k):
         calls.append(Path(out_dir).resolve())
@@ -40,15 +44,28 @@ def refined(demo_root, tmp_path_factory):
         at_publish.append(sorted(p.name for p in Path(out_dir).iterdir()))
         return real_publish(candidate, workspace, out_dir)
 
+    def watching_read(path, *a, **k):
+        if "asset2sim-candidates-" in str(path):  # the reader: the first frame outside the XML and URDF readers
+            frames = [Path(f.filename) for f in traceback.extract_stack()[:-1]]
+            scratch_readers.append(next(f for f in reversed(frames) if f.name not in XML_READERS))
+        return real_read(path, *a, **k)
+
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(write, "write_output", counting_write)
         mp.setattr(output, "publish", watching_publish)
+        mp.setattr(safexml, "read_xml_file", watching_read)
+        mp.setattr(urdf._READ_MEMO, "get", lambda key: None)
+        mp.setattr(extract._EXTRACT_MEMO, "get", lambda key: None)
         res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
-    return res, out.resolve(), calls, at_publish
+    return res, out.resolve(), calls, at_publish, scratch_readers
+
+
+#: Modules that read XML on a caller's behalf (the caller is the reader that counts).
+XML_READERS = {"safexml.py", "urdf.py", "loading.py"}
 
 
 def test_the_output_folder_is_written_once_by_publish(refined):
-    res, out, calls, at_publish = refined
+    res, out, calls, at_publish, _ = refined
     into_output = [c for c in calls if c == out or out in c.parents]
     elsewhere = {c for c in calls if c not in into_output}
     assert len(into_output) == 1
@@ -62,8 +79,15 @@ def test_the_output_folder_is_written_once_by_publish(refined):
     assert res.report.failure_mode == "none" and (out / "mobility.urdf").is_file()
 
 
+def test_only_engines_read_the_workspace_the_stages_take_the_candidates_model(refined):
+    *_, readers = refined
+    assert readers, "the engines load every candidate from the workspace"
+    not_engines = sorted({str(r) for r in readers if "engines" not in r.parts})
+    assert not not_engines, f"stages read a file the refine wrote: {not_engines}"
+
+
 def test_publish_copies_the_repaired_pieces_and_refuses_names_that_leave(refined, demo_root, tmp_path):
-    res, out, _, _ = refined
+    res, out, _, _, _ = refined
     asset, _ = extract.extract_asset_checked(demo_root / "box_lid")
     state = {k: float(v) for k, v in res.report.initial_joint_positions.items()}
     link = next(ln for ln in asset.links if any(g.kind == "mesh" for g in ln.collisions))
@@ -86,7 +110,7 @@ def test_publish_copies_the_repaired_pieces_and_refuses_names_that_leave(refined
 
 
 def test_a_candidate_is_frozen_and_the_workspace_model_is_the_file_as_read(refined, demo_root):
-    res, out, _, _ = refined
+    res, out, _, _, _ = refined
     asset, _ = extract.extract_asset_checked(demo_root / "box_lid")
     state = dict(res.report.initial_joint_positions)
     cand = Candidate(asset, res.overlay, state)
