@@ -233,17 +233,10 @@ class NotRegularFileError(OSError):
     (``errno`` EINVAL, or EISDIR for a folder)."""
 
 
-def _open_regular(path: Path | str, follow_symlinks: bool = True) -> int:
-    """A read-only descriptor of ``path``, checked on the descriptor to be a
-    regular file (``O_NONBLOCK``: a FIFO cannot block the open).
-
-    Raises:
-        NotRegularFileError: not a regular file.
-        OSError: it cannot be opened (``ELOOP``: a symlink, ``follow_symlinks`` False).
-    """
+def open_regular(path: Path | str) -> BinaryIO:
+    """``path`` opened for binary reading, checked on the descriptor to be a regular file
+    (``O_NONBLOCK``: a FIFO cannot block the open). Raises NotRegularFileError, OSError."""
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
-    if not follow_symlinks:
-        flags |= getattr(os, "O_NOFOLLOW", 0)
     fd = os.open(str(path), flags)
     try:
         mode = os.fstat(fd).st_mode
@@ -253,24 +246,17 @@ def _open_regular(path: Path | str, follow_symlinks: bool = True) -> int:
     except BaseException:
         os.close(fd)
         raise
-    return fd
+    return os.fdopen(fd, "rb")
 
 
-def open_regular(path: Path | str) -> BinaryIO:
-    """``path`` opened for binary reading once :func:`_open_regular` checked it."""
-    return os.fdopen(_open_regular(path), "rb")
-
-
-def read_regular(path: Path | str, max_bytes: int | None = None, *, follow_symlinks: bool = True) -> bytes:
-    """The bytes of ``path``, which must be a regular file (checked before
-    reading), at most ``max_bytes``; ``follow_symlinks`` False refuses a symlink.
+def read_regular(path: Path | str, max_bytes: int | None = None) -> bytes:
+    """The bytes of ``path``, which must be a regular file (checked before reading), at most ``max_bytes``.
 
     Raises:
         NotRegularFileError: not a regular file.
-        OSError: unreadable, a symlink (``ELOOP``) or over ``max_bytes`` (``EFBIG``).
+        OSError: unreadable or over ``max_bytes`` (``EFBIG``).
     """
-    fd = _open_regular(path, follow_symlinks)
-    with os.fdopen(fd, "rb") as fh:
+    with open_regular(path) as fh:
         if max_bytes is None:
             return fh.read()
         data = fh.read(max_bytes + 1)
@@ -279,24 +265,19 @@ def read_regular(path: Path | str, max_bytes: int | None = None, *, follow_symli
     return data
 
 
-def sha256_file(path: Path | str, chunk: int = 1 << 20) -> str:
+def sha256_file(path: Path | str) -> str:
     """Hex sha256 of a regular file's bytes (NotRegularFileError, OSError)."""
     h = hashlib.sha256()
-    with os.fdopen(_open_regular(path), "rb") as fh:
-        while True:
-            block = fh.read(chunk)
-            if not block:
-                break
+    with open_regular(path) as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
 
 
-def sha256_files(paths: Iterable[Path | str], root: Path | str | None = None) -> str:
-    """Hex sha256 over several files' names (relative to ``root`` when given)
-    and contents, in sorted order."""
+def sha256_files(paths: Iterable[Path | str]) -> str:
+    """Hex sha256 over several files' names and contents, in sorted order."""
     h = hashlib.sha256()
-    items = {(str(p.relative_to(root)) if root is not None else str(p), p) for p in map(Path, paths)}
-    for name, p in sorted(items):
+    for name, p in sorted({(str(p), p) for p in map(Path, paths)}):
         h.update(name.encode())
         h.update(b"\0")
         h.update(sha256_file(p).encode())

@@ -24,17 +24,8 @@ from pathlib import Path, PurePosixPath
 from typing import Any, Iterable, Iterator
 
 from asset2sim import atomic
-from asset2sim.output_paths import (
-    MARKER_NAME,
-    RECORD_NAME,
-    OutputError,
-    _entries,
-    _prune_empty,
-    _remove_with_temps,
-    _safe_rel,
-    _within,
-    check_location,
-)
+from asset2sim.output_paths import (MARKER_NAME, RECORD_NAME, OutputError, _entries, _prune_empty, _remove_with_temps, _safe_rel,
+                                    _within, check_location)
 
 #: The files and folders of an output folder (the SPEC's contract and the extras).
 URDF_NAME = "mobility.urdf"

@@ -11,13 +11,14 @@ dropped; namespaces are not processed.
 from __future__ import annotations
 
 import os
-import stat
 import xml.etree.ElementTree as ET
 import xml.parsers.expat as expat
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from asset2sim import atomic
 
 __all__ = [
     "XMLLimits", "SourceElement", "SafeXMLError", "XMLTooLarge", "XMLTokenTooLarge", "XMLTooDeep", "XMLTooManyElements",
@@ -128,10 +129,6 @@ def _longest_run_without_markup(data: bytes) -> tuple[int, int]:
     return best, best_at
 
 
-def _line_of(data: bytes, offset: int) -> int:
-    return data.count(b"\n", 0, offset) + 1
-
-
 class _Abort(Exception):
     """Carries a SafeXMLError out of expat's callbacks unchanged."""
 
@@ -171,7 +168,7 @@ def _checked_bytes(data: bytes, source: str, lim: XMLLimits) -> bytes:
     run, at = _longest_run_without_markup(data)
     if run > lim.max_token_bytes:
         raise XMLTokenTooLarge(f"a token of {run} bytes (starting at byte {at}) > limit {lim.max_token_bytes}",
-                               source=source, line=_line_of(data, at))
+                               source=source, line=data.count(b"\n", 0, at) + 1)
     return data
 
 
@@ -262,32 +259,23 @@ def read_xml_file(path: Path | str, limits: XMLLimits | None = None) -> bytes:
     """
     lim = limits or DEFAULT_LIMITS
     src = str(path)
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        fd = os.open(src, flags)
+        fh = atomic.open_regular(src)
+    except atomic.NotRegularFileError:
+        raise XMLNotAFile("not a regular file", source=src) from None
     except OSError as exc:
         raise XMLNotAFile(f"cannot open: {exc.strerror or exc}", source=src) from None
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise XMLNotAFile("not a regular file", source=src)
-        if st.st_size > lim.max_bytes:
-            raise XMLTooLarge(f"{st.st_size} bytes > limit {lim.max_bytes}", source=src)
-        chunks = []
-        total = 0
-        while total <= lim.max_bytes:
-            block = os.read(fd, min(1 << 20, lim.max_bytes + 1 - total))
-            if not block:
-                break
-            chunks.append(block)
-            total += len(block)
-        if total > lim.max_bytes:
-            raise XMLTooLarge(f"more than {lim.max_bytes} bytes", source=src)
-        return b"".join(chunks)
-    except OSError as exc:
-        raise XMLNotAFile(f"cannot read: {exc.strerror or exc}", source=src) from None
-    finally:
-        os.close(fd)
+    with fh:
+        try:
+            size = os.fstat(fh.fileno()).st_size
+            if size > lim.max_bytes:
+                raise XMLTooLarge(f"{size} bytes > limit {lim.max_bytes}", source=src)
+            data = fh.read(lim.max_bytes + 1)
+        except OSError as exc:
+            raise XMLNotAFile(f"cannot read: {exc.strerror or exc}", source=src) from None
+    if len(data) > lim.max_bytes:
+        raise XMLTooLarge(f"more than {lim.max_bytes} bytes", source=src)
+    return data
 
 
 def parse_xml_file(path: Path | str, limits: XMLLimits | None = None) -> SourceElement:

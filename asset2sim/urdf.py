@@ -1070,11 +1070,6 @@ def _num_or_none(out: _Out, v: float | None) -> str | None:
     return None if v is None else out.fmt(v)
 
 
-def _write_limit(out: _Out, depth: int, lim: UrdfLimit) -> None:
-    keys = ("lower", "upper", "effort", "velocity") if out.style.partnet_order else ("effort", "velocity", "lower", "upper")
-    out.leaf(depth, "limit", tuple((k, _num_or_none(out, getattr(lim, k))) for k in keys))
-
-
 def _write_joint(out: _Out, depth: int, j: UrdfJoint) -> None:
     def body(d: int) -> None:
         if out.style.partnet_order:
@@ -1090,7 +1085,8 @@ def _write_joint(out: _Out, depth: int, j: UrdfJoint) -> None:
             if j.axis_xyz is not None:
                 out.leaf(d, "axis", (("xyz", out.vec(j.axis_xyz)),))
         if j.limit is not None:
-            _write_limit(out, d, j.limit)
+            keys = ("lower", "upper", "effort", "velocity") if out.style.partnet_order else ("effort", "velocity", "lower", "upper")
+            out.leaf(d, "limit", tuple((k, _num_or_none(out, getattr(j.limit, k))) for k in keys))
         if j.dynamics is not None:
             out.leaf(d, "dynamics", (("damping", _num_or_none(out, j.dynamics.damping)),
                                      ("friction", _num_or_none(out, j.dynamics.friction))))

@@ -296,9 +296,12 @@ def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]
 #: The Parquet schema of a row, derived from :class:`~asset2sim.schemas.catalog.CatalogRow`.
 _schema = arrow_schema
 
-#: The file a run's partition is compacted into (a name no asset id can take:
-#: ids start with a letter or digit).
-COMPACTED_NAME = "_compacted.parquet"
+#: The file a run's partition is compacted into: a name no asset id can take (ids have no ``@``) and
+#: that readers do not skip as hidden (pandas, pyarrow and Spark skip names starting with ``_`` or ``.``).
+COMPACTED_NAME = "rows@compacted.parquet"
+#: The compacted file's name before version 3 of the row schema (hidden from pandas and pyarrow); read,
+#: and replaced by :data:`COMPACTED_NAME` at the run's next compaction.
+LEGACY_COMPACTED_NAME = "_compacted.parquet"
 RUN_INFO_NAME = "_run.json"
 
 _PART_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
@@ -331,7 +334,7 @@ class _RunFiles:
 
     def add(self, name: str, info) -> None:
         """Record file ``info`` named ``name`` when it is the compacted file or a row file."""
-        if name == COMPACTED_NAME:
+        if name == COMPACTED_NAME or (name == LEGACY_COMPACTED_NAME and self.compacted is None):
             self.compacted = info
         elif name.endswith(".parquet") and _PART_RE.match(name):
             self.loose[name[: -len(".parquet")]] = info
@@ -341,12 +344,15 @@ class ResultCatalog:
     """The Parquet result catalog under ``root`` (a local folder or a URI such
     as ``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)::
 
-        <root>/dataset=<name>/run=<run_id>/<asset_id>.parquet   one row, while the run is on
-        <root>/dataset=<name>/run=<run_id>/_compacted.parquet   all rows, once the run ended
-        <root>/dataset=<name>/run=<run_id>/_run.json            run metadata
+        <root>/dataset=<name>/run=<run_id>/<asset_id>.parquet        one row, while the run is on
+        <root>/dataset=<name>/run=<run_id>/rows@compacted.parquet    all rows, once the run ended
+        <root>/dataset=<name>/run=<run_id>/_run.json                 run metadata
 
-    A row file beside the compacted file replaces the compacted row of its
-    asset; files of older schema versions read with the newer columns null.
+    Every row lies in exactly one data file, so ``pandas.read_parquet(root)``,
+    ``pyarrow.dataset.dataset(root, partitioning="hive")`` and duckdb over
+    ``root/**/*.parquet`` read each row once: a row written after compaction
+    is taken out of the compacted file. Files of older schema versions read
+    with the newer columns null.
     """
 
     def __init__(self, root: Path | str):
@@ -389,7 +395,22 @@ class ResultCatalog:
         table = pa.Table.from_pydict(values, schema=_schema(with_version=True))
         path = f"{self._run_path(dataset, run)}/{aid}.parquet"
         catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
+        self._drop_compacted_row(dataset, run, aid)  # the row file holds it now: each row in one file
         return Path(path) if self.location.local else self.location.display(path)
+
+    def _drop_compacted_row(self, dataset: str, run: str, asset_id: str) -> bool:
+        """Rewrite the run's compacted file (atomically) without the row of ``asset_id``; False when it holds none."""
+        import pyarrow.compute as pc
+
+        compacted = self._run_files(dataset, run).compacted
+        if compacted is None:
+            return False
+        table = self._read_files([compacted.path])
+        keep = pc.invert(pc.equal(table["asset_id"], asset_id))
+        if not table.num_rows or pc.all(keep).as_py():
+            return False
+        catalog_fs.write_bytes(self.location, compacted.path, _parquet_bytes(table.filter(keep)))
+        return True
 
     def write_run_info(self, dataset: str, run: str, info: dict[str, Any]) -> Path | str:
         """Write the run's metadata ``_run.json`` atomically (replacing it)."""
@@ -439,15 +460,7 @@ class ResultCatalog:
         removed = False
         if asset_id in (files.loose or {}):
             removed = catalog_fs.delete_file(self.location, files.loose[asset_id].path)
-        if files.compacted is not None:
-            import pyarrow.compute as pc
-
-            table = self._read_files([files.compacted.path])
-            keep = pc.invert(pc.equal(table["asset_id"], asset_id))
-            if table.num_rows and not pc.all(keep).as_py():
-                catalog_fs.write_bytes(self.location, files.compacted.path, _parquet_bytes(table.filter(keep)))
-                removed = True
-        return removed
+        return self._drop_compacted_row(dataset, run, asset_id) or removed
 
     def compact(self, dataset: str, run: str) -> Compaction:
         """Fold the run's row files into its compacted file (sorted by asset
@@ -463,25 +476,34 @@ class ResultCatalog:
         t0 = time.perf_counter()
         files = self._run_files(dataset, run)
         loose = dict(files.loose or {})
-        if not loose:
+        legacy = files.compacted is not None and files.compacted.base_name == LEGACY_COMPACTED_NAME
+        if not loose and not legacy:
             rows = 0 if files.compacted is None else self._read_files([files.compacted.path], ["asset_id"]).num_rows
             size = 0 if files.compacted is None else int(files.compacted.size or 0)
             return Compaction(dataset, run, rows, 0, size, time.perf_counter() - t0)
-        new = self._read_files([info.path for info in loose.values()])
+        new = self._read_files([info.path for info in loose.values()]) if loose else None
         if files.compacted is not None:
             old = self._read_files([files.compacted.path])
-            old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose)))))
-            new = pa.concat_tables([old, new])
+            old = old.filter(pc.invert(pc.is_in(old["asset_id"], value_set=pa.array(sorted(loose), pa.string()))))
+            new = old if new is None else pa.concat_tables([old, new])
         new = new.sort_by("asset_id")
         data = _parquet_bytes(new)
         path = f"{self._run_path(dataset, run)}/{COMPACTED_NAME}"
         catalog_fs.write_bytes(self.location, path, data)
-        removed = 0
+        if legacy:
+            catalog_fs.delete_file(self.location, files.compacted.path)
+        removed, changed = 0, []
         now = {i.base_name: i for i in catalog_fs.list_files(self.location, self._run_path(dataset, run))}
-        for info in loose.values():
+        for aid, info in loose.items():
             cur = now.get(info.base_name)
             if cur is not None and cur.size == info.size and cur.mtime == info.mtime:
                 removed += bool(catalog_fs.delete_file(self.location, info.path))
+            elif cur is not None:  # rewritten meanwhile: its row file holds the row, the compacted file must not
+                changed.append(aid)
+        if changed:
+            new = new.filter(pc.invert(pc.is_in(new["asset_id"], value_set=pa.array(sorted(changed), pa.string()))))
+            data = _parquet_bytes(new)
+            catalog_fs.write_bytes(self.location, path, data)
         return Compaction(dataset, run, new.num_rows, removed, len(data), time.perf_counter() - t0)
 
     # ----------------------------------------------------------------- reading

@@ -86,10 +86,14 @@ class RunComparison(BaseModel):
     metrics: list[MetricDrift] = Field(default_factory=list)
     exceeded: bool = False
     reasons: list[str] = Field(default_factory=list)
+    nothing_done: bool = False
+    """The run reused every asset's earlier result: not compared, no drift recorded."""
 
     @property
     def status(self) -> str:
-        """``no_previous_run``, ``regressed`` (a limit exceeded) or ``ok``."""
+        """``nothing_done``, ``no_previous_run``, ``regressed`` (a limit exceeded) or ``ok``."""
+        if self.nothing_done:
+            return "nothing_done"
         if self.previous_run is None:
             return "no_previous_run"
         return "regressed" if self.exceeded else "ok"
@@ -106,7 +110,9 @@ class RunComparison(BaseModel):
         }
 
     def metrics_for_tracking(self) -> dict[str, float]:
-        """Numbers of the comparison for the run's metrics (finite only)."""
+        """Numbers of the comparison for the run's metrics (finite only; none for a run that did no work)."""
+        if self.nothing_done:
+            return {}
         out = {"regressed_assets": float(self.regressed), "improved_assets": float(self.improved)}
         if self.pass_rate_drift is not None:
             out["pass_rate_drift"] = float(self.pass_rate_drift)
@@ -116,11 +122,17 @@ class RunComparison(BaseModel):
         return out
 
 
+def did_work(store: ResultCatalog, dataset: str, run: str) -> bool:
+    """Whether ``run`` refined or failed at least one asset (a rerun that reused every earlier result did not)."""
+    status = store.read_table(dataset, run, columns=["status"])["status"].to_pylist()
+    return any(s != "skipped" for s in status)
+
+
 def previous_run(store: ResultCatalog, dataset: str, run: str) -> str | None:
-    """The latest run of ``dataset`` before ``run`` (by id) that holds rows; None when there is none."""
+    """The latest run of ``dataset`` before ``run`` (by id) that did work (:func:`did_work`); None when there is none."""
     earlier = [r for d, r in store.runs(dataset) if r < run]
     for r in reversed(earlier):
-        if store.read_table(dataset, r, columns=["asset_id"]).num_rows:
+        if did_work(store, dataset, r):
             return r
     return None
 
@@ -178,9 +190,12 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
         out.regressed = sum(f.direction == "regressed" for f in out.flips)
         out.improved = sum(f.direction == "improved" for f in out.flips)
         out.changed = sum(f.direction == "changed" for f in out.flips)
+        reused = (both["status_a"] == "skipped") | (both["status_b"] == "skipped")
         for col, (unit, higher_better) in COMPARED_METRICS.items():
             va, vb = _as_float(both[f"{col}_a"]), _as_float(both[f"{col}_b"])
             ok = va.notna() & vb.notna()
+            if col == "wall_seconds":  # a reused result took no time of its own: not a speed-up
+                ok &= ~reused
             m = MetricDrift(column=col, unit=unit, n=int(ok.sum()), limit=settings.max_metric_drift.get(col))
             if m.n:
                 m.before, m.after = float(va[ok].mean()), float(vb[ok].mean())
@@ -206,9 +221,14 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
 
 def compare_with_previous(store: ResultCatalog, dataset: str, run: str,
                           settings: RegressionSettings | None = None) -> RunComparison:
-    """:func:`compare_runs` of ``run`` against :func:`previous_run` read from ``store``."""
+    """:func:`compare_runs` of ``run`` against :func:`previous_run` read from ``store``; a run that did no
+    work (every asset reused) is not compared (``nothing_done``): its figures would only echo the earlier run's."""
     cols = list(COMPARE_COLUMNS)
     current = store.read(dataset, run, columns=cols)
+    if len(current) and not (current["status"] != "skipped").any():
+        out = compare_runs(None, current, dataset=dataset, run=run, previous_run_id=None, settings=settings)
+        out.nothing_done = True
+        return out
     prev_id = previous_run(store, dataset, run)
     previous = None if prev_id is None else store.read(dataset, prev_id, columns=cols)
     return compare_runs(previous, current, dataset=dataset, run=run, previous_run_id=prev_id, settings=settings)
@@ -220,6 +240,8 @@ def _pct(v: float | None) -> str:
 
 def comparison_lines(cmp: RunComparison, max_flips: int = 20) -> list[str]:
     """The comparison as text lines for a terminal or a log."""
+    if cmp.nothing_done:
+        return ["regression check: nothing to do in this run (every asset's earlier result reused); not compared"]
     if cmp.previous_run is None:
         return [f"regression check: no earlier run of dataset {cmp.dataset} to compare with"]
     head = "REGRESSION" if cmp.exceeded else "no regression"

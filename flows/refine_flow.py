@@ -588,6 +588,7 @@ def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str]
             project_root=cat.project_root,
             settings=cat.config.tracking,
             tags={"prefect.flow_run_id": info["flow_run_id"] or "", "asset2sim.run": run_id, **(extra_tags or {})},
+            started_at=info.get("started_at"), ended_at=time.time(),
         )
     except Exception as exc:  # the catalog is the record; tracking must not lose it
         return None, f"{type(exc).__name__}: {exc}"

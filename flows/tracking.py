@@ -154,13 +154,22 @@ def log_flow_run(
     settings=None,
     tags: dict[str, str] | None = None,
     nested: bool = True,
+    started_at: float | None = None,
+    ended_at: float | None = None,
 ) -> str:
     """Log one flow run (and a nested run per asset row of ``df``) to MLflow.
 
     ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s);
     ``params`` stringified (cut at 500 characters); ``artifacts``: name -> file;
     ``project_root``: where the default store lives; ``settings``:
-    :class:`asset2sim.flows.catalog.TrackingSettings`. Returns the MLflow run id.
+    :class:`asset2sim.flows.catalog.TrackingSettings`; ``started_at`` /
+    ``ended_at``: the flow run's wall-clock start and end (epoch s; default now),
+    so MLflow shows its true duration. Each asset's run has the asset's own
+    start and end and, for an asset refined in this run (not reused), its
+    ``report.json``, ``report.html``, ``evaluation.json`` and renders as
+    artifacts. A run that reused every asset is tagged
+    ``asset2sim.outcome = nothing_to_do``. The experiment opens on its runs
+    table (``mlflow.experimentKind``). Returns the MLflow run id.
 
     Raises:
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
@@ -179,9 +188,13 @@ def log_flow_run(
         exp_id = client.create_experiment(settings.experiment, artifact_location=art.as_uri())
     else:
         exp_id = exp.experiment_id
+    if exp is None or EXPERIMENT_KIND_TAG not in (exp.tags or {}):  # MLflow 3 opens other kinds on a GenAI overview
+        client.set_experiment_tag(exp_id, EXPERIMENT_KIND_TAG, EXPERIMENT_KIND)
     ts = int(time.time() * 1000)
     run_name = f"{params.get('dataset', '')}/{params.get('run', '')}".strip("/") or None
-    parent = client.create_run(exp_id, run_name=run_name, tags={"asset2sim.kind": "flow_run", **(tags or {})})
+    outcome = "nothing_to_do" if not df.empty and bool((df["status"] == "skipped").all()) else "worked"
+    parent = client.create_run(exp_id, run_name=run_name, start_time=_ms(started_at) or ts,
+                               tags={"asset2sim.kind": "flow_run", "asset2sim.outcome": outcome, **(tags or {})})
     rid = parent.info.run_id
     try:
         client.log_batch(
@@ -197,6 +210,7 @@ def log_flow_run(
                 child = client.create_run(
                     exp_id,
                     run_name=str(row["asset_id"]),
+                    start_time=_ms(row.get("started_at")) or ts,
                     tags={
                         "mlflow.parentRunId": rid,
                         "asset2sim.kind": "asset",
@@ -216,9 +230,54 @@ def log_flow_run(
                         Param("config_hash", str(row.get("config_hash") or "")),
                     ],
                 )
-                client.set_terminated(child.info.run_id, "FINISHED")
+                if row.get("status") != "skipped":  # a reused asset's files belong to the run that made them
+                    for path in asset_artifacts(row.get("out_dir")):
+                        client.log_artifact(child.info.run_id, str(path), artifact_path=_artifact_dir(path, row["out_dir"]))
+                client.set_terminated(child.info.run_id, "FINISHED", end_time=_ms(row.get("finished_at")) or ts)
     except BaseException:
-        client.set_terminated(rid, "FAILED")
+        client.set_terminated(rid, "FAILED", end_time=int(time.time() * 1000))
         raise
-    client.set_terminated(rid, "FINISHED")
+    client.set_terminated(rid, "FINISHED", end_time=_ms(ended_at) or int(time.time() * 1000))
     return rid
+
+
+#: The experiment tag by which the MLflow 3 UI chooses its first page, and the kind that opens on the runs table.
+EXPERIMENT_KIND_TAG, EXPERIMENT_KIND = "mlflow.experimentKind", "custom_model_development"
+#: An asset's files logged with its MLflow run (relative to its output folder; globs).
+ASSET_ARTIFACTS = ("report.json", "report.html", "evaluation.json", "views/*.png")
+
+
+def asset_artifacts(out_dir: Any) -> list[Path]:
+    """The files of :data:`ASSET_ARTIFACTS` present in the local output folder ``out_dir`` (none for an
+    object-store URI, a missing folder or None)."""
+    if not out_dir or "://" in str(out_dir) or not Path(str(out_dir)).is_dir():
+        return []
+    root = Path(str(out_dir))
+    return [p for pattern in ASSET_ARTIFACTS for p in sorted(root.glob(pattern)) if p.is_file() and not p.is_symlink()]
+
+
+def _artifact_dir(path: Path, out_dir: Any) -> str | None:
+    """The artifact folder of ``path`` inside its output folder (None: the run's root)."""
+    rel = path.parent.relative_to(Path(str(out_dir)))
+    return None if str(rel) == "." else rel.as_posix()
+
+
+def _ms(when: Any) -> int | None:
+    """Epoch milliseconds of ``when`` (epoch s, a datetime, an ISO text or a pandas Timestamp); None when unknown."""
+    if when is None:
+        return None
+    if isinstance(when, str):
+        from datetime import datetime
+
+        try:
+            when = datetime.fromisoformat(when)
+        except ValueError:
+            return None
+    if hasattr(when, "timestamp"):
+        try:
+            v = float(when.timestamp())
+        except (TypeError, ValueError, OverflowError):  # NaT
+            return None
+    else:
+        v = float(when)
+    return int(round(v * 1000)) if math.isfinite(v) else None

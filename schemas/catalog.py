@@ -16,8 +16,8 @@ from pydantic import BaseModel, ConfigDict, field_validator
 
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
-#: (version 2 added ``code_hash``).
-SCHEMA_VERSION = 2
+#: (version 2 added ``code_hash``, version 3 ``request_warnings``).
+SCHEMA_VERSION = 3
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
 
 RowStatus = Literal["done", "skipped", "failed"]
@@ -28,7 +28,9 @@ class CatalogRow(BaseModel):
     """One asset's result in one flow run (``dataset`` and ``run`` are the
     partition folders): ``status`` done, skipped (``source_run`` reused) or
     failed; ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON
-    {stage: s}; ``code_hash`` what the skip rule compares. Non-finite floats are null."""
+    {stage: s}; ``request_warnings`` JSON [text]: what of the request was not
+    understood or not applied; ``code_hash`` what the skip rule compares.
+    Non-finite floats are null."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
@@ -51,6 +53,7 @@ class CatalogRow(BaseModel):
     d_ori_rad: Optional[float] = None
     oscillation_pass: Optional[bool] = None
     prompt_alignment: Optional[float] = None
+    request_warnings: Optional[str] = None
     model_queries: Optional[int] = None
     tokens: Optional[int] = None
     wall_seconds: Optional[float] = None

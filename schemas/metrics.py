@@ -6,6 +6,7 @@ the evaluation, parity and the catalog. Definitions: ``docs/design/metrics.md``.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Literal
@@ -46,7 +47,7 @@ METRIC_INFO: dict[str, MetricInfo] = {
         MetricInfo("initial_joint_deviation", "rad", "semantic", "|q - q_ref| of the task-relevant joint"),
         MetricInfo("total_mass", "kg", "semantic", "total mass and its plausibility for the category and size"),
         MetricInfo("prompt_alignment", "fraction", "semantic", "0.5 size + 0.5 joint state vs the request",
-                   {"prompt_alignment": "value"}),
+                   {"prompt_alignment": "value", "request_warnings": "json:details.warnings"}),
         MetricInfo("probes", "failed probes", "behaviour", "scripted pusher closes/opens each task-relevant joint"),
         MetricInfo("joint_sweep", "joints", "behaviour",
                    "root fixed: each movable joint driven (force-limited) from its closed end to >= 95 % open and back"),
@@ -88,6 +89,9 @@ def _field(m: MetricResult, source: str) -> Any:
         return m.passed
     elif source.startswith("details."):
         v = (m.details or {}).get(source[len("details."):])
+    elif source.startswith("json:details."):  # a list or mapping, as a JSON text column
+        v = (m.details or {}).get(source[len("json:details."):])
+        return None if v is None else json.dumps(v)
     else:
         raise ValueError(f"unknown metric field {source!r}")
     try:

@@ -101,6 +101,11 @@ class JointStateRequest(BaseModel):
     phrase: str = ""
     """The words of the request this came from."""
 
+    @property
+    def names_part(self) -> bool:
+        """Whether this names a part (a label) or a joint, not the object as a whole ("half open")."""
+        return self.selector == "joint" or (self.selector != "all" and bool(self.label))
+
 
 class RequestSpec(BaseModel):
     """What a request asks for."""

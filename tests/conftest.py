@@ -1,4 +1,5 @@
-"""Shared fixtures: the dev dataset location and generated demo assets."""
+"""Shared fixtures: the dev dataset location and generated demo assets; the
+test-only "fake" engine registered (:mod:`tests.fake_engine`)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,11 @@ import os
 from pathlib import Path
 
 import pytest
+
+from asset2sim.engines.base import register_engine
+from tests.fake_engine import FakeSession
+
+register_engine("fake", FakeSession)  # every test of the process can open_session("fake", ...)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("ASSET2SIM_SHARED", ROOT.parent / "shared")) / "datasets" / "partnet_mobility"

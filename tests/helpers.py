@@ -175,3 +175,21 @@ def rest_tests_of_refine(report) -> int:
     rounds = report.escalation
     full = [r for r in rounds if not postcheck.sweep_not_run(r.metrics)]
     return len(rounds) * (1 + len(robust_rest.TRIALS)) + len(full) * (len(RefineConfig().engines) - 1)
+
+
+def catalog_reader_counts(root) -> dict[str, int]:
+    """Rows of the Parquet catalog under ``root`` as a user reads them with the
+    obvious calls: ``pandas.read_parquet``, ``pyarrow.dataset`` (hive
+    partitions) and duckdb over ``root/**/*.parquet``."""
+    import duckdb
+    import pandas as pd
+    import pyarrow.dataset as pads
+
+    con = duckdb.connect()
+    try:
+        n_duck = con.execute("SELECT count(*) FROM read_parquet(?, hive_partitioning = true, union_by_name = true)",
+                             [f"{root}/**/*.parquet"]).fetchone()[0]
+    finally:
+        con.close()
+    return {"pandas": len(pd.read_parquet(root)), "pyarrow": pads.dataset(root, partitioning="hive").count_rows(),
+            "duckdb": int(n_duck)}

@@ -5,7 +5,7 @@ Every ``import`` / ``from ... import`` of an ``asset2sim`` module anywhere in a
 module (top level or inside a function) is an edge, so a cycle hidden behind a
 function-level import is still found. A module that imports by name
 (``importlib.import_module``, ``flows.isolation.import_target``) has an edge
-to every project module a string of it names (``"asset2sim.engines.fake"``,
+to every project module a string of it names (``"asset2sim.engines.mujoco_engine"``,
 ``"asset2sim.tasks.refine:refine_asset"``, an f-string prefix
 ``f"asset2sim.commands.{name}"``: every module under it). Lazy imports are for
 optional heavy third-party packages only.

@@ -23,6 +23,11 @@ def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = 
     return elapsed / n * (total - finished)
 
 
+#: Shown until the first asset finishes: the orchestrator's start-up takes a while (a temporary Prefect
+#: server, a Dask cluster, the stage servers' imports: up to about a minute on a 2-core machine).
+STARTING = "starting Prefect, Dask and the workers (up to a minute) ..."
+
+
 class FlowProgress:
     """A listener of :mod:`asset2sim.flow_progress`: a bar when ``live``
     (default: stdout is a terminal), else one line per asset."""
@@ -44,11 +49,11 @@ class FlowProgress:
             if self.live:
                 self._start_bar(ev)
             else:
-                print(f"run {ev.run} of dataset {ev.dataset}: {ev.total} assets", file=self.stream, flush=True)
+                print(f"run {ev.run} of dataset {ev.dataset}: {ev.total} assets; {STARTING}", file=self.stream, flush=True)
         elif ev.kind == "asset_finished":
             self.counts[ev.status if ev.status in self.counts else "failed"] += 1
             if self._progress is not None:
-                self._progress.update(self._task, advance=1, **self.counts)
+                self._progress.update(self._task, advance=1, description=ev.dataset, **self.counts)
             elif not self.live:
                 print(self._line(ev), file=self.stream, flush=True)
         elif ev.kind == "run_finished":
@@ -75,7 +80,7 @@ class FlowProgress:
                                   TextColumn("ETA"), TimeRemainingColumn(), console=Console(file=self.stream), transient=False)
         self._quiet_console_logs()
         self._progress.start()
-        self._task = self._progress.add_task(ev.dataset, total=max(1, ev.total), **self.counts)
+        self._task = self._progress.add_task(f"{ev.dataset}: {STARTING}", total=max(1, ev.total), **self.counts)
 
     def _quiet_console_logs(self) -> None:
         """Raise every terminal log handler to WARNING (remembering its level)."""

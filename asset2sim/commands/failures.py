@@ -106,8 +106,12 @@ def run(args: argparse.Namespace) -> int:
         scope = f"run {run_id}"
 
     if args.slowest:
+        slow = queries.slowest_in_catalog(store, dataset, runs, args.slowest)
+        if slow.empty:  # e.g. a rerun that reused every asset: none was worked on
+            print(f"no asset was refined in {scope} (every result reused or none recorded): no timings")
+            return 0
         print(f"{args.slowest} slowest assets of {scope}:")
-        print(queries.slowest_in_catalog(store, dataset, runs, args.slowest).to_string(index=False))
+        print(slow.to_string(index=False))
         return 0
 
     if getattr(args, "compare", False):

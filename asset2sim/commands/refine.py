@@ -19,7 +19,9 @@ from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
 from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
-from asset2sim.output_folder import OutputError
+from asset2sim.output_folder import URDF_NAME, OutputError
+from asset2sim.tasks.check.asset_files import parse_urdf
+from asset2sim.tasks.evaluation.report_changes import opening_text, position_text
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
 
@@ -64,11 +66,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
 
 
+def _joint_types(out_dir) -> dict[str, str]:
+    """Joint name -> type of the output's URDF ({} when it cannot be read)."""
+    try:
+        return {n: j.type for n, j in parse_urdf(Path(out_dir) / URDF_NAME)[1].items()}
+    except Exception:
+        return {}
+
+
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
     pen, stab, osc = r.metric("penetration"), r.metric("rest_stability"), r.metric("oscillation")
-    state = ", ".join(f"{k}={v:.4g}" for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
+    types = _joint_types(result.out_dir)
+    state = ", ".join(f"{k} = {position_text(v, types.get(k, 'revolute'))}"
+                      + (f", {opening_text(r.opening_fractions[k])}" if k in r.opening_fractions else "")
+                      for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
     stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
                                                      f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
                                                      f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad)")
@@ -77,7 +90,7 @@ def summary_lines(result) -> list[str]:
         f"output       {result.out_dir}",
         f"scale        {r.scale:.4g}",
         f"total mass   {r.total_mass:.4g} kg",
-        f"initial state {state}  (rad / m)",
+        f"initial state {state}",
     ] + ([f"task         {r.task}"] if r.task else []) + [
         f"penetration  {pen.value:.3f} mm" if pen and pen.value is not None else "penetration  n/a",
         stability,

@@ -297,6 +297,9 @@ class Viewer(Protocol):
     def set_joint_positions(self, q: dict[str, float]) -> None:
         """Teleport joints (rad or m), zero velocity."""
 
+    def set_root_pose(self, position, quat_xyzw) -> None:
+        """Place the root link's URDF frame at ``position`` (3,) m with orientation ``quat_xyzw`` (4,)."""
+
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) m and rotation (3, 3) of the link's URDF frame."""
 

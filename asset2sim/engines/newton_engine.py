@@ -64,7 +64,10 @@ class NewtonSession(SessionDefaults):
             b.add_ground_plane(cfg=newton.ModelBuilder.ShapeConfig(mu=CONTACT_FRICTION))
         self.model = b.finalize(device="cpu")
         self._init_state()
-        self._size_contacts()
+        self._query = newton.CollisionPipeline(self.model, publish_capacity=False)  # sized from the initial contacts
+        self._query_contacts = self._query.contacts()
+        self._query.collide(self.state0, self._query_contacts)
+        self._capacity = _capacity_for(int(self._query_contacts.rigid_contact_count.numpy()[0]))
         self.rebuilds = 0
         self._build_solver()
         self._ground_shape = self.model.shape_count - 1 if options.ground else -1
@@ -147,13 +150,6 @@ class NewtonSession(SessionDefaults):
         self.state0, self.state1 = self.model.state(), self.model.state()
         self.control = self.model.control()
         self._nt.eval_fk(self.model, self.model.joint_q, self.model.joint_qd, self.state0)
-
-    def _size_contacts(self) -> None:
-        """The query collision pipeline and ``_capacity`` from the initial contacts."""
-        self._query = self._nt.CollisionPipeline(self.model, publish_capacity=False)
-        self._query_contacts = self._query.contacts()
-        self._query.collide(self.state0, self._query_contacts)
-        self._capacity = _capacity_for(int(self._query_contacts.rigid_contact_count.numpy()[0]))
 
     def _build_solver(self) -> None:
         """The stepping collision pipeline and the Kamino solver for ``_capacity`` contacts."""

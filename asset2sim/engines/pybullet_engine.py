@@ -455,6 +455,10 @@ class PyBulletViewer:
         for name, value in q.items():
             self._p.resetJointState(self.body, self._joints[name], float(value), 0.0, physicsClientId=self.cid)
 
+    def set_root_pose(self, position, quat_xyzw) -> None:
+        self._p.resetBasePositionAndOrientation(self.body, np.asarray(position, float).tolist(),
+                                                np.asarray(quat_xyzw, float).tolist(), physicsClientId=self.cid)
+
     def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
         return _link_frame(self._p, self.body, self._index[link], self.cid)
 

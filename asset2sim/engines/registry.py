@@ -21,7 +21,6 @@ _LAZY: dict[str, tuple[str, tuple[str, ...]]] = {
     "physx": ("asset2sim.engines.physx_engine", ("sapien",)),
     "mujoco": ("asset2sim.engines.mujoco_engine", ("mujoco",)),
     "newton": ("asset2sim.engines.newton_engine", ("newton", "warp", "scipy")),
-    "fake": ("asset2sim.engines.fake", ()),
 }
 
 

@@ -1,13 +1,7 @@
-"""The working asset: one candidate output held in memory, and the scratch
-folder the engines load candidates from.
-
-A refine tries several candidates (the synthesized overlay, clipped limits,
-repaired collision pieces, escalated damping) before it publishes one. Each is
-a frozen :class:`Candidate`; the stages hand candidates over, never the output
-folder. Engines load files, so :class:`Workspace` writes the candidate an
-engine is to load into a scratch folder of its own (outside the output
-folder, removed when the refine ends); the output folder is written once, by
-:func:`asset2sim.tasks.publish.output.publish`, from the final candidate.
+"""The working asset: a refine's candidate outputs held in memory (frozen :class:`Candidate`s; the stages
+hand candidates over, never the output folder) and :class:`Workspace`, the scratch folder (outside the
+output folder, removed when the refine ends) the engines load them from. The output folder is written
+once, from the final candidate (:func:`asset2sim.tasks.publish.output.publish`).
 """
 
 from __future__ import annotations
@@ -50,10 +44,6 @@ class Candidate:
         object.__setattr__(self, "collision_overrides",
                            MappingProxyType({k: tuple(v) for k, v in (self.collision_overrides or {}).items()}))
 
-    def overrides(self) -> dict:
-        """``collision_overrides`` as the writer takes them (link -> list of pieces)."""
-        return {k: list(v) for k, v in self.collision_overrides.items()}
-
     def write_into(self, folder: Path, *, copy: bool) -> write.OutputPaths:
         """Write this candidate's files into ``folder``
         (:func:`asset2sim.tasks.assemble.write.write_output`; meshes copied
@@ -63,7 +53,8 @@ class Candidate:
             OutputError: ``folder`` inside the input, or an incomplete overlay.
         """
         return write.write_output(self.asset, self.overlay, folder, dict(self.state), copy=copy,
-                                  collision_overrides=self.overrides(), root_rotation=self.root_rotation)
+                                  collision_overrides={k: list(v) for k, v in self.collision_overrides.items()},
+                                  root_rotation=self.root_rotation)
 
 
 #: Name prefix of a workspace folder, followed by the process id of the refine that owns it.

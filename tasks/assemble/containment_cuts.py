@@ -175,12 +175,11 @@ MAX_SPLIT_SAMPLES = 8000
 MAX_SHAVE_FRACTION = 0.5
 
 
-def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT_TOLERANCE,
-                max_fraction: float = MAX_SHAVE_FRACTION) -> Piece | None:
+def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT_TOLERANCE) -> Piece | None:
     """``piece`` with the face that needs the least move moved inwards just
     far enough that none of ``points`` (k, 3) m held deeper than
     ``tolerance`` m sits deeper than half of it; None when that move exceeds
-    ``max_fraction`` of the piece's width along the face's normal."""
+    :data:`MAX_SHAVE_FRACTION` of the piece's width along the face's normal."""
     if not len(points):
         return piece
     d = points @ piece.equations[:, :3].T + piece.equations[:, 3]  # (k, f), <= 0 inside
@@ -191,7 +190,7 @@ def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT
     f = int(np.argmin(need))
     n = piece.equations[f, :3]
     width = float(np.ptp(piece.points @ n))
-    if need[f] > max_fraction * width:
+    if need[f] > MAX_SHAVE_FRACTION * width:
         return None
     return clip_piece(piece, n, piece.equations[f, 3] + need[f])
 

@@ -91,12 +91,10 @@ _HULLS_MAX = 5000
 _OBJS: dict[tuple, bytes] = {}
 
 
-def solid_points(points: np.ndarray, thickness: float = MIN_THICKNESS, flat: float = None) -> np.ndarray | None:
-    """``points`` (k, 3) m, grown to ``thickness`` m along their thinnest
-    principal direction (both sides equally) when they are thinner than
-    ``flat`` m (default :data:`FLAT_WIDTH`); None when they span no area
-    (fewer than 3 points, or all on a line)."""
-    flat = FLAT_WIDTH if flat is None else flat
+def solid_points(points: np.ndarray) -> np.ndarray | None:
+    """``points`` (k, 3) m, grown to :data:`MIN_THICKNESS` m along their thinnest principal direction (both
+    sides equally) when they are thinner than :data:`FLAT_WIDTH` m; None when they span no area (fewer than
+    3 points, or all on a line)."""
     p = np.asarray(points, float)
     p = p[np.all(np.isfinite(p), axis=1)]
     if len(p) < 3:
@@ -109,9 +107,9 @@ def solid_points(points: np.ndarray, thickness: float = MIN_THICKNESS, flat: flo
     n = vt[2] if vt.shape[0] == 3 else np.cross(vt[0], vt[1])
     n = n / np.linalg.norm(n)
     width = float(np.ptp(p @ n))
-    if width >= min(flat, thickness):
+    if width >= min(FLAT_WIDTH, MIN_THICKNESS):
         return p
-    h = 0.5 * (thickness - width)
+    h = 0.5 * (MIN_THICKNESS - width)
     return np.vstack([p + h * n, p - h * n])
 
 

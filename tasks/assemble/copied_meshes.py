@@ -71,11 +71,6 @@ def _meshes(asset: AssetDescription) -> list:
     return [g for ln in asset.links for g in ln.visuals + ln.collisions if g.kind == "mesh"]
 
 
-def _copies_key(asset: AssetDescription) -> tuple:
-    meshes = tuple((str(g.path), g.filename) for g in _meshes(asset) if g.path is not None)
-    return str(asset.source_dir), str(asset.urdf_path), meshes
-
-
 def _stamps(files: list[Path]) -> tuple:
     """(path, size, modification time ns, inode) of each file and of each
     folder holding one (a file added, removed or renamed there changes the
@@ -104,7 +99,7 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
             folder), ``OUTPUT_NAME_CONFLICT`` (two different input files for
             one output path, or an input file named like a contract file).
     """
-    key = _copies_key(asset)
+    key = (str(asset.source_dir), str(asset.urdf_path), tuple((str(g.path), g.filename) for g in _meshes(asset) if g.path is not None))
     with _COPIES_LOCK:
         hit = _COPIES_CACHE.get(key)
     if hit is not None and _stamps(hit[0]) == hit[1]:

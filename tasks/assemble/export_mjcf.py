@@ -50,13 +50,10 @@ def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None =
         overlay = Overlay.model_validate(json.loads(p.read_text()))
     except Exception as exc:  # pydantic.ValidationError, JSONDecodeError
         raise ValueError(f"{p}: not a valid overlay: {exc}") from exc
-    initial_state = initial_state or {}
-    out = {}
-    for name, dyn in overlay.joints.items():
-        if dyn.stiffness > 0:
-            ref = dyn.spring_reference if dyn.spring_reference is not None else initial_state.get(name, 0.0)
-            out[name] = Spring(stiffness=float(dyn.stiffness), reference=float(ref))
-    return out
+    state = initial_state or {}
+    return {name: Spring(stiffness=float(dyn.stiffness),
+                         reference=float(dyn.spring_reference if dyn.spring_reference is not None else state.get(name, 0.0)))
+            for name, dyn in overlay.joints.items() if dyn.stiffness > 0}
 
 
 def output_session_options(out_dir: Path | str, initial_state: dict[str, float] | None = None,

@@ -48,14 +48,9 @@ def collision_folder(asset: AssetDescription) -> str:
     raise OutputError(f"{asset.source_dir}: no free folder name for collision pieces", "OUTPUT_NAME_CONFLICT", asset.source_dir)
 
 
-def build_urdf(
-    asset: AssetDescription,
-    overlay: Overlay,
-    collision_overrides: dict | None = None,
-    root_rotation: np.ndarray | None = None,
-    collision_out: tuple[Path, dict[str, float]] | None = None,
-    collision_notes: list[str] | None = None,
-) -> bytes:
+def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: dict | None = None,
+               root_rotation: np.ndarray | None = None, collision_out: tuple[Path, dict[str, float]] | None = None,
+               collision_notes: list[str] | None = None) -> bytes:
     """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``: scale baked in, the overlay's
     inertial on every link that has one, ``<dynamics>`` and a complete ``<limit>`` (effort and velocity 1000
     when absent) on every movable joint, an explicit ``<axis>`` on every joint and a comment pointing to
@@ -166,16 +161,8 @@ def _urdf_comment(s: float, overlay: Overlay) -> str:
     )
 
 
-def write_output(
-    asset: AssetDescription,
-    overlay: Overlay,
-    out_dir: Path,
-    initial_state: dict[str, float],
-    *,
-    copy: bool = True,
-    collision_overrides: dict | None = None,
-    root_rotation: np.ndarray | None = None,
-) -> OutputPaths:
+def write_output(asset: AssetDescription, overlay: Overlay, out_dir: Path, initial_state: dict[str, float], *, copy: bool = True,
+                 collision_overrides: dict | None = None, root_rotation: np.ndarray | None = None) -> OutputPaths:
     """Write (or rewrite) the output folder: meshes, ``mobility.urdf``, ``initial_state.json``,
     ``overlay.json`` and (when the input labelled parts) ``semantics.txt``.
 

@@ -233,10 +233,9 @@ def lowest_point(session, links: list[str], model: UrdfModel | None) -> float:
     return z
 
 
-def grasp_side(session, joint: str, model: UrdfModel | None, *, root_fixed: bool = False,
-               support_tol: float = SUPPORT_TOL) -> str:
+def grasp_side(session, joint: str, model: UrdfModel | None, *, root_fixed: bool = False) -> str:
     """Which side of ``joint`` the gripper moves: ``parent`` when the child's
-    side carries the object (its lowest point more than ``support_tol`` m
+    side carries the object (its lowest point more than :data:`SUPPORT_TOL` m
     below the rest's), else ``child`` (always with a fixed root or no model)."""
     if root_fixed or model is None:
         return "child"
@@ -246,4 +245,4 @@ def grasp_side(session, joint: str, model: UrdfModel | None, *, root_fixed: bool
     z_rest = lowest_point(session, [ln for ln in session.link_names if ln not in sub], model)
     if not np.isfinite(z_child) or not np.isfinite(z_rest):
         return "child"
-    return "parent" if z_child + support_tol < z_rest else "child"
+    return "parent" if z_child + SUPPORT_TOL < z_rest else "child"

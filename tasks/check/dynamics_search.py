@@ -1,26 +1,10 @@
-"""The friction and damping of a joint bracketed between the two tiers that
-pull them apart: robust rest wants them high, the task wants them low. Refine's
-post-check alternates relief (:func:`asset2sim.tasks.check.task_tier.relieve`)
-and escalation (:func:`asset2sim.tasks.check.postcheck.escalate`);
-:class:`DynamicsSearch` turns their proposals into a bracketed search
-(``docs/design/metrics.md``, "Interaction under manipulation").
-
-Per joint it records **weak** (the strongest setting robust rest did not
-hold), **strong** (the weakest at which the task failed by force) and **good**
-(the latest at which both passed), ordered by the operating cost f + c w (w
-the gripper's top speed at the grasp point; 1 without a budget). For each
-joint a round changes, or that robust rest did not hold (:meth:`DynamicsSearch.settle`):
-
-1. A proposal reaching a known bound, or a joint stuck at its caps with a
-   ``strong`` bound, goes back to ``good`` when there is one.
-2. Where ``weak`` is at least as strong as ``strong`` there is no bracket:
-   the proposal stands (:func:`fewest_failures` picks the round at the end).
-3. Otherwise a proposal reaching a bound becomes the midpoint of ``weak`` and
-   ``strong`` when both are known (bisection), else of the current setting
-   and the bound; a stuck joint with a ``strong`` bound the same.
-4. A stuck joint without a ``strong`` bound whose task passed below the
-   budget's allowed force F gets its friction (and cap) raised by the
-   measured headroom (BUDGET_SHARE F - F_peak) r (prismatic: without r).
+"""The friction and damping of a joint bracketed between robust rest (wants them high) and the task
+(wants them low): :class:`DynamicsSearch` turns the proposals of relief
+(:func:`asset2sim.tasks.check.task_tier.relieve`) and escalation
+(:func:`asset2sim.tasks.check.postcheck.escalate`) into a bracketed search over the post-check rounds
+(``docs/design/metrics.md``, "Interaction under manipulation"; the rules of :meth:`DynamicsSearch.settle`:
+``docs/design/core.md``). Settings are ordered by the operating cost f + c w (w the gripper's top speed
+at the grasp point; 1 without a budget).
 """
 
 from __future__ import annotations
@@ -56,7 +40,8 @@ class Setting:
 
 @dataclass
 class JointRecord:
-    """What the rounds measured for one joint (module docstring)."""
+    """What the rounds measured for one joint: ``weak`` the strongest setting robust rest did not hold,
+    ``strong`` the weakest at which the task failed by force, ``good`` the latest at which both passed."""
 
     weak: Setting | None = None
     strong: Setting | None = None
@@ -152,7 +137,7 @@ class DynamicsSearch:
 
     def settle(self, before: Overlay, proposal: Overlay, changes: dict[str, dict[str, float]],
                caps: dict[str, float] | None = None) -> tuple[Overlay, dict[str, dict[str, float]], list[str]]:
-        """Apply the rules of the module docstring to a round's ``proposal`` (made
+        """Apply the bracketing rules (``docs/design/core.md``) to a round's ``proposal`` (made
         from ``before``, the round just recorded, with its ``changes``);
         ``caps``: joint -> friction cap (N m or N), raised in place by a headroom step.
 
@@ -213,7 +198,7 @@ class DynamicsSearch:
         return b is not None and b.joint_type == "prismatic"
 
     def _inside(self, joint: str, rec: JointRecord, cur: Setting, bound: Setting, what: str) -> tuple[Setting, str]:
-        """The setting rule 3 of the module docstring puts a joint at."""
+        """The bisection of ``weak`` and ``strong`` when both are known, else halfway from ``cur`` to ``bound``."""
         b = f"{what} friction {bound.friction:.3g}, damping {bound.damping:.3g}"
         if rec.weak is not None and rec.strong is not None:
             if self._same(joint, rec.weak, rec.strong):

@@ -1,18 +1,8 @@
-"""A floating, force- and speed-limited parallel gripper as a bounded-force attachment.
-
-The gripper point ``g`` moves no faster than ``max_speed_m_s``; the grasped
-part is pulled towards it at the grasp point ``p`` (fixed in the grasped link) by
-
-    F = clip_{|F| <= F_max}( k (g - p) + c (v_g - v_p) )
-
-(the bounded spring-damper grasp model of simulation benchmarks), ``v_p`` the
-finite difference of ``p`` between calls; ``g`` stays within ``F_max / k`` of
-``p`` (the gripper stalls). Call :meth:`BoundedGrasp.step_towards` once per engine step.
-
-k and c are capped at ``m_eff / dt^2`` and ``m_eff / dt`` (half the stability
-limits of an explicit step: omega dt < 2, Hairer, Lubich & Wanner, *Geometric
-Numerical Integration*, 2nd ed. 2006, ch. I; c dt / m < 2 for explicit Euler),
-``m_eff`` a third of the grasped link's mass (a uniform plate at its far edge).
+"""A floating, force- and speed-limited parallel gripper as a bounded-force attachment (the model and its
+constants: ``docs/design/metrics.md``, "task_execution" 3). Call :meth:`BoundedGrasp.step_towards` once per
+engine step. k and c are capped at ``m_eff / dt^2`` and ``m_eff / dt``, half the stability limits of an
+explicit step (omega dt < 2: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. 2006,
+ch. I; c dt / m < 2 for explicit Euler), ``m_eff`` a third of the grasped link's mass.
 """
 
 from __future__ import annotations

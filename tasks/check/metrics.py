@@ -1,15 +1,5 @@
-"""Physical-robustness metrics with the SPEC's definitions, in any engine.
-
-Definitions (SPEC, "How quality is measured"; ``docs/design/metrics.md``):
-
-- **Penetration** Phi at the initial state, before any step: the sum over
-  self-contact points (parent-child pairs excluded) of max(0, -separation), mm.
-- **Rest stability**: settle T_set, then over T_test D_pos = max ||p_t - p0||
-  (m) and D_ori = max angle(q0, q_t) (rad); pass iff both within the SPEC's
-  tolerances and nothing diverges.
-- **Oscillation** during T_test: a joint fails iff its step-to-step motion
-  changes sign (exact zeros skipped) at least ``oscillation_sign_changes``
-  times and its peak-to-peak amplitude exceeds ``oscillation_amp_*``.
+"""Physical-robustness metrics (penetration Phi, rest stability, oscillation, ...) with the SPEC's
+definitions, in any engine; each metric's definition: ``docs/design/metrics.md``, "Physical robustness".
 """
 
 from __future__ import annotations
@@ -51,7 +41,7 @@ def penetration(session: SimSession) -> MetricResult:
     phi, pairs = session.self_penetration()
     return MetricResult(
         name="penetration", value=phi * 1000.0, unit=unit("penetration"), passed=None,
-        threshold="reported (no SPEC threshold)",
+        threshold="reported (no pass/fail threshold)",
         details={"pairs": [{"link_a": c.link_a, "link_b": c.link_b, "depth_mm": c.depth * 1000.0,
                             "max_depth_mm": c.max_depth * 1000.0, "points": c.points} for c in pairs]},
         engine=session.engine)

@@ -1,14 +1,7 @@
 """How hard a joint may be to operate: the bounds escalation
-(:func:`asset2sim.tasks.check.postcheck.escalate`) keeps friction and damping
-to. Definitions: ``docs/design/metrics.md``, "Operable friction".
-
-- Probe's cap (no task): friction <= ``OPERABLE_SHARE`` E - L, E = F_max r the
-  probe's operating effort (:func:`operating_effort`; prismatic E = F_max), L the
-  moving subtree's weight times the lever to the child's center of mass; at
-  most ``max_stable_friction``, at least the friction before escalation.
-- Tilt floor: the friction before escalation plus ``TILT_MARGIN`` m_s g r
-  sin(theta) (prismatic: ``TILT_MARGIN`` m_s g sin(theta)).
-- Operating budget (with a task): :func:`operating_budgets`.
+(:func:`asset2sim.tasks.check.postcheck.escalate`) keeps friction and damping to: the probe's cap, the
+operating budget with a task (``docs/design/metrics.md``, "Operable friction") and the tilt floor, the
+friction before escalation plus ``TILT_MARGIN`` m_s g r sin(theta) (prismatic: without r).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ __all__ = ["CONTACT_MARGIN", "parent_child_penetration"]
 
 #: Distance (m) an engine's closest-point query reports for two touching convex pieces
 #: (PyBullet: 1 mm hull margin each; ``docs/design/simulators.md``, "Contact margins").
-CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0, "fake": 0.0}
+CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0}
 
 
 def parent_child_penetration(urdf_path: urdf.UrdfSource, initial_state: dict[str, float], engine: str = "pybullet",

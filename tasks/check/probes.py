@@ -1,18 +1,6 @@
-"""Passive behaviour probes: a scripted pusher tries to close / open a joint.
-Definition: ``docs/design/metrics.md``, "Behaviour: passive probes".
-
-The object (root as the output folder declares it) settles; the pusher
-(:mod:`asset2sim.tasks.check.pusher`) pushes the moving link while the other
-hand holds the body (the reaction on the root; a body weighing at most
-``ProbeConfig.hold_force`` is gripped by a bounded root hold). Targets
-(opening fraction f): close f = 0.05, reached at f <= 0.10; open f = 0.6,
-reached at f >= 0.55 (0.9 / 0.85 when starting beyond 0.55; capped where the floor stops the part).
-A probe succeeds iff the target is reached without the object sliding or
-tipping (:class:`~asset2sim.tasks.check.support.SupportWatch`) and a close
-probe does not rebound after release (unless the joint's spring returns it
-by design); an open probe's rebound fails only when the request asks the
-joint to hold. A part shut in by another is probed again with the joints
-between lifted towards their open ends (``CLEARING_SHARES``, in turn).
+"""Passive behaviour probes: a scripted pusher (:mod:`asset2sim.tasks.check.pusher`) tries to close /
+open a joint while the other hand holds the body. Definition (targets, success, rebound, the retry of a
+part shut in by another with ``CLEARING_SHARES``): ``docs/design/metrics.md``, "Behaviour: passive probes".
 """
 
 from __future__ import annotations
@@ -24,7 +12,7 @@ import numpy as np
 
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, blocking_link, joints_between
-from asset2sim.tasks.check.pusher import ProbeConfig, Pusher, push_budget, push_geometry, pusher_for, root_held, total_mass
+from asset2sim.tasks.check.pusher import ProbeConfig, Pusher, push_budget, push_geometry, pusher_for, root_held
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.geometry.limits import rigid_group, subtrees
 from asset2sim.urdf import UrdfModel
@@ -77,15 +65,6 @@ class ProbeResult:
         return {k: v for k, v in self.__dict__.items() if k != "trace"}
 
 
-def moved_links(session, joint: str, model: UrdfModel | None = None) -> list[str]:
-    """The links ``joint`` moves by the URDF ``model``; the child link alone without a model."""
-    if model is not None:
-        links = subtrees(model).get(joint)
-        if links:
-            return [ln for ln in links if ln in session.link_names]
-    return [session.joint_child[joint]]
-
-
 def probe_joint(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
                 config: ProbeConfig | None = None, holds_position: bool = False, model: UrdfModel | None = None,
                 returns: bool = False, floor_stop: float | None = None) -> ProbeResult:
@@ -115,7 +94,7 @@ def probe_joint(session, joint: str, *, closed: float, direction: float, open_ra
     f_target, reached_if, notes = _target(action, f0, open_range, floor_stop)
     q_target = closed + direction * f_target * open_range
     sign = 1.0 if q_target >= q0 else -1.0  # +1 when the target needs q to increase
-    weight = total_mass(session) * abs(session.options.conventions.gravity)
+    weight = float(sum(session.link_masses().values())) * abs(session.options.conventions.gravity)  # the engine's masses
     hand = pusher_for(session, joint, cfg, weight, model)
     # Sliding is measured where the object stands (the footprint point, carried with the root).
     watch = SupportWatch(session, session.link_names[0])
@@ -158,21 +137,28 @@ def check_action(session, joint: str, action: str, open_range: float, what: str 
         raise KeyError(joint if unknown is None else unknown)
 
 
+def reached_fraction(action: str, target_fraction: float) -> float:
+    """The opening fraction (0 closed .. 1 fully open) at which a probe with ``action`` (close / open) and
+    ``target_fraction`` counts its target reached: at most it (close), at least it (open)."""
+    if action == "close":
+        return CLOSE_REACHED
+    if target_fraction == OPEN_TARGET:
+        return OPEN_REACHED
+    if target_fraction == OPEN_FAR_TARGET:
+        return OPEN_FAR_REACHED
+    return target_fraction * OPEN_REACHED / OPEN_TARGET  # a target the floor set
+
+
 def _target(action: str, f0: float, open_range: float, floor_stop: float | None
             ) -> tuple[float, Callable[[float], bool], list[str]]:
     """(target opening fraction, whether a fraction has reached it, notes) of a probe starting at ``f0``."""
-    if action == "close":
-        f_target, reached_if = CLOSE_TARGET, (lambda f: f <= CLOSE_REACHED)
-    elif f0 < OPEN_REACHED:
-        f_target, reached_if = OPEN_TARGET, (lambda f: f >= OPEN_REACHED)
-    else:
-        f_target, reached_if = OPEN_FAR_TARGET, (lambda f: f >= OPEN_FAR_REACHED)
+    f_target = CLOSE_TARGET if action == "close" else (OPEN_TARGET if f0 < OPEN_REACHED else OPEN_FAR_TARGET)
     notes: list[str] = []
     if action == "open" and floor_stop is not None and floor_stop / open_range < f_target:
         f_target = max(floor_stop / open_range, 0.0)  # the floor stops the part before the target
-        reached_if = (lambda f, at=f_target * OPEN_REACHED / OPEN_TARGET: f >= at)
         notes.append(f"the floor stops it {f_target:.0%} open (the object resting as it is): the open probe's target")
-    return f_target, reached_if, notes
+    at = reached_fraction(action, f_target)
+    return f_target, ((lambda f: f <= at) if action == "close" else (lambda f: f >= at)), notes
 
 
 @dataclass
@@ -328,7 +314,8 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
     jd = next((j for j in model.joints if j.name == name), None)
     if jd is None:
         return None
-    links = moved_links(session, name, model)
+    sub = subtrees(model).get(name)
+    links = [ln for ln in sub if ln in session.link_names] if sub else [session.joint_child[name]]
     who = blocking_link(session, links, rigid_group(model, jd.parent))
     if who is None:
         return None

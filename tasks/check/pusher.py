@@ -1,20 +1,9 @@
-"""The probes' pusher: a hand that pushes the moving link through a bounded
-spring-damper, its push time, the other hand holding the body, and the
-probe's knobs (``docs/design/metrics.md``, "Behaviour: passive probes").
-
-- Push point c: revolute, the corner of the moving link's world AABB farthest
-  from the axis (lever r = (c - o) - ((c - o).a) a, direction +-(a x r)/|a x r|,
-  generalised force F |r|); prismatic, the AABB's centre, direction +-a.
-- Force law: the hand leads the push point by s, s_{k+1} = clip(s_k + (v_des
-  - v) dt, 0, F_max / k), F = clip(k s + c (v_des - v), 0, F_max), v the push
-  point's speed along the direction, v_des = ``push_speed``.
-- k = min(F_max / (v_des ramp_time), m_eff omega^2), c = 2 sqrt(k m_eff),
-  omega dt = :data:`PUSHER_OMEGA_DT`: stable for an explicit spring-damper
-  step (Jury's criterion, Franklin, Powell & Workman, *Digital Control of
-  Dynamic Systems*, 3rd ed. 1998, section 4.5); m_eff a lower bound of the
-  part's effective mass at c (:func:`effective_mass`).
-- F_max = max(``min_force``, ``force_factor`` m_total g); ``min_force`` = 22.2 N
-  (5 lbf, 2010 ADA Standards for Accessible Design, section 309.4).
+"""The probes' pusher: a hand that pushes the moving link through a bounded spring-damper, its push
+time, the other hand holding the body, and the probe's knobs. Push point, force law, k, c and F_max:
+``docs/design/metrics.md``, "Behaviour: passive probes". omega dt = :data:`PUSHER_OMEGA_DT` keeps the
+explicit spring-damper step stable (Jury's criterion, Franklin, Powell & Workman, *Digital Control of
+Dynamic Systems*, 3rd ed. 1998, section 4.5); ``min_force`` 22.2 N (5 lbf): 2010 ADA Standards for
+Accessible Design, section 309.4.
 """
 
 from __future__ import annotations
@@ -45,7 +34,7 @@ class ProbeConfig:
     settle_time: float = 0.25
     """free settling before the push, s"""
     push_time: float = 2.0
-    """longest push, s, unless the travel needs longer (module docstring)"""
+    """longest push, s, unless the travel needs longer (:func:`push_budget`)"""
     max_push_time: float = MAX_PUSH_TIME
     """longest push whatever the travel and the ramp ask, s (:data:`MAX_PUSH_TIME`)"""
     release_time: float = 0.75
@@ -75,7 +64,7 @@ class ProbeConfig:
 
 @dataclass(frozen=True)
 class Pusher:
-    """The force law of one probe's hand (module docstring, "Force law")."""
+    """The force law of one probe's hand (``docs/design/metrics.md``, probes, step 3)."""
 
     f_max: float
     """largest force, N"""
@@ -95,7 +84,7 @@ class Pusher:
 
 
 def pusher_for(session, joint: str, cfg: ProbeConfig, weight: float, model: UrdfModel | None = None) -> Pusher:
-    """The hand that probes ``joint`` of a body weighing ``weight`` N (module docstring)."""
+    """The hand that probes ``joint`` of a body weighing ``weight`` N (:class:`Pusher`)."""
     dt = session.options.conventions.timestep
     f_max = max(cfg.min_force, cfg.force_factor * weight)
     m_eff = effective_mass(session, joint, model)
@@ -130,11 +119,6 @@ def push_budget(cfg: ProbeConfig, ramp: float, travel: float) -> tuple[float, fl
     (never below ``push_time``)."""
     asked = max(cfg.push_time, ramp + TRAVEL_TIME_MARGIN * travel / cfg.push_speed)
     return min(asked, max(cfg.max_push_time, cfg.push_time)), asked
-
-
-def total_mass(session) -> float:
-    """Sum of the masses the engine uses for every link of the body, kg."""
-    return float(sum(session.link_masses().values()))
 
 
 def effective_mass(session, joint: str, model: UrdfModel | None = None) -> float:

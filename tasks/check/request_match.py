@@ -101,22 +101,24 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     """([(joint, band, label, phrase, target)], [phrases that matched no joint])
     of a RequestSpec's joint states: ``all`` every task-relevant joint, ``joint``
     the one named, ``label`` the movable joints whose child's label the word
-    names (else the task-relevant ones), top to bottom by ``centres`` (link ->
-    (3,) m), ``ordinal`` picking one; a later phrase overrides an earlier one."""
+    names (else the unlabelled task-relevant ones, which it may name; none when
+    every part is labelled otherwise: the phrase goes to the second list),
+    top to bottom by ``centres`` (link -> (3,) m), ``ordinal`` picking one; a
+    phrase naming a part or joint overrides one naming none, else a later
+    phrase overrides an earlier one."""
     out, unmatched = [], []
     if spec is None:
         return out, unmatched
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     zero = np.zeros(3)
-    for js in spec.joint_states:
+    for js in sorted(spec.joint_states, key=lambda js: js.names_part):
         if js.selector == "all":
             names = list(task_joints)
         elif js.selector == "joint":  # an override names the joint itself
             names = [js.joint] if js.joint in movable else []
         else:
-            names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
-            if not names:
-                names = [n for n in task_joints if n in movable]
+            names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)] \
+                or [n for n in task_joints if n in movable and not semantics.get(joints[n].child, (None, None))[1]]
             names.sort(key=lambda n: (-float(centres.get(joints[n].child, zero)[2]), float(centres.get(joints[n].child, zero)[0])))
             if js.ordinal is not None:
                 names = [names[js.ordinal]] if 0 <= js.ordinal < len(names) else []
@@ -140,4 +142,17 @@ def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sema
     for js in spec.joint_states:
         if js.selector == "label":
             out += [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
+    return out
+
+
+def request_warnings(spec: RequestSpec, unmatched: list[str], category: str | None) -> list[str]:
+    """What of the request the output could not honour, in plain words: nothing understood, the parser's
+    warnings, ``unmatched`` phrases (:func:`requested_joints`: naming no part of the object) and the words
+    no rule used."""
+    if not spec.understood:
+        return [f"no word of the request was understood: {spec.text[:120]!r}; refined with the category's defaults"]
+    out = list(spec.warnings)
+    out += [f"'{p}' names no part of this {category or 'object'}: not applied" for p in unmatched]
+    if spec.ignored:
+        out.append("words not used: " + "; ".join(f"'{g}'" for g in spec.ignored))
     return out

@@ -1,14 +1,5 @@
-"""Robust rest: does the object come back to rest, with its joints held, after
-the small disturbances of being put down? Definition: ``docs/design/metrics.md``, "robust_rest".
-
-Each trial (:data:`TRIALS`: a drop, four tilts about the footprint's centre, a
-nudge) starts from the saved placement of the SPEC rest test and is followed
-by the rest test, settling extended by up to ``recovery_time`` while the
-object still moves. A trial passes iff the object comes back to rest, its up
-direction ends within ``topple_tol`` of the vertical, and every movable joint
-but the wheels it rolls on stays within ``joint_tol_*`` of its initial state
-at every step (clipped to its limits). A trial the engine cannot perform is
-skipped, and so is the metric for a root fixed as the asset declares.
+"""Robust rest: does the object come back to rest, with its joints held, after the small disturbances
+of being put down (:data:`TRIALS`)? Definition: ``docs/design/metrics.md``, "robust_rest".
 """
 
 from __future__ import annotations
@@ -71,10 +62,14 @@ class Trial:
     """joints the object rolls on: their drift is recorded, not graded"""
     diverged: bool = False
     failure: str = ""
+    trace: metrics.RestTrace | None = field(default=None, repr=False, compare=False)
+    """The rest test that followed the disturbance (for the report's evidence; not in :meth:`summary`)."""
+    reference_quat: np.ndarray | None = field(default=None, repr=False, compare=False)
+    """The root's orientation (4,) xyzw at rest before the disturbance."""
 
     def summary(self) -> dict[str, Any]:
-        """JSON-able dict."""
-        return dict(self.__dict__)
+        """JSON-able dict (the trace left out)."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("trace", "reference_quat")}
 
 
 def world_vertices(session: SimSession) -> np.ndarray:
@@ -170,7 +165,7 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
     return Trial(
         name=name, passed=not why, d_pos=stab.details.get("D_pos_m"), d_ori=stab.details.get("D_ori_rad"),
         topple=topple, joint_drift=drift, joint_tolerance=tols, failing_joints=failing, rolling=[j for j in trace.joints if j in rolling],
-        diverged=diverged, failure="; ".join(why))
+        diverged=diverged, failure="; ".join(why), trace=trace, reference_quat=np.asarray(q_ref, float))
 
 
 @dataclass

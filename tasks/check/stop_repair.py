@@ -1,12 +1,7 @@
-"""Collision repair where the joint sweep stops inside the range against a
-hull that bulges (a convex hull filling a concave part's opening): convex
-decomposition of the pieces in the way (refine stage 7b).
-
-For every joint the sweep reports stopped short, :data:`SAMPLES` positions
-from the stall to the end it was driven to (fixed-base, gravity-free PyBullet)
-give the deepest pair (moving link, other link; parent-child excepted);
-deeper than :data:`MIN_DEPTH`, :func:`asset2sim.tasks.state.collision.improve_collisions`
-works on that pair there. The caller keeps the repair only when the check improves.
+"""Collision repair where the joint sweep stops inside the range against a hull that bulges (a convex
+hull filling a concave part's opening): the deepest pair (moving link, other link) over :data:`SAMPLES`
+positions from the stall, deeper than :data:`MIN_DEPTH`, gets its pieces improved by
+:func:`asset2sim.tasks.state.collision.improve_collisions` (refine stage 7b; ``docs/design/metrics.md``).
 """
 
 from __future__ import annotations

@@ -1,11 +1,6 @@
-"""Did the object slide or tip while it was being operated? One measure for
-the probes, the gripper task and the learning environment
-(``docs/design/metrics.md``, probes: "slid").
-
-The slide is the horizontal displacement of the footprint point (below the
-carrying link's origin at the object's lowest height when the watch starts,
-carried rigidly with that link); the tip is the angle between the world
-vertical and the carrying link's up direction (a turn about the vertical is not tipping).
+"""Did the object slide or tip while it was being operated? One measure (the footprint point's
+horizontal displacement, the carrying link's up direction against the vertical) for the probes, the
+gripper task and the learning environment (``docs/design/metrics.md``, probes, step 4).
 """
 
 from __future__ import annotations

@@ -1,14 +1,6 @@
 """Task execution by a gripper: a force- and speed-limited floating gripper
-performs the task of the manifest row on the object (root free on the ground,
-fixed for a mounted asset). Definition: ``docs/design/metrics.md``, "task_execution".
-
-Settle (a joint already at the target starts from the far side), grasp at the
-contact point with a :class:`~asset2sim.tasks.check.gripper.BoundedGrasp`, lead
-the joint to the target (:func:`~asset2sim.tasks.check.gripper_motion.move_joint`),
-release and wait. Success iff the target is reached and still reached after
-the wait (unless meant to return) and the object neither slid nor tipped.
-Recorded: peak |F| (N), peak torque about the axis (N m; prismatic |F . a|)
-and peak operating force (torque / lever).
+(:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`) performs the task of the manifest row on the object
+(root free on the ground, fixed for a mounted asset). Definition: ``docs/design/metrics.md``, "task_execution".
 """
 
 from __future__ import annotations
@@ -112,7 +104,9 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         ValueError: unknown action, non-positive ``open_range``, ``speed_share`` outside (0, 1].
         KeyError: unknown joint.
     """
-    _check_task(session, joint, action, open_range, speed_share)
+    check_action(session, joint, action, open_range, "task", f"joint {joint!r} is not a movable joint of the session")
+    if not 0.0 < speed_share <= 1.0:
+        raise ValueError(f"joint {joint!r}: speed_share must be in (0, 1], got {speed_share!r}")
     cfg = config or TaskConfig()
     dt = float(session.options.conventions.timestep)
     prismatic = session.joint_types[joint] == "prismatic"
@@ -153,13 +147,6 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
         force_limited=bool(m.force_limited), moved=m.moved, seconds_simulated=m.steps * dt, success=not failure,
         failure=failure, notes=notes, speed_share=float(speed_share))
-
-
-def _check_task(session, joint: str, action: str, open_range: float, speed_share: float) -> None:
-    """Raises :func:`execute_task`'s ValueError or KeyError for bad arguments."""
-    check_action(session, joint, action, open_range, "task", f"joint {joint!r} is not a movable joint of the session")
-    if not 0.0 < speed_share <= 1.0:
-        raise ValueError(f"joint {joint!r}: speed_share must be in (0, 1], got {speed_share!r}")
 
 
 def _settle(session, joint: str, action: str, closed: float, direction: float, open_range: float, cfg: TaskConfig,

@@ -1,16 +1,6 @@
-"""A manipulation task ("close the microwave door", the manifest's ``task``
-column or ``--task``) as joints, a direction and a target opening fraction
-(``docs/design/metrics.md``, "Behaviour: passive probes").
-
-1. The leading verb gives the action (:data:`VERBS`): ``close`` (target
-   :data:`~asset2sim.tasks.check.probes.CLOSE_TARGET`) or ``open`` (target
-   :data:`~asset2sim.tasks.check.probes.OPEN_TARGET`); any other verb or none: both.
-2. The words after it are parsed as the request "<words> closed": a part
-   label selects the movable joints whose child link carries it
-   (:func:`asset2sim.tasks.check.request_match.labelled_joints`); a
-   whole-object phrase selects every task-relevant joint.
-3. Nothing matched: every task-relevant joint, both directions. Ordinals are not used.
-4. :func:`with_work_to_do`: a one-direction task naming one part acts on the joints it has work on.
+"""A manipulation task ("close the microwave door", the manifest's ``task`` column or ``--task``) as
+joints, a direction (:data:`VERBS`) and a target opening fraction; the rules are in
+``docs/design/metrics.md``, "Behaviour: passive probes".
 """
 
 from __future__ import annotations
@@ -98,7 +88,7 @@ _EVERY = re.compile(r"\b(?:all|every|each|both)\b")
 
 
 def with_work_to_do(spec: TaskSpec, fractions: dict[str, float]) -> TaskSpec:
-    """``spec`` narrowed to the joints it has work on (module docstring, rule 4);
+    """``spec`` narrowed to the joints it has work on (``docs/design/metrics.md``, probes);
     ``fractions``: joint -> opening fraction at the initial state (missing: has work)."""
     low = " ".join(spec.text.lower().split())
     if len(spec.actions) != 1 or len(spec.joints) < 2 or spec.rule.startswith("fallback") or _EVERY.search(low):

@@ -112,11 +112,6 @@ def post_check_failure_mode(check: Any) -> str:
     return readiness(list(check.metrics)).failure_mode
 
 
-def status_failure_mode(status: str, recorded: str | None = None) -> str:
-    """Mode of a stage that failed with ``status``: the mode its exception carried, else ``timeout`` or ``crash``."""
-    return recorded or ("crash" if status == "error" else status)
-
-
 def exception_failure_mode(exc: BaseException, retryable: type[BaseException] | None = None) -> str:
     """Mode of an exception that stopped an asset's chain outside its stages:
     ``estimator_failure`` (or its own) for ``retryable``, ``timeout``, else ``crash``."""
@@ -155,7 +150,7 @@ def asset_failure_mode(*, manifest_error: str | None = None, input_failure: str 
     if refine_status == "ok":
         mode = refine_mode or "none"
     elif refine_status in FAILED_STATUSES:
-        mode = status_failure_mode(refine_status, refine_mode)
+        mode = refine_mode or ("crash" if refine_status == "error" else refine_status)  # the exception's, else timeout / crash
     if measured_status == "ok" and mode == "none":
         if rest_stable is False:
             mode = "unstable"

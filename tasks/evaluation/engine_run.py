@@ -46,6 +46,7 @@ class EngineRun:
     point_cloud: dict[str, np.ndarray] = field(default_factory=dict)  # link -> (N, 3) m world collision vertices
     seconds: float = 0.0
     recorded: RecordedRuns | None = None  # the post-check's manipulation runs, reused when their inputs match
+    robust_rest: Any = None  # the RobustRestRun the robust_rest metric was graded from (the report's evidence)
 
 
 def link_centres(session) -> dict[str, np.ndarray]:

@@ -22,7 +22,7 @@ from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
-from asset2sim.tasks.check.request_match import requested_joints, scaled_mass_range
+from asset2sim.tasks.check.request_match import request_warnings, requested_joints, scaled_mass_range
 
 #: Largest ground penetration during the rest test that passes, m.
 GROUND_PENETRATION_TOL = 0.005
@@ -264,7 +264,8 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     dims = ctx.prior.get("base_dims")
     m = sem.prompt_alignment(size_requested=spec.size_class is not None, largest_extent=largest, typical_largest=dims[0] if dims else None,
                              size_factor=float(ctx.prior.get("factor", 1.0)), joint_checks=checks,
-                             state_requested=bool(spec.joint_states), unmatched_requests=unmatched, text=ctx.prompt)
+                             state_requested=bool(spec.joint_states), unmatched_requests=unmatched, text=ctx.prompt,
+                             understood=spec.understood, warnings=request_warnings(spec, unmatched, ctx.category))
     m.details.update({"size_class": spec.size_class, "category": ctx.category, "variant": ctx.prior.get("variant"),
                       "extent_state": where, "prior_note": ctx.prior.get("note")})
     return [m]
@@ -295,9 +296,12 @@ def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
 def _m_robust(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.robust_rest` in every engine that loaded the
     asset, the root as the asset declares (``ctx.root_fixed``: skipped)."""
-    return _per_engine(runs, "robust_rest", unit_of("robust_rest"), lambda e, r: robust_rest.robust_rest_metric(
-        recorded_runs.robust_rest_run(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                      fixed_base=ctx.root_fixed, recorded=r.recorded)), lambda r: bool(r.error))
+    def graded(e: str, r: EngineRun) -> MetricResult:
+        r.robust_rest = recorded_runs.robust_rest_run(e, ctx.urdf, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                                      fixed_base=ctx.root_fixed, recorded=r.recorded)
+        return robust_rest.robust_rest_metric(r.robust_rest)
+
+    return _per_engine(runs, "robust_rest", unit_of("robust_rest"), graded, lambda r: bool(r.error))
 
 
 def _task_joints(ctx: Context) -> dict[str, tuple[float, float, float]]:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.frames import quat_angle
+from asset2sim.tasks.check.probes import reached_fraction
 from asset2sim.tasks.evaluation.svg_chart import Panel, figure_svg
 
 SVG_MIME = "image/svg+xml"  # the media type of every figure here (``data:`` URIs)
@@ -96,6 +97,10 @@ def plot_probes(probes: list[Any]) -> bytes | None:
                   ylabel_right="N")
         a.line(t, q, "C0", f"{pr.joint} ({unit})")
         a.hline(pr.target, "C0", ":", "target")
+        if pr.target_fraction != pr.start_fraction:  # the position where the probe counts the target reached
+            at = reached_fraction(pr.action, pr.target_fraction)
+            a.hline(pr.start + (at - pr.start_fraction) * (pr.target - pr.start) / (pr.target_fraction - pr.start_fraction),
+                    "C2", "--", "counts as reached")
         if len(ph) and np.any(ph > 0):
             a.vline(t[int(np.argmax(ph > 0))], "gray", "--", "release")
         a.line(t, f, "C1", "force (N)", width=1.0, right=True)

@@ -16,8 +16,11 @@ from typing import Any
 import numpy as np
 
 from asset2sim.atomic import write_text
+from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.evaluation import plots
+from asset2sim.tasks.evaluation.failure_evidence import evidence_section
+from asset2sim.tasks.evaluation.report_changes import changes_section, opening_text, position_text
 from asset2sim.tasks.geometry.render import render_views
 
 CSS = """
@@ -90,18 +93,16 @@ def _array_png(arr: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def _renders(ev, views: dict[str, np.ndarray] | None = None) -> tuple[str, str]:
-    """(HTML of the object views, what they are); ``views``: renders already taken, else rendered here."""
-    try:
-        if views is None:
-            views = render_views(Path(ev.urdf), dict(ev.initial_state))
-        figs = "".join(
-            f"<figure>{img_tag(_array_png(v), k)}<figcaption class='small'>{esc(k)}</figcaption></figure>"
-            for k, v in views.items()
-        )
-        return f"<div class='views'>{figs}</div>", "renders (asset2sim.tasks.geometry.render)"
-    except Exception as exc:  # fall back to the plot
-        note = f"render failed ({type(exc).__name__}: {exc}); "
+def _figure(image: np.ndarray, caption: str) -> str:
+    """A rendered view (H, W, 3) uint8 with its caption."""
+    return f"<figure>{img_tag(_array_png(image), caption)}<figcaption class='small'>{esc(caption)}</figcaption></figure>"
+
+
+def _renders(ev, views: dict[str, np.ndarray] | None = None, error: Exception | None = None) -> tuple[str, str]:
+    """(HTML of the object views, what they are); ``views``: the renders, None when ``error`` stopped them."""
+    if views is not None:
+        return f"<div class='views'>{''.join(_figure(v, k) for k, v in views.items())}</div>", "renders"
+    note = f"render failed ({type(error).__name__}: {error}); "
     run = next((r for r in ev._runs.values() if r.point_cloud), None)
     svg = plots.plot_object(run.point_cloud) if run is not None else None
     if svg is None:
@@ -154,11 +155,21 @@ def _penetration_details(ev) -> str:
     return "".join(out) or "<p class='small'>no self-penetration at the initial state</p>"
 
 
+def _request_warnings(d: dict) -> str:
+    """The request's warnings (what was not understood or not applied) as a visible list; empty without any."""
+    items = list(d.get("warnings", []))
+    if d.get("not_counted"):
+        items.append("not counted in prompt alignment: " + ", ".join(f"'{n['phrase']}'" for n in d["not_counted"]))
+    if not items:
+        return ""
+    return "<div class='warn' style='padding:6px 12px;border-radius:6px'><b>Request warnings</b><ul>" + "".join(f"<li>{esc(w)}</li>" for w in items) + "</ul></div>"
+
+
 def _prompt_details(ev) -> str:
     m = ev.metric("prompt_alignment")
     if m is None or m.value is None:
         reason = (m.details.get("reason") if m else None) or "not scored"
-        return f"<p class='small'>prompt alignment: {esc(reason)}</p>"
+        return f"<p class='small'>prompt alignment: {esc(reason)}</p>" + (_request_warnings(m.details) if m else "")
     d = m.details
     rows = []
     size = d.get("size") or {}
@@ -169,8 +180,8 @@ def _prompt_details(ev) -> str:
                     f"<td class='num'>{fmt(j.get('score'))}</td><td class='small'>{esc(j.get('reason'))}</td></tr>")
     if d.get("joint_state_score") is None:
         rows.append(f"<tr><td>joint state</td><td>-</td><td>-</td><td class='small'>{esc(d.get('joint_state_reason'))}</td></tr>")
-    return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>"
-            "<table><tr><th>part</th><th>requested</th><th>score</th><th>reason</th></tr>" + "".join(rows) + "</table>")
+    return (f"<p>score <b>{fmt(m.value, 3)}</b> for <i>{esc(d.get('request'))}</i></p>" + _request_warnings(d)
+            + "<table><tr><th>part</th><th>requested</th><th>score</th><th>reason</th></tr>" + "".join(rows) + "</table>")
 
 
 def _probe_details(ev) -> str:
@@ -190,7 +201,7 @@ def _probe_details(ev) -> str:
             f"<td>{fmt(p['rebound'])}</td><td>{fmt(p['kept_moving'])}</td>"
             f"<td class='{cls}'>{esc(p['failure'] or 'ok')}</td><td class='small'>{esc('; '.join(p['notes']))}</td></tr>"
         )
-    return ("<table><tr><th>joint</th><th>probe</th><th>start</th><th>target</th><th>reached</th><th>peak force</th>"
+    return ("<table><tr><th>joint</th><th>probe</th><th>start</th><th>target</th><th>reached (crossed the line that counts)</th><th>peak force</th>"
             "<th>peak torque/force</th><th>object moved</th><th>rebound</th><th>kept moving</th><th>verdict</th><th>notes</th></tr>"
             + "".join(rows) + "</table>")
 
@@ -237,7 +248,7 @@ def parameter_rows(ev) -> list[dict[str, Any]]:
             for k in ("damping", "friction", "stiffness"):
                 src = jd.get("source") or (f"estimator {est}" if est else "overlay")
                 if (jn, k) in escal:
-                    src = f"escalation round {escal[(jn, k)]}"
+                    src = f"changed after check round {escal[(jn, k)]} (the checks failed; see What asset2sim changed)"
                 val = jd.get(k)
                 # the URDF written after escalation is what is simulated
                 if k in ("damping", "friction") and jn in ctx.joints:
@@ -301,29 +312,49 @@ def _badge(ev) -> str:
     return html
 
 
-def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
+def _opening(ev, joint: str, q: float) -> str:
+    """`` (45 % open)`` for a joint whose closed end is known, else empty."""
+    c = ev.closed_positions.get(joint)
+    if not c or not c.get("open_range"):
+        return ""
+    return f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})"
+
+
+def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str = "evaluate") -> str:
     """The HTML text of one evaluation's report; ``views``: renders at
-    ``ev.initial_state`` (view -> (H, W, 3) uint8) already taken, None to render here."""
+    ``ev.initial_state`` (view -> (H, W, 3) uint8) already taken, None to render here;
+    ``command``: the command that wrote it (``refine`` or ``evaluate``), in the title."""
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
     badge = _badge(ev)
-    views_html, views_what = _renders(ev, views)
+    error = None
+    if views is None:
+        try:
+            views = render_views(Path(ev.urdf), dict(ev.initial_state))
+        except Exception as exc:  # the report falls back to a plot of the collision vertices
+            error = exc
+    views_html, views_what = _renders(ev, views, error)
+    joint_types = {n: j.type for n, j in ctx.joints.items()} if ctx is not None else {}
+    state_text = ", ".join(f"{k} = {position_text(v, joint_types.get(k, 'revolute'))}" + _opening(ev, k, v)
+                           for k, v in ev.initial_state.items()) or "none"
     sections = [
-        f"<h1>asset2sim evaluation: {esc(ev.asset_id)}</h1>",
+        f"<h1>asset2sim {esc(command)}: {esc(ev.asset_id)}</h1>",
         f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
         f"engines {esc(', '.join(ev.engines))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)}) &middot; "
         f"evaluated in {fmt(ev.seconds, 3)} s</p>",
         f"<p class='meta'>URDF <code>{esc(ev.urdf)}</code><br/>request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
+        _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
         f"<p>{badge}</p>",
         "<h2>Object at its initial state</h2>",
-        f"<p class='small'>{esc(views_what)}; joints: "
-        + esc(", ".join(f"{k} = {fmt(v)}" for k, v in ev.initial_state.items()) or "none")
-        + f" ({esc(ev.initial_state_source)}); task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
+        f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
+        f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
         views_html,
+        changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, _figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
+        evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure),
         "<h2>Penetration at the initial state</h2>",
         _penetration_details(ev),
         "<h2>Rest test</h2>",
@@ -342,14 +373,21 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None) -> str:
         sections.append(svg_tag(plots.plot_probes(pb.probes), "probes"))
     sections += ["<h2>Physical parameters</h2>", _parameter_table(ev)]
     sections.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in ev.notes) + "</ul>")
-    sections.append("<p class='small'>Definitions, conventions and thresholds: docs/guide/metrics.md. Simulation: PyBullet DIRECT, "
-                    "dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, self-collision except parent-child, inertia from file, root free.</p>")
-    return _page(f"asset2sim evaluation {esc(ev.asset_id)}", "\n".join(sections))
+    sections.append("<h2>What the checks mean</h2><table><tr><th>check</th><th>unit</th><th>what it measures</th></tr>"
+                    + "".join(f"<tr><td>{esc(i.name)}</td><td>{esc(i.unit)}</td><td class='small'>{esc(i.description)}</td></tr>"
+                              for i in METRIC_INFO.values() if ev.metric(i.name) is not None) + "</table>")
+    sections.append("<p class='small'>Simulation: PyBullet DIRECT, dt = 1/240 s, gravity -9.81 m/s^2, ground z = 0, "
+                    "self-collision except parent-child, inertia from file, root free unless the asset is mounted. "
+                    "The user guide (docs/guide/metrics.md in the asset2sim source) gives every threshold and convention.</p>")
+    return _page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
 
 
 def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None) -> Path:
-    """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path."""
-    return write_text(Path(path), render_report(ev, views))
+    """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path. Its
+    title names ``refine`` when it lies beside the refine's ``report.json`` it reports on, else ``evaluate``."""
+    ctx = ev._context
+    by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.folder).resolve()
+    return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate"))
 
 
 # ------------------------------------------------------------------ benchmark pages

@@ -38,7 +38,7 @@ def scale_deviation(scale: float | None, reference_scale: float | None, *, scale
         details["reason"] = "the reference has no scale"
     else:
         value = abs(float(scale) - float(reference_scale)) / float(reference_scale) * 100.0
-    return _result("scale_deviation", value, "%", "reported: |s - s_ref| / s_ref (no SPEC threshold)", details)
+    return _result("scale_deviation", value, "%", "reported: |s - s_ref| / s_ref (no pass/fail threshold)", details)
 
 
 def initial_joint_deviation(state: dict[str, float], reference_state: dict[str, float], joints: list[str],
@@ -58,7 +58,7 @@ def initial_joint_deviation(state: dict[str, float], reference_state: dict[str, 
     units = {v["unit"] for v in per.values()}
     unit = units.pop() if len(units) == 1 else ("mixed" if units else "rad")
     value = float(np.mean([v["deviation"] for v in per.values()])) if per else None
-    return _result("initial_joint_deviation", value, unit, "reported: |q - q_ref| of the task-relevant joint (no SPEC threshold)",
+    return _result("initial_joint_deviation", value, unit, "reported: |q - q_ref| of the task-relevant joint (no pass/fail threshold)",
                    {"joints": per, "skipped": skipped})
 
 
@@ -176,11 +176,18 @@ def target_score(check: JointStateCheck) -> tuple[float | None, str]:
 
 def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typical_largest: float | None, size_factor: float,
                      joint_checks: list[JointStateCheck], state_requested: bool, unmatched_requests: list[str] | None = None,
-                     text: str = "") -> MetricResult:
+                     text: str = "", understood: bool = True, warnings: list[str] | None = None) -> MetricResult:
     """``prompt_alignment`` in [0, 1]: the mean of the size half (when ``typical_largest`` m and ``largest_extent`` m are
-    known) and the joint-state half (when ``state_requested``: mean over ``joint_checks``, each ``unmatched_requests``
-    phrase scoring 0)."""
-    details: dict[str, Any] = {"request": text, "size": None, "joints": []}
+    known) and the joint-state half (when ``state_requested``: mean over ``joint_checks``). Only what was understood
+    counts: ``unmatched_requests`` (phrases naming no part of the object) are listed in ``details["not_counted"]``,
+    not scored; a request of which nothing was understood (``understood`` False) scores 0. ``warnings``: the
+    request's warnings, kept in ``details["warnings"]`` for the report."""
+    details: dict[str, Any] = {"request": text, "size": None, "joints": [], "warnings": list(warnings or []),
+                               "not_counted": [{"phrase": p, "reason": "names no part of this object"} for p in unmatched_requests or []]}
+    if not understood:
+        details.update(joint_state_score=None, joint_state_reason="no word of the request was understood")
+        details["size"] = {"score": None, "reason": "no word of the request was understood"}
+        return _result("prompt_alignment", 0.0, "fraction", "nothing understood: not aligned", details)
     halves = []
     if typical_largest and largest_extent:
         s, reason, ratio = size_score(largest_extent, typical_largest, size_factor)
@@ -189,7 +196,10 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
         halves.append(s)
     else:
         details["size"] = {"score": None, "reason": "no typical size known for the category or no extent measured"}
-    if state_requested:
+    if state_requested and not joint_checks:
+        details["joint_state_score"] = None
+        details["joint_state_reason"] = "no state the request asks names a part of this object"
+    elif state_requested:
         scores = []
         for c in joint_checks:
             if c.fraction is None:
@@ -206,11 +216,7 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
                 {"joint": c.joint, "band": c.band, "label": c.label, "fraction": c.fraction, "score": sc, "reason": reason,
                  "target": c.target.model_dump() if c.target is not None else None}
             )
-        for phrase in unmatched_requests or []:
-            scores.append(0.0)
-            details["joints"].append({"joint": None, "band": None, "score": 0.0, "reason": f"no joint matches {phrase!r}"})
-        graded = bool(scores) or not joint_checks
-        js = float(np.mean(scores)) if scores else (0.0 if graded else None)
+        js = float(np.mean(scores)) if scores else None
         details["joint_state_score"] = js
         if js is not None:
             halves.append(js)

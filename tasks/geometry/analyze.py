@@ -23,23 +23,11 @@ from asset2sim import array_cache
 from asset2sim.frames import rpy_matrix
 from asset2sim.mesh_io import MeshCache
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, LinkDesc, LinkGeometry
-from asset2sim.tasks.geometry.moments import (
-    REGULARIZATION,
-    SolidMoments,
-    inertia_from_second_moment,
-    regularize_inertia,
-    surface_properties,
-    watertight_properties,
-)
+from asset2sim.tasks.geometry.moments import (REGULARIZATION, SolidMoments, inertia_from_second_moment, regularize_inertia,
+                                              surface_properties, watertight_properties)
 from asset2sim.tasks.geometry.surface import MeshAnalysisError, link_surface
-from asset2sim.tasks.geometry.voxels import (
-    CLOSE_GAPS,
-    LAYER_CORRECTION,
-    MAX_VOXELS,
-    VOXELS_PER_AXIS,
-    grid_pitch,
-    voxel_properties,
-)
+from asset2sim.tasks.geometry.voxels import (CLOSE_GAPS, LAYER_CORRECTION, MAX_VOXELS, VOXELS_PER_AXIS, grid_pitch,
+                                             voxel_properties)
 
 __all__ = [
     "MeshAnalysisError", "MeshCache", "link_surface", "surface_properties", "watertight_properties", "voxel_properties",
@@ -90,12 +78,6 @@ def _tup3(a: np.ndarray) -> tuple[float, float, float]:
 
 def _tup33(m: np.ndarray):
     return tuple(_tup3(row) for row in m)
-
-
-def _shift(cov: np.ndarray, frm: np.ndarray, to: np.ndarray) -> np.ndarray:
-    """Second moment about ``to`` from the central one about ``frm`` (parallel axis)."""
-    d = np.asarray(frm) - np.asarray(to)
-    return cov + np.outer(d, d)
 
 
 #: Modules whose source the analysis of a link depends on (part of the on-disk cache key).
@@ -223,7 +205,8 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
     else:
         com = solid.com
         c_solid = solid.second
-    c_shell = _shift(s_cov, s_centroid, com)
+    d = np.asarray(s_centroid) - np.asarray(com)
+    c_shell = s_cov + np.outer(d, d)  # the surface's second moment about com (parallel axis)
     sep = float(np.linalg.norm(s_centroid - com))
     if sep > 0.01 * size:
         notes.append(f"surface centroid {np.round(s_centroid, 6).tolist()} m differs from com by {sep:.4g} m")

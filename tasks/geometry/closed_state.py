@@ -1,18 +1,7 @@
-"""The geometric *closed* end of every movable joint (``docs/design/refine.md``, "Closed state").
-
-Per joint, other joints at their reference state, in a fixed-base, gravity-free session:
-
-1. score(q) = (c / min c) x (o / min o)^``OWN_WEIGHT``, c the volume of the root-frame box bounding
-   the joint's parent and moving subtree, o that of the subtree alone;
-2. sample ``coarse`` states over the range, keep those within ``tie_tol`` of the best score and,
-   among them, those whose penetration with the rest exceeds the least by at most
-   ``PHI_TIE_FRACTION`` of the object size;
-3. take the tie farthest from the open end (the part rests against its parent);
-4. refine with ``fine`` samples between the neighbouring coarse samples.
-
-A joint whose parent+subtree box stays within ``tie_tol`` of its smallest over the range takes the
-limit nearest the modelled pose 0 (unless it penetrates there); continuous joints keep 0. The
-opening direction points to the farther limit; f(q) = direction * (q - q_closed) / open_range.
+"""The geometric *closed* end of every movable joint, in a fixed-base, gravity-free session: the score
+(``OWN_WEIGHT``), the ties (``tie_tol``, ``PHI_TIE_FRACTION``) and the pick are in
+``docs/design/refine.md``, "Closed state"; the refinement and the joints without a geometric closed end
+in ``docs/design/core.md``. Opening fraction f(q) = direction * (q - q_closed) / open_range.
 """
 
 from __future__ import annotations
@@ -206,22 +195,20 @@ def _subtree_phi(session, screen: _PairScreen) -> float:
     return total
 
 
-def closed_positions(session, asset: AssetDescription, *, reference: dict[str, float] | None = None, coarse: int = 41,
-                     fine: int = 21, tie_tol: float = 0.03, passes: int = 2,
-                     hull_points: dict[str, np.ndarray] | None = None) -> dict[str, ClosedState]:
+def closed_positions(session, asset: AssetDescription, *, coarse: int = 41, fine: int = 21, tie_tol: float = 0.03,
+                     passes: int = 2, hull_points: dict[str, np.ndarray] | None = None) -> dict[str, ClosedState]:
     """Closed end of every movable joint of ``session`` (a fixed-base session of ``asset``).
 
     Args:
         session: a :class:`asset2sim.engines.base.SimSession` answering ``link_frame`` and ``link_distances``.
         asset: the description of the same URDF (for the kinematic tree).
-        reference: starting state of the other joints (default 0 clipped).
         coarse, fine, tie_tol: samples over the range and in the refinement window; relative tie tolerance.
         passes: passes over all joints; later passes hold the others closed.
         hull_points: :func:`link_hull_points` of the asset (computed when None).
 
     Returns joint name -> :class:`ClosedState`; the session is left at the closed state.
     """
-    state = dict(reference or default_reference(session))
+    state = default_reference(session)
     result: dict[str, ClosedState] = {}
     points = link_hull_points(asset) if hull_points is None else hull_points
     names = list(session.joint_names)
@@ -250,7 +237,7 @@ def closed_positions(session, asset: AssetDescription, *, reference: dict[str, f
 
 def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, float], points: dict[str, np.ndarray],
                         coarse: int, fine: int, tie_tol: float) -> ClosedState:
-    """Steps 1-4 of the module docstring for the bounded joint ``jd``, the others at ``state``."""
+    """The closed end of the bounded joint ``jd``, the others at ``state`` (module docstring)."""
     name = jd.name
     lo, hi = session.joint_limits[name]
     sub = subtree_links(asset, jd.child)
@@ -292,7 +279,7 @@ def _joint_closed_state(session, asset: AssetDescription, jd, state: dict[str, f
 
 def _pick(qv: np.ndarray, vals: np.ndarray, tol: float, q_open: float) -> int:
     """Index of the closed state among samples ``qv`` with ``vals`` (n, 3) (parent+subtree box, subtree
-    box, penetration): steps 1-3 of the module docstring, ``tol`` the relative tie tolerance."""
+    box, penetration), ``tol`` the relative tie tolerance (module docstring)."""
     score = (vals[:, 0] / vals[:, 0].min()) * (vals[:, 1] / vals[:, 1].min()) ** OWN_WEIGHT
     phi = vals[:, 2]
     ties = np.flatnonzero(score <= score.min() * (1.0 + tol))

@@ -1,22 +1,8 @@
-"""Joint limits clipped to what the geometry allows (``docs/design/metrics.md``, before the post-check).
-
-Per movable joint j (closed end q_c, opening direction d, range R; other joints at the sweep's start
-state; fixed-base, gravity-free session at the output scale):
-
-1. pairs (link of j's moving subtree, other link with collision geometry); baseline b_p: the pair's
-   depth at q_c (parent-child) or its least over the raw range (other pairs);
-2. excess e(q) = max_p (depth_p(q) - b_p), m; a closed end with e > tol moves to the first free state;
-3. from q_c towards each raw limit (:data:`SCAN_SAMPLES` samples), the first sample with
-   e >= :data:`STOP_DEPTH` is in a stop; the last sample before it with e <= tol, refined by
-   bisection, ends the free range;
-4. a refined initial state outside the free range keeps the limit (hull overlap, noted);
-5. a limit inside the raw range by more than :data:`MIN_CLIP_FRACTION` of R becomes the free end,
-   moved back to the contact's onset (:func:`contact_onset`); free less than :data:`MIN_FREE_FRACTION`
-   of R: blocked, the limit is kept;
-6. (``chain_open``) the far end is also scanned against the chain that carries j beyond its parent's
-   rigid group, the movable joints between at their open ends; a nearer end becomes the limit.
-
-tol = :data:`EXCESS_TOLERANCE`; the scans are in :mod:`asset2sim.tasks.geometry.penetration_scan`.
+"""Joint limits clipped to what the geometry allows. The method (pairs and baselines, excess, stops,
+contact onset, the ``chain_open`` scan of the carrying chain) is in ``docs/design/metrics.md``, before
+the post-check; tolerances :data:`~asset2sim.tasks.geometry.penetration_scan.EXCESS_TOLERANCE`,
+:data:`STOP_DEPTH`, :data:`MIN_CLIP_FRACTION`, :data:`MIN_FREE_FRACTION`; the scans are in
+:mod:`asset2sim.tasks.geometry.penetration_scan`.
 """
 
 from __future__ import annotations
@@ -26,15 +12,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from asset2sim.schemas.overlay import Overlay
-from asset2sim.tasks.geometry.penetration_scan import (
-    EXCESS_TOLERANCE,
-    SCAN_SAMPLES,
-    collision_pairs,
-    contact_onset,
-    depth_scan,
-    free_end,
-    pair_depths,
-)
+from asset2sim.tasks.geometry.penetration_scan import (EXCESS_TOLERANCE, SCAN_SAMPLES, collision_pairs, contact_onset, depth_scan,
+                                                       free_end, pair_depths)
 from asset2sim.urdf import UrdfModel
 
 #: Excess (m) a contact must reach on the way to be a stop: the sweep's 5 mm self-penetration bound.
@@ -109,9 +88,8 @@ def chain_links(model: UrdfModel, joint: str) -> set[str]:
 
 
 def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed: dict[str, tuple[float, float, float]],
-                   state: dict[str, float], q_close: float, far_raw: float, tol: float, samples: int,
-                   range_: float) -> tuple[float, str | None, list[str]]:
-    """Step 6 of the module docstring: (far end at the contact's onset, the link run into, the joints
+                   state: dict[str, float], q_close: float, far_raw: float, range_: float) -> tuple[float, str | None, list[str]]:
+    """The chain scan (``chain_open``): (far end at the contact's onset, the link run into, the joints
     opened), or (``far_raw``, None, []) when the chain does not end the range or the part cannot open
     from ``q_close`` even then. The session is left at ``state`` with ``name`` at ``q_close``."""
     pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
@@ -130,12 +108,12 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
         return float(far_raw), None, []
     try:
         session.set_joint_positions({**state, **opened, name: q_close})
-        _, depth = depth_scan(session, name, pairs, *sorted((q_close, far_raw)), q_close, samples)
+        _, depth = depth_scan(session, name, pairs, *sorted((q_close, far_raw)), q_close, SCAN_SAMPLES)
         base = depth.min(axis=0)
         session.set_joint_positions({name: q_close})
-        if float((pair_depths(session, pairs) - base).max(initial=0.0)) > tol:
+        if float((pair_depths(session, pairs) - base).max(initial=0.0)) > EXCESS_TOLERANCE:
             return float(far_raw), None, []  # not free at its closed end even with the chain open: the sweep's finding
-        far, who = free_end(session, name, q_close, far_raw, pairs, base, tol, samples, STOP_DEPTH)
+        far, who = free_end(session, name, q_close, far_raw, pairs, base, EXCESS_TOLERANCE, SCAN_SAMPLES, STOP_DEPTH)
         if who is None or abs(far - q_close) < MIN_FREE_FRACTION * range_:
             return float(far_raw), None, []
         far = contact_onset(session, name, far, q_close, pairs, base, BACK_OFF_FRACTION * range_)
@@ -145,22 +123,19 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
 
 
 def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                     tol: float = EXCESS_TOLERANCE, samples: int = SCAN_SAMPLES, against: str = "stops",
-                     confirm_stops: bool = True, chain_open: bool = False) -> dict[str, LimitClip]:
-    """Geometric limits of every joint of ``closed`` (see the module docstring).
+                     against: str = "stops", confirm_stops: bool = True, chain_open: bool = False) -> dict[str, LimitClip]:
+    """Geometric limits of every joint of ``closed`` (module docstring).
 
     Args:
         session, model: a fixed-base :class:`~asset2sim.engines.base.SimSession` of the URDF ``model``.
         closed: joint -> (q_closed, direction +-1, open range), rad or m, at the session's scale.
         state: joint -> position (rad or m) the other joints hold (the sweep's start state).
-        tol: penetration excess (m) above which a closed end is pressed into another link.
         confirm_stops: a contact ends the range only when its excess reaches :data:`STOP_DEPTH`
             further on (the end then at the contact's onset); False: any contact.
-        samples: samples over the raw range.
-        against: ``"stops"``: the links rigid with the joint's parent (:func:`rigid_group`), and step 6
-            with ``chain_open``; ``"held"``: only the links of :func:`chain_links`, posed by the joints
+        against: ``"stops"``: the links rigid with the joint's parent (:func:`rigid_group`), and the
+            chain scan with ``chain_open``; ``"held"``: only the links of :func:`chain_links`, posed by the joints
             between held at ``state``, the far end only.
-        chain_open: with ``against="stops"``, step 6 too (refine's repair of a sweep that stopped short).
+        chain_open: with ``against="stops"``, the chain scan too (refine's repair of a sweep that stopped short).
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
@@ -183,7 +158,7 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
         out[name] = _raw_clip(name, lo, hi, qc, d, rng)
         if pairs:
-            scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs, tol, samples, STOP_DEPTH if confirm_stops else None)
+            scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs, STOP_DEPTH if confirm_stops else None)
             out[name] = scan.clip(out[name], model, sub, parent_of, closed, state, against == "stops", chain_open)
     session.set_joint_positions(state)
     return out
@@ -213,16 +188,14 @@ class _JointScan:
     d: float
     rng: float
     pairs: list[tuple[str, str]]
-    tol: float
-    samples: int
     stop_depth: float | None
     base: np.ndarray | None = None
 
     def free_end(self, q_from: float, q_to: float, stop_depth: float | None = None,
                  samples: int | None = None) -> tuple[float, str | None]:
         """:func:`free_end` of the joint from ``q_from`` towards ``q_to``."""
-        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base, self.tol,
-                        self.samples if samples is None else samples, stop_depth)
+        return free_end(self.session, self.name, q_from, q_to, self.pairs, self.base, EXCESS_TOLERANCE,
+                        SCAN_SAMPLES if samples is None else samples, stop_depth)
 
     def onset(self, q_end: float, q_free: float) -> float:
         """:func:`contact_onset`, at most ``BACK_OFF_FRACTION`` of the range back from ``q_end``."""
@@ -235,8 +208,8 @@ class _JointScan:
     def clip(self, clip: LimitClip, model: UrdfModel, sub: list[str], parent_of: dict[str, str],
              closed: dict[str, tuple[float, float, float]], state: dict[str, float], stops: bool,
              chain_open: bool) -> LimitClip:
-        """Steps 1-6 of the module docstring: ``clip`` with the clipped limits, or the raw limits with a note."""
-        qs, depth = depth_scan(self.session, self.name, self.pairs, self.lo, self.hi, self.qc, self.samples)
+        """``clip`` with the clipped limits, or the raw limits with a note."""
+        qs, depth = depth_scan(self.session, self.name, self.pairs, self.lo, self.hi, self.qc, SCAN_SAMPLES)
         k_c = int(np.flatnonzero(qs == self.qc)[0])
         # baseline: a parent-child pair's depth at the closed end; any other pair's least over the range
         adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in self.pairs])
@@ -255,8 +228,7 @@ class _JointScan:
             return clip
         chain_end = None
         if stops and chain_open:
-            chain_end = _chain_far_end(self.session, model, self.name, sub, closed, state, q_close, far_raw, self.tol,
-                                       self.samples, self.rng)
+            chain_end = _chain_far_end(self.session, model, self.name, sub, closed, state, q_close, far_raw, self.rng)
         far, who = self.far_end(clip, far, who, q_close, far_raw, chain_end)
         back = self.back_end(clip, q_close, back_raw, stops)
         clip.lower, clip.upper = (back, far) if self.d > 0 else (far, back)
@@ -271,7 +243,7 @@ class _JointScan:
 
     def closed_end(self, clip: LimitClip, qs: np.ndarray, depth: np.ndarray, k_c: int) -> float | None:
         """``qc``, or where the part first comes free towards the opening side; None when it never does."""
-        free = (depth - self.base).max(axis=1) <= self.tol
+        free = (depth - self.base).max(axis=1) <= EXCESS_TOLERANCE
         if free[k_c]:
             return float(self.qc)
         # the closed end itself pushes into another link: first free sample towards the opening side
@@ -288,7 +260,7 @@ class _JointScan:
 
     def far_end(self, clip: LimitClip, far: float, who: str | None, q_close: float, far_raw: float,
                 chain_end: tuple[float, str | None, list[str]] | None) -> tuple[float, str | None]:
-        """(limit on the opening side, the link run into): the chain's end (step 6) when nearer, else
+        """(limit on the opening side, the link run into): the chain's end when nearer, else
         ``far`` at its contact's onset when it clips ``far_raw``, else ``far_raw``."""
         side = "upper" if self.d > 0 else "lower"
         if chain_end is not None:

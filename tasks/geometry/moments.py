@@ -6,7 +6,6 @@ meshes (signed tetrahedra, Tonon, J. Math. Stat. 1(1), 2004), and inertia helper
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable
 
 import numpy as np
 
@@ -43,11 +42,6 @@ def regularize_inertia(inertia: np.ndarray, scale_m2: float, rel: float = REGULA
     return i + eps * np.eye(3), True
 
 
-def _triangles(vertices: np.ndarray, faces: np.ndarray, ref: np.ndarray) -> Iterable[np.ndarray]:
-    for s in range(0, len(faces), FACE_BATCH):
-        yield vertices[faces[s : s + FACE_BATCH]] - ref
-
-
 def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Exact area moments of a triangle surface: vertices (N, 3) m, faces (M, 3) int (valid).
 
@@ -59,7 +53,8 @@ def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, 
     area = 0.0
     first = np.zeros(3)
     second = np.zeros((3, 3))
-    for t in _triangles(vertices, faces, ref):
+    for start in range(0, len(faces), FACE_BATCH):
+        t = vertices[faces[start : start + FACE_BATCH]] - ref
         a = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
         s = t.sum(axis=1)
         area += float(a.sum())
@@ -106,19 +101,18 @@ class SolidMoments:
     overlap_candidates: bool = False  # closed components whose bounding boxes overlap
 
 
-def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: float | None = None) -> SolidMoments | None:
+def watertight_properties(vertices: np.ndarray, faces: np.ndarray) -> SolidMoments | None:
     """Exact solid moments of a closed, consistently oriented triangle surface.
 
     Args:
-        vertices: (N, 3) m. faces: (M, 3) int. merge_tol: vertex merge
-            distance, m (default 1e-9 x the longest extent).
+        vertices: (N, 3) m. faces: (M, 3) int.
 
     Returns:
         ``SolidMoments`` (method ``watertight_exact``) when every edge is in exactly two faces with
-        opposite orientation, as indexed or with coincident vertices merged; else ``None``. Per
-        component, integral of x x^T dV = V/20 (sum_i p_i p_i^T + s s^T) over signed tetrahedra (Tonon
-        2004); an inside-out component is flipped (noted). ``overlap_candidates``: closed components
-        with overlapping bounding boxes (their union may be smaller than the sum).
+        opposite orientation, as indexed or with coincident vertices (within 1e-9 x the longest extent)
+        merged; else ``None``. Per component, integral of x x^T dV = V/20 (sum_i p_i p_i^T + s s^T) over
+        signed tetrahedra (Tonon 2004); an inside-out component is flipped (noted). ``overlap_candidates``:
+        closed components with overlapping bounding boxes (their union may be smaller than the sum).
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -130,7 +124,7 @@ def watertight_properties(vertices: np.ndarray, faces: np.ndarray, merge_tol: fl
     # topology as indexed first, else with coincident vertices merged (polygon soups)
     fm, nv = faces, len(vertices)
     if not _is_closed_oriented(fm, nv):
-        fm, nv = _merge_vertices(vertices, faces, merge_tol or 1e-9 * size)
+        fm, nv = _merge_vertices(vertices, faces, 1e-9 * size)
         ok = (fm[:, 0] != fm[:, 1]) & (fm[:, 1] != fm[:, 2]) & (fm[:, 0] != fm[:, 2])
         if not _is_closed_oriented(fm[ok], nv):
             return None

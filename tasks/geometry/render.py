@@ -21,6 +21,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_to_xyzw
 from asset2sim.engines.registry import open_viewer
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.geometry.render_camera import FILL, VIEWS, Camera, ViewSpec, fit_camera, view_spec
@@ -140,6 +141,7 @@ class SceneRenderer:
         self.timings = RenderTimings()
         self.urdf_path = Path(urdf_path)
         self._viewer = None
+        self._root0: tuple[np.ndarray, np.ndarray] | None = None
         self._work = Path(tempfile.mkdtemp(prefix="asset2sim-render-"))
         try:
             t0 = time.perf_counter()
@@ -185,6 +187,15 @@ class SceneRenderer:
                 raise ValueError(f"joint {name!r}: position {value!r} is not finite")
             self._viewer.set_joint_positions({name: v})
 
+    def turn_root(self, rotation: np.ndarray) -> None:
+        """Draw the object turned by ``rotation`` (3, 3) about the world origin from its pose as loaded (a
+        tilted or toppled object as it lies; the cameras fit whatever pose)."""
+        if self._root0 is None:
+            self._root0 = self._viewer.link_frame(self._viewer.link_names[0])
+        pos0, R0 = self._root0
+        R = np.asarray(rotation, float)
+        self._viewer.set_root_pose(R @ pos0, quat_wxyz_to_xyzw(matrix_quat_wxyz(R @ R0)))
+
     def world_points(self) -> np.ndarray:
         """Visual vertices (N, 3) of all links in the base frame, m, at the current state."""
         out = []
@@ -215,8 +226,7 @@ class SceneRenderer:
         """
         spec = view_spec(view)
         t0 = time.perf_counter()
-        cam = self.camera(spec)
-        img = self._draw(cam)
+        img = self._draw(self.camera(spec))
         self.timings.views.setdefault(spec.name, []).append(time.perf_counter() - t0)
         return img
 
@@ -296,11 +306,9 @@ def render_views(urdf_path: Path | str, joint_positions: Mapping[str, float] | N
     views = list(views)
     for v in views:
         view_spec(v)
-    images: dict[str, np.ndarray] = {}
     with SceneRenderer(urdf_path, size=size, backend=backend, supersample=supersample, shadows=shadows) as r:
         r.set_joint_positions(joint_positions)
-        for v in views:
-            images[v] = r.render(v)
+        images = {v: r.render(v) for v in views}
     if out_dir is not None:
         for v, img in images.items():
             write_png(Path(out_dir) / f"{v}.png", img)

@@ -9,14 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.tasks.geometry.render_meshes import (
-    DEFAULT_COLOR,
-    DrawableMesh,
-    TextureLinks,
-    colored_obj,
-    convert_other_mesh,
-    split_obj,
-)
+from asset2sim.tasks.geometry.render_meshes import (DEFAULT_COLOR, DrawableMesh, TextureLinks, colored_obj, convert_other_mesh,
+                                                    split_obj)
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfLink, UrdfMaterial, UrdfModel, read_urdf, write_urdf
 
 
@@ -123,16 +117,6 @@ class _VisualFiles:
         return info, files
 
 
-def _read_model(urdf_path: Path) -> UrdfModel:
-    """The URDF model, read leniently; FileNotFoundError (no such file) or ValueError (unparseable)."""
-    if not urdf_path.is_file():
-        raise FileNotFoundError(f"no such URDF: {urdf_path}")
-    try:
-        return read_urdf(urdf_path, mode="lenient")
-    except UrdfError as exc:
-        raise ValueError(f"{urdf_path}: not a parseable URDF ({exc})") from exc
-
-
 def _all_materials(model: UrdfModel) -> list[UrdfMaterial]:
     """Top-level materials, then the visuals' own, in file order."""
     return [*model.materials, *(v.material for ln in model.links.values() for v in ln.visuals if v.material is not None)]
@@ -200,7 +184,12 @@ def prepare_scene(urdf_path: Path, work: Path, texture_max: int = 1024) -> Rende
         FileNotFoundError: the URDF or one of its visual meshes is missing.
         ValueError: the URDF or a mesh does not parse, or there is no visual geometry.
     """
-    model = _read_model(urdf_path)
+    if not urdf_path.is_file():
+        raise FileNotFoundError(f"no such URDF: {urdf_path}")
+    try:
+        model = read_urdf(urdf_path, mode="lenient")
+    except UrdfError as exc:
+        raise ValueError(f"{urdf_path}: not a parseable URDF ({exc})") from exc
     urdf_dir = urdf_path.parent.resolve()
     named = _named_colors(model)
     notes: list[str] = []

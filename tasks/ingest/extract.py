@@ -18,14 +18,7 @@ import numpy as np
 from asset2sim import file_memo
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
-from asset2sim.schemas.asset import (
-    AssetDescription,
-    GeometryRef,
-    GivenInertial,
-    JointDesc,
-    LinkDesc,
-    Origin,
-)
+from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
 from asset2sim.tasks.ingest import validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
@@ -67,12 +60,6 @@ def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: st
     return None
 
 
-def _refusal_message(asset: Path | str, errs: list["Finding"]) -> str:
-    lines = [f.describe() for f in errs[:MESSAGE_FINDINGS]]
-    more = f"\n  ... and {len(errs) - MESSAGE_FINDINGS} more" if len(errs) > MESSAGE_FINDINGS else ""
-    return f"{asset}: {len(errs)} validation error(s):\n  " + "\n  ".join(lines) + more
-
-
 def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, category: str | None = None,
                           policy: "ValidationPolicy | None" = None) -> tuple[AssetDescription, list["Finding"]]:
     """Validate, then read an asset; also return every validation finding.
@@ -98,7 +85,9 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     result = validate_input.run_validation(asset, policy)
     errs = result.errors
     if errs:
-        raise AssetError(_refusal_message(asset, errs), errs)
+        more = f"\n  ... and {len(errs) - MESSAGE_FINDINGS} more" if len(errs) > MESSAGE_FINDINGS else ""
+        lines = "\n  ".join(f.describe() for f in errs[:MESSAGE_FINDINGS])
+        raise AssetError(f"{asset}: {len(errs)} validation error(s):\n  {lines}{more}", errs)
     assert result.urdf is not None and result.folder is not None and result.urdf_bytes is not None
     urdf = Path(os.path.realpath(result.urdf))
     folder = Path(os.path.realpath(result.folder))
@@ -119,7 +108,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     desc = AssetDescription(
         asset_id=asset_id or (folder.name if urdf.name in URDF_NAMES else urdf.stem), source_dir=folder, urdf_path=urdf,
         robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=roots[0],
-        category=category or result.category, input_hash=sha256_files(files, root=None))
+        category=category or result.category, input_hash=sha256_files(files))
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)

@@ -21,7 +21,7 @@ Action = Literal["refuse", "replace_with_estimate", "mass_from_area", "ignore"]
 MeshUse = Literal["collision", "mass", "visual"]
 
 __all__ = [
-    "Action", "CODES", "DEFAULT_POLICY", "Finding", "IMAGE_EXTENSIONS", "JOINT_TYPES", "MAX_COORDINATE", "MAX_LINKS",
+    "Action", "CODES", "DEFAULT_POLICY", "Finding", "IMAGE_EXTENSIONS", "MAX_COORDINATE", "MAX_LINKS",
     "MAX_MOVABLE_JOINTS", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
     "MAX_TOTAL_TEXTURE_PIXELS", "MAX_TOTAL_FACES", "MESH_EXTENSIONS", "MESH_USE_DEPENDENT", "MOVABLE_TYPES", "MeshUse",
     "Recorder", "SEMANTIC_KINDS", "SIMULATOR_MESH_EXTENSIONS", "Severity", "ValidationPolicy", "ValidationResult",
@@ -49,7 +49,6 @@ MAX_TEXTURE_PIXELS = 8192 * 8192
 MAX_TOTAL_TEXTURE_BYTES = 1024 * 1024 * 1024
 MAX_TOTAL_TEXTURE_PIXELS = 4 * 8192 * 8192
 IMAGE_EXTENSIONS = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tga", ".tif", ".tiff", ".gif"})
-JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 MOVABLE_TYPES = frozenset({"revolute", "continuous", "prismatic", "floating", "planar"})
 SEMANTIC_KINDS = frozenset({"hinge", "slider", "free", "heavy", "static", "junk"})
 

@@ -460,10 +460,6 @@ def read_usd(path: Path) -> UsdAsset:
     return UsdAsset(links=links, joints=joints, articulation_root=bool(art), fixed_root=fixed_root)
 
 
-def _close(a: float, b: float, scale: float) -> bool:
-    return abs(a - b) <= FLOAT_RTOL * max(abs(b), scale) + 1e-15
-
-
 @dataclass
 class UsdCheck:
     """Largest relative differences between the USD and the source files
@@ -498,7 +494,7 @@ def check_usd(path: Path, out_dir: Path) -> UsdCheck:
         got, want = np.atleast_1d(np.asarray(got, float)), np.atleast_1d(np.asarray(want, float))
         err = float(np.abs(got - want).max()) / max(scale, 1e-300)
         worst = max(worst, err)
-        if not all(_close(float(g), float(w), scale) for g, w in zip(got.ravel(), want.ravel())):
+        if not all(abs(float(g) - float(w)) <= FLOAT_RTOL * max(abs(float(w)), scale) + 1e-15 for g, w in zip(got.ravel(), want.ravel())):
             raise UsdExportError(f"{path}: {what} is {got.tolist()} in the USD, {want.tolist()} in {out_dir}")
 
     def cmp_inertial(what: str, got: UsdLink, mass: float, com: np.ndarray, inertia: np.ndarray) -> None:

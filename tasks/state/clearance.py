@@ -14,12 +14,7 @@ from scipy.spatial import QhullError
 
 from asset2sim import atomic, file_names, mesh_io
 from asset2sim.schemas.asset import GeometryRef
-from asset2sim.tasks.assemble.sliding_clearance import (
-    RUNNING_CLEARANCE,
-    clear_sliding_contact,
-    joint_velocity,
-    sat_gap,
-)
+from asset2sim.tasks.assemble.sliding_clearance import RUNNING_CLEARANCE, clear_sliding_contact, joint_velocity, sat_gap
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
 

@@ -81,9 +81,7 @@ def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     parts = coacd.run_coacd(coacd.Mesh(v, f), **COACD_SETTINGS)
     pieces = refit_pieces(v, [(np.asarray(pv, float), np.asarray(pf, int)) for pv, pf in parts])
     arrays = {"n": np.array(len(pieces))}
-    for i, (pv, pf) in enumerate(pieces):
-        arrays[f"v{i}"] = pv
-        arrays[f"f{i}"] = pf
+    arrays.update({f"{k}{i}": a for i, piece in enumerate(pieces) for k, a in zip("vf", piece)})
     array_cache.store("coacd", digest, arrays)
     return pieces
 

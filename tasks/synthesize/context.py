@@ -85,13 +85,6 @@ def subtree_height(session: SimSession, links: list[str], hull_points: dict[str,
     return 0.0 if box is None else float(0.5 * (box[0][2] + box[1][2]))
 
 
-def kinematic_session(asset: AssetDescription, config: RefineConfig | None = None) -> SimSession:
-    """A fixed-base, gravity-free PyBullet session of the input asset without ground, ``config.sim``'s
-    conventions; the caller closes it. Raises as :func:`asset2sim.engines.registry.open_session`."""
-    conventions = (config or RefineConfig()).sim
-    return open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=conventions))
-
-
 @contextlib.contextmanager
 def build_context(source: AssetDescription | Path | str, prompt: str, config: RefineConfig | None = None, *, category: str | None = None,
                   asset_id: str | None = None, geometry: dict[str, LinkGeometry] | None = None, cache: analyze.MeshCache | None = None,
@@ -120,7 +113,8 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     if geometry is None:
         geometry = analyze.analyze_asset(asset, cache=cache)
     meaning = interpret(asset, prompt, category, (config or RefineConfig()).overrides)
-    with kinematic_session(asset, config) as kin:
+    kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=(config or RefineConfig()).sim)
+    with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
         hull = link_hull_points(asset, cache=cache)
         closed = closed_positions(kin, asset, hull_points=hull)
         extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)

@@ -140,11 +140,6 @@ How your answer is used and what each field means (SI units, angles in radians):
 """
 
 
-def system_prompt(schema: dict[str, Any]) -> str:
-    """The system message: instructions plus the JSON schema (for servers that ignore ``response_format``)."""
-    return SYSTEM_PROMPT + "\nJSON schema:\n" + json.dumps(schema, separators=(",", ":"))
-
-
 def png_data_url(image: np.ndarray) -> str:
     """``data:image/png;base64,...`` of an RGB(A) uint8 (H, W, 3|4) image."""
     from PIL import Image
@@ -180,16 +175,12 @@ def build_messages(description: dict[str, Any], images: dict[str, str], schema: 
     for view, url in images.items():
         parts.append({"type": "text", "text": f"view: {view} (closed state)"})
         parts.append({"type": "image_url", "image_url": {"url": url}})
-    return [{"role": "system", "content": system_prompt(schema)}, {"role": "user", "content": parts}]
+    system = SYSTEM_PROMPT + "\nJSON schema:\n" + json.dumps(schema, separators=(",", ":"))  # for servers ignoring response_format
+    return [{"role": "system", "content": system}, {"role": "user", "content": parts}]
 
 
-def proposal_messages(
-    ctx: EstimationContext,
-    state: dict[str, float],
-    pairs: list[dict[str, Any]],
-    intervals: dict[str, tuple[float, float]],
-    schema: dict[str, Any],
-) -> list[dict[str, Any]]:
+def proposal_messages(ctx: EstimationContext, state: dict[str, float], pairs: list[dict[str, Any]],
+                      intervals: dict[str, tuple[float, float]], schema: dict[str, Any]) -> list[dict[str, Any]]:
     """OpenAI-format messages asking for alternative initial states: instructions with ``schema``, then
     :data:`PROPOSAL_MARK` and a summary of every joint of ``state`` with an interval in ``intervals`` (rad or
     m) and the colliding link ``pairs`` (``depth_m`` in m), values rounded to 1e-6."""

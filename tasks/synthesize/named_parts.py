@@ -31,8 +31,14 @@ def joints_named(ctx: "EstimationContext", label: str) -> list[str]:
 
 
 def joints_of(ctx: "EstimationContext", d: DynamicsValue, relevant: list[str]) -> list[str]:
-    """The joints an explicit joint parameter names: its label's, else (no label, or no such part) ``relevant``."""
-    return (joints_named(ctx, d.label) if d.label is not None else []) or relevant
+    """The joints an explicit joint parameter names: its label's (else the unlabelled ``relevant`` ones, which the
+    word may name; none when every part is labelled otherwise), or without a label ``relevant``."""
+    return relevant if d.label is None else (joints_named(ctx, d.label) or unlabelled(ctx, relevant))
+
+
+def unlabelled(ctx: "EstimationContext", joints: list[str]) -> list[str]:
+    """The non-continuous ``joints`` whose moving part carries no semantic label."""
+    return [n for n in joints if ctx.asset.joint(n).type != "continuous" and not ctx.asset.link(ctx.asset.joint(n).child).semantic_label]
 
 
 def unit_fits(d: DynamicsValue, linear: bool) -> bool:
@@ -63,19 +69,24 @@ def _order_key(order: str, c: np.ndarray) -> float:
 
 def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: list[str], centers: dict[str, np.ndarray],
                   warnings: list[str]) -> list[str]:
-    """The joints a state request names (else the non-continuous ``relevant`` ones, warned), an ordinal
-    picking among them by ``centers`` (joint -> (3,) box center, m); warnings appended."""
+    """The joints a state request names: the joint of an override, the movable joints whose part carries the
+    label, or for a request that names no part the non-continuous ``relevant`` ones; an ordinal picks among
+    them by ``centers`` (joint -> (3,) box center, m). A label no part of the object carries moves nothing
+    (warned: [] returned) unless parts are unlabelled: then the unlabelled ``relevant`` joints (warned; the
+    word may name them). Warnings appended to ``warnings``."""
     if jr.selector == "joint":  # an override names the joint itself
         return [jr.joint] if jr.joint in relevant or any(j.name == jr.joint for j in ctx.asset.movable_joints()) else []
-    named = jr.selector != "all" and bool(jr.label)
+    named = jr.names_part
     targets = joints_named(ctx, str(jr.label)) if named else []
-    if not targets:
+    if named and not targets:
+        targets = unlabelled(ctx, relevant)
+        warnings.append(f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but no part of this {ctx.category} carries that "
+                        f"label; its moving parts: {moving_parts(ctx)}; " + (f"'{jr.phrase}' applied to its unlabelled task-relevant "
+                        f"joints {targets}" if targets else f"'{jr.phrase}' not applied"))
+        if not targets:
+            return []
+    if not named:
         targets = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
-        if named:
-            warnings.append(
-                f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but this {ctx.category} has no such part; "
-                f"its moving parts: {moving_parts(ctx)}; '{jr.phrase}' applied to the task-relevant joints {targets}"
-            )
     if jr.ordinal is not None:
         targets.sort(key=lambda n: _order_key(jr.order, centers.get(n, np.zeros(3))))
         if -len(targets) <= jr.ordinal < len(targets):

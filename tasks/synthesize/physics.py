@@ -51,14 +51,9 @@ def material_choice(m) -> MaterialChoice:
                           source=m.source)
 
 
-def is_open_shell(geom: LinkGeometry) -> bool:
-    """True when the link's surface encloses (almost) no volume (an open bin, a lone plate)."""
-    return "open_shell" in geom.volume_method or geom.volume <= 0.0
-
-
 def hollow_fraction(geom: LinkGeometry, scale: float, material: MaterialChoice) -> float | None:
     """eta in m = v rho s^3 eta: 1 solid, min(1, A s^2 t / (v s^3)) shell; None for an open shell (m = A s^2 t rho)."""
-    if is_open_shell(geom):
+    if "open_shell" in geom.volume_method or geom.volume <= 0.0:  # encloses (almost) nothing: an open bin, a lone plate
         return None
     if not material.shell:
         return 1.0

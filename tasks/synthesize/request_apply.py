@@ -77,13 +77,14 @@ def band_of(f: float) -> str:
 
 def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     """Band per movable joint and the targets of numbers and ends at the overlay's ``scale``; joints not
-    addressed are closed, a later request for a joint overrides an earlier one. Acceptance: +-5 % of a number
+    addressed are closed; a request naming a part (or a joint) overrides one that names none ("half open"),
+    else a later request for a joint overrides an earlier one. Acceptance: +-5 % of a number
     (at least :data:`MIN_TOLERANCE`), +-:data:`END_TOLERANCE` of an end."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
     centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
-    for jr in ctx.request.joint_states:
+    for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
         targets = state_targets(ctx, jr, relevant, centers, res.warnings)
         for t in targets:
             res.bands[t] = jr.band
@@ -183,8 +184,9 @@ def unmatched_properties(ctx: "EstimationContext") -> list[str]:
                        f"{moving_parts(ctx)}; not applied")
     for d in ctx.request.dynamics_values:
         if d.label is not None and not joints_named(ctx, d.label):
-            out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but this {ctx.category} has no such part; its moving parts: "
-                       f"{moving_parts(ctx)}; applied to the task-relevant joints")
+            to = joints_of(ctx, d, task_relevant_joints(ctx))
+            out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but no part of this {ctx.category} carries that label; its moving "
+                       f"parts: {moving_parts(ctx)}; " + (f"applied to its unlabelled task-relevant joints {to}" if to else "not applied"))
     return out
 
 
@@ -247,6 +249,8 @@ def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynam
     out = dict(joints)
     for d in ctx.request.dynamics_values:
         names = joints_of(ctx, d, relevant)
+        if d.label is not None and not names:  # no such part: warned by unmatched_properties
+            continue
         applied = []
         for n in names:
             if n not in out or not unit_fits(d, ctx.asset.joint(n).type == "prismatic"):
@@ -325,6 +329,8 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
     lines), what was asked, and every number against the output (``closed_out`` at the output's scale,
     ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters)."""
     warnings = list(ctx.request.warnings) + [n for n in notes if n.startswith("WARNING")]
+    if not ctx.request.understood:
+        warnings.insert(0, "WARNING: no word of the request was understood; refined with the category's defaults")
     q: list[QuantityOutcome] = []
     for n, t in targets.items():
         cs = closed_out.get(n)

@@ -88,7 +88,7 @@ def test_finish_run_compacts_compares_and_writes_artifacts(store, tmp_path):
     out = tmp_path / "out"
     fin = catalog_finish.finish_run(store, "d", RUN2, out, ResultsSettings())
     assert fin.compaction.rows == 10 and fin.compaction.files_removed == 10 and not fin.errors
-    assert [p.name for p in (store.root / "dataset=d" / f"run={RUN2}").glob("*.parquet")] == ["_compacted.parquet"]
+    assert [p.name for p in (store.root / "dataset=d" / f"run={RUN2}").glob("*.parquet")] == ["rows@compacted.parquet"]
     assert fin.comparison.regressed == 2
     data = json.loads((out / "comparison.json").read_text())
     assert data["status"] == "regressed" and data["previous_run"] == RUN1

@@ -19,7 +19,7 @@ import pytest
 from tests.conftest import SHARED
 from asset2sim.engines.base import EngineUnsupported, SessionOptions
 from asset2sim.engines.registry import open_session, open_shape_world, open_viewer
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 
 REAL = SHARED / "100221" / "mobility.urdf"
 OTHERS = [

@@ -12,8 +12,8 @@ import pytest
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import available_engines, open_session
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, FLAT_HULL_THICKNESS, collision_pieces, read_initial_state, read_urdf
-from asset2sim.engines.contract_asset import write_contract_asset
-from asset2sim.engines.fake import FakeBehaviour, FakeSession, fake_behaviour
+from tests.contract_asset import write_contract_asset
+from tests.fake_engine import FakeBehaviour, FakeSession, fake_behaviour
 from asset2sim.urdf import UrdfError
 from asset2sim.frames import matrix_quat_wxyz, rpy_matrix
 from asset2sim.mesh_io import obj_groups

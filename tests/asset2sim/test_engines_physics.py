@@ -15,7 +15,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import open_session
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.frames import translation_matrix
 from asset2sim.tasks.check import metrics
 from asset2sim.urdf import UrdfGeometry, read_urdf, write_urdf

@@ -8,7 +8,7 @@ import pytest
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
 from asset2sim.engines.loading import BULLET_DEFAULT_MASS, read_urdf
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 
 pytestmark = pytest.mark.physx
 pytest.importorskip("sapien")

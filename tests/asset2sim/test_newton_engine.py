@@ -8,7 +8,7 @@ import pytest
 
 from asset2sim.engines.base import EngineUnsupported, SessionOptions, Spring
 from asset2sim.engines.registry import known_engines, open_session
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.engines.loading import read_urdf
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 

@@ -150,3 +150,18 @@ def test_failures_command_prints_the_latest_breakdown(store, tmp_path, capsys):
     empty = tmp_path / "empty.yaml"
     empty.write_text(f"default_dataset: demo\ncatalog_root: {tmp_path / 'none'}\ndatasets: {{demo: {{root: raw}}}}\n")
     assert failures.run(_args(empty)) == 1
+
+
+def test_slowest_of_a_run_that_reused_every_asset_says_so(store, tmp_path, capsys):
+    """A rerun with nothing to do has no timings of its own: --slowest says
+    so in words (it printed pandas' "Empty DataFrame")."""
+    from asset2sim.commands import failures
+
+    r3 = "20260303T020000Z-cccccc"
+    for aid in ("box", "box2", "lap"):
+        store.append_row("demo", r3, _row(aid, "Box", status="skipped", wall=0.01))
+    catalog = tmp_path / "catalog.yaml"
+    catalog.write_text(f"default_dataset: demo\ncatalog_root: {store.root}\ndatasets: {{demo: {{root: raw}}}}\n")
+    assert failures.run(_args(catalog, slowest=3)) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"no asset was refined in run {r3}") and "Empty DataFrame" not in out

@@ -12,7 +12,7 @@ import pytest
 
 from tests.conftest import SHARED
 from asset2sim import urdf
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 
 DATASET = SHARED
 REAL = sorted(DATASET.glob("*/mobility.urdf")) + sorted(DATASET.glob("*/reference_gensim2.urdf"))
@@ -284,7 +284,7 @@ def test_clone_is_an_independent_copy_that_keeps_shared_objects_shared(tmp_path)
 def test_a_source_is_a_file_or_a_model_in_memory(tmp_path):
     """model_of gives a copy of a model (the caller's stays as it was) or
     reads a file; path_of gives the file an engine loads."""
-    from asset2sim.engines.contract_asset import write_contract_asset
+    from tests.contract_asset import write_contract_asset
 
     a = write_contract_asset(tmp_path / "a", lid_angle=0.4)
     read = urdf.read_urdf(a.urdf)

@@ -13,6 +13,7 @@ import pytest
 from asset2sim.flows.catalog import ROW_COLUMNS, ResultCatalog, load_catalog
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
+from tests.helpers import catalog_reader_counts
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
@@ -113,7 +114,7 @@ def test_catalog_partitions_run_info_and_artifacts(first_run):
     cat = load_catalog(catalog)
     run_dir = cat.catalog_root / "dataset=gen" / f"run={summary['run']}"
     # the run's rows were compacted into one file when it ended
-    assert [p.name for p in run_dir.glob("*.parquet")] == ["_compacted.parquet"]
+    assert [p.name for p in run_dir.glob("*.parquet")] == ["rows@compacted.parquet"]
     assert ResultCatalog(cat.catalog_root).recorded_assets("gen", summary["run"]) == set({**GOOD, **BAD})
     assert summary["compaction"]["rows"] == 8 and summary["compaction"]["files_removed"] == 8
     assert not list(run_dir.glob(".*"))  # no temporary files left behind
@@ -150,6 +151,13 @@ def test_mlflow_run_has_params_metrics_artifacts_and_nested_assets(first_run):
     by_id = {c.data.tags["asset_id"]: c for c in children}
     assert by_id["hang_box"].data.tags["failure_mode"] == "timeout"
     assert by_id["box_lid"].data.metrics["wall_seconds"] > 0
+    # the run's true duration (the flow's planning to its end, Prefect and Dask start-up included), each asset's own
+    span = (run.info.end_time - run.info.start_time) / 1000.0
+    assert span >= summary["assets_seconds"] and run.data.tags["asset2sim.outcome"] == "worked"
+    box = by_id["box_lid"].info
+    assert (box.end_time - box.start_time) / 1000.0 >= by_id["box_lid"].data.metrics["wall_seconds"] - 0.01  # queueing included
+    assert "report.json" in {a.path for a in client.list_artifacts(box.run_id)}  # the asset's files, for a refined asset
+    assert exp.tags["mlflow.experimentKind"] == "custom_model_development"  # the UI opens on the runs table
 
 
 def test_rerun_skips_finished_assets_and_a_changed_request_redoes_only_that_one(first_run, dask_address):
@@ -162,6 +170,12 @@ def test_rerun_skips_finished_assets_and_a_changed_request_redoes_only_that_one(
     s2 = _run(catalog, ids=finished, dask_address=dask_address)
     rows2 = _rows(catalog, s2["run"])
     assert s2["run"] != summary1["run"] and s2["skipped"] == 4 and s2["done"] == 0
+    # nothing to do: recorded as such, not compared (no drift figures), and never the run a later one is compared with
+    assert s2["regression"]["status"] == "nothing_done" and not any(k.startswith("drift_") for k in s2)
+    from mlflow.tracking import MlflowClient
+
+    tracked = MlflowClient(tracking_uri=load_catalog(catalog).config.tracking.uri).get_run(s2["mlflow_run_id"])
+    assert tracked.data.tags["asset2sim.outcome"] == "nothing_to_do" and "drift_wall_seconds" not in tracked.data.metrics
     rows1 = _rows(catalog, summary1["run"])
     for aid in finished:
         assert rows2[aid]["status"] == "skipped"
@@ -185,11 +199,16 @@ def test_rerun_skips_finished_assets_and_a_changed_request_redoes_only_that_one(
     CALLS_PATH.write_text("")
     s3 = _run(catalog, ids=finished, dask_address=dask_address)
     rows3 = _rows(catalog, s3["run"])
+    assert s3["regression"]["previous_run"] == summary1["run"]  # the run that did nothing is passed over
     assert [c["asset_id"] for c in _calls()] == ["laptop"]
     assert rows3["laptop"]["status"] == "done" and rows3["laptop"]["source_run"] == s3["run"]
     assert rows3["laptop"]["config_hash"] != rows1["laptop"]["config_hash"]
     assert rows3["laptop"]["input_hash"] == rows1["laptop"]["input_hash"]
     assert {a: rows3[a]["status"] for a in finished if a != "laptop"} == {a: "skipped" for a in finished if a != "laptop"}
+    # after the flows, their compaction and the reruns, each row lies in one visible file: read as a user would, once
+    n = len(ResultCatalog(cat.catalog_root).read())
+    assert n == len(rows1) + len(rows2) + len(rows3) and n >= 16
+    assert catalog_reader_counts(cat.catalog_root) == {"pandas": n, "pyarrow": n, "duckdb": n}
 
 
 def test_force_and_subsets_when_planning_a_run(first_run):

@@ -71,7 +71,7 @@ def test_two_assets_made_to_fail_stop_make_flow_and_a_code_change_reruns(tmp_pat
     assert "[4/4] " in out and "done 4, skipped 0, failed 0" in out
     assert "no earlier run of dataset gen to compare with" in out
     part = cat.catalog_root / "dataset=gen" / f"run={run1}"
-    assert sorted(p.name for p in part.iterdir()) == ["_compacted.parquet", "_run.json"]
+    assert sorted(p.name for p in part.iterdir()) == ["_run.json", "rows@compacted.parquet"]
 
     # 2: two assets made to fail (their requests changed); the other two are skipped
     _make_fail(catalog, {"box_lid", "laptop"})

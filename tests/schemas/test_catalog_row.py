@@ -50,6 +50,7 @@ def test_column_values_from_metric_results():
         MetricResult(name="prompt_alignment", value=0.75, unit="fraction", engine="none"),
     ]
     v = column_values(ms, "pybullet")
-    assert v == {"penetration_mm": 1.5, "rest_stable": True, "d_pos_m": 1e-5, "d_ori_rad": None, "prompt_alignment": 0.75}
+    assert v == {"penetration_mm": 1.5, "rest_stable": True, "d_pos_m": 1e-5, "d_ori_rad": None, "prompt_alignment": 0.75,
+                 "request_warnings": None}
     assert column_values(ms, None)["penetration_mm"] == 2.5  # first of any engine
     assert "oscillation_pass" not in v  # absent metric: no key

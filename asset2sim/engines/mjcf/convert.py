@@ -175,7 +175,10 @@ def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | Non
     model = read_urdf(urdf_path)
     initial_state = dict(initial_state or {})
     springs = dict(springs or {})
-    movable = _movable_joints(model, initial_state, urdf_path)
+    movable = {j.name: j for j in model.movable_joints}
+    unknown = sorted(set(initial_state) - set(movable))
+    if unknown:
+        raise ValueError(f"{urdf_path}: initial state names joints that are not movable joints of the file: {unknown}")
     mesh_root = Path(mesh_root) if mesh_root is not None else urdf_path.parent
     pieces, notes = collision_pieces(model)
     meshes = mesh_assets(pieces, mesh_root)
@@ -189,9 +192,8 @@ def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | Non
     if asset_el is None:
         asset_el = etree.SubElement(root, "asset")
     worldbody = root.find("worldbody")
-    bodies = _rewrite_bodies(
-        worldbody, model, spec, pieces, meshes, file_to_mesh, springs, missing_inertial, visuals, movable, urdf_path, notes
-    )
+    bodies = _rewrite_bodies(worldbody, model, spec, pieces, meshes, file_to_mesh, springs, missing_inertial, visuals, movable,
+                             urdf_path, notes)
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
@@ -200,21 +202,15 @@ def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | Non
     if visuals:  # after placement: visual meshes never collide, and cost compile time
         for b in worldbody.iter("body"):
             add_visuals(b, model.links[b.get("name")], mesh_root, asset_el, meshes.files, final_assets, used, notes)
-    xml = _with_keyframe(root, qpos)
+    key = etree.SubElement(etree.SubElement(root, "keyframe"), "key", name=KEYFRAME)  # the initial state
+    key.set("qpos", vec_text(qpos))
+    etree.indent(root, space="  ")
+    xml = etree.tostring(root, encoding="unicode")
     if visuals:  # the file as written must compile too
         compile_xml(xml, final_assets, urdf_path)
     order = [mujoco.mj_id2name(compiled, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(compiled.njnt)]
     return MjcfBuild(xml=xml, derived_meshes=meshes.derived, mesh_files=meshes.files, initial_qpos=qpos,
                      joint_names=[n for n in order if n in movable], notes=notes, root_height=height)
-
-
-def _movable_joints(model: UrdfModel, initial_state: dict[str, float], urdf_path: Path) -> dict:
-    """Movable joints by name (ValueError: ``initial_state`` names another joint)."""
-    movable = {j.name: j for j in model.movable_joints}
-    unknown = sorted(set(initial_state) - set(movable))
-    if unknown:
-        raise ValueError(f"{urdf_path}: initial state names joints that are not movable joints of the file: {unknown}")
-    return movable
 
 
 def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], meshes: MeshAssets,
@@ -238,11 +234,3 @@ def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[Co
     if set(names_in_qpos) != set(movable):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
     return bodies
-
-
-def _with_keyframe(root, qpos: np.ndarray) -> str:
-    """The MJCF text of ``root`` (indented by two spaces) with the keyframe :data:`KEYFRAME` = ``qpos`` (nq,)."""
-    key = etree.SubElement(etree.SubElement(root, "keyframe"), "key", name=KEYFRAME)
-    key.set("qpos", vec_text(qpos))
-    etree.indent(root, space="  ")
-    return etree.tostring(root, encoding="unicode")

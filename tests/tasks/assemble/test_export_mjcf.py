@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from asset2sim.engines.loading import read_initial_state, read_urdf
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 
 pytestmark = pytest.mark.mujoco
 mujoco = pytest.importorskip("mujoco")

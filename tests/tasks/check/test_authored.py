@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from asset2sim.engines.registry import available_engines
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.authored import Tolerances, authored_physics, compare_physics, held_by_engines
 
 FAST_ENGINES = [e for e in ("pybullet", "physx", "mujoco") if e in available_engines()]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from asset2sim.engines import base, registry
-from asset2sim.engines.contract_asset import write_contract_asset
-from asset2sim.engines.fake import FakeBehaviour, fake_behaviour
+from tests.contract_asset import write_contract_asset
+from tests.fake_engine import FakeBehaviour, fake_behaviour
 from asset2sim.tasks.check.parity import evaluate_engines, parity_table, worst_case
 from tests.conftest import SHARED, needs_shared
 
@@ -75,7 +75,7 @@ def test_an_engine_that_cannot_load_the_asset_fails(tmp_path, monkeypatch):
 
 def test_worst_case_over_engines(tmp_path, monkeypatch):
     write_contract_asset(tmp_path)
-    from asset2sim.engines.fake import FakeSession
+    from tests.fake_engine import FakeSession
 
     monkeypatch.setitem(base._ENGINES, "calm", lambda u, o: FakeSession(u, o, FakeBehaviour(penetration=0.001)))
     monkeypatch.setitem(base._ENGINES, "shaky", lambda u, o: FakeSession(u, o, FakeBehaviour(penetration=0.004, root_velocity=(0.01, 0, 0))))

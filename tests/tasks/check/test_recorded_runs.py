@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck, recorded_runs
 from asset2sim.tasks.check.recorded_runs import RecordedRuns

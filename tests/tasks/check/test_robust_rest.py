@@ -10,7 +10,7 @@ import pytest
 from asset2sim.demo_assets import build_laptop
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check import robust_rest
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.check.robust_rest import (

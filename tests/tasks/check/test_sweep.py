@@ -6,7 +6,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.sweep import (DAMPED_SPEED_MARGIN, SweepConfig, blocked_positions, damping_caps, effort_limit,
                                          joint_subtrees, run_sweep, sweep_joint, sweep_metric, sweep_score)
 from asset2sim.urdf import read_urdf

@@ -11,7 +11,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import available_engines, open_session
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.force_ranges import (
     OperatingForcesError,
     force_metric,

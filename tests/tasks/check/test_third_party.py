@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.third_party import (
     check_drake,
     check_mjcf_doctor,

@@ -12,7 +12,7 @@ import pytest
 
 from asset2sim.cli import main
 from asset2sim.engines.registry import available_engines
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
 from tests.conftest import SHARED, needs_shared

@@ -11,6 +11,7 @@ import pytest
 
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.evaluation.report_html import parameter_rows, render_benchmark_index, render_benchmark_summary
+from tests.conftest import SHARED, needs_shared
 
 
 def _drawer(folder: Path, with_overlay: bool) -> Path:
@@ -93,7 +94,7 @@ def test_parameter_table_has_value_unit_and_source(report):
     assert rows[("joint slide", "damping")]["source"] == "estimator prior"
     # friction was raised by escalation; the URDF value (1.0) is what is simulated
     fr = rows[("joint slide", "friction")]
-    assert fr["value"] == 1.0 and fr["source"].startswith("escalation round 1") and fr["unit"] == "N"
+    assert fr["value"] == 1.0 and fr["source"].startswith("changed after check round 1") and fr["unit"] == "N"
     assert rows[("joint slide", "initial position")]["source"].startswith("refinement")
     assert rows[("joint slide", "initial position")]["unit"] == "m"
 
@@ -141,4 +142,41 @@ def test_write_refine_report_evaluates_the_output_folder(tmp_path):
     assert path == f / "report.html" and path.is_file()
     data = json.loads((f / "evaluation.json").read_text())
     assert data["method"] == "asset2sim" and data["prompt"] == "a cabinet with its drawer closed"
-    assert "asset2sim evaluation" in path.read_text()
+    assert "<h1>asset2sim refine: cab</h1>" in path.read_text()  # beside the report.json it reports on
+
+
+@needs_shared
+def test_a_failing_asset_shows_the_failing_trials_plot_and_frames(tmp_path):
+    """The raw trash can (no physics) fails robust rest: its report, titled by
+    the command that wrote it, shows each failing trial's plot and the object
+    as disturbed, after settling and at the end, with positions in degrees and
+    percent open."""
+    from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+    from asset2sim.tasks.evaluation.failure_evidence import FRAMES
+
+    ev = evaluate_asset(SHARED / "102181", out_dir=tmp_path / "ev", write_report=True, engines=("pybullet",))
+    rr = ev.metric("robust_rest")
+    assert rr.passed is False
+    html = (tmp_path / "ev" / "report.html").read_text()
+    assert "<h1>asset2sim evaluate: 102181</h1>" in html and "Why it failed: the failing trials" in html
+    failing = [name for name, t in rr.details["trials"].items() if t["passed"] is False]
+    for name in failing:
+        assert f"robust rest, trial {name} (pybullet)" in html and f"alt=\"trial {name}\"" in html
+    assert html.count(">as disturbed</figcaption>") == len(failing) and all(f">{c}</figcaption>" in html for c in FRAMES)
+    assert " deg)" in html and "% open)" in html
+
+
+@needs_shared
+def test_a_refine_report_says_what_asset2sim_changed_and_why(tmp_path):
+    from asset2sim.tasks.refine import refine_asset
+
+    refine_asset(SHARED / "103275", "I want a slightly open stapler.", tmp_path / "out")
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "<h1>asset2sim refine: 103275</h1>" in html and "<h2>What asset2sim changed</h2>" in html
+    section = html.split("<h2>What asset2sim changed</h2>")[1].split("<h2>")[0]
+    for what in ("scale", "total mass", "joint_1 limits", "joint_1 initial position", "collision pieces", "root"):
+        assert f"<td>{what}</td>" in section, what
+    assert "input, perspective" in section and "output, perspective" in section
+    assert "it runs into link_2" in section  # the clipped limit's reason
+    assert "the request: slightly open" in section
+    assert "Why it failed" not in html  # it passes every tier

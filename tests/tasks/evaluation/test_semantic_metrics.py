@@ -81,10 +81,18 @@ def test_prompt_alignment_halves_and_missing_parts():
     m = sem.prompt_alignment(size_requested=False, largest_extent=0.2, typical_largest=0.2, size_factor=1.0,
                              joint_checks=[], state_requested=False)
     assert m.value == 1.0 and m.details["joint_state_score"] is None
-    # a state asked for a part that does not exist scores 0
+    # a state asked for a part that does not exist is not understood for this object: listed, not counted
     m = sem.prompt_alignment(size_requested=False, largest_extent=0.2, typical_largest=0.2, size_factor=1.0,
                              joint_checks=[], state_requested=True, unmatched_requests=["its drawer closed"])
-    assert m.value == 0.5
+    assert m.value == 1.0 and m.details["joint_state_score"] is None
+    assert m.details["not_counted"] == [{"phrase": "its drawer closed", "reason": "names no part of this object"}]
+    m = sem.prompt_alignment(size_requested=False, largest_extent=0.2, typical_largest=0.2, size_factor=1.0,
+                             joint_checks=checks, state_requested=True, unmatched_requests=["its drawer closed"])
+    assert m.value == 1.0  # the lid's state counts, the drawer's does not
+    # a request of which nothing was understood is not aligned, whatever the object's size
+    m = sem.prompt_alignment(size_requested=False, largest_extent=0.2, typical_largest=0.2, size_factor=1.0,
+                             joint_checks=[], state_requested=False, understood=False, warnings=["no word understood"])
+    assert m.value == 0.0 and m.details["warnings"] == ["no word understood"]
     # neither measurable
     m = sem.prompt_alignment(size_requested=False, largest_extent=None, typical_largest=None, size_factor=1.0,
                              joint_checks=[], state_requested=False)
@@ -109,8 +117,11 @@ def test_requested_joints_orders_drawers_top_to_bottom():
     got = {j: band for j, band, *_ in req}
     assert got == {"j_high": "closed", "j_low": "slightly_open", "j_lid": "halfway"}
     assert unmatched == ["door fully open"]
-    # a part word that names nothing falls back to the task-relevant joints
+    # a part word that names nothing moves no other part, task-relevant or not
     req, unmatched = requested_joints(spec, joints, sem_, centres, ["j_lid"])
+    assert {j: band for j, band, *_ in req}["j_lid"] == "halfway" and unmatched == ["door fully open"]
+    # ... unless the task-relevant part carries no label: the word may name it
+    req, unmatched = requested_joints(spec, joints, {**sem_, "lid": ("hinge", "")}, centres, ["j_lid"])
     assert {j: band for j, band, *_ in req}["j_lid"] == "fully" and unmatched == []
 
 

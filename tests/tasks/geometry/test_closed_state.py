@@ -87,7 +87,7 @@ def test_closed_ends_of_one_geometry_are_measured_once_and_stay_right(tmp_path):
     (a memo hit) and it equals a fresh measurement; another limit is
     measured again."""
     from asset2sim import urdf as urdf_mod
-    from asset2sim.engines.contract_asset import write_contract_asset
+    from tests.contract_asset import write_contract_asset
     from asset2sim.tasks.geometry import urdf_closed
 
     a = write_contract_asset(tmp_path / "a", lid_angle=0.4)

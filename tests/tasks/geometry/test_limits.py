@@ -9,7 +9,7 @@ from pathlib import Path
 from asset2sim.cli import main
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.check.sweep import run_sweep, sweep_metric
 from asset2sim.tasks.geometry import limits

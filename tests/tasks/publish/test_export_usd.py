@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.contract_asset import write_contract_asset
+from tests.contract_asset import write_contract_asset
 from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.overlay import Inertia

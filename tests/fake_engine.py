@@ -2,6 +2,8 @@
 deterministic :class:`~asset2sim.engines.base.SimSession` without physics whose
 joints and root follow closed-form trajectories set by a :class:`FakeBehaviour`,
 so tests can be made to pass or fail on purpose. Units SI, radians.
+
+``tests/conftest.py`` registers it as the engine ``"fake"``.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, principal_moments, register_engine)
+                                    SessionOptions, principal_moments)
 from asset2sim.engines.loading import BOX_CORNERS, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, collision_pieces, joint_tables, read_urdf
 from asset2sim.frames import quat_wxyz_matrix
 
@@ -294,9 +296,6 @@ def _yawed(q: np.ndarray, sz: float, cz: float) -> np.ndarray:
     """Quaternion ``q`` (xyzw) turned about world z by twice the angle of sine ``sz``, cosine ``cz``."""
     x, y, z, w = q
     return np.array([cz * x - sz * y, cz * y + sz * x, cz * z + sz * w, cz * w - sz * z])
-
-
-register_engine("fake", FakeSession)
 
 
 __all__ = ["FakeBehaviour", "FakeSession", "fake_behaviour"]
