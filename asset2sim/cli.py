@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
 import ctypes
 import importlib
 import os
@@ -152,14 +153,10 @@ def fast_exit(code: int) -> None:
         sys.exit(code)
     run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
-        try:
+        with contextlib.suppress(OSError, ValueError):  # closed or broken pipe: nothing left to flush
             stream.flush()
-        except (OSError, ValueError):  # closed or broken pipe: nothing left to flush
-            pass
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None).fflush(None)  # what C libraries printed (PyBullet, MuJoCo) but not yet wrote
-    except (OSError, AttributeError):
-        pass
     os._exit(code)
 
 

@@ -106,13 +106,8 @@ def _is_generated(folder: Path) -> bool:
 
 
 def _write_folder(out_dir: Path, files: dict[str, bytes]) -> Path:
-    """Write ``files`` as a fresh folder ``out_dir`` (replacing an earlier demo
-    build), assembled beside it and renamed into place.
-
-    Raises:
-        FileExistsError: ``out_dir`` exists, is not empty and is not a folder
-            this generator wrote (never overwrites foreign data).
-    """
+    """Write ``files`` as a fresh folder ``out_dir``, assembled beside it and renamed into place; FileExistsError
+    when ``out_dir`` is not empty and not a folder this generator wrote."""
     out_dir = Path(out_dir)
     if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not _is_generated(out_dir))):
         raise FileExistsError(f"{out_dir} exists and is not a generated demo asset; not overwriting it")

@@ -67,13 +67,7 @@ class Part:
 
     def vertices(self) -> list[np.ndarray]:
         """Corners (8, 3) of each box piece, after :attr:`pose`, object units."""
-        out = []
-        for b in self.boxes:
-            v = b.corners()
-            if self.pose is not None:
-                v = self.pose.apply(v)
-            out.append(v)
-        return out
+        return [b.corners() if self.pose is None else self.pose.apply(b.corners()) for b in self.boxes]
 
 
 @dataclass
@@ -118,14 +112,7 @@ class DemoArticulation:
 def fmt_number(x: float) -> str:
     """Deterministic short float text (9 significant digits, no ``-0``)."""
     v = round(float(x), 9) + 0.0
-    if v == 0.0:
-        return "0"
-    return f"{v:.9g}"
-
-
-def _vec(v) -> str:
-    """Numbers of ``v`` as :func:`fmt_number` text, space separated."""
-    return " ".join(fmt_number(c) for c in v)
+    return "0" if v == 0.0 else f"{v:.9g}"
 
 
 def obj_text(part: Part, mtl_name: str) -> str:
@@ -150,7 +137,7 @@ def mtl_text(color: Vec3) -> str:
     return (
         "# asset2sim demo asset\n"
         "newmtl material_0\n"
-        f"Kd {_vec(color)}\n"
+        f"Kd {' '.join(fmt_number(c) for c in color)}\n"
         "Ka 0 0 0\n"
         "Ks 0.1 0.1 0.1\n"
         "Ns 10\n"
@@ -164,13 +151,12 @@ def box_xyz(x0, x1, y0, y1, z0, z1) -> Box:
     return Box((x0, y0, z0), (x1, y1, z1))
 
 
-def open_box(x0, x1, y0, y1, z0, z1, t, prefix, color, first=1) -> list[Part]:
-    """Bottom plate and four walls of an open-topped box (wall thickness t)."""
-    n = first
+def open_box(x0, x1, y0, y1, z0, z1, t, prefix, color) -> list[Part]:
+    """Bottom plate and four walls (parts 1 to 5) of an open-topped box (wall thickness t)."""
     return [
-        Part(f"{prefix}_bottom-{n}", [box_xyz(x0, x1, y0, y0 + t, z0, z1)], color),
-        Part(f"{prefix}_front-{n + 1}", [box_xyz(x0, x1, y0 + t, y1, z1 - t, z1)], color),
-        Part(f"{prefix}_back-{n + 2}", [box_xyz(x0, x1, y0 + t, y1, z0, z0 + t)], color),
-        Part(f"{prefix}_side-{n + 3}", [box_xyz(x0, x0 + t, y0 + t, y1, z0 + t, z1 - t)], color),
-        Part(f"{prefix}_side-{n + 4}", [box_xyz(x1 - t, x1, y0 + t, y1, z0 + t, z1 - t)], color),
+        Part(f"{prefix}_bottom-1", [box_xyz(x0, x1, y0, y0 + t, z0, z1)], color),
+        Part(f"{prefix}_front-2", [box_xyz(x0, x1, y0 + t, y1, z1 - t, z1)], color),
+        Part(f"{prefix}_back-3", [box_xyz(x0, x1, y0 + t, y1, z0, z0 + t)], color),
+        Part(f"{prefix}_side-4", [box_xyz(x0, x0 + t, y0 + t, y1, z0 + t, z1 - t)], color),
+        Part(f"{prefix}_side-5", [box_xyz(x1 - t, x1, y0 + t, y1, z0 + t, z1 - t)], color),
     ]

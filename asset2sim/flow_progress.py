@@ -51,7 +51,5 @@ def emit(event: ProgressEvent) -> None:
     with _lock:
         targets = list(_listeners)
     for fn in targets:
-        try:
+        with contextlib.suppress(Exception):  # a display problem is not the run's
             fn(event)
-        except Exception:  # noqa: BLE001 - a display problem is not the run's
-            pass

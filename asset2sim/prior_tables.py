@@ -197,11 +197,8 @@ def _read_yaml(directory: Path | None, fname: str) -> Any:
 
 
 def _fmt_validation(fname: str, prefix: str, exc: ValidationError) -> str:
-    lines = []
-    for err in exc.errors():
-        loc = ".".join(str(p) for p in (prefix, *err["loc"]) if str(p) != "")
-        lines.append(f"{fname}: {loc}: {err['msg']}")
-    return "; ".join(lines)
+    return "; ".join(f"{fname}: " + ".".join(str(p) for p in (prefix, *err["loc"]) if str(p) != "") + f": {err['msg']}"
+                     for err in exc.errors())
 
 
 def _validate_entry(model: type[BaseModel], fname: str, where: str, data: Any, **extra: Any) -> Any:

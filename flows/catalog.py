@@ -9,10 +9,11 @@ column names. docs/design/pipeline.md explains the layout and compaction.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Literal
 
@@ -23,8 +24,6 @@ from asset2sim.flows import catalog_fs
 from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.ingest import partnet_mobility
-
-# --------------------------------------------------------------------------- config
 
 
 class CatalogError(ValueError):
@@ -206,9 +205,7 @@ class Catalog:
         Raises:
             CatalogError: an unknown or invalid ``refine`` field.
         """
-        fields = dict(self.config.refine)
-        fields.setdefault("estimator", self.config.estimator.name)
-        fields.setdefault("model", self.config.estimator.model)
+        fields = {"estimator": self.config.estimator.name, "model": self.config.estimator.model, **self.config.refine}
         try:
             return RefineConfig(**fields)
         except ValidationError as exc:
@@ -291,11 +288,6 @@ def read_manifest(manifest: Path | str, root: Path | str) -> list[ManifestEntry]
     return entries
 
 
-# ----------------------------------------------------------------------- Parquet rows
-
-#: The Parquet schema of a row, derived from :class:`~asset2sim.schemas.catalog.CatalogRow`.
-_schema = arrow_schema
-
 #: The file a run's partition is compacted into: a name no asset id can take (ids have no ``@``) and
 #: that readers do not skip as hidden (pandas, pyarrow and Spark skip names starting with ``_`` or ``.``).
 COMPACTED_NAME = "rows@compacted.parquet"
@@ -330,7 +322,7 @@ class Compaction:
 @dataclass
 class _RunFiles:
     compacted: Any = None  # FileInfo of the compacted file
-    loose: dict[str, Any] | None = None  # asset id -> FileInfo of its row file
+    loose: dict[str, Any] = field(default_factory=dict)  # asset id -> FileInfo of its row file
 
     def add(self, name: str, info) -> None:
         """Record file ``info`` named ``name`` when it is the compacted file or a row file."""
@@ -341,25 +333,13 @@ class _RunFiles:
 
 
 class ResultCatalog:
-    """The Parquet result catalog under ``root`` (a local folder or a URI such
-    as ``s3://bucket/prefix``, :mod:`asset2sim.flows.catalog_fs`)::
-
-        <root>/dataset=<name>/run=<run_id>/<asset_id>.parquet        one row, while the run is on
-        <root>/dataset=<name>/run=<run_id>/rows@compacted.parquet    all rows, once the run ended
-        <root>/dataset=<name>/run=<run_id>/_run.json                 run metadata
-
-    Every row lies in exactly one data file, so ``pandas.read_parquet(root)``,
-    ``pyarrow.dataset.dataset(root, partitioning="hive")`` and duckdb over
-    ``root/**/*.parquet`` read each row once: a row written after compaction
-    is taken out of the compacted file. Files of older schema versions read
-    with the newer columns null.
-    """
+    """The Parquet result catalog under ``root`` (a local folder or a URI such as ``s3://bucket/prefix``,
+    :mod:`asset2sim.flows.catalog_fs`), laid out as docs/design/pipeline.md describes: every row in exactly
+    one data file; files of older schema versions read with the newer columns null."""
 
     def __init__(self, root: Path | str):
         self.location = catalog_fs.open_location(root)
         self.root: Path | str = Path(self.location.base) if self.location.local else self.location.uri
-
-    # ------------------------------------------------------------------ paths
 
     def _run_path(self, dataset: str, run: str) -> str:
         return self.location.join(f"dataset={_check_part('dataset', dataset)}", f"run={_check_part('run', run)}")
@@ -368,8 +348,6 @@ class ResultCatalog:
         """The run's partition: a local :class:`~pathlib.Path`, or a URI on an object store."""
         p = self._run_path(dataset, run)
         return Path(p) if self.location.local else self.location.display(p)
-
-    # ----------------------------------------------------------------- writing
 
     def append_row(self, dataset: str, run: str, row: CatalogRow | dict[str, Any]) -> Path | str:
         """Write one row (a :class:`~asset2sim.schemas.catalog.CatalogRow`, or a
@@ -392,7 +370,7 @@ class ResultCatalog:
         import pyarrow as pa
 
         values = {name: [v] for name, v in row.model_dump().items()}
-        table = pa.Table.from_pydict(values, schema=_schema(with_version=True))
+        table = pa.Table.from_pydict(values, schema=arrow_schema(with_version=True))
         path = f"{self._run_path(dataset, run)}/{aid}.parquet"
         catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
         self._drop_compacted_row(dataset, run, aid)  # the row file holds it now: each row in one file
@@ -437,7 +415,7 @@ class ResultCatalog:
         """
         import pyarrow as pa
 
-        schema = _schema()
+        schema = arrow_schema()
         extra = [c for c in table.schema.names if c not in schema.names]
         if extra:
             raise ValueError(f"unknown catalog column(s): {sorted(extra)}")
@@ -448,7 +426,7 @@ class ResultCatalog:
             _check_part("asset", aid)
         path = f"{self._run_path(dataset, run)}/{COMPACTED_NAME}"
         catalog_fs.write_bytes(self.location, path, _parquet_bytes(table))
-        for info in (self._run_files(dataset, run).loose or {}).values():
+        for info in self._run_files(dataset, run).loose.values():
             catalog_fs.delete_file(self.location, info.path)
         return Path(path) if self.location.local else self.location.display(path)
 
@@ -458,7 +436,7 @@ class ResultCatalog:
         run held no such row."""
         files = self._run_files(dataset, run)
         removed = False
-        if asset_id in (files.loose or {}):
+        if asset_id in files.loose:
             removed = catalog_fs.delete_file(self.location, files.loose[asset_id].path)
         return self._drop_compacted_row(dataset, run, asset_id) or removed
 
@@ -475,7 +453,7 @@ class ResultCatalog:
 
         t0 = time.perf_counter()
         files = self._run_files(dataset, run)
-        loose = dict(files.loose or {})
+        loose = files.loose
         legacy = files.compacted is not None and files.compacted.base_name == LEGACY_COMPACTED_NAME
         if not loose and not legacy:
             rows = 0 if files.compacted is None else self._read_files([files.compacted.path], ["asset_id"]).num_rows
@@ -506,8 +484,6 @@ class ResultCatalog:
             catalog_fs.write_bytes(self.location, path, data)
         return Compaction(dataset, run, new.num_rows, removed, len(data), time.perf_counter() - t0)
 
-    # ----------------------------------------------------------------- reading
-
     def runs(self, dataset: str | None = None) -> list[tuple[str, str]]:
         """``(dataset, run)`` partitions present, sorted (chronologically within a dataset)."""
         return sorted(self._partitions(dataset))
@@ -516,11 +492,7 @@ class ResultCatalog:
         """Every run partition (of ``dataset``) and its row files, from one recursive listing."""
         import pyarrow.fs as pafs
 
-        if dataset is not None:
-            _check_part("dataset", dataset)
-            top = self.location.join(f"dataset={dataset}")
-        else:
-            top = self.location.base
+        top = self.location.base if dataset is None else self.location.join(f"dataset={_check_part('dataset', dataset)}")
         out: dict[tuple[str, str], _RunFiles] = {}
         base = self.location.base.rstrip("/")
         for info in catalog_fs.list_files(self.location, top, recursive=True):
@@ -533,16 +505,16 @@ class ResultCatalog:
                 continue
             if len(bits) == 2:
                 if info.type == pafs.FileType.Directory:
-                    out.setdefault(key, _RunFiles(loose={}))
+                    out.setdefault(key, _RunFiles())
                 continue
             if len(bits) == 3 and info.type == pafs.FileType.File:
-                out.setdefault(key, _RunFiles(loose={})).add(bits[2], info)
+                out.setdefault(key, _RunFiles()).add(bits[2], info)
         return out
 
     def _run_files(self, dataset: str, run: str) -> _RunFiles:
         import pyarrow.fs as pafs
 
-        rf = _RunFiles(loose={})
+        rf = _RunFiles()
         for info in catalog_fs.list_files(self.location, self._run_path(dataset, run)):
             if info.type == pafs.FileType.File:
                 rf.add(info.base_name, info)
@@ -552,13 +524,13 @@ class ResultCatalog:
         """Parquet files of the catalog as one table of the current schema (missing columns null)."""
         import pyarrow.dataset as pads
 
-        dset = pads.dataset(paths, schema=_schema(), format="parquet", filesystem=self.location.fs)
+        dset = pads.dataset(paths, schema=arrow_schema(), format="parquet", filesystem=self.location.fs)
         return dset.to_table(columns=columns)
 
     def recorded_assets(self, dataset: str, run: str) -> set[str]:
         """Ids of the assets the run has a row for (row files and compacted file)."""
         files = self._run_files(dataset, run)
-        ids = set(files.loose or {})
+        ids = set(files.loose)
         if files.compacted is not None:
             ids |= set(self._read_files([files.compacted.path], ["asset_id"])["asset_id"].to_pylist())
         return ids
@@ -589,8 +561,9 @@ class ResultCatalog:
         import pyarrow.dataset as pads
 
         runs = None if run is None else ({run} if isinstance(run, str) else set(run))
-        part_schema = _PARTITION_SCHEMA()
-        full = pa.unify_schemas([_schema(), part_schema])
+        # the partition columns, dictionary-encoded while scanning (one value per file)
+        part_schema = pa.schema([("dataset", pa.dictionary(pa.int32(), pa.string())), ("run", pa.dictionary(pa.int32(), pa.string()))])
+        full = pa.unify_schemas([arrow_schema(), part_schema])
         cols = None if columns is None else list(dict.fromkeys([*columns, "dataset", "run"]))
         if cols is not None:
             unknown = [c for c in cols if c not in full.names]
@@ -603,11 +576,10 @@ class ResultCatalog:
             if runs is not None and run_id not in runs:
                 continue
             scanned.append((ds_name, run_id))
-            loose = rf.loose or {}
-            if rf.compacted is not None and loose:
-                overlaid.append((rf.compacted, loose))
+            if rf.compacted is not None and rf.loose:
+                overlaid.append((rf.compacted, rf.loose))
             else:
-                plain += [rf.compacted.path] if rf.compacted is not None else [i.path for _, i in sorted(loose.items())]
+                plain += [rf.compacted.path] if rf.compacted is not None else [i.path for _, i in sorted(rf.loose.items())]
         out_schema = full if cols is None else pa.schema([full.field(c) for c in cols])
 
         names = {"dataset": {d for d, _ in scanned}, "run": {r for _, r in scanned}}
@@ -670,9 +642,8 @@ class ResultCatalog:
             expr = expr & (pads.field("code_hash") == code_hash)
         # pass 1: the key columns only; the latest run of each key
         keys = self.read_table(dataset, columns=["asset_id", "input_hash", "config_hash"], filter=expr)
-        out: dict[str, dict[str, Any]] = {}
         if keys.num_rows == 0:
-            return out
+            return {}
         keys = keys.set_column(keys.schema.get_field_index("run"), "run", keys["run"].cast(pa.string()))
         kdf = keys.select(["asset_id", "input_hash", "config_hash", "run"]).to_pandas()
         kdf["_key"] = kdf["asset_id"] + "|" + kdf["input_hash"].fillna("") + "|" + kdf["config_hash"].fillna("")
@@ -681,17 +652,8 @@ class ResultCatalog:
         rows = self.read(dataset, sorted(latest["run"].unique()), filter=expr)
         rows = rows.assign(_key=rows["asset_id"] + "|" + rows["input_hash"].fillna("") + "|" + rows["config_hash"].fillna(""))
         rows = rows.merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
-        for rec in rows.to_dict("records"):
-            rec = {k: _plain(v) for k, v in rec.items()}
-            out[result_key(rec["asset_id"], rec["input_hash"], rec["config_hash"])] = rec
-        return out
-
-
-def _PARTITION_SCHEMA():
-    """The partition columns (dictionary-encoded while scanning: one value per file)."""
-    import pyarrow as pa
-
-    return pa.schema([("dataset", pa.dictionary(pa.int32(), pa.string())), ("run", pa.dictionary(pa.int32(), pa.string()))])
+        recs = [{k: _plain(v) for k, v in rec.items()} for rec in rows.to_dict("records")]
+        return {result_key(r["asset_id"], r["input_hash"], r["config_hash"]): r for r in recs}
 
 
 def plain_strings(table, names=("dataset", "run")):
@@ -708,7 +670,7 @@ def _parquet_bytes(table) -> bytes:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    table = table.replace_schema_metadata({**(table.schema.metadata or {}), **(_schema(with_version=True).metadata or {})})
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), **(arrow_schema(with_version=True).metadata or {})})
     buf = pa.BufferOutputStream()
     pq.write_table(table, buf, compression="zstd")
     return buf.getvalue().to_pybytes()
@@ -721,11 +683,9 @@ def _plain(v: Any) -> Any:
 
     if isinstance(v, pd.Timestamp):
         return None if pd.isna(v) else v.isoformat()
-    try:
+    with contextlib.suppress(TypeError, ValueError):
         if pd.isna(v):
             return None
-    except (TypeError, ValueError):
-        pass
     return v.item() if hasattr(v, "item") else v
 
 

@@ -131,10 +131,7 @@ def did_work(store: ResultCatalog, dataset: str, run: str) -> bool:
 def previous_run(store: ResultCatalog, dataset: str, run: str) -> str | None:
     """The latest run of ``dataset`` before ``run`` (by id) that did work (:func:`did_work`); None when there is none."""
     earlier = [r for d, r in store.runs(dataset) if r < run]
-    for r in reversed(earlier):
-        if did_work(store, dataset, r):
-            return r
-    return None
+    return next((r for r in reversed(earlier) if did_work(store, dataset, r)), None)
 
 
 def _passes(df):
@@ -209,9 +206,8 @@ def compare_runs(previous, current, *, dataset: str, run: str, previous_run_id: 
     if out.pass_rate_drift is not None and -out.pass_rate_drift > settings.max_pass_rate_drop + 1e-12:
         out.reasons.append(f"pass rate over the {out.common_assets} common assets fell by {-100 * out.pass_rate_drift:.1f} "
                            f"points (limit {100 * settings.max_pass_rate_drop:.1f})")
-    for m in out.metrics:
-        if m.exceeded:
-            out.reasons.append(f"mean {m.column} worsened by {m.worsening:.4g} {m.unit} (limit {m.limit:.4g})")
+    out.reasons += [f"mean {m.column} worsened by {m.worsening:.4g} {m.unit} (limit {m.limit:.4g})"
+                    for m in out.metrics if m.exceeded]
     unknown = sorted(set(settings.max_metric_drift) - set(COMPARED_METRICS))
     if unknown:
         out.reasons.append(f"results.regression.max_metric_drift names unknown metric(s) {unknown}; known: {sorted(COMPARED_METRICS)}")
@@ -253,8 +249,7 @@ def comparison_lines(cmp: RunComparison, max_flips: int = 20) -> list[str]:
         + ("" if cmp.pass_rate_drift is None else f" ({100 * cmp.pass_rate_drift:+.1f} points)"),
         f"  verdict flips: {cmp.regressed} regressed, {cmp.improved} improved, {cmp.changed} changed failure mode",
     ]
-    for f in cmp.flips[:max_flips]:
-        lines.append(f"    {f.direction:9s} {f.asset_id} ({f.category or '?'}): {f.before} -> {f.after}")
+    lines += [f"    {f.direction:9s} {f.asset_id} ({f.category or '?'}): {f.before} -> {f.after}" for f in cmp.flips[:max_flips]]
     if len(cmp.flips) > max_flips:
         lines.append(f"    ... and {len(cmp.flips) - max_flips} more (verdict_flips.csv)")
     drifts = [m for m in cmp.metrics if m.drift is not None and (m.drift != 0 or m.exceeded)]
@@ -263,12 +258,7 @@ def comparison_lines(cmp: RunComparison, max_flips: int = 20) -> list[str]:
         for m in drifts:
             mark = "  EXCEEDS LIMIT" if m.exceeded else ""
             lines.append(f"    {m.column:20s} {m.before:.4g} -> {m.after:.4g} {m.unit} ({m.drift:+.4g}){mark}")
-    for r in cmp.reasons:
-        lines.append(f"  ! {r}")
-    return lines
-
-
-# ---------------------------------------------------------------------- artifacts
+    return lines + [f"  ! {r}" for r in cmp.reasons]
 
 
 def pass_rate_figure(history, current_run: str | None = None, title: str = ""):

@@ -7,6 +7,7 @@ temporary file locally, one whole-object upload on an object store.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from dataclasses import dataclass
@@ -56,13 +57,10 @@ def open_location(root: str | Path) -> Location:
     """
     import pyarrow.fs as pafs
 
-    if isinstance(root, Path) or not is_uri(root):
-        p = Path(root).expanduser().resolve()
-        return Location(fs=pafs.LocalFileSystem(), base=str(p), uri=str(p), local=True)
     uri = str(root)
-    scheme = uri.split("://", 1)[0].lower()
-    if scheme == "file":
-        p = Path(uri.split("://", 1)[1]).expanduser().resolve()
+    scheme = uri.split("://", 1)[0].lower() if is_uri(root) else None
+    if scheme in (None, "file"):
+        p = Path(uri.split("://", 1)[1] if scheme else root).expanduser().resolve()
         return Location(fs=pafs.LocalFileSystem(), base=str(p), uri=str(p), local=True)
     try:
         fs, path = pafs.FileSystem.from_uri(uri)
@@ -85,10 +83,8 @@ def write_bytes(loc: Location, path: str, data: bytes) -> None:
         atomic.write_bytes(Path(path), data)
         return
     if loc.fs.type_name not in ("s3", "gcs"):  # object stores have no folders to make (a marker object would be one more request)
-        try:
+        with contextlib.suppress(OSError):  # a filesystem without directories
             loc.fs.create_dir(path.rsplit("/", 1)[0], recursive=True)
-        except OSError:  # a filesystem without directories
-            pass
     with loc.fs.open_output_stream(path) as fh:
         fh.write(data)
 
@@ -120,14 +116,9 @@ def list_files(loc: Location, path: str, recursive: bool = False) -> list[Any]:
 
 def delete_file(loc: Location, path: str) -> bool:
     """Delete file ``path``; False when it was not there."""
-    if loc.local:
-        try:
-            os.unlink(path)
-        except FileNotFoundError:
-            return False
-        return True
+    delete = os.unlink if loc.local else loc.fs.delete_file
     try:
-        loc.fs.delete_file(path)
+        delete(path)
     except FileNotFoundError:
         return False
     return True

@@ -1,13 +1,6 @@
-"""Skip decisions in the driver, before any worker starts.
-
-A per-dataset *input index* in the catalog (``dataset=<name>/_inputs.json``)
-records per asset the fingerprint of its folder (:func:`input_fingerprint`),
-what the input stage found (input hash, category, link and joint counts) and
-the code hash that found it. Where those still match, the driver computes the
-configuration hashes itself and applies the skip rule to the earlier row;
-any miss hands the asset to the workers. docs/design/pipeline.md, "Skips
-decided by the driver", has the reasoning and measurements.
-"""
+"""Skip decisions in the driver, before any worker starts, from a per-dataset *input index* in the catalog
+(``dataset=<name>/_inputs.json``: per asset its folder's :func:`input_fingerprint` and what the input stage
+found); any miss hands the asset to the workers. docs/design/pipeline.md, "Skips decided by the driver"."""
 
 from __future__ import annotations
 
@@ -166,7 +159,6 @@ def decide_skips(
     fingerprints: dict[str, str | None],
     config_hash_of,
     finished_check,
-    threads: int = 8,
 ) -> dict[str, Prepared]:
     """The jobs the driver can skip: asset id -> the prepared record (with
     ``skip`` the earlier catalog row) the input stage would have returned.
@@ -178,7 +170,6 @@ def decide_skips(
             (``asset2sim.flows.stages.job_config_hash``).
         finished_check: the skip rule, ``(row, input_hash) -> row or None``
             (``asset2sim.flows.stages.finished_in_store``).
-        threads: size of the thread pool of the completeness checks.
     """
     code = code_hash()
     todo = [j for j in jobs if j.finished and j.asset_id in index]
@@ -190,7 +181,7 @@ def decide_skips(
             job, index.get(job.asset_id), fingerprints.get(job.asset_id), code, config_hash_of, finished_check
         )
 
-    with ThreadPoolExecutor(max_workers=max(1, min(threads, len(todo)))) as pool:
+    with ThreadPoolExecutor(max_workers=min(8, len(todo))) as pool:
         return {aid: p for aid, p in pool.map(one, todo) if p is not None}
 
 

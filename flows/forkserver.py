@@ -8,6 +8,7 @@ when it ended (``rc`` < 0: killed by signal ``-rc``; ``cpu``: user + system s).
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import json
 import os
@@ -72,8 +73,7 @@ def warm_tables() -> list[str]:
         if not (name.startswith("asset2sim.tasks.") or name == "asset2sim.prior_tables") or mod is None:
             continue
         for attr, fn in sorted(vars(mod).items()):
-            info = getattr(fn, "cache_info", None)
-            if info is None or not isinstance(fn, functools._lru_cache_wrapper) or getattr(fn, "__module__", None) != name:
+            if not isinstance(fn, functools._lru_cache_wrapper) or getattr(fn, "__module__", None) != name:
                 continue
             try:
                 if fn.cache_parameters().get("maxsize") != 1 or inspect.signature(fn).parameters:
@@ -125,10 +125,8 @@ class StageServer:
             return
 
         def run() -> None:
-            try:
+            with contextlib.suppress(RuntimeError):  # the next call starts it again and reports the failure
                 self.ensure_started()
-            except RuntimeError:  # the next call starts it again and reports the failure
-                pass
 
         threading.Thread(target=run, name="asset2sim-stage-server-start", daemon=True).start()
 
@@ -146,15 +144,11 @@ class StageServer:
         if self.proc is None:
             return
         _kill_group(self.proc.pid)
-        try:
+        with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pass
         for fh in (self.proc.stdin, self.proc.stdout):
-            try:
+            with contextlib.suppress(OSError, AttributeError):
                 fh.close()
-            except (OSError, AttributeError):
-                pass
         self.proc = None
 
     def _send(self, obj: dict[str, Any]) -> bool:
@@ -239,10 +233,8 @@ class StageServer:
 
 def _kill_group(pid: int) -> None:
     """SIGKILL the process group ``pid`` (gone already: nothing to do)."""
-    try:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
 
 
 _OWNER: dict[int, tuple[threading.Thread, queue.Queue]] = {}
@@ -285,10 +277,7 @@ _SERVERS_LOCK = threading.Lock()
 def worker_server(preload: tuple[str, ...] = ()) -> StageServer:
     """This process's stage server (one per process id)."""
     with _SERVERS_LOCK:
-        srv = _SERVERS.get(os.getpid())
-        if srv is None:
-            srv = _SERVERS[os.getpid()] = StageServer(preload)
-        return srv
+        return _SERVERS.setdefault(os.getpid(), StageServer(preload))
 
 
 def _server_with(preload: tuple[str, ...]) -> StageServer:
@@ -316,8 +305,7 @@ def run_forked(target: str, kwargs: dict[str, Any], *, timeout: float, workdir: 
                memory_limit_mb: int | None = None, preload: tuple[str, ...] = ()) -> IsolatedResult:
     """``target(**kwargs)`` in a child forked from this process's stage server (:meth:`StageServer.call`);
     ``preload``: modules the server should import."""
-    srv = _server_with(preload)  # a new refine function: restarted with it imported
-    return srv.call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
+    return _server_with(preload).call(target, kwargs, timeout=timeout, workdir=workdir, memory_limit_mb=memory_limit_mb)
 
 
 def _run_child(spec_path: str, out_fd: int) -> None:
@@ -349,10 +337,8 @@ def _server_main(argv: list[str]) -> int:
     import importlib
 
     for mod in (*WARM_MODULES, *argv[1:]):
-        try:
+        with contextlib.suppress(Exception):  # a missing optional package: the call that needs it fails in its child
             importlib.import_module(mod)
-        except Exception:  # noqa: BLE001 - a missing optional package: the call that needs it fails in its child
-            pass
     warm_tables()
     gc.collect()
     gc.freeze()  # what the imports made is never collected, so a child's collections do not copy its pages

@@ -1,18 +1,12 @@
-"""Run one function call in a child process with a hard wall-time limit, so
-that a native crash or a hang costs only that asset.
-
-Protocol: the parent writes ``spec.json`` (``target`` = ``module:function``,
-``kwargs`` JSON, ``result`` path) into a work folder and starts
-``python -m asset2sim.flows.isolation spec.json`` in a new session with the
-parent's ``sys.path`` on ``PYTHONPATH``. The child asks for SIGKILL when that
-parent ends (:mod:`asset2sim.flows.lifeline`), calls ``target(**kwargs)``
-(which returns a JSON-able dict) and writes ``{"ok": true, "value": ...}`` or
-``{"ok": false, "error", "error_type", "failure_mode", "traceback"}``
-atomically to the result path; its output goes to ``child.log``.
+"""Run one function call in a child process with a hard wall-time limit, so that a native crash or a hang
+costs only that asset: the parent writes ``spec.json`` into a work folder and starts ``python -m
+asset2sim.flows.isolation spec.json`` in a new session; the child, killed when that parent ends
+(:mod:`asset2sim.flows.lifeline`), writes :func:`call_target`'s record atomically to the result path.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import json
 import os
@@ -151,8 +145,7 @@ def _write_spec(workdir: Path | str, target: str, kwargs: dict[str, Any], **more
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
     result_path = workdir / "result.json"
-    if result_path.exists():
-        result_path.unlink()
+    result_path.unlink(missing_ok=True)
     spec = workdir / "spec.json"
     atomic.write_json(spec, {"target": target, "kwargs": kwargs, "result": str(result_path), **more})
     return spec, result_path, workdir / "child.log"
@@ -185,25 +178,16 @@ def _kill_group(proc: subprocess.Popen) -> None:
     try:
         os.killpg(proc.pid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
-        try:
+        with contextlib.suppress(ProcessLookupError):
             proc.kill()
-        except ProcessLookupError:
-            pass
-    try:
+    with contextlib.suppress(subprocess.TimeoutExpired):
         proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        pass
 
 
 def run_child_spec(spec: dict[str, Any]) -> None:
-    """The body of an isolated call in its (spawned or forked) child: the
-    address-space limit ``spec["memory_limit_mb"]`` (MiB), :func:`call_target`
-    of ``spec["target"]`` and ``spec["kwargs"]``, its record written
-    atomically as JSON to ``spec["result"]``.
-
-    Raises:
-        OSError: the result file cannot be written.
-    """
+    """The body of an isolated call in its (spawned or forked) child: :func:`call_target` under the address-space
+    limit ``spec["memory_limit_mb"]`` (MiB), its record written atomically as JSON to ``spec["result"]``.
+    Raises OSError: the result file cannot be written."""
     allocator.keep_freed_memory()  # a stage process lives for one call: freed arrays are reused, not faulted in again
     if spec.get("memory_limit_mb"):
         limit = int(spec["memory_limit_mb"]) * 1024 * 1024

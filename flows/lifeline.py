@@ -1,17 +1,7 @@
-"""Child processes that end with the process that started them, killed or not.
-
-On Linux ``prctl(PR_SET_PDEATHSIG, sig)`` asks the kernel for ``sig`` when
-the parent ends (strictly: the *thread* that created the child, so start
-helpers from a thread that lives as long as they are wanted). The setting
-survives ``execve``, so a launcher sets it and becomes the real program::
-
-    python -m asset2sim.flows.lifeline <parent pid> -- <program> <args...>
-
-(:func:`command`); it checks that its parent is still ``<parent pid>`` after
-setting the signal. The flow starts its temporary Prefect server this way
-(:mod:`asset2sim.flows.server`). Elsewhere than Linux,
-:func:`set_parent_death_signal` returns False and the launcher just runs the
-program.
+"""Child processes that end with the process that started them, killed or not (Linux
+``prctl(PR_SET_PDEATHSIG)``, which survives ``execve``): the launcher ``python -m asset2sim.flows.lifeline
+<parent pid> -- <program> <args...>`` (:func:`command`) sets it and becomes the program; elsewhere than
+Linux it just runs the program.
 """
 
 from __future__ import annotations

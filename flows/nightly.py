@@ -1,10 +1,6 @@
-"""The nightly refinement: a Prefect deployment of the ``refine-dataset`` flow
-on a cron schedule, with the parameters of ``make flow``
-(:func:`asset2sim.flows.stages.flow_parameters`; the dataset defaults to
-``schedule.dataset``). Schedule: argument, else environment
-(``ASSET2SIM_CRON``, ``ASSET2SIM_TIMEZONE``), else ``catalog.yaml``
-``schedule``; the cron expression is evaluated in the IANA time zone.
-``make serve`` registers and serves it (:func:`serve_nightly`).
+"""The nightly refinement: a Prefect deployment of the ``refine-dataset`` flow with the parameters of ``make
+flow``, on a cron schedule evaluated in an IANA time zone; ``make serve`` (``asset2sim flow --serve``) registers
+and serves it.
 """
 
 from __future__ import annotations
@@ -118,15 +114,3 @@ def register_nightly(deployment) -> str:
 def deployment_full_name(deployment) -> str:
     """``<flow name>/<deployment name>`` as Prefect addresses it."""
     return f"{FLOW_NAME}/{deployment.name}"
-
-
-def serve_nightly(deployment) -> None:
-    """Register ``deployment`` and serve it (blocks until interrupted): the
-    server's scheduler creates a run at each cron time and this process runs it.
-
-    Requires ``PREFECT_API_URL`` to point at a Prefect server (see
-    :func:`start_local_server`).
-    """
-    from prefect import serve
-
-    serve(deployment, print_starting_message=False)

@@ -89,12 +89,8 @@ def _failure_counts_arrow(table, keys: list[str], run: str | None):
     table = plain_strings(table)
     if run is not None:
         table = table.filter(pc.equal(table["run"], run))
-    cols = {}
-    for k in keys:
-        col = table[k]
-        if not pa.types.is_string(col.type):
-            col = col.cast(pa.string())
-        cols[k] = pc.fill_null(col, "(unknown)")
+    cols = {k: pc.fill_null(table[k] if pa.types.is_string(table[k].type) else table[k].cast(pa.string()), "(unknown)")
+            for k in keys}
     cols["failure_mode"] = pc.fill_null(table["failure_mode"], MISSING_FAILURE_MODE)
     grouped = pa.table(cols).group_by([*keys, "failure_mode"]).aggregate([([], "count_all")]).to_pandas()
     grouped = grouped.sort_values([*keys, "failure_mode"])

@@ -24,6 +24,7 @@ from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 from prefect.context import FlowRunContext
 from prefect.futures import as_completed
+from prefect.settings import PREFECT_API_URL
 
 from asset2sim.flows import catalog_compare, catalog_finish, queries, tracking
 from asset2sim import flow_progress
@@ -32,7 +33,7 @@ from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, server, stages
 from asset2sim.flows.forkserver import ready_server
 from asset2sim.flows.store import join_uri, upload_folder
-from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, BadManifestRow, ModelCallFailure, RegressionFailure,
+from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, ModelCallFailure, RegressionFailure,
                                     code_version, flow_parameters, make_run_id, plan_run)
 from asset2sim.tasks.check.verdict import exception_failure_mode
 from asset2sim.tasks.publish.contract import Prepared, build_manifest_row, build_row
@@ -150,13 +151,13 @@ class _AssetRecorder:
         _add_isolation_times(row, refined, measured)
         self.store.append_row(job.dataset, job.run_id, row)
         self.rows.append(row)
-        _emit_finished(job, row)
+        _emit_finished(job.dataset, job.run_id, row)
         self.log.info("%s: %s (%s) in %.1f s", job.asset_id, row.status, row.failure_mode, row.wall_seconds or 0.0)
 
 
-def _emit_finished(job: AssetJob, row) -> None:
+def _emit_finished(dataset: str, run_id: str, row) -> None:
     """The progress event of an asset whose row was written."""
-    flow_progress.emit(ProgressEvent("asset_finished", job.dataset, job.run_id, asset_id=job.asset_id,
+    flow_progress.emit(ProgressEvent("asset_finished", dataset, run_id, asset_id=row.asset_id,
                                      status=row.status, failure_mode=row.failure_mode, seconds=row.wall_seconds))
 
 
@@ -254,11 +255,10 @@ class DriverPlan:
         return [j for j in self.plan.jobs if j.asset_id not in self.skips]
 
 
-def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None,
-                started: datetime | None = None) -> DriverPlan:
+def plan_driver(cat, name: str, *, ids=None, limit=None, force: bool = False, out: str | None = None) -> DriverPlan:
     """Plan a run of dataset ``name`` and decide which assets are finished already (none when ``force``).
     Raises CatalogError as :func:`asset2sim.flows.stages.plan_run`."""
-    started = started or datetime.now(timezone.utc)
+    started = datetime.now(timezone.utc)
     run_id = make_run_id(started)
     plan = plan_run(cat, name, run_id, ids=ids, limit=limit, force=force, out_store=out)
     fps = driver_skip.fingerprints(plan.jobs)
@@ -273,7 +273,8 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
                 out: str | None = None, planned: DriverPlan | None = None, dask_host: str | None = None,
                 dashboard: bool | None = None) -> dict[str, Any]:
     """The body of :func:`refine_dataset`, also run without a Prefect flow run when nothing is left to dispatch;
-    ``planned``: a plan made already by :func:`plan_driver`."""
+    ``planned``: a plan made already by :func:`plan_driver`. Raises :class:`RegressionFailure` (the report logged)
+    when the run regressed beyond ``catalog.yaml`` ``results.regression`` with ``fail_flow``."""
     t0, body_started_epoch = time.perf_counter(), time.time()
     cat = load_catalog(catalog)
     name, _ = cat.dataset(dataset)
@@ -296,8 +297,19 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
         flow_started_epoch=body_started_epoch,
         artifacts={k: str(v) for k, v in artifacts.items()},
     )
-    _write_finished_info(run, summary, mlflow_run_id)
-    _raise_on_regression(log, cat, summary)
+    run.info.update(
+        status="finished",
+        finished_at=datetime.now(timezone.utc).isoformat(),
+        mlflow_run_id=mlflow_run_id,
+        regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
+        summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
+    )
+    run.store.write_run_info(run.name, run.run_id, run.info)
+    regression = summary["regression"]
+    if regression.get("exceeded") and cat.config.results.regression.fail_flow:
+        report = "\n".join(["run regressed beyond catalog.yaml results.regression", *regression.get("lines", [])])
+        log.error("%s", report)
+        raise RegressionFailure(report, summary)
     return summary
 
 
@@ -323,8 +335,21 @@ def _start_run(log, cat, name: str, planned: DriverPlan, workers, dask_address, 
     address = dask_address or os.environ.get("DASK_ADDRESS") or None
     n_workers = workers or cat.config.run.workers
     store = ResultCatalog(cat.catalog_root)
-    info = _run_info(cat, name, run_id, planned.started, jobs, n_workers, address)
-    info["assets"] = len(jobs) + len(planned.plan.bad_rows)
+    info = {
+        "dataset": name,
+        "run": run_id,
+        "flow_run_id": _current_flow_run_id(),
+        "catalog": str(cat.path),
+        "started_at": planned.started.isoformat(),
+        "status": "running",
+        "assets": len(jobs) + len(planned.plan.bad_rows),
+        "estimator": cat.config.estimator.name,
+        "model": cat.config.estimator.model,
+        "refine_config_hash": cat.refine_config().config_hash(),
+        "workers": None if address else n_workers,
+        "dask_address": address,
+        "code_version": jobs[0].code_version if jobs else code_version(),
+    }
     store.write_run_info(name, run_id, info)
     host = dask_host or cat.config.run.dask_host
     dashboard = cat.config.run.dashboard if dashboard is None else bool(dashboard)
@@ -336,9 +361,15 @@ def _start_run(log, cat, name: str, planned: DriverPlan, workers, dask_address, 
 
 
 def _record_without_workers(log, run: _Run, planned: DriverPlan) -> None:
-    """The rows of the manifest's bad rows and of the assets the driver skips, before any worker starts."""
+    """The rows of the manifest's bad rows (failed, ``invalid_manifest_row``) and of the assets the driver skips,
+    before any worker starts."""
     bad_rows = planned.plan.bad_rows
-    _record_bad_rows(run.store, run.cat, run.name, run.run_id, bad_rows, run.info["flow_run_id"], run.info["code_version"])
+    config = run.cat.refine_config().model_dump(mode="json")
+    for bad in bad_rows:
+        row = build_manifest_row(bad.error, asset_id=bad.asset_id, run_id=run.run_id, config=config,
+                                 code_version=run.info["code_version"], flow_run_id=run.info["flow_run_id"])
+        run.store.append_row(run.name, run.run_id, row)
+        _emit_finished(run.name, run.run_id, row)
     for bad in bad_rows:
         log.warning("%s: manifest row refused (%s): %s", bad.asset_id, bad.error.code, bad.error.message[:300])
     _record_driver_skips(run.store, planned.plan.jobs, planned.skips, run.info["flow_run_id"])
@@ -404,40 +435,6 @@ def _track(log, run: _Run, summary: dict[str, Any], finish, df, run_out: Path) -
     return artifacts, mlflow_run_id, tracking_error
 
 
-def _write_finished_info(run: _Run, summary: dict[str, Any], mlflow_run_id: str | None) -> None:
-    """The run's ``_run.json`` at its end (status ``finished``, regression verdict, scalar summary)."""
-    run.info.update(
-        status="finished",
-        finished_at=datetime.now(timezone.utc).isoformat(),
-        mlflow_run_id=mlflow_run_id,
-        regression={k: summary["regression"][k] for k in ("status", "exceeded", "previous_run", "regressed", "reasons")},
-        summary={k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))},
-    )
-    run.store.write_run_info(run.name, run.run_id, run.info)
-
-
-def _raise_on_regression(log, cat, summary: dict[str, Any]) -> None:
-    """Raises :class:`RegressionFailure` (the report logged) when the run regressed beyond ``catalog.yaml``
-    ``results.regression`` with ``fail_flow``: the nightly deployment's run then ends Failed."""
-    regression = summary["regression"]
-    if regression.get("exceeded") and cat.config.results.regression.fail_flow:
-        report = "\n".join(["run regressed beyond catalog.yaml results.regression", *regression.get("lines", [])])
-        log.error("%s", report)
-        raise RegressionFailure(report, summary)
-
-
-def _record_bad_rows(store: ResultCatalog, cat, name: str, run_id: str, bad_rows: list[BadManifestRow],
-                     flow_run_id: str | None, version: str) -> None:
-    """One failed row (``invalid_manifest_row``) per manifest row that cannot be used."""
-    config = cat.refine_config().model_dump(mode="json")
-    for bad in bad_rows:
-        row = build_manifest_row(bad.error, asset_id=bad.asset_id, run_id=run_id, config=config,
-                                 code_version=version, flow_run_id=flow_run_id)
-        store.append_row(name, run_id, row)
-        flow_progress.emit(ProgressEvent("asset_finished", name, run_id, asset_id=bad.asset_id, status=row.status,
-                                         failure_mode=row.failure_mode, seconds=0.0))
-
-
 def _add_isolation_times(row, refined, measured) -> None:
     """Add the isolated stages' ``cpu.refine`` / ``cpu.metrics`` and ``isolation.server_start`` (s) to ``stage_seconds``."""
     add: dict[str, float] = {}
@@ -472,7 +469,7 @@ def _record_driver_skips(store: ResultCatalog, jobs: list[AssetJob], skips: dict
 
     with ThreadPoolExecutor(max_workers=min(4, len(todo))) as pool:
         for job, row in pool.map(write, todo):  # progress events from this thread, in manifest order
-            _emit_finished(job, row)
+            _emit_finished(job.dataset, job.run_id, row)
 
 
 def _record_resumed(store: ResultCatalog, job: AssetJob, prepared: Prepared, refined, measured,
@@ -514,33 +511,12 @@ def _prefect_summary_artifact(summary: dict[str, Any], comparison, mlflow_run_id
         log.warning("Prefect summary artifact not created: %s", exc)
 
 
-def _run_info(cat, name: str, run_id: str, started: datetime, jobs: list[AssetJob], n_workers, address) -> dict[str, Any]:
-    """The run's ``_run.json`` at its start."""
-    return {
-        "dataset": name,
-        "run": run_id,
-        "flow_run_id": _current_flow_run_id(),
-        "catalog": str(cat.path),
-        "started_at": started.isoformat(),
-        "status": "running",
-        "assets": len(jobs),
-        "estimator": cat.config.estimator.name,
-        "model": cat.config.estimator.model,
-        "refine_config_hash": cat.refine_config().config_hash(),
-        "workers": None if address else n_workers,
-        "dask_address": address,
-        "code_version": jobs[0].code_version if jobs else code_version(),
-    }
-
-
 def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None] | None = None) -> dict[str, Any]:
     """Run :func:`refine_assets` on a Dask task runner (nothing starts for no jobs); returns its timings (s) and
     ``inputs``, the input index entries of the assets it read."""
-    timing: dict[str, Any] = {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0,
-                              "dask_teardown_seconds": 0.0,
-                              "inputs": {}}
     if not jobs:
-        return timing
+        return {"dask_startup_seconds": 0.0, "stage_servers_seconds": 0.0, "assets_seconds": 0.0, "dask_teardown_seconds": 0.0,
+                "inputs": {}}
     cat, n_workers, address = run.cat, run.n_workers, run.address
     t_fan, t_fan_epoch = time.perf_counter(), time.time()
     sub = refine_assets.with_options(task_runner=_dask_task_runner(n_workers, address, host=run.host, dashboard=run.dashboard))
@@ -554,14 +530,11 @@ def _fan_out(run: _Run, jobs: list[AssetJob], fingerprints: dict[str, str | None
             parent_flow_run_id=run.info["flow_run_id"],
             fingerprints={j.asset_id: (fingerprints or {}).get(j.asset_id) for j in jobs},
         )
-    timing["inputs"] = out.get("inputs", {})
     fan_seconds = time.perf_counter() - t_fan
-    timing["dask_startup_seconds"] = max(0.0, out["cluster_up"] - t_fan_epoch)
-    timing["stage_servers_seconds"] = out["servers_seconds"]
-    timing["assets_seconds"] = out["body_seconds"]
-    timing["dask_teardown_seconds"] = max(0.0, fan_seconds - timing["dask_startup_seconds"] - out["servers_seconds"]
-                                          - out["body_seconds"])
-    return timing
+    startup = max(0.0, out["cluster_up"] - t_fan_epoch)
+    return {"dask_startup_seconds": startup, "stage_servers_seconds": out["servers_seconds"], "assets_seconds": out["body_seconds"],
+            "dask_teardown_seconds": max(0.0, fan_seconds - startup - out["servers_seconds"] - out["body_seconds"]),
+            "inputs": out.get("inputs", {})}
 
 
 def _log_to_mlflow(run: _Run, df, summary, artifacts, extra_tags: dict[str, str] | None = None) -> tuple[str | None, str | None]:
@@ -604,13 +577,9 @@ def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "
     if address:
         return DaskTaskRunner(address=address)
     n = int(workers or os.cpu_count() or 1)
-    env = {}
     api = _prefect_api_url()
-    if api:
-        env["PREFECT_API_URL"] = api
-    # a free port (several clusters may run on one machine) on ``host``: a bare ":0" makes
-    # distributed listen on 0.0.0.0 whatever ``host`` is; a tuple also takes an IPv6 address
-    http_address = (host.strip("[]"), 0)
+    env = {"PREFECT_API_URL": api} if api else {}
+    http_address = (host.strip("[]"), 0)  # a free port on ``host`` (docs/design/pipeline.md)
     return DaskTaskRunner(
         cluster_kwargs={
             "n_workers": n,
@@ -618,7 +587,6 @@ def _dask_task_runner(workers: int | None, address: str | None, *, host: str = "
             "processes": True,
             "host": host,
             "dashboard_address": http_address if dashboard else None,
-            # without the dashboard the scheduler still opens its HTTP port (8787 by default)
             "scheduler_kwargs": {} if dashboard else {"dashboard_address": http_address},
             "env": env,
         }
@@ -640,8 +608,6 @@ def _local_cluster_config(address: str | None, dashboard: bool):
 def _prefect_api_url() -> str | None:
     """The Prefect API this process talks to (its temporary server when none is configured), or None."""
     try:
-        from prefect.settings import PREFECT_API_URL
-
         url = PREFECT_API_URL.value()
         if not url:
             from prefect.server.api.server import SubprocessASGIServer
@@ -675,7 +641,7 @@ def run_refine_flow(
     params = flow_parameters(catalog, dataset, workers, dask_address, out)
     params.update({k: v for k, v in (("dask_host", dask_host), ("dashboard", dashboard)) if v is not None})
     cat = load_catalog(params["catalog"])  # fail early, before the flow starts
-    if not _prefect_api_configured():
+    if not PREFECT_API_URL.value():
         # no Prefect server to talk to: plan here first; a run with nothing to
         # dispatch (every asset finished) starts neither a server nor Dask
         name, _ = cat.dataset(dataset)
@@ -695,19 +661,11 @@ def run_refine_flow(
     return state.result(raise_on_failure=True)
 
 
-def _prefect_api_configured() -> bool:
-    """True when ``PREFECT_API_URL`` names a Prefect server."""
-    from prefect.settings import PREFECT_API_URL
-
-    return bool(PREFECT_API_URL.value())
-
-
 @contextlib.contextmanager
 def prefect_api_for_run(project_root: Path | str):
     """Yield the Prefect API URL of one flow run: the configured ``PREFECT_API_URL``, else a temporary server stopped
     when the block ends (main thread only). RuntimeError: it did not start (log: ``<project>/.prefect/server.log``)."""
     from prefect.settings import (
-        PREFECT_API_URL,
         PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS,
         temporary_settings,
     )
@@ -731,11 +689,9 @@ def prefect_api_for_run(project_root: Path | str):
 
 def _drain_prefect_workers() -> None:
     """Flush Prefect's background log and event workers before the server stops."""
-    try:
+    with contextlib.suppress(Exception):  # best effort: the catalog, not Prefect's log, is the record
         from prefect.events.worker import EventsWorker
         from prefect.logging.handlers import APILogWorker
 
         APILogWorker.drain_all(timeout=5)
         EventsWorker.drain_all(timeout=5)
-    except Exception:  # best effort: the catalog, not Prefect's log, is the record
-        pass

@@ -1,7 +1,5 @@
-"""A local Prefect server for one flow run or for the nightly deployment,
-bound to 127.0.0.1, ended with the process that started it
-(:mod:`asset2sim.flows.lifeline`). Used by :mod:`.refine_flow` (a temporary
-API for one run) and :mod:`.nightly` (``serve``)."""
+"""A local Prefect server for one flow run or for the nightly deployment, bound to 127.0.0.1, ended with the
+process that started it (:mod:`asset2sim.flows.lifeline`)."""
 
 from __future__ import annotations
 
@@ -13,19 +11,11 @@ import time
 from pathlib import Path
 
 from asset2sim.flows import lifeline
-from asset2sim.flows.stages import default_prefect_home
 
 __all__ = ["start_local_server", "stop_server"]
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def start_local_server(project_root: Path | str, port: int | None = None, timeout: float = 120.0, *,
-                       ephemeral: bool = False):
+def start_local_server(project_root: Path | str, timeout: float = 120.0, *, ephemeral: bool = False):
     """Start a Prefect server bound to 127.0.0.1 (state under
     ``<project>/.prefect`` unless ``PREFECT_HOME`` is set, log
     ``server.log`` there) and wait until its API answers; it gets SIGKILL
@@ -39,7 +29,7 @@ def start_local_server(project_root: Path | str, port: int | None = None, timeou
     """
     import urllib.request
 
-    home = default_prefect_home(project_root)
+    home = Path(project_root) / ".prefect"
     home.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)
     env.setdefault("PREFECT_HOME", str(home))
@@ -49,7 +39,9 @@ def start_local_server(project_root: Path | str, port: int | None = None, timeou
         env.update({"PREFECT_UI_ENABLED": "0", "PREFECT__SERVER_EPHEMERAL": "1", "PREFECT__SERVER_FINAL": "1"})
     log_path = home / "server.log"
     for attempt in range(3):  # a free port may be taken before the server binds it
-        port_n = port or _free_port()
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind(("127.0.0.1", 0))
+            port_n = int(s.getsockname()[1])
         if ephemeral:
             import prefect
 
@@ -81,7 +73,7 @@ def start_local_server(project_root: Path | str, port: int | None = None, timeou
         else:
             stop_server(proc)
             raise RuntimeError(f"prefect server did not answer at {url} within {timeout:.0f} s; see {log_path}")
-        if port is not None or proc.returncode != 3 or attempt == 2:  # 3: uvicorn could not bind the port
+        if proc.returncode != 3 or attempt == 2:  # 3: uvicorn could not bind the port
             raise RuntimeError(f"prefect server exited with code {proc.returncode}; see {log_path}")
     raise RuntimeError(f"prefect server did not start; see {log_path}")  # not reached
 

@@ -7,6 +7,7 @@ returning a :class:`~asset2sim.tasks.publish.contract.StageRecord`.
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import time
 import uuid
@@ -144,15 +145,13 @@ def flow_parameters(
     out: str | None = None,
 ) -> dict[str, Any]:
     """The parameters ``make flow`` passes to ``refine_dataset`` (the catalog as an absolute path; ``out`` when given)."""
-    params = {
+    return {
         "catalog": str(Path(catalog).expanduser().resolve()),
         "dataset": dataset,
         "workers": workers,
         "dask_address": dask_address,
+        **({"out": out} if out else {}),
     }
-    if out:
-        params["out"] = out
-    return params
 
 
 def plan_jobs(cat: Catalog, dataset: str, run_id: str, *, ids: list[str] | None = None, limit: int | None = None,
@@ -309,7 +308,7 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
                            error_type=type(exc).__name__, failure_mode="crash", seconds=time.perf_counter() - t0,
                            worker=_worker_name())
     for folder in (local, job.metrics_dir, job.work_dir):
-        store_mod.remove_local(folder)
+        shutil.rmtree(folder, ignore_errors=True)
     return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"]},
                        seconds=time.perf_counter() - t0, worker=_worker_name())
 
@@ -614,24 +613,16 @@ def metrics_stage(job: AssetJob, prepared: Prepared, refined: StageRecord) -> St
     return rec
 
 
-def default_prefect_home(project_root: Path | str) -> Path:
-    """Where the CLI keeps Prefect's local state: ``<project>/.prefect``."""
-    return Path(project_root) / ".prefect"
-
-
 def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
     """Set Prefect's environment defaults (home under the project, analytics off, a longer start-up timeout) where
     unset, before Prefect is imported; returns what was set."""
     defaults = {
-        "PREFECT_HOME": str(default_prefect_home(project_root)),
+        "PREFECT_HOME": str(Path(project_root) / ".prefect"),
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         "DO_NOT_TRACK": "1",
         # a first start migrates a fresh SQLite database: slower than Prefect's 20 s on a busy machine
         "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "180",
     }
-    set_now = {}
-    for k, v in defaults.items():
-        if k not in os.environ:
-            os.environ[k] = v
-            set_now[k] = v
+    set_now = {k: v for k, v in defaults.items() if k not in os.environ}
+    os.environ.update(set_now)
     return set_now

@@ -1,16 +1,11 @@
-"""Refined outputs on object storage: the output store of a flow run.
-
-With ``output_store`` (or ``asset2sim flow --out URI``) a run's outputs go
-to ``<store>/<dataset>/<run>/<asset id>/`` (metrics to ``.../_metrics/<asset
-id>/``) on any filesystem :func:`asset2sim.flows.catalog_fs.open_location`
-opens. Workers refine into a local folder (:func:`local_work_root`) and the
-publish stage uploads it, the completion marker last; a store folder is
-complete only when its marker is there and every file it lists exists
-(:func:`store_complete`, one listing), which is what the skip rule reads.
+"""Refined outputs on object storage (``output_store``, ``asset2sim flow --out URI``), any filesystem
+:func:`asset2sim.flows.catalog_fs.open_location` opens: workers refine into :func:`local_work_root` and
+upload, the completion marker last (docs/design/pipeline.md, "Outputs on object storage").
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import tempfile
@@ -18,7 +13,7 @@ import time
 from pathlib import Path
 
 from asset2sim import __version__
-from asset2sim.flows.catalog_fs import Location, is_uri, open_location
+from asset2sim.flows.catalog_fs import is_uri, open_location
 from asset2sim.output_folder import MARKER_NAME
 
 #: Bytes per read when uploading (files are streamed, not held whole in memory).
@@ -44,11 +39,6 @@ def local_work_root() -> Path:
     return Path(tempfile.gettempdir()) / "asset2sim-work"
 
 
-def _open(uri: str) -> tuple[Location, str]:
-    loc = open_location(uri)
-    return loc, loc.base
-
-
 def upload_folder(local_dir: Path | str, uri: str) -> dict[str, float | int]:
     """Upload the folder ``local_dir`` to ``uri``: every file under it, the
     completion marker (when there is one) last.
@@ -64,7 +54,8 @@ def upload_folder(local_dir: Path | str, uri: str) -> dict[str, float | int]:
     local_dir = Path(local_dir)
     if not local_dir.is_dir():
         raise FileNotFoundError(f"{local_dir}: no folder to upload")
-    loc, base = _open(uri)
+    loc = open_location(uri)
+    base = loc.base
     files = sorted(p for p in local_dir.rglob("*") if p.is_file() and not p.name.endswith(".tmp"))
     files.sort(key=lambda p: p.name == MARKER_NAME and p.parent == local_dir)  # the marker last
     total = 0
@@ -78,10 +69,8 @@ def upload_folder(local_dir: Path | str, uri: str) -> dict[str, float | int]:
             tmp.replace(dest)
         else:
             if loc.fs.type_name not in ("s3", "gcs"):
-                try:
+                with contextlib.suppress(OSError):
                     loc.fs.create_dir(dest.rsplit("/", 1)[0], recursive=True)
-                except OSError:
-                    pass
             with open(p, "rb") as src, loc.fs.open_output_stream(dest) as out:
                 while chunk := src.read(CHUNK_BYTES):
                     out.write(chunk)
@@ -97,7 +86,8 @@ def download_folder(uri: str, local_dir: Path | str) -> Path:
     """
     import pyarrow.fs as pafs
 
-    loc, base = _open(uri)
+    loc = open_location(uri)
+    base = loc.base
     infos = [i for i in loc.fs.get_file_info(pafs.FileSelector(base, allow_not_found=True, recursive=True))
              if i.type == pafs.FileType.File]
     if not infos:
@@ -121,7 +111,8 @@ def store_complete(uri: str, input_hash: str, config_hash: str) -> bool:
     import pyarrow.fs as pafs
 
     try:
-        loc, base = _open(uri)
+        loc = open_location(uri)
+        base = loc.base
         with loc.fs.open_input_stream(f"{base}/{MARKER_NAME}") as fh:
             data = json.loads(fh.read(16 * 1024 * 1024))
         infos = loc.fs.get_file_info(pafs.FileSelector(base, allow_not_found=True, recursive=True))
@@ -133,8 +124,3 @@ def store_complete(uri: str, input_hash: str, config_hash: str) -> bool:
         return False
     present = {i.path[len(base):].lstrip("/") for i in infos if i.type == pafs.FileType.File}
     return all(rel in present for rel in data.get("files", {}))
-
-
-def remove_local(path: Path | str) -> None:
-    """Delete a worker's local folder after its upload (missing is fine)."""
-    shutil.rmtree(path, ignore_errors=True)

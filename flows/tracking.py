@@ -1,10 +1,5 @@
-"""Experiment tracking of flow runs with MLflow, and the run's artifacts.
-
-One MLflow run per flow run (parameters, metrics, ``summary.csv``,
-``failure_modes.png``) with one nested run per asset. The store is
-``MLFLOW_TRACKING_URI``, else ``tracking.uri``, else
-``sqlite:///<project>/mlflow.db``; new experiments keep their artifacts in
-``<project>/mlruns/<experiment>``.
+"""Experiment tracking of flow runs with MLflow (one run per flow run, one nested run per asset; new
+experiments keep their artifacts in ``<project>/mlruns/<experiment>``), and the run's artifacts.
 """
 
 from __future__ import annotations
@@ -33,9 +28,6 @@ SUMMARY_COLUMNS = (
 def resolve_tracking_uri(project_root: Path | str, configured: str | None = None) -> str:
     """``MLFLOW_TRACKING_URI`` if set, else ``configured``, else the project's SQLite store."""
     return os.environ.get("MLFLOW_TRACKING_URI") or configured or "sqlite:///" + str((Path(project_root) / "mlflow.db").resolve())
-
-
-# ------------------------------------------------------------------------- artifacts
 
 
 def summary_table(df):
@@ -83,10 +75,8 @@ def write_run_artifacts(df, out_dir: Path | str, title: str = "") -> dict[str, P
     """Write ``summary.csv``, ``summary.json`` (:func:`asset2sim.flows.queries.run_summary`)
     and ``failure_modes.png`` into ``out_dir`` atomically; returns name -> path."""
     out_dir = Path(out_dir)
-    table = summary_table(df)
-    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", table.to_csv(index=False))}
-    summary = run_summary(df)
-    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(summary))
+    paths = {"summary.csv": atomic.write_text(out_dir / "summary.csv", summary_table(df).to_csv(index=False))}
+    paths["summary.json"] = atomic.write_json(out_dir / "summary.json", _jsonable(run_summary(df)))
     fig = failure_mode_figure(df, title)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -104,9 +94,6 @@ def _jsonable(obj: Any) -> Any:
     if hasattr(obj, "item"):  # numpy scalars
         return _jsonable(obj.item())
     return obj
-
-
-# --------------------------------------------------------------------------- MLflow
 
 
 def flow_metrics(summary: dict[str, Any]) -> dict[str, float]:
@@ -153,23 +140,16 @@ def log_flow_run(
     project_root: Path | str,
     settings=None,
     tags: dict[str, str] | None = None,
-    nested: bool = True,
     started_at: float | None = None,
     ended_at: float | None = None,
 ) -> str:
-    """Log one flow run (and a nested run per asset row of ``df``) to MLflow.
+    """Log one flow run and a nested run per asset row of ``df`` (its own start and end; for an asset refined in
+    this run, :func:`asset_artifacts`) to MLflow; returns the MLflow run id.
 
-    ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s);
-    ``params`` stringified (cut at 500 characters); ``artifacts``: name -> file;
-    ``project_root``: where the default store lives; ``settings``:
-    :class:`asset2sim.flows.catalog.TrackingSettings`; ``started_at`` /
-    ``ended_at``: the flow run's wall-clock start and end (epoch s; default now),
-    so MLflow shows its true duration. Each asset's run has the asset's own
-    start and end and, for an asset refined in this run (not reused), its
-    ``report.json``, ``report.html``, ``evaluation.json`` and renders as
-    artifacts. A run that reused every asset is tagged
-    ``asset2sim.outcome = nothing_to_do``. The experiment opens on its runs
-    table (``mlflow.experimentKind``). Returns the MLflow run id.
+    ``summary``: :func:`asset2sim.flows.queries.run_summary` plus timings (s); ``params`` stringified (cut at
+    500 characters); ``artifacts``: name -> file; ``project_root``: where the default store lives; ``settings``:
+    :class:`asset2sim.flows.catalog.TrackingSettings`; ``started_at`` / ``ended_at``: the flow run's start and
+    end (epoch s; default now).
 
     Raises:
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
@@ -205,35 +185,34 @@ def log_flow_run(
         )
         for path in artifacts.values():
             client.log_artifact(rid, str(path))
-        if nested and not df.empty:
-            for row in df.to_dict("records"):
-                child = client.create_run(
-                    exp_id,
-                    run_name=str(row["asset_id"]),
-                    start_time=_ms(row.get("started_at")) or ts,
-                    tags={
-                        "mlflow.parentRunId": rid,
-                        "asset2sim.kind": "asset",
-                        "asset_id": str(row["asset_id"]),
-                        "category": str(row.get("category") or ""),
-                        "status": str(row.get("status") or ""),
-                        "failure_mode": str(row.get("failure_mode") or ""),
-                    },
-                )
-                client.log_batch(
-                    child.info.run_id,
-                    metrics=[Metric(k, v, ts, 0) for k, v in _asset_metrics(row).items()],
-                    params=[
-                        Param("prompt", str(row.get("prompt") or "")[:500]),
-                        Param("estimator", str(row.get("estimator") or "")),
-                        Param("input_hash", str(row.get("input_hash") or "")),
-                        Param("config_hash", str(row.get("config_hash") or "")),
-                    ],
-                )
-                if row.get("status") != "skipped":  # a reused asset's files belong to the run that made them
-                    for path in asset_artifacts(row.get("out_dir")):
-                        client.log_artifact(child.info.run_id, str(path), artifact_path=_artifact_dir(path, row["out_dir"]))
-                client.set_terminated(child.info.run_id, "FINISHED", end_time=_ms(row.get("finished_at")) or ts)
+        for row in df.to_dict("records"):
+            child = client.create_run(
+                exp_id,
+                run_name=str(row["asset_id"]),
+                start_time=_ms(row.get("started_at")) or ts,
+                tags={
+                    "mlflow.parentRunId": rid,
+                    "asset2sim.kind": "asset",
+                    "asset_id": str(row["asset_id"]),
+                    "category": str(row.get("category") or ""),
+                    "status": str(row.get("status") or ""),
+                    "failure_mode": str(row.get("failure_mode") or ""),
+                },
+            )
+            client.log_batch(
+                child.info.run_id,
+                metrics=[Metric(k, v, ts, 0) for k, v in _asset_metrics(row).items()],
+                params=[
+                    Param("prompt", str(row.get("prompt") or "")[:500]),
+                    Param("estimator", str(row.get("estimator") or "")),
+                    Param("input_hash", str(row.get("input_hash") or "")),
+                    Param("config_hash", str(row.get("config_hash") or "")),
+                ],
+            )
+            if row.get("status") != "skipped":  # a reused asset's files belong to the run that made them
+                for path in asset_artifacts(row.get("out_dir")):
+                    client.log_artifact(child.info.run_id, str(path), artifact_path=_artifact_dir(path, row["out_dir"]))
+            client.set_terminated(child.info.run_id, "FINISHED", end_time=_ms(row.get("finished_at")) or ts)
     except BaseException:
         client.set_terminated(rid, "FAILED", end_time=int(time.time() * 1000))
         raise

@@ -88,17 +88,12 @@ def _arrow_type(annotation):
 
     args = [a for a in typing.get_args(annotation) if a is not type(None)]
     base = args[0] if typing.get_origin(annotation) in (typing.Union, types.UnionType) else annotation
-    if typing.get_origin(base) is Literal or base is str:
+    if typing.get_origin(base) is Literal:
         return pa.string()
-    if base is bool:
-        return pa.bool_()
-    if base is int:
-        return pa.int64()
-    if base is float:
-        return pa.float64()
-    if base is datetime:
-        return pa.timestamp("us", tz="UTC")
-    raise TypeError(f"no Parquet type for {annotation!r}")
+    by_type = {str: pa.string(), bool: pa.bool_(), int: pa.int64(), float: pa.float64(), datetime: pa.timestamp("us", tz="UTC")}
+    if base not in by_type:
+        raise TypeError(f"no Parquet type for {annotation!r}")
+    return by_type[base]
 
 
 def arrow_schema(with_version: bool = False):

@@ -77,11 +77,6 @@ def unit(name: str) -> str:
     return METRIC_INFO[name].unit
 
 
-def catalog_columns() -> dict[str, str]:
-    """Catalog column -> metric name, for every metric that fills a column."""
-    return {col: m.name for m in METRIC_INFO.values() for col in m.columns}
-
-
 def _field(m: MetricResult, source: str) -> Any:
     if source == "value":
         v = m.value
@@ -111,9 +106,8 @@ def column_values(metrics: Iterable[MetricResult], engine: str | None = "pybulle
     out: dict[str, Any] = {}
     for m in metrics:
         info = METRIC_INFO.get(m.name)
-        if info is None or m.name in seen or (wanted is not None and m.name not in wanted):
-            continue
-        if engine is not None and m.engine not in (engine, "none"):
+        if (info is None or m.name in seen or (wanted is not None and m.name not in wanted)
+                or (engine is not None and m.engine not in (engine, "none"))):
             continue
         seen.add(m.name)
         for col, source in info.columns.items():

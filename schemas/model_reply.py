@@ -1,20 +1,15 @@
-"""What a model backend must answer: the reply schema (SPEC stage 2).
-
-A reply is a *prior*: the estimator (:mod:`asset2sim.tasks.synthesize.llm_estimator`)
-derives the overlay from its qualitative choices through the geometry; the
-``direct`` and ``ivw`` baselines apply its numeric estimates. Entries are
-lists, not dicts, as structured-output APIs need fixed properties;
-:func:`reply_json_schema` is the schema sent, and :class:`ModelReply` also
-checks what a JSON schema cannot say. Units as :mod:`asset2sim.schemas.overlay`
-(output asset): density kg/m^3, wall thickness m, mass kg.
+"""What a model backend must answer (SPEC stage 2): :func:`reply_json_schema` is the schema sent (entries are lists,
+as structured-output APIs need fixed properties); :class:`ModelReply` also checks what a JSON schema cannot say. A
+reply is a prior: :mod:`asset2sim.tasks.synthesize.llm_estimator` derives the overlay from its choices through the
+geometry, the ``direct`` and ``ivw`` baselines apply its estimates. Units as :mod:`asset2sim.schemas.overlay`.
 """
 
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
 from asset2sim.schemas.request import DampingLevel, StateBand
 
@@ -36,6 +31,10 @@ def _short(v: str, limit: int) -> str:
     return v
 
 
+_Name = Annotated[str, AfterValidator(lambda v: _short(v, MAX_NAME))]
+_Text = Annotated[str, AfterValidator(lambda v: _short(v, MAX_TEXT))]
+
+
 class Estimate(_Strict):
     """A numeric estimate with its uncertainty: ``value`` and one standard
     deviation ``std`` (> 0), both in the unit of the field that holds it."""
@@ -47,9 +46,9 @@ class Estimate(_Strict):
 class LinkReply(_Strict):
     """The model's choice for one link."""
 
-    link: str
+    link: _Name
     """Link name exactly as in the description."""
-    material: str
+    material: _Name
     """Material note, e.g. ``ABS plastic``, ``painted steel sheet``."""
     density: float = Field(ge=10.0, le=25000.0)
     """kg/m^3 of the material."""
@@ -59,11 +58,6 @@ class LinkReply(_Strict):
     """m; real-world wall thickness of shell parts (typical smallest section otherwise)."""
     mass: Estimate
     """kg; the model's own estimate of this link's mass at the requested size (mass.value > 0)."""
-
-    @field_validator("link", "material")
-    @classmethod
-    def _name(cls, v: str) -> str:
-        return _short(v, MAX_NAME)
 
     @field_validator("mass")
     @classmethod
@@ -76,7 +70,7 @@ class LinkReply(_Strict):
 class JointReply(_Strict):
     """The model's choice for one movable joint."""
 
-    joint: str
+    joint: _Name
     """Joint name exactly as in the description."""
     band: StateBand
     """Requested opening band (fraction of the opening range from the closed end)."""
@@ -98,11 +92,6 @@ class JointReply(_Strict):
     stiffness: Estimate
     """N*m/rad or N/m, value >= 0."""
 
-    @field_validator("joint")
-    @classmethod
-    def _name(cls, v: str) -> str:
-        return _short(v, MAX_NAME)
-
     @field_validator("damping", "friction", "stiffness")
     @classmethod
     def _non_negative(cls, v: Estimate, info) -> Estimate:
@@ -114,20 +103,15 @@ class JointReply(_Strict):
 class ReplyNotes(_Strict):
     """Reasoning notes (free text; the SPEC's validation notes)."""
 
-    size: str
-    material: str
-    mass_arithmetic: str
-
-    @field_validator("size", "material", "mass_arithmetic")
-    @classmethod
-    def _text(cls, v: str) -> str:
-        return _short(v, MAX_TEXT)
+    size: _Text
+    material: _Text
+    mass_arithmetic: _Text
 
 
 class ModelReply(_Strict):
     """A model's answer for one asset (see the module docstring for units)."""
 
-    category: str
+    category: _Name
     """Object category as the model sees it (e.g. ``Stapler``)."""
     scale: Estimate
     """Uniform scale s (dimensionless, value in [0.001, 1000])."""
@@ -137,11 +121,6 @@ class ModelReply(_Strict):
     links: list[LinkReply] = Field(max_length=500)
     joints: list[JointReply] = Field(max_length=500)
     notes: ReplyNotes
-
-    @field_validator("category")
-    @classmethod
-    def _cat(cls, v: str) -> str:
-        return _short(v, MAX_NAME)
 
     @field_validator("scale")
     @classmethod
@@ -160,15 +139,8 @@ _KEEP = {
 
 def _prune(node: Any) -> Any:
     if isinstance(node, dict):
-        out = {}
-        for k, v in node.items():
-            if k not in _KEEP:
-                continue
-            if k in ("properties", "$defs"):
-                out[k] = {name: _prune(sub) for name, sub in v.items()}
-            else:
-                out[k] = _prune(v)
-        return out
+        return {k: {name: _prune(sub) for name, sub in v.items()} if k in ("properties", "$defs") else _prune(v)
+                for k, v in node.items() if k in _KEEP}
     if isinstance(node, list):
         return [_prune(x) for x in node]
     return node

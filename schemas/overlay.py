@@ -8,11 +8,10 @@ joint positions rad or m.
 
 from __future__ import annotations
 
-import math
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field
 
 SCHEMA_VERSION = "1.0"
 
@@ -154,13 +153,6 @@ class Overlay(_Strict):
     notes: ValidationNotes = Field(default_factory=ValidationNotes)
     mounting: RootMount | None = None
     """How the root is held (None: free-standing, the SPEC's convention)."""
-
-    @field_validator("scale")
-    @classmethod
-    def _finite_scale(cls, v: float) -> float:
-        if not math.isfinite(v):
-            raise ValueError("scale must be finite")
-        return v
 
     def total_mass(self) -> float:
         """Sum of link masses, kg."""

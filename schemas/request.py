@@ -1,7 +1,5 @@
-"""A natural-language request, parsed into what the estimator needs.
-
-Produced by :func:`asset2sim.tasks.interpret.request.parse_request`. Nothing here is
-object-specific: size words, state words, dynamics words and per-joint phrases.
+"""A natural-language request parsed into what the estimator needs (:func:`asset2sim.tasks.interpret.request.parse_request`):
+size, state and dynamics words and per-joint phrases, nothing object-specific; the overrides that win over them.
 """
 
 from __future__ import annotations
@@ -16,9 +14,7 @@ SizeClass = Literal["tiny", "very_small", "small", "regular", "large", "very_lar
 StateBand = Literal["closed", "slightly_open", "quarter", "halfway", "mostly", "fully"]
 DampingLevel = Literal["low", "moderate", "high"]
 
-#: Target opening fraction per band: |q - q_closed| / (largest opening from q_closed).
-#: "slightly open" aims low in its band (a slightly open stapler or laptop is a
-#: few tens of degrees open, not a third of a 200-degree range).
+#: Target opening fraction per band: |q - q_closed| / (largest opening from q_closed) (docs/design/requests.md).
 BAND_TARGET: dict[str, float] = {"closed": 0.0, "slightly_open": 0.12, "quarter": 0.25, "halfway": 0.5, "mostly": 0.75, "fully": 1.0}
 
 #: Acceptance interval per band (fractions of the opening range), from the
@@ -266,15 +262,10 @@ class RequestOverrides(BaseModel):
     mount: Literal["fixed", "free"] | None = None
     material: str | None = None
 
-    @field_validator("mass", mode="before")
+    @field_validator("mass", "size", mode="before")
     @classmethod
-    def _mass(cls, v):
-        return None if v is None else parse_quantity(v, MASS_UNITS, "mass")
-
-    @field_validator("size", mode="before")
-    @classmethod
-    def _size(cls, v):
-        return None if v is None else parse_quantity(v, LENGTH_UNITS, "size")
+    def _quantity(cls, v, info):
+        return None if v is None else parse_quantity(v, MASS_UNITS if info.field_name == "mass" else LENGTH_UNITS, info.field_name)
 
     @field_validator("state", mode="before")
     @classmethod
@@ -288,19 +279,10 @@ class RequestOverrides(BaseModel):
 
     def given(self) -> list[str]:
         """Each override as the report lists it (``--mass 12 kg`` ...)."""
-        out = []
-        if self.mass is not None:
-            out.append(f"--mass {self.mass:g} kg")
-        if self.size is not None:
-            out.append(f"--size {self.size:g} m")
-        if self.scale is not None:
-            out.append(f"--scale {self.scale:g}")
+        out = [f"--{k} {v:g}{unit}" for k, v, unit in (("mass", self.mass, " kg"), ("size", self.size, " m"), ("scale", self.scale, ""))
+               if v is not None]
         out += [f"--state {k}={s.text or s.value}" for k, s in self.state.items()]
-        if self.mount is not None:
-            out.append(f"--mount {self.mount}")
-        if self.material is not None:
-            out.append(f"--material {self.material}")
-        return out
+        return out + [f"--{k} {v}" for k, v in (("mount", self.mount), ("material", self.material)) if v is not None]
 
     def __bool__(self) -> bool:
         return bool(self.given())

@@ -97,39 +97,15 @@ def refine_asset(
     reference: Path | str | None = None,
     task: str | None = None,
 ) -> RefineResult:
-    """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``.
+    """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``: the engine of
+    :func:`asset2sim.api.refine`, whose docstring gives the output, the result and the errors
+    (:class:`RefineError`; no partial file is left in ``out_dir``).
 
-    Args:
-        asset_dir: PartNet-Mobility-style folder (or a URDF file).
-        prompt: the request, e.g. "I want a slightly open stapler.".
-        out_dir: output folder (created; must not be inside the input).
-        config: pipeline knobs (default :class:`RefineConfig`).
-        category: overrides the asset's own category (e.g. a manifest column).
-        asset_id: identifier for reports (default: folder name).
-        progress: callback(stage, message) for user-facing progress.
-        skip_if_complete: return the existing result when the completion
-            marker matches the input and configuration hashes.
-        extras: also write exports (MJCF), renders and the HTML report.
-        overwrite: write into an output folder holding files asset2sim did
-            not write (kept unless the run writes the same path); without it
-            such a folder is refused (:mod:`asset2sim.output_folder`).
-        extracted: (description, findings) already read by
-            :func:`asset2sim.tasks.ingest.extract.extract_asset_checked` for
-            these arguments (the flow's prepare stage); None: read here.
-        reference: PartNet-Mobility folder with the reference (GenSim2) for
-            the extras' evaluation; None: evaluated without one.
-        task: the manipulation task ("close the microwave door"), executed
-            with the gripper in the post-check (:mod:`asset2sim.tasks.check.task_tier`);
-            the operating budget follows its direction. None: no task tier.
-
-    Returns:
-        :class:`RefineResult`; ``report.failure_mode`` is "none" when every
-        check passed, else the first failing check's mode (the output is still
-        written).
-
-    Raises:
-        RefineError: input invalid, estimator failure or invalid overlay
-            (``failure_mode`` says which); no partial file is left in ``out_dir``.
+    Args beyond the API's: ``asset_id`` (for reports; default the folder name); ``skip_if_complete``
+    (return the recorded result when the completion marker matches the input and configuration
+    hashes); ``extracted`` ((description, findings) the flow's prepare stage already read with
+    :func:`asset2sim.tasks.ingest.extract.extract_asset_checked`); ``reference`` (a PartNet-Mobility
+    folder with the GenSim2 reference for the extras' evaluation).
     """
     config = config or RefineConfig()
     out_dir = Path(out_dir)

@@ -23,8 +23,7 @@ def eta_seconds(elapsed: float, finished: int, total: int, worked: int | None = 
     return elapsed / n * (total - finished)
 
 
-#: Shown until the first asset finishes: the orchestrator's start-up takes a while (a temporary Prefect
-#: server, a Dask cluster, the stage servers' imports: up to about a minute on a 2-core machine).
+#: Shown until the first asset finishes (a temporary Prefect server, a Dask cluster and the stage servers start first).
 STARTING = "starting Prefect, Dask and the workers (up to a minute) ..."
 
 

@@ -14,7 +14,6 @@ from typing import Iterable
 from asset2sim.engines.registry import known_engines
 from asset2sim.output_folder import OutputError
 
-OK = 0
 INVALID_INPUT = 1
 INVALID_REQUEST = 2
 NOT_READY = 3

@@ -50,10 +50,7 @@ def format_table(table) -> str:
 
 def _latest(store: ResultCatalog, dataset: str | None) -> tuple[str, str] | None:
     """(dataset, run) of the most recent run (run ids start with the UTC start time)."""
-    parts = store.runs(dataset)
-    if not parts:
-        return None
-    return max(parts, key=lambda p: (p[1], p[0]))
+    return max(store.runs(dataset), key=lambda p: (p[1], p[0]), default=None)
 
 
 def run(args: argparse.Namespace) -> int:

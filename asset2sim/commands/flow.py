@@ -145,6 +145,7 @@ def _serve(args: argparse.Namespace, cat) -> int:
     try:
         deployment = nightly.build_nightly_deployment(cat.path, dataset=args.dataset, workers=args.workers, dask_address=args.dask_address,
                                                       cron=sched.cron, timezone=sched.timezone)
+        from prefect import serve
         from prefect.settings import PREFECT_API_URL, temporary_settings
 
         with temporary_settings({PREFECT_API_URL: os.environ["PREFECT_API_URL"]}):
@@ -154,10 +155,8 @@ def _serve(args: argparse.Namespace, cat) -> int:
             if args.register_only:
                 return 0
             print("serving; scheduled runs execute here (Ctrl-C to stop)")
-            try:
-                nightly.serve_nightly(deployment)
-            except KeyboardInterrupt:
-                pass
+            with contextlib.suppress(KeyboardInterrupt):
+                serve(deployment, print_starting_message=False)  # the server's scheduler starts a run at each cron time
     finally:
         if server is not None:
             prefect_server.stop_server(server)

@@ -156,10 +156,7 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     mode = exc.failure_mode
     code = join_codes(codes) or mode.upper()
     status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, (RequestTooLong, OverrideError)) else INVALID_REQUEST
-    msg = str(exc)
-    prefix = f"{args.asset}: "
-    if msg.startswith(prefix):
-        msg = msg[len(prefix):]
+    msg = str(exc).removeprefix(f"{args.asset}: ")
     return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}")
 
 

@@ -82,9 +82,7 @@ def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: 
             fname = g.filename or ""
             if fname.startswith("package://"):
                 raise ValueError(f"{src}: link {link.name!r}: package:// mesh paths are not supported")
-            if fname.startswith("file://"):
-                fname = fname[len("file://") :]
-            mesh_src = (src.parent / fname).resolve()
+            mesh_src = (src.parent / fname.removeprefix("file://")).resolve()
             if copy_meshes and mesh_src.is_relative_to(src.parent):
                 to_copy.add(mesh_src)
                 g.filename = mesh_src.relative_to(src.parent).as_posix()
@@ -113,11 +111,8 @@ def scale_urdf(src: Path | str, dst: Path | str, scale: float, *, joint_limits: 
 def urdf_joints(urdf: Path | str) -> dict[str, dict[str, Any]]:
     """Joint name -> {type, lower, upper} (rad or m; None when absent) of a URDF (lenient reading).
     Raises UrdfError: unreadable XML or a malformed number."""
-    out = {}
-    for joint in read_urdf(urdf, mode="lenient").joints:
-        lim = joint.limit
-        out[joint.name] = {"type": joint.type, "lower": None if lim is None else lim.lower, "upper": None if lim is None else lim.upper}
-    return out
+    return {j.name: {"type": j.type, "lower": None if j.limit is None else j.limit.lower,
+                     "upper": None if j.limit is None else j.limit.upper} for j in read_urdf(urdf, mode="lenient").joints}
 
 
 def _clip(q: float, lo: float | None, hi: float | None) -> float:
@@ -134,12 +129,9 @@ def human_initial_state(joints: dict[str, dict[str, Any]], task_joints: list[str
     end of ``rng`` (prismatic times ``scale``), others at 0, clipped to the limits."""
     out = {}
     for name, j in joints.items():
-        if j["type"] not in ("revolute", "continuous", "prismatic"):
-            continue
-        q = 0.0
-        if rng is not None and name in task_joints:
-            q = rng[0] * (scale if j["type"] == "prismatic" else 1.0)
-        out[name] = _clip(q, j["lower"], j["upper"])
+        if j["type"] in ("revolute", "continuous", "prismatic"):
+            q = rng[0] * (scale if j["type"] == "prismatic" else 1.0) if rng is not None and name in task_joints else 0.0
+            out[name] = _clip(q, j["lower"], j["upper"])
     return out
 
 
@@ -215,8 +207,7 @@ def make_direct(row: ManifestRow, out_dir: Path | str, *, seed: int = 0, estimat
         overlay = result.overlay
         prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
         state = estimate.state_from_bands(ctx.closed, result.bands, overlay.scale, prismatic)
-        if overlay.initial_joint_positions:
-            state.update(overlay.initial_joint_positions)
+        state.update(overlay.initial_joint_positions or {})
         write.write_output(ctx.asset, overlay, out_dir, state)
     except Exception as exc:
         raise BaselineError(f"{row.id}: direct ({estimator}) failed: {type(exc).__name__}: {exc}") from exc

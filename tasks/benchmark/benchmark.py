@@ -15,7 +15,7 @@ from asset2sim.atomic import write_bytes, write_json, write_text
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.benchmark.baselines import available_methods, run_method
-from asset2sim.tasks.evaluation.evaluate import evaluate_asset
+from asset2sim.tasks.evaluation.evaluate import _jsonable, evaluate_asset
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRow, ManifestRowError, read_manifest_rows
 from asset2sim.tasks.evaluation.plots import plot_method_summary
 from asset2sim.tasks.evaluation.report_html import render_benchmark_index, render_benchmark_summary
@@ -54,12 +54,8 @@ def evaluation_record(ev: Evaluation, row: ManifestRow, method: str, *, engine: 
     ready = readiness(list(ev.metrics))  # every engine evaluated: the verdict report.html shows
     rec["ready"] = ready.ready and not any(f.startswith("engine@") for f in ev.failures)
     rec["ready_failures"] = ";".join(ready.failures)
-    for tier, verdict in ready.tiers.items():
-        rec[f"tier_{tier}"] = verdict
-    rec["all_pass"] = bool(ev.passed)
-    rec["failures"] = ";".join(ev.failures)
-    rec["seconds"] = ev.seconds
-    return rec
+    rec.update({f"tier_{tier}": verdict for tier, verdict in ready.tiers.items()})
+    return {**rec, "all_pass": bool(ev.passed), "failures": ";".join(ev.failures), "seconds": ev.seconds}
 
 
 def _mean_sd(vals: list[float]) -> tuple[float | None, float | None]:
@@ -160,10 +156,8 @@ def run_benchmark(manifest: Path | str, methods: list[str], out_dir: Path | str,
                 say(method, row.id, rec["error"])
                 continue
             rec = evaluation_record(ev, row, method)
-            rec.update(base)
-            rec["method_seconds"] = res.seconds
-            rec["model_queries"] = res.model_queries
-            rec["report"] = f"{method}/{row.id}/report.html" if reports else None
+            rec.update(base, method_seconds=res.seconds, model_queries=res.model_queries,
+                       report=f"{method}/{row.id}/report.html" if reports else None)
             records.append(rec)
             say(method, row.id, f"{'pass' if rec['all_pass'] else 'fail: ' + rec['failures']} ({ev.seconds:.2f} s)")
     return records
@@ -175,16 +169,6 @@ def benchmark_tables(records: list[dict[str, Any]], methods: list[str]) -> dict[
             "all rows": summarize(records, methods)}
 
 
-def _json_clean(obj: Any) -> Any:
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _json_clean(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_json_clean(v) for v in obj]
-    return obj
-
-
 def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], out_dir: Path | str,
                             meta: dict[str, Any]) -> dict[str, Path]:
     """Write ``results.json``/``.csv``/``.parquet`` (one record per object and method), ``summary.json``/``.csv``/``.html``
@@ -193,11 +177,10 @@ def write_benchmark_outputs(records: list[dict[str, Any]], methods: list[str], o
     import pandas as pd  # heavy; only the benchmark's tables need it
 
     out_dir = Path(out_dir)
-    records = _json_clean(records)
-    tables = _json_clean(benchmark_tables(records, methods))
-    paths: dict[str, Path] = {}
-    paths["results.json"] = write_json(out_dir / "results.json", {"meta": meta, "records": records})
-    paths["summary.json"] = write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})
+    records = _jsonable(records)
+    tables = _jsonable(benchmark_tables(records, methods))
+    paths = {"results.json": write_json(out_dir / "results.json", {"meta": meta, "records": records}),
+             "summary.json": write_json(out_dir / "summary.json", {"meta": meta, "tables": tables, "research": RESEARCH_NUMBERS})}
     df = pd.DataFrame(records)
     paths["results.csv"] = write_text(out_dir / "results.csv", df.to_csv(index=False))
     try:

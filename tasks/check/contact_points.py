@@ -213,13 +213,6 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
     return link, far.mean(axis=0), "far edge"
 
 
-def contact_point(session, joint: str, model: UrdfModel | None = None, *, opening_direction: float = 1.0
-                  ) -> tuple[str, np.ndarray]:
-    """``(link, point_link (3,) m)`` of :func:`contact_point_rule` on the child side."""
-    link, point, _ = contact_point_rule(session, joint, model, opening_direction=opening_direction)
-    return link, point
-
-
 def lowest_point(session, links: list[str], model: UrdfModel | None) -> float:
     """Lowest world z (m) of ``links``' collision points (URDF geometry with ``model``, else AABBs); +inf without."""
     z = float("inf")

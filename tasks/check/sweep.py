@@ -77,10 +77,13 @@ class JointSweep:
     failure: str = ""
     range_note: str = ""
     """how the range differs from the closed end's (parts held in the way)"""
+    trace: dict[str, list[float]] = field(default_factory=dict, repr=False, compare=False)
+    """per step: ``t`` (s), ``fraction`` (opening fraction), ``phase`` (0 opening, 1 closing); for the report,
+    not in :meth:`summary`"""
 
     def summary(self) -> dict[str, Any]:
-        """JSON-able dict."""
-        d = dict(self.__dict__)
+        """JSON-able dict (the trace left out)."""
+        d = {k: v for k, v in self.__dict__.items() if k != "trace"}
         d["worst_pair"] = list(self.worst_pair) if self.worst_pair else None
         return d
 
@@ -182,6 +185,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     vdiv = DIVERGED_SPEED_PRISMATIC if prismatic else DIVERGED_SPEED_REVOLUTE
     max_pen, worst = _deepest(session)
     diverged = False
+    trace: dict[str, list[float]] = {"t": [], "fraction": [], "phase": []}
 
     def frac(q: float) -> float:
         return float(direction * (q - closed) / open_range)
@@ -190,8 +194,12 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
         nonlocal max_pen, worst, diverged
         best = None
         n = int(round(cfg.time_limit / dt))
+        phase, t0 = float(goal != q_far), (trace["t"][-1] + dt if trace["t"] else 0.0)
         for k in range(n):
             q, qd = session.joint_state(joint)
+            trace["t"].append(t0 + k * dt)
+            trace["fraction"].append(frac(q))
+            trace["phase"].append(phase)
             if not (np.isfinite(q) and np.isfinite(qd)) or abs(qd) > vdiv:
                 diverged = True
                 return (best if best is not None else float("nan")), None
@@ -232,7 +240,8 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
     return JointSweep(
         joint=joint, joint_type=jtype, q_closed=float(closed), q_far=float(q_far), open_range=float(open_range),
         effort_limit=limit, reached_open=float(out), reached_closed=float(back), time_open=t_out, time_close=t_back,
-        max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure))
+        max_penetration=max_pen, worst_pair=worst, diverged=diverged, passed=not failure, failure="; ".join(failure),
+        trace=trace)
 
 
 @dataclass

@@ -16,11 +16,8 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.check.asset_files import JointInfo, clip_to_limits
 from asset2sim.tasks.geometry.closed_state import link_hull_points
-from asset2sim.tasks.geometry.urdf_closed import aabb_extents, geometry_extents, measure_closed_ends
+from asset2sim.tasks.geometry.urdf_closed import geometry_extents, measure_closed_ends
 from asset2sim.tasks.ingest.extract import extract_asset
-
-__all__ = ["ClosedEnd", "aabb_extents", "closed_fallback", "compute_closed", "geometry_extents", "hull_points",
-           "infer_scale_from_geometry"]
 
 
 @dataclass
@@ -92,15 +89,12 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
         return out, notes
     try:
         m = measure_closed_ends(urdf)
-        cs = m.closed
         if extents_out is not None:
             extents_out.append(m.extents)
         for n in names:
-            c = cs.get(n)
-            if c is None or not c.open_range > 0:
-                out[n] = closed_fallback(joints[n])
-            else:
-                out[n] = ClosedEnd(float(c.q_closed), float(c.direction), float(c.open_range), "geometry (closed_state)")
+            c = m.closed.get(n)
+            out[n] = (closed_fallback(joints[n]) if c is None or not c.open_range > 0
+                      else ClosedEnd(float(c.q_closed), float(c.direction), float(c.open_range), "geometry (closed_state)"))
     except Exception as exc:
         notes.append(f"closed_positions failed ({type(exc).__name__}: {exc}); closed end = limit nearest 0")
         out = {n: closed_fallback(joints[n]) for n in names}

@@ -20,9 +20,10 @@ from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.check.probes import OPEN_FAR_TARGET, run_probes
 from asset2sim.tasks.check.support import rolling_joints
 from asset2sim.tasks.check.asset_files import LinkInfo
-from asset2sim.tasks.evaluation.closed_ends import aabb_extents, compute_closed
+from asset2sim.tasks.evaluation.closed_ends import compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
 from asset2sim.tasks.geometry.limits import subtrees
+from asset2sim.tasks.geometry.urdf_closed import aabb_extents
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.state.ground_clearance import floor_stops
 from asset2sim.urdf import read_urdf
@@ -47,24 +48,18 @@ class EngineRun:
     seconds: float = 0.0
     recorded: RecordedRuns | None = None  # the post-check's manipulation runs, reused when their inputs match
     robust_rest: Any = None  # the RobustRestRun the robust_rest metric was graded from (the report's evidence)
+    sweep: Any = None  # the SweepRun the joint_sweep metric was graded from (the report's evidence)
 
 
 def link_centres(session) -> dict[str, np.ndarray]:
     """Link -> (3,) m centre of the engine's AABB of the link (world frame)."""
-    out = {}
-    for name in session.link_names:
-        a, b = session.link_aabb(name)
-        out[name] = 0.5 * (a + b)
-    return out
+    return {name: 0.5 * np.add(*session.link_aabb(name)) for name in session.link_names}
 
 
 def link_masses(session, links: dict[str, LinkInfo]) -> dict[str, dict[str, Any]]:
     """Link -> {"mass" (kg, as the engine loaded it), "source"} (the file's ``<inertial>``, else the engine's default)."""
-    out = {}
-    for name, m in session.link_masses().items():
-        li = links.get(name)
-        out[name] = {"mass": m, "source": "file <inertial>" if li is not None and li.mass is not None else "engine default (no <inertial>)"}
-    return out
+    return {name: {"mass": m, "source": "file <inertial>" if getattr(links.get(name), "mass", None) is not None
+                   else "engine default (no <inertial>)"} for name, m in session.link_masses().items()}
 
 
 def point_cloud(session, max_points: int = 1500) -> dict[str, np.ndarray]:
@@ -117,16 +112,12 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                closed_for: list[str] | None = None, rest_test: bool = True,
                recording: RestRecording | None = None, probe_joints: list[str] | None = None,
                probe_actions: tuple[str, ...] = ("close", "open"), recorded: RecordedRuns | None = None) -> EngineRun:
-    """Open ``engine`` on the asset and take every raw measurement once:
-    penetration at the initial state, extents, masses, the rest test with
-    per-step recording, and (PyBullet) the probes from the unstepped initial state.
-
-    ``closed_for``: joints whose closed ends are computed into ``ctx.closed``;
-    ``rest_test=False``: none (``trace`` and series stay None); ``recording``:
-    the post-check's rest test, used when it matches; ``probe_joints`` /
-    ``probe_actions``: what the probes try (default the task-relevant joints,
-    close and open); ``recorded``: kept for the manipulation metrics. Errors
-    are caught into ``EngineRun.error``."""
+    """Open ``engine`` on the asset and take every raw measurement once: penetration at the initial state, extents,
+    masses, the rest test per step, and (PyBullet) the probes from the unstepped initial state. ``closed_for``: joints
+    whose closed ends go into ``ctx.closed``; ``rest_test=False``: no rest test (``trace`` and series stay None);
+    ``recording``: the post-check's rest test, used when it matches; ``probe_joints`` / ``probe_actions``: what the
+    probes try (default the task-relevant joints, close and open); ``recorded``: kept for the manipulation metrics.
+    Errors are caught into ``EngineRun.error``."""
     t0 = time.perf_counter()
     run = EngineRun(engine, recorded=recorded)
     try:
@@ -140,9 +131,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
         return run
     try:
         pyb = session.engine == "pybullet"  # the reference engine takes the extra measurements
-        # Phi first, in the fresh session: Bullet keeps contact manifolds (up to 4
-        # cached points per pair) across later queries and restoreState, so Phi
-        # "at the initial state" is only history-free at the first query.
+        # Phi first, in the fresh session: Bullet keeps contact manifolds across later queries (docs/design/metrics.md)
         run.penetration = spec_metrics.penetration(session)
         saved = None
         if pyb:
@@ -158,10 +147,8 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                     _, recording = measure_rest_test(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed)
                 else:
                     recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
-            run.trace = recording.trace
-            run.root_series = recording.root_series
-            run.ground_series = recording.ground_series
-            run.joint_series = recording.joint_series
+            for name in ("trace", "root_series", "ground_series", "joint_series"):
+                setattr(run, name, getattr(recording, name))
         if pyb and closed_for is not None:
             set_closed_ends(ctx, closed_for)
         if pyb and probes and saved is not None:

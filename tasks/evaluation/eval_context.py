@@ -102,12 +102,9 @@ def task_joints(joints: dict[str, JointInfo], reference_dir: Path | None, reques
 def _stated_scale(overlay: dict[str, Any] | None, report: dict[str, Any] | None, baseline: dict[str, Any] | None,
                   urdf: Path, ref_dir: Path | None) -> tuple[float | None, str]:
     """(scale, source): the first sidecar stating one, else geometry against the reference's raw URDF, else unknown."""
-    if overlay is not None and isinstance(overlay.get("scale"), (int, float)):
-        return float(overlay["scale"]), OVERLAY_NAME
-    if report is not None and isinstance(report.get("scale"), (int, float)):
-        return float(report["scale"]), REPORT_NAME
-    if baseline is not None and isinstance(baseline.get("scale"), (int, float)):
-        return float(baseline["scale"]), "baseline.json"
+    for data, name in ((overlay, OVERLAY_NAME), (report, REPORT_NAME), (baseline, "baseline.json")):
+        if data is not None and isinstance(data.get("scale"), (int, float)):
+            return float(data["scale"]), name
     if ref_dir is not None and (ref_dir / partnet_mobility.URDF_NAMES[0]).is_file():
         inferred = infer_scale_from_geometry(urdf, ref_dir / partnet_mobility.URDF_NAMES[0])
         if inferred is not None:
@@ -162,9 +159,7 @@ def build_context(asset: Path | str, *, reference: Path | str | None = None, pro
     ref_info = partnet_mobility.read_reference(ref_dir) if ref_dir is not None else None
     scale, scale_src = _stated_scale(overlay, report, baseline, urdf, ref_dir)
     springs = _springs(overlay, joints, initial)
-    ref_state, rule = ({}, "")
-    if ref_info is not None and ref_info.urdf is not None:
-        ref_state, rule = _reference_state(ref_info, joints, scale)
+    ref_state, rule = _reference_state(ref_info, joints, scale) if ref_info is not None and ref_info.urdf is not None else ({}, "")
     return Context(
         urdf=urdf, folder=folder, asset_id=(report or {}).get("asset_id") or (baseline or {}).get("asset_id") or folder.name,
         links=links, joints=joints, initial_state=initial, initial_state_source=src, overlay=overlay, report=report,
@@ -179,16 +174,12 @@ def build_context(asset: Path | str, *, reference: Path | str | None = None, pro
 
 def _initial_state(st: dict[str, Any] | None, joints: dict[str, JointInfo]) -> tuple[dict[str, float], str]:
     """(joint -> initial position rad/m from ``st``, other movable joints 0 clipped to the limits; its source)."""
-    if st is not None:
-        raw = st.get("initial_joint_positions", st)
-        initial = {k: float(v) for k, v in raw.items() if k in joints}
-        src = STATE_NAME
-    else:
-        initial, src = {}, "none: 0 clipped to the limits"
-    for n in [n for n, j in joints.items() if j.type in MOVABLE]:
-        if n not in initial:
-            initial[n] = clip_to_limits(0.0, joints[n].lower, joints[n].upper)
-    return initial, src
+    raw = {} if st is None else st.get("initial_joint_positions", st)
+    initial = {k: float(v) for k, v in raw.items() if k in joints}
+    for n, j in joints.items():
+        if j.type in MOVABLE and n not in initial:
+            initial[n] = clip_to_limits(0.0, j.lower, j.upper)
+    return initial, STATE_NAME if st is not None else "none: 0 clipped to the limits"
 
 
 def _root_fixed(folder: Path, notes: list[str]) -> bool:

@@ -61,7 +61,10 @@ def evaluate_asset(
         EvaluationError: the asset or reference cannot be read.
         ValueError: ``write_report`` without ``out_dir``; no engine given.
     """
-    _check_arguments(write_report, out_dir, engines)
+    if write_report and out_dir is None:
+        raise ValueError("write_report needs out_dir")
+    if not engines:
+        raise ValueError("at least one engine is needed")
     t0 = time.perf_counter()
     ctx = build_context(urdf_dir_or_path, reference=reference, prompt=prompt, category=category, conventions=conventions)
     need_closed = _joints_to_close(ctx)
@@ -75,14 +78,6 @@ def evaluate_asset(
         same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
         write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None)
     return ev
-
-
-def _check_arguments(write_report: bool, out_dir: Path | str | None, engines: tuple[str, ...] | list[str]) -> None:
-    """Raises ValueError: ``write_report`` without ``out_dir``; no engine given."""
-    if write_report and out_dir is None:
-        raise ValueError("write_report needs out_dir")
-    if not engines:
-        raise ValueError("at least one engine is needed")
 
 
 def _joints_to_close(ctx: Context) -> list[str]:
@@ -114,12 +109,11 @@ def _run_engines(ctx: Context, engines: tuple[str, ...] | list[str], need_closed
     """engine -> its :class:`EngineRun`, in the order of ``engines``; errors noted. PyBullet runs first and computes
     the closed ends of ``need_closed`` (else they are computed after the runs); ``reuse_engine`` runs no rest test."""
     runs: dict[str, EngineRun] = {}
-    tspec = ctx.task
     for e in sorted(engines, key=lambda e: e != "pybullet"):
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
         runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=keep_geometry, closed_for=pending,
                              rest_test=e != reuse_engine, recording=recording, recorded=recorded,
-                             **({} if tspec is None else {"probe_joints": tspec.joints, "probe_actions": tspec.actions}))
+                             **({} if ctx.task is None else {"probe_joints": ctx.task.joints, "probe_actions": ctx.task.actions}))
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:
@@ -204,17 +198,11 @@ def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True
 
 
 def _jsonable(obj: Any) -> Any:
-    """Replace non-finite floats by None (strict JSON)."""
+    """Replace non-finite floats by None (strict JSON); for ``model_dump(mode="json")`` output and plain records."""
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
     if isinstance(obj, dict):
         return {k: _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating,)):
-        return _jsonable(float(obj))
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
     return obj

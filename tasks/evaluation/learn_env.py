@@ -1,14 +1,8 @@
-"""A gymnasium learning environment per manipulation task: can a policy learn
-it on this asset? (SPEC, "Behavioral fidelity, learning feasibility".)
-
-Task instance: :func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`;
-agent: a force- and speed-limited gripper at the task link's contact point
-(:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`); action (4,) in
-[-1, 1]: gripper velocity in units of the speed limit and a press flag;
-observation (13,) float32; reward: progress towards the target, a stretch
-penalty, a slide/tip penalty, a success bonus. Definitions (world, action,
-observation, reward, success): docs/design/metrics.md, design notes.
-``gymnasium`` is the optional extra ``gym``; PPO is the extra ``learn``.
+"""A gymnasium learning environment per manipulation task (SPEC, "Behavioral fidelity, learning feasibility"): the
+task of :func:`~asset2sim.tasks.evaluation.learn_task.prepare_task`, a force- and speed-limited gripper
+(:class:`~asset2sim.tasks.check.gripper.BoundedGrasp`) at the task link's contact point; action (4,) in [-1, 1]
+(gripper velocity in units of the speed limit, press flag), observation (13,) float32, reward for progress, stretch,
+slide/tip and success (definitions: docs/design/metrics.md). ``gymnasium`` is the extra ``gym``; PPO the extra ``learn``.
 """
 
 from __future__ import annotations
@@ -205,11 +199,8 @@ class TaskEnv(gym.Env):
         a = np.nan_to_num(np.asarray(action, float).reshape(-1), nan=0.0)
         if a.shape != (ACTION_DIM,):
             raise ValueError(f"action must have {ACTION_DIM} components (velocity x, y, z; press), got shape {a.shape}")
-        v = a[:3]
-        n = float(np.linalg.norm(v))
-        if n > 1.0:
-            v = v / n
-        v = v * cfg.limits.max_speed_m_s
+        n = float(np.linalg.norm(a[:3]))
+        v = (a[:3] / n if n > 1.0 else a[:3]) * cfg.limits.max_speed_m_s
         press = _UP if a[3] > 0 else None
         for _ in range(cfg.action_repeat):
             self.grasp.step_towards(self.grasp.gripper_point + v * self.dt, self.dt, direction=press)
@@ -281,10 +272,7 @@ class TaskEnv(gym.Env):
         d = sign * d
         corr = (p - self.grasp.gripper_point) / max(self.config.limits.max_speed_m_s * self.dt * self.config.action_repeat, 1e-9)
         press = abs(float(d[2])) >= vertical_share
-        if press:
-            vel = _UP * (speed / float(d[2])) + corr[2] * _UP
-        else:
-            vel = speed * d + corr
+        vel = _UP * (speed / float(d[2])) + corr[2] * _UP if press else speed * d + corr
         n = float(np.linalg.norm(vel))
         vel = vel / n if n > 1.0 else vel
         return np.append(vel, 1.0 if press else -1.0)

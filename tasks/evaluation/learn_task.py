@@ -61,9 +61,7 @@ class LearnTask:
 
     def reached(self, fraction: float) -> bool:
         """Whether ``fraction`` satisfies the task's reach threshold."""
-        if self.action == "close":
-            return fraction <= self.reach_fraction
-        return fraction >= self.reach_fraction
+        return fraction <= self.reach_fraction if self.action == "close" else fraction >= self.reach_fraction
 
     def fraction(self, q: float) -> float:
         """Opening fraction of the task joint at ``q`` (rad or m)."""
@@ -113,8 +111,6 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     if best is None:
         raise LearnTaskError(f"{ctx.urdf}: task {task!r}: none of {candidates} can open (range 0)")
     _, joint, action, f0 = best
-    c = closed[joint]
-    jtype = ctx.joints[joint].type
     target, reach = targets_for(action, f0)
     notes = list(spec.notes) + cnotes + [f"task-relevant joints: {tj_rule}"]
     label = (ctx.semantics.get(ctx.joints[joint].child) or (None, None))[1]
@@ -123,7 +119,7 @@ def prepare_task(asset: Path | str, task: str, *, reference: Path | str | None =
     if not hold:
         notes.append(f"{joint} returns by its spring by design ({ctx.category} {label}): the target need not hold after release")
     return LearnTask(
-        urdf=ctx.urdf, task=task, joint=joint, joint_type=jtype, action=action, closed=c,
+        urdf=ctx.urdf, task=task, joint=joint, joint_type=ctx.joints[joint].type, action=action, closed=closed[joint],
         target_fraction=target, reach_fraction=reach, hold_required=hold, initial_state=dict(ctx.initial_state),
         springs=dict(ctx.springs), root_fixed=ctx.root_fixed, conventions=ctx.conventions,
         start_fraction=f0, start=start, candidates=candidates, rule=spec.rule, notes=notes,

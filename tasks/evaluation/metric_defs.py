@@ -53,14 +53,13 @@ class MetricSpec:
 METRICS: dict[str, MetricSpec] = {}
 
 
-def register_metric(name: str, group: str | None = None, description: str | None = None) -> Callable[[MetricFn], MetricFn]:
-    """Decorator registering ``fn(context, runs) -> list[MetricResult]`` for metric ``name``; ``group`` and ``description``
-    default to the registry table's (:data:`asset2sim.schemas.metrics.METRIC_INFO`)."""
+def register_metric(name: str) -> Callable[[MetricFn], MetricFn]:
+    """Decorator registering ``fn(context, runs) -> list[MetricResult]`` for metric ``name``, with the group and
+    description of the registry table (:data:`asset2sim.schemas.metrics.METRIC_INFO`; else ``physical``, none)."""
     info = METRIC_INFO.get(name)
 
     def deco(fn: MetricFn) -> MetricFn:
-        METRICS[name] = MetricSpec(name, group or (info.group if info else "physical"), fn,
-                                   description or (info.description if info else ""))
+        METRICS[name] = MetricSpec(name, info.group if info else "physical", fn, info.description if info else "")
         return fn
 
     return deco
@@ -207,10 +206,7 @@ def _m_initdev(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
 
 
 def _first_run(runs: dict[str, EngineRun]) -> EngineRun | None:
-    for r in runs.values():
-        if r.extents is not None:
-            return r
-    return None
+    return next((r for r in runs.values() if r.extents is not None), None)
 
 
 def _largest_extent(ctx: Context, runs: dict[str, EngineRun]) -> tuple[float | None, str]:
@@ -218,7 +214,7 @@ def _largest_extent(ctx: Context, runs: dict[str, EngineRun]) -> tuple[float | N
     if ctx.closed_extents is not None and float(np.max(ctx.closed_extents)) > 0:
         return float(np.max(ctx.closed_extents)), "closed state"
     r = _first_run(runs)
-    if r is not None and r.extents is not None and float(np.max(r.extents)) > 0:
+    if r is not None and float(np.max(r.extents)) > 0:
         return float(np.max(r.extents)), "initial state"
     return None, "unknown"
 
@@ -287,9 +283,13 @@ def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.sweep` in every engine that loaded the asset
     (its own fixed-root session), closed ends from ``ctx.closed``."""
     closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in ctx.movable}
-    return _per_engine(runs, "joint_sweep", unit_of("joint_sweep"), lambda e, r: sweep.sweep_metric(
-        recorded_runs.sweep_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                recorded=r.recorded)), lambda r: bool(r.error))
+
+    def graded(e: str, r: EngineRun) -> MetricResult:
+        r.sweep = recorded_runs.sweep_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                          recorded=r.recorded)
+        return sweep.sweep_metric(r.sweep)
+
+    return _per_engine(runs, "joint_sweep", unit_of("joint_sweep"), graded, lambda r: bool(r.error))
 
 
 @register_metric("robust_rest")

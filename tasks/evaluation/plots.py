@@ -66,11 +66,10 @@ def plot_joints(joint_series: dict[str, np.ndarray], joint_types: dict[str, str]
     if not joint_series:
         return None
     rows = []
-    names = list(joint_series)
-    for k, name in enumerate(names):
+    for k, name in enumerate(joint_series):
         q = np.asarray(joint_series[name], float)
         unit = "m" if joint_types.get(name) == "prismatic" else "rad"
-        p = Panel(ylabel=f"{name} ({unit})", xlabel="time (s); dashed line: end of settling" if k == len(names) - 1 else "")
+        p = Panel(ylabel=f"{name} ({unit})", xlabel="time (s); dashed line: end of settling" if k == len(joint_series) - 1 else "")
         p.line(np.arange(1, len(q) + 1) * dt, q, "C0")
         p.vline(settle_steps * dt, "gray", "--")
         if closed and name in closed:
@@ -87,9 +86,7 @@ def plot_probes(probes: list[Any]) -> bytes | None:
     rows = []
     for pr in probes:
         tr = pr.trace
-        t = np.asarray(tr.get("t", []), float)
-        q = np.asarray(tr.get("q", []), float)
-        f = np.asarray(tr.get("force", []), float)
+        t, q, f = (np.asarray(tr.get(k, []), float) for k in ("t", "q", "force"))
         ph = np.asarray(tr.get("phase", []))
         unit = "m" if pr.joint_type == "prismatic" else "rad"
         verdict = "ok" if pr.success else pr.failure
@@ -119,7 +116,6 @@ def plot_method_summary(summary: dict[str, dict[str, Any]]) -> bytes | None:
         return None
     keys = [("rest_stability_pass", "rest stability"), ("oscillation_pass", "oscillation"),
             ("probes_pass", "probes"), ("all_pass", "all checks")]
-    p = Panel(ylabel="pass rate (%)", legend="upper right")
-    p.ylim = (0.0, 105.0)
+    p = Panel(ylabel="pass rate (%)", legend="upper right", ylim=(0.0, 105.0))
     p.bars([lab for _, lab in keys], [(m, [100.0 * (summary[m].get(k) or 0.0) for k, _ in keys]) for m in summary])
     return _svg([[p]], 900, 320)

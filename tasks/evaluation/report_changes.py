@@ -21,6 +21,7 @@ COMPARED_VIEWS = ("perspective", "front")
 
 
 def esc(x: Any) -> str:
+    """HTML-escaped text of ``x`` (empty for None)."""
     return html.escape("" if x is None else str(x))
 
 
@@ -41,10 +42,6 @@ def opening_text(fraction: float | None) -> str:
 
 def _limits_text(lo: float | None, hi: float | None, jtype: str) -> str:
     return f"[{position_text(lo, jtype)}, {position_text(hi, jtype)}]"
-
-
-def _times(x: float | None, k: float) -> float | None:
-    return None if x is None else float(x) * k
 
 
 def _row(what: str, before: str, after: str, why: str) -> str:
@@ -76,7 +73,8 @@ def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_ty
             jt = joint_types.get(name, "revolute")
             old = before.get(name)
             k = float(report.get("scale", 1.0)) if jt == "prismatic" else 1.0  # the input's lengths at the output's scale
-            lo, hi = (None, None) if old is None else (_times(old.lower, k), _times(old.upper, k))
+            lo, hi = (None, None) if old is None else (old.lower, old.upper)
+            lo, hi = (None if x is None else float(x) * k for x in (lo, hi))
             new_lo, new_hi = (lo if jd.get("lower") is None else jd["lower"]), (hi if jd.get("upper") is None else jd["upper"])
             rows.append(_row(f"{name} limits", _limits_text(lo, hi, jt) if old else "as the input declares",
                              _limits_text(new_lo, new_hi, jt), src.split(": ", 1)[-1]))

@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import base64
-import html
 import io
 import math
 from pathlib import Path
@@ -20,7 +19,7 @@ from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
-from asset2sim.tasks.evaluation.report_changes import changes_section, opening_text, position_text
+from asset2sim.tasks.evaluation.report_changes import changes_section, esc, opening_text, position_text
 from asset2sim.tasks.geometry.render import render_views
 
 CSS = """
@@ -41,11 +40,6 @@ def _page(title: str, body: str) -> str:
     """A whole HTML document: ``title`` (HTML text), the CSS, ``body`` (HTML)."""
     return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/><title>{title}</title><style>{CSS}</style></head>"
             f"<body>{body}</body></html>\n")
-
-
-def esc(x: Any) -> str:
-    """HTML-escaped text of ``x``."""
-    return html.escape("" if x is None else str(x))
 
 
 def fmt(v: Any, digits: int = 4) -> str:
@@ -354,7 +348,8 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, _figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
-        evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure),
+        evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
+                         (ev.metric("task_execution").details if ev.metric("task_execution") else None), ev.closed_positions),
         "<h2>Penetration at the initial state</h2>",
         _penetration_details(ev),
         "<h2>Rest test</h2>",

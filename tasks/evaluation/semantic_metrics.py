@@ -197,8 +197,7 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
     else:
         details["size"] = {"score": None, "reason": "no typical size known for the category or no extent measured"}
     if state_requested and not joint_checks:
-        details["joint_state_score"] = None
-        details["joint_state_reason"] = "no state the request asks names a part of this object"
+        details.update(joint_state_score=None, joint_state_reason="no state the request asks names a part of this object")
     elif state_requested:
         scores = []
         for c in joint_checks:
@@ -206,10 +205,7 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
                 scores.append(0.0)
                 details["joints"].append({"joint": c.joint, "band": c.band, "score": 0.0, "reason": "closed end unknown"})
                 continue
-            if c.target is not None:
-                sc, reason = target_score(c)
-            else:
-                sc, reason = band_score(c.fraction, c.band)
+            sc, reason = target_score(c) if c.target is not None else band_score(c.fraction, c.band)
             if sc is not None:
                 scores.append(sc)
             details["joints"].append(
@@ -221,7 +217,6 @@ def prompt_alignment(*, size_requested: bool, largest_extent: float | None, typi
         if js is not None:
             halves.append(js)
     else:
-        details["joint_state_score"] = None
-        details["joint_state_reason"] = "the request asks for no joint state"
+        details.update(joint_state_score=None, joint_state_reason="the request asks for no joint state")
     value = float(np.mean(halves)) if halves else None
     return _result("prompt_alignment", value, "fraction", "reported: 0.5 size + 0.5 joint state, each 1 / 0.5 / 0", details)

@@ -9,6 +9,7 @@ colours are the Tableau 10 palette (matplotlib's ``tab10``).
 from __future__ import annotations
 
 import html
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -168,13 +169,8 @@ class Panel:
         return self
 
 
-def _finite(a: np.ndarray) -> np.ndarray:
-    return a[np.isfinite(a)]
-
-
 def _span(values: list[np.ndarray], extra: list[float]) -> tuple[float, float]:
-    vals = [_finite(v) for v in values if len(v)]
-    vals = [v for v in vals if len(v)]
+    vals = [f for f in (v[np.isfinite(v)] for v in values) if len(f)]
     ext = [e for e in extra if math.isfinite(e)]
     lo = min([float(v.min()) for v in vals] + ext, default=0.0)
     hi = max([float(v.max()) for v in vals] + ext, default=1.0)
@@ -327,15 +323,8 @@ def _series(cv: _Canvas, s: _Series, a: _Axes) -> None:
         return
     xr, yr = reduce_series(s.x, s.y, int(a.aw))
     xs, ys = a.px(xr), a.py(yr, s.right)
-    segs, cur = [], []
-    for x, y, g in zip(xs, ys, np.isfinite(xs) & np.isfinite(ys)):
-        if g:
-            cur.append(f"{x:.1f},{y:.1f}")
-        elif cur:
-            segs.append(cur)
-            cur = []
-    if cur:
-        segs.append(cur)
+    runs = itertools.groupby(zip(xs, ys, np.isfinite(xs) & np.isfinite(ys)), key=lambda p: p[2])  # broken at non-finite points
+    segs = [[f"{x:.1f},{y:.1f}" for x, y, _ in run] for finite, run in runs if finite]
     d = f' stroke-dasharray="{s.dash}"' if s.dash else ""
     for seg in segs:
         cv.parts.append(f'<polyline points="{" ".join(seg)}" fill="none" stroke="{s.colour}" stroke-width="{s.width}"'

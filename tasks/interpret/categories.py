@@ -47,9 +47,8 @@ def _lookup_tables() -> tuple[dict[str, str], dict[str, str]]:
     by_key: dict[str, str] = {}
     tokens: dict[str, str] = {}
     for name, cat in pri.categories.items():
-        by_key.setdefault(_simple(name), name)
-        for mc in cat.model_cats:
-            by_key.setdefault(_simple(mc), name)
+        for key in [name, *cat.model_cats]:
+            by_key.setdefault(_simple(key), name)
     for name, cat in pri.categories.items():
         for syn in cat.synonyms:
             by_key.setdefault(_simple(syn.lstrip("~")), name)
@@ -146,17 +145,13 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
                 if key.endswith(suf) and key[: -len(suf)] in phrase_to:
                     key = key[: -len(suf)]
                     break
-        if key not in phrase_to:  # pragma: no cover - regex built from the keys
-            continue
         cat, weak = phrase_to[key]
         possessive = any(w in _POSSESSIVES for w in _last_words(rev, len(low) - m.start()))
         out.append(CategoryMention(m.start(), m.end(), m.group(0), cat, weak, possessive))
     # "the door of a microwave": a mention followed by "of <det>" and another
     # mention within three words names a part of that other object
-    for i, m in enumerate(out[:-1]):
-        nxt = out[i + 1]
-        gap = low[m.end: nxt.start]
-        if re.fullmatch(r"\s+of\s+(?:(?:a|an|the|this|that|my|your|our|its)\s+)?(?:[\w-]+\s+){0,2}", gap):
+    for i, (m, nxt) in enumerate(zip(out, out[1:])):
+        if re.fullmatch(r"\s+of\s+(?:(?:a|an|the|this|that|my|your|our|its)\s+)?(?:[\w-]+\s+){0,2}", low[m.end: nxt.start]):
             out[i] = CategoryMention(m.start, m.end, m.phrase, m.category, m.weak, True)
     return out
 
@@ -164,12 +159,8 @@ def find_category_mentions(text: str) -> list[CategoryMention]:
 def request_category(text: str) -> tuple[str | None, CategoryMention | None]:
     """(category, mention) a request is about: the first strong non-possessive mention, else the first."""
     mentions = find_category_mentions(text)
-    for m in mentions:
-        if not m.weak and not m.possessive:
-            return m.category, m
-    if mentions:
-        return mentions[0].category, mentions[0]
-    return None, None
+    m = next((m for m in mentions if not m.weak and not m.possessive), mentions[0] if mentions else None)
+    return (None, None) if m is None else (m.category, m)
 
 
 def find_variant(category: str, text: str) -> VariantPrior | None:
@@ -203,10 +194,9 @@ def recognize_category(
     ev = _Evidence()
     text = request_text or ""
     _request_evidence(ev, text)
-    if model_cat:
-        mc = resolve_category(model_cat)
-        if mc is not None and mc != GENERIC:
-            ev.add(mc, _W_MODEL_CAT, f"model_cat {model_cat!r}")
+    mc = resolve_category(model_cat)
+    if mc not in (None, GENERIC):
+        ev.add(mc, _W_MODEL_CAT, f"model_cat {model_cat!r}")
     labels = sorted({lab for lab in semantic_labels if lab})
     _label_evidence(ev, labels)
     if not ev.scores or max(ev.scores.values()) < _MIN_SCORE:

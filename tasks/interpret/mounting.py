@@ -1,9 +1,6 @@
-"""How an asset is held in the world: free-standing or mounted (a faucet on its
-deck, a switch in a wall box: loaded with a fixed root). The per-category prior
-is ``asset2sim/priors/mounting.yaml`` (each entry with its source; unlisted
-categories are free-standing, the SPEC's convention); the request's words can
-override it. The decision is a :class:`~asset2sim.schemas.overlay.RootMount`
-that every check honours (:func:`session_root_options`).
+"""How an asset is held: free-standing or mounted (a faucet on its deck: a fixed root). The prior per category is
+``asset2sim/priors/mounting.yaml`` (with sources; unlisted: free-standing, the SPEC's convention), the request's words
+override it; every check honours the :class:`~asset2sim.schemas.overlay.RootMount` (:func:`session_root_options`).
 """
 
 from __future__ import annotations

@@ -35,9 +35,6 @@ def canonical_label(label: str | None) -> str | None:
             return x[:-1]
         return None
 
-    hit = look(s)
-    if hit:
-        return hit
     stripped = s
     changed = True
     while changed:
@@ -46,12 +43,8 @@ def canonical_label(label: str | None) -> str | None:
             if stripped.startswith(p) and len(stripped) > len(p):
                 stripped = stripped[len(p):]
                 changed = True
-    hit = look(stripped)
-    if hit:
-        return hit
-    toks = [t for t in stripped.split("_") if t]
-    for tok in reversed(toks):
-        hit = look(tok)
+    for cand in [s, stripped, *reversed([t for t in stripped.split("_") if t])]:  # whole, prefixes stripped, last token first
+        hit = look(cand)
         if hit:
             return hit
     return stripped

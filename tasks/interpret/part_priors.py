@@ -55,12 +55,17 @@ def part_role(category: str, semantic_label: str | None) -> PartRole:
     if canon in cat.accessories:
         return "accessory"
     lp = load_priors().labels.labels.get(canon)
-    if lp is None:
-        return "other"
-    if lp.role == "task" and cat.task_relevant:
-        # a generic 'task' label the category's list lacks is secondary
-        return "other"
-    return lp.role
+    return "other" if lp is None or (lp.role == "task" and cat.task_relevant) else lp.role  # a 'task' label the list lacks: secondary
+
+
+def stands_in_for(category: str, word: str, part_labels: Sequence[str | None]) -> bool:
+    """Whether an object's task-relevant parts, labelled ``part_labels``, stand in for a part ``word`` it has
+    none of: ``word`` is a task-relevant part of ``category`` ranked above every one of them (the object
+    lacks the category's main part, which its dataset labels otherwise: a dishwasher's only door labelled
+    "shelf"). False without parts or for a word the category does not rank."""
+    rank = task_relevant_rank(category, word)
+    ranks = [task_relevant_rank(category, label) for label in part_labels]
+    return rank is not None and bool(ranks) and all(r is not None and r > rank for r in ranks)
 
 
 def task_relevant_rank(category: str, semantic_label: str | None) -> int | None:
@@ -96,11 +101,7 @@ def request_label_matches(category: str, request_label: str | None, semantic_lab
     ``label_synonyms`` entry (a laptop's "lid" is its ``screen``)."""
     a = canonical_label(request_label)
     b = canonical_label(semantic_label)
-    if a is None or b is None:
-        return False
-    if a == b:
-        return True
-    return b in category_prior(category).label_synonyms.get(a, [])
+    return a is not None and b is not None and (a == b or b in category_prior(category).label_synonyms.get(a, []))
 
 
 

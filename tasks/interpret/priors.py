@@ -1,9 +1,6 @@
-"""Physical priors as data (``asset2sim/priors/*.yaml``, each entry with its
-source): the public names of the prior modules gathered in one place (tables
-:mod:`asset2sim.prior_tables`, :mod:`.part_labels`, :mod:`.categories`,
-:mod:`.part_priors`, :mod:`.size_priors`). SI units; unknown categories and
-labels fall back to ``Generic`` and the per-label defaults of ``labels.yaml``
-(``docs/design/priors.md``).
+"""The public names of the prior modules (:mod:`asset2sim.prior_tables`, :mod:`.part_labels`, :mod:`.categories`,
+:mod:`.part_priors`, :mod:`.size_priors`) in one place. The priors are data (``asset2sim/priors/*.yaml``, SI, each entry
+with its source); unknown categories and labels fall back to ``Generic`` and ``labels.yaml`` (``docs/design/priors.md``).
 """
 
 from __future__ import annotations

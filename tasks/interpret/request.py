@@ -31,10 +31,9 @@ class RequestTooLong(ValueError):
 
     code = "REQUEST_TOO_LONG"
 
-    def __init__(self, length: int, limit: int = MAX_REQUEST_CHARS):
-        super().__init__(f"REQUEST_TOO_LONG: the request has {length} characters; at most {limit} are accepted")
+    def __init__(self, length: int):
+        super().__init__(f"REQUEST_TOO_LONG: the request has {length} characters; at most {MAX_REQUEST_CHARS} are accepted")
         self.length = length
-        self.limit = limit
         self.codes = [self.code]
 
 
@@ -465,11 +464,8 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
             who = "every task-relevant part" if js.selector == "all" else (js.label or "part") + ("" if js.ordinal is None else f" #{js.ordinal} ({js.order})")
             warnings.append(f"contradiction: '{old.phrase}' and '{js.phrase}' both set {who}; the later one ('{js.phrase}') is used")
         dedup[key] = js
-
-    def specificity(js: JointStateRequest) -> int:
-        return 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2)
-
-    return sorted(dedup.values(), key=specificity), bands + used, warnings
+    specific = sorted(dedup.values(), key=lambda js: 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2))
+    return specific, bands + used, warnings
 
 
 def parse_request(text: str) -> RequestSpec:
@@ -483,7 +479,7 @@ def parse_request(text: str) -> RequestSpec:
     if not isinstance(text, str):
         raise TypeError(f"request must be a string, got {type(text).__name__}")
     check_request_length(text)
-    low = _normalized(text)
+    low = text.lower().replace("\u2019", "'").replace("\u2018", "'").replace("\u2013", "-").replace("\u2014", " ")  # plain quotes, dashes
     mentions = find_category_mentions(low)
     mention_starts = [m.start for m in mentions]
     hint, head = request_category(low)
@@ -509,23 +505,25 @@ def parse_request(text: str) -> RequestSpec:
     found: list = size_hits + size_against + band_hits + sizes + verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
     damping, holds, spring, stiff, free = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings)
-    pose = _pose_word(low, matched)
-    matched += _variant_phrases(hint, low)
+    pose = None
+    for h in _scan(low, _POSE_TABLE):  # the last pose word not negated
+        if not _negated(low, h.start):
+            pose = h.value
+            matched.append((h.start, h.text))
+    var = variant_mention(hint, low) if hint is not None else None  # the variant's phrases count as understood
+    if var is not None:
+        matched += [(m.start(), m.group(0)) for ph in var[2].phrases for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low)]
     matched += [(pos, phrase) for pos, _, phrase in mounting_mentions(low)]  # "free-standing", "mounted on the wall" (tasks.interpret.mounting)
     unused, groups = _unused_words(low, matched, mentions)
+    in_order = [" ".join(ph.split()) for _pos, ph in dict.fromkeys(sorted(matched, key=lambda t: t[0]))]  # by position, each once
     return RequestSpec(
         text=text, category_hint=hint, size_class=size_class, size_factor=factor, size_phrase=size_phrase,  # type: ignore[arg-type]
         joint_states=joint_states, damping=damping, holds_position=holds, spring=spring, stiff=stiff,  # type: ignore[arg-type]
         free_moving=free, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
         sizes=[f.value for f in sizes], dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
-        ignored=groups, warnings=warnings, matched=_in_text_order(matched), unused_words=unused,
+        ignored=groups, warnings=warnings, matched=in_order, unused_words=unused,
     )
-
-
-def _normalized(text: str) -> str:
-    """``text`` lower-cased, typographic quotes and dashes made plain."""
-    return text.lower().replace("\u2019", "'").replace("\u2018", "'").replace("\u2013", "-").replace("\u2014", " ")
 
 
 def _mass_level(level_found: list[rv.Found], properties: list[PartProperty], warnings: list[str]) -> object:
@@ -568,29 +566,6 @@ def _dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[
     if len(levels) > 1:
         warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
     return damping, holds, spring, stiff, free
-
-
-def _pose_word(low: str, matched: list[tuple[int, str]]) -> object:
-    """The last pose word not negated (None without one); each such word goes to ``matched``."""
-    pose = None
-    for h in _scan(low, _POSE_TABLE):
-        if not _negated(low, h.start):
-            pose = h.value
-            matched.append((h.start, h.text))
-    return pose
-
-
-def _variant_phrases(hint: str | None, low: str) -> list[tuple[int, str]]:
-    """Every phrase of the category's variant that the request names, so they count as understood."""
-    var = variant_mention(hint, low) if hint is not None else None
-    if var is None:
-        return []
-    return [(m.start(), m.group(0)) for ph in var[2].phrases for m in re.finditer(phrase_regex(" ".join(ph.lower().split())), low)]
-
-
-def _in_text_order(matched: list[tuple[int, str]]) -> list[str]:
-    """The matched phrases by position (stable), each (position, phrase) once, whitespace collapsed."""
-    return [" ".join(ph.split()) for _pos, ph in dict.fromkeys(sorted(matched, key=lambda t: t[0]))]
 
 
 def _part_soon(text: str, i: int) -> bool:

@@ -345,8 +345,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
     warns: list[str] = []
     for rx in (_DYN_RX, _DYN_RX_AFTER):
         for m in rx.finditer(low):
-            q = m.group("q")
-            q = "stiffness" if q.startswith("spring") else q
+            q = "stiffness" if m.group("q").startswith("spring") else m.group("q")
             v = number_value(m.group("num"))
             motion = "any"
             unit = m.group("unit")
@@ -371,13 +370,9 @@ _COUNT_RX = re.compile(
 
 def part_counts(low: str) -> list[Found]:
     """Counts of parts ("a two-drawer cabinet"): value (canonical label, count)."""
-    out = []
-    for m in _COUNT_RX.finditer(low):
-        n = m.group("n")
-        k = int(n) if n.isdigit() else _COUNT_WORDS[n]
-        part = m.group("part")
-        out.append(Found(m.start(), m.end(), m.group(0), (canonical_label(part) or part.rstrip("s"), k)))
-    return out
+    return [Found(m.start(), m.end(), m.group(0), (canonical_label(m["part"]) or m["part"].rstrip("s"),
+                                                   int(m["n"]) if m["n"].isdigit() else _COUNT_WORDS[m["n"]]))
+            for m in _COUNT_RX.finditer(low)]
 
 
 #: Words naming the kind of joint or motion ("sliding joints"): understood, no effect.

@@ -1,8 +1,6 @@
-"""The joints and links a request's part words name on one object: a label its
-movable joints (``priors.request_label_matches``), "all" or a missing label the
-task-relevant ones (warned). Ordinals count top to bottom by the moving part's
-box center, or left / right / front / back as seen facing the front, which is
--x of the root frame (PartNet-Mobility's base rpy (pi/2, 0, -pi/2)), left +y.
+"""The joints and links a request's part words name on one object: a label its movable joints
+(``priors.request_label_matches``), "all" or a missing label the task-relevant ones (warned). Ordinals count top to
+bottom by the moving part's box center, or left / right / front / back facing the front (``docs/design/requests.md``).
 """
 
 from __future__ import annotations
@@ -14,6 +12,7 @@ import numpy as np
 from asset2sim.schemas.request import DynamicsValue, JointStateRequest
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
+from asset2sim.tasks.interpret.part_priors import stands_in_for
 from asset2sim.tasks.interpret.request_values import PART_RX
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
@@ -31,9 +30,24 @@ def joints_named(ctx: "EstimationContext", label: str) -> list[str]:
 
 
 def joints_of(ctx: "EstimationContext", d: DynamicsValue, relevant: list[str]) -> list[str]:
-    """The joints an explicit joint parameter names: its label's (else the unlabelled ``relevant`` ones, which the
-    word may name; none when every part is labelled otherwise), or without a label ``relevant``."""
-    return relevant if d.label is None else (joints_named(ctx, d.label) or unlabelled(ctx, relevant))
+    """The joints an explicit joint parameter names: its label's (else :func:`stand_ins`; none when no part
+    stands in), or without a label ``relevant``."""
+    return relevant if d.label is None else (joints_named(ctx, d.label) or stand_ins(ctx, d.label, relevant)[0])
+
+
+def stand_ins(ctx: "EstimationContext", label: str, relevant: list[str]) -> tuple[list[str], str]:
+    """The joints a part word the object has no part of still names, and how: the unlabelled non-continuous
+    ``relevant`` joints (the word may name them), else the task-relevant ones when they stand in for the
+    category's main part the word names (:func:`~asset2sim.tasks.interpret.part_priors.stands_in_for`);
+    ([], "") when none does."""
+    free = unlabelled(ctx, relevant)
+    if free:
+        return free, "its unlabelled task-relevant joints"
+    moving = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
+    labels = [ctx.asset.link(ctx.asset.joint(n).child).semantic_label for n in moving]
+    if moving and stands_in_for(ctx.category, label, labels):
+        return moving, f"its task-relevant parts ({', '.join(dict.fromkeys(str(x) for x in labels))}), which stand in for a {ctx.category}'s {label}:"
+    return [], ""
 
 
 def unlabelled(ctx: "EstimationContext", joints: list[str]) -> list[str]:
@@ -57,14 +71,8 @@ def link_named(ctx: "EstimationContext", link: str, label: str | None) -> bool:
 
 
 def _order_key(order: str, c: np.ndarray) -> float:
-    """Sort key of a joint for an ordinal's order (ascending = first)."""
-    if order == "left_right":
-        return -float(c[1])
-    if order == "right_left":
-        return float(c[1])
-    if order == "front_back":
-        return float(c[0])
-    return -float(c[2])
+    """Sort key of a joint for an ordinal's order (ascending = first); ``c`` the (3,) box center, m."""
+    return float({"left_right": -c[1], "right_left": c[1], "front_back": c[0]}.get(order, -c[2]))
 
 
 def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: list[str], centers: dict[str, np.ndarray],
@@ -79,10 +87,10 @@ def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: lis
     named = jr.names_part
     targets = joints_named(ctx, str(jr.label)) if named else []
     if named and not targets:
-        targets = unlabelled(ctx, relevant)
+        targets, how = stand_ins(ctx, str(jr.label), relevant)
         warnings.append(f"WARNING: the request names a '{jr.label}' ('{jr.phrase}') but no part of this {ctx.category} carries that "
-                        f"label; its moving parts: {moving_parts(ctx)}; " + (f"'{jr.phrase}' applied to its unlabelled task-relevant "
-                        f"joints {targets}" if targets else f"'{jr.phrase}' not applied"))
+                        f"label; its moving parts: {moving_parts(ctx)}; " + (f"'{jr.phrase}' applied to {how} {targets}" if targets
+                                                                               else f"'{jr.phrase}' not applied"))
         if not targets:
             return []
     if not named:

@@ -85,8 +85,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
     centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
-        targets = state_targets(ctx, jr, relevant, centers, res.warnings)
-        for t in targets:
+        for t in state_targets(ctx, jr, relevant, centers, res.warnings):
             res.bands[t] = jr.band
             res.addressed.add(t)
             res.targets.pop(t, None)
@@ -164,13 +163,9 @@ def _extents(ctx: "EstimationContext") -> dict:
 
 def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
     """The material the request names for ``link``: a part's over the body's over the whole object's."""
-    best: tuple[int, str] | None = None
-    for p in ctx.request.properties:
-        if p.material is None or not link_named(ctx, link, p.label):
-            continue
-        rank = 0 if p.label is None else (1 if p.label == "body" else 2)
-        if best is None or rank >= best[0]:
-            best = (rank, p.material)
+    ranked = [(0 if p.label is None else (1 if p.label == "body" else 2), p.material) for p in ctx.request.properties
+              if p.material is not None and link_named(ctx, link, p.label)]
+    best = max(reversed(ranked), key=lambda t: t[0], default=None)  # of equal ranks the last named
     return None if best is None else load_priors().materials[best[1]]
 
 
@@ -260,10 +255,8 @@ def apply_dynamics_values(ctx: "EstimationContext", joints: dict[str, JointDynam
                 upd["spring_reference"] = float(state.get(n, 0.0)) if d.value > 0 else None
             out[n] = out[n].model_copy(update=upd)
             applied.append(n)
-        if applied:
-            notes.append(f"'{d.phrase}' set on {applied}")
-        else:
-            notes.append(f"WARNING: '{d.phrase}' fits no joint ({d.motion} unit; joints {names}); not applied")
+        notes.append(f"'{d.phrase}' set on {applied}" if applied
+                     else f"WARNING: '{d.phrase}' fits no joint ({d.motion} unit; joints {names}); not applied")
     return out, notes
 
 
@@ -285,11 +278,8 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     for d in ctx.request.dynamics_values:
         for n, jd in overlay.joints.items():
             linear = ctx.asset.joint(n).type == "prismatic" if n in {j.name for j in ctx.asset.joints} else False
-            if not unit_fits(d, linear):
-                continue
-            if d.label is None and n not in task_relevant_joints(ctx):
-                continue
-            if d.label is not None and not priors.request_label_matches(ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label):
+            if not unit_fits(d, linear) or (n not in task_relevant_joints(ctx) if d.label is None else not priors.request_label_matches(
+                    ctx.category, d.label, ctx.asset.link(ctx.asset.joint(n).child).semantic_label)):
                 continue
             v = getattr(jd, d.quantity)
             if abs(v - d.value) > NUMBER_TOLERANCE * max(d.value, 1e-12):
@@ -317,9 +307,7 @@ def summary(spec: RequestSpec) -> list[str]:
         out.append(f"{p.label or 'object'}: {what}")
     if spec.mass_level:
         out.append(f"mass: {spec.mass_level}")
-    for d in spec.dynamics_values:
-        out.append(f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})")
-    return out
+    return out + [f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})" for d in spec.dynamics_values]
 
 
 def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
@@ -377,10 +365,8 @@ def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: l
     for d in ctx.request.dynamics_values:
         for n in joints_of(ctx, d, relevant):
             jd = overlay.joints.get(n)
-            if jd is None:
-                continue
             linear = ctx.asset.joint(n).type == "prismatic"
-            if not unit_fits(d, linear):
+            if jd is None or not unit_fits(d, linear):
                 continue
             got = float(getattr(jd, d.quantity))
             ok = abs(got - d.value) <= NUMBER_TOLERANCE * max(d.value, 1e-12)

@@ -13,6 +13,7 @@ import pytest
 from asset2sim.flows import catalog_compare, catalog_finish
 from asset2sim import flow_progress
 from asset2sim.flows.catalog import RegressionSettings, ResultCatalog, ResultsSettings
+from asset2sim.commands import _progress
 from asset2sim.commands._progress import FlowProgress, eta_seconds
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.schemas.catalog import CatalogRow
@@ -116,7 +117,7 @@ def test_progress_lines_count_and_estimate():
         flow_progress.emit(ProgressEvent("run_finished", "d", RUN1, total=3))
     flow_progress.emit(ProgressEvent("asset_finished", "d", RUN1, asset_id="late", status="done"))  # not listening
     lines = buf.getvalue().splitlines()
-    assert lines[0] == f"run {RUN1} of dataset d: 3 assets"
+    assert lines[0] == f"run {RUN1} of dataset d: 3 assets; {_progress.STARTING}"  # said until the first asset finishes
     assert lines[2].startswith("[2/3] b: failed (timeout) 8.0 s | done 0, skipped 1, failed 1")
     assert lines[3].startswith("[3/3] c: done 2.0 s | done 1, skipped 1, failed 1") and "ETA 0 s" in lines[3]
     assert len(lines) == 4

@@ -19,7 +19,7 @@ from asset2sim.tasks.check.force_ranges import (
     operating_range,
     parse_operating_forces,
 )
-from asset2sim.tasks.check.contact_points import contact_point, contact_point_rule, grasp_side
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.task_execution import TaskConfig, run_task, task_metric
 from asset2sim.urdf import read_urdf
@@ -86,7 +86,7 @@ def test_the_grasp_force_is_bounded_and_the_gripper_speed_limited(tmp_path, engi
     urdf = _cabinet(tmp_path / "c")
     limits = GripperLimits(max_force_n=5.0, max_speed_m_s=0.1)
     with open_session(engine, urdf, SessionOptions(fixed_base=True, ground=False)) as s:
-        link, point = contact_point(s, "slide", read_urdf(urdf))
+        link, point, _ = contact_point_rule(s, "slide", read_urdf(urdf))
         g = BoundedGrasp(s, link, point, limits)
         dt = s.options.conventions.timestep
         start = g.gripper_point.copy()

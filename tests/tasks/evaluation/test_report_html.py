@@ -180,3 +180,36 @@ def test_a_refine_report_says_what_asset2sim_changed_and_why(tmp_path):
     assert "it runs into link_2" in section  # the clipped limit's reason
     assert "the request: slightly open" in section
     assert "Why it failed" not in html  # it passes every tier
+
+
+@needs_shared
+def test_a_failing_joint_sweep_shows_its_opening_over_time_and_where_it_stalled(tmp_path):
+    """The raw two-drawer cabinet (no physics): a drawer does not close back
+    under the sweep's drive; the report plots its opening against the lines
+    that count and draws it closed, opened and where the closing stalled."""
+    ev = evaluate_asset(SHARED / "19179", out_dir=tmp_path / "ev", write_report=True, engines=("pybullet",), probes=False)
+    sw = ev.metric("joint_sweep")
+    assert sw.passed is False
+    html = (tmp_path / "ev" / "report.html").read_text()
+    for joint in sw.details["failing"]:
+        assert f"joint sweep of {joint} (pybullet)" in html and f"alt=\"sweep {joint}\"" in html
+    assert ">closed (start)</figcaption>" in html and "closed as far as it went (" in html
+
+
+@needs_shared
+def test_a_failed_task_attempt_shows_its_numbers_and_where_the_part_was_taken_asked_and_left():
+    from asset2sim.tasks.evaluation.failure_evidence import evidence_section
+    from asset2sim.tasks.geometry.urdf_closed import measure_closed
+
+    urdf = SHARED / "101668" / "mobility.urdf"
+    c = measure_closed(urdf)["joint_2"]
+    closed = {"joint_2": {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range}}
+    attempt = {"joint": "joint_2", "action": "close", "success": False, "failure": "the object slid before the target was reached",
+               "start_fraction": 0.65, "target_fraction": 0.05, "final_fraction": 0.64, "reached": False, "held": False,
+               "peak_force_n": 11.7, "root_slide_m": 0.00665, "root_tilt_rad": 1e-4, "force_limited": False}
+    seen = []
+    html = evidence_section({}, urdf, 1 / 240, lambda svg, alt: "", lambda img, cap: seen.append((img.shape, cap)) or cap,
+                            {}, {"attempts": [attempt, {**attempt, "joint": "joint_0", "success": True}]}, closed)
+    assert "task: close joint_2: the object slid" in html and "<td>6.65</td>" in html and "joint_0" not in html
+    assert [cap for _, cap in seen] == ["taken at (65 % open)", "asked for (5 % open)", "left at (64 % open)"]
+    assert all(shape == (200, 200, 3) for shape, _ in seen)

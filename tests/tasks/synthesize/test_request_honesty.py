@@ -84,3 +84,16 @@ def test_a_request_not_understood_is_not_aligned(tmp_path):
     pa = next(m for m in ev["metrics"] if m["name"] == "prompt_alignment")
     assert pa["value"] == 0.0 and "was understood" in pa["details"]["warnings"][0]
     assert "Request warnings" in (tmp_path / "out" / "report.html").read_text()
+
+
+@needs_shared
+def test_the_category_main_part_a_dataset_labels_otherwise_still_takes_the_request():
+    """12085's only moving part is labelled "shelf", yet a Dishwasher's main
+    task part is its door: "door slightly open" goes to that part, warned. A
+    trash can's door ranks below its lid, so the lids never stand in for it
+    (test above)."""
+    with build_context(SHARED / "12085", "a dishwasher with its door slightly open", category="Dishwasher") as ctx:
+        assert not named_parts.joints_named(ctx, "door")
+        res = request_apply.resolve_states(ctx, 1.0)
+    assert res.bands == {"joint_1": "slightly_open"}
+    assert any("stand in for a Dishwasher's door" in w for w in res.warnings), res.warnings
