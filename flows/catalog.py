@@ -379,9 +379,11 @@ class ResultCatalog:
     def _drop_compacted_row(self, dataset: str, run: str, asset_id: str) -> bool:
         """Rewrite the run's compacted file (atomically) without the row of ``asset_id``; False when it holds none."""
         import pyarrow.compute as pc
+        import pyarrow.fs as pafs
 
-        compacted = self._run_files(dataset, run).compacted
-        if compacted is None:
+        paths = [f"{self._run_path(dataset, run)}/{name}" for name in (COMPACTED_NAME, LEGACY_COMPACTED_NAME)]
+        compacted = next((i for i in self.location.fs.get_file_info(paths) if i.type == pafs.FileType.File), None)
+        if compacted is None:  # two stats, not a listing of the partition: cheap for every row a run appends
             return False
         table = self._read_files([compacted.path])
         keep = pc.invert(pc.equal(table["asset_id"], asset_id))
