@@ -103,7 +103,7 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     the one named, ``label`` the movable joints whose child's label the word
     names (else the unlabelled task-relevant ones, which it may name, or the
     task-relevant ones standing in for the category's main part the word names,
-    ``part_priors.stands_in_for``; else none: the phrase goes to the second list),
+    ``part_priors.stand_in_joints``; else none: the phrase goes to the second list),
     top to bottom by ``centres`` (link -> (3,) m), ``ordinal`` picking one; a
     phrase naming a part or joint overrides one naming none, else a later
     phrase overrides an earlier one."""
@@ -118,11 +118,9 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
         elif js.selector == "joint":  # an override names the joint itself
             names = [js.joint] if js.joint in movable else []
         else:
-            tm = [n for n in task_joints if n in movable]
+            tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable]
             names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)] \
-                or [n for n in tm if not semantics.get(joints[n].child, (None, None))[1]] \
-                or (tm if part_priors.stands_in_for(category or "", js.label, [semantics.get(joints[n].child, (None, None))[1] for n in tm])
-                    else [])
+                or part_priors.stand_in_joints(category or "", js.label, tm)[0]
             names.sort(key=lambda n: (-float(centres.get(joints[n].child, zero)[2]), float(centres.get(joints[n].child, zero)[0])))
             if js.ordinal is not None:
                 names = [names[js.ordinal]] if 0 <= js.ordinal < len(names) else []

@@ -97,7 +97,7 @@ def tilt_pose(session: SimSession, axis: np.ndarray, angle: float) -> tuple[np.n
     return new_pos, new_quat
 
 
-def _up_change(q_ref: np.ndarray, q_now: np.ndarray) -> float:
+def up_change(q_ref: np.ndarray, q_now: np.ndarray) -> float:
     """Angle (rad) between world z and the body's up direction (world z at ``q_ref``) at ``q_now`` (xyzw)."""
     R0 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_ref))
     R1 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_now))
@@ -152,7 +152,7 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
         if not d <= tol:
             failing.append(j)
     diverged = trace.diverged
-    topple = None if diverged else _up_change(q_ref, trace.root_quat[-1])
+    topple = None if diverged else up_change(q_ref, trace.root_quat[-1])
     why = []
     if diverged:
         why.append("diverged")

@@ -6,6 +6,7 @@ lay; per failing sweep, the opening over time against the lines that count and f
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 from typing import Callable
@@ -13,13 +14,17 @@ from typing import Callable
 import numpy as np
 
 from asset2sim.frames import quat_wxyz_matrix, quat_xyzw_to_wxyz
-from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial
+from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial, up_change
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
 from asset2sim.tasks.evaluation.svg_chart import Panel, figure_svg
 from asset2sim.tasks.geometry.render import SceneRenderer
 
 #: The frames drawn of a failing trial: (caption, where in the trace).
 FRAMES = ("as disturbed", "after settling", "end of the test")
+#: Size (width, height) of a frame, pixels.
+FRAME_SIZE = (200, 200)
+#: A frame: (caption, joint positions rad or m, root rotation (3, 3) from its rest).
+Pose = tuple[str, dict[str, float], np.ndarray]
 
 
 def failing(runs: dict) -> tuple[list[tuple[str, JointSweep]], list[tuple[str, Trial]]]:
@@ -34,13 +39,6 @@ def failing(runs: dict) -> tuple[list[tuple[str, JointSweep]], list[tuple[str, T
     return sweeps, trials
 
 
-def _tilt(q_ref: np.ndarray, quats: np.ndarray) -> np.ndarray:
-    """Angle (rad) between world z and the body's up direction (world z at ``q_ref``), per quaternion (N, 4) xyzw."""
-    R0 = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_ref))
-    ups = np.array([quat_wxyz_matrix(quat_xyzw_to_wxyz(q)) @ (R0.T @ np.array([0.0, 0.0, 1.0])) for q in quats])
-    return np.arccos(np.clip(ups[:, 2] / np.maximum(np.linalg.norm(ups, axis=1), 1e-12), -1.0, 1.0))
-
-
 def trial_plot(trial: Trial, dt: float, config: RobustRestConfig | None = None) -> bytes:
     """SVG of one trial: the tilt (rad) of the up direction at placement, after settling and over the test,
     against the topple tolerance; each joint's position (rad or m) over settling and test, with its
@@ -52,9 +50,9 @@ def trial_plot(trial: Trial, dt: float, config: RobustRestConfig | None = None) 
               ylabel="tilt of the up direction (rad)")
     n_settle = max((len(v) for v in tr.settle_joints.values()), default=0)
     t_place = -n_settle * dt
-    placed = _tilt(q_ref, np.asarray([tr.initial_root_quat]))[0] if tr.initial_root_quat is not None else math.nan
-    a.line(np.array([t_place, 0.0]), np.array([placed, _tilt(q_ref, np.asarray([tr.q0]))[0]]), "C7", "settling (placement to rest)")
-    a.line(np.asarray(tr.t, float), _tilt(q_ref, np.asarray(tr.root_quat)), "C3", "test")
+    placed = up_change(q_ref, tr.initial_root_quat) if tr.initial_root_quat is not None else math.nan
+    a.line(np.array([t_place, 0.0]), np.array([placed, up_change(q_ref, tr.q0)]), "C7", "settling (placement to rest)")
+    a.line(np.asarray(tr.t, float), np.array([up_change(q_ref, q) for q in tr.root_quat]), "C3", "test")
     a.hline(cfg.topple_tol, "C3", ":", f"topple tolerance {cfg.topple_tol:g} rad")
     rows = [[a]]
     for j, q in tr.joints.items():
@@ -74,13 +72,9 @@ def trial_plot(trial: Trial, dt: float, config: RobustRestConfig | None = None) 
     return figure_svg(rows[:4], 1000.0, 240.0).encode()
 
 
-def trial_frames(urdf: Path | str, trial: Trial, size: tuple[int, int] = (200, 200)) -> dict[str, np.ndarray]:
+def trial_poses(trial: Trial) -> list[Pose]:
     """The object as disturbed, after settling and at the end of the test (:data:`FRAMES`), turned as it lay
-    relative to its rest before the trial, perspective view: caption -> (H, W, 3) uint8.
-
-    Raises:
-        as :class:`~asset2sim.tasks.geometry.render.SceneRenderer`.
-    """
+    relative to its rest before the trial."""
     tr = trial.trace
     q_ref = trial.reference_quat if trial.reference_quat is not None else tr.q0
     R_ref = quat_wxyz_matrix(quat_xyzw_to_wxyz(q_ref))
@@ -89,13 +83,7 @@ def trial_frames(urdf: Path | str, trial: Trial, size: tuple[int, int] = (200, 2
     last = {j: float(v[-1]) for j, v in tr.joints.items() if len(v)}
     poses = [(tr.initial_root_quat if tr.initial_root_quat is not None else tr.q0, first or tr.initial_joints),
              (tr.q0, settled), (tr.root_quat[-1], last)]
-    out = {}
-    with SceneRenderer(urdf, size=size) as r:
-        for caption, (quat, joints) in zip(FRAMES, poses):
-            r.set_joint_positions({k: v for k, v in joints.items() if k in r.joint_names and math.isfinite(v)})
-            r.turn_root(quat_wxyz_matrix(quat_xyzw_to_wxyz(quat)) @ R_ref.T)
-            out[caption] = r.render("perspective")
-    return out
+    return [(caption, joints, quat_wxyz_matrix(quat_xyzw_to_wxyz(quat)) @ R_ref.T) for caption, (quat, joints) in zip(FRAMES, poses)]
 
 
 def sweep_plot(js: JointSweep, config: SweepConfig | None = None) -> bytes:
@@ -113,46 +101,38 @@ def sweep_plot(js: JointSweep, config: SweepConfig | None = None) -> bytes:
     return figure_svg([[a]], 1000.0, 260.0).encode()
 
 
-def sweep_frames(urdf: Path | str, js: JointSweep, others: dict[str, float],
-                 size: tuple[int, int] = (200, 200)) -> dict[str, np.ndarray]:
+def sweep_poses(js: JointSweep, others: dict[str, float]) -> list[Pose]:
     """The object (root fixed, the other joints at ``others``, rad or m) with the swept joint closed, where
-    the opening stalled and where the closing stalled: caption -> (H, W, 3) uint8, perspective view."""
+    the opening stalled and where the closing stalled."""
     def at(fraction: float) -> float:
         return js.q_closed + (js.q_far - js.q_closed) * float(fraction)
 
     shown = {"closed (start)": js.q_closed, f"opened as far as it went ({js.reached_open:.0%})": at(js.reached_open)}
     if np.isfinite(js.reached_closed):
         shown[f"closed as far as it went ({js.reached_closed:.0%} open)"] = at(js.reached_closed)
-    out = {}
-    with SceneRenderer(urdf, size=size) as r:
-        base = {k: v for k, v in others.items() if k in r.joint_names and math.isfinite(v)}
-        for caption, q in shown.items():
-            if math.isfinite(q):
-                r.set_joint_positions({**base, js.joint: q})
-                out[caption] = r.render("perspective")
-    return out
+    return [(caption, {**others, js.joint: q}, np.eye(3)) for caption, q in shown.items() if math.isfinite(q)]
 
 
-def task_frames(urdf: Path | str, attempt: dict, closed: dict, others: dict[str, float],
-                size: tuple[int, int] = (200, 200)) -> dict[str, np.ndarray]:
+def task_poses(attempt: dict, closed: dict, others: dict[str, float]) -> list[Pose]:
     """The part of a failed task attempt (``attempt``: a ``task_execution`` attempt summary) where the
     gripper took it, where it asked it to go and where it was left, the other joints at ``others`` and the
-    root as at rest (its slide and tilt are in the table): caption -> (H, W, 3) uint8, perspective view.
-    ``closed``: joint -> {q_closed, direction, open_range} (rad or m)."""
+    root as at rest (its slide and tilt are in the table); ``closed``: joint -> {q_closed, direction,
+    open_range} (rad or m)."""
     c = closed[attempt["joint"]]
+    return [(f"{what} ({100 * attempt[key]:.0f} % open)",
+             {**others, attempt["joint"]: c["q_closed"] + c["direction"] * float(attempt[key]) * c["open_range"]}, np.eye(3))
+            for what, key in (("taken at", "start_fraction"), ("asked for", "target_fraction"), ("left at", "final_fraction"))
+            if attempt.get(key) is not None and math.isfinite(attempt[key])]
 
-    def at(f: float) -> float:
-        return c["q_closed"] + c["direction"] * float(f) * c["open_range"]
 
-    shown = {f"{what} ({100 * attempt[key]:.0f} % open)": at(attempt[key])
-             for what, key in (("taken at", "start_fraction"), ("asked for", "target_fraction"), ("left at", "final_fraction"))
-             if attempt.get(key) is not None and math.isfinite(attempt[key])}
+def draw_poses(renderer: SceneRenderer, poses: list[Pose]) -> dict[str, np.ndarray]:
+    """caption -> (H, W, 3) uint8 perspective render of each pose (every joint a pose names set, the root
+    turned by its rotation)."""
     out = {}
-    with SceneRenderer(urdf, size=size) as r:
-        base = {k: v for k, v in others.items() if k in r.joint_names and math.isfinite(v)}
-        for caption, q in shown.items():
-            r.set_joint_positions({**base, attempt["joint"]: q})
-            out[caption] = r.render("perspective")
+    for caption, joints, rotation in poses:
+        renderer.set_joint_positions({k: v for k, v in joints.items() if k in renderer.joint_names and math.isfinite(v)})
+        renderer.turn_root(rotation)
+        out[caption] = renderer.render("perspective")
     return out
 
 
@@ -165,35 +145,40 @@ def _task_table(attempt: dict) -> str:
             + "</tr></table>")
 
 
-def _frames(draw: Callable[[], dict[str, np.ndarray]], figure: Callable[[np.ndarray, str], str]) -> str:
-    """The frames ``draw`` renders as captioned images, or a note when they cannot be drawn (the plot or
-    numbers beside them stand alone)."""
-    try:
-        return "<div class='views'>" + "".join(figure(img, cap) for cap, img in draw().items()) + "</div>"
-    except Exception as exc:
-        return f"<p class='small'>frames not drawn ({type(exc).__name__}: {exc})</p>"
-
-
 def evidence_section(runs: dict, urdf: Path | str, dt: float, svg: Callable[[bytes, str], str],
                      figure: Callable[[np.ndarray, str], str], initial_state: dict[str, float] | None = None,
                      task: dict | None = None, closed: dict | None = None) -> str:
     """HTML of every failing robust-rest trial's and joint sweep's plot and frames, and of every failed task
-    attempt's numbers and frames (empty when none failed); ``svg`` and ``figure`` make the HTML of a plot and
-    of a captioned image; ``initial_state``: the other joints' positions (rad or m); ``task``: the
-    ``task_execution`` metric's details; ``closed``: joint -> {q_closed, direction, open_range}."""
-    parts = []
+    attempt's numbers and frames (empty when none failed), the frames drawn by one renderer of ``urdf``;
+    ``svg`` and ``figure`` make the HTML of a plot and of a captioned image; ``initial_state``: the other
+    joints' positions (rad or m); ``task``: the ``task_execution`` metric's details; ``closed``: joint ->
+    {q_closed, direction, open_range}."""
+    others = dict(initial_state or {})
+    items: list[tuple[str, Callable[[], list[Pose]]]] = []  # (the HTML before the frames, the poses)
     for attempt in [a for a in (task or {}).get("attempts", []) if not a.get("success")]:
-        parts.append(f"<h3>task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}</h3>" + _task_table(attempt))
-        parts.append(_frames(lambda: task_frames(urdf, attempt, dict(closed or {}), dict(initial_state or {})), figure))
+        items.append((f"<h3>task: {attempt['action']} {attempt['joint']}: {attempt.get('failure', '')}</h3>" + _task_table(attempt),
+                      lambda a=attempt: task_poses(a, dict(closed or {}), others)))
     sweeps, trials = failing(runs)
     for engine, js in sweeps:
-        parts.append(f"<h3>joint sweep of {js.joint} ({engine}): {js.failure}</h3>")
-        parts.append(svg(sweep_plot(js), f"sweep {js.joint}"))
-        parts.append(_frames(lambda: sweep_frames(urdf, js, dict(initial_state or {})), figure))
+        items.append((f"<h3>joint sweep of {js.joint} ({engine}): {js.failure}</h3>" + svg(sweep_plot(js), f"sweep {js.joint}"),
+                      lambda js=js: sweep_poses(js, others)))
     for engine, trial in trials:
-        parts.append(f"<h3>robust rest, trial {trial.name} ({engine}): {trial.failure}</h3>")
-        parts.append(svg(trial_plot(trial, dt), f"trial {trial.name}"))
-        parts.append(_frames(lambda: trial_frames(urdf, trial), figure))
-    if not parts:
+        items.append((f"<h3>robust rest, trial {trial.name} ({engine}): {trial.failure}</h3>" + svg(trial_plot(trial, dt), f"trial {trial.name}"),
+                      lambda trial=trial: trial_poses(trial)))
+    if not items:
         return ""
-    return "<h2>Why it failed: the failing trials</h2>" + "".join(parts)
+    parts = ["<h2>Why it failed: the failing trials</h2>"]
+    with contextlib.ExitStack() as stack:
+        try:
+            renderer, error = stack.enter_context(SceneRenderer(urdf, size=FRAME_SIZE)), None
+        except Exception as exc:  # the plots and numbers stand alone
+            renderer, error = None, exc
+        for head, poses in items:
+            parts.append(head)
+            try:
+                if renderer is None:
+                    raise error
+                parts.append("<div class='views'>" + "".join(figure(img, cap) for cap, img in draw_poses(renderer, poses()).items()) + "</div>")
+            except Exception as exc:
+                parts.append(f"<p class='small'>frames not drawn ({type(exc).__name__}: {exc})</p>")
+    return "".join(parts)

@@ -349,7 +349,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
         evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
-                         (ev.metric("task_execution").details if ev.metric("task_execution") else None), ev.closed_positions),
+                         getattr(ev.metric("task_execution"), "details", None), ev.closed_positions),
         "<h2>Penetration at the initial state</h2>",
         _penetration_details(ev),
         "<h2>Rest test</h2>",

@@ -58,14 +58,20 @@ def part_role(category: str, semantic_label: str | None) -> PartRole:
     return "other" if lp is None or (lp.role == "task" and cat.task_relevant) else lp.role  # a 'task' label the list lacks: secondary
 
 
-def stands_in_for(category: str, word: str, part_labels: Sequence[str | None]) -> bool:
-    """Whether an object's task-relevant parts, labelled ``part_labels``, stand in for a part ``word`` it has
-    none of: ``word`` is a task-relevant part of ``category`` ranked above every one of them (the object
-    lacks the category's main part, which its dataset labels otherwise: a dishwasher's only door labelled
-    "shelf"). False without parts or for a word the category does not rank."""
+def stand_in_joints(category: str, word: str, labelled: Sequence[tuple[str, str | None]]) -> tuple[list[str], str]:
+    """Of an object's task-relevant (joint, part label) pairs, the joints a part ``word`` it has no part of
+    still names, and how: the unlabelled ones (the word may name them), else all of them when ``word`` is a
+    task-relevant part of ``category`` ranked above every one (the object lacks the category's main part,
+    which its dataset labels otherwise: a dishwasher's only door labelled "shelf"); ([], "") when none does."""
+    free = [j for j, label in labelled if not label]
+    if free:
+        return free, "its unlabelled task-relevant joints"
     rank = task_relevant_rank(category, word)
-    ranks = [task_relevant_rank(category, label) for label in part_labels]
-    return rank is not None and bool(ranks) and all(r is not None and r > rank for r in ranks)
+    ranks = [task_relevant_rank(category, label) for _, label in labelled]
+    if rank is not None and ranks and all(r is not None and r > rank for r in ranks):
+        names = ", ".join(dict.fromkeys(str(label) for _, label in labelled))
+        return [j for j, _ in labelled], f"its task-relevant parts ({names}), which stand in for a {category}'s {word}:"
+    return [], ""
 
 
 def task_relevant_rank(category: str, semantic_label: str | None) -> int | None:

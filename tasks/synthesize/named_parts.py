@@ -12,7 +12,7 @@ import numpy as np
 from asset2sim.schemas.request import DynamicsValue, JointStateRequest
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret.part_labels import BODY_LABELS, canonical_label
-from asset2sim.tasks.interpret.part_priors import stands_in_for
+from asset2sim.tasks.interpret.part_priors import stand_in_joints
 from asset2sim.tasks.interpret.request_values import PART_RX
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
@@ -36,23 +36,10 @@ def joints_of(ctx: "EstimationContext", d: DynamicsValue, relevant: list[str]) -
 
 
 def stand_ins(ctx: "EstimationContext", label: str, relevant: list[str]) -> tuple[list[str], str]:
-    """The joints a part word the object has no part of still names, and how: the unlabelled non-continuous
-    ``relevant`` joints (the word may name them), else the task-relevant ones when they stand in for the
-    category's main part the word names (:func:`~asset2sim.tasks.interpret.part_priors.stands_in_for`);
-    ([], "") when none does."""
-    free = unlabelled(ctx, relevant)
-    if free:
-        return free, "its unlabelled task-relevant joints"
-    moving = [n for n in relevant if ctx.asset.joint(n).type != "continuous"]
-    labels = [ctx.asset.link(ctx.asset.joint(n).child).semantic_label for n in moving]
-    if moving and stands_in_for(ctx.category, label, labels):
-        return moving, f"its task-relevant parts ({', '.join(dict.fromkeys(str(x) for x in labels))}), which stand in for a {ctx.category}'s {label}:"
-    return [], ""
-
-
-def unlabelled(ctx: "EstimationContext", joints: list[str]) -> list[str]:
-    """The non-continuous ``joints`` whose moving part carries no semantic label."""
-    return [n for n in joints if ctx.asset.joint(n).type != "continuous" and not ctx.asset.link(ctx.asset.joint(n).child).semantic_label]
+    """The non-continuous ``relevant`` joints a part word the object has no part of still names, and how
+    (:func:`~asset2sim.tasks.interpret.part_priors.stand_in_joints`)."""
+    labelled = [(n, ctx.asset.link(ctx.asset.joint(n).child).semantic_label) for n in relevant if ctx.asset.joint(n).type != "continuous"]
+    return stand_in_joints(ctx.category, label, labelled)
 
 
 def unit_fits(d: DynamicsValue, linear: bool) -> bool:
@@ -80,8 +67,8 @@ def state_targets(ctx: "EstimationContext", jr: JointStateRequest, relevant: lis
     """The joints a state request names: the joint of an override, the movable joints whose part carries the
     label, or for a request that names no part the non-continuous ``relevant`` ones; an ordinal picks among
     them by ``centers`` (joint -> (3,) box center, m). A label no part of the object carries moves nothing
-    (warned: [] returned) unless parts are unlabelled: then the unlabelled ``relevant`` joints (warned; the
-    word may name them). Warnings appended to ``warnings``."""
+    (warned: [] returned) unless some ``relevant`` joints stand in for it (:func:`stand_ins`, warned).
+    Warnings appended to ``warnings``."""
     if jr.selector == "joint":  # an override names the joint itself
         return [jr.joint] if jr.joint in relevant or any(j.name == jr.joint for j in ctx.asset.movable_joints()) else []
     named = jr.names_part

@@ -16,7 +16,7 @@ from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, QuantityOutcome, RequestFindings, RequestSpec
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
-from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, state_targets, unit_fits
+from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
 from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
@@ -179,9 +179,9 @@ def unmatched_properties(ctx: "EstimationContext") -> list[str]:
                        f"{moving_parts(ctx)}; not applied")
     for d in ctx.request.dynamics_values:
         if d.label is not None and not joints_named(ctx, d.label):
-            to = joints_of(ctx, d, task_relevant_joints(ctx))
+            to, how = stand_ins(ctx, d.label, task_relevant_joints(ctx))
             out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but no part of this {ctx.category} carries that label; its moving "
-                       f"parts: {moving_parts(ctx)}; " + (f"applied to its unlabelled task-relevant joints {to}" if to else "not applied"))
+                       f"parts: {moving_parts(ctx)}; " + (f"applied to {how} {to}" if to else "not applied"))
     return out
 
 
