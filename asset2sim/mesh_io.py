@@ -5,17 +5,24 @@
 line-parser fallback, other formats through :func:`load_trimesh`.
 :func:`obj_groups` / :func:`hull_point_sets` give the point sets whose convex
 hulls a simulator collides with; :func:`scan_obj_text` an OBJ as lines for
-tools that rewrite it. The MTL helpers of :mod:`asset2sim.mesh_materials` are
+tools that rewrite it. :func:`remember` keeps the bytes of a mesh file a
+refine writes for its engines, which :func:`file_bytes` gives back while the
+file is unchanged: the stages take them from memory. The MTL helpers of :mod:`asset2sim.mesh_materials` are
 re-exported. Format: Wavefront OBJ / MTL (Advanced Visualizer manual, B1/B2).
 """
 
 from __future__ import annotations
 
+import os
+import threading
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from asset2sim import file_memo
 
 from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs besides itself
     is_texture_statement,
@@ -27,7 +34,7 @@ from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs be
 )
 
 __all__ = [
-    "MeshCache", "MeshReadError", "ObjText", "hull_point_sets", "is_texture_statement", "load_trimesh", "mtl_libraries",
+    "MeshCache", "MeshReadError", "ObjText", "file_bytes", "forget_under", "remember", "write_file", "hull_point_sets", "is_texture_statement", "load_trimesh", "mtl_libraries",
     "mtl_texture_maps", "obj_groups", "obj_material_files", "obj_material_uses", "parse_vertex_lines", "read_mesh",
     "read_mtl", "read_obj", "scan_obj_text"
 ]
@@ -35,6 +42,47 @@ __all__ = [
 
 class MeshReadError(ValueError):
     """A mesh file is missing or cannot be parsed (the message names the file)."""
+
+
+#: absolute path -> (identity when remembered, its bytes or the file it is a copy of); oldest dropped past 512 MiB.
+_WRITTEN: OrderedDict[str, tuple[file_memo.FileIdentity, bytes | Path]] = OrderedDict()
+_WRITTEN_LOCK = threading.Lock()
+
+
+def remember(path: Path | str, data: bytes | Path) -> None:
+    """Keep what was just written to ``path``: its bytes, or the file it is a plain copy of."""
+    ident = file_memo.identity(path)
+    if ident is not None:
+        with _WRITTEN_LOCK:
+            _WRITTEN[os.path.abspath(path)] = (ident, data)
+            while sum(len(d) for _, d in _WRITTEN.values() if isinstance(d, bytes)) > 512 << 20:
+                _WRITTEN.popitem(last=False)
+
+
+def write_file(path: Path | str, data: bytes) -> Path:
+    """Write a mesh file atomically (:func:`asset2sim.atomic.write_bytes`, OSError) and :func:`remember` it."""
+    from asset2sim import atomic
+
+    remember(atomic.write_bytes(path, data), data)
+    return Path(path)
+
+
+def forget_under(folder: Path | str) -> None:
+    """Drop what :func:`remember` kept of files in ``folder``."""
+    prefix = os.path.join(os.path.abspath(folder), "")
+    with _WRITTEN_LOCK:
+        for key in [k for k in _WRITTEN if k.startswith(prefix)]:
+            del _WRITTEN[key]
+
+
+def file_bytes(path: Path | str) -> bytes:
+    """The bytes of ``path``: what :func:`remember` kept while the file still has the identity it had
+    then (:func:`asset2sim.file_memo.identity`), else read. Raises OSError."""
+    with _WRITTEN_LOCK:
+        hit = _WRITTEN.get(os.path.abspath(path))
+    if hit is not None and file_memo.identity(path) == hit[0]:
+        return hit[1] if isinstance(hit[1], bytes) else Path(hit[1]).read_bytes()
+    return Path(path).read_bytes()
 
 
 def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
@@ -148,11 +196,15 @@ def read_obj(data: bytes, where: str = "<obj>") -> tuple[np.ndarray, np.ndarray,
 
 
 def load_trimesh(path: Path | str, *, skip_materials: bool = False):
-    """``trimesh.load(path, force="mesh", process=False)`` (trimesh's exceptions propagate)."""
+    """``trimesh.load`` of :func:`file_bytes` ``(path)`` as one mesh, unprocessed, side files (textures,
+    glTF buffers) from its folder (trimesh's exceptions and OSError propagate)."""
+    import io
+
     import trimesh  # about 1 s to import; only non-OBJ files and primitives need it
 
     extra = {"skip_materials": True} if skip_materials else {}
-    return trimesh.load(str(path), force="mesh", process=False, **extra)
+    return trimesh.load(io.BytesIO(file_bytes(path)), file_type=Path(path).suffix.lstrip(".").lower(), force="mesh",
+                        process=False, resolver=trimesh.resolvers.FilePathResolver(str(path)), **extra)
 
 
 def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -166,7 +218,7 @@ def read_mesh(path: Path | str) -> tuple[np.ndarray, np.ndarray, list[str]]:
     path = Path(path)
     try:
         if path.suffix.lower() == ".obj":
-            return read_obj(path.read_bytes(), str(path))
+            return read_obj(file_bytes(path), str(path))
         loaded = load_trimesh(path, skip_materials=True)
         return np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces, np.int64), []
     except MeshReadError:
@@ -212,7 +264,7 @@ def obj_groups(path: Path | str) -> list[np.ndarray]:
         MeshReadError: the file cannot be read or a face names a missing vertex.
     """
     try:
-        text = Path(path).read_text(errors="replace")
+        text = file_bytes(path).decode(errors="replace")
     except OSError as exc:
         raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
     verts: list[tuple[float, float, float]] = []

@@ -342,11 +342,6 @@ class UrdfJoint(_ArrayEq):
         d = self.dynamics
         return 0.0 if d is None or d.friction is None else float(d.friction)
 
-    @property
-    def has_dynamics(self) -> bool:
-        """True when the joint has a ``<dynamics>`` element."""
-        return self.dynamics is not None
-
 
 @dataclass(eq=False)
 class UrdfModel(_ArrayEq):

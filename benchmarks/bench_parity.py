@@ -48,7 +48,7 @@ def inputs_hash(folder: Path) -> str:
 def parity_rows(folder: Path, engines: list[str], reuse: bool) -> tuple[list[dict], dict[str, float]]:
     """One parity row per engine (``parity_table``), run or reused; and the
     wall seconds per engine that ran."""
-    from asset2sim.tasks.check.parity import evaluate_engine, parity_table
+    from asset2sim.tasks.check.parity import evaluate_engines, parity_table
 
     digest = inputs_hash(folder)
     rows, seconds = [], {}
@@ -60,7 +60,7 @@ def parity_rows(folder: Path, engines: list[str], reuse: bool) -> tuple[list[dic
                 rows.append(stored["row"])
                 continue
         t0 = time.perf_counter()
-        row = parity_table({e: evaluate_engine(folder, e)})[0]
+        row = parity_table(evaluate_engines(folder, [e]))[0]
         seconds[e] = time.perf_counter() - t0
         row["wall_s"] = seconds[e]
         if row["status"] != "skipped":

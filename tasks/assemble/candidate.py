@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from asset2sim import urdf
+from asset2sim import mesh_io, urdf
 from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
@@ -123,7 +123,8 @@ class Workspace:
         return urdf.clone_model(self._model)
 
     def close(self) -> None:
-        """Remove the scratch folder."""
+        """Remove the scratch folder (and what :mod:`asset2sim.mesh_io` kept of its meshes)."""
+        mesh_io.forget_under(self.root)
         shutil.rmtree(self.root, ignore_errors=True)
 
     def __enter__(self) -> "Workspace":

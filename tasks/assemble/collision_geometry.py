@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import QhullError
 
-from asset2sim import array_cache, atomic, file_names, urdf
+from asset2sim import array_cache, atomic, file_names, mesh_io, urdf
 from asset2sim.engines.loading import mesh_hulls
 from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, MAX_PIECES_PER_LINK,
@@ -188,7 +188,7 @@ def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
 
     def content(path: Path) -> bytes | None:
         try:
-            return hashlib.sha256(path.read_bytes()).digest()
+            return hashlib.sha256(mesh_io.file_bytes(path)).digest()
         except OSError:
             return None
 
@@ -294,8 +294,8 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
             data = piece_obj(p)
             rel = f"{folder}/{safe}_hull{i}_{hashlib.sha256(data).hexdigest()[:12]}.obj"
             dst = file_names.join_inside(out_dir, rel)
-            if not (dst.is_file() and not dst.is_symlink() and dst.read_bytes() == data):
-                atomic.write_bytes(dst, data)
+            if not (dst.is_file() and not dst.is_symlink() and mesh_io.file_bytes(dst) == data):
+                mesh_io.write_file(dst, data)
             else:
                 atomic.announce([dst])
             kept.append(urdf.UrdfGeometry(kind="mesh", filename=rel, path=dst))

@@ -278,8 +278,10 @@ def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:
     # in one write of its record instead of one per edited file
     atomic.announce([*kept, *(d for _, d in todo), *(d for d, _ in edited)])
     atomic.copy_files(todo)
+    for src, dst in todo:
+        mesh_io.remember(dst, src)
     for dst, data in edited:
-        atomic.write_bytes(dst, data)
+        mesh_io.write_file(dst, data)
     for d in _walked_dirs(asset):
         (out_dir / d).mkdir(parents=True, exist_ok=True)
     return out

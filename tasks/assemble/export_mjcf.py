@@ -50,6 +50,11 @@ def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None =
         overlay = Overlay.model_validate(json.loads(p.read_text()))
     except Exception as exc:  # pydantic.ValidationError, JSONDecodeError
         raise ValueError(f"{p}: not a valid overlay: {exc}") from exc
+    return overlay_springs(overlay, initial_state)
+
+
+def overlay_springs(overlay: Overlay, initial_state: dict[str, float] | None = None) -> dict[str, Spring]:
+    """Joint springs of ``overlay`` as :func:`springs_from_overlay` reads them from a folder."""
     state = initial_state or {}
     return {name: Spring(stiffness=float(dyn.stiffness),
                          reference=float(dyn.spring_reference if dyn.spring_reference is not None else state.get(name, 0.0)))

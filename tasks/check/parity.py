@@ -1,8 +1,8 @@
 """Cross-simulator parity: the SPEC's physical-robustness metrics (penetration,
 rest stability, oscillation) of an output folder in several engines under the
 same conventions (``docs/design/simulators.md``). A missing engine is skipped,
-one that cannot load the asset fails; :func:`parity_table` gives report rows,
-:func:`worst_case` the verdict over every engine that ran.
+one that cannot load the asset fails; :func:`parity_table` gives report rows (the post-check fails on any engine
+that fails, ``PostCheck.passed``).
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics
 from asset2sim.tasks.assemble.export_mjcf import output_session_options
 
-from asset2sim.engines.base import EngineUnavailable
+from asset2sim.engines.base import EngineUnavailable, SessionOptions
 from asset2sim.engines.registry import open_session
-from asset2sim.tasks.assemble.write import read_root
 from asset2sim.output_folder import URDF_NAME
+from asset2sim.urdf import UrdfSource
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS
@@ -30,30 +30,34 @@ def _not_run(engine: str, key: str, reason: str, passed: bool | None) -> list[Me
                          engine=engine) for n in METRICS]
 
 
-def evaluate_engine(urdf_dir: Path, engine: str, *, initial_state: dict[str, float] | None = None,
-                    conventions: SimConventions | None = None) -> list[MetricResult]:
-    """[penetration (mm), rest stability, oscillation] of one output folder in one
-    engine (``initial_state`` overrides the folder's); a missing package gives
-    ``details.skipped``, a load or run error ``details.error`` and ``passed`` False.
+def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[str, float] | None = None,
+                     conventions: SimConventions | None = None) -> dict[str, list[MetricResult]]:
+    """engine -> [penetration (mm), rest stability, oscillation] of one output folder in each of ``engines``
+    (duplicates dropped; :func:`session_metrics`), ``initial_state`` overriding the folder's, the root as the
+    folder declares it.
 
     Raises:
         FileNotFoundError: no ``mobility.urdf`` in ``urdf_dir``.
         ValueError: invalid ``initial_state.json`` or ``overlay.json``.
     """
-    urdf_dir = Path(urdf_dir)
-    urdf = urdf_dir / URDF_NAME
+    urdf = Path(urdf_dir) / URDF_NAME
     if not urdf.is_file():
         raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
-    results = _evaluate_engine(urdf_dir, urdf, engine, initial_state, conventions)
-    fixed = read_root(urdf_dir).fixed
+    options = output_session_options(urdf_dir, initial_state, conventions)
+    return {e: session_metrics(urdf, e, options) for e in dict.fromkeys(engines)}
+
+
+def session_metrics(urdf: UrdfSource, engine: str, options: SessionOptions) -> list[MetricResult]:
+    """[penetration (mm), rest stability, oscillation] of ``urdf`` opened in ``engine`` with ``options``, each
+    with ``details["root"]``; a missing package gives ``details.skipped``, a load or run error
+    ``details.error`` and ``passed`` False."""
+    results = _session_metrics(urdf, engine, options)
     for m in results:  # how the root was held (the post-check's label, postcheck.root_label)
-        m.details["root"] = "fixed (mounted)" if fixed else "free (on the ground)"
+        m.details["root"] = "fixed (mounted)" if options.fixed_base else "free (on the ground)"
     return results
 
 
-def _evaluate_engine(urdf_dir: Path, urdf: Path, engine: str, initial_state: dict[str, float] | None,
-                     conventions: SimConventions | None) -> list[MetricResult]:
-    options = output_session_options(urdf_dir, initial_state, conventions)  # the root as the folder declares it
+def _session_metrics(urdf: UrdfSource, engine: str, options: SessionOptions) -> list[MetricResult]:
     conv = options.conventions
     try:
         session = open_session(engine, urdf, options)
@@ -76,20 +80,6 @@ def _evaluate_engine(urdf_dir: Path, urdf: Path, engine: str, initial_state: dic
         return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)
     finally:
         session.close()
-
-
-def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[str, float] | None = None,
-                     conventions: SimConventions | None = None) -> dict[str, list[MetricResult]]:
-    """:func:`evaluate_engine` for each of ``engines`` (duplicates dropped): engine -> its metrics.
-
-    Raises:
-        FileNotFoundError, ValueError: as :func:`evaluate_engine`.
-    """
-    out: dict[str, list[MetricResult]] = {}
-    for e in engines:
-        if e not in out:
-            out[e] = evaluate_engine(urdf_dir, e, initial_state=initial_state, conventions=conventions)
-    return out
 
 
 def _get(results: list[MetricResult], name: str) -> MetricResult | None:
@@ -121,28 +111,3 @@ def parity_table(results: dict[str, list[MetricResult]]) -> list[dict[str, Any]]
             "engine_notes": list(pen.details.get("engine_notes", [])) if pen is not None else [],
         })
     return rows
-
-
-def worst_case(results: dict[str, list[MetricResult]]) -> list[MetricResult]:
-    """The verdict over every engine that ran (``engine`` ``"worst"``): the
-    largest Phi (mm); rest stability and oscillation pass only if they pass in
-    every engine. ``details.per_engine`` keeps each engine's value and verdict.
-    """
-    out = []
-    for name in METRICS:
-        per = {}
-        for engine, res in results.items():
-            m = _get(res, name)
-            if m is None or "skipped" in m.details:
-                continue
-            per[engine] = {"value": m.value, "passed": m.passed, "error": m.details.get("error")}
-            if name == "penetration" and m.value is not None:
-                per[engine]["max_depth_mm"] = max((p["max_depth_mm"] for p in m.details.get("pairs", [])), default=0.0)
-        if not per:
-            out.append(MetricResult(name=name, value=None, unit=unit(name), passed=None, details={"skipped": "no engine ran"}, engine="worst"))
-            continue
-        values = [v["value"] for v in per.values() if v["value"] is not None]
-        value = max(values) if values else None
-        passed = None if name == "penetration" else all(v["passed"] is True for v in per.values())
-        out.append(MetricResult(name=name, value=value, unit=unit(name), passed=passed, details={"per_engine": per}, engine="worst"))
-    return out

@@ -22,6 +22,7 @@ from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, r
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
+from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.urdf import UrdfSource, path_of
 
 
@@ -188,7 +189,9 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
     def run_parity() -> None:
         nonlocal engine_results, parity_done
         if not parity_done:
-            engine_results = parity.evaluate_engines(path_of(urdf_path).parent, others, initial_state=initial_state, conventions=conv)
+            options = SessionOptions(initial_state=dict(initial_state), springs=overlay_springs(overlay, initial_state),
+                                     conventions=conv, **session_root_options(fixed))
+            engine_results = {e: parity.session_metrics(urdf_path, e, options) for e in others}
             parity_done = True
 
     nested = parent_child.parent_child_penetration(urdf_path, initial_state, engine, conv)  # the pairs the SPEC's Phi skips

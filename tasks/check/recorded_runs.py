@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from asset2sim import atomic, file_memo
+from asset2sim import file_memo, mesh_io
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check import robust_rest, sweep
@@ -36,7 +36,7 @@ def _mesh_identities(model: UrdfModel) -> list[tuple[str, str] | str]:
             if digest is None:
                 files = file_memo.identities([p])  # before reading: a file changed while read is not remembered
                 try:
-                    digest = atomic.sha256_file(p)
+                    digest = hashlib.sha256(mesh_io.file_bytes(p)).hexdigest()
                 except OSError:
                     out.append(str(g.filename))
                     continue

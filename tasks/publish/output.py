@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from asset2sim import atomic, file_names
+from asset2sim import atomic, file_names, mesh_io
 from asset2sim.output_paths import OutputError
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
@@ -29,5 +29,5 @@ def publish(candidate: Candidate, workspace: Workspace, out_dir: Path) -> write.
         except file_names.UnsafePath as exc:
             raise OutputError(f"collision piece {rel!r} would be written outside the output folder {out_dir}",
                               "OUTPUT_PATH_ESCAPES", Path(out_dir)) from exc
-        atomic.write_bytes(dst, src.read_bytes())
+        atomic.write_bytes(dst, mesh_io.file_bytes(src))
     return candidate.write_into(out_dir, copy=True)

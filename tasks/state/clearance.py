@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import QhullError
 
-from asset2sim import atomic, file_names, mesh_io
+from asset2sim import file_names, mesh_io
 from asset2sim.schemas.asset import GeometryRef
 from asset2sim.tasks.assemble.sliding_clearance import RUNNING_CLEARANCE, clear_sliding_contact, joint_velocity, sat_gap
 from asset2sim.tasks.state.collision import CollisionPiece
@@ -42,7 +42,7 @@ def link_pieces(model: UrdfModel, root: Path, link: str) -> list[np.ndarray]:
         if c.kind != "mesh" or not c.filename:
             continue
         path = Path(c.path) if c.path is not None else root / c.filename
-        v, _, _ = mesh_io.read_obj(path.read_bytes(), str(path))
+        v, _, _ = mesh_io.read_obj(mesh_io.file_bytes(path), str(path))
         if not len(v):
             continue
         v = np.asarray(v, float) * (c.mesh_scale if c.mesh_scale is not None else 1.0)
@@ -138,7 +138,7 @@ def write_piece_overrides(pieces: dict[str, list[np.ndarray]], scale: float, out
                 data = mesh_io.hull_obj(np.asarray(P, float) / scale)
             except QhullError as exc:
                 raise ValueError(f"link {ln!r}: collision piece {i} spans no volume") from exc
-            dst = atomic.write_bytes(file_names.join_inside(out_dir, rel), data)
+            dst = mesh_io.write_file(file_names.join_inside(out_dir, rel), data)
             ref = GeometryRef(role="collision", kind="mesh", filename=rel, path=dst.resolve())
             items.append(CollisionPiece(filename=rel, source=ref))
         out[ln] = items

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import array_cache, atomic, file_names
+from asset2sim import array_cache, file_names, mesh_io
 from asset2sim.frames import rpy_matrix
 from asset2sim.engines.registry import open_shape_world
 from asset2sim.mesh_io import MeshCache, read_mesh
@@ -322,7 +322,7 @@ def _write_pieces(asset: AssetDescription, changed: dict, out_dir: Path, folder:
                     continue
                 for i, (v, f) in enumerate(changed[(ln, k)]):
                     rel = f"{folder}/{file_names.file_stem(ln)}_{k}_{i}.obj"
-                    atomic.write_text(file_names.join_inside(out_dir, rel), _obj_text(v, f))
+                    mesh_io.write_file(file_names.join_inside(out_dir, rel), _obj_text(v, f).encode())
                     pieces_out.append(CollisionPiece(filename=rel, source=g))
             elif g.kind == "mesh" and g.filename:
                 pieces_out.append(CollisionPiece(filename=g.filename, source=g))

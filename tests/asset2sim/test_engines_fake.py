@@ -32,7 +32,7 @@ def test_contract_asset_satisfies_the_output_contract(tmp_path):
             assert link.inertial is not None and link.inertial.mass > 0
             assert np.all(np.linalg.eigvalsh(link.inertial.inertia) > 0)
     for j in m.movable_joints:
-        assert j.has_dynamics
+        assert j.dynamics is not None
     for link in m.links.values():
         for c in link.collisions + link.visuals:
             assert c.path.is_file() and not c.filename.startswith("/")

@@ -70,6 +70,35 @@ def test_other_formats_go_through_trimesh(tmp_path):
     assert np.allclose(np.ptp(sets, axis=0), (1, 2, 3))
 
 
+def test_a_written_mesh_is_read_from_memory_while_unchanged_and_from_disk_once_changed(tmp_path, monkeypatch):
+    box = trimesh.creation.box(extents=(1, 2, 3))
+    gltf = {name: data for name, data in box.export(file_type="gltf").items()}  # model.gltf + its buffer file
+    for name, data in gltf.items():
+        (tmp_path / name).write_bytes(data)
+    written = mesh_io.write_file(tmp_path / "box.obj", BOX.encode())
+    copy = tmp_path / "copy.obj"
+    copy.write_bytes(b"v 9 9 9\n")
+    mesh_io.remember(copy, written)  # a plain copy: its source's bytes are given
+    reads: list[Path] = []
+    real = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda self: reads.append(self) or real(self))
+    assert mesh_io.file_bytes(written) == BOX.encode() and mesh_io.file_bytes(copy) == BOX.encode()
+    assert [len(g) for g in mesh_io.obj_groups(written)] == [4, 3] and reads == [written]  # the copy's source, once
+    # the glTF read from its bytes, its buffer from its folder
+    v, f, _ = mesh_io.read_mesh(tmp_path / "model.gltf")
+    assert len(f) == 12 and np.allclose(np.ptp(v, axis=0), (1, 2, 3))
+    # changed on disk (a new inode): read again; forgotten: read again
+    (tmp_path / "other.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "other.obj").replace(written)
+    assert [len(g) for g in mesh_io.obj_groups(written)] == [3]
+    mesh_io.write_file(written, BOX.encode())
+    mesh_io.forget_under(tmp_path)
+    reads.clear()
+    assert mesh_io.file_bytes(written) == BOX.encode() and reads == [written]
+    with pytest.raises(mesh_io.MeshReadError, match="none.obj"):
+        mesh_io.obj_groups(tmp_path / "none.obj")
+
+
 def test_cache_reads_once_and_remembers_failures(tmp_path):
     p = _write(tmp_path)
     cache = mesh_io.MeshCache()

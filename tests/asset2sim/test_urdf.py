@@ -68,7 +68,7 @@ def test_model_values_match_the_file():
         else:
             assert math.isinf(j.upper)
         assert np.linalg.norm(j.axis) == pytest.approx(1.0)
-        assert not j.has_dynamics and j.damping == 0.0
+        assert j.dynamics is None and j.damping == 0.0
     for ln in model.links.values():
         for g in ln.visuals + ln.collisions:
             assert g.kind == "mesh" and g.path.is_file() and np.array_equal(g.scale, np.ones(3))

@@ -3,7 +3,9 @@ from the workspace, publish writing the final one."""
 
 from __future__ import annotations
 
+import builtins
 import dataclasses
+import io
 import os
 import traceback
 from pathlib import Path
@@ -27,14 +29,16 @@ CUBE_OBJ = "".join(f"v {x} {y} {z}\n" for x in (0, 0.01) for y in (0, 0.01) for 
 def refined(demo_root, tmp_path_factory):
     """box_lid refined (its damping escalates once: several candidates) with every
     call of the writer, the output folder's content when publish began and the
-    code that read a file of the workspace (the memos of read URDFs and
-    extracted assets off, so that every read reaches the file) recorded."""
+    code that read a file of the workspace, URDF or mesh, through Python's
+    ``open`` or ``os.open`` (the memos of read URDFs and extracted assets off,
+    so that every read reaches the file) recorded."""
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "box_lid")
     out = tmp_path_factory.mktemp("published") / "out"
     calls: list[Path] = []
     at_publish: list[list[str]] = []
     scratch_readers: list[Path] = []
-    real_write, real_publish, real_read = write.write_output, output.publish, safexml.read_xml_file
+    real_write, real_publish = write.write_output, output.publish
+    real_open, real_os_open = io.open, os.open
 
     def counting_write(asset, overlay, out_dir, *a, **k):
         calls.append(Path(out_dir).resolve())
@@ -44,24 +48,37 @@ def refined(demo_root, tmp_path_factory):
         at_publish.append(sorted(p.name for p in Path(out_dir).iterdir()))
         return real_publish(candidate, workspace, out_dir)
 
-    def watching_read(path, *a, **k):
-        if "asset2sim-candidates-" in str(path):  # the reader: the first frame outside the XML and URDF readers
-            frames = [Path(f.filename) for f in traceback.extract_stack()[:-1]]
-            scratch_readers.append(next(f for f in reversed(frames) if f.name not in XML_READERS))
-        return real_read(path, *a, **k)
+    def record(path) -> None:
+        if isinstance(path, (str, os.PathLike)) and "asset2sim-candidates-" in str(path) and not os.path.isdir(path):
+            # the reader: the innermost frame of the project outside the modules that read files on a caller's behalf
+            frames = [Path(f.filename) for f in traceback.extract_stack()[:-2]]
+            scratch_readers.append(next(f for f in reversed(frames) if PROJECT in f.parents and f.name not in READERS))
+
+    def watching_open(file, mode="r", *a, **k):
+        if not set(mode) & set("wax+"):
+            record(file)
+        return real_open(file, mode, *a, **k)
+
+    def watching_os_open(path, flags, *a, **k):
+        if not flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT):
+            record(path)
+        return real_os_open(path, flags, *a, **k)
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(write, "write_output", counting_write)
         mp.setattr(output, "publish", watching_publish)
-        mp.setattr(safexml, "read_xml_file", watching_read)
+        mp.setattr(io, "open", watching_open)
+        mp.setattr(builtins, "open", watching_open)
+        mp.setattr(os, "open", watching_os_open)
         mp.setattr(urdf._READ_MEMO, "get", lambda key: None)
         mp.setattr(extract._EXTRACT_MEMO, "get", lambda key: None)
         res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
     return res, out.resolve(), calls, at_publish, scratch_readers
 
 
-#: Modules that read XML on a caller's behalf (the caller is the reader that counts).
-XML_READERS = {"safexml.py", "urdf.py", "loading.py"}
+#: Modules that read files on a caller's behalf (the caller is the reader that counts).
+READERS = {"safexml.py", "urdf.py", "loading.py", "mesh_io.py", "atomic.py"}
+PROJECT = Path(__file__).resolve().parents[3]
 
 
 def test_the_output_folder_is_written_once_by_publish(refined):
