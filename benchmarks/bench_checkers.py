@@ -1,6 +1,7 @@
 """Third-party checkers over refined output folders: urdf_parser_py (ROS),
 urdf-validator, Drake (parse, finalize, spatial inertias valid, damping held)
-and mjcf-doctor (on mjcf/mobility.xml). Prints one row per object and the
+and mjcf-doctor (on mjcf/mobility.xml); simcheck when named (``--checkers
+simcheck``: it simulates, minutes an object). Prints one row per object and the
 counts; opt-in (extra ``checkers``: ``pip install 'asset2sim[checkers]'``, Drake
 about 170 MB).
 
@@ -27,10 +28,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from asset2sim.engines.quiet import quiet_stdout
-    from asset2sim.tasks.check.third_party import CHECKERS, MJCF_PATH, run_checkers
+    from asset2sim.tasks.check.third_party import CHECKERS, MJCF_PATH, OPT_IN, run_checkers
     from asset2sim.tasks.assemble.export_mjcf import export_mjcf
 
-    names = args.checkers.split(",") if args.checkers else list(CHECKERS)
+    names = args.checkers.split(",") if args.checkers else [n for n in CHECKERS if n not in OPT_IN]
     folders = sorted(p.parent for p in args.root.glob("*/mobility.urdf"))
     if args.ids:
         keep = set(args.ids.split(","))

@@ -78,31 +78,6 @@ def upload_folder(local_dir: Path | str, uri: str) -> dict[str, float | int]:
     return {"files": len(files), "bytes": total, "seconds": time.perf_counter() - t0}
 
 
-def download_folder(uri: str, local_dir: Path | str) -> Path:
-    """Download the folder ``uri`` into ``local_dir`` (created); returns it.
-
-    Raises:
-        FileNotFoundError: nothing under ``uri``.
-    """
-    import pyarrow.fs as pafs
-
-    loc = open_location(uri)
-    base = loc.base
-    infos = [i for i in loc.fs.get_file_info(pafs.FileSelector(base, allow_not_found=True, recursive=True))
-             if i.type == pafs.FileType.File]
-    if not infos:
-        raise FileNotFoundError(f"{uri}: no files")
-    local_dir = Path(local_dir)
-    for info in infos:
-        rel = info.path[len(base):].lstrip("/")
-        dest = local_dir / rel
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        with loc.fs.open_input_stream(info.path) as src, open(dest, "wb") as out:
-            while chunk := src.read(CHUNK_BYTES):
-                out.write(chunk)
-    return local_dir
-
-
 def store_complete(uri: str, input_hash: str, config_hash: str) -> bool:
     """True when the store folder ``uri`` holds a completion marker for
     exactly this input, refine configuration and code version, and every

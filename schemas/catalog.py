@@ -105,13 +105,3 @@ def arrow_schema(with_version: bool = False):
     if with_version:
         schema = schema.with_metadata({SCHEMA_VERSION_KEY: str(SCHEMA_VERSION).encode()})
     return schema
-
-
-def file_schema_version(metadata: dict | None) -> int:
-    """The row-schema version recorded in a Parquet file's schema metadata
-    (1 for files written before versions were recorded)."""
-    raw = (metadata or {}).get(SCHEMA_VERSION_KEY)
-    try:
-        return int(raw) if raw is not None else 1
-    except ValueError:
-        return 1

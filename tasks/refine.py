@@ -34,7 +34,7 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
-from asset2sim.tasks.assemble import export_mjcf, footprint, sliding_clearance, write
+from asset2sim.tasks.assemble import collision_geometry, export_mjcf, footprint, sliding_clearance, write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import export_usd, output
 from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
@@ -328,7 +328,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
                     att: _Attempt) -> _Attempt | None:
     """Stability by design through the opening after an unsteady attempt ``att``: the opened joints where,
     within their bands, the object stands steadiest (:func:`asset2sim.tasks.state.balance.steadiest_fractions`),
-    or, when statically steady yet toppled, the least opening each band allows. Stages 4-7 run once more from
+    or, when statically steady yet unstable or toppled in simulation, the least opening each band allows. Stages 4-7 run once more from
     there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
@@ -342,7 +342,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
                 + ", ".join(f"{n} opened to {f:.2f} of its range (allowed {intervals[n][0]:.2f}-{intervals[n][1]:.2f})" for n, f in fractions.items())
                 + f", where the object stands steadiest: static margin {before.margin * 1000:.3g} -> {after.margin * 1000:.3g} mm"
                 f" (asked >= {after.required * 1000:.3g} mm)")
-    elif att.check.stable and before.stable:
+    elif before.stable:  # statically steady, yet unstable or toppled in simulation
         fractions = _least_openings(att, intervals)
         if not fractions:
             return None
@@ -475,8 +475,9 @@ def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, 
 
 
 def _clearance_lines(notes: list[str]) -> list[str]:
-    """The writer's collision notes on running clearance and a levelled footprint."""
-    return [n for n in notes if sliding_clearance.RUNNING_CLEARANCE_NOTE in n or footprint.LEVEL_NOTE in n]
+    """The writer's collision notes on running clearance, a levelled footprint and pieces thinner than their part."""
+    return [n for n in notes if any(w in n for w in (sliding_clearance.RUNNING_CLEARANCE_NOTE, footprint.LEVEL_NOTE,
+                                                     collision_geometry.DENSITY_NOTE))]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: _StageLog,
@@ -538,13 +539,12 @@ def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config:
 
 
 def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], ws: Workspace, config: RefineConfig,
-                 log: _StageLog, chain_open: bool = False) -> tuple[Overlay, dict[str, ClosedState]]:
+                 log: _StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
     """Stage 6b: joint limits clipped to what the geometry allows at ``state`` (:mod:`asset2sim.tasks.geometry.limits`;
-    ``chain_open``: also against the carrying chain opened). Returns (overlay, closed ends)."""
+    with a carrying chain, also against the chain opened). Returns (overlay, closed ends)."""
     with open_session("pybullet", ws.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
                                                        conventions=config.sim)) as sess:
-        clips = limits.geometric_limits(sess, ws.model(), manipulation.closed_tuples(closed_out), state,
-                                        chain_open=chain_open)
+        clips = limits.geometric_limits(sess, ws.model(), manipulation.closed_tuples(closed_out), state)
     if any(c.clipped for c in clips.values()):
         overlay, notes = limits.apply_clips(overlay, clips)
         for line in notes:
@@ -588,7 +588,7 @@ def _repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[s
     passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
     for rep in repairs:
         ws.load(Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation))
-        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, ws, config, log, chain_open=rep.chain_open)
+        clipped, closed2 = _clip_limits(unclipped, closed_raw, state, ws, config, log)
         ov2, check2, rounds2 = _post_check(ctx, clipped, state, rep.overrides, urdf, config, ws, log,
                                            closed=manipulation.closed_tuples(closed2))
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]

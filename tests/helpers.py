@@ -177,6 +177,18 @@ def rest_tests_of_refine(report) -> int:
     return len(rounds) * (1 + len(robust_rest.TRIALS)) + len(full) * (len(RefineConfig().engines) - 1)
 
 
+def download_folder(uri: str, local_dir: Path) -> Path:
+    """The folder at the store ``uri`` copied into ``local_dir`` (``pyarrow.fs.copy_files``)."""
+    import pyarrow.fs as pafs
+
+    from asset2sim.flows import store
+
+    loc = store.open_location(uri)
+    local_dir.mkdir(parents=True, exist_ok=True)
+    pafs.copy_files(loc.base, str(local_dir), source_filesystem=loc.fs, destination_filesystem=pafs.LocalFileSystem())
+    return local_dir
+
+
 def catalog_reader_counts(root) -> dict[str, int]:
     """Rows of the Parquet catalog under ``root`` as a user reads them with the
     obvious calls: ``pandas.read_parquet``, ``pyarrow.dataset`` (hive

@@ -275,6 +275,21 @@ def build_kitchen_pot(folder: Path) -> Path:
     return b.write(folder)
 
 
+def build_bucket(folder: Path) -> Path:
+    """A bucket (1.0 x 1.1 x 1.0 units, open at the top) with a wire bail handle (``handle``, revolute
+    -1.3..1.3 rad about the axis through its two pivots on the side walls, upright at 0): it falls either
+    way onto the rim, as a real bail does."""
+    b = _Builder("u_bucket", "Bucket")
+    w, h, t, py = 0.5, 0.55, 0.03, 0.45
+    b.body("link_1", "bucket_body", _open_box(b, "bucket_body", w, h, w, t, _WHITE))
+    arms = [box_xyz(sx * (w + 0.01) - (0.02 if sx > 0 else 0.0), sx * (w + 0.01) + (0.0 if sx > 0 else 0.02), py - 0.03,
+                    h + 0.37, -0.015, 0.015) for sx in (1.0, -1.0)]
+    grip = box_xyz(-w - 0.03, w + 0.03, h + 0.33, h + 0.37, -0.015, 0.015)
+    b.moving("link_0", "hinge", "handle", [b.part("handle", [*arms, grip], _GREY)], "revolute", "link_1", (0.0, py, 0.0),
+             (1.0, 0.0, 0.0), -1.3, 1.3)
+    return b.write(folder)
+
+
 def build_washing_machine(folder: Path) -> Path:
     """A front-loading washing machine (0.6 x 0.85 x 0.6 units carcass with
     an open front) with a door (``door``, revolute 0-1.9 rad about the
@@ -357,4 +372,5 @@ UNSEEN_BUILDERS = (
     ("u_glasses", build_eyeglasses, "Eyeglasses"),
     ("u_usb", build_usb_swivel, "USB"),
     ("u_kettle", build_kettle, "Kettle"),
+    ("u_bucket", build_bucket, "Bucket"),
 )

@@ -259,8 +259,13 @@ def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) ->
     return _model_digest(model, mesh_path, limit, decompose, identity)
 
 
+#: Words of the note on a link denser over its pieces than its material allows.
+DENSITY_NOTE = "denser than its material"
+
+
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
-                      mesh_base: Path | None = None, *, decompose: bool = True, level: bool = False) -> list[str]:
+                      mesh_base: Path | None = None, *, decompose: bool = True, level: bool = False,
+                      max_density: dict[str, float] | None = None) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
     written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
     rewritten). Primitive collisions stay.
@@ -271,6 +276,8 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         state: the initial state (joint -> rad or m).
         mesh_base: folder of relative collision filenames without a ``path`` (default ``out_dir``).
         level: the object is free-standing: its footprint at ``state`` is made planar.
+        max_density: link -> the densest its material may be (kg/m^3): a link whose inertial mass over its
+            pieces' volume exceeds it is noted.
 
     Returns:
         notes (what changed).
@@ -300,4 +307,9 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
                 atomic.announce([dst])
             kept.append(urdf.UrdfGeometry(kind="mesh", filename=rel, path=dst))
         link.collisions = kept
+        vol, rho = sum(p.volume for p in pieces[name]), (max_density or {}).get(name)
+        if rho and link.inertial is not None and vol > 0 and link.inertial.mass > 1.01 * rho * vol:  # 1 %: float and cut slivers
+            notes.append(f"link {name!r}: {link.inertial.mass:.3g} kg in its collision pieces' {vol * 1e6:.3g} cm^3 is "
+                         f"{link.inertial.mass / vol:.3g} kg/m^3, {DENSITY_NOTE} ({rho:.3g} kg/m^3 at most): the pieces are "
+                         "thinner than the part its mass and inertia stand for")
     return notes

@@ -21,6 +21,7 @@ from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.assemble import collision_geometry
 from asset2sim.tasks.assemble.copied_meshes import copy_meshes, taken_paths
+from asset2sim.tasks.synthesize.validate_overlay import max_density
 from asset2sim.output_folder import OVERLAY_NAME, STATE_NAME, URDF_NAME, OutputError, check_location
 
 
@@ -83,7 +84,9 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
     if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
-        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free)
+        densest = {name: max_density(lp) for name, lp in overlay.links.items()}
+        notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free,
+                                                     max_density=densest)
         if collision_notes is not None:
             collision_notes.extend(notes)
     return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))

@@ -1,6 +1,5 @@
-"""What blocks a moving part: the link in its way, the movable joints that
-place that link, and the ranges that parts held in place leave a joint
-(shared by the joint sweep and the probes).
+"""What blocks a moving part: the link in its way and the movable joints that
+place that link (shared by the joint sweep and the probes).
 """
 
 from __future__ import annotations
@@ -11,7 +10,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import tree_path
-from asset2sim.urdf import UrdfModel, UrdfSource, model_of
+from asset2sim.urdf import UrdfModel, UrdfSource
 
 
 def fixed_root_options(state: dict[str, float], conventions: SimConventions | None = None,
@@ -19,25 +18,6 @@ def fixed_root_options(state: dict[str, float], conventions: SimConventions | No
     """Options of a session with the root fixed, gravity off and no ground (the sweep's) at ``state``."""
     return SessionOptions(initial_state=dict(state), springs=dict(springs or {}), fixed_base=True, gravity=False,
                           ground=False, conventions=conventions or SimConventions())
-
-
-def held_ranges(urdf: UrdfSource, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                conventions: SimConventions | None = None) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
-    """The ranges the sweep can demand with the other joints held at ``state``:
-    each joint's (q_closed, direction, range) of ``closed`` (rad or m) cut where
-    its moving part meets a link of the chain that carries it
-    (:func:`asset2sim.tasks.geometry.limits.geometric_limits`, ``against="held"``,
-    in PyBullet). Returns (closed tuples, joint -> note for the joints cut)."""
-    out = dict(closed)
-    notes = {}
-    with open_session("pybullet", urdf, fixed_root_options(state, conventions)) as s:
-        # any contact ends the range (1 mm, no stop confirmation): the drive stalls at it
-        clips = limits.geometric_limits(s, model_of(urdf), closed, state, against="held", confirm_stops=False)
-    for name, c in clips.items():
-        if c.clipped:
-            out[name] = (c.q_closed, c.direction, c.open_range)
-            notes[name] = "held parts in the way: " + "; ".join(c.notes)
-    return out, notes
 
 
 #: Opening fraction under which a part whose drive stalls counts as shut in by another part.

@@ -37,8 +37,6 @@ class CollisionRepair:
     """link -> collision pieces (link frame, m): every override so far plus this repair's"""
     notes: list[str] = field(default_factory=list)
     """what changed, before -> after, for the report"""
-    chain_open: bool = False
-    """clip the limits again against the carrying chain with the joints between open"""
 
 
 def held_together_pairs(metrics: list[MetricResult]) -> list[tuple[str, str]]:
@@ -80,8 +78,6 @@ def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_m
     Raises:
         OSError: a collision file cannot be read or written.
     """
-    if any(limits.chain_links(model, j) for j in blocked):
-        yield CollisionRepair("limits against the carrying chain", overrides, [], chain_open=True)
     repair = clearance_repair(model, urdf, blocked, state, overrides, scale, out_dir, folder)
     if repair is not None:
         yield repair

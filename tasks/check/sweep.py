@@ -15,7 +15,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, held_ranges, joints_between
+from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
@@ -322,9 +322,6 @@ def run_sweep(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, floa
     subtrees = joint_subtrees(model)
     run = SweepRun(engine)
     springs = dict(springs or {})
-    notes: dict[str, str] = {}
-    if cfg.hold_others and closed:
-        closed, notes = held_ranges(urdf, closed, initial_state, conv)
     # a held joint's spring load is taken by its hold: one session per set of acting springs
     groups: dict[tuple[str, ...], list[str]] = {}
     for name in closed:
@@ -356,8 +353,6 @@ def run_sweep(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, floa
             session.close()
     order = list(closed)
     run.joints.sort(key=lambda j: order.index(j.joint))
-    for j in run.joints:
-        j.range_note = "; ".join(x for x in (notes.get(j.joint, ""), j.range_note) if x)
     return run
 
 

@@ -1,7 +1,9 @@
 """Third-party checkers on an output folder: ``urdf_parser_py`` (PyPI
 ``urdf-parser-py``), ``urdf-validator`` (command ``urdf_validate``),
-``mjcf-doctor`` (on ``mjcf/mobility.xml``) and Drake (``MultibodyPlant``:
-inertia validity, damping read back). All are optional (extra ``checkers``);
+``mjcf-doctor`` (on ``mjcf/mobility.xml``), Drake (``MultibodyPlant``:
+inertia validity, damping read back) and, on request only (:data:`OPT_IN`: it
+simulates in MuJoCo and PyBullet, up to minutes an object), ``simcheck``
+(densities, inertia against geometry, pass-through, drops and sweeps). All are optional (extra ``checkers``);
 a missing one raises :class:`CheckerUnavailable`. Findings are reported as
 the tool gives them; false alarms are discussed in ``docs/design/simulators.md``.
 """
@@ -20,6 +22,7 @@ from pathlib import Path
 
 from asset2sim.engines.loading import read_urdf
 from asset2sim.output_folder import URDF_NAME
+from asset2sim.tasks.assemble.write import read_root
 
 MJCF_PATH = "mjcf/mobility.xml"
 #: Wall-clock limit for one run of a checker's command line (s).
@@ -133,11 +136,7 @@ def check_mjcf_doctor(xml: Path) -> CheckerResult:
         return res
     for rep in reports:
         for f in rep.get("findings", []):
-            text = f"{f.get('code')} {f.get('subject')}: {f.get('message')}"
-            if f.get("level") == "ERROR":
-                res.errors.append(text)
-            elif f.get("level") == "WARN":
-                res.warnings.append(text)
+            _add(res, f.get("level"), f"{f.get('code')} {f.get('subject')}: {f.get('message')}", "ERROR", "WARN")
         res.details = {"errors": rep.get("errors"), "warnings": rep.get("warnings")}
     return res
 
@@ -208,6 +207,37 @@ def check_drake(urdf: Path) -> CheckerResult:
     return res
 
 
+def check_simcheck(urdf: Path) -> CheckerResult:
+    """Run ``simcheck check --format json URDF`` (the root held as the output folder declares it); its error and
+    warning findings as ``check: message``.
+
+    Raises:
+        CheckerUnavailable: simcheck is not installed.
+    """
+    cmd = _command("simcheck")
+    res = CheckerResult("simcheck", str(urdf))
+    root = "--fixed-base" if read_root(Path(urdf).parent).fixed else "--free-base"
+    with tempfile.TemporaryDirectory() as tmp:
+        report = Path(tmp) / "simcheck.json"
+        proc = subprocess.run([cmd, "check", "--object", root, "--no-config", "--no-cache", "--fail-on", "never", "-q",
+                               "--json", str(report), str(Path(urdf).resolve())], capture_output=True, text=True,
+                              timeout=COMMAND_TIMEOUT, cwd=tmp)
+        if not report.is_file():
+            res.errors.append(f"no report (exit {proc.returncode}): {(proc.stderr or proc.stdout).strip()[-300:]}")
+            return res
+        asset = json.loads(report.read_text())  # one object per file (a list for several)
+    for check in asset.get("results", []):
+        for f in check.get("findings", []):
+            _add(res, f.get("severity"), f"{check.get('id')}: {f.get('message')}", "error", "warning")
+    res.details = {"verdict": asset.get("verdict"), "score": asset.get("score"), "engines": asset.get("engines")}
+    return res
+
+
+def _add(res: CheckerResult, level: str | None, text: str, error: str, warning: str) -> None:
+    """``text`` among ``res``'s errors when ``level`` is the tool's ``error``, its warnings when ``warning``."""
+    {error: res.errors, warning: res.warnings}.get(level or "", []).append(text)
+
+
 def _text(x) -> str:
     if isinstance(x, dict):
         return "; ".join(f"{k}={v}" for k, v in x.items() if v not in (None, "", []))
@@ -220,11 +250,14 @@ CHECKERS = {
     "urdf-validator": (check_urdf_validator, URDF_NAME),
     "drake": (check_drake, URDF_NAME),
     "mjcf-doctor": (check_mjcf_doctor, MJCF_PATH),
+    "simcheck": (check_simcheck, URDF_NAME),
 }
+#: Checkers run only when named.
+OPT_IN = {"simcheck"}
 
 
 def run_checkers(out_dir: Path, names: list[str] | None = None) -> dict[str, CheckerResult | str]:
-    """Every checker of :data:`CHECKERS` (or ``names``) on an output folder:
+    """Every checker of :data:`CHECKERS` but :data:`OPT_IN` (or ``names``) on an output folder:
     name -> :class:`CheckerResult`, or why it did not run.
 
     Raises:
@@ -232,7 +265,7 @@ def run_checkers(out_dir: Path, names: list[str] | None = None) -> dict[str, Che
     """
     out_dir = Path(out_dir)
     out: dict[str, CheckerResult | str] = {}
-    for name in names or list(CHECKERS):
+    for name in names or [n for n in CHECKERS if n not in OPT_IN]:
         fn, rel = CHECKERS[name]
         path = out_dir / rel
         if not path.is_file():

@@ -123,8 +123,11 @@ def _chain_far_end(session, model: UrdfModel, name: str, sub: list[str], closed:
 
 
 def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, float, float]], state: dict[str, float],
-                     against: str = "stops", confirm_stops: bool = True, chain_open: bool = False) -> dict[str, LimitClip]:
-    """Geometric limits of every joint of ``closed`` (module docstring).
+                     confirm_stops: bool = True) -> dict[str, LimitClip]:
+    """Geometric limits of every joint of ``closed`` (module docstring): each joint's range against the links
+    rigid with its parent (:func:`rigid_group`) and, for a part carried by a chain of other parts (a stapler's
+    magazine hinged on its top), against the chain's links with the chain's joints at the state and open
+    (``chain_open``): a limit the part reaches in neither is clipped where it meets them.
 
     Args:
         session, model: a fixed-base :class:`~asset2sim.engines.base.SimSession` of the URDF ``model``.
@@ -132,10 +135,6 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
         state: joint -> position (rad or m) the other joints hold (the sweep's start state).
         confirm_stops: a contact ends the range only when its excess reaches :data:`STOP_DEPTH`
             further on (the end then at the contact's onset); False: any contact.
-        against: ``"stops"``: the links rigid with the joint's parent (:func:`rigid_group`), and the
-            chain scan with ``chain_open``; ``"held"``: only the links of :func:`chain_links`, posed by the joints
-            between held at ``state``, the far end only.
-        chain_open: with ``against="stops"``, the chain scan too (refine's repair of a sweep that stopped short).
 
     Returns:
         joint -> :class:`LimitClip` (continuous joints and joints not in the session are left out).
@@ -152,14 +151,11 @@ def geometric_limits(session, model: UrdfModel, closed: dict[str, tuple[float, f
             continue
         session.set_joint_positions({**state, name: qc})
         sub = subs.get(name, [session.joint_child[name]])
-        if against == "stops":
-            pairs = collision_pairs(session, sub, rigid_group(model, model.joint(name).parent) - set(sub))
-        else:  # the links of the chain that carries the joint: its ancestors beyond the parent's rigid group
-            pairs = collision_pairs(session, sub, chain_links(model, name) - set(sub))
+        pairs = collision_pairs(session, sub, rigid_group(model, model.joint(name).parent) - set(sub))
         out[name] = _raw_clip(name, lo, hi, qc, d, rng)
         if pairs:
             scan = _JointScan(session, name, lo, hi, qc, d, rng, pairs, STOP_DEPTH if confirm_stops else None)
-            out[name] = scan.clip(out[name], model, sub, parent_of, closed, state, against == "stops", chain_open)
+            out[name] = scan.clip(out[name], model, sub, parent_of, closed, state)
     session.set_joint_positions(state)
     return out
 
@@ -206,15 +202,14 @@ class _JointScan:
         return abs(raw - end) > MIN_CLIP_FRACTION * self.rng
 
     def clip(self, clip: LimitClip, model: UrdfModel, sub: list[str], parent_of: dict[str, str],
-             closed: dict[str, tuple[float, float, float]], state: dict[str, float], stops: bool,
-             chain_open: bool) -> LimitClip:
+             closed: dict[str, tuple[float, float, float]], state: dict[str, float]) -> LimitClip:
         """``clip`` with the clipped limits, or the raw limits with a note."""
         qs, depth = depth_scan(self.session, self.name, self.pairs, self.lo, self.hi, self.qc, SCAN_SAMPLES)
         k_c = int(np.flatnonzero(qs == self.qc)[0])
         # baseline: a parent-child pair's depth at the closed end; any other pair's least over the range
         adjacent = np.array([parent_of.get(a) == b or parent_of.get(b) == a for a, b in self.pairs])
         self.base = np.where(adjacent, depth[k_c], depth.min(axis=0))
-        q_close = self.closed_end(clip, qs, depth, k_c) if stops else float(self.qc)
+        q_close = self.closed_end(clip, qs, depth, k_c)
         if q_close is None:
             return clip
         far_raw, back_raw = (self.hi, self.lo) if self.d > 0 else (self.lo, self.hi)
@@ -226,11 +221,9 @@ class _JointScan:
             clip.blocked_by = who
             clip.notes = clip.notes[-1:]
             return clip
-        chain_end = None
-        if stops and chain_open:
-            chain_end = _chain_far_end(self.session, model, self.name, sub, closed, state, q_close, far_raw, self.rng)
+        chain_end = _chain_far_end(self.session, model, self.name, sub, closed, state, q_close, far_raw, self.rng)
         far, who = self.far_end(clip, far, who, q_close, far_raw, chain_end)
-        back = self.back_end(clip, q_close, back_raw, stops)
+        back = self.back_end(clip, q_close, back_raw)
         clip.lower, clip.upper = (back, far) if self.d > 0 else (far, back)
         clip.q_closed, clip.open_range = q_close, abs(far - q_close)
         q0 = state.get(self.name)
@@ -281,15 +274,15 @@ class _JointScan:
             return far, who
         return float(far_raw), who
 
-    def back_end(self, clip: LimitClip, q_close: float, back_raw: float, stops: bool) -> float:
-        """The limit beyond the closed end: the new closed end when it moved, else (``stops`` only) the
+    def back_end(self, clip: LimitClip, q_close: float, back_raw: float) -> float:
+        """The limit beyond the closed end: the new closed end when it moved, else the
         free end towards ``back_raw`` at its contact's onset when it clips, else ``back_raw``."""
         side = "lower" if self.d > 0 else "upper"
         back = float(back_raw)
         if q_close != self.qc:
             back = q_close
             clip.notes.append(_limit_note(side, back_raw, back, "): the new closed end"))
-        elif stops and self.clips(back_raw, self.qc):
+        elif self.clips(back_raw, self.qc):
             self.session.set_joint_positions({self.name: self.qc})
             b, who_b = self.free_end(self.qc, back_raw, self.stop_depth)
             if self.clips(back_raw, b):

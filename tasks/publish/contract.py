@@ -189,14 +189,6 @@ def write_job_record(work_dir: Path | str, record: JobRecord) -> Path:
     return atomic.write_json(Path(work_dir) / JOB_RECORD_NAME, record.model_dump(mode="json"))
 
 
-def read_job_record(work_dir: Path | str) -> JobRecord | None:
-    """The job record of ``work_dir``; None when absent or unreadable."""
-    try:
-        return JobRecord.model_validate_json(atomic.read_regular(Path(work_dir) / JOB_RECORD_NAME, MAX_RECORD_BYTES))
-    except (OSError, ValueError):
-        return None
-
-
 def resumable_output(candidates: list[dict[str, Any]], input_hash: str, config_hash: str,
                      refine_config_hash: str) -> JobRecord | None:
     """The first of ``candidates`` (:class:`JobRecord` dicts of earlier runs without a catalog row, newest

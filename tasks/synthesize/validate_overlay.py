@@ -64,9 +64,33 @@ class ValidationPolicy:
 MIN_LINK_MASS_FRACTION = 1e-3
 
 
-def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None) -> None:
-    """Raise links below :data:`MIN_LINK_MASS_FRACTION` of the total to that floor (inertia alike); with
-    ``asset``, joints whose moving subtree got heavier get friction, damping and axis inertia times its ratio."""
+#: Densest a link may be, as a multiple of its material's density (``materials.yaml``): a part is at most
+#: solid; the margin covers the spread of grades within a material family in the tables cited there (ABS
+#: 1020-1080, carbon steels 7750-8050 kg/m^3) and metal inserts in plastic parts.
+MAX_DENSITY_FACTOR = 1.25
+#: Densest any link may be without a known material, kg/m^3 (brass, the densest material of ``materials.yaml``,
+#: x :data:`MAX_DENSITY_FACTOR`).
+MAX_DENSITY = 8500.0 * MAX_DENSITY_FACTOR
+
+
+def max_density(lp: LinkPhysics) -> float:
+    """The densest a link of physics ``lp`` may be, kg/m^3: :data:`MAX_DENSITY_FACTOR` x its material's
+    density, :data:`MAX_DENSITY` without one."""
+    return lp.density * MAX_DENSITY_FACTOR if lp.density else MAX_DENSITY
+
+
+def solid_volume(geom: LinkGeometry | None, scale: float) -> float | None:
+    """The volume a link's geometry (scale 1) encloses at ``scale``, m^3; None for an open surface or none."""
+    if geom is None or not geom.volume > 0 or "open_shell" in geom.volume_method:
+        return None
+    return geom.volume * scale**3
+
+
+def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None,
+                       geometry: dict[str, LinkGeometry] | None = None) -> None:
+    """Raise links below :data:`MIN_LINK_MASS_FRACTION` of the total to that floor (inertia alike), never
+    beyond :func:`max_density` over :func:`solid_volume` (a density its material cannot have); with ``asset``,
+    joints whose moving subtree got heavier get friction, damping and axis inertia times its ratio."""
     before = {n: lp.mass for n, lp in ov.links.items()}
     masses = {n: lp.mass for n, lp in ov.links.items() if math.isfinite(lp.mass) and lp.mass > 0}
     total = sum(masses.values())
@@ -80,13 +104,20 @@ def _raise_light_links(ov: Overlay, add, asset: AssetDescription | None = None) 
         floor = new
     for name, lp in list(ov.links.items()):
         if name in masses and lp.mass < floor * (1 - 1e-9):
-            k = floor / lp.mass
+            vol, rho = solid_volume((geometry or {}).get(name), ov.scale), max_density(lp)
+            target = floor if vol is None else min(floor, max(vol * rho, lp.mass))
+            why = (f"; not to the floor {floor:.3g} kg: {floor / vol:.3g} kg/m^3 in its {vol * 1e6:.3g} cm^3, denser than "
+                   f"its material ({rho:.3g} kg/m^3 at most); the mass ratio stays below the solver floor") if target < floor else ""
             add("OVL_MASS_TOO_SMALL", "warning", name,
-                f"mass {lp.mass:.3g} kg is below {MIN_LINK_MASS_FRACTION:g} of the object's {total:.4g} kg; raised to {floor:.3g} kg "
-                "(inertia scaled alike)", fixed=True)
+                f"mass {lp.mass:.3g} kg is below {MIN_LINK_MASS_FRACTION:g} of the object's {total:.4g} kg; "
+                + (f"raised to {target:.3g} kg (inertia scaled alike){why}" if target > lp.mass else f"kept{why}"),
+                fixed=target > lp.mass)
+            if target <= lp.mass:
+                continue
             ov.links[name] = lp.model_copy(update={
-                "mass": floor, "inertia": Inertia.from_matrix(lp.inertia.matrix() * k),
-                "source": lp.source + "; mass raised to the floor by validator",
+                "mass": target, "inertia": Inertia.from_matrix(lp.inertia.matrix() * (target / lp.mass)),
+                "source": lp.source + ("; mass raised to the floor by validator" if target == floor else
+                                       "; mass raised by validator to the densest its material allows"),
             })
     if asset is None:
         return
@@ -200,7 +231,7 @@ def validate_overlay(overlay: Overlay, asset: AssetDescription, geometry: dict[s
             _fill_link(ov, ln, geometry.get(ln.name), s, total_known, add)
         else:
             _check_link(ov, ln.name, lp, geometry.get(ln.name), s, add)
-    _raise_light_links(ov, add, asset)
+    _raise_light_links(ov, add, asset, geometry)
     limits = scaled_limits(asset, s)
     for name, jd in movable.items():
         _check_joint(ov, name, jd.type, limits[name], add)

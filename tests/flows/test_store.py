@@ -13,7 +13,7 @@ from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import store
 from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.output_folder import MARKER_NAME
-from tests.helpers import local_s3_server
+from tests.helpers import download_folder, local_s3_server
 
 try:
     from .conftest import make_project
@@ -61,7 +61,7 @@ def test_upload_marker_last_and_completeness_read_from_the_store(s3_server, tmp_
     assert up["files"] == 3
     assert store.store_complete(uri, "i", "c")
     assert not store.store_complete(uri, "other", "c") and not store.store_complete(uri, "i", "other")
-    back = store.download_folder(uri, tmp_path / "back")
+    back = download_folder(uri, tmp_path / "back")
     assert is_complete(back, "i", "c")
     import boto3
 
@@ -101,7 +101,7 @@ def test_catalog_and_outputs_round_trip_through_a_local_s3_server(s3_server, tmp
     assert f"refined/gen/{first['run']}/comparison.json" in keys  # the run's report files beside its assets
     assert not list((tmp_path / "worker-tmp").rglob(MARKER_NAME))  # local copies removed after the upload
     # the folder comes back whole
-    back = store.download_folder(rows.loc["box_lid", "out_dir"], tmp_path / "back")
+    back = download_folder(rows.loc["box_lid", "out_dir"], tmp_path / "back")
     assert is_complete(back, rows.loc["box_lid", "input_hash"], rows.loc["box_lid", "refine_config_hash"])
 
     # rerun: the skip rule reads the store

@@ -1,7 +1,8 @@
 """Categories the dev set lacks, on generated assets (tests/unseen_assets.py):
 a safe with a dial on its door, a toaster with a lever and a dial, a capped
 bottle, a desk with a drawer, a range oven with a drop-down door, a pot with
-a lid, a front-loading washing machine, a kettle, folding glasses. Each is
+a lid, a front-loading washing machine, a kettle, folding glasses, a bucket
+with a bail handle. Each is
 refined for a short request of the hidden set's kind and must be
 interaction-ready on every tier (probes included), recognised as its
 category, mounted as the category's prior says, with the requested joint in
@@ -16,6 +17,7 @@ from asset2sim.tasks.interpret.mounting import category_mounting
 from asset2sim.tasks.refine import refine_asset
 from tests.unseen_assets import (
     build_bottle,
+    build_bucket,
     build_eyeglasses,
     build_kettle,
     build_kitchen_pot,
@@ -36,6 +38,7 @@ CASES = [
     (build_washing_machine, "WashingMachine", "A washing machine with its door fully open.", "joint_0", "fully"),
     (build_kettle, "Kettle", "A kettle, halfway open.", "joint_0", "halfway"),
     (build_eyeglasses, "Eyeglasses", "Eyeglasses, fully open.", "joint_1", "fully"),
+    (build_bucket, "Bucket", "A bucket with its handle halfway open.", "joint_0", "halfway"),
 ]
 
 

@@ -11,10 +11,12 @@ from pathlib import Path
 
 import pytest
 
+from asset2sim import urdf
 from tests.contract_asset import write_contract_asset
 from asset2sim.tasks.check.third_party import (
     check_drake,
     check_mjcf_doctor,
+    check_simcheck,
     check_urdf_parser_py,
     check_urdf_validator,
     run_checkers,
@@ -33,6 +35,7 @@ needs_parser = pytest.mark.skipif(not _has_module("urdf_parser_py"), reason="urd
 needs_drake = pytest.mark.skipif(not _has_module("pydrake"), reason="drake not installed")
 needs_validator = pytest.mark.skipif(not _has_command("urdf_validate"), reason="urdf-validator not installed")
 needs_doctor = pytest.mark.skipif(not _has_command("mjcf-doctor"), reason="mjcf-doctor not installed")
+needs_simcheck = pytest.mark.skipif(not _has_command("simcheck"), reason="simcheck not installed")
 
 
 @pytest.fixture
@@ -94,6 +97,23 @@ def test_mjcf_doctor_finds_no_error_in_the_exported_mjcf(contract):
     assert r.passed, r.errors
     # the SPEC's 1/240 s step is larger than mjcf-doctor's taste: a warning, documented
     assert all(not w.startswith("timestep_large") or "0.0041" in w for w in r.warnings)
+
+
+@needs_simcheck
+def test_simcheck_passes_the_contract_and_flags_a_lid_of_lead_by_the_ton(contract):
+    """simcheck (opt-in) on the contract asset: no error; the lid made 100,000 x heavier is a density error."""
+    r = check_simcheck(contract / "mobility.urdf")
+    assert r.passed, r.errors
+    assert r.details["verdict"] in ("PASS", "WARN")
+    p = contract / "mobility.urdf"
+    model = urdf.read_urdf(p)
+    lid = model.joint("lid_hinge").child
+    model.links[lid].inertial.mass *= 1e5
+    model.links[lid].inertial.inertia = model.links[lid].inertial.inertia * 1e5
+    p.write_bytes(urdf.write_urdf(model))
+    r = check_simcheck(p)
+    assert any(e.startswith("inertia.density") and lid in e for e in r.errors), r.errors
+    assert "simcheck" not in run_checkers(contract)  # opt-in
 
 
 def test_missing_files_and_packages_are_reported_not_raised(tmp_path):

@@ -11,6 +11,7 @@ from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
 from asset2sim.tasks.publish.contract import (
     MARKER_NAME,
     REPORT_NAME,
+    JOB_RECORD_NAME,
     JobRecord,
     Measurement,
     Prepared,
@@ -22,7 +23,6 @@ from asset2sim.tasks.publish.contract import (
     flow_config_hash,
     is_complete,
     manifest_row_id,
-    read_job_record,
     refined_output,
     resumable_output,
     run_hash,
@@ -108,7 +108,7 @@ def test_a_complete_folder_of_an_earlier_run_is_resumable_for_the_same_job_only(
     rec = JobRecord(job={"asset_id": "lap", "run_id": "run1", "out_dir": str(out)}, input_hash="IN",
                     config_hash="FCFG", refine_config_hash="RCFG")
     write_job_record(work, rec)
-    cands = [read_job_record(work).model_dump(mode="json")]
+    cands = [JobRecord.model_validate_json((work / JOB_RECORD_NAME).read_bytes()).model_dump(mode="json")]
     assert resumable_output(cands, "IN", "FCFG", "RCFG") == rec
     assert resumable_output(cands, "CHANGED", "FCFG", "RCFG") is None  # another input
     assert resumable_output(cands, "IN", "OTHER", "RCFG") is None  # other flow settings (extras, refine function ...)
@@ -118,7 +118,6 @@ def test_a_complete_folder_of_an_earlier_run_is_resumable_for_the_same_job_only(
     assert value.skipped and value.report == _report() and value.out_dir == str(out) and value.tokens == 0
     (out / "mobility.urdf").write_text("<robot name='edited'/>")  # no longer complete
     assert resumable_output(cands, "IN", "FCFG", "RCFG") is None
-    assert read_job_record(tmp_path / "nowhere") is None
 
 
 def test_rows_of_bad_manifest_rows_have_unique_ids_and_their_own_failure_mode():
