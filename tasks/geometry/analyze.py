@@ -24,7 +24,7 @@ from asset2sim.frames import rpy_matrix
 from asset2sim.mesh_io import MeshCache
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, LinkDesc, LinkGeometry
 from asset2sim.tasks.geometry.moments import (REGULARIZATION, SolidMoments, inertia_from_second_moment, regularize_inertia,
-                                              surface_properties, watertight_properties)
+                                              single_sided, surface_properties, watertight_properties)
 from asset2sim.tasks.geometry.surface import MeshAnalysisError, link_surface
 from asset2sim.tasks.geometry.voxels import (CLOSE_GAPS, LAYER_CORRECTION, MAX_VOXELS, VOXELS_PER_AXIS, grid_pitch,
                                              voxel_properties)
@@ -215,6 +215,8 @@ def _analyze_surface(link: LinkDesc, prefer, voxels_per_axis: int, max_voxels: i
     if reg_s or reg_h:
         which = " and ".join(n for n, r in (("inertia_solid", reg_s), ("inertia_shell", reg_h)) if r)
         notes.append(f"{which}: flat or line-like geometry, isotropic {REGULARIZATION:g} x trace regularisation added")
+    if analytic is None:  # the area a shell's mass takes: a surface drawn twice, once facing each way, counts once
+        area = surface_properties(v, single_sided(v, f))[0]
     return LinkGeometry(link=link.name, volume=volume, volume_method=method, watertight=watertight, area=float(area),
                         bbox_min=_tup3(bmin), bbox_max=_tup3(bmax), com=_tup3(com), inertia_solid=_tup33(i_solid),
                         inertia_shell=_tup33(i_shell), n_meshes=len(surf.sources), n_faces=int(len(f)), notes=notes)

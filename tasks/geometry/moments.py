@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["REGULARIZATION", "SolidMoments", "inertia_from_second_moment", "regularize_inertia", "surface_properties",
+__all__ = ["REGULARIZATION", "SolidMoments", "inertia_from_second_moment", "regularize_inertia", "single_sided", "surface_properties",
            "watertight_properties"]
 
 #: Relative size of the isotropic inertia regularisation.
@@ -40,6 +40,17 @@ def regularize_inertia(inertia: np.ndarray, scale_m2: float, rel: float = REGULA
     tr = float(np.trace(i))
     eps = rel * (tr if tr > rel * scale_m2 else max(float(scale_m2), 1e-300))
     return i + eps * np.eye(3), True
+
+
+def single_sided(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``faces`` (M, 3) without a triangle drawn again over the same three points (either winding, vertices
+    (N, 3) m equal to 1e-9 m): the sheet a two-sided surface stands for, whose area counts once
+    (PartNet-Mobility draws every open surface twice, once facing each way)."""
+    if not len(faces):
+        return faces
+    _, point = np.unique(np.round(vertices * 1e9).astype(np.int64), axis=0, return_inverse=True)
+    _, first = np.unique(np.sort(point.ravel()[faces], axis=1), axis=0, return_index=True)
+    return faces[np.sort(first)]
 
 
 def surface_properties(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:

@@ -252,6 +252,31 @@ def test_tilted_zero_thickness_sheet_encloses_nothing(tmp_path):
     assert g.area == pytest.approx(a * a, rel=1e-12)
 
 
+def test_a_sheet_drawn_twice_counts_its_area_once(tmp_path):
+    """PartNet-Mobility draws an open surface twice, once facing each way (every open-shell link of the
+    dev set); the area a shell's mass takes counts the sheet once: the mass of a 0.5 x 0.5 sheet of
+    2.5 mm ABS, not of two. The same triangles on separate vertices and in another winding are found."""
+    a = 0.5
+    quad = np.array([[0, 0, 0], [a, 0, 0], [a, a, 0], [0, a, 0]], float)
+    twice = np.vstack([quad, quad])
+    path = write_obj(tmp_path / "sheet.obj", twice, [[0, 1, 2], [0, 2, 3], [6, 5, 4], [7, 6, 4]])
+    g = analyze_link(link_of([mesh_ref(path)]))
+    assert g.volume_method.endswith("open_shell") and g.area == pytest.approx(a * a, rel=1e-12)
+    one = analyze_link(link_of([mesh_ref(write_obj(tmp_path / "once.obj", quad, [[0, 1, 2], [0, 2, 3]]))]))
+    assert np.allclose(g.inertia_shell, one.inertia_shell) and np.allclose(g.com, one.com)
+
+
+@needs_shared
+def test_the_door_leaf_of_8877_is_one_sheet():
+    """Door 8877's leaf: 4 triangles, two drawn over the other two; its area is the leaf's one side."""
+    from asset2sim.tasks.ingest.extract import extract_asset
+
+    asset = extract_asset(SHARED / "8877")
+    g = analyze_link(asset.link("link_1"))
+    w, h = sorted(g.extents)[1:]
+    assert g.area == pytest.approx(w * h, rel=1e-3)
+
+
 def test_thin_watertight_slab_solid_values(tmp_path):
     a, b, t = 0.5, 0.3, 0.004
     path = write_obj(tmp_path / "slab.obj", *box_mesh(a, b, t))
