@@ -283,9 +283,3 @@ def sha256_files(paths: Iterable[Path | str]) -> str:
         h.update(sha256_file(p).encode())
         h.update(b"\0")
     return h.hexdigest()
-
-
-def tree_hashes(root: Path | str) -> dict[str, str]:
-    """sha256 of every regular file under ``root`` keyed by relative path."""
-    root = Path(root)
-    return {str(p.relative_to(root)): sha256_file(p) for p in sorted(root.rglob("*")) if p.is_file() and not p.is_symlink()}

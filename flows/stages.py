@@ -154,12 +154,6 @@ def flow_parameters(
     }
 
 
-def plan_jobs(cat: Catalog, dataset: str, run_id: str, *, ids: list[str] | None = None, limit: int | None = None,
-              force: bool = False) -> list[AssetJob]:
-    """The jobs of a run (:func:`plan_run` without the manifest's bad rows; raises as it does)."""
-    return plan_run(cat, dataset, run_id, ids=ids, limit=limit, force=force).jobs
-
-
 def plan_run(
     cat: Catalog,
     dataset: str,

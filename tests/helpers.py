@@ -177,6 +177,13 @@ def rest_tests_of_refine(report) -> int:
     return len(rounds) * (1 + len(robust_rest.TRIALS)) + len(full) * (len(RefineConfig().engines) - 1)
 
 
+def tree_hashes(root: Path) -> dict[str, str]:
+    """sha256 of every regular file under ``root`` keyed by relative path: what a test compares to say nothing changed."""
+    from asset2sim import atomic
+
+    return {str(p.relative_to(root)): atomic.sha256_file(p) for p in sorted(Path(root).rglob("*")) if p.is_file() and not p.is_symlink()}
+
+
 def download_folder(uri: str, local_dir: Path) -> Path:
     """The folder at the store ``uri`` copied into ``local_dir`` (``pyarrow.fs.copy_files``)."""
     import pyarrow.fs as pafs

@@ -16,13 +16,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim import array_cache, atomic, urdf
+from asset2sim import array_cache, urdf
 from asset2sim.array_cache import CacheWarning
 from asset2sim.schemas.asset import LinkGeometry
 from asset2sim.tasks.geometry import analyze as an
 from asset2sim.tasks.assemble import collision_geometry as cg
 from tests.tasks.geometry.test_analyze import box_mesh, link_of, mesh_ref, write_obj
 from tests.tasks.state.test_clearance import write_stacked_drawers
+from tests.helpers import tree_hashes
 
 
 @pytest.fixture
@@ -198,12 +199,12 @@ def test_refine_with_the_cache_inside_the_input_or_output_writes_nothing_there(d
     refine_asset(src, prompt, tmp_path / "out0", extras=False)
     assert list((tmp_path / "cache").rglob("*.npz"))
 
-    before = atomic.tree_hashes(src)
+    before = tree_hashes(src)
     monkeypatch.setenv("ASSET2SIM_CACHE", str(src / "cache"))
     _fresh_pieces()
     with pytest.warns(CacheWarning, match="inside"):
         refine_asset(src, prompt, tmp_path / "out1", extras=False)
-    assert atomic.tree_hashes(src) == before and not (src / "cache").exists()
+    assert tree_hashes(src) == before and not (src / "cache").exists()
 
     out = tmp_path / "out2"
     monkeypatch.setenv("ASSET2SIM_CACHE", str(out / "cache"))
@@ -211,4 +212,4 @@ def test_refine_with_the_cache_inside_the_input_or_output_writes_nothing_there(d
     with pytest.warns(CacheWarning, match="inside"):
         refine_asset(src, prompt, out, extras=False)
     assert not (out / "cache").exists() and not list(out.rglob("*.npz"))
-    assert atomic.tree_hashes(src) == before
+    assert tree_hashes(src) == before

@@ -18,6 +18,7 @@ from asset2sim.cli import main
 from asset2sim.tasks import refine as refine_mod
 from asset2sim.tasks.interpret.request import MAX_REQUEST_CHARS
 from tests.conftest import SHARED, needs_shared
+from tests.helpers import tree_hashes
 
 
 def run(*args, timeout=600):
@@ -92,12 +93,12 @@ def _one_line(err: str) -> str:
 def test_output_location_problems_exit_4_with_code_and_path(box, tmp_path, capsys, where, code):
     (tmp_path / "f").write_text("x")
     out = {"input": box, "inside": box / "o", "parent": box.parent, "file": tmp_path / "f", "devnull": Path("/dev/null")}[where]
-    before = atomic.tree_hashes(tmp_path)
+    before = tree_hashes(tmp_path)
     assert main(["refine", str(box), "--out", str(out), "--no-extras", "-q"]) == 4
     line = _one_line(capsys.readouterr().err)
     assert line.startswith(f"asset2sim refine: {code}: ") and str(out) in line  # labelled by its own code
     assert "invalid_input" not in line
-    assert atomic.tree_hashes(tmp_path) == before
+    assert tree_hashes(tmp_path) == before
 
 
 def test_foreign_files_need_overwrite(box, tmp_path, capsys):

@@ -14,6 +14,7 @@ import pytest
 from asset2sim import atomic, demo_assets, demo_objects
 from asset2sim.demo_assets import DEMO_OBJECTS, LAPTOP_MODEL_OPENING
 from asset2sim.demo_geometry import DemoArticulation, Part, Pose, box_xyz, fmt_number, mtl_text, obj_text, open_box
+from tests.helpers import tree_hashes
 
 IDS = [o.asset_id for o in DEMO_OBJECTS]
 
@@ -242,12 +243,12 @@ def test_loads_in_the_project_engine(dataset: Path):
 def test_output_is_deterministic_and_rebuild_replaces(tmp_path: Path):
     a = demo_assets.build_demo_dataset(tmp_path / "a")
     b = demo_assets.build_demo_dataset(tmp_path / "b")
-    ha, hb = atomic.tree_hashes(a), atomic.tree_hashes(b)
+    ha, hb = tree_hashes(a), tree_hashes(b)
     assert ha == hb and len(ha) > 5 * 10
     # a rebuild over an earlier build (with a stray file) gives the same tree
     (a / "laptop" / "textured_objs" / "stale.obj").write_text("junk")
     demo_assets.build_demo_dataset(a)
-    assert atomic.tree_hashes(a) == hb
+    assert tree_hashes(a) == hb
     # in-memory files equal the written ones
     files = demo_assets.demo_files("microwave")
     assert {k: atomic.sha256_file(b / "microwave" / k) for k in files} == {
@@ -277,7 +278,7 @@ def test_single_builders_and_ensure(tmp_path: Path):
     assert set(builders) == set(IDS)
     for asset_id, build in builders.items():
         out = build(tmp_path / "single" / asset_id)
-        assert atomic.tree_hashes(out) == {
+        assert tree_hashes(out) == {
             k: hashlib.sha256(v).hexdigest() for k, v in demo_assets.demo_files(asset_id).items()
         }
     root = tmp_path / "ensure"

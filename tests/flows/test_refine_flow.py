@@ -215,19 +215,19 @@ def test_force_and_subsets_when_planning_a_run(first_run):
     """``--force`` plans without earlier results (everything is redone);
     ``--ids`` / ``--limit`` select assets; unknown ids are refused."""
     from asset2sim.flows.catalog import CatalogError
-    from asset2sim.flows.stages import plan_jobs
+    from asset2sim.flows.stages import plan_run
 
     catalog, summary, _ = first_run
     cat = load_catalog(catalog)
-    jobs = plan_jobs(cat, "gen", "20990101T000000Z-zzzzzz", ids=["box_lid", "laptop"])
+    jobs = plan_run(cat, "gen", "20990101T000000Z-zzzzzz", ids=["box_lid", "laptop"]).jobs
     assert [j.asset_id for j in jobs] == ["box_lid", "laptop"] and all(j.finished for j in jobs)
     assert jobs[0].out_dir.endswith("gen/20990101T000000Z-zzzzzz/box_lid")
-    forced = plan_jobs(cat, "gen", "20990101T000000Z-zzzzzz", ids=["box_lid"], force=True)
+    forced = plan_run(cat, "gen", "20990101T000000Z-zzzzzz", ids=["box_lid"], force=True).jobs
     assert forced[0].finished == {}
-    assert len(plan_jobs(cat, "gen", "20990101T000000Z-zzzzzz", limit=3)) == 3
-    assert {j.asset_id: j.time_limit_seconds for j in plan_jobs(cat, "gen", "r1")}["hang_box"] == HANG_LIMIT
+    assert len(plan_run(cat, "gen", "20990101T000000Z-zzzzzz", limit=3).jobs) == 3
+    assert {j.asset_id: j.time_limit_seconds for j in plan_run(cat, "gen", "r1").jobs}["hang_box"] == HANG_LIMIT
     with pytest.raises(CatalogError, match="unknown id"):
-        plan_jobs(cat, "gen", "r1", ids=["nope"])
+        plan_run(cat, "gen", "r1", ids=["nope"]).jobs
 
 
 def test_model_call_failures_are_retried_and_nothing_else(tmp_path, dask_address, prefect_server):

@@ -28,9 +28,10 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim import atomic, safexml
+from asset2sim import safexml
 from asset2sim.tasks.ingest import validate_input as vi
 from tests import corpus_builder as cb
+from tests.helpers import tree_hashes
 
 refine = pytest.importorskip("asset2sim.tasks.refine")
 
@@ -148,7 +149,7 @@ def check_output_complete(out: Path, asset: Path) -> dict[str, int]:
 
 def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
     assets = _assets(tmp_path)
-    before = {k: atomic.tree_hashes(a) for k, a in assets.items()}
+    before = {k: tree_hashes(a) for k, a in assets.items()}
     outs = {k: tmp_path / "out" / k for k in assets}
     # one complete run per asset, then a second, warm one (caches filled, as the killed runs find them) counts the
     # progress lines and their mean gap: a kill comes a random time after a random progress line
@@ -173,7 +174,7 @@ def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
         if old:  # --force over a complete output: a kill leaves the old output or the complete new one
             assert counts.get("marker_valid") == 1, (k, at, rc, counts)
         log.append((k, (at[0], round(at[1], 2)), rc, counts))
-        assert atomic.tree_hashes(assets[k]) == before[k], f"input {k} changed"
+        assert tree_hashes(assets[k]) == before[k], f"input {k} changed"
     print("\n".join(map(str, log)))
     assert sum(1 for e in log if e[2] == -signal.SIGKILL) >= n_kills // 2, "most runs should have been killed mid-way"
     # a rerun after the kills completes, and a second rerun skips
@@ -185,7 +186,7 @@ def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
         from asset2sim.tasks.ingest.extract import extract_asset
 
         assert m["input_hash"] == extract_asset(a).input_hash
-        assert atomic.tree_hashes(a) == before[k]
+        assert tree_hashes(a) == before[k]
 
 
 def test_refine_killed_at_random_moments(tmp_path):
@@ -199,13 +200,13 @@ def test_refine_killed_20_times(tmp_path):
 
 def test_refine_refuses_output_inside_input(tmp_path):
     asset = cb.build_valid(tmp_path / "asset")
-    before = atomic.tree_hashes(asset)
+    before = tree_hashes(asset)
     (tmp_path / "link_into_input").symlink_to(asset / "meshes")
     for out in (asset, asset / "out", asset / "meshes" / "deeper", tmp_path / "link_into_input" / "x"):
         proc = subprocess.run(_cmd(asset, out, "open", force=False), capture_output=True, timeout=300)
         assert proc.returncode == 4, (out, proc.stderr[-500:])  # output location problem (docs/guide/outputs.md, exit statuses)
         assert proc.stderr.startswith(b"asset2sim refine: OUTPUT_"), proc.stderr[-500:]
-        assert atomic.tree_hashes(asset) == before
+        assert tree_hashes(asset) == before
     assert not (asset / "out").exists() and not (asset / "meshes" / "deeper").exists()
 
 

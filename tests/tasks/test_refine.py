@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim.schemas.config import RefineConfig
-from asset2sim import atomic, demo_assets
+from asset2sim import demo_assets
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.request import BAND_INTERVAL
@@ -19,6 +19,7 @@ from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
 from tests.conftest import SHARED, needs_shared
 from tests.helpers import rest_tests_of_refine
+from tests.helpers import tree_hashes
 
 
 def check_output_contract(out, report):
@@ -60,11 +61,11 @@ def check_output_contract(out, report):
 @pytest.mark.parametrize("entry", demo_assets.DEMO_OBJECTS, ids=lambda e: e.asset_id)
 def test_demo_objects_refine_to_interaction_ready(entry, demo_root, tmp_path):
     src = demo_root / entry.asset_id
-    before = atomic.tree_hashes(src)
+    before = tree_hashes(src)
     res = refine_asset(src, entry.prompt, tmp_path / "out", extras=False)
     r = res.report
     check_output_contract(res.out_dir, r)
-    assert atomic.tree_hashes(src) == before
+    assert tree_hashes(src) == before
     assert r.failure_mode == "none", r.metrics
     assert r.metric("penetration").value <= 5.0
     for joint, band in r.requested_bands.items():
@@ -96,11 +97,11 @@ def test_rerun_skips_complete_output_and_redoes_on_change(demo_root, tmp_path):
 
 def test_output_inside_input_refused(demo_root):
     src = demo_root / "laptop"
-    before = atomic.tree_hashes(src)
+    before = tree_hashes(src)
     with pytest.raises(RefineError) as err:
         refine_asset(src, "open", src / "out", extras=False)
     assert err.value.failure_mode == "invalid_input"
-    assert atomic.tree_hashes(src) == before
+    assert tree_hashes(src) == before
 
 
 def test_broken_asset_is_invalid_input(tmp_path):
@@ -123,9 +124,9 @@ def test_broken_asset_is_invalid_input(tmp_path):
 )
 def test_real_objects(obj, prompt, tmp_path):
     src = SHARED / obj
-    before = atomic.tree_hashes(src)
+    before = tree_hashes(src)
     res = refine_asset(src, prompt, tmp_path / obj, extras=False)
-    assert atomic.tree_hashes(src) == before
+    assert tree_hashes(src) == before
     r = res.report
     check_output_contract(res.out_dir, r)
     assert r.metric("rest_stability").passed and r.metric("oscillation").passed

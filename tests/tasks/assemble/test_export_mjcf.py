@@ -44,7 +44,7 @@ def _load(path: Path):
 
 
 def test_export_compiles_with_the_urdf_masses_and_keyframe(tmp_path):
-    from asset2sim.atomic import tree_hashes
+    from tests.helpers import tree_hashes
 
     a = write_contract_asset(tmp_path, lid_angle=0.35, post_height=0.015, lid_stiffness=0.8, lid_spring_reference=0.2)
     _tilt_lid_inertial(a.urdf)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from asset2sim import atomic, demo_assets
+from asset2sim import demo_assets
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
@@ -17,6 +17,7 @@ from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems, validate_overlay
 from asset2sim.tasks.assemble.write import OutputError, build_urdf, write_output
+from tests.helpers import tree_hashes
 
 
 def _overlay(asset, geometry, scale):
@@ -107,15 +108,15 @@ def test_state_and_overlay_json_written(cabinet, tmp_path):
 
 def test_input_never_written_and_output_inside_input_refused(cabinet, tmp_path):
     asset, geometry = cabinet
-    before = atomic.tree_hashes(asset.source_dir)
+    before = tree_hashes(asset.source_dir)
     ov = _overlay(asset, geometry, 0.5)
     write_output(asset, ov, tmp_path / "out", {})
-    assert atomic.tree_hashes(asset.source_dir) == before
+    assert tree_hashes(asset.source_dir) == before
     with pytest.raises(OutputError):
         write_output(asset, ov, asset.source_dir, {})
     with pytest.raises(OutputError):
         write_output(asset, ov, asset.source_dir / "sub", {})
-    assert atomic.tree_hashes(asset.source_dir) == before
+    assert tree_hashes(asset.source_dir) == before
 
 
 def test_incomplete_overlay_refused(cabinet):

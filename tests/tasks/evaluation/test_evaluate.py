@@ -18,6 +18,7 @@ from asset2sim.tasks.evaluation.evaluate import (
     metric_names,
 )
 from tests.conftest import SHARED, needs_shared
+from tests.helpers import tree_hashes
 
 # ------------------------------------------------------------------ URDF builders
 
@@ -392,15 +393,14 @@ def test_evaluate_command_writes_files_and_sets_the_exit_code(tmp_path, capsys):
 def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys):
     """``asset2sim evaluate OUT`` without ``--out`` writes beside OUT: every
     file of OUT stays byte-equal and the next identical refine is skipped."""
-    from asset2sim import atomic
     from asset2sim.cli import main
     from asset2sim.tasks.refine import refine_asset
 
     out = tmp_path / "box"
     refine_asset(demo_root / "box_lid", "a box with its lid slightly open", out, extras=False)
-    before = atomic.tree_hashes(out)
+    before = tree_hashes(out)
     assert main(["evaluate", str(out), "--no-probes"]) in (0, 1)
-    assert atomic.tree_hashes(out) == before
+    assert tree_hashes(out) == before
     assert (tmp_path / "box-evaluation" / "evaluation.json").is_file() and (tmp_path / "box-evaluation" / "report.html").is_file()
     assert str(tmp_path / "box-evaluation" / "evaluation.json") in capsys.readouterr().out
     assert refine_asset(demo_root / "box_lid", "a box with its lid slightly open", out, extras=False).skipped

@@ -24,7 +24,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from asset2sim import frames, mesh_io
-from asset2sim.atomic import tree_hashes
+from tests.helpers import tree_hashes
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, LinkDesc, Origin
 from asset2sim.tasks.geometry import analyze as an
 from asset2sim.tasks.geometry.analyze import MeshAnalysisError, analyze_asset, analyze_link

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from asset2sim import mesh_io
-from asset2sim.atomic import tree_hashes
+from tests.helpers import tree_hashes
 from asset2sim.tasks.geometry import render as R
 from asset2sim.tasks.geometry import render_camera, render_images, render_meshes
 from asset2sim.tasks.geometry.render_camera import VIEWS, ViewSpec, view_spec

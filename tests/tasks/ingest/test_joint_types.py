@@ -18,9 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim import atomic, cli, urdf
+from asset2sim import cli, urdf
 from asset2sim.tasks.ingest import validate_input as vi
 from tests import corpus_builder as cb
+from tests.helpers import tree_hashes
 
 #: Corpus cases refused for their joint type -> the joint the finding names.
 REFUSED = {
@@ -69,7 +70,7 @@ def test_floating_and_planar_joints_are_refused_naming_the_file_and_joint(name, 
     and the input is unchanged."""
     joint = REFUSED[name]
     asset = cb.CASES_BY_NAME[name].build(tmp_path / "asset")
-    before = atomic.tree_hashes(asset)
+    before = tree_hashes(asset)
     (f,) = [f for f in vi.validate_asset(asset) if f.code == "JOINT_TYPE_UNSUPPORTED"]
     jtype = "planar" if "planar" in name else "floating"
     assert (f.severity, f.file, f.joint) == ("error", "mobility.urdf", joint)
@@ -84,7 +85,7 @@ def test_floating_and_planar_joints_are_refused_naming_the_file_and_joint(name, 
     assert len(lines) == 1 and "JOINT_TYPE_UNSUPPORTED" in lines[0] and f"joint {joint!r}" in lines[0], err
     assert "INTERNAL_ERROR" not in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
-    assert atomic.tree_hashes(asset) == before
+    assert tree_hashes(asset) == before
 
 
 @pytest.mark.parametrize("jtype", ["continuous", "fixed"])

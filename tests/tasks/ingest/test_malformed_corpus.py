@@ -11,11 +11,12 @@ from contextlib import contextmanager
 
 import pytest
 
-from asset2sim import atomic, cli
+from asset2sim import cli
 from asset2sim.tasks.ingest import validate_input as vi
 from asset2sim.tasks.ingest.extract import AssetError, extract_asset_checked
 from tests import corpus_builder as cb
 from tests.conftest import ROOT
+from tests.helpers import tree_hashes
 
 TIME_LIMIT_S = 5.0
 HANG_LIMIT_S = 30
@@ -55,7 +56,7 @@ def test_base_asset_is_valid(tmp_path):
 def test_case_gets_its_code(case, tmp_path):
     asset = case.build(tmp_path / "asset")
     policy = vi.ValidationPolicy(**(case.policy or {}))
-    before = atomic.tree_hashes(asset)
+    before = tree_hashes(asset)
     with _no_hang(HANG_LIMIT_S):
         t = time.perf_counter()
         findings = vi.validate_asset(asset, policy)
@@ -84,7 +85,7 @@ def test_case_gets_its_code(case, tmp_path):
             assert all(desc.link(n).given_inertial is None for n in replaced)
             if case.topic == "inertials" and vi.CODES[case.code].severity == "warning":
                 assert replaced, "an invalid inertial must be marked for replacement"
-    assert atomic.tree_hashes(asset) == before
+    assert tree_hashes(asset) == before
 
 
 # ----------------------------------------------------------------------------- issue 11: validate agrees with refine
@@ -97,7 +98,7 @@ def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
     """What validate refuses, ``asset2sim refine`` refuses the same way: exit
     status 1, one line naming the code, no traceback, no hang (FIFOs)."""
     asset = case.build(tmp_path / "asset")
-    before = atomic.tree_hashes(asset)
+    before = tree_hashes(asset)
     with _no_hang(HANG_LIMIT_S):
         assert cli.main(["validate", str(asset), "--quiet"]) == 1
         capsys.readouterr()
@@ -107,7 +108,7 @@ def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
     lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim refine")]
     assert len(lines) == 1 and case.code in lines[0], err
     assert "Traceback" not in err
-    assert atomic.tree_hashes(asset) == before
+    assert tree_hashes(asset) == before
 
 
 @pytest.mark.slow

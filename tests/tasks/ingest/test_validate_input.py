@@ -10,11 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim import atomic, cli
+from asset2sim import cli
 from asset2sim.tasks.ingest import validate_input as vi
 from asset2sim.tasks.ingest.extract import AssetError, extract_asset, extract_asset_checked
 from tests import corpus_builder as cb
 from tests.conftest import ROOT, SHARED, needs_shared
+from tests.helpers import tree_hashes
 
 
 # ----------------------------------------------------------------------------- numbers
@@ -108,7 +109,7 @@ def test_device_is_not_a_regular_file():
 
 def test_valid_asset_is_clean_and_extracts(tmp_path):
     asset = cb.build_valid(tmp_path / "a")
-    before = atomic.tree_hashes(asset)
+    before = tree_hashes(asset)
     findings = vi.validate_asset(asset)
     assert [f.describe() for f in findings if f.severity != "info"] == []
     desc, found = extract_asset_checked(asset)
@@ -117,7 +118,7 @@ def test_valid_asset_is_clean_and_extracts(tmp_path):
     assert all(ln.given_inertial is not None for ln in desc.links)
     assert desc.root_link == "base" and desc.category == "StorageFurniture"
     assert desc.link("lid").semantic_label == "lid"
-    assert atomic.tree_hashes(asset) == before  # validation and extraction never write
+    assert tree_hashes(asset) == before  # validation and extraction never write
 
 
 def test_invalid_inertial_is_reported_with_eigenvalues_and_replaced(tmp_path):
@@ -284,10 +285,10 @@ def test_all_real_objects_extract():
     ids = sorted(p.name for p in SHARED.iterdir() if (p / "mobility.urdf").is_file())
     assert len(ids) == 21
     for oid in ids:
-        before = atomic.tree_hashes(SHARED / oid)
+        before = tree_hashes(SHARED / oid)
         desc, findings = extract_asset_checked(SHARED / oid)
         assert not vi.has_errors(findings), oid
-        assert desc.links and atomic.tree_hashes(SHARED / oid) == before
+        assert desc.links and tree_hashes(SHARED / oid) == before
 
 
 def test_demo_assets_validate_without_errors(demo_root):
