@@ -13,6 +13,7 @@ re-exported. Format: Wavefront OBJ / MTL (Advanced Visualizer manual, B1/B2).
 
 from __future__ import annotations
 
+import io
 import os
 import threading
 import warnings
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import file_memo
+from asset2sim import atomic, file_memo
 
 from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs besides itself
     is_texture_statement,
@@ -44,9 +45,11 @@ class MeshReadError(ValueError):
     """A mesh file is missing or cannot be parsed (the message names the file)."""
 
 
-#: absolute path -> (identity when remembered, its bytes or the file it is a copy of); oldest dropped past 512 MiB.
-_WRITTEN: OrderedDict[str, tuple[file_memo.FileIdentity, bytes | Path]] = OrderedDict()
+#: absolute path -> (identity when remembered, its bytes or the file it is a plain copy of, bytes kept); the oldest
+#: dropped past 512 MiB of bytes or 65,536 files (a flow worker refines many assets).
+_WRITTEN: OrderedDict[str, tuple[file_memo.FileIdentity, bytes | Path, int]] = OrderedDict()
 _WRITTEN_LOCK = threading.Lock()
+_WRITTEN_BYTES = [0]
 
 
 def remember(path: Path | str, data: bytes | Path) -> None:
@@ -54,15 +57,15 @@ def remember(path: Path | str, data: bytes | Path) -> None:
     ident = file_memo.identity(path)
     if ident is not None:
         with _WRITTEN_LOCK:
-            _WRITTEN[os.path.abspath(path)] = (ident, data)
-            while sum(len(d) for _, d in _WRITTEN.values() if isinstance(d, bytes)) > 512 << 20:
-                _WRITTEN.popitem(last=False)
+            size = len(data) if isinstance(data, bytes) else 0
+            _WRITTEN_BYTES[0] += size - _WRITTEN.pop(os.path.abspath(path), (None, None, 0))[2]
+            _WRITTEN[os.path.abspath(path)] = (ident, data, size)
+            while _WRITTEN_BYTES[0] > 512 << 20 or len(_WRITTEN) > 65536:
+                _WRITTEN_BYTES[0] -= _WRITTEN.popitem(last=False)[1][2]
 
 
 def write_file(path: Path | str, data: bytes) -> Path:
     """Write a mesh file atomically (:func:`asset2sim.atomic.write_bytes`, OSError) and :func:`remember` it."""
-    from asset2sim import atomic
-
     remember(atomic.write_bytes(path, data), data)
     return Path(path)
 
@@ -72,7 +75,7 @@ def forget_under(folder: Path | str) -> None:
     prefix = os.path.join(os.path.abspath(folder), "")
     with _WRITTEN_LOCK:
         for key in [k for k in _WRITTEN if k.startswith(prefix)]:
-            del _WRITTEN[key]
+            _WRITTEN_BYTES[0] -= _WRITTEN.pop(key)[2]
 
 
 def file_bytes(path: Path | str) -> bytes:
@@ -198,8 +201,6 @@ def read_obj(data: bytes, where: str = "<obj>") -> tuple[np.ndarray, np.ndarray,
 def load_trimesh(path: Path | str, *, skip_materials: bool = False):
     """``trimesh.load`` of :func:`file_bytes` ``(path)`` as one mesh, unprocessed, side files (textures,
     glTF buffers) from its folder (trimesh's exceptions and OSError propagate)."""
-    import io
-
     import trimesh  # about 1 s to import; only non-OBJ files and primitives need it
 
     extra = {"skip_materials": True} if skip_materials else {}

@@ -30,4 +30,6 @@ def publish(candidate: Candidate, workspace: Workspace, out_dir: Path) -> write.
             raise OutputError(f"collision piece {rel!r} would be written outside the output folder {out_dir}",
                               "OUTPUT_PATH_ESCAPES", Path(out_dir)) from exc
         atomic.write_bytes(dst, mesh_io.file_bytes(src))
-    return candidate.write_into(out_dir, copy=True)
+    paths = candidate.write_into(out_dir, copy=True)
+    mesh_io.forget_under(out_dir)  # nothing of this refine reads the output folder
+    return paths
