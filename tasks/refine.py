@@ -640,7 +640,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
-                "pybullet", ws.model(), state, postcheck.springs_of(overlay), config.sim, closed, spec, asset, ctx.category,
+                "pybullet", ws.model(), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
                 fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
                 free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring)]
         return chk

@@ -149,12 +149,6 @@ class PostCheck:
                     and not manipulation.failing(self.metrics))
 
 
-def springs_of(overlay: Overlay) -> dict[str, Spring]:
-    """Springs (stiffness > 0) of an overlay as engine options."""
-    return {n: Spring(stiffness=d.stiffness, reference=float(d.spring_reference or 0.0))
-            for n, d in overlay.joints.items() if d.stiffness > 0}
-
-
 def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
                    engine: str = "pybullet", closed: dict[str, tuple[float, float, float]] | None = None, *,
                    escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None) -> PostCheck:
@@ -170,7 +164,7 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
     manipulation runs taken from / recorded into it."""
     conv = config.sim
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
-    pen, recording = measure_rest_test(engine, urdf_path, initial_state, springs_of(overlay), conv, fixed_base=fixed)
+    pen, recording = measure_rest_test(engine, urdf_path, initial_state, overlay_springs(overlay), conv, fixed_base=fixed)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
@@ -214,7 +208,7 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
         return ESCALATION_ROUND if partial_escalated(rr) else None
 
     extra = [] if closed is None else manipulation.measure_manipulation(
-        engine, urdf_path, initial_state, springs_of(overlay), conv, closed, fixed_base=fixed,
+        engine, urdf_path, initial_state, overlay_springs(overlay), conv, closed, fixed_base=fixed,
         recorded=recorded, sweep_needed=sweep_needed)
     if not sweep_not_run(extra):
         run_parity()

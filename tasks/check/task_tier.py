@@ -16,7 +16,7 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operating, sweep, task_execution
-from asset2sim.tasks.check.postcheck import springs_of
+from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
@@ -130,7 +130,7 @@ def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
-        for name, c in sweep.damping_caps(urdf, closed, state, springs_of(overlay), conventions).items():
+        for name, c in sweep.damping_caps(urdf, closed, state, overlay_springs(overlay), conventions).items():
             dcaps[name] = min(c, dcaps.get(name, c))
     return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
                            notes=[b.conflict for b in budgets.values() if b.conflict])
