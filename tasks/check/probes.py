@@ -106,8 +106,9 @@ def probe_joint(session, joint: str, *, closed: float, direction: float, open_ra
     run.t_reach = 0.0 if run.reached else None
     # a body a hand can lift is gripped by the other hand; a heavier one is only steadied
     gripped = cfg.hold_body and weight <= cfg.hold_force
-    with root_held(session, cfg.hold_force if gripped else None, notes):
-        _push(session, joint, hand, sign, cfg, n_push, reached_if, frac, watch, run)
+    with root_held(session, cfg.hold_force if gripped else None, notes) as held:
+        # a gripped body takes the push's reaction through the hold; a steadied one as a force on its root
+        _push(session, joint, hand, sign, cfg, n_push, reached_if, frac, watch, run, react=cfg.hold_body and not held)
         _release(session, joint, int(round(cfg.release_time / dt)), frac, watch, run)
     q_end, qd_end = session.joint_state(joint)
     f_end = frac(q_end)
@@ -185,9 +186,11 @@ class _Run:
 
 
 def _push(session, joint: str, hand: Pusher, sign: float, cfg: ProbeConfig, n_push: int,
-          reached_if: Callable[[float], bool], frac: Callable[[float], float], watch: SupportWatch, run: _Run) -> None:
+          reached_if: Callable[[float], bool], frac: Callable[[float], float], watch: SupportWatch, run: _Run,
+          react: bool) -> None:
     """Push ``joint``'s part towards the target (``sign`` +1: q increases) for at
-    most ``n_push`` steps, until reached or the object slid or tipped."""
+    most ``n_push`` steps, until reached or the object slid or tipped; ``react``: the push's
+    reaction acts on the root, equal and opposite at the push point."""
     link, root = session.joint_child[joint], session.link_names[0]
     dt = session.options.conventions.timestep
     lead = 0.0  # how far the hand runs ahead of the push point, m
@@ -198,8 +201,8 @@ def _push(session, joint: str, hand: Pusher, sign: float, cfg: ProbeConfig, n_pu
         v = sign * qd * (lever if lever is not None else 1.0)  # speed of the push point along d
         lead, force = hand.step(lead, v, dt)
         session.apply_link_force(link, force * d, c)
-        if cfg.hold_body and link != root:
-            session.apply_link_force(root, -force * d, c)  # the holding hand's reaction
+        if react and link != root:
+            session.apply_link_force(root, -force * d, c)  # the steadying hand's reaction
         session.step(1)
         run.steps += 1
         run.peak_force = max(run.peak_force, force)

@@ -152,7 +152,8 @@ def effective_mass(session, joint: str, model: UrdfModel | None = None) -> float
 @contextmanager
 def root_held(session, max_force: float | None, notes: list[str]):
     """The other hand grips the body (``SimSession.hold_root`` with ``max_force`` N,
-    released on exit; None: not gripped); an engine without it gets a note."""
+    released on exit; None: not gripped); an engine without it gets a note.
+    Yields whether the root is held."""
     held = False
     if max_force is not None:
         try:
@@ -161,7 +162,7 @@ def root_held(session, max_force: float | None, notes: list[str]):
         except EngineUnsupported as exc:
             notes.append(f"the root is not held ({exc}): the push's reaction on the root only")
     try:
-        yield
+        yield held
     finally:
         if held:
             session.release_root()

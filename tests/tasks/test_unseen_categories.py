@@ -10,6 +10,8 @@ its band."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from asset2sim.schemas.request import BAND_INTERVAL
@@ -25,6 +27,7 @@ from tests.unseen_assets import (
     build_safe,
     build_table_with_drawer,
     build_toaster,
+    build_usb_swivel,
     build_washing_machine,
 )
 
@@ -54,3 +57,23 @@ def test_an_unseen_category_is_interaction_ready(tmp_path, build, category, prom
     assert r.requested_bands[joint] == band
     lo, hi = BAND_INTERVAL[band]
     assert lo - 0.02 <= r.opening_fractions[joint] <= hi + 0.02
+
+
+@pytest.mark.parametrize("build, prompt, joint", [
+    (build_usb_swivel, "A tiny usb.", "joint_0"),
+    (build_eyeglasses, "Tiny eyeglasses.", "joint_0"),
+], ids=["USB", "Eyeglasses"])
+def test_a_part_of_a_few_grams_opens_while_the_other_hand_holds_the_body(tmp_path, build, prompt, joint):
+    """At a few grams (an 18 mm, 1.2 g USB stick; eyeglasses a third of their
+    size) the probe's hand grips the body and takes the push's reaction.
+    The same reaction also applied to the gripped root left these parts
+    unmoved in PyBullet while the push rose to 2.7 N."""
+    src = build(tmp_path / "src")
+    res = refine_asset(src, prompt, tmp_path / "out")
+    r = res.report
+    assert r.total_mass < 0.05
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    metrics = json.loads((tmp_path / "out" / "evaluation.json").read_text())["metrics"]
+    probes = next(m for m in metrics if m["name"] == "probes" and m["engine"] == "pybullet")
+    opened = [p for p in probes["details"]["probes"] if p["joint"] == joint and p["action"] == "open"]
+    assert opened and all(p["success"] and p["peak_force"] < 1.0 for p in opened), opened
