@@ -34,7 +34,7 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
-from asset2sim.tasks.assemble import collision_geometry, export_mjcf, footprint, sliding_clearance, write
+from asset2sim.tasks.assemble import collision_geometry, export_mjcf, footprint, parent_child_separation, sliding_clearance, write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import export_usd, output
 from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
@@ -475,9 +475,10 @@ def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, 
 
 
 def _clearance_lines(notes: list[str]) -> list[str]:
-    """The writer's collision notes on running clearance, a levelled footprint and pieces thinner than their part."""
+    """The writer's collision notes on running clearance, a levelled footprint, pieces thinner than their part
+    and a child kept inside its parent past a stop."""
     return [n for n in notes if any(w in n for w in (sliding_clearance.RUNNING_CLEARANCE_NOTE, footprint.LEVEL_NOTE,
-                                                     collision_geometry.DENSITY_NOTE))]
+                                                     collision_geometry.DENSITY_NOTE, parent_child_separation.PAST_STOP_NOTE))]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: _StageLog,

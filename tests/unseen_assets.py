@@ -177,6 +177,25 @@ def build_safe(folder: Path) -> Path:
     return b.write(folder)
 
 
+def build_barred_safe(folder: Path) -> Path:
+    """A variant of :func:`build_safe` built to fail: a bar of the body
+    (0.1 x 0.06 units in section, on two posts) runs across the front 2 cm
+    before the door, so the door (revolute 0-1.75 rad) cannot open past a
+    few hundredths of a radian. The door is the body's child, and simulators
+    do not collide a link with its parent: any state asked open lies through
+    the bar."""
+    b = _Builder("u_safe_barred", "Safe")
+    w, h, d, t = 0.4, 0.45, 0.4, 0.06
+    body = _carcass(b, "safe_body", w, h, d, t, _GREY)
+    body.append(b.part("safe_body", box_xyz(-w - 0.1, w + 0.1, -0.05, 0.05, d + 0.08, d + 0.14), _DARK))  # the bar
+    body.append(b.part("safe_body", box_xyz(w, w + 0.1, -0.05, 0.05, d, d + 0.14), _DARK))  # its posts
+    body.append(b.part("safe_body", box_xyz(-w - 0.1, -w, -0.05, 0.05, d, d + 0.14), _DARK))
+    b.body("link_1", "safe_body", body)
+    b.moving("link_0", "hinge", "door", [b.part("door", box_xyz(-w, w, -h, h, d, d + 0.06), _GREY)],
+             "revolute", "link_1", (-w, 0.0, d + 0.03), (0.0, -1.0, 0.0), 0.0, 1.75)
+    return b.write(folder)
+
+
 def build_toaster(folder: Path) -> Path:
     """A two-slot toaster (0.6 x 0.45 x 0.3 units) with a push-down lever
     (``slider``, prismatic 0-0.2 units down the front face, in a slot) and a

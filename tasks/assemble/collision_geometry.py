@@ -27,7 +27,7 @@ from asset2sim.tasks.assemble.footprint import level_footprint
 from asset2sim.tasks.assemble.joint_sweep import swept_child_points, swept_other_points
 from asset2sim.tasks.assemble.parent_child_separation import separate_parent_child
 from asset2sim.tasks.assemble.piece_penetration import parent_child_depths
-from asset2sim.tasks.assemble.sliding_clearance import running_clearance
+from asset2sim.tasks.assemble.sliding_clearance import running_clearance, swept_clearance
 
 
 def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> tuple[list[Piece], int]:
@@ -112,6 +112,7 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
     if decompose:
         separate_parent_child(model, pieces, notes)
     running_clearance(model, pieces, notes)
+    swept_clearance(model, pieces, notes)
     for name in model.links:
         pieces[name] = drop_slivers(pieces[name])
     return {k: list(v) for k, v in pieces.items()}, list(notes)

@@ -12,10 +12,16 @@ from asset2sim import urdf
 from asset2sim.tasks.assemble.convex_pieces import CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, Piece, clip_piece
 from asset2sim.tasks.assemble.joint_sweep import _joint_motion, _joint_transforms, reference_state
 from asset2sim.tasks.assemble.piece_penetration import _boxes_apart, _transformed, penetration_depth
+from asset2sim.tasks.geometry import limits
 
 #: Overlap (m) along the separating direction that :func:`separate_parent_child` leaves between a parent's and its
 #: child's pieces: touching.
 SEPARATION_GAP = 0.0
+#: Deepest overlap cut at a state inside the range: the limit scan's :data:`~asset2sim.tasks.geometry.limits.STOP_DEPTH`
+#: (m) or this fraction of the child's largest extent, the larger (dev doors in their frames: 1-2 %); deeper, the state
+#: lies past a stop (a door through a bar of its own body, 16 %). At a limit (within :data:`AT_LIMIT_FRACTION` of the
+#: range) any overlap is cut (folded eyeglasses' temples at the closed end).
+STATE_CUT_DEPTH, STATE_CUT_FRACTION, AT_LIMIT_FRACTION, PAST_STOP_NOTE = limits.STOP_DEPTH, 0.05, 0.01, "past a stop"
 
 
 def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) -> list[int]:
@@ -47,7 +53,9 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
     (:func:`_slot`, at most :data:`SLOT_PIECES` parts and
     :data:`MAX_PIECES_HARD` per link), whichever of the four removes the
     smallest share of its link's volume; a link's last piece is never
-    removed (such an overlap is kept and noted)."""
+    removed (such an overlap is kept and noted); at ``state``, an overlap
+    deeper than :data:`STATE_CUT_DEPTH` (or :data:`STATE_CUT_FRACTION`) is a stop the state lies past, kept
+    and noted, unless the joint is at a limit."""
     for joint in model.joints:
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
         if P and C:
@@ -58,18 +66,25 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
                     C: list[Piece | None], tolerance: float, state: dict[str, float] | None, notes: list[str]) -> None:
     """Cut, in place, the pieces ``P`` of ``joint``'s parent and ``C`` of its child apart (:func:`separate_parent_child`),
     pair by pair; a note when they overlapped."""
+    deepest_cut = np.inf
     if state is None:
         transforms, ref = _joint_transforms(model, pieces, joint)
     else:
-        transforms, ref = [_joint_motion(joint, float(state.get(joint.name, reference_state(model).get(joint.name, 0.0))))], 0
+        q = float(state.get(joint.name, reference_state(model).get(joint.name, 0.0)))
+        size = float(np.ptp(np.vstack([c.points for c in C if c is not None]), axis=0).max())
+        transforms, ref = [_joint_motion(joint, q)], 0
+        deepest_cut = np.inf if _at_limit(joint, q) else max(STATE_CUT_DEPTH, STATE_CUT_FRACTION * size)
     sizes = {"p": sum(p.volume for p in P), "c": sum(c.volume for c in C)}
-    before = after = 0.0
+    before = after = past = 0.0
     cut, kept = {"p": set(), "c": set()}, 0
     i = 0
     while i < len(P):
         k = 0
         while k < len(C) and P[i] is not None:
             overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref, tolerance)
+            if overlap is not None and overlap[0] > deepest_cut:
+                past = max(past, overlap[0])
+                overlap = None
             if overlap is not None:
                 depth, deepest, cuts = overlap
                 before = max(before, depth)
@@ -90,6 +105,17 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
     C[:] = [c for c in C if c is not None]
     if before > 0.0:
         notes.append(_separation_note(joint, before, after, len(cut["p"]), len(cut["c"]), kept, gone, state is None))
+    if past > 0.0:
+        notes.append(f"joint {joint.name!r}: {joint.child!r} lies {past * 1000:.3g} mm inside its parent {joint.parent!r} at the "
+                     f"initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, not cut")
+
+
+def _at_limit(joint: urdf.UrdfJoint, q: float) -> bool:
+    """Whether ``q`` (rad or m) lies within :data:`AT_LIMIT_FRACTION` of ``joint``'s range from one of its finite limits."""
+    lo, hi = (np.nan if v is None else float(v) for v in (joint.lower, joint.upper))
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        return False
+    return min(abs(q - lo), abs(q - hi)) <= AT_LIMIT_FRACTION * (hi - lo)
 
 
 def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, tolerance: float) -> tuple[float, float, dict] | None:

@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from asset2sim import urdf
+from asset2sim.frames import axis_angle_matrix
 from asset2sim.tasks.assemble.convex_pieces import Piece
 from asset2sim.tasks.assemble.joint_sweep import reference_state
 from asset2sim.tasks.geometry import limits
@@ -39,12 +40,20 @@ def sat_gap(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
     Raises:
         ValueError: a set spans no volume.
     """
+    return _sat_on(p, q, np.vstack([_normals(p), _normals(q)]))
+
+
+def _normals(p: np.ndarray) -> np.ndarray:
+    """Unit outward face normals (f, 3) of the hull of ``p`` (k, 3). Raises ValueError (no volume)."""
     try:
-        hp, hq = ConvexHull(p), ConvexHull(q)
+        n = ConvexHull(p).equations[:, :3]
     except (QhullError, ValueError) as exc:
         raise ValueError("a convex piece spans no volume") from exc
-    axes = np.vstack([hp.equations[:, :3], hq.equations[:, :3]])
-    axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _sat_on(p: np.ndarray, q: np.ndarray, axes: np.ndarray) -> tuple[float, np.ndarray]:
+    """:func:`sat_gap` of ``p`` (k, 3) and ``q`` (l, 3) over the unit ``axes`` (A, 3)."""
     sp, sq = p @ axes.T, q @ axes.T  # (k, A), (l, A)
     ahead = sq.min(axis=0) - sp.max(axis=0)  # q beyond p along +axis
     behind = sp.min(axis=0) - sq.max(axis=0)  # q before p
@@ -156,3 +165,127 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                         boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
                         notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
                                      f"{other!r} (gap {g * 1000:.2g} mm, sliding along {joint.name!r})")
+
+
+#: Positions sampled over a revolute joint's range (a continuous joint's full turn) by :func:`swept_clearance`.
+SWEPT_SAMPLES = 24
+#: Most a piece is shrunk about a joint's axis by :func:`swept_clearance` (fraction of its radius).
+MAX_RADIAL_SHRINK = 0.25
+#: Gap (m) under which a turning piece touches in PyBullet (its two 1 mm hull margins): :func:`swept_clearance` acts.
+SWEPT_TRIGGER = 0.002
+
+
+def _turn(points: np.ndarray, origin: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """``points`` (k, 3) m turned by ``angle`` rad about the unit ``axis`` (3,) through ``origin`` (3,)."""
+    return (points - origin) @ axis_angle_matrix(axis, angle)[:3, :3].T + origin
+
+
+def _shrink(points: np.ndarray, origin: np.ndarray, axis: np.ndarray, f: float) -> np.ndarray:
+    """``points`` (k, 3) m with their distance from the line (``origin`` (3,), unit ``axis`` (3,)) times ``f``: an
+    affine map, so a convex piece stays convex."""
+    rel = points - origin
+    along = np.outer(rel @ axis, axis)
+    return origin + along + f * (rel - along)
+
+
+def _swept_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray
+               ) -> tuple[float, float, np.ndarray]:
+    """(least :func:`sat_gap` m, its angle rad, its axis (3,)) of ``p`` (k, 3) turned by each of ``angles``
+    about the line (``origin``, ``axis``) against ``q`` (l, 3), one frame (each hull made once, ``p``'s normals
+    turned with it). Raises ValueError (no volume)."""
+    np_, nq = _normals(p), _normals(q)
+    best = (np.inf, 0.0, np.zeros(3))
+    for a in angles:
+        R = axis_angle_matrix(axis, float(a))
+        g, n = _sat_on((p - origin) @ R.T + origin, q, np.vstack([np_ @ R.T, nq]))
+        if g < best[0]:
+            best = (g, float(a), n)
+    return best
+
+
+def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray
+                         ) -> tuple[np.ndarray, float, float] | None:
+    """``p`` (k, 3) m shrunk about the line (``origin``, unit ``axis``) until, turned by every one of ``angles``
+    (rad), it clears ``q`` (l, 3) by :data:`RUNNING_CLEARANCE`. None when it is nearer than that unturned
+    (:func:`running_clearance`'s), stays :data:`SWEPT_TRIGGER` away turning, overlaps deeper than
+    :data:`TOUCHING_OVERLAP`, meets it head-on (a stop: the motion along the gap's axis, :data:`SLIDING_COS`),
+    or would need more than :data:`MAX_RADIAL_SHRINK`. Returns (points, shrink fraction, least gap m before).
+    Raises ValueError (no volume)."""
+    if sat_gap(p, q)[0] < RUNNING_CLEARANCE - 1e-9:
+        return None
+    g, a, n = _swept_gap(p, q, origin, axis, angles)
+    least = g
+    if g >= SWEPT_TRIGGER or g <= -TOUCHING_OVERLAP:
+        return None
+    turned = _turn(p, origin, axis, a)
+    s = turned @ n
+    face = turned[s >= s.max() - 1e-3].mean(axis=0)
+    t = np.cross(axis, face - origin)
+    if abs(float(n @ t)) >= SLIDING_COS * max(float(np.linalg.norm(t)), 1e-12):
+        return None
+    rel = face - origin
+    r = float(np.linalg.norm(rel - axis * float(rel @ axis)))
+    f = 1.0
+    for _ in range(4):  # the radius at the contact gives the first shrink; what the samples still find, the next
+        f -= (RUNNING_CLEARANCE - g) / max(r, 1e-9)
+        if f < 1.0 - MAX_RADIAL_SHRINK:
+            return None
+        out = _shrink(p, origin, axis, f)
+        g = _swept_gap(out, q, origin, axis, angles)[0]
+        if g >= RUNNING_CLEARANCE - 1e-6:
+            return out, 1.0 - f, least
+    return None
+
+
+def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> None:
+    """Running clearance along the whole turn of every revolute and continuous joint, in place: a piece of a link
+    the joint turns (its child; the joints below at :func:`reference_state`) that clears a piece of a link the
+    joint does not move by :data:`RUNNING_CLEARANCE` at :func:`reference_state` but comes nearer while it turns
+    (a square dial's corners passing a door's top edge: a contact that slides, held by the contact margins) is
+    shrunk about the joint's axis (:func:`_clear_turning_piece`) at :data:`SWEPT_SAMPLES` positions over the range
+    (a full turn for a continuous joint). Parent-child pairs excepted. Notes name each change."""
+    poses = model.link_poses(reference_state(model))
+    ref = reference_state(model)
+    parent_of = {j.child: j.parent for j in model.joints}
+    subtrees = limits.subtrees(model)
+    for joint in model.movable_joints:
+        if joint.type not in ("revolute", "continuous"):
+            continue
+        if joint.type == "continuous" or joint.lower is None or joint.upper is None:
+            angles = np.linspace(0.0, 2 * np.pi, SWEPT_SAMPLES, endpoint=False)
+        else:
+            angles = np.linspace(float(joint.lower), float(joint.upper), SWEPT_SAMPLES) - ref.get(joint.name, 0.0)
+            angles = np.concatenate([[0.0], angles])
+        Tj = poses[joint.child]
+        origin, axis = Tj[:3, 3], Tj[:3, :3] @ np.asarray(joint.axis, float)
+        axis = axis / max(float(np.linalg.norm(axis)), 1e-12)
+        moved = subtrees[joint.name]
+        for ln in moved:
+            for i, P in enumerate(pieces.get(ln) or []):
+                pw = P.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+                rel = pw - origin
+                radius = float(np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1).max())
+                box_lo, box_hi = pw.min(axis=0) - radius, pw.max(axis=0) + radius  # holds the piece's whole turn
+                for other in model.links:
+                    if other in moved or not pieces.get(other) or parent_of.get(ln) == other or parent_of.get(other) == ln:
+                        continue
+                    for k, Q in enumerate(pieces[other]):
+                        qw = Q.points @ poses[other][:3, :3].T + poses[other][:3, 3]
+                        if np.any(qw.min(axis=0) > box_hi + RUNNING_CLEARANCE) or np.any(qw.max(axis=0) < box_lo - RUNNING_CLEARANCE):
+                            continue
+                        try:
+                            hit = _clear_turning_piece(pw, qw, origin, axis, angles)
+                        except ValueError:
+                            continue
+                        if hit is None:
+                            continue
+                        pts, shrink, g = hit
+                        inv = np.linalg.inv(poses[ln])
+                        try:
+                            pieces[ln][i] = P = Piece.of(pts @ inv[:3, :3].T + inv[:3, 3], P.sources)
+                        except (QhullError, ValueError):
+                            continue
+                        pw = pts
+                        notes.append(f"link {ln!r}: collision piece {i} shrunk {shrink:.1%} about {joint.name!r}'s axis for "
+                                     f"{RUNNING_CLEARANCE * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against {other!r} over its "
+                                     f"turn (it came {g * 1000:.2g} mm from it)")

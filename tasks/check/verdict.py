@@ -11,6 +11,8 @@ from typing import Any
 
 #: Phi (mm) above which penetration counts as unresolved (refine's verdict).
 UNRESOLVED_PENETRATION_MM = 5.0
+#: Metrics read against :data:`UNRESOLVED_PENETRATION_MM` (their own pass threshold is the writer's tolerance).
+PENETRATION_METRICS = ("penetration", "parent_child_penetration")
 #: What a catalog row without a failure mode counts as.
 MISSING_FAILURE_MODE = "crash"
 #: Stage statuses of a stage that ran and failed (``flows.isolation``).
@@ -20,11 +22,12 @@ INVALID_MANIFEST_ROW = "invalid_manifest_row"
 
 
 #: Interaction-readiness tiers: tier -> (metrics that decide it, failure mode when one fails), in
-#: reporting order. Penetration fails above :data:`UNRESOLVED_PENETRATION_MM` (no SPEC threshold).
+#: reporting order. Penetration fails above :data:`UNRESOLVED_PENETRATION_MM` (no SPEC threshold), the SPEC's Phi
+#: and a child inside its parent alike (the pairs Phi skips: a door opened through a bar of its own body).
 TIERS: dict[str, tuple[tuple[str, ...], str]] = {
     "rest": (("rest_stability", "settle_tilt", "divergence", "ground_penetration", "oscillation", "state_hold",
               "joint_hold"), "unstable"),
-    "penetration": (("penetration",), "unresolved_penetration"),
+    "penetration": (("penetration", "parent_child_penetration"), "unresolved_penetration"),
     "sweep": (("joint_sweep",), "blocked_joint"),
     "robust_rest": (("robust_rest",), "not_robust_at_rest"),
     "probes": (("probes",), "probe_failed"),
@@ -61,8 +64,8 @@ class Readiness:
 
 
 def _verdict(m: Any) -> bool | None:
-    """A metric's pass/fail for readiness (penetration: at most :data:`UNRESOLVED_PENETRATION_MM`)."""
-    if m.name == "penetration":
+    """A metric's pass/fail for readiness (penetration, parent-child included: at most :data:`UNRESOLVED_PENETRATION_MM`)."""
+    if m.name in PENETRATION_METRICS:
         return None if m.value is None else bool(m.value <= UNRESOLVED_PENETRATION_MM)
     return m.passed
 

@@ -18,6 +18,7 @@ from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.interpret.mounting import category_mounting
 from asset2sim.tasks.refine import refine_asset
 from tests.unseen_assets import (
+    build_barred_safe,
     build_bottle,
     build_bucket,
     build_eyeglasses,
@@ -77,3 +78,31 @@ def test_a_part_of_a_few_grams_opens_while_the_other_hand_holds_the_body(tmp_pat
     probes = next(m for m in metrics if m["name"] == "probes" and m["engine"] == "pybullet")
     opened = [p for p in probes["details"]["probes"] if p["joint"] == joint and p["action"] == "open"]
     assert opened and all(p["success"] and p["peak_force"] < 1.0 for p in opened), opened
+
+
+def test_a_door_barred_by_its_own_body_is_not_reported_ready(tmp_path):
+    """Built to fail: the safe's door is barred by a part of its body. Asked
+    halfway open, the door lies through the bar, which the simulators do not
+    collide with it (parent and child): the bar's collision piece is kept
+    (it used to be cut away at the initial state, and the safe reported
+    ready) and the penetration tier fails on the parent-child depth."""
+    src = build_barred_safe(tmp_path / "src")
+    res = refine_asset(src, "A safe, halfway open.", tmp_path / "out")
+    r = res.report
+    assert r.failure_mode == "unresolved_penetration", (r.failure_mode, r.readiness)
+    nested = next(m for m in r.metrics if m.name == "parent_child_penetration")
+    assert nested.value > 20.0  # mm: the door's edge well inside the bar
+    assert any("past a stop" in n for n in r.state.collision_changes + r.notes), r.state.collision_changes
+
+
+@pytest.mark.parametrize("prompt", ["A tiny oven.", "A very small oven."])
+def test_a_small_ovens_square_dial_turns_past_the_door_below_it(tmp_path, prompt):
+    """The oven's square dial clears the door's top edge by 3.4 mm (model
+    units) at rest and by 1 mm less than its corners reach while it turns:
+    at a quarter of its size that is under the engines' contact margins, and
+    the dial stuck at 13 % of its probe. Its collision piece is shrunk about
+    its axis (noted) and it turns."""
+    res = refine_asset(build_oven(tmp_path / "src"), prompt, tmp_path / "out")
+    r = res.report
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    assert any("shrunk" in c and "'joint_1'" in c for c in r.state.collision_changes), r.state.collision_changes

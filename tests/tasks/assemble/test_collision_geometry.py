@@ -502,6 +502,30 @@ def test_clear_sliding_contact_leaves_deep_overlaps_and_stops():
     assert sc.clear_sliding_contact(a, a + [0.0, 0.9, 0.0], along_x, deepest=0.05) is None  # 0.1 m deep
 
 
+def test_a_square_dial_is_shrunk_about_its_axis_to_pass_a_slab_below_it():
+    """A 20 mm square dial turning about z through its centre, 13.9 mm above a
+    slab's top (3.9 mm clear at 0, its corners 14.1 mm out at 45 deg): passing
+    the slab slides, so the dial is shrunk about its axis until every sampled
+    turn clears by RUNNING_CLEARANCE; a slab it is already near at 0, one it
+    clears all round, and a wall a lever's tip turns into head-on (a stop) are
+    left alone."""
+    h = 0.01
+    dial = np.array([[x, y, z] for x in (-h, h) for y in (-h, h) for z in (0.0, 0.01)])
+    slab = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.05, -0.0139) for z in (-0.01, 0.02)])
+    origin, axis = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    turn = np.linspace(0.0, 2 * np.pi, sc.SWEPT_SAMPLES, endpoint=False)
+    pts, shrink, least = sc._clear_turning_piece(dial, slab, origin, axis, turn)
+    assert least < 0.0 and 0.15 < shrink < sc.MAX_RADIAL_SHRINK  # the corners reached 0.24 mm into the slab
+    assert sc._swept_gap(pts, slab, origin, axis, turn)[0] >= sc.RUNNING_CLEARANCE - 1e-6
+    assert np.allclose(pts[:, 2], dial[:, 2])  # along the axis unchanged
+    assert sc._clear_turning_piece(dial, slab + [0.0, 0.002, 0.0], origin, axis, turn) is None  # near at 0 already
+    assert sc._clear_turning_piece(dial, slab - [0.0, 0.01, 0.0], origin, axis, turn) is None  # clear all round
+    lever = np.array([[x, y, z] for x in (0.0, 0.03) for y in (-0.002, 0.002) for z in (0.0, 0.01)])
+    wall = np.array([[x, y, z] for x in (0.02, 0.04) for y in (0.01, 0.05) for z in (-0.01, 0.02)])
+    assert sc._swept_gap(lever, wall, origin, axis, np.linspace(0.0, 0.25, 6))[0] < sc.RUNNING_CLEARANCE
+    assert sc._clear_turning_piece(lever, wall, origin, axis, np.linspace(0.0, 0.25, 6)) is None  # its tip runs into it
+
+
 def test_pieces_are_kept_on_disk_by_content_and_code(tmp_path, monkeypatch):
     """A second process (the in-memory caches cleared) loads the same pieces
     and notes from the on-disk cache (asset2sim.array_cache) instead of

@@ -110,3 +110,16 @@ def test_catalog_mode_takes_a_failing_measured_tier():
     assert v.failure_mode == "probe_failed" and "probes@pybullet" in v.errors[0]
     v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", measured_failures=["total_mass@none"])
     assert v.failure_mode == "none"
+
+
+def test_a_child_deep_inside_its_parent_fails_the_penetration_tier():
+    """The SPEC's Phi skips a link and its parent; the parent-child depth is
+    read against the same threshold (a door opened through a bar of its own
+    body), below it (the writer's tolerance is stricter) the tier passes."""
+    rest = _m("rest_stability", True)
+    for depth, ok in ((UNRESOLVED_PENETRATION_MM + 0.5, False), (UNRESOLVED_PENETRATION_MM - 0.5, True)):
+        nested = MetricResult(name="parent_child_penetration", value=depth, unit="mm", passed=False)
+        r = readiness([rest, MetricResult(name="penetration", value=0.0, unit="mm"), nested])
+        assert r.tiers["penetration"] is ok
+        assert r.failure_mode == ("none" if ok else "unresolved_penetration")
+        assert r.failures == ([] if ok else ["parent_child_penetration@pybullet"])
