@@ -11,8 +11,9 @@ from typing import Any
 
 #: Phi (mm) above which penetration counts as unresolved (refine's verdict).
 UNRESOLVED_PENETRATION_MM = 5.0
-#: Metrics read against :data:`UNRESOLVED_PENETRATION_MM` (their own pass threshold is the writer's tolerance).
-PENETRATION_METRICS = ("penetration", "parent_child_penetration")
+#: Metrics read against :data:`UNRESOLVED_PENETRATION_MM` (their own pass threshold is the writer's tolerance):
+#: metric -> the detail read instead of the value when present (a child inside its parent beyond the modelled pose).
+PENETRATION_METRICS = {"penetration": None, "parent_child_penetration": "beyond_modelled_mm"}
 #: What a catalog row without a failure mode counts as.
 MISSING_FAILURE_MODE = "crash"
 #: Stage statuses of a stage that ran and failed (``flows.isolation``).
@@ -27,7 +28,7 @@ INVALID_MANIFEST_ROW = "invalid_manifest_row"
 TIERS: dict[str, tuple[tuple[str, ...], str]] = {
     "rest": (("rest_stability", "settle_tilt", "divergence", "ground_penetration", "oscillation", "state_hold",
               "joint_hold"), "unstable"),
-    "penetration": (("penetration", "parent_child_penetration"), "unresolved_penetration"),
+    "penetration": (tuple(PENETRATION_METRICS), "unresolved_penetration"),
     "sweep": (("joint_sweep",), "blocked_joint"),
     "robust_rest": (("robust_rest",), "not_robust_at_rest"),
     "probes": (("probes",), "probe_failed"),
@@ -64,9 +65,10 @@ class Readiness:
 
 
 def _verdict(m: Any) -> bool | None:
-    """A metric's pass/fail for readiness (penetration, parent-child included: at most :data:`UNRESOLVED_PENETRATION_MM`)."""
+    """A metric's pass/fail for readiness (:data:`PENETRATION_METRICS`: at most :data:`UNRESOLVED_PENETRATION_MM`)."""
     if m.name in PENETRATION_METRICS:
-        return None if m.value is None else bool(m.value <= UNRESOLVED_PENETRATION_MM)
+        value = (m.details or {}).get(PENETRATION_METRICS[m.name] or "", m.value)
+        return None if value is None else bool(value <= UNRESOLVED_PENETRATION_MM)
     return m.passed
 
 

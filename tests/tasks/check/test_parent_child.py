@@ -30,6 +30,19 @@ def test_input_nested_in_its_parent_reads_its_depth(tmp_path, engine):
     assert m.value == pytest.approx(20.0, abs=0.05)  # the post's top 20 mm into the lid's hull, margins removed
     assert m.passed is False and m.details["pairs"] == {"body/lid": m.value}
     assert m.engine == engine
+    assert m.details["modelled"] == m.details["pairs"] and m.details["beyond_modelled_mm"] == 0.0  # at 0, as modelled
+
+
+def test_a_lid_swung_into_a_bar_of_its_body_reads_its_depth_beyond_the_modelled_pose(tmp_path):
+    """A lid clear of a bar of its body as modelled (20 mm below it), swung
+    0.5 rad up into it: all of its depth is beyond the modelled pose; the
+    nested lid opened 0.3 rad is shallower than as modelled (nothing beyond)."""
+    slab, bar = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.0, 0.0, 0.07], [0.1, 0.06, 0.09])
+    barred = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
+    m = parent_child_penetration(barred / "mobility.urdf", {"hinge": 0.5})
+    assert m.value > 10.0 and m.details["modelled"] == {} and m.details["beyond_modelled_mm"] == m.value
+    m = parent_child_penetration(_nested(tmp_path / "nested") / "mobility.urdf", {"hinge": 0.3})
+    assert 0.0 < m.value < 20.0 and m.details["beyond_modelled_mm"] == 0.0
 
 
 def test_post_check_reports_the_metric_on_the_written_output(tmp_path):
