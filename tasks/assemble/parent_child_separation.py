@@ -17,11 +17,12 @@ from asset2sim.tasks.geometry import limits
 #: Overlap (m) along the separating direction that :func:`separate_parent_child` leaves between a parent's and its
 #: child's pieces: touching.
 SEPARATION_GAP = 0.0
-#: Deepest overlap cut at a state inside the range: the limit scan's :data:`~asset2sim.tasks.geometry.limits.STOP_DEPTH`
-#: (m) or this fraction of the child's largest extent, the larger (dev doors in their frames: 1-2 %); deeper, the state
-#: lies past a stop (a door through a bar of its own body, 16 %). At a limit (within :data:`AT_LIMIT_FRACTION` of the
-#: range) any overlap is cut (folded eyeglasses' temples at the closed end).
-STATE_CUT_DEPTH, STATE_CUT_FRACTION, AT_LIMIT_FRACTION, PAST_STOP_NOTE = limits.STOP_DEPTH, 0.05, 0.01, "past a stop"
+#: Deepest overlap cut at a state inside the range that the pair is clear of at the modelled pose: the limit scan's
+#: :data:`~asset2sim.tasks.geometry.limits.STOP_DEPTH` (m) or this fraction of the child's largest extent, the larger
+#: (dev doors in their frames: 1-2 %); deeper, the state lies past a stop (a door through a bar of its own body, 16 %).
+#: Overlapping as modelled too, or at a limit (within :data:`AT_LIMIT_FRACTION` of the range: folded eyeglasses'
+#: temples at the closed end; a lever's closed end found 1 % inside its raw limit, in its slot), any overlap is cut.
+STATE_CUT_DEPTH, STATE_CUT_FRACTION, AT_LIMIT_FRACTION, PAST_STOP_NOTE = limits.STOP_DEPTH, 0.05, 0.05, "past a stop"
 
 
 def _carried(depth: Callable[[int], float], n: int, ref: int, tolerance: float) -> list[int]:
@@ -55,7 +56,8 @@ def separate_parent_child(model: urdf.UrdfModel, pieces: dict[str, list[Piece]],
     smallest share of its link's volume; a link's last piece is never
     removed (such an overlap is kept and noted); at ``state``, an overlap
     deeper than :data:`STATE_CUT_DEPTH` (or :data:`STATE_CUT_FRACTION`) is a stop the state lies past, kept
-    and noted, unless the joint is at a limit."""
+    and noted, unless the pair overlaps at the modelled pose too or the joint
+    is at a limit."""
     for joint in model.joints:
         P, C = pieces.get(joint.parent), pieces.get(joint.child)
         if P and C:
@@ -66,13 +68,14 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
                     C: list[Piece | None], tolerance: float, state: dict[str, float] | None, notes: list[str]) -> None:
     """Cut, in place, the pieces ``P`` of ``joint``'s parent and ``C`` of its child apart (:func:`separate_parent_child`),
     pair by pair; a note when they overlapped."""
-    deepest_cut = np.inf
+    deepest_cut, T_ref = np.inf, None
     if state is None:
         transforms, ref = _joint_transforms(model, pieces, joint)
     else:
-        q = float(state.get(joint.name, reference_state(model).get(joint.name, 0.0)))
+        q_ref = reference_state(model).get(joint.name, 0.0)
+        q = float(state.get(joint.name, q_ref))
         size = float(np.ptp(np.vstack([c.points for c in C if c is not None]), axis=0).max())
-        transforms, ref = [_joint_motion(joint, q)], 0
+        transforms, ref, T_ref = [_joint_motion(joint, q)], 0, _joint_motion(joint, q_ref)
         deepest_cut = np.inf if _at_limit(joint, q) else max(STATE_CUT_DEPTH, STATE_CUT_FRACTION * size)
     sizes = {"p": sum(p.volume for p in P), "c": sum(c.volume for c in C)}
     before = after = past = 0.0
@@ -82,8 +85,8 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
         k = 0
         while k < len(C) and P[i] is not None:
             overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref, tolerance)
-            if overlap is not None and overlap[0] > deepest_cut:
-                past = max(past, overlap[0])
+            if overlap is not None and overlap[0] > deepest_cut and not _overlaps_at(P[i], C[k], T_ref, tolerance):
+                past = max(past, overlap[0])  # met only after moving clear of the modelled pose: a stop
                 overlap = None
             if overlap is not None:
                 depth, deepest, cuts = overlap
@@ -108,6 +111,11 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
     if past > 0.0:
         notes.append(f"joint {joint.name!r}: {joint.child!r} lies {past * 1000:.3g} mm inside its parent {joint.parent!r} at the "
                      f"initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, not cut")
+
+
+def _overlaps_at(a: Piece, b: Piece, T: np.ndarray, tolerance: float) -> bool:
+    """Whether child piece ``b`` at the child pose ``T`` (4, 4) penetrates parent piece ``a`` deeper than ``tolerance`` m."""
+    return not _boxes_apart(a, b, T) and penetration_depth(a, _transformed(b, T), tolerance)[0] > tolerance
 
 
 def _at_limit(joint: urdf.UrdfJoint, q: float) -> bool:
