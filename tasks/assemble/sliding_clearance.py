@@ -264,8 +264,10 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
             for i, P in enumerate(pieces.get(ln) or []):
                 pw = P.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
                 rel = pw - origin
-                radius = float(np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1).max())
-                box_lo, box_hi = pw.min(axis=0) - radius, pw.max(axis=0) + radius  # holds the piece's whole turn
+                along = rel @ axis
+                radius = float(np.linalg.norm(rel - np.outer(along, axis), axis=1).max())
+                ends = origin + np.outer([along.min(), along.max()], axis)  # the axis over the piece's extent along it
+                box_lo, box_hi = ends.min(axis=0) - radius, ends.max(axis=0) + radius  # holds the piece's whole turn
                 for other in model.links:
                     if other in moved or not pieces.get(other) or parent_of.get(ln) == other or parent_of.get(other) == ln:
                         continue
