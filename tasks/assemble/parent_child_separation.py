@@ -85,7 +85,7 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
         k = 0
         while k < len(C) and P[i] is not None:
             overlap = None if C[k] is None else _pair_cuts(P[i], C[k], transforms, ref, tolerance)
-            if overlap is not None and overlap[0] > deepest_cut and not _overlaps_at(P[i], C[k], T_ref, tolerance):
+            if overlap is not None and overlap[0] > deepest_cut and _depth_at(P[i], C[k], T_ref, tolerance)[0] <= tolerance:
                 past = max(past, overlap[0])  # met only after moving clear of the modelled pose: a stop
                 overlap = None
             if overlap is not None:
@@ -113,9 +113,10 @@ def _separate_joint(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], joint
                      f"initial state, {PAST_STOP_NOTE} (too deep to cut): the pieces are kept, not cut")
 
 
-def _overlaps_at(a: Piece, b: Piece, T: np.ndarray, tolerance: float) -> bool:
-    """Whether child piece ``b`` at the child pose ``T`` (4, 4) penetrates parent piece ``a`` deeper than ``tolerance`` m."""
-    return not _boxes_apart(a, b, T) and penetration_depth(a, _transformed(b, T), tolerance)[0] > tolerance
+def _depth_at(a: Piece, b: Piece, T: np.ndarray, tolerance: float) -> tuple[float, np.ndarray]:
+    """(depth m, separating direction (3,)) of parent piece ``a`` and child piece ``b`` at the child pose ``T`` (4, 4)
+    (:func:`penetration_depth`; (0, 0) when their boxes are apart)."""
+    return (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), tolerance)
 
 
 def _at_limit(joint: urdf.UrdfJoint, q: float) -> bool:
@@ -135,8 +136,7 @@ def _pair_cuts(a: Piece, b: Piece, transforms: list[np.ndarray], ref: int, toler
     def depth_at(t: int) -> float:
         """The pair's depth (m) at position ``t`` (kept in ``found``)."""
         if t not in found:
-            T = transforms[t]
-            found[t] = (0.0, np.zeros(3)) if _boxes_apart(a, b, T) else penetration_depth(a, _transformed(b, T), tolerance)
+            found[t] = _depth_at(a, b, transforms[t], tolerance)
         return found[t][0]
 
     carried = _carried(depth_at, len(transforms), ref, tolerance)

@@ -116,6 +116,19 @@ def joint_velocity(joint: urdf.UrdfJoint, T: np.ndarray) -> Callable[[np.ndarray
     return lambda c: np.cross(axis, np.asarray(c, float) - t)
 
 
+def _moving_links(model: urdf.UrdfModel, pieces: dict[str, list[Piece]]):
+    """(movable joint, a link with pieces it moves, the links with pieces it does not move, parent and
+    child of that link excepted), joints in file order: the pairs the clearances look at."""
+    parent_of = {j.child: j.parent for j in model.joints}
+    subtrees = limits.subtrees(model)
+    for joint in model.movable_joints:
+        moved = subtrees[joint.name]
+        for ln in moved:
+            if pieces.get(ln):
+                yield joint, ln, [o for o in model.links if o not in moved and pieces.get(o)
+                                  and parent_of.get(ln) != o and parent_of.get(o) != ln]
+
+
 def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> None:
     """Give running clearance, in place, to every sliding contact between a
     link a movable joint moves and a link it does not move (parent-child
@@ -126,45 +139,37 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
     each change."""
     poses = model.link_poses(reference_state(model))
     done: set[tuple[str, int, str, int]] = set()
-    parent_of = {j.child: j.parent for j in model.joints}
     boxes = {ln: [(p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]) for p in pl] for ln, pl in pieces.items()}
-    subtrees = limits.subtrees(model)
-    for joint in model.movable_joints:
-        moved = subtrees[joint.name]
-        for ln in moved:
-            if not pieces.get(ln):
-                continue
-            inv = np.linalg.inv(poses[ln])
-            velocity = joint_velocity(joint, inv @ poses[joint.child])
-            for other in model.links:
-                if other in moved or not pieces.get(other) or parent_of.get(ln) == other or parent_of.get(other) == ln:
-                    continue
-                To = inv @ poses[other]
-                for k, Q in enumerate(pieces[other]):
-                    qw = boxes[other][k]
-                    for i, P in enumerate(pieces[ln]):
-                        pw = boxes[ln][i]
-                        if (ln, i, other, k) in done:
-                            continue
-                        if np.any(np.minimum(pw.max(axis=0), qw.max(axis=0)) + RUNNING_CLEARANCE
-                                  < np.maximum(pw.min(axis=0), qw.min(axis=0))):
-                            continue  # bounding boxes apart by more than the clearance
-                        try:
-                            hit = clear_sliding_contact(P.points, Q.points @ To[:3, :3].T + To[:3, 3], velocity,
-                                                        deepest=TOUCHING_OVERLAP)
-                        except ValueError:
-                            continue
-                        if hit is None:
-                            continue
-                        pts, used, g = hit
-                        done.add((ln, i, other, k))
-                        try:
-                            pieces[ln][i] = Piece.of(pts, P.sources)
-                        except (QhullError, ValueError):
-                            continue
-                        boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
-                        notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
-                                     f"{other!r} (gap {g * 1000:.2g} mm, sliding along {joint.name!r})")
+    for joint, ln, others in _moving_links(model, pieces):
+        inv = np.linalg.inv(poses[ln])
+        velocity = joint_velocity(joint, inv @ poses[joint.child])
+        for other in others:
+            To = inv @ poses[other]
+            for k, Q in enumerate(pieces[other]):
+                qw = boxes[other][k]
+                for i, P in enumerate(pieces[ln]):
+                    pw = boxes[ln][i]
+                    if (ln, i, other, k) in done:
+                        continue
+                    if np.any(np.minimum(pw.max(axis=0), qw.max(axis=0)) + RUNNING_CLEARANCE
+                              < np.maximum(pw.min(axis=0), qw.min(axis=0))):
+                        continue  # bounding boxes apart by more than the clearance
+                    try:
+                        hit = clear_sliding_contact(P.points, Q.points @ To[:3, :3].T + To[:3, 3], velocity,
+                                                    deepest=TOUCHING_OVERLAP)
+                    except ValueError:
+                        continue
+                    if hit is None:
+                        continue
+                    pts, used, g = hit
+                    done.add((ln, i, other, k))
+                    try:
+                        pieces[ln][i] = Piece.of(pts, P.sources)
+                    except (QhullError, ValueError):
+                        continue
+                    boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+                    notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
+                                 f"{other!r} (gap {g * 1000:.2g} mm, sliding along {joint.name!r})")
 
 
 #: Positions sampled over a revolute joint's range (a continuous joint's full turn) by :func:`swept_clearance`.
@@ -244,50 +249,43 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
     (a square dial's corners passing a door's top edge: a contact that slides, held by the contact margins) is
     shrunk about the joint's axis (:func:`_clear_turning_piece`) at :data:`SWEPT_SAMPLES` positions over the range
     (a full turn for a continuous joint). Parent-child pairs excepted. Notes name each change."""
-    poses = model.link_poses(reference_state(model))
     ref = reference_state(model)
-    parent_of = {j.child: j.parent for j in model.joints}
-    subtrees = limits.subtrees(model)
-    for joint in model.movable_joints:
+    poses = model.link_poses(ref)
+    for joint, ln, others in _moving_links(model, pieces):
         if joint.type not in ("revolute", "continuous"):
             continue
         if joint.type == "continuous" or joint.lower is None or joint.upper is None:
             angles = np.linspace(0.0, 2 * np.pi, SWEPT_SAMPLES, endpoint=False)
         else:
-            angles = np.linspace(float(joint.lower), float(joint.upper), SWEPT_SAMPLES) - ref.get(joint.name, 0.0)
-            angles = np.concatenate([[0.0], angles])
+            angles = np.concatenate([[0.0], np.linspace(float(joint.lower), float(joint.upper), SWEPT_SAMPLES) - ref.get(joint.name, 0.0)])
         Tj = poses[joint.child]
         origin, axis = Tj[:3, 3], Tj[:3, :3] @ np.asarray(joint.axis, float)
         axis = axis / max(float(np.linalg.norm(axis)), 1e-12)
-        moved = subtrees[joint.name]
-        for ln in moved:
-            for i, P in enumerate(pieces.get(ln) or []):
-                pw = P.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
-                rel = pw - origin
-                along = rel @ axis
-                radius = float(np.linalg.norm(rel - np.outer(along, axis), axis=1).max())
-                ends = origin + np.outer([along.min(), along.max()], axis)  # the axis over the piece's extent along it
-                box_lo, box_hi = ends.min(axis=0) - radius, ends.max(axis=0) + radius  # holds the piece's whole turn
-                for other in model.links:
-                    if other in moved or not pieces.get(other) or parent_of.get(ln) == other or parent_of.get(other) == ln:
+        world = {o: [Q.points @ poses[o][:3, :3].T + poses[o][:3, 3] for Q in pieces[o]] for o in others}  # they do not change here
+        for i, P in enumerate(pieces[ln]):
+            pw = P.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+            rel = pw - origin
+            along = rel @ axis
+            radius = float(np.linalg.norm(rel - np.outer(along, axis), axis=1).max())
+            ends = origin + np.outer([along.min(), along.max()], axis)  # the axis over the piece's extent along it
+            box_lo, box_hi = ends.min(axis=0) - radius, ends.max(axis=0) + radius  # holds the piece's whole turn
+            for other in others:
+                for qw in world[other]:
+                    if np.any(qw.min(axis=0) > box_hi + RUNNING_CLEARANCE) or np.any(qw.max(axis=0) < box_lo - RUNNING_CLEARANCE):
                         continue
-                    for k, Q in enumerate(pieces[other]):
-                        qw = Q.points @ poses[other][:3, :3].T + poses[other][:3, 3]
-                        if np.any(qw.min(axis=0) > box_hi + RUNNING_CLEARANCE) or np.any(qw.max(axis=0) < box_lo - RUNNING_CLEARANCE):
-                            continue
-                        try:
-                            hit = _clear_turning_piece(pw, qw, origin, axis, angles)
-                        except ValueError:
-                            continue
-                        if hit is None:
-                            continue
-                        pts, shrink, g = hit
-                        inv = np.linalg.inv(poses[ln])
-                        try:
-                            pieces[ln][i] = P = Piece.of(pts @ inv[:3, :3].T + inv[:3, 3], P.sources)
-                        except (QhullError, ValueError):
-                            continue
-                        pw = pts
-                        notes.append(f"link {ln!r}: collision piece {i} shrunk {shrink:.1%} about {joint.name!r}'s axis for "
-                                     f"{RUNNING_CLEARANCE * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against {other!r} over its "
-                                     f"turn (it came {g * 1000:.2g} mm from it)")
+                    try:
+                        hit = _clear_turning_piece(pw, qw, origin, axis, angles)
+                    except ValueError:
+                        continue
+                    if hit is None:
+                        continue
+                    pts, shrink, g = hit
+                    inv = np.linalg.inv(poses[ln])
+                    try:
+                        pieces[ln][i] = P = Piece.of(pts @ inv[:3, :3].T + inv[:3, 3], P.sources)
+                    except (QhullError, ValueError):
+                        continue
+                    pw = pts
+                    notes.append(f"link {ln!r}: collision piece {i} shrunk {shrink:.1%} about {joint.name!r}'s axis for "
+                                 f"{RUNNING_CLEARANCE * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against {other!r} over its "
+                                 f"turn (it came {g * 1000:.2g} mm from it)")
