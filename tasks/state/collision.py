@@ -24,7 +24,7 @@ from asset2sim.schemas.asset import AssetDescription, GeometryRef
 COACD_SETTINGS = {
     "threshold": 0.05,
     "max_convex_hull": 16,
-    "preprocess_resolution": 50,
+    "preprocess_resolution": 30,
     "resolution": 1000,
     "mcts_iterations": 60,
     "mcts_max_depth": 2,
