@@ -185,6 +185,8 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
         else:
             asset, findings = extracted[0], list(extracted[1])
         output_folder.check_location(asset.source_dir, out_dir)
+        if asset.staged_from is not None:  # never into the folder the MJCF or USD file lies in
+            output_folder.check_location(asset.staged_from.parent, out_dir)
     except (extract.AssetError, output_folder.OutputError) as exc:
         raise RefineError(str(exc), "invalid_input", getattr(exc, "codes", None)) from exc
     return asset, findings
@@ -790,13 +792,21 @@ def _announce_post_check(att: _Attempt, log: _StageLog) -> None:
     log.say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
 
 
+def _staging_notes(asset) -> list[str]:
+    """The report's lines on an MJCF or USD input read and staged as a URDF (none for a URDF input)."""
+    if asset.staged_from is None:
+        return []
+    return [f"input: {asset.staged_from} read into the asset model and staged as a URDF"] + [
+        f"input: {n}" for n in asset.staging_notes]
+
+
 def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt, findings: list, pose_note: str, times: dict[str, float]) -> RefineReport:
     """``report.json``'s model from the final attempt."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
     metrics = att.check.metrics + [m for res in att.check.engine_results.values() for m in res]
     return RefineReport(
         asset_id=asset.asset_id,
-        source=str(asset.source_dir),
+        source=str(asset.staged_from or asset.source_dir),
         prompt=prompt,
         category=ctx.category,
         task=ctx.task,
@@ -823,7 +833,7 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         failure_mode=post_check_failure_mode(att.check),
         readiness=readiness(metrics).tiers,
         stage_seconds=times,
-        notes=request_notes(ctx.request) + list(overlay.notes.other)
+        notes=_staging_notes(asset) + request_notes(ctx.request) + list(overlay.notes.other)
         + ([f"resting pose ({ctx.request.pose_hint or 'stability'}): {pose_note}"] if pose_note else [])
         + [mounting_note(overlay)] + att.design,
         mounting=overlay.mounting,

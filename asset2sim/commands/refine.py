@@ -30,7 +30,7 @@ HELP = "Refine one asset for a natural-language request into an interaction-read
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
+    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or OpenUSD (.usd, .usda, .usdc, .usdz) file")
     parser.add_argument("--prompt", "-p", default="", help='the request, e.g. "I want a slightly open stapler."')
     parser.add_argument("--out", "-o", type=Path, required=True, help="output folder (must not be inside the input)")
     parser.add_argument("--category", default=None, help="override the asset's category (meta.json model_cat)")

@@ -19,7 +19,7 @@ from asset2sim import file_memo
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
-from asset2sim.tasks.ingest import validate_input
+from asset2sim.tasks.ingest import staged, validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
@@ -65,8 +65,11 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     """Validate, then read an asset; also return every validation finding.
 
     Args:
-        asset: folder with ``mobility.urdf`` (or one ``*.urdf``), or a URDF file.
-        asset_id: identifier to record; default the folder name.
+        asset: folder with ``mobility.urdf`` (or one ``*.urdf``), a URDF file, or an MJCF (``.xml``) or
+            OpenUSD (``.usd``, ``.usda``, ``.usdc``, ``.usdz``) file, read and staged as a URDF folder
+            (:func:`_stage_other_format`; the description's ``staged_from`` names the file), or a folder
+            without a URDF holding one such file.
+        asset_id: identifier to record; default the folder name (an MJCF or USD file given alone: its stem).
         category: overrides ``meta.json``'s ``model_cat`` when given.
         policy: validation policy; default ``validate_input.DEFAULT_POLICY`` (then the result is
             memoized while the files are unchanged, :data:`_EXTRACT_MEMO`).
@@ -82,6 +85,10 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     key = (os.path.realpath(asset), asset_id, category) if policy is None else None
     if key is not None and (hit := _EXTRACT_MEMO.get(key)) is not None:
         return hit
+    given = Path(asset)
+    staged_asset = _stage_other_format(asset)
+    if staged_asset is not None:
+        asset = staged_asset.folder
     result = validate_input.run_validation(asset, policy)
     errs = result.errors
     if errs:
@@ -103,15 +110,45 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     if len(roots) != 1:  # validation refuses this; defensive
         raise AssetError(f"{urdf}: expected exactly one root link, found {roots or 'none'}")
     files = _input_files(urdf, links, result)
-    # the files' identities before they are hashed (asset2sim.file_memo): the folder too, whose listing found the URDF
-    read = file_memo.identities(([folder] if Path(asset).is_dir() else []) + files)
+    if staged_asset is not None:  # the file read and what it names, then the staged URDF and meshes made of them
+        files = [*staged_asset.read.files, *files]
+        read = file_memo.identities(list(staged_asset.read.files))
+        default_id = given.name if given.is_dir() else staged_asset.read.source.stem
+    else:
+        # the files' identities before they are hashed (asset2sim.file_memo): the folder too, whose listing found the URDF
+        read = file_memo.identities(([folder] if Path(asset).is_dir() else []) + files)
+        default_id = folder.name if urdf.name in URDF_NAMES else urdf.stem
     desc = AssetDescription(
-        asset_id=asset_id or (folder.name if urdf.name in URDF_NAMES else urdf.stem), source_dir=folder, urdf_path=urdf,
+        asset_id=asset_id or default_id, source_dir=folder, urdf_path=urdf,
         robot_name=robot.name or urdf.stem, links=links, joints=joints, root_link=roots[0],
-        category=category or result.category, input_hash=sha256_files(files))
+        category=category or result.category, input_hash=sha256_files(files),
+        staged_from=None if staged_asset is None else Path(os.path.realpath(staged_asset.read.source)),
+        staging_notes=[] if staged_asset is None else list(staged_asset.read.notes))
     if key is not None:
         _EXTRACT_MEMO.put(key, read, (desc, list(result.findings)))
     return desc, list(result.findings)
+
+
+def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
+    """An MJCF or USD file (:func:`~asset2sim.tasks.ingest.staged.other_format_file` of ``asset``) read (:mod:`~asset2sim.tasks.ingest.mjcf_reader`, :mod:`~asset2sim.tasks.ingest.usd_reader`)
+    and staged as a URDF folder (:func:`~asset2sim.tasks.ingest.staged.stage`); None for a URDF input.
+
+    Raises:
+        AssetError: the file cannot be read into the asset model (the reader's message, naming the body, prim
+            or joint), or its reader is not installed.
+    """
+    source = staged.other_format_file(asset)
+    if source is None:
+        return None
+    fmt = staged.input_format(source)
+    try:
+        if fmt == "mjcf":
+            from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset as read
+        else:
+            from asset2sim.tasks.ingest.usd_reader import read_usd_asset as read
+        return staged.stage(read(source), staged.staging_folder(source))
+    except (staged.StagingError, ImportError, OSError) as exc:
+        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
 
 
 def _link(ln: UrdfLink, mesh_paths: dict[str, Path], semantics: dict, replace: set[str], urdf: Path) -> LinkDesc:

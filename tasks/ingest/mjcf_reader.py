@@ -1,0 +1,328 @@
+"""MJCF (MuJoCo) articulated objects read into the project's one asset model.
+
+The file is parsed and compiled by MuJoCo itself (``mujoco.MjSpec.from_file``,
+then ``spec.compile()``): default classes, ``<compiler angle>`` (degrees are
+MJCF's default), ``meshdir``, mesh scale and recentring, ``fromto`` and
+alternative orientations all come resolved from the compiled ``MjModel``; the
+spec says which bodies declare an ``<inertial>``. Nothing here walks XML.
+
+Conventions (MJCF -> URDF):
+
+- The world body's one child body is the root link. A ``<freejoint>`` on it
+  means a free-standing object; none means the root is welded to the world
+  (a mounted object). Geoms on the world body (a ground plane) are scenery
+  and are left out, with a note.
+- A body with one hinge or slide joint is a link whose URDF frame is the body
+  frame moved to the joint's ``pos``; the joint origin is the URDF frame at
+  joint value 0 (MuJoCo's ``ref`` is undone), so joint values, ``range``,
+  ``springref`` read the same in both. A body without joints is a fixed
+  joint. Ball joints, several joints on one body and a slide without a range
+  are refused.
+- ``damping`` and ``frictionloss`` become ``<dynamics damping friction>``;
+  ``stiffness`` about ``springref`` is a declared spring; the largest force of
+  the joint's ``actuatorfrcrange`` or of an actuator driving it is the limit's
+  effort. ``armature``, tendons and equality constraints have no URDF element
+  and are noted.
+- A geom with ``contype`` and ``conaffinity`` 0 is a visual; any other is a
+  collision, and a body without visual geoms shows its collision geoms. Boxes,
+  spheres and cylinders stay primitives; capsules, ellipsoids and meshes are
+  written as meshes (MuJoCo's compiled vertices, in the geom frame).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix
+from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, mesh_name
+from asset2sim.urdf import (UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfMaterial,
+                            UrdfModel)
+
+#: Primitive geoms written as a mesh of their surface: triangles per full turn of the tessellation.
+PRIMITIVE_SEGMENTS = 16
+
+
+def _pose(pos, quat_wxyz) -> np.ndarray:
+    """The (4, 4) pose of a position (3,) m and a unit quaternion (w, x, y, z)."""
+    m = np.eye(4)
+    m[:3, :3] = quat_wxyz_matrix(np.asarray(quat_wxyz, float))
+    m[:3, 3] = np.asarray(pos, float)
+    return m
+
+
+def _shift(xyz) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = np.asarray(xyz, float)
+    return m
+
+
+def _compile(path: Path):
+    """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``; StagingError with MuJoCo's message when it cannot."""
+    try:
+        import mujoco
+    except ImportError as exc:
+        raise ImportError(f"reading MJCF needs MuJoCo ({exc}); install the extra: pip install 'asset2sim[mujoco]'") from exc
+    try:
+        with warnings.catch_warnings(record=True) as caught:  # MuJoCo's decoder warnings become notes
+            warnings.simplefilter("always")
+            spec = mujoco.MjSpec.from_file(str(path))
+            model = spec.compile()
+    except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
+        raise StagingError(f"{path}: MuJoCo cannot read this MJCF: {exc}") from exc
+    return spec, model, [f"MuJoCo: {w.message}" for w in caught]
+
+
+def read_mjcf_asset(path: Path | str) -> ReadAsset:
+    """Read one articulated object from an MJCF file.
+
+    Args:
+        path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them).
+
+    Returns:
+        A :class:`~asset2sim.tasks.ingest.staged.ReadAsset` (format ``"mjcf"``): lengths in m, angles in
+        rad, masses in kg, inertia tensors (3, 3) in kg*m^2 about the center of mass in the link axes.
+
+    Raises:
+        ImportError: MuJoCo is not installed.
+        StagingError: MuJoCo cannot compile the file, or the file holds something the asset model
+            cannot take (names the body or joint): not exactly one body under the world body, a ball
+            joint, several joints on one body, a free joint below the root, a slide joint without a range.
+    """
+    import mujoco
+
+    path = Path(path)
+    spec, m, warned = _compile(path)
+    roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0]
+    if len(roots) != 1:
+        names = [m.body(b).name or f"#{b}" for b in roots]
+        raise StagingError(f"{path}: one articulated object per file: the world body holds {len(roots)} bodies {names}")
+    reader = _Reader(path, spec, m, mujoco)
+    reader.notes.extend(warned)
+    return reader.read(roots[0])
+
+
+class _Reader:
+    """State of one :func:`read_mjcf_asset` call."""
+
+    def __init__(self, path: Path, spec, m, mujoco):
+        self.path, self.spec, self.m, self.mj = path, spec, m, mujoco
+        self.notes: list[str] = []
+        self.meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.mesh_files: dict[tuple, str] = {}
+        self.used: set[str] = set()
+        self.springs: dict[str, DeclaredSpring] = {}
+        self.inferred: list[str] = []
+        self.explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
+        self.names: dict[int, str] = {}
+
+    def body_name(self, b: int) -> str:
+        if b not in self.names:
+            name = self.m.body(b).name or f"body_{b}"
+            if name in self.names.values():
+                raise StagingError(f"{self.path}: two bodies are called {name!r}")
+            self.names[b] = name
+        return self.names[b]
+
+    def read(self, root: int) -> ReadAsset:
+        m = self.m
+        world_geoms = int(m.body_geomnum[0])
+        if world_geoms:
+            self.notes.append(f"{world_geoms} geom(s) on the world body (scenery, e.g. a ground plane) left out")
+        links: dict[str, UrdfLink] = {}
+        joints: list[UrdfJoint] = []
+        frames: dict[int, np.ndarray] = {}  # body -> its URDF link frame in the body frame (the joint's pos)
+        order = [root] + [b for b in range(1, m.nbody) if b != root]
+        for b in order:
+            parent = int(m.body_parentid[b])
+            joint, frame = self._joint(b, is_root=b == root)
+            frames[b] = frame
+            if b != root:
+                if parent not in frames:  # MuJoCo numbers bodies depth-first: a parent precedes its children
+                    raise StagingError(f"{self.path}: body {self.body_name(b)!r} comes before its parent")
+                origin = np.linalg.inv(frames[parent]) @ _pose(m.body_pos[b], m.body_quat[b]) @ frame
+                joints.append(self._urdf_joint(b, joint, origin))
+            links[self.body_name(b)] = self._link(b, np.linalg.inv(frame))
+        self._other_notes()
+        model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
+        files = tuple(sorted({self.path, *self._mesh_files()}))
+        return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs,
+                         inferred=tuple(self.inferred), notes=tuple(self.notes), files=files)
+
+    # ------------------------------------------------------------------ joints
+    def _joint(self, b: int, is_root: bool) -> tuple[int | None, np.ndarray]:
+        """(the body's joint id or None, the URDF link frame (4, 4) in the body frame)."""
+        m, mj = self.m, self.mj
+        n, adr = int(m.body_jntnum[b]), int(m.body_jntadr[b])
+        ids = list(range(adr, adr + n))
+        free = [j for j in ids if m.jnt_type[j] == mj.mjtJoint.mjJNT_FREE]
+        if free and not is_root:
+            raise StagingError(f"{self.path}: body {self.body_name(b)!r} has a free joint below the root")
+        if is_root:
+            if not free:
+                self.notes.append(f"root body {self.body_name(b)!r} has no free joint: welded to the world (mounted)")
+            others = [j for j in ids if j not in free]
+            if others:
+                raise StagingError(f"{self.path}: the root body {self.body_name(b)!r} has joint(s) "
+                                   f"{[m.joint(j).name for j in others]}; the root may only have a free joint")
+            return None, np.eye(4)
+        if n == 0:
+            return None, np.eye(4)
+        if n > 1:
+            raise StagingError(f"{self.path}: body {self.body_name(b)!r} has {n} joints "
+                               f"{[m.joint(j).name for j in ids]}; a link takes one joint to its parent")
+        j = ids[0]
+        if m.jnt_type[j] == mj.mjtJoint.mjJNT_BALL:
+            raise StagingError(f"{self.path}: joint {m.joint(j).name!r} of body {self.body_name(b)!r} is a ball joint; "
+                               "only hinge and slide joints are read")
+        return j, _shift(m.jnt_pos[j])
+
+    def _urdf_joint(self, b: int, j: int | None, origin: np.ndarray) -> UrdfJoint:
+        """The URDF joint carrying body ``b`` (fixed when ``j`` is None); ``origin`` at MuJoCo's ``ref``."""
+        m, mj = self.m, self.mj
+        parent, child = self.body_name(int(m.body_parentid[b])), self.body_name(b)
+        if j is None:
+            return UrdfJoint(name=f"{child}_fixed", type="fixed", parent=parent, child=child, origin=origin)
+        name = m.joint(j).name or f"{child}_joint"
+        axis = np.asarray(m.jnt_axis[j], float)
+        hinge = m.jnt_type[j] == mj.mjtJoint.mjJNT_HINGE
+        ref = float(m.qpos0[m.jnt_qposadr[j]])
+        if ref != 0.0:  # the body frame is drawn at q = ref; URDF's origin is q = 0
+            undo = np.eye(4)
+            if hinge:
+                undo[:3, :3] = axis_angle_matrix(axis, -ref)
+            else:
+                undo[:3, 3] = -ref * axis
+            origin = origin @ undo
+            self.notes.append(f"joint {name!r}: ref {ref:g} undone (the URDF origin is the joint at 0)")
+        limited = bool(m.jnt_limited[j])
+        if not hinge and not limited:
+            raise StagingError(f"{self.path}: slide joint {name!r} of body {child!r} has no range; give it one")
+        kind = ("revolute" if limited else "continuous") if hinge else "prismatic"
+        lo, hi = (float(v) for v in m.jnt_range[j]) if limited else (None, None)
+        dof = int(m.jnt_dofadr[j])
+        effort = self._effort(j)
+        limit = UrdfLimit(lower=lo, upper=hi, effort=effort) if limited or effort is not None else None
+        dyn = UrdfDynamics(damping=float(m.dof_damping[dof]), friction=float(m.dof_frictionloss[dof]))
+        k = float(m.jnt_stiffness[j])
+        if k > 0:
+            self.springs[name] = DeclaredSpring(stiffness=k, reference=float(m.qpos_spring[m.jnt_qposadr[j]]))
+        if float(m.dof_armature[dof]) > 0:
+            self.notes.append(f"joint {name!r}: armature {float(m.dof_armature[dof]):g} not carried (URDF has no element for it)")
+        return UrdfJoint(name=name, type=kind, parent=parent, child=child, origin=origin, axis_xyz=axis,
+                         limit=limit, dynamics=dyn)
+
+    def _effort(self, j: int) -> float | None:
+        """Largest force (N or N*m) the joint's actuator force range or an actuator on it allows; None when unbounded."""
+        m, mj = self.m, self.mj
+        forces = []
+        if bool(m.jnt_actfrclimited[j]):
+            forces.append(float(np.abs(m.jnt_actfrcrange[j]).max()))
+        for a in range(m.nu):
+            if m.actuator_trntype[a] == mj.mjtTrn.mjTRN_JOINT and int(m.actuator_trnid[a, 0]) == j and bool(m.actuator_forcelimited[a]):
+                forces.append(float(np.abs(m.actuator_forcerange[a]).max() * abs(float(m.actuator_gear[a, 0]))))
+        return max(forces) if forces else None
+
+    # ------------------------------------------------------------------- links
+    def _link(self, b: int, to_link: np.ndarray) -> UrdfLink:
+        """The link of body ``b``; ``to_link`` (4, 4) maps the body frame to the link frame."""
+        m = self.m
+        name = self.body_name(b)
+        inertial = None
+        if self.explicit.get(name, False) and float(m.body_mass[b]) > 0:
+            r = quat_wxyz_matrix(m.body_iquat[b])
+            tensor = r @ np.diag(m.body_inertia[b]) @ r.T
+            rot = to_link[:3, :3]
+            com = to_link[:3, :3] @ m.body_ipos[b] + to_link[:3, 3]
+            inertial = UrdfInertial(mass=float(m.body_mass[b]), origin=_shift(com), inertia=rot @ tensor @ rot.T)
+        elif float(m.body_mass[b]) > 0:
+            self.inferred.append(name)
+        visuals, collisions, friction = [], [], set()
+        for g in range(int(m.body_geomadr[b]), int(m.body_geomadr[b]) + int(m.body_geomnum[b])):
+            geom = self._geometry(g, to_link @ _pose(m.geom_pos[g], m.geom_quat[g]))
+            if geom is None:
+                continue
+            if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0:
+                visuals.append(geom)
+            else:
+                collisions.append(geom)
+                friction.add(float(m.geom_friction[g, 0]))
+        if collisions and not visuals:
+            visuals = [UrdfGeometry(kind=c.kind, origin=c.origin.copy(), name=c.name, filename=c.filename, size=c.size,
+                                    radius=c.radius, length=c.length, material=c.material) for c in collisions]
+        contact = {"lateral_friction": friction.pop()} if len(friction) == 1 else {}
+        return UrdfLink(name=name, inertial=inertial, visuals=visuals, collisions=collisions, contact=contact)
+
+    def _geometry(self, g: int, origin: np.ndarray) -> UrdfGeometry | None:
+        """The URDF geometry of geom ``g`` at ``origin`` (4, 4, link frame); None (noted) for a kind URDF cannot take."""
+        m, T = self.m, self.mj.mjtGeom
+        kind, size = int(m.geom_type[g]), np.asarray(m.geom_size[g], float)
+        name = m.geom(g).name or None
+        rgba = np.asarray(m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g], float)
+        mat = UrdfMaterial(name="rgba_" + "".join(f"{int(round(255 * float(c))):02x}" for c in np.clip(rgba, 0, 1)), rgba=rgba)
+        if kind == T.mjGEOM_BOX:
+            return UrdfGeometry(kind="box", origin=origin, name=name, size=2.0 * size, material=mat)
+        if kind == T.mjGEOM_SPHERE:
+            return UrdfGeometry(kind="sphere", origin=origin, name=name, radius=float(size[0]), material=mat)
+        if kind == T.mjGEOM_CYLINDER:
+            return UrdfGeometry(kind="cylinder", origin=origin, name=name, radius=float(size[0]), length=2.0 * float(size[1]), material=mat)
+        if kind in (T.mjGEOM_MESH, T.mjGEOM_CAPSULE, T.mjGEOM_ELLIPSOID):
+            fname = self._mesh_file(g, kind, size)
+            return UrdfGeometry(kind="mesh", origin=origin, name=name, filename=fname, material=mat)
+        self.notes.append(f"geom {name or g} of body {self.body_name(int(m.geom_bodyid[g]))!r}: type "
+                          f"{T(kind).name.removeprefix('mjGEOM_').lower()} has no URDF geometry; left out")
+        return None
+
+    def _mesh_file(self, g: int, kind: int, size: np.ndarray) -> str:
+        """``meshes/<name>.obj`` holding the surface of geom ``g`` in its own frame (one file per mesh asset)."""
+        import trimesh
+
+        m, T = self.m, self.mj.mjtGeom
+        if kind == T.mjGEOM_MESH:
+            mid = int(m.geom_dataid[g])
+            key: tuple = ("mesh", mid)
+            if key not in self.mesh_files:
+                va, vn, fa, fn = (int(x) for x in (m.mesh_vertadr[mid], m.mesh_vertnum[mid], m.mesh_faceadr[mid], m.mesh_facenum[mid]))
+                fname = mesh_name(m.mesh(mid).name or f"mesh_{mid}", self.used)
+                self.meshes[fname] = (np.array(m.mesh_vert[va:va + vn], float), np.array(m.mesh_face[fa:fa + fn], np.int64))
+                self.mesh_files[key] = fname
+            return self.mesh_files[key]
+        key = ("primitive", kind, *np.round(size, 12))
+        if key not in self.mesh_files:
+            if kind == T.mjGEOM_CAPSULE:
+                shape = trimesh.creation.capsule(height=2.0 * float(size[1]), radius=float(size[0]), count=[PRIMITIVE_SEGMENTS, PRIMITIVE_SEGMENTS])
+                label = "capsule"
+            else:
+                shape = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+                shape.apply_scale(size)
+                label = "ellipsoid"
+            fname = mesh_name(f"{label}_{len(self.mesh_files)}", self.used)
+            self.meshes[fname] = (np.asarray(shape.vertices, float), np.asarray(shape.faces, np.int64))
+            self.mesh_files[key] = fname
+            self.notes.append(f"{label} geom(s) written as a mesh of {len(shape.faces)} triangles ({fname})")
+        return self.mesh_files[key]
+
+    def _other_notes(self) -> None:
+        m = self.m
+        if m.ntendon:
+            self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
+        if m.neq:
+            self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
+
+    def _mesh_files(self) -> list[Path]:
+        """Mesh and texture files the MJCF names that exist (for the input hash)."""
+        base = self.path.parent
+        meshdir = Path(self.spec.meshdir or "")
+        texdir = Path(self.spec.texturedir or "")
+        out = []
+        for items, folder in ((self.spec.meshes, meshdir), (self.spec.textures, texdir)):
+            for item in items:
+                f = getattr(item, "file", "") or ""
+                if not f:
+                    continue
+                p = Path(f) if Path(f).is_absolute() else base / folder / f
+                if p.is_file():
+                    out.append(p.resolve())
+        return out

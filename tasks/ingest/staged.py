@@ -1,0 +1,188 @@
+"""Assets in other formats (MJCF, OpenUSD) staged as a URDF folder.
+
+A reader of another format (:mod:`asset2sim.tasks.ingest.mjcf_reader`,
+:mod:`asset2sim.tasks.ingest.usd_reader`) turns the file into the project's one
+asset model (:class:`asset2sim.urdf.UrdfModel`, SI units, radians) and the
+values URDF has no element for (joint springs). :func:`stage` writes that
+model as ``<folder>/model.urdf`` with its meshes as ``<folder>/meshes/*.obj``.
+The rest of the pipeline (validation, extraction, refine, audit) reads that
+folder as it reads any URDF asset. The input file is only read; the folder is
+a fresh temporary one (:func:`staging_folder`) or one the caller names.
+"""
+
+from __future__ import annotations
+
+import atexit
+import hashlib
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import atomic, file_names
+from asset2sim.urdf import UrdfModel, write_urdf
+
+#: The staged URDF's file name inside its folder.
+STAGED_URDF = "model.urdf"
+#: Folder (inside the staged folder) of the meshes written for the model.
+MESH_DIR = "meshes"
+#: File suffixes read as MJCF and as OpenUSD.
+MJCF_SUFFIXES = (".xml", ".mjcf")
+USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+
+
+class StagingError(ValueError):
+    """An MJCF or USD input cannot be read into the asset model (the message names the file and the
+    body, prim or joint)."""
+
+
+@dataclass(frozen=True)
+class DeclaredSpring:
+    """A joint spring as the input declares it: ``stiffness`` N*m/rad or N/m about ``reference`` rad or m."""
+
+    stiffness: float
+    reference: float
+
+
+@dataclass(frozen=True)
+class ReadAsset:
+    """What a reader made of one file, before it is written.
+
+    ``model``: links, joints (limits, damping, friction as declared), inertials as declared (a link
+    whose mass the file leaves to the simulator has ``inertial`` None), geometry in the link frame with
+    mesh ``filename`` ``meshes/<stem>.obj``; ``meshes``: that filename -> (vertices (n, 3) m, triangles
+    (m, 3) int) to write; ``springs``: joint -> :class:`DeclaredSpring`; ``inferred``: links whose
+    inertial the file did not declare (the simulator would infer it from geometry); ``notes``: what was
+    converted or left out, one line each; ``files``: every input file read (for the input hash)."""
+
+    source: Path
+    format: str
+    model: UrdfModel
+    meshes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    springs: dict[str, DeclaredSpring] = field(default_factory=dict)
+    inferred: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    files: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
+class StagedAsset:
+    """A :class:`ReadAsset` written: ``urdf_path`` the staged URDF (its folder holds ``meshes/``)."""
+
+    read: ReadAsset
+    urdf_path: Path
+
+    @property
+    def folder(self) -> Path:
+        """The staged folder."""
+        return self.urdf_path.parent
+
+
+def input_format(path: Path | str) -> str:
+    """``"urdf"``, ``"mjcf"`` or ``"usd"`` for an input path: a folder or a ``.urdf`` file is URDF; ``.xml`` /
+    ``.mjcf`` files are MJCF (a ``.xml`` whose root element is ``<robot>`` is URDF); ``.usd*`` files are USD."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if p.is_dir() or suffix == ".urdf":
+        return "urdf"
+    if suffix in USD_SUFFIXES:
+        return "usd"
+    if suffix in MJCF_SUFFIXES:
+        try:
+            head = p.read_bytes()[:4096].decode("utf-8", "replace")
+        except OSError:
+            return "mjcf"
+        return "urdf" if "<robot" in head and "<mujoco" not in head else "mjcf"
+    return "urdf"
+
+
+def other_format_file(asset: Path | str) -> Path | None:
+    """The MJCF or USD file an input names: the path itself when it is one (:func:`input_format`); for a
+    folder without any ``*.urdf``, its one top-level MJCF or USD file (a folder per object, as a dataset
+    of MJCF objects is laid out); else None (a URDF input, or a folder validation will report on)."""
+    p = Path(asset)
+    if not p.is_dir():
+        return p if input_format(p) != "urdf" else None
+    if any(p.glob("*.urdf")):
+        return None
+    found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in (*MJCF_SUFFIXES, *USD_SUFFIXES)
+                   and input_format(f) != "urdf")
+    return found[0] if len(found) == 1 else None
+
+
+def mesh_name(stem: str, used: set[str]) -> str:
+    """``meshes/<stem>.obj`` for a name from the input (made safe by :func:`asset2sim.file_names.file_stem`,
+    numbered when taken); added to ``used``."""
+    base = file_names.file_stem(stem)
+    name, k = f"{MESH_DIR}/{base}.obj", 1
+    while name in used:
+        name, k = f"{MESH_DIR}/{base}_{k}.obj", k + 1
+    used.add(name)
+    return name
+
+
+def obj_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:
+    """A Wavefront OBJ of ``vertices`` (n, 3) and ``triangles`` (m, 3) (0-based), through trimesh's exporter.
+
+    Raises:
+        StagingError: no vertices or no triangles.
+    """
+    import trimesh
+
+    v, f = np.asarray(vertices, float).reshape(-1, 3), np.asarray(triangles, np.int64).reshape(-1, 3)
+    if not len(v) or not len(f):
+        raise StagingError("a mesh without vertices or triangles")
+    mesh = trimesh.Trimesh(v, f, process=False)
+    return mesh.export(file_type="obj", include_normals=False, include_color=False, include_texture=False,
+                       digits=17).encode("utf-8")
+
+
+def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
+    """Write ``read`` into ``folder``: ``model.urdf`` and ``meshes/*.obj`` (atomically, inside ``folder``).
+
+    Raises:
+        StagingError: a mesh cannot be written (names the file).
+        OSError: ``folder`` cannot be written.
+    """
+    folder = Path(folder)
+    for rel, (v, f) in sorted(read.meshes.items()):
+        try:
+            data = obj_bytes(v, f)
+        except StagingError as exc:
+            raise StagingError(f"{read.source}: {rel}: {exc}") from exc
+        atomic.write_bytes(file_names.join_inside(folder, rel), data)
+    urdf_path = folder / STAGED_URDF
+    comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "
+    atomic.write_bytes(urdf_path, write_urdf(read.model, comment=comment))
+    model = read.model
+    for link in model.links.values():
+        for g in (*link.visuals, *link.collisions):
+            if g.kind == "mesh" and g.filename:
+                g.path = file_names.join_inside(folder, g.filename)
+    model.path = urdf_path
+    return StagedAsset(read=read, urdf_path=urdf_path)
+
+
+_STAGING_ROOT: list[Path] = []
+
+
+def _remove_if_owner(root: Path, pid: int) -> None:
+    """Remove ``root`` at exit of the process that made it (a forked child exiting normally leaves it)."""
+    if os.getpid() == pid:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def staging_folder(source: Path | str) -> Path:
+    """A new empty folder for staging ``source``, under this process's temporary folder
+    (``<tmp>/asset2sim-staged-<random>/<stem>-<digest of the path>``), removed when the process exits."""
+    if not _STAGING_ROOT:
+        root = Path(tempfile.mkdtemp(prefix="asset2sim-staged-"))
+        _STAGING_ROOT.append(root)
+        atexit.register(_remove_if_owner, root, os.getpid())
+    src = os.path.realpath(source)
+    digest = hashlib.sha256(src.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+    folder = Path(tempfile.mkdtemp(prefix=f"{file_names.file_stem(Path(src).stem)[:40]}-{digest}-", dir=_STAGING_ROOT[0]))
+    return folder
