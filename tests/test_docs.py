@@ -50,6 +50,7 @@ EXPECTED_FILES = {
                   "out/stapler/usd/mobility.usd", "eval/stapler/evaluation.json", "eval/stapler/report.html",
                   "views/front.png", "bench/results.csv"],
     "api.md": ["out/box/mobility.urdf", "out/box/report.json", "out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
+    "inputs.md": ["out/from_mjcf/mobility.urdf", "out/from_mjcf/report.json", "out/from_mjcf_api/report.json"],
     "outputs.md": ["out/demo/mobility.urdf", "out/demo/initial_state.json", "out/demo/overlay.json", "out/demo/report.json"],
     "requests.md": ["refine.yaml"],
     "simulators.md": ["out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],

@@ -19,7 +19,7 @@ from asset2sim import file_memo
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
-from asset2sim.tasks.ingest import staged, validate_input
+from asset2sim.tasks.ingest import mjcf_reader, staged, usd_reader, validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
@@ -141,11 +141,8 @@ def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
     if source is None:
         return None
     fmt = staged.input_format(source)
+    read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
     try:
-        if fmt == "mjcf":
-            from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset as read
-        else:
-            from asset2sim.tasks.ingest.usd_reader import read_usd_asset as read
         return staged.stage(read(source), staged.staging_folder(source))
     except (staged.StagingError, ImportError, OSError) as exc:
         raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc

@@ -254,3 +254,18 @@ def test_a_folder_holding_one_mjcf_file_is_an_asset_named_after_the_folder(tmp_p
     assert again.input_hash == asset.input_hash
     (folder / "assets" / "door.obj").write_text((folder / "assets" / "door.obj").read_text() + "\n# changed\n")
     assert extract_asset_checked(folder)[0].input_hash != asset.input_hash  # the mesh file is part of the input
+
+
+def test_a_usd_export_is_refined_from_its_file(tmp_path):
+    """The USD reader behind the same extraction: an output's USD export refined as an input."""
+    pytest.importorskip("pxr")
+    from asset2sim import demo_assets
+
+    root = tmp_path / "demo"
+    demo_assets.build_demo_dataset(root)
+    first = refine_asset(root / "box_lid", "A box, lid closed.", tmp_path / "first")
+    usd = tmp_path / "first" / "usd" / "mobility.usd"
+    res = refine_asset(usd, "A box, lid halfway open.", tmp_path / "again", extras=False)
+    assert res.report.source == str(usd.resolve()) and res.report.asset_id == "mobility"
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    assert set(res.report.initial_joint_positions) == set(first.report.initial_joint_positions)
