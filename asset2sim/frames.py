@@ -17,7 +17,8 @@ import numpy as np
 
 __all__ = [
     "axis_angle_matrix", "axis_rotation", "matrix_quat_wxyz", "matrix_rpy", "pose_matrix", "quat_angle",
-    "quat_wxyz_matrix", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz", "rpy_matrix", "translation_matrix"
+    "quat_wxyz_matrix", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz", "rigid_inverse", "rigid_matrix", "rigid_part",
+    "rpy_matrix", "translation_matrix"
 ]
 
 #: Threshold of ``cos(pitch)`` under which :func:`matrix_rpy` treats the
@@ -58,6 +59,29 @@ def translation_matrix(xyz: Iterable[float]) -> np.ndarray:
     t = np.eye(4)
     t[:3, 3] = np.asarray(xyz, float)
     return t
+
+
+def rigid_matrix(rotation: np.ndarray, translation: Iterable[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Homogeneous transform (4, 4) of a rotation (3, 3) and a translation (3,)."""
+    t = np.eye(4)
+    t[:3, :3] = np.asarray(rotation, float)
+    t[:3, 3] = np.asarray(translation, float)
+    return t
+
+
+def rigid_inverse(m: np.ndarray) -> np.ndarray:
+    """Inverse (4, 4) of a rigid transform ``m`` (4, 4): ``R^T`` and ``-R^T t``."""
+    r = np.asarray(m, float)[:3, :3]
+    return rigid_matrix(r.T, -r.T @ np.asarray(m, float)[:3, 3])
+
+
+def rigid_part(m: np.ndarray) -> np.ndarray:
+    """The rigid part (4, 4) of a transform ``m`` (4, 4) that may scale or shear: the rotation of the polar
+    decomposition of its (3, 3) block (a proper rotation, also for a mirror), the same translation."""
+    u, _, vt = np.linalg.svd(np.asarray(m, float)[:3, :3])
+    if np.linalg.det(u @ vt) < 0:
+        u[:, 2] = -u[:, 2]
+    return rigid_matrix(u @ vt, np.asarray(m, float)[:3, 3])
 
 
 def pose_matrix(xyz: Iterable[float] = (0.0, 0.0, 0.0), rpy: Iterable[float] = (0.0, 0.0, 0.0)) -> np.ndarray:

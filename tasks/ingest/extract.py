@@ -137,10 +137,10 @@ def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
         AssetError: the file cannot be read into the asset model (the reader's message, naming the body, prim
             or joint), or its reader is not installed.
     """
-    source = staged.other_format_file(asset)
-    if source is None:
+    found = staged.other_format_file(asset)
+    if found is None:
         return None
-    fmt = staged.input_format(source)
+    source, fmt = found
     read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
     try:
         return staged.stage(read(source), staged.staging_folder(source))

@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix
-from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, mesh_name
+from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
+from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name
 from asset2sim.urdf import (UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfMaterial,
                             UrdfModel)
 
@@ -47,16 +47,7 @@ PRIMITIVE_SEGMENTS = 16
 
 def _pose(pos, quat_wxyz) -> np.ndarray:
     """The (4, 4) pose of a position (3,) m and a unit quaternion (w, x, y, z)."""
-    m = np.eye(4)
-    m[:3, :3] = quat_wxyz_matrix(np.asarray(quat_wxyz, float))
-    m[:3, 3] = np.asarray(pos, float)
-    return m
-
-
-def _shift(xyz) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, 3] = np.asarray(xyz, float)
-    return m
+    return rigid_matrix(quat_wxyz_matrix(np.asarray(quat_wxyz, float)), pos)
 
 
 def _compile(path: Path):
@@ -116,15 +107,10 @@ class _Reader:
         self.springs: dict[str, DeclaredSpring] = {}
         self.inferred: list[str] = []
         self.explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
-        self.names: dict[int, str] = {}
 
     def body_name(self, b: int) -> str:
-        if b not in self.names:
-            name = self.m.body(b).name or f"body_{b}"
-            if name in self.names.values():
-                raise StagingError(f"{self.path}: two bodies are called {name!r}")
-            self.names[b] = name
-        return self.names[b]
+        """Body ``b``'s name (MuJoCo refuses repeated names), ``body_<b>`` for an unnamed one."""
+        return self.m.body(b).name or f"body_{b}"
 
     def read(self, root: int) -> ReadAsset:
         m = self.m
@@ -134,17 +120,14 @@ class _Reader:
         links: dict[str, UrdfLink] = {}
         joints: list[UrdfJoint] = []
         frames: dict[int, np.ndarray] = {}  # body -> its URDF link frame in the body frame (the joint's pos)
-        order = [root] + [b for b in range(1, m.nbody) if b != root]
-        for b in order:
+        for b in range(root, m.nbody):  # depth first: MuJoCo numbers a parent before its children
             parent = int(m.body_parentid[b])
             joint, frame = self._joint(b, is_root=b == root)
             frames[b] = frame
             if b != root:
-                if parent not in frames:  # MuJoCo numbers bodies depth-first: a parent precedes its children
-                    raise StagingError(f"{self.path}: body {self.body_name(b)!r} comes before its parent")
-                origin = np.linalg.inv(frames[parent]) @ _pose(m.body_pos[b], m.body_quat[b]) @ frame
+                origin = rigid_inverse(frames[parent]) @ _pose(m.body_pos[b], m.body_quat[b]) @ frame
                 joints.append(self._urdf_joint(b, joint, origin))
-            links[self.body_name(b)] = self._link(b, np.linalg.inv(frame))
+            links[self.body_name(b)] = self._link(b, rigid_inverse(frame))
         self._other_notes()
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
         files = tuple(sorted({self.path, *self._mesh_files()}))
@@ -177,7 +160,7 @@ class _Reader:
         if m.jnt_type[j] == mj.mjtJoint.mjJNT_BALL:
             raise StagingError(f"{self.path}: joint {m.joint(j).name!r} of body {self.body_name(b)!r} is a ball joint; "
                                "only hinge and slide joints are read")
-        return j, _shift(m.jnt_pos[j])
+        return j, translation_matrix(m.jnt_pos[j])
 
     def _urdf_joint(self, b: int, j: int | None, origin: np.ndarray) -> UrdfJoint:
         """The URDF joint carrying body ``b`` (fixed when ``j`` is None); ``origin`` at MuJoCo's ``ref``."""
@@ -236,7 +219,7 @@ class _Reader:
             tensor = r @ np.diag(m.body_inertia[b]) @ r.T
             rot = to_link[:3, :3]
             com = to_link[:3, :3] @ m.body_ipos[b] + to_link[:3, 3]
-            inertial = UrdfInertial(mass=float(m.body_mass[b]), origin=_shift(com), inertia=rot @ tensor @ rot.T)
+            inertial = UrdfInertial(mass=float(m.body_mass[b]), origin=translation_matrix(com), inertia=rot @ tensor @ rot.T)
         elif float(m.body_mass[b]) > 0:
             self.inferred.append(name)
         visuals, collisions, friction = [], [], set()
@@ -249,11 +232,10 @@ class _Reader:
             else:
                 collisions.append(geom)
                 friction.add(float(m.geom_friction[g, 0]))
-        if collisions and not visuals:
-            visuals = [UrdfGeometry(kind=c.kind, origin=c.origin.copy(), name=c.name, filename=c.filename, size=c.size,
-                                    radius=c.radius, length=c.length, material=c.material) for c in collisions]
         contact = {"lateral_friction": friction.pop()} if len(friction) == 1 else {}
-        return UrdfLink(name=name, inertial=inertial, visuals=visuals, collisions=collisions, contact=contact)
+        link = UrdfLink(name=name, inertial=inertial, visuals=visuals, collisions=collisions, contact=contact)
+        collisions_as_visuals(link)
+        return link
 
     def _geometry(self, g: int, origin: np.ndarray) -> UrdfGeometry | None:
         """The URDF geometry of geom ``g`` at ``origin`` (4, 4, link frame); None (noted) for a kind URDF cannot take."""

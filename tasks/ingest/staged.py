@@ -17,13 +17,13 @@ import hashlib
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from asset2sim import atomic, file_names
-from asset2sim.urdf import UrdfModel, write_urdf
+from asset2sim.urdf import UrdfLink, UrdfModel, write_urdf
 
 #: The staged URDF's file name inside its folder.
 STAGED_URDF = "model.urdf"
@@ -99,29 +99,42 @@ def input_format(path: Path | str) -> str:
     return "urdf"
 
 
-def other_format_file(asset: Path | str) -> Path | None:
-    """The MJCF or USD file an input names: the path itself when it is one (:func:`input_format`); for a
-    folder without any ``*.urdf``, its one top-level MJCF or USD file (a folder per object, as a dataset
-    of MJCF objects is laid out); else None (a URDF input, or a folder validation will report on)."""
+def other_format_file(asset: Path | str) -> tuple[Path, str] | None:
+    """(file, ``"mjcf"`` or ``"usd"``) of the MJCF or USD file an input names: the path itself when it is one
+    (:func:`input_format`); for a folder without any ``*.urdf``, its one top-level MJCF or USD file (a folder
+    per object, as a dataset of MJCF objects is laid out); else None (a URDF input, or a folder validation
+    will report on)."""
     p = Path(asset)
-    if not p.is_dir():
-        return p if input_format(p) != "urdf" else None
-    if any(p.glob("*.urdf")):
-        return None
-    found = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in (*MJCF_SUFFIXES, *USD_SUFFIXES)
-                   and input_format(f) != "urdf")
+    if p.is_dir():
+        if any(p.glob("*.urdf")):
+            return None
+        cands = sorted(f for f in p.iterdir() if f.is_file() and f.suffix.lower() in (*MJCF_SUFFIXES, *USD_SUFFIXES))
+    else:
+        cands = [p]
+    found = [(f, fmt) for f in cands if (fmt := input_format(f)) != "urdf"]
     return found[0] if len(found) == 1 else None
+
+
+def numbered(name: str, used: set[str]) -> str:
+    """``name``, or ``name_1``, ``name_2`` ... the first not in ``used``; added to ``used``."""
+    cand, k = name, 1
+    while cand in used:
+        cand, k = f"{name}_{k}", k + 1
+    used.add(cand)
+    return cand
 
 
 def mesh_name(stem: str, used: set[str]) -> str:
     """``meshes/<stem>.obj`` for a name from the input (made safe by :func:`asset2sim.file_names.file_stem`,
-    numbered when taken); added to ``used``."""
-    base = file_names.file_stem(stem)
-    name, k = f"{MESH_DIR}/{base}.obj", 1
-    while name in used:
-        name, k = f"{MESH_DIR}/{base}_{k}.obj", k + 1
-    used.add(name)
-    return name
+    :func:`numbered` against the stems in ``used``)."""
+    return f"{MESH_DIR}/{numbered(file_names.file_stem(stem), used)}.obj"
+
+
+def collisions_as_visuals(link: UrdfLink) -> None:
+    """A link with collision geometry but no visual shows its collisions (copies), as the simulators that read
+    the input would draw nothing else."""
+    if link.collisions and not link.visuals:
+        link.visuals = [replace(g, origin=g.origin.copy()) for g in link.collisions]
 
 
 def obj_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:
@@ -157,12 +170,6 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
     urdf_path = folder / STAGED_URDF
     comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "
     atomic.write_bytes(urdf_path, write_urdf(read.model, comment=comment))
-    model = read.model
-    for link in model.links.values():
-        for g in (*link.visuals, *link.collisions):
-            if g.kind == "mesh" and g.filename:
-                g.path = file_names.join_inside(folder, g.filename)
-    model.path = urdf_path
     return StagedAsset(read=read, urdf_path=urdf_path)
 
 

@@ -4,8 +4,7 @@
 :class:`~asset2sim.tasks.ingest.staged.ReadAsset` (``format="usd"``) whose :class:`~asset2sim.urdf.UrdfModel`
 is in SI units (m, kg, rad) and Z up. Rigid bodies are the links, revolute / prismatic / fixed joints the joints
 (``body0`` the parent, ``body1`` the child). The stage is re-expressed in metres, Z up: every transform ``X``
-becomes ``L X L^-1``, ``L = metersPerUnit * U`` (``U`` +90 deg about x for a Y-up stage), local coordinates
-``v`` become ``L v``. A child's link frame has its body's axes and its origin at the joint (``localPos1``), so a
+becomes ``L X L^-1`` (:mod:`asset2sim.tasks.ingest.usd_stage`, which also reads the geometry). A child's link frame has its body's axes and its origin at the joint (``localPos1``), so a
 USD written by :mod:`asset2sim.tasks.publish.export_usd` reads back in the source URDF's link frames. The root
 link keeps the world's axes: the object stands as it stands on the stage.
 """
@@ -13,15 +12,16 @@ link keeps the world's axes: the object stands as it stands on the stage.
 from __future__ import annotations
 
 import math
-from collections import Counter
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim.frames import quat_wxyz_matrix
-from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, mesh_name
-from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfMaterial, UrdfModel
+from asset2sim.frames import quat_wxyz_matrix, rigid_inverse, rigid_matrix
+from asset2sim.openusd import authored, pxr_modules, value_or
+from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, collisions_as_visuals, numbered
+from asset2sim.tasks.ingest.usd_stage import StageReading, link_geometry, open_stage, used_files
+from asset2sim.urdf import UrdfDynamics, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
 #: Degrees per radian (UsdPhysics angles, angular limits and angular gains are per degree).
 DEG = 180.0 / math.pi
@@ -31,40 +31,6 @@ UNLIMITED = 1e30
 FRICTION_ATTRS = ("asset2sim:friction", "newton:friction")
 #: Token -> unit vector (3,) along that axis.
 _AXES = {"X": np.array([1.0, 0.0, 0.0]), "Y": np.array([0.0, 1.0, 0.0]), "Z": np.array([0.0, 0.0, 1.0])}
-#: Rotation (3, 3) taking +z to the axis of a Cylinder / Capsule / Cone.
-_AXIS_TURN = {"X": np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]), "Y": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),
-              "Z": np.eye(3)}
-#: Y up -> Z up: +90 deg about x.
-_Y_TO_Z = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
-
-
-def _pxr():
-    """pxr's modules, imported on first use (``usd-core`` is an optional extra)."""
-    try:
-        from pxr import Usd, UsdGeom, UsdPhysics
-    except ImportError as exc:
-        raise ImportError(f"OpenUSD is not installed ({exc}); install the extra: pip install 'asset2sim[usd]'") from exc
-    return Usd, UsdGeom, UsdPhysics
-
-
-def _pose(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """Transform (4, 4) of a rotation (3, 3) and a translation (3,)."""
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = rot, pos
-    return out
-
-
-def _rigid(m: np.ndarray) -> np.ndarray:
-    """The rigid part (4, 4) of a transform ``m`` (4, 4): its rotation by polar decomposition, same translation."""
-    u, _, vt = np.linalg.svd(m[:3, :3])
-    if np.linalg.det(u @ vt) < 0:  # a mirror: keep a proper rotation
-        u[:, 2] = -u[:, 2]
-    return _pose(u @ vt, m[:3, 3])
-
-
-def _inv(m: np.ndarray) -> np.ndarray:
-    """Inverse (4, 4) of a rigid transform."""
-    return _pose(m[:3, :3].T, -m[:3, :3].T @ m[:3, 3])
 
 
 def _quat(q) -> np.ndarray:
@@ -74,63 +40,16 @@ def _quat(q) -> np.ndarray:
     return np.eye(3) if n == 0.0 else quat_wxyz_matrix(v / n)
 
 
-def _authored(prim, name: str):
-    """The authored value of attribute ``name`` of ``prim`` (None when absent)."""
-    a = prim.GetAttribute(name)
-    return a.Get() if a and a.HasAuthoredValue() else None
-
-
-def _attr(prim, name: str, default):
-    """Attribute ``name``'s value (its schema fallback included), ``default`` when it has none."""
-    a = prim.GetAttribute(name)
-    value = a.Get() if a else None
-    return default if value is None else value
-
-
 def _name(prim) -> str:
     """``asset2sim:name`` when authored, else the prim name."""
-    value = _authored(prim, "asset2sim:name")
+    value = authored(prim, "asset2sim:name")
     return str(value) if value else prim.GetName()
 
 
 def _unique(names: list[str]) -> list[str]:
     """``names`` with repeats numbered (``name_1``, ...)."""
-    out, used = [], set()
-    for n in names:
-        cand, k = n, 1
-        while cand in used:
-            cand, k = f"{n}_{k}", k + 1
-        used.add(cand)
-        out.append(cand)
-    return out
-
-
-@dataclass
-class _Ctx:
-    """One reading: the stage, the basis change ``L`` (4, 4; stage units and up axis -> m, Z up) with its
-    rotation ``u`` (3, 3), metres ``m`` and kilograms ``kg`` per stage unit, and what is gathered."""
-
-    path: Path
-    stage: object
-    cache: object
-    L: np.ndarray
-    u: np.ndarray
-    m: float
-    kg: float
-    notes: list[str] = field(default_factory=list)
-    meshes: dict = field(default_factory=dict)
-    used: set = field(default_factory=set)
-
-    def error(self, what: str, message: str) -> StagingError:
-        return StagingError(f"{self.path}: {what}: {message}")
-
-    def world(self, prim) -> np.ndarray:
-        """Prim-local coordinates (stage units) -> world (m, Z up), (4, 4)."""
-        return self.L @ np.array(self.cache.GetLocalToWorldTransform(prim), float).T
-
-    def frame(self, prim) -> np.ndarray:
-        """The prim's rigid frame (4, 4) in the world (m, Z up), its scale stripped."""
-        return _rigid(self.world(prim) @ np.linalg.inv(self.L))
+    used: set[str] = set()
+    return [numbered(n, used) for n in names]
 
 
 @dataclass
@@ -193,11 +112,11 @@ def read_usd_asset(path: Path | str) -> ReadAsset:
             not exactly one root body, bodies not connected to it, a body other than the root fixed to the
             world; an authored inertia on a scaled body; faceVertexCounts not matching faceVertexIndices.
     """
-    ctx = _open(Path(path))
+    ctx = open_stage(Path(path))
     bodies, joints = _collect(ctx)
     parent_of, order = _tree(ctx, bodies, joints)
     key = {b.GetPath(): n for b, n in zip(order, _unique([_name(b) for b in order]))}
-    frames = {order[0].GetPath(): _pose(np.eye(3), ctx.world(order[0])[:3, 3])}  # the world's axes at the root
+    frames = {order[0].GetPath(): rigid_matrix(np.eye(3), ctx.world(order[0])[:3, 3])}  # the world's axes at the root
     tree_joints = [parent_of[b.GetPath()] for b in order[1:]]
     for j, name in zip(tree_joints, _unique([j.name for j in tree_joints])):
         j.name = name
@@ -213,48 +132,13 @@ def read_usd_asset(path: Path | str) -> ReadAsset:
                       root=key[order[0].GetPath()])
     return ReadAsset(source=ctx.path, format="usd", model=model, meshes=ctx.meshes, springs=springs,
                      inferred=tuple(n for n, lk in links.items() if lk.inertial is None), notes=tuple(ctx.notes),
-                     files=_files(ctx))
+                     files=used_files(ctx))
 
 
-def _open(path: Path) -> _Ctx:
-    """The stage at ``path`` and its basis change (the conversions noted)."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
-    if not path.is_file():
-        raise StagingError(f"{path}: no such file")
-    try:
-        stage = Usd.Stage.Open(str(path))
-    except Exception as exc:  # pxr raises Tf.ErrorException for an unreadable layer
-        raise StagingError(f"{path}: not a readable USD stage: {str(exc).strip()[:300]}") from None
-    if stage is None:
-        raise StagingError(f"{path}: not a readable USD stage")
-    m, kg = float(UsdGeom.GetStageMetersPerUnit(stage)), float(UsdPhysics.GetStageKilogramsPerUnit(stage))
-    if not (math.isfinite(m) and m > 0 and math.isfinite(kg) and kg > 0):
-        raise StagingError(f"{path}: metersPerUnit {m} / kilogramsPerUnit {kg}: not positive numbers")
-    notes = [] if UsdGeom.StageHasAuthoredMetersPerUnit(stage) else [f"metersPerUnit not authored: USD's fallback {m} used"]
-    if m != 1.0 or kg != 1.0:
-        notes.append(f"stage units converted to SI: {m} m and {kg} kg per unit")
-    u = np.eye(3)
-    if str(UsdGeom.GetStageUpAxis(stage)) == "Y":
-        u = _Y_TO_Z
-        notes.append("stage is Y up: the object is turned +90 deg about x to Z up")
-    L = _pose(m * u, np.zeros(3))
-    return _Ctx(path=path, stage=stage, cache=UsdGeom.XformCache(Usd.TimeCode.Default()), L=L, u=u, m=m, kg=kg, notes=notes)
-
-
-def _files(ctx: _Ctx) -> tuple[Path, ...]:
-    """The file read and every other layer file the stage uses (existing on disk)."""
-    out = [ctx.path]
-    for layer in ctx.stage.GetUsedLayers():
-        real = layer.realPath
-        if real and Path(real).is_file() and Path(real).resolve() != ctx.path.resolve():
-            out.append(Path(real))
-    return tuple(dict.fromkeys(out))
-
-
-def _collect(ctx: _Ctx) -> tuple[list, list[_Joint]]:
+def _collect(ctx: StageReading) -> tuple[list, list[_Joint]]:
     """The rigid bodies to read (under the articulation root, or all, and those jointed to them) and the joints
     touching them."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
     prims = list(ctx.stage.Traverse(Usd.TraverseInstanceProxies()))
     roots = [p for p in prims if p.HasAPI(UsdPhysics.ArticulationRootAPI)]
     if len(roots) > 1:
@@ -280,9 +164,9 @@ def _collect(ctx: _Ctx) -> tuple[list, list[_Joint]]:
                     or scope is None or j.prim.GetPath().HasPrefix(scope)]
 
 
-def _read_joint(ctx: _Ctx, prim) -> _Joint | None:
+def _read_joint(ctx: StageReading, prim) -> _Joint | None:
     """A joint prim's kind, bodies and frame prims (None for a disabled joint, noted)."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
     api = UsdPhysics.Joint(prim)
     kinds = ((UsdPhysics.RevoluteJoint, "revolute"), (UsdPhysics.PrismaticJoint, "prismatic"), (UsdPhysics.FixedJoint, "fixed"))
     j = _Joint(prim, _name(prim), next((k for t, k in kinds if prim.IsA(t)), None))
@@ -307,7 +191,7 @@ def _read_joint(ctx: _Ctx, prim) -> _Joint | None:
     return j
 
 
-def _tree(ctx: _Ctx, bodies: list, joints: list[_Joint]) -> tuple[dict, list]:
+def _tree(ctx: StageReading, bodies: list, joints: list[_Joint]) -> tuple[dict, list]:
     """Body path -> its parent joint, and the bodies depth first from the root (the root first)."""
     parent_of, world = {}, []
     for j in joints:
@@ -349,24 +233,24 @@ def _tree(ctx: _Ctx, bodies: list, joints: list[_Joint]) -> tuple[dict, list]:
     return parent_of, order
 
 
-def _joint_frame(ctx: _Ctx, j: _Joint, side: int) -> np.ndarray:
+def _joint_frame(ctx: StageReading, j: _Joint, side: int) -> np.ndarray:
     """The joint frame (4, 4) in the world (m, Z up) of ``localPos<side>`` / ``localRot<side>``."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
     api = UsdPhysics.Joint(j.prim)
     pos = np.array((api.GetLocalPos1Attr() if side else api.GetLocalPos0Attr()).Get(), float)
     rot = ctx.u @ _quat((api.GetLocalRot1Attr() if side else api.GetLocalRot0Attr()).Get()) @ ctx.u.T
     target = j.target1 if side else j.target0
-    return _pose(ctx.frame(target)[:3, :3] @ rot, (ctx.world(target) @ np.append(pos, 1.0))[:3])
+    return rigid_matrix(ctx.frame(target)[:3, :3] @ rot, (ctx.world(target) @ np.append(pos, 1.0))[:3])
 
 
-def _joint(ctx: _Ctx, j: _Joint, parent_frame: np.ndarray, key: dict) -> tuple[np.ndarray, UrdfJoint, DeclaredSpring | None]:
+def _joint(ctx: StageReading, j: _Joint, parent_frame: np.ndarray, key: dict) -> tuple[np.ndarray, UrdfJoint, DeclaredSpring | None]:
     """The child's link frame (4, 4, world), the URDF joint (origin in the parent link frame ``parent_frame``,
     axis in the child's) and the declared spring."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
     j0, j1 = _joint_frame(ctx, j, 0), _joint_frame(ctx, j, 1)
-    child = _pose(ctx.frame(j.body1)[:3, :3], j1[:3, 3])
+    child = rigid_matrix(ctx.frame(j.body1)[:3, :3], j1[:3, 3])
     turn = j1[:3, :3].T @ child[:3, :3]  # joint frame -> child link axes
-    origin = _inv(parent_frame) @ _pose(j0[:3, :3] @ turn, j0[:3, 3])
+    origin = rigid_inverse(parent_frame) @ rigid_matrix(j0[:3, :3] @ turn, j0[:3, 3])
     uj = UrdfJoint(name=j.name, type=j.kind, parent=key[j.body0.GetPath()], child=key[j.body1.GetPath()], origin=origin)
     spring = None
     if j.kind != "fixed":
@@ -383,15 +267,15 @@ def _joint(ctx: _Ctx, j: _Joint, parent_frame: np.ndarray, key: dict) -> tuple[n
     return child, uj, spring
 
 
-def _limits(ctx: _Ctx, j: _Joint) -> tuple[str, UrdfLimit | None]:
+def _limits(ctx: StageReading, j: _Joint) -> tuple[str, UrdfLimit | None]:
     """URDF type (revolute / continuous / prismatic) and limits (rad or m; velocity rad/s or m/s)."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
     rot = j.kind == "revolute"
     api = UsdPhysics.RevoluteJoint(j.prim) if rot else UsdPhysics.PrismaticJoint(j.prim)
     unit = 1.0 / DEG if rot else ctx.m
     lo, hi = float(api.GetLowerLimitAttr().Get()), float(api.GetUpperLimitAttr().Get())  # fallbacks -inf, inf
     limited = [math.isfinite(v) and abs(v) < UNLIMITED for v in (lo, hi)]
-    vel = _authored(j.prim, "physxJoint:maxJointVelocity")
+    vel = authored(j.prim, "physxJoint:maxJointVelocity")
     vel = float(vel) * unit if vel is not None and math.isfinite(vel) and abs(vel) < UNLIMITED else None
     if rot and not any(limited):
         return "continuous", (UrdfLimit(velocity=vel) if vel is not None else None)
@@ -402,9 +286,9 @@ def _limits(ctx: _Ctx, j: _Joint) -> tuple[str, UrdfLimit | None]:
     return j.kind, UrdfLimit(lower=lo * unit, upper=hi * unit, velocity=vel)
 
 
-def _dynamics(ctx: _Ctx, j: _Joint) -> tuple[UrdfDynamics | None, DeclaredSpring | None, float | None]:
+def _dynamics(ctx: StageReading, j: _Joint) -> tuple[UrdfDynamics | None, DeclaredSpring | None, float | None]:
     """Damping and friction, the spring (stiffness > 0) and the effort limit (N*m or N) of a movable joint, in SI."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
+    _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
     rot = j.kind == "revolute"
     dof = "angular" if rot else "linear"
     force = ctx.kg * ctx.m * (ctx.m if rot else 1.0)  # stage unit of torque or force -> N*m or N
@@ -421,9 +305,9 @@ def _dynamics(ctx: _Ctx, j: _Joint) -> tuple[UrdfDynamics | None, DeclaredSpring
         effort = max_force * force if math.isfinite(max_force) and 0 <= max_force < UNLIMITED else None
         if str(drive.GetTypeAttr().Get()) == "acceleration":
             ctx.notes.append(f"{j.what}: acceleration drive, its gains read as force gains")
-    authored = [_authored(j.prim, a) for a in FRICTION_ATTRS]
-    friction = next((float(v) * force for v in authored if v is not None), None)
-    physx = _authored(j.prim, "physxJoint:jointFriction")
+    given = [authored(j.prim, a) for a in FRICTION_ATTRS]
+    friction = next((float(v) * force for v in given if v is not None), None)
+    physx = authored(j.prim, "physxJoint:jointFriction")
     if physx is not None and friction is None:
         ctx.notes.append(f"{j.what}: physxJoint:jointFriction {physx} is PhysX's unitless coefficient, not a "
                          "friction torque or force: not taken")
@@ -431,154 +315,33 @@ def _dynamics(ctx: _Ctx, j: _Joint) -> tuple[UrdfDynamics | None, DeclaredSpring
     return dyn, spring, effort
 
 
-def _link(ctx: _Ctx, body, name: str, frame: np.ndarray) -> UrdfLink:
+def _link(ctx: StageReading, body, name: str, frame: np.ndarray) -> UrdfLink:
     """The link of ``body`` in its link ``frame`` (4, 4, world): inertial and geometry."""
     link = UrdfLink(name=name, inertial=_inertial(ctx, body, name, frame))
-    _geometry(ctx, body, link, _inv(frame))
-    if link.collisions and not link.visuals:
-        link.visuals = [replace(g) for g in link.collisions]
+    link_geometry(ctx, body, link, rigid_inverse(frame))
+    collisions_as_visuals(link)
     return link
 
 
-def _inertial(ctx: _Ctx, body, name: str, frame: np.ndarray) -> UrdfInertial | None:
+def _inertial(ctx: StageReading, body, name: str, frame: np.ndarray) -> UrdfInertial | None:
     """Mass kg, COM (origin (4, 4), identity rotation) and inertia (3, 3) kg*m^2 in the link frame ``frame``;
     None (noted) when any of them is left to the simulator."""
-    mass, com, diag = (_authored(body, f"physics:{a}") for a in ("mass", "centerOfMass", "diagonalInertia"))
+    mass, com, diag = (authored(body, f"physics:{a}") for a in ("mass", "centerOfMass", "diagonalInertia"))
     missing = [w for w, ok in (("mass", mass is not None and mass > 0),
                                ("center of mass", com is not None and np.isfinite(np.array(com, float)).all()),
                                ("inertia", diag is not None and max(diag) > 0)) if not ok]
     if missing:
-        density = _authored(body, "physics:density")
+        density = authored(body, "physics:density")
         how = f" (physics:density {density} per stage unit^3 authored)" if density else ""
         ctx.notes.append(f"link {name!r}: {', '.join(missing)} left to the simulator{how}: inertial not declared")
         return None
-    to_link = _inv(frame) @ ctx.world(body)
+    to_link = rigid_inverse(frame) @ ctx.world(body)
     a = to_link[:3, :3] / ctx.m  # body axes -> link axes (identity when the link frame is the body frame)
     if not np.allclose(a.T @ a, np.eye(3), atol=1e-6):
         raise ctx.error(f"body {body.GetPath()}", "scaled, with an authored inertia (its units are ambiguous)")
-    q = a @ _quat(_attr(body, "physics:principalAxes", None))
+    q = a @ _quat(value_or(body, "physics:principalAxes", None))
     inertia = ctx.kg * ctx.m ** 2 * (q @ np.diag(np.array(diag, float)) @ q.T)
-    origin = _pose(np.eye(3), (to_link @ np.append(np.array(com, float), 1.0))[:3])
+    origin = rigid_matrix(np.eye(3), (to_link @ np.append(np.array(com, float), 1.0))[:3])
     return UrdfInertial(mass=float(mass) * ctx.kg, origin=origin, inertia=(inertia + inertia.T) / 2)
 
 
-def _geometry(ctx: _Ctx, body, link: UrdfLink, inverse: np.ndarray) -> None:
-    """Collisions and visuals of ``body`` (its Gprims, not those of nested bodies) into ``link``; ``inverse``
-    (4, 4) world -> link frame."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
-    it, approx = iter(Usd.PrimRange(body, Usd.TraverseInstanceProxies())), Counter()
-    for prim in it:
-        if prim != body and prim.HasAPI(UsdPhysics.RigidBodyAPI):
-            it.PruneChildren()
-            continue
-        if not prim.IsA(UsdGeom.Gprim):
-            continue
-        img = UsdGeom.Imageable(prim)
-        collision = prim.HasAPI(UsdPhysics.CollisionAPI) and bool(UsdPhysics.CollisionAPI(prim).GetCollisionEnabledAttr().Get())
-        visual = (not collision and img.ComputePurpose() in (UsdGeom.Tokens.default_, UsdGeom.Tokens.render)
-                  and img.ComputeVisibility() != UsdGeom.Tokens.invisible)
-        g = _shape(ctx, prim, link.name, inverse @ ctx.world(prim)) if collision or visual else None
-        if g is None:
-            continue
-        if collision:
-            approx[str(_authored(prim, "physics:approximation") or "none")] += 1
-            link.collisions.append(g)
-        else:
-            g.material = _color(prim)
-            link.visuals.append(g)
-    for how, n in sorted(approx.items()):
-        if how != "none":
-            ctx.notes.append(f"link {link.name!r}: {n} collision mesh(es) with physics:approximation {how} (kept as authored)")
-
-
-def _color(prim) -> UrdfMaterial | None:
-    """rgba (4,) of the first displayColor / displayOpacity values, None when no colour is authored."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
-    gp = UsdGeom.Gprim(prim)
-    color = gp.GetDisplayColorPrimvar().Get() if gp.GetDisplayColorPrimvar().HasAuthoredValue() else None
-    if not color:
-        return None
-    opacity = gp.GetDisplayOpacityPrimvar().Get() if gp.GetDisplayOpacityPrimvar().HasAuthoredValue() else None
-    return UrdfMaterial(rgba=np.array([*color[0], opacity[0] if opacity else 1.0], float))
-
-
-def _shape(ctx: _Ctx, prim, link: str, to_link: np.ndarray) -> UrdfGeometry | None:
-    """The geometry of a Gprim whose local coordinates (stage units) ``to_link`` (4, 4) maps to the link frame (m)."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
-    import trimesh
-
-    if prim.IsA(UsdGeom.Mesh):
-        return _mesh(ctx, prim, link, to_link)
-    turn = _pose(_AXIS_TURN.get(str(_attr(prim, "axis", "Z")), np.eye(3)), np.zeros(3))
-    r, h = float(_attr(prim, "radius", 1.0)), float(_attr(prim, "height", 2.0))
-    if prim.IsA(UsdGeom.Cube):
-        size = float(_attr(prim, "size", 2.0))
-        g, surface = _exact(to_link, "box", np.full(3, size)), trimesh.creation.box(extents=np.full(3, size))
-    elif prim.IsA(UsdGeom.Sphere):
-        g, surface = _exact(to_link, "sphere", np.full(3, 2 * r)), trimesh.creation.icosphere(subdivisions=3, radius=r)
-    elif prim.IsA(UsdGeom.Cylinder):
-        g = _exact(to_link @ turn, "cylinder", np.array([2 * r, 2 * r, h]))
-        surface = trimesh.creation.cylinder(radius=r, height=h, sections=48).apply_transform(turn)
-    elif prim.IsA(UsdGeom.Capsule) or prim.IsA(UsdGeom.Cone):
-        surface = (trimesh.creation.capsule(height=h, radius=r) if prim.IsA(UsdGeom.Capsule)
-                   else trimesh.creation.cone(radius=r, height=h).apply_translation([0, 0, -h / 2])).apply_transform(turn)
-        g = None
-    else:
-        ctx.notes.append(f"link {link!r}: {prim.GetTypeName()} {prim.GetPath()} has no URDF geometry: left out")
-        return None
-    if g is not None:
-        g.name = prim.GetName()
-        return g
-    ctx.notes.append(f"link {link!r}: {prim.GetTypeName()} {prim.GetPath()} written as a mesh of its surface")
-    verts = np.asarray(surface.vertices) @ to_link[:3, :3].T + to_link[:3, 3]
-    return _store(ctx, prim, link, verts, np.asarray(surface.faces))
-
-
-def _exact(m: np.ndarray, kind: str, size: np.ndarray) -> UrdfGeometry | None:
-    """A URDF primitive of local ``size`` (3,) (box edges; sphere or cylinder diameters and length) placed by
-    ``m`` (4, 4, local -> link frame), or None when ``m``'s scale or shear makes it another shape."""
-    scale = np.linalg.norm(m[:3, :3], axis=0)
-    if (scale <= 0).any():
-        return None
-    rot = m[:3, :3] / scale  # orthonormal up to binary32 rounding unless sheared
-    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        return None
-    s, origin = size * scale, _rigid(_pose(rot, m[:3, 3]))
-    if kind == "box":
-        return UrdfGeometry(kind="box", origin=origin, size=s)
-    if kind == "sphere" and np.allclose(s, s[0], rtol=1e-6):
-        return UrdfGeometry(kind="sphere", origin=origin, radius=float(s[0] / 2))
-    if kind == "cylinder" and math.isclose(s[0], s[1], rel_tol=1e-6):
-        return UrdfGeometry(kind="cylinder", origin=origin, radius=float(s[0] / 2), length=float(s[2]))
-    return None
-
-
-def _mesh(ctx: _Ctx, prim, link: str, to_link: np.ndarray) -> UrdfGeometry | None:
-    """A UsdGeom.Mesh, fan-triangulated, its points mapped to the link frame (m) by ``to_link`` (4, 4)."""
-    Usd, UsdGeom, UsdPhysics = _pxr()
-    mesh = UsdGeom.Mesh(prim)
-    attrs = (mesh.GetPointsAttr(), mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr())
-    points, counts, idx = (a.Get() for a in attrs)
-    pts = np.array(points if points is not None else [], float).reshape(-1, 3)
-    counts = np.array(counts if counts is not None else [], np.int64)
-    idx = np.array(idx if idx is not None else [], np.int64)
-    if counts.sum() != len(idx) or (counts < 0).any():
-        raise ctx.error(f"mesh {prim.GetPath()}", f"faceVertexCounts sum to {counts.sum()}, not the {len(idx)} faceVertexIndices")
-    ntri = np.clip(counts - 2, 0, None)  # a fan of c - 2 triangles per polygon of c corners
-    first = np.repeat(np.cumsum(counts) - counts, ntri)
-    k = np.arange(int(ntri.sum())) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
-    tris = np.stack([idx[first], idx[first + k], idx[first + k + 1]], axis=1).reshape(-1, 3)
-    tris = tris[((tris >= 0) & (tris < len(pts))).all(axis=1)]
-    if not len(tris):
-        ctx.notes.append(f"link {link!r}: mesh {prim.GetPath()} has no triangles: left out")
-        return None
-    if (str(mesh.GetOrientationAttr().Get()) == "leftHanded") != (np.linalg.det(to_link[:3, :3]) < 0):
-        tris = tris[:, ::-1]  # counter-clockwise in the link frame
-    return _store(ctx, prim, link, pts @ to_link[:3, :3].T + to_link[:3, 3], tris)
-
-
-def _store(ctx: _Ctx, prim, link: str, vertices: np.ndarray, triangles: np.ndarray) -> UrdfGeometry:
-    """Keep a mesh (vertices (n, 3) m in the link frame, triangles (m, 3)); its geometry has an identity origin."""
-    name = mesh_name(f"{link}_{prim.GetName()}", ctx.used)
-    ctx.meshes[name] = (np.ascontiguousarray(vertices, float), np.ascontiguousarray(triangles, np.int64))
-    return UrdfGeometry(kind="mesh", filename=name, name=prim.GetName())

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic
+from asset2sim.openusd import authored, pxr_modules as _pxr
 from asset2sim.engines.loading import CollisionPiece, collision_pieces, principal_axes, read_initial_state, read_urdf
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix
 from asset2sim.mesh_io import MeshReadError, convex_hull_mesh, read_mesh
@@ -35,15 +36,6 @@ class UsdExportError(RuntimeError):
 
 
 # --------------------------------------------------------------------- helpers
-def _pxr():
-    """Import pxr lazily (``usd-core``, an optional extra)."""
-    try:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
-    except ImportError as exc:
-        raise ImportError(f"OpenUSD is not installed ({exc}); install the extra: pip install 'asset2sim[usd]'") from exc
-    return Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
-
-
 def _axis_frame(axis: np.ndarray) -> np.ndarray:
     """A rotation (3, 3) whose first column is the unit ``axis`` (3,)."""
     x = np.asarray(axis, float) / np.linalg.norm(axis)
@@ -416,8 +408,7 @@ def read_usd(path: Path) -> UsdAsset:
     links, joints, fixed_root = {}, {}, False
     art = stage.GetDefaultPrim().HasAPI(UsdPhysics.ArticulationRootAPI)
     for prim in stage.Traverse():
-        name_attr = prim.GetAttribute("asset2sim:name")
-        name = name_attr.Get() if name_attr and name_attr.HasAuthoredValue() else None
+        name = authored(prim, "asset2sim:name")
         if prim.HasAPI(UsdPhysics.RigidBodyAPI):
             m = UsdPhysics.MassAPI(prim)
             mass_attr, com_attr = m.GetMassAttr(), m.GetCenterOfMassAttr()
