@@ -12,8 +12,8 @@ __version__ = "0.2.0"
 
 #: The public names, all defined in :mod:`asset2sim.api`.
 __all__ = [
-    "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides", "SimConventions",
-    "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
+    "AuditError", "AuditResult", "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides",
+    "SimConventions", "audit", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
 ]
 
 

@@ -30,14 +30,15 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.request import RequestOverrides
 from asset2sim.tasks.assemble.export_mjcf import export_mjcf, output_session_options
+from asset2sim.tasks.audit.audit import AuditError, AuditResult, audit_asset
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, validate_asset
 from asset2sim.tasks.publish.export_usd import export_usd
 from asset2sim.tasks.refine import RefineError, RefineResult, refine_asset
 
 __all__ = [
-    "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides", "SimConventions",
-    "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
+    "AuditError", "AuditResult", "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides",
+    "SimConventions", "audit", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
 ]
 
 
@@ -178,6 +179,30 @@ def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None =
     """
     return evaluate_asset(asset, reference=reference, prompt=prompt, engines=tuple(engines), category=category,
                           out_dir=write_to, write_report=write_to is not None, probes=probes, task=task)
+
+
+def audit(asset: str | Path, out_dir: str | Path | None = None, *, category: str | None = None,
+          simulate: bool = True) -> AuditResult:
+    """Audit the physics an asset declares (``asset2sim audit``, ``docs/guide/audit.md``): every mass, density,
+    inertia tensor, center of mass, joint damping, friction, spring and limit against asset2sim's estimate and
+    the band a real object's value lies in; the rest, robust-rest and sweep checks on the declared and the
+    patched physics; with ``out_dir``, ``audit.json``, ``audit.md`` and a patch in the input's format.
+
+    Args:
+        asset: a URDF folder or file, an MJCF file, an OpenUSD file, or a folder holding one. Never modified.
+        out_dir: where to write (None: nothing written); not inside the input's folder.
+        category: the object category (default: from the asset's files and names).
+        simulate: run the simulation checks (PyBullet).
+
+    Returns:
+        :class:`AuditResult`: ``report`` (``values``: ``where``, ``quantity``, ``declared``, ``estimate``, ``low``,
+        ``high``, ``factor``, ``verdict``, ``reason``, ``patched``, SI units; ``checks``; ``patch``;
+        ``failure_mode``) and ``out_dir``.
+
+    Raises:
+        AuditError: the asset cannot be read, or ``out_dir`` lies inside the input.
+    """
+    return audit_asset(asset, out_dir, category=category, simulate=simulate)
 
 
 def validate(asset: str | Path, policy: ValidationPolicy | None = None) -> list[Finding]:

@@ -37,9 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
-from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name
-from asset2sim.urdf import (UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfMaterial,
-                            UrdfModel)
+from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
+from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
 #: Primitive geoms written as a mesh of their surface: triangles per full turn of the tessellation.
 PRIMITIVE_SEGMENTS = 16
@@ -106,6 +105,10 @@ class _Reader:
         self.used: set[str] = set()
         self.springs: dict[str, DeclaredSpring] = {}
         self.inferred: list[str] = []
+        self.simulated: dict[str, UrdfInertial] = {}
+        self.densities: dict[str, float] = {}
+        self.written_moments: dict[str, tuple[float, float, float]] = {}
+        self.root_fixed = False
         self.explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
 
     def body_name(self, b: int) -> str:
@@ -132,7 +135,8 @@ class _Reader:
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
         files = tuple(sorted({self.path, *self._mesh_files()}))
         return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs,
-                         inferred=tuple(self.inferred), notes=tuple(self.notes), files=files)
+                         inferred=tuple(self.inferred), notes=tuple(self.notes), files=files, root_fixed=self.root_fixed,
+                         simulated=self.simulated, densities=self.densities, written_moments=self.written_moments)
 
     # ------------------------------------------------------------------ joints
     def _joint(self, b: int, is_root: bool) -> tuple[int | None, np.ndarray]:
@@ -145,6 +149,7 @@ class _Reader:
             raise StagingError(f"{self.path}: body {self.body_name(b)!r} has a free joint below the root")
         if is_root:
             if not free:
+                self.root_fixed = True
                 self.notes.append(f"root body {self.body_name(b)!r} has no free joint: welded to the world (mounted)")
             others = [j for j in ids if j not in free]
             if others:
@@ -214,14 +219,21 @@ class _Reader:
         m = self.m
         name = self.body_name(b)
         inertial = None
-        if self.explicit.get(name, False) and float(m.body_mass[b]) > 0:
+        if float(m.body_mass[b]) > 0:
             r = quat_wxyz_matrix(m.body_iquat[b])
             tensor = r @ np.diag(m.body_inertia[b]) @ r.T
             rot = to_link[:3, :3]
             com = to_link[:3, :3] @ m.body_ipos[b] + to_link[:3, 3]
-            inertial = UrdfInertial(mass=float(m.body_mass[b]), origin=translation_matrix(com), inertia=rot @ tensor @ rot.T)
-        elif float(m.body_mass[b]) > 0:
-            self.inferred.append(name)
+            compiled = UrdfInertial(mass=float(m.body_mass[b]), origin=translation_matrix(com), inertia=rot @ tensor @ rot.T)
+            if self.explicit.get(name, False):
+                inertial = compiled
+                self._written_moments(b, name)
+            else:
+                self.inferred.append(name)
+                self.simulated[name] = compiled
+                density = self._density(b)
+                if density is not None:
+                    self.densities[name] = density
         visuals, collisions, friction = [], [], set()
         for g in range(int(m.body_geomadr[b]), int(m.body_geomadr[b]) + int(m.body_geomnum[b])):
             geom = self._geometry(g, to_link @ _pose(m.geom_pos[g], m.geom_quat[g]))
@@ -237,13 +249,40 @@ class _Reader:
         collisions_as_visuals(link)
         return link
 
+    def _written_moments(self, b: int, name: str) -> None:
+        """Record body ``b``'s principal moments as written when MuJoCo's ``balanceinertia`` changed them (noted)."""
+        body = self.spec.bodies[b]
+        full = np.asarray(body.fullinertia, float)
+        tensor = (np.array([[full[0], full[3], full[4]], [full[3], full[1], full[5]], [full[4], full[5], full[2]]])
+                  if not np.isnan(full).any() else np.diag(np.asarray(body.inertia, float)))
+        written = np.sort(np.linalg.eigvalsh(tensor))
+        compiled = np.sort(np.asarray(self.m.body_inertia[b], float))
+        if not np.allclose(written, compiled, rtol=1e-6, atol=1e-12):
+            self.written_moments[name] = tuple(float(v) for v in written)
+            self.notes.append(f"body {name!r}: principal moments written {np.round(written, 9).tolist()} kg*m^2, loaded as "
+                              f"{np.round(compiled, 9).tolist()} (MuJoCo's balanceinertia)")
+
+    def _density(self, b: int) -> float | None:
+        """The density (kg/m^3) MuJoCo infers body ``b``'s mass from: the one ``density`` of the geoms that
+        count for inertia (``compiler inertiagrouprange``), none of them given a ``mass``; else None."""
+        m = self.m
+        lo, hi = (int(x) for x in self.spec.compiler.inertiagrouprange)
+        body = self.spec.body(m.body(b).name) if m.body(b).name else None
+        if body is None:
+            return None
+        geoms = [g for g in body.geoms if lo <= int(g.group) <= hi]
+        if not geoms or any(float(g.mass) > 0 for g in geoms if not np.isnan(float(g.mass))):
+            return None
+        values = {float(g.density) for g in geoms}
+        return values.pop() if len(values) == 1 else None
+
     def _geometry(self, g: int, origin: np.ndarray) -> UrdfGeometry | None:
         """The URDF geometry of geom ``g`` at ``origin`` (4, 4, link frame); None (noted) for a kind URDF cannot take."""
         m, T = self.m, self.mj.mjtGeom
         kind, size = int(m.geom_type[g]), np.asarray(m.geom_size[g], float)
         name = m.geom(g).name or None
         rgba = np.asarray(m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g], float)
-        mat = UrdfMaterial(name="rgba_" + "".join(f"{int(round(255 * float(c))):02x}" for c in np.clip(rgba, 0, 1)), rgba=rgba)
+        mat = rgba_material(rgba)
         if kind == T.mjGEOM_BOX:
             return UrdfGeometry(kind="box", origin=origin, name=name, size=2.0 * size, material=mat)
         if kind == T.mjGEOM_SPHERE:

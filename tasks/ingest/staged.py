@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic, file_names
-from asset2sim.urdf import UrdfLink, UrdfModel, write_urdf
+from asset2sim.urdf import UrdfInertial, UrdfLink, UrdfMaterial, UrdfModel, write_urdf
 
 #: The staged URDF's file name inside its folder.
 STAGED_URDF = "model.urdf"
@@ -56,7 +56,14 @@ class ReadAsset:
     mesh ``filename`` ``meshes/<stem>.obj``; ``meshes``: that filename -> (vertices (n, 3) m, triangles
     (m, 3) int) to write; ``springs``: joint -> :class:`DeclaredSpring`; ``inferred``: links whose
     inertial the file did not declare (the simulator would infer it from geometry); ``notes``: what was
-    converted or left out, one line each; ``files``: every input file read (for the input hash)."""
+    converted or left out, one line each; ``files``: every input file read (for the input hash);
+    ``root_fixed``: the file welds the root to the world (True), lets it stand free (False), or does not say
+    (None); ``simulated``: for links of ``inferred``, the inertial the simulator infers from the geometry
+    (MuJoCo's compiled one), when the reader knows it; ``densities``: link -> the density (kg/m^3) its
+    geometry declares for that inference; ``written_moments``: link -> the principal moments (3,) kg*m^2 as the
+    file writes them, where the simulator changed them on loading (MuJoCo's ``balanceinertia``); ``prims``
+    (USD): link or joint name -> the prim path it was read from; ``frames`` (USD): link -> its link frame (4, 4)
+    in the stage's world (m, Z up)."""
 
     source: Path
     format: str
@@ -66,6 +73,12 @@ class ReadAsset:
     inferred: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     files: tuple[Path, ...] = ()
+    root_fixed: bool | None = None
+    simulated: dict[str, UrdfInertial] = field(default_factory=dict)
+    densities: dict[str, float] = field(default_factory=dict)
+    written_moments: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    prims: dict[str, str] = field(default_factory=dict)
+    frames: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -135,6 +148,13 @@ def collisions_as_visuals(link: UrdfLink) -> None:
     the input would draw nothing else."""
     if link.collisions and not link.visuals:
         link.visuals = [replace(g, origin=g.origin.copy()) for g in link.collisions]
+
+
+def rgba_material(rgba) -> UrdfMaterial:
+    """A URDF material of colour ``rgba`` (4,) in 0..1, named after it (``rgba_<8 hex digits>``): URDF readers
+    (PyBullet's among them) refuse a ``<material>`` without a name."""
+    rgba = np.clip(np.asarray(rgba, float), 0.0, 1.0)
+    return UrdfMaterial(name="rgba_" + "".join(f"{int(round(255 * float(c))):02x}" for c in rgba), rgba=rgba)
 
 
 def obj_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:

@@ -132,7 +132,9 @@ def read_usd_asset(path: Path | str) -> ReadAsset:
                       root=key[order[0].GetPath()])
     return ReadAsset(source=ctx.path, format="usd", model=model, meshes=ctx.meshes, springs=springs,
                      inferred=tuple(n for n, lk in links.items() if lk.inertial is None), notes=tuple(ctx.notes),
-                     files=used_files(ctx))
+                     files=used_files(ctx), root_fixed=any("(fixed_root)" in n for n in ctx.notes),
+                     prims={**{key[b.GetPath()]: str(b.GetPath()) for b in order}, **{j.name: str(j.prim.GetPath()) for j in tree_joints}},
+                     frames={key[b.GetPath()]: frames[b.GetPath()] for b in order})
 
 
 def _collect(ctx: StageReading) -> tuple[list, list[_Joint]]:

@@ -16,7 +16,7 @@ import numpy as np
 
 from asset2sim.frames import rigid_matrix, rigid_part
 from asset2sim.openusd import authored, pxr_modules, value_or
-from asset2sim.tasks.ingest.staged import StagingError, mesh_name
+from asset2sim.tasks.ingest.staged import StagingError, mesh_name, rgba_material
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfMaterial
 
 #: Rotation (3, 3) taking +z to the axis of a Cylinder / Capsule / Cone.
@@ -131,7 +131,7 @@ def _color(prim) -> UrdfMaterial | None:
     if not color:
         return None
     opacity = gp.GetDisplayOpacityPrimvar().Get() if gp.GetDisplayOpacityPrimvar().HasAuthoredValue() else None
-    return UrdfMaterial(rgba=np.array([*color[0], opacity[0] if opacity else 1.0], float))
+    return rgba_material([*color[0], opacity[0] if opacity else 1.0])
 
 
 def _shape(ctx: StageReading, prim, link: str, to_link: np.ndarray) -> UrdfGeometry | None:

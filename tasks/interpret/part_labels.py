@@ -57,3 +57,15 @@ def body_label_tokens(label: str) -> list[str]:
     if len(toks) >= 2 and canonical_label(toks[-1]) in BODY_LABELS:
         return toks[:-1]
     return []
+
+
+def label_from_name(name: str | None) -> str | None:
+    """A known part label read from a link name (``link_0_handle`` -> ``handle``, ``LidLink`` -> ``lid``) by the
+    rules of :func:`canonical_label`, for assets without ``semantics.txt``; None when no word of the name is a
+    known label (``labels.yaml``)."""
+    if not name:
+        return None
+    words = re.sub(r"([a-z])([A-Z])", r"\1_\2", name)  # camelCase -> camel_Case
+    words = re.sub(r"[^A-Za-z]+", "_", words)
+    hit = canonical_label(words)
+    return hit if hit in load_priors().labels.labels else None

@@ -1,0 +1,84 @@
+"""``asset2sim audit PATH... --out OUT``: audit assets that carry physics (URDF, MJCF, USD; one asset, a folder
+of many, or a package's asset tree). Per asset: ``OUT/<asset>/audit.json``, ``audit.md`` and ``patch/`` (the
+input's format); for the run: ``OUT/audit_assets.parquet`` and ``OUT/audit_values.parquet``; a table per
+category on the terminal.
+
+Exit status: 0 every asset plausible with its declared physics passing the checks, 3 an asset has implausible
+values or fails a check, 1 an asset could not be audited, 2 usage errors, 4 the output cannot be written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, output_folder_failure
+from asset2sim.flows import audit_catalog
+from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
+
+NAME = "audit"
+HELP = ("Audit assets that already carry physics (URDF, MJCF, USD): each mass, density, inertia, center of mass, damping, "
+        "friction and limit against the product's estimate, simulation checks, and a patch in the input's format.")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("paths", type=Path, nargs="+", metavar="PATH",
+                   help="an asset (URDF folder or file, MJCF .xml, USD file, or a folder holding one), or a folder of many")
+    p.add_argument("--out", type=Path, default=None,
+                   help="where to write each asset's audit.json, audit.md and patch/, and the audit catalog (Parquet); "
+                        "default: print only")
+    p.add_argument("--category", default=None, help="object category for every asset (default: from the files and names)")
+    p.add_argument("--no-sim", action="store_true", help="judge the values only; skip the simulation checks")
+    p.add_argument("--jobs", type=int, default=1, help="assets audited at once (processes; default 1)")
+    p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
+
+
+def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int) -> list:
+    if jobs <= 1 or len(targets) <= 1:
+        return [audit_one(t, out, category=category, simulate=simulate) for t in targets]
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate) for t in targets]
+        return [f.result() for f in futures]
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    if args.jobs < 1:
+        raise CommandError(INVALID_REQUEST, "JOBS_INVALID", None, f"--jobs must be >= 1, got {args.jobs}")
+    try:
+        targets = find_assets(args.paths)
+    except FileNotFoundError as exc:
+        raise CommandError(INVALID_INPUT, "AUDIT_INPUT_MISSING", None, str(exc)) from exc
+    if not targets:
+        raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
+    if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
+        raise bad
+    rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
+    if args.out is not None:
+        audit_catalog.write_audit_catalog(args.out, rows)
+    console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
+    if args.json:
+        for r in rows:
+            print(r.model_dump_json())
+    else:
+        table = Table(title=f"audit of {len(rows)} asset(s)")
+        for col in ("asset", "format", "category", "verdict", "implausible", "declared physics"):
+            table.add_column(col)
+        for r in rows:
+            checks = "-" if r.declared_passed is None else ("passes" if r.declared_passed else "fails " + ", ".join(r.declared_failures))
+            table.add_row(r.asset_id, r.format, r.category, r.failure_mode, "; ".join(r.implausible) or r.error[:160] or "-", checks)
+        console.print(table)
+        import pandas as pd
+
+        by_cat = audit_catalog.failure_modes_by_category(pd.DataFrame.from_records([r.model_dump() for r in rows]))
+        console.print(by_cat.to_string())
+        if args.out is not None:
+            console.print(f"written: {args.out}/<asset>/audit.md, {args.out}/{audit_catalog.ASSETS_PARQUET}, "
+                          f"{args.out}/{audit_catalog.VALUES_PARQUET}")
+    if any(r.failure_mode == "audit_failed" for r in rows):
+        return INVALID_INPUT
+    return NOT_READY if any(r.failure_mode != "none" for r in rows) else 0

@@ -1,0 +1,83 @@
+"""The audit catalog: one Parquet row per audited asset (``audit_assets.parquet``, :class:`AuditRow`) and one per
+judged value (``audit_values.parquet``, :class:`ValueVerdict` with the asset id and category), written atomically
+into the audit's output folder; and the tables people query them for (failure modes and implausible quantities
+per category)."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+from asset2sim import atomic
+from asset2sim.schemas.audit import AuditReport, AuditRow
+from asset2sim.tasks.audit.audit import AUDIT_JSON
+
+#: File names of the audit catalog inside the output folder.
+ASSETS_PARQUET = "audit_assets.parquet"
+VALUES_PARQUET = "audit_values.parquet"
+#: The failure modes of an audit row, in table order.
+AUDIT_MODES = ("none", "implausible_values", "values_missing", "declared_physics_fails", "audit_failed")
+
+
+def _write_parquet(path: Path, df) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    buf = io.BytesIO()
+    pq.write_table(pa.Table.from_pandas(df, preserve_index=False), buf)
+    atomic.write_bytes(path, buf.getvalue())
+
+
+def values_frame(rows: list[AuditRow]):
+    """Every judged value of the audited ``rows`` (read from each asset's ``audit.json``) as a DataFrame: the
+    :class:`~asset2sim.schemas.audit.ValueVerdict` columns plus ``asset_id`` and ``category``."""
+    import pandas as pd
+
+    records = []
+    for row in rows:
+        if not row.out_dir or not (Path(row.out_dir) / AUDIT_JSON).is_file():
+            continue
+        report = AuditReport.model_validate_json(atomic.read_regular(Path(row.out_dir) / AUDIT_JSON))
+        records += [{"asset_id": row.asset_id, "category": report.category, **v.model_dump(mode="json")} for v in report.values]
+    columns = ["asset_id", "category", "where", "quantity", "unit", "declared", "estimate", "low", "high", "factor", "verdict",
+               "reason", "patched"]
+    return pd.DataFrame.from_records(records, columns=columns)
+
+
+def write_audit_catalog(out_root: Path | str, rows: list[AuditRow]) -> dict[str, Path]:
+    """``audit_assets.parquet`` and ``audit_values.parquet`` in ``out_root``; returns name -> path.
+
+    Raises:
+        OSError: the files cannot be written.
+    """
+    import pandas as pd
+
+    out_root = Path(out_root)
+    out_root.mkdir(parents=True, exist_ok=True)
+    assets = pd.DataFrame.from_records([r.model_dump(mode="json") for r in rows], columns=list(AuditRow.model_fields))
+    paths = {"assets": out_root / ASSETS_PARQUET, "values": out_root / VALUES_PARQUET}
+    _write_parquet(paths["assets"], assets)
+    _write_parquet(paths["values"], values_frame(rows))
+    return paths
+
+
+def failure_modes_by_category(assets):
+    """Assets per category (rows, plus ``total``) and failure mode (columns :data:`AUDIT_MODES`), from the
+    ``audit_assets`` table."""
+    import pandas as pd
+
+    if assets.empty:
+        return pd.DataFrame(columns=list(AUDIT_MODES))
+    table = pd.crosstab(assets["category"].replace("", "(unread)"), assets["failure_mode"]).reindex(columns=list(AUDIT_MODES), fill_value=0)
+    table.loc["total"] = table.sum()
+    return table
+
+
+def implausible_by_category(values):
+    """Implausible values per category (rows) and quantity (columns), from the ``audit_values`` table."""
+    import pandas as pd
+
+    bad = values[values["verdict"] == "implausible"]
+    if bad.empty:
+        return pd.DataFrame()
+    return pd.crosstab(bad["category"], bad["quantity"])

@@ -1,0 +1,129 @@
+"""The physics an input declares, as a simulator loading it would use it: per link mass, center of mass,
+inertia tensor (or that the simulator infers them from the geometry, and from which density), per joint
+limits, damping, friction and spring. Read from a URDF (:mod:`asset2sim.urdf`), an MJCF file
+(:mod:`.mjcf_reader`, MuJoCo's compiled values) or an OpenUSD stage (:mod:`.usd_reader`), in the frames of
+the asset model those readers make (the staged URDF's), SI units and radians. The audit
+(:mod:`asset2sim.tasks.audit`) judges these values."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from asset2sim.urdf import UrdfInertial, UrdfModel, read_urdf
+from asset2sim.tasks.ingest import mjcf_reader, staged, usd_reader
+
+__all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared"]
+
+How = Literal["declared", "inferred", "absent"]
+
+
+@dataclass(frozen=True)
+class DeclaredLink:
+    """One link's inertial as loaded: ``mass`` kg, ``com`` (3,) m in the link frame, ``inertia`` (3, 3) kg*m^2
+    about the COM in the link axes; ``how`` ``declared`` (the file gives them), ``inferred`` (the simulator
+    computes them from the geometry, values as MuJoCo compiles them when known) or ``absent`` (no values);
+    ``density`` kg/m^3 the file declares for that inference (None when not one value); ``written_moments`` (3,)
+    kg*m^2 the principal moments as written where the simulator changed them on loading (else None)."""
+
+    name: str
+    how: How
+    mass: float | None = None
+    com: np.ndarray | None = None
+    inertia: np.ndarray | None = None
+    density: float | None = None
+    written_moments: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class DeclaredJoint:
+    """One movable joint as declared: ``type`` revolute / continuous / prismatic; ``lower`` / ``upper`` rad or m
+    (None when absent); ``damping`` N*m*s/rad or N*s/m, ``friction`` N*m or N (None when absent); ``stiffness``
+    N*m/rad or N/m about ``reference`` rad or m (None without a spring); ``effort`` N*m or N."""
+
+    name: str
+    type: str
+    child: str
+    lower: float | None = None
+    upper: float | None = None
+    damping: float | None = None
+    friction: float | None = None
+    stiffness: float | None = None
+    reference: float | None = None
+    effort: float | None = None
+
+
+@dataclass(frozen=True)
+class DeclaredPhysics:
+    """What one input file declares: ``format`` ``urdf`` / ``mjcf`` / ``usd``; ``root_fixed`` the file welds the
+    root to the world (True), leaves it free (False) or does not say (None, URDF); ``read`` what the MJCF or USD
+    reader made of the file (None for a URDF), for writers that edit the file in its own format."""
+
+    source: Path
+    format: str
+    links: dict[str, DeclaredLink] = field(default_factory=dict)
+    joints: dict[str, DeclaredJoint] = field(default_factory=dict)
+    root_fixed: bool | None = None
+    read: staged.ReadAsset | None = None
+
+
+def _link(name: str, inertial: UrdfInertial | None, how: How, density: float | None = None,
+          written: tuple[float, float, float] | None = None) -> DeclaredLink:
+    if inertial is None or inertial.mass is None:
+        return DeclaredLink(name=name, how="absent" if how == "declared" else how, density=density)
+    origin = np.asarray(inertial.origin, float)
+    rot = origin[:3, :3]
+    tensor = np.asarray(inertial.inertia if inertial.inertia is not None else np.zeros((3, 3)), float)
+    return DeclaredLink(name=name, how=how, mass=float(inertial.mass), com=origin[:3, 3].copy(), inertia=rot @ tensor @ rot.T,
+                        density=density, written_moments=None if written is None else np.asarray(written, float))
+
+
+def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staged.ReadAsset | None = None) -> DeclaredPhysics:
+    """The declared physics of an asset model (a URDF's, or a reader's ``read.model`` with its springs,
+    inferred inertials and densities)."""
+    links = {}
+    for name, ln in model.links.items():
+        if read is not None and name in read.inferred:
+            links[name] = _link(name, read.simulated.get(name), "inferred", read.densities.get(name))
+        else:
+            links[name] = _link(name, ln.inertial, "declared", written=None if read is None else read.written_moments.get(name))
+    joints = {}
+    for j in model.joints:
+        if j.type not in ("revolute", "continuous", "prismatic"):
+            continue
+        spring = read.springs.get(j.name) if read is not None else None
+        lim, dyn = j.limit, j.dynamics
+        joints[j.name] = DeclaredJoint(
+            name=j.name, type=j.type, child=j.child,
+            lower=None if lim is None or j.type == "continuous" else lim.lower, upper=None if lim is None or j.type == "continuous" else lim.upper,
+            damping=None if dyn is None else dyn.damping, friction=None if dyn is None else dyn.friction,
+            stiffness=None if spring is None else spring.stiffness, reference=None if spring is None else spring.reference,
+            effort=None if lim is None else lim.effort)
+    return DeclaredPhysics(source=source, format=fmt, links=links, joints=joints, root_fixed=None if read is None else read.root_fixed,
+                           read=read)
+
+
+def read_declared(path: Path | str, urdf_path: Path | str | None = None) -> DeclaredPhysics:
+    """The physics the input at ``path`` declares.
+
+    Args:
+        path: an MJCF or USD file (or a folder holding one, :func:`staged.other_format_file`), or a URDF asset.
+        urdf_path: the URDF file of a URDF asset (as extraction found it); needed when ``path`` is a folder.
+
+    Raises:
+        StagingError: the MJCF or USD file cannot be read into the asset model.
+        UrdfError: the URDF cannot be read (lenient mode).
+        ValueError: a URDF asset given as a folder without ``urdf_path``.
+    """
+    other = staged.other_format_file(path)
+    if other is not None:
+        source, fmt = other
+        read = (mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset)(source)
+        return declared_from_model(Path(source), fmt, read.model, read)
+    urdf = Path(urdf_path) if urdf_path is not None else Path(path)
+    if urdf.is_dir():
+        raise ValueError(f"{path}: a URDF asset folder needs its URDF file")
+    return declared_from_model(urdf, "urdf", read_urdf(urdf, mode="lenient"))
