@@ -80,10 +80,16 @@ class RefineConfig(BaseModel):
     """CoACD decompositions one collision repair may try (a count, never
     seconds: same input, same files); beyond it meshes keep their hulls."""
     seed: int = 0
+    keep_declared: bool = False
+    """Keep the masses, inertia tensors, centers of mass, joint damping, friction and springs the asset declares
+    where ``asset2sim audit`` judges them plausible, and its size when plausible (``docs/guide/audit.md``)."""
     overrides: RequestOverrides = Field(default_factory=RequestOverrides)
     """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""
-        blob = json.dumps(self.model_dump(mode="json"), sort_keys=True).encode()
+        data = self.model_dump(mode="json")
+        if not data.get("keep_declared"):  # off: the hash of every configuration before the option existed
+            data.pop("keep_declared", None)
+        blob = json.dumps(data, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]

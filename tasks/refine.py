@@ -25,6 +25,9 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
+from asset2sim.tasks.audit import keep
+from asset2sim.tasks.audit.judge import part_labels
+from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
@@ -114,6 +117,8 @@ def refine_asset(
     log = _StageLog(progress)
     asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted)
     _check_overrides(asset, config)
+    if config.keep_declared:
+        est = _keep_declared(est, asset_dir, asset)
     chash = run_hash(asset.input_hash, config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
         return _completed_result(out_dir, log)
@@ -190,6 +195,16 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
     except (extract.AssetError, output_folder.OutputError) as exc:
         raise RefineError(str(exc), "invalid_input", getattr(exc, "codes", None)) from exc
     return asset, findings
+
+
+def _keep_declared(est: estimator.Estimator, asset_dir: Path | str, asset: AssetDescription) -> estimator.Estimator:
+    """``est`` keeping the asset's plausible declared physics (:class:`asset2sim.tasks.audit.keep.KeepDeclared`);
+    RefineError("invalid_input") when the declared physics cannot be read."""
+    try:
+        declared = read_declared(asset_dir, asset.urdf_path)
+    except Exception as exc:
+        raise RefineError(f"{asset.urdf_path}: the declared physics cannot be read: {exc}", "invalid_input") from exc
+    return keep.KeepDeclared(est, declared, part_labels(asset))
 
 
 def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
@@ -793,11 +808,10 @@ def _announce_post_check(att: _Attempt, log: _StageLog) -> None:
 
 
 def _staging_notes(asset) -> list[str]:
-    """The report's lines on an MJCF or USD input read and staged as a URDF (none for a URDF input)."""
-    if asset.staged_from is None:
-        return []
-    return [f"input: {asset.staged_from} read into the asset model and staged as a URDF"] + [
-        f"input: {n}" for n in asset.staging_notes]
+    """The report's lines on an MJCF or USD input read and staged as a URDF, and on part labels read from link
+    names (none for a PartNet-Mobility input)."""
+    head = [] if asset.staged_from is None else [f"input: {asset.staged_from} read into the asset model and staged as a URDF"]
+    return head + [f"input: {n}" for n in asset.staging_notes]
 
 
 def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt, findings: list, pose_note: str, times: dict[str, float]) -> RefineReport:

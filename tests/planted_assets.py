@@ -157,3 +157,34 @@ def write_planted_folder(folder: Path) -> dict[str, tuple[str, str, str]]:
         "trash_can_lead_lid": ("link lid", "density", "density of lead on a plastic lid"),
         "storage_box_bad_inertia": ("link lid", "inertia", "inertia violating the triangle inequality"),
     }
+
+
+def write_generated_urdf(folder: Path, unit: float = 1.0) -> Path:
+    """A cabinet as generators ship URDFs: one GLB / PLY mesh per link, names like ``link_1_door``, no
+    ``semantics.txt``, no inertials or dynamics; lengths times ``unit`` (100: centimetres written as metres).
+    Returns the folder (``model.urdf`` + ``meshes/``)."""
+    (folder / "meshes").mkdir(parents=True, exist_ok=True)
+
+    def box(ext, pos):
+        return trimesh.creation.box(extents=np.asarray(ext) * unit, transform=trimesh.transformations.translation_matrix(np.asarray(pos) * unit))
+
+    w, d, h, t = 0.6, 0.45, 0.4, 0.016
+    carcass = trimesh.util.concatenate([box((w, d, t), (0, 0, t / 2)), box((w, d, t), (0, 0, h - t / 2)),
+                                        box((t, d, h - 2 * t), (w / 2 - t / 2, 0, h / 2)), box((t, d, h - 2 * t), (-w / 2 + t / 2, 0, h / 2)),
+                                        box((w - 2 * t, t, h - 2 * t), (0, d / 2 - t / 2, h / 2))])
+    carcass.export(folder / "meshes" / "base.glb")
+    box((w - 2 * t - 0.004, t, h - 2 * t - 0.004), (-(w - 2 * t) / 2, -t / 2, 0)).export(folder / "meshes" / "door.ply")
+    box((0.02, 0.03, 0.12), (-(w - 2 * t) + 0.05, -t - 0.015, 0)).export(folder / "meshes" / "handle.glb")
+    o = np.array([w / 2 - t - 0.001, -d / 2 - 0.001, h / 2]) * unit
+    link = '<link name="{0}"><visual><geometry><mesh filename="meshes/{1}"/></geometry></visual>' \
+           '<collision><geometry><mesh filename="meshes/{1}"/></geometry></collision></link>'
+    (folder / "model.urdf").write_text(f"""<robot name="generated_cabinet">
+  {link.format("link_0_base", "base.glb")}
+  {link.format("link_1_door", "door.ply")}
+  {link.format("link_2_handle", "handle.glb")}
+  <joint name="joint_0" type="revolute"><parent link="link_0_base"/><child link="link_1_door"/>
+    <origin xyz="{_fmt(o)}"/><axis xyz="0 0 1"/><limit lower="0" upper="1.6" effort="10" velocity="1"/></joint>
+  <joint name="joint_1" type="fixed"><parent link="link_1_door"/><child link="link_2_handle"/></joint>
+</robot>
+""")
+    return folder

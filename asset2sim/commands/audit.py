@@ -16,6 +16,7 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, output_folder_failure
 from asset2sim.flows import audit_catalog
+from asset2sim.schemas.audit import AuditRow
 from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
 
 NAME = "audit"
@@ -32,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--category", default=None, help="object category for every asset (default: from the files and names)")
     p.add_argument("--no-sim", action="store_true", help="judge the values only; skip the simulation checks")
     p.add_argument("--jobs", type=int, default=1, help="assets audited at once (processes; default 1)")
+    p.add_argument("--flow", action="store_true",
+                   help="run as the Prefect audit flow on a Dask cluster of --jobs workers (needs --out; logs the run to MLflow)")
+    p.add_argument("--dask-address", default=None, help="with --flow: an existing Dask scheduler instead of a local cluster")
     p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
 
 
@@ -41,6 +45,13 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate) for t in targets]
         return [f.result() for f in futures]
+
+
+def _read_rows(path: Path) -> list[AuditRow]:
+    import pandas as pd
+
+    return [AuditRow.model_validate({k: (list(v) if k in ("implausible", "declared_failures") else v) for k, v in r.items()})
+            for r in pd.read_parquet(path).astype(object).where(lambda d: d.notna(), None).to_dict("records")]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,9 +68,18 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
     if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
         raise bad
-    rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
-    if args.out is not None:
-        audit_catalog.write_audit_catalog(args.out, rows)
+    if args.flow:
+        if args.out is None:
+            raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
+        from asset2sim.flows.audit_flow import run_audit_flow
+
+        summary = run_audit_flow(args.paths, args.out, category=args.category, simulate=not args.no_sim, workers=args.jobs,
+                                 dask_address=args.dask_address)
+        rows = _read_rows(Path(summary["catalog"]["assets"]))
+    else:
+        rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
+        if args.out is not None:
+            audit_catalog.write_audit_catalog(args.out, rows)
     console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
     if args.json:
         for r in rows:

@@ -59,6 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
+    parser.add_argument("--keep-declared", action="store_true", help=(
+        "keep the physics the asset declares where asset2sim audit finds it plausible (masses, inertia, damping, "
+        "friction, springs, size) and refine around it (docs/guide/audit.md)"))
     parser.add_argument("--force", action="store_true", help="redo even when the output is complete for this input and configuration")
     parser.add_argument("--overwrite", action="store_true", help=(
         "write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)"))
@@ -168,6 +171,8 @@ def options(args: argparse.Namespace) -> RefineConfig:
     except (OSError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, "CONFIG_INVALID", args.config, str(exc)) from exc
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url)) if v is not None}
+    if getattr(args, "keep_declared", False):
+        fields["keep_declared"] = True
     engines = getattr(args, "engines", None)
     if engines or not getattr(args, "config", None):
         listed = parse_engines(engines or ",".join(default_engines()))

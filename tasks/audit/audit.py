@@ -19,13 +19,12 @@ from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.audit import patch, report_md
-from asset2sim.tasks.audit.judge import Judgement, judge
+from asset2sim.tasks.audit.judge import Judgement, judge, part_labels
 from asset2sim.tasks.check import manipulation, postcheck
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret import mounting
 from asset2sim.tasks.interpret.categories import recognize_category
-from asset2sim.tasks.interpret.part_labels import canonical_label, label_from_name
 from asset2sim.tasks.synthesize.context import build_context
 
 __all__ = ["AUDIT_JSON", "AUDIT_MD", "AuditError", "AuditResult", "audit_asset"]
@@ -45,11 +44,6 @@ class AuditResult:
 
     report: AuditReport
     out_dir: Path | None = None
-
-
-def _labels(asset: AssetDescription) -> dict[str, str | None]:
-    """link -> part label: ``semantics.txt``'s (canonical), else read from the link name (:func:`label_from_name`)."""
-    return {ln.name: canonical_label(ln.semantic_label) if ln.semantic_label else label_from_name(ln.name) for ln in asset.links}
 
 
 def _name_words(asset: AssetDescription) -> str:
@@ -82,8 +76,8 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         asset, _ = extract.extract_asset_checked(path, asset_id=asset_id, category=category)
         dp = declared_mod.read_declared(path, asset.urdf_path)
     except Exception as exc:
-        raise AuditError(f"{path}: cannot audit: {exc}") from exc
-    labels = _labels(asset)
+        raise AuditError(_cannot(path, exc)) from exc
+    labels = part_labels(asset)
     asset = asset.model_copy(update={"links": [ln.model_copy(update={"semantic_label": ln.semantic_label or labels[ln.name]})
                                                for ln in asset.links]})
     match = recognize_category(category or asset.category, list(labels.values()), _name_words(asset))
@@ -106,7 +100,7 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     except AuditError:
         raise
     except Exception as exc:
-        raise AuditError(f"{source}: cannot audit: {type(exc).__name__}: {exc}") from exc
+        raise AuditError(_cannot(source, exc, with_type=True)) from exc
     report = AuditReport(asset_id=asset.asset_id, source=str(source), format=dp.format, category=ctx.category,
                          category_reason=match.reason, labels={k: v for k, v in labels.items() if v}, root_fixed=mount.fixed,
                          root_source=mount.source, values=judged.values, checks=checks,
@@ -114,6 +108,16 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     if out_dir is None:
         return AuditResult(report=report)
     return AuditResult(report=_write(report, asset, dp, judged, out_dir), out_dir=out_dir)
+
+
+def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> str:
+    """``<path>: cannot audit: <why>``, the path said once (the reason may start with it already)."""
+    why, before = str(exc), None
+    while why != before:
+        before = why
+        for prefix in (f"{path}: ", f"{Path(path).resolve()}: ", "cannot read this MJCF file: ", "cannot read this USD file: "):
+            why = why.removeprefix(prefix)
+    return f"{path}: cannot audit: " + (f"{type(exc).__name__}: " if with_type else "") + why
 
 
 def _mounting(dp: declared_mod.DeclaredPhysics, category: str) -> RootMount:

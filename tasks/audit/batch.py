@@ -30,8 +30,16 @@ def _is_asset(path: Path) -> bool:
 
 
 def _model_files(folder: Path) -> list[Path]:
-    return sorted(f for f in folder.iterdir() if f.is_file() and f.suffix.lower() in (*staged.MJCF_SUFFIXES, *staged.USD_SUFFIXES)
-                  and staged.input_format(f) != "urdf")
+    """The MJCF and USD files directly in ``folder``; MJCF files whose root element is not ``<mujoco>`` (include
+    fragments such as ``<mujocoinclude>``) are parts of other files, not assets."""
+    out = []
+    for f in sorted(folder.iterdir()):
+        if not f.is_file() or f.suffix.lower() not in (*staged.MJCF_SUFFIXES, *staged.USD_SUFFIXES):
+            continue
+        fmt = staged.input_format(f)
+        if fmt == "usd" or (fmt == "mjcf" and staged.root_element(f) == "mujoco"):
+            out.append(f)
+    return out
 
 
 def find_assets(paths: list[Path | str]) -> list[AuditTarget]:
@@ -39,7 +47,7 @@ def find_assets(paths: list[Path | str]) -> list[AuditTarget]:
 
     A path that is one asset (:func:`_is_asset`) is one target, named after the folder or the file's stem. Any
     other folder is walked (sorted, symlinked folders not followed): a folder with a ``*.urdf`` is one URDF asset
-    (not walked further); every MJCF or USD file is one asset, named after its folder when it is the only one
+    (not walked further); every MJCF file with a ``<mujoco>`` root (:func:`_model_files`) or USD file is one asset, named after its folder when it is the only one
     there, else after its stem; names are the path below the given folder, ``/`` written ``__``.
 
     Raises:
@@ -80,12 +88,14 @@ def _name(rel: Path) -> str:
 
 def audit_one(target: AuditTarget, out_root: Path | str | None, *, category: str | None = None, simulate: bool = True) -> AuditRow:
     """Audit ``target`` into ``out_root/<asset_id>`` (a safe folder name; None: nothing written). Never raises for
-    a bad asset: the row's ``failure_mode`` is ``audit_failed`` and ``error`` says why."""
+    a bad asset, nor for a patch that cannot be written: the row's ``failure_mode`` is ``audit_failed`` and
+    ``error`` says why."""
     start = time.perf_counter()
     out = None if out_root is None else file_names.join_inside(out_root, file_names.file_stem(target.asset_id))
     try:
         result = audit_asset(target.path, out, category=category, asset_id=target.asset_id, simulate=simulate)
-    except AuditError as exc:
-        return AuditRow(asset_id=target.asset_id, source=str(target.path), failure_mode="audit_failed", error=str(exc),
+    except Exception as exc:  # noqa: BLE001 - a failed asset never stops a batch; its row says why
+        error = str(exc) if isinstance(exc, AuditError) else f"{target.path}: {type(exc).__name__}: {exc}"
+        return AuditRow(asset_id=target.asset_id, source=str(target.path), failure_mode="audit_failed", error=error,
                         seconds=time.perf_counter() - start)
     return AuditRow.of(result.report, None if out is None else str(out), time.perf_counter() - start)

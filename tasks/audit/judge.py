@@ -14,18 +14,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.audit import bands
 from asset2sim.tasks.check import force_ranges
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret.part_labels import canonical_label, label_from_name
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.estimate import JointChoice, joint_dynamics_for, link_material, plausible_mass_range
 from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia, solid_volume
 
-__all__ = ["Judgement", "judge"]
+__all__ = ["Judgement", "judge", "part_labels"]
+
+
+def part_labels(asset: AssetDescription) -> dict[str, str | None]:
+    """link -> part label: ``semantics.txt``'s (canonical), else read from the link name (:func:`label_from_name`)."""
+    return {ln.name: canonical_label(ln.semantic_label) if ln.semantic_label else label_from_name(ln.name) for ln in asset.links}
 
 
 @dataclass(frozen=True)

@@ -66,6 +66,14 @@ def apply_physics(model: UrdfModel, links: dict[str, LinkPhysics], joints: dict[
 
 def _write_urdf(asset: AssetDescription, source: Path, links: dict[str, LinkPhysics], joints: dict[str, JointDynamics], folder: Path) -> Path:
     model = apply_physics(read_urdf(source, mode="lenient"), links, joints)
+    if asset.staged_from is not None:  # meshes the simulators could not load were converted: the originals copied
+        for link in model.links.values():
+            for g in (*link.visuals, *link.collisions):
+                if g.kind == "mesh" and g.path is not None:
+                    g.filename = _copy_named(g.path, source.parent, folder)
+        out = folder / file_names.file_stem(source.name)
+        atomic.write_bytes(out, write_urdf(model, comment=f"patched by asset2sim audit from {source.name}"))
+        return out
     copied_meshes.copy_meshes(asset, folder)
     out = folder / file_names.file_stem(source.name)
     atomic.write_bytes(out, write_urdf(model, comment=f"patched by asset2sim audit from {source.name}"))
@@ -73,7 +81,7 @@ def _write_urdf(asset: AssetDescription, source: Path, links: dict[str, LinkPhys
 
 
 def _copy_named(src: Path, base: Path, folder: Path) -> str:
-    """Copy an asset file the MJCF names into ``folder``: at its path relative to ``base`` (the MJCF's folder)
+    """Copy an asset file the MJCF or URDF names into ``folder``: at its path relative to ``base`` (the file's folder)
     when inside it, else under ``assets/`` by a safe name; returns the relative POSIX path written."""
     real = Path(os.path.realpath(src))
     try:
@@ -101,6 +109,7 @@ def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict
                 p = Path(item.file)
                 item.file = _copy_named(p if p.is_absolute() else base / sub / p, base, folder)
     spec.meshdir = spec.texturedir = ""
+    spec.modelfiledir = str(folder)  # MuJoCo resolves the copies' relative paths from the patch's folder
     if spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:  # else explicit inertials would be ignored
         spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_AUTO
     bodies = {(model.body(b).name or f"body_{b}"): b for b in range(1, model.nbody)}

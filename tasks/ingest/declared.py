@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 
 from asset2sim.urdf import UrdfInertial, UrdfModel, read_urdf
-from asset2sim.tasks.ingest import mjcf_reader, staged, usd_reader
+from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader
 
 __all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared"]
 
@@ -123,7 +123,8 @@ def read_declared(path: Path | str, urdf_path: Path | str | None = None) -> Decl
         source, fmt = other
         read = (mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset)(source)
         return declared_from_model(Path(source), fmt, read.model, read)
-    urdf = Path(urdf_path) if urdf_path is not None else Path(path)
+    original = urdf_meshes.urdf_needing_conversion(path)  # its meshes converted for the simulators: its own values
+    urdf = original or (Path(urdf_path) if urdf_path is not None else Path(path))
     if urdf.is_dir():
         raise ValueError(f"{path}: a URDF asset folder needs its URDF file")
     return declared_from_model(urdf, "urdf", read_urdf(urdf, mode="lenient"))

@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from asset2sim import file_memo
+from asset2sim import atomic, file_memo
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
-from asset2sim.tasks.ingest import mjcf_reader, staged, usd_reader, validate_input
+from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader, validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
@@ -131,7 +131,9 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
 
 def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
     """An MJCF or USD file (:func:`~asset2sim.tasks.ingest.staged.other_format_file` of ``asset``) read (:mod:`~asset2sim.tasks.ingest.mjcf_reader`, :mod:`~asset2sim.tasks.ingest.usd_reader`)
-    and staged as a URDF folder (:func:`~asset2sim.tasks.ingest.staged.stage`); None for a URDF input.
+    and staged as a URDF folder (:func:`~asset2sim.tasks.ingest.staged.stage`), or a URDF naming GLB / glTF / PLY
+    meshes staged with OBJ copies (:mod:`~asset2sim.tasks.ingest.urdf_meshes`, its ``semantics.txt`` and
+    ``meta.json`` beside it); None for any other URDF input.
 
     Raises:
         AssetError: the file cannot be read into the asset model (the reader's message, naming the body, prim
@@ -139,7 +141,17 @@ def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
     """
     found = staged.other_format_file(asset)
     if found is None:
-        return None
+        urdf = urdf_meshes.urdf_needing_conversion(asset)
+        if urdf is None:
+            return None
+        try:
+            out = staged.stage(urdf_meshes.read_urdf_converting(urdf), staged.staging_folder(urdf))
+        except (staged.StagingError, OSError) as exc:
+            raise AssetError(f"{urdf}: cannot convert its meshes: {exc}") from exc
+        for side in ("semantics.txt", "meta.json"):  # the dataset's side files go with the URDF
+            if (urdf.parent / side).is_file():
+                atomic.copy_file(urdf.parent / side, out.folder / side)
+        return out
     source, fmt = found
     read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
     try:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import atexit
 import hashlib
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
@@ -110,6 +111,21 @@ def input_format(path: Path | str) -> str:
             return "mjcf"
         return "urdf" if "<robot" in head and "<mujoco" not in head else "mjcf"
     return "urdf"
+
+
+_ROOT_TAG = re.compile(rb"<\s*([A-Za-z_][\w:.-]*)")
+
+
+def root_element(path: Path | str) -> str | None:
+    """The name of an XML file's root element, read from its first 4 KiB past the declaration and comments
+    (``mujoco``, ``mujocoinclude``, ``robot`` ...); None when none is found or the file cannot be read."""
+    try:
+        head = Path(path).read_bytes()[:4096]
+    except OSError:
+        return None
+    head = re.sub(rb"<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>", b"", head, flags=re.S)
+    m = _ROOT_TAG.search(head)
+    return m.group(1).decode("ascii", "replace") if m else None
 
 
 def other_format_file(asset: Path | str) -> tuple[Path, str] | None:

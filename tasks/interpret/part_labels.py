@@ -7,6 +7,7 @@ import functools
 import re
 
 from asset2sim.prior_tables import load_priors
+from asset2sim.schemas.asset import AssetDescription
 
 #: Canonical labels of an object's main body.
 BODY_LABELS = frozenset({"body", "base", "frame"})
@@ -69,3 +70,17 @@ def label_from_name(name: str | None) -> str | None:
     words = re.sub(r"[^A-Za-z]+", "_", words)
     hit = canonical_label(words)
     return hit if hit in load_priors().labels.labels else None
+
+
+def labels_from_names(asset: AssetDescription) -> AssetDescription:
+    """``asset`` with part labels read from its link names (:func:`label_from_name`) when it has none (no
+    ``semantics.txt``: MJCF, USD and generated URDFs), said in its ``staging_notes``; unchanged when any link
+    has a label or no name holds one."""
+    if any(ln.semantic_label for ln in asset.links):
+        return asset
+    found = {ln.name: lab for ln in asset.links if (lab := label_from_name(ln.name))}
+    if not found:
+        return asset
+    links = [ln.model_copy(update={"semantic_label": found.get(ln.name)}) for ln in asset.links]
+    note = "part labels read from link names (no semantics.txt): " + ", ".join(f"{k} -> {v}" for k, v in found.items())
+    return asset.model_copy(update={"links": links, "staging_notes": [*asset.staging_notes, note]})

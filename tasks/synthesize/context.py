@@ -19,6 +19,7 @@ from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions,
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.overrides import apply_overrides
+from asset2sim.tasks.interpret.part_labels import labels_from_names
 from asset2sim.tasks.interpret.request import parse_request
 
 from asset2sim.engines.base import SessionOptions, SimSession
@@ -109,6 +110,7 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         OverrideError: an override of ``config.overrides`` does not fit the asset.
     """
     asset = source if isinstance(source, AssetDescription) else extract.extract_asset(source, asset_id=asset_id, category=category)
+    asset = labels_from_names(asset)  # an asset without semantics.txt: labels from its link names
     cache = cache if cache is not None else analyze.MeshCache()
     if geometry is None:
         geometry = analyze.analyze_asset(asset, cache=cache)

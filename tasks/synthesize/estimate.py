@@ -57,7 +57,23 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
         if s > cap:
             note += f"; handheld: capped to {cap:.4g} so two dimensions fit a {priors.GRASPABLE_WIDTH_M} m gripper"
             s = cap
-    return s, note
+    return s, note + unit_warning(s)
+
+
+#: Length units an input's numbers are often written in by mistake for metres: metres per unit -> name.
+UNIT_MISTAKES = {0.001: "millimetres", 0.01: "centimetres", 0.0254: "inches"}
+#: A scale beyond this factor from 1 is reported as a likely unit mistake (sizes within a category span less).
+UNIT_WARNING_FACTOR = 5.0
+
+
+def unit_warning(scale: float) -> str:
+    """``"; WARNING: ..."`` when ``scale`` (output / input size) lies beyond :data:`UNIT_WARNING_FACTOR` from 1: the
+    unit of :data:`UNIT_MISTAKES` nearest to it (within a factor 1.5) or a model at another size; ``""`` otherwise."""
+    if 1.0 / UNIT_WARNING_FACTOR <= scale <= UNIT_WARNING_FACTOR:
+        return ""
+    unit, per = min(((name, m) for m, name in UNIT_MISTAKES.items()), key=lambda u: abs(np.log(scale / u[1])))
+    guess = f"its lengths look like {unit} read as metres" if abs(np.log(scale / per)) < np.log(1.5) else "a unit mistake or a model at another size"
+    return f"; WARNING: the input is {1.0 / scale:.3g}x its category's typical size ({guess}); rescaled by {scale:.4g}"
 
 
 def plausible_mass_range(ctx: EstimationContext, scale: float) -> tuple[float, float]:

@@ -80,6 +80,7 @@ class OfflineEstimator:
             notes=ValidationNotes(
                 size=size_note, material="; ".join(mat_notes), mass_arithmetic=mass_note,
                 other=[f"category: {ctx.category} ({ctx.category_reason})"]
+                + [w.strip() for w in size_note.split(";") if w.strip().startswith("WARNING:")]
                 + ["requested bands: " + ", ".join(f"{k}={v}" for k, v in bands.items())]
                 + band_notes
                 + ([] if asked_state else ["the request asks for no state: every joint starts at its geometric closed end"]),

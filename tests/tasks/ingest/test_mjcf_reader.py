@@ -1,6 +1,6 @@
 """MJCF inputs: read by MuJoCo into the asset model, staged as a URDF, refined like any asset.
 
-Round trip: a refined output's own MJCF export read back equals its ``mobility.urdf`` (links, joints,
+Round trip: a refined output's own MJCF export (and, in the slow test, its USD export) read back equals its ``mobility.urdf`` (links, joints,
 limits, damping, friction, masses, centers of mass, inertia tensors) within 1e-6 relative. Files the
 tests write cover MJCF's conventions (degrees, default classes, meshdir, joint pos and ref, primitives)
 and what is refused.
@@ -74,12 +74,18 @@ def _manifest_rows(ids: list[str] | None = None) -> list[dict]:
     return [r for r in rows if ids is None or r["id"] in ids]
 
 
-def _round_trip(row: dict, tmp: Path) -> None:
+def _round_trip(row: dict, tmp: Path, usd: bool = False) -> None:
     out = tmp / row["id"]
     refine_asset(SHARED / row["id"], row["prompt"], out, task=row["task"] or None, extras=False)
     xml = export_mjcf(out)
     read = read_mjcf_asset(xml)
-    assert_same_model(read.model, read_urdf(out / "mobility.urdf"), row["id"])
+    urdf = read_urdf(out / "mobility.urdf")
+    assert_same_model(read.model, urdf, row["id"])
+    if usd:  # URDF -> USD -> asset model, within the same tolerances (USD stores float32)
+        from asset2sim.tasks.ingest.usd_reader import read_usd_asset
+        from asset2sim.tasks.publish.export_usd import export_usd
+
+        assert_same_model(read_usd_asset(export_usd(out, check=False).path).model, urdf, f"{row['id']} (USD)")
 
 
 @pytest.mark.parametrize("asset_id", ["148", "8877", "103275"])
@@ -88,11 +94,12 @@ def test_a_refined_outputs_mjcf_reads_back_as_its_urdf(shared_dataset, tmp_path,
 
 
 @pytest.mark.slow
-def test_every_dev_outputs_mjcf_reads_back_as_its_urdf(shared_dataset, tmp_path):
+def test_every_dev_outputs_mjcf_and_usd_read_back_as_its_urdf(shared_dataset, tmp_path):
+    pytest.importorskip("pxr")
     rows = _manifest_rows()
     assert len(rows) == 21
     for row in rows:
-        _round_trip(row, tmp_path)
+        _round_trip(row, tmp_path, usd=True)
 
 
 # ------------------------------------------------------------------ files the tests write
