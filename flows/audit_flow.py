@@ -72,21 +72,27 @@ def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tr
     """One MLflow run in :data:`AUDIT_EXPERIMENT` (the store of ``tracking_uri``, else ``MLFLOW_TRACKING_URI``, else
     ``<out>/mlflow.db``): metrics ``assets``, ``<mode>`` counts and ``implausible_<quantity>``; the catalog files as
     artifacts. Returns the run id."""
-    import mlflow
+    from mlflow.tracking import MlflowClient
 
-    mlflow.set_tracking_uri(tracking.resolve_tracking_uri(out, tracking_uri))
-    experiment = mlflow.get_experiment_by_name(AUDIT_EXPERIMENT)
-    exp_id = experiment.experiment_id if experiment else mlflow.create_experiment(
+    client = MlflowClient(tracking_uri=tracking.resolve_tracking_uri(out, tracking_uri))  # never the process-wide URI
+    experiment = client.get_experiment_by_name(AUDIT_EXPERIMENT)
+    exp_id = experiment.experiment_id if experiment else client.create_experiment(
         AUDIT_EXPERIMENT, artifact_location=(Path(out).resolve() / "mlruns").as_uri())
-    with mlflow.start_run(experiment_id=exp_id, run_name=f"audit-{out.name}") as run:
-        mlflow.log_metric("assets", summary["assets"])
+    run = client.create_run(exp_id, run_name=f"audit-{out.name}")
+    run_id = run.info.run_id
+    try:
+        client.log_metric(run_id, "assets", summary["assets"])
         for mode, n in summary["failure_modes"].items():
-            mlflow.log_metric(mode, n)
+            client.log_metric(run_id, mode, n)
         for quantity, n in summary["implausible_by_quantity"].items():
-            mlflow.log_metric(f"implausible_{quantity}", int(n))
+            client.log_metric(run_id, f"implausible_{quantity}", int(n))
         for path in files.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id
+            client.log_artifact(run_id, str(path))
+    except BaseException:
+        client.set_terminated(run_id, "FAILED")
+        raise
+    client.set_terminated(run_id)
+    return run_id
 
 
 def run_audit_flow(paths: list[str], out: str | Path, *, category: str | None = None, simulate: bool = True,

@@ -848,10 +848,10 @@ def _cases() -> list[Case]:
           _files_case(_write("meshes/lid_visual.obj", CUBE_V + CUBE_F + "f 1 2 99\n"), _mesh("lid", "meshes/lid_visual.obj", role="visual")),
           refused=False, note="a visual-only defect is a warning"))
     # --- issue 11: validate agrees with refine
-    for fmt, data in (("glb", box_glb), ("ply", box_ply), ("off", box_off)):
+    for fmt, data in (("off", box_off),):  # GLB, glTF and PLY are converted to OBJ (tests/tasks/ingest/test_urdf_meshes.py)
         add(C(f"format_{fmt}_mesh", "refine_agreement", "MESH_FORMAT_UNSUPPORTED",
               _files_case(_mesh_file(f"meshes/lid.{fmt}", data), _mesh("lid", f"meshes/lid.{fmt}")),
-              note="PyBullet (refine loads the input URDF) reads OBJ, STL, DAE only: refused, convert to OBJ"))
+              note="PyBullet (refine loads the input URDF) reads OBJ, STL, DAE only; refine converts GLB, glTF, PLY: OFF refused"))
     add(C("format_symlink_name_differs", "refine_agreement", "MESH_FORMAT_UNSUPPORTED",
           _files_case(_symlink_other_format, _mesh("lid", "meshes/alias.obj")),
           note="alias.obj -> drawer.stl: the simulator picks the reader by the name"))

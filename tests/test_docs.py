@@ -51,7 +51,7 @@ EXPECTED_FILES = {
                   "views/front.png", "bench/results.csv"],
     "audit.md": ["audit/box_grams/audit.md", "audit/box_grams/patch/storage_box.xml", "audit/audit_assets.parquet",
                  "audit/audit_values.parquet", "audit_api/audit.json", "audit_flow/audit_assets.parquet",
-                 "audit_flow/mlflow.db", "out/kept/report.json"],
+                 "out/kept/report.json"],
     "api.md": ["out/box/mobility.urdf", "out/box/report.json", "out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
     "inputs.md": ["out/from_mjcf/mobility.urdf", "out/from_mjcf/report.json", "out/from_mjcf_api/report.json"],
     "outputs.md": ["out/demo/mobility.urdf", "out/demo/initial_state.json", "out/demo/overlay.json", "out/demo/report.json"],

@@ -115,7 +115,7 @@ CODES: dict[str, CodeInfo] = {
     "MESH_IS_DIRECTORY": _c("error", "mesh_paths", "the mesh path is a directory"),
     "MESH_NOT_REGULAR_FILE": _c("error", "mesh_paths", "the mesh path is a FIFO, device or socket"),
     "MESH_EXTENSION_UNSUPPORTED": _c("error", "mesh_paths", "not a mesh extension (.obj .stl .ply .off .glb .gltf .dae)"),
-    "MESH_FORMAT_UNSUPPORTED": _c("error", "mesh_paths", "a mesh format refine's simulator cannot load (PLY, OFF, GLB, GLTF; PyBullet reads OBJ, STL, DAE)"),
+    "MESH_FORMAT_UNSUPPORTED": _c("error", "mesh_paths", "a mesh format refine cannot load (OFF and others; PyBullet reads OBJ, STL, DAE; GLB, glTF and PLY are converted to OBJ)"),
     "MESH_UNREADABLE": _c("error", "mesh_paths", "the mesh cannot be opened (permissions)"),
     "MESH_TOO_LARGE": _c("error", "mesh_contents", "mesh file above the byte cap"),
     "MESH_TOO_MANY_FACES": _c("error", "mesh_contents", "mesh above the face-count cap"),

@@ -17,6 +17,7 @@ from PIL import Image, UnidentifiedImageError
 from asset2sim import atomic, mesh_materials
 from asset2sim.tasks.ingest.findings import MeshUse, Recorder, asset_size_range
 from asset2sim.tasks.ingest.mesh_paths import MeshReference, file_kind, read_regular, resolve_mesh_reference
+from asset2sim.tasks.ingest import urdf_meshes
 from asset2sim.tasks.ingest.mesh_scan import MeshScan, is_flat, scan_mesh_file
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfModel
 
@@ -240,9 +241,12 @@ class MeshChecks(Recorder):
 
     def _format_problem(self, fname: str, real: Path) -> str | None:
         """Why refine cannot load this mesh file (None: it can): the suffix as written (PyBullet's choice)
-        and the real file's must be the same format of ``policy.simulator_mesh_extensions``."""
+        and the real file's must be the same format of ``policy.simulator_mesh_extensions``, or both GLB, glTF
+        or PLY (:data:`~asset2sim.tasks.ingest.urdf_meshes.CONVERTED_SUFFIXES`: converted to OBJ first)."""
         written = os.path.splitext(fname)[1].lower()
         actual = real.suffix.lower()
+        if written == actual and written in urdf_meshes.CONVERTED_SUFFIXES:  # staged as OBJ before refine loads it
+            return None
         allowed = self.policy.simulator_mesh_extensions
         if written not in allowed or actual not in allowed:
             bad = written if written not in allowed else actual

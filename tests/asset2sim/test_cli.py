@@ -196,7 +196,7 @@ def _fields(line: str) -> tuple[str, str, str]:
 def test_validation_failure_names_path_once_and_codes_once(tmp_path, capsys):
     from tests import corpus_builder as cb
 
-    asset = cb.CASES_BY_NAME["format_glb_mesh"].build(tmp_path / "glb")  # visual and collision: 2 errors, one code
+    asset = cb.CASES_BY_NAME["format_off_mesh"].build(tmp_path / "off")  # visual and collision: 2 errors, one code
     assert main(["refine", str(asset), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
     prog, code, rest = _fields(line)

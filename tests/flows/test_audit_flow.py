@@ -35,10 +35,11 @@ def test_the_audit_flow_records_every_asset_and_logs_the_run(tmp_path, prefect_s
         assert f"{where}: {quantity}" in list(assets.loc[name, "implausible"]), name
     assert summary["implausible_by_quantity"]["mass"] >= 2
 
-    import mlflow
+    from mlflow.tracking import MlflowClient
 
-    mlflow.set_tracking_uri("sqlite:///" + str(tmp_path / "mlflow.db"))
-    run = mlflow.get_run(summary["mlflow_run_id"])
+    client = MlflowClient(tracking_uri="sqlite:///" + str(tmp_path / "mlflow.db"))
+    run = client.get_run(summary["mlflow_run_id"])
     assert run.data.metrics["assets"] == len(expected) + 2 and run.data.metrics["audit_failed"] == 1
-    artifacts = {Path(a.path).name for a in mlflow.MlflowClient().list_artifacts(run.info.run_id)}
+    assert run.info.status == "FINISHED"
+    artifacts = {Path(a.path).name for a in client.list_artifacts(run.info.run_id)}
     assert {audit_catalog.ASSETS_PARQUET, audit_catalog.VALUES_PARQUET} <= artifacts
