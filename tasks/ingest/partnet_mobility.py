@@ -41,6 +41,12 @@ REFERENCE_URDF = "reference_gensim2.urdf"
 MANIFEST_NAME = "manifest.csv"
 
 
+def size_normalized(urdf_path: Path | str) -> bool:
+    """Whether the URDF follows PartNet-Mobility's convention of models normalized to about unit size (its file
+    name is ``mobility.urdf``): their scale says nothing about units (SAPIEN / PartNet-Mobility dataset notes)."""
+    return Path(urdf_path).name in URDF_NAMES
+
+
 def _is_regular(path: Path) -> bool:
     try:
         return stat.S_ISREG(os.stat(path).st_mode)

@@ -11,6 +11,7 @@ import numpy as np
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
 from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -57,7 +58,7 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
         if s > cap:
             note += f"; handheld: capped to {cap:.4g} so two dimensions fit a {priors.GRASPABLE_WIDTH_M} m gripper"
             s = cap
-    return s, note + unit_warning(s)
+    return s, note + ('' if partnet_mobility.size_normalized(ctx.asset.staged_from or ctx.asset.urdf_path) else unit_warning(s))
 
 
 #: Length units an input's numbers are often written in by mistake for metres: metres per unit -> name.
@@ -67,12 +68,15 @@ UNIT_WARNING_FACTOR = 5.0
 
 
 def unit_warning(scale: float) -> str:
-    """``"; WARNING: ..."`` when ``scale`` (output / input size) lies beyond :data:`UNIT_WARNING_FACTOR` from 1: the
-    unit of :data:`UNIT_MISTAKES` nearest to it (within a factor 1.5) or a model at another size; ``""`` otherwise."""
+    """``"; WARNING: ..."`` when ``scale`` (output / input size) lies beyond :data:`UNIT_WARNING_FACTOR` from 1 and
+    within a factor 1.5 of a unit of :data:`UNIT_MISTAKES` (lengths in that unit read as metres); ``""`` otherwise
+    (a model drawn at another size is no unit mistake: the size note says how it was scaled)."""
     if 1.0 / UNIT_WARNING_FACTOR <= scale <= UNIT_WARNING_FACTOR:
         return ""
     unit, per = min(((name, m) for m, name in UNIT_MISTAKES.items()), key=lambda u: abs(np.log(scale / u[1])))
-    guess = f"its lengths look like {unit} read as metres" if abs(np.log(scale / per)) < np.log(1.5) else "a unit mistake or a model at another size"
+    if abs(np.log(scale / per)) >= np.log(1.5):
+        return ""
+    guess = f"its lengths look like {unit} read as metres"
     return f"; WARNING: the input is {1.0 / scale:.3g}x its category's typical size ({guess}); rescaled by {scale:.4g}"
 
 

@@ -59,3 +59,19 @@ def test_centimetre_meshes_are_caught_by_the_size_priors(tmp_path):
     assert {g.filename for ln in patched.links.values() for g in ln.collisions} == {"meshes/base.glb", "meshes/door.ply", "meshes/handle.glb"}
     assert all(g.path.is_file() for ln in patched.links.values() for g in ln.collisions)
     assert json.loads((tmp_path / "audit" / "audit.json").read_text())["format"] == "urdf"
+
+
+@pytest.mark.parametrize("scale, unit", [(0.01, "centimetres"), (0.0254, "inches"), (0.001, "millimetres"), (0.014, "centimetres"),
+                                         (0.2, None), (4.0, None), (0.05, None), (0.3, None)])
+def test_a_unit_mistake_is_named_only_near_a_unit_factor(scale, unit):
+    from asset2sim.tasks.synthesize.estimate import unit_warning
+
+    text = unit_warning(scale)
+    assert (f"look like {unit} read as metres" in text) if unit else text == ""
+
+
+def test_a_partnet_mobility_model_is_never_called_a_unit_mistake(tmp_path):
+    src = write_generated_urdf(tmp_path / "gen_cm", unit=100.0)
+    (src / "model.urdf").rename(src / "mobility.urdf")  # the dataset's convention: normalized size, not units
+    res = refine_asset(src, "a cabinet", tmp_path / "out", extras=False)
+    assert res.overlay.scale < 0.03 and not any("read as metres" in n for n in res.report.notes)
