@@ -90,7 +90,7 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         except output_folder.OutputError as exc:
             raise AuditError(str(exc)) from exc
     try:
-        initial, declared_root = _state_file(asset) if dp.format == "urdf" else ({}, None)
+        initial, declared_root = _state_file(asset) if dp.format == "urdf" else (dict(dp.initial_state), None)
         dp = _overlay_springs(asset, dp) if dp.format == "urdf" else dp
         with build_context(asset, "", config, category=match.name) as ctx:
             mount = declared_root or _mounting(dp, ctx.category)
@@ -171,7 +171,8 @@ def _state_file(asset: AssetDescription) -> tuple[dict[str, float], RootMount | 
 
 def _simulate(ctx, judged: Judgement, config: RefineConfig, initial: dict[str, float]) -> list[SimulationChecks]:
     """Rest, robust rest and the joint sweep (:func:`asset2sim.tasks.check.postcheck.run_post_check`) on the
-    declared and on the patched physics, each from ``initial`` (the asset's ``initial_state.json``), else the
+    declared and on the patched physics, each from ``initial`` (the asset's ``initial_state.json``, or an MJCF
+    keyframe), else the
     joints' closed ends (a spring's joint: its reference within the limits), with the asset's own collision
     geometry as a simulator loading the file gets it (:func:`_physics_urdf`)."""
     state = {**ctx.closed_state(), **initial}

@@ -60,7 +60,8 @@ class DeclaredJoint:
 class DeclaredPhysics:
     """What one input file declares: ``format`` ``urdf`` / ``mjcf`` / ``usd``; ``root_fixed`` the file welds the
     root to the world (True), leaves it free (False) or does not say (None, URDF); ``read`` what the MJCF or USD
-    reader made of the file (None for a URDF), for writers that edit the file in its own format."""
+    reader made of the file (None for a URDF), for writers that edit the file in its own format;
+    ``initial_state`` joint -> the position (rad or m) the file starts it at (an MJCF keyframe), empty if none."""
 
     source: Path
     format: str
@@ -68,6 +69,7 @@ class DeclaredPhysics:
     joints: dict[str, DeclaredJoint] = field(default_factory=dict)
     root_fixed: bool | None = None
     read: staged.ReadAsset | None = None
+    initial_state: dict[str, float] = field(default_factory=dict)
 
 
 def _link(name: str, inertial: UrdfInertial | None, how: How, density: float | None = None,
@@ -103,7 +105,7 @@ def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staged.R
             stiffness=None if spring is None else spring.stiffness, reference=None if spring is None else spring.reference,
             effort=None if lim is None else lim.effort)
     return DeclaredPhysics(source=source, format=fmt, links=links, joints=joints, root_fixed=None if read is None else read.root_fixed,
-                           read=read)
+                           read=read, initial_state={} if read is None else dict(read.initial_state))
 
 
 def read_declared(path: Path | str, urdf_path: Path | str | None = None) -> DeclaredPhysics:

@@ -134,7 +134,8 @@ class _Reader:
         self._other_notes()
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
         files = tuple(sorted({self.path, *self._mesh_files()}))
-        return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs,
+        initial = self._keyframe_state(joints)
+        return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs, initial_state=initial,
                          inferred=tuple(self.inferred), notes=tuple(self.notes), files=files, root_fixed=self.root_fixed,
                          simulated=self.simulated, densities=self.densities, written_moments=self.written_moments)
 
@@ -248,6 +249,26 @@ class _Reader:
         link = UrdfLink(name=name, inertial=inertial, visuals=visuals, collisions=collisions, contact=contact)
         collisions_as_visuals(link)
         return link
+
+    def _keyframe_state(self, joints: list[UrdfJoint]) -> dict[str, float]:
+        """joint -> position (rad or m, the URDF joint's: MuJoCo's ``ref`` subtracted) in the keyframe named
+        ``initial``, else the first keyframe; {} without one (noted when used)."""
+        m = self.m
+        if m.nkey == 0:
+            return {}
+        names = [m.key(k).name for k in range(m.nkey)]
+        k = names.index("initial") if "initial" in names else 0
+        out = {}
+        for j in joints:
+            if j.type == "fixed":
+                continue
+            jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
+            if jid >= 0:
+                adr = int(m.jnt_qposadr[jid])
+                out[j.name] = float(m.key_qpos[k, adr] - m.qpos0[adr])
+        if out:
+            self.notes.append(f"initial joint positions from keyframe {names[k] or '#' + str(k)!r}")
+        return out
 
     def _written_moments(self, b: int, name: str) -> None:
         """Record body ``b``'s principal moments as written when MuJoCo's ``balanceinertia`` changed them (noted)."""

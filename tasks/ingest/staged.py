@@ -64,7 +64,8 @@ class ReadAsset:
     geometry declares for that inference; ``written_moments``: link -> the principal moments (3,) kg*m^2 as the
     file writes them, where the simulator changed them on loading (MuJoCo's ``balanceinertia``); ``prims``
     (USD): link or joint name -> the prim path it was read from; ``frames`` (USD): link -> its link frame (4, 4)
-    in the stage's world (m, Z up)."""
+    in the stage's world (m, Z up); ``initial_state``: joint -> the position (rad or m) the file starts it at
+    (MJCF: a keyframe), empty when it says none."""
 
     source: Path
     format: str
@@ -80,6 +81,7 @@ class ReadAsset:
     written_moments: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     prims: dict[str, str] = field(default_factory=dict)
     frames: dict[str, np.ndarray] = field(default_factory=dict)
+    initial_state: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -81,6 +81,12 @@ def _round_trip(row: dict, tmp: Path, usd: bool = False) -> None:
     read = read_mjcf_asset(xml)
     urdf = read_urdf(out / "mobility.urdf")
     assert_same_model(read.model, urdf, row["id"])
+    from asset2sim.engines.loading import read_initial_state
+
+    state = read_initial_state(out)  # the export's keyframe read back as the declared initial state
+    assert set(read.initial_state) == {j.name for j in urdf.joints if j.type != "fixed"}, row["id"]
+    for name, q in read.initial_state.items():
+        assert abs(q - state.get(name, 0.0)) <= 1e-9, (row["id"], name, q, state.get(name))
     if usd:  # URDF -> USD -> asset model, within the same tolerances (USD stores float32)
         from asset2sim.tasks.ingest.usd_reader import read_usd_asset
         from asset2sim.tasks.publish.export_usd import export_usd
