@@ -44,7 +44,8 @@ def _audit_each(targets: list[AuditTarget], out: str, category: str | None, simu
 def audit_flow(paths: list[str], out: str, category: str | None = None, simulate: bool = True, workers: int | None = None,
                dask_address: str | None = None, tracking_uri: str | None = None) -> dict[str, Any]:
     """Audit every asset ``paths`` hold (:func:`~asset2sim.tasks.audit.batch.find_assets`) into ``out``; returns the
-    run summary (assets, failure modes, implausible values per quantity, catalog paths, MLflow run id)."""
+    run summary (assets, failure modes, implausible values per quantity, catalog paths, MLflow run id) and the
+    catalog ``rows`` (:class:`~asset2sim.schemas.audit.AuditRow`)."""
     start = time.perf_counter()
     targets = find_assets(paths)
     runner = _dask_task_runner(workers, dask_address, dashboard=False)
@@ -54,7 +55,7 @@ def audit_flow(paths: list[str], out: str, category: str | None = None, simulate
     summary = audit_summary(rows, files)
     summary["seconds"] = time.perf_counter() - start
     summary["mlflow_run_id"] = log_audit_run(summary, files, Path(out), tracking_uri)
-    return summary
+    return {**summary, "rows": rows}
 
 
 def audit_summary(rows: list[AuditRow], files: dict[str, Path]) -> dict[str, Any]:

@@ -26,7 +26,6 @@ from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
 from asset2sim.tasks.audit import keep
-from asset2sim.tasks.audit.judge import part_labels
 from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
@@ -204,7 +203,7 @@ def _keep_declared(est: estimator.Estimator, asset_dir: Path | str, asset: Asset
         declared = read_declared(asset_dir, asset.urdf_path)
     except Exception as exc:
         raise RefineError(f"{asset.urdf_path}: the declared physics cannot be read: {exc}", "invalid_input") from exc
-    return keep.KeepDeclared(est, declared, part_labels(asset))
+    return keep.KeepDeclared(est, declared)
 
 
 def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:

@@ -16,7 +16,6 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, output_folder_failure
 from asset2sim.flows import audit_catalog
-from asset2sim.schemas.audit import AuditRow
 from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
 
 NAME = "audit"
@@ -47,13 +46,6 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
         return [f.result() for f in futures]
 
 
-def _read_rows(path: Path) -> list[AuditRow]:
-    import pandas as pd
-
-    return [AuditRow.model_validate({k: (list(v) if k in ("implausible", "declared_failures") else v) for k, v in r.items()})
-            for r in pd.read_parquet(path).astype(object).where(lambda d: d.notna(), None).to_dict("records")]
-
-
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
@@ -75,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
 
         summary = run_audit_flow(args.paths, args.out, category=args.category, simulate=not args.no_sim, workers=args.jobs,
                                  dask_address=args.dask_address)
-        rows = _read_rows(Path(summary["catalog"]["assets"]))
+        rows = summary["rows"]
     else:
         rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
         if args.out is not None:

@@ -9,7 +9,7 @@ import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from asset2sim import atomic, file_names, output_folder
+from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.urdf import read_urdf, write_urdf
 from asset2sim.schemas.asset import AssetDescription
@@ -18,13 +18,15 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.tasks.assemble import write
+from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
 from asset2sim.tasks.audit import patch, report_md
-from asset2sim.tasks.audit.judge import Judgement, judge, part_labels
+from asset2sim.tasks.audit.judge import Judgement, judge
 from asset2sim.tasks.check import manipulation, postcheck
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret import mounting
 from asset2sim.tasks.interpret.categories import recognize_category
+from asset2sim.tasks.interpret.part_labels import labels_from_names
 from asset2sim.tasks.synthesize.context import build_context
 
 __all__ = ["AUDIT_JSON", "AUDIT_MD", "AuditError", "AuditResult", "audit_asset"]
@@ -77,10 +79,8 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         dp = declared_mod.read_declared(path, asset.urdf_path)
     except Exception as exc:
         raise AuditError(_cannot(path, exc)) from exc
-    labels = part_labels(asset)
-    asset = asset.model_copy(update={"links": [ln.model_copy(update={"semantic_label": ln.semantic_label or labels[ln.name]})
-                                               for ln in asset.links]})
-    match = recognize_category(category or asset.category, list(labels.values()), _name_words(asset))
+    asset = labels_from_names(asset)  # as the context builder labels it
+    match = recognize_category(category or asset.category, [ln.semantic_label for ln in asset.links], _name_words(asset))
     source = asset.staged_from or asset.urdf_path
     if out_dir is not None:
         out_dir = Path(out_dir)
@@ -94,7 +94,7 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         dp = _overlay_springs(asset, dp) if dp.format == "urdf" else dp
         with build_context(asset, "", config, category=match.name) as ctx:
             mount = declared_root or _mounting(dp, ctx.category)
-            judged = judge(ctx, dp, labels, mount)
+            judged = judge(ctx, dp, mount)
             with quiet_stdout():  # engines print from C; the library must not
                 checks = _simulate(ctx, judged, config, initial) if simulate else []
     except AuditError:
@@ -102,7 +102,7 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     except Exception as exc:
         raise AuditError(_cannot(source, exc, with_type=True)) from exc
     report = AuditReport(asset_id=asset.asset_id, source=str(source), format=dp.format, category=ctx.category,
-                         category_reason=match.reason, labels={k: v for k, v in labels.items() if v}, root_fixed=mount.fixed,
+                         category_reason=match.reason, labels={ln.name: ln.semantic_label for ln in asset.links if ln.semantic_label}, root_fixed=mount.fixed,
                          root_source=mount.source, values=judged.values, checks=checks,
                          notes=[*judged.notes, *asset.staging_notes])
     if out_dir is None:
@@ -121,33 +121,28 @@ def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> st
 
 
 def _mounting(dp: declared_mod.DeclaredPhysics, category: str) -> RootMount:
-    """The root as the file declares it (MJCF: no free joint welds it; USD: a fixed joint to the world), else the
-    category's prior (:func:`asset2sim.tasks.interpret.mounting.category_mounting`)."""
+    """The root as the file declares it (MJCF: no free joint welds it; USD: a fixed joint to the world), read as a
+    ``--mount`` override reads (:func:`asset2sim.tasks.interpret.mounting.resolve_mounting`), else the category's prior."""
     if dp.root_fixed is None:
         return mounting.category_mounting(category)
-    prior = mounting.category_mounting(category)
-    if dp.root_fixed:
-        kind = prior.kind if prior.fixed else "wall-mounted"
-        return RootMount(kind=kind, fixed=True, source=f"the {dp.format.upper()} file welds the root to the world")
-    return RootMount(kind="free-standing", fixed=False, source=f"the {dp.format.upper()} file leaves the root free")
+    held = "welds the root to the world" if dp.root_fixed else "leaves the root free"
+    mount = mounting.resolve_mounting(category, "", "fixed" if dp.root_fixed else "free")
+    return mount.model_copy(update={"source": f"the {dp.format.upper()} file {held}"})
 
 
 def _overlay_springs(asset: AssetDescription, dp: declared_mod.DeclaredPhysics) -> declared_mod.DeclaredPhysics:
     """``dp`` with the joint springs of the asset folder's ``overlay.json`` (an asset2sim output keeps them there,
-    URDF having no element for them); unchanged without the file.
+    URDF having no element for them; read as the MJCF exporter reads them); unchanged without the file.
 
     Raises:
         AuditError: the file is not an overlay.
     """
-    p = asset.source_dir / output_folder.OVERLAY_NAME
-    if not p.is_file():
-        return dp
     try:
-        ov = Overlay.model_validate_json(atomic.read_regular(p, output_folder.MAX_RECORD_BYTES))
+        springs = springs_from_overlay(asset.source_dir)
     except ValueError as exc:
-        raise AuditError(f"{p}: not an overlay: {exc}") from exc
-    joints = {n: replace(j, stiffness=ov.joints[n].stiffness, reference=ov.joints[n].spring_reference)
-              if n in ov.joints and ov.joints[n].stiffness > 0 else j for n, j in dp.joints.items()}
+        raise AuditError(str(exc)) from exc
+    joints = {n: replace(j, stiffness=springs[n].stiffness, reference=springs[n].reference) if n in springs else j
+              for n, j in dp.joints.items()}
     return replace(dp, joints=joints)
 
 
@@ -224,8 +219,3 @@ def _write(report: AuditReport, asset: AssetDescription, dp: declared_mod.Declar
     atomic.write_json(out_dir / AUDIT_JSON, report.model_dump(mode="json"))
     atomic.write_text(out_dir / AUDIT_MD, report_md.render(report))
     return report
-
-
-def asset_folder(out_root: Path | str, asset_id: str) -> Path:
-    """The audit folder of ``asset_id`` under ``out_root`` (a safe file name of the id, checked inside)."""
-    return file_names.join_inside(out_root, file_names.file_stem(asset_id))

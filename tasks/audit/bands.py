@@ -182,6 +182,12 @@ def scale_verdict(largest: float, typical: float | None, category: str) -> Value
                          f"largest dimension; a typical {category} is {typical:.3g} m")
 
 
+def critical_damping(inertia_axis: float, stiffness: float) -> float:
+    """Critical damping 2 sqrt(I k) (N*m*s/rad or N*s/m) of a joint with ``inertia_axis`` (kg*m^2 or kg) and restoring
+    ``stiffness`` (N*m/rad or N/m) (Ogata, System Dynamics, 4th ed., ch. 8)."""
+    return 2.0 * math.sqrt(max(inertia_axis, 0.0) * max(stiffness, 0.0))
+
+
 def operating_damping(operable: float | None, travel: float | None) -> float | None:
     """The damping (N*m*s/rad or N*s/m) at which a hand's ``operable`` torque or force moves a part across ``travel``
     (rad or m) in :data:`OPERATE_SECONDS`; None when either is unknown."""
@@ -197,7 +203,7 @@ def damping_verdict(where: str, declared: float | None, inertia_axis: float, sti
     above the larger of :data:`ZETA_MAX` x critical and ``operable_damping`` (:func:`operating_damping`: a hand
     still moves the part across its range in :data:`OPERATE_SECONDS`), or when no damping and no friction leave
     nothing to stop a moving part. ``estimate``: the product's (zeta 0.7)."""
-    crit = 2.0 * math.sqrt(max(inertia_axis, 0.0) * max(stiffness, 0.0))
+    crit = critical_damping(inertia_axis, stiffness)
     high = max(ZETA_MAX * crit, operable_damping or 0.0) or None
     what = f"critical damping {crit:.4g} {unit}" + (f"; a hand moves it across its range in {OPERATE_SECONDS:g} s up to "
                                                     f"{operable_damping:.3g}" if operable_damping else "")
@@ -212,7 +218,7 @@ def spring_damping_verdict(where: str, declared: float | None, inertia_axis: flo
     """Damping of a spring-returned joint: zeta = c / (2 sqrt(I k)) at least :data:`ZETA_MIN_SPRING` (below it the
     part rings), at most the larger of :data:`ZETA_MAX` and ``operable_damping`` (:func:`damping_verdict`)
     (``inertia_axis`` kg*m^2 or kg, ``stiffness`` N*m/rad or N/m of the spring)."""
-    crit = 2.0 * math.sqrt(max(inertia_axis, 0.0) * max(stiffness, 0.0))
+    crit = critical_damping(inertia_axis, stiffness)
     return _band_verdict(where, "damping", unit, declared if declared is not None else 0.0, estimate, ZETA_MIN_SPRING * crit,
                          max(ZETA_MAX * crit, operable_damping or 0.0), f"a spring of {stiffness:.4g}: critical damping {crit:.4g} {unit}; zeta "
                          f"{(declared or 0.0) / crit if crit > 0 else float('nan'):.3g}, plausible {ZETA_MIN_SPRING:g}-{ZETA_MAX:g}")

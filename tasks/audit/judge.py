@@ -14,25 +14,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.audit import bands
 from asset2sim.tasks.check import force_ranges
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import priors
-from asset2sim.tasks.interpret.part_labels import canonical_label, label_from_name
+from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.estimate import JointChoice, joint_dynamics_for, link_material, plausible_mass_range
 from asset2sim.tasks.synthesize.validate_overlay import geometry_inertia, solid_volume
 
-__all__ = ["Judgement", "judge", "part_labels"]
-
-
-def part_labels(asset: AssetDescription) -> dict[str, str | None]:
-    """link -> part label: ``semantics.txt``'s (canonical), else read from the link name (:func:`label_from_name`)."""
-    return {ln.name: canonical_label(ln.semantic_label) if ln.semantic_label else label_from_name(ln.name) for ln in asset.links}
+__all__ = ["Judgement", "judge"]
 
 
 @dataclass(frozen=True)
@@ -179,14 +173,16 @@ def _judge_joints(ctx: EstimationContext, dp: DeclaredPhysics, labels: dict[str,
     return declared, patched
 
 
-def judge(ctx: EstimationContext, dp: DeclaredPhysics, labels: dict[str, str | None], mounting: RootMount) -> Judgement:
-    """Judge every declared value of ``dp`` (the asset of ``ctx``, at scale 1; ``labels`` link -> part label).
+def judge(ctx: EstimationContext, dp: DeclaredPhysics, mounting: RootMount) -> Judgement:
+    """Judge every declared value of ``dp`` (the asset of ``ctx``, at scale 1; part labels those of ``ctx.asset``:
+    ``semantics.txt``'s, else read from the link names by the context builder).
 
     Returns:
         :class:`Judgement`: the verdicts in the order scale, then per link (mass, density, inertia, center of
         mass), then per movable joint (damping, friction, stiffness, limits); the declared and patched
         overlays (scale 1, ``mounting`` as given) the simulation checks load.
     """
+    labels = {ln.name: canonical_label(ln.semantic_label) for ln in ctx.asset.links}
     values: list[ValueVerdict] = []
     target = priors.target_size(ctx.category)
     typical = None if ctx.category == priors.GENERIC else float(max(target.dims))

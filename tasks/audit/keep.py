@@ -43,11 +43,10 @@ def _dynamics_asked(ctx: EstimationContext) -> bool:
 class KeepDeclared:
     """An estimator (``inner``'s name) that keeps the declared values of ``declared`` the audit finds plausible."""
 
-    def __init__(self, inner: Estimator, declared: DeclaredPhysics, labels: dict[str, str | None]):
+    def __init__(self, inner: Estimator, declared: DeclaredPhysics):
         self.inner = inner
         self.name = inner.name
         self.declared = declared
-        self.labels = labels
         self.judged: Judgement | None = None
 
     def __getattr__(self, name):  # the inner estimator's extras (joint_proposer ...)
@@ -55,7 +54,9 @@ class KeepDeclared:
 
     def estimate(self, ctx: EstimationContext) -> Estimate:
         """The inner estimate at the declared size when plausible, with the plausible declared values kept."""
-        judged = self.judged = judge(ctx, self.declared, self.labels, mounting.category_mounting(ctx.category))
+        if self.judged is None:  # the declared values and the context do not change between a refine's attempts
+            self.judged = judge(ctx, self.declared, mounting.category_mounting(ctx.category))
+        judged = self.judged
         size_ok = judged.values[0].quantity == "scale" and judged.values[0].verdict == "plausible"
         inner_ctx = ctx
         if size_ok and ctx.request.scale is None and not ctx.request.sizes:

@@ -113,13 +113,17 @@ def read_declared(path: Path | str, urdf_path: Path | str | None = None) -> Decl
 
     Args:
         path: an MJCF or USD file (or a folder holding one, :func:`staged.other_format_file`), or a URDF asset.
-        urdf_path: the URDF file of a URDF asset (as extraction found it); needed when ``path`` is a folder.
+        urdf_path: the URDF file extraction found or staged; needed when ``path`` is a URDF folder. A URDF this
+            process staged (:func:`staged.read_of`) gives what its reader read, without reading the file again.
 
     Raises:
         StagingError: the MJCF or USD file cannot be read into the asset model.
         UrdfError: the URDF cannot be read (lenient mode).
         ValueError: a URDF asset given as a folder without ``urdf_path``.
     """
+    read = staged.read_of(urdf_path) if urdf_path is not None else None
+    if read is not None:  # staged by extraction in this process: the file is not read again
+        return declared_from_model(read.source, read.format, read.model, read)
     other = staged.other_format_file(path)
     if other is not None:
         source, fmt = other

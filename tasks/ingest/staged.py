@@ -16,6 +16,8 @@ import atexit
 import hashlib
 import os
 import re
+import threading
+from collections import OrderedDict
 import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
@@ -208,7 +210,39 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
     urdf_path = folder / STAGED_URDF
     comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "
     atomic.write_bytes(urdf_path, write_urdf(read.model, comment=comment))
+    real = os.path.realpath(urdf_path)
+    with _READS_LOCK:
+        _READS[real] = (_identity(real), read)
+        _READS.move_to_end(real)
+        while len(_READS) > _READS_KEPT:
+            _READS.popitem(last=False)
     return StagedAsset(read=read, urdf_path=urdf_path)
+
+
+#: The reads staged last in this process, by their staged URDF (real path), with that file's identity when
+#: written: what :func:`read_of` answers.
+_READS: "OrderedDict[str, tuple[tuple, ReadAsset]]" = OrderedDict()
+_READS_LOCK = threading.Lock()
+#: How many staged reads are kept (each holds its meshes' arrays).
+_READS_KEPT = 8
+
+
+def read_of(urdf_path: Path | str) -> ReadAsset | None:
+    """The :class:`ReadAsset` this process staged as ``urdf_path`` (one of the last :data:`_READS_KEPT`, the file
+    unchanged since: same inode, size and modification time), so the input need not be read again; None otherwise
+    (then read it)."""
+    real = os.path.realpath(urdf_path)
+    with _READS_LOCK:
+        hit = _READS.get(real)
+    return hit[1] if hit is not None and hit[0] == _identity(real) else None
+
+
+def _identity(path: str) -> tuple:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return ()
+    return (st.st_ino, st.st_size, st.st_mtime_ns)
 
 
 _STAGING_ROOT: list[Path] = []
