@@ -151,7 +151,8 @@ def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
 
 def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None = None,
              reference: str | Path | None = None, engines: tuple[str, ...] | list[str] = ("pybullet",),
-             category: str | None = None, probes: bool = True, write_to: str | Path | None = None) -> Evaluation:
+             category: str | None = None, probes: bool = True, write_to: str | Path | None = None,
+             clips: bool = True) -> Evaluation:
     """Evaluate any articulated URDF asset (a refine output or not) with every
     metric: rest stability, penetration (mm), oscillation, the probes and,
     when given, prompt alignment and the task. Nothing is written unless
@@ -168,6 +169,8 @@ def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None =
         category: overrides the category found beside the asset.
         probes: run the passive probes.
         write_to: folder for ``evaluation.json`` and ``report.html``.
+        clips: with ``write_to``, also write the clips of each task-relevant joint's sweep
+            (``clips/clips.json``, WebM and PNG; ``docs/guide/outputs.md``) and play them in the report.
 
     Returns:
         :class:`~asset2sim.schemas.evaluation.Evaluation` (pydantic;
@@ -178,7 +181,7 @@ def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None =
         OutputError: ``write_to`` cannot be written.
     """
     return evaluate_asset(asset, reference=reference, prompt=prompt, engines=tuple(engines), category=category,
-                          out_dir=write_to, write_report=write_to is not None, probes=probes, task=task)
+                          out_dir=write_to, write_report=write_to is not None, probes=probes, task=task, clips=clips)
 
 
 def audit(asset: str | Path, out_dir: str | Path | None = None, *, category: str | None = None,

@@ -37,6 +37,7 @@ REPORT_HTML_NAME = "report.html"
 MJCF_DIR = "mjcf"
 USD_DIR = "usd"
 VIEWS_DIR = "views"
+CLIPS_DIR = "clips"
 _BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})
 _MAX_LISTED = 5
 #: A bookkeeping file larger than this (bytes) is not one asset2sim wrote (a marker lists at most a few thousand files).

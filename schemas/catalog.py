@@ -16,8 +16,8 @@ from pydantic import BaseModel, ConfigDict, field_validator
 
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
-#: (version 2 added ``code_hash``, version 3 ``request_warnings``).
-SCHEMA_VERSION = 3
+#: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``).
+SCHEMA_VERSION = 4
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
 
 RowStatus = Literal["done", "skipped", "failed"]
@@ -29,7 +29,8 @@ class CatalogRow(BaseModel):
     partition folders): ``status`` done, skipped (``source_run`` reused) or
     failed; ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON
     {stage: s}; ``request_warnings`` JSON [text]: what of the request was not
-    understood or not applied; ``code_hash`` what the skip rule compares.
+    understood or not applied; ``clips`` JSON [path]: the output's interaction clips (WebM), relative to
+    ``out_dir``; ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
@@ -54,6 +55,7 @@ class CatalogRow(BaseModel):
     oscillation_pass: Optional[bool] = None
     prompt_alignment: Optional[float] = None
     request_warnings: Optional[str] = None
+    clips: Optional[str] = None
     model_queries: Optional[int] = None
     tokens: Optional[int] = None
     wall_seconds: Optional[float] = None

@@ -83,6 +83,9 @@ class RefineConfig(BaseModel):
     keep_declared: bool = False
     """Keep the masses, inertia tensors, centers of mass, joint damping, friction and springs the asset declares
     where ``asset2sim audit`` judges them plausible, and its size when plausible (``docs/guide/audit.md``)."""
+    clips: bool = True
+    """Write clips of each task-relevant joint's sweep (``clips/``, WebM and PNG) with the report
+    (``docs/guide/outputs.md``); ``False`` (``--no-clips``) leaves them out."""
     overrides: RequestOverrides = Field(default_factory=RequestOverrides)
     """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
@@ -91,5 +94,7 @@ class RefineConfig(BaseModel):
         data = self.model_dump(mode="json")
         if not data.get("keep_declared"):  # off: the hash of every configuration before the option existed
             data.pop("keep_declared", None)
+        if data.get("clips", True):  # on (the default): the hash of every configuration before the option existed
+            data.pop("clips", None)
         blob = json.dumps(data, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]

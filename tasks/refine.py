@@ -30,6 +30,7 @@ from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
+from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import analyze, limits, render, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import extract
@@ -43,7 +44,7 @@ from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_comple
 from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
-from asset2sim.output_folder import URDF_NAME, VIEWS_DIR
+from asset2sim.output_folder import CLIPS_DIR, URDF_NAME, VIEWS_DIR
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
@@ -136,7 +137,7 @@ def refine_asset(
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
             atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
-            extra_paths = _extras(work, report, att, log, reference, shown=out_dir) if extras else {}
+            extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips) if extras else {}
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except BaseException:
             owner.abandon()
@@ -901,13 +902,13 @@ def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
 
 
 def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None,
-            shown: Path) -> dict[str, str]:
+            shown: Path, clips: bool = True) -> dict[str, str]:
     """Optional outputs: MJCF and USD exports, renders, evaluation and HTML report (the renders reused in
     it), then ``report.json`` again with their notes and the final stage times. Each failure (an engine or
     renderer unavailable included) is a note in the report, never the loss of the refined asset, except a
     full disk, a quota or a read-only file system (``OUTPUT_WRITE_FAILED``). The evaluation reuses the final
     post-check's rest test when it measured the files as they are now; ``shown``: the output folder as the
-    user named it (``out_dir`` may be a staging folder). Returns name -> path."""
+    user named it (``out_dir`` may be a staging folder); ``clips``: the sweep clips too (``clips/``). Returns name -> path."""
     recording = None if att.rewritten else att.check.recording
     if recording is not None:  # measured on the workspace's files; publish wrote the same bytes here
         recording = replace(recording, urdf=(out_dir / URDF_NAME).resolve())
@@ -936,8 +937,10 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
             paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=att.check.recorded,
                                               views=views, views_state=report.initial_joint_positions,
                                               checks=list(report.metrics) if recording is not None else None,
-                                              shown=shown)
+                                              shown=shown, clips=clips)
             out["html"] = str(paths["report"])
+            if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
+                out["clips"] = str(out_dir / CLIPS_DIR)
             ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
             combine_verdict(report, ev.metrics)  # report.json says what report.html says
         except Exception as exc:

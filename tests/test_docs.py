@@ -58,6 +58,7 @@ EXPECTED_FILES = {
     "requests.md": ["refine.yaml"],
     "simulators.md": ["out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
     "validation.md": ["broken/mobility.urdf"],
+    "realism.md": ["out/demo/clips/clips.json", "pairs/pairs.json", "pairs/clips/0000/a_front.webm", "pairs/clips/0001/b_perspective.webm"],
 }
 
 #: Python run in a document's folder before its blocks. The pipeline guide

@@ -115,7 +115,7 @@ def _named_modules(text: str, modules: dict[str, Path]) -> list[str]:
 #: The layers in data-flow order (index = rank); a module may import only
 #: modules of its own or an earlier layer (:func:`_layer`).
 LAYERS = ["core", "ingest", "geometry", "interpret", "synthesize", "assemble", "state", "check", "evaluation",
-          "publish", "audit", "refine", "benchmark", "flows", "api", "cli"]
+          "publish", "audit", "refine", "benchmark", "realism", "flows", "api", "cli"]
 
 
 def _layer(module: str) -> str:

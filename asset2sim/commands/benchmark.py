@@ -69,7 +69,7 @@ def _print_table(console, title: str, summary: dict) -> None:
     t = Table(title=title)
     for c in ("method", "pen. mm (toilet+stapler)", "pen. mm (all)", "rest pass", "osc. pass", "probes pass",
               "sweep pass", "robust rest pass", "task pass", "force plausible", "ready", "scale dev. %", "init. dev.", "prompt", "all pass",
-              "median eval s", "failed"):
+              "median eval s", "realism", "failed"):
         t.add_column(c)
 
     def pm(m, s):
@@ -87,8 +87,20 @@ def _print_table(console, title: str, summary: dict) -> None:
                   f"{pct(r.get('ready'))} ({r.get('ready_n', 0)})",
                   pm(r["scale_mean"], r["scale_sd"]), pm(r["init_mean"], r["init_sd"]),
                   pct(r["prompt_mean"]), pct(r["all_pass"]), "-" if r["median_seconds"] is None else f"{r['median_seconds']:.2f}",
-                  str(r["errors"]))
+                  r.get("realism", "not rated"), str(r["errors"]))
     console.print(t)
+
+
+def _realism(out: Path, methods: list[str]) -> dict[str, str]:
+    """The realism column: Bradley-Terry scores of ``OUT/realism`` (``asset2sim pairs OUT``, then ``rate`` or
+    ``judge``), else "not rated" (never an invented score)."""
+    from asset2sim.tasks.realism.pair_set import PairSetError
+    from asset2sim.tasks.realism.scores import NOT_RATED, realism_column
+
+    try:
+        return realism_column(out / "realism", methods)
+    except PairSetError as exc:
+        return {m: f"{NOT_RATED} ({exc})" for m in methods}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -112,6 +124,10 @@ def run(args: argparse.Namespace) -> int:
                            f"benchmark cannot run: {exc.args[0] if isinstance(exc, KeyError) and exc.args else exc}") from exc
     records = _clean(records)
     tables = benchmark_tables(records, methods)
+    realism = _realism(out, methods)
+    for summary in tables.values():
+        for method, row in summary.items():
+            row["realism"] = realism[method]
     meta = {"manifest": str(args.manifest), "methods": methods, "seed": args.seed, "rows": len({r["id"] for r in records}),
             "engines": list(engines)}
     write_benchmark_outputs(records, methods, out, meta)

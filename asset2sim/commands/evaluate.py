@@ -30,6 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "never the asset folder itself unless named here)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--no-probes", action="store_true", help="skip the passive probes")
+    p.add_argument("--no-clips", action="store_true", help="with the report: skip the clips of each task-relevant joint's sweep (clips/)")
     p.add_argument("--task", default=None,
                    help='the manipulation task, e.g. "close the microwave door": the probes try only its part and direction')
     p.add_argument("--seed", type=int, default=0)
@@ -60,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
         with output_folder.adopting(out):  # into a refined folder: its files become the product's
             ev = evaluate_asset(args.asset, reference=args.reference, prompt=args.prompt, engines=engines, seed=args.seed,
                                 category=args.category, out_dir=out, write_report=not args.no_report, probes=not args.no_probes,
-                                task=getattr(args, "task", None))
+                                task=getattr(args, "task", None), clips=not getattr(args, "no_clips", False))
     except output_folder.OutputError as exc:
         raise output_failure(exc, out) from exc
     except OSError as exc:

@@ -66,6 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help=(
         "write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)"))
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
+    parser.add_argument("--no-clips", action="store_true", help="skip the clips of each task-relevant joint's sweep (clips/)")
     parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
 
 
@@ -173,6 +174,8 @@ def options(args: argparse.Namespace) -> RefineConfig:
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url)) if v is not None}
     if getattr(args, "keep_declared", False):
         fields["keep_declared"] = True
+    if getattr(args, "no_clips", False):
+        fields["clips"] = False
     engines = getattr(args, "engines", None)
     if engines or not getattr(args, "config", None):
         listed = parse_engines(engines or ",".join(default_engines()))

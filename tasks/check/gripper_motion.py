@@ -68,6 +68,29 @@ class Motion:
     peak_op: float = 0.0
     lever: float | None = None
     force_limited: bool = False
+    trace: dict[str, list] = field(default_factory=dict, repr=False, compare=False)
+    """every :data:`RECORD_EVERY` steps from the grasp on: ``t`` (s), ``joints`` (joint -> rad or m),
+    ``root_pos`` (3,) m, ``root_rot`` (3, 3), ``grip`` (3,) m the grasp point (NaN once released); for clips"""
+
+
+#: Engine steps between recorded samples of a task's motion (4 at 240 Hz: 60 samples per s).
+RECORD_EVERY = 4
+
+
+def record_sample(session, m: Motion, grip: np.ndarray | None) -> None:
+    """Append the session's state now to ``m.trace`` (its joints, root pose and the grasp point ``grip`` (3,) m,
+    None once released); reads only."""
+    tr = m.trace
+    if not tr:
+        tr.update(t=[], joints={n: [] for n in session.joint_types}, root_pos=[], root_rot=[], grip=[])
+    q = session.joint_positions()
+    pos, R = session.link_frame(session.link_names[0])
+    tr["t"].append(m.steps * float(session.options.conventions.timestep))
+    for n, v in tr["joints"].items():
+        v.append(float(q[n]))
+    tr["root_pos"].append(np.asarray(pos, float))
+    tr["root_rot"].append(np.asarray(R, float))
+    tr["grip"].append(np.full(3, np.nan) if grip is None else np.asarray(grip, float))
 
 
 def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, cfg: TaskConfig,
@@ -87,6 +110,7 @@ def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: f
         qdot_max = v_cmd / m.lever
     else:
         qdot_max = v_cmd
+    record_sample(session, m, p)
     travel = abs(q_target - q0) * (m.lever if m.lever is not None else 1.0)
     n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
     done, pushed_steps = _lead(session, joint, grasp, side_sign, q0, q_target, qdot_max, n_move, cfg, frac, reached, watch, m)
@@ -102,6 +126,8 @@ def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: f
         session.step(1)
         m.steps += 1
         watch.update()
+        if m.steps % RECORD_EVERY == 0:
+            record_sample(session, m, None)
     q_end, _ = session.joint_state(joint)
     m.f_end = frac(q_end)
     m.held_ok = reached(m.f_end) if np.isfinite(m.f_end) else False
@@ -139,6 +165,8 @@ def _lead(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float,
             m.force_limited = True
         session.step(1)
         m.steps += 1
+        if m.steps % RECORD_EVERY == 0:
+            record_sample(session, m, grasp.grasp_point_world())
         q, qd = session.joint_state(joint)
         slide, tilt = watch.update()
         if not np.isfinite(q):

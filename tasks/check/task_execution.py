@@ -72,10 +72,13 @@ class TaskAttempt:
     notes: list[str] = field(default_factory=list)
     speed_share: float = 1.0
     """commanded speed as a share of the gripper's top speed (lower on a retry)"""
+    trace: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    """the motion from the grasp on (:attr:`asset2sim.tasks.check.gripper_motion.Motion.trace`); for clips, not in
+    :meth:`summary`"""
 
     def summary(self) -> dict[str, Any]:
-        """JSON-able dict."""
-        return dict(self.__dict__)
+        """JSON-able dict (the trace left out)."""
+        return {k: v for k, v in self.__dict__.items() if k != "trace"}
 
 
 @dataclass
@@ -146,7 +149,7 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         peak_axial_force_n=float(m.peak_ax) if prismatic and m.moved else None, lever_m=m.lever,
         root_slide_m=float(watch.slide), root_tilt_rad=float(watch.tilt), slid=bool(slid), tipped=bool(tipped),
         force_limited=bool(m.force_limited), moved=m.moved, seconds_simulated=m.steps * dt, success=not failure,
-        failure=failure, notes=notes, speed_share=float(speed_share))
+        failure=failure, notes=notes, speed_share=float(speed_share), trace=m.trace)
 
 
 def _settle(session, joint: str, action: str, closed: float, direction: float, open_range: float, cfg: TaskConfig,

@@ -49,6 +49,7 @@ class EngineRun:
     recorded: RecordedRuns | None = None  # the post-check's manipulation runs, reused when their inputs match
     robust_rest: Any = None  # the RobustRestRun the robust_rest metric was graded from (the report's evidence)
     sweep: Any = None  # the SweepRun the joint_sweep metric was graded from (the report's evidence)
+    task: Any = None  # the TaskRun the task_execution metric was graded from (the clips of the task)
 
 
 def link_centres(session) -> dict[str, np.ndarray]:

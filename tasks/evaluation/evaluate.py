@@ -17,9 +17,12 @@ from asset2sim.atomic import write_json
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.metrics import REST_TEST_METRICS
+from asset2sim.schemas.realism import ClipSet
 from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.check.postcheck import RestRecording
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
+from asset2sim.tasks.check.sweep import SweepRun
+from asset2sim.tasks.evaluation import clips as clip_files
 from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo
 from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine, set_closed_ends
 from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
@@ -39,7 +42,7 @@ def evaluate_asset(
     out_dir: Path | str | None = None, write_report: bool = False, probes: bool = True, conventions: SimConventions | None = None,
     measured: list[MetricResult] | None = None, recording: RestRecording | None = None, views: dict[str, np.ndarray] | None = None,
     views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None, task: str | None = None,
-    recorded: RecordedRuns | None = None, shown_urdf: Path | str | None = None,
+    recorded: RecordedRuns | None = None, shown_urdf: Path | str | None = None, clips: bool = True,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -56,6 +59,9 @@ def evaluate_asset(
         task: the manipulation task the probes and ``task_execution`` try (None: no task execution).
         recorded: the post-check's sweep and robust-rest runs (``RecordedRuns``), reused when inputs match.
         shown_urdf: the URDF path recorded instead of the evaluated one.
+        clips: with ``write_report``, also write the clips of each task-relevant joint's sweep into
+            ``out_dir/clips/`` (:func:`asset2sim.tasks.evaluation.clips.sweep_clips`) and play them in the report;
+            a clip that cannot be drawn is a note, never a failed evaluation.
 
     Raises:
         EvaluationError: the asset or reference cannot be read.
@@ -76,8 +82,28 @@ def evaluate_asset(
     ev = _evaluation(ctx, runs, results, engines=engines, method=method, prompt=prompt, seed=seed, shown_urdf=shown_urdf, t0=t0)
     if out_dir is not None:
         same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
-        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None)
+        clip_set = _write_clips(ev, runs, engines[0], out_dir) if write_report and clips else None
+        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None, clips=clip_set)
     return ev
+
+
+def _write_clips(ev: Evaluation, runs: dict[str, EngineRun], engine: str, out_dir: Path | str) -> ClipSet | None:
+    """The sweep clips of ``engine``'s run (:func:`clip_files.sweep_clips`) of the task-relevant joints, else every swept
+    joint; None, with a note in ``ev.notes``, when they cannot be drawn (no sweep, no PyAV, a render error)."""
+    sweep = getattr(runs.get(engine), "sweep", None)
+    if not isinstance(sweep, SweepRun) or not sweep.joints:
+        ev.notes.append(f"clips: none ({engine} ran no joint sweep)")
+        return None
+    joints = [j for j in ev.task_joints if j in {js.joint for js in sweep.joints}] or [js.joint for js in sweep.joints]
+    ctx_urdf = ev._context.urdf  # the files evaluated (a refine's staging folder; ``ev.urdf`` names the published one)
+    try:
+        return clip_files.sweep_clips(ctx_urdf, sweep, joints, dict(ev.initial_state), out_dir,
+                                      task_run=getattr(runs.get(engine), "task", None))
+    except ImportError as exc:
+        ev.notes.append(f"clips skipped: {exc} (pip install av)")
+    except Exception as exc:  # a clip must not cost the evaluation (a full disk shows again writing evaluation.json)
+        ev.notes.append(f"clips failed: {exc}")
+    return None
 
 
 def _joints_to_close(ctx: Context) -> list[str]:
@@ -172,28 +198,29 @@ def _evaluation(ctx: Context, runs: dict[str, EngineRun], results: list[MetricRe
 def evaluate_refined(out_dir: Path | str, report: RefineReport, *, recording: RestRecording | None = None,
                      reference: Path | str | None = None, views: dict[str, np.ndarray] | None = None,
                      views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None,
-                     recorded: RecordedRuns | None = None, shown: Path | str | None = None) -> dict[str, Path]:
+                     recorded: RecordedRuns | None = None, shown: Path | str | None = None, clips: bool = True) -> dict[str, Path]:
     """Evaluate a refined output folder and write ``evaluation.json`` and ``report.html`` beside its ``report.json``
     (refine's extras); the report's ``prompt``, ``category`` and ``task`` are used, the other arguments as in
     :func:`evaluate_asset`. ``shown``: the output folder as its user will find it (the staging folder of a rerun is swapped
-    in later; None: ``out_dir``). Returns {"evaluation": path, "report": path}. Raises EvaluationError: the folder cannot be
+    in later; None: ``out_dir``); ``clips``: write the sweep clips (``clips/``) too. Returns {"evaluation": path, "report": path}. Raises EvaluationError: the folder cannot be
     read."""
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
                    method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
                    views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task,
-                   shown_urdf=None if shown is None else Path(shown) / URDF_NAME)
+                   shown_urdf=None if shown is None else Path(shown) / URDF_NAME, clips=clips)
     return {"evaluation": out_dir / EVALUATION_NAME, "report": out_dir / REPORT_HTML_NAME}
 
 
 def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
-                     views: dict[str, np.ndarray] | None = None) -> dict[str, Path]:
+                     views: dict[str, np.ndarray] | None = None, clips: ClipSet | None = None) -> dict[str, Path]:
     """Write ``evaluation.json`` (and, with ``report``, ``report.html``; ``views`` the renders at ``ev.initial_state`` when
-    taken) into ``out_dir`` atomically; returns {"evaluation": path, "report": path (when written)}."""
+    taken; ``clips`` the clips written in ``out_dir/clips/``, played in the report) into ``out_dir`` atomically; returns
+    {"evaluation": path, "report": path (when written)}."""
     out_dir = Path(out_dir)
     paths = {"evaluation": write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json")))}
     if report:
-        paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views)
+        paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
     return paths
 
 

@@ -329,6 +329,7 @@ def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
                                       initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
                                       conventions=ctx.conventions, fixed_base=ctx.root_fixed,
                                       hold_required=hold_required(ctx, list(joints)), task=ctx.task.text)
+        r.task = run
         tm = task_execution.task_metric(run)
         tm.details["joints_rule"] = ctx.task.rule
         out += [tm, force_metric(run, ctx.category, labels)]

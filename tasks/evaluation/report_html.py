@@ -33,6 +33,7 @@ th{background:#f1f4f8} td.num{text-align:right;font-variant-numeric:tabular-nums
 .meta{color:#4a5565;font-size:13px} img{max-width:100%;border:1px solid #e2e6ec;margin:6px 0}
 .small{font-size:12px;color:#5b6574} code{background:#f1f4f8;padding:1px 4px;border-radius:3px}
 .views{display:flex;flex-wrap:wrap;gap:8px} .views figure{margin:0} .views img{max-width:280px}
+.clips{display:flex;flex-wrap:wrap;gap:8px} .clips figure{margin:0} .clips video{border:1px solid #e2e6ec;background:#eef0f3}
 """
 
 
@@ -314,10 +315,36 @@ def _opening(ev, joint: str, q: float) -> str:
     return f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})"
 
 
-def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str = "evaluate") -> str:
+def clips_section(clip_set, folder: str = "clips") -> str:
+    """HTML playing every clip of ``clip_set`` (a :class:`~asset2sim.schemas.realism.ClipSet`; None or empty:
+    nothing), one row per joint and motion, the videos looping muted with their poster frames; ``folder``: the
+    clips' folder relative to the report."""
+    if clip_set is None or not (clip_set.clips or clip_set.skipped):
+        return ""
+    rows: dict[tuple[str, str], list] = {}
+    for c in clip_set.clips:
+        rows.setdefault((c.joint, c.motion), []).append(c)
+    what = {"sweep": "the joint sweep: driven open and closed again by a force-limited drive (root fixed, other joints held)",
+            "task": "the task: the gripper (red dot: where it holds) moves the part, the object free or mounted as simulated",
+            "push_release": "pushed open by a force-limited drive, then let go"}
+    parts = ["<h2>How it moves</h2>", "<p class='small'>Clips played in real time, from two fixed cameras.</p>"]
+    for (joint, motion), cs in rows.items():
+        parts.append(f"<h3>{esc(joint)}: {esc(what.get(motion, motion))}</h3><div class='clips'>")
+        for c in cs:
+            src, poster = (esc(f"{folder}/{p}") for p in (c.video, c.poster))
+            parts.append(f"<figure><video src='{src}' poster='{poster}' width='{c.width}' height='{c.height}' autoplay loop muted "
+                         f"playsinline controls></video><figcaption>{esc(c.view)} view, {c.duration_s:.1f} s</figcaption></figure>")
+        parts.append("</div>")
+    if clip_set.skipped:
+        parts.append("<p class='small'>no clip: " + "; ".join(f"{esc(k)}: {esc(v)}" for k, v in clip_set.skipped.items()) + "</p>")
+    return "\n".join(parts)
+
+
+def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str = "evaluate", clips=None) -> str:
     """The HTML text of one evaluation's report; ``views``: renders at
     ``ev.initial_state`` (view -> (H, W, 3) uint8) already taken, None to render here;
-    ``command``: the command that wrote it (``refine`` or ``evaluate``), in the title."""
+    ``command``: the command that wrote it (``refine`` or ``evaluate``), in the title;
+    ``clips``: the :class:`~asset2sim.schemas.realism.ClipSet` written beside the report (played in it)."""
     ctx = ev._context
     dt = ctx.conventions.timestep if ctx is not None else 1.0 / 240.0
     settle_n = int(round(ctx.conventions.settle_time / dt)) if ctx is not None else 240
@@ -345,6 +372,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
         views_html,
+        clips_section(clips),
         changes_section(ctx.report if ctx is not None else None, ctx.overlay if ctx is not None else None, joint_types, views, _figure),
         "<h2>Verdicts</h2>",
         _verdict_table(ev),
@@ -377,12 +405,12 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     return _page(f"asset2sim {esc(command)} {esc(ev.asset_id)}", "\n".join(sections))
 
 
-def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None) -> Path:
+def write_report(ev, path: Path | str, views: dict[str, np.ndarray] | None = None, clips=None) -> Path:
     """Write ``report.html`` atomically (``views`` as in :func:`render_report`); returns the path. Its
     title names ``refine`` when it lies beside the refine's ``report.json`` it reports on, else ``evaluate``."""
     ctx = ev._context
     by_refine = ctx is not None and ctx.report is not None and Path(path).resolve().parent == Path(ctx.folder).resolve()
-    return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate"))
+    return write_text(Path(path), render_report(ev, views, "refine" if by_refine else "evaluate", clips))
 
 
 # ------------------------------------------------------------------ benchmark pages
@@ -408,7 +436,7 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
     cols = ["penetration (mm, toilet+stapler)", "penetration (mm, all)", "rest-stability pass", "oscillation pass",
             "probes pass", "joint sweep pass", "robust rest pass", "task success", "operating force plausible",
             "interaction-ready", "scale dev. vs GenSim2", "init. joint dev. (rad)", "prompt alignment", "all checks pass",
-            "median eval. time (s)"]
+            "median eval. time (s)", "realism (Bradley-Terry)"]
     parts = [f"<h1>asset2sim benchmark</h1><p class='meta'>{esc(meta.get('manifest'))} &middot; methods "
              f"{esc(', '.join(meta.get('methods', [])))} &middot; seed {esc(meta.get('seed'))} &middot; "
              f"{esc(meta.get('rows'))} rows &middot; <a href='index.html'>per-object index</a></p>"]
@@ -419,7 +447,7 @@ def render_benchmark_summary(tables: dict[str, dict[str, dict[str, Any]]], resea
                      *(_pm(r.get(rate), None, pct=True) + f" ({r.get(n, 0)})" for rate, n in _PASS_RATES),
                      _pm(r.get("scale_mean"), r.get("scale_sd"), pct=False) + ("%" if r.get("scale_mean") is not None else ""),
                      _pm(r.get("init_mean"), r.get("init_sd")), _pm(r.get("prompt_mean"), None, pct=True),
-                     _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3)]
+                     _pm(r.get("all_pass"), None, pct=True), fmt(r.get("median_seconds"), 3), esc(r.get("realism", "not rated"))]
             err = f" <span class='small'>({r.get('errors')} failed to produce)</span>" if r.get("errors") else ""
             parts.append(f"<tr><td>{esc(method)}{err}</td>" + "".join(f"<td class='num'>{c}</td>" for c in cells) + "</tr>")
         parts.append("</table>")

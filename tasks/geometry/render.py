@@ -196,6 +196,16 @@ class SceneRenderer:
         R = np.asarray(rotation, float)
         self._viewer.set_root_pose(R @ pos0, quat_wxyz_to_xyzw(matrix_quat_wxyz(R @ R0)))
 
+    def place_root(self, position: np.ndarray, rotation: np.ndarray) -> None:
+        """Put the root link's frame at ``position`` (3,) m with ``rotation`` (3, 3), in the world frame (a
+        pose a simulator recorded)."""
+        R = np.asarray(rotation, float)
+        self._viewer.set_root_pose(np.asarray(position, float), quat_wxyz_to_xyzw(matrix_quat_wxyz(R)))
+
+    def root_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(position (3,) m, rotation (3, 3)) of the root link's frame in the world now."""
+        return self._viewer.link_frame(self._viewer.link_names[0])
+
     def world_points(self) -> np.ndarray:
         """Visual vertices (N, 3) of all links in the base frame, m, at the current state."""
         out = []
@@ -228,6 +238,14 @@ class SceneRenderer:
         t0 = time.perf_counter()
         img = self._draw(self.camera(spec))
         self.timings.views.setdefault(spec.name, []).append(time.perf_counter() - t0)
+        return img
+
+    def draw(self, cam: Camera) -> np.ndarray:
+        """RGB image (H, W, 3) uint8 through ``cam`` (a fixed camera, e.g. fitted once for a whole clip) at
+        the current joint state. Raises RenderError: the renderer returned no image."""
+        t0 = time.perf_counter()
+        img = self._draw(cam)
+        self.timings.views.setdefault("camera", []).append(time.perf_counter() - t0)
         return img
 
     def _draw(self, cam: Camera) -> np.ndarray:

@@ -26,6 +26,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.metrics import column_values
 from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
+from asset2sim.tasks.evaluation.clips import clip_videos
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OVERLAY_NAME, REPORT_NAME, OwnedFolder, read_record
@@ -304,7 +305,7 @@ def _utc(ts: float | None) -> datetime | None:
 REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
-    "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash",
+    "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash", "clips",
 )  # fmt: skip
 
 
@@ -397,6 +398,7 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         value: RefineOutput = refined.value
         report = value.report
         row.out_dir = value.out_dir or job.out_dir
+        row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
         stages["refine"] = round(float(refined.seconds or 0.0), 4)
         for k, v in report.stage_seconds.items():
             stages[f"refine.{k}"] = round(float(v), 4)

@@ -1,0 +1,105 @@
+"""``asset2sim rate FOLDER``: the realism rating app for people over a pair set (``FOLDER/pairs.json``, or
+``FOLDER/realism/pairs.json`` of a run's output folder), served on 127.0.0.1 until Ctrl-C; answers land in
+``ratings.sqlite`` and ``ratings.parquet`` beside ``pairs.json``. ``--scores`` instead prints the
+Bradley-Terry scores per method, writes ``realism_scores.parquet`` there and, with ``--tracking-uri``, logs
+them to MLflow.
+
+Exit status: 0 done (or stopped with Ctrl-C), 1 no pair set or an invalid one, 2 a bad option, 3 nothing
+rated yet (``--scores``), 4 the port or the folder cannot be used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
+from asset2sim.flows.realism_tracking import REALISM_EXPERIMENT, log_realism_scores
+from asset2sim.tasks.realism.rating_app import serve
+from asset2sim.tasks.realism.pair_set import PairSetError, find_pair_set
+from asset2sim.tasks.realism.ratings import RATINGS_FILE
+from asset2sim.tasks.realism.scores import SCORES_FILE, NotRated, realism_scores
+
+NAME = "rate"
+HELP = ("Serve the realism rating app for people over a pair set (FOLDER/pairs.json or FOLDER/realism/pairs.json) "
+        "on 127.0.0.1, or with --scores print the Bradley-Terry scores per method (docs/guide/realism.md).")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("folder", type=Path, metavar="FOLDER",
+                   help="a pair-set folder (holding pairs.json) or an output folder holding realism/pairs.json")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
+    p.add_argument("--port", type=int, default=8765, help="port to listen on (default 8765)")
+    p.add_argument("--scores", action="store_true",
+                   help="instead of serving: print the Bradley-Terry scores of the ratings so far, "
+                        "write realism_scores.parquet")
+    p.add_argument("--tracking-uri", default=None,
+                   help="with --scores: also log the scores to this MLflow tracking store (e.g. sqlite:///mlflow.db)")
+
+
+def pair_set_folder(folder: Path) -> Path:
+    """``folder`` when it holds ``pairs.json``, else ``folder/realism`` when that does (CommandError status 1
+    ``PAIRS_MISSING`` otherwise)."""
+    try:
+        return find_pair_set(folder)
+    except PairSetError as exc:
+        raise CommandError(INVALID_INPUT, "PAIRS_MISSING", folder, f"{exc} (docs/guide/realism.md)") from None
+
+
+def _print_scores(scores, folder: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
+    table = Table(title=f"realism (Bradley-Terry, people) of {folder}")
+    for column, justify in (("method", "left"), ("strength", "right"), ("95 % interval", "right"), ("Elo", "right"),
+                            ("wins", "right"), ("comparisons", "right")):
+        table.add_column(column, justify=justify)
+    for s in scores:
+        table.add_row(s.method, f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
+                      str(s.wins), str(s.comparisons))
+    console.print(table)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not 0 < args.port < 65536:
+        raise CommandError(INVALID_REQUEST, "PORT_INVALID", None, f"--port must be 1-65535, got {args.port}")
+    if args.tracking_uri and not args.scores:
+        raise CommandError(INVALID_REQUEST, "TRACKING_WITHOUT_SCORES", None, "--tracking-uri goes with --scores")
+    folder = pair_set_folder(args.folder)
+    try:
+        if args.scores:
+            return _scores(folder, args.tracking_uri)
+        print(f"rating app for {folder}: http://{args.host}:{args.port}/  (Ctrl-C stops)", flush=True)
+        try:
+            serve(folder, host=args.host, port=args.port)
+        except KeyboardInterrupt:  # uvicorn stopped gracefully (ratings.parquet synced) and re-raised Ctrl-C
+            pass
+        except SystemExit as exc:  # uvicorn could not start (the port taken): it logged why
+            raise CommandError(OUTPUT_LOCATION, "PORT_UNAVAILABLE", None,
+                               f"cannot listen on {args.host}:{args.port} (in use or not allowed)") from exc
+        print(f"stopped; ratings in {folder / RATINGS_FILE}", flush=True)
+        return 0
+    except FileNotFoundError as exc:
+        raise CommandError(INVALID_INPUT, "PAIRS_MISSING", exc.filename, exc.strerror or str(exc)) from exc
+    except PairSetError as exc:
+        raise CommandError(INVALID_INPUT, "PAIRS_INVALID", exc.path, str(exc)) from exc
+    except NotRated as exc:
+        raise CommandError(NOT_READY, "NOT_RATED", folder, str(exc)) from exc
+    except ImportError as exc:  # the app's server (fastapi, uvicorn) or MLflow not installed
+        raise CommandError(INVALID_REQUEST, "EXTRA_MISSING", None,
+                           f"{exc.name or exc} is not installed: pip install 'asset2sim[realism]' (MLflow: 'asset2sim[pipeline]')") from exc
+    except OSError as exc:
+        raise CommandError(OUTPUT_LOCATION, "FOLDER_UNWRITABLE", exc.filename or folder, str(exc)) from exc
+
+
+def _scores(folder: Path, tracking_uri: str | None) -> int:
+    scores = realism_scores(folder)
+    _print_scores(scores, folder)
+    print(f"written: {folder / SCORES_FILE}")
+    if tracking_uri:
+        run_id = log_realism_scores(scores, tracking_uri=tracking_uri, experiment=REALISM_EXPERIMENT,
+                                    ratings_parquet=folder / RATINGS_FILE)
+        print(f"MLflow run {run_id} (experiment {REALISM_EXPERIMENT}) at {tracking_uri}")
+    return 0

@@ -1,0 +1,119 @@
+"""Realism pairs: the scripted push-and-release on two sets of physics, planted defects that change what a
+person sees, clips drawn with the same cameras, ``asset2sim pairs``."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("av")
+
+from asset2sim.schemas.realism import PairSet  # noqa: E402
+from asset2sim.tasks.evaluation import clips  # noqa: E402
+from asset2sim.tasks.realism import defects, motion, pairs  # noqa: E402
+from asset2sim.tasks.refine import refine_asset  # noqa: E402
+from asset2sim.urdf import read_urdf  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def refined(demo_root, tmp_path_factory):
+    """A refined box with a lid (the demo dataset's, extras off): side ``a`` of every pair here."""
+    out = tmp_path_factory.mktemp("refined") / "box_lid"
+    res = refine_asset(demo_root / "box_lid", "a box with its lid closed", out, extras=False)
+    assert res.report.failure_mode == "none"
+    return out
+
+
+@pytest.fixture(scope="module")
+def setting(refined):
+    a = motion.side_from_folder(refined, "asset2sim")
+    [(joint, closed)] = pairs.pushed_joints(refined)
+    force = motion.drive_limit(a, joint, closed.open_range)
+    return a, joint, closed, force
+
+
+def _run(side, joint, closed, force):
+    traj = motion.push_release(side, joint, closed, force)
+    return traj, closed.direction * (traj.joints[joint] - closed.q_closed) / closed.open_range  # opening fraction per sample
+
+
+def test_push_release_is_deterministic_and_opens_then_lets_go(setting):
+    a, joint, closed, force = setting
+    t1, f1 = _run(a, joint, closed, force)
+    t2, f2 = _run(a, joint, closed, force)
+    assert np.array_equal(f1, f2) and np.array_equal(t1.root_pos, t2.root_pos)
+    cfg = motion.PushReleaseConfig()
+    assert t1.t[-1] == pytest.approx(cfg.push_time + cfg.release_time, abs=1e-9)
+    push_end = int(np.searchsorted(t1.t, cfg.push_time))
+    assert f1[push_end] - f1[0] > 0.2  # the drive opened it
+    assert t1.root_rot.shape == (len(t1.t), 3, 3)
+
+
+@pytest.mark.parametrize("name", sorted(defects.DEFECTS))
+def test_each_planted_defect_changes_the_motion_or_the_object(setting, tmp_path, name):
+    a, joint, closed, force = setting
+    b = defects.plant_defect(a, name, joint, closed, force, tmp_path / "b")
+    assert b.method == f"defect:{name}" and b.urdf.parent == tmp_path / "b"
+    assert a.urdf.read_bytes() != b.urdf.read_bytes() or b.springs != a.springs
+    _, fa = _run(a, joint, closed, force)
+    tb, fb = _run(b, joint, closed, force)
+    push_end = int(np.searchsorted(tb.t, motion.PushReleaseConfig().push_time))
+    if name == "mass_x100":  # the same drive lifts a 100x heavier lid far less
+        assert fb[: push_end + 1].max() < 0.5 * fa[: push_end + 1].max()
+    elif name == "stuck_friction":  # friction beyond the drive: it never moves
+        assert np.abs(fb - fb[0]).max() < 1e-3 and np.abs(fa - fa[0]).max() > 0.2
+    elif name == "zero_damping":  # it coasts on after the release (or falls) where the damped part stops
+        assert np.abs(np.diff(fb[push_end:])).sum() > 1.5 * np.abs(np.diff(fa[push_end:])).sum()
+    elif name == "slamming_spring":  # pulled shut after the release
+        assert fb[-1] < fa[-1] - 0.2 and fb[-1] < 0.1
+    elif name == "scale_x3":
+        la, lb = read_urdf(a.urdf), read_urdf(b.urdf)
+        oa = next(j for j in la.joints if j.name == joint).origin[:3, 3]
+        ob = next(j for j in lb.joints if j.name == joint).origin[:3, 3]
+        assert np.allclose(ob, 3.0 * oa) and b.scale == 3.0
+    elif name == "penetration_10mm":
+        oa = next(j for j in read_urdf(a.urdf).joints if j.name == joint).origin[:3, 3]
+        ob = next(j for j in read_urdf(b.urdf).joints if j.name == joint).origin[:3, 3]
+        assert np.linalg.norm(ob - oa) == pytest.approx(defects.PENETRATION_DEPTH, rel=1e-6)
+    with pytest.raises(KeyError, match="unknown defect"):
+        defects.plant_defect(a, "nonsense", joint, closed, force, tmp_path / "c")
+
+
+def test_a_pair_holds_the_visuals_fixed_and_only_the_physics_differs(setting, refined, tmp_path):
+    a, joint, closed, force = setting
+    b = defects.plant_defect(a, "stuck_friction", joint, closed, force, tmp_path / "work")
+    spec = pairs.PairSpec(a=a, b=b, joint=joint, object_id="box_lid", category="Box", defect="stuck_friction")
+    pair = pairs.make_pair(spec, closed, tmp_path / "set", 0)
+    assert [c.view for c in pair.a.clips] == list(clips.CLIP_VIEWS) == [c.view for c in pair.b.clips]
+    for ca, cb in zip(pair.a.clips, pair.b.clips):
+        va, vb = clips.decode_frames(tmp_path / "set" / ca.video), clips.decode_frames(tmp_path / "set" / cb.video)
+        assert len(va) == len(vb) == ca.n_frames
+        # the same start pose through the same camera: the first frames are the same picture
+        assert np.abs(va[0].astype(int) - vb[0].astype(int)).mean() < 1.0
+        # then the intact lid opens and the stuck one does not
+        assert np.abs(va[len(va) // 3].astype(int) - vb[len(vb) // 3].astype(int)).mean() > 2.0
+    again = pairs.make_pair(spec, closed, tmp_path / "set2", 0)
+    assert again.pair_id == pair.pair_id  # a digest of the clips' bytes: same inputs, same pair
+    assert "box_lid" not in json.dumps([c.video for c in pair.a.clips + pair.b.clips])  # folders by number only
+
+
+def test_pairs_command_writes_a_pair_set_of_refined_outputs(refined, tmp_path):
+    out = tmp_path / "pairs"
+    cmd = [sys.executable, "-m", "asset2sim", "pairs", str(refined), "--out", str(out), "--defects", "mass_x100,slamming_spring"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    ps = PairSet.model_validate_json((out / "pairs.json").read_text())
+    assert [p.defect for p in ps.pairs] == ["mass_x100", "slamming_spring"]
+    assert all(p.a.method == "asset2sim" and p.b.method == f"defect:{p.defect}" for p in ps.pairs)
+    for p in ps.pairs:
+        for c in p.a.clips + p.b.clips:
+            assert (out / c.video).is_file() and all((out / f).is_file() for f in c.frames)
+    bad = subprocess.run([*cmd[:-1], "nonsense"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "DEFECT_UNKNOWN" in bad.stderr + bad.stdout
+    none = subprocess.run([sys.executable, "-m", "asset2sim", "pairs", str(tmp_path), "--out", str(tmp_path / "x")],
+                          capture_output=True, text=True, timeout=120)
+    assert none.returncode == 1 and "PAIRS_INPUT_INVALID" in none.stderr + none.stdout
