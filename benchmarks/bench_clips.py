@@ -3,7 +3,11 @@ process, clips off then on, each side from its own empty cache, and print per
 row and in total the refine time of each side, their difference, and the time
 spent drawing and encoding the clips themselves (``sweep_clips``, timed
 in place), as wall and CPU time (the CPU figure is the one to compare on a
-shared machine).
+shared machine). The headline is the clips' CPU time over the rest of the
+same pass's refine: the "off" pass runs first in the process and pays
+first-use costs (imports, in-process memos) the "on" pass does not, so the
+difference of the two passes understates the clips' cost or even turns
+negative.
 
     python benchmarks/bench_clips.py [--manifest PATH] [--ids 100221,7119] [--out DIR]
 
@@ -89,10 +93,15 @@ def main(argv: list[str] | None = None) -> int:
         "refine_wall_s_off": tot["off_wall"], "refine_wall_s_on": tot["on_wall"], "clips_wall_s": tot["clip_wall"],
         "clips_share_of_refine_cpu": tot["clip"] / tot["off"] if tot["off"] else None,
         "on_over_off_cpu": tot["on"] / tot["off"] - 1.0 if tot["off"] else None, "rows_without_clips": missing,
+        # the same pass's refine without its clips: the fair base (the "off" pass warms in-process memos and pays
+        # first-use costs the "on" pass does not)
+        "clips_share_same_pass": tot["clip"] / (tot["on"] - tot["clip"]) if tot["on"] > tot["clip"] else None,
     }
     print(f"\ntotal: refine {tot['off']:.1f} s cpu without clips, {tot['on']:.1f} s with ({summary['on_over_off_cpu']:+.1%}); "
           f"the clips themselves {tot['clip']:.1f} s cpu = {summary['clips_share_of_refine_cpu']:.1%} of refine without them "
           f"(wall: {tot['off_wall']:.1f} s, {tot['on_wall']:.1f} s, clips {tot['clip_wall']:.1f} s); goal <= 25 %")
+    print(f"the same pass: clips {tot['clip']:.1f} s cpu on top of {tot['on'] - tot['clip']:.1f} s of the rest of refine = "
+          f"{summary['clips_share_same_pass']:.1%} more refine time")
     print(f"rows without clips: {', '.join(missing) or 'none'}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps({"summary": summary, "rows": results}, indent=2))

@@ -41,7 +41,7 @@ CLIPS_JSON = "clips.json"
 #: from above that shows doors and lids swinging toward the camera's side.
 CLIP_VIEWS: tuple[str, ...] = ("front", "perspective")
 #: Frame size (width, height), pixels (even numbers: the encoder's 4:2:0 chroma needs them).
-CLIP_SIZE: tuple[int, int] = (256, 192)
+CLIP_SIZE: tuple[int, int] = (224, 168)
 #: Frames per simulated second (the clips play in real time; 10 keeps a sweep smooth at a tenth of a second).
 CLIP_FPS = 10.0
 #: Time a task clip goes on after the gripper lets go, s (the rest of the hold test is still).

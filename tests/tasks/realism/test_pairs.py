@@ -17,6 +17,7 @@ from asset2sim.tasks.evaluation import clips  # noqa: E402
 from asset2sim.tasks.realism import defects, motion, pairs  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
+from tests.conftest import SHARED, needs_shared  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -117,3 +118,21 @@ def test_pairs_command_writes_a_pair_set_of_refined_outputs(refined, tmp_path):
     none = subprocess.run([sys.executable, "-m", "asset2sim", "pairs", str(tmp_path), "--out", str(tmp_path / "x")],
                           capture_output=True, text=True, timeout=120)
     assert none.returncode == 1 and "PAIRS_INPUT_INVALID" in none.stderr + none.stdout
+
+
+@needs_shared
+def test_a_benchmark_folder_gives_asset2sim_against_each_other_method(tmp_path):
+    from asset2sim.tasks.benchmark.benchmark import run_benchmark
+
+    bench = tmp_path / "bench"
+    records = run_benchmark(SHARED / "manifest.csv", ["asset2sim", "defaults", "human"], bench, rows=["100221"], reports=False)
+    assert not [r for r in records if r.get("error")]
+    specs, skipped = pairs.specs_from_folders([bench], bench / "realism", defects=())
+    assert skipped == {} and [(s.a.method, s.b.method) for s, _ in specs] == [("asset2sim", "human"), ("asset2sim", "defaults")]  # in --against order
+    assert all(s.object_id == "100221" and s.defect is None and s.request for s, _ in specs)
+    ps = pairs.build_pair_set(specs, bench / "realism")
+    assert [p.b.method for p in ps.pairs] == ["human", "defaults"] and ps.skipped == {}
+    # the human reference's scale differs from asset2sim's: the same cameras show it (the sides' first frames differ)
+    a0 = clips.decode_frames(bench / "realism" / ps.pairs[0].a.clips[0].video)[0].astype(int)
+    b0 = clips.decode_frames(bench / "realism" / ps.pairs[0].b.clips[0].video)[0].astype(int)
+    assert np.abs(a0 - b0).mean() > 1.0
