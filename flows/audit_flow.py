@@ -76,12 +76,7 @@ def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tr
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=tracking.resolve_tracking_uri(out, tracking_uri))  # never the process-wide URI
-    experiment = client.get_experiment_by_name(AUDIT_EXPERIMENT)
-    exp_id = experiment.experiment_id if experiment else client.create_experiment(
-        AUDIT_EXPERIMENT, artifact_location=(Path(out).resolve() / "mlruns").as_uri())
-    run = client.create_run(exp_id, run_name=f"audit-{out.name}")
-    run_id = run.info.run_id
-    try:
+    with tracking.client_run(client, AUDIT_EXPERIMENT, (Path(out).resolve() / "mlruns").as_uri(), f"audit-{out.name}") as run_id:
         client.log_metric(run_id, "assets", summary["assets"])
         for mode, n in summary["failure_modes"].items():
             client.log_metric(run_id, mode, n)
@@ -89,10 +84,6 @@ def log_audit_run(summary: dict[str, Any], files: dict[str, Path], out: Path, tr
             client.log_metric(run_id, f"implausible_{quantity}", int(n))
         for path in files.values():
             client.log_artifact(run_id, str(path))
-    except BaseException:
-        client.set_terminated(run_id, "FAILED")
-        raise
-    client.set_terminated(run_id)
     return run_id
 
 

@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
+from asset2sim.flows.tracking import client_run
 from asset2sim.schemas.realism import MethodScore
 from asset2sim.tasks.realism.bradley_terry import PRIOR_GAMES
 
@@ -60,14 +61,9 @@ def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experime
     if ratings_parquet is not None and not Path(ratings_parquet).is_file():
         raise ValueError(f"{ratings_parquet}: no such ratings table")
     client = MlflowClient(tracking_uri=tracking_uri)  # never the process-wide URI
-    found = client.get_experiment_by_name(experiment)
-    exp_id = found.experiment_id if found else client.create_experiment(
-        experiment, artifact_location=_artifact_location(tracking_uri, experiment))
     sources = sorted({s.source for s in scores})
-    run = client.create_run(exp_id, run_name=run_name or f"realism-{'-'.join(sources)}",
-                            tags={"asset2sim.kind": "realism"})
-    run_id = run.info.run_id
-    try:
+    with client_run(client, experiment, _artifact_location(tracking_uri, experiment), run_name or f"realism-{'-'.join(sources)}",
+                    tags={"asset2sim.kind": "realism"}) as run_id:
         client.log_param(run_id, "sources", ",".join(sources))
         client.log_param(run_id, "methods", ",".join(sorted({s.method for s in scores})))
         client.log_param(run_id, "model", "Bradley-Terry (MAP, virtual games prior)")
@@ -79,8 +75,4 @@ def log_realism_scores(scores: list[MethodScore], *, tracking_uri: str, experime
         client.log_text(run_id, json.dumps([s.model_dump() for s in scores], indent=2), "realism_scores.json")
         if ratings_parquet is not None:
             client.log_artifact(run_id, str(ratings_parquet))
-    except BaseException:
-        client.set_terminated(run_id, "FAILED")
-        raise
-    client.set_terminated(run_id)
     return run_id

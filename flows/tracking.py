@@ -4,13 +4,14 @@ experiments keep their artifacts in ``<project>/mlruns/<experiment>``), and the 
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import math
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from asset2sim import atomic
 from asset2sim.flows.catalog import TrackingSettings
@@ -260,3 +261,20 @@ def _ms(when: Any) -> int | None:
     else:
         v = float(when)
     return int(round(v * 1000)) if math.isfinite(v) else None
+
+
+@contextlib.contextmanager
+def client_run(client: Any, experiment: str, artifact_location: str | None, run_name: str,
+               tags: dict[str, str] | None = None) -> Iterator[str]:
+    """One MLflow run through ``client`` (an ``MlflowClient`` of one store, never the process-wide URI) in
+    ``experiment`` (created with ``artifact_location`` when missing): yields the run id; the run ends FINISHED, or
+    FAILED when the block raises (the error is raised again)."""
+    found = client.get_experiment_by_name(experiment)
+    exp_id = found.experiment_id if found else client.create_experiment(experiment, artifact_location=artifact_location)
+    run_id = client.create_run(exp_id, run_name=run_name, tags=dict(tags or {})).info.run_id
+    try:
+        yield run_id
+    except BaseException:
+        client.set_terminated(run_id, "FAILED")
+        raise
+    client.set_terminated(run_id)

@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
-from asset2sim.flows.realism_tracking import REALISM_EXPERIMENT, log_realism_scores
 from asset2sim.tasks.realism.rating_app import serve
 from asset2sim.tasks.realism.pair_set import PairSetError, find_pair_set
 from asset2sim.tasks.realism.ratings import RATINGS_FILE
@@ -99,6 +98,8 @@ def _scores(folder: Path, tracking_uri: str | None) -> int:
     _print_scores(scores, folder)
     print(f"written: {folder / SCORES_FILE}")
     if tracking_uri:
+        from asset2sim.flows.realism_tracking import REALISM_EXPERIMENT, log_realism_scores  # MLflow: only when asked
+
         run_id = log_realism_scores(scores, tracking_uri=tracking_uri, experiment=REALISM_EXPERIMENT,
                                     ratings_parquet=folder / RATINGS_FILE)
         print(f"MLflow run {run_id} (experiment {REALISM_EXPERIMENT}) at {tracking_uri}")

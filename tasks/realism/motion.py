@@ -74,6 +74,18 @@ def side_from_folder(folder: Path | str, method: str) -> PhysicsSide:
                        root_fixed=bool(ctx.root_fixed))
 
 
+def _session(side: PhysicsSide, joint: str, conventions: SimConventions | None):
+    """A PyBullet session of ``side`` (gravity on, the root as declared); KeyError when ``joint`` is not movable."""
+    with quiet_stdout():
+        session = open_session("pybullet", side.urdf, SessionOptions(initial_state=dict(side.initial_state), springs=dict(side.springs),
+                                                                     conventions=conventions or SimConventions(),
+                                                                     **session_root_options(side.root_fixed)))
+    if joint not in session.joint_types:
+        session.close()
+        raise KeyError(f"{side.urdf}: no movable joint named {joint!r}")
+    return session
+
+
 def drive_limit(side: PhysicsSide, joint: str, open_range: float, conventions: SimConventions | None = None) -> float:
     """The force limit (N*m or N) of the pair's drive: the joint sweep's rule
     (:func:`asset2sim.tasks.check.sweep.effort_limit`) on ``side``'s physics plus the joint's own friction,
@@ -82,13 +94,8 @@ def drive_limit(side: PhysicsSide, joint: str, open_range: float, conventions: S
     Raises:
         KeyError: ``joint`` is not a movable joint of the side's URDF.
     """
-    conv = conventions or SimConventions()
-    with quiet_stdout():
-        session = open_session("pybullet", side.urdf, SessionOptions(initial_state=dict(side.initial_state), springs=dict(side.springs),
-                                                                     conventions=conv, **session_root_options(side.root_fixed)))
+    session = _session(side, joint, conventions)
     try:
-        if joint not in session.joint_types:
-            raise KeyError(f"{side.urdf}: no movable joint named {joint!r}")
         links = joint_subtrees(model_of(side.urdf)).get(joint, [session.joint_child[joint]])
         return effort_limit(session, joint, links, open_range, SweepConfig()) + float(session.held_physics().joints[joint].friction)
     finally:
@@ -113,12 +120,8 @@ def push_release(side: PhysicsSide, joint: str, closed: ClosedEnd, force_limit: 
     if not force_limit > 0 or not closed.open_range > 0:
         raise ValueError(f"joint {joint!r}: force limit {force_limit} and open range {closed.open_range} must be > 0")
     prismatic_scale = side.scale
-    with quiet_stdout():
-        session = open_session("pybullet", side.urdf, SessionOptions(initial_state=dict(side.initial_state), springs=dict(side.springs),
-                                                                     conventions=conv, **session_root_options(side.root_fixed)))
+    session = _session(side, joint, conv)
     try:
-        if joint not in session.joint_types:
-            raise KeyError(f"{side.urdf}: no movable joint named {joint!r}")
         speed = closed.open_range / cfg.traverse_time * (prismatic_scale if session.joint_types[joint] == "prismatic" else 1.0)
         # the drive's whole force is the limit: the joint's own friction is a load within it (a hand pushing a stiff hinge)
         drive = max(float(force_limit) - float(session.held_physics().joints[joint].friction), 0.0)

@@ -30,13 +30,6 @@ def pair_folder(tmp_path_factory):
     return folder
 
 
-@pytest.fixture
-def folder(pair_folder, tmp_path):
-    dst = tmp_path / "set"
-    shutil.copytree(pair_folder, dst)
-    return dst
-
-
 def _pair_index(page: str) -> int:
     return int(re.search(r'name="pair" value="(\d+)"', page).group(1))
 

@@ -36,16 +36,6 @@ def pair_folder(tmp_path_factory):
     return folder
 
 
-@pytest.fixture
-def folder(pair_folder, tmp_path):
-    """A fresh copy of the pair set (pairs.json and its clips), no ratings."""
-    import shutil
-
-    dst = tmp_path / "set"
-    shutil.copytree(pair_folder, dst)
-    return dst
-
-
 def test_read_pair_set_and_its_errors(folder, tmp_path):
     pairs = read_pair_set(folder)
     assert len(pairs.pairs) == 12 and pairs.pairs[0].a.method == "asset2sim"
