@@ -133,3 +133,23 @@ def test_rows_of_bad_manifest_rows_have_unique_ids_and_their_own_failure_mode():
     row = build_manifest_row(errs[1], asset_id=ids[1], run_id="r1", config={"estimator": "offline"}, code_version="v")
     assert row.status == "failed" and row.failure_mode == "invalid_manifest_row"
     assert row.error.startswith("manifest: MANIFEST_INVALID_ID: m.csv:4") and row.source_run == "r1"
+
+
+def test_the_row_lists_the_output_folders_clips(tmp_path):
+    """The catalog's ``clips`` column: the videos ``clips/clips.json`` lists, relative to the output folder; empty
+    without clips, and carried over to a row that reuses an earlier result."""
+    from asset2sim.schemas.realism import Clip, ClipSet
+
+    out = tmp_path / "lap"
+    (out / "clips").mkdir(parents=True)
+    clip = Clip(joint="j", motion="sweep", view="front", video="sweep_00_front.webm", poster="sweep_00_front_poster.png",
+                fps=10.0, n_frames=12, duration_s=1.1, width=224, height=168)
+    (out / "clips" / "clips.json").write_text(ClipSet(clips=[clip]).model_dump_json())
+    prep = Prepared(ok=True, seconds=0.5, input_hash="IN", config_hash="C", refine_config_hash="RC", category="Laptop", worker="w")
+    refined = StageRecord(status="ok", seconds=2.0, value=RefineOutput(report=_report(), out_dir=str(out), tokens=0))
+    row = build_row(_job(), prep, refined, None)
+    assert json.loads(row.clips) == ["clips/sweep_00_front.webm"]
+    bare = build_row(_job(), prep, StageRecord(status="ok", seconds=2.0, value=RefineOutput(report=_report(), out_dir=str(tmp_path / "none"), tokens=0)), None)
+    assert json.loads(bare.clips) == []
+    skipped = build_row(_job(), prep.model_copy(update={"skip": row.model_dump() | {"source_run": "r1"}}), None, None)
+    assert json.loads(skipped.clips) == ["clips/sweep_00_front.webm"]
