@@ -32,7 +32,7 @@ from asset2sim.output_folder import CLIPS_DIR
 from asset2sim.schemas.realism import Clip, ClipSet, Motion
 from asset2sim.tasks.check.sweep import JointSweep, SweepRun
 from asset2sim.tasks.geometry.render import SceneRenderer
-from asset2sim.tasks.geometry.render_camera import Camera, fit_camera, view_spec
+from asset2sim.tasks.geometry.render_camera import Camera, view_camera, view_spec
 from asset2sim.tasks.geometry.render_images import write_png
 
 #: The file of ``clips/`` (:data:`asset2sim.output_folder.CLIPS_DIR`) listing the clips (:class:`ClipSet`).
@@ -151,13 +151,8 @@ def pose_points(renderer: SceneRenderer, poses: Sequence[Pose]) -> np.ndarray:
 
 def fit_cameras(points: np.ndarray, views: Iterable[str], size: tuple[int, int] = CLIP_SIZE) -> dict[str, Camera]:
     """One camera per view fitted to ``points`` (N, 3), m, by the rules of today's views
-    (:meth:`SceneRenderer.camera`) for images of ``size`` (width, height) pixels."""
-    out = {}
-    for v in views:
-        spec = view_spec(v)
-        up = (1.0, 0.0, 0.0) if spec.elevation_deg >= 89.9 else (0.0, 0.0, 1.0)
-        out[spec.name] = fit_camera(points, spec.direction(), up=up, aspect=size[0] / size[1])
-    return out
+    (:func:`~asset2sim.tasks.geometry.render_camera.view_camera`) for images of ``size`` (width, height) pixels."""
+    return {view_spec(v).name: view_camera(points, v, aspect=size[0] / size[1]) for v in views}
 
 
 def draw_frames(renderer: SceneRenderer, traj: Trajectory, cameras: Mapping[str, Camera],

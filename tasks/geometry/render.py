@@ -24,7 +24,7 @@ import numpy as np
 from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_to_xyzw
 from asset2sim.engines.registry import open_viewer
 from asset2sim.tasks.ingest import partnet_mobility
-from asset2sim.tasks.geometry.render_camera import FILL, VIEWS, Camera, ViewSpec, fit_camera, view_spec
+from asset2sim.tasks.geometry.render_camera import FILL, VIEWS, Camera, ViewSpec, fit_camera, view_camera, view_spec
 from asset2sim.tasks.geometry.render_images import BACKGROUND, render_contact_sheet, write_png
 from asset2sim.tasks.geometry.render_meshes import DEFAULT_COLOR
 from asset2sim.tasks.geometry.render_scene import prepare_scene
@@ -223,9 +223,7 @@ class SceneRenderer:
         Raises:
             KeyError: unknown view name.
         """
-        spec = view_spec(view)
-        up = (1.0, 0.0, 0.0) if spec.elevation_deg >= 89.9 else (0.0, 0.0, 1.0)
-        return fit_camera(self.world_points(), spec.direction(), up=up, aspect=self.size[0] / self.size[1])
+        return view_camera(self.world_points(), view, aspect=self.size[0] / self.size[1])
 
     def render(self, view: str | ViewSpec) -> np.ndarray:
         """RGB image (H, W, 3) uint8 of ``view`` at the current joint state.

@@ -104,3 +104,16 @@ def view_spec(view: str | ViewSpec) -> ViewSpec:
         return VIEWS[view]
     except KeyError:
         raise KeyError(f"unknown view {view!r}; known views: {list(VIEWS)}") from None
+
+
+def view_camera(points: np.ndarray, view: str | ViewSpec, aspect: float = 1.0) -> Camera:
+    """The camera of ``view`` (a name of :data:`VIEWS` or a :class:`ViewSpec`) fitted to ``points`` (N, 3) m for an
+    image of ``aspect`` = width / height: :func:`fit_camera` with the view's direction, the world's z up (x up when
+    looking straight down).
+
+    Raises:
+        KeyError: unknown view name. ValueError: no points or a non-finite point.
+    """
+    spec = view_spec(view)
+    up = (1.0, 0.0, 0.0) if spec.elevation_deg >= 89.9 else (0.0, 0.0, 1.0)
+    return fit_camera(points, spec.direction(), up=up, aspect=aspect)

@@ -61,6 +61,13 @@ class PhysicsSide:
     scale: float = 1.0
 
 
+def side_of(ctx, method: str) -> PhysicsSide:
+    """The :class:`PhysicsSide` of an evaluation context (:class:`asset2sim.tasks.evaluation.eval_context.Context`):
+    its URDF, initial state, springs and declared root."""
+    return PhysicsSide(method=method, urdf=Path(ctx.urdf), initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
+                       root_fixed=bool(ctx.root_fixed))
+
+
 def side_from_folder(folder: Path | str, method: str) -> PhysicsSide:
     """The :class:`PhysicsSide` of an asset folder (a refine output, a benchmark method's ``asset/``): its
     URDF, ``initial_state.json``, the springs of ``overlay.json`` and the declared root, read as the
@@ -69,9 +76,7 @@ def side_from_folder(folder: Path | str, method: str) -> PhysicsSide:
     Raises:
         EvaluationError: the folder has no readable URDF or sidecar.
     """
-    ctx = build_context(folder)
-    return PhysicsSide(method=method, urdf=Path(ctx.urdf), initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
-                       root_fixed=bool(ctx.root_fixed))
+    return side_of(build_context(folder), method)
 
 
 def _session(side: PhysicsSide, joint: str, conventions: SimConventions | None):

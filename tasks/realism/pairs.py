@@ -25,11 +25,11 @@ from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
 from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
                                               write_clip)
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
-from asset2sim.tasks.evaluation.eval_context import build_context, task_joints
+from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
 from asset2sim.tasks.geometry.render import SceneRenderer
 from asset2sim.tasks.geometry.render_camera import view_spec
 from asset2sim.tasks.realism.pair_set import write_pair_set
-from asset2sim.tasks.realism.motion import PhysicsSide, PushReleaseConfig, drive_limit, push_release, side_from_folder
+from asset2sim.tasks.realism.motion import PhysicsSide, PushReleaseConfig, drive_limit, push_release, side_from_folder, side_of
 
 #: The folder of a pair set's clips.
 PAIR_CLIPS_DIR = "clips"
@@ -47,17 +47,52 @@ class PairSpec:
     category: str = ""
     request: str = ""
     defect: str | None = None
+    force_limit: float | None = None
+    """the drive's limit, N*m or N (None: :func:`drive_limit` of side ``a``, computed by :func:`make_pair`)"""
 
 
-def pushed_joints(folder: Path | str, limit: int = 1) -> list[tuple[str, ClosedEnd]]:
-    """The joints a pair of the asset in ``folder`` pushes: its task-relevant joints (the evaluation's rule,
-    :func:`asset2sim.tasks.evaluation.eval_context.task_joints`) that can open, at most ``limit``, with their
-    closed ends (rad or m). Raises EvaluationError: the folder cannot be read."""
-    ctx = build_context(folder)
+def pushed_joints(asset: Context | Path | str, limit: int = 1) -> list[tuple[str, ClosedEnd]]:
+    """The joints a pair of an asset (its evaluation context, or its folder) pushes: its task-relevant joints (the
+    evaluation's rule, :func:`asset2sim.tasks.evaluation.eval_context.task_joints`) that can open, at most ``limit``,
+    with their closed ends (rad or m). Raises EvaluationError: the folder cannot be read."""
+    ctx = asset if isinstance(asset, Context) else build_context(asset)
     chosen, _ = task_joints(ctx.joints, ctx.reference_dir, [], ctx.category, ctx.semantics)
     names = list(dict.fromkeys([*chosen, *ctx.movable]))
     closed, _ = compute_closed(ctx.urdf, ctx.joints, names)
     return [(n, closed[n]) for n in names if n in closed and closed[n].open_range > 0][:limit]
+
+
+@dataclass(frozen=True)
+class Subject:
+    """asset2sim's output of one object as every pair of it shows it: its ``side``, the ``joint`` pushed with its
+    ``closed`` end and the drive's ``force_limit`` (N*m or N, :func:`drive_limit`), the object's id, category and
+    request (the output's ``report.json`` prompt)."""
+
+    side: PhysicsSide
+    joint: str
+    closed: ClosedEnd
+    force_limit: float
+    object_id: str
+    category: str = ""
+    request: str = ""
+
+
+def subject_of(folder: Path | str, object_id: str, conventions: SimConventions | None = None) -> Subject | None:
+    """The :class:`Subject` of the asset2sim output in ``folder``, read once (None: no joint that opens). Raises
+    EvaluationError: the folder cannot be read."""
+    ctx = build_context(folder)
+    joints = pushed_joints(ctx)
+    if not joints:
+        return None
+    joint, closed = joints[0]
+    side = side_of(ctx, "asset2sim")
+    return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed.open_range, conventions),
+                   object_id=object_id, category=ctx.category or "", request=str((ctx.report or {}).get("prompt") or ""))
+
+
+def _spec(subject: Subject, b: PhysicsSide, defect: str | None = None) -> tuple[PairSpec, ClosedEnd]:
+    return PairSpec(a=subject.side, b=b, joint=subject.joint, object_id=subject.object_id, category=subject.category,
+                    request=subject.request, defect=defect, force_limit=subject.force_limit), subject.closed
 
 
 def _side_clips(renderer: SceneRenderer, traj, cams, folder: Path, base: Path, slot: str, joint: str) -> list[Clip]:
@@ -79,7 +114,7 @@ def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: in
     """
     base = Path(pair_set)
     folder = base / PAIR_CLIPS_DIR / f"{index:04d}"
-    force = drive_limit(spec.a, spec.joint, closed.open_range, conventions)
+    force = spec.force_limit if spec.force_limit is not None else drive_limit(spec.a, spec.joint, closed.open_range, conventions)
     trajs = [push_release(s, spec.joint, closed, force, config=config, conventions=conventions) for s in (spec.a, spec.b)]
     with SceneRenderer(spec.a.urdf, size=CLIP_SIZE, supersample=1) as ra, SceneRenderer(spec.b.urdf, size=CLIP_SIZE, supersample=1) as rb:
         cloud = np.concatenate([pose_points(r, fit_poses(traj)) for r, traj in ((ra, trajs[0]), (rb, trajs[1]))])
@@ -91,45 +126,28 @@ def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: in
                     joint=spec.joint, motion="push_release", a=sides[0], b=sides[1], defect=spec.defect)
 
 
-def calibration_specs(folder: Path | str, *, object_id: str, category: str = "", request: str = "", work: Path | str,
-                      defects: Sequence[str] | None = None, conventions: SimConventions | None = None
+def calibration_specs(subject: Subject, *, work: Path | str, defects: Sequence[str] | None = None
                       ) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
-    """The calibration pairs of the asset in ``folder`` (side ``a``, method ``asset2sim``): one per planted defect
-    (:data:`asset2sim.tasks.realism.defects.DEFECTS`, or ``defects``) on its first pushed joint, each broken copy
-    written under ``work/<k>/`` (``k`` the defect's number: no input name becomes a path). Returns (specs with side ``a``'s closed end, skipped: key -> why).
-
-    Raises:
-        EvaluationError: the folder cannot be read.
-    """
+    """The calibration pairs of ``subject``: one per planted defect (:data:`asset2sim.tasks.realism.defects.DEFECTS`,
+    or ``defects``) on its pushed joint, each broken copy written under ``work/<k>/`` (``k`` the defect's number: no
+    input name becomes a path). Returns (specs with the closed end, skipped: key -> why)."""
     from asset2sim.tasks.realism.defects import DEFECTS, plant_defect
 
-    a = side_from_folder(folder, "asset2sim")
-    joints = pushed_joints(folder)
-    if not joints:
-        return [], {object_id: "no joint that opens"}
-    joint, closed = joints[0]
-    force = drive_limit(a, joint, closed.open_range, conventions)
     specs, skipped = [], {}
     for k, name in enumerate(defects or list(DEFECTS)):
         try:
-            b = plant_defect(a, name, joint, closed, force, Path(work) / f"{k:02d}")
+            b = plant_defect(subject.side, name, subject.joint, subject.closed, subject.force_limit, Path(work) / f"{k:02d}")
         except (KeyError, ValueError) as exc:
-            skipped[f"{object_id} {name}"] = str(exc)
+            skipped[f"{subject.object_id} {name}"] = str(exc)
             continue
-        specs.append((PairSpec(a=a, b=b, joint=joint, object_id=object_id, category=category, request=request, defect=name), closed))
+        specs.append(_spec(subject, b, name))
     return specs, skipped
 
 
-def method_specs(folders: dict[str, Path], *, object_id: str, category: str = "", request: str = ""
-                 ) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
-    """asset2sim's output (``folders["asset2sim"]``) against every other method's asset folder of the same object:
-    one pair each on asset2sim's first pushed joint (a method whose asset lacks the joint is skipped). Returns
-    (specs, skipped). Raises KeyError: no ``asset2sim`` folder; EvaluationError: it cannot be read."""
-    a = side_from_folder(folders["asset2sim"], "asset2sim")
-    joints = pushed_joints(folders["asset2sim"])
-    if not joints:
-        return [], {object_id: "no joint that opens"}
-    joint, closed = joints[0]
+def method_specs(subject: Subject, folders: dict[str, Path]) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+    """``subject`` against every other method's asset folder of the same object (``folders``: method -> folder; an
+    ``asset2sim`` entry is passed over): one pair each on the subject's pushed joint. A method whose asset cannot be
+    read is skipped. Returns (specs, skipped)."""
     specs, skipped = [], {}
     for method, folder in folders.items():
         if method == "asset2sim":
@@ -137,9 +155,9 @@ def method_specs(folders: dict[str, Path], *, object_id: str, category: str = ""
         try:
             b = side_from_folder(folder, method)
         except Exception as exc:  # one method's unreadable asset skips its pair only
-            skipped[f"{object_id} {method}"] = f"{type(exc).__name__}: {exc}"
+            skipped[f"{subject.object_id} {method}"] = f"{type(exc).__name__}: {exc}"
             continue
-        specs.append((PairSpec(a=a, b=b, joint=joint, object_id=object_id, category=category, request=request), closed))
+        specs.append(_spec(subject, b))
     return specs, skipped
 
 
@@ -166,13 +184,6 @@ def build_pair_set(specs: Sequence[tuple[PairSpec, ClosedEnd]], pair_set: Path |
 AGAINST: tuple[str, ...] = ("human", "direct", "defaults")
 #: The folder of a pair set's broken copies (planted defects).
 DEFECTS_DIR = "defects"
-
-
-def _request_of(folder: Path) -> str:
-    try:
-        return str(json.loads(atomic.read_regular(folder / "report.json", 64 * 1024 * 1024)).get("prompt") or "")
-    except (OSError, ValueError, AttributeError):
-        return ""
 
 
 def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, against: Sequence[str] = AGAINST,
@@ -202,14 +213,15 @@ def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, aga
     skipped: dict[str, str] = {}
     for n, (object_id, folders) in enumerate(outputs):
         try:
-            ctx_category = build_context(folders["asset2sim"]).category or ""
-            request = _request_of(folders["asset2sim"])
-            got, why = method_specs(folders, object_id=object_id, category=ctx_category, request=request)
+            subject = subject_of(folders["asset2sim"], object_id, conventions)
+            if subject is None:
+                skipped[object_id] = "no joint that opens"
+                continue
+            got, why = method_specs(subject, folders)
             specs += got
             skipped.update(why)
             if defects is None or len(defects):
-                got, why = calibration_specs(folders["asset2sim"], object_id=object_id, category=ctx_category, request=request,
-                                             work=Path(pair_set) / DEFECTS_DIR / f"{n:04d}", defects=defects, conventions=conventions)
+                got, why = calibration_specs(subject, work=Path(pair_set) / DEFECTS_DIR / f"{n:04d}", defects=defects)
                 specs += got
                 skipped.update(why)
         except Exception as exc:  # one object's unreadable output never stops the set
