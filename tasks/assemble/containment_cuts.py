@@ -113,7 +113,10 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
                 lo, hi = p[p[:, ax] <= cut + spacing], p[p[:, ax] >= cut - spacing]
                 if len(lo) < 4 or len(hi) < 4 or len(lo) == len(p) or len(hi) == len(p):
                     continue
-                (dl, vl), (dh, vh) = measure(lo), measure(hi)
+                dl, vl = measure(lo)
+                if best is not None and dl > best[0][0]:  # max(dl, dh) > the best's depth: this cut cannot win
+                    continue
+                dh, vh = measure(hi)
                 score = (max(dl, dh), vl + vh)
                 if best is None or score < best[0]:
                     best = (score, (dl, lo), (dh, hi))

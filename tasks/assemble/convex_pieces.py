@@ -202,8 +202,13 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
                         c += penalty
         return c, m
 
-    def centre(p: Piece) -> np.ndarray:
-        return p.points.mean(axis=0)
+    centres: dict[int, np.ndarray] = {}
+
+    def centre(i: int) -> np.ndarray:  # of alive piece i, computed once
+        c = centres.get(i)
+        if c is None:
+            c = centres[i] = alive[i].points.mean(axis=0)
+        return c
 
     heap: list[tuple[float, int, int]] = []
     merged: dict[tuple[int, int], Piece] = {}
@@ -212,8 +217,8 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
         ids = [j for j in alive if j != i]
         if not ids:
             return
-        cs = np.array([centre(alive[j]) for j in ids])
-        order = np.argsort(np.linalg.norm(cs - centre(alive[i]), axis=1))[:neighbours]
+        cs = np.array([centre(j) for j in ids])
+        order = np.argsort(np.linalg.norm(cs - centre(i), axis=1))[:neighbours]
         for o in order:
             j = ids[int(o)]
             key = (min(i, j), max(i, j))
