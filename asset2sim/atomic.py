@@ -2,7 +2,10 @@
 
 Every output file is written as a temporary ``.<name>.<random>.tmp`` beside
 it, ``fsync``, ``os.replace``, then an ``fsync`` of the folder: a run killed at
-any moment leaves each file absent or complete. Files get mode ``0o666`` minus
+any moment leaves each file absent or complete. Inside a scratch folder
+(:func:`add_scratch`: a run's working copies, removed when it ends) the two
+``fsync`` calls are left out: the write is still atomic for a killed process,
+and nothing there has to outlive a crash of the machine. Files get mode ``0o666`` minus
 the umask, as ``open()`` gives. Observers (:func:`add_observer`) hear of every
 destination before anything is created.
 """
@@ -26,6 +29,34 @@ it may raise to refuse the write (nothing is then created)."""
 
 _OBSERVERS: list[Observer] = []
 _OBSERVERS_LOCK = threading.Lock()
+_SCRATCH: dict[str, int] = {}  # absolute folder + os.sep -> times added
+
+
+def add_scratch(folder: Path | str) -> None:
+    """Write the files under ``folder`` (absolute, or made so) without ``fsync``: a scratch folder its owner
+    removes (every thread; once per :func:`remove_scratch`)."""
+    key = os.path.join(os.path.abspath(folder), "")
+    with _OBSERVERS_LOCK:
+        _SCRATCH[key] = _SCRATCH.get(key, 0) + 1
+
+
+def remove_scratch(folder: Path | str) -> None:
+    """Undo one :func:`add_scratch` of ``folder`` (no error when it was not added)."""
+    key = os.path.join(os.path.abspath(folder), "")
+    with _OBSERVERS_LOCK:
+        n = _SCRATCH.get(key, 0) - 1
+        if n > 0:
+            _SCRATCH[key] = n
+        else:
+            _SCRATCH.pop(key, None)
+
+
+def _durable(path: Path) -> bool:
+    """False for a path under a scratch folder (:func:`add_scratch`)."""
+    if not _SCRATCH:
+        return True
+    ap = os.path.abspath(path)
+    return not any(ap.startswith(root) for root in list(_SCRATCH))
 
 
 def add_observer(observer: Observer) -> None:
@@ -154,8 +185,9 @@ def exchange_folders(a: Path | str, b: Path | str) -> None:
     _fsync_dir(b.parent)
 
 
-def write_bytes(path: Path | str, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (parents created). Returns the path.
+def write_bytes(path: Path | str, data: bytes, *, durable: bool = True) -> Path:
+    """Write ``data`` to ``path`` atomically (parents created); ``durable=False`` (or a scratch folder): without
+    ``fsync``, atomic for a killed process only. Returns the path.
 
     Raises:
         OSError: the folder cannot be written (the error names ``path``).
@@ -163,23 +195,26 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
     path = Path(path)
     announce([path])
     path.parent.mkdir(parents=True, exist_ok=True)
+    durable = durable and _durable(path)
     fd, tmp = _create_temp(path)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+            if durable:
+                fh.flush()
+                os.fsync(fh.fileno())
         _replace(tmp, path)
     except BaseException:
         _unlink_quietly([tmp])
         raise
-    _fsync_dir(path.parent)
+    if durable:
+        _fsync_dir(path.parent)
     return path
 
 
-def write_text(path: Path | str, text: str) -> Path:
-    """Write UTF-8 ``text`` atomically."""
-    return write_bytes(path, text.encode("utf-8"))
+def write_text(path: Path | str, text: str, *, durable: bool = True) -> Path:
+    """Write UTF-8 ``text`` atomically (``durable`` as in :func:`write_bytes`)."""
+    return write_bytes(path, text.encode("utf-8"), durable=durable)
 
 
 def _check_finite(obj: Any, where: str = "$") -> None:
@@ -193,15 +228,16 @@ def _check_finite(obj: Any, where: str = "$") -> None:
             _check_finite(v, f"{where}[{i}]")
 
 
-def write_json(path: Path | str, obj: Any, indent: int = 2) -> Path:
-    """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError) atomically."""
+def write_json(path: Path | str, obj: Any, indent: int = 2, *, durable: bool = True) -> Path:
+    """Write ``obj`` as strict JSON (no NaN/inf; raises ValueError) atomically (``durable`` as in :func:`write_bytes`)."""
     _check_finite(obj)
-    return write_text(path, json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n")
+    return write_text(path, json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n", durable=durable)
 
 
 def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
     """Copy many files, each atomically: all written as temporary files, one
-    ``os.sync()``, then each renamed into place. Returns the destinations."""
+    ``os.sync()`` (none when every destination is in a scratch folder), then each renamed into place.
+    Returns the destinations."""
     pairs = [(src, Path(dst)) for src, dst in pairs]
     announce(dst for _, dst in pairs)
     staged: list[tuple[str, Path]] = []
@@ -212,10 +248,12 @@ def copy_files(pairs: Iterable[tuple[Path | str, Path | str]]) -> list[Path]:
             staged.append((tmp, dst))
             with os.fdopen(fd, "wb") as fh:
                 fh.write(Path(src).read_bytes())
-        os.sync()
+        durable = any(_durable(dst) for _, dst in staged)
+        if durable:
+            os.sync()
         for tmp, dst in staged:
             _replace(tmp, dst)
-        for folder in {dst.parent for _, dst in staged}:
+        for folder in {dst.parent for _, dst in staged} if durable else ():
             _fsync_dir(folder)
     except BaseException:
         _unlink_quietly(tmp for tmp, _ in staged)

@@ -151,7 +151,9 @@ class OwnedFolder:
                 self._save()
 
     def _save(self) -> None:
-        atomic.write_json(self.root / RECORD_NAME, {"version": 1, "files": sorted(self.files)})
+        # rewritten before each new file, without fsync: it is for a killed run's clean-up; after a crash of the
+        # machine a file it missed is foreign to the next run, which then refuses rather than deletes it
+        atomic.write_json(self.root / RECORD_NAME, {"version": 1, "files": sorted(self.files)}, durable=False)
 
     def finish(self, marker: dict[str, Any]) -> dict[str, str]:
         """Write the completion marker: ``marker`` plus ``files`` (relative path -> sha256 of every file this

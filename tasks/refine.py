@@ -660,7 +660,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
                 "pybullet", ws.model(), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
                 fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
-                free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring)]
+                free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
         return chk
 
     check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))

@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from asset2sim import mesh_io, urdf
+from asset2sim import atomic, mesh_io, urdf
 from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
@@ -86,6 +86,7 @@ class Workspace:
         self.asset = asset
         _remove_orphans(Path(tempfile.gettempdir()))
         self.root = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")).resolve()
+        atomic.add_scratch(self.root)  # engines read it and close() removes it: no fsync
         self._copied = False
         self.collision_notes: list[str] = []
         self._written: tuple[bytes, Path] | None = None  # the loaded URDF's bytes and path, parsed on demand
@@ -126,6 +127,7 @@ class Workspace:
         """Remove the scratch folder (and what :mod:`asset2sim.mesh_io` kept of its meshes)."""
         mesh_io.forget_under(self.root)
         shutil.rmtree(self.root, ignore_errors=True)
+        atomic.remove_scratch(self.root)
 
     def __enter__(self) -> "Workspace":
         return self

@@ -185,6 +185,9 @@ def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT
     :data:`MAX_SHAVE_FRACTION` of the piece's width along the face's normal."""
     if not len(points):
         return piece
+    if tolerance > 0:  # a point outside the piece's box is outside its hull: never held deeper than the tolerance
+        lo, hi = piece.points.min(axis=0), piece.points.max(axis=0)
+        points = points[np.all((points >= lo) & (points <= hi), axis=1)]
     d = points @ piece.equations[:, :3].T + piece.equations[:, 3]  # (k, f), <= 0 inside
     inside = np.max(d, axis=1) < -tolerance
     if not inside.any():

@@ -255,16 +255,28 @@ def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:
     """``piece`` cut by the half-space ``normal . x + offset <= 0`` (m): the
     hull of its vertices inside the half-space and of the points where its
     edges cross the plane; None when nothing with volume is left."""
-    verts, tris = mesh_io.convex_hull_mesh(piece.points)
+    verts, edges = _memo(_HULL_EDGES, _HULLS_MAX, piece.points, _hull_edges)
     s = verts @ normal + offset
     keep = [verts[s <= 0]]
-    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
     a, b = edges[:, 0], edges[:, 1]
     cross = (s[a] > 0) != (s[b] > 0)
     if cross.any():
         t = s[a[cross]] / (s[a[cross]] - s[b[cross]])
         keep.append(verts[a[cross]] + t[:, None] * (verts[b[cross]] - verts[a[cross]]))
     return solid_piece(np.vstack(keep), piece.sources)
+
+
+def _hull_edges(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (k, 3) m, edges (e, 2) vertex indices a < b in lexicographic order) of the hull of ``pts``."""
+    verts, tris = mesh_io.convex_hull_mesh(pts)
+    pairs = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1).astype(np.int64)
+    n = max(1, len(verts))
+    code = np.unique(pairs[:, 0] * n + pairs[:, 1])  # as np.unique(pairs, axis=0), on one integer per edge
+    return verts, np.stack([code // n, code % n], axis=1)
+
+
+#: Hull vertices and edges (:func:`_hull_edges`) of the pieces :func:`clip_piece` cut, in this process.
+_HULL_EDGES: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
 
 #: Volume (m^3) under which a piece a cut or trim left is a sliver and is dropped: 1 mm^3.

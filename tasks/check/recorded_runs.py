@@ -1,4 +1,4 @@
-"""The manipulation tiers (joint sweep, robust rest) measured once per set of
+"""The manipulation tiers (joint sweep, robust rest, task execution) measured once per set of
 inputs, reused by every check of the same files: the post-check records each
 run under a digest of all its inputs (:func:`input_digest`) and refine's
 evaluation takes it from there (deterministic simulation: the same inputs
@@ -17,7 +17,8 @@ from typing import Any
 from asset2sim import file_memo, mesh_io
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
-from asset2sim.tasks.check import robust_rest, sweep
+from asset2sim.tasks.check import robust_rest, sweep, task_execution
+from asset2sim.tasks.check.gripper_motion import TaskConfig
 from asset2sim.urdf import UrdfModel, UrdfSource, model_of, write_urdf
 
 
@@ -130,3 +131,36 @@ def robust_rest_run(engine: str, urdf: UrdfSource, initial_state: dict[str, floa
     return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, urdf, initial_state, springs, conv, cfg,
                                                                    fixed_base=fixed_base),
                      "robust_rest", engine, urdf, initial_state, springs, conv, fixed_base, cfg)
+
+
+@dataclass(frozen=True)
+class _TaskInputs:
+    """What :func:`task_run` hands :func:`~asset2sim.tasks.check.task_execution.run_task` besides the files and the
+    session options (part of its :func:`input_digest`)."""
+
+    config: TaskConfig
+    joints: tuple[tuple[str, tuple[float, float, float]], ...]
+    actions: tuple[str, ...]
+    targets: tuple[tuple[str, float], ...]
+    hold_required: tuple[tuple[str, bool], ...]
+    task: str | None
+
+
+def task_run(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float, float]], *,
+             actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
+             initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
+             conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
+             hold_required: dict[str, bool] | None = None, task: str | None = None,
+             recorded: RecordedRuns | None = None) -> task_execution.TaskRun:
+    """:func:`asset2sim.tasks.check.task_execution.run_task` (same arguments), recorded as :func:`sweep_run`: the
+    post-check's attempt is the evaluation's when every input is the same (the joints' closed ends to the bit)."""
+    cfg = config or TaskConfig()
+    conv = conventions or SimConventions()
+    state = dict(initial_state or {})
+    inputs = _TaskInputs(cfg, tuple((str(n), tuple(float(x) for x in c)) for n, c in joints.items()), tuple(actions),
+                         tuple(sorted((str(k), float(v)) for k, v in (targets or {}).items())),
+                         tuple(sorted((str(k), bool(v)) for k, v in (hold_required or {}).items())), task)
+    return _recorded(recorded, lambda: task_execution.run_task(
+        engine, urdf, joints, actions=actions, targets=targets, initial_state=state, springs=springs, conventions=conv,
+        fixed_base=fixed_base, config=cfg, hold_required=hold_required, task=task),
+        "task_execution", engine, urdf, state, springs, conv, fixed_base, inputs)

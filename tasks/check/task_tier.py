@@ -15,7 +15,7 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import operating, sweep, task_execution
+from asset2sim.tasks.check import operating, recorded_runs, sweep, task_execution
 from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
@@ -78,20 +78,21 @@ def task_spec_for(text: str, urdf: UrdfSource, asset: AssetDescription, category
 def run_task_tier(engine: str, urdf: UrdfSource, state: dict[str, float], springs: dict[str, Spring],
                   conventions: SimConventions, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
                   asset: AssetDescription, category: str | None, *, fixed_base: bool, free_moving: bool,
-                  spring_requested: bool) -> list[MetricResult]:
+                  spring_requested: bool, recorded: recorded_runs.RecordedRuns | None = None) -> list[MetricResult]:
     """[``task_execution``, ``operating_force``] of the written asset in
-    ``engine``; ``closed``: joint -> (q_closed, direction, open range) at the output scale.
+    ``engine``; ``closed``: joint -> (q_closed, direction, open range) at the output scale; ``recorded``: the
+    attempt is recorded there (:func:`~asset2sim.tasks.check.recorded_runs.task_run`) for the evaluation.
 
     Raises:
         EngineUnavailable; whatever loading ``urdf`` raises.
     """
     joints = {n: closed[n] for n in spec.joints if n in closed and closed[n][2] > 0}
     actions = tuple(a for a in spec.actions if a in ("close", "open"))
-    run = task_execution.run_task(engine, urdf, joints, actions=actions, targets=dict(spec.targets),
-                                  initial_state=dict(state), springs=dict(springs), conventions=conventions,
-                                  fixed_base=fixed_base, task=spec.text,
-                                  hold_required=hold_required(asset, list(joints), springs, category,
-                                                              free_moving=free_moving, spring_requested=spring_requested))
+    run = recorded_runs.task_run(engine, urdf, joints, actions=actions, targets=dict(spec.targets),
+                                 initial_state=dict(state), springs=dict(springs), conventions=conventions,
+                                 fixed_base=fixed_base, task=spec.text, recorded=recorded,
+                                 hold_required=hold_required(asset, list(joints), springs, category,
+                                                             free_moving=free_moving, spring_requested=spring_requested))
     tm = task_execution.task_metric(run)
     tm.details["joints_rule"] = spec.rule
     return [tm, force_metric(run, category, link_labels(asset))]

@@ -325,10 +325,10 @@ def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
             continue
         joints = _task_joints(ctx)
         actions = tuple(a for a in ctx.task.actions if a in ("close", "open"))
-        run = task_execution.run_task(e, ctx.urdf, joints, actions=actions, targets=dict(ctx.task.targets),
-                                      initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
-                                      conventions=ctx.conventions, fixed_base=ctx.root_fixed,
-                                      hold_required=hold_required(ctx, list(joints)), task=ctx.task.text)
+        run = recorded_runs.task_run(e, ctx.urdf, joints, actions=actions, targets=dict(ctx.task.targets),
+                                     initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
+                                     conventions=ctx.conventions, fixed_base=ctx.root_fixed,
+                                     hold_required=hold_required(ctx, list(joints)), task=ctx.task.text, recorded=r.recorded)
         r.task = run
         tm = task_execution.task_metric(run)
         tm.details["joints_rule"] = ctx.task.rule
