@@ -7,6 +7,7 @@ import json
 
 import pytest
 
+from tests.conftest import SHARED, needs_shared
 from tests.contract_asset import write_contract_asset
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck, recorded_runs
@@ -107,3 +108,60 @@ def test_evaluation_takes_the_post_checks_runs_only_where_inputs_match(faucet_ou
     assert rec.hits >= 1  # at least robust rest; the sweep too when the evaluation's closed ends are the same
     pick = lambda ev: [m for m in ev.metrics if m.name in ("joint_sweep", "robust_rest")]  # noqa: E731
     assert pick(reused) == pick(fresh)
+
+
+def test_task_attempt_is_reused_for_the_same_inputs_and_rerun_when_one_differs(tmp_path):
+    """The task tier's gripper attempt (``recorded_runs.task_run``) comes from the record only when the files, state,
+    joints with their closed ends, actions, targets and hold rule are the same; what it reports is what a fresh
+    attempt measures."""
+    from asset2sim.tasks.check.task_execution import run_task, task_metric
+
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    lid = {"lid_hinge": CLOSED["lid_hinge"]}
+    rec = RecordedRuns()
+    first = recorded_runs.task_run("pybullet", a.urdf, lid, actions=("open",), initial_state=STATE, recorded=rec)
+    again = recorded_runs.task_run("pybullet", a.urdf, lid, actions=("open",), initial_state=dict(reversed(list(STATE.items()))),
+                                   recorded=rec)
+    assert (rec.hits, rec.misses) == (1, 1)
+    fresh = run_task("pybullet", a.urdf, lid, actions=("open",), initial_state=STATE)
+    assert task_metric(again) == task_metric(first) == task_metric(fresh)
+    assert again.attempts[0].trace["t"] == fresh.attempts[0].trace["t"]  # the motion the clips replay, too
+    again.attempts[0].notes.append("changed")  # a copy: the record is not changed through it
+    assert recorded_runs.task_run("pybullet", a.urdf, lid, actions=("open",), initial_state=STATE,
+                                  recorded=rec).attempts[0].notes == first.attempts[0].notes
+    for changed in ({"targets": {"open": 0.5}}, {"hold_required": {"lid_hinge": False}}, {"actions": ("close", "open")}):
+        recorded_runs.task_run("pybullet", a.urdf, lid, **{"actions": ("open",), **changed}, initial_state=STATE, recorded=rec)
+    other_end = {"lid_hinge": (0.0, 1.0, 1.5)}
+    recorded_runs.task_run("pybullet", a.urdf, other_end, actions=("open",), initial_state=STATE, recorded=rec)
+    assert (rec.hits, rec.misses) == (2, 5)
+
+
+@needs_shared
+def test_refines_evaluation_takes_the_post_checks_task_attempt(tmp_path):
+    """Door 8877 refined with its manifest row's task: the gripper's attempt is simulated in the post-check only, the
+    evaluation takes it from the record (its task and inputs are the same), and the report's task metric is what
+    evaluating the output afresh measures."""
+    import csv
+    import traceback
+
+    from asset2sim.tasks.check import task_execution
+
+    row = next(r for r in csv.DictReader(open(SHARED / "manifest.csv")) if r["id"] == "8877")
+    callers = []
+    real = task_execution.run_task
+
+    def counted(*args, **kw):
+        callers.append({f.name for f in traceback.extract_stack()})
+        return real(*args, **kw)
+
+    task_execution.run_task = counted
+    try:
+        res = refine_asset(SHARED / "8877", row["prompt"], tmp_path / "out", task=row["task"], reference=SHARED / "8877")
+    finally:
+        task_execution.run_task = real
+    assert callers and all("run_task_tier" in c and "_m_task" not in c for c in callers)  # none from the evaluation
+    ev = json.loads((res.out_dir / "evaluation.json").read_text())
+    fresh = evaluate_asset(res.out_dir, task=row["task"], prompt=row["prompt"], reference=SHARED / "8877", probes=False)
+    pick = lambda ms: [(m["value"], m["passed"], m["details"].get("attempts")) for m in ms  # noqa: E731
+                       if m["name"] == "task_execution"]
+    assert pick(ev["metrics"]) and pick(ev["metrics"]) == pick([m.model_dump(mode="json") for m in fresh.metrics])
