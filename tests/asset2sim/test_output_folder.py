@@ -534,3 +534,30 @@ def test_output_mtl_and_obj_never_reference_files_outside(tmp_path):
 )
 def test_reference_leaves_folder(ref, inside):
     assert copied_meshes.reference_leaves_folder(ref, "meshes/base.mtl") is (not inside)
+
+
+def test_outputs_are_fsynced_scratch_files_and_the_ownership_record_are_not(tmp_path, box, monkeypatch):
+    """Each output file is synced (the file and its folder) before it counts as written; a scratch folder's files
+    (``atomic.add_scratch``) and the ownership record are written atomically without ``fsync``; a refine leaves no
+    scratch folder registered."""
+    synced: list[int] = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(fd), real(fd))[1])
+    out = tmp_path / "out"
+    owner = of.start(box, out)
+    atomic.write_text(out / "a.json", "{}")  # the record is rewritten first (no fsync), then a.json (file + folder)
+    assert len(synced) == 2 and json.loads((out / of.RECORD_NAME).read_text())["files"] == ["a.json"]
+    owner.close()
+    scratch = tmp_path / "scratch"
+    atomic.add_scratch(scratch)
+    try:
+        atomic.write_bytes(scratch / "deep" / "b.obj", b"v 0 0 0\n")
+        atomic.copy_files([(scratch / "deep" / "b.obj", scratch / "c.obj")])
+        assert len(synced) == 2 and (scratch / "c.obj").read_bytes() == b"v 0 0 0\n"
+        assert not list(scratch.rglob("*.tmp"))
+    finally:
+        atomic.remove_scratch(scratch)
+    atomic.write_bytes(scratch / "d.obj", b"")  # no longer scratch: synced again
+    assert len(synced) == 4
+    refine_asset(box, "", tmp_path / "refined", extras=False)
+    assert atomic._SCRATCH == {}
