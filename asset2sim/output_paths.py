@@ -53,9 +53,9 @@ OutputError.__module__ = "asset2sim.output_folder"
 
 
 def _within(path: Path, root: Path) -> bool:
-    """``path`` is ``root`` or lies under it (lexically; both absolute)."""
-    if isinstance(path, PurePosixPath) and isinstance(root, PurePosixPath):  # case-sensitive: compare the parts
-        return path.parts[:len(root.parts)] == root.parts
+    """``path`` is ``root`` or lies under it (lexically)."""
+    if isinstance(path, PurePosixPath) and isinstance(root, PurePosixPath) and path.is_absolute() == root.is_absolute():
+        return path.parts[:len(root.parts)] == root.parts  # as below on POSIX (case-sensitive), without building parents
     return path == root or root in path.parents
 
 
