@@ -30,20 +30,21 @@ it may raise to refuse the write (nothing is then created)."""
 _OBSERVERS: list[Observer] = []
 _OBSERVERS_LOCK = threading.Lock()
 _SCRATCH: dict[str, int] = {}  # absolute folder + os.sep -> times added
+_SCRATCH_LOCK = threading.Lock()
 
 
 def add_scratch(folder: Path | str) -> None:
     """Write the files under ``folder`` (absolute, or made so) without ``fsync``: a scratch folder its owner
     removes (every thread; once per :func:`remove_scratch`)."""
     key = os.path.join(os.path.abspath(folder), "")
-    with _OBSERVERS_LOCK:
+    with _SCRATCH_LOCK:
         _SCRATCH[key] = _SCRATCH.get(key, 0) + 1
 
 
 def remove_scratch(folder: Path | str) -> None:
     """Undo one :func:`add_scratch` of ``folder`` (no error when it was not added)."""
     key = os.path.join(os.path.abspath(folder), "")
-    with _OBSERVERS_LOCK:
+    with _SCRATCH_LOCK:
         n = _SCRATCH.get(key, 0) - 1
         if n > 0:
             _SCRATCH[key] = n
