@@ -68,7 +68,8 @@ class Piece:
 def _hull(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """(vertices (k, 3) m, outward planes (f, 4), volume m^3) of the hull of ``pts``."""
     hull = ConvexHull(pts)
-    return hull.points[hull.vertices], hull.equations, float(hull.volume)
+    used = np.flatnonzero(np.bincount(hull.simplices.ravel(), minlength=len(pts)))  # hull.vertices without its sort
+    return pts[used], hull.equations, float(hull.volume)
 
 
 def _memo(cache: dict, most: int, points: np.ndarray, make: Callable[[np.ndarray], object]):

@@ -105,9 +105,8 @@ def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> Drawa
     with several (or downscaled textures) is written again as one OBJ (+ MTL) per material into
     ``work`` (names start with ``tag``), each with all vertex data; faces without a known material go
     to :attr:`DrawableMesh.bare_text`."""
-    scan = mesh_io.scan_obj_text(path.read_text(encoding="utf-8", errors="replace"))
+    scan, vertices = _scanned(path.read_text(encoding="utf-8", errors="replace"))
     data_lines, faces, mtllibs = scan.data_lines, scan.faces, scan.mtllibs
-    vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
     materials: dict[str, list[str]] = {}
     downscaled = False
     for lib in mtllibs:
@@ -134,6 +133,31 @@ def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> Drawa
     if unknown:
         bare_text = "\n".join([header, *(f for m in unknown for f in faces[m])]) + "\n"
     return DrawableMesh(vertices, parts, bare_text=bare_text)
+
+
+#: OBJ texts scanned in this process (:func:`_scanned`), by SHA-1 of the text: a refine draws the same visual
+#: files in several scenes (the input's, its output's copies, the clips); at most this many characters kept (a scan
+#: takes about 2.7 bytes per character: 9912's 16 M characters of OBJ, 42 MiB).
+_SCANS: dict[bytes, tuple[mesh_io.ObjText, np.ndarray, int]] = {}
+_SCANS_MAX_CHARS = 32_000_000
+
+
+def _scanned(text: str) -> tuple[mesh_io.ObjText, np.ndarray]:
+    """(:func:`mesh_io.scan_obj_text` of OBJ ``text``, its vertices (N, 3), read-only), remembered by the text's
+    SHA-1 (the oldest dropped beyond :data:`_SCANS_MAX_CHARS`). The scan is shared: callers must not change it."""
+    key = hashlib.sha1(text.encode("utf-8", "surrogatepass")).digest()
+    hit = _SCANS.get(key)
+    if hit is None:
+        scan = mesh_io.scan_obj_text(text)
+        vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
+        vertices.setflags(write=False)
+        hit = (scan, vertices, len(text))
+        if len(text) <= _SCANS_MAX_CHARS:
+            kept = sum(h[2] for h in _SCANS.values())
+            while kept + len(text) > _SCANS_MAX_CHARS:
+                kept -= _SCANS.pop(next(iter(_SCANS)))[2]
+            _SCANS[key] = hit
+    return hit[0], hit[1]
 
 
 def colored_obj(info: DrawableMesh, source: Path, rgba: Sequence[float], work: Path, tag: str) -> Path:

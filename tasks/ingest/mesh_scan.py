@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import io
 import math
 import re
@@ -134,16 +136,35 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
         A :class:`MeshScan` (never raises for a bad file); OSError when the file cannot be read.
     """
     path = Path(path)
-    scan = MeshScan()
     data = read_regular(path, max_bytes)
     ext = path.suffix.lower()
+    if ext not in (".obj", ".stl"):  # trimesh's messages may name the file
+        return _scan_data(data, ext, max_faces, max_coordinate, str(path))
+    key = (hashlib.sha1(data).digest(), ext, max_faces, max_coordinate)
+    hit = _SCANS.get(key)
+    if hit is None:
+        hit = _SCANS[key] = _scan_data(data, ext, max_faces, max_coordinate, str(path))
+        if len(_SCANS) > _SCANS_MAX:
+            _SCANS.pop(next(iter(_SCANS)))
+    return copy.deepcopy(hit)
+
+
+#: Scans of OBJ and STL files in this process by (SHA-1 of the bytes, extension, caps): an output's visual meshes
+#: are copies of its input's, and both are validated; at most :data:`_SCANS_MAX` kept.
+_SCANS: dict[tuple, MeshScan] = {}
+_SCANS_MAX = 4096
+
+
+def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, source: str) -> MeshScan:
+    """:func:`scan_mesh_file` of a file's ``data`` with extension ``ext`` (``source``: its name for messages)."""
+    scan = MeshScan()
     try:
         if ext == ".obj":
             v, f, defects, scan.mtllibs = _scan_obj(data, max_faces)
         elif ext == ".stl":
             v, f, defects = _scan_stl(data, max_faces)
         else:
-            v, f, defects = _scan_trimesh(data, ext, max_faces, str(path))
+            v, f, defects = _scan_trimesh(data, ext, max_faces, source)
     except _TooManyFaces as exc:  # counted in the asset's total all the same
         scan.defects["MESH_TOO_MANY_FACES"] = str(exc)
         scan.n_faces = exc.count

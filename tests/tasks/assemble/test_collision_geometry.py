@@ -673,3 +673,30 @@ def test_written_free_standing_object_rests_on_four_feet_mounted_one_is_not_leve
                   if float(read_mesh(c.path)[0][:, 2].max()) <= 0.01 + 1e-9)
     assert lows == pytest.approx([0.0, 0.0, 0.0, 0.0006], abs=1e-9)
     assert _feet_on_the_ground(tmp_path / "mounted" / "mobility.urdf") == 3  # put down free, it stands on three
+
+
+def test_surface_rows_are_numpy_s_distinct_rows_with_signed_zeros_merged():
+    """:func:`containment_cuts._unique_rows` gives ``np.unique(points, axis=0)`` (sorted by x, y, z) on points with
+    repeated rows, a -0.0 counted as 0.0 (one row, never a negative zero)."""
+    rng = np.random.default_rng(5)
+    pts = rng.integers(-3, 4, size=(400, 3)).astype(float) / 4
+    pts[rng.random(pts.shape) < 0.1] = -0.0
+    got = cc._unique_rows(pts)
+    want = np.unique(pts + 0.0, axis=0)
+    assert got.tobytes() == want.tobytes() and len(got) < len(pts)
+    assert not np.signbit(got[got == 0]).any()
+    tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], [[-0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])  # the same triangle twice
+    samples = cc.surface_samples(tri, 0.25)
+    # the longest edge sqrt(2) in ceil(sqrt(2) / 0.25) = 6 steps: a grid of 28 points, once for both triangles
+    assert len(samples) == 28 and samples.tobytes() == np.unique(samples, axis=0).tobytes()
+
+
+def test_a_hull_keeps_the_vertices_qhull_names_in_input_order():
+    """:func:`convex_pieces._hull`'s vertices are scipy's ``hull.points[hull.vertices]`` (sorted indices)."""
+    from scipy.spatial import ConvexHull
+
+    pts = np.random.default_rng(7).random((300, 3))
+    verts, eqs, vol = cp._hull(pts)
+    ref = ConvexHull(pts)
+    assert verts.tobytes() == ref.points[ref.vertices].tobytes()
+    assert np.array_equal(eqs, ref.equations) and vol == ref.volume

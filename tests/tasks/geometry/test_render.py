@@ -494,3 +494,37 @@ def test_view_spec_names_the_known_views():
     assert np.isclose(np.linalg.norm(custom.direction()), 1.0)
     with pytest.raises(KeyError, match="known views"):
         view_spec("underneath")
+
+
+def test_an_obj_drawn_in_several_scenes_is_scanned_once(tmp_path, monkeypatch):
+    """A refine draws the same visual files in several scenes (its input, the output's byte copies, the clips):
+    the second copy of a two-material OBJ takes the first one's scan, still gets its own split files in its own
+    work folder, equal to the first's, and read-only vertices; other text is scanned; the memo keeps at most
+    ``_SCANS_MAX_CHARS`` characters, the oldest dropped first."""
+    scans = []
+    real = mesh_io.scan_obj_text
+    monkeypatch.setattr(mesh_io, "scan_obj_text", lambda text: scans.append(len(text)) or real(text))
+    monkeypatch.setattr(render_meshes, "_SCANS", {})
+    obj = (f"# {tmp_path.name}\nmtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+           "usemtl red\nf 1 2 3\nusemtl blue\nf 1 2 4\nf 1 3 4\n")
+    folders = []
+    for name in ("input", "output"):
+        d = tmp_path / name
+        (d / "work").mkdir(parents=True)
+        (d / "m.mtl").write_text("newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n")
+        (d / "a.obj").write_text(obj)
+        folders.append(d)
+    infos = [split_obj(d / "a.obj", d / "work", "m0000", TextureLinks(d / "work", 4096)) for d in folders]
+    assert len(scans) == 1
+    assert [p.parent for p in infos[1].parts] == [folders[1] / "work"] * 2
+    assert [p.read_text() for p in infos[0].parts] == [p.read_text() for p in infos[1].parts]
+    assert infos[0].vertices is infos[1].vertices and not infos[1].vertices.flags.writeable
+    (folders[1] / "a.obj").write_text(obj + "f 2 3 4\n")
+    split_obj(folders[1] / "a.obj", folders[1] / "work", "m0001", TextureLinks(folders[1] / "work", 4096))
+    assert len(scans) == 2
+    monkeypatch.setattr(render_meshes, "_SCANS_MAX_CHARS", len(obj) + 20)  # room for one text of this size
+    (folders[1] / "a.obj").write_text(obj + "# a third text\n")
+    split_obj(folders[1] / "a.obj", folders[1] / "work", "m0002", TextureLinks(folders[1] / "work", 4096))
+    assert len(scans) == 3 and len(render_meshes._SCANS) == 1  # both earlier texts dropped
+    split_obj(folders[0] / "a.obj", folders[0] / "work", "m0003", TextureLinks(folders[0] / "work", 4096))
+    assert len(scans) == 4

@@ -150,3 +150,28 @@ def test_public_names_unchanged():
         assert hasattr(vi, name), name
     assert vi.check_inertia is tree_checks.check_inertia
     assert vi.Finding is findings.Finding
+
+
+def test_a_copied_mesh_is_scanned_once_and_each_caller_gets_its_own_scan(tmp_path, monkeypatch):
+    """An output's visual meshes are byte copies of its input's and both are validated: a second file of the same
+    bytes takes the first one's scan without parsing again; a caller changing its scan changes no later caller's;
+    other bytes are parsed."""
+    from asset2sim.tasks.ingest import mesh_scan
+
+    parsed = []
+    real = mesh_scan._scan_obj
+    monkeypatch.setattr(mesh_scan, "_scan_obj", lambda data, max_faces: parsed.append(data) or real(data, max_faces))
+    text = cb.CUBE_V + cb.CUBE_F + f"# {tmp_path.name}\n"  # bytes no other test scanned
+    a, b = tmp_path / "a.obj", tmp_path / "copy" / "b.obj"
+    b.parent.mkdir()
+    a.write_text(text)
+    b.write_text(text)
+    first = vi.scan_mesh_file(a)
+    first.defects["MESH_MALFORMED"] = "changed by its caller"
+    first.bounds[1] = 99.0
+    second = vi.scan_mesh_file(b)
+    assert len(parsed) == 1
+    assert second.defects == {} and second.n_faces == 12 and np.allclose(second.bounds, [[0, 0, 0], [1, 1, 1]])
+    assert "MESH_TOO_MANY_FACES" in vi.scan_mesh_file(b, max_faces=5).defects and len(parsed) == 2  # other caps: parsed
+    b.write_text(text + "f 1 2 99\n")
+    assert "MESH_BAD_INDEX" in vi.scan_mesh_file(b).defects and len(parsed) == 3
