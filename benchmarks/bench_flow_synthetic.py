@@ -18,8 +18,10 @@ requests and tasks) instead of generated cabinets; step 1 is skipped.
    a local Dask cluster of ``--workers`` single-threaded workers, per-asset
    isolation in a child forked from each worker's pre-imported stage
    server) over them with extras (MJCF export, renders, HTML report) and the
-   metrics stage, and prints assets per hour, start-up (Prefect, Dask) and
-   the per-asset worker time.
+   metrics stage, and prints assets per hour, start-up (Prefect, Dask),
+   the per-asset worker time, and the CPU of every kind of process the
+   flow starts (stage servers and children, Dask workers, Prefect's
+   server) beside what other processes took from the same cores.
 3. In the same run, side by side: for a sample of the assets (``--sample``,
    spread over sizes), the same stages in this process (prepare: read and
    hash; refine with extras; metrics), timed per asset, against the flow's
@@ -336,18 +338,85 @@ def _cpu_since(before, after) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+class ProcessCpu:
+    """CPU seconds of this process's descendants by kind while it runs (a thread sampling them every
+    ``interval`` s with psutil; a process's last interval before it ends is missed), and of the whole machine
+    (``psutil.cpu_times``), so that what other processes took from the same cores shows."""
+
+    KINDS = ("stage servers", "stage children", "Dask workers", "Prefect server", "other children")
+
+    def __init__(self, interval: float = 0.25):
+        import threading
+
+        import psutil
+
+        self._psutil, self.interval = psutil, interval
+        self._me = psutil.Process()
+        self._seen: dict[tuple[int, float], tuple[float, str]] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _kind(self, proc) -> str:
+        cmd = " ".join(proc.cmdline())
+        if "asset2sim.flows.forkserver" in cmd:
+            parent = proc.parent()
+            return "stage children" if parent is not None and "forkserver" in " ".join(parent.cmdline()) else "stage servers"
+        if "spawn_main" in cmd:
+            return "Dask workers"
+        if "uvicorn" in cmd and "prefect" in cmd:
+            return "Prefect server"
+        return "other children"
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.interval):
+            for proc in self._me.children(recursive=True):
+                try:
+                    key = (proc.pid, proc.create_time())
+                    t = proc.cpu_times()
+                    kind = self._seen[key][1] if key in self._seen else self._kind(proc)
+                    self._seen[key] = (t.user + t.system, kind)
+                except (self._psutil.NoSuchProcess, self._psutil.AccessDenied, self._psutil.ZombieProcess):
+                    continue
+
+    def __enter__(self) -> "ProcessCpu":
+        self._machine0 = self._psutil.cpu_times()
+        self._self0 = sum(self._me.cpu_times()[:2])
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        t0, t1 = self._machine0, self._psutil.cpu_times()
+        busy = [f for f in t1._fields if f not in ("idle", "iowait", "steal", "guest", "guest_nice")]
+        self.machine = sum(getattr(t1, f) - getattr(t0, f) for f in busy)
+        self.steal = getattr(t1, "steal", 0.0) - getattr(t0, "steal", 0.0)  # taken by the hypervisor
+        self.own = sum(self._me.cpu_times()[:2]) - self._self0
+
+    def by_kind(self) -> dict[str, float]:
+        """Kind -> CPU seconds sampled."""
+        out = dict.fromkeys(self.KINDS, 0.0)
+        for cpu, kind in self._seen.values():
+            out[kind] += cpu
+        return out
+
+
 def _timed_flow(catalog: Path, args) -> tuple[dict, dict[str, float]]:
     """The flow's run summary and its cost (s): ``wall``, ``driver_cpu``, ``kids_cpu`` (ended child processes),
-    ``prefect`` (start-up before the flow body)."""
+    ``prefect`` (start-up before the flow body), ``by_kind`` (:class:`ProcessCpu`) and ``others`` (the machine's
+    CPU outside this process tree)."""
     from asset2sim.flows.refine_flow import run_refine_flow
 
     ru_self0, ru_kids0 = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     t0, t0_epoch = time.perf_counter(), time.time()
-    summary = run_refine_flow(catalog, workers=args.workers)
+    with ProcessCpu() as sampled:
+        summary = run_refine_flow(catalog, workers=args.workers)
     wall = time.perf_counter() - t0
     ru_self1, ru_kids1 = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    by_kind = sampled.by_kind()
     cost = {"wall": wall, "driver_cpu": _cpu_since(ru_self0, ru_self1), "kids_cpu": _cpu_since(ru_kids0, ru_kids1),
-            "prefect": max(0.0, float(summary["flow_started_epoch"]) - t0_epoch)}
+            "prefect": max(0.0, float(summary["flow_started_epoch"]) - t0_epoch), "by_kind": by_kind,
+            "others": max(0.0, sampled.machine - sampled.own - sum(by_kind.values())), "steal": sampled.steal}
     return summary, cost
 
 
@@ -385,6 +454,9 @@ def _print_flow(cat, summary: dict, cost: dict[str, float], args) -> tuple[dict,
           f"({driver_cpu / max(1, worked):.2f} s per asset); its ended child processes (Prefect server, Dask nannies "
           f"and workers with what they reaped) {kids_cpu:.1f} s ({kids_cpu / max(1, worked):.2f} s per asset); "
           f"isolated stage children {sum(v[1] for v in ft.values()):.1f} s")
+    print("  CPU by process, sampled every 0.25 s over the run (a process's last 0.25 s missed): "
+          + ", ".join(f"{k} {v:.1f} s" for k, v in cost["by_kind"].items())
+          + f"; processes outside the flow on this machine {cost['others']:.1f} s, the hypervisor (steal) {cost['steal']:.1f} s")
     fails = df[df["status"] == "failed"]
     if len(fails):
         print("  failed: " + ", ".join(f"{a} ({m})" for a, m in zip(fails["asset_id"], fails["failure_mode"])))
