@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import shutil
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -140,23 +141,26 @@ def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> Drawa
 #: takes about 2.7 bytes per character: 9912's 16 M characters of OBJ, 42 MiB).
 _SCANS: dict[bytes, tuple[mesh_io.ObjText, np.ndarray, int]] = {}
 _SCANS_MAX_CHARS = 32_000_000
+_SCANS_LOCK = threading.Lock()
 
 
 def _scanned(text: str) -> tuple[mesh_io.ObjText, np.ndarray]:
     """(:func:`mesh_io.scan_obj_text` of OBJ ``text``, its vertices (N, 3), read-only), remembered by the text's
     SHA-1 (the oldest dropped beyond :data:`_SCANS_MAX_CHARS`). The scan is shared: callers must not change it."""
     key = hashlib.sha1(text.encode("utf-8", "surrogatepass")).digest()
-    hit = _SCANS.get(key)
+    with _SCANS_LOCK:
+        hit = _SCANS.get(key)
     if hit is None:
         scan = mesh_io.scan_obj_text(text)
         vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
         vertices.setflags(write=False)
         hit = (scan, vertices, len(text))
         if len(text) <= _SCANS_MAX_CHARS:
-            kept = sum(h[2] for h in _SCANS.values())
-            while kept + len(text) > _SCANS_MAX_CHARS:
-                kept -= _SCANS.pop(next(iter(_SCANS)))[2]
-            _SCANS[key] = hit
+            with _SCANS_LOCK:
+                kept = sum(h[2] for h in _SCANS.values())
+                while kept + len(text) > _SCANS_MAX_CHARS:
+                    kept -= _SCANS.pop(next(iter(_SCANS)))[2]
+                _SCANS[key] = hit
     return hit[0], hit[1]
 
 

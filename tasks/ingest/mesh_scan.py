@@ -7,6 +7,7 @@ import hashlib
 import io
 import math
 import re
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -141,11 +142,14 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
     if ext not in (".obj", ".stl"):  # trimesh's messages may name the file
         return _scan_data(data, ext, max_faces, max_coordinate, str(path))
     key = (hashlib.sha1(data).digest(), ext, max_faces, max_coordinate)
-    hit = _SCANS.get(key)
+    with _SCANS_LOCK:
+        hit = _SCANS.get(key)
     if hit is None:
-        hit = _SCANS[key] = _scan_data(data, ext, max_faces, max_coordinate, str(path))
-        if len(_SCANS) > _SCANS_MAX:
-            _SCANS.pop(next(iter(_SCANS)))
+        hit = _scan_data(data, ext, max_faces, max_coordinate, str(path))
+        with _SCANS_LOCK:
+            _SCANS[key] = hit
+            while len(_SCANS) > _SCANS_MAX:
+                _SCANS.pop(next(iter(_SCANS)))
     return copy.deepcopy(hit)
 
 
@@ -153,6 +157,7 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
 #: are copies of its input's, and both are validated; at most :data:`_SCANS_MAX` kept.
 _SCANS: dict[tuple, MeshScan] = {}
 _SCANS_MAX = 4096
+_SCANS_LOCK = threading.Lock()
 
 
 def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, source: str) -> MeshScan:
