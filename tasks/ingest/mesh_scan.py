@@ -7,13 +7,12 @@ import hashlib
 import io
 import math
 import re
-import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import mesh_io, mesh_materials, safexml
+from asset2sim import file_memo, mesh_io, mesh_materials, safexml
 from asset2sim.tasks.ingest.findings import MAX_COORDINATE
 from asset2sim.tasks.ingest.mesh_paths import read_regular
 
@@ -142,22 +141,16 @@ def scan_mesh_file(path: Path | str, *, max_bytes: int = 64 << 20, max_faces: in
     if ext not in (".obj", ".stl"):  # trimesh's messages may name the file
         return _scan_data(data, ext, max_faces, max_coordinate, str(path))
     key = (hashlib.sha1(data).digest(), ext, max_faces, max_coordinate)
-    with _SCANS_LOCK:
-        hit = _SCANS.get(key)
-    if hit is None:
-        hit = _scan_data(data, ext, max_faces, max_coordinate, str(path))
-        with _SCANS_LOCK:
-            _SCANS[key] = hit
-            while len(_SCANS) > _SCANS_MAX:
-                _SCANS.pop(next(iter(_SCANS)))
-    return copy.deepcopy(hit)
+    scan = _SCANS.get(key)
+    if scan is None:
+        scan = _scan_data(data, ext, max_faces, max_coordinate, str(path))
+        _SCANS.put(key, (), scan)  # no file identities: the key is the content itself
+    return scan
 
 
-#: Scans of OBJ and STL files in this process by (SHA-1 of the bytes, extension, caps): an output's visual meshes
-#: are copies of its input's, and both are validated; at most :data:`_SCANS_MAX` kept.
-_SCANS: dict[tuple, MeshScan] = {}
-_SCANS_MAX = 4096
-_SCANS_LOCK = threading.Lock()
+#: Scans of OBJ and STL files in this process by (SHA-1 of the bytes, extension, caps), each caller given its own
+#: copy: an output's visual meshes are copies of its input's, and both are validated.
+_SCANS: file_memo.FileMemo[MeshScan] = file_memo.FileMemo(copy.deepcopy, max_entries=4096)
 
 
 def _scan_data(data: bytes, ext: str, max_faces: int, max_coordinate: float, source: str) -> MeshScan:
