@@ -4,7 +4,7 @@ request kind, and the failures by mode.
 
     python benchmarks/bench_generalization.py [--manifest PATH] [--out DIR]
         [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,mount]
-        [--no-generated] [--evaluate]
+        [--no-generated] [--evaluate] [--one-mesh-per-link]
 
 Corpus (issue 16): for every manifest object (its category from the
 manifest), the requests
@@ -41,7 +41,11 @@ the floor stops, a steadier opening; else ``state_out_of_band``) and, with
 ``--evaluate``, the evaluation (the interaction tier: probes included) lists
 no failures. Cases run in ``--jobs`` worker processes (default 1); ``--limit``
 keeps the first N cases (in a deterministic, category-interleaved order so a
-small limit still spans categories). Writes DIR/cases.json.
+small limit still spans categories). ``--one-mesh-per-link`` refines the
+generated assets with each link's meshes merged into one OBJ of one group
+(``tests.unseen_assets.one_mesh_per_link``), as PartNet-Mobility's files
+are, so that no convex piece comes for free from the generator's boxes.
+Writes DIR/cases.json.
 """
 
 from __future__ import annotations
@@ -107,8 +111,10 @@ def requests_for(category: str, src: Path, kinds: tuple[str, ...] = KINDS) -> li
     return out
 
 
-def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], ids: set[str]) -> list[dict]:
-    """Every case: {"case", "source", "asset", "category", "kind", "prompt", "generated"}."""
+def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], ids: set[str],
+                 one_mesh: bool = False) -> list[dict]:
+    """Every case: {"case", "source", "asset", "category", "kind", "prompt", "generated"}; with ``one_mesh``, each
+    generated asset as :func:`tests.unseen_assets.one_mesh_per_link` rewrites a copy of it (under ``gen_root/one_mesh``)."""
     per_object: list[list[dict]] = []
     rows = list(csv.DictReader(manifest.open())) if manifest.is_file() else []
     objects = [(r["id"], manifest.parent / r["id"], r["category"], False) for r in rows]
@@ -133,6 +139,9 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
             if not (folder / "mobility.urdf").is_file():
                 build(folder)
             objects.append((f"gen:{name}", folder, cat, True))
+        if one_mesh:
+            objects = [(oid, _one_mesh_copy(src, gen_root / "one_mesh" / oid[4:], unseen_assets) if gen else src, cat, gen)
+                       for oid, src, cat, gen in objects]
     for oid, src, cat, gen in objects:
         if ids and oid not in ids:
             continue
@@ -147,6 +156,17 @@ def build_corpus(manifest: Path, gen_root: Path | None, kinds: tuple[str, ...], 
             if i < len(cases):
                 out.append(cases[i])
     return out
+
+
+def _one_mesh_copy(src: Path, dst: Path, unseen_assets) -> Path:
+    """``dst``: a copy of the generated asset ``src`` with one OBJ of one group per link (made once)."""
+    import shutil
+
+    if not (dst / "mobility.urdf").is_file():
+        shutil.rmtree(dst, ignore_errors=True)
+        shutil.copytree(src, dst)
+        unseen_assets.one_mesh_per_link(dst)
+    return dst
 
 
 #: Opening fraction (of the range) a written state may lie beyond its band's
@@ -262,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--kinds", default=",".join(KINDS), help="request kinds to include")
     ap.add_argument("--no-generated", action="store_true", help="dev objects only")
     ap.add_argument("--evaluate", action="store_true", help="also run the evaluation (extras; probes) and count its failures")
+    ap.add_argument("--one-mesh-per-link", action="store_true",
+                    help="generated assets with each link's meshes merged into one OBJ of one group, as PartNet-Mobility's files are")
     args = ap.parse_args(argv)
     kinds = tuple(k for k in args.kinds.split(",") if k)
     unknown = set(kinds) - set(KINDS)
@@ -269,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(KINDS)}")
     args.out.mkdir(parents=True, exist_ok=True)
     cases = build_corpus(args.manifest, None if args.no_generated else args.out / "generated", kinds,
-                         set(filter(None, args.ids.split(","))))
+                         set(filter(None, args.ids.split(","))), one_mesh=args.one_mesh_per_link)
     if args.limit:
         cases = cases[: args.limit]
     print(f"{len(cases)} cases, {args.jobs} job(s)", flush=True)

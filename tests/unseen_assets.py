@@ -7,9 +7,13 @@ dataset; dimensions are in object units, as PartNet-Mobility's are.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
+
+from asset2sim import atomic, mesh_io, urdf
 from asset2sim.demo_assets import _serialise, _write_folder
 from asset2sim.demo_geometry import DemoArticulation, DemoJoint, DemoLink, Part, Pose, box_xyz
 
@@ -373,6 +377,43 @@ def build_kettle(folder: Path) -> Path:
              "revolute", "link_1", (0.0, h + 0.02, -d), (-1.0, 0.0, 0.0), 0.0, 1.4)
     return b.write(folder)
 
+
+
+def one_mesh_per_link(folder: Path) -> Path:
+    """Rewrite the generated asset in ``folder`` in place so that each link draws and collides with one OBJ of one
+    group holding all its parts (``textured_objs/merged-<link>.obj``), as PartNet-Mobility's files are: one group per
+    file, a part concave as modelled, so that no convex piece comes for free from the generator's boxes. The per-part
+    files stay on disk, unreferenced. Returns ``folder``.
+
+    Raises:
+        ValueError: a link whose meshes differ in origin or scale (the builders of this module give all the parts of
+            a link the same).
+    """
+    folder = Path(folder)
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    for name, link in model.links.items():
+        for role in ("visuals", "collisions"):
+            meshes = [g for g in getattr(link, role) if g.kind == "mesh"]
+            if not meshes:
+                continue
+            first = meshes[0]
+            if any(not np.array_equal(g.origin, first.origin) or not np.array_equal(g.scale, first.scale) for g in meshes):
+                raise ValueError(f"{folder}: link {name!r}: its meshes differ in origin or scale")
+            verts, faces, n = [], [], 0
+            for g in meshes:
+                v, f, _ = mesh_io.read_mesh(folder / g.filename)
+                verts.append(v)
+                faces.append(f + n)
+                n += len(v)
+            rel = f"textured_objs/merged-{name}.obj"
+            mtl = Path(first.filename).with_suffix(".mtl").name
+            lines = [f"mtllib {mtl}", f"o {name}", *(f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.vstack(verts)),
+                     "usemtl material_0", *(f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.vstack(faces))]
+            atomic.write_text(folder / rel, "\n".join(lines) + "\n")
+            setattr(link, role, [dataclasses.replace(first, filename=rel, path=None)]
+                    + [g for g in getattr(link, role) if g.kind != "mesh"])
+    atomic.write_bytes(folder / "mobility.urdf", urdf.write_urdf(model, style=urdf.PARTNET_STYLE))
+    return folder
 
 #: Every builder of this module: (asset name, builder, category).
 UNSEEN_BUILDERS = (
