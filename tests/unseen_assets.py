@@ -378,7 +378,6 @@ def build_kettle(folder: Path) -> Path:
     return b.write(folder)
 
 
-
 def one_mesh_per_link(folder: Path) -> Path:
     """Rewrite the generated asset in ``folder`` in place so that each link draws and collides with one OBJ of one
     group holding all its parts (``textured_objs/merged-<link>.obj``), as PartNet-Mobility's files are: one group per
