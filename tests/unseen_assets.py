@@ -390,6 +390,7 @@ def one_mesh_per_link(folder: Path) -> Path:
     """
     folder = Path(folder)
     model = urdf.read_urdf(folder / "mobility.urdf")
+    merged: dict[tuple[str, ...], str] = {}  # the part files -> their merged file (visuals and collisions share them)
     for name, link in model.links.items():
         for role in ("visuals", "collisions"):
             meshes = [g for g in getattr(link, role) if g.kind == "mesh"]
@@ -398,21 +399,30 @@ def one_mesh_per_link(folder: Path) -> Path:
             first = meshes[0]
             if any(not np.array_equal(g.origin, first.origin) or not np.array_equal(g.scale, first.scale) for g in meshes):
                 raise ValueError(f"{folder}: link {name!r}: its meshes differ in origin or scale")
-            verts, faces, n = [], [], 0
-            for g in meshes:
-                v, f, _ = mesh_io.read_mesh(folder / g.filename)
-                verts.append(v)
-                faces.append(f + n)
-                n += len(v)
-            rel = f"textured_objs/merged-{name}.obj"
-            mtl = Path(first.filename).with_suffix(".mtl").name
-            lines = [f"mtllib {mtl}", f"o {name}", *(f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.vstack(verts)),
-                     "usemtl material_0", *(f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.vstack(faces))]
-            atomic.write_text(folder / rel, "\n".join(lines) + "\n")
+            files = tuple(g.filename for g in meshes)
+            rel = merged.get(files)
+            if rel is None:
+                rel = merged[files] = f"textured_objs/merged-{name}{'' if role == 'visuals' else '-collision'}.obj"
+                _write_merged_obj(folder, files, folder / rel, name)
             setattr(link, role, [dataclasses.replace(first, filename=rel, path=None)]
                     + [g for g in getattr(link, role) if g.kind != "mesh"])
     atomic.write_bytes(folder / "mobility.urdf", urdf.write_urdf(model, style=urdf.PARTNET_STYLE))
     return folder
+
+
+def _write_merged_obj(folder: Path, files: tuple[str, ...], dst: Path, group: str) -> None:
+    """Write ``dst``: the OBJ ``files`` (paths relative to ``folder``) as one group ``group``, with the first file's
+    material library and material ``material_0`` (the generator's)."""
+    verts, faces, n = [], [], 0
+    for rel in files:
+        v, f, _ = mesh_io.read_mesh(folder / rel)
+        verts.append(v)
+        faces.append(f + n)
+        n += len(v)
+    lines = [f"mtllib {Path(files[0]).with_suffix('.mtl').name}", f"o {group}",
+             *(f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.vstack(verts)),
+             "usemtl material_0", *(f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.vstack(faces))]
+    atomic.write_text(dst, "\n".join(lines) + "\n")
 
 #: Every builder of this module: (asset name, builder, category).
 UNSEEN_BUILDERS = (
