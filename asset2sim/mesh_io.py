@@ -36,7 +36,7 @@ from asset2sim.mesh_materials import (  # re-exported: the files an OBJ needs be
 
 __all__ = [
     "MeshCache", "MeshReadError", "ObjText", "file_bytes", "forget_under", "remember", "write_file", "hull_point_sets", "is_texture_statement", "load_trimesh", "mtl_libraries",
-    "mtl_texture_maps", "obj_groups", "obj_material_files", "obj_material_uses", "parse_vertex_lines", "read_mesh",
+    "group_meshes", "mtl_texture_maps", "obj_groups", "obj_material_files", "obj_material_uses", "parse_vertex_lines", "read_mesh",
     "read_mtl", "read_obj", "scan_obj_text"
 ]
 
@@ -301,6 +301,60 @@ def obj_groups(path: Path | str) -> list[np.ndarray]:
         if ids.min() < 0 or ids.max() >= len(v):
             raise MeshReadError(f"{path}: a face names a vertex that does not exist")
         out.append(v[ids])
+    return out
+
+
+def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Triangle meshes ``(vertices (k, 3), faces (m, 3) int)`` in file units, one per group of
+    :func:`hull_point_sets` in the same order (OBJ: per ``o``/``g`` group with faces, polygons
+    fan-triangulated, only the vertices its faces use; other formats: the whole mesh).
+
+    Raises:
+        MeshReadError: the file cannot be read or a face names a missing vertex.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".obj":
+        v, f, _ = read_mesh(path)
+        return [(v, f)]
+    try:
+        text = file_bytes(path).decode(errors="replace")
+    except OSError as exc:
+        raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
+    verts: list[tuple[float, float, float]] = []
+    groups: list[list[tuple[int, int, int]]] = []
+    current: list[tuple[int, int, int]] | None = None  # None: no face in this group yet
+    for line in text.splitlines():
+        if not line or line[0] not in "vfog":
+            continue
+        parts = line.split()
+        tag = parts[0]
+        if tag == "v":
+            try:
+                verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
+            except (IndexError, ValueError) as exc:
+                raise MeshReadError(f"{path}: bad vertex line {line!r}") from exc
+        elif tag == "f":
+            try:
+                ids = [int(tok.split("/")[0]) for tok in parts[1:]]
+            except ValueError as exc:
+                raise MeshReadError(f"{path}: bad face line {line!r}") from exc
+            ids = [i - 1 if i > 0 else len(verts) + i for i in ids]
+            current = current if current is not None else []
+            current += [(ids[0], ids[k], ids[k + 1]) for k in range(1, len(ids) - 1)]
+        elif tag in ("o", "g"):
+            if current is not None:
+                groups.append(current)
+            current = None
+    if current is not None:
+        groups.append(current)
+    v = np.asarray(verts, float).reshape(-1, 3)
+    out = []
+    for tris in groups:
+        f = np.asarray(tris, np.int64).reshape(-1, 3)
+        if len(f) and (f.min() < 0 or f.max() >= len(v)):
+            raise MeshReadError(f"{path}: a face names a vertex that does not exist")
+        ids, inv = np.unique(f, return_inverse=True)
+        out.append((v[ids], inv.reshape(-1, 3).astype(np.int64)))
     return out
 
 

@@ -73,7 +73,13 @@ class RefineConfig(BaseModel):
     sag_tolerance_prismatic: float = 0.002
     """Largest drift of a requested joint state during the rest test, m."""
     convex_decomposition: bool = True
-    """Allow CoACD decomposition of collision meshes whose hulls always overlap."""
+    """Allow CoACD decomposition of collision meshes: of those whose hulls always overlap and, with
+    ``open_containers``, of containers."""
+    open_containers: bool = False
+    """Give a part modelled as one mesh group with an open inside (a bucket, a trash can's body, a dishwasher
+    tub) a convex decomposition that leaves the inside open, instead of one solid hull, so that things can be put
+    into it (needs CoACD and ``convex_decomposition``; off by default: it costs CoACD time per container;
+    ``docs/guide/outputs.md``)."""
     engines: list[str] = Field(default_factory=lambda: default_engines())
     """Engines the post-check must pass in (worst case); PyBullet first."""
     max_decompositions: int = Field(32, ge=0)
@@ -96,5 +102,7 @@ class RefineConfig(BaseModel):
             data.pop("keep_declared", None)
         if data.get("clips", True):  # on (the default): the hash of every configuration before the option existed
             data.pop("clips", None)
+        if not data.get("open_containers", False):  # off (the default): the hash of every configuration before the option existed
+            data.pop("open_containers", None)
         blob = json.dumps(data, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]

@@ -33,6 +33,7 @@ from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import analyze, limits, render, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
+from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
@@ -129,7 +130,8 @@ def refine_asset(
             _announce_extract(asset, findings, log)
             cache = analyze.MeshCache()
             geometry = _analyze(asset, cache, log)
-            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, Workspace(asset) as ws:
+            with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, \
+                    Workspace(asset, open_containers=config.open_containers and config.convex_decomposition) as ws:
                 ctx.task = task
                 pose_note = _interpret(ctx, log)
                 att, pose_note = _synthesize_and_check(ctx, est, config, ws, cache, log, pose_note)
@@ -487,15 +489,16 @@ def _clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, 
     """The writer's clearance notes for the output as written with ``overlay``, ``state`` and
     ``overrides`` (cached pieces: nothing recomputed, no file changes)."""
     notes: list[str] = []
-    write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (ws.root, state), notes)
+    write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (ws.root, state), notes, ws.open_containers)
     return _clearance_lines(notes)
 
 
 def _clearance_lines(notes: list[str]) -> list[str]:
-    """The writer's collision notes on running clearance, a levelled footprint, pieces thinner than their part
-    and a child kept inside its parent past a stop."""
+    """The writer's collision notes on running clearance, a levelled footprint, pieces thinner than their part,
+    a child kept inside its parent past a stop and containers kept open."""
     return [n for n in notes if any(w in n for w in (sliding_clearance.RUNNING_CLEARANCE_NOTE, footprint.LEVEL_NOTE,
-                                                     collision_geometry.DENSITY_NOTE, parent_child_separation.PAST_STOP_NOTE))]
+                                                     collision_geometry.DENSITY_NOTE, parent_child_separation.PAST_STOP_NOTE,
+                                                     collision_geometry.CAVITY_NOTE))]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: _StageLog,
@@ -770,7 +773,7 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
         overrides, dnotes = collision.improve_collisions(sess, asset, deep, s, ws.root, cache=mesh_cache,
                                                          max_decompositions=config.max_decompositions,
                                                          folder=write.collision_folder(asset))
-    except (collision.DecompositionUnavailable, ValueError) as exc:
+    except (DecompositionUnavailable, ValueError) as exc:
         say("refine_state", f"collision improvement skipped: {exc}")
         st.collision_changes = [f"collision improvement skipped: {exc}"]
         return st, base

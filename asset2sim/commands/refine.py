@@ -67,6 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)"))
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
     parser.add_argument("--no-clips", action="store_true", help="skip the clips of each task-relevant joint's sweep (clips/)")
+    parser.add_argument("--open-containers", action="store_true", help=(
+        "give a container modelled as one mesh group (a bucket, a trash can's body, a dishwasher tub) a convex "
+        "decomposition that leaves its inside open, so things can be put into it (needs the [coacd] extra; "
+        "docs/guide/outputs.md)"))
     parser.add_argument("--quiet", "-q", action="store_true", help="print only warnings and the summary")
 
 
@@ -176,6 +180,8 @@ def options(args: argparse.Namespace) -> RefineConfig:
         fields["keep_declared"] = True
     if getattr(args, "no_clips", False):
         fields["clips"] = False
+    if getattr(args, "open_containers", False):
+        fields["open_containers"] = True
     engines = getattr(args, "engines", None)
     if engines or not getattr(args, "config", None):
         listed = parse_engines(engines or ",".join(default_engines()))

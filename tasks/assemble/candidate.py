@@ -44,17 +44,17 @@ class Candidate:
         object.__setattr__(self, "collision_overrides",
                            MappingProxyType({k: tuple(v) for k, v in (self.collision_overrides or {}).items()}))
 
-    def write_into(self, folder: Path, *, copy: bool) -> write.OutputPaths:
+    def write_into(self, folder: Path, *, copy: bool, open_containers: bool = False) -> write.OutputPaths:
         """Write this candidate's files into ``folder``
         (:func:`asset2sim.tasks.assemble.write.write_output`; meshes copied
-        when ``copy``).
+        when ``copy``; containers decomposed with ``open_containers``).
 
         Raises:
             OutputError: ``folder`` inside the input, or an incomplete overlay.
         """
         return write.write_output(self.asset, self.overlay, folder, dict(self.state), copy=copy,
                                   collision_overrides={k: list(v) for k, v in self.collision_overrides.items()},
-                                  root_rotation=self.root_rotation)
+                                  root_rotation=self.root_rotation, open_containers=open_containers)
 
 
 #: Name prefix of a workspace folder, followed by the process id of the refine that owns it.
@@ -80,10 +80,13 @@ def _remove_orphans(parent: Path) -> None:
 class Workspace:
     """The scratch folder a refine's engine sessions load candidates from:
     a fresh temporary folder (meshes copied into it once), removed by
-    :meth:`close`. Only engines read what is written here."""
+    :meth:`close`. Only engines read what is written here. ``open_containers``:
+    a container's collision is a decomposition that leaves its inside open
+    (:func:`asset2sim.tasks.assemble.collision_geometry.link_pieces`)."""
 
-    def __init__(self, asset: AssetDescription):
+    def __init__(self, asset: AssetDescription, *, open_containers: bool = False):
         self.asset = asset
+        self.open_containers = open_containers
         _remove_orphans(Path(tempfile.gettempdir()))
         self.root = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")).resolve()
         atomic.add_scratch(self.root)  # engines read it and close() removes it: no fsync
@@ -101,7 +104,7 @@ class Workspace:
         """Write ``candidate`` into the scratch folder for the engines to load.
         Returns the scratch URDF; :attr:`collision_notes` holds what the
         writer's convex pieces changed."""
-        paths = candidate.write_into(self.root, copy=not self._copied)
+        paths = candidate.write_into(self.root, copy=not self._copied, open_containers=self.open_containers)
         self._copied = True
         self.collision_notes = list(paths.collision_notes)
         self._written, self._model = (paths.urdf_bytes, paths.urdf), None

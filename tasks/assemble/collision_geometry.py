@@ -2,9 +2,10 @@
 
 :func:`convex_collisions` replaces the mesh collisions of every link of a URDF
 model by a few closed convex pieces (:func:`link_pieces`: the hull of each OBJ
-group, parents cut around their children, merged, separated, with running
-clearance), written as OBJ files in the link frame. ``docs/design/simulators.md``
-explains why.
+group, or a convex decomposition of a group holding an open cavity such as a
+bucket's or a drawer's inside, parents cut around their children, merged,
+separated, with running clearance), written as OBJ files in the link frame.
+``docs/design/simulators.md`` explains why.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from scipy.spatial import QhullError
 
 from asset2sim import array_cache, atomic, file_names, mesh_io, urdf
 from asset2sim.engines.loading import mesh_hulls
-from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim
+from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim, surface_samples
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, MAX_PIECES_PER_LINK,
                                                     CollisionGeometryError, Piece, depth_inside, drop_slivers,
                                                     merge_pieces, piece_obj, solid_points)
@@ -28,11 +29,30 @@ from asset2sim.tasks.assemble.joint_sweep import swept_child_points, swept_other
 from asset2sim.tasks.assemble.parent_child_separation import separate_parent_child
 from asset2sim.tasks.assemble.piece_penetration import parent_child_depths
 from asset2sim.tasks.assemble.sliding_clearance import running_clearance, swept_clearance
+from asset2sim.tasks.geometry import cavities, decomposition
+
+#: Share of an open cavity's core a decomposition must leave free to replace the part's hull.
+OPENED_SHARE = 0.75
+#: CoACD settings for a part holding an open cavity: a coarser concavity threshold and a shallower search than
+#: :data:`decomposition.COACD_SETTINGS` (walls and a bottom are what the cavity needs; measured 1-5 s a part).
+CAVITY_COACD = {**decomposition.COACD_SETTINGS, "threshold": 0.1, "mcts_iterations": 20, "mcts_max_depth": 1}
+#: Surface samples along the part's largest extent that its decomposition is refitted to.
+REFIT_SAMPLES = 80
+#: Thinnest piece of a decomposed container's wall, m, grown toward the cavity: a model's walls are often single
+#: sheets, and a piece must be thick enough for a running clearance (:data:`sliding_clearance.RUNNING_CLEARANCE`)
+#: to be taken off it (at most half its width).
+CAVITY_WALL = 0.006
+#: Words of the notes on a part holding an open cavity.
+CAVITY_NOTE = "holds an open cavity"
 
 
-def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> tuple[list[Piece], int]:
-    """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame) and the number of groups."""
-    out: list[Piece] = []
+def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: bool = True,
+                  slides_along: set[str] | None = None) -> tuple[list[Piece], int, np.ndarray | None, set[str]]:
+    """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame; with ``decompose``, a group holding
+    an open cavity the link's other groups leave open decomposed, :func:`_open_pieces`, unless the link slides along
+    the links ``slides_along``), the number of groups, the cavities' core points (K, 3) m (None: none) and the
+    files of the groups decomposed."""
+    found: list[tuple[int, int, Piece]] = []  # (collision, group, hull)
     n = 0
     for k, c in enumerate(link.collisions):
         if c.kind != "mesh":
@@ -49,15 +69,150 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> tuple[lis
                 continue
             world = solid @ c.origin[:3, :3].T + c.origin[:3, 3]
             try:
-                out.append(Piece.of(world, (str(c.filename),)))
+                found.append((k, g, Piece.of(world, (str(c.filename),))))
             except (QhullError, ValueError):
                 notes.append(f"link {link.name!r}: group {g} of {c.filename} has no hull; no collision")
-    return out, n
+    out: list[Piece] = []
+    cores: list[np.ndarray] = []
+    opened_files: set[str] = set()
+    surfaces = _link_surfaces(link, mesh_path) if decompose and any(_may_hold_cavity(p) for _, _, p in found) else None
+    for k, g, piece in found:
+        opened = None
+        if surfaces is not None and _may_hold_cavity(piece) and (k, g) in surfaces[1]:
+            opened = _open_pieces(link.name, link.collisions[k], g, piece, surfaces[1][(k, g)], surfaces[0], notes,
+                                  slides_along)
+        if opened is None:
+            out.append(piece)
+        else:
+            out += opened[0]
+            cores.append(opened[1])
+            opened_files.add(str(link.collisions[k].filename))
+    return out, n, (np.vstack(cores) if cores else None), opened_files
+
+
+def _sliding_neighbours(model: urdf.UrdfModel, mesh_path) -> dict[str, set[str]]:
+    """Link -> the links it slides along (:func:`running_clearance` on every link's group hulls: contacts between
+    a moving link and a link its joint does not move, parent and child excepted)."""
+    trial = {name: _group_pieces(link, mesh_path, [], decompose=False)[0] for name, link in model.links.items()}
+    out: dict[str, set[str]] = {}
+    for a, b in running_clearance(model, trial, []):
+        out.setdefault(a, set()).add(b)
+        out.setdefault(b, set()).add(a)
+    return out
+
+
+def _may_hold_cavity(piece: Piece) -> bool:
+    """A hull wide enough every way (principal extents) to hold a ball of :data:`cavities.MIN_CAVITY_RADIUS`."""
+    p = piece.points
+    if len(p) < 4:
+        return False
+    _, _, vt = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
+    ext = np.ptp(p @ vt.T, axis=0)
+    return bool(ext.min() >= 2.0 * cavities.MIN_CAVITY_RADIUS)
+
+
+def _link_surfaces(link: urdf.UrdfLink, mesh_path) -> tuple[tuple[np.ndarray, np.ndarray],
+                                                               dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]] | None:
+    """The triangles of every mesh collision group of ``link`` in the link frame (m): (all of them as one mesh
+    (vertices (V, 3), faces (F, 3)), (collision, group) -> that group's mesh), or None when a file cannot be read
+    the way its hulls were (then no group is decomposed)."""
+    by_group: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    for k, c in enumerate(link.collisions):
+        if c.kind != "mesh":
+            continue
+        try:
+            meshes = mesh_io.group_meshes(mesh_path(c))
+            if len(meshes) != len(mesh_hulls(mesh_path(c), c.scale)):
+                return None
+        except (mesh_io.MeshReadError, urdf.UrdfError):
+            return None
+        s, R, t = c.scale, c.origin[:3, :3], c.origin[:3, 3]
+        for g, (v, f) in enumerate(meshes):
+            if len(f):
+                by_group[(k, g)] = ((v * s) @ R.T + t, f)
+    if not by_group:
+        return None
+    offsets = np.cumsum([0] + [len(v) for v, _ in by_group.values()])
+    allv = np.vstack([v for v, _ in by_group.values()])
+    allf = np.vstack([f + o for (_, f), o in zip(by_group.values(), offsets)])
+    return (allv, allf), by_group
+
+
+def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tuple[np.ndarray, np.ndarray],
+                 link_mesh: tuple[np.ndarray, np.ndarray], notes: list[str],
+                 slides_along: set[str] | None = None) -> tuple[list[Piece], np.ndarray] | None:
+    """The convex pieces (CoACD, :mod:`~asset2sim.tasks.geometry.decomposition`) of ``mesh`` (vertices (V, 3) m,
+    faces (F, 3)), group ``g`` of collision ``c``, replacing its hull ``hull`` when the hull holds an open cavity
+    that the link's surfaces ``link_mesh`` leave open (:func:`cavities.open_cavity`), the link slides along no
+    other link (``slides_along``: a part sliding across the seams between pieces catches on them in PyBullet, as
+    drawers stacked in a cabinet would) and the pieces leave at least :data:`OPENED_SHARE` of the cavity free, with
+    the cavity's core points (K, 3) m; None (the hull stays, a note says why when there is a cavity) otherwise."""
+    try:
+        hv, hf = mesh_io.convex_hull_mesh(hull.points)
+        cav = cavities.open_cavity(link_mesh[0], link_mesh[1], hv, hf)
+    except (QhullError, ValueError):
+        return None
+    if cav is None:
+        return None
+    what = (f"link {link!r}: group {g} of {c.filename} {CAVITY_NOTE} (a ball of {cav.radius * 1000:.0f} mm radius, "
+            f"{100 * cav.volume / max(cav.hull_volume, 1e-12):.0f} % of its hull)")
+    if slides_along:
+        notes.append(f"{what}; kept as one convex hull, solid inside: it slides along {', '.join(map(repr, sorted(slides_along)))} "
+                     "and a part sliding across the seams between convex pieces catches on them")
+        return None
+    try:
+        parts = decomposition.decompose(mesh[0], mesh[1], CAVITY_COACD, refit=False)
+    except (decomposition.DecompositionUnavailable, ValueError) as exc:
+        notes.append(f"{what}; kept as one convex hull, solid inside: {exc}")
+        return None
+    # refitted to points on the part's own surface: CoACD's pieces lie on its remesh, offset from the surface,
+    # and a few corners per wall are too few to refit to
+    size = float(np.ptp(mesh[0], axis=0).max())
+    surface = np.vstack([mesh[0], surface_samples(mesh[0][mesh[1]], size / REFIT_SAMPLES)])
+    pieces = []
+    inward = cav.core.mean(axis=0)
+    for pv, _ in decomposition.refit_pieces(surface, parts):
+        solid = _thick_wall(pv, inward)
+        if solid is None:
+            continue
+        try:
+            pieces.append(Piece.of(solid, (str(c.filename),)))
+        except (QhullError, ValueError):
+            continue
+    free = cavities.open_fraction(cav.core, [p.equations for p in pieces])
+    if not pieces or free < OPENED_SHARE:
+        notes.append(f"{what}; kept as one convex hull, solid inside: its convex decomposition leaves "
+                     f"{100 * free:.0f} % of the cavity free")
+        return None
+    notes.append(f"{what}: {len(pieces)} convex pieces (CoACD) instead of its hull, so that things can be put in it")
+    return pieces, cav.core
+
+
+def _thick_wall(points: np.ndarray, inward: np.ndarray) -> np.ndarray | None:
+    """``points`` (k, 3) m of a piece of a container's wall, grown to :data:`CAVITY_WALL` m along their thinnest
+    principal direction toward ``inward`` (3,) m (the cavity: the outer face stays where the part is); None when
+    they span no area."""
+    p = np.asarray(points, float)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if len(p) < 3:
+        return None
+    c = p.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+    if len(sv) < 2 or sv[1] <= 1e-9 * max(float(sv[0]), 1e-12):
+        return None
+    n = vt[2] if vt.shape[0] == 3 else np.cross(vt[0], vt[1])
+    n = n / np.linalg.norm(n)
+    width = float(np.ptp(p @ n))
+    if width >= CAVITY_WALL:
+        return p
+    if float(n @ (np.asarray(inward, float) - c)) < 0:
+        n = -n
+    return np.vstack([p, p + n * (CAVITY_WALL - width)])
 
 
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
-                level: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
+                level: bool = False, open_containers: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m), cached in this process and on disk.
 
     The pieces depend on the joint limits (the ranges swept); only what ``state`` puts a child into its
@@ -69,6 +224,8 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         state: joint -> rad or m, the initial state (None: nothing state-dependent).
         limit: most pieces per link.
         decompose: cut a parent piece that contains its child (else only a note).
+        open_containers: with ``decompose``, decompose a part that holds an open cavity (:func:`_open_pieces`;
+            else its hull, solid inside).
         level: the object is free-standing: its footprint at ``state`` is made planar.
 
     Returns:
@@ -77,8 +234,9 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     Raises:
         CollisionGeometryError: a collision mesh cannot be read.
     """
-    key = _cache_key(model, mesh_path, limit, decompose)
-    done = _cached_pieces(key, model, mesh_path, limit, decompose)
+    opening = decompose and open_containers
+    key = _cache_key(model, mesh_path, limit, decompose, opening)
+    done = _cached_pieces(key, model, mesh_path, limit, decompose, opening)
     if state is not None:
         skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
         done = _STATE_CACHE.get(skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level))
@@ -86,29 +244,39 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
 
 
 def _cached_pieces(key: str, model: urdf.UrdfModel, mesh_path, limit: int,
-                   decompose: bool) -> tuple[dict[str, list[Piece]], list[str]]:
+                   decompose: bool, opening: bool) -> tuple[dict[str, list[Piece]], list[str]]:
     """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache, else made."""
     hit = _PIECE_CACHE.get(key)
     if hit is not None:
         return hit
-    disk_key = _content_key(model, mesh_path, limit, decompose)
+    disk_key = _content_key(model, mesh_path, limit, decompose, opening)
     hit = _load_pieces(disk_key, model) if disk_key is not None else None
     if hit is not None:
         return _remember(_PIECE_CACHE, key, hit)
-    hit = _remember(_PIECE_CACHE, key, _made_pieces(model, mesh_path, limit, decompose))
+    hit = _remember(_PIECE_CACHE, key, _made_pieces(model, mesh_path, limit, decompose, opening))
     if disk_key is not None:
         _store_pieces(disk_key, hit)
     return hit
 
 
-def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> tuple[dict[str, list[Piece]], list[str]]:
-    """(link -> pieces, notes) before any state."""
+def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
+                 opening: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
+    """(link -> pieces, notes) before any state; ``opening``: containers decomposed (:func:`_open_pieces`)."""
     notes: list[str] = []
-    pieces = {name: _group_pieces(link, mesh_path, notes)[0] for name, link in model.links.items()}
-    _resolve_containment(model, pieces, mesh_path, notes, decompose, limit)
+    pieces: dict[str, list[Piece]] = {}
+    cores: dict[str, np.ndarray] = {}
+    whole: set[tuple[str, str]] = set()
+    sliding = _sliding_neighbours(model, mesh_path) if opening else {}
+    for name, link in model.links.items():
+        pieces[name], _, core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name))
+        whole.update((name, source) for source in opened)
+        if core is not None:
+            cores[name] = core
+    # a container's decomposition is not cut again around a child (a new cut would fill its cavity): only trimmed
+    _resolve_containment(model, pieces, mesh_path, notes, decompose, limit, frozenset(whole))
     for name in model.links:
         if len(pieces[name]) > limit:
-            _merge_link(model, pieces, name, limit, decompose, notes)
+            _merge_link(model, pieces, name, limit, decompose, notes, cores.get(name))
     if decompose:
         separate_parent_child(model, pieces, notes)
     running_clearance(model, pieces, notes)
@@ -119,12 +287,13 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
 
 
 def _merge_link(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], name: str, limit: int, decompose: bool,
-                notes: list[str]) -> None:
-    """Merge the pieces of link ``name`` (in place) down to ``limit``, guarded against the other links; a merge
-    that holds a child again is trimmed (``decompose``)."""
+                notes: list[str], cavity: np.ndarray | None = None) -> None:
+    """Merge the pieces of link ``name`` (in place) down to ``limit``, guarded against the other links and the
+    link's own open cavities (``cavity`` (K, 3) m core points); a merge that holds a child again is trimmed
+    (``decompose``)."""
     n = len(pieces[name])
     guard = [x for x in (swept_other_points(model, pieces, name),
-                         *swept_child_points(model, pieces, name, support=True).values()) if x is not None]
+                         *swept_child_points(model, pieces, name, support=True).values(), cavity) if x is not None]
     guard = np.vstack(guard) if guard else None
     # merges that hold no other link over the ranges down to the limit; beyond
     # MAX_PIECES_HARD (pieces a parent was cut into around its child) any merge
@@ -176,10 +345,11 @@ PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.a
                "asset2sim.tasks.assemble.convex_pieces", "asset2sim.tasks.assemble.footprint", "asset2sim.tasks.assemble.joint_sweep",
                "asset2sim.tasks.assemble.parent_child_separation", "asset2sim.tasks.assemble.piece_penetration",
                "asset2sim.tasks.assemble.sliding_clearance", "asset2sim.tasks.geometry.limits", "asset2sim.mesh_io",
-               "asset2sim.engines.loading", "asset2sim.urdf", "asset2sim.frames")
+               "asset2sim.engines.loading", "asset2sim.urdf", "asset2sim.frames", "asset2sim.tasks.geometry.cavities",
+               "asset2sim.tasks.geometry.decomposition", "asset2sim.tasks.geometry.voxels")
 
 
-def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str | None:
+def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False) -> str | None:
     """The on-disk key: :func:`_model_digest` with the collision meshes' bytes and the source of
     :data:`PIECES_CODE`; None when either cannot be read."""
     try:
@@ -193,7 +363,7 @@ def _content_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) 
         except OSError:
             return None
 
-    return _model_digest(model, mesh_path, limit, decompose, content, code)
+    return _model_digest(model, mesh_path, limit, decompose, content, code, opening)
 
 
 def _store_pieces(key: str, hit: tuple[dict[str, list[Piece]], list[str]]) -> None:
@@ -227,10 +397,10 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
 
 
 def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
-                  mesh_id: Callable[[Path], bytes | None], prefix: str = "") -> str | None:
+                  mesh_id: Callable[[Path], bytes | None], prefix: str = "", opening: bool = False) -> str | None:
     """Digest of everything :func:`link_pieces` reads (each mesh as ``mesh_id`` of its file), after ``prefix``;
     None when ``mesh_id`` gives None."""
-    parts: list[bytes | str] = [prefix, repr((limit, decompose))]
+    parts: list[bytes | str] = [prefix, repr((limit, decompose, opening))]
     for name, link in model.links.items():
         parts.append(name)
         for c in link.collisions:
@@ -247,7 +417,7 @@ def _model_digest(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
     return array_cache.digest(*parts)
 
 
-def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) -> str:
+def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool, opening: bool = False) -> str:
     """The in-process key: :func:`_model_digest` with each mesh file's resolved path, mtime and size."""
 
     def identity(path: Path) -> bytes:
@@ -257,7 +427,7 @@ def _cache_key(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool) ->
         except OSError:
             return str(path).encode()
 
-    return _model_digest(model, mesh_path, limit, decompose, identity)
+    return _model_digest(model, mesh_path, limit, decompose, identity, opening=opening)
 
 
 #: Words of the note on a link denser over its pieces than its material allows.
@@ -266,7 +436,7 @@ DENSITY_NOTE = "denser than its material"
 
 def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: dict[str, float] | None = None,
                       mesh_base: Path | None = None, *, decompose: bool = True, level: bool = False,
-                      max_density: dict[str, float] | None = None) -> list[str]:
+                      max_density: dict[str, float] | None = None, open_containers: bool = False) -> list[str]:
     """Replace the mesh collisions of every link of ``model`` (in place) by the pieces of :func:`link_pieces`,
     written as ``out_dir/folder/<link>_hull<i>_<digest>.obj`` (link frame, m; an unchanged file is not
     rewritten). Primitive collisions stay.
@@ -279,6 +449,7 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
         level: the object is free-standing: its footprint at ``state`` is made planar.
         max_density: link -> the densest its material may be (kg/m^3): a link whose inertial mass over its
             pieces' volume exceeds it is noted.
+        open_containers: see :func:`link_pieces`.
 
     Returns:
         notes (what changed).
@@ -292,7 +463,8 @@ def convex_collisions(model: urdf.UrdfModel, out_dir: Path, folder: str, state: 
     def mesh_path(g: urdf.UrdfGeometry) -> Path:
         return Path(g.path) if g.path is not None else base / str(g.filename)
 
-    pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose, level=level and state is not None)
+    pieces, notes = link_pieces(model, mesh_path, state, decompose=decompose, level=level and state is not None,
+                                open_containers=open_containers)
     for name, link in model.links.items():
         if not any(c.kind == "mesh" for c in link.collisions):
             continue

@@ -225,11 +225,14 @@ def probe_points(points: np.ndarray, pieces: list[Piece], n: int = PROBE_POINTS)
     return points[np.concatenate([head, rest[:: max(1, len(rest) // (n - len(head)))]])]
 
 
-def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit: int) -> None:
+def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit: int,
+                         whole: frozenset[tuple[str, str]] = frozenset()) -> None:
     """Cut, in place, the parent pieces that contain a child deeper than
     :data:`CONTAINMENT_TOLERANCE` anywhere over the child's joint range
     (:func:`_split_pieces` around all children at once, kept only when they
-    then sit less deep); pieces that still hold a child are trimmed (:func:`_trim`)."""
+    then sit less deep); pieces that still hold a child are trimmed (:func:`_trim`).
+    The pieces of a (link, source) in ``whole`` (a container's decomposition, whose
+    cavity a new cut would fill) are never cut again, only trimmed."""
     for parent in list(pieces):
         swept = swept_child_points(model, pieces, parent, support=True)
         if not swept:
@@ -243,7 +246,10 @@ def _resolve_containment(model, pieces, mesh_path, notes, decompose: bool, limit
         if not decompose:
             notes.append(f"{names} sit {before * 1000:.3g} mm inside the collision hull of their parent {parent!r} over their ranges")
             continue
-        sources = sorted({s for _, p in deep for s in p.sources})
+        sources = sorted({s for _, p in deep for s in p.sources if (parent, s) not in whole})
+        if not sources:
+            _trim(pieces, parent, names, pts, before, notes)
+            continue
         trial = [p for p in pieces[parent] if not set(p.sources) & set(sources)]
         budget = max(2, limit - len(trial)) if len(sources) == 1 else max(2, (limit - len(trial)) // len(sources))
         probe = probe_points(pts, [p for _, p in deep])

@@ -129,14 +129,15 @@ def _moving_links(model: urdf.UrdfModel, pieces: dict[str, list[Piece]]):
                                   and parent_of.get(ln) != o and parent_of.get(o) != ln]
 
 
-def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> None:
+def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes: list[str]) -> set[tuple[str, str]]:
     """Give running clearance, in place, to every sliding contact between a
     link a movable joint moves and a link it does not move (parent-child
     pairs excepted), measured at :func:`reference_state`: each moving piece in
     contact with an overlap of at most :data:`TOUCHING_OVERLAP` along a face
     that slides is squeezed back (:func:`clear_sliding_contact`) by the first
     joint in file order that moves it, once per pair of pieces. Notes name
-    each change."""
+    each change; returns the (moving link, other link) pairs given clearance."""
+    pairs: set[tuple[str, str]] = set()
     poses = model.link_poses(reference_state(model))
     done: set[tuple[str, int, str, int]] = set()
     boxes = {ln: [(p.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]) for p in pl] for ln, pl in pieces.items()}
@@ -168,8 +169,10 @@ def running_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], not
                     except (QhullError, ValueError):
                         continue
                     boxes[ln][i] = pieces[ln][i].points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
+                    pairs.add((ln, other))
                     notes.append(f"link {ln!r}: collision piece {i} given {used * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against "
                                  f"{other!r} (gap {g * 1000:.2g} mm, sliding along {joint.name!r})")
+    return pairs
 
 
 #: Positions sampled over a revolute joint's range (a continuous joint's full turn) by :func:`swept_clearance`.

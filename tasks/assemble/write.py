@@ -51,7 +51,7 @@ def collision_folder(asset: AssetDescription) -> str:
 
 def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: dict | None = None,
                root_rotation: np.ndarray | None = None, collision_out: tuple[Path, dict[str, float]] | None = None,
-               collision_notes: list[str] | None = None) -> bytes:
+               collision_notes: list[str] | None = None, open_containers: bool = False) -> bytes:
     """The revised URDF (bytes, UTF-8) for ``overlay`` applied to ``asset``: scale baked in, the overlay's
     inertial on every link that has one, ``<dynamics>`` and a complete ``<limit>`` (effort and velocity 1000
     when absent) on every movable joint, an explicit ``<axis>`` on every joint and a comment pointing to
@@ -63,7 +63,8 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     rotation baked into the root link's geometry and the joints hanging from it. ``collision_out``:
     (output folder, initial state): the mesh collisions become the convex pieces of
     :func:`asset2sim.tasks.assemble.collision_geometry.convex_collisions`, written into the folder (a
-    free-standing object's footprint levelled); their notes are appended to ``collision_notes`` when given.
+    free-standing object's footprint levelled; with ``open_containers`` a container decomposed so that its
+    inside stays open); their notes are appended to ``collision_notes`` when given.
 
     Raises:
         OutputError: the overlay lacks an entry for a link with geometry or a
@@ -86,6 +87,7 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
         densest = {name: max_density(lp) for name, lp in overlay.links.items()}
         notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free,
+                                                     open_containers=open_containers,
                                                      max_density=densest)
         if collision_notes is not None:
             collision_notes.extend(notes)
@@ -165,14 +167,15 @@ def _urdf_comment(s: float, overlay: Overlay) -> str:
 
 
 def write_output(asset: AssetDescription, overlay: Overlay, out_dir: Path, initial_state: dict[str, float], *, copy: bool = True,
-                 collision_overrides: dict | None = None, root_rotation: np.ndarray | None = None) -> OutputPaths:
+                 collision_overrides: dict | None = None, root_rotation: np.ndarray | None = None,
+                 open_containers: bool = False) -> OutputPaths:
     """Write (or rewrite) the output folder: meshes, ``mobility.urdf``, ``initial_state.json``,
     ``overlay.json`` and (when the input labelled parts) ``semantics.txt``.
 
     Args:
         initial_state: joint -> position in output units (rad or m).
         copy: copy the meshes and write ``semantics.txt``.
-        collision_overrides, root_rotation: see :func:`build_urdf`.
+        collision_overrides, root_rotation, open_containers: see :func:`build_urdf`.
 
     Raises:
         OutputError: output folder inside the input, or an incomplete overlay.
@@ -186,7 +189,7 @@ def write_output(asset: AssetDescription, overlay: Overlay, out_dir: Path, initi
         if labels:
             atomic.write_bytes(sem, partnet_mobility.format_semantics(labels).encode())
     notes: list[str] = []
-    data = build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state), notes)
+    data = build_urdf(asset, overlay, collision_overrides, root_rotation, (out, initial_state), notes, open_containers)
     urdf = atomic.write_bytes(out / URDF_NAME, data)
     state = atomic.write_json(out / STATE_NAME, {
         "initial_joint_positions": {k: float(v) for k, v in initial_state.items()},

@@ -18,7 +18,8 @@ from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.geometry import limits
-from asset2sim.tasks.state import clearance, collision
+from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
+from asset2sim.tasks.state import clearance
 from asset2sim.tasks.check import stop_repair
 from asset2sim.tasks.state.collision import CollisionPiece
 from asset2sim.urdf import UrdfModel
@@ -88,7 +89,7 @@ def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_m
         dec, notes = stop_repair.decompose_for_blocked(
             model, urdf, asset, sweep_metric, state, limits.subtrees(model), set(overrides), scale, out_dir,
             folder, max_decompositions=config.max_decompositions, conventions=config.sim)
-    except collision.DecompositionUnavailable:
+    except DecompositionUnavailable:
         return
     if dec:
         yield CollisionRepair("convex decomposition", {**overrides, **dec}, notes)

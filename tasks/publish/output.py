@@ -15,8 +15,8 @@ def publish(candidate: Candidate, workspace: Workspace, out_dir: Path) -> write.
     """Write the output folder ``out_dir`` once, from the final ``candidate``:
     the collision pieces its overrides name that the refine made (copied from
     the workspace, where the repairs wrote them), then the SPEC's files and
-    the meshes (:meth:`~asset2sim.tasks.assemble.candidate.Candidate.write_into`). Every file is written
-    atomically.
+    the meshes (:meth:`~asset2sim.tasks.assemble.candidate.Candidate.write_into`, containers opened as the
+    workspace's engines loaded them). Every file is written atomically.
 
     Raises:
         OutputError: ``out_dir`` inside the input, an incomplete overlay, or a
@@ -30,6 +30,6 @@ def publish(candidate: Candidate, workspace: Workspace, out_dir: Path) -> write.
             raise OutputError(f"collision piece {rel!r} would be written outside the output folder {out_dir}",
                               "OUTPUT_PATH_ESCAPES", Path(out_dir)) from exc
         atomic.write_bytes(dst, mesh_io.file_bytes(src))
-    paths = candidate.write_into(out_dir, copy=True)
+    paths = candidate.write_into(out_dir, copy=True, open_containers=workspace.open_containers)  # as the engines loaded it
     mesh_io.forget_under(out_dir)  # nothing of this refine reads the output folder
     return paths

@@ -1,35 +1,22 @@
 """Collision geometry improvement by approximate convex decomposition
 (:func:`improve_collisions`): small overlapping pieces lose their collision,
-concave ones are replaced by a CoACD decomposition (Wei et al., SIGGRAPH 2022),
-cached by mesh hash and settings (:mod:`asset2sim.array_cache`).
+concave ones are replaced by a CoACD decomposition
+(:mod:`asset2sim.tasks.geometry.decomposition`).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import array_cache, file_names, mesh_io
+from asset2sim import file_names, mesh_io
 from asset2sim.frames import rpy_matrix
 from asset2sim.engines.registry import open_shape_world
-from asset2sim.mesh_io import MeshCache, read_mesh
+from asset2sim.mesh_io import MeshCache
 from asset2sim.schemas.asset import AssetDescription, GeometryRef
-
-#: CoACD settings: concavity threshold (fraction of the mesh size), most hulls
-#: per mesh, reduced search effort (the defaults take minutes per mesh).
-COACD_SETTINGS = {
-    "threshold": 0.05,
-    "max_convex_hull": 16,
-    "preprocess_resolution": 30,
-    "resolution": 1000,
-    "mcts_iterations": 60,
-    "mcts_max_depth": 2,
-}
-
+from asset2sim.tasks.geometry.decomposition import decompose_mesh
 
 #: A collision piece below this fraction of its link's collision surface that
 #: overlaps another link is hinge hardware and loses its collision.
@@ -38,10 +25,6 @@ PIN_AREA_FRACTION = 0.05
 
 #: Smallest decrease of the piece-wise overlap (m) that counts as an improvement.
 IMPROVEMENT_EPS = 1e-5
-
-
-class DecompositionUnavailable(RuntimeError):
-    """CoACD is not installed (``pip install asset2sim[coacd]``)."""
 
 
 @dataclass
@@ -57,69 +40,6 @@ def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
     lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in np.asarray(vertices, float)]
     lines += [f"f {int(a) + 1} {int(b) + 1} {int(c) + 1}" for a, b, c in np.asarray(faces, int)]
     return "\n".join(lines) + "\n"
-
-
-def decompose_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Convex pieces [(vertices (N, 3), faces (M, 3))] of the mesh at ``path`` (file units), from the cache or CoACD. Raises
-    DecompositionUnavailable (no coacd) or ValueError (the mesh cannot be read)."""
-    digest = hashlib.sha256(path.read_bytes() + json.dumps({**COACD_SETTINGS, "refit": 1}, sort_keys=True).encode()).hexdigest()
-    data = array_cache.load("coacd", digest)
-    if data is not None:
-        try:
-            return [(data[f"v{i}"], data[f"f{i}"]) for i in range(int(data["n"]))]
-        except (KeyError, ValueError):
-            pass
-    try:
-        import coacd
-    except ImportError as exc:
-        raise DecompositionUnavailable(f"convex decomposition needs coacd ({exc})") from exc
-    v, f, _ = read_mesh(path)
-    good = np.all(np.isfinite(v), axis=1)
-    if not good.all():
-        raise ValueError(f"{path}: NaN vertices; not decomposed")
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(v, f), **COACD_SETTINGS)
-    pieces = refit_pieces(v, [(np.asarray(pv, float), np.asarray(pf, int)) for pv, pf in parts])
-    arrays = {"n": np.array(len(pieces))}
-    arrays.update({f"{k}{i}": a for i, piece in enumerate(pieces) for k, a in zip("vf", piece)})
-    array_cache.store("coacd", digest, arrays)
-    return pieces
-
-
-def refit_pieces(vertices: np.ndarray, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Refit convex pieces to the original surface: each vertex (N, 3) goes to the piece it lies deepest inside, each piece
-    becomes the hull of its vertices (kept as CoACD made it when they span no volume)."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    v = np.asarray(vertices, float)
-    v = v[np.all(np.isfinite(v), axis=1)]
-    eqs = []
-    for pv, _ in pieces:
-        try:
-            eqs.append(ConvexHull(pv).equations)
-        except (QhullError, ValueError):
-            eqs.append(None)
-    if not eqs or all(e is None for e in eqs) or len(v) == 0:
-        return pieces
-    dist = np.full((len(v), len(pieces)), np.inf)
-    for i, e in enumerate(eqs):
-        if e is not None:
-            dist[:, i] = np.max(v @ e[:, :3].T + e[:, 3], axis=1)
-    owner = np.argmin(dist, axis=1)
-    out = []
-    for i, (pv, pf) in enumerate(pieces):
-        pts = v[owner == i]
-        try:
-            hull = ConvexHull(pts)
-            out.append((pts[hull.vertices], _reindex(hull.simplices, hull.vertices)))
-        except (QhullError, ValueError):
-            out.append((pv, pf))
-    return out
-
-
-def _reindex(simplices: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    remap = {int(old): new for new, old in enumerate(keep)}
-    return np.array([[remap[int(a)] for a in tri] for tri in simplices], dtype=int)
 
 
 def convexity_ratio(path: Path, cache=None) -> float:

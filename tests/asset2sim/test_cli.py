@@ -325,3 +325,20 @@ def test_a_thread_the_interpreter_waits_for_falls_back_to_a_normal_exit(tmp_path
     )
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert p.returncode == 4 and "thread finished" in p.stdout
+
+
+def test_open_containers_is_a_refine_option_off_by_default_and_part_of_the_configuration_hash(tmp_path):
+    """``--open-containers`` (``open_containers: true`` in a ``--config`` file) turns the option on; off, the
+    configuration hash is the one of every configuration before the option existed."""
+    from asset2sim.cli import build_parser
+    from asset2sim.commands.refine import options
+    from asset2sim.schemas.config import RefineConfig
+
+    parser = build_parser("refine")
+    plain = options(parser.parse_args(["refine", "in", "--prompt", "a bucket", "--out", "o"]))
+    opened = options(parser.parse_args(["refine", "in", "--prompt", "a bucket", "--out", "o", "--open-containers"]))
+    assert plain.open_containers is False and opened.open_containers is True
+    assert RefineConfig(open_containers=False).config_hash() == RefineConfig().config_hash() != opened.config_hash()
+    cfg = tmp_path / "refine.yaml"
+    cfg.write_text("open_containers: true\n")
+    assert options(parser.parse_args(["refine", "in", "--prompt", "a bucket", "--out", "o", "--config", str(cfg)])).open_containers

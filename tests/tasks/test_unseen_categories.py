@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from asset2sim import mesh_io
+from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.interpret.mounting import category_mounting
 from asset2sim.tasks.refine import refine_asset
@@ -135,3 +137,54 @@ def test_an_unseen_category_with_one_concave_mesh_per_link_is_interaction_ready(
     assert all(v in (True, None) for v in r.readiness.values()), r.readiness
     assert r.readiness["probes"] is True
     assert r.opening_fractions[joint] > 0.1
+
+
+def _settled_in(urdf_path, body: str, joint: str, joint_q: float) -> tuple[float, float, float]:
+    """Drop a cube of a fifth of the body's narrower width from above the middle of ``body`` (the object fixed,
+    ``joint`` at ``joint_q``) in PyBullet and let it settle 2 s: (the cube's final height, the body's top, the
+    cube's half size), m."""
+    import pybullet as p
+
+    cid = p.connect(p.DIRECT)
+    try:
+        p.setGravity(0, 0, -9.81, physicsClientId=cid)
+        obj = p.loadURDF(str(urdf_path), useFixedBase=True, physicsClientId=cid,
+                         flags=p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | p.URDF_USE_INERTIA_FROM_FILE)
+        index = {p.getJointInfo(obj, i, physicsClientId=cid)[12].decode(): i for i in range(p.getNumJoints(obj, physicsClientId=cid))}
+        joints = {p.getJointInfo(obj, i, physicsClientId=cid)[1].decode(): i for i in range(p.getNumJoints(obj, physicsClientId=cid))}
+        p.resetJointState(obj, joints[joint], joint_q, physicsClientId=cid)
+        for i in joints.values():
+            p.setJointMotorControl2(obj, i, p.VELOCITY_CONTROL, targetVelocity=0.0, force=50.0, physicsClientId=cid)
+        lo, hi = (np.asarray(v) for v in p.getAABB(obj, index.get(body, -1), physicsClientId=cid))
+        half = 0.1 * float(min(hi[:2] - lo[:2]))
+        box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[half] * 3, physicsClientId=cid)
+        cube = p.createMultiBody(0.05, box, basePosition=[*((lo[:2] + hi[:2]) / 2), hi[2] + 2 * half], physicsClientId=cid)
+        for _ in range(480):
+            p.stepSimulation(physicsClientId=cid)
+        z = p.getBasePositionAndOrientation(cube, physicsClientId=cid)[0][2]
+        return float(z), float(hi[2]), half
+    finally:
+        p.disconnect(cid)
+
+
+def test_a_bucket_of_one_mesh_is_hollow_and_holds_what_is_dropped_into_it(tmp_path):
+    """A bucket whose body is one OBJ group: its one convex hull would be a solid block and a cube dropped into
+    it would rest on its rim. With ``open_containers`` the body's collision is a convex decomposition (noted in
+    the report) and the cube falls to the bottom, below the rim by more than its own size; without it (the
+    default) the cube rests on the solid hull."""
+    pytest.importorskip("coacd")
+    src = one_mesh_per_link(build_bucket(tmp_path / "src"))
+    res = refine_asset(src, "A bucket.", tmp_path / "out", config=RefineConfig(open_containers=True), extras=False)
+    r = res.report
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    opened = [n for n in r.state.collision_changes if "holds an open cavity" in n and "'link_1'" in n]
+    assert opened and "convex pieces (CoACD)" in opened[0], r.state.collision_changes
+    model = read_urdf(res.out_dir / "mobility.urdf")
+    assert len([c for c in model.links["link_1"].collisions if c.kind == "mesh"]) > 1
+    handle = next(j for j in model.joints if j.name == "joint_0")
+    z, top, half = _settled_in(res.out_dir / "mobility.urdf", "link_1", "joint_0", handle.upper)
+    assert z < top - 2.0 * half, (z, top, half)
+    solid = refine_asset(src, "A bucket.", tmp_path / "solid", extras=False)
+    assert not any("holds an open cavity" in n for n in solid.report.state.collision_changes)
+    z, top, half = _settled_in(solid.out_dir / "mobility.urdf", "link_1", "joint_0", handle.upper)
+    assert z > top, (z, top, half)

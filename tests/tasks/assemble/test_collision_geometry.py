@@ -189,6 +189,53 @@ def test_parent_is_cut_around_a_child_inside_its_hull(tmp_path):
     assert pp.containment_depths(written, after, {"hinge": 0.0})[("body", "lid")] <= cp.CONTAINMENT_TOLERANCE
 
 
+def test_a_part_holding_an_open_cavity_keeps_it_open(tmp_path):
+    """An open tray that is one OBJ group, alone on its link: its one hull would be a solid block. Its pieces are
+    a convex decomposition (noted) that leaves the inside free and still holds the bottom and the walls; without
+    ``decompose`` or ``open_containers`` it stays one hull."""
+    pytest.importorskip("coacd")
+    folder, _ = _tray_with_block(tmp_path)
+    (folder / "textured_objs" / "lid.obj").write_text(_obj([_box([0.0, 0.2, 0.0], [0.1, 0.22, 0.01])]))  # lid beside it
+    model = urdf.read_urdf(folder / "mobility.urdf")
+    solid, _ = cg.link_pieces(model, lambda g: g.path, {}, decompose=False)
+    assert len(solid["body"]) == 1
+    assert len(cg.link_pieces(model, lambda g: g.path, {})[0]["body"]) == 1  # the default: containers stay hulls
+    pieces, notes = cg.link_pieces(model, lambda g: g.path, {}, open_containers=True)
+    assert len(pieces["body"]) > 1
+    assert any(cg.CAVITY_NOTE in n and "'body'" in n for n in notes), notes
+
+    def held(p: np.ndarray) -> bool:
+        return any(np.max(p @ q.equations[:, :3].T + q.equations[:, 3]) <= 0 for q in pieces["body"])
+
+    assert not held(np.array([0.05, 0.05, 0.03]))  # the middle of the inside
+    assert not held(np.array([0.03, 0.07, 0.02]))
+    for wall in ([0.05, 0.05, 0.002], [0.002, 0.05, 0.025], [0.098, 0.05, 0.025], [0.05, 0.002, 0.025], [0.05, 0.098, 0.025]):
+        assert held(np.array(wall)), wall
+
+
+@needs_shared
+def test_a_trash_can_body_is_hollow_and_a_drawer_that_slides_along_another_keeps_its_hull():
+    """Dev assets whose container is one OBJ group: trash can 102155's body (link_3) is decomposed and its inside
+    left free; cabinet 19179's upper drawer box (link_0) slides along the drawer below it, so it keeps its one
+    hull (a sliding part catches on the seams between pieces in PyBullet), and the note says why."""
+    pytest.importorskip("coacd")
+    can = urdf.read_urdf(SHARED / "102155" / "mobility.urdf")
+    pieces, notes = cg.link_pieces(can, lambda g: g.path, {}, open_containers=True)
+    opened = [n for n in notes if cg.CAVITY_NOTE in n and "'link_3'" in n]
+    assert opened and "convex pieces (CoACD)" in opened[0], notes
+    body = can.links["link_3"]
+    surfaces = cg._link_surfaces(body, lambda g: g.path)
+    group = next(m for (k, _), m in surfaces[1].items() if "original-6" in body.collisions[k].filename)
+    hv, hf = cg.mesh_io.convex_hull_mesh(group[0])
+    cav = cg.cavities.open_cavity(*surfaces[0], hv, hf)
+    assert cav is not None and cg.cavities.open_fraction(cav.core, [p.equations for p in pieces["link_3"]]) > 0.9
+    cabinet = urdf.read_urdf(SHARED / "19179" / "mobility.urdf")
+    pieces, notes = cg.link_pieces(cabinet, lambda g: g.path, {}, open_containers=True)
+    kept = [n for n in notes if cg.CAVITY_NOTE in n and "'link_0'" in n]
+    assert kept and "kept as one convex hull" in kept[0] and "slides along 'link_1'" in kept[0], notes
+    assert len(pieces["link_0"]) <= 2  # the box's hull and the handle's
+
+
 @needs_shared
 def test_laptop_9912_has_few_pieces_and_loads_in_mujoco(tmp_path):
     """Laptop 9912: 118 part meshes, flat groups among them. Its output has at

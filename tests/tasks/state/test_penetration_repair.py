@@ -15,7 +15,23 @@ from tests.tasks.check.failure_assets import build_interlocked_box
 pytest.importorskip("coacd")
 
 
+def test_an_open_box_of_one_mesh_is_written_hollow_and_its_latch_goes_in(tmp_path):
+    """With ``open_containers`` the writer gives the box's body, a container of one mesh group, a convex
+    decomposition that leaves its inside open: the latch's shaft reaching into the box penetrates nothing at
+    the requested state and no repair is needed."""
+    src = build_interlocked_box(tmp_path / "interlocked_box")
+    r = refine_asset(src, "A box with its lid closed.", tmp_path / "out", extras=False,
+                     config=RefineConfig(open_containers=True)).report
+    tol = RefineConfig().penetration_tolerance
+    assert any("holds an open cavity" in c and "convex pieces (CoACD)" in c for c in r.state.collision_changes), r.state.collision_changes
+    assert r.state.phi_requested <= tol and r.state.phi_result <= tol
+    assert "collision pieces improved" not in r.state.method
+    assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+
+
 def test_band_that_penetrates_everywhere_is_repaired(tmp_path):
+    """Without ``open_containers`` (the default) the body is its solid hull: the repair's decomposition
+    resolves it."""
     src = build_interlocked_box(tmp_path / "interlocked_box")
     res = refine_asset(src, "A box with its lid closed.", tmp_path / "out", extras=False)
     r = res.report
