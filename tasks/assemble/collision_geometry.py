@@ -25,7 +25,7 @@ from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_P
                                                     CollisionGeometryError, Piece, depth_inside, drop_slivers,
                                                     merge_pieces, piece_obj, solid_points)
 from asset2sim.tasks.assemble.footprint import level_footprint
-from asset2sim.tasks.assemble.joint_sweep import swept_child_points, swept_other_points
+from asset2sim.tasks.assemble.joint_sweep import reference_state, swept_child_points, swept_other_points
 from asset2sim.tasks.assemble.parent_child_separation import separate_parent_child
 from asset2sim.tasks.assemble.piece_penetration import parent_child_depths
 from asset2sim.tasks.assemble.sliding_clearance import running_clearance, swept_clearance
@@ -42,16 +42,19 @@ REFIT_SAMPLES = 80
 #: sheets, and a piece must be thick enough for a running clearance (:data:`sliding_clearance.RUNNING_CLEARANCE`)
 #: to be taken off it (at most half its width).
 CAVITY_WALL = 0.006
+#: A cavity whose mouth points more than this sine below the horizontal (30 degrees) opens downward.
+MOUTH_BELOW = 0.5
 #: Words of the notes on a part holding an open cavity.
 CAVITY_NOTE = "holds an open cavity"
 
 
 def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: bool = True,
-                  slides_along: set[str] | None = None) -> tuple[list[Piece], int, np.ndarray | None, set[str]]:
+                  slides_along: set[str] | None = None,
+                  up: np.ndarray | None = None) -> tuple[list[Piece], int, np.ndarray | None, set[str]]:
     """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame; with ``decompose``, a group holding
     an open cavity the link's other groups leave open decomposed, :func:`_open_pieces`, unless the link slides along
-    the links ``slides_along``), the number of groups, the cavities' core points (K, 3) m (None: none) and the
-    files of the groups decomposed."""
+    the links ``slides_along`` or the cavity opens downward against ``up`` (3,), the world's up in the link frame),
+    the number of groups, the cavities' core points (K, 3) m (None: none) and the files of the groups decomposed."""
     found: list[tuple[int, int, Piece]] = []  # (collision, group, hull)
     n = 0
     for k, c in enumerate(link.collisions):
@@ -80,7 +83,7 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
         opened = None
         if surfaces is not None and _may_hold_cavity(piece) and (k, g) in surfaces[1]:
             opened = _open_pieces(link.name, link.collisions[k], g, piece, surfaces[1][(k, g)], surfaces[0], notes,
-                                  slides_along)
+                                  slides_along, up)
         if opened is None:
             out.append(piece)
         else:
@@ -140,12 +143,15 @@ def _link_surfaces(link: urdf.UrdfLink, mesh_path) -> tuple[tuple[np.ndarray, np
 
 def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tuple[np.ndarray, np.ndarray],
                  link_mesh: tuple[np.ndarray, np.ndarray], notes: list[str],
-                 slides_along: set[str] | None = None) -> tuple[list[Piece], np.ndarray] | None:
+                 slides_along: set[str] | None = None, up: np.ndarray | None = None) -> tuple[list[Piece], np.ndarray] | None:
     """The convex pieces (CoACD, :mod:`~asset2sim.tasks.geometry.decomposition`) of ``mesh`` (vertices (V, 3) m,
     faces (F, 3)), group ``g`` of collision ``c``, replacing its hull ``hull`` when the hull holds an open cavity
     that the link's surfaces ``link_mesh`` leave open (:func:`cavities.open_cavity`), the link slides along no
     other link (``slides_along``: a part sliding across the seams between pieces catches on them in PyBullet, as
-    drawers stacked in a cabinet would) and the pieces leave at least :data:`OPENED_SHARE` of the cavity free, with
+    drawers stacked in a cabinet would), the cavity does not open downward (its mouth more than
+    :data:`MOUTH_BELOW` below the horizontal against ``up`` (3,), the world's up in the link frame at the joints'
+    reference state: a lid's underside, which nothing put in would stay in) and the pieces leave at least
+    :data:`OPENED_SHARE` of the cavity free, with
     the cavity's core points (K, 3) m; None (the hull stays, a note says why when there is a cavity) otherwise."""
     try:
         hv, hf = mesh_io.convex_hull_mesh(hull.points)
@@ -156,6 +162,11 @@ def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tup
         return None
     what = (f"link {link!r}: group {g} of {c.filename} {CAVITY_NOTE} (a ball of {cav.radius * 1000:.0f} mm radius, "
             f"{100 * cav.volume / max(cav.hull_volume, 1e-12):.0f} % of its hull)")
+    if up is not None and float(cav.mouth @ up) < -MOUTH_BELOW:
+        notes.append(f"{what}; kept as one convex hull: its opening faces down at the joints' reference state "
+                     f"({np.degrees(np.arcsin(min(1.0, -float(cav.mouth @ up)))):.0f} deg below the horizontal), so nothing put in "
+                     "would stay in it")
+        return None
     if slides_along:
         notes.append(f"{what}; kept as one convex hull, solid inside: it slides along {', '.join(map(repr, sorted(slides_along)))} "
                      "and a part sliding across the seams between convex pieces catches on them")
@@ -267,8 +278,10 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
     cores: dict[str, np.ndarray] = {}
     whole: set[tuple[str, str]] = set()
     sliding = _sliding_neighbours(model, mesh_path) if opening else {}
+    poses = model.link_poses(reference_state(model)) if opening else {}
     for name, link in model.links.items():
-        pieces[name], _, core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name))
+        up = poses[name][:3, :3].T @ np.array([0.0, 0.0, 1.0]) if name in poses else None
+        pieces[name], _, core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name), up)
         whole.update((name, source) for source in opened)
         if core is not None:
             cores[name] = core

@@ -42,12 +42,14 @@ MAX_CORE_POINTS = 4000
 class Cavity:
     """An open cavity of a part: ``radius`` m of the largest ball inside it, ``volume`` m^3, ``hull_volume`` m^3 of the
     part's convex hull (both counted in voxels), ``core`` (K, 3) m points of its core (cell centers, :data:`CORE_DEPTH`),
-    in the part's frame."""
+    and ``mouth`` (3,), the unit direction from the cavity's centre to its opening (the cells of the hull's boundary
+    next to the cavity that the part leaves open; zero when none is found), in the part's frame."""
 
     radius: float
     volume: float
     hull_volume: float
     core: np.ndarray
+    mouth: np.ndarray
 
 
 def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarray, hull_faces: np.ndarray, *,
@@ -90,7 +92,12 @@ def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarr
     core = np.argwhere(depth >= max(1.0, CORE_DEPTH * deepest))
     if len(core) > MAX_CORE_POINTS:
         core = core[:: -(-len(core) // MAX_CORE_POINTS)]
-    return Cavity(radius=radius, volume=volume, hull_volume=hull_volume, core=part.origin + (core + 0.5) * h)
+    # the mouth: the hull's boundary cells next to the cavity that the part leaves open
+    mouth = np.argwhere(both.surface & ~part.filled & ndi.binary_dilation(cavity))
+    way = mouth.mean(axis=0) - np.argwhere(cavity).mean(axis=0) if len(mouth) else np.zeros(3)
+    norm = float(np.linalg.norm(way))
+    return Cavity(radius=radius, volume=volume, hull_volume=hull_volume, core=part.origin + (core + 0.5) * h,
+                  mouth=way / norm if norm > 0 else np.zeros(3))
 
 
 def open_fraction(core: np.ndarray, pieces_equations: list[np.ndarray]) -> float:

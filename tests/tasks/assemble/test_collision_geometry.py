@@ -217,7 +217,8 @@ def test_a_part_holding_an_open_cavity_keeps_it_open(tmp_path):
 def test_a_trash_can_body_is_hollow_and_a_drawer_that_slides_along_another_keeps_its_hull():
     """Dev assets whose container is one OBJ group: trash can 102155's body (link_3) is decomposed and its inside
     left free; cabinet 19179's upper drawer box (link_0) slides along the drawer below it, so it keeps its one
-    hull (a sliding part catches on the seams between pieces in PyBullet), and the note says why."""
+    hull (a sliding part catches on the seams between pieces in PyBullet), and the note says why; toilet 102703's
+    lid (link_2), whose hollow underside faces down when shut, keeps its hull too."""
     pytest.importorskip("coacd")
     can = urdf.read_urdf(SHARED / "102155" / "mobility.urdf")
     pieces, notes = cg.link_pieces(can, lambda g: g.path, {}, open_containers=True)
@@ -234,6 +235,10 @@ def test_a_trash_can_body_is_hollow_and_a_drawer_that_slides_along_another_keeps
     kept = [n for n in notes if cg.CAVITY_NOTE in n and "'link_0'" in n]
     assert kept and "kept as one convex hull" in kept[0] and "slides along 'link_1'" in kept[0], notes
     assert len(pieces["link_0"]) <= 2  # the box's hull and the handle's
+    toilet = urdf.read_urdf(SHARED / "102703" / "mobility.urdf")  # its lid's underside opens downward when shut
+    pieces, notes = cg.link_pieces(toilet, lambda g: g.path, {}, open_containers=True)
+    lid = [n for n in notes if cg.CAVITY_NOTE in n and "'link_2'" in n]
+    assert lid and "opening faces down" in lid[0] and len(pieces["link_2"]) == 1, notes
 
 
 @needs_shared

@@ -80,3 +80,12 @@ def test_group_meshes_match_the_hull_point_sets(tmp_path):
     bad.write_text("v 0 0 0\nf 1 2 3\n")
     with pytest.raises(mesh_io.MeshReadError, match="bad.obj"):
         mesh_io.group_meshes(bad)
+
+
+def test_the_mouth_points_from_the_inside_to_the_opening():
+    """A tray open on top opens along +z; the same tray turned upside down (a lid over what it covers) along -z."""
+    v, f = _tray(0.1, 0.05, 0.004)
+    up = _cavity(v, f)
+    assert up is not None and up.mouth @ np.array([0.0, 0.0, 1.0]) > 0.9
+    down = _cavity(v * np.array([1.0, 1.0, -1.0]), f[:, ::-1])
+    assert down is not None and down.mouth @ np.array([0.0, 0.0, -1.0]) > 0.9
