@@ -256,73 +256,20 @@ class MeshCache:
         return len(self._store)
 
 
-def obj_groups(path: Path | str) -> list[np.ndarray]:
-    """Point sets (k, 3) of an OBJ file, one per ``o``/``g`` group with faces:
-    the vertices its faces use (sorted by index, file units), in file order;
-    PyBullet collides with one convex hull per such group.
+def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[int]]]]:
+    """The vertices (N, 3) of an OBJ file (file units) and, per ``o``/``g`` group with face indices, its
+    faces as lists of 0-based vertex indices (negative OBJ indices resolved), in file order.
 
     Raises:
-        MeshReadError: the file cannot be read or a face names a missing vertex.
+        MeshReadError: the file cannot be read, or a vertex or face line is malformed.
     """
     try:
         text = file_bytes(path).decode(errors="replace")
     except OSError as exc:
         raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
     verts: list[tuple[float, float, float]] = []
-    groups: list[list[int]] = []
-    current: list[int] = []
-    for line in text.splitlines():
-        if not line or line[0] not in "vfog":
-            continue
-        parts = line.split()
-        tag = parts[0]
-        if tag == "v":
-            try:
-                verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
-            except (IndexError, ValueError) as exc:
-                raise MeshReadError(f"{path}: bad vertex line {line!r}") from exc
-        elif tag == "f":
-            for tok in parts[1:]:
-                try:
-                    i = int(tok.split("/")[0])
-                except ValueError as exc:
-                    raise MeshReadError(f"{path}: bad face line {line!r}") from exc
-                current.append(i - 1 if i > 0 else len(verts) + i)
-        elif tag in ("o", "g"):
-            if current:
-                groups.append(current)
-            current = []
-    if current:
-        groups.append(current)
-    v = np.asarray(verts, float).reshape(-1, 3)
-    out = []
-    for idx in groups:
-        ids = np.unique(np.asarray(idx, int))
-        if ids.min() < 0 or ids.max() >= len(v):
-            raise MeshReadError(f"{path}: a face names a vertex that does not exist")
-        out.append(v[ids])
-    return out
-
-
-def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Triangle meshes ``(vertices (k, 3), faces (m, 3) int)`` in file units, one per group of
-    :func:`hull_point_sets` in the same order (OBJ: per ``o``/``g`` group with faces, polygons
-    fan-triangulated, only the vertices its faces use; other formats: the whole mesh).
-
-    Raises:
-        MeshReadError: the file cannot be read or a face names a missing vertex.
-    """
-    path = Path(path)
-    if path.suffix.lower() != ".obj":
-        v, f, _ = read_mesh(path)
-        return [(v, f)]
-    try:
-        text = file_bytes(path).decode(errors="replace")
-    except OSError as exc:
-        raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
-    verts: list[tuple[float, float, float]] = []
-    groups: list[list[tuple[int, int, int]]] = []
-    current: list[tuple[int, int, int]] | None = None  # None: no face in this group yet
+    groups: list[list[list[int]]] = []
+    current: list[list[int]] = []
     for line in text.splitlines():
         if not line or line[0] not in "vfog":
             continue
@@ -338,19 +285,51 @@ def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
                 ids = [int(tok.split("/")[0]) for tok in parts[1:]]
             except ValueError as exc:
                 raise MeshReadError(f"{path}: bad face line {line!r}") from exc
-            ids = [i - 1 if i > 0 else len(verts) + i for i in ids]
-            current = current if current is not None else []
-            current += [(ids[0], ids[k], ids[k + 1]) for k in range(1, len(ids) - 1)]
+            if ids:
+                current.append([i - 1 if i > 0 else len(verts) + i for i in ids])
         elif tag in ("o", "g"):
-            if current is not None:
+            if current:
                 groups.append(current)
-            current = None
-    if current is not None:
+            current = []
+    if current:
         groups.append(current)
-    v = np.asarray(verts, float).reshape(-1, 3)
+    return np.asarray(verts, float).reshape(-1, 3), groups
+
+
+def obj_groups(path: Path | str) -> list[np.ndarray]:
+    """Point sets (k, 3) of an OBJ file, one per ``o``/``g`` group with faces:
+    the vertices its faces use (sorted by index, file units), in file order;
+    PyBullet collides with one convex hull per such group.
+
+    Raises:
+        MeshReadError: the file cannot be read or a face names a missing vertex.
+    """
+    v, groups = _obj_group_polygons(path)
     out = []
-    for tris in groups:
-        f = np.asarray(tris, np.int64).reshape(-1, 3)
+    for polygons in groups:
+        ids = np.unique(np.fromiter((i for poly in polygons for i in poly), int))
+        if ids.min() < 0 or ids.max() >= len(v):
+            raise MeshReadError(f"{path}: a face names a vertex that does not exist")
+        out.append(v[ids])
+    return out
+
+
+def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Triangle meshes ``(vertices (k, 3), faces (m, 3) int)`` in file units, one per group of
+    :func:`hull_point_sets` in the same order (OBJ: per ``o``/``g`` group with faces, polygons
+    fan-triangulated, only the vertices its triangles use; other formats: the whole mesh).
+
+    Raises:
+        MeshReadError: the file cannot be read or a face names a missing vertex.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".obj":
+        v, f, _ = read_mesh(path)
+        return [(v, f)]
+    v, groups = _obj_group_polygons(path)
+    out = []
+    for polygons in groups:
+        f = np.asarray([(p[0], p[k], p[k + 1]) for p in polygons for k in range(1, len(p) - 1)], np.int64).reshape(-1, 3)
         if len(f) and (f.min() < 0 or f.max() >= len(v)):
             raise MeshReadError(f"{path}: a face names a vertex that does not exist")
         ids, inv = np.unique(f, return_inverse=True)

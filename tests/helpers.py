@@ -7,6 +7,8 @@ import socket
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
+
 
 def write_hinged_plate(folder: Path, *, arm: float = 0.4, lower: float = -1.0, upper: float = 2.0, axis: str = "0 1 0") -> Path:
     """A fixed 0.2 m cube base and a 0.02 kg-scale plate on a revolute joint at
@@ -212,3 +214,13 @@ def catalog_reader_counts(root) -> dict[str, int]:
         con.close()
     return {"pandas": len(pd.read_parquet(root)), "pyarrow": pads.dataset(root, partitioning="hive").count_rows(),
             "duckdb": int(n_duck)}
+
+
+def box_mesh(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The closed triangle mesh of the axis-aligned box from ``lo`` (3,) to ``hi`` (3,): vertices (8, 3) and
+    outward-wound faces (12, 3)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    v = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return v, f

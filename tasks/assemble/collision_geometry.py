@@ -23,7 +23,7 @@ from asset2sim.engines.loading import mesh_hulls
 from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim, surface_samples
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, MAX_PIECES_PER_LINK,
                                                     CollisionGeometryError, Piece, depth_inside, drop_slivers,
-                                                    merge_pieces, piece_obj, solid_points)
+                                                    merge_pieces, piece_obj, solid_points, thinnest_axis)
 from asset2sim.tasks.assemble.footprint import level_footprint
 from asset2sim.tasks.assemble.joint_sweep import reference_state, swept_child_points, swept_other_points
 from asset2sim.tasks.assemble.parent_child_separation import separate_parent_child
@@ -203,17 +203,10 @@ def _thick_wall(points: np.ndarray, inward: np.ndarray) -> np.ndarray | None:
     """``points`` (k, 3) m of a piece of a container's wall, grown to :data:`CAVITY_WALL` m along their thinnest
     principal direction toward ``inward`` (3,) m (the cavity: the outer face stays where the part is); None when
     they span no area."""
-    p = np.asarray(points, float)
-    p = p[np.all(np.isfinite(p), axis=1)]
-    if len(p) < 3:
+    axis = thinnest_axis(points)
+    if axis is None:
         return None
-    c = p.mean(axis=0)
-    _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
-    if len(sv) < 2 or sv[1] <= 1e-9 * max(float(sv[0]), 1e-12):
-        return None
-    n = vt[2] if vt.shape[0] == 3 else np.cross(vt[0], vt[1])
-    n = n / np.linalg.norm(n)
-    width = float(np.ptp(p @ n))
+    p, c, n, width = axis
     if width >= CAVITY_WALL:
         return p
     if float(n @ (np.asarray(inward, float) - c)) < 0:

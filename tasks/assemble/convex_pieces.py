@@ -92,9 +92,9 @@ _HULLS_MAX = 5000
 _OBJS: dict[tuple, bytes] = {}
 
 
-def solid_points(points: np.ndarray) -> np.ndarray | None:
-    """``points`` (k, 3) m, grown to :data:`MIN_THICKNESS` m along their thinnest principal direction (both
-    sides equally) when they are thinner than :data:`FLAT_WIDTH` m; None when they span no area (fewer than
+def thinnest_axis(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+    """The finite rows of ``points`` (k, 3) m, their centroid (3,) m, the unit direction (3,) of their
+    thinnest principal axis (SVD) and their width along it, m; None when they span no area (fewer than
     3 points, or all on a line)."""
     p = np.asarray(points, float)
     p = p[np.all(np.isfinite(p), axis=1)]
@@ -102,12 +102,21 @@ def solid_points(points: np.ndarray) -> np.ndarray | None:
         return None
     c = p.mean(axis=0)
     _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
-    scale = max(float(sv[0]), 1e-12)
-    if len(sv) < 2 or sv[1] <= 1e-9 * scale:
+    if len(sv) < 2 or sv[1] <= 1e-9 * max(float(sv[0]), 1e-12):
         return None
     n = vt[2] if vt.shape[0] == 3 else np.cross(vt[0], vt[1])
     n = n / np.linalg.norm(n)
-    width = float(np.ptp(p @ n))
+    return p, c, n, float(np.ptp(p @ n))
+
+
+def solid_points(points: np.ndarray) -> np.ndarray | None:
+    """``points`` (k, 3) m, grown to :data:`MIN_THICKNESS` m along their thinnest principal direction (both
+    sides equally) when they are thinner than :data:`FLAT_WIDTH` m; None when they span no area (fewer than
+    3 points, or all on a line)."""
+    axis = thinnest_axis(points)
+    if axis is None:
+        return None
+    p, _, n, width = axis
     if width >= min(FLAT_WIDTH, MIN_THICKNESS):
         return p
     h = 0.5 * (MIN_THICKNESS - width)

@@ -21,14 +21,7 @@ from asset2sim.tasks.assemble import joint_sweep as js, parent_child_separation 
 from asset2sim.tasks.assemble.write import write_output
 from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
 from tests.conftest import SHARED, needs_shared
-
-
-def _box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    v = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
-    return v, f
+from tests.helpers import box_mesh as _box
 
 
 def _obj(parts: list[tuple[np.ndarray, np.ndarray]], groups: bool = True) -> str:

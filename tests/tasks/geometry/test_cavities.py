@@ -8,14 +8,7 @@ import pytest
 
 from asset2sim import mesh_io
 from asset2sim.tasks.geometry import cavities
-
-
-def _box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    v = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
-    return v, f
+from tests.helpers import box_mesh as _box
 
 
 def _tray(width: float, height: float, wall: float, *, lid: bool = False) -> tuple[np.ndarray, np.ndarray]:
