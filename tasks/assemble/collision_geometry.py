@@ -48,15 +48,14 @@ MOUTH_BELOW = 0.5
 CAVITY_NOTE = "holds an open cavity"
 
 
-def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: bool = True,
-                  slides_along: set[str] | None = None,
-                  up: np.ndarray | None = None) -> tuple[list[Piece], int, np.ndarray | None, set[str]]:
-    """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame; with ``decompose``, a group holding
-    an open cavity the link's other groups leave open decomposed, :func:`_open_pieces`, unless the link slides along
-    the links ``slides_along`` or the cavity opens downward against ``up`` (3,), the world's up in the link frame),
-    the number of groups, the cavities' core points (K, 3) m (None: none) and the files of the groups decomposed."""
-    found: list[tuple[int, int, Piece]] = []  # (collision, group, hull)
-    n = 0
+def _group_hulls(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> list[tuple[int, int, Piece]]:
+    """(collision index, group index, hull) of every OBJ group of ``link``'s mesh collisions (link frame, m); a
+    group without a hull gets a note and no piece.
+
+    Raises:
+        CollisionGeometryError: a collision mesh cannot be read.
+    """
+    found: list[tuple[int, int, Piece]] = []
     for k, c in enumerate(link.collisions):
         if c.kind != "mesh":
             continue
@@ -65,7 +64,6 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
         except urdf.UrdfError as exc:
             raise CollisionGeometryError(f"link {link.name!r} collision {k} ({c.filename}): {exc}") from exc
         for g, pts in enumerate(groups):
-            n += 1
             solid = solid_points(pts)
             if solid is None:
                 notes.append(f"link {link.name!r}: group {g} of {c.filename} spans no area; no collision")
@@ -75,6 +73,18 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
                 found.append((k, g, Piece.of(world, (str(c.filename),))))
             except (QhullError, ValueError):
                 notes.append(f"link {link.name!r}: group {g} of {c.filename} has no hull; no collision")
+    return found
+
+
+def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: bool = True,
+                  slides_along: set[str] | None = None, up: np.ndarray | None = None,
+                  hulls: list[tuple[int, int, Piece]] | None = None) -> tuple[list[Piece], np.ndarray | None, set[str]]:
+    """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame: :func:`_group_hulls`, or
+    ``hulls`` when given; with ``decompose``, a group holding an open cavity the link's other groups leave open
+    decomposed, :func:`_open_pieces`, unless the link slides along the links ``slides_along`` or the cavity opens
+    downward against ``up`` (3,), the world's up in the link frame), the cavities' core points (K, 3) m (None:
+    none) and the files of the groups decomposed."""
+    found = _group_hulls(link, mesh_path, notes) if hulls is None else hulls
     out: list[Piece] = []
     cores: list[np.ndarray] = []
     opened_files: set[str] = set()
@@ -90,13 +100,14 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
             out += opened[0]
             cores.append(opened[1])
             opened_files.add(str(link.collisions[k].filename))
-    return out, n, (np.vstack(cores) if cores else None), opened_files
+    return out, (np.vstack(cores) if cores else None), opened_files
 
 
-def _sliding_neighbours(model: urdf.UrdfModel, mesh_path) -> dict[str, set[str]]:
-    """Link -> the links it slides along (:func:`running_clearance` on every link's group hulls: contacts between
-    a moving link and a link its joint does not move, parent and child excepted)."""
-    trial = {name: _group_pieces(link, mesh_path, [], decompose=False)[0] for name, link in model.links.items()}
+def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int, Piece]]]) -> dict[str, set[str]]:
+    """Link -> the links it slides along (:func:`running_clearance` on every link's group ``hulls``
+    (:func:`_group_hulls`): contacts between a moving link and a link its joint does not move, parent and child
+    excepted)."""
+    trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
     out: dict[str, set[str]] = {}
     for a, b in running_clearance(model, trial, []):
         out.setdefault(a, set()).add(b)
@@ -270,11 +281,15 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
     pieces: dict[str, list[Piece]] = {}
     cores: dict[str, np.ndarray] = {}
     whole: set[tuple[str, str]] = set()
-    sliding = _sliding_neighbours(model, mesh_path) if opening else {}
+    # with ``opening`` each link's group hulls are made once: for the sliding contacts and for its pieces
+    hull_notes: dict[str, list[str]] = {name: [] for name in model.links}
+    hulls = {name: _group_hulls(link, mesh_path, hull_notes[name]) for name, link in model.links.items()} if opening else {}
+    sliding = _sliding_neighbours(model, hulls) if opening else {}
     poses = model.link_poses(reference_state(model)) if opening else {}
     for name, link in model.links.items():
         up = poses[name][:3, :3].T @ np.array([0.0, 0.0, 1.0]) if name in poses else None
-        pieces[name], _, core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name), up)
+        notes.extend(hull_notes[name])
+        pieces[name], core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name), up, hulls.get(name))
         whole.update((name, source) for source in opened)
         if core is not None:
             cores[name] = core
