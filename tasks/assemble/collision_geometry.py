@@ -115,6 +115,21 @@ def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, 
     return out
 
 
+def _holding_children(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int, Piece]]]) -> set[str]:
+    """The links whose group ``hulls`` (:func:`_group_hulls`) hold a child's vertices deeper than
+    :data:`CONTAINMENT_TOLERANCE` somewhere over the child's joint range (:func:`swept_child_points`): a desk body
+    around its drawer, whose space opens downward under its top but must be cut away for the drawer all the same."""
+    trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
+    out = set()
+    for name, found in trial.items():
+        swept = swept_child_points(model, trial, name, support=True)
+        if swept and found:
+            pts = np.vstack(list(swept.values()))
+            if any(depth_inside(pts, p) > CONTAINMENT_TOLERANCE for p in found):
+                out.add(name)
+    return out
+
+
 def _may_hold_cavity(piece: Piece) -> bool:
     """A hull wide enough every way (principal extents) to hold a ball of :data:`cavities.MIN_CAVITY_RADIUS`."""
     p = piece.points
@@ -159,11 +174,12 @@ def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tup
     faces (F, 3)), group ``g`` of collision ``c``, replacing its hull ``hull`` when the hull holds an open cavity
     that the link's surfaces ``link_mesh`` leave open (:func:`cavities.open_cavity`), the link slides along no
     other link (``slides_along``: a part sliding across the seams between pieces catches on them in PyBullet, as
-    drawers stacked in a cabinet would), the cavity does not open downward (its mouth more than
-    :data:`MOUTH_BELOW` below the horizontal against ``up`` (3,), the world's up in the link frame at the joints'
-    reference state: a lid's underside, which nothing put in would stay in) and the pieces leave at least
-    :data:`OPENED_SHARE` of the cavity free, with
-    the cavity's core points (K, 3) m; None (the hull stays, a note says why when there is a cavity) otherwise."""
+    drawers stacked in a cabinet would), the cavity does not only open downward (the mouth of each of its regions,
+    :class:`cavities.CavityRegion`, more than :data:`MOUTH_BELOW` below the horizontal against ``up`` (3,), the
+    world's up in the link frame at the joints' reference state: a lid's underside, which nothing put in would
+    stay in; a toilet body's bowl opens upward beside the space under its rim, which opens downward) and the pieces
+    leave at least :data:`OPENED_SHARE` of the cavity free, with the cavity's core points (K, 3) m; None (the hull
+    stays, a note says why when there is a cavity) otherwise."""
     try:
         hv, hf = mesh_io.convex_hull_mesh(hull.points)
         cav = cavities.open_cavity(link_mesh[0], link_mesh[1], hv, hf)
@@ -173,10 +189,9 @@ def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tup
         return None
     what = (f"link {link!r}: group {g} of {c.filename} {CAVITY_NOTE} (a ball of {cav.radius * 1000:.0f} mm radius, "
             f"{100 * cav.volume / max(cav.hull_volume, 1e-12):.0f} % of its hull)")
-    if up is not None and float(cav.mouth @ up) < -MOUTH_BELOW:
+    if up is not None and cav.regions and all(float(r.mouth @ up) < -MOUTH_BELOW for r in cav.regions):
         notes.append(f"{what}; kept as one convex hull: its opening faces down at the joints' reference state "
-                     f"({np.degrees(np.arcsin(min(1.0, -float(cav.mouth @ up)))):.0f} deg below the horizontal), so nothing put in "
-                     "would stay in it")
+                     f"({_below_horizontal(cav.regions, up)}), so nothing put in would stay in it")
         return None
     if slides_along:
         notes.append(f"{what}; kept as one convex hull, solid inside: it slides along {', '.join(map(repr, sorted(slides_along)))} "
@@ -208,6 +223,12 @@ def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tup
         return None
     notes.append(f"{what}: {len(pieces)} convex pieces (CoACD) instead of its hull, so that things can be put in it")
     return pieces, cav.core
+
+
+def _below_horizontal(regions: tuple[cavities.CavityRegion, ...], up: np.ndarray) -> str:
+    """How far below the horizontal (against ``up`` (3,)) the mouths of ``regions`` face, in words (degrees)."""
+    angles = sorted({round(float(np.degrees(np.arcsin(min(1.0, max(0.0, -float(r.mouth @ up))))))) for r in regions})
+    return ", ".join(f"{a} deg" for a in angles) + " below the horizontal"
 
 
 def _thick_wall(points: np.ndarray, inward: np.ndarray) -> np.ndarray | None:
@@ -286,8 +307,10 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
     hulls = {name: _group_hulls(link, mesh_path, hull_notes[name]) for name, link in model.links.items()} if opening else {}
     sliding = _sliding_neighbours(model, hulls) if opening else {}
     poses = model.link_poses(reference_state(model)) if opening else {}
+    holding = _holding_children(model, hulls) if opening else set()
     for name, link in model.links.items():
-        up = poses[name][:3, :3].T @ np.array([0.0, 0.0, 1.0]) if name in poses else None
+        # the world's up, against which a cavity opens downward; none for a link whose hull a child moves in
+        up = poses[name][:3, :3].T @ np.array([0.0, 0.0, 1.0]) if name in poses and name not in holding else None
         notes.extend(hull_notes[name])
         pieces[name], core, opened = _group_pieces(link, mesh_path, notes, opening, sliding.get(name), up, hulls.get(name))
         whole.update((name, source) for source in opened)

@@ -8,6 +8,9 @@ The part is voxelized (:func:`asset2sim.tasks.geometry.voxels.voxelize`:
 surface sampling, gap closing, flood fill from outside); the cavity is the
 empty space connected to the outside that lies inside the hull, and its size
 is the radius of the largest ball it holds (Euclidean distance transform).
+Its core (the cells deep inside it) may lie in several connected regions, each
+with its own mouth, such as a toilet body's bowl, open upward, and the space
+under its rim, open downward.
 Lengths in the mesh's units (m for a link's geometry at its output scale).
 """
 
@@ -20,6 +23,7 @@ import numpy as np
 from asset2sim.tasks.geometry.voxels import voxelize
 
 __all__ = ["CAVITY_VOXELS", "CORE_DEPTH", "MAX_CORE_POINTS", "MIN_CAVITY_RADIUS", "MIN_CAVITY_SHARE", "MIN_CAVITY_VOLUME_SHARE", "Cavity",
+           "CavityRegion",
            "open_cavity", "open_fraction"]
 
 #: Voxels along the part's length scale (:func:`asset2sim.tasks.geometry.voxels.mean_size`).
@@ -39,17 +43,28 @@ MAX_CORE_POINTS = 4000
 
 
 @dataclass(frozen=True)
+class CavityRegion:
+    """One connected region of an open cavity's core (the cavity's empty space falls apart into such regions, as a
+    toilet body's bowl and the space under its rim): ``radius`` m of the largest ball inside it, ``volume`` m^3 of
+    its cells, and ``mouth`` (3,), the unit direction from the region's centre to its opening (the cells of the
+    hull's boundary next to the region that the part leaves open; zero when none is found), in the part's frame."""
+
+    radius: float
+    volume: float
+    mouth: np.ndarray
+
+
+@dataclass(frozen=True)
 class Cavity:
     """An open cavity of a part: ``radius`` m of the largest ball inside it, ``volume`` m^3, ``hull_volume`` m^3 of the
     part's convex hull (both counted in voxels), ``core`` (K, 3) m points of its core (cell centers, :data:`CORE_DEPTH`),
-    and ``mouth`` (3,), the unit direction from the cavity's centre to its opening (the cells of the hull's boundary
-    next to the cavity that the part leaves open; zero when none is found), in the part's frame."""
+    and ``regions``, the connected regions the core lies in (:class:`CavityRegion`); in the part's frame."""
 
     radius: float
     volume: float
     hull_volume: float
     core: np.ndarray
-    mouth: np.ndarray
+    regions: tuple[CavityRegion, ...]
 
 
 def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarray, hull_faces: np.ndarray, *,
@@ -89,15 +104,24 @@ def open_cavity(vertices: np.ndarray, faces: np.ndarray, hull_vertices: np.ndarr
     volume, hull_volume = float(cavity.sum()) * h**3, float(both.filled.sum()) * h**3
     if radius < need or volume < min_volume_share * hull_volume:
         return None
-    core = np.argwhere(depth >= max(1.0, CORE_DEPTH * deepest))
+    core_cells = depth >= max(1.0, CORE_DEPTH * deepest)
+    core = np.argwhere(core_cells)
     if len(core) > MAX_CORE_POINTS:
         core = core[:: -(-len(core) // MAX_CORE_POINTS)]
-    # the mouth: the hull's boundary cells next to the cavity that the part leaves open
-    mouth = np.argwhere(both.surface & ~part.filled & ndi.binary_dilation(cavity))
-    way = mouth.mean(axis=0) - np.argwhere(cavity).mean(axis=0) if len(mouth) else np.zeros(3)
-    norm = float(np.linalg.norm(way))
+    # the connected regions the core lies in, each with its mouth: the hull's boundary cells next to the region
+    # that the part leaves open
+    labels, _ = ndi.label(cavity)
+    opening = both.surface & ~part.filled
+    regions = []
+    for label in np.unique(labels[core_cells]):
+        cells = labels == label
+        mouth = np.argwhere(opening & ndi.binary_dilation(cells))
+        way = mouth.mean(axis=0) - np.argwhere(cells).mean(axis=0) if len(mouth) else np.zeros(3)
+        norm = float(np.linalg.norm(way))
+        regions.append(CavityRegion(radius=float(depth[cells].max()) * h, volume=float(cells.sum()) * h**3,
+                                    mouth=way / norm if norm > 0 else np.zeros(3)))
     return Cavity(radius=radius, volume=volume, hull_volume=hull_volume, core=part.origin + (core + 0.5) * h,
-                  mouth=way / norm if norm > 0 else np.zeros(3))
+                  regions=tuple(regions))
 
 
 def open_fraction(core: np.ndarray, pieces_equations: list[np.ndarray]) -> float:

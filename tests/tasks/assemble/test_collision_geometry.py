@@ -206,12 +206,25 @@ def test_a_part_holding_an_open_cavity_keeps_it_open(tmp_path):
         assert held(np.array(wall)), wall
 
 
+def test_a_link_whose_hull_a_child_moves_in_is_found(tmp_path):
+    """The open tray holding a block on a hinge (:func:`_tray_with_block`): the tray's hull holds the block over
+    its range, so a cavity of the tray is decomposed even where it opens downward (a desk's body around its
+    drawer); the block holds no child."""
+    _, model = _tray_with_block(tmp_path)
+    hulls = {name: cg._group_hulls(link, lambda g: g.path, []) for name, link in model.links.items()}
+    assert cg._holding_children(model, hulls) == {"body"}
+    far = {name: [(k, g, cg.Piece.of(p.points + (0.0, 0.0, 1.0) if name == "lid" else p.points, p.sources))
+                  for k, g, p in found] for name, found in hulls.items()}  # the block lifted 1 m clear of the tray
+    assert cg._holding_children(model, far) == set()
+
+
 @needs_shared
 def test_a_trash_can_body_is_hollow_and_a_drawer_that_slides_along_another_keeps_its_hull():
     """Dev assets whose container is one OBJ group: trash can 102155's body (link_3) is decomposed and its inside
     left free; cabinet 19179's upper drawer box (link_0) slides along the drawer below it, so it keeps its one
     hull (a sliding part catches on the seams between pieces in PyBullet), and the note says why; toilet 102703's
-    lid (link_2), whose hollow underside faces down when shut, keeps its hull too."""
+    lid (link_2), whose hollow underside faces down when shut, keeps its hull too, while its body (link_4) is
+    decomposed: its bowl opens upward, though the space under the bowl's rim opens downward."""
     pytest.importorskip("coacd")
     can = urdf.read_urdf(SHARED / "102155" / "mobility.urdf")
     pieces, notes = cg.link_pieces(can, lambda g: g.path, {}, open_containers=True)
@@ -232,6 +245,9 @@ def test_a_trash_can_body_is_hollow_and_a_drawer_that_slides_along_another_keeps
     pieces, notes = cg.link_pieces(toilet, lambda g: g.path, {}, open_containers=True)
     lid = [n for n in notes if cg.CAVITY_NOTE in n and "'link_2'" in n]
     assert lid and "opening faces down" in lid[0] and len(pieces["link_2"]) == 1, notes
+    body = [n for n in notes if cg.CAVITY_NOTE in n and "'link_4'" in n]
+    assert body and "convex pieces (CoACD)" in body[0], notes
+    assert len(pieces["link_4"]) > 1
 
 
 @needs_shared

@@ -79,6 +79,33 @@ def test_the_mouth_points_from_the_inside_to_the_opening():
     """A tray open on top opens along +z; the same tray turned upside down (a lid over what it covers) along -z."""
     v, f = _tray(0.1, 0.05, 0.004)
     up = _cavity(v, f)
-    assert up is not None and up.mouth @ np.array([0.0, 0.0, 1.0]) > 0.9
+    assert up is not None and len(up.regions) == 1 and up.regions[0].mouth @ np.array([0.0, 0.0, 1.0]) > 0.9
     down = _cavity(v * np.array([1.0, 1.0, -1.0]), f[:, ::-1])
-    assert down is not None and down.mouth @ np.array([0.0, 0.0, -1.0]) > 0.9
+    assert down is not None and len(down.regions) == 1 and down.regions[0].mouth @ np.array([0.0, 0.0, -1.0]) > 0.9
+
+
+def _bowl_on_a_skirt() -> tuple[np.ndarray, np.ndarray]:
+    """A bowl on a skirt in one mesh, as a toilet body or a sink's basin on its pedestal is modelled: a 16 cm tray
+    8 cm deep, open on top, its floor 10 cm up on four walls open at the bottom, so that its hull also encloses
+    the space under the floor, which opens downward."""
+    w, t, z = 0.16, 0.004, 0.10
+    boxes = [_box([0, 0, z], [w, w, z + t]), _box([0, 0, 0], [t, w, 0.18]), _box([w - t, 0, 0], [w, w, 0.18]),
+             _box([0, 0, 0], [w, t, 0.18]), _box([0, w - t, 0], [w, w, 0.18])]
+    v = np.vstack([b[0] for b in boxes])
+    f = np.vstack([b[1] + 8 * i for i, b in enumerate(boxes)])
+    return v, f
+
+
+def test_a_cavity_falls_apart_into_regions_each_with_its_mouth():
+    """A bowl on a skirt (:func:`_bowl_on_a_skirt`): the space in the bowl opens upward, the space under its
+    floor downward, each a region of the cavity's core holding its own ball (a radius of about half the inner height of each:
+    76 mm and 100 mm)."""
+    cav = _cavity(*_bowl_on_a_skirt())
+    assert cav is not None and len(cav.regions) == 2
+    z = np.array([0.0, 0.0, 1.0])
+    bowl, under = sorted(cav.regions, key=lambda r: -float(r.mouth @ z))
+    assert bowl.mouth @ z > 0.9 and under.mouth @ z < -0.9
+    assert 0.025 < bowl.radius < 0.045 and 0.035 < under.radius < 0.055
+    assert cav.radius == max(bowl.radius, under.radius)
+    assert bowl.volume + under.volume <= cav.volume
+    assert np.any(cav.core[:, 2] > 0.104) and np.any(cav.core[:, 2] < 0.1)  # the core lies in both
