@@ -38,7 +38,8 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
-from asset2sim.tasks.assemble import collision_geometry, export_mjcf, footprint, parent_child_separation, sliding_clearance, write
+from asset2sim.tasks.assemble import (collision_geometry, container_pieces, export_mjcf, footprint, parent_child_separation,
+                                      sliding_clearance, write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import export_usd, output
 from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
@@ -498,7 +499,7 @@ def _clearance_lines(notes: list[str]) -> list[str]:
     a child kept inside its parent past a stop and containers kept open."""
     return [n for n in notes if any(w in n for w in (sliding_clearance.RUNNING_CLEARANCE_NOTE, footprint.LEVEL_NOTE,
                                                      collision_geometry.DENSITY_NOTE, parent_child_separation.PAST_STOP_NOTE,
-                                                     collision_geometry.CAVITY_NOTE))]
+                                                     container_pieces.CAVITY_NOTE))]
 
 
 def _refine_state(ctx: EstimationContext, est, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: _StageLog,

@@ -20,33 +20,16 @@ from scipy.spatial import QhullError
 
 from asset2sim import array_cache, atomic, file_names, mesh_io, urdf
 from asset2sim.engines.loading import mesh_hulls
-from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim, surface_samples
+from asset2sim.tasks.assemble import container_pieces
+from asset2sim.tasks.assemble.containment_cuts import _resolve_containment, _trim
 from asset2sim.tasks.assemble.convex_pieces import (CONTAINMENT_TOLERANCE, MAX_PIECES_HARD, MAX_PIECES_PER_LINK,
                                                     CollisionGeometryError, Piece, depth_inside, drop_slivers,
-                                                    merge_pieces, piece_obj, solid_points, thinnest_axis)
+                                                    merge_pieces, piece_obj, solid_points)
 from asset2sim.tasks.assemble.footprint import level_footprint
 from asset2sim.tasks.assemble.joint_sweep import reference_state, swept_child_points, swept_other_points
 from asset2sim.tasks.assemble.parent_child_separation import separate_parent_child
 from asset2sim.tasks.assemble.piece_penetration import parent_child_depths
 from asset2sim.tasks.assemble.sliding_clearance import running_clearance, swept_clearance
-from asset2sim.tasks.geometry import cavities, decomposition
-
-#: Share of an open cavity's core a decomposition must leave free to replace the part's hull.
-OPENED_SHARE = 0.75
-#: CoACD settings for a part holding an open cavity: a coarser concavity threshold and a shallower search than
-#: :data:`decomposition.COACD_SETTINGS` (walls and a bottom are what the cavity needs; measured 1-5 s a part).
-CAVITY_COACD = {**decomposition.COACD_SETTINGS, "threshold": 0.1, "mcts_iterations": 20, "mcts_max_depth": 1}
-#: Surface samples along the part's largest extent that its decomposition is refitted to.
-REFIT_SAMPLES = 80
-#: Thinnest piece of a decomposed container's wall, m, grown toward the cavity: a model's walls are often single
-#: sheets, and a piece must be thick enough for a running clearance (:data:`sliding_clearance.RUNNING_CLEARANCE`)
-#: to be taken off it (at most half its width).
-CAVITY_WALL = 0.006
-#: A cavity whose mouth points more than this sine below the horizontal (30 degrees) opens downward.
-MOUTH_BELOW = 0.5
-#: Words of the notes on a part holding an open cavity.
-CAVITY_NOTE = "holds an open cavity"
-
 
 def _group_hulls(link: urdf.UrdfLink, mesh_path, notes: list[str]) -> list[tuple[int, int, Piece]]:
     """(collision index, group index, hull) of every OBJ group of ``link``'s mesh collisions (link frame, m); a
@@ -81,18 +64,19 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
                   hulls: list[tuple[int, int, Piece]] | None = None) -> tuple[list[Piece], np.ndarray | None, set[str]]:
     """Pieces of every mesh collision of ``link`` (one per OBJ group, link frame: :func:`_group_hulls`, or
     ``hulls`` when given; with ``decompose``, a group holding an open cavity the link's other groups leave open
-    decomposed, :func:`_open_pieces`, unless the link slides along the links ``slides_along`` or the cavity opens
+    decomposed, :func:`container_pieces.open_pieces`, unless the link slides along the links ``slides_along`` or the cavity opens
     downward against ``up`` (3,), the world's up in the link frame), the cavities' core points (K, 3) m (None:
     none) and the files of the groups decomposed."""
     found = _group_hulls(link, mesh_path, notes) if hulls is None else hulls
     out: list[Piece] = []
     cores: list[np.ndarray] = []
     opened_files: set[str] = set()
-    surfaces = _link_surfaces(link, mesh_path) if decompose and any(_may_hold_cavity(p) for _, _, p in found) else None
+    may_hold = decompose and any(container_pieces.may_hold_cavity(p) for _, _, p in found)
+    surfaces = container_pieces.link_surfaces(link, mesh_path) if may_hold else None
     for k, g, piece in found:
         opened = None
-        if surfaces is not None and _may_hold_cavity(piece) and (k, g) in surfaces[1]:
-            opened = _open_pieces(link.name, link.collisions[k], g, piece, surfaces[1][(k, g)], surfaces[0], notes,
+        if surfaces is not None and container_pieces.may_hold_cavity(piece) and (k, g) in surfaces[1]:
+            opened = container_pieces.open_pieces(link.name, link.collisions[k], g, piece, surfaces[1][(k, g)], surfaces[0], notes,
                                   slides_along, up)
         if opened is None:
             out.append(piece)
@@ -115,137 +99,6 @@ def _sliding_neighbours(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, 
     return out
 
 
-def _holding_children(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int, Piece]]]) -> set[str]:
-    """The links whose group ``hulls`` (:func:`_group_hulls`) hold a child's vertices deeper than
-    :data:`CONTAINMENT_TOLERANCE` somewhere over the child's joint range (:func:`swept_child_points`): a desk body
-    around its drawer, whose space opens downward under its top but must be cut away for the drawer all the same."""
-    trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
-    out = set()
-    for name, found in trial.items():
-        swept = swept_child_points(model, trial, name, support=True)
-        if swept and found:
-            pts = np.vstack(list(swept.values()))
-            if any(depth_inside(pts, p) > CONTAINMENT_TOLERANCE for p in found):
-                out.add(name)
-    return out
-
-
-def _may_hold_cavity(piece: Piece) -> bool:
-    """A hull wide enough every way (principal extents) to hold a ball of :data:`cavities.MIN_CAVITY_RADIUS`."""
-    p = piece.points
-    if len(p) < 4:
-        return False
-    _, _, vt = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
-    ext = np.ptp(p @ vt.T, axis=0)
-    return bool(ext.min() >= 2.0 * cavities.MIN_CAVITY_RADIUS)
-
-
-def _link_surfaces(link: urdf.UrdfLink, mesh_path) -> tuple[tuple[np.ndarray, np.ndarray],
-                                                               dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]] | None:
-    """The triangles of every mesh collision group of ``link`` in the link frame (m): (all of them as one mesh
-    (vertices (V, 3), faces (F, 3)), (collision, group) -> that group's mesh), or None when a file cannot be read
-    the way its hulls were (then no group is decomposed)."""
-    by_group: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
-    for k, c in enumerate(link.collisions):
-        if c.kind != "mesh":
-            continue
-        try:
-            meshes = mesh_io.group_meshes(mesh_path(c))
-            if len(meshes) != len(mesh_hulls(mesh_path(c), c.scale)):
-                return None
-        except (mesh_io.MeshReadError, urdf.UrdfError):
-            return None
-        s, R, t = c.scale, c.origin[:3, :3], c.origin[:3, 3]
-        for g, (v, f) in enumerate(meshes):
-            if len(f):
-                by_group[(k, g)] = ((v * s) @ R.T + t, f)
-    if not by_group:
-        return None
-    offsets = np.cumsum([0] + [len(v) for v, _ in by_group.values()])
-    allv = np.vstack([v for v, _ in by_group.values()])
-    allf = np.vstack([f + o for (_, f), o in zip(by_group.values(), offsets)])
-    return (allv, allf), by_group
-
-
-def _open_pieces(link: str, c: urdf.UrdfGeometry, g: int, hull: Piece, mesh: tuple[np.ndarray, np.ndarray],
-                 link_mesh: tuple[np.ndarray, np.ndarray], notes: list[str],
-                 slides_along: set[str] | None = None, up: np.ndarray | None = None) -> tuple[list[Piece], np.ndarray] | None:
-    """The convex pieces (CoACD, :mod:`~asset2sim.tasks.geometry.decomposition`) of ``mesh`` (vertices (V, 3) m,
-    faces (F, 3)), group ``g`` of collision ``c``, replacing its hull ``hull`` when the hull holds an open cavity
-    that the link's surfaces ``link_mesh`` leave open (:func:`cavities.open_cavity`), the link slides along no
-    other link (``slides_along``: a part sliding across the seams between pieces catches on them in PyBullet, as
-    drawers stacked in a cabinet would), the cavity does not only open downward (the mouth of each of its regions,
-    :class:`cavities.CavityRegion`, more than :data:`MOUTH_BELOW` below the horizontal against ``up`` (3,), the
-    world's up in the link frame at the joints' reference state: a lid's underside, which nothing put in would
-    stay in; a toilet body's bowl opens upward beside the space under its rim, which opens downward) and the pieces
-    leave at least :data:`OPENED_SHARE` of the cavity free, with the cavity's core points (K, 3) m; None (the hull
-    stays, a note says why when there is a cavity) otherwise."""
-    try:
-        hv, hf = mesh_io.convex_hull_mesh(hull.points)
-        cav = cavities.open_cavity(link_mesh[0], link_mesh[1], hv, hf)
-    except (QhullError, ValueError):
-        return None
-    if cav is None:
-        return None
-    what = (f"link {link!r}: group {g} of {c.filename} {CAVITY_NOTE} (a ball of {cav.radius * 1000:.0f} mm radius, "
-            f"{100 * cav.volume / max(cav.hull_volume, 1e-12):.0f} % of its hull)")
-    if up is not None and cav.regions and all(float(r.mouth @ up) < -MOUTH_BELOW for r in cav.regions):
-        notes.append(f"{what}; kept as one convex hull: its opening faces down at the joints' reference state "
-                     f"({_below_horizontal(cav.regions, up)}), so nothing put in would stay in it")
-        return None
-    if slides_along:
-        notes.append(f"{what}; kept as one convex hull, solid inside: it slides along {', '.join(map(repr, sorted(slides_along)))} "
-                     "and a part sliding across the seams between convex pieces catches on them")
-        return None
-    try:
-        parts = decomposition.decompose(mesh[0], mesh[1], CAVITY_COACD, refit=False)
-    except (decomposition.DecompositionUnavailable, ValueError) as exc:
-        notes.append(f"{what}; kept as one convex hull, solid inside: {exc}")
-        return None
-    # refitted to points on the part's own surface: CoACD's pieces lie on its remesh, offset from the surface,
-    # and a few corners per wall are too few to refit to
-    size = float(np.ptp(mesh[0], axis=0).max())
-    surface = np.vstack([mesh[0], surface_samples(mesh[0][mesh[1]], size / REFIT_SAMPLES)])
-    pieces = []
-    inward = cav.core.mean(axis=0)
-    for pv, _ in decomposition.refit_pieces(surface, parts):
-        solid = _thick_wall(pv, inward)
-        if solid is None:
-            continue
-        try:
-            pieces.append(Piece.of(solid, (str(c.filename),)))
-        except (QhullError, ValueError):
-            continue
-    free = cavities.open_fraction(cav.core, [p.equations for p in pieces])
-    if not pieces or free < OPENED_SHARE:
-        notes.append(f"{what}; kept as one convex hull, solid inside: its convex decomposition leaves "
-                     f"{100 * free:.0f} % of the cavity free")
-        return None
-    notes.append(f"{what}: {len(pieces)} convex pieces (CoACD) instead of its hull, so that things can be put in it")
-    return pieces, cav.core
-
-
-def _below_horizontal(regions: tuple[cavities.CavityRegion, ...], up: np.ndarray) -> str:
-    """How far below the horizontal (against ``up`` (3,)) the mouths of ``regions`` face, in words (degrees)."""
-    angles = sorted({round(float(np.degrees(np.arcsin(min(1.0, max(0.0, -float(r.mouth @ up))))))) for r in regions})
-    return ", ".join(f"{a} deg" for a in angles) + " below the horizontal"
-
-
-def _thick_wall(points: np.ndarray, inward: np.ndarray) -> np.ndarray | None:
-    """``points`` (k, 3) m of a piece of a container's wall, grown to :data:`CAVITY_WALL` m along their thinnest
-    principal direction toward ``inward`` (3,) m (the cavity: the outer face stays where the part is); None when
-    they span no area."""
-    axis = thinnest_axis(points)
-    if axis is None:
-        return None
-    p, c, n, width = axis
-    if width >= CAVITY_WALL:
-        return p
-    if float(n @ (np.asarray(inward, float) - c)) < 0:
-        n = -n
-    return np.vstack([p, p + n * (CAVITY_WALL - width)])
-
-
 def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None = None, *,
                 limit: int = MAX_PIECES_PER_LINK, decompose: bool = True,
                 level: bool = False, open_containers: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
@@ -260,7 +113,7 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
         state: joint -> rad or m, the initial state (None: nothing state-dependent).
         limit: most pieces per link.
         decompose: cut a parent piece that contains its child (else only a note).
-        open_containers: with ``decompose``, decompose a part that holds an open cavity (:func:`_open_pieces`;
+        open_containers: with ``decompose``, decompose a part that holds an open cavity (:func:`container_pieces.open_pieces`;
             else its hull, solid inside).
         level: the object is free-standing: its footprint at ``state`` is made planar.
 
@@ -297,7 +150,7 @@ def _cached_pieces(key: str, model: urdf.UrdfModel, mesh_path, limit: int,
 
 def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
                  opening: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
-    """(link -> pieces, notes) before any state; ``opening``: containers decomposed (:func:`_open_pieces`)."""
+    """(link -> pieces, notes) before any state; ``opening``: containers decomposed (:func:`container_pieces.open_pieces`)."""
     notes: list[str] = []
     pieces: dict[str, list[Piece]] = {}
     cores: dict[str, np.ndarray] = {}
@@ -307,7 +160,7 @@ def _made_pieces(model: urdf.UrdfModel, mesh_path, limit: int, decompose: bool,
     hulls = {name: _group_hulls(link, mesh_path, hull_notes[name]) for name, link in model.links.items()} if opening else {}
     sliding = _sliding_neighbours(model, hulls) if opening else {}
     poses = model.link_poses(reference_state(model)) if opening else {}
-    holding = _holding_children(model, hulls) if opening else set()
+    holding = container_pieces.holding_children(model, hulls) if opening else set()
     for name, link in model.links.items():
         # the world's up, against which a cavity opens downward; none for a link whose hull a child moves in
         up = poses[name][:3, :3].T @ np.array([0.0, 0.0, 1.0]) if name in poses and name not in holding else None
@@ -389,6 +242,7 @@ PIECES_CODE = ("asset2sim.tasks.assemble.collision_geometry", "asset2sim.tasks.a
                "asset2sim.tasks.assemble.convex_pieces", "asset2sim.tasks.assemble.footprint", "asset2sim.tasks.assemble.joint_sweep",
                "asset2sim.tasks.assemble.parent_child_separation", "asset2sim.tasks.assemble.piece_penetration",
                "asset2sim.tasks.assemble.sliding_clearance", "asset2sim.tasks.geometry.limits", "asset2sim.mesh_io",
+               "asset2sim.tasks.assemble.container_pieces",
                "asset2sim.engines.loading", "asset2sim.urdf", "asset2sim.frames", "asset2sim.tasks.geometry.cavities",
                "asset2sim.tasks.geometry.decomposition", "asset2sim.tasks.geometry.voxels")
 

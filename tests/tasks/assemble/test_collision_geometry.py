@@ -11,14 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim import urdf
+from asset2sim import mesh_io, urdf
 from asset2sim.mesh_io import read_mesh
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
 from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.assemble import collision_geometry as cg, containment_cuts as cc, convex_pieces as cp, footprint as fp
 from asset2sim.tasks.assemble import joint_sweep as js, parent_child_separation as pcs, piece_penetration as pp, sliding_clearance as sc
+from asset2sim.tasks.assemble import container_pieces as cp_
 from asset2sim.tasks.assemble.write import write_output
+from asset2sim.tasks.geometry import cavities
 from asset2sim.tasks.synthesize.validate_overlay import validate_overlay
 from tests.conftest import SHARED, needs_shared
 from tests.helpers import box_mesh as _box
@@ -195,7 +197,7 @@ def test_a_part_holding_an_open_cavity_keeps_it_open(tmp_path):
     assert len(cg.link_pieces(model, lambda g: g.path, {})[0]["body"]) == 1  # the default: containers stay hulls
     pieces, notes = cg.link_pieces(model, lambda g: g.path, {}, open_containers=True)
     assert len(pieces["body"]) > 1
-    assert any(cg.CAVITY_NOTE in n and "'body'" in n for n in notes), notes
+    assert any(cp_.CAVITY_NOTE in n and "'body'" in n for n in notes), notes
 
     def held(p: np.ndarray) -> bool:
         return any(np.max(p @ q.equations[:, :3].T + q.equations[:, 3]) <= 0 for q in pieces["body"])
@@ -212,10 +214,10 @@ def test_a_link_whose_hull_a_child_moves_in_is_found(tmp_path):
     drawer); the block holds no child."""
     _, model = _tray_with_block(tmp_path)
     hulls = {name: cg._group_hulls(link, lambda g: g.path, []) for name, link in model.links.items()}
-    assert cg._holding_children(model, hulls) == {"body"}
+    assert cp_.holding_children(model, hulls) == {"body"}
     far = {name: [(k, g, cg.Piece.of(p.points + (0.0, 0.0, 1.0) if name == "lid" else p.points, p.sources))
                   for k, g, p in found] for name, found in hulls.items()}  # the block lifted 1 m clear of the tray
-    assert cg._holding_children(model, far) == set()
+    assert cp_.holding_children(model, far) == set()
 
 
 @needs_shared
@@ -228,24 +230,24 @@ def test_a_trash_can_body_is_hollow_and_a_drawer_that_slides_along_another_keeps
     pytest.importorskip("coacd")
     can = urdf.read_urdf(SHARED / "102155" / "mobility.urdf")
     pieces, notes = cg.link_pieces(can, lambda g: g.path, {}, open_containers=True)
-    opened = [n for n in notes if cg.CAVITY_NOTE in n and "'link_3'" in n]
+    opened = [n for n in notes if cp_.CAVITY_NOTE in n and "'link_3'" in n]
     assert opened and "convex pieces (CoACD)" in opened[0], notes
     body = can.links["link_3"]
-    surfaces = cg._link_surfaces(body, lambda g: g.path)
+    surfaces = cp_.link_surfaces(body, lambda g: g.path)
     group = next(m for (k, _), m in surfaces[1].items() if "original-6" in body.collisions[k].filename)
-    hv, hf = cg.mesh_io.convex_hull_mesh(group[0])
-    cav = cg.cavities.open_cavity(*surfaces[0], hv, hf)
-    assert cav is not None and cg.cavities.open_fraction(cav.core, [p.equations for p in pieces["link_3"]]) > 0.9
+    hv, hf = mesh_io.convex_hull_mesh(group[0])
+    cav = cavities.open_cavity(*surfaces[0], hv, hf)
+    assert cav is not None and cavities.open_fraction(cav.core, [p.equations for p in pieces["link_3"]]) > 0.9
     cabinet = urdf.read_urdf(SHARED / "19179" / "mobility.urdf")
     pieces, notes = cg.link_pieces(cabinet, lambda g: g.path, {}, open_containers=True)
-    kept = [n for n in notes if cg.CAVITY_NOTE in n and "'link_0'" in n]
+    kept = [n for n in notes if cp_.CAVITY_NOTE in n and "'link_0'" in n]
     assert kept and "kept as one convex hull" in kept[0] and "slides along 'link_1'" in kept[0], notes
     assert len(pieces["link_0"]) <= 2  # the box's hull and the handle's
     toilet = urdf.read_urdf(SHARED / "102703" / "mobility.urdf")  # its lid's underside opens downward when shut
     pieces, notes = cg.link_pieces(toilet, lambda g: g.path, {}, open_containers=True)
-    lid = [n for n in notes if cg.CAVITY_NOTE in n and "'link_2'" in n]
+    lid = [n for n in notes if cp_.CAVITY_NOTE in n and "'link_2'" in n]
     assert lid and "opening faces down" in lid[0] and len(pieces["link_2"]) == 1, notes
-    body = [n for n in notes if cg.CAVITY_NOTE in n and "'link_4'" in n]
+    body = [n for n in notes if cp_.CAVITY_NOTE in n and "'link_4'" in n]
     assert body and "convex pieces (CoACD)" in body[0], notes
     assert len(pieces["link_4"]) > 1
 
