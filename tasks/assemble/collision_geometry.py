@@ -71,13 +71,13 @@ def _group_pieces(link: urdf.UrdfLink, mesh_path, notes: list[str], decompose: b
     out: list[Piece] = []
     cores: list[np.ndarray] = []
     opened_files: set[str] = set()
-    may_hold = decompose and any(container_pieces.may_hold_cavity(p) for _, _, p in found)
-    surfaces = container_pieces.link_surfaces(link, mesh_path) if may_hold else None
-    for k, g, piece in found:
+    may_hold = [decompose and container_pieces.may_hold_cavity(p) for _, _, p in found]
+    surfaces = container_pieces.link_surfaces(link, mesh_path) if any(may_hold) else None
+    for (k, g, piece), holds in zip(found, may_hold):
         opened = None
-        if surfaces is not None and container_pieces.may_hold_cavity(piece) and (k, g) in surfaces[1]:
-            opened = container_pieces.open_pieces(link.name, link.collisions[k], g, piece, surfaces[1][(k, g)], surfaces[0], notes,
-                                  slides_along, up)
+        if surfaces is not None and holds and (k, g) in surfaces[1]:
+            opened = container_pieces.open_pieces(link.name, link.collisions[k], g, piece, surfaces[1][(k, g)], surfaces[0],
+                                                  notes, slides_along, up)
         if opened is None:
             out.append(piece)
         else:

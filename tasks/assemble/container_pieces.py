@@ -38,7 +38,8 @@ CAVITY_NOTE = "holds an open cavity"
 
 
 def holding_children(model: urdf.UrdfModel, hulls: dict[str, list[tuple[int, int, Piece]]]) -> set[str]:
-    """The links whose group ``hulls`` (:func:`_group_hulls`) hold a child's vertices deeper than
+    """The links whose group ``hulls`` (link -> (collision index, group index, hull), as
+    :mod:`~asset2sim.tasks.assemble.collision_geometry` makes them) hold a child's vertices deeper than
     :data:`CONTAINMENT_TOLERANCE` somewhere over the child's joint range (:func:`swept_child_points`): a desk body
     around its drawer, whose space opens downward under its top but must be cut away for the drawer all the same."""
     trial = {name: [p for _, _, p in found] for name, found in hulls.items()}
