@@ -300,7 +300,7 @@ def load_pybullet(out_dir: str | Path, client: int | None = None, *, ground: boo
 
 def load_sapien(out_dir: str | Path, scene: Any = None, *, ground: bool = True) -> SimSession:
     """Load a refine output into SAPIEN 3 (PhysX) as asset2sim verified it.
-    Friction, damping and springs act through ``session.step()``; when
+    Friction, damping, springs and catches act through ``session.step()``; when
     stepping yourself, call ``session.apply_passive_forces()`` before each
     ``scene.step()``.
 

@@ -62,6 +62,9 @@ from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_operability import guarded, mechanisms  # noqa: E402  (the same case outcome and overlay reading)
+
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "manifest.csv"
 
@@ -198,38 +201,35 @@ def out_of_band(report) -> list[tuple[str, str]]:
 
 def run_case(case: dict, out_root: str, evaluate: bool, open_containers: bool = False) -> dict:
     """Refine one case in this process (``open_containers``: :attr:`RefineConfig.open_containers`); returns the
-    case with its outcome."""
-    from asset2sim.schemas.config import RefineConfig
-    from asset2sim.tasks.refine import RefineError, refine_asset
-
-    t0 = time.perf_counter()
-    res = dict(case)
+    case with its outcome (a failure as :func:`bench_operability.guarded` records it)."""
     out = Path(out_root) / case["case"].replace(":", "_").replace("#", "_")
-    try:
-        r = refine_asset(case["source"], case["prompt"], out, RefineConfig(open_containers=open_containers),
-                         category=case["category"], skip_if_complete=False, extras=evaluate, overwrite=True).report
-        res["mode"] = r.failure_mode
-        res["mounted"] = bool(r.mounting is not None and r.mounting.fixed)
-        res["design"] = list(r.design_changes)
-        res["collision"] = list(r.state.collision_changes) if r.state else []
-        res["out_of_band"] = out_of_band(r)
-        if res["mode"] == "none" and any(not why for _, why in res["out_of_band"]):
-            res["mode"] = "state_out_of_band"
-        if evaluate:
-            ev_path = out / "evaluation.json"
-            failures = json.loads(ev_path.read_text()).get("failures", []) if ev_path.is_file() else ["no evaluation.json"]
-            res["evaluation_failures"] = failures
-            if res["mode"] == "none" and failures:
-                res["mode"] = "evaluation:" + ",".join(sorted(failures))
-    except RefineError as exc:
-        res["mode"] = exc.failure_mode
-        res["error"] = str(exc)[:300]
-    except Exception as exc:  # a crash is a failure mode of its own
-        res["mode"] = "crash"
-        res["error"] = f"{type(exc).__name__}: {exc}"[:300]
-    res["seconds"] = time.perf_counter() - t0
-    return res
+    return guarded(case, lambda res: _measure(res, out, evaluate, open_containers))
 
+
+def _measure(res: dict, out: Path, evaluate: bool, open_containers: bool) -> None:
+    """Refine ``res``'s case into ``out``; its verdict, design notes and operability into ``res``."""
+    from asset2sim.schemas.config import RefineConfig
+    from asset2sim.tasks.refine import refine_asset
+
+    r = refine_asset(res["source"], res["prompt"], out, RefineConfig(open_containers=open_containers),
+                     category=res["category"], skip_if_complete=False, extras=evaluate, overwrite=True).report
+    res["mode"] = r.failure_mode
+    res["mounted"] = bool(r.mounting is not None and r.mounting.fixed)
+    res["design"] = list(r.design_changes)
+    res["collision"] = list(r.state.collision_changes) if r.state else []
+    res["out_of_band"] = out_of_band(r)
+    op = next((m for m in r.metrics if m.name == "operability" and m.engine == "pybullet"), None)
+    res["operable"] = None if op is None else op.passed
+    res["efforts"] = {} if op is None else dict(op.details.get("efforts") or {})
+    res["mechanisms"] = mechanisms({"joints": json.loads((out / "overlay.json").read_text())["joints"]})
+    if res["mode"] == "none" and any(not why for _, why in res["out_of_band"]):
+        res["mode"] = "state_out_of_band"
+    if evaluate:
+        ev_path = out / "evaluation.json"
+        failures = json.loads(ev_path.read_text()).get("failures", []) if ev_path.is_file() else ["no evaluation.json"]
+        res["evaluation_failures"] = failures
+        if res["mode"] == "none" and failures:
+            res["mode"] = "evaluation:" + ",".join(sorted(failures))
 
 def _table(title: str, groups: dict[str, list[dict]]) -> list[str]:
     lines = [f"\n{title}", f"{'':28} {'pass':>6} {'n':>5} {'rate':>7}"]
@@ -237,6 +237,30 @@ def _table(title: str, groups: dict[str, list[dict]]) -> list[str]:
         g = groups[key]
         ok = sum(1 for c in g if c["mode"] == "none")
         lines.append(f"{key:28} {ok:6d} {len(g):5d} {100.0 * ok / len(g):6.1f}%")
+    return lines
+
+
+def operability_table(results: list[dict]) -> list[str]:
+    """Per category: cases interaction-ready with every handled part operable, the parts' peak operating
+    forces (N; median and max) against the top of their ranges, and how often each stability mechanism was used."""
+    lines = ["\noperability per category (ready = interaction-ready; parts: operable / pushed; forces N)",
+             f"{'':28} {'ready':>6} {'n':>5} {'parts':>9} {'median':>7} {'max':>7} {'range top':>10}"]
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for c in results:
+        if c["mode"] != "invalid_input":
+            groups[c["category"] + (" (generated)" if c["generated"] else "")].append(c)
+    for key in sorted(groups):
+        g = groups[key]
+        parts = [e for c in g for e in (c.get("efforts") or {}).values()]
+        f = sorted(e["peak_force_n"] for e in parts)
+        tops = sorted({e["force_range_n"][1] for e in parts if e.get("force_range_n")})
+        lines.append(f"{key:28} {sum(1 for c in g if c['mode'] == 'none'):6d} {len(g):5d} "
+                     f"{sum(1 for e in parts if e['passed']):4d}/{len(parts):<4d} {f[len(f) // 2] if f else float('nan'):7.2f} "
+                     f"{max(f, default=float('nan')):7.2f} {'/'.join(f'{t:g}' for t in tops):>10}")
+    ready_bad = [c for c in results if c["mode"] == "none" and c.get("operable") is False]
+    lines.append(f"interaction-ready with a part not operable: {len(ready_bad)}")
+    used = Counter(m for c in results for m in set(c.get("mechanisms") or []))
+    lines.append("stability mechanisms (cases using each): " + (", ".join(f"{m} {n}" for m, n in sorted(used.items())) or "none"))
     return lines
 
 
@@ -271,6 +295,7 @@ def report(results: list[dict]) -> str:
     if explained:
         lines.append(f"\nwritten outside the requested band with a design note saying why, in {len(explained)} passing cases: "
                      + ", ".join(f"{c['asset']} {c['prompt']!r} ({'; '.join(j for j, _ in c['out_of_band'])})" for c in explained[:20]))
+    lines += operability_table(results)
     mounted = [c for c in results if c.get("mounted")]
     lines.append(f"mounted (fixed root) in {len(mounted)} of {len(results)} cases")
     opened = [c for c in results if any("holds an open cavity" in n and "convex pieces (CoACD)" in n for n in c.get("collision", []))]

@@ -16,8 +16,9 @@ from pydantic import BaseModel, ConfigDict, field_validator
 
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
-#: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``).
-SCHEMA_VERSION = 4
+#: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``, version 5 ``operable`` and
+#: ``operating_efforts``, version 6 ``request_met`` and ``request_unmet``).
+SCHEMA_VERSION = 6
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
 
 RowStatus = Literal["done", "skipped", "failed"]
@@ -29,7 +30,10 @@ class CatalogRow(BaseModel):
     partition folders): ``status`` done, skipped (``source_run`` reused) or
     failed; ``initial_state`` JSON {joint: rad or m}; ``stage_seconds`` JSON
     {stage: s}; ``request_warnings`` JSON [text]: what of the request was not
-    understood or not applied; ``clips`` JSON [path]: the output's interaction clips (WebM), relative to
+    understood or not applied; ``request_met``: the as-asked verdict (every part and state the request names
+    applied, every number within its tolerance; null without a request), ``request_unmet`` JSON [{phrase, kind,
+    target, achieved, gap, unit, text, ...}]: what was not; ``operable``: every handled part moved by a hand inside its real operating range;
+    ``operating_efforts`` JSON {joint: {peak_force_n, peak_torque_nm, force_range_n, ...}}; ``clips`` JSON [path]: the output's interaction clips (WebM), relative to
     ``out_dir``; ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
@@ -54,7 +58,11 @@ class CatalogRow(BaseModel):
     d_ori_rad: Optional[float] = None
     oscillation_pass: Optional[bool] = None
     prompt_alignment: Optional[float] = None
+    operable: Optional[bool] = None
+    operating_efforts: Optional[str] = None
     request_warnings: Optional[str] = None
+    request_met: Optional[bool] = None
+    request_unmet: Optional[str] = None
     clips: Optional[str] = None
     model_queries: Optional[int] = None
     tokens: Optional[int] = None

@@ -86,6 +86,14 @@ class JointDynamics(_Strict):
     stiffness: float = 0.0
     spring_reference: float | None = None
     """Rest position q_s of the spring (rad or m); required when stiffness > 0."""
+    catch_force: float = 0.0
+    """Holding force of a catch at the closed end (a magnetic catch, a stay-closed slide): N (prismatic) or
+    N*m about the axis (revolute); 0 without one."""
+    catch_position: float | None = None
+    """The closed end the catch holds the part at (rad or m, output scale); required when catch_force > 0."""
+    catch_zone: float | None = None
+    """Travel (rad or m, signed: > 0 when opening increases q) over which the catch's pull falls from
+    ``catch_force`` to 0; required when catch_force > 0."""
     inertia_axis: float | None = None
     """Inertia of the moving subtree about / along the axis (kg*m^2 or kg), when
     known: bounds the damping a simulator integrates stably (c <= I / dt)."""

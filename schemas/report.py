@@ -12,8 +12,8 @@ from asset2sim.schemas.request import RequestFindings
 #: Fixed vocabulary of per-asset failure modes (pipeline catalog, reports).
 FailureMode = Literal[
     "none", "invalid_input", "estimator_failure", "invalid_overlay", "unresolved_penetration", "unstable", "oscillating",
-    "joint_not_held", "blocked_joint", "not_robust_at_rest", "probe_failed", "task_failed", "implausible_force", "timeout",
-    "crash", "invalid_manifest_row",
+    "joint_not_held", "blocked_joint", "not_operable", "not_robust_at_rest", "probe_failed", "task_failed", "implausible_force", "timeout",
+    "crash", "invalid_manifest_row", "request_not_met",
 ]
 FAILURE_MODES: tuple[str, ...] = FailureMode.__args__  # type: ignore[attr-defined]
 

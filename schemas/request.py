@@ -140,6 +140,9 @@ class RequestSpec(BaseModel):
     different count on the object is a warning."""
     warnings: list[str] = Field(default_factory=list)
     """Contradictions and numbers the parser could not use."""
+    overridden: list[str] = Field(default_factory=list)
+    """Phrases of joint states a later phrase for the same part replaced ("the door open 90 degrees and the door
+    closed": the first), each once: asked and not applied (the as-asked verdict, ``tasks/check/as_asked.py``)."""
     matched: list[str] = Field(default_factory=list)
     """Every phrase the parser recognised (for the report)."""
     mount: Literal["fixed", "free"] | None = None
@@ -171,6 +174,9 @@ class QuantityOutcome(BaseModel):
     within_tolerance: bool = True
     why: str = ""
     """How the target was decided; why it was missed (a limit, the geometry)."""
+    kind: Literal["state", "size", "mass", "dynamics", ""] = ""
+    """What was asked: a joint ``state`` (an angle, a distance or a fraction from the closed end, or an end), a
+    ``size``, the total ``mass``, a joint's ``dynamics`` value; "" in reports written before it was recorded."""
 
 
 class RequestFindings(BaseModel):

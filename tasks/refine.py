@@ -28,6 +28,7 @@ from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
 from asset2sim.tasks.audit import keep
 from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
+from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
@@ -136,9 +137,10 @@ def refine_asset(
                 ctx.task = task
                 pose_note = _interpret(ctx, log)
                 att, pose_note = _synthesize_and_check(ctx, est, config, ws, cache, log, pose_note)
+                resolution = request_apply.resolve_states(ctx, att.overlay.scale)  # what each phrase set (the as-asked tier)
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             _announce_post_check(att, log)
-            report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times)
+            report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
             atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
             extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips) if extras else {}
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
@@ -540,7 +542,9 @@ def _closed_on_output(ctx: EstimationContext, syn: _Synthesis, urdf: Path, ws: W
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
     ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
-    return replace(syn, overlay=overlay, closed_out=new, requested=requested)
+    targets = request_apply.retarget(syn.targets, syn.closed_out, new)  # the angle asked, from the new closed end
+    bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
+    return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=targets, bands=bands)
 
 
 def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, log: _StageLog,
@@ -552,12 +556,18 @@ def _clip_synthesis(ctx: EstimationContext, syn: _Synthesis, urdf: Path, config:
     if overlay is syn.overlay:
         return syn
     s = overlay.scale
+    targets = request_apply.retarget(syn.targets, syn.closed_out, closed_out)  # an angle asked stays that angle from the closed end
+    moved = {n: t for n, t in targets.items() if t is not syn.targets[n]}
+    bands = {**syn.bands, **{n: t.band for n, t in moved.items()}}
+    if moved and overlay.initial_joint_positions:
+        overlay = overlay.model_copy(update={"initial_joint_positions": {
+            **overlay.initial_joint_positions, **{n: closed_out[n].position(t.fraction) for n, t in moved.items()}}})
     unscaled = _scaled_closed(closed_out, 1.0 / s, syn.prismatic)
-    requested = estimate.state_from_bands(unscaled, syn.bands, s, syn.prismatic)
+    requested = estimate.state_from_bands(unscaled, bands, s, syn.prismatic)
     requested.update(overlay.initial_joint_positions or {})
     requested.update(_at_fractions(closed_out, fractions or {}))
     ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
-    return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested)
+    return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested, targets=targets, bands=bands)
 
 
 def _clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], ws: Workspace, config: RefineConfig,
@@ -640,6 +650,7 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
     rounds: list[EscalationRound] = []
     ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
+    labels = task_tier.link_labels(asset)
     n = 0
     spec = task_tier.task_spec_for(ctx.task, ws.model(), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
@@ -667,9 +678,10 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
                 free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
         return chk
 
-    check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
+    check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+                                                     category=ctx.category, labels=labels))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
-    search = dynamics_search.DynamicsSearch(lim.budgets)  # relief and escalation bracketed by what each round measured
+    search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps)  # relief and escalation bracketed by what each round measured
     search.record(overlay, check.metrics)
     tried = [(overlay, check)]
     while (not check.passed or task_tier.task_failing(check.metrics)) and n < config.max_escalation_rounds:
@@ -684,7 +696,8 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         if not changes:
             break
         ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded))
+        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+                                                     category=ctx.category, labels=labels))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
         search.record(overlay, check.metrics)
         tried.append((overlay, check))
@@ -697,7 +710,8 @@ def _post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float
         if earlier:
             overlay = tried[best][0]
             ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, recorded=recorded))
+        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, recorded=recorded,
+                                                   category=ctx.category, labels=labels))
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
@@ -818,10 +832,16 @@ def _staging_notes(asset) -> list[str]:
     return head + [f"input: {n}" for n in asset.staging_notes]
 
 
-def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt, findings: list, pose_note: str, times: dict[str, float]) -> RefineReport:
-    """``report.json``'s model from the final attempt."""
+def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt, findings: list, pose_note: str, times: dict[str, float],
+                  resolution: request_apply.StateResolution | None = None) -> RefineReport:
+    """``report.json``'s model from the final attempt; ``resolution``: what each phrase of the request set
+    (``request_apply.resolve_states``), for the as-asked tier (``request_met``)."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
-    metrics = att.check.metrics + [m for res in att.check.engine_results.values() for m in res]
+    found = request_apply.findings(ctx, att.targets, closed_out, state, overlay.scale, overlay.total_mass(), list(overlay.notes.other),
+                                   overlay, att.rounds)
+    asked = as_asked.refine_request_met(ctx.request, resolution, found, closed_out, state, request_apply.unapplied_properties(ctx))
+    metrics = att.check.metrics + [m for res in att.check.engine_results.values() for m in res] + [asked]
+    mode = post_check_failure_mode(att.check)
     return RefineReport(
         asset_id=asset.asset_id,
         source=str(asset.staged_from or asset.source_dir),
@@ -848,7 +868,7 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         parity=_parity_rows(att.check),
         escalation=att.rounds,
         validation=[f.to_issue().model_dump() for f in findings] + [i.model_dump() for i in att.issues],
-        failure_mode=post_check_failure_mode(att.check),
+        failure_mode=readiness([asked]).failure_mode if mode == "none" else mode,  # the as-asked tier after the physical ones
         readiness=readiness(metrics).tiers,
         stage_seconds=times,
         notes=_staging_notes(asset) + request_notes(ctx.request) + list(overlay.notes.other)
@@ -856,8 +876,7 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
         + [mounting_note(overlay)] + att.design,
         mounting=overlay.mounting,
         design_changes=att.design,
-        request=request_apply.findings(ctx, att.targets, closed_out, state, overlay.scale, overlay.total_mass(), list(overlay.notes.other),
-                                       overlay, att.rounds),
+        request=found,
     )
 
 
@@ -947,6 +966,8 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
                 out["clips"] = str(out_dir / CLIPS_DIR)
             ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
             combine_verdict(report, ev.metrics)  # report.json says what report.html says
+            asked = [m for m in ev.metrics if m.name == "request_met"]  # and names the unmet phrases the verdict read
+            report.metrics = [m for m in report.metrics if m.name != "request_met" or not asked] + asked
         except Exception as exc:
             _raise_if_unwritable(exc, out_dir)
             report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")

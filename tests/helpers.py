@@ -224,3 +224,20 @@ def box_mesh(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
     return v, f
+
+
+def assert_ready_or_honestly_not_robust(report, overlay) -> None:
+    """Interaction-ready, or failing robust rest honestly: every handled part operable (no part jammed to make
+    the object still) and each joint robust rest found leaving its state at the friction a hand still
+    overcomes (its ``source`` says the friction was capped or bounded there)."""
+    op = report.metric("operability")
+    assert op is not None and op.passed is True, (op.details.get("failures") if op is not None else "no operability tier")
+    if report.failure_mode == "none":
+        return
+    assert report.failure_mode == "not_robust_at_rest", (report.failure_mode, report.readiness)
+    rr = report.metric("robust_rest")
+    loose = {j for t in (rr.details.get("trials") or {}).values() for j in (t.get("failing_joints") or [])}
+    assert loose
+    for j in loose:
+        src = overlay.joints[j].source
+        assert "capped at" in src or "operable: friction" in src, (j, src)

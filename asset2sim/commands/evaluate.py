@@ -82,6 +82,9 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     if not wide:
         console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
+    asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap
+    for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
+        console.print(f"NOT AS ASKED {u.get('text') or u.get('phrase')}", markup=False, soft_wrap=True)
     for n in ev.notes:
         console.print(f"[dim]note: {n}[/dim]")
     console.print(f"evaluated in {ev.seconds:.2f} s; wrote {out / 'evaluation.json'}" + ("" if args.no_report else f" and {out / 'report.html'}"),

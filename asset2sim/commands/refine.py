@@ -2,7 +2,7 @@
 
 Exit status: 0 written and interaction-ready, 1 invalid input, 2 invalid
 request, estimator failure or invalid overlay, 3 written but not
-interaction-ready, 4 output location problem.
+interaction-ready or not as asked (``request_not_met``), 4 output location problem.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.output_folder import URDF_NAME, OutputError
 from asset2sim.tasks.check.asset_files import parse_urdf
-from asset2sim.tasks.evaluation.report_changes import opening_text, position_text
+from asset2sim.tasks.check.as_asked import quantity_text
+from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
 
@@ -87,7 +88,7 @@ def summary_lines(result) -> list[str]:
     r = result.report
     pen, stab, osc = r.metric("penetration"), r.metric("rest_stability"), r.metric("oscillation")
     types = _joint_types(result.out_dir)
-    state = ", ".join(f"{k} = {position_text(v, types.get(k, 'revolute'))}"
+    state = ", ".join(f"{k} = {from_closed_text(v, r.closed_positions.get(k), types.get(k, 'revolute'))}"
                       + (f", {opening_text(r.opening_fractions[k])}" if k in r.opening_fractions else "")
                       for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
     stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
@@ -104,8 +105,9 @@ def summary_lines(result) -> list[str]:
         stability,
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
+        _operability_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + [
+    ] + as_asked_lines(r) + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
@@ -122,12 +124,22 @@ def request_lines(found) -> list[str]:
     for q in found.quantities:
         if q.asked is None or q.achieved is None:
             continue
-        out.append(f"request      {q.what}: asked {q.asked:.4g} {q.unit}, got {q.achieved:.4g}"
-                   + ("" if q.within_tolerance else f"  (NOT within 5 %: {q.why})"))
+        frame = " from the closed end" if q.kind == "state" and q.unit in ("rad", "m") else ""
+        out.append(f"request      {q.what}: asked {quantity_text(q.asked, q.unit)}, got {quantity_text(q.achieved, q.unit)}{frame}"
+                   + ("" if q.within_tolerance else f"  (MISSED, gap {quantity_text(abs(q.achieved - q.asked), q.unit)}: {q.why})"))
     out += [f"request      {w}" for w in found.warnings]
     if found.ignored:
         out.append("request      not understood: " + "; ".join(f"'{g}'" for g in found.ignored))
     return out
+
+
+def as_asked_lines(report) -> list[str]:
+    """The as-asked verdict (``request_met``): one line per unmet phrase with its gap, states from the closed end;
+    nothing when met or not measured."""
+    m = report.metric("request_met")
+    if m is None or m.passed is not False:
+        return []
+    return [f"NOT AS ASKED {u.get('text') or u.get('phrase')}" for u in (m.details or {}).get("unmet") or []]
 
 
 def _tiers(report) -> str:
@@ -149,6 +161,23 @@ def _manipulation_line(report) -> str:
         fails = m.details.get("failures") or []
         parts.append(f"{label} {verdict}" + (f" ({'; '.join(fails[:3])})" if fails else ""))
     return "manipulation " + (", ".join(parts) if parts else "n/a")
+
+
+def _operability_line(report) -> str:
+    """The operability tier, one line: each handled part's peak operating force (and torque) against the top
+    of its real range, and what fails."""
+    m = report.metric("operability")
+    if m is None or m.passed is None:
+        return "operability  n/a" + (f" ({m.details['not_run']})" if m is not None and m.details.get("not_run") else "")
+    parts = []
+    for joint, e in (m.details.get("efforts") or {}).items():
+        top = (e.get("force_range_n") or [None, None])[1]
+        torque = "" if e.get("peak_torque_nm") is None else f", {e['peak_torque_nm']:.2f} N m"
+        parts.append(f"{joint} ({e.get('label') or 'unlabelled'}) {e['peak_force_n']:.1f} N{torque}"
+                     + (f" of {top:g} N" if top is not None else ""))
+    fails = m.details.get("failures") or []
+    return (f"operability  {'PASS' if m.passed else 'FAIL'}: " + ", ".join(parts)
+            + (f" ({'; '.join(fails[:3])})" if fails else ""))
 
 
 def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:

@@ -18,7 +18,7 @@ with startup_quiet():
     from sapien import physx
 
 from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults,
-                                    SessionOptions, penetration_sum, register_engine)
+                                    SessionOptions, Spring, penetration_sum, register_engine)
 from asset2sim.engines.loading import (BULLET_DEFAULT_FRICTION, BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, BULLET_PLANE_FRICTION,
                                        collision_pieces, joint_tables, link_friction, principal_axes, read_urdf)
 from asset2sim.frames import matrix_quat_wxyz
@@ -214,6 +214,7 @@ class PhysXSession(SessionDefaults):
         self._joints = list(self.art.active_joints)
         self._friction, self._damping, self._stiffness, self._reference = (np.zeros(len(active)) for _ in range(4))
         self._drive: dict[int, tuple[float, float]] = {}  # joint index -> (target velocity, force limit beyond friction)
+        self._catches: dict[int, Spring] = {}  # joint index -> its spring with a catch
         for pj in self.urdf.movable_joints:
             i = self._index[pj.name]
             self._damping[i] = pj.damping
@@ -227,6 +228,8 @@ class PhysXSession(SessionDefaults):
             if sp is not None:
                 self._stiffness[i] = sp.stiffness
                 self._reference[i] = sp.reference
+                if sp.catch_force > 0.0:
+                    self._catches[i] = sp
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
@@ -427,7 +430,7 @@ class PhysXSession(SessionDefaults):
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
-        springs = bool(np.any(self._stiffness))
+        springs = bool(np.any(self._stiffness)) or bool(self._catches)
         for _ in range(int(n)):
             self.apply_passive_forces()
             if self._effort is not None:
@@ -442,15 +445,18 @@ class PhysXSession(SessionDefaults):
 
     def apply_passive_forces(self) -> None:
         """For the next ``scene.step()``: each drive's force limit (friction +
-        damping * |qdot|) and the springs' joint forces ``-k (q - q_ref)``."""
+        damping * |qdot|) and the springs' joint forces ``-k (q - q_ref)`` with their catches (:meth:`Spring.catch`)."""
         if bool(np.any(self._damping)) or self._drive:
             qd = np.abs(np.asarray(self.art.get_qvel(), float))
             for i, _joint in enumerate(self._joints):
                 if self._damping[i] > 0 or i in self._drive:
                     self._set_drive(i, float(qd[i]))
-        if bool(np.any(self._stiffness)):
+        if bool(np.any(self._stiffness)) or self._catches:
             q = np.asarray(self.art.get_qpos(), float)
-            self.art.set_qf((-self._stiffness * (q - self._reference)).astype(np.float32))
+            qf = -self._stiffness * (q - self._reference)
+            for i, sp in self._catches.items():
+                qf[i] += sp.catch(float(q[i]))
+            self.art.set_qf(qf.astype(np.float32))
 
     def held_physics(self) -> HeldPhysics:
         """Links and joints from PhysX's getters; friction is the drive's force limit at rest."""

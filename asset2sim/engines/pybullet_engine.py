@@ -265,7 +265,7 @@ class PyBulletSession(SessionDefaults):
             self._p.stepSimulation(physicsClientId=self.cid)
 
     def apply_passive_forces(self) -> None:
-        """Each joint spring's torque ``-k (q - q_ref)`` for the next ``stepSimulation``."""
+        """Each joint spring's torque ``-k (q - q_ref)`` and catch (:meth:`Spring.force`) for the next ``stepSimulation``."""
         p = self._p
         springs = self.options.springs
         if not springs:
@@ -275,7 +275,7 @@ class PyBulletSession(SessionDefaults):
             j = self._index.get(name)
             if j is None:
                 continue
-            tau = -spring.stiffness * (q[name] - spring.reference)
+            tau = spring.force(q[name])
             p.setJointMotorControl2(self.body, j, p.TORQUE_CONTROL, force=tau, physicsClientId=self.cid)
 
     def apply_joint_effort(self, name: str, effort: float) -> None:

@@ -213,6 +213,29 @@ def contact_point_rule(session, joint: str, model: UrdfModel | None = None, *, o
     return link, far.mean(axis=0), "far edge"
 
 
+#: A grasp point closer to the axis than this share of the part's outer radius is a twist of the part by its rim.
+TWIST_SHARE = 0.25
+
+
+def grasp_lever(session, joint: str, link: str, point: np.ndarray, model: UrdfModel | None = None) -> float:
+    """Distance (m, >= 1e-3) from revolute ``joint``'s axis at which a hand applies its force on ``link``:
+    the grasp ``point``'s ((3,) m in ``link``'s frame), or, where that lies within :data:`TWIST_SHARE` of the
+    part's outer radius (a knob or dial grasped on its axis), the outer radius: the fingers twist it by its
+    rim. Points from the URDF's collision geometry with ``model``, else from the engine."""
+    o, a = joint_frame_axis(session, joint, session.joint_child[joint])
+    p, R = session.link_frame(link)
+    R = np.asarray(R, float)
+
+    def off_axis(v: np.ndarray) -> np.ndarray:
+        w = v @ R.T + np.asarray(p, float) - o
+        return np.linalg.norm(w - np.outer(w @ a, a), axis=1)
+
+    d = float(off_axis(np.asarray(point, float).reshape(1, 3))[0])
+    pts = link_points(model, link) if model is not None else _session_points(session, link)
+    rim = float(off_axis(pts).max()) if len(pts) else 0.0
+    return max(rim if d < TWIST_SHARE * rim else d, 1e-3)
+
+
 def lowest_point(session, links: list[str], model: UrdfModel | None) -> float:
     """Lowest world z (m) of ``links``' collision points (URDF geometry with ``model``, else AABBs); +inf without."""
     z = float("inf")

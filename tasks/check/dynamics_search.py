@@ -92,10 +92,14 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
 class DynamicsSearch:
     """Bracketed search of each joint's friction and damping over the post-check
     rounds (module docstring); ``budgets``: joint -> the task gripper's
-    operating budget (joints without one get no measured-headroom step)."""
+    operating budget (joints without one get no measured-headroom step); ``hand_caps``: joint -> the friction
+    (N m or N) a headroom step never passes."""
 
-    def __init__(self, budgets: dict[str, operating.OperatingBudget] | None = None):
+    def __init__(self, budgets: dict[str, operating.OperatingBudget] | None = None,
+                 hand_caps: dict[str, float] | None = None):
         self.budgets = dict(budgets or {})
+        self.hand_caps = dict(hand_caps or {})
+        """joint -> friction (N m or N) no headroom step goes above (a hand still moves the part both ways)"""
         self.joints: dict[str, JointRecord] = {}
         self._last: RoundOutcome | None = None
 
@@ -175,7 +179,7 @@ class DynamicsSearch:
                 if rec.strong is not None:
                     new, why = self._inside(name, rec, cur, rec.strong, "not held at its caps; the task needed more than a real force at")
                 else:
-                    h = self._headroom(name)
+                    h = min(self._headroom(name), self.hand_caps.get(name, float("inf")) - cur.friction)
                     if h > HEADROOM_MIN_SHARE * max(cur.friction, 1e-9):
                         new = Setting(cur.friction + h, cur.damping)
                         why = (f"not held at its caps; the task's measured operating force leaves {h:.3g} "

@@ -52,11 +52,14 @@ class OperatingForces(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     sources: dict[str, str]
     default: ForceRange
+    breakaway: ForceRange
+    """pulling a part off its catch at the closed end, from rest (any part)"""
     categories: dict[str, dict[str, ForceRange]]
 
     @model_validator(mode="after")
     def _known_sources(self) -> "OperatingForces":
-        ranges = [("default", self.default)] + [(f"{c}.{l}", r) for c, d in self.categories.items() for l, r in d.items()]
+        ranges = [("default", self.default), ("breakaway", self.breakaway)] + [
+            (f"{c}.{l}", r) for c, d in self.categories.items() for l, r in d.items()]
         for where, r in ranges:
             unknown = [s for s in r.sources if s not in self.sources]
             if unknown:
@@ -99,6 +102,12 @@ def operating_range(category: str | None, label: str | None, table: OperatingFor
         if "default" in cat:
             return cat["default"], f"{category}.default"
     return t.default, "default"
+
+
+def breakaway_force(table: OperatingForces | None = None) -> float:
+    """Top of the breakaway range (N): the most a hand pulls to take a part off its catch, from rest."""
+    t = table or load_operating_forces()
+    return float(t.breakaway.force_n[1]) if t.breakaway.force_n is not None else 0.0
 
 
 def _inside(v: float | None, r: tuple[float, float] | None) -> bool | None:

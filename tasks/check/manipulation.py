@@ -11,23 +11,25 @@ from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
-from asset2sim.tasks.check import recorded_runs, robust_rest, sweep
+from asset2sim.tasks.check import operability, recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.urdf import UrdfSource
 
 #: The metrics this module adds to the post-check.
-MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "robust_rest")
+MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "operability", "robust_rest")
 
 
 def measure_manipulation(engine: str, urdf: UrdfSource, initial_state: dict[str, float], springs: dict[str, Spring],
                          conventions: SimConventions, closed: dict[str, tuple[float, float, float]],
                          fixed_base: bool = False, *, recorded: RecordedRuns | None = None,
-                         sweep_needed: Callable[[MetricResult], str | None] | None = None) -> list[MetricResult]:
-    """[joint_sweep, robust_rest] of ``urdf`` in ``engine`` (robust rest run first;
+                         sweep_needed: Callable[[MetricResult], str | None] | None = None,
+                         category: str | None = None, labels: dict[str, str | None] | None = None) -> list[MetricResult]:
+    """[joint_sweep, operability, robust_rest] of ``urdf`` in ``engine`` (robust rest run first;
     skipped where ``fixed_base``). ``closed``: joint -> (q_closed, direction,
     open range), rad or m; ``recorded``: runs taken from / recorded into it;
-    ``sweep_needed(robust_rest)``: why the sweep is not needed (then recorded
-    as not run, ``details["not_run"]``), or None to run it.
+    ``sweep_needed(robust_rest)``: why the sweep is not needed (then the sweep and
+    operability are recorded as not run, ``details["not_run"]``), or None to run them;
+    ``category`` and ``labels`` (link -> semantic label): the parts' operating ranges.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
@@ -39,11 +41,16 @@ def measure_manipulation(engine: str, urdf: UrdfSource, initial_state: dict[str,
     if why_not:
         sw = MetricResult(name="joint_sweep", value=None, unit=unit("joint_sweep"), passed=None,
                           details={"not_run": why_not}, engine=engine)
+        op = MetricResult(name="operability", value=None, unit=unit("operability"), passed=None,
+                          details={"not_run": why_not}, engine=engine)
     else:
         sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, urdf, closed, initial_state, springs, conventions,
                                                         recorded=recorded))
+        op = operability.operability_metric(recorded_runs.operability_run(
+            engine, urdf, closed, initial_state, springs, conventions, category=category, labels=labels, recorded=recorded))
     sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
-    return [sw, rr]
+    op.details["root"] = "fixed (mounted)" if fixed_base else "fixed (held by the other hand)"
+    return [sw, op, rr]
 
 
 def joints_not_held(metrics: list[MetricResult]) -> list[str]:

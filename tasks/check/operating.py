@@ -11,15 +11,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession
+from asset2sim.engines.base import SimSession, Spring
+from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import JointDynamics, Overlay
 from asset2sim.tasks.check.blockers import fixed_root_options
-from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side, joint_frame_axis, subtree
-from asset2sim.tasks.check.force_ranges import ForceRange, operating_range
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
+from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
@@ -168,7 +169,7 @@ class OperatingBudget:
     """friction (N m or N) below which the requested state does not hold (0 for parts moving freely)"""
 
 
-def _gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
+def gravity_force(session: SimSession, model: UrdfModel, joint: str, links: list[str]) -> float:
     """Generalised gravity force Q (N m or N; > 0 pushes q up) of ``links`` on ``joint``:
     a . sum((c_i - o) x m_i g), prismatic a . sum(m_i g)."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
@@ -207,7 +208,7 @@ def operating_budgets(urdf: UrdfSource, state: dict[str, float], overlay: Overla
                       labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
                       free: bool = True, ground: bool = True, free_moving: bool = False, engine: str = "pybullet",
                       limits: GripperLimits | None = None, conventions: SimConventions | None = None,
-                      vertical_share: float = 0.5) -> dict[str, OperatingBudget]:
+                      vertical_share: float = 0.5, whole: bool = False) -> dict[str, OperatingBudget]:
     """The operating budget of every movable joint of ``closed`` in the written
     asset ``urdf`` at ``state``: how much friction and damping the task's
     gripper can overcome with a real operating force. Definition (grasp, path
@@ -215,13 +216,15 @@ def operating_budgets(urdf: UrdfSource, state: dict[str, float], overlay: Overla
     ``docs/design/metrics.md``, "Operable friction".
     ``closed``: joint -> (q_closed, direction +-1, open range); ``labels``: link
     -> semantic label; ``free``: root free (no ground bound when mounted);
-    ``ground``: apply the ground bound to a free object.
+    ``ground``: apply the ground bound to a free object; ``whole``: each action along the whole range (the
+    operability tier's strokes, :mod:`asset2sim.tasks.check.operability`) rather than the task's path.
 
     Raises:
         EngineUnavailable; whatever loading ``urdf`` raises.
     """
     lim = limits or GripperLimits()
     model = model_of(urdf, mode="lenient")
+    springs = overlay_springs(overlay, state)
     mu = ground_friction(model)
     out: dict[str, OperatingBudget] = {}
     with quiet_stdout():
@@ -237,7 +240,8 @@ def operating_budgets(urdf: UrdfSource, state: dict[str, float], overlay: Overla
             child = session.joint_child[name]
             rng_, where = operating_range(category, labels.get(child) if grasp.side == "child" else None)
             best, lever, q_state = _tightest(session, model, name, (qc, d, rng), state, actions, grasp, rng_, where,
-                                             (mu, total) if free and ground else None, vertical_share)
+                                             (mu, total) if free and ground else None, vertical_share, springs.get(name),
+                                             whole)
             session.set_joint_positions(dict(state))
             if best is not None:
                 out[name] = _budget(name, session.joint_types[name], grasp, lever, best, q_state, lim, free_moving,
@@ -270,52 +274,69 @@ def _grasp(session: SimSession, model: UrdfModel, joint: str, direction: float, 
     return _Grasp(side, link, point, rule, moving)
 
 
+def _spring_force(spring: Spring | None, q: float) -> float:
+    """Generalised force (N m or N) of ``spring`` (and its catch) at ``q``; 0 without one."""
+    return 0.0 if spring is None else float(spring.force(q))
+
+
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
               state: dict[str, float], actions: tuple[str, ...], grasp: _Grasp, rng_: ForceRange, where: str,
-              ground: tuple[float, float] | None, vertical_share: float
-              ) -> tuple[tuple[float, float, str] | None, float | None, float | None]:
-    """((smallest budget B, smallest allowed force F N, what bounds F), the lever
-    at the last sample m or None, |Q| at ``state``) over the task's paths.
-    ``ground``: (mu, whole mass kg) where the ground bound applies."""
+              ground: tuple[float, float] | None, vertical_share: float, spring: Spring | None = None,
+              whole: bool = False) -> tuple[tuple[float, float, str, float] | None, float | None, float | None]:
+    """((smallest budget B off the catch, smallest allowed force F N, what bounds F, smallest budget on the
+    catch or inf), the lever at the last sample m or None, |Q| at ``state``) over the task's paths (``whole``:
+    the whole range each way); Q of gravity and of the joint's ``spring`` and catch. ``ground``: (mu, whole
+    mass kg) where the ground bound applies."""
     qc, d, rng = closed
     prismatic = session.joint_types[joint] == "prismatic"
     f_state = float(d * (state.get(joint, qc) - qc) / rng)
     lever = None
     best: tuple[float, float, str] | None = None  # (budget, force, bound)
+    breakaway = float("inf")  # the smallest budget on the catch, where the part starts from rest
     q_state = None
+    side = 1.0 if grasp.side == "child" else -1.0  # Q of the parent side pushes q the other way
     for action in actions:
-        s_motion = (-d if action == "close" else d) * (1.0 if grasp.side == "child" else -1.0)
-        for f in _task_path(f_state, action):
+        s_motion = (-d if action == "close" else d) * side
+        for f in (np.linspace(0.0, 1.0, 2 * PATH_SAMPLES + 1) if whole else _task_path(f_state, action)):
             session.set_joint_positions({**state, joint: qc + d * f * rng})
-            t, nt, lever = _grasp_motion(session, joint, grasp, prismatic)
+            t, nt, lever = _grasp_motion(session, joint, grasp, prismatic, model)
             force, bound = _range_force(rng_, where, lever)
             hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
             fg = _ground_force(t, nt, s_motion, *ground, vertical_share) if ground is not None else None
             if fg is not None and fg < force:
                 force, bound = fg, f"ground friction mu={ground[0]:g} of the free object (M={ground[1]:.3g} kg)"
-            qg = _gravity_force(session, model, joint, grasp.moving)
+            qg = gravity_force(session, model, joint, grasp.moving) + side * _spring_force(spring, qc + d * f * rng)
             if q_state is None:
                 session.set_joint_positions(dict(state))
-                q_state = abs(_gravity_force(session, model, joint, grasp.moving))
+                q0 = state.get(joint, qc)  # a catch presses the part into its stop: nothing for friction to hold
+                q_state = abs(gravity_force(session, model, joint, grasp.moving)
+                              + side * (_spring_force(spring, q0) - (spring.catch(q0) if spring is not None else 0.0)))
             b = hand + qg * s_motion
+            if spring is not None and spring.catch(qc + d * f * rng) != 0.0:  # on the catch: pulled off it from rest
+                top = force if bound.startswith("ground friction") else max(force, breakaway_force())
+                breakaway = min(breakaway, BUDGET_SHARE * top * (lever or 1.0) + qg * s_motion)
+                b = float("inf") if best is None or not np.isfinite(best[0]) else best[0]
             if best is None or b < best[0]:
                 best = (b, best[1] if best else float("inf"), best[2] if best else "")
             if force < best[1]:
                 best = (best[0], force, bound)
-    return best, lever, q_state
+    if best is not None and not np.isfinite(best[0]):  # every sample on the catch
+        best = (breakaway, best[1], best[2])
+    return (None if best is None else (*best, breakaway)), lever, q_state
 
 
-def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool) -> tuple[np.ndarray, float, float | None]:
+def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
+                  model: UrdfModel | None = None) -> tuple[np.ndarray, float, float | None]:
     """(direction t (3,) of the grasp point's motion as q grows, |t| >= 1e-12,
-    lever >= 1e-3 m or None for prismatic) at the session's state."""
+    lever >= 1e-3 m (:func:`~asset2sim.tasks.check.contact_points.grasp_lever`) or None for prismatic) at the
+    session's state."""
     o, a = joint_frame_axis(session, joint, session.joint_child[joint])
     lo, Rl = session.link_frame(grasp.link)
     p = np.asarray(lo, float) + np.asarray(Rl, float) @ np.asarray(grasp.point, float)
     if prismatic:
         return a, max(float(np.linalg.norm(a)), 1e-12), None
-    rv = (p - o) - float((p - o) @ a) * a
     t = np.cross(a, p - o)
-    return t, max(float(np.linalg.norm(t)), 1e-12), max(float(np.linalg.norm(rv)), 1e-3)
+    return t, max(float(np.linalg.norm(t)), 1e-12), grasp_lever(session, joint, grasp.link, grasp.point, model)
 
 
 def _range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
@@ -338,12 +359,14 @@ def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: f
     return None
 
 
-def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str],
+def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str, float],
             q_state: float | None, lim: GripperLimits, free_moving: bool, inertia: float | None) -> OperatingBudget:
-    """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`)."""
-    budget, force, bound = best
+    """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`): on a catch the part is pulled
+    off from rest, so there friction alone takes the budget (no damping at the gripper's speed), against the
+    breakaway force (:func:`~asset2sim.tasks.check.force_ranges.breakaway_force`)."""
+    budget, force, bound, breakaway = best
     speed = lim.max_speed_m_s / lever if lever is not None else lim.max_speed_m_s
-    fcap = FRICTION_SHARE * max(budget, 0.0)
+    fcap = min(FRICTION_SHARE * max(budget, 0.0), max(breakaway, 0.0))
     dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
     conflict = ""
     floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)

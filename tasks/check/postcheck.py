@@ -151,7 +151,8 @@ class PostCheck:
 
 def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
                    engine: str = "pybullet", closed: dict[str, tuple[float, float, float]] | None = None, *,
-                   escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None) -> PostCheck:
+                   escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None,
+                   category: str | None = None, labels: dict[str, str | None] | None = None) -> PostCheck:
     """Penetration, rest stability, oscillation and sag of the written asset in
     ``engine`` (the root as ``overlay.mounting`` declares, said in
     ``details["root"]``), the SPEC metrics in every other engine of
@@ -161,7 +162,8 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
     ``escalated(check)``: whether the caller escalates ``check``; a check that
     fails and is escalated without the sweep records it as not run, and without
     the other engines when ``engine``'s own tiers fail so. ``recorded``:
-    manipulation runs taken from / recorded into it."""
+    manipulation runs taken from / recorded into it. ``category`` and ``labels``
+    (link -> semantic label): the operating ranges of the operability tier."""
     conv = config.sim
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
     pen, recording = measure_rest_test(engine, urdf_path, initial_state, overlay_springs(overlay), conv, fixed_base=fixed)
@@ -209,7 +211,7 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
 
     extra = [] if closed is None else manipulation.measure_manipulation(
         engine, urdf_path, initial_state, overlay_springs(overlay), conv, closed, fixed_base=fixed,
-        recorded=recorded, sweep_needed=sweep_needed)
+        recorded=recorded, sweep_needed=sweep_needed, category=category, labels=labels)
     if not sweep_not_run(extra):
         run_parity()
     return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,

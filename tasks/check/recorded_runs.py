@@ -17,7 +17,7 @@ from typing import Any
 from asset2sim import file_memo, mesh_io
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
-from asset2sim.tasks.check import robust_rest, sweep, task_execution
+from asset2sim.tasks.check import operability, robust_rest, sweep, task_execution
 from asset2sim.tasks.check.gripper_motion import TaskConfig
 from asset2sim.urdf import UrdfModel, UrdfSource, model_of, write_urdf
 
@@ -68,7 +68,8 @@ def input_digest(tier: str, engine: str, urdf: UrdfSource, initial_state: dict[s
     h.update(write_urdf(model))
     h.update(repr(_mesh_identities(model)).encode())
     h.update(repr(sorted((str(k), float(v)) for k, v in initial_state.items())).encode())
-    h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference)) for k, s in (springs or {}).items())).encode())
+    h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference), float(s.catch_force), float(s.catch_position),
+                          float(s.catch_zone)) for k, s in (springs or {}).items())).encode())
     h.update(conventions.model_dump_json().encode())
     h.update(repr(dataclasses.asdict(config)).encode())
     if closed is not None:
@@ -131,6 +132,30 @@ def robust_rest_run(engine: str, urdf: UrdfSource, initial_state: dict[str, floa
     return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, urdf, initial_state, springs, conv, cfg,
                                                                    fixed_base=fixed_base),
                      "robust_rest", engine, urdf, initial_state, springs, conv, fixed_base, cfg)
+
+
+@dataclass(frozen=True)
+class _OperabilityInputs:
+    """What :func:`operability_run` hands :func:`~asset2sim.tasks.check.operability.run_operability` besides the
+    files and the session options (part of its :func:`input_digest`)."""
+
+    config: operability.OperabilityConfig
+    category: str | None
+    labels: tuple[tuple[str, str | None], ...]
+
+
+def operability_run(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
+                    initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
+                    conventions: SimConventions | None = None, *, category: str | None = None,
+                    labels: dict[str, str | None] | None = None, config: operability.OperabilityConfig | None = None,
+                    recorded: RecordedRuns | None = None) -> operability.OperabilityRun:
+    """:func:`asset2sim.tasks.check.operability.run_operability` (same arguments), recorded as :func:`sweep_run`."""
+    cfg = config or operability.OperabilityConfig()
+    conv = conventions or SimConventions()
+    inputs = _OperabilityInputs(cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
+    return _recorded(recorded, lambda: operability.run_operability(engine, urdf, closed, initial_state, springs, conv,
+                                                                   category=category, labels=labels, config=cfg),
+                     "operability", engine, urdf, initial_state, springs, conv, True, inputs, closed)
 
 
 @dataclass(frozen=True)

@@ -95,16 +95,22 @@ def match_label(label: str | None, wanted: str | None, category: str | None = No
     return wanted == label or wanted in label.split("_")
 
 
+#: How an ordinal counts (``JointStateRequest.order``, seen facing the object's front): (world axis, sign) of the sort
+#: key, first = smallest (refine's ``named_parts._order_key``).
+_ORDER_AXES = {"vertical": (2, -1.0), "left_right": (1, -1.0), "right_left": (1, 1.0), "front_back": (0, 1.0)}
+
+
 def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                      centres: dict[str, np.ndarray], task_joints: list[str],
                      category: str | None = None) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
     """([(joint, band, label, phrase, target)], [phrases that matched no joint])
-    of a RequestSpec's joint states: ``all`` every task-relevant joint, ``joint``
+    of a RequestSpec's joint states: ``all`` every task-relevant joint but a continuous one, ``joint``
     the one named, ``label`` the movable joints whose child's label the word
     names (else the unlabelled task-relevant ones, which it may name, or the
     task-relevant ones standing in for the category's main part the word names,
     ``part_priors.stand_in_joints``; else none: the phrase goes to the second list),
-    top to bottom by ``centres`` (link -> (3,) m), ``ordinal`` picking one; a
+    top to bottom (or as the request's ``order`` counts) by ``centres`` (link -> (3,) m), ``ordinal``
+    picking one (negative: from the end); a
     phrase naming a part or joint overrides one naming none, else a later
     phrase overrides an earlier one."""
     out, unmatched = [], []
@@ -113,17 +119,18 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     zero = np.zeros(3)
     for js in sorted(spec.joint_states, key=lambda js: js.names_part):
-        if js.selector == "all":
-            names = list(task_joints)
+        if js.selector == "all":  # a continuous joint (a knob, a wheel) has no open or closed: not "it" (as refine applies it)
+            names = [n for n in task_joints if n in movable and joints[n].type != "continuous"]
         elif js.selector == "joint":  # an override names the joint itself
             names = [js.joint] if js.joint in movable else []
         else:
-            tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable]
+            tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
             names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)] \
                 or part_priors.stand_in_joints(category or "", js.label, tm)[0]
-            names.sort(key=lambda n: (-float(centres.get(joints[n].child, zero)[2]), float(centres.get(joints[n].child, zero)[0])))
-            if js.ordinal is not None:
-                names = [names[js.ordinal]] if 0 <= js.ordinal < len(names) else []
+            axis, sign = _ORDER_AXES.get(js.order, (2, -1.0))
+            names.sort(key=lambda n: (sign * float(centres.get(joints[n].child, zero)[axis]), float(centres.get(joints[n].child, zero)[0])))
+            if js.ordinal is not None:  # a negative ordinal counts from the end ("the bottom drawer")
+                names = [names[js.ordinal]] if -len(names) <= js.ordinal < len(names) else []
         if not names:
             unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
         for n in names:
@@ -144,6 +151,33 @@ def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sema
     for js in spec.joint_states:
         if js.selector == "label":
             out += [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
+    return out
+
+
+def unmatched_properties(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
+                         task_joints: list[str], category: str | None = None) -> list[tuple[str, str]]:
+    """(phrase, why) of every mass or material of ``spec`` naming a part no link's label (``semantics``: link ->
+    (kind, label)) carries, and every joint parameter naming a part no movable joint's child carries and none stands
+    in for (``part_priors.stand_in_joints`` over ``task_joints``)."""
+    out: list[tuple[str, str]] = []
+    if spec is None:
+        return out
+    labels = [lab for _, lab in semantics.values()]
+    what = category or "object"
+    for p in spec.properties:
+        if p.label not in (None, "body") and not any(match_label(lab, p.label, category) for lab in labels):
+            out.append((p.phrase, f"names a '{p.label}' but this {what} has no such part"))
+    movable = [n for n, j in joints.items() if j.type in MOVABLE]
+    for d in spec.dynamics_values:
+        if d.label is None or any(match_label(semantics.get(joints[n].child, (None, None))[1], d.label, category) for n in movable):
+            continue
+        tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
+        try:
+            stand_in = part_priors.stand_in_joints(category or "", d.label, tm)[0]
+        except Exception:  # a prior that cannot be read must not stop the evaluation
+            stand_in = []
+        if not stand_in:
+            out.append((d.phrase, f"names a '{d.label}' but no part of this {what} carries that label"))
     return out
 
 

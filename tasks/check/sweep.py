@@ -111,15 +111,16 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
 
 
 def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
-    """Drive force limit E = f_w m_sub g L + k R (N*m or N): m_sub the engine's
+    """Drive force limit E = f_w m_sub g L + k R + F_c (N*m or N): m_sub the engine's
     masses of ``links``, L their largest distance from the axis (1 for
-    prismatic), k the session's spring stiffness, R = ``open_range`` (rad or m)."""
+    prismatic), k the session's spring stiffness, R = ``open_range`` (rad or m), F_c its catch's force."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
     lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
     spring = session.options.springs.get(joint)
     k = spring.stiffness if spring is not None else 0.0
-    return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
+    catch = spring.catch_force if spring is not None else 0.0
+    return float(cfg.weight_factor * m_sub * G * lever + k * open_range + catch)
 
 
 #: Speed margin of :func:`damping_caps`: the damped speed E / c covers the range this many times in the time limit.
@@ -222,7 +223,8 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
         return best, (n * dt if done(f) else None)
 
     # PyBullet applies springs by torque control, which makes the holds drift: the others stay passive
-    hold = cfg.hold_others and not (session.options.springs and session.engine == "pybullet")
+    hold = cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
+                                     and session.engine == "pybullet")
     held = [o for o in session.joint_types if o != joint] if hold else []
     try:
         out, t_out = drive(q_far, lambda f: f >= cfg.reach_fraction)

@@ -20,7 +20,7 @@ from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
-from asset2sim.tasks.interpret.part_priors import spring_expected
+from asset2sim.tasks.interpret.part_priors import handled, spring_expected
 from asset2sim.urdf import UrdfSource
 
 #: The metrics this tier adds to the post-check.
@@ -107,26 +107,40 @@ class OperatingLimits:
     damping_caps: dict[str, float]
     budgets: dict[str, operating.OperatingBudget] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    hand_caps: dict[str, float] = field(default_factory=dict)
+    """joint -> the friction (N m or N) a hand inside the part's range still moves both ways over the whole range
+    (the operability tier's): no step of the dynamics search goes above it"""
 
 
 def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
                      geometry: dict[str, LinkGeometry], closed: dict[str, tuple[float, float, float]] | None, *,
                      category: str | None, task: str | None, free_moving: bool,
                      conventions: SimConventions | None = None, joints: list[str] | None = None) -> OperatingLimits:
-    """Friction and damping caps of every movable joint: the task gripper's
-    operating budget (:func:`~asset2sim.tasks.check.operating.operating_budgets`)
-    for the task's ``joints`` where the closed ends are known, else the probe's
-    cap (:func:`~asset2sim.tasks.check.operating.friction_caps`); damping at
+    """Friction and damping caps of every movable joint: the operating budget
+    (:func:`~asset2sim.tasks.check.operating.operating_budgets`) of a hand inside the part's real range, both
+    ways with the root fixed, for every handled part (:func:`~asset2sim.tasks.interpret.part_priors.handled`) where
+    the closed ends are known, the tighter of it and the task gripper's for the task's ``joints``; else the
+    probe's cap (:func:`~asset2sim.tasks.check.operating.friction_caps`); damping at
     most what the joint sweep's drive still moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
 
     Raises:
         EngineUnavailable; whatever loading ``urdf`` raises.
     """
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
+    labels = link_labels(asset)
+    hand = {n: c for n, c in (closed or {}).items() if handled(labels.get(asset.joint(n).child))}
+    # every handled part, both ways, root fixed (the operability tier's hand); a task's joints also as its gripper meets them
+    budgets = operating.operating_budgets(urdf, state, overlay, hand, category=category, labels=labels,
+                                          free=False, free_moving=free_moving, conventions=conventions,
+                                          whole=True) if hand else {}
+    hand_caps = {n: b.friction_cap for n, b in budgets.items()}
     sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
-    budgets = operating.operating_budgets(urdf, state, overlay, sel, category=category, labels=link_labels(asset),
-                                          actions=task_actions(task), free=not fixed, free_moving=free_moving,
-                                          conventions=conventions) if sel and task else {}
+    if sel and task:
+        for n, b in operating.operating_budgets(urdf, state, overlay, sel, category=category, labels=labels,
+                                                actions=task_actions(task), free=not fixed, free_moving=free_moving,
+                                                conventions=conventions).items():
+            if n not in budgets or b.budget < budgets[n].budget:
+                budgets[n] = b
     caps = operating.friction_caps(overlay, overlay, asset, geometry)
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
@@ -134,7 +148,7 @@ def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay
         for name, c in sweep.damping_caps(urdf, closed, state, overlay_springs(overlay), conventions).items():
             dcaps[name] = min(c, dcaps.get(name, c))
     return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
-                           notes=[b.conflict for b in budgets.values() if b.conflict])
+                           notes=[b.conflict for b in budgets.values() if b.conflict], hand_caps=hand_caps)
 
 
 def force_excess(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget]) -> tuple[dict[str, float], dict[str, str]]:

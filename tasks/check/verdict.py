@@ -30,10 +30,12 @@ TIERS: dict[str, tuple[tuple[str, ...], str]] = {
               "joint_hold"), "unstable"),
     "penetration": (tuple(PENETRATION_METRICS), "unresolved_penetration"),
     "sweep": (("joint_sweep",), "blocked_joint"),
+    "operability": (("operability",), "not_operable"),
     "robust_rest": (("robust_rest",), "not_robust_at_rest"),
     "probes": (("probes",), "probe_failed"),
     "task": (("task_execution",), "task_failed"),
     "force": (("operating_force",), "implausible_force"),
+    "request": (("request_met",), "request_not_met"),  # as asked (tasks/check/as_asked.py), after the physical tiers
 }
 
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.engines.base import Spring
+from asset2sim.tasks.assemble.export_mjcf import joint_spring
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.request import RequestSpec
 from asset2sim.tasks.check.asset_files import (
@@ -194,13 +195,12 @@ def _root_fixed(folder: Path, notes: list[str]) -> bool:
 
 
 def _springs(overlay: dict[str, Any] | None, joints: dict[str, JointInfo], initial: dict[str, float]) -> dict[str, Spring]:
-    """joint -> the overlay's spring (stiffness > 0; reference rad/m, else the initial position)."""
+    """joint -> the overlay's spring and catch (stiffness > 0 or a catch; reference rad/m, else the initial
+    position; :func:`~asset2sim.tasks.assemble.export_mjcf.joint_spring`)."""
     springs: dict[str, Spring] = {}
     for jn, jd in ((overlay or {}).get("joints") or {}).items():
-        k = float(jd.get("stiffness") or 0.0)
-        if k > 0 and jn in joints:
-            ref_q = jd.get("spring_reference")
-            springs[jn] = Spring(k, float(ref_q) if ref_q is not None else initial.get(jn, 0.0))
+        if jn in joints and (float(jd.get("stiffness") or 0.0) > 0 or float(jd.get("catch_force") or 0.0) > 0):
+            springs[jn] = joint_spring(jd, initial.get(jn, 0.0))
     return springs
 
 

@@ -15,14 +15,15 @@ from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.schemas.metrics import unit as unit_of
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
-from asset2sim.tasks.check import recorded_runs, robust_rest, sweep
+from asset2sim.tasks.check import operability, recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check import task_execution
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.probes import probes_metric
 from asset2sim.tasks.evaluation import semantic_metrics as sem
 from asset2sim.tasks.evaluation.engine_run import EngineRun
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
-from asset2sim.tasks.check.request_match import request_warnings, requested_joints, scaled_mass_range
+from asset2sim.tasks.check.request_match import request_warnings, requested_joints, scaled_mass_range, unmatched_properties
+from asset2sim.tasks.check import as_asked
 
 #: Largest ground penetration during the rest test that passes, m.
 GROUND_PENETRATION_TOL = 0.005
@@ -267,6 +268,96 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     return [m]
 
 
+def _target_miss(c: sem.JointStateCheck) -> dict[str, Any] | None:
+    """The unmet item of a joint asked by a number or an end (:func:`sem.target_score` below 1: outside its tolerance),
+    None when met or not graded; the same tolerances as prompt alignment's full score."""
+    t = c.target
+    score, why = sem.target_score(c)
+    if score is None or score >= 1.0 or t is None:
+        return None
+    if c.fraction is None or (t.kind in ("angle", "distance") and c.opening is None):
+        return as_asked.not_applied(c.phrase, f"{c.joint}: {why}", c.joint)
+    if t.kind == "angle" and c.joint_type == "prismatic":
+        return as_asked.not_applied(c.phrase, f"{c.joint}: {why}", c.joint)
+    if t.kind == "end":
+        end = 0.0 if c.fraction < 0.5 else 1.0
+        return as_asked.missed(c.phrase, kind="state", target=end, achieved=c.fraction, unit="opening fraction",
+                               tolerance=sem.END_FRACTION_TOL, joint=c.joint, reason=f"'{t.end}' is a travel end")
+    asked = float(t.value or 0.0)
+    achieved, unit = (c.fraction, "opening fraction") if t.kind == "fraction" else (c.opening, "m" if t.kind == "distance" else "rad")
+    tol = max(sem.TARGET_REL_TOL * abs(asked), sem.TARGET_ABS_TOL[t.kind])
+    return as_asked.missed(c.phrase, kind="state", target=asked, achieved=float(achieved), unit=unit, tolerance=tol, joint=c.joint)
+
+
+def _size_along(ext: np.ndarray, dimension: str) -> float:
+    """The closed extent (m) along a size ``dimension`` of ``ext`` ((3,) m, world axes): height z, width / depth the
+    larger / smaller horizontal, length / largest the largest (as refine's ``request_apply`` reads sizes)."""
+    horiz = sorted([float(ext[0]), float(ext[1])], reverse=True)
+    return {"height": float(ext[2]), "width": horiz[0], "depth": horiz[1]}.get(dimension, float(np.max(ext)))
+
+
+@register_metric("request_met")
+def _m_request_met(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """As asked (:mod:`asset2sim.tasks.check.as_asked`) measured on the output itself: phrases of the request naming
+    no part of it, replaced by a later phrase for the same part, masses / materials / joint parameters naming a part
+    it lacks; each requested joint's state from its closed end (bands, numbers and ends, prompt alignment's
+    tolerances), sizes in numbers against the closed extents, the total mass asked against the simulator's.
+    Not measured without a request or when none of it was understood."""
+    if not ctx.prompt:
+        return [as_asked.not_measured("no request")]
+    spec = ctx.request
+    if spec is None:
+        return [as_asked.not_measured(ctx.request_error or "request not parsed", ctx.prompt)]
+    if not spec.understood:
+        return [as_asked.not_measured("no word of the request was understood", ctx.prompt)]
+    r = _first_run(runs)
+    req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, r.link_centres if r is not None else {}, ctx.task_joints,
+                                      ctx.category)
+    what = ctx.category or "object"
+    unmet = [as_asked.not_applied(p, f"names no part of this {what}") for p in unmatched]
+    unmet += as_asked.overridden_items(spec)
+    won = {item[3] for item in req}
+    unmet += [as_asked.not_applied(js.phrase, "every part it names is set by a later phrase of the request") for js in spec.joint_states
+              if js.names_part and js.selector == "label" and js.phrase not in won and js.phrase not in unmatched]
+    unmet += [as_asked.not_applied(p, why) for p, why in unmatched_properties(spec, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)]
+    graded, not_graded = len(unmet), []
+    for name, band, label, phrase, target in req:
+        c, q = ctx.closed.get(name), ctx.initial_state.get(name)
+        if c is None or q is None:
+            not_graded.append({"phrase": phrase, "joint": name, "reason": "closed end unknown"})
+            continue
+        check = sem.JointStateCheck(name, band, c.fraction(q), label, phrase, target, c.direction * (q - c.q_closed), ctx.joints[name].type)
+        if target is not None and sem.target_score(check)[0] is None:
+            not_graded.append({"phrase": phrase, "joint": name, "reason": sem.target_score(check)[1]})
+            continue
+        graded += 1
+        item = _target_miss(check) if target is not None else as_asked.band_missed(phrase or band, name, band, abs(check.fraction))
+        if item is not None:
+            unmet.append(item)
+    for sz in spec.sizes:
+        if ctx.closed_extents is None:
+            not_graded.append({"phrase": sz.phrase, "reason": "closed extents not measured"})
+            continue
+        graded += 1
+        got = _size_along(np.asarray(ctx.closed_extents, float), sz.dimension)
+        tol = max(sem.TARGET_REL_TOL * sz.value, sem.TARGET_ABS_TOL["distance"])
+        if abs(got - sz.value) > tol:
+            unmet.append(as_asked.missed(sz.phrase, kind="size", target=sz.value, achieved=got, unit="m", tolerance=tol,
+                                         reason=f"{sz.dimension} of the closed object"))
+    total = next((p for p in spec.properties if p.mass is not None and p.label is None), None)
+    if total is not None:
+        graded += 1
+        got = sum(v["mass"] for v in r.masses.values()) if r is not None else sum(
+            (li.mass if li.mass is not None else 1.0) for li in ctx.links.values())
+        tol = sem.TARGET_REL_TOL * float(total.mass)
+        if abs(got - float(total.mass)) > tol:
+            unmet.append(as_asked.missed(total.phrase, kind="mass", target=float(total.mass), achieved=float(got), unit="kg", tolerance=tol,
+                                         reason="total mass in the simulator"))
+    m = as_asked.request_met_metric(unmet, request=ctx.prompt, graded=graded, not_graded=not_graded,
+                                    source="the evaluation (the output measured, closed ends its own)")
+    return [m]
+
+
 @register_metric("probes")
 def _m_probes(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     r = runs.get("pybullet")
@@ -290,6 +381,23 @@ def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
         return sweep.sweep_metric(r.sweep)
 
     return _per_engine(runs, "joint_sweep", unit_of("joint_sweep"), graded, lambda r: bool(r.error))
+
+
+@register_metric("operability")
+def _m_operability(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
+    """:mod:`asset2sim.tasks.check.operability` in every engine that loaded the asset (its own fixed-root session
+    with gravity), closed ends from ``ctx.closed``, operating ranges by ``ctx.category`` and part label."""
+    closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in ctx.movable}
+    labels = {link: lab for link, (_, lab) in ctx.semantics.items()}
+
+    def graded(e: str, r: EngineRun) -> MetricResult:
+        run = recorded_runs.operability_run(e, ctx.urdf, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
+                                            category=ctx.category, labels=labels, recorded=r.recorded)
+        m = operability.operability_metric(run)
+        m.details["root"] = "fixed (mounted)" if ctx.root_fixed else "fixed (held by the other hand)"
+        return m
+
+    return _per_engine(runs, "operability", unit_of("operability"), graded, lambda r: bool(r.error))
 
 
 @register_metric("robust_rest")

@@ -1,7 +1,8 @@
 """The report's account of what asset2sim changed: the input and the output side by side, and every
 change (scale, masses, joint limits, the joint state, joint dynamics, collision pieces, the root) with
-its reason, read from the output's ``report.json`` and ``overlay.json``. Positions are shown in radians
-with degrees, or in millimetres, and as the percentage open (the opening fraction).
+its reason, read from the output's ``report.json`` and ``overlay.json``. Joint states are shown from the
+closed end, in degrees or millimetres, and as the percentage open (the opening fraction); limits in the
+joint's own coordinate (radians with degrees, or millimetres).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.asset_files import find_urdf, parse_urdf
 from asset2sim.tasks.geometry.render import render_views
 
@@ -33,6 +35,20 @@ def position_text(q: float | None, jtype: str) -> str:
     if jtype == "prismatic":
         return f"{float(q) * 1000.0:.4g} mm"
     return f"{float(q):.4g} rad ({math.degrees(float(q)):.1f} deg)"
+
+
+def from_closed_text(q: float | None, q_closed: float | None, jtype: str) -> str:
+    """How far a joint stands from its closed end, for people: ``"20.8 deg from closed"`` (revolute,
+    continuous) or ``"12.5 mm from closed"`` (prismatic), |q - q_closed| with ``q`` and ``q_closed`` in rad or m;
+    :func:`position_text` of ``q`` (the joint's own coordinate, labelled so) when the closed end is unknown."""
+    if q is None or not math.isfinite(float(q)):
+        return "-"
+    if q_closed is None or not math.isfinite(float(q_closed)):
+        return f"joint position {position_text(q, jtype)}"
+    d = abs(float(q) - float(q_closed))
+    if jtype == "prismatic":
+        return f"{d * 1000.0:.4g} mm from closed"
+    return f"{math.degrees(d):.1f} deg from closed"
 
 
 def opening_text(fraction: float | None) -> str:
@@ -81,6 +97,7 @@ def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_ty
     fractions = report.get("opening_fractions") or {}
     bands = report.get("requested_bands") or {}
     state = report.get("state") or {}
+    closed = report.get("closed_positions") or {}
     for name, q in (report.get("initial_joint_positions") or {}).items():
         jt = joint_types.get(name, "revolute")
         moved = abs(float((state.get("requested") or {}).get(name, q)) - float(q)) > 1e-9
@@ -90,7 +107,7 @@ def change_rows(report: dict[str, Any], overlay: dict[str, Any] | None, joint_ty
         if moved:
             why += f"; moved by the state search to remove self-penetration ({state.get('method', '')})"
         rows.append(_row(f"{name} initial position", "as modelled (0)",
-                         f"{position_text(q, jt)}, {opening_text(fractions.get(name))}".rstrip(", "), why))
+                         f"{from_closed_text(q, closed.get(name), jt)}, {opening_text(fractions.get(name))}".rstrip(", "), why))
     changed: dict[tuple[str, str], tuple[float, str]] = {}
     for rnd in report.get("escalation") or []:
         for joint, ch in (rnd.get("changes") or {}).items():
@@ -140,8 +157,10 @@ def understood(found: dict[str, Any] | None) -> str:
         return ""
     rows = [_row("asked", "", a, "") for a in found.get("asked") or []]
     for q in found.get("quantities") or []:
-        got = "-" if q.get("achieved") is None else f"{q['achieved']:.4g} {q.get('unit', '')}"
-        asked = "-" if q.get("asked") is None else f"{q['asked']:.4g} {q.get('unit', '')}"
+        unit = q.get("unit", "")
+        frame = " from the closed end" if q.get("kind") == "state" and unit in ("rad", "m") else ""
+        got = "-" if q.get("achieved") is None else quantity_text(q["achieved"], unit) + frame
+        asked = "-" if q.get("asked") is None else quantity_text(q["asked"], unit) + frame
         rows.append(_row(f"{q.get('what')} ('{q.get('phrase', '')}')", asked, got,
                          ("within tolerance" if q.get("within_tolerance") else "MISSED") + (f": {q['why']}" if q.get("why") else "")))
     if found.get("ignored"):

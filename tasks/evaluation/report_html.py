@@ -19,7 +19,7 @@ from asset2sim.schemas.metrics import METRIC_INFO
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
-from asset2sim.tasks.evaluation.report_changes import changes_section, esc, opening_text, position_text
+from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
 from asset2sim.tasks.geometry.render import render_views
 
 CSS = """
@@ -201,6 +201,41 @@ def _probe_details(ev) -> str:
             + "".join(rows) + "</table>")
 
 
+def operability_section(ev) -> str:
+    """The operability tier as a table: per engine and handled part, the grasp, the effort each stroke needs
+    (force at the grasp point N, torque about the axis N m) against the part's real range and its source,
+    how far the hand got, and the verdict."""
+    rows = []
+    for m in [m for m in ev.metrics if m.name == "operability"]:
+        if not m.details.get("parts"):
+            why = m.details.get("skipped") or m.details.get("not_run") or "no handled part"
+            rows.append(f"<tr><td>{esc(m.engine)}</td><td colspan='8' class='small'>{esc(why)}</td></tr>")
+            continue
+        for joint, p in m.details["parts"].items():
+            rng = p.get("force_range_n")
+            trng = p.get("torque_range_nm")
+            limit = (f"{fmt(rng[1])} N" if rng else "") + (f", {fmt(trng[1])} N m" if trng else "")
+            lever = "" if p.get("lever_m") is None else f", lever {fmt(p['lever_m'], 3)} m"
+            for s in p.get("strokes") or []:
+                cls = "pass" if s["passed"] else "fail"
+                torque = "" if s.get("needed_torque_nm") is None else f" / {fmt(s['needed_torque_nm'])} N m"
+                got = f"{fmt(100.0 * s['reached'], 3)} % open" + (f", stopped by {s['stopped_by']}" if s.get("stopped_by") else "")
+                rows.append(
+                    f"<tr><td>{esc(m.engine)}</td><td>{esc(joint)} ({esc(p.get('label') or 'unlabelled')})</td>"
+                    f"<td>{esc(p['rule'])}{lever}</td>"
+                    f"<td>{esc(s['action'])}</td><td class='num'>{fmt(s['needed_force_n'])} N{torque}</td>"
+                    f"<td class='num'>{esc(limit)} ({esc(p['range_of'])})</td><td>{esc(got)}</td>"
+                    f"<td class='{cls}'>{esc(s['failure'] or 'ok')}</td>"
+                    f"<td class='small'>{esc('; '.join(p.get('sources') or []))}</td></tr>")
+    if not rows:
+        return "<p class='small'>operability not measured</p>"
+    return ("<p class='small'>Root fixed, gravity on, the other joints held: a hand at the grasp point pushes each handled "
+            "part from its closed end to its far end and back; the effort it needs (friction, damping at the hand's "
+            "0.25 m/s, springs, gravity) must lie inside the part's real operating range.</p>"
+            "<table><tr><th>engine</th><th>part</th><th>grasp</th><th>stroke</th><th>effort needed</th><th>range</th>"
+            "<th>hand got it to</th><th>verdict</th><th>range source</th></tr>" + "".join(rows) + "</table>")
+
+
 def _joint_unit(jtype: str, what: str) -> str:
     pri = jtype == "prismatic"
     return {"damping": "N*s/m" if pri else "N*m*s/rad", "friction": "N" if pri else "N*m",
@@ -315,6 +350,30 @@ def _opening(ev, joint: str, q: float) -> str:
     return f" ({opening_text(c['direction'] * (q - c['q_closed']) / c['open_range'])})"
 
 
+def _joint_state(ev, joint: str, q: float, jtype: str) -> str:
+    """A joint's initial state from its closed end (``"20.8 deg from closed (18 % open)"``); its own coordinate,
+    labelled so, when the closed end is unknown."""
+    c = ev.closed_positions.get(joint)
+    return from_closed_text(q, c.get("q_closed") if c else None, jtype) + _opening(ev, joint, q)
+
+
+def as_asked_block(ev) -> str:
+    """The as-asked verdict (``request_met``, :mod:`asset2sim.tasks.check.as_asked`) near the top of the report:
+    each unmet phrase with its gap in a visible block; one line when met; empty when not measured."""
+    m = ev.metric("request_met")
+    if m is None or m.passed is None:
+        return ""
+    d = m.details or {}
+    if m.passed:
+        return (f"<p class='small'>As asked: every part and state the request names is applied ({int(d.get('graded') or 0)} "
+                "checked; states measured from the closed end).</p>")
+    items = "".join(f"<li>{esc(u.get('text') or u.get('phrase'))}</li>" for u in d.get("unmet") or [])
+    if d.get("error"):
+        items += f"<li>{esc(d['error'])}</li>"
+    return ("<div class='fail' style='padding:6px 12px;border-radius:6px'><b>Not as asked</b> (failure mode "
+            "<code>request_not_met</code>; states measured from the closed end)<ul>" + items + "</ul></div>")
+
+
 def clips_section(clip_set, folder: str = "clips") -> str:
     """HTML playing every clip of ``clip_set`` (a :class:`~asset2sim.schemas.realism.ClipSet`; None or empty:
     nothing), one row per joint and motion, the videos looping muted with their poster frames; ``folder``: the
@@ -357,7 +416,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
             error = exc
     views_html, views_what = _renders(ev, views, error)
     joint_types = {n: j.type for n, j in ctx.joints.items()} if ctx is not None else {}
-    state_text = ", ".join(f"{k} = {position_text(v, joint_types.get(k, 'revolute'))}" + _opening(ev, k, v)
+    state_text = ", ".join(f"{k} = {_joint_state(ev, k, v, joint_types.get(k, 'revolute'))}"
                            for k, v in ev.initial_state.items()) or "none"
     sections = [
         f"<h1>asset2sim {esc(command)}: {esc(ev.asset_id)}</h1>",
@@ -368,6 +427,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
         f"<p>{badge}</p>",
+        as_asked_block(ev),
         "<h2>Object at its initial state</h2>",
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
         f"task-relevant: {esc(', '.join(ev.task_joints) or '-')}</p>",
@@ -378,6 +438,8 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         _verdict_table(ev),
         evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions),
+        "<h2>Operability</h2>",
+        operability_section(ev),
         "<h2>Penetration at the initial state</h2>",
         _penetration_details(ev),
         "<h2>Rest test</h2>",

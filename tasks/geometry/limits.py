@@ -288,6 +288,10 @@ class _JointScan:
             if self.clips(back_raw, b):
                 back = b = self.onset(b, self.qc)
                 clip.notes.append(_limit_note(side, back_raw, b, f", beyond the closed end): runs into {who_b}"))
+        elif back_raw != self.qc:  # a sliver past the closed end: the part meets its body there, which is the stop
+            back = float(self.qc)
+            clip.notes.append(_limit_note(side, back_raw, back, ", less than "
+                                          f"{MIN_CLIP_FRACTION:.0%} of the range beyond the closed end): the closed end is the stop"))
         return back
 
 

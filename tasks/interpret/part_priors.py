@@ -90,6 +90,16 @@ def task_relevant_rank(category: str, semantic_label: str | None) -> int | None:
     return None
 
 
+#: Canonical part labels nobody operates by hand (a wheel rolls on the floor).
+NOT_HANDLED_LABELS = frozenset({"wheel"})
+
+
+def handled(semantic_label: str | None) -> bool:
+    """Whether a part with this label is operated by hand: every part but :data:`NOT_HANDLED_LABELS`; an
+    unlabelled part counts as handled."""
+    return canonical_label(semantic_label) not in NOT_HANDLED_LABELS if semantic_label else True
+
+
 def spring_expected(category: str, semantic_label: str | None) -> bool:
     """True when a joint moving this part naturally has a return spring (a toaster lever, push buttons)."""
     canon = canonical_label(semantic_label)

@@ -390,9 +390,10 @@ _ELIDED = re.compile(r"\s*(?:,\s*)?(?:and|or|but|then|yet)?\s*(?:also\s+|at the 
 _OTHERS = re.compile(r"(?<![\w-])(?:others|(?:the )?rest(?: of them)?|remaining(?: ones)?|other(?: ones?)?)(?![\w-])")
 
 
-def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = None) -> tuple[list[JointStateRequest], list[_Hit], list[str]]:
+def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = None
+                  ) -> tuple[list[JointStateRequest], list[_Hit], list[str], list[str]]:
     """Joint-state requests (every joint first, then per label, then one part: the specific one wins), the
-    state hits used and warnings (contradictions)."""
+    state hits used, warnings (contradictions) and the phrases a later one for the same part replaced."""
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
     ords = [o for o in _scan(low, _ORDINALS) if o.flag == ""]
@@ -456,6 +457,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
             result.append(make("all", None, None, "vertical", b, b.text))
     # one request per target: a later phrase overrides an earlier one; a different state is warned
     warnings: list[str] = []
+    overridden: list[str] = []
     dedup: dict[tuple, JointStateRequest] = {}
     for js in result:
         key = (js.selector, js.label, js.ordinal, js.order)
@@ -463,9 +465,11 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
         if old is not None and (old.band, old.target) != (js.band, js.target):
             who = "every task-relevant part" if js.selector == "all" else (js.label or "part") + ("" if js.ordinal is None else f" #{js.ordinal} ({js.order})")
             warnings.append(f"contradiction: '{old.phrase}' and '{js.phrase}' both set {who}; the later one ('{js.phrase}') is used")
+            overridden.append(old.phrase)
         dedup[key] = js
     specific = sorted(dedup.values(), key=lambda js: 0 if js.selector == "all" and js.ordinal is None else (1 if js.ordinal is None else 2))
-    return specific, bands + used, warnings
+    kept = {js.phrase for js in specific}
+    return specific, bands + used, warnings, [p for p in dict.fromkeys(overridden) if p not in kept]
 
 
 def parse_request(text: str) -> RequestSpec:
@@ -490,7 +494,7 @@ def parse_request(text: str) -> RequestSpec:
     warnings = [f"contradiction: size words {size_phrase!r} and " + ", ".join(repr(h.text) for h in size_against)
                 + f" point opposite ways; '{size_class}' (the first direction) is used"] if size_against else []
     numeric, sizes, size_warn, verbs = rv.state_quantities(low, mention_starts)
-    joint_states, band_hits, contradictions = _joint_states(low, tokens, numeric)
+    joint_states, band_hits, contradictions, overridden = _joint_states(low, tokens, numeric)
     warnings += size_warn + contradictions
     if sizes and size_class is not None:
         warnings.append(f"size words ({size_phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
@@ -522,7 +526,7 @@ def parse_request(text: str) -> RequestSpec:
         free_moving=free, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
         sizes=[f.value for f in sizes], dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
-        ignored=groups, warnings=warnings, matched=in_order, unused_words=unused,
+        ignored=groups, warnings=warnings, overridden=overridden, matched=in_order, unused_words=unused,
     )
 
 

@@ -305,7 +305,7 @@ def _utc(ts: float | None) -> datetime | None:
 REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
-    "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash", "clips",
+    "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash", "clips", "request_met", "request_unmet",
 )  # fmt: skip
 
 
@@ -411,9 +411,9 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         row.estimator = report.estimator or row.estimator
         row.model = report.model or row.model
         row.category = report.category or row.category
-        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation"))
+        post = column_values(report.metrics, engine=None, names=("penetration", "rest_stability", "oscillation", "request_met"))
         row.penetration_mm = post.get("penetration_mm")
-        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass"):
+        for col in ("rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "request_met", "request_unmet"):
             if col in post:
                 setattr(row, col, post[col])
         return report.failure_mode

@@ -4,6 +4,7 @@ registry are :mod:`.estimator`, the physics :mod:`.physics`."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -122,7 +123,8 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
     ``state`` (output units), shaped by ``choices`` (``docs/design/refine.md``, "Joint dynamics").
 
     Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
-    holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
+    holding position; of a part asked closed only the loads pushing it open: its stop takes the others) and
+    where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
     k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
@@ -140,10 +142,12 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             f0 = cs.fraction(state[name] / unit)
             fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
         hold = 0.0
+        shut = cs.fraction(state[name] / unit) <= BAND_INTERVAL["closed"][1]  # a load pushing it shut rests on the stop
         for f in fr:
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
-            hold = max(hold, abs(ld[name].gravity_load))
+            if not (shut and ld[name].gravity_load * cs.direction < 0):
+                hold = max(hold, abs(ld[name].gravity_load))
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f in CLOSED_HOLD_FRACTIONS:
             st = {**state, name: cs.position(float(f)) * unit}
@@ -151,15 +155,165 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             if ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
         spring = None
+        note = source
         if ch.spring:
             load = loads[name]
             k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
             spring = (k, ref)
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
-        out[name] = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
-                                           free_moving=ch.free_moving, spring=spring, source=source)
+        elif name not in prismatic and not ch.free_moving and _label(ctx, name) in COUNTERBALANCE_LABELS:
+            counter = counterbalance(ctx, links, state, scale, name, fr)
+            if counter is not None:
+                spring, hold, why = counter
+                note = f"{source}; {why}"
+        dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
+                                     free_moving=ch.free_moving, spring=spring, source=note)
+        latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
+        if latch is not None:
+            force, position, zone, why = latch
+            dyn = dyn.model_copy(update={"catch_force": force, "catch_position": position, "catch_zone": zone,
+                                         "source": f"{dyn.source}; {why}"})
+        out[name] = dyn
     return out
+
+
+#: Holding forces of catches at a part's closed end, N: magnetic cabinet catches pull 2-8 lb (8.9-35.6 N;
+#: Monroe Engineering, "Magnetic catches: what is pull force and why does it matter"; light-duty catches for small
+#: doors 4-6 lb, engineerfix.com, chosen "to hold the door closed without making it difficult to open").
+CATCH_FORCE_N = (8.9, 35.6)
+#: A catch is chosen to keep its part shut when the object leans this much (rad): the SPEC's robust-rest tilt,
+#: 5 deg, an uneven floor or a bump ...
+CATCH_LEAN = math.radians(5.0)
+#: ... with this margin on the part's weight along its travel (dimensionless).
+CATCH_LEAN_MARGIN = 2.0
+#: Travel over which a drawer's stay-closed slide pulls it shut, m: the last 2 in (AWS Architectural Woodwork
+#: Standards, 1st ed. 2009, Appendix B, drawer slide selection guide: "self closing / stay closed").
+CATCH_ZONE_SLIDE_M = 0.0508
+#: Gap at a hinged part's edge within which a magnetic catch pulls it shut, m (estimate: a catch's pull falls
+#: to a small part of its rating within a few millimetres of the strike plate).
+CATCH_ZONE_HINGE_M = 0.005
+#: Shortest catch zone kept (at the catch), m: a state this near the closed end sits on the catch itself.
+CATCH_ZONE_MIN_M = 0.001
+#: Largest share of the opening travel a catch zone takes (a small drawer's catch acts near its closed end only).
+CATCH_ZONE_RANGE_SHARE = 0.25
+#: Largest opening fraction of a requested state at which a part gets its catch: the closed band's top
+#: (schemas.request BAND_INTERVAL["closed"]); a part asked open is held by its friction, which its catch's
+#: breakaway would only take budget from.
+CATCH_STATE_FRACTION = BAND_INTERVAL["closed"][1]
+#: Parts that close an opening and carry a catch (canonical labels; push buttons and knobs have none).
+CATCH_LABELS = frozenset({"door", "drawer", "lid"})
+#: Largest natural frequency of a catch's pull on its part, rad/s: 0.5 / dt at the SPEC's dt = 1/240 s (an
+#: explicit joint force any stiffer than that diverges); a catch that would be stiffer is not modelled.
+CATCH_MAX_RATE = 0.5 * 240.0
+
+
+def catch(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+          name: str) -> tuple[float, float, float, str] | None:
+    """The catch that holds a door, drawer or lid (:data:`CATCH_LABELS`) at its closed end where its own
+    weight does not (a drawer, a side-hinged door, a drop-down door): F at the part's front (prismatic, N) or
+    at its far edge r from the axis (revolute, F r N m), F = :data:`CATCH_LEAN_MARGIN` x the part's weight
+    along its travel at a lean of :data:`CATCH_LEAN` (half of it at a hinge's edge), within the magnetic
+    catches' :data:`CATCH_FORCE_N`, pulling it shut over
+    :data:`CATCH_ZONE_SLIDE_M` (a stay-closed slide) or :data:`CATCH_ZONE_HINGE_M` / r rad (a magnetic catch
+    at the edge), at most :data:`CATCH_ZONE_RANGE_SHARE` of the travel; only where the request leaves the part
+    closed (:data:`CATCH_STATE_FRACTION`). None for other parts, parts without a range,
+    parts whose weight presses them shut with at least the catch's force (a lid), a zone under
+    :data:`CATCH_ZONE_MIN_M`, and a catch stiffer than :data:`CATCH_MAX_RATE` allows for the part's inertia.
+
+    Returns:
+        (force N or N m, closed end rad or m, zone rad or m signed with the opening direction, note), or None.
+    """
+    j = ctx.asset.joint(name)
+    cs = ctx.closed[name]
+    if j.type not in ("revolute", "prismatic") or not cs.open_range > 0 or _label(ctx, name) not in CATCH_LABELS:
+        return None
+    prismatic = j.type == "prismatic"
+    unit = scale if prismatic else 1.0
+    if prismatic:
+        lever, zone_m = 1.0, CATCH_ZONE_SLIDE_M
+    else:
+        pts = ctx.hull_points.get(j.child)
+        if pts is None or not len(pts):
+            return None
+        a = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)
+        p = np.asarray(pts, float) * scale
+        lever = float(np.linalg.norm(p - np.outer(p @ a, a), axis=1).max())
+        if not lever > 0:
+            return None
+        zone_m = CATCH_ZONE_HINGE_M
+    st = {**state, name: cs.position(0.0) * unit}
+    load = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)
+    # the part's weight along its travel when the object leans: all of it for a slide, about half at a hinge's
+    # far edge (its centre of mass half way out)
+    lean = CATCH_LEAN_MARGIN * load[name].mass * physics.G * math.sin(CATCH_LEAN) * (1.0 if prismatic else 0.5)
+    force = float(np.clip(lean, *CATCH_FORCE_N))
+    torque = force * lever
+    if -load[name].gravity_load * cs.direction >= torque:  # its weight is its catch
+        return None
+    if cs.fraction(state[name] / unit) > CATCH_STATE_FRACTION:  # asked open: friction holds it, a catch only costs
+        return None
+    zone_m = min(zone_m, CATCH_ZONE_RANGE_SHARE * cs.open_range * unit * lever)  # a small part's catch acts near its end
+    if zone_m < CATCH_ZONE_MIN_M:
+        return None
+    zone = cs.direction * zone_m / lever
+    inertia = load[name].inertia_axis
+    if not inertia > 0 or torque / abs(zone) > inertia * CATCH_MAX_RATE**2:  # too stiff for its inertia at dt
+        return None
+    why = (f"catch at the closed end ({'stay-closed slide' if prismatic else 'magnetic catch at the far edge'}): "
+           f"{force:.3g} N{'' if prismatic else f' at {lever:.3g} m = {torque:.3g} N m'} over {zone_m * 1000:.3g} mm "
+           f"(holds the part shut when the object leans {math.degrees(CATCH_LEAN):g} deg, x{CATCH_LEAN_MARGIN:g}, "
+           f"within magnetic catches' {CATCH_FORCE_N[0]:g}-{CATCH_FORCE_N[1]:g} N)")
+    return float(torque), float(cs.position(0.0) * unit), float(zone), why
+
+
+#: Parts that carry a counterbalance spring when they open downward (canonical labels: a door, a drop-front
+#: lid; a toggle or a lever is thrown over its centre instead).
+COUNTERBALANCE_LABELS = frozenset({"door", "lid"})
+
+
+def _label(ctx: EstimationContext, joint: str) -> str | None:
+    """Canonical part label of ``joint``'s child link, None when unlabelled."""
+    child = ctx.asset.joint(joint).child
+    return priors.canonical_label(next((ln.semantic_label for ln in ctx.asset.links if ln.name == child), None))
+
+
+#: Opening fractions at which gravity must push a part open for it to count as opening downward (:func:`counterbalance`).
+DOWNWARD_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+
+
+def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+                   name: str, hold_fractions) -> tuple[tuple[float, float], float, str] | None:
+    """The counterbalance spring of a hinged door or lid (:data:`COUNTERBALANCE_LABELS`) that opens downward (an
+    oven's or a dishwasher's drop-down door, a drop-front desk lid): gravity pushes it open at every one of
+    :data:`DOWNWARD_FRACTIONS`. Such doors
+    carry their weight on door-balance springs (torsion or extension springs through a link, in every
+    consumer range and dishwasher); modelled as a torsion spring about the hinge with its rest position at
+    the closed end and the rate k = |tau_g(open end)| / R that balances the weight moment fully open (R the
+    opening range, rad). Friction then holds only what the spring leaves: the largest |tau_g + tau_s| over
+    ``hold_fractions`` and the closed end.
+
+    Returns:
+        ((k N m/rad, q_s rad), hold load N m, note), or None when the part does not open downward.
+    """
+    cs = ctx.closed[name]
+    rot = ctx.root_rotation
+    sub = {name: ctx.subtrees[name]}
+
+    def load(f: float) -> float:
+        st = {**state, name: cs.position(float(f))}
+        return physics.joint_loads(ctx.session, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+
+    open_loads = [load(f) * cs.direction for f in DOWNWARD_FRACTIONS]
+    if not all(t > 0 for t in open_loads) or not cs.open_range > 0:
+        return None
+    k = open_loads[-1] / cs.open_range
+    q_s = cs.position(0.0)
+    fractions = sorted({*(float(f) for f in hold_fractions), *CLOSED_HOLD_FRACTIONS})
+    hold = max(abs(load(f) * cs.direction - k * f * cs.open_range) for f in fractions)
+    why = (f"counterbalance spring of a door opening downward (door-balance springs of ranges and dishwashers): "
+           f"k = {k:.4g} N m/rad at rest closed balances the {open_loads[-1]:.3g} N m weight moment fully open")
+    return (float(k), float(q_s)), float(hold), why
 
 
 #: Opening fractions near the closed end where friction also holds a joint gravity pushes open (probes release at <= 0.10).

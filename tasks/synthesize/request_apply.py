@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
-from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, QuantityOutcome, RequestFindings, RequestSpec
+from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequest, QuantityOutcome, RequestFindings, RequestSpec
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
@@ -55,6 +55,11 @@ class StateResolution:
     warnings: list[str] = field(default_factory=list)
     addressed: set[str] = field(default_factory=set)
     """joints a phrase of the request set (the others are closed by default)"""
+    requests: dict[str, JointStateRequest] = field(default_factory=dict)
+    """joint -> the request (phrase) whose state it has"""
+    unapplied: list[tuple[str, str]] = field(default_factory=list)
+    """(phrase, why) of every state phrase applied to no joint: it names no part of the object (and none stands
+    in), an ordinal beyond the count, a number that cannot be applied, every part it names set by a later phrase"""
 
 
 def task_relevant_joints(ctx: "EstimationContext") -> list[str]:
@@ -79,15 +84,28 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     """Band per movable joint and the targets of numbers and ends at the overlay's ``scale``; joints not
     addressed are closed; a request naming a part (or a joint) overrides one that names none ("half open"),
     else a later request for a joint overrides an earlier one. Acceptance: +-5 % of a number
-    (at least :data:`MIN_TOLERANCE`), +-:data:`END_TOLERANCE` of an end."""
+    (at least :data:`MIN_TOLERANCE`), +-:data:`END_TOLERANCE` of an end. Phrases applied to no joint are in
+    ``unapplied``, why with each (not a phrase naming no part, "half open", that phrases naming parts refine);
+    ``requests`` says which phrase set each joint. Uses ``ctx.session`` (ordinals, ends): call it while open."""
     res = StateResolution(bands={})
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
     centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
+    named: list[tuple[JointStateRequest, list[str]]] = []
+    cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
-        for t in state_targets(ctx, jr, relevant, centers, res.warnings):
+        before = len(res.warnings)
+        joints = state_targets(ctx, jr, relevant, centers, res.warnings)
+        named.append((jr, joints))
+        if not joints:
+            why = res.warnings[-1].removeprefix("WARNING: ") if len(res.warnings) > before else (
+                f"names joint {jr.joint}, not a movable joint of this object" if jr.selector == "joint"
+                else f"this {ctx.category} has no task-relevant movable part")
+            res.unapplied.append((jr.phrase, why))
+        for t in joints:
             res.bands[t] = jr.band
             res.addressed.add(t)
+            res.requests[t] = jr
             res.targets.pop(t, None)
             if jr.target is None:
                 continue
@@ -95,6 +113,7 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
             f, why = fraction_for(ctx, t, jr.target, scale, label, closed_state)
             if f is None:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' cannot be applied: {why}; the nominal band '{jr.band}' is used")
+                cannot.append((jr, t, f"{t} ({label}): cannot be applied: {why}"))
                 continue
             if f > 1.0 + 1e-9 or f < -1e-9:
                 res.warnings.append(f"WARNING: {t} ({label}): '{jr.phrase}' is beyond the joint's limit ({why}, fraction {f:.3g}); set to the "
@@ -109,10 +128,50 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
             res.notes.append(f"{t} ({label}): '{jr.phrase}' -> opening fraction {f:.4g} ({why})")
     for j in ctx.asset.movable_joints():
         res.bands.setdefault(j.name, "closed")
+    res.unapplied += [(jr.phrase, why) for jr, t, why in cannot if res.requests.get(t) is jr]
+    res.unapplied += _replaced(named, res.requests)
     res.warnings += count_warnings(ctx)
     if closed_state:
         ctx.session.set_joint_positions(closed_state)
     return res
+
+
+def _replaced(named: list[tuple[JointStateRequest, list[str]]], requests: dict[str, JointStateRequest]) -> list[tuple[str, str]]:
+    """(phrase, why) of the phrases naming parts whose every joint a later phrase of the request set (``named``:
+    (request, its joints) in resolution order; ``requests``: joint -> the request that won it). A phrase naming no
+    part ("half open") refined by one naming a part, and a phrase a typed override (``selector`` joint) replaced,
+    are not among them."""
+    out = []
+    for jr, joints in named:
+        if not joints or not jr.names_part or jr.selector == "joint" or any(requests.get(t) is jr for t in joints):
+            continue
+        winners = [requests[t] for t in joints if t in requests]
+        if all(w.selector == "joint" for w in winners):
+            continue
+        later = ", ".join(dict.fromkeys(f"'{w.phrase}'" for w in winners if w.selector != "joint"))
+        out.append((jr.phrase, f"every part it names ({', '.join(joints)}) is set by the later {later}"))
+    return out
+
+
+def retarget(targets: dict[str, JointTarget], old: dict, new: dict) -> dict[str, JointTarget]:
+    """``targets`` with every angle and distance re-resolved after a joint's closed end or range moved from
+    ``old`` to ``new`` (joint -> ``ClosedState``, output units: the output's collision pieces, limits clipped to
+    the geometry): the same opening from the new closed end (rad, or m), as a fraction of the new range (at most
+    the range), with its acceptance interval and band; fractions and ends are fractions of whatever range the part
+    has and stay. Unchanged joints keep their target."""
+    out = dict(targets)
+    for n, t in targets.items():
+        a, b = old.get(n), new.get(n)
+        if t.kind not in ("angle", "distance") or t.fraction is None or a is None or b is None or not b.open_range > 0:
+            continue
+        if abs(a.q_closed - b.q_closed) <= 1e-12 and abs(a.open_range - b.open_range) <= 1e-12 and a.direction == b.direction:
+            continue
+        f = float(np.clip(t.fraction * a.open_range / b.open_range, 0.0, 1.0))
+        tol = max(NUMBER_TOLERANCE * f, MIN_TOLERANCE)
+        note = f"{t.note}; the output's closed end or range moved: the same opening placed from its closed end ({f:.3g} of its range)"
+        out[n] = JointTarget(joint=t.joint, band=band_of(f), fraction=f, interval=(max(0.0, f - tol), min(1.0, f + tol)), kind=t.kind,
+                             asked=t.asked, phrase=t.phrase, note=note)
+    return out
 
 
 def state_with_targets(ctx: "EstimationContext", state: dict[str, float], res: StateResolution, scale: float) -> dict[str, float]:
@@ -182,6 +241,21 @@ def unmatched_properties(ctx: "EstimationContext") -> list[str]:
             to, how = stand_ins(ctx, d.label, task_relevant_joints(ctx))
             out.append(f"WARNING: '{d.phrase}' names a '{d.label}' but no part of this {ctx.category} carries that label; its moving "
                        f"parts: {moving_parts(ctx)}; " + (f"applied to {how} {to}" if to else "not applied"))
+    return out
+
+
+def unapplied_properties(ctx: "EstimationContext") -> list[tuple[str, str]]:
+    """(phrase, why) of every mass or material naming a part the object lacks, and every joint parameter naming a
+    part no joint carries and none stands in for (:func:`unmatched_properties` warns of both)."""
+    out = []
+    links = [ln.name for ln in ctx.asset.links]
+    for p in ctx.request.properties:
+        if p.label not in (None, "body") and not any(link_named(ctx, ln, p.label) for ln in links):
+            out.append((p.phrase, f"names a '{p.label}' but this {ctx.category} has no such part (its moving parts: {moving_parts(ctx)})"))
+    for d in ctx.request.dynamics_values:
+        if d.label is not None and not joints_named(ctx, d.label) and not stand_ins(ctx, d.label, task_relevant_joints(ctx))[0]:
+            out.append((d.phrase, f"names a '{d.label}' but no part of this {ctx.category} carries that label (its moving parts: "
+                                  f"{moving_parts(ctx)})"))
     return out
 
 
@@ -328,7 +402,7 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
         if t.kind == "end":
             ok = abs(f - t.fraction) <= END_TOLERANCE + 1e-9
             q.append(QuantityOutcome(what=f"{n} end", phrase=t.phrase, asked=t.fraction, achieved=f, unit="opening fraction",
-                                     within_tolerance=ok, why=t.note))
+                                     within_tolerance=ok, why=t.note, kind="state"))
             continue
         if t.kind == "angle" or t.kind == "distance" and ctx.asset.joint(n).type == "prismatic":
             asked, got, unit = t.asked, f * cs.open_range, "rad" if t.kind == "angle" else "m"
@@ -343,16 +417,17 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
                 why += "; the joint's limit is below the number"
             else:
                 why += "; the state search moved it inside its interval to remove self-penetration"
-        q.append(QuantityOutcome(what=f"{n} {t.kind}", phrase=t.phrase, asked=asked, achieved=got, unit=unit, within_tolerance=ok, why=why))
+        q.append(QuantityOutcome(what=f"{n} {t.kind}", phrase=t.phrase, asked=asked, achieved=got, unit=unit, within_tolerance=ok, why=why,
+                                 kind="state"))
     for phrase, asked, got in size_residuals(ctx, scale):
         ok = abs(got - asked) <= NUMBER_TOLERANCE * asked
         q.append(QuantityOutcome(what="size", phrase=phrase, asked=asked, achieved=got, unit="m", within_tolerance=ok,
-                                 why="" if ok else "one uniform scale cannot meet every size asked"))
+                                 why="" if ok else "one uniform scale cannot meet every size asked", kind="size"))
     total_req = next((p for p in ctx.request.properties if p.mass is not None and p.label is None), None)
     if total_req is not None:
         ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
         q.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
-                                 within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it"))
+                                 within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
     if overlay is not None:
         q += _dynamics_outcomes(ctx, overlay, escalation or [])
     return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q)
@@ -378,7 +453,7 @@ def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: l
             unit = {"damping": "N*m*s/rad" if not linear else "N*s/m", "friction": "N*m" if not linear else "N",
                     "stiffness": "N*m/rad" if not linear else "N/m"}[d.quantity]
             out.append(QuantityOutcome(what=f"{n} {d.quantity}", phrase=d.phrase, asked=d.value, achieved=got, unit=unit,
-                                       within_tolerance=ok, why=why))
+                                       within_tolerance=ok, why=why, kind="dynamics"))
     return out
 
 

@@ -60,6 +60,21 @@ def test_refine_command_prints_summary_and_writes_contract(tmp_path):
     assert ("interaction-ready" if mode == "none" else f"FAILED: {mode}") in p.stdout
 
 
+@needs_shared
+def test_a_request_not_met_exits_3_and_prints_the_phrase(tmp_path, capsys):
+    """As asked: "its drawer open" on a stapler (no drawer) is not applied; refine exits 3 (NOT_READY), names
+    ``request_not_met`` and prints the phrase; joint states are printed from their closed ends."""
+    out = tmp_path / "o"
+    assert main(["refine", str(SHARED / "103275"), "--prompt", "A stapler with its drawer open.", "--out", str(out),
+                 "--no-extras", "-q"]) == 3
+    text = capsys.readouterr().out
+    assert "FAILED: request_not_met" in text and "request FAIL" in text
+    assert "NOT AS ASKED 'drawer open': not applied" in text
+    assert "from closed" in text and "% open" in text
+    report = json.loads((out / "report.json").read_text())
+    assert report["failure_mode"] == "request_not_met" and report["readiness"]["request"] is False
+
+
 def test_refine_bad_input_exits_nonzero_with_named_error(tmp_path):
     bad = tmp_path / "bad"
     bad.mkdir()

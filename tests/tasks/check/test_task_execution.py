@@ -227,13 +227,14 @@ def test_the_packaged_force_table_loads_and_looks_up_by_category_and_label():
     r, where = operating_range("Laptop", "screen", t)
     assert where == "Laptop.default" and r.torque_nm is not None and r.estimate and r.note
     assert operating_range("Unknown", None, t)[1] == "default"
-    for rng in [t.default] + [x for d in t.categories.values() for x in d.values()]:
+    for rng in [t.default, t.breakaway] + [x for d in t.categories.values() for x in d.values()]:
         assert all(s in t.sources for s in rng.sources)
         assert not rng.estimate or rng.note  # an estimate says how it was derived
 
 
 def test_a_bad_force_table_is_refused_with_its_key():
-    good = {"sources": {"a": "x"}, "default": {"force_n": [0, 10], "sources": ["a"]}, "categories": {}}
+    good = {"sources": {"a": "x"}, "default": {"force_n": [0, 10], "sources": ["a"]},
+            "breakaway": {"force_n": [0, 40], "sources": ["a"]}, "categories": {}}
     assert parse_operating_forces(good).default.force_n == (0.0, 10.0)
     with pytest.raises(OperatingForcesError, match="unknown source"):
         parse_operating_forces(dict(good, categories={"Box": {"lid": {"force_n": [0, 5], "sources": ["b"]}}}))

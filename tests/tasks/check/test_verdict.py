@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from asset2sim.schemas.report import FAILURE_MODES, MetricResult
 from asset2sim.tasks.check.verdict import (
+    TIERS,
     INVALID_MANIFEST_ROW,
     UNRESOLVED_PENETRATION_MM,
     asset_failure_mode,
@@ -78,8 +79,9 @@ def test_readiness_names_every_failing_tier_and_the_first_mode():
     r = readiness([_m("rest_stability", True), _m("oscillation", True), _m("joint_sweep", True),
                    _m("robust_rest", False, "physx"), _m("probes", False), _m("total_mass", False)])
     assert not r.ready
-    assert r.tiers == {"rest": True, "penetration": None, "sweep": True, "robust_rest": False, "probes": False,
-                       "task": None, "force": None}
+    assert {t: r.tiers[t] for t in ("rest", "penetration", "sweep", "robust_rest", "probes", "task", "force")} == {
+        "rest": True, "penetration": None, "sweep": True, "robust_rest": False, "probes": False, "task": None, "force": None}
+    assert r.tiers["request"] is None  # no request_met: not measured
     assert r.failures == ["robust_rest@physx", "probes@pybullet"]  # semantic metrics do not decide readiness
     assert r.failure_mode == "not_robust_at_rest"
     assert r.line().startswith("NOT READY: robust_rest@physx, probes@pybullet")
@@ -126,3 +128,19 @@ def test_a_child_deep_inside_its_parent_fails_the_penetration_tier():
         assert r.tiers["penetration"] is ok
         assert r.failure_mode == ("none" if ok else "unresolved_penetration")
         assert r.failures == ([] if ok else ["parent_child_penetration@pybullet"])
+
+
+def test_an_unmet_request_fails_the_request_tier_after_the_physical_ones():
+    """As asked (SPEC): a request not met is a failure of the verdict, named after every physical tier."""
+    assert list(TIERS)[-1] == "request" and "request_not_met" in FAILURE_MODES
+    unmet = MetricResult(name="request_met", value=1.0, unit="unmet phrases", passed=False, engine="none")
+    r = readiness([_m("rest_stability", True), _m("joint_sweep", True), unmet])
+    assert not r.ready and r.failure_mode == "request_not_met" and r.failures == ["request_met@none"]
+    assert r.tiers["request"] is False
+    assert readiness([_m("joint_sweep", False), unmet]).failure_mode == "blocked_joint"  # physical tiers first
+    met = unmet.model_copy(update={"value": 0.0, "passed": True})
+    assert readiness([_m("rest_stability", True), met]).ready
+    none = unmet.model_copy(update={"value": None, "passed": None})  # no request: not measured
+    assert readiness([_m("rest_stability", True), none]).tiers["request"] is None
+    v = asset_failure_mode(refine_status="ok", refine_mode="none", measured_status="ok", measured_failures=["request_met@none"])
+    assert v.failure_mode == "request_not_met"  # the catalog's mode when only the evaluation found it

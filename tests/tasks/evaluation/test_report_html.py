@@ -163,7 +163,7 @@ def test_a_failing_asset_shows_the_failing_trials_plot_and_frames(tmp_path):
     for name in failing:
         assert f"robust rest, trial {name} (pybullet)" in html and f"alt=\"trial {name}\"" in html
     assert html.count(">as disturbed</figcaption>") == len(failing) and all(f">{c}</figcaption>" in html for c in FRAMES)
-    assert " deg)" in html and "% open)" in html
+    assert " deg from closed (" in html and "% open)" in html  # joint states from their closed ends
 
 
 @needs_shared
@@ -179,6 +179,8 @@ def test_a_refine_report_says_what_asset2sim_changed_and_why(tmp_path):
     assert "input, perspective" in section and "output, perspective" in section
     assert "it runs into link_2" in section  # the clipped limit's reason
     assert "the request: slightly open" in section
+    assert "deg from closed, " in section and "% open" in section  # the joint state from its closed end
+    assert "As asked: every part and state the request names is applied" in html
     assert "Why it failed" not in html  # it passes every tier
 
 

@@ -68,7 +68,7 @@ def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path):
         if j.type != "continuous":
             assert _close([g.lower, g.upper], [j.lower, j.upper], max(abs(j.lower), abs(j.upper), 1e-3)), j.name
         assert _close(g.damping, j.damping) and _close(g.friction, j.friction), j.name
-    springs = springs_from_overlay(out, read_initial_state(out))
+    springs = {n: s for n, s in springs_from_overlay(out, read_initial_state(out)).items() if s.stiffness > 0}  # catches: no USD attribute
     assert set(read.springs) == set(springs)
     for name, s in springs.items():
         assert _close(read.springs[name].stiffness, s.stiffness) and _close(read.springs[name].reference, s.reference, 1.0)

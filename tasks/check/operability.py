@@ -1,0 +1,409 @@
+"""Operability: every movable part a person handles is moved by a hand across
+its range, both ways, against its own friction, damping, springs and gravity,
+with an effort inside the real operating range of that part
+(``asset2sim/priors/operating_forces.yaml``, :func:`~asset2sim.tasks.check.force_ranges.operating_range`).
+Definition (session, hand, grasp, pass rule): ``docs/design/metrics.md``, "operability".
+
+The session has the root fixed (a mounted asset as it is used; a free one held
+by the other hand), gravity on, no ground, the asset's springs acting, and the
+other movable joints held at the initial state. Each handled part is put at its
+closed end and pushed open, then pushed closed, by a hand:
+
+- **where**: the grasp point of :func:`~asset2sim.tasks.check.contact_points.contact_point_rule`
+  (a handle's centre, a door's far edge, a drawer's front), lever r its distance from the axis
+  (a knob's rim where it is grasped on its axis: :func:`~asset2sim.tasks.check.contact_points.grasp_lever`);
+- **how hard**: at most the top of the part's operating range F (N; a torque range T N m bounds
+  F r too), rising from 0 over ``ramp_time`` and easing off as the part nears the hand's speed;
+- **how fast**: the hand's speed v at the grasp point (0.25 m/s, ISO 10218-1 reduced speed,
+  :class:`~asset2sim.tasks.check.gripper.GripperLimits`).
+
+A stroke passes when the part gets to ``reach_fraction`` of its range (95 %,
+the SPEC sweep's) in time, or where the hand stops short with another link in
+the part's way (geometry stops it there: :class:`~asset2sim.tasks.check.blockers.Blocker`).
+The effort a part needs is also computed along each stroke from the joint
+model the simulators use: E(q) = f + c v / r + max(0, -s Q(q)), f Coulomb
+friction, c damping, s the stroke's direction, Q the generalised force of
+gravity and the spring; its peak, as a force at the grasp point E / r (N) and a
+torque about the axis (N m), must lie inside the part's range. On a catch at the
+closed end the part is pulled off from rest: there E = f + max(0, -s Q) (the
+catch in Q) against the breakaway force instead (45 N,
+:func:`~asset2sim.tasks.check.force_ranges.breakaway_force`; ADA 404.2.9 leaves
+latches out of its 22.2 N), and the hand may pull that hard. The part is
+operable when both strokes pass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from asset2sim.engines.base import SessionOptions, SimSession, Spring
+from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.engines.registry import open_session
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.metrics import unit
+from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.blockers import Blocker
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, joint_frame_axis, rigid_group, subtree
+from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, load_operating_forces, operating_range
+from asset2sim.tasks.check.gripper import GripperLimits
+from asset2sim.tasks.check.operating import gravity_force
+from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
+from asset2sim.tasks.interpret.part_priors import handled
+from asset2sim.urdf import UrdfModel, UrdfSource, model_of
+
+#: Joint types a hand moves along a range.
+RANGED = ("revolute", "prismatic")
+
+
+@dataclass(frozen=True)
+class OperabilityConfig:
+    """The hand (units on every field)."""
+
+    hand_speed: float = GripperLimits().max_speed_m_s
+    """speed of the hand at the grasp point, m/s (ISO 10218-1:2011 5.6 reduced speed, as the task's gripper)"""
+    min_time: float = 4.0
+    """shortest time allowed for one stroke, s"""
+    time_factor: float = 2.0
+    """a stroke may take this many times the path length / ``hand_speed``, s"""
+    reach_fraction: float = REACH_FRACTION
+    """share of the range a stroke must cover (the SPEC sweep's 95 %)"""
+    ramp_time: float = 0.25
+    """time over which the hand's force rises from 0 to its limit, s"""
+    samples: int = 11
+    """positions along the range where the needed effort is computed"""
+    hold_force: float = HOLD_FORCE
+    """force limit of the holds of the other joints, N m or N"""
+
+
+@dataclass
+class Stroke:
+    """One push of a part, ``open`` or ``close``. Fractions of the opening range; effort in N m
+    (revolute) or N (prismatic); force at the grasp point N; torque about the axis N m."""
+
+    action: str
+    target: float
+    reached: float
+    time: float | None
+    needed_effort: float
+    needed_force_n: float
+    needed_torque_nm: float | None
+    at_fraction: float
+    stopped_by: str | None = None
+    """the link in the part's way where the hand stopped short (geometry stops it there)"""
+    breakaway_force_n: float = 0.0
+    """force at the grasp point that pulls the part off its catch from rest, N (0 without a catch)"""
+    diverged: bool = False
+    passed: bool = False
+    failure: str = ""
+
+
+@dataclass
+class PartOperability:
+    """One handled part's strokes and the range they are judged against."""
+
+    joint: str
+    joint_type: str
+    link: str
+    label: str | None
+    rule: str
+    lever: float | None
+    """distance (m) of the grasp point from the axis (revolute)"""
+    hand_force_n: float
+    """the hand's force limit at the grasp point, N"""
+    force_range_n: tuple[float, float] | None
+    torque_range_nm: tuple[float, float] | None
+    range_of: str
+    sources: list[str]
+    estimate: bool
+    strokes: list[Stroke] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.strokes) and all(s.passed for s in self.strokes)
+
+    @property
+    def peak_force_n(self) -> float:
+        return max((s.needed_force_n for s in self.strokes), default=0.0)
+
+    @property
+    def peak_torque_nm(self) -> float | None:
+        ts = [s.needed_torque_nm for s in self.strokes if s.needed_torque_nm is not None]
+        return max(ts) if ts else None
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able dict."""
+        return {"joint": self.joint, "joint_type": self.joint_type, "link": self.link, "label": self.label, "rule": self.rule,
+                "lever_m": self.lever, "hand_force_n": self.hand_force_n,
+                "force_range_n": list(self.force_range_n) if self.force_range_n else None,
+                "torque_range_nm": list(self.torque_range_nm) if self.torque_range_nm else None,
+                "range_of": self.range_of, "sources": self.sources, "estimate": self.estimate,
+                "peak_force_n": self.peak_force_n, "peak_torque_nm": self.peak_torque_nm, "passed": self.passed,
+                "strokes": [dict(s.__dict__) for s in self.strokes]}
+
+
+@dataclass
+class OperabilityRun:
+    """Every handled part of one asset in one engine; ``skipped`` joint -> why it was not pushed."""
+
+    engine: str
+    parts: list[PartOperability] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+
+
+def hand_limits(rng: ForceRange, lever: float | None) -> tuple[float, float]:
+    """(force limit at the grasp point N, effort limit N m or N) of a hand inside ``rng`` at ``lever`` m
+    (None: prismatic): the top of the force range, lowered where the torque range's top bounds F r.
+
+    Raises:
+        ValueError: a revolute part (``lever`` given) whose range has neither a force nor, with a lever <= 0, a usable bound.
+    """
+    f = rng.force_n[1] if rng.force_n is not None else float("inf")
+    if lever is None:
+        if not np.isfinite(f):
+            raise ValueError("a prismatic part needs a force range")
+        return float(f), float(f)
+    r = max(float(lever), 1e-3)
+    if rng.torque_nm is not None:
+        f = min(f, rng.torque_nm[1] / r)
+    if not np.isfinite(f):
+        raise ValueError("a revolute part needs a force or torque range")
+    return float(f), float(f * r)
+
+
+def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: list[str],
+                     springs: dict[str, Spring]) -> float:
+    """Generalised force Q (N m or N; > 0 pushes q up) on ``joint`` at the session's state: gravity on ``links``
+    (:func:`~asset2sim.tasks.check.operating.gravity_force`) plus the joint's spring and catch
+    (:meth:`~asset2sim.engines.base.Spring.force`)."""
+    q = gravity_force(session, model, joint, links)
+    s = springs.get(joint)
+    if s is not None:
+        q += s.force(session.joint_state(joint)[0])
+    return q
+
+
+def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str], state: dict[str, float],
+            closed: tuple[float, float, float], springs: dict[str, Spring], sign: float, fractions: np.ndarray,
+            friction: float, damping: float, speed: float) -> tuple[float, float, float]:
+    """(peak effort N m or N off the catch, the opening fraction where it peaks, peak effort on the catch) a
+    stroke in direction ``sign`` (+1 opening) needs over ``fractions``: f + c w + max(0, -s Q), w the joint
+    speed at the hand's speed; on a catch the part is pulled off from rest (no damping), 0 without one."""
+    qc, d, rng = closed
+    best, at, on = 0.0, float(fractions[0]), 0.0
+    sp = springs.get(joint)
+    for fr in fractions:
+        q = qc + d * fr * rng
+        session.set_joint_positions({**state, joint: q})
+        s = sign * d  # the stroke's direction in q
+        load = max(0.0, -s * generalized_load(session, model, joint, links, springs))
+        if sp is not None and sp.catch(q) != 0.0:
+            on = max(on, friction + load)
+        elif friction + damping * speed + load > best:
+            best, at = friction + damping * speed + load, float(fr)
+    session.set_joint_positions(dict(state))
+    return float(best), at, float(on)
+
+
+def _push(session: SimSession, joint: str, closed: tuple[float, float, float], sign: float, target: float,
+          effort: float, speed: float, time_limit: float, held: list[str], cfg: OperabilityConfig,
+          breakaway: float | None = None) -> tuple[float, float | None, bool]:
+    """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes ``target``: the hand
+    (``effort`` N m or N at most, easing off near ``speed`` rad/s or m/s; on the joint's catch at most
+    ``breakaway``). Returns (farthest fraction reached, time s or None, diverged)."""
+    qc, d, rng = closed
+    dt = session.options.conventions.timestep
+    s = sign * d
+    n = int(round(time_limit / dt))
+    far = -np.inf if sign > 0 else np.inf
+
+    def frac(q: float) -> float:
+        return float(d * (q - qc) / rng)
+
+    def done(f: float) -> bool:
+        return f >= target if sign > 0 else f <= target
+
+    for k in range(n):
+        q, qd = session.joint_state(joint)
+        if not (np.isfinite(q) and np.isfinite(qd)):
+            return (far if np.isfinite(far) else float("nan")), None, True
+        f = frac(q)
+        far = max(far, f) if sign > 0 else min(far, f)
+        if done(f):
+            return float(far), k * dt, False
+        ease = float(np.clip((speed - s * qd) / (0.5 * speed), 0.0, 1.0))
+        ramp = min(1.0, (k + 1) * dt / cfg.ramp_time)
+        sp = session.options.springs.get(joint)
+        limit = breakaway if breakaway is not None and sp is not None and sp.catch(q) != 0.0 else effort
+        session.apply_joint_effort(joint, s * limit * ramp * ease)
+        for o in held:
+            session.drive_joint(o, 0.0, cfg.hold_force)
+        session.step(1)
+    q, _ = session.joint_state(joint)
+    if np.isfinite(q):
+        f = frac(q)
+        far = max(far, f) if sign > 0 else min(far, f)
+        if done(f):
+            return float(far), time_limit, False
+    return float(far), None, False
+
+
+def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
+                 state: dict[str, float], springs: dict[str, Spring], blocker: Blocker, *, category: str | None,
+                 label: str | None, config: OperabilityConfig | None = None) -> PartOperability:
+    """Push one part open from its closed end and closed again (module docstring) in a fixed-root session with
+    gravity (stepped in place; the joint's state is restored at the end). ``closed``: (q_closed rad or m,
+    direction +-1, open range R > 0); ``state``: the initial state (joint -> rad or m); ``blocker``: finds the
+    link in the part's way where the hand stops short (:class:`~asset2sim.tasks.check.blockers.Blocker`).
+
+    Raises:
+        KeyError: ``joint`` is not a movable joint of the session.
+        ValueError: R <= 0; the part has no geometry to grasp.
+    """
+    cfg = config or OperabilityConfig()
+    qc, d, rng = closed
+    if not rng > 0:
+        raise ValueError(f"joint {joint!r}: open range must be > 0, got {rng}")
+    jt = session.joint_types[joint]
+    prismatic = jt == "prismatic"
+    table = load_operating_forces()
+    r_, where = operating_range(category, label, table)
+    session.set_joint_positions({**state, joint: qc + d * 0.5 * rng})
+    link, point, rule = contact_point_rule(session, joint, model, opening_direction=d, side="child")
+    lever = None if prismatic else grasp_lever(session, joint, link, point, model)
+    hand_f, effort = hand_limits(r_, lever)
+    breakaway_top = max(hand_f, breakaway_force(table))  # pulling a part off its catch, from rest
+    speed = cfg.hand_speed / lever if lever else cfg.hand_speed
+    time_limit = max(cfg.min_time, cfg.time_factor * rng * (lever or 1.0) / cfg.hand_speed)
+    jm = model.joint(joint)
+    links = [ln for ln in subtree(model, session.joint_child[joint]) if ln in session.link_names]
+    held = [o for o in session.joint_types if o != joint]
+    own = set(rigid_group(model, jm.parent))  # the parent's side: never collided with the part
+    part = PartOperability(joint=joint, joint_type=jt, link=link, label=label, rule=rule, lever=lever, hand_force_n=hand_f,
+                           force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
+                           sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
+    fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
+    saved = session.save_state()
+    try:
+        session.set_joint_positions({**state, joint: qc})
+        for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
+            need, at, on = _needed(session, model, joint, links, state, closed, springs, sign, fractions,
+                                   jm.friction, jm.damping, speed)
+            if action == "open":
+                session.set_joint_positions({**state, joint: qc})
+            else:
+                session.set_joint_positions({**state, joint: qc + d * reached_open * rng})
+            reached, t, diverged = _push(session, joint, closed, sign, target, effort, speed, time_limit, held, cfg,
+                                         breakaway_top * (lever or 1.0))
+            stop = None
+            if t is None and not diverged and need <= effort:  # as far as geometry lets it: a link in the way?
+                stop = blocker(session.joint_positions(), links, own)
+            if action == "open":
+                reached_open = reached if np.isfinite(reached) else 0.0
+            force = need / lever if lever else need
+            torque = need if lever else None
+            why = []
+            if diverged:
+                why.append("diverged")
+            elif t is None and stop is None:
+                why.append(f"a {hand_f:.3g} N hand at the {rule} got it only to {reached:.0%} open")
+            if r_.force_n is not None and force > r_.force_n[1]:
+                why.append(f"needs {force:.3g} N at the {rule} (range {r_.force_n[0]:g}-{r_.force_n[1]:g} N, {where})")
+            off = on / lever if lever else on
+            if off > breakaway_top:
+                why.append(f"needs {off:.3g} N to leave its catch (breakaway at most {breakaway_top:g} N)")
+            if torque is not None and r_.torque_nm is not None and torque > r_.torque_nm[1]:
+                why.append(f"needs {torque:.3g} N m (range {r_.torque_nm[0]:g}-{r_.torque_nm[1]:g} N m, {where})")
+            part.strokes.append(Stroke(action=action, target=float(target), reached=float(reached), time=t,
+                                       needed_effort=need, needed_force_n=float(force), needed_torque_nm=torque,
+                                       breakaway_force_n=float(off),
+                                       at_fraction=at, stopped_by=stop, diverged=diverged, passed=not why,
+                                       failure="; ".join(why)))
+            if diverged:
+                break
+    finally:
+        session.restore_state(saved)
+        session.discard_state(saved)
+        for o in [joint, *held]:
+            session.release_joint(o)
+    return part
+
+
+def operability_options(state: dict[str, float], conventions: SimConventions | None = None,
+                        springs: dict[str, Spring] | None = None) -> SessionOptions:
+    """Options of the operability session: root fixed, gravity on, no ground, the springs acting, at ``state``."""
+    return SessionOptions(initial_state=dict(state), springs=dict(springs or {}), fixed_base=True, gravity=True,
+                          ground=False, conventions=conventions or SimConventions())
+
+
+def run_operability(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
+                    initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
+                    conventions: SimConventions | None = None, *, category: str | None = None,
+                    labels: dict[str, str | None] | None = None, config: OperabilityConfig | None = None) -> OperabilityRun:
+    """Every handled part of ``closed`` (joint -> (q_closed, direction, open range), rad or m) pushed by a hand
+    (:func:`operate_part`) in one fresh session of ``engine``; ``labels``: link -> semantic label.
+
+    Raises:
+        EngineUnavailable: the engine is not installed; whatever loading ``urdf`` raises.
+    """
+    cfg = config or OperabilityConfig()
+    model = model_of(urdf, mode="lenient")
+    labels = dict(labels or {})
+    springs = dict(springs or {})
+    run = OperabilityRun(engine)
+    with quiet_stdout():
+        session = open_session(engine, urdf, operability_options(initial_state, conventions, springs))
+    blocker = Blocker(session, urdf, conventions or SimConventions())
+    try:
+        for name, c in closed.items():
+            if name not in session.joint_types or session.joint_types[name] not in RANGED:
+                run.skipped[name] = "not a ranged movable joint in this engine"
+                continue
+            if not c[2] > 0:
+                run.skipped[name] = "no opening range"
+                continue
+            label = labels.get(session.joint_child[name])
+            if not handled(label):
+                run.skipped[name] = f"a {label} is not operated by hand"
+                continue
+            try:
+                run.parts.append(operate_part(session, model, name, c, dict(initial_state), springs, blocker,
+                                              category=category, label=label, config=cfg))
+            except ValueError as exc:
+                run.skipped[name] = str(exc)
+    finally:
+        blocker.close()
+        session.close()
+    return run
+
+
+def operability_metric(run: OperabilityRun) -> MetricResult:
+    """The ``operability`` metric: value = parts not operable; passes iff every handled part is (None when none was
+    pushed); ``details["efforts"]`` joint -> the peak force (N) and torque (N m) and their range."""
+    failing = [p.joint for p in run.parts if not p.passed]
+    failures = [f"{p.joint} ({p.label or 'unlabelled'}) {s.action}: {s.failure}" for p in run.parts for s in p.strokes if not s.passed]
+    efforts = {p.joint: {"label": p.label, "peak_force_n": round(p.peak_force_n, 4),
+                         "peak_torque_nm": None if p.peak_torque_nm is None else round(p.peak_torque_nm, 4),
+                         "force_range_n": list(p.force_range_n) if p.force_range_n else None,
+                         "torque_range_nm": list(p.torque_range_nm) if p.torque_range_nm else None,
+                         "range_of": p.range_of, "passed": p.passed} for p in run.parts}
+    return MetricResult(
+        name="operability", value=float(len(failing)), unit=unit("operability"), passed=(not failing) if run.parts else None,
+        threshold=("root fixed, gravity on, the other joints held: every handled part pushed by a hand from its closed end "
+                   f"to >= {REACH_FRACTION:.0%} open and back (or as far as geometry lets it), the effort it needs "
+                   "(friction, damping at the hand's speed, springs, gravity) inside its real operating range "
+                   "(asset2sim/priors/operating_forces.yaml)"),
+        details={"parts": {p.joint: p.summary() for p in run.parts}, "failing": failing, "failures": failures,
+                 "efforts": efforts, "skipped": run.skipped},
+        engine=run.engine)
+
+
+def not_operable(metrics: list[MetricResult]) -> list[str]:
+    """Joints an ``operability`` metric of ``metrics`` found not operable, first-seen order."""
+    out: list[str] = []
+    for m in metrics:
+        if m.name == "operability" and m.passed is False:
+            out += list(m.details.get("failing") or [])
+    return list(dict.fromkeys(out))
