@@ -131,6 +131,10 @@ def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iter
 GROUND_FRICTION = 0.25
 #: Share of the allowed operating force that friction, damping at top speed and gravity may take.
 BUDGET_SHARE = 0.95
+#: Share of the breakaway force (:func:`~asset2sim.tasks.check.force_ranges.breakaway_force`) that friction and a
+#: catch may take where the part is pulled off its catch from rest: the rest is the margin of a jerked pull whose
+#: peak a hand cannot hold steady (design margin; 38 N of MIL-STD-1472E's 45 N).
+BREAKAWAY_SHARE = 0.85
 #: Share of the budget that friction may take; the rest is damping at the gripper's top speed.
 FRICTION_SHARE = 0.75
 #: Friction never capped below this multiple of the gravity load at the requested state.
@@ -314,7 +318,7 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
             b = hand + qg * s_motion
             if spring is not None and spring.catch(qc + d * f * rng) != 0.0:  # on the catch: pulled off it from rest
                 top = force if bound.startswith("ground friction") else max(force, breakaway_force())
-                breakaway = min(breakaway, BUDGET_SHARE * top * (lever or 1.0) + qg * s_motion)
+                breakaway = min(breakaway, BREAKAWAY_SHARE * top * (lever or 1.0) + qg * s_motion)
                 b = float("inf") if best is None or not np.isfinite(best[0]) else best[0]
             if best is None or b < best[0]:
                 best = (b, best[1] if best else float("inf"), best[2] if best else "")
@@ -370,10 +374,12 @@ def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tup
     dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
     conflict = ""
     floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)
-    if fcap < floor:
-        conflict = (f"{name}: the operating budget {max(budget, 0.0):.3g} {'N' if jtype == 'prismatic' else 'N m'} "
-                    f"({bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
+    if fcap < floor:  # friction takes what holding the state needs, damping the rest of the budget
+        if floor > max(budget, 0.0):
+            conflict = (f"{name}: the operating budget {max(budget, 0.0):.3g} {'N' if jtype == 'prismatic' else 'N m'} "
+                        f"({bound}) is below what holds the requested state ({floor:.3g}): friction kept at the hold floor")
         fcap = floor
+        dcap = min(dcap, max(budget - floor, 0.0) / speed)
     if inertia:
         fcap = min(fcap, max_stable_friction(inertia))
     return OperatingBudget(joint=name, joint_type=jtype, link=grasp.link, rule=grasp.rule, lever=lever, force_n=float(force),
