@@ -18,6 +18,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import JointDynamics, Overlay
+from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check.blockers import fixed_root_options
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
 from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, operating_range
@@ -139,6 +140,8 @@ BREAKAWAY_SHARE = 0.85
 FRICTION_SHARE = 0.75
 #: Friction never capped below this multiple of the gravity load at the requested state.
 HOLD_MARGIN = 1.2
+#: Opening fraction up to which a part counts as shut (the closed band's top, ``schemas.request.BAND_INTERVAL``).
+CLOSED_FRACTION = BAND_INTERVAL["closed"][1]
 #: Opening fractions sampled along a task's path (per path, including ends).
 PATH_SAMPLES = 5
 
@@ -313,8 +316,10 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
             if q_state is None:
                 session.set_joint_positions(dict(state))
                 q0 = state.get(joint, qc)  # a catch presses the part into its stop: nothing for friction to hold
-                q_state = abs(gravity_force(session, model, joint, grasp.moving)
-                              + side * (_spring_force(spring, q0) - (spring.catch(q0) if spring is not None else 0.0)))
+                q_signed = side * (gravity_force(session, model, joint, grasp.moving)
+                                   + side * (_spring_force(spring, q0) - (spring.catch(q0) if spring is not None else 0.0)))
+                # a part asked shut that gravity presses into its closed end rests on it: no hold floor
+                q_state = 0.0 if f_state <= CLOSED_FRACTION and q_signed * -d > 0 else abs(q_signed)
             b = hand + qg * s_motion
             if spring is not None and spring.catch(qc + d * f * rng) != 0.0:  # on the catch: pulled off it from rest
                 top = force if bound.startswith("ground friction") else max(force, breakaway_force())

@@ -123,8 +123,7 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
     ``state`` (output units), shaped by ``choices`` (``docs/design/refine.md``, "Joint dynamics").
 
     Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
-    holding position; of a part asked closed only the loads pushing it open: its stop takes the others) and
-    where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
+    holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
     k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
@@ -142,12 +141,10 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             f0 = cs.fraction(state[name] / unit)
             fr = np.clip([f0 - 0.05, f0, f0 + 0.05], 0.0, 1.0)
         hold = 0.0
-        shut = cs.fraction(state[name] / unit) <= BAND_INTERVAL["closed"][1]  # a load pushing it shut rests on the stop
         for f in fr:
             st = {**state, name: cs.position(float(f)) * unit}
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
-            if not (shut and ld[name].gravity_load * cs.direction < 0):
-                hold = max(hold, abs(ld[name].gravity_load))
+            hold = max(hold, abs(ld[name].gravity_load))
         # a part stays shut once closed: friction also holds a load pushing it open near its closed end
         for f in CLOSED_HOLD_FRACTIONS:
             st = {**state, name: cs.position(float(f)) * unit}
