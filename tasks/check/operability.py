@@ -46,7 +46,7 @@ from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import Blocker
-from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, joint_frame_axis, rigid_group, subtree
+from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, rigid_group, subtree
 from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.operating import gravity_force
@@ -286,6 +286,7 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
     fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
     saved = session.save_state()
+    reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
         session.set_joint_positions({**state, joint: qc})
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
