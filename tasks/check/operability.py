@@ -49,7 +49,7 @@ from asset2sim.tasks.check.blockers import Blocker
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, rigid_group, subtree
 from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
-from asset2sim.tasks.check.operating import gravity_force
+from asset2sim.tasks.check.operating import gravity_force, range_force
 from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
 from asset2sim.tasks.interpret.part_priors import handled
 from asset2sim.urdf import UrdfModel, UrdfSource, model_of
@@ -155,22 +155,16 @@ class OperabilityRun:
 
 def hand_limits(rng: ForceRange, lever: float | None) -> tuple[float, float]:
     """(force limit at the grasp point N, effort limit N m or N) of a hand inside ``rng`` at ``lever`` m
-    (None: prismatic): the top of the force range, lowered where the torque range's top bounds F r.
+    (None: prismatic): :func:`~asset2sim.tasks.check.operating.range_force`, the force range's top lowered
+    where the torque range's top bounds F r.
 
     Raises:
-        ValueError: a revolute part (``lever`` given) whose range has neither a force nor, with a lever <= 0, a usable bound.
+        ValueError: the range bounds neither the force nor, for a revolute part, the torque.
     """
-    f = rng.force_n[1] if rng.force_n is not None else float("inf")
-    if lever is None:
-        if not np.isfinite(f):
-            raise ValueError("a prismatic part needs a force range")
-        return float(f), float(f)
-    r = max(float(lever), 1e-3)
-    if rng.torque_nm is not None:
-        f = min(f, rng.torque_nm[1] / r)
+    f, _ = range_force(rng, "", lever)
     if not np.isfinite(f):
-        raise ValueError("a revolute part needs a force or torque range")
-    return float(f), float(f * r)
+        raise ValueError("a part needs a force range" + ("" if lever is None else " or a torque range"))
+    return float(f), float(f * lever) if lever is not None else float(f)
 
 
 def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: list[str],
@@ -288,7 +282,6 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     saved = session.save_state()
     reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
-        session.set_joint_positions({**state, joint: qc})
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
             need, at, on = _needed(session, model, joint, links, state, closed, springs, sign, fractions,
                                    jm.friction, jm.damping, speed)

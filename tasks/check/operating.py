@@ -307,7 +307,7 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
         for f in (np.linspace(0.0, 1.0, 2 * PATH_SAMPLES + 1) if whole else _task_path(f_state, action)):
             session.set_joint_positions({**state, joint: qc + d * f * rng})
             t, nt, lever = _grasp_motion(session, joint, grasp, prismatic, model)
-            force, bound = _range_force(rng_, where, lever)
+            force, bound = range_force(rng_, where, lever)
             hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
             fg = _ground_force(t, nt, s_motion, *ground, vertical_share) if ground is not None else None
             if fg is not None and fg < force:
@@ -348,7 +348,7 @@ def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: boo
     return t, max(float(np.linalg.norm(t)), 1e-12), grasp_lever(session, joint, grasp.link, grasp.point, model)
 
 
-def _range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
+def range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[float, str]:
     """(upper end of the force range, or of the torque range / ``lever`` where smaller, N; what set it)."""
     force, bound = float("inf"), ""
     if rng_.force_n is not None:
