@@ -306,6 +306,7 @@ REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
     "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash", "clips", "request_met", "request_unmet",
+    "media",
 )  # fmt: skip
 
 
@@ -399,6 +400,7 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         report = value.report
         row.out_dir = value.out_dir or job.out_dir
         row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
+        row.media = report.media
         stages["refine"] = round(float(refined.seconds or 0.0), 4)
         for k, v in report.stage_seconds.items():
             stages[f"refine.{k}"] = round(float(v), 4)

@@ -294,7 +294,7 @@ def test_failed_write_during_extras_leaves_no_marker(tmp_path, box, monkeypatch)
     cause) and writes no completion marker, so a rerun redoes the asset."""
     from asset2sim.tasks import refine as refine_mod
 
-    monkeypatch.setattr(refine_mod.render, "render_views", lambda *a, **k: None)
+    monkeypatch.setattr(refine_mod.media_phase.render, "render_views", lambda *a, **k: None)
     monkeypatch.setattr(refine_mod.export_mjcf, "export_mjcf", lambda *a, **k: None)
     real = atomic._create_temp
 
