@@ -44,7 +44,8 @@ from asset2sim.tasks.assemble import (collision_geometry, container_pieces, expo
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import export_usd, output
 from asset2sim.tasks.publish import media as media_phase
-from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
+from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
+                                              write_report_json)
 from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
@@ -149,7 +150,7 @@ def refine_asset(
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
             report.media = "off"
-            atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
+            write_report_json(work, report)
             extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except BaseException:
@@ -230,7 +231,7 @@ def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
 
 def _completed_result(out_dir: Path, log: _StageLog) -> RefineResult:
     """The result recorded in a complete output folder (nothing recomputed)."""
-    report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, output_folder.MAX_RECORD_BYTES))
+    report = read_report_json(out_dir)
     overlay = Overlay.model_validate_json(atomic.read_regular(out_dir / write.OVERLAY_NAME, output_folder.MAX_RECORD_BYTES))
     log.say("skip", f"{out_dir} is complete for this input and configuration")
     return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
@@ -986,5 +987,5 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
     if not media:
         report.notes.append(f"{media_phase.DEFERRED_NOTE} (views/, clips/, report.html): `asset2sim report {shown}` makes them")
     report.stage_seconds = log.times
-    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
+    write_report_json(out_dir, report)
     return out

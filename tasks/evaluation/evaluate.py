@@ -30,6 +30,7 @@ from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergen
 from asset2sim.tasks.check.request_match import labelled_joints, requested_joints
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import write_report
+from asset2sim import output_folder
 from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
 
 __all__ = ["METRICS", "Evaluation", "EvaluationError", "JointInfo", "divergence_check", "evaluate_asset", "evaluate_refined",
@@ -229,8 +230,9 @@ def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True
     into ``out_dir`` atomically; returns {"evaluation": path, "report": path} for the files written."""
     out_dir = Path(out_dir)
     paths = {}
-    if evaluation_json:
-        paths["evaluation"] = write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json")))
+    if evaluation_json:  # its wall time apart (timings.json), so two evaluations of the same files write the same bytes
+        paths["evaluation"] = write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json", exclude={"seconds"})))
+        output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
         paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
     return paths

@@ -18,12 +18,13 @@ import numpy as np
 
 from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME, URDF_NAME, VIEWS_DIR
+from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
 from asset2sim.output_paths import OutputError
 from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import render
+from asset2sim.tasks.publish.contract import read_report_json, write_report_json
 
 __all__ = ["DEFERRED_NOTE", "media_pending", "make_media", "output_views"]
 
@@ -67,7 +68,7 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
     out_dir = Path(out_dir)
     marker = out_dir / MARKER_NAME
     try:
-        report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, output_folder.MAX_RECORD_BYTES))
+        report = read_report_json(out_dir)
         head = output_folder.read_record(marker)
     except (OSError, ValueError) as exc:
         raise OutputError(f"{out_dir} holds no complete refine output ({exc}); refine it first", "OUTPUT_INCOMPLETE",
@@ -92,7 +93,7 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
             out["clips"] = str(out_dir / CLIPS_DIR)
         report.media = "done"
         report.notes = [n for n in report.notes if not n.startswith(DEFERRED_NOTE)]
-        atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
+        write_report_json(out_dir, report)
         added = set(owner.files) if owner is not None else set()
     _extend_marker(out_dir, head, added)
     return out
@@ -101,7 +102,7 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
 def _extend_marker(out_dir: Path, head: dict, added: set[str]) -> None:
     """Rewrite the completion marker ``head`` of ``out_dir`` with the SHA-256 of every file it listed and of
     ``added`` (relative paths written since), then drop the ownership record the writes left."""
-    files = sorted(set(head["files"]) | {r for r in added if (out_dir / r).is_file()})
+    files = sorted(set(head["files"]) | {r for r in added if (out_dir / r).is_file() and r not in VOLATILE})
     atomic.write_json(out_dir / MARKER_NAME, {**{k: v for k, v in head.items() if k != "files"},
                                               "files": {r: atomic.sha256_file(out_dir / r) for r in files}})
     (out_dir / RECORD_NAME).unlink(missing_ok=True)
