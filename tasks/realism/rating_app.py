@@ -50,7 +50,9 @@ if TYPE_CHECKING:
 #: Largest answer form accepted, bytes.
 MAX_FORM_BYTES = 16_384
 _KINDS = {"video": "video/webm", "poster": "image/png"}
-_HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Content-Type-Options": "nosniff"}
+#: Headers of every page: ``same-origin`` sends no referrer to another site, and lets a browser's form post carry
+#: the app's own ``Origin`` (under ``no-referrer`` browsers send ``Origin: null``, which the app refuses).
+_HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "same-origin", "X-Content-Type-Options": "nosniff"}
 _STATUS = {"RATER_INVALID": 400, "PAIR_UNKNOWN": 404, "ANSWER_INVALID": 400, "PAIR_NOT_SHOWN": 409, "ANSWER_CONFLICT": 409,
            "ORIGIN_REFUSED": 403, "TOKEN_INVALID": 403, "ANSWER_TOO_LARGE": 413, "STORE_FAILED": 503}
 #: Host names every app answers to (besides the address it serves and ``allowed_hosts``).
