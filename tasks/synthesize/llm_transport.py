@@ -24,6 +24,7 @@ import math
 import os
 import threading
 import time
+import urllib.request
 from contextlib import contextmanager
 from typing import Iterator
 
@@ -86,10 +87,9 @@ def _bounded_time(timeout: float | None, bounds: CallBounds, httpcore, error) ->
     return left if timeout is None else min(timeout, left)
 
 
-def bounded_transport():
-    """An ``httpx.HTTPTransport`` whose connections obey :func:`call_bounds` (module docstring)."""
+def _bounder():
+    """A function that makes an httpx transport's connections obey :func:`call_bounds` (module docstring)."""
     import httpcore
-    import httpx
 
     class BoundedStream(httpcore.NetworkStream):
         def __init__(self, inner):
@@ -153,21 +153,46 @@ def bounded_transport():
         def sleep(self, seconds: float) -> None:
             self._inner.sleep(seconds)
 
+    def bound(transport) -> None:
+        pool = getattr(transport, "_pool", None)  # httpx keeps its httpcore pool here (httpx 0.28)
+        if not isinstance(pool, httpcore.ConnectionPool) or not hasattr(pool, "_network_backend"):
+            raise RuntimeError("httpx/httpcore changed: the bounded model transport cannot be installed")
+        if not isinstance(pool._network_backend, BoundedBackend):
+            pool._network_backend = BoundedBackend(pool._network_backend)
+
+    return bound
+
+
+def bounded_client():
+    """An ``httpx.Client`` (redirects followed, proxies and certificates from the environment as httpx reads
+    them) whose every transport obeys :func:`call_bounds`."""
+    import httpx
+
+    client = httpx.Client(follow_redirects=True)
+    bound = _bounder()
+    for transport in [client._transport, *client._mounts.values()]:  # the proxies' transports too
+        if transport is not None:
+            bound(transport)
+    return client
+
+
+def bounded_transport():
+    """An ``httpx.HTTPTransport`` whose connections obey :func:`call_bounds` (module docstring)."""
+    import httpx
+
     transport = httpx.HTTPTransport()
-    pool = transport._pool  # httpx keeps its httpcore pool here (httpx 0.28); the backend is the pool's
-    if not isinstance(pool, httpcore.ConnectionPool) or not hasattr(pool, "_network_backend"):
-        raise RuntimeError("httpx/httpcore changed: the bounded model transport cannot be installed")
-    pool._network_backend = BoundedBackend(pool._network_backend)
+    _bounder()(transport)
     return transport
 
 
 def _install_bounded_transport(litellm) -> None:
-    """Give litellm the bounded transport (unless the user set ``client_session`` / ``sync_transport``)."""
-    import httpx
-
+    """Give litellm bounded connections (unless the user set ``client_session`` / ``sync_transport``). The
+    providers litellm reaches through its own HTTP handler take one transport for every URL, which would
+    drop the proxies of the environment: with ``HTTP(S)_PROXY`` / ``ALL_PROXY`` set they keep httpx's
+    per-read time-out only."""
     if getattr(litellm, "client_session", None) is None:
-        litellm.client_session = httpx.Client(transport=bounded_transport(), follow_redirects=True)
-    if getattr(litellm, "sync_transport", None) is None:
+        litellm.client_session = bounded_client()
+    if getattr(litellm, "sync_transport", None) is None and not [k for k in urllib.request.getproxies() if k != "no"]:
         litellm.sync_transport = bounded_transport()
 
 
