@@ -75,7 +75,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.scores:
             return _scores(folder, args.tracking_uri)
-        print(f"rating app for {folder}: http://{args.host}:{args.port}/  (Ctrl-C stops)", flush=True)
+        # a browser must name a host the app answers to: every interface is reached here as 127.0.0.1
+        shown = "127.0.0.1" if args.host in ("", "0.0.0.0", "::") else args.host
+        shown = f"[{shown}]" if ":" in shown else shown
+        print(f"rating app for {folder}: http://{shown}:{args.port}/  (Ctrl-C stops)", flush=True)
         try:
             serve(folder, host=args.host, port=args.port, allowed_hosts=args.allow_host)
         except KeyboardInterrupt:  # uvicorn stopped gracefully (ratings.parquet synced) and re-raised Ctrl-C
