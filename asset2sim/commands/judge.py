@@ -113,11 +113,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _models_without_a_reply(verdicts) -> list[str]:
     """One line per model every one of whose questions failed (no reply from the server nor the cache)."""
-    asked: dict[str, list[int]] = {}
+    asked: dict[str, int] = {}
+    failed: dict[str, int] = {}
+    why: dict[str, str] = {}
     for v in verdicts:
-        n = asked.setdefault(v.model, [0, 0, ""])
-        n[0] += 2
-        n[1] += v.failed_calls
-        if v.failed_calls and not n[2]:
-            n[2] = v.reason
-    return [f"model {m}: all {q} calls failed (e.g. {why[:200]})" for m, (q, f, why) in asked.items() if q and f == q]
+        asked[v.model] = asked.get(v.model, 0) + 2  # both orders
+        failed[v.model] = failed.get(v.model, 0) + v.failed_calls
+        if v.failed_calls:
+            why.setdefault(v.model, v.reason[:200])
+    return [f"model {m}: all {n} calls failed (e.g. {why.get(m, '')})" for m, n in asked.items() if failed[m] == n]

@@ -16,7 +16,7 @@ Durability: each answer is committed to ``ratings.sqlite`` before the reply, the
 rewritten (after every answer, at start and at shutdown), so a restart loses nothing. Re-posting an answer is
 harmless (the stored one is kept). :func:`serve` listens on 127.0.0.1 unless told otherwise.
 
-Protections, as a web app on a shared machine needs them (``docs/guide/realism.md``, "The rating app"):
+Protections, as a web app on a shared machine needs them (``docs/guide/realism.md``, "What the app refuses"):
 
 - Host: a request whose ``Host`` header is not the address served, ``127.0.0.1``, ``localhost``, ``::1`` or a
   name given in ``allowed_hosts`` is refused (400, Starlette's ``TrustedHostMiddleware``): a web page whose

@@ -152,6 +152,9 @@ class RatingStore:
         except sqlite3.DatabaseError as exc:
             self.close()
             raise self._damaged(exc) from None
+        except BaseException:  # ratings.parquet unreadable (PairSetError naming it): nothing overwritten
+            self.close()
+            raise
         if stored or self.parquet.exists():
             self.sync_parquet()
 
