@@ -120,5 +120,6 @@ def _models_without_a_reply(verdicts) -> list[str]:
         asked[v.model] = asked.get(v.model, 0) + 2  # both orders
         failed[v.model] = failed.get(v.model, 0) + v.failed_calls
         if v.failed_calls:
-            why.setdefault(v.model, v.reason[:200])
+            first = v.reason.split(" | B/A: ")[0].removeprefix("A/B: ")  # what the first order's call got
+            why.setdefault(v.model, first if len(first) <= 240 else first[:237] + "...")
     return [f"model {m}: all {n} calls failed (e.g. {why.get(m, '')})" for m, n in asked.items() if failed[m] == n]
