@@ -106,7 +106,7 @@ class LLMClient:
             why = None
         except FileNotFoundError:  # deleted since: a miss
             return None
-        except (OSError, ValueError) as exc:  # too large, not a regular file, not JSON
+        except (OSError, ValueError, RecursionError) as exc:  # too large, not a regular file, not JSON, nested too deep
             rec, why = None, f"unreadable ({type(exc).__name__}: {exc})"
         if why is None:
             if not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or not isinstance(rec.get("content"), str):

@@ -91,6 +91,18 @@ def test_parsing_a_reply_nested_100000_deep_is_a_named_error():
     assert parse_json_strict(deep_in_a_string)["more_realistic"] == "A"  # brackets inside strings do not count
 
 
+def test_a_cached_record_nested_100000_deep_is_asked_again(tmp_path):
+    with fake.FakeOpenAIServer(fake.reply("fresh"), lifetime_s=60) as srv:
+        c = client(srv, tmp_path, cache_dir=tmp_path / "cache")
+        key = c.cache_key(MESSAGES, None, c.config.temperature)
+        record = tmp_path / "cache" / key[:2] / f"{key}.json"
+        record.parent.mkdir(parents=True)
+        record.write_text('{"content": ' + "[" * 100_000 + "]" * 100_000 + "}")
+        with pytest.warns(Warning, match="rejected"):
+            comp = c.complete(MESSAGES)
+    assert comp.content == "fresh" and not comp.cached and srv.n_chat == 1
+
+
 @pytest.mark.parametrize("reply", [
     "'Answer' + ' ' * 2000 + 'x'",
     "'the more realistic one is' + ' \\t\\n' * 100000 + 'x'",
