@@ -141,8 +141,13 @@ class LLMClient:
         """One model reply for ``messages`` (OpenAI chat format), from the cache when present. ``schema``
         goes as a strict ``json_schema`` response format; ``temperature`` "config" is the config's.
 
+        Each attempt is bounded (``tasks/synthesize/llm_transport.py``): ``timeout_s`` for connecting, sending
+        and the whole reply, ``max_reply_bytes`` for the reply.
+
         Raises:
             LLMUnavailable: litellm missing.
+            DeadlineExceeded: the server was still sending at the deadline (not retried).
+            ReplyTooLarge: the reply grew past ``max_reply_bytes`` (not retried).
             ModelCallError: a non-retryable error, or every attempt failed.
         """
         temp = self.config.temperature if temperature == "config" else temperature
