@@ -8,6 +8,7 @@ interaction-ready or not as asked (``request_not_met``), 4 output location probl
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,6 +22,8 @@ from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.output_folder import URDF_NAME, OutputError
 from asset2sim.tasks.check.asset_files import parse_urdf
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
 from asset2sim.tasks.refine import RefineError
@@ -204,7 +207,26 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     code = join_codes(codes) or mode.upper()
     status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, (RequestTooLong, OverrideError)) else INVALID_REQUEST
     msg = str(exc).removeprefix(f"{args.asset}: ")
-    return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}")
+    return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}",
+                        problems=finding_problems(cause, args.asset) if isinstance(cause, AssetError) else ())
+
+
+def finding_problems(exc: AssetError, asset) -> list[tuple[str, str, str]]:
+    """``(code, path, message)`` of each validation error of a refused asset, one problem each: the asset's path
+    once, the file inside it (and line) and the link or joint in the message; ``... and N more`` past
+    :data:`MESSAGE_FINDINGS`."""
+    errors = [f for f in exc.findings if f.severity == "error"]
+    out = []
+    for f in errors[:MESSAGE_FINDINGS]:
+        same = os.path.abspath(f.file) == os.path.abspath(asset) or (os.path.isfile(asset) and f.file == os.path.basename(asset))
+        inside = f"line {f.line}: " if same and f.line else "" if same else (f"{f.file}:{f.line}: " if f.line else f"{f.file}: ")
+        text = f.message.removeprefix(f"{f.file}: ").removeprefix(f"{asset}: ")
+        where = "" if f.where == "global" or text.startswith(f.where) else f"{f.where}: "
+        out.append((f.code, str(asset), f"invalid input: {inside}{where}{text}"))
+    if len(errors) > MESSAGE_FINDINGS:
+        out.append((join_codes(f.code for f in errors[MESSAGE_FINDINGS:]), str(asset),
+                    f"invalid input: ... and {len(errors) - MESSAGE_FINDINGS} more (asset2sim validate lists them all)"))
+    return out
 
 
 def options(args: argparse.Namespace) -> RefineConfig:

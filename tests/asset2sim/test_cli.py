@@ -95,7 +95,7 @@ def box(tmp_path):
 
 
 def _one_line(err: str) -> str:
-    lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim ")]
+    lines = [ln for ln in err.splitlines() if ln.startswith(("asset2sim ", "asset2sim:"))]
     assert len(lines) == 1, err
     assert "Traceback" not in err
     return lines[0]
@@ -133,10 +133,13 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
     bad.mkdir()
     (bad / "mobility.urdf").write_text("<robot name='x'><link name='a'/><link name='b'/></robot>")
     assert main(["refine", str(bad), "--out", str(tmp_path / "o1"), "--no-extras"]) == 1
-    line = _one_line(capsys.readouterr().err)
-    assert "invalid input" in line and str(bad) in line
-    code = line.split(": ")[1]
-    assert code and code == code.upper() and " " not in code, line
+    lines = capsys.readouterr().err.splitlines()  # one line per problem: 2 orphan links, two roots, no geometry
+    assert len(lines) == 4 and len(set(lines)) == 4, lines
+    for line in lines:
+        assert line.startswith("asset2sim refine: ") and "invalid input" in line and line.count(str(bad)) == 1, line
+        code = line.split(": ")[1]
+        assert code and code == code.upper() and " " not in code, line
+    assert any("link 'a' is connected by no joint" in line and "link 'a': link 'a'" not in line for line in lines), lines
     assert main(["refine", str(box), "--prompt", "x" * (MAX_REQUEST_CHARS + 1), "--out", str(tmp_path / "o2"), "--no-extras"]) == 2
     assert "REQUEST_TOO_LONG" in _one_line(capsys.readouterr().err)
     assert not (tmp_path / "o2").exists()  # refused before any work
@@ -213,10 +216,86 @@ def test_validation_failure_names_path_once_and_codes_once(tmp_path, capsys):
 
     asset = cb.CASES_BY_NAME["format_off_mesh"].build(tmp_path / "off")  # visual and collision: 2 errors, one code
     assert main(["refine", str(asset), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim ")]
+    assert len(lines) == 2 and len(err.splitlines()) == 2 and "Traceback" not in err, err  # one line per problem
+    for line, element in zip(lines, ("mobility.urdf:24: link 'lid': <visual>", "mobility.urdf:30: link 'lid': <collision>")):
+        prog, code, rest = _fields(line)
+        assert prog == "asset2sim refine" and code == "MESH_FORMAT_UNSUPPORTED"
+        assert rest.startswith(f"{asset}: invalid input: {element}") and rest.count(str(asset)) == 1, line
+        assert " | " not in line and "validation error(s)" not in line
+
+
+def test_a_wrong_path_is_named_once(tmp_path, capsys):
+    missing = tmp_path / "no_such_asset"
+    assert main(["refine", str(missing), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
-    prog, code, rest = _fields(line)
-    assert prog == "asset2sim refine" and code == "MESH_FORMAT_UNSUPPORTED"
-    assert rest.startswith(f"{asset}: ") and rest.count(str(asset)) == 1, line
+    assert line == f"asset2sim refine: ASSET_NOT_FOUND: {missing}: invalid input: no such file or folder", line
+    assert main(["validate", str(missing)]) == 1
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].count(str(missing)) == 1, out
+
+
+# ------------------------------------------------------------------ usage errors as in well-kept command lines (issue 62)
+
+
+@pytest.mark.parametrize("argv, prog, bad, meant", [
+    (["refine", "{box}", "--promt", "a box", "--out", "{out}"], "asset2sim refine", "--promt", "--prompt"),
+    (["refine", "{box}", "--outt", "{out}"], "asset2sim refine", "--outt", "--out"),  # not "--out is required"
+    (["--verbsoe", "refine", "{box}", "--out", "{out}"], "asset2sim", "--verbsoe", "--verbose"),
+    (["evaluate", "{box}", "--engins", "pybullet"], "asset2sim evaluate", "--engins", "--engines"),
+])
+def test_a_mistyped_option_is_named_with_the_closest_one(box, tmp_path, capsys, argv, prog, bad, meant):
+    argv = [a.format(box=box, out=tmp_path / "o") for a in argv]
+    assert main(argv) == 2
+    cap = capsys.readouterr()
+    line = _one_line(cap.err)
+    assert len(cap.err.splitlines()) == 1 and not cap.out, cap.err  # one line, no usage block
+    assert line.startswith(f"{prog}: OPTION_UNKNOWN: unknown option {bad}; did you mean {meant}?"), line
+    assert "required" not in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_mistyped_command_is_named_with_the_closest_one(capsys):
+    assert main(["refyne", "x"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith("asset2sim: COMMAND_UNKNOWN: unknown command 'refyne'; did you mean refine?"), line
+    assert main(["zzzz"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "did you mean" not in line and "refine" in line  # nothing close: the commands are listed
+
+
+def test_other_usage_errors_are_one_line_and_abbreviations_still_work(box, tmp_path, capsys):
+    assert main(["refine", str(box)]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith("asset2sim refine: USAGE_INVALID: ") and "--out" in line
+    assert main(["refine", str(box), "--promp", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 0  # a prefix
+
+
+def test_help_lists_every_exit_status(capsys):
+    from asset2sim.commands import _status
+
+    assert main(["--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    statuses = {v for k, v in vars(_status).items() if k.isupper() and isinstance(v, int) and not isinstance(v, bool)}
+    assert {1, 2, 3, 4, 5, 70, 130} <= statuses
+    for status in statuses | {0}:
+        assert f"{status} {_status.EXIT_STATUSES[status]}" in text, (status, text)
+
+
+def test_failures_outside_the_project_is_one_prefixed_line(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "asset2sim", "failures"], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                       env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2])))
+    assert p.returncode == 2 and not p.stdout, (p.stdout, p.stderr)
+    assert p.stderr.splitlines() == [p.stderr.strip()] and p.stderr.startswith("asset2sim failures: CATALOG_NOT_FOUND: catalog.yaml: ")
+    assert "--catalog" in p.stderr and "Errno" not in p.stderr
+
+
+def test_a_size_without_a_unit_suggests_plausible_units(box, tmp_path, capsys):
+    assert main(["refine", str(box), "--size", "30", "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "OVERRIDE_INVALID" in line and "30cm (0.3 m)" in line and "30m " not in line and "30m)" not in line, line
+    assert "size: size:" not in line
 
 
 def test_estimator_and_engine_errors_have_codes(box, tmp_path, capsys):
@@ -304,7 +383,7 @@ def test_a_command_imports_only_its_own_module():
     full = run("--help")
     assert full.returncode == 0 and all(c in full.stdout for c in ("refine", "flow", "benchmark", "failures"))
     bad = run("refyne")
-    assert bad.returncode == 2 and "invalid choice" in bad.stderr and "refine" in bad.stderr
+    assert bad.returncode == 2 and "COMMAND_UNKNOWN" in bad.stderr and "did you mean refine?" in bad.stderr
 
 
 def test_fast_exit_runs_the_exit_handlers_flushes_and_keeps_the_code(tmp_path):
