@@ -37,6 +37,16 @@ from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQU
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
 
 
+#: Environment defaults that keep the libraries' logs at WARNING on the terminal (Prefect's console handler, Dask's
+#: ``distributed.*`` loggers, MLflow's); inherited by the processes a command starts (Prefect's server, Dask workers,
+#: stage servers). ``--verbose`` leaves the libraries' own defaults; a value the user set is kept.
+QUIET_LIBRARY_LOGS = {
+    "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL": "WARNING",
+    "DASK_LOGGING__DISTRIBUTED": "warning",
+    "MLFLOW_LOGGING_LEVEL": "WARNING",
+}
+
+
 def command_names() -> list[str]:
     """The subcommands' module names, sorted (without importing them)."""
     return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
@@ -189,6 +199,9 @@ def main(argv: list[str] | None = None) -> int:
     debug = bool(getattr(args, "debug", False))
     if getattr(args, "verbose", False):  # inherited by the worker processes a command starts
         os.environ[STARTUP_MESSAGES] = "1"
+    else:  # before any library is imported: their loggers read these when configured
+        for name, value in QUIET_LIBRARY_LOGS.items():
+            os.environ.setdefault(name, value)
     command = getattr(args, "command", None)
     try:
         return int(args._run(args) or 0)
