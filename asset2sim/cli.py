@@ -35,6 +35,7 @@ from asset2sim import __version__, allocator  # noqa: E402
 from asset2sim.commands import _status  # noqa: E402
 from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, CommandError  # noqa: E402
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
+from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module  # noqa: E402
 
 
 #: Environment defaults that keep the libraries' logs at WARNING on the terminal (Prefect's console handler, Dask's
@@ -213,16 +214,28 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"asset2sim {command}: INTERRUPTED", file=sys.stderr, flush=True)
         return INTERRUPTED
-    except Exception as exc:  # the one place that turns a bug into a status
+    except ImportError as exc:  # an optional dependency missing: the extra named; any other import error is a bug
+        if missing_module(exc) not in EXTRA_OF_MODULE:
+            return internal_error(command, exc, debug)
         if debug:
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-        try:
-            where = f"traceback in {write_error_log(command, exc)}"
-        except OSError as log_exc:
-            where = f"no log written ({log_exc}); rerun with --debug for the traceback"
-        first = (str(exc).strip().splitlines() or [""])[0]
-        print(f"asset2sim {command}: INTERNAL_ERROR: {type(exc).__name__}: {first}; {where}", file=sys.stderr, flush=True)
-        return INTERNAL_ERROR
+        print(CommandError(INVALID_REQUEST, "EXTRA_MISSING", None, install_hint(exc)).line(command), file=sys.stderr, flush=True)
+        return INVALID_REQUEST
+    except Exception as exc:  # the one place that turns a bug into a status
+        return internal_error(command, exc, debug)
+
+
+def internal_error(command: str | None, exc: BaseException, debug: bool) -> int:
+    """One line naming a log of ``exc``'s traceback (printed too with ``debug``); returns :data:`INTERNAL_ERROR`."""
+    if debug:
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+    try:
+        where = f"traceback in {write_error_log(command, exc)}"
+    except OSError as log_exc:
+        where = f"no log written ({log_exc}); rerun with --debug for the traceback"
+    first = (str(exc).strip().splitlines() or [""])[0]
+    print(f"asset2sim {command}: INTERNAL_ERROR: {type(exc).__name__}: {first}; {where}", file=sys.stderr, flush=True)
+    return INTERNAL_ERROR
 
 
 #: Commands whose process ends by :func:`fast_exit`: one asset's work, no

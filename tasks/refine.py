@@ -18,6 +18,7 @@ from typing import Callable
 from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.extras import install_hint
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
@@ -950,8 +951,8 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
                                 ("usd", lambda: export_usd.export_usd(out_dir).path, "USD export")):
             try:
                 out[key] = str(make())
-            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed
-                report.notes.append(f"{what} skipped: {exc}")
+            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
+                report.notes.append(f"{what} skipped: {install_hint(exc)}")
             except Exception as exc:  # export must not lose the refined asset
                 _raise_if_unwritable(exc, out_dir)
                 report.notes.append(f"{what} failed: {exc}")

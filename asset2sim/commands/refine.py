@@ -113,7 +113,7 @@ def summary_lines(result) -> list[str]:
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + as_asked_lines(r) + [
+    ] + as_asked_lines(r) + skipped_lines(r) + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
@@ -127,6 +127,12 @@ def media_lines(report, out_dir) -> list[str]:
     if report.media != "deferred":
         return []
     return [f"media        deferred: `asset2sim report {out_dir}` makes views/, clips/ and report.html"]
+
+
+def skipped_lines(report) -> list[str]:
+    """An export or check skipped for a missing optional dependency, one line each with the extra that would do it
+    (``skipped      MJCF export: MuJoCo is not installed: pip install 'asset2sim[mujoco]'``)."""
+    return [f"skipped      {n.replace(' skipped: ', ': ', 1)}" for n in report.notes if " skipped: " in n and "asset2sim[" in n]
 
 
 def request_lines(found) -> list[str]:
