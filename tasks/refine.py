@@ -30,7 +30,7 @@ from asset2sim.tasks.audit import keep
 from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check import as_asked
-from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
+from asset2sim.tasks.check.verdict import combine_verdict, penetration_measures, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import analyze, limits, urdf_closed
@@ -830,8 +830,8 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
 
 # ---------------------------------------------------------- 8: report, extras, marker
 def _announce_post_check(att: _Attempt, log: _StageLog) -> None:
-    pen, stab, osc = (att.check.metric(n) for n in ("penetration", "rest_stability", "oscillation"))
-    log.say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
+    stab, osc = (att.check.metric(n) for n in ("rest_stability", "oscillation"))
+    log.say("post_check", f"penetration {'; '.join(penetration_measures(att.check.metrics)) or 'n/a'}; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
 
 
 def _staging_notes(asset) -> list[str]:

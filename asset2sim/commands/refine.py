@@ -25,6 +25,7 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
+from asset2sim.tasks.check.verdict import penetration_measures, penetration_why
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
@@ -92,7 +93,7 @@ def _joint_types(out_dir) -> dict[str, str]:
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
-    pen, stab, osc = r.metric("penetration"), r.metric("rest_stability"), r.metric("oscillation")
+    stab, osc = r.metric("rest_stability"), r.metric("oscillation")
     types = _joint_types(result.out_dir)
     state = ", ".join(f"{k} = {from_closed_text(v, r.closed_positions.get(k), types.get(k, 'revolute'))}"
                       + (f", {opening_text(r.opening_fractions[k])}" if k in r.opening_fractions else "")
@@ -107,13 +108,13 @@ def summary_lines(result) -> list[str]:
         f"total mass   {r.total_mass:.4g} kg",
         f"initial state {state}",
     ] + ([f"task         {r.task}"] if r.task else []) + [
-        f"penetration  {pen.value:.3f} mm" if pen and pen.value is not None else "penetration  n/a",
+        "penetration  " + ("; ".join(penetration_measures(r.metrics)) or "n/a"),
         stability,
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + as_asked_lines(r) + skipped_lines(r) + [
+    ] + [f"why it failed {why}" for why in penetration_why(r.metrics)] + as_asked_lines(r) + skipped_lines(r) + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity

@@ -436,3 +436,38 @@ def test_open_containers_is_a_refine_option_off_by_default_and_part_of_the_confi
     cfg = tmp_path / "refine.yaml"
     cfg.write_text("open_containers: true\n")
     assert options(parser.parse_args(["refine", "in", "--prompt", "a bucket", "--out", "o", "--config", str(cfg)])).open_containers
+
+
+# ------------------------------------------------------------------ one explanation per failure: penetration (issue 62)
+
+
+def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_report(tmp_path, capsys):
+    """A lid clear of a bar of its body as modelled, asked open 0.5 rad: it lies inside the bar (parent-child
+    penetration, which the SPEC's Phi skips). The terminal's penetration line names both kinds, the verdict is
+    unresolved_penetration with one "why it failed" line (the links, the depth against 5 mm, what to do), and
+    report.html says the same, with no line saying there is no penetration."""
+    import html
+    import re
+
+    from tests.tasks.assemble.test_collision_geometry import _asset, _box
+
+    slab, bar = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.0, 0.0, 0.07], [0.1, 0.06, 0.09])
+    asset = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
+    out = tmp_path / "o"
+    assert main(["refine", str(asset), "--state", "hinge=0.5rad", "--out", str(out), "--no-clips", "--engines", "pybullet",
+                 "-q"]) == 3
+    lines = capsys.readouterr().out.splitlines()
+    assert "verdict      FAILED: unresolved_penetration" in "\n".join(lines)
+    pen = [ln for ln in lines if ln.startswith("penetration  ")]
+    assert len(pen) == 1 and "self-contact Phi 0.000 mm (pybullet) pass" in pen[0], pen
+    assert re.search(r"parent-child \d+\.\d+ mm \(pybullet, body/lid; \d+\.\d+ mm beyond its modelled pose\) FAIL", pen[0]), pen
+    why = [ln.removeprefix("why it failed ") for ln in lines if ln.startswith("why it failed ")]
+    assert len(why) == 1, lines
+    assert re.match(r"parent-child penetration \(pybullet\): link 'lid' is \d+\.\d mm inside its parent 'body' .*"
+                    r"\(fails above 5 mm\)\. Ask for a state .*--state", why[0]), why
+    report = json.loads((out / "report.json").read_text())
+    assert report["failure_mode"] == "unresolved_penetration"
+    text = html.unescape((out / "report.html").read_text())
+    assert "<h2>Why it failed: penetration</h2>" in text and why[0] in text  # the terminal's sentence, word for word
+    assert "no self-penetration at the initial state" not in text
+    assert "A child inside its parent (pybullet)" in text
