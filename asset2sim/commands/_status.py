@@ -55,13 +55,15 @@ class CommandError(Exception):
 
     def line(self, command: str | None) -> str:
         """``asset2sim COMMAND: CODE: PATH: message`` on one line (a message
-        that starts with the path does not repeat it)."""
+        that starts or ends with the path does not repeat it)."""
         msg = " | ".join(part.strip() for part in self.message.splitlines() if part.strip())
         if self.path:
             for prefix in (f"{self.path}: ", f"{os.path.abspath(self.path)}: "):
                 if msg.startswith(prefix):
                     msg = msg[len(prefix):]
                     break
+            for suffix in (f": {self.path}", f": {os.path.abspath(self.path)}"):
+                msg = msg.removesuffix(suffix)
         where = f"{self.path}: " if self.path else ""
         prog = f"asset2sim {command}" if command else "asset2sim"
         return f"{prog}: {self.code}: {where}{msg}"

@@ -234,6 +234,11 @@ def test_a_wrong_path_is_named_once(tmp_path, capsys):
     assert main(["validate", str(missing)]) == 1
     out = capsys.readouterr().out
     assert out.splitlines()[0].count(str(missing)) == 1, out
+    for argv in (["render", str(missing), "--out", str(tmp_path / "v")], ["evaluate", str(missing)], ["audit", str(missing)],
+                 ["export", str(missing)]):
+        assert main(argv) in (1, 2), argv
+        line = _one_line(capsys.readouterr().err)
+        assert line.count(str(missing)) == 1, line
 
 
 # ------------------------------------------------------------------ usage errors as in well-kept command lines (issue 62)
