@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from asset2sim.extras import import_extra
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
 from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
@@ -51,10 +52,7 @@ def _pose(pos, quat_wxyz) -> np.ndarray:
 
 def _compile(path: Path):
     """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``; StagingError with MuJoCo's message when it cannot."""
-    try:
-        import mujoco
-    except ImportError as exc:
-        raise ImportError(f"reading MJCF needs MuJoCo ({exc}); install the extra: pip install 'asset2sim[mujoco]'") from exc
+    mujoco = import_extra("mujoco", "reading MJCF")
     try:
         with warnings.catch_warnings(record=True) as caught:  # MuJoCo's decoder warnings become notes
             warnings.simplefilter("always")
@@ -76,15 +74,14 @@ def read_mjcf_asset(path: Path | str) -> ReadAsset:
         rad, masses in kg, inertia tensors (3, 3) in kg*m^2 about the center of mass in the link axes.
 
     Raises:
-        ImportError: MuJoCo is not installed.
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
         StagingError: MuJoCo cannot compile the file, or the file holds something the asset model
             cannot take (names the body or joint): not exactly one body under the world body, a ball
             joint, several joints on one body, a free joint below the root, a slide joint without a range.
     """
-    import mujoco
-
     path = Path(path)
     spec, m, warned = _compile(path)
+    mujoco = import_extra("mujoco", "reading MJCF")
     roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0]
     if len(roots) != 1:
         names = [m.body(b).name or f"#{b}" for b in roots]
