@@ -28,7 +28,10 @@ BAND_INTERVAL: dict[str, tuple[float, float]] = {
 TargetKind = Literal["fraction", "angle", "distance", "end"]
 EndName = Literal["high", "low", "on", "off"]
 Dimension = Literal["height", "width", "depth", "length", "largest"]
-OrderAxis = Literal["vertical", "left_right", "right_left", "front_back"]
+OrderAxis = Literal["vertical", "left_right", "right_left", "front_back", "middle", "size"]
+"""How an ordinal counts, facing the object's front: top to bottom, left to right, right to left, front to back;
+``middle`` the middle one of an odd count along the direction the parts are spread in (ordinal 0); ``size`` by the
+moving part's box volume, smallest first ("the freezer door" 0, "the main door" -1)."""
 
 
 class StateTarget(BaseModel):

@@ -64,7 +64,15 @@ def _scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[_
 _OPEN = r"open(?:ed)?"
 #: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
 _MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
-          r"turned|rotated|unfolded|folded)")
+          r"turned|rotated|unfolded|folded|unscrewed|screwed (?:off|open)|loosened)")
+#: Hedges before a degree word ("open about halfway"): the degree is what is asked.
+_ABOUT = r"(?:(?:about|around|roughly|approximately|approx\.?|some|more or less|close to|nearly|almost|just about) )?"
+#: Comparatives around halfway ("a little less than halfway open"): an opening fraction a step below or above it.
+_LESS = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:less than|under|short of|below)"
+_MORE = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:more than|over|past|beyond|above)"
+_HALF = r"(?:half[- ]?way|half(?: of the way)?|the halfway (?:point|mark))"
+#: Opening fraction of "less than halfway" / "more than halfway": one band step (0.1 of the range) from 0.5.
+LESS_THAN_HALF, MORE_THAN_HALF = 0.4, 0.6
 _SZ = r"[- ]?siz(?:ed?|es)"
 
 # (regex, size class, flag) - flag "weak": only counts right before a category word.
@@ -104,6 +112,12 @@ _STATE_TABLE = _compile(
         (r"not (?:quite|fully|completely|entirely) (?:closed|shut)", "slightly_open", ""),
         (r"not (?:closed|shut)", "halfway", ""),
         (r"not (?:fully|completely|all the way|entirely) " + _OPEN, "mostly", ""),
+        # hedged and compared ("mostly closed": a small opening, not closed; "a little less than halfway open")
+        (r"(?:mostly|largely|almost|nearly|practically|just about|almost fully|nearly fully|not quite fully) (?:closed|shut)", "slightly_open", ""),
+        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _LESS + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
+         ("halfway", StateTarget(kind="fraction", value=LESS_THAN_HALF)), ""),
+        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _MORE + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
+         ("halfway", StateTarget(kind="fraction", value=MORE_THAN_HALF)), ""),
         # closed
         (r"(?:fully |completely |all the way )?(?:closed|shut)(?: all the way| completely| tight)?", "closed", ""),
         (r"(?:turned|switched|shut) off", "closed", ""),
@@ -130,15 +144,15 @@ _STATE_TABLE = _compile(
         (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         (_MOVED + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         # halfway
-        (r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
-        (r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
-        (_OPEN + r" (?:half[- ]?way|half)", "halfway", ""),
-        (_MOVED + r" (?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
+        (_ABOUT + r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
+        (_ABOUT + r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
+        (_OPEN + r" " + _ABOUT + r"(?:half[- ]?way|half)", "halfway", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
         (r"(?:partially|partly) " + _OPEN, "halfway", ""),
         # quarter
-        (r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
-        (_OPEN + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
-        (_MOVED + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (_ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
+        (_OPEN + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
         (r"(?:a |one )?quarter of the way", "quarter", ""),
         # slightly open
         (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
@@ -178,8 +192,18 @@ _ORDINALS = _compile(
         (r"right(?:most|[- ]hand)?", 0, "right_left"),
         (r"front(?:most)?", 0, "front_back"),
         (r"back(?:most)?|rear(?:most)?", -1, "front_back"),
+        # resolved from the geometry (tasks/synthesize/named_parts.py): the middle one of an odd count, along the
+        # direction the parts are spread in; by the size of the moving part's box, smallest first ("the freezer
+        # door": a refrigerator's smaller door; "the main door": its largest)
+        (r"middle(?:most)?|cent(?:er|re)|central", 0, "middle"),
+        (r"freezer|small(?:er|est)|narrow(?:er|est)", 0, "size"),
+        (r"main|large(?:r|st)|bigg(?:er|est)|wid(?:er|est)", -1, "size"),
+        # "one door open and the other shut": one of them (the first, top to bottom), the rest by "the other"
+        (r"one", 0, "vertical"),
     ]
 )
+#: Ordinal flags that only count right before the part noun ("the freezer door", not "a freezer with its door").
+_ADJACENT_ORDERS = frozenset({"middle", "size"})
 
 # (regex, (kind, value), flag) - flag "strong" for explicit damping phrases.
 _DYN_TABLE = _compile(
@@ -266,6 +290,9 @@ def _size_factors() -> dict[str, float]:
     return {k: v.factor for k, v in load_priors().size_classes.items()}
 
 
+_COMPARED = re.compile(r"(?:small|large|big)(?:ger|er|r|est|st)")
+
+
 def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit], list[_Hit]]:
     """Size class, factor, phrase, the size words used, and those pointing the other way from the first one."""
     used: list[_Hit] = []
@@ -273,6 +300,8 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> t
     for h in _scan(low, _SIZE_TABLE):
         if _negated(low, h.start):
             continue
+        if _COMPARED.fullmatch(h.text) and rv.PART_RX.match(low, h.end + 1):
+            continue  # "the smaller door": which door (an ordinal by size), not the object's size
         if h.flag == "weak":
             k = bisect_left(mention_starts, h.end)  # the first mention after the word
             if k == len(mentions) or tokens.count(h.end, mentions[k].start) > 2:
@@ -291,7 +320,8 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> t
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 _BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)")
-_END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
+_END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
+                       r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
 
 
 def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
@@ -355,7 +385,8 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
         n_before = bisect_right(ord_ends, m.start())  # ordinals ending before the noun
         if n_before:
             o = ords[n_before - 1]
-            if tokens.count(o.end, m.start()) <= 2 and not tokens.marks_between(o.end, m.start()):
+            gap = tokens.count(o.end, m.start())
+            if (gap == 0 or gap <= 2 and o.flag not in _ADJACENT_ORDERS) and not tokens.marks_between(o.end, m.start()):
                 if o.flag == "quant":
                     quant = True
                     pstart = o.start

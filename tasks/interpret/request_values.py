@@ -23,7 +23,7 @@ PART_WORDS = (
     r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
     r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
     r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?|"
-    r"containers?|carafes?|jugs?|temples?|lens(?:es)?"
+    r"containers?|carafes?|jugs?|temples?|lens(?:es)?|dials?|bails?|plungers?|triggers?"
 )
 PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
 #: Words for the object's fixed body (material per part: "on a plastic body").
@@ -363,7 +363,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
 
 _COUNT_WORDS = {"one": 1, "single": 1, "two": 2, "double": 2, "twin": 2, "three": 3, "triple": 3, "four": 4, "five": 5, "six": 6}
 _COUNT_RX = re.compile(
-    _L + r"(?P<n>one|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
+    _L + r"(?P<n>one(?=-)|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
     r"shel(?:f|ves)|compartments?|burners?|buttons?|knobs?|handles?|wheels?)" + _R
 )
 

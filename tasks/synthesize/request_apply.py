@@ -17,6 +17,7 @@ from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequ
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
+from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
@@ -74,6 +75,16 @@ def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.
     return {n: box_center(ctx, n) for n in ctx.subtrees}
 
 
+def _box_volumes(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, float]:
+    """joint -> volume (m^3, scale 1) of its moving subtree's axis-aligned box at ``state`` (input units)."""
+    ctx.session.set_joint_positions(state)
+    out = {}
+    for n, links in ctx.subtrees.items():
+        box = links_aabb(ctx.session, links, ctx.hull_points)
+        out[n] = 0.0 if box is None else float(np.prod(np.maximum(box[1] - box[0], 0.0)))
+    return out
+
+
 def band_of(f: float) -> str:
     """The band of opening fraction ``f``: of those whose interval holds it (else all), the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
@@ -91,11 +102,12 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
     centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
+    sizes = _box_volumes(ctx, closed_state) if any(jr.order == "size" for jr in ctx.request.joint_states) else {}
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
         before = len(res.warnings)
-        joints = state_targets(ctx, jr, relevant, centers, res.warnings)
+        joints = state_targets(ctx, jr, relevant, centers, res.warnings, sizes, res.notes)
         named.append((jr, joints))
         if not joints:
             why = res.warnings[-1].removeprefix("WARNING: ") if len(res.warnings) > before else (
