@@ -260,7 +260,7 @@ def _interpret(ctx: EstimationContext, log: _StageLog) -> str:
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
-    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
+    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.short() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
     return pose_note
 

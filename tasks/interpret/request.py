@@ -527,6 +527,15 @@ def parse_request(text: str) -> RequestSpec:
     numeric, sizes, size_warn, verbs = rv.state_quantities(low, mention_starts)
     joint_states, band_hits, contradictions, overridden = _joint_states(low, tokens, numeric)
     warnings += size_warn + contradictions
+    vols = rv.volumes(low)
+    if vols and sizes:  # a length is the closer measure of a size: the volume is named as not used
+        warnings += [f"'{v.text}' is a volume; the size in numbers ({', '.join(f.text for f in sizes)}) sets the size: '{v.text}' not used"
+                     for v in vols]
+    elif len(vols) > 1:
+        warnings += [f"'{v.text}' is a second volume; the first ('{vols[0].text}') sets the size: not used" for v in vols[1:]]
+        sizes = vols[:1]
+    else:
+        sizes = sizes + vols
     if sizes and size_class is not None:
         warnings.append(f"size words ({size_phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
     mass_found = rv.masses(low, head_starts)
@@ -537,7 +546,7 @@ def parse_request(text: str) -> RequestSpec:
     properties = _merge_properties([f.value for f in mass_found + material_found], warnings)  # type: ignore[misc]
     mass_level = _mass_level(level_found, properties, warnings)
     counts = rv.part_counts(low)
-    found: list = size_hits + size_against + band_hits + sizes + verbs + mass_found + material_found + level_found + dyn_found + counts
+    found: list = size_hits + size_against + band_hits + sizes + vols + verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
     damping, holds, spring, stiff, free = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings)
     pose = None

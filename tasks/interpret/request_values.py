@@ -52,6 +52,14 @@ _LENGTH_UNITS = [
     (r"in(?:ch(?:es)?)?|\"|''", 0.0254),
     (r"ft|foot|feet", 0.3048),
 ]
+#: A container's volume (NIST SP 811, Appendix B: litre 1e-3 m^3; US fluid ounce 2.957353e-5 m^3; US gallon 3.785412e-3 m^3).
+_VOLUME_UNITS = [
+    (r"ml|millilit(?:er|re)s?", 1e-6),
+    (r"cl|centilit(?:er|re)s?", 1e-5),
+    (r"l|ltrs?|lit(?:er|re)s?", 1e-3),
+    (r"fl\.? ?oz|fluid ounces?", 2.95735295625e-5),
+    (r"gal(?:lons?)?", 3.785411784e-3),
+]
 _MASS_UNITS = [
     (r"g|grams?|grammes?", 1e-3),
     (r"kg|kgs|kilos?|kilograms?|kilogrammes?", 1.0),
@@ -72,12 +80,13 @@ def _factor(units: list[tuple[str, float]], text: str) -> float:
 
 
 #: A unit right after a number ("drawer 10 cm" is a distance, not drawer number 10).
-UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + _unit_rx(_ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS) + r")(?![\w])")
+UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + _unit_rx(_ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS + _VOLUME_UNITS) + r")(?![\w])")
 
 _QTY = r"(?P<num>" + NUM + r")\s*-?\s*(?P<unit>{units})(?![\w])"
 _ANGLE_RX = re.compile(_L + _QTY.format(units=_unit_rx(_ANGLE_UNITS)))
 _LENGTH_RX = re.compile(_L + _QTY.format(units=_unit_rx(_LENGTH_UNITS)))
 _MASS_RX = re.compile(_L + _QTY.format(units=_unit_rx(_MASS_UNITS)))
+_VOLUME_RX = re.compile(_L + _QTY.format(units=_unit_rx(_VOLUME_UNITS)))
 _PERCENT_RX = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?:%|percent|per cent)(?![\w])")
 _THIRDS_RX = re.compile(
     _L + r"(?P<frac>(?:two|2)[- ]thirds?|(?:a|one|1)[- ]third|(?P<n>\d)\s*/\s*(?P<d>[1-9]))"
@@ -192,6 +201,19 @@ def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], 
             warnings.append(f"'{m.group(0)}' is a length but neither a size (tall/wide/deep/long) nor a state (open/out): not used")
     states.sort(key=lambda f: f.start)
     return leftmost_longest(states), sizes, warnings, verbs
+
+
+def volumes(low: str) -> list[Found]:
+    """A container's volume in numbers ("a 500 ml bottle", "2 litres", "16 fl oz") as a ``SizeTarget`` of
+    dimension ``volume`` (m^3)."""
+    out = []
+    for m in _VOLUME_RX.finditer(low):
+        if m.group("unit") == "l" and not m.group("num")[0].isdigit():
+            continue  # "a l": not a number
+        v = number_value(m.group("num")) * _factor(_VOLUME_UNITS, m.group("unit"))
+        if v > 0:
+            out.append(Found(m.start(), m.end(), m.group(0), SizeTarget(dimension="volume", value=v, phrase=m.group(0))))
+    return out
 
 
 def leftmost_longest(found: list) -> list:

@@ -206,9 +206,12 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
     if not sizes:
         return None
     along = _extents(ctx)
-    extents = [max(float(along[sz.dimension]), 1e-9) for sz in sizes]
-    ratios = [sz.value / e for sz, e in zip(sizes, extents)]
-    parts = [f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {sz.value / e:.4g}" for sz, e in zip(sizes, extents)]
+    extents = [max(float(along[sz.dimension]), 1e-12) for sz in sizes]
+    ratios = [(sz.value / e) ** (1.0 / 3.0) if sz.dimension == "volume" else sz.value / e for sz, e in zip(sizes, extents)]
+    parts = [(f"'{sz.phrase}': a container's volume, taken as the closed object's outer volume (convex hull; its walls make "
+              f"the inside a little smaller) {e:.4g} at scale 1 -> ({sz.value:.4g} / {e:.4g})^(1/3) = {r:.4g}")
+             if sz.dimension == "volume" else f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {r:.4g}"
+             for sz, e, r in zip(sizes, extents, ratios)]
     s = float(np.exp(np.mean(np.log(ratios))))
     note = "size in numbers: " + "; ".join(parts) + f" -> s = {s:.4g}"
     if len(ratios) > 1 and max(ratios) / min(ratios) > 1 + NUMBER_TOLERANCE:
@@ -218,18 +221,20 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
 
 
 def size_residuals(ctx: "EstimationContext", scale: float) -> list[tuple[str, float, float]]:
-    """(phrase, asked m, obtained m) of every size in numbers at ``scale``."""
+    """(phrase, asked, obtained) of every size in numbers at ``scale``: m, or m^3 for a volume."""
     along = _extents(ctx)
-    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale) for sz in ctx.request.sizes]
+    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale ** (3 if sz.dimension == "volume" else 1)) for sz in ctx.request.sizes]
 
 
 def _extents(ctx: "EstimationContext") -> dict:
-    """The closed extent (m, scale 1) per size dimension: height z, width / depth the larger / smaller horizontal."""
+    """The closed extent (m, scale 1) per size dimension: height z, width / depth the larger / smaller horizontal;
+    ``volume`` the closed object's convex-hull volume (m^3, ``ctx.closed_volume``)."""
     ext = np.asarray(ctx.closed_extents, float)
     if ctx.root_rotation is not None:
         ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
     horiz = sorted([ext[0], ext[1]], reverse=True)
-    return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
+    return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max()),
+            "volume": float(ctx.closed_volume or 0.0)}
 
 
 def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
@@ -354,9 +359,10 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     total = overlay.total_mass()
     if total_req is not None and abs(total - total_req) > NUMBER_TOLERANCE * total_req:
         out.append(f"total mass {total:.4g} kg but the request asks {total_req:.4g} kg")
-    for phrase, asked, got in size_residuals(ctx, overlay.scale):
+    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, overlay.scale)):
+        unit = "m^3" if sz.dimension == "volume" else "m"
         if abs(got - asked) > NUMBER_TOLERANCE * asked:
-            out.append(f"'{phrase}': {got:.4g} m at scale {overlay.scale:.4g}, asked {asked:.4g} m")
+            out.append(f"'{phrase}': {got:.4g} {unit} at scale {overlay.scale:.4g}, asked {asked:.4g} {unit}")
     for name, lp in overlay.links.items():
         mat = requested_material(ctx, name) if name in ctx.geometry else None  # links with geometry only
         if mat is not None and (lp.density is None or abs(lp.density - mat.density) > 1e-6 * mat.density):
@@ -431,9 +437,10 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
                 why += "; the state search moved it inside its interval to remove self-penetration"
         q.append(QuantityOutcome(what=f"{n} {t.kind}", phrase=t.phrase, asked=asked, achieved=got, unit=unit, within_tolerance=ok, why=why,
                                  kind="state"))
-    for phrase, asked, got in size_residuals(ctx, scale):
+    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, scale)):
         ok = abs(got - asked) <= NUMBER_TOLERANCE * asked
-        q.append(QuantityOutcome(what="size", phrase=phrase, asked=asked, achieved=got, unit="m", within_tolerance=ok,
+        q.append(QuantityOutcome(what="volume" if sz.dimension == "volume" else "size", phrase=phrase, asked=asked, achieved=got,
+                                 unit="m^3" if sz.dimension == "volume" else "m", within_tolerance=ok,
                                  why="" if ok else "one uniform scale cannot meet every size asked", kind="size"))
     total_req = next((p for p in ctx.request.properties if p.mass is not None and p.label is None), None)
     if total_req is not None:
