@@ -107,7 +107,8 @@ _SIZE_TABLE = _compile(
 _STATE_TABLE = _compile(
     [
         # negations first (longest match wins at a position)
-        (r"not (?:at all |even slightly |yet )?" + _OPEN, "closed", ""),
+        (r"(?:not (?:at all |even slightly |yet )?|no longer |never )" + _OPEN + r"(?: at all)?", "closed", ""),
+        (r"no longer (?:closed|shut)", "mostly", ""),
         (r"(?:is|are|was)n'?t " + _OPEN, "closed", ""),
         (r"not (?:quite|fully|completely|entirely) (?:closed|shut)", "slightly_open", ""),
         (r"not (?:closed|shut)", "halfway", ""),
@@ -363,6 +364,7 @@ class _Part:
     phrase_start: int
 
 
+_FRACTION_AHEAD = re.compile(r"\s*/\s*\d")
 _ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
 
 
@@ -395,8 +397,8 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
                     ordinals = [(int(ords[i].value), ords[i].flag or "vertical") for i in range(first, n_before)]  # type: ignore[arg-type]
                     pstart = ords[first].start
         num = _NUM_AFTER.match(low, m.end())
-        if num is not None and rv.UNIT_AHEAD.match(low, num.end()):
-            num = None  # "drawer 10 cm": a distance
+        if num is not None and (rv.UNIT_AHEAD.match(low, num.end()) or _FRACTION_AHEAD.match(low, num.end())):
+            num = None  # "drawer 10 cm": a distance; "door 3/4 open": a fraction
         if not ordinals and num is not None and not quant:
             ordinals = [(int(n) - 1, "vertical") for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
         out.append(_Part(m.start(), m.end(), label, ordinals, quant, pstart))

@@ -397,8 +397,9 @@ def part_counts(low: str) -> list[Found]:
             for m in _COUNT_RX.finditer(low)]
 
 
-#: Words naming the kind of joint or motion ("sliding joints"): understood, no effect.
+#: Words naming the kind of joint or motion ("sliding joints") or a part left as it is ("the knobs left alone"): understood, no effect.
 DESCRIPTOR_RX = re.compile(
     _L + r"(?:(?:rotational|rotating|rotary|revolute|hinged|hinge[- ]like|pivoting|swinging|sliding|prismatic|linear|telescopic)"
-    r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling)" + _R
+    r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling|"
+    r"left (?:alone|untouched|as (?:it is|they are))|untouched|as (?:it is|they are))" + _R
 )
