@@ -116,7 +116,8 @@ def _ordered_pick(js, names: list[str], joints: dict[str, JointInfo], centres: d
                   volumes: dict[str, float]) -> list[str]:
     """``names`` sorted as ``js.order`` counts and narrowed to ``js.ordinal`` (refine's ``named_parts._pick``):
     ``middle`` the middle one of an odd count (>= 3) along the direction the parts spread most, ``size`` by the
-    child link's box volume (smallest first; the smaller of one part, or of parts within 5 % of one size, is none)."""
+    child link's box volume (smallest first; the smaller of one part, or the smaller / larger of parts within 5 % of one
+    size, is none)."""
     zero = np.zeros(3)
     order = js.order
     if order == "middle":
@@ -131,10 +132,13 @@ def _ordered_pick(js, names: list[str], joints: dict[str, JointInfo], centres: d
         return names
     if js.order == "middle":
         return [names[len(names) // 2]] if len(names) >= 3 and len(names) % 2 else []
-    if order == "size" and js.ordinal >= 0:
+    if order == "size" and js.ordinal in (0, -1) and len(names) >= 2:
         v = [volumes.get(joints[n].child, 0.0) for n in names]
-        if len(names) < 2 or v[min(js.ordinal, len(v) - 1)] >= 0.95 * max(v):
+        pick, nxt = (v[0], v[1]) if js.ordinal == 0 else (v[-1], v[-2])
+        if min(pick, nxt) >= 0.95 * max(pick, nxt):  # parts of one size: none is smaller (larger)
             return []
+    if order == "size" and js.ordinal == 0 and len(names) < 2:
+        return []
     return [names[js.ordinal]] if -len(names) <= js.ordinal < len(names) else []  # negative: from the end ("the bottom drawer")
 
 
@@ -159,6 +163,8 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     for js in sorted(spec.joint_states, key=lambda js: js.names_part):
         if js.selector == "all":  # a continuous joint (a knob, a wheel) has no open or closed: not "it" (as refine applies it)
             names = [n for n in task_joints if n in movable and joints[n].type != "continuous"]
+            if js.ordinal is not None:  # "the second slightly open", "the freezer open": one of them
+                names = _ordered_pick(js, names, joints, centres, volumes or {})
         elif js.selector == "joint":  # an override names the joint itself
             names = [js.joint] if js.joint in movable else []
         else:

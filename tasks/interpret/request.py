@@ -205,6 +205,7 @@ _ORDINALS = _compile(
 )
 #: Ordinal flags that only count right before the part noun ("the freezer door", not "a freezer with its door").
 _ADJACENT_ORDERS = frozenset({"middle", "size"})
+_THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 # (regex, (kind, value), flag) - flag "strong" for explicit damping phrases.
 _DYN_TABLE = _compile(
@@ -362,9 +363,12 @@ class _Part:
     """(ordinal, order) pairs; order "vertical" or a spatial order."""
     quant: bool
     phrase_start: int
+    none: bool = False
+    """"none of the drawers open": the state is negated (open -> closed, closed -> open)."""
 
 
 _FRACTION_AHEAD = re.compile(r"\s*/\s*\d")
+_NONE_OF = re.compile(r"(?<![\w-])(?:none|neither) of (?:the |its |their |these |those )?$")
 _ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
 
 
@@ -401,7 +405,8 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
             num = None  # "drawer 10 cm": a distance; "door 3/4 open": a fraction
         if not ordinals and num is not None and not quant:
             ordinals = [(int(n) - 1, "vertical") for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
-        out.append(_Part(m.start(), m.end(), label, ordinals, quant, pstart))
+        none = _NONE_OF.search(low, max(0, pstart - 24), pstart)
+        out.append(_Part(m.start(), m.end(), label, ordinals, quant, none.start() if none else pstart, none is not None))
     return out
 
 
@@ -429,7 +434,8 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
     state hits used, warnings (contradictions) and the phrases a later one for the same part replaced."""
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
-    ords = [o for o in _scan(low, _ORDINALS) if o.flag == ""]
+    # ordinals without a part noun ("the second slightly open"; "the freezer open": the smallest part)
+    ords = [o for o in _scan(low, _ORDINALS) if o.flag == "" or o.flag in _ADJACENT_ORDERS and _THE_BEFORE.search(low, max(0, o.start - 8), o.start)]
     band_starts = [b.start for b in bands]
     part_starts = [p.start for p in parts]
     part_ends = [p.end for p in parts]
@@ -441,8 +447,10 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
     last_label: str | None = None
     prev_subjects: list[_Part] = []
 
-    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: _Hit, phrase: str) -> JointStateRequest:
+    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: _Hit, phrase: str, none: bool = False) -> JointStateRequest:
         band, target = _band_and_target(b.value)
+        if none:  # "none of the drawers open": closed; "none of the doors closed": open
+            band, target = ("mostly" if band == "closed" else "closed"), None
         return JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
                                  band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
 
@@ -471,7 +479,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
                     end = max(p.end, b.end)
                     phrase = " ".join(low[start:end].split())
                     for ordinal, order in (p.ordinals if p.ordinals and not p.quant else [(None, "vertical")]):
-                        result.append(make("label", p.label, ordinal, order, b, phrase))
+                        result.append(make("label", p.label, ordinal, order, b, phrase, p.none))
                     last_label = p.label
                 prev_subjects = subjects
                 continue
@@ -485,7 +493,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
             if seg_ords:
                 o = seg_ords[-1]
                 phrase = " ".join(low[o.start: b.end].split())
-                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), "vertical", b, phrase))  # type: ignore[arg-type]
+                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), o.flag or "vertical", b, phrase))  # type: ignore[arg-type]
                 continue
             result.append(make("all", None, None, "vertical", b, b.text))
     # one request per target: a later phrase overrides an earlier one; a different state is warned
@@ -651,7 +659,7 @@ _FUNCTION_WORDS = frozenset(
     "want wants need needs would like please give make made get have has having be is are was were being "
     "with without and or but of for to in on at by from as into onto so such some any one which who whose "
     "can could should will shall may might must do does also just very really quite rather more most less "
-    "there here where when while than then every all each both everything pair".split()
+    "there here where when while than then every all each both everything pair none neither".split()
 )
 
 

@@ -103,11 +103,13 @@ def _pick(jr: JointStateRequest, targets: list[str], centers: dict[str, np.ndarr
         notes.append(f"'{jr.phrase}': middle {jr.label or 'part'} = {pick}, the middle one of {n} {what} "
                      f"({'top to bottom' if order == 'vertical' else 'left to right'})")
         return [pick]
-    if order == "size" and jr.ordinal is not None and jr.ordinal >= 0 and n >= 2:
+    if order == "size" and jr.ordinal in (0, -1) and n >= 2:
         v = [sizes.get(t, 0.0) for t in targets]
-        if v[jr.ordinal if jr.ordinal < n else -1] >= (1.0 - SAME_SIZE) * max(v):
-            warnings.append(f"WARNING: '{jr.phrase}' asks for the smaller {jr.label or 'part'} but the {n} {what} are the same size "
-                            f"(box volumes {', '.join(f'{x:.3g}' for x in v)} m^3): none is smaller; not applied")
+        pick, nxt = (v[0], v[1]) if jr.ordinal == 0 else (v[-1], v[-2])
+        if min(pick, nxt) >= (1.0 - SAME_SIZE) * max(pick, nxt):
+            word = "smaller" if jr.ordinal == 0 else "larger"
+            warnings.append(f"WARNING: '{jr.phrase}' asks for the {word} {jr.label or 'part'} but the {what} are of one size "
+                            f"(box volumes {', '.join(f'{x:.3g}' for x in v)} m^3): none is {word}; not applied")
             return []
     if order == "size" and jr.ordinal == 0 and n < 2:
         warnings.append(f"WARNING: '{jr.phrase}' asks for the smaller of several {what} but this object has {n}: not applied")

@@ -21,7 +21,7 @@ from asset2sim.tasks.synthesize import estimate, request_apply
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.interpret.request_assets import build_three_drawer_cabinet
-from tests.unseen_assets import build_bottle, build_toaster
+from tests.unseen_assets import build_bottle, build_double_door_cabinet, build_toaster
 
 
 @pytest.fixture(scope="module")
@@ -218,3 +218,35 @@ def test_the_summary_prints_the_amount_from_the_closed_end_beside_what_was_asked
     (line,) = [ln for ln in summary_lines(res) if ln.startswith("initial state")]
     (lid,) = [part for part in line.split(", joint_") if "(lid)" in part]
     assert "30.0 deg from closed (asked 30 deg)" in lid and "% open" in line
+
+
+@needs_shared
+def test_a_size_word_without_a_part_noun_picks_among_the_task_relevant_parts_in_refine_and_the_evaluation():
+    """"the freezer open": the smaller door in refine's resolution and in the evaluation's."""
+    res, labels, vols, *_ = resolve(SHARED / "11178", "A fridge with the freezer open.")
+    small = min(joint_of(labels, "door"), key=vols.get)
+    assert set(res.addressed) == {small} and res.bands[small] == "mostly"
+    joints = parse_urdf(SHARED / "11178" / "mobility.urdf")[1]
+    sem = {k: (v.joint_kind, v.label) for k, v in read_semantics(SHARED / "11178").items()}
+    link_vols = {joints[n].child: v for n, v in vols.items()}
+    req, _ = requested_joints(parse_request("A fridge with the freezer open."), joints, sem, {}, sorted(vols), "Refrigerator", link_vols)
+    assert [n for n, *_ in req] == [small]
+
+
+def test_none_of_the_parts_negates_the_state():
+    (js,) = parse_request("A cabinet with none of the drawers open.").joint_states
+    assert (js.label, js.band, js.target) == ("drawer", "closed", None)
+    (js,) = parse_request("A fridge with neither of its doors closed.").joint_states
+    assert (js.label, js.band) == ("door", "mostly")
+
+
+def test_smaller_or_main_of_parts_of_one_size_names_none(tmp_path):
+    """Two doors of one size (a generated double-door cabinet): "the smaller door" and "the main door" move nothing,
+    and say why; "the left door" still picks one."""
+    folder = build_double_door_cabinet(tmp_path / "cabinet")
+    for text, phrase in (("A cabinet with the smaller door open.", "smaller door open"), ("A cabinet with the main door open.", "main door open")):
+        res, *_ = resolve(folder, text)
+        assert not res.addressed and [p for p, _ in res.unapplied] == [phrase]
+        assert "one size" in res.unapplied[0][1]
+    res, *_ = resolve(folder, "A cabinet with the left door open.")
+    assert len(res.addressed) == 1
