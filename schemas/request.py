@@ -213,6 +213,9 @@ class RequestFindings(BaseModel):
     warnings: list[str] = Field(default_factory=list)
     asked: list[str] = Field(default_factory=list)
     quantities: list[QuantityOutcome] = Field(default_factory=list)
+    phrases: list[str] = Field(default_factory=list)
+    """Each state phrase of the request with the parts it set (joint and label), the amount set from the closed
+    end and the amount asked, or why it was not applied, in the request's order."""
 
 
 #: Units an override may carry -> factor to SI (kg, m, rad).

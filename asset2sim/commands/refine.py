@@ -144,10 +144,11 @@ def summary_lines(result) -> list[str]:
 
 
 def request_lines(found) -> list[str]:
-    """The request's lines of the summary: numbers asked vs achieved, warnings, words no rule used."""
+    """The request's lines of the summary: each state phrase with the parts it set (or why not), numbers asked vs
+    achieved, warnings, words no rule used."""
     if found is None:
         return []
-    out = [f"request      {a}" for a in found.asked]
+    out = [f"request      {p}" for p in found.phrases] + [f"request      {a}" for a in found.asked]
     for q in found.quantities:
         if q.asked is None or q.achieved is None:
             continue

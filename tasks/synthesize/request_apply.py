@@ -402,12 +402,45 @@ def summary(spec: RequestSpec) -> list[str]:
     return out + [f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})" for d in spec.dynamics_values]
 
 
+def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dict, state: dict[str, float]) -> list[str]:
+    """One line per state phrase of the request, in its order: the joints it set with their labels, the amount
+    each has from its closed end (``closed_out`` at the output's scale, ``state`` output units) and what was asked
+    ("'lid open 30 degrees': joint_2 (lid) 30.0 deg from closed, 25 % open (asked 30 deg from closed)"), or why it
+    was not applied."""
+    by_phrase: dict[str, list[str]] = {}
+    for n, jr in res.requests.items():
+        by_phrase.setdefault(jr.phrase, []).append(n)
+    why_not = dict(res.unapplied)
+    out = []
+    for jr in ctx.request.joint_states:
+        if jr.phrase in why_not:
+            out.append(f"'{jr.phrase}': not applied: {why_not.pop(jr.phrase)}")
+            continue
+        joints = by_phrase.pop(jr.phrase, None)
+        if not joints:
+            continue
+        asked = jr.short().split("=", 1)[1]
+        got = []
+        for n in joints:
+            label = ctx.asset.link(ctx.asset.joint(n).child).semantic_label
+            cs, q = closed_out.get(n), state.get(n)
+            if cs is None or q is None:
+                got.append(f"{n}" + (f" ({label})" if label else ""))
+                continue
+            d = abs(q - cs.q_closed)
+            amount = f"{1000.0 * d:.4g} mm" if ctx.asset.joint(n).type == "prismatic" else f"{np.degrees(d):.1f} deg"
+            got.append(f"{n}" + (f" ({label})" if label else "") + f" {amount} from closed, {100.0 * abs(cs.fraction(q)):.0f} % open")
+        out.append(f"'{jr.phrase}': " + "; ".join(got) + f" (asked {asked})")
+    return out
+
+
 def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
              scale: float, total_mass: float, notes: list[str], overlay: Overlay | None = None,
-             escalation: list | None = None) -> RequestFindings:
+             escalation: list | None = None, resolution: StateResolution | None = None) -> RequestFindings:
     """The report's account of the request: ignored words, warnings (the parser's and ``notes``' ``WARNING``
-    lines), what was asked, and every number against the output (``closed_out`` at the output's scale,
-    ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters)."""
+    lines), what was asked, every number against the output (``closed_out`` at the output's scale,
+    ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters) and, with the
+    ``resolution`` of the request, each state phrase with what it set (:func:`phrase_lines`)."""
     warnings = list(ctx.request.warnings) + [n for n in notes if n.startswith("WARNING")]
     if not ctx.request.understood:
         warnings.insert(0, "WARNING: no word of the request was understood; refined with the category's defaults")
@@ -449,7 +482,8 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
                                  within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
     if overlay is not None:
         q += _dynamics_outcomes(ctx, overlay, escalation or [])
-    return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q)
+    phrases = phrase_lines(ctx, resolution, closed_out, state) if resolution is not None else []
+    return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q, phrases=phrases)
 
 
 def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: list) -> list[QuantityOutcome]:

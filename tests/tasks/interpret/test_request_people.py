@@ -218,6 +218,10 @@ def test_the_summary_prints_the_amount_from_the_closed_end_beside_what_was_asked
     (line,) = [ln for ln in summary_lines(res) if ln.startswith("initial state")]
     (lid,) = [part for part in line.split(", joint_") if "(lid)" in part]
     assert "30.0 deg from closed (asked 30 deg)" in lid and "% open" in line
+    # each phrase with the part it set, the amount set and the amount asked
+    assert res.report.request.phrases == [line.removeprefix("request      ") for line in summary_lines(res) if line.startswith("request      '")]
+    (phrase,) = res.report.request.phrases
+    assert phrase.startswith("'lid open 30 degrees': joint_2 (lid) 30.0 deg from closed,") and phrase.endswith("(asked 30 deg from closed)")
 
 
 @needs_shared
