@@ -205,6 +205,8 @@ _ORDINALS = _compile(
 )
 #: Ordinal flags that only count right before the part noun ("the freezer door", not "a freezer with its door").
 _ADJACENT_ORDERS = frozenset({"middle", "size"})
+#: "one of its two doors": one of them, however many words name them.
+_ONE_OF = re.compile(r"one\s+of\s+(?:(?:the|its|their|his|her)\s+)?(?:(?:two|three|four|five|both|\d)\s+)?")
 _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 # (regex, (kind, value), flag) - flag "strong" for explicit damping phrases.
@@ -392,7 +394,8 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
         if n_before:
             o = ords[n_before - 1]
             gap = tokens.count(o.end, m.start())
-            if (gap == 0 or gap <= 2 and o.flag not in _ADJACENT_ORDERS) and not tokens.marks_between(o.end, m.start()):
+            if (gap == 0 or gap <= 2 and o.flag not in _ADJACENT_ORDERS or _ONE_OF.fullmatch(low, o.start, m.start())) \
+                    and not tokens.marks_between(o.end, m.start()):
                 if o.flag == "quant":
                     quant = True
                     pstart = o.start
