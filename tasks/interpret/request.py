@@ -128,6 +128,7 @@ _STATE_TABLE = _compile(
         (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
         (r"(?:turned|switched) (?:fully )?on(?: (?:full|fully|completely|all the way))?|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
         (r"(?:" + _OPEN + r"|laid open|lying open|unfolded|folded out|swung open) flat|flat open|(?:" + _OPEN + r"|folded|swung) (?:out )?flat", "fully", ""),
+        (r"(?:folded|bent|pushed|tilted|laid|swung) (?:all the way )?back(?: flat| all the way)?", "fully", ""),
         # named states: which end they are does not depend on the geometry
         (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
         (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
@@ -159,7 +160,7 @@ _STATE_TABLE = _compile(
         (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
         (_OPEN + r" (?:slightly|a (?:little |tiny )?bit|a little|a crack|a tad|just a (?:little|bit))", "slightly_open", ""),
         (_MOVED + r" (?:slightly|a (?:little |tiny )?bit|a little|a tad|just a (?:little|bit))", "slightly_open", ""),
-        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?", "slightly_open", ""),
+        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?(?: (?:a (?:little|bit|crack)|slightly))?", "slightly_open", ""),
         (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
         # "open" after a verb that leaves it open ("the lid propped open"): as a lone "open", never the verb "to open"
         (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", ""),
@@ -330,7 +331,9 @@ _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|
 
 def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
     """State phrases left to right, not overlapping: the state table's words and the ``numeric`` states."""
-    hits = _scan(low, _STATE_TABLE) + [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
+    nums = [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
+    # a number wins over the words it overlaps ("propped open about a third of the way": a third)
+    hits = [h for h in _scan(low, _STATE_TABLE) if not any(h.start < n.end and n.start < h.end for n in nums)] + nums
     return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
 
 

@@ -94,8 +94,8 @@ _THIRDS_RX = re.compile(
 )
 
 _STATE_BEFORE = re.compile(
-    r"(?<![\w-])(?:(?:open(?:ed)?|rotated|tilted|swung(?: open)?|turned|raised|lifted|pulled(?: out)?|pushed(?: in)?|slid(?: out| open)?|"
-    r"extended|lowered|set|positioned|sits?|stands?)\s+)?(?:(?:up )?to |by |at |of )?(?:about |around |roughly |approximately |exactly |an? angle of )?$"
+    r"(?<![\w-])(?:(?:(?:propped|popped|held|left|kept|flipped|swung|thrown|pulled|pushed|tilted)\s+)?(?:open(?:ed)?|rotated|tilted|swung(?: open)?|turned|raised|lifted|pulled(?: out)?|pushed(?: in)?|slid(?: out| open)?|"
+    r"extended|lowered|set|positioned|sits?|stands?|out)\s+)?(?:(?:up )?to |by |at |of )?(?:about |around |roughly |approximately |exactly |an? angle of )?$"
 )
 _STATE_AFTER = re.compile(
     r"^(?:\s+(?:open(?:ed)?|ajar|out|outwards?|apart|up|from (?:the )?(?:closed|shut)(?: position)?|(?:of |of the )?(?:opening|travel)))+"
