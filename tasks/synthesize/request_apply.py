@@ -412,7 +412,8 @@ def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dic
         by_phrase.setdefault(jr.phrase, []).append(n)
     why_not = dict(res.unapplied)
     out = []
-    for jr in ctx.request.joint_states:
+    low = " ".join(ctx.request.text.lower().split())
+    for jr in sorted(ctx.request.joint_states, key=lambda jr: (low.find(jr.phrase) % (len(low) + 1))):  # in the request's order
         if jr.phrase in why_not:
             out.append(f"'{jr.phrase}': not applied: {why_not.pop(jr.phrase)}")
             continue
