@@ -15,7 +15,9 @@ the parse time per request; the rate per phenomenon (synonym, ordinal,
 quantifier, compound, negation, hedge, fraction, unit, volume, missing part;
 the rest "general"), an entry counting when its parse matches and, for the
 hand-written entries, the request resolved on its object sets the expected
-joints (no refine); ``--outcomes N`` also refines the first N corpus
+joints (no refine); and 600 requests generated from structured intents
+(``tests/tasks/interpret/request_generated.py``), the share whose parse gives
+the intent back, per phenomenon; ``--outcomes N`` also refines the first N corpus
 entries that have an expected outcome (``all``: every one; dev objects
 included, minutes) and prints how many land (numbers within 5 %, bands in
 their interval, sizes, masses, materials, damping levels, warnings).
@@ -81,6 +83,19 @@ def corpus(outcomes: str | None) -> None:
             m = apply_misses(e, Path(tmp))
             if m:
                 print(f"  APPLY MISS {e['id']} {e['object']} {','.join(phenomena_of(e))} {e['text']!r}: {'; '.join(m)}")
+    from collections import Counter
+
+    from tests.tasks.interpret.request_generated import generate, mismatch
+
+    intents = generate(600)
+    misses = [(i, m) for i in intents if (m := mismatch(i, request.parse_request(i.text)))]
+    total = Counter(p for i in intents for p in i.phenomena)
+    missed = Counter(p for i, _ in misses for p in i.phenomena)
+    print(f"generated from structured intents: {len(intents) - len(misses)}/{len(intents)} parse back to their intent; per phenomenon:")
+    for ph, n in sorted(total.items()):
+        print(f"  {ph:<13} {n - missed[ph]:>4}/{n:<4} {(n - missed[ph]) / n:6.1%}")
+    for i, m in misses:
+        print(f"  GENERATED MISS {i.text!r}: {m}")
     if not outcomes:
         return
     todo = [e for e in entries if "outcome" in e]

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, phrase_regex, request_category, variant_mention
 from asset2sim.tasks.interpret.mounting import mounting_mentions
-from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret import request_values as rv
 
@@ -389,7 +388,7 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
         chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
     for m in rv.PART_RX.finditer(low):
-        label = canonical_label(m.group(0)) or m.group(0)
+        label = rv.part_label(m.group(0))
         ordinals: list[tuple[int, str]] = []
         quant = False
         pstart = m.start()
@@ -452,6 +451,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
     used: list[_Hit] = []
     last_label: str | None = None
     prev_subjects: list[_Part] = []
+    claimed: set[int] = set()
 
     def make(selector: str, label: str | None, ordinal: int | None, order: str, b: _Hit, phrase: str, none: bool = False) -> JointStateRequest:
         band, target = _band_and_target(b.value)
@@ -466,7 +466,10 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
             seg0 = sb[i - 1].end if i > 0 else s0
             seg1 = sb[i + 1].start if i + 1 < len(sb) else s1
             fwd = _forward_part(low, b.end, seg1, part_at)
-            back = parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)]
+            # parts before the state, but not one an earlier state went forward to ("a fully open door and the cap ajar")
+            back = [p for p in parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)] if p.start not in claimed]
+            if fwd is not None:
+                claimed.add(fwd.start)
             subjects: list[_Part] = []
             if fwd is not None:
                 subjects = [fwd]

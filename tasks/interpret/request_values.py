@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass
 
 from asset2sim.schemas.request import BAND_TARGET, DynamicsValue, PartProperty, SizeTarget, StateTarget
+from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
 
 _L = r"(?<![\w.-])"
@@ -36,6 +37,21 @@ _WORD_NUMBERS = {
     "a hundred": 100, "hundred": 100, "half a": 0.5, "a half": 0.5,
 }
 NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_NUMBERS), key=len, reverse=True)) + r")"
+
+
+def part_label(word: str) -> str:
+    """The label a request's part word names, singular: its canonical label (``part_labels.canonical_label``:
+    "covers" -> lid, "hatches" -> door), else the word made singular ("arms" -> arm)."""
+    labels = load_priors().labels
+    known = set(labels.labels)
+    cands = [word] + ([word[:-2]] if word.endswith("es") else []) + ([word[:-1]] if word.endswith("s") and not word.endswith("ss") else [])
+    for c in cands:
+        hit = canonical_label(c)
+        if hit in known:
+            return hit
+    if word.endswith(("ches", "shes", "xes", "sses")):
+        return word[:-2]
+    return word[:-1] if word.endswith("s") and not word.endswith(("ss", "us", "is")) and len(word) > 3 else (canonical_label(word) or word)
 
 
 def number_value(text: str) -> float:
@@ -241,7 +257,7 @@ def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[in
         w = m.group(0)
         start = w0 + cut + m.start()
         if PART_RX.fullmatch(w):
-            return None if mention_starts and start in mention_starts else (canonical_label(w) or w)
+            return None if mention_starts and start in mention_starts else part_label(w)
         if BODY_RX.fullmatch(w):
             return "body"
     return None
@@ -251,7 +267,7 @@ def _part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int
     """(label, end) of the part or body noun within ``max_words`` words after ``end``; None for a category mention."""
     for s, e, w in _next_words(low, end, max_words):
         if PART_RX.fullmatch(w):
-            return (None if mention_starts and s in mention_starts else (canonical_label(w) or w)), e
+            return (None if mention_starts and s in mention_starts else part_label(w)), e
         if BODY_RX.fullmatch(w):
             return "body", e
         if w in {",", ";", ":", ".", "!", "?", "and", "with", "on", "in", "of"}:
