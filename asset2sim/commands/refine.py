@@ -100,12 +100,12 @@ def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict
     asked = next((x for x in (report.request.quantities if report.request else []) if x.kind == "state" and x.asked is not None
                   and x.what.rsplit(" ", 1)[0] == name), None)
     ask = ""
-    if asked is not None and asked.unit in ("rad", "m", "opening fraction"):
+    if asked is not None and asked.what.endswith(" end"):
+        ask = f" (asked '{asked.phrase}')"
+    elif asked is not None and asked.unit in ("rad", "m", "opening fraction"):
         v = asked.asked
         ask = (f" (asked {math.degrees(v):.4g} deg)" if asked.unit == "rad" else f" (asked {1000.0 * v:.4g} mm)" if asked.unit == "m"
                else f" (asked {100.0 * v:.4g} % open)")
-    elif asked is not None and asked.what.endswith(" end"):
-        ask = f" (asked '{asked.phrase}')"
     who = f"{name} ({labels[name]})" if labels.get(name) else name
     return (f"{who} = {from_closed_text(q, report.closed_positions.get(name), types.get(name, 'revolute'))}{ask}"
             + (f", {opening_text(report.opening_fractions[name])}" if name in report.opening_fractions else ""))

@@ -254,3 +254,14 @@ def test_smaller_or_main_of_parts_of_one_size_names_none(tmp_path):
         assert "one size" in res.unapplied[0][1]
     res, *_ = resolve(folder, "A cabinet with the left door open.")
     assert len(res.addressed) == 1
+
+
+def test_a_toasters_lever_refined_down_is_said_with_its_label_and_phrase(generated, tmp_path):
+    """End to end on the generated toaster (its lever labelled ``slider``): "lever pushed down" sets the slider's
+    lowest end, and the summary names the part and the phrase."""
+    res = refine_asset(generated["toaster"], "A toaster with its lever pushed down.", tmp_path / "out", extras=False)
+    lines = summary_lines(res)
+    (state,) = [ln for ln in lines if ln.startswith("initial state")]
+    assert "joint_0 (slider) = " in state and "(asked 'lever pushed down'), 100 % open" in state
+    assert res.report.request.phrases[0].startswith("'lever pushed down': joint_0 (slider)")
+    assert res.report.metric("request_met").passed
