@@ -3,8 +3,8 @@ geometry. Numbers count from the geometric closed end (a revolute joint's
 distance is the gap at the farthest point from the axis, angle = d / r). "up" /
 "down" are the highest / lowest box center in world z over the travel (the travel end when
 it is within :data:`END_SNAP` of the part's rise of it); "on" /
-"off" of a toggle switch its high / low end (NFPA 70 NEC 404.7), of other parts
-fully open / closed. A part whose height changes less than :data:`FLAT_TRAVEL`
+"off" of a toggle switch its high / low end (NFPA 70 NEC 404.7), of a lid or cap closed / fully open
+(put on, taken off), of other parts fully open / closed. A part whose height changes less than :data:`FLAT_TRAVEL`
 of the object's size has no up or down.
 """
 
@@ -25,6 +25,8 @@ if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
 FLAT_TRAVEL = 0.02
 #: Labels whose "on"/"off" are their high/low ends (toggle switches).
 TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
+#: Labels whose "on" is in place (closed) and "off" taken off (fully open): "the cap off", "the lid on".
+COVER_LABELS = frozenset({"lid", "cap"})
 #: Samples of the travel searched for the highest / lowest end.
 END_SAMPLES = 41
 #: A travel end within this share of the part's rise (max - min height over its travel) of the highest (lowest)
@@ -95,6 +97,8 @@ def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scal
         if end in ("on", "off"):
             if canon in TOGGLE_LABELS:
                 end = "high" if end == "on" else "low"
+            elif canon in COVER_LABELS:
+                return (0.0 if end == "on" else 1.0), f"'{target.end}' of a {canon}: {'in place, closed' if end == 'on' else 'taken off, fully open'}"
             else:
                 return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
         return _end_fraction(ctx, joint, str(end), closed_state)

@@ -267,3 +267,12 @@ def test_a_toasters_lever_refined_down_is_said_with_its_label_and_phrase(generat
     assert "joint_0 (slider) = " in state and "(asked 'lever pushed down'), 100 % open" in state
     assert res.report.request.phrases[0].startswith("'lever pushed down': joint_0 (slider)")
     assert res.report.metric("request_met").passed
+
+
+def test_a_cap_off_is_taken_off_and_on_is_in_place(generated):
+    """"the cap off" on a bottle (its cap labelled ``lid``): fully open, not the valve convention's closed."""
+    res, labels, *_ = resolve(generated["bottle"], "A bottle with its cap off.")
+    (cap,) = joint_of(labels, "lid")
+    assert res.targets[cap].kind == "end" and res.targets[cap].fraction == 1.0
+    res, *_ = resolve(generated["bottle"], "A bottle with the cap on.")
+    assert res.targets[cap].fraction == 0.0
