@@ -330,9 +330,15 @@ _END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|
 
 def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
     """State phrases left to right, not overlapping: the state table's words and the ``numeric`` states."""
-    nums = [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
+    nums = [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]  # left to right, not overlapping
+    num_ends = [n.end for n in nums]
+
+    def under_number(h: _Hit) -> bool:  # the first number ending after h starts overlaps it when it starts before h ends
+        k = bisect_right(num_ends, h.start)
+        return k < len(nums) and nums[k].start < h.end
+
     # a number wins over the words it overlaps ("propped open about a third of the way": a third)
-    hits = [h for h in _scan(low, _STATE_TABLE) if not any(h.start < n.end and n.start < h.end for n in nums)] + nums
+    hits = [h for h in _scan(low, _STATE_TABLE) if not under_number(h)] + nums
     return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
 
 
