@@ -1,4 +1,4 @@
-"""The five demo objects (:data:`DEMO_OBJECTS`) built from boxes
+"""The six demo objects (:data:`DEMO_OBJECTS`) built from boxes
 (:mod:`asset2sim.demo_geometry`), each with its category, manifest prompt and
 closed joint positions. Moving parts keep at least 0.005 units from their
 parent in the closed state.
@@ -207,6 +207,32 @@ def _trash_can() -> DemoArticulation:
     ])
 
 
+def _door_in_frame() -> DemoArticulation:
+    # Frame: two posts x [-0.3, -0.26] and [0.26, 0.3], a header y [0.66, 0.7], all z [-0.035, 0.035]; no threshold
+    # (the door stands on the floor at y = -0.7, its panel 0.005 above it).
+    frame = [
+        Part("door_frame-1", [box_xyz(-0.3, -0.26, -0.7, 0.7, -0.035, 0.035)], _WOOD),
+        Part("door_frame-2", [box_xyz(0.26, 0.3, -0.7, 0.7, -0.035, 0.035)], _WOOD),
+        Part("door_frame-3", [box_xyz(-0.26, 0.26, 0.66, 0.7, -0.035, 0.035)], _WOOD),
+    ]
+    # Door (closed at 0): stiles and rails around a thinner centre panel, 0.005 inside the frame on every side, its
+    # front flush with the frame's; a lever handle near the free edge. The hinge line is the panel's front edge on
+    # the left post, so the door swings out (+z) past 90 deg clear of the post.
+    hinge = (-0.255, 0.0, 0.035)
+    door = [
+        Part("door-4", [box_xyz(-0.255, -0.205, -0.695, 0.655, 0.005, 0.035)], _WHITE),
+        Part("door-5", [box_xyz(0.205, 0.255, -0.695, 0.655, 0.005, 0.035)], _WHITE),
+        Part("door-6", [box_xyz(-0.205, 0.205, 0.605, 0.655, 0.005, 0.035)], _WHITE),
+        Part("door-7", [box_xyz(-0.205, 0.205, -0.695, -0.6, 0.005, 0.035)], _WHITE),
+        Part("panel-8", [box_xyz(-0.205, 0.205, -0.6, 0.605, 0.012, 0.028)], _WHITE),
+        Part("handle-9", [box_xyz(0.17, 0.19, -0.05, -0.02, 0.035, 0.06), box_xyz(0.1, 0.19, -0.05, -0.03, 0.06, 0.075)], _METAL),
+    ]
+    return _demo("door", "Door", [DemoLink("link_0", "hinge", "rotation_door", door), DemoLink("link_1", "static", "door_frame", frame)], [
+        DemoJoint("joint_0", "revolute", "link_1", "link_0", origin=hinge, axis=(0.0, -1.0, 0.0), lower=0.0, upper=1.75),
+        _base_joint("joint_1", "link_1"),
+    ])
+
+
 #: The manipulation task of each demo category (the manifest's ``task`` column),
 #: worded as the dev manifest words it.
 CATEGORY_TASKS: dict[str, str] = {
@@ -215,6 +241,7 @@ CATEGORY_TASKS: dict[str, str] = {
     "Laptop": "close the laptop",
     "Microwave": "close the microwave door",
     "TrashCan": "open the trashcan lid",
+    "Door": "open the door",
 }
 
 
@@ -247,4 +274,5 @@ DEMO_OBJECTS: tuple[DemoObject, ...] = (
                {"joint_0": 0.0}),
     DemoObject("trash_can", "TrashCan", "A very small trash can with its lid closed. The lid hinge holds its position.", _trash_can,
                {"joint_0": 0.0}),
+    DemoObject("door", "Door", "A 12 kg interior door in its frame, slightly open.", _door_in_frame, {"joint_0": 0.0}),
 )

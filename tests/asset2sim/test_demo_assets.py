@@ -28,6 +28,7 @@ EXPECTED_JOINTS = {
     "laptop": {"joint_1": ("revolute", (-1, 0, 0), -LAPTOP_MODEL_OPENING, 0.35)},
     "microwave": {"joint_0": ("revolute", (0, -1, 0), 0.0, 1.75)},
     "trash_can": {"joint_0": ("revolute", (1, 0, 0), -1.9, 0.0)},
+    "door": {"joint_0": ("revolute", (0, -1, 0), 0.0, 1.75)},
 }
 EXPECTED_CATEGORY = {
     "box_lid": "Box",
@@ -35,6 +36,7 @@ EXPECTED_CATEGORY = {
     "laptop": "Laptop",
     "microwave": "Microwave",
     "trash_can": "TrashCan",
+    "door": "Door",
 }
 
 
@@ -274,6 +276,7 @@ def test_single_builders_and_ensure(tmp_path: Path):
         "laptop": demo_assets.build_laptop,
         "microwave": demo_assets.build_microwave,
         "trash_can": demo_assets.build_trash_can,
+        "door": lambda out: demo_assets.build_object("door", out),
     }
     assert set(builders) == set(IDS)
     for asset_id, build in builders.items():
