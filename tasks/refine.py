@@ -27,6 +27,7 @@ from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinem
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
 from asset2sim.tasks.audit import keep
 from asset2sim.tasks.ingest.declared import read_declared
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
@@ -118,7 +119,7 @@ def refine_asset(
     _check_prompt(prompt)
     est = _open_estimator(config)  # first: a model backend without its key fails before any work
     log = _StageLog(progress)
-    asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted)
+    asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted, config)
     _check_overrides(asset, config)
     if config.keep_declared:
         est = _keep_declared(est, asset_dir, asset)
@@ -186,12 +187,17 @@ def _open_estimator(config: RefineConfig) -> estimator.Estimator:
 
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
-             extracted: tuple[AssetDescription, list[Finding]] | None = None) -> tuple[AssetDescription, list[Finding]]:
+             extracted: tuple[AssetDescription, list[Finding]] | None = None,
+             config: RefineConfig | None = None) -> tuple[AssetDescription, list[Finding]]:
     """Stage 1: the checked asset and its validation findings (``extracted`` when
-    already read); the output folder checked against it. RefineError("invalid_input") with the codes."""
+    already read; an MJCF input read as ``config.body`` and ``config.mjcf`` say); the output folder checked against
+    it. RefineError("invalid_input") with the codes, also for a joint range that only makes sense in the other
+    unit (``JOINT_RANGE_WRONG_UNIT``: never part of an interaction-ready output)."""
+    config = config or RefineConfig()
     try:
         if extracted is None:
-            asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
+            reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
+            asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category, reading=reading)
         else:
             asset, findings = extracted[0], list(extracted[1])
         output_folder.check_location(asset.source_dir, out_dir)
@@ -199,6 +205,12 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
             output_folder.check_location(asset.staged_from.parent, out_dir)
     except (extract.AssetError, output_folder.OutputError) as exc:
         raise RefineError(str(exc), "invalid_input", getattr(exc, "codes", None)) from exc
+    wrong = [f for f in findings if f.code == "JOINT_RANGE_WRONG_UNIT"]
+    if wrong:
+        lines = "\n  ".join(f.describe() for f in wrong)
+        raise RefineError(f"{asset.staged_from or asset.urdf_path}: a joint range in the wrong unit; not refined:\n  {lines}\n"
+                          "  (an MJCF fragment: --mjcf-angle radian|degree, config mjcf.angle, says which unit its angles are in)",
+                          "invalid_input", ["JOINT_RANGE_WRONG_UNIT"])
     return asset, findings
 
 

@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from asset2sim.schemas.audit import ValueVerdict
+from asset2sim.tasks.interpret import size_priors
 
 #: A declared mass is implausible beyond this factor outside the span of the product's estimates for the
 #: link (thin shell of its material at the typical wall, solid of its material): the wall thicknesses of
@@ -32,11 +33,10 @@ INERTIA_TOLERANCE = 3.0
 TRIANGLE_SLACK = 1e-6
 #: The center of mass is implausible outside the geometry's bounding box grown by this share of its diagonal.
 COM_MARGIN = 0.10
-#: The object's largest dimension is implausible beyond this factor from its category's typical one: unit
-#: mistakes are 10x (mm/cm), 25.4x (inch), 100x (cm/m) or 1000x (mm/m); sizes within a category span less.
-SCALE_TOLERANCE = 5.0
-#: Largest dimension span of a household object of unknown category, m (a 2 cm part to a 3 m wardrobe).
-GENERIC_SIZE_M = (0.02, 3.0)
+#: The object's largest dimension is implausible beyond this factor from its category's typical one, and a
+#: household object of unknown category outside this span (m): the rule refine keeps sizes by
+#: (:func:`asset2sim.tasks.interpret.size_priors.plausible_largest_dimension`).
+SCALE_TOLERANCE, GENERIC_SIZE_M = size_priors.SCALE_TOLERANCE, size_priors.GENERIC_SIZE_M
 #: Damping ratio below which a spring-returned joint rings (zeta of 0.05 keeps 73 % of the swing per cycle;
 #: damping ratios of light structures are 0.02-0.05, Chopra, Dynamics of Structures, 5th ed., table 11.2.1).
 ZETA_MIN_SPRING = 0.05
@@ -178,8 +178,8 @@ def scale_verdict(largest: float, typical: float | None, category: str) -> Value
     if typical is None:
         lo, hi = GENERIC_SIZE_M
         return _band_verdict("object", "scale", "m", largest, math.sqrt(lo * hi), lo, hi, "largest dimension; a household object")
-    return _band_verdict("object", "scale", "m", largest, typical, typical / SCALE_TOLERANCE, typical * SCALE_TOLERANCE,
-                         f"largest dimension; a typical {category} is {typical:.3g} m")
+    lo, hi = size_priors.plausible_span(typical)
+    return _band_verdict("object", "scale", "m", largest, typical, lo, hi, f"largest dimension; a typical {category} is {typical:.3g} m")
 
 
 def critical_damping(inertia_axis: float, stiffness: float) -> float:

@@ -1,0 +1,80 @@
+"""The articulated object inside an MJCF scene: the subtree that carries the joints; static bodies around it
+(a table, a wall) are noted and left out; ``--body`` picks one of several."""
+
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from tests.tasks.ingest import host_layouts as hl
+
+pytest.importorskip("mujoco")
+
+from asset2sim.tasks.ingest.errors import AssetError  # noqa: E402
+from asset2sim.tasks.ingest.extract import extract_asset_checked  # noqa: E402
+from asset2sim.tasks.ingest.host_conventions import ReadOptions  # noqa: E402
+from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset  # noqa: E402
+from asset2sim.tasks.ingest.staged import StagingError  # noqa: E402
+
+
+def test_a_meta_world_scene_reads_the_drawer_and_leaves_the_table_and_wall(tmp_path):
+    xml = hl.metaworld_drawer(tmp_path)
+    read = read_mjcf_asset(xml)
+    assert read.model.root == "body_3"
+    assert set(read.model.links) == {"body_3", "drawercase_link", "drawer_link"}
+    slide = next(j for j in read.model.joints if j.name == "goal_slidey")
+    assert (slide.type, slide.limit.lower, slide.limit.upper) == ("prismatic", *hl.METAWORLD_DRAWER_RANGE)
+    static = next(n for n in read.notes if n.startswith("static bodies"))
+    assert "'tablelink'" in static and "'RetainingWall'" in static and "mounted on" in static
+    assert read.root_fixed is True
+    desc, _ = extract_asset_checked(xml)
+    assert {ln.name for ln in desc.links} == {"body_3", "drawercase_link", "drawer_link"}
+
+
+def _two_objects(tmp_path):
+    xml = tmp_path / "two.xml"
+    xml.write_text(textwrap.dedent("""
+        <mujoco model="two">
+          <worldbody>
+            <body name="table"><geom type="box" size="0.5 0.5 0.02" pos="0 0 -0.02"/></body>
+            <body name="cabinet" pos="0 0 0.3">
+              <geom type="box" size="0.2 0.2 0.3"/>
+              <body name="cabinet_door" pos="0.2 -0.21 0">
+                <joint name="door_hinge" type="hinge" axis="0 0 1" range="0 90"/>
+                <geom type="box" size="0.2 0.01 0.3" pos="-0.2 0 0"/>
+              </body>
+            </body>
+            <body name="box" pos="1 0 0.1">
+              <geom type="box" size="0.1 0.1 0.1"/>
+              <body name="lid" pos="0 0.1 0.1">
+                <joint name="lid_hinge" type="hinge" axis="1 0 0" range="0 100"/>
+                <geom type="box" size="0.1 0.1 0.005" pos="0 -0.1 0.005"/>
+              </body>
+            </body>
+          </worldbody>
+        </mujoco>""").lstrip())
+    return xml
+
+
+def test_several_jointed_objects_need_a_body_and_the_error_lists_them(tmp_path):
+    xml = _two_objects(tmp_path)
+    with pytest.raises(StagingError, match=r"2 bodies under the world body carry hinge or slide joints \['cabinet', 'box'\]") as err:
+        read_mjcf_asset(xml)
+    assert "--body" in str(err.value) and str(xml) in str(err.value)
+    with pytest.raises(AssetError, match="--body"):
+        extract_asset_checked(xml)
+    box = read_mjcf_asset(xml, ReadOptions(body="box"))
+    assert set(box.model.links) == {"box", "lid"}
+    assert any("'table'" in n and "static" in n for n in box.notes)
+    assert any("'cabinet'" in n and "left out" in n for n in box.notes)
+    by_part = read_mjcf_asset(xml, ReadOptions(body="cabinet_door"))  # a body inside an object picks that object
+    assert set(by_part.model.links) == {"cabinet", "cabinet_door"}
+    desc, _ = extract_asset_checked(xml, reading=ReadOptions(body="cabinet"))
+    assert [j.name for j in desc.joints if j.type != "fixed"] == ["door_hinge"]
+
+
+def test_a_body_that_is_not_there_is_refused_with_the_candidates(tmp_path):
+    xml = _two_objects(tmp_path)
+    with pytest.raises(StagingError, match=r"no body named 'drawer'; the objects under the world body: \['cabinet', 'box'\]"):
+        read_mjcf_asset(xml, ReadOptions(body="drawer"))

@@ -1,0 +1,87 @@
+"""Third-party MJCF objects refined as their packages mean them: a robosuite fragment (radians from robosuite's
+world), a Meta-World scene (a drawer on a table inside a wall), a degree-range door: interaction-ready at their own
+size, their names and ranges in the host's unit; the audit agrees with refine on the size; a range in the wrong
+unit is refused."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from tests.tasks.ingest import host_layouts as hl
+
+pytest.importorskip("mujoco")
+
+from asset2sim.schemas.config import RefineConfig  # noqa: E402
+from asset2sim.schemas.request import RequestOverrides  # noqa: E402
+from asset2sim.tasks.audit.audit import audit_asset  # noqa: E402
+from asset2sim.tasks.refine import RefineError, refine_asset  # noqa: E402
+from asset2sim.urdf import read_urdf  # noqa: E402
+
+CONFIG = RefineConfig(engines=["pybullet"])
+
+
+def _out(res):
+    model = read_urdf(res.out_dir / "mobility.urdf")
+    overlay = json.loads((res.out_dir / "overlay.json").read_text())
+    return model, overlay
+
+
+def _joint(model, name):
+    return next(j for j in model.joints if j.name == name)
+
+
+def test_a_robosuite_door_is_refined_at_its_size_with_its_range_in_radians(tmp_path):
+    xml = hl.robosuite_door(tmp_path / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    before = xml.read_bytes()
+    res = refine_asset(xml, "A door, slightly open.", tmp_path / "out", CONFIG, extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    model, overlay = _out(res)
+    assert overlay["scale"] == 1.0 and "size kept" in overlay["notes"]["size"]
+    hinge = _joint(model, "door_hinge")
+    assert hinge.limit.upper == pytest.approx(0.4)
+    assert 0.0 < res.report.initial_joint_positions["door_hinge"] < 0.4 * 0.5
+    assert {"door_body", "frame", "door", "latch"} <= set(model.links)
+    assert any("robosuite" in n and "radians" in n for n in res.report.notes)
+    assert xml.read_bytes() == before
+    audit = audit_asset(xml, simulate=False).report
+    scale = audit.values[0]
+    assert scale.quantity == "scale" and scale.verdict == "plausible" and scale.declared == pytest.approx(0.6, rel=0.05)
+
+
+def test_a_robosuite_door_read_in_degrees_is_refused_by_name(tmp_path):
+    xml = hl.robosuite_door(tmp_path / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    config = CONFIG.model_copy(update={"mjcf": CONFIG.mjcf.model_copy(update={"angle": "degree"})})
+    with pytest.raises(RefineError, match="door_hinge.*0.4 degrees") as err:
+        refine_asset(xml, "A door, slightly open.", tmp_path / "out", config, extras=False)
+    assert err.value.failure_mode == "invalid_input" and err.value.codes == ["JOINT_RANGE_WRONG_UNIT"]
+    assert not (tmp_path / "out" / "mobility.urdf").exists()
+    audit = audit_asset(xml, simulate=False, config=config).report
+    assert any(n.startswith("WARNING: ") and "JOINT_RANGE_WRONG_UNIT" in n for n in audit.notes)
+
+
+def test_a_meta_world_drawer_is_refined_out_of_its_scene(tmp_path):
+    xml = hl.metaworld_drawer(tmp_path / "in")
+    res = refine_asset(xml, "A drawer, slightly open.", tmp_path / "out", CONFIG, extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    model, overlay = _out(res)
+    assert overlay["scale"] == 1.0
+    assert set(model.links) == {"body_3", "drawercase_link", "drawer_link"}
+    slide = _joint(model, "goal_slidey")
+    assert (slide.limit.lower, slide.limit.upper) == pytest.approx(hl.METAWORLD_DRAWER_RANGE)
+    assert hl.METAWORLD_DRAWER_RANGE[0] < res.report.initial_joint_positions["goal_slidey"] < 0.0
+    assert any("'tablelink'" in n and "not refined" in n for n in res.report.notes)
+
+
+def test_a_degree_range_door_keeps_its_size_and_its_quarter_turn(tmp_path):
+    xml = hl.degree_door(tmp_path / "dm_control" / "suite" / "door.xml")
+    res = refine_asset(xml, "A door, halfway open.", tmp_path / "out", CONFIG, extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    model, overlay = _out(res)
+    assert overlay["scale"] == 1.0
+    assert _joint(model, "hinge").limit.upper == pytest.approx(math.pi / 2)
+    scaled = refine_asset(xml, "A door, halfway open.", tmp_path / "scaled",
+                          CONFIG.model_copy(update={"overrides": RequestOverrides(scale=0.5)}), extras=False)
+    assert _out(scaled)[1]["scale"] == 0.5
