@@ -107,3 +107,10 @@ def test_an_unknown_angle_unit_is_refused():
         ReadOptions(mjcf_angle="grad")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="expected one of"):
         mjcf_angle(Path("x.xml"), "grad")  # type: ignore[arg-type]
+
+
+def test_an_install_without_mujoco_names_the_extra(tmp_path, monkeypatch):
+    xml = hl.degree_door(tmp_path / "door.xml")
+    monkeypatch.setitem(__import__("sys").modules, "mujoco", None)  # as on a core-only install
+    with pytest.raises(ImportError, match=r"pip install 'asset2sim\[mujoco\]'"):
+        read_mjcf_asset(xml)
