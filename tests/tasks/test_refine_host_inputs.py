@@ -85,3 +85,17 @@ def test_a_degree_range_door_keeps_its_size_and_its_quarter_turn(tmp_path):
     scaled = refine_asset(xml, "A door, halfway open.", tmp_path / "scaled",
                           CONFIG.model_copy(update={"overrides": RequestOverrides(scale=0.5)}), extras=False)
     assert _out(scaled)[1]["scale"] == 0.5
+
+
+def test_a_urdf_with_inertials_keeps_its_size_and_a_partnet_mobility_model_is_sized(tmp_path):
+    from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
+    from asset2sim.tasks.ingest.staged import stage
+
+    xml = hl.robosuite_door(tmp_path / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    urdf = stage(read_mjcf_asset(xml), tmp_path / "door_urdf").urdf_path  # model.urdf with the door's inertials
+    kept = refine_asset(urdf.parent, "A door, slightly open.", tmp_path / "kept", CONFIG, extras=False)
+    size = _out(kept)[1]["notes"]["size"]
+    assert _out(kept)[1]["scale"] == 1.0 and "a URDF declaring inertials" in size
+    urdf.rename(urdf.parent / "mobility.urdf")  # PartNet-Mobility's name: a normalized size, sized to the category
+    sized = refine_asset(urdf.parent, "A door, slightly open.", tmp_path / "sized", CONFIG, extras=False)
+    assert _out(sized)[1]["scale"] > 2.0
