@@ -36,14 +36,14 @@ from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import analyze, limits, render, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
-from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.ingest import extract, staged
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.assemble import (collision_geometry, container_pieces, export_mjcf, footprint, parent_child_separation,
                                       sliding_clearance, write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.publish import export_usd, output
+from asset2sim.tasks.publish import export_usd, host_mjcf, output
 from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
 from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
@@ -142,8 +142,10 @@ def refine_asset(
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
+            host = _host_mjcf(work, asset, config, report)
             atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
             extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips) if extras else {}
+            extra_paths.update(host)
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except BaseException:
             owner.abandon()
@@ -934,6 +936,27 @@ def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
             raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
                                             "OUTPUT_WRITE_FAILED", where) from cur
         cur = cur.__cause__ or cur.__context__
+
+
+def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+    """An MJCF input's refined object written back into its own file (``mjcf/host/``,
+    :func:`asset2sim.tasks.publish.host_mjcf.write_host_mjcf`), noted in the report; {} for other inputs. A file
+    that cannot be written (a rescaled object, MuJoCo missing) is a note, never the loss of the refined asset."""
+    source = asset.staged_from
+    if source is None or staged.input_format(source) != "mjcf":
+        return {}
+    try:
+        with quiet_stdout():
+            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
+    except Exception as exc:  # the host file must not lose the refined asset
+        _raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"host MJCF not written: {exc}")
+        return {}
+    rel = done.path.relative_to(out_dir).as_posix()
+    report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
+                        f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
+                        f"{done.diff.relative_to(out_dir).as_posix()}")
+    return {"host_mjcf": str(done.path)}
 
 
 def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None,

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import pytest
 
 from tests.tasks.ingest import host_layouts as hl
 
-pytest.importorskip("mujoco")
+mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig  # noqa: E402
 from asset2sim.schemas.request import RequestOverrides  # noqa: E402
@@ -33,8 +34,46 @@ def _joint(model, name):
     return next(j for j in model.joints if j.name == name)
 
 
+def _names(m):
+    kinds = ((mujoco.mjtObj.mjOBJ_BODY, m.nbody), (mujoco.mjtObj.mjOBJ_JOINT, m.njnt), (mujoco.mjtObj.mjOBJ_GEOM, m.ngeom),
+             (mujoco.mjtObj.mjOBJ_SITE, m.nsite))
+    return [sorted(x for i in range(n) if (x := mujoco.mj_id2name(m, obj, i))) for obj, n in kinds]
+
+
+def _swapped_in(res, xml, tmp_path):
+    """The host package's tree copied, the refined host file in place of ``xml``: (original model, swapped model)."""
+    root = xml.parents[len(xml.relative_to(tmp_path / "in").parts) - 1]
+    copy = tmp_path / "host_copy"
+    shutil.copytree(root, copy / root.name)
+    target = copy / xml.relative_to(root.parent)
+    host = res.out_dir / "mjcf" / "host" / f"{xml.stem}.xml"
+    assert (res.out_dir / "mjcf" / "host" / f"{xml.stem}.diff").read_text().startswith("---")
+    shutil.copyfile(host, target)
+    return mujoco.MjModel.from_xml_path(str(xml)), mujoco.MjModel.from_xml_path(str(target))
+
+
+def _check_swapped(res, before, after, joint):
+    """Same names; the refined masses, range and damping; the keyframe 'initial' at the refined state; it steps."""
+    assert _names(after) == _names(before)
+    model, _ = _out(res)
+    for name, link in model.links.items():
+        b = mujoco.mj_name2id(after, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b > 0 and link.inertial is not None and before.body_geomnum[b] > 0:
+            assert after.body_mass[b] == pytest.approx(link.inertial.mass, rel=1e-5)
+    j = mujoco.mj_name2id(after, mujoco.mjtObj.mjOBJ_JOINT, joint)
+    urdf = _joint(model, joint)
+    assert after.jnt_range[j] == pytest.approx([urdf.limit.lower, urdf.limit.upper], abs=1e-5)
+    assert after.dof_damping[after.jnt_dofadr[j]] == pytest.approx(urdf.dynamics.damping, rel=1e-5)
+    data = mujoco.MjData(after)
+    mujoco.mj_resetDataKeyframe(after, data, mujoco.mj_name2id(after, mujoco.mjtObj.mjOBJ_KEY, "initial"))
+    assert data.qpos[after.jnt_qposadr[j]] == pytest.approx(res.report.initial_joint_positions[joint], abs=1e-5)
+    for _ in range(200):
+        mujoco.mj_step(after, data)
+    assert abs(data.qpos[after.jnt_qposadr[j]] - res.report.initial_joint_positions[joint]) < 0.02
+
+
 def test_a_robosuite_door_is_refined_at_its_size_with_its_range_in_radians(tmp_path):
-    xml = hl.robosuite_door(tmp_path / "robosuite" / "models" / "assets" / "objects" / "door.xml")
+    xml = hl.robosuite_door(tmp_path / "in" / "robosuite" / "models" / "assets" / "objects" / "door.xml")
     before = xml.read_bytes()
     res = refine_asset(xml, "A door, slightly open.", tmp_path / "out", CONFIG, extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
@@ -46,6 +85,10 @@ def test_a_robosuite_door_is_refined_at_its_size_with_its_range_in_radians(tmp_p
     assert {"door_body", "frame", "door", "latch"} <= set(model.links)
     assert any("robosuite" in n and "radians" in n for n in res.report.notes)
     assert xml.read_bytes() == before
+    before_model, after_model = _swapped_in(res, xml, tmp_path)
+    _check_swapped(res, before_model, after_model, "door_hinge")
+    assert after_model.jnt_range[0][1] == pytest.approx(0.4)  # radians, as robosuite compiles it
+    assert any(n.startswith("host MJCF: mjcf/host/door.xml") for n in res.report.notes)
     audit = audit_asset(xml, simulate=False).report
     scale = audit.values[0]
     assert scale.quantity == "scale" and scale.verdict == "plausible" and scale.declared == pytest.approx(0.6, rel=0.05)
@@ -73,6 +116,8 @@ def test_a_meta_world_drawer_is_refined_out_of_its_scene(tmp_path):
     assert (slide.limit.lower, slide.limit.upper) == pytest.approx(hl.METAWORLD_DRAWER_RANGE)
     assert hl.METAWORLD_DRAWER_RANGE[0] < res.report.initial_joint_positions["goal_slidey"] < 0.0
     assert any("'tablelink'" in n and "not refined" in n for n in res.report.notes)
+    before_model, after_model = _swapped_in(res, xml, tmp_path)  # the scene's includes inlined, the table kept
+    _check_swapped(res, before_model, after_model, "goal_slidey")
 
 
 def test_a_degree_range_door_keeps_its_size_and_its_quarter_turn(tmp_path):
@@ -85,6 +130,8 @@ def test_a_degree_range_door_keeps_its_size_and_its_quarter_turn(tmp_path):
     scaled = refine_asset(xml, "A door, halfway open.", tmp_path / "scaled",
                           CONFIG.model_copy(update={"overrides": RequestOverrides(scale=0.5)}), extras=False)
     assert _out(scaled)[1]["scale"] == 0.5
+    assert any(n.startswith("host MJCF not written: ") and "rescaled" in n for n in scaled.report.notes)
+    assert not (scaled.out_dir / "mjcf" / "host").exists()
 
 
 def test_a_urdf_with_inertials_keeps_its_size_and_a_partnet_mobility_model_is_sized(tmp_path):
