@@ -268,8 +268,8 @@ class _Reader:
         return link
 
     def _keyframe_state(self, joints: list[UrdfJoint]) -> dict[str, float]:
-        """joint -> position (rad or m, the URDF joint's: MuJoCo's ``ref`` subtracted) in the keyframe named
-        ``initial``, else the first keyframe; {} without one (noted when used)."""
+        """joint -> position (rad or m) in the keyframe named ``initial``, else the first keyframe; {} without one
+        (noted when used). MuJoCo's joint values are the URDF joint's: ``ref`` moved the URDF origin, not the values."""
         m = self.m
         if m.nkey == 0:
             return {}
@@ -282,7 +282,7 @@ class _Reader:
             jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
             if jid >= 0:
                 adr = int(m.jnt_qposadr[jid])
-                out[j.name] = float(m.key_qpos[k, adr] - m.qpos0[adr])
+                out[j.name] = float(m.key_qpos[k, adr])
         if out:
             self.notes.append(f"initial joint positions from keyframe {names[k] or '#' + str(k)!r}")
         return out

@@ -7,13 +7,13 @@ An MJCF input (a robosuite fragment, a Meta-World scene) is read again with the 
 - each body of the object that carries geometry or declares an ``<inertial>`` gets the refined link's mass, center
   of mass and full inertia tensor (an explicit ``<inertial>``; bodies without either, wrappers, are left as they are);
 - each hinge and slide joint gets the refined damping, friction loss, spring (``stiffness``, ``springref``) and
-  range, angles in the file's unit, MuJoCo's ``ref`` kept;
+  range, angles in the file's unit, MuJoCo's ``ref`` kept (joint values read the same in the URDF and in MuJoCo);
 - the refined initial state is the keyframe ``initial`` (replaced when the file has one; joint values in
   radians, as MJCF writes ``qpos`` whatever the angle unit).
 
 Body, joint, geom and site names, the geometry, the bodies around the object (a table, a wall), the materials
 and the file's ``<compiler>`` conventions (its angle unit now stated) stay. MuJoCo writes the result
-(``MjSpec.to_xml``, includes inlined); it is compiled and checked (same names, the refined masses) before it is
+(``MjSpec.to_xml``, includes inlined, numbers to MuJoCo's 6 significant digits); it is compiled and checked (same names, the refined masses) before it is
 written as ``mjcf/host/<input file name>``, with ``mjcf/host/<stem>.diff``, the unified diff of the input file
 and the written one. A refine that rescaled the object writes no such file: the host's geometry would no longer
 match the physics.
@@ -154,16 +154,15 @@ def _set_inertial(body, inertial, offset: np.ndarray) -> None:
 
 
 def _set_joint(joint, m, j: int, model, overlay: Overlay, per_rad: float) -> None:
-    """The refined damping, friction loss, spring and range on ``joint`` (an ``mjsJoint``, id ``j`` in ``m``):
-    URDF values (rad or m, about q = 0) moved by MuJoCo's ``ref`` and written in the file's unit (``per_rad``:
-    file units per radian for a hinge)."""
+    """The refined damping, friction loss, spring and range on ``joint`` (an ``mjsJoint``, id ``j`` in ``m``), in
+    the file's unit (``per_rad``: file units per radian for a hinge). Joint values read the same in the URDF and
+    in MuJoCo (the reader moved the URDF origin by ``ref``), so ranges and references are written as they are."""
     name = m.joint(j).name
     urdf = next((x for x in model.joints if x.name == name), None)
     if urdf is None:
         return
     hinge = int(m.jnt_type[j]) == mjcf_scene.JNT_HINGE
     unit = per_rad if hinge else 1.0
-    ref = float(m.qpos0[m.jnt_qposadr[j]])
     if urdf.dynamics is not None:
         damping = np.array(joint.damping, float)
         damping[0] = float(urdf.dynamics.damping or 0.0)
@@ -175,21 +174,21 @@ def _set_joint(joint, m, j: int, model, overlay: Overlay, per_rad: float) -> Non
         stiffness[0] = float(dyn.stiffness)
         joint.stiffness = stiffness
         if dyn.stiffness > 0 and dyn.spring_reference is not None:
-            joint.springref = (float(dyn.spring_reference) + ref) * unit
+            joint.springref = float(dyn.spring_reference) * unit
     lim = urdf.limit
     if lim is not None and lim.lower is not None and lim.upper is not None and bool(m.jnt_limited[j]):
-        joint.range = [(float(lim.lower) + ref) * unit, (float(lim.upper) + ref) * unit]
+        joint.range = [float(lim.lower) * unit, float(lim.upper) * unit]
 
 
 def _set_keyframe(spec, m, mujoco, state: dict[str, float], joints: list[str]) -> None:
     """The keyframe :data:`KEYFRAME`: the model's ``qpos0`` with the object's joints at their refined initial
-    state (``state``: joint -> rad or m about the URDF's zero, MuJoCo's ``ref`` added)."""
+    state (``state``: joint -> rad or m, the same values in MuJoCo)."""
     qpos = np.array(m.qpos0, float)
     for name in joints:
         if name in state:
             j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
             adr = int(m.jnt_qposadr[j])
-            qpos[adr] = float(state[name]) + float(m.qpos0[adr])
+            qpos[adr] = float(state[name])
     existing = [k for k in spec.keys if k.name == KEYFRAME]
     if existing:
         existing[0].qpos = qpos

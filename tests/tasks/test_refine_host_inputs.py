@@ -121,12 +121,15 @@ def test_a_meta_world_drawer_is_refined_out_of_its_scene(tmp_path):
 
 
 def test_a_degree_range_door_keeps_its_size_and_its_quarter_turn(tmp_path):
-    xml = hl.degree_door(tmp_path / "dm_control" / "suite" / "door.xml")
+    xml = hl.degree_door(tmp_path / "in" / "dm_control" / "suite" / "door.xml", ref=10.0)
     res = refine_asset(xml, "A door, halfway open.", tmp_path / "out", CONFIG, extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     model, overlay = _out(res)
     assert overlay["scale"] == 1.0
     assert _joint(model, "hinge").limit.upper == pytest.approx(math.pi / 2)
+    before_model, after_model = _swapped_in(res, xml, tmp_path)  # written in radians, stated by its <compiler>
+    _check_swapped(res, before_model, after_model, "hinge")  # drawn at ref 10 degrees: values read the same
+    assert after_model.jnt_range[0][1] == pytest.approx(math.pi / 2, abs=1e-5)  # MuJoCo writes 6 significant digits
     scaled = refine_asset(xml, "A door, halfway open.", tmp_path / "scaled",
                           CONFIG.model_copy(update={"overrides": RequestOverrides(scale=0.5)}), extras=False)
     assert _out(scaled)[1]["scale"] == 0.5

@@ -126,21 +126,21 @@ def metaworld_drawer(root: Path) -> Path:
         </mujoco>""")
 
 
-def degree_door(path: Path) -> Path:
-    """A door (0.8 x 2.0 m, 4 cm thick) on a frame, hinge ``hinge`` ranged ``0 90`` with no ``<compiler>``: degrees,
-    as dm_control and MuJoCo read it alone."""
+def degree_door(path: Path, ref: float = 0.0) -> Path:
+    """A door (0.8 x 2.0 m, 4 cm thick, 2 cm clear of its posts) on a frame, hinge ``hinge`` ranged ``0 90`` with no ``<compiler>``: degrees,
+    as dm_control and MuJoCo read it alone; ``ref`` (degrees) the hinge value the leaf is drawn at."""
     return _write(path, """
         <mujoco model="door">
           <worldbody>
             <body name="frame">
-              <geom type="box" size="0.03 0.03 1.0" pos="-0.43 0 1.0"/>
-              <geom type="box" size="0.03 0.03 1.0" pos="0.43 0 1.0"/>
-              <geom type="box" size="0.46 0.03 0.03" pos="0 0 2.03"/>
-              <body name="leaf" pos="-0.4 0 1.0">
-                <joint name="hinge" type="hinge" axis="0 0 1" range="0 90" damping="0.5"/>
+              <geom type="box" size="0.03 0.03 1.0" pos="-0.45 0 1.0"/>
+              <geom type="box" size="0.03 0.03 1.0" pos="0.45 0 1.0"/>
+              <geom type="box" size="0.48 0.03 0.03" pos="0 0 2.03"/>
+              <body name="leaf" pos="-0.38 0 1.0">
+                <joint name="hinge" type="hinge" axis="0 0 1" range="0 90" damping="0.5" ref="REF"/>
                 <geom name="panel" type="box" size="0.39 0.02 0.98" pos="0.4 0 0"/>
                 <geom name="knob" type="box" size="0.02 0.04 0.02" pos="0.72 -0.06 0"/>
               </body>
             </body>
           </worldbody>
-        </mujoco>""")
+        </mujoco>""".replace("REF", f"{ref:g}"))

@@ -114,3 +114,14 @@ def test_an_install_without_mujoco_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "mujoco", None)  # as on a core-only install
     with pytest.raises(ImportError, match=r"pip install 'asset2sim\[mujoco\]'"):
         read_mjcf_asset(xml)
+
+
+def test_a_keyframe_of_a_joint_drawn_at_its_ref_reads_as_mujoco_values_it(tmp_path):
+    """MuJoCo's joint values are the URDF joint's (``ref`` moves the URDF origin): a keyframe at 30 degrees of a hinge
+    drawn at 10 degrees starts the joint at 30 degrees, within its 0 to 90 degree range."""
+    xml = hl.degree_door(tmp_path / "door.xml", ref=10.0)
+    text = xml.read_text().replace("</worldbody>", '</worldbody><keyframe><key name="initial" qpos="0.5235987755982988"/></keyframe>')
+    xml.write_text(text)
+    read = read_mjcf_asset(xml)
+    assert read.initial_state["hinge"] == pytest.approx(math.radians(30))
+    assert _range(read, "hinge") == pytest.approx((0.0, math.pi / 2))
