@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from asset2sim.schemas.audit import ValueVerdict
+from asset2sim.tasks.ingest.tree_checks import MIN_PRISMATIC_SPAN, MIN_REVOLUTE_SPAN
 from asset2sim.tasks.interpret import size_priors
 
 #: A declared mass is implausible beyond this factor outside the span of the product's estimates for the
@@ -246,8 +247,9 @@ def stiffness_verdict(where: str, declared: float, travel: float, operable: floa
 
 
 def limits_verdict(where: str, kind: str, lower: float | None, upper: float | None, largest: float) -> ValueVerdict:
-    """Joint limits (rad or m): implausible when lower > upper, a revolute range over a full turn, or a prismatic
-    travel over :data:`MAX_TRAVEL_FACTOR` x the object's ``largest`` dimension (m). ``declared`` is the range."""
+    """Joint limits (rad or m): implausible when lower > upper, a revolute range over a full turn or under a degree,
+    or a prismatic travel over :data:`MAX_TRAVEL_FACTOR` x the object's ``largest`` dimension (m) or under a
+    millimetre (the unit rule of validation's ``JOINT_RANGE_WRONG_UNIT``). ``declared`` is the range."""
     unit = "m" if kind == "prismatic" else "rad"
     if lower is None or upper is None:
         return ValueVerdict(where=where, quantity="limits", unit=unit, declared=None, verdict="not_declared",
@@ -256,6 +258,12 @@ def limits_verdict(where: str, kind: str, lower: float | None, upper: float | No
     if rng < 0:
         return ValueVerdict(where=where, quantity="limits", unit=unit, declared=rng, verdict="implausible",
                             reason=f"lower {lower:.4g} > upper {upper:.4g}")
+    small = MIN_PRISMATIC_SPAN if kind == "prismatic" else MIN_REVOLUTE_SPAN
+    if 0 < rng < small:  # validation's JOINT_RANGE_WRONG_UNIT: the same rule
+        what = "a millimetre (millimetres read as metres?)" if kind == "prismatic" else "a degree (radians read as degrees?)"
+        return ValueVerdict(where=where, quantity="limits", unit=unit, declared=rng, verdict="implausible",
+                            reason=f"range {lower:.4g} to {upper:.4g} spans less than {what}: it only makes sense in the "
+                                   "other unit (JOINT_RANGE_WRONG_UNIT)")
     high = 2 * math.pi if kind != "prismatic" else MAX_TRAVEL_FACTOR * largest
     what = "a full turn" if kind != "prismatic" else f"{MAX_TRAVEL_FACTOR:g} x the object's largest dimension"
     return _band_verdict(where, "limits", unit, rng, rng, 0.0, high, f"range {lower:.4g} to {upper:.4g}; at most {what}")

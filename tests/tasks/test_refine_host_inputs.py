@@ -103,6 +103,10 @@ def test_a_robosuite_door_read_in_degrees_is_refused_by_name(tmp_path):
     assert not (tmp_path / "out" / "mobility.urdf").exists()
     audit = audit_asset(xml, simulate=False, config=config).report
     assert any(n.startswith("WARNING: ") and "JOINT_RANGE_WRONG_UNIT" in n for n in audit.notes)
+    limits = next(v for v in audit.values if v.where == "joint door_hinge" and v.quantity == "limits")
+    assert limits.verdict == "implausible" and "less than a degree" in limits.reason
+    radians = audit_asset(xml, simulate=False).report  # as robosuite compiles it: 0.4 rad, plausible
+    assert next(v for v in radians.values if v.where == "joint door_hinge" and v.quantity == "limits").verdict == "plausible"
 
 
 def test_a_meta_world_drawer_is_refined_out_of_its_scene(tmp_path):
