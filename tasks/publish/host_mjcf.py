@@ -118,11 +118,11 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
             _set_inertial(spec.bodies[b], link.inertial, offset)
             bodies.append(name)
         for j in jids:
-            jname = original.joint(j).name
-            if jname:
-                _set_joint(spec.joint(jname), original, j, model, overlay, per_rad)
-                joints.append(jname)
-    _set_keyframe(spec, original, mujoco, state, joints)
+            jname = original.joint(j).name or f"{name}_joint"  # the reader's name for an unnamed joint
+            target = next(x for x in spec.joints if x.id == j)
+            _set_joint(target, original, j, jname, model, overlay, per_rad)
+            joints.append((jname, j))
+    _set_keyframe(spec, original, state, joints)
     try:
         written = spec.compile()
     except Exception as exc:  # mujoco raises ValueError with the compiler's message
@@ -136,7 +136,7 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(joints))
+    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints))
 
 
 def _set_inertial(body, inertial, offset: np.ndarray) -> None:
@@ -153,11 +153,11 @@ def _set_inertial(body, inertial, offset: np.ndarray) -> None:
     body.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]
 
 
-def _set_joint(joint, m, j: int, model, overlay: Overlay, per_rad: float) -> None:
-    """The refined damping, friction loss, spring and range on ``joint`` (an ``mjsJoint``, id ``j`` in ``m``), in
+def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: float) -> None:
+    """The refined damping, friction loss, spring and range of URDF joint ``name`` on ``joint`` (an ``mjsJoint``, id
+    ``j`` in ``m``), in
     the file's unit (``per_rad``: file units per radian for a hinge). Joint values read the same in the URDF and
     in MuJoCo (the reader moved the URDF origin by ``ref``), so ranges and references are written as they are."""
-    name = m.joint(j).name
     urdf = next((x for x in model.joints if x.name == name), None)
     if urdf is None:
         return
@@ -180,15 +180,13 @@ def _set_joint(joint, m, j: int, model, overlay: Overlay, per_rad: float) -> Non
         joint.range = [float(lim.lower) * unit, float(lim.upper) * unit]
 
 
-def _set_keyframe(spec, m, mujoco, state: dict[str, float], joints: list[str]) -> None:
-    """The keyframe :data:`KEYFRAME`: the model's ``qpos0`` with the object's joints at their refined initial
-    state (``state``: joint -> rad or m, the same values in MuJoCo)."""
+def _set_keyframe(spec, m, state: dict[str, float], joints: list[tuple[str, int]]) -> None:
+    """The keyframe :data:`KEYFRAME`: the model's ``qpos0`` with the object's joints (URDF name, joint id in ``m``)
+    at their refined initial state (``state``: joint -> rad or m, the same values in MuJoCo)."""
     qpos = np.array(m.qpos0, float)
-    for name in joints:
+    for name, j in joints:
         if name in state:
-            j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
-            adr = int(m.jnt_qposadr[j])
-            qpos[adr] = float(state[name])
+            qpos[int(m.jnt_qposadr[j])] = float(state[name])
     existing = [k for k in spec.keys if k.name == KEYFRAME]
     if existing:
         existing[0].qpos = qpos

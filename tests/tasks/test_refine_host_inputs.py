@@ -52,15 +52,16 @@ def _swapped_in(res, xml, tmp_path):
     return mujoco.MjModel.from_xml_path(str(xml)), mujoco.MjModel.from_xml_path(str(target))
 
 
-def _check_swapped(res, before, after, joint):
-    """Same names; the refined masses, range and damping; the keyframe 'initial' at the refined state; it steps."""
+def _check_swapped(res, before, after, joint, jid=None):
+    """Same names; the refined masses, range and damping; the keyframe 'initial' at the refined state; it steps
+    (``jid``: the joint's id when it has no name in the file)."""
     assert _names(after) == _names(before)
     model, _ = _out(res)
     for name, link in model.links.items():
         b = mujoco.mj_name2id(after, mujoco.mjtObj.mjOBJ_BODY, name)
         if b > 0 and link.inertial is not None and before.body_geomnum[b] > 0:
             assert after.body_mass[b] == pytest.approx(link.inertial.mass, rel=1e-5)
-    j = mujoco.mj_name2id(after, mujoco.mjtObj.mjOBJ_JOINT, joint)
+    j = mujoco.mj_name2id(after, mujoco.mjtObj.mjOBJ_JOINT, joint) if jid is None else jid
     urdf = _joint(model, joint)
     assert after.jnt_range[j] == pytest.approx([urdf.limit.lower, urdf.limit.upper], abs=1e-5)
     assert after.dof_damping[after.jnt_dofadr[j]] == pytest.approx(urdf.dynamics.damping, rel=1e-5)
@@ -153,3 +154,16 @@ def test_a_urdf_with_inertials_keeps_its_size_and_a_partnet_mobility_model_is_si
     urdf.rename(urdf.parent / "mobility.urdf")  # PartNet-Mobility's name: a normalized size, sized to the category
     sized = refine_asset(urdf.parent, "A door, slightly open.", tmp_path / "sized", CONFIG, extras=False)
     assert _out(sized)[1]["scale"] > 2.0
+
+
+def test_an_unnamed_joint_is_refined_and_written_back_in_its_place(tmp_path):
+    """Meta-World leaves some joints unnamed (the doorlock's lock): the link's joint is ``<body>_joint`` and the host
+    file changes that joint, still unnamed."""
+    xml = hl.metaworld_drawer(tmp_path / "in", joint_name=None)
+    res = refine_asset(xml, "A drawer, slightly open.", tmp_path / "out", CONFIG, extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    assert "drawer_link_joint" in res.report.initial_joint_positions
+    before_model, after_model = _swapped_in(res, xml, tmp_path)
+    assert after_model.njnt == 1 and not mujoco.mj_id2name(after_model, mujoco.mjtObj.mjOBJ_JOINT, 0)
+    _check_swapped(res, before_model, after_model, "drawer_link_joint", jid=0)
+

@@ -59,11 +59,12 @@ def robosuite_door(path: Path, compiler: str = "") -> Path:
         </mujoco>""")
 
 
-def metaworld_drawer(root: Path) -> Path:
+def metaworld_drawer(root: Path, joint_name: str | None = "goal_slidey") -> Path:
     """Meta-World's layout under ``root`` (``metaworld/assets/``): ``objects/drawer.xml`` including
     ``objects/assets/drawer_dependencies.xml``, ``scene/basic_scene.xml`` and ``objects/assets/drawer.xml``; returns
     the scene file. The drawer (20 x 20 x 17 cm case, a slide ``goal_slidey`` ranged -0.16 to 0 m, an ``objGeom`` handle)
-    sits on a 1.4 x 0.8 m table inside a retaining wall."""
+    sits on a 1.4 x 0.8 m table inside a retaining wall; ``joint_name`` None leaves the slide unnamed (as Meta-World's
+    doorlock leaves its lock's hinge)."""
     assets = root / "metaworld" / "assets"
     _write(assets / "scene" / "basic_scene.xml", """
         <mujocoinclude>
@@ -102,7 +103,7 @@ def metaworld_drawer(root: Path) -> Path:
               <geom class="drawer_col" pos="0 -0.008 -0.07" size="0.102 0.092 0.014" mass=".05"/>
               <geom class="drawer_col" pos="0 0 0.076" size="0.102 0.1 0.008" mass=".05"/>
               <body name="drawer_link" pos="0 -0.01 0.006">
-                <joint type="slide" range="-0.16 0" axis="0 1 0" name="goal_slidey" pos="0 0 0" damping="2"/>
+                <joint type="slide" range="-0.16 0" axis="0 1 0" NAME pos="0 0 0" damping="2"/>
                 <geom class="drawer_col" pos="0 -0.082 0.008" size="0.1 0.008 0.052" mass=".04"/>
                 <geom class="drawer_col" pos="0 0.082 0.008" size="0.1 0.008 0.052" mass=".04"/>
                 <geom class="drawer_col" pos="-0.092 0 0.008" size="0.008 0.074 0.052" mass=".04"/>
@@ -115,7 +116,7 @@ def metaworld_drawer(root: Path) -> Path:
               </body>
             </body>
           </body>
-        </mujocoinclude>""")
+        </mujocoinclude>""".replace("NAME", f'name="{joint_name}"' if joint_name else ""))
     return _write(assets / "objects" / "drawer.xml", """
         <mujoco model="drawer">
           <include file="assets/drawer_dependencies.xml"/>
