@@ -475,7 +475,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
         overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
-    overlay = overlay.model_copy(update={"mounting": mounting.resolve_mounting(ctx.category, ctx.request.text, ctx.request.mount)})
+    overlay = overlay.model_copy(update={"mounting": _root_mounting(ctx, config)})
     s = overlay.scale
     overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
@@ -936,6 +936,20 @@ def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
             raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
                                             "OUTPUT_WRITE_FAILED", where) from cur
         cur = cur.__cause__ or cur.__context__
+
+
+def _root_mounting(ctx: EstimationContext, config: RefineConfig):
+    """The root's mounting: ``--mount``, else the request's words, else an MJCF file's own declaration (a root
+    without a free joint is welded to the world, as MuJoCo compiles it), else the category prior."""
+    source = ctx.asset.staged_from
+    if (ctx.request.mount is None and mounting.request_mounting(ctx.request.text, ctx.category) is None
+            and source is not None and staged.input_format(source) == "mjcf"):
+        reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
+        declared = mounting.declared_mounting(ctx.category, read_declared(source, ctx.asset.urdf_path, reading).root_fixed,
+                                              "the MJCF file")
+        if declared is not None:
+            return declared
+    return mounting.resolve_mounting(ctx.category, ctx.request.text, ctx.request.mount)
 
 
 def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:

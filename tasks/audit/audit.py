@@ -132,11 +132,8 @@ def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> st
 def _mounting(dp: declared_mod.DeclaredPhysics, category: str) -> RootMount:
     """The root as the file declares it (MJCF: no free joint welds it; USD: a fixed joint to the world), read as a
     ``--mount`` override reads (:func:`asset2sim.tasks.interpret.mounting.resolve_mounting`), else the category's prior."""
-    if dp.root_fixed is None:
-        return mounting.category_mounting(category)
-    held = "welds the root to the world" if dp.root_fixed else "leaves the root free"
-    mount = mounting.resolve_mounting(category, "", "fixed" if dp.root_fixed else "free")
-    return mount.model_copy(update={"source": f"the {dp.format.upper()} file {held}"})
+    declared = mounting.declared_mounting(category, dp.root_fixed, f"the {dp.format.upper()} file")
+    return declared if declared is not None else mounting.category_mounting(category)
 
 
 def _overlay_springs(asset: AssetDescription, dp: declared_mod.DeclaredPhysics) -> declared_mod.DeclaredPhysics:

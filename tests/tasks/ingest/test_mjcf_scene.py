@@ -78,3 +78,47 @@ def test_a_body_that_is_not_there_is_refused_with_the_candidates(tmp_path):
     xml = _two_objects(tmp_path)
     with pytest.raises(StagingError, match=r"no body named 'drawer'; the objects under the world body: \['cabinet', 'box'\]"):
         read_mjcf_asset(xml, ReadOptions(body="drawer"))
+
+
+def _unnamed_sash(tmp_path):
+    """Meta-World's window in small: the sash is an unnamed body whose slide is named ``window_slide``."""
+    xml = tmp_path / "window.xml"
+    xml.write_text(textwrap.dedent("""
+        <mujoco model="window">
+          <worldbody>
+            <body>
+              <geom type="box" size="0.2 0.03 0.01" pos="0 0 0.01"/>
+              <geom type="box" size="0.015 0.03 0.2" pos="0.18 0 0.2"/>
+              <geom type="box" size="0.015 0.03 0.2" pos="-0.18 0 0.2"/>
+              <body pos="0 -0.05 0.05">
+                <joint type="slide" axis="1 0 0" range="0 0.15" name="window_slide"/>
+                <geom type="box" size="0.1 0.01 0.1" pos="0 0 0.1"/>
+              </body>
+            </body>
+          </worldbody>
+        </mujoco>""").lstrip())
+    return xml
+
+
+def test_a_moving_body_without_a_name_is_labelled_by_its_joints_name(tmp_path):
+    from asset2sim.tasks.interpret.part_labels import labels_from_names
+
+    desc, _ = extract_asset_checked(_unnamed_sash(tmp_path))
+    labelled = labels_from_names(desc)
+    assert {ln.name: ln.semantic_label for ln in labelled.links} == {"body_1": "body", "body_2": "window"}
+    assert any("body_2 -> window (its joint's name)" in n for n in labelled.staging_notes)
+
+
+def test_an_mjcf_root_without_a_free_joint_is_refined_mounted_as_the_file_says(tmp_path):
+    """A lever's category prior is free-standing; MuJoCo welds a root without a free joint, so refine does too
+    (the request's words and --mount still win)."""
+    from asset2sim.schemas.config import RefineConfig
+    from asset2sim.tasks.refine import refine_asset
+
+    (tmp_path / "in").mkdir()
+    xml = _unnamed_sash(tmp_path / "in")
+    config = RefineConfig(engines=["pybullet"])
+    res = refine_asset(xml, "A window, slightly open.", tmp_path / "out", config, extras=False)
+    assert res.overlay.mounting.fixed and res.overlay.mounting.source == "the MJCF file welds the root to the world"
+    free = refine_asset(xml, "A free-standing window, slightly open.", tmp_path / "free", config, extras=False)
+    assert not free.overlay.mounting.fixed and free.overlay.mounting.source.startswith("request")
