@@ -11,6 +11,8 @@ from asset2sim.schemas.asset import AssetDescription
 
 #: Canonical labels of an object's main body.
 BODY_LABELS = frozenset({"body", "base", "frame"})
+#: Labels that, in a joint's name (``door_hinge``, ``slider``), name the mechanism rather than the part it moves.
+JOINT_WORDS = frozenset({"hinge", "slider"})
 
 
 def _norm_token(s: str) -> str:
@@ -85,7 +87,7 @@ def labels_from_names(asset: AssetDescription) -> AssetDescription:
         own = found.get(j.child)
         if j.type != "fixed" and (own is None or own in BODY_LABELS):
             lab = label_from_name(j.name)
-            if lab is not None and lab not in BODY_LABELS:
+            if lab is not None and lab not in BODY_LABELS and lab not in JOINT_WORDS:
                 found[j.child] = by_joint[j.child] = lab
     if not found:
         return asset

@@ -107,6 +107,8 @@ def test_a_moving_body_without_a_name_is_labelled_by_its_joints_name(tmp_path):
     labelled = labels_from_names(desc)
     assert {ln.name: ln.semantic_label for ln in labelled.links} == {"body_1": "body", "body_2": "window"}
     assert any("body_2 -> window (its joint's name)" in n for n in labelled.staging_notes)
+    door, _ = extract_asset_checked(hl.degree_door(tmp_path / "door" / "door.xml"))  # 'hinge' names the mechanism
+    assert "leaf" not in {ln.name for ln in labels_from_names(door).links if ln.semantic_label}
 
 
 def test_an_mjcf_root_without_a_free_joint_is_refined_mounted_as_the_file_says(tmp_path):
