@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
         raise bad
     if args.flow:
+        if args.body or args.mjcf_angle:
+            raise CommandError(INVALID_REQUEST, "OPTION_NOT_IN_FLOW", None, "--body and --mjcf-angle apply to an audit run here; "
+                               "leave out --flow to use them")
         if args.out is None:
             raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
         from asset2sim.flows.audit_flow import run_audit_flow

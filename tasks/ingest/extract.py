@@ -175,6 +175,8 @@ def validate_any(asset: Path | str, policy: "ValidationPolicy | None" = None,
     Raises:
         AssetError: an MJCF or USD file that cannot be read into the asset model (names the body, prim or joint).
     """
+    if not os.path.exists(asset):  # ASSET_NOT_FOUND, as for any input
+        return validate_input.validate_asset(asset, policy), ()
     staged_asset = _stage_other_format(asset, reading)
     if staged_asset is None:
         return validate_input.validate_asset(asset, policy), ()
