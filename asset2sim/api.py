@@ -38,7 +38,8 @@ from asset2sim.tasks.refine import RefineError, RefineResult, refine_asset
 
 __all__ = [
     "AuditError", "AuditResult", "Evaluation", "Finding", "RefineConfig", "RefineError", "RefineResult", "RequestOverrides",
-    "SimConventions", "audit", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "refine", "validate",
+    "SimConventions", "audit", "evaluate", "export", "load_config", "load_mujoco", "load_pybullet", "load_sapien", "make_media", "refine",
+    "validate",
 ]
 
 
@@ -97,7 +98,7 @@ def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
            config: RefineConfig | Mapping[str, Any] | str | Path | None = None,
            overrides: RequestOverrides | Mapping[str, Any] | None = None, task: str | None = None,
            category: str | None = None, force: bool = False, overwrite: bool = False, extras: bool = True,
-           progress: Callable[[str, str], None] | None = None) -> RefineResult:
+           media: bool = True, progress: Callable[[str, str], None] | None = None) -> RefineResult:
     """Refine one articulated asset for a natural-language request.
 
     Writes ``out_dir`` (``mobility.urdf``, meshes, ``initial_state.json``,
@@ -126,6 +127,9 @@ def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
             configuration (otherwise the recorded result is returned).
         overwrite: write into a folder that holds files asset2sim did not write.
         extras: also write report.html, the MJCF export and renders.
+        media: with ``extras``, also make the renders, clips and report.html (False: the verdict's files and the
+            exports only, ``report.media == "deferred"``; :func:`make_media` or ``asset2sim report OUT`` makes them
+            later, and a refine with ``media`` over the complete output makes them there).
         progress: called with (stage, message) as the run goes.
 
     Returns:
@@ -146,7 +150,7 @@ def refine(asset: str | Path, prompt: str = "", out_dir: str | Path = "out", *,
     if overrides:
         cfg = cfg.model_copy(update={"overrides": merge_overrides(cfg.overrides, overrides)})
     return refine_asset(asset, prompt, out_dir, cfg, task=task, category=category, progress=progress,
-                        skip_if_complete=not force, overwrite=overwrite, extras=extras)
+                        skip_if_complete=not force, overwrite=overwrite, extras=extras, media=media)
 
 
 def evaluate(asset: str | Path, *, prompt: str | None = None, task: str | None = None,
@@ -249,6 +253,30 @@ def export(out_dir: str | Path, format: str = "mjcf", *, visuals: bool = True) -
     if format == "usd":
         return export_usd(out, visuals=visuals).path
     raise ValueError(f"unknown export format {format!r} (mjcf or usd)")
+
+
+def make_media(out_dir: str | Path, *, reference: str | Path | None = None, clips: bool = True,
+               force: bool = False) -> dict[str, str]:
+    """Make the renders (``views/``), sweep clips (``clips/``) and ``report.html`` of a refine output folder whose
+    refine deferred them (``refine(..., media=False)``, ``--defer-media``, a flow with ``extras: deferred``); the
+    same as ``asset2sim report OUT``. The verdict in ``report.json`` is kept; the new files join the completion
+    marker.
+
+    Args:
+        out_dir: a complete folder written by :func:`refine`.
+        reference: a PartNet-Mobility folder with GenSim2's reference, shown in the report.
+        clips: also write the clips of each task-relevant joint's sweep.
+        force: make them again when they are already made.
+
+    Returns:
+        What was written (``views``, ``html``, ``clips`` -> path); empty when the media were already made.
+
+    Raises:
+        OutputError: ``out_dir`` holds no complete refine output, or cannot be written.
+    """
+    from asset2sim.tasks.publish.media import make_media as _make_media
+
+    return _make_media(out_dir, reference=reference, clips=clips, force=force)
 
 
 def _output_folder(out_dir: str | Path) -> Path:

@@ -141,8 +141,19 @@ def demo_files(asset_id: str) -> dict[str, bytes]:
     raise KeyError(f"unknown demo object {asset_id!r}; known: {[o.asset_id for o in DEMO_OBJECTS]}")
 
 
-def _build(asset_id: str, out_dir: Path) -> Path:
+def build_object(asset_id: str, out_dir: Path) -> Path:
+    """Write built-in object ``asset_id`` (:data:`~asset2sim.demo_objects.DEMO_OBJECTS`) as a PartNet-Mobility-style
+    folder (``mobility.urdf``, ``textured_objs/*.obj``, ``semantics.txt``, ``meta.json``) to ``out_dir``; returns it.
+
+    Raises:
+        KeyError: unknown id.
+        FileExistsError: ``out_dir`` holds something this generator did not write.
+        OSError: the folder cannot be written.
+    """
     return _write_folder(Path(out_dir), demo_files(asset_id))
+
+
+_build = build_object
 
 
 def build_box_with_lid(out_dir: Path) -> Path:

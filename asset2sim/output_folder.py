@@ -38,6 +38,10 @@ MJCF_DIR = "mjcf"
 USD_DIR = "usd"
 VIEWS_DIR = "views"
 CLIPS_DIR = "clips"
+TIMINGS_NAME = "timings.json"
+#: Files an output owns whose bytes differ from run to run (wall times): listed in the completion marker under
+#: ``unhashed``, never hashed, so two runs of the same input and code write byte-identical hashed files and markers.
+VOLATILE = frozenset({TIMINGS_NAME})
 _BOOKKEEPING = frozenset({MARKER_NAME, RECORD_NAME})
 _MAX_LISTED = 5
 #: A bookkeeping file larger than this (bytes) is not one asset2sim wrote (a marker lists at most a few thousand files).
@@ -50,14 +54,28 @@ def read_record(path: Path | str) -> Any:
     return json.loads(atomic.read_regular(path, MAX_RECORD_BYTES).decode("utf-8"))
 
 
+def merge_timings(out_dir: Path | str, timings: dict[str, Any]) -> Path:
+    """Add ``timings`` (JSON values: wall times, s) to ``out_dir/timings.json`` (:data:`VOLATILE`), keeping its other
+    entries (an unreadable file is replaced); returns its path."""
+    path = Path(out_dir) / TIMINGS_NAME
+    try:
+        old = read_record(path)
+    except (OSError, ValueError):
+        old = {}
+    return atomic.write_json(path, {**(old if isinstance(old, dict) else {}), **timings})
+
+
 def _listed(path: Path) -> set[str]:
-    """The safe relative paths the ``files`` of bookkeeping file ``path`` lists (none when unreadable)."""
+    """The safe relative paths the ``files`` (and ``unhashed``) of bookkeeping file ``path`` list (none when
+    unreadable)."""
     try:
         data = read_record(path)
     except (OSError, ValueError):
         return set()
-    entries = data.get("files") if isinstance(data, dict) else None
-    return {r for r in (_safe_rel(x) for x in entries or []) if r is not None}
+    if not isinstance(data, dict):
+        return set()
+    entries = [*(data.get("files") or []), *(data.get("unhashed") or [])]
+    return {r for r in (_safe_rel(x) for x in entries if isinstance(x, str)) if r is not None}
 
 
 def recorded_files(out_dir: Path | str) -> set[str]:
@@ -157,7 +175,7 @@ class OwnedFolder:
 
     def finish(self, marker: dict[str, Any]) -> dict[str, str]:
         """Write the completion marker: ``marker`` plus ``files`` (relative path -> sha256 of every file this
-        run wrote), drop the ownership record, stop observing writes, and swap a staged run in.
+        run wrote but the :data:`VOLATILE` ones, listed under ``unhashed``), drop the ownership record, stop observing writes, and swap a staged run in.
 
         Raises:
             OutputError: ``OUTPUT_INCOMPLETE`` when a file the run wrote is missing (no marker is written), or
@@ -168,8 +186,9 @@ class OwnedFolder:
             if missing:
                 raise OutputError(f"{self.given}: {len(missing)} file(s) the run wrote are missing ({', '.join(missing[:_MAX_LISTED])}); "
                                   "the output is incomplete, no completion marker written", "OUTPUT_INCOMPLETE", self.given / missing[0])
-            hashes = {rel: atomic.sha256_file(self.root / rel) for rel in sorted(self.files)}
-            atomic.write_json(self.root / MARKER_NAME, {**marker, "files": hashes})
+            hashes = {rel: atomic.sha256_file(self.root / rel) for rel in sorted(self.files) if rel not in VOLATILE}
+            unhashed = sorted(rel for rel in self.files if rel in VOLATILE)
+            atomic.write_json(self.root / MARKER_NAME, {**marker, "files": hashes, **({"unhashed": unhashed} if unhashed else {})})
             (self.root / RECORD_NAME).unlink(missing_ok=True)
         finally:
             self.close()

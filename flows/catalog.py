@@ -63,7 +63,8 @@ class RunSettings(BaseModel):
     :mod:`asset2sim.flows.forkserver`, killed at the limit), ``spawn`` (a fresh
     Python per stage) or ``none`` (in the worker); ``memory_limit_mb`` of that
     child (MiB, ``RLIMIT_AS``; None = none); ``evaluate`` (the metrics stage),
-    ``probes``, ``extras`` (MJCF, renders, HTML report); ``refine_function``
+    ``probes``, ``extras`` (MJCF and USD exports, renders, clips, HTML report; ``deferred``: the exports with
+    each asset, the media (renders, clips, HTML report) after every asset's verdict, :func:`asset2sim.flows.refine_flow.media_phase`); ``refine_function``
     (``module:function`` like :func:`asset2sim.tasks.refine.refine_asset`);
     ``dask_host`` (where the local cluster listens; default loopback only) and
     ``dashboard`` (false: no HTTP pages), both ignored with a Dask address."""
@@ -75,7 +76,7 @@ class RunSettings(BaseModel):
     isolation: Literal["process", "spawn", "none"] = "process"
     evaluate: bool = True
     probes: bool = False
-    extras: bool = True
+    extras: bool | Literal["deferred"] = True
     refine_function: str = "asset2sim.tasks.refine:refine_asset"
     dask_host: str = Field(default="127.0.0.1", min_length=1)
     dashboard: bool = True

@@ -283,6 +283,9 @@ def run_dataset(log, catalog: str = "catalog.yaml", dataset: str | None = None, 
     run = _start_run(log, cat, name, planned, workers, dask_address, dask_host, dashboard)
     _record_without_workers(log, run, planned)
     timing = _dispatch(log, run, planned)
+    if run.cat.config.run.extras == "deferred":
+        timing.update(media_phase(log, run.store.read(run.name, run.run_id, columns=["out_dir", "media"]),
+                                  workers=run.n_workers or 1))
     t_track = time.perf_counter()
     flow_progress.emit(ProgressEvent("run_finished", name, run.run_id, total=run.info["assets"]))
     finish, run_out = _finish_partition(log, run)
@@ -389,6 +392,49 @@ def _dispatch(log, run: _Run, planned: DriverPlan) -> dict[str, Any]:
         log.warning("input index not written: %s: %s", type(exc).__name__, exc)
     timing["driver_skipped"] = len(planned.skips)
     return timing
+
+
+#: CPU priority (``nice`` increment) of a deferred media phase's children: the verdicts of other work come first.
+MEDIA_NICENESS = 10
+
+
+def media_phase(log, rows, *, workers: int = 1, time_limit_seconds: float = 1800.0) -> dict[str, Any]:
+    """The deferred media phase of a run (``catalog.yaml`` ``run.extras: deferred``): ``asset2sim report OUT`` for every
+    local output folder of ``rows`` (a DataFrame with ``out_dir`` and ``media``) whose ``report.json`` still says its
+    media are deferred, each in a child process at lower CPU priority (:data:`MEDIA_NICENESS`), ``workers`` at a time.
+    A child that fails or passes ``time_limit_seconds`` (s) leaves its folder deferred and complete (``asset2sim report
+    OUT`` or the next run's media phase makes it); the verdicts are made already and never change here.
+
+    Returns:
+        ``{"media_made": n, "media_failed": n, "media_seconds": s}``.
+    """
+    import subprocess
+    import sys
+
+    from asset2sim.tasks.publish.media import media_pending
+
+    t0 = time.perf_counter()
+    folders = sorted({str(d) for d, m in zip(rows.get("out_dir", []), rows.get("media", []))
+                      if m == "deferred" and isinstance(d, str) and Path(d).is_dir() and media_pending(d)})
+
+    def make(folder: str) -> tuple[str, str | None]:
+        try:
+            done = subprocess.run([sys.executable, "-m", "asset2sim", "report", folder], capture_output=True, text=True,
+                                  timeout=time_limit_seconds, preexec_fn=lambda: os.nice(MEDIA_NICENESS))
+        except subprocess.TimeoutExpired:
+            return folder, f"more than {time_limit_seconds:g} s"
+        return folder, None if done.returncode == 0 else (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]
+
+    failed = 0
+    with ThreadPoolExecutor(max_workers=max(1, int(workers))) as pool:
+        for folder, error in pool.map(make, folders):
+            if error is not None:
+                failed += 1
+                log.warning("media of %s not made (it stays deferred): %s", folder, error)
+    seconds = time.perf_counter() - t0
+    if folders:
+        log.info("media phase: %d of %d outputs in %.1f s", len(folders) - failed, len(folders), seconds)
+    return {"media_made": len(folders) - failed, "media_failed": failed, "media_seconds": seconds}
 
 
 def _finish_partition(log, run: _Run) -> tuple[Any, Path]:

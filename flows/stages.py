@@ -106,6 +106,8 @@ class AssetJob:
     evaluate: bool = True
     probes: bool = False
     extras: bool = True
+    media: bool = True
+    """with ``extras``: the renders, clips and HTML report with the refine (False: deferred to the run's media phase)"""
     isolation: str = "process"
     time_limit_seconds: float = 1800.0
     memory_limit_mb: int | None = 8192
@@ -214,8 +216,8 @@ def plan_run(
                 reference_scale=e.reference_scale,
                 reference_dir=ref_dir,
                 config=config,
-                **{k: getattr(settings, k) for k in ("refine_function", "evaluate", "probes", "extras", "isolation",
-                                                     "memory_limit_mb")},
+                **{k: getattr(settings, k) for k in ("refine_function", "evaluate", "probes", "isolation", "memory_limit_mb")},
+                extras=settings.extras is not False, media=settings.extras is True,
                 time_limit_seconds=e.time_limit_seconds or settings.time_limit_seconds,
                 finished={k: v for k, v in finished.items() if k.startswith(e.asset_id + "|")},
                 resumable=unrecorded.get(e.asset_id, []),
@@ -400,6 +402,7 @@ def stage_refine(
     extras: bool = True,
     extracted: dict[str, Any] | None = None,
     reference_dir: str | None = None,
+    media: bool = True,
 ) -> dict[str, Any]:
     """Run the refine function on one asset; ``extracted`` (``{"asset", "findings"}`` JSON) and ``reference_dir``
     go to a refine function that takes them. Returns a RefineOutput as JSON; raises what the function raises."""
@@ -415,6 +418,8 @@ def stage_refine(
     kwargs: dict[str, Any] = {"category": category, "progress": say}
     params = inspect.signature(fn).parameters
     kwargs.update({k: v for k, v in (("asset_id", asset_id), ("extras", extras)) if k in params})
+    if not media and "media" in params:  # the media phase deferred to the end of the run
+        kwargs["media"] = False
     if extracted is not None and "extracted" in params:
         kwargs["extracted"] = (
             AssetDescription.model_validate(extracted["asset"]),
@@ -554,7 +559,7 @@ def refine_stage(job: AssetJob, prepared: Prepared) -> StageRecord:
         "asset2sim.flows.stages:stage_refine",
         {
             **{k: getattr(job, k) for k in ("asset_dir", "prompt", "out_dir", "config", "category", "asset_id",
-                                            "refine_function", "extras")},
+                                            "refine_function", "extras", "media")},
             "extracted": None if prepared.asset is None else {
                 "asset": prepared.asset.model_dump(mode="json"),
                 "findings": [f.model_dump(mode="json") for f in prepared.findings],

@@ -17,8 +17,8 @@ from pydantic import BaseModel, ConfigDict, field_validator
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
 #: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``, version 5 ``operable`` and
-#: ``operating_efforts``, version 6 ``request_met`` and ``request_unmet``).
-SCHEMA_VERSION = 6
+#: ``operating_efforts``, version 6 ``request_met`` and ``request_unmet``, version 7 ``media``).
+SCHEMA_VERSION = 7
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
 
 RowStatus = Literal["done", "skipped", "failed"]
@@ -34,7 +34,8 @@ class CatalogRow(BaseModel):
     applied, every number within its tolerance; null without a request), ``request_unmet`` JSON [{phrase, kind,
     target, achieved, gap, unit, text, ...}]: what was not; ``operable``: every handled part moved by a hand inside its real operating range;
     ``operating_efforts`` JSON {joint: {peak_force_n, peak_torque_nm, force_range_n, ...}}; ``clips`` JSON [path]: the output's interaction clips (WebM), relative to
-    ``out_dir``; ``code_hash`` what the skip rule compares.
+    ``out_dir``; ``media``: the output's media phase (renders, clips, ``report.html``) when the row was written:
+    ``done``, ``deferred`` (``asset2sim report OUT`` makes it) or ``off``; ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
@@ -64,6 +65,7 @@ class CatalogRow(BaseModel):
     request_met: Optional[bool] = None
     request_unmet: Optional[str] = None
     clips: Optional[str] = None
+    media: Optional[str] = None
     model_queries: Optional[int] = None
     tokens: Optional[int] = None
     wall_seconds: Optional[float] = None

@@ -116,6 +116,10 @@ class RefineReport(BaseModel):
     pass, False fail, None not measured; ``failure_mode`` is the first failing tier's."""
     design_changes: list[str] = Field(default_factory=list)
     """What stability by design changed and why (``tasks.state.stability``)."""
+    media: Literal["done", "deferred", "off"] | None = None
+    """The media phase (renders in ``views/``, sweep clips in ``clips/``, ``report.html``): ``done``;
+    ``deferred`` (``refine --defer-media``, a flow with ``extras: deferred``: ``asset2sim report OUT`` makes
+    it); ``off`` (``--no-extras``); None in reports written before the phases were recorded."""
 
     def metric(self, name: str) -> MetricResult | None:
         return next((m for m in self.metrics if m.name == name), None)

@@ -33,7 +33,7 @@ from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
-from asset2sim.tasks.geometry import analyze, limits, render, urdf_closed
+from asset2sim.tasks.geometry import analyze, limits, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
 from asset2sim.tasks.ingest import extract, staged
@@ -44,7 +44,9 @@ from asset2sim.tasks.assemble import (collision_geometry, container_pieces, expo
                                       sliding_clearance, write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.publish import export_usd, host_mjcf, output
-from asset2sim.tasks.publish.contract import MARKER_NAME, REPORT_NAME, is_complete, run_hash, write_completion_marker
+from asset2sim.tasks.publish import media as media_phase
+from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
+                                              write_report_json)
 from asset2sim.tasks.state import balance, clearance, collision, ground_clearance, pose, refine_state, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
@@ -103,6 +105,7 @@ def refine_asset(
     extracted: tuple[AssetDescription, list[Finding]] | None = None,
     reference: Path | str | None = None,
     task: str | None = None,
+    media: bool = True,
 ) -> RefineResult:
     """Refine ``asset_dir`` for the natural-language ``prompt`` into ``out_dir``: the engine of
     :func:`asset2sim.api.refine`, whose docstring gives the output, the result and the errors
@@ -112,7 +115,9 @@ def refine_asset(
     (return the recorded result when the completion marker matches the input and configuration
     hashes); ``extracted`` ((description, findings) the flow's prepare stage already read with
     :func:`asset2sim.tasks.ingest.extract.extract_asset_checked`); ``reference`` (a PartNet-Mobility
-    folder with the GenSim2 reference for the extras' evaluation).
+    folder with the GenSim2 reference for the extras' evaluation); ``media`` (with ``extras``: make the renders,
+    clips and ``report.html`` too; False defers them to :func:`asset2sim.tasks.publish.media.make_media`, and a later
+    refine with ``media`` over the complete output makes them there).
     """
     config = config or RefineConfig()
     out_dir = Path(out_dir)
@@ -125,6 +130,9 @@ def refine_asset(
         est = _keep_declared(est, asset_dir, asset)
     chash = run_hash(asset.input_hash, config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
+        if extras and media and media_phase.media_pending(out_dir):  # a deferred media phase, resumed
+            made = media_phase.make_media(out_dir, reference=reference, clips=config.clips)
+            log.say("media", f"{out_dir}: " + ", ".join(sorted(made)) + " made (the deferred media phase)")
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
@@ -143,8 +151,9 @@ def refine_asset(
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
             host = _host_mjcf(work, asset, config, report)
-            atomic.write_json(work / REPORT_NAME, report.model_dump(mode="json"))
-            extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips) if extras else {}
+            report.media = "off"
+            write_report_json(work, report)
+            extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
             extra_paths.update(host)
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except BaseException:
@@ -236,7 +245,7 @@ def _check_overrides(asset: AssetDescription, config: RefineConfig) -> None:
 
 def _completed_result(out_dir: Path, log: _StageLog) -> RefineResult:
     """The result recorded in a complete output folder (nothing recomputed)."""
-    report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, output_folder.MAX_RECORD_BYTES))
+    report = read_report_json(out_dir)
     overlay = Overlay.model_validate_json(atomic.read_regular(out_dir / write.OVERLAY_NAME, output_folder.MAX_RECORD_BYTES))
     log.say("skip", f"{out_dir} is complete for this input and configuration")
     return RefineResult(out_dir=out_dir, report=report, overlay=overlay, skipped=True)
@@ -974,9 +983,10 @@ def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
 
 
 def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None,
-            shown: Path, clips: bool = True) -> dict[str, str]:
-    """Optional outputs: MJCF and USD exports, renders, evaluation and HTML report (the renders reused in
-    it), then ``report.json`` again with their notes and the final stage times. Each failure (an engine or
+            shown: Path, clips: bool = True, media: bool = True) -> dict[str, str]:
+    """Optional outputs: MJCF and USD exports, the evaluation, and with ``media`` the renders and the HTML report (the
+    renders reused in it; without, ``report.json`` says the media phase is deferred: :mod:`asset2sim.tasks.publish.media`),
+    then ``report.json`` again with their notes and the final stage times. Each failure (an engine or
     renderer unavailable included) is a note in the report, never the loss of the refined asset, except a
     full disk, a quota or a read-only file system (``OUTPUT_WRITE_FAILED``). The evaluation reuses the final
     post-check's rest test when it measured the files as they are now; ``shown``: the output folder as the
@@ -997,21 +1007,22 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
                 report.notes.append(f"{what} failed: {exc}")
             log.lap(f"extras_{key}")
         views = None
-        try:
-            views = render.render_views(out_dir / URDF_NAME, report.initial_joint_positions, out_dir / VIEWS_DIR,
-                                        size=render.OUTPUT_VIEW_SIZE)
-            out["views"] = str(out_dir / VIEWS_DIR)
-        except Exception as exc:
-            _raise_if_unwritable(exc, out_dir)
-            report.notes.append(f"renders failed: {exc}")
-        log.lap("extras_render")
+        if media:
+            try:
+                views = media_phase.output_views(out_dir, report.initial_joint_positions)
+                out["views"] = str(out_dir / VIEWS_DIR)
+            except Exception as exc:
+                _raise_if_unwritable(exc, out_dir)
+                report.notes.append(f"renders failed: {exc}")
+            log.lap("extras_render")
         try:
             paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=att.check.recorded,
                                               views=views, views_state=report.initial_joint_positions,
                                               checks=list(report.metrics) if recording is not None else None,
-                                              shown=shown, clips=clips)
-            out["html"] = str(paths["report"])
-            if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
+                                              shown=shown, clips=clips, html=media)
+            if media:
+                out["html"] = str(paths["report"])
+            if media and clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
                 out["clips"] = str(out_dir / CLIPS_DIR)
             ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
             combine_verdict(report, ev.metrics)  # report.json says what report.html says
@@ -1020,7 +1031,10 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
         except Exception as exc:
             _raise_if_unwritable(exc, out_dir)
             report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
-        log.lap("extras_report")
+        log.lap("extras_report" if media else "extras_evaluation")
+    report.media = "done" if media else "deferred"
+    if not media:
+        report.notes.append(f"{media_phase.DEFERRED_NOTE} (views/, clips/, report.html): `asset2sim report {shown}` makes them")
     report.stage_seconds = log.times
-    atomic.write_json(out_dir / REPORT_NAME, report.model_dump(mode="json"))
+    write_report_json(out_dir, report)
     return out

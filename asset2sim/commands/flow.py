@@ -104,6 +104,9 @@ def run(args: argparse.Namespace) -> int:
           f"stage servers {servers_s:.1f} s, assets {assets_s:.1f} s"
           + (f" ({worked / assets_s * 60:.2f} assets/min)" if worked and assets_s > 0 else "")
           + f", summary + MLflow {tracking_s:.1f} s")
+    if summary.get("media_made") is not None:  # catalog.yaml run.extras: deferred
+        print(f"  media    {summary['media_made']} made after the verdicts in {float(summary.get('media_seconds') or 0):.1f} s"
+              + (f", {summary['media_failed']} left deferred (`asset2sim report OUT` makes them)" if summary.get("media_failed") else ""))
     print(f"  outputs  {summary.get('output_store') or summary['output_dir']}")
     print(f"  catalog  {summary['catalog_root']}")
     if summary.get("mlflow_run_id"):

@@ -75,6 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "write into an output folder that holds files asset2sim did not write (they are kept unless a written file has the same path)"))
     parser.add_argument("--no-extras", action="store_true", help="skip MJCF export, renders and the HTML report")
     parser.add_argument("--no-clips", action="store_true", help="skip the clips of each task-relevant joint's sweep (clips/)")
+    parser.add_argument("--defer-media", action="store_true",
+                        help="write the verdict's files and exports only; `asset2sim report OUT` makes the renders, clips and "
+                             "report.html later")
     parser.add_argument("--open-containers", action="store_true", help=(
         "give a container modelled as one mesh group (a bucket, a trash can's body, a dishwasher tub) a convex "
         "decomposition that leaves its inside open, so things can be put into it (needs the [coacd] extra; "
@@ -118,9 +121,16 @@ def summary_lines(result) -> list[str]:
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
-    ] + request_lines(r.request) + [
+    ] + request_lines(r.request) + media_lines(r, result.out_dir) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
+
+
+def media_lines(report, out_dir) -> list[str]:
+    """The summary's media line when the media phase was deferred (how to make it), else nothing."""
+    if report.media != "deferred":
+        return []
+    return [f"media        deferred: `asset2sim report {out_dir}` makes views/, clips/ and report.html"]
 
 
 def request_lines(found) -> list[str]:
@@ -254,7 +264,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = refine_stage.refine_asset(args.asset, args.prompt, args.out, config, category=args.category,
                                            task=getattr(args, "task", None) or None, progress=progress, skip_if_complete=not args.force,
-                                           extras=not args.no_extras, overwrite=getattr(args, "overwrite", False))
+                                           extras=not args.no_extras, overwrite=getattr(args, "overwrite", False),
+                                           media=not getattr(args, "defer_media", False))
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
     except OutputError as exc:  # e.g. an output file missing at the end: no completion marker

@@ -13,7 +13,7 @@ from pathlib import Path, PurePosixPath
 
 from asset2sim import atomic, mesh_io
 from asset2sim.output_folder import (EVALUATION_NAME, MARKER_NAME, OVERLAY_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME,
-                                     STATE_NAME, URDF_NAME, OutputError)
+                                     STATE_NAME, TIMINGS_NAME, URDF_NAME, OutputError)
 from asset2sim.schemas.asset import AssetDescription
 
 
@@ -35,7 +35,8 @@ def mesh_dependencies(mesh_path: Path, asset_root: Path) -> list[Path]:
 
 
 #: output paths a copied input file may not take (the contract's own files)
-RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, REPORT_NAME, REPORT_HTML_NAME, EVALUATION_NAME, MARKER_NAME, RECORD_NAME})
+RESERVED_NAMES = frozenset({URDF_NAME, STATE_NAME, OVERLAY_NAME, REPORT_NAME, REPORT_HTML_NAME, EVALUATION_NAME, MARKER_NAME, RECORD_NAME,
+                            TIMINGS_NAME})
 
 
 def _walked_dirs(asset: AssetDescription) -> list[str]:

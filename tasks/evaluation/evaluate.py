@@ -30,6 +30,7 @@ from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergen
 from asset2sim.tasks.check.request_match import labelled_joints, requested_joints
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import write_report
+from asset2sim import output_folder
 from asset2sim.output_folder import EVALUATION_NAME, REPORT_HTML_NAME, URDF_NAME
 
 __all__ = ["METRICS", "Evaluation", "EvaluationError", "JointInfo", "divergence_check", "evaluate_asset", "evaluate_refined",
@@ -43,6 +44,7 @@ def evaluate_asset(
     measured: list[MetricResult] | None = None, recording: RestRecording | None = None, views: dict[str, np.ndarray] | None = None,
     views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None, task: str | None = None,
     recorded: RecordedRuns | None = None, shown_urdf: Path | str | None = None, clips: bool = True,
+    evaluation_json: bool = True,
 ) -> Evaluation:
     """Evaluate one asset with every registered metric.
 
@@ -62,6 +64,8 @@ def evaluate_asset(
         clips: with ``write_report``, also write the clips of each task-relevant joint's sweep into
             ``out_dir/clips/`` (:func:`asset2sim.tasks.evaluation.clips.sweep_clips`) and play them in the report;
             a clip that cannot be drawn is a note, never a failed evaluation.
+        evaluation_json: write ``evaluation.json`` into ``out_dir`` (False: only ``report.html`` and the clips, for
+            the media phase of an output whose evaluation is already written).
 
     Raises:
         EvaluationError: the asset or reference cannot be read.
@@ -83,7 +87,8 @@ def evaluate_asset(
     if out_dir is not None:
         same_state = views is not None and views_state is not None and dict(views_state) == dict(ev.initial_state)
         clip_set = _write_clips(ev, runs, engines[0], out_dir) if write_report and clips else None
-        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None, clips=clip_set)
+        write_evaluation(ev, out_dir, report=write_report, views=views if same_state else None, clips=clip_set,
+                         evaluation_json=evaluation_json)
     return ev
 
 
@@ -198,27 +203,36 @@ def _evaluation(ctx: Context, runs: dict[str, EngineRun], results: list[MetricRe
 def evaluate_refined(out_dir: Path | str, report: RefineReport, *, recording: RestRecording | None = None,
                      reference: Path | str | None = None, views: dict[str, np.ndarray] | None = None,
                      views_state: dict[str, float] | None = None, checks: list[MetricResult] | None = None,
-                     recorded: RecordedRuns | None = None, shown: Path | str | None = None, clips: bool = True) -> dict[str, Path]:
+                     recorded: RecordedRuns | None = None, shown: Path | str | None = None, clips: bool = True,
+                     html: bool = True, evaluation_json: bool = True) -> dict[str, Path]:
     """Evaluate a refined output folder and write ``evaluation.json`` and ``report.html`` beside its ``report.json``
     (refine's extras); the report's ``prompt``, ``category`` and ``task`` are used, the other arguments as in
     :func:`evaluate_asset`. ``shown``: the output folder as its user will find it (the staging folder of a rerun is swapped
-    in later; None: ``out_dir``); ``clips``: write the sweep clips (``clips/``) too. Returns {"evaluation": path, "report": path}. Raises EvaluationError: the folder cannot be
-    read."""
+    in later; None: ``out_dir``); ``clips``: write the sweep clips (``clips/``) too; ``html``: write ``report.html`` (False:
+    the verdict's phase alone, no clips); ``evaluation_json``: write ``evaluation.json`` (False: the media phase of an
+    output evaluated before). Returns the paths written ({"evaluation": path, "report": path}). Raises EvaluationError:
+    the folder cannot be read."""
     out_dir = Path(out_dir)
     evaluate_asset(out_dir, reference=reference, prompt=report.prompt or None, category=report.category,
-                   method="asset2sim", out_dir=out_dir, write_report=True, recording=recording,
+                   method="asset2sim", out_dir=out_dir, write_report=html, recording=recording,
                    views=views, views_state=views_state, checks=checks, recorded=recorded, task=report.task,
-                   shown_urdf=None if shown is None else Path(shown) / URDF_NAME, clips=clips)
-    return {"evaluation": out_dir / EVALUATION_NAME, "report": out_dir / REPORT_HTML_NAME}
+                   shown_urdf=None if shown is None else Path(shown) / URDF_NAME, clips=clips and html,
+                   evaluation_json=evaluation_json)
+    return {**({"evaluation": out_dir / EVALUATION_NAME} if evaluation_json else {}),
+            **({"report": out_dir / REPORT_HTML_NAME} if html else {})}
 
 
 def write_evaluation(ev: Evaluation, out_dir: Path | str, *, report: bool = True,
-                     views: dict[str, np.ndarray] | None = None, clips: ClipSet | None = None) -> dict[str, Path]:
-    """Write ``evaluation.json`` (and, with ``report``, ``report.html``; ``views`` the renders at ``ev.initial_state`` when
-    taken; ``clips`` the clips written in ``out_dir/clips/``, played in the report) into ``out_dir`` atomically; returns
-    {"evaluation": path, "report": path (when written)}."""
+                     views: dict[str, np.ndarray] | None = None, clips: ClipSet | None = None,
+                     evaluation_json: bool = True) -> dict[str, Path]:
+    """Write ``evaluation.json`` (unless ``evaluation_json`` is False) and, with ``report``, ``report.html`` (``views`` the
+    renders at ``ev.initial_state`` when taken; ``clips`` the clips written in ``out_dir/clips/``, played in the report)
+    into ``out_dir`` atomically; returns {"evaluation": path, "report": path} for the files written."""
     out_dir = Path(out_dir)
-    paths = {"evaluation": write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json")))}
+    paths = {}
+    if evaluation_json:  # its wall time apart (timings.json), so two evaluations of the same files write the same bytes
+        paths["evaluation"] = write_json(out_dir / EVALUATION_NAME, _jsonable(ev.model_dump(mode="json", exclude={"seconds"})))
+        output_folder.merge_timings(out_dir, {"evaluation_seconds": ev.seconds})
     if report:
         paths["report"] = write_report(ev, out_dir / REPORT_HTML_NAME, views=views, clips=clips)
     return paths

@@ -423,8 +423,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
     sections = [
         f"<h1>asset2sim {esc(command)}: {esc(ev.asset_id)}</h1>",
         f"<p class='meta'>method <b>{esc(ev.method or '-')}</b> &middot; category {esc(ev.category or '-')} &middot; "
-        f"engines {esc(', '.join(ev.engines))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)}) &middot; "
-        f"evaluated in {fmt(ev.seconds, 3)} s</p>",
+        f"engines {esc(', '.join(ev.engines))} &middot; scale {fmt(ev.scale)} ({esc(ev.scale_source)})</p>",
         f"<p class='meta'>URDF <code>{esc(ev.urdf)}</code><br/>request: <i>{esc(ev.prompt or '-')}</i><br/>"
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",

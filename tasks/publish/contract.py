@@ -19,7 +19,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 import asset2sim
-from asset2sim import __version__, atomic
+from asset2sim import __version__, atomic, output_folder
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.catalog import CatalogRow
 from asset2sim.schemas.config import RefineConfig
@@ -29,7 +29,8 @@ from asset2sim.tasks.check.verdict import FAILED_STATUSES, asset_failure_mode
 from asset2sim.tasks.evaluation.clips import clip_videos
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError, is_valid_id
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.output_folder import MARKER_NAME, MAX_RECORD_BYTES, OVERLAY_NAME, REPORT_NAME, OwnedFolder, read_record
+from asset2sim.output_folder import (MARKER_NAME, MAX_RECORD_BYTES, OVERLAY_NAME, REPORT_NAME, TIMINGS_NAME, VOLATILE, OwnedFolder,
+                                    read_record)
 
 #: The flow's record of an asset's job in its run's work folder (``<run>/.work/<asset id>/job.json``).
 JOB_RECORD_NAME = "job.json"
@@ -160,7 +161,40 @@ def write_completion_marker(out_dir: Path | str, input_hash: str, config_hash: s
     if owner is not None:
         owner.finish(head)
         return out_dir / MARKER_NAME
-    return atomic.write_json(out_dir / MARKER_NAME, {**head, "files": {f: atomic.sha256_file(out_dir / f) for f in output_files(out_dir)}})
+    return atomic.write_json(out_dir / MARKER_NAME, {**head, "files": {f: atomic.sha256_file(out_dir / f) for f in output_files(out_dir)
+                                                                        if f not in VOLATILE}})
+
+
+def write_report_json(out_dir: Path | str, report: RefineReport) -> Path:
+    """Write ``report`` as ``out_dir/report.json`` without its wall times, and those (``stage_seconds`` {stage: s},
+    ``state_seconds`` s) as ``out_dir/timings.json`` (:data:`asset2sim.output_folder.VOLATILE`: not hashed), so two
+    refines of the same input and code write the same ``report.json``. Returns the report's path."""
+    out_dir = Path(out_dir)
+    data = report.model_dump(mode="json")
+    timings = {"stage_seconds": data.pop("stage_seconds", {}) or {}}
+    if isinstance(data.get("state"), dict):
+        timings["state_seconds"] = data["state"].pop("seconds", 0.0)
+    output_folder.merge_timings(out_dir, timings)
+    return atomic.write_json(out_dir / REPORT_NAME, data)
+
+
+def read_report_json(out_dir: Path | str) -> RefineReport:
+    """``out_dir/report.json`` as a :class:`RefineReport`, with the wall times of ``timings.json`` when it is readable
+    (:func:`write_report_json`). Raises OSError (missing, not a regular file, too large) or ValueError (invalid)."""
+    out_dir = Path(out_dir)
+    data = read_record(out_dir / REPORT_NAME)
+    if not isinstance(data, dict):
+        raise ValueError(f"{out_dir / REPORT_NAME}: not a JSON object")
+    try:
+        timings = read_record(out_dir / TIMINGS_NAME)
+    except (OSError, ValueError):
+        timings = {}
+    if isinstance(timings, dict):
+        if isinstance(timings.get("stage_seconds"), dict) and not data.get("stage_seconds"):
+            data["stage_seconds"] = timings["stage_seconds"]
+        if isinstance(data.get("state"), dict) and "seconds" not in data["state"] and isinstance(timings.get("state_seconds"), (int, float)):
+            data["state"]["seconds"] = timings["state_seconds"]
+    return RefineReport.model_validate(data)
 
 
 def finished_result(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
@@ -211,7 +245,7 @@ def refined_output(out_dir: Path | str) -> "RefineOutput":
     """The refine stage's value (``skipped``) for a complete output folder, from its ``report.json``.
     Raises OSError or ValueError when there is no readable report."""
     out_dir = Path(out_dir)
-    report = RefineReport.model_validate_json(atomic.read_regular(out_dir / REPORT_NAME, MAX_RECORD_BYTES))
+    report = read_report_json(out_dir)
     return RefineOutput(report=report, out_dir=str(out_dir), skipped=True, tokens=report_tokens(report, out_dir))
 
 
@@ -306,6 +340,7 @@ REUSED_COLUMNS = (
     "category", "estimator", "model", "scale", "scale_deviation_pct", "total_mass_kg", "initial_state",
     "penetration_mm", "rest_stable", "d_pos_m", "d_ori_rad", "oscillation_pass", "prompt_alignment",
     "failure_mode", "model_queries", "tokens", "out_dir", "error", "code_hash", "clips", "request_met", "request_unmet",
+    "media",
 )  # fmt: skip
 
 
@@ -399,6 +434,7 @@ def _add_refined(row: CatalogRow, job: Any, refined: StageRecord | None, stages:
         report = value.report
         row.out_dir = value.out_dir or job.out_dir
         row.clips = json.dumps(clip_videos(row.out_dir)) if row.out_dir else None
+        row.media = report.media
         stages["refine"] = round(float(refined.seconds or 0.0), 4)
         for k, v in report.stage_seconds.items():
             stages[f"refine.{k}"] = round(float(v), 4)

@@ -165,7 +165,7 @@ def test_full_disk_while_writing_the_report_exits_4_with_enospc(name, box, tmp_p
     ``report.json`` after the post-check) is the documented
     ``OUTPUT_WRITE_FAILED [ENOSPC]`` naming the file, not ``OUTPUT_INCOMPLETE``
     (which the missing ``report.html`` gave, the error having become a note)."""
-    monkeypatch.setattr(refine_mod.render, "render_views", lambda *a, **k: None)
+    monkeypatch.setattr(refine_mod.media_phase.render, "render_views", lambda *a, **k: None)
     monkeypatch.setattr(refine_mod.export_mjcf, "export_mjcf", lambda *a, **k: None)
     real = atomic._create_temp
 

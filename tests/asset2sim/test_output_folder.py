@@ -217,7 +217,8 @@ def test_refine_rerun_owns_its_files_and_marker_lists_them(tmp_path, box):
     first = refine_asset(box, PROMPT, out, extras=False)
     marker = json.loads((out / MARKER_NAME).read_text())
     on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.name != MARKER_NAME}
-    assert set(marker["files"]) == on_disk  # the same list the whole-folder scan gave
+    assert set(marker["files"]) | set(marker["unhashed"]) == on_disk  # the same list the whole-folder scan gave
+    assert marker["unhashed"] == [of.TIMINGS_NAME]  # wall times: owned, never hashed
     assert not (out / of.RECORD_NAME).exists()
     (out / "user_notes.txt").write_text("mine")
     with pytest.raises(RefineError) as err:  # a changed request must rewrite, but the folder holds a user file
@@ -294,7 +295,7 @@ def test_failed_write_during_extras_leaves_no_marker(tmp_path, box, monkeypatch)
     cause) and writes no completion marker, so a rerun redoes the asset."""
     from asset2sim.tasks import refine as refine_mod
 
-    monkeypatch.setattr(refine_mod.render, "render_views", lambda *a, **k: None)
+    monkeypatch.setattr(refine_mod.media_phase.render, "render_views", lambda *a, **k: None)
     monkeypatch.setattr(refine_mod.export_mjcf, "export_mjcf", lambda *a, **k: None)
     real = atomic._create_temp
 
@@ -344,7 +345,7 @@ def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, mon
     assert is_complete(out, again.report.input_hash, again.report.config_hash)
     assert not is_complete(out, first.report.input_hash, first.report.config_hash)
     assert not of.staging_folder(out).exists() and of.foreign_files(out) == []
-    assert set(json.loads((out / MARKER_NAME).read_text())["files"]) == set(_tree(out)) - {MARKER_NAME}
+    assert set(json.loads((out / MARKER_NAME).read_text())["files"]) == set(_tree(out)) - {MARKER_NAME, of.TIMINGS_NAME}
 
 
 def test_a_first_run_that_fails_mid_way_leaves_no_partial_output(tmp_path, box, monkeypatch):

@@ -66,3 +66,29 @@ def test_refine_files_do_not_depend_on_the_cache_state(tmp_path, monkeypatch):
         assert sorted(got) == sorted(base), name
         diff = [k for k in base if got[k] != base[k]]
         assert not diff, (name, diff)
+
+
+def test_two_refines_into_one_folder_are_byte_identical(tmp_path, monkeypatch):
+    """The same input refined twice into the same folder, the on-disk cache cold then warm: every file byte for byte,
+    the completion marker included, with no filter; wall times live in ``timings.json`` alone (listed in the marker
+    as unhashed) and are still there for the summary."""
+    box = demo_assets.build_box_with_lid(tmp_path / "in" / "box")
+    monkeypatch.setenv("ASSET2SIM_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    snapshots = []
+    for _ in range(2):
+        result = refine_asset(box, PROMPT, out, config=RefineConfig(), skip_if_complete=False)
+        snapshots.append({str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
+                          if p.is_file() and p.name != "timings.json"})
+        assert result.report.stage_seconds and result.report.stage_seconds.get("post_check", 0) > 0
+    first, second = snapshots
+    assert sorted(first) == sorted(second) and "report.html" in first and MARKER_NAME in first
+    assert [k for k in first if first[k] != second[k]] == []
+    report = json.loads((out / "report.json").read_text())
+    assert "stage_seconds" not in report and "seconds" not in (report.get("state") or {})
+    timings = json.loads((out / "timings.json").read_text())
+    assert timings["stage_seconds"]["post_check"] > 0 and timings["evaluation_seconds"] > 0
+    marker = json.loads((out / MARKER_NAME).read_text())
+    assert marker["unhashed"] == ["timings.json"] and "timings.json" not in marker["files"]
+    again = refine_asset(box, PROMPT, out, config=RefineConfig())  # complete: the recorded result, its timings read back
+    assert again.skipped and again.report.stage_seconds == timings["stage_seconds"]

@@ -1,0 +1,158 @@
+"""Throughput of the dataset flow on real objects, the verdict's phase and the media phase apart.
+
+    .venv/bin/python benchmarks/bench_flow.py [--requests 5] [--workers 2] [--work DIR] [--media now|deferred]
+
+1. Builds a dataset of the dev rows (``../shared/datasets/partnet_mobility/manifest.csv``) times ``--requests``
+   requests per object: the row's own request and task, then "A <noun>.", "A <noun>, halfway open.", "A <noun>,
+   fully open." and "A small <noun>." (``bench_generalization``'s nouns), each as its own asset folder (a copy:
+   the flow keys assets by folder) under ``DIR/raw``; 21 x 5 = 105 assets by default.
+2. Runs the flow (``run_refine_flow``, what ``make flow`` runs) over it with ``--workers`` workers, every check on
+   (the metrics stage included) and, by default, ``run.extras: deferred``: every asset's verdict and exports first,
+   then the media phase (renders, clips, HTML report) of every output in children at lower CPU priority.
+3. Prints the load average before and after, assets per hour of the first phase (over the flow's assets phase)
+   and of the media phase, per-stage seconds per asset from the catalog's ``stage_seconds`` (the stage children
+   are single-threaded: wall s of a stage = its core-seconds on an idle core) as median / p90 / p99, each asset's
+   first-phase wall time median / p90 / p99 with p99 / median, the slowest assets and the failure modes; writes
+   ``DIR/summary.json``.
+
+Goal (throughput issue): >= 2,000 assets an hour for the first phase on 2 cores, p99 <= 5x the median. Numbers from
+a loaded machine (see the load average printed) are upper bounds of the cost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
+
+from bench_flow_synthetic import _load, flow_times  # noqa: E402
+from bench_generalization import _noun  # noqa: E402
+
+#: The requests of each object after its own (``{n}``: the category's noun).
+VARIANTS = ("A {n}.", "A {n}, halfway open.", "A {n}, fully open.", "A small {n}.")
+
+
+def build_dataset(manifest: Path, raw: Path, requests: int) -> list[dict]:
+    """Copy every row's asset folder ``requests`` times under ``raw`` (``<id>_r<k>``) and write ``raw/manifest.csv``
+    with the row's request and task first, then :data:`VARIANTS`. Returns the manifest rows."""
+    with open(manifest, newline="") as fh:
+        src = list(csv.DictReader(fh))
+    raw.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for r in src:
+        prompts = [(r["prompt"], r.get("task", ""))] + [(v.format(n=_noun(r["category"])), "") for v in VARIANTS]
+        for k, (prompt, task) in enumerate(prompts[:requests]):
+            aid = f"{r['id']}_r{k}"
+            if not (raw / aid).is_dir():
+                shutil.copytree(manifest.parent / r["id"], raw / aid)
+            rows.append({"id": aid, "category": r["category"], "prompt": prompt, "task": task})
+    with open(raw / "manifest.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=["id", "category", "prompt", "task"], lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+    return rows
+
+
+def write_catalog(work: Path, workers: int, media: str) -> Path:
+    """``work/catalog.yaml`` over ``work/raw`` (tracking off, metrics on, extras ``deferred`` or on)."""
+    from asset2sim.flows.stages import prepare_prefect_environment
+
+    config = {"version": 1, "default_dataset": "dev", "output_root": "refined", "catalog_root": "catalog",
+              "datasets": {"dev": {"root": "raw", "manifest": "raw/manifest.csv"}},
+              "run": {"workers": workers, "time_limit_seconds": 900, "evaluate": True,
+                      "extras": "deferred" if media == "deferred" else True},
+              "tracking": {"enabled": False}, "results": {"code_change": "keep"}}
+    path = work / "catalog.yaml"
+    path.write_text(json.dumps(config))  # JSON is YAML
+    prepare_prefect_environment(work)
+    return path
+
+
+def quantiles(values: list[float]) -> tuple[float, float, float]:
+    """(median, p90, p99) of ``values`` (nearest-rank; zeros when empty)."""
+    if not values:
+        return 0.0, 0.0, 0.0
+    s = sorted(values)
+
+    def q(p: float) -> float:
+        return s[min(len(s) - 1, max(0, int(round(p * len(s) + 0.5)) - 1))]
+
+    return statistics.median(s), q(0.9), q(0.99)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--manifest", type=Path, default=DEV / "manifest.csv")
+    ap.add_argument("--requests", type=int, default=5, help="requests per object, 1-5 (default 5: 105 assets)")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--media", choices=("deferred", "now"), default="deferred",
+                    help="deferred (default): run.extras deferred; now: media with each asset")
+    ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
+    args = ap.parse_args(argv)
+    work = args.work or Path(tempfile.mkdtemp(prefix="a2s-bench-flow-"))
+    os.environ.setdefault("ASSET2SIM_CACHE", str(work / "cache"))  # an empty on-disk cache of its own
+    try:
+        rows = build_dataset(args.manifest, work / "raw", max(1, min(len(VARIANTS) + 1, args.requests)))
+        catalog = write_catalog(work, args.workers, args.media)
+        from asset2sim.flows.catalog import ResultCatalog, load_catalog
+        from asset2sim.flows.refine_flow import run_refine_flow
+
+        print(f"dataset: {len(rows)} assets ({args.requests} requests x {len(rows) // max(1, args.requests)} objects); "
+              f"load before: {_load()}", flush=True)
+        t0 = time.perf_counter()
+        summary = run_refine_flow(catalog, workers=args.workers)
+        wall = time.perf_counter() - t0
+        df = ResultCatalog(load_catalog(catalog).catalog_root).read("dev", summary["run"])
+        worked = int(summary["done"]) + int(summary["failed"])
+        assets_s = float(summary["assets_seconds"])
+        media_s, made = float(summary.get("media_seconds") or 0.0), int(summary.get("media_made") or 0)
+        per_asset = [v[0] for v in flow_times(df).values()]
+        med, p90, p99 = quantiles(per_asset)
+        stages: dict[str, list[float]] = {}
+        for st in df["stage_seconds"]:
+            for k, v in json.loads(st or "{}").items():
+                if k.startswith("refine.") or k in ("prepare", "metrics"):
+                    stages.setdefault(k, []).append(float(v))
+        out = {"assets": len(rows), "done": summary["done"], "failed": summary["failed"], "wall_s": wall,
+               "assets_phase_s": assets_s, "first_phase_assets_per_hour": worked / assets_s * 3600 if assets_s else None,
+               "media_s": media_s, "media_made": made,
+               "media_assets_per_hour": made / media_s * 3600 if media_s else None,
+               "per_asset_s": {"median": med, "p90": p90, "p99": p99, "p99_over_median": p99 / med if med else None},
+               "stages_s": {k: dict(zip(("median", "p90", "p99"), quantiles(v))) for k, v in sorted(stages.items())},
+               "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(),
+               "workers": args.workers, "media": args.media, "load_after": _load()}
+        print(f"flow: {worked} assets refined in {wall:.1f} s wall (assets phase {assets_s:.1f} s); load after: {_load()}")
+        print(f"  first phase (verdict, evaluation, exports): {out['first_phase_assets_per_hour'] or 0:.0f} assets/hour "
+              f"(goal >= 2000)")
+        if args.media == "deferred":
+            print(f"  media phase (renders, clips, report.html): {made} outputs in {media_s:.1f} s = "
+                  f"{out['media_assets_per_hour'] or 0:.0f} assets/hour")
+        print(f"  per asset: median {med:.2f} s, p90 {p90:.2f} s, p99 {p99:.2f} s = {p99 / med if med else 0:.2f}x the "
+              "median (goal <= 5x)")
+        print("  slowest: " + ", ".join(f"{a} {t:.1f} s" for a, t in sorted(zip(df["asset_id"], per_asset), key=lambda x: -x[1])[:5]))
+        print("  stage seconds per asset (median / p90 / p99):")
+        for k, q in out["stages_s"].items():
+            if q["p99"] >= 0.05:
+                print(f"    {k:<28} {q['median']:7.3f} {q['p90']:7.3f} {q['p99']:7.3f}")
+        print("  failure modes: " + ", ".join(f"{k} {v}" for k, v in out["failure_modes"].items()))
+        (work / "summary.json").write_text(json.dumps(out, indent=1))
+        print(f"wrote {work / 'summary.json'}")
+    finally:
+        if args.work is None:
+            shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

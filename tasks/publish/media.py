@@ -1,0 +1,108 @@
+"""The media phase of an output folder: renders of the initial state (``views/``), the sweep clips (``clips/``) and
+``report.html``.
+
+An output is made in two phases. The first writes what a verdict and a simulator need (``mobility.urdf`` with its
+meshes and collision pieces, ``initial_state.json``, ``overlay.json``, ``report.json``, ``evaluation.json``, the MJCF
+and USD exports); the second, the media, is for people. A single ``refine`` makes both; ``refine --defer-media`` and a
+flow with ``extras: deferred`` stop after the first, and :func:`make_media` (``asset2sim report OUT``) makes the media
+later from the folder alone. The media phase never changes a verdict: ``report.json`` keeps its metrics and failure
+mode (only its ``media`` field becomes ``done``) and ``evaluation.json`` is not rewritten; the new files join the
+completion marker, so the folder stays complete for its input and configuration.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import atomic, output_folder
+from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
+from asset2sim.output_paths import OutputError
+from asset2sim.schemas.report import RefineReport
+from asset2sim.tasks.evaluation import evaluate
+from asset2sim.tasks.evaluation.clips import CLIPS_JSON
+from asset2sim.tasks.geometry import render
+from asset2sim.tasks.publish.contract import read_report_json, write_report_json
+
+__all__ = ["DEFERRED_NOTE", "media_pending", "make_media", "output_views"]
+
+#: How the note ``report.json`` carries while the media phase is deferred begins.
+DEFERRED_NOTE = "media deferred"
+
+
+def output_views(out_dir: Path | str, state: dict[str, float]) -> dict[str, np.ndarray]:
+    """Render the SPEC's five views of the output's ``mobility.urdf`` at ``state`` (joint -> rad or m) into
+    ``out_dir/views/<view>.png`` (:data:`asset2sim.tasks.geometry.render.OUTPUT_VIEW_SIZE` pixels). Returns view ->
+    (H, W, 3) uint8. Raises what the renderer raises (no renderer, unreadable meshes)."""
+    out_dir = Path(out_dir)
+    return render.render_views(out_dir / URDF_NAME, state, out_dir / VIEWS_DIR, size=render.OUTPUT_VIEW_SIZE)
+
+
+def media_pending(out_dir: Path | str) -> bool:
+    """True when ``out_dir``'s ``report.json`` says its media phase was deferred (False when it is done, off,
+    unrecorded or the report cannot be read)."""
+    try:
+        report = RefineReport.model_validate_json(atomic.read_regular(Path(out_dir) / REPORT_NAME, output_folder.MAX_RECORD_BYTES))
+    except (OSError, ValueError):
+        return False
+    return report.media == "deferred"
+
+
+def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clips: bool = True,
+               force: bool = False) -> dict[str, str]:
+    """Make the media of a complete output folder: ``views/``, ``clips/`` (with ``clips``) and ``report.html``, from the
+    folder's own files (the evaluation's engines run again to draw the report's evidence; the verdict is the one
+    ``report.json`` records). ``reference``: a PartNet-Mobility folder with the GenSim2 reference, as for refine;
+    ``force``: make them again when ``report.json`` says they are done.
+
+    Returns:
+        What was written: ``views``, ``html``, ``clips`` -> path; empty when the media were already done. A render or
+        clip that cannot be drawn is a note in ``report.json`` (never a lost output).
+
+    Raises:
+        OutputError: ``OUTPUT_INCOMPLETE`` when ``out_dir`` holds no complete output (no completion marker or no
+            readable ``report.json``); ``OUTPUT_WRITE_FAILED`` when it cannot be written.
+    """
+    out_dir = Path(out_dir)
+    marker = out_dir / MARKER_NAME
+    try:
+        report = read_report_json(out_dir)
+        head = output_folder.read_record(marker)
+    except (OSError, ValueError) as exc:
+        raise OutputError(f"{out_dir} holds no complete refine output ({exc}); refine it first", "OUTPUT_INCOMPLETE",
+                          out_dir) from exc
+    if not isinstance(head, dict) or not isinstance(head.get("files"), dict):
+        raise OutputError(f"{marker}: not a completion marker asset2sim wrote", "OUTPUT_INCOMPLETE", marker)
+    if report.media == "done" and (out_dir / REPORT_HTML_NAME).is_file() and not force:
+        return {}
+    out: dict[str, str] = {}
+    with output_folder.adopting(out_dir) as owner, quiet_stdout():  # renderers print from C; the library must not
+        views = None
+        try:
+            views = output_views(out_dir, dict(report.initial_joint_positions))
+            out["views"] = str(out_dir / VIEWS_DIR)
+        except Exception as exc:  # a renderer unavailable: the report without its renders
+            report.notes.append(f"renders failed: {exc}")
+        paths = evaluate.evaluate_refined(out_dir, report, reference=reference, views=views,
+                                          views_state=dict(report.initial_joint_positions), checks=list(report.metrics),
+                                          shown=out_dir, clips=clips, html=True, evaluation_json=False)
+        out["html"] = str(paths["report"])
+        if clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
+            out["clips"] = str(out_dir / CLIPS_DIR)
+        report.media = "done"
+        report.notes = [n for n in report.notes if not n.startswith(DEFERRED_NOTE)]
+        write_report_json(out_dir, report)
+        added = set(owner.files) if owner is not None else set()
+    _extend_marker(out_dir, head, added)
+    return out
+
+
+def _extend_marker(out_dir: Path, head: dict, added: set[str]) -> None:
+    """Rewrite the completion marker ``head`` of ``out_dir`` with the SHA-256 of every file it listed and of
+    ``added`` (relative paths written since), then drop the ownership record the writes left."""
+    files = sorted(set(head["files"]) | {r for r in added if (out_dir / r).is_file() and r not in VOLATILE})
+    atomic.write_json(out_dir / MARKER_NAME, {**{k: v for k, v in head.items() if k != "files"},
+                                              "files": {r: atomic.sha256_file(out_dir / r) for r in files}})
+    (out_dir / RECORD_NAME).unlink(missing_ok=True)
