@@ -76,7 +76,11 @@ def load_config(config: RefineConfig | Mapping[str, Any] | str | Path | None) ->
 
 def _field_errors(exc: ValidationError) -> str:
     """``field: message; ...`` of a pydantic validation error, one line."""
-    return "; ".join(f"{'.'.join(str(x) for x in e['loc']) or 'value'}: {e['msg'].removeprefix('Value error, ')}" for e in exc.errors())
+    out = []
+    for e in exc.errors():
+        field, msg = ".".join(str(x) for x in e["loc"]) or "value", e["msg"].removeprefix("Value error, ")
+        out.append(msg if msg.startswith(f"{field}: ") else f"{field}: {msg}")  # a message naming its field: once
+    return "; ".join(out)
 
 
 def merge_overrides(base: RequestOverrides, more: RequestOverrides | Mapping[str, Any]) -> RequestOverrides:

@@ -14,11 +14,13 @@ import argparse
 import atexit
 import contextlib
 import ctypes
+import difflib
 import importlib
 import os
 import pkgutil
 import sys
 import tempfile
+import re
 import threading
 import time
 import traceback
@@ -30,8 +32,20 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import asset2sim.commands as commands  # noqa: E402
 from asset2sim import __version__, allocator  # noqa: E402
-from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, CommandError  # noqa: E402
+from asset2sim.commands import _status  # noqa: E402
+from asset2sim.commands._status import INTERNAL_ERROR, INTERRUPTED, INVALID_REQUEST, CommandError  # noqa: E402
 from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
+from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module  # noqa: E402
+
+
+#: Environment defaults that keep the libraries' logs at WARNING on the terminal (Prefect's console handler, Dask's
+#: ``distributed.*`` loggers, MLflow's); inherited by the processes a command starts (Prefect's server, Dask workers,
+#: stage servers). ``--verbose`` leaves the libraries' own defaults; a value the user set is kept.
+QUIET_LIBRARY_LOGS = {
+    "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL": "WARNING",
+    "DASK_LOGGING__DISTRIBUTED": "warning",
+    "MLFLOW_LOGGING_LEVEL": "WARNING",
+}
 
 
 def command_names() -> list[str]:
@@ -39,42 +53,117 @@ def command_names() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
 
 
+#: Options of the top level, accepted before the command (they take no value).
+TOP_LEVEL_FLAGS = ("--debug", "--verbose", "-v")
+#: A negative number, which argparse reads as a value, not an option.
+_NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")
+
+
+def exit_statuses_text() -> str:
+    """Every exit status of :mod:`asset2sim.commands._status` with its meaning, one phrase each (``--help``)."""
+    return ", ".join(f"{code} {meaning}" for code, meaning in _status.EXIT_STATUSES.items())
+
+
+def did_you_mean(word: str, choices) -> str:
+    """``"; did you mean X?"`` for the closest of ``choices`` to a mistyped ``word`` (difflib), else ``""``."""
+    close = difflib.get_close_matches(word, sorted(set(choices)), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]}?" if close else ""
+
+
+def unknown_options(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """The options of ``argv`` that ``parser`` does not know (the text before any ``=``), in order: not one of its
+    option strings nor, with ``allow_abbrev``, a prefix of one; a negative number and anything after ``--`` are values."""
+    known = [s for a in parser._actions for s in a.option_strings]
+    out = []
+    for token in argv:
+        if token == "--":
+            break
+        if not token.startswith("-") or token == "-" or _NEGATIVE_NUMBER.match(token):
+            continue
+        name = token.split("=", 1)[0]
+        if name in known:
+            continue
+        if name.startswith("--"):
+            if parser.allow_abbrev and any(k.startswith(name) for k in known if k.startswith("--")):
+                continue  # an abbreviation (an ambiguous one argparse names itself)
+        elif name[:2] in known:  # -ovalue, -qv
+            continue
+        out.append(name)
+    return list(dict.fromkeys(out))
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line each, ``asset2sim COMMAND: CODE: message`` on stderr
+    (status 2): an unknown option (``OPTION_UNKNOWN``) with the closest known one ("did you mean"), named before the
+    problems it causes (a required option reported missing); any other usage problem ``USAGE_INVALID``."""
+
+    command: str | None = None  # the subcommand this parser reads (None: the top level)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._argv = list(sys.argv[1:] if args is None else args)
+        parsed, extras = super().parse_known_args(args, namespace)
+        if extras and self.command is not None:  # a command's leftovers are its own errors, not the top level's
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed, extras
+
+    def error(self, message: str):
+        argv = getattr(self, "_argv", [])
+        if self.command is None:  # the top level reads only what comes before the command
+            names = command_names()
+            argv = next((argv[:i] for i, a in enumerate(argv) if a in names), argv)
+        unknown = unknown_options(self, argv)
+        known = [s for a in self._actions for s in a.option_strings]
+        where = f"asset2sim {self.command} --help" if self.command else "asset2sim --help"
+        lines = [CommandError(INVALID_REQUEST, "OPTION_UNKNOWN", None,
+                              f"unknown option {name}{did_you_mean(name, known)} (options: {where})").line(self.command)
+                 for name in unknown]
+        if not lines:
+            lines = [CommandError(INVALID_REQUEST, "USAGE_INVALID", None, f"{message} (usage: {where})").line(self.command)]
+        self.exit(INVALID_REQUEST, "\n".join(lines) + "\n")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The argument parser with every discovered subcommand, or only the one
     named ``only`` (its module alone is imported)."""
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="asset2sim",
         description="Turn articulated-object assets into interaction-ready simulation assets.",
-        epilog="exit statuses: 0 done, 1 invalid input, 2 invalid request/overlay or usage, 3 written but not "
-        "interaction-ready, 4 output location problem, 70 internal error (see docs/guide/outputs.md)",
+        epilog=f"exit statuses: {exit_statuses_text()} (see docs/guide/outputs.md)",
     )
     parser.add_argument("--version", action="version", version=f"asset2sim {__version__}")
     parser.add_argument("--debug", action="store_true", help="print the traceback of an error (also accepted after the command)")
     parser.add_argument("--verbose", "-v", action="store_true",
-                        help="also show the simulators' start-up messages (PyBullet's build line, SAPIEN's renderer warnings)")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+                        help="also show the simulators' start-up messages and the libraries' INFO logs (PyBullet's build line, "
+                             "SAPIEN's renderer warnings, Dask's and Prefect's logs)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=CommandParser)
     for name in command_names():
         if only is not None and name != only:
             continue
         module = importlib.import_module(f"asset2sim.commands.{name}")
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
+        p.command = module.NAME
         module.add_arguments(p)
         p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of an error")
         p.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
-                       help="also show the simulators' start-up messages")
+                       help="also show the simulators' start-up messages and the libraries' INFO logs")
         p.set_defaults(_run=module.run)
     return parser
 
 
-def requested_command(argv: list[str]) -> str | None:
-    """The known subcommand ``argv`` names before any option but ``--debug``, else None."""
+def command_word(argv: list[str]) -> str | None:
+    """The first word of ``argv`` after the top-level flags (the command, known or not); None when an option
+    such as ``--help`` comes first or nothing does."""
     for arg in argv:
-        if arg == "--debug":
+        if arg in TOP_LEVEL_FLAGS:
             continue
-        if arg.startswith("-"):
-            return None
-        return arg if arg in command_names() else None
+        return None if arg.startswith("-") else arg
     return None
+
+
+def requested_command(argv: list[str]) -> str | None:
+    """The known subcommand ``argv`` names before any option but the top-level flags, else None."""
+    word = command_word(argv)
+    return word if word in command_names() else None
 
 
 def write_error_log(command: str | None, exc: BaseException) -> str:
@@ -95,35 +184,58 @@ def main(argv: list[str] | None = None) -> int:
     allocator.keep_freed_memory()  # freed arrays reused, not faulted in again (asset2sim.allocator)
     # never renders with MuJoCo: no OpenGL back-end spares its import GLFW and a GL context (a user's value is kept)
     os.environ.setdefault("MUJOCO_GL", "disable")
-    parser = build_parser(only=requested_command(argv))
-    args = parser.parse_args(argv)
+    word, names = command_word(argv), command_names()
+    if word is not None and word not in names:
+        print(CommandError(INVALID_REQUEST, "COMMAND_UNKNOWN", None, f"unknown command {word!r}{did_you_mean(word, names)} "
+                           f"(commands: {', '.join(names)})").line(None), file=sys.stderr, flush=True)
+        return INVALID_REQUEST
+    parser = build_parser(only=word)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, a usage error (printed already)
+        return exc.code if isinstance(exc.code, int) else 0
     if not hasattr(args, "_run"):
         parser.print_help()
         return 2
     debug = bool(getattr(args, "debug", False))
     if getattr(args, "verbose", False):  # inherited by the worker processes a command starts
         os.environ[STARTUP_MESSAGES] = "1"
+    else:  # before any library is imported: their loggers read these when configured
+        for name, value in QUIET_LIBRARY_LOGS.items():
+            os.environ.setdefault(name, value)
     command = getattr(args, "command", None)
     try:
         return int(args._run(args) or 0)
     except CommandError as exc:
         if debug:
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-        print(exc.line(command), file=sys.stderr, flush=True)
+        print("\n".join(exc.lines(command)), file=sys.stderr, flush=True)
         return exc.status
     except KeyboardInterrupt:
         print(f"asset2sim {command}: INTERRUPTED", file=sys.stderr, flush=True)
         return INTERRUPTED
-    except Exception as exc:  # the one place that turns a bug into a status
+    except ImportError as exc:  # an optional dependency missing: the extra named; any other import error is a bug
+        if missing_module(exc) not in EXTRA_OF_MODULE:
+            return internal_error(command, exc, debug)
         if debug:
             traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-        try:
-            where = f"traceback in {write_error_log(command, exc)}"
-        except OSError as log_exc:
-            where = f"no log written ({log_exc}); rerun with --debug for the traceback"
-        first = (str(exc).strip().splitlines() or [""])[0]
-        print(f"asset2sim {command}: INTERNAL_ERROR: {type(exc).__name__}: {first}; {where}", file=sys.stderr, flush=True)
-        return INTERNAL_ERROR
+        print(CommandError(INVALID_REQUEST, "EXTRA_MISSING", None, install_hint(exc)).line(command), file=sys.stderr, flush=True)
+        return INVALID_REQUEST
+    except Exception as exc:  # the one place that turns a bug into a status
+        return internal_error(command, exc, debug)
+
+
+def internal_error(command: str | None, exc: BaseException, debug: bool) -> int:
+    """One line naming a log of ``exc``'s traceback (printed too with ``debug``); returns :data:`INTERNAL_ERROR`."""
+    if debug:
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+    try:
+        where = f"traceback in {write_error_log(command, exc)}"
+    except OSError as log_exc:
+        where = f"no log written ({log_exc}); rerun with --debug for the traceback"
+    first = (str(exc).strip().splitlines() or [""])[0]
+    print(f"asset2sim {command}: INTERNAL_ERROR: {type(exc).__name__}: {first}; {where}", file=sys.stderr, flush=True)
+    return INTERNAL_ERROR
 
 
 #: Commands whose process ends by :func:`fast_exit`: one asset's work, no

@@ -3,6 +3,8 @@ writer share."""
 
 from __future__ import annotations
 
+from asset2sim.extras import import_extra
+
 __all__ = ["authored", "pxr_modules", "value_or"]
 
 
@@ -10,13 +12,9 @@ def pxr_modules():
     """``(Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics)`` from ``pxr``.
 
     Raises:
-        ImportError: ``usd-core`` is not installed (the message says how to install it).
+        MissingExtra (an ImportError): ``usd-core`` is not installed (the message names the extra, ``[usd]``).
     """
-    try:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
-    except ImportError as exc:
-        raise ImportError(f"OpenUSD is not installed ({exc}); install the extra: pip install 'asset2sim[usd]'") from exc
-    return Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
+    return tuple(import_extra(f"pxr.{m}", "OpenUSD") for m in ("Gf", "Sdf", "Tf", "Usd", "UsdGeom", "UsdPhysics"))
 
 
 def authored(prim, name: str):

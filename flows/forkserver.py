@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import allocator
+from asset2sim.engines.quiet import startup_quiet
 from asset2sim.flows.isolation import IsolatedResult, _child_env, _read_result, _tail, _timed_out, _write_spec, run_child_spec
 from asset2sim.flows.lifeline import set_parent_death_signal
 
@@ -336,9 +337,10 @@ def _server_main(argv: list[str]) -> int:
     allocator.keep_freed_memory()  # the children inherit it (Dask gives its workers a 64 KiB trim threshold)
     import importlib
 
-    for mod in (*WARM_MODULES, *argv[1:]):
-        with contextlib.suppress(Exception):  # a missing optional package: the call that needs it fails in its child
-            importlib.import_module(mod)
+    with startup_quiet():  # PyBullet's build line, SAPIEN's libvulkan warning (shown with asset2sim --verbose)
+        for mod in (*WARM_MODULES, *argv[1:]):
+            with contextlib.suppress(Exception):  # a missing optional package: the call that needs it fails in its child
+                importlib.import_module(mod)
     warm_tables()
     gc.collect()
     gc.freeze()  # what the imports made is never collected, so a child's collections do not copy its pages

@@ -129,7 +129,8 @@ class Rating(BaseModel):
 class JudgeVerdict(BaseModel):
     """A model judge's verdict on one pair (a row of ``judgements.parquet``): asked in both orders;
     ``first`` / ``second`` the method each order chose (None: no usable answer); ``kept`` only when both
-    orders chose the same method, which is then ``winner``."""
+    orders chose the same method, which is then ``winner``; ``failed_calls`` the questions (of the two) whose
+    model call failed (time-out, deadline, reply too large, HTTP error after the retries)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
     model: str
@@ -148,6 +149,7 @@ class JudgeVerdict(BaseModel):
     prompt_tokens: int = 0
     completion_tokens: int = 0
     cost_usd: float = 0.0
+    failed_calls: int = 0
 
 
 class MethodScore(BaseModel):

@@ -197,9 +197,24 @@ ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
 _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z°]*)\s*$")
 
 
+#: The SI range in which a size (m) or a mass (kg) of an articulated household object lies (a 1 cm stapler button to a
+#: 10 m garage door; a 10 g lid to a 1 t machine): the units a number without one is suggested with.
+PLAUSIBLE_SI = {"size": (0.01, 10.0), "mass": (0.01, 1000.0)}
+
+
+def unit_suggestion(number: str, units: dict[str, float], what: str) -> str:
+    """``30cm (0.3 m) or 30mm (0.03 m)``: ``number`` with each of ``units`` that puts it in :data:`PLAUSIBLE_SI`
+    for ``what`` (every unit when none does, or ``what`` has no range), with its SI value."""
+    si = "kg" if units is MASS_UNITS else "m" if units is LENGTH_UNITS else next(iter(units))
+    lo, hi = PLAUSIBLE_SI.get(what, (0.0, math.inf))
+    fits = [u for u, f in units.items() if lo <= float(number) * f <= hi] or list(units)
+    return " or ".join(f"{number}{u}" + ("" if units[u] == 1.0 else f" ({float(number) * units[u]:g} {si})") for u in fits)
+
+
 def parse_quantity(text: str | float | int, units: dict[str, float], what: str) -> float:
     """A number with one of ``units`` ("12kg", "50 cm") in SI; a plain number
-    is SI already. ValueError (naming ``what``): no number, no unit or an unknown one."""
+    is SI already. ValueError (naming ``what``): no number, an unknown unit, or a string without a unit (the
+    message suggests the units that make it a plausible ``what``: :func:`unit_suggestion`)."""
     if isinstance(text, (int, float)) and not isinstance(text, bool):
         return float(text)
     m = _QUANTITY.match(str(text))
@@ -207,7 +222,8 @@ def parse_quantity(text: str | float | int, units: dict[str, float], what: str) 
         raise ValueError(f"{what}: {text!r} is not a number with a unit ({', '.join(units)})")
     value, unit = float(m.group(1)), m.group(2).replace("°", "deg").lower()
     if not unit:
-        raise ValueError(f"{what}: unit missing in {text!r}; write e.g. {m.group(1)}{next(iter(units))} ({', '.join(units)})")
+        raise ValueError(f"{what}: unit missing in {text!r}; write e.g. {unit_suggestion(m.group(1), units, what)} "
+                         f"(units: {', '.join(units)})")
     if unit not in units:
         raise ValueError(f"{what}: unknown unit {unit!r} in {text!r} (use {', '.join(units)})")
     return value * units[unit]

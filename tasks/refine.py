@@ -18,6 +18,7 @@ from typing import Callable
 from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.extras import install_hint
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
@@ -30,7 +31,7 @@ from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check import as_asked
-from asset2sim.tasks.check.verdict import combine_verdict, post_check_failure_mode, readiness
+from asset2sim.tasks.check.verdict import combine_verdict, penetration_measures, post_check_failure_mode, readiness
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import analyze, limits, urdf_closed
@@ -844,8 +845,8 @@ def _refine_state_with_decomposition(asset, overlay, closed_out, bands, requeste
 
 # ---------------------------------------------------------- 8: report, extras, marker
 def _announce_post_check(att: _Attempt, log: _StageLog) -> None:
-    pen, stab, osc = (att.check.metric(n) for n in ("penetration", "rest_stability", "oscillation"))
-    log.say("post_check", f"penetration {pen.value:.3g} mm; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
+    stab, osc = (att.check.metric(n) for n in ("rest_stability", "oscillation"))
+    log.say("post_check", f"penetration {'; '.join(penetration_measures(att.check.metrics)) or 'n/a'}; rest stability {'PASS' if stab.passed else 'FAIL'} (D_pos {stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori {stab.details.get('D_ori_rad', float('nan')):.2e} rad); oscillation {'PASS' if osc.passed else 'FAIL'}; escalation rounds {len(att.rounds) - 1}")
 
 
 def _staging_notes(asset) -> list[str]:
@@ -1000,8 +1001,8 @@ def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, 
                                 ("usd", lambda: export_usd.export_usd(out_dir).path, "USD export")):
             try:
                 out[key] = str(make())
-            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed
-                report.notes.append(f"{what} skipped: {exc}")
+            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
+                report.notes.append(f"{what} skipped: {install_hint(exc)}")
             except Exception as exc:  # export must not lose the refined asset
                 _raise_if_unwritable(exc, out_dir)
                 report.notes.append(f"{what} failed: {exc}")

@@ -10,7 +10,9 @@ Behaviours (plain callables ``behaviour(server, request) -> None`` that write th
 HTTP answer, built by the helpers below): :func:`reply` (any message content,
 finish reason, refusal), :func:`status` (an HTTP error with headers),
 :func:`sleep_then` (answer late: a timeout), :func:`drop` (close the
-connection without answering), :func:`raw` (arbitrary bytes, e.g. a 10 MB body).
+connection without answering), :func:`raw` (arbitrary bytes, e.g. a 10 MB body),
+:func:`trickle` (a valid reply sent a byte at a time, slowly) and :func:`flood`
+(a body of any size, generated while it is sent, never held whole).
 
 Bounded by construction: at most ``max_requests`` requests are served (later
 ones get 503), the server shuts itself down after ``lifetime_s`` seconds, and
@@ -101,6 +103,7 @@ class FakeOpenAIServer:
         self.max_requests = max_requests
         self.lifetime_s = lifetime_s
         self.requests: list[Request] = []
+        self.sent = 0  # bytes written by trickle / flood
         self._queue: deque[Behaviour] = deque()
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -260,6 +263,64 @@ def raw(payload: bytes, code: int = 200, content_type: str = "application/json")
 
     def b(server: FakeOpenAIServer, req: Request) -> None:
         _send(req, code, payload, content_type=content_type)
+
+    return b
+
+
+def trickle(payload: bytes | None = None, interval_s: float = 0.5, *, headers_too: bool = False) -> Behaviour:
+    """Send a 200 reply (``payload``, default a valid JSON completion) one byte every ``interval_s`` seconds
+    until it is sent, the client hangs up or the server stops; ``headers_too`` trickles the status line and
+    headers as well. ``server.sent`` counts the bytes written."""
+
+    def b(server: FakeOpenAIServer, req: Request) -> None:
+        body = payload if payload is not None else json.dumps(completion_body('{"more_realistic": "A", "reason": "x"}')).encode()
+        head = (f"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n").encode()
+        h = req.handler
+        h.close_connection = True
+        data, start = head + body, 0
+        try:
+            if not headers_too:
+                h.wfile.write(head)
+                h.wfile.flush()
+                start = len(head)
+            for i in range(start, len(data)):
+                if server._stop.wait(interval_s):
+                    return
+                h.wfile.write(data[i:i + 1])
+                h.wfile.flush()
+                server.sent += 1
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            pass
+
+    return b
+
+
+def flood(total_bytes: int, chunk_bytes: int = 1 << 20) -> Behaviour:
+    """Answer 200 with a JSON completion whose content is ``total_bytes`` of ``x`` (Content-Length set), generated
+    chunk by chunk while it is sent; stops when the client hangs up. ``server.sent`` counts the bytes written."""
+
+    def b(server: FakeOpenAIServer, req: Request) -> None:
+        pre = b'{"id": "f", "object": "chat.completion", "created": 0, "model": "m", "choices": [{"index": 0, ' \
+              b'"finish_reason": "stop", "message": {"role": "assistant", "content": "'
+        post = b'"}}]}'
+        h = req.handler
+        h.close_connection = True
+        try:
+            h.send_response(200)
+            h.send_header("Content-Type", "application/json")
+            h.send_header("Content-Length", str(len(pre) + total_bytes + len(post)))
+            h.end_headers()
+            h.wfile.write(pre)
+            left, chunk = total_bytes, b"x" * chunk_bytes
+            while left > 0 and not server._stop.is_set():
+                piece = chunk[:min(left, chunk_bytes)]
+                h.wfile.write(piece)
+                server.sent += len(piece)
+                left -= len(piece)
+            h.wfile.write(post)
+            h.wfile.flush()
+        except (BrokenPipeError, ConnectionResetError, OSError):
+            pass
 
     return b
 

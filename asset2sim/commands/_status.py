@@ -22,27 +22,48 @@ REGRESSION = 5
 INTERNAL_ERROR = 70
 INTERRUPTED = 130
 
+#: Every exit status with its meaning, as ``asset2sim --help`` lists them (docs/guide/outputs.md has the codes).
+EXIT_STATUSES = {
+    0: "done",
+    INVALID_INPUT: "invalid input",
+    INVALID_REQUEST: "invalid request, overlay or usage",
+    NOT_READY: "written but not interaction-ready or not as asked",
+    OUTPUT_LOCATION: "output location problem",
+    REGRESSION: "a flow run regressed against the previous run",
+    INTERNAL_ERROR: "internal error",
+    INTERRUPTED: "interrupted",
+}
+
 
 class CommandError(Exception):
     """An expected failure of a command: ``status``, ``code`` (upper case, such
-    as ``OUTPUT_INSIDE_INPUT``; several joined by ``,``), ``path`` and a message."""
+    as ``OUTPUT_INSIDE_INPUT``; several joined by ``,``), ``path`` and a message;
+    ``problems``, when given, the ``(code, path, message)`` of each problem, printed one line each."""
 
-    def __init__(self, status: int, code: str, path: Path | str | None, message: str):
+    def __init__(self, status: int, code: str, path: Path | str | None, message: str,
+                 problems: Iterable[tuple[str, Path | str | None, str]] = ()):
         super().__init__(message)
         self.status = int(status)
         self.code = code
         self.path = None if path is None else str(path)
         self.message = message
+        self.problems = [CommandError(status, c, p, m) for c, p, m in problems]
+
+    def lines(self, command: str | None) -> list[str]:
+        """One :meth:`line` per problem (the error's own line when it lists none)."""
+        return [p.line(command) for p in self.problems] or [self.line(command)]
 
     def line(self, command: str | None) -> str:
         """``asset2sim COMMAND: CODE: PATH: message`` on one line (a message
-        that starts with the path does not repeat it)."""
+        that starts or ends with the path does not repeat it)."""
         msg = " | ".join(part.strip() for part in self.message.splitlines() if part.strip())
         if self.path:
             for prefix in (f"{self.path}: ", f"{os.path.abspath(self.path)}: "):
                 if msg.startswith(prefix):
                     msg = msg[len(prefix):]
                     break
+            for suffix in (f": {self.path}", f": {os.path.abspath(self.path)}"):
+                msg = msg.removesuffix(suffix)
         where = f"{self.path}: " if self.path else ""
         prog = f"asset2sim {command}" if command else "asset2sim"
         return f"{prog}: {self.code}: {where}{msg}"
@@ -112,3 +133,12 @@ def output_failure(exc: OutputError, out: Path | str) -> CommandError:
         code = f"{code} [{errno_name(exc.__cause__)}]"
     msg = str(exc) + (f"; {_HINTS[exc.code]}" if exc.code in _HINTS else "")
     return CommandError(OUTPUT_LOCATION, code, exc.path or out, msg)
+
+
+def catalog_failure(exc: Exception, catalog: Path | str) -> CommandError:
+    """Status 2 for a ``catalog.yaml`` that cannot be used: ``CATALOG_NOT_FOUND`` (run where it is, or pass
+    ``--catalog``) or ``CATALOG_INVALID`` with the reason."""
+    if isinstance(exc.__cause__, FileNotFoundError):
+        return CommandError(INVALID_REQUEST, "CATALOG_NOT_FOUND", catalog, "no such file; run the command in the "
+                            "project's folder (where catalog.yaml is) or pass --catalog PATH")
+    return CommandError(INVALID_REQUEST, "CATALOG_INVALID", catalog, str(exc).removeprefix(f"{Path(catalog).expanduser().resolve()}: "))

@@ -53,6 +53,7 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
 
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     if args.jobs < 1:
@@ -91,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
             table.add_column(col)
         for r in rows:
             checks = "-" if r.declared_passed is None else ("passes" if r.declared_passed else "fails " + ", ".join(r.declared_failures))
-            table.add_row(r.asset_id, r.format, r.category, r.failure_mode, "; ".join(r.implausible) or r.error[:160] or "-", checks)
+            table.add_row(*map(escape, (r.asset_id, r.format, r.category, r.failure_mode,  # "[mujoco]" is text, not markup
+                                        "; ".join(r.implausible) or r.error[:160] or "-", checks)))
         console.print(table)
         import pandas as pd
 
@@ -100,6 +102,9 @@ def run(args: argparse.Namespace) -> int:
         if args.out is not None:
             console.print(f"written: {args.out}/<asset>/audit.md, {args.out}/{audit_catalog.ASSETS_PARQUET}, "
                           f"{args.out}/{audit_catalog.VALUES_PARQUET}")
-    if any(r.failure_mode == "audit_failed" for r in rows):
+    failed = [r for r in rows if r.failure_mode == "audit_failed"]
+    for r in failed:  # the whole reason, one line each (the table cuts it; a missing extra's hint ends it)
+        print(CommandError(INVALID_INPUT, "AUDIT_FAILED", r.source, r.error).line(NAME), file=sys.stderr)
+    if failed:
         return INVALID_INPUT
     return NOT_READY if any(r.failure_mode != "none" for r in rows) else 0

@@ -1,11 +1,16 @@
 """``asset2sim failures``: failure-mode breakdowns and other questions of the
-Parquet result catalog; each query reads only the runs and columns it needs."""
+Parquet result catalog; each query reads only the runs and columns it needs.
+
+Exit status: 0 printed, 1 the catalog has no rows, 2 the catalog file cannot be read or an option names no
+run or column (one line, ``asset2sim failures: CODE: ...``).
+"""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, catalog_failure
 from asset2sim.flows import catalog_compare, queries
 from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 
@@ -60,8 +65,7 @@ def run(args: argparse.Namespace) -> int:
         cat = load_catalog(args.catalog)
         store = ResultCatalog(cat.catalog_root)
     except (CatalogError, ValueError) as exc:
-        print(f"error: {exc}")
-        return 2
+        raise catalog_failure(exc, args.catalog) from exc
     latest = _latest(store, args.dataset)
     if latest is None:
         print(f"the catalog {cat.catalog_root} has no rows" + (f" for dataset {args.dataset!r}" if args.dataset else "")
@@ -74,8 +78,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             ch = queries.verdict_changes(df, *args.changes)
         except KeyError as exc:
-            print(f"error: {exc.args[0]}")
-            return 2
+            raise CommandError(INVALID_REQUEST, "RUN_UNKNOWN", None, f"--changes: {exc.args[0]}") from exc
         print(f"verdict changes {args.changes[0]} -> {args.changes[1]}: {len(ch)} asset(s)")
         if len(ch):
             print(ch[["asset_id", "category", "change"]].to_string(index=False))
@@ -97,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
         run_id = runs = args.run
         found = [d for d, r in store.runs(args.dataset) if r == run_id]
         if not found:
-            print(f"error: no run {run_id!r} in the catalog")
-            return 2
+            raise CommandError(INVALID_REQUEST, "RUN_UNKNOWN", None, f"--run: no run {run_id!r} in the catalog {cat.catalog_root}")
         dataset = args.dataset or found[0]
         scope = f"run {run_id}"
 
@@ -113,8 +115,7 @@ def run(args: argparse.Namespace) -> int:
 
     if getattr(args, "compare", False):
         if run_id is None or dataset is None:
-            print("error: --compare needs one run (--run latest or a run id)")
-            return 2
+            raise CommandError(INVALID_REQUEST, "USAGE_INVALID", None, "--compare needs one run (--run latest or a run id)")
         cmp = catalog_compare.compare_with_previous(store, dataset, run_id, cat.config.results.regression)
         print("\n".join(catalog_compare.comparison_lines(cmp)))
         return 0
@@ -125,8 +126,7 @@ def run(args: argparse.Namespace) -> int:
         df = store.read_table(dataset, runs, columns=list(dict.fromkeys([*BREAKDOWN_COLUMNS, *[b for b in by if b not in ("dataset", "run")]])))
         table = queries.failure_modes(df, by=by if len(by) > 1 else by[0])
     except KeyError as exc:
-        print(f"error: {exc.args[0]}")
-        return 2
+        raise CommandError(INVALID_REQUEST, "COLUMN_UNKNOWN", None, f"--by: {exc.args[0]}") from exc
     table = table.loc[:, (table != 0).any(axis=0)]
     s = queries.status_counts(df)
     print(f"failure modes of {scope}: {s['assets']} assets, {s['done']} done, {s['skipped']} skipped, {s['failed']} failed; "

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from asset2sim.commands._progress import FlowProgress
-from asset2sim.commands._status import REGRESSION
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, REGRESSION, CommandError, catalog_failure
 from asset2sim.flow_progress import listening
 
 NAME = "flow"
@@ -62,8 +62,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         cat = load_catalog(args.catalog)
     except CatalogError as exc:
-        print(f"error: {exc}")
-        return 2
+        raise catalog_failure(exc, args.catalog) from exc
     prepare_prefect_environment(cat.project_root)  # before Prefect is imported
     if args.serve:
         return _serve(args, cat)
@@ -83,8 +82,7 @@ def run(args: argparse.Namespace) -> int:
                                       out=getattr(args, "out", None), dask_host=getattr(args, "dask_host", None),
                                       dashboard=False if getattr(args, "no_dashboard", False) else None)
     except CatalogError as exc:
-        print(f"error: {exc}")
-        return 2
+        raise CommandError(INVALID_REQUEST, "CATALOG_INVALID", None, str(exc)) from exc
     total = time.perf_counter() - t0
     prefect_s = max(0.0, float(summary.get("flow_started_epoch") or t0_epoch) - t0_epoch)
     dask_s = float(summary.get("dask_startup_seconds") or 0.0) + float(summary.get("dask_teardown_seconds") or 0.0)
@@ -132,8 +130,7 @@ def _serve(args: argparse.Namespace, cat) -> int:
     try:
         sched = nightly.nightly_schedule(cat.path, cron=args.cron, timezone=args.timezone)
     except ValueError as exc:
-        print(f"error: {exc}")
-        return 2
+        raise CommandError(INVALID_REQUEST, "SCHEDULE_INVALID", cat.path, str(exc)) from exc
     server = None
     if not os.environ.get("PREFECT_API_URL"):
         # schedules need a server's scheduler; start one before Prefect reads its settings
@@ -141,8 +138,7 @@ def _serve(args: argparse.Namespace, cat) -> int:
         try:
             server, url = prefect_server.start_local_server(cat.project_root)
         except RuntimeError as exc:
-            print(f"error: {exc}")
-            return 1
+            raise CommandError(INVALID_INPUT, "PREFECT_SERVER_FAILED", None, str(exc)) from exc
         os.environ["PREFECT_API_URL"] = url
         print(f"Prefect server at {url} (UI: {url[:-4]}); log in {cat.project_root / '.prefect' / 'server.log'}")
     try:

@@ -1,6 +1,9 @@
 """``asset2sim judge``: a vision-language model judges the realism of a pair set's clips (both orders,
 verdicts kept only when they agree), calibrated on the planted-defect pairs; with two models of two
-families, their agreement (Cohen's kappa). Protocol: docs/guide/realism.md."""
+families, their agreement (Cohen's kappa). Protocol: docs/guide/realism.md.
+
+Exit status: 0 judged; 1 no pair set or an invalid one; 2 a bad option, a model that cannot be used, or
+``MODEL_CALLS_FAILED``: every call to a model failed (its verdicts are still written, each without an answer)."""
 
 from __future__ import annotations
 
@@ -46,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--family", dest="family", action=_JudgeOption, metavar="NAME",
                         help="model family of the --model before it (default: the leading letters of its name)")
     parser.add_argument("--timeout", type=float, default=None, metavar="S",
-                        help="seconds per HTTP attempt (default: ASSET2SIM_LLM_TIMEOUT_S or 120)")
+                        help="deadline of one HTTP attempt in seconds: connecting, sending and the whole reply "
+                             "(default: ASSET2SIM_LLM_TIMEOUT_S or 120)")
     parser.add_argument("--jobs", type=int, default=4, metavar="N", help="pairs asked at once per model (default 4)")
     parser.set_defaults(judges=[])
 
@@ -100,4 +104,22 @@ def run(args: argparse.Namespace) -> int:
         print(f"realism ({sc.source}): {sc.method} {sc.elo:.0f} Elo, strength {sc.strength:+.2f} [{sc.ci_low:+.2f}, {sc.ci_high:+.2f}]")
     print(f"wrote {folder / JUDGEMENTS_FILE} and {folder / CALIBRATION_FILE}"
           + (f"; calibrated models' Bradley-Terry scores in {folder / SCORES_FILE}" if scored else ""))
+    silent = _models_without_a_reply(verdicts)
+    if silent:
+        raise CommandError(INVALID_REQUEST, "MODEL_CALLS_FAILED", None, "; ".join(silent) + (
+            ": check --model, --base-url and the server (its verdicts are recorded as without an answer)"))
     return 0
+
+
+def _models_without_a_reply(verdicts) -> list[str]:
+    """One line per model every one of whose questions failed (no reply from the server nor the cache)."""
+    asked: dict[str, int] = {}
+    failed: dict[str, int] = {}
+    why: dict[str, str] = {}
+    for v in verdicts:
+        asked[v.model] = asked.get(v.model, 0) + 2  # both orders
+        failed[v.model] = failed.get(v.model, 0) + v.failed_calls
+        if v.failed_calls:
+            first = v.reason.split(" | B/A: ")[0].removeprefix("A/B: ")  # what the first order's call got
+            why.setdefault(v.model, first if len(first) <= 240 else first[:237] + "...")
+    return [f"model {m}: all {n} calls failed (e.g. {why.get(m, '')})" for m, n in asked.items() if failed[m] == n]

@@ -33,6 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
 
     from asset2sim.tasks.realism.defects import DEFECTS
     from asset2sim.tasks.realism.pairs import build_pair_set, specs_from_folders
@@ -61,11 +62,11 @@ def run(args: argparse.Namespace) -> int:
         specs, skipped = specs_from_folders(args.folders, out, against=against, defects=defects)
     except FileNotFoundError as exc:
         raise CommandError(INVALID_INPUT, "PAIRS_INPUT_INVALID", None, str(exc)) from exc
-    pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(text))
+    pair_set = build_pair_set(specs, out, skipped=skipped, progress=lambda text: console.print(escape(text)))
     for key, why in pair_set.skipped.items():
-        console.print(f"[yellow]skipped {key}: {why}[/yellow]")
+        console.print(f"[yellow]skipped {escape(key)}: {escape(why)}[/yellow]")
     n_defect = sum(1 for p in pair_set.pairs if p.defect)
-    console.print(f"wrote {out / 'pairs.json'}: {len(pair_set.pairs)} pairs ({n_defect} calibration pairs with planted defects)")
+    console.print(f"wrote {escape(str(out / 'pairs.json'))}: {len(pair_set.pairs)} pairs ({n_defect} calibration pairs with planted defects)")
     if not pair_set.pairs:
         raise CommandError(INVALID_INPUT, "NO_PAIRS", out, "no pair could be made (see the skipped lines above)")
     return 0

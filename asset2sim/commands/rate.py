@@ -4,8 +4,9 @@
 Bradley-Terry scores per method, writes ``realism_scores.parquet`` there and, with ``--tracking-uri``, logs
 them to MLflow.
 
-Exit status: 0 done (or stopped with Ctrl-C), 1 no pair set or an invalid one, 2 a bad option, 3 nothing
-rated yet (``--scores``), 4 the port or the folder cannot be used.
+Exit status: 0 done (or stopped with Ctrl-C), 1 no pair set or an invalid one, or a damaged ``ratings.sqlite``
+(``RATINGS_DATABASE_DAMAGED``, left as it is), 2 a bad option, 3 nothing rated yet (``--scores``), 4 the port or
+the folder cannot be used.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pathlib import Path
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
 from asset2sim.tasks.realism.rating_app import serve
 from asset2sim.tasks.realism.pair_set import PairSetError, find_pair_set
-from asset2sim.tasks.realism.ratings import RATINGS_FILE
+from asset2sim.tasks.realism.ratings import RATINGS_FILE, RatingsDatabaseError
 from asset2sim.tasks.realism.scores import SCORES_FILE, NotRated, realism_scores
 
 NAME = "rate"
@@ -30,6 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a pair-set folder (holding pairs.json) or an output folder holding realism/pairs.json")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=int, default=8765, help="port to listen on (default 8765)")
+    p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="another host name raters' browsers use to reach the app (with --host 0.0.0.0, e.g. the "
+                        "machine's name); requests naming any other host are refused (repeatable)")
     p.add_argument("--scores", action="store_true",
                    help="instead of serving: print the Bradley-Terry scores of the ratings so far, "
                         "write realism_scores.parquet")
@@ -48,15 +52,16 @@ def pair_set_folder(folder: Path) -> Path:
 
 def _print_scores(scores, folder: Path) -> None:
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)
-    table = Table(title=f"realism (Bradley-Terry, people) of {folder}")
+    table = Table(title=f"realism (Bradley-Terry, people) of {escape(str(folder))}")
     for column, justify in (("method", "left"), ("strength", "right"), ("95 % interval", "right"), ("Elo", "right"),
                             ("wins", "right"), ("comparisons", "right")):
         table.add_column(column, justify=justify)
     for s in scores:
-        table.add_row(s.method, f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
+        table.add_row(escape(s.method), f"{s.strength:+.2f}", f"[{s.ci_low:+.2f}, {s.ci_high:+.2f}]", f"{s.elo:.0f}",
                       str(s.wins), str(s.comparisons))
     console.print(table)
 
@@ -70,9 +75,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.scores:
             return _scores(folder, args.tracking_uri)
-        print(f"rating app for {folder}: http://{args.host}:{args.port}/  (Ctrl-C stops)", flush=True)
+        # a browser must name a host the app answers to: every interface is reached here as 127.0.0.1
+        shown = "127.0.0.1" if args.host in ("", "0.0.0.0", "::") else args.host
+        shown = f"[{shown}]" if ":" in shown else shown
+        print(f"rating app for {folder}: http://{shown}:{args.port}/  (Ctrl-C stops)", flush=True)
         try:
-            serve(folder, host=args.host, port=args.port)
+            serve(folder, host=args.host, port=args.port, allowed_hosts=args.allow_host)
         except KeyboardInterrupt:  # uvicorn stopped gracefully (ratings.parquet synced) and re-raised Ctrl-C
             pass
         except SystemExit as exc:  # uvicorn could not start (the port taken): it logged why
@@ -82,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     except FileNotFoundError as exc:
         raise CommandError(INVALID_INPUT, "PAIRS_MISSING", exc.filename, exc.strerror or str(exc)) from exc
+    except RatingsDatabaseError as exc:
+        raise CommandError(INVALID_INPUT, exc.code, exc.path, str(exc)) from None
     except PairSetError as exc:
         raise CommandError(INVALID_INPUT, "PAIRS_INVALID", exc.path, str(exc)) from exc
     except NotRated as exc:

@@ -8,6 +8,7 @@ interaction-ready or not as asked (``request_not_met``), 4 output location probl
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,7 +22,10 @@ from asset2sim.tasks.interpret.overrides import OverrideError
 from asset2sim.tasks.interpret.request import RequestTooLong
 from asset2sim.output_folder import URDF_NAME, OutputError
 from asset2sim.tasks.check.asset_files import parse_urdf
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
+from asset2sim.tasks.check.verdict import penetration_measures, penetration_why
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
@@ -96,7 +100,7 @@ def _joint_types(out_dir) -> dict[str, str]:
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
-    pen, stab, osc = r.metric("penetration"), r.metric("rest_stability"), r.metric("oscillation")
+    stab, osc = r.metric("rest_stability"), r.metric("oscillation")
     types = _joint_types(result.out_dir)
     state = ", ".join(f"{k} = {from_closed_text(v, r.closed_positions.get(k), types.get(k, 'revolute'))}"
                       + (f", {opening_text(r.opening_fractions[k])}" if k in r.opening_fractions else "")
@@ -111,13 +115,13 @@ def summary_lines(result) -> list[str]:
         f"total mass   {r.total_mass:.4g} kg",
         f"initial state {state}",
     ] + ([f"task         {r.task}"] if r.task else []) + [
-        f"penetration  {pen.value:.3f} mm" if pen and pen.value is not None else "penetration  n/a",
+        "penetration  " + ("; ".join(penetration_measures(r.metrics)) or "n/a"),
         stability,
         f"oscillation  {'PASS' if osc and osc.passed else 'FAIL'}",
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + as_asked_lines(r) + [
+    ] + [f"why it failed {why}" for why in penetration_why(r.metrics)] + as_asked_lines(r) + skipped_lines(r) + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
@@ -131,6 +135,12 @@ def media_lines(report, out_dir) -> list[str]:
     if report.media != "deferred":
         return []
     return [f"media        deferred: `asset2sim report {out_dir}` makes views/, clips/ and report.html"]
+
+
+def skipped_lines(report) -> list[str]:
+    """An export or check skipped for a missing optional dependency, one line each with the extra that would do it
+    (``skipped      MJCF export: MuJoCo is not installed: pip install 'asset2sim[mujoco]'``)."""
+    return [f"skipped      {n.replace(' skipped: ', ': ', 1)}" for n in report.notes if " skipped: " in n and "asset2sim[" in n]
 
 
 def request_lines(found) -> list[str]:
@@ -211,7 +221,26 @@ def _refine_failure(exc: RefineError, args: argparse.Namespace) -> CommandError:
     code = join_codes(codes) or mode.upper()
     status = INVALID_INPUT if mode == "invalid_input" and not isinstance(cause, (RequestTooLong, OverrideError)) else INVALID_REQUEST
     msg = str(exc).removeprefix(f"{args.asset}: ")
-    return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}")
+    return CommandError(status, code, args.asset, f"{mode.replace('_', ' ')}: {msg}",
+                        problems=finding_problems(cause, args.asset) if isinstance(cause, AssetError) else ())
+
+
+def finding_problems(exc: AssetError, asset) -> list[tuple[str, str, str]]:
+    """``(code, path, message)`` of each validation error of a refused asset, one problem each: the asset's path
+    once, the file inside it (and line) and the link or joint in the message; ``... and N more`` past
+    :data:`MESSAGE_FINDINGS`."""
+    errors = [f for f in exc.findings if f.severity == "error"]
+    out = []
+    for f in errors[:MESSAGE_FINDINGS]:
+        same = os.path.abspath(f.file) == os.path.abspath(asset) or (os.path.isfile(asset) and f.file == os.path.basename(asset))
+        inside = f"line {f.line}: " if same and f.line else "" if same else (f"{f.file}:{f.line}: " if f.line else f"{f.file}: ")
+        text = f.message.removeprefix(f"{f.file}: ").removeprefix(f"{asset}: ")
+        where = "" if f.where == "global" or text.startswith(f.where) else f"{f.where}: "
+        out.append((f.code, str(asset), f"invalid input: {inside}{where}{text}"))
+    if len(errors) > MESSAGE_FINDINGS:
+        out.append((join_codes(f.code for f in errors[MESSAGE_FINDINGS:]), str(asset),
+                    f"invalid input: ... and {len(errors) - MESSAGE_FINDINGS} more (asset2sim validate lists them all)"))
+    return out
 
 
 def options(args: argparse.Namespace) -> RefineConfig:

@@ -168,9 +168,11 @@ class PyBulletSession(SessionDefaults):
         return self._has_collision[idx]
 
     def link_collision_vertices(self, link: str) -> np.ndarray:
-        """``getMeshData`` of the link, link frame (empty when Bullet returns none)."""
+        """``getMeshData`` of the link, link frame (empty when Bullet returns none). Bullet prints a ``?`` line on
+        stdout for each primitive shape (box, capsule) it has no mesh of: kept out of the product's output."""
         try:
-            n, verts = self._p.getMeshData(self.body, self.link_index(link), physicsClientId=self.cid)
+            with quiet_stdout():
+                n, verts = self._p.getMeshData(self.body, self.link_index(link), physicsClientId=self.cid)
         except Exception:
             return np.zeros((0, 3))
         if not n:

@@ -10,6 +10,7 @@ from pathlib import Path
 from asset2sim.engines.base import (_ENGINES, _FILE_READERS, _SHAPE_WORLDS, _VIEWERS, EngineFactory, EngineUnavailable, EngineUnsupported,
                                     HeldPhysics, SessionOptions, ShapeWorld, SimSession, Viewer)
 from asset2sim.engines.quiet import startup_quiet
+from asset2sim.extras import install_hint
 from asset2sim.urdf import UrdfSource, path_of
 
 __all__ = ["available_engines", "known_engines", "open_session", "open_shape_world", "open_viewer", "read_held_physics"]
@@ -72,7 +73,7 @@ def _factory(name: str) -> EngineFactory:
                 with startup_quiet():
                     importlib.import_module(package)
             except ImportError as exc:  # optional extra missing
-                raise EngineUnavailable(f"engine {name!r} is not installed ({exc})") from exc
+                raise EngineUnavailable(f"engine {name!r} unavailable: {install_hint(exc)}") from exc
         importlib.import_module(module)
     return _ENGINES[name]
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic, file_names, output_folder
+from asset2sim.extras import import_extra
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, STATE_NAME, URDF_NAME
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import read_initial_state, read_urdf
@@ -183,12 +184,12 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
 
     Raises:
         FileNotFoundError: no ``mobility.urdf`` in ``out_dir``.
-        ImportError: MuJoCo is not installed (``pip install asset2sim[mujoco]``).
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
         ValueError: invalid ``initial_state.json`` / ``overlay.json``.
         UrdfError, MjcfError, ExportError: the URDF cannot be read, converted,
             compiled, or the written file does not check out.
     """
-    import mujoco  # noqa: F401  - the clear ImportError when the extra is missing
+    import_extra("mujoco", "the MJCF export")  # the one-line hint naming the extra when it is missing
 
     out_dir = Path(out_dir)
     urdf = out_dir / URDF_NAME

@@ -94,6 +94,56 @@ def readiness(metrics: list[Any]) -> Readiness:
     return Readiness(tiers, failures, mode)
 
 
+def penetration_measures(metrics: list[Any]) -> list[str]:
+    """The penetration tier's measures at the initial state, each named by kind and engine, with its verdict against
+    :data:`UNRESOLVED_PENETRATION_MM`: ``self-contact Phi 0.000 mm (pybullet) pass`` (links that are not parent and
+    child, the SPEC's Phi) and ``parent-child 35.090 mm (pybullet, base/door; 35.090 mm beyond its modelled pose)
+    FAIL``; empty when neither was measured."""
+    out = []
+    for m in metrics:
+        if m.name not in PENETRATION_METRICS or m.value is None:
+            continue
+        verdict = {True: "pass", False: "FAIL", None: "n/a"}[_verdict(m)]
+        if m.name == "penetration":
+            out.append(f"self-contact Phi {m.value:.3f} mm ({m.engine}) {verdict}")
+            continue
+        pairs = (m.details or {}).get("pairs") or {}
+        worst = max(pairs, key=pairs.get) if pairs else None
+        beyond = (m.details or {}).get("beyond_modelled_mm")
+        where = ", ".join([m.engine] + ([worst] if worst else []))
+        out.append(f"parent-child {m.value:.3f} mm ({where}" + (f"; {beyond:.3f} mm beyond its modelled pose" if pairs and beyond is not None
+                                                                 else "") + f") {verdict}")
+    return out
+
+
+def penetration_why(metrics: list[Any]) -> list[str]:
+    """Why the penetration tier failed (``unresolved_penetration``), one sentence per failing measure: which
+    penetration, the links, the measured depth against :data:`UNRESOLVED_PENETRATION_MM`, and what a user can do;
+    empty when the tier passes. The terminal summary and ``report.html`` print the same sentences."""
+    out = []
+    for m in metrics:
+        if m.name not in PENETRATION_METRICS or _verdict(m) is not False:
+            continue
+        d = m.details or {}
+        if m.name == "penetration":
+            pairs = sorted(d.get("pairs") or [], key=lambda p: -float(p.get("max_depth_mm") or 0.0))
+            links = f"links '{pairs[0]['link_a']}' and '{pairs[0]['link_b']}' (not parent and child) overlap by up to " \
+                    f"{float(pairs[0]['max_depth_mm']):.1f} mm" if pairs else "links that are not parent and child overlap"
+            out.append(f"self-contact penetration Phi {m.value:.1f} mm ({m.engine}) is above {UNRESOLVED_PENETRATION_MM:g} mm: "
+                       f"{links} at the initial state. Ask for another state (--state JOINT=closed or a smaller opening) "
+                       "or give these links collision meshes that do not overlap.")
+            continue
+        pairs = d.get("pairs") or {}
+        worst = max(pairs, key=pairs.get) if pairs else "?/?"
+        parent, _, child = worst.partition("/")
+        depth = float(pairs.get(worst, m.value or 0.0))
+        out.append(f"parent-child penetration ({m.engine}): link '{child}' is {depth:.1f} mm inside its parent '{parent}' at "
+                   f"the initial state, {float(d.get('beyond_modelled_mm') or 0.0):.1f} mm deeper than at its modelled pose "
+                   f"(fails above {UNRESOLVED_PENETRATION_MM:g} mm). Ask for a state the part reaches without entering its "
+                   "parent (--state JOINT=closed or a smaller opening), or check the joint's axis, origin and limits in the input.")
+    return out
+
+
 def combine_verdict(report: Any, evaluation_metrics: list[Any]) -> Readiness:
     """Refine's final verdict once its evaluation ran: :func:`readiness` of the
     evaluation's metrics, set on ``report`` (a ``RefineReport``, in place:

@@ -16,7 +16,7 @@ import numpy as np
 
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
-from asset2sim.tasks.check.verdict import readiness
+from asset2sim.tasks.check.verdict import penetration_why, readiness
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
@@ -147,7 +147,26 @@ def _penetration_details(ev) -> str:
             f"<h3>Penetrating link pairs ({esc(m.engine)})</h3><table><tr><th>link a</th><th>link b</th>"
             f"<th>sum of depths (mm)</th><th>deepest point (mm)</th><th>points</th></tr>{rows}</table>"
         )
-    return "".join(out) or "<p class='small'>no self-penetration at the initial state</p>"
+    if not out:
+        out.append("<p class='small'>no self-contact penetration (links that are not parent and child) at the initial state</p>")
+    for m in ev.metrics:  # the pairs the SPEC's Phi skips: a child inside its parent
+        pairs = m.details.get("pairs") if m.name == "parent_child_penetration" else None
+        if not pairs:
+            continue
+        modelled = m.details.get("modelled") or {}
+        rows = "".join(f"<tr><td>{esc(k.partition('/')[0])}</td><td>{esc(k.partition('/')[2])}</td><td class='num'>{fmt(v)}</td>"
+                       f"<td class='num'>{fmt(modelled.get(k, 0.0))}</td></tr>" for k, v in pairs.items())
+        out.append(f"<h3>A child inside its parent ({esc(m.engine)})</h3><table><tr><th>parent</th><th>child</th>"
+                   f"<th>depth (mm)</th><th>at its modelled pose (mm)</th></tr>{rows}</table>")
+    return "".join(out)
+
+
+def penetration_why_section(ev) -> str:
+    """``Why it failed: penetration``: which penetration failed, the links, the depth against the threshold and what
+    to do (the sentences the terminal prints, :func:`~asset2sim.tasks.check.verdict.penetration_why`); empty when
+    the tier passes."""
+    why = penetration_why(ev.metrics)
+    return "<h2>Why it failed: penetration</h2><ul>" + "".join(f"<li>{esc(w)}</li>" for w in why) + "</ul>" if why else ""
 
 
 def _request_warnings(d: dict) -> str:
@@ -439,6 +458,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         _verdict_table(ev),
         evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions),
+        penetration_why_section(ev),
         "<h2>Operability</h2>",
         operability_section(ev),
         "<h2>Penetration at the initial state</h2>",

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from asset2sim.extras import import_extra
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
 from asset2sim.tasks.ingest import host_conventions, mjcf_scene
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
@@ -59,10 +60,7 @@ def _compile(path: Path, degree: bool | None = None):
     """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``, its angles read in degrees (``degree``
     True) or radians (False) whatever its ``<compiler angle>`` says (None: as it says); StagingError with MuJoCo's
     message when it cannot."""
-    try:
-        import mujoco
-    except ImportError as exc:
-        raise ImportError(f"reading MJCF needs MuJoCo ({exc}); install the extra: pip install 'asset2sim[mujoco]'") from exc
+    mujoco = import_extra("mujoco", "reading MJCF")
     try:
         with warnings.catch_warnings(record=True) as caught:  # MuJoCo's decoder warnings become notes
             warnings.simplefilter("always")
@@ -90,7 +88,7 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
         rad, masses in kg, inertia tensors (3, 3) in kg*m^2 about the center of mass in the link axes.
 
     Raises:
-        ImportError: MuJoCo is not installed.
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
         StagingError: MuJoCo cannot compile the file, or the file holds something the asset model
             cannot take (names the body or joint): no object or several under the world body and no ``body``
             naming one, a ball joint, several joints on one body, a free joint below the root, a slide joint
@@ -100,8 +98,7 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
     options = options or ReadOptions()
     convention = host_conventions.mjcf_angle(path, options.mjcf_angle)
     spec, m, warned = _compile(path, degree=convention.unit == "degree")
-    import mujoco
-
+    mujoco = import_extra("mujoco", "reading MJCF")
     scene = mjcf_scene.pick_object(m, path, options.body)
     reader = _Reader(path, spec, m, mujoco)
     reader.notes.append(convention.note)

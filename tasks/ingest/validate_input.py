@@ -43,7 +43,7 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         try:
             st = os.stat(asset)
         except OSError:
-            self.add("ASSET_NOT_FOUND", f"{asset}: no such file or folder", file=str(asset))
+            self.add("ASSET_NOT_FOUND", "no such file or folder", file=str(asset))
             return None
         if stat.S_ISDIR(st.st_mode):
             folder = asset

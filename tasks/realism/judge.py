@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import base64
 import re
+import threading
 import typing
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -176,9 +177,11 @@ def judge_pair(client: LLMClient, folder: Path | str, pair: ClipPair, *, family:
     picks: list[str | None] = []
     readings: list[Reading] = []
     usage = Usage()
+    failed = 0
     for first, second, sides in ((fa, fb, ("a", "b")), (fb, fa, ("b", "a"))):
         reading, u = ask_once(client, build_messages(pair, first, second))
         usage.add(u)
+        failed += u.calls == 0 and u.cached == 0  # no reply from the network nor the cache: the call failed
         readings.append(reading)
         picks.append(None if reading.choice is None else sides[0 if reading.choice == "A" else 1])
     kept = picks[0] is not None and picks[0] == picks[1]
@@ -193,7 +196,8 @@ def judge_pair(client: LLMClient, folder: Path | str, pair: ClipPair, *, family:
         object_id=pair.object_id, method_a=pair.a.method, method_b=pair.b.method, defect=pair.defect,
         first=None if picks[0] is None else method[picks[0]], second=None if picks[1] is None else method[picks[1]],
         kept=kept, winner=method[picks[0]] if kept else None, reason=reason, calls=usage.calls,
-        prompt_tokens=usage.prompt_tokens, completion_tokens=usage.completion_tokens, cost_usd=usage.cost_usd or 0.0)
+        prompt_tokens=usage.prompt_tokens, completion_tokens=usage.completion_tokens, cost_usd=usage.cost_usd or 0.0,
+        failed_calls=failed)
 
 
 def family_of(model: str) -> str:
@@ -210,11 +214,14 @@ def judge_pairs(folder: Path | str, configs: Sequence[ClientConfig], *, families
                 workers: int = 1, write: bool = True) -> list[JudgeVerdict]:
     """Every pair of ``folder/pairs.json`` judged by every configured model (rows in config order, then
     pair order); ``families[i]`` names config i's family (None or missing: :func:`family_of`); ``workers``
-    pairs asked at once per model. With ``write`` the rows go to ``folder/judgements.parquet`` (atomic).
+    pairs asked at once per model. With ``write`` the rows go to ``folder/judgements.parquet`` (atomic),
+    rewritten after every verdict, so a run that fails or is stopped keeps the verdicts it reached.
     Every frame is read before the first call.
 
     Raises:
         JudgeInputError: the pair set or a frame (see :func:`read_pair_set`, :func:`side_frames`).
+        OSError: the reply cache or ``judgements.parquet`` cannot be written (raised once every other pair
+            of that model is judged and written).
         ValueError: no config, two configs with the same model string (the reply cache keys on it), or
             ``workers`` < 1.
         MissingCredentials, LLMUnavailable: a provider key missing, litellm missing (before any call).
@@ -236,12 +243,29 @@ def judge_pairs(folder: Path | str, configs: Sequence[ClientConfig], *, families
     clients = [LLMClient(c) for c in configs]
     for c in clients:
         c.check_credentials()
-    verdicts: list[JudgeVerdict] = []
+    done: dict[tuple[int, int], JudgeVerdict] = {}
+    lock = threading.Lock()
+
+    def keep(key: tuple[int, int], verdict: JudgeVerdict) -> None:
+        with lock:
+            done[key] = verdict
+            if write:
+                write_judgements(folder, [done[k] for k in sorted(done)])
+
     for i, client in enumerate(clients):
         family = (fams[i] if i < len(fams) else None) or family_of(client.config.model)
+        failure: BaseException | None = None
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            verdicts += list(pool.map(lambda p: judge_pair(client, folder, p, family=family), ps.pairs))
-    if write:
+            futures = {pool.submit(judge_pair, client, folder, p, family=family): (i, j) for j, p in enumerate(ps.pairs)}
+            for future in as_completed(futures):
+                try:
+                    keep(futures[future], future.result())
+                except Exception as exc:  # the others are still judged and written first
+                    failure = failure or exc
+        if failure is not None:
+            raise failure
+    verdicts = [done[k] for k in sorted(done)]
+    if write and not verdicts:
         write_judgements(folder, verdicts)
     return verdicts
 

@@ -3,7 +3,10 @@
 Strict JSON first (``{"more_realistic": "A" | "B", "reason": "..."}``, one
 Markdown fence tolerated), then a tolerant reading of prose such as "Video B
 looks more realistic": only claims of the forms below count, and a reply whose
-claims name both videos, or none, is no answer. Refusals, content-filter
+claims name both videos, or none, is no answer. The prose is read with every
+run of white space made one space first, so the patterns' ``\s*`` never
+backtrack over long runs (a reply of "Answer", 2,000 spaces and "x" is read in
+linear time). Refusals, content-filter
 blocks and empty replies are no answer. The judge protocol:
 ``docs/guide/realism.md``.
 """
@@ -104,8 +107,9 @@ def read_reply(content: str, *, finish_reason: str | None = None, refusal: str |
         if choice is None:
             return Reading(None, f"JSON reply without more_realistic 'A' or 'B': {_short(text)}")
         return Reading(choice, _short(obj.get("reason", "") if isinstance(obj.get("reason"), str) else ""))
-    fields = {m.upper() for m in _JSON_FIELD.findall(text)}
-    letters = fields or _claims(text)
+    prose = " ".join(text.split())  # one space between words: every \s* below matches at most one character
+    fields = {m.upper() for m in _JSON_FIELD.findall(prose)}
+    letters = fields or _claims(prose)
     if len(letters) == 1:
         return Reading(letters.pop(), _short(text))  # type: ignore[arg-type]
     why = "names both videos as more realistic" if letters else "names no video as more realistic"

@@ -106,7 +106,9 @@ def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: in
               views: Sequence[str] = CLIP_VIEWS) -> ClipPair:
     """Simulate ``spec``'s two sides with the same script and drive (force limit from side ``a``,
     :func:`drive_limit`), draw both with the same cameras (fitted to every pose of both) and write their
-    clips into ``pair_set/clips/<index>/``. ``closed``: side ``a``'s closed end of ``spec.joint``.
+    clips into ``pair_set/clips/<index>/``. ``closed``: side ``a``'s closed end of ``spec.joint``. The pair id is
+    a SHA-256 digest (16 hex digits) of ``index``, the object id, the defect and both sides' methods and clips:
+    deterministic, and distinct within a set even when two pairs show the same clips.
 
     Raises:
         KeyError: the joint is missing on a side. RenderError / FileNotFoundError: a side cannot be drawn.
@@ -121,7 +123,10 @@ def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: in
         cams = fit_cameras(cloud, views, CLIP_SIZE)  # one camera per view for both sides
         sides = [PairSide(method=s.method, clips=_side_clips(r, traj, cams, folder, base, slot, spec.joint))
                  for s, r, traj, slot in ((spec.a, ra, trajs[0], "a"), (spec.b, rb, trajs[1], "b"))]
-    digest = hashlib.sha256(json.dumps([[s.method, [atomic.sha256_file(base / c.video) for c in s.clips]] for s in sides]).encode())
+    # the clips' content, and where the pair sits in its set: two refines of one object give the same clips of a
+    # planted defect, and each pair still needs its own id
+    digest = hashlib.sha256(json.dumps([index, spec.object_id, spec.defect, [[s.method, [atomic.sha256_file(base / c.video)
+                                                                                       for c in s.clips]] for s in sides]]).encode())
     return ClipPair(pair_id=digest.hexdigest()[:16], object_id=spec.object_id, category=spec.category, request=spec.request,
                     joint=spec.joint, motion="push_release", a=sides[0], b=sides[1], defect=spec.defect)
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
+import secrets
 import sqlite3
 import stat
 import threading
@@ -55,8 +56,16 @@ CREATE TABLE IF NOT EXISTS ratings (
     rater TEXT NOT NULL, pair_id TEXT NOT NULL, object_id TEXT NOT NULL, left TEXT NOT NULL, right TEXT NOT NULL,
     choice TEXT NOT NULL, winner TEXT NOT NULL, loser TEXT NOT NULL, score INTEGER, comment TEXT NOT NULL,
     shown_at REAL NOT NULL, answered_at REAL NOT NULL, seconds REAL NOT NULL, PRIMARY KEY (rater, pair_id));
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value BLOB NOT NULL);
 """
 _COLUMNS = tuple(Rating.model_fields)
+
+
+class RatingsDatabaseError(PairSetError):
+    """``ratings.sqlite`` cannot be opened or read as a ratings database (damaged, or not one): the message says
+    what to do; the file is left as it is. Code ``RATINGS_DATABASE_DAMAGED``."""
+
+    code = "RATINGS_DATABASE_DAMAGED"
 
 
 class RatingError(ValueError):
@@ -110,10 +119,13 @@ class RatingStore:
     """The ratings of the pair set in ``folder`` (``pairs.json``; ``ratings.sqlite`` created beside it).
 
     Safe for many threads at once (one SQLite connection per thread) and for several processes (SQLite
-    locking). Opening syncs ``ratings.parquet`` when the database holds answers it may lack.
+    locking). Opening checks the database (SQLite's ``quick_check``), loads the answers of ``ratings.parquet``
+    back into a database that has none (a new one, after a damaged one was moved aside: the copy is the
+    backup), then syncs ``ratings.parquet`` when the database holds answers it may lack.
 
-    Raises (on opening): FileNotFoundError, PairSetError (:func:`read_pair_set`); sqlite3.Error when the
-    database cannot be created or read.
+    Raises (on opening): FileNotFoundError, PairSetError (:func:`read_pair_set`, or an unreadable
+    ``ratings.parquet`` beside an empty database); :class:`RatingsDatabaseError` when ``ratings.sqlite`` is
+    damaged or not a ratings database (left as it is; the message says what to do).
     """
 
     def __init__(self, folder: Path | str):
@@ -128,10 +140,58 @@ class RatingStore:
         self._lock = threading.Lock()
         self._sync_lock = threading.Lock()
         self.closed = False
-        con = self._con()
-        con.executescript(_SCHEMA)
-        if self.count() or self.parquet.exists():
+        try:
+            con = self._con()
+            (check,) = con.execute("PRAGMA quick_check").fetchone()
+            if check != "ok":
+                raise sqlite3.DatabaseError(f"integrity check: {check}")
+            con.executescript(_SCHEMA)
+            if not self.count() and self.parquet.exists():
+                self._load_parquet()
+            stored = self.count()
+        except sqlite3.DatabaseError as exc:
+            self.close()
+            raise self._damaged(exc) from None
+        except BaseException:  # ratings.parquet unreadable (PairSetError naming it): nothing overwritten
+            self.close()
+            raise
+        if stored or self.parquet.exists():
             self.sync_parquet()
+
+    def _damaged(self, exc: sqlite3.DatabaseError) -> RatingsDatabaseError:
+        if isinstance(exc, sqlite3.OperationalError):  # locked, unreadable, read-only folder: not damage
+            err = RatingsDatabaseError(self.database, f"cannot be opened ({exc}); check that the folder can be "
+                                                      "written and that no other program holds the file")
+            err.code = "RATINGS_DATABASE_UNAVAILABLE"
+            return err
+        backup = f"; {self.parquet.name} beside it holds a copy of the answers, loaded back when the app starts " \
+                 "without the damaged file" if self.parquet.exists() else ""
+        return RatingsDatabaseError(self.database, (
+            f"not a readable ratings database ({exc}); it was left as it is{backup}. Move it aside "
+            f"(e.g. mv {self.database} {self.database}.damaged) and start again, or restore it from a backup"))
+
+    def _load_parquet(self) -> None:
+        """Copy the answers of ``ratings.parquet`` (and when each pair was shown) into the empty database."""
+        rows = read_ratings(self.parquet)
+        con = self._con()
+        con.execute("BEGIN IMMEDIATE")
+        try:
+            for r in rows:
+                con.execute("INSERT OR IGNORE INTO shown VALUES (?, ?, ?)", (r.rater, r.pair_id, r.shown_at))
+                con.execute(f"INSERT OR IGNORE INTO ratings ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})",
+                            tuple(getattr(r, c) for c in _COLUMNS))
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+
+    def form_secret(self) -> bytes:
+        """The secret of the rating app's form tokens: 32 random bytes made once and kept in the database (so
+        a restart keeps open forms valid)."""
+        con = self._con()
+        con.execute("INSERT OR IGNORE INTO meta VALUES ('form_secret', ?)", (secrets.token_bytes(32),))
+        (value,) = con.execute("SELECT value FROM meta WHERE key = 'form_secret'").fetchone()
+        return bytes(value)
 
     # connections -------------------------------------------------------------------------------------
     def _con(self) -> sqlite3.Connection:
@@ -140,8 +200,12 @@ class RatingStore:
         con = getattr(self._local, "con", None)
         if con is None:
             con = sqlite3.connect(self.database, timeout=BUSY_TIMEOUT_S, isolation_level=None, check_same_thread=False)
-            con.execute("PRAGMA journal_mode=WAL")
-            con.execute("PRAGMA synchronous=FULL")  # an answer survives a power cut once record() returns
+            try:
+                con.execute("PRAGMA journal_mode=WAL")
+                con.execute("PRAGMA synchronous=FULL")  # an answer survives a power cut once record() returns
+            except sqlite3.Error:
+                con.close()
+                raise
             self._local.con = con
             with self._lock:
                 self._connections.append(con)

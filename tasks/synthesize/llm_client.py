@@ -19,9 +19,10 @@ from typing import Any, Callable
 
 from asset2sim import array_cache, atomic
 from asset2sim.tasks.synthesize.llm_config import ClientConfig, with_overrides
-from asset2sim.tasks.synthesize.llm_errors import LLMError, LLMUnavailable, MissingCredentials, ModelCallError, ReplyError, ReplyInvalid
+from asset2sim.tasks.synthesize.llm_errors import (DeadlineExceeded, LLMError, LLMUnavailable, MissingCredentials, ModelCallError,
+                                                   ReplyError, ReplyInvalid, ReplyTooLarge)
 from asset2sim.tasks.synthesize.llm_reply import excerpt, parse_json_strict, parse_reply, reask_text
-from asset2sim.tasks.synthesize.llm_transport import NO_KEY, classify, import_litellm, retry_after_s, short_error
+from asset2sim.tasks.synthesize.llm_transport import NO_KEY, call_bounds, classify, import_litellm, retry_after_s, short_error
 from asset2sim.tasks.synthesize.llm_usage import M, Answer, Completion, T, Usage
 
 CACHE_FORMAT = 1
@@ -38,8 +39,8 @@ def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str
 
 
 #: The client's own names and the pieces' names callers import from here.
-__all__ = ["CACHE_FORMAT", "NO_KEY", "ClientConfig", "LLMClient", "LLMError", "LLMUnavailable", "MissingCredentials", "ModelCallError",
-           "ReplyError", "ReplyInvalid", "import_litellm", "parse_json_strict", "parse_reply", "retry_after_s", "with_overrides"]
+__all__ = ["CACHE_FORMAT", "NO_KEY", "ClientConfig", "DeadlineExceeded", "LLMClient", "LLMError", "LLMUnavailable", "MissingCredentials",
+           "ModelCallError", "ReplyError", "ReplyInvalid", "ReplyTooLarge", "import_litellm", "parse_json_strict", "parse_reply", "retry_after_s", "with_overrides"]
 
 
 class LLMClient:
@@ -105,7 +106,7 @@ class LLMClient:
             why = None
         except FileNotFoundError:  # deleted since: a miss
             return None
-        except (OSError, ValueError) as exc:  # too large, not a regular file, not JSON
+        except (OSError, ValueError, RecursionError) as exc:  # too large, not a regular file, not JSON, nested too deep
             rec, why = None, f"unreadable ({type(exc).__name__}: {exc})"
         if why is None:
             if not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or not isinstance(rec.get("content"), str):
@@ -140,8 +141,13 @@ class LLMClient:
         """One model reply for ``messages`` (OpenAI chat format), from the cache when present. ``schema``
         goes as a strict ``json_schema`` response format; ``temperature`` "config" is the config's.
 
+        Each attempt is bounded (``tasks/synthesize/llm_transport.py``): ``timeout_s`` for connecting, sending
+        and the whole reply, ``max_reply_bytes`` for the reply.
+
         Raises:
             LLMUnavailable: litellm missing.
+            DeadlineExceeded: the server was still sending at the deadline (not retried).
+            ReplyTooLarge: the reply grew past ``max_reply_bytes`` (not retried).
             ModelCallError: a non-retryable error, or every attempt failed.
         """
         temp = self.config.temperature if temperature == "config" else temperature
@@ -176,9 +182,20 @@ class LLMClient:
             for attempt in range(1, cfg.max_attempts + 1):
                 u.attempts += 1
                 try:
-                    resp = litellm.completion(**kwargs)
+                    with call_bounds(cfg.timeout_s, cfg.max_reply_bytes) as bounds:
+                        resp = litellm.completion(**kwargs)
                 except Exception as exc:  # classified below; non-API bugs are not retried
+                    if bounds.tripped == "size":
+                        raise ReplyTooLarge(f"model {cfg.model}: MODEL_REPLY_TOO_LARGE: the reply grew past "
+                                            f"{cfg.max_reply_bytes} bytes and was refused while it arrived "
+                                            "(ASSET2SIM_LLM_MAX_REPLY_BYTES raises the cap)", u.attempts, None) from None
+                    if bounds.tripped == "deadline" and bounds.received:
+                        raise DeadlineExceeded(f"model {cfg.model}: MODEL_DEADLINE_EXCEEDED: the reply was not complete "
+                                               f"{cfg.timeout_s:g} s after the attempt began ({bounds.received} bytes "
+                                               "arrived); a server this slow is not asked again", u.attempts, None) from None
                     retryable, status, kind = classify(exc, litellm)
+                    if bounds.tripped == "deadline":
+                        retryable, kind = True, "timeout"
                     last = f"{kind}: {short_error(exc)}"
                     if not retryable:
                         raise ModelCallError(f"model {cfg.model}: {last} (not retried)", u.attempts, status) from None

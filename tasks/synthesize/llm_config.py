@@ -34,9 +34,10 @@ def default_cache_dir() -> Path:
 @dataclass(frozen=True)
 class ClientConfig:
     """Settings of one ``LLMClient``: ``model`` (litellm ``provider/name``), ``base_url`` (a local server),
-    ``api_key`` (else the provider's variable; never hashed), per-attempt ``timeout_s``, ``max_attempts`` HTTP
-    tries per call, ``backoff_s`` doubling up to ``max_backoff_s``, the longest ``Retry-After`` honoured
-    (``max_retry_after_s``), ``max_reply_chars``, ``max_tokens``, ``temperature`` (None: the provider's),
+    ``api_key`` (else the provider's variable; never hashed), ``timeout_s`` the deadline of one HTTP attempt
+    (connecting, sending and every read of the whole reply), ``max_attempts`` HTTP tries per call, ``backoff_s`` doubling up to ``max_backoff_s``, the longest ``Retry-After`` honoured
+    (``max_retry_after_s``), ``max_reply_chars`` (the message), ``max_reply_bytes`` (the whole HTTP reply, refused
+    while it arrives), ``max_tokens``, ``temperature`` (None: the provider's),
     ``cache_dir`` (None: no cache) and the ``render_size`` of the views (pixels). Times in s.
     """
 
@@ -49,6 +50,7 @@ class ClientConfig:
     max_backoff_s: float = 60.0
     max_retry_after_s: float = 300.0
     max_reply_chars: int = 1_000_000
+    max_reply_bytes: int = 16 << 20
     max_tokens: int = 16384
     temperature: float | None = 0.0
     cache_dir: Path | None = None
@@ -59,8 +61,10 @@ class ClientConfig:
             raise ValueError("a model string is required (e.g. gemini/gemini-2.5-flash)")
         if self.max_attempts < 1:
             raise ValueError(f"max_attempts must be >= 1, got {self.max_attempts}")
-        if not (self.timeout_s > 0):
-            raise ValueError(f"timeout_s must be > 0, got {self.timeout_s}")
+        if not (self.timeout_s > 0) or not math.isfinite(self.timeout_s):
+            raise ValueError(f"timeout_s must be a finite number > 0, got {self.timeout_s}")
+        if self.max_reply_bytes < 1024:
+            raise ValueError(f"max_reply_bytes must be >= 1024, got {self.max_reply_bytes}")
 
     @classmethod
     def from_env(cls, model: str, base_url: str | None = None, **overrides) -> "ClientConfig":
@@ -81,6 +85,7 @@ class ClientConfig:
             max_backoff_s=_env_float("ASSET2SIM_LLM_MAX_BACKOFF_S", 60.0),
             max_retry_after_s=_env_float("ASSET2SIM_LLM_MAX_RETRY_AFTER_S", 300.0),
             max_reply_chars=int(_env_float("ASSET2SIM_LLM_MAX_REPLY_CHARS", 1_000_000)),
+            max_reply_bytes=int(_env_float("ASSET2SIM_LLM_MAX_REPLY_BYTES", 16 << 20)),
             max_tokens=int(_env_float("ASSET2SIM_LLM_MAX_TOKENS", 16384)),
             cache_dir=None if cache_env.lower() in ("off", "none", "0") else default_cache_dir(),
             render_size=(max(size, 16), max(size, 16)),

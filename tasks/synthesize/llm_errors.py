@@ -24,6 +24,21 @@ class ModelCallError(LLMError):
         self.status = status
 
 
+class DeadlineExceeded(ModelCallError):
+    """The reply did not arrive whole within the deadline of one attempt (``ClientConfig.timeout_s``: connecting,
+    sending and every read), though the server was sending: a server that trickles its reply. Code
+    ``MODEL_DEADLINE_EXCEEDED``; not retried."""
+
+    code = "MODEL_DEADLINE_EXCEEDED"
+
+
+class ReplyTooLarge(ModelCallError):
+    """The HTTP reply grew past ``ClientConfig.max_reply_bytes`` while it arrived (refused then, not read whole).
+    Code ``MODEL_REPLY_TOO_LARGE``; not retried."""
+
+    code = "MODEL_REPLY_TOO_LARGE"
+
+
 class ReplyInvalid(LLMError):
     """One reply is unusable; ``errors`` lists the problems (sent back when re-asking)."""
 

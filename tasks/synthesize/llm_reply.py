@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from typing import Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
@@ -45,16 +46,54 @@ def _strip_fence(text: str) -> str:
     return t
 
 
+#: Deepest nesting of arrays and objects a reply may have (the reply schemas need fewer than 10 levels).
+MAX_JSON_DEPTH = 64
+
+_NESTING = re.compile(r'[\[\]{}"\\]')
+
+
+def json_depth_exceeds(text: str, limit: int = MAX_JSON_DEPTH) -> bool:
+    """Whether ``text`` opens more than ``limit`` arrays / objects inside each other (outside strings): one
+    linear pass, no recursion, so a reply nested 100,000 deep is refused before a decoder recurses into it."""
+    depth = 0
+    in_string = False
+    skip = -1  # the position of a character a backslash escapes
+    for m in _NESTING.finditer(text):
+        i, c = m.start(), m.group()
+        if i == skip:
+            continue
+        if in_string:
+            if c == "\\":
+                skip = i + 1
+            elif c == '"':
+                in_string = False
+            continue
+        if c == '"':
+            in_string = True
+        elif c in "[{":
+            depth += 1
+            if depth > limit:
+                return True
+        elif c in "]}":
+            depth -= 1
+    return False
+
+
 def parse_json_strict(text: str) -> dict[str, Any]:
     """Parse exactly one JSON object (one Markdown fence around it tolerated).
 
     Raises:
-        ReplyInvalid: prose, several values, truncation, duplicate keys, NaN / Infinity / overflowing numbers.
+        ReplyInvalid: prose, several values, truncation, duplicate keys, NaN / Infinity / overflowing numbers,
+            nesting deeper than :data:`MAX_JSON_DEPTH`.
     """
     t = _strip_fence(text)
+    if json_depth_exceeds(t):
+        raise ReplyInvalid([f"invalid JSON: nested deeper than {MAX_JSON_DEPTH} arrays or objects"])
     dec = json.JSONDecoder(object_pairs_hook=_no_duplicates, parse_constant=_no_constant, parse_float=_finite_float)
     try:
         obj, end = dec.raw_decode(t)
+    except RecursionError:
+        raise ReplyInvalid([f"invalid JSON: nested deeper than {MAX_JSON_DEPTH} arrays or objects"]) from None
     except _Reject as exc:
         raise ReplyInvalid([f"invalid JSON: {exc}"]) from None
     except json.JSONDecodeError as exc:

@@ -1,13 +1,32 @@
 """The network side of model calls: litellm imported on first use (refused in a
-forbidden version), faults classified as retryable or not, and the wait a
-server asks for. The retry loop is ``LLMClient.complete``."""
+forbidden version) and given a bounded HTTP transport, faults classified as
+retryable or not, and the wait a server asks for. The retry loop is
+``LLMClient.complete``.
+
+Bounds of one attempt (:func:`call_bounds`): httpx's time-out is per read, so a
+server that sends one byte a second never trips it, and a reply is read whole
+before anything looks at its size. The transport litellm is given
+(``litellm.client_session`` for OpenAI-compatible providers,
+``litellm.sync_transport`` for the others) wraps httpcore's network backend so
+that every connect, write and read of the calling thread gets at most the time
+left to the attempt's deadline, and counts the bytes read: past the deadline or
+past the size cap the socket read raises at once and the attempt is recorded as
+``deadline`` or ``size`` (:class:`CallBounds`), which the client turns into
+:class:`~asset2sim.tasks.synthesize.llm_errors.DeadlineExceeded` or
+:class:`~asset2sim.tasks.synthesize.llm_errors.ReplyTooLarge`. Memory stays
+bounded by the cap; calls outside :func:`call_bounds` pass through unchanged.
+"""
 
 from __future__ import annotations
 
 import email.utils
+import math
 import os
 import threading
 import time
+import urllib.request
+from contextlib import contextmanager
+from typing import Iterator
 
 from asset2sim.tasks.synthesize.llm_errors import LLMUnavailable
 
@@ -21,6 +40,160 @@ RETRYABLE_STATUS = {408, 409, 425, 429, 500, 502, 503, 504, 529}
 NO_KEY = "no-key-needed"
 
 _LITELLM_LOCK = threading.Lock()
+_BOUNDS = threading.local()
+
+
+class CallBounds:
+    """The bounds of one HTTP attempt of the calling thread: ``deadline_s`` (s, from entering
+    :func:`call_bounds`) for connecting, sending and every read, ``max_bytes`` read in all. ``received``: bytes
+    read so far; ``tripped``: ``"deadline"`` or ``"size"`` once a bound stopped the attempt, else None."""
+
+    def __init__(self, deadline_s: float, max_bytes: int):
+        self.deadline_s = float(deadline_s)
+        self.max_bytes = int(max_bytes)
+        self.start = time.monotonic()
+        self.received = 0
+        self.tripped: str | None = None
+
+    def left(self) -> float:
+        """Seconds left before the deadline (<= 0: passed)."""
+        return self.deadline_s - (time.monotonic() - self.start)
+
+    def elapsed(self) -> float:
+        """Seconds since the attempt began."""
+        return time.monotonic() - self.start
+
+
+@contextmanager
+def call_bounds(deadline_s: float, max_bytes: int) -> Iterator[CallBounds]:
+    """Bound the model calls the calling thread makes inside the block (see the module docstring)."""
+    if not (deadline_s > 0 and math.isfinite(deadline_s)):
+        raise ValueError(f"deadline must be a finite number of seconds > 0, got {deadline_s}")
+    bounds = CallBounds(deadline_s, max_bytes)
+    previous = getattr(_BOUNDS, "current", None)
+    _BOUNDS.current = bounds
+    try:
+        yield bounds
+    finally:
+        _BOUNDS.current = previous
+
+
+def _bounded_time(timeout: float | None, bounds: CallBounds, httpcore, error) -> float:
+    """The time a network operation may take: ``timeout`` cut to the time left (``error`` raised when none is)."""
+    left = bounds.left()
+    if left <= 0:
+        bounds.tripped = bounds.tripped or "deadline"
+        raise error(f"the deadline of {bounds.deadline_s:g} s for the whole reply passed ({bounds.received} bytes received)")
+    return left if timeout is None else min(timeout, left)
+
+
+def _bounder():
+    """A function that makes an httpx transport's connections obey :func:`call_bounds` (module docstring)."""
+    import httpcore
+
+    class BoundedStream(httpcore.NetworkStream):
+        def __init__(self, inner):
+            self._inner = inner
+
+        def read(self, max_bytes: int, timeout: float | None = None) -> bytes:
+            bounds = getattr(_BOUNDS, "current", None)
+            if bounds is None:
+                return self._inner.read(max_bytes, timeout)
+            t = _bounded_time(timeout, bounds, httpcore, httpcore.ReadTimeout)
+            try:
+                data = self._inner.read(min(max_bytes, max(1, bounds.max_bytes - bounds.received + 1)), t)
+            except httpcore.ReadTimeout:
+                if timeout is None or t < timeout:  # the deadline, not httpx's own per-read time-out, ended the wait
+                    bounds.tripped = bounds.tripped or "deadline"
+                raise
+            bounds.received += len(data)
+            if bounds.received > bounds.max_bytes:
+                bounds.tripped = "size"
+                raise httpcore.ReadError(f"the reply is larger than {bounds.max_bytes} bytes")
+            return data
+
+        def write(self, buffer: bytes, timeout: float | None = None) -> None:
+            bounds = getattr(_BOUNDS, "current", None)
+            if bounds is None:
+                return self._inner.write(buffer, timeout)
+            t = _bounded_time(timeout, bounds, httpcore, httpcore.WriteTimeout)
+            try:
+                return self._inner.write(buffer, t)
+            except httpcore.WriteTimeout:
+                if timeout is None or t < timeout:
+                    bounds.tripped = bounds.tripped or "deadline"
+                raise
+
+        def close(self) -> None:
+            self._inner.close()
+
+        def start_tls(self, ssl_context, server_hostname=None, timeout=None):
+            bounds = getattr(_BOUNDS, "current", None)
+            if bounds is not None:
+                timeout = _bounded_time(timeout, bounds, httpcore, httpcore.ConnectTimeout)
+            return BoundedStream(self._inner.start_tls(ssl_context, server_hostname, timeout))
+
+        def get_extra_info(self, info: str):
+            return self._inner.get_extra_info(info)
+
+    class BoundedBackend(httpcore.NetworkBackend):
+        def __init__(self, inner):
+            self._inner = inner
+
+        def _timeout(self, timeout):
+            bounds = getattr(_BOUNDS, "current", None)
+            return timeout if bounds is None else _bounded_time(timeout, bounds, httpcore, httpcore.ConnectTimeout)
+
+        def connect_tcp(self, host, port, timeout=None, local_address=None, socket_options=None):
+            return BoundedStream(self._inner.connect_tcp(host, port, self._timeout(timeout), local_address, socket_options))
+
+        def connect_unix_socket(self, path, timeout=None, socket_options=None):
+            return BoundedStream(self._inner.connect_unix_socket(path, self._timeout(timeout), socket_options))
+
+        def sleep(self, seconds: float) -> None:
+            self._inner.sleep(seconds)
+
+    def bound(transport) -> None:
+        pool = getattr(transport, "_pool", None)  # httpx keeps its httpcore pool here (httpx 0.28)
+        if not isinstance(pool, httpcore.ConnectionPool) or not hasattr(pool, "_network_backend"):
+            raise RuntimeError("httpx/httpcore changed: the bounded model transport cannot be installed")
+        if not isinstance(pool._network_backend, BoundedBackend):
+            pool._network_backend = BoundedBackend(pool._network_backend)
+
+    return bound
+
+
+def bounded_client():
+    """An ``httpx.Client`` (redirects followed, proxies and certificates from the environment as httpx reads
+    them) whose every transport obeys :func:`call_bounds`."""
+    import httpx
+
+    client = httpx.Client(follow_redirects=True)
+    bound = _bounder()
+    for transport in [client._transport, *client._mounts.values()]:  # the proxies' transports too
+        if transport is not None:
+            bound(transport)
+    return client
+
+
+def bounded_transport():
+    """An ``httpx.HTTPTransport`` whose connections obey :func:`call_bounds` (module docstring)."""
+    import httpx
+
+    transport = httpx.HTTPTransport()
+    _bounder()(transport)
+    return transport
+
+
+def _install_bounded_transport(litellm) -> None:
+    """Give litellm bounded connections (unless the user set ``client_session`` / ``sync_transport``). The
+    providers litellm reaches through its own HTTP handler take one transport for every URL, which would
+    drop the proxies of the environment: with ``HTTP(S)_PROXY`` / ``ALL_PROXY`` set they keep httpx's
+    per-read time-out only."""
+    if getattr(litellm, "client_session", None) is None:
+        litellm.client_session = bounded_client()
+    if getattr(litellm, "sync_transport", None) is None and not [k for k in urllib.request.getproxies() if k != "no"]:
+        litellm.sync_transport = bounded_transport()
 
 
 def import_litellm():
@@ -41,6 +214,7 @@ def import_litellm():
             raise LLMUnavailable("model backends need litellm: pip install 'asset2sim[llm]' (litellm==1.100.5)") from exc
         litellm.suppress_debug_info = True
         litellm.set_verbose = False
+        _install_bounded_transport(litellm)
         return litellm
 
 

@@ -95,7 +95,7 @@ def box(tmp_path):
 
 
 def _one_line(err: str) -> str:
-    lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim ")]
+    lines = [ln for ln in err.splitlines() if ln.startswith(("asset2sim ", "asset2sim:"))]
     assert len(lines) == 1, err
     assert "Traceback" not in err
     return lines[0]
@@ -133,10 +133,13 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
     bad.mkdir()
     (bad / "mobility.urdf").write_text("<robot name='x'><link name='a'/><link name='b'/></robot>")
     assert main(["refine", str(bad), "--out", str(tmp_path / "o1"), "--no-extras"]) == 1
-    line = _one_line(capsys.readouterr().err)
-    assert "invalid input" in line and str(bad) in line
-    code = line.split(": ")[1]
-    assert code and code == code.upper() and " " not in code, line
+    lines = capsys.readouterr().err.splitlines()  # one line per problem: 2 orphan links, two roots, no geometry
+    assert len(lines) == 4 and len(set(lines)) == 4, lines
+    for line in lines:
+        assert line.startswith("asset2sim refine: ") and "invalid input" in line and line.count(str(bad)) == 1, line
+        code = line.split(": ")[1]
+        assert code and code == code.upper() and " " not in code, line
+    assert any("link 'a' is connected by no joint" in line and "link 'a': link 'a'" not in line for line in lines), lines
     assert main(["refine", str(box), "--prompt", "x" * (MAX_REQUEST_CHARS + 1), "--out", str(tmp_path / "o2"), "--no-extras"]) == 2
     assert "REQUEST_TOO_LONG" in _one_line(capsys.readouterr().err)
     assert not (tmp_path / "o2").exists()  # refused before any work
@@ -213,10 +216,91 @@ def test_validation_failure_names_path_once_and_codes_once(tmp_path, capsys):
 
     asset = cb.CASES_BY_NAME["format_off_mesh"].build(tmp_path / "off")  # visual and collision: 2 errors, one code
     assert main(["refine", str(asset), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim ")]
+    assert len(lines) == 2 and len(err.splitlines()) == 2 and "Traceback" not in err, err  # one line per problem
+    for line, element in zip(lines, ("mobility.urdf:24: link 'lid': <visual>", "mobility.urdf:30: link 'lid': <collision>")):
+        prog, code, rest = _fields(line)
+        assert prog == "asset2sim refine" and code == "MESH_FORMAT_UNSUPPORTED"
+        assert rest.startswith(f"{asset}: invalid input: {element}") and rest.count(str(asset)) == 1, line
+        assert " | " not in line and "validation error(s)" not in line
+
+
+def test_a_wrong_path_is_named_once(tmp_path, capsys):
+    missing = tmp_path / "no_such_asset"
+    assert main(["refine", str(missing), "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
-    prog, code, rest = _fields(line)
-    assert prog == "asset2sim refine" and code == "MESH_FORMAT_UNSUPPORTED"
-    assert rest.startswith(f"{asset}: ") and rest.count(str(asset)) == 1, line
+    assert line == f"asset2sim refine: ASSET_NOT_FOUND: {missing}: invalid input: no such file or folder", line
+    assert main(["validate", str(missing)]) == 1
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].count(str(missing)) == 1, out
+    for argv in (["render", str(missing), "--out", str(tmp_path / "v")], ["evaluate", str(missing)], ["audit", str(missing)],
+                 ["export", str(missing)]):
+        assert main(argv) in (1, 2), argv
+        line = _one_line(capsys.readouterr().err)
+        assert line.count(str(missing)) == 1, line
+
+
+# ------------------------------------------------------------------ usage errors as in well-kept command lines (issue 62)
+
+
+@pytest.mark.parametrize("argv, prog, bad, meant", [
+    (["refine", "{box}", "--promt", "a box", "--out", "{out}"], "asset2sim refine", "--promt", "--prompt"),
+    (["refine", "{box}", "--outt", "{out}"], "asset2sim refine", "--outt", "--out"),  # not "--out is required"
+    (["--verbsoe", "refine", "{box}", "--out", "{out}"], "asset2sim", "--verbsoe", "--verbose"),
+    (["evaluate", "{box}", "--engins", "pybullet"], "asset2sim evaluate", "--engins", "--engines"),
+])
+def test_a_mistyped_option_is_named_with_the_closest_one(box, tmp_path, capsys, argv, prog, bad, meant):
+    argv = [a.format(box=box, out=tmp_path / "o") for a in argv]
+    assert main(argv) == 2
+    cap = capsys.readouterr()
+    line = _one_line(cap.err)
+    assert len(cap.err.splitlines()) == 1 and not cap.out, cap.err  # one line, no usage block
+    assert line.startswith(f"{prog}: OPTION_UNKNOWN: unknown option {bad}; did you mean {meant}?"), line
+    assert "required" not in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_mistyped_command_is_named_with_the_closest_one(capsys):
+    assert main(["refyne", "x"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith("asset2sim: COMMAND_UNKNOWN: unknown command 'refyne'; did you mean refine?"), line
+    assert main(["zzzz"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "did you mean" not in line and "refine" in line  # nothing close: the commands are listed
+
+
+def test_other_usage_errors_are_one_line_and_abbreviations_still_work(box, tmp_path, capsys):
+    assert main(["refine", str(box)]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith("asset2sim refine: USAGE_INVALID: ") and "--out" in line
+    assert main(["refine", str(box), "--promp", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 0  # a prefix
+
+
+def test_help_lists_every_exit_status(capsys):
+    from asset2sim.commands import _status
+
+    assert main(["--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    statuses = {v for k, v in vars(_status).items() if k.isupper() and isinstance(v, int) and not isinstance(v, bool)}
+    assert {1, 2, 3, 4, 5, 70, 130} <= statuses
+    for status in statuses | {0}:
+        assert f"{status} {_status.EXIT_STATUSES[status]}" in text, (status, text)
+
+
+def test_failures_outside_the_project_is_one_prefixed_line(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "asset2sim", "failures"], capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                       env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2])))
+    assert p.returncode == 2 and not p.stdout, (p.stdout, p.stderr)
+    assert p.stderr.splitlines() == [p.stderr.strip()] and p.stderr.startswith("asset2sim failures: CATALOG_NOT_FOUND: catalog.yaml: ")
+    assert "--catalog" in p.stderr and "Errno" not in p.stderr
+
+
+def test_a_size_without_a_unit_suggests_plausible_units(box, tmp_path, capsys):
+    assert main(["refine", str(box), "--size", "30", "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "OVERRIDE_INVALID" in line and "30cm (0.3 m)" in line and "30m " not in line and "30m)" not in line, line
+    assert "size: size:" not in line
 
 
 def test_estimator_and_engine_errors_have_codes(box, tmp_path, capsys):
@@ -304,7 +388,7 @@ def test_a_command_imports_only_its_own_module():
     full = run("--help")
     assert full.returncode == 0 and all(c in full.stdout for c in ("refine", "flow", "benchmark", "failures"))
     bad = run("refyne")
-    assert bad.returncode == 2 and "invalid choice" in bad.stderr and "refine" in bad.stderr
+    assert bad.returncode == 2 and "COMMAND_UNKNOWN" in bad.stderr and "did you mean refine?" in bad.stderr
 
 
 def test_fast_exit_runs_the_exit_handlers_flushes_and_keeps_the_code(tmp_path):
@@ -379,3 +463,38 @@ def test_body_and_mjcf_angle_are_refine_options_and_config_fields_outside_the_de
     assert (from_file.body, from_file.mjcf.angle) == ("box", "degree")
     with pytest.raises(SystemExit):
         parser.parse_args([*base, "--mjcf-angle", "grad"])
+
+
+# ------------------------------------------------------------------ one explanation per failure: penetration (issue 62)
+
+
+def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_report(tmp_path, capsys):
+    """A lid clear of a bar of its body as modelled, asked open 0.5 rad: it lies inside the bar (parent-child
+    penetration, which the SPEC's Phi skips). The terminal's penetration line names both kinds, the verdict is
+    unresolved_penetration with one "why it failed" line (the links, the depth against 5 mm, what to do), and
+    report.html says the same, with no line saying there is no penetration."""
+    import html
+    import re
+
+    from tests.tasks.assemble.test_collision_geometry import _asset, _box
+
+    slab, bar = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.0, 0.0, 0.07], [0.1, 0.06, 0.09])
+    asset = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
+    out = tmp_path / "o"
+    assert main(["refine", str(asset), "--state", "hinge=0.5rad", "--out", str(out), "--no-clips", "--engines", "pybullet",
+                 "-q"]) == 3
+    lines = capsys.readouterr().out.splitlines()
+    assert "verdict      FAILED: unresolved_penetration" in "\n".join(lines)
+    pen = [ln for ln in lines if ln.startswith("penetration  ")]
+    assert len(pen) == 1 and "self-contact Phi 0.000 mm (pybullet) pass" in pen[0], pen
+    assert re.search(r"parent-child \d+\.\d+ mm \(pybullet, body/lid; \d+\.\d+ mm beyond its modelled pose\) FAIL", pen[0]), pen
+    why = [ln.removeprefix("why it failed ") for ln in lines if ln.startswith("why it failed ")]
+    assert len(why) == 1, lines
+    assert re.match(r"parent-child penetration \(pybullet\): link 'lid' is \d+\.\d mm inside its parent 'body' .*"
+                    r"\(fails above 5 mm\)\. Ask for a state .*--state", why[0]), why
+    report = json.loads((out / "report.json").read_text())
+    assert report["failure_mode"] == "unresolved_penetration"
+    text = html.unescape((out / "report.html").read_text())
+    assert "<h2>Why it failed: penetration</h2>" in text and why[0] in text  # the terminal's sentence, word for word
+    assert "no self-penetration at the initial state" not in text
+    assert "A child inside its parent (pybullet)" in text

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from asset2sim.commands._status import CommandError
 from asset2sim.flows import queries, tracking
 from asset2sim.flows.catalog import ResultCatalog
 
@@ -146,7 +147,9 @@ def test_failures_command_prints_the_latest_breakdown(store, tmp_path, capsys):
     assert failures.run(_args(catalog, changes=["20260301T020000Z-aaaaaa", "20260302T020000Z-bbbbbb"])) == 0
     assert "box2" in capsys.readouterr().out
     assert failures.run(_args(catalog, over_time=True)) == 0
-    assert failures.run(_args(catalog, run="nope")) == 2
+    with pytest.raises(CommandError) as bad:
+        failures.run(_args(catalog, run="nope"))
+    assert bad.value.status == 2 and bad.value.code == "RUN_UNKNOWN"
     empty = tmp_path / "empty.yaml"
     empty.write_text(f"default_dataset: demo\ncatalog_root: {tmp_path / 'none'}\ndatasets: {{demo: {{root: raw}}}}\n")
     assert failures.run(_args(empty)) == 1

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -43,3 +44,28 @@ def test_the_command_line_hides_them_unless_verbose(demo_root, tmp_path, verbose
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "v" / "front.png").is_file()
     assert ("pybullet build time" in done.stdout + done.stderr) is verbose
+
+
+#: What refine itself prints on stdout: progress lines (``[  0.29s] extract ...``) and the summary's labels.
+REFINE_LINE = re.compile(r"^(\[\s*\d+\.\d+s\] |(asset|output|scale|total mass|initial state|task|penetration|stability|oscillation|"
+                         r"manipulation|operability|verdict|why it failed|NOT AS ASKED|engine|request|media|wall time|skipped) )")
+
+
+def test_a_refine_prints_only_its_own_lines(tmp_path):
+    """A hand-written MJCF cabinet (primitive geoms: Bullet printed a ``?`` line on stdout for each box or capsule
+    whose mesh data was asked) refined from the command line: stdout holds progress and summary lines only, stderr
+    nothing (no build line, no libvulkan warning, no library log)."""
+    pytest.importorskip("mujoco")
+    from tests.tasks.ingest.test_mjcf_reader import _cabinet_xml
+
+    xml = _cabinet_xml(tmp_path / "in")
+    env = _env()
+    for name in ("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "DASK_LOGGING__DISTRIBUTED", "MLFLOW_LOGGING_LEVEL"):
+        env.pop(name, None)
+    done = subprocess.run([str(BIN / "asset2sim"), "refine", str(xml), "--prompt", "A cabinet, door halfway open.",
+                           "--out", str(tmp_path / "out"), "--no-clips"], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines and "?" not in lines, done.stdout
+    assert [ln for ln in lines if not REFINE_LINE.match(ln)] == [], done.stdout
+    assert done.stderr == "", done.stderr

@@ -148,3 +148,14 @@ def test_the_command_line_and_a_config_file(demo_root, tmp_path):
         assert code in bad.stderr and words in bad.stderr, bad.stderr
         assert not (tmp_path / "b").exists()
     assert RefineConfig(overrides={"mass": "3kg"}).config_hash() != RefineConfig().config_hash()
+
+
+def test_a_number_without_a_unit_is_suggested_with_plausible_units():
+    """``--size 30`` is 30 cm or 30 mm, not 30 m; ``--mass 5000`` is 5000 g (a number given as a number is SI)."""
+    with pytest.raises(ValidationError) as size:
+        RequestOverrides(size="30")
+    assert "30cm (0.3 m) or 30mm (0.03 m)" in str(size.value) and "30m " not in str(size.value)
+    with pytest.raises(ValidationError) as mass:
+        RequestOverrides(mass="5000")
+    assert "5000g (5 kg)" in str(mass.value) and "5000kg" not in str(mass.value)
+    assert RequestOverrides(size=30).size == 30.0

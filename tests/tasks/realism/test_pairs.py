@@ -4,6 +4,7 @@ person sees, clips drawn with the same cameras, ``asset2sim pairs``."""
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -15,6 +16,7 @@ pytest.importorskip("av")
 from asset2sim.schemas.realism import PairSet  # noqa: E402
 from asset2sim.tasks.evaluation import clips  # noqa: E402
 from asset2sim.tasks.realism import defects, motion, pairs  # noqa: E402
+from asset2sim.tasks.realism.pair_set import read_pair_set  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 from tests.conftest import SHARED, needs_shared  # noqa: E402
@@ -118,6 +120,26 @@ def test_pairs_command_writes_a_pair_set_of_refined_outputs(refined, tmp_path):
     none = subprocess.run([sys.executable, "-m", "asset2sim", "pairs", str(tmp_path), "--out", str(tmp_path / "x")],
                           capture_output=True, text=True, timeout=120)
     assert none.returncode == 1 and "PAIRS_INPUT_INVALID" in none.stderr + none.stdout
+
+
+def test_pairs_over_two_refines_of_one_object_get_distinct_ids_that_rate_accepts(refined, tmp_path):
+    runs = [tmp_path / run / "box_lid" for run in ("monday", "tuesday")]
+    for run in runs:  # two refines of the same object: the same clips for the same planted defect
+        shutil.copytree(refined, run)
+    out = tmp_path / "pairs"
+    cmd = [sys.executable, "-m", "asset2sim", "pairs", *map(str, runs), "--out", str(out), "--defects", "mass_x100"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    ps = read_pair_set(out)  # refuses a repeated pair id
+    ids = [p.pair_id for p in ps.pairs]
+    assert len(ids) == 2 and len(set(ids)) == 2
+    assert ps.pairs[0].a.clips[0].video != ps.pairs[1].a.clips[0].video
+    rate = subprocess.run([sys.executable, "-m", "asset2sim", "rate", str(out), "--scores"], capture_output=True,
+                          text=True, timeout=300)
+    assert rate.returncode == 3 and "NOT_RATED" in rate.stderr, rate.stdout + rate.stderr  # a valid set, not rated yet
+    again = tmp_path / "again"
+    assert subprocess.run([*cmd[:-3], str(again), *cmd[-2:]], capture_output=True, timeout=600).returncode == 0
+    assert [p.pair_id for p in read_pair_set(again).pairs] == ids  # deterministic
 
 
 @needs_shared

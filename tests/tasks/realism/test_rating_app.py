@@ -15,7 +15,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from asset2sim.commands import rate as rate_command
-from asset2sim.tasks.realism.rating_app import create_app, serve
+from asset2sim.tasks.realism.rating_app import create_app, form_token, serve
 from asset2sim.tasks.realism.ratings import PairSetError, RatingStore, read_pair_set, side
 from tests.realism_fixtures import write_pair_set
 
@@ -34,9 +34,16 @@ def _pair_index(page: str) -> int:
     return int(re.search(r'name="pair" value="(\d+)"', page).group(1))
 
 
-def _answer(client, rater, index, choice="left", score="", comment=""):
+def _client(app) -> TestClient:
+    """A test client that names the app's own host (the app refuses others) and sends no Origin."""
+    return TestClient(app, base_url="http://127.0.0.1:8765")
+
+
+def _answer(client, rater, index, choice="left", score="", comment="", token=None, headers=None):
+    token = form_token(client.app.state.store.form_secret(), rater) if token is None else token
     return client.post(f"/rate/{rater}/answer", data={"pair": str(index), "choice": choice, "score": score,
-                                                      "comment": comment}, follow_redirects=False)
+                                                      "comment": comment, "token": token},
+                       headers=headers, follow_redirects=False)
 
 
 def _assert_blind(page: str):
@@ -49,7 +56,7 @@ def _assert_blind(page: str):
 
 def test_pages_are_blind_and_media_match_the_layout(folder):
     pair_set = read_pair_set(folder)
-    client = TestClient(create_app(folder))
+    client = _client(create_app(folder))
     pages = [client.get("/").text, client.get("/rate?rater=bad id").text]
     start = client.get("/rate?rater=alice", follow_redirects=False)
     assert start.status_code == 303 and start.headers["location"] == "/rate/alice"
@@ -85,7 +92,7 @@ def test_pages_are_blind_and_media_match_the_layout(folder):
 
 
 def test_media_paths_come_from_pairs_json_only(folder):
-    client = TestClient(create_app(folder))
+    client = _client(create_app(folder))
     secret = (folder / "pairs.json").read_text()
     for url in ["/media/alice/0/left/0/../../../pairs.json", "/media/alice/0/left/0/..%2F..%2Fpairs.json",
                 "/media/alice/0/a/0/video", "/media/alice/0/b/0/video", "/media/alice/0/left/5/video",
@@ -111,7 +118,7 @@ def test_a_pair_set_naming_files_outside_is_refused(folder, tmp_path):
 
 
 def test_answers_validated_and_reposts_idempotent(folder):
-    client = TestClient(create_app(folder))
+    client = _client(create_app(folder))
     index = _pair_index(client.get("/rate/bob").text)
     other = (index + 1) % N_PAIRS
     assert _answer(client, "bob", index, "up").status_code == 400
@@ -120,7 +127,7 @@ def test_answers_validated_and_reposts_idempotent(folder):
     assert _answer(client, "bob", other, "left").status_code == 409  # not the pair shown
     assert _answer(client, "bob", 99, "left").status_code == 404
     assert client.post("/rate/bob/answer", content=b"pair=0&choice=left&comment=" + b"x" * 20000,
-                       headers={"content-type": "application/x-www-form-urlencoded"}).status_code == 400
+                       headers={"content-type": "application/x-www-form-urlencoded"}).status_code == 413
     assert client.get("/rate/b%20ob").status_code == 400
     assert RatingStore(folder).count() == 0
     ok = _answer(client, "bob", index, "left", score="2", comment="lid bounces")
@@ -138,7 +145,7 @@ def test_many_raters_at_once(folder):
 
     def work(rater):
         try:
-            client = TestClient(app)
+            client = _client(app)
             mine = []
             for _ in range(N_PAIRS + 2):
                 page = client.get(f"/rate/{rater}").text
@@ -164,7 +171,7 @@ def test_many_raters_at_once(folder):
 
 
 def test_restart_keeps_everything(folder):
-    with TestClient(create_app(folder)) as client:  # the lifespan: syncs and closes the store at shutdown
+    with _client(create_app(folder)) as client:  # the lifespan: syncs and closes the store at shutdown
         answered = []
         for _ in range(3):
             index = _pair_index(client.get("/rate/carol").text)
@@ -172,7 +179,7 @@ def test_restart_keeps_everything(folder):
             _answer(client, "carol", index, "right")
         pending = _pair_index(client.get("/rate/carol").text)
     assert len(pd.read_parquet(folder / "ratings.parquet")) == 3
-    with TestClient(create_app(folder)) as client:
+    with _client(create_app(folder)) as client:
         assert _pair_index(client.get("/rate/carol").text) == pending  # the shown, unanswered pair again
         assert re.search(r'pair <span id="progress">4</span>\s+of 8', client.get("/rate/carol").text)
         rest = []

@@ -14,6 +14,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -240,6 +241,9 @@ SCENARIOS = {
     "10 MB reply": ([fake.reply("z" * (10 * 1024 * 1024))], True, 2),
     "10 MB junk body": ([fake.raw(JUNK_10MB)] * 3, False, MAX_ATTEMPTS),
     "prose three times": ([fake.text_reply("I think it is a box.")] * 3, False, 3),
+    "nested 100000 deep": ([fake.text_reply("[" * 100_000 + "]" * 100_000)], True, 2),
+    "trickled reply": ([fake.trickle(interval_s=0.25)], False, 1),
+    "200 MB reply": ([fake.flood(200 << 20)], False, 1),
 }
 
 
@@ -262,6 +266,19 @@ def test_faults_end_in_valid_output_or_clear_error(server, plate, tmp_path, name
     assert server.n_chat == n_requests <= BUDGET
     if name == "429 with Retry-After":
         assert server.requests[1].t - server.requests[0].t >= 0.95
+
+
+def test_a_trickling_server_ends_the_estimate_at_the_deadline(server, plate, tmp_path, capsys):
+    from asset2sim.cli import main
+
+    server.push(fake.trickle(interval_s=0.25))  # about 300 bytes: 75 s when only each read is timed
+    t0 = time.monotonic()
+    rc = main(["refine", str(plate), "--prompt", PROMPT, "--estimator", "openai", "--model", "m", "--base-url", server.url,
+               "--out", str(tmp_path / "out"), "--no-extras"])
+    took = time.monotonic() - t0
+    err = capsys.readouterr().err
+    assert rc == 2 and "ESTIMATOR_FAILED" in err and "MODEL_DEADLINE_EXCEEDED" in err, err
+    assert server.n_chat == 1 and took < 40.0, took
 
 
 # ------------------------------------------------------------- credentials

@@ -1,0 +1,69 @@
+"""The optional dependencies (the extras of ``pyproject.toml``) by the modules they provide, and the one-line hint
+that names the extra a missing module belongs to: ``MuJoCo is not installed: pip install 'asset2sim[mujoco]'``,
+never a bare "No module named 'mujoco'".
+"""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+#: Top-level module -> (what it is, the extra of ``pyproject.toml`` that installs it).
+EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
+    "mujoco": ("MuJoCo", "mujoco"),
+    "pxr": ("OpenUSD (usd-core)", "usd"),
+    "sapien": ("SAPIEN", "physx"),
+    "coacd": ("CoACD", "coacd"),
+    "litellm": ("litellm", "llm"),
+    "prefect": ("Prefect", "pipeline"),
+    "prefect_dask": ("prefect-dask", "pipeline"),
+    "dask": ("Dask", "pipeline"),
+    "distributed": ("Dask distributed", "pipeline"),
+    "mlflow": ("MLflow", "pipeline"),
+    "fastapi": ("FastAPI", "realism"),
+    "uvicorn": ("uvicorn", "realism"),
+    "newton": ("Newton", "newton"),
+    "warp": ("NVIDIA Warp", "newton"),
+    "gymnasium": ("Gymnasium", "gym"),
+    "stable_baselines3": ("Stable-Baselines3", "learn"),
+    "pydrake": ("Drake", "checkers"),
+}
+
+
+def install_command(extra: str) -> str:
+    """``pip install 'asset2sim[extra]'``."""
+    return f"pip install 'asset2sim[{extra}]'"
+
+
+def missing_module(exc: BaseException) -> str | None:
+    """The top-level name of the module an ImportError could not import (``exc.name``), or None."""
+    name = getattr(exc, "name", None)
+    return name.split(".")[0] if isinstance(name, str) and name else None
+
+
+def install_hint(exc: BaseException) -> str:
+    """One line for an ImportError: ``MuJoCo is not installed: pip install 'asset2sim[mujoco]'`` when the missing
+    module belongs to an extra (:data:`EXTRA_OF_MODULE`), else the first line of the error's own message."""
+    module = missing_module(exc)
+    if module in EXTRA_OF_MODULE:
+        what, extra = EXTRA_OF_MODULE[module]
+        return f"{what} is not installed: {install_command(extra)}"
+    return (str(exc).strip().splitlines() or [""])[0] or type(exc).__name__
+
+
+class MissingExtra(ImportError):
+    """An optional dependency is not installed; the message is :func:`install_hint`'s line, prefixed by what
+    needed it. ``name`` is the missing module's, as Python's own ImportError has it."""
+
+
+def import_extra(module: str, needed_for: str) -> ModuleType:
+    """Import ``module`` (an optional dependency) for ``needed_for`` ("the MJCF export").
+
+    Raises:
+        MissingExtra: it is not installed (``reading MJCF: MuJoCo is not installed: pip install
+            'asset2sim[mujoco]'``).
+    """
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise MissingExtra(f"{needed_for}: {install_hint(exc)}", name=missing_module(exc) or module.split(".")[0]) from exc

@@ -1,0 +1,72 @@
+"""Same input, same code, same bytes: refine every dev row twice into the same folder, the on-disk cache empty the
+first time and warm the second, and compare every file byte for byte (the completion marker included; only
+``timings.json``, the wall times, may differ).
+
+    .venv/bin/python benchmarks/bench_determinism.py [--manifest PATH] [--ids 103275,7236] [--work DIR] [--no-extras]
+
+Prints one line per row (identical, or the files that differ) and the count; exit status 1 when a row differs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
+VOLATILE = {"timings.json"}
+
+
+def snapshot(out: Path) -> dict[str, bytes]:
+    """Relative path -> bytes of every file of ``out`` but the volatile ones."""
+    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*"))
+            if p.is_file() and p.name not in VOLATILE}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--manifest", type=Path, default=DEV / "manifest.csv")
+    ap.add_argument("--ids", default="", help="comma-separated subset of ids")
+    ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
+    ap.add_argument("--no-extras", action="store_true", help="without exports, renders, clips and report.html")
+    args = ap.parse_args(argv)
+    from asset2sim.schemas.config import RefineConfig
+    from asset2sim.tasks.refine import refine_asset
+
+    with open(args.manifest, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    wanted = {i.strip() for i in args.ids.split(",") if i.strip()}
+    rows = [r for r in rows if not wanted or r["id"] in wanted]
+    work = args.work or Path(tempfile.mkdtemp(prefix="a2s-determinism-"))
+    os.environ["ASSET2SIM_CACHE"] = str(work / "cache")  # empty for the first refine of each row, warm for the second
+    differing = 0
+    t0 = time.perf_counter()
+    try:
+        for r in rows:
+            out = work / "out" / r["id"]
+            snaps = []
+            for _ in range(2):
+                refine_asset(args.manifest.parent / r["id"], r["prompt"], out, RefineConfig(), task=r.get("task") or None,
+                             skip_if_complete=False, extras=not args.no_extras)
+                snaps.append(snapshot(out))
+            a, b = snaps
+            diff = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+            differing += bool(diff)
+            print(f"{r['id']:>8} {r['category']:<17} {len(a):4d} files: " + ("identical" if not diff else
+                  f"{len(diff)} differ: {', '.join(diff[:6])}"), flush=True)
+        print(f"{len(rows) - differing} of {len(rows)} rows byte-identical across two refines (cold, then warm cache) "
+              f"in {time.perf_counter() - t0:.0f} s")
+    finally:
+        if args.work is None:
+            shutil.rmtree(work, ignore_errors=True)
+    return 1 if differing else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
