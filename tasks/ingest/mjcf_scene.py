@@ -76,9 +76,10 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
     Args:
         m: the compiled model.
         path: the file (for messages).
-        body: a body's name (``body_<id>`` or ``#<id>`` for an unnamed one): the world body's child holding it is
-            the object. None: the one child whose subtree carries a hinge or slide joint (a file with one child: that
-            child).
+        body: a body's name (``body_<id>`` or ``#<id>`` for an unnamed one): a child of the world body, or a moving
+            part of one (a body with a hinge or slide joint), picks that child; another body deeper in the scene (a
+            kitchen's ``microwave`` on its counter) is itself the object's root, mounted on the bodies above it.
+            None: the one child whose subtree carries a hinge or slide joint (a file with one child: that child).
 
     Raises:
         StagingError: no body under the world body; ``body`` names no body (the message lists the candidates);
@@ -97,8 +98,23 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
         if not hits:
             names = [label(m, b) for b in (articulated or tops)]
             raise StagingError(f"{path}: no body named {body!r}; the objects under the world body: {names}")
-        root = next(t for t in tops if hits[0] in trees[t])
-        notes.append(f"object: body {label(m, root)!r} (asked: --body {body})")
+        named = hits[0]
+        own = [t for t in joint_types(m, [named]) if t in (JNT_HINGE, JNT_SLIDE)]
+        if named in trees or own:  # an object under the world body, or a moving part of one: that object
+            root = next(t for t in tops if named in trees[t])
+            notes.append(f"object: body {label(m, root)!r} (asked: --body {body})")
+        else:  # a body deeper in a scene (a kitchen's microwave on its counter): its own subtree, mounted where it is
+            chain, b = [], int(m.body_parentid[named])
+            while b != 0:
+                chain.append(b)
+                b = int(m.body_parentid[b])
+            inside = set(subtree(m, named))
+            top = chain[-1] if chain else named
+            beside = [label(m, b) for b in subtree(m, top) if b not in inside and int(m.body_jntnum[b]) > 0]
+            notes.append(f"object: body {label(m, named)!r} (asked: --body {body}), mounted on "
+                         f"{[label(m, c) for c in chain]} (left out, not refined)"
+                         + (f"; bodies with joints beside it left out: {beside}" if beside else ""))
+            root = named
     elif len(tops) == 1:
         root = tops[0]
     elif len(articulated) == 1:
@@ -112,12 +128,13 @@ def pick_object(m, path: Path | str, body: str | None = None) -> ScenePick:
     else:
         raise StagingError(f"{path}: none of the {len(tops)} bodies under the world body {[label(m, b) for b in tops]} "
                            "carries a hinge or slide joint: name the object with --body NAME (config body:)")
-    static = tuple(label(m, b) for b in tops if b != root and not joint_types(m, trees[b]))
-    left_out = tuple(label(m, b) for b in tops if b != root and joint_types(m, trees[b]))
+    home = next(t for t in tops if root in trees[t])  # the world body's child holding the object (itself, mostly)
+    static = tuple(label(m, b) for b in tops if b != home and not joint_types(m, trees[b]))
+    left_out = tuple(label(m, b) for b in tops if b != home and joint_types(m, trees[b]))
     if static:
         free = JNT_FREE in joint_types(m, [root])
         where = "stands on" if free else "is mounted on"
         notes.append(f"static bodies {list(static)} (no joints): the world the object {where}; left out, not refined")
     if left_out:
         notes.append(f"other bodies with joints {list(left_out)} left out (one object is read; --body picks another)")
-    return ScenePick(root=root, bodies=tuple(trees[root]), static=static, left_out=left_out, notes=tuple(notes))
+    return ScenePick(root=root, bodies=tuple(subtree(m, root)), static=static, left_out=left_out, notes=tuple(notes))

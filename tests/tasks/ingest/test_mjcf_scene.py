@@ -124,3 +124,47 @@ def test_an_mjcf_root_without_a_free_joint_is_refined_mounted_as_the_file_says(t
     assert res.overlay.mounting.fixed and res.overlay.mounting.source == "the MJCF file welds the root to the world"
     free = refine_asset(xml, "A free-standing window, slightly open.", tmp_path / "free", config, extras=False)
     assert not free.overlay.mounting.fixed and free.overlay.mounting.source.startswith("request")
+
+
+def test_a_body_deep_in_a_kitchen_scene_is_read_as_the_object_mounted_where_it_is(tmp_path):
+    """Franka Kitchen's layout in small: a robot arm and a desk under the world body, the desk holding a counter, a
+    sliding cabinet and a microwave; --body microwave reads the microwave alone, mounted on the desk."""
+    xml = tmp_path / "kitchen.xml"
+    xml.write_text(textwrap.dedent("""
+        <mujoco model="kitchen">
+          <compiler angle="radian"/>
+          <worldbody>
+            <body name="arm" pos="0 -1 0">
+              <geom type="cylinder" size="0.06 0.4" pos="0 0 0.4"/>
+              <body name="link1" pos="0 0 0.8"><joint name="j1" axis="0 0 1" range="-2 2"/><geom type="box" size="0.05 0.05 0.2"/></body>
+            </body>
+            <body name="desk">
+              <body name="counter"><geom type="box" size="1 0.4 0.45" pos="0 0 0.45"/></body>
+              <body name="slidecabinet" pos="0.5 0 1.5">
+                <geom type="box" size="0.3 0.2 0.2"/>
+                <body name="slidedoor" pos="0 -0.22 0"><joint name="slide" type="slide" axis="1 0 0" range="0 0.4"/>
+                  <geom type="box" size="0.15 0.01 0.19"/></body>
+              </body>
+              <body name="microwave" pos="-0.5 0 1.1" euler="0 0 0.3">
+                <body name="micro_body"><geom type="box" size="0.25 0.2 0.15"/>
+                  <body name="micro_door" pos="-0.25 -0.21 0">
+                    <joint name="micro0joint" axis="0 0 1" range="-2.094 0"/>
+                    <geom type="box" size="0.25 0.01 0.15" pos="0.25 0 0"/>
+                  </body>
+                </body>
+              </body>
+            </body>
+          </worldbody>
+        </mujoco>""").lstrip())
+    with pytest.raises(StagingError, match=r"\['arm', 'desk'\]"):
+        read_mjcf_asset(xml)
+    read = read_mjcf_asset(xml, ReadOptions(body="microwave"))
+    assert read.model.root == "microwave" and set(read.model.links) == {"microwave", "micro_body", "micro_door"}
+    hinge = next(j for j in read.model.joints if j.name == "micro0joint")
+    assert (hinge.limit.lower, hinge.limit.upper) == pytest.approx((-2.094, 0.0))
+    note = next(n for n in read.notes if n.startswith("object: body 'microwave'"))
+    assert "mounted on ['desk']" in note and "'slidedoor'" in note
+    assert any("'arm'" in n and "left out" in n for n in read.notes)
+    assert read.root_fixed is True
+    door = read_mjcf_asset(xml, ReadOptions(body="micro_door"))  # a moving part: the object under the world body
+    assert door.model.root == "desk"
