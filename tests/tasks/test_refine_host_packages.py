@@ -1,4 +1,4 @@
-"""Objects as robosuite and Meta-World ship them, refined from the installed package's own files (skipped where the
+"""Objects as robosuite, Meta-World and gymnasium-robotics (Franka Kitchen) ship them, refined from the installed package's own files (skipped where the
 package is not installed: neither is a dependency of asset2sim). Nothing of the package is imported; its files are
 found where Python would import it from."""
 
@@ -29,17 +29,21 @@ def _package_file(package: str, rel: str) -> Path:
     return path
 
 
-@pytest.mark.parametrize("package, rel, prompt", [
-    ("robosuite", "models/assets/objects/door.xml", "A door, slightly open."),
-    ("metaworld", "assets/objects/drawer.xml", "A drawer, slightly open."),
-    ("metaworld", "assets/objects/faucet.xml", "A faucet."),
-    ("metaworld", "assets/objects/lever.xml", "A lever."),
-    ("metaworld", "assets/objects/coffeemachine.xml", "A coffee machine."),
-    ("metaworld", "assets/objects/doorlockA.xml", "A door lock."),
+KITCHEN = "envs/assets/kitchen_franka/kitchen_assets/kitchen_env_model.xml"
+
+
+@pytest.mark.parametrize("package, rel, prompt, body", [
+    ("robosuite", "models/assets/objects/door.xml", "A door, slightly open.", None),
+    ("metaworld", "assets/objects/drawer.xml", "A drawer, slightly open.", None),
+    ("metaworld", "assets/objects/faucet.xml", "A faucet.", None),
+    ("metaworld", "assets/objects/lever.xml", "A lever.", None),
+    ("metaworld", "assets/objects/coffeemachine.xml", "A coffee machine.", None),
+    ("metaworld", "assets/objects/doorlockA.xml", "A door lock.", None),
+    ("gymnasium_robotics", KITCHEN, "A microwave, door slightly open.", "microwave"),
 ], ids=lambda v: Path(v).stem if "/" in str(v) else None)
-def test_a_package_object_is_refined_interaction_ready_at_its_size_in_its_unit(tmp_path, package, rel, prompt):
+def test_a_package_object_is_refined_interaction_ready_at_its_size_in_its_unit(tmp_path, package, rel, prompt, body):
     xml = _package_file(package, rel)
-    res = refine_asset(xml, prompt, tmp_path / "out", CONFIG, extras=False)
+    res = refine_asset(xml, prompt, tmp_path / "out", CONFIG.model_copy(update={"body": body}), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
     assert json.loads((res.out_dir / "overlay.json").read_text())["scale"] == 1.0
     spec = mujoco.MjSpec.from_file(str(xml))
