@@ -80,6 +80,9 @@ class LabelTable(PriorModel):
 
     strip_prefixes: list[str] = Field(default_factory=list)
     aliases: dict[str, str] = Field(default_factory=dict)
+    words: dict[str, list[str]] = Field(default_factory=dict)
+    """A request's part word -> the canonical labels it may also name, in order; tried only when no part of the
+    object carries the word's own label or a category synonym of it (``part_priors.named_by_word``)."""
     labels: dict[str, LabelPrior]
 
 
@@ -149,6 +152,7 @@ class CategoryPrior(PriorModel):
     task_relevant: list[str] = Field(default_factory=list)
     accessories: list[str] = Field(default_factory=list)
     label_synonyms: dict[str, list[str]] = Field(default_factory=dict)
+    """A request's part word (a label or any word, "arm") -> the labels it also names on this category."""
     part_evidence: dict[str, float] = Field(default_factory=dict)
     variants: list[VariantPrior] = Field(default_factory=list)
     notes: str = ""
@@ -227,6 +231,10 @@ def _build(directory: Path | None) -> Priors:
     for alias, target in labels.aliases.items():
         if target not in labels.labels:
             raise PriorsError(f"labels.yaml: aliases.{alias}: target {target!r} is not a label")
+    for word, targets in labels.words.items():
+        for target in targets:
+            if target not in labels.labels:
+                raise PriorsError(f"labels.yaml: words.{word}: {target!r} is not a label")
 
     raw_cat = _read_yaml(directory, "categories.yaml")
     categories = {k: _validate_entry(CategoryPrior, "categories.yaml", k, v, name=k) for k, v in raw_cat.items()}
@@ -247,7 +255,6 @@ def _build(directory: Path | None) -> Priors:
         label_refs += [("spring_labels", k) for k in cat.spring_labels]
         label_refs += [("task_relevant", k) for k in cat.task_relevant]
         label_refs += [("accessories", k) for k in cat.accessories]
-        label_refs += [(f"label_synonyms.{k}", k) for k in cat.label_synonyms]
         label_refs += [(f"label_synonyms.{k}", v) for k, vs in cat.label_synonyms.items() for v in vs]
         label_refs += [(f"part_evidence.{k}", k) for k in cat.part_evidence]
         for i, var in enumerate(cat.variants):

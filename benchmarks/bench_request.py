@@ -9,9 +9,15 @@ and the time to refuse a request above the length cap
 the measurement only.
 
 It then parses the request corpus (``tests/data/request_corpus.yaml``:
-requests over the dev objects, the demo assets and a generated toaster) and
+requests over the dev objects, the demo assets and generated objects) and
 prints the share of parses that match their expected parse, the misses, and
-the parse time per request; ``--outcomes N`` also refines the first N corpus
+the parse time per request; the rate per phenomenon (synonym, ordinal,
+quantifier, compound, negation, hedge, fraction, unit, volume, missing part;
+the rest "general"), an entry counting when its parse matches and, for the
+hand-written entries, the request resolved on its object sets the expected
+joints (no refine); and 600 requests generated from structured intents
+(``tests/tasks/interpret/request_generated.py``), the share whose parse gives
+the intent back, per phenomenon; ``--outcomes N`` also refines the first N corpus
 entries that have an expected outcome (``all``: every one; dev objects
 included, minutes) and prints how many land (numbers within 5 %, bands in
 their interval, sizes, masses, materials, damping levels, warnings).
@@ -53,7 +59,8 @@ def time_parse(text: str, repeat: int) -> float:
 def corpus(outcomes: str | None) -> None:
     """Parse match rate of the corpus (and optionally its outcomes)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from tests.tasks.interpret.request_corpus import load_corpus, parse_misses, run_outcome  # the test corpus tools
+    from tests.tasks.interpret.request_corpus import (apply_misses, load_corpus, parse_misses, phenomena_of,  # the test corpus tools
+                                                      rates_by_phenomenon, run_outcome)
 
     entries = load_corpus()
     t = time.perf_counter()
@@ -63,6 +70,32 @@ def corpus(outcomes: str | None) -> None:
           f"{1000 * secs / len(entries):.2f} ms per request")
     for m in misses:
         print("  MISS", m)
+    with tempfile.TemporaryDirectory() as tmp:
+        applied = [e for e in entries if e.get("apply")]
+        t = time.perf_counter()
+        rates = rates_by_phenomenon(entries, Path(tmp))
+        secs = time.perf_counter() - t
+        print(f"per phenomenon (parse, and the joints it sets where the entry says; {len(applied)} entries resolved on their "
+              f"objects in {secs:.1f} s):")
+        for ph, (ok, n) in sorted(rates.items(), key=lambda kv: (kv[0] == "general", kv[0])):
+            print(f"  {ph:<13} {ok:>4}/{n:<4} {ok / n:6.1%}")
+        for e in applied:
+            m = apply_misses(e, Path(tmp))
+            if m:
+                print(f"  APPLY MISS {e['id']} {e['object']} {','.join(phenomena_of(e))} {e['text']!r}: {'; '.join(m)}")
+    from collections import Counter
+
+    from tests.tasks.interpret.request_generated import generate, mismatch
+
+    intents = generate(600)
+    misses = [(i, m) for i in intents if (m := mismatch(i, request.parse_request(i.text)))]
+    total = Counter(p for i in intents for p in i.phenomena)
+    missed = Counter(p for i, _ in misses for p in i.phenomena)
+    print(f"generated from structured intents: {len(intents) - len(misses)}/{len(intents)} parse back to their intent; per phenomenon:")
+    for ph, n in sorted(total.items()):
+        print(f"  {ph:<13} {n - missed[ph]:>4}/{n:<4} {(n - missed[ph]) / n:6.1%}")
+    for i, m in misses:
+        print(f"  GENERATED MISS {i.text!r}: {m}")
     if not outcomes:
         return
     todo = [e for e in entries if "outcome" in e]

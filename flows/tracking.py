@@ -224,7 +224,9 @@ def log_flow_run(
 #: The experiment tag by which the MLflow 3 UI chooses its first page, and the kind that opens on the runs table.
 EXPERIMENT_KIND_TAG, EXPERIMENT_KIND = "mlflow.experimentKind", "custom_model_development"
 #: An asset's files logged with its MLflow run (relative to its output folder; globs).
-ASSET_ARTIFACTS = ("report.json", "report.html", "evaluation.json", "views/*.png")
+ASSET_ARTIFACTS = ("report.json", "report.html", "evaluation.json", "timings.json", "views/*.png", "clips/clips.json",
+                   "clips/*.webm", "clips/*.png")
+"""The report's videos and posters (``clips/``) travel with it, so ``report.html`` plays them in MLflow's artifact view."""
 
 
 def asset_artifacts(out_dir: Any) -> list[Path]:

@@ -27,8 +27,11 @@ BAND_INTERVAL: dict[str, tuple[float, float]] = {
 
 TargetKind = Literal["fraction", "angle", "distance", "end"]
 EndName = Literal["high", "low", "on", "off"]
-Dimension = Literal["height", "width", "depth", "length", "largest"]
-OrderAxis = Literal["vertical", "left_right", "right_left", "front_back"]
+Dimension = Literal["height", "width", "depth", "length", "largest", "volume"]
+OrderAxis = Literal["vertical", "left_right", "right_left", "front_back", "middle", "size"]
+"""How an ordinal counts, facing the object's front: top to bottom, left to right, right to left, front to back;
+``middle`` the middle one of an odd count along the direction the parts are spread in (ordinal 0); ``size`` by the
+moving part's box volume, smallest first ("the freezer door" 0, "the main door" -1)."""
 
 
 class StateTarget(BaseModel):
@@ -45,7 +48,9 @@ class StateTarget(BaseModel):
 
 class SizeTarget(BaseModel):
     """A size in numbers: ``value`` m along ``dimension`` (height: world z of
-    the closed object; width / depth: larger / smaller horizontal extent)."""
+    the closed object; width / depth: larger / smaller horizontal extent), or
+    for ``volume`` m^3, a container's volume ("a 500 ml bottle") compared with
+    the closed object's convex-hull volume."""
 
     model_config = ConfigDict(extra="forbid")
     dimension: Dimension
@@ -96,6 +101,26 @@ class JointStateRequest(BaseModel):
     """How ``ordinal`` counts, seen facing the object's front."""
     phrase: str = ""
     """The words of the request this came from."""
+
+    def short(self) -> str:
+        """The request in a few words for a progress line: who (label, joint or "all", "#n" an ordinal, "@order"
+        when not top to bottom) and what: a number as asked from the closed end ("lid=30 deg from closed",
+        "drawer=20 mm from closed", "door=40 %"), an end ("lever=up"), else the band ("door=halfway")."""
+        who = (self.joint if self.selector == "joint" else self.label) or "all"
+        if self.ordinal is not None:
+            who += f"#{self.ordinal}" + ("" if self.order == "vertical" else f"@{self.order}")
+        t = self.target
+        if t is None:
+            what = self.band
+        elif t.kind == "end":
+            what = {"high": "up", "low": "down"}.get(str(t.end), str(t.end))
+        elif t.kind == "angle":
+            what = f"{math.degrees(float(t.value or 0.0)):.4g} deg from closed"
+        elif t.kind == "distance":
+            what = f"{1000.0 * float(t.value or 0.0):.4g} mm from closed"
+        else:
+            what = f"{100.0 * float(t.value or 0.0):.4g} %"
+        return f"{who}={what}"
 
     @property
     def names_part(self) -> bool:
@@ -188,6 +213,9 @@ class RequestFindings(BaseModel):
     warnings: list[str] = Field(default_factory=list)
     asked: list[str] = Field(default_factory=list)
     quantities: list[QuantityOutcome] = Field(default_factory=list)
+    phrases: list[str] = Field(default_factory=list)
+    """Each state phrase of the request with the parts it set (joint and label), the amount set from the closed
+    end and the amount asked, or why it was not applied, in the request's order."""
 
 
 #: Units an override may carry -> factor to SI (kg, m, rad).

@@ -284,7 +284,7 @@ def _interpret(ctx: EstimationContext, log: _StageLog) -> str:
         log.say("request", f"pose '{spec.pose_hint}': {pose_note}")
     for note in request_notes(spec):
         log.say("request", note)
-    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(f"{js.label or 'all'}{'' if js.ordinal is None else '#' + str(js.ordinal)}={js.band}" for js in spec.joint_states) or "none asked"))
+    log.say("request", f"category {ctx.category}; size {spec.size_class or 'regular'}; states " + (", ".join(js.short() for js in spec.joint_states) or "none asked"))
     log.lap("closed_state")
     return pose_note
 
@@ -862,7 +862,7 @@ def _build_report(ctx: EstimationContext, prompt: str, chash: str, att: _Attempt
     (``request_apply.resolve_states``), for the as-asked tier (``request_met``)."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
     found = request_apply.findings(ctx, att.targets, closed_out, state, overlay.scale, overlay.total_mass(), list(overlay.notes.other),
-                                   overlay, att.rounds)
+                                   overlay, att.rounds, resolution)
     asked = as_asked.refine_request_met(ctx.request, resolution, found, closed_out, state, request_apply.unapplied_properties(ctx))
     metrics = att.check.metrics + [m for res in att.check.engine_results.values() for m in res] + [asked]
     mode = post_check_failure_mode(att.check)

@@ -8,6 +8,7 @@ interaction-ready or not as asked (``request_not_met``), 4 output location probl
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -25,8 +26,9 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.verdict import penetration_measures, penetration_why
+from asset2sim.tasks.check.verdict import penetration_measures, penetration_why, robust_rest_why
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
+from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
 
@@ -97,14 +99,39 @@ def _joint_types(out_dir) -> dict[str, str]:
         return {}
 
 
+def _joint_labels(out_dir) -> dict[str, str]:
+    """Joint name -> its moving part's label in the output's ``semantics.txt`` ({} when either cannot be read)."""
+    try:
+        sem = read_semantics(Path(out_dir))
+        return {n: sem[j.child].label for n, j in parse_urdf(Path(out_dir) / URDF_NAME)[1].items() if j.child in sem}
+    except Exception:
+        return {}
+
+
+def _state_text(name: str, q: float, report, types: dict[str, str], labels: dict[str, str]) -> str:
+    """One joint's initial state in the one frame of every amount: "joint_2 (lid) = 30.0 deg from closed (asked 30 deg),
+    25 % open", the number asked (``report.request.quantities``) beside what it has."""
+    asked = next((x for x in (report.request.quantities if report.request else []) if x.kind == "state" and x.asked is not None
+                  and x.what.rsplit(" ", 1)[0] == name), None)
+    ask = ""
+    if asked is not None and asked.what.endswith(" end"):
+        ask = f" (asked '{asked.phrase}')"
+    elif asked is not None and asked.unit in ("rad", "m", "opening fraction"):
+        v = asked.asked
+        ask = (f" (asked {math.degrees(v):.4g} deg)" if asked.unit == "rad" else f" (asked {1000.0 * v:.4g} mm)" if asked.unit == "m"
+               else f" (asked {100.0 * v:.4g} % open)")
+    who = f"{name} ({labels[name]})" if labels.get(name) else name
+    return (f"{who} = {from_closed_text(q, report.closed_positions.get(name), types.get(name, 'revolute'))}{ask}"
+            + (f", {opening_text(report.opening_fractions[name])}" if name in report.opening_fractions else ""))
+
+
 def summary_lines(result) -> list[str]:
     """Human-readable summary of a RefineResult."""
     r = result.report
     stab, osc = r.metric("rest_stability"), r.metric("oscillation")
     types = _joint_types(result.out_dir)
-    state = ", ".join(f"{k} = {from_closed_text(v, r.closed_positions.get(k), types.get(k, 'revolute'))}"
-                      + (f", {opening_text(r.opening_fractions[k])}" if k in r.opening_fractions else "")
-                      for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
+    labels = _joint_labels(result.out_dir)
+    state = ", ".join(_state_text(k, v, r, types, labels) for k, v in r.initial_joint_positions.items()) or "(no movable joints)"
     stability = "stability    n/a" if not stab else (f"stability    {'PASS' if stab.passed else 'FAIL'} (D_pos "
                                                      f"{stab.details.get('D_pos_m', float('nan')):.2e} m, D_ori "
                                                      f"{stab.details.get('D_ori_rad', float('nan')):.2e} rad)")
@@ -121,7 +148,7 @@ def summary_lines(result) -> list[str]:
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + [f"why it failed {why}" for why in penetration_why(r.metrics)] + as_asked_lines(r) + skipped_lines(r) + [
+    ] + [f"why it failed {why}" for why in penetration_why(r.metrics) + robust_rest_why(r.metrics)] + as_asked_lines(r) + skipped_lines(r) + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
@@ -144,10 +171,11 @@ def skipped_lines(report) -> list[str]:
 
 
 def request_lines(found) -> list[str]:
-    """The request's lines of the summary: numbers asked vs achieved, warnings, words no rule used."""
+    """The request's lines of the summary: each state phrase with the parts it set (or why not), numbers asked vs
+    achieved, warnings, words no rule used."""
     if found is None:
         return []
-    out = [f"request      {a}" for a in found.asked]
+    out = [f"request      {p}" for p in found.phrases] + [f"request      {a}" for a in found.asked]
     for q in found.quantities:
         if q.asked is None or q.achieved is None:
             continue

@@ -5,6 +5,7 @@ on first use and registers its factories with :mod:`asset2sim.engines.base`.
 from __future__ import annotations
 
 import importlib
+import sys
 from pathlib import Path
 
 from asset2sim.engines.base import (_ENGINES, _FILE_READERS, _SHAPE_WORLDS, _VIEWERS, EngineFactory, EngineUnavailable, EngineUnsupported,
@@ -64,17 +65,20 @@ def available_engines() -> list[str]:
 
 
 def _factory(name: str) -> EngineFactory:
-    if name not in _ENGINES:
-        if name not in _LAZY:
-            raise KeyError(f"unknown engine {name!r}; known: {known_engines()}")
+    if name not in _ENGINES and name not in _LAZY:
+        raise KeyError(f"unknown engine {name!r}; known: {known_engines()}")
+    if name in _LAZY:  # its packages checked on every open: one made unimportable since (sys.modules) is unavailable
         module, packages = _LAZY[name]
         for package in packages:
             try:
+                if package in sys.modules and sys.modules[package] is not None:
+                    continue
                 with startup_quiet():
                     importlib.import_module(package)
             except ImportError as exc:  # optional extra missing
                 raise EngineUnavailable(f"engine {name!r} unavailable: {install_hint(exc)}") from exc
-        importlib.import_module(module)
+        if name not in _ENGINES:
+            importlib.import_module(module)
     return _ENGINES[name]
 
 

@@ -44,6 +44,8 @@ def quantity_text(value: float | None, unit: str) -> str:
         return f"{math.degrees(v):.1f} deg"
     if unit == "m":
         return f"{v * 1000.0:.4g} mm" if abs(v) < 1.0 else f"{v:.4g} m"
+    if unit == "m^3":
+        return f"{v * 1e6:.4g} ml" if abs(v) < 1e-2 else f"{v * 1e3:.4g} l"
     if unit == "opening fraction":
         return f"{100.0 * v:.1f} % of the range"
     return f"{v:.4g} {unit}".rstrip()

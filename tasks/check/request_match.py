@@ -100,37 +100,78 @@ def match_label(label: str | None, wanted: str | None, category: str | None = No
 _ORDER_AXES = {"vertical": (2, -1.0), "left_right": (1, -1.0), "right_left": (1, 1.0), "front_back": (0, 1.0)}
 
 
+def _words_named(category: str | None, word: str | None, names: list[str], joints: dict[str, JointInfo],
+                 semantics: dict[str, tuple[str, str]]) -> list[str]:
+    """Of ``names``, the joints whose child's label the request's part ``word`` names
+    (``part_priors.named_by_word``: its own label or a category synonym, else the synonym table)."""
+    labels = [semantics.get(joints[n].child, (None, None))[1] for n in names]
+    try:
+        hit, _ = part_priors.named_by_word(category or "Generic", word, labels)
+    except Exception:  # a prior that cannot be read must not stop the evaluation
+        hit = [i for i, lab in enumerate(labels) if match_label(lab, word, category)]
+    return [names[i] for i in hit]
+
+
+def _ordered_pick(js, names: list[str], joints: dict[str, JointInfo], centres: dict[str, np.ndarray],
+                  volumes: dict[str, float]) -> list[str]:
+    """``names`` sorted as ``js.order`` counts and narrowed to ``js.ordinal`` (refine's ``named_parts._pick``):
+    ``middle`` the middle one of an odd count (>= 3) along the direction the parts spread most, ``size`` by the
+    child link's box volume (smallest first; the smaller of one part, or the smaller / larger of parts within 5 % of one
+    size, is none)."""
+    zero = np.zeros(3)
+    order = js.order
+    if order == "middle":
+        c = np.array([centres.get(joints[n].child, zero) for n in names]) if names else np.zeros((0, 3))
+        order = "vertical" if not len(c) or np.ptp(c[:, 2]) >= np.ptp(c[:, 1]) else "left_right"
+    if order == "size":
+        names.sort(key=lambda n: volumes.get(joints[n].child, 0.0))
+    else:
+        axis, sign = _ORDER_AXES.get(order, (2, -1.0))
+        names.sort(key=lambda n: (sign * float(centres.get(joints[n].child, zero)[axis]), float(centres.get(joints[n].child, zero)[0])))
+    if js.ordinal is None:
+        return names
+    if js.order == "middle":
+        return [names[len(names) // 2]] if len(names) >= 3 and len(names) % 2 else []
+    if order == "size" and js.ordinal in (0, -1) and len(names) >= 2:
+        v = [volumes.get(joints[n].child, 0.0) for n in names]
+        pick, nxt = (v[0], v[1]) if js.ordinal == 0 else (v[-1], v[-2])
+        if min(pick, nxt) >= 0.95 * max(pick, nxt):  # parts of one size: none is smaller (larger)
+            return []
+    if order == "size" and js.ordinal == 0 and len(names) < 2:
+        return []
+    return [names[js.ordinal]] if -len(names) <= js.ordinal < len(names) else []  # negative: from the end ("the bottom drawer")
+
+
 def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
                      centres: dict[str, np.ndarray], task_joints: list[str],
-                     category: str | None = None) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
+                     category: str | None = None, volumes: dict[str, float] | None = None
+                     ) -> tuple[list[tuple[str, str, str | None, str]], list[str]]:
     """([(joint, band, label, phrase, target)], [phrases that matched no joint])
     of a RequestSpec's joint states: ``all`` every task-relevant joint but a continuous one, ``joint``
     the one named, ``label`` the movable joints whose child's label the word
     names (else the unlabelled task-relevant ones, which it may name, or the
     task-relevant ones standing in for the category's main part the word names,
     ``part_priors.stand_in_joints``; else none: the phrase goes to the second list),
-    top to bottom (or as the request's ``order`` counts) by ``centres`` (link -> (3,) m), ``ordinal``
-    picking one (negative: from the end); a
+    top to bottom (or as the request's ``order`` counts) by ``centres`` (link -> (3,) m) or ``volumes`` (link ->
+    box volume, m^3, order ``size``), ``ordinal`` picking one (negative: from the end; :func:`_ordered_pick`); a
     phrase naming a part or joint overrides one naming none, else a later
     phrase overrides an earlier one."""
     out, unmatched = [], []
     if spec is None:
         return out, unmatched
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
-    zero = np.zeros(3)
     for js in sorted(spec.joint_states, key=lambda js: js.names_part):
         if js.selector == "all":  # a continuous joint (a knob, a wheel) has no open or closed: not "it" (as refine applies it)
             names = [n for n in task_joints if n in movable and joints[n].type != "continuous"]
+            if js.ordinal is not None:  # "the second slightly open", "the freezer open": one of them
+                names = _ordered_pick(js, names, joints, centres, volumes or {})
         elif js.selector == "joint":  # an override names the joint itself
             names = [js.joint] if js.joint in movable else []
         else:
             tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
-            names = [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)] \
+            names = _words_named(category, js.label, movable, joints, semantics) \
                 or part_priors.stand_in_joints(category or "", js.label, tm)[0]
-            axis, sign = _ORDER_AXES.get(js.order, (2, -1.0))
-            names.sort(key=lambda n: (sign * float(centres.get(joints[n].child, zero)[axis]), float(centres.get(joints[n].child, zero)[0])))
-            if js.ordinal is not None:  # a negative ordinal counts from the end ("the bottom drawer")
-                names = [names[js.ordinal]] if -len(names) <= js.ordinal < len(names) else []
+            names = _ordered_pick(js, list(names), joints, centres, volumes or {})
         if not names:
             unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
         for n in names:
@@ -150,7 +191,7 @@ def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sema
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     for js in spec.joint_states:
         if js.selector == "label":
-            out += [n for n in movable if match_label(semantics.get(joints[n].child, (None, None))[1], js.label, category)]
+            out += _words_named(category, js.label, movable, joints, semantics)
     return out
 
 
@@ -165,11 +206,11 @@ def unmatched_properties(spec: RequestSpec | None, joints: dict[str, JointInfo],
     labels = [lab for _, lab in semantics.values()]
     what = category or "object"
     for p in spec.properties:
-        if p.label not in (None, "body") and not any(match_label(lab, p.label, category) for lab in labels):
+        if p.label not in (None, "body") and not part_priors.named_by_word(category or "Generic", p.label, labels)[0]:
             out.append((p.phrase, f"names a '{p.label}' but this {what} has no such part"))
     movable = [n for n, j in joints.items() if j.type in MOVABLE]
     for d in spec.dynamics_values:
-        if d.label is None or any(match_label(semantics.get(joints[n].child, (None, None))[1], d.label, category) for n in movable):
+        if d.label is None or _words_named(category, d.label, movable, joints, semantics):
             continue
         tm = [(n, semantics.get(joints[n].child, (None, None))[1]) for n in task_joints if n in movable and joints[n].type != "continuous"]
         try:

@@ -144,6 +144,46 @@ def penetration_why(metrics: list[Any]) -> list[str]:
     return out
 
 
+#: How each robust-rest trial disturbed the object, for :func:`robust_rest_why`.
+_TRIAL_WORDS = {"drop": "landed after the 2 cm drop", "tilt+x": "landed after the 5 deg tilt about +x",
+                "tilt-x": "landed after the 5 deg tilt about -x", "tilt+y": "landed after the 5 deg tilt about +y",
+                "tilt-y": "landed after the 5 deg tilt about -y", "nudge": "was nudged at 0.05 m/s"}
+
+
+def robust_rest_why(metrics: list[Any]) -> list[str]:
+    """Why robust rest failed (``not_robust_at_rest``), one sentence per part that moved (its largest drift over the
+    trials against its tolerance, and the trial) or per toppling, with what a user can do; empty when it passes. A
+    part's friction and damping stay within what a hand overcomes (the operability tier), so a drift here is the
+    part's momentum when the object lands, not a search that stopped short (``docs/guide/metrics.md``)."""
+    out: list[str] = []
+    for m in metrics:
+        if m.name != "robust_rest" or _verdict(m) is not False:
+            continue
+        trials = (m.details or {}).get("trials") or {}
+        worst: dict[str, tuple[float, float, str]] = {}
+        toppled: tuple[float, str] | None = None
+        for name, t in trials.items():
+            if not isinstance(t, dict) or t.get("passed") is not False:
+                continue
+            for j in t.get("failing_joints") or []:
+                drift, tol = float((t.get("joint_drift") or {}).get(j, 0.0)), float((t.get("joint_tolerance") or {}).get(j, 0.0))
+                if j not in worst or drift > worst[j][0]:
+                    worst[j] = (drift, tol, name)
+            if "toppled" in str(t.get("failure", "")) and (toppled is None or float(t.get("topple") or 0) > toppled[0]):
+                toppled = (float(t.get("topple") or 0.0), name)
+        for j, (drift, tol, name) in sorted(worst.items()):
+            prismatic = tol < 0.01  # 2 mm against 0.02 rad
+            amount = f"{1000 * drift:.1f} mm (tolerance {1000 * tol:.0f} mm)" if prismatic else f"{drift:.3f} rad (tolerance {tol:g} rad)"
+            out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its friction "
+                       "and damping stay within what a hand overcomes, and at that the part's momentum carries it. A lighter "
+                       "part (--mass, --material) may hold; a mounted object (--mount fixed) is not dropped or tilted.")
+        if toppled is not None:
+            out.append(f"the object toppled ({toppled[0]:.2f} rad) when it {_TRIAL_WORDS.get(toppled[1], toppled[1])} "
+                       f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. Ask for a smaller "
+                       "opening of its heavy parts, or --mount fixed when it stands fixed in use.")
+    return out
+
+
 def combine_verdict(report: Any, evaluation_metrics: list[Any]) -> Readiness:
     """Refine's final verdict once its evaluation ran: :func:`readiness` of the
     evaluation's metrics, set on ``report`` (a ``RefineReport``, in place:

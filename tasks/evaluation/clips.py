@@ -251,7 +251,7 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
     skipped: dict[str, str] = {}
     chosen = list(dict.fromkeys(joints))
     for name in chosen[max_joints:]:
-        skipped[name] = f"only the first {max_joints} task-relevant joints get clips"
+        skipped[name] = f"only {max_joints} joints get clips (one of each kind of part first, the task's first)"
     todo = []
     for name in chosen[:max_joints]:
         js = by_joint.get(name)

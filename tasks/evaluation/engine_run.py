@@ -42,6 +42,7 @@ class EngineRun:
     joint_series: dict[str, np.ndarray] = field(default_factory=dict)
     extents: np.ndarray | None = None  # (3,) m AABB of the links with collision at the initial state
     link_centres: dict[str, np.ndarray] = field(default_factory=dict)
+    link_volumes: dict[str, float] = field(default_factory=dict)  # link -> m^3 volume of its AABB (which part is smaller)
     masses: dict[str, dict[str, Any]] = field(default_factory=dict)
     probes: list[Any] = field(default_factory=list)
     point_cloud: dict[str, np.ndarray] = field(default_factory=dict)  # link -> (N, 3) m world collision vertices
@@ -55,6 +56,11 @@ class EngineRun:
 def link_centres(session) -> dict[str, np.ndarray]:
     """Link -> (3,) m centre of the engine's AABB of the link (world frame)."""
     return {name: 0.5 * np.add(*session.link_aabb(name)) for name in session.link_names}
+
+
+def link_volumes(session) -> dict[str, float]:
+    """Link -> volume (m^3) of the engine's AABB of the link (world frame): "the smaller door" is the smaller box."""
+    return {name: float(np.prod(np.maximum(np.subtract(*session.link_aabb(name)[::-1]), 0.0))) for name in session.link_names}
 
 
 def link_masses(session, links: dict[str, LinkInfo]) -> dict[str, dict[str, Any]]:
@@ -138,6 +144,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
         if pyb:
             run.extents = aabb_extents(session)
             run.link_centres = link_centres(session)
+            run.link_volumes = link_volumes(session)
             run.masses = link_masses(session, ctx.links)
             if keep_geometry:
                 run.point_cloud = point_cloud(session)

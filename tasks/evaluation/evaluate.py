@@ -92,6 +92,24 @@ def evaluate_asset(
     return ev
 
 
+def clip_joints(task_joints: list[str], swept: list[str], labels: dict[str, str | None]) -> list[str]:
+    """The joints whose sweeps get clips, in the order they get them (:func:`clip_files.sweep_clips` keeps the first
+    :data:`~asset2sim.tasks.evaluation.clips.MAX_CLIP_JOINTS`): one of each kind of part first (by part
+    label; an unlabelled joint is a kind of its own), the task-relevant joints' kinds before the others, then more of
+    the task's joints, then the rest (four buttons and a door give a button and the door before a second button).
+    ``swept``: the joints with a recorded sweep, in sweep order; ``labels``: joint -> part label."""
+    task = [j for j in task_joints if j in swept]
+    order = task + [j for j in swept if j not in task]
+    first, seen = [], set()
+    for j in order:
+        kind = labels.get(j) or f"joint:{j}"
+        if kind not in seen:
+            seen.add(kind)
+            first.append(j)
+    rest = [j for j in task if j not in first] + [j for j in order if j not in first and j not in task]
+    return first + rest
+
+
 def _write_clips(ev: Evaluation, runs: dict[str, EngineRun], engine: str, out_dir: Path | str) -> ClipSet | None:
     """The sweep clips of ``engine``'s run (:func:`clip_files.sweep_clips`) of the task-relevant joints, else every swept
     joint; None, with a note in ``ev.notes``, when they cannot be drawn (no sweep, no PyAV, a render error)."""
@@ -99,7 +117,9 @@ def _write_clips(ev: Evaluation, runs: dict[str, EngineRun], engine: str, out_di
     if not isinstance(sweep, SweepRun) or not sweep.joints:
         ev.notes.append(f"clips: none ({engine} ran no joint sweep)")
         return None
-    joints = [j for j in ev.task_joints if j in {js.joint for js in sweep.joints}] or [js.joint for js in sweep.joints]
+    ctx = ev._context
+    labels = {n: (ctx.semantics or {}).get(j.child, (None, None))[1] for n, j in ctx.joints.items()}
+    joints = clip_joints(ev.task_joints, [js.joint for js in sweep.joints], labels)
     ctx_urdf = ev._context.urdf  # the files evaluated (a refine's staging folder; ``ev.urdf`` names the published one)
     try:
         return clip_files.sweep_clips(ctx_urdf, sweep, joints, dict(ev.initial_state), out_dir,

@@ -251,7 +251,8 @@ def _m_prompt(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     r = _first_run(runs)
     centres = r.link_centres if r is not None else {}
     largest, where = _largest_extent(ctx, runs)
-    req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, centres, ctx.task_joints, ctx.category)
+    req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, centres, ctx.task_joints, ctx.category,
+                                      r.link_volumes if r is not None else {})
     checks = []
     for name, band, label, phrase, target in req:
         c = ctx.closed.get(name)
@@ -312,7 +313,7 @@ def _m_request_met(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResul
         return [as_asked.not_measured("no word of the request was understood", ctx.prompt)]
     r = _first_run(runs)
     req, unmatched = requested_joints(spec, ctx.joints, ctx.semantics, r.link_centres if r is not None else {}, ctx.task_joints,
-                                      ctx.category)
+                                      ctx.category, r.link_volumes if r is not None else {})
     what = ctx.category or "object"
     unmet = [as_asked.not_applied(p, f"names no part of this {what}") for p in unmatched]
     unmet += as_asked.overridden_items(spec)
@@ -335,6 +336,10 @@ def _m_request_met(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResul
         if item is not None:
             unmet.append(item)
     for sz in spec.sizes:
+        if sz.dimension == "volume":
+            not_graded.append({"phrase": sz.phrase, "reason": "a volume is measured by refine on the closed object's convex hull "
+                                                             "(report.json request.quantities); the evaluation measures extents"})
+            continue
         if ctx.closed_extents is None:
             not_graded.append({"phrase": sz.phrase, "reason": "closed extents not measured"})
             continue

@@ -302,6 +302,29 @@ def _modelled_end(qs: np.ndarray, vals: np.ndarray, ratio: float, tie_tol: float
     return float(qs[i])
 
 
+def object_hull_volume(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray] | None = None) -> float:
+    """Volume (the asset's units cubed) of the convex hull of every link at ``state``: the closed object's outer
+    volume, what a container's volume ("a 500 ml bottle") is compared with; 0 without geometry.
+    Source: Qhull (Barber, Dobkin, Huhdanpaa 1996) through ``scipy.spatial.ConvexHull``."""
+    from scipy.spatial import ConvexHull, QhullError  # scipy is heavy to import; only a volume request needs it
+
+    points = link_hull_points(asset) if hull_points is None else hull_points
+    session.set_joint_positions(state)
+    world = []
+    for ln in asset.links:
+        v = points.get(ln.name)
+        if v is None or not len(v):
+            continue
+        pos, R = session.link_frame(ln.name)
+        world.append(np.asarray(v, float) @ R.T + pos)
+    if not world:
+        return 0.0
+    try:
+        return float(ConvexHull(np.concatenate(world)).volume)
+    except (QhullError, ValueError):  # flat or too few points: no volume
+        return 0.0
+
+
 def object_extents(session, state: dict[str, float], asset: AssetDescription, hull_points: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Extents (3,) of the root-frame box bounding every link at ``state`` (the asset's units)."""
     points = link_hull_points(asset) if hull_points is None else hull_points

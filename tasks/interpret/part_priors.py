@@ -121,6 +121,25 @@ def request_label_matches(category: str, request_label: str | None, semantic_lab
 
 
 
+def named_by_word(category: str, word: str | None, labels: Sequence[str | None]) -> tuple[list[int], str]:
+    """(indices of ``labels`` a request's part ``word`` names, how): those :func:`request_label_matches` finds (the
+    word's own label or the category's ``label_synonyms``; how "" for its own label), else those of the first label of the word's
+    ``words`` entry in ``labels.yaml`` that any of ``labels`` carries (how: "'lever' = the 'slider' (synonym
+    table ...)"); ([], "") when none."""
+    hit = [i for i, lab in enumerate(labels) if request_label_matches(category, word, lab)]
+    canon = [canonical_label(lab) for lab in labels]
+    w = canonical_label(word)
+    if hit or word is None:
+        other = list(dict.fromkeys(str(canon[i]) for i in hit if canon[i] != w))
+        return hit, (f"'{word}' = the '{', '.join(other)}' (a {category}'s synonym: asset2sim/priors/categories.yaml label_synonyms)"
+                     if other else "")
+    for target in load_priors().labels.words.get(str(w), []):
+        hit = [i for i, c in enumerate(canon) if c == target]
+        if hit:
+            return hit, f"'{word}' = the '{target}' (no part is labelled '{w}'; synonym table asset2sim/priors/labels.yaml: words)"
+    return [], ""
+
+
 def task_relevant_joints(category: str, joint_labels: Sequence[tuple[str, str | None]]) -> tuple[list[str], str]:
     """(joints whose part tasks manipulate, the rule) from ``joint_labels`` ((joint, part label or None)):
     the task-relevant parts by priority; else every joint of neither body nor accessory; else every joint."""

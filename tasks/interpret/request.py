@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, phrase_regex, request_category, variant_mention
 from asset2sim.tasks.interpret.mounting import mounting_mentions
-from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret import request_values as rv
 
@@ -64,7 +63,15 @@ def _scan(text: str, table: list[tuple[re.Pattern[str], object, str]]) -> list[_
 _OPEN = r"open(?:ed)?"
 #: Verbs of a part's motion a degree word may follow ("pulled out halfway"): the degree is the state.
 _MOVED = (r"(?:(?:pulled|slid|drawn|pushed) (?:out|in)|pulled|slid|extended|retracted|raised|lifted|lowered|swung|tilted|"
-          r"turned|rotated|unfolded|folded)")
+          r"turned|rotated|unfolded|folded|unscrewed|screwed (?:off|open)|loosened)")
+#: Hedges before a degree word ("open about halfway"): the degree is what is asked.
+_ABOUT = r"(?:(?:about|around|roughly|approximately|approx\.?|some|more or less|close to|nearly|almost|just about) )?"
+#: Comparatives around halfway ("a little less than halfway open"): an opening fraction a step below or above it.
+_LESS = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:less than|under|short of|below)"
+_MORE = r"(?:(?:a (?:little|bit|tad)|slightly|just|somewhat) )?(?:more than|over|past|beyond|above)"
+_HALF = r"(?:half[- ]?way|half(?: of the way)?|the halfway (?:point|mark))"
+#: Opening fraction of "less than halfway" / "more than halfway": one band step (0.1 of the range) from 0.5.
+LESS_THAN_HALF, MORE_THAN_HALF = 0.4, 0.6
 _SZ = r"[- ]?siz(?:ed?|es)"
 
 # (regex, size class, flag) - flag "weak": only counts right before a category word.
@@ -99,11 +106,18 @@ _SIZE_TABLE = _compile(
 _STATE_TABLE = _compile(
     [
         # negations first (longest match wins at a position)
-        (r"not (?:at all |even slightly |yet )?" + _OPEN, "closed", ""),
+        (r"(?:not (?:at all |even slightly |yet )?|no longer |never )" + _OPEN + r"(?: at all)?", "closed", ""),
+        (r"no longer (?:closed|shut)", "mostly", ""),
         (r"(?:is|are|was)n'?t " + _OPEN, "closed", ""),
         (r"not (?:quite|fully|completely|entirely) (?:closed|shut)", "slightly_open", ""),
         (r"not (?:closed|shut)", "halfway", ""),
         (r"not (?:fully|completely|all the way|entirely) " + _OPEN, "mostly", ""),
+        # hedged and compared ("mostly closed": a small opening, not closed; "a little less than halfway open")
+        (r"(?:mostly|largely|almost|nearly|practically|just about|almost fully|nearly fully|not quite fully) (?:closed|shut)", "slightly_open", ""),
+        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _LESS + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
+         ("halfway", StateTarget(kind="fraction", value=LESS_THAN_HALF)), ""),
+        (r"(?:" + _OPEN + r" |" + _MOVED + r" )?" + _MORE + r" " + _HALF + r"(?:[- ]" + _OPEN + r")?",
+         ("halfway", StateTarget(kind="fraction", value=MORE_THAN_HALF)), ""),
         # closed
         (r"(?:fully |completely |all the way )?(?:closed|shut)(?: all the way| completely| tight)?", "closed", ""),
         (r"(?:turned|switched|shut) off", "closed", ""),
@@ -113,6 +127,7 @@ _STATE_TABLE = _compile(
         (_OPEN + r" (?:fully|completely|wide|to the max(?:imum)?|as far as (?:it|they) (?:can|will) go|to (?:its|their|the) (?:limit|maximum|max))", "fully", ""),
         (r"(?:turned|switched) (?:fully )?on(?: (?:full|fully|completely|all the way))?|fully (?:extended|raised|pulled out)|pulled all the way out", "fully", ""),
         (r"(?:" + _OPEN + r"|laid open|lying open|unfolded|folded out|swung open) flat|flat open|(?:" + _OPEN + r"|folded|swung) (?:out )?flat", "fully", ""),
+        (r"(?:folded|bent|pushed|tilted|laid|swung) (?:all the way )?back(?: flat| all the way)?", "fully", ""),
         # named states: which end they are does not depend on the geometry
         (r"(?:pulled|slid|drawn) (?:all the way )?out|extended|unfolded|unscrewed|deployed", "fully", ""),
         (r"(?:(?:pulled|slid|drawn) out|extended|unfolded) (?:all the way|fully|completely)", "fully", ""),
@@ -130,21 +145,21 @@ _STATE_TABLE = _compile(
         (_OPEN + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         (_MOVED + r" (?:most of the way|three[- ]quarters?(?: of the way)?)", "mostly", ""),
         # halfway
-        (r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
-        (r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
-        (_OPEN + r" (?:half[- ]?way|half)", "halfway", ""),
-        (_MOVED + r" (?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
+        (_ABOUT + r"half[- ]?way(?:[- ]" + _OPEN + r")?|mid[- ]?way(?:[- ]" + _OPEN + r")?", "halfway", ""),
+        (_ABOUT + r"half[- ]" + _OPEN + r"|half of the way(?: " + _OPEN + r")?|half[- ](?:closed|shut)", "halfway", ""),
+        (_OPEN + r" " + _ABOUT + r"(?:half[- ]?way|half)", "halfway", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:half[- ]?way|half(?: of the way)?)", "halfway", ""),
         (r"(?:partially|partly) " + _OPEN, "halfway", ""),
         # quarter
-        (r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
-        (_OPEN + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
-        (_MOVED + r" (?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (_ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?[- ]" + _OPEN, "quarter", ""),
+        (_OPEN + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
+        (_MOVED + r" " + _ABOUT + r"(?:a |one )?quarter(?:[- ]way| of the way)?", "quarter", ""),
         (r"(?:a |one )?quarter of the way", "quarter", ""),
         # slightly open
         (r"(?:slightly|barely|just|a (?:little |tiny )?bit|a little|a tad|a crack|a touch) " + _OPEN, "slightly_open", ""),
         (_OPEN + r" (?:slightly|a (?:little |tiny )?bit|a little|a crack|a tad|just a (?:little|bit))", "slightly_open", ""),
         (_MOVED + r" (?:slightly|a (?:little |tiny )?bit|a little|a tad|just a (?:little|bit))", "slightly_open", ""),
-        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?", "slightly_open", ""),
+        (r"(?:slightly |partially )?ajar|cracked(?: " + _OPEN + r")?(?: (?:a (?:little|bit|crack)|slightly))?", "slightly_open", ""),
         (r"slightly (?:raised|lifted|pulled out|extended|apart|rotated|turned)", "slightly_open", ""),
         # "open" after a verb that leaves it open ("the lid propped open"): as a lone "open", never the verb "to open"
         (r"(?:propped|popped|sprung|flipped|swung|thrown|flung|left|kept|held|standing|stands|hanging|hangs|wedged) " + _OPEN, "mostly", ""),
@@ -178,8 +193,21 @@ _ORDINALS = _compile(
         (r"right(?:most|[- ]hand)?", 0, "right_left"),
         (r"front(?:most)?", 0, "front_back"),
         (r"back(?:most)?|rear(?:most)?", -1, "front_back"),
+        # resolved from the geometry (tasks/synthesize/named_parts.py): the middle one of an odd count, along the
+        # direction the parts are spread in; by the size of the moving part's box, smallest first ("the freezer
+        # door": a refrigerator's smaller door; "the main door": its largest)
+        (r"middle(?:most)?|cent(?:er|re)|central", 0, "middle"),
+        (r"freezer|small(?:er|est)|narrow(?:er|est)", 0, "size"),
+        (r"main|large(?:r|st)|bigg(?:er|est)|wid(?:er|est)", -1, "size"),
+        # "one door open and the other shut": one of them (the first, top to bottom), the rest by "the other"
+        (r"one", 0, "vertical"),
     ]
 )
+#: Ordinal flags that only count right before the part noun ("the freezer door", not "a freezer with its door").
+_ADJACENT_ORDERS = frozenset({"middle", "size"})
+#: "one of its two doors": one of them, however many words name them.
+_ONE_OF = re.compile(r"one\s+of\s+(?:(?:the|its|their|his|her)\s+)?(?:(?:two|three|four|five|both|\d)\s+)?")
+_THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
 # (regex, (kind, value), flag) - flag "strong" for explicit damping phrases.
 _DYN_TABLE = _compile(
@@ -266,6 +294,9 @@ def _size_factors() -> dict[str, float]:
     return {k: v.factor for k, v in load_priors().size_classes.items()}
 
 
+_COMPARED = re.compile(r"(?:small|large|big)(?:ger|er|r|est|st)")
+
+
 def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> tuple[str | None, float, str, list[_Hit], list[_Hit]]:
     """Size class, factor, phrase, the size words used, and those pointing the other way from the first one."""
     used: list[_Hit] = []
@@ -273,6 +304,8 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> t
     for h in _scan(low, _SIZE_TABLE):
         if _negated(low, h.start):
             continue
+        if _COMPARED.fullmatch(h.text) and rv.PART_RX.match(low, h.end + 1):
+            continue  # "the smaller door": which door (an ordinal by size), not the object's size
         if h.flag == "weak":
             k = bisect_left(mention_starts, h.end)  # the first mention after the word
             if k == len(mentions) or tokens.count(h.end, mentions[k].start) > 2:
@@ -291,12 +324,21 @@ def _parse_size(low: str, mentions: list[CategoryMention], tokens: _Tokens) -> t
 
 _END_TAIL = re.compile(r"\s*(?:$|[,.;:!?)]|and\b|but\b|with\b|while\b|position\b)")
 _BARE_END = re.compile(r"(?:all the way |fully )?(?:up|down|on|off)")
-_END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
+_END_LEAD = re.compile(r"(?:" + rv.PART_WORDS + r")(?:\s+(?:are\s+)?(?:both|all|each))?"
+                       r"(?:\s+(?:is|are|was|were|set|turned|switched|flipped|pushed|pulled|left|stays?|kept))?\s+$")
 
 
 def _state_hits(low: str, numeric: list[rv.Found] | None = None) -> list[_Hit]:
     """State phrases left to right, not overlapping: the state table's words and the ``numeric`` states."""
-    hits = _scan(low, _STATE_TABLE) + [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]
+    nums = [_Hit(f.start, f.end, f.text, f.value, "number") for f in (numeric or [])]  # left to right, not overlapping
+    num_ends = [n.end for n in nums]
+
+    def under_number(h: _Hit) -> bool:  # the first number ending after h starts overlaps it when it starts before h ends
+        k = bisect_right(num_ends, h.start)
+        return k < len(nums) and nums[k].start < h.end
+
+    # a number wins over the words it overlaps ("propped open about a third of the way": a third)
+    hits = [h for h in _scan(low, _STATE_TABLE) if not under_number(h)] + nums
     return rv.leftmost_longest([h for h in hits if _is_state(low, h)])
 
 
@@ -331,8 +373,12 @@ class _Part:
     """(ordinal, order) pairs; order "vertical" or a spatial order."""
     quant: bool
     phrase_start: int
+    none: bool = False
+    """"none of the drawers open": the state is negated (open -> closed, closed -> open)."""
 
 
+_FRACTION_AHEAD = re.compile(r"\s*/\s*\d")
+_NONE_OF = re.compile(r"(?<![\w-])(?:none|neither) of (?:the |its |their |these |those )?$")
 _ORD_JOIN = re.compile(r"\s*(?:,\s*(?:and|or)?|and|or|&)\s*(?:the\s+)?$")
 
 
@@ -348,14 +394,16 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
         chain.append(chain[j - 1] if joined else j)
     out: list[_Part] = []
     for m in rv.PART_RX.finditer(low):
-        label = canonical_label(m.group(0)) or m.group(0)
+        label = rv.part_label(m.group(0))
         ordinals: list[tuple[int, str]] = []
         quant = False
         pstart = m.start()
         n_before = bisect_right(ord_ends, m.start())  # ordinals ending before the noun
         if n_before:
             o = ords[n_before - 1]
-            if tokens.count(o.end, m.start()) <= 2 and not tokens.marks_between(o.end, m.start()):
+            gap = tokens.count(o.end, m.start())
+            if (gap == 0 or gap <= 2 and o.flag not in _ADJACENT_ORDERS or _ONE_OF.fullmatch(low, o.start, m.start())) \
+                    and not tokens.marks_between(o.end, m.start()):
                 if o.flag == "quant":
                     quant = True
                     pstart = o.start
@@ -364,11 +412,12 @@ def _parts(low: str, tokens: _Tokens) -> list[_Part]:
                     ordinals = [(int(ords[i].value), ords[i].flag or "vertical") for i in range(first, n_before)]  # type: ignore[arg-type]
                     pstart = ords[first].start
         num = _NUM_AFTER.match(low, m.end())
-        if num is not None and rv.UNIT_AHEAD.match(low, num.end()):
-            num = None  # "drawer 10 cm": a distance
+        if num is not None and (rv.UNIT_AHEAD.match(low, num.end()) or _FRACTION_AHEAD.match(low, num.end())):
+            num = None  # "drawer 10 cm": a distance; "door 3/4 open": a fraction
         if not ordinals and num is not None and not quant:
             ordinals = [(int(n) - 1, "vertical") for n in re.findall(r"\d+", num.group(1)) if int(n) >= 1]
-        out.append(_Part(m.start(), m.end(), label, ordinals, quant, pstart))
+        none = _NONE_OF.search(low, max(0, pstart - 24), pstart)
+        out.append(_Part(m.start(), m.end(), label, ordinals, quant, none.start() if none else pstart, none is not None))
     return out
 
 
@@ -396,7 +445,8 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
     state hits used, warnings (contradictions) and the phrases a later one for the same part replaced."""
     bands = _state_hits(low, numeric)  # every list here is left to right and not overlapping
     parts = _parts(low, tokens)
-    ords = [o for o in _scan(low, _ORDINALS) if o.flag == ""]
+    # ordinals without a part noun ("the second slightly open"; "the freezer open": the smallest part)
+    ords = [o for o in _scan(low, _ORDINALS) if o.flag == "" or o.flag in _ADJACENT_ORDERS and _THE_BEFORE.search(low, max(0, o.start - 8), o.start)]
     band_starts = [b.start for b in bands]
     part_starts = [p.start for p in parts]
     part_ends = [p.end for p in parts]
@@ -407,9 +457,12 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
     used: list[_Hit] = []
     last_label: str | None = None
     prev_subjects: list[_Part] = []
+    claimed: set[int] = set()
 
-    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: _Hit, phrase: str) -> JointStateRequest:
+    def make(selector: str, label: str | None, ordinal: int | None, order: str, b: _Hit, phrase: str, none: bool = False) -> JointStateRequest:
         band, target = _band_and_target(b.value)
+        if none:  # "none of the drawers open": closed; "none of the doors closed": open
+            band, target = ("mostly" if band == "closed" else "closed"), None
         return JointStateRequest(selector=selector, label=label, ordinal=ordinal, order=order,  # type: ignore[arg-type]
                                  band=band, target=target, phrase=phrase)  # type: ignore[arg-type]
 
@@ -419,7 +472,10 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
             seg0 = sb[i - 1].end if i > 0 else s0
             seg1 = sb[i + 1].start if i + 1 < len(sb) else s1
             fwd = _forward_part(low, b.end, seg1, part_at)
-            back = parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)]
+            # parts before the state, but not one an earlier state went forward to ("a fully open door and the cap ajar")
+            back = [p for p in parts[bisect_left(part_starts, seg0): bisect_right(part_ends, b.start)] if p.start not in claimed]
+            if fwd is not None:
+                claimed.add(fwd.start)
             subjects: list[_Part] = []
             if fwd is not None:
                 subjects = [fwd]
@@ -438,7 +494,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
                     end = max(p.end, b.end)
                     phrase = " ".join(low[start:end].split())
                     for ordinal, order in (p.ordinals if p.ordinals and not p.quant else [(None, "vertical")]):
-                        result.append(make("label", p.label, ordinal, order, b, phrase))
+                        result.append(make("label", p.label, ordinal, order, b, phrase, p.none))
                     last_label = p.label
                 prev_subjects = subjects
                 continue
@@ -452,7 +508,7 @@ def _joint_states(low: str, tokens: _Tokens, numeric: list[rv.Found] | None = No
             if seg_ords:
                 o = seg_ords[-1]
                 phrase = " ".join(low[o.start: b.end].split())
-                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), "vertical", b, phrase))  # type: ignore[arg-type]
+                result.append(make("label" if last_label is not None else "all", last_label, int(o.value), o.flag or "vertical", b, phrase))  # type: ignore[arg-type]
                 continue
             result.append(make("all", None, None, "vertical", b, b.text))
     # one request per target: a later phrase overrides an earlier one; a different state is warned
@@ -496,6 +552,15 @@ def parse_request(text: str) -> RequestSpec:
     numeric, sizes, size_warn, verbs = rv.state_quantities(low, mention_starts)
     joint_states, band_hits, contradictions, overridden = _joint_states(low, tokens, numeric)
     warnings += size_warn + contradictions
+    vols = rv.volumes(low)
+    if vols and sizes:  # a length is the closer measure of a size: the volume is named as not used
+        warnings += [f"'{v.text}' is a volume; the size in numbers ({', '.join(f.text for f in sizes)}) sets the size: '{v.text}' not used"
+                     for v in vols]
+    elif len(vols) > 1:
+        warnings += [f"'{v.text}' is a second volume; the first ('{vols[0].text}') sets the size: not used" for v in vols[1:]]
+        sizes = vols[:1]
+    else:
+        sizes = sizes + vols
     if sizes and size_class is not None:
         warnings.append(f"size words ({size_phrase}) and a size in numbers ({', '.join(f.text for f in sizes)}): the numbers are used")
     mass_found = rv.masses(low, head_starts)
@@ -506,7 +571,7 @@ def parse_request(text: str) -> RequestSpec:
     properties = _merge_properties([f.value for f in mass_found + material_found], warnings)  # type: ignore[misc]
     mass_level = _mass_level(level_found, properties, warnings)
     counts = rv.part_counts(low)
-    found: list = size_hits + size_against + band_hits + sizes + verbs + mass_found + material_found + level_found + dyn_found + counts
+    found: list = size_hits + size_against + band_hits + sizes + vols + verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
     damping, holds, spring, stiff, free = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings)
     pose = None
@@ -609,7 +674,7 @@ _FUNCTION_WORDS = frozenset(
     "want wants need needs would like please give make made get have has having be is are was were being "
     "with without and or but of for to in on at by from as into onto so such some any one which who whose "
     "can could should will shall may might must do does also just very really quite rather more most less "
-    "there here where when while than then every all each both everything pair".split()
+    "there here where when while than then every all each both everything pair none neither".split()
 )
 
 

@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass
 
 from asset2sim.schemas.request import BAND_TARGET, DynamicsValue, PartProperty, SizeTarget, StateTarget
+from asset2sim.prior_tables import load_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
 
 _L = r"(?<![\w.-])"
@@ -23,7 +24,7 @@ PART_WORDS = (
     r"lids?|doors?|drawers?|screens?|displays?|seats?|handles?|switch(?:es)?|levers?|knobs?|"
     r"buttons?|caps?|trays?|shel(?:f|ves)|racks?|flaps?|covers?|hatch(?:es)?|gates?|panels?|"
     r"blades?|windows?|sash(?:es)?|pedals?|straps?|spouts?|legs?|wheels?|keys?|toggles?|sliders?|arms?|"
-    r"containers?|carafes?|jugs?|temples?|lens(?:es)?"
+    r"containers?|carafes?|jugs?|temples?|lens(?:es)?|dials?|bails?|plungers?|triggers?"
 )
 PART_RX = re.compile(r"(?<![\w-])(?:" + PART_WORDS + r")(?![\w-])")
 #: Words for the object's fixed body (material per part: "on a plastic body").
@@ -36,6 +37,21 @@ _WORD_NUMBERS = {
     "a hundred": 100, "hundred": 100, "half a": 0.5, "a half": 0.5,
 }
 NUM = r"(?:\d+(?:\.\d+)?|\.\d+|" + "|".join(sorted((re.escape(w) for w in _WORD_NUMBERS), key=len, reverse=True)) + r")"
+
+
+def part_label(word: str) -> str:
+    """The label a request's part word names, singular: its canonical label (``part_labels.canonical_label``:
+    "covers" -> lid, "hatches" -> door), else the word made singular ("arms" -> arm)."""
+    labels = load_priors().labels
+    known = set(labels.labels)
+    cands = [word] + ([word[:-2]] if word.endswith("es") else []) + ([word[:-1]] if word.endswith("s") and not word.endswith("ss") else [])
+    for c in cands:
+        hit = canonical_label(c)
+        if hit in known:
+            return hit
+    if word.endswith(("ches", "shes", "xes", "sses")):
+        return word[:-2]
+    return word[:-1] if word.endswith("s") and not word.endswith(("ss", "us", "is")) and len(word) > 3 else (canonical_label(word) or word)
 
 
 def number_value(text: str) -> float:
@@ -51,6 +67,14 @@ _LENGTH_UNITS = [
     (r"m|met(?:er|re)s?", 1.0),
     (r"in(?:ch(?:es)?)?|\"|''", 0.0254),
     (r"ft|foot|feet", 0.3048),
+]
+#: A container's volume (NIST SP 811, Appendix B: litre 1e-3 m^3; US fluid ounce 2.957353e-5 m^3; US gallon 3.785412e-3 m^3).
+_VOLUME_UNITS = [
+    (r"ml|millilit(?:er|re)s?", 1e-6),
+    (r"cl|centilit(?:er|re)s?", 1e-5),
+    (r"l|ltrs?|lit(?:er|re)s?", 1e-3),
+    (r"fl\.? ?oz|fluid ounces?", 2.95735295625e-5),
+    (r"gal(?:lons?)?", 3.785411784e-3),
 ]
 _MASS_UNITS = [
     (r"g|grams?|grammes?", 1e-3),
@@ -72,12 +96,13 @@ def _factor(units: list[tuple[str, float]], text: str) -> float:
 
 
 #: A unit right after a number ("drawer 10 cm" is a distance, not drawer number 10).
-UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + _unit_rx(_ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS) + r")(?![\w])")
+UNIT_AHEAD = re.compile(r"\s*-?\s*(?:%|percent|" + _unit_rx(_ANGLE_UNITS + _LENGTH_UNITS + _MASS_UNITS + _VOLUME_UNITS) + r")(?![\w])")
 
 _QTY = r"(?P<num>" + NUM + r")\s*-?\s*(?P<unit>{units})(?![\w])"
 _ANGLE_RX = re.compile(_L + _QTY.format(units=_unit_rx(_ANGLE_UNITS)))
 _LENGTH_RX = re.compile(_L + _QTY.format(units=_unit_rx(_LENGTH_UNITS)))
 _MASS_RX = re.compile(_L + _QTY.format(units=_unit_rx(_MASS_UNITS)))
+_VOLUME_RX = re.compile(_L + _QTY.format(units=_unit_rx(_VOLUME_UNITS)))
 _PERCENT_RX = re.compile(_L + r"(?P<num>" + NUM + r")\s*(?:%|percent|per cent)(?![\w])")
 _THIRDS_RX = re.compile(
     _L + r"(?P<frac>(?:two|2)[- ]thirds?|(?:a|one|1)[- ]third|(?P<n>\d)\s*/\s*(?P<d>[1-9]))"
@@ -85,8 +110,8 @@ _THIRDS_RX = re.compile(
 )
 
 _STATE_BEFORE = re.compile(
-    r"(?<![\w-])(?:(?:open(?:ed)?|rotated|tilted|swung(?: open)?|turned|raised|lifted|pulled(?: out)?|pushed(?: in)?|slid(?: out| open)?|"
-    r"extended|lowered|set|positioned|sits?|stands?)\s+)?(?:(?:up )?to |by |at |of )?(?:about |around |roughly |approximately |exactly |an? angle of )?$"
+    r"(?<![\w-])(?:(?:(?:propped|popped|held|left|kept|flipped|swung|thrown|pulled|pushed|tilted)\s+)?(?:open(?:ed)?|rotated|tilted|swung(?: open)?|turned|raised|lifted|pulled(?: out)?|pushed(?: in)?|slid(?: out| open)?|"
+    r"extended|lowered|set|positioned|sits?|stands?|out)\s+)?(?:(?:up )?to |by |at |of )?(?:about |around |roughly |approximately |exactly |an? angle of )?$"
 )
 _STATE_AFTER = re.compile(
     r"^(?:\s+(?:open(?:ed)?|ajar|out|outwards?|apart|up|from (?:the )?(?:closed|shut)(?: position)?|(?:of |of the )?(?:opening|travel)))+"
@@ -194,6 +219,19 @@ def state_quantities(low: str, mention_starts: list[int]) -> tuple[list[Found], 
     return leftmost_longest(states), sizes, warnings, verbs
 
 
+def volumes(low: str) -> list[Found]:
+    """A container's volume in numbers ("a 500 ml bottle", "2 litres", "16 fl oz") as a ``SizeTarget`` of
+    dimension ``volume`` (m^3)."""
+    out = []
+    for m in _VOLUME_RX.finditer(low):
+        if m.group("unit") == "l" and not m.group("num")[0].isdigit():
+            continue  # "a l": not a number
+        v = number_value(m.group("num")) * _factor(_VOLUME_UNITS, m.group("unit"))
+        if v > 0:
+            out.append(Found(m.start(), m.end(), m.group(0), SizeTarget(dimension="volume", value=v, phrase=m.group(0))))
+    return out
+
+
 def leftmost_longest(found: list) -> list:
     """The findings (anything with ``start`` and ``end``) that do not overlap: leftmost first, then longest."""
     out: list = []
@@ -219,7 +257,7 @@ def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[in
         w = m.group(0)
         start = w0 + cut + m.start()
         if PART_RX.fullmatch(w):
-            return None if mention_starts and start in mention_starts else (canonical_label(w) or w)
+            return None if mention_starts and start in mention_starts else part_label(w)
         if BODY_RX.fullmatch(w):
             return "body"
     return None
@@ -229,7 +267,7 @@ def _part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int
     """(label, end) of the part or body noun within ``max_words`` words after ``end``; None for a category mention."""
     for s, e, w in _next_words(low, end, max_words):
         if PART_RX.fullmatch(w):
-            return (None if mention_starts and s in mention_starts else (canonical_label(w) or w)), e
+            return (None if mention_starts and s in mention_starts else part_label(w)), e
         if BODY_RX.fullmatch(w):
             return "body", e
         if w in {",", ";", ":", ".", "!", "?", "and", "with", "on", "in", "of"}:
@@ -363,7 +401,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
 
 _COUNT_WORDS = {"one": 1, "single": 1, "two": 2, "double": 2, "twin": 2, "three": 3, "triple": 3, "four": 4, "five": 5, "six": 6}
 _COUNT_RX = re.compile(
-    _L + r"(?P<n>one|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
+    _L + r"(?P<n>one(?=-)|single|two|double|twin|three|triple|four|five|six|[1-9])[- ](?P<part>drawers?|doors?|slots?|slices?|lids?|"
     r"shel(?:f|ves)|compartments?|burners?|buttons?|knobs?|handles?|wheels?)" + _R
 )
 
@@ -375,8 +413,9 @@ def part_counts(low: str) -> list[Found]:
             for m in _COUNT_RX.finditer(low)]
 
 
-#: Words naming the kind of joint or motion ("sliding joints"): understood, no effect.
+#: Words naming the kind of joint or motion ("sliding joints") or a part left as it is ("the knobs left alone"): understood, no effect.
 DESCRIPTOR_RX = re.compile(
     _L + r"(?:(?:rotational|rotating|rotary|revolute|hinged|hinge[- ]like|pivoting|swinging|sliding|prismatic|linear|telescopic)"
-    r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling)" + _R
+    r"(?: (?:joints?|hinges?|motion|movement|behaviou?r|action))?|(?:behaviou?r|operation|motion|movement|action)|(?:drawer )?slides|joints?|opening|closing|pressing|pushing|pulling|"
+    r"left (?:alone|untouched|as (?:it is|they are))|untouched|as (?:it is|they are))" + _R
 )

@@ -15,7 +15,7 @@ from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import RequestOverrides, RequestSpec
 from asset2sim.tasks.geometry import analyze
-from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, links_aabb, object_extents, subtree_links
+from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, links_aabb, object_extents, object_hull_volume, subtree_links
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.overrides import apply_overrides
@@ -44,6 +44,9 @@ class EstimationContext:
     joint_heights: dict[str, float] = field(default_factory=dict)
     """joint -> z (scale 1) of its moving subtree's box center in the closed state."""
     hull_points: dict[str, np.ndarray] = field(default_factory=dict)
+    closed_volume: float | None = None
+    """Convex-hull volume of the closed object at scale 1 (the input's units cubed); measured only when the request
+    asks a volume ("a 500 ml bottle"), else None."""
     """link -> (N, 3) convex-hull vertices of its collision geometry, link frame, scale 1."""
     root_rotation: Any = None
     """(3, 3) resting-pose rotation the output will carry (``tasks.state.pose``), or None."""
@@ -122,6 +125,9 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         extents = object_extents(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
         subtrees = {j.name: subtree_links(asset, j.child) for j in asset.movable_joints()}
         heights = {n: subtree_height(kin, links, hull) for n, links in subtrees.items()}
+        volume = (object_hull_volume(kin, {n: c.q_closed for n, c in closed.items()}, asset, hull)
+                  if any(sz.dimension == "volume" for sz in meaning.request.sizes) else None)
         yield EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents, session=kin,
-                                subtrees=subtrees, joint_heights=heights, hull_points=hull, settings=dict(settings or {}))
+                                subtrees=subtrees, joint_heights=heights, hull_points=hull, closed_volume=volume,
+                                settings=dict(settings or {}))

@@ -1,9 +1,10 @@
 """The opening fraction a request's number or end asks of one joint, from the
 geometry. Numbers count from the geometric closed end (a revolute joint's
 distance is the gap at the farthest point from the axis, angle = d / r). "up" /
-"down" are the highest / lowest box center in world z over the travel; "on" /
-"off" of a toggle switch its high / low end (NFPA 70 NEC 404.7), of other parts
-fully open / closed. A part whose height changes less than :data:`FLAT_TRAVEL`
+"down" are the highest / lowest box center in world z over the travel (the travel end when
+it is within :data:`END_SNAP` of the part's rise of it); "on" /
+"off" of a toggle switch its high / low end (NFPA 70 NEC 404.7), of a lid or cap closed / fully open
+(put on, taken off), of other parts fully open / closed. A part whose height changes less than :data:`FLAT_TRAVEL`
 of the object's size has no up or down.
 """
 
@@ -24,8 +25,13 @@ if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
 FLAT_TRAVEL = 0.02
 #: Labels whose "on"/"off" are their high/low ends (toggle switches).
 TOGGLE_LABELS = frozenset({"switch", "toggle", "rocker"})
+#: Labels whose "on" is in place (closed) and "off" taken off (fully open): "the cap off", "the lid on".
+COVER_LABELS = frozenset({"lid", "cap"})
 #: Samples of the travel searched for the highest / lowest end.
 END_SAMPLES = 41
+#: A travel end within this share of the part's rise (max - min height over its travel) of the highest (lowest)
+#: position is "up" ("down"): a toilet seat raised past upright rests at the end of its travel.
+END_SNAP = 0.1
 
 
 def box_center(ctx: "EstimationContext", joint: str) -> np.ndarray:
@@ -67,7 +73,14 @@ def _end_fraction(ctx: "EstimationContext", joint: str, end: str, closed_state: 
     if zs.max() - zs.min() < FLAT_TRAVEL * size:
         return None, f"its height changes by {zs.max() - zs.min():.3g} (< {FLAT_TRAVEL:g} of the object's size) over the travel"
     i = int(np.argmax(zs) if end == "high" else np.argmin(zs))
-    return float(fr[i]), f"{'highest' if end == 'high' else 'lowest'} position in world z at opening fraction {fr[i]:.3g}"
+    word = "highest" if end == "high" else "lowest"
+    e = (0 if zs[0] >= zs[-1] else len(zs) - 1) if end == "high" else (0 if zs[0] <= zs[-1] else len(zs) - 1)
+    if i != e and abs(zs[e] - zs[i]) <= END_SNAP * (zs.max() - zs.min()):
+        # a seat or lid raised past upright: "up" is where it rests at the end of its travel, within a tenth of
+        # its rise of the very highest point
+        return float(fr[e]), (f"the travel end at opening fraction {fr[e]:.3g}, within {END_SNAP:g} of the part's rise of its {word} "
+                              f"position in world z (at {fr[i]:.3g})")
+    return float(fr[i]), f"{word} position in world z at opening fraction {fr[i]:.3g}"
 
 
 def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scale: float, label: str,
@@ -84,6 +97,8 @@ def fraction_for(ctx: "EstimationContext", joint: str, target: StateTarget, scal
         if end in ("on", "off"):
             if canon in TOGGLE_LABELS:
                 end = "high" if end == "on" else "low"
+            elif canon in COVER_LABELS:
+                return (0.0 if end == "on" else 1.0), f"'{target.end}' of a {canon}: {'in place, closed' if end == 'on' else 'taken off, fully open'}"
             else:
                 return (1.0 if end == "on" else 0.0), f"'{target.end}' of a {canon or 'part'}: {'fully open' if end == 'on' else 'closed'} (not a toggle switch)"
         return _end_fraction(ctx, joint, str(end), closed_state)

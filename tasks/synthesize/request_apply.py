@@ -17,6 +17,7 @@ from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, JointStateRequ
 from asset2sim.tasks.interpret import priors
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.synthesize.named_parts import count_warnings, joints_named, joints_of, link_named, moving_parts, stand_ins, state_targets, unit_fits
+from asset2sim.tasks.geometry.closed_state import links_aabb
 from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_for
 
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
@@ -74,6 +75,16 @@ def _centers(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, np.
     return {n: box_center(ctx, n) for n in ctx.subtrees}
 
 
+def _box_volumes(ctx: "EstimationContext", state: dict[str, float]) -> dict[str, float]:
+    """joint -> volume (m^3, scale 1) of its moving subtree's axis-aligned box at ``state`` (input units)."""
+    ctx.session.set_joint_positions(state)
+    out = {}
+    for n, links in ctx.subtrees.items():
+        box = links_aabb(ctx.session, links, ctx.hull_points)
+        out[n] = 0.0 if box is None else float(np.prod(np.maximum(box[1] - box[0], 0.0)))
+    return out
+
+
 def band_of(f: float) -> str:
     """The band of opening fraction ``f``: of those whose interval holds it (else all), the nearest target."""
     inside = [b for b, (lo, hi) in BAND_INTERVAL.items() if lo <= f <= hi]
@@ -91,11 +102,12 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
     relevant = task_relevant_joints(ctx)
     closed_state = {n: c.q_closed for n, c in ctx.closed.items()}
     centers = _centers(ctx, closed_state) if any(jr.ordinal is not None for jr in ctx.request.joint_states) else {}
+    sizes = _box_volumes(ctx, closed_state) if any(jr.order == "size" for jr in ctx.request.joint_states) else {}
     named: list[tuple[JointStateRequest, list[str]]] = []
     cannot: list[tuple[JointStateRequest, str, str]] = []
     for jr in sorted(ctx.request.joint_states, key=lambda jr: jr.names_part):  # a part named wins over a request for "it", in any order
         before = len(res.warnings)
-        joints = state_targets(ctx, jr, relevant, centers, res.warnings)
+        joints = state_targets(ctx, jr, relevant, centers, res.warnings, sizes, res.notes)
         named.append((jr, joints))
         if not joints:
             why = res.warnings[-1].removeprefix("WARNING: ") if len(res.warnings) > before else (
@@ -194,9 +206,12 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
     if not sizes:
         return None
     along = _extents(ctx)
-    extents = [max(float(along[sz.dimension]), 1e-9) for sz in sizes]
-    ratios = [sz.value / e for sz, e in zip(sizes, extents)]
-    parts = [f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {sz.value / e:.4g}" for sz, e in zip(sizes, extents)]
+    extents = [max(float(along[sz.dimension]), 1e-12) for sz in sizes]
+    ratios = [(sz.value / e) ** (1.0 / 3.0) if sz.dimension == "volume" else sz.value / e for sz, e in zip(sizes, extents)]
+    parts = [(f"'{sz.phrase}': a container's volume, taken as the closed object's outer volume (convex hull; its walls make "
+              f"the inside a little smaller) {e:.4g} at scale 1 -> ({sz.value:.4g} / {e:.4g})^(1/3) = {r:.4g}")
+             if sz.dimension == "volume" else f"'{sz.phrase}': {sz.dimension} {e:.4g} at scale 1 -> {r:.4g}"
+             for sz, e, r in zip(sizes, extents, ratios)]
     s = float(np.exp(np.mean(np.log(ratios))))
     note = "size in numbers: " + "; ".join(parts) + f" -> s = {s:.4g}"
     if len(ratios) > 1 and max(ratios) / min(ratios) > 1 + NUMBER_TOLERANCE:
@@ -206,18 +221,20 @@ def scale_from_sizes(ctx: "EstimationContext") -> tuple[float, str] | None:
 
 
 def size_residuals(ctx: "EstimationContext", scale: float) -> list[tuple[str, float, float]]:
-    """(phrase, asked m, obtained m) of every size in numbers at ``scale``."""
+    """(phrase, asked, obtained) of every size in numbers at ``scale``: m, or m^3 for a volume."""
     along = _extents(ctx)
-    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale) for sz in ctx.request.sizes]
+    return [(sz.phrase, sz.value, float(along[sz.dimension]) * scale ** (3 if sz.dimension == "volume" else 1)) for sz in ctx.request.sizes]
 
 
 def _extents(ctx: "EstimationContext") -> dict:
-    """The closed extent (m, scale 1) per size dimension: height z, width / depth the larger / smaller horizontal."""
+    """The closed extent (m, scale 1) per size dimension: height z, width / depth the larger / smaller horizontal;
+    ``volume`` the closed object's convex-hull volume (m^3, ``ctx.closed_volume``)."""
     ext = np.asarray(ctx.closed_extents, float)
     if ctx.root_rotation is not None:
         ext = np.abs(np.asarray(ctx.root_rotation, float)) @ ext
     horiz = sorted([ext[0], ext[1]], reverse=True)
-    return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max())}
+    return {"height": ext[2], "width": horiz[0], "depth": horiz[1], "length": float(ext.max()), "largest": float(ext.max()),
+            "volume": float(ctx.closed_volume or 0.0)}
 
 
 def requested_material(ctx: "EstimationContext", link: str) -> MaterialPrior | None:
@@ -342,9 +359,10 @@ def check_overlay(ctx: "EstimationContext", overlay: Overlay, res: StateResoluti
     total = overlay.total_mass()
     if total_req is not None and abs(total - total_req) > NUMBER_TOLERANCE * total_req:
         out.append(f"total mass {total:.4g} kg but the request asks {total_req:.4g} kg")
-    for phrase, asked, got in size_residuals(ctx, overlay.scale):
+    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, overlay.scale)):
+        unit = "m^3" if sz.dimension == "volume" else "m"
         if abs(got - asked) > NUMBER_TOLERANCE * asked:
-            out.append(f"'{phrase}': {got:.4g} m at scale {overlay.scale:.4g}, asked {asked:.4g} m")
+            out.append(f"'{phrase}': {got:.4g} {unit} at scale {overlay.scale:.4g}, asked {asked:.4g} {unit}")
     for name, lp in overlay.links.items():
         mat = requested_material(ctx, name) if name in ctx.geometry else None  # links with geometry only
         if mat is not None and (lp.density is None or abs(lp.density - mat.density) > 1e-6 * mat.density):
@@ -384,12 +402,46 @@ def summary(spec: RequestSpec) -> list[str]:
     return out + [f"{d.label or 'joints'}: {d.quantity} {d.value:g} ({d.motion})" for d in spec.dynamics_values]
 
 
+def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dict, state: dict[str, float]) -> list[str]:
+    """One line per state phrase of the request, in its order: the joints it set with their labels, the amount
+    each has from its closed end (``closed_out`` at the output's scale, ``state`` output units) and what was asked
+    ("'lid open 30 degrees': joint_2 (lid) 30.0 deg from closed, 25 % open (asked 30 deg from closed)"), or why it
+    was not applied."""
+    by_phrase: dict[str, list[str]] = {}
+    for n, jr in res.requests.items():
+        by_phrase.setdefault(jr.phrase, []).append(n)
+    why_not = dict(res.unapplied)
+    out = []
+    low = " ".join(ctx.request.text.lower().split())
+    for jr in sorted(ctx.request.joint_states, key=lambda jr: (low.find(jr.phrase) % (len(low) + 1))):  # in the request's order
+        if jr.phrase in why_not:
+            out.append(f"'{jr.phrase}': not applied: {why_not.pop(jr.phrase)}")
+            continue
+        joints = by_phrase.pop(jr.phrase, None)
+        if not joints:
+            continue
+        asked = jr.short().split("=", 1)[1]
+        got = []
+        for n in joints:
+            label = ctx.asset.link(ctx.asset.joint(n).child).semantic_label
+            cs, q = closed_out.get(n), state.get(n)
+            if cs is None or q is None:
+                got.append(f"{n}" + (f" ({label})" if label else ""))
+                continue
+            d = abs(q - cs.q_closed)
+            amount = f"{1000.0 * d:.4g} mm" if ctx.asset.joint(n).type == "prismatic" else f"{np.degrees(d):.1f} deg"
+            got.append(f"{n}" + (f" ({label})" if label else "") + f" {amount} from closed, {100.0 * abs(cs.fraction(q)):.0f} % open")
+        out.append(f"'{jr.phrase}': " + "; ".join(got) + f" (asked {asked})")
+    return out
+
+
 def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
              scale: float, total_mass: float, notes: list[str], overlay: Overlay | None = None,
-             escalation: list | None = None) -> RequestFindings:
+             escalation: list | None = None, resolution: StateResolution | None = None) -> RequestFindings:
     """The report's account of the request: ignored words, warnings (the parser's and ``notes``' ``WARNING``
-    lines), what was asked, and every number against the output (``closed_out`` at the output's scale,
-    ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters)."""
+    lines), what was asked, every number against the output (``closed_out`` at the output's scale,
+    ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters) and, with the
+    ``resolution`` of the request, each state phrase with what it set (:func:`phrase_lines`)."""
     warnings = list(ctx.request.warnings) + [n for n in notes if n.startswith("WARNING")]
     if not ctx.request.understood:
         warnings.insert(0, "WARNING: no word of the request was understood; refined with the category's defaults")
@@ -419,9 +471,10 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
                 why += "; the state search moved it inside its interval to remove self-penetration"
         q.append(QuantityOutcome(what=f"{n} {t.kind}", phrase=t.phrase, asked=asked, achieved=got, unit=unit, within_tolerance=ok, why=why,
                                  kind="state"))
-    for phrase, asked, got in size_residuals(ctx, scale):
+    for sz, (phrase, asked, got) in zip(ctx.request.sizes, size_residuals(ctx, scale)):
         ok = abs(got - asked) <= NUMBER_TOLERANCE * asked
-        q.append(QuantityOutcome(what="size", phrase=phrase, asked=asked, achieved=got, unit="m", within_tolerance=ok,
+        q.append(QuantityOutcome(what="volume" if sz.dimension == "volume" else "size", phrase=phrase, asked=asked, achieved=got,
+                                 unit="m^3" if sz.dimension == "volume" else "m", within_tolerance=ok,
                                  why="" if ok else "one uniform scale cannot meet every size asked", kind="size"))
     total_req = next((p for p in ctx.request.properties if p.mass is not None and p.label is None), None)
     if total_req is not None:
@@ -430,7 +483,8 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
                                  within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
     if overlay is not None:
         q += _dynamics_outcomes(ctx, overlay, escalation or [])
-    return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q)
+    phrases = phrase_lines(ctx, resolution, closed_out, state) if resolution is not None else []
+    return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q, phrases=phrases)
 
 
 def _dynamics_outcomes(ctx: "EstimationContext", overlay: Overlay, escalation: list) -> list[QuantityOutcome]:

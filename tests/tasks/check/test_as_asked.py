@@ -89,7 +89,7 @@ def test_words_the_parser_did_not_use_and_reported_joint_parameters_do_not_fail(
 
 
 def test_a_phrase_a_later_one_replaced_for_the_same_part_fails():
-    spec = parse_request("a fridge with the freezer door open 90 degrees and the main door closed")
+    spec = parse_request("a fridge with the door open 90 degrees and then the door closed")
     assert spec.overridden == ["door open 90 degrees"]
     m = as_asked.refine_request_met(spec, StateResolution(bands={}), RequestFindings(), {}, {})
     (item,) = m.details["unmet"]

@@ -215,3 +215,14 @@ def test_a_failed_task_attempt_shows_its_numbers_and_where_the_part_was_taken_as
     assert "task: close joint_2: the object slid" in html and "<td>6.65</td>" in html and "joint_0" not in html
     assert [cap for _, cap in seen] == ["taken at (65 % open)", "asked for (5 % open)", "left at (64 % open)"]
     assert all(shape == (200, 200, 3) for shape, _ in seen)
+
+
+def test_clips_go_to_each_kind_of_part_before_a_second_of_one_kind():
+    """Four buttons asked by the task and a door: a button and the door get clips before a second button; without
+    a task, one of each kind (door, button, knob) first."""
+    from asset2sim.tasks.evaluation.evaluate import clip_joints
+
+    labels = {"door": "door", "b1": "button", "b2": "button", "b3": "button", "b4": "button", "k1": "knob", "u": None}
+    assert clip_joints(["b1", "b2", "b3", "b4"], ["door", "b1", "b2", "b3", "b4"], labels)[:4] == ["b1", "door", "b2", "b3"]
+    assert clip_joints([], ["door", "b1", "b2", "b3", "b4", "k1"], labels)[:3] == ["door", "b1", "k1"]
+    assert clip_joints(["gone"], ["u", "b1"], labels) == ["u", "b1"]  # a task joint without a sweep gets none

@@ -6,8 +6,9 @@ output against the expected outcome. Used by
 
 Entry format (YAML list)::
 
-    - object: "7119" | "demo:<id>" | "gen:toaster"
+    - object: "7119" | "demo:<id>" | "gen:toaster" | "gen:chest" | "unseen:toaster" | "unseen:bottle"
       text: the request
+      phenomena: [synonym, ordinal, ...]   # hand-written entries (PHENOMENA); rates per phenomenon in the benchmark
       parse:            # every field has a default; all are compared
         states: ["door=halfway", "drawer#0=closed", "door#0@left_right=mostly",
                  "door=angle:30deg", "drawer=distance:0.1", "door=fraction:0.6", "lever=end:high"]
@@ -30,6 +31,9 @@ Entry format (YAML list)::
         damping: low              # damping level of the task-relevant joints
         dyn: {joint: "damping=0.05"}  # 5 %
         warnings: [substring, ...]    # each in some warning of report.request
+      apply:            # optional: the request resolved on the object's joints, no refine (apply_misses)
+        joints: {joint: band | "end:high" | "angle:30deg" | "distance:0.1" | "fraction:0.4"}
+        unapplied: [phrase, ...]      # the phrases applied to no joint, in order
 """
 
 from __future__ import annotations
@@ -50,7 +54,9 @@ from asset2sim.tasks.interpret.request import parse_request
 from asset2sim.tasks.refine import RefineResult, refine_asset
 from asset2sim.tasks.synthesize.context import build_context
 from tests.conftest import SHARED
-from tests.tasks.interpret.request_assets import build_toaster
+from asset2sim.tasks.synthesize import estimate, request_apply
+from tests import unseen_assets
+from tests.tasks.interpret.request_assets import build_three_drawer_cabinet, build_toaster
 
 CORPUS = Path(__file__).resolve().parents[2] / "data" / "request_corpus.yaml"
 DEV = SHARED  # tests.conftest.SHARED: the dev dataset folder
@@ -176,12 +182,66 @@ def asset_folder(obj: str, scratch: Path) -> Path:
     ``scratch``) or a generated one."""
     if obj.startswith("demo:"):
         return ensure_demo_dataset(scratch / "demo") / obj[5:]
-    if obj == "gen:toaster":
-        folder = scratch / "gen_toaster"
+    builders = {"gen:toaster": build_toaster, "gen:chest": build_three_drawer_cabinet,
+                "unseen:toaster": unseen_assets.build_toaster, "unseen:bottle": unseen_assets.build_bottle}
+    if obj in builders:
+        folder = scratch / obj.replace(":", "_")
         if not (folder / "mobility.urdf").exists():
-            build_toaster(folder)
+            builders[obj](folder)
         return folder
     return DEV / obj
+
+
+#: Phenomena of the hand-written entries (``phenomena:``); the others count as ``general``.
+PHENOMENA = ("synonym", "ordinal", "quantifier", "compound", "negation", "hedge", "fraction", "unit", "volume", "missing_part")
+
+
+def phenomena_of(entry: dict) -> list[str]:
+    """The entry's phenomena (``general`` without any)."""
+    return list(entry.get("phenomena") or ["general"])
+
+
+def apply_misses(entry: dict, scratch: Path) -> list[str]:
+    """What the request resolved on the entry's object misses of its ``apply`` expectation (joint -> band, or
+    ``kind:value`` of the target: ``end:high``, ``angle:30deg``, ``distance:0.1`` m at the chosen scale,
+    ``fraction:0.4``; ``unapplied``: the phrases applied to no joint, in order). No refine: the parse and
+    ``request_apply.resolve_states`` at ``estimate.choose_scale``."""
+    want = entry.get("apply") or {}
+    out: list[str] = []
+    with build_context(asset_folder(entry["object"], scratch), entry["text"]) as ctx:
+        scale, _ = estimate.choose_scale(ctx)
+        res = request_apply.resolve_states(ctx, scale)
+    for j, exp in (want.get("joints") or {}).items():
+        t = res.targets.get(j)
+        if ":" not in exp:
+            if res.bands.get(j) != exp or t is not None:
+                out.append(f"{j}: band {res.bands.get(j)}" + (f" (target {t.kind} {t.fraction:.3g})" if t else "") + f", expected {exp}")
+            continue
+        kind, x = exp.split(":", 1)
+        if t is None or t.kind != kind:
+            out.append(f"{j}: {'no target' if t is None else t.kind}, expected {exp}")
+        elif kind == "end":
+            if res.requests[j].target.end != x:
+                out.append(f"{j}: end {res.requests[j].target.end}, expected {x}")
+        elif kind == "fraction" and abs(t.fraction - _num(x)) > 1e-3 or kind != "fraction" and abs((t.asked or 0.0) - _num(x)) > 1e-6:
+            out.append(f"{j}: {kind} {t.fraction if kind == 'fraction' else t.asked:.4g}, expected {_num(x):.4g}")
+    got = [p for p, _ in res.unapplied]
+    if "unapplied" in want and got != list(want["unapplied"]):
+        out.append(f"not applied {got}, expected {want['unapplied']}")
+    return out
+
+
+def rates_by_phenomenon(entries: list[dict], scratch: Path) -> dict[str, tuple[int, int]]:
+    """phenomenon -> (entries whose parse and, when given, application match; entries) over ``entries``."""
+    parse_bad = {m.split(" ", 1)[0] for m in parse_misses(entries)}
+    out: dict[str, list[int]] = {}
+    for e in entries:
+        ok = e["id"] not in parse_bad and (not e.get("apply") or not apply_misses(e, scratch))
+        for ph in phenomena_of(e):
+            c = out.setdefault(ph, [0, 0])
+            c[0] += ok
+            c[1] += 1
+    return {k: (v[0], v[1]) for k, v in out.items()}
 
 
 @lru_cache(maxsize=64)

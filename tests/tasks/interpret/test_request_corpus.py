@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import needs_shared
-from tests.tasks.interpret.request_corpus import load_corpus, parse_misses, run_outcome
+from tests.tasks.interpret.request_corpus import (PHENOMENA, apply_misses, load_corpus, parse_misses, phenomena_of, rates_by_phenomenon,
+                                                  run_outcome)
 
 ENTRIES = load_corpus()
 WITH_OUTCOME = [e for e in ENTRIES if "outcome" in e]
@@ -91,3 +92,31 @@ def test_corpus_outcomes_all_at_least_95_percent(tmp_path_factory) -> None:
     for m in missed:
         print("MISS", m)
     assert rate >= 0.95, "\n".join(missed)
+
+
+WITH_APPLY = [e for e in ENTRIES if "apply" in e]
+
+
+def test_hand_written_entries_cover_every_phenomenon():
+    assert len(WITH_APPLY) >= 40
+    assert set(PHENOMENA) <= {ph for e in WITH_APPLY for ph in phenomena_of(e)}
+    assert all(e.get("phenomena") for e in WITH_APPLY)
+
+
+@needs_shared
+def test_hand_written_entries_apply_to_the_right_joints(tmp_path_factory) -> None:
+    """Every entry with an ``apply`` expectation: the request resolved on its object names the joints and amounts
+    expected, and the phrases applied to nothing are the expected ones (every one must match)."""
+    scratch = tmp_path_factory.mktemp("request_corpus_apply")
+    missed = [f"{e['id']} {e['object']} {e['text']!r}: {m}" for e in WITH_APPLY if (m := apply_misses(e, scratch))]
+    rates = rates_by_phenomenon(WITH_APPLY, scratch)
+    print("per phenomenon: " + ", ".join(f"{k} {a}/{n}" for k, (a, n) in sorted(rates.items())))
+    assert not missed, "\n".join(missed)
+
+
+def test_an_apply_expectation_can_fail(tmp_path_factory) -> None:
+    """The comparison can fail: the stapler's arm expected on the wrong joint, a phrase expected unapplied."""
+    entry = next(e for e in WITH_APPLY if e["text"].startswith("a heavy 2 lb stapler"))
+    wrong = {**entry, "apply": {"joints": {"joint_1": "fully", "joint_0": "end:high"}, "unapplied": ["arm pressed down"]}}
+    misses = apply_misses(wrong, tmp_path_factory.mktemp("request_corpus_wrong"))
+    assert len(misses) == 3, misses
