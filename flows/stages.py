@@ -36,6 +36,7 @@ from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.evaluation.evaluate import Evaluation, evaluate_asset
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.extract import extract_asset_checked
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.publish.contract import (
@@ -365,7 +366,9 @@ def prepare_asset(job: AssetJob) -> Prepared:
     t0 = time.perf_counter()
     rec = Prepared(worker=_worker_name())
     try:
-        asset, findings = extract_asset_checked(Path(job.asset_dir), asset_id=job.asset_id, category=job.category)
+        config = RefineConfig(**job.config)
+        reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
+        asset, findings = extract_asset_checked(Path(job.asset_dir), asset_id=job.asset_id, category=job.category, reading=reading)
     except Exception as exc:  # any reading problem is the input's
         rec.failure_mode, rec.error, rec.seconds = "invalid_input", f"{type(exc).__name__}: {exc}", time.perf_counter() - t0
         return rec

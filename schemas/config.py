@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -44,6 +45,16 @@ def default_engines() -> list[str]:
     """The post-check's default engines: PyBullet, and PhysX (SAPIEN 3) when
     ``sapien`` is installed (``docs/design/simulators.md``)."""
     return ["pybullet", "physx"] if importlib.util.find_spec("sapien") is not None else ["pybullet"]
+
+
+class MjcfConfig(BaseModel):
+    """How an MJCF input is read."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    angle: Literal["radian", "degree"] | None = None
+    """The unit of the file's angles (joint ranges, ``euler``, ``ref``), winning over its ``<compiler angle>``
+    and its host package's convention; None: as the package that compiles it reads it
+    (:mod:`asset2sim.tasks.ingest.host_conventions`, ``docs/guide/inputs.md``)."""
 
 
 class RefineConfig(BaseModel):
@@ -92,6 +103,11 @@ class RefineConfig(BaseModel):
     clips: bool = True
     """Write clips of each task-relevant joint's sweep (``clips/``, WebM and PNG) with the report
     (``docs/guide/outputs.md``); ``False`` (``--no-clips``) leaves them out."""
+    body: str | None = None
+    """The body (MJCF) whose subtree is the object, in a scene holding several objects with joints; None: the one
+    subtree under the world body that carries hinge or slide joints (``docs/guide/inputs.md``)."""
+    mjcf: MjcfConfig = Field(default_factory=MjcfConfig)
+    """How an MJCF input is read (:class:`MjcfConfig`)."""
     overrides: RequestOverrides = Field(default_factory=RequestOverrides)
     """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
 
@@ -104,5 +120,9 @@ class RefineConfig(BaseModel):
             data.pop("clips", None)
         if not data.get("open_containers", False):  # off (the default): the hash of every configuration before the option existed
             data.pop("open_containers", None)
+        if data.get("body") is None:  # the default: the hash of every configuration before the option existed
+            data.pop("body", None)
+        if data.get("mjcf") == MjcfConfig().model_dump(mode="json"):  # the default, likewise
+            data.pop("mjcf", None)
         blob = json.dumps(data, sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]

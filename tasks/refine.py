@@ -28,6 +28,7 @@ from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinem
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
 from asset2sim.tasks.audit import keep
 from asset2sim.tasks.ingest.declared import read_declared
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.check.verdict import combine_verdict, penetration_measures, post_check_failure_mode, readiness
@@ -36,14 +37,14 @@ from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import analyze, limits, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
-from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.ingest import extract, staged
 from asset2sim.tasks.ingest.validate_input import Finding
 from asset2sim.tasks.interpret import mounting, overrides, request
 from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.assemble import (collision_geometry, container_pieces, export_mjcf, footprint, parent_child_separation,
                                       sliding_clearance, write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.publish import export_usd, output
+from asset2sim.tasks.publish import export_usd, host_mjcf, output
 from asset2sim.tasks.publish import media as media_phase
 from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
                                               write_report_json)
@@ -124,7 +125,7 @@ def refine_asset(
     _check_prompt(prompt)
     est = _open_estimator(config)  # first: a model backend without its key fails before any work
     log = _StageLog(progress)
-    asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted)
+    asset, findings = _extract(asset_dir, out_dir, asset_id, category, extracted, config)
     _check_overrides(asset, config)
     if config.keep_declared:
         est = _keep_declared(est, asset_dir, asset)
@@ -150,9 +151,11 @@ def refine_asset(
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
+            host = _host_mjcf(work, asset, config, report)
             report.media = "off"
             write_report_json(work, report)
             extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
+            extra_paths.update(host)
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
         except BaseException:
             owner.abandon()
@@ -196,12 +199,17 @@ def _open_estimator(config: RefineConfig) -> estimator.Estimator:
 
 
 def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, category: str | None,
-             extracted: tuple[AssetDescription, list[Finding]] | None = None) -> tuple[AssetDescription, list[Finding]]:
+             extracted: tuple[AssetDescription, list[Finding]] | None = None,
+             config: RefineConfig | None = None) -> tuple[AssetDescription, list[Finding]]:
     """Stage 1: the checked asset and its validation findings (``extracted`` when
-    already read); the output folder checked against it. RefineError("invalid_input") with the codes."""
+    already read; an MJCF input read as ``config.body`` and ``config.mjcf`` say); the output folder checked against
+    it. RefineError("invalid_input") with the codes, also for a joint range that only makes sense in the other
+    unit (``JOINT_RANGE_WRONG_UNIT``: never part of an interaction-ready output)."""
+    config = config or RefineConfig()
     try:
         if extracted is None:
-            asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category)
+            reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
+            asset, findings = extract.extract_asset_checked(asset_dir, asset_id=asset_id, category=category, reading=reading)
         else:
             asset, findings = extracted[0], list(extracted[1])
         output_folder.check_location(asset.source_dir, out_dir)
@@ -209,6 +217,12 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
             output_folder.check_location(asset.staged_from.parent, out_dir)
     except (extract.AssetError, output_folder.OutputError) as exc:
         raise RefineError(str(exc), "invalid_input", getattr(exc, "codes", None)) from exc
+    wrong = [f for f in findings if f.code == "JOINT_RANGE_WRONG_UNIT"]
+    if wrong:
+        lines = "\n  ".join(f.describe() for f in wrong)
+        raise RefineError(f"{asset.staged_from or asset.urdf_path}: a joint range in the wrong unit; not refined:\n  {lines}\n"
+                          "  (an MJCF fragment: --mjcf-angle radian|degree, config mjcf.angle, says which unit its angles are in)",
+                          "invalid_input", ["JOINT_RANGE_WRONG_UNIT"])
     return asset, findings
 
 
@@ -471,7 +485,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: _StageLo
         overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
-    overlay = overlay.model_copy(update={"mounting": mounting.resolve_mounting(ctx.category, ctx.request.text, ctx.request.mount)})
+    overlay = overlay.model_copy(update={"mounting": _root_mounting(ctx, config)})
     s = overlay.scale
     overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)
@@ -932,6 +946,41 @@ def _raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
             raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
                                             "OUTPUT_WRITE_FAILED", where) from cur
         cur = cur.__cause__ or cur.__context__
+
+
+def _root_mounting(ctx: EstimationContext, config: RefineConfig):
+    """The root's mounting: ``--mount``, else the request's words, else an MJCF file's own declaration (a root
+    without a free joint is welded to the world, as MuJoCo compiles it), else the category prior."""
+    source = ctx.asset.staged_from
+    if (ctx.request.mount is None and mounting.request_mounting(ctx.request.text, ctx.category) is None
+            and source is not None and staged.input_format(source) == "mjcf"):
+        reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
+        declared = mounting.declared_mounting(ctx.category, read_declared(source, ctx.asset.urdf_path, reading).root_fixed,
+                                              "the MJCF file")
+        if declared is not None:
+            return declared
+    return mounting.resolve_mounting(ctx.category, ctx.request.text, ctx.request.mount)
+
+
+def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+    """An MJCF input's refined object written back into its own file (``mjcf/host/``,
+    :func:`asset2sim.tasks.publish.host_mjcf.write_host_mjcf`), noted in the report; {} for other inputs. A file
+    that cannot be written (a rescaled object, MuJoCo missing) is a note, never the loss of the refined asset."""
+    source = asset.staged_from
+    if source is None or staged.input_format(source) != "mjcf":
+        return {}
+    try:
+        with quiet_stdout():
+            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
+    except Exception as exc:  # the host file must not lose the refined asset
+        _raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"host MJCF not written: {exc}")
+        return {}
+    rel = done.path.relative_to(out_dir).as_posix()
+    report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
+                        f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
+                        f"{done.diff.relative_to(out_dir).as_posix()}")
+    return {"host_mjcf": str(done.path)}
 
 
 def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None,

@@ -17,6 +17,7 @@ from pathlib import Path
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, output_folder_failure
 from asset2sim.flows import audit_catalog
 from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
+from asset2sim.schemas.config import RefineConfig
 
 NAME = "audit"
 HELP = ("Audit assets that already carry physics (URDF, MJCF, USD): each mass, density, inertia, center of mass, damping, "
@@ -30,6 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="where to write each asset's audit.json, audit.md and patch/, and the audit catalog (Parquet); "
                         "default: print only")
     p.add_argument("--category", default=None, help="object category for every asset (default: from the files and names)")
+    p.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
+    p.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
+                   help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
     p.add_argument("--no-sim", action="store_true", help="judge the values only; skip the simulation checks")
     p.add_argument("--jobs", type=int, default=1, help="assets audited at once (processes; default 1)")
     p.add_argument("--flow", action="store_true",
@@ -38,11 +42,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
 
 
-def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int) -> list:
+def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int,
+             config: RefineConfig | None = None) -> list:
     if jobs <= 1 or len(targets) <= 1:
-        return [audit_one(t, out, category=category, simulate=simulate) for t in targets]
+        return [audit_one(t, out, category=category, simulate=simulate, config=config) for t in targets]
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate) for t in targets]
+        futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate, config=config) for t in targets]
         return [f.result() for f in futures]
 
 
@@ -62,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
         raise bad
     if args.flow:
+        if args.body or args.mjcf_angle:
+            raise CommandError(INVALID_REQUEST, "OPTION_NOT_IN_FLOW", None, "--body and --mjcf-angle apply to an audit run here; "
+                               "leave out --flow to use them")
         if args.out is None:
             raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
         from asset2sim.flows.audit_flow import run_audit_flow
@@ -70,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
                                  dask_address=args.dask_address)
         rows = summary["rows"]
     else:
-        rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
+        config = RefineConfig(body=args.body, mjcf={"angle": args.mjcf_angle})
+        rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs, config)
         if args.out is not None:
             audit_catalog.write_audit_catalog(args.out, rows)
     console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)

@@ -63,6 +63,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                            "fraction (0.4) or a band (closed, slightly_open, quarter, halfway, mostly, fully); repeatable")
     over.add_argument("--mount", choices=("fixed", "free"), default=None, help="root fixed where the file puts it, or free on the ground")
     over.add_argument("--material", default=None, help="material of the whole object (a materials.yaml key, e.g. steel_sheet)")
+    parser.add_argument("--body", default=None, help=(
+        "the body (MJCF) whose subtree is the object, in a scene with several objects with joints (default: the one "
+        "subtree under the world body with hinge or slide joints; tables and walls around it are left out)"))
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None, help=(
+        "the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention (default: "
+        "as the package compiles it: robosuite, RoboCasa, LIBERO, Meta-World and Franka Kitchen fragments in radians; "
+        "docs/guide/inputs.md)"))
     parser.add_argument("--config", type=Path, default=None,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
@@ -278,6 +285,10 @@ def options(args: argparse.Namespace) -> RefineConfig:
         fields["clips"] = False
     if getattr(args, "open_containers", False):
         fields["open_containers"] = True
+    if getattr(args, "body", None):
+        fields["body"] = args.body
+    if getattr(args, "mjcf_angle", None):
+        fields["mjcf"] = base.mjcf.model_copy(update={"angle": args.mjcf_angle})
     engines = getattr(args, "engines", None)
     if engines or not getattr(args, "config", None):
         listed = parse_engines(engines or ",".join(default_engines()))

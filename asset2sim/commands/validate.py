@@ -8,15 +8,21 @@ import argparse
 import json
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError
-from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError
+from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.extract import validate_any
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors
 
 NAME = "validate"
 HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh paths and contents); exit 1 on errors."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
+    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF or OpenUSD file")
+    parser.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
+    parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
+                        help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
     parser.add_argument("--json", action="store_true", help="print the findings as a JSON list instead of text")
     parser.add_argument("--strict", action="store_true", help="treat warnings as errors")
     parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (no info)")
@@ -34,7 +40,13 @@ def run(args: argparse.Namespace) -> int:
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
-    findings = validate_asset(args.asset, policy)
+    try:
+        findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
+    except AssetError as exc:
+        raise CommandError(INVALID_INPUT, "INPUT_UNREADABLE", args.asset, str(exc)) from exc
+    if not args.json and not args.quiet:
+        for note in notes:
+            print(f"{'info':<7} {'INPUT_READ':<32} {args.asset.name}  {note}")
     shown = [f for f in findings if not (args.quiet and f.severity == "info")]
     if args.json:
         print(json.dumps([f.model_dump(mode="json") for f in shown], indent=2))

@@ -24,6 +24,7 @@ from asset2sim.tasks.audit.judge import Judgement, judge
 from asset2sim.tasks.check import manipulation, postcheck
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.interpret import mounting
 from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.part_labels import labels_from_names
@@ -64,7 +65,8 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
         category: the object category (default: ``meta.json``'s, else recognised from labels and names).
         asset_id: the name to report (default: the folder name, or the file stem).
         simulate: run the rest, robust-rest and sweep checks on the declared and patched physics (PyBullet).
-        config: the simulation conventions (``config.sim``); default :class:`RefineConfig`.
+        config: the simulation conventions (``config.sim``) and how an MJCF input is read (``config.body``,
+            ``config.mjcf``); default :class:`RefineConfig`.
 
     Returns:
         :class:`AuditResult` with the :class:`~asset2sim.schemas.audit.AuditReport`.
@@ -75,8 +77,9 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     """
     config = config or RefineConfig()
     try:
-        asset, _ = extract.extract_asset_checked(path, asset_id=asset_id, category=category)
-        dp = declared_mod.read_declared(path, asset.urdf_path)
+        reading = ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle)
+        asset, findings = extract.extract_asset_checked(path, asset_id=asset_id, category=category, reading=reading)
+        dp = declared_mod.read_declared(path, asset.urdf_path, reading)
     except Exception as exc:
         raise AuditError(_cannot(path, exc)) from exc
     asset = labels_from_names(asset)  # as the context builder labels it
@@ -104,10 +107,16 @@ def audit_asset(path: Path | str, out_dir: Path | str | None = None, *, category
     report = AuditReport(asset_id=asset.asset_id, source=str(source), format=dp.format, category=ctx.category,
                          category_reason=match.reason, labels={ln.name: ln.semantic_label for ln in asset.links if ln.semantic_label}, root_fixed=mount.fixed,
                          root_source=mount.source, values=judged.values, checks=checks,
-                         notes=[*judged.notes, *asset.staging_notes])
+                         notes=[*_unit_warnings(findings), *judged.notes, *asset.staging_notes])
     if out_dir is None:
         return AuditResult(report=report)
     return AuditResult(report=_write(report, asset, dp, judged, out_dir), out_dir=out_dir)
+
+
+def _unit_warnings(findings: list) -> list[str]:
+    """``WARNING: ...`` lines of the validation findings that say a joint range only makes sense in the other unit
+    (``JOINT_RANGE_WRONG_UNIT``: an MJCF fragment's radians read as degrees)."""
+    return [f"WARNING: {f.describe()}" for f in findings if f.code == "JOINT_RANGE_WRONG_UNIT"]
 
 
 def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> str:
@@ -123,11 +132,8 @@ def _cannot(path: Path | str, exc: BaseException, with_type: bool = False) -> st
 def _mounting(dp: declared_mod.DeclaredPhysics, category: str) -> RootMount:
     """The root as the file declares it (MJCF: no free joint welds it; USD: a fixed joint to the world), read as a
     ``--mount`` override reads (:func:`asset2sim.tasks.interpret.mounting.resolve_mounting`), else the category's prior."""
-    if dp.root_fixed is None:
-        return mounting.category_mounting(category)
-    held = "welds the root to the world" if dp.root_fixed else "leaves the root free"
-    mount = mounting.resolve_mounting(category, "", "fixed" if dp.root_fixed else "free")
-    return mount.model_copy(update={"source": f"the {dp.format.upper()} file {held}"})
+    declared = mounting.declared_mounting(category, dp.root_fixed, f"the {dp.format.upper()} file")
+    return declared if declared is not None else mounting.category_mounting(category)
 
 
 def _overlay_springs(asset: AssetDescription, dp: declared_mod.DeclaredPhysics) -> declared_mod.DeclaredPhysics:

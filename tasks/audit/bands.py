@@ -12,6 +12,8 @@ import math
 import numpy as np
 
 from asset2sim.schemas.audit import ValueVerdict
+from asset2sim.tasks.ingest.tree_checks import MIN_PRISMATIC_SPAN, MIN_REVOLUTE_SPAN
+from asset2sim.tasks.interpret import size_priors
 
 #: A declared mass is implausible beyond this factor outside the span of the product's estimates for the
 #: link (thin shell of its material at the typical wall, solid of its material): the wall thicknesses of
@@ -32,11 +34,10 @@ INERTIA_TOLERANCE = 3.0
 TRIANGLE_SLACK = 1e-6
 #: The center of mass is implausible outside the geometry's bounding box grown by this share of its diagonal.
 COM_MARGIN = 0.10
-#: The object's largest dimension is implausible beyond this factor from its category's typical one: unit
-#: mistakes are 10x (mm/cm), 25.4x (inch), 100x (cm/m) or 1000x (mm/m); sizes within a category span less.
-SCALE_TOLERANCE = 5.0
-#: Largest dimension span of a household object of unknown category, m (a 2 cm part to a 3 m wardrobe).
-GENERIC_SIZE_M = (0.02, 3.0)
+#: The object's largest dimension is implausible beyond this factor from its category's typical one, and a
+#: household object of unknown category outside this span (m): the rule refine keeps sizes by
+#: (:func:`asset2sim.tasks.interpret.size_priors.plausible_largest_dimension`).
+SCALE_TOLERANCE, GENERIC_SIZE_M = size_priors.SCALE_TOLERANCE, size_priors.GENERIC_SIZE_M
 #: Damping ratio below which a spring-returned joint rings (zeta of 0.05 keeps 73 % of the swing per cycle;
 #: damping ratios of light structures are 0.02-0.05, Chopra, Dynamics of Structures, 5th ed., table 11.2.1).
 ZETA_MIN_SPRING = 0.05
@@ -178,8 +179,8 @@ def scale_verdict(largest: float, typical: float | None, category: str) -> Value
     if typical is None:
         lo, hi = GENERIC_SIZE_M
         return _band_verdict("object", "scale", "m", largest, math.sqrt(lo * hi), lo, hi, "largest dimension; a household object")
-    return _band_verdict("object", "scale", "m", largest, typical, typical / SCALE_TOLERANCE, typical * SCALE_TOLERANCE,
-                         f"largest dimension; a typical {category} is {typical:.3g} m")
+    lo, hi = size_priors.plausible_span(typical)
+    return _band_verdict("object", "scale", "m", largest, typical, lo, hi, f"largest dimension; a typical {category} is {typical:.3g} m")
 
 
 def critical_damping(inertia_axis: float, stiffness: float) -> float:
@@ -246,8 +247,9 @@ def stiffness_verdict(where: str, declared: float, travel: float, operable: floa
 
 
 def limits_verdict(where: str, kind: str, lower: float | None, upper: float | None, largest: float) -> ValueVerdict:
-    """Joint limits (rad or m): implausible when lower > upper, a revolute range over a full turn, or a prismatic
-    travel over :data:`MAX_TRAVEL_FACTOR` x the object's ``largest`` dimension (m). ``declared`` is the range."""
+    """Joint limits (rad or m): implausible when lower > upper, a revolute range over a full turn or under a degree,
+    or a prismatic travel over :data:`MAX_TRAVEL_FACTOR` x the object's ``largest`` dimension (m) or under a
+    millimetre (the unit rule of validation's ``JOINT_RANGE_WRONG_UNIT``). ``declared`` is the range."""
     unit = "m" if kind == "prismatic" else "rad"
     if lower is None or upper is None:
         return ValueVerdict(where=where, quantity="limits", unit=unit, declared=None, verdict="not_declared",
@@ -256,6 +258,12 @@ def limits_verdict(where: str, kind: str, lower: float | None, upper: float | No
     if rng < 0:
         return ValueVerdict(where=where, quantity="limits", unit=unit, declared=rng, verdict="implausible",
                             reason=f"lower {lower:.4g} > upper {upper:.4g}")
+    small = MIN_PRISMATIC_SPAN if kind == "prismatic" else MIN_REVOLUTE_SPAN
+    if 0 < rng < small:  # validation's JOINT_RANGE_WRONG_UNIT: the same rule
+        what = "a millimetre (millimetres read as metres?)" if kind == "prismatic" else "a degree (radians read as degrees?)"
+        return ValueVerdict(where=where, quantity="limits", unit=unit, declared=rng, verdict="implausible",
+                            reason=f"range {lower:.4g} to {upper:.4g} spans less than {what}: it only makes sense in the "
+                                   "other unit (JOINT_RANGE_WRONG_UNIT)")
     high = 2 * math.pi if kind != "prismatic" else MAX_TRAVEL_FACTOR * largest
     what = "a full turn" if kind != "prismatic" else f"{MAX_TRAVEL_FACTOR:g} x the object's largest dimension"
     return _band_verdict(where, "limits", unit, rng, rng, 0.0, high, f"range {lower:.4g} to {upper:.4g}; at most {what}")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from asset2sim import file_names
 from asset2sim.schemas.audit import AuditRow
+from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.audit.audit import AuditError, audit_asset
 from asset2sim.tasks.ingest import staged
 
@@ -86,14 +87,15 @@ def _name(rel: Path) -> str:
     return "__".join(rel.parts) or "asset"
 
 
-def audit_one(target: AuditTarget, out_root: Path | str | None, *, category: str | None = None, simulate: bool = True) -> AuditRow:
-    """Audit ``target`` into ``out_root/<asset_id>`` (a safe folder name; None: nothing written). Never raises for
-    a bad asset, nor for a patch that cannot be written: the row's ``failure_mode`` is ``audit_failed`` and
-    ``error`` says why."""
+def audit_one(target: AuditTarget, out_root: Path | str | None, *, category: str | None = None, simulate: bool = True,
+              config: RefineConfig | None = None) -> AuditRow:
+    """Audit ``target`` into ``out_root/<asset_id>`` (a safe folder name; None: nothing written), with ``config``
+    (:func:`~asset2sim.tasks.audit.audit.audit_asset`). Never raises for a bad asset, nor for a patch that cannot be
+    written: the row's ``failure_mode`` is ``audit_failed`` and ``error`` says why."""
     start = time.perf_counter()
     out = None if out_root is None else file_names.join_inside(out_root, file_names.file_stem(target.asset_id))
     try:
-        result = audit_asset(target.path, out, category=category, asset_id=target.asset_id, simulate=simulate)
+        result = audit_asset(target.path, out, category=category, asset_id=target.asset_id, simulate=simulate, config=config)
     except Exception as exc:  # noqa: BLE001 - a failed asset never stops a batch; its row says why
         error = str(exc) if isinstance(exc, AuditError) else f"{target.path}: {type(exc).__name__}: {exc}"
         return AuditRow(asset_id=target.asset_id, source=str(target.path), failure_mode="audit_failed", error=error,

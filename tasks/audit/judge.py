@@ -20,6 +20,7 @@ from asset2sim.tasks.audit import bands
 from asset2sim.tasks.check import force_ranges
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import priors
+from asset2sim.tasks.interpret import size_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.synthesize import physics
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -184,8 +185,7 @@ def judge(ctx: EstimationContext, dp: DeclaredPhysics, mounting: RootMount) -> J
     """
     labels = {ln.name: canonical_label(ln.semantic_label) for ln in ctx.asset.links}
     values: list[ValueVerdict] = []
-    target = priors.target_size(ctx.category)
-    typical = None if ctx.category == priors.GENERIC else float(max(target.dims))
+    _, _, typical = size_priors.plausible_largest_dimension(ctx.category)  # refine keeps a real size by the same rule
     values.append(bands.scale_verdict(float(np.max(ctx.closed_extents)), typical, ctx.category))
     declared_links, patched_links = {}, {}
     for name, dl in dp.links.items():

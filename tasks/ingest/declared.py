@@ -15,6 +15,7 @@ import numpy as np
 
 from asset2sim.urdf import UrdfInertial, UrdfModel, read_urdf
 from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 
 __all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared"]
 
@@ -108,13 +109,15 @@ def declared_from_model(source: Path, fmt: str, model: UrdfModel, read: staged.R
                            read=read, initial_state={} if read is None else dict(read.initial_state))
 
 
-def read_declared(path: Path | str, urdf_path: Path | str | None = None) -> DeclaredPhysics:
+def read_declared(path: Path | str, urdf_path: Path | str | None = None, reading: ReadOptions | None = None) -> DeclaredPhysics:
     """The physics the input at ``path`` declares.
 
     Args:
         path: an MJCF or USD file (or a folder holding one, :func:`staged.other_format_file`), or a URDF asset.
         urdf_path: the URDF file extraction found or staged; needed when ``path`` is a URDF folder. A URDF this
             process staged (:func:`staged.read_of`) gives what its reader read, without reading the file again.
+        reading: how an MJCF file is read (the object's body in a scene, the angle unit;
+            :class:`~asset2sim.tasks.ingest.host_conventions.ReadOptions`).
 
     Raises:
         StagingError: the MJCF or USD file cannot be read into the asset model.
@@ -127,7 +130,7 @@ def read_declared(path: Path | str, urdf_path: Path | str | None = None) -> Decl
     other = staged.other_format_file(path)
     if other is not None:
         source, fmt = other
-        read = (mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset)(source)
+        read = mjcf_reader.read_mjcf_asset(source, reading) if fmt == "mjcf" else usd_reader.read_usd_asset(source)
         return declared_from_model(Path(source), fmt, read.model, read)
     original = urdf_meshes.urdf_needing_conversion(path)  # its meshes converted for the simulators: its own values
     urdf = original or (Path(urdf_path) if urdf_path is not None else Path(path))

@@ -21,6 +21,7 @@ from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
 from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader, validate_input
 from asset2sim.tasks.ingest.errors import AssetError
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
 from asset2sim.urdf import UrdfError, UrdfGeometry, UrdfJoint, UrdfLink, UrdfModel, parse_urdf_bytes
 
@@ -61,7 +62,8 @@ def _geometry(g: UrdfGeometry, role: str, mesh_paths: dict[str, Path], where: st
 
 
 def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, category: str | None = None,
-                          policy: "ValidationPolicy | None" = None) -> tuple[AssetDescription, list["Finding"]]:
+                          policy: "ValidationPolicy | None" = None,
+                          reading: ReadOptions | None = None) -> tuple[AssetDescription, list["Finding"]]:
     """Validate, then read an asset; also return every validation finding.
 
     Args:
@@ -73,6 +75,8 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         category: overrides ``meta.json``'s ``model_cat`` when given.
         policy: validation policy; default ``validate_input.DEFAULT_POLICY`` (then the result is
             memoized while the files are unchanged, :data:`_EXTRACT_MEMO`).
+        reading: how an MJCF file is read (:class:`~asset2sim.tasks.ingest.host_conventions.ReadOptions`: the
+            object's body in a scene, the angle unit); default: as its package compiles it.
 
     Returns:
         ``(description, findings)``: lengths in the file's units, angles in radians; findings of every
@@ -82,11 +86,12 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         AssetError: validation found errors (``.findings`` has them all; the message lists them), or
             the URDF reader cannot read the validated bytes.
     """
-    key = (os.path.realpath(asset), asset_id, category) if policy is None else None
+    reading = reading or ReadOptions()
+    key = (os.path.realpath(asset), asset_id, category, reading) if policy is None else None
     if key is not None and (hit := _EXTRACT_MEMO.get(key)) is not None:
         return hit
     given = Path(asset)
-    staged_asset = _stage_other_format(asset)
+    staged_asset = _stage_other_format(asset, reading)
     if staged_asset is not None:
         asset = staged_asset.folder
     result = validate_input.run_validation(asset, policy)
@@ -129,7 +134,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
     return desc, list(result.findings)
 
 
-def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
+def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -> "staged.StagedAsset | None":
     """An MJCF or USD file (:func:`~asset2sim.tasks.ingest.staged.other_format_file` of ``asset``) read (:mod:`~asset2sim.tasks.ingest.mjcf_reader`, :mod:`~asset2sim.tasks.ingest.usd_reader`)
     and staged as a URDF folder (:func:`~asset2sim.tasks.ingest.staged.stage`), or a URDF naming GLB / glTF / PLY
     meshes staged with OBJ copies (:mod:`~asset2sim.tasks.ingest.urdf_meshes`, its ``semantics.txt`` and
@@ -153,11 +158,29 @@ def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
                 atomic.copy_file(urdf.parent / side, out.folder / side)
         return out
     source, fmt = found
-    read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
     try:
-        return staged.stage(read(source), staged.staging_folder(source))
+        read = mjcf_reader.read_mjcf_asset(source, reading) if fmt == "mjcf" else usd_reader.read_usd_asset(source)
+        return staged.stage(read, staged.staging_folder(source))
     except (staged.StagingError, ImportError, OSError) as exc:
         raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
+
+
+def validate_any(asset: Path | str, policy: "ValidationPolicy | None" = None,
+                 reading: ReadOptions | None = None) -> tuple[list["Finding"], tuple[str, ...]]:
+    """(every validation finding, the reader's notes) of any input: a URDF asset as
+    :func:`~asset2sim.tasks.ingest.validate_input.validate_asset` checks it; an MJCF or USD file read as ``reading``
+    says (the object in a scene, the angle unit), staged and checked as a URDF folder, with the notes saying what
+    was read and which conventions applied.
+
+    Raises:
+        AssetError: an MJCF or USD file that cannot be read into the asset model (names the body, prim or joint).
+    """
+    if not os.path.exists(asset):  # ASSET_NOT_FOUND, as for any input
+        return validate_input.validate_asset(asset, policy), ()
+    staged_asset = _stage_other_format(asset, reading)
+    if staged_asset is None:
+        return validate_input.validate_asset(asset, policy), ()
+    return validate_input.validate_asset(staged_asset.folder, policy), staged_asset.read.notes
 
 
 def _link(ln: UrdfLink, mesh_paths: dict[str, Path], semantics: dict, replace: set[str], urdf: Path) -> LinkDesc:

@@ -89,6 +89,7 @@ CODES: dict[str, CodeInfo] = {
     "JOINT_LIMIT_REVERSED": _c("error", "joints", "lower > upper"),
     "JOINT_LIMIT_EQUAL": _c("warning", "joints", "lower == upper: the joint cannot move"),
     "JOINT_LIMIT_IMPLAUSIBLE": _c("error", "joints", "revolute limit beyond +-4 pi (two turns), or prismatic travel beyond the object's size"),
+    "JOINT_RANGE_WRONG_UNIT": _c("warning", "joints", "a revolute range spanning less than a degree or a prismatic travel under a millimetre: a range that only makes sense in the other unit (radians read as degrees, millimetres as metres); refine refuses it"),
     "JOINT_EFFORT_NEGATIVE": _c("error", "joints", "effort < 0"),
     "JOINT_VELOCITY_NEGATIVE": _c("error", "joints", "velocity < 0"),
     "JOINT_DYNAMICS_NEGATIVE": _c("error", "joints", "damping or friction < 0"),

@@ -8,7 +8,11 @@ spec says which bodies declare an ``<inertial>``. Nothing here walks XML.
 
 Conventions (MJCF -> URDF):
 
-- The world body's one child body is the root link. A ``<freejoint>`` on it
+- The object is the world body's child whose subtree carries the joints
+  (:mod:`asset2sim.tasks.ingest.mjcf_scene`: the static bodies around it, a
+  table or a wall, are noted and left out); its body is the root link. Angles
+  are read in the unit the file's host package compiles it with
+  (:mod:`asset2sim.tasks.ingest.host_conventions`). A ``<freejoint>`` on it
   means a free-standing object; none means the root is welded to the world
   (a mounted object). Geoms on the world body (a ground plane) are scenery
   and are left out, with a note.
@@ -38,6 +42,8 @@ import numpy as np
 
 from asset2sim.extras import import_extra
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
+from asset2sim.tasks.ingest import host_conventions, mjcf_scene
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
@@ -50,24 +56,32 @@ def _pose(pos, quat_wxyz) -> np.ndarray:
     return rigid_matrix(quat_wxyz_matrix(np.asarray(quat_wxyz, float)), pos)
 
 
-def _compile(path: Path):
-    """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``; StagingError with MuJoCo's message when it cannot."""
+def _compile(path: Path, degree: bool | None = None):
+    """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``, its angles read in degrees (``degree``
+    True) or radians (False) whatever its ``<compiler angle>`` says (None: as it says); StagingError with MuJoCo's
+    message when it cannot."""
     mujoco = import_extra("mujoco", "reading MJCF")
     try:
         with warnings.catch_warnings(record=True) as caught:  # MuJoCo's decoder warnings become notes
             warnings.simplefilter("always")
             spec = mujoco.MjSpec.from_file(str(path))
+            if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
+                spec.compiler.degree = degree
             model = spec.compile()
     except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
         raise StagingError(f"{path}: MuJoCo cannot read this MJCF: {exc}") from exc
     return spec, model, [f"MuJoCo: {w.message}" for w in caught]
 
 
-def read_mjcf_asset(path: Path | str) -> ReadAsset:
-    """Read one articulated object from an MJCF file.
+def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> ReadAsset:
+    """Read one articulated object from an MJCF file (or from a scene holding it).
 
     Args:
         path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them).
+        options: ``body`` picks the object in a scene with several jointed subtrees
+            (:func:`~asset2sim.tasks.ingest.mjcf_scene.pick_object`); ``mjcf_angle`` overrides the angle unit
+            the file's place implies (:func:`~asset2sim.tasks.ingest.host_conventions.mjcf_angle`). The notes
+            say which convention was used and why, and which bodies around the object were left out.
 
     Returns:
         A :class:`~asset2sim.tasks.ingest.staged.ReadAsset` (format ``"mjcf"``): lengths in m, angles in
@@ -76,19 +90,21 @@ def read_mjcf_asset(path: Path | str) -> ReadAsset:
     Raises:
         MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
         StagingError: MuJoCo cannot compile the file, or the file holds something the asset model
-            cannot take (names the body or joint): not exactly one body under the world body, a ball
-            joint, several joints on one body, a free joint below the root, a slide joint without a range.
+            cannot take (names the body or joint): no object or several under the world body and no ``body``
+            naming one, a ball joint, several joints on one body, a free joint below the root, a slide joint
+            without a range.
     """
     path = Path(path)
-    spec, m, warned = _compile(path)
+    options = options or ReadOptions()
+    convention = host_conventions.mjcf_angle(path, options.mjcf_angle)
+    spec, m, warned = _compile(path, degree=convention.unit == "degree")
     mujoco = import_extra("mujoco", "reading MJCF")
-    roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0]
-    if len(roots) != 1:
-        names = [m.body(b).name or f"#{b}" for b in roots]
-        raise StagingError(f"{path}: one articulated object per file: the world body holds {len(roots)} bodies {names}")
+    scene = mjcf_scene.pick_object(m, path, options.body)
     reader = _Reader(path, spec, m, mujoco)
+    reader.notes.append(convention.note)
+    reader.notes.extend(scene.notes)
     reader.notes.extend(warned)
-    return reader.read(roots[0])
+    return reader.read(scene.root, scene.bodies)
 
 
 class _Reader:
@@ -112,7 +128,8 @@ class _Reader:
         """Body ``b``'s name (MuJoCo refuses repeated names), ``body_<b>`` for an unnamed one."""
         return self.m.body(b).name or f"body_{b}"
 
-    def read(self, root: int) -> ReadAsset:
+    def read(self, root: int, bodies: tuple[int, ...]) -> ReadAsset:
+        """The object whose root body is ``root`` and whose bodies are ``bodies`` (depth first, ``root`` first)."""
         m = self.m
         world_geoms = int(m.body_geomnum[0])
         if world_geoms:
@@ -120,7 +137,7 @@ class _Reader:
         links: dict[str, UrdfLink] = {}
         joints: list[UrdfJoint] = []
         frames: dict[int, np.ndarray] = {}  # body -> its URDF link frame in the body frame (the joint's pos)
-        for b in range(root, m.nbody):  # depth first: MuJoCo numbers a parent before its children
+        for b in bodies:  # depth first: MuJoCo numbers a parent before its children
             parent = int(m.body_parentid[b])
             joint, frame = self._joint(b, is_root=b == root)
             frames[b] = frame
@@ -248,8 +265,8 @@ class _Reader:
         return link
 
     def _keyframe_state(self, joints: list[UrdfJoint]) -> dict[str, float]:
-        """joint -> position (rad or m, the URDF joint's: MuJoCo's ``ref`` subtracted) in the keyframe named
-        ``initial``, else the first keyframe; {} without one (noted when used)."""
+        """joint -> position (rad or m) in the keyframe named ``initial``, else the first keyframe; {} without one
+        (noted when used). MuJoCo's joint values are the URDF joint's: ``ref`` moved the URDF origin, not the values."""
         m = self.m
         if m.nkey == 0:
             return {}
@@ -262,7 +279,7 @@ class _Reader:
             jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
             if jid >= 0:
                 adr = int(m.jnt_qposadr[jid])
-                out[j.name] = float(m.key_qpos[k, adr] - m.qpos0[adr])
+                out[j.name] = float(m.key_qpos[k, adr])
         if out:
             self.notes.append(f"initial joint positions from keyframe {names[k] or '#' + str(k)!r}")
         return out

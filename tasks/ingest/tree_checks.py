@@ -15,6 +15,11 @@ from asset2sim.tasks.ingest.mesh_checks import zero_pose_bounds
 from asset2sim.tasks.ingest.urdf_checks import joint_name, link_name
 from asset2sim.urdf import UrdfJoint, UrdfLink, UrdfModel
 
+#: A revolute range spanning less than this (rad, one degree) only makes sense in the other unit.
+MIN_REVOLUTE_SPAN = float(np.radians(1.0))
+#: A prismatic range spanning less than this (m, one millimetre) only makes sense in the other unit.
+MIN_PRISMATIC_SPAN = 1e-3
+
 __all__ = ["TreeChecks", "check_inertia"]
 
 
@@ -269,3 +274,25 @@ class TreeChecks(Recorder):
                          f"size {size:.4g} (diagonal of its bounding box, file units): the part would leave the object; "
                          "check the units of the limits and of the meshes", line=lim.line, joint=joint_name(j.name),
                          lower=lim.lower, upper=lim.upper, object_size=size)
+
+    def joint_range_units(self, model: UrdfModel) -> None:
+        """A movable joint whose whole range is below :data:`MIN_REVOLUTE_SPAN` (a degree) or
+        :data:`MIN_PRISMATIC_SPAN` (a millimetre) but not zero: a range that only makes sense in the other unit
+        (an MJCF fragment's radians read as degrees: robosuite's door ``range="0 0.4"`` becomes 0.4 degrees)."""
+        for j in model.joints:
+            lim = j.limit
+            if j.type not in ("revolute", "prismatic") or lim is None or lim.lower is None or lim.upper is None:
+                continue
+            span = float(lim.upper) - float(lim.lower)
+            if not np.isfinite(span) or span <= 0:
+                continue
+            if j.type == "revolute" and span < MIN_REVOLUTE_SPAN:
+                why = (f"revolute range [{lim.lower:.6g}, {lim.upper:.6g}] rad spans {np.degrees(span):.3g} degrees: "
+                       f"a part that turns a fraction of a degree; its numbers read as radians would span {np.degrees(np.degrees(span)):.3g} degrees "
+                       "(an MJCF file's radians read as degrees? asset2sim refine --mjcf-angle radian)")
+            elif j.type == "prismatic" and span < MIN_PRISMATIC_SPAN:
+                why = (f"prismatic range [{lim.lower:.6g}, {lim.upper:.6g}] spans {span * 1000:.3g} mm: a part that slides a "
+                       "fraction of a millimetre (millimetres read as metres?)")
+            else:
+                continue
+            self.add("JOINT_RANGE_WRONG_UNIT", why, line=lim.line, joint=joint_name(j.name), lower=lim.lower, upper=lim.upper)

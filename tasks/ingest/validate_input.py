@@ -158,6 +158,7 @@ class _Validator(UrdfChecks, TreeChecks, MeshChecks):
         self.meshes(model.link_elements)
         self.asset_size(model, root)
         self.joint_travel(model, root)
+        self.joint_range_units(model)
         self.extras({ln.name for ln in model.link_elements if ln.name})
         return self.result
 

@@ -139,6 +139,17 @@ def resolve_mounting(category: str | None, text: str, override: str | None = Non
     return request_mounting(text, category) or category_mounting(category)
 
 
+def declared_mounting(category: str | None, root_fixed: bool | None, what: str) -> RootMount | None:
+    """The root as a file declares it (``root_fixed``: an MJCF root without a free joint is welded to the world; a
+    USD fixed joint to the world), read as a ``--mount`` override reads (:func:`resolve_mounting`), its source
+    naming ``what`` (``the MJCF file``); None when the file does not say."""
+    if root_fixed is None:
+        return None
+    held = "welds the root to the world" if root_fixed else "leaves the root free"
+    mount = resolve_mounting(category, "", "fixed" if root_fixed else "free")
+    return mount.model_copy(update={"source": f"{what} {held}"})
+
+
 def session_root_options(fixed: bool) -> dict[str, bool]:
     """``SessionOptions`` keywords for a root as declared: mounted -> fixed base, no ground (the mount holds it
     where the file puts it); free -> ``{}`` (resting on the ground)."""

@@ -11,6 +11,8 @@ from asset2sim.schemas.asset import AssetDescription
 
 #: Canonical labels of an object's main body.
 BODY_LABELS = frozenset({"body", "base", "frame"})
+#: Labels that, in a joint's name (``door_hinge``, ``slider``), name the mechanism rather than the part it moves.
+JOINT_WORDS = frozenset({"hinge", "slider"})
 
 
 def _norm_token(s: str) -> str:
@@ -74,13 +76,22 @@ def label_from_name(name: str | None) -> str | None:
 
 def labels_from_names(asset: AssetDescription) -> AssetDescription:
     """``asset`` with part labels read from its link names (:func:`label_from_name`) when it has none (no
-    ``semantics.txt``: MJCF, USD and generated URDFs), said in its ``staging_notes``; unchanged when any link
-    has a label or no name holds one."""
+    ``semantics.txt``: MJCF, USD and generated URDFs), said in its ``staging_notes``; a moving link whose name holds
+    no label or only a body word takes the label of its joint's name (``window_slide`` -> ``window``); unchanged
+    when any link has a label or no name holds one."""
     if any(ln.semantic_label for ln in asset.links):
         return asset
     found = {ln.name: lab for ln in asset.links if (lab := label_from_name(ln.name))}
+    by_joint = {}
+    for j in asset.joints:  # a moving link named for nothing (MJCF's unnamed body_4) takes its joint's name: window_slide
+        own = found.get(j.child)
+        if j.type != "fixed" and (own is None or own in BODY_LABELS):
+            lab = label_from_name(j.name)
+            if lab is not None and lab not in BODY_LABELS and lab not in JOINT_WORDS:
+                found[j.child] = by_joint[j.child] = lab
     if not found:
         return asset
     links = [ln.model_copy(update={"semantic_label": found.get(ln.name)}) for ln in asset.links]
-    note = "part labels read from link names (no semantics.txt): " + ", ".join(f"{k} -> {v}" for k, v in found.items())
+    note = "part labels read from link names (no semantics.txt): " + ", ".join(
+        f"{k} -> {v}" + (" (its joint's name)" if k in by_joint else "") for k, v in found.items())
     return asset.model_copy(update={"links": links, "staging_notes": [*asset.staging_notes, note]})

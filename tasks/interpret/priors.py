@@ -10,12 +10,13 @@ from asset2sim.tasks.interpret.categories import category_prior, find_variant, r
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.interpret.part_priors import (handled, material, material_for, part_role, request_label_matches,
                                                    spring_expected, task_relevant_joints, task_relevant_rank)
-from asset2sim.tasks.interpret.size_priors import (MASS_FLOOR_KG, fits_gripper, gripper_limit_factor, mass_range, scale_mass_range,
-                                                   size_factor, target_size)
+from asset2sim.tasks.interpret.size_priors import (MASS_FLOOR_KG, fits_gripper, gripper_limit_factor, mass_range,
+                                                   plausible_largest_dimension, scale_mass_range, size_factor, target_size)
 
 __all__ = [
     "GENERIC", "GRASPABLE_WIDTH_M", "MASS_FLOOR_KG", "SIZE_CLASSES", "PriorsError", "canonical_label", "category_prior", "find_variant",
     "fits_gripper", "gripper_limit_factor", "load_priors", "load_priors_from", "mass_range", "material", "material_for", "part_role",
+    "plausible_largest_dimension",
     "recognize_category", "request_category", "request_label_matches", "resolve_category", "scale_mass_range", "size_factor",
     "spring_expected", "target_size", "task_relevant_joints", "task_relevant_rank",
 ]

@@ -8,11 +8,17 @@ from collections.abc import Iterable
 
 from asset2sim.schemas.request import RequestSpec, SizeClass
 from asset2sim.tasks.interpret.categories import category_prior, find_variant
-from asset2sim.prior_tables import GRASPABLE_WIDTH_M, SIZE_CLASSES, Dims, PriorModel, load_priors
+from asset2sim.prior_tables import GENERIC, GRASPABLE_WIDTH_M, SIZE_CLASSES, Dims, PriorModel, load_priors
 from asset2sim.tasks.interpret.request import parse_request
 
 #: Smallest plausible total mass of any object, kg: the floor of the scaled mass ranges.
 MASS_FLOOR_KG: float = 0.001
+#: An object's largest dimension is plausible within this factor either way of its category's typical one: unit
+#: mistakes are 10x (mm/cm), 25.4x (inch), 100x (cm/m) or 1000x (mm/m); sizes within a category span less.
+#: The one rule of refine (a size in real units is kept when plausible) and the audit (its scale verdict).
+SCALE_TOLERANCE: float = 5.0
+#: Largest dimension span of a household object of unknown category, m (a 2 cm part to a 3 m wardrobe).
+GENERIC_SIZE_M: tuple[float, float] = (0.02, 3.0)
 
 
 class SizeTarget(PriorModel):
@@ -125,3 +131,20 @@ def target_size(category: str, request: RequestSpec | str | None = None) -> Size
     return SizeTarget(category=cat.name, variant=var.name if var else None, size_class=size_class, base_dims=base, factor=f,
                       dims=dims, mass_range=mr, body_material=body, handheld=cat.handheld,  # type: ignore[arg-type]
                       gripper_limit_factor=glf, note="; ".join(notes))
+
+
+def plausible_largest_dimension(category: str, request: RequestSpec | str | None = None) -> tuple[float, float, float | None]:
+    """(low, high, typical) m: the span of plausible largest dimensions of an object of ``category`` as
+    ``request`` sizes it (:func:`target_size`): the typical largest dimension divided and multiplied by
+    :data:`SCALE_TOLERANCE`; for ``Generic``, :data:`GENERIC_SIZE_M` and no typical one (None). The audit's scale
+    verdict and refine's choice to keep a size in real units both read it."""
+    if category == GENERIC:
+        lo, hi = GENERIC_SIZE_M
+        return lo, hi, None
+    typical = float(max(target_size(category, request).dims))
+    return (*plausible_span(typical), typical)
+
+
+def plausible_span(typical: float) -> tuple[float, float]:
+    """(low, high) m: the plausible largest dimensions around a ``typical`` one (m), :data:`SCALE_TOLERANCE` either way."""
+    return typical / SCALE_TOLERANCE, typical * SCALE_TOLERANCE

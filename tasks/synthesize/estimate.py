@@ -12,7 +12,7 @@ import numpy as np
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
 from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
 from asset2sim.tasks.geometry.closed_state import ClosedState
-from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest import host_conventions, partnet_mobility
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
@@ -45,6 +45,10 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
     sized = request_apply.scale_from_sizes(ctx)
     if sized is not None:
         return sized
+    real = host_conventions.real_units(ctx.asset)
+    kept, why_not = _real_size(ctx, real)
+    if kept is not None:
+        return 1.0, kept
     target = priors.target_size(ctx.category, ctx.request)
     dims = np.sort(np.asarray(target.dims, float))[::-1]
     ext = np.maximum(np.sort(np.asarray(ctx.closed_extents, float))[::-1], 1e-9)
@@ -59,7 +63,27 @@ def choose_scale(ctx: EstimationContext) -> tuple[float, str]:
         if s > cap:
             note += f"; handheld: capped to {cap:.4g} so two dimensions fit a {priors.GRASPABLE_WIDTH_M} m gripper"
             s = cap
+    note += f"; {why_not}" if why_not else ""
     return s, note + ('' if partnet_mobility.size_normalized(ctx.asset.staged_from or ctx.asset.urdf_path) else unit_warning(s))
+
+
+def _real_size(ctx: EstimationContext, real: str | None) -> tuple[str | None, str | None]:
+    """(note, None) when an input in real units (``real``: why, :func:`~asset2sim.tasks.ingest.host_conventions.real_units`)
+    keeps its size: no size asked (no size words, numbers, ``--size`` or ``--scale``) and its largest closed dimension
+    plausible for its category by the audit's rule (:func:`~asset2sim.tasks.interpret.size_priors.plausible_largest_dimension`);
+    else (None, why it is rescaled, for the size note; None for a normalized input)."""
+    if real is None:
+        return None, None
+    largest = float(np.max(ctx.closed_extents))
+    lo, hi, typical = priors.plausible_largest_dimension(ctx.category)
+    what = f"a typical {ctx.category} is {typical:.3g} m" if typical is not None else "a household object"
+    if ctx.request.size_class is not None:
+        return None, f"{real}, rescaled as asked ({ctx.request.size_class})"
+    if lo <= largest <= hi:
+        return (f"size kept (scale 1): {real}; largest closed dimension {largest:.4g} m is plausible "
+                f"({what}; plausible {lo:.3g}-{hi:.3g} m, the audit's rule)"), None
+    return None, (f"{real}, but its largest closed dimension {largest:.4g} m is implausible ({what}; plausible "
+                  f"{lo:.3g}-{hi:.3g} m): rescaled")
 
 
 #: Length units an input's numbers are often written in by mistake for metres: metres per unit -> name.

@@ -443,6 +443,28 @@ def test_open_containers_is_a_refine_option_off_by_default_and_part_of_the_confi
     assert options(parser.parse_args(["refine", "in", "--prompt", "a bucket", "--out", "o", "--config", str(cfg)])).open_containers
 
 
+def test_body_and_mjcf_angle_are_refine_options_and_config_fields_outside_the_default_hash(tmp_path):
+    """``--body`` and ``--mjcf-angle`` (``body:`` and ``mjcf: {angle: ...}`` in a ``--config`` file) set how an MJCF
+    input is read; unset, the configuration hash is the one of every configuration before the options existed."""
+    from asset2sim.cli import build_parser
+    from asset2sim.commands.refine import options
+    from asset2sim.schemas.config import RefineConfig
+
+    parser = build_parser("refine")
+    base = ["refine", "in.xml", "--prompt", "a drawer", "--out", "o"]
+    plain = options(parser.parse_args(base))
+    asked = options(parser.parse_args([*base, "--body", "drawer_link", "--mjcf-angle", "radian"]))
+    assert (plain.body, plain.mjcf.angle) == (None, None)
+    assert (asked.body, asked.mjcf.angle) == ("drawer_link", "radian")
+    assert RefineConfig(body=None, mjcf={"angle": None}).config_hash() == RefineConfig().config_hash() != asked.config_hash()
+    cfg = tmp_path / "refine.yaml"
+    cfg.write_text("body: box\nmjcf:\n  angle: degree\n")
+    from_file = options(parser.parse_args([*base, "--config", str(cfg)]))
+    assert (from_file.body, from_file.mjcf.angle) == ("box", "degree")
+    with pytest.raises(SystemExit):
+        parser.parse_args([*base, "--mjcf-angle", "grad"])
+
+
 # ------------------------------------------------------------------ one explanation per failure: penetration (issue 62)
 
 

@@ -223,7 +223,7 @@ def test_staged_urdf_reads_back_and_pybullet_loads_it(tmp_path):
 @pytest.mark.parametrize("body, message", [
     ('<body name="a"><geom size="0.1"/><body name="b"><joint name="ball" type="ball"/><geom size="0.1"/></body></body>',
      "ball joint"),
-    ('<body name="a"><geom size="0.1"/></body><body name="b"><geom size="0.1"/></body>', "one articulated object per file"),
+    ('<body name="a"><geom size="0.1"/></body><body name="b"><geom size="0.1"/></body>', "carries a hinge or slide joint"),
     ('<body name="a"><geom size="0.1"/><body name="b"><joint name="s" type="slide" limited="false"/><geom size="0.1"/></body></body>',
      "slide joint 's'"),
     ('<body name="a"><geom size="0.1"/><body name="b"><joint name="h1" type="hinge"/><joint name="h2" type="hinge" axis="1 0 0"/>'

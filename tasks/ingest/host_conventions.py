@@ -1,0 +1,247 @@
+"""The conventions an MJCF file is compiled with by the package it belongs to.
+
+An MJCF object is often a fragment of a larger model: robosuite compiles
+``robosuite/models/assets/objects/door.xml`` inside its world file
+``robosuite/models/assets/base.xml``, whose ``<compiler angle="radian">``
+applies to the object, while MuJoCo compiles the same file alone with its own
+default, degrees. Read alone, the door's hinge range ``0 0.4`` (0.4 rad) would
+become 0.4 degrees. :func:`mjcf_angle` decides the unit the file's angles are
+read in, and says why, in this order:
+
+1. the caller's override (``--mjcf-angle``, config ``mjcf.angle``);
+2. the file's own ``<compiler angle>``, in the file or a file it includes
+   (the last one MuJoCo reads wins, as in MuJoCo);
+3. a known host package, from the folders the file lies in
+   (:data:`HOST_LAYOUTS`);
+4. a world file beside the file's folders that compiles them
+   (``base.xml`` in an ancestor folder, robosuite's layout, stating
+   ``<compiler angle>``);
+5. MuJoCo's default, degrees.
+
+The hosts' conventions, as their sources state them:
+
+- robosuite: ``robosuite/models/assets/base.xml`` holds
+  ``<compiler angle="radian" meshdir="meshes/"/>``; objects, arenas and
+  robots are merged into it (``robosuite.models.base.MujocoXML``).
+- RoboCasa and LIBERO build their scenes with robosuite's ``MujocoXML``
+  classes, so robosuite's ``base.xml`` applies to their fixtures and objects.
+- Meta-World: each scene file includes its ``*_dependencies.xml``, which
+  states ``<compiler angle="radian">``; the object fragments
+  (``assets/*.xml``, ``<mujocoinclude>``) are compiled through those.
+- gymnasium-robotics' Franka Kitchen: the items' chains are included by
+  ``kitchen_env_model.xml``, which states ``<compiler angle="radian">``.
+- dm_control and MuJoCo Menagerie compile each model file as it is: the file's
+  own ``<compiler>`` (most Menagerie models state radians), else MuJoCo's
+  default, degrees.
+
+Nothing here compiles the model; the files are only read (:mod:`asset2sim.safexml`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from asset2sim import safexml
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest.staged import MJCF_SUFFIXES, USD_SUFFIXES
+
+AngleUnit = Literal["radian", "degree"]
+#: The angle units MJCF's ``<compiler angle>`` takes.
+ANGLE_UNITS: tuple[str, ...] = ("radian", "degree")
+#: MuJoCo's default angle unit of a file that does not state one (MuJoCo XML reference, ``compiler/angle``).
+MUJOCO_DEFAULT_ANGLE: AngleUnit = "degree"
+#: Most ``<include>`` files followed when looking for the file's own ``<compiler angle>``.
+MAX_INCLUDES = 64
+#: How many folders above the file are searched for a world file (:data:`WORLD_FILES`).
+MAX_ANCESTORS = 4
+#: World files that hosts compile their fragments inside (robosuite, RoboCasa, LIBERO: ``base.xml``).
+WORLD_FILES: tuple[str, ...] = ("base.xml",)
+
+
+@dataclass(frozen=True)
+class HostLayout:
+    """A package whose MJCF files are compiled with its conventions: ``folders`` consecutive folder names in the
+    file's path (lower case) that mark it; ``angle`` the unit its fragments are compiled with (None: each file's
+    own ``<compiler>``, else MuJoCo's default); ``why`` the source of that convention."""
+
+    name: str
+    folders: tuple[str, ...]
+    angle: AngleUnit | None
+    why: str
+
+
+_ROBOSUITE_WORLD = 'robosuite/models/assets/base.xml, whose <compiler angle="radian"> applies'
+
+#: Known host packages, most specific first.
+HOST_LAYOUTS: tuple[HostLayout, ...] = (
+    HostLayout("RoboCasa", ("robocasa", "models", "assets"), "radian",
+               f"RoboCasa builds its kitchens with robosuite, inside {_ROBOSUITE_WORLD}"),
+    HostLayout("LIBERO", ("libero", "libero", "assets"), "radian",
+               f"LIBERO builds its scenes with robosuite, inside {_ROBOSUITE_WORLD}"),
+    HostLayout("robosuite", ("robosuite", "models", "assets"), "radian",
+               f"robosuite compiles its objects, arenas and robots inside {_ROBOSUITE_WORLD}"),
+    HostLayout("Meta-World", ("metaworld", "envs", "assets_v2"), "radian",
+               'Meta-World compiles its objects through their *_dependencies.xml, which state <compiler angle="radian">'),
+    HostLayout("Meta-World", ("metaworld", "assets"), "radian",
+               'Meta-World compiles its objects through their *_dependencies.xml, which state <compiler angle="radian">'),
+    HostLayout("Franka Kitchen (gymnasium-robotics)", ("kitchen_franka",), "radian",
+               'gymnasium-robotics compiles the kitchen\'s items inside kitchen_env_model.xml, whose <compiler angle="radian"> applies'),
+    HostLayout("dm_control", ("dm_control",), None,
+               "dm_control compiles each model file as it is"),
+    HostLayout("MuJoCo Menagerie", ("mujoco_menagerie",), None,
+               "MuJoCo Menagerie compiles each model file as it is"),
+)
+
+
+@dataclass(frozen=True)
+class AngleConvention:
+    """The angle unit an MJCF file's angles (joint ranges, ``euler``, ``axisangle``, ``springref``, ``ref``) are
+    read in: ``unit``; ``source`` one of ``override``, ``file``, ``host``, ``world_file``, ``default``; ``host``
+    the package recognised (or None); ``reason`` a sentence saying why."""
+
+    unit: AngleUnit
+    source: str
+    host: str | None
+    reason: str
+
+    @property
+    def note(self) -> str:
+        """The line the reader's notes carry: ``angles in radians: <reason>``."""
+        return f"angles read in {self.unit}s: {self.reason}"
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How an input file is read: ``body`` the body (MJCF) whose subtree is the object when a scene holds several
+    (``--body``, config ``body``); ``mjcf_angle`` the angle unit of an MJCF file, overriding what its place says
+    (``--mjcf-angle``, config ``mjcf.angle``). The defaults read a file as its package compiles it."""
+
+    body: str | None = None
+    mjcf_angle: AngleUnit | None = None
+
+    def __post_init__(self) -> None:
+        if self.mjcf_angle is not None and self.mjcf_angle not in ANGLE_UNITS:
+            raise ValueError(f"mjcf angle {self.mjcf_angle!r}: expected one of {list(ANGLE_UNITS)}")
+
+
+def host_layout(path: Path | str) -> HostLayout | None:
+    """The known host package (:data:`HOST_LAYOUTS`) whose folders the file at ``path`` lies in, or None."""
+    parts = [p.lower() for p in Path(os.path.abspath(path)).parent.parts]
+    for layout in HOST_LAYOUTS:
+        n = len(layout.folders)
+        if any(tuple(parts[i:i + n]) == layout.folders for i in range(len(parts) - n + 1)):
+            return layout
+    return None
+
+
+def _element_compiler_angle(root, base: Path, top: Path, seen: set[str]) -> tuple[str | None, str | None]:
+    """(last ``<compiler angle>`` value, the file stating it) in ``root`` and the files it includes, in document
+    order; ``base`` the including file's folder, ``top`` the model file's folder (MuJoCo resolves includes against
+    it; the including file's folder is tried first)."""
+    found: tuple[str | None, str | None] = (None, None)
+    for el in root.iter():
+        tag = el.tag if isinstance(el.tag, str) else ""
+        if tag == "compiler" and el.get("angle") is not None:
+            found = (el.get("angle", "").strip().lower(), None)
+        elif tag == "include" and el.get("file") and len(seen) < MAX_INCLUDES:
+            name = el.get("file", "")
+            for folder in (base, top):
+                inc = Path(os.path.abspath(folder / name)) if not os.path.isabs(name) else Path(name)
+                if inc.is_file():
+                    break
+            else:
+                continue
+            key = os.path.realpath(inc)
+            if key in seen:
+                continue
+            seen.add(key)
+            try:
+                sub = safexml.parse_xml_file(inc)
+            except (safexml.SafeXMLError, OSError):  # an unreadable include: MuJoCo's compile reports it
+                continue
+            angle, where = _element_compiler_angle(sub, inc.parent, top, seen)
+            if angle is not None:
+                found = (angle, where or str(inc))
+    return found
+
+
+def file_compiler_angle(path: Path | str) -> tuple[AngleUnit | None, str | None]:
+    """(the unit the file's own ``<compiler angle>`` states, the file stating it: ``path`` or an include), or
+    (None, None) when neither the file nor its includes state one (or the value is not ``radian`` / ``degree``,
+    which MuJoCo refuses when compiling)."""
+    path = Path(path)
+    try:
+        root = safexml.parse_xml_file(path)
+    except (safexml.SafeXMLError, OSError):  # MuJoCo's compile reports an unreadable file with its own message
+        return None, None
+    angle, where = _element_compiler_angle(root, path.parent, path.parent, {os.path.realpath(path)})
+    if angle not in ANGLE_UNITS:
+        return None, None
+    return angle, where or str(path)  # type: ignore[return-value]
+
+
+def _world_file_angle(path: Path) -> tuple[AngleUnit | None, Path | None]:
+    """(unit, file) of a world file (:data:`WORLD_FILES`) in one of the :data:`MAX_ANCESTORS` folders above
+    ``path``'s folder that states ``<compiler angle>``; (None, None) when none does."""
+    folder = Path(os.path.abspath(path)).parent
+    for ancestor in list(folder.parents)[:MAX_ANCESTORS]:
+        for name in WORLD_FILES:
+            cand = ancestor / name
+            if cand.is_file() and os.path.realpath(cand) != os.path.realpath(path):
+                angle, _ = file_compiler_angle(cand)
+                if angle is not None:
+                    return angle, cand
+    return None, None
+
+
+def mjcf_angle(path: Path | str, override: AngleUnit | None = None) -> AngleConvention:
+    """The angle unit the MJCF file at ``path`` is read in, and why (the order in the module's docstring).
+
+    Raises:
+        ValueError: ``override`` is neither ``radian`` nor ``degree``.
+    """
+    path = Path(path)
+    if override is not None:
+        if override not in ANGLE_UNITS:
+            raise ValueError(f"mjcf angle {override!r}: expected one of {list(ANGLE_UNITS)}")
+        return AngleConvention(override, "override", None, f"asked (--mjcf-angle {override}, config mjcf.angle)")
+    own, where = file_compiler_angle(path)
+    if own is not None:
+        shown = Path(where).name if where else path.name
+        return AngleConvention(own, "file", None, f'the file states <compiler angle="{own}"> ({shown})')
+    layout = host_layout(path)
+    if layout is not None and layout.angle is not None:
+        return AngleConvention(layout.angle, "host", layout.name,
+                               f"a {layout.name} fragment without its own <compiler angle>: {layout.why}")
+    world, world_path = _world_file_angle(path)
+    if world is not None and world_path is not None:
+        return AngleConvention(world, "world_file", None,
+                               f'a fragment without its own <compiler angle>, below {world_path.parent.name}/{world_path.name}, '
+                               f'the world file that compiles it, which states <compiler angle="{world}">')
+    if layout is not None:
+        return AngleConvention(MUJOCO_DEFAULT_ANGLE, "default", layout.name,
+                               f"{layout.why}, and this file states no <compiler angle>: MuJoCo's default, degrees")
+    return AngleConvention(MUJOCO_DEFAULT_ANGLE, "default", None,
+                           "the file states no <compiler angle> and lies in no known host package: MuJoCo's default, degrees")
+
+
+def real_units(asset: AssetDescription) -> str | None:
+    """Why ``asset``'s lengths are real sizes in metres, or None when they say nothing about its size: an MJCF file
+    (MuJoCo's lengths are metres), a USD stage (read through its ``metersPerUnit``), a URDF declaring inertials (SI
+    units, mass and lengths together); never PartNet-Mobility's ``mobility.urdf``, normalized to about unit size
+    (:func:`asset2sim.tasks.ingest.partnet_mobility.size_normalized`)."""
+    source = asset.staged_from or asset.urdf_path
+    if partnet_mobility.size_normalized(source):
+        return None
+    suffix = Path(source).suffix.lower()
+    if asset.staged_from is not None and suffix in MJCF_SUFFIXES:
+        return f"an MJCF file ({Path(source).name}: MuJoCo's lengths are metres)"
+    if asset.staged_from is not None and suffix in USD_SUFFIXES:
+        return f"a USD stage ({Path(source).name}, read in metres through its metersPerUnit)"
+    if any(ln.given_inertial is not None for ln in asset.links):
+        return f"a URDF declaring inertials ({Path(source).name}: SI units, masses and lengths together)"
+    return None

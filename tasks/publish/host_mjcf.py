@@ -1,0 +1,210 @@
+"""The refined object written back into its own MJCF file, to drop into its host in place of the original.
+
+An MJCF input (a robosuite fragment, a Meta-World scene) is read again with the conventions it was read with
+(:func:`asset2sim.tasks.ingest.host_conventions.mjcf_angle`, the object of
+:func:`asset2sim.tasks.ingest.mjcf_scene.pick_object`), and only its physics is changed to the refined output's:
+
+- each body of the object that carries geometry or declares an ``<inertial>`` gets the refined link's mass, center
+  of mass and full inertia tensor (an explicit ``<inertial>``; bodies without either, wrappers, are left as they are);
+- each hinge and slide joint gets the refined damping, friction loss, spring (``stiffness``, ``springref``) and
+  range, angles in the file's unit, MuJoCo's ``ref`` kept (joint values read the same in the URDF and in MuJoCo);
+- the refined initial state is the keyframe ``initial`` (replaced when the file has one; joint values in
+  radians, as MJCF writes ``qpos`` whatever the angle unit).
+
+Body, joint, geom and site names, the geometry, the bodies around the object (a table, a wall), the materials
+and the file's ``<compiler>`` conventions (its angle unit now stated) stay. MuJoCo writes the result
+(``MjSpec.to_xml``, includes inlined, numbers to MuJoCo's 6 significant digits); it is compiled and checked (same names, the refined masses) before it is
+written as ``mjcf/host/<input file name>``, with ``mjcf/host/<stem>.diff``, the unified diff of the input file
+and the written one. A refine that rescaled the object writes no such file: the host's geometry would no longer
+match the physics.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import atomic, file_names
+from asset2sim.engines.loading import read_initial_state
+from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.ingest import host_conventions, mjcf_scene
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.urdf import read_urdf
+
+#: Folder (inside the output's ``mjcf/``) of the file written for the host.
+HOST_DIR = "host"
+#: The keyframe holding the refined initial state.
+KEYFRAME = "initial"
+#: Relative tolerance of the check that the written file carries the refined masses.
+MASS_RTOL = 1e-6
+
+
+class HostExportError(RuntimeError):
+    """The host file cannot be written (names the input and why)."""
+
+
+@dataclass(frozen=True)
+class HostExport:
+    """What :func:`write_host_mjcf` wrote: ``path`` the MJCF file, ``diff`` the diff against the input, ``bodies``
+    and ``joints`` the names whose physics changed."""
+
+    path: Path
+    diff: Path
+    bodies: tuple[str, ...]
+    joints: tuple[str, ...]
+
+
+def _names(m, mujoco) -> dict[str, list[str]]:
+    """Names of the compiled model's bodies, joints, geoms and sites (sorted; unnamed ones left out)."""
+    out = {}
+    for kind, obj, n in (("body", mujoco.mjtObj.mjOBJ_BODY, m.nbody), ("joint", mujoco.mjtObj.mjOBJ_JOINT, m.njnt),
+                         ("geom", mujoco.mjtObj.mjOBJ_GEOM, m.ngeom), ("site", mujoco.mjtObj.mjOBJ_SITE, m.nsite)):
+        out[kind] = sorted(x for i in range(n) if (x := mujoco.mj_id2name(m, obj, i)))
+    return out
+
+
+def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOptions | None = None) -> HostExport:
+    """Write the refined output in ``out_dir`` back into the MJCF file ``source`` it was refined from.
+
+    Args:
+        out_dir: a refined output folder (``mobility.urdf``, ``overlay.json``, ``initial_state.json``).
+        source: the MJCF file the refine read (only read).
+        reading: the options it was read with (the object's body, the angle unit).
+
+    Returns:
+        :class:`HostExport`: ``mjcf/host/<source name>`` and its diff, inside ``out_dir``.
+
+    Raises:
+        ImportError: MuJoCo is not installed.
+        HostExportError: the output was rescaled; a refined link or joint has no counterpart in the file; the
+            written model does not compile or loses a name or a mass.
+    """
+    import mujoco
+
+    out_dir, source = Path(out_dir), Path(source)
+    reading = reading or ReadOptions()
+    overlay = Overlay.model_validate(json.loads((out_dir / OVERLAY_NAME).read_text()))
+    if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
+        raise HostExportError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host file keeps the host's sizes, "
+                              "so none is written (refine without --size / --scale / size words to keep the size)")
+    model = read_urdf(out_dir / URDF_NAME)
+    state = read_initial_state(out_dir)
+    convention = host_conventions.mjcf_angle(source, reading.mjcf_angle)
+    spec = mujoco.MjSpec.from_file(str(source))
+    spec.compiler.degree = convention.unit == "degree"
+    original = spec.compile()
+    pick = mjcf_scene.pick_object(original, source, reading.body)
+    per_rad = 180.0 / math.pi if convention.unit == "degree" else 1.0
+    explicit = {b.name: bool(b.explicitinertial) for b in spec.bodies if b.name}
+    bodies, joints = [], []
+    for b in pick.bodies:
+        name = mjcf_scene.label(original, b)
+        link = model.links.get(name)
+        if link is None:
+            raise HostExportError(f"{source}: body {name!r} has no link in the refined {URDF_NAME}")
+        offset = np.zeros(3)
+        jids = [j for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
+                if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
+        if jids:
+            offset = np.asarray(original.jnt_pos[jids[0]], float)  # the link frame sits on the joint
+        carries = int(original.body_geomnum[b]) > 0 or explicit.get(original.body(b).name, False)
+        if carries and link.inertial is not None and link.inertial.mass:
+            _set_inertial(spec.bodies[b], link.inertial, offset)
+            bodies.append(name)
+        for j in jids:
+            jname = original.joint(j).name or f"{name}_joint"  # the reader's name for an unnamed joint
+            target = next(x for x in spec.joints if x.id == j)
+            _set_joint(target, original, j, jname, model, overlay, per_rad)
+            joints.append((jname, j))
+    _set_keyframe(spec, original, state, joints)
+    try:
+        written = spec.compile()
+    except Exception as exc:  # mujoco raises ValueError with the compiler's message
+        raise HostExportError(f"{source}: the refined host file does not compile: {exc}") from exc
+    _check(source, original, written, mujoco, model, bodies)
+    xml = spec.to_xml()
+    folder = out_dir / MJCF_DIR / HOST_DIR
+    path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".xml")
+    atomic.write_bytes(path, xml.encode("utf-8"))
+    before = source.read_text(errors="replace").splitlines(keepends=True)
+    diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
+    diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
+    atomic.write_bytes(diff_path, diff.encode("utf-8"))
+    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints))
+
+
+def _set_inertial(body, inertial, offset: np.ndarray) -> None:
+    """An explicit ``<inertial>`` on ``body`` (an ``mjsBody``) of the refined link's ``inertial``: its center of
+    mass moved by ``offset`` (3,) m from the link frame to the body frame, the tensor (3, 3) kg*m^2 as written."""
+    origin = np.asarray(inertial.origin if inertial.origin is not None else np.eye(4), float)
+    rot = origin[:3, :3]
+    tensor = rot @ np.asarray(inertial.inertia if inertial.inertia is not None else np.zeros((3, 3)), float) @ rot.T
+    body.explicitinertial = True
+    body.mass = float(inertial.mass)
+    body.ipos = origin[:3, 3] + offset
+    body.iquat = [1.0, 0.0, 0.0, 0.0]
+    body.inertia = [0.0, 0.0, 0.0]  # MuJoCo takes either the diagonal or the full tensor
+    body.fullinertia = [tensor[0, 0], tensor[1, 1], tensor[2, 2], tensor[0, 1], tensor[0, 2], tensor[1, 2]]
+
+
+def _set_joint(joint, m, j: int, name: str, model, overlay: Overlay, per_rad: float) -> None:
+    """The refined damping, friction loss, spring and range of URDF joint ``name`` on ``joint`` (an ``mjsJoint``, id
+    ``j`` in ``m``), in
+    the file's unit (``per_rad``: file units per radian for a hinge). Joint values read the same in the URDF and
+    in MuJoCo (the reader moved the URDF origin by ``ref``), so ranges and references are written as they are."""
+    urdf = next((x for x in model.joints if x.name == name), None)
+    if urdf is None:
+        return
+    hinge = int(m.jnt_type[j]) == mjcf_scene.JNT_HINGE
+    unit = per_rad if hinge else 1.0
+    if urdf.dynamics is not None:
+        damping = np.array(joint.damping, float)
+        damping[0] = float(urdf.dynamics.damping or 0.0)
+        joint.damping = damping
+        joint.frictionloss = float(urdf.dynamics.friction or 0.0)
+    dyn = overlay.joints.get(name)
+    if dyn is not None:
+        stiffness = np.array(joint.stiffness, float)
+        stiffness[0] = float(dyn.stiffness)
+        joint.stiffness = stiffness
+        if dyn.stiffness > 0 and dyn.spring_reference is not None:
+            joint.springref = float(dyn.spring_reference) * unit
+    lim = urdf.limit
+    if lim is not None and lim.lower is not None and lim.upper is not None and bool(m.jnt_limited[j]):
+        joint.range = [float(lim.lower) * unit, float(lim.upper) * unit]
+
+
+def _set_keyframe(spec, m, state: dict[str, float], joints: list[tuple[str, int]]) -> None:
+    """The keyframe :data:`KEYFRAME`: the model's ``qpos0`` with the object's joints (URDF name, joint id in ``m``)
+    at their refined initial state (``state``: joint -> rad or m, the same values in MuJoCo)."""
+    qpos = np.array(m.qpos0, float)
+    for name, j in joints:
+        if name in state:
+            qpos[int(m.jnt_qposadr[j])] = float(state[name])
+    existing = [k for k in spec.keys if k.name == KEYFRAME]
+    if existing:
+        existing[0].qpos = qpos
+    else:
+        spec.add_key(name=KEYFRAME, qpos=qpos)
+
+
+def _check(source: Path, original, written, mujoco, model, bodies: list[str]) -> None:
+    """The written model keeps every body, joint, geom and site name and carries the refined masses."""
+    before, after = _names(original, mujoco), _names(written, mujoco)
+    if before != after:
+        lost = {k: sorted(set(before[k]) ^ set(after[k])) for k in before if before[k] != after[k]}
+        raise HostExportError(f"{source}: the refined host file changes names: {lost}")
+    for name in bodies:
+        b = mujoco.mj_name2id(written, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b < 0:  # an unnamed body: body_<id>
+            b = int(name.removeprefix("body_"))
+        want = float(model.links[name].inertial.mass)
+        if not math.isclose(float(written.body_mass[b]), want, rel_tol=MASS_RTOL):
+            raise HostExportError(f"{source}: body {name!r} weighs {float(written.body_mass[b]):.6g} kg in the host file, "
+                                  f"not the refined {want:.6g} kg")
