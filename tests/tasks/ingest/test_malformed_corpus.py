@@ -96,7 +96,8 @@ AGREEMENT = [c for c in cb.CASES if c.topic == "refine_agreement" and not c.poli
 @pytest.mark.parametrize("case", AGREEMENT, ids=[c.name for c in AGREEMENT])
 def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
     """What validate refuses, ``asset2sim refine`` refuses the same way: exit
-    status 1, one line naming the code, no traceback, no hang (FIFOs)."""
+    status 1, one line per problem (the first naming the case's code), no
+    traceback, no hang (FIFOs)."""
     asset = case.build(tmp_path / "asset")
     before = tree_hashes(asset)
     with _no_hang(HANG_LIMIT_S):
@@ -106,7 +107,8 @@ def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
     err = capsys.readouterr().err
     assert status == 1, err
     lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim refine")]
-    assert len(lines) == 1 and case.code in lines[0], err
+    assert lines and case.code in lines[0], err
+    assert len(set(lines)) == len(lines) and all(ln.startswith("asset2sim refine: ") for ln in err.splitlines() if ln), err
     assert "Traceback" not in err
     assert tree_hashes(asset) == before
 
