@@ -156,7 +156,11 @@ def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
     read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
     try:
         return staged.stage(read(source), staged.staging_folder(source))
-    except (staged.StagingError, ImportError, OSError) as exc:
+    except staged.StagingError as exc:
+        findings = [] if exc.code is None else [validate_input.Finding(
+            code=exc.code, severity="error", message=str(exc), file=str(source), action="refuse")]
+        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}", findings) from exc
+    except (ImportError, OSError) as exc:
         raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
 
 

@@ -1,7 +1,8 @@
 """MJCF (MuJoCo) articulated objects read into the project's one asset model.
 
-The file is parsed and compiled by MuJoCo itself (``mujoco.MjSpec.from_file``,
-then ``spec.compile()``): default classes, ``<compiler angle>`` (degrees are
+The file and every file it names are checked and read first
+(:mod:`asset2sim.tasks.ingest.mjcf_files`); the checked copy is parsed and compiled by
+MuJoCo itself (``mujoco.MjSpec.from_file``, then ``spec.compile()``): default classes, ``<compiler angle>`` (degrees are
 MJCF's default), ``meshdir``, mesh scale and recentring, ``fromto`` and
 alternative orientations all come resolved from the compiled ``MjModel``; the
 spec says which bodies declare an ``<inertial>``. Nothing here walks XML.
@@ -31,13 +32,13 @@ Conventions (MJCF -> URDF):
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim.extras import import_extra
+from asset2sim.engines.mjcf.base import load_mujoco
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
+from asset2sim.tasks.ingest.mjcf_files import MjcfSources, compile_mjcf, gather_mjcf
 from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
@@ -50,24 +51,13 @@ def _pose(pos, quat_wxyz) -> np.ndarray:
     return rigid_matrix(quat_wxyz_matrix(np.asarray(quat_wxyz, float)), pos)
 
 
-def _compile(path: Path):
-    """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``; StagingError with MuJoCo's message when it cannot."""
-    mujoco = import_extra("mujoco", "reading MJCF")
-    try:
-        with warnings.catch_warnings(record=True) as caught:  # MuJoCo's decoder warnings become notes
-            warnings.simplefilter("always")
-            spec = mujoco.MjSpec.from_file(str(path))
-            model = spec.compile()
-    except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
-        raise StagingError(f"{path}: MuJoCo cannot read this MJCF: {exc}") from exc
-    return spec, model, [f"MuJoCo: {w.message}" for w in caught]
-
-
 def read_mjcf_asset(path: Path | str) -> ReadAsset:
     """Read one articulated object from an MJCF file.
 
     Args:
-        path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them).
+        path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them). The file and every file it
+            names are checked and read first (:func:`~asset2sim.tasks.ingest.mjcf_files.gather_mjcf`: regular
+            files inside the file's folder, under the size cap); MuJoCo reads only a private copy of those.
 
     Returns:
         A :class:`~asset2sim.tasks.ingest.staged.ReadAsset` (format ``"mjcf"``): lengths in m, angles in
@@ -75,18 +65,20 @@ def read_mjcf_asset(path: Path | str) -> ReadAsset:
 
     Raises:
         MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
-        StagingError: MuJoCo cannot compile the file, or the file holds something the asset model
+        StagingError: a named file refused by the reader policy (``code`` set: ``MJCF_PATH_ESCAPES``,
+            ``INPUT_NOT_REGULAR_FILE``, ``INPUT_TOO_LARGE`` ...); MuJoCo cannot compile the file, or the file holds something the asset model
             cannot take (names the body or joint): not exactly one body under the world body, a ball
             joint, several joints on one body, a free joint below the root, a slide joint without a range.
     """
     path = Path(path)
-    spec, m, warned = _compile(path)
-    mujoco = import_extra("mujoco", "reading MJCF")
+    sources = gather_mjcf(path)
+    spec, m, warned = compile_mjcf(sources)
+    mujoco = load_mujoco()
     roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0]
     if len(roots) != 1:
         names = [m.body(b).name or f"#{b}" for b in roots]
         raise StagingError(f"{path}: one articulated object per file: the world body holds {len(roots)} bodies {names}")
-    reader = _Reader(path, spec, m, mujoco)
+    reader = _Reader(path, spec, m, mujoco, sources)
     reader.notes.extend(warned)
     return reader.read(roots[0])
 
@@ -94,8 +86,8 @@ def read_mjcf_asset(path: Path | str) -> ReadAsset:
 class _Reader:
     """State of one :func:`read_mjcf_asset` call."""
 
-    def __init__(self, path: Path, spec, m, mujoco):
-        self.path, self.spec, self.m, self.mj = path, spec, m, mujoco
+    def __init__(self, path: Path, spec, m, mujoco, sources: MjcfSources):
+        self.path, self.spec, self.m, self.mj, self.sources = path, spec, m, mujoco, sources
         self.notes: list[str] = []
         self.meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.mesh_files: dict[tuple, str] = {}
@@ -130,7 +122,7 @@ class _Reader:
             links[self.body_name(b)] = self._link(b, rigid_inverse(frame))
         self._other_notes()
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
-        files = tuple(sorted({self.path, *self._mesh_files()}))
+        files = tuple(sorted({self.path.resolve(), *self.sources.real.values()}))
         initial = self._keyframe_state(joints)
         return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs, initial_state=initial,
                          inferred=tuple(self.inferred), notes=tuple(self.notes), files=files, root_fixed=self.root_fixed,
@@ -262,7 +254,11 @@ class _Reader:
             jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
             if jid >= 0:
                 adr = int(m.jnt_qposadr[jid])
-                out[j.name] = float(m.key_qpos[k, adr] - m.qpos0[adr])
+                value = float(m.key_qpos[k, adr] - m.qpos0[adr])
+                if not np.isfinite(value):  # a NaN or infinity in the keyframe is no position: the joint's default kept
+                    self.notes.append(f"keyframe {names[k] or '#' + str(k)!r}: joint {j.name!r} at {value}, not a number: not used")
+                    continue
+                out[j.name] = value
         if out:
             self.notes.append(f"initial joint positions from keyframe {names[k] or '#' + str(k)!r}")
         return out
@@ -349,19 +345,3 @@ class _Reader:
             self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
         if m.neq:
             self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
-
-    def _mesh_files(self) -> list[Path]:
-        """Mesh and texture files the MJCF names that exist (for the input hash)."""
-        base = self.path.parent
-        meshdir = Path(self.spec.meshdir or "")
-        texdir = Path(self.spec.texturedir or "")
-        out = []
-        for items, folder in ((self.spec.meshes, meshdir), (self.spec.textures, texdir)):
-            for item in items:
-                f = getattr(item, "file", "") or ""
-                if not f:
-                    continue
-                p = Path(f) if Path(f).is_absolute() else base / folder / f
-                if p.is_file():
-                    out.append(p.resolve())
-        return out

@@ -1,0 +1,154 @@
+"""Files an input names, opened under one policy: a regular file (symlinks resolved), inside the input's
+tree when a tree is given, under a size cap, opened without blocking.
+
+Every file the product reads because a user or an input names it (an MJCF or USD file, what it includes,
+its meshes, textures, sublayers, references and payloads, a ``--config`` file) goes through
+:func:`check_file` (``os.stat`` only: a FIFO, device or socket is refused before anything opens it) and is
+read with :func:`read_file` (``O_NONBLOCK``, the descriptor checked again, at most the cap read). A file
+that fails raises :class:`InputFileError` with a stable code:
+
+- ``INPUT_NOT_FOUND``: the path does not exist (or a folder on it is a file);
+- ``INPUT_NOT_REGULAR_FILE``: a directory, FIFO, character or block device (``/dev/zero``) or socket;
+- ``INPUT_TOO_LARGE``: a regular file above the cap (never read);
+- ``INPUT_OUTSIDE_TREE``: the path, or a symlink on it, leads outside the tree the input may read;
+- ``INPUT_UNREADABLE``: the operating system refuses to open or read it.
+
+Format readers map these to their own codes where the format has them (``MJCF_PATH_ESCAPES``,
+``USD_LAYER_OUTSIDE_ASSET``, ...).
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+__all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "check_file", "file_kind", "inside", "read_file", "read_head"]
+
+#: Default cap of one input file, bytes (the largest mesh the validator accepts, ValidationPolicy.max_mesh_bytes).
+DEFAULT_MAX_BYTES = 64 * 1024 * 1024
+
+_KINDS = ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"),
+          (stat.S_ISSOCK, "socket"), (stat.S_ISDIR, "directory"), (stat.S_ISREG, "regular file"))
+
+
+class InputFileError(ValueError):
+    """A file an input names that the policy refuses: ``code`` (``INPUT_*``, or a format's own code),
+    ``path`` as named."""
+
+    def __init__(self, code: str, path: Path | str, message: str):
+        super().__init__(message)
+        self.code = code
+        self.path = Path(path)
+
+
+def file_kind(mode: int) -> str:
+    """``"FIFO"``, ``"character device"``, ``"regular file"`` ... of an ``st_mode``."""
+    return next((name for test, name in _KINDS if test(mode)), "special file")
+
+
+def inside(path: str, root: str) -> bool:
+    """True when ``path`` is ``root`` or lies below it (both absolute and normalized)."""
+    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+
+def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: int | None = DEFAULT_MAX_BYTES,
+               what: str = "input file") -> os.stat_result:
+    """Check, with ``os.stat`` only (nothing is opened), that ``path`` may be read.
+
+    Args:
+        path: the file as named (absolute, or relative to the working directory).
+        tree: the folder the file must lie in, lexically and with every symlink resolved (None: anywhere).
+        max_bytes: size cap in bytes (None: none).
+        what: how the message names the file ("MJCF include", "--config file" ...).
+
+    Returns:
+        The ``os.stat`` result of the real file.
+
+    Raises:
+        InputFileError: ``INPUT_OUTSIDE_TREE``, ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE``,
+            ``INPUT_TOO_LARGE`` or ``INPUT_UNREADABLE`` (the message names the file and why).
+    """
+    name = str(path)
+    if "\x00" in name:
+        raise InputFileError("INPUT_UNREADABLE", "?", f"{what} {name!r}: the path contains a NUL byte")
+    root = os.path.abspath(str(tree)) if tree is not None else None
+    if root is not None and not inside(os.path.normpath(os.path.abspath(name)), root):
+        raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: lies outside {root}, the folder the input may read")
+    try:
+        st = os.stat(name)
+    except (FileNotFoundError, NotADirectoryError):
+        raise InputFileError("INPUT_NOT_FOUND", path, f"{what} {name}: no such file") from None
+    except OSError as exc:
+        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file "
+                             "(FIFOs, devices, sockets and folders are never read)")
+    if root is not None:
+        real = os.path.realpath(name)
+        if not inside(real, os.path.realpath(root)):
+            raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: a symlink leads to {real}, outside {root}, "
+                                 "the folder the input may read")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: {st.st_size} bytes, above the cap of {max_bytes} bytes; not read")
+    return st
+
+
+def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: int = DEFAULT_MAX_BYTES,
+              what: str = "input file") -> bytes:
+    """The bytes of ``path`` after :func:`check_file`, opened with ``O_NONBLOCK`` and checked again on the
+    open descriptor (a file swapped for a FIFO between the check and the open is refused, not waited on);
+    at most ``max_bytes`` are read.
+
+    Raises:
+        InputFileError: as :func:`check_file`; ``INPUT_TOO_LARGE`` also when the file grew past the cap.
+    """
+    check_file(path, tree=tree, max_bytes=max_bytes, what=what)
+    name = str(path)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(name, flags)
+    except OSError as exc:
+        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file")
+        chunks, left = [], max_bytes + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+    except OSError as exc:
+        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:
+        raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: grew above the cap of {max_bytes} bytes while read")
+    return data
+
+
+def read_head(path: Path | str, n: int = 4096) -> bytes | None:
+    """The first ``n`` bytes of ``path`` when it is a regular file (opened without blocking); None for a
+    missing, unreadable or special file (a FIFO, ``/dev/zero``), which is never read."""
+    try:
+        st = os.stat(str(path))
+    except (OSError, ValueError):
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    try:
+        fd = os.open(str(path), os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        return os.read(fd, n)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)

@@ -1,0 +1,199 @@
+"""The files an MJCF input names, checked and read before MuJoCo sees any of them, and MuJoCo given only those.
+
+:func:`gather_mjcf` reads the ``<mujoco>`` file and every ``<include>`` (safe XML), takes ``<compiler meshdir
+texturedir assetdir>`` and every attribute whose name starts with ``file`` (``<mesh file>``, ``<texture file
+fileright ...>``, ``<hfield file>``, ``<skin file>``, ``<model file>``, ``<flexcomp file>`` ...), and resolves
+each as MuJoCo does (relative to the model file's folder, through ``meshdir`` for meshes, skins and height
+fields and ``texturedir`` for textures). Each must be a relative path that stays inside the input's tree (the
+model file's folder), with every symlink resolved, and name a regular file under the size cap; it is then
+read without blocking (:mod:`asset2sim.input_files`). A refusal is a
+:class:`~asset2sim.tasks.ingest.staged.StagingError` with a code:
+
+- ``MJCF_PATH_ESCAPES``: an absolute path, a URI, ``../`` leaving the tree or a symlink out of it (in a file
+  attribute, an include or ``meshdir`` / ``texturedir`` / ``assetdir``);
+- ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE``,
+  ``INPUT_OUTSIDE_TREE`` (the model file itself a symlink out of its folder), ``INPUT_UNREADABLE``;
+- ``XML_*``: the model file or an include is refused by the hardened XML parser.
+
+:func:`compile_mjcf` then writes the bytes read into a private temporary copy of that part of the tree and
+lets MuJoCo (``MjSpec.from_file``) read the copy, so MuJoCo opens nothing but what was checked; its
+warnings are collected, never written to ``MUJOCO_LOG.TXT``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from asset2sim import atomic, safexml
+from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
+from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, inside, read_file
+from asset2sim.tasks.ingest.staged import StagingError, input_tree
+
+__all__ = ["MAX_INCLUDES", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
+
+#: Includes per model (MuJoCo refuses a repeated include; a chain deeper than this is refused too).
+MAX_INCLUDES = 256
+#: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
+MAX_TOTAL_BYTES = 1024 * 1024 * 1024
+#: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
+_MESHDIR_TAGS = frozenset({"mesh", "skin", "hfield"})
+_TEXDIR_TAGS = frozenset({"texture"})
+_URI = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]+:")
+_DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
+
+
+@dataclass(frozen=True)
+class MjcfSources:
+    """Every file an MJCF model names, checked and read: ``files`` path relative to ``tree`` (POSIX, as
+    MuJoCo resolves it) -> bytes, the model file's among them as ``main``; ``real`` the same keys -> the real
+    path read (for the input hash and the audit's copies)."""
+
+    path: Path
+    tree: Path
+    main: str
+    files: dict[str, bytes]
+    real: dict[str, Path]
+
+
+def _refuse(code: str, message: str) -> StagingError:
+    return StagingError(message, code=code)
+
+
+def _from_input_error(exc: InputFileError) -> StagingError:
+    return _refuse(exc.code, str(exc))
+
+
+def _relative(value: str, base_rel: str, tree: str, source: Path, what: str) -> str:
+    """``value`` (as written) joined to ``base_rel`` (a folder relative to ``tree``), normalized, relative to ``tree``.
+
+    Raises:
+        StagingError: ``MJCF_PATH_ESCAPES`` for a URI, an absolute path or one leaving ``tree`` (lexically or
+            through a symlink).
+    """
+    if "\x00" in value or any(ord(c) < 32 for c in value):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a control character in the path")
+    if _URI.match(value) and not _DRIVE.match(value):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a URI; only relative paths inside {tree} are read")
+    if value.startswith(("/", "\\")) or _DRIVE.match(value):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: an absolute path; only relative paths inside {tree} are read")
+    joined = os.path.normpath(os.path.join(tree, base_rel, value))
+    if not inside(joined, tree):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} resolves to {joined}, outside {tree}")
+    real = os.path.realpath(joined)
+    if not inside(real, os.path.realpath(tree)):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} is a symlink (or under one) to {real}, outside {tree}")
+    return os.path.relpath(joined, tree).replace(os.sep, "/")
+
+
+class _Gather:
+    def __init__(self, path: Path, tree: Path, max_file_bytes: int, max_total_bytes: int, limits: safexml.XMLLimits):
+        self.path, self.tree = path, str(tree)
+        self.max_file, self.max_total, self.limits = max_file_bytes, max_total_bytes, limits
+        self.files: dict[str, bytes] = {}
+        self.real: dict[str, Path] = {}
+        self.total = 0
+        self.includes = 0
+        self.compiler: dict[str, str] = {}
+        self.refs: list[tuple[str, str, str, str]] = []  # (tag, attribute, value, file naming it)
+
+    def read(self, rel: str, what: str) -> bytes:
+        if rel in self.files:
+            return self.files[rel]
+        full = os.path.join(self.tree, rel)
+        try:
+            data = read_file(full, tree=self.tree, max_bytes=self.max_file, what=f"{self.path.name}: {what}")
+        except InputFileError as exc:
+            raise _from_input_error(exc) from None
+        self.total += len(data)
+        if self.total > self.max_total:
+            raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files it names exceed {self.max_total} bytes together; not read")
+        self.files[rel], self.real[rel] = data, Path(os.path.realpath(full))
+        return data
+
+    def document(self, rel: str, what: str, depth: int) -> None:
+        data = self.read(rel, what)
+        try:
+            root = safexml.parse_xml_bytes(data, source=str(Path(self.tree, rel)), limits=self.limits)
+        except safexml.SafeXMLError as exc:
+            raise _refuse(exc.code, str(exc)) from None
+        for el in root.iter():
+            tag = el.tag if isinstance(el.tag, str) else ""
+            if tag == "include":
+                self.includes += 1
+                if self.includes > MAX_INCLUDES or depth >= 16:
+                    raise _refuse("MJCF_PATH_ESCAPES", f"{self.path}: more than {MAX_INCLUDES} includes or nested deeper than 16")
+                value = el.get("file", "")
+                inc = _relative(value, self.main_dir, self.tree, self.path, "<include file>")
+                self.document(inc, f"<include file={value!r}>", depth + 1)
+                continue
+            if tag == "compiler":
+                for key in ("meshdir", "texturedir", "assetdir"):
+                    if el.get(key) is not None:
+                        self.compiler[key] = el.get(key, "")
+            for key, value in el.attrib.items():
+                if key.startswith("file") and value:
+                    self.refs.append((tag, key, value, rel))
+
+    def run(self) -> MjcfSources:
+        main = os.path.relpath(os.path.normpath(os.path.abspath(self.path)), self.tree).replace(os.sep, "/")
+        self.main_dir = os.path.dirname(main)
+        self.document(main, "model file", 0)
+        dirs = {}
+        for key in ("meshdir", "texturedir", "assetdir"):
+            if key in self.compiler:
+                value = self.compiler[key]
+                dirs[key] = _relative(value, self.main_dir, self.tree, self.path, f"<compiler {key}>") if value else self.main_dir
+        meshdir = dirs.get("meshdir", dirs.get("assetdir", self.main_dir))
+        texdir = dirs.get("texturedir", dirs.get("assetdir", self.main_dir))
+        for tag, key, value, where in self.refs:
+            base = meshdir if tag in _MESHDIR_TAGS else texdir if tag in _TEXDIR_TAGS else self.main_dir
+            rel = _relative(value, base, self.tree, self.path, f"<{tag} {key}> in {where}")
+            self.read(rel, f"<{tag} {key}={value!r}>")
+        return MjcfSources(path=self.path, tree=Path(self.tree), main=main, files=self.files, real=self.real)
+
+
+def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_bytes: int = DEFAULT_MAX_BYTES,
+                max_total_bytes: int = MAX_TOTAL_BYTES, limits: safexml.XMLLimits = safexml.DEFAULT_LIMITS) -> MjcfSources:
+    """Check and read the MJCF file at ``path`` and every file it names (module docstring); nothing else is opened.
+
+    Args:
+        path: the ``<mujoco>`` file. tree: the folder its references must stay in (default:
+            :func:`~asset2sim.tasks.ingest.staged.input_tree`, the file's folder).
+        max_file_bytes: cap per file, bytes. max_total_bytes: cap over all files, bytes.
+        limits: the XML parser's caps for the model file and its includes.
+
+    Raises:
+        StagingError: with ``code`` (module docstring), naming the file and the reference.
+    """
+    path = Path(os.path.abspath(str(path)))
+    root = Path(os.path.abspath(str(tree))) if tree is not None else input_tree(path)
+    return _Gather(path, root, max_file_bytes, max_total_bytes, limits).run()
+
+
+def compile_mjcf(sources: MjcfSources):
+    """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources``: MuJoCo reads a private temporary
+    copy holding only those files (the folder is removed before returning; the model holds what it needs).
+
+    Raises:
+        ImportError: MuJoCo is not installed.
+        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
+    """
+    try:
+        mujoco = load_mujoco()
+    except ImportError as exc:
+        raise ImportError(f"reading MJCF needs MuJoCo ({exc}); install the extra: pip install 'asset2sim[mujoco]'") from exc
+    with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
+        for rel, data in sources.files.items():
+            atomic.write_bytes(Path(tmp, rel), data, durable=False)
+        try:
+            with mujoco_messages() as caught:
+                spec = mujoco.MjSpec.from_file(str(Path(tmp, sources.main)))
+                model = spec.compile()
+        except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
+            msg = str(exc).replace(tmp + os.sep, "").replace(tmp, ".")
+            raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {msg}") from exc
+    return spec, model, [f"MuJoCo: {w}" for w in caught]
