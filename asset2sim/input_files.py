@@ -23,7 +23,8 @@ import os
 import stat
 from pathlib import Path
 
-__all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "check_file", "file_kind", "inside", "read_file", "read_head"]
+__all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "MAX_CONFIG_BYTES", "MAX_YAML_ALIASES", "MAX_YAML_DEPTH", "MAX_YAML_NODES", "check_file",
+           "file_kind", "inside", "load_yaml", "read_file", "read_head"]
 
 #: Default cap of one input file, bytes (the largest mesh the validator accepts, ValidationPolicy.max_mesh_bytes).
 DEFAULT_MAX_BYTES = 64 * 1024 * 1024
@@ -152,3 +153,82 @@ def read_head(path: Path | str, n: int = 4096) -> bytes | None:
         return None
     finally:
         os.close(fd)
+
+
+#: Cap of a configuration file (``--config``, ``catalog.yaml``), bytes.
+MAX_CONFIG_BYTES = 1024 * 1024
+#: YAML aliases (``*name``) a configuration file may use: each repeats a whole node, so a few nested anchors
+#: make a document of billions of nodes ("billion laughs").
+MAX_YAML_ALIASES = 64
+#: Deepest nesting of YAML collections in a configuration file.
+MAX_YAML_DEPTH = 64
+#: Nodes of a configuration file with its aliases expanded.
+MAX_YAML_NODES = 100_000
+
+
+def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, max_aliases: int = MAX_YAML_ALIASES,
+              max_depth: int = MAX_YAML_DEPTH, max_nodes: int = MAX_YAML_NODES, what: str = "configuration file"):
+    """The YAML document at ``path``, read under :func:`read_file`'s policy and built by PyYAML's safe loader
+    (plain data only: no Python objects) with at most ``max_aliases`` aliases, ``max_depth`` levels of nesting and
+    ``max_nodes`` nodes once every alias is expanded (counted on the parsed graph, before anything is built).
+
+    Raises:
+        InputFileError: ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, ``/dev/zero``),
+            ``INPUT_TOO_LARGE``, ``INPUT_UNREADABLE``; ``YAML_ALIAS_LIMIT`` or ``YAML_TOO_DEEP`` (refused while
+            parsing, before any node is built); ``YAML_MALFORMED`` (not YAML, not UTF-8).
+    """
+    import yaml
+
+    data = read_file(path, max_bytes=max_bytes, what=what)
+
+    class _Bounded(yaml.SafeLoader):
+        aliases = 0
+        depth = 0
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                self.aliases += 1
+                if self.aliases > max_aliases:
+                    raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: more than {max_aliases} YAML aliases "
+                                         "(*name); refused before expanding them")
+            self.depth += 1
+            try:
+                if self.depth > max_depth:
+                    raise InputFileError("YAML_TOO_DEEP", path, f"{what} {path}: YAML nested deeper than {max_depth} levels")
+                return super().compose_node(parent, index)
+            finally:
+                self.depth -= 1
+
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not UTF-8 ({exc})") from None
+    loader = _Bounded(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        sizes: dict[int, int] = {}
+
+        def expanded(n) -> int:  # nodes of the document with every alias expanded (each shared node counted once per use)
+            if sizes.get(id(n)) == 0:
+                raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: a YAML alias inside its own anchor (a recursive document)")
+            if id(n) not in sizes:
+                sizes[id(n)] = 0  # in progress
+                if isinstance(n, yaml.SequenceNode):
+                    sizes[id(n)] = 1 + sum(expanded(c) for c in n.value)
+                elif isinstance(n, yaml.MappingNode):
+                    sizes[id(n)] = 1 + sum(expanded(k) + expanded(v) for k, v in n.value)
+                else:
+                    sizes[id(n)] = 1
+            return sizes[id(n)]
+
+        total = expanded(node)
+        if total > max_nodes:
+            raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: its aliases expand to {total} YAML nodes, above the "
+                                 f"cap of {max_nodes}; refused before expanding them")
+        return loader.construct_document(node)
+    except yaml.YAMLError as exc:
+        raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not YAML: {exc}") from None
+    finally:
+        loader.dispose()

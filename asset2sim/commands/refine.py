@@ -266,11 +266,12 @@ def finding_problems(exc: AssetError, asset) -> list[tuple[str, str, str]]:
 
 def options(args: argparse.Namespace) -> RefineConfig:
     """The run's :class:`RefineConfig`: ``--config``'s file, then the flags
-    given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``)."""
+    given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``, or the code of a file refused unread:
+    ``INPUT_NOT_REGULAR_FILE``, ``INPUT_TOO_LARGE``, ``YAML_ALIAS_LIMIT`` ...)."""
     try:
         base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
     except (OSError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "CONFIG_INVALID", args.config, str(exc)) from exc
+        raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url)) if v is not None}
     if getattr(args, "keep_declared", False):
         fields["keep_declared"] = True
