@@ -14,7 +14,9 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, output_folder_failure
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError,
+                                        output_folder_failure)
+from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
 
@@ -46,6 +48,18 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
         return [f.result() for f in futures]
 
 
+def _out_outside_inputs(out: Path, inputs: list[Path]) -> None:
+    """CommandError status 4 ``OUTPUT_IS_INPUT`` / ``OUTPUT_INSIDE_INPUT`` when ``out`` is an input folder (a path
+    given, or the folder of an input file) or lies inside one, also through a symlink: nothing is written there."""
+    for given in inputs:
+        folder = Path(given) if Path(given).is_dir() else Path(given).parent
+        try:
+            check_location(folder, out)
+        except OutputError as exc:
+            if exc.code in ("OUTPUT_IS_INPUT", "OUTPUT_INSIDE_INPUT"):
+                raise CommandError(OUTPUT_LOCATION, exc.code, out, f"{exc}: the audit writes nothing into its input") from None
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.markup import escape
@@ -61,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
     if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
         raise bad
+    if args.out is not None:
+        _out_outside_inputs(args.out, [*args.paths, *(t.path for t in targets)])
     if args.flow:
         if args.out is None:
             raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
