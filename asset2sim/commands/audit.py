@@ -49,14 +49,15 @@ def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None,
 
 
 def _out_outside_inputs(out: Path, inputs: list[Path]) -> None:
-    """CommandError status 4 ``OUTPUT_IS_INPUT`` / ``OUTPUT_INSIDE_INPUT`` when ``out`` is an input folder (a path
-    given, or the folder of an input file) or lies inside one, also through a symlink: nothing is written there."""
+    """CommandError status 4 ``OUTPUT_IS_INPUT`` / ``OUTPUT_INSIDE_INPUT`` / ``OUTPUT_CONTAINS_INPUT`` when ``out`` is
+    an input folder (a path given, or the folder of an input file), lies inside one or holds one (its per-asset
+    folders could be the input's), also through a symlink: nothing is written there."""
     for given in inputs:
         folder = Path(given) if Path(given).is_dir() else Path(given).parent
         try:
             check_location(folder, out)
         except OutputError as exc:
-            if exc.code in ("OUTPUT_IS_INPUT", "OUTPUT_INSIDE_INPUT"):
+            if exc.code in ("OUTPUT_IS_INPUT", "OUTPUT_INSIDE_INPUT", "OUTPUT_CONTAINS_INPUT"):
                 raise CommandError(OUTPUT_LOCATION, exc.code, out, f"{exc}: the audit writes nothing into its input") from None
 
 
