@@ -236,7 +236,10 @@ def validate(asset: str | Path, policy: ValidationPolicy | None = None) -> list[
     numbers, inertials, mesh paths and contents), as ``asset2sim validate``.
 
     Args:
-        asset: an asset folder or a URDF file. Never modified.
+        asset: an asset folder, a URDF file, or an MJCF or USD file (every
+            file it names checked first: ``MJCF_PATH_ESCAPES``,
+            ``USD_LAYER_OUTSIDE_ASSET``, ``INPUT_NOT_REGULAR_FILE`` ...;
+            ``docs/guide/validation.md``). Never modified.
         policy: severities and caps (default: the product's).
 
     Returns:

@@ -74,9 +74,9 @@ class RefineConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     estimator: str = Field("offline", min_length=1, max_length=64)
     """Registered estimator name (``offline``, ``llm``, ``openai`` ...)."""
-    model: str | None = None
+    model: str | None = Field(None, min_length=1, max_length=256)
     """Model string for model-backed estimators (litellm form, e.g. ``gemini/gemini-2.5-flash``)."""
-    base_url: str | None = None
+    base_url: str | None = Field(None, min_length=1, max_length=2048)
     """Base URL of an OpenAI-compatible server for model-backed estimators."""
     sim: SimConventions = Field(default_factory=SimConventions)
     penetration_tolerance: float = Field(1e-3, gt=0.0, le=1.0)

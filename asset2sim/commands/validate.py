@@ -16,7 +16,8 @@ HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes) or a URDF file")
+    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or "
+                        "OpenUSD (.usd, .usda, .usdc, .usdz) file (the files it names checked first)")
     parser.add_argument("--json", action="store_true", help="print the findings as a JSON list instead of text")
     parser.add_argument("--strict", action="store_true", help="treat warnings as errors")
     parser.add_argument("--quiet", "-q", action="store_true", help="print errors and warnings only (no info)")

@@ -180,3 +180,18 @@ def test_refine_with_a_fifo_config_ends_in_a_child_process(tmp_path):
                            "--config", str(tmp_path / "config.yaml")], capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert "INPUT_NOT_REGULAR_FILE" in proc.stderr
+
+
+@pytest.mark.parametrize("overrides, field", [
+    ({"mass": float("inf")}, "overrides.mass"),
+    ({"mass": "1e400 kg"}, "overrides.mass"),
+    ({"size": 1e300}, "overrides.size"),
+    ({"scale": float("inf")}, "overrides.scale"),
+    ({"scale": 1e-9}, "overrides.scale"),
+    ({"material": "x" * 1000}, "overrides.material"),
+])
+def test_override_values_out_of_range_are_refused(overrides, field):
+    with pytest.raises(ValueError) as info:
+        load_config({"overrides": overrides})
+    assert field in str(info.value)
+    assert load_config({"overrides": {"mass": "12 kg", "size": "30 cm", "scale": 2, "material": "oak"}}).overrides.mass == 12.0
