@@ -43,6 +43,7 @@ CODES: dict[str, CodeInfo] = {
     "INPUT_OUTSIDE_TREE": _c("error", "files", "the MJCF or USD file given is a symlink leading out of its folder"),
     "INPUT_UNREADABLE": _c("error", "files", "the operating system refuses to open or read a file the input names (permissions)"),
     "MJCF_PATH_ESCAPES": _c("error", "files", "an MJCF include, mesh, texture, height field, skin or model file, or meshdir / texturedir / assetdir, that is absolute, a URI, leaves the file's folder through ../ or a symlink"),
+    "MJCF_INCLUDE_INVALID": _c("error", "files", "an MJCF <include> of itself (a loop) or without a file, more than 256 includes, or a chain deeper than 16"),
     "USD_LAYER_OUTSIDE_ASSET": _c("error", "files", "a USD sublayer, reference or payload outside the file's folder (absolute path, ../, symlink, URI)"),
     "FORMAT_UNREADABLE": _c("error", "files", "MuJoCo or OpenUSD cannot read the MJCF or USD file into an articulated object (the message has the reader's reason)"),
     # xml (safexml)

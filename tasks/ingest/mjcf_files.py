@@ -13,6 +13,8 @@ read without blocking (:mod:`asset2sim.input_files`). A refusal is a
   attribute, an include or ``meshdir`` / ``texturedir`` / ``assetdir``);
 - ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE``,
   ``INPUT_OUTSIDE_TREE`` (the model file itself a symlink out of its folder), ``INPUT_UNREADABLE``;
+- ``MJCF_INCLUDE_INVALID``: an include of itself (a loop), without a file, more than :data:`MAX_INCLUDES`
+  includes or a chain deeper than :data:`MAX_INCLUDE_DEPTH`;
 - ``XML_*``: the model file or an include is refused by the hardened XML parser.
 
 :func:`compile_mjcf` then writes the bytes read into a private temporary copy of that part of the tree and
@@ -33,10 +35,12 @@ from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, inside, read_file
 from asset2sim.tasks.ingest.staged import StagingError, input_tree
 
-__all__ = ["MAX_INCLUDES", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
+__all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
 
 #: Includes per model (MuJoCo refuses a repeated include; a chain deeper than this is refused too).
 MAX_INCLUDES = 256
+#: Deepest chain of includes.
+MAX_INCLUDE_DEPTH = 16
 #: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
 MAX_TOTAL_BYTES = 1024 * 1024 * 1024
 #: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
@@ -114,7 +118,7 @@ class _Gather:
         self.files[rel], self.real[rel] = data, Path(os.path.realpath(full))
         return data
 
-    def document(self, rel: str, what: str, depth: int) -> None:
+    def document(self, rel: str, what: str, depth: int, stack: tuple[str, ...] = ()) -> None:
         data = self.read(rel, what)
         try:
             root = safexml.parse_xml_bytes(data, source=str(Path(self.tree, rel)), limits=self.limits)
@@ -124,11 +128,17 @@ class _Gather:
             tag = el.tag if isinstance(el.tag, str) else ""
             if tag == "include":
                 self.includes += 1
-                if self.includes > MAX_INCLUDES or depth >= 16:
-                    raise _refuse("MJCF_PATH_ESCAPES", f"{self.path}: more than {MAX_INCLUDES} includes or nested deeper than 16")
+                if self.includes > MAX_INCLUDES or depth >= MAX_INCLUDE_DEPTH:
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: more than {MAX_INCLUDES} includes, or nested deeper "
+                                  f"than {MAX_INCLUDE_DEPTH}")
                 value = el.get("file", "")
+                if not value:
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: an <include> in {rel} without a file")
                 inc = _relative(value, self.main_dir, self.tree, self.path, "<include file>")
-                self.document(inc, f"<include file={value!r}>", depth + 1)
+                if inc in stack:
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: <include file={value!r}> in {rel} includes itself "
+                                  f"({' -> '.join((*stack, inc))})")
+                self.document(inc, f"<include file={value!r}>", depth + 1, (*stack, inc))
                 continue
             if tag == "compiler":
                 for key in ("meshdir", "texturedir", "assetdir"):
@@ -141,7 +151,7 @@ class _Gather:
     def run(self) -> MjcfSources:
         main = os.path.relpath(os.path.normpath(os.path.abspath(self.path)), self.tree).replace(os.sep, "/")
         self.main_dir = os.path.dirname(main)
-        self.document(main, "model file", 0)
+        self.document(main, "model file", 0, (main,))
         dirs = {}
         for key in ("meshdir", "texturedir", "assetdir"):
             if key in self.compiler:

@@ -299,3 +299,16 @@ def test_usd_sublayer_fifo_and_input_fifo_are_refused_unread(tmp_path, pxr):
     folder3.mkdir()
     os.symlink("/dev/zero", folder3 / "obj.usda")
     _refused(folder3 / "obj.usda", "INPUT_NOT_REGULAR_FILE")
+
+
+def test_mjcf_include_loops_and_bombs_are_refused(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "a.xml").write_text('<mujocoinclude><include file="b.xml"/></mujocoinclude>')
+    (folder / "b.xml").write_text('<mujocoinclude><include file="a.xml"/></mujocoinclude>')
+    _refused(_mjcf(folder, compiler='<include file="a.xml"/>'), "MJCF_INCLUDE_INVALID")
+    folder2 = tmp_path / "in2"
+    folder2.mkdir()
+    (folder2 / "inc.xml").write_text('<!DOCTYPE x [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]>'
+                                     "<mujocoinclude>&b;</mujocoinclude>")
+    _refused(_mjcf(folder2, compiler='<include file="inc.xml"/>'), "XML_ENTITY_FORBIDDEN")
