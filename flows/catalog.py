@@ -225,7 +225,7 @@ def load_catalog(path: Path | str) -> Catalog:
     try:  # a regular file under 1 MiB, at most 64 YAML aliases (asset2sim.input_files.load_yaml)
         data = load_yaml(path, what="catalog")
     except InputFileError as exc:
-        raise CatalogError(f"{exc.code}: {exc}") from exc
+        raise CatalogError(f"{path}: cannot read the catalog ({exc.code}): {exc}") from exc
     if not isinstance(data, dict):
         raise CatalogError(f"{path}: expected a mapping at the top level")
     try:
