@@ -31,8 +31,8 @@ import numpy as np
 from asset2sim import atomic
 
 __all__ = [
-    "MAX_ENTRY_BYTES", "CacheWarning", "array_json", "array_text", "cache_dir", "content_digest", "digest", "guard", "kept_out", "load",
-    "source_digest", "store", "text_array",
+    "MAX_ENTRY_BYTES", "CacheWarning", "array_json", "array_text", "cache_dir", "content_digest", "digest", "finite_json",
+    "guard", "kept_out", "load", "source_digest", "store", "text_array",
 ]
 
 _OFF = ("off", "none", "0")
@@ -285,6 +285,16 @@ def _no_constant(name: str):
     raise ValueError(f"{name} in a cached JSON member: not a number JSON allows")
 
 
+def finite_json(text: str | bytes):
+    """``json.loads(text)`` refusing ``NaN``, ``Infinity`` and ``-Infinity`` (which Python's ``json`` accepts):
+    a cached record carrying them is a miss for its cache.
+
+    Raises:
+        ValueError: not JSON, or a non-finite constant.
+    """
+    return json.loads(text, parse_constant=_no_constant)
+
+
 def array_json(array: np.ndarray):
     """The JSON value a :func:`text_array` holds, strictly: ``NaN``, ``Infinity`` and ``-Infinity`` (which Python's
     ``json`` accepts) are refused, so an entry whose proof holds but whose JSON carries them is a miss for the
@@ -294,4 +304,4 @@ def array_json(array: np.ndarray):
         ValueError: not UTF-8, not JSON, or a non-finite constant (``UnicodeDecodeError`` and
             ``json.JSONDecodeError`` are ValueErrors).
     """
-    return json.loads(array_text(array), parse_constant=_no_constant)
+    return finite_json(array_text(array))

@@ -106,7 +106,7 @@ class LLMClient:
         if p is None or not p.is_file():
             return None
         try:
-            rec = json.loads(atomic.read_regular(p, self.cache_record_cap()))
+            rec = array_cache.finite_json(atomic.read_regular(p, self.cache_record_cap()))  # NaN anywhere: rejected, asked again
             why = None
         except FileNotFoundError:  # deleted since: a miss
             return None

@@ -7,6 +7,7 @@ with a time-out."""
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import subprocess
 import sys
@@ -161,3 +162,34 @@ def test_a_user_folder_named_like_a_staging_folder_is_kept(tmp_path, box):
     (mine / "notes.txt").write_text("mine")
     assert not of.remove_stale_staging(out)
     assert (mine / "notes.txt").read_text() == "mine"
+
+
+def test_a_cached_reply_record_with_nan_is_asked_again(tmp_path):
+    """A reply record whose digest holds but whose JSON carries NaN is rejected (deleted, a CacheWarning) and
+    the model asked again, instead of being replayed."""
+    from asset2sim import array_cache
+    from asset2sim.schemas.model_reply import ModelReply, reply_json_schema
+    from asset2sim.tasks.synthesize import llm_client as lc
+
+    def ask(client):
+        return client.ask(messages, ModelReply, schema=reply_json_schema(), schema_name="asset2sim_overlay_reply")
+
+    with fake.FakeOpenAIServer(lifetime_s=120) as server:
+        client = lc.LLMClient(lc.ClientConfig(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=1,
+                                              cache_dir=tmp_path / "cache"))
+        desc = {"category": "Box", "closed_extents_m": [0.2, 0.2, 0.2], "typical_dims_m": [0.3, 0.2, 0.1],
+                "links": [{"name": "body", "volume_m3": 0.008, "area_m2": 0.24}],
+                "joints": [{"name": "hinge", "requested_band": "slightly_open", "closed_position": 0.0}]}
+        messages = [{"role": "system", "content": "answer JSON"},
+                    {"role": "user", "content": f"{fake.DESCRIPTION_MARK}\n{json.dumps(desc)}"}]
+        ask(client)
+        (record,) = (tmp_path / "cache").rglob("*.json")
+        record.write_text(record.read_text().replace('"tokens": ', '"tokens": NaN, "was": '))
+        assert "NaN" in record.read_text()
+        n = server.n_chat
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ask(client)
+        assert server.n_chat == n + 1 and client.usage.cached == 0
+        assert any(issubclass(w.category, array_cache.CacheWarning) for w in caught)
+        assert "NaN" not in record.read_text()
