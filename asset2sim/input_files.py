@@ -19,12 +19,16 @@ Format readers map these to their own codes where the format has them (``MJCF_PA
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 import stat
 from pathlib import Path
+from typing import Iterator
 
-__all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "MAX_CONFIG_BYTES", "MAX_YAML_ALIASES", "MAX_YAML_DEPTH", "MAX_YAML_NODES", "check_file",
-           "file_kind", "inside", "load_yaml", "read_file", "read_head"]
+__all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "MAX_CONFIG_BYTES", "MAX_YAML_ALIASES", "MAX_YAML_DEPTH", "MAX_YAML_NODES",
+           "allow_outside", "allowed_folders", "allowed_outside", "check_file", "file_kind", "inside", "load_yaml", "read_file",
+           "read_head", "set_allowed_outside"]
 
 #: Default cap of one input file, bytes (the largest mesh the validator accepts, ValidationPolicy.max_mesh_bytes).
 DEFAULT_MAX_BYTES = 64 * 1024 * 1024
@@ -43,6 +47,58 @@ class InputFileError(ValueError):
         self.path = Path(path)
 
 
+#: Folders outside an input's tree that its files may name, in this context (:func:`allow_outside`): (absolute,
+#: real) path pairs.
+_OUTSIDE: contextvars.ContextVar[tuple[tuple[str, str], ...]] = contextvars.ContextVar("asset2sim_allowed_outside", default=())
+
+
+def _pairs(folders) -> tuple[tuple[str, str], ...]:
+    pairs = []
+    for f in folders:
+        absolute = os.path.normpath(os.path.abspath(str(f)))
+        if not os.path.isdir(absolute):
+            raise InputFileError("INPUT_NOT_FOUND", f, f"--allow-outside-paths {f}: not a folder")
+        pairs.append((absolute, os.path.realpath(absolute)))
+    return tuple(pairs)
+
+
+def set_allowed_outside(*folders: Path | str) -> None:
+    """:func:`allow_outside` for the rest of the current context (a worker process's initializer)."""
+    _OUTSIDE.set(_OUTSIDE.get() + _pairs(folders))
+
+
+@contextlib.contextmanager
+def allow_outside(*folders: Path | str) -> Iterator[None]:
+    """Within the block, files an MJCF or USD input names may also lie in ``folders`` (``--allow-outside-paths DIR``:
+    a user widening the tree on purpose, e.g. meshes shared by several models); every other rule still holds
+    (regular file, size cap, no blocking open). Nested blocks add their folders.
+
+    Raises:
+        InputFileError: ``INPUT_NOT_FOUND`` when a folder does not exist or is not a folder.
+    """
+    token = _OUTSIDE.set(_OUTSIDE.get() + _pairs(folders))
+    try:
+        yield
+    finally:
+        _OUTSIDE.reset(token)
+
+
+def allowed_folders() -> tuple[str, ...]:
+    """The real paths of the folders :func:`allow_outside` allows in this context (for cache keys)."""
+    return tuple(real for _, real in _OUTSIDE.get())
+
+
+def allowed_outside(path: Path | str) -> bool:
+    """True when ``path`` lies in a folder :func:`allow_outside` allows, as written (normalized) and with every
+    symlink resolved."""
+    pairs = _OUTSIDE.get()
+    if not pairs:
+        return False
+    lexical = os.path.normpath(os.path.abspath(str(path)))
+    real = os.path.realpath(lexical)
+    return any(inside(lexical, a) or inside(lexical, r) for a, r in pairs) and any(inside(real, r) for _, r in pairs)
+
+
 def file_kind(mode: int) -> str:
     """``"FIFO"``, ``"character device"``, ``"regular file"`` ... of an ``st_mode``."""
     return next((name for test, name in _KINDS if test(mode)), "special file")
@@ -59,7 +115,8 @@ def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: i
 
     Args:
         path: the file as named (absolute, or relative to the working directory).
-        tree: the folder the file must lie in, lexically and with every symlink resolved (None: anywhere).
+        tree: the folder the file must lie in, lexically and with every symlink resolved (None: anywhere), or
+            a folder :func:`allow_outside` allows.
         max_bytes: size cap in bytes (None: none).
         what: how the message names the file ("MJCF include", "--config file" ...).
 
@@ -74,6 +131,8 @@ def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: i
     if "\x00" in name:
         raise InputFileError("INPUT_UNREADABLE", "?", f"{what} {name!r}: the path contains a NUL byte")
     root = os.path.abspath(str(tree)) if tree is not None else None
+    if root is not None and allowed_outside(name):  # a folder the user allowed (allow_outside): the tree is wider
+        root = None
     if root is not None and not inside(os.path.normpath(os.path.abspath(name)), root):
         raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: lies outside {root}, the folder the input may read")
     try:

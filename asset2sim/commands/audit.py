@@ -15,7 +15,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError,
-                                        output_folder_failure)
+                                        add_allow_outside, output_folder_failure, outside_paths)
+from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
@@ -38,12 +39,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run as the Prefect audit flow on a Dask cluster of --jobs workers (needs --out; logs the run to MLflow)")
     p.add_argument("--dask-address", default=None, help="with --flow: an existing Dask scheduler instead of a local cluster")
     p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
+    add_allow_outside(p)
 
 
 def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int) -> list:
     if jobs <= 1 or len(targets) <= 1:
         return [audit_one(t, out, category=category, simulate=simulate) for t in targets]
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, initializer=set_allowed_outside, initargs=allowed_folders()) as pool:
         futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate) for t in targets]
         return [f.result() for f in futures]
 
@@ -81,13 +83,17 @@ def run(args: argparse.Namespace) -> int:
     if args.flow:
         if args.out is None:
             raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
+        if args.allow_outside_paths:
+            raise CommandError(INVALID_REQUEST, "OPTION_CONFLICT", None, "--allow-outside-paths applies to audits in this "
+                               "process and its --jobs; the --flow's Dask workers do not take it")
         from asset2sim.flows.audit_flow import run_audit_flow
 
         summary = run_audit_flow(args.paths, args.out, category=args.category, simulate=not args.no_sim, workers=args.jobs,
                                  dask_address=args.dask_address)
         rows = summary["rows"]
     else:
-        rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
+        with outside_paths(args):
+            rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs)
         if args.out is not None:
             audit_catalog.write_audit_catalog(args.out, rows)
     console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)

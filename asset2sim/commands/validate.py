@@ -8,7 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_REQUEST, CommandError
+from asset2sim.commands._status import INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
 from asset2sim.tasks.ingest.validate_input import CODES, ValidationPolicy, has_errors, validate_asset
 
 NAME = "validate"
@@ -25,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--error", metavar="CODE", action="append", default=[],
                         help="make this code an error (repeatable), e.g. --error JOINT_LIMIT_EQUAL")
     parser.add_argument("--allow", metavar="CODE", action="append", default=[], help="downgrade this code to a warning (repeatable)")
+    add_allow_outside(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     overrides = {c: "error" for c in args.error}
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
-    findings = validate_asset(args.asset, policy)
+    with outside_paths(args):
+        findings = validate_asset(args.asset, policy)
     shown = [f for f in findings if not (args.quiet and f.severity == "info")]
     if args.json:
         print(json.dumps([f.model_dump(mode="json") for f in shown], indent=2))

@@ -109,7 +109,7 @@ def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict
         for item in items:
             if getattr(item, "file", ""):
                 named = os.path.normpath(os.path.join(os.path.abspath(base), sub, item.file))
-                real = sources.real.get(os.path.relpath(named, sources.tree).replace(os.sep, "/"))
+                real = sources.real.get(named)
                 if real is None:  # gather_mjcf checked every file attribute; nothing else is copied
                     raise StagingError(f"{source}: {item.file!r} was not checked by the reader policy; not copied")
                 item.file = _copy_named(real, base, folder)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from asset2sim import atomic, file_memo
+from asset2sim import atomic, file_memo, input_files
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
@@ -82,7 +82,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
         AssetError: validation found errors (``.findings`` has them all; the message lists them), or
             the URDF reader cannot read the validated bytes.
     """
-    key = (os.path.realpath(asset), asset_id, category) if policy is None else None
+    key = (os.path.realpath(asset), asset_id, category, input_files.allowed_folders()) if policy is None else None
     if key is not None and (hit := _EXTRACT_MEMO.get(key)) is not None:
         return hit
     given = Path(asset)
@@ -234,8 +234,8 @@ def _copy_extracted(value: tuple[AssetDescription, list["Finding"]]) -> tuple[As
     return desc.model_copy(deep=True), [f.model_copy(deep=True) for f in findings]
 
 
-#: What :func:`extract_asset_checked` returned with the default policy, by (real path, asset id,
-#: category), while the folder and the files it references are unchanged (each caller gets a copy).
+#: What :func:`extract_asset_checked` returned with the default policy, by (real path, asset id, category, folders
+#: allowed outside the input (:func:`asset2sim.input_files.allow_outside`)), while the folder and the files it references are unchanged (each caller gets a copy).
 _EXTRACT_MEMO = file_memo.FileMemo(_copy_extracted, max_entries=16)
 
 

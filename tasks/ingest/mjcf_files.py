@@ -32,7 +32,7 @@ from pathlib import Path
 
 from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
-from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, inside, read_file
+from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
 from asset2sim.tasks.ingest.staged import StagingError, input_tree
 
 __all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
@@ -52,9 +52,10 @@ _DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
 
 @dataclass(frozen=True)
 class MjcfSources:
-    """Every file an MJCF model names, checked and read: ``files`` path relative to ``tree`` (POSIX, as
-    MuJoCo resolves it) -> bytes, the model file's among them as ``main``; ``real`` the same keys -> the real
-    path read (for the input hash and the audit's copies)."""
+    """Every file an MJCF model names, checked and read: ``files`` absolute normalized path (as MuJoCo resolves
+    it from the model file) -> bytes, the model file's among them as ``main``; ``real`` the same keys -> the real
+    path read (for the input hash and the audit's copies); ``tree`` the folder they lie in (or a folder
+    :func:`~asset2sim.input_files.allow_outside` allows)."""
 
     path: Path
     tree: Path
@@ -71,26 +72,33 @@ def _from_input_error(exc: InputFileError) -> StagingError:
     return _refuse(exc.code, str(exc))
 
 
-def _relative(value: str, base_rel: str, tree: str, source: Path, what: str) -> str:
-    """``value`` (as written) joined to ``base_rel`` (a folder relative to ``tree``), normalized, relative to ``tree``.
+def _resolve(value: str, base: str, tree: str, source: Path, what: str) -> str:
+    """``value`` (as written) joined to the absolute folder ``base`` as MuJoCo joins it (an absolute ``value`` stays
+    itself), normalized: an absolute path inside ``tree`` or a folder the user allowed
+    (:func:`~asset2sim.input_files.allow_outside`).
 
     Raises:
-        StagingError: ``MJCF_PATH_ESCAPES`` for a URI, an absolute path or one leaving ``tree`` (lexically or
-            through a symlink).
+        StagingError: ``MJCF_PATH_ESCAPES`` for a control character, a URI, an absolute path (unless allowed) or one
+            leaving ``tree`` (lexically or through a symlink, unless into an allowed folder).
     """
     if "\x00" in value or any(ord(c) < 32 for c in value):
         raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a control character in the path")
     if _URI.match(value) and not _DRIVE.match(value):
         raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a URI; only relative paths inside {tree} are read")
-    if value.startswith(("/", "\\")) or _DRIVE.match(value):
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: an absolute path; only relative paths inside {tree} are read")
-    joined = os.path.normpath(os.path.join(tree, base_rel, value))
+    absolute = value.startswith(("/", "\\")) or bool(_DRIVE.match(value))
+    joined = os.path.normpath(value if absolute else os.path.join(base, value))
+    if allowed_outside(joined):
+        return joined
+    if absolute:
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: an absolute path; only relative paths inside {tree} "
+                      "are read (--allow-outside-paths DIR widens this)")
     if not inside(joined, tree):
-        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} resolves to {joined}, outside {tree}")
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} resolves to {joined}, outside {tree} "
+                      "(--allow-outside-paths DIR widens this)")
     real = os.path.realpath(joined)
     if not inside(real, os.path.realpath(tree)):
         raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} is a symlink (or under one) to {real}, outside {tree}")
-    return os.path.relpath(joined, tree).replace(os.sep, "/")
+    return joined
 
 
 class _Gather:
@@ -103,27 +111,29 @@ class _Gather:
         self.includes = 0
         self.compiler: dict[str, str] = {}
         self.refs: list[tuple[str, str, str, str]] = []  # (tag, attribute, value, file naming it)
+        self.main = os.path.normpath(str(path))
+        self.main_dir = os.path.dirname(self.main)
 
-    def read(self, rel: str, what: str) -> bytes:
-        if rel in self.files:
-            return self.files[rel]
-        full = os.path.join(self.tree, rel)
+    def read(self, key: str, what: str) -> bytes:
+        if key in self.files:
+            return self.files[key]
         try:
-            data = read_file(full, tree=self.tree, max_bytes=self.max_file, what=f"{self.path.name}: {what}")
+            data = read_file(key, tree=self.tree, max_bytes=self.max_file, what=f"{self.path.name}: {what}")
         except InputFileError as exc:
             raise _from_input_error(exc) from None
         self.total += len(data)
         if self.total > self.max_total:
             raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files it names exceed {self.max_total} bytes together; not read")
-        self.files[rel], self.real[rel] = data, Path(os.path.realpath(full))
+        self.files[key], self.real[key] = data, Path(os.path.realpath(key))
         return data
 
-    def document(self, rel: str, what: str, depth: int, stack: tuple[str, ...] = ()) -> None:
-        data = self.read(rel, what)
+    def document(self, key: str, what: str, depth: int, stack: tuple[str, ...] = ()) -> None:
+        data = self.read(key, what)
         try:
-            root = safexml.parse_xml_bytes(data, source=str(Path(self.tree, rel)), limits=self.limits)
+            root = safexml.parse_xml_bytes(data, source=key, limits=self.limits)
         except safexml.SafeXMLError as exc:
             raise _refuse(exc.code, str(exc)) from None
+        name = os.path.relpath(key, self.main_dir)
         for el in root.iter():
             tag = el.tag if isinstance(el.tag, str) else ""
             if tag == "include":
@@ -133,37 +143,35 @@ class _Gather:
                                   f"than {MAX_INCLUDE_DEPTH}")
                 value = el.get("file", "")
                 if not value:
-                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: an <include> in {rel} without a file")
-                inc = _relative(value, self.main_dir, self.tree, self.path, "<include file>")
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: an <include> in {name} without a file")
+                inc = _resolve(value, self.main_dir, self.tree, self.path, "<include file>")
                 if inc in stack:
-                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: <include file={value!r}> in {rel} includes itself "
-                                  f"({' -> '.join((*stack, inc))})")
+                    chain = " -> ".join(os.path.relpath(k, self.main_dir) for k in (*stack, inc))
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: <include file={value!r}> in {name} includes itself ({chain})")
                 self.document(inc, f"<include file={value!r}>", depth + 1, (*stack, inc))
                 continue
             if tag == "compiler":
-                for key in ("meshdir", "texturedir", "assetdir"):
-                    if el.get(key) is not None:
-                        self.compiler[key] = el.get(key, "")
-            for key, value in el.attrib.items():
-                if key.startswith("file") and value:
-                    self.refs.append((tag, key, value, rel))
+                for attr in ("meshdir", "texturedir", "assetdir"):
+                    if el.get(attr) is not None:
+                        self.compiler[attr] = el.get(attr, "")
+            for attr, value in el.attrib.items():
+                if attr.startswith("file") and value:
+                    self.refs.append((tag, attr, value, name))
 
     def run(self) -> MjcfSources:
-        main = os.path.relpath(os.path.normpath(os.path.abspath(self.path)), self.tree).replace(os.sep, "/")
-        self.main_dir = os.path.dirname(main)
-        self.document(main, "model file", 0, (main,))
+        self.document(self.main, "model file", 0, (self.main,))
         dirs = {}
-        for key in ("meshdir", "texturedir", "assetdir"):
-            if key in self.compiler:
-                value = self.compiler[key]
-                dirs[key] = _relative(value, self.main_dir, self.tree, self.path, f"<compiler {key}>") if value else self.main_dir
+        for attr in ("meshdir", "texturedir", "assetdir"):
+            if attr in self.compiler:
+                value = self.compiler[attr]
+                dirs[attr] = _resolve(value, self.main_dir, self.tree, self.path, f"<compiler {attr}>") if value else self.main_dir
         meshdir = dirs.get("meshdir", dirs.get("assetdir", self.main_dir))
         texdir = dirs.get("texturedir", dirs.get("assetdir", self.main_dir))
-        for tag, key, value, where in self.refs:
+        for tag, attr, value, where in self.refs:
             base = meshdir if tag in _MESHDIR_TAGS else texdir if tag in _TEXDIR_TAGS else self.main_dir
-            rel = _relative(value, base, self.tree, self.path, f"<{tag} {key}> in {where}")
-            self.read(rel, f"<{tag} {key}={value!r}>")
-        return MjcfSources(path=self.path, tree=Path(self.tree), main=main, files=self.files, real=self.real)
+            key = _resolve(value, base, self.tree, self.path, f"<{tag} {attr}> in {where}")
+            self.read(key, f"<{tag} {attr}={value!r}>")
+        return MjcfSources(path=self.path, tree=Path(self.tree), main=self.main, files=self.files, real=self.real)
 
 
 def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_bytes: int = DEFAULT_MAX_BYTES,
@@ -184,9 +192,16 @@ def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_by
     return _Gather(path, root, max_file_bytes, max_total_bytes, limits).run()
 
 
+def _mirrored(tmp: str, path: str) -> str:
+    """Where the private copy holds the file at the absolute ``path``: the same path under ``tmp``."""
+    return os.path.join(tmp, os.path.splitdrive(path)[1].lstrip("/\\"))
+
+
 def compile_mjcf(sources: MjcfSources):
     """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources``: MuJoCo reads a private temporary
-    copy holding only those files (the folder is removed before returning; the model holds what it needs).
+    copy holding only those files, each at its absolute path mirrored under the copy's folder (a file attribute or
+    folder written absolute, in a folder the user allowed, is pointed at its copy while compiling, then given back
+    as written); the folder is removed before returning (the model holds what it needs).
 
     Raises:
         ImportError: MuJoCo is not installed.
@@ -197,13 +212,25 @@ def compile_mjcf(sources: MjcfSources):
     except ImportError as exc:
         raise ImportError(f"reading MJCF needs MuJoCo ({exc}); install the extra: pip install 'asset2sim[mujoco]'") from exc
     with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
-        for rel, data in sources.files.items():
-            atomic.write_bytes(Path(tmp, rel), data, durable=False)
+        for key, data in sources.files.items():
+            atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
         try:
             with mujoco_messages() as caught:
-                spec = mujoco.MjSpec.from_file(str(Path(tmp, sources.main)))
-                model = spec.compile()
+                spec = mujoco.MjSpec.from_file(_mirrored(tmp, sources.main))
+                written = []  # (object, attribute, value as written) pointed at the copy while compiling
+                for obj, attr in ((spec, "meshdir"), (spec, "texturedir"),
+                                  *((item, "file") for items in (spec.meshes, spec.textures, spec.hfields, spec.skins)
+                                    for item in items)):
+                    value = getattr(obj, attr, "") or ""
+                    if os.path.isabs(value):
+                        written.append((obj, attr, value))
+                        setattr(obj, attr, _mirrored(tmp, os.path.normpath(value)))
+                try:
+                    model = spec.compile()
+                finally:
+                    for obj, attr, value in written:
+                        setattr(obj, attr, value)
         except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
-            msg = str(exc).replace(tmp + os.sep, "").replace(tmp, ".")
+            msg = str(exc).replace(tmp + os.sep, "/").replace(tmp, ".")
             raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {msg}") from exc
     return spec, model, [f"MuJoCo: {w}" for w in caught]

@@ -312,3 +312,51 @@ def test_mjcf_include_loops_and_bombs_are_refused(tmp_path):
     (folder2 / "inc.xml").write_text('<!DOCTYPE x [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]>'
                                      "<mujocoinclude>&b;</mujocoinclude>")
     _refused(_mjcf(folder2, compiler='<include file="inc.xml"/>'), "XML_ENTITY_FORBIDDEN")
+
+
+# ------------------------------------------------------------------------- --allow-outside-paths
+
+
+def test_allow_outside_paths_widens_the_tree_only_where_asked(tmp_path, capsys):
+    """Meshes shared beside the input (``meshdir="../shared"``, and an absolute path into it) are refused by default
+    and read with ``--allow-outside-paths`` naming that folder; another folder stays refused; refine writes an
+    output from them and the audit's patch copies them (the allowed files only)."""
+    from asset2sim import cli
+
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    (shared / "lid.obj").write_text(TETRA)
+    _secret(tmp_path)
+    path = _mjcf(tmp_path / "in", mesh="lid.obj", compiler='<compiler meshdir="../shared"/>')
+    assert cli.main(["validate", str(path)]) == 1
+    assert "MJCF_PATH_ESCAPES" in capsys.readouterr().out
+    assert cli.main(["validate", str(path), "--allow-outside-paths", str(shared)]) == 0
+    assert cli.main(["validate", str(path), "--allow-outside-paths", str(tmp_path / "elsewhere")]) == 1
+    assert "MJCF_PATH_ESCAPES" in capsys.readouterr().out
+    absolute = _mjcf(tmp_path / "in2", mesh=str(shared / "lid.obj"))
+    assert cli.main(["validate", str(absolute), "--allow-outside-paths", str(shared)]) == 0
+    escaping = _mjcf(tmp_path / "in3", mesh="../elsewhere/secret.obj")
+    assert cli.main(["validate", str(escaping), "--allow-outside-paths", str(shared)]) == 1
+    assert cli.main(["validate", str(path), "--allow-outside-paths", str(tmp_path / "nosuch")]) == 2
+    capsys.readouterr()
+    before = tree_hashes(tmp_path / "in")
+    code = cli.main(["refine", str(path), "--prompt", "a box", "--out", str(tmp_path / "out"), "--no-extras",
+                     "--engines", "pybullet", "--allow-outside-paths", str(shared)])
+    assert code in (0, 3), capsys.readouterr().err
+    assert (tmp_path / "out" / "mobility.urdf").is_file() and tree_hashes(tmp_path / "in") == before
+    code = cli.main(["audit", str(path), "--out", str(tmp_path / "audit"), "--no-sim", "--allow-outside-paths", str(shared)])
+    assert code in (0, 3), capsys.readouterr().err
+    copied = [p for p in (tmp_path / "audit").rglob("*.obj")]
+    assert copied and all(p.read_text() == TETRA for p in copied)
+
+
+def test_allow_outside_paths_for_a_usd_layer(tmp_path):
+    from asset2sim.input_files import allow_outside
+
+    pytest.importorskip("pxr")
+    layer = _layer(tmp_path / "shared" / "extra.usda")
+    path = _usda(tmp_path / "in" / "obj.usda", f"subLayers = [@{layer}@]")
+    _refused(path, "USD_LAYER_OUTSIDE_ASSET")
+    with allow_outside(tmp_path / "shared"):
+        assert not [f.describe() for f in validate_asset(path) if f.severity == "error"]
+    _refused(path, "USD_LAYER_OUTSIDE_ASSET")  # only inside the block
