@@ -157,13 +157,13 @@ def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: i
 def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: int = DEFAULT_MAX_BYTES,
               what: str = "input file") -> bytes:
     """The bytes of ``path`` after :func:`check_file`, opened with ``O_NONBLOCK`` and checked again on the
-    open descriptor (a file swapped for a FIFO between the check and the open is refused, not waited on);
-    at most ``max_bytes`` are read.
+    open descriptor (a file swapped for a FIFO, or for any other file, between the check and the open is refused,
+    not waited on or read); at most ``max_bytes`` are read.
 
     Raises:
         InputFileError: as :func:`check_file`; ``INPUT_TOO_LARGE`` also when the file grew past the cap.
     """
-    check_file(path, tree=tree, max_bytes=max_bytes, what=what)
+    checked = check_file(path, tree=tree, max_bytes=max_bytes, what=what)
     name = str(path)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
@@ -174,6 +174,8 @@ def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: in
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
             raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file")
+        if (st.st_dev, st.st_ino) != (checked.st_dev, checked.st_ino):  # swapped between the check and the open
+            raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: replaced by another file while it was opened")
         chunks, left = [], max_bytes + 1
         while left > 0:
             chunk = os.read(fd, min(left, 1 << 20))

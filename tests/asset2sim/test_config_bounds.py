@@ -195,3 +195,26 @@ def test_override_values_out_of_range_are_refused(overrides, field):
         load_config({"overrides": overrides})
     assert field in str(info.value)
     assert load_config({"overrides": {"mass": "12 kg", "size": "30 cm", "scale": 2, "material": "oak"}}).overrides.mass == 12.0
+
+
+def test_a_file_swapped_after_its_check_is_not_read(tmp_path, monkeypatch):
+    """read_file opens the file it checked: one replaced in between (here by a symlink to a file outside the tree,
+    swapped in right after the check) is refused, not read."""
+    from asset2sim import input_files
+
+    tree = tmp_path / "tree"
+    tree.mkdir()
+    (tree / "config.yaml").write_text("seed: 1\n")
+    (tmp_path / "secret.yaml").write_text("seed: 4711\n")
+    real_check = input_files.check_file
+
+    def check_then_swap(path, **kw):
+        st = real_check(path, **kw)
+        os.replace(tmp_path / "swap", path)
+        return st
+
+    os.symlink(tmp_path / "secret.yaml", tmp_path / "swap")
+    monkeypatch.setattr(input_files, "check_file", check_then_swap)
+    with pytest.raises(InputFileError) as info:
+        input_files.read_file(tree / "config.yaml", tree=tree)
+    assert info.value.code == "INPUT_UNREADABLE"
