@@ -5,8 +5,9 @@ texturedir assetdir>`` and every attribute whose name starts with ``file`` (``<m
 fileright ...>``, ``<hfield file>``, ``<skin file>``, ``<model file>``, ``<flexcomp file>`` ...), and resolves
 each as MuJoCo does (relative to the model file's folder, through ``meshdir`` for meshes, skins and height
 fields and ``texturedir`` for textures). Each must be a relative path that stays inside the input's tree (the
-model file's folder), with every symlink resolved, and name a regular file under the size cap; it is then
-read without blocking (:mod:`asset2sim.input_files`). A refusal is a
+model file's folder), with every symlink resolved, or lie in a folder the user allowed
+(:func:`asset2sim.input_files.allow_outside`, ``--allow-outside-paths``), and name a regular file under the size
+cap; it is then read without blocking (:mod:`asset2sim.input_files`). A refusal is a
 :class:`~asset2sim.tasks.ingest.staged.StagingError` with a code:
 
 - ``MJCF_PATH_ESCAPES``: an absolute path, a URI, ``../`` leaving the tree or a symlink out of it (in a file
@@ -17,9 +18,9 @@ read without blocking (:mod:`asset2sim.input_files`). A refusal is a
   includes or a chain deeper than :data:`MAX_INCLUDE_DEPTH`;
 - ``XML_*``: the model file or an include is refused by the hardened XML parser.
 
-:func:`compile_mjcf` then writes the bytes read into a private temporary copy of that part of the tree and
-lets MuJoCo (``MjSpec.from_file``) read the copy, so MuJoCo opens nothing but what was checked; its
-warnings are collected, never written to ``MUJOCO_LOG.TXT``.
+:func:`compile_mjcf` then writes the bytes read into a private temporary folder, each file at its absolute path
+mirrored below it, and lets MuJoCo (``MjSpec.from_file``) read that copy, so MuJoCo opens nothing but what was
+checked; its warnings are collected, never written to ``MUJOCO_LOG.TXT``.
 """
 
 from __future__ import annotations
