@@ -157,9 +157,10 @@ def _stage_other_format(asset: Path | str) -> "staged.StagedAsset | None":
     try:
         return staged.stage(read(source), staged.staging_folder(source))
     except staged.StagingError as exc:
-        findings = [] if exc.code is None else [validate_input.Finding(
-            code=exc.code, severity="error", message=str(exc), file=str(source), action="refuse")]
-        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}", findings) from exc
+        if exc.code is None:
+            raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
+        finding = validate_input.Finding(code=exc.code, severity="error", message=str(exc), file=str(source), action="refuse")
+        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc.code}: {exc}", [finding]) from exc
     except (ImportError, OSError) as exc:
         raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
 

@@ -155,8 +155,9 @@ def input_tree(path: Path | str) -> Path:
 
 def other_format_file(asset: Path | str) -> tuple[Path, str] | None:
     """(file, ``"mjcf"`` or ``"usd"``) of the MJCF or USD file an input names: the path itself when it is one
-    (:func:`input_format`); for a folder without any ``*.urdf``, its one top-level MJCF or USD file (a folder
-    per object, as a dataset of MJCF objects is laid out); else None (a URDF input, or a folder validation
+    (:func:`input_format`); for a folder without any ``*.urdf``, its one top-level MJCF (root ``<mujoco>``, its
+    ``<mujocoinclude>`` files beside it) or USD file (a folder per object, as a dataset of MJCF objects is laid
+    out); else None (a URDF input, or a folder validation
     will report on)."""
     p = Path(asset)
     if not os.path.lexists(p):
@@ -168,6 +169,8 @@ def other_format_file(asset: Path | str) -> tuple[Path, str] | None:
     else:
         cands = [p]
     found = [(f, fmt) for f in cands if (fmt := input_format(f)) != "urdf"]
+    if p.is_dir() and len(found) > 1:  # a model's <mujocoinclude> files beside it are not objects of their own
+        found = [(f, fmt) for f, fmt in found if fmt != "mjcf" or root_element(f) == "mujoco"]
     return found[0] if len(found) == 1 else None
 
 
