@@ -225,7 +225,8 @@ def load_catalog(path: Path | str) -> Catalog:
     try:  # a regular file under 1 MiB, at most 64 YAML aliases (asset2sim.input_files.load_yaml)
         data = load_yaml(path, what="catalog")
     except InputFileError as exc:
-        raise CatalogError(f"{path}: cannot read the catalog ({exc.code}): {exc}") from exc
+        cause = FileNotFoundError(str(exc)) if exc.code == "INPUT_NOT_FOUND" else exc  # the commands say where to run
+        raise CatalogError(f"{path}: cannot read the catalog ({exc.code}): {exc}") from cause
     if not isinstance(data, dict):
         raise CatalogError(f"{path}: expected a mapping at the top level")
     try:

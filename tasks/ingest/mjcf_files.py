@@ -33,6 +33,7 @@ from pathlib import Path
 
 from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
+from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
 from asset2sim.tasks.ingest.staged import StagingError, input_tree
 
@@ -205,13 +206,11 @@ def compile_mjcf(sources: MjcfSources):
     as written); the folder is removed before returning (the model holds what it needs).
 
     Raises:
-        ImportError: MuJoCo is not installed.
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
         StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
     """
-    try:
-        mujoco = load_mujoco()
-    except ImportError as exc:
-        raise ImportError(f"reading MJCF needs MuJoCo ({exc}); install the extra: pip install 'asset2sim[mujoco]'") from exc
+    import_extra("mujoco", "reading MJCF")  # MissingExtra naming the extra when MuJoCo is not installed
+    mujoco = load_mujoco()
     with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
         for key, data in sources.files.items():
             atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
