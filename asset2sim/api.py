@@ -16,15 +16,16 @@ radians (revolute) and metres (prismatic) for joint positions.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import ValidationError
 
 from asset2sim.engines.base import SessionOptions, SimSession
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.registry import known_engines, open_session
+from asset2sim.input_files import load_yaml
 from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
@@ -50,28 +51,42 @@ def load_config(config: RefineConfig | Mapping[str, Any] | str | Path | None) ->
     Raises:
         FileNotFoundError: the YAML file does not exist.
         ValueError: the file is not YAML or not a mapping, or a field is
-            unknown or invalid (the message names the file and the field).
+            unknown, invalid or out of its range, or an engine is unknown (the
+            message names the file and the field); an
+            :class:`~asset2sim.input_files.InputFileError` (``code``) when the
+            file is refused unread or while parsing: a FIFO or device, above
+            1 MiB, more than 64 YAML aliases (an anchor bomb), nested deeper
+            than 64 levels (:func:`asset2sim.input_files.load_yaml`).
     """
     if config is None:
         return RefineConfig()
-    if isinstance(config, RefineConfig):
-        return config
     source = "the configuration"
+    if isinstance(config, RefineConfig):
+        return _known_engines(config, source)
     if isinstance(config, (str, Path)):
         path = Path(config)
         source = str(path)
-        try:
-            config = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            raise ValueError(f"{path}: not YAML: {exc}") from exc
+        if not os.path.lexists(path):
+            raise FileNotFoundError(f"{path}: no such configuration file")
+        config = load_yaml(path)  # InputFileError (a ValueError with a code): FIFO, too large, aliases ...
         if config is None:
             config = {}
     if not isinstance(config, Mapping):
         raise ValueError(f"{source}: expected a mapping of RefineConfig fields, got {type(config).__name__}")
     try:
-        return RefineConfig.model_validate(dict(config))
+        return _known_engines(RefineConfig.model_validate(dict(config)), source)
     except ValidationError as exc:
         raise ValueError(f"{source}: {_field_errors(exc)}") from exc
+
+
+def _known_engines(config: RefineConfig, source: str) -> RefineConfig:
+    """``config`` when every engine it lists is known to the registry (installed or not); ValueError naming the
+    unknown ones and the known ones otherwise."""
+    known = known_engines()
+    unknown = [e for e in config.engines if e not in known]
+    if unknown:
+        raise ValueError(f"{source}: engines: unknown engine(s) {', '.join(unknown)}; known: {', '.join(known)}")
+    return config
 
 
 def _field_errors(exc: ValidationError) -> str:
@@ -221,7 +236,10 @@ def validate(asset: str | Path, policy: ValidationPolicy | None = None) -> list[
     numbers, inertials, mesh paths and contents), as ``asset2sim validate``.
 
     Args:
-        asset: an asset folder or a URDF file. Never modified.
+        asset: an asset folder, a URDF file, or an MJCF or USD file (every
+            file it names checked first: ``MJCF_PATH_ESCAPES``,
+            ``USD_LAYER_OUTSIDE_ASSET``, ``INPUT_NOT_REGULAR_FILE`` ...;
+            ``docs/guide/validation.md``). Never modified.
         policy: severities and caps (default: the product's).
 
     Returns:

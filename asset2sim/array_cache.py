@@ -31,8 +31,8 @@ import numpy as np
 from asset2sim import atomic
 
 __all__ = [
-    "MAX_ENTRY_BYTES", "CacheWarning", "array_text", "cache_dir", "content_digest", "digest", "guard", "load",
-    "source_digest", "store", "text_array",
+    "MAX_ENTRY_BYTES", "CacheWarning", "array_json", "array_text", "cache_dir", "content_digest", "digest", "finite_json",
+    "guard", "kept_out", "load", "source_digest", "store", "text_array",
 ]
 
 _OFF = ("off", "none", "0")
@@ -63,20 +63,29 @@ def cache_dir() -> Path | None:
     if root is not None and root.strip().lower() in _OFF:
         return None
     path = Path(root) if root else Path.home() / ".cache" / "asset2sim"
+    return None if kept_out(path, "asset2sim cache") else path
+
+
+def kept_out(path: Path | str, what: str) -> bool:
+    """True when the cache folder ``path`` lies inside a folder a :func:`guard` keeps caches out of (an input or
+    output folder; symlinks resolved; a path that cannot be resolved counts as inside), with a
+    :class:`CacheWarning` naming ``what`` once per pair. Every on-disk cache (arrays, model replies) asks this."""
     forbidden = _FORBIDDEN.get()
-    if forbidden:
-        try:
-            resolved = path.expanduser().resolve()
-        except (OSError, RuntimeError):  # a symlink loop: where it lies is unknown
-            resolved = None
-        for folder in forbidden:
-            if resolved is None or resolved == folder or folder in resolved.parents:
-                if (str(path), str(folder)) not in _WARNED:
-                    _WARNED.add((str(path), str(folder)))
-                    warnings.warn(f"asset2sim cache: the cache folder {path} lies inside {folder} (an input or output "
-                                  "folder): the on-disk cache is off there", CacheWarning, stacklevel=2)
-                return None
-    return path
+    if not forbidden:
+        return False
+    path = Path(path)
+    try:
+        resolved = path.expanduser().resolve()
+    except (OSError, RuntimeError):  # a symlink loop: where it lies is unknown
+        resolved = None
+    for folder in forbidden:
+        if resolved is None or resolved == folder or folder in resolved.parents:
+            if (str(path), str(folder)) not in _WARNED:
+                _WARNED.add((str(path), str(folder)))
+                warnings.warn(f"{what}: the cache folder {path} lies inside {folder} (an input or output "
+                              "folder): the on-disk cache is off there", CacheWarning, stacklevel=3)
+            return True
+    return False
 
 
 @contextlib.contextmanager
@@ -191,7 +200,7 @@ def _read_proven(path: Path, kind: str, key: str) -> dict[str, np.ndarray]:
         _check_directory(data)
         with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
-        proof = json.loads(array_text(arrays.pop(_PROOF))) if _PROOF in arrays else None
+        proof = array_json(arrays.pop(_PROOF)) if _PROOF in arrays else None
     except _Rejected:
         raise
     except (OSError, ValueError, KeyError, EOFError, MemoryError, RuntimeError, NotImplementedError,
@@ -270,3 +279,29 @@ def array_text(array: np.ndarray) -> str:
         UnicodeDecodeError: the bytes are not UTF-8.
     """
     return np.asarray(array, dtype=np.uint8).tobytes().decode()
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} in a cached JSON member: not a number JSON allows")
+
+
+def finite_json(text: str | bytes):
+    """``json.loads(text)`` refusing ``NaN``, ``Infinity`` and ``-Infinity`` (which Python's ``json`` accepts):
+    a cached record carrying them is a miss for its cache.
+
+    Raises:
+        ValueError: not JSON, or a non-finite constant.
+    """
+    return json.loads(text, parse_constant=_no_constant)
+
+
+def array_json(array: np.ndarray):
+    """The JSON value a :func:`text_array` holds, strictly: ``NaN``, ``Infinity`` and ``-Infinity`` (which Python's
+    ``json`` accepts) are refused, so an entry whose proof holds but whose JSON carries them is a miss for the
+    caller, computed again and stored over it.
+
+    Raises:
+        ValueError: not UTF-8, not JSON, or a non-finite constant (``UnicodeDecodeError`` and
+            ``json.JSONDecodeError`` are ValueErrors).
+    """
+    return finite_json(array_text(array))

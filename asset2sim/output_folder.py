@@ -14,6 +14,7 @@ are read through :func:`read_record` (regular files only). Errors are
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import shutil
@@ -130,6 +131,14 @@ class OwnedFolder:
     #: the output folder a staged run replaces when it finishes (None: the run writes ``root`` in place)
     final: Path | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    #: a staged run's descriptor of its staging folder, holding the lock that tells a later run it is live
+    _held: int | None = field(default=None, repr=False)
+
+    def _release(self) -> None:
+        if self._held is not None:
+            with contextlib.suppress(OSError):
+                os.close(self._held)
+            self._held = None
 
     def _rel(self, path: Path) -> str | None:
         """Relative path of a destination inside this folder, or None when it lies elsewhere. Raises
@@ -198,9 +207,11 @@ class OwnedFolder:
                 atomic.exchange_folders(staging, final)
             except OSError as exc:
                 shutil.rmtree(staging, ignore_errors=True)
+                self._release()
                 raise _write_failed(self.given, exc) from exc
             shutil.rmtree(staging, ignore_errors=True)
             self.root, self.final = final, None
+            self._release()
         return hashes
 
     def write_path(self, path: Path | str) -> Path:
@@ -221,6 +232,7 @@ class OwnedFolder:
         self.close()
         if self.final is not None:
             shutil.rmtree(self.root, ignore_errors=True)
+            self._release()
             return
         for rel in sorted(self.files):
             _remove_with_temps(self.root, rel)
@@ -312,17 +324,18 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
         return None
     staging = staging_folder(root)
     if os.path.lexists(staging):
-        ours = staging.is_dir() and not staging.is_symlink() and (
-            not any(staging.iterdir()) or any((staging / n).exists() for n in _BOOKKEEPING))
-        if not ours:
+        if not _ours(staging):
             raise OutputError(f"{staging} (the staging folder of {given}) exists and is not asset2sim's; remove it",
                               "OUTPUT_NAME_CONFLICT", staging)
-        shutil.rmtree(staging)  # a killed run's leftovers
+        if not _remove_stale(staging):
+            raise OutputError(f"{staging} (the staging folder of {given}) is being written by another run; wait for it to end",
+                              "OUTPUT_NAME_CONFLICT", staging)
     try:
         staging.mkdir(mode=stat.S_IMODE(root.stat().st_mode))
     except OSError:
         return None
-    owner = OwnedFolder(root=staging.resolve(), given=given, source=src, created=True, final=root)
+    held = _try_lock(staging)
+    owner = OwnedFolder(root=staging.resolve(), given=given, source=src, created=True, final=root, _held=held)
     try:
         owner._save()
     except OSError as exc:
@@ -332,6 +345,54 @@ def _start_staged(root: Path, given: Path, src: Path, previous: set[str], foreig
         _ACTIVE[owner.root] = owner
         atomic.add_observer(_dispatch)
     return owner
+
+
+def _ours(staging: Path) -> bool:
+    """A staging folder asset2sim made: a real folder, empty or holding its bookkeeping files."""
+    try:
+        return staging.is_dir() and not staging.is_symlink() and (
+            not any(staging.iterdir()) or any((staging / n).exists() for n in _BOOKKEEPING))
+    except OSError:
+        return False
+
+
+def _try_lock(folder: Path) -> int | None:
+    """A descriptor of ``folder`` holding an exclusive ``flock`` (released when closed, or when the process ends,
+    killed or not); None when another process holds it or the folder cannot be locked."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def _remove_stale(staging: Path) -> bool:
+    """Remove a staging folder no live run holds (a killed run's leftovers); False when a run still writes it."""
+    fd = _try_lock(staging)
+    if fd is None:
+        return False
+    try:
+        shutil.rmtree(staging, ignore_errors=True)
+    finally:
+        os.close(fd)
+    return not os.path.lexists(staging)
+
+
+def remove_stale_staging(out_dir: Path | str) -> bool:
+    """Remove the staging folder ``.<name>.asset2sim-next`` beside ``out_dir`` when a killed or terminated
+    ``--force`` run left it (asset2sim's, and no live run holds its lock); True when one was removed. A rerun
+    that finds its output complete calls this, so nothing of an interrupted run stays beside ``--out``."""
+    try:
+        root = Path(out_dir).resolve()
+    except (OSError, RuntimeError):
+        return False
+    staging = staging_folder(root)
+    return os.path.lexists(staging) and _ours(staging) and _remove_stale(staging)
 
 
 def _write_failed(given: Path, exc: OSError) -> OutputError:

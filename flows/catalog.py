@@ -17,10 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Literal
 
-import yaml
+
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from asset2sim.flows import catalog_fs
+from asset2sim.input_files import InputFileError, load_yaml
 from asset2sim.schemas.catalog import ROW_COLUMNS, ROW_STATUSES, CatalogRow, arrow_schema
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.ingest import partnet_mobility
@@ -221,12 +222,11 @@ def load_catalog(path: Path | str) -> Catalog:
             :class:`CatalogConfig` (the message names the field).
     """
     path = Path(path).expanduser().resolve()
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise CatalogError(f"{path}: cannot read the catalog: {exc}") from exc
-    except yaml.YAMLError as exc:
-        raise CatalogError(f"{path}: not valid YAML: {exc}") from exc
+    try:  # a regular file under 1 MiB, at most 64 YAML aliases (asset2sim.input_files.load_yaml)
+        data = load_yaml(path, what="catalog")
+    except InputFileError as exc:
+        cause = FileNotFoundError(str(exc)) if exc.code == "INPUT_NOT_FOUND" else exc  # the commands say where to run
+        raise CatalogError(f"{path}: cannot read the catalog ({exc.code}): {exc}") from cause
     if not isinstance(data, dict):
         raise CatalogError(f"{path}: expected a mapping at the top level")
     try:

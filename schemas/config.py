@@ -10,35 +10,57 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
+import math
+import re
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from asset2sim.schemas.request import RequestOverrides
 
 
-class SimConventions(BaseModel):
-    """SPEC conventions for every simulator measurement."""
+#: Longest settle or test phase of one simulator measurement, s (the SPEC's are 1 s and 2 s).
+MAX_PHASE_TIME = 60.0
+#: Most simulator steps one settle + test measurement may take ((settle_time + test_time) / timestep): a time step
+#: and times that ask for more would run for hours, not give a better verdict.
+MAX_MEASUREMENT_STEPS = 200_000
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    timestep: float = 1.0 / 240.0
+
+class SimConventions(BaseModel):
+    """SPEC conventions for every simulator measurement. Every field is finite and bounded (pydantic refuses
+    the rest, naming the field): a time step in (0, 0.05] s, settle and test times up to :data:`MAX_PHASE_TIME`,
+    at most :data:`MAX_MEASUREMENT_STEPS` steps per measurement."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    timestep: float = Field(1.0 / 240.0, gt=0.0, le=0.05)
     """s"""
-    gravity: float = -9.81
+    gravity: float = Field(-9.81, ge=-100.0, le=100.0)
     """m/s^2 along z"""
-    settle_time: float = 1.0
+    settle_time: float = Field(1.0, ge=0.0, le=MAX_PHASE_TIME)
     """T_set, s"""
-    test_time: float = 2.0
+    test_time: float = Field(2.0, gt=0.0, le=MAX_PHASE_TIME)
     """T_test, s"""
-    stability_pos_tol: float = 1e-3
+    stability_pos_tol: float = Field(1e-3, gt=0.0, le=1.0)
     """D_pos pass threshold, m"""
-    stability_ori_tol: float = 1e-2
+    stability_ori_tol: float = Field(1e-2, gt=0.0, le=math.pi)
     """D_ori pass threshold, rad"""
-    oscillation_sign_changes: int = 3
+    oscillation_sign_changes: int = Field(3, ge=1, le=10_000)
     """a joint fails with at least this many sign changes of its step-to-step motion ..."""
-    oscillation_amp_revolute: float = 0.05
+    oscillation_amp_revolute: float = Field(0.05, gt=0.0, le=2 * math.pi)
     """... and amplitude above this, rad"""
-    oscillation_amp_prismatic: float = 0.005
+    oscillation_amp_prismatic: float = Field(0.005, gt=0.0, le=10.0)
     """... or above this for prismatic joints, m"""
+
+    @model_validator(mode="after")
+    def _steps_bounded(self) -> "SimConventions":
+        steps = (self.settle_time + self.test_time) / self.timestep
+        if steps > MAX_MEASUREMENT_STEPS:
+            raise ValueError(f"(settle_time + test_time) / timestep = {steps:.0f} simulator steps per measurement, above the "
+                             f"cap of {MAX_MEASUREMENT_STEPS}: use a larger timestep or shorter times")
+        return self
+
+
+_ENGINE_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")
 
 
 def default_engines() -> list[str]:
@@ -60,28 +82,28 @@ class MjcfConfig(BaseModel):
 class RefineConfig(BaseModel):
     """Knobs of the refine pipeline (units on every field)."""
 
-    model_config = ConfigDict(extra="forbid")
-    estimator: str = "offline"
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    estimator: str = Field("offline", min_length=1, max_length=64)
     """Registered estimator name (``offline``, ``llm``, ``openai`` ...)."""
-    model: str | None = None
+    model: str | None = Field(None, min_length=1, max_length=256)
     """Model string for model-backed estimators (litellm form, e.g. ``gemini/gemini-2.5-flash``)."""
-    base_url: str | None = None
+    base_url: str | None = Field(None, min_length=1, max_length=2048)
     """Base URL of an OpenAI-compatible server for model-backed estimators."""
     sim: SimConventions = Field(default_factory=SimConventions)
-    penetration_tolerance: float = 1e-3
+    penetration_tolerance: float = Field(1e-3, gt=0.0, le=1.0)
     """Phi below which the state is accepted, m (sum over contact points)."""
-    state_lambda: float = 0.05
+    state_lambda: float = Field(0.05, ge=0.0, le=1e3)
     """lambda in Phi(q) + lambda*||q - q_request||^2, m per rad^2 (or per m^2)."""
-    max_state_evaluations: int = 4000
+    max_state_evaluations: int = Field(4000, ge=1, le=1_000_000)
     """Budget of contact queries during state refinement (count)."""
-    max_escalation_rounds: int = 5
+    max_escalation_rounds: int = Field(5, ge=0, le=50)
     """Post-check rounds changing damping/friction (count;
     :mod:`asset2sim.tasks.check.dynamics_search`)."""
-    escalation_factor: float = 3.0
+    escalation_factor: float = Field(3.0, gt=1.0, le=100.0)
     """Multiplier on damping/friction per escalation round (dimensionless)."""
-    sag_tolerance_revolute: float = 0.02
+    sag_tolerance_revolute: float = Field(0.02, gt=0.0, le=math.pi)
     """Largest drift of a requested joint state during the rest test, rad."""
-    sag_tolerance_prismatic: float = 0.002
+    sag_tolerance_prismatic: float = Field(0.002, gt=0.0, le=10.0)
     """Largest drift of a requested joint state during the rest test, m."""
     convex_decomposition: bool = True
     """Allow CoACD decomposition of collision meshes: of those whose hulls always overlap and, with
@@ -92,11 +114,13 @@ class RefineConfig(BaseModel):
     into it (needs CoACD and ``convex_decomposition``; off by default: it costs CoACD time per container;
     ``docs/guide/outputs.md``)."""
     engines: list[str] = Field(default_factory=lambda: default_engines())
-    """Engines the post-check must pass in (worst case); PyBullet first."""
-    max_decompositions: int = Field(32, ge=0)
+    """Engines the post-check must pass in (worst case); PyBullet first. One to 8 distinct engine names; which
+    names exist is checked against the engine registry by :func:`asset2sim.api.load_config` (the CLI, the API and
+    configuration files) and by refine."""
+    max_decompositions: int = Field(32, ge=0, le=4096)
     """CoACD decompositions one collision repair may try (a count, never
     seconds: same input, same files); beyond it meshes keep their hulls."""
-    seed: int = 0
+    seed: int = Field(0, ge=0, le=2**32 - 1)
     keep_declared: bool = False
     """Keep the masses, inertia tensors, centers of mass, joint damping, friction and springs the asset declares
     where ``asset2sim audit`` judges them plausible, and its size when plausible (``docs/guide/audit.md``)."""
@@ -110,6 +134,16 @@ class RefineConfig(BaseModel):
     """How an MJCF input is read (:class:`MjcfConfig`)."""
     overrides: RequestOverrides = Field(default_factory=RequestOverrides)
     """Typed values that win over the request's words (:class:`~asset2sim.schemas.request.RequestOverrides`)."""
+
+    @field_validator("engines")
+    @classmethod
+    def _engine_names(cls, v: list[str]) -> list[str]:
+        if not 1 <= len(v) <= 8:
+            raise ValueError(f"engines: give 1 to 8 engine names, got {len(v)}")
+        bad = [e for e in v if not isinstance(e, str) or not _ENGINE_NAME.fullmatch(e)]
+        if bad:
+            raise ValueError(f"engines: {bad[:3]} are not engine names (lower-case letters, digits and '_')")
+        return v
 
     def config_hash(self) -> str:
         """sha256 (hex, 16 chars) of the canonical JSON of this configuration."""

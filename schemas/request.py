@@ -300,17 +300,19 @@ class StateOverride(BaseModel):
 
 class RequestOverrides(BaseModel):
     """Typed values that win over the request's words (command line, API,
-    configuration file; strings carry units, numbers are SI): ``mass`` kg,
-    ``size`` m (largest extent), ``scale`` (wins over ``size``), ``state``
-    (joint or part label -> :class:`StateOverride`), ``mount``, ``material``."""
+    configuration file; strings carry units, numbers are SI): ``mass`` kg in
+    (0, 1e5], ``size`` m (largest extent) in (0, 100], ``scale`` in [1e-4, 1e4]
+    (the overlay's range; wins over ``size``), ``state`` (joint or part label
+    -> :class:`StateOverride`, at most 256), ``mount``, ``material`` (a name of
+    at most 64 characters). Finite numbers only."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    mass: float | None = Field(None, gt=0.0)
-    size: float | None = Field(None, gt=0.0)
-    scale: float | None = Field(None, gt=0.0)
-    state: dict[str, StateOverride] = Field(default_factory=dict)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+    mass: float | None = Field(None, gt=0.0, le=1e5)
+    size: float | None = Field(None, gt=0.0, le=100.0)
+    scale: float | None = Field(None, ge=1e-4, le=1e4)
+    state: dict[str, StateOverride] = Field(default_factory=dict, max_length=256)
     mount: Literal["fixed", "free"] | None = None
-    material: str | None = None
+    material: str | None = Field(None, min_length=1, max_length=64)
 
     @field_validator("mass", "size", mode="before")
     @classmethod

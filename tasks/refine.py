@@ -131,13 +131,15 @@ def refine_asset(
         est = _keep_declared(est, asset_dir, asset)
     chash = run_hash(asset.input_hash, config, prompt + (f"\ntask: {task}" if task else ""), category)
     if skip_if_complete and is_complete(out_dir, asset.input_hash, chash):
+        output_folder.remove_stale_staging(out_dir)  # what a killed --force run left beside it
         if extras and media and media_phase.media_pending(out_dir):  # a deferred media phase, resumed
             made = media_phase.make_media(out_dir, reference=reference, clips=config.clips)
             log.say("media", f"{out_dir}: " + ", ".join(sorted(made)) + " made (the deferred media phase)")
         return _completed_result(out_dir, log)
     owner = _start_output(asset, out_dir, overwrite)
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
-    with array_cache.guard(asset.source_dir, out_dir, owner.root, reference):  # no cache entry in the input or output
+    staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
+    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference):  # no cache entry in the input or output
         try:
             _announce_extract(asset, findings, log)
             cache = analyze.MeshCache()

@@ -920,6 +920,94 @@ def _cases() -> list[Case]:
           note="PIL cannot identify it: neither PyBullet nor the renderer can use it"))
     add(C("texture_total_cap", "mesh_paths", "TEXTURE_TOO_LARGE", build_valid, policy={"max_total_texture_pixels": 0},
           note="the per-asset texture caps (1 GiB, 4 x 8192 x 8192 pixels by default) with a lowered cap"))
+    out.extend(_other_format_cases())
+    return out
+
+
+# ----------------------------------------------------------------------------- MJCF and USD inputs (issue 58)
+
+_TETRA = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+
+
+def _mjcf_folder(mesh: str = "part.obj", head: str = "", asset: str = "",
+                 prepare: Callable[[Path], None] | None = None) -> Callable[[Path], Path]:
+    """A folder holding one MJCF object (a base and a hinged lid whose geom is the mesh ``mesh``) and ``part.obj``;
+    ``head`` goes after ``<mujoco>``, ``asset`` into ``<asset>``; ``prepare(folder)`` adds what the case needs
+    (files outside go beside the folder, in ``outside/``)."""
+
+    def build(folder: Path) -> Path:
+        folder.mkdir(parents=True, exist_ok=True)
+        outside = folder.parent / "outside"
+        outside.mkdir(exist_ok=True)
+        (outside / "secret.obj").write_text(_TETRA)
+        (folder / "part.obj").write_text(_TETRA)
+        if prepare is not None:
+            prepare(folder)
+        (folder / "object.xml").write_text(
+            f'<mujoco model="corpus">{head}<asset><mesh name="m" file="{mesh}"/>{asset}</asset>'
+            '<worldbody><body name="base" pos="0 0 0.1"><freejoint/><geom type="box" size="0.2 0.2 0.1" mass="2"/>'
+            '<body name="lid" pos="0 0 0.1"><joint name="hinge" type="hinge" axis="0 1 0" range="0 1.5"/>'
+            '<geom type="mesh" mesh="m" mass="0.3"/></body></body></worldbody></mujoco>\n')
+        return folder
+
+    return build
+
+
+def _usd_folder(header: str, prepare: Callable[[Path], None] | None = None) -> Callable[[Path], Path]:
+    """A folder holding one USD object whose layer metadata carries ``header`` (its sublayers)."""
+
+    def build(folder: Path) -> Path:
+        folder.mkdir(parents=True, exist_ok=True)
+        outside = folder.parent / "outside"
+        outside.mkdir(exist_ok=True)
+        (outside / "extra.usda").write_text('#usda 1.0\n\nover "obj"\n{\n}\n')
+        if prepare is not None:
+            prepare(folder)
+        (folder / "object.usda").write_text(
+            f'#usda 1.0\n(\n    defaultPrim = "obj"\n    metersPerUnit = 1\n    upAxis = "Z"\n    {header}\n)\n'
+            'def Xform "obj" (prepend apiSchemas = ["PhysicsArticulationRootAPI"])\n{\n'
+            '    def Xform "base" (prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsMassAPI"])\n    {\n'
+            '        float physics:mass = 2\n'
+            '        def Cube "box" (prepend apiSchemas = ["PhysicsCollisionAPI"])\n        {\n            double size = 0.3\n        }\n'
+            '    }\n}\n')
+        return folder
+
+    return build
+
+
+def _other_format_cases() -> list[Case]:
+    """MJCF and USD inputs under the reader policy: every file they name a regular file inside their folder."""
+    C, topic = Case, "other_formats"
+    out = [
+        C("mjcf_mesh_absolute", topic, "MJCF_PATH_ESCAPES", lambda f: _mjcf_folder(str(f.parent / "outside" / "secret.obj"))(f)),
+        C("mjcf_mesh_dotdot", topic, "MJCF_PATH_ESCAPES", _mjcf_folder("../outside/secret.obj")),
+        C("mjcf_meshdir_outside", topic, "MJCF_PATH_ESCAPES", _mjcf_folder("secret.obj", head='<compiler meshdir="../outside"/>')),
+        C("mjcf_mesh_symlink_out", topic, "MJCF_PATH_ESCAPES",
+          _mjcf_folder("link.obj", prepare=lambda f: os.symlink(f.parent / "outside" / "secret.obj", f / "link.obj"))),
+        C("mjcf_texture_outside", topic, "MJCF_PATH_ESCAPES",
+          _mjcf_folder(asset='<texture name="t" type="2d" file="../outside/secret.png"/>')),
+        C("mjcf_mesh_fifo", topic, "INPUT_NOT_REGULAR_FILE", _mjcf_folder("pipe.obj", prepare=lambda f: os.mkfifo(f / "pipe.obj"))),
+        C("mjcf_include_fifo", topic, "INPUT_NOT_REGULAR_FILE",
+          _mjcf_folder(head='<include file="pipe.xml"/>', prepare=lambda f: os.mkfifo(f / "pipe.xml"))),
+        C("mjcf_mesh_dev_zero", topic, "MJCF_PATH_ESCAPES",
+          _mjcf_folder("zero.obj", prepare=lambda f: os.symlink("/dev/zero", f / "zero.obj"))),
+        C("mjcf_include_loop", topic, "MJCF_INCLUDE_INVALID",
+          _mjcf_folder(head='<include file="a.xml"/>', prepare=lambda f: (
+              (f / "a.xml").write_text('<mujocoinclude><include file="b.xml"/></mujocoinclude>'),
+              (f / "b.xml").write_text('<mujocoinclude><include file="a.xml"/></mujocoinclude>')))),
+        C("mjcf_mesh_missing", topic, "INPUT_NOT_FOUND", _mjcf_folder("nosuch.obj")),
+    ]
+    try:
+        import pxr  # noqa: F401  - the USD cases need usd-core (the [usd] extra)
+    except ImportError:
+        return out
+    out += [
+        C("usd_sublayer_absolute_outside", topic, "USD_LAYER_OUTSIDE_ASSET",
+          lambda f: _usd_folder(f"subLayers = [@{f.parent / 'outside' / 'extra.usda'}@]")(f)),
+        C("usd_sublayer_dotdot", topic, "USD_LAYER_OUTSIDE_ASSET", _usd_folder("subLayers = [@../outside/extra.usda@]")),
+        C("usd_sublayer_fifo", topic, "INPUT_NOT_REGULAR_FILE",
+          _usd_folder("subLayers = [@./pipe.usda@]", prepare=lambda f: os.mkfifo(f / "pipe.usda"))),
+    ]
     return out
 
 

@@ -6,12 +6,14 @@ status) and the helpers that turn failures into it.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 from pathlib import Path
 from typing import Iterable
 
 from asset2sim.engines.registry import known_engines
+from asset2sim.input_files import allow_outside
 from asset2sim.output_folder import OutputError
 
 INVALID_INPUT = 1
@@ -142,3 +144,21 @@ def catalog_failure(exc: Exception, catalog: Path | str) -> CommandError:
         return CommandError(INVALID_REQUEST, "CATALOG_NOT_FOUND", catalog, "no such file; run the command in the "
                             "project's folder (where catalog.yaml is) or pass --catalog PATH")
     return CommandError(INVALID_REQUEST, "CATALOG_INVALID", catalog, str(exc).removeprefix(f"{Path(catalog).expanduser().resolve()}: "))
+
+
+def add_allow_outside(parser) -> None:
+    """``--allow-outside-paths DIR`` (repeatable) on a command that reads MJCF or USD inputs."""
+    parser.add_argument("--allow-outside-paths", action="append", default=[], type=Path, metavar="DIR",
+                        help="let MJCF and USD inputs name files in DIR too, outside their own folder (repeatable; every other "
+                             "rule holds: regular files under the size cap)")
+
+
+@contextlib.contextmanager
+def outside_paths(args):
+    """The block run with ``--allow-outside-paths`` in force (CommandError status 2 ``INPUT_NOT_FOUND``: not a folder)."""
+    folders = getattr(args, "allow_outside_paths", None) or []
+    bad = [f for f in folders if not os.path.isdir(f)]
+    if bad:
+        raise CommandError(INVALID_REQUEST, "INPUT_NOT_FOUND", bad[0], f"--allow-outside-paths {bad[0]}: not a folder")
+    with allow_outside(*folders):
+        yield

@@ -14,7 +14,10 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, output_folder_failure
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError,
+                                        add_allow_outside, output_folder_failure, outside_paths)
+from asset2sim.input_files import allowed_folders, set_allowed_outside
+from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
 from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
@@ -40,15 +43,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run as the Prefect audit flow on a Dask cluster of --jobs workers (needs --out; logs the run to MLflow)")
     p.add_argument("--dask-address", default=None, help="with --flow: an existing Dask scheduler instead of a local cluster")
     p.add_argument("--json", action="store_true", help="print the catalog rows as JSON lines instead of tables")
+    add_allow_outside(p)
 
 
 def _run_all(targets: list[AuditTarget], out: Path | None, category: str | None, simulate: bool, jobs: int,
              config: RefineConfig | None = None) -> list:
     if jobs <= 1 or len(targets) <= 1:
         return [audit_one(t, out, category=category, simulate=simulate, config=config) for t in targets]
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, initializer=set_allowed_outside, initargs=allowed_folders()) as pool:
         futures = [pool.submit(audit_one, t, out, category=category, simulate=simulate, config=config) for t in targets]
         return [f.result() for f in futures]
+
+
+def _out_outside_inputs(out: Path, inputs: list[Path]) -> None:
+    """CommandError status 4 ``OUTPUT_IS_INPUT`` / ``OUTPUT_INSIDE_INPUT`` / ``OUTPUT_CONTAINS_INPUT`` when ``out`` is
+    an input folder (a path given, or the folder of an input file), lies inside one or holds one (its per-asset
+    folders could be the input's), also through a symlink: nothing is written there."""
+    for given in inputs:
+        folder = Path(given) if Path(given).is_dir() else Path(given).parent
+        try:
+            check_location(folder, out)
+        except OutputError as exc:
+            if exc.code in ("OUTPUT_IS_INPUT", "OUTPUT_INSIDE_INPUT", "OUTPUT_CONTAINS_INPUT"):
+                raise CommandError(OUTPUT_LOCATION, exc.code, out, f"{exc}: the audit writes nothing into its input") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,12 +83,17 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(INVALID_INPUT, "AUDIT_NO_ASSETS", None, f"no URDF, MJCF or USD asset in {', '.join(map(str, args.paths))}")
     if args.out is not None and (bad := output_folder_failure(args.out)) is not None:
         raise bad
+    if args.out is not None:
+        _out_outside_inputs(args.out, [*args.paths, *(t.path for t in targets)])
     if args.flow:
         if args.body or args.mjcf_angle:
             raise CommandError(INVALID_REQUEST, "OPTION_NOT_IN_FLOW", None, "--body and --mjcf-angle apply to an audit run here; "
                                "leave out --flow to use them")
         if args.out is None:
             raise CommandError(INVALID_REQUEST, "OUT_REQUIRED", None, "--flow writes the audit catalog: give --out")
+        if args.allow_outside_paths:
+            raise CommandError(INVALID_REQUEST, "OPTION_CONFLICT", None, "--allow-outside-paths applies to audits in this "
+                               "process and its --jobs; the --flow's Dask workers do not take it")
         from asset2sim.flows.audit_flow import run_audit_flow
 
         summary = run_audit_flow(args.paths, args.out, category=args.category, simulate=not args.no_sim, workers=args.jobs,
@@ -79,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
         rows = summary["rows"]
     else:
         config = RefineConfig(body=args.body, mjcf={"angle": args.mjcf_angle})
-        rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs, config)
+        with outside_paths(args):
+            rows = _run_all(targets, args.out, args.category, not args.no_sim, args.jobs, config)
         if args.out is not None:
             audit_catalog.write_audit_catalog(args.out, rows)
     console = Console() if sys.stdout.isatty() else Console(width=200, soft_wrap=True)

@@ -14,8 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, join_codes, os_failure, output_failure,
-                                        parse_engines)
+from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READY, CommandError, add_allow_outside, join_codes,
+                                        os_failure, outside_paths, output_failure, parse_engines)
 from asset2sim.api import load_config, merge_overrides
 from asset2sim.schemas.config import RefineConfig, default_engines
 from asset2sim.tasks import refine as refine_stage
@@ -73,6 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None,
                         help="YAML file of refine options (estimator, model, engines, sim, overrides: {mass: 12kg, state: {lid: 30deg}} ...); "
                              "flags given on the command line win over it")
+    add_allow_outside(parser)
     parser.add_argument("--keep-declared", action="store_true", help=(
         "keep the physics the asset declares where asset2sim audit finds it plausible (masses, inertia, damping, "
         "friction, springs, size) and refine around it (docs/guide/audit.md)"))
@@ -273,11 +274,12 @@ def finding_problems(exc: AssetError, asset) -> list[tuple[str, str, str]]:
 
 def options(args: argparse.Namespace) -> RefineConfig:
     """The run's :class:`RefineConfig`: ``--config``'s file, then the flags
-    given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``)."""
+    given (CommandError status 2 ``CONFIG_INVALID`` / ``OVERRIDE_INVALID``, or the code of a file refused unread:
+    ``INPUT_NOT_REGULAR_FILE``, ``INPUT_TOO_LARGE``, ``YAML_ALIAS_LIMIT`` ...)."""
     try:
         base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
     except (OSError, ValueError) as exc:
-        raise CommandError(INVALID_REQUEST, "CONFIG_INVALID", args.config, str(exc)) from exc
+        raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
     fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url)) if v is not None}
     if getattr(args, "keep_declared", False):
         fields["keep_declared"] = True
@@ -319,10 +321,11 @@ def run(args: argparse.Namespace) -> int:
 
     config = options(args)
     try:
-        result = refine_stage.refine_asset(args.asset, args.prompt, args.out, config, category=args.category,
-                                           task=getattr(args, "task", None) or None, progress=progress, skip_if_complete=not args.force,
-                                           extras=not args.no_extras, overwrite=getattr(args, "overwrite", False),
-                                           media=not getattr(args, "defer_media", False))
+        with outside_paths(args):
+            result = refine_stage.refine_asset(args.asset, args.prompt, args.out, config, category=args.category,
+                                               task=getattr(args, "task", None) or None, progress=progress,
+                                               skip_if_complete=not args.force, extras=not args.no_extras,
+                                               overwrite=getattr(args, "overwrite", False), media=not getattr(args, "defer_media", False))
     except RefineError as exc:
         raise _refine_failure(exc, args) from exc
     except OutputError as exc:  # e.g. an output file missing at the end: no completion marker

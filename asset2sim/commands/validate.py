@@ -8,7 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
-from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError
+from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, add_allow_outside, outside_paths
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import validate_any
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
@@ -19,7 +19,8 @@ HELP = "Check an input asset (safe XML, kinematic tree, numbers, inertials, mesh
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF or OpenUSD file")
+    parser.add_argument("asset", type=Path, help="asset folder (mobility.urdf + meshes), a URDF file, or an MJCF (.xml) or "
+                        "OpenUSD (.usd, .usda, .usdc, .usdz) file (the files it names checked first)")
     parser.add_argument("--body", default=None, help="the body (MJCF) whose subtree is the object, in a scene with several objects with joints")
     parser.add_argument("--mjcf-angle", choices=("radian", "degree"), default=None,
                         help="the unit of an MJCF file's angles, winning over its <compiler angle> and its package's convention")
@@ -30,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--error", metavar="CODE", action="append", default=[],
                         help="make this code an error (repeatable), e.g. --error JOINT_LIMIT_EQUAL")
     parser.add_argument("--allow", metavar="CODE", action="append", default=[], help="downgrade this code to a warning (repeatable)")
+    add_allow_outside(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
     overrides.update({c: "warning" for c in args.allow})
     policy = ValidationPolicy(overrides=overrides, warnings_as_errors=args.strict, check_mesh_contents=not args.paths_only)
     try:
-        findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
+        with outside_paths(args):
+            findings, notes = validate_any(args.asset, policy, ReadOptions(body=args.body, mjcf_angle=args.mjcf_angle))
     except AssetError as exc:
         raise CommandError(INVALID_INPUT, "INPUT_UNREADABLE", args.asset, str(exc)) from exc
     if not args.json and not args.quiet:

@@ -281,7 +281,7 @@ def _load_pieces(key: str, model: urdf.UrdfModel) -> tuple[dict[str, list[Piece]
     if data is None:
         return None
     try:
-        meta = json.loads(array_cache.array_text(data["meta"]))
+        meta = array_cache.array_json(data["meta"])  # NaN or infinity in it: a miss
         if set(meta["links"]) != set(model.links):
             return None
         pieces, n = {}, 0

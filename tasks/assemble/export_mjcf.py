@@ -23,6 +23,7 @@ from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, STATE_NAME, URDF_NAM
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import read_initial_state, read_urdf
 from asset2sim.engines.mjcf import KEYFRAME, mujoco_messages, urdf_to_mjcf
+from asset2sim.engines.mjcf.base import load_mujoco
 from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
@@ -117,8 +118,7 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float],
             beyond 1e-6 relative, a body's inertial beyond 1e-9 absolute /
             1e-6 relative, a keyframe value beyond 1e-12).
     """
-    import mujoco
-
+    mujoco = load_mujoco()
     try:
         with mujoco_messages():
             m = mujoco.MjModel.from_xml_path(str(xml_path))

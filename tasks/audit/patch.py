@@ -18,7 +18,10 @@ from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import JointDynamics, LinkPhysics, Overlay
 from asset2sim.tasks.assemble import copied_meshes
 from asset2sim.tasks.audit import patch_usd
+from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.tasks.ingest.declared import DeclaredPhysics
+from asset2sim.tasks.ingest.mjcf_files import compile_mjcf, gather_mjcf
+from asset2sim.tasks.ingest.staged import StagingError
 from asset2sim.frames import translation_matrix
 from asset2sim.urdf import UrdfDynamics, UrdfInertial, UrdfModel, read_urdf, write_urdf
 
@@ -96,18 +99,20 @@ def _copy_named(src: Path, base: Path, folder: Path) -> str:
 
 
 def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict[str, JointDynamics], folder: Path) -> Path:
-    import mujoco
-
+    mujoco = load_mujoco()
     source = dp.source
-    spec = mujoco.MjSpec.from_file(str(source))
-    model = spec.compile()
+    sources = gather_mjcf(source)  # the reader policy: only checked files inside the input's tree are read and copied
+    spec, model, _ = compile_mjcf(sources)
     base = source.parent
     meshdir, texdir = Path(spec.meshdir or ""), Path(spec.texturedir or "")
     for items, sub in ((spec.meshes, meshdir), (spec.hfields, meshdir), (spec.skins, meshdir), (spec.textures, texdir)):
         for item in items:
             if getattr(item, "file", ""):
-                p = Path(item.file)
-                item.file = _copy_named(p if p.is_absolute() else base / sub / p, base, folder)
+                named = os.path.normpath(os.path.join(os.path.abspath(base), sub, item.file))
+                real = sources.real.get(named)
+                if real is None:  # gather_mjcf checked every file attribute; nothing else is copied
+                    raise StagingError(f"{source}: {item.file!r} was not checked by the reader policy; not copied")
+                item.file = _copy_named(real, base, folder)
     spec.meshdir = spec.texturedir = ""
     spec.modelfiledir = str(folder)  # MuJoCo resolves the copies' relative paths from the patch's folder
     if spec.compiler.inertiafromgeom == mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE:  # else explicit inertials would be ignored
@@ -130,9 +135,11 @@ def _write_mjcf(dp: DeclaredPhysics, links: dict[str, LinkPhysics], joints: dict
         damping[0] = jd.damping
         joint.damping = damping
         joint.frictionloss = jd.friction
-    spec.compile()
+    with mujoco_messages():
+        spec.compile()
+        xml = spec.to_xml()
     out = folder / file_names.file_stem(source.name)
-    atomic.write_text(out, spec.to_xml())
+    atomic.write_text(out, xml)
     return out
 
 

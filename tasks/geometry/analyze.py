@@ -132,8 +132,8 @@ def analyze_link(link: LinkDesc, *, prefer: Literal["collision", "visual"] = "co
     hit = array_cache.load(DISK_KIND, key) if key is not None else None
     if hit is not None and "json" in hit:
         try:
-            return LinkGeometry.model_validate_json(array_cache.array_text(hit["json"]))
-        except ValueError:  # UnicodeDecodeError and pydantic's ValidationError included
+            return LinkGeometry.model_validate(array_cache.array_json(hit["json"]))
+        except ValueError:  # NaN or infinity in its JSON, UnicodeDecodeError and pydantic's ValidationError included
             pass  # an unreadable entry: computed again and rewritten
     geo = _analyze_surface(link, prefer, voxels_per_axis, max_voxels, close_gaps, layer_correction, subvoxel, cache)
     if geo is not None and key is not None:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from asset2sim import atomic, file_memo
+from asset2sim import atomic, file_memo, input_files
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
@@ -87,7 +87,7 @@ def extract_asset_checked(asset: Path | str, *, asset_id: str | None = None, cat
             the URDF reader cannot read the validated bytes.
     """
     reading = reading or ReadOptions()
-    key = (os.path.realpath(asset), asset_id, category, reading) if policy is None else None
+    key = (os.path.realpath(asset), asset_id, category, reading, input_files.allowed_folders()) if policy is None else None
     if key is not None and (hit := _EXTRACT_MEMO.get(key)) is not None:
         return hit
     given = Path(asset)
@@ -161,7 +161,12 @@ def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -
     try:
         read = mjcf_reader.read_mjcf_asset(source, reading) if fmt == "mjcf" else usd_reader.read_usd_asset(source)
         return staged.stage(read, staged.staging_folder(source))
-    except (staged.StagingError, ImportError, OSError) as exc:
+    except staged.StagingError as exc:
+        if exc.code is None:
+            raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
+        finding = validate_input.Finding(code=exc.code, severity="error", message=str(exc), file=str(source), action="refuse")
+        raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc.code}: {exc}", [finding]) from exc
+    except (ImportError, OSError) as exc:
         raise AssetError(f"{source}: cannot read this {fmt.upper()} file: {exc}") from exc
 
 
@@ -177,7 +182,12 @@ def validate_any(asset: Path | str, policy: "ValidationPolicy | None" = None,
     """
     if not os.path.exists(asset):  # ASSET_NOT_FOUND, as for any input
         return validate_input.validate_asset(asset, policy), ()
-    staged_asset = _stage_other_format(asset, reading)
+    try:
+        staged_asset = _stage_other_format(asset, reading)
+    except AssetError as exc:
+        if exc.findings:  # a file the reader policy refused: its finding, as validate_asset reports it
+            return list(exc.findings), ()
+        raise
     if staged_asset is None:
         return validate_input.validate_asset(asset, policy), ()
     return validate_input.validate_asset(staged_asset.folder, policy), staged_asset.read.notes
@@ -253,8 +263,8 @@ def _copy_extracted(value: tuple[AssetDescription, list["Finding"]]) -> tuple[As
     return desc.model_copy(deep=True), [f.model_copy(deep=True) for f in findings]
 
 
-#: What :func:`extract_asset_checked` returned with the default policy, by (real path, asset id,
-#: category), while the folder and the files it references are unchanged (each caller gets a copy).
+#: What :func:`extract_asset_checked` returned with the default policy, by (real path, asset id, category, folders
+#: allowed outside the input (:func:`asset2sim.input_files.allow_outside`)), while the folder and the files it references are unchanged (each caller gets a copy).
 _EXTRACT_MEMO = file_memo.FileMemo(_copy_extracted, max_entries=16)
 
 

@@ -36,6 +36,16 @@ CODES: dict[str, CodeInfo] = {
     "URDF_ENCODING_UNSUPPORTED": _c("error", "files", "the URDF is not UTF-8 (UTF-16/32, invalid UTF-8, or another declared encoding with non-ASCII bytes)"),
     "ASSET_FILE_NOT_REGULAR": _c("error", "files", "semantics.txt or meta.json is not a regular file inside the folder"),
     "ASSET_FILE_TOO_LARGE": _c("error", "files", "semantics.txt or meta.json is a regular file above the cap (max_extra_bytes, 1 MiB); not read"),
+    # files an MJCF or USD input names, and the input file itself (asset2sim.input_files)
+    "INPUT_NOT_FOUND": _c("error", "files", "a file the input names (an MJCF include, mesh or texture, a USD layer) does not exist"),
+    "INPUT_NOT_REGULAR_FILE": _c("error", "files", "the input file, or a file it names, is a FIFO, device (/dev/zero), socket or folder: refused without reading it"),
+    "INPUT_TOO_LARGE": _c("error", "files", "the input file, or a file it names, is above the size cap (64 MiB per file, 1 GiB per MJCF model): not read"),
+    "INPUT_OUTSIDE_TREE": _c("error", "files", "the MJCF or USD file given is a symlink leading out of its folder"),
+    "INPUT_UNREADABLE": _c("error", "files", "the operating system refuses to open or read a file the input names (permissions)"),
+    "MJCF_PATH_ESCAPES": _c("error", "files", "an MJCF include, mesh, texture, height field, skin or model file, or meshdir / texturedir / assetdir, that is absolute, a URI, leaves the file's folder through ../ or a symlink"),
+    "MJCF_INCLUDE_INVALID": _c("error", "files", "an MJCF <include> of itself (a loop) or without a file, more than 256 includes, or a chain deeper than 16"),
+    "USD_LAYER_OUTSIDE_ASSET": _c("error", "files", "a USD sublayer, reference or payload outside the file's folder (absolute path, ../, symlink, URI)"),
+    "FORMAT_UNREADABLE": _c("error", "files", "MuJoCo or OpenUSD cannot read the MJCF or USD file into an articulated object (the message has the reader's reason)"),
     # xml (safexml)
     "XML_TOO_LARGE": _c("error", "xml", "document above the size cap"),
     "XML_TOKEN_TOO_LARGE": _c("error", "xml", "a text, tag or attribute value above the token cap"),

@@ -128,6 +128,22 @@ class ReadOptions:
             raise ValueError(f"mjcf angle {self.mjcf_angle!r}: expected one of {list(ANGLE_UNITS)}")
 
 
+def package_tree(path: Path | str) -> Path | None:
+    """The asset folder of the known host package (:data:`HOST_LAYOUTS`) the MJCF at ``path`` lies in (the folder
+    its layout's last folder name marks: ``.../metaworld/assets``, ``.../robosuite/models/assets``), the tree the
+    files it names may come from (its packages' files include shared scenes and textures beside the object's
+    folder: ``../scene/basic_scene.xml``, ``../textures``); None outside a known package (the file's own folder is
+    the tree). The package's layout bounds it: nothing above that folder is read."""
+    parts = Path(os.path.abspath(path)).parent.parts
+    lower = [p.lower() for p in parts]
+    for layout in HOST_LAYOUTS:
+        n = len(layout.folders)
+        for i in range(len(lower) - n, -1, -1):  # the innermost match
+            if tuple(lower[i:i + n]) == layout.folders:
+                return Path(*parts[:i + n])
+    return None
+
+
 def host_layout(path: Path | str) -> HostLayout | None:
     """The known host package (:data:`HOST_LAYOUTS`) whose folders the file at ``path`` lies in, or None."""
     parts = [p.lower() for p in Path(os.path.abspath(path)).parent.parts]

@@ -1,7 +1,8 @@
 """MJCF (MuJoCo) articulated objects read into the project's one asset model.
 
-The file is parsed and compiled by MuJoCo itself (``mujoco.MjSpec.from_file``,
-then ``spec.compile()``): default classes, ``<compiler angle>`` (degrees are
+The file and every file it names are checked and read first
+(:mod:`asset2sim.tasks.ingest.mjcf_files`); the checked copy is parsed and compiled by
+MuJoCo itself (``mujoco.MjSpec.from_file``, then ``spec.compile()``): default classes, ``<compiler angle>`` (degrees are
 MJCF's default), ``meshdir``, mesh scale and recentring, ``fromto`` and
 alternative orientations all come resolved from the compiled ``MjModel``; the
 spec says which bodies declare an ``<inertial>``. Nothing here walks XML.
@@ -35,15 +36,15 @@ Conventions (MJCF -> URDF):
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim.extras import import_extra
+from asset2sim.engines.mjcf.base import load_mujoco
 from asset2sim.frames import axis_angle_matrix, quat_wxyz_matrix, rigid_inverse, rigid_matrix, translation_matrix
 from asset2sim.tasks.ingest import host_conventions, mjcf_scene
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.tasks.ingest.mjcf_files import MjcfSources, compile_mjcf, gather_mjcf
 from asset2sim.tasks.ingest.staged import DeclaredSpring, ReadAsset, StagingError, collisions_as_visuals, mesh_name, rgba_material
 from asset2sim.urdf import UrdfDynamics, UrdfGeometry, UrdfInertial, UrdfJoint, UrdfLimit, UrdfLink, UrdfModel
 
@@ -56,28 +57,15 @@ def _pose(pos, quat_wxyz) -> np.ndarray:
     return rigid_matrix(quat_wxyz_matrix(np.asarray(quat_wxyz, float)), pos)
 
 
-def _compile(path: Path, degree: bool | None = None):
-    """(spec, compiled model, MuJoCo's warnings) of the MJCF at ``path``, its angles read in degrees (``degree``
-    True) or radians (False) whatever its ``<compiler angle>`` says (None: as it says); StagingError with MuJoCo's
-    message when it cannot."""
-    mujoco = import_extra("mujoco", "reading MJCF")
-    try:
-        with warnings.catch_warnings(record=True) as caught:  # MuJoCo's decoder warnings become notes
-            warnings.simplefilter("always")
-            spec = mujoco.MjSpec.from_file(str(path))
-            if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
-                spec.compiler.degree = degree
-            model = spec.compile()
-    except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
-        raise StagingError(f"{path}: MuJoCo cannot read this MJCF: {exc}") from exc
-    return spec, model, [f"MuJoCo: {w.message}" for w in caught]
-
-
 def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> ReadAsset:
     """Read one articulated object from an MJCF file (or from a scene holding it).
 
     Args:
-        path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them).
+        path: the ``<mujoco>`` XML file (its meshes resolved as MuJoCo resolves them). The file and every file it
+            names are checked and read first (:func:`~asset2sim.tasks.ingest.mjcf_files.gather_mjcf`: regular
+            files inside the file's folder, or inside its package's asset folder for a file of a known package
+            (:func:`~asset2sim.tasks.ingest.host_conventions.package_tree`), under the size cap); MuJoCo reads
+            only a private copy of those.
         options: ``body`` picks the object in a scene with several jointed subtrees
             (:func:`~asset2sim.tasks.ingest.mjcf_scene.pick_object`); ``mjcf_angle`` overrides the angle unit
             the file's place implies (:func:`~asset2sim.tasks.ingest.host_conventions.mjcf_angle`). The notes
@@ -89,19 +77,24 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
 
     Raises:
         MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
-        StagingError: MuJoCo cannot compile the file, or the file holds something the asset model
-            cannot take (names the body or joint): no object or several under the world body and no ``body``
-            naming one, a ball joint, several joints on one body, a free joint below the root, a slide joint
-            without a range.
+        StagingError: a named file refused by the reader policy (``code`` set: ``MJCF_PATH_ESCAPES``,
+            ``INPUT_NOT_REGULAR_FILE``, ``INPUT_TOO_LARGE`` ...); MuJoCo cannot compile the file, or the file holds
+            something the asset model cannot take (names the body or joint): no object or several under the world
+            body and no ``body`` naming one, a ball joint, several joints on one body, a free joint below the root,
+            a slide joint without a range.
     """
     path = Path(path)
     options = options or ReadOptions()
+    tree = host_conventions.package_tree(path)
+    sources = gather_mjcf(path, tree=tree)  # first: every file it names checked before anything reads it
     convention = host_conventions.mjcf_angle(path, options.mjcf_angle)
-    spec, m, warned = _compile(path, degree=convention.unit == "degree")
-    mujoco = import_extra("mujoco", "reading MJCF")
+    spec, m, warned = compile_mjcf(sources, degree=convention.unit == "degree")
+    mujoco = load_mujoco()
     scene = mjcf_scene.pick_object(m, path, options.body)
-    reader = _Reader(path, spec, m, mujoco)
+    reader = _Reader(path, spec, m, mujoco, sources)
     reader.notes.append(convention.note)
+    if tree is not None:
+        reader.notes.append(f"files it names read within its package's asset folder {tree}")
     reader.notes.extend(scene.notes)
     reader.notes.extend(warned)
     return reader.read(scene.root, scene.bodies)
@@ -110,8 +103,8 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
 class _Reader:
     """State of one :func:`read_mjcf_asset` call."""
 
-    def __init__(self, path: Path, spec, m, mujoco):
-        self.path, self.spec, self.m, self.mj = path, spec, m, mujoco
+    def __init__(self, path: Path, spec, m, mujoco, sources: MjcfSources):
+        self.path, self.spec, self.m, self.mj, self.sources = path, spec, m, mujoco, sources
         self.notes: list[str] = []
         self.meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.mesh_files: dict[tuple, str] = {}
@@ -147,7 +140,7 @@ class _Reader:
             links[self.body_name(b)] = self._link(b, rigid_inverse(frame))
         self._other_notes()
         model = UrdfModel(name=self.spec.modelname or self.path.stem, links=links, joints=joints, root=self.body_name(root))
-        files = tuple(sorted({self.path, *self._mesh_files()}))
+        files = tuple(sorted({self.path.resolve(), *self.sources.real.values()}))
         initial = self._keyframe_state(joints)
         return ReadAsset(source=self.path, format="mjcf", model=model, meshes=self.meshes, springs=self.springs, initial_state=initial,
                          inferred=tuple(self.inferred), notes=tuple(self.notes), files=files, root_fixed=self.root_fixed,
@@ -279,7 +272,11 @@ class _Reader:
             jid = self.mj.mj_name2id(m, self.mj.mjtObj.mjOBJ_JOINT, j.name)
             if jid >= 0:
                 adr = int(m.jnt_qposadr[jid])
-                out[j.name] = float(m.key_qpos[k, adr])
+                value = float(m.key_qpos[k, adr])  # as MuJoCo reads it (a joint's ref moves its frame, not the value)
+                if not np.isfinite(value):  # a NaN or infinity in the keyframe is no position: the joint's default kept
+                    self.notes.append(f"keyframe {names[k] or '#' + str(k)!r}: joint {j.name!r} at {value}, not a number: not used")
+                    continue
+                out[j.name] = value
         if out:
             self.notes.append(f"initial joint positions from keyframe {names[k] or '#' + str(k)!r}")
         return out
@@ -366,19 +363,3 @@ class _Reader:
             self.notes.append(f"{m.ntendon} tendon(s) not carried (URDF has no element for them)")
         if m.neq:
             self.notes.append(f"{m.neq} equality constraint(s) not carried (URDF has no element for them)")
-
-    def _mesh_files(self) -> list[Path]:
-        """Mesh and texture files the MJCF names that exist (for the input hash)."""
-        base = self.path.parent
-        meshdir = Path(self.spec.meshdir or "")
-        texdir = Path(self.spec.texturedir or "")
-        out = []
-        for items, folder in ((self.spec.meshes, meshdir), (self.spec.textures, texdir)):
-            for item in items:
-                f = getattr(item, "file", "") or ""
-                if not f:
-                    continue
-                p = Path(f) if Path(f).is_absolute() else base / folder / f
-                if p.is_file():
-                    out.append(p.resolve())
-        return out

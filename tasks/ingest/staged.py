@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim import atomic, file_names
+from asset2sim.input_files import read_head
 from asset2sim.urdf import UrdfInertial, UrdfLink, UrdfMaterial, UrdfModel, write_urdf
 
 #: The staged URDF's file name inside its folder.
@@ -39,7 +40,13 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 
 class StagingError(ValueError):
     """An MJCF or USD input cannot be read into the asset model (the message names the file and the
-    body, prim or joint)."""
+    body, prim or joint). ``code``: the finding code when a file the input names is refused by the reader
+    policy (:mod:`asset2sim.input_files`: ``MJCF_PATH_ESCAPES``, ``USD_LAYER_OUTSIDE_ASSET``,
+    ``INPUT_NOT_REGULAR_FILE`` ...), else None."""
+
+    def __init__(self, message: str, code: str | None = None):
+        super().__init__(message)
+        self.code = code
 
 
 @dataclass(frozen=True)
@@ -101,18 +108,19 @@ class StagedAsset:
 
 def input_format(path: Path | str) -> str:
     """``"urdf"``, ``"mjcf"`` or ``"usd"`` for an input path: a folder or a ``.urdf`` file is URDF; ``.xml`` /
-    ``.mjcf`` files are MJCF (a ``.xml`` whose root element is ``<robot>`` is URDF); ``.usd*`` files are USD."""
+    ``.mjcf`` files are MJCF (a ``.xml`` whose root element is ``<robot>`` is URDF); ``.usd*`` files are USD. Only the
+    first 4 KiB of a regular file are read (a FIFO or device is taken as MJCF by its suffix, and refused by the reader)."""
     p = Path(path)
     suffix = p.suffix.lower()
     if p.is_dir() or suffix == ".urdf":
         return "urdf"
     if suffix in USD_SUFFIXES:
         return "usd"
-    if suffix in MJCF_SUFFIXES:
-        try:
-            head = p.read_bytes()[:4096].decode("utf-8", "replace")
-        except OSError:
+    if suffix in MJCF_SUFFIXES:  # the first 4 KiB of a regular file only: a FIFO or /dev/zero is never read here
+        raw = read_head(p)
+        if raw is None:
             return "mjcf"
+        head = raw.decode("utf-8", "replace")
         return "urdf" if "<robot" in head and "<mujoco" not in head else "mjcf"
     return "urdf"
 
@@ -123,21 +131,37 @@ _ROOT_TAG = re.compile(rb"<\s*([A-Za-z_][\w:.-]*)")
 def root_element(path: Path | str) -> str | None:
     """The name of an XML file's root element, read from its first 4 KiB past the declaration and comments
     (``mujoco``, ``mujocoinclude``, ``robot`` ...); None when none is found or the file cannot be read."""
-    try:
-        head = Path(path).read_bytes()[:4096]
-    except OSError:
+    head = read_head(path)
+    if head is None:
         return None
     head = re.sub(rb"<\?.*?\?>|<!--.*?-->|<!DOCTYPE[^>]*>", b"", head, flags=re.S)
     m = _ROOT_TAG.search(head)
     return m.group(1).decode("ascii", "replace") if m else None
 
 
+#: Sub-folders of an output folder that hold its MJCF and USD exports (``asset2sim export``), whose meshes are the
+#: output folder's own (``meshdir=".."``).
+EXPORT_FOLDERS = ("mjcf", "usd")
+
+
+def input_tree(path: Path | str) -> Path:
+    """The folder every file an MJCF or USD input names must lie in: the input file's folder; for an export of an
+    asset2sim output folder (``OUT/mjcf/*.xml``, ``OUT/usd/*.usd`` beside ``OUT/mobility.urdf``), that output folder."""
+    folder = Path(os.path.abspath(str(path))).parent
+    if folder.name in EXPORT_FOLDERS and os.path.isfile(folder.parent / "mobility.urdf"):
+        return folder.parent
+    return folder
+
+
 def other_format_file(asset: Path | str) -> tuple[Path, str] | None:
     """(file, ``"mjcf"`` or ``"usd"``) of the MJCF or USD file an input names: the path itself when it is one
-    (:func:`input_format`); for a folder without any ``*.urdf``, its one top-level MJCF or USD file (a folder
-    per object, as a dataset of MJCF objects is laid out); else None (a URDF input, or a folder validation
+    (:func:`input_format`); for a folder without any ``*.urdf``, its one top-level MJCF (root ``<mujoco>``, its
+    ``<mujocoinclude>`` files beside it) or USD file (a folder per object, as a dataset of MJCF objects is laid
+    out); else None (a URDF input, or a folder validation
     will report on)."""
     p = Path(asset)
+    if not os.path.lexists(p):
+        return None
     if p.is_dir():
         if any(p.glob("*.urdf")):
             return None
@@ -145,6 +169,8 @@ def other_format_file(asset: Path | str) -> tuple[Path, str] | None:
     else:
         cands = [p]
     found = [(f, fmt) for f in cands if (fmt := input_format(f)) != "urdf"]
+    if p.is_dir() and len(found) > 1:  # a model's <mujocoinclude> files beside it are not objects of their own
+        found = [(f, fmt) for f, fmt in found if fmt != "mjcf" or root_element(f) == "mujoco"]
     return found[0] if len(found) == 1 else None
 
 

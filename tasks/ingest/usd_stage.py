@@ -8,6 +8,7 @@ A stage's lengths are ``metersPerUnit`` m and its up axis Y or Z: every transfor
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.frames import rigid_matrix, rigid_part
+from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, check_file
 from asset2sim.openusd import authored, pxr_modules, value_or
-from asset2sim.tasks.ingest.staged import StagingError, mesh_name, rgba_material
+from asset2sim.tasks.ingest.staged import StagingError, input_tree, mesh_name, rgba_material
 from asset2sim.urdf import UrdfGeometry, UrdfLink, UrdfMaterial
 
 #: Rotation (3, 3) taking +z to the axis of a Cylinder / Capsule / Cone.
@@ -54,18 +56,93 @@ class StageReading:
         return rigid_part(self.world(prim) @ np.linalg.inv(self.L))
 
 
+#: Layers per stage (sublayers, references and payloads, each counted once).
+MAX_LAYERS = 1024
+
+
+def _layer_file(identifier: str) -> tuple[str, bool]:
+    """(the file on disk, True when ``identifier`` names a layer inside a package: ``pkg.usdz[inner.usd]``)."""
+    if identifier.endswith("]") and "[" in identifier:
+        return identifier[:identifier.index("[")], True
+    return identifier, False
+
+
+def open_layers(path: Path | str, tree: Path | str | None = None, *, max_bytes: int = DEFAULT_MAX_BYTES) -> list:
+    """Open the root layer at ``path`` and every layer it composes (sublayers, references, payloads, in variants
+    too: ``Sdf.Layer.GetCompositionAssetDependencies``), each checked before pxr opens it: a regular file inside
+    ``tree`` (default :func:`~asset2sim.tasks.ingest.staged.input_tree`, the file's folder; symlinks resolved)
+    under ``max_bytes``. A stage opened on the first layer returned finds the others open and opens no other file.
+
+    Returns:
+        The open ``Sdf.Layer`` objects, the root first (keep them alive while the stage is open).
+
+    Raises:
+        StagingError: with ``code``: ``USD_LAYER_OUTSIDE_ASSET`` (a layer outside the tree: an absolute path,
+            ``../``, a symlink out, a URI), ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device or
+            socket), ``INPUT_TOO_LARGE``, ``INPUT_OUTSIDE_TREE`` (the file given a symlink out of its folder),
+            ``INPUT_UNREADABLE``; without a code when pxr cannot read a layer.
+    """
+    _, Sdf, _, _, _, _ = pxr_modules()
+    path = Path(os.path.abspath(str(path)))
+    root = os.path.abspath(str(tree)) if tree is not None else str(input_tree(path))
+
+    def check(file: str, what: str) -> None:
+        try:
+            check_file(file, tree=root, max_bytes=max_bytes, what=what)
+        except InputFileError as exc:
+            code = "USD_LAYER_OUTSIDE_ASSET" if exc.code == "INPUT_OUTSIDE_TREE" and what != "USD file" else exc.code
+            raise StagingError(str(exc), code=code) from None
+
+    def layer(identifier: str, what: str):
+        try:
+            opened = Sdf.Layer.FindOrOpen(identifier)
+        except Exception as exc:  # Tf.ErrorException
+            raise StagingError(f"{path}: {what} {identifier}: not a readable USD layer: {str(exc).strip()[:300]}") from None
+        if opened is None:
+            raise StagingError(f"{path}: {what} {identifier}: not a readable USD layer")
+        return opened
+
+    check(str(path), "USD file")
+    layers = [layer(str(path), "USD file")]
+    seen = {layers[0].identifier}
+    todo = list(layers)
+    while todo:
+        current = todo.pop()
+        for dep in current.GetCompositionAssetDependencies():
+            if not dep:
+                continue
+            resolved = current.ComputeAbsolutePath(dep)
+            file, packaged = _layer_file(resolved)
+            what = f"USD layer {dep!r} named by {current.identifier}"
+            if "://" in file or not os.path.isabs(file):
+                raise StagingError(f"{what}: resolves to {resolved!r}, not a file inside {root}", code="USD_LAYER_OUTSIDE_ASSET")
+            check(file, what)
+            if resolved in seen:
+                continue
+            seen.add(resolved)
+            if len(seen) > MAX_LAYERS:
+                raise StagingError(f"{path}: more than {MAX_LAYERS} layers", code="INPUT_TOO_LARGE")
+            opened = layer(resolved, what)
+            layers.append(opened)
+            if not packaged:
+                todo.append(opened)
+    return layers
+
+
 def open_stage(path: Path) -> StageReading:
     """The stage at ``path`` and its basis change (the conversions noted).
 
     Raises:
         ImportError: ``usd-core`` is not installed.
-        StagingError: no such file, not a readable stage, or stage units that are not positive numbers.
+        StagingError: a layer refused by :func:`open_layers` (``code`` set), not a readable stage, or stage units
+            that are not positive numbers.
     """
     _, _, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
-    if not path.is_file():
-        raise StagingError(f"{path}: no such file")
     try:
-        stage = Usd.Stage.Open(str(path))
+        layers = open_layers(path)
+        stage = Usd.Stage.Open(layers[0])
+    except StagingError:
+        raise
     except Exception as exc:  # pxr raises Tf.ErrorException for an unreadable layer
         raise StagingError(f"{path}: not a readable USD stage: {str(exc).strip()[:300]}") from None
     if stage is None:

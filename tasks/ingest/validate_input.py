@@ -17,7 +17,7 @@ import os
 import stat
 from pathlib import Path
 
-from asset2sim.tasks.ingest import partnet_mobility
+from asset2sim.tasks.ingest import mjcf_reader, partnet_mobility, staged, usd_reader
 from asset2sim.tasks.ingest.findings import (CODES, DEFAULT_POLICY, MAX_LINKS, MAX_TOTAL_FACES, SEMANTIC_KINDS, Finding,
                                              ValidationPolicy, ValidationResult, has_errors)
 from asset2sim.tasks.ingest.mesh_checks import MeshChecks
@@ -168,7 +168,9 @@ def run_validation(asset: Path | str, policy: ValidationPolicy | None = None) ->
 
     Args:
         asset: an asset folder (``mobility.urdf``, or the only ``*.urdf`` not named ``reference_*``)
-            or a URDF file (its folder is the asset folder).
+            or a URDF file (its folder is the asset folder), or an MJCF or USD file (or a folder holding one
+            and no URDF): the files it names checked first, then the file read and staged as a URDF folder,
+            which is validated (:func:`_other_format`).
         policy: severities and caps; default :data:`DEFAULT_POLICY`.
 
     Returns:
@@ -177,10 +179,34 @@ def run_validation(asset: Path | str, policy: ValidationPolicy | None = None) ->
     """
     v = _Validator(Path(asset), policy or DEFAULT_POLICY)
     try:
+        found = staged.other_format_file(asset)
+        if found is not None:
+            return _other_format(v, *found)
         return v.run()
     except Exception as exc:  # a bug must not crash a batch; it refuses the asset
         v.add("INTERNAL_ERROR", f"{type(exc).__name__}: {exc}")
         return v.result
+
+
+def _other_format(v: _Validator, source: Path, fmt: str) -> ValidationResult:
+    """An MJCF or USD file validated: the files it names under the reader policy (``MJCF_PATH_ESCAPES``,
+    ``USD_LAYER_OUTSIDE_ASSET``, ``INPUT_*``: :mod:`~asset2sim.tasks.ingest.mjcf_files`,
+    :func:`~asset2sim.tasks.ingest.usd_stage.open_layers`), then the file read and staged as a URDF folder,
+    whose validation gives the rest of the findings (``FORMAT_UNREADABLE`` when the reader refuses it)."""
+    read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
+    try:
+        staged_asset = staged.stage(read(source), staged.staging_folder(source))
+    except staged.StagingError as exc:
+        v.add(exc.code or "FORMAT_UNREADABLE", str(exc), file=str(source))
+        return v.result
+    except ImportError as exc:
+        v.add("FORMAT_UNREADABLE", f"{source}: {exc}", file=str(source))
+        return v.result
+    inner = _Validator(staged_asset.folder, v.policy)
+    result = inner.run()
+    v.findings.extend(result.findings)
+    result.findings = v.findings
+    return result
 
 
 def validate_asset(asset: Path | str, policy: ValidationPolicy | None = None) -> list[Finding]:

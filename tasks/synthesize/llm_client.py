@@ -87,8 +87,12 @@ class LLMClient:
         return hashlib.sha256(blob).hexdigest()
 
     def _cache_path(self, key: str) -> Path | None:
+        """The record's path; None without a cache folder, or when it lies inside an input or output folder of the
+        run (:func:`asset2sim.array_cache.kept_out`, as the array cache: a ``CacheWarning``, the cache off there)."""
         d = self.config.cache_dir
-        return None if d is None else Path(d) / key[:2] / f"{key}.json"
+        if d is None or array_cache.kept_out(d, "asset2sim reply cache"):
+            return None
+        return Path(d) / key[:2] / f"{key}.json"
 
     def cache_record_cap(self) -> int:
         """Largest reply record read back, bytes: 12 bytes per character of ``max_reply_chars`` (an escaped
@@ -102,7 +106,7 @@ class LLMClient:
         if p is None or not p.is_file():
             return None
         try:
-            rec = json.loads(atomic.read_regular(p, self.cache_record_cap()))
+            rec = array_cache.finite_json(atomic.read_regular(p, self.cache_record_cap()))  # NaN anywhere: rejected, asked again
             why = None
         except FileNotFoundError:  # deleted since: a miss
             return None

@@ -182,3 +182,28 @@ def test_concurrent_appends_never_expose_partial_files(tmp_path):
     assert not errors
     df = store.read("d")
     assert sorted(df["asset_id"]) == ["a0", "a1", "a2", "a3"] and set(df["wall_seconds"]) == {4.0}
+
+
+def test_a_hostile_catalog_file_is_refused_unread(tmp_path):
+    """A FIFO catalog.yaml is refused without blocking, an anchor bomb before it expands (asset2sim.input_files)."""
+    import os
+    import signal
+
+    def on_alarm(signum, frame):
+        raise TimeoutError("load_catalog blocked on a FIFO")
+
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)
+    old = signal.signal(signal.SIGALRM, on_alarm)
+    signal.alarm(20)  # a regression fails instead of hanging the suite
+    try:
+        with pytest.raises(CatalogError, match="INPUT_NOT_REGULAR_FILE"):
+            load_catalog(fifo)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text("a: &a [x,x,x,x,x,x,x,x,x]\n" + "".join(f"a{i}: &a{i} [{', '.join([f'*a{i - 1}' if i > 1 else '*a'] * 9)}]\n"
+                                                          for i in range(1, 9)) + "datasets: *a8\n")
+    with pytest.raises(CatalogError, match="YAML_ALIAS_LIMIT"):
+        load_catalog(bomb)

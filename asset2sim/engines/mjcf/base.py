@@ -6,6 +6,7 @@ root on the ground, the lowest point of a model."""
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import warnings
 from pathlib import Path
@@ -68,10 +69,22 @@ def close(a, b, tol: float) -> bool:
     return bool(np.allclose(np.asarray(a, float), np.asarray(b, float), atol=tol, rtol=tol))
 
 
+#: Where MuJoCo's warnings go outside :func:`mujoco_messages`: this logger, never ``MUJOCO_LOG.TXT`` in the
+#: working directory (MuJoCo's own handler appends every warning to that file and prints it).
+MUJOCO_LOGGER = logging.getLogger("asset2sim.mujoco")
+
+
+def _log_warning(msg) -> None:
+    MUJOCO_LOGGER.warning("MuJoCo: %s", msg)
+
+
 def load_mujoco():
-    """The ``mujoco`` module (ImportError: not installed)."""
+    """The ``mujoco`` module (ImportError: not installed), its warning handler set to :data:`MUJOCO_LOGGER` when
+    none is set, so that no MuJoCo warning writes ``MUJOCO_LOG.TXT`` into the current directory."""
     import mujoco
 
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(_log_warning)
     return mujoco
 
 

@@ -657,3 +657,26 @@ def test_analysis_is_kept_on_disk_by_content(tmp_path, monkeypatch):
     other = write_obj(tmp_path / "other.obj", v * 3.0, f)
     analyze_link(link_of([mesh_ref(other)]))
     assert len(list((tmp_path / "cache" / an.DISK_KIND).glob("*.npz"))) == 2
+
+
+# ------------------------------------------------------------------ a proven cache entry with NaN inside its JSON
+def test_a_cached_analysis_whose_json_holds_nan_is_computed_again(tmp_path, monkeypatch):
+    """An entry whose proof holds (its digest recomputed over the altered JSON) but whose JSON says ``NaN`` is
+    a miss: the link is analysed again and the entry stored over, instead of a NaN volume on every rerun."""
+    from asset2sim import array_cache
+
+    monkeypatch.setenv("ASSET2SIM_CACHE", str(tmp_path / "cache"))
+    v, f = box_mesh(1.0, 1.0, 1.0)
+    link = link_of([mesh_ref(write_obj(tmp_path / "box.obj", v, f), scale=(0.3, 0.2, 0.1))])
+    first = analyze_link(link)
+    (entry,) = (tmp_path / "cache" / an.DISK_KIND).glob("*.npz")
+    key = entry.stem
+    text = first.model_dump_json().replace(f'"volume":{first.volume!r}', '"volume":NaN')
+    assert "NaN" in text
+    array_cache.store(an.DISK_KIND, key, {"json": array_cache.text_array(text)})  # a valid proof over the NaN
+    assert array_cache.load(an.DISK_KIND, key) is not None
+    again = analyze_link(link)
+    assert np.isfinite(again.volume) and again == first
+    assert "NaN" not in array_cache.array_text(array_cache.load(an.DISK_KIND, key)["json"])  # stored over it
+    with pytest.raises(ValueError):
+        array_cache.array_json(array_cache.text_array('{"a": Infinity}'))

@@ -230,3 +230,22 @@ def test_texture_that_is_a_fifo_never_blocks(tmp_path):
     with _no_hang(10):
         code, _ = texture_problem(p, 1 << 20, 1 << 20)
     assert code == "TEXTURE_UNREADABLE"
+
+
+OTHER_FORMATS = [c for c in cb.CASES if c.topic == "other_formats"]
+
+
+@pytest.mark.parametrize("case", OTHER_FORMATS, ids=[c.name for c in OTHER_FORMATS])
+def test_refine_refuses_hostile_mjcf_and_usd_with_one_line(case, tmp_path, capsys):
+    """An MJCF or USD input naming a file it may not read: ``asset2sim refine`` exits 1 with one line naming the
+    code, no traceback, no hang (FIFOs), nothing written in the input or beside the output."""
+    asset = case.build(tmp_path / "asset")
+    before = tree_hashes(asset)
+    with _no_hang(HANG_LIMIT_S):
+        status = cli.main(["refine", str(asset), "--out", str(tmp_path / "out"), "--no-extras", "-q"])
+    err = capsys.readouterr().err
+    assert status == 1, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("asset2sim refine")]
+    assert len(lines) == 1 and case.code in lines[0], err
+    assert "Traceback" not in err
+    assert tree_hashes(asset) == before and not (tmp_path / "out").exists()

@@ -1,0 +1,295 @@
+"""Files an input names, opened under one policy: a regular file (symlinks resolved), inside the input's
+tree when a tree is given, under a size cap, opened without blocking.
+
+Every file the product reads because a user or an input names it (an MJCF or USD file, what it includes,
+its meshes, textures, sublayers, references and payloads, a ``--config`` file) goes through
+:func:`check_file` (``os.stat`` only: a FIFO, device or socket is refused before anything opens it) and is
+read with :func:`read_file` (``O_NONBLOCK``, the descriptor checked again, at most the cap read). A file
+that fails raises :class:`InputFileError` with a stable code:
+
+- ``INPUT_NOT_FOUND``: the path does not exist (or a folder on it is a file);
+- ``INPUT_NOT_REGULAR_FILE``: a directory, FIFO, character or block device (``/dev/zero``) or socket;
+- ``INPUT_TOO_LARGE``: a regular file above the cap (never read);
+- ``INPUT_OUTSIDE_TREE``: the path, or a symlink on it, leads outside the tree the input may read;
+- ``INPUT_UNREADABLE``: the operating system refuses to open or read it.
+
+Format readers map these to their own codes where the format has them (``MJCF_PATH_ESCAPES``,
+``USD_LAYER_OUTSIDE_ASSET``, ...).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import os
+import stat
+from pathlib import Path
+from typing import Iterator
+
+__all__ = ["DEFAULT_MAX_BYTES", "InputFileError", "MAX_CONFIG_BYTES", "MAX_YAML_ALIASES", "MAX_YAML_DEPTH", "MAX_YAML_NODES",
+           "allow_outside", "allowed_folders", "allowed_outside", "check_file", "file_kind", "inside", "load_yaml", "read_file",
+           "read_head", "set_allowed_outside"]
+
+#: Default cap of one input file, bytes (the largest mesh the validator accepts, ValidationPolicy.max_mesh_bytes).
+DEFAULT_MAX_BYTES = 64 * 1024 * 1024
+
+_KINDS = ((stat.S_ISFIFO, "FIFO"), (stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"),
+          (stat.S_ISSOCK, "socket"), (stat.S_ISDIR, "directory"), (stat.S_ISREG, "regular file"))
+
+
+class InputFileError(ValueError):
+    """A file an input names that the policy refuses: ``code`` (``INPUT_*``, or a format's own code),
+    ``path`` as named."""
+
+    def __init__(self, code: str, path: Path | str, message: str):
+        super().__init__(message)
+        self.code = code
+        self.path = Path(path)
+
+
+#: Folders outside an input's tree that its files may name, in this context (:func:`allow_outside`): (absolute,
+#: real) path pairs.
+_OUTSIDE: contextvars.ContextVar[tuple[tuple[str, str], ...]] = contextvars.ContextVar("asset2sim_allowed_outside", default=())
+
+
+def _pairs(folders) -> tuple[tuple[str, str], ...]:
+    pairs = []
+    for f in folders:
+        absolute = os.path.normpath(os.path.abspath(str(f)))
+        if not os.path.isdir(absolute):
+            raise InputFileError("INPUT_NOT_FOUND", f, f"--allow-outside-paths {f}: not a folder")
+        pairs.append((absolute, os.path.realpath(absolute)))
+    return tuple(pairs)
+
+
+def set_allowed_outside(*folders: Path | str) -> None:
+    """:func:`allow_outside` for the rest of the current context (a worker process's initializer)."""
+    _OUTSIDE.set(_OUTSIDE.get() + _pairs(folders))
+
+
+@contextlib.contextmanager
+def allow_outside(*folders: Path | str) -> Iterator[None]:
+    """Within the block, files an MJCF or USD input names may also lie in ``folders`` (``--allow-outside-paths DIR``:
+    a user widening the tree on purpose, e.g. meshes shared by several models); every other rule still holds
+    (regular file, size cap, no blocking open). Nested blocks add their folders.
+
+    Raises:
+        InputFileError: ``INPUT_NOT_FOUND`` when a folder does not exist or is not a folder.
+    """
+    token = _OUTSIDE.set(_OUTSIDE.get() + _pairs(folders))
+    try:
+        yield
+    finally:
+        _OUTSIDE.reset(token)
+
+
+def allowed_folders() -> tuple[str, ...]:
+    """The real paths of the folders :func:`allow_outside` allows in this context (for cache keys)."""
+    return tuple(real for _, real in _OUTSIDE.get())
+
+
+def allowed_outside(path: Path | str) -> bool:
+    """True when ``path`` lies in a folder :func:`allow_outside` allows, as written (normalized) and with every
+    symlink resolved."""
+    pairs = _OUTSIDE.get()
+    if not pairs:
+        return False
+    lexical = os.path.normpath(os.path.abspath(str(path)))
+    real = os.path.realpath(lexical)
+    return any(inside(lexical, a) or inside(lexical, r) for a, r in pairs) and any(inside(real, r) for _, r in pairs)
+
+
+def file_kind(mode: int) -> str:
+    """``"FIFO"``, ``"character device"``, ``"regular file"`` ... of an ``st_mode``."""
+    return next((name for test, name in _KINDS if test(mode)), "special file")
+
+
+def inside(path: str, root: str) -> bool:
+    """True when ``path`` is ``root`` or lies below it (both absolute and normalized)."""
+    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+
+def check_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: int | None = DEFAULT_MAX_BYTES,
+               what: str = "input file") -> os.stat_result:
+    """Check, with ``os.stat`` only (nothing is opened), that ``path`` may be read.
+
+    Args:
+        path: the file as named (absolute, or relative to the working directory).
+        tree: the folder the file must lie in, lexically and with every symlink resolved (None: anywhere), or
+            a folder :func:`allow_outside` allows.
+        max_bytes: size cap in bytes (None: none).
+        what: how the message names the file ("MJCF include", "--config file" ...).
+
+    Returns:
+        The ``os.stat`` result of the real file.
+
+    Raises:
+        InputFileError: ``INPUT_OUTSIDE_TREE``, ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE``,
+            ``INPUT_TOO_LARGE`` or ``INPUT_UNREADABLE`` (the message names the file and why).
+    """
+    name = str(path)
+    if "\x00" in name:
+        raise InputFileError("INPUT_UNREADABLE", "?", f"{what} {name!r}: the path contains a NUL byte")
+    root = os.path.abspath(str(tree)) if tree is not None else None
+    if root is not None and allowed_outside(name):  # a folder the user allowed (allow_outside): the tree is wider
+        root = None
+    if root is not None and not inside(os.path.normpath(os.path.abspath(name)), root):
+        raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: lies outside {root}, the folder the input may read")
+    try:
+        st = os.stat(name)
+    except (FileNotFoundError, NotADirectoryError):
+        raise InputFileError("INPUT_NOT_FOUND", path, f"{what} {name}: no such file") from None
+    except OSError as exc:
+        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file "
+                             "(FIFOs, devices, sockets and folders are never read)")
+    if root is not None:
+        real = os.path.realpath(name)
+        if not inside(real, os.path.realpath(root)):
+            raise InputFileError("INPUT_OUTSIDE_TREE", path, f"{what} {name}: a symlink leads to {real}, outside {root}, "
+                                 "the folder the input may read")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: {st.st_size} bytes, above the cap of {max_bytes} bytes; not read")
+    return st
+
+
+def read_file(path: Path | str, *, tree: Path | str | None = None, max_bytes: int = DEFAULT_MAX_BYTES,
+              what: str = "input file") -> bytes:
+    """The bytes of ``path`` after :func:`check_file`, opened with ``O_NONBLOCK`` and checked again on the
+    open descriptor (a file swapped for a FIFO, or for any other file, between the check and the open is refused,
+    not waited on or read); at most ``max_bytes`` are read.
+
+    Raises:
+        InputFileError: as :func:`check_file`; ``INPUT_TOO_LARGE`` also when the file grew past the cap.
+    """
+    checked = check_file(path, tree=tree, max_bytes=max_bytes, what=what)
+    name = str(path)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(name, flags)
+    except OSError as exc:
+        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise InputFileError("INPUT_NOT_REGULAR_FILE", path, f"{what} {name}: a {file_kind(st.st_mode)}, not a regular file")
+        if (st.st_dev, st.st_ino) != (checked.st_dev, checked.st_ino):  # swapped between the check and the open
+            raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: replaced by another file while it was opened")
+        chunks, left = [], max_bytes + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+    except OSError as exc:
+        raise InputFileError("INPUT_UNREADABLE", path, f"{what} {name}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:
+        raise InputFileError("INPUT_TOO_LARGE", path, f"{what} {name}: grew above the cap of {max_bytes} bytes while read")
+    return data
+
+
+def read_head(path: Path | str, n: int = 4096) -> bytes | None:
+    """The first ``n`` bytes of ``path`` when it is a regular file (opened without blocking); None for a
+    missing, unreadable or special file (a FIFO, ``/dev/zero``), which is never read."""
+    try:
+        st = os.stat(str(path))
+    except (OSError, ValueError):
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    try:
+        fd = os.open(str(path), os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        return os.read(fd, n)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+
+
+#: Cap of a configuration file (``--config``, ``catalog.yaml``), bytes.
+MAX_CONFIG_BYTES = 1024 * 1024
+#: YAML aliases (``*name``) a configuration file may use: each repeats a whole node, so a few nested anchors
+#: make a document of billions of nodes ("billion laughs").
+MAX_YAML_ALIASES = 64
+#: Deepest nesting of YAML collections in a configuration file.
+MAX_YAML_DEPTH = 64
+#: Nodes of a configuration file with its aliases expanded.
+MAX_YAML_NODES = 100_000
+
+
+def load_yaml(path: Path | str, *, max_bytes: int = MAX_CONFIG_BYTES, max_aliases: int = MAX_YAML_ALIASES,
+              max_depth: int = MAX_YAML_DEPTH, max_nodes: int = MAX_YAML_NODES, what: str = "configuration file"):
+    """The YAML document at ``path``, read under :func:`read_file`'s policy and built by PyYAML's safe loader
+    (plain data only: no Python objects) with at most ``max_aliases`` aliases, ``max_depth`` levels of nesting and
+    ``max_nodes`` nodes once every alias is expanded (counted on the parsed graph, before anything is built).
+
+    Raises:
+        InputFileError: ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, ``/dev/zero``),
+            ``INPUT_TOO_LARGE``, ``INPUT_UNREADABLE``; ``YAML_ALIAS_LIMIT`` or ``YAML_TOO_DEEP`` (refused while
+            parsing, before any node is built); ``YAML_MALFORMED`` (not YAML, not UTF-8).
+    """
+    import yaml
+
+    data = read_file(path, max_bytes=max_bytes, what=what)
+
+    class _Bounded(yaml.SafeLoader):
+        aliases = 0
+        depth = 0
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                self.aliases += 1
+                if self.aliases > max_aliases:
+                    raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: more than {max_aliases} YAML aliases "
+                                         "(*name); refused before expanding them")
+            self.depth += 1
+            try:
+                if self.depth > max_depth:
+                    raise InputFileError("YAML_TOO_DEEP", path, f"{what} {path}: YAML nested deeper than {max_depth} levels")
+                return super().compose_node(parent, index)
+            finally:
+                self.depth -= 1
+
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not UTF-8 ({exc})") from None
+    loader = _Bounded(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        sizes: dict[int, int] = {}
+
+        def expanded(n) -> int:  # nodes of the document with every alias expanded (each shared node counted once per use)
+            if sizes.get(id(n)) == 0:
+                raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: a YAML alias inside its own anchor (a recursive document)")
+            if id(n) not in sizes:
+                sizes[id(n)] = 0  # in progress
+                if isinstance(n, yaml.SequenceNode):
+                    sizes[id(n)] = 1 + sum(expanded(c) for c in n.value)
+                elif isinstance(n, yaml.MappingNode):
+                    sizes[id(n)] = 1 + sum(expanded(k) + expanded(v) for k, v in n.value)
+                else:
+                    sizes[id(n)] = 1
+            return sizes[id(n)]
+
+        total = expanded(node)
+        if total > max_nodes:
+            raise InputFileError("YAML_ALIAS_LIMIT", path, f"{what} {path}: its aliases expand to {total} YAML nodes, above the "
+                                 f"cap of {max_nodes}; refused before expanding them")
+        return loader.construct_document(node)
+    except yaml.YAMLError as exc:
+        raise InputFileError("YAML_MALFORMED", path, f"{what} {path}: not YAML: {exc}") from None
+    finally:
+        loader.dispose()

@@ -1,0 +1,239 @@
+"""The files an MJCF input names, checked and read before MuJoCo sees any of them, and MuJoCo given only those.
+
+:func:`gather_mjcf` reads the ``<mujoco>`` file and every ``<include>`` (safe XML), takes ``<compiler meshdir
+texturedir assetdir>`` and every attribute whose name starts with ``file`` (``<mesh file>``, ``<texture file
+fileright ...>``, ``<hfield file>``, ``<skin file>``, ``<model file>``, ``<flexcomp file>`` ...), and resolves
+each as MuJoCo does (relative to the model file's folder, through ``meshdir`` for meshes, skins and height
+fields and ``texturedir`` for textures). Each must be a relative path that stays inside the input's tree (the
+model file's folder), with every symlink resolved, or lie in a folder the user allowed
+(:func:`asset2sim.input_files.allow_outside`, ``--allow-outside-paths``), and name a regular file under the size
+cap; it is then read without blocking (:mod:`asset2sim.input_files`). A refusal is a
+:class:`~asset2sim.tasks.ingest.staged.StagingError` with a code:
+
+- ``MJCF_PATH_ESCAPES``: an absolute path, a URI, ``../`` leaving the tree or a symlink out of it (in a file
+  attribute, an include or ``meshdir`` / ``texturedir`` / ``assetdir``);
+- ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE``,
+  ``INPUT_OUTSIDE_TREE`` (the model file itself a symlink out of its folder), ``INPUT_UNREADABLE``;
+- ``MJCF_INCLUDE_INVALID``: an include of itself (a loop), without a file, more than :data:`MAX_INCLUDES`
+  includes or a chain deeper than :data:`MAX_INCLUDE_DEPTH`;
+- ``XML_*``: the model file or an include is refused by the hardened XML parser.
+
+:func:`compile_mjcf` then writes the bytes read into a private temporary folder, each file at its absolute path
+mirrored below it, and lets MuJoCo (``MjSpec.from_file``) read that copy, so MuJoCo opens nothing but what was
+checked; its warnings are collected, never written to ``MUJOCO_LOG.TXT``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from asset2sim import atomic, safexml
+from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
+from asset2sim.extras import import_extra
+from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
+from asset2sim.tasks.ingest.staged import StagingError, input_tree
+
+__all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
+
+#: Includes per model (MuJoCo refuses a repeated include; a chain deeper than this is refused too).
+MAX_INCLUDES = 256
+#: Deepest chain of includes.
+MAX_INCLUDE_DEPTH = 16
+#: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
+MAX_TOTAL_BYTES = 1024 * 1024 * 1024
+#: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
+_MESHDIR_TAGS = frozenset({"mesh", "skin", "hfield"})
+_TEXDIR_TAGS = frozenset({"texture"})
+_URI = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]+:")
+_DRIVE = re.compile(r"^[A-Za-z]:[\\/]")
+
+
+@dataclass(frozen=True)
+class MjcfSources:
+    """Every file an MJCF model names, checked and read: ``files`` absolute normalized path (as MuJoCo resolves
+    it from the model file) -> bytes, the model file's among them as ``main``; ``real`` the same keys -> the real
+    path read (for the input hash and the audit's copies); ``tree`` the folder they lie in (or a folder
+    :func:`~asset2sim.input_files.allow_outside` allows)."""
+
+    path: Path
+    tree: Path
+    main: str
+    files: dict[str, bytes]
+    real: dict[str, Path]
+
+
+def _refuse(code: str, message: str) -> StagingError:
+    return StagingError(message, code=code)
+
+
+def _from_input_error(exc: InputFileError) -> StagingError:
+    return _refuse(exc.code, str(exc))
+
+
+def _resolve(value: str, base: str, tree: str, source: Path, what: str) -> str:
+    """``value`` (as written) joined to the absolute folder ``base`` as MuJoCo joins it (an absolute ``value`` stays
+    itself), normalized: an absolute path inside ``tree`` or a folder the user allowed
+    (:func:`~asset2sim.input_files.allow_outside`).
+
+    Raises:
+        StagingError: ``MJCF_PATH_ESCAPES`` for a control character, a URI, an absolute path (unless allowed) or one
+            leaving ``tree`` (lexically or through a symlink, unless into an allowed folder).
+    """
+    if "\x00" in value or any(ord(c) < 32 for c in value):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a control character in the path")
+    if _URI.match(value) and not _DRIVE.match(value):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: a URI; only relative paths inside {tree} are read")
+    absolute = value.startswith(("/", "\\")) or bool(_DRIVE.match(value))
+    joined = os.path.normpath(value if absolute else os.path.join(base, value))
+    if allowed_outside(joined):
+        return joined
+    if absolute:
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r}: an absolute path; only relative paths inside {tree} "
+                      "are read (--allow-outside-paths DIR widens this)")
+    if not inside(joined, tree):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} resolves to {joined}, outside {tree} "
+                      "(--allow-outside-paths DIR widens this)")
+    real = os.path.realpath(joined)
+    if not inside(real, os.path.realpath(tree)):
+        raise _refuse("MJCF_PATH_ESCAPES", f"{source}: {what} {value!r} is a symlink (or under one) to {real}, outside {tree}")
+    return joined
+
+
+class _Gather:
+    def __init__(self, path: Path, tree: Path, max_file_bytes: int, max_total_bytes: int, limits: safexml.XMLLimits):
+        self.path, self.tree = path, str(tree)
+        self.max_file, self.max_total, self.limits = max_file_bytes, max_total_bytes, limits
+        self.files: dict[str, bytes] = {}
+        self.real: dict[str, Path] = {}
+        self.total = 0
+        self.includes = 0
+        self.compiler: dict[str, str] = {}
+        self.refs: list[tuple[str, str, str, str]] = []  # (tag, attribute, value, file naming it)
+        self.main = os.path.normpath(str(path))
+        self.main_dir = os.path.dirname(self.main)
+
+    def read(self, key: str, what: str) -> bytes:
+        if key in self.files:
+            return self.files[key]
+        try:
+            data = read_file(key, tree=self.tree, max_bytes=self.max_file, what=f"{self.path.name}: {what}")
+        except InputFileError as exc:
+            raise _from_input_error(exc) from None
+        self.total += len(data)
+        if self.total > self.max_total:
+            raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files it names exceed {self.max_total} bytes together; not read")
+        self.files[key], self.real[key] = data, Path(os.path.realpath(key))
+        return data
+
+    def document(self, key: str, what: str, depth: int, stack: tuple[str, ...] = ()) -> None:
+        data = self.read(key, what)
+        try:
+            root = safexml.parse_xml_bytes(data, source=key, limits=self.limits)
+        except safexml.SafeXMLError as exc:
+            raise _refuse(exc.code, str(exc)) from None
+        name = os.path.relpath(key, self.main_dir)
+        for el in root.iter():
+            tag = el.tag if isinstance(el.tag, str) else ""
+            if tag == "include":
+                self.includes += 1
+                if self.includes > MAX_INCLUDES or depth >= MAX_INCLUDE_DEPTH:
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: more than {MAX_INCLUDES} includes, or nested deeper "
+                                  f"than {MAX_INCLUDE_DEPTH}")
+                value = el.get("file", "")
+                if not value:
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: an <include> in {name} without a file")
+                inc = _resolve(value, self.main_dir, self.tree, self.path, "<include file>")
+                if inc in stack:
+                    chain = " -> ".join(os.path.relpath(k, self.main_dir) for k in (*stack, inc))
+                    raise _refuse("MJCF_INCLUDE_INVALID", f"{self.path}: <include file={value!r}> in {name} includes itself ({chain})")
+                self.document(inc, f"<include file={value!r}>", depth + 1, (*stack, inc))
+                continue
+            if tag == "compiler":
+                for attr in ("meshdir", "texturedir", "assetdir"):
+                    if el.get(attr) is not None:
+                        self.compiler[attr] = el.get(attr, "")
+            for attr, value in el.attrib.items():
+                if attr.startswith("file") and value:
+                    self.refs.append((tag, attr, value, name))
+
+    def run(self) -> MjcfSources:
+        self.document(self.main, "model file", 0, (self.main,))
+        dirs = {}
+        for attr in ("meshdir", "texturedir", "assetdir"):
+            if attr in self.compiler:
+                value = self.compiler[attr]
+                dirs[attr] = _resolve(value, self.main_dir, self.tree, self.path, f"<compiler {attr}>") if value else self.main_dir
+        meshdir = dirs.get("meshdir", dirs.get("assetdir", self.main_dir))
+        texdir = dirs.get("texturedir", dirs.get("assetdir", self.main_dir))
+        for tag, attr, value, where in self.refs:
+            base = meshdir if tag in _MESHDIR_TAGS else texdir if tag in _TEXDIR_TAGS else self.main_dir
+            key = _resolve(value, base, self.tree, self.path, f"<{tag} {attr}> in {where}")
+            self.read(key, f"<{tag} {attr}={value!r}>")
+        return MjcfSources(path=self.path, tree=Path(self.tree), main=self.main, files=self.files, real=self.real)
+
+
+def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_bytes: int = DEFAULT_MAX_BYTES,
+                max_total_bytes: int = MAX_TOTAL_BYTES, limits: safexml.XMLLimits = safexml.DEFAULT_LIMITS) -> MjcfSources:
+    """Check and read the MJCF file at ``path`` and every file it names (module docstring); nothing else is opened.
+
+    Args:
+        path: the ``<mujoco>`` file. tree: the folder its references must stay in (default:
+            :func:`~asset2sim.tasks.ingest.staged.input_tree`, the file's folder).
+        max_file_bytes: cap per file, bytes. max_total_bytes: cap over all files, bytes.
+        limits: the XML parser's caps for the model file and its includes.
+
+    Raises:
+        StagingError: with ``code`` (module docstring), naming the file and the reference.
+    """
+    path = Path(os.path.abspath(str(path)))
+    root = Path(os.path.abspath(str(tree))) if tree is not None else input_tree(path)
+    return _Gather(path, root, max_file_bytes, max_total_bytes, limits).run()
+
+
+def _mirrored(tmp: str, path: str) -> str:
+    """Where the private copy holds the file at the absolute ``path``: the same path under ``tmp``."""
+    return os.path.join(tmp, os.path.splitdrive(path)[1].lstrip("/\\"))
+
+
+def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
+    """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources``, its angles read in degrees (``degree``
+    True) or radians (False) whatever its ``<compiler angle>`` says (None: as it says): MuJoCo reads a private temporary
+    copy holding only those files, each at its absolute path mirrored under the copy's folder (a file attribute or
+    folder written absolute, in a folder the user allowed, is pointed at its copy while compiling, then given back
+    as written); the folder is removed before returning (the model holds what it needs).
+
+    Raises:
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
+        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
+    """
+    import_extra("mujoco", "reading MJCF")  # MissingExtra naming the extra when MuJoCo is not installed
+    mujoco = load_mujoco()
+    with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
+        for key, data in sources.files.items():
+            atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
+        try:
+            with mujoco_messages() as caught:
+                spec = mujoco.MjSpec.from_file(_mirrored(tmp, sources.main))
+                if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
+                    spec.compiler.degree = degree
+                written = []  # (object, attribute, value as written) pointed at the copy while compiling
+                for obj, attr in ((spec, "meshdir"), (spec, "texturedir"),
+                                  *((item, "file") for items in (spec.meshes, spec.textures, spec.hfields, spec.skins)
+                                    for item in items)):
+                    value = getattr(obj, attr, "") or ""
+                    if os.path.isabs(value):
+                        written.append((obj, attr, value))
+                        setattr(obj, attr, _mirrored(tmp, os.path.normpath(value)))
+                try:
+                    model = spec.compile()
+                finally:
+                    for obj, attr, value in written:
+                        setattr(obj, attr, value)
+        except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
+            msg = str(exc).replace(tmp + os.sep, "/").replace(tmp, ".")
+            raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {msg}") from exc
+    return spec, model, [f"MuJoCo: {w}" for w in caught]
