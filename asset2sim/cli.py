@@ -38,11 +38,12 @@ from asset2sim.engines.quiet import STARTUP_MESSAGES  # noqa: E402
 from asset2sim.extras import EXTRA_OF_MODULE, install_hint, missing_module  # noqa: E402
 
 
-#: Environment defaults that keep the libraries' logs at WARNING on the terminal (Prefect's console handler, Dask's
-#: ``distributed.*`` loggers, MLflow's); inherited by the processes a command starts (Prefect's server, Dask workers,
-#: stage servers). ``--verbose`` leaves the libraries' own defaults; a value the user set is kept.
+#: Environment defaults that keep the libraries' logs off the terminal (Prefect's console handler at CRITICAL: a failed
+#: flow's traceback is not printed, the command says what failed in one line; Dask's ``distributed.*`` loggers and
+#: MLflow's at WARNING); inherited by the processes a command starts (Prefect's server, Dask workers, stage servers).
+#: ``--verbose`` leaves the libraries' own defaults; a value the user set is kept.
 QUIET_LIBRARY_LOGS = {
-    "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL": "WARNING",
+    "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL": "CRITICAL",
     "DASK_LOGGING__DISTRIBUTED": "warning",
     "MLFLOW_LOGGING_LEVEL": "WARNING",
 }

@@ -38,3 +38,28 @@ def test_a_flow_prints_no_third_party_lines(tmp_path):
     assert any(ln.startswith("[1/1] box_lid: done") for ln in lines), done.stdout
     assert [ln for ln in lines if not FLOW_LINE.match(ln) or THIRD_PARTY.search(ln)] == [], done.stdout
     assert done.stderr == "", done.stderr[-3000:]
+
+
+def test_a_flow_on_a_full_disk_says_so_in_one_line(tmp_path):
+    """The result catalog cannot be written (ENOSPC raised where the run records itself): ``asset2sim flow`` exits 4
+    with one ``OUTPUT_WRITE_FAILED [ENOSPC]`` line naming the file, and no traceback of Prefect's or ours."""
+    root = tmp_path / "proj"
+    catalog = make_project(root, {"box_lid": "box_lid"}, catalog_extra={
+        "run": {"refine_function": "asset2sim.tasks.refine:refine_asset", "workers": 1, "evaluate": False,
+                "time_limit_seconds": 300, "dashboard": False}})
+    code = f"""
+import errno, sys
+from asset2sim.flows import catalog as c
+def full(self, *a, **k):
+    raise OSError(errno.ENOSPC, "No space left on device", {str(root / "catalog" / "_run.json")!r})
+c.ResultCatalog.write_run_info = full
+from asset2sim.cli import main
+sys.exit(main(["flow", "--catalog", {str(catalog)!r}, "--workers", "1", "--no-progress"]))
+"""
+    env = {k: v for k, v in os.environ.items()
+           if k not in (STARTUP_MESSAGES, "PREFECT_API_URL", "PREFECT_LOGGING_LEVEL", *QUIET_LIBRARY_LOGS)}
+    done = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=420)
+    assert done.returncode == 4, (done.stdout[-2000:], done.stderr[-3000:])
+    err = [ln for ln in done.stderr.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("asset2sim flow: OUTPUT_WRITE_FAILED [ENOSPC]: "), done.stderr[-3000:]
+    assert "_run.json" in err[0] and "Traceback" not in done.stderr + done.stdout
