@@ -184,6 +184,11 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
         for j, (drift, tol, name) in sorted(worst.items()):
             prismatic = tol < 0.01  # 2 mm against 0.02 rad
             amount = f"{1000 * drift:.1f} mm (tolerance {1000 * tol:.0f} mm)" if prismatic else f"{drift:.3f} rad (tolerance {tol:g} rad)"
+            if "toppled" in str((trials.get(name) or {}).get("failure", "")):
+                out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} and toppled "
+                           f"({m.engine}): the part swings as the object falls (the toppling is explained next). "
+                           "--mount fixed when it stands fixed in use; a mounted object is not dropped or tilted.")
+                continue
             if j in skip:
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
                            "it moves at rest with no disturbance (the rest tier). " + TIER_ADVICE["hold"])
