@@ -157,8 +157,9 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
     trials against its tolerance, and the trial) or per toppling, with what a user can do; empty when it passes. A
     part's friction and damping stay within what a hand overcomes (the operability tier), so a drift here is the
     part's momentum when the object lands, not a search that stopped short (``docs/guide/metrics.md``). A trial
-    the object did not come to rest in (or diverged) is one sentence too. ``skip``: joints left out (a joint the
-    rest tier already found not held, :func:`why_it_failed`)."""
+    the object did not come to rest in (or diverged) is one sentence too; a part that moved in a trial the object
+    toppled in is said to swing as the object falls. ``skip``: joints the rest tier already found not held
+    (:func:`why_it_failed`): their drift is said to be the same motion, with the rest tier's advice."""
     out: list[str] = []
     for m in metrics:
         if m.name != "robust_rest" or _verdict(m) is not False:
