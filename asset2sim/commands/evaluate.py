@@ -13,6 +13,7 @@ from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, os_failure, output_failure, output_folder_failure, parse_engines
 from asset2sim.tasks.evaluation.evaluate import EvaluationError, evaluate_asset
+from asset2sim.tasks.check.verdict import why_it_failed
 from asset2sim import output_folder
 
 NAME = "evaluate"
@@ -82,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     if not wide:
         console.print(f"[dim]thresholds: report.html, or a terminal of {WIDE_TABLE} columns or more[/dim]")
+    for why in why_it_failed(ev.metrics):  # the sentences of report.html's "Why it failed"
+        console.print(f"why it failed {why}", markup=False, soft_wrap=True)
     asked = ev.metric("request_met")  # as asked: each unmet phrase with its gap
     for u in (asked.details.get("unmet") or []) if asked is not None and asked.passed is False else []:
         console.print(f"NOT AS ASKED {u.get('text') or u.get('phrase')}", markup=False, soft_wrap=True)

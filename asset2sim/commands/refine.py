@@ -26,7 +26,7 @@ from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import MESSAGE_FINDINGS
 from asset2sim.tasks.check.as_asked import quantity_text
-from asset2sim.tasks.check.verdict import penetration_measures, penetration_why, robust_rest_why
+from asset2sim.tasks.check.verdict import penetration_measures, why_it_failed
 from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_text
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
@@ -149,13 +149,21 @@ def summary_lines(result) -> list[str]:
         _manipulation_line(r),
         _operability_line(r),
         f"verdict      {'interaction-ready' if r.failure_mode == 'none' else 'FAILED: ' + r.failure_mode}" + _tiers(r),
-    ] + [f"why it failed {why}" for why in penetration_why(r.metrics) + robust_rest_why(r.metrics)] + as_asked_lines(r) + skipped_lines(r) + [
+    ] + why_lines(r) + as_asked_lines(r) + skipped_lines(r) + [
         f"engine {row['engine']:<8} {row['status']}: rest {row['rest_stability']}, oscillation {row['oscillation']}, Phi {row['penetration_mm']} mm"
         + (f" ({row['reason']})" if row['reason'] else "")
         for row in r.parity
     ] + request_lines(r.request) + media_lines(r, result.out_dir) + [
         "wall time    " + ", ".join(f"{k} {v:.2f}s" for k, v in r.stage_seconds.items()),
     ]
+
+
+def why_lines(report) -> list[str]:
+    """``why it failed SENTENCE``, one per sentence of :func:`~asset2sim.tasks.check.verdict.why_it_failed` (the
+    sentences ``report.html`` shows); nothing when the output is interaction-ready."""
+    if report.failure_mode == "none":
+        return []
+    return [f"why it failed {why}" for why in why_it_failed(report.metrics)]
 
 
 def media_lines(report, out_dir) -> list[str]:

@@ -176,7 +176,10 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
     sag_metric = MetricResult(
         name="state_hold", value=max(drift.values()) if drift else 0.0, unit=unit("state_hold"), passed=not sagging,
         threshold=f"every joint within {config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m of its initial state",
-        details={"drift": drift, "sagging": sagging}, engine=engine)
+        details={"drift": drift, "sagging": sagging,
+                 "units": {n: "m" if trace.joint_types.get(n) == "prismatic" else "rad" for n in drift},
+                 "tolerances": {n: config.sag_tolerance_prismatic if trace.joint_types.get(n) == "prismatic"
+                                else config.sag_tolerance_revolute for n in drift}}, engine=engine)
     tilt = metrics.settle_tilt(trace, engine=engine)
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
     engine_results: dict[str, list[MetricResult]] = {}

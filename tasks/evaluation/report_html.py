@@ -16,7 +16,7 @@ import numpy as np
 
 from asset2sim.atomic import write_text
 from asset2sim.schemas.metrics import METRIC_INFO
-from asset2sim.tasks.check.verdict import penetration_why, readiness
+from asset2sim.tasks.check.verdict import readiness, why_it_failed
 from asset2sim.tasks.evaluation import plots
 from asset2sim.tasks.evaluation.failure_evidence import evidence_section
 from asset2sim.tasks.evaluation.report_changes import changes_section, esc, from_closed_text, opening_text
@@ -161,12 +161,13 @@ def _penetration_details(ev) -> str:
     return "".join(out)
 
 
-def penetration_why_section(ev) -> str:
-    """``Why it failed: penetration``: which penetration failed, the links, the depth against the threshold and what
-    to do (the sentences the terminal prints, :func:`~asset2sim.tasks.check.verdict.penetration_why`); empty when
-    the tier passes."""
-    why = penetration_why(ev.metrics)
-    return "<h2>Why it failed: penetration</h2><ul>" + "".join(f"<li>{esc(w)}</li>" for w in why) + "</ul>" if why else ""
+def why_section(ev) -> str:
+    """``Why it failed``, at the top of the report: for every failing tier, one sentence per failing measure naming
+    the tier, the parts, the measured value against its threshold and what to do, the sentences the terminal prints
+    (:func:`~asset2sim.tasks.check.verdict.why_it_failed`); empty when ready. The failing trials' evidence follows
+    under the verdicts."""
+    why = why_it_failed(ev.metrics)
+    return ("<h2>Why it failed</h2><ul class='why'>" + "".join(f"<li>{esc(w)}</li>" for w in why) + "</ul>") if why else ""
 
 
 def _request_warnings(d: dict) -> str:
@@ -447,6 +448,7 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         f"reference: <code>{esc(ev.reference or '-')}</code></p>",
         _request_warnings(pa.details) if (pa := ev.metric("prompt_alignment")) is not None else "",
         f"<p>{badge}</p>",
+        why_section(ev),
         as_asked_block(ev),
         "<h2>Object at its initial state</h2>",
         f"<p class='small'>{esc(views_what)}; joints: {esc(state_text)} ({esc(ev.initial_state_source)}); "
@@ -458,7 +460,6 @@ def render_report(ev, views: dict[str, np.ndarray] | None = None, command: str =
         _verdict_table(ev),
         evidence_section(ev._runs, ev.urdf, dt, svg_tag, _figure, dict(ev.initial_state),
                          getattr(ev.metric("task_execution"), "details", None), ev.closed_positions),
-        penetration_why_section(ev),
         "<h2>Operability</h2>",
         operability_section(ev),
         "<h2>Penetration at the initial state</h2>",

@@ -490,11 +490,11 @@ def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_rep
     assert re.search(r"parent-child \d+\.\d+ mm \(pybullet, body/lid; \d+\.\d+ mm beyond its modelled pose\) FAIL", pen[0]), pen
     why = [ln.removeprefix("why it failed ") for ln in lines if ln.startswith("why it failed ")]
     assert len(why) == 1, lines
-    assert re.match(r"parent-child penetration \(pybullet\): link 'lid' is \d+\.\d mm inside its parent 'body' .*"
+    assert re.match(r"unresolved_penetration \(penetration tier\): parent-child penetration \(pybullet\): link 'lid' is \d+\.\d mm inside its parent 'body' .*"
                     r"\(fails above 5 mm\)\. Ask for a state .*--state", why[0]), why
     report = json.loads((out / "report.json").read_text())
     assert report["failure_mode"] == "unresolved_penetration"
     text = html.unescape((out / "report.html").read_text())
-    assert "<h2>Why it failed: penetration</h2>" in text and why[0] in text  # the terminal's sentence, word for word
+    assert "<h2>Why it failed</h2>" in text and f"<li>{why[0]}</li>" in text  # the terminal's sentence, word for word
     assert "no self-penetration at the initial state" not in text
     assert "A child inside its parent (pybullet)" in text

@@ -153,7 +153,7 @@ def test_a_part_robust_rest_moves_is_explained_with_what_to_do(tmp_path, capsys)
     tolerance and the trial, and what a user can do; mounted (``--mount fixed``) it is not dropped and passes."""
     from asset2sim import demo_assets
     from asset2sim.cli import main
-    from asset2sim.tasks.check.verdict import robust_rest_why
+    from asset2sim.tasks.check.verdict import robust_rest_why, why_it_failed
 
     laptop = demo_assets.build_object("laptop", tmp_path / "laptop")
     out = tmp_path / "out"
@@ -165,6 +165,7 @@ def test_a_part_robust_rest_moves_is_explained_with_what_to_do(tmp_path, capsys)
     assert why and why[0].startswith("joint 'joint_1' moved ") and "(tolerance 0.02 rad)" in why[0]
     drift = float(why[0].split(" moved ")[1].split(" rad")[0])
     assert drift > 0.02 and "--mount fixed" in why[0]
-    assert f"why it failed {why[0]}" in lines
+    assert f"why it failed not_robust_at_rest (robust_rest tier): {why[0]}" in lines
+    assert why_it_failed([MetricResult.model_validate(m) for m in report["metrics"]])[0].endswith(why[0])
     assert main(["refine", str(laptop), "-p", "A slightly open laptop.", "--out", str(tmp_path / "fixed"), "--no-extras",
                  "--mount", "fixed"]) == 0
