@@ -99,14 +99,16 @@ def intent_problems(intent: RequestIntent) -> list[str]:
 
 def with_intent(offline: RequestSpec, intent: RequestIntent, note: str) -> RequestSpec:
     """``offline`` with the intent fields of ``intent`` (``size_factor`` from the size class's prior factor when the
-    class differs), its phrases counted as recognised, ``parser`` "model" and ``parse_note`` ``note``."""
+    class differs), ``parser`` "model" and ``parse_note`` ``note``; the model's phrases are the recognised words
+    when the offline parser recognised none (``RequestSpec.understood``)."""
     fields = intent.fields()
     if intent.size_class != offline.size_class:
         factors = {k: v.factor for k, v in load_priors().size_classes.items()}
         fields["size_factor"] = factors.get(intent.size_class, 1.0) if intent.size_class else 1.0
         fields["size_phrase"] = ""
-    phrases = [js.phrase for js in intent.joint_states] + [s.phrase for s in intent.sizes] + [p.phrase for p in intent.properties]
-    fields["matched"] = list(dict.fromkeys(list(offline.matched) + [" ".join(p.split()) for p in phrases if p.strip()]))
+    if not offline.matched:  # the offline parser recognised nothing: the model's phrases are what was understood
+        phrases = [js.phrase for js in intent.joint_states] + [s.phrase for s in intent.sizes] + [p.phrase for p in intent.properties]
+        fields["matched"] = list(dict.fromkeys(" ".join(p.split()) for p in phrases if p.strip()))
     return offline.model_copy(update={**fields, "parser": "model", "parse_note": note})
 
 

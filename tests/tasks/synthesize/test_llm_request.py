@@ -138,3 +138,19 @@ def test_interpret_on_a_dev_refrigerator(server, tmp_path, monkeypatch):
     assert [js.short() for js in meaning.request.joint_states] == ["door#0@size=90 deg from closed", "door#-1@size=closed"]
     assert server.n_chat == 1
     assert interpret(asset, FRIDGE, None, None, RefineConfig()).request == parse_request(FRIDGE)
+
+
+def test_every_corpus_parse_is_a_valid_model_reply():
+    """The offline parse of every corpus request, sent as a model would (JSON of the intent), validates strictly,
+    passes the checks and gives the same parse back: the schema and the checks refuse no intent the parser makes."""
+    from asset2sim.tasks.synthesize.llm_reply import parse_reply
+    from tests.tasks.interpret.request_corpus import load_corpus
+
+    entries = load_corpus()
+    assert len(entries) >= 100
+    for e in entries:
+        offline = parse_request(e["text"])
+        intent = parse_reply(RequestIntent.of(offline).model_dump_json(), RequestIntent)
+        assert lr.intent_problems(intent) == [], e["id"]
+        back = lr.with_intent(offline, intent, "note")
+        assert back.model_copy(update={"parser": "offline", "parse_note": ""}) == offline, e["id"]
