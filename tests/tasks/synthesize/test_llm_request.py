@@ -154,3 +154,34 @@ def test_every_corpus_parse_is_a_valid_model_reply():
         assert lr.intent_problems(intent) == [], e["id"]
         back = lr.with_intent(offline, intent, "note")
         assert back.model_copy(update={"parser": "offline", "parse_note": ""}) == offline, e["id"]
+
+
+def test_request_parser_is_a_refine_option_and_a_config_field(tmp_path):
+    """``--request-parser model`` (``request_parser: model`` in a ``--config`` file) asks the model to parse; unset,
+    the configuration is the offline parser's; another value is refused."""
+    from asset2sim.cli import build_parser
+    from asset2sim.commands.refine import options
+
+    parser = build_parser("refine")
+    base = ["refine", "in", "--prompt", "a box", "--out", "o", "--estimator", "openai", "--model", "m"]
+    assert options(parser.parse_args(base)).request_parser == "offline"
+    assert options(parser.parse_args([*base, "--request-parser", "model"])).request_parser == "model"
+    cfg = tmp_path / "refine.yaml"
+    cfg.write_text("request_parser: model\n")
+    assert options(parser.parse_args([*base, "--config", str(cfg)])).request_parser == "model"
+    with pytest.raises(SystemExit):
+        parser.parse_args([*base, "--request-parser", "guess"])
+
+
+def test_a_request_only_the_model_understands(server, tmp_path):
+    """A request the offline parser recognises no word of, which the model reads: the model's phrases are what was
+    understood (no "request not understood" warning), the words stay listed as the offline parser left them."""
+    text = "la porte du frigo grande ouverte"
+    assert not parse_request(text).understood
+    server.push(fake.intent_reply(lambda t: json.loads(RequestIntent(category_hint="Refrigerator", joint_states=[
+        {"selector": "label", "label": "door", "band": "fully", "phrase": "porte grande ouverte"}]).model_dump_json())))
+    spec = lr.parse_request_model(text, client(server, tmp_path))
+    assert spec.parser == "model" and spec.understood and spec.matched == ["porte grande ouverte"]
+    assert [js.short() for js in spec.joint_states] == ["door=fully"]
+    notes = request_notes(spec)
+    assert notes[0] == spec.parse_note and not any("not understood" in n for n in notes)
