@@ -185,3 +185,26 @@ def test_a_request_only_the_model_understands(server, tmp_path):
     assert [js.short() for js in spec.joint_states] == ["door=fully"]
     notes = request_notes(spec)
     assert notes[0] == spec.parse_note and not any("not understood" in n for n in notes)
+
+
+def test_refine_applies_the_models_parse_and_says_so(server, tmp_path, monkeypatch):
+    """A refine with ``request_parser`` "model" against the fake server: the intent call (answered with the hinge
+    30 degrees from closed where the words say "slightly open") and the overlay call; the 30 degrees are what the
+    refined asset has and the report's notes name the model's parse."""
+    from asset2sim.tasks.refine import refine_asset
+    from tests.helpers import write_hinged_plate
+
+    monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("ASSET2SIM_LLM_RENDER_SIZE", "64")
+    thirty = {"selector": "all", "band": "quarter", "target": {"kind": "angle", "value": math.pi / 6}, "phrase": "lid slightly open"}
+    intent = fake.intent_reply(lambda t: json.loads(RequestIntent(joint_states=[thirty]).model_dump_json()))
+    overlay = fake.valid_reply()
+    server.default = lambda srv, req: (intent if req.request_text() is not None else overlay)(srv, req)
+    plate = write_hinged_plate(tmp_path / "plate")
+    cfg = RefineConfig(estimator="openai", model="m", base_url=server.url, request_parser="model")
+    res = refine_asset(plate, "A small box with its lid slightly open.", tmp_path / "out", cfg, extras=False)
+    assert server.n_chat == 2 and sum(r.request_text() is not None for r in server.requests) == 1
+    assert any(n.startswith("request parse: model openai/m, validated against the intent schema (all=30 deg from closed)")
+               for n in res.report.notes), res.report.notes
+    asked = [q for q in res.report.request.quantities if q.kind == "state"]
+    assert len(asked) == 1 and asked[0].asked == pytest.approx(math.pi / 6) and asked[0].within_tolerance, asked
