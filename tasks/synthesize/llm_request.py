@@ -97,6 +97,19 @@ def intent_problems(intent: RequestIntent) -> list[str]:
     return out
 
 
+def normalised(intent: RequestIntent) -> RequestIntent:
+    """``intent`` with its part labels as the offline parser writes them: stripped, lower case, single spaces
+    ("Door " -> "door")."""
+    def norm(label: str | None) -> str | None:
+        return " ".join(label.lower().split()) if label is not None else None
+
+    return intent.model_copy(update={
+        "joint_states": [js.model_copy(update={"label": norm(js.label)}) for js in intent.joint_states],
+        "properties": [p.model_copy(update={"label": norm(p.label)}) for p in intent.properties],
+        "dynamics_values": [d.model_copy(update={"label": norm(d.label)}) for d in intent.dynamics_values],
+        "part_counts": [c.model_copy(update={"label": norm(c.label)}) for c in intent.part_counts]})
+
+
 def with_intent(offline: RequestSpec, intent: RequestIntent, note: str) -> RequestSpec:
     """``offline`` with the intent fields of ``intent`` (``size_factor`` from the size class's prior factor when the
     class differs), ``parser`` "model" and ``parse_note`` ``note``; the model's phrases are the recognised words
@@ -130,7 +143,7 @@ def parse_request_model(text: str, client: LLMClient, offline: RequestSpec | Non
         problems = intent_problems(intent)
         if problems:
             raise ReplyInvalid(problems)
-        return intent
+        return normalised(intent)
 
     try:
         answer = client.ask(intent_messages(text, schema), RequestIntent, schema=schema, schema_name=INTENT_SCHEMA_NAME, accept=accept,
@@ -138,9 +151,8 @@ def parse_request_model(text: str, client: LLMClient, offline: RequestSpec | Non
     except LLMError as exc:  # the call failed, or the reply did not validate (ReplyError lists why)
         why = str(exc).split("\n", 1)[0][:400]
         return offline.model_copy(update={"parse_note": f"request parse: offline (the model's parse was not used: {why})"})
-    cached = " (from the reply cache)" if answer.usage.cached and not answer.usage.calls else ""
-    states = ", ".join(js.short() for js in answer.value.joint_states) or "no states"
-    return with_intent(offline, answer.value, f"request parse: model {model}{cached}, validated against the intent schema ({states})")
+    states = ", ".join(js.short() for js in answer.value.joint_states) or "no states"  # the same note from the cache: same output
+    return with_intent(offline, answer.value, f"request parse: model {model}, validated against the intent schema ({states})")
 
 
 def parse_request_for(text: str, config: RefineConfig | None = None, client: LLMClient | None = None) -> RequestSpec:
