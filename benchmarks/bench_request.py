@@ -22,7 +22,14 @@ entries that have an expected outcome (``all``: every one; dev objects
 included, minutes) and prints how many land (numbers within 5 %, bands in
 their interval, sizes, masses, materials, damping levels, warnings).
 
-    python benchmarks/bench_request.py [--sizes 1024,131072,1000000] [--outcomes 10|all]
+``--model URL`` also parses the corpus and the generated requests with the model path
+(``--request-parser model``: ``tasks/synthesize/llm_request.py``) against the OpenAI-compatible server at URL
+(``--model-name``, default ``m``; 127.0.0.1 for a local server) and prints the parse rate per phenomenon of
+both paths side by side, with the calls made and the replies the offline parse replaced; ``--model fake``
+starts a local fake server (``tests/fake_openai_server.py``) that answers each request with the offline
+parser's own intent: it measures the plumbing (schema, validation, reply cache, fallbacks), not a model.
+
+    python benchmarks/bench_request.py [--sizes 1024,131072,1000000] [--outcomes 10|all] [--model fake|URL]
 """
 
 from __future__ import annotations
@@ -111,10 +118,62 @@ def corpus(outcomes: str | None) -> None:
     print(f"outcomes: {len(todo) - missed}/{len(todo)} land ({1 - missed / max(len(todo), 1):.1%})")
 
 
+def model_path(target: str, model_name: str) -> None:
+    """The corpus and the generated requests through the model path against ``target`` (a base URL, or ``fake``: a
+    local server echoing the offline parse), the parse rate per phenomenon of both paths."""
+    import contextlib
+    import json
+    from collections import Counter
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from asset2sim.schemas.request import RequestIntent
+    from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient
+    from asset2sim.tasks.synthesize.llm_request import parse_request_model
+    from tests import fake_openai_server as fake
+    from tests.tasks.interpret.request_corpus import load_corpus, parse_rates
+    from tests.tasks.interpret.request_generated import generate, mismatch
+
+    entries = load_corpus()
+    intents = generate(600)
+    with contextlib.ExitStack() as stack:
+        if target == "fake":
+            echo = fake.intent_reply(lambda text: json.loads(RequestIntent.of(request.parse_request(text)).model_dump_json()))
+            srv = stack.enter_context(fake.FakeOpenAIServer(echo, max_requests=len(entries) + len(intents) + 10, lifetime_s=3600))
+            url, what = srv.url, "a local fake server that answers with the offline parser's intent (plumbing, not a model)"
+        else:
+            url, what = target, f"the server at {target}"
+        client = LLMClient(ClientConfig.from_env("openai/" + model_name, url, cache_dir=None))
+        kinds: Counter[str] = Counter()
+
+        def parse(text: str):
+            spec = parse_request_model(text, client)
+            kinds[spec.parser] += 1
+            return spec
+
+        t = time.perf_counter()
+        offline_rates, model_rates = parse_rates(entries), parse_rates(entries, parse)
+        g_total = Counter(p for i in intents for p in i.phenomena)
+        g_off = Counter(p for i in intents if mismatch(i, request.parse_request(i.text)) for p in i.phenomena)
+        g_mod = Counter(p for i in intents if mismatch(i, parse(i.text)) for p in i.phenomena)
+        secs = time.perf_counter() - t
+    print(f"model path against {what}: {client.usage.calls} calls, {kinds['model']} model parses used, "
+          f"{kinds['offline']} kept offline, {secs:.1f} s")
+    print(f"  {'corpus':<13} {'offline':>14} {'model path':>14}")
+    for ph in sorted(offline_rates, key=lambda k: (k == "general", k)):
+        (a, n), (b, _) = offline_rates[ph], model_rates[ph]
+        print(f"  {ph:<13} {a:>4}/{n:<4} {a / n:5.1%} {b:>4}/{n:<4} {b / n:5.1%}")
+    print(f"  {'generated':<13} {'offline':>14} {'model path':>14}")
+    for ph, n in sorted(g_total.items()):
+        print(f"  {ph:<13} {n - g_off[ph]:>4}/{n:<4} {(n - g_off[ph]) / n:5.1%} {n - g_mod[ph]:>4}/{n:<4} {(n - g_mod[ph]) / n:5.1%}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1024,16384,65536,131072,1000000", help="request lengths in characters")
     ap.add_argument("--outcomes", default=None, help="refine the first N corpus entries with an outcome ('all': every one)")
+    ap.add_argument("--model", default=None, help="also run the model path: an OpenAI-compatible base URL, or 'fake' (a local "
+                    "server echoing the offline parse)")
+    ap.add_argument("--model-name", default="m", help="the server's model name (sent as openai/NAME)")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     request.parse_request(SENTENCE)  # priors and regexes loaded once, outside the timings
@@ -141,6 +200,8 @@ def main() -> None:
         refused = f"refused: {exc}"
     print(f"{cap + 1:>11} {time.perf_counter() - t:>9.6f} {'':>11}  {refused}")
     corpus(args.outcomes)
+    if args.model:
+        model_path(args.model, args.model_name)
 
 
 if __name__ == "__main__":

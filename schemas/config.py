@@ -89,6 +89,10 @@ class RefineConfig(BaseModel):
     """Model string for model-backed estimators (litellm form, e.g. ``gemini/gemini-2.5-flash``)."""
     base_url: str | None = Field(None, min_length=1, max_length=2048)
     """Base URL of an OpenAI-compatible server for model-backed estimators."""
+    request_parser: Literal["offline", "model"] = "offline"
+    """Who turns the request into its typed intent: the offline parser (the default), or the model of ``estimator``
+    ``llm`` / ``openai`` (``model``) with the intent's JSON schema, the offline parse kept when the model's reply
+    is invalid or the call fails (``docs/guide/requests.md``)."""
     sim: SimConventions = Field(default_factory=SimConventions)
     penetration_tolerance: float = Field(1e-3, gt=0.0, le=1.0)
     """Phi below which the state is accepted, m (sum over contact points)."""
@@ -154,6 +158,8 @@ class RefineConfig(BaseModel):
             data.pop("clips", None)
         if not data.get("open_containers", False):  # off (the default): the hash of every configuration before the option existed
             data.pop("open_containers", None)
+        if data.get("request_parser", "offline") == "offline":  # the default, likewise
+            data.pop("request_parser", None)
         if data.get("body") is None:  # the default: the hash of every configuration before the option existed
             data.pop("body", None)
         if data.get("mjcf") == MjcfConfig().model_dump(mode="json"):  # the default, likewise

@@ -179,11 +179,73 @@ class RequestSpec(BaseModel):
     unused_words: list[str] = Field(default_factory=list)
     """Words of the request no rule used (function words, part labels and
     category names excepted), in order, each once."""
+    parser: Literal["offline", "model"] = "offline"
+    """Which parse the intent fields come from: the offline parser's, or a model's (``--request-parser model``)."""
+    parse_note: str = ""
+    """Why that parse was used ("" for the offline parser by default): the model's parse was valid, or why the
+    offline parse was kept (no model backend, the call failed, the reply did not validate)."""
 
     @property
     def understood(self) -> bool:
         """False for a non-empty request of which no word was recognised."""
         return bool(self.matched) or not self.text.strip()
+
+
+class PartCount(BaseModel):
+    """A count of parts the request names ("a two-drawer cabinet": ``label`` drawer, ``count`` 2)."""
+
+    model_config = ConfigDict(extra="forbid")
+    label: str = Field(min_length=1, max_length=64)
+    count: int = Field(ge=1, le=64)
+
+
+#: The fields of :class:`RequestSpec` that say what is asked (the typed intent); the others are the parse's account
+#: of the text (the words used and unused, warnings, phrases replaced) and the overrides.
+INTENT_FIELDS = ("category_hint", "size_class", "joint_states", "sizes", "pose_hint", "mass_level", "properties", "dynamics_values",
+                 "damping", "holds_position", "spring", "stiff", "free_moving", "part_counts", "mount")
+
+
+class RequestIntent(BaseModel):
+    """The typed intent of a request: per part the reference (label, ordinal and order), the state (band), the
+    amount and its unit (``target``: a fraction, an angle in rad, a distance in m or an end) and the source words
+    (``phrase``); the object's size (class and numbers in m or m^3), pose, mass (kg), materials, dynamics and
+    mounting. The same fields, with the same types, as :class:`RequestSpec` (:data:`INTENT_FIELDS`;
+    ``part_counts`` as a list); a model's parse is validated into it (``tasks/synthesize/llm_request.py``)."""
+
+    model_config = ConfigDict(extra="forbid")
+    category_hint: str | None = None
+    """The object's category named by the request (e.g. ``Stapler``, ``Refrigerator``), or null."""
+    size_class: SizeClass | None = None
+    """The size words' class, or null when none is said."""
+    joint_states: list[JointStateRequest] = Field(default_factory=list, max_length=64)
+    """One entry per part state asked, in the request's order."""
+    sizes: list[SizeTarget] = Field(default_factory=list, max_length=16)
+    pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
+    mass_level: Literal["light", "heavy"] | None = None
+    properties: list[PartProperty] = Field(default_factory=list, max_length=64)
+    dynamics_values: list[DynamicsValue] = Field(default_factory=list, max_length=64)
+    damping: DampingLevel = "moderate"
+    holds_position: bool = False
+    spring: bool = False
+    stiff: bool = False
+    free_moving: bool = False
+    part_counts: list[PartCount] = Field(default_factory=list, max_length=64)
+    mount: Literal["fixed", "free"] | None = None
+    """The mounting asked ("mounted on the wall": fixed; "free-standing": free), or null."""
+
+    @classmethod
+    def of(cls, spec: "RequestSpec") -> "RequestIntent":
+        """The intent of a parsed request (``part_counts`` sorted by label)."""
+        data = {k: getattr(spec, k) for k in INTENT_FIELDS}
+        data["part_counts"] = [PartCount(label=k, count=v) for k, v in sorted(spec.part_counts.items())]
+        return cls.model_validate(data).model_copy(deep=True)
+
+    def fields(self) -> dict[str, object]:
+        """The intent as :class:`RequestSpec` field values (``part_counts`` a dict; copies of the nested models)."""
+        out = {k: getattr(self, k) for k in INTENT_FIELDS}
+        out = {k: [x.model_copy(deep=True) for x in v] if isinstance(v, list) else v for k, v in out.items()}
+        out["part_counts"] = {c.label: c.count for c in self.part_counts}
+        return out
 
 
 class QuantityOutcome(BaseModel):

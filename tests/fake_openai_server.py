@@ -43,6 +43,11 @@ DESCRIPTION_MARK = "ASSET DESCRIPTION (JSON):"
 ``asset2sim.tasks.synthesize.llm_estimator.DESCRIPTION_MARK``)."""
 
 
+INTENT_MARK = "REQUEST TO PARSE:"
+"""Line that precedes the request text of a request-parse call
+(``asset2sim.tasks.synthesize.llm_request.INTENT_MARK``)."""
+
+
 @dataclass
 class Request:
     """One received request."""
@@ -76,6 +81,13 @@ class Request:
                         iu = p["image_url"]
                         out.append(iu["url"] if isinstance(iu, dict) else iu)
         return out
+
+    def request_text(self) -> str | None:
+        """The request text of a request-parse call (after :data:`INTENT_MARK`), else None."""
+        for t in self.texts():
+            if t.startswith(INTENT_MARK + "\n"):
+                return t[len(INTENT_MARK) + 1:]
+        return None
 
     def stalled_search(self) -> dict[str, Any] | None:
         """The state-search summary of a joint-proposal request, or None."""
@@ -414,5 +426,19 @@ def json_with_nan() -> Behaviour:
         s = json.dumps(content)
         s = re.sub(r'"scale": \{"value": [^,]+,', '"scale": {"value": NaN,', s, count=1)
         reply(s)(server, req)
+
+    return b
+
+
+def intent_reply(make: Callable[[str], Any]) -> Behaviour:
+    """Answer a request-parse call with ``make(request text)`` as JSON (a typed intent, or anything to test
+    validation); a call without a request text gets HTTP 400."""
+
+    def b(server: FakeOpenAIServer, req: Request) -> None:
+        text = req.request_text()
+        if text is None:
+            _send(req, 400, json.dumps({"error": {"message": "not a request-parse call", "type": "fake", "code": 400}}).encode())
+            return
+        reply(json.dumps(make(text)))(server, req)
 
     return b

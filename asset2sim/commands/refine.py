@@ -51,6 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "See docs/guide/model_backends.md"))
     parser.add_argument("--model", default=None, help="model for llm/openai: a litellm model string (provider/name) or the server's model name")
     parser.add_argument("--base-url", default=None, help="base URL of an OpenAI-compatible or local server (vLLM, Ollama, llama.cpp); needs no key")
+    parser.add_argument("--request-parser", choices=("offline", "model"), default=None, help=(
+        "who parses the request into its typed intent: offline (the default) or model (the --estimator llm/openai model, "
+        "with the intent's JSON schema; the offline parse is kept, with a note, when the model's parse is invalid or the "
+        "call fails; docs/guide/requests.md)"))
     parser.add_argument("--engines", default=None, help=(
         "comma-separated engines the asset must pass in (pybullet,physx,mujoco,newton); missing ones are skipped and "
         "reported (default: pybullet, and physx where SAPIEN is installed)"))
@@ -288,7 +292,8 @@ def options(args: argparse.Namespace) -> RefineConfig:
         base = load_config(args.config) if getattr(args, "config", None) else RefineConfig()
     except (OSError, ValueError) as exc:
         raise CommandError(INVALID_REQUEST, getattr(exc, "code", None) or "CONFIG_INVALID", args.config, str(exc)) from exc
-    fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url)) if v is not None}
+    fields = {k: v for k, v in (("estimator", args.estimator), ("model", args.model), ("base_url", args.base_url),
+                                ("request_parser", getattr(args, "request_parser", None))) if v is not None}
     if getattr(args, "keep_declared", False):
         fields["keep_declared"] = True
     if getattr(args, "no_clips", False):

@@ -21,6 +21,7 @@ from asset2sim.tasks.interpret.categories import recognize_category
 from asset2sim.tasks.interpret.overrides import apply_overrides
 from asset2sim.tasks.interpret.part_labels import labels_from_names
 from asset2sim.tasks.interpret.request import parse_request
+from asset2sim.tasks.synthesize.llm_request import parse_request_for
 
 from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.registry import open_session
@@ -70,14 +71,17 @@ class Interpretation:
 
 
 def interpret(asset: AssetDescription, prompt: str, category: str | None = None,
-              overrides: RequestOverrides | None = None) -> Interpretation:
+              overrides: RequestOverrides | None = None, config: RefineConfig | None = None) -> Interpretation:
     """Parse ``prompt`` (``overrides`` win over its words) and recognise the category of ``asset``
-    (``category`` wins over the asset's own; else labels and words decide).
+    (``category`` wins over the asset's own; else labels and words decide). ``config.request_parser`` "model":
+    the model of ``config.estimator`` parses the request, the offline parse kept when its parse is not valid
+    (:func:`asset2sim.tasks.synthesize.llm_request.parse_request_for`).
 
     Raises:
         OverrideError: an override does not fit the asset.
     """
-    spec = apply_overrides(parse_request(prompt), overrides, asset)
+    parsed = parse_request(prompt) if config is None or config.request_parser == "offline" else parse_request_for(prompt, config)
+    spec = apply_overrides(parsed, overrides, asset)
     labels = [ln.semantic_label for ln in asset.links if ln.semantic_label]
     match = recognize_category(category or asset.category, labels, prompt)
     return Interpretation(spec, getattr(match, "name", None) or str(match), getattr(match, "reason", ""))
@@ -117,7 +121,7 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     cache = cache if cache is not None else analyze.MeshCache()
     if geometry is None:
         geometry = analyze.analyze_asset(asset, cache=cache)
-    meaning = interpret(asset, prompt, category, (config or RefineConfig()).overrides)
+    meaning = interpret(asset, prompt, category, (config or RefineConfig()).overrides, config)
     kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=(config or RefineConfig()).sim)
     with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
         hull = link_hull_points(asset, cache=cache)

@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import yaml
@@ -163,13 +164,13 @@ def parse_key(spec: RequestSpec, with_ignored: bool) -> dict:
     return out
 
 
-def parse_misses(entries: list[dict]) -> list[str]:
-    """One line per entry whose parse differs from the expected one (the
-    differing fields: expected vs got)."""
+def parse_misses(entries: list[dict], parse: Callable[[str], RequestSpec] = parse_request) -> list[str]:
+    """One line per entry whose parse (by ``parse``, default the offline parser) differs from the expected one
+    (the differing fields: expected vs got)."""
     misses = []
     for e in entries:
         exp = expected_parse(e)
-        got = parse_key(parse_request(e["text"]), "ignored" in exp)
+        got = parse_key(parse(e["text"]), "ignored" in exp)
         diff = {k: (exp[k], got[k]) for k in exp if exp[k] != got[k]}
         if diff:
             misses.append(f"{e['id']} {e['text']!r}: " + "; ".join(f"{k}: expected {a}, got {b}" for k, (a, b) in diff.items()))
@@ -229,6 +230,19 @@ def apply_misses(entry: dict, scratch: Path) -> list[str]:
     if "unapplied" in want and got != list(want["unapplied"]):
         out.append(f"not applied {got}, expected {want['unapplied']}")
     return out
+
+
+def parse_rates(entries: list[dict], parse: Callable[[str], RequestSpec] = parse_request) -> dict[str, tuple[int, int]]:
+    """phenomenon -> (entries whose parse by ``parse`` matches the expected one; entries) over ``entries``; the
+    parse alone, not the joints it sets on the object."""
+    bad = {m.split(" ", 1)[0] for m in parse_misses(entries, parse)}
+    out: dict[str, list[int]] = {}
+    for e in entries:
+        for ph in phenomena_of(e):
+            c = out.setdefault(ph, [0, 0])
+            c[0] += e["id"] not in bad
+            c[1] += 1
+    return {k: (v[0], v[1]) for k, v in out.items()}
 
 
 def rates_by_phenomenon(entries: list[dict], scratch: Path) -> dict[str, tuple[int, int]]:
