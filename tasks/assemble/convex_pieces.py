@@ -260,17 +260,24 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
 def _newly_inside(near: np.ndarray, inside_m: np.ndarray, parts: tuple[Piece, ...], threshold: float) -> bool:
     """Whether a point of ``near`` (k, 3) m flagged in ``inside_m`` (k,) bool lies inside none of ``parts``
     (the largest plane value of a point below ``threshold`` m: inside). The parts' planes are measured on the
-    flagged points only; where one of them reads within :func:`_rounding_margin` of ``threshold`` (a row's
-    value may round differently in a smaller product), all of ``near`` is measured as a whole instead."""
+    flagged points only when they are at most half of ``near``; where one of them reads within
+    :func:`_rounding_margin` of ``threshold`` (a row's value may round differently in a smaller product), and
+    when most points are flagged, all of ``near`` is measured as a whole instead."""
+
+    def whole() -> bool:
+        full = np.zeros(len(near), bool)
+        for q in parts:
+            full |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < threshold
+        return bool((inside_m & ~full).any())
+
+    if 2 * int(np.count_nonzero(inside_m)) > len(near):
+        return whole()
     sub = near[inside_m]
     before = np.zeros(len(sub), bool)
     for p in parts:
         v = np.max(sub @ p.equations[:, :3].T + p.equations[:, 3], axis=1)
         if np.any(np.abs(v - threshold) <= _rounding_margin(sub, p.equations)):
-            full = np.zeros(len(near), bool)
-            for q in parts:
-                full |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < threshold
-            return bool((inside_m & ~full).any())
+            return whole()
         before |= v < threshold
     return bool((~before).any())
 

@@ -834,3 +834,34 @@ def test_drop_slivers_on_a_real_object_equals_the_full_plane_test():
         got = cp.drop_slivers(mixed)
         assert [id(p) for p in got] == [id(p) for p in _drop_slivers_reference(mixed)]
         assert len(got) < len(mixed)  # the test can fail: duplicates and halves inside their pieces go
+
+
+def test_a_surface_is_split_once_per_content(monkeypatch):
+    """split_surface kept by content: the same samples around the same points are split once (the cuts
+    measured once), the answer equals a fresh split and cannot be changed through it, the caller's
+    samples stay writable; other points kept out are split anew."""
+    rng = np.random.default_rng(5)
+    shell = rng.uniform(-0.05, 0.05, (3000, 3))
+    shell /= np.abs(shell).max(axis=1, keepdims=True) / 0.05  # points on a 10 cm box's surface
+    child = rng.uniform(-0.01, 0.01, (200, 3))  # a child in its middle
+    measured: list[int] = []
+    real = cc.depth_inside
+
+    def counting(points, piece):
+        measured.append(1)
+        return real(points, piece)
+
+    monkeypatch.setattr(cc, "depth_inside", counting)
+    cc._SPLITS.clear()
+    first = cc.split_surface(shell, child, cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    n = len(measured)
+    assert len(first) > 1 and n > 0  # the box was cut around the child
+    again = cc.split_surface(shell.copy(), child.copy(), cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    assert len(measured) == n  # nothing measured again
+    fresh = cc._split_surface(shell.copy(), child, cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    assert len(again) == len(fresh) and all(np.array_equal(a, b) for a, b in zip(again, fresh))
+    with pytest.raises(ValueError):
+        again[0][0, 0] = 1.0
+    assert shell.flags.writeable
+    cc.split_surface(shell, child + 0.001, cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    assert len(measured) > n
