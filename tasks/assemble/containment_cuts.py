@@ -8,6 +8,10 @@ pieces that still hold it are trimmed."""
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
+
 import numpy as np
 
 from asset2sim import mesh_io, urdf
@@ -90,7 +94,39 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
     (at :data:`CUT_FRACTIONS` of its extent, or through that point) after
     which the deeper half holds ``keep_out`` least deep (ties: less hull
     volume); points within ``spacing`` m of the plane go to both halves.
-    Stops when no cut helps. Returns the point sets."""
+    Stops when no cut helps. Returns the point sets (read-only arrays).
+
+    Kept per process by the content of its arguments (:data:`_SPLITS`): a parent cut facet by facet and as a
+    whole often splits the same samples twice (a single facet), and a refine builds the pieces of a model
+    again after changes elsewhere."""
+    pts = np.ascontiguousarray(points, dtype=float)
+    out = np.ascontiguousarray(keep_out, dtype=float)
+    key = (pts.shape, out.shape, hashlib.sha256(pts.tobytes() + b"|" + out.tobytes()).digest(), float(tolerance), int(budget),
+           float(spacing))
+    with _SPLITS_LOCK:
+        hit = _SPLITS.get(key)
+        if hit is not None:
+            _SPLITS.move_to_end(key)
+            return list(hit)
+    sets = _split_surface(pts.copy(), out, tolerance, budget, spacing)  # a copy: the arrays kept never alias the caller's
+    for a in sets:
+        a.flags.writeable = False
+    with _SPLITS_LOCK:
+        _SPLITS[key] = tuple(sets)
+        while len(_SPLITS) > _SPLITS_SIZE:
+            _SPLITS.popitem(last=False)
+    return list(sets)
+
+
+#: :func:`split_surface`'s point sets made in this process, by (shapes, SHA-256 of the points and the points kept
+#: out, tolerance, budget, spacing); the oldest dropped beyond :data:`_SPLITS_SIZE`.
+_SPLITS: OrderedDict[tuple, tuple[np.ndarray, ...]] = OrderedDict()
+_SPLITS_SIZE = 64
+_SPLITS_LOCK = threading.Lock()
+
+
+def _split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, budget: int, spacing: float) -> list[np.ndarray]:
+    """:func:`split_surface`, computed."""
     def hull_of(p: np.ndarray) -> Piece | None:
         return solid_piece(p[:: max(1, len(p) // MEASURE_SAMPLES)])  # an even subsample guides the cut; the pieces keep every point
 

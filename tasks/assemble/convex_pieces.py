@@ -204,12 +204,8 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
             size = float(np.ptp(m.points, axis=0).max())
             if len(near):
                 inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < -_INSIDE_EPS * size
-                if inside_m.any():
-                    before = np.zeros(len(near), bool)
-                    for p in (a, b):
-                        before |= np.max(near @ p.equations[:, :3].T + p.equations[:, 3], axis=1) < -_INSIDE_EPS * size
-                    if (inside_m & ~before).any():
-                        c += penalty
+                if inside_m.any() and _newly_inside(near, inside_m, (a, b), -_INSIDE_EPS * size):
+                    c += penalty
         return c, m
 
     centres: dict[int, np.ndarray] = {}
@@ -261,6 +257,31 @@ def merge_pieces(pieces: list[Piece], limit: int, others: np.ndarray | None = No
     return list(alive.values())
 
 
+def _newly_inside(near: np.ndarray, inside_m: np.ndarray, parts: tuple[Piece, ...], threshold: float) -> bool:
+    """Whether a point of ``near`` (k, 3) m flagged in ``inside_m`` (k,) bool lies inside none of ``parts``
+    (the largest plane value of a point below ``threshold`` m: inside). The parts' planes are measured on the
+    flagged points only when they are at most half of ``near``; where one of them reads within
+    :func:`_rounding_margin` of ``threshold`` (a row's value may round differently in a smaller product), and
+    when most points are flagged, all of ``near`` is measured as a whole instead."""
+
+    def whole() -> bool:
+        full = np.zeros(len(near), bool)
+        for q in parts:
+            full |= np.max(near @ q.equations[:, :3].T + q.equations[:, 3], axis=1) < threshold
+        return bool((inside_m & ~full).any())
+
+    if 2 * int(np.count_nonzero(inside_m)) > len(near):
+        return whole()
+    sub = near[inside_m]
+    before = np.zeros(len(sub), bool)
+    for p in parts:
+        v = np.max(sub @ p.equations[:, :3].T + p.equations[:, 3], axis=1)
+        if np.any(np.abs(v - threshold) <= _rounding_margin(sub, p.equations)):
+            return whole()
+        before |= v < threshold
+    return bool((~before).any())
+
+
 def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:
     """``piece`` cut by the half-space ``normal . x + offset <= 0`` (m): the
     hull of its vertices inside the half-space and of the points where its
@@ -306,7 +327,25 @@ def drop_slivers(pieces: list[Piece]) -> list[Piece]:
         if kept and p.volume < MIN_PIECE_VOLUME:
             continue
         size = float(np.ptp(p.points, axis=0).max())
-        if any(np.all(p.points @ q.equations[:, :3].T + q.equations[:, 3] <= 1e-9 * max(size, 1e-9)) for q in kept):
+        tol = 1e-9 * max(size, 1e-9)
+        if any(not _surely_outside(p.support, q, tol)
+               and np.all(p.points @ q.equations[:, :3].T + q.equations[:, 3] <= tol) for q in kept):
             continue
         kept.append(p)
     return [p for p in pieces if any(p is k for k in kept)]
+
+
+def _rounding_margin(points: np.ndarray, equations: np.ndarray) -> float:
+    """A bound (m) far above the floating-point error of ``points @ equations[:, :3].T + equations[:, 3]``
+    (unit normals; any summation order): 1e-12 of the largest coordinate and offset (the error is ~1e-16 of them)."""
+    return 1e-12 * (1.0 + float(np.abs(points).max(initial=0.0)) + float(np.abs(equations[:, 3]).max(initial=0.0)))
+
+
+def _surely_outside(points: np.ndarray, piece: Piece, tol: float) -> bool:
+    """Whether one of ``points`` (k, 3) m lies beyond a face plane of ``piece`` by more than ``tol`` m plus
+    :func:`_rounding_margin`: then no computation of the planes over a superset of ``points`` finds them all
+    within ``tol`` (a cheap test on a few points, e.g. :attr:`Piece.support`, before the full one)."""
+    if len(points) == 0:
+        return False
+    d = points @ piece.equations[:, :3].T + piece.equations[:, 3]
+    return bool(d.max() > tol + _rounding_margin(points, piece.equations))

@@ -763,3 +763,105 @@ def test_a_hull_keeps_the_vertices_qhull_names_in_input_order():
     ref = ConvexHull(pts)
     assert verts.tobytes() == ref.points[ref.vertices].tobytes()
     assert np.array_equal(eqs, ref.equations) and vol == ref.volume
+
+
+def _drop_slivers_reference(pieces):
+    """drop_slivers as the full plane test over every vertex, the definition the quick test must not change."""
+    if len(pieces) <= 1:
+        return list(pieces)
+    kept = []
+    for i in sorted(range(len(pieces)), key=lambda i: -pieces[i].volume):
+        p = pieces[i]
+        if kept and p.volume < cp.MIN_PIECE_VOLUME:
+            continue
+        size = float(np.ptp(p.points, axis=0).max())
+        if any(np.all(p.points @ q.equations[:, :3].T + q.equations[:, 3] <= 1e-9 * max(size, 1e-9)) for q in kept):
+            continue
+        kept.append(p)
+    return [p for p in pieces if any(p is k for k in kept)]
+
+
+def test_the_quick_outside_test_never_contradicts_the_full_one():
+    """A point clearly beyond a face is found on the few points tested; a point on a face (within rounding) is
+    left to the full test: the quick test never says outside where the full test finds every point inside."""
+    box = cp.Piece.of(_box([0, 0, 0], [0.1, 0.05, 0.02])[0])
+    tol = 1e-9 * 0.1
+    assert cp._surely_outside(np.array([[0.05, 0.025, 0.03]]), box, tol)  # 1 cm above the top
+    on_face = np.array([[0.1, 0.025, 0.01], [0.0, 0.0, 0.0], [0.1 + 0.5 * tol, 0.05, 0.02]])
+    assert not cp._surely_outside(on_face, box, tol)
+    assert np.all(on_face @ box.equations[:, :3].T + box.equations[:, 3] <= tol)  # the full test: inside
+    assert not cp._surely_outside(np.zeros((0, 3)), box, tol)
+
+
+def test_newly_inside_matches_the_full_measure_at_the_threshold():
+    """Points of another link inside a merged hull and, flagged or not, inside one of its parts: the answer on the
+    flagged points alone equals the full measure, also for points exactly on a part's face (the fallback)."""
+    rng = np.random.default_rng(3)
+    a = cp.Piece.of(_box([0, 0, 0], [0.02, 0.02, 0.02])[0])
+    b = cp.Piece.of(_box([0.03, 0, 0], [0.05, 0.02, 0.02])[0])
+    m = cp.Piece.of(np.vstack([a.points, b.points]))
+    for near in (rng.uniform([0, 0, 0], [0.05, 0.02, 0.02], (400, 3)),  # some in the gap between a and b
+                 rng.uniform([0, 0, 0], [0.02, 0.02, 0.02], (50, 3)),  # all inside a
+                 np.array([[0.02, 0.01, 0.01], [0.025, 0.01, 0.01]])):  # on a's face, and in the gap
+        size = float(np.ptp(m.points, axis=0).max())
+        thr = -cp._INSIDE_EPS * size
+        inside_m = np.max(near @ m.equations[:, :3].T + m.equations[:, 3], axis=1) < thr
+        before = np.zeros(len(near), bool)
+        for p in (a, b):
+            before |= np.max(near @ p.equations[:, :3].T + p.equations[:, 3], axis=1) < thr
+        assert cp._newly_inside(near, inside_m, (a, b), thr) == bool((inside_m & ~before).any())
+    assert cp._newly_inside(np.array([[0.025, 0.01, 0.01]]), np.array([True]), (a, b), thr)  # the gap: newly held
+
+
+@needs_shared
+def test_drop_slivers_on_a_real_object_equals_the_full_plane_test():
+    """On the pieces of laptop 9912's parts and of toilet 102703's, their cut halves and duplicates (every piece
+    again, and a piece's own half inside it), the quick test keeps exactly what the full test keeps."""
+    for aid in ("9912", "102703"):
+        model = urdf.read_urdf(SHARED / aid / "mobility.urdf")
+        pieces = []
+        for link in model.links.values():
+            for c in link.collisions:
+                if c.kind != "mesh":
+                    continue
+                v, _ = read_mesh(Path(c.path) if c.path else SHARED / aid / str(c.filename))[:2]
+                pc = cp.solid_piece(np.asarray(v, float) * np.asarray(c.scale, float))
+                if pc is not None:
+                    pieces.append(pc)
+        pieces = pieces[:60]
+        halves = [h for p in pieces[:20] for h in [cp.clip_piece(p, np.array([1.0, 0, 0]), -float(p.points[:, 0].mean()))] if h is not None]
+        mixed = pieces + halves + pieces[:10]
+        got = cp.drop_slivers(mixed)
+        assert [id(p) for p in got] == [id(p) for p in _drop_slivers_reference(mixed)]
+        assert len(got) < len(mixed)  # the test can fail: duplicates and halves inside their pieces go
+
+
+def test_a_surface_is_split_once_per_content(monkeypatch):
+    """split_surface kept by content: the same samples around the same points are split once (the cuts
+    measured once), the answer equals a fresh split and cannot be changed through it, the caller's
+    samples stay writable; other points kept out are split anew."""
+    rng = np.random.default_rng(5)
+    shell = rng.uniform(-0.05, 0.05, (3000, 3))
+    shell /= np.abs(shell).max(axis=1, keepdims=True) / 0.05  # points on a 10 cm box's surface
+    child = rng.uniform(-0.01, 0.01, (200, 3))  # a child in its middle
+    measured: list[int] = []
+    real = cc.depth_inside
+
+    def counting(points, piece):
+        measured.append(1)
+        return real(points, piece)
+
+    monkeypatch.setattr(cc, "depth_inside", counting)
+    cc._SPLITS.clear()
+    first = cc.split_surface(shell, child, cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    n = len(measured)
+    assert len(first) > 1 and n > 0  # the box was cut around the child
+    again = cc.split_surface(shell.copy(), child.copy(), cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    assert len(measured) == n  # nothing measured again
+    fresh = cc._split_surface(shell.copy(), child, cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    assert len(again) == len(fresh) and all(np.array_equal(a, b) for a, b in zip(again, fresh))
+    with pytest.raises(ValueError):
+        again[0][0, 0] = 1.0
+    assert shell.flags.writeable
+    cc.split_surface(shell, child + 0.001, cp.CONTAINMENT_TOLERANCE, 8, 0.004)
+    assert len(measured) > n

@@ -65,3 +65,38 @@ def test_cache_on_a_real_asset_is_identical(tmp_path):
     victim = sorted(p for p in fresh.values() if p.suffix == ".mtl")[0]
     victim.unlink()  # a removed MTL is no longer copied
     assert copied_meshes.mesh_copies(asset) == copied_meshes._mesh_copies(asset) != fresh
+
+
+def test_meshes_copied_twice_are_edited_once_per_content(tmp_path, monkeypatch):
+    """A refine copies an object's meshes into its workspace and then into its output: each OBJ's lines are
+    scanned for outside references once per content, the second copy is byte for byte the first, and a
+    file whose bytes change is scanned again."""
+    src = SHARED / "100221"
+    if not (src / "mobility.urdf").is_file():
+        pytest.skip("PartNet-Mobility object 100221 not available")
+    shutil.copytree(src, tmp_path / "a")
+    obj = sorted((tmp_path / "a").rglob("*.obj"))[0]
+    obj.write_bytes(b"mtllib ../../../outside.mtl\n" + obj.read_bytes())  # a reference the copy drops
+    asset = extract_asset(tmp_path / "a")
+    scans: list[str] = []
+    real = copied_meshes._drop_outside_references
+
+    def counting(data, rel, names_of):
+        scans.append(rel)
+        return real(data, rel, names_of)
+
+    monkeypatch.setattr(copied_meshes, "_drop_outside_references", counting)
+    copied_meshes._EDITED.clear()
+    copied_meshes.copy_meshes(asset, tmp_path / "one")
+    first = len(scans)
+    assert first > 50
+    copied_meshes.copy_meshes(asset, tmp_path / "two")
+    assert len(scans) == first  # the second copy scanned nothing again
+    rel = obj.relative_to(tmp_path / "a").as_posix()
+    one, two = (tmp_path / "one" / rel).read_bytes(), (tmp_path / "two" / rel).read_bytes()
+    assert one == two and b"outside.mtl" not in one and b"was dropped" in one
+    obj.write_bytes(obj.read_bytes().replace(b"outside.mtl", b"elsewhere.mtl"))
+    _bump(obj)
+    copied_meshes.copy_meshes(extract_asset(tmp_path / "a"), tmp_path / "three")
+    assert scans.count(rel) == 2  # new bytes: scanned again
+    assert b"elsewhere.mtl" not in (tmp_path / "three" / rel).read_bytes()
