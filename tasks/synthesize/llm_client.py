@@ -39,7 +39,7 @@ def record_digest(key: str, model: Any, content: Any, finish_reason: Any) -> str
 
 
 #: The client's own names and the pieces' names callers import from here.
-__all__ = ["CACHE_FORMAT", "NO_KEY", "ClientConfig", "DeadlineExceeded", "LLMClient", "LLMError", "LLMUnavailable", "MissingCredentials",
+__all__ = ["make_client", "model_string", "CACHE_FORMAT", "NO_KEY", "ClientConfig", "DeadlineExceeded", "LLMClient", "LLMError", "LLMUnavailable", "MissingCredentials",
            "ModelCallError", "ReplyError", "ReplyInvalid", "ReplyTooLarge", "import_litellm", "parse_json_strict", "parse_reply", "retry_after_s", "with_overrides"]
 
 
@@ -298,3 +298,26 @@ class LLMClient:
                 ]
         summary = " | ".join(f"reply {i + 1}: " + "; ".join(e[:3]) for i, e in enumerate(history))
         raise ReplyError(f"model {self.config.model}: no usable reply after {len(history)} replies ({summary})", history)
+
+
+def model_string(estimator: str, model: str | None) -> str:
+    """litellm model string for an estimator name (``openai`` prefixes ``openai/``); ValueError without a model."""
+    if not model:
+        raise ValueError(f"--estimator {estimator} needs --model (a litellm model string, e.g. gemini/gemini-2.5-flash)")
+    if estimator == "openai" and not model.startswith("openai/"):
+        return "openai/" + model
+    return model
+
+
+def make_client(estimator: str = "llm", model: str | None = None, base_url: str | None = None, *, check: bool = True, **overrides) -> LLMClient:
+    """A client for ``estimator`` (``llm`` or ``openai``), knobs from the environment and ``overrides``.
+
+    Raises:
+        ValueError: no model.
+        LLMUnavailable: litellm missing.
+        MissingCredentials: ``check`` and the provider's key is not set.
+    """
+    client = LLMClient(ClientConfig.from_env(model_string(estimator, model), base_url, **overrides))
+    if check:
+        client.check_credentials()
+    return client

@@ -12,7 +12,7 @@ from asset2sim.schemas.model_reply import PROPOSAL_SCHEMA_NAME, REPLY_SCHEMA_NAM
 from asset2sim.tasks.synthesize import estimator
 from asset2sim.tasks.synthesize.context import EstimationContext
 from asset2sim.tasks.synthesize.llm_baselines import IVW_TEMPERATURE, direct_overlay, ivw_overlay
-from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient
+from asset2sim.tasks.synthesize.llm_client import ClientConfig, LLMClient, make_client, model_string
 from asset2sim.tasks.synthesize.llm_errors import ModelCallError, ReplyError, ReplyInvalid
 from asset2sim.tasks.synthesize.llm_overlay import MASS_AGREEMENT, estimator_info, overlay_from_reply
 from asset2sim.tasks.synthesize.llm_prompt import (DESCRIPTION_MARK, PROPOSAL_MARK, VIEWS, build_messages, describe, proposal_messages,
@@ -22,29 +22,6 @@ from asset2sim.tasks.synthesize.llm_usage import Usage
 #: The estimators' own names and the pieces' names callers import from here.
 __all__ = ["DESCRIPTION_MARK", "IVW_TEMPERATURE", "MASS_AGREEMENT", "PROPOSAL_MARK", "VIEWS", "LLMEstimator", "OpenAICompatibleEstimator",
            "describe", "direct_overlay", "ivw_overlay", "make_client", "model_string", "overlay_from_reply"]
-
-
-def model_string(estimator: str, model: str | None) -> str:
-    """litellm model string for an estimator name (``openai`` prefixes ``openai/``); ValueError without a model."""
-    if not model:
-        raise ValueError(f"--estimator {estimator} needs --model (a litellm model string, e.g. gemini/gemini-2.5-flash)")
-    if estimator == "openai" and not model.startswith("openai/"):
-        return "openai/" + model
-    return model
-
-
-def make_client(estimator: str = "llm", model: str | None = None, base_url: str | None = None, *, check: bool = True, **overrides) -> LLMClient:
-    """A client for ``estimator`` (``llm`` or ``openai``), knobs from the environment and ``overrides``.
-
-    Raises:
-        ValueError: no model.
-        LLMUnavailable: litellm missing.
-        MissingCredentials: ``check`` and the provider's key is not set.
-    """
-    client = LLMClient(ClientConfig.from_env(model_string(estimator, model), base_url, **overrides))
-    if check:
-        client.check_credentials()
-    return client
 
 
 class LLMEstimator:

@@ -21,7 +21,7 @@ from asset2sim.prior_tables import load_priors
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import RequestIntent, RequestSpec
 from asset2sim.tasks.interpret.request import parse_request
-from asset2sim.tasks.synthesize.llm_client import LLMClient
+from asset2sim.tasks.synthesize.llm_client import LLMClient, make_client
 from asset2sim.tasks.synthesize.llm_errors import LLMError, ReplyInvalid
 
 INTENT_SCHEMA_NAME = "request_intent"
@@ -173,7 +173,6 @@ def parse_request_for(text: str, config: RefineConfig | None = None, client: LLM
             return offline.model_copy(update={"parse_note": "request parse: offline (--request-parser model needs --estimator "
                                                             f"llm or openai with --model; estimator {config.estimator!r}"
                                                             + ("" if config.model else ", no model") + ")"})
-        from asset2sim.tasks.synthesize.llm_estimator import make_client
         try:
             client = make_client(config.estimator, config.model, config.base_url)
         except (LLMError, ValueError) as exc:

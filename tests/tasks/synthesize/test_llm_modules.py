@@ -29,8 +29,9 @@ from tests.helpers import write_hinged_plate
 @pytest.mark.parametrize(
     ("facade", "homes", "own"),
     [
-        (llm_client, (llm_config, llm_errors, llm_transport, llm_reply, llm_usage), {"LLMClient", "CACHE_FORMAT"}),
-        (llm_estimator, (llm_prompt, llm_overlay, llm_baselines), {"LLMEstimator", "OpenAICompatibleEstimator", "make_client", "model_string"}),
+        (llm_client, (llm_config, llm_errors, llm_transport, llm_reply, llm_usage), {"LLMClient", "CACHE_FORMAT", "make_client",
+                                                                                  "model_string"}),
+        (llm_estimator, (llm_prompt, llm_overlay, llm_baselines, llm_client), {"LLMEstimator", "OpenAICompatibleEstimator"}),
     ],
 )
 def test_public_names_are_the_homes_objects(facade, homes, own) -> None:
