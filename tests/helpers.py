@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import signal
 import socket
 from collections.abc import Iterator
 from pathlib import Path
@@ -241,3 +242,19 @@ def assert_ready_or_honestly_not_robust(report, overlay) -> None:
     for j in loose:
         src = overlay.joints[j].source
         assert "capped at" in src or "operable: friction" in src, (j, src)
+
+
+@contextlib.contextmanager
+def no_hang(seconds: int) -> Iterator[None]:
+    """Fail the test with TimeoutError after ``seconds`` (SIGALRM) instead of hanging the suite (a FIFO, a bomb)."""
+
+    def on_alarm(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, on_alarm)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)

@@ -6,11 +6,9 @@ bombs); calls that could block run under an alarm or in a child process with a t
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -19,22 +17,14 @@ from asset2sim import cli
 from asset2sim.api import load_config
 from asset2sim.input_files import InputFileError, load_yaml
 from asset2sim.schemas.config import MAX_MEASUREMENT_STEPS, RefineConfig, SimConventions
+from tests.helpers import no_hang
 
 HANG_LIMIT_S = 20
 
 
-@contextmanager
 def _no_hang(seconds: int = HANG_LIMIT_S):
-    def on_alarm(signum, frame):
-        raise TimeoutError(f"still running after {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, on_alarm)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
+    """:func:`tests.helpers.no_hang` with this module's limit."""
+    return no_hang(seconds)
 
 
 def _bomb(levels: int, width: int = 9) -> str:

@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import collections
 import re
-import signal
 import time
-from contextlib import contextmanager
 
 import pytest
 
@@ -16,26 +14,15 @@ from asset2sim.tasks.ingest import validate_input as vi
 from asset2sim.tasks.ingest.extract import AssetError, extract_asset_checked
 from tests import corpus_builder as cb
 from tests.conftest import ROOT
-from tests.helpers import tree_hashes
+from tests.helpers import tree_hashes, no_hang
 
 TIME_LIMIT_S = 5.0
 HANG_LIMIT_S = 30
 
 
-@contextmanager
 def _no_hang(seconds: int):
-    """Fail the test (instead of hanging the suite) after ``seconds``."""
-
-    def on_alarm(signum, frame):
-        raise TimeoutError(f"validation still running after {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, on_alarm)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
+    """:func:`tests.helpers.no_hang`."""
+    return no_hang(seconds)
 
 
 def test_corpus_size_and_coverage():

@@ -8,11 +8,9 @@ process with a time-out, so a regression fails instead of hanging the suite."""
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -21,7 +19,7 @@ from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.extract import extract_asset_checked
 from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
 from asset2sim.tasks.ingest.validate_input import CODES, validate_asset
-from tests.helpers import tree_hashes
+from tests.helpers import tree_hashes, no_hang
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -33,18 +31,9 @@ HANG_LIMIT_S = 30
 TETRA = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 
 
-@contextmanager
 def _no_hang(seconds: int = HANG_LIMIT_S):
-    def on_alarm(signum, frame):
-        raise TimeoutError(f"still running after {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, on_alarm)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
+    """:func:`tests.helpers.no_hang` with this module's limit."""
+    return no_hang(seconds)
 
 
 def _mjcf(folder: Path, name: str = "obj.xml", *, mesh: str = "part.obj", compiler: str = "", extra_asset: str = "",
