@@ -114,6 +114,7 @@ def test_hand_written_entries_apply_to_the_right_joints(tmp_path_factory) -> Non
     assert not missed, "\n".join(missed)
 
 
+@needs_shared
 def test_an_apply_expectation_can_fail(tmp_path_factory) -> None:
     """The comparison can fail: the stapler's arm expected on the wrong joint, a phrase expected unapplied."""
     entry = next(e for e in WITH_APPLY if e["text"].startswith("a heavy 2 lb stapler"))

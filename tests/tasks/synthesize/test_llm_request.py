@@ -25,6 +25,7 @@ from asset2sim.tasks.synthesize import llm_client as lc  # noqa: E402
 from asset2sim.tasks.synthesize import llm_request as lr  # noqa: E402
 from asset2sim.tasks.synthesize.context import interpret  # noqa: E402
 from tests import fake_openai_server as fake  # noqa: E402
+from tests.conftest import needs_shared  # noqa: E402
 
 DEV = Path(__file__).resolve().parents[4] / "shared" / "datasets" / "partnet_mobility"
 FRIDGE = "a fridge with the freezer door open 90 degrees and the main door closed"
@@ -125,6 +126,7 @@ def test_missing_backend_and_default(tmp_path):
         RefineConfig(request_parser="model").config_hash()
 
 
+@needs_shared
 def test_interpret_on_a_dev_refrigerator(server, tmp_path, monkeypatch):
     """The model's parse reaches the estimation context of a real asset through the refine configuration."""
     monkeypatch.setenv("ASSET2SIM_LLM_CACHE_DIR", str(tmp_path / "cache"))
