@@ -18,9 +18,8 @@ import numpy as np
 
 from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, REPORT_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
+from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
 from asset2sim.output_paths import OutputError
-from asset2sim.schemas.report import RefineReport
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import render
@@ -44,7 +43,7 @@ def media_pending(out_dir: Path | str) -> bool:
     """True when ``out_dir``'s ``report.json`` says its media phase was deferred (False when it is done, off,
     unrecorded or the report cannot be read)."""
     try:
-        report = RefineReport.model_validate_json(atomic.read_regular(Path(out_dir) / REPORT_NAME, output_folder.MAX_RECORD_BYTES))
+        report = read_report_json(out_dir)
     except (OSError, ValueError):
         return False
     return report.media == "deferred"
