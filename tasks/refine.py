@@ -26,7 +26,7 @@ from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, RefineReport, StateRefinement
 from asset2sim.schemas.request import BAND_INTERVAL, RequestSpec
-from asset2sim.tasks.audit import keep
+from asset2sim.tasks.check import keep_declared as keep
 from asset2sim.tasks.ingest.declared import read_declared
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.check import dynamics_search, manipulation, operating, parity, postcheck, repair, robust_rest, sweep, task_tier
@@ -229,7 +229,7 @@ def _extract(asset_dir: Path | str, out_dir: Path, asset_id: str | None, categor
 
 
 def _keep_declared(est: estimator.Estimator, asset_dir: Path | str, asset: AssetDescription) -> estimator.Estimator:
-    """``est`` keeping the asset's plausible declared physics (:class:`asset2sim.tasks.audit.keep.KeepDeclared`);
+    """``est`` keeping the asset's plausible declared physics (:class:`asset2sim.tasks.check.keep_declared.KeepDeclared`);
     RefineError("invalid_input") when the declared physics cannot be read."""
     try:
         declared = read_declared(asset_dir, asset.urdf_path)
