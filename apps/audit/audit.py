@@ -21,7 +21,8 @@ from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
 from asset2sim.apps.audit import patch, report_md
 from asset2sim.tasks.check.plausibility import Judgement, judge
-from asset2sim.tasks.check import manipulation, postcheck
+from asset2sim.tasks.geometry.closed_state import closed_tuples
+from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.ingest import declared as declared_mod
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
@@ -177,7 +178,7 @@ def _simulate(ctx, judged: Judgement, config: RefineConfig, initial: dict[str, f
     joints' closed ends (a spring's joint: its reference within the limits), with the asset's own collision
     geometry as a simulator loading the file gets it (:func:`_physics_urdf`)."""
     state = {**ctx.closed_state(), **initial}
-    closed = manipulation.closed_tuples(ctx.closed)
+    closed = closed_tuples(ctx.closed)
     out = []
     with tempfile.TemporaryDirectory(prefix="asset2sim-audit-") as tmp:
         for kind, overlay in (("declared", judged.declared), ("patched", judged.patched)):
