@@ -44,8 +44,8 @@ from urllib.parse import parse_qs, quote
 from asset2sim.apps.realism.ratings import RatingError, RatingStore, Showing, check_rater, media_path, side
 
 if TYPE_CHECKING:
-    from fastapi import FastAPI
-    from fastapi.responses import HTMLResponse
+    from fastapi import FastAPI, Request
+    from fastapi.responses import HTMLResponse, Response
 
 #: Largest answer form accepted, bytes.
 MAX_FORM_BYTES = 16_384
@@ -173,6 +173,66 @@ def _media_table(store: RatingStore) -> dict[tuple[int, str, int, str], Path]:
     return table
 
 
+async def _answer(store: RatingStore, secret: bytes, rater: str, request: "Request") -> "Response":
+    """An answer posted by ``rater``: Origin, size, form token and values checked, recorded, the next pair
+    (a redirect) or an error page naming what was refused."""
+    from fastapi.responses import RedirectResponse
+
+    origin = request.headers.get("origin")
+    if origin is not None and origin.lower() != f"{request.url.scheme}://{request.headers.get('host', '')}".lower():
+        return _error_page("ORIGIN_REFUSED", "refused: the answer was sent from another site", None)
+    length = request.headers.get("content-length")
+    if length is not None and (not length.strip().isdigit() or int(length) > MAX_FORM_BYTES):
+        return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes", None)
+    body = bytearray()
+    async for chunk in request.stream():  # a chunked body: read only up to the cap
+        body += chunk
+        if len(body) > MAX_FORM_BYTES:
+            return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes", None)
+    try:
+        form = {k: v[0] for k, v in parse_qs(body.decode("utf-8"), keep_blank_values=True).items()}
+    except UnicodeDecodeError:
+        return _error_page("ANSWER_INVALID", "the answer is not UTF-8 text", None)
+    if not hmac.compare_digest(form.get("token", "").encode(), form_token(secret, rater).encode()):
+        return _error_page("TOKEN_INVALID", "refused: the form is not one this app sent (reload the page and "
+                                            "answer again)", None)
+    try:
+        check_rater(rater)
+        index = int(form.get("pair", ""))
+        if not 0 <= index < len(store.pairs):
+            raise RatingError("PAIR_UNKNOWN", f"no pair {index}")
+        score_text = form.get("score", "").strip()
+        score = int(score_text) if score_text else None
+        store.record(rater, store.pairs[index].pair_id, form.get("choice", ""), score=score,
+                     comment=form.get("comment", ""))
+    except ValueError as exc:  # RatingError, or a number that is not one
+        code = exc.code if isinstance(exc, RatingError) else "ANSWER_INVALID"
+        message = str(exc) if isinstance(exc, RatingError) else "pair and score must be whole numbers"
+        return _error_page(code, message, rater if code != "RATER_INVALID" else None)
+    except sqlite3.Error as exc:  # the database failed under the app: the rater is told, nothing is pretended
+        return _error_page("STORE_FAILED", f"the answer could not be stored ({exc}); tell the person running "
+                                           "the study", None)
+    store.sync_parquet()
+    return RedirectResponse(f"/rate/{quote(rater, safe='')}", status_code=303, headers=_HEADERS)
+
+
+def _clip_response(store: RatingStore, media: dict, rater: str, index: int, position: str, view: int, kind: str) -> "Response":
+    """The clip or poster shown to ``rater`` at ``position`` of pair ``index`` (404 for anything else)."""
+    from fastapi.responses import FileResponse, Response
+
+    if kind not in _KINDS or position not in ("left", "right") or not 0 <= index < len(store.pairs):
+        return Response("not found", status_code=404, media_type="text/plain")
+    try:
+        shown = store.showing(rater, store.pairs[index].pair_id)
+    except RatingError:
+        return Response("not found", status_code=404, media_type="text/plain")
+    path = media.get((index, shown.left if position == "left" else shown.right, view, kind))
+    if path is None:
+        return Response("not found", status_code=404, media_type="text/plain")
+    return FileResponse(path, media_type=_KINDS[kind], headers={"Cache-Control": "private, max-age=3600",
+                                                                  "X-Content-Type-Options": "nosniff"})
+
+
 def create_app(folder: Path | str, *, store: RatingStore | None = None, host: str = "127.0.0.1",
                allowed_hosts: Sequence[str] = ()) -> "FastAPI":
     """The rating app of the pair set in ``folder`` (``pairs.json``; answers in ``ratings.sqlite`` and
@@ -187,7 +247,7 @@ def create_app(folder: Path | str, *, store: RatingStore | None = None, host: st
         RatingsDatabaseError: ``ratings.sqlite`` damaged (naming it and what to do).
     """
     from fastapi import FastAPI, Request  # optional (the pipeline extra): imported when an app is made
-    from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+    from fastapi.responses import HTMLResponse, RedirectResponse, Response
     from starlette.middleware.trustedhost import TrustedHostMiddleware
 
     store = store or RatingStore(folder)
@@ -229,56 +289,11 @@ def create_app(folder: Path | str, *, store: RatingStore | None = None, host: st
 
     @app.post("/rate/{rater}/answer")
     async def answer(rater: str, request: Request) -> Response:
-        origin = request.headers.get("origin")
-        if origin is not None and origin.lower() != f"{request.url.scheme}://{request.headers.get('host', '')}".lower():
-            return _error_page("ORIGIN_REFUSED", "refused: the answer was sent from another site", None)
-        length = request.headers.get("content-length")
-        if length is not None and (not length.strip().isdigit() or int(length) > MAX_FORM_BYTES):
-            return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes", None)
-        body = bytearray()
-        async for chunk in request.stream():  # a chunked body: read only up to the cap
-            body += chunk
-            if len(body) > MAX_FORM_BYTES:
-                return _error_page("ANSWER_TOO_LARGE", f"the answer is larger than {MAX_FORM_BYTES} bytes", None)
-        try:
-            form = {k: v[0] for k, v in parse_qs(body.decode("utf-8"), keep_blank_values=True).items()}
-        except UnicodeDecodeError:
-            return _error_page("ANSWER_INVALID", "the answer is not UTF-8 text", None)
-        if not hmac.compare_digest(form.get("token", "").encode(), form_token(secret, rater).encode()):
-            return _error_page("TOKEN_INVALID", "refused: the form is not one this app sent (reload the page and "
-                                                "answer again)", None)
-        try:
-            check_rater(rater)
-            index = int(form.get("pair", ""))
-            if not 0 <= index < len(store.pairs):
-                raise RatingError("PAIR_UNKNOWN", f"no pair {index}")
-            score_text = form.get("score", "").strip()
-            score = int(score_text) if score_text else None
-            store.record(rater, store.pairs[index].pair_id, form.get("choice", ""), score=score,
-                         comment=form.get("comment", ""))
-        except ValueError as exc:  # RatingError, or a number that is not one
-            code = exc.code if isinstance(exc, RatingError) else "ANSWER_INVALID"
-            message = str(exc) if isinstance(exc, RatingError) else "pair and score must be whole numbers"
-            return _error_page(code, message, rater if code != "RATER_INVALID" else None)
-        except sqlite3.Error as exc:  # the database failed under the app: the rater is told, nothing is pretended
-            return _error_page("STORE_FAILED", f"the answer could not be stored ({exc}); tell the person running "
-                                               "the study", None)
-        store.sync_parquet()
-        return RedirectResponse(f"/rate/{quote(rater, safe='')}", status_code=303, headers=_HEADERS)
+        return await _answer(store, secret, rater, request)
 
     @app.get("/media/{rater}/{index}/{position}/{view}/{kind}")
     def clip_file(rater: str, index: int, position: str, view: int, kind: str) -> Response:
-        if kind not in _KINDS or position not in ("left", "right") or not 0 <= index < len(store.pairs):
-            return Response("not found", status_code=404, media_type="text/plain")
-        try:
-            shown = store.showing(rater, store.pairs[index].pair_id)
-        except RatingError:
-            return Response("not found", status_code=404, media_type="text/plain")
-        path = media.get((index, shown.left if position == "left" else shown.right, view, kind))
-        if path is None:
-            return Response("not found", status_code=404, media_type="text/plain")
-        return FileResponse(path, media_type=_KINDS[kind], headers={"Cache-Control": "private, max-age=3600",
-                                                                      "X-Content-Type-Options": "nosniff"})
+        return _clip_response(store, media, rater, index, position, view, kind)
 
     return app
 
