@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 
 from asset2sim.urdf import UrdfInertial, UrdfModel, read_urdf
-from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader
+from asset2sim.tasks.ingest import readers, staged, urdf_meshes
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 
 __all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared"]
@@ -130,7 +130,7 @@ def read_declared(path: Path | str, urdf_path: Path | str | None = None, reading
     other = staged.other_format_file(path)
     if other is not None:
         source, fmt = other
-        read = mjcf_reader.read_mjcf_asset(source, reading) if fmt == "mjcf" else usd_reader.read_usd_asset(source)
+        read = readers.read_asset_file(source, fmt, reading)
         return declared_from_model(Path(source), fmt, read.model, read)
     original = urdf_meshes.urdf_needing_conversion(path)  # its meshes converted for the simulators: its own values
     urdf = original or (Path(urdf_path) if urdf_path is not None else Path(path))
