@@ -14,7 +14,7 @@ from asset2sim.flows.catalog import ResultCatalog, load_catalog
 try:
     from .conftest import make_project
 except ImportError:
-    from conftest import make_project
+    from tests.flows.conftest import make_project
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -30,7 +30,7 @@ try:
     from .conftest import CALLS_PATH, make_project, write_manifest
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from conftest import CALLS_PATH, make_project, write_manifest
+    from tests.flows.conftest import CALLS_PATH, make_project, write_manifest
 
 
 def _run(catalog: Path, **kw):
