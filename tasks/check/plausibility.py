@@ -19,7 +19,6 @@ from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, Lin
 from asset2sim.tasks.check import plausibility_bands as bands
 from asset2sim.tasks.check import force_ranges
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
-from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.interpret import size_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.tasks.synthesize import physics
