@@ -44,7 +44,7 @@ from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.assemble import (collision_geometry, container_pieces, export_mjcf, footprint, parent_child_separation,
                                       sliding_clearance, write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.publish import export_usd, host_mjcf, output
+from asset2sim.tasks.publish import export_usd, host_mjcf, host_usd, output
 from asset2sim.tasks.publish import media as media_phase
 from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_complete, read_report_json, run_hash, write_completion_marker,
                                               write_report_json)
@@ -153,7 +153,7 @@ def refine_asset(
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             _announce_post_check(att, log)
             report = _build_report(ctx, prompt, chash, att, findings, pose_note, log.times, resolution)
-            host = _host_mjcf(work, asset, config, report)
+            host = _host_mjcf(work, asset, config, report) or _host_usd(work, asset, report)
             report.media = "off"
             write_report_json(work, report)
             extra_paths = _extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
@@ -984,6 +984,27 @@ def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
                         f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
                         f"{done.diff.relative_to(out_dir).as_posix()}")
     return {"host_mjcf": str(done.path)}
+
+
+def _host_usd(out_dir: Path, asset: AssetDescription, report: RefineReport) -> dict[str, str]:
+    """A USD input's refined object written back into its own stage (``usd/host/``,
+    :func:`asset2sim.tasks.publish.host_usd.write_host_usd`), noted in the report with its changes; {} for other
+    inputs. A stage that cannot be written (a rescaled object, usd-core missing) is a note, never the loss of the
+    refined asset."""
+    source = asset.staged_from
+    if source is None or staged.input_format(source) != "usd":
+        return {}
+    try:
+        done = host_usd.write_host_usd(out_dir, source)
+    except Exception as exc:  # the host stage must not lose the refined asset
+        _raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"host USD not written: {exc}")
+        return {}
+    rel = lambda p: p.relative_to(out_dir).as_posix()  # noqa: E731
+    report.notes.append(f"host USD: {rel(done.path)} is {source.name} with the refined physics and initial state "
+                        f"({done.changes} attributes on {list(done.prims)}), prim paths as they were; the changes alone as a "
+                        f"layer: {rel(done.layer)}; prim path -> attribute old -> new: {rel(done.diff)}")
+    return {"host_usd": str(done.path), "host_usd_layer": str(done.layer)}
 
 
 def _extras(out_dir: Path, report: RefineReport, att: _Attempt, log: _StageLog, reference: Path | str | None,
