@@ -982,7 +982,9 @@ def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
     rel = done.path.relative_to(out_dir).as_posix()
     report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
                         f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
-                        f"{done.diff.relative_to(out_dir).as_posix()}")
+                        f"{done.diff.relative_to(out_dir).as_posix()}"
+                        + "".join(f"; the object's included file {f.relative_to(out_dir).as_posix()} with the same physics"
+                                  for f in done.fragments))
     return {"host_mjcf": str(done.path)}
 
 

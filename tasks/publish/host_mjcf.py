@@ -17,6 +17,13 @@ and the file's ``<compiler>`` conventions (its angle unit now stated) stay. MuJo
 written as ``mjcf/host/<input file name>``, with ``mjcf/host/<stem>.diff``, the unified diff of the input file
 and the written one. A refine that rescaled the object writes no such file: the host's geometry would no longer
 match the physics.
+
+A host that builds its own scene around the object's included file (Meta-World's environments include
+``objects/assets/drawer.xml``, not the ``objects/drawer.xml`` scene) needs that file: each ``<include>`` file of the
+input holding bodies of the object is written again as ``mjcf/host/fragments/<its path in the input's tree>``, its
+bodies' ``<inertial>`` and their joints' ``damping``, ``frictionloss``, ``stiffness``, ``springref`` and ``range``
+those of the host file (bodies matched by name, their joints in order), everything else as it was (XML comments
+dropped), to copy over the package's file.
 """
 
 from __future__ import annotations
@@ -29,16 +36,24 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, file_names
+import xml.etree.ElementTree as ET
+
+from asset2sim import atomic, file_names, safexml
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.ingest import host_conventions, mjcf_scene
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.tasks.ingest.mjcf_files import gather_mjcf
+from asset2sim.tasks.ingest.staged import MJCF_SUFFIXES
 from asset2sim.urdf import read_urdf
 
 #: Folder (inside the output's ``mjcf/``) of the file written for the host.
 HOST_DIR = "host"
+#: Folder (inside ``mjcf/host/``) of the object's included files written again.
+FRAGMENTS_DIR = "fragments"
+#: Joint attributes a fragment takes from the host file (absent there: removed, the class default applies in both).
+JOINT_PHYSICS = ("damping", "frictionloss", "stiffness", "springref", "range")
 #: The keyframe holding the refined initial state.
 KEYFRAME = "initial"
 #: Relative tolerance of the check that the written file carries the refined masses.
@@ -52,12 +67,13 @@ class HostExportError(RuntimeError):
 @dataclass(frozen=True)
 class HostExport:
     """What :func:`write_host_mjcf` wrote: ``path`` the MJCF file, ``diff`` the diff against the input, ``bodies``
-    and ``joints`` the names whose physics changed."""
+    and ``joints`` the names whose physics changed, ``fragments`` the object's included files written again."""
 
     path: Path
     diff: Path
     bodies: tuple[str, ...]
     joints: tuple[str, ...]
+    fragments: tuple[Path, ...] = ()
 
 
 def _names(m, mujoco) -> dict[str, list[str]]:
@@ -136,7 +152,59 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints))
+    fragments = write_fragments(folder / FRAGMENTS_DIR, source, xml, set(bodies))
+    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
+                      fragments=tuple(fragments))
+
+
+def write_fragments(folder: Path, source: Path, host_xml: str, bodies: set[str]) -> list[Path]:
+    """The ``<include>`` files of ``source`` holding a body of ``bodies`` (names), written again under ``folder``
+    at their path in the input's tree with the ``<inertial>`` of those bodies and the physics of their joints
+    (:data:`JOINT_PHYSICS`, in order) as ``host_xml`` (the host file written) has them. Returns the files written.
+
+    Raises:
+        StagingError: an included file cannot be read again under the input's trust rules.
+        UnsafePath: an included file's path would leave ``folder``.
+    """
+    host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
+    wanted = {b.get("name"): b for b in host.iter("body") if b.get("name") in bodies}
+    sources = gather_mjcf(source, tree=host_conventions.package_tree(source))  # the tree the reader read it in
+    out = []
+    for name, data in sorted(sources.files.items()):
+        if name == sources.main or Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
+            continue
+        root = safexml.parse_xml_bytes(data, source=name)
+        found = [b for b in root.iter("body") if b.get("name") in wanted]
+        if not found:
+            continue
+        for body in found:
+            _copy_physics(wanted[body.get("name")], body)
+        rel = Path(name).relative_to(sources.tree).as_posix()
+        path = file_names.join_inside(folder, rel)
+        atomic.write_bytes(path, b'<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="utf-8", xml_declaration=False) + b"\n")
+        out.append(path)
+    return out
+
+
+def _copy_physics(host, body) -> None:
+    """``host``'s ``<inertial>`` on ``body`` (replacing its own) and the :data:`JOINT_PHYSICS` of ``host``'s joints on
+    ``body``'s joints, paired in order."""
+    inertial = host.find("inertial")
+    if inertial is not None:
+        old = body.find("inertial")
+        new = ET.Element("inertial", dict(inertial.attrib))
+        if old is not None:
+            new.tail = old.tail
+            body[list(body).index(old)] = new
+        else:
+            new.tail = body[0].tail if len(body) else None
+            body.insert(0, new)
+    for target, given in zip(body.findall("joint"), host.findall("joint")):
+        for key in JOINT_PHYSICS:
+            if key in given.attrib:
+                target.set(key, given.get(key))
+            else:
+                target.attrib.pop(key, None)
 
 
 def _set_inertial(body, inertial, offset: np.ndarray) -> None:
