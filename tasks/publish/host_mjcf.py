@@ -159,7 +159,9 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
 
 def write_fragments(folder: Path, source: Path, host_xml: str, bodies: set[str]) -> list[Path]:
     """The ``<include>`` files of ``source`` holding a body of ``bodies`` (names), written again under ``folder``
-    at their path in the input's tree with the ``<inertial>`` of those bodies and the physics of their joints
+    at their path in the input's tree (the host package's asset folder,
+    :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
+    ``--allow-outside-paths`` allows is left out) with the ``<inertial>`` of those bodies and the physics of their joints
     (:data:`JOINT_PHYSICS`, in order) as ``host_xml`` (the host file written) has them. Returns the files written.
 
     Raises:
@@ -179,6 +181,8 @@ def write_fragments(folder: Path, source: Path, host_xml: str, bodies: set[str])
             continue
         for body in found:
             _copy_physics(wanted[body.get("name")], body)
+        if not Path(name).is_relative_to(sources.tree):  # a file --allow-outside-paths let in: no place to mirror it
+            continue
         rel = Path(name).relative_to(sources.tree).as_posix()
         path = file_names.join_inside(folder, rel)
         atomic.write_bytes(path, b'<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="utf-8", xml_declaration=False) + b"\n")
