@@ -21,9 +21,9 @@ match the physics.
 A host that builds its own scene around the object's included file (Meta-World's environments include
 ``objects/assets/drawer.xml``, not the ``objects/drawer.xml`` scene) needs that file: each ``<include>`` file of the
 input holding bodies of the object is written again as ``mjcf/host/fragments/<its path in the input's tree>``, its
-bodies' ``<inertial>`` and their joints' ``damping``, ``frictionloss``, ``stiffness``, ``springref`` and ``range``
-those of the host file (bodies matched by name, their joints in order), everything else as it was (XML comments
-dropped), to copy over the package's file.
+bodies' ``<inertial>`` those of the host file and their joints' ``damping``, ``frictionloss``, ``stiffness``,
+``springref`` and ``range`` the refined ones in the unit the file is compiled in (bodies matched by name, their
+joints in order), everything else as it was (XML comments dropped), to copy over the package's file.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ from asset2sim.urdf import read_urdf
 HOST_DIR = "host"
 #: Folder (inside ``mjcf/host/``) of the object's included files written again.
 FRAGMENTS_DIR = "fragments"
-#: Joint attributes a fragment takes from the host file (absent there: removed, the class default applies in both).
+#: Joint attributes a fragment takes from the refined joint (in the file's units).
 JOINT_PHYSICS = ("damping", "frictionloss", "stiffness", "springref", "range")
 #: The keyframe holding the refined initial state.
 KEYFRAME = "initial"
@@ -152,35 +152,41 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    fragments = write_fragments(folder / FRAGMENTS_DIR, source, xml, set(bodies))
+    moving = {mjcf_scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))
+                                              for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
+                                              if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
+              for b in pick.bodies}
+    fragments = write_fragments(folder / FRAGMENTS_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v})
     return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
                       fragments=tuple(fragments))
 
 
-def write_fragments(folder: Path, source: Path, host_xml: str, bodies: set[str]) -> list[Path]:
-    """The ``<include>`` files of ``source`` holding a body of ``bodies`` (names), written again under ``folder``
-    at their path in the input's tree (the host package's asset folder,
+def write_fragments(folder: Path, source: Path, host_xml: str, inertials: set[str],
+                    joints: dict[str, list[dict[str, str]]]) -> list[Path]:
+    """The ``<include>`` files of ``source`` holding a body of ``inertials`` or ``joints`` (names), written again
+    under ``folder`` at their path in the input's tree (the host package's asset folder,
     :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
-    ``--allow-outside-paths`` allows is left out) with the ``<inertial>`` of those bodies and the physics of their joints
-    (:data:`JOINT_PHYSICS`, in order) as ``host_xml`` (the host file written) has them. Returns the files written.
+    ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
+    (the host file written) has it, and on the hinge and slide ``<joint>`` elements of the bodies of ``joints``
+    (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes. Returns the files written.
 
     Raises:
         StagingError: an included file cannot be read again under the input's trust rules.
         UnsafePath: an included file's path would leave ``folder``.
     """
     host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
-    wanted = {b.get("name"): b for b in host.iter("body") if b.get("name") in bodies}
+    hosted = {b.get("name"): b for b in host.iter("body") if b.get("name") in inertials}
     sources = gather_mjcf(source, tree=host_conventions.package_tree(source))  # the tree the reader read it in
     out = []
     for name, data in sorted(sources.files.items()):
         if name == sources.main or Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
             continue
         root = safexml.parse_xml_bytes(data, source=name)
-        found = [b for b in root.iter("body") if b.get("name") in wanted]
+        found = [b for b in root.iter("body") if b.get("name") in hosted or b.get("name") in joints]
         if not found:
             continue
         for body in found:
-            _copy_physics(wanted[body.get("name")], body)
+            _copy_physics(hosted.get(body.get("name")), body, joints.get(body.get("name"), []))
         if not Path(name).is_relative_to(sources.tree):  # a file --allow-outside-paths let in: no place to mirror it
             continue
         rel = Path(name).relative_to(sources.tree).as_posix()
@@ -190,10 +196,22 @@ def write_fragments(folder: Path, source: Path, host_xml: str, bodies: set[str])
     return out
 
 
-def _copy_physics(host, body) -> None:
-    """``host``'s ``<inertial>`` on ``body`` (replacing its own) and the :data:`JOINT_PHYSICS` of ``host``'s joints on
-    ``body``'s joints, paired in order."""
-    inertial = host.find("inertial")
+def _joint_physics(joint, limited: bool) -> dict[str, str]:
+    """The :data:`JOINT_PHYSICS` of ``joint`` (an ``mjsJoint``, in the file's units; ``range`` only when
+    ``limited``) as MJCF attribute values, to 12 significant digits."""
+    def text(values) -> str:
+        return " ".join(f"{float(v):.12g}" for v in values)
+    out = {"damping": text(joint.damping[:1]), "frictionloss": text([joint.frictionloss]),
+           "stiffness": text(joint.stiffness[:1]), "springref": text([joint.springref])}
+    if limited:
+        out["range"] = text(joint.range)
+    return out
+
+
+def _copy_physics(host, body, joints: list[dict[str, str]]) -> None:
+    """``host``'s ``<inertial>`` on ``body`` (replacing its own; ``host`` None: none) and ``joints``' attributes on
+    ``body``'s hinge and slide joints, paired in order."""
+    inertial = host.find("inertial") if host is not None else None
     if inertial is not None:
         old = body.find("inertial")
         new = ET.Element("inertial", dict(inertial.attrib))
@@ -203,12 +221,9 @@ def _copy_physics(host, body) -> None:
         else:
             new.tail = body[0].tail if len(body) else None
             body.insert(0, new)
-    for target, given in zip(body.findall("joint"), host.findall("joint")):
-        for key in JOINT_PHYSICS:
-            if key in given.attrib:
-                target.set(key, given.get(key))
-            else:
-                target.attrib.pop(key, None)
+    for target, given in zip([j for j in body.findall("joint") if j.get("type") not in ("free", "ball")], joints):
+        for key, value in given.items():
+            target.set(key, value)
 
 
 def _set_inertial(body, inertial, offset: np.ndarray) -> None:

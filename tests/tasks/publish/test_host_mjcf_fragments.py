@@ -6,6 +6,7 @@ names and geometry, the refined masses, damping and friction, and a pull opens t
 
 from __future__ import annotations
 
+import math
 import shutil
 import textwrap
 
@@ -72,3 +73,25 @@ def test_a_meta_world_drawer_goes_back_into_an_environment_of_its_package(tmp_pa
     for _ in range(400):
         mujoco.mj_step(after, data)
     assert data.qpos[after.jnt_qposadr[j]] < -0.02  # it opens
+
+
+def test_a_menagerie_model_in_degrees_goes_back_into_its_scene_in_degrees(tmp_path):
+    """A Menagerie-style ``scene.xml`` including the model file, which states no ``<compiler>`` (degrees): the
+    model file written again keeps its ranges in degrees, so the scene compiles the refined quarter turn."""
+    door = hl.degree_door(tmp_path / "in" / "mujoco_menagerie" / "door" / "door.xml", ref=10.0)
+    scene = door.parent / "scene.xml"
+    scene.write_text('<mujoco model="scene"><include file="door.xml"/><worldbody><light pos="0 0 3"/></worldbody></mujoco>')
+    res = refine_asset(scene, "A door, halfway open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    fragment = res.out_dir / "mjcf" / "host" / "fragments" / "door" / "door.xml"
+    copy = tmp_path / "swapped" / "mujoco_menagerie"
+    shutil.copytree(tmp_path / "in" / "mujoco_menagerie", copy)
+    shutil.copyfile(fragment, copy / "door" / "door.xml")
+    after = mujoco.MjModel.from_xml_path(str(copy / "door" / "scene.xml"))
+    model = read_urdf(res.out_dir / "mobility.urdf")
+    (hinge,) = model.movable_joints
+    j = after.joint("hinge").id
+    assert tuple(after.jnt_range[j]) == pytest.approx((hinge.limit.lower, hinge.limit.upper), abs=1e-9)  # 0..90 degrees
+    assert after.dof_damping[after.jnt_dofadr[j]] == pytest.approx(hinge.dynamics.damping, rel=1e-9)
+    assert after.body("leaf").mass[0] == pytest.approx(model.links["leaf"].inertial.mass, rel=1e-5)
+    assert after.qpos0[after.jnt_qposadr[j]] == pytest.approx(math.radians(10.0))  # its ref kept, in degrees
