@@ -41,7 +41,7 @@ import numpy as np
 
 from asset2sim import atomic, file_names
 from asset2sim.engines.loading import read_initial_state
-from asset2sim.frames import matrix_quat_wxyz, rigid_inverse
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
 from asset2sim.openusd import pxr_modules
 from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
 from asset2sim.schemas.overlay import Overlay
@@ -56,8 +56,9 @@ __all__ = ["HOST_DIR", "HostUsdExport", "HostUsdError", "UsdEdit", "applied_sche
 HOST_DIR = "host"
 #: Relative tolerance of the check that the written stage holds the refined values (binary32 attributes).
 VALUE_RTOL = 1e-5
-#: A value within this relative difference of the one the stage holds is left as it is (binary32's precision).
-SAME_RTOL = 1e-7
+#: A value within this difference (relative to its magnitude) of the one the stage holds is left as it is: a value
+#: read in, converted to SI and back, agrees to a few binary32 roundings.
+SAME_RTOL = 1e-6
 
 
 class HostUsdError(RuntimeError):
@@ -89,7 +90,7 @@ class UsdEdit:
         """Author ``name`` (of Sdf type ``type_name``, used when the attribute does not exist) on ``prim``."""
         attr = prim.GetAttribute(name)
         old = attr.Get() if attr and attr.HasValue() else None
-        if old is not None and np.allclose(_numbers(old), _numbers(value), rtol=SAME_RTOL, atol=0.0):
+        if old is not None and same(old, value):
             return  # the stage holds it already (to the attribute's binary32 precision)
         if not attr:
             attr = prim.CreateAttribute(name, type_name, custom=name.startswith(("asset2sim:",)))
@@ -113,6 +114,16 @@ def applied_schemas(prim) -> list[str]:
     (``PhysicsJointStateAPI`` is PhysX's, which usd-core does not register)."""
     op = prim.GetMetadata("apiSchemas")
     return list(op.ApplyOperations([])) if op is not None else []
+
+
+def same(a, b) -> bool:
+    """Whether two values (numbers, vectors, quaternions) agree to :data:`SAME_RTOL` of the larger magnitude (a
+    vector's tiny components, 1e-17 beside 0.03, count as equal)."""
+    x, y = _numbers(a), _numbers(b)
+    if x.shape != y.shape:
+        return False
+    scale = max(float(np.abs(x).max(initial=0.0)), float(np.abs(y).max(initial=0.0)))
+    return bool(np.allclose(x, y, rtol=0.0, atol=SAME_RTOL * scale))
 
 
 def _numbers(value) -> np.ndarray:
@@ -148,6 +159,18 @@ def _principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return d, q
 
 
+def _authored_tensor(body) -> np.ndarray:
+    """The inertia tensor (3, 3, body axes, stage units) ``body``'s diagonal inertia and principal axes give; NaN
+    where no diagonal inertia is authored."""
+    diag = body.GetAttribute("physics:diagonalInertia")
+    if not (diag and diag.HasAuthoredValue()):
+        return np.full((3, 3), np.nan)
+    axes = body.GetAttribute("physics:principalAxes")
+    q = axes.Get() if axes and axes.HasValue() else None
+    r = np.eye(3) if q is None else quat_wxyz_matrix(_numbers(q) / max(float(np.linalg.norm(_numbers(q))), 1e-300))
+    return r @ np.diag(np.asarray(diag.Get(), float)) @ r.T
+
+
 def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray, world: np.ndarray, mass: float,
                   com: np.ndarray, inertia: np.ndarray) -> None:
     """Author a link's ``mass`` kg, ``com`` (3,) m and ``inertia`` (3, 3) kg*m^2 about the COM, both in the link
@@ -162,9 +185,10 @@ def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray
     edit.apply(body, "PhysicsMassAPI")
     edit.set(body, "physics:mass", Sdf.ValueTypeNames.Float, float(mass / ctx.kg))
     edit.set(body, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*(float(v) for v in local)))
-    edit.set(body, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*(float(v) for v in d)))
-    w, x, y, z = (float(v) for v in matrix_quat_wxyz(q))
-    edit.set(body, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(w, x, y, z))
+    if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
+        edit.set(body, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*(float(v) for v in d)))
+        w, x, y, z = (float(v) for v in matrix_quat_wxyz(q))
+        edit.set(body, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(w, x, y, z))
     density = body.GetAttribute("physics:density")
     if density and density.HasAuthoredValue() and density.Get():
         edit.set(body, "physics:density", Sdf.ValueTypeNames.Float, 0.0)  # an explicit mass wins; no density contradicts it

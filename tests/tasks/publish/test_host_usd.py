@@ -92,3 +92,18 @@ def test_a_rescaled_usd_object_is_not_written_back(tmp_path):
                        CONFIG.model_copy(update={"overrides": RequestOverrides(scale=0.5)}), extras=False)
     assert any(n.startswith("host USD not written: ") and "rescaled" in n for n in res.report.notes), res.report.notes
     assert not (res.out_dir / "usd" / "host").exists()
+
+
+def test_a_binary_usd_goes_back_as_a_binary_layer_of_the_same_name(tmp_path):
+    text = cabinet_usd(tmp_path / "src" / "cabinet.usda")
+    src = tmp_path / "in" / "cabinet.usdc"
+    src.parent.mkdir()
+    assert Sdf.Layer.FindOrOpen(str(text)).Export(str(src))
+    res = refine_asset(src, "A cabinet, door slightly open.", tmp_path / "out", CONFIG, extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    host = res.out_dir / "usd" / "host" / "cabinet.usdc"
+    assert host.read_bytes().startswith(b"PXR-USDC")  # crate, as a .usdc must be
+    written = Usd.Stage.Open(str(host))
+    assert {p for p, _ in _attributes(written)} == {p for p, _ in _attributes(Usd.Stage.Open(str(src)))}
+    model = read_urdf(res.out_dir / "mobility.urdf")
+    assert read_usd_asset(host).model.links["door"].inertial.mass == pytest.approx(model.links["door"].inertial.mass, rel=1e-6)
