@@ -73,6 +73,12 @@ def _host_python() -> tuple[str, Path]:
     return python, Path(done.stdout.strip().splitlines()[-1]).parent
 
 
+@pytest.fixture(scope="module")
+def host() -> tuple[str, Path]:
+    """:func:`_host_python`, probed once for the module."""
+    return _host_python()
+
+
 def _run(python: str, packages: Path, args: list) -> dict:
     env = {**os.environ, "PYTHONPATH": str(packages)}
     done = subprocess.run([python, "-c", SCRIPT, json.dumps(args)], capture_output=True, text=True, timeout=300, env=env)
@@ -81,9 +87,9 @@ def _run(python: str, packages: Path, args: list) -> dict:
 
 
 @pytest.mark.parametrize("task, scene, prompt, policy, joint, bodies, travel", TASKS, ids=[t[0] for t in TASKS])
-def test_a_meta_world_environment_runs_with_the_refined_object_swapped_in(tmp_path, task, scene, prompt, policy, joint,
-                                                                          bodies, travel):
-    python, package = _host_python()
+def test_a_meta_world_environment_runs_with_the_refined_object_swapped_in(host, tmp_path, task, scene, prompt, policy,
+                                                                          joint, bodies, travel):
+    python, package = host
     xml = package / "assets" / "objects" / f"{scene}.xml"
     res = refine_asset(xml, prompt, tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
