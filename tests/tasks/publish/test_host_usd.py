@@ -107,3 +107,36 @@ def test_a_binary_usd_goes_back_as_a_binary_layer_of_the_same_name(tmp_path):
     assert {p for p, _ in _attributes(written)} == {p for p, _ in _attributes(Usd.Stage.Open(str(src)))}
     model = read_urdf(res.out_dir / "mobility.urdf")
     assert read_usd_asset(host).model.links["door"].inertial.mass == pytest.approx(model.links["door"].inertial.mass, rel=1e-6)
+
+
+@pytest.mark.slow
+def test_a_partnet_mobility_object_as_a_usd_stage_goes_back_with_its_meshes(shared_dataset, tmp_path):
+    """A dataset object (148, a faucet, real meshes) refined and exported to USD, the stage refined as an input in
+    its own right: the host stage keeps every prim path and every mesh's points, and holds the second refine's
+    masses."""
+    import csv
+
+    from asset2sim.tasks.publish.export_usd import export_usd
+
+    if not (shared_dataset / "148" / "mobility.urdf").is_file():
+        pytest.skip("dev object 148 not present")
+    with open(shared_dataset / "manifest.csv", newline="") as f:
+        prompt = next(r["prompt"] for r in csv.DictReader(f) if r["id"] == "148")
+    first = refine_asset(shared_dataset / "148", prompt, tmp_path / "first", CONFIG, extras=False)
+    src = tmp_path / "in" / "faucet.usd"
+    src.parent.mkdir()
+    src.write_bytes(export_usd(first.out_dir).path.read_bytes())
+    res = refine_asset(src, prompt, tmp_path / "out", CONFIG, extras=False)
+    host = res.out_dir / "usd" / "host" / "faucet.usd"
+    assert host.is_file(), res.report.notes
+    original, written = Usd.Stage.Open(str(src)), Usd.Stage.Open(str(host))
+    before, after = _attributes(original), _attributes(written)
+    assert {p for p, _ in after} == {p for p, _ in before}
+    points = [k for k in before if k[1] == "points"]
+    assert points and all(np.array_equal(np.asarray(after[k]), np.asarray(before[k])) for k in points)
+    changed = {k for k in before if before[k] != after.get(k)} | (set(after) - set(before))
+    assert changed and all(name.startswith(PHYSICS) for _, name in changed), sorted(changed)
+    model, back = read_urdf(res.out_dir / "mobility.urdf"), read_usd_asset(host).model
+    for name, link in model.links.items():
+        if link.inertial is not None:
+            assert back.links[name].inertial.mass == pytest.approx(link.inertial.mass, rel=1e-6), name
