@@ -983,8 +983,8 @@ def _host_mjcf(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
     report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
                         f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
                         f"{done.diff.relative_to(out_dir).as_posix()}"
-                        + "".join(f"; the object's included file {f.relative_to(out_dir).as_posix()} with the same physics"
-                                  for f in done.fragments))
+                        + "".join(f"; {f.relative_to(out_dir).as_posix()}, the package's file with the same physics"
+                                  for f in done.files))
     return {"host_mjcf": str(done.path)}
 
 

@@ -55,6 +55,7 @@ EXPECTED_FILES = {
     "api.md": ["out/box/mobility.urdf", "out/box/report.json", "out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
     "inputs.md": ["out/from_mjcf/mobility.urdf", "out/from_mjcf/report.json", "out/from_mjcf_api/report.json",
                   "out/robosuite_door/mobility.urdf", "out/robosuite_door/mjcf/host/door.xml",
+                  "out/robosuite_door/mjcf/host/files/objects/door.xml",
                   "out/from_usd/usd/host/mobility.usd", "out/from_usd/usd/host/mobility.physics.usda"],
     "outputs.md": ["out/demo/mobility.urdf", "out/demo/initial_state.json", "out/demo/overlay.json", "out/demo/report.json"],
     "requests.md": ["refine.yaml"],

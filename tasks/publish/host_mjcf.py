@@ -18,12 +18,15 @@ written as ``mjcf/host/<input file name>``, with ``mjcf/host/<stem>.diff``, the 
 and the written one. A refine that rescaled the object writes no such file: the host's geometry would no longer
 match the physics.
 
-A host that builds its own scene around the object's included file (Meta-World's environments include
-``objects/assets/drawer.xml``, not the ``objects/drawer.xml`` scene) needs that file: each ``<include>`` file of the
-input holding bodies of the object is written again as ``mjcf/host/fragments/<its path in the input's tree>``, its
-bodies' ``<inertial>`` those of the host file and their joints' ``damping``, ``frictionloss``, ``stiffness``,
-``springref`` and ``range`` the refined ones in the unit the file is compiled in (bodies matched by name, their
-joints in order), everything else as it was (XML comments dropped), to copy over the package's file.
+MuJoCo's writer is the MuJoCo installed here, and an older MuJoCo, which a host package may pin (Meta-World
+pins 3.3.0), rejects attributes a newer one writes (a texture's ``colorspace``). And a host may build its own scene
+around the object's included file (Meta-World's environments include ``objects/assets/drawer.xml``, not the
+``objects/drawer.xml`` scene). So each of the input's own files holding bodies of the object (the file given, and
+the files it includes) is also written again as ``mjcf/host/files/<its path in the input's tree>``, the package's
+XML as it was (XML comments dropped) with only the bodies' ``<inertial>`` those of the host file and their hinge
+and slide joints' ``damping``, ``frictionloss``, ``stiffness``, ``springref`` and ``range`` the refined ones in the
+unit the file is compiled in (bodies matched by name, their joints in order), to copy over the package's file.
+These files carry no keyframe: the host sets its state.
 """
 
 from __future__ import annotations
@@ -50,9 +53,9 @@ from asset2sim.urdf import read_urdf
 
 #: Folder (inside the output's ``mjcf/``) of the file written for the host.
 HOST_DIR = "host"
-#: Folder (inside ``mjcf/host/``) of the object's included files written again.
-FRAGMENTS_DIR = "fragments"
-#: Joint attributes a fragment takes from the refined joint (in the file's units).
+#: Folder (inside ``mjcf/host/``) of the input's files holding the object, written again.
+FILES_DIR = "files"
+#: Joint attributes a package file takes from the refined joint (in the file's units).
 JOINT_PHYSICS = ("damping", "frictionloss", "stiffness", "springref", "range")
 #: The keyframe holding the refined initial state.
 KEYFRAME = "initial"
@@ -67,13 +70,13 @@ class HostExportError(RuntimeError):
 @dataclass(frozen=True)
 class HostExport:
     """What :func:`write_host_mjcf` wrote: ``path`` the MJCF file, ``diff`` the diff against the input, ``bodies``
-    and ``joints`` the names whose physics changed, ``fragments`` the object's included files written again."""
+    and ``joints`` the names whose physics changed, ``files`` the input's files holding the object written again."""
 
     path: Path
     diff: Path
     bodies: tuple[str, ...]
     joints: tuple[str, ...]
-    fragments: tuple[Path, ...] = ()
+    files: tuple[Path, ...] = ()
 
 
 def _names(m, mujoco) -> dict[str, list[str]]:
@@ -156,14 +159,14 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
                                               for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
                                               if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
               for b in pick.bodies}
-    fragments = write_fragments(folder / FRAGMENTS_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v})
+    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v})
     return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
-                      fragments=tuple(fragments))
+                      files=tuple(files))
 
 
-def write_fragments(folder: Path, source: Path, host_xml: str, inertials: set[str],
+def write_package_files(folder: Path, source: Path, host_xml: str, inertials: set[str],
                     joints: dict[str, list[dict[str, str]]]) -> list[Path]:
-    """The ``<include>`` files of ``source`` holding a body of ``inertials`` or ``joints`` (names), written again
+    """``source`` and the files it includes that hold a body of ``inertials`` or ``joints`` (names), written again
     under ``folder`` at their path in the input's tree (the host package's asset folder,
     :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
     ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
@@ -179,7 +182,7 @@ def write_fragments(folder: Path, source: Path, host_xml: str, inertials: set[st
     sources = gather_mjcf(source, tree=host_conventions.package_tree(source))  # the tree the reader read it in
     out = []
     for name, data in sorted(sources.files.items()):
-        if name == sources.main or Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
+        if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
             continue
         root = safexml.parse_xml_bytes(data, source=name)
         found = [b for b in root.iter("body") if b.get("name") in hosted or b.get("name") in joints]

@@ -60,18 +60,18 @@ def test_a_package_object_is_refined_interaction_ready_at_its_size_in_its_unit(t
             assert lo - 1e-9 <= j.limit.lower <= j.limit.upper <= hi + 1e-9, (j.name, (j.limit.lower, j.limit.upper), (lo, hi))
             assert j.limit.upper - j.limit.lower > 0.5 * (hi - lo), j.name  # clipped by the geometry at most
     assert (res.out_dir / "mjcf" / "host" / xml.name).is_file()
-    # the object's included files written again (robosuite's door: the host file itself): the package's tree
-    # (linked) with them in place compiles the input scene with the refined masses, as the package's environments would
-    fragments = res.out_dir / "mjcf" / "host" / "fragments"
-    written = sorted(fragments.rglob("*.xml")) if fragments.is_dir() else []
-    assert bool(written) == (package != "robosuite"), written  # robosuite's door is one file, loaded as it is
+    # the package's files holding the object written again, as the package wrote them (robosuite's door.xml, or the
+    # objects/assets/<name>.xml a Meta-World scene includes): the package's tree (linked) with them in place
+    # compiles the input scene with the refined masses, as the package's environments would
+    files = res.out_dir / "mjcf" / "host" / "files"
+    written = sorted(files.rglob("*.xml"))
+    assert written, res.report.notes
     tree = package_tree(xml)
     copy = tmp_path / "swapped" / tree.name
     shutil.copytree(tree, copy, copy_function=os.symlink)
-    swaps = [(f, copy / f.relative_to(fragments)) for f in written] or [(res.out_dir / "mjcf" / "host" / xml.name, copy / xml.relative_to(tree))]
-    for f, target in swaps:
-        target.unlink()
-        shutil.copyfile(f, target)
+    for f in written:
+        (copy / f.relative_to(files)).unlink()
+        shutil.copyfile(f, copy / f.relative_to(files))
     spec = mujoco.MjSpec.from_file(str(copy / xml.relative_to(tree)))
     spec.compiler.degree = False
     swapped = spec.compile()

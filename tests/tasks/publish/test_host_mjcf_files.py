@@ -1,7 +1,7 @@
 """The object's included file written back for hosts that build their own scene around it: Meta-World's layout
 (generated: ``objects/drawer.xml`` including ``objects/assets/drawer.xml``) refined; an environment file as
 Meta-World writes them (``sawyer_xyz/sawyer_drawer.xml``, the drawer's file included at another place) compiled
-from a copy of the tree with ``mjcf/host/fragments/objects/assets/drawer.xml`` in place of the package's: the same
+from a copy of the tree with ``mjcf/host/files/objects/assets/drawer.xml`` in place of the package's: the same
 names and geometry, the refined masses, damping and friction, and a pull opens the drawer."""
 
 from __future__ import annotations
@@ -45,9 +45,9 @@ def test_a_meta_world_drawer_goes_back_into_an_environment_of_its_package(tmp_pa
     xml = hl.metaworld_drawer(tmp_path / "in", joint_name=joint_name)
     res = refine_asset(xml, "A drawer, slightly open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
-    fragment = res.out_dir / "mjcf" / "host" / "fragments" / "objects" / "assets" / "drawer.xml"
+    fragment = res.out_dir / "mjcf" / "host" / "files" / "objects" / "assets" / "drawer.xml"
     assert fragment.is_file(), res.report.notes
-    assert any("included file mjcf/host/fragments/objects/assets/drawer.xml" in n for n in res.report.notes)
+    assert any("; mjcf/host/files/objects/assets/drawer.xml, the package's file" in n for n in res.report.notes)
     package = tmp_path / "in" / "metaworld"
     for name in ("original", "swapped"):
         shutil.copytree(package, tmp_path / name / "metaworld")
@@ -83,7 +83,7 @@ def test_a_menagerie_model_in_degrees_goes_back_into_its_scene_in_degrees(tmp_pa
     scene.write_text('<mujoco model="scene"><include file="door.xml"/><worldbody><light pos="0 0 3"/></worldbody></mujoco>')
     res = refine_asset(scene, "A door, halfway open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
     assert res.report.failure_mode == "none", res.report.failure_mode
-    fragment = res.out_dir / "mjcf" / "host" / "fragments" / "door" / "door.xml"
+    fragment = res.out_dir / "mjcf" / "host" / "files" / "door" / "door.xml"
     copy = tmp_path / "swapped" / "mujoco_menagerie"
     shutil.copytree(tmp_path / "in" / "mujoco_menagerie", copy)
     shutil.copyfile(fragment, copy / "door" / "door.xml")
