@@ -34,12 +34,11 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-import xml.etree.ElementTree as ET
 
 from asset2sim import atomic, file_names, safexml
 from asset2sim.engines.loading import read_initial_state

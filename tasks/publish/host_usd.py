@@ -50,7 +50,7 @@ from asset2sim.tasks.ingest.usd_reader import DEG, FRICTION_ATTRS
 from asset2sim.tasks.ingest.usd_stage import StageReading, open_stage
 from asset2sim.urdf import read_urdf
 
-__all__ = ["HOST_DIR", "HostUsdExport", "HostUsdError", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
+__all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
 
 #: Folder (inside the output's ``usd/``) of the files written for the host.
 HOST_DIR = "host"
@@ -239,7 +239,7 @@ def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
         HostUsdError: the output was rescaled; a refined link or joint has no prim in the stage; the written
             stage loses a prim path or does not hold a refined value.
     """
-    _, Sdf, _, Usd, UsdGeom, UsdPhysics = pxr_modules()
+    _, Sdf, _, Usd, _, UsdPhysics = pxr_modules()
     out_dir, source = Path(out_dir), Path(source)
     overlay = Overlay.model_validate_json((out_dir / OVERLAY_NAME).read_text())
     if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):

@@ -28,9 +28,9 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from asset2sim.schemas.config import RefineConfig  # noqa: E402
-from asset2sim.tasks.refine import refine_asset  # noqa: E402
-from asset2sim.urdf import read_urdf  # noqa: E402
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.refine import refine_asset
+from asset2sim.urdf import read_urdf
 
 CONFIG = RefineConfig(engines=["pybullet"])
 #: Run in Meta-World's Python with ``sys.argv[1]`` a JSON list (task, policy class, joint, bodies): the environment
@@ -87,7 +87,7 @@ def _host_python(package: str, variable: str, probe: str, why_separate: str) -> 
     prints the package's ``__file__`` last) runs there; skips, saying why, where it does not."""
     python = os.environ.get(variable, sys.executable)
     try:
-        done = subprocess.run([python, "-c", probe], capture_output=True, text=True, timeout=300)
+        done = subprocess.run([python, "-c", probe], capture_output=True, text=True, timeout=300, check=False)
     except (OSError, subprocess.TimeoutExpired) as exc:
         pytest.skip(f"{python} cannot run {package}: {exc}")
     if done.returncode != 0:
@@ -128,7 +128,7 @@ def _swapped(res, package: Path, tmp_path: Path) -> Path:
 
 def _run(python: str, packages: Path, script: str, *args) -> dict:
     env = {**os.environ, "PYTHONPATH": str(packages)}
-    done = subprocess.run([python, "-c", script, *args], capture_output=True, text=True, timeout=300, env=env)
+    done = subprocess.run([python, "-c", script, *args], capture_output=True, text=True, timeout=300, env=env, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
 

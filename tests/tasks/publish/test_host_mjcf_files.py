@@ -16,9 +16,9 @@ from tests.tasks.ingest import host_layouts as hl
 
 mujoco = pytest.importorskip("mujoco")
 
-from asset2sim.schemas.config import RefineConfig  # noqa: E402
-from asset2sim.tasks.refine import refine_asset  # noqa: E402
-from asset2sim.urdf import read_urdf  # noqa: E402
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.tasks.refine import refine_asset
+from asset2sim.urdf import read_urdf
 
 ENVIRONMENT = textwrap.dedent("""
     <mujoco>

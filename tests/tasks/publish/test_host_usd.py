@@ -14,15 +14,15 @@ import pytest
 pytest.importorskip("pxr")
 pytest.importorskip("pybullet")
 
-from pxr import Sdf, Usd  # noqa: E402
+from pxr import Sdf, Usd
 
-from asset2sim.schemas.config import RefineConfig  # noqa: E402
-from asset2sim.schemas.request import RequestOverrides  # noqa: E402
-from asset2sim.tasks.ingest.usd_reader import read_usd_asset  # noqa: E402
-from asset2sim.tasks.publish.host_usd import applied_schemas  # noqa: E402
-from asset2sim.tasks.refine import refine_asset  # noqa: E402
-from asset2sim.urdf import read_urdf  # noqa: E402
-from tests.tasks.publish.usd_cabinet import CARCASS, DOOR, HINGE, cabinet_usd  # noqa: E402
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.request import RequestOverrides
+from asset2sim.tasks.ingest.usd_reader import read_usd_asset
+from asset2sim.tasks.publish.host_usd import applied_schemas
+from asset2sim.tasks.refine import refine_asset
+from asset2sim.urdf import read_urdf
+from tests.tasks.publish.usd_cabinet import CARCASS, DOOR, HINGE, cabinet_usd
 
 CONFIG = RefineConfig(engines=["pybullet"])
 PHYSICS = ("physics:mass", "physics:centerOfMass", "physics:diagonalInertia", "physics:principalAxes",
