@@ -333,3 +333,8 @@ def object_extents(session, state: dict[str, float], asset: AssetDescription, hu
     if box is None:
         return np.zeros(3)
     return np.maximum(box[1] - box[0], 0.0)
+
+
+def closed_tuples(closed: dict) -> dict[str, tuple[float, float, float]]:
+    """joint -> (q_closed, direction, open_range), rad or m, of closed-end objects with those attributes."""
+    return {n: (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in closed.items()}

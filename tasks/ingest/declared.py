@@ -3,7 +3,7 @@ inertia tensor (or that the simulator infers them from the geometry, and from wh
 limits, damping, friction and spring. Read from a URDF (:mod:`asset2sim.urdf`), an MJCF file
 (:mod:`.mjcf_reader`, MuJoCo's compiled values) or an OpenUSD stage (:mod:`.usd_reader`), in the frames of
 the asset model those readers make (the staged URDF's), SI units and radians. The audit
-(:mod:`asset2sim.tasks.audit`) judges these values."""
+(:mod:`asset2sim.apps.audit`) judges these values."""
 
 from __future__ import annotations
 

@@ -23,7 +23,7 @@ import pytest
 from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
-from asset2sim.tasks.publish.contract import JOB_RECORD_NAME
+from asset2sim.flows.job_records import JOB_RECORD_NAME
 
 try:
     from . import flowfakes  # type: ignore[no-redef]

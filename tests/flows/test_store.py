@@ -9,16 +9,14 @@ from __future__ import annotations
 
 import pytest
 
+from tests.flows.conftest import make_project
+
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import store
 from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.output_folder import MARKER_NAME
 from tests.helpers import download_folder, local_s3_server
 
-try:
-    from .conftest import make_project
-except ImportError:
-    from conftest import make_project
 
 BUCKET = "a2s-flow"
 
