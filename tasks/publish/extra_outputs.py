@@ -88,7 +88,9 @@ def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, st
         raise_if_unwritable(exc, out_dir)
         report.notes.append(f"host USD not written: {exc}")
         return {}
-    rel = lambda p: p.relative_to(out_dir).as_posix()  # noqa: E731
+    def rel(p: Path) -> str:
+        return p.relative_to(out_dir).as_posix()
+
     report.notes.append(f"host USD: {rel(done.path)} is {source.name} with the refined physics and initial state "
                         f"({done.changes} attributes on {list(done.prims)}), prim paths as they were; the changes alone as a "
                         f"layer: {rel(done.layer)}; prim path -> attribute old -> new: {rel(done.diff)}")
