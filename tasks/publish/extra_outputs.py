@@ -88,6 +88,7 @@ def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, st
         raise_if_unwritable(exc, out_dir)
         report.notes.append(f"host USD not written: {exc}")
         return {}
+
     def rel(p: Path) -> str:
         return p.relative_to(out_dir).as_posix()
 
