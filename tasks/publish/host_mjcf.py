@@ -25,8 +25,9 @@ around the object's included file (Meta-World's environments include ``objects/a
 the files it includes) is also written again as ``mjcf/host/files/<its path in the input's tree>``, the package's
 XML as it was (XML comments dropped) with only the bodies' ``<inertial>`` those of the host file and their hinge
 and slide joints' ``damping``, ``frictionloss``, ``stiffness``, ``springref`` and ``range`` the refined ones in the
-unit the file is compiled in (bodies matched by name, their joints in order), to copy over the package's file.
-These files carry no keyframe: the host sets its state.
+unit the file is compiled in (bodies matched by name, their joints in order), to copy over the package's file;
+``mjcf/host/files.diff`` is their diff against the package's. These files carry no keyframe: the host sets its
+state.
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ from asset2sim.urdf import read_urdf
 HOST_DIR = "host"
 #: Folder (inside ``mjcf/host/``) of the input's files holding the object, written again.
 FILES_DIR = "files"
+#: Their unified diff against the package's files (inside ``mjcf/host/``).
+FILES_DIFF = "files.diff"
 #: Joint attributes a package file takes from the refined joint (in the file's units).
 JOINT_PHYSICS = ("damping", "frictionloss", "stiffness", "springref", "range")
 #: The keyframe holding the refined initial state.
@@ -170,7 +173,8 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
     :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
     ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
     (the host file written) has it, and on the hinge and slide ``<joint>`` elements of the bodies of ``joints``
-    (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes. Returns the files written.
+    (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes; their unified diff against
+    the package's files in ``folder``'s parent as :data:`FILES_DIFF`. Returns the files written.
 
     Raises:
         StagingError: an included file cannot be read again under the input's trust rules.
@@ -179,7 +183,7 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
     host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
     hosted = {b.get("name"): b for b in host.iter("body") if b.get("name") in inertials}
     sources = gather_mjcf(source, tree=host_conventions.package_tree(source))  # the tree the reader read it in
-    out = []
+    out, diffs = [], []
     for name, data in sorted(sources.files.items()):
         if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
             continue
@@ -193,8 +197,17 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
             continue
         rel = Path(name).relative_to(sources.tree).as_posix()
         path = file_names.join_inside(folder, rel)
-        atomic.write_bytes(path, b'<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="utf-8", xml_declaration=False) + b"\n")
+        text = ET.tostring(root, encoding="unicode").replace(" />", "/>")  # ET's empty-element style; ">" in values is escaped
+        head = data[:data.index(b"<", data.index(b"?>") + 2)] if data.lstrip().startswith(b"<?xml") else b""
+        if b"encoding" in head and b"utf-8" not in head.lower():
+            head = b""  # written as UTF-8, which needs no declaration
+        written = head + text.encode("utf-8") + b"\n"
+        atomic.write_bytes(path, written)
+        diffs.extend(difflib.unified_diff(data.decode("utf-8", "replace").splitlines(keepends=True),
+                                          written.decode("utf-8").splitlines(keepends=True), fromfile=rel, tofile=rel))
         out.append(path)
+    if out:
+        atomic.write_bytes(folder.parent / FILES_DIFF, "".join(diffs).encode("utf-8"))
     return out
 
 

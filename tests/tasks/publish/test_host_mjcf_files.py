@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import shutil
 import textwrap
+import xml.etree.ElementTree as ET
 
 import pytest
 
@@ -32,6 +33,18 @@ ENVIRONMENT = textwrap.dedent("""
     </mujoco>""")
 
 
+def _without_physics(path, keep: bool = False):
+    """The file's element tree as nested tuples, without ``<inertial>`` elements and the joints' physics
+    attributes (``keep``: with them)."""
+    physics = {"damping", "frictionloss", "stiffness", "springref", "range"}
+
+    def walk(e):
+        attrib = {k: v for k, v in e.attrib.items() if keep or e.tag != "joint" or k not in physics}
+        return (e.tag, tuple(sorted(attrib.items())), tuple(walk(c) for c in e if keep or c.tag != "inertial"))
+
+    return walk(ET.parse(path).getroot())
+
+
 def _environment(tree) -> mujoco.MjModel:
     """The environment file written into ``tree`` (a ``metaworld`` folder), compiled."""
     path = tree / "assets" / "sawyer_xyz" / "sawyer_drawer.xml"
@@ -48,6 +61,10 @@ def test_a_meta_world_drawer_goes_back_into_an_environment_of_its_package(tmp_pa
     fragment = res.out_dir / "mjcf" / "host" / "files" / "objects" / "assets" / "drawer.xml"
     assert fragment.is_file(), res.report.notes
     assert any("; mjcf/host/files/objects/assets/drawer.xml, the package's file" in n for n in res.report.notes)
+    assert "+++ objects/assets/drawer.xml" in (res.out_dir / "mjcf" / "host" / "files.diff").read_text()
+    original = tmp_path / "in" / "metaworld" / "assets" / "objects" / "assets" / "drawer.xml"
+    assert _without_physics(fragment) == _without_physics(original)  # only the physics changed
+    assert _without_physics(fragment, keep=True) != _without_physics(original, keep=True)
     package = tmp_path / "in" / "metaworld"
     for name in ("original", "swapped"):
         shutil.copytree(package, tmp_path / name / "metaworld")
