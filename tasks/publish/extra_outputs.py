@@ -1,5 +1,5 @@
-"""A refine's optional outputs beside the refined asset: the MJCF and USD exports, the host MJCF an MJCF input
-is written back into, the evaluation and (unless deferred) the media. A failure is a note in the report, never
+"""A refine's optional outputs beside the refined asset: the MJCF and USD exports, the host files an MJCF or USD
+input is written back into, the evaluation and (unless deferred) the media. A failure is a note in the report, never
 the loss of the refined asset, except an output folder that cannot be written (``OUTPUT_WRITE_FAILED``)."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.ingest import staged
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
-from asset2sim.tasks.publish import export_usd, host_mjcf
+from asset2sim.tasks.publish import export_usd, host_mjcf, host_usd
 from asset2sim.tasks.publish import media as media_phase
 from asset2sim.tasks.publish.contract import write_report_json
 
@@ -50,12 +50,21 @@ def raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
 
 
 def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
-    """An MJCF input's refined object written back into its own file (``mjcf/host/``,
-    :func:`asset2sim.tasks.publish.host_mjcf.write_host_mjcf`), noted in the report; {} for other inputs. A file
-    that cannot be written (a rescaled object, MuJoCo missing) is a note, never the loss of the refined asset."""
+    """An MJCF or USD input's refined object written back into its own files (``mjcf/host/``,
+    :func:`asset2sim.tasks.publish.host_mjcf.write_host_mjcf`; ``usd/host/``,
+    :func:`asset2sim.tasks.publish.host_usd.write_host_usd`), noted in the report; {} for other inputs. A file
+    that cannot be written (a rescaled object, MuJoCo or usd-core missing) is a note, never the loss of the refined
+    asset."""
     source = asset.staged_from
-    if source is None or staged.input_format(source) != "mjcf":
-        return {}
+    fmt = staged.input_format(source) if source is not None else None
+    if fmt == "mjcf":
+        return _host_mjcf(out_dir, source, config, report)
+    if fmt == "usd":
+        return _host_usd(out_dir, source, report)
+    return {}
+
+
+def _host_mjcf(out_dir: Path, source: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
     try:
         with quiet_stdout():
             done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
@@ -66,8 +75,27 @@ def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
     rel = done.path.relative_to(out_dir).as_posix()
     report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
                         f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
-                        f"{done.diff.relative_to(out_dir).as_posix()}")
+                        f"{done.diff.relative_to(out_dir).as_posix()}"
+                        + "".join(f"; {f.relative_to(out_dir).as_posix()}, the package's file with the same physics"
+                                  for f in done.files))
     return {"host_mjcf": str(done.path)}
+
+
+def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, str]:
+    try:
+        done = host_usd.write_host_usd(out_dir, source)
+    except Exception as exc:  # the host stage must not lose the refined asset
+        raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"host USD not written: {exc}")
+        return {}
+
+    def rel(p: Path) -> str:
+        return p.relative_to(out_dir).as_posix()
+
+    report.notes.append(f"host USD: {rel(done.path)} is {source.name} with the refined physics and initial state "
+                        f"({done.changes} attributes on {list(done.prims)}), prim paths as they were; the changes alone as a "
+                        f"layer: {rel(done.layer)}; prim path -> attribute old -> new: {rel(done.diff)}")
+    return {"host_usd": str(done.path), "host_usd_layer": str(done.layer)}
 
 
 def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLog, reference: Path | str | None,
