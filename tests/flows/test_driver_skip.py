@@ -14,10 +14,10 @@ from asset2sim.flows import driver_skip
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
-    from .conftest import CALLS_PATH, make_project
+    from .flowproject import CALLS_PATH, make_project
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from tests.flows.conftest import CALLS_PATH, make_project
+    from flowproject import CALLS_PATH, make_project
 
 ASSETS = {"box_lid": "box_lid", "laptop": "laptop", "cabinet_2drawer": "cabinet_2drawer"}
 

@@ -22,10 +22,10 @@ from asset2sim.output_folder import MARKER_NAME
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
-    from .conftest import FAKE_REFINE, make_project
+    from .flowproject import FAKE_REFINE, make_project
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from tests.flows.conftest import FAKE_REFINE, make_project
+    from flowproject import FAKE_REFINE, make_project
 
 ASSETS = {a: a for a in ("box_lid", "cabinet_2drawer", "laptop", "microwave", "trash_can")}
 

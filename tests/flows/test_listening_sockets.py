@@ -17,9 +17,9 @@ import psutil
 import pytest
 
 try:
-    from .conftest import make_project
+    from .flowproject import make_project
 except ImportError:
-    from tests.flows.conftest import make_project
+    from flowproject import make_project
 
 ASSETS = {"box_lid": "box_lid", "laptop": "laptop"}
 #: pages of the scheduler's HTTP server: the dashboard (bokeh, or the page

@@ -12,9 +12,9 @@ import pytest
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
 try:
-    from .conftest import make_project
+    from .flowproject import make_project
 except ImportError:
-    from tests.flows.conftest import make_project
+    from flowproject import make_project
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -9,7 +9,10 @@ import re
 import subprocess
 import sys
 
-from tests.flows.conftest import make_project
+try:  # package layout or rootdir-on-sys.path layout
+    from .flowproject import make_project  # type: ignore[no-redef]
+except ImportError:
+    from flowproject import make_project  # type: ignore[no-redef]
 from asset2sim.cli import QUIET_LIBRARY_LOGS
 from asset2sim.engines.quiet import STARTUP_MESSAGES
 

@@ -17,10 +17,10 @@ from tests.helpers import catalog_reader_counts
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
-    from .conftest import CALLS_PATH, make_project, write_manifest
+    from .flowproject import CALLS_PATH, make_project, write_manifest
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from tests.flows.conftest import CALLS_PATH, make_project, write_manifest
+    from flowproject import CALLS_PATH, make_project, write_manifest
 
 GOOD = {"box_lid": "box_lid", "cabinet_2drawer": "cabinet_2drawer", "laptop": "laptop"}
 BAD = {

@@ -18,10 +18,10 @@ from asset2sim.tasks.publish import contract
 
 try:
     from . import regressfakes  # type: ignore[no-redef]
-    from .conftest import make_project, write_manifest
+    from .flowproject import make_project, write_manifest
 except ImportError:
     import regressfakes  # type: ignore[no-redef]
-    from tests.flows.conftest import make_project, write_manifest
+    from flowproject import make_project, write_manifest
 
 ASSETS = {"box_lid": "box_lid", "laptop": "laptop", "trash_can": "trash_can", "cabinet_2drawer": "cabinet_2drawer"}
 FAILING = f"{regressfakes.__name__}:refine_failing"

@@ -27,10 +27,10 @@ from asset2sim.flows.job_records import JOB_RECORD_NAME
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
-    from .conftest import CALLS_PATH, make_project, write_manifest
+    from .flowproject import CALLS_PATH, make_project, write_manifest
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from tests.flows.conftest import CALLS_PATH, make_project, write_manifest
+    from flowproject import CALLS_PATH, make_project, write_manifest
 
 
 def _run(catalog: Path, **kw):

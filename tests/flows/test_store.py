@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import pytest
 
-from tests.flows.conftest import make_project
+try:  # package layout or rootdir-on-sys.path layout
+    from .flowproject import make_project  # type: ignore[no-redef]
+except ImportError:
+    from flowproject import make_project  # type: ignore[no-redef]
 
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import store
