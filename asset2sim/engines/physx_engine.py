@@ -150,6 +150,13 @@ def attach_collision_shapes(comp, urdf, pieces: list, urdf_path: Path, notes: li
     comp.set_angular_damping(BULLET_LINK_DAMPING)
 
 
+def configure_articulation(art) -> None:
+    """A built ``PhysxArticulation`` as the checks step it: never asleep, :data:`SOLVER_ITERATIONS`."""
+    art.set_sleep_threshold(0.0)
+    art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
+    art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
+
+
 @dataclass
 class PassiveJoints:
     """The passive forces of an articulation's movable joints, in the order of its ``active_joints``: Coulomb
@@ -282,9 +289,7 @@ class PhysXSession(SessionDefaults):
             self.scene.add_entity(ent)
         self._entities = list(entities)
         self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
-        self.art.set_sleep_threshold(0.0)
-        self.art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
-        self.art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
+        configure_articulation(self.art)
 
     def _attach_shapes(self, comp, pieces: list, urdf_path: Path) -> None:
         attach_collision_shapes(comp, self.urdf, pieces, urdf_path, self.notes)
