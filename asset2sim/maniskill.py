@@ -58,7 +58,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -104,6 +104,8 @@ REST_SPEED = {"revolute": 1.0, "continuous": 1.0, "prismatic": 0.1}
 MAX_REWARD = 5.0
 #: Panda base behind the grasp point along -x (m) and below it (m), and clearance from the object's -x face (m).
 ROBOT_STANDOFF, ROBOT_BELOW, ROBOT_CLEARANCE = 0.6, 0.25, 0.25
+#: A floating gripper starts this far (m) in front of the grasp point along -x, in ManiSkill's side-facing keyframe.
+GRIPPER_STANDOFF = 0.15
 SUPPORTED_ROBOTS = ["panda", "floating_panda_gripper"]
 
 
@@ -215,8 +217,10 @@ def _task_text(report_task: str | None, action: str, category: str | None) -> st
     return f"{action} the {category.lower()}" if category else action
 
 
-def task_object(folder: str | Path, action: str) -> TaskObject:
-    """The :class:`TaskObject` of an output or input ``folder`` for ``action`` (``open`` / ``close``).
+def task_object(folder: str | Path, action: str, task: str | None = None) -> TaskObject:
+    """The :class:`TaskObject` of an output or input ``folder`` for ``action`` (``open`` / ``close``): the part
+    ``task`` names ("close the laptop"; default: the output's ``report.json`` task, else the category's), turned to
+    ``action``.
 
     Raises:
         ManiSkillAssetError: ``MS_NOT_AN_ASSET`` (no ``mobility.urdf``, or an unreadable ``report.json``),
@@ -234,7 +238,7 @@ def task_object(folder: str | Path, action: str) -> TaskObject:
             report = read_report_json(folder)
         except (OSError, ValueError) as exc:
             raise ManiSkillAssetError("MS_NOT_AN_ASSET", f"{folder / REPORT_NAME}: unreadable ({exc})") from exc
-    text = _task_text(report.task if report else None, action, report.category if report else None)
+    text = _task_text(task or (report.task if report else None), action, report.category if report else None)
     try:
         lt = prepare_task(folder, text, start="task")
     except ValueError as exc:  # LearnTaskError, EvaluationError, UrdfError
@@ -284,14 +288,16 @@ def find_assets(assets: str | Path | Sequence[str | Path]) -> list[Path]:
     return out
 
 
-def load_task_objects(assets: str | Path | Sequence[str | Path], action: str) -> tuple[list[TaskObject], list[tuple[Path, str]]]:
+def load_task_objects(assets: str | Path | Sequence[str | Path], action: str,
+                      task: str | Mapping[str, str] | None = None) -> tuple[list[TaskObject], list[tuple[Path, str]]]:
     """Every object of ``assets`` (:func:`find_assets`) as a :class:`TaskObject`, and the folders that could not
-    become one with the error (a failed asset does not stop the others). Raises ManiSkillAssetError
+    become one with the error (a failed asset does not stop the others); ``task`` as :func:`task_object`'s, or
+    per folder (``str(folder)`` -> task text). Raises ManiSkillAssetError
     ``MS_NO_ASSETS``: none could."""
     objects, skipped = [], []
     for folder in find_assets(assets):
         try:
-            objects.append(task_object(folder, action))
+            objects.append(task_object(folder, action, task.get(str(folder)) if isinstance(task, Mapping) else task))
         except ManiSkillAssetError as exc:
             skipped.append((folder, str(exc)))
     if not objects:
@@ -371,6 +377,8 @@ class _ArticulationTaskEnv(BaseEnv):
     ``sim_backend``, ``render_mode`` ...):
         assets: output or input folders (:func:`find_assets`); objects that cannot become a task are left out
             (``skipped``: folder and error); ManiSkillAssetError ``MS_NO_ASSETS`` when none can.
+        task: the task text for every object ("close the laptop", turned to the environment's direction), or
+            per folder (``str(folder)`` -> text); default: each output's ``report.json`` task (an input's: its category's part).
         robot_uids: ``panda`` (default) or ``floating_panda_gripper``.
         robot_init_qpos_noise: standard deviation (rad) of the robot's start joint positions.
         reconfiguration_freq: ManiSkill's; default: every reset with one sub-scene and several objects, else never.
@@ -379,10 +387,11 @@ class _ArticulationTaskEnv(BaseEnv):
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
     action_kind: str = ""
 
-    def __init__(self, *args, assets: str | Path | Sequence[str | Path] = (), robot_uids: str = "panda",
+    def __init__(self, *args, assets: str | Path | Sequence[str | Path] = (), task: str | Mapping[str, str] | None = None, robot_uids: str = "panda",
                  robot_init_qpos_noise: float = 0.02, reconfiguration_freq: int | None = None, num_envs: int = 1, **kwargs):
-        self.objects, self.skipped = load_task_objects(assets, self.action_kind)
+        self.objects, self.skipped = load_task_objects(assets, self.action_kind, task)
         self.robot_init_qpos_noise = robot_init_qpos_noise
+        self._floating = robot_uids.startswith("floating")
         if reconfiguration_freq is None:
             reconfiguration_freq = 1 if (num_envs == 1 and len(self.objects) > 1) else 0
         super().__init__(*args, robot_uids=robot_uids, reconfiguration_freq=reconfiguration_freq, num_envs=num_envs, **kwargs)
@@ -453,19 +462,23 @@ class _ArticulationTaskEnv(BaseEnv):
                 q = o.start_qpos(self._joint_names[i])
                 start[i, :len(q)] = q
             self.start_qpos = torch.tensor(start, dtype=torch.float32)
-            self.robot_base = torch.tensor(np.array([self._robot_base(o, self._joint_names[i]) for i, o in enumerate(objs)]),
+            self.robot_base = torch.tensor(np.array([self._robot_base(o, self._joint_names[i], self._floating)
+                                                     for i, o in enumerate(objs)]),
                                            dtype=torch.float32)
         if self.gpu_sim_enabled:
             self._gpu_passive_tables()
 
     @staticmethod
-    def _robot_base(obj: TaskObject, names: list[str]) -> np.ndarray:
-        """The robot's base position (3,) m for ``obj`` (joints ``names``): behind the grasp point along -x, clear of the object."""
+    def _robot_base(obj: TaskObject, names: list[str], floating: bool = False) -> np.ndarray:
+        """The robot's base position (3,) m for ``obj`` (joints ``names``): behind the grasp point along -x, clear of the
+        object (a floating gripper: :data:`GRIPPER_STANDOFF` in front of the grasp point)."""
         q0 = dict(zip(names, obj.start_qpos(names)))
         t = obj.model.link_poses(q0)[obj.grasp_link]
         g = t[:3, :3] @ obj.grasp_point + t[:3, 3] + np.array([0.0, 0.0, obj.base_z])
         pts = _world_points(obj.model, obj.pieces, q0)
         xmin = float(pts[:, 0].min()) if len(pts) else g[0]
+        if floating:
+            return np.array([min(g[0], xmin) - GRIPPER_STANDOFF, g[1], g[2]])
         return np.array([min(g[0] - ROBOT_STANDOFF, xmin - ROBOT_CLEARANCE), g[1], max(g[2] - ROBOT_BELOW, 0.0)])
 
     # ------------------------------------------------------------------ episodes
@@ -477,7 +490,8 @@ class _ArticulationTaskEnv(BaseEnv):
             self.object.set_pose(Pose.create_from_pq(p=p))
             self.object.set_qpos(self.start_qpos[env_idx])
             self.object.set_qvel(torch.zeros_like(self.start_qpos[env_idx]))
-            rest = torch.tensor(self.agent.keyframes["rest"].qpos, dtype=torch.float32)
+            key = self.agent.keyframes.get("rest") or self.agent.keyframes["open_facing_side"]
+            rest = torch.tensor(key.qpos, dtype=torch.float32)
             qpos = rest.repeat(b, 1) + torch.randn((b, rest.numel())) * self.robot_init_qpos_noise
             self.agent.reset(qpos)
             self.agent.robot.set_pose(Pose.create_from_pq(p=self.robot_base[env_idx]))

@@ -176,3 +176,15 @@ def test_every_joint_gets_the_outputs_friction_damping_and_spring(outputs):
         assert not math.isnan(float(u.task_fraction()[0]))
     finally:
         env.close()
+
+
+def test_the_floating_gripper_starts_at_the_grasp_point(outputs):
+    env = _make(ams.ENV_IDS["open"], [outputs / "box"], robot_uids="floating_panda_gripper")
+    try:
+        obs, info = env.reset(seed=0)
+        u = env.unwrapped
+        assert float(torch.linalg.norm(u.agent.tcp.pose.p - info["grasp_pos"], axis=1)[0]) < ams.GRIPPER_STANDOFF + 0.1
+        obs, reward, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
+        assert torch.isfinite(obs).all()
+    finally:
+        env.close()
