@@ -27,7 +27,6 @@ import json
 import statistics
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -40,12 +39,6 @@ def gpu_command(args) -> str:
             f"--ids {args.ids or '<train ids>'} --held-out {args.held_out or '<held-out ids>'} --methods {args.methods} "
             f"--action {args.action} --n-envs 1024 --steps 10000000 --num-steps 50 --seeds 0,1,2 --eval-episodes 16 "
             f"--out out/bench_learnability_gpu")
-
-
-@dataclass
-class Budget:
-    env_steps: int = 0
-    train_seconds: float = 0.0
 
 
 class _Batch:
