@@ -46,8 +46,9 @@ once the part moves) + 2 x progress toward the target, 3 once reached, 5 on
 success; ``normalized_dense`` divides by 5.
 
 Robots: ManiSkill's Panda (default, ``robot_uids="panda"``) or its floating
-Panda gripper (``"floating_panda_gripper"``), placed on the object's -x side in
-front of the grasp point. Observations: ``state`` (the robot's, the grasp point,
+Panda gripper (``"floating_panda_gripper"``), placed on the object's -x side so
+that the gripper starts :data:`TCP_APPROACH` from the grasp point, touching
+nothing. Observations: ``state`` (the robot's, the grasp point,
 the task joint's opening fraction and velocity, the target) and ``pointcloud``
 (one camera, needs a render device). ``sim_backend="cpu"`` is what the tests
 run; on ``"gpu"`` the friction is a constant force limit and damping and springs
@@ -104,10 +105,13 @@ SIM_FREQ, CONTROL_FREQ = 240, 20
 REST_SPEED = {"revolute": 1.0, "continuous": 1.0, "prismatic": 0.1}
 #: The dense reward's maximum (``compute_normalized_dense_reward`` divides by it).
 MAX_REWARD = 5.0
-#: Panda base behind the grasp point along -x (m) and below it (m), and clearance from the object's -x face (m).
-ROBOT_STANDOFF, ROBOT_BELOW, ROBOT_CLEARANCE = 0.6, 0.25, 0.25
-#: A floating gripper starts this far (m) in front of the grasp point along -x, in ManiSkill's side-facing keyframe.
-GRIPPER_STANDOFF = 0.15
+#: Where the TCP starts relative to the grasp point, m: in front of it along -x and above it (no contact at the start).
+TCP_APPROACH = np.array([-0.10, 0.0, 0.05])
+#: The TCP in the robot's base frame at its start keyframe (ManiSkill 3.0.1: Panda ``rest``, the floating gripper
+#: ``open_facing_side``), m.
+TCP_AT_START = {"panda": np.array([0.615, 0.0, 0.170]), "floating_panda_gripper": np.array([0.1034, 0.0, 0.0])}
+#: The Panda's base stays this far (m) behind the object's -x face.
+ROBOT_CLEARANCE = 0.25
 SUPPORTED_ROBOTS = ["panda", "floating_panda_gripper"]
 
 
@@ -131,7 +135,7 @@ class TaskObject:
     ``reach_fraction`` the success threshold (>= for open, <= for close); ``initial_state`` the other joints'
     positions, ``springs`` (``overlay.json``), ``fixed_root``; ``grasp_link`` / ``grasp_point`` (3,) m in that
     link's frame (:func:`~asset2sim.tasks.check.contact_points.contact_point_rule`); ``base_z`` the root's
-    height that puts the lowest collision point on z = 0 at the episode's start (0 for a fixed root)."""
+    height that puts the lowest collision point on z = 0 at the episode's start (a fixed root is welded there)."""
 
     folder: Path
     kind: str
@@ -267,9 +271,8 @@ def task_object(folder: str | Path, action: str, task: str | None = None) -> Tas
     link, point, rule = contact_point_rule(_Kinematics(model, q0), lt.joint, model, opening_direction=direction)
     obj.grasp_link, obj.grasp_point = link, np.asarray(point, float)
     obj.notes.append(f"grasp point: {rule} of {link}")
-    if not obj.fixed_root:
-        pts = _world_points(model, pieces, q0)
-        obj.base_z = float(-pts[:, 2].min()) if len(pts) else 0.0
+    pts = _world_points(model, pieces, q0)  # free objects rest on the floor; mounted ones are welded standing on it
+    obj.base_z = float(-pts[:, 2].min()) if len(pts) else 0.0
     return obj
 
 
@@ -393,7 +396,7 @@ class _ArticulationTaskEnv(BaseEnv):
                  robot_init_qpos_noise: float = 0.02, reconfiguration_freq: int | None = None, num_envs: int = 1, **kwargs):
         self.objects, self.skipped = load_task_objects(assets, self.action_kind, task)
         self.robot_init_qpos_noise = robot_init_qpos_noise
-        self._floating = robot_uids.startswith("floating")
+        self._robot = robot_uids
         if reconfiguration_freq is None:
             reconfiguration_freq = 1 if (num_envs == 1 and len(self.objects) > 1) else 0
         super().__init__(*args, robot_uids=robot_uids, reconfiguration_freq=reconfiguration_freq, num_envs=num_envs, **kwargs)
@@ -464,24 +467,27 @@ class _ArticulationTaskEnv(BaseEnv):
                 q = o.start_qpos(self._joint_names[i])
                 start[i, :len(q)] = q
             self.start_qpos = torch.tensor(start, dtype=torch.float32)
-            self.robot_base = torch.tensor(np.array([self._robot_base(o, self._joint_names[i], self._floating)
+            self.robot_base = torch.tensor(np.array([self._robot_base(o, self._joint_names[i], self._robot)
                                                      for i, o in enumerate(objs)]),
                                            dtype=torch.float32)
         if self.gpu_sim_enabled:
             self._gpu_passive_tables()
 
     @staticmethod
-    def _robot_base(obj: TaskObject, names: list[str], floating: bool = False) -> np.ndarray:
-        """The robot's base position (3,) m for ``obj`` (joints ``names``): behind the grasp point along -x, clear of the
-        object (a floating gripper: :data:`GRIPPER_STANDOFF` in front of the grasp point)."""
+    def _robot_base(obj: TaskObject, names: list[str], robot: str = "panda") -> np.ndarray:
+        """The robot's base position (3,) m for ``obj`` (joints ``names``) at the episode's start: the TCP
+        :data:`TCP_APPROACH` from the grasp point; a Panda's base at least :data:`ROBOT_CLEARANCE` behind the object's
+        -x face and not below the floor."""
         q0 = dict(zip(names, obj.start_qpos(names)))
         t = obj.model.link_poses(q0)[obj.grasp_link]
         g = t[:3, :3] @ obj.grasp_point + t[:3, 3] + np.array([0.0, 0.0, obj.base_z])
-        pts = _world_points(obj.model, obj.pieces, q0)
-        xmin = float(pts[:, 0].min()) if len(pts) else g[0]
-        if floating:
-            return np.array([min(g[0], xmin) - GRIPPER_STANDOFF, g[1], g[2]])
-        return np.array([min(g[0] - ROBOT_STANDOFF, xmin - ROBOT_CLEARANCE), g[1], max(g[2] - ROBOT_BELOW, 0.0)])
+        base = g + TCP_APPROACH - TCP_AT_START.get(robot, TCP_AT_START["panda"])
+        if robot == "panda":
+            pts = _world_points(obj.model, obj.pieces, q0)
+            if len(pts):
+                base[0] = min(base[0], float(pts[:, 0].min()) - ROBOT_CLEARANCE)
+            base[2] = max(base[2], 0.0)
+        return base
 
     # ------------------------------------------------------------------ episodes
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict):

@@ -15,7 +15,7 @@ torch = pytest.importorskip("torch", reason="torch is not installed (pip install
 
 import asset2sim  # noqa: E402
 from asset2sim import maniskill as ams  # noqa: E402
-from asset2sim.demo_assets import build_box_with_lid  # noqa: E402
+from asset2sim.demo_assets import build_box_with_lid, build_two_drawer_cabinet  # noqa: E402
 from asset2sim.engines import physx_engine  # noqa: E402
 
 pytestmark = pytest.mark.physx
@@ -178,13 +178,28 @@ def test_every_joint_gets_the_outputs_friction_damping_and_spring(outputs):
         env.close()
 
 
-def test_the_floating_gripper_starts_at_the_grasp_point(outputs):
-    env = _make(ams.ENV_IDS["open"], [outputs / "box"], robot_uids="floating_panda_gripper")
+@pytest.fixture(scope="module")
+def cabinet(tmp_path_factory) -> Path:
+    """The generated two-drawer cabinet refined (30 kg, free on the ground, prismatic drawers)."""
+    src = build_two_drawer_cabinet(tmp_path_factory.mktemp("maniskill_cab") / "cabinet")
+    out = tmp_path_factory.mktemp("maniskill_cab_out") / "cabinet"
+    asset2sim.refine(src, "a small two-drawer cabinet, the first drawer closed and the second slightly open", out, extras=False)
+    return out
+
+
+@pytest.mark.parametrize("robot", ["panda", "floating_panda_gripper"])
+def test_the_robot_starts_before_the_grasp_point_without_touching_the_object(cabinet, robot):
+    """The TCP starts TCP_APPROACH from the grasp point; holding still, neither the cabinet nor its drawer moves."""
+    env = _make(ams.ENV_IDS["close"], [cabinet], robot_uids=robot, robot_init_qpos_noise=0.0)
     try:
         obs, info = env.reset(seed=0)
         u = env.unwrapped
-        assert float(torch.linalg.norm(u.agent.tcp.pose.p - info["grasp_pos"], axis=1)[0]) < ams.GRIPPER_STANDOFF + 0.1
-        obs, reward, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
-        assert torch.isfinite(obs).all()
+        start = info["grasp_pos"] + torch.tensor(ams.TCP_APPROACH, dtype=torch.float32)
+        assert float(torch.linalg.norm(u.agent.tcp.pose.p - start, axis=1)[0]) < 0.01
+        p0, f0 = u.object.pose.p.clone(), float(info["fraction"][0])
+        for _ in range(10):
+            obs, reward, terminated, truncated, info = env.step(np.zeros(env.action_space.shape, np.float32))
+        assert float(torch.linalg.norm(u.object.pose.p - p0, axis=1)[0]) < 0.005
+        assert float(info["fraction"][0]) == pytest.approx(f0, abs=0.01)
     finally:
         env.close()
