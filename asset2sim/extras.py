@@ -27,6 +27,8 @@ EXTRA_OF_MODULE: dict[str, tuple[str, str]] = {
     "gymnasium": ("Gymnasium", "gym"),
     "stable_baselines3": ("Stable-Baselines3", "learn"),
     "pydrake": ("Drake", "checkers"),
+    "mani_skill": ("ManiSkill 3", "maniskill"),
+    "torch": ("torch", "maniskill"),
 }
 
 

@@ -4,6 +4,12 @@
         [--methods defaults,human,direct,asset2sim] [--steps 3000] [--seeds 0] \\
         [--eval-episodes 5] [--n-envs 2] [--max-run-seconds 600] [--out DIR] [--reuse] [--no-ppo]
     python benchmarks/bench_learnability.py --table DIR/results.jsonl[,MORE.jsonl]
+    python benchmarks/bench_learnability.py --framework maniskill --ids 100221,9912 --held-out 47645 \
+        --methods raw,asset2sim --steps 20000 --seeds 0,1,2 [--sim-backend gpu --n-envs 1024 --device cuda]
+
+``--framework maniskill`` runs the comparison in ManiSkill 3 (:mod:`asset2sim.maniskill`, the ``maniskill``
+extra): PPO per method and seed on the training objects, evaluated on them and on the held-out ones
+(``benchmarks/learnability_maniskill.py``). What follows is the PyBullet benchmark (the default).
 
 The thesis trained PPO with 4096 parallel environments for 3000 iterations
 on 9 tasks (SPEC, "Numbers to beat": thesis method 97.5 % mean success,
@@ -132,6 +138,8 @@ def print_table(records: list[dict], out=sys.stdout) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = _arguments().parse_args(argv)
+    if args.framework == "maniskill":
+        return _maniskill(args)
     if args.table:
         recs = [json.loads(x) for f in args.table.split(",") for x in Path(f).read_text().splitlines() if x.strip()]
         print_table(recs)
@@ -189,7 +197,41 @@ def _arguments() -> argparse.ArgumentParser:
     ap.add_argument("--reuse", action="store_true", help="keep assets already made under --out")
     ap.add_argument("--no-ppo", action="store_true", help="only the scripted and passive references")
     ap.add_argument("--table", default="", help="only print the table of results.jsonl file(s), comma-separated")
+    ms = ap.add_argument_group("--framework maniskill")
+    ms.add_argument("--framework", choices=("pybullet", "maniskill"), default="pybullet")
+    ms.add_argument("--held-out", default="", help="comma-separated ids evaluated but not trained on")
+    ms.add_argument("--action", choices=("close", "open"), default="close", help="the environment: Close- or OpenArticulation")
+    ms.add_argument("--sim-backend", choices=("cpu", "gpu"), default="cpu")
+    ms.add_argument("--device", default="cpu", help="where the policy trains (cuda with --sim-backend gpu)")
+    ms.add_argument("--control-mode", default="pd_joint_delta_pos")
+    ms.add_argument("--num-steps", type=int, default=50, help="PPO rollout length per environment (ManiSkill's baseline: 50)")
+    ms.add_argument("--hidden", type=int, default=64, help="units per hidden layer (ManiSkill's baseline: 256)")
+    ms.add_argument("--lr", type=float, default=3e-4)
+    ms.add_argument("--gamma", type=float, default=0.8)
+    ms.add_argument("--gae-lambda", type=float, default=0.9)
+    ms.add_argument("--clip", type=float, default=0.2)
+    ms.add_argument("--target-kl", type=float, default=0.1)
+    ms.add_argument("--update-epochs", type=int, default=4)
+    ms.add_argument("--minibatches", type=int, default=4)
     return ap
+
+
+def _maniskill(args) -> int:
+    """``--framework maniskill``: the comparison in ManiSkill 3 (benchmarks/learnability_maniskill.py)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import learnability_maniskill
+
+    if args.table:
+        recs = [json.loads(x) for f in args.table.split(",") for x in Path(f).read_text().splitlines() if x.strip()]
+        learnability_maniskill.print_table(recs)
+        return 0
+    if args.methods == DEFAULT_METHODS:
+        args.methods = "raw,asset2sim"
+    rows = _manifest_rows(args)
+    held = [x.strip() for x in args.held_out.split(",") if x.strip()]
+    held_rows = _manifest_rows(argparse.Namespace(manifest=args.manifest, ids=",".join(held))) if held else []
+    rows = [r for r in rows if r.id not in held]
+    return learnability_maniskill.run(args, rows, held_rows, _make_assets)
 
 
 def _manifest_rows(args) -> list:

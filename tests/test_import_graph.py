@@ -124,7 +124,8 @@ def _layer(module: str) -> str:
     parts = module.split(".")
     if module in ("asset2sim.cli", "asset2sim.__main__") or parts[:2] == ["asset2sim", "commands"]:
         return "cli"
-    if module in ("asset2sim", "asset2sim.api"):  # the public API: the package's names are asset2sim.api's
+    # the public API: the package's names are asset2sim.api's; asset2sim.maniskill (an extra) builds tasks on it
+    if module in ("asset2sim", "asset2sim.api", "asset2sim.maniskill"):
         return "api"
     if parts[:2] == ["asset2sim", "flows"]:
         return "flows"

@@ -7,6 +7,7 @@ different: ``docs/design/simulators.md``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,157 @@ def new_scene(gravity: float = -9.81, timestep: float = 1.0 / 240.0) -> "sapien.
     return scene
 
 
+def link_inertia(urdf, name: str, urdf_path: Path, notes: list[str]):
+    """Mass (kg), COM pose on the principal axes and principal moments (3,)
+    kg*m^2 of link ``name`` of ``urdf`` (PyBullet's default without ``<inertial>``,
+    noted in ``notes``). Raises PhysXError: a mass or principal moment not positive."""
+    ine = urdf.links[name].inertial
+    if ine is None:
+        notes.append(f"link {name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
+        return BULLET_DEFAULT_MASS, sapien.Pose(), np.array(BULLET_DEFAULT_INERTIA)
+    moments, axes = principal_axes(ine.inertia_in_link_axes())
+    if ine.mass <= 0 or moments.min() <= 0:
+        raise PhysXError(f"{urdf_path}: link {name!r} has mass {ine.mass} and principal moments {moments}: not positive")
+    t = np.eye(4)
+    t[:3, :3] = axes
+    t[:3, 3] = ine.com()
+    return ine.mass, _pose(t), moments
+
+
+def fill_articulation_builder(builder, urdf, urdf_path: Path, *, fixed_base: bool, notes: list[str]):
+    """Add every link of ``urdf`` (an :class:`~asset2sim.urdf.UrdfModel` read from ``urdf_path``) to a SAPIEN
+    (or ManiSkill) articulation ``builder`` in tree order: its joint (PhysX's x axis along the URDF axis, the
+    URDF limits, no joint friction or damping: :class:`PassiveJoints` carries them), its mass and inertia
+    (:func:`link_inertia`), the root fixed or free. Collision shapes are attached to the built components
+    (:func:`attach_collision_shapes`). Returns ``builder``."""
+    link_builders = {}
+    for name in urdf.tree_order():
+        pj = urdf.parent_joint(name)
+        lb = builder.create_link_builder(link_builders[pj.parent] if pj else None)
+        link_builders[name] = lb
+        lb.set_name(name)
+        lb.set_joint_name(pj.name if pj else "")
+        if pj is None:
+            lb.set_joint_properties("fixed" if fixed_base else "undefined", [], sapien.Pose(), sapien.Pose())
+        else:
+            ax = _axis_frame(pj.axis)
+            kind = {"revolute": "revolute_unwrapped", "continuous": "revolute", "prismatic": "prismatic", "fixed": "fixed"}[pj.type]
+            limits = [] if pj.type == "fixed" else [[pj.lower, pj.upper]]
+            lb.set_joint_properties(kind, limits, _pose(pj.origin @ ax), _pose(ax), 0.0, 0.0)
+        mass, com_pose, moments = link_inertia(urdf, name, urdf_path, notes)
+        lb.set_mass_and_inertia(float(mass), com_pose, np.asarray(moments, np.float32))
+    return builder
+
+
+def attach_collision_shapes(comp, urdf, pieces: list, urdf_path: Path, notes: list[str]) -> None:
+    """Cook a link's collision pieces (:func:`~asset2sim.engines.loading.collision_pieces`) into its PhysX
+    component ``comp`` (named as the URDF link) with PyBullet's contact friction and link damping; an uncookable
+    piece is skipped with a note. Raises PhysXError: none of the link's pieces could be cooked."""
+    name = comp.name
+    lmu = link_friction(urdf, name)
+    mat = physx.PhysxMaterial(lmu, lmu, 0.0)
+    cooked = 0
+    for p in pieces:
+        local = p.origin
+        try:
+            if p.kind == "hull":
+                shape = physx.PhysxCollisionShapeConvexMesh(np.asarray(p.points, np.float32), np.ones(3, np.float32), mat)
+            elif p.kind == "box":
+                shape = physx.PhysxCollisionShapeBox(np.asarray(p.size, np.float32) / 2, mat)
+            elif p.kind == "sphere":
+                shape = physx.PhysxCollisionShapeSphere(float(p.radius), mat)
+            else:  # cylinder: URDF axis z, PhysX axis x
+                shape = physx.PhysxCollisionShapeCylinder(float(p.radius), float(p.length) / 2, mat)
+                local = p.origin @ _axis_frame(np.array([0.0, 0.0, 1.0]))
+        except RuntimeError as exc:  # PhysX could not cook the hull
+            notes.append(f"link {name!r} collision {p.collision} group {p.group}: PhysX could not cook it ({exc}); skipped")
+            continue
+        shape.local_pose = _pose(local)
+        shape.set_collision_groups([1, 1, 0, 0])
+        shape.set_rest_offset(0.0)
+        comp.attach(shape)
+        cooked += 1
+    if pieces and not cooked:
+        raise PhysXError(f"{urdf_path}: no collision shape of link {name!r} could be cooked by PhysX")
+    comp.set_linear_damping(BULLET_LINK_DAMPING)
+    comp.set_angular_damping(BULLET_LINK_DAMPING)
+
+
+def configure_articulation(art) -> None:
+    """A built ``PhysxArticulation`` as the checks step it: never asleep, :data:`SOLVER_ITERATIONS`."""
+    art.set_sleep_threshold(0.0)
+    art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
+    art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
+
+
+@dataclass
+class PassiveJoints:
+    """The passive forces of an articulation's movable joints, in the order of its ``active_joints``: Coulomb
+    ``friction`` (N*m or N) and viscous ``damping`` (N*m*s/rad or N*s/m) act through a zero-velocity drive whose
+    force limit is ``friction + damping * |qdot|`` (:meth:`force_limits`, set each step); springs
+    (``stiffness`` N*m/rad or N/m about ``reference``) and their ``catches`` as joint forces (:meth:`joint_forces`).
+    The one implementation of SAPIEN's passive joints: :class:`PhysXSession` and :mod:`asset2sim.maniskill` use it."""
+
+    names: list[str]
+    friction: np.ndarray
+    damping: np.ndarray
+    stiffness: np.ndarray
+    reference: np.ndarray
+    catches: dict[int, Spring] = field(default_factory=dict)
+
+    @classmethod
+    def from_urdf(cls, urdf, springs: dict[str, Spring], names: list[str]) -> "PassiveJoints":
+        """From the ``<dynamics>`` of ``urdf``'s movable joints and ``springs`` (joint -> :class:`Spring`, the
+        output's ``overlay.json``), for the joints ``names`` in the articulation's order (a name the URDF does
+        not have as a movable joint keeps zeros)."""
+        index = {n: i for i, n in enumerate(names)}
+        out = cls(list(names), *(np.zeros(len(names)) for _ in range(4)))
+        for pj in urdf.movable_joints:
+            i = index.get(pj.name)
+            if i is None:
+                continue
+            out.damping[i] = pj.damping
+            out.friction[i] = pj.friction
+            sp = springs.get(pj.name)
+            if sp is not None:
+                out.stiffness[i] = sp.stiffness
+                out.reference[i] = sp.reference
+                if sp.catch_force > 0.0:
+                    out.catches[i] = sp
+        return out
+
+    @property
+    def sprung(self) -> bool:
+        """Whether any joint has a spring or a catch (joint forces to apply each step)."""
+        return bool(np.any(self.stiffness)) or bool(self.catches)
+
+    @property
+    def damped(self) -> bool:
+        """Whether any joint has damping (force limits to update each step)."""
+        return bool(np.any(self.damping))
+
+    def configure(self, joints) -> None:
+        """Give each of ``joints`` (``PhysxArticulationJoint``, this order) its passive drive: no PhysX joint
+        friction, zero target velocity, damping :data:`FRICTION_DRIVE_DAMPING`, force limit the friction."""
+        for i, joint in enumerate(joints):
+            joint.set_friction(0.0)
+            joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(self.friction[i]), "force")
+            joint.set_drive_target(0.0)
+            joint.set_drive_velocity_target(0.0)
+
+    def force_limits(self, qvel: np.ndarray) -> np.ndarray:
+        """The drives' force limits (n,) N*m or N at joint velocities ``qvel`` (n,) or (b, n): friction + damping * |qdot|."""
+        return self.friction + self.damping * np.abs(np.asarray(qvel, float))
+
+    def joint_forces(self, qpos: np.ndarray) -> np.ndarray:
+        """The springs' and catches' joint forces (n,) or (b, n) N*m or N at joint positions ``qpos``: -k (q - q_ref) + catch."""
+        q = np.asarray(qpos, float)
+        qf = -self.stiffness * (q - self.reference)
+        for i, sp in self.catches.items():
+            qf[..., i] += np.vectorize(sp.catch)(q[..., i])
+        return qf
+
+
 class PhysXSession(SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in PhysX through SAPIEN 3:
     a CPU scene of its own, or (``scene``) the caller's, left as it is
@@ -122,24 +274,8 @@ class PhysXSession(SessionDefaults):
 
     def _articulation_builder(self, urdf_path: Path):
         """SAPIEN's articulation builder: every link's joint (x along the URDF axis) and inertia."""
-        builder = self.scene.create_articulation_builder()
-        link_builders = {}
-        for name in self.urdf.tree_order():
-            pj = self.urdf.parent_joint(name)
-            lb = builder.create_link_builder(link_builders[pj.parent] if pj else None)
-            link_builders[name] = lb
-            lb.set_name(name)
-            lb.set_joint_name(pj.name if pj else "")
-            if pj is None:
-                lb.set_joint_properties("fixed" if self.options.fixed_base else "undefined", [], sapien.Pose(), sapien.Pose())
-            else:
-                ax = _axis_frame(pj.axis)
-                kind = {"revolute": "revolute_unwrapped", "continuous": "revolute", "prismatic": "prismatic", "fixed": "fixed"}[pj.type]
-                limits = [] if pj.type == "fixed" else [[pj.lower, pj.upper]]
-                lb.set_joint_properties(kind, limits, _pose(pj.origin @ ax), _pose(ax), 0.0, 0.0)
-            mass, com_pose, moments = self._link_inertia(name, urdf_path)
-            lb.set_mass_and_inertia(float(mass), com_pose, np.asarray(moments, np.float32))
-        return builder
+        return fill_articulation_builder(self.scene.create_articulation_builder(), self.urdf, urdf_path,
+                                         fixed_base=self.options.fixed_base, notes=self.notes)
 
     def _add_articulation(self, builder, pieces: dict, urdf_path: Path) -> None:
         """Build the articulation with its collision shapes into the scene (``links``, ``art``)."""
@@ -153,56 +289,10 @@ class PhysXSession(SessionDefaults):
             self.scene.add_entity(ent)
         self._entities = list(entities)
         self.art = entities[0].find_component_by_type(physx.PhysxArticulationLinkComponent).articulation
-        self.art.set_sleep_threshold(0.0)
-        self.art.set_solver_position_iterations(SOLVER_ITERATIONS[0])
-        self.art.set_solver_velocity_iterations(SOLVER_ITERATIONS[1])
-
-    def _link_inertia(self, name: str, urdf_path: Path):
-        """Mass (kg), COM pose on the principal axes and principal moments (3,)
-        kg*m^2 of a link (PyBullet's default without ``<inertial>``)."""
-        ine = self.urdf.links[name].inertial
-        if ine is None:
-            self.notes.append(f"link {name!r} has no <inertial>: given PyBullet's {BULLET_DEFAULT_MASS} kg, unit inertia")
-            return BULLET_DEFAULT_MASS, sapien.Pose(), np.array(BULLET_DEFAULT_INERTIA)
-        moments, axes = principal_axes(ine.inertia_in_link_axes())
-        if ine.mass <= 0 or moments.min() <= 0:
-            raise PhysXError(f"{urdf_path}: link {name!r} has mass {ine.mass} and principal moments {moments}: not positive")
-        t = np.eye(4)
-        t[:3, :3] = axes
-        t[:3, 3] = ine.com()
-        return ine.mass, _pose(t), moments
+        configure_articulation(self.art)
 
     def _attach_shapes(self, comp, pieces: list, urdf_path: Path) -> None:
-        """Cook a link's collision pieces into its component (uncookable ones
-        skipped with a note) with PyBullet's contact friction and link damping."""
-        name = comp.name
-        lmu = link_friction(self.urdf, name)
-        mat = physx.PhysxMaterial(lmu, lmu, 0.0)
-        cooked = 0
-        for p in pieces:
-            local = p.origin
-            try:
-                if p.kind == "hull":
-                    shape = physx.PhysxCollisionShapeConvexMesh(np.asarray(p.points, np.float32), np.ones(3, np.float32), mat)
-                elif p.kind == "box":
-                    shape = physx.PhysxCollisionShapeBox(np.asarray(p.size, np.float32) / 2, mat)
-                elif p.kind == "sphere":
-                    shape = physx.PhysxCollisionShapeSphere(float(p.radius), mat)
-                else:  # cylinder: URDF axis z, PhysX axis x
-                    shape = physx.PhysxCollisionShapeCylinder(float(p.radius), float(p.length) / 2, mat)
-                    local = p.origin @ _axis_frame(np.array([0.0, 0.0, 1.0]))
-            except RuntimeError as exc:  # PhysX could not cook the hull
-                self.notes.append(f"link {name!r} collision {p.collision} group {p.group}: PhysX could not cook it ({exc}); skipped")
-                continue
-            shape.local_pose = _pose(local)
-            shape.set_collision_groups([1, 1, 0, 0])
-            shape.set_rest_offset(0.0)
-            comp.attach(shape)
-            cooked += 1
-        if pieces and not cooked:
-            raise PhysXError(f"{urdf_path}: no collision shape of link {name!r} could be cooked by PhysX")
-        comp.set_linear_damping(BULLET_LINK_DAMPING)
-        comp.set_angular_damping(BULLET_LINK_DAMPING)
+        attach_collision_shapes(comp, self.urdf, pieces, urdf_path, self.notes)
 
     def _passive_drives(self, urdf_path: Path) -> None:
         """Joint tables and each movable joint's passive zero-velocity drive
@@ -212,24 +302,12 @@ class PhysXSession(SessionDefaults):
             raise PhysXError(f"{urdf_path}: PhysX built joints {active}, the URDF has {self.joint_names}")
         self._index = {n: i for i, n in enumerate(active)}
         self._joints = list(self.art.active_joints)
-        self._friction, self._damping, self._stiffness, self._reference = (np.zeros(len(active)) for _ in range(4))
+        self._passive = PassiveJoints.from_urdf(self.urdf, self.options.springs, active)
+        self._passive.configure(self._joints)
+        p = self._passive
+        self._friction, self._damping, self._stiffness, self._reference, self._catches = (
+            p.friction, p.damping, p.stiffness, p.reference, p.catches)
         self._drive: dict[int, tuple[float, float]] = {}  # joint index -> (target velocity, force limit beyond friction)
-        self._catches: dict[int, Spring] = {}  # joint index -> its spring with a catch
-        for pj in self.urdf.movable_joints:
-            i = self._index[pj.name]
-            self._damping[i] = pj.damping
-            self._friction[i] = pj.friction
-            joint = self._joints[i]
-            joint.set_friction(0.0)
-            joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(pj.friction), "force")
-            joint.set_drive_target(0.0)
-            joint.set_drive_velocity_target(0.0)
-            sp = self.options.springs.get(pj.name)
-            if sp is not None:
-                self._stiffness[i] = sp.stiffness
-                self._reference[i] = sp.reference
-                if sp.catch_force > 0.0:
-                    self._catches[i] = sp
 
     # ------------------------------------------------------------------ state
     def set_joint_positions(self, q: dict[str, float], zero_velocity: bool = True) -> None:
@@ -451,12 +529,8 @@ class PhysXSession(SessionDefaults):
             for i, _joint in enumerate(self._joints):
                 if self._damping[i] > 0 or i in self._drive:
                     self._set_drive(i, float(qd[i]))
-        if bool(np.any(self._stiffness)) or self._catches:
-            q = np.asarray(self.art.get_qpos(), float)
-            qf = -self._stiffness * (q - self._reference)
-            for i, sp in self._catches.items():
-                qf[i] += sp.catch(float(q[i]))
-            self.art.set_qf(qf.astype(np.float32))
+        if self._passive.sprung:
+            self.art.set_qf(self._passive.joint_forces(np.asarray(self.art.get_qpos(), float)).astype(np.float32))
 
     def held_physics(self) -> HeldPhysics:
         """Links and joints from PhysX's getters; friction is the drive's force limit at rest."""

@@ -1,0 +1,626 @@
+"""Refined objects as ManiSkill 3 tasks (``pip install 'asset2sim[maniskill]'``).
+
+``import asset2sim.maniskill`` registers two environments with ManiSkill's
+``register_env`` (and so with ``gymnasium``)::
+
+    import gymnasium as gym
+    import asset2sim.maniskill  # noqa: F401  (registers the ids)
+
+    env = gym.make("Asset2Sim-OpenArticulation-v1", assets="out/", obs_mode="state", num_envs=1)
+    obs, info = env.reset(seed=0)
+
+- ``Asset2Sim-OpenArticulation-v1``: open the object's task part (a lid, a
+  door, a drawer) from its closed end to the learnability target (opening
+  fraction >= 0.55, target 0.6);
+- ``Asset2Sim-CloseArticulation-v1``: close it from the common start (half
+  open, a revolute part at most 45 degrees) to fraction <= 0.05.
+
+``assets`` is an asset2sim output folder (``asset2sim refine`` /
+``asset2sim demo --out``), an unrefined input folder (``mobility.urdf``, no
+``report.json``: baselines run in the same environment), a folder holding such
+folders, or a list of any of these. Each parallel sub-scene holds one object
+(different links and joints per sub-scene, as ManiSkill's
+``OpenCabinetDrawer-v1`` builds them: an articulation builder per scene index);
+with fewer sub-scenes than objects, each reconfiguration draws one per sub-scene.
+
+Every object is built as asset2sim verified it (:mod:`asset2sim.engines.physx_engine`,
+the builder :func:`asset2sim.load_sapien` uses): the output's convex collision
+pieces and inertia, self-collision between links that are not parent and child,
+the root welded to the world when ``initial_state.json`` declares it fixed (a
+mounted door) and free on the ground otherwise, and each movable joint's
+friction, damping and spring (``mobility.urdf`` ``<dynamics>``, ``overlay.json``)
+applied every simulation step by
+:class:`~asset2sim.engines.physx_engine.PassiveJoints`. The scene keeps
+ManiSkill's solver settings (TGS, 15 position iterations; asset2sim's checks
+use PGS) and steps at 240 Hz, 12 steps per control step. SAPIEN's own URDF loader,
+which ManiSkill uses, drops the friction: a lid that holds open falls shut.
+
+The task joint, its closed end and the target are those of
+:func:`asset2sim.tasks.evaluation.learn_task.prepare_task` (the learnability
+benchmark's task definition) for the output's ``report.json`` task turned to
+the environment's direction, with the closed end ``report.json`` records.
+Success (``evaluate``): the target reached and the joint at rest (|qdot| <=
+1 rad/s or 0.1 m/s, ManiSkill's ``OpenCabinetDrawer-v1`` thresholds). Dense
+reward as ``OpenCabinetDrawer-v1``'s: reaching the grasp point (up to 1, 2
+once the part moves) + 2 x progress toward the target, 3 once reached, 5 on
+success; ``normalized_dense`` divides by 5.
+
+Robots: ManiSkill's Panda (default, ``robot_uids="panda"``) or its floating
+Panda gripper (``"floating_panda_gripper"``), placed on the object's -x side so
+that the gripper starts :data:`TCP_APPROACH` from the grasp point, touching
+nothing. Observations: ``state`` (the robot's, the grasp point,
+the task joint's opening fraction and velocity, the target) and ``pointcloud``
+(one camera, needs a render device). ``sim_backend="cpu"`` is what the tests
+run; on ``"gpu"`` the friction is a constant force limit and damping and springs
+are joint forces (the same model, not run by the tests: no GPU in CI).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from asset2sim.extras import MissingExtra, install_hint
+
+try:
+    import sapien
+    import torch
+    from mani_skill.envs.sapien_env import BaseEnv
+    from mani_skill.sensors.camera import CameraConfig
+    from mani_skill.utils import common, sapien_utils
+    from mani_skill.utils.building.articulation_builder import ArticulationBuilder
+    from mani_skill.utils.building.ground import build_ground
+    from mani_skill.utils.geometry.geometry import transform_points
+    from mani_skill.utils.registration import register_env
+    from mani_skill.utils.structs import Articulation, Link, Pose
+    from mani_skill.utils.structs.types import SceneConfig, SimConfig
+    from sapien.wrapper.articulation_builder import LinkBuilder
+except ImportError as exc:  # ManiSkill, torch or SAPIEN not installed: one line naming the extra
+    raise MissingExtra(f"asset2sim.maniskill: {install_hint(exc)}", name=getattr(exc, "name", None)) from exc
+
+from asset2sim.engines.base import Spring
+from asset2sim.engines.loading import CollisionPiece, collision_pieces, read_urdf
+from asset2sim.engines.physx_engine import (FRICTION_DRIVE_DAMPING, PassiveJoints, attach_collision_shapes, configure_articulation,
+                                            fill_articulation_builder)
+from asset2sim.output_folder import REPORT_NAME, URDF_NAME
+from asset2sim.tasks.check.contact_points import contact_point_rule
+from asset2sim.tasks.check.task_spec import VERBS
+from asset2sim.tasks.evaluation.learn_task import prepare_task, targets_for
+from asset2sim.tasks.publish.contract import read_report_json
+from asset2sim.urdf import UrdfModel
+
+#: The environments' ids and the action each asks for.
+ENV_IDS = {"open": "Asset2Sim-OpenArticulation-v1", "close": "Asset2Sim-CloseArticulation-v1"}
+#: Episode length, control steps (ManiSkill's OpenCabinetDrawer-v1: 100).
+MAX_EPISODE_STEPS = 100
+#: Simulation and control rates, Hz: asset2sim's checks step PhysX at 1/240 s; 12 steps per action as the
+#: PyBullet learnability environment.
+SIM_FREQ, CONTROL_FREQ = 240, 20
+#: The task joint counts as at rest at or below this speed (rad/s, m/s): OpenCabinetDrawer-v1's link thresholds.
+REST_SPEED = {"revolute": 1.0, "continuous": 1.0, "prismatic": 0.1}
+#: The dense reward's maximum (``compute_normalized_dense_reward`` divides by it).
+MAX_REWARD = 5.0
+#: Where the TCP starts relative to the grasp point, m: in front of it along -x and above it (no contact at the start).
+TCP_APPROACH = np.array([-0.10, 0.0, 0.05])
+#: The TCP in the robot's base frame at its start keyframe (ManiSkill 3.0.1: Panda ``rest``, the floating gripper
+#: ``open_facing_side``), m.
+TCP_AT_START = {"panda": np.array([0.615, 0.0, 0.170]), "floating_panda_gripper": np.array([0.1034, 0.0, 0.0])}
+#: The Panda's base stays this far (m) behind the object's -x face.
+ROBOT_CLEARANCE = 0.25
+SUPPORTED_ROBOTS = ["panda", "floating_panda_gripper"]
+
+
+class ManiSkillAssetError(ValueError):
+    """An asset cannot become a ManiSkill task object. ``code``: ``MS_NO_ASSETS`` (nothing to load),
+    ``MS_NOT_AN_ASSET`` (a folder without ``mobility.urdf``), ``MS_NO_TASK_JOINT`` (no joint the task can
+    move), ``MS_BUILD`` (SAPIEN cannot build it); the message names the folder."""
+
+    def __init__(self, code: str, message: str):
+        super().__init__(f"{code}: {message}")
+        self.code = code
+
+
+@dataclass
+class TaskObject:
+    """One object of an environment and its task, SI units (rad or m; fractions 0 closed, 1 fully open).
+
+    ``kind``: ``refined`` (an asset2sim output folder) or ``raw`` (an input folder). ``joint`` the task
+    joint, ``q_closed`` / ``direction`` / ``open_range`` its closed end (the opening fraction is
+    ``direction * (q - q_closed) / open_range``), ``start_fraction`` where an episode starts it,
+    ``reach_fraction`` the success threshold (>= for open, <= for close); ``initial_state`` the other joints'
+    positions, ``springs`` (``overlay.json``), ``fixed_root``; ``grasp_link`` / ``grasp_point`` (3,) m in that
+    link's frame (:func:`~asset2sim.tasks.check.contact_points.contact_point_rule`); ``base_z`` the root's
+    height that puts the lowest collision point on z = 0 at the episode's start (a fixed root is welded there)."""
+
+    folder: Path
+    kind: str
+    action: str
+    urdf: Path
+    model: UrdfModel
+    pieces: dict[str, list[CollisionPiece]]
+    joint: str
+    joint_type: str
+    q_closed: float
+    direction: float
+    open_range: float
+    start_fraction: float
+    target_fraction: float
+    reach_fraction: float
+    initial_state: dict[str, float]
+    springs: dict[str, Spring]
+    fixed_root: bool
+    grasp_link: str
+    grasp_point: np.ndarray
+    base_z: float
+    task: str
+    notes: list[str] = field(default_factory=list)
+
+    def q_at(self, fraction: float) -> float:
+        """The task joint's position (rad or m) at opening ``fraction``."""
+        return self.q_closed + self.direction * fraction * self.open_range
+
+    def start_qpos(self, names: Sequence[str]) -> np.ndarray:
+        """Joint positions (n,) for the joints ``names`` at an episode's start: the initial state, the task joint
+        at ``start_fraction``."""
+        q = {**self.initial_state, self.joint: self.q_at(self.start_fraction)}
+        return np.array([q.get(n, 0.0) for n in names], float)
+
+
+class _Kinematics:
+    """The URDF's link frames at joint positions ``q`` with the root at the identity (the part of a session
+    :func:`~asset2sim.tasks.check.contact_points.contact_point_rule` reads)."""
+
+    def __init__(self, model: UrdfModel, q: dict[str, float]):
+        self.model = model
+        self.poses = model.link_poses(q)
+        self.link_names = list(model.links)
+        self.joint_child = {j.name: j.child for j in model.movable_joints}
+        self.joint_types = {j.name: j.type for j in model.movable_joints}
+
+    def link_frame(self, link: str) -> tuple[np.ndarray, np.ndarray]:
+        t = self.poses[link]
+        return t[:3, 3].copy(), t[:3, :3].copy()
+
+    def joint_axis(self, joint: str) -> np.ndarray:
+        return np.asarray(self.model.joint(joint).axis, float)
+
+
+def _piece_points(p: CollisionPiece) -> np.ndarray:
+    """Points (k, 3) in the link frame bounding a collision piece."""
+    if p.kind == "hull":
+        local = np.asarray(p.points, float)
+    elif p.kind == "box":
+        h = np.asarray(p.size, float) / 2
+        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float) * h
+    else:
+        r = float(p.radius or 0.0)
+        hl = float(p.length or 2 * r) / 2 if p.kind == "cylinder" else r
+        local = np.array([[sx * r, sy * r, sz * hl] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    return local @ p.origin[:3, :3].T + p.origin[:3, 3]
+
+
+def _world_points(model: UrdfModel, pieces: dict[str, list[CollisionPiece]], q: dict[str, float]) -> np.ndarray:
+    poses = model.link_poses(q)
+    pts = [_piece_points(p) @ poses[link][:3, :3].T + poses[link][:3, 3] for link, ps in pieces.items() for p in ps]
+    return np.vstack(pts) if pts else np.zeros((0, 3))
+
+
+def _task_text(report_task: str | None, action: str, category: str | None) -> str:
+    """The report's task turned to ``action`` ("close the laptop" -> "open the laptop"); without one, the action
+    on the category's task part."""
+    if report_task:
+        low = " ".join(report_task.lower().split())
+        for verb in sorted(VERBS, key=len, reverse=True):
+            m = re.match(rf"{re.escape(verb)}\b(.*)$", low)
+            if m:
+                return f"{action}{m.group(1)}"
+        return f"{action} {low}"
+    return f"{action} the {category.lower()}" if category else action
+
+
+def task_object(folder: str | Path, action: str, task: str | None = None) -> TaskObject:
+    """The :class:`TaskObject` of an output or input ``folder`` for ``action`` (``open`` / ``close``): the part
+    ``task`` names ("close the laptop"; default: the output's ``report.json`` task, else the category's), turned to
+    ``action``.
+
+    Raises:
+        ManiSkillAssetError: ``MS_NOT_AN_ASSET`` (no ``mobility.urdf``, or an unreadable ``report.json``),
+            ``MS_NO_TASK_JOINT`` (the task moves no joint).
+    """
+    if action not in ENV_IDS:
+        raise ValueError(f"action must be one of {sorted(ENV_IDS)}, got {action!r}")
+    folder = Path(folder)
+    urdf = folder / URDF_NAME
+    if not urdf.is_file():
+        raise ManiSkillAssetError("MS_NOT_AN_ASSET", f"{folder}: has no {URDF_NAME}")
+    report = None
+    if (folder / REPORT_NAME).is_file():
+        try:
+            report = read_report_json(folder)
+        except (OSError, ValueError) as exc:
+            raise ManiSkillAssetError("MS_NOT_AN_ASSET", f"{folder / REPORT_NAME}: unreadable ({exc})") from exc
+    text = _task_text(task or (report.task if report else None), action, report.category if report else None)
+    try:
+        lt = prepare_task(folder, text, start="task")
+    except ValueError as exc:  # LearnTaskError, EvaluationError, UrdfError
+        raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: task {text!r}: {exc}") from exc
+    if lt.action != action:
+        raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: task {text!r} does not {action} a joint ({lt.rule})")
+    model = read_urdf(urdf)
+    pieces, notes = collision_pieces(model)
+    q_closed, direction, open_range = lt.closed.q_closed, lt.closed.direction, lt.closed.open_range
+    if report is not None and lt.joint in report.closed_positions:  # the closed end refine measured and wrote
+        j = model.joint(lt.joint)
+        q_closed = float(report.closed_positions[lt.joint])
+        if j.type != "continuous":
+            open_range = max((j.upper - q_closed) if direction > 0 else (q_closed - j.lower), 0.0)
+    if not open_range > 0:
+        raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: joint {lt.joint!r} cannot open (range 0)")
+    target, reach = targets_for(action, lt.start_fraction)
+    obj = TaskObject(folder=folder, kind="refined" if report is not None else "raw", action=action, urdf=urdf, model=model,
+                     pieces=pieces, joint=lt.joint, joint_type=lt.joint_type, q_closed=q_closed, direction=direction,
+                     open_range=open_range, start_fraction=lt.start_fraction, target_fraction=target, reach_fraction=reach,
+                     initial_state=dict(lt.initial_state), springs=dict(lt.springs), fixed_root=bool(lt.root_fixed),
+                     grasp_link="", grasp_point=np.zeros(3), base_z=0.0, task=text, notes=list(lt.notes) + notes)
+    q0 = dict(zip([j.name for j in model.movable_joints], obj.start_qpos([j.name for j in model.movable_joints])))
+    link, point, rule = contact_point_rule(_Kinematics(model, q0), lt.joint, model, opening_direction=direction)
+    obj.grasp_link, obj.grasp_point = link, np.asarray(point, float)
+    obj.notes.append(f"grasp point: {rule} of {link}")
+    pts = _world_points(model, pieces, q0)  # free objects rest on the floor; mounted ones are welded standing on it
+    obj.base_z = float(-pts[:, 2].min()) if len(pts) else 0.0
+    return obj
+
+
+def find_assets(assets: str | Path | Sequence[str | Path]) -> list[Path]:
+    """The object folders of ``assets``: each path that holds ``mobility.urdf`` itself, else its sub-folders that
+    do (sorted by name). Raises ManiSkillAssetError ``MS_NO_ASSETS``: none found."""
+    paths = [assets] if isinstance(assets, (str, Path)) else list(assets)
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if (p / URDF_NAME).is_file():
+            out.append(p)
+        elif p.is_dir():
+            out.extend(sorted(d for d in p.iterdir() if d.is_dir() and (d / URDF_NAME).is_file()))
+        else:
+            raise ManiSkillAssetError("MS_NO_ASSETS", f"{p}: not a folder")
+    if not out:
+        raise ManiSkillAssetError("MS_NO_ASSETS", f"no folder with {URDF_NAME} in {[str(p) for p in paths]}")
+    return out
+
+
+def load_task_objects(assets: str | Path | Sequence[str | Path], action: str,
+                      task: str | Mapping[str, str] | None = None) -> tuple[list[TaskObject], list[tuple[Path, str]]]:
+    """Every object of ``assets`` (:func:`find_assets`) as a :class:`TaskObject`, and the folders that could not
+    become one with the error (a failed asset does not stop the others); ``task`` as :func:`task_object`'s, or
+    per folder (``str(folder)`` -> task text). Raises ManiSkillAssetError
+    ``MS_NO_ASSETS``: none could."""
+    objects, skipped = [], []
+    for folder in find_assets(assets):
+        try:
+            objects.append(task_object(folder, action, task.get(str(folder)) if isinstance(task, Mapping) else task))
+        except ManiSkillAssetError as exc:
+            skipped.append((folder, str(exc)))
+    if not objects:
+        raise ManiSkillAssetError("MS_NO_ASSETS", "no asset can be a task object: " + "; ".join(f"{f}: {e}" for f, e in skipped))
+    return objects, skipped
+
+
+class _VerifiedLinkBuilder(LinkBuilder):
+    """SAPIEN's link builder with the output's convex collision pieces attached as asset2sim's PhysX session cooks
+    them (:func:`~asset2sim.engines.physx_engine.attach_collision_shapes`)."""
+
+    def __init__(self, index, parent, obj: TaskObject):
+        super().__init__(index, parent)
+        self._obj = obj
+
+    def build_physx_component(self, link_parent=None):
+        comp = super().build_physx_component(link_parent)
+        attach_collision_shapes(comp, self._obj.model, self._obj.pieces.get(self.name, []), self._obj.urdf, self._obj.notes)
+        return comp
+
+
+class _VerifiedArticulationBuilder(ArticulationBuilder):
+    """ManiSkill's articulation builder (scene indices, batched build) making :class:`_VerifiedLinkBuilder` links,
+    self-collision kept (ManiSkill's ``disable_self_collisions`` off)."""
+
+    def __init__(self, obj: TaskObject):
+        super().__init__()
+        self._obj = obj
+
+    def create_link_builder(self, parent: LinkBuilder = None):
+        if self.link_builders:
+            assert parent and parent in self.link_builders
+        builder = _VerifiedLinkBuilder(len(self.link_builders), parent, self._obj)
+        self.link_builders.append(builder)
+        return builder
+
+    def add_visuals(self) -> None:
+        """The URDF's visual meshes and primitives on each link (for cameras and point clouds)."""
+        for lb in self.link_builders:
+            for v in self._obj.model.links[lb.name].visuals:
+                pose = sapien.Pose(v.origin.astype(np.float32))
+                if v.kind == "mesh" and v.path is not None and v.path.is_file():
+                    lb.add_visual_from_file(str(v.path), pose=pose, scale=v.scale)
+                elif v.kind == "box":
+                    lb.add_box_visual(pose=pose, half_size=np.asarray(v.size, float) / 2)
+                elif v.kind == "sphere":
+                    lb.add_sphere_visual(pose=pose, radius=float(v.radius))
+
+
+def build_object(scene, obj: TaskObject, scene_idx: int, name: str) -> Articulation:
+    """Build ``obj`` into sub-scene ``scene_idx`` of a ManiSkill ``scene`` as asset2sim verified it (links, joints,
+    inertia, collision pieces, the root as declared; visuals when the scene renders) and give its joints their
+    passive drives. Returns ManiSkill's ``Articulation``. Raises ManiSkillAssetError ``MS_BUILD``."""
+    builder = _VerifiedArticulationBuilder(obj).set_scene(scene)
+    try:
+        fill_articulation_builder(builder, obj.model, obj.urdf, fixed_base=obj.fixed_root, notes=obj.notes)
+        if scene.can_render():
+            builder.add_visuals()
+        builder.set_scene_idxs([scene_idx])
+        builder.initial_pose = sapien.Pose(p=[0.0, 0.0, obj.base_z])
+        art = builder.build(name=name, fix_root_link=obj.fixed_root)
+    except (RuntimeError, ValueError) as exc:
+        raise ManiSkillAssetError("MS_BUILD", f"{obj.folder}: SAPIEN cannot build it ({exc})") from exc
+    for px in art._objs:
+        configure_articulation(px)
+    return art
+
+
+def _bare(name: str, prefix: str) -> str:
+    return name[len(prefix):] if name.startswith(prefix) else name
+
+
+class _ArticulationTaskEnv(BaseEnv):
+    """The environment of :data:`ENV_IDS` (see the module's docstring); ``action`` set by the subclass.
+
+    Args (beyond ManiSkill's ``BaseEnv``'s ``num_envs``, ``obs_mode``, ``reward_mode``, ``control_mode``,
+    ``sim_backend``, ``render_mode`` ...):
+        assets: output or input folders (:func:`find_assets`); objects that cannot become a task are left out
+            (``skipped``: folder and error); ManiSkillAssetError ``MS_NO_ASSETS`` when none can.
+        task: the task text for every object ("close the laptop", turned to the environment's direction), or
+            per folder (``str(folder)`` -> text); default: each output's ``report.json`` task (an input's: its category's part).
+        robot_uids: ``panda`` (default) or ``floating_panda_gripper``.
+        robot_init_qpos_noise: standard deviation (rad) of the robot's start joint positions.
+        reconfiguration_freq: ManiSkill's; default: every reset with one sub-scene and several objects, else never.
+    """
+
+    SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
+    action_kind: str = ""
+
+    def __init__(self, *args, assets: str | Path | Sequence[str | Path] = (), task: str | Mapping[str, str] | None = None, robot_uids: str = "panda",
+                 robot_init_qpos_noise: float = 0.02, reconfiguration_freq: int | None = None, num_envs: int = 1, **kwargs):
+        self.objects, self.skipped = load_task_objects(assets, self.action_kind, task)
+        self.robot_init_qpos_noise = robot_init_qpos_noise
+        self._robot = robot_uids
+        if reconfiguration_freq is None:
+            reconfiguration_freq = 1 if (num_envs == 1 and len(self.objects) > 1) else 0
+        super().__init__(*args, robot_uids=robot_uids, reconfiguration_freq=reconfiguration_freq, num_envs=num_envs, **kwargs)
+
+    # ------------------------------------------------------------------ configs
+    @property
+    def _default_sim_config(self):
+        return SimConfig(sim_freq=SIM_FREQ, control_freq=CONTROL_FREQ, spacing=5,
+                         scene_config=SceneConfig(solver_position_iterations=15, solver_velocity_iterations=1))
+
+    @property
+    def _default_sensor_configs(self):
+        pose = sapien_utils.look_at(eye=[-1.2, -0.5, 1.1], target=[0.0, 0.0, 0.35])
+        return [CameraConfig("base_camera", pose=pose, width=128, height=128, fov=1.2, near=0.01, far=10)]
+
+    @property
+    def _default_human_render_camera_configs(self):
+        pose = sapien_utils.look_at(eye=[-1.6, -1.0, 1.4], target=[0.0, 0.0, 0.35])
+        return CameraConfig("render_camera", pose=pose, width=512, height=512, fov=1.0, near=0.01, far=100)
+
+    # ------------------------------------------------------------------ loading
+    def _load_agent(self, options: dict):
+        super()._load_agent(options, sapien.Pose(p=[-1.0, 0.0, 0.0]))
+
+    def _load_scene(self, options: dict):
+        self.ground = build_ground(self.scene)
+        n = self.num_envs
+        if n >= len(self.objects):
+            picks = [i % len(self.objects) for i in range(n)]
+        else:
+            picks = [int(k) for k in self._batched_episode_rng.randint(0, len(self.objects))]
+        self.env_objects: list[TaskObject] = [self.objects[k] for k in picks]
+        arts, links, self._passive, self._task_index, self._physx_arts = [], [], [], [], []
+        for i, obj in enumerate(self.env_objects):
+            name = f"object-{i}"
+            art = build_object(self.scene, obj, i, name)
+            self.remove_from_state_dict_registry(art)
+            prefix = f"scene-{i}-{name}_"
+            px = art._objs[0]
+            names = [_bare(j.name, prefix) for j in px.active_joints]
+            passive = PassiveJoints.from_urdf(obj.model, obj.springs, names)
+            passive.configure(px.active_joints)
+            self._passive.append(passive)
+            self._physx_arts.append(px)
+            self._task_index.append(names.index(obj.joint))
+            links.append(next(lk for lk in art.links if _bare(lk._objs[0].name, prefix) == obj.grasp_link))
+            arts.append(art)
+        self.object = Articulation.merge(arts, name="object")
+        self.add_to_state_dict_registry(self.object)
+        self.grasp_link = Link.merge(links, name="grasp_link")
+        self._joint_names = [[_bare(j.name, f"scene-{i}-object-{i}_") for j in px.active_joints]
+                             for i, px in enumerate(self._physx_arts)]
+        with torch.device(self.device):
+            objs = self.env_objects
+            self.task_index = torch.tensor(self._task_index, dtype=torch.long)
+            self.grasp_point_local = torch.tensor(np.array([o.grasp_point for o in objs]), dtype=torch.float32)
+            self.q_closed = torch.tensor([o.q_closed for o in objs], dtype=torch.float32)
+            self.direction = torch.tensor([o.direction for o in objs], dtype=torch.float32)
+            self.open_range = torch.tensor([o.open_range for o in objs], dtype=torch.float32)
+            self.start_fraction = torch.tensor([o.start_fraction for o in objs], dtype=torch.float32)
+            self.target_fraction = torch.tensor([o.target_fraction for o in objs], dtype=torch.float32)
+            self.reach_fraction = torch.tensor([o.reach_fraction for o in objs], dtype=torch.float32)
+            self.rest_speed = torch.tensor([REST_SPEED.get(o.joint_type, 1.0) for o in objs], dtype=torch.float32)
+            self.base_z = torch.tensor([o.base_z for o in objs], dtype=torch.float32)
+            dof = self.object.max_dof
+            start = np.zeros((len(objs), dof))
+            for i, o in enumerate(objs):
+                q = o.start_qpos(self._joint_names[i])
+                start[i, :len(q)] = q
+            self.start_qpos = torch.tensor(start, dtype=torch.float32)
+            self.robot_base = torch.tensor(np.array([self._robot_base(o, self._joint_names[i], self._robot)
+                                                     for i, o in enumerate(objs)]),
+                                           dtype=torch.float32)
+        if self.gpu_sim_enabled:
+            self._gpu_passive_tables()
+
+    @staticmethod
+    def _robot_base(obj: TaskObject, names: list[str], robot: str = "panda") -> np.ndarray:
+        """The robot's base position (3,) m for ``obj`` (joints ``names``) at the episode's start: the TCP
+        :data:`TCP_APPROACH` from the grasp point; a Panda's base at least :data:`ROBOT_CLEARANCE` behind the object's
+        -x face and not below the floor."""
+        q0 = dict(zip(names, obj.start_qpos(names)))
+        t = obj.model.link_poses(q0)[obj.grasp_link]
+        g = t[:3, :3] @ obj.grasp_point + t[:3, 3] + np.array([0.0, 0.0, obj.base_z])
+        base = g + TCP_APPROACH - TCP_AT_START.get(robot, TCP_AT_START["panda"])
+        if robot == "panda":
+            pts = _world_points(obj.model, obj.pieces, q0)
+            if len(pts):
+                base[0] = min(base[0], float(pts[:, 0].min()) - ROBOT_CLEARANCE)
+            base[2] = max(base[2], 0.0)
+        return base
+
+    # ------------------------------------------------------------------ episodes
+    def _initialize_episode(self, env_idx: torch.Tensor, options: dict):
+        with torch.device(self.device):
+            b = len(env_idx)
+            p = torch.zeros((b, 3))
+            p[:, 2] = self.base_z[env_idx]
+            self.object.set_pose(Pose.create_from_pq(p=p))
+            self.object.set_qpos(self.start_qpos[env_idx])
+            self.object.set_qvel(torch.zeros_like(self.start_qpos[env_idx]))
+            key = self.agent.keyframes.get("rest") or self.agent.keyframes["open_facing_side"]
+            rest = torch.tensor(key.qpos, dtype=torch.float32)
+            qpos = rest.repeat(b, 1) + torch.randn((b, rest.numel())) * self.robot_init_qpos_noise
+            self.agent.reset(qpos)
+            self.agent.robot.set_pose(Pose.create_from_pq(p=self.robot_base[env_idx]))
+
+    # ------------------------------------------------------------------ passive joints
+    def _before_simulation_step(self):
+        if self.gpu_sim_enabled:
+            self._gpu_passive_forces()
+            return
+        for px, passive in zip(self._physx_arts, self._passive):
+            if passive.damped:
+                limits = passive.force_limits(px.get_qvel())
+                for joint, limit in zip(px.active_joints, limits):
+                    joint.set_drive_properties(0.0, FRICTION_DRIVE_DAMPING, float(limit), "force")
+            if passive.sprung:
+                px.set_qf(passive.joint_forces(px.get_qpos()).astype(np.float32))
+
+    def _gpu_passive_tables(self) -> None:
+        dof = self.object.max_dof
+        tabs = np.zeros((4, self.num_envs, dof))
+        for i, p in enumerate(self._passive):
+            n = len(p.names)
+            tabs[0, i, :n], tabs[1, i, :n], tabs[2, i, :n] = p.damping, p.stiffness, p.reference
+        self._gpu_damping, self._gpu_stiffness, self._gpu_reference = (common.to_tensor(t, device=self.device).float() for t in tabs[:3])
+        self._gpu_sprung = bool(np.any(tabs[:2]))
+
+    def _gpu_passive_forces(self) -> None:
+        """GPU: damping and springs as joint forces (friction stays the drives' constant force limit); catches
+        are not applied. Written for the GPU backend; not run by the tests (no GPU there)."""
+        if self._gpu_sprung:
+            self.scene.px.gpu_fetch_articulation_qpos()
+            self.scene.px.gpu_fetch_articulation_qvel()
+            qf = -self._gpu_damping * self.object.qvel - self._gpu_stiffness * (self.object.qpos - self._gpu_reference)
+            self.object.set_qf(qf)
+            self.scene.px.gpu_apply_articulation_qf()
+
+    # ------------------------------------------------------------------ task
+    def task_fraction(self) -> torch.Tensor:
+        """The task joint's opening fraction per sub-scene (b,)."""
+        q = self.object.qpos.gather(1, self.task_index[:, None])[:, 0]
+        return self.direction * (q - self.q_closed) / self.open_range
+
+    def task_speed(self) -> torch.Tensor:
+        """The task joint's |qdot| per sub-scene (b,), rad/s or m/s."""
+        return self.object.qvel.gather(1, self.task_index[:, None])[:, 0].abs()
+
+    def grasp_positions(self) -> torch.Tensor:
+        """The grasp point in the world per sub-scene (b, 3) m."""
+        return transform_points(self.grasp_link.pose.to_transformation_matrix().clone(), self.grasp_point_local)
+
+    def _progress(self, f: torch.Tensor) -> torch.Tensor:
+        span = self.reach_fraction - self.start_fraction
+        return torch.clamp((f - self.start_fraction) / torch.where(span.abs() > 1e-9, span, torch.ones_like(span)), 0.0, 1.0)
+
+    def _reached(self, f: torch.Tensor) -> torch.Tensor:
+        return f >= self.reach_fraction if self.action_kind == "open" else f <= self.reach_fraction
+
+    def evaluate(self) -> dict:
+        f = self.task_fraction()
+        reached = self._reached(f)
+        at_rest = self.task_speed() <= self.rest_speed
+        return {"success": reached & at_rest, "reached": reached, "fraction": f, "progress": self._progress(f),
+                "grasp_pos": self.grasp_positions()}
+
+    def _get_obs_extra(self, info: dict):
+        obs = dict(tcp_pose=self.agent.tcp.pose.raw_pose)
+        if "state" in self.obs_mode:
+            obs.update(grasp_pos=info["grasp_pos"], tcp_to_grasp_pos=info["grasp_pos"] - self.agent.tcp.pose.p,
+                       task_fraction=info["fraction"][:, None], task_speed=self.task_speed()[:, None],
+                       target_fraction=self.reach_fraction[:, None])
+        return obs
+
+    def compute_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        dist = torch.linalg.norm(self.agent.tcp.pose.p - info["grasp_pos"], axis=1)
+        reaching = 1 - torch.tanh(5 * dist)
+        progress = info["progress"]
+        reaching = torch.where(progress > 1e-3, torch.full_like(reaching, 2.0), reaching)
+        moving = torch.where(info["reached"], torch.full_like(progress, 3.0), 2 * progress)
+        reward = reaching + moving
+        return torch.where(info["success"], torch.full_like(reward, MAX_REWARD), reward)
+
+    def compute_normalized_dense_reward(self, obs: Any, action: torch.Tensor, info: dict):
+        return self.compute_dense_reward(obs=obs, action=action, info=info) / MAX_REWARD
+
+
+@register_env(ENV_IDS["open"], max_episode_steps=MAX_EPISODE_STEPS)
+class OpenArticulationEnv(_ArticulationTaskEnv):
+    """Open the task part of an asset2sim output (or a raw input) to opening fraction >= 0.55 and leave it at rest."""
+
+    action_kind = "open"
+
+
+@register_env(ENV_IDS["close"], max_episode_steps=MAX_EPISODE_STEPS)
+class CloseArticulationEnv(_ArticulationTaskEnv):
+    """Close the task part of an asset2sim output (or a raw input) from the common start to opening fraction <= 0.05."""
+
+    action_kind = "close"
+
+
+def hold_drift(folder: str | Path, seconds: float = 2.0, *, sim_backend: str = "cpu") -> dict[str, float]:
+    """Largest |q(t) - q(0)| (rad or m) of each movable joint of the object in ``folder`` over ``seconds`` of
+    simulated time in :data:`ENV_IDS` ``close``'s environment, started at the output's initial state, nobody
+    touching it (the robot held at its rest pose, away from the object). What a held lid does in ManiSkill."""
+    import gymnasium as gym
+
+    env = gym.make(ENV_IDS["close"], assets=[folder], num_envs=1, obs_mode="state", sim_backend=sim_backend,
+                   render_backend="none", robot_init_qpos_noise=0.0, control_mode="pd_joint_delta_pos")
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        obj = u.env_objects[0]
+        names = u._joint_names[0]
+        q0 = np.array([obj.initial_state.get(n, 0.0) for n in names], np.float32)
+        u.object.set_qpos(torch.tensor(q0)[None])
+        u.object.set_qvel(torch.zeros((1, len(q0))))
+        u.agent.robot.set_pose(Pose.create_from_pq(p=torch.tensor([[-3.0, 0.0, 0.0]])))
+        still = np.zeros(env.action_space.shape, np.float32)  # pd_joint_delta_pos: hold the arm where it is
+        drift = np.zeros(len(names))
+        for _ in range(int(math.ceil(seconds * CONTROL_FREQ))):
+            env.step(still)
+            drift = np.maximum(drift, np.abs(np.asarray(u.object.qpos[0, :len(names)], float) - q0))
+        return {n: float(d) for n, d in zip(names, drift)}
+    finally:
+        env.close()
