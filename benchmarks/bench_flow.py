@@ -1,6 +1,7 @@
 """Throughput of the dataset flow on real objects, the verdict's phase and the media phase apart.
 
     .venv/bin/python benchmarks/bench_flow.py [--requests 5] [--workers 2] [--work DIR] [--media now|deferred]
+    .venv/bin/python benchmarks/bench_flow.py --work DIR --report-only      # the tail of a kept run, again
 
 1. Builds a dataset of the dev rows (``../shared/datasets/partnet_mobility/manifest.csv``) times ``--requests``
    requests per object: the row's own request and task, then "A <noun>.", "A <noun>, halfway open.", "A <noun>,
@@ -12,8 +13,10 @@
 3. Prints the load average before and after, assets per hour of the first phase (over the flow's assets phase)
    and of the media phase, per-stage seconds per asset from the catalog's ``stage_seconds`` (the stage children
    are single-threaded: wall s of a stage = its core-seconds on an idle core) as median / p90 / p99, each asset's
-   first-phase wall time median / p90 / p99 with p99 / median, the slowest assets and the failure modes; writes
-   ``DIR/summary.json``.
+   first-phase wall time median / p90 / p99 with p99 / median and max / median (and the same of its CPU time: the
+   figure to compare on a loaded machine), the failure modes, and the tail: every asset above
+   :data:`TAIL_FACTOR` times the median (wall or CPU) with the stage that took most of its time (the output's
+   ``timings.json``) and the CoACD decompositions its report names; writes ``DIR/summary.json``.
 
 Goal (throughput issue): >= 2,000 assets an hour for the first phase on 2 cores, p99 <= 5x the median. Numbers from
 a loaded machine (see the load average printed) are upper bounds of the cost.
@@ -25,6 +28,7 @@ import argparse
 import csv
 import json
 import os
+import re
 import shutil
 import statistics
 import sys
@@ -38,6 +42,9 @@ DEV = ROOT.parent / "shared" / "datasets" / "partnet_mobility"
 
 from bench_flow_synthetic import _load, flow_times  # noqa: E402
 from bench_generalization import _noun  # noqa: E402
+
+#: An asset above this many times the median first-phase time (wall or CPU) is listed in the tail.
+TAIL_FACTOR = 3.0
 
 #: The requests of each object after its own (``{n}``: the category's noun).
 VARIANTS = ("A {n}.", "A {n}, halfway open.", "A {n}, fully open.", "A small {n}.")
@@ -91,6 +98,72 @@ def quantiles(values: list[float]) -> tuple[float, float, float]:
     return statistics.median(s), q(0.9), q(0.99)
 
 
+def tail(df, factor: float = TAIL_FACTOR) -> dict:
+    """The first phase's spread over a run's catalog rows ``df``: per asset wall and CPU s (:func:`flow_times`);
+    their median, p99 / median and max / median; and every asset above ``factor`` times either median, slowest
+    CPU first, with its failure mode, the stage of its refine that took longest (``timings.json`` in its output,
+    wall s) and the number of convex pieces CoACD made that its report keeps."""
+    times = flow_times(df)
+    wall = {a: t[0] for a, t in times.items()}
+    cpu = {a: t[1] for a, t in times.items()}
+    out: dict = {}
+    for name, vals in (("wall", wall), ("cpu", cpu)):
+        med, _, p99 = quantiles(list(vals.values()))
+        out[name] = {"median": med, "p99": p99, "max": max(vals.values(), default=0.0),
+                     "p99_over_median": p99 / med if med else None,
+                     "max_over_median": max(vals.values(), default=0.0) / med if med else None}
+    rows = {r["asset_id"]: r for r in df.to_dict("records")}
+    listed = []
+    for aid in sorted(times, key=lambda a: -cpu[a]):
+        w, c = wall[aid] / (out["wall"]["median"] or 1.0), cpu[aid] / (out["cpu"]["median"] or 1.0)
+        if w <= factor and c <= factor:
+            continue
+        folder = Path(str(rows[aid].get("out_dir") or ""))
+        stages, coacd = {}, 0
+        try:
+            stages = json.loads((folder / "timings.json").read_text())["stage_seconds"]
+            notes = json.dumps(json.loads((folder / "report.json").read_text()).get("state", {}).get("collision_changes", []))
+            coacd = sum(int(n) for n in re.findall(r"replaced by (\d+) convex pieces \(CoACD\)", notes))
+        except (OSError, ValueError, KeyError, AttributeError):
+            pass
+        top = max(stages.items(), key=lambda kv: kv[1], default=("-", 0.0))
+        listed.append({"asset": aid, "wall_s": wall[aid], "wall_x": w, "cpu_s": cpu[aid], "cpu_x": c,
+                       "failure_mode": rows[aid].get("failure_mode") or "none", "top_stage": top[0], "top_stage_s": top[1],
+                       "coacd_pieces": coacd})
+    out["above"] = listed
+    return out
+
+
+def print_tail(t: dict, factor: float = TAIL_FACTOR) -> None:
+    """Print :func:`tail`'s figures."""
+    for name in ("wall", "cpu"):
+        q = t[name]
+        print(f"  per asset {name}: median {q['median']:.2f} s, p99 {q['p99']:.2f} s = {q['p99_over_median'] or 0:.2f}x, "
+              f"max {q['max']:.2f} s = {q['max_over_median'] or 0:.2f}x the median")
+    print(f"  above {factor:g}x the median (wall or CPU), slowest CPU first:")
+    for e in t["above"]:
+        print(f"    {e['asset']:<12} wall {e['wall_s']:6.2f} s ({e['wall_x']:4.1f}x) CPU {e['cpu_s']:6.2f} s ({e['cpu_x']:4.1f}x) "
+              f"{e['failure_mode']:<18} longest stage {e['top_stage']} {e['top_stage_s']:.2f} s"
+              + (f", CoACD pieces kept {e['coacd_pieces']}" if e["coacd_pieces"] else ""))
+
+
+def report_only(work: Path) -> int:
+    """``--report-only``: :func:`print_tail` of the latest run recorded under ``work`` (a kept ``--work``)."""
+    from asset2sim.flows.catalog import ResultCatalog, load_catalog
+
+    cat = ResultCatalog(load_catalog(work / "catalog.yaml").catalog_root)
+    runs = sorted(r for d, r in cat.runs("dev"))
+    if not runs:
+        print(f"no run recorded under {work}")
+        return 1
+    df = cat.read("dev", runs[-1])
+    print(f"run {runs[-1]}: {len(df)} assets")
+    t = tail(df)
+    print_tail(t)
+    (work / "tail.json").write_text(json.dumps(t, indent=1))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--manifest", type=Path, default=DEV / "manifest.csv")
@@ -99,7 +172,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--media", choices=("deferred", "now"), default="deferred",
                     help="deferred (default): run.extras deferred; now: media with each asset")
     ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
+    ap.add_argument("--report-only", action="store_true", help="with --work: print the tail of the run kept there")
     args = ap.parse_args(argv)
+    if args.report_only:
+        if args.work is None:
+            ap.error("--report-only needs --work DIR")
+        return report_only(args.work)
     work = args.work or Path(tempfile.mkdtemp(prefix="a2s-bench-flow-"))
     os.environ.setdefault("ASSET2SIM_CACHE", str(work / "cache"))  # an empty on-disk cache of its own
     try:
@@ -130,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
                "media_assets_per_hour": made / media_s * 3600 if media_s else None,
                "per_asset_s": {"median": med, "p90": p90, "p99": p99, "p99_over_median": p99 / med if med else None},
                "stages_s": {k: dict(zip(("median", "p90", "p99"), quantiles(v))) for k, v in sorted(stages.items())},
-               "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(),
+               "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(), "tail": tail(df),
                "workers": args.workers, "media": args.media, "load_after": _load()}
         print(f"flow: {worked} assets refined in {wall:.1f} s wall (assets phase {assets_s:.1f} s); load after: {_load()}")
         print(f"  first phase (verdict, evaluation, exports): {out['first_phase_assets_per_hour'] or 0:.0f} assets/hour "
@@ -140,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{out['media_assets_per_hour'] or 0:.0f} assets/hour")
         print(f"  per asset: median {med:.2f} s, p90 {p90:.2f} s, p99 {p99:.2f} s = {p99 / med if med else 0:.2f}x the "
               "median (goal <= 5x)")
-        print("  slowest: " + ", ".join(f"{a} {t:.1f} s" for a, t in sorted(zip(df["asset_id"], per_asset), key=lambda x: -x[1])[:5]))
+        print_tail(out["tail"])
         print("  stage seconds per asset (median / p90 / p99):")
         for k, q in out["stages_s"].items():
             if q["p99"] >= 0.05:

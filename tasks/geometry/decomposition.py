@@ -1,14 +1,23 @@
 """Approximate convex decomposition of a mesh by CoACD (Wei, Liu, Lu, Li,
 "Approximate convex decomposition for 3D meshes with collision-aware concavity
 and tree search", SIGGRAPH 2022), refitted to the mesh's own vertices and
-cached by content and settings (:mod:`asset2sim.array_cache`). CoACD is an
-optional dependency (``pip install asset2sim[coacd]``).
+cached by content and settings: in this process (:data:`_MEMO`) and on disk (:mod:`asset2sim.array_cache`).
+CoACD is an optional dependency (``pip install asset2sim[coacd]``).
+
+A refine asks for the same decomposition more than once: the collision repair's second pass tries again a piece
+its first pass decomposed, and the shut repair and the state search of a request that opens a part repair the
+same pair. The on-disk cache answers those when it is on; with it off (``ASSET2SIM_CACHE=off``) each would run
+CoACD again (about 3 s of CPU for a 13-piece stapler arm, PartNet-Mobility 102990). The process cache is keyed by
+the same digest as the disk entry (the mesh's bytes and every setting), and hands out copies, so no result
+depends on whether it answered.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import threading
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -58,12 +67,47 @@ def decompose(vertices: np.ndarray, faces: np.ndarray, settings: dict | None = N
     return _decompose(digest, lambda: (v, f), "mesh", settings, refit)
 
 
+#: Decompositions made or read in this process, by the digest of their on-disk entry (content and settings): the
+#: pieces as read-only arrays, handed out as copies; the oldest dropped beyond :data:`_MEMO_SIZE` entries.
+_MEMO: OrderedDict[str, tuple[tuple[np.ndarray, np.ndarray], ...]] = OrderedDict()
+_MEMO_SIZE = 64
+_MEMO_LOCK = threading.Lock()
+
+
+def _remembered(digest: str) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """Copies of the pieces :data:`_MEMO` holds under ``digest``, or None."""
+    with _MEMO_LOCK:
+        hit = _MEMO.get(digest)
+        if hit is None:
+            return None
+        _MEMO.move_to_end(digest)
+    return [(v.copy(), f.copy()) for v, f in hit]
+
+
+def _remember(digest: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``pieces``, a read-only copy of them kept in :data:`_MEMO` under ``digest``."""
+    kept = []
+    for v, f in pieces:
+        v, f = np.array(v), np.array(f)  # copies, dtypes kept
+        v.flags.writeable = f.flags.writeable = False
+        kept.append((v, f))
+    with _MEMO_LOCK:
+        _MEMO[digest] = tuple(kept)
+        _MEMO.move_to_end(digest)
+        while len(_MEMO) > _MEMO_SIZE:
+            _MEMO.popitem(last=False)
+    return pieces
+
+
 def _decompose(digest: str, mesh, where: str, settings: dict = COACD_SETTINGS,
                refit: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
+    hit = _remembered(digest)
+    if hit is not None:
+        return hit
     data = array_cache.load("coacd", digest)
     if data is not None:
         try:
-            return [(data[f"v{i}"], data[f"f{i}"]) for i in range(int(data["n"]))]
+            return _remember(digest, [(data[f"v{i}"], data[f"f{i}"]) for i in range(int(data["n"]))])
         except (KeyError, ValueError):
             pass
     try:
@@ -82,7 +126,7 @@ def _decompose(digest: str, mesh, where: str, settings: dict = COACD_SETTINGS,
     arrays = {"n": np.array(len(pieces))}
     arrays.update({f"{k}{i}": a for i, piece in enumerate(pieces) for k, a in zip("vf", piece)})
     array_cache.store("coacd", digest, arrays)
-    return pieces
+    return _remember(digest, pieces)
 
 
 def refit_pieces(vertices: np.ndarray, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
