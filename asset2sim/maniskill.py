@@ -1,6 +1,6 @@
 """Refined objects as ManiSkill 3 tasks (``pip install 'asset2sim[maniskill]'``).
 
-``import asset2sim.maniskill`` registers two environments with ManiSkill's
+``import asset2sim.maniskill`` registers three environments with ManiSkill's
 ``register_env`` (and so with ``gymnasium``)::
 
     import gymnasium as gym
@@ -13,12 +13,20 @@
   door, a drawer) from its closed end to the learnability target (opening
   fraction >= 0.55, target 0.6);
 - ``Asset2Sim-CloseArticulation-v1``: close it from the common start (half
-  open, a revolute part at most 45 degrees) to fraction <= 0.05.
+  open, a revolute part at most 45 degrees) to fraction <= 0.05;
+- ``Asset2Sim-ManifestTask-v1``: each object's own task in its verb's
+  direction (``report.json``'s task as ``asset2sim refine --task`` recorded
+  it, else the ``manifest`` row's ``task`` column): "press the stapler" closes
+  the lid, "open the drawer" opens it, in the same environment.
 
 ``assets`` is an asset2sim output folder (``asset2sim refine`` /
 ``asset2sim demo --out``), an unrefined input folder (``mobility.urdf``, no
 ``report.json``: baselines run in the same environment), a folder holding such
-folders, or a list of any of these. Each parallel sub-scene holds one object
+folders, or a list of any of these. With ``reference=True`` each folder is a
+PartNet-Mobility input and the object is GenSim2's reference of it
+(``reference_gensim2.urdf`` at ``reference_gensim2.json``'s scale and joint
+range, as the learnability benchmark's ``human`` method writes it), so
+GenSim2's hand-curated assets run in the same environment. Each parallel sub-scene holds one object
 (different links and joints per sub-scene, as ManiSkill's
 ``OpenCabinetDrawer-v1`` builds them: an articulation builder per scene index);
 with fewer sub-scenes than objects, each reconfiguration draws one per sub-scene.
@@ -59,6 +67,8 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -91,11 +101,14 @@ from asset2sim.output_folder import REPORT_NAME, URDF_NAME
 from asset2sim.tasks.check.contact_points import contact_point_rule
 from asset2sim.tasks.check.task_spec import VERBS
 from asset2sim.tasks.evaluation.learn_task import prepare_task, targets_for
+from asset2sim.tasks.ingest.manifest import ManifestRow, read_manifest_rows
+from asset2sim.tasks.ingest.partnet_mobility import read_category
 from asset2sim.tasks.publish.contract import read_report_json
 from asset2sim.urdf import UrdfModel
 
-#: The environments' ids and the action each asks for.
-ENV_IDS = {"open": "Asset2Sim-OpenArticulation-v1", "close": "Asset2Sim-CloseArticulation-v1"}
+#: The environments' ids and the action each asks for (``task``: each object's own task, its verb's direction).
+ENV_IDS = {"open": "Asset2Sim-OpenArticulation-v1", "close": "Asset2Sim-CloseArticulation-v1",
+           "task": "Asset2Sim-ManifestTask-v1"}
 #: Episode length, control steps (ManiSkill's OpenCabinetDrawer-v1: 100).
 MAX_EPISODE_STEPS = 100
 #: Simulation and control rates, Hz: asset2sim's checks step PhysX at 1/240 s; 12 steps per action as the
@@ -118,7 +131,9 @@ SUPPORTED_ROBOTS = ["panda", "floating_panda_gripper"]
 class ManiSkillAssetError(ValueError):
     """An asset cannot become a ManiSkill task object. ``code``: ``MS_NO_ASSETS`` (nothing to load),
     ``MS_NOT_AN_ASSET`` (a folder without ``mobility.urdf``), ``MS_NO_TASK_JOINT`` (no joint the task can
-    move), ``MS_BUILD`` (SAPIEN cannot build it); the message names the folder."""
+    move), ``MS_NO_TASK`` (``Asset2Sim-ManifestTask-v1``: no task recorded for the object), ``MS_NO_REFERENCE``
+    (``reference=True``: the folder has no usable ``reference_gensim2.urdf``), ``MS_BAD_MANIFEST`` (the manifest
+    cannot be read), ``MS_BUILD`` (SAPIEN cannot build it); the message names the folder or file."""
 
     def __init__(self, code: str, message: str):
         super().__init__(f"{code}: {message}")
@@ -129,7 +144,9 @@ class ManiSkillAssetError(ValueError):
 class TaskObject:
     """One object of an environment and its task, SI units (rad or m; fractions 0 closed, 1 fully open).
 
-    ``kind``: ``refined`` (an asset2sim output folder) or ``raw`` (an input folder). ``joint`` the task
+    ``kind``: ``refined`` (an asset2sim output folder), ``raw`` (an input folder) or ``gensim2`` (GenSim2's
+    reference of a PartNet-Mobility folder, ``source``, written to ``folder`` as the benchmark's ``human`` method
+    writes it). ``action``: ``open`` or ``close``. ``joint`` the task
     joint, ``q_closed`` / ``direction`` / ``open_range`` its closed end (the opening fraction is
     ``direction * (q - q_closed) / open_range``), ``start_fraction`` where an episode starts it,
     ``reach_fraction`` the success threshold (>= for open, <= for close); ``initial_state`` the other joints'
@@ -159,6 +176,7 @@ class TaskObject:
     base_z: float
     task: str
     notes: list[str] = field(default_factory=list)
+    source: Path | None = None
 
     def q_at(self, fraction: float) -> float:
         """The task joint's position (rad or m) at opening ``fraction``."""
@@ -223,14 +241,18 @@ def _task_text(report_task: str | None, action: str, category: str | None) -> st
     return f"{action} the {category.lower()}" if category else action
 
 
-def task_object(folder: str | Path, action: str, task: str | None = None) -> TaskObject:
-    """The :class:`TaskObject` of an output or input ``folder`` for ``action`` (``open`` / ``close``): the part
-    ``task`` names ("close the laptop"; default: the output's ``report.json`` task, else the category's), turned to
-    ``action``.
+def task_object(folder: str | Path, action: str, task: str | None = None, *, default_task: str | None = None,
+                category: str | None = None, kind: str | None = None) -> TaskObject:
+    """The :class:`TaskObject` of an output or input ``folder`` for ``action``: ``open`` / ``close`` (the part
+    ``task`` names, "close the laptop", turned to ``action``) or ``task`` (the task itself, its verb's direction:
+    "press the stapler" closes the lid). The task text: ``task``, else the output's ``report.json`` task (what
+    ``asset2sim refine --task`` recorded), else ``default_task`` (a manifest row's ``task``), else, for ``open`` /
+    ``close``, the category's part. ``category`` overrides the folder's (``meta.json``, ``report.json``); ``kind``
+    overrides ``refined`` / ``raw``.
 
     Raises:
         ManiSkillAssetError: ``MS_NOT_AN_ASSET`` (no ``mobility.urdf``, or an unreadable ``report.json``),
-            ``MS_NO_TASK_JOINT`` (the task moves no joint).
+            ``MS_NO_TASK`` (``action="task"`` and no task text anywhere), ``MS_NO_TASK_JOINT`` (the task moves no joint).
     """
     if action not in ENV_IDS:
         raise ValueError(f"action must be one of {sorted(ENV_IDS)}, got {action!r}")
@@ -244,13 +266,21 @@ def task_object(folder: str | Path, action: str, task: str | None = None) -> Tas
             report = read_report_json(folder)
         except (OSError, ValueError) as exc:
             raise ManiSkillAssetError("MS_NOT_AN_ASSET", f"{folder / REPORT_NAME}: unreadable ({exc})") from exc
-    text = _task_text(task or (report.task if report else None), action, report.category if report else None)
+    recorded = task or (report.task if report else None) or default_task
+    if action == "task":
+        if not (recorded and recorded.strip()):
+            raise ManiSkillAssetError("MS_NO_TASK", f"{folder}: no task: neither report.json (asset2sim refine --task) "
+                                                    "nor a manifest row's task column records one")
+        text = " ".join(recorded.split())
+    else:
+        text = _task_text(recorded, action, category or (report.category if report else None))
     try:
-        lt = prepare_task(folder, text, start="task")
+        lt = prepare_task(folder, text, start="task", category=category)
     except ValueError as exc:  # LearnTaskError, EvaluationError, UrdfError
         raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: task {text!r}: {exc}") from exc
-    if lt.action != action:
+    if action != "task" and lt.action != action:
         raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: task {text!r} does not {action} a joint ({lt.rule})")
+    action = lt.action
     model = read_urdf(urdf)
     pieces, notes = collision_pieces(model)
     q_closed, direction, open_range = lt.closed.q_closed, lt.closed.direction, lt.closed.open_range
@@ -262,7 +292,7 @@ def task_object(folder: str | Path, action: str, task: str | None = None) -> Tas
     if not open_range > 0:
         raise ManiSkillAssetError("MS_NO_TASK_JOINT", f"{folder}: joint {lt.joint!r} cannot open (range 0)")
     target, reach = targets_for(action, lt.start_fraction)
-    obj = TaskObject(folder=folder, kind="refined" if report is not None else "raw", action=action, urdf=urdf, model=model,
+    obj = TaskObject(folder=folder, kind=kind or ("refined" if report is not None else "raw"), action=action, urdf=urdf, model=model,
                      pieces=pieces, joint=lt.joint, joint_type=lt.joint_type, q_closed=q_closed, direction=direction,
                      open_range=open_range, start_fraction=lt.start_fraction, target_fraction=target, reach_fraction=reach,
                      initial_state=dict(lt.initial_state), springs=dict(lt.springs), fixed_root=bool(lt.root_fixed),
@@ -293,16 +323,63 @@ def find_assets(assets: str | Path | Sequence[str | Path]) -> list[Path]:
     return out
 
 
+def read_manifest_tasks(manifest: str | Path) -> dict[str, Any]:
+    """The usable rows of a ``manifest.csv`` by ``id`` (:func:`asset2sim.tasks.ingest.manifest.read_manifest_rows`;
+    refused rows are left out). Raises ManiSkillAssetError ``MS_BAD_MANIFEST``: the file cannot be read or used."""
+    try:
+        reading = read_manifest_rows(manifest)
+    except (OSError, ValueError) as exc:  # ManifestError is a ValueError
+        raise ManiSkillAssetError("MS_BAD_MANIFEST", f"{manifest}: {exc}") from exc
+    return {row.id: row for row in reading.rows}
+
+
+def gensim2_reference(folder: str | Path, out_dir: str | Path, row: Any = None) -> Path:
+    """GenSim2's reference of the PartNet-Mobility ``folder`` (``reference_gensim2.urdf`` at
+    ``reference_gensim2.json``'s scale, the task joint's limits its ``joint_position_range``, starting at the range's
+    lower end) written to ``out_dir`` as an asset folder, as the learnability benchmark's ``human`` method writes it
+    (:func:`asset2sim.apps.benchmark.baselines.make_human`); ``row``: the folder's manifest row, if any. Returns
+    ``out_dir``. Raises ManiSkillAssetError ``MS_NO_REFERENCE``: no usable reference in ``folder``."""
+    from asset2sim.apps.benchmark.baselines import BaselineError, make_human
+
+    folder = Path(folder)
+    if row is None:
+        row = ManifestRow(id=folder.name, category=read_category(folder) or "", prompt="", folder=folder)
+    try:
+        make_human(row, out_dir)
+    except (BaselineError, OSError, ValueError) as exc:  # UrdfError is a ValueError
+        raise ManiSkillAssetError("MS_NO_REFERENCE", f"{folder}: GenSim2's reference cannot be used ({exc})") from exc
+    return Path(out_dir)
+
+
 def load_task_objects(assets: str | Path | Sequence[str | Path], action: str,
-                      task: str | Mapping[str, str] | None = None) -> tuple[list[TaskObject], list[tuple[Path, str]]]:
+                      task: str | Mapping[str, str] | None = None, *, manifest: str | Path | None = None,
+                      reference: bool = False, reference_dir: str | Path | None = None,
+                      ) -> tuple[list[TaskObject], list[tuple[Path, str]]]:
     """Every object of ``assets`` (:func:`find_assets`) as a :class:`TaskObject`, and the folders that could not
     become one with the error (a failed asset does not stop the others); ``task`` as :func:`task_object`'s, or
-    per folder (``str(folder)`` -> task text). Raises ManiSkillAssetError
-    ``MS_NO_ASSETS``: none could."""
+    per folder (``str(folder)`` -> task text). ``manifest``: a ``manifest.csv`` whose row with the folder's name as
+    ``id`` gives the task (its ``task`` column) and category where the output records none. ``reference``: each
+    folder is a PartNet-Mobility input and its GenSim2 reference is the object (:func:`gensim2_reference`, written
+    under ``reference_dir``, required then). Raises ManiSkillAssetError ``MS_NO_ASSETS``: none could;
+    ``MS_BAD_MANIFEST``: the manifest cannot be read."""
+    rows = read_manifest_tasks(manifest) if manifest is not None else {}
+    if reference and reference_dir is None:
+        raise ValueError("reference=True needs reference_dir (where GenSim2's references are written)")
     objects, skipped = [], []
-    for folder in find_assets(assets):
+    for i, folder in enumerate(find_assets(assets)):
+        row = rows.get(folder.name)
+        text = task.get(str(folder)) if isinstance(task, Mapping) else task
         try:
-            objects.append(task_object(folder, action, task.get(str(folder)) if isinstance(task, Mapping) else task))
+            if reference:
+                ref = gensim2_reference(folder, Path(reference_dir) / f"{i:04d}", row)
+                category = (row.category if row else "") or read_category(folder)
+                obj = task_object(ref, action, text, default_task=row.task if row else None, category=category or None,
+                                  kind="gensim2")
+                obj.source = folder
+            else:
+                obj = task_object(folder, action, text, default_task=(row.task or None) if row else None,
+                                  category=(row.category or None) if row else None)
+            objects.append(obj)
         except ManiSkillAssetError as exc:
             skipped.append((folder, str(exc)))
     if not objects:
@@ -384,6 +461,12 @@ class _ArticulationTaskEnv(BaseEnv):
             (``skipped``: folder and error); ManiSkillAssetError ``MS_NO_ASSETS`` when none can.
         task: the task text for every object ("close the laptop", turned to the environment's direction), or
             per folder (``str(folder)`` -> text); default: each output's ``report.json`` task (an input's: its category's part).
+        manifest: a ``manifest.csv``: the row whose ``id`` is a folder's name gives its task (``task`` column) and
+            category where its ``report.json`` records no task (raw inputs, outputs refined without ``--task``).
+        reference: build GenSim2's reference of each PartNet-Mobility folder (``reference_gensim2.urdf`` and
+            ``.json``, as the benchmark's ``human`` method) instead of the folder's own ``mobility.urdf``; folders
+            without one are skipped (``MS_NO_REFERENCE``). The references are written to a temporary folder removed
+            by ``close()``.
         robot_uids: ``panda`` (default) or ``floating_panda_gripper``.
         robot_init_qpos_noise: standard deviation (rad) of the robot's start joint positions.
         reconfiguration_freq: ManiSkill's; default: every reset with one sub-scene and several objects, else never.
@@ -392,14 +475,33 @@ class _ArticulationTaskEnv(BaseEnv):
     SUPPORTED_ROBOTS = SUPPORTED_ROBOTS
     action_kind: str = ""
 
-    def __init__(self, *args, assets: str | Path | Sequence[str | Path] = (), task: str | Mapping[str, str] | None = None, robot_uids: str = "panda",
+    def __init__(self, *args, assets: str | Path | Sequence[str | Path] = (), task: str | Mapping[str, str] | None = None,
+                 manifest: str | Path | None = None, reference: bool = False, robot_uids: str = "panda",
                  robot_init_qpos_noise: float = 0.02, reconfiguration_freq: int | None = None, num_envs: int = 1, **kwargs):
-        self.objects, self.skipped = load_task_objects(assets, self.action_kind, task)
+        self._reference_dir = Path(tempfile.mkdtemp(prefix="asset2sim-gensim2-")) if reference else None
+        try:
+            self.objects, self.skipped = load_task_objects(assets, self.action_kind, task, manifest=manifest,
+                                                           reference=reference, reference_dir=self._reference_dir)
+        except BaseException:
+            self._remove_references()
+            raise
         self.robot_init_qpos_noise = robot_init_qpos_noise
         self._robot = robot_uids
         if reconfiguration_freq is None:
             reconfiguration_freq = 1 if (num_envs == 1 and len(self.objects) > 1) else 0
         super().__init__(*args, robot_uids=robot_uids, reconfiguration_freq=reconfiguration_freq, num_envs=num_envs, **kwargs)
+
+    def _remove_references(self) -> None:
+        if getattr(self, "_reference_dir", None) is not None:
+            shutil.rmtree(self._reference_dir, ignore_errors=True)
+            self._reference_dir = None
+
+    def close(self):
+        """ManiSkill's ``close``, and the GenSim2 references written for ``reference=True`` removed."""
+        try:
+            return super().close()
+        finally:
+            self._remove_references()
 
     # ------------------------------------------------------------------ configs
     @property
@@ -459,6 +561,7 @@ class _ArticulationTaskEnv(BaseEnv):
             self.start_fraction = torch.tensor([o.start_fraction for o in objs], dtype=torch.float32)
             self.target_fraction = torch.tensor([o.target_fraction for o in objs], dtype=torch.float32)
             self.reach_fraction = torch.tensor([o.reach_fraction for o in objs], dtype=torch.float32)
+            self.opens = torch.tensor([o.action == "open" for o in objs], dtype=torch.bool)
             self.rest_speed = torch.tensor([REST_SPEED.get(o.joint_type, 1.0) for o in objs], dtype=torch.float32)
             self.base_z = torch.tensor([o.base_z for o in objs], dtype=torch.float32)
             dof = self.object.max_dof
@@ -555,7 +658,7 @@ class _ArticulationTaskEnv(BaseEnv):
         return torch.clamp((f - self.start_fraction) / torch.where(span.abs() > 1e-9, span, torch.ones_like(span)), 0.0, 1.0)
 
     def _reached(self, f: torch.Tensor) -> torch.Tensor:
-        return f >= self.reach_fraction if self.action_kind == "open" else f <= self.reach_fraction
+        return torch.where(self.opens, f >= self.reach_fraction, f <= self.reach_fraction)
 
     def evaluate(self) -> dict:
         f = self.task_fraction()
@@ -597,6 +700,16 @@ class CloseArticulationEnv(_ArticulationTaskEnv):
     """Close the task part of an asset2sim output (or a raw input) from the common start to opening fraction <= 0.05."""
 
     action_kind = "close"
+
+
+@register_env(ENV_IDS["task"], max_episode_steps=MAX_EPISODE_STEPS)
+class ManifestTaskEnv(_ArticulationTaskEnv):
+    """Each object's own task, in its verb's direction: the ``report.json`` task ``asset2sim refine --task`` recorded
+    (or the ``manifest`` row's ``task`` column, or ``task=``), "press the stapler" closing its lid from the common
+    start to <= 0.05, "open the drawer" opening it from closed to >= 0.55. Objects with no task are skipped
+    (``MS_NO_TASK``)."""
+
+    action_kind = "task"
 
 
 def hold_drift(folder: str | Path, seconds: float = 2.0, *, sim_backend: str = "cpu") -> dict[str, float]:

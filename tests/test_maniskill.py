@@ -203,3 +203,103 @@ def test_the_robot_starts_before_the_grasp_point_without_touching_the_object(cab
         assert float(info["fraction"][0]) == pytest.approx(f0, abs=0.01)
     finally:
         env.close()
+
+
+@pytest.fixture(scope="module")
+def task_outputs(shared_dataset, outputs, tmp_path_factory) -> Path:
+    """The dev stapler 103275 refined with the manifest's task ("press the stapler", ``refine --task``) beside the
+    generated box refined without a task."""
+    root = tmp_path_factory.mktemp("maniskill_task") / "outputs"
+    asset2sim.refine(shared_dataset / "103275", "I want a slightly open stapler.", root / "103275", extras=False,
+                     task="press the stapler")
+    shutil.copytree(outputs / "box", root / "box")
+    return root
+
+
+def test_the_manifest_task_id_runs_each_object_on_the_task_its_report_records(task_outputs):
+    from asset2sim.tasks.evaluation.learn_task import prepare_task, targets_for
+    from asset2sim.tasks.publish.contract import read_report_json
+
+    out = task_outputs / "103275"
+    recorded = read_report_json(out).task
+    assert recorded == "press the stapler"
+    env = _make(ams.ENV_IDS["task"], task_outputs)
+    try:
+        u = env.unwrapped
+        assert [o.folder.name for o in u.objects] == ["103275"]  # the box records no task
+        assert len(u.skipped) == 1 and u.skipped[0][0].name == "box" and "MS_NO_TASK:" in u.skipped[0][1]
+        obj = u.objects[0]
+        lt = prepare_task(out, recorded, start="task")
+        assert obj.task == recorded and obj.joint == lt.joint == "joint_1"
+        assert obj.action == lt.action == "close"  # "press" closes the lid, in the task's own direction
+        assert (obj.target_fraction, obj.reach_fraction) == targets_for("close", obj.start_fraction)
+        assert obj.start_fraction == pytest.approx(lt.start_fraction)
+        obs, info = env.reset(seed=0)
+        assert float(info["fraction"][0]) == pytest.approx(obj.start_fraction, abs=0.02)
+        steps, done = 0, False
+        rng = np.random.default_rng(0)
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+            steps += 1
+            assert torch.isfinite(obs).all() and 0.0 <= float(reward[0]) <= ams.MAX_REWARD
+            done = bool(terminated[0]) or bool(truncated[0])
+        assert steps <= ams.MAX_EPISODE_STEPS
+    finally:
+        env.close()
+
+
+def test_a_manifest_row_gives_the_task_where_the_output_records_none(task_outputs, tmp_path):
+    """The box (no report task) takes its manifest row's "open the box lid" and succeeds at the open target; the
+    stapler keeps its report's "press the stapler" and succeeds at the close target."""
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text("id,category,prompt,task\nbox,Box,a small box,open the box lid\n103275,Stapler,x,open the stapler\n")
+    objects, skipped = ams.load_task_objects(task_outputs, "task", manifest=manifest)
+    assert not skipped
+    by_name = {o.folder.name: o for o in objects}
+    assert by_name["103275"].action == "close"  # report.json's task comes before the manifest row's
+    assert by_name["box"].action == "open" and by_name["box"].task == "open the box lid"
+    for name in ("box", "103275"):
+        env = _make(ams.ENV_IDS["task"], [task_outputs / name], manifest=manifest)
+        try:
+            env.reset(seed=0)
+            u = env.unwrapped
+            obj = u.env_objects[0]
+            assert not bool(u.evaluate()["success"][0])
+            q = u.start_qpos.clone()
+            q[0, u._joint_names[0].index(obj.joint)] = obj.q_at(obj.target_fraction)
+            u.object.set_qpos(q)
+            u.object.set_qvel(torch.zeros_like(q))
+            assert bool(u.evaluate()["success"][0]), f"{name}: {obj.action} to {obj.target_fraction} is not a success"
+        finally:
+            env.close()
+    with pytest.raises(ams.ManiSkillAssetError, match="MS_BAD_MANIFEST"):
+        ams.load_task_objects(task_outputs, "task", manifest=tmp_path / "missing.csv")
+
+
+def test_gensim2_references_build_and_step_in_the_same_environment(shared_dataset, outputs):
+    """``reference=True``: the dev folder's reference_gensim2.urdf at its scale is the object; a folder without a
+    reference is skipped with MS_NO_REFERENCE; close() removes the written references."""
+    from asset2sim.tasks.ingest.partnet_mobility import read_reference
+
+    ref = read_reference(shared_dataset / "103275")
+    env = _make(ams.ENV_IDS["close"], [shared_dataset / "103275", outputs / "box"], reference=True)
+    try:
+        u = env.unwrapped
+        assert len(u.objects) == 1 and u.objects[0].kind == "gensim2" and u.objects[0].source == shared_dataset / "103275"
+        assert len(u.skipped) == 1 and u.skipped[0][0] == outputs / "box" and "MS_NO_REFERENCE" in u.skipped[0][1]
+        obj = u.objects[0]
+        written = obj.folder
+        assert [j.name for j in obj.model.movable_joints] == ref.task_joints and obj.joint in ref.task_joints
+        lo, hi = ref.joint_position_range
+        j = obj.model.joint(obj.joint)
+        assert (j.lower, j.upper) == (pytest.approx(max(lo, j.lower)), pytest.approx(hi))  # GenSim2's range
+        raw = ams.task_object(shared_dataset / "103275", "close")
+        extent = [float(np.ptp(ams._world_points(o.model, o.pieces, {}), axis=0).max()) for o in (obj, raw)]
+        assert extent[0] == pytest.approx(ref.scale * extent[1], rel=0.05)  # at GenSim2's scale
+        obs, info = env.reset(seed=0)
+        for _ in range(10):
+            obs, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
+        assert torch.isfinite(obs).all() and math.isfinite(float(info["fraction"][0]))
+    finally:
+        env.close()
+    assert not written.exists()
