@@ -200,7 +200,8 @@ def _arguments() -> argparse.ArgumentParser:
     ms = ap.add_argument_group("--framework maniskill")
     ms.add_argument("--framework", choices=("pybullet", "maniskill"), default="pybullet")
     ms.add_argument("--held-out", default="", help="comma-separated ids evaluated but not trained on")
-    ms.add_argument("--action", choices=("close", "open"), default="close", help="the environment: Close- or OpenArticulation")
+    ms.add_argument("--action", choices=("close", "open", "task"), default="close",
+                    help="the environment: Close- or OpenArticulation, or task: ManifestTask (each row's own task, its direction)")
     ms.add_argument("--sim-backend", choices=("cpu", "gpu"), default="cpu")
     ms.add_argument("--device", default="cpu", help="where the policy trains (cuda with --sim-backend gpu)")
     ms.add_argument("--control-mode", default="pd_joint_delta_pos")
