@@ -9,6 +9,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 try:
     from .conftest import make_project
 except ImportError:
@@ -16,6 +18,8 @@ except ImportError:
 
 from asset2sim.cli import QUIET_LIBRARY_LOGS
 from asset2sim.engines.quiet import STARTUP_MESSAGES
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 #: Lines of the libraries (any of them fails the test).
 THIRD_PARTY = re.compile(r"\| (DEBUG|INFO) +\||\bINFO (mlflow|alembic)|distributed\.|Flow run '|Task run '|pybullet build time|"
