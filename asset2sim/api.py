@@ -31,7 +31,7 @@ from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.evaluation import Evaluation
 from asset2sim.schemas.request import RequestOverrides
 from asset2sim.tasks.assemble.export_mjcf import export_mjcf, output_session_options
-from asset2sim.tasks.audit.audit import AuditError, AuditResult, audit_asset
+from asset2sim.apps.audit.audit import AuditError, AuditResult, audit_asset
 from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 from asset2sim.tasks.ingest.validate_input import Finding, ValidationPolicy, validate_asset
 from asset2sim.tasks.publish.export_usd import export_usd

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _planted(work: Path, simulate: bool) -> tuple[int, int, int]:
     sys.path.insert(0, str(ROOT))
-    from asset2sim.tasks.audit.batch import audit_one, find_assets
+    from asset2sim.apps.audit.batch import audit_one, find_assets
     from tests.planted_assets import cabinet, storage_box, trash_can, write_mjcf, write_planted_folder
 
     inputs = work / "planted"
@@ -51,7 +51,7 @@ def _tree(path: Path, work: Path, simulate: bool) -> None:
     import pandas as pd
 
     from asset2sim.flows import audit_catalog
-    from asset2sim.tasks.audit.batch import audit_one, find_assets
+    from asset2sim.apps.audit.batch import audit_one, find_assets
 
     out = work / "tree-audit"
     t0 = time.perf_counter()

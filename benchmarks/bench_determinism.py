@@ -3,8 +3,12 @@ first time and warm the second, and compare every file byte for byte (the comple
 ``timings.json``, the wall times, may differ).
 
     .venv/bin/python benchmarks/bench_determinism.py [--manifest PATH] [--ids 103275,7236] [--work DIR] [--no-extras]
+        [--keep DIR] [--against DIR]
 
 Prints one line per row (identical, or the files that differ) and the count; exit status 1 when a row differs.
+``--keep DIR`` copies each row's output to ``DIR/<id>``; ``--against DIR`` also compares each output with
+``DIR/<id>`` kept by a run of another commit (a change that must not change outputs: run ``--keep`` on the commit
+before it, ``--against`` on the commit after).
 """
 
 from __future__ import annotations
@@ -35,6 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ids", default="", help="comma-separated subset of ids")
     ap.add_argument("--work", type=Path, default=None, help="work folder (default: a temporary one, removed)")
     ap.add_argument("--no-extras", action="store_true", help="without exports, renders, clips and report.html")
+    ap.add_argument("--keep", type=Path, default=None, help="copy each row's output to DIR/<id>")
+    ap.add_argument("--against", type=Path, default=None, help="compare each row's output with DIR/<id> too")
     args = ap.parse_args(argv)
     from asset2sim.schemas.config import RefineConfig
     from asset2sim.tasks.refine import refine_asset
@@ -57,9 +63,17 @@ def main(argv: list[str] | None = None) -> int:
                 snaps.append(snapshot(out))
             a, b = snaps
             diff = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+            line = "identical" if not diff else f"{len(diff)} differ: {', '.join(diff[:6])}"
+            if args.against is not None:
+                ref = snapshot(args.against / r["id"]) if (args.against / r["id"]).is_dir() else {}
+                other = sorted(k for k in set(a) | set(ref) if a.get(k) != ref.get(k))
+                diff = diff + other
+                line += "; against the kept output: " + ("identical" if not other else f"{len(other)} differ: {', '.join(other[:6])}")
+            if args.keep is not None:
+                shutil.rmtree(args.keep / r["id"], ignore_errors=True)
+                shutil.copytree(out, args.keep / r["id"])
             differing += bool(diff)
-            print(f"{r['id']:>8} {r['category']:<17} {len(a):4d} files: " + ("identical" if not diff else
-                  f"{len(diff)} differ: {', '.join(diff[:6])}"), flush=True)
+            print(f"{r['id']:>8} {r['category']:<17} {len(a):4d} files: {line}", flush=True)
         print(f"{len(rows) - differing} of {len(rows)} rows byte-identical across two refines (cold, then warm cache) "
               f"in {time.perf_counter() - t0:.0f} s")
     finally:

@@ -177,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-probes", action="store_true")
     args = ap.parse_args(argv)
 
-    from asset2sim.tasks.benchmark.baselines import read_manifest, run_method
+    from asset2sim.apps.benchmark.baselines import read_manifest, run_method
     from asset2sim.tasks.evaluation.evaluate import evaluate_asset
 
     rows = read_manifest(args.manifest)

@@ -13,7 +13,7 @@ experiment at the budget a CPU allows, and scales with ``--steps``,
 
 1. For each manifest row (default: the first 9, the thesis set) and method,
    the method's asset is made in-process
-   (:func:`asset2sim.tasks.benchmark.baselines.run_method`: ``defaults``,
+   (:func:`asset2sim.apps.benchmark.baselines.run_method`: ``defaults``,
    ``human`` where the row has GenSim2's reference, ``direct``, ``asset2sim``
    = :func:`asset2sim.tasks.refine.refine_asset`) under ``DIR/<method>/<id>/asset``
    (``--reuse`` keeps an asset already there).
@@ -206,7 +206,7 @@ def _manifest_rows(args) -> list:
 
 def _make_assets(rows: list, methods: list[str], args) -> dict[tuple[str, str], Path | str]:
     """Each method's asset of each row under ``--out``: (id, method) -> its folder, or the error that left it n/a."""
-    from asset2sim.tasks.benchmark.baselines import BaselineError, run_method
+    from asset2sim.apps.benchmark.baselines import BaselineError, run_method
 
     assets: dict[tuple[str, str], Path | str] = {}
     for row in rows:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from asset2sim import atomic
 from asset2sim.schemas.audit import AuditReport, AuditRow
-from asset2sim.tasks.audit.audit import AUDIT_JSON
+from asset2sim.apps.audit.audit import AUDIT_JSON
 
 #: File names of the audit catalog inside the output folder.
 ASSETS_PARQUET = "audit_assets.parquet"

@@ -1,7 +1,7 @@
 """The audit flow: many assets audited as Prefect tasks fanned out on Dask (a local cluster, or the scheduler at
 ``dask_address``), the audit catalog written (:mod:`.audit_catalog`) and the run logged to MLflow (counts,
 failure modes, implausible values per quantity, the catalog files as artifacts). ``asset2sim audit --flow``
-runs it; flows wire, :mod:`asset2sim.tasks.audit` decides. Imports Prefect."""
+runs it; flows wire, :mod:`asset2sim.apps.audit` decides. Imports Prefect."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from prefect.cache_policies import NO_CACHE
 from asset2sim.flows import audit_catalog, tracking
 from asset2sim.flows.refine_flow import _dask_task_runner, _local_cluster_config, prefect_api_for_run
 from asset2sim.schemas.audit import AuditRow
-from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
+from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 
 __all__ = ["AUDIT_EXPERIMENT", "AUDIT_FLOW_NAME", "audit_flow", "run_audit_flow"]
 
@@ -43,7 +43,7 @@ def _audit_each(targets: list[AuditTarget], out: str, category: str | None, simu
 @flow(name=AUDIT_FLOW_NAME, persist_result=False, validate_parameters=False)
 def audit_flow(paths: list[str], out: str, category: str | None = None, simulate: bool = True, workers: int | None = None,
                dask_address: str | None = None, tracking_uri: str | None = None) -> dict[str, Any]:
-    """Audit every asset ``paths`` hold (:func:`~asset2sim.tasks.audit.batch.find_assets`) into ``out``; returns the
+    """Audit every asset ``paths`` hold (:func:`~asset2sim.apps.audit.batch.find_assets`) into ``out``; returns the
     run summary (assets, failure modes, implausible values per quantity, catalog paths, MLflow run id) and the
     catalog ``rows`` (:class:`~asset2sim.schemas.audit.AuditRow`)."""
     start = time.perf_counter()

@@ -17,7 +17,8 @@ from typing import Any
 from asset2sim.flows import catalog_fs
 from asset2sim.flows.catalog import ResultCatalog, result_key
 from asset2sim.schemas.config import RefineConfig
-from asset2sim.tasks.publish.contract import Prepared, code_hash, run_hash
+from asset2sim.tasks.publish.contract import code_hash, run_hash
+from asset2sim.flows.job_records import Prepared
 
 #: The input index of a dataset, beside its run partitions (not a partition:
 #: the catalog's readers list only ``run=`` folders).

@@ -11,7 +11,7 @@ from urllib.parse import unquote, urlparse
 
 from asset2sim.flows.tracking import client_run
 from asset2sim.schemas.realism import MethodScore
-from asset2sim.tasks.realism.bradley_terry import PRIOR_GAMES
+from asset2sim.apps.realism.bradley_terry import PRIOR_GAMES
 
 #: The default experiment of realism runs.
 REALISM_EXPERIMENT = "asset2sim-realism"

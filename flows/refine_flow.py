@@ -36,7 +36,7 @@ from asset2sim.flows.store import join_uri, upload_folder
 from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, ModelCallFailure, RegressionFailure,
                                     code_version, flow_parameters, make_run_id, plan_run)
 from asset2sim.tasks.check.verdict import exception_failure_mode
-from asset2sim.tasks.publish.contract import Prepared, build_manifest_row, build_row
+from asset2sim.flows.job_records import Prepared, build_manifest_row, build_row
 
 __all__ = ["FLOW_NAME", "SUBFLOW_NAME", "AssetJob", "flow_parameters", "refine_assets", "refine_dataset", "run_refine_flow"]
 

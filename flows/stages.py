@@ -1,7 +1,7 @@
 """The refine flow's per-asset stages as plain functions (no Prefect, Dask or
 MLflow here): :func:`plan_run`, then per asset :func:`prepare_asset`,
 :func:`refine_stage`, :func:`metrics_stage` and :func:`publish_stage`, each
-returning a :class:`~asset2sim.tasks.publish.contract.StageRecord`.
+returning a :class:`~asset2sim.flows.job_records.StageRecord`.
 """
 
 from __future__ import annotations
@@ -39,24 +39,10 @@ from asset2sim.tasks.ingest.extract import extract_asset_checked
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.publish.contract import (
-    JOB_RECORD_NAME,
-    JobRecord,
-    Measurement,
-    code_version,
-    Prepared,
-    RefineOutput,
-    StageRecord,
-    finished_result,
-    flow_config_hash,
-    manifest_row_id,
-    refined_output,
-    report_tokens,
-    resumable_output,
-    run_hash,
-    skip_code_hash,
-    write_job_record,
-)
+from asset2sim.tasks.publish.contract import code_version, flow_config_hash, run_hash, skip_code_hash
+from asset2sim.flows.job_records import (JOB_RECORD_NAME, JobRecord, Measurement, Prepared, RefineOutput,
+                                         StageRecord, finished_result, manifest_row_id, refined_output,
+                                         report_tokens, resumable_output, write_job_record)
 from asset2sim.output_folder import EVALUATION_NAME
 
 FLOW_NAME = "refine-dataset"
@@ -281,7 +267,7 @@ def job_config_hash(job: AssetJob, refine_hash: str) -> str:
 
 
 def finished_in_store(row: dict[str, Any] | None, input_hash: str) -> dict[str, Any] | None:
-    """The skip rule (:func:`asset2sim.tasks.publish.contract.finished_result`) for a row whose output is a local
+    """The skip rule (:func:`asset2sim.flows.job_records.finished_result`) for a row whose output is a local
     folder or a folder in an output store (:func:`asset2sim.flows.store.store_complete`)."""
     if row is not None and store_mod.is_store_uri(row.get("out_dir")):
         return row if store_mod.store_complete(row["out_dir"], input_hash, row.get("refine_config_hash") or "") else None
@@ -494,7 +480,7 @@ def stage_metrics(
     refine's matching evaluation; ``post_check``: rest-test metrics JSON recorded instead of rerunning the test.
 
     Returns:
-        A :class:`~asset2sim.tasks.publish.contract.Measurement` as JSON: the catalog's metric columns
+        A :class:`~asset2sim.flows.job_records.Measurement` as JSON: the catalog's metric columns
         (``penetration_mm`` mm, ``rest_stable``, ``d_pos_m`` m, ``d_ori_rad`` rad, ``oscillation_pass``,
         ``prompt_alignment`` 0..1, ``scale_deviation_pct`` %), failures, seconds.
 

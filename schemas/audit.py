@@ -1,5 +1,5 @@
 """The audit of an asset that carries physics: the contents of ``audit.json``
-(:func:`asset2sim.tasks.audit.audit.audit_asset`).
+(:func:`asset2sim.apps.audit.audit.audit_asset`).
 
 Every value is in SI units and radians: mass kg, density kg/m^3, inertia
 kg*m^2, center of mass m, scale dimensionless, revolute damping N*m*s/rad,

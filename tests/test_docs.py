@@ -54,7 +54,9 @@ EXPECTED_FILES = {
                  "out/kept/report.json"],
     "api.md": ["out/box/mobility.urdf", "out/box/report.json", "out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
     "inputs.md": ["out/from_mjcf/mobility.urdf", "out/from_mjcf/report.json", "out/from_mjcf_api/report.json",
-                  "out/robosuite_door/mobility.urdf", "out/robosuite_door/mjcf/host/door.xml"],
+                  "out/robosuite_door/mobility.urdf", "out/robosuite_door/mjcf/host/door.xml",
+                  "out/robosuite_door/mjcf/host/files/objects/door.xml",
+                  "out/from_usd/usd/host/mobility.usd", "out/from_usd/usd/host/mobility.physics.usda"],
     "outputs.md": ["out/demo/mobility.urdf", "out/demo/initial_state.json", "out/demo/overlay.json", "out/demo/report.json"],
     "requests.md": ["refine.yaml"],
     "simulators.md": ["out/box/mjcf/mobility.xml", "out/box/usd/mobility.usd"],
@@ -72,7 +74,7 @@ import asset2sim
 from asset2sim.demo_assets import build_box_with_lid
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows.stages import AssetJob, make_run_id
-from asset2sim.tasks.publish.contract import Prepared, RefineOutput, StageRecord, build_row
+from asset2sim.flows.job_records import Prepared, RefineOutput, StageRecord, build_row
 
 shutil.copy(CATALOG_YAML, "catalog.yaml")
 run = make_run_id()

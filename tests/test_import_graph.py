@@ -12,8 +12,8 @@ optional heavy third-party packages only.
 
 The layers (:data:`LAYERS`), each importing only its own and earlier ones:
 the core (``asset2sim/`` and ``schemas/``), then the stages of ``tasks/`` in
-data-flow order, ``tasks/refine.py`` that chains them, ``tasks/benchmark/``
-above it, ``flows/``, the public API (``asset2sim.api``, whose names the
+data-flow order, ``tasks/refine.py`` that chains them, the applications
+(``apps/``: the audit, the realism tools, the benchmark) above it, ``flows/``, the public API (``asset2sim.api``, whose names the
 package ``asset2sim`` lends on first use) and the command line.
 """
 
@@ -27,7 +27,8 @@ import networkx as nx
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Installed package name -> source folder (pyproject.toml's package-dir).
-PACKAGE_DIRS = {"asset2sim": "asset2sim", "asset2sim.tasks": "tasks", "asset2sim.schemas": "schemas", "asset2sim.flows": "flows"}
+PACKAGE_DIRS = {"asset2sim": "asset2sim", "asset2sim.tasks": "tasks", "asset2sim.schemas": "schemas", "asset2sim.flows": "flows",
+                "asset2sim.apps": "apps"}
 
 
 def _modules() -> dict[str, Path]:
@@ -41,7 +42,7 @@ def _modules() -> dict[str, Path]:
                 parts = parts[:-1]
             name = ".".join([pkg, *parts])
             # asset2sim/ itself must not claim the other top-level folders' names
-            if pkg == "asset2sim" and parts and parts[0] in ("tasks", "schemas", "flows"):
+            if pkg == "asset2sim" and parts and parts[0] in ("tasks", "schemas", "flows", "apps"):
                 continue
             out[name] = path
     return out
@@ -115,7 +116,7 @@ def _named_modules(text: str, modules: dict[str, Path]) -> list[str]:
 #: The layers in data-flow order (index = rank); a module may import only
 #: modules of its own or an earlier layer (:func:`_layer`).
 LAYERS = ["core", "ingest", "geometry", "interpret", "synthesize", "assemble", "state", "check", "evaluation",
-          "publish", "audit", "refine", "benchmark", "realism", "flows", "api", "cli"]
+          "publish", "refine", "apps", "flows", "api", "cli"]
 
 
 def _layer(module: str) -> str:
@@ -127,6 +128,8 @@ def _layer(module: str) -> str:
         return "api"
     if parts[:2] == ["asset2sim", "flows"]:
         return "flows"
+    if parts[:2] == ["asset2sim", "apps"]:  # the applications (audit, realism, benchmark): above the stages
+        return "apps"
     if parts[:2] == ["asset2sim", "tasks"] and len(parts) >= 3:
         return parts[2] if parts[2] in LAYERS else "refine" if parts[2] == "refine" else parts[2]
     return "core"
@@ -206,6 +209,9 @@ def test_a_stage_importing_a_later_one_is_reported():
     assert _layer("asset2sim.tasks.state.clearance") == "state" and _layer("asset2sim.tasks.refine") == "refine"
     assert LAYERS.index(_layer("asset2sim.tasks.assemble.write")) > LAYERS.index(_layer("asset2sim.tasks.synthesize.estimate"))
     assert _layer("asset2sim.output_folder") == "core" and _layer("asset2sim.flows.catalog") == "flows"
+    # the applications sit above every stage and below the flows and commands
+    assert _layer("asset2sim.apps.audit.audit") == "apps" and _layer("asset2sim.apps.realism.judge") == "apps"
+    assert LAYERS.index("refine") < LAYERS.index("apps") < LAYERS.index("flows") < LAYERS.index("cli")
 
 
 def test_no_guarded_imports_of_own_modules():

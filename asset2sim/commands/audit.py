@@ -19,7 +19,7 @@ from asset2sim.commands._status import (INVALID_INPUT, INVALID_REQUEST, NOT_READ
 from asset2sim.input_files import allowed_folders, set_allowed_outside
 from asset2sim.output_paths import OutputError, check_location
 from asset2sim.flows import audit_catalog
-from asset2sim.tasks.audit.batch import AuditTarget, audit_one, find_assets
+from asset2sim.apps.audit.batch import AuditTarget, audit_one, find_assets
 from asset2sim.schemas.config import RefineConfig
 
 NAME = "audit"

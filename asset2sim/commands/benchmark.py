@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_REQUEST, CommandError, parse_engines
-from asset2sim.tasks.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
+from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS, benchmark_tables, run_benchmark, write_benchmark_outputs
 
 NAME = "benchmark"
 HELP = "Run methods (defaults, human, direct, asset2sim) on a manifest, evaluate each, write the thesis table and an index page."
@@ -94,8 +94,8 @@ def _print_table(console, title: str, summary: dict) -> None:
 def _realism(out: Path, methods: list[str]) -> dict[str, str]:
     """The realism column: Bradley-Terry scores of ``OUT/realism`` (``asset2sim pairs OUT``, then ``rate`` or
     ``judge``), else "not rated" (never an invented score)."""
-    from asset2sim.tasks.realism.pair_set import PairSetError
-    from asset2sim.tasks.realism.scores import NOT_RATED, realism_column
+    from asset2sim.apps.realism.pair_set import PairSetError
+    from asset2sim.apps.realism.scores import NOT_RATED, realism_column
 
     try:
         return realism_column(out / "realism", methods)

@@ -11,9 +11,9 @@ import argparse
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, CommandError, os_failure
-from asset2sim.tasks.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
-from asset2sim.tasks.realism.judge import JUDGEMENTS_FILE, JudgeInputError, find_pair_set, judge_pairs
-from asset2sim.tasks.realism.scores import SCORES_FILE, judge_scores
+from asset2sim.apps.realism.calibration import CALIBRATION_FILE, judge_calibration, write_calibration
+from asset2sim.apps.realism.judge import JUDGEMENTS_FILE, JudgeInputError, find_pair_set, judge_pairs
+from asset2sim.apps.realism.scores import SCORES_FILE, judge_scores
 from asset2sim.tasks.synthesize.llm_config import ClientConfig
 from asset2sim.tasks.synthesize.llm_errors import LLMUnavailable, MissingCredentials
 

@@ -35,8 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.markup import escape
 
-    from asset2sim.tasks.realism.defects import DEFECTS
-    from asset2sim.tasks.realism.pairs import build_pair_set, specs_from_folders
+    from asset2sim.apps.realism.defects import DEFECTS
+    from asset2sim.apps.realism.pairs import build_pair_set, specs_from_folders
 
     console = Console()
     out = args.out

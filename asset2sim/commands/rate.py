@@ -16,10 +16,10 @@ import sys
 from pathlib import Path
 
 from asset2sim.commands._status import INVALID_INPUT, INVALID_REQUEST, NOT_READY, OUTPUT_LOCATION, CommandError
-from asset2sim.tasks.realism.rating_app import serve
-from asset2sim.tasks.realism.pair_set import PairSetError, find_pair_set
-from asset2sim.tasks.realism.ratings import RATINGS_FILE, RatingsDatabaseError
-from asset2sim.tasks.realism.scores import SCORES_FILE, NotRated, realism_scores
+from asset2sim.apps.realism.rating_app import serve
+from asset2sim.apps.realism.pair_set import PairSetError, find_pair_set
+from asset2sim.apps.realism.ratings import RATINGS_FILE, RatingsDatabaseError
+from asset2sim.apps.realism.scores import SCORES_FILE, NotRated, realism_scores
 
 NAME = "rate"
 HELP = ("Serve the realism rating app for people over a pair set (FOLDER/pairs.json or FOLDER/realism/pairs.json) "

@@ -122,12 +122,39 @@ class EngineUnsupported(NotImplementedError):
     """The engine cannot answer this query (names the engine and the query)."""
 
 
+@dataclass(frozen=True)
+class EngineTraits:
+    """What stage code needs to know of an engine beyond the protocol's queries, so that no stage keys a
+    decision by engine name (each engine's session class declares its own; the defaults are the cautious ones).
+
+    Attributes:
+        reference: the SPEC's reference engine, on which its metrics are defined (PyBullet): the evaluation
+            takes its extra measurements (extents, the sweep's extras) there.
+        conservative_aabb: ``link_aabb`` encloses the link's collision shapes with the contact margin, so two
+            links whose boxes are disjoint cannot be in contact (pairs are screened by box).
+        springs_by_torque: joint springs are applied as a torque every step (PyBullet's torque control),
+            which makes position holds of other joints drift: sweeps leave the others passive.
+        incremental_penetration: ``self_penetration_fresh`` and per-pair closest points are cheap, so the
+            state search re-queries only the pairs a moved joint touches
+            (:class:`asset2sim.tasks.state.penetration.StatePenetration`).
+    """
+
+    reference: bool = False
+    conservative_aabb: bool = False
+    springs_by_torque: bool = False
+    incremental_penetration: bool = False
+
+
 class SimSession(Protocol):
     """One loaded asset in one engine; a query the engine cannot answer raises
     :class:`EngineUnsupported`. Positions m, angles rad, quaternions x, y, z,
     w, every pose in the world frame."""
 
     engine: str
+    traits: EngineTraits
+    """What the stages need to know of this engine (:class:`EngineTraits`)."""
+    notes: list[str]
+    """What the engine changed or could not load of the asset (a missing inertial, a shape not cooked)."""
     options: SessionOptions
     joint_names: list[str]
     """Movable (revolute, continuous, prismatic) joints, in file order."""
@@ -227,6 +254,10 @@ class SimSession(Protocol):
     def ground_penetration(self) -> float:
         """Deepest penetration of any link into the ground plane, m (>= 0)."""
 
+    def place_on_ground(self) -> float:
+        """Move a free root vertically so the lowest collision point of the object lies on the ground (z = 0);
+        returns the height moved, m (EngineUnsupported where the engine has no exact lowest point)."""
+
     def step_ground_penetration(self) -> float:
         """Deepest ground penetration (m, >= 0) among the last step's contacts,
         without a new collision query."""
@@ -255,10 +286,14 @@ class SessionDefaults:
     """Mixed into every session class: a context manager that closes it;
     ``step_ground_penetration`` = ``ground_penetration`` (no contact cache);
     ``hold_root`` / ``release_root`` of an engine without a bounded root
-    constraint (a no-op on a fixed base, else :class:`EngineUnsupported`)."""
+    constraint (a no-op on a fixed base, else :class:`EngineUnsupported`); ``place_on_ground`` of an
+    engine without an exact lowest point (:class:`EngineUnsupported`); the cautious :class:`EngineTraits`
+    and no notes."""
 
     engine: str
     options: SessionOptions
+    traits: EngineTraits = EngineTraits()
+    notes: tuple[str, ...] | list[str] = ()
 
     def step_ground_penetration(self) -> float:
         return self.ground_penetration()
@@ -276,6 +311,9 @@ class SessionDefaults:
 
     def release_root(self) -> None:
         pass
+
+    def place_on_ground(self) -> float:
+        raise EngineUnsupported(f"{self.engine}: no exact lowest collision point to place on the ground")
 
 
 class ShapeWorld(Protocol):

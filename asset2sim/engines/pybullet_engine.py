@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import (ContactPair, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
+from asset2sim.engines.base import (ContactPair, EngineTraits, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
                                     penetration_sum, register_engine, register_shape_world, register_viewer)
 from asset2sim.engines.quiet import quiet_fds, quiet_stdout, startup_quiet
 
@@ -44,6 +44,7 @@ class PyBulletSession(SessionDefaults):
     caller's world (the object is still put with its lowest point on z = 0)."""
 
     engine = "pybullet"
+    traits = EngineTraits(reference=True, conservative_aabb=True, springs_by_torque=True, incremental_penetration=True)
 
     def __init__(self, urdf_path: Path, options: SessionOptions, client: int | None = None, ground: bool = True):
         p = _bullet()

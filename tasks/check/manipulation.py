@@ -106,7 +106,3 @@ def failing(metrics: list[MetricResult]) -> list[str]:
     """Names of the manipulation metrics of ``metrics`` that fail."""
     return [m.name for m in metrics if m.name in MANIPULATION_METRICS and m.passed is False]
 
-
-def closed_tuples(closed: dict) -> dict[str, tuple[float, float, float]]:
-    """joint -> (q_closed, direction, open_range), rad or m, of closed-end objects with those attributes."""
-    return {n: (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in closed.items()}

@@ -69,7 +69,7 @@ def _session_metrics(urdf: UrdfSource, engine: str, options: SessionOptions) -> 
         return _not_run(engine, "error", f"could not load: {type(exc).__name__}: {exc}", False)
     try:
         pen = metrics.penetration(session)
-        pen.details["engine_notes"] = list(getattr(session, "notes", []))
+        pen.details["engine_notes"] = list(session.notes)
         pen.details["ground_penetration_mm"] = float(session.ground_penetration()) * 1000.0
         trace = metrics.run_rest_test(session, conv)
         rest = metrics.rest_stability(trace, conv, engine=engine)

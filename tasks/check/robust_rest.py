@@ -114,9 +114,10 @@ def _disturb(session: SimSession, name: str, cfg: RobustRestConfig) -> None:
         sign = 1.0 if name[4] == "+" else -1.0
         p, q = tilt_pose(session, axis, sign * cfg.tilt)
         session.set_root_pose(p, q)
-        place = getattr(session, "place_on_ground", None)
-        if place is not None:  # exact: the lowest collision point of the tilted object on z = 0
-            place()
+        try:  # exact: the lowest collision point of the tilted object on z = 0
+            session.place_on_ground()
+        except EngineUnsupported:  # the engine settles it from the tilt
+            pass
     elif name == "nudge":
         session.set_root_velocity(np.array([cfg.nudge_speed, 0.0, 0.0]), np.zeros(3))
     else:

@@ -224,7 +224,7 @@ def sweep_joint(session: SimSession, joint: str, *, closed: float, direction: fl
 
     # PyBullet applies springs by torque control, which makes the holds drift: the others stay passive
     hold = cfg.hold_others and not (any(sp.stiffness > 0 for sp in session.options.springs.values())
-                                     and session.engine == "pybullet")
+                                     and session.traits.springs_by_torque)
     held = [o for o in session.joint_types if o != joint] if hold else []
     try:
         out, t_out = drive(q_far, lambda f: f >= cfg.reach_fraction)

@@ -6,7 +6,7 @@ A clip is drawn from a recorded trajectory (:class:`Trajectory`: joint
 positions and the root's pose at fixed simulated times), never simulated
 here: the joint sweep tier's trace (:func:`sweep_trajectory`) for every
 output, and the scripted motions of realism pairs
-(``asset2sim.tasks.realism.pairs``). One camera per view is fitted to every
+(``asset2sim.apps.realism.pairs``). One camera per view is fitted to every
 pose of the clip (the cameras of today's views, :mod:`render_camera`), so the
 object never leaves the frame and two clips drawn with the same cameras
 differ only in how the object moved.

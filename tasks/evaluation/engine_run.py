@@ -137,7 +137,7 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
         run.error = f"could not load: {type(exc).__name__}: {exc}"
         return run
     try:
-        pyb = session.engine == "pybullet"  # the reference engine takes the extra measurements
+        pyb = session.traits.reference  # the reference engine takes the extra measurements
         # Phi first, in the fresh session: Bullet keeps contact manifolds across later queries (docs/design/metrics.md)
         run.penetration = spec_metrics.penetration(session)
         saved = None

@@ -156,20 +156,16 @@ def _aabb_volume(session, names: list[str], points: dict[str, np.ndarray]) -> fl
     return float(np.prod(np.maximum(box[1] - box[0], 1e-9)))
 
 
-#: Engines whose ``link_aabb`` encloses the collision shape with its margin (boxes apart: no penetration).
-CONSERVATIVE_AABB_ENGINES = ("pybullet",)
-
-
 class _PairScreen:
     """The (subtree link, other link) pairs of one joint whose penetration can be non-zero now: with an
-    engine of :data:`CONSERVATIVE_AABB_ENGINES` pairs with disjoint boxes are dropped (the others keep
+    engine whose ``link_aabb`` encloses the shapes (``traits.conservative_aabb``) pairs with disjoint boxes are dropped (the others keep
     their order, so the sum is the same float)."""
 
     def __init__(self, session, subset: set[str]):
         self.session = session
         self.sub = [n for n in session.link_names if n in subset and session.link_has_collision(n)]
         self.rest = [n for n in session.link_names if n not in subset and session.link_has_collision(n)]
-        self.screen = getattr(session, "engine", None) in CONSERVATIVE_AABB_ENGINES
+        self.screen = session.traits.conservative_aabb
 
     def pairs(self) -> list[tuple[str, str]]:
         """Pairs (sub link, other link) in subtree-major order, m."""
@@ -333,3 +329,8 @@ def object_extents(session, state: dict[str, float], asset: AssetDescription, hu
     if box is None:
         return np.zeros(3)
     return np.maximum(box[1] - box[0], 0.0)
+
+
+def closed_tuples(closed: dict) -> dict[str, tuple[float, float, float]]:
+    """joint -> (q_closed, direction, open_range), rad or m, of closed-end objects with those attributes."""
+    return {n: (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in closed.items()}

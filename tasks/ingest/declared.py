@@ -3,7 +3,7 @@ inertia tensor (or that the simulator infers them from the geometry, and from wh
 limits, damping, friction and spring. Read from a URDF (:mod:`asset2sim.urdf`), an MJCF file
 (:mod:`.mjcf_reader`, MuJoCo's compiled values) or an OpenUSD stage (:mod:`.usd_reader`), in the frames of
 the asset model those readers make (the staged URDF's), SI units and radians. The audit
-(:mod:`asset2sim.tasks.audit`) judges these values."""
+(:mod:`asset2sim.apps.audit`) judges these values."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 
 from asset2sim.urdf import UrdfInertial, UrdfModel, read_urdf
-from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader
+from asset2sim.tasks.ingest import readers, staged, urdf_meshes
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 
 __all__ = ["DeclaredJoint", "DeclaredLink", "DeclaredPhysics", "read_declared"]
@@ -130,7 +130,7 @@ def read_declared(path: Path | str, urdf_path: Path | str | None = None, reading
     other = staged.other_format_file(path)
     if other is not None:
         source, fmt = other
-        read = mjcf_reader.read_mjcf_asset(source, reading) if fmt == "mjcf" else usd_reader.read_usd_asset(source)
+        read = readers.read_asset_file(source, fmt, reading)
         return declared_from_model(Path(source), fmt, read.model, read)
     original = urdf_meshes.urdf_needing_conversion(path)  # its meshes converted for the simulators: its own values
     urdf = original or (Path(urdf_path) if urdf_path is not None else Path(path))

@@ -19,7 +19,7 @@ from asset2sim import atomic, file_memo, input_files
 from asset2sim.atomic import sha256_files
 from asset2sim.frames import matrix_rpy
 from asset2sim.schemas.asset import AssetDescription, GeometryRef, GivenInertial, JointDesc, LinkDesc, Origin
-from asset2sim.tasks.ingest import mjcf_reader, staged, urdf_meshes, usd_reader, validate_input
+from asset2sim.tasks.ingest import readers, staged, urdf_meshes, validate_input
 from asset2sim.tasks.ingest.errors import AssetError
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.ingest.partnet_mobility import URDF_NAMES
@@ -159,7 +159,7 @@ def _stage_other_format(asset: Path | str, reading: ReadOptions | None = None) -
         return out
     source, fmt = found
     try:
-        read = mjcf_reader.read_mjcf_asset(source, reading) if fmt == "mjcf" else usd_reader.read_usd_asset(source)
+        read = readers.read_asset_file(source, fmt, reading)
         return staged.stage(read, staged.staging_folder(source))
     except staged.StagingError as exc:
         if exc.code is None:

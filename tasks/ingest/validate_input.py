@@ -17,7 +17,7 @@ import os
 import stat
 from pathlib import Path
 
-from asset2sim.tasks.ingest import mjcf_reader, partnet_mobility, staged, usd_reader
+from asset2sim.tasks.ingest import partnet_mobility, readers, staged
 from asset2sim.tasks.ingest.findings import (CODES, DEFAULT_POLICY, MAX_LINKS, MAX_TOTAL_FACES, SEMANTIC_KINDS, Finding,
                                              ValidationPolicy, ValidationResult, has_errors)
 from asset2sim.tasks.ingest.mesh_checks import MeshChecks
@@ -193,9 +193,8 @@ def _other_format(v: _Validator, source: Path, fmt: str) -> ValidationResult:
     ``USD_LAYER_OUTSIDE_ASSET``, ``INPUT_*``: :mod:`~asset2sim.tasks.ingest.mjcf_files`,
     :func:`~asset2sim.tasks.ingest.usd_stage.open_layers`), then the file read and staged as a URDF folder,
     whose validation gives the rest of the findings (``FORMAT_UNREADABLE`` when the reader refuses it)."""
-    read = mjcf_reader.read_mjcf_asset if fmt == "mjcf" else usd_reader.read_usd_asset
     try:
-        staged_asset = staged.stage(read(source), staged.staging_folder(source))
+        staged_asset = staged.stage(readers.read_asset_file(source, fmt), staged.staging_folder(source))
     except staged.StagingError as exc:
         v.add(exc.code or "FORMAT_UNREADABLE", str(exc), file=str(source))
         return v.result

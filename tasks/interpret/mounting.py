@@ -13,7 +13,12 @@ from typing import get_args
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import MountingKind, RootMount
+from asset2sim.schemas.request import RequestSpec
+from asset2sim.tasks.ingest import staged
+from asset2sim.tasks.ingest.declared import read_declared
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 
 __all__ = [
     "FREE",
@@ -154,3 +159,16 @@ def session_root_options(fixed: bool) -> dict[str, bool]:
     """``SessionOptions`` keywords for a root as declared: mounted -> fixed base, no ground (the mount holds it
     where the file puts it); free -> ``{}`` (resting on the ground)."""
     return {"fixed_base": True, "ground": False} if fixed else {}
+
+
+def root_mounting(asset: AssetDescription, request: RequestSpec, category: str, reading: ReadOptions) -> RootMount:
+    """The root's mounting: ``--mount`` (``request.mount``), else the request's words, else an MJCF file's own
+    declaration (a root without a free joint is welded to the world, as MuJoCo compiles it; the file read with
+    ``reading``), else the category prior."""
+    source = asset.staged_from
+    if (request.mount is None and request_mounting(request.text, category) is None
+            and source is not None and staged.input_format(source) == "mjcf"):
+        declared = declared_mounting(category, read_declared(source, asset.urdf_path, reading).root_fixed, "the MJCF file")
+        if declared is not None:
+            return declared
+    return resolve_mounting(category, request.text, request.mount)

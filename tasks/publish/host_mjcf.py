@@ -17,6 +17,17 @@ and the file's ``<compiler>`` conventions (its angle unit now stated) stay. MuJo
 written as ``mjcf/host/<input file name>``, with ``mjcf/host/<stem>.diff``, the unified diff of the input file
 and the written one. A refine that rescaled the object writes no such file: the host's geometry would no longer
 match the physics.
+
+MuJoCo's writer is the MuJoCo installed here, and an older MuJoCo, which a host package may pin (Meta-World
+pins 3.3.0), rejects attributes a newer one writes (a texture's ``colorspace``). And a host may build its own scene
+around the object's included file (Meta-World's environments include ``objects/assets/drawer.xml``, not the
+``objects/drawer.xml`` scene). So each of the input's own files holding bodies of the object (the file given, and
+the files it includes) is also written again as ``mjcf/host/files/<its path in the input's tree>``, the package's
+XML as it was (XML comments dropped) with only the bodies' ``<inertial>`` those of the host file and their hinge
+and slide joints' ``damping``, ``frictionloss``, ``stiffness``, ``springref`` and ``range`` the refined ones in the
+unit the file is compiled in (bodies matched by name, their joints in order), to copy over the package's file;
+``mjcf/host/files.diff`` is their diff against the package's. These files carry no keyframe: the host sets its
+state.
 """
 
 from __future__ import annotations
@@ -24,21 +35,30 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, file_names
+from asset2sim import atomic, file_names, safexml
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.ingest import host_conventions, mjcf_scene
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.tasks.ingest.mjcf_files import gather_mjcf
+from asset2sim.tasks.ingest.staged import MJCF_SUFFIXES
 from asset2sim.urdf import read_urdf
 
 #: Folder (inside the output's ``mjcf/``) of the file written for the host.
 HOST_DIR = "host"
+#: Folder (inside ``mjcf/host/``) of the input's files holding the object, written again.
+FILES_DIR = "files"
+#: Their unified diff against the package's files (inside ``mjcf/host/``).
+FILES_DIFF = "files.diff"
+#: Joint attributes a package file takes from the refined joint (in the file's units).
+JOINT_PHYSICS = ("damping", "frictionloss", "stiffness", "springref", "range")
 #: The keyframe holding the refined initial state.
 KEYFRAME = "initial"
 #: Relative tolerance of the check that the written file carries the refined masses.
@@ -52,12 +72,13 @@ class HostExportError(RuntimeError):
 @dataclass(frozen=True)
 class HostExport:
     """What :func:`write_host_mjcf` wrote: ``path`` the MJCF file, ``diff`` the diff against the input, ``bodies``
-    and ``joints`` the names whose physics changed."""
+    and ``joints`` the names whose physics changed, ``files`` the input's files holding the object written again."""
 
     path: Path
     diff: Path
     bodies: tuple[str, ...]
     joints: tuple[str, ...]
+    files: tuple[Path, ...] = ()
 
 
 def _names(m, mujoco) -> dict[str, list[str]]:
@@ -136,7 +157,88 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
     diff = "".join(difflib.unified_diff(before, xml.splitlines(keepends=True), fromfile=str(source), tofile=path.name))
     diff_path = file_names.join_inside(folder, file_names.file_stem(source.stem) + ".diff")
     atomic.write_bytes(diff_path, diff.encode("utf-8"))
-    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints))
+    moving = {mjcf_scene.label(original, b): [_joint_physics(next(x for x in spec.joints if x.id == j), bool(original.jnt_limited[j]))
+                                              for j in range(int(original.body_jntadr[b]), int(original.body_jntadr[b]) + int(original.body_jntnum[b]))
+                                              if int(original.jnt_type[j]) in (mjcf_scene.JNT_HINGE, mjcf_scene.JNT_SLIDE)]
+              for b in pick.bodies}
+    files = write_package_files(folder / FILES_DIR, source, xml, set(bodies), {b: v for b, v in moving.items() if v})
+    return HostExport(path=path, diff=diff_path, bodies=tuple(bodies), joints=tuple(name for name, _ in joints),
+                      files=tuple(files))
+
+
+def write_package_files(folder: Path, source: Path, host_xml: str, inertials: set[str],
+                    joints: dict[str, list[dict[str, str]]]) -> list[Path]:
+    """``source`` and the files it includes that hold a body of ``inertials`` or ``joints`` (names), written again
+    under ``folder`` at their path in the input's tree (the host package's asset folder,
+    :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, else the input's folder; a file from a folder
+    ``--allow-outside-paths`` allows is left out): the ``<inertial>`` of the bodies of ``inertials`` as ``host_xml``
+    (the host file written) has it, and on the hinge and slide ``<joint>`` elements of the bodies of ``joints``
+    (body name -> attributes per joint in order, :func:`_joint_physics`) those attributes; their unified diff against
+    the package's files in ``folder``'s parent as :data:`FILES_DIFF`. Returns the files written.
+
+    Raises:
+        StagingError: an included file cannot be read again under the input's trust rules.
+        UnsafePath: an included file's path would leave ``folder``.
+    """
+    host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
+    hosted = {b.get("name"): b for b in host.iter("body") if b.get("name") in inertials}
+    sources = gather_mjcf(source, tree=host_conventions.package_tree(source))  # the tree the reader read it in
+    out, diffs = [], []
+    for name, data in sorted(sources.files.items()):
+        if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
+            continue
+        root = safexml.parse_xml_bytes(data, source=name)
+        found = [b for b in root.iter("body") if b.get("name") in hosted or b.get("name") in joints]
+        if not found:
+            continue
+        for body in found:
+            _copy_physics(hosted.get(body.get("name")), body, joints.get(body.get("name"), []))
+        if not Path(name).is_relative_to(sources.tree):  # a file --allow-outside-paths let in: no place to mirror it
+            continue
+        rel = Path(name).relative_to(sources.tree).as_posix()
+        path = file_names.join_inside(folder, rel)
+        text = ET.tostring(root, encoding="unicode").replace(" />", "/>")  # ET's empty-element style; ">" in values is escaped
+        head = data[:data.index(b"<", data.index(b"?>") + 2)] if data.lstrip().startswith(b"<?xml") else b""
+        if b"encoding" in head and b"utf-8" not in head.lower():
+            head = b""  # written as UTF-8, which needs no declaration
+        written = head + text.encode("utf-8") + b"\n"
+        atomic.write_bytes(path, written)
+        diffs.extend(difflib.unified_diff(data.decode("utf-8", "replace").splitlines(keepends=True),
+                                          written.decode("utf-8").splitlines(keepends=True), fromfile=rel, tofile=rel))
+        out.append(path)
+    if out:
+        atomic.write_bytes(folder.parent / FILES_DIFF, "".join(diffs).encode("utf-8"))
+    return out
+
+
+def _joint_physics(joint, limited: bool) -> dict[str, str]:
+    """The :data:`JOINT_PHYSICS` of ``joint`` (an ``mjsJoint``, in the file's units; ``range`` only when
+    ``limited``) as MJCF attribute values, to 12 significant digits."""
+    def text(values) -> str:
+        return " ".join(f"{float(v):.12g}" for v in values)
+    out = {"damping": text(joint.damping[:1]), "frictionloss": text([joint.frictionloss]),
+           "stiffness": text(joint.stiffness[:1]), "springref": text([joint.springref])}
+    if limited:
+        out["range"] = text(joint.range)
+    return out
+
+
+def _copy_physics(host, body, joints: list[dict[str, str]]) -> None:
+    """``host``'s ``<inertial>`` on ``body`` (replacing its own; ``host`` None: none) and ``joints``' attributes on
+    ``body``'s hinge and slide joints, paired in order."""
+    inertial = host.find("inertial") if host is not None else None
+    if inertial is not None:
+        old = body.find("inertial")
+        new = ET.Element("inertial", dict(inertial.attrib))
+        if old is not None:
+            new.tail = old.tail
+            body[list(body).index(old)] = new
+        else:
+            new.tail = body[0].tail if len(body) else None
+            body.insert(0, new)
+    for target, given in zip([j for j in body.findall("joint") if j.get("type") not in ("free", "ball")], joints):
+        for key, value in given.items():
+            target.set(key, value)
 
 
 def _set_inertial(body, inertial, offset: np.ndarray) -> None:

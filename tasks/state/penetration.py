@@ -9,7 +9,6 @@ import numpy as np
 
 from asset2sim.engines.base import ContactPair, penetration_sum
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.tasks.geometry.closed_state import CONSERVATIVE_AABB_ENGINES
 
 
 class StatePenetration:
@@ -43,7 +42,7 @@ class StatePenetration:
         self._points: list[list[float]] = [[] for _ in pairs]
         self._penetrating: set[int] = set()
         self._last: np.ndarray | None = None
-        self._screen = getattr(session, "engine", None) in CONSERVATIVE_AABB_ENGINES
+        self._screen = session.traits.conservative_aabb
 
     def __call__(self, q: dict[str, float]) -> tuple[float, list[ContactPair]]:
         """Phi (m) and the penetrating pairs, deepest first, at the session's current state, which must be ``q``."""

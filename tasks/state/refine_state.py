@@ -117,7 +117,7 @@ class _Search:
         self.lam, self.tolerance, self.max_evaluations = lam, tolerance, max_evaluations
         self.asset = asset
         self.evals = 0
-        if hasattr(session, "self_penetration_fresh"):
+        if session.traits.incremental_penetration:
             # the same Phi as the engine's fresh query, re-queried only for moved pairs
             self.penetration = StatePenetration(session, asset, names)
         else:

@@ -148,7 +148,7 @@ def test_code_hash_is_the_source_and_the_policy_picks_it():
     contract.code_hash.cache_clear()
     assert contract.code_hash() == h  # deterministic
     dirs = {p.name for p in contract._package_dirs()}
-    assert {"asset2sim", "tasks", "schemas", "flows"} <= dirs
+    assert {"asset2sim", "tasks", "schemas", "apps", "flows"} <= dirs
     assert contract.skip_code_hash("rerun") == h and contract.skip_code_hash("keep") is None
     with pytest.raises(ValueError, match="code_change"):
         contract.skip_code_hash("sometimes")

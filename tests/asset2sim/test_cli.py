@@ -16,6 +16,8 @@ import pytest
 from asset2sim import atomic, demo_assets
 from asset2sim.cli import main
 from asset2sim.tasks import refine as refine_mod
+from asset2sim.tasks.assemble import export_mjcf
+from asset2sim.tasks.publish import refine_report
 from asset2sim.tasks.interpret.request import MAX_REQUEST_CHARS
 from tests.conftest import SHARED, needs_shared
 from tests.helpers import tree_hashes
@@ -149,7 +151,7 @@ def test_invalid_input_exits_1_and_long_request_2(box, tmp_path, capsys):
 
 
 def test_written_but_not_interaction_ready_exits_3(box, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(refine_mod, "post_check_failure_mode", lambda check: "unstable")
+    monkeypatch.setattr(refine_report, "post_check_failure_mode", lambda check: "unstable")
     assert main(["refine", str(box), "--prompt", PROMPT, "--out", str(tmp_path / "o"), "--no-extras", "-q"]) == 3
     assert "FAILED: unstable" in capsys.readouterr().out
     assert (tmp_path / "o" / "mobility.urdf").is_file()
@@ -172,7 +174,7 @@ def test_full_disk_while_writing_the_report_exits_4_with_enospc(name, box, tmp_p
     ``OUTPUT_WRITE_FAILED [ENOSPC]`` naming the file, not ``OUTPUT_INCOMPLETE``
     (which the missing ``report.html`` gave, the error having become a note)."""
     monkeypatch.setattr(refine_mod.media_phase.render, "render_views", lambda *a, **k: None)
-    monkeypatch.setattr(refine_mod.export_mjcf, "export_mjcf", lambda *a, **k: None)
+    monkeypatch.setattr(export_mjcf, "export_mjcf", lambda *a, **k: None)
     real = atomic._create_temp
 
     def full_disk(path):

@@ -25,7 +25,8 @@ from asset2sim.engines.registry import open_session
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.ingest.validate_input import validate_asset
 from asset2sim import output_folder as of
-from asset2sim.tasks.assemble import copied_meshes, write
+from asset2sim.tasks.assemble import copied_meshes, export_mjcf, write
+from asset2sim.tasks.publish import refine_report
 from asset2sim.tasks.refine import MARKER_NAME, RefineError, is_complete, refine_asset
 from tests import corpus_builder as cb
 
@@ -296,7 +297,7 @@ def test_failed_write_during_extras_leaves_no_marker(tmp_path, box, monkeypatch)
     from asset2sim.tasks import refine as refine_mod
 
     monkeypatch.setattr(refine_mod.media_phase.render, "render_views", lambda *a, **k: None)
-    monkeypatch.setattr(refine_mod.export_mjcf, "export_mjcf", lambda *a, **k: None)
+    monkeypatch.setattr(export_mjcf, "export_mjcf", lambda *a, **k: None)
     real = atomic._create_temp
 
     def full_disk(path):
@@ -324,23 +325,22 @@ def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, mon
     """--force over a complete output that then fails (here: the report step
     raises) leaves the earlier output byte for byte, marker valid, and no
     staging folder; a rerun that completes replaces it whole."""
-    from asset2sim.tasks import refine as refine_mod
 
     out = tmp_path / "out"
     first = refine_asset(box, PROMPT, out, extras=False)
     before = _tree(out)
-    real = refine_mod._build_report
+    real = refine_report.build_report
 
     def broken(*a, **k):
         raise RuntimeError("refused mid-way")
 
-    monkeypatch.setattr(refine_mod, "_build_report", broken)
+    monkeypatch.setattr(refine_report, "build_report", broken)
     with pytest.raises(RuntimeError):
         refine_asset(box, "a small box with its lid closed", out, extras=False, skip_if_complete=False)
     assert _tree(out) == before
     assert is_complete(out, first.report.input_hash, first.report.config_hash)
     assert not of.staging_folder(out).exists()
-    monkeypatch.setattr(refine_mod, "_build_report", real)
+    monkeypatch.setattr(refine_report, "build_report", real)
     again = refine_asset(box, "a small box with its lid closed", out, extras=False, skip_if_complete=False)
     assert is_complete(out, again.report.input_hash, again.report.config_hash)
     assert not is_complete(out, first.report.input_hash, first.report.config_hash)
@@ -351,12 +351,11 @@ def test_failed_force_rerun_keeps_the_earlier_complete_output(tmp_path, box, mon
 def test_a_first_run_that_fails_mid_way_leaves_no_partial_output(tmp_path, box, monkeypatch):
     """An internal error after the writer ran (here: the report step raises)
     removes what the run wrote: no URDF without its report, no folder."""
-    from asset2sim.tasks import refine as refine_mod
 
     def broken(*a, **k):
         raise RuntimeError("internal error")
 
-    monkeypatch.setattr(refine_mod, "_build_report", broken)
+    monkeypatch.setattr(refine_report, "build_report", broken)
     out = tmp_path / "new" / "out"
     with pytest.raises(RuntimeError):
         refine_asset(box, PROMPT, out, extras=False)

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.flows.conftest import make_project
+
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
@@ -20,11 +22,9 @@ pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage pro
 try:
     from . import flowfakes  # type: ignore[no-redef]
     from .cluster import check_exactly_once, kill_one_worker_when, start_cluster, tally
-    from .conftest import make_project
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
     from cluster import check_exactly_once, kill_one_worker_when, start_cluster, tally
-    from conftest import make_project
 
 ASSETS = {f"{src}_{i}": src for i in range(3) for src in ("box_lid", "laptop", "trash_can")}
 #: The fast variant's assets (fewer, shorter refines): the same checks.

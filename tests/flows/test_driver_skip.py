@@ -20,7 +20,7 @@ try:
     from .conftest import CALLS_PATH, make_project
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from conftest import CALLS_PATH, make_project
+    from tests.flows.conftest import CALLS_PATH, make_project
 
 ASSETS = {"box_lid": "box_lid", "laptop": "laptop", "cabinet_2drawer": "cabinet_2drawer"}
 

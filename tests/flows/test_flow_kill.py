@@ -27,7 +27,7 @@ try:
     from .conftest import FAKE_REFINE, make_project
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from conftest import FAKE_REFINE, make_project
+    from tests.flows.conftest import FAKE_REFINE, make_project
 
 ASSETS = {a: a for a in ("box_lid", "cabinet_2drawer", "laptop", "microwave", "trash_can")}
 

@@ -21,7 +21,7 @@ pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage pro
 try:
     from .conftest import make_project
 except ImportError:
-    from conftest import make_project
+    from tests.flows.conftest import make_project
 
 ASSETS = {"box_lid": "box_lid", "laptop": "laptop"}
 #: pages of the scheduler's HTTP server: the dashboard (bokeh, or the page

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage pro
 try:
     from .conftest import make_project
 except ImportError:
-    from conftest import make_project
+    from tests.flows.conftest import make_project
 
 REPO = Path(__file__).resolve().parents[2]
 

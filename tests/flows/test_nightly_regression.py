@@ -19,7 +19,7 @@ try:
     from .conftest import make_project
 except ImportError:
     import test_regression_flow as rf  # type: ignore[no-redef]
-    from conftest import make_project
+    from tests.flows.conftest import make_project
 
 
 def test_a_regression_fails_the_nightly_flow_run(tmp_path, prefect_server, dask_address):

@@ -11,11 +11,7 @@ import sys
 
 import pytest
 
-try:
-    from .conftest import make_project
-except ImportError:
-    from conftest import make_project
-
+from tests.flows.conftest import make_project
 from asset2sim.cli import QUIET_LIBRARY_LOGS
 from asset2sim.engines.quiet import STARTUP_MESSAGES
 

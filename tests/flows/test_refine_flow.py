@@ -24,7 +24,7 @@ try:
     from .conftest import CALLS_PATH, make_project, write_manifest
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from conftest import CALLS_PATH, make_project, write_manifest
+    from tests.flows.conftest import CALLS_PATH, make_project, write_manifest
 
 GOOD = {"box_lid": "box_lid", "cabinet_2drawer": "cabinet_2drawer", "laptop": "laptop"}
 BAD = {

@@ -23,7 +23,7 @@ try:
     from .conftest import make_project, write_manifest
 except ImportError:
     import regressfakes  # type: ignore[no-redef]
-    from conftest import make_project, write_manifest
+    from tests.flows.conftest import make_project, write_manifest
 
 ASSETS = {"box_lid": "box_lid", "laptop": "laptop", "trash_can": "trash_can", "cabinet_2drawer": "cabinet_2drawer"}
 FAILING = f"{regressfakes.__name__}:refine_failing"

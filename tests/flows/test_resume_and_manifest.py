@@ -23,7 +23,7 @@ import pytest
 from asset2sim.flows.catalog import CatalogError, ResultCatalog, load_catalog
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
-from asset2sim.tasks.publish.contract import JOB_RECORD_NAME
+from asset2sim.flows.job_records import JOB_RECORD_NAME
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
@@ -32,7 +32,7 @@ try:
     from .conftest import CALLS_PATH, make_project, write_manifest
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
-    from conftest import CALLS_PATH, make_project, write_manifest
+    from tests.flows.conftest import CALLS_PATH, make_project, write_manifest
 
 
 def _run(catalog: Path, **kw):

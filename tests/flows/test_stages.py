@@ -16,7 +16,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import metrics as check_metrics
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.ingest import extract
-from asset2sim.tasks.publish.contract import Prepared
+from asset2sim.flows.job_records import Prepared
 from tests.helpers import rest_tests_of_refine
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)

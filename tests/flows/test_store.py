@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import pytest
 
+from tests.flows.conftest import make_project
+
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import store
 from asset2sim.tasks.publish.contract import is_complete
@@ -16,11 +18,6 @@ from asset2sim.output_folder import MARKER_NAME
 from tests.helpers import download_folder, local_s3_server
 
 pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
-
-try:
-    from .conftest import make_project
-except ImportError:
-    from conftest import make_project
 
 BUCKET = "a2s-flow"
 

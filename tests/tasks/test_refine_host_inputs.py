@@ -17,7 +17,7 @@ mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig  # noqa: E402
 from asset2sim.schemas.request import RequestOverrides  # noqa: E402
-from asset2sim.tasks.audit.audit import audit_asset  # noqa: E402
+from asset2sim.apps.audit.audit import audit_asset  # noqa: E402
 from asset2sim.tasks.refine import RefineError, refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,7 @@ import pytest
 mujoco = pytest.importorskip("mujoco")
 
 from asset2sim.schemas.config import RefineConfig  # noqa: E402
+from asset2sim.tasks.ingest.host_conventions import package_tree  # noqa: E402
 from asset2sim.tasks.refine import refine_asset  # noqa: E402
 from asset2sim.urdf import read_urdf  # noqa: E402
 
@@ -57,3 +60,22 @@ def test_a_package_object_is_refined_interaction_ready_at_its_size_in_its_unit(t
             assert lo - 1e-9 <= j.limit.lower <= j.limit.upper <= hi + 1e-9, (j.name, (j.limit.lower, j.limit.upper), (lo, hi))
             assert j.limit.upper - j.limit.lower > 0.5 * (hi - lo), j.name  # clipped by the geometry at most
     assert (res.out_dir / "mjcf" / "host" / xml.name).is_file()
+    # the package's files holding the object written again, as the package wrote them (robosuite's door.xml, or the
+    # objects/assets/<name>.xml a Meta-World scene includes): the package's tree (linked) with them in place
+    # compiles the input scene with the refined masses, as the package's environments would
+    files = res.out_dir / "mjcf" / "host" / "files"
+    written = sorted(files.rglob("*.xml"))
+    assert written, res.report.notes
+    tree = package_tree(xml)
+    copy = tmp_path / "swapped" / tree.name
+    shutil.copytree(tree, copy, copy_function=os.symlink)
+    for f in written:
+        (copy / f.relative_to(files)).unlink()
+        shutil.copyfile(f, copy / f.relative_to(files))
+    spec = mujoco.MjSpec.from_file(str(copy / xml.relative_to(tree)))
+    spec.compiler.degree = False
+    swapped = spec.compile()
+    for name, link in model.links.items():
+        b = mujoco.mj_name2id(swapped, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b > 0 and link.inertial is not None and compiled.body_geomnum[b] > 0:
+            assert swapped.body_mass[b] == pytest.approx(link.inertial.mass, rel=1e-5), name

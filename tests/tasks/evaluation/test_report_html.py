@@ -126,7 +126,7 @@ def test_benchmark_pages(tmp_path):
     assert "href='human/1/report.html'" in idx and "&lt;boom&gt;" in idx
     tables = {"all rows": {"human": {"pen_ts_mean": 15.0, "pen_ts_sd": 2.0, "rest_stability_pass": 8 / 9, "rest_n": 9,
                                      "oscillation_pass": 1.0, "osc_n": 9, "errors": 0}}}
-    from asset2sim.tasks.benchmark.benchmark import RESEARCH_NUMBERS
+    from asset2sim.apps.benchmark.benchmark import RESEARCH_NUMBERS
 
     page = render_benchmark_summary(tables, RESEARCH_NUMBERS, {"manifest": "m.csv", "methods": ["human"], "seed": 0, "rows": 9})
     assert "15 &plusmn; 2" in page and "88.9%" in page and "Human (GenSim2)" in page and "thesis method" in page

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from asset2sim.tasks.audit.audit import audit_asset
+from asset2sim.apps.audit.audit import audit_asset
 from asset2sim.tasks.ingest.extract import extract_asset_checked
 from asset2sim.tasks.ingest.urdf_meshes import urdf_needing_conversion
 from asset2sim.tasks.interpret.part_labels import label_from_name

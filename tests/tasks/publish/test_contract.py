@@ -8,27 +8,11 @@ from types import SimpleNamespace
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import MetricResult, RefineReport
 from asset2sim.tasks.ingest.partnet_mobility import ManifestRowError
-from asset2sim.tasks.publish.contract import (
-    MARKER_NAME,
-    REPORT_NAME,
-    JOB_RECORD_NAME,
-    JobRecord,
-    Measurement,
-    Prepared,
-    RefineOutput,
-    StageRecord,
-    build_manifest_row,
-    build_row,
-    finished_result,
-    flow_config_hash,
-    is_complete,
-    manifest_row_id,
-    refined_output,
-    resumable_output,
-    run_hash,
-    write_completion_marker,
-    write_job_record,
-)
+from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, flow_config_hash, is_complete,
+                                              run_hash, write_completion_marker)
+from asset2sim.flows.job_records import (JOB_RECORD_NAME, JobRecord, Measurement, Prepared, RefineOutput,
+                                         StageRecord, build_manifest_row, build_row, finished_result,
+                                         manifest_row_id, refined_output, resumable_output, write_job_record)
 
 
 def test_hashes_change_with_what_changes_the_result():

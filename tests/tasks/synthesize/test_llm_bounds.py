@@ -21,7 +21,7 @@ if importlib.util.find_spec("litellm") is None:  # the client imports it on firs
     pytest.skip("model calls need litellm (pip install 'asset2sim[llm]')", allow_module_level=True)
 
 from asset2sim.cli import main  # noqa: E402
-from asset2sim.tasks.realism import judge as J  # noqa: E402
+from asset2sim.apps.realism import judge as J  # noqa: E402
 from asset2sim.tasks.synthesize.llm_client import LLMClient  # noqa: E402
 from asset2sim.tasks.synthesize.llm_config import ClientConfig  # noqa: E402
 from asset2sim.tasks.synthesize.llm_errors import DeadlineExceeded, ModelCallError, ReplyInvalid, ReplyTooLarge  # noqa: E402
@@ -108,7 +108,7 @@ def test_a_cached_record_nested_100000_deep_is_asked_again(tmp_path):
     "'the more realistic one is' + ' \\t\\n' * 100000 + 'x'",
 ])
 def test_a_judge_reply_with_long_runs_of_spaces_is_read_in_linear_time(reply):
-    code = ("import time; from asset2sim.tasks.realism.judge_reply import read_reply; t = time.monotonic(); "
+    code = ("import time; from asset2sim.apps.realism.judge_reply import read_reply; t = time.monotonic(); "
             f"r = read_reply({reply}); print(r.choice, round(time.monotonic() - t, 3))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr[-2000:]

@@ -1,0 +1,234 @@
+"""Pairs that differ only in physics: one object, one joint, the same meshes,
+cameras and scripted motion (:func:`asset2sim.apps.realism.motion.push_release`),
+simulated with two overlays and drawn as two clips per view. Which side a
+judge sees on the left is drawn later, per judge and pair; ``pairs.json``
+only says which side is which method.
+
+A pair set is a folder: ``pairs.json`` (:class:`~asset2sim.schemas.realism.PairSet`)
+and ``clips/<pair>/`` with each side's WebM, poster and stills; clip folders
+are named by a counter, never by an input's name.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from asset2sim import atomic
+from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.realism import Clip, ClipPair, PairSet, PairSide
+from asset2sim.tasks.evaluation.clips import (CLIP_FPS, CLIP_SIZE, CLIP_VIEWS, draw_frames, fit_cameras, fit_poses, pose_points,
+                                              write_clip)
+from asset2sim.tasks.evaluation.closed_ends import ClosedEnd, compute_closed
+from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
+from asset2sim.tasks.geometry.render import SceneRenderer
+from asset2sim.tasks.geometry.render_camera import view_spec
+from asset2sim.apps.realism.pair_set import write_pair_set
+from asset2sim.apps.realism.motion import PhysicsSide, PushReleaseConfig, drive_limit, push_release, side_from_folder, side_of
+
+#: The folder of a pair set's clips.
+PAIR_CLIPS_DIR = "clips"
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    """What one pair shows: ``a`` and ``b`` (the sides), the ``joint`` pushed, the object's id, category,
+    request and ``defect`` (the planted defect of ``b``, a calibration pair; else None)."""
+
+    a: PhysicsSide
+    b: PhysicsSide
+    joint: str
+    object_id: str
+    category: str = ""
+    request: str = ""
+    defect: str | None = None
+    force_limit: float | None = None
+    """the drive's limit, N*m or N (None: :func:`drive_limit` of side ``a``, computed by :func:`make_pair`)"""
+
+
+def pushed_joints(asset: Context | Path | str, limit: int = 1) -> list[tuple[str, ClosedEnd]]:
+    """The joints a pair of an asset (its evaluation context, or its folder) pushes: its task-relevant joints (the
+    evaluation's rule, :func:`asset2sim.tasks.evaluation.eval_context.task_joints`) that can open, at most ``limit``,
+    with their closed ends (rad or m). Raises EvaluationError: the folder cannot be read."""
+    ctx = asset if isinstance(asset, Context) else build_context(asset)
+    chosen, _ = task_joints(ctx.joints, ctx.reference_dir, [], ctx.category, ctx.semantics)
+    names = list(dict.fromkeys([*chosen, *ctx.movable]))
+    closed, _ = compute_closed(ctx.urdf, ctx.joints, names)
+    return [(n, closed[n]) for n in names if n in closed and closed[n].open_range > 0][:limit]
+
+
+@dataclass(frozen=True)
+class Subject:
+    """asset2sim's output of one object as every pair of it shows it: its ``side``, the ``joint`` pushed with its
+    ``closed`` end and the drive's ``force_limit`` (N*m or N, :func:`drive_limit`), the object's id, category and
+    request (the output's ``report.json`` prompt)."""
+
+    side: PhysicsSide
+    joint: str
+    closed: ClosedEnd
+    force_limit: float
+    object_id: str
+    category: str = ""
+    request: str = ""
+
+
+def subject_of(folder: Path | str, object_id: str, conventions: SimConventions | None = None) -> Subject | None:
+    """The :class:`Subject` of the asset2sim output in ``folder``, read once (None: no joint that opens). Raises
+    EvaluationError: the folder cannot be read."""
+    ctx = build_context(folder)
+    joints = pushed_joints(ctx)
+    if not joints:
+        return None
+    joint, closed = joints[0]
+    side = side_of(ctx, "asset2sim")
+    return Subject(side=side, joint=joint, closed=closed, force_limit=drive_limit(side, joint, closed.open_range, conventions),
+                   object_id=object_id, category=ctx.category or "", request=str((ctx.report or {}).get("prompt") or ""))
+
+
+def _spec(subject: Subject, b: PhysicsSide, defect: str | None = None) -> tuple[PairSpec, ClosedEnd]:
+    return PairSpec(a=subject.side, b=b, joint=subject.joint, object_id=subject.object_id, category=subject.category,
+                    request=subject.request, defect=defect, force_limit=subject.force_limit), subject.closed
+
+
+def _side_clips(renderer: SceneRenderer, traj, cams, folder: Path, base: Path, slot: str, joint: str) -> list[Clip]:
+    frames = draw_frames(renderer, traj, cams, CLIP_FPS)
+    return [write_clip(folder, f"{slot}_{v}", frames[view_spec(v).name], joint=joint, motion="push_release", view=v,
+                       fps=CLIP_FPS, poster_index=len(frames[view_spec(v).name]) // 3, relative_to=base) for v in cams]
+
+
+def make_pair(spec: PairSpec, closed: ClosedEnd, pair_set: Path | str, index: int, *,
+              config: PushReleaseConfig | None = None, conventions: SimConventions | None = None,
+              views: Sequence[str] = CLIP_VIEWS) -> ClipPair:
+    """Simulate ``spec``'s two sides with the same script and drive (force limit from side ``a``,
+    :func:`drive_limit`), draw both with the same cameras (fitted to every pose of both) and write their
+    clips into ``pair_set/clips/<index>/``. ``closed``: side ``a``'s closed end of ``spec.joint``. The pair id is
+    a SHA-256 digest (16 hex digits) of ``index``, the object id, the defect and both sides' methods and clips:
+    deterministic, and distinct within a set even when two pairs show the same clips.
+
+    Raises:
+        KeyError: the joint is missing on a side. RenderError / FileNotFoundError: a side cannot be drawn.
+        ImportError: PyAV is not installed. OSError: the folder cannot be written.
+    """
+    base = Path(pair_set)
+    folder = base / PAIR_CLIPS_DIR / f"{index:04d}"
+    force = spec.force_limit if spec.force_limit is not None else drive_limit(spec.a, spec.joint, closed.open_range, conventions)
+    trajs = [push_release(s, spec.joint, closed, force, config=config, conventions=conventions) for s in (spec.a, spec.b)]
+    with SceneRenderer(spec.a.urdf, size=CLIP_SIZE, supersample=1) as ra, SceneRenderer(spec.b.urdf, size=CLIP_SIZE, supersample=1) as rb:
+        cloud = np.concatenate([pose_points(r, fit_poses(traj)) for r, traj in ((ra, trajs[0]), (rb, trajs[1]))])
+        cams = fit_cameras(cloud, views, CLIP_SIZE)  # one camera per view for both sides
+        sides = [PairSide(method=s.method, clips=_side_clips(r, traj, cams, folder, base, slot, spec.joint))
+                 for s, r, traj, slot in ((spec.a, ra, trajs[0], "a"), (spec.b, rb, trajs[1], "b"))]
+    # the clips' content, and where the pair sits in its set: two refines of one object give the same clips of a
+    # planted defect, and each pair still needs its own id
+    digest = hashlib.sha256(json.dumps([index, spec.object_id, spec.defect, [[s.method, [atomic.sha256_file(base / c.video)
+                                                                                       for c in s.clips]] for s in sides]]).encode())
+    return ClipPair(pair_id=digest.hexdigest()[:16], object_id=spec.object_id, category=spec.category, request=spec.request,
+                    joint=spec.joint, motion="push_release", a=sides[0], b=sides[1], defect=spec.defect)
+
+
+def calibration_specs(subject: Subject, *, work: Path | str, defects: Sequence[str] | None = None
+                      ) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+    """The calibration pairs of ``subject``: one per planted defect (:data:`asset2sim.apps.realism.defects.DEFECTS`,
+    or ``defects``) on its pushed joint, each broken copy written under ``work/<k>/`` (``k`` the defect's number: no
+    input name becomes a path). Returns (specs with the closed end, skipped: key -> why)."""
+    from asset2sim.apps.realism.defects import DEFECTS, plant_defect
+
+    specs, skipped = [], {}
+    for k, name in enumerate(defects or list(DEFECTS)):
+        try:
+            b = plant_defect(subject.side, name, subject.joint, subject.closed, subject.force_limit, Path(work) / f"{k:02d}")
+        except (KeyError, ValueError) as exc:
+            skipped[f"{subject.object_id} {name}"] = str(exc)
+            continue
+        specs.append(_spec(subject, b, name))
+    return specs, skipped
+
+
+def method_specs(subject: Subject, folders: dict[str, Path]) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+    """``subject`` against every other method's asset folder of the same object (``folders``: method -> folder; an
+    ``asset2sim`` entry is passed over): one pair each on the subject's pushed joint. A method whose asset cannot be
+    read is skipped. Returns (specs, skipped)."""
+    specs, skipped = [], {}
+    for method, folder in folders.items():
+        if method == "asset2sim":
+            continue
+        try:
+            b = side_from_folder(folder, method)
+        except Exception as exc:  # one method's unreadable asset skips its pair only
+            skipped[f"{subject.object_id} {method}"] = f"{type(exc).__name__}: {exc}"
+            continue
+        specs.append(_spec(subject, b))
+    return specs, skipped
+
+
+def build_pair_set(specs: Sequence[tuple[PairSpec, ClosedEnd]], pair_set: Path | str, *, skipped: dict[str, str] | None = None,
+                   config: PushReleaseConfig | None = None, conventions: SimConventions | None = None,
+                   progress=None) -> PairSet:
+    """Make every pair of ``specs`` (:func:`make_pair`, clip folders numbered in order) and write ``pairs.json``; a pair
+    that fails is listed in ``skipped`` with its error and the others go on. ``progress``: callback(text) per pair."""
+    pairs, skipped = [], dict(skipped or {})
+    for index, (spec, closed) in enumerate(specs):
+        key = f"{spec.object_id} {spec.b.method}"
+        try:
+            pairs.append(make_pair(spec, closed, pair_set, index, config=config, conventions=conventions))
+            if progress:
+                progress(f"{key}: pair {pairs[-1].pair_id}")
+        except Exception as exc:  # one pair never stops the set
+            skipped[key] = f"{type(exc).__name__}: {exc}"
+            if progress:
+                progress(f"{key}: skipped ({skipped[key]})")
+    return write_pair_set(pair_set, pairs, skipped)
+
+
+#: The methods a benchmark's asset2sim output is paired with by default (``asset2sim benchmark``'s baselines).
+AGAINST: tuple[str, ...] = ("human", "direct", "defaults")
+#: The folder of a pair set's broken copies (planted defects).
+DEFECTS_DIR = "defects"
+
+
+def specs_from_folders(paths: Sequence[Path | str], pair_set: Path | str, *, against: Sequence[str] = AGAINST,
+                       defects: Sequence[str] | None = (), conventions: SimConventions | None = None
+                       ) -> tuple[list[tuple[PairSpec, ClosedEnd]], dict[str, str]]:
+    """The pairs of ``paths``: a benchmark output folder (``<method>/<id>/asset/``, ``asset2sim benchmark``) gives,
+    per object, asset2sim against each method of ``against`` it holds; a refine output folder (``report.json``
+    beside ``mobility.urdf``) gives nothing by itself. ``defects`` (None: every one of
+    :data:`~asset2sim.apps.realism.defects.DEFECTS`; empty: none) adds calibration pairs of every asset2sim output,
+    their broken copies under ``pair_set/defects/<n>/``. Returns (specs, skipped: key -> why).
+
+    Raises:
+        FileNotFoundError: a path that is neither.
+    """
+    outputs: list[tuple[str, dict[str, Path]]] = []
+    for path in map(Path, paths):
+        if (path / "asset2sim").is_dir():
+            for asset in sorted(p for p in (path / "asset2sim").iterdir() if (p / "asset").is_dir()):
+                folders = {"asset2sim": asset / "asset"}
+                folders.update({m: path / m / asset.name / "asset" for m in against if (path / m / asset.name / "asset").is_dir()})
+                outputs.append((asset.name, folders))
+        elif (path / "report.json").is_file():
+            outputs.append((path.name, {"asset2sim": path}))
+        else:
+            raise FileNotFoundError(f"{path}: neither a benchmark output (asset2sim/<id>/asset/) nor a refine output (report.json)")
+    specs: list[tuple[PairSpec, ClosedEnd]] = []
+    skipped: dict[str, str] = {}
+    for n, (object_id, folders) in enumerate(outputs):
+        try:
+            subject = subject_of(folders["asset2sim"], object_id, conventions)
+            if subject is None:
+                skipped[object_id] = "no joint that opens"
+                continue
+            got, why = method_specs(subject, folders)
+            specs += got
+            skipped.update(why)
+            if defects is None or len(defects):
+                got, why = calibration_specs(subject, work=Path(pair_set) / DEFECTS_DIR / f"{n:04d}", defects=defects)
+                specs += got
+                skipped.update(why)
+        except Exception as exc:  # one object's unreadable output never stops the set
+            skipped[object_id] = f"{type(exc).__name__}: {exc}"
+    return specs, skipped

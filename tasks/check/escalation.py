@@ -1,0 +1,152 @@
+"""Stage 7 of the refine: the post-check and its escalation of damping and friction within the hand's range
+(:func:`post_check`), the joint limits clipped to the geometry (:func:`clip_limits`) and the collision repairs
+the post-check calls for (:func:`repair_sweep`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.report import EscalationRound, StateRefinement
+from asset2sim.stage_log import StageLog
+from asset2sim.tasks.assemble import export_mjcf, write
+from asset2sim.tasks.assemble.candidate import Candidate, Workspace
+from asset2sim.tasks.check import dynamics_search, operating, postcheck, repair, robust_rest, sweep, task_tier
+from asset2sim.tasks.geometry import limits
+from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
+from asset2sim.tasks.state import clearance, placement
+from asset2sim.tasks.synthesize import estimate
+from asset2sim.tasks.synthesize.context import EstimationContext
+
+
+def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, ws: Workspace, log: StageLog,
+                closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
+    """Stage 7: post-check the refined state (``closed``: closed ends at the output scale, for the sweep and
+    robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while it
+    fails. Returns (final overlay, last check, rounds)."""
+    asset, root_rotation = ctx.asset, ctx.root_rotation
+    if overlay.initial_joint_positions is not None:
+        overlay = overlay.model_copy(update={"initial_joint_positions": state})
+    rounds: list[EscalationRound] = []
+    ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+    recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
+    labels = task_tier.link_labels(asset)
+    n = 0
+    spec = task_tier.task_spec_for(ctx.task, ws.model(), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
+        if ctx.task and closed else None
+    # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
+    lim = task_tier.operating_limits(ws.model(), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
+                                     free_moving=ctx.request.free_moving, conventions=config.sim,
+                                     joints=spec.joints if spec is not None else None)
+    bounded, notes = operating.bound_overlay(overlay, lim.budgets)
+    for line in notes:
+        log.say("post_check", line)
+    if bounded != overlay:
+        overlay = bounded
+        ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+    caps, dcaps = lim.friction_caps, lim.damping_caps
+    floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
+
+    def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
+        return n < config.max_escalation_rounds and bool(postcheck.escalate(overlay, chk, config.escalation_factor, caps, floors, dcaps)[1])
+
+    def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
+        if spec is not None:
+            chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
+                "pybullet", ws.model(), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
+                fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
+                free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
+        return chk
+
+    check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+                                                     category=ctx.category, labels=labels))
+    rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
+    search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps)  # relief and escalation bracketed by what each round measured
+    search.record(overlay, check.metrics)
+    tried = [(overlay, check)]
+    while (not check.passed or task_tier.task_failing(check.metrics)) and n < config.max_escalation_rounds:
+        n += 1
+        before = overlay
+        # a task that needed more than a real operating force first: lower friction / damping (and their caps)
+        overlay, changes, reason = task_tier.relieve(overlay, check.metrics, lim)
+        if not changes:
+            overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
+        overlay, changes, notes = search.settle(before, overlay, changes, caps)
+        reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
+        if not changes:
+            break
+        ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+                                                     category=ctx.category, labels=labels))
+        rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
+        search.record(overlay, check.metrics)
+        tried.append((overlay, check))
+    best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
+    earlier = best != len(tried) - 1
+    sweep_skipped = postcheck.sweep_not_run(check.metrics)  # an escalation round: the sweep (and the other engines) not run
+    if earlier or sweep_skipped:  # checked again, the sweep included
+        reason = (f"round {best} failed the fewest tiers: its friction and damping kept" if earlier
+                  else "the last round's setting checked again with the joint sweep")
+        if earlier:
+            overlay = tried[best][0]
+            ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, recorded=recorded,
+                                                   category=ctx.category, labels=labels))
+        changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
+        rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
+    log.lap("post_check")
+    return overlay, check, rounds
+
+
+def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
+                  state: dict[str, float], urdf: Path, config: RefineConfig, ws: Workspace, log: StageLog):
+    """Stage 7b: collision repairs where the post-check shows a part held by its neighbours' pieces: a
+    blocked joint sweep (:func:`asset2sim.tasks.check.repair.sweep_repairs`, better = a better sweep score)
+    or parts held together (running clearance, better = fewer failing tiers). Each repair is loaded, the
+    limits clipped again from ``unclipped`` and ``closed_raw``, and post-checked; the first that is better
+    while no passed metric fails is kept. ``result``: (overlay, check, rounds, collision overrides, closed
+    ends), returned unchanged or replaced; notes go to ``st.collision_changes``."""
+    overlay, check, rounds, overrides, closed_out = result
+    sw = next((m for m in check.metrics if m.name == "joint_sweep"), None)
+    blocked = {} if sw is None or sw.passed is not False else sweep.blocked_positions(sw)
+    pairs = [] if blocked else repair.held_together_pairs(check.metrics)
+    if not blocked and not pairs:
+        return result  # the common case: nothing read, nothing simulated
+    model = ws.model()
+    folder = write.collision_folder(ctx.asset)
+    if blocked:
+        label = "sweep blocked"
+        repairs = repair.sweep_repairs(model, urdf, ctx.asset, sw, blocked, state, overrides, unclipped.scale, ws.root,
+                                       folder, config)
+
+        def better(chk2) -> bool:
+            return sweep.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep.sweep_score(sw)
+    else:
+        label = "parts held together"
+        touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
+        one = repair.clearance_repair(model, urdf, touching, state, overrides, unclipped.scale, ws.root, folder) if touching else None
+        repairs = iter([one] if one is not None else [])
+
+        def better(chk2) -> bool:
+            return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
+    passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
+    for rep in repairs:
+        ws.load(Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation))
+        clipped, closed2 = placement.clip_limits(unclipped, closed_raw, state, ws, config, log)
+        ov2, check2, rounds2 = post_check(ctx, clipped, state, rep.overrides, urdf, config, ws, log,
+                                           closed=closed_tuples(closed2))
+        lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
+        if better(check2) and not lost:
+            for line in rep.notes:
+                log.say("sweep_repair", line)
+            st.collision_changes = list(st.collision_changes) + rep.notes
+            n = len(rounds)
+            rounds = rounds + [r.model_copy(update={"round": n + r.round, "reason": f"{rep.what} ({label}): {r.reason}"})
+                               for r in rounds2]
+            return ov2, check2, rounds, rep.overrides, closed2
+        log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
+                                f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
+                                "the asset kept as it was")
+        ws.load(Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation))
+    return result

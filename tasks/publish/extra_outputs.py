@@ -1,0 +1,156 @@
+"""A refine's optional outputs beside the refined asset: the MJCF and USD exports, the host files an MJCF or USD
+input is written back into, the evaluation and (unless deferred) the media. A failure is a note in the report, never
+the loss of the refined asset, except an output folder that cannot be written (``OUTPUT_WRITE_FAILED``)."""
+
+from __future__ import annotations
+
+import errno
+import traceback
+from dataclasses import replace
+from pathlib import Path
+
+from asset2sim import atomic, output_folder
+from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.extras import install_hint
+from asset2sim.output_folder import CLIPS_DIR, URDF_NAME, VIEWS_DIR
+from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.evaluation import Evaluation
+from asset2sim.schemas.report import RefineReport
+from asset2sim.stage_log import StageLog
+from asset2sim.tasks.assemble import export_mjcf
+from asset2sim.tasks.check.attempt import Attempt
+from asset2sim.tasks.check.verdict import combine_verdict
+from asset2sim.tasks.evaluation import evaluate
+from asset2sim.tasks.evaluation.clips import CLIPS_JSON
+from asset2sim.tasks.ingest import staged
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
+from asset2sim.tasks.publish import export_usd, host_mjcf, host_usd
+from asset2sim.tasks.publish import media as media_phase
+from asset2sim.tasks.publish.contract import write_report_json
+
+
+#: errno values of an OSError that says nothing more can be written to the
+#: output folder: a full disk, an exhausted quota, a read-only file system.
+UNWRITABLE = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EROFS) if e is not None)
+
+
+def raise_if_unwritable(exc: BaseException, out_dir: Path) -> None:
+    """Raise ``OUTPUT_WRITE_FAILED`` (an :class:`~asset2sim.output_folder.OutputError`) when ``exc`` or an
+    exception in its chain is an OSError whose errno is in :data:`UNWRITABLE`; return otherwise."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, OSError) and cur.errno in UNWRITABLE:
+            where = cur.filename or out_dir
+            raise output_folder.OutputError(f"output folder {out_dir} cannot be written: {where}: {cur.strerror or cur}",
+                                            "OUTPUT_WRITE_FAILED", where) from cur
+        cur = cur.__cause__ or cur.__context__
+
+
+def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+    """An MJCF or USD input's refined object written back into its own files (``mjcf/host/``,
+    :func:`asset2sim.tasks.publish.host_mjcf.write_host_mjcf`; ``usd/host/``,
+    :func:`asset2sim.tasks.publish.host_usd.write_host_usd`), noted in the report; {} for other inputs. A file
+    that cannot be written (a rescaled object, MuJoCo or usd-core missing) is a note, never the loss of the refined
+    asset."""
+    source = asset.staged_from
+    fmt = staged.input_format(source) if source is not None else None
+    if fmt == "mjcf":
+        return _host_mjcf(out_dir, source, config, report)
+    if fmt == "usd":
+        return _host_usd(out_dir, source, report)
+    return {}
+
+
+def _host_mjcf(out_dir: Path, source: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+    try:
+        with quiet_stdout():
+            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
+    except Exception as exc:  # the host file must not lose the refined asset
+        raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"host MJCF not written: {exc}")
+        return {}
+    rel = done.path.relative_to(out_dir).as_posix()
+    report.notes.append(f"host MJCF: {rel} is {source.name} with the refined physics (bodies {list(done.bodies)}, joints "
+                        f"{list(done.joints)}, keyframe 'initial'), names and geometry as they were; the diff: "
+                        f"{done.diff.relative_to(out_dir).as_posix()}"
+                        + "".join(f"; {f.relative_to(out_dir).as_posix()}, the package's file with the same physics"
+                                  for f in done.files))
+    return {"host_mjcf": str(done.path)}
+
+
+def _host_usd(out_dir: Path, source: Path, report: RefineReport) -> dict[str, str]:
+    try:
+        done = host_usd.write_host_usd(out_dir, source)
+    except Exception as exc:  # the host stage must not lose the refined asset
+        raise_if_unwritable(exc, out_dir)
+        report.notes.append(f"host USD not written: {exc}")
+        return {}
+
+    def rel(p: Path) -> str:
+        return p.relative_to(out_dir).as_posix()
+
+    report.notes.append(f"host USD: {rel(done.path)} is {source.name} with the refined physics and initial state "
+                        f"({done.changes} attributes on {list(done.prims)}), prim paths as they were; the changes alone as a "
+                        f"layer: {rel(done.layer)}; prim path -> attribute old -> new: {rel(done.diff)}")
+    return {"host_usd": str(done.path), "host_usd_layer": str(done.layer)}
+
+
+def write_extras(out_dir: Path, report: RefineReport, att: Attempt, log: StageLog, reference: Path | str | None,
+            shown: Path, clips: bool = True, media: bool = True) -> dict[str, str]:
+    """Optional outputs: MJCF and USD exports, the evaluation, and with ``media`` the renders and the HTML report (the
+    renders reused in it; without, ``report.json`` says the media phase is deferred: :mod:`asset2sim.tasks.publish.media`),
+    then ``report.json`` again with their notes and the final stage times. Each failure (an engine or
+    renderer unavailable included) is a note in the report, never the loss of the refined asset, except a
+    full disk, a quota or a read-only file system (``OUTPUT_WRITE_FAILED``). The evaluation reuses the final
+    post-check's rest test when it measured the files as they are now; ``shown``: the output folder as the
+    user named it (``out_dir`` may be a staging folder); ``clips``: the sweep clips too (``clips/``). Returns name -> path."""
+    recording = None if att.rewritten else att.check.recording
+    if recording is not None:  # measured on the workspace's files; publish wrote the same bytes here
+        recording = replace(recording, urdf=(out_dir / URDF_NAME).resolve())
+    out: dict[str, str] = {}
+    with quiet_stdout():  # engines and renderers print from C; the library must not
+        for key, make, what in (("mjcf", lambda: export_mjcf.export_mjcf(out_dir), "MJCF export"),
+                                ("usd", lambda: export_usd.export_usd(out_dir).path, "USD export")):
+            try:
+                out[key] = str(make())
+            except ImportError as exc:  # MuJoCo / usd-core (pxr) not installed: the extra that would do it named
+                report.notes.append(f"{what} skipped: {install_hint(exc)}")
+            except Exception as exc:  # export must not lose the refined asset
+                raise_if_unwritable(exc, out_dir)
+                report.notes.append(f"{what} failed: {exc}")
+            log.lap(f"extras_{key}")
+        views = None
+        if media:
+            try:
+                views = media_phase.output_views(out_dir, report.initial_joint_positions)
+                out["views"] = str(out_dir / VIEWS_DIR)
+            except Exception as exc:
+                raise_if_unwritable(exc, out_dir)
+                report.notes.append(f"renders failed: {exc}")
+            log.lap("extras_render")
+        try:
+            paths = evaluate.evaluate_refined(out_dir, report, recording=recording, reference=reference, recorded=att.check.recorded,
+                                              views=views, views_state=report.initial_joint_positions,
+                                              checks=list(report.metrics) if recording is not None else None,
+                                              shown=shown, clips=clips, html=media)
+            if media:
+                out["html"] = str(paths["report"])
+            if media and clips and (out_dir / CLIPS_DIR / CLIPS_JSON).is_file():
+                out["clips"] = str(out_dir / CLIPS_DIR)
+            ev = Evaluation.model_validate_json(atomic.read_regular(paths["evaluation"], output_folder.MAX_RECORD_BYTES))
+            combine_verdict(report, ev.metrics)  # report.json says what report.html says
+            asked = [m for m in ev.metrics if m.name == "request_met"]  # and names the unmet phrases the verdict read
+            report.metrics = [m for m in report.metrics if m.name != "request_met" or not asked] + asked
+        except Exception as exc:
+            raise_if_unwritable(exc, out_dir)
+            report.notes.append(f"HTML report failed: {exc}\n{traceback.format_exc(limit=3)}")
+        log.lap("extras_report" if media else "extras_evaluation")
+    report.media = "done" if media else "deferred"
+    if not media:
+        report.notes.append(f"{media_phase.DEFERRED_NOTE} (views/, clips/, report.html): `asset2sim report {shown}` makes them")
+    report.stage_seconds = log.times
+    write_report_json(out_dir, report)
+    return out

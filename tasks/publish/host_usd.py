@@ -1,0 +1,328 @@
+"""The refined object written back into its own OpenUSD stage, to drop into its host in place of the original.
+
+A USD input is opened again (:func:`asset2sim.tasks.ingest.usd_stage.open_stage`, the trust rules of the reader)
+and read again (:func:`asset2sim.tasks.ingest.usd_reader.read_usd_asset`: each link's rigid-body prim and frame,
+each joint's prim). The refined physics of ``mobility.urdf``, ``overlay.json`` and ``initial_state.json`` is
+authored on the stage's session layer, in the stage's own units (``metersPerUnit``, ``kilogramsPerUnit``, degrees
+for angles and angular gains, as UsdPhysics writes them; the inverse of the reader's conversions):
+
+- each link's body: ``physics:mass``, ``physics:centerOfMass`` (body-local), ``physics:diagonalInertia`` and
+  ``physics:principalAxes`` (the refined tensor in the body's axes, diagonalised); an authored
+  ``physics:density`` is set to 0 so that no density contradicts the explicit mass;
+- each revolute and prismatic joint: ``physics:lowerLimit`` / ``physics:upperLimit`` where the joint had limits,
+  ``PhysicsDriveAPI:angular`` / ``:linear`` damping, stiffness and ``targetPosition`` (the refined spring and its
+  reference; a drive of stiffness 0 is added where the joint had none), the Coulomb friction in
+  ``asset2sim:friction`` and ``newton:friction`` (torque or force in stage units), and the refined initial state
+  in ``state:<angular|linear>:physics:position`` (``PhysicsJointStateAPI``, as PhysX and Isaac Sim read it) and
+  ``newton:<angular|linear>:position``.
+
+Prim paths, geometry, materials, transforms and every other attribute stay. Three files are written in
+``usd/host/``:
+
+- ``<input file name>`` (a ``.usdz`` input: ``<stem>.usd``): the stage flattened with the refined physics, one
+  self-contained layer with the input's prim paths, to put in place of the input file (its relative asset paths,
+  a texture, resolve from where the input was);
+- ``<stem>.physics.usda``: the changes alone, ``over`` specs at the input's prim paths, a layer to put above the
+  input in a layer stack (``subLayers = [@<stem>.physics.usda@, @<input>@]``) where the input file stays as it is;
+- ``<stem>.diff``: one line per changed attribute, ``<prim path>.<attribute>: <old> -> <new>`` (``None``: it was not
+  authored), and the API schemas applied.
+
+A refine that rescaled the object writes no such files: the host's geometry would no longer match the physics.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from asset2sim import atomic, file_names
+from asset2sim.engines.loading import read_initial_state
+from asset2sim.frames import matrix_quat_wxyz, quat_wxyz_matrix, rigid_inverse
+from asset2sim.openusd import pxr_modules
+from asset2sim.output_folder import OVERLAY_NAME, URDF_NAME, USD_DIR
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.tasks.ingest import usd_reader
+from asset2sim.tasks.ingest.usd_reader import DEG, FRICTION_ATTRS
+from asset2sim.tasks.ingest.usd_stage import StageReading, open_stage
+from asset2sim.urdf import read_urdf
+
+__all__ = ["HOST_DIR", "HostUsdError", "HostUsdExport", "UsdEdit", "applied_schemas", "set_body_mass", "set_joint_dynamics", "write_host_usd"]
+
+#: Folder (inside the output's ``usd/``) of the files written for the host.
+HOST_DIR = "host"
+#: Relative tolerance of the check that the written stage holds the refined values (binary32 attributes).
+VALUE_RTOL = 1e-5
+#: A value within this difference (relative to its magnitude) of the one the stage holds is left as it is: a value
+#: read in, converted to SI and back, agrees to a few binary32 roundings.
+SAME_RTOL = 1e-6
+
+
+class HostUsdError(RuntimeError):
+    """The host stage cannot be written (names the input and why)."""
+
+
+@dataclass(frozen=True)
+class HostUsdExport:
+    """What :func:`write_host_usd` wrote, inside the output folder: ``path`` the flattened stage, ``layer`` the
+    changes alone, ``diff`` their listing; ``prims`` the prim paths whose physics changed; ``changes`` how many
+    attributes."""
+
+    path: Path
+    layer: Path
+    diff: Path
+    prims: tuple[str, ...]
+    changes: int
+
+
+@dataclass
+class UsdEdit:
+    """Attributes authored on a stage, each with the value the stage held before: ``changes`` (prim path,
+    attribute, old or None, new), ``schemas`` (prim path, API schema) applied where the prim lacked it."""
+
+    changes: list[tuple[str, str, object, object]] = field(default_factory=list)
+    schemas: list[tuple[str, str]] = field(default_factory=list)
+
+    def set(self, prim, name: str, type_name, value) -> None:
+        """Author ``name`` (of Sdf type ``type_name``, used when the attribute does not exist) on ``prim``."""
+        attr = prim.GetAttribute(name)
+        old = attr.Get() if attr and attr.HasValue() else None
+        if old is not None and same(old, value):
+            return  # the stage holds it already (to the attribute's binary32 precision)
+        if not attr:
+            attr = prim.CreateAttribute(name, type_name, custom=name.startswith(("asset2sim:",)))
+        attr.Set(value)
+        self.changes.append((str(prim.GetPath()), name, old, attr.Get()))
+
+    def apply(self, prim, schema: str) -> None:
+        """Apply the API schema ``schema`` (``PhysicsMassAPI``, ``PhysicsDriveAPI:angular``) unless it is."""
+        if schema not in applied_schemas(prim):
+            prim.AddAppliedSchema(schema)
+            self.schemas.append((str(prim.GetPath()), schema))
+
+    def lines(self) -> list[str]:
+        """The edit as text: ``<path>: apiSchemas += <schema>``, then ``<path>.<attribute>: <old> -> <new>``."""
+        out = [f"{path}: apiSchemas += {schema}" for path, schema in self.schemas]
+        return out + [f"{path}.{name}: {_text(old)} -> {_text(new)}" for path, name, old, new in self.changes]
+
+
+def applied_schemas(prim) -> list[str]:
+    """The API schemas applied to ``prim`` as its ``apiSchemas`` metadata lists them, registered or not
+    (``PhysicsJointStateAPI`` is PhysX's, which usd-core does not register)."""
+    op = prim.GetMetadata("apiSchemas")
+    return list(op.ApplyOperations([])) if op is not None else []
+
+
+def same(a, b) -> bool:
+    """Whether two values (numbers, vectors, quaternions) agree to :data:`SAME_RTOL` of the larger magnitude (a
+    vector's tiny components, 1e-17 beside 0.03, count as equal)."""
+    x, y = _numbers(a), _numbers(b)
+    if x.shape != y.shape:
+        return False
+    scale = max(float(np.abs(x).max(initial=0.0)), float(np.abs(y).max(initial=0.0)))
+    return bool(np.allclose(x, y, rtol=0.0, atol=SAME_RTOL * scale))
+
+
+def _numbers(value) -> np.ndarray:
+    """A number, vector or quaternion (w, x, y, z) as an array."""
+    if hasattr(value, "GetReal"):
+        return np.array([value.GetReal(), *value.GetImaginary()], float)
+    return np.atleast_1d(np.asarray(value, float))
+
+
+def _text(value) -> str:
+    """A value as the diff writes it (floats to 9 significant digits, vectors and quaternions as tuples)."""
+    if value is None:
+        return "None"
+    if isinstance(value, float):
+        return f"{value:.9g}"
+    if hasattr(value, "GetReal"):
+        return "(" + ", ".join(f"{float(v):.9g}" for v in (value.GetReal(), *value.GetImaginary())) + ")"
+    if hasattr(value, "__len__") and not isinstance(value, str):
+        return "(" + ", ".join(_text(float(v)) for v in value) + ")"
+    return str(value)
+
+
+def _principal(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(principal moments (3,), rotation (3, 3) with det +1 whose columns are the principal axes) of a tensor; a
+    tensor diagonal in the body's axes keeps them (identity)."""
+    tensor = 0.5 * (tensor + tensor.T)
+    off = tensor - np.diag(np.diag(tensor))
+    if np.abs(off).max() <= 1e-12 * max(np.abs(tensor).max(), 1e-300):
+        return np.diag(tensor).copy(), np.eye(3)
+    d, q = np.linalg.eigh(0.5 * (tensor + tensor.T))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return d, q
+
+
+def _authored_tensor(body) -> np.ndarray:
+    """The inertia tensor (3, 3, body axes, stage units) ``body``'s diagonal inertia and principal axes give; NaN
+    where no diagonal inertia is authored."""
+    diag = body.GetAttribute("physics:diagonalInertia")
+    if not (diag and diag.HasAuthoredValue()):
+        return np.full((3, 3), np.nan)
+    axes = body.GetAttribute("physics:principalAxes")
+    q = axes.Get() if axes and axes.HasValue() else None
+    r = np.eye(3) if q is None else quat_wxyz_matrix(_numbers(q) / max(float(np.linalg.norm(_numbers(q))), 1e-300))
+    return r @ np.diag(np.asarray(diag.Get(), float)) @ r.T
+
+
+def set_body_mass(edit: UsdEdit, ctx: StageReading, body, link_frame: np.ndarray, world: np.ndarray, mass: float,
+                  com: np.ndarray, inertia: np.ndarray) -> None:
+    """Author a link's ``mass`` kg, ``com`` (3,) m and ``inertia`` (3, 3) kg*m^2 about the COM, both in the link
+    frame ``link_frame`` (4, 4, world, m, Z up), on its rigid-body prim ``body`` whose local-to-world is ``world``
+    (4, 4, body-local stage units -> m, Z up), in the stage's units (``ctx.m`` m and ``ctx.kg`` kg per unit)."""
+    Gf, Sdf, _, _, _, _ = pxr_modules()
+    to_link = rigid_inverse(link_frame) @ world  # body-local (stage units) -> link frame (m)
+    a = to_link[:3, :3] / ctx.m  # body axes -> link axes
+    tensor = a.T @ np.asarray(inertia, float) @ a / (ctx.kg * ctx.m ** 2)
+    d, q = _principal(tensor)
+    local = (np.linalg.inv(to_link) @ np.append(np.asarray(com, float), 1.0))[:3]
+    edit.apply(body, "PhysicsMassAPI")
+    edit.set(body, "physics:mass", Sdf.ValueTypeNames.Float, float(mass / ctx.kg))
+    edit.set(body, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*(float(v) for v in local)))
+    if not same(_authored_tensor(body), tensor):  # the moments and axes together: one tensor has many of them
+        edit.set(body, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*(float(v) for v in d)))
+        w, x, y, z = (float(v) for v in matrix_quat_wxyz(q))
+        edit.set(body, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(w, x, y, z))
+    density = body.GetAttribute("physics:density")
+    if density and density.HasAuthoredValue() and density.Get():
+        edit.set(body, "physics:density", Sdf.ValueTypeNames.Float, 0.0)  # an explicit mass wins; no density contradicts it
+
+
+def set_joint_dynamics(edit: UsdEdit, ctx: StageReading, prim, damping: float, friction: float,
+                       stiffness: float | None = None, reference: float | None = None) -> None:
+    """Author a revolute or prismatic joint's ``damping`` (N*m*s/rad or N*s/m) on its drive and its Coulomb
+    ``friction`` (N*m or N) in :data:`~asset2sim.tasks.ingest.usd_reader.FRICTION_ATTRS` (the first always, the
+    others where authored), in stage units (angular gains per degree); with ``stiffness`` (N*m/rad or N/m) the
+    drive's stiffness and its ``targetPosition`` ``reference`` (rad or m). A drive of stiffness 0 is added where
+    the joint had none."""
+    _, Sdf, _, _, _, UsdPhysics = pxr_modules()
+    rot = prim.IsA(UsdPhysics.RevoluteJoint)
+    dof = "angular" if rot else "linear"
+    gain = ctx.kg * ctx.m ** 2 * DEG if rot else ctx.kg  # the reader's: stage gain -> SI
+    force = ctx.kg * ctx.m * (ctx.m if rot else 1.0)
+    had_drive = prim.HasAPI(UsdPhysics.DriveAPI, dof)
+    edit.apply(prim, f"PhysicsDriveAPI:{dof}")
+    drive = f"drive:{dof}:physics:"
+    if not had_drive:
+        edit.set(prim, drive + "stiffness", Sdf.ValueTypeNames.Float, 0.0)
+    edit.set(prim, drive + "damping", Sdf.ValueTypeNames.Float, float(damping / gain))
+    if stiffness is not None:
+        edit.set(prim, drive + "stiffness", Sdf.ValueTypeNames.Float, float(stiffness / gain))
+        if stiffness > 0 and reference is not None:
+            edit.set(prim, drive + "targetPosition", Sdf.ValueTypeNames.Float,
+                     float(reference * (DEG if rot else 1.0 / ctx.m)))
+    for i, name in enumerate(FRICTION_ATTRS):
+        if i == 0 or prim.GetAttribute(name).HasAuthoredValue():
+            edit.set(prim, name, Sdf.ValueTypeNames.Float, float(friction / force))
+
+
+def write_host_usd(out_dir: Path | str, source: Path | str) -> HostUsdExport:
+    """Write the refined output in ``out_dir`` back into the USD stage ``source`` it was refined from.
+
+    Args:
+        out_dir: a refined output folder (``mobility.urdf``, ``overlay.json``, ``initial_state.json``).
+        source: the USD file the refine read (only read; its layers opened under the reader's trust rules).
+
+    Returns:
+        :class:`HostUsdExport`: ``usd/host/<source name>``, ``<stem>.physics.usda`` and ``<stem>.diff``, inside
+        ``out_dir``.
+
+    Raises:
+        ImportError: usd-core is not installed.
+        StagingError: the stage cannot be opened or read again.
+        HostUsdError: the output was rescaled; a refined link or joint has no prim in the stage; the written
+            stage loses a prim path or does not hold a refined value.
+    """
+    _, Sdf, _, Usd, _, UsdPhysics = pxr_modules()
+    out_dir, source = Path(out_dir), Path(source)
+    overlay = Overlay.model_validate_json((out_dir / OVERLAY_NAME).read_text())
+    if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
+        raise HostUsdError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host stage keeps the host's sizes, "
+                           "so none is written (refine without --size / --scale / size words to keep the size)")
+    model = read_urdf(out_dir / URDF_NAME)
+    state = read_initial_state(out_dir)
+    read = usd_reader.read_usd_asset(source)
+    ctx = open_stage(source)
+    stage = ctx.stage
+    before = _prim_paths(stage, Usd)
+    stage.SetEditTarget(Usd.EditTarget(stage.GetSessionLayer()))
+    edit = UsdEdit()
+    for name, link in model.links.items():
+        if link.inertial is None or not link.inertial.mass:
+            continue
+        if name not in read.prims:
+            raise HostUsdError(f"{source}: link {name!r} of the refined {URDF_NAME} has no rigid body in the stage")
+        body = stage.GetPrimAtPath(read.prims[name])
+        origin = np.asarray(link.inertial.origin if link.inertial.origin is not None else np.eye(4), float)
+        tensor = origin[:3, :3] @ np.asarray(link.inertial.inertia, float) @ origin[:3, :3].T
+        set_body_mass(edit, ctx, body, read.frames[name], ctx.world(body), float(link.inertial.mass), origin[:3, 3], tensor)
+    for j in model.movable_joints:
+        if j.name not in read.prims:
+            raise HostUsdError(f"{source}: joint {j.name!r} of the refined {URDF_NAME} has no joint prim in the stage")
+        prim = stage.GetPrimAtPath(read.prims[j.name])
+        rot = prim.IsA(UsdPhysics.RevoluteJoint)
+        unit = DEG if rot else 1.0 / ctx.m  # rad -> degrees, m -> stage units
+        dyn = overlay.joints.get(j.name)
+        set_joint_dynamics(edit, ctx, prim, float(j.dynamics.damping or 0.0) if j.dynamics else 0.0,
+                           float(j.dynamics.friction or 0.0) if j.dynamics else 0.0,
+                           None if dyn is None else float(dyn.stiffness), None if dyn is None else dyn.spring_reference)
+        if j.type != "continuous" and j.limit is not None and j.limit.lower is not None and j.limit.upper is not None:
+            edit.set(prim, "physics:lowerLimit", Sdf.ValueTypeNames.Float, float(j.limit.lower * unit))
+            edit.set(prim, "physics:upperLimit", Sdf.ValueTypeNames.Float, float(j.limit.upper * unit))
+        dof = "angular" if rot else "linear"
+        position = float(state.get(j.name, 0.0) * unit)
+        edit.apply(prim, f"PhysicsJointStateAPI:{dof}")
+        edit.set(prim, f"state:{dof}:physics:position", Sdf.ValueTypeNames.Float, position)
+        edit.set(prim, f"state:{dof}:physics:velocity", Sdf.ValueTypeNames.Float, 0.0)
+        edit.set(prim, f"newton:{dof}:position", Sdf.ValueTypeNames.Float, position)
+    folder = out_dir / USD_DIR / HOST_DIR
+    stem = file_names.file_stem(source.stem)
+    name = f"{stem}.usd" if source.suffix.lower() == ".usdz" else file_names.file_stem(source.name)
+    path = file_names.join_inside(folder, name)
+    flat = stage.Flatten()
+    _write_layer(flat, path)
+    layer = file_names.join_inside(folder, f"{stem}.physics.usda")
+    atomic.write_text(layer, stage.GetSessionLayer().ExportToString())
+    _check(source, path, before, edit, Usd)
+    diff = file_names.join_inside(folder, f"{stem}.diff")
+    atomic.write_text(diff, "".join(line + "\n" for line in edit.lines()))
+    prims = tuple(dict.fromkeys(p for p, *_ in edit.changes))
+    return HostUsdExport(path=path, layer=layer, diff=diff, prims=prims, changes=len(edit.changes))
+
+
+def _prim_paths(stage, Usd) -> list[str]:
+    """Every prim path of a stage (instance proxies included), sorted."""
+    return sorted(str(p.GetPath()) for p in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)))
+
+
+def _write_layer(layer, path: Path) -> None:
+    """``layer`` written atomically at ``path`` in the format its suffix names (``.usdc`` binary, else text)."""
+    if path.suffix.lower() == ".usdc":
+        with tempfile.TemporaryDirectory() as tmp:
+            scratch = Path(tmp) / path.name
+            if not layer.Export(str(scratch)):
+                raise HostUsdError(f"{path}: the stage could not be exported")
+            atomic.write_bytes(path, scratch.read_bytes())
+    else:
+        atomic.write_text(path, layer.ExportToString())
+
+
+def _check(source: Path, path: Path, before: list[str], edit: UsdEdit, Usd) -> None:
+    """The written stage has the input's prim paths and holds every authored value."""
+    written = Usd.Stage.Open(str(path))
+    if written is None:
+        raise HostUsdError(f"{path}: the written stage does not open")
+    after = _prim_paths(written, Usd)
+    if after != before:
+        lost, added = sorted(set(before) - set(after)), sorted(set(after) - set(before))
+        raise HostUsdError(f"{source}: the host stage changes prim paths (lost {lost[:5]}, added {added[:5]})")
+    for prim_path, name, _, new in edit.changes:
+        got = written.GetPrimAtPath(prim_path).GetAttribute(name).Get()
+        if got is None or not np.allclose(_numbers(got), _numbers(new), rtol=VALUE_RTOL, atol=0.0):
+            raise HostUsdError(f"{path}: {prim_path}.{name} reads {got}, not the refined {new}")

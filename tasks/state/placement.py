@@ -1,0 +1,169 @@
+"""Stages 5-6 of the refine on the written candidate: the synthesis as a value (:class:`Synthesis`), the closed
+ends measured on the output and the requested state placed on them (:func:`closed_on_output`), the joint limits
+clipped to the geometry (:func:`clip_limits`, :func:`clip_synthesis`), the collision pieces that let the object
+shut (:func:`shut_repair`) and the state search (:func:`search_state`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from asset2sim.engines.base import SessionOptions
+from asset2sim.engines.registry import open_session
+from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.overlay import Overlay
+from asset2sim.schemas.report import StateRefinement
+from asset2sim.schemas.request import BAND_INTERVAL
+from asset2sim.stage_log import StageLog
+from asset2sim.tasks.assemble import (collision_geometry, container_pieces, footprint, parent_child_separation,
+                                      sliding_clearance, write)
+from asset2sim.tasks.assemble.candidate import Candidate, Workspace
+from asset2sim.tasks.geometry import limits, urdf_closed
+from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
+from asset2sim.tasks.state import state_search
+from asset2sim.tasks.synthesize import estimate, request_apply
+from asset2sim.tasks.synthesize.context import EstimationContext
+
+
+@dataclass
+class Synthesis:
+    """Stage 4's result: the validated overlay and the state it asks for."""
+
+    overlay: Overlay
+    issues: list
+    bands: dict[str, str]
+    prismatic: set[str]
+    closed_out: dict[str, ClosedState]  # at the overlay's scale
+    requested: dict[str, float]  # joint positions, output units
+    targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)  # numbers / ends the request asked
+
+
+def scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
+    """Closed ends at ``scale`` (prismatic positions and ranges times ``scale``)."""
+    return {n: replace(cs, q_closed=cs.q_closed * scale, open_range=cs.open_range * scale, lower=cs.lower * scale,
+                       upper=cs.upper * scale) if n in prismatic else cs for n, cs in closed.items()}
+
+
+def at_fractions(closed: dict[str, ClosedState], fractions: dict[str, float]) -> dict[str, float]:
+    """Joint -> position (rad or m) at each opening fraction (joints without a closed state left out)."""
+    return {n: closed[n].position(f) for n, f in fractions.items() if n in closed}
+
+
+def closed_on_output(ctx: EstimationContext, syn: Synthesis, urdf: Path, ws: Workspace, log: StageLog,
+                      overrides: dict | None = None) -> Synthesis:
+    """Stage 5a: the closed ends measured on the written output (:mod:`asset2sim.tasks.geometry.urdf_closed`),
+    the requested state and the overlay's initial positions moved onto them and the candidate loaded again
+    (with the collision ``overrides``). Unchanged when the measurement fails."""
+    try:
+        measured = urdf_closed.measure_closed(ws.model())
+    except Exception as exc:
+        log.say("closed_state", f"closed ends not measured on the output ({type(exc).__name__}: {exc}); the input's are used")
+        return syn
+    new = {n: measured.get(n, c) for n, c in syn.closed_out.items()}
+    moved = [n for n, c in new.items() if abs(c.q_closed - syn.closed_out[n].q_closed) > 1e-9 or c.direction != syn.closed_out[n].direction]
+    if not moved:
+        return replace(syn, closed_out=new)
+    keep = {n for n, t in syn.targets.items() if t.kind in ("angle", "distance")}
+    requested = urdf_closed.replace_positions(syn.requested, syn.closed_out, new, keep)
+    overlay = syn.overlay
+    if overlay.initial_joint_positions:
+        overlay = overlay.model_copy(update={"initial_joint_positions": urdf_closed.replace_positions(
+            overlay.initial_joint_positions, syn.closed_out, new, keep)})
+    for n in moved:
+        log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
+                                f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
+    ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
+    targets = request_apply.retarget(syn.targets, syn.closed_out, new)  # the angle asked, from the new closed end
+    bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
+    return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=targets, bands=bands)
+
+
+def clip_synthesis(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, log: StageLog,
+                    overrides: dict | None = None, fractions: dict[str, float] | None = None) -> Synthesis:
+    """Stage 5b: the limits clipped to the geometry before the state search, the requested state
+    recomputed from the bands over the clipped ranges (``fractions`` win over the bands' targets) and the
+    candidate loaded again (with the collision ``overrides``). ``syn`` itself when nothing was clipped."""
+    overlay, closed_out = clip_limits(syn.overlay, syn.closed_out, syn.requested, ws, config, log)
+    if overlay is syn.overlay:
+        return syn
+    s = overlay.scale
+    targets = request_apply.retarget(syn.targets, syn.closed_out, closed_out)  # an angle asked stays that angle from the closed end
+    moved = {n: t for n, t in targets.items() if t is not syn.targets[n]}
+    bands = {**syn.bands, **{n: t.band for n, t in moved.items()}}
+    if moved and overlay.initial_joint_positions:
+        overlay = overlay.model_copy(update={"initial_joint_positions": {
+            **overlay.initial_joint_positions, **{n: closed_out[n].position(t.fraction) for n, t in moved.items()}}})
+    unscaled = scaled_closed(closed_out, 1.0 / s, syn.prismatic)
+    requested = estimate.state_from_bands(unscaled, bands, s, syn.prismatic)
+    requested.update(overlay.initial_joint_positions or {})
+    requested.update(at_fractions(closed_out, fractions or {}))
+    ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
+    return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested, targets=targets, bands=bands)
+
+
+def shut_repair(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache,
+                 log: StageLog) -> tuple[dict, list[str]]:
+    """Stage 5 (before 5a): collision pieces that let the object shut. When the request opens a joint and the
+    closed configuration overlaps beyond the tolerance, the state search with its collision repair runs as for
+    a closed request. Returns (collision overrides, notes for ``state.collision_changes``); ({}, []) when not run."""
+    closed = {n: c.q_closed for n, c in syn.closed_out.items()}
+    opened = [n for n, c in syn.closed_out.items()
+              if abs(c.fraction(syn.requested.get(n, c.q_closed))) > BAND_INTERVAL["closed"][1]]
+    if not (config.convex_decomposition and opened and state_search.phi_at(urdf, closed, config) > config.penetration_tolerance):
+        return {}, []
+    ws.load(Candidate(ctx.asset, syn.overlay, closed, {}, ctx.root_rotation))
+    shut, overrides = state_search.refine_state_with_decomposition(
+        ctx.asset, syn.overlay, syn.closed_out, {n: "closed" for n in syn.closed_out}, closed, urdf, ctx.root_rotation,
+        config, ws, cache, log.say)
+    ws.load(Candidate(ctx.asset, syn.overlay, syn.requested, overrides, ctx.root_rotation))
+    head = (f"closed configuration (the request opens {', '.join(opened)}): Phi {shut.phi_requested * 1000:.3g} -> "
+            f"{shut.phi_result * 1000:.3g} mm" + ("" if overrides else "; collision pieces kept"))
+    log.say("shut_repair", head)
+    log.lap("shut_repair")
+    return overrides, [head + (":" if shut.collision_changes else "")] + list(shut.collision_changes)
+
+
+def search_state(ctx: EstimationContext, est, syn: Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: StageLog,
+                  base: dict | None = None) -> tuple[StateRefinement, dict]:
+    """Stage 6: state refinement on the written asset (with the estimator's joint proposer when it has
+    one); ``base``: the collision overrides written. Returns (refinement, collision overrides)."""
+    proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
+    st, overrides = state_search.refine_state_with_decomposition(
+        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, ws, cache, log.say, proposer=proposer,
+        intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
+        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed, base=base)
+    log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
+    log.lap("refine_state")
+    return st, overrides
+
+
+def clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, ws: Workspace) -> list[str]:
+    """The writer's clearance notes for the output as written with ``overlay``, ``state`` and
+    ``overrides`` (cached pieces: nothing recomputed, no file changes)."""
+    notes: list[str] = []
+    write.build_urdf(ctx.asset, overlay, overrides, ctx.root_rotation, (ws.root, state), notes, ws.open_containers)
+    return clearance_lines(notes)
+
+
+def clearance_lines(notes: list[str]) -> list[str]:
+    """The writer's collision notes on running clearance, a levelled footprint, pieces thinner than their part,
+    a child kept inside its parent past a stop and containers kept open."""
+    return [n for n in notes if any(w in n for w in (sliding_clearance.RUNNING_CLEARANCE_NOTE, footprint.LEVEL_NOTE,
+                                                     collision_geometry.DENSITY_NOTE, parent_child_separation.PAST_STOP_NOTE,
+                                                     container_pieces.CAVITY_NOTE))]
+
+
+def clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], ws: Workspace, config: RefineConfig,
+                 log: StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
+    """Stage 6b: joint limits clipped to what the geometry allows at ``state`` (:mod:`asset2sim.tasks.geometry.limits`;
+    with a carrying chain, also against the chain opened). Returns (overlay, closed ends)."""
+    with open_session("pybullet", ws.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
+                                                       conventions=config.sim)) as sess:
+        clips = limits.geometric_limits(sess, ws.model(), closed_tuples(closed_out), state)
+    if any(c.clipped for c in clips.values()):
+        overlay, notes = limits.apply_clips(overlay, clips)
+        for line in notes:
+            log.say("limits", line)
+        closed_out = limits.clipped_closed(closed_out, clips)
+    log.lap("limits")
+    return overlay, closed_out
