@@ -21,18 +21,19 @@ setup: $(PY)  ## install asset2sim with every extra into .venv (the exact versio
 demo: ## refine the built-in demo asset (no data needed)
 	$(VENV)/bin/asset2sim demo --out out/demo
 
-test: ## the test suite CI runs (slow end-to-end runs excluded)
-	$(PY) -m pytest -m "not slow" -q
+TEST_WORKERS ?= 2
+test: ## the fast tiers: unit and integration tests (end-to-end tests, marked slow, left out) on TEST_WORKERS processes
+	$(PY) -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
 
-test-all: ## every test, slow ones included
+test-all: ## the whole suite, every tier (what CI runs)
 	$(PY) -m pytest -q
 
 LOWER_VENV ?= .venv-lower
-test-lower: ## the test suite with the lowest versions pyproject.toml allows (constraints/lower.txt), in .venv-lower
+test-lower: ## the fast tiers with the lowest versions pyproject.toml allows (constraints/lower.txt), in .venv-lower
 	$(PYTHON) -m venv $(LOWER_VENV)
 	$(LOWER_VENV)/bin/python -m pip install --quiet --upgrade pip setuptools wheel
 	$(LOWER_VENV)/bin/python -m pip install --quiet -e ".[all]" -c constraints/lower.txt
-	$(LOWER_VENV)/bin/python -m pytest -m "not slow" -q
+	$(LOWER_VENV)/bin/python -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
 
 check-install: ## build the wheel and install it beside ManiSkill, robosuite and torch in fresh environments (long; network)
 	$(PY) benchmarks/check_install.py

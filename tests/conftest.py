@@ -1,15 +1,19 @@
 """Shared fixtures: the dev dataset location and generated demo assets; the
-test-only "fake" engine registered (:mod:`tests.fake_engine`)."""
+session's shared refines (``refine_once``, :class:`tests.helpers.RefineFactory`);
+the test-only "fake" engine registered (:mod:`tests.fake_engine`); tests that
+use the shared refines marked ``integration``."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
 from asset2sim.engines.base import register_engine
 from tests.fake_engine import FakeSession
+from tests.helpers import RefineFactory, Refined
 
 register_engine("fake", FakeSession)  # every test of the process can open_session("fake", ...)
 
@@ -34,3 +38,35 @@ def demo_root(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("demo")
     demo_assets.build_demo_dataset(root)
     return root
+
+
+@pytest.fixture(scope="session")
+def refine_factory(tmp_path_factory) -> Iterator[RefineFactory]:
+    """The session's :class:`~tests.helpers.RefineFactory` (module-scoped fixtures use it directly); at the end of the
+    session every shared output and input is checked unchanged."""
+    factory = RefineFactory(tmp_path_factory.mktemp("shared_refines"))
+    yield factory
+    factory.assert_all_untouched()
+
+
+@pytest.fixture()
+def refine_once(refine_factory) -> Iterator[Callable[..., Refined]]:
+    """``refine_once(asset, prompt, config=None, **options)``: the session's one refine of that asset, request and
+    options (:class:`~tests.helpers.RefineFactory`), its output folder read-only; after the test each folder handed
+    out is checked unchanged (a test that changes an output works on ``Refined.copy_to``)."""
+    handed: list[Refined] = []
+
+    def get(asset, prompt: str, config=None, **options) -> Refined:
+        handed.append(refine_factory(asset, prompt, config, **options))
+        return handed[-1]
+
+    yield get
+    for r in handed:
+        refine_factory.assert_untouched(r)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests on the shared refines are the ``integration`` tier (``-m "not slow and not integration"``: the unit tests)."""
+    for item in items:
+        if {"refine_once", "refine_factory"} & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.integration)

@@ -256,6 +256,7 @@ def test_command_help_cites_no_spec():
             assert (ROOT / link).is_file(), link
 
 
+@pytest.mark.slow  # end to end: every documented command, through the command line
 @pytest.mark.parametrize("doc", DOCUMENTS, ids=lambda p: p.name)
 def test_document_commands_and_snippets_run(doc, tmp_path):
     text = doc.read_text()

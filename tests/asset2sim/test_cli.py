@@ -28,6 +28,7 @@ def run(*args, timeout=600):
     return subprocess.run([sys.executable, "-m", "asset2sim", *args], capture_output=True, text=True, timeout=timeout, env=env)
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_demo_runs_without_data(tmp_path):
     out = tmp_path / "demo"
     p = run("demo", "--out", str(out), "--no-extras")
@@ -46,6 +47,7 @@ def test_demo_runs_without_data(tmp_path):
     assert "task PASS, force PASS" in p.stdout
 
 
+@pytest.mark.slow  # end to end: the command line
 @needs_shared
 def test_refine_command_prints_summary_and_writes_contract(tmp_path):
     out = tmp_path / "stapler"
@@ -62,6 +64,7 @@ def test_refine_command_prints_summary_and_writes_contract(tmp_path):
     assert ("interaction-ready" if mode == "none" else f"FAILED: {mode}") in p.stdout
 
 
+@pytest.mark.slow  # end to end: the command line
 @needs_shared
 def test_a_request_not_met_exits_3_and_prints_the_phrase(tmp_path, capsys):
     """As asked: "its drawer open" on a stapler (no drawer) is not applied; refine exits 3 (NOT_READY), names

@@ -5,9 +5,13 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from asset2sim import demo_assets
 from asset2sim.flows.tracking import _artifact_dir, asset_artifacts
 from asset2sim.tasks.refine import refine_asset
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 
 def test_the_artifacts_hold_every_file_the_report_names(tmp_path):

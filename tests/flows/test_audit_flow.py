@@ -11,6 +11,8 @@ import pytest
 from asset2sim.flows import audit_catalog
 from tests.planted_assets import storage_box, write_mjcf, write_planted_folder
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 pytest.importorskip("mujoco")
 
 

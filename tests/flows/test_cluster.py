@@ -20,6 +20,8 @@ except ImportError:
 
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 try:
     from . import flowfakes  # type: ignore[no-redef]
     from .cluster import check_exactly_once, kill_one_worker_when, start_cluster, tally

@@ -8,9 +8,12 @@ from __future__ import annotations
 import os
 
 import pandas as pd
+import pytest
 
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows import driver_skip
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 try:
     from . import flowfakes  # type: ignore[no-redef]

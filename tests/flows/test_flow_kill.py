@@ -20,6 +20,8 @@ import pytest
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.output_folder import MARKER_NAME
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 try:
     from . import flowfakes  # type: ignore[no-redef]
     from .flowproject import FAKE_REFINE, make_project

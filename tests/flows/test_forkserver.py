@@ -9,8 +9,11 @@ import signal
 import time
 
 import psutil
+import pytest
 
 from asset2sim.flows.forkserver import StageServer
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 try:
     from . import test_isolation as iso  # type: ignore[no-redef]

@@ -9,6 +9,8 @@ import pytest
 
 from asset2sim.flows.isolation import call_target, import_target, run_isolated
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 
 class Boom(RuntimeError):
     failure_mode = "invalid_overlay"

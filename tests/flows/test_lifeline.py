@@ -21,7 +21,7 @@ try:
 except ImportError:
     import flowfakes  # type: ignore[no-redef]
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux's")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux's")]  # end to end: the flows (Prefect, Dask, stage processes)
 
 
 def _env() -> dict[str, str]:

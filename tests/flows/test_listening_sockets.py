@@ -16,6 +16,8 @@ import urllib.request
 import psutil
 import pytest
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 try:
     from .flowproject import make_project
 except ImportError:

@@ -11,6 +11,8 @@ import pytest
 
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 try:
     from .flowproject import make_project
 except ImportError:

@@ -6,10 +6,13 @@ to failing and ``results.regression.fail_flow`` is on; the same run with
 
 from __future__ import annotations
 
+import pytest
 import yaml
 
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flows.stages import flow_parameters
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 try:
     from . import test_regression_flow as rf  # type: ignore[no-redef]

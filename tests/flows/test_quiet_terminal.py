@@ -9,12 +9,16 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 try:  # package layout or rootdir-on-sys.path layout
     from .flowproject import make_project  # type: ignore[no-redef]
 except ImportError:
     from flowproject import make_project  # type: ignore[no-redef]
 from asset2sim.cli import QUIET_LIBRARY_LOGS
 from asset2sim.engines.quiet import STARTUP_MESSAGES
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 #: Lines of the libraries (any of them fails the test).
 THIRD_PARTY = re.compile(r"\| (DEBUG|INFO) +\||\bINFO (mlflow|alembic)|distributed\.|Flow run '|Task run '|pybullet build time|"

@@ -8,6 +8,8 @@ import pytest
 from asset2sim.flows.realism_tracking import log_realism_scores, metric_key
 from asset2sim.schemas.realism import MethodScore
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 
 def _scores():
     return [MethodScore(source="people", method="asset2sim", strength=0.7, ci_low=0.1, ci_high=1.3, elo=1121.6,

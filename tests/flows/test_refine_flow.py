@@ -11,9 +11,13 @@ from pathlib import Path
 import pytest
 
 from asset2sim.flows.catalog import ROW_COLUMNS, ResultCatalog, load_catalog
+from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
-from tests.helpers import catalog_reader_counts
+from asset2sim.tasks.publish.contract import read_report_json
+from tests.helpers import assert_ready_or_honestly_not_robust, catalog_reader_counts
+
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 try:
     from . import flowfakes  # type: ignore[no-redef]
@@ -276,7 +280,13 @@ def test_flow_with_the_real_refine_pipeline_on_demo_assets(tmp_path, prefect_ser
     for aid in ("box_lid", "laptop"):
         r = rows[aid]
         assert r["status"] == "done", r["error"]
-        assert r["failure_mode"] == "none", r
+        if aid == "box_lid":
+            assert r["failure_mode"] == "none", r
+        else:  # the laptop's slightly open screen: held at what a hand overcomes, which robust rest may say moves
+            # (as tests/tasks/test_refine.py::test_demo_objects_refine_to_interaction_ready accepts)
+            out = Path(r["out_dir"])
+            assert_ready_or_honestly_not_robust(read_report_json(out), Overlay.model_validate_json((out / "overlay.json").read_text()))
+            assert r["failure_mode"] in ("none", "not_robust_at_rest"), r
         assert r["rest_stable"] and r["oscillation_pass"]
         assert 0 < r["scale"] < 1 and r["total_mass_kg"] > 0
         report = json.loads((Path(r["out_dir"]) / "report.json").read_text())

@@ -16,6 +16,8 @@ import yaml
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.tasks.publish import contract
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 try:
     from . import regressfakes  # type: ignore[no-redef]
     from .flowproject import make_project, write_manifest

@@ -25,6 +25,8 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.verdict import readiness
 from asset2sim.flows.job_records import JOB_RECORD_NAME
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 try:
     from . import flowfakes  # type: ignore[no-redef]
     from .flowproject import CALLS_PATH, make_project, write_manifest

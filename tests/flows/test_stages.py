@@ -19,6 +19,8 @@ from asset2sim.tasks.ingest import extract
 from asset2sim.flows.job_records import Prepared
 from tests.helpers import rest_tests_of_refine
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
+
 
 def _job(root, tmp_path, extras: bool, asset_id: str = "box_lid") -> AssetJob:
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == asset_id)

@@ -20,6 +20,7 @@ from asset2sim.tasks.publish.contract import is_complete
 from asset2sim.output_folder import MARKER_NAME
 from tests.helpers import download_folder, local_s3_server
 
+pytestmark = pytest.mark.slow  # end to end: the flows (Prefect, Dask, stage processes)
 
 BUCKET = "a2s-flow"
 

@@ -189,6 +189,7 @@ def _kill_runs(tmp_path: Path, n_kills: int, seed: int) -> None:
         assert tree_hashes(a) == before[k]
 
 
+@pytest.mark.slow  # end to end: the command line killed and rerun
 def test_refine_killed_at_random_moments(tmp_path):
     _kill_runs(tmp_path, n_kills=4, seed=5)
 

@@ -61,10 +61,10 @@ def check_output_contract(out, report):
 
 
 @pytest.mark.parametrize("entry", demo_assets.DEMO_OBJECTS, ids=lambda e: e.asset_id)
-def test_demo_objects_refine_to_interaction_ready(entry, demo_root, tmp_path):
-    src = demo_root / entry.asset_id
-    before = tree_hashes(src)
-    res = refine_asset(src, entry.prompt, tmp_path / "out", extras=False)
+def test_demo_objects_refine_to_interaction_ready(entry, demo_root, refine_once):
+    before = tree_hashes(demo_root / entry.asset_id)  # the object as built
+    res = refine_once(entry.asset_id, entry.prompt, extras=False)
+    src = res.src
     r = res.report
     check_output_contract(res.out_dir, r)
     assert tree_hashes(src) == before
@@ -220,11 +220,11 @@ def test_a_request_naming_a_part_the_object_lacks_ends_request_not_met(tmp_path)
 
 
 @needs_shared
-def test_an_angle_asked_is_met_from_the_closed_end_when_the_limits_are_clipped(tmp_path):
+def test_an_angle_asked_is_met_from_the_closed_end_when_the_limits_are_clipped(refine_once):
     """The suitcase 101668 lying flat: its lid's range is clipped to the geometry (180 -> about 119 degrees) after the
     30 degrees were resolved; the lid still stands 30 degrees from its closed end (it was left at 20.8, the 1/6 of
     the range the first resolution gave), and the as-asked tier passes."""
-    r = refine_asset(SHARED / "101668", "a carry-on suitcase lying flat with the lid open 30 degrees", tmp_path / "o", extras=False).report
+    r = refine_once(SHARED / "101668", "a carry-on suitcase lying flat with the lid open 30 degrees", extras=False).report
     (q,) = [q for q in r.request.quantities if q.kind == "state"]
     assert q.unit == "rad" and q.achieved == pytest.approx(math.radians(30), rel=0.05) and q.within_tolerance
     j = q.what.split()[0]
@@ -310,15 +310,17 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
     assert _metrics_without_timing(_jsonable(fresh.model_dump(mode="json"))) == _metrics_without_timing(written)
 
 
-def test_refine_takes_an_already_extracted_asset(demo_root, tmp_path, monkeypatch):
+def test_refine_takes_an_already_extracted_asset(refine_once, tmp_path, monkeypatch):
     """``extracted=`` (what the flow's prepare stage read) is used as it is: no
     second reading, and the same report as a run that reads the asset itself."""
     from asset2sim.tasks.ingest import extract
 
     entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "laptop")
-    src = demo_root / entry.asset_id
+    shared = refine_once(entry.asset_id, entry.prompt, extras=False)  # a run that read the asset itself
+    src = shared.src
+    assert src.name == "laptop"  # so its asset id is the one handed below
     asset, findings = extract.extract_asset_checked(src, asset_id="laptop")
-    read_here = refine_asset(src, entry.prompt, tmp_path / "a", asset_id="laptop", extras=False).report
+    read_here = shared.report
 
     def no_reading(*a, **k):
         raise AssertionError("the asset was read again")

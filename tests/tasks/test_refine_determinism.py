@@ -10,6 +10,8 @@ import json
 import re
 from pathlib import Path
 
+import pytest
+
 from asset2sim import demo_assets
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.refine import MARKER_NAME, refine_asset
@@ -48,6 +50,7 @@ def _contents(out: Path) -> dict[str, object]:
     return res
 
 
+@pytest.mark.slow  # end to end: refines with every extra, cold and warm caches
 def test_refine_files_do_not_depend_on_the_cache_state(tmp_path, monkeypatch):
     box = demo_assets.build_box_with_lid(tmp_path / "in" / "box")
     other = cb.build_valid(tmp_path / "in" / "other")

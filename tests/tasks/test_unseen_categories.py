@@ -52,6 +52,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow  # end to end: a sweep of generated objects, every extra
 @pytest.mark.parametrize("build, category, prompt, joint, band", CASES, ids=[c[1] for c in CASES])
 def test_an_unseen_category_is_interaction_ready(tmp_path, build, category, prompt, joint, band):
     src = build(tmp_path / "src")

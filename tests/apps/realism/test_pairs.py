@@ -104,6 +104,7 @@ def test_a_pair_holds_the_visuals_fixed_and_only_the_physics_differs(setting, re
     assert "box_lid" not in json.dumps([c.video for c in pair.a.clips + pair.b.clips])  # folders by number only
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_pairs_command_writes_a_pair_set_of_refined_outputs(refined, tmp_path):
     out = tmp_path / "pairs"
     cmd = [sys.executable, "-m", "asset2sim", "pairs", str(refined), "--out", str(out), "--defects", "mass_x100,slamming_spring"]
@@ -122,6 +123,7 @@ def test_pairs_command_writes_a_pair_set_of_refined_outputs(refined, tmp_path):
     assert none.returncode == 1 and "PAIRS_INPUT_INVALID" in none.stderr + none.stdout
 
 
+@pytest.mark.slow  # end to end: two refines through the command line
 def test_pairs_over_two_refines_of_one_object_get_distinct_ids_that_rate_accepts(refined, tmp_path):
     runs = [tmp_path / run / "box_lid" for run in ("monday", "tuesday")]
     for run in runs:  # two refines of the same object: the same clips for the same planted defect
@@ -142,6 +144,7 @@ def test_pairs_over_two_refines_of_one_object_get_distinct_ids_that_rate_accepts
     assert [p.pair_id for p in read_pair_set(again).pairs] == ids  # deterministic
 
 
+@pytest.mark.slow  # end to end: dev objects through the benchmark and the pairs
 @needs_shared
 def test_a_benchmark_folder_gives_asset2sim_against_each_other_method(tmp_path):
     from asset2sim.apps.benchmark.benchmark import run_benchmark

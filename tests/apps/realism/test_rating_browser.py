@@ -23,6 +23,8 @@ from asset2sim.apps.realism.ratings import left_slot, read_pair_set, side
 from tests.helpers import free_port
 from tests.realism_fixtures import write_pair_set
 
+pytestmark = pytest.mark.slow  # end to end: the browser
+
 #: The scripted raters' preference, best first: the side whose method comes first is chosen.
 PREFERENCE = ("asset2sim", "human", "direct", "defaults")
 

@@ -25,6 +25,8 @@ from tests import fake_openai_server as fake  # noqa: E402
 from tests import realism_judge_fixtures as fx  # noqa: E402
 from tests.helpers import assert_ready_or_honestly_not_robust  # noqa: E402
 
+pytestmark = pytest.mark.slow  # end to end: refined demo objects through the pairs, the judge and the ratings
+
 OBJECTS = {"cabinet_2drawer": "A small two-drawer cabinet with both drawers closed.",
            "microwave": "A microwave with its door closed."}
 

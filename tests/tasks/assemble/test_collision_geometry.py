@@ -813,6 +813,7 @@ def test_newly_inside_matches_the_full_measure_at_the_threshold():
     assert cp._newly_inside(np.array([[0.025, 0.01, 0.01]]), np.array([True]), (a, b), thr)  # the gap: newly held
 
 
+@pytest.mark.slow  # end to end: a real object's whole decomposition
 @needs_shared
 def test_drop_slivers_on_a_real_object_equals_the_full_plane_test():
     """On the pieces of laptop 9912's parts and of toilet 102703's, their cut halves and duplicates (every piece

@@ -12,18 +12,17 @@ from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.evaluation import eval_context
 from asset2sim.tasks.evaluation.engine_run import run_engine
 from asset2sim.tasks.assemble import write
-from asset2sim.tasks.refine import refine_asset
 from tests.tasks.check.failure_assets import build_tall_faucet
 
 
-@pytest.fixture(scope="module")
-def faucet(tmp_path_factory):
-    return build_tall_faucet(tmp_path_factory.mktemp("faucet") / "tall_faucet")
+@pytest.fixture()
+def mounted(refine_once):
+    return refine_once(build_tall_faucet, "A faucet.", extras=True)
 
 
-@pytest.fixture(scope="module")
-def mounted(faucet, tmp_path_factory):
-    return refine_asset(faucet, "A faucet.", tmp_path_factory.mktemp("m") / "out", extras=True)
+@pytest.fixture()
+def free_standing(refine_once):
+    return refine_once(build_tall_faucet, "A free-standing faucet.", extras=False)
 
 
 def test_mounted_fixture_passes_every_check_with_a_fixed_root(mounted):
@@ -62,8 +61,8 @@ def test_evaluation_runs_with_the_root_as_declared(mounted):
     assert float(abs(run.root_series).max()) == pytest.approx(0.0, abs=1e-9)  # held at the file's origin
 
 
-def test_the_same_fixture_tips_when_free_standing(faucet, tmp_path):
-    res = refine_asset(faucet, "A free-standing faucet.", tmp_path / "free", extras=False)
+def test_the_same_fixture_tips_when_free_standing(free_standing):
+    res = free_standing
     r = res.report
     assert r.mounting is not None and not r.mounting.fixed
     assert r.failure_mode == "unstable"
@@ -83,14 +82,14 @@ def test_post_check_follows_the_overlay_root(mounted):
     assert not fixed.recording.matches("pybullet", out / "mobility.urdf", state, fixed.recording.springs, RefineConfig().sim, False)
 
 
-def test_mjcf_check_refuses_a_free_joint_on_a_mounted_asset(faucet, tmp_path):
+def test_mjcf_check_refuses_a_free_joint_on_a_mounted_asset(free_standing, tmp_path):
     pytest.importorskip("mujoco")
     from asset2sim.tasks.assemble.export_mjcf import ExportError, check_mjcf, export_mjcf
 
-    free = refine_asset(faucet, "A free-standing faucet.", tmp_path / "free", extras=False)
-    xml = export_mjcf(free.out_dir)
+    out = free_standing.copy_to(tmp_path / "free")  # the export writes into the folder
+    xml = export_mjcf(out)
     assert "freejoint" in xml.read_text() or 'type="free"' in xml.read_text()
-    state = json.loads((free.out_dir / "initial_state.json").read_text())["initial_joint_positions"]
-    check_mjcf(xml, free.out_dir / "mobility.urdf", state)  # free asset: fine
+    state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
+    check_mjcf(xml, out / "mobility.urdf", state)  # free asset: fine
     with pytest.raises(ExportError, match="free joint"):
-        check_mjcf(xml, free.out_dir / "mobility.urdf", state, fixed_base=True)
+        check_mjcf(xml, out / "mobility.urdf", state, fixed_base=True)

@@ -25,12 +25,11 @@ from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.refine import refine_asset
 
 
-@pytest.fixture(scope="module")
-def laptop(tmp_path_factory):
-    src = demo_assets.build_laptop(tmp_path_factory.mktemp("src") / "laptop")
-    out = tmp_path_factory.mktemp("out") / "laptop"
-    res = refine_asset(src, "I want a slightly open laptop. Low damping for smooth operation.", out, extras=False)
-    return src, out, res
+@pytest.fixture()
+def laptop(refine_once):
+    """The demo laptop refined for its demo request (the session's refine)."""
+    res = refine_once("laptop", "I want a slightly open laptop. Low damping for smooth operation.", extras=False)
+    return res.src, res.out, res
 
 
 def test_push_lever_is_the_far_corner_and_the_cap_leaves_the_probe_a_margin(laptop):

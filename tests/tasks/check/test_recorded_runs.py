@@ -60,10 +60,10 @@ def _closed(out):
             for j in read_urdf(out / "mobility.urdf").movable_joints}
 
 
-@pytest.fixture(scope="module")
-def faucet_out(tmp_path_factory):
-    src = build_tall_faucet(tmp_path_factory.mktemp("faucet") / "tall_faucet")
-    return refine_asset(src, "A faucet.", tmp_path_factory.mktemp("out") / "out", extras=False)
+@pytest.fixture()
+def faucet_out(refine_once):
+    """The tall faucet refined (the session's refine that tests/tasks/check/test_mounted_root.py reads too)."""
+    return refine_once(build_tall_faucet, "A faucet.", extras=True)
 
 
 def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(faucet_out):

@@ -92,6 +92,7 @@ def _check_clip_folder(out, sweeps: int, tasks: int = 0) -> ClipSet:
     return clip_set
 
 
+@pytest.mark.slow  # end to end: a dev object refined twice with every extra
 @needs_shared
 def test_refine_writes_clips_that_the_report_plays_and_the_catalog_lists(tmp_path):
     row = next(r for r in csv.DictReader(open(SHARED / "manifest.csv")) if r["id"] == "100221")

@@ -83,6 +83,7 @@ def test_an_asset_written_but_not_ready_exits_3_and_every_output_agrees(tmp_path
     ("102703", "A very small toilet with its lid fully open.", "close the toilet lid", ["joint_2"], "part label 'lid' in semantics.txt"),
     ("103275", "I want a slightly open stapler.", "press the stapler", ["joint_1"], "whole object: every task-relevant joint"),
 ])
+@pytest.mark.slow  # end to end: dev objects refined and evaluated
 def test_the_post_check_and_the_outputs_evaluation_operate_the_same_joints(obj, prompt, task, joints, rule, tmp_path):
     """One verdict without the input beside the output: the output carries
     the input's part labels (semantics.txt) and its evaluation picks the

@@ -20,6 +20,15 @@ TIME_LIMIT_S = 5.0
 HANG_LIMIT_S = 30
 
 
+#: Cases whose files are 1-2 GB (sparse) to write and read: the end-to-end tier.
+HUGE = {"files_meta_1gb_sparse", "texture_2gb_sparse"}
+
+
+def _tiered(cases) -> list:
+    """``cases`` as parameters named by the case, the ``HUGE`` ones marked slow."""
+    return [pytest.param(c, id=c.name, marks=[pytest.mark.slow] if c.name in HUGE else []) for c in cases]
+
+
 def _no_hang(seconds: int):
     """:func:`tests.helpers.no_hang`."""
     return no_hang(seconds)
@@ -28,6 +37,7 @@ def _no_hang(seconds: int):
 def test_corpus_size_and_coverage():
     assert len(cb.CASES) >= 60
     assert len(cb.CASES_BY_NAME) == len(cb.CASES), "case names must be unique"
+    assert HUGE <= set(cb.CASES_BY_NAME), "a case marked slow is gone"
     topics = collections.Counter(c.topic for c in cb.CASES)
     for topic in ("xml", "structure", "numbers", "inertials", "mesh_paths", "mesh_contents"):
         assert topics[topic] >= 5, topics
@@ -39,7 +49,7 @@ def test_base_asset_is_valid(tmp_path):
     assert not vi.has_errors(vi.validate_asset(cb.build_valid(tmp_path / "a")))
 
 
-@pytest.mark.parametrize("case", cb.CASES, ids=[c.name for c in cb.CASES])
+@pytest.mark.parametrize("case", _tiered(cb.CASES))
 def test_case_gets_its_code(case, tmp_path):
     asset = case.build(tmp_path / "asset")
     policy = vi.ValidationPolicy(**(case.policy or {}))
@@ -80,7 +90,7 @@ def test_case_gets_its_code(case, tmp_path):
 AGREEMENT = [c for c in cb.CASES if c.topic == "refine_agreement" and not c.policy]
 
 
-@pytest.mark.parametrize("case", AGREEMENT, ids=[c.name for c in AGREEMENT])
+@pytest.mark.parametrize("case", _tiered(AGREEMENT))
 def test_refine_refuses_with_one_line_and_status_1(case, tmp_path, capsys):
     """What validate refuses, ``asset2sim refine`` refuses the same way: exit
     status 1, one line per problem (the first naming the case's code), no

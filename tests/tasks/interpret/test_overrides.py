@@ -127,6 +127,7 @@ def _cli(*args, cwd=None) -> subprocess.CompletedProcess:
     return subprocess.run([str(BIN / "asset2sim"), "refine", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_the_command_line_and_a_config_file(demo_root, tmp_path):
     box = demo_root / "box_lid"
     cfg = tmp_path / "refine.yaml"

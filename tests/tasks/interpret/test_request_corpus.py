@@ -103,6 +103,7 @@ def test_hand_written_entries_cover_every_phenomenon():
     assert all(e.get("phenomena") for e in WITH_APPLY)
 
 
+@pytest.mark.slow  # end to end: the request corpus refined on dev objects
 @needs_shared
 def test_hand_written_entries_apply_to_the_right_joints(tmp_path_factory) -> None:
     """Every entry with an ``apply`` expectation: the request resolved on its object names the joints and amounts

@@ -213,10 +213,10 @@ def test_the_evaluation_resolves_the_same_words_as_refine():
 
 
 @needs_shared
-def test_the_summary_prints_the_amount_from_the_closed_end_beside_what_was_asked(tmp_path):
+def test_the_summary_prints_the_amount_from_the_closed_end_beside_what_was_asked(refine_once):
     """One refine of a suitcase lying flat, the lid asked 30 degrees: the summary's state line says "30.0 deg from
     closed (asked 30 deg)" for the lid, with its label."""
-    res = refine_asset(SHARED / "101668", "a carry-on suitcase lying flat with the lid open 30 degrees", tmp_path / "out", extras=False)
+    res = refine_once(SHARED / "101668", "a carry-on suitcase lying flat with the lid open 30 degrees", extras=False).result
     (line,) = [ln for ln in summary_lines(res) if ln.startswith("initial state")]
     (lid,) = [part for part in line.split(", joint_") if "(lid)" in part]
     assert "30.0 deg from closed (asked 30 deg)" in lid and "% open" in line

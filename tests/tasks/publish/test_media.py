@@ -98,6 +98,7 @@ def test_report_command_and_its_errors(deferred, tmp_path):
     assert "html" in again.stdout and json.loads((out / REPORT_NAME).read_text())["media"] == "done"
 
 
+@pytest.mark.slow  # end to end: a flow run
 def test_the_flow_defers_media_to_its_media_phase(tmp_path):
     """``run.extras: deferred``: the refine stage writes no media and the run's media phase makes them in a child
     process; a folder whose media are made already is left alone."""

@@ -320,6 +320,7 @@ REAL = [
 ]
 
 
+@pytest.mark.slow  # end to end: the command line on dev objects
 @pytest.mark.skipif(not SHARED.is_dir(), reason=f"dev dataset not found at {SHARED}")
 def test_cli_refine_real_objects_in_process(server, tmp_path, capsys):
     """``asset2sim refine ... --estimator openai`` (the CLI entry point, in this

@@ -52,6 +52,7 @@ def test_a_part_word_the_object_lacks_moves_no_other_part(asset_id, category, wo
     assert any(f"'{word}'" in w and "not applied" in w for w in res.warnings), res.warnings
 
 
+@pytest.mark.slow  # end to end: dev objects refined with every extra
 @needs_shared
 def test_the_part_named_wins_and_the_unknown_one_is_reported_everywhere(tmp_path):
     """The laptop request of the issue, in both orders: the screen stays half
@@ -76,6 +77,7 @@ def test_the_part_named_wins_and_the_unknown_one_is_reported_everywhere(tmp_path
         assert any("drawer" in w for w in json.loads(col))
 
 
+@pytest.mark.slow  # end to end: a dev object refined with every extra
 @needs_shared
 def test_a_request_not_understood_is_not_aligned(tmp_path):
     res = refine_asset(SHARED / "9912", "make it look nice for my robot demo", tmp_path / "out")
