@@ -25,8 +25,8 @@ TEST_WORKERS ?= 2
 test: ## the fast tiers: unit and integration tests (end-to-end tests, marked slow, left out) on TEST_WORKERS processes
 	$(PY) -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
 
-test-all: ## the whole suite, every tier (what CI runs)
-	$(PY) -m pytest -q
+test-all: ## the whole suite, every tier (what CI runs), on TEST_WORKERS processes
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 LOWER_VENV ?= .venv-lower
 test-lower: ## the fast tiers with the lowest versions pyproject.toml allows (constraints/lower.txt), in .venv-lower
