@@ -137,6 +137,7 @@ def _steps(path: Path) -> tuple[list[dict], list[str]]:
     shared = str(SHARED_FOLDER)
     steps, skipped = [], []
     bin_dir = Path(sys.executable).parent
+    continues_skipped = False  # a block without imports of its own goes on from the one before it
     for block in _blocks(path):
         kind = RUN_LANGUAGES.get(block["language"])
         if kind is None or block["not_run"] is not None:
@@ -147,7 +148,12 @@ def _steps(path: Path) -> tuple[list[dict], list[str]]:
             module = _first_module(code)
             if module is not None and importlib.util.find_spec(module) is None:
                 skipped.append(f"{where} ({module} not installed)")
+                continues_skipped = True
                 continue
+            if module is None and continues_skipped:
+                skipped.append(f"{where} (goes on from a block skipped above)")
+                continue
+            continues_skipped = False
             steps.append({"kind": "python", "code": code, "where": where})
             continue
         for line in _commands(code):
@@ -226,11 +232,16 @@ def test_every_block_is_tagged_and_few_are_not_run():
 
 
 def test_documented_options_exist():
-    """Every ``--option`` the user documents name is one of asset2sim's (or of pip, dask, mlflow)."""
+    """Every ``--option`` the user documents name is one of asset2sim's (or of pip, dask, mlflow), or one of a
+    benchmark script the documents name (``benchmarks/bench_learnability.py --framework maniskill``)."""
     from asset2sim.cli import build_parser
 
     parser = build_parser()
     known = set(FOREIGN_OPTIONS)
+    texts = " ".join(doc.read_text() for doc in DOCUMENTS)
+    for script in sorted(set(re.findall(r"benchmarks/(\w+\.py)", texts))):
+        if (ROOT / "benchmarks" / script).is_file():
+            known.update(re.findall(r"add_argument\(\s*\"(--[a-z][a-z-]*)\"", (ROOT / "benchmarks" / script).read_text()))
     for action in parser._actions:
         known.update(action.option_strings)
         for sub in getattr(action, "choices", None) or {}:
