@@ -33,12 +33,6 @@ ROOT = Path(__file__).resolve().parents[3]
 MESSAGES = [{"role": "user", "content": "which is more realistic?"}]
 
 
-@pytest.fixture(autouse=True)
-def no_keys(monkeypatch):
-    for k in ("OPENAI_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY", "ANTHROPIC_API_KEY"):
-        monkeypatch.delenv(k, raising=False)
-
-
 @pytest.fixture(scope="module", autouse=True)
 def warm_litellm():
     """One plain call first, so litellm's first-call set-up is not counted against a test's deadline."""

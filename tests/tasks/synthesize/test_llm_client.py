@@ -38,18 +38,6 @@ def messages(tag: str = "") -> list[dict]:
     ]
 
 
-@pytest.fixture
-def server():
-    with fake.FakeOpenAIServer(lifetime_s=120) as srv:
-        yield srv
-
-
-@pytest.fixture(autouse=True)
-def no_keys(monkeypatch):
-    for k in ("OPENAI_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY", "ANTHROPIC_API_KEY"):
-        monkeypatch.delenv(k, raising=False)
-
-
 class Sleeps(list):
     """A sleep function that records the waits and really sleeps them."""
 

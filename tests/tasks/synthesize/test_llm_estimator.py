@@ -58,12 +58,6 @@ def llm_env(monkeypatch, tmp_path):
 
 
 @pytest.fixture
-def server():
-    with fake.FakeOpenAIServer(lifetime_s=300) as srv:
-        yield srv
-
-
-@pytest.fixture
 def plate(tmp_path) -> Path:
     return write_hinged_plate(tmp_path / "plate")
 

@@ -31,18 +31,6 @@ DEV = Path(__file__).resolve().parents[4] / "shared" / "datasets" / "partnet_mob
 FRIDGE = "a fridge with the freezer door open 90 degrees and the main door closed"
 
 
-@pytest.fixture
-def server():
-    with fake.FakeOpenAIServer(lifetime_s=120) as srv:
-        yield srv
-
-
-@pytest.fixture(autouse=True)
-def no_keys(monkeypatch):
-    for k in ("OPENAI_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY", "ANTHROPIC_API_KEY"):
-        monkeypatch.delenv(k, raising=False)
-
-
 def client(server, tmp_path, **kw) -> lc.LLMClient:
     cfg = dict(model="openai/m", base_url=server.url, timeout_s=5.0, max_attempts=1, cache_dir=tmp_path / "cache")
     cfg.update(kw)
