@@ -157,8 +157,12 @@ def _judge_joints(ctx: EstimationContext, dp: DeclaredPhysics, labels: dict[str,
         if k > 0:
             ref = float(j.reference or 0.0)
             ends = [v for v in (j.lower, j.upper) if v is not None]
-            travel = max((abs(v - ref) for v in ends), default=0.0)
-            out.append(bands.stiffness_verdict(where, k, travel, operable, _unit(j, "stiffness")))
+            far = max(ends, key=lambda v: abs(v - ref), default=ref)
+            travel = abs(far - ref)
+            weight = physics.joint_loads(ctx.session, ctx.asset, links, {**state, name: far}, 1.0,
+                                         {name: ctx.subtrees[name]})[name].gravity_load
+            carried = abs(weight) if weight * (ref - far) < 0 else 0.0  # the spring pulls against the weight there
+            out.append(bands.stiffness_verdict(where, k, travel, operable, _unit(j, "stiffness"), carried))
         out.append(bands.limits_verdict(where, j.type, j.lower, j.upper, largest))
         c = damping if damp_v.verdict == "plausible" else (c_est if k > 0 else e.damping)
         f = friction if fric_v.verdict == "plausible" else e.friction

@@ -235,15 +235,19 @@ def friction_verdict(where: str, declared: float | None, estimate: float, operab
     return _band_verdict(where, "friction", unit, declared, estimate, None, high, what)
 
 
-def stiffness_verdict(where: str, declared: float, travel: float, operable: float | None, unit: str) -> ValueVerdict:
+def stiffness_verdict(where: str, declared: float, travel: float, operable: float | None, unit: str,
+                      carried: float = 0.0) -> ValueVerdict:
     """A joint spring: implausible when its force over the ``travel`` (rad or m: the farthest point of the range
-    from the spring's reference) exceeds :data:`FRICTION_TOLERANCE` x ``operable`` (a hand's force or torque)."""
+    from the spring's reference), less the part's weight it ``carried`` there (N or N*m along the travel, >= 0: a
+    window's sash balance, an oven door's counterbalance), exceeds :data:`FRICTION_TOLERANCE` x ``operable`` (a
+    hand's force or torque): k <= (3 operable + carried) / travel."""
     if operable is None or travel <= 0:
         return ValueVerdict(where=where, quantity="stiffness", unit=unit, declared=declared, verdict="plausible",
                             reason="no operating force known to compare with")
-    high = FRICTION_TOLERANCE * operable / travel
-    return _band_verdict(where, "stiffness", unit, declared, operable / travel, None, high,
-                         f"a hand's {operable:.3g} over {travel:.3g} of travel from the spring's reference")
+    high = (FRICTION_TOLERANCE * operable + max(carried, 0.0)) / travel
+    return _band_verdict(where, "stiffness", unit, declared, (operable + max(carried, 0.0)) / travel, None, high,
+                         f"a hand's {operable:.3g} over {travel:.3g} of travel from the spring's reference"
+                         + (f", with the {carried:.3g} of the part's weight it carries there" if carried > 0 else ""))
 
 
 def limits_verdict(where: str, kind: str, lower: float | None, upper: float | None, largest: float) -> ValueVerdict:

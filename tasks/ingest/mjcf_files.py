@@ -35,6 +35,7 @@ from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
+from asset2sim.tasks.ingest import host_conventions
 from asset2sim.tasks.ingest.staged import StagingError, input_tree
 
 __all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
@@ -181,8 +182,11 @@ def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_by
     """Check and read the MJCF file at ``path`` and every file it names (module docstring); nothing else is opened.
 
     Args:
-        path: the ``<mujoco>`` file. tree: the folder its references must stay in (default:
-            :func:`~asset2sim.tasks.ingest.staged.input_tree`, the file's folder).
+        path: the ``<mujoco>`` file. tree: the folder its references must stay in (default: its package's asset
+            folder for a file of a known package, :func:`~asset2sim.tasks.ingest.host_conventions.package_tree`, so
+            Meta-World's ``../scene`` includes read; else :func:`~asset2sim.tasks.ingest.staged.input_tree`, the
+            file's folder). Every reader of the file (extraction, the audit's patch, the host write-back) so reads
+            the same files.
         max_file_bytes: cap per file, bytes. max_total_bytes: cap over all files, bytes.
         limits: the XML parser's caps for the model file and its includes.
 
@@ -190,6 +194,8 @@ def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_by
         StagingError: with ``code`` (module docstring), naming the file and the reference.
     """
     path = Path(os.path.abspath(str(path)))
+    if tree is None:
+        tree = host_conventions.package_tree(path)
     root = Path(os.path.abspath(str(tree))) if tree is not None else input_tree(path)
     return _Gather(path, root, max_file_bytes, max_total_bytes, limits).run()
 

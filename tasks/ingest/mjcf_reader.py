@@ -85,8 +85,8 @@ def read_mjcf_asset(path: Path | str, options: ReadOptions | None = None) -> Rea
     """
     path = Path(path)
     options = options or ReadOptions()
+    sources = gather_mjcf(path)  # first: every file it names checked before anything reads it
     tree = host_conventions.package_tree(path)
-    sources = gather_mjcf(path, tree=tree)  # first: every file it names checked before anything reads it
     convention = host_conventions.mjcf_angle(path, options.mjcf_angle)
     spec, m, warned = compile_mjcf(sources, degree=convention.unit == "degree")
     mujoco = load_mujoco()

@@ -181,18 +181,26 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
         UnsafePath: an included file's path would leave ``folder``.
     """
     host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
-    hosted = {b.get("name"): b for b in host.iter("body") if b.get("name") in inertials}
-    sources = gather_mjcf(source, tree=host_conventions.package_tree(source))  # the tree the reader read it in
+    labels = {id(b): b.get("name") or f"body_{i}" for i, b in enumerate(host.iter("body"), start=1)}  # mjcf_scene.label
+    keys: dict[tuple, list[str]] = {}
+    for b in host.iter("body"):
+        keys.setdefault(_body_key(b), []).append(labels[id(b)])
+    hosted = {labels[id(b)]: b for b in host.iter("body") if labels[id(b)] in inertials}
+    sources = gather_mjcf(source)  # the files the reader read, in the tree it read them in
     out, diffs = [], []
     for name, data in sorted(sources.files.items()):
         if Path(name).suffix.lower() not in MJCF_SUFFIXES:  # meshes and textures
             continue
         root = safexml.parse_xml_bytes(data, source=name)
-        found = [b for b in root.iter("body") if b.get("name") in hosted or b.get("name") in joints]
+        found = []
+        for body in root.iter("body"):
+            match = keys.get(_body_key(body), [])
+            if len(match) == 1 and (match[0] in hosted or match[0] in joints):  # one body of the host file is this one
+                found.append((body, match[0]))
         if not found:
             continue
-        for body in found:
-            _copy_physics(hosted.get(body.get("name")), body, joints.get(body.get("name"), []))
+        for body, label in found:
+            _copy_physics(hosted.get(label), body, joints.get(label, []))
         if not Path(name).is_relative_to(sources.tree):  # a file --allow-outside-paths let in: no place to mirror it
             continue
         rel = Path(name).relative_to(sources.tree).as_posix()
@@ -209,6 +217,16 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
     if out:
         atomic.write_bytes(folder.parent / FILES_DIFF, "".join(diffs).encode("utf-8"))
     return out
+
+
+def _body_key(body) -> tuple:
+    """What identifies a ``<body>`` element in a package's file and in the host file written from it: its name; an
+    unnamed body (Meta-World's window sash) by the names of its own joints and the keys of its child bodies, so the
+    same subtree in both files has the same key."""
+    if body.get("name"):
+        return ("name", body.get("name"))
+    return ("subtree", tuple(j.get("name") or "" for j in body.findall("joint")),
+            tuple(_body_key(c) for c in body.findall("body")))
 
 
 def _joint_physics(joint, limited: bool) -> dict[str, str]:

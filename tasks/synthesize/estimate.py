@@ -188,6 +188,11 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             if counter is not None:
                 spring, hold, why = counter
                 note = f"{source}; {why}"
+        elif name in prismatic and not ch.free_moving and _label(ctx, name) in BALANCE_LABELS:
+            bal = balance(loads[name], cs, unit)
+            if bal is not None:
+                spring, hold, why = bal
+                note = f"{source}; {why}"
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note)
         latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
@@ -334,6 +339,48 @@ def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state:
     hold = max(abs(load(f) * cs.direction - k * f * cs.open_range) for f in fractions)
     why = (f"counterbalance spring of a door opening downward (door-balance springs of ranges and dishwashers): "
            f"k = {k:.4g} N m/rad at rest closed balances the {open_loads[-1]:.3g} N m weight moment fully open")
+    return (float(k), float(q_s)), float(hold), why
+
+
+#: Parts on a vertical slide that ride on a balance (canonical labels): a hung window's sash (coil "constant
+#: force" balances, block-and-tackle and spiral balances, or sash weights on cords, each sized to the sash's weight:
+#: Swisco, "How to choose the appropriate coil balance strength"; Nationwide Windows glossary, "Sash balance") and a
+#: vertical-lift door (the counterbalance springs of overhead and lift-up doors).
+BALANCE_LABELS = frozenset({"window", "door"})
+#: Least share of a part's weight along its travel for it to ride on a balance: a travel within 60 deg of vertical.
+BALANCE_MIN_SHARE = 0.5
+#: Variation of a balance's force over the travel, +- share of the part's weight: constant-load supports hold their
+#: set load within +-6 % over their whole travel (MSS SP-58, pipe hangers and supports). A constant-force spring's
+#: near-constant pull comes from a long, preloaded travel (a coiled steel tape), so the balance is the linear spring
+#: whose reference lies far beyond the part's travel and whose force changes by this share from end to end.
+BALANCE_VARIATION = 0.06
+
+
+def balance(load: physics.JointLoad, cs: ClosedState, unit: float) -> tuple[tuple[float, float], float, str] | None:
+    """The balance of a part on a vertical slide (:data:`BALANCE_LABELS`): a sash balance of a hung window, a
+    lift-up door's counterbalance. Its pull equals the part's weight along the travel at mid-travel and varies
+    by +- :data:`BALANCE_VARIATION` of it from end to end: k = 2 v |F_g| / R (N/m, R the travel in m) about the
+    reference q_s = q_mid - F_g / k (m, beyond the travel: the preload of a constant-force spring), so friction
+    holds only the imbalance v |F_g| at the ends.
+
+    Args:
+        load: the joint's loads at the initial state (output units; ``gravity_load`` F_g N along the axis).
+        cs: the joint's closed end (input units); ``unit``: the scale s that turns them into metres.
+
+    Returns:
+        ((k N/m, q_s m), hold load N, note), or None when the weight along the travel is under
+        :data:`BALANCE_MIN_SHARE` of the part's weight or the joint has no travel.
+    """
+    weight = load.mass * physics.G
+    travel = cs.open_range * unit
+    if not (travel > 0 and weight > 0 and abs(load.gravity_load) >= BALANCE_MIN_SHARE * weight):
+        return None
+    k = 2.0 * BALANCE_VARIATION * abs(load.gravity_load) / travel
+    q_s = cs.position(0.5) * unit - load.gravity_load / k
+    hold = BALANCE_VARIATION * abs(load.gravity_load)
+    why = (f"balance of a part on a vertical slide (sash balances of hung windows, counterbalances of lift-up doors): "
+           f"k = {k:.4g} N/m about {q_s:.4g} m carries the {abs(load.gravity_load):.3g} N weight at mid-travel, "
+           f"+-{BALANCE_VARIATION:.0%} from end to end")
     return (float(k), float(q_s)), float(hold), why
 
 

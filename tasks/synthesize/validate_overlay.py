@@ -13,7 +13,8 @@
 - ``OVL_COM_OUTSIDE``: COM farther than 10 % of the diagonal outside the box.
 - ``OVL_JOINT_MISSING``: filled by :func:`conservative_dynamics`.
 - ``OVL_DYNAMICS_NEGATIVE``: damping, friction or stiffness < 0 or not finite (error).
-- ``OVL_SPRING_REFERENCE``: stiffness > 0 without a reference inside the limits.
+- ``OVL_SPRING_REFERENCE``: stiffness > 0 without a reference within ``SPRING_REFERENCE_REACH``
+  ranges of the limits (a preloaded balance's reference lies beyond the travel).
 - ``OVL_STATE_UNKNOWN_JOINT`` / ``OVL_STATE_OUT_OF_LIMITS``: dropped / projected
   onto the limits (prismatic in output units, input limits x scale).
 """
@@ -71,6 +72,11 @@ MAX_DENSITY_FACTOR = 1.25
 #: Densest any link may be without a known material, kg/m^3 (brass, the densest material of ``materials.yaml``,
 #: x :data:`MAX_DENSITY_FACTOR`).
 MAX_DENSITY = 8500.0 * MAX_DENSITY_FACTOR
+
+#: Farthest a spring's reference may lie outside its joint's limits, in ranges of the joint (dimensionless): a
+#: preloaded balance (a window's constant-force sash balance, ``estimate.balance``) refers to a position about
+#: 1 / (2 x 0.06) = 8.3 ranges from mid-travel; a reference farther out is a unit or sign error.
+SPRING_REFERENCE_REACH = 10.0
 
 
 def max_density(lp: LinkPhysics) -> float:
@@ -319,9 +325,11 @@ def _check_joint(ov: Overlay, name: str, joint_type: str, limits: tuple[float, f
     if dyn.stiffness > 0:
         lo, hi = limits
         ref = dyn.spring_reference
-        if ref is None or not math.isfinite(ref) or not (lo <= ref <= hi):
+        reach = SPRING_REFERENCE_REACH * (hi - lo) if math.isfinite(hi - lo) else 0.0
+        if ref is None or not math.isfinite(ref) or not (lo - reach <= ref <= hi + reach):
             new_ref = (ov.initial_joint_positions or {}).get(name, float(np.clip(0.0, lo, hi)))
-            add("OVL_SPRING_REFERENCE", "warning", name, f"spring reference {ref!r} missing or outside limits [{lo}, {hi}]; set to {new_ref}", fixed=True)
+            add("OVL_SPRING_REFERENCE", "warning", name, f"spring reference {ref!r} missing or more than {SPRING_REFERENCE_REACH:g} "
+                f"ranges outside limits [{lo}, {hi}]; set to {new_ref}", fixed=True)
             ov.joints[name] = dyn.model_copy(update={"spring_reference": new_ref})
 
 

@@ -22,6 +22,7 @@ from asset2sim.apps.audit.batch import find_assets
 from asset2sim.tasks.ingest import staged
 from asset2sim.tasks.ingest.mjcf_reader import read_mjcf_asset
 from asset2sim.urdf import read_urdf, write_urdf
+from tests.tasks.ingest import host_layouts as hl
 from tests.planted_assets import cabinet, storage_box, trash_can, write_mjcf, write_planted_folder
 
 mujoco = pytest.importorskip("mujoco")
@@ -223,3 +224,17 @@ def test_assets_are_found_in_a_package_tree(tmp_path):
     assert found["urdf__cab"].is_dir() and found["objects__box"].name == "storage_box.xml"
     assert [t.asset_id for t in find_assets([tree / "objects" / "box"])] == ["box"]
     json.dumps([str(p) for p in found.values()])
+
+
+def test_a_meta_world_scene_is_audited_as_refine_reads_it_and_its_patch_stays_in_the_package(tmp_path):
+    """Meta-World's window (generated layout: its scene includes ``../scene/basic_scene.xml`` from the package's
+    asset folder) is audited as refine reads it, not refused for the include; its 6 g sash (six 1 g geoms, as
+    Meta-World writes it) is flagged, and the patch compiles with the package's files beside it."""
+    xml = hl.metaworld_window(tmp_path / "in")
+    before = _tree_digest(tmp_path / "in")
+    res = audit_asset(xml, tmp_path / "out", simulate=False)
+    flagged = [f"{v.where}: {v.quantity}" for v in res.report.values if v.verdict == "implausible"]
+    (slide,) = read_mjcf_asset(xml).model.movable_joints
+    assert f"link {slide.child}: mass" in flagged, flagged
+    assert res.report.patch is not None
+    assert _tree_digest(tmp_path / "in") == before

@@ -96,6 +96,9 @@ def test_friction_a_hand_cannot_overcome_is_implausible():
     assert bands.friction_verdict("joint j", 0.0, 0.5, 5.0, "N*m").verdict == "plausible"
     assert bands.stiffness_verdict("joint j", 100.0, 1.5, 5.0, "N*m/rad").verdict == "implausible"
     assert bands.stiffness_verdict("joint j", 5.0, 1.5, 5.0, "N*m/rad").verdict == "plausible"
+    # a balance pulls against the part's weight: 150 N of spring over 1.5 m carrying 140 N of sash is a hand's 10 N net
+    assert bands.stiffness_verdict("joint j", 100.0, 1.5, 5.0, "N/m", carried=140.0).verdict == "plausible"
+    assert bands.stiffness_verdict("joint j", 100.0, 1.5, 5.0, "N/m", carried=40.0).verdict == "implausible"
 
 
 def test_limits():

@@ -5,6 +5,8 @@
 - :func:`metaworld_drawer`: a Meta-World scene (``objects/drawer.xml``) including its dependencies
   (``<compiler angle="radian">``, default classes) and ``../scene/basic_scene.xml`` (a table, a retaining wall and a
   floor plane around the object), the drawer's body unnamed under the world body.
+- :func:`metaworld_window`: Meta-World's vertical window (``objects/window.xml``) in the same layout: a frame and
+  a sash on a vertical slide ``window_slide`` ranged 0 to 0.2 m, both bodies unnamed, as Meta-World writes them.
 - :func:`degree_door`: a door whose range is written in degrees (``0 90``) with no ``<compiler>``.
 """
 
@@ -123,6 +125,64 @@ def metaworld_drawer(root: Path, joint_name: str | None = "goal_slidey") -> Path
           <include file="../scene/basic_scene.xml"/>
           <worldbody>
             <include file="assets/drawer.xml"/>
+          </worldbody>
+        </mujoco>""")
+
+
+#: The Meta-World window's slide range as written (m).
+METAWORLD_WINDOW_RANGE = (0.0, 0.2)
+
+
+def metaworld_window(root: Path) -> Path:
+    """Meta-World's vertical window under ``root`` (``metaworld/assets/``): ``objects/window.xml`` including
+    ``objects/assets/window_dependencies.xml``, ``scene/basic_scene.xml`` and ``objects/assets/window.xml``; returns
+    the scene file. A 0.39 x 0.47 m frame (posts, sill, head, a fixed upper pane) and a 0.3 x 0.2 m lower sash with its
+    pane and a handle on a vertical slide ``window_slide`` ranged 0 to 0.2 m; neither body is named."""
+    metaworld_drawer(root)  # the scene and the table around it
+    assets = root / "metaworld" / "assets"
+    _write(assets / "objects" / "assets" / "window_dependencies.xml", """
+        <mujocoinclude>
+          <compiler angle="radian" inertiafromgeom="auto" inertiagrouprange="4 5"/>
+          <default>
+            <default class="window_base">
+              <joint armature="0.001" damping="2" limited="true"/>
+              <geom conaffinity="0" contype="0" group="1" type="box"/>
+              <default class="window_col">
+                <geom conaffinity="1" condim="3" contype="1" group="4"/>
+              </default>
+            </default>
+          </default>
+        </mujocoinclude>""")
+    _write(assets / "objects" / "assets" / "window.xml", """
+        <mujocoinclude>
+          <body childclass="window_base">
+            <geom class="window_col" pos="0 0 0.035" size="0.181 0.03 0.015" type="box"/>
+            <geom class="window_col" pos="0 0 0.01" size="0.195 0.06 0.01" type="box"/>
+            <geom class="window_col" pos="0 0 0.467" size="0.181 0.03 0.015" type="box"/>
+            <geom class="window_col" pos="0.166 0 0.251" size="0.015 0.03 0.201" type="box"/>
+            <geom class="window_col" pos="-0.166 0 0.251" size="0.015 0.03 0.201" type="box"/>
+            <geom class="window_col" pos="0 0.012 0.351" size="0.13 0.004 0.08" type="box"/>
+            <geom class="window_col" pos="0 0.012 0.261" size="0.15 0.012 0.01" type="box"/>
+            <geom class="window_col" pos="0 0.012 0.441" size="0.15 0.012 0.01" type="box"/>
+            <body pos="0 0 0.051">
+              <joint type="slide" range="0 .2" axis="0 0 1" name="window_slide"/>
+              <geom class="window_col" pos="0 -0.013 0.014" size="0.15 0.012 0.014" type="box" mass=".001"/>
+              <geom class="window_col" pos="0 -0.013 0.19" size="0.15 0.012 0.01" type="box" mass=".001"/>
+              <geom class="window_col" pos="0.14 -0.013 0.104" size="0.01 0.012 0.076" type="box" mass=".001"/>
+              <geom class="window_col" pos="-0.14 -0.013 0.104" size="0.01 0.012 0.076" type="box" mass=".001"/>
+              <geom class="window_col" pos="0 -0.018 0.104" size="0.13 0.004 0.076" type="box" mass=".001"/>
+              <geom class="window_col" euler="0 1.57 0" pos="0 -0.095 0.014" size="0.008 0.045" type="capsule" mass=".001"/>
+            </body>
+          </body>
+        </mujocoinclude>""")
+    return _write(assets / "objects" / "window.xml", """
+        <mujoco model="window">
+          <include file="assets/window_dependencies.xml"/>
+          <include file="../scene/basic_scene.xml"/>
+          <worldbody>
+            <body pos="0 0.8 0">
+              <include file="assets/window.xml"/>
+            </body>
           </worldbody>
         </mujoco>""")
 

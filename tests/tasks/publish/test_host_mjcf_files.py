@@ -112,3 +112,53 @@ def test_a_menagerie_model_in_degrees_goes_back_into_its_scene_in_degrees(tmp_pa
     assert after.dof_damping[after.jnt_dofadr[j]] == pytest.approx(hinge.dynamics.damping, rel=1e-9)
     assert after.body("leaf").mass[0] == pytest.approx(model.links["leaf"].inertial.mass, rel=1e-5)
     assert after.qpos0[after.jnt_qposadr[j]] == pytest.approx(math.radians(10.0))  # its ref kept, in degrees
+
+
+def test_a_meta_world_window_rides_on_its_sash_balance_back_in_its_package(tmp_path):
+    """Meta-World's vertical window (generated; the frame and the sash unnamed, as Meta-World writes them), asked
+    slightly open: the sash gets a balance (a preloaded spring whose reference lies beyond the 0.2 m travel, carrying
+    its weight within +-6 %), so the friction that holds it at any height is a few newtons and a hand inside 22.2 N
+    works it; the window is interaction-ready. The package's ``objects/assets/window.xml`` is written back with the
+    unnamed bodies found by their joints and children: in an environment file of the package, the sash stays where
+    the keyframe puts it, and a pull 5 N beyond its friction lifts it."""
+    xml = hl.metaworld_window(tmp_path / "in")
+    res = refine_asset(xml, "A window, slightly open.", tmp_path / "out", RefineConfig(engines=["pybullet"]), extras=False)
+    assert res.report.failure_mode == "none", res.report.failure_mode
+    assert res.report.metric("operability").passed is True
+    model = read_urdf(res.out_dir / "mobility.urdf")
+    (slide,) = model.movable_joints
+    sash = model.links[slide.child].inertial.mass
+    dyn = res.overlay.joints[slide.name]
+    lo, hi = hl.METAWORLD_WINDOW_RANGE
+    assert dyn.stiffness > 0 and dyn.spring_reference > hi + 5 * (hi - lo)  # a balance, preloaded far beyond the travel
+    mid = 0.5 * (lo + hi)
+    assert dyn.stiffness * (dyn.spring_reference - mid) == pytest.approx(sash * 9.81, rel=0.02)  # the weight at mid-travel
+    assert dyn.friction < 0.3 * sash * 9.81  # friction holds the balance's imbalance, not the sash's weight
+
+    fragment = res.out_dir / "mjcf" / "host" / "files" / "objects" / "assets" / "window.xml"
+    assert fragment.is_file(), res.report.notes
+    original = tmp_path / "in" / "metaworld" / "assets" / "objects" / "assets" / "window.xml"
+    assert _without_physics(fragment) == _without_physics(original)  # only the physics changed
+    copy = tmp_path / "swapped" / "metaworld"
+    shutil.copytree(tmp_path / "in" / "metaworld", copy)
+    shutil.copyfile(fragment, copy / "assets" / "objects" / "assets" / "window.xml")
+    env = copy / "assets" / "sawyer_xyz" / "sawyer_window.xml"
+    env.parent.mkdir(parents=True)
+    env.write_text(ENVIRONMENT.replace("drawer_dependencies", "window_dependencies").replace("assets/drawer.xml", "assets/window.xml"))
+    after = mujoco.MjModel.from_xml_path(str(env))
+    j = after.joint("window_slide").id
+    dof, adr = after.jnt_dofadr[j], after.jnt_qposadr[j]
+    assert after.body(after.jnt_bodyid[j]).mass[0] == pytest.approx(sash, rel=1e-5)
+    assert after.jnt_stiffness[j] == pytest.approx(dyn.stiffness, rel=1e-6)
+    assert after.qpos_spring[adr] == pytest.approx(dyn.spring_reference, rel=1e-6)
+    assert after.dof_frictionloss[dof] == pytest.approx(slide.dynamics.friction, rel=1e-5)
+    data = mujoco.MjData(after)
+    q0 = res.report.initial_joint_positions[slide.name]
+    data.qpos[adr] = q0
+    for _ in range(800):  # 2 s at MuJoCo's default 2.5 ms
+        mujoco.mj_step(after, data)
+    assert abs(data.qpos[adr] - q0) < 0.002  # held where it was put
+    data.qfrc_applied[dof] = slide.dynamics.friction + 5.0  # a lift 5 N beyond the refined friction
+    for _ in range(400):
+        mujoco.mj_step(after, data)
+    assert data.qpos[adr] > q0 + 0.05  # it rises

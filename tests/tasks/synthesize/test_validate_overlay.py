@@ -138,6 +138,23 @@ def test_spring_without_reference_gets_one(box):
     assert fixed.joints[j].spring_reference is not None
 
 
+def test_a_preloaded_spring_may_refer_beyond_the_travel_and_a_far_one_is_pulled_back(box):
+    """A balance's reference lies beyond its joint's travel (a window's sash balance: about 8 ranges from
+    mid-travel) and is kept; one more than SPRING_REFERENCE_REACH ranges out is a unit or sign error, reset."""
+    asset, geometry = box
+    j = asset.movable_joints()[0]
+    lo, hi = j.lower, j.upper
+    ov = _good(asset, geometry)
+    ov.joints[j.name] = JointDynamics(damping=0.1, friction=0.0, stiffness=2.0, spring_reference=hi + 8.0 * (hi - lo))
+    fixed, issues = validate_overlay(ov, asset, geometry)
+    assert "OVL_SPRING_REFERENCE" not in codes(issues)
+    assert fixed.joints[j.name].spring_reference == pytest.approx(hi + 8.0 * (hi - lo))
+    ov.joints[j.name] = JointDynamics(damping=0.1, friction=0.0, stiffness=2.0, spring_reference=hi + 11.0 * (hi - lo))
+    fixed, issues = validate_overlay(ov, asset, geometry)
+    assert "OVL_SPRING_REFERENCE" in codes(issues)
+    assert lo <= fixed.joints[j.name].spring_reference <= hi
+
+
 def test_unknown_link_is_an_error_and_policy_decides(box):
     asset, geometry = box
     ov = _good(asset, geometry)
