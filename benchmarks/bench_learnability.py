@@ -4,6 +4,7 @@
         [--methods defaults,human,direct,asset2sim] [--steps 3000] [--seeds 0] \\
         [--eval-episodes 5] [--n-envs 2] [--max-run-seconds 600] [--out DIR] [--reuse] [--no-ppo]
     python benchmarks/bench_learnability.py --table DIR/results.jsonl[,MORE.jsonl]
+    python benchmarks/bench_learnability.py ... --catalog catalog.yaml [--dataset NAME]   # flags into the catalog
     python benchmarks/bench_learnability.py --framework maniskill --ids 100221,9912 --held-out 47645 \
         --methods raw,asset2sim --steps 20000 --seeds 0,1,2 [--sim-backend gpu --n-envs 1024 --device cuda]
 
@@ -46,7 +47,11 @@ The passive reference runs the same episodes with the gripper holding still
 Prints the table (success per task and method: PPO, scripted, passive; mean per
 method), the wall time and the budget used (environment and engine steps,
 episodes). Each run is appended to ``DIR/results.jsonl`` as it ends, so a run
-cut short keeps what it finished; ``--table`` prints the table of such a file.
+cut short keeps what it finished; ``--table`` prints the table of such a file. With ``--catalog``, each
+asset2sim asset's learnability flag (learned; not learned on any seed while
+learned on other assets; undecided: :mod:`asset2sim.flows.learnability`) is
+written onto its latest row of the catalog's dataset (columns ``learnable``
+and ``learnability``), after a run or from ``--table``.
 Needs the ``learn`` extra (``pip install -e ".[learn]"``: stable-baselines3 and torch, about 5 GB from PyPI).
 """
 
@@ -136,6 +141,31 @@ def print_table(records: list[dict], out=sys.stdout) -> None:
             print(f"error {r['method']} {r['id']} ({r.get('kind')}): {r['error']}", file=out)
 
 
+def record_flags(records: list[dict], args) -> None:
+    """With ``--catalog``: the per-asset learnability flags of ``--flag-method``'s assets
+    (:func:`asset2sim.flows.learnability.learnability_flags`) written onto their latest finished rows of
+    ``--dataset`` in the catalog (``learnable``, ``learnability``), each only where the row is of the input the
+    trained output was refined from (``DIR/<method>/<id>/asset/report.json``); prints what was written."""
+    if args.catalog is None:
+        return
+    from asset2sim.flows.catalog import ResultCatalog, load_catalog
+    from asset2sim.flows.learnability import learnability_flags, record_learnability
+
+    flags = learnability_flags(records, args.flag_method)
+    cat = load_catalog(args.catalog)
+    dataset, _ = cat.dataset(args.dataset)
+    hashes = {}
+    for rid in flags:
+        report = args.out / args.flag_method / rid / "asset" / "report.json"
+        if report.is_file():
+            hashes[rid] = json.loads(report.read_text()).get("input_hash", "")
+    done = record_learnability(ResultCatalog(cat.catalog_root), dataset, flags, hashes)
+    for rid, f in flags.items():
+        where = (f"written to run {done.written[rid]}" if rid in done.written else
+                 "no finished row in the catalog" if rid in done.missing else done.other_input.get(rid, ""))
+        print(f"learnability {rid}: {f.verdict} (seeds {f.seeds}; learned on {list(f.learned_on) or '-'}): {where}")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _arguments().parse_args(argv)
     if args.framework == "maniskill":
@@ -143,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.table:
         recs = [json.loads(x) for f in args.table.split(",") for x in Path(f).read_text().splitlines() if x.strip()]
         print_table(recs)
+        record_flags(recs, args)
         return 0
 
     os.environ.setdefault("MPLBACKEND", "Agg")
@@ -178,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
             _learn_task(row, m, assets[(row.id, m)], args, cfg, seeds, emit, PPO)
     print(f"wall time {(time.perf_counter() - t_all) / 60:.1f} min; results in {results}", flush=True)
     print_table(records)
+    record_flags(records, args)
     return 0
 
 
@@ -197,6 +229,10 @@ def _arguments() -> argparse.ArgumentParser:
     ap.add_argument("--reuse", action="store_true", help="keep assets already made under --out")
     ap.add_argument("--no-ppo", action="store_true", help="only the scripted and passive references")
     ap.add_argument("--table", default="", help="only print the table of results.jsonl file(s), comma-separated")
+    ap.add_argument("--catalog", type=Path, default=None,
+                    help="write per-asset learnability flags onto the rows of this catalog file's dataset (--dataset)")
+    ap.add_argument("--dataset", default=None, help="with --catalog: the dataset (default: the catalog's default_dataset)")
+    ap.add_argument("--flag-method", default="asset2sim", help="with --catalog: the method whose assets are flagged")
     ms = ap.add_argument_group("--framework maniskill")
     ms.add_argument("--framework", choices=("pybullet", "maniskill"), default="pybullet")
     ms.add_argument("--held-out", default="", help="comma-separated ids evaluated but not trained on")
@@ -225,6 +261,7 @@ def _maniskill(args) -> int:
     if args.table:
         recs = [json.loads(x) for f in args.table.split(",") for x in Path(f).read_text().splitlines() if x.strip()]
         learnability_maniskill.print_table(recs)
+        record_flags(recs, args)
         return 0
     if args.methods == DEFAULT_METHODS:
         args.methods = "raw,asset2sim"
@@ -232,7 +269,7 @@ def _maniskill(args) -> int:
     held = [x.strip() for x in args.held_out.split(",") if x.strip()]
     held_rows = _manifest_rows(argparse.Namespace(manifest=args.manifest, ids=",".join(held))) if held else []
     rows = [r for r in rows if r.id not in held]
-    return learnability_maniskill.run(args, rows, held_rows, _make_assets)
+    return learnability_maniskill.run(args, rows, held_rows, _make_assets, record_flags)
 
 
 def _manifest_rows(args) -> list:

@@ -291,9 +291,10 @@ def print_table(records: list[dict], out=sys.stdout) -> None:
             print(f"error {r['method']} {r.get('id', '')} ({r.get('kind')}): {r['error']}", file=out)
 
 
-def run(args, rows: list, held_out: list, make_assets) -> int:
+def run(args, rows: list, held_out: list, make_assets, record_flags=None) -> int:
     """The ManiSkill comparison over ``rows`` (training objects) and ``held_out`` (manifest rows); ``make_assets``:
-    bench_learnability's (rows, methods, args) -> {(id, method): folder or error}."""
+    bench_learnability's (rows, methods, args) -> {(id, method): folder or error}; ``record_flags``: bench_learnability's
+    (records, args) -> None, the flags into the catalog (``--catalog``)."""
     import platform
 
     import mani_skill
@@ -355,5 +356,7 @@ def run(args, rows: list, held_out: list, make_assets) -> int:
                 print(f"    {rid} ({split[rid]}): {res['success_rate']:.2f} {res['final_fractions']}", flush=True)
     print(f"wall time {(time.perf_counter() - t_all) / 60:.1f} min; results in {results}", flush=True)
     print_table(records)
+    if record_flags is not None:
+        record_flags(records, args)
     print(f"field's budget on a GPU: {gpu_command(args)}")
     return 0

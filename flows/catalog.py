@@ -655,7 +655,7 @@ class ResultCatalog:
         rows = self.read(dataset, sorted(latest["run"].unique()), filter=expr)
         rows = rows.assign(_key=rows["asset_id"] + "|" + rows["input_hash"].fillna("") + "|" + rows["config_hash"].fillna(""))
         rows = rows.merge(latest[["_key", "run"]], on=["_key", "run"], how="inner").drop(columns="_key")
-        recs = [{k: _plain(v) for k, v in rec.items()} for rec in rows.to_dict("records")]
+        recs = [{k: plain_value(v) for k, v in rec.items()} for rec in rows.to_dict("records")]
         return {result_key(r["asset_id"], r["input_hash"], r["config_hash"]): r for r in recs}
 
 
@@ -679,7 +679,7 @@ def _parquet_bytes(table) -> bytes:
     return buf.getvalue().to_pybytes()
 
 
-def _plain(v: Any) -> Any:
+def plain_value(v: Any) -> Any:
     """A catalog value as plain JSON-able Python (NaN/NaT -> None, numpy
     scalars -> Python, timestamps -> ISO text)."""
     import pandas as pd

@@ -17,8 +17,9 @@ from pydantic import BaseModel, ConfigDict, field_validator
 #: Version of the row schema in every Parquet file's metadata; columns are only
 #: ever added (nullable), so a reader of version N reads every older file
 #: (version 2 added ``code_hash``, version 3 ``request_warnings``, version 4 ``clips``, version 5 ``operable`` and
-#: ``operating_efforts``, version 6 ``request_met`` and ``request_unmet``, version 7 ``media``).
-SCHEMA_VERSION = 7
+#: ``operating_efforts``, version 6 ``request_met`` and ``request_unmet``, version 7 ``media``, version 8 ``learnable`` and
+#: ``learnability``).
+SCHEMA_VERSION = 8
 SCHEMA_VERSION_KEY = b"asset2sim.catalog_schema_version"
 
 RowStatus = Literal["done", "skipped", "failed"]
@@ -35,7 +36,10 @@ class CatalogRow(BaseModel):
     target, achieved, gap, unit, text, ...}]: what was not; ``operable``: every handled part moved by a hand inside its real operating range;
     ``operating_efforts`` JSON {joint: {peak_force_n, peak_torque_nm, force_range_n, ...}}; ``clips`` JSON [path]: the output's interaction clips (WebM), relative to
     ``out_dir``; ``media``: the output's media phase (renders, clips, ``report.html``) when the row was written:
-    ``done``, ``deferred`` (``asset2sim report OUT`` makes it) or ``off``; ``code_hash`` what the skip rule compares.
+    ``done``, ``deferred`` (``asset2sim report OUT`` makes it) or ``off``; ``learnable``: a trained policy learned the
+    asset's task (false: on no seed while it learned it on other assets; null: not measured or undecided),
+    ``learnability`` JSON {verdict, seeds, success, passive, learned_on, action, framework, budget}, written by the
+    learnability benchmark (:mod:`asset2sim.flows.learnability`); ``code_hash`` what the skip rule compares.
     Non-finite floats are null."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
@@ -66,6 +70,8 @@ class CatalogRow(BaseModel):
     request_unmet: Optional[str] = None
     clips: Optional[str] = None
     media: Optional[str] = None
+    learnable: Optional[bool] = None
+    learnability: Optional[str] = None
     model_queries: Optional[int] = None
     tokens: Optional[int] = None
     wall_seconds: Optional[float] = None
