@@ -61,6 +61,24 @@ def robosuite_door(path: Path, compiler: str = "") -> Path:
         </mujoco>""")
 
 
+def _dependencies(assets: Path, name: str) -> Path:
+    """Meta-World's ``objects/assets/<name>_dependencies.xml`` under ``assets``: ``<compiler angle="radian">`` and the
+    default classes ``<name>_base`` (visual geoms, joints) and ``<name>_col`` (collision geoms)."""
+    return _write(assets / "objects" / "assets" / f"{name}_dependencies.xml", """
+        <mujocoinclude>
+          <compiler angle="radian" inertiafromgeom="auto" inertiagrouprange="4 5"/>
+          <default>
+            <default class="NAME_base">
+              <joint armature="0.001" damping="2" limited="true"/>
+              <geom conaffinity="0" contype="0" group="1" type="box"/>
+              <default class="NAME_col">
+                <geom conaffinity="1" condim="3" contype="1" group="4"/>
+              </default>
+            </default>
+          </default>
+        </mujocoinclude>""".replace("NAME", name))
+
+
 def metaworld_drawer(root: Path, joint_name: str | None = "goal_slidey") -> Path:
     """Meta-World's layout under ``root`` (``metaworld/assets/``): ``objects/drawer.xml`` including
     ``objects/assets/drawer_dependencies.xml``, ``scene/basic_scene.xml`` and ``objects/assets/drawer.xml``; returns
@@ -82,19 +100,7 @@ def metaworld_drawer(root: Path, joint_name: str | None = "goal_slidey") -> Path
             <geom name="floor" size="4 4 .1" pos="0 0 -.913" type="plane"/>
           </worldbody>
         </mujocoinclude>""")
-    _write(assets / "objects" / "assets" / "drawer_dependencies.xml", """
-        <mujocoinclude>
-          <compiler angle="radian" inertiafromgeom="auto" inertiagrouprange="4 5"/>
-          <default>
-            <default class="drawer_base">
-              <joint armature="0.001" damping="2" limited="true"/>
-              <geom conaffinity="0" contype="0" group="1" type="box"/>
-              <default class="drawer_col">
-                <geom conaffinity="1" condim="3" contype="1" group="4"/>
-              </default>
-            </default>
-          </default>
-        </mujocoinclude>""")
+    _dependencies(assets, "drawer")
     _write(assets / "objects" / "assets" / "drawer.xml", """
         <mujocoinclude>
           <body childclass="drawer_base">
@@ -140,19 +146,7 @@ def metaworld_window(root: Path) -> Path:
     pane and a handle on a vertical slide ``window_slide`` ranged 0 to 0.2 m; neither body is named."""
     metaworld_drawer(root)  # the scene and the table around it
     assets = root / "metaworld" / "assets"
-    _write(assets / "objects" / "assets" / "window_dependencies.xml", """
-        <mujocoinclude>
-          <compiler angle="radian" inertiafromgeom="auto" inertiagrouprange="4 5"/>
-          <default>
-            <default class="window_base">
-              <joint armature="0.001" damping="2" limited="true"/>
-              <geom conaffinity="0" contype="0" group="1" type="box"/>
-              <default class="window_col">
-                <geom conaffinity="1" condim="3" contype="1" group="4"/>
-              </default>
-            </default>
-          </default>
-        </mujocoinclude>""")
+    _dependencies(assets, "window")
     _write(assets / "objects" / "assets" / "window.xml", """
         <mujocoinclude>
           <body childclass="window_base">
