@@ -14,6 +14,7 @@ Rule (per method and task action, over the records of one benchmark run):
   one other asset with the same action;
 - ``undecided`` (null): nothing was learned on any asset of that action: the budget, not the asset, decides.
 
+Held-out assets (ManiSkill's ``--held-out``) get no flag: the policy did not train on them.
 A task the object does by itself (the passive reference, the robot holding still, succeeds in at least half its
 episodes) is still ``learned`` where a policy succeeds; the JSON keeps the passive rate to tell them apart.
 """
@@ -69,9 +70,10 @@ class LearnabilityFlag:
 def learnability_flags(records: Iterable[dict], method: str = "asset2sim") -> dict[str, LearnabilityFlag]:
     """The flags of ``method``'s assets (asset id -> :class:`LearnabilityFlag`) from the benchmark's records (dicts
     as ``results.jsonl`` / ``results_maniskill.jsonl`` hold them: ``kind``, ``method``, ``id``, ``seed``,
-    ``success_rate``, and where known ``action``, ``task``, ``env_steps``, ``n_envs``, ``device``); records with an
-    ``error`` are left out. Rule: the module docstring."""
-    records = [r for r in records if r.get("method") == method and not r.get("error")]
+    ``success_rate``, and where known ``action``, ``task``, ``split``, ``env_steps``, ``n_envs``, ``device``); records
+    with an ``error`` are left out, and so are held-out assets (``split`` "held-out": the policy never trained on them,
+    so their success measures generalization, not the asset). Rule: the module docstring."""
+    records = [r for r in records if r.get("method") == method and not r.get("error") and r.get("split") != "held-out"]
     framework = "maniskill" if any(r.get("kind") == "ppo_eval" for r in records) else "pybullet"
     seeds: dict[str, dict[int, float]] = {}
     passive: dict[str, float] = {}

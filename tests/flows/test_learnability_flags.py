@@ -55,11 +55,13 @@ def test_flags_follow_the_rule_learned_not_learned_where_others_were_and_undecid
 def test_maniskill_records_are_read_the_same_way():
     recs = [_ppo("a", s, r, kind="ppo_eval") for s, r in ((0, 0.2), (1, 0.0))] + \
            [_ppo("b", s, 0.0, kind="ppo_eval") for s in (0, 1)] + \
+           [dict(_ppo("c", s, 0.0, kind="ppo_eval"), split="held-out") for s in (0, 1)] + \
            [{"kind": "ppo_train", "method": "asset2sim", "seed": 0, "env_steps": 9000, "n_envs": 3, "device": "cpu",
              "sim_backend": "cpu"}]
     flags = learnability_flags(recs)
     assert flags["a"].verdict == "learned" and flags["b"].verdict == "not_learned"
     assert flags["b"].framework == "maniskill" and flags["b"].budget["env_steps"] == 9000
+    assert "c" not in flags  # held out: the policy never trained on it
 
 
 def _row(aid: str, status: str = "done", input_hash: str = "in-", mode: str = "none") -> CatalogRow:
