@@ -47,7 +47,7 @@ class Sleeps(list):
 
 
 def client(server, tmp_path, sleeps=None, **kw) -> lc.LLMClient:
-    cfg = dict(model="openai/m", base_url=server.url, timeout_s=2.0, max_attempts=3, backoff_s=0.05, max_backoff_s=0.2, cache_dir=tmp_path / "cache")
+    cfg = dict(model="openai/m", base_url=server.url, timeout_s=20.0, max_attempts=3, backoff_s=0.05, max_backoff_s=0.2, cache_dir=tmp_path / "cache")
     cfg.update(kw)
     return lc.LLMClient(lc.ClientConfig(**cfg), sleep=sleeps if sleeps is not None else Sleeps())
 
