@@ -131,10 +131,13 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
         def better(chk2) -> bool:
             return dynamics_search.failing_tiers(chk2.metrics) < dynamics_search.failing_tiers(check.metrics)
     passed_before = {(m.name, m.engine) for m in check.metrics if m.passed}
+    # the repaired pieces are checked at the dynamics the escalation kept, with the rounds it left (a work-counted
+    # budget: the repair's check does not replay the escalation from the estimate)
+    left = config.model_copy(update={"max_escalation_rounds": max(0, config.max_escalation_rounds - (len(rounds) - 1))})
     for rep in repairs:
         ws.load(Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation))
         clipped, closed2 = placement.clip_limits(unclipped, closed_raw, state, ws, config, log)
-        ov2, check2, rounds2 = post_check(ctx, clipped, state, rep.overrides, urdf, config, ws, log,
+        ov2, check2, rounds2 = post_check(ctx, kept_dynamics(clipped, overlay), state, rep.overrides, urdf, left, ws, log,
                                            closed=closed_tuples(closed2))
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
         if better(check2) and not lost:
@@ -150,3 +153,11 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
                                 "the asset kept as it was")
         ws.load(Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation))
     return result
+
+
+def kept_dynamics(clipped: Overlay, kept: Overlay) -> Overlay:
+    """``clipped`` (limits clipped to the repaired pieces) with the damping, friction and their notes of ``kept`` (the
+    dynamics the post-check's escalation kept) on every joint both hold; the limits stay ``clipped``'s."""
+    joints = {name: dyn.model_copy(update={k: getattr(kept.joints[name], k) for k in ("damping", "friction", "source")})
+              if name in kept.joints else dyn for name, dyn in clipped.joints.items()}
+    return clipped.model_copy(update={"joints": joints})

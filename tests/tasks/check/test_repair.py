@@ -4,7 +4,9 @@ candidate."""
 
 from __future__ import annotations
 
+from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.check.escalation import kept_dynamics
 from asset2sim.tasks.state import clearance
 from asset2sim.tasks.check import repair
 from asset2sim.urdf import read_urdf
@@ -38,3 +40,19 @@ def test_clearance_candidate_keeps_earlier_overrides_and_writes_its_pieces(tmp_p
     assert rep.overrides["lower"] and all((tmp_path / p.filename).is_file() for p in rep.overrides["lower"])
     # a pair that does not touch along a sliding contact: no candidate
     assert repair.clearance_repair(model, urdf, {}, state, earlier, 1.0, tmp_path, "collision") is None
+
+
+def test_a_repair_is_checked_at_the_dynamics_the_escalation_kept_and_the_limits_clipped_again():
+    """The repaired candidate's post-check starts from the damping and friction the first escalation kept (not from
+    the estimate, which would replay the same rounds), with the limits clipped to the repaired pieces."""
+    link = LinkPhysics(mass=1.0, inertia=Inertia(ixx=0.01, iyy=0.01, izz=0.01), com=(0.0, 0.0, 0.0))
+    clipped = Overlay(scale=1.0, estimator=EstimatorInfo(name="offline"), links={"lid": link}, joints={
+        "hinge": JointDynamics(damping=0.01, friction=0.02, lower=0.0, upper=1.2, source="estimate"),
+        "slide": JointDynamics(damping=1.0, friction=2.0, lower=0.0, upper=0.3, source="estimate")})
+    kept = clipped.model_copy(update={"joints": {
+        "hinge": JointDynamics(damping=0.38, friction=1.77, lower=0.0, upper=1.5, source="estimate; escalated x3")}})
+    start = kept_dynamics(clipped, kept)
+    hinge = start.joints["hinge"]
+    assert (hinge.damping, hinge.friction, hinge.source) == (0.38, 1.77, "estimate; escalated x3")
+    assert (hinge.lower, hinge.upper) == (0.0, 1.2)  # the repaired pieces' clip, not the kept one's
+    assert start.joints["slide"] == clipped.joints["slide"]  # a joint the kept overlay lacks stays as clipped
