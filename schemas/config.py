@@ -101,7 +101,7 @@ class RefineConfig(BaseModel):
     max_state_evaluations: int = Field(4000, ge=1, le=1_000_000)
     """Budget of contact queries during state refinement (count)."""
     max_escalation_rounds: int = Field(5, ge=0, le=50)
-    """Post-check rounds changing damping/friction (count;
+    """Post-check rounds changing damping/friction in one attempt, its collision repairs included (count;
     :mod:`asset2sim.tasks.check.dynamics_search`)."""
     escalation_factor: float = Field(3.0, gt=1.0, le=100.0)
     """Multiplier on damping/friction per escalation round (dimensionless)."""
