@@ -15,8 +15,8 @@ Rule (per method and task action, over the records of one benchmark run):
 - ``undecided`` (null): nothing was learned on any asset of that action: the budget, not the asset, decides.
 
 Held-out assets (ManiSkill's ``--held-out``) get no flag: the policy did not train on them.
-A task the object does by itself (the passive reference, the robot holding still, succeeds in at least half its
-episodes) is still ``learned`` where a policy succeeds; the JSON keeps the passive rate to tell them apart.
+A task the object does by itself (the passive reference, the robot holding still, succeeds) is still ``learned``
+where a policy succeeds; the JSON keeps the passive rate to tell them apart.
 """
 
 from __future__ import annotations
@@ -30,8 +30,6 @@ from asset2sim.flows.catalog import ResultCatalog, plain_value
 
 #: Record kinds holding a trained policy's evaluation: the PyBullet harness's ``ppo``, ManiSkill's ``ppo_eval``.
 POLICY_KINDS = ("ppo", "ppo_eval")
-#: Success rate of the passive reference from which a task counts as done by the object itself.
-PASSIVE_SHARE = 0.5
 
 
 @dataclass(frozen=True)

@@ -181,11 +181,13 @@ def write_package_files(folder: Path, source: Path, host_xml: str, inertials: se
         UnsafePath: an included file's path would leave ``folder``.
     """
     host = safexml.parse_xml_bytes(host_xml.encode("utf-8"), source="host file")
-    labels = {id(b): b.get("name") or f"body_{i}" for i, b in enumerate(host.iter("body"), start=1)}  # mjcf_scene.label
-    keys: dict[tuple, list[str]] = {}
-    for b in host.iter("body"):
-        keys.setdefault(_body_key(b), []).append(labels[id(b)])
-    hosted = {labels[id(b)]: b for b in host.iter("body") if labels[id(b)] in inertials}
+    keys: dict[tuple, list[str]] = {}  # body key -> labels (mjcf_scene.label: body ids count from 1 in document order)
+    hosted = {}
+    for i, b in enumerate(host.iter("body"), start=1):
+        label = b.get("name") or f"body_{i}"
+        keys.setdefault(_body_key(b), []).append(label)
+        if label in inertials:
+            hosted[label] = b
     sources = gather_mjcf(source)  # the files the reader read, in the tree it read them in
     out, diffs = [], []
     for name, data in sorted(sources.files.items()):
