@@ -394,7 +394,8 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
         overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
-    overlay = overlay.model_copy(update={"mounting": mounting.root_mounting(ctx.asset, ctx.request, ctx.category, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))})
+    mount = ctx.mounting or mounting.root_mounting(ctx.asset, ctx.request, ctx.category, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
+    overlay = overlay.model_copy(update={"mounting": mount})
     s = overlay.scale
     overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)

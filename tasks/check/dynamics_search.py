@@ -20,6 +20,15 @@ from asset2sim.tasks.check import operating, task_tier
 SAME_SHARE = 0.02
 #: Smallest measured headroom worth a round, as a share of the joint's friction (dimensionless).
 HEADROOM_MIN_SHARE = 0.01
+#: Raises in a row after which a joint whose drift did not answer is raised no more ...
+UNANSWERED_RAISES = 2
+#: ... each raising its friction at least this many times (dimensionless) ...
+UNANSWERED_RATIO = 2.0
+#: ... while its largest drift shrank by less than this share (dimensionless): friction from its tilt floor on
+#: (its weight held at robust rest's tilt with a margin) that leaves a part moving as much is not what stops it (a
+#: contact pushes it), so more friction would only cost the hand. Below the floor a part may slide onto a stop,
+#: the same drift at any friction until it holds: no stop there.
+UNANSWERED_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -46,6 +55,8 @@ class JointRecord:
     weak: Setting | None = None
     strong: Setting | None = None
     good: Setting | None = None
+    drifts: list[tuple[Setting, float]] = field(default_factory=list)
+    """(setting, largest drift in rad or m: robust rest's trials and the rest test) of each round it was not held"""
 
 
 @dataclass
@@ -63,6 +74,8 @@ class RoundOutcome:
     peak_force: dict[str, float] = field(default_factory=dict)
     """joint -> largest peak operating force of its attempts, N"""
     task_ran: bool = False
+    drift: dict[str, float] = field(default_factory=dict)
+    """joint -> largest drift from its state (rad or m) over robust rest's trials and the rest test's state hold"""
 
 
 def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.OperatingBudget] | None = None) -> RoundOutcome:
@@ -75,6 +88,11 @@ def round_outcome(metrics: list[MetricResult], budgets: dict[str, operating.Oper
             for trial in (m.details.get("trials") or {}).values():
                 out.not_held.update(trial.get("failing_joints") or [])
                 seen.update((trial.get("joint_drift") or {}).keys())
+                for j, d in (trial.get("joint_drift") or {}).items():
+                    out.drift[j] = max(out.drift.get(j, 0.0), float(d))
+        elif m.name == "state_hold":
+            for j, d in (m.details.get("drift") or {}).items():
+                out.drift[j] = max(out.drift.get(j, 0.0), float(d))
     out.held = seen - out.not_held
     tried: dict[str, bool] = {}
     for m in metrics:
@@ -93,11 +111,16 @@ class DynamicsSearch:
     """Bracketed search of each joint's friction and damping over the post-check
     rounds (module docstring); ``budgets``: joint -> the task gripper's
     operating budget (joints without one get no measured-headroom step); ``hand_caps``: joint -> the friction
-    (N m or N) a headroom step never passes."""
+    (N m or N) a headroom step never passes; ``floors``: joint -> its tilt floor (N m or N), from which on a drift
+    that does not answer raises stops them (joints without one are never stopped so)."""
 
     def __init__(self, budgets: dict[str, operating.OperatingBudget] | None = None,
-                 hand_caps: dict[str, float] | None = None):
+                 hand_caps: dict[str, float] | None = None, floors: dict[str, float] | None = None):
         self.budgets = dict(budgets or {})
+        self.floors = dict(floors or {})
+        """joint -> friction (N m or N) that holds its part's weight at robust rest's tilt
+        (:func:`~asset2sim.tasks.check.operating.tilt_floors`); a drift that does not answer raises from at least it
+        is not its weight's (:meth:`_unanswered`)"""
         self.hand_caps = dict(hand_caps or {})
         """joint -> friction (N m or N) no headroom step goes above (a hand still moves the part both ways)"""
         self.joints: dict[str, JointRecord] = {}
@@ -123,6 +146,8 @@ class DynamicsSearch:
             if out.task_ran and name in out.held and name not in out.task_bad and (
                     name in out.task_ok or name not in out.peak_force):
                 rec.good = s
+            if name in out.not_held and name in out.drift:
+                rec.drifts.append((s, out.drift[name]))
         self._last = out
         return out
 
@@ -186,6 +211,9 @@ class DynamicsSearch:
                                f"{'N' if self._is_prismatic(name) else 'N m'} of the real range: friction raised by it")
                         if caps is not None:
                             caps[name] = max(caps.get(name, 0.0), new.friction)
+            if up and new == prop and (why := self._unanswered(name)):
+                new = cur
+                notes.append(f"{name}: {why}")
             if new == cur:
                 ov.joints[name] = d0
                 changes.pop(name, None)
@@ -196,6 +224,21 @@ class DynamicsSearch:
                 notes.append(f"{name}: {why}")
             changes[name] = {"damping": new.damping, "friction": new.friction}
         return ov, {k: v for k, v in changes.items() if k in ov.joints}, notes
+
+    def _unanswered(self, joint: str) -> str:
+        """Why ``joint`` is raised no more ("" when it may be): its last :data:`UNANSWERED_RAISES` raises, each at
+        least :data:`UNANSWERED_RATIO` times the friction and the first from at least its tilt floor, left its largest
+        drift within :data:`UNANSWERED_SHARE` of where it was."""
+        seen = self.joints.get(joint, JointRecord()).drifts[-(UNANSWERED_RAISES + 1):]
+        floor = self.floors.get(joint)
+        if len(seen) < UNANSWERED_RAISES + 1 or floor is None or seen[0][0].friction < floor:
+            return ""  # below the tilt floor, a part may slide onto a stop whatever its friction, until it holds
+        for (a, da), (b, db) in zip(seen, seen[1:]):
+            if b.friction < UNANSWERED_RATIO * a.friction or db < (1.0 - UNANSWERED_SHARE) * da:
+                return ""
+        (first, d0), (last, d1) = seen[0], seen[-1]
+        return (f"friction {first.friction:.3g} -> {last.friction:.3g} left its drift at {d0:.3g} -> {d1:.3g}: not what "
+                f"holds it (a contact or a stop moves it), raised no more")
 
     def _is_prismatic(self, joint: str) -> bool:
         b = self.budgets.get(joint)

@@ -62,7 +62,7 @@ def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float]
     check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
                                                      category=ctx.category, labels=labels))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
-    search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps)  # relief and escalation bracketed by what each round measured
+    search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps, floors)  # relief and escalation bracketed by what each round measured
     search.record(overlay, check.metrics)
     tried = [(overlay, check)]
     while (not check.passed or task_tier.task_failing(check.metrics)) and n < config.max_escalation_rounds:

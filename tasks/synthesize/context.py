@@ -13,11 +13,14 @@ from typing import Any, Iterator
 import numpy as np
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.overlay import RootMount
 from asset2sim.schemas.request import RequestOverrides, RequestSpec
 from asset2sim.tasks.geometry import analyze
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, links_aabb, object_extents, object_hull_volume, subtree_links
 from asset2sim.tasks.ingest import extract
+from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.interpret.categories import recognize_category
+from asset2sim.tasks.interpret.mounting import root_mounting
 from asset2sim.tasks.interpret.overrides import apply_overrides
 from asset2sim.tasks.interpret.part_labels import labels_from_names
 from asset2sim.tasks.interpret.request import parse_request
@@ -55,6 +58,8 @@ class EstimationContext:
     """Knobs for the estimator (e.g. ``seed``); read-only for estimators."""
     task: str | None = None
     """The manipulation task refine was given ("close the microwave door"): the post-check executes it."""
+    mounting: RootMount | None = None
+    """How the root is held (:func:`asset2sim.tasks.interpret.mounting.root_mounting`); None: not resolved (free-standing)."""
 
     def closed_state(self) -> dict[str, float]:
         """joint -> closed position (rad, or input units for prismatic joints)."""
@@ -121,8 +126,10 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
     cache = cache if cache is not None else analyze.MeshCache()
     if geometry is None:
         geometry = analyze.analyze_asset(asset, cache=cache)
-    meaning = interpret(asset, prompt, category, (config or RefineConfig()).overrides, config)
-    kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=(config or RefineConfig()).sim)
+    cfg = config or RefineConfig()
+    meaning = interpret(asset, prompt, category, cfg.overrides, config)
+    mount = root_mounting(asset, meaning.request, meaning.category, ReadOptions(body=cfg.body, mjcf_angle=cfg.mjcf.angle))
+    kin_options = SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=cfg.sim)
     with open_session("pybullet", asset.urdf_path, kin_options) as kin:  # the input asset, kinematics only
         hull = link_hull_points(asset, cache=cache)
         closed = closed_positions(kin, asset, hull_points=hull)
@@ -134,4 +141,4 @@ def build_context(source: AssetDescription | Path | str, prompt: str, config: Re
         yield EstimationContext(asset=asset, geometry=geometry, request=meaning.request, category=meaning.category,
                                 category_reason=meaning.category_reason, closed=closed, closed_extents=extents, session=kin,
                                 subtrees=subtrees, joint_heights=heights, hull_points=hull, closed_volume=volume,
-                                settings=dict(settings or {}))
+                                settings=dict(settings or {}), mounting=mount)

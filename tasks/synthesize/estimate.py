@@ -148,7 +148,11 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
 
     Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
     holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
-    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load.
+    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load. A part
+    left open (past :data:`CATCH_STATE_FRACTION`) of an object that is set down (:func:`set_down`) is also held at
+    the set-down's lean (:func:`physics.lean_load`, x :data:`physics.LEAN_SAFETY`) and stopped after its drop (:func:`physics.impact_friction`),
+    as a real hinge or slide holds a part where it was left when its object is put down; a shut part has its catch
+    or its weight, a spring or a balance carries its load, and a part that moves freely is left free.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
@@ -193,8 +197,13 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             if bal is not None:
                 spring, hold, why = bal
                 note = f"{source}; {why}"
+        impact = 0.0
+        if spring is None and not ch.free_moving and set_down(ctx) and cs.fraction(state[name] / unit) > CATCH_STATE_FRACTION:
+            # an open part of a free-standing object is held by its friction when the object is set down
+            hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * physics.lean_load(loads[name]))
+            impact = physics.impact_friction(loads[name], prismatic=name in prismatic)
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
-                                     free_moving=ch.free_moving, spring=spring, source=note)
+                                     free_moving=ch.free_moving, spring=spring, source=note, impact=impact)
         latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
         if latch is not None:
             force, position, zone, why = latch
@@ -296,6 +305,12 @@ def catch(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str
 #: Parts that carry a counterbalance spring when they open downward (canonical labels: a door, a drop-front
 #: lid; a toggle or a lever is thrown over its centre instead).
 COUNTERBALANCE_LABELS = frozenset({"door", "lid"})
+
+
+def set_down(ctx: EstimationContext) -> bool:
+    """Whether the object stands free and is set down (the SPEC's robust rest drops and leans it): not when
+    its root is fixed (a mounted object: ``ctx.mounting``)."""
+    return not (ctx.mounting is not None and ctx.mounting.fixed)
 
 
 def _label(ctx: EstimationContext, joint: str) -> str | None:

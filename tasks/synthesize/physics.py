@@ -7,7 +7,11 @@ joint loads from kinematics, joint dynamics from those loads. Formulas (SI):
 - gravity load: tau_g = ((c - p) x M g) . a (revolute), F_g = M g . a (prismatic);
 - damping c = 2 zeta sqrt(I k) of I qdd + c qd + k q = 0 (Ogata, System
   Dynamics, 4th ed., ch. 8), k = max(|d tau_g / d q|, spring, I (2 pi f0)^2);
-- holding friction f = safety x max |tau_g| over the states to hold.
+- holding friction f = safety x max |tau_g| over the states to hold;
+- set down (SPEC robust rest: a 2 cm drop, 5 deg leans): the lean's load |tau_g| cos(d) + g sin(d) |w_h| (w: the
+  load per unit gravity, w . g = tau_g; w_h its horizontal part) and the friction that takes the part's kinetic
+  energy after the drop within the SPEC's drift, (p^2 / 2 I) / dq with p = |tau_g| / g sqrt(2 g h) (work-energy
+  theorem, an instant stop of the body: an upper bound).
 """
 
 from __future__ import annotations
@@ -101,6 +105,9 @@ class JointLoad:
     inertia_axis: float
     gravity_load: float
     gravity_stiffness: float
+    lateral_moment: float = 0.0
+    """|w_h| of the load per unit gravity w (w . g = ``gravity_load``; kg*m or kg): its part across gravity, which
+    a lean of the object turns into load (:func:`lean_load`)."""
 
 
 def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
@@ -118,7 +125,9 @@ def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics],
             n: (v / scale if session.joint_types.get(n) == "prismatic" else v) for n, v in st.items()
         }
 
-    def load_at(name: str, st: dict[str, float]) -> tuple[float, float, float]:
+    g_hat = gvec / G
+
+    def load_at(name: str, st: dict[str, float]) -> tuple[float, float, float, float]:
         session.set_joint_positions(to_input(st))
         axis_local = session.joint_axis(name)
         child_pos, child_R = session.link_frame(session.joint_child[name])
@@ -141,15 +150,14 @@ def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics],
             r_perp = r - np.dot(r, axis) * axis
             I_axis += float(axis @ Iw @ axis) + lp.mass * float(r_perp @ r_perp)
         if M <= 0:
-            return 0.0, 0.0, 0.0
+            return 0.0, 0.0, 0.0, 0.0
         com = mc / M
+        # w: the load per unit gravity, load = w . g ((c - p) x M g . a = M (a x (c - p)) . g)
+        w = M * axis if session.joint_types[name] == "prismatic" else M * np.cross(axis, com - child_pos)
+        lateral = float(np.linalg.norm(w - np.dot(w, g_hat) * g_hat))
         if session.joint_types[name] == "prismatic":
-            load = float(M * np.dot(gvec, axis))
-            inertia = M
-        else:
-            load = float(np.dot(np.cross(com - child_pos, M * gvec), axis))
-            inertia = I_axis
-        return M, inertia, load
+            return M, M, float(M * np.dot(gvec, axis)), lateral
+        return M, I_axis, float(np.dot(np.cross(com - child_pos, M * gvec), axis)), lateral
 
     for name in [n for n in session.joint_names if n in subtrees]:
         q0 = state.get(name, 0.0)
@@ -157,18 +165,49 @@ def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics],
         if session.joint_types[name] == "prismatic":
             lo, hi = lo * scale, hi * scale
         step = 0.02 if session.joint_types[name] != "prismatic" else 0.002
-        M, inertia, load = load_at(name, state)
+        M, inertia, load, lateral = load_at(name, state)
         qa = max(q0 - step, lo) if np.isfinite(lo) else q0 - step
         qb = min(q0 + step, hi) if np.isfinite(hi) else q0 + step
         if qb - qa > 0:
-            _, _, la = load_at(name, {**state, name: qa})
-            _, _, lb = load_at(name, {**state, name: qb})
+            la = load_at(name, {**state, name: qa})[2]
+            lb = load_at(name, {**state, name: qb})[2]
             k = abs(lb - la) / (qb - qa)
         else:
             k = 0.0
-        out[name] = JointLoad(joint=name, mass=M, inertia_axis=inertia, gravity_load=load, gravity_stiffness=k)
+        out[name] = JointLoad(joint=name, mass=M, inertia_axis=inertia, gravity_load=load, gravity_stiffness=k, lateral_moment=lateral)
     session.set_joint_positions(to_input(state))
     return out
+
+
+#: How a free-standing object is set down (SPEC, robust rest): dropped from this height, m ...
+SET_DOWN_DROP = 0.02
+#: ... and leaned this far about each horizontal axis, rad (5 deg) ...
+SET_DOWN_LEAN = float(np.radians(5.0))
+#: ... while each joint stays within this of its state, rad (revolute) or m (prismatic).
+SET_DOWN_DRIFT = {"revolute": 0.02, "prismatic": 0.002}
+#: Safety factor on the lean's load (dimensionless): the object is let go leaned and rocks back, so the lean is held
+#: with the margin a catch is sized with (``estimate.CATCH_LEAN_MARGIN``) and the escalation's tilt floor
+#: (``check.operating.TILT_MARGIN``), not the static :data:`HOLD_SAFETY`.
+LEAN_SAFETY = 2.0
+
+
+def lean_load(load: JointLoad, lean: float = SET_DOWN_LEAN) -> float:
+    """Largest |gravity load| (N*m or N) on a joint when its object leans ``lean`` rad in any direction:
+    |tau_g| cos(lean) + g sin(lean) |w_h| (module docstring)."""
+    return float(abs(load.gravity_load) * np.cos(lean) + G * np.sin(abs(lean)) * load.lateral_moment)
+
+
+def impact_friction(load: JointLoad, prismatic: bool, drop: float = SET_DOWN_DROP, drift: float | None = None) -> float:
+    """Friction (N*m or N) beyond the gravity load that stops a part within ``drift`` (rad or m; default
+    :data:`SET_DOWN_DRIFT`) after its object, dropped from ``drop`` m, stops on the ground: the part's momentum
+    about its joint p = |tau_g| / g v with v = sqrt(2 g drop) (w . v, the momentum's share along the joint),
+    its energy p^2 / (2 I) taken by friction over the drift (work-energy theorem; an instant stop of the body, so an
+    upper bound: the ground's give and the joint's damping take some of it). 0 without inertia about the joint."""
+    if not load.inertia_axis > 0:
+        return 0.0
+    dq = drift if drift is not None else SET_DOWN_DRIFT["prismatic" if prismatic else "revolute"]
+    p = abs(load.gravity_load) / G * np.sqrt(2.0 * G * drop)
+    return float(p * p / (2.0 * load.inertia_axis) / dq)
 
 
 #: Simulator timestep the damping bound is computed for, s (SPEC: 1/240 s).
@@ -205,7 +244,8 @@ def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: 
 
 
 def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: bool, damping_level: str = "moderate", stiff: bool = False,
-                   free_moving: bool = False, spring: tuple[float, float] | None = None, source: str = "physics") -> JointDynamics:
+                   free_moving: bool = False, spring: tuple[float, float] | None = None, source: str = "physics",
+                   impact: float = 0.0) -> JointDynamics:
     """Damping, friction and stiffness of one joint from its loads.
 
     Args:
@@ -216,6 +256,8 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
         stiff: a stiff joint is asked for: friction x 4 over the floor load.
         free_moving: "moves freely": no extra friction floor.
         spring: (stiffness, reference) when a spring is intended.
+        impact: friction (N*m or N) beyond the holding friction that stops the part after its object is set down
+            (:func:`impact_friction`; 0: none).
 
     Friction floor: Coulomb coefficient 0.05 on the moving weight (prismatic, N; lubricated drawer slides,
     Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m). Friction and damping are capped by
@@ -229,7 +271,7 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
     floor = 0.05 * weight if prismatic else 0.05 * weight * 0.01
     if free_moving:
         floor *= 0.2
-    friction = HOLD_SAFETY * abs(hold_load) + floor
+    friction = HOLD_SAFETY * abs(hold_load) + floor + max(impact, 0.0)
     if stiff:
         friction = max(friction * 2.0, 4.0 * HOLD_SAFETY * abs(load_at_state.gravity_load) + 4.0 * floor)
         c *= 2.0
@@ -244,5 +286,6 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
             f"k_g={load_at_state.gravity_stiffness:.4g}, hold load={abs(hold_load):.4g}"
             + (", stiff" if stiff else "")
             + (", spring" if spring else "")
+            + (f", set-down impact={impact:.4g}" if impact > 0 else "")
         ),
     )

@@ -276,7 +276,7 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
     real_extract, real_rest = extract.extract_asset_checked, check_metrics.run_rest_test
 
     def counting_extract(*a, **k):
-        if Path(a[0]).resolve() == (demo_root / "box_lid").resolve():  # the input (the evaluator reads the output URDF)
+        if Path(a[0]).resolve() == (demo_root / "laptop").resolve():  # the input (the evaluator reads the output URDF)
             counts["extract"] += 1
         return real_extract(*a, **k)
 
@@ -286,7 +286,7 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
 
     monkeypatch.setattr(extract, "extract_asset_checked", counting_extract)
     monkeypatch.setattr(check_metrics, "run_rest_test", counting_rest)
-    entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "box_lid")
+    entry = next(e for e in demo_assets.DEMO_OBJECTS if e.asset_id == "laptop")
     out = tmp_path / "out"
     res = refine_asset(demo_root / entry.asset_id, entry.prompt, out)
     assert "html" in res.extras, res.report.notes
@@ -294,7 +294,7 @@ def test_refine_reads_once_and_runs_the_rest_test_once_per_check(demo_root, tmp_
     # the post-check's rest tests (tests.helpers.rest_tests_of_refine), none in the extras: the evaluation
     # takes the last post-check's robust rest (same files, state and conventions: tasks.check.recorded_runs)
     rounds = res.report.escalation
-    assert len(rounds) > 1 and postcheck.sweep_not_run(rounds[0].metrics)  # box_lid escalates once
+    assert len(rounds) > 1 and postcheck.sweep_not_run(rounds[0].metrics)  # the laptop's screen escalates
     assert counts["rest_test"] == rest_tests_of_refine(res.report)
     written = json.loads((out / "evaluation.json").read_text())
     names = {m["name"] for m in written["metrics"]}
