@@ -238,7 +238,7 @@ class DynamicsSearch:
                 return ""
         (first, d0), (last, d1) = seen[0], seen[-1]
         return (f"friction {first.friction:.3g} -> {last.friction:.3g} left its drift at {d0:.3g} -> {d1:.3g}: not what "
-                f"holds it (a contact or a stop moves it), raised no more")
+                f"holds it (a contact moves it), raised no more")
 
     def _is_prismatic(self, joint: str) -> bool:
         b = self.budgets.get(joint)
