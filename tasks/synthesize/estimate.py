@@ -151,8 +151,10 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
     k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load. A part
     left open (past :data:`CATCH_STATE_FRACTION`) of an object that is set down (:func:`set_down`) is also held at
     the set-down's lean (:func:`physics.lean_load`, x :data:`physics.LEAN_SAFETY`) and stopped after its drop (:func:`physics.impact_friction`),
-    as a real hinge or slide holds a part where it was left when its object is put down; a shut part has its catch
-    or its weight, a spring or a balance carries its load, and a part that moves freely is left free.
+    as a real hinge or slide holds a part where it was left when its object is put down; a part its weight presses
+    onto its open stop (within the SPEC's drift of it) is held there by the stop, its friction only against a lean
+    that lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg); a shut part has its catch or its weight, a spring or a
+    balance carries its load, and a part that moves freely is left free.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
@@ -199,9 +201,14 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
                 note = f"{source}; {why}"
         impact = 0.0
         if spring is None and not ch.free_moving and set_down(ctx) and cs.fraction(state[name] / unit) > CATCH_STATE_FRACTION:
-            # an open part of a free-standing object is held by its friction when the object is set down
-            hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * physics.lean_load(loads[name]))
-            impact = physics.impact_friction(loads[name], prismatic=name in prismatic)
+            # an open part of a free-standing object is held by its friction when the object is set down; one its
+            # weight presses onto its open stop is held by the stop, friction only against a lean that lifts it off
+            ld = loads[name]
+            at_stop = (ld.gravity_load * cs.direction > 0
+                       and abs(cs.position(1.0) * unit - state[name]) <= physics.SET_DOWN_DRIFT["prismatic" if name in prismatic else "revolute"])
+            lean = physics.lean_load(ld) - (2.0 * abs(ld.gravity_load) * math.cos(physics.SET_DOWN_LEAN) if at_stop else 0.0)
+            hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * lean)
+            impact = 0.0 if at_stop else physics.impact_friction(ld, prismatic=name in prismatic)
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact)
         latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
