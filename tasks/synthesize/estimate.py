@@ -206,8 +206,7 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             ld = loads[name]
             at_stop = (ld.gravity_load * cs.direction > 0
                        and abs(cs.position(1.0) * unit - state[name]) <= physics.SET_DOWN_DRIFT["prismatic" if name in prismatic else "revolute"])
-            lean = physics.lean_load(ld) - (2.0 * abs(ld.gravity_load) * math.cos(physics.SET_DOWN_LEAN) if at_stop else 0.0)
-            hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * lean)
+            hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * physics.lean_load(ld, on_stop=at_stop))
             impact = 0.0 if at_stop else physics.impact_friction(ld, prismatic=name in prismatic)
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact)

@@ -191,10 +191,14 @@ SET_DOWN_DRIFT = {"revolute": 0.02, "prismatic": 0.002}
 LEAN_SAFETY = 2.0
 
 
-def lean_load(load: JointLoad, lean: float = SET_DOWN_LEAN) -> float:
+def lean_load(load: JointLoad, lean: float = SET_DOWN_LEAN, *, on_stop: bool = False) -> float:
     """Largest |gravity load| (N*m or N) on a joint when its object leans ``lean`` rad in any direction:
-    |tau_g| cos(lean) + g sin(lean) |w_h| (module docstring)."""
-    return float(abs(load.gravity_load) * np.cos(lean) + G * np.sin(abs(lean)) * load.lateral_moment)
+    |tau_g| cos(lean) + g sin(lean) |w_h| (module docstring). ``on_stop``: the part rests on the stop its weight
+    presses it onto, so only a lean that lifts it off loads the joint: g sin(lean) |w_h| - |tau_g| cos(lean)
+    (negative: none does)."""
+    pressed = abs(load.gravity_load) * np.cos(lean)
+    lateral = G * np.sin(abs(lean)) * load.lateral_moment
+    return float(lateral - pressed if on_stop else pressed + lateral)
 
 
 def impact_friction(load: JointLoad, prismatic: bool, drop: float = SET_DOWN_DROP, drift: float | None = None) -> float:

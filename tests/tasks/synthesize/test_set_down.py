@@ -69,7 +69,7 @@ def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path,
     assert len(first.report.escalation) == 1, [r.reason for r in first.report.escalation]
     assert first.report.readiness["robust_rest"] is True and first.report.readiness["operability"] is True
     monkeypatch.setattr(physics, "impact_friction", lambda load, prismatic, **_: 0.0)
-    monkeypatch.setattr(physics, "lean_load", lambda load, lean=0.0: 0.0)
+    monkeypatch.setattr(physics, "lean_load", lambda load, lean=0.0, **_: 0.0)
     without = refine_asset(BOX, BOX_REQUEST, tmp_path / "without", extras=False, category="Box")
     assert "set-down" not in without.overlay.joints["joint_0"].source
     rr = next(m for m in without.report.escalation[0].metrics if m.name == "robust_rest")
