@@ -148,13 +148,14 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
 
     Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
     holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
-    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load. A part
-    left open (past :data:`CATCH_STATE_FRACTION`) of an object that is set down (:func:`set_down`) is also held at
-    the set-down's lean (:func:`physics.lean_load`, x :data:`physics.LEAN_SAFETY`) and stopped after its drop (:func:`physics.impact_friction`),
-    as a real hinge or slide holds a part where it was left when its object is put down; a part its weight presses
-    onto its open stop (within the SPEC's drift of it) is held there by the stop, its friction only against a lean
-    that lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg); a shut part has its catch or its weight, a spring or a
-    balance carries its load, and a part that moves freely is left free.
+    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load. A shut
+    door, drawer or lid has its catch (:func:`catch`). Any other part of an object that is set down (:func:`set_down`),
+    open or shut, is also held at the set-down's lean (:func:`physics.lean_load`, x :data:`physics.LEAN_SAFETY`) and
+    stopped after its drop (:func:`physics.impact_friction`), as a real hinge or slide holds a part where it was
+    left when its object is put down; a part its weight presses onto a stop (:func:`_on_stop`: its open end or its
+    closed end, within the SPEC's drift of it) is held there by the stop, its friction only against a lean that
+    lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg). A spring or a balance carries its part's load, and a part
+    that moves freely is left free.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
@@ -199,24 +200,33 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             if bal is not None:
                 spring, hold, why = bal
                 note = f"{source}; {why}"
+        latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
         impact = 0.0
-        if spring is None and not ch.free_moving and set_down(ctx) and cs.fraction(state[name] / unit) > CATCH_STATE_FRACTION:
-            # an open part of a free-standing object is held by its friction when the object is set down; one its
-            # weight presses onto its open stop is held by the stop, friction only against a lean that lifts it off
+        if spring is None and latch is None and not ch.free_moving and set_down(ctx):
+            # a part of a free-standing object without a catch is held by its friction where it was left when the
+            # object is set down; one its weight presses onto a stop is held by the stop, friction only against a
+            # lean that lifts it off
             ld = loads[name]
-            at_stop = (ld.gravity_load * cs.direction > 0
-                       and abs(cs.position(1.0) * unit - state[name]) <= physics.SET_DOWN_DRIFT["prismatic" if name in prismatic else "revolute"])
+            at_stop = _on_stop(ld, cs, state[name], unit, physics.SET_DOWN_DRIFT["prismatic" if name in prismatic else "revolute"])
             hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * physics.lean_load(ld, on_stop=at_stop))
             impact = 0.0 if at_stop else physics.impact_friction(ld, prismatic=name in prismatic)
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
                                      free_moving=ch.free_moving, spring=spring, source=note, impact=impact)
-        latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
         if latch is not None:
             force, position, zone, why = latch
             dyn = dyn.model_copy(update={"catch_force": force, "catch_position": position, "catch_zone": zone,
                                          "source": f"{dyn.source}; {why}"})
         out[name] = dyn
     return out
+
+
+def _on_stop(load: physics.JointLoad, cs: ClosedState, q: float, unit: float, drift: float) -> bool:
+    """Whether a part at ``q`` (rad or m) rests on the stop its weight presses it onto: its gravity load
+    ``load.gravity_load`` pushes it open and it lies within ``drift`` (rad or m) of its open end, or it pushes it
+    shut and it lies within ``drift`` of its closed end (``cs``'s ends in unscaled units x ``unit``)."""
+    push = load.gravity_load * cs.direction
+    end = cs.position(1.0) if push > 0 else cs.position(0.0) if push < 0 else None
+    return end is not None and abs(end * unit - q) <= drift
 
 
 #: Holding forces of catches at a part's closed end, N: magnetic cabinet catches pull 2-8 lb (8.9-35.6 N;
