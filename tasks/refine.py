@@ -23,7 +23,7 @@ from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.geometry import analyze, limits
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.ingest.validate_input import Finding
-from asset2sim.tasks.interpret import mounting, overrides, request
+from asset2sim.tasks.interpret import overrides, request
 from asset2sim.tasks.synthesize import request_apply
 from asset2sim.tasks.assemble import (write)
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
@@ -394,8 +394,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
         overlay, issues = validate_overlay.validate_overlay(result.overlay, asset, ctx.geometry)
     except validate_overlay.OverlayInvalid as exc:
         raise RefineError(f"{asset.asset_id}: {exc}", "invalid_overlay") from exc
-    mount = ctx.mounting or mounting.root_mounting(ctx.asset, ctx.request, ctx.category, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
-    overlay = overlay.model_copy(update={"mounting": mount})
+    overlay = overlay.model_copy(update={"mounting": ctx.mounting})  # resolved with the context (build_context)
     s = overlay.scale
     overlay, targets = request_apply.check_against_request(ctx, overlay, result.targets)
     requested = estimate.state_from_bands(ctx.closed, bands, s, prismatic)

@@ -59,7 +59,8 @@ class EstimationContext:
     task: str | None = None
     """The manipulation task refine was given ("close the microwave door"): the post-check executes it."""
     mounting: RootMount | None = None
-    """How the root is held (:func:`asset2sim.tasks.interpret.mounting.root_mounting`); None: not resolved (free-standing)."""
+    """How the root is held (:func:`asset2sim.tasks.interpret.mounting.root_mounting`, resolved by :func:`build_context`);
+    None: free-standing."""
 
     def closed_state(self) -> dict[str, float]:
         """joint -> closed position (rad, or input units for prismatic joints)."""
