@@ -299,7 +299,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = balance.steadiest_fractions(ws.model(), att.overlay, att.state, att.closed_out, intervals)
+        fractions, before, after = balance.steadiest_fractions(ws.model(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None
@@ -336,15 +336,16 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, c
     syn = _synthesize(ctx, est, config, log)
     if fractions:
         syn = replace(syn, requested={**syn.requested, **placement.at_fractions(syn.closed_out, fractions)})
-    urdf, first_clear = _write(ctx, syn, ws, log)
-    shut, shut_notes = placement.shut_repair(ctx, syn, urdf, config, ws, cache, log)
-    syn = placement.closed_on_output(ctx, syn, urdf, ws, log, shut)
+    first_clear = _write(ctx, syn, ws, log)
+    shut, shut_notes = placement.shut_repair(ctx, syn, config, ws, cache, log)
+    syn = placement.closed_on_output(ctx, syn, ws, log, shut)
     closed_raw = syn.closed_out
-    clipped = placement.clip_synthesis(ctx, syn, urdf, config, ws, log, shut, fractions)
+    clipped = placement.clip_synthesis(ctx, syn, config, ws, log, shut, fractions)
     if clipped is not syn:  # clipped limits change the pieces and the range the closed end is found in: measured once more
-        clipped = placement.closed_on_output(ctx, clipped, urdf, ws, log, shut)
+        clipped = placement.closed_on_output(ctx, clipped, ws, log, shut)
     syn = clipped
-    st, overrides = placement.search_state(ctx, est, syn, urdf, config, ws, cache, log, shut)
+    searched = syn.candidate(ctx, shut)
+    st, kept = placement.search_state(ctx, est, syn, searched, config, ws, cache, log)
     st.collision_changes = shut_notes + list(st.collision_changes)
     state = dict(st.result)
     room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "
@@ -354,23 +355,24 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, c
         for line in room:
             log.say("refine_state", line)
     state, overrides, floored, lifted = ground_clearance.apply_ground_clearance(
-        ctx.asset, syn.overlay, ws, state, overrides, closed_tuples(syn.closed_out), ctx.root_rotation)
+        replace(kept, state=state), ws, closed_tuples(syn.closed_out))
     st.collision_changes = list(st.collision_changes) + lifted
-    if overrides is not shut:  # the state search changed the collision pieces: the limits are clipped again on them (stage 6b)
-        unclipped = limits.strip_clips(syn.overlay)
-        ws.load(Candidate(ctx.asset, unclipped, state, overrides, ctx.root_rotation))
-        reclipped, closed_re = placement.clip_limits(unclipped, closed_raw, state, ws, config, log)
+    refined = Candidate(ctx.asset, syn.overlay, state, overrides, ctx.root_rotation)
+    measured = refined  # the pieces the statics are measured on: those the limits were clipped on
+    if overrides is not searched.collision_overrides:  # the collision pieces changed: the limits are clipped again on them (stage 6b)
+        measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
+        reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
         syn = replace(syn, overlay=reclipped, closed_out=closed_re)
-    balanced, design = stability.design_for_stability(ws.model(), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
+    balanced, design = stability.design_for_stability(ws.model(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
     design = floored + design
     for line in design:
         log.say("stability", line)
     design = room + design
     closed_out = syn.closed_out
-    overlay, check, rounds = escalation.post_check(ctx, balanced, state, overrides, urdf, config, ws, log,
-                                         closed=closed_tuples(closed_out))
+    overlay, check, rounds = escalation.post_check(ctx, replace(refined, overlay=balanced), config, ws, log,
+                                                   closed=closed_tuples(closed_out))
     overlay, check, rounds, overrides, closed_out = escalation.repair_sweep(
-        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, urdf, config, ws, log)
+        ctx, limits.strip_clips(balanced), closed_raw, (overlay, check, rounds, overrides, closed_out), st, state, config, ws, log)
     # the clearance of the first pieces (carried on by pieces a repair rewrote from them) and of the final ones
     clear = list(dict.fromkeys(first_clear + placement.clearance_notes(ctx, overlay, state, overrides, ws)))
     st.collision_changes = clear + list(st.collision_changes)
@@ -404,15 +406,15 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
     return placement.Synthesis(overlay, issues, bands, prismatic, placement.scaled_closed(ctx.closed, s, prismatic), requested, targets)
 
 
-def _write(ctx: EstimationContext, syn: placement.Synthesis, ws: Workspace, log: StageLog) -> tuple[Path, list[str]]:
+def _write(ctx: EstimationContext, syn: placement.Synthesis, ws: Workspace, log: StageLog) -> list[str]:
     """Stage 5: the candidate at the requested state loaded into the workspace.
-    Returns (the URDF path, the writer's clearance notes)."""
-    urdf = ws.load(Candidate(ctx.asset, syn.overlay, syn.requested, {}, ctx.root_rotation))
+    Returns the writer's clearance notes."""
+    ws.load(syn.candidate(ctx))
     clear = placement.clearance_lines(ws.collision_notes)
     for line in clear:
         log.say("write", line)
     log.lap("write")
-    return urdf, clear
+    return clear
 
 
 # ---------------------------------------------------------- 8: report, extras, marker

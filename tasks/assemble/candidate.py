@@ -17,7 +17,9 @@ from typing import Mapping
 
 import numpy as np
 
-from asset2sim import atomic, mesh_io, urdf
+from asset2sim import array_cache, atomic, mesh_io, urdf
+from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.registry import open_session
 from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
@@ -41,8 +43,10 @@ class Candidate:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "state", MappingProxyType({k: float(v) for k, v in self.state.items()}))
-        object.__setattr__(self, "collision_overrides",
-                           MappingProxyType({k: tuple(v) for k, v in (self.collision_overrides or {}).items()}))
+        if not isinstance(self.collision_overrides, MappingProxyType):  # frozen already: kept, so that
+            # dataclasses.replace hands the same overrides on (a stage tells "unchanged" by identity)
+            object.__setattr__(self, "collision_overrides",
+                               MappingProxyType({k: tuple(v) for k, v in (self.collision_overrides or {}).items()}))
 
     def write_into(self, folder: Path, *, copy: bool, open_containers: bool = False) -> write.OutputPaths:
         """Write this candidate's files into ``folder``
@@ -55,6 +59,23 @@ class Candidate:
         return write.write_output(self.asset, self.overlay, folder, dict(self.state), copy=copy,
                                   collision_overrides={k: list(v) for k, v in self.collision_overrides.items()},
                                   root_rotation=self.root_rotation, open_containers=open_containers)
+
+
+def candidate_digest(candidate: Candidate, folder: Path) -> str:
+    """Digest of what :meth:`Candidate.write_into` reads: the overlay, the state, the root rotation, the
+    collision overrides with the bytes of their files (relative to ``folder``, where the stages wrote them)
+    and the asset's URDF file."""
+    parts: list[bytes | str] = [str(candidate.asset.urdf_path), candidate.overlay.model_dump_json(),
+                                repr(sorted(candidate.state.items())),
+                                b"" if candidate.root_rotation is None else np.asarray(candidate.root_rotation, float).tobytes()]
+    for link in sorted(candidate.collision_overrides):
+        for piece in candidate.collision_overrides[link]:
+            parts.append(f"{link}\0{piece!r}")
+            try:
+                parts.append(mesh_io.file_bytes(folder / piece.filename))
+            except OSError:
+                parts.append(b"\0missing")
+    return array_cache.digest(*parts)
 
 
 #: Name prefix of a workspace folder, followed by the process id of the refine that owns it.
@@ -82,7 +103,12 @@ class Workspace:
     a fresh temporary folder (meshes copied into it once), removed by
     :meth:`close`. Only engines read what is written here. ``open_containers``:
     a container's collision is a decomposition that leaves its inside open
-    (:func:`asset2sim.tasks.assemble.collision_geometry.link_pieces`)."""
+    (:func:`asset2sim.tasks.assemble.collision_geometry.link_pieces`).
+
+    A stage asks for the candidate it works on (:meth:`load`, :meth:`model`,
+    :meth:`session`); the folder is written only when that candidate is not
+    the one on disk (:func:`candidate_digest`), so asking again costs nothing.
+    :attr:`writes` counts the writes."""
 
     def __init__(self, asset: AssetDescription, *, open_containers: bool = False):
         self.asset = asset
@@ -94,6 +120,8 @@ class Workspace:
         self.collision_notes: list[str] = []
         self._written: tuple[bytes, Path] | None = None  # the loaded URDF's bytes and path, parsed on demand
         self._model: urdf.UrdfModel | None = None
+        self._digest: str | None = None  # candidate_digest of the candidate on disk
+        self.writes = 0
 
     @property
     def urdf(self) -> Path:
@@ -101,23 +129,35 @@ class Workspace:
         return self.root / URDF_NAME
 
     def load(self, candidate: Candidate) -> Path:
-        """Write ``candidate`` into the scratch folder for the engines to load.
-        Returns the scratch URDF; :attr:`collision_notes` holds what the
-        writer's convex pieces changed."""
-        paths = candidate.write_into(self.root, copy=not self._copied, open_containers=self.open_containers)
-        self._copied = True
-        self.collision_notes = list(paths.collision_notes)
-        self._written, self._model = (paths.urdf_bytes, paths.urdf), None
-        return paths.urdf
-
-    def model(self) -> urdf.UrdfModel:
-        """The loaded candidate's URDF model as the engines read it (parsed
-        from the bytes written, mesh paths in the scratch folder); a copy the
-        caller may change.
+        """The scratch URDF of ``candidate`` for the engines to load: written
+        into the scratch folder unless it is the candidate on disk already.
+        :attr:`collision_notes` holds what the writer's convex pieces changed.
 
         Raises:
-            RuntimeError: nothing was loaded yet.
+            OutputError: an incomplete overlay (see :meth:`Candidate.write_into`).
+            OSError: a file cannot be read or written.
         """
+        key = candidate_digest(candidate, self.root)
+        if key == self._digest and self._written is not None:
+            return self._written[1]
+        self._digest = None  # a write that fails leaves no candidate on disk
+        paths = candidate.write_into(self.root, copy=not self._copied, open_containers=self.open_containers)
+        self._copied = True
+        self.writes += 1
+        self.collision_notes = list(paths.collision_notes)
+        self._written, self._model, self._digest = (paths.urdf_bytes, paths.urdf), None, key
+        return paths.urdf
+
+    def model(self, candidate: Candidate | None = None) -> urdf.UrdfModel:
+        """The URDF model of ``candidate`` (loaded first; None: the candidate
+        loaded last) as the engines read it (parsed once from the bytes
+        written, mesh paths in the scratch folder); a copy the caller may change.
+
+        Raises:
+            RuntimeError: ``candidate`` is None and nothing was loaded yet.
+        """
+        if candidate is not None:
+            self.load(candidate)
         if self._written is None:
             raise RuntimeError("no candidate loaded into the workspace")
         if self._model is None:
@@ -125,6 +165,15 @@ class Workspace:
             self._model = urdf.parse_urdf_bytes(data, source=str(path), base=self.root)
             self._model.path = path
         return urdf.clone_model(self._model)
+
+    def session(self, candidate: Candidate, engine: str = "pybullet", options: SessionOptions | None = None) -> SimSession:
+        """A session of ``candidate`` (loaded first) in ``engine``
+        (:func:`asset2sim.engines.registry.open_session`); the caller closes it.
+
+        Raises:
+            EngineUnavailable, RuntimeError: see :func:`asset2sim.engines.registry.open_session`.
+        """
+        return open_session(engine, self.load(candidate), options)
 
     def close(self) -> None:
         """Remove the scratch folder (and what :mod:`asset2sim.mesh_io` kept of its meshes)."""

@@ -4,7 +4,7 @@ the post-check calls for (:func:`repair_sweep`)."""
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import replace
 
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
@@ -20,23 +20,23 @@ from asset2sim.tasks.synthesize import estimate
 from asset2sim.tasks.synthesize.context import EstimationContext
 
 
-def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, urdf: Path, config: RefineConfig, ws: Workspace, log: StageLog,
+def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfig, ws: Workspace, log: StageLog,
                 closed: dict[str, tuple[float, float, float]] | None = None) -> tuple[Overlay, postcheck.PostCheck, list[EscalationRound]]:
-    """Stage 7: post-check the refined state (``closed``: closed ends at the output scale, for the sweep and
-    robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while it
-    fails. Returns (final overlay, last check, rounds)."""
-    asset, root_rotation = ctx.asset, ctx.root_rotation
+    """Stage 7: post-check ``candidate`` at its refined state (``closed``: closed ends at the output scale, for the
+    sweep and robust rest) and escalate damping and friction up to ``config.max_escalation_rounds`` times while
+    it fails. Returns (final overlay, last check, rounds)."""
+    asset, overlay, state = candidate.asset, candidate.overlay, dict(candidate.state)
     if overlay.initial_joint_positions is not None:
         overlay = overlay.model_copy(update={"initial_joint_positions": state})
     rounds: list[EscalationRound] = []
-    ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+    cand = replace(candidate, overlay=overlay)
     recorded = postcheck.RecordedRuns()  # the manipulation tiers' runs, handed on to the evaluation
     labels = task_tier.link_labels(asset)
     n = 0
-    spec = task_tier.task_spec_for(ctx.task, ws.model(), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
+    spec = task_tier.task_spec_for(ctx.task, ws.model(cand), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
-    lim = task_tier.operating_limits(ws.model(), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
+    lim = task_tier.operating_limits(ws.model(cand), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, conventions=config.sim,
                                      joints=spec.joints if spec is not None else None)
     bounded, notes = operating.bound_overlay(overlay, lim.budgets)
@@ -44,7 +44,7 @@ def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float]
         log.say("post_check", line)
     if bounded != overlay:
         overlay = bounded
-        ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
+        cand = replace(cand, overlay=overlay)
     caps, dcaps = lim.friction_caps, lim.damping_caps
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
@@ -54,12 +54,12 @@ def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float]
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
-                "pybullet", ws.model(), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
+                "pybullet", ws.model(cand), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
                 fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
                 free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
         return chk
 
-    check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+    check = with_task(postcheck.run_post_check(ws.model(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
                                                      category=ctx.category, labels=labels))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps, floors)  # relief and escalation bracketed by what each round measured
@@ -76,8 +76,8 @@ def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float]
         reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
         if not changes:
             break
-        ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+        cand = replace(cand, overlay=overlay)
+        check = with_task(postcheck.run_post_check(ws.model(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
                                                      category=ctx.category, labels=labels))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
         search.record(overlay, check.metrics)
@@ -90,8 +90,8 @@ def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float]
                   else "the last round's setting checked again with the joint sweep")
         if earlier:
             overlay = tried[best][0]
-            ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-        check = with_task(postcheck.run_post_check(ws.model(), state, overlay, config, closed=closed, recorded=recorded,
+            cand = replace(cand, overlay=overlay)
+        check = with_task(postcheck.run_post_check(ws.model(cand), state, overlay, config, closed=closed, recorded=recorded,
                                                    category=ctx.category, labels=labels))
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
@@ -100,7 +100,7 @@ def post_check(ctx: EstimationContext, overlay: Overlay, state: dict[str, float]
 
 
 def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,
-                  state: dict[str, float], urdf: Path, config: RefineConfig, ws: Workspace, log: StageLog):
+                  state: dict[str, float], config: RefineConfig, ws: Workspace, log: StageLog):
     """Stage 7b: collision repairs where the post-check shows a part held by its neighbours' pieces: a
     blocked joint sweep (:func:`asset2sim.tasks.check.repair.sweep_repairs`, better = a better sweep score)
     or parts held together (running clearance, better = fewer failing tiers). Each repair is loaded, the
@@ -113,7 +113,9 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     pairs = [] if blocked else repair.held_together_pairs(check.metrics)
     if not blocked and not pairs:
         return result  # the common case: nothing read, nothing simulated
-    model = ws.model()
+    current = Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation)
+    model = ws.model(current)
+    urdf = model.path  # the lazy repairs below read the current candidate's scratch file (loaded again after each one tried)
     folder = write.collision_folder(ctx.asset)
     if blocked:
         label = "sweep blocked"
@@ -135,9 +137,9 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     # budget: the repair's check does not replay the escalation from the estimate)
     left = config.model_copy(update={"max_escalation_rounds": max(0, config.max_escalation_rounds - (len(rounds) - 1))})
     for rep in repairs:
-        ws.load(Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation))
-        clipped, closed2 = placement.clip_limits(unclipped, closed_raw, state, ws, config, log)
-        ov2, check2, rounds2 = post_check(ctx, kept_dynamics(clipped, overlay), state, rep.overrides, urdf, left, ws, log,
+        repaired = Candidate(ctx.asset, unclipped, state, rep.overrides, ctx.root_rotation)
+        clipped, closed2 = placement.clip_limits(repaired, closed_raw, ws, config, log)
+        ov2, check2, rounds2 = post_check(ctx, replace(repaired, overlay=kept_dynamics(clipped, overlay)), left, ws, log,
                                            closed=closed_tuples(closed2))
         lost = [m.name for m in check2.metrics if (m.name, m.engine) in passed_before and m.passed is False]
         if better(check2) and not lost:
@@ -151,7 +153,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
         log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
                                 f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
                                 "the asset kept as it was")
-        ws.load(Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation))
+        ws.load(current)
     return result
 
 

@@ -7,14 +7,13 @@ openings"). A collision piece that drags on the ground is raised to
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asset2sim.schemas.asset import AssetDescription
-from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry.limits import subtrees
@@ -136,28 +135,25 @@ def ground_clearance(model: UrdfModel, urdf: Path | str, state: dict[str, float]
     return rep
 
 
-def apply_ground_clearance(asset: AssetDescription, overlay: Overlay, ws: Workspace, state: dict[str, float],
-                           overrides: dict, closed: dict[str, tuple[float, float, float]],
-                           root_rotation=None) -> tuple[dict[str, float], dict, list[str], list[str]]:
-    """Refine's step after the state search (nothing for a mounted asset): load
-    the candidate with ``overrides`` into ``ws``, apply :func:`floor_limited_state`
-    and :func:`ground_clearance` to its model, load it again when anything
-    changed. ``closed``: joint -> (q_closed, direction, open_range), rad or m.
+def apply_ground_clearance(candidate: Candidate, ws: Workspace, closed: dict[str, tuple[float, float, float]]
+                           ) -> tuple[dict[str, float], Mapping, list[str], list[str]]:
+    """Refine's step after the state search (nothing for a mounted asset): :func:`floor_limited_state` and
+    :func:`ground_clearance` applied to ``candidate``'s model (loaded into ``ws``; new pieces written into its
+    folder). ``closed``: joint -> (q_closed, direction, open_range), rad or m.
 
-    Returns (state, collision overrides (``overrides`` itself when unchanged),
+    Returns (state, collision overrides (``candidate.collision_overrides`` itself when unchanged),
     state notes, collision notes).
     Raises OSError: a collision file cannot be read or written.
     """
+    overlay, state, overrides = candidate.overlay, dict(candidate.state), candidate.collision_overrides
     if overlay.mounting is not None and overlay.mounting.fixed:
         return state, overrides, [], []
-    urdf = ws.load(Candidate(asset, overlay, state, overrides, root_rotation))
-    new_state, state_notes = floor_limited_state(ws.model(), urdf, state, closed)
-    rep = ground_clearance(ws.model(), urdf, new_state)
+    model = ws.model(candidate)
+    new_state, state_notes = floor_limited_state(model, model.path, state, closed)
+    rep = ground_clearance(ws.model(candidate), model.path, new_state)
     new = overrides
     if rep.pieces:
-        new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, ws.root, write.collision_folder(asset), "ground")}
-    if rep.pieces or state_notes:
-        ws.load(Candidate(asset, overlay, new_state, new, root_rotation))
+        new = {**overrides, **write_piece_overrides(rep.pieces, overlay.scale, ws.root, write.collision_folder(candidate.asset), "ground")}
     return new_state, new, state_notes, rep.notes
 
 

@@ -6,10 +6,8 @@ shut (:func:`shut_repair`) and the state search (:func:`search_state`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import StateRefinement
@@ -37,6 +35,10 @@ class Synthesis:
     requested: dict[str, float]  # joint positions, output units
     targets: dict[str, request_apply.JointTarget] = field(default_factory=dict)  # numbers / ends the request asked
 
+    def candidate(self, ctx: EstimationContext, overrides=None) -> Candidate:
+        """The candidate of this synthesis: its overlay at the requested state, with the collision ``overrides``."""
+        return Candidate(ctx.asset, self.overlay, self.requested, overrides or {}, ctx.root_rotation)
+
 
 def scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
     """Closed ends at ``scale`` (prismatic positions and ranges times ``scale``)."""
@@ -49,13 +51,13 @@ def at_fractions(closed: dict[str, ClosedState], fractions: dict[str, float]) ->
     return {n: closed[n].position(f) for n, f in fractions.items() if n in closed}
 
 
-def closed_on_output(ctx: EstimationContext, syn: Synthesis, urdf: Path, ws: Workspace, log: StageLog,
+def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log: StageLog,
                       overrides: dict | None = None) -> Synthesis:
-    """Stage 5a: the closed ends measured on the written output (:mod:`asset2sim.tasks.geometry.urdf_closed`),
-    the requested state and the overlay's initial positions moved onto them and the candidate loaded again
-    (with the collision ``overrides``). Unchanged when the measurement fails."""
+    """Stage 5a: the closed ends measured on the synthesis' candidate (with the collision ``overrides``;
+    :mod:`asset2sim.tasks.geometry.urdf_closed`), the requested state and the overlay's initial positions
+    moved onto them. Unchanged when the measurement fails."""
     try:
-        measured = urdf_closed.measure_closed(ws.model())
+        measured = urdf_closed.measure_closed(ws.model(syn.candidate(ctx, overrides)))
     except Exception as exc:
         log.say("closed_state", f"closed ends not measured on the output ({type(exc).__name__}: {exc}); the input's are used")
         return syn
@@ -72,18 +74,17 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, urdf: Path, ws: Wor
     for n in moved:
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
-    ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
     targets = request_apply.retarget(syn.targets, syn.closed_out, new)  # the angle asked, from the new closed end
     bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
     return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=targets, bands=bands)
 
 
-def clip_synthesis(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, log: StageLog,
+def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, log: StageLog,
                     overrides: dict | None = None, fractions: dict[str, float] | None = None) -> Synthesis:
-    """Stage 5b: the limits clipped to the geometry before the state search, the requested state
-    recomputed from the bands over the clipped ranges (``fractions`` win over the bands' targets) and the
-    candidate loaded again (with the collision ``overrides``). ``syn`` itself when nothing was clipped."""
-    overlay, closed_out = clip_limits(syn.overlay, syn.closed_out, syn.requested, ws, config, log)
+    """Stage 5b: the limits clipped to the geometry of the synthesis' candidate (with the collision
+    ``overrides``) before the state search and the requested state recomputed from the bands over the
+    clipped ranges (``fractions`` win over the bands' targets). ``syn`` itself when nothing was clipped."""
+    overlay, closed_out = clip_limits(syn.candidate(ctx, overrides), syn.closed_out, ws, config, log)
     if overlay is syn.overlay:
         return syn
     s = overlay.scale
@@ -97,11 +98,10 @@ def clip_synthesis(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: R
     requested = estimate.state_from_bands(unscaled, bands, s, syn.prismatic)
     requested.update(overlay.initial_joint_positions or {})
     requested.update(at_fractions(closed_out, fractions or {}))
-    ws.load(Candidate(ctx.asset, overlay, requested, overrides, ctx.root_rotation))
     return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested, targets=targets, bands=bands)
 
 
-def shut_repair(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache,
+def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, cache,
                  log: StageLog) -> tuple[dict, list[str]]:
     """Stage 5 (before 5a): collision pieces that let the object shut. When the request opens a joint and the
     closed configuration overlaps beyond the tolerance, the state search with its collision repair runs as for
@@ -109,13 +109,12 @@ def shut_repair(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: Refi
     closed = {n: c.q_closed for n, c in syn.closed_out.items()}
     opened = [n for n, c in syn.closed_out.items()
               if abs(c.fraction(syn.requested.get(n, c.q_closed))) > BAND_INTERVAL["closed"][1]]
-    if not (config.convex_decomposition and opened and state_search.phi_at(urdf, closed, config) > config.penetration_tolerance):
+    if not (config.convex_decomposition and opened
+            and state_search.phi_at(ws, syn.candidate(ctx), closed, config) > config.penetration_tolerance):
         return {}, []
-    ws.load(Candidate(ctx.asset, syn.overlay, closed, {}, ctx.root_rotation))
-    shut, overrides = state_search.refine_state_with_decomposition(
-        ctx.asset, syn.overlay, syn.closed_out, {n: "closed" for n in syn.closed_out}, closed, urdf, ctx.root_rotation,
-        config, ws, cache, log.say)
-    ws.load(Candidate(ctx.asset, syn.overlay, syn.requested, overrides, ctx.root_rotation))
+    shut, kept = state_search.refine_state_with_decomposition(
+        replace(syn.candidate(ctx), state=closed), syn.closed_out, {n: "closed" for n in syn.closed_out}, config, ws, cache, log.say)
+    overrides = kept.collision_overrides
     head = (f"closed configuration (the request opens {', '.join(opened)}): Phi {shut.phi_requested * 1000:.3g} -> "
             f"{shut.phi_result * 1000:.3g} mm" + ("" if overrides else "; collision pieces kept"))
     log.say("shut_repair", head)
@@ -123,18 +122,18 @@ def shut_repair(ctx: EstimationContext, syn: Synthesis, urdf: Path, config: Refi
     return overrides, [head + (":" if shut.collision_changes else "")] + list(shut.collision_changes)
 
 
-def search_state(ctx: EstimationContext, est, syn: Synthesis, urdf: Path, config: RefineConfig, ws: Workspace, cache, log: StageLog,
-                  base: dict | None = None) -> tuple[StateRefinement, dict]:
-    """Stage 6: state refinement on the written asset (with the estimator's joint proposer when it has
-    one); ``base``: the collision overrides written. Returns (refinement, collision overrides)."""
+def search_state(ctx: EstimationContext, est, syn: Synthesis, base: Candidate, config: RefineConfig, ws: Workspace, cache,
+                  log: StageLog) -> tuple[StateRefinement, Candidate]:
+    """Stage 6: state refinement of the synthesis' candidate ``base`` (with the estimator's joint proposer when
+    it has one). Returns (refinement, the candidate with the collision overrides kept: ``base`` when unchanged)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
-    st, overrides = state_search.refine_state_with_decomposition(
-        ctx.asset, syn.overlay, syn.closed_out, syn.bands, syn.requested, urdf, ctx.root_rotation, config, ws, cache, log.say, proposer=proposer,
+    st, kept = state_search.refine_state_with_decomposition(
+        base, syn.closed_out, syn.bands, config, ws, cache, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
-        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed, base=base)
+        addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed)
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")
     log.lap("refine_state")
-    return st, overrides
+    return st, kept
 
 
 def clearance_notes(ctx: EstimationContext, overlay: Overlay, state: dict[str, float], overrides: dict, ws: Workspace) -> list[str]:
@@ -153,13 +152,15 @@ def clearance_lines(notes: list[str]) -> list[str]:
                                                      container_pieces.CAVITY_NOTE))]
 
 
-def clip_limits(overlay: Overlay, closed_out: dict[str, ClosedState], state: dict[str, float], ws: Workspace, config: RefineConfig,
+def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Workspace, config: RefineConfig,
                  log: StageLog) -> tuple[Overlay, dict[str, ClosedState]]:
-    """Stage 6b: joint limits clipped to what the geometry allows at ``state`` (:mod:`asset2sim.tasks.geometry.limits`;
-    with a carrying chain, also against the chain opened). Returns (overlay, closed ends)."""
-    with open_session("pybullet", ws.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
-                                                       conventions=config.sim)) as sess:
-        clips = limits.geometric_limits(sess, ws.model(), closed_tuples(closed_out), state)
+    """Stage 6b: the joint limits of ``candidate``'s overlay clipped to what its geometry allows at its state
+    (:mod:`asset2sim.tasks.geometry.limits`; with a carrying chain, also against the chain opened).
+    Returns (overlay, closed ends)."""
+    overlay, state = candidate.overlay, dict(candidate.state)
+    with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
+                                                          conventions=config.sim)) as sess:
+        clips = limits.geometric_limits(sess, ws.model(candidate), closed_tuples(closed_out), state)
     if any(c.clipped for c in clips.values()):
         overlay, notes = limits.apply_clips(overlay, clips)
         for line in notes:

@@ -4,48 +4,50 @@ decomposition of the colliding pieces (:func:`refine_state_with_decomposition`).
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import replace
 from typing import Callable
 
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.assemble import write
-from asset2sim.tasks.assemble.candidate import Candidate
+from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry.decomposition import DecompositionUnavailable
 from asset2sim.tasks.state import collision, refine_state
 from asset2sim.tasks.synthesize import estimate
 
 
-def phi_at(urdf: Path, state: dict[str, float], config: RefineConfig) -> float:
-    """Phi (m, the SPEC's self-penetration) of ``urdf`` at ``state`` (joint -> rad or m)."""
-    with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
-                                                       conventions=config.sim)) as sess:
+def phi_at(ws: Workspace, candidate: Candidate, state: dict[str, float], config: RefineConfig) -> float:
+    """Phi (m, the SPEC's self-penetration) of ``candidate`` (loaded into ``ws``) at ``state`` (joint -> rad or m)."""
+    with ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=state,
+                                                          conventions=config.sim)) as sess:
         return float(sess.self_penetration_fresh()[0])
 
 
-def refine_state_with_decomposition(asset, overlay, closed_out, bands, requested, urdf, root_rotation, config, ws, mesh_cache, say, proposer=None, intervals=None,
-                                     addressed: Callable[[], set[str]] | None = None, base: dict | None = None):
-    """State refinement; then, each kept only if it lowers Phi: a search with the parts the request left
-    closed (not in ``addressed()``) free where an opened part penetrates them, and CoACD decomposition of the
-    colliding pieces with another search. ``base``: the collision overrides written (the pieces changed here
-    replace those of the same links). Returns (StateRefinement, collision overrides)."""
+def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, config, ws: Workspace, mesh_cache, say, proposer=None,
+                                     intervals=None, addressed: Callable[[], set[str]] | None = None):
+    """State refinement of ``candidate`` from its state (the requested one; its pieces are those searched on);
+    then, each kept only if it lowers Phi: a search with the parts the request left closed (not in
+    ``addressed()``) free where an opened part penetrates them, and CoACD decomposition of the colliding pieces
+    with another search (the pieces changed here replace the candidate's collision overrides of the same links).
+    Returns (StateRefinement, the candidate with the collision overrides kept: ``candidate`` itself when nothing
+    changed)."""
     fractions = estimate.band_intervals(bands, intervals)
+    asset, overlay, requested = candidate.asset, candidate.overlay, dict(candidate.state)
     s = overlay.scale
 
-    def search(start: dict[str, float]):
-        with open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
+    def search(on: Candidate, start: dict[str, float]):
+        with ws.session(on, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
             return refine_state.refine_initial_state(
                 sess, asset, closed_out, start, fractions, tolerance=config.penetration_tolerance, lam=config.state_lambda,
                 max_evaluations=config.max_state_evaluations, seed=config.seed, proposer=proposer)
 
-    st = search(requested)
+    st = search(candidate, requested)
     in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \
         refine_state.joints_in_the_way(asset, st.worst_pairs, bands, addressed(), config.penetration_tolerance)
     if in_the_way:
         held = fractions
         fractions = {**fractions, **{j: (0.0, 1.0) for j in in_the_way}}
-        room = search(st.result)
+        room = search(candidate, st.result)
         if room.phi_result < st.phi_result:
             room.requested, room.phi_requested = st.requested, st.phi_requested
             room.evaluations += st.evaluations
@@ -55,12 +57,12 @@ def refine_state_with_decomposition(asset, overlay, closed_out, bands, requested
             st = room
         else:
             fractions = held
-    base = {} if base is None else base  # returned as it is when nothing changes (the caller tells by identity)
+    base = candidate.collision_overrides
     if not (st.phi_result > config.penetration_tolerance and config.convex_decomposition):
-        return st, base
+        return st, candidate
     deep = [(p_["link_a"], p_["link_b"]) for p_ in st.worst_pairs if p_["depth_m"] > config.penetration_tolerance]
     links = sorted({ln for pair in deep for ln in pair})
-    sess = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
+    sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
     try:
         overrides, dnotes = collision.improve_collisions(sess, asset, deep, s, ws.root, cache=mesh_cache,
                                                          max_decompositions=config.max_decompositions,
@@ -68,29 +70,28 @@ def refine_state_with_decomposition(asset, overlay, closed_out, bands, requested
     except (DecompositionUnavailable, ValueError) as exc:
         say("refine_state", f"collision improvement skipped: {exc}")
         st.collision_changes = [f"collision improvement skipped: {exc}"]
-        return st, base
+        return st, candidate
     finally:
         sess.close()
     if not overrides:
         st.collision_changes = dnotes or [f"no collision piece change lowered the overlap of {', '.join(links)}"]
-        return st, base
+        return st, candidate
     overrides = {**base, **overrides}
     before = st
-    ws.load(Candidate(asset, overlay, requested, overrides, root_rotation))
-    st = search(requested)
+    decomposed = replace(candidate, collision_overrides=overrides)
+    st = search(decomposed, requested)
     st.evaluations += before.evaluations
     st.model_queries += before.model_queries
     st.phi_requested = before.phi_requested
     if st.phi_result >= before.phi_result:
         # the decomposition did not help (pieces of neighbours can bulge): keep the original hulls
-        ws.load(Candidate(asset, overlay, requested, base, root_rotation))
         before.evaluations = st.evaluations
         before.model_queries = st.model_queries
         before.collision_changes = [
             f"collision pieces changed for {', '.join(links)} but Phi went {before.phi_result * 1000:.3g} -> "
             f"{st.phi_result * 1000:.3g} mm; original collision meshes kept"
         ] + dnotes
-        return before, base
+        return before, candidate
     st.collision_changes = dnotes
     st.method = before.method + " | collision pieces improved -> " + st.method
-    return st, overrides
+    return st, decomposed
