@@ -147,6 +147,7 @@ def _penetration_checks(row: dict, urdf_path: Path, model, pieces: dict, state: 
     """Into ``row``: the deepest child inside its parent's hull pieces at the initial state (mm, and the pair), and
     the same pairs' penetration as an engine colliding them sees it (mm)."""
     from asset2sim.tasks.check.parent_child import parent_child_penetration
+    from asset2sim.engines.source import UrdfFile
     from asset2sim.tasks.assemble.convex_pieces import Piece
     from asset2sim.tasks.assemble.piece_penetration import containment_depths, parent_child_depths
 
@@ -170,7 +171,7 @@ def _penetration_checks(row: dict, urdf_path: Path, model, pieces: dict, state: 
     sat = parent_child_depths(model, hulls, state)
     row["pc_sat_mm"] = round(max(sat.values(), default=0.0) * 1000, 2)
     for e in ("pybullet", "mujoco"):
-        m = parent_child_penetration(urdf_path, state, e)
+        m = parent_child_penetration(UrdfFile(urdf_path), state, e)
         row[f"pc_{e}_mm"] = round(m.value, 2)
         if e == "pybullet":
             row["pc_pairs"] = m.details["pairs"]

@@ -299,7 +299,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     there. Returns that attempt when it passes every check, else None (``att`` loaded again)."""
     intervals = estimate.band_intervals(att.bands, {n: t.interval for n, t in att.targets.items() if t.interval is not None})
     try:
-        fractions, before, after = balance.steadiest_fractions(ws.model(att.candidate), att.overlay, att.state, att.closed_out, intervals)
+        fractions, before, after = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
         log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
         return None
@@ -363,7 +363,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, c
         measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
         reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
         syn = replace(syn, overlay=reclipped, closed_out=closed_re)
-    balanced, design = stability.design_for_stability(ws.model(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
+    balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)
     design = floored + design
     for line in design:
         log.say("stability", line)

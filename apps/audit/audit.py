@@ -11,6 +11,7 @@ from pathlib import Path
 
 from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.engines.source import UrdfFile
 from asset2sim.urdf import read_urdf, write_urdf
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.audit import AuditReport, SimulationChecks
@@ -185,7 +186,7 @@ def _simulate(ctx, judged: Judgement, config: RefineConfig, initial: dict[str, f
             start = {**_rest_state(ctx, overlay, state), **initial}
             try:
                 urdf = _physics_urdf(ctx.asset, overlay, Path(tmp) / f"{kind}.urdf")
-                check = postcheck.run_post_check(urdf, start, overlay, config, closed=closed)
+                check = postcheck.run_post_check(UrdfFile(urdf), start, overlay, config, closed=closed)
             except Exception as exc:  # a simulator that cannot load or step these values: said, not raised
                 out.append(SimulationChecks(physics=kind, passed=False, error=f"{type(exc).__name__}: {exc}"))
                 continue

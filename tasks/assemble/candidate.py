@@ -166,6 +166,11 @@ class Workspace:
             self._model.path = path
         return urdf.clone_model(self._model)
 
+    def source(self, candidate: Candidate) -> "CandidateSource":
+        """``candidate`` as the :class:`~asset2sim.engines.source.SimSource` the checks simulate: loaded into this
+        workspace whenever its model, its file or a session of it is asked for."""
+        return CandidateSource(self, candidate)
+
     def session(self, candidate: Candidate, engine: str = "pybullet", options: SessionOptions | None = None) -> SimSession:
         """A session of ``candidate`` (loaded first) in ``engine``
         (:func:`asset2sim.engines.registry.open_session`); the caller closes it.
@@ -186,3 +191,24 @@ class Workspace:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@dataclass(frozen=True)
+class CandidateSource:
+    """A candidate of a workspace as a :class:`~asset2sim.engines.source.SimSource` (:meth:`Workspace.source`)."""
+
+    workspace: Workspace
+    candidate: Candidate
+
+    @property
+    def path(self) -> Path:
+        """The scratch URDF, the candidate loaded first."""
+        return self.workspace.load(self.candidate)
+
+    def model(self, mode: str = "strict") -> urdf.UrdfModel:
+        """:meth:`Workspace.model` of the candidate (written by this project: ``mode`` changes nothing)."""
+        return self.workspace.model(self.candidate)
+
+    def open(self, engine: str, options: SessionOptions | None = None) -> SimSession:
+        """:meth:`Workspace.session` of the candidate."""
+        return self.workspace.session(self.candidate, engine, options)

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 
 from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import tree_path
-from asset2sim.urdf import UrdfModel, UrdfSource
+from asset2sim.urdf import UrdfModel
 
 
 def fixed_root_options(state: dict[str, float], conventions: SimConventions | None = None,
@@ -53,8 +53,8 @@ class Blocker:
     """:func:`blocking_link` at a state, in the session, or in a PyBullet session
     of the same URDF where its engine answers no closest-point queries."""
 
-    def __init__(self, session: SimSession, urdf: UrdfSource, conventions: SimConventions):
-        self.session, self.urdf, self.conventions = session, urdf, conventions
+    def __init__(self, session: SimSession, source: SimSource, conventions: SimConventions):
+        self.session, self.source, self.conventions = session, source, conventions
         self._pybullet: SimSession | None = None
 
     def __call__(self, state: dict[str, float], links: list[str], exclude: set[str]) -> str | None:
@@ -64,7 +64,7 @@ class Blocker:
         except EngineUnsupported:
             pass
         if self._pybullet is None:
-            self._pybullet = open_session("pybullet", self.urdf, fixed_root_options(state, self.conventions))
+            self._pybullet = self.source.open("pybullet", fixed_root_options(state, self.conventions))
         self._pybullet.set_joint_positions(state)
         return blocking_link(self._pybullet, links, exclude)
 

@@ -36,7 +36,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     spec = task_tier.task_spec_for(ctx.task, ws.model(cand), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
-    lim = task_tier.operating_limits(ws.model(cand), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
+    lim = task_tier.operating_limits(ws.source(cand), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
                                      free_moving=ctx.request.free_moving, conventions=config.sim,
                                      joints=spec.joints if spec is not None else None)
     bounded, notes = operating.bound_overlay(overlay, lim.budgets)
@@ -54,12 +54,12 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
-                "pybullet", ws.model(cand), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
+                "pybullet", ws.source(cand), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
                 fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
                 free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
         return chk
 
-    check = with_task(postcheck.run_post_check(ws.model(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+    check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
                                                      category=ctx.category, labels=labels))
     rounds.append(EscalationRound(round=0, metrics=check.metrics, reason="initial post-check"))
     search = dynamics_search.DynamicsSearch(lim.budgets, lim.hand_caps, floors)  # relief and escalation bracketed by what each round measured
@@ -77,7 +77,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         if not changes:
             break
         cand = replace(cand, overlay=overlay)
-        check = with_task(postcheck.run_post_check(ws.model(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
+        check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
                                                      category=ctx.category, labels=labels))
         rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
         search.record(overlay, check.metrics)
@@ -91,7 +91,7 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         if earlier:
             overlay = tried[best][0]
             cand = replace(cand, overlay=overlay)
-        check = with_task(postcheck.run_post_check(ws.model(cand), state, overlay, config, closed=closed, recorded=recorded,
+        check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, recorded=recorded,
                                                    category=ctx.category, labels=labels))
         changes = {n_: {"damping": d.damping, "friction": d.friction} for n_, d in overlay.joints.items()}
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
@@ -113,13 +113,12 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     pairs = [] if blocked else repair.held_together_pairs(check.metrics)
     if not blocked and not pairs:
         return result  # the common case: nothing read, nothing simulated
-    current = Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation)
-    model = ws.model(current)
-    urdf = model.path  # the lazy repairs below read the current candidate's scratch file (loaded again after each one tried)
+    current = ws.source(Candidate(ctx.asset, overlay, state, overrides, ctx.root_rotation))
+    model = current.model()
     folder = write.collision_folder(ctx.asset)
     if blocked:
         label = "sweep blocked"
-        repairs = repair.sweep_repairs(model, urdf, ctx.asset, sw, blocked, state, overrides, unclipped.scale, ws.root,
+        repairs = repair.sweep_repairs(current, ctx.asset, sw, blocked, state, overrides, unclipped.scale, ws.root,
                                        folder, config)
 
         def better(chk2) -> bool:
@@ -127,7 +126,7 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     else:
         label = "parts held together"
         touching = clearance.touching_joints(model, pairs, state, limits.subtrees(model))
-        one = repair.clearance_repair(model, urdf, touching, state, overrides, unclipped.scale, ws.root, folder) if touching else None
+        one = repair.clearance_repair(model, current.path, touching, state, overrides, unclipped.scale, ws.root, folder) if touching else None
         repairs = iter([one] if one is not None else [])
 
         def better(chk2) -> bool:
@@ -153,7 +152,6 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
         log.say("sweep_repair", f"{rep.what} not kept ({label}; failing metrics {dynamics_search.failing_tiers(check.metrics)} -> "
                                 f"{dynamics_search.failing_tiers(check2.metrics)}{'; would fail ' + ', '.join(lost) if lost else ''}); "
                                 "the asset kept as it was")
-        ws.load(current)
     return result
 
 

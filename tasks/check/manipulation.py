@@ -13,18 +13,18 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operability, recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.urdf import UrdfSource
+from asset2sim.engines.source import SimSource
 
 #: The metrics this module adds to the post-check.
 MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "operability", "robust_rest")
 
 
-def measure_manipulation(engine: str, urdf: UrdfSource, initial_state: dict[str, float], springs: dict[str, Spring],
+def measure_manipulation(engine: str, source: SimSource, initial_state: dict[str, float], springs: dict[str, Spring],
                          conventions: SimConventions, closed: dict[str, tuple[float, float, float]],
                          fixed_base: bool = False, *, recorded: RecordedRuns | None = None,
                          sweep_needed: Callable[[MetricResult], str | None] | None = None,
                          category: str | None = None, labels: dict[str, str | None] | None = None) -> list[MetricResult]:
-    """[joint_sweep, operability, robust_rest] of ``urdf`` in ``engine`` (robust rest run first;
+    """[joint_sweep, operability, robust_rest] of ``source`` in ``engine`` (robust rest run first;
     skipped where ``fixed_base``). ``closed``: joint -> (q_closed, direction,
     open range), rad or m; ``recorded``: runs taken from / recorded into it;
     ``sweep_needed(robust_rest)``: why the sweep is not needed (then the sweep and
@@ -34,7 +34,7 @@ def measure_manipulation(engine: str, urdf: UrdfSource, initial_state: dict[str,
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
     """
-    rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, urdf, initial_state, springs, conventions,
+    rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, source, initial_state, springs, conventions,
                                                                       fixed_base=fixed_base, recorded=recorded))
     rr.details["root"] = "fixed (mounted)" if fixed_base else "free (on the ground)"
     why_not = sweep_needed(rr) if sweep_needed is not None else None
@@ -44,10 +44,10 @@ def measure_manipulation(engine: str, urdf: UrdfSource, initial_state: dict[str,
         op = MetricResult(name="operability", value=None, unit=unit("operability"), passed=None,
                           details={"not_run": why_not}, engine=engine)
     else:
-        sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, urdf, closed, initial_state, springs, conventions,
+        sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, source, closed, initial_state, springs, conventions,
                                                         recorded=recorded))
         op = operability.operability_metric(recorded_runs.operability_run(
-            engine, urdf, closed, initial_state, springs, conventions, category=category, labels=labels, recorded=recorded))
+            engine, source, closed, initial_state, springs, conventions, category=category, labels=labels, recorded=recorded))
     sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
     op.details["root"] = "fixed (mounted)" if fixed_base else "fixed (held by the other hand)"
     return [sw, op, rr]

@@ -41,7 +41,7 @@ import numpy as np
 
 from asset2sim.engines.base import SessionOptions, SimSession, Spring
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
@@ -52,7 +52,7 @@ from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.operating import gravity_force, range_force
 from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
 from asset2sim.tasks.interpret.part_priors import handled
-from asset2sim.urdf import UrdfModel, UrdfSource, model_of
+from asset2sim.urdf import UrdfModel
 
 #: Joint types a hand moves along a range.
 RANGED = ("revolute", "prismatic")
@@ -332,7 +332,7 @@ def operability_options(state: dict[str, float], conventions: SimConventions | N
                           ground=False, conventions=conventions or SimConventions())
 
 
-def run_operability(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
+def run_operability(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
                     initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
                     conventions: SimConventions | None = None, *, category: str | None = None,
                     labels: dict[str, str | None] | None = None, config: OperabilityConfig | None = None) -> OperabilityRun:
@@ -340,16 +340,16 @@ def run_operability(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float
     (:func:`operate_part`) in one fresh session of ``engine``; ``labels``: link -> semantic label.
 
     Raises:
-        EngineUnavailable: the engine is not installed; whatever loading ``urdf`` raises.
+        EngineUnavailable: the engine is not installed; whatever loading ``source`` raises.
     """
     cfg = config or OperabilityConfig()
-    model = model_of(urdf, mode="lenient")
+    model = source.model(mode="lenient")
     labels = dict(labels or {})
     springs = dict(springs or {})
     run = OperabilityRun(engine)
     with quiet_stdout():
-        session = open_session(engine, urdf, operability_options(initial_state, conventions, springs))
-    blocker = Blocker(session, urdf, conventions or SimConventions())
+        session = source.open(engine, operability_options(initial_state, conventions, springs))
+    blocker = Blocker(session, source, conventions or SimConventions())
     try:
         for name, c in closed.items():
             if name not in session.joint_types or session.joint_types[name] not in RANGED:

@@ -14,7 +14,7 @@ import numpy as np
 from asset2sim.engines.base import SimSession, Spring
 from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import JointDynamics, Overlay
@@ -27,7 +27,7 @@ from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
 from asset2sim.tasks.synthesize.physics import G as GRAVITY, max_stable_friction
-from asset2sim.urdf import UrdfModel, UrdfSource, model_of
+from asset2sim.urdf import UrdfModel
 
 TILT_MARGIN = 2.0
 """Safety factor on the tilt's extra gravity load (dimensionless)."""
@@ -210,14 +210,14 @@ def _task_path(f_state: float, action: str) -> np.ndarray:
     return np.linspace(start, OPEN_TARGET, PATH_SAMPLES)
 
 
-def operating_budgets(urdf: UrdfSource, state: dict[str, float], overlay: Overlay,
+def operating_budgets(source: SimSource, state: dict[str, float], overlay: Overlay,
                       closed: dict[str, tuple[float, float, float]], *, category: str | None,
                       labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
                       free: bool = True, ground: bool = True, free_moving: bool = False, engine: str = "pybullet",
                       limits: GripperLimits | None = None, conventions: SimConventions | None = None,
                       vertical_share: float = 0.5, whole: bool = False) -> dict[str, OperatingBudget]:
     """The operating budget of every movable joint of ``closed`` in the written
-    asset ``urdf`` at ``state``: how much friction and damping the task's
+    asset ``source`` at ``state``: how much friction and damping the task's
     gripper can overcome with a real operating force. Definition (grasp, path
     samples, allowed force, budget B, friction and damping caps):
     ``docs/design/metrics.md``, "Operable friction".
@@ -227,15 +227,15 @@ def operating_budgets(urdf: UrdfSource, state: dict[str, float], overlay: Overla
     operability tier's strokes, :mod:`asset2sim.tasks.check.operability`) rather than the task's path.
 
     Raises:
-        EngineUnavailable; whatever loading ``urdf`` raises.
+        EngineUnavailable; whatever loading ``source`` raises.
     """
     lim = limits or GripperLimits()
-    model = model_of(urdf, mode="lenient")
+    model = source.model(mode="lenient")
     springs = overlay_springs(overlay, state)
     mu = ground_friction(model)
     out: dict[str, OperatingBudget] = {}
     with quiet_stdout():
-        session = open_session(engine, urdf, fixed_root_options(state, conventions))
+        session = source.open(engine, fixed_root_options(state, conventions))
     try:
         total = sum(float(m) for m in session.link_masses().values())
         for name, (qc, d, rng) in closed.items():

@@ -11,9 +11,8 @@ a door opened through a bar of its own body is not.
 from __future__ import annotations
 
 
-from asset2sim import urdf
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
@@ -27,7 +26,7 @@ __all__ = ["CONTACT_MARGIN", "parent_child_penetration"]
 CONTACT_MARGIN: dict[str, float] = {"pybullet": 0.002, "mujoco": 0.0}
 
 
-def parent_child_penetration(urdf_path: urdf.UrdfSource, initial_state: dict[str, float], engine: str = "pybullet",
+def parent_child_penetration(source: SimSource, initial_state: dict[str, float], engine: str = "pybullet",
                              conventions: SimConventions | None = None,
                              tolerance: float = CONTAINMENT_TOLERANCE) -> MetricResult:
     """Deepest penetration (mm) of a child link's collision shapes into its
@@ -42,9 +41,9 @@ def parent_child_penetration(urdf_path: urdf.UrdfSource, initial_state: dict[str
     """
     engine = engine if engine in CONTACT_MARGIN else "pybullet"
     margin = CONTACT_MARGIN[engine]
-    model = urdf.model_of(urdf_path, mode="lenient")
-    session = open_session(engine, urdf_path, SessionOptions(initial_state=dict(initial_state), gravity=False, ground=False,
-                                                             conventions=conventions or SimConventions()))
+    model = source.model(mode="lenient")
+    session = source.open(engine, SessionOptions(initial_state=dict(initial_state), gravity=False, ground=False,
+                                                 conventions=conventions or SimConventions()))
     joints = [j for j in model.joints if model.links[j.parent].collisions and model.links[j.child].collisions]
 
     def depths() -> dict[str, float]:

@@ -17,9 +17,8 @@ from asset2sim.tasks.check import metrics
 from asset2sim.tasks.assemble.export_mjcf import output_session_options
 
 from asset2sim.engines.base import EngineUnavailable, SessionOptions
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource, UrdfFile
 from asset2sim.output_folder import URDF_NAME
-from asset2sim.urdf import UrdfSource
 
 #: The metrics compared across engines (the registry's SPEC metrics).
 METRICS = SPEC_METRICS
@@ -44,23 +43,23 @@ def evaluate_engines(urdf_dir: Path, engines: list[str], *, initial_state: dict[
     if not urdf.is_file():
         raise FileNotFoundError(f"{urdf} does not exist (not an output folder?)")
     options = output_session_options(urdf_dir, initial_state, conventions)
-    return {e: session_metrics(urdf, e, options) for e in dict.fromkeys(engines)}
+    return {e: session_metrics(UrdfFile(urdf), e, options) for e in dict.fromkeys(engines)}
 
 
-def session_metrics(urdf: UrdfSource, engine: str, options: SessionOptions) -> list[MetricResult]:
-    """[penetration (mm), rest stability, oscillation] of ``urdf`` opened in ``engine`` with ``options``, each
+def session_metrics(source: SimSource, engine: str, options: SessionOptions) -> list[MetricResult]:
+    """[penetration (mm), rest stability, oscillation] of ``source`` opened in ``engine`` with ``options``, each
     with ``details["root"]``; a missing package gives ``details.skipped``, a load or run error
     ``details.error`` and ``passed`` False."""
-    results = _session_metrics(urdf, engine, options)
+    results = _session_metrics(source, engine, options)
     for m in results:  # how the root was held (the post-check's label, postcheck.root_label)
         m.details["root"] = "fixed (mounted)" if options.fixed_base else "free (on the ground)"
     return results
 
 
-def _session_metrics(urdf: UrdfSource, engine: str, options: SessionOptions) -> list[MetricResult]:
+def _session_metrics(source: SimSource, engine: str, options: SessionOptions) -> list[MetricResult]:
     conv = options.conventions
     try:
-        session = open_session(engine, urdf, options)
+        session = source.open(engine, options)
     except EngineUnavailable as exc:
         return _not_run(engine, "skipped", str(exc), None)
     except KeyError as exc:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from asset2sim.engines.base import SessionOptions, SimSession, Spring
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
@@ -23,7 +23,6 @@ from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
 from asset2sim.tasks.assemble.export_mjcf import overlay_springs
-from asset2sim.urdf import UrdfSource, path_of
 
 
 class _StepRecorder:
@@ -65,40 +64,40 @@ class RestRecording:
     fixed_base: bool = False
     """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
 
-    def matches(self, engine: str, urdf: UrdfSource, initial_state: dict[str, float],
+    def matches(self, engine: str, source: SimSource, initial_state: dict[str, float],
                 springs: dict[str, Spring], conventions: SimConventions, fixed_base: bool = False) -> bool:
         """True when this recording is the rest test of exactly that simulation (floats compared exactly)."""
-        return (self.fixed_base == bool(fixed_base) and self.engine == engine and self.urdf == path_of(urdf).resolve()
+        return (self.fixed_base == bool(fixed_base) and self.engine == engine and self.urdf == source.path.resolve()
                 and dict(self.initial_state) == dict(initial_state) and dict(self.springs) == dict(springs)
                 and self.conventions == conventions)
 
 
-def record_rest_test(session: SimSession, conventions: SimConventions, urdf: UrdfSource,
+def record_rest_test(session: SimSession, conventions: SimConventions, source: SimSource,
                      initial_state: dict[str, float], springs: dict[str, Spring]) -> RestRecording:
     """Run the SPEC rest test on ``session`` in place, recording every step;
-    ``urdf``, ``initial_state`` and ``springs``: the options it was opened with."""
+    ``source``, ``initial_state`` and ``springs``: what it was opened on and with."""
     rec = _StepRecorder(session)
     trace = metrics.run_rest_test(rec, conventions)
     return RestRecording(
         trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
         joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
-        engine=session.engine, urdf=path_of(urdf).resolve(), initial_state=dict(initial_state), springs=dict(springs),
+        engine=session.engine, urdf=source.path.resolve(), initial_state=dict(initial_state), springs=dict(springs),
         conventions=conventions, fixed_base=bool(session.options.fixed_base))
 
 
-def measure_rest_test(engine: str, urdf: UrdfSource, initial_state: dict[str, float], springs: dict[str, Spring],
+def measure_rest_test(engine: str, source: SimSource, initial_state: dict[str, float], springs: dict[str, Spring],
                       conventions: SimConventions, fixed_base: bool = False) -> tuple[MetricResult, RestRecording]:
-    """(penetration in mm, :class:`RestRecording`) of ``urdf`` in a fresh session
+    """(penetration in mm, :class:`RestRecording`) of ``source`` in a fresh session
     of ``engine`` at ``initial_state`` (the root fixed where ``fixed_base``).
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
     """
-    session = open_session(engine, urdf, SessionOptions(initial_state=initial_state, springs=springs, conventions=conventions,
-                                                        **session_root_options(fixed_base)))
+    session = source.open(engine, SessionOptions(initial_state=initial_state, springs=springs, conventions=conventions,
+                                                 **session_root_options(fixed_base)))
     try:
         pen = metrics.penetration(session)
-        recording = record_rest_test(session, conventions, urdf, initial_state, springs)
+        recording = record_rest_test(session, conventions, source, initial_state, springs)
     finally:
         session.close()
     return pen, recording
@@ -149,7 +148,7 @@ class PostCheck:
                     and not manipulation.failing(self.metrics))
 
 
-def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
+def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
                    engine: str = "pybullet", closed: dict[str, tuple[float, float, float]] | None = None, *,
                    escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None,
                    category: str | None = None, labels: dict[str, str | None] | None = None) -> PostCheck:
@@ -166,7 +165,7 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
     (link -> semantic label): the operating ranges of the operability tier."""
     conv = config.sim
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
-    pen, recording = measure_rest_test(engine, urdf_path, initial_state, overlay_springs(overlay), conv, fixed_base=fixed)
+    pen, recording = measure_rest_test(engine, source, initial_state, overlay_springs(overlay), conv, fixed_base=fixed)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
@@ -190,10 +189,10 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
         if not parity_done:
             options = SessionOptions(initial_state=dict(initial_state), springs=overlay_springs(overlay, initial_state),
                                      conventions=conv, **session_root_options(fixed))
-            engine_results = {e: parity.session_metrics(urdf_path, e, options) for e in others}
+            engine_results = {e: parity.session_metrics(source, e, options) for e in others}
             parity_done = True
 
-    nested = parent_child.parent_child_penetration(urdf_path, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
+    nested = parent_child.parent_child_penetration(source, initial_state, engine, conv)  # the pairs the SPEC's Phi skips
     base = [pen, stab, osc, sag_metric, tilt, nested]
     for m in base:
         m.details["root"] = root_label(fixed)
@@ -213,7 +212,7 @@ def run_post_check(urdf_path: UrdfSource, initial_state: dict[str, float], overl
         return ESCALATION_ROUND if partial_escalated(rr) else None
 
     extra = [] if closed is None else manipulation.measure_manipulation(
-        engine, urdf_path, initial_state, overlay_springs(overlay), conv, closed, fixed_base=fixed,
+        engine, source, initial_state, overlay_springs(overlay), conv, closed, fixed_base=fixed,
         recorded=recorded, sweep_needed=sweep_needed, category=category, labels=labels)
     if not sweep_not_run(extra):
         run_parity()

@@ -19,7 +19,8 @@ from asset2sim.engines.base import Spring
 from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check import operability, robust_rest, sweep, task_execution
 from asset2sim.tasks.check.gripper_motion import TaskConfig
-from asset2sim.urdf import UrdfModel, UrdfSource, model_of, write_urdf
+from asset2sim.engines.source import SimSource
+from asset2sim.urdf import UrdfModel, write_urdf
 
 
 def _mesh_identities(model: UrdfModel) -> list[tuple[str, str] | str]:
@@ -50,7 +51,7 @@ def _mesh_identities(model: UrdfModel) -> list[tuple[str, str] | str]:
 _MESH_DIGESTS: file_memo.FileMemo[str] = file_memo.FileMemo(lambda d: d, max_entries=4096)
 
 
-def input_digest(tier: str, engine: str, urdf: UrdfSource, initial_state: dict[str, float],
+def input_digest(tier: str, engine: str, source: SimSource, initial_state: dict[str, float],
                  springs: dict[str, Spring] | None, conventions: SimConventions, fixed_base: bool,
                  config: Any, closed: dict[str, tuple[float, float, float]] | None = None) -> str:
     """SHA-256 (hex) of everything a manipulation tier (``tier``) reads: the
@@ -60,9 +61,9 @@ def input_digest(tier: str, engine: str, urdf: UrdfSource, initial_state: dict[s
     ``repr`` (exact).
 
     Raises:
-        UrdfError: ``urdf`` cannot be read.
+        UrdfError: the source's URDF cannot be read.
     """
-    model = model_of(urdf, mode="lenient")
+    model = source.model(mode="lenient")
     h = hashlib.sha256()
     h.update(repr((tier, engine, bool(fixed_base))).encode())
     h.update(write_urdf(model))
@@ -99,7 +100,7 @@ class RecordedRuns:
         self.runs[key] = copy.deepcopy(run)
 
 
-def sweep_run(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
+def sweep_run(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: sweep.SweepConfig | None = None, *,
               recorded: RecordedRuns | None = None) -> sweep.SweepRun:
@@ -107,8 +108,8 @@ def sweep_run(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, floa
     a run of exactly these inputs is there, else simulated and recorded into it."""
     cfg = config or sweep.SweepConfig()
     conv = conventions or SimConventions()
-    return _recorded(recorded, lambda: sweep.run_sweep(engine, urdf, closed, initial_state, springs, conv, cfg),
-                     "joint_sweep", engine, urdf, initial_state, springs, conv, True, cfg, closed)
+    return _recorded(recorded, lambda: sweep.run_sweep(engine, source, closed, initial_state, springs, conv, cfg),
+                     "joint_sweep", engine, source, initial_state, springs, conv, True, cfg, closed)
 
 
 def _recorded(recorded: RecordedRuns | None, simulate, *key_args) -> Any:
@@ -122,16 +123,16 @@ def _recorded(recorded: RecordedRuns | None, simulate, *key_args) -> Any:
     return run
 
 
-def robust_rest_run(engine: str, urdf: UrdfSource, initial_state: dict[str, float],
+def robust_rest_run(engine: str, source: SimSource, initial_state: dict[str, float],
                     springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                     config: robust_rest.RobustRestConfig | None = None, fixed_base: bool = False, *,
                     recorded: RecordedRuns | None = None) -> robust_rest.RobustRestRun:
     """:func:`asset2sim.tasks.check.robust_rest.run_robust_rest`, recorded as :func:`sweep_run`."""
     cfg = config or robust_rest.RobustRestConfig()
     conv = conventions or SimConventions()
-    return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, urdf, initial_state, springs, conv, cfg,
+    return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, source, initial_state, springs, conv, cfg,
                                                                    fixed_base=fixed_base),
-                     "robust_rest", engine, urdf, initial_state, springs, conv, fixed_base, cfg)
+                     "robust_rest", engine, source, initial_state, springs, conv, fixed_base, cfg)
 
 
 @dataclass(frozen=True)
@@ -144,7 +145,7 @@ class _OperabilityInputs:
     labels: tuple[tuple[str, str | None], ...]
 
 
-def operability_run(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
+def operability_run(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
                     initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
                     conventions: SimConventions | None = None, *, category: str | None = None,
                     labels: dict[str, str | None] | None = None, config: operability.OperabilityConfig | None = None,
@@ -153,9 +154,9 @@ def operability_run(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float
     cfg = config or operability.OperabilityConfig()
     conv = conventions or SimConventions()
     inputs = _OperabilityInputs(cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
-    return _recorded(recorded, lambda: operability.run_operability(engine, urdf, closed, initial_state, springs, conv,
+    return _recorded(recorded, lambda: operability.run_operability(engine, source, closed, initial_state, springs, conv,
                                                                    category=category, labels=labels, config=cfg),
-                     "operability", engine, urdf, initial_state, springs, conv, True, inputs, closed)
+                     "operability", engine, source, initial_state, springs, conv, True, inputs, closed)
 
 
 @dataclass(frozen=True)
@@ -171,7 +172,7 @@ class _TaskInputs:
     task: str | None
 
 
-def task_run(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float, float]], *,
+def task_run(engine: str, source: SimSource, joints: dict[str, tuple[float, float, float]], *,
              actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
              initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
              conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
@@ -186,6 +187,6 @@ def task_run(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float
                          tuple(sorted((str(k), float(v)) for k, v in (targets or {}).items())),
                          tuple(sorted((str(k), bool(v)) for k, v in (hold_required or {}).items())), task)
     return _recorded(recorded, lambda: task_execution.run_task(
-        engine, urdf, joints, actions=actions, targets=targets, initial_state=state, springs=springs, conventions=conv,
+        engine, source, joints, actions=actions, targets=targets, initial_state=state, springs=springs, conventions=conv,
         fixed_base=fixed_base, config=cfg, hold_required=hold_required, task=task),
-        "task_execution", engine, urdf, state, springs, conv, fixed_base, inputs)
+        "task_execution", engine, source, state, springs, conv, fixed_base, inputs)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import MetricResult
@@ -67,11 +68,11 @@ def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], sta
                            list(rep.notes))
 
 
-def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_metric: MetricResult,
+def sweep_repairs(source: SimSource, asset: AssetDescription, sweep_metric: MetricResult,
                   blocked: dict[str, float], state: dict[str, float], overrides: dict[str, list[CollisionPiece]],
                   scale: float, out_dir: Path, folder: str, config: RefineConfig) -> Iterator[CollisionRepair]:
-    """The candidate repairs of a blocked sweep, lazily, in order (each computed
-    only when the one before was not kept). ``blocked``: joint -> where the
+    """The candidate repairs of a blocked sweep of ``source``, lazily, in order (each
+    computed only when the one before was not kept). ``blocked``: joint -> where the
     sweep stopped (rad or m); ``overrides``: the collision overrides so far;
     the rest as :func:`clearance_repair` and
     :func:`~asset2sim.tasks.check.stop_repair.decompose_for_blocked`.
@@ -79,7 +80,8 @@ def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_m
     Raises:
         OSError: a collision file cannot be read or written.
     """
-    repair = clearance_repair(model, urdf, blocked, state, overrides, scale, out_dir, folder)
+    model = source.model()
+    repair = clearance_repair(model, source.path, blocked, state, overrides, scale, out_dir, folder)
     if repair is not None:
         yield repair
         return
@@ -87,7 +89,7 @@ def sweep_repairs(model: UrdfModel, urdf: Path, asset: AssetDescription, sweep_m
         return
     try:
         dec, notes = stop_repair.decompose_for_blocked(
-            model, urdf, asset, sweep_metric, state, limits.subtrees(model), set(overrides), scale, out_dir,
+            source, asset, sweep_metric, state, limits.subtrees(model), set(overrides), scale, out_dir,
             folder, max_decompositions=config.max_decompositions, conventions=config.sim)
     except DecompositionUnavailable:
         return

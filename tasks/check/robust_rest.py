@@ -11,14 +11,13 @@ from typing import Any
 import numpy as np
 
 from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics, support
 from asset2sim.tasks.geometry.limits import subtrees
-from asset2sim.urdf import UrdfSource, model_of
 
 #: The trials, in order.
 TRIALS: tuple[str, ...] = ("drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudge")
@@ -179,7 +178,7 @@ class RobustRestRun:
     """why the whole metric was skipped (fixed root)"""
 
 
-def run_robust_rest(engine: str, urdf: UrdfSource, initial_state: dict[str, float],
+def run_robust_rest(engine: str, source: SimSource, initial_state: dict[str, float],
                     springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                     config: RobustRestConfig | None = None, fixed_base: bool = False) -> RobustRestRun:
     """Every trial of ``config`` in one session of ``engine`` opened as for the
@@ -194,10 +193,9 @@ def run_robust_rest(engine: str, urdf: UrdfSource, initial_state: dict[str, floa
     if fixed_base:
         run.skipped = "root fixed as the asset declares: a mounted object is not dropped, tilted or nudged"
         return run
-    session = open_session(engine, urdf, SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}),
-                                                        conventions=conv))
+    session = source.open(engine, SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}), conventions=conv))
     try:
-        rolling = support.rolling_joints(session, subtrees(model_of(urdf, mode="lenient")))
+        rolling = support.rolling_joints(session, subtrees(source.model(mode="lenient")))
         run.trials = run_trials(session, initial_state, conv, cfg, rolling)
     finally:
         session.close()

@@ -9,14 +9,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.sweep import blocked_stops
 from asset2sim.tasks.state import collision
 from asset2sim.tasks.state.collision import CollisionPiece
-from asset2sim.urdf import UrdfModel
 
 #: Positions sampled from the stall to the end the drive aimed at.
 SAMPLES = 8
@@ -42,13 +41,13 @@ def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str]
     return best
 
 
-def decompose_for_blocked(model: UrdfModel, urdf: Path, asset: AssetDescription, metric: MetricResult,
+def decompose_for_blocked(source: SimSource, asset: AssetDescription, metric: MetricResult,
                           state: dict[str, float], subtrees: dict[str, list[str]], replaced: set[str], scale: float,
                           out_dir: Path, folder: str, *, cache=None, max_decompositions: int = 32,
                           conventions: SimConventions | None = None) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """(collision overrides link -> pieces, notes) repairing the joints the
-    ``joint_sweep`` ``metric`` found stopped short (module docstring). ``model``:
-    the written URDF (file ``urdf``); ``state``: joint -> initial position (rad
+    ``joint_sweep`` ``metric`` found stopped short (module docstring). ``source``:
+    the written URDF; ``state``: joint -> initial position (rad
     or m); ``replaced``: links left alone; pieces under ``out_dir`` / ``folder``.
 
     Raises:
@@ -58,12 +57,12 @@ def decompose_for_blocked(model: UrdfModel, urdf: Path, asset: AssetDescription,
     stops = blocked_stops(metric)
     if not stops:
         return {}, []
-    adjacent = {frozenset((j.parent, j.child)) for j in model.joints}
+    adjacent = {frozenset((j.parent, j.child)) for j in source.model().joints}
     overrides: dict[str, list[CollisionPiece]] = {}
     notes: list[str] = []
     opts = SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False,
                           conventions=conventions or SimConventions())
-    with open_session("pybullet", urdf, opts) as session:
+    with source.open("pybullet", opts) as session:
         with_collision = [ln for ln in session.link_names if session.link_has_collision(ln)]
         for name, (stall, goal) in stops.items():
             if name not in session.joint_types:

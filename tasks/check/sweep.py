@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.engines.base import SimSession, Spring
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
@@ -19,7 +19,7 @@ from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root
 from asset2sim.tasks.check.contact_points import joint_frame_axis
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.synthesize.physics import G
-from asset2sim.urdf import UrdfModel, UrdfSource, model_of
+from asset2sim.urdf import UrdfModel
 
 #: Fraction of the range that counts as reached (SPEC: >= 95 % both ways).
 REACH_FRACTION = 0.95
@@ -127,7 +127,7 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
 DAMPED_SPEED_MARGIN = 2.0
 
 
-def damping_caps(urdf: UrdfSource, closed: dict[str, tuple[float, float, float]], initial_state: dict[str, float],
+def damping_caps(source: SimSource, closed: dict[str, tuple[float, float, float]], initial_state: dict[str, float],
                  springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
                  config: SweepConfig | None = None) -> dict[str, float]:
     """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
@@ -138,13 +138,13 @@ def damping_caps(urdf: UrdfSource, closed: dict[str, tuple[float, float, float]]
     gravity-free PyBullet session; joints with no range are left out.
 
     Raises:
-        EngineUnavailable: PyBullet is not installed; whatever loading ``urdf`` raises.
+        EngineUnavailable: PyBullet is not installed; whatever loading ``source`` raises.
     """
     cfg = config or SweepConfig()
-    model = model_of(urdf)
+    model = source.model()
     subtrees = joint_subtrees(model)
     caps: dict[str, float] = {}
-    with open_session("pybullet", urdf, fixed_root_options(initial_state, conventions, springs)) as session:
+    with source.open("pybullet", fixed_root_options(initial_state, conventions, springs)) as session:
         for name, (qc, _, rng) in closed.items():
             if name not in session.joint_types or not rng > 0:
                 continue
@@ -309,7 +309,7 @@ def _clearing_ends(first: JointSweep) -> tuple[tuple[float, str], ...]:
     return ((1.0, "open"),)
 
 
-def run_sweep(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, float, float]],
+def run_sweep(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
               initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
               conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
     """Sweep every joint of ``closed`` (joint -> (q_closed, direction,
@@ -320,7 +320,7 @@ def run_sweep(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, floa
     """
     cfg = config or SweepConfig()
     conv = conventions or SimConventions()
-    model = model_of(urdf)
+    model = source.model()
     subtrees = joint_subtrees(model)
     run = SweepRun(engine)
     springs = dict(springs or {})
@@ -330,8 +330,8 @@ def run_sweep(engine: str, urdf: UrdfSource, closed: dict[str, tuple[float, floa
         key = ((name,) if name in springs else ()) if cfg.hold_others else tuple(sorted(springs))
         groups.setdefault(key, []).append(name)
     for key, names in groups.items():
-        session = open_session(engine, urdf, fixed_root_options(initial_state, conv, {n: springs[n] for n in key}))
-        blocker = Blocker(session, urdf, conv)
+        session = source.open(engine, fixed_root_options(initial_state, conv, {n: springs[n] for n in key}))
+        blocker = Blocker(session, source, conv)
         try:
             saved = session.save_state()
             for name in names:

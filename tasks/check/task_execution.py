@@ -12,7 +12,7 @@ import numpy as np
 
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side
@@ -21,7 +21,7 @@ from asset2sim.tasks.check.gripper_motion import Motion, TaskConfig, move_joint
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, check_action
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.interpret.mounting import session_root_options
-from asset2sim.urdf import UrdfError, UrdfModel, UrdfSource, model_of
+from asset2sim.urdf import UrdfError, UrdfModel
 
 #: Opening fraction a close task starts from when the delivered state is already closed.
 FAR_SIDE_OPEN = OPEN_TARGET
@@ -188,7 +188,7 @@ def _task_failure(m: Motion, slid: bool, tipped: bool, ok_reached: bool, lim: Gr
     return failure
 
 
-def run_task(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float, float]], *,
+def run_task(engine: str, source: SimSource, joints: dict[str, tuple[float, float, float]], *,
              actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
              initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
              conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
@@ -205,7 +205,7 @@ def run_task(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float
     cfg = config or TaskConfig()
     conv = conventions or SimConventions()
     try:
-        model = model_of(urdf, mode="lenient")
+        model = source.model(mode="lenient")
     except (UrdfError, OSError):
         model = None
     run = TaskRun(engine=engine, root="fixed (mounted)" if fixed_base else "free (on the ground)", task=task, config=cfg)
@@ -217,7 +217,7 @@ def run_task(engine: str, urdf: UrdfSource, joints: dict[str, tuple[float, float
             tried: list[str] = []
             for share in shares:
                 with quiet_stdout():
-                    session = open_session(engine, urdf, opts)
+                    session = source.open(engine, opts)
                 try:
                     att = execute_task(session, name, closed=qc, direction=d, open_range=rng, action=action,
                                        target_fraction=(targets or {}).get(action), config=cfg, model=model,

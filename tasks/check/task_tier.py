@@ -21,7 +21,8 @@ from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import handled, spring_expected
-from asset2sim.urdf import UrdfSource
+from asset2sim.engines.source import SimSource
+from asset2sim.urdf import UrdfModel
 
 #: The metrics this tier adds to the post-check.
 TASK_METRICS: tuple[str, ...] = ("task_execution", "operating_force")
@@ -60,13 +61,13 @@ def hold_required(asset: AssetDescription, joints: list[str], springs: dict[str,
     return hold_required_by_label(named, springs, category, free_moving=free_moving, spring_requested=spring_requested)
 
 
-def task_spec_for(text: str, urdf: UrdfSource, asset: AssetDescription, category: str | None,
+def task_spec_for(text: str, model: UrdfModel, asset: AssetDescription, category: str | None,
                   task_joints: list[str], state: dict[str, float] | None = None,
                   closed: dict[str, tuple[float, float, float]] | None = None) -> TaskSpec:
-    """The ``TaskSpec`` of ``text`` on the written asset ``urdf`` (labels from
+    """The ``TaskSpec`` of ``text`` on the written asset's ``model`` (labels from
     ``asset``); with ``state`` and ``closed`` (joint -> (q_closed, direction,
     open range)) narrowed to the joints it has work on."""
-    _, joints = parse_urdf(urdf)
+    _, joints = parse_urdf(model)
     semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
     spec = parse_task(text, joints, semantics, category, task_joints)
     if state is not None and closed:
@@ -75,7 +76,7 @@ def task_spec_for(text: str, urdf: UrdfSource, asset: AssetDescription, category
     return spec
 
 
-def run_task_tier(engine: str, urdf: UrdfSource, state: dict[str, float], springs: dict[str, Spring],
+def run_task_tier(engine: str, source: SimSource, state: dict[str, float], springs: dict[str, Spring],
                   conventions: SimConventions, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
                   asset: AssetDescription, category: str | None, *, fixed_base: bool, free_moving: bool,
                   spring_requested: bool, recorded: recorded_runs.RecordedRuns | None = None) -> list[MetricResult]:
@@ -84,11 +85,11 @@ def run_task_tier(engine: str, urdf: UrdfSource, state: dict[str, float], spring
     attempt is recorded there (:func:`~asset2sim.tasks.check.recorded_runs.task_run`) for the evaluation.
 
     Raises:
-        EngineUnavailable; whatever loading ``urdf`` raises.
+        EngineUnavailable; whatever loading ``source`` raises.
     """
     joints = {n: closed[n] for n in spec.joints if n in closed and closed[n][2] > 0}
     actions = tuple(a for a in spec.actions if a in ("close", "open"))
-    run = recorded_runs.task_run(engine, urdf, joints, actions=actions, targets=dict(spec.targets),
+    run = recorded_runs.task_run(engine, source, joints, actions=actions, targets=dict(spec.targets),
                                  initial_state=dict(state), springs=dict(springs), conventions=conventions,
                                  fixed_base=fixed_base, task=spec.text, recorded=recorded,
                                  hold_required=hold_required(asset, list(joints), springs, category,
@@ -112,7 +113,7 @@ class OperatingLimits:
     (the operability tier's): no step of the dynamics search goes above it"""
 
 
-def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
+def operating_limits(source: SimSource, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
                      geometry: dict[str, LinkGeometry], closed: dict[str, tuple[float, float, float]] | None, *,
                      category: str | None, task: str | None, free_moving: bool,
                      conventions: SimConventions | None = None, joints: list[str] | None = None) -> OperatingLimits:
@@ -124,19 +125,19 @@ def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay
     most what the joint sweep's drive still moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
 
     Raises:
-        EngineUnavailable; whatever loading ``urdf`` raises.
+        EngineUnavailable; whatever loading ``source`` raises.
     """
     fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
     labels = link_labels(asset)
     hand = {n: c for n, c in (closed or {}).items() if handled(labels.get(asset.joint(n).child))}
     # every handled part, both ways, root fixed (the operability tier's hand); a task's joints also as its gripper meets them
-    budgets = operating.operating_budgets(urdf, state, overlay, hand, category=category, labels=labels,
+    budgets = operating.operating_budgets(source, state, overlay, hand, category=category, labels=labels,
                                           free=False, free_moving=free_moving, conventions=conventions,
                                           whole=True) if hand else {}
     hand_caps = {n: b.friction_cap for n, b in budgets.items()}
     sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
     if sel and task:
-        for n, b in operating.operating_budgets(urdf, state, overlay, sel, category=category, labels=labels,
+        for n, b in operating.operating_budgets(source, state, overlay, sel, category=category, labels=labels,
                                                 actions=task_actions(task), free=not fixed, free_moving=free_moving,
                                                 conventions=conventions).items():
             if n not in budgets or b.budget < budgets[n].budget:
@@ -145,7 +146,7 @@ def operating_limits(urdf: UrdfSource, state: dict[str, float], overlay: Overlay
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
-        for name, c in sweep.damping_caps(urdf, closed, state, overlay_springs(overlay), conventions).items():
+        for name, c in sweep.damping_caps(source, closed, state, overlay_springs(overlay), conventions).items():
             dcaps[name] = min(c, dcaps.get(name, c))
     return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
                            notes=[b.conflict for b in budgets.values() if b.conflict], hand_caps=hand_caps)

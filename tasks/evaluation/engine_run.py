@@ -150,11 +150,11 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 run.point_cloud = point_cloud(session)
             saved = session.save_state()
         if rest_test:
-            if recording is None or not recording.matches(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed):
+            if recording is None or not recording.matches(engine, ctx.source, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed):
                 if pyb and probes:  # in a session of its own, as the post-check does: the probes start unstepped
-                    _, recording = measure_rest_test(engine, ctx.urdf, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed)
+                    _, recording = measure_rest_test(engine, ctx.source, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed)
                 else:
-                    recording = record_rest_test(session, ctx.conventions, ctx.urdf, ctx.initial_state, ctx.springs)
+                    recording = record_rest_test(session, ctx.conventions, ctx.source, ctx.initial_state, ctx.springs)
             for name in ("trace", "root_series", "ground_series", "joint_series"):
                 setattr(run, name, getattr(recording, name))
         if pyb and closed_for is not None:

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.engines.base import Spring
+from asset2sim.engines.source import UrdfFile
 from asset2sim.tasks.assemble.export_mjcf import joint_spring
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.request import RequestSpec
@@ -73,6 +74,11 @@ class Context:
     closed_extents: np.ndarray | None = None  # (3,) m AABB with every joint at its closed end
     root_fixed: bool = False  # a mounted asset: every simulation holds the root fixed
     task: TaskSpec | None = None  # the parsed manipulation task; None: task execution not run
+
+    @property
+    def source(self) -> UrdfFile:
+        """The evaluated ``urdf`` as the checks simulate it."""
+        return UrdfFile(self.urdf)
 
     @property
     def movable(self) -> list[str]:

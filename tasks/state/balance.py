@@ -15,9 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource
 from asset2sim.engines.loading import collision_pieces
-from asset2sim.urdf import UrdfSource, model_of
 from asset2sim.schemas.overlay import Overlay
 
 if TYPE_CHECKING:
@@ -135,11 +134,10 @@ def support_polygon(points: np.ndarray, tol: float, com: np.ndarray | None = Non
     return _hull2d(low[:, :2])
 
 
-def _link_world(urdf: UrdfSource, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
+def _link_world(source: SimSource, state: dict[str, float]) -> tuple[dict, dict[str, np.ndarray]]:
     """Link frames (position (3,), rotation (3, 3)) and world collision hull points (N, 3) per link at ``state``."""
-    model = model_of(urdf)
-    pieces, _ = collision_pieces(model)
-    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
+    pieces, _ = collision_pieces(source.model())
+    with source.open("pybullet", SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
         return _world_at(s, pieces, state)
 
 
@@ -175,11 +173,11 @@ def _com(overlay: Overlay, frames: dict, masses: dict[str, float] | None = None)
     return acc / max(m_tot, 1e-12)
 
 
-def measure_balance(urdf: UrdfSource, overlay: Overlay, state: dict[str, float]) -> Balance:
-    """Static balance of the written asset ``urdf`` (scale baked in) at ``state`` (rad or m) with the overlay's masses and
+def measure_balance(source: SimSource, overlay: Overlay, state: dict[str, float]) -> Balance:
+    """Static balance of the written asset ``source`` (scale baked in) at ``state`` (rad or m) with the overlay's masses and
     COMs. Contact band: max(1 mm, 0.5 % of the height); required margin: max(2 mm, :data:`SUPPORT_MARGIN_FRACTION` x
     sqrt(support area), h tan(:data:`TILT_RECOVERY_RAD`)), h the COM height. Raises whatever loading the URDF raises."""
-    return _balance(overlay, *_link_world(urdf, state))
+    return _balance(overlay, *_link_world(source, state))
 
 
 def _balance(overlay: Overlay, frames: dict, pts: dict[str, np.ndarray]) -> Balance:
@@ -201,7 +199,7 @@ BAND_SAMPLES = 9
 MARGIN_GAIN = 2e-3
 
 
-def steadiest_fractions(urdf: UrdfSource, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
+def steadiest_fractions(source: SimSource, overlay: Overlay, state: dict[str, float], closed: dict[str, "ClosedState"],
                         intervals: dict[str, tuple[float, float]], samples: int = BAND_SAMPLES) -> tuple[dict[str, float], Balance, Balance]:
     """The opening fractions within the requested bands at which a free-standing
     object stands steadiest: for each opened joint of ``intervals`` (joint ->
@@ -210,15 +208,15 @@ def steadiest_fractions(urdf: UrdfSource, overlay: Overlay, state: dict[str, flo
     at least :data:`MARGIN_GAIN`; fractions that lower the object's bottom by
     more than 1 mm are skipped.
 
-    ``urdf``: the written URDF of ``overlay``; ``state``: joint -> rad or m;
+    ``source``: the written URDF of ``overlay``; ``state``: joint -> rad or m;
     ``closed``: joint -> ``ClosedState`` in the URDF's units. Returns (joint ->
     fraction moved, :class:`Balance` before, after); ({}, b, b) for a mounted
     asset or when nothing gains.
     """
-    model = model_of(urdf)
+    model = source.model()
     pieces, _ = collision_pieces(model)
     cur = dict(state)
-    with open_session("pybullet", urdf, SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
+    with source.open("pybullet", SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False)) as s:
         frames, pts = _world_at(s, pieces, cur)
         before = best = _balance(overlay, frames, pts)
         if overlay.mounting is not None and overlay.mounting.fixed:

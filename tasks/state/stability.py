@@ -18,7 +18,7 @@ from asset2sim.tasks.interpret.part_labels import canonical_label
 from asset2sim.prior_tables import MaterialPrior, load_priors
 from asset2sim.tasks.state.balance import Balance, _com, _link_world, _signed_margin, measure_balance
 from asset2sim.tasks.synthesize import physics
-from asset2sim.urdf import UrdfSource
+from asset2sim.engines.source import SimSource
 
 __all__ = ["PART_MASS_FRACTION", "design_for_stability", "envelope_masses"]
 
@@ -85,7 +85,7 @@ def envelope_masses(overlay: Overlay, points: dict[str, np.ndarray],
     return out
 
 
-def design_for_stability(urdf: UrdfSource, asset: AssetDescription, overlay: Overlay, state: dict[str, float],
+def design_for_stability(source: SimSource, asset: AssetDescription, overlay: Overlay, state: dict[str, float],
                          category: str | None, geometry: dict[str, LinkGeometry] | None = None) -> tuple[Overlay, list[str]]:
     """Make a free-standing object balance at ``state`` by its part masses: the
     smallest transfer from the opened parts (each linearly towards its floor:
@@ -93,7 +93,7 @@ def design_for_stability(urdf: UrdfSource, asset: AssetDescription, overlay: Ove
     (links no joint moves, scaled up alike) that gives the required margin.
     A mounted or already balanced asset is returned unchanged.
 
-    ``urdf``: the written URDF (scale baked in, pose applied) of ``overlay``;
+    ``source``: the written URDF (scale baked in, pose applied) of ``overlay``;
     ``state``: joint -> rad or m; ``category``: key of :data:`PART_MASS_FRACTION`;
     ``geometry``: link -> :class:`LinkGeometry` (scale 1) for the envelope shell
     masses (None: only the sourced fractions). Returns (overlay, changes): the
@@ -101,18 +101,18 @@ def design_for_stability(urdf: UrdfSource, asset: AssetDescription, overlay: Ove
     """
     if overlay.mounting is not None and overlay.mounting.fixed:
         return overlay, []
-    bal = measure_balance(urdf, overlay, state)
+    bal = measure_balance(source, overlay, state)
     if bal.stable or len(bal.support) < 3:
         return overlay, []
     moved, parts = _opened_links(asset, category)
     body = [ln for ln in overlay.links if ln not in moved]
     m_body = sum(overlay.links[ln].mass for ln in body)
-    floors, reasons, pf = _mass_floors(overlay, parts, moved, urdf, state, geometry)
+    floors, reasons, pf = _mass_floors(overlay, parts, moved, source, state, geometry)
     light = [ln for ln in floors if floors[ln] < overlay.links[ln].mass * (1 - 1e-9)]
     kept = _why_kept(overlay, bal, category, floors, light, m_body, pf)
     if kept is not None:
         return overlay, kept
-    frames, _ = _link_world(urdf, state)
+    frames, _ = _link_world(source, state)
     span = sum(overlay.links[ln].mass - floors[ln] for ln in light)
     masses_for = partial(_masses, overlay, light, body, floors, m_body, span)
     t = _smallest_transfer(lambda x: _signed_margin(bal.support, _com(overlay, frames, masses_for(x))[:2]), bal.required)
@@ -146,7 +146,7 @@ def _opened_links(asset: AssetDescription, category: str | None) -> tuple[set[st
     return moved, parts
 
 
-def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], urdf: UrdfSource, state: dict[str, float],
+def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[str], source: SimSource, state: dict[str, float],
                  geometry: dict[str, LinkGeometry] | None) -> tuple[dict[str, float], list[str], PartFraction | None]:
     """(link -> least mass, kg; reasons; the sourced fraction used or None)."""
     total = overlay.total_mass()
@@ -159,7 +159,7 @@ def _mass_floors(overlay: Overlay, parts: dict[str, PartFraction], moved: set[st
         share = min(1.0, pf.lo * total / max(m_table, 1e-12))
         floors.update({ln: overlay.links[ln].mass * share for ln in table})
         reasons.append(f"sourced range {pf.lo:.0%}-{pf.hi:.0%}: {pf.source}")
-    env = envelope_masses(overlay, _link_world(urdf, state)[1], geometry) if geometry else {}
+    env = envelope_masses(overlay, _link_world(source, state)[1], geometry) if geometry else {}
     env_links = [ln for ln in overlay.links if ln in moved and ln not in parts and ln in env
                  and env[ln] < overlay.links[ln].mass * (1 - 1e-9)]
     if env_links:

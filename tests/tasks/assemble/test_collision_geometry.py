@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from asset2sim.engines.source import UrdfFile
 from asset2sim import mesh_io, urdf
 from asset2sim.mesh_io import read_mesh
 from asset2sim.schemas.overlay import EstimatorInfo, JointDynamics, Overlay
@@ -468,9 +469,9 @@ def test_a_child_that_starts_around_its_parent_is_separated(tmp_path):
     before, _ = cg.link_pieces(model, lambda g: g.path, {}, decompose=False)
     assert pp.containment_depths(model, before, {"hinge": 0.0})[("body", "lid")] == 0.0  # no lid vertex inside the body
     assert pp.parent_child_depths(model, before, {"hinge": 0.0})[("body", "lid")] > 0.015
-    assert parent_child_penetration(folder / "mobility.urdf", {"hinge": 0.0}).value > 15.0
+    assert parent_child_penetration(UrdfFile(folder / "mobility.urdf"), {"hinge": 0.0}).value > 15.0
     out = _write(folder, tmp_path / "out")
-    m = parent_child_penetration(out.urdf, {"hinge": 0.0})
+    m = parent_child_penetration(UrdfFile(out.urdf), {"hinge": 0.0})
     assert m.passed and m.value <= cp.CONTAINMENT_TOLERANCE * 1000
     written = urdf.read_urdf(out.urdf)
     after, _ = cg.link_pieces(written, lambda g: g.path, {}, decompose=False)
@@ -478,7 +479,7 @@ def test_a_child_that_starts_around_its_parent_is_separated(tmp_path):
         assert pp.parent_child_depths(written, after, {"hinge": float(q)})[("body", "lid")] <= cp.CONTAINMENT_TOLERANCE + 1e-9
     assert sum(p.volume for p in after["lid"]) == pytest.approx(0.06 * 0.06 * 0.03, rel=1e-6)  # the post was cut, not the lid
     mujoco = pytest.importorskip("mujoco")
-    assert parent_child_penetration(out.urdf, {"hinge": 0.0}, engine="mujoco").value <= cp.CONTAINMENT_TOLERANCE * 1000
+    assert parent_child_penetration(UrdfFile(out.urdf), {"hinge": 0.0}, engine="mujoco").value <= cp.CONTAINMENT_TOLERANCE * 1000
     assert mujoco.MjModel.from_xml_path(str(out.urdf)).ngeom >= 2
 
 

@@ -7,6 +7,7 @@ import json
 
 import pytest
 
+from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.evaluation import eval_context
@@ -75,11 +76,11 @@ def test_post_check_follows_the_overlay_root(mounted):
     out = mounted.out_dir
     ov = mounted.overlay
     state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
-    fixed = postcheck.run_post_check(out / "mobility.urdf", state, ov, RefineConfig())
-    free = postcheck.run_post_check(out / "mobility.urdf", state, ov.model_copy(update={"mounting": None}), RefineConfig())
+    fixed = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, RefineConfig())
+    free = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov.model_copy(update={"mounting": None}), RefineConfig())
     assert fixed.stable and fixed.recording.fixed_base
     assert not free.stable and not free.recording.fixed_base
-    assert not fixed.recording.matches("pybullet", out / "mobility.urdf", state, fixed.recording.springs, RefineConfig().sim, False)
+    assert not fixed.recording.matches("pybullet", UrdfFile(out / "mobility.urdf"), state, fixed.recording.springs, RefineConfig().sim, False)
 
 
 def test_mjcf_check_refuses_a_free_joint_on_a_mounted_asset(free_standing, tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.check.parent_child import parent_child_penetration
@@ -26,7 +27,7 @@ def _nested(tmp_path):
 def test_input_nested_in_its_parent_reads_its_depth(tmp_path, engine):
     if engine == "mujoco":
         pytest.importorskip("mujoco")
-    m = parent_child_penetration(_nested(tmp_path) / "mobility.urdf", {"hinge": 0.0}, engine)
+    m = parent_child_penetration(UrdfFile(_nested(tmp_path) / "mobility.urdf"), {"hinge": 0.0}, engine)
     assert m.value == pytest.approx(20.0, abs=0.05)  # the post's top 20 mm into the lid's hull, margins removed
     assert m.passed is False and m.details["pairs"] == {"body/lid": m.value}
     assert m.engine == engine
@@ -39,9 +40,9 @@ def test_a_lid_swung_into_a_bar_of_its_body_reads_its_depth_beyond_the_modelled_
     nested lid opened 0.3 rad is shallower than as modelled (nothing beyond)."""
     slab, bar = _box([0, 0, 0], [0.1, 0.1, 0.01]), _box([0.0, 0.0, 0.07], [0.1, 0.06, 0.09])
     barred = _asset(tmp_path / "barred", [slab, bar], [_box([0.02, 0.02, 0.02], [0.08, 0.08, 0.05])])
-    m = parent_child_penetration(barred / "mobility.urdf", {"hinge": 0.5})
+    m = parent_child_penetration(UrdfFile(barred / "mobility.urdf"), {"hinge": 0.5})
     assert m.value > 10.0 and m.details["modelled"] == {} and m.details["beyond_modelled_mm"] == m.value
-    m = parent_child_penetration(_nested(tmp_path / "nested") / "mobility.urdf", {"hinge": 0.3})
+    m = parent_child_penetration(UrdfFile(_nested(tmp_path / "nested") / "mobility.urdf"), {"hinge": 0.3})
     assert 0.0 < m.value < 20.0 and m.details["beyond_modelled_mm"] == 0.0
 
 
@@ -51,6 +52,6 @@ def test_post_check_reports_the_metric_on_the_written_output(tmp_path):
                  joints={j.name: JointDynamics(damping=0.1, friction=0.01) for j in asset.movable_joints()})
     ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
     out = write_output(asset, ov, tmp_path / "out", {"hinge": 0.0})
-    check = postcheck.run_post_check(out.urdf, {"hinge": 0.0}, ov, RefineConfig(engines=["pybullet"]))
+    check = postcheck.run_post_check(UrdfFile(out.urdf), {"hinge": 0.0}, ov, RefineConfig(engines=["pybullet"]))
     m = check.metric("parent_child_penetration")
     assert m.passed and m.value <= 2.0

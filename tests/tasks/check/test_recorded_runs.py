@@ -9,6 +9,7 @@ import pytest
 
 from tests.conftest import SHARED, needs_shared
 from tests.contract_asset import write_contract_asset
+from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck, recorded_runs
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
@@ -26,12 +27,12 @@ STATE = {"lid_hinge": 0.4, "post_slide": 0.0}
 def test_sweep_is_reused_for_the_same_inputs_and_rerun_for_other_closed_ends(tmp_path):
     a = write_contract_asset(tmp_path, lid_angle=0.4)
     rec = RecordedRuns()
-    first = recorded_runs.sweep_run("pybullet", a.urdf, CLOSED, STATE, recorded=rec)
-    again = recorded_runs.sweep_run("pybullet", a.urdf, CLOSED, dict(reversed(list(STATE.items()))), recorded=rec)
+    first = recorded_runs.sweep_run("pybullet", UrdfFile(a.urdf), CLOSED, STATE, recorded=rec)
+    again = recorded_runs.sweep_run("pybullet", UrdfFile(a.urdf), CLOSED, dict(reversed(list(STATE.items()))), recorded=rec)
     assert (rec.hits, rec.misses) == (1, 1)
-    assert sweep_metric(again) == sweep_metric(first) == sweep_metric(run_sweep("pybullet", a.urdf, CLOSED, STATE))
+    assert sweep_metric(again) == sweep_metric(first) == sweep_metric(run_sweep("pybullet", UrdfFile(a.urdf), CLOSED, STATE))
     other = {"lid_hinge": (0.0, 1.0, 1.5), "post_slide": (0.0, 1.0, 0.05)}
-    shorter = recorded_runs.sweep_run("pybullet", a.urdf, other, STATE, recorded=rec)
+    shorter = recorded_runs.sweep_run("pybullet", UrdfFile(a.urdf), other, STATE, recorded=rec)
     assert (rec.hits, rec.misses) == (1, 2)
     assert shorter.joints[0].open_range == 1.5 != first.joints[0].open_range
 
@@ -39,19 +40,19 @@ def test_sweep_is_reused_for_the_same_inputs_and_rerun_for_other_closed_ends(tmp
 def test_robust_rest_is_rerun_when_the_urdf_or_state_changes(tmp_path):
     a = write_contract_asset(tmp_path / "a", lid_angle=0.4)
     rec = RecordedRuns()
-    first = recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)
-    again = recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)
+    first = recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)
+    again = recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)
     assert (rec.hits, rec.misses) == (1, 1)
-    assert robust_rest_metric(again) == robust_rest_metric(first) == robust_rest_metric(run_robust_rest("pybullet", a.urdf, STATE))
+    assert robust_rest_metric(again) == robust_rest_metric(first) == robust_rest_metric(run_robust_rest("pybullet", UrdfFile(a.urdf), STATE))
     again.trials[0].joint_drift.clear()  # a copy: the record is not changed through it
-    assert robust_rest_metric(recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)) == robust_rest_metric(first)
-    recorded_runs.robust_rest_run("pybullet", a.urdf, {**STATE, "lid_hinge": 0.5}, recorded=rec)
+    assert robust_rest_metric(recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)) == robust_rest_metric(first)
+    recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), {**STATE, "lid_hinge": 0.5}, recorded=rec)
     assert rec.misses == 2
     # the same path written again with a stiffer hinge: other bytes, another run
     write_contract_asset(tmp_path / "a", lid_angle=0.4, lid_friction=5.0)
-    stiff = recorded_runs.robust_rest_run("pybullet", a.urdf, STATE, recorded=rec)
+    stiff = recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)
     assert rec.misses == 3
-    assert robust_rest_metric(stiff) == robust_rest_metric(run_robust_rest("pybullet", a.urdf, STATE))
+    assert robust_rest_metric(stiff) == robust_rest_metric(run_robust_rest("pybullet", UrdfFile(a.urdf), STATE))
 
 
 def _closed(out):
@@ -81,8 +82,8 @@ def test_sweep_is_skipped_only_on_a_round_that_is_escalated_whatever_it_says(fau
     def escalated(chk):  # as refine's loop: another round whenever escalation changes something
         return bool(postcheck.escalate(ov, chk, cfg.escalation_factor)[1])
 
-    early = postcheck.run_post_check(out / "mobility.urdf", state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
-    last = postcheck.run_post_check(out / "mobility.urdf", state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
+    early = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=escalated, recorded=rec)
+    last = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, cfg, closed=closed, escalated=lambda chk: False, recorded=rec)
     assert not early.passed and not last.passed
     for name in ("joint_sweep", "operability"):  # the sweep and the hand run together, or neither
         assert early.metric(name).passed is None and "not_run" in early.metric(name).details
@@ -103,7 +104,7 @@ def test_evaluation_takes_the_post_checks_runs_only_where_inputs_match(faucet_ou
     ov = faucet_out.overlay
     state = json.loads((out / "initial_state.json").read_text())["initial_joint_positions"]
     closed = _closed(out)
-    check = postcheck.run_post_check(out / "mobility.urdf", state, ov, RefineConfig(), closed=closed)
+    check = postcheck.run_post_check(UrdfFile(out / "mobility.urdf"), state, ov, RefineConfig(), closed=closed)
     rec = check.recorded
     reused = evaluate_asset(out, probes=False, recorded=rec)
     fresh = evaluate_asset(out, probes=False)
@@ -121,20 +122,20 @@ def test_task_attempt_is_reused_for_the_same_inputs_and_rerun_when_one_differs(t
     a = write_contract_asset(tmp_path, lid_angle=0.4)
     lid = {"lid_hinge": CLOSED["lid_hinge"]}
     rec = RecordedRuns()
-    first = recorded_runs.task_run("pybullet", a.urdf, lid, actions=("open",), initial_state=STATE, recorded=rec)
-    again = recorded_runs.task_run("pybullet", a.urdf, lid, actions=("open",), initial_state=dict(reversed(list(STATE.items()))),
+    first = recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=STATE, recorded=rec)
+    again = recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=dict(reversed(list(STATE.items()))),
                                    recorded=rec)
     assert (rec.hits, rec.misses) == (1, 1)
-    fresh = run_task("pybullet", a.urdf, lid, actions=("open",), initial_state=STATE)
+    fresh = run_task("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=STATE)
     assert task_metric(again) == task_metric(first) == task_metric(fresh)
     assert again.attempts[0].trace["t"] == fresh.attempts[0].trace["t"]  # the motion the clips replay, too
     again.attempts[0].notes.append("changed")  # a copy: the record is not changed through it
-    assert recorded_runs.task_run("pybullet", a.urdf, lid, actions=("open",), initial_state=STATE,
+    assert recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=STATE,
                                   recorded=rec).attempts[0].notes == first.attempts[0].notes
     for changed in ({"targets": {"open": 0.5}}, {"hold_required": {"lid_hinge": False}}, {"actions": ("close", "open")}):
-        recorded_runs.task_run("pybullet", a.urdf, lid, **{"actions": ("open",), **changed}, initial_state=STATE, recorded=rec)
+        recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, **{"actions": ("open",), **changed}, initial_state=STATE, recorded=rec)
     other_end = {"lid_hinge": (0.0, 1.0, 1.5)}
-    recorded_runs.task_run("pybullet", a.urdf, other_end, actions=("open",), initial_state=STATE, recorded=rec)
+    recorded_runs.task_run("pybullet", UrdfFile(a.urdf), other_end, actions=("open",), initial_state=STATE, recorded=rec)
     assert (rec.hits, rec.misses) == (2, 5)
 
 

@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from asset2sim.engines.source import UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay, RootMount
 from asset2sim.tasks.check import postcheck
@@ -49,9 +50,9 @@ def test_open_screen_tips_the_laptop_as_estimated(laptop, fully_open, tmp_path):
             undone.links[ln] = lp.model_copy(update={"mass": lp.mass / f})
     asset, _ = extract.extract_asset_checked(laptop)
     paths = write.write_output(asset, undone, tmp_path / "undone", r.initial_joint_positions)
-    bal = balance.measure_balance(paths.urdf, undone, r.initial_joint_positions)
+    bal = balance.measure_balance(UrdfFile(paths.urdf), undone, r.initial_joint_positions)
     assert bal.margin < 0, "the estimated masses should put the COM outside the support"
-    check = postcheck.run_post_check(paths.urdf, r.initial_joint_positions, undone, RefineConfig())
+    check = postcheck.run_post_check(UrdfFile(paths.urdf), r.initial_joint_positions, undone, RefineConfig())
     assert not check.stable
     assert estimated["links"]["link_0"]["mass"] == pytest.approx(ov.links["link_0"].mass)
 
@@ -64,7 +65,7 @@ def test_design_balances_within_the_sourced_ratio(fully_open):
     screen = ov.links["link_0"].mass / total
     assert 0.25 - 1e-9 <= screen <= 0.40 + 1e-9
     assert ov.links["link_1"].mass > ov.links["link_0"].mass  # the base outweighs the screen
-    bal = balance.measure_balance(fully_open.out_dir / "mobility.urdf", ov, r.initial_joint_positions)
+    bal = balance.measure_balance(UrdfFile(fully_open.out_dir / "mobility.urdf"), ov, r.initial_joint_positions)
     assert bal.stable
     assert r.initial_joint_positions == r.state.result  # the requested state is kept
     assert any("stability by design" in n for n in r.notes)
@@ -77,7 +78,7 @@ def test_closed_laptop_is_left_unchanged(laptop, tmp_path):
 
 def test_mounted_asset_is_never_redesigned(fully_open):
     ov = fully_open.overlay.model_copy(update={"mounting": RootMount(kind="wall-mounted", fixed=True, source="test")})
-    same, changes = stability.design_for_stability(fully_open.out_dir / "mobility.urdf", None, ov, fully_open.report.initial_joint_positions, "Laptop")
+    same, changes = stability.design_for_stability(UrdfFile(fully_open.out_dir / "mobility.urdf"), None, ov, fully_open.report.initial_joint_positions, "Laptop")
     assert same is ov and changes == []
 
 
@@ -124,18 +125,18 @@ def test_open_stapler_is_balanced_by_the_envelope_mass_of_its_sheet_steel_parts(
     r, ov = open_stapler.report, open_stapler.overlay
     assert r.failure_mode == "none" and r.opening_fractions["joint_1"] == pytest.approx(1.0)
     urdf = open_stapler.out_dir / "mobility.urdf"
-    assert balance.measure_balance(urdf, ov, r.initial_joint_positions).stable
+    assert balance.measure_balance(UrdfFile(urdf), ov, r.initial_joint_positions).stable
     heavy = ov.model_copy(deep=True)
     for ln in ("link_0", "link_1"):
         heavy.links[ln] = heavy.links[ln].model_copy(update={"mass": 2 * ov.links[ln].mass})
-    assert not balance.measure_balance(urdf, heavy, r.initial_joint_positions).stable
+    assert not balance.measure_balance(UrdfFile(urdf), heavy, r.initial_joint_positions).stable
     asset, _ = extract.extract_asset_checked(STAPLER)
     geometry = analyze_asset(asset)
-    fixed, (change,) = stability.design_for_stability(urdf, asset, heavy, r.initial_joint_positions, "Stapler", geometry)
+    fixed, (change,) = stability.design_for_stability(UrdfFile(urdf), asset, heavy, r.initial_joint_positions, "Stapler", geometry)
     assert "envelope shell mass" in change
     assert fixed.total_mass() == pytest.approx(heavy.total_mass())
-    assert balance.measure_balance(urdf, fixed, r.initial_joint_positions).stable
-    _, pts = balance._link_world(urdf, r.initial_joint_positions)
+    assert balance.measure_balance(UrdfFile(urdf), fixed, r.initial_joint_positions).stable
+    _, pts = balance._link_world(UrdfFile(urdf), r.initial_joint_positions)
     env = stability.envelope_masses(heavy, pts, geometry)
     for ln in ("link_0", "link_1"):
         assert env[ln] - 1e-9 <= fixed.links[ln].mass < heavy.links[ln].mass
@@ -145,7 +146,7 @@ def test_without_geometry_only_sourced_fractions_are_used(fully_open):
     """The laptop's design is the same with or without the envelope bound
     (its screen has a sourced fraction)."""
     r, ov = fully_open.report, fully_open.overlay
-    same, changes = stability.design_for_stability(fully_open.out_dir / "mobility.urdf", None, ov, r.initial_joint_positions, "Laptop")
+    same, changes = stability.design_for_stability(UrdfFile(fully_open.out_dir / "mobility.urdf"), None, ov, r.initial_joint_positions, "Laptop")
     assert changes == [] and same is ov  # already balanced
 
 
@@ -167,8 +168,8 @@ def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_openin
     assert 0.6 - 1e-6 <= f < 0.75 and r.requested_bands["joint_0"] == "mostly"
     overlay = Overlay.model_validate_json((res.out_dir / "overlay.json").read_text())
     closed = r.closed_positions["joint_0"]
-    here = balance.measure_balance(res.out_dir / "mobility.urdf", overlay, dict(r.initial_joint_positions)).margin
-    at_target = balance.measure_balance(res.out_dir / "mobility.urdf", overlay, {
+    here = balance.measure_balance(UrdfFile(res.out_dir / "mobility.urdf"), overlay, dict(r.initial_joint_positions)).margin
+    at_target = balance.measure_balance(UrdfFile(res.out_dir / "mobility.urdf"), overlay, {
         "joint_0": closed + 0.75 * (r.initial_joint_positions["joint_0"] - closed) / f}).margin
     assert here > at_target + balance.MARGIN_GAIN
 
