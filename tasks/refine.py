@@ -287,8 +287,7 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws:
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
     ctx.root_rotation = None
-    att.rewrite(ws)  # the first attempt stays the result
-    return att, f"{note}; not better in simulation, kept as modelled"
+    return att.kept_after_another(), f"{note}; not better in simulation, kept as modelled"
 
 
 def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: StageLog,
@@ -325,7 +324,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
         second.design = [note, *second.design]
         return second
     log.say("stability", "the steadier opening did not pass every check: the bands' targets kept")
-    att.rewrite(ws)
+    att.kept_after_another()
     return None
 
 
@@ -409,8 +408,7 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
 def _write(ctx: EstimationContext, syn: placement.Synthesis, ws: Workspace, log: StageLog) -> list[str]:
     """Stage 5: the candidate at the requested state loaded into the workspace.
     Returns the writer's clearance notes."""
-    ws.load(syn.candidate(ctx))
-    clear = placement.clearance_lines(ws.collision_notes)
+    clear = placement.clearance_lines(ws.collision_notes_of(syn.candidate(ctx)))
     for line in clear:
         log.say("write", line)
     log.lap("write")

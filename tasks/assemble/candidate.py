@@ -148,6 +148,11 @@ class Workspace:
         self._written, self._model, self._digest = (paths.urdf_bytes, paths.urdf), None, key
         return paths.urdf
 
+    def collision_notes_of(self, candidate: Candidate) -> list[str]:
+        """What the writer's convex pieces changed in ``candidate`` (loaded first)."""
+        self.load(candidate)
+        return list(self.collision_notes)
+
     def model(self, candidate: Candidate | None = None) -> urdf.UrdfModel:
         """The URDF model of ``candidate`` (loaded first; None: the candidate
         loaded last) as the engines read it (parsed once from the bytes

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, StateRefinement
-from asset2sim.tasks.assemble.candidate import Candidate, Workspace
+from asset2sim.tasks.assemble.candidate import Candidate
 from asset2sim.tasks.check import postcheck
 from asset2sim.tasks.geometry.closed_state import ClosedState
 
@@ -31,16 +31,17 @@ class Attempt:
     rounds: list[EscalationRound]
     design: list[str] = field(default_factory=list)  # what stability by design changed and why
     targets: dict = field(default_factory=dict)  # joint -> request_apply.JointTarget
-    rewritten: bool = False  # loaded again after another attempt: its files may differ from those ``check`` measured
+    rewritten: bool = False  # kept after another attempt was loaded: its files may differ from those ``check`` measured
 
     @property
     def candidate(self) -> Candidate:
         return Candidate(self.asset, self.overlay, self.state, self.overrides, self.root_rotation)
 
-    def rewrite(self, ws: Workspace) -> None:
-        """Load this attempt into the workspace again (after another attempt replaced it)."""
+    def kept_after_another(self) -> "Attempt":
+        """This attempt, marked kept after another one was tried (its rest recording is not reused: the stages
+        ask the workspace for the candidate they work on, so nothing needs loading again)."""
         self.rewritten = True
-        ws.load(self.candidate)
+        return self
 
 
 def least_openings(att: Attempt, intervals: dict[str, tuple[float, float]]) -> dict[str, float]:
