@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from asset2sim import array_cache, atomic, mesh_io, urdf
+from asset2sim import array_cache, atomic, file_names, mesh_io, urdf
 from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.registry import open_session
 from asset2sim.output_folder import URDF_NAME
@@ -72,9 +72,9 @@ def candidate_digest(candidate: Candidate, folder: Path) -> str:
         for piece in candidate.collision_overrides[link]:
             parts.append(f"{link}\0{piece!r}")
             try:
-                parts.append(mesh_io.file_bytes(folder / piece.filename))
-            except OSError:
-                parts.append(b"\0missing")
+                parts.append(mesh_io.file_bytes(file_names.join_inside(folder, piece.filename)))
+            except (OSError, file_names.UnsafePath):  # written as named, it fails there with the file's name
+                parts.append(b"\0unreadable")
     return array_cache.digest(*parts)
 
 
