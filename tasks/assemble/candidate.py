@@ -20,7 +20,6 @@ import numpy as np
 from asset2sim import array_cache, atomic, file_names, mesh_io, urdf
 from asset2sim.engines.base import SessionOptions, SimSession
 from asset2sim.engines.registry import open_session
-from asset2sim.output_folder import URDF_NAME
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble import write
@@ -123,11 +122,6 @@ class Workspace:
         self._digest: str | None = None  # candidate_digest of the candidate on disk
         self.writes = 0
 
-    @property
-    def urdf(self) -> Path:
-        """The scratch URDF of the candidate loaded last."""
-        return self.root / URDF_NAME
-
     def load(self, candidate: Candidate) -> Path:
         """The scratch URDF of ``candidate`` for the engines to load: written
         into the scratch folder unless it is the candidate on disk already.
@@ -153,18 +147,14 @@ class Workspace:
         self.load(candidate)
         return list(self.collision_notes)
 
-    def model(self, candidate: Candidate | None = None) -> urdf.UrdfModel:
-        """The URDF model of ``candidate`` (loaded first; None: the candidate
-        loaded last) as the engines read it (parsed once from the bytes
+    def model(self, candidate: Candidate) -> urdf.UrdfModel:
+        """The URDF model of ``candidate`` (loaded first) as the engines read it (parsed once from the bytes
         written, mesh paths in the scratch folder); a copy the caller may change.
 
         Raises:
-            RuntimeError: ``candidate`` is None and nothing was loaded yet.
+            OutputError, OSError: as :meth:`load`.
         """
-        if candidate is not None:
-            self.load(candidate)
-        if self._written is None:
-            raise RuntimeError("no candidate loaded into the workspace")
+        self.load(candidate)
         if self._model is None:
             data, path = self._written
             self._model = urdf.parse_urdf_bytes(data, source=str(path), base=self.root)

@@ -120,7 +120,7 @@ def test_publish_copies_the_repaired_pieces_and_refuses_names_that_leave(refined
         target = tmp_path / "pub"
         paths = output.publish(cand, ws, target)
         assert (target / "collision" / "repaired_0_0.obj").read_text() == CUBE_OBJ
-        assert paths.urdf.read_bytes() == ws.urdf.read_bytes()
+        assert paths.urdf.read_bytes() == ws.load(cand).read_bytes()
         leaving = dataclasses.replace(cand, collision_overrides={link.name: [dataclasses.replace(piece, filename="../escaped.obj")]})
         with pytest.raises(OutputError):
             output.publish(leaving, ws, tmp_path / "pub2")
@@ -142,17 +142,14 @@ def test_a_candidate_is_frozen_and_the_workspace_model_is_the_file_as_read(refin
     moved = dataclasses.replace(cand, state={k: 0.0 for k in cand.state})
     assert set(moved.state.values()) == {0.0} and cand.state != moved.state
     with Workspace(asset) as ws:
-        with pytest.raises(RuntimeError):
-            ws.model()
-        ws.load(cand)
-        model = ws.model()
-        read = urdf.read_urdf(ws.urdf)
+        model = ws.model(cand)
+        read = urdf.read_urdf(ws.load(cand))
         assert urdf.write_urdf(model) == urdf.write_urdf(read)
         assert [(n, str(g.path)) for n, ln in model.links.items() for g in ln.collisions] == \
             [(n, str(g.path)) for n, ln in read.links.items() for g in ln.collisions]
         model.joints[0].name = "changed"  # a copy: the next caller gets the model as loaded
-        assert ws.model().joints[0].name != "changed"
-        assert os.path.commonpath([ws.root, ws.urdf]) == str(ws.root)
+        assert ws.model(cand).joints[0].name != "changed"
+        assert os.path.commonpath([ws.root, ws.load(cand)]) == str(ws.root)
 
 
 def test_a_workspace_removes_what_killed_runs_left_and_nothing_else(refined, demo_root, tmp_path, monkeypatch):
