@@ -40,7 +40,7 @@ def _floats(s: str) -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     from asset2sim.urdf import UrdfDynamics, read_urdf, write_urdf
     from asset2sim.tasks.check import robust_rest
-    from asset2sim.engines.source import UrdfFile
+    from asset2sim.engines.source import SimObject, UrdfFile
     from asset2sim.tasks.check.force_ranges import operating_range
     from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
 
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
                 joint.dynamics = UrdfDynamics(damping=c, friction=f)
                 out = Path(tmp) / "scan.urdf"
                 out.write_bytes(write_urdf(model))
-                run = robust_rest.run_robust_rest(a.engine, UrdfFile(out), state, springs, config=cfg)
+                run = robust_rest.run_robust_rest(a.engine, SimObject(UrdfFile(out), state, springs), config=cfg)
                 cells = [f"{t.joint_drift.get(a.joint, float('nan')) * scale:9.3g}" for t in run.trials]
                 print(f"{f:9.3g} {c:8.3g}  " + "  ".join(cells), flush=True)
     return 0

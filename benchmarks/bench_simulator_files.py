@@ -180,6 +180,7 @@ def _penetration_checks(row: dict, urdf_path: Path, model, pieces: dict, state: 
 def _mjcf_checks(f: Path, state: dict, row: dict, convert: bool) -> bool:
     """Into ``row``: the MJCF's 5 cm drop (:func:`drop_test`; the ``mjcf/`` file, or the URDF converted in memory
     with ``convert`` or without one). False when the conversion failed (``row["mjcf"]`` says why)."""
+    from asset2sim.engines.base import SessionOptions
     from asset2sim.engines.mjcf import urdf_to_mjcf
     from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
     from asset2sim.tasks.assemble.write import read_root
@@ -191,8 +192,8 @@ def _mjcf_checks(f: Path, state: dict, row: dict, convert: bool) -> bool:
         try:
             with tempfile.TemporaryDirectory():
                 fixed = read_root(f).fixed  # a mounted asset converts as export_mjcf writes it: no free joint
-                build = urdf_to_mjcf(urdf_path, initial_state=state, springs=springs_from_overlay(f, state), visuals=True,
-                                     fixed_base=fixed, ground=not fixed)
+                build = urdf_to_mjcf(urdf_path, SessionOptions(initial_state=state, springs=springs_from_overlay(f, state),
+                                                               fixed_base=fixed, ground=not fixed), visuals=True)
             xml = None
         except Exception as exc:
             row["mjcf"] = f"convert failed: {str(exc)[:120]}"

@@ -37,9 +37,7 @@ class MuJoCoSession(SessionDefaults):
         mujoco = _mujoco()
         self._mj = mujoco
         self.options = options
-        self.build = urdf_to_mjcf(urdf_path, initial_state=options.initial_state, springs=options.springs, missing_inertial="bullet",
-                                  fixed_base=options.fixed_base, ground=options.ground, gravity=options.gravity,
-                                  conventions=options.conventions)
+        self.build = urdf_to_mjcf(urdf_path, options, missing_inertial="bullet")
         self.notes = list(self.build.notes)
         self.m = _compile(lambda: mujoco.MjModel.from_xml_string(self.build.xml, assets=self.build.assets()), urdf_path)
         self.d = mujoco.MjData(self.m)

@@ -7,15 +7,19 @@ loads it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Protocol, runtime_checkable
 
-from asset2sim.engines.base import SessionOptions, SimSession
+from asset2sim.engines.base import SessionOptions, SimSession, Spring
 from asset2sim.engines.registry import open_session
+from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import Mode, UrdfModel, UrdfSource, model_of, path_of
 
-__all__ = ["SimSource", "UrdfFile"]
+__all__ = ["SimObject", "SimSource", "UrdfFile"]
 
 
 @runtime_checkable
@@ -59,3 +63,40 @@ class UrdfFile:
     def open(self, engine: str, options: SessionOptions | None = None, **attach) -> SimSession:
         """:func:`asset2sim.engines.registry.open_session` of the file; ``attach`` as there."""
         return open_session(engine, self.source, options, **attach)
+
+
+@dataclass(frozen=True)
+class SimObject:
+    """An object as the checks simulate it: its :class:`SimSource`, the initial joint positions ``state`` (joint ->
+    rad or m), the joints' passive ``springs`` (joint -> :class:`asset2sim.engines.base.Spring`), the measurement
+    ``conventions`` and whether its root is fixed as mounted (``fixed_base``; else it rests free on the ground).
+
+    The mappings are frozen copies. Example:
+    ``run_robust_rest("pybullet", SimObject(UrdfFile(out / "mobility.urdf"), state))``.
+    """
+
+    source: SimSource
+    state: Mapping[str, float] = field(default_factory=dict)
+    springs: Mapping[str, Spring] = field(default_factory=dict)
+    conventions: SimConventions = field(default_factory=SimConventions)
+    fixed_base: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "state", MappingProxyType({str(k): float(v) for k, v in self.state.items()}))
+        object.__setattr__(self, "springs", MappingProxyType(dict(self.springs or {})))
+
+    def options(self, **changes) -> SessionOptions:
+        """The :class:`asset2sim.engines.base.SessionOptions` of the object as it is (state, springs, conventions; a
+        mounted root fixed with no ground), with ``changes`` (SessionOptions fields) applied over them."""
+        root = {"fixed_base": True, "ground": False} if self.fixed_base else {}
+        return SessionOptions(**{"initial_state": dict(self.state), "springs": dict(self.springs),
+                                 "conventions": self.conventions, **root, **changes})
+
+    def open(self, engine: str, **changes) -> SimSession:
+        """A session of the source in ``engine`` under :meth:`options` (``changes`` as there; the caller closes it).
+        Raises EngineUnavailable, RuntimeError: as :meth:`SimSource.open`."""
+        return self.source.open(engine, self.options(**changes))
+
+    def with_state(self, state: Mapping[str, float]) -> "SimObject":
+        """The same object started from ``state`` (joint -> rad or m)."""
+        return dataclasses.replace(self, state=state)

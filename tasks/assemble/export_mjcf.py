@@ -198,7 +198,7 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     initial = read_initial_state(out_dir)
     springs = springs_from_overlay(out_dir, initial)
     fixed = read_root(out_dir).fixed  # mounted: no free joint, the root welded where the file puts it
-    build = urdf_to_mjcf(urdf, initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed,
+    build = urdf_to_mjcf(urdf, SessionOptions(initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed),
                          missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals)
     for rel, data in build.derived_meshes.items():
         dst = file_names.join_inside(out_dir, rel)

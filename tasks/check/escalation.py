@@ -10,7 +10,7 @@ from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import EscalationRound, StateRefinement
 from asset2sim.stage_log import StageLog
-from asset2sim.tasks.assemble import export_mjcf, write
+from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.check import dynamics_search, operating, postcheck, repair, robust_rest, sweep, task_tier
 from asset2sim.tasks.geometry import limits
@@ -36,9 +36,9 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     spec = task_tier.task_spec_for(ctx.task, ws.model(cand), asset, ctx.category, estimate.task_relevant_joints(ctx), state, closed) \
         if ctx.task and closed else None
     # what the task's gripper can still operate on the task's joints (task_tier.operating_limits); estimates above it are lowered
-    lim = task_tier.operating_limits(ws.source(cand), state, overlay, asset, ctx.geometry, closed, category=ctx.category, task=ctx.task,
-                                     free_moving=ctx.request.free_moving, conventions=config.sim,
-                                     joints=spec.joints if spec is not None else None)
+    lim = task_tier.operating_limits(postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), overlay, asset,
+                                     ctx.geometry, closed, category=ctx.category, task=ctx.task,
+                                     free_moving=ctx.request.free_moving, joints=spec.joints if spec is not None else None)
     bounded, notes = operating.bound_overlay(overlay, lim.budgets)
     for line in notes:
         log.say("post_check", line)
@@ -54,9 +54,8 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     def with_task(chk: postcheck.PostCheck) -> postcheck.PostCheck:  # the task tier appended when refine was given a task
         if spec is not None:
             chk.metrics = [*chk.metrics, *task_tier.run_task_tier(
-                "pybullet", ws.source(cand), state, export_mjcf.overlay_springs(overlay), config.sim, closed, spec, asset, ctx.category,
-                fixed_base=bool(overlay.mounting is not None and overlay.mounting.fixed),
-                free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
+                "pybullet", postcheck.overlay_object(ws.source(cand), state, overlay, config.sim), closed, spec, asset,
+                ctx.category, free_moving=ctx.request.free_moving, spring_requested=ctx.request.spring, recorded=recorded)]
         return chk
 
     check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
@@ -118,8 +117,8 @@ def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[st
     folder = write.collision_folder(ctx.asset)
     if blocked:
         label = "sweep blocked"
-        repairs = repair.sweep_repairs(current, ctx.asset, sw, blocked, state, overrides, unclipped.scale, ws.root,
-                                       folder, config)
+        repairs = repair.sweep_repairs(postcheck.overlay_object(current, state, overlay, config.sim), ctx.asset, sw,
+                                       blocked, overrides, unclipped.scale, ws.root, folder, config)
 
         def better(chk2) -> bool:
             return sweep.sweep_score(next(m for m in chk2.metrics if m.name == "joint_sweep")) < sweep.sweep_score(sw)

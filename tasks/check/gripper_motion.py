@@ -8,7 +8,7 @@ the release and the wait; and the knobs of task execution (:class:`TaskConfig`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -93,89 +93,103 @@ def record_sample(session, m: Motion, grip: np.ndarray | None) -> None:
     tr["grip"].append(np.full(3, np.nan) if grip is None else np.asarray(grip, float))
 
 
-def move_joint(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, cfg: TaskConfig,
-          speed_share: float, frac: Callable[[float], float], reached: Callable[[float], bool], watch: SupportWatch,
-          notes: list[str]) -> Motion:
-    """Lead the grasped joint from ``q0`` to ``q_target`` (rad or m), release and
-    wait ``hold_time``; ``side_sign`` -1 where the gripper moves the parent side."""
-    dt = float(session.options.conventions.timestep)
-    prismatic = session.joint_types[joint] == "prismatic"
-    m = Motion(moved=True)
-    o, a = joint_frame_axis(session, joint, grasp.link)
-    p = grasp.grasp_point_world()
-    v_cmd = cfg.limits.max_speed_m_s * speed_share
-    if not prismatic:
-        r_vec = (p - o) - float((p - o) @ a) * a
-        m.lever = max(float(np.linalg.norm(r_vec)), 1e-3)
-        qdot_max = v_cmd / m.lever
-    else:
-        qdot_max = v_cmd
-    record_sample(session, m, p)
-    travel = abs(q_target - q0) * (m.lever if m.lever is not None else 1.0)
-    n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
-    done, pushed_steps = _lead(session, joint, grasp, side_sign, q0, q_target, qdot_max, n_move, cfg, frac, reached, watch, m)
-    m.peak_force = grasp.peak_force_n
-    grasp.release()
-    if pushed_steps:
-        notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
-    q_rel, _ = session.joint_state(joint)
-    m.f_rel = frac(q_rel)
-    if not done and reached(m.f_rel):
-        notes.append("target reached but the joint was still moving at the time limit")
-    for _ in range(int(round(cfg.hold_time / dt))):
-        session.step(1)
-        m.steps += 1
-        watch.update()
-        if m.steps % RECORD_EVERY == 0:
-            record_sample(session, m, None)
-    q_end, _ = session.joint_state(joint)
-    m.f_end = frac(q_end)
-    m.held_ok = reached(m.f_end) if np.isfinite(m.f_end) else False
-    return m
+@dataclass
+class GripperMove:
+    """The task's gripper leading one grasped ``joint`` of ``session`` (``side_sign`` -1 where it moves the parent
+    side): what stays the same through a motion. ``frac(q)``: the opening fraction of q (rad or m);
+    ``reached(f)``: f is on the target's side; ``watch``: the object's support, updated every step."""
 
+    session: Any
+    joint: str
+    grasp: BoundedGrasp
+    side_sign: float
+    cfg: TaskConfig
+    frac: Callable[[float], float]
+    reached: Callable[[float], bool]
+    watch: SupportWatch
 
-def _lead(session, joint: str, grasp: BoundedGrasp, side_sign: float, q0: float, q_target: float, qdot_max: float,
-          n_move: int, cfg: TaskConfig, frac: Callable[[float], float], reached: Callable[[float], bool],
-          watch: SupportWatch, m: Motion) -> tuple[bool, int]:
-    """Lead the gripper for at most ``n_move`` steps, q_des from ``q0`` to ``q_target``
-    at up to ``qdot_max`` (rad/s or m/s), recording the peaks into ``m``.
-    Returns (the joint reached the target and stopped, steps pressed or lifted vertically)."""
-    dt = float(session.options.conventions.timestep)
-    prismatic = session.joint_types[joint] == "prismatic"
-    stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
-    sgn = 1.0 if q_target >= q0 else -1.0
-    decel = qdot_max / cfg.accel_time
-    q_des = q0
-    pushed_steps = 0
-    for k in range(n_move):
-        # trapezoidal speed profile: ramped up over accel_time, and down at the same rate before the target
-        speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
-        speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
-        q_des = q_des + sgn * speed * dt
-        if sgn * (q_des - q_target) > 0:
-            q_des = q_target
-        q, _ = session.joint_state(joint)
+    def move(self, q0: float, q_target: float, speed_share: float, notes: list[str]) -> Motion:
+        """Lead the joint from ``q0`` to ``q_target`` (rad or m) at ``speed_share`` of the gripper's top speed,
+        release and wait ``hold_time``; what happened is said in ``notes``."""
+        session, joint, grasp, cfg, frac, reached, watch = (self.session, self.joint, self.grasp, self.cfg, self.frac,
+                                                            self.reached, self.watch)
+        dt = float(session.options.conventions.timestep)
+        prismatic = session.joint_types[joint] == "prismatic"
+        m = Motion(moved=True)
         o, a = joint_frame_axis(session, joint, grasp.link)
         p = grasp.grasp_point_world()
-        target, push = _gripper_target(o, a, p, side_sign * (q_des - q), prismatic, cfg.vertical_share)
-        F = grasp.step_towards(target, dt, direction=_UP if push else None)
-        pushed_steps += int(push)
-        _record_peaks(m, F, o, a, p, prismatic)
-        if float(np.linalg.norm(F)) >= cfg.limits.max_force_n * (1 - 1e-9):
-            m.force_limited = True
-        session.step(1)
-        m.steps += 1
-        if m.steps % RECORD_EVERY == 0:
-            record_sample(session, m, grasp.grasp_point_world())
-        q, qd = session.joint_state(joint)
-        slide, tilt = watch.update()
-        if not np.isfinite(q):
-            break
-        if slide > cfg.slide_tol or tilt > cfg.tip_tol:
-            break  # the object moves instead of the joint: the gripper stops
-        if q_des == q_target and reached(frac(q)) and abs(qd) < stopped:
-            return True, pushed_steps
-    return False, pushed_steps
+        v_cmd = cfg.limits.max_speed_m_s * speed_share
+        if not prismatic:
+            r_vec = (p - o) - float((p - o) @ a) * a
+            m.lever = max(float(np.linalg.norm(r_vec)), 1e-3)
+            qdot_max = v_cmd / m.lever
+        else:
+            qdot_max = v_cmd
+        record_sample(session, m, p)
+        travel = abs(q_target - q0) * (m.lever if m.lever is not None else 1.0)
+        n_move = int(round((cfg.accel_time + cfg.travel_margin * travel / v_cmd + cfg.extra_time) / dt))
+        done, pushed_steps = self._lead(q0, q_target, qdot_max, n_move, m)
+        m.peak_force = grasp.peak_force_n
+        grasp.release()
+        if pushed_steps:
+            notes.append(f"vertical press/lift for {pushed_steps * dt:.2f} s of the motion")
+        q_rel, _ = session.joint_state(joint)
+        m.f_rel = frac(q_rel)
+        if not done and reached(m.f_rel):
+            notes.append("target reached but the joint was still moving at the time limit")
+        for _ in range(int(round(cfg.hold_time / dt))):
+            session.step(1)
+            m.steps += 1
+            watch.update()
+            if m.steps % RECORD_EVERY == 0:
+                record_sample(session, m, None)
+        q_end, _ = session.joint_state(joint)
+        m.f_end = frac(q_end)
+        m.held_ok = reached(m.f_end) if np.isfinite(m.f_end) else False
+        return m
+
+    def _lead(self, q0: float, q_target: float, qdot_max: float, n_move: int, m: Motion) -> tuple[bool, int]:
+        """Lead the gripper for at most ``n_move`` steps, q_des from ``q0`` to ``q_target``
+        at up to ``qdot_max`` (rad/s or m/s), recording the peaks into ``m``.
+        Returns (the joint reached the target and stopped, steps pressed or lifted vertically)."""
+        session, joint, grasp, cfg, frac, reached, watch = (self.session, self.joint, self.grasp, self.cfg, self.frac,
+                                                            self.reached, self.watch)
+        dt = float(session.options.conventions.timestep)
+        prismatic = session.joint_types[joint] == "prismatic"
+        stopped = STOPPED_PRISMATIC if prismatic else STOPPED_REVOLUTE
+        sgn = 1.0 if q_target >= q0 else -1.0
+        decel = qdot_max / cfg.accel_time
+        q_des = q0
+        pushed_steps = 0
+        for k in range(n_move):
+            # trapezoidal speed profile: ramped up over accel_time, and down at the same rate before the target
+            speed = qdot_max * min(1.0, (k + 1) * dt / cfg.accel_time)
+            speed = min(speed, max(float(np.sqrt(2.0 * decel * abs(q_target - q_des))), decel * dt))
+            q_des = q_des + sgn * speed * dt
+            if sgn * (q_des - q_target) > 0:
+                q_des = q_target
+            q, _ = session.joint_state(joint)
+            o, a = joint_frame_axis(session, joint, grasp.link)
+            p = grasp.grasp_point_world()
+            target, push = _gripper_target(o, a, p, self.side_sign * (q_des - q), prismatic, cfg.vertical_share)
+            F = grasp.step_towards(target, dt, direction=_UP if push else None)
+            pushed_steps += int(push)
+            _record_peaks(m, F, o, a, p, prismatic)
+            if float(np.linalg.norm(F)) >= cfg.limits.max_force_n * (1 - 1e-9):
+                m.force_limited = True
+            session.step(1)
+            m.steps += 1
+            if m.steps % RECORD_EVERY == 0:
+                record_sample(session, m, grasp.grasp_point_world())
+            q, qd = session.joint_state(joint)
+            slide, tilt = watch.update()
+            if not np.isfinite(q):
+                break
+            if slide > cfg.slide_tol or tilt > cfg.tip_tol:
+                break  # the object moves instead of the joint: the gripper stops
+            if q_des == q_target and reached(frac(q)) and abs(qd) < stopped:
+                return True, pushed_steps
+        return False, pushed_steps
 
 
 def _gripper_target(o: np.ndarray, a: np.ndarray, p: np.ndarray, dq: float, prismatic: bool,

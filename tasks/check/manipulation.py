@@ -7,25 +7,22 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from asset2sim.engines.base import Spring
-from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operability, recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.source import SimObject
 
 #: The metrics this module adds to the post-check.
 MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "operability", "robust_rest")
 
 
-def measure_manipulation(engine: str, source: SimSource, initial_state: dict[str, float], springs: dict[str, Spring],
-                         conventions: SimConventions, closed: dict[str, tuple[float, float, float]],
-                         fixed_base: bool = False, *, recorded: RecordedRuns | None = None,
+def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
+                         recorded: RecordedRuns | None = None,
                          sweep_needed: Callable[[MetricResult], str | None] | None = None,
                          category: str | None = None, labels: dict[str, str | None] | None = None) -> list[MetricResult]:
-    """[joint_sweep, operability, robust_rest] of ``source`` in ``engine`` (robust rest run first;
-    skipped where ``fixed_base``). ``closed``: joint -> (q_closed, direction,
+    """[joint_sweep, operability, robust_rest] of ``obj`` in ``engine`` (robust rest run first;
+    skipped where ``obj.fixed_base``). ``closed``: joint -> (q_closed, direction,
     open range), rad or m; ``recorded``: runs taken from / recorded into it;
     ``sweep_needed(robust_rest)``: why the sweep is not needed (then the sweep and
     operability are recorded as not run, ``details["not_run"]``), or None to run them;
@@ -34,8 +31,8 @@ def measure_manipulation(engine: str, source: SimSource, initial_state: dict[str
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
     """
-    rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, source, initial_state, springs, conventions,
-                                                                      fixed_base=fixed_base, recorded=recorded))
+    fixed_base = obj.fixed_base
+    rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, obj, recorded=recorded))
     rr.details["root"] = "fixed (mounted)" if fixed_base else "free (on the ground)"
     why_not = sweep_needed(rr) if sweep_needed is not None else None
     if why_not:
@@ -44,10 +41,9 @@ def measure_manipulation(engine: str, source: SimSource, initial_state: dict[str
         op = MetricResult(name="operability", value=None, unit=unit("operability"), passed=None,
                           details={"not_run": why_not}, engine=engine)
     else:
-        sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, source, closed, initial_state, springs, conventions,
-                                                        recorded=recorded))
+        sw = sweep.sweep_metric(recorded_runs.sweep_run(engine, obj, closed, recorded=recorded))
         op = operability.operability_metric(recorded_runs.operability_run(
-            engine, source, closed, initial_state, springs, conventions, category=category, labels=labels, recorded=recorded))
+            engine, obj, closed, category=category, labels=labels, recorded=recorded))
     sw.details["root"] = "fixed (mounted)" if fixed_base else "fixed (by definition of the sweep)"
     op.details["root"] = "fixed (mounted)" if fixed_base else "fixed (held by the other hand)"
     return [sw, op, rr]

@@ -39,10 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring
+from asset2sim.engines.base import SimSession, Spring
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.engines.source import SimSource
-from asset2sim.schemas.config import SimConventions
+from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import Blocker
@@ -179,13 +178,27 @@ def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: l
     return q
 
 
-def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str], state: dict[str, float],
-            closed: tuple[float, float, float], springs: dict[str, Spring], sign: float, fractions: np.ndarray,
-            friction: float, damping: float, speed: float) -> tuple[float, float, float]:
+@dataclass(frozen=True)
+class _Hand:
+    """The hand pushing a part: at most ``effort`` (N m or N), easing off near ``speed`` (rad/s or m/s), for
+    ``time_limit`` s; on the joint's catch at most ``breakaway`` (N m or N; None: ``effort``)."""
+
+    effort: float
+    speed: float
+    time_limit: float
+    breakaway: float | None = None
+
+
+def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str], closed: tuple[float, float, float],
+            sign: float, fractions: np.ndarray, hand: _Hand) -> tuple[float, float, float]:
     """(peak effort N m or N off the catch, the opening fraction where it peaks, peak effort on the catch) a
-    stroke in direction ``sign`` (+1 opening) needs over ``fractions``: f + c w + max(0, -s Q), w the joint
-    speed at the hand's speed; on a catch the part is pulled off from rest (no damping), 0 without one."""
+    stroke in direction ``sign`` (+1 opening) needs over ``fractions`` from the session's initial state, its
+    springs acting: f + c w + max(0, -s Q), f and c the joint's friction and damping, w the joint speed at the
+    ``hand``'s speed; on a catch the part is pulled off from rest (no damping), 0 without one."""
     qc, d, rng = closed
+    state, springs = session.options.initial_state, session.options.springs
+    jm = model.joint(joint)
+    friction, damping, speed = jm.friction, jm.damping, hand.speed
     best, at, on = 0.0, float(fractions[0]), 0.0
     sp = springs.get(joint)
     for fr in fractions:
@@ -202,12 +215,11 @@ def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str],
 
 
 def _push(session: SimSession, joint: str, closed: tuple[float, float, float], sign: float, target: float,
-          effort: float, speed: float, time_limit: float, held: list[str], cfg: OperabilityConfig,
-          breakaway: float | None = None) -> tuple[float, float | None, bool]:
-    """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes ``target``: the hand
-    (``effort`` N m or N at most, easing off near ``speed`` rad/s or m/s; on the joint's catch at most
-    ``breakaway``). Returns (farthest fraction reached, time s or None, diverged)."""
+          hand: _Hand, held: list[str], cfg: OperabilityConfig) -> tuple[float, float | None, bool]:
+    """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes ``target`` with
+    ``hand``, the ``held`` joints driven still. Returns (farthest fraction reached, time s or None, diverged)."""
     qc, d, rng = closed
+    effort, speed, time_limit, breakaway = hand.effort, hand.speed, hand.time_limit, hand.breakaway
     dt = session.options.conventions.timestep
     s = sign * d
     n = int(round(time_limit / dt))
@@ -245,18 +257,19 @@ def _push(session: SimSession, joint: str, closed: tuple[float, float, float], s
 
 
 def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
-                 state: dict[str, float], springs: dict[str, Spring], blocker: Blocker, *, category: str | None,
-                 label: str | None, config: OperabilityConfig | None = None) -> PartOperability:
+                 blocker: Blocker, *, category: str | None, label: str | None,
+                 config: OperabilityConfig | None = None) -> PartOperability:
     """Push one part open from its closed end and closed again (module docstring) in a fixed-root session with
-    gravity (stepped in place; the joint's state is restored at the end). ``closed``: (q_closed rad or m,
-    direction +-1, open range R > 0); ``state``: the initial state (joint -> rad or m); ``blocker``: finds the
-    link in the part's way where the hand stops short (:class:`~asset2sim.tasks.check.blockers.Blocker`).
+    gravity (stepped in place from the session's initial state, its springs acting; the joint's state is
+    restored at the end). ``closed``: (q_closed rad or m, direction +-1, open range R > 0); ``blocker``: finds
+    the link in the part's way where the hand stops short (:class:`~asset2sim.tasks.check.blockers.Blocker`).
 
     Raises:
         KeyError: ``joint`` is not a movable joint of the session.
         ValueError: R <= 0; the part has no geometry to grasp.
     """
     cfg = config or OperabilityConfig()
+    state = session.options.initial_state
     qc, d, rng = closed
     if not rng > 0:
         raise ValueError(f"joint {joint!r}: open range must be > 0, got {rng}")
@@ -279,18 +292,17 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
     fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
+    hand = _Hand(effort, speed, time_limit, breakaway_top * (lever or 1.0))
     saved = session.save_state()
     reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
-            need, at, on = _needed(session, model, joint, links, state, closed, springs, sign, fractions,
-                                   jm.friction, jm.damping, speed)
+            need, at, on = _needed(session, model, joint, links, closed, sign, fractions, hand)
             if action == "open":
                 session.set_joint_positions({**state, joint: qc})
             else:
                 session.set_joint_positions({**state, joint: qc + d * reached_open * rng})
-            reached, t, diverged = _push(session, joint, closed, sign, target, effort, speed, time_limit, held, cfg,
-                                         breakaway_top * (lever or 1.0))
+            reached, t, diverged = _push(session, joint, closed, sign, target, hand, held, cfg)
             stop = None
             if t is None and not diverged and need <= effort:  # as far as geometry lets it: a link in the way?
                 stop = blocker(session.joint_positions(), links, own)
@@ -325,31 +337,24 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     return part
 
 
-def operability_options(state: dict[str, float], conventions: SimConventions | None = None,
-                        springs: dict[str, Spring] | None = None) -> SessionOptions:
-    """Options of the operability session: root fixed, gravity on, no ground, the springs acting, at ``state``."""
-    return SessionOptions(initial_state=dict(state), springs=dict(springs or {}), fixed_base=True, gravity=True,
-                          ground=False, conventions=conventions or SimConventions())
-
-
-def run_operability(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
-                    initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
-                    conventions: SimConventions | None = None, *, category: str | None = None,
-                    labels: dict[str, str | None] | None = None, config: OperabilityConfig | None = None) -> OperabilityRun:
-    """Every handled part of ``closed`` (joint -> (q_closed, direction, open range), rad or m) pushed by a hand
-    (:func:`operate_part`) in one fresh session of ``engine``; ``labels``: link -> semantic label.
+def run_operability(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
+                    category: str | None = None, labels: dict[str, str | None] | None = None,
+                    config: OperabilityConfig | None = None) -> OperabilityRun:
+    """Every handled part of ``closed`` (joint -> (q_closed, direction, open range), rad or m) of ``obj`` pushed by a
+    hand (:func:`operate_part`) in one fresh session of ``engine``: root fixed, gravity on, no ground, the springs
+    acting; ``labels``: link -> semantic label.
 
     Raises:
-        EngineUnavailable: the engine is not installed; whatever loading ``source`` raises.
+        EngineUnavailable: the engine is not installed; whatever loading ``obj.source`` raises.
     """
     cfg = config or OperabilityConfig()
+    source = obj.source
     model = source.model(mode="lenient")
     labels = dict(labels or {})
-    springs = dict(springs or {})
     run = OperabilityRun(engine)
     with quiet_stdout():
-        session = source.open(engine, operability_options(initial_state, conventions, springs))
-    blocker = Blocker(session, source, conventions or SimConventions())
+        session = obj.open(engine, fixed_base=True, gravity=True, ground=False)
+    blocker = Blocker(session, source, obj.conventions)
     try:
         for name, c in closed.items():
             if name not in session.joint_types or session.joint_types[name] not in RANGED:
@@ -363,8 +368,8 @@ def run_operability(engine: str, source: SimSource, closed: dict[str, tuple[floa
                 run.skipped[name] = f"a {label} is not operated by hand"
                 continue
             try:
-                run.parts.append(operate_part(session, model, name, c, dict(initial_state), springs, blocker,
-                                              category=category, label=label, config=cfg))
+                run.parts.append(operate_part(session, model, name, c, blocker, category=category, label=label,
+                                              config=cfg))
             except ValueError as exc:
                 run.skipped[name] = str(exc)
     finally:

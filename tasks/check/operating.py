@@ -14,15 +14,15 @@ import numpy as np
 from asset2sim.engines.base import SimSession, Spring
 from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
-from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import JointDynamics, Overlay
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check.blockers import fixed_root_options
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
 from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
+from asset2sim.tasks.check.gripper_motion import TaskConfig
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.pusher import ProbeConfig
 from asset2sim.tasks.geometry.closed_state import subtree_links
@@ -33,6 +33,10 @@ TILT_MARGIN = 2.0
 """Safety factor on the tilt's extra gravity load (dimensionless)."""
 OPERABLE_SHARE = 0.7
 """Share of the operating effort that friction plus gravity may take (dimensionless)."""
+VERTICAL_SHARE = TaskConfig().vertical_share
+"""A push whose direction is at least this much vertical (|t_z| / |t| >= 0.5: within 60 deg of vertical) presses
+the object into the ground or lifts it rather than sliding it, as the task's gripper does
+(:attr:`~asset2sim.tasks.check.gripper_motion.TaskConfig.vertical_share`): no ground-friction bound (dimensionless)."""
 
 
 def operating_effort(overlay: Overlay, asset: AssetDescription, joint: str, geometry: dict[str, LinkGeometry],
@@ -210,32 +214,31 @@ def _task_path(f_state: float, action: str) -> np.ndarray:
     return np.linspace(start, OPEN_TARGET, PATH_SAMPLES)
 
 
-def operating_budgets(source: SimSource, state: dict[str, float], overlay: Overlay,
-                      closed: dict[str, tuple[float, float, float]], *, category: str | None,
-                      labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
-                      free: bool = True, ground: bool = True, free_moving: bool = False, engine: str = "pybullet",
-                      limits: GripperLimits | None = None, conventions: SimConventions | None = None,
-                      vertical_share: float = 0.5, whole: bool = False) -> dict[str, OperatingBudget]:
+def operating_budgets(obj: SimObject, overlay: Overlay, closed: dict[str, tuple[float, float, float]], *,
+                      category: str | None, labels: dict[str, str | None], actions: tuple[str, ...] = ("close", "open"),
+                      ground: bool = True, free_moving: bool = False, whole: bool = False) -> dict[str, OperatingBudget]:
     """The operating budget of every movable joint of ``closed`` in the written
-    asset ``source`` at ``state``: how much friction and damping the task's
-    gripper can overcome with a real operating force. Definition (grasp, path
-    samples, allowed force, budget B, friction and damping caps):
+    asset ``obj`` at its state: how much friction and damping the task's
+    gripper (:class:`~asset2sim.tasks.check.gripper.GripperLimits`) can overcome with a real operating force.
+    Definition (grasp, path samples, allowed force, budget B, friction and damping caps):
     ``docs/design/metrics.md``, "Operable friction".
     ``closed``: joint -> (q_closed, direction +-1, open range); ``labels``: link
-    -> semantic label; ``free``: root free (no ground bound when mounted);
+    -> semantic label; ``obj.fixed_base``: the root held (no ground bound), else free;
     ``ground``: apply the ground bound to a free object; ``whole``: each action along the whole range (the
-    operability tier's strokes, :mod:`asset2sim.tasks.check.operability`) rather than the task's path.
+    operability tier's strokes, :mod:`asset2sim.tasks.check.operability`) rather than the task's path. The joints'
+    springs are the overlay's about ``obj.state`` (:func:`~asset2sim.tasks.assemble.export_mjcf.overlay_springs`).
 
     Raises:
-        EngineUnavailable; whatever loading ``source`` raises.
+        EngineUnavailable; whatever loading ``obj.source`` raises.
     """
-    lim = limits or GripperLimits()
+    lim = GripperLimits()
+    source, state, free = obj.source, dict(obj.state), not obj.fixed_base
     model = source.model(mode="lenient")
     springs = overlay_springs(overlay, state)
     mu = ground_friction(model)
     out: dict[str, OperatingBudget] = {}
     with quiet_stdout():
-        session = source.open(engine, fixed_root_options(state, conventions))
+        session = source.open("pybullet", fixed_root_options(state, obj.conventions))
     try:
         total = sum(float(m) for m in session.link_masses().values())
         for name, (qc, d, rng) in closed.items():
@@ -245,10 +248,10 @@ def operating_budgets(source: SimSource, state: dict[str, float], overlay: Overl
                 continue
             grasp = _grasp(session, model, name, d, state, free)
             child = session.joint_child[name]
-            rng_, where = operating_range(category, labels.get(child) if grasp.side == "child" else None)
-            best, lever, q_state = _tightest(session, model, name, (qc, d, rng), state, actions, grasp, rng_, where,
-                                             (mu, total) if free and ground else None, vertical_share, springs.get(name),
-                                             whole)
+            range_of = operating_range(category, labels.get(child) if grasp.side == "child" else None)
+            paths = _paths(float(d * (state.get(name, qc) - qc) / rng), actions, whole)
+            best, lever, q_state = _tightest(session, model, name, (qc, d, rng), paths, grasp, range_of,
+                                             (mu, total) if free and ground else None, springs.get(name))
             session.set_joint_positions(dict(state))
             if best is not None:
                 out[name] = _budget(name, session.joint_types[name], grasp, lever, best, q_state, lim, free_moving,
@@ -286,15 +289,25 @@ def _spring_force(spring: Spring | None, q: float) -> float:
     return 0.0 if spring is None else float(spring.force(q))
 
 
+def _paths(f_state: float, actions: tuple[str, ...], whole: bool) -> list[tuple[str, np.ndarray]]:
+    """(action, opening fractions it moves the joint through) of each of ``actions`` from the opening fraction
+    ``f_state``: the task's paths (:func:`_task_path`), or with ``whole`` the whole range each way."""
+    return [(action, np.linspace(0.0, 1.0, 2 * PATH_SAMPLES + 1) if whole else _task_path(f_state, action))
+            for action in actions]
+
+
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
-              state: dict[str, float], actions: tuple[str, ...], grasp: _Grasp, rng_: ForceRange, where: str,
-              ground: tuple[float, float] | None, vertical_share: float, spring: Spring | None = None,
-              whole: bool = False) -> tuple[tuple[float, float, str, float] | None, float | None, float | None]:
+              paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
+              ground: tuple[float, float] | None, spring: Spring | None = None
+              ) -> tuple[tuple[float, float, str, float] | None, float | None, float | None]:
     """((smallest budget B off the catch, smallest allowed force F N, what bounds F, smallest budget on the
-    catch or inf), the lever at the last sample m or None, |Q| at ``state``) over the task's paths (``whole``:
-    the whole range each way); Q of gravity and of the joint's ``spring`` and catch. ``ground``: (mu, whole
-    mass kg) where the ground bound applies."""
+    catch or inf), the lever at the last sample m or None, |Q| at the session's initial state) over ``paths``
+    ((action, opening fractions) from :func:`_paths`); Q of gravity and of the joint's ``spring`` and catch.
+    ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
+    ground bound applies."""
     qc, d, rng = closed
+    rng_, where = range_of
+    state = session.options.initial_state
     prismatic = session.joint_types[joint] == "prismatic"
     f_state = float(d * (state.get(joint, qc) - qc) / rng)
     lever = None
@@ -302,14 +315,14 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
     breakaway = float("inf")  # the smallest budget on the catch, where the part starts from rest
     q_state = None
     side = 1.0 if grasp.side == "child" else -1.0  # Q of the parent side pushes q the other way
-    for action in actions:
+    for action, fractions in paths:
         s_motion = (-d if action == "close" else d) * side
-        for f in (np.linspace(0.0, 1.0, 2 * PATH_SAMPLES + 1) if whole else _task_path(f_state, action)):
+        for f in fractions:
             session.set_joint_positions({**state, joint: qc + d * f * rng})
             t, nt, lever = _grasp_motion(session, joint, grasp, prismatic, model)
             force, bound = range_force(rng_, where, lever)
             hand = BUDGET_SHARE * force * (lever if lever is not None else 1.0)
-            fg = _ground_force(t, nt, s_motion, *ground, vertical_share) if ground is not None else None
+            fg = _ground_force(t, nt, s_motion, *ground) if ground is not None else None
             if fg is not None and fg < force:
                 force, bound = fg, f"ground friction mu={ground[0]:g} of the free object (M={ground[1]:.3g} kg)"
             qg = gravity_force(session, model, joint, grasp.moving) + side * _spring_force(spring, qc + d * f * rng)
@@ -358,12 +371,13 @@ def range_force(rng_: ForceRange, where: str, lever: float | None) -> tuple[floa
     return force, bound
 
 
-def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float, vertical_share: float) -> float | None:
+def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: float) -> float | None:
     """mu M g / (h - mu v), N: the push along ``s_motion`` ``t`` (|t| = ``nt``) the
-    ground friction still resists; None where the gripper presses or lifts or h <= mu v."""
+    ground friction still resists; None where the gripper presses or lifts (a vertical share of the push of
+    :data:`VERTICAL_SHARE` or more) or h <= mu v."""
     horiz = float(np.linalg.norm(t[:2])) / nt
     down = max(0.0, -s_motion * float(t[2]) / nt)  # a push with a downward part loads the ground more
-    if abs(float(t[2])) / nt < vertical_share and horiz - mu * down > 0:
+    if abs(float(t[2])) / nt < VERTICAL_SHARE and horiz - mu * down > 0:
         return mu * total * GRAVITY / (horiz - mu * down)
     return None
 

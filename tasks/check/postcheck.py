@@ -12,15 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.base import SimSession, Spring
+from asset2sim.engines.source import SimObject, SimSource
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import manipulation, metrics, parent_child, parity, robust_rest
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
-from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.synthesize.physics import max_stable_damping
 from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 
@@ -64,40 +63,35 @@ class RestRecording:
     fixed_base: bool = False
     """The root was fixed (a mounted asset, ``tasks.interpret.mounting``)."""
 
-    def matches(self, engine: str, source: SimSource, initial_state: dict[str, float],
-                springs: dict[str, Spring], conventions: SimConventions, fixed_base: bool = False) -> bool:
-        """True when this recording is the rest test of exactly that simulation (floats compared exactly)."""
-        return (self.fixed_base == bool(fixed_base) and self.engine == engine and self.urdf == source.path.resolve()
-                and dict(self.initial_state) == dict(initial_state) and dict(self.springs) == dict(springs)
-                and self.conventions == conventions)
+    def matches(self, engine: str, obj: SimObject) -> bool:
+        """True when this recording is the rest test of exactly ``obj`` in ``engine`` (floats compared exactly)."""
+        return (self.fixed_base == bool(obj.fixed_base) and self.engine == engine and self.urdf == obj.source.path.resolve()
+                and dict(self.initial_state) == dict(obj.state) and dict(self.springs) == dict(obj.springs)
+                and self.conventions == obj.conventions)
 
 
-def record_rest_test(session: SimSession, conventions: SimConventions, source: SimSource,
-                     initial_state: dict[str, float], springs: dict[str, Spring]) -> RestRecording:
-    """Run the SPEC rest test on ``session`` in place, recording every step;
-    ``source``, ``initial_state`` and ``springs``: what it was opened on and with."""
+def record_rest_test(session: SimSession, obj: SimObject) -> RestRecording:
+    """Run the SPEC rest test on ``session`` in place, recording every step; ``obj``: what it was opened on."""
     rec = _StepRecorder(session)
-    trace = metrics.run_rest_test(rec, conventions)
+    trace = metrics.run_rest_test(rec, obj.conventions)
     return RestRecording(
         trace=trace, root_series=np.array(rec.root) if rec.root else np.zeros((0, 3)), ground_series=np.array(rec.ground),
         joint_series={n: np.concatenate([trace.settle_joints.get(n, np.empty(0)), trace.joints[n][1:]]) for n in trace.joints},
-        engine=session.engine, urdf=source.path.resolve(), initial_state=dict(initial_state), springs=dict(springs),
-        conventions=conventions, fixed_base=bool(session.options.fixed_base))
+        engine=session.engine, urdf=obj.source.path.resolve(), initial_state=dict(obj.state), springs=dict(obj.springs),
+        conventions=obj.conventions, fixed_base=bool(session.options.fixed_base))
 
 
-def measure_rest_test(engine: str, source: SimSource, initial_state: dict[str, float], springs: dict[str, Spring],
-                      conventions: SimConventions, fixed_base: bool = False) -> tuple[MetricResult, RestRecording]:
-    """(penetration in mm, :class:`RestRecording`) of ``source`` in a fresh session
-    of ``engine`` at ``initial_state`` (the root fixed where ``fixed_base``).
+def measure_rest_test(engine: str, obj: SimObject) -> tuple[MetricResult, RestRecording]:
+    """(penetration in mm, :class:`RestRecording`) of ``obj`` in a fresh session
+    of ``engine`` (the root fixed where ``obj.fixed_base``).
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading the URDF raises.
     """
-    session = source.open(engine, SessionOptions(initial_state=initial_state, springs=springs, conventions=conventions,
-                                                 **session_root_options(fixed_base)))
+    session = obj.open(engine)
     try:
         pen = metrics.penetration(session)
-        recording = record_rest_test(session, conventions, source, initial_state, springs)
+        recording = record_rest_test(session, obj)
     finally:
         session.close()
     return pen, recording
@@ -148,24 +142,35 @@ class PostCheck:
                     and not manipulation.failing(self.metrics))
 
 
+def overlay_object(source: SimSource, state: dict[str, float], overlay: Overlay,
+                   conventions: SimConventions) -> SimObject:
+    """``source`` as the post-check simulates it: at ``state`` (joint -> rad or m), with ``overlay``'s springs and
+    catches (:func:`~asset2sim.tasks.assemble.export_mjcf.overlay_springs`) and its root as ``overlay.mounting``
+    declares."""
+    return SimObject(source, state, overlay_springs(overlay), conventions,
+                     bool(overlay.mounting is not None and overlay.mounting.fixed))
+
+
 def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: Overlay, config: RefineConfig,
-                   engine: str = "pybullet", closed: dict[str, tuple[float, float, float]] | None = None, *,
+                   closed: dict[str, tuple[float, float, float]] | None = None, *,
                    escalated: Callable[[PostCheck], bool] | None = None, recorded: RecordedRuns | None = None,
                    category: str | None = None, labels: dict[str, str | None] | None = None) -> PostCheck:
     """Penetration, rest stability, oscillation and sag of the written asset in
-    ``engine`` (the root as ``overlay.mounting`` declares, said in
+    PyBullet, the reference engine (the root as ``overlay.mounting`` declares, said in
     ``details["root"]``), the SPEC metrics in every other engine of
     ``config.engines``, and with ``closed`` (joint -> (q_closed, direction,
     open range), rad or m) robust rest and the joint sweep.
 
     ``escalated(check)``: whether the caller escalates ``check``; a check that
     fails and is escalated without the sweep records it as not run, and without
-    the other engines when ``engine``'s own tiers fail so. ``recorded``:
+    the other engines when PyBullet's own tiers fail so. ``recorded``:
     manipulation runs taken from / recorded into it. ``category`` and ``labels``
     (link -> semantic label): the operating ranges of the operability tier."""
+    engine = "pybullet"
     conv = config.sim
-    fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
-    pen, recording = measure_rest_test(engine, source, initial_state, overlay_springs(overlay), conv, fixed_base=fixed)
+    obj = overlay_object(source, initial_state, overlay, conv)
+    fixed = obj.fixed_base
+    pen, recording = measure_rest_test(engine, obj)
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
@@ -187,8 +192,7 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
     def run_parity() -> None:
         nonlocal engine_results, parity_done
         if not parity_done:
-            options = SessionOptions(initial_state=dict(initial_state), springs=overlay_springs(overlay, initial_state),
-                                     conventions=conv, **session_root_options(fixed))
+            options = obj.options(springs=overlay_springs(overlay, initial_state))
             engine_results = {e: parity.session_metrics(source, e, options) for e in others}
             parity_done = True
 
@@ -212,8 +216,7 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
         return ESCALATION_ROUND if partial_escalated(rr) else None
 
     extra = [] if closed is None else manipulation.measure_manipulation(
-        engine, source, initial_state, overlay_springs(overlay), conv, closed, fixed_base=fixed,
-        recorded=recorded, sweep_needed=sweep_needed, category=category, labels=labels)
+        engine, obj, closed, recorded=recorded, sweep_needed=sweep_needed, category=category, labels=labels)
     if not sweep_not_run(extra):
         run_parity()
     return PostCheck(metrics=[*base, *extra], trace=trace, sag=drift, sagging=sagging,

@@ -65,12 +65,12 @@ class ProbeResult:
         return {k: v for k, v in self.__dict__.items() if k != "trace"}
 
 
-def probe_joint(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
+def probe_joint(session, joint: str, closed: tuple[float, float, float], *, action: str,
                 config: ProbeConfig | None = None, holds_position: bool = False, model: UrdfModel | None = None,
                 returns: bool = False, floor_stop: float | None = None) -> ProbeResult:
     """Run one probe (``action`` ``close`` / ``open``) on ``joint`` of a session
-    (stepped in place) from its current state: ``closed`` q_c and ``open_range``
-    > 0 (rad or m), ``direction`` +-1. ``holds_position``: an open probe that
+    (stepped in place) from its current state: ``closed`` (q_c rad or m, direction +-1, open range > 0 rad or
+    m). ``holds_position``: an open probe that
     falls back fails; ``model``: the URDF (links rigid with the child);
     ``returns``: a close probe's rebound is by design; ``floor_stop``: opening
     (rad or m) where the floor stops the part, capping an open probe's target.
@@ -79,6 +79,7 @@ def probe_joint(session, joint: str, *, closed: float, direction: float, open_ra
         ValueError: unknown action or non-positive ``open_range``.
         KeyError: unknown joint.
     """
+    closed, direction, open_range = closed
     check_action(session, joint, action, open_range)
     cfg = config or ProbeConfig()
     dt = session.options.conventions.timestep
@@ -108,15 +109,17 @@ def probe_joint(session, joint: str, *, closed: float, direction: float, open_ra
     gripped = cfg.hold_body and weight <= cfg.hold_force
     with root_held(session, cfg.hold_force if gripped else None, notes) as held:
         # a gripped body takes the push's reaction through the hold; a steadied one as a force on its root
-        _push(session, joint, hand, sign, cfg, n_push, reached_if, frac, watch, run, react=cfg.hold_body and not held)
+        _push(session, _Stroke(joint, sign, n_push, reached_if, frac), hand, cfg, watch, run,
+              react=cfg.hold_body and not held)
         _release(session, joint, int(round(cfg.release_time / dt)), frac, watch, run)
     q_end, qd_end = session.joint_state(joint)
+    run.q_end, run.qd_end = q_end, qd_end
     f_end = frac(q_end)
     if not run.reached and push_s < asked_s and run.steps >= n_push:
         notes.append(f"push stopped at the {push_s:.0f} s cap (ProbeConfig.max_push_time): the travel ({travel:.3g} m at the "
                      f"push point, lever {lever0 if lever0 is not None else 0.0:.3g} m) and the force ramp ({hand.ramp:.3g} s) asked "
                      f"{asked_s:.0f} s")
-    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run, q_end, qd_end,
+    rebound, kept, failure = _judge(session.joint_types[joint] == "prismatic", action, open_range, cfg, run,
                                     holds_position, returns, notes)
     return ProbeResult(
         joint=joint, joint_type=session.joint_types[joint], action=action, start=q0, target=float(q_target), start_fraction=f0,
@@ -177,6 +180,8 @@ class _Run:
     f_rel: float = 0.0  # opening fraction at release, and its smallest and largest after
     f_low: float = 0.0
     f_high: float = 0.0
+    q_end: float = 0.0  # the joint's position (rad or m) and speed (rad/s or m/s) at the end of the release
+    qd_end: float = 0.0
     trace: dict[str, list[float]] = field(default_factory=lambda: {"t": [], "q": [], "force": [], "root_disp": [], "phase": []})
 
     def record(self, t: float, q: float, force: float, disp: float, phase: float) -> None:
@@ -185,12 +190,23 @@ class _Run:
             self.trace[key].append(x)
 
 
-def _push(session, joint: str, hand: Pusher, sign: float, cfg: ProbeConfig, n_push: int,
-          reached_if: Callable[[float], bool], frac: Callable[[float], float], watch: SupportWatch, run: _Run,
+@dataclass(frozen=True)
+class _Stroke:
+    """Where a probe pushes: ``joint`` towards its target (``sign`` +1: q increases) for at most ``n_push`` steps;
+    ``frac(q)``: the opening fraction of q (rad or m); ``reached_if(f)``: f has reached the target."""
+
+    joint: str
+    sign: float
+    n_push: int
+    reached_if: Callable[[float], bool]
+    frac: Callable[[float], float]
+
+
+def _push(session, stroke: _Stroke, hand: Pusher, cfg: ProbeConfig, watch: SupportWatch, run: _Run,
           react: bool) -> None:
-    """Push ``joint``'s part towards the target (``sign`` +1: q increases) for at
-    most ``n_push`` steps, until reached or the object slid or tipped; ``react``: the push's
-    reaction acts on the root, equal and opposite at the push point."""
+    """Push the ``stroke``'s part towards its target with ``hand``, until reached, the steps run out or the object
+    slid or tipped; ``react``: the push's reaction acts on the root, equal and opposite at the push point."""
+    joint, sign, n_push, reached_if, frac = stroke.joint, stroke.sign, stroke.n_push, stroke.reached_if, stroke.frac
     link, root = session.joint_child[joint], session.link_names[0]
     dt = session.options.conventions.timestep
     lead = 0.0  # how far the hand runs ahead of the push point, m
@@ -235,9 +251,10 @@ def _release(session, joint: str, n_rel: int, frac: Callable[[float], float], wa
         run.record((run.steps + i + 1) * dt, q, 0.0, float(np.linalg.norm(watch.current()[0])), 1.0)
 
 
-def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, q_end: float, qd_end: float,
-           holds_position: bool, returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
+def _judge(prismatic: bool, action: str, open_range: float, cfg: ProbeConfig, run: _Run, holds_position: bool,
+           returns: bool, notes: list[str]) -> tuple[bool, bool, str]:
     """(rebound, kept moving, failure: "" on success) of a probe; notes what is allowed."""
+    q_end, qd_end = run.q_end, run.qd_end
     # "towards the start": for close the start is more open (larger f).
     tol = max(REBOUND_FRACTION, (REBOUND_FLOOR_PRISMATIC if prismatic else REBOUND_FLOOR_REVOLUTE) / open_range)
     if action == "close":
@@ -289,10 +306,9 @@ def run_probes(session, joints: dict[str, tuple[float, float, float]], *, action
         for name, (closed, direction, rng) in joints.items():
             for action in actions:
                 session.restore_state(sid)
-                kw = dict(closed=closed, direction=direction, open_range=rng, action=action, config=config,
-                          holds_position=holds_position, model=model, returns=name in returns,
-                          floor_stop=(floor_stops or {}).get(name))
-                r = probe_joint(session, name, **kw)
+                kw = dict(action=action, config=config, holds_position=holds_position, model=model,
+                          returns=name in returns, floor_stop=(floor_stops or {}).get(name))
+                r = probe_joint(session, name, (closed, direction, rng), **kw)
                 if model is not None and _shut_in(r):
                     r = _probe_cleared(session, r, joints, model, sid, kw) or r
                 out.append(r)
@@ -347,7 +363,7 @@ def _probe_cleared(session, first: ProbeResult, joints: dict[str, tuple[float, f
             _, _, lever = push_geometry(session, k)
             session.drive_joint(k, 0.0, f_max * (lever if lever is not None else 1.0))
         try:
-            retry = probe_joint(session, name, **kw)
+            retry = probe_joint(session, name, joints[name], **kw)
         finally:
             for k in opened:
                 session.release_joint(k)

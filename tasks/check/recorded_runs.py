@@ -15,11 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from asset2sim import file_memo, mesh_io
-from asset2sim.engines.base import Spring
-from asset2sim.schemas.config import SimConventions
 from asset2sim.tasks.check import operability, robust_rest, sweep, task_execution
 from asset2sim.tasks.check.gripper_motion import TaskConfig
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.source import SimObject
 from asset2sim.urdf import UrdfModel, write_urdf
 
 
@@ -51,19 +49,19 @@ def _mesh_identities(model: UrdfModel) -> list[tuple[str, str] | str]:
 _MESH_DIGESTS: file_memo.FileMemo[str] = file_memo.FileMemo(lambda d: d, max_entries=4096)
 
 
-def input_digest(tier: str, engine: str, source: SimSource, initial_state: dict[str, float],
-                 springs: dict[str, Spring] | None, conventions: SimConventions, fixed_base: bool,
-                 config: Any, closed: dict[str, tuple[float, float, float]] | None = None) -> str:
+def input_digest(tier: str, engine: str, obj: SimObject, config: Any,
+                 closed: dict[str, tuple[float, float, float]] | None = None) -> str:
     """SHA-256 (hex) of everything a manipulation tier (``tier``) reads: the
-    engine, the URDF (its model as written) and its meshes' identities, ``initial_state`` and
-    ``springs`` (order-free), the conventions, the root, the tier's dataclass
+    engine, the URDF of ``obj.source`` (its model as written) and its meshes' identities, ``obj``'s initial state
+    and springs (order-free), its conventions and root, the tier's dataclass
     ``config`` and the sweep's ``closed`` ends in order. Floats enter by
     ``repr`` (exact).
 
     Raises:
         UrdfError: the source's URDF cannot be read.
     """
-    model = source.model(mode="lenient")
+    initial_state, springs, conventions, fixed_base = obj.state, obj.springs, obj.conventions, obj.fixed_base
+    model = obj.source.model(mode="lenient")
     h = hashlib.sha256()
     h.update(repr((tier, engine, bool(fixed_base))).encode())
     h.update(write_urdf(model))
@@ -100,16 +98,18 @@ class RecordedRuns:
         self.runs[key] = copy.deepcopy(run)
 
 
-def sweep_run(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
-              initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
-              conventions: SimConventions | None = None, config: sweep.SweepConfig | None = None, *,
-              recorded: RecordedRuns | None = None) -> sweep.SweepRun:
+def sweep_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]],
+              config: sweep.SweepConfig | None = None, *, recorded: RecordedRuns | None = None) -> sweep.SweepRun:
     """:func:`asset2sim.tasks.check.sweep.run_sweep`, taken from ``recorded`` when
     a run of exactly these inputs is there, else simulated and recorded into it."""
     cfg = config or sweep.SweepConfig()
-    conv = conventions or SimConventions()
-    return _recorded(recorded, lambda: sweep.run_sweep(engine, source, closed, initial_state, springs, conv, cfg),
-                     "joint_sweep", engine, source, initial_state, springs, conv, True, cfg, closed)
+    return _recorded(recorded, lambda: sweep.run_sweep(engine, obj, closed, cfg),
+                     "joint_sweep", engine, _swept(obj), cfg, closed)
+
+
+def _swept(obj: SimObject) -> SimObject:
+    """``obj`` with its root fixed, as the sweep and the operability check hold it whatever it declares."""
+    return dataclasses.replace(obj, fixed_base=True)
 
 
 def _recorded(recorded: RecordedRuns | None, simulate, *key_args) -> Any:
@@ -123,16 +123,11 @@ def _recorded(recorded: RecordedRuns | None, simulate, *key_args) -> Any:
     return run
 
 
-def robust_rest_run(engine: str, source: SimSource, initial_state: dict[str, float],
-                    springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
-                    config: robust_rest.RobustRestConfig | None = None, fixed_base: bool = False, *,
+def robust_rest_run(engine: str, obj: SimObject, config: robust_rest.RobustRestConfig | None = None, *,
                     recorded: RecordedRuns | None = None) -> robust_rest.RobustRestRun:
     """:func:`asset2sim.tasks.check.robust_rest.run_robust_rest`, recorded as :func:`sweep_run`."""
     cfg = config or robust_rest.RobustRestConfig()
-    conv = conventions or SimConventions()
-    return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, source, initial_state, springs, conv, cfg,
-                                                                   fixed_base=fixed_base),
-                     "robust_rest", engine, source, initial_state, springs, conv, fixed_base, cfg)
+    return _recorded(recorded, lambda: robust_rest.run_robust_rest(engine, obj, cfg), "robust_rest", engine, obj, cfg)
 
 
 @dataclass(frozen=True)
@@ -145,18 +140,16 @@ class _OperabilityInputs:
     labels: tuple[tuple[str, str | None], ...]
 
 
-def operability_run(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
-                    initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
-                    conventions: SimConventions | None = None, *, category: str | None = None,
-                    labels: dict[str, str | None] | None = None, config: operability.OperabilityConfig | None = None,
+def operability_run(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], *,
+                    category: str | None = None, labels: dict[str, str | None] | None = None,
+                    config: operability.OperabilityConfig | None = None,
                     recorded: RecordedRuns | None = None) -> operability.OperabilityRun:
     """:func:`asset2sim.tasks.check.operability.run_operability` (same arguments), recorded as :func:`sweep_run`."""
     cfg = config or operability.OperabilityConfig()
-    conv = conventions or SimConventions()
     inputs = _OperabilityInputs(cfg, category, tuple(sorted((str(k), str(v)) for k, v in (labels or {}).items() if v)))
-    return _recorded(recorded, lambda: operability.run_operability(engine, source, closed, initial_state, springs, conv,
-                                                                   category=category, labels=labels, config=cfg),
-                     "operability", engine, source, initial_state, springs, conv, True, inputs, closed)
+    return _recorded(recorded, lambda: operability.run_operability(engine, obj, closed, category=category, labels=labels,
+                                                                   config=cfg),
+                     "operability", engine, _swept(obj), inputs, closed)
 
 
 @dataclass(frozen=True)
@@ -172,21 +165,16 @@ class _TaskInputs:
     task: str | None
 
 
-def task_run(engine: str, source: SimSource, joints: dict[str, tuple[float, float, float]], *,
+def task_run(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, float]], *,
              actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
-             initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
-             conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
-             hold_required: dict[str, bool] | None = None, task: str | None = None,
+             config: TaskConfig | None = None, hold_required: dict[str, bool] | None = None, task: str | None = None,
              recorded: RecordedRuns | None = None) -> task_execution.TaskRun:
     """:func:`asset2sim.tasks.check.task_execution.run_task` (same arguments), recorded as :func:`sweep_run`: the
     post-check's attempt is the evaluation's when every input is the same (the joints' closed ends to the bit)."""
     cfg = config or TaskConfig()
-    conv = conventions or SimConventions()
-    state = dict(initial_state or {})
     inputs = _TaskInputs(cfg, tuple((str(n), tuple(float(x) for x in c)) for n, c in joints.items()), tuple(actions),
                          tuple(sorted((str(k), float(v)) for k, v in (targets or {}).items())),
                          tuple(sorted((str(k), bool(v)) for k, v in (hold_required or {}).items())), task)
     return _recorded(recorded, lambda: task_execution.run_task(
-        engine, source, joints, actions=actions, targets=targets, initial_state=state, springs=springs, conventions=conv,
-        fixed_base=fixed_base, config=cfg, hold_required=hold_required, task=task),
-        "task_execution", engine, source, state, springs, conv, fixed_base, inputs)
+        engine, obj, joints, actions=actions, targets=targets, config=cfg, hold_required=hold_required, task=task),
+        "task_execution", engine, obj, inputs)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import MetricResult
@@ -68,10 +68,10 @@ def clearance_repair(model: UrdfModel, urdf: Path, joints: dict[str, float], sta
                            list(rep.notes))
 
 
-def sweep_repairs(source: SimSource, asset: AssetDescription, sweep_metric: MetricResult,
-                  blocked: dict[str, float], state: dict[str, float], overrides: dict[str, list[CollisionPiece]],
-                  scale: float, out_dir: Path, folder: str, config: RefineConfig) -> Iterator[CollisionRepair]:
-    """The candidate repairs of a blocked sweep of ``source``, lazily, in order (each
+def sweep_repairs(obj: SimObject, asset: AssetDescription, sweep_metric: MetricResult, blocked: dict[str, float],
+                  overrides: dict[str, list[CollisionPiece]], scale: float, out_dir: Path, folder: str,
+                  config: RefineConfig) -> Iterator[CollisionRepair]:
+    """The candidate repairs of a blocked sweep of ``obj`` (at its initial state), lazily, in order (each
     computed only when the one before was not kept). ``blocked``: joint -> where the
     sweep stopped (rad or m); ``overrides``: the collision overrides so far;
     the rest as :func:`clearance_repair` and
@@ -80,6 +80,7 @@ def sweep_repairs(source: SimSource, asset: AssetDescription, sweep_metric: Metr
     Raises:
         OSError: a collision file cannot be read or written.
     """
+    source, state = obj.source, dict(obj.state)
     model = source.model()
     repair = clearance_repair(model, source.path, blocked, state, overrides, scale, out_dir, folder)
     if repair is not None:
@@ -88,9 +89,8 @@ def sweep_repairs(source: SimSource, asset: AssetDescription, sweep_metric: Metr
     if not config.convex_decomposition:
         return
     try:
-        dec, notes = stop_repair.decompose_for_blocked(
-            source, asset, sweep_metric, state, limits.subtrees(model), set(overrides), scale, out_dir,
-            folder, max_decompositions=config.max_decompositions, conventions=config.sim)
+        dec, notes = stop_repair.decompose_for_blocked(obj, asset, sweep_metric, set(overrides), scale, out_dir, folder,
+                                                       max_decompositions=config.max_decompositions)
     except DecompositionUnavailable:
         return
     if dec:

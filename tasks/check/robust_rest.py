@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnsupported, SessionOptions, SimSession, Spring
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.base import EngineUnsupported, SimSession
+from asset2sim.engines.source import SimObject
 from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.metrics import unit
@@ -178,25 +178,22 @@ class RobustRestRun:
     """why the whole metric was skipped (fixed root)"""
 
 
-def run_robust_rest(engine: str, source: SimSource, initial_state: dict[str, float],
-                    springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
-                    config: RobustRestConfig | None = None, fixed_base: bool = False) -> RobustRestRun:
-    """Every trial of ``config`` in one session of ``engine`` opened as for the
-    SPEC rest test. ``fixed_base``: the root is fixed as declared: skipped.
+def run_robust_rest(engine: str, obj: SimObject, config: RobustRestConfig | None = None) -> RobustRestRun:
+    """Every trial of ``config`` in one session of ``engine`` opened on ``obj`` as for the SPEC rest test. A root
+    fixed as mounted (``obj.fixed_base``) is skipped.
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
     """
     cfg = config or RobustRestConfig()
-    conv = conventions or SimConventions()
     run = RobustRestRun(engine)
-    if fixed_base:
+    if obj.fixed_base:
         run.skipped = "root fixed as the asset declares: a mounted object is not dropped, tilted or nudged"
         return run
-    session = source.open(engine, SessionOptions(initial_state=dict(initial_state), springs=dict(springs or {}), conventions=conv))
+    session = obj.open(engine)
     try:
-        rolling = support.rolling_joints(session, subtrees(source.model(mode="lenient")))
-        run.trials = run_trials(session, initial_state, conv, cfg, rolling)
+        rolling = support.rolling_joints(session, subtrees(obj.source.model(mode="lenient")))
+        run.trials = run_trials(session, dict(obj.state), obj.conventions, cfg, rolling)
     finally:
         session.close()
     return run

@@ -8,12 +8,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.source import SimObject
 from asset2sim.schemas.asset import AssetDescription
-from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.sweep import blocked_stops
+from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.state import collision
 from asset2sim.tasks.state.collision import CollisionPiece
 
@@ -41,14 +40,13 @@ def _deepest_stop(session, stall: float, goal: float, joint: str, sub: list[str]
     return best
 
 
-def decompose_for_blocked(source: SimSource, asset: AssetDescription, metric: MetricResult,
-                          state: dict[str, float], subtrees: dict[str, list[str]], replaced: set[str], scale: float,
-                          out_dir: Path, folder: str, *, cache=None, max_decompositions: int = 32,
-                          conventions: SimConventions | None = None) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
+def decompose_for_blocked(obj: SimObject, asset: AssetDescription, metric: MetricResult, replaced: set[str],
+                          scale: float, out_dir: Path, folder: str, *, cache=None,
+                          max_decompositions: int = 32) -> tuple[dict[str, list[CollisionPiece]], list[str]]:
     """(collision overrides link -> pieces, notes) repairing the joints the
-    ``joint_sweep`` ``metric`` found stopped short (module docstring). ``source``:
-    the written URDF; ``state``: joint -> initial position (rad
-    or m); ``replaced``: links left alone; pieces under ``out_dir`` / ``folder``.
+    ``joint_sweep`` ``metric`` found stopped short (module docstring). ``obj``:
+    the written URDF at its initial state (joint -> rad or m; searched root fixed, gravity-free, no springs);
+    ``replaced``: links left alone; pieces under ``out_dir`` / ``folder``.
 
     Raises:
         DecompositionUnavailable: CoACD is not installed.
@@ -57,11 +55,13 @@ def decompose_for_blocked(source: SimSource, asset: AssetDescription, metric: Me
     stops = blocked_stops(metric)
     if not stops:
         return {}, []
-    adjacent = {frozenset((j.parent, j.child)) for j in source.model().joints}
+    source, state = obj.source, dict(obj.state)
+    model = source.model()
+    subtrees = limits.subtrees(model)
+    adjacent = {frozenset((j.parent, j.child)) for j in model.joints}
     overrides: dict[str, list[CollisionPiece]] = {}
     notes: list[str] = []
-    opts = SessionOptions(initial_state=dict(state), fixed_base=True, gravity=False, ground=False,
-                          conventions=conventions or SimConventions())
+    opts = obj.options(springs={}, fixed_base=True, gravity=False, ground=False)
     with source.open("pybullet", opts) as session:
         with_collision = [ln for ln in session.link_names if session.link_has_collision(ln)]
         for name, (stall, goal) in stops.items():

@@ -10,9 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import SimSession, Spring
-from asset2sim.engines.source import SimSource
-from asset2sim.schemas.config import SimConventions
+from asset2sim.engines.base import SimSession
+from asset2sim.engines.source import SimObject
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import SHUT_IN_FRACTION, Blocker, fixed_root_options, joints_between
@@ -127,24 +126,24 @@ def effort_limit(session: SimSession, joint: str, links: list[str], open_range: 
 DAMPED_SPEED_MARGIN = 2.0
 
 
-def damping_caps(source: SimSource, closed: dict[str, tuple[float, float, float]], initial_state: dict[str, float],
-                 springs: dict[str, Spring] | None = None, conventions: SimConventions | None = None,
+def damping_caps(obj: SimObject, closed: dict[str, tuple[float, float, float]],
                  config: SweepConfig | None = None) -> dict[str, float]:
     """Joint -> the largest viscous damping (N m s/rad or N s/m) with which
     the sweep's drive still traverses the range in time: c_max = E T /
     (``DAMPED_SPEED_MARGIN`` R), E :func:`effort_limit` at the closed end, T
     :attr:`SweepConfig.time_limit`, R the range of ``closed`` (joint ->
     (q_closed, direction, R), rad or m). Measured in a fixed-root,
-    gravity-free PyBullet session; joints with no range are left out.
+    gravity-free PyBullet session of ``obj``; joints with no range are left out.
 
     Raises:
-        EngineUnavailable: PyBullet is not installed; whatever loading ``source`` raises.
+        EngineUnavailable: PyBullet is not installed; whatever loading ``obj.source`` raises.
     """
     cfg = config or SweepConfig()
+    source, initial_state = obj.source, dict(obj.state)
     model = source.model()
     subtrees = joint_subtrees(model)
     caps: dict[str, float] = {}
-    with source.open("pybullet", fixed_root_options(initial_state, conventions, springs)) as session:
+    with source.open("pybullet", fixed_root_options(initial_state, obj.conventions, dict(obj.springs))) as session:
         for name, (qc, _, rng) in closed.items():
             if name not in session.joint_types or not rng > 0:
                 continue
@@ -309,21 +308,21 @@ def _clearing_ends(first: JointSweep) -> tuple[tuple[float, str], ...]:
     return ((1.0, "open"),)
 
 
-def run_sweep(engine: str, source: SimSource, closed: dict[str, tuple[float, float, float]],
-              initial_state: dict[str, float], springs: dict[str, Spring] | None = None,
-              conventions: SimConventions | None = None, config: SweepConfig | None = None) -> SweepRun:
+def run_sweep(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]],
+              config: SweepConfig | None = None) -> SweepRun:
     """Sweep every joint of ``closed`` (joint -> (q_closed, direction,
-    open_range), rad or m) in fresh fixed-root, gravity-free sessions of ``engine``.
+    open_range), rad or m) of ``obj`` in fresh fixed-root, gravity-free sessions of ``engine`` (the root as swept,
+    whatever ``obj.fixed_base`` says).
 
     Raises:
         EngineUnavailable: the engine is not installed; whatever loading raises.
     """
     cfg = config or SweepConfig()
-    conv = conventions or SimConventions()
+    source, conv, initial_state = obj.source, obj.conventions, dict(obj.state)
     model = source.model()
     subtrees = joint_subtrees(model)
     run = SweepRun(engine)
-    springs = dict(springs or {})
+    springs = dict(obj.springs)
     # a held joint's spring load is taken by its hold: one session per set of acting springs
     groups: dict[tuple[str, ...], list[str]] = {}
     for name in closed:

@@ -10,17 +10,14 @@ from typing import Any, Callable
 
 import numpy as np
 
-from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.quiet import quiet_stdout
-from asset2sim.engines.source import SimSource
-from asset2sim.schemas.config import SimConventions
+from asset2sim.engines.source import SimObject
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_side
 from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
-from asset2sim.tasks.check.gripper_motion import Motion, TaskConfig, move_joint
+from asset2sim.tasks.check.gripper_motion import GripperMove, Motion, TaskConfig
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET, check_action
 from asset2sim.tasks.check.support import SupportWatch
-from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.urdf import UrdfError, UrdfModel
 
 #: Opening fraction a close task starts from when the delivered state is already closed.
@@ -93,20 +90,19 @@ class TaskRun:
     config: TaskConfig = field(default_factory=TaskConfig)
 
 
-def execute_task(session, joint: str, *, closed: float, direction: float, open_range: float, action: str,
+def execute_task(session, joint: str, closed: tuple[float, float, float], *, action: str,
                  target_fraction: float | None = None, config: TaskConfig | None = None,
-                 model: UrdfModel | None = None, hold_required: bool = True, root_fixed: bool = False,
-                 speed_share: float = 1.0) -> TaskAttempt:
+                 model: UrdfModel | None = None, hold_required: bool = True, speed_share: float = 1.0) -> TaskAttempt:
     """Execute one ``action`` (``close`` / ``open``) on ``joint`` from the session's
-    current state (stepped in place): ``closed`` q_c and ``open_range`` R > 0
-    (rad or m), ``direction`` +-1; ``target_fraction`` None: close 0.05, open
-    0.6; ``model``: the URDF (handles); ``root_fixed``: the child side is
-    always moved; ``speed_share`` in (0, 1] of the gripper's top speed.
+    current state (stepped in place): ``closed`` (q_c rad or m, direction +-1, open range R > 0 rad or m);
+    ``target_fraction`` None: close 0.05, open 0.6; ``model``: the URDF (handles); a session with its root fixed
+    (mounted) always moves the child side; ``speed_share`` in (0, 1] of the gripper's top speed.
 
     Raises:
         ValueError: unknown action, non-positive ``open_range``, ``speed_share`` outside (0, 1].
         KeyError: unknown joint.
     """
+    closed, direction, open_range = closed
     check_action(session, joint, action, open_range, "task", f"joint {joint!r} is not a movable joint of the session")
     if not 0.0 < speed_share <= 1.0:
         raise ValueError(f"joint {joint!r}: speed_share must be in (0, 1], got {speed_share!r}")
@@ -123,8 +119,8 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         return f <= target_fraction + cfg.reach_tol if action == "close" else f >= target_fraction - cfg.reach_tol
 
     notes: list[str] = []
-    q0, f0, started_from = _settle(session, joint, action, closed, direction, open_range, cfg, frac, reached, notes)
-    side = grasp_side(session, joint, model, root_fixed=root_fixed)
+    q0, f0, started_from = _settle(session, joint, action, (closed, direction, open_range), cfg, frac, reached, notes)
+    side = grasp_side(session, joint, model, root_fixed=bool(session.options.fixed_base))
     link, point, rule = contact_point_rule(session, joint, model, opening_direction=direction, side=side)
     watch = SupportWatch(session, session.link_names[0] if side == "child" else session.joint_child[joint])
     q_target = closed + direction * target_fraction * open_range
@@ -133,8 +129,8 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         notes.append("at the target before the motion: nothing to move")
     else:
         # moving the parent side by -dq gives the same relative motion dq
-        m = move_joint(session, joint, BoundedGrasp(session, link, point, cfg.limits), 1.0 if side == "child" else -1.0, q0,
-                       q_target, cfg, speed_share, frac, reached, watch, notes)
+        m = GripperMove(session, joint, BoundedGrasp(session, link, point, cfg.limits), 1.0 if side == "child" else -1.0,
+                        cfg, frac, reached, watch).move(q0, q_target, speed_share, notes)
     slid = watch.slide > cfg.slide_tol
     tipped = watch.tilt > cfg.tip_tol
     ok_reached = reached(m.f_rel) if np.isfinite(m.f_rel) else False
@@ -152,10 +148,12 @@ def execute_task(session, joint: str, *, closed: float, direction: float, open_r
         failure=failure, notes=notes, speed_share=float(speed_share), trace=m.trace)
 
 
-def _settle(session, joint: str, action: str, closed: float, direction: float, open_range: float, cfg: TaskConfig,
+def _settle(session, joint: str, action: str, closed: tuple[float, float, float], cfg: TaskConfig,
             frac: Callable[[float], float], reached: Callable[[float], bool], notes: list[str]) -> tuple[float, float, str]:
     """Settle and approach, from the far side where the joint is already at
-    the target (``TaskConfig.from_far_side``). Returns (q0, its opening fraction, where it started)."""
+    the target (``TaskConfig.from_far_side``); ``closed``: (q_c, direction, open range). Returns (q0, its opening
+    fraction, where it started)."""
+    closed, direction, open_range = closed
     dt = float(session.options.conventions.timestep)
     n_settle = int(round((cfg.settle_time + cfg.approach_distance / cfg.limits.max_speed_m_s) / dt))
     session.step(n_settle)
@@ -188,14 +186,13 @@ def _task_failure(m: Motion, slid: bool, tipped: bool, ok_reached: bool, lim: Gr
     return failure
 
 
-def run_task(engine: str, source: SimSource, joints: dict[str, tuple[float, float, float]], *,
+def run_task(engine: str, obj: SimObject, joints: dict[str, tuple[float, float, float]], *,
              actions: tuple[str, ...] = ("close", "open"), targets: dict[str, float] | None = None,
-             initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
-             conventions: SimConventions | None = None, fixed_base: bool = False, config: TaskConfig | None = None,
-             hold_required: dict[str, bool] | None = None, task: str | None = None) -> TaskRun:
+             config: TaskConfig | None = None, hold_required: dict[str, bool] | None = None,
+             task: str | None = None) -> TaskRun:
     """A :class:`TaskRun`: every joint of ``joints`` (joint -> (q_closed,
-    direction, open_range), rad or m) with every action, each in a fresh
-    session of ``engine``; a slid or tipped attempt is made again at each of
+    direction, open_range), rad or m) of ``obj`` with every action, each in a fresh
+    session of ``engine`` (the root as ``obj`` declares); a slid or tipped attempt is made again at each of
     :attr:`TaskConfig.retry_speed_shares` in turn, the last one recorded.
     ``targets``: action -> target fraction; ``hold_required``: joint -> bool (missing: True).
 
@@ -203,26 +200,24 @@ def run_task(engine: str, source: SimSource, joints: dict[str, tuple[float, floa
         EngineUnavailable, and whatever loading the URDF raises.
     """
     cfg = config or TaskConfig()
-    conv = conventions or SimConventions()
+    source, fixed_base = obj.source, obj.fixed_base
     try:
         model = source.model(mode="lenient")
     except (UrdfError, OSError):
         model = None
     run = TaskRun(engine=engine, root="fixed (mounted)" if fixed_base else "free (on the ground)", task=task, config=cfg)
-    opts = SessionOptions(initial_state=dict(initial_state or {}), springs=dict(springs or {}), conventions=conv,
-                          **session_root_options(fixed_base))
+    opts = obj.options()
     shares = (1.0,) if fixed_base else (1.0, *cfg.retry_speed_shares)  # a mounted object cannot slide or tip
-    for name, (qc, d, rng) in joints.items():
+    for name, end in joints.items():
         for action in actions:
             tried: list[str] = []
             for share in shares:
                 with quiet_stdout():
                     session = source.open(engine, opts)
                 try:
-                    att = execute_task(session, name, closed=qc, direction=d, open_range=rng, action=action,
-                                       target_fraction=(targets or {}).get(action), config=cfg, model=model,
-                                       hold_required=(hold_required or {}).get(name, True),
-                                       root_fixed=fixed_base, speed_share=share)
+                    att = execute_task(session, name, end, action=action, target_fraction=(targets or {}).get(action),
+                                       config=cfg, model=model, hold_required=(hold_required or {}).get(name, True),
+                                       speed_share=share)
                 finally:
                     session.close()
                 if tried:

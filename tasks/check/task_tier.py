@@ -8,20 +8,19 @@ more than a real force (:func:`relieve`).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
-from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operating, recorded_runs, sweep, task_execution
-from asset2sim.tasks.assemble.export_mjcf import overlay_springs
 from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import handled, spring_expected
-from asset2sim.engines.source import SimSource
+from asset2sim.engines.source import SimObject
 from asset2sim.urdf import UrdfModel
 
 #: The metrics this tier adds to the post-check.
@@ -76,23 +75,21 @@ def task_spec_for(text: str, model: UrdfModel, asset: AssetDescription, category
     return spec
 
 
-def run_task_tier(engine: str, source: SimSource, state: dict[str, float], springs: dict[str, Spring],
-                  conventions: SimConventions, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
-                  asset: AssetDescription, category: str | None, *, fixed_base: bool, free_moving: bool,
-                  spring_requested: bool, recorded: recorded_runs.RecordedRuns | None = None) -> list[MetricResult]:
-    """[``task_execution``, ``operating_force``] of the written asset in
+def run_task_tier(engine: str, obj: SimObject, closed: dict[str, tuple[float, float, float]], spec: TaskSpec,
+                  asset: AssetDescription, category: str | None, *, free_moving: bool, spring_requested: bool,
+                  recorded: recorded_runs.RecordedRuns | None = None) -> list[MetricResult]:
+    """[``task_execution``, ``operating_force``] of the written asset ``obj`` in
     ``engine``; ``closed``: joint -> (q_closed, direction, open range) at the output scale; ``recorded``: the
     attempt is recorded there (:func:`~asset2sim.tasks.check.recorded_runs.task_run`) for the evaluation.
 
     Raises:
-        EngineUnavailable; whatever loading ``source`` raises.
+        EngineUnavailable; whatever loading ``obj.source`` raises.
     """
     joints = {n: closed[n] for n in spec.joints if n in closed and closed[n][2] > 0}
     actions = tuple(a for a in spec.actions if a in ("close", "open"))
-    run = recorded_runs.task_run(engine, source, joints, actions=actions, targets=dict(spec.targets),
-                                 initial_state=dict(state), springs=dict(springs), conventions=conventions,
-                                 fixed_base=fixed_base, task=spec.text, recorded=recorded,
-                                 hold_required=hold_required(asset, list(joints), springs, category,
+    run = recorded_runs.task_run(engine, obj, joints, actions=actions, targets=dict(spec.targets), task=spec.text,
+                                 recorded=recorded,
+                                 hold_required=hold_required(asset, list(joints), dict(obj.springs), category,
                                                              free_moving=free_moving, spring_requested=spring_requested))
     tm = task_execution.task_metric(run)
     tm.details["joints_rule"] = spec.rule
@@ -113,40 +110,37 @@ class OperatingLimits:
     (the operability tier's): no step of the dynamics search goes above it"""
 
 
-def operating_limits(source: SimSource, state: dict[str, float], overlay: Overlay, asset: AssetDescription,
-                     geometry: dict[str, LinkGeometry], closed: dict[str, tuple[float, float, float]] | None, *,
-                     category: str | None, task: str | None, free_moving: bool,
-                     conventions: SimConventions | None = None, joints: list[str] | None = None) -> OperatingLimits:
-    """Friction and damping caps of every movable joint: the operating budget
-    (:func:`~asset2sim.tasks.check.operating.operating_budgets`) of a hand inside the part's real range, both
-    ways with the root fixed, for every handled part (:func:`~asset2sim.tasks.interpret.part_priors.handled`) where
-    the closed ends are known, the tighter of it and the task gripper's for the task's ``joints``; else the
-    probe's cap (:func:`~asset2sim.tasks.check.operating.friction_caps`); damping at
-    most what the joint sweep's drive still moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
+def operating_limits(obj: SimObject, overlay: Overlay, asset: AssetDescription, geometry: dict[str, LinkGeometry],
+                     closed: dict[str, tuple[float, float, float]] | None, *, category: str | None, task: str | None,
+                     free_moving: bool, joints: list[str] | None = None) -> OperatingLimits:
+    """Friction and damping caps of every movable joint of the written asset ``obj`` (its root as mounted): the
+    operating budget (:func:`~asset2sim.tasks.check.operating.operating_budgets`) of a hand inside the part's real
+    range, both ways with the root fixed, for every handled part
+    (:func:`~asset2sim.tasks.interpret.part_priors.handled`) where the closed ends are known, the tighter of it and
+    the task gripper's for the task's ``joints``; else the probe's cap
+    (:func:`~asset2sim.tasks.check.operating.friction_caps`); damping at most what the joint sweep's drive still
+    moves (:func:`~asset2sim.tasks.check.sweep.damping_caps`).
 
     Raises:
-        EngineUnavailable; whatever loading ``source`` raises.
+        EngineUnavailable; whatever loading ``obj.source`` raises.
     """
-    fixed = bool(overlay.mounting is not None and overlay.mounting.fixed)
     labels = link_labels(asset)
     hand = {n: c for n, c in (closed or {}).items() if handled(labels.get(asset.joint(n).child))}
     # every handled part, both ways, root fixed (the operability tier's hand); a task's joints also as its gripper meets them
-    budgets = operating.operating_budgets(source, state, overlay, hand, category=category, labels=labels,
-                                          free=False, free_moving=free_moving, conventions=conventions,
-                                          whole=True) if hand else {}
+    budgets = operating.operating_budgets(dataclasses.replace(obj, fixed_base=True), overlay, hand, category=category,
+                                          labels=labels, free_moving=free_moving, whole=True) if hand else {}
     hand_caps = {n: b.friction_cap for n, b in budgets.items()}
     sel = {n: c for n, c in (closed or {}).items() if joints is None or n in joints}
     if sel and task:
-        for n, b in operating.operating_budgets(source, state, overlay, sel, category=category, labels=labels,
-                                                actions=task_actions(task), free=not fixed, free_moving=free_moving,
-                                                conventions=conventions).items():
+        for n, b in operating.operating_budgets(obj, overlay, sel, category=category, labels=labels,
+                                                actions=task_actions(task), free_moving=free_moving).items():
             if n not in budgets or b.budget < budgets[n].budget:
                 budgets[n] = b
     caps = operating.friction_caps(overlay, overlay, asset, geometry)
     caps.update({n: b.friction_cap for n, b in budgets.items()})
     dcaps = {n: b.damping_cap for n, b in budgets.items()}
     if closed:  # what the joint sweep's drive still moves through the range in time
-        for name, c in sweep.damping_caps(source, closed, state, overlay_springs(overlay), conventions).items():
+        for name, c in sweep.damping_caps(obj, closed).items():
             dcaps[name] = min(c, dcaps.get(name, c))
     return OperatingLimits(friction_caps=caps, damping_caps=dcaps, budgets=budgets,
                            notes=[b.conflict for b in budgets.values() if b.conflict], hand_caps=hand_caps)

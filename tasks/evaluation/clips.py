@@ -232,10 +232,10 @@ def write_clip(folder: Path | str, stem: str, frames: Sequence[np.ndarray], *, j
 
 
 def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others: Mapping[str, float], out_dir: Path | str,
-                *, views: Sequence[str] = CLIP_VIEWS, size: tuple[int, int] = CLIP_SIZE, fps: float = CLIP_FPS,
-                max_joints: int = MAX_CLIP_JOINTS, task_run=None) -> ClipSet:
-    """Clips of the joint sweep of each joint of ``joints`` (in order, at most ``max_joints``) from each of
-    ``views``, written into ``out_dir/clips/`` with ``clips.json``. ``others``: every joint's position
+                *, task_run=None) -> ClipSet:
+    """Clips of the joint sweep of each joint of ``joints`` (in order, at most :data:`MAX_CLIP_JOINTS`) from each of
+    :data:`CLIP_VIEWS` (:data:`CLIP_SIZE` pixels, :data:`CLIP_FPS` frames per simulated second), written into
+    ``out_dir/clips/`` with ``clips.json``. ``others``: every joint's position
     during the sweep of another (the initial state), rad or m. A joint without a recorded sweep is listed
     in ``skipped`` with the reason. ``task_run``: the task execution's run, whose attempts get clips too
     (:func:`task_clips`).
@@ -245,6 +245,7 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
         RenderError / FileNotFoundError: the URDF cannot be drawn.
         OSError: the folder cannot be written.
     """
+    views, size, fps, max_joints = CLIP_VIEWS, CLIP_SIZE, CLIP_FPS, MAX_CLIP_JOINTS
     folder = Path(out_dir) / CLIPS_DIR
     by_joint = {js.joint: js for js in sweep.joints}
     clips: list[Clip] = []
@@ -274,7 +275,7 @@ def sweep_clips(urdf: Path | str, sweep: SweepRun, joints: Sequence[str], others
                 clips.append(write_clip(folder, f"sweep_{n:02d}_{v}", frames[view_spec(v).name], joint=js.joint, motion="sweep",
                                         view=v, fps=fps, poster_index=poster))
         if task_run is not None:
-            more, why = task_clips(urdf, task_run, out_dir, views=views, size=size, fps=fps, renderer=r)
+            more, why = task_clips(urdf, task_run, out_dir, renderer=r)
             clips += more
             skipped.update(why)
     clip_set = ClipSet(clips=clips, skipped=skipped)
@@ -334,14 +335,14 @@ def draw_mark(image: np.ndarray, xy: np.ndarray, radius: int = 4) -> np.ndarray:
     return out
 
 
-def task_clips(urdf: Path | str, task_run, out_dir: Path | str, *, views: Sequence[str] = CLIP_VIEWS,
-               size: tuple[int, int] = CLIP_SIZE, fps: float = CLIP_FPS, max_attempts: int = MAX_CLIP_JOINTS,
+def task_clips(urdf: Path | str, task_run, out_dir: Path | str, *,
                renderer: SceneRenderer | None = None) -> tuple[list[Clip], dict[str, str]]:
     """Clips of each recorded attempt of ``task_run`` (a :class:`~asset2sim.tasks.check.task_execution.TaskRun`, at
-    most ``max_attempts``): the object as the gripper moved it (root free or mounted as simulated), the grasp point
-    drawn as a red dot while held, written into ``out_dir/clips/task_<n>_<view>.*``. Returns (clips, skipped:
-    ``<joint> <action>`` -> why); ``renderer``: one of ``urdf`` at ``size`` already open (else one is opened). Raises
-    as :func:`sweep_clips`."""
+    most :data:`MAX_CLIP_JOINTS`; views, size and rate as :func:`sweep_clips`): the object as the gripper moved it
+    (root free or mounted as simulated), the grasp point drawn as a red dot while held, written into
+    ``out_dir/clips/task_<n>_<view>.*``. Returns (clips, skipped: ``<joint> <action>`` -> why); ``renderer``: one
+    of ``urdf`` at :data:`CLIP_SIZE` already open (else one is opened). Raises as :func:`sweep_clips`."""
+    views, size, fps, max_attempts = CLIP_VIEWS, CLIP_SIZE, CLIP_FPS, MAX_CLIP_JOINTS
     folder = Path(out_dir) / CLIPS_DIR
     out: list[Clip] = []
     skipped: dict[str, str] = {}

@@ -10,8 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.engines.base import EngineUnavailable, SessionOptions
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.base import EngineUnavailable
 from asset2sim.mesh_io import MeshReadError
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics as spec_metrics
@@ -24,7 +23,6 @@ from asset2sim.tasks.evaluation.closed_ends import compute_closed
 from asset2sim.tasks.evaluation.eval_context import Context, hold_required
 from asset2sim.tasks.geometry.limits import subtrees
 from asset2sim.tasks.geometry.urdf_closed import aabb_extents
-from asset2sim.tasks.interpret.mounting import session_root_options
 from asset2sim.tasks.state.ground_clearance import floor_stops
 from asset2sim.urdf import read_urdf
 
@@ -117,19 +115,19 @@ def set_closed_ends(ctx: Context, joints: list[str]) -> None:
 
 def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry: bool = False,
                closed_for: list[str] | None = None, rest_test: bool = True,
-               recording: RestRecording | None = None, probe_joints: list[str] | None = None,
-               probe_actions: tuple[str, ...] = ("close", "open"), recorded: RecordedRuns | None = None) -> EngineRun:
+               recording: RestRecording | None = None, recorded: RecordedRuns | None = None) -> EngineRun:
     """Open ``engine`` on the asset and take every raw measurement once: penetration at the initial state, extents,
     masses, the rest test per step, and (PyBullet) the probes from the unstepped initial state. ``closed_for``: joints
     whose closed ends go into ``ctx.closed``; ``rest_test=False``: no rest test (``trace`` and series stay None);
-    ``recording``: the post-check's rest test, used when it matches; ``probe_joints`` / ``probe_actions``: what the
-    probes try (default the task-relevant joints, close and open); ``recorded``: kept for the manipulation metrics.
-    Errors are caught into ``EngineRun.error``."""
+    ``recording``: the post-check's rest test, used when it matches; the probes try the task's joints and actions
+    (``ctx.task``), without a task the task-relevant joints, close and open; ``recorded``: kept for the
+    manipulation metrics. Errors are caught into ``EngineRun.error``."""
+    probe_joints = ctx.task.joints if ctx.task is not None else None
+    probe_actions = ctx.task.actions if ctx.task is not None else ("close", "open")
     t0 = time.perf_counter()
     run = EngineRun(engine, recorded=recorded)
     try:
-        session = open_session(engine, ctx.urdf, SessionOptions(initial_state=dict(ctx.initial_state), springs=dict(ctx.springs), conventions=ctx.conventions,
-                                                                **session_root_options(ctx.root_fixed)))  # the root as declared
+        session = ctx.sim_object.open(engine)  # the root as declared
     except EngineUnavailable as exc:
         run.error = f"engine unavailable: {exc}"
         return run
@@ -150,11 +148,11 @@ def run_engine(ctx: Context, engine: str, *, probes: bool = True, keep_geometry:
                 run.point_cloud = point_cloud(session)
             saved = session.save_state()
         if rest_test:
-            if recording is None or not recording.matches(engine, ctx.source, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed):
+            if recording is None or not recording.matches(engine, ctx.sim_object):
                 if pyb and probes:  # in a session of its own, as the post-check does: the probes start unstepped
-                    _, recording = measure_rest_test(engine, ctx.source, ctx.initial_state, ctx.springs, ctx.conventions, ctx.root_fixed)
+                    _, recording = measure_rest_test(engine, ctx.sim_object)
                 else:
-                    recording = record_rest_test(session, ctx.conventions, ctx.source, ctx.initial_state, ctx.springs)
+                    recording = record_rest_test(session, ctx.sim_object)
             for name in ("trace", "root_series", "ground_series", "joint_series"):
                 setattr(run, name, getattr(recording, name))
         if pyb and closed_for is not None:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from asset2sim.engines.base import Spring
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.tasks.assemble.export_mjcf import joint_spring
 from asset2sim.schemas.config import RefineConfig, SimConventions
 from asset2sim.schemas.request import RequestSpec
@@ -79,6 +79,12 @@ class Context:
     def source(self) -> UrdfFile:
         """The evaluated ``urdf`` as the checks simulate it."""
         return UrdfFile(self.urdf)
+
+    @property
+    def sim_object(self) -> SimObject:
+        """The evaluated asset as the checks simulate it: ``source`` at ``initial_state`` with ``springs``,
+        ``conventions`` and the root as declared (``root_fixed``)."""
+        return SimObject(self.source, self.initial_state, self.springs, self.conventions, self.root_fixed)
 
     @property
     def movable(self) -> list[str]:

@@ -163,8 +163,7 @@ def _run_engines(ctx: Context, engines: tuple[str, ...] | list[str], need_closed
     for e in sorted(engines, key=lambda e: e != "pybullet"):
         pending = need_closed if (e == "pybullet" and not ctx.closed) else None
         runs[e] = run_engine(ctx, e, probes=probes and e == "pybullet", keep_geometry=keep_geometry, closed_for=pending,
-                             rest_test=e != reuse_engine, recording=recording, recorded=recorded,
-                             **({} if ctx.task is None else {"probe_joints": ctx.task.joints, "probe_actions": ctx.task.actions}))
+                             rest_test=e != reuse_engine, recording=recording, recorded=recorded)
         if runs[e].error:
             ctx.notes.append(f"{e}: {runs[e].error}")
     if need_closed and not ctx.closed:

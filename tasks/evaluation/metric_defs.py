@@ -381,8 +381,7 @@ def _m_sweep(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     closed = {n: (c.q_closed, c.direction, c.open_range) for n, c in ctx.closed.items() if n in ctx.movable}
 
     def graded(e: str, r: EngineRun) -> MetricResult:
-        r.sweep = recorded_runs.sweep_run(e, ctx.source, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                          recorded=r.recorded)
+        r.sweep = recorded_runs.sweep_run(e, ctx.sim_object, closed, recorded=r.recorded)
         return sweep.sweep_metric(r.sweep)
 
     return _per_engine(runs, "joint_sweep", unit_of("joint_sweep"), graded, lambda r: bool(r.error))
@@ -396,8 +395,8 @@ def _m_operability(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResul
     labels = {link: lab for link, (_, lab) in ctx.semantics.items()}
 
     def graded(e: str, r: EngineRun) -> MetricResult:
-        run = recorded_runs.operability_run(e, ctx.source, closed, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                            category=ctx.category, labels=labels, recorded=r.recorded)
+        run = recorded_runs.operability_run(e, ctx.sim_object, closed, category=ctx.category, labels=labels,
+                                            recorded=r.recorded)
         m = operability.operability_metric(run)
         m.details["root"] = "fixed (mounted)" if ctx.root_fixed else "fixed (held by the other hand)"
         return m
@@ -410,8 +409,7 @@ def _m_robust(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
     """:mod:`asset2sim.tasks.check.robust_rest` in every engine that loaded the
     asset, the root as the asset declares (``ctx.root_fixed``: skipped)."""
     def graded(e: str, r: EngineRun) -> MetricResult:
-        r.robust_rest = recorded_runs.robust_rest_run(e, ctx.source, dict(ctx.initial_state), dict(ctx.springs), ctx.conventions,
-                                                      fixed_base=ctx.root_fixed, recorded=r.recorded)
+        r.robust_rest = recorded_runs.robust_rest_run(e, ctx.sim_object, recorded=r.recorded)
         return robust_rest.robust_rest_metric(r.robust_rest)
 
     return _per_engine(runs, "robust_rest", unit_of("robust_rest"), graded, lambda r: bool(r.error))
@@ -438,9 +436,7 @@ def _m_task(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
             continue
         joints = _task_joints(ctx)
         actions = tuple(a for a in ctx.task.actions if a in ("close", "open"))
-        run = recorded_runs.task_run(e, ctx.source, joints, actions=actions, targets=dict(ctx.task.targets),
-                                     initial_state=dict(ctx.initial_state), springs=dict(ctx.springs),
-                                     conventions=ctx.conventions, fixed_base=ctx.root_fixed,
+        run = recorded_runs.task_run(e, ctx.sim_object, joints, actions=actions, targets=dict(ctx.task.targets),
                                      hold_required=hold_required(ctx, list(joints)), task=ctx.task.text, recorded=r.recorded)
         r.task = run
         tm = task_execution.task_metric(run)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asset2sim.schemas.asset import AssetDescription
+from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.report import StateRefinement
 from asset2sim.tasks.geometry.closed_state import ClosedState, tree_path
 from asset2sim.tasks.state.penetration import StatePenetration
@@ -71,8 +72,8 @@ def path_joints(asset: AssetDescription, link_a: str, link_b: str) -> list[str]:
 
 
 def refine_initial_state(session, asset: AssetDescription, closed: dict[str, ClosedState], requested: dict[str, float],
-                         fractions: dict[str, tuple[float, float]], *, tolerance: float = 1e-4, lam: float = 0.05,
-                         max_evaluations: int = 4000, seed: int = 0, proposer=None) -> StateRefinement:
+                         fractions: dict[str, tuple[float, float]], config: RefineConfig | None = None, *,
+                         proposer=None) -> StateRefinement:
     """Lowest-objective state near ``requested`` (module docstring) as a
     :class:`~asset2sim.schemas.report.StateRefinement` (Phi in m).
 
@@ -80,12 +81,15 @@ def refine_initial_state(session, asset: AssetDescription, closed: dict[str, Clo
         session: fixed-base PyBullet session of the output (scaled) URDF.
         closed, requested: closed states and joint -> requested position, output units.
         fractions: joint -> allowed opening-fraction interval (band).
-        tolerance: Phi (m) at which the search stops; lam: lambda (m per squared fraction of range).
-        max_evaluations: budget of contact queries; seed: of the perturbation phase.
+        config: the search's knobs: ``penetration_tolerance`` (Phi, m, at which the search stops),
+            ``state_lambda`` (lambda, m per squared fraction of range), ``max_state_evaluations`` (budget of
+            contact queries) and ``seed`` (of the perturbation phase); default ``RefineConfig()``.
         proposer: optional ``proposer(state, worst_pairs, intervals) -> (list of
             {joint: value}, queries)``, asked once when the search stalls above
-            ``tolerance``; proposals are clipped and kept only if they improve.
+            the tolerance; proposals are clipped and kept only if they improve.
     """
+    cfg = config or RefineConfig()
+    tolerance, lam, max_evaluations, seed = cfg.penetration_tolerance, cfg.state_lambda, cfg.max_state_evaluations, cfg.seed
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     names = [n for n in session.joint_names if n in closed]

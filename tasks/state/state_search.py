@@ -37,9 +37,7 @@ def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, con
 
     def search(on: Candidate, start: dict[str, float]):
         with ws.session(on, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, conventions=config.sim)) as sess:
-            return refine_state.refine_initial_state(
-                sess, asset, closed_out, start, fractions, tolerance=config.penetration_tolerance, lam=config.state_lambda,
-                max_evaluations=config.max_state_evaluations, seed=config.seed, proposer=proposer)
+            return refine_state.refine_initial_state(sess, asset, closed_out, start, fractions, config, proposer=proposer)
 
     st = search(candidate, requested)
     in_the_way = [] if addressed is None or not st.phi_result > config.penetration_tolerance else \

@@ -36,7 +36,7 @@ def test_registered():
 
 def test_conversion_keeps_the_file_values_at_full_precision(tmp_path):
     a = write_contract_asset(tmp_path, lid_angle=0.3, post_height=0.02, base_inertial=False)
-    b = urdf_to_mjcf(a.urdf, initial_state=a.initial_state, springs={"lid_hinge": Spring(0.7, 0.123456789012345)})
+    b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state, springs={"lid_hinge": Spring(0.7, 0.123456789012345)}))
     from lxml import etree
 
     root = etree.fromstring(b.xml.encode())
@@ -97,7 +97,7 @@ def test_missing_inertial_policies(tmp_path):
     with pytest.raises(ValueError, match="missing_inertial"):
         urdf_to_mjcf(a.urdf, missing_inertial="guess")
     with pytest.raises(ValueError, match="not movable joints"):
-        urdf_to_mjcf(a.urdf, initial_state={"no_such_joint": 0.1})
+        urdf_to_mjcf(a.urdf, SessionOptions(initial_state={"no_such_joint": 0.1}))
 
 
 def test_contact_policy_matches_pybullet_pairs(tmp_path):
@@ -155,7 +155,7 @@ def test_keyframe_places_the_object_on_the_ground(tmp_path):
     model = read_urdf(a.urdf)
     model.links["body"].collisions[0].origin = translation_matrix([0.0, 0.0, -0.03])
     a.urdf.write_bytes(write_urdf(model))
-    b = urdf_to_mjcf(a.urdf, initial_state=a.initial_state)
+    b = urdf_to_mjcf(a.urdf, SessionOptions(initial_state=a.initial_state))
     assert b.root_height == pytest.approx(0.03, abs=1e-9)
     assert b.initial_qpos[:3] == pytest.approx([0, 0, 0.03])
     assert b.initial_qpos[7] == pytest.approx(1.9)

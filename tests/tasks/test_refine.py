@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim import demo_assets
 from asset2sim.engines.base import SessionOptions
@@ -174,7 +174,7 @@ def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
     model = read_urdf(urdf)  # the drawers close at their lower limit and open towards the upper
     closed = {j: (model.joint(j).lower, 1.0, model.joint(j).upper - model.joint(j).lower) for j in r.closed_positions}
     assert all(r.closed_positions[j] == pytest.approx(c[0]) for j, c in closed.items())
-    caps = damping_caps(UrdfFile(urdf), closed, r.initial_joint_positions)
+    caps = damping_caps(SimObject(UrdfFile(urdf), r.initial_joint_positions), closed)
     assert caps and all(res.overlay.joints[j].damping <= c * (1 + 1e-6) for j, c in caps.items())
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from asset2sim.engines.base import Spring
+from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.loading import BULLET_DEFAULT_INERTIA, BULLET_DEFAULT_MASS, CollisionPiece, collision_pieces, read_urdf
 from asset2sim.engines.mjcf.base import (DERIVED_MESH_DIR, KEYFRAME, MjcfError, compile_xml, load_mujoco, mujoco_messages, mujoco_warnings,
                                          num_text, place_on_ground, relative_to, safe_name, vec_text)
@@ -144,19 +144,18 @@ class MjcfBuild:
         return out
 
 
-def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | None = None, springs: dict[str, Spring] | None = None,
-                 missing_inertial: str = "massless", fixed_base: bool = False, ground: bool = True, gravity: bool = True,
-                 conventions: SimConventions | None = None, mesh_root: Path | None = None, meshdir: str = ".",
-                 visuals: bool = False) -> MjcfBuild:
-    """Convert a URDF into MJCF under the SPEC's conventions.
+def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *, missing_inertial: str = "massless",
+                 mesh_root: Path | None = None, meshdir: str = ".", visuals: bool = False) -> MjcfBuild:
+    """Convert a URDF into MJCF under the SPEC's conventions, as a session of ``options`` opens it.
 
     Args:
-        initial_state: joint -> rad or m, in the keyframe ``initial`` (other joints at 0).
-        springs: joint -> :class:`Spring`, written as joint ``stiffness`` and ``springref``.
+        options: what the model is opened with (default ``SessionOptions()``): ``initial_state`` (joint -> rad
+            or m) in the keyframe ``initial`` (other joints at 0); ``springs`` (joint -> :class:`Spring`)
+            written as joint ``stiffness`` and ``springref``; ``fixed_base``: no free joint, the root stays at
+            the world origin; ``ground`` / ``gravity``: the ground plane / gravity -9.81 m/s^2 along z;
+            ``conventions``: the time step and solver settings.
         missing_inertial: a link without ``<inertial>`` is ``"massless"`` (the
             file's truth) or gets PyBullet's 1 kg and unit inertia (``"bullet"``).
-        fixed_base: no free joint; the root stays at the world origin.
-        ground / gravity: add the ground plane / gravity -9.81 m/s^2 along z.
         mesh_root: folder the MJCF's ``meshdir`` points at (default: the URDF's folder).
         meshdir: the ``meshdir`` written in the MJCF (relative to the MJCF file).
         visuals: also write the visual meshes as non-colliding geoms (group 2;
@@ -167,6 +166,9 @@ def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | Non
         MjcfError: MuJoCo cannot import or compile the result, or reads a value differently.
         ValueError: an unknown ``missing_inertial`` policy, or an initial state naming an unknown joint.
     """
+    opts = options or SessionOptions()
+    initial_state, springs, conventions = opts.initial_state, opts.springs, opts.conventions
+    fixed_base, ground, gravity = opts.fixed_base, opts.ground, opts.gravity
     mujoco = load_mujoco()
     if missing_inertial not in ("massless", "bullet"):
         raise ValueError(f"missing_inertial must be 'massless' or 'bullet', not {missing_inertial!r}")
@@ -194,8 +196,8 @@ def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | Non
     if asset_el is None:
         asset_el = etree.SubElement(root, "asset")
     worldbody = root.find("worldbody")
-    bodies = _rewrite_bodies(worldbody, model, spec, pieces, meshes, file_to_mesh, springs, missing_inertial, visuals, movable,
-                             urdf_path, notes)
+    geom_mesh = {key: file_to_mesh[v] for key, v in meshes.names.items()}
+    bodies = _rewrite_bodies(worldbody, model, spec, pieces, geom_mesh, springs, missing_inertial, visuals, notes)
     set_contacts(root, model, pieces, fixed_base, notes)
     root_body = bodies[model.root]
     add_root_and_ground(root_body, worldbody, fixed_base, ground)
@@ -215,13 +217,15 @@ def urdf_to_mjcf(urdf_path: Path | str, *, initial_state: dict[str, float] | Non
                      joint_names=[n for n in order if n in movable], notes=notes, root_height=height)
 
 
-def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], meshes: MeshAssets,
-                    file_to_mesh: dict[str, str], springs: dict[str, Spring], missing_inertial: str, visuals: bool, movable: dict,
-                    urdf_path: Path, notes: list[str]) -> dict:
+def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[CollisionPiece]], geom_mesh: dict[tuple, str],
+                    springs: dict[str, Spring], missing_inertial: str, visuals: bool, notes: list[str]) -> dict:
     """Rewrite every body of the import (pose, inertial, joint, collision
-    geoms) from the URDF; returns body name -> element (MjcfError: the
-    import's bodies or joints are not the URDF's, or a per-body check fails).
+    geoms) from the URDF ``model`` (read from its file); ``geom_mesh``: (link, ...) key of a collision mesh -> the
+    MJCF mesh name. Returns body name -> element (MjcfError: the import's bodies or joints are not the URDF's, or
+    a per-body check fails).
     """
+    urdf_path = model.path
+    movable = [j.name for j in model.movable_joints]
     bodies = {b.get("name"): b for b in worldbody.iter("body")}
     if set(bodies) != set(model.links):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has bodies {sorted(bodies)}, the URDF links {sorted(model.links)}")
@@ -231,8 +235,8 @@ def _rewrite_bodies(worldbody, model: UrdfModel, spec, pieces: dict[str, list[Co
         link = model.links[b.get("name")]
         set_inertial(b, link, missing_inertial, notes)
         names_in_qpos += set_joints(b, link, model, spec, springs, urdf_path)
-        geom_mesh = {key: file_to_mesh[v] for key, v in meshes.names.items() if key[0] == link.name}
-        set_geoms(b, link, model, pieces[link.name], geom_mesh, visuals, urdf_path)
+        own = {key: name for key, name in geom_mesh.items() if key[0] == link.name}
+        set_geoms(b, link, model, pieces[link.name], own, visuals, urdf_path)
     if set(names_in_qpos) != set(movable):
         raise MjcfError(f"{urdf_path}: MuJoCo's import has joints {names_in_qpos}, the URDF {sorted(movable)}")
     return bodies

@@ -264,9 +264,10 @@ def test_laptop_9912_has_few_pieces_and_loads_in_mujoco(tmp_path):
     m = mujoco.MjModel.from_xml_path(str(out.urdf))
     assert m.ngeom <= 2 * cp.MAX_PIECES_PER_LINK
     # the MJCF dropped from 5 cm: few contacts, no MuJoCo warning (arena / stack overflow)
+    from asset2sim.engines.base import SessionOptions
     from asset2sim.engines.mjcf import urdf_to_mjcf
 
-    build = urdf_to_mjcf(out.urdf, initial_state={"joint_1": -1.5})
+    build = urdf_to_mjcf(out.urdf, SessionOptions(initial_state={"joint_1": -1.5}))
     mj = mujoco.MjModel.from_xml_string(build.xml, assets=build.assets())
     d = mujoco.MjData(mj)
     mujoco.mj_resetDataKeyframe(mj, d, 0)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.engines.base import Spring
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
@@ -50,9 +50,8 @@ def _operate(out: Path, springs: dict[str, Spring] | None = None) -> operability
         parts = line.split()
         if len(parts) == 3:
             labels[parts[0]] = parts[2]
-    return operability.run_operability("pybullet", UrdfFile(out / "mobility.urdf"), closed, state,
-                                       springs_from_overlay(out, state) if springs is None else springs,
-                                       category=report["category"], labels=labels)
+    obj = SimObject(UrdfFile(out / "mobility.urdf"), state, springs_from_overlay(out, state) if springs is None else springs)
+    return operability.run_operability("pybullet", obj, closed, category=report["category"], labels=labels)
 
 
 @pytest.fixture(scope="module")
@@ -118,12 +117,13 @@ def test_a_drop_down_door_carries_its_weight_on_a_counterbalance_spring(tmp_path
     (part,) = [p for p in run.parts if p.joint == "joint_0"]
     assert part.passed, [s.failure for s in part.strokes]
     # without the spring: friction holding the door's weight moment at its state
-    budgets = operating.operating_budgets(UrdfFile(res.out_dir / "mobility.urdf"), res.report.initial_joint_positions,
+    budgets = operating.operating_budgets(SimObject(UrdfFile(res.out_dir / "mobility.urdf"), res.report.initial_joint_positions,
+                                                    fixed_base=True),
                                           res.overlay.model_copy(update={"joints": {**res.overlay.joints, "joint_0": door.model_copy(
                                               update={"stiffness": 0.0, "spring_reference": None})}}),
                                           {"joint_0": (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in
                                            measure_closed(res.out_dir / "mobility.urdf").items() if n == "joint_0"},
-                                          category="Oven", labels={"link_0": "door"}, free=False, whole=True)
+                                          category="Oven", labels={"link_0": "door"}, whole=True)
     hold = budgets["joint_0"].hold_floor
     assert budgets["joint_0"].conflict, "without the spring the door is not held inside its operating budget"
     bare = _operate(_with_friction(res.out_dir, tmp_path / "bare", "joint_0", hold), springs={})
@@ -145,8 +145,8 @@ def test_a_closed_drawer_is_held_by_its_catch_and_slides_out_on_a_tilt_without_i
     assert 0 < abs(dyn.catch_zone) <= 0.0508 and dyn.catch_position == pytest.approx(r.closed_positions[name])
     assert r.failure_mode == "none" and r.metric("operability").passed is True
     state = r.initial_joint_positions
-    with_catch = robust_rest.run_robust_rest("pybullet", UrdfFile(out / "mobility.urdf"), state, springs_from_overlay(out, state))
-    without = robust_rest.run_robust_rest("pybullet", UrdfFile(out / "mobility.urdf"), state, {})
+    with_catch = robust_rest.run_robust_rest("pybullet", SimObject(UrdfFile(out / "mobility.urdf"), state, springs=springs_from_overlay(out, state)))
+    without = robust_rest.run_robust_rest("pybullet", SimObject(UrdfFile(out / "mobility.urdf"), state, springs={}))
     assert all(t.passed for t in with_catch.trials)
     assert max(t.joint_drift[name] for t in without.trials) > 0.002
 

@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim import demo_assets
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import MetricResult
@@ -95,9 +95,9 @@ def _budgets(out, res, task):
         lo, hi = j.lower, j.upper
         d = 1.0 if abs(hi - qc) >= abs(qc - lo) else -1.0
         closed[n] = (qc, d, abs((hi if d > 0 else lo) - qc))
-    return operating.operating_budgets(UrdfFile(out / "mobility.urdf"), state, res.overlay, closed, category=report["category"],
-                                       labels={ln.name: ln.semantic_label for ln in asset.links},
-                                       actions=task_actions(task), free=True, ground=bool(task))
+    return operating.operating_budgets(SimObject(UrdfFile(out / "mobility.urdf"), state), res.overlay, closed,
+                                       category=report["category"], labels={ln.name: ln.semantic_label for ln in asset.links},
+                                       actions=task_actions(task), ground=bool(task))
 
 
 def test_budget_of_a_side_hinged_door_is_bounded_by_ground_friction(tmp_path):

@@ -112,7 +112,7 @@ def test_a_light_carcass_held_by_the_probe_is_operated_pushed_alone_it_slides(tm
     for hold, ok in ((True, True), (False, False)):
         s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"slide": 0.15}))
         try:
-            r = probe_joint(s, "slide", closed=0.0, direction=1.0, open_range=0.3, action="close",
+            r = probe_joint(s, "slide", (0.0, 1.0, 0.3), action="close",
                             config=ProbeConfig(hold_body=hold))
         finally:
             s.close()
@@ -160,7 +160,7 @@ def test_a_cover_that_drags_on_the_ground_is_swung_open_while_the_other_hand_hol
     s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"swivel": 0.0}))
     try:
         session = _NoRootHold(s) if hold == "reaction only" else s
-        r = probe_joint(session, "swivel", closed=0.0, direction=1.0, open_range=1.2, action="open",
+        r = probe_joint(session, "swivel", (0.0, 1.0, 1.2), action="open",
                         config=ProbeConfig(hold_body=hold != "external push"))
     finally:
         s.close()
@@ -191,7 +191,7 @@ def test_open_probe_detects_a_lid_that_falls_shut(tmp_path, friction, holds):
     f = _lid(tmp_path / "l", friction)
     s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"hinge": 0.0}))
     try:
-        r = probe_joint(s, "hinge", closed=0.0, direction=1.0, open_range=2.0, action="open", holds_position=True)
+        r = probe_joint(s, "hinge", (0.0, 1.0, 2.0), action="open", holds_position=True)
     finally:
         s.close()
     assert r.reached
@@ -220,11 +220,11 @@ def test_probe_arguments_are_checked(tmp_path):
     s = open_session("pybullet", f / "mobility.urdf", SessionOptions())
     try:
         with pytest.raises(ValueError, match="action"):
-            probe_joint(s, "slide", closed=0, direction=1, open_range=0.3, action="push")
+            probe_joint(s, "slide", (0, 1, 0.3), action="push")
         with pytest.raises(ValueError, match="open_range"):
-            probe_joint(s, "slide", closed=0, direction=1, open_range=0.0, action="open")
+            probe_joint(s, "slide", (0, 1, 0.0), action="open")
         with pytest.raises(KeyError):
-            probe_joint(s, "nope", closed=0, direction=1, open_range=0.3, action="open")
+            probe_joint(s, "nope", (0, 1, 0.3), action="open")
     finally:
         s.close()
 
@@ -239,7 +239,7 @@ def test_probe_config_time_budget_limits_a_stuck_push(tmp_path):
     s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"slide": 0.15}))
     try:
         cfg = ProbeConfig(push_time=0.5, release_time=0.1, force_factor=0.05)  # F_max ~ 99 N: below both frictions
-        r = probe_joint(s, "slide", closed=0.0, direction=1.0, open_range=0.3, action="close", config=cfg)
+        r = probe_joint(s, "slide", (0.0, 1.0, 0.3), action="close", config=cfg)
     finally:
         s.close()
     assert not r.reached and r.failure == "target not reached"
@@ -277,7 +277,7 @@ def test_push_on_a_part_far_from_its_axis_is_bounded(tmp_path):
     )
     s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"hinge": 0.0}))
     try:
-        r = probe_joint(s, "hinge", closed=0.0, direction=1.0, open_range=0.5, action="open")
+        r = probe_joint(s, "hinge", (0.0, 1.0, 0.5), action="open")
         dt = s.options.conventions.timestep
     finally:
         s.close()
@@ -313,7 +313,7 @@ def test_a_light_lever_on_a_heavy_body_is_closed_without_slamming_into_its_stop(
     f = _lever_on_heavy_body(tmp_path / "t")
     s = open_session("pybullet", f / "mobility.urdf", SessionOptions(initial_state={"flush": 0.52}))
     try:
-        r = probe_joint(s, "flush", closed=0.0, direction=1.0, open_range=0.52, action="close")
+        r = probe_joint(s, "flush", (0.0, 1.0, 0.52), action="close")
     finally:
         s.close()
     assert r.success, r.failure

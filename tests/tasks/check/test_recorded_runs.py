@@ -9,7 +9,7 @@ import pytest
 
 from tests.conftest import SHARED, needs_shared
 from tests.contract_asset import write_contract_asset
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.schemas.config import RefineConfig
 from asset2sim.tasks.check import postcheck, recorded_runs
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
@@ -27,12 +27,12 @@ STATE = {"lid_hinge": 0.4, "post_slide": 0.0}
 def test_sweep_is_reused_for_the_same_inputs_and_rerun_for_other_closed_ends(tmp_path):
     a = write_contract_asset(tmp_path, lid_angle=0.4)
     rec = RecordedRuns()
-    first = recorded_runs.sweep_run("pybullet", UrdfFile(a.urdf), CLOSED, STATE, recorded=rec)
-    again = recorded_runs.sweep_run("pybullet", UrdfFile(a.urdf), CLOSED, dict(reversed(list(STATE.items()))), recorded=rec)
+    first = recorded_runs.sweep_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), CLOSED, recorded=rec)
+    again = recorded_runs.sweep_run("pybullet", SimObject(UrdfFile(a.urdf), dict(reversed(list(STATE.items())))), CLOSED, recorded=rec)
     assert (rec.hits, rec.misses) == (1, 1)
-    assert sweep_metric(again) == sweep_metric(first) == sweep_metric(run_sweep("pybullet", UrdfFile(a.urdf), CLOSED, STATE))
+    assert sweep_metric(again) == sweep_metric(first) == sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(a.urdf), STATE), CLOSED))
     other = {"lid_hinge": (0.0, 1.0, 1.5), "post_slide": (0.0, 1.0, 0.05)}
-    shorter = recorded_runs.sweep_run("pybullet", UrdfFile(a.urdf), other, STATE, recorded=rec)
+    shorter = recorded_runs.sweep_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), other, recorded=rec)
     assert (rec.hits, rec.misses) == (1, 2)
     assert shorter.joints[0].open_range == 1.5 != first.joints[0].open_range
 
@@ -40,19 +40,49 @@ def test_sweep_is_reused_for_the_same_inputs_and_rerun_for_other_closed_ends(tmp
 def test_robust_rest_is_rerun_when_the_urdf_or_state_changes(tmp_path):
     a = write_contract_asset(tmp_path / "a", lid_angle=0.4)
     rec = RecordedRuns()
-    first = recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)
-    again = recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)
+    first = recorded_runs.robust_rest_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), recorded=rec)
+    again = recorded_runs.robust_rest_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), recorded=rec)
     assert (rec.hits, rec.misses) == (1, 1)
-    assert robust_rest_metric(again) == robust_rest_metric(first) == robust_rest_metric(run_robust_rest("pybullet", UrdfFile(a.urdf), STATE))
+    assert robust_rest_metric(again) == robust_rest_metric(first) == robust_rest_metric(run_robust_rest("pybullet", SimObject(UrdfFile(a.urdf), STATE)))
     again.trials[0].joint_drift.clear()  # a copy: the record is not changed through it
-    assert robust_rest_metric(recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)) == robust_rest_metric(first)
-    recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), {**STATE, "lid_hinge": 0.5}, recorded=rec)
+    assert robust_rest_metric(recorded_runs.robust_rest_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), recorded=rec)) == robust_rest_metric(first)
+    recorded_runs.robust_rest_run("pybullet", SimObject(UrdfFile(a.urdf), {**STATE, "lid_hinge": 0.5}), recorded=rec)
     assert rec.misses == 2
     # the same path written again with a stiffer hinge: other bytes, another run
     write_contract_asset(tmp_path / "a", lid_angle=0.4, lid_friction=5.0)
-    stiff = recorded_runs.robust_rest_run("pybullet", UrdfFile(a.urdf), STATE, recorded=rec)
+    stiff = recorded_runs.robust_rest_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), recorded=rec)
     assert rec.misses == 3
-    assert robust_rest_metric(stiff) == robust_rest_metric(run_robust_rest("pybullet", UrdfFile(a.urdf), STATE))
+    assert robust_rest_metric(stiff) == robust_rest_metric(run_robust_rest("pybullet", SimObject(UrdfFile(a.urdf), STATE)))
+
+
+def test_the_declared_root_separates_robust_rest_runs_but_not_sweeps(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    free, mounted = SimObject(UrdfFile(a.urdf), STATE), SimObject(UrdfFile(a.urdf), STATE, fixed_base=True)
+    rec = RecordedRuns()
+    assert recorded_runs.robust_rest_run("pybullet", free, recorded=rec).trials
+    assert recorded_runs.robust_rest_run("pybullet", mounted, recorded=rec).skipped  # a mounted object is not dropped
+    assert (rec.hits, rec.misses) == (0, 2)
+    # the sweep holds the root fixed whatever the object declares: one run serves both
+    first = recorded_runs.sweep_run("pybullet", free, CLOSED, recorded=rec)
+    again = recorded_runs.sweep_run("pybullet", mounted, CLOSED, recorded=rec)
+    assert (rec.hits, rec.misses) == (1, 3)
+    assert sweep_metric(again) == sweep_metric(first)
+
+
+def test_sim_object_options_follow_its_root_and_take_changes(tmp_path):
+    a = write_contract_asset(tmp_path, lid_angle=0.4)
+    state = dict(STATE)
+    free = SimObject(UrdfFile(a.urdf), state)
+    state["lid_hinge"] = 1.0  # the object keeps its own copy
+    assert dict(free.state) == STATE and not isinstance(free.state, dict)
+    opts = free.options()
+    assert (opts.fixed_base, opts.ground, opts.gravity, opts.initial_state) == (False, True, True, STATE)
+    mounted = SimObject(UrdfFile(a.urdf), STATE, fixed_base=True).options()
+    assert (mounted.fixed_base, mounted.ground) == (True, False)
+    swept = free.options(fixed_base=True, gravity=False, ground=False)
+    assert (swept.fixed_base, swept.gravity, swept.ground) == (True, False, False)
+    with free.open("pybullet") as session:  # the session starts where the object says
+        assert session.joint_positions()["lid_hinge"] == pytest.approx(STATE["lid_hinge"], abs=1e-9)
 
 
 def _closed(out):
@@ -122,20 +152,18 @@ def test_task_attempt_is_reused_for_the_same_inputs_and_rerun_when_one_differs(t
     a = write_contract_asset(tmp_path, lid_angle=0.4)
     lid = {"lid_hinge": CLOSED["lid_hinge"]}
     rec = RecordedRuns()
-    first = recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=STATE, recorded=rec)
-    again = recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=dict(reversed(list(STATE.items()))),
-                                   recorded=rec)
+    first = recorded_runs.task_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), lid, actions=("open",), recorded=rec)
+    again = recorded_runs.task_run("pybullet", SimObject(UrdfFile(a.urdf), dict(reversed(list(STATE.items())))), lid, actions=("open",), recorded=rec)
     assert (rec.hits, rec.misses) == (1, 1)
-    fresh = run_task("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=STATE)
+    fresh = run_task("pybullet", SimObject(UrdfFile(a.urdf), STATE), lid, actions=("open",))
     assert task_metric(again) == task_metric(first) == task_metric(fresh)
     assert again.attempts[0].trace["t"] == fresh.attempts[0].trace["t"]  # the motion the clips replay, too
     again.attempts[0].notes.append("changed")  # a copy: the record is not changed through it
-    assert recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, actions=("open",), initial_state=STATE,
-                                  recorded=rec).attempts[0].notes == first.attempts[0].notes
+    assert recorded_runs.task_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), lid, actions=("open",), recorded=rec).attempts[0].notes == first.attempts[0].notes
     for changed in ({"targets": {"open": 0.5}}, {"hold_required": {"lid_hinge": False}}, {"actions": ("close", "open")}):
-        recorded_runs.task_run("pybullet", UrdfFile(a.urdf), lid, **{"actions": ("open",), **changed}, initial_state=STATE, recorded=rec)
+        recorded_runs.task_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), lid, **{"actions": ("open",), **changed}, recorded=rec)
     other_end = {"lid_hinge": (0.0, 1.0, 1.5)}
-    recorded_runs.task_run("pybullet", UrdfFile(a.urdf), other_end, actions=("open",), initial_state=STATE, recorded=rec)
+    recorded_runs.task_run("pybullet", SimObject(UrdfFile(a.urdf), STATE), other_end, actions=("open",), recorded=rec)
     assert (rec.hits, rec.misses) == (2, 5)
 
 

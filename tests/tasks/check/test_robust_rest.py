@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.demo_assets import build_laptop
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
@@ -66,7 +66,7 @@ def _pillar(folder: Path, width: float) -> Path:
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_box_whose_lid_holds_passes(tmp_path, engine):
     a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.0, lid_friction=2.0)
-    run = run_robust_rest(engine, UrdfFile(a.urdf), {"lid_hinge": 0.4, "post_slide": 0.0})
+    run = run_robust_rest(engine, SimObject(UrdfFile(a.urdf), {"lid_hinge": 0.4, "post_slide": 0.0}))
     m = robust_rest_metric(run)
     assert m.passed, m.details["failures"]
     assert [t.name for t in run.trials] == ["drop", "tilt+x", "tilt-x", "tilt+y", "tilt-y", "nudge"]
@@ -77,17 +77,17 @@ def test_a_lid_held_without_margin_falls(tmp_path, engine):
     """Lid friction 0.02 N*m against a gravity torque of about 0.2 N*m: the
     lid falls shut and every trial fails on its joint."""
     a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.0, lid_friction=0.02)
-    m = robust_rest_metric(run_robust_rest(engine, UrdfFile(a.urdf), {"lid_hinge": 0.4, "post_slide": 0.0}))
+    m = robust_rest_metric(run_robust_rest(engine, SimObject(UrdfFile(a.urdf), {"lid_hinge": 0.4, "post_slide": 0.0})))
     assert m.passed is False
     assert all("lid_hinge" in t["failing_joints"] for t in m.details["trials"].values())
 
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_slender_pillar_topples_when_tilted_a_squat_block_does_not(tmp_path, engine):
-    thin = robust_rest_metric(run_robust_rest(engine, UrdfFile(_pillar(tmp_path / "thin", 0.02)), {"flap_hinge": 0.0}))
+    thin = robust_rest_metric(run_robust_rest(engine, SimObject(UrdfFile(_pillar(tmp_path / "thin", 0.02)), {"flap_hinge": 0.0})))
     assert thin.passed is False
     assert any("toppled" in f for f in thin.details["failures"])
-    squat = robust_rest_metric(run_robust_rest(engine, UrdfFile(_pillar(tmp_path / "squat", 0.3)), {"flap_hinge": 0.0}))
+    squat = robust_rest_metric(run_robust_rest(engine, SimObject(UrdfFile(_pillar(tmp_path / "squat", 0.3)), {"flap_hinge": 0.0})))
     assert squat.passed, squat.details["failures"]
 
 
@@ -105,13 +105,13 @@ def test_tilt_pose_turns_about_the_footprint_and_touches_the_ground(tmp_path):
 
 def test_a_fixed_root_is_not_put_down(tmp_path):
     a = write_contract_asset(tmp_path)
-    m = robust_rest_metric(run_robust_rest("pybullet", UrdfFile(a.urdf), {}, fixed_base=True))
+    m = robust_rest_metric(run_robust_rest("pybullet", SimObject(UrdfFile(a.urdf), {}, fixed_base=True)))
     assert m.passed is None and "root fixed" in m.details["skipped"]
 
 
 def test_the_fake_engine_skips_the_nudge(tmp_path):
     a = write_contract_asset(tmp_path, lid_angle=0.4)
-    run = run_robust_rest("fake", UrdfFile(a.urdf), dict(a.initial_state), config=RobustRestConfig(trials=("drop", "nudge")))
+    run = run_robust_rest("fake", SimObject(UrdfFile(a.urdf), dict(a.initial_state)), config=RobustRestConfig(trials=("drop", "nudge")))
     assert run.trials[0].passed is True and run.trials[1].passed is None
 
 
@@ -130,7 +130,7 @@ def test_tilted_refined_laptop_is_put_down_touching_the_ground(tmp_path):
             s.restore_state(saved)
             robust_rest._disturb(s, name, RobustRestConfig())
             assert abs(s.place_on_ground()) < 1e-3, name  # already touching: nothing to move
-    run = run_robust_rest("pybullet", UrdfFile(tmp_path / "out" / "mobility.urdf"), state)
+    run = run_robust_rest("pybullet", SimObject(UrdfFile(tmp_path / "out" / "mobility.urdf"), state))
     assert all(t.topple is not None and t.topple < 0.05 for t in run.trials), [t.failure for t in run.trials]
 
 
@@ -153,9 +153,9 @@ def test_a_tall_block_rocking_after_a_tilt_comes_back_to_rest_within_the_recover
     Housner 1963): still moving after the SPEC's 1 s settle, at rest and
     upright after the recovery time."""
     urdf = _block(tmp_path / "tall", 0.5, 2.0, 60.0)
-    spec_only = run_robust_rest("pybullet", UrdfFile(urdf), {}, config=RobustRestConfig(trials=("tilt+y",), recovery_time=0.0))
+    spec_only = run_robust_rest("pybullet", SimObject(UrdfFile(urdf), {}), config=RobustRestConfig(trials=("tilt+y",), recovery_time=0.0))
     assert not spec_only.trials[0].passed and "not at rest" in spec_only.trials[0].failure
-    recovered = run_robust_rest("pybullet", UrdfFile(urdf), {}, config=RobustRestConfig(trials=("tilt+y",)))
+    recovered = run_robust_rest("pybullet", SimObject(UrdfFile(urdf), {}), config=RobustRestConfig(trials=("tilt+y",)))
     assert recovered.trials[0].passed, recovered.trials[0].failure
     assert recovered.trials[0].d_pos <= 1e-3 and recovered.trials[0].topple <= 0.05
 
@@ -171,7 +171,7 @@ def test_an_object_that_keeps_moving_still_fails_after_the_recovery_time(tmp_pat
   <collision><origin rpy="1.5707963 0 0"/><geometry><cylinder radius="0.1" length="0.3"/></geometry></collision>
 </link></robot>
 """)
-    run = run_robust_rest("pybullet", UrdfFile(urdf), {}, config=RobustRestConfig(trials=("nudge",)))
+    run = run_robust_rest("pybullet", SimObject(UrdfFile(urdf), {}), config=RobustRestConfig(trials=("nudge",)))
     assert run.trials[0].passed is False and "not at rest" in run.trials[0].failure
 
 

@@ -8,12 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.tasks.check.sweep import blocked_positions, blocked_stops, run_sweep, sweep_metric
-from asset2sim.tasks.check.sweep import joint_subtrees
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.check import stop_repair
-from asset2sim.urdf import read_urdf
 
 pytest.importorskip("coacd")
 
@@ -76,28 +74,25 @@ def test_a_u_hull_that_stops_on_a_rail_is_decomposed_and_the_sweep_passes(tmp_pa
     urdf = _carriage_over_rail(tmp_path / "src")
     closed = {"slide": (0.0, 1.0, 0.2)}
     state = {"flap": 0.0, "slide": 0.0}
-    before = sweep_metric(run_sweep("pybullet", UrdfFile(urdf), closed, state))
+    before = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(urdf), state), closed))
     assert not before.passed  # the hull of the U runs into the rail's end
     assert 0.3 < blocked_positions(before)["slide"] / 0.2 < 0.6
     stall, goal = blocked_stops(before)["slide"]
     assert goal == pytest.approx(0.2) and stall < goal
-    model = read_urdf(urdf)
     overrides, notes = stop_repair.decompose_for_blocked(
-        UrdfFile(urdf), extract_asset(urdf.parent), before, state, joint_subtrees(model), set(), 1.0, urdf.parent, "collision")
+        SimObject(UrdfFile(urdf), state), extract_asset(urdf.parent), before, set(), 1.0, urdf.parent, "collision")
     assert set(overrides) == {"carriage"} and len(overrides["carriage"]) >= 3  # the U in pieces
     assert any("CoACD" in n and "sweep of slide stopped by rail" in n for n in notes)
-    after = sweep_metric(run_sweep("pybullet", UrdfFile(_with_overrides(urdf, overrides)), closed, state))
+    after = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(_with_overrides(urdf, overrides)), state), closed))
     assert after.passed, after.details["failures"]
 
 
 def test_nothing_is_decomposed_when_the_sweep_passes_or_a_link_was_replaced(tmp_path):
     urdf = _carriage_over_rail(tmp_path / "src")
     state = {"flap": 0.0, "slide": 0.0}
-    model = read_urdf(urdf)
-    free = sweep_metric(run_sweep("pybullet", UrdfFile(urdf), {"flap": (0.0, -1.0, 0.5)}, state))
+    free = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(urdf), state), {"flap": (0.0, -1.0, 0.5)}))
     assert free.passed and blocked_stops(free) == {}
-    blocked = sweep_metric(run_sweep("pybullet", UrdfFile(urdf), {"slide": (0.0, 1.0, 0.2)}, state))
+    blocked = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(urdf), state), {"slide": (0.0, 1.0, 0.2)}))
     overrides, notes = stop_repair.decompose_for_blocked(
-        UrdfFile(urdf), extract_asset(urdf.parent), blocked, state, joint_subtrees(model), {"carriage"}, 1.0, urdf.parent,
-        "collision")
+        SimObject(UrdfFile(urdf), state), extract_asset(urdf.parent), blocked, {"carriage"}, 1.0, urdf.parent, "collision")
     assert overrides == {} and notes == []  # earlier stages' pieces are left alone

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import available_engines, open_session
 from tests.contract_asset import write_contract_asset
@@ -24,7 +24,7 @@ def test_free_lid_and_post_sweep_through_their_ranges(tmp_path, engine):
     held): the raised post clears it (at 0.4 rad it would touch the lid at
     about 4.9 cm, see test_a_held_lid_cuts_the_post_range)."""
     a = write_contract_asset(tmp_path, lid_angle=1.0, post_height=0.0)
-    run = run_sweep(engine, UrdfFile(a.urdf), CLOSED, {"lid_hinge": 1.0, "post_slide": 0.0})
+    run = run_sweep(engine, SimObject(UrdfFile(a.urdf), {"lid_hinge": 1.0, "post_slide": 0.0}), CLOSED)
     m = sweep_metric(run)
     assert m.passed, m.details["failures"]
     for j in run.joints:
@@ -45,7 +45,7 @@ def test_a_post_in_the_way_keeps_the_lid_from_shutting_until_it_is_lowered(tmp_p
         held = sweep_joint(s, "lid_hinge", closed=0.0, direction=1.0, open_range=2.0, links=subtrees["lid_hinge"], initial_state=state)
     assert not held.passed
     assert held.reached_closed > 0.05 or held.max_penetration >= 0.005
-    lid = sweep_metric(run_sweep(engine, UrdfFile(a.urdf), CLOSED, state)).details["joints"]["lid_hinge"]
+    lid = sweep_metric(run_sweep(engine, SimObject(UrdfFile(a.urdf), state), CLOSED)).details["joints"]["lid_hinge"]
     assert lid["passed"], lid["failure"]
     assert "in the way of closing" in lid["range_note"] and "post_slide closed" in lid["range_note"]
 
@@ -55,7 +55,7 @@ def test_a_joint_limit_beyond_the_geometry_fails(tmp_path):
     stiff hinge): the far end is not reached without pushing into the lid,
     and a sibling in the way is not cut from the range."""
     a = write_contract_asset(tmp_path, lid_angle=0.0, post_height=0.0, lid_friction=50.0)
-    run = run_sweep("pybullet", UrdfFile(a.urdf), {"post_slide": (0.0, 1.0, 0.05)}, {"lid_hinge": 0.0, "post_slide": 0.0})
+    run = run_sweep("pybullet", SimObject(UrdfFile(a.urdf), {"lid_hinge": 0.0, "post_slide": 0.0}), {"post_slide": (0.0, 1.0, 0.05)})
     post = run.joints[0]
     assert not post.passed and (post.reached_open < 0.95 or post.max_penetration >= 0.005)
     assert post.range_note == "" and post.q_far == 0.05
@@ -69,7 +69,7 @@ def test_subtrees_follow_the_kinematic_tree(tmp_path):
 
 def test_metric_without_joints_is_not_graded(tmp_path):
     a = write_contract_asset(tmp_path)
-    run = run_sweep("pybullet", UrdfFile(a.urdf), {}, {})
+    run = run_sweep("pybullet", SimObject(UrdfFile(a.urdf), {}), {})
     assert sweep_metric(run).passed is None
 
 
@@ -80,9 +80,9 @@ def test_a_held_lid_stops_the_post(tmp_path):
     a = write_contract_asset(tmp_path, lid_angle=0.4, post_height=0.0)
     state = {"lid_hinge": 0.4, "post_slide": 0.0}
     post = {"post_slide": CLOSED["post_slide"]}
-    held = run_sweep("pybullet", UrdfFile(a.urdf), post, state).joints[0]
+    held = run_sweep("pybullet", SimObject(UrdfFile(a.urdf), state), post).joints[0]
     assert not held.passed and held.reached_open < 0.95
-    free = run_sweep("pybullet", UrdfFile(a.urdf), post, state, config=SweepConfig(hold_others=False)).joints[0]
+    free = run_sweep("pybullet", SimObject(UrdfFile(a.urdf), state), post, config=SweepConfig(hold_others=False)).joints[0]
     assert free.passed
 
 
@@ -95,10 +95,10 @@ def test_a_magazine_hinged_on_a_held_top_is_graded_on_its_written_range(tmp_path
     position of the top fails (stapler 103099: the sweep used to stop where
     the base was met and pass)."""
     state, top = {"top": 0.3, "magazine": 0.0}, (0.0, 1.0, 1.5)
-    top_j, j = run_sweep("pybullet", UrdfFile(_stapler(tmp_path / "ok", magazine_upper=1.3)), {"top": top, "magazine": (0.0, 1.0, 1.3)}, state).joints
+    top_j, j = run_sweep("pybullet", SimObject(UrdfFile(_stapler(tmp_path / "ok", magazine_upper=1.3)), state), {"top": top, "magazine": (0.0, 1.0, 1.3)}).joints
     assert top_j.passed and j.passed, j.failure
     assert j.q_far == 1.3 and j.reached_open >= 0.95 and "base" in j.range_note and "swept with top open" in j.range_note
-    _, j = run_sweep("pybullet", UrdfFile(_stapler(tmp_path / "far", magazine_upper=2.0)), {"top": top, "magazine": (0.0, 1.0, 2.0)}, state).joints
+    _, j = run_sweep("pybullet", SimObject(UrdfFile(_stapler(tmp_path / "far", magazine_upper=2.0)), state), {"top": top, "magazine": (0.0, 1.0, 2.0)}).joints
     assert not j.passed and j.q_far == 2.0 and j.reached_open < 0.95
 
 
@@ -141,10 +141,10 @@ def test_blocked_positions_and_score_of_a_blocked_post(tmp_path):
     scores better than the blocked one."""
     a = write_contract_asset(tmp_path, lid_angle=0.0, post_height=0.0, lid_friction=50.0)
     state = {"lid_hinge": 0.0, "post_slide": 0.0}
-    blocked = sweep_metric(run_sweep("pybullet", UrdfFile(a.urdf), {"post_slide": (0.0, 1.0, 0.05)}, state, config=SweepConfig(hold_others=False)))
+    blocked = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(a.urdf), state), {"post_slide": (0.0, 1.0, 0.05)}, config=SweepConfig(hold_others=False)))
     where = blocked_positions(blocked)
     assert set(where) == {"post_slide"} and 0.0 <= where["post_slide"] < 0.95 * 0.05
-    free = sweep_metric(run_sweep("pybullet", UrdfFile(a.urdf), {"lid_hinge": (0.0, 1.0, 2.0)}, state))
+    free = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(a.urdf), state), {"lid_hinge": (0.0, 1.0, 2.0)}))
     assert free.passed and blocked_positions(free) == {}
     assert sweep_score(free) < sweep_score(blocked)
 
@@ -183,7 +183,7 @@ def test_a_seat_shut_in_by_its_closed_lid_is_swept_with_the_lid_open(tmp_path):
     urdf = _seat_under_lid(tmp_path)
     closed = {"seat": (0.0, 1.0, 1.5), "lid": (0.0, 1.0, 1.5)}
     state = {"seat": 0.0, "lid": 0.0}
-    run = run_sweep("pybullet", UrdfFile(urdf), closed, state)
+    run = run_sweep("pybullet", SimObject(UrdfFile(urdf), state), closed)
     j = {x.joint: x for x in run.joints}
     assert j["seat"].passed, j["seat"].failure
     assert "lid_link" in j["seat"].range_note and "lid open" in j["seat"].range_note
@@ -203,7 +203,7 @@ def test_parts_held_a_quarter_open_are_moved_out_of_each_others_way(tmp_path):
     urdf = _seat_under_lid(tmp_path)
     closed = {"seat": (0.0, 1.0, 1.5), "lid": (0.0, 1.0, 1.5)}
     state = {"seat": 0.4, "lid": 0.4}
-    run = run_sweep("pybullet", UrdfFile(urdf), closed, state)
+    run = run_sweep("pybullet", SimObject(UrdfFile(urdf), state), closed)
     j = {x.joint: x for x in run.joints}
     assert j["seat"].passed and j["lid"].passed, (j["seat"].failure, j["lid"].failure)
     assert "lid_link" in j["seat"].range_note and "lid open" in j["seat"].range_note
@@ -250,13 +250,13 @@ def test_damping_above_the_cap_fails_the_sweep_and_below_it_passes(tmp_path):
     state = {"lid_hinge": 1.0, "post_slide": 0.0}
     post = {"post_slide": CLOSED["post_slide"]}
     probe = write_contract_asset(tmp_path / "probe", lid_angle=1.0)
-    cap = damping_caps(UrdfFile(probe.urdf), post, state)["post_slide"]
+    cap = damping_caps(SimObject(UrdfFile(probe.urdf), state), post)["post_slide"]
     with open_session("pybullet", probe.urdf, SessionOptions(fixed_base=True, gravity=False, ground=False)) as s:
         e = effort_limit(s, "post_slide", ["post"], 0.05, SweepConfig())
     assert cap == pytest.approx(e * SweepConfig().time_limit / (DAMPED_SPEED_MARGIN * 0.05))
     ok = write_contract_asset(tmp_path / "ok", lid_angle=1.0, post_damping=0.5 * cap, post_friction=0.0)
     slow = write_contract_asset(tmp_path / "slow", lid_angle=1.0, post_damping=4.0 * cap, post_friction=0.0)
-    passed = run_sweep("pybullet", UrdfFile(ok.urdf), post, state).joints[0]
-    crawled = run_sweep("pybullet", UrdfFile(slow.urdf), post, state).joints[0]
+    passed = run_sweep("pybullet", SimObject(UrdfFile(ok.urdf), state), post).joints[0]
+    crawled = run_sweep("pybullet", SimObject(UrdfFile(slow.urdf), state), post).joints[0]
     assert passed.passed, passed.failure
     assert not crawled.passed and 0.0 < crawled.reached_open < 0.95

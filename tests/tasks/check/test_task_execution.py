@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.registry import available_engines, open_session
 from tests.contract_asset import write_contract_asset
@@ -136,7 +136,7 @@ def test_contact_points_handle_far_edge_and_side(tmp_path, engine):
 @pytest.mark.parametrize("engine", ENGINES)
 def test_closing_a_light_lid_succeeds_with_a_plausible_force(tmp_path, engine):
     a = write_contract_asset(tmp_path, lid_angle=0.6, lid_friction=0.3)
-    run = run_task(engine, UrdfFile(a.urdf), LID, actions=("close",), initial_state={"lid_hinge": 0.6, "post_slide": 0.0})
+    run = run_task(engine, SimObject(UrdfFile(a.urdf), {"lid_hinge": 0.6, "post_slide": 0.0}), LID, actions=("close",))
     m = task_metric(run)
     assert m.passed, m.details["failures"]
     att = run.attempts[0]
@@ -153,7 +153,7 @@ def test_a_lid_too_stiff_to_open_without_the_body_moving_fails(tmp_path, engine)
     (0.2 m from the hinge) needs 15 N, more than the whole box weighs: the
     box lifts and tips or slides instead of the lid opening."""
     a = write_contract_asset(tmp_path, lid_angle=0.1, lid_friction=3.0, body_mass=0.3)
-    run = run_task(engine, UrdfFile(a.urdf), LID, actions=("open",), initial_state={"lid_hinge": 0.1, "post_slide": 0.0})
+    run = run_task(engine, SimObject(UrdfFile(a.urdf), {"lid_hinge": 0.1, "post_slide": 0.0}), LID, actions=("open",))
     att = run.attempts[0]
     assert not att.success and (att.slid or att.tipped), att
     assert not task_metric(run).passed
@@ -167,9 +167,9 @@ def test_an_object_pushed_away_at_top_speed_is_operated_again_more_slowly(tmp_pa
     cabinet slides; at half the speed it is 19 N and the drawer opens. The
     attempt recorded is the slower one, with a note of the first."""
     urdf = _cabinet(tmp_path / "c", drawer_friction=0.2, body_mass=5.0, drawer_damping=150.0)
-    once = run_task(engine, UrdfFile(urdf), DRAWER, actions=("open",), config=TaskConfig(retry_speed_shares=()))
+    once = run_task(engine, SimObject(UrdfFile(urdf)), DRAWER, actions=("open",), config=TaskConfig(retry_speed_shares=()))
     assert not once.attempts[0].success and once.attempts[0].slid and once.attempts[0].speed_share == 1.0
-    run = run_task(engine, UrdfFile(urdf), DRAWER, actions=("open",))
+    run = run_task(engine, SimObject(UrdfFile(urdf)), DRAWER, actions=("open",))
     att = run.attempts[0]
     assert att.success and att.speed_share < 1.0, att
     assert "retried more slowly" in att.notes[0] and "slid" in att.notes[0]
@@ -179,17 +179,16 @@ def test_an_object_pushed_away_at_top_speed_is_operated_again_more_slowly(tmp_pa
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_drawer_opens_and_holds_one_that_springs_back_fails(tmp_path, engine):
     urdf = _cabinet(tmp_path / "c")
-    ok = run_task(engine, UrdfFile(urdf), DRAWER, actions=("open",))
+    ok = run_task(engine, SimObject(UrdfFile(urdf)), DRAWER, actions=("open",))
     att = ok.attempts[0]
     assert att.success and att.contact_rule == "handle", att
     assert att.final_fraction >= 0.55 and att.peak_axial_force_n is not None and att.peak_torque_nm is None
     # a spring pulling the drawer shut (reference at the closed end) beats its friction once released
-    springy = run_task(engine, UrdfFile(urdf), DRAWER, actions=("open",), springs={"slide": Spring(stiffness=40.0, reference=0.0)})
+    springy = run_task(engine, SimObject(UrdfFile(urdf), springs={"slide": Spring(stiffness=40.0, reference=0.0)}), DRAWER, actions=("open",))
     att = springy.attempts[0]
     assert att.reached and not att.held and att.failure == "target not held 1 s after release", att
     # where the return is by design (a requested spring), not holding is allowed
-    waived = run_task(engine, UrdfFile(urdf), DRAWER, actions=("open",), springs={"slide": Spring(stiffness=40.0, reference=0.0)},
-                      hold_required={"slide": False})
+    waived = run_task(engine, SimObject(UrdfFile(urdf), springs={"slide": Spring(stiffness=40.0, reference=0.0)}), DRAWER, actions=("open",), hold_required={"slide": False})
     assert waived.attempts[0].success and waived.attempts[0].notes
 
 
@@ -198,8 +197,7 @@ def test_a_stiff_mounted_lid_is_operable_but_its_force_is_implausible(tmp_path, 
     """Root fixed (a mounted asset): nothing slides; hinge friction 6 N*m at
     a 0.2 m lever needs about 30 N, above ADA 309.4's 22.2 N."""
     a = write_contract_asset(tmp_path, lid_angle=0.1, lid_friction=6.0)
-    run = run_task(engine, UrdfFile(a.urdf), LID, actions=("open",), initial_state={"lid_hinge": 0.1, "post_slide": 0.0},
-                   fixed_base=True)
+    run = run_task(engine, SimObject(UrdfFile(a.urdf), {"lid_hinge": 0.1, "post_slide": 0.0}, fixed_base=True), LID, actions=("open",))
     assert run.root == "fixed (mounted)"
     att = run.attempts[0]
     assert att.success and att.root_slide_m == 0.0, att
@@ -210,11 +208,11 @@ def test_a_stiff_mounted_lid_is_operable_but_its_force_is_implausible(tmp_path, 
 def test_a_joint_delivered_at_its_target_is_operated_from_the_far_side(tmp_path):
     a = write_contract_asset(tmp_path, lid_angle=0.0, lid_friction=0.5)
     state = {"lid_hinge": 0.0, "post_slide": 0.0}
-    run = run_task("pybullet", UrdfFile(a.urdf), LID, actions=("close",), initial_state=state)
+    run = run_task("pybullet", SimObject(UrdfFile(a.urdf), state), LID, actions=("close",))
     att = run.attempts[0]
     assert att.moved and att.started_from.startswith("far side") and att.start_fraction == pytest.approx(0.6, abs=0.02)
     assert att.success and att.peak_operating_force_n > 0.0
-    still = run_task("pybullet", UrdfFile(a.urdf), LID, actions=("close",), initial_state=state, config=TaskConfig(from_far_side=False))
+    still = run_task("pybullet", SimObject(UrdfFile(a.urdf), state), LID, actions=("close",), config=TaskConfig(from_far_side=False))
     att = still.attempts[0]
     assert att.success and not att.moved and att.peak_force_n == 0.0
     assert force_metric(still, "Box", {}).passed is None  # nothing was operated
@@ -275,7 +273,7 @@ def _hinged_arm(folder: Path) -> Path:
 @pytest.mark.parametrize("engine", ENGINES)
 def test_pressing_an_object_whose_child_carries_it_moves_the_parent_side(tmp_path, engine):
     urdf = _hinged_arm(tmp_path / "arm")
-    run = run_task(engine, UrdfFile(urdf), {"hinge": (0.0, 1.0, 0.6)}, actions=("close",), initial_state={"hinge": 0.3})
+    run = run_task(engine, SimObject(UrdfFile(urdf), {"hinge": 0.3}), {"hinge": (0.0, 1.0, 0.6)}, actions=("close",))
     att = run.attempts[0]
     assert att.side == "parent" and att.link == "arm", att
     assert att.success and att.final_fraction <= 0.10, att

@@ -6,7 +6,7 @@ import json
 import re
 from pathlib import Path
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.cli import main
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
@@ -53,7 +53,7 @@ def test_a_lid_limit_through_its_body_is_clipped_and_the_sweep_passes(tmp_path):
     text = urdf.read_text()
     urdf.write_text(re.sub(r'(<joint name="lid_hinge".*?<limit[^>]*upper=")([^"]+)"', lambda m: m.group(1) + f'{c.upper}"',
                            text, flags=re.S))
-    run = run_sweep("pybullet", UrdfFile(urdf), {"lid_hinge": (c.q_closed, c.direction, c.open_range)}, STATE)
+    run = run_sweep("pybullet", SimObject(UrdfFile(urdf), STATE), {"lid_hinge": (c.q_closed, c.direction, c.open_range)})
     m = sweep_metric(run)
     assert m.passed, m.details["failures"]
 
@@ -128,7 +128,7 @@ def test_a_magazine_limit_through_the_base_is_clipped_with_the_top_open(tmp_path
     urdf = _stapler_shut_in(tmp_path)
     state = {"top": 0.0, "magazine": 0.0}
     closed = {"top": (0.0, 1.0, 1.5), "magazine": (0.0, 1.0, 2.5)}
-    raw = sweep_metric(run_sweep("pybullet", UrdfFile(urdf), closed, state))
+    raw = sweep_metric(run_sweep("pybullet", SimObject(UrdfFile(urdf), state), closed))
     assert not raw.passed and raw.details["failing"] == ["magazine"]  # the raw range cannot be swept
     with _session(urdf, state) as sess:
         clips = limits.geometric_limits(sess, read_urdf(urdf), closed, state)
@@ -138,7 +138,7 @@ def test_a_magazine_limit_through_the_base_is_clipped_with_the_top_open(tmp_path
         assert not clips["top"].clipped
         sess.set_joint_positions({"top": 1.5, "magazine": c.upper})  # free at the clipped end with the top open
         assert min(sess.link_distances("mag_link", "base", 0.0), default=0.0) > -0.0021
-    run = run_sweep("pybullet", UrdfFile(urdf), {**closed, "magazine": (c.q_closed, c.direction, c.open_range)}, state)
+    run = run_sweep("pybullet", SimObject(UrdfFile(urdf), state), {**closed, "magazine": (c.q_closed, c.direction, c.open_range)})
     m = sweep_metric(run)
     assert m.passed, m.details["failures"]
     assert "swept with top open" in next(j for j in run.joints if j.joint == "magazine").range_note

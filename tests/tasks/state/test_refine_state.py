@@ -6,6 +6,7 @@ import pytest
 
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
+from asset2sim.schemas.config import RefineConfig
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest.extract import extract_asset
@@ -26,7 +27,8 @@ def arm(tmp_path):
 def test_penetration_resolved_inside_the_band(arm):
     asset, session, closed = arm
     band = BAND_INTERVAL["slightly_open"]
-    st = refine_initial_state(session, asset, closed, {"hinge": 0.1}, {"hinge": band}, tolerance=1e-6, lam=0.05)
+    st = refine_initial_state(session, asset, closed, {"hinge": 0.1}, {"hinge": band},
+                              RefineConfig(penetration_tolerance=1e-6, state_lambda=0.05))
     assert st.phi_requested > 1e-3  # the arm passes through the post at the request
     assert st.phi_result <= 1e-6
     q = st.result["hinge"]
@@ -38,7 +40,7 @@ def test_penetration_resolved_inside_the_band(arm):
 def test_never_leaves_the_band_even_if_penetration_remains(arm):
     asset, session, closed = arm
     band = BAND_INTERVAL["closed"]
-    st = refine_initial_state(session, asset, closed, {"hinge": 0.0}, {"hinge": band}, tolerance=1e-6)
+    st = refine_initial_state(session, asset, closed, {"hinge": 0.0}, {"hinge": band}, RefineConfig(penetration_tolerance=1e-6))
     assert band[0] <= st.result["hinge"] <= band[1]
     assert st.phi_result > 0  # honest: the overlap cannot be removed while closed
     assert st.phi_result <= st.phi_requested
@@ -48,7 +50,8 @@ def test_requested_state_projected_onto_band(arm):
     asset, session, closed = arm
     box = allowed_intervals(closed, {"hinge": BAND_INTERVAL["halfway"]})
     assert box["hinge"].lo == pytest.approx(0.35) and box["hinge"].hi == pytest.approx(0.65)
-    st = refine_initial_state(session, asset, closed, {"hinge": 0.9}, {"hinge": BAND_INTERVAL["halfway"]})
+    st = refine_initial_state(session, asset, closed, {"hinge": 0.9}, {"hinge": BAND_INTERVAL["halfway"]},
+                              RefineConfig(penetration_tolerance=1e-4))
     assert st.requested["hinge"] == pytest.approx(0.65)
     assert st.phi_result == 0.0 and st.evaluations == 1
 

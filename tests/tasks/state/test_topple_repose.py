@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from asset2sim.engines.source import UrdfFile
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.tasks.check import robust_rest
 from asset2sim.tasks.ingest import extract
 from asset2sim.tasks.assemble import write
@@ -29,7 +29,7 @@ def test_as_modelled_it_rests_but_a_tilt_topples_it(case, refined, tmp_path):
     over (up direction off by far more than 0.05 rad)."""
     asset, _ = extract.extract_asset_checked(case)
     paths = write.write_output(asset, refined.overlay, tmp_path / "modelled", refined.report.initial_joint_positions)
-    run = robust_rest.run_robust_rest("pybullet", UrdfFile(paths.urdf), refined.report.initial_joint_positions)
+    run = robust_rest.run_robust_rest("pybullet", SimObject(UrdfFile(paths.urdf), refined.report.initial_joint_positions))
     topple = max(t.topple for t in run.trials if t.topple is not None)
     assert topple > 1.0, topple
     assert not robust_rest.robust_rest_metric(run).passed

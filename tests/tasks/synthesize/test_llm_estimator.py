@@ -463,7 +463,8 @@ def test_stalled_state_search_asks_the_model_and_keeps_only_improvements(tmp_pat
         s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
         try:
             band = BAND_INTERVAL["closed"]
-            st = refine_initial_state(s, asset, closed, {"hinge": 0.0}, {"hinge": band}, tolerance=1e-6, proposer=proposer)
+            st = refine_initial_state(s, asset, closed, {"hinge": 0.0}, {"hinge": band}, RefineConfig(penetration_tolerance=1e-6),
+                                      proposer=proposer)
         finally:
             s.close()
         assert st.model_queries == 1 and len(server.requests) == 1
