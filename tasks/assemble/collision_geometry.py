@@ -104,9 +104,8 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
                 level: bool = False, open_containers: bool = False) -> tuple[dict[str, list[Piece]], list[str]]:
     """The convex pieces of every link's mesh collisions (link frame, m), cached in this process and on disk.
 
-    The pieces depend on the joint limits (the ranges swept: the writer hands the input's whole ranges,
-    :func:`asset2sim.tasks.assemble.write.build_urdf`); only what ``state`` puts a child into its parent is
-    cut last, for that state.
+    The pieces depend on the joint limits (the ranges swept); only what ``state`` puts a child into its
+    parent is cut last, for that state.
 
     Args:
         model: a URDF model (scale baked in).

@@ -81,9 +81,9 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
     if root_rotation is not None and not np.allclose(root_rotation, np.eye(3)):
         _rotate_root(model, asset.root_link, root_rotation)
     urdf.scale_model(model, s, geometry=False, inertials=False)
-    clipped = _set_joints(model, overlay)
+    _set_joints(model, overlay)
     urdf.conform_limits(model, effort=1000.0, velocity=1000.0)  # no <limit> on fixed joints (urdf_parser_py)
-    if collision_out is not None:  # on the joints' whole ranges: a clipped limit changes no piece
+    if collision_out is not None:
         free = overlay.mounting is None or not overlay.mounting.fixed  # a mounted root does not stand on its footprint
         densest = {name: max_density(lp) for name, lp in overlay.links.items()}
         notes = collision_geometry.convex_collisions(model, collision_out[0], collision_folder(asset), collision_out[1], level=free,
@@ -91,7 +91,6 @@ def build_urdf(asset: AssetDescription, overlay: Overlay, collision_overrides: d
                                                      max_density=densest)
         if collision_notes is not None:
             collision_notes.extend(notes)
-    _clip_limits(model, clipped)
     return urdf.write_urdf(model, comment=_urdf_comment(s, overlay))
 
 
@@ -134,14 +133,9 @@ def _rotate_root(model: urdf.UrdfModel, root_link: str, rotation: np.ndarray) ->
             root.inertial.origin = T @ root.inertial.origin
 
 
-def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> dict[str, tuple[float | None, float | None]]:
+def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> None:
     """Every joint without ``<mimic>``, ``<calibration>``, ``<safety_controller>`` and with an explicit axis; every
-    movable one with a ``<limit>`` and the overlay's ``<dynamics>`` (OutputError when it lacks one). Its range is
-    widened to take in the overlay's limits, not narrowed: the collision pieces are built over the whole range
-    the input allows (pieces that clear a range clear every part of it), so a limit the geometry clipped
-    (:mod:`asset2sim.tasks.geometry.limits`) changes no piece. Returns joint -> the overlay's (lower, upper), rad
-    or m (None: the input's), for :func:`_clip_limits`."""
-    clipped: dict[str, tuple[float | None, float | None]] = {}
+    movable one with a ``<limit>`` and the overlay's ``<dynamics>`` and limits (OutputError when it lacks one)."""
     for joint in model.joints:
         joint.mimic = joint.calibration = joint.safety_controller = None
         if joint.axis_xyz is None:
@@ -153,26 +147,10 @@ def _set_joints(model: urdf.UrdfModel, overlay: Overlay) -> dict[str, tuple[floa
             joint.dynamics = urdf.UrdfDynamics(damping=float(dyn.damping), friction=float(dyn.friction))
             if joint.limit is None:  # effort and velocity filled by urdf.conform_limits
                 joint.limit = urdf.UrdfLimit()
-            lim = joint.limit
-            if dyn.lower is not None:
-                lim.lower = float(dyn.lower) if lim.lower is None else min(float(lim.lower), float(dyn.lower))
+            if dyn.lower is not None:  # clipped to what the geometry allows (tasks.geometry.limits)
+                joint.limit.lower = float(dyn.lower)
             if dyn.upper is not None:
-                lim.upper = float(dyn.upper) if lim.upper is None else max(float(lim.upper), float(dyn.upper))
-            clipped[joint.name] = (dyn.lower, dyn.upper)
-    return clipped
-
-
-def _clip_limits(model: urdf.UrdfModel, clipped: dict[str, tuple[float | None, float | None]]) -> None:
-    """Set the overlay's limits (``clipped``: joint -> (lower, upper), rad or m, None: kept) on ``model``'s joints
-    that have a ``<limit>``: what the geometry allows (:mod:`asset2sim.tasks.geometry.limits`)."""
-    for joint in model.joints:
-        lower, upper = clipped.get(joint.name, (None, None))
-        if joint.limit is None:
-            continue
-        if lower is not None:
-            joint.limit.lower = float(lower)
-        if upper is not None:
-            joint.limit.upper = float(upper)
+                joint.limit.upper = float(dyn.upper)
 
 
 def _urdf_comment(s: float, overlay: Overlay) -> str:

@@ -17,8 +17,6 @@ from asset2sim.tasks.geometry.analyze import analyze_asset
 from asset2sim.tasks.ingest.extract import extract_asset
 from asset2sim.tasks.synthesize.validate_overlay import inertia_problems, validate_overlay
 from asset2sim.tasks.assemble.write import OutputError, build_urdf, write_output
-from asset2sim.urdf import read_urdf
-from tests.conftest import SHARED, needs_shared
 from tests.helpers import tree_hashes
 
 
@@ -170,22 +168,3 @@ def test_mesh_reached_through_a_symlink_keeps_its_material(tmp_path):
     h0 = asset.input_hash
     (src / "meshes" / "base.mtl").write_text(cb.MTL + "Ks 0.1 0.1 0.1\n")
     assert extract_asset(src).input_hash != h0, "the MTL beside the real file is part of the input"
-
-
-@needs_shared
-def test_a_clipped_limit_is_written_and_changes_no_collision_piece(tmp_path):
-    """Stapler 102990: its top arm (joint_0) runs into the base beyond 0.877 rad of its 2.83 rad input range, and
-    refine clips the limit there. The pieces are built over the input's range whatever the clip (pieces that clear a
-    range clear every part of it), so the clipped output's pieces are the unclipped output's, byte for byte."""
-    asset = extract_asset(SHARED / "102990")
-    geometry = analyze_asset(asset)
-    whole = _overlay(asset, geometry, 0.1325)
-    clipped = whole.model_copy(deep=True)
-    clipped.joints["joint_0"].upper = 0.877
-    a = write_output(asset, whole, tmp_path / "whole", {"joint_0": 0.0, "joint_1": 0.0})
-    b = write_output(asset, clipped, tmp_path / "clipped", {"joint_0": 0.0, "joint_1": 0.0})
-    limit = {o: read_urdf(out.root / "mobility.urdf").joint("joint_0").upper for o, out in (("a", a), ("b", b))}
-    assert limit["b"] == 0.877 and limit["a"] == pytest.approx(2.8274, abs=1e-3)
-    pieces = {o: {p.relative_to(out.root): p.read_bytes() for p in (out.root / "collision").rglob("*") if p.is_file()}
-              for o, out in (("a", a), ("b", b))}
-    assert pieces["a"] and pieces["a"] == pieces["b"]
