@@ -130,10 +130,11 @@ def refine_asset(
             cache = analyze.MeshCache()
             geometry = _analyze(asset, cache, log)
             with build_context(asset, prompt, config, category=category, geometry=geometry, cache=cache) as ctx, \
-                    Workspace(asset, open_containers=config.open_containers and config.convex_decomposition) as ws:
+                    Workspace(asset, open_containers=config.open_containers and config.convex_decomposition,
+                              mesh_cache=cache) as ws:
                 ctx.task = task
                 pose_note = _interpret(ctx, log)
-                att, pose_note = _synthesize_and_check(ctx, est, config, ws, cache, log, pose_note)
+                att, pose_note = _synthesize_and_check(ctx, est, config, ws, log, pose_note)
                 resolution = request_apply.resolve_states(ctx, att.overlay.scale)  # what each phrase set (the as-asked tier)
                 output.publish(att.candidate, ws, work)  # the output folder's files, written once
             log.say("post_check", refine_report.post_check_line(att))
@@ -266,13 +267,13 @@ def _interpret(ctx: EstimationContext, log: StageLog) -> str:
 # ----------------------------------------------------- 4-7: synthesize .. post-check
 
 
-def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: StageLog, pose_note: str) -> tuple[Attempt, str]:
+def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, log: StageLog, pose_note: str) -> tuple[Attempt, str]:
     """Stages 4-7 once; when the object is unstable or toppled as modelled and the request named no
     pose, a steadier opening, else once more on its stablest face (kept only if better). Returns (attempt, pose note)."""
-    att = _attempt(ctx, est, config, ws, cache, log)
+    att = _attempt(ctx, est, config, ws, log)
     if (att.check.stable and not att.check.topples) or ctx.request.pose_hint is not None:
         return att, pose_note
-    steadier = _steadier_state(ctx, est, config, ws, cache, log, att)
+    steadier = _steadier_state(ctx, est, config, ws, log, att)
     if steadier is not None:
         return steadier, pose_note
     state_in = estimate.state_from_bands(ctx.closed, att.bands, 1.0, att.prismatic)
@@ -282,7 +283,7 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws:
     why = "unstable as modelled" if not att.check.stable else "toppled by a robust-rest disturbance as modelled"
     log.say("post_check", f"{why}; {note}")
     ctx.root_rotation = R
-    second = _attempt(ctx, est, config, ws, cache, log)
+    second = _attempt(ctx, est, config, ws, log)
     if second.check.stable and (second.check.passed or not att.check.passed) and not (
             second.check.topples and not att.check.topples):
         return second, f"{why}; {note}"
@@ -290,7 +291,7 @@ def _synthesize_and_check(ctx: EstimationContext, est, config: RefineConfig, ws:
     return att.kept_after_another(), f"{note}; not better in simulation, kept as modelled"
 
 
-def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: StageLog,
+def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, log: StageLog,
                     att: Attempt) -> Attempt | None:
     """Stability by design through the opening after an unsteady attempt ``att``: the opened joints where,
     within their bands, the object stands steadiest (:func:`asset2sim.tasks.state.balance.steadiest_fractions`),
@@ -319,7 +320,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     else:  # the opening alone does not make it steady: the resting pose may
         return None
     log.say("stability", note)
-    second = _attempt(ctx, est, config, ws, cache, log, fractions=fractions)
+    second = _attempt(ctx, est, config, ws, log, fractions=fractions)
     if second.check.passed and not second.check.topples:
         second.design = [note, *second.design]
         return second
@@ -328,7 +329,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     return None
 
 
-def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, cache, log: StageLog,
+def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, log: StageLog,
              fractions: dict[str, float] | None = None) -> Attempt:
     """Stages 4-7 for the current ``ctx.root_rotation``; ``fractions`` (joint -> opening fraction)
     replace the requested state of those joints."""
@@ -336,7 +337,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, c
     if fractions:
         syn = replace(syn, requested={**syn.requested, **placement.at_fractions(syn.closed_out, fractions)})
     first_clear = _write(ctx, syn, ws, log)
-    shut, shut_notes = placement.shut_repair(ctx, syn, config, ws, cache, log)
+    shut, shut_notes = placement.shut_repair(ctx, syn, config, ws, log)
     syn = placement.closed_on_output(ctx, syn, ws, log, shut)
     closed_raw = syn.closed_out
     clipped = placement.clip_synthesis(ctx, syn, config, ws, log, shut, fractions)
@@ -344,7 +345,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, c
         clipped = placement.closed_on_output(ctx, clipped, ws, log, shut)
     syn = clipped
     searched = syn.candidate(ctx, shut)
-    st, kept = placement.search_state(ctx, est, syn, searched, config, ws, cache, log)
+    st, kept = placement.search_state(ctx, est, syn, searched, config, ws, log)
     st.collision_changes = shut_notes + list(st.collision_changes)
     state = dict(st.result)
     room = [f"{j} ({ctx.asset.link(ctx.asset.joint(j).child).semantic_label or 'part'}) opened to {f:.2f} of its range: the request "

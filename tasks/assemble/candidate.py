@@ -23,6 +23,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble import write
+from asset2sim.tasks.geometry import analyze
 
 
 @dataclass(frozen=True)
@@ -102,16 +103,20 @@ class Workspace:
     a fresh temporary folder (meshes copied into it once), removed by
     :meth:`close`. Only engines read what is written here. ``open_containers``:
     a container's collision is a decomposition that leaves its inside open
-    (:func:`asset2sim.tasks.assemble.collision_geometry.link_pieces`).
+    (:func:`asset2sim.tasks.assemble.collision_geometry.link_pieces`); ``mesh_cache``: the refine's mesh analysis
+    cache (:class:`asset2sim.tasks.geometry.analyze.MeshCache`), which the collision improvements made on its
+    candidates share (a fresh one when None).
 
     A stage asks for the candidate it works on (:meth:`load`, :meth:`model`,
     :meth:`session`); the folder is written only when that candidate is not
     the one on disk (:func:`candidate_digest`), so asking again costs nothing.
     :attr:`writes` counts the writes."""
 
-    def __init__(self, asset: AssetDescription, *, open_containers: bool = False):
+    def __init__(self, asset: AssetDescription, *, open_containers: bool = False,
+                 mesh_cache: analyze.MeshCache | None = None):
         self.asset = asset
         self.open_containers = open_containers
+        self.mesh_cache = mesh_cache if mesh_cache is not None else analyze.MeshCache()
         _remove_orphans(Path(tempfile.gettempdir()))
         self.root = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")).resolve()
         atomic.add_scratch(self.root)  # engines read it and close() removes it: no fsync

@@ -33,8 +33,7 @@ def build_report(ctx: EstimationContext, prompt: str, chash: str, att: Attempt, 
     """``report.json``'s model from the final attempt; ``resolution``: what each phrase of the request set
     (``request_apply.resolve_states``), for the as-asked tier (``request_met``)."""
     asset, overlay, st, state, closed_out = ctx.asset, att.overlay, att.st, att.state, att.closed_out
-    found = request_apply.findings(ctx, att.targets, closed_out, state, overlay.scale, overlay.total_mass(), list(overlay.notes.other),
-                                   overlay, att.rounds, resolution)
+    found = request_apply.findings(ctx, att.targets, closed_out, state, overlay, att.rounds, resolution)
     asked = as_asked.refine_request_met(ctx.request, resolution, found, closed_out, state, request_apply.unapplied_properties(ctx))
     metrics = att.check.metrics + [m for res in att.check.engine_results.values() for m in res] + [asked]
     mode = post_check_failure_mode(att.check)

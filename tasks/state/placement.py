@@ -101,7 +101,7 @@ def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig,
     return replace(syn, overlay=overlay, closed_out=closed_out, requested=requested, targets=targets, bands=bands)
 
 
-def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace, cache,
+def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws: Workspace,
                  log: StageLog) -> tuple[dict, list[str]]:
     """Stage 5 (before 5a): collision pieces that let the object shut. When the request opens a joint and the
     closed configuration overlaps beyond the tolerance, the state search with its collision repair runs as for
@@ -113,7 +113,7 @@ def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws
             and state_search.phi_at(ws, syn.candidate(ctx), closed, config) > config.penetration_tolerance):
         return {}, []
     shut, kept = state_search.refine_state_with_decomposition(
-        replace(syn.candidate(ctx), state=closed), syn.closed_out, {n: "closed" for n in syn.closed_out}, config, ws, cache, log.say)
+        replace(syn.candidate(ctx), state=closed), syn.closed_out, {n: "closed" for n in syn.closed_out}, config, ws, log.say)
     overrides = kept.collision_overrides
     head = (f"closed configuration (the request opens {', '.join(opened)}): Phi {shut.phi_requested * 1000:.3g} -> "
             f"{shut.phi_result * 1000:.3g} mm" + ("" if overrides else "; collision pieces kept"))
@@ -122,13 +122,13 @@ def shut_repair(ctx: EstimationContext, syn: Synthesis, config: RefineConfig, ws
     return overrides, [head + (":" if shut.collision_changes else "")] + list(shut.collision_changes)
 
 
-def search_state(ctx: EstimationContext, est, syn: Synthesis, base: Candidate, config: RefineConfig, ws: Workspace, cache,
+def search_state(ctx: EstimationContext, est, syn: Synthesis, base: Candidate, config: RefineConfig, ws: Workspace,
                   log: StageLog) -> tuple[StateRefinement, Candidate]:
     """Stage 6: state refinement of the synthesis' candidate ``base`` (with the estimator's joint proposer when
     it has one). Returns (refinement, the candidate with the collision overrides kept: ``base`` when unchanged)."""
     proposer = est.joint_proposer(ctx) if hasattr(est, "joint_proposer") else None
     st, kept = state_search.refine_state_with_decomposition(
-        base, syn.closed_out, syn.bands, config, ws, cache, log.say, proposer=proposer,
+        base, syn.closed_out, syn.bands, config, ws, log.say, proposer=proposer,
         intervals={n: t.interval for n, t in syn.targets.items() if t.interval is not None},
         addressed=lambda: request_apply.resolve_states(ctx, syn.overlay.scale).addressed)
     log.say("refine_state", f"Phi {st.phi_requested * 1000:.3g} mm -> {st.phi_result * 1000:.3g} mm in {st.evaluations} evaluations ({st.method})")

@@ -23,7 +23,7 @@ def phi_at(ws: Workspace, candidate: Candidate, state: dict[str, float], config:
         return float(sess.self_penetration_fresh()[0])
 
 
-def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, config, ws: Workspace, mesh_cache, say, proposer=None,
+def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, config, ws: Workspace, say, proposer=None,
                                      intervals=None, addressed: Callable[[], set[str]] | None = None):
     """State refinement of ``candidate`` from its state (the requested one; its pieces are those searched on);
     then, each kept only if it lowers Phi: a search with the parts the request left closed (not in
@@ -62,7 +62,7 @@ def refine_state_with_decomposition(candidate: Candidate, closed_out, bands, con
     links = sorted({ln for pair in deep for ln in pair})
     sess = ws.session(candidate, "pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False, initial_state=st.result))
     try:
-        overrides, dnotes = collision.improve_collisions(sess, asset, deep, s, ws.root, cache=mesh_cache,
+        overrides, dnotes = collision.improve_collisions(sess, asset, deep, s, ws.root, cache=ws.mesh_cache,
                                                          max_decompositions=config.max_decompositions,
                                                          folder=write.collision_folder(asset))
     except (DecompositionUnavailable, ValueError) as exc:

@@ -436,13 +436,14 @@ def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dic
 
 
 def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
-             scale: float, total_mass: float, notes: list[str], overlay: Overlay | None = None,
-             escalation: list | None = None, resolution: StateResolution | None = None) -> RequestFindings:
-    """The report's account of the request: ignored words, warnings (the parser's and ``notes``' ``WARNING``
-    lines), what was asked, every number against the output (``closed_out`` at the output's scale,
-    ``state`` in output units, ``total_mass`` kg; ``escalation`` rounds explain changed parameters) and, with the
-    ``resolution`` of the request, each state phrase with what it set (:func:`phrase_lines`)."""
-    warnings = list(ctx.request.warnings) + [n for n in notes if n.startswith("WARNING")]
+             overlay: Overlay, escalation: list | None = None, resolution: StateResolution | None = None) -> RequestFindings:
+    """The report's account of the request: ignored words, warnings (the parser's and the ``WARNING`` lines of the
+    ``overlay``'s notes), what was asked, every number against the output (``closed_out`` at the output's scale,
+    ``state`` in output units, the ``overlay``'s scale, total mass (kg) and joint parameters; ``escalation`` rounds
+    explain changed parameters) and, with the ``resolution`` of the request, each state phrase with what it set
+    (:func:`phrase_lines`)."""
+    scale, total_mass = overlay.scale, overlay.total_mass()
+    warnings = list(ctx.request.warnings) + [n for n in overlay.notes.other if n.startswith("WARNING")]
     if not ctx.request.understood:
         warnings.insert(0, "WARNING: no word of the request was understood; refined with the category's defaults")
     q: list[QuantityOutcome] = []
@@ -481,8 +482,7 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
         ok = abs(total_mass - total_req.mass) <= NUMBER_TOLERANCE * total_req.mass
         q.append(QuantityOutcome(what="total mass", phrase=total_req.phrase, asked=total_req.mass, achieved=total_mass, unit="kg",
                                  within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
-    if overlay is not None:
-        q += _dynamics_outcomes(ctx, overlay, escalation or [])
+    q += _dynamics_outcomes(ctx, overlay, escalation or [])
     phrases = phrase_lines(ctx, resolution, closed_out, state) if resolution is not None else []
     return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q, phrases=phrases)
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from asset2sim.commands.refine import summary_lines
+from asset2sim.schemas.overlay import EstimatorInfo, Overlay
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.request_match import requested_joints
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
@@ -163,7 +164,8 @@ def test_a_bottles_volume_sets_its_size_with_the_reasoning(generated):
     assert "'500 ml'" in note and "convex hull" in note
     with build_context(generated["bottle"], "a 500 ml bottle") as ctx:
         assert ctx.closed_volume * s ** 3 == pytest.approx(5e-4, rel=1e-6)
-        (q,) = [x for x in request_apply.findings(ctx, {}, {}, {}, s, 1.0, []).quantities if x.what == "volume"]
+        overlay = Overlay(estimator=EstimatorInfo(name="test"), scale=s)
+        (q,) = [x for x in request_apply.findings(ctx, {}, {}, {}, overlay).quantities if x.what == "volume"]
         assert q.within_tolerance and q.unit == "m^3"
 
 
