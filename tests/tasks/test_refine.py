@@ -11,7 +11,6 @@ from pathlib import Path
 import pytest
 
 from asset2sim.engines.source import SimObject, UrdfFile
-from asset2sim.schemas.config import RefineConfig
 from asset2sim import demo_assets
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
