@@ -31,6 +31,7 @@ from asset2sim.tasks.evaluation.report_changes import from_closed_text, opening_
 from asset2sim.tasks.ingest.partnet_mobility import read_semantics
 from asset2sim.tasks.refine import RefineError
 from asset2sim.tasks.synthesize.validate_overlay import OverlayInvalid
+from asset2sim.engines.source import UrdfFile
 
 NAME = "refine"
 HELP = "Refine one asset for a natural-language request into an interaction-ready asset (an output folder: docs/guide/outputs.md)."
@@ -99,7 +100,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _joint_types(out_dir) -> dict[str, str]:
     """Joint name -> type of the output's URDF ({} when it cannot be read)."""
     try:
-        return {n: j.type for n, j in parse_urdf(Path(out_dir) / URDF_NAME)[1].items()}
+        return {n: j.type for n, j in parse_urdf(UrdfFile(Path(out_dir) / URDF_NAME))[1].items()}
     except Exception:
         return {}
 
@@ -108,7 +109,7 @@ def _joint_labels(out_dir) -> dict[str, str]:
     """Joint name -> its moving part's label in the output's ``semantics.txt`` ({} when either cannot be read)."""
     try:
         sem = read_semantics(Path(out_dir))
-        return {n: sem[j.child].label for n, j in parse_urdf(Path(out_dir) / URDF_NAME)[1].items() if j.child in sem}
+        return {n: sem[j.child].label for n, j in parse_urdf(UrdfFile(Path(out_dir) / URDF_NAME))[1].items() if j.child in sem}
     except Exception:
         return {}
 

@@ -7,7 +7,6 @@ loads it.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,7 +95,3 @@ class SimObject:
         """A session of the source in ``engine`` under :meth:`options` (``changes`` as there; the caller closes it).
         Raises EngineUnavailable, RuntimeError: as :meth:`SimSource.open`."""
         return self.source.open(engine, self.options(**changes))
-
-    def with_state(self, state: Mapping[str, float]) -> "SimObject":
-        """The same object started from ``state`` (joint -> rad or m)."""
-        return dataclasses.replace(self, state=state)

@@ -12,7 +12,8 @@ from typing import Any
 
 from asset2sim.tasks.ingest import partnet_mobility
 from asset2sim.tasks.ingest.errors import AssetError
-from asset2sim.urdf import UrdfError, UrdfSource, model_of
+from asset2sim.engines.source import SimSource
+from asset2sim.urdf import UrdfError
 
 #: Joint types that move (the others are fixed).
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -58,8 +59,8 @@ def find_urdf(path: Path | str) -> Path:
         raise EvaluationError(str(exc)) from exc
 
 
-def parse_urdf(urdf: UrdfSource) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
-    """Links and joints of a URDF as written (a file read leniently, or a model): (link name ->
+def parse_urdf(source: SimSource) -> tuple[dict[str, LinkInfo], dict[str, JointInfo]]:
+    """Links and joints of a URDF as written (``source.model``, a file read leniently): (link name ->
     :class:`LinkInfo`, joint name -> :class:`JointInfo`), in file order.
 
     Raises:
@@ -67,7 +68,7 @@ def parse_urdf(urdf: UrdfSource) -> tuple[dict[str, LinkInfo], dict[str, JointIn
             line and link or joint).
     """
     try:
-        model = model_of(urdf, mode="lenient")
+        model = source.model(mode="lenient")
     except UrdfError as exc:
         raise EvaluationError(f"unreadable URDF: {exc}") from exc
     links = {name: LinkInfo(name, None if ln.inertial is None else ln.inertial.mass, bool(ln.collisions), bool(ln.visuals))

@@ -20,7 +20,7 @@ from asset2sim.tasks.check.force_ranges import force_metric
 from asset2sim.tasks.check.asset_files import parse_urdf
 from asset2sim.tasks.check.task_spec import TaskSpec, parse_task, task_actions, with_work_to_do
 from asset2sim.tasks.interpret.part_priors import handled, spring_expected
-from asset2sim.engines.source import SimObject
+from asset2sim.engines.source import SimObject, UrdfFile
 from asset2sim.urdf import UrdfModel
 
 #: The metrics this tier adds to the post-check.
@@ -66,7 +66,7 @@ def task_spec_for(text: str, model: UrdfModel, asset: AssetDescription, category
     """The ``TaskSpec`` of ``text`` on the written asset's ``model`` (labels from
     ``asset``); with ``state`` and ``closed`` (joint -> (q_closed, direction,
     open range)) narrowed to the joints it has work on."""
-    _, joints = parse_urdf(model)
+    _, joints = parse_urdf(UrdfFile(model))
     semantics = {ln.name: (ln.semantic_joint or "", ln.semantic_label or "") for ln in asset.links if ln.semantic_label}
     spec = parse_task(text, joints, semantics, category, task_joints)
     if state is not None and closed:

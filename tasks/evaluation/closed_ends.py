@@ -16,6 +16,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.check.asset_files import JointInfo, clip_to_limits
 from asset2sim.tasks.geometry.closed_state import link_hull_points
+from asset2sim.engines.source import UrdfFile
 from asset2sim.tasks.geometry.urdf_closed import geometry_extents, measure_closed_ends
 from asset2sim.tasks.ingest.extract import extract_asset
 
@@ -88,7 +89,7 @@ def compute_closed(urdf: Path, joints: dict[str, JointInfo], names: list[str],
     if not names:
         return out, notes
     try:
-        m = measure_closed_ends(urdf)
+        m = measure_closed_ends(UrdfFile(urdf))
         if extents_out is not None:
             extents_out.append(m.extents)
         for n in names:

@@ -131,7 +131,7 @@ def _reference_state(ref: partnet_mobility.GenSim2Reference, joints: dict[str, J
     (else 0) clipped to the reference's limits, prismatic values times the scale (else the
     reference's, else 1). Raises EvaluationError: the reference URDF cannot be read."""
     state: dict[str, float] = {}
-    _, ref_joints = parse_urdf(ref.urdf)
+    _, ref_joints = parse_urdf(UrdfFile(ref.urdf))
     rng = ref.joint_position_range
     for n in ref.task_joints:
         if n not in joints:
@@ -152,7 +152,7 @@ def build_context(asset: Path | str, *, reference: Path | str | None = None, pro
     folder."""
     urdf = find_urdf(asset).resolve()
     folder = urdf.parent
-    links, joints = parse_urdf(urdf)
+    links, joints = parse_urdf(UrdfFile(urdf))
     notes: list[str] = []
     overlay = read_json(folder / OVERLAY_NAME)
     report = read_json(folder / REPORT_NAME)

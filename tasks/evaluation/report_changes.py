@@ -17,6 +17,7 @@ import numpy as np
 from asset2sim.tasks.check.as_asked import quantity_text
 from asset2sim.tasks.check.asset_files import find_urdf, parse_urdf
 from asset2sim.tasks.geometry.render import render_views
+from asset2sim.engines.source import UrdfFile
 
 #: Views shown for the input and the output, side by side.
 COMPARED_VIEWS = ("perspective", "front")
@@ -68,7 +69,7 @@ def _row(what: str, before: str, after: str, why: str) -> str:
 def _input_joints(report: dict[str, Any]) -> dict[str, Any]:
     """The input URDF's joints (``asset_files.JointInfo`` by name); {} when the input cannot be read."""
     try:
-        return parse_urdf(find_urdf(Path(report["source"])))[1]
+        return parse_urdf(UrdfFile(find_urdf(Path(report["source"]))))[1]
     except Exception:
         return {}
 

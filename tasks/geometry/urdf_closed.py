@@ -20,11 +20,11 @@ import numpy as np
 
 from asset2sim import file_memo
 from asset2sim.engines.base import SessionOptions
-from asset2sim.engines.registry import open_session
+from asset2sim.engines.source import SimSource, UrdfFile
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents
 from asset2sim.tasks.ingest.extract import describe_model, extract_asset
-from asset2sim.urdf import UrdfError, UrdfModel, UrdfSource, model_of, path_of, write_urdf
+from asset2sim.urdf import UrdfError, UrdfModel, write_urdf
 
 
 @dataclass
@@ -38,16 +38,18 @@ class UrdfClosed:
 
 
 @contextmanager
-def closed_session(urdf: UrdfSource) -> Iterator[UrdfClosed]:
-    """Closed ends of every movable joint of ``urdf`` (a file, or a model in memory:
-    :func:`~asset2sim.tasks.ingest.extract.describe_model`) (:func:`closed_positions` with its defaults) in a
-    fresh fixed-base, gravity-free PyBullet session without ground, open inside the ``with`` block.
+def closed_session(source: SimSource) -> Iterator[UrdfClosed]:
+    """Closed ends of every movable joint of ``source`` (:func:`closed_positions` with its defaults) in a
+    fresh fixed-base, gravity-free PyBullet session without ground, open inside the ``with`` block. A file
+    (:class:`~asset2sim.engines.source.UrdfFile` of a path) is described with its folder's part labels
+    (:func:`~asset2sim.tasks.ingest.extract.extract_asset`), any other source from its model
+    (:func:`~asset2sim.tasks.ingest.extract.describe_model`).
 
     Raises:
-        asset2sim.tasks.ingest.extract.AssetError: ``urdf`` cannot be read; and whatever the engine raises.
+        asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read; and whatever the engine raises.
     """
-    desc = describe_model(urdf) if isinstance(urdf, UrdfModel) else extract_asset(urdf)
-    s = open_session("pybullet", urdf, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    desc = _described(source)
+    s = source.open("pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False))
     try:
         try:
             hull = link_hull_points(desc)
@@ -67,20 +69,27 @@ class ClosedMeasurement:
     extents: np.ndarray  # (3,) m, the object's box with every joint at its closed end (geometry_extents)
 
 
-def measure_closed_ends(urdf: UrdfSource) -> ClosedMeasurement:
-    """The closed ends of ``urdf`` (:func:`closed_session`) and the object's extents there, measured once
+def _described(source: SimSource) -> AssetDescription:
+    """The description :func:`closed_session` measures ``source`` with."""
+    if isinstance(source, UrdfFile) and not isinstance(source.source, UrdfModel):
+        return extract_asset(source.path)
+    return describe_model(source.model())
+
+
+def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
+    """The closed ends of ``source`` (:func:`closed_session`) and the object's extents there, measured once
     per geometry (not joint dynamics: the measurement is kinematic) in this process (:data:`_MEASURED`;
     each caller gets its own copy).
 
     Raises:
         as :func:`closed_session`.
     """
-    key, files = _geometry_key(urdf)
+    key, files = _geometry_key(source)
     if key is not None:
         hit = _MEASURED.get(key)
         if hit is not None:
             return hit
-    with closed_session(urdf) as m:
+    with closed_session(source) as m:
         out = ClosedMeasurement(closed=m.closed, extents=geometry_extents(
             m.session, m.asset, {n: c.q_closed for n, c in m.closed.items()}, m.hull))
     if key is not None:
@@ -88,31 +97,31 @@ def measure_closed_ends(urdf: UrdfSource) -> ClosedMeasurement:
     return out
 
 
-def measure_closed(urdf: UrdfSource) -> dict[str, ClosedState]:
-    """joint -> closed end of ``urdf`` (:func:`measure_closed_ends`), the joints with an opening range > 0.
+def measure_closed(source: SimSource) -> dict[str, ClosedState]:
+    """joint -> closed end of ``source`` (:func:`measure_closed_ends`), the joints with an opening range > 0.
 
     Raises:
         as :func:`closed_session`.
     """
-    return {n: c for n, c in measure_closed_ends(urdf).closed.items() if c.open_range > 0}
+    return {n: c for n, c in measure_closed_ends(source).closed.items() if c.open_range > 0}
 
 
 #: :func:`measure_closed_ends` results by :func:`_geometry_key` while the mesh files are unchanged.
 _MEASURED: file_memo.FileMemo[ClosedMeasurement] = file_memo.FileMemo(copy.deepcopy, max_entries=16)
 
 
-def _geometry_key(urdf: UrdfSource) -> tuple[str | None, tuple]:
+def _geometry_key(source: SimSource) -> tuple[str | None, tuple]:
     """(digest of the URDF's folder and of the model without joint ``<dynamics>``, identities of its mesh
     files), or (None, ()) when the URDF cannot be read."""
     try:
-        model = model_of(urdf)
+        model = source.model()
     except (UrdfError, OSError):
         return None, ()
     meshes = sorted({str(g.path) for link in model.links.values() for g in (*link.collisions, *link.visuals)
                      if g.kind == "mesh" and g.path is not None})
     for j in model.joints:
         j.dynamics = None
-    h = hashlib.sha256(os.path.abspath(path_of(urdf).parent).encode() + b"\0" + write_urdf(model))
+    h = hashlib.sha256(os.path.abspath(source.path.parent).encode() + b"\0" + write_urdf(model))
     return h.hexdigest(), file_memo.identities(meshes)
 
 

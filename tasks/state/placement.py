@@ -57,7 +57,7 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log:
     :mod:`asset2sim.tasks.geometry.urdf_closed`), the requested state and the overlay's initial positions
     moved onto them. Unchanged when the measurement fails."""
     try:
-        measured = urdf_closed.measure_closed(ws.model(syn.candidate(ctx, overrides)))
+        measured = urdf_closed.measure_closed(ws.source(syn.candidate(ctx, overrides)))
     except Exception as exc:
         log.say("closed_state", f"closed ends not measured on the output ({type(exc).__name__}: {exc}); the input's are used")
         return syn

@@ -14,6 +14,7 @@ from asset2sim.tasks.evaluation.closed_ends import compute_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.geometry.urdf_closed import measure_closed, replace_positions
 from asset2sim.tasks.refine import refine_asset
+from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 
 
@@ -52,7 +53,7 @@ def write_lever_in_slot(folder: Path) -> Path:
 
 
 def _evaluation_closed(urdf: Path, joint: str):
-    _, joints = parse_urdf(urdf)
+    _, joints = parse_urdf(UrdfFile(urdf))
     closed, notes = compute_closed(urdf, joints, [joint])
     assert closed[joint].source.startswith("geometry"), notes
     return closed[joint]
@@ -75,7 +76,7 @@ def test_refine_closed_end_is_the_evaluations_when_a_part_overlaps_its_parent(tm
     pieces; refine's closed end, and the closed state it writes, are those the
     evaluation measures on the output."""
     src = write_lever_in_slot(tmp_path / "src")
-    on_input = measure_closed(src / "mobility.urdf")["lever_j"].q_closed
+    on_input = measure_closed(UrdfFile(src / "mobility.urdf"))["lever_j"].q_closed
     res = refine_asset(src, "a faucet with its handle turned off", tmp_path / "out", extras=False)
     r = res.report
     ev = _evaluation_closed(res.out_dir / "mobility.urdf", "lever_j")

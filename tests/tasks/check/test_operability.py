@@ -44,7 +44,7 @@ def _operate(out: Path, springs: dict[str, Spring] | None = None) -> operability
     """The operability run of an output folder (its closed ends, initial state, springs and labels)."""
     report = json.loads((out / "report.json").read_text())
     state = report["initial_joint_positions"]
-    closed = {n: (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in measure_closed(out / "mobility.urdf").items()}
+    closed = {n: (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in measure_closed(UrdfFile(out / "mobility.urdf")).items()}
     labels = {}
     for line in (out / "semantics.txt").read_text().splitlines():
         parts = line.split()
@@ -122,7 +122,7 @@ def test_a_drop_down_door_carries_its_weight_on_a_counterbalance_spring(tmp_path
                                           res.overlay.model_copy(update={"joints": {**res.overlay.joints, "joint_0": door.model_copy(
                                               update={"stiffness": 0.0, "spring_reference": None})}}),
                                           {"joint_0": (float(c.q_closed), float(c.direction), float(c.open_range)) for n, c in
-                                           measure_closed(res.out_dir / "mobility.urdf").items() if n == "joint_0"},
+                                           measure_closed(UrdfFile(res.out_dir / "mobility.urdf")).items() if n == "joint_0"},
                                           category="Oven", labels={"link_0": "door"}, whole=True)
     hold = budgets["joint_0"].hold_floor
     assert budgets["joint_0"].conflict, "without the spring the door is not held inside its operating budget"

@@ -9,11 +9,12 @@ import pytest
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
 from asset2sim.tasks.check.asset_files import parse_urdf, read_semantics
 from asset2sim.tasks.check.task_spec import parse_task, task_actions, with_work_to_do
+from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 
 
 def _asset(aid: str):
-    _, joints = parse_urdf(SHARED / aid / "mobility.urdf")
+    _, joints = parse_urdf(UrdfFile(SHARED / aid / "mobility.urdf"))
     return joints, read_semantics(SHARED / aid)
 
 

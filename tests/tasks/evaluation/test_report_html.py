@@ -201,10 +201,11 @@ def test_a_failing_joint_sweep_shows_its_opening_over_time_and_where_it_stalled(
 @needs_shared
 def test_a_failed_task_attempt_shows_its_numbers_and_where_the_part_was_taken_asked_and_left():
     from asset2sim.tasks.evaluation.failure_evidence import evidence_section
+    from asset2sim.engines.source import UrdfFile
     from asset2sim.tasks.geometry.urdf_closed import measure_closed
 
     urdf = SHARED / "101668" / "mobility.urdf"
-    c = measure_closed(urdf)["joint_2"]
+    c = measure_closed(UrdfFile(urdf))["joint_2"]
     closed = {"joint_2": {"q_closed": c.q_closed, "direction": c.direction, "open_range": c.open_range}}
     attempt = {"joint": "joint_2", "action": "close", "success": False, "failure": "the object slid before the target was reached",
                "start_fraction": 0.65, "target_fraction": 0.05, "final_fraction": 0.64, "reached": False, "held": False,

@@ -12,6 +12,7 @@ from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.geometry.closed_state import closed_positions, object_extents
 from asset2sim.tasks.ingest.extract import extract_asset
+from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 
 
@@ -91,23 +92,23 @@ def test_closed_ends_of_one_geometry_are_measured_once_and_stay_right(tmp_path):
     from asset2sim.tasks.geometry import urdf_closed
 
     a = write_contract_asset(tmp_path / "a", lid_angle=0.4)
-    first = urdf_closed.measure_closed_ends(a.urdf)
+    first = urdf_closed.measure_closed_ends(UrdfFile(a.urdf))
     hits = urdf_closed._MEASURED.hits
     model = urdf_mod.read_urdf(a.urdf)
     for j in model.movable_joints:
         j.dynamics = urdf_mod.UrdfDynamics(damping=3.0, friction=0.7)
     a.urdf.write_bytes(urdf_mod.write_urdf(model))
-    again = urdf_closed.measure_closed_ends(a.urdf)
+    again = urdf_closed.measure_closed_ends(UrdfFile(a.urdf))
     assert urdf_closed._MEASURED.hits == hits + 1
-    with urdf_closed.closed_session(a.urdf) as fresh:
+    with urdf_closed.closed_session(UrdfFile(a.urdf)) as fresh:
         assert again.closed == fresh.closed == first.closed
     np.testing.assert_array_equal(again.extents, first.extents)
     again.closed.clear()  # a copy: the memo is not changed through it
-    assert urdf_closed.measure_closed_ends(a.urdf).closed == first.closed
+    assert urdf_closed.measure_closed_ends(UrdfFile(a.urdf)).closed == first.closed
     lid = model.joint("lid_hinge")
     lid.limit.upper = 0.5 * float(lid.limit.upper)
     a.urdf.write_bytes(urdf_mod.write_urdf(model))
-    shorter = urdf_closed.measure_closed_ends(a.urdf)
+    shorter = urdf_closed.measure_closed_ends(UrdfFile(a.urdf))
     assert urdf_closed._MEASURED.hits == hits + 2  # the copy check above; the new limit was measured
     assert shorter.closed["lid_hinge"].upper == lid.limit.upper != first.closed["lid_hinge"].upper
 
@@ -123,7 +124,7 @@ def test_a_motion_that_leaves_the_object_as_compact_closes_at_the_modelled_pose(
     from tests.unseen_assets import build_sliding_window
 
     src = build_sliding_window(tmp_path / "window")
-    with closed_session(src / "mobility.urdf") as m:
+    with closed_session(UrdfFile(src / "mobility.urdf")) as m:
         for j in ("joint_0", "joint_1"):
             c = m.closed[j]
             assert (c.q_closed, c.direction) == (0.0, 1.0) and c.open_range == pytest.approx(0.5)
@@ -137,7 +138,7 @@ def test_suitcase_buttons_close_unpressed():
     tie rule put them 6.9 mm in)."""
     from asset2sim.tasks.geometry.urdf_closed import closed_session
 
-    with closed_session(SHARED / "101668" / "mobility.urdf") as m:
+    with closed_session(UrdfFile(SHARED / "101668" / "mobility.urdf")) as m:
         for j in ("joint_0", "joint_1"):
             assert m.closed[j].q_closed == 0.0 and m.closed[j].open_range == pytest.approx(0.012, abs=1e-4)
         assert m.closed["joint_2"].compactness_ratio > 1.5  # the lid: found from the geometry
@@ -160,7 +161,7 @@ def test_a_model_in_memory_is_described_and_closed_as_its_file(tmp_path):
     assert described.joints == from_file.joints and described.root_link == from_file.root_link
     assert [(ln.name, ln.visuals, ln.collisions) for ln in described.links] == \
         [(ln.name, ln.visuals, ln.collisions) for ln in from_file.links]
-    with urdf_closed.closed_session(urdf) as by_file, urdf_closed.closed_session(model) as by_model:
+    with urdf_closed.closed_session(UrdfFile(urdf)) as by_file, urdf_closed.closed_session(UrdfFile(model)) as by_model:
         assert by_model.closed == by_file.closed and by_model.closed["joint_2"].open_range > 0
     nameless = urdf_mod.clone_model(model)
     nameless.path = None

@@ -20,6 +20,7 @@ from asset2sim.tasks.interpret.request import LESS_THAN_HALF, parse_request
 from asset2sim.tasks.refine import refine_asset
 from asset2sim.tasks.synthesize import estimate, request_apply
 from asset2sim.tasks.synthesize.context import build_context
+from asset2sim.engines.source import UrdfFile
 from tests.conftest import SHARED, needs_shared
 from tests.tasks.interpret.request_assets import build_three_drawer_cabinet
 from tests.unseen_assets import build_bottle, build_double_door_cabinet, build_toaster
@@ -202,7 +203,7 @@ def test_the_evaluation_resolves_the_same_words_as_refine():
     """``request_match.requested_joints`` (the evaluation's as-asked check): the stapler's arm is its lid, the freezer
     door the smaller one, a middle drawer of two is none."""
     def run(obj: str, text: str, category: str, volumes: dict[str, float] | None = None):
-        joints = parse_urdf(SHARED / obj / "mobility.urdf")[1]
+        joints = parse_urdf(UrdfFile(SHARED / obj / "mobility.urdf"))[1]
         sem = {k: (v.joint_kind, v.label) for k, v in read_semantics(SHARED / obj).items()}
         return requested_joints(parse_request(text), joints, sem, {}, [], category, volumes), joints
 
@@ -234,7 +235,7 @@ def test_a_size_word_without_a_part_noun_picks_among_the_task_relevant_parts_in_
     res, labels, vols, *_ = resolve(SHARED / "11178", "A fridge with the freezer open.")
     small = min(joint_of(labels, "door"), key=vols.get)
     assert set(res.addressed) == {small} and res.bands[small] == "mostly"
-    joints = parse_urdf(SHARED / "11178" / "mobility.urdf")[1]
+    joints = parse_urdf(UrdfFile(SHARED / "11178" / "mobility.urdf"))[1]
     sem = {k: (v.joint_kind, v.label) for k, v in read_semantics(SHARED / "11178").items()}
     link_vols = {joints[n].child: v for n, v in vols.items()}
     req, _ = requested_joints(parse_request("A fridge with the freezer open."), joints, sem, {}, sorted(vols), "Refrigerator", link_vols)
