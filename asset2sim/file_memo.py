@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import threading
-from collections import OrderedDict
+import cachetools
 from pathlib import Path
 from typing import Callable, Generic, Hashable, Iterable, TypeVar
 
@@ -43,8 +43,7 @@ class FileMemo(Generic[T]):
 
     def __init__(self, copy: Callable[[T], T], max_entries: int = 64):
         self._copy = copy
-        self._max = int(max_entries)
-        self._entries: OrderedDict[Hashable, tuple[tuple, T]] = OrderedDict()
+        self._entries: cachetools.LRUCache = cachetools.LRUCache(maxsize=int(max_entries))
         self._lock = threading.Lock()
         self.hits = 0
 
@@ -57,8 +56,6 @@ class FileMemo(Generic[T]):
             files, value = entry
             if all(i is not None and identity(p) == i for p, i in files):
                 with self._lock:
-                    if key in self._entries:
-                        self._entries.move_to_end(key)
                     self.hits += 1
                 return self._copy(value)
             with self._lock:
@@ -73,6 +70,3 @@ class FileMemo(Generic[T]):
         stored = self._copy(value)
         with self._lock:
             self._entries[key] = (files, stored)
-            self._entries.move_to_end(key)
-            while len(self._entries) > self._max:
-                self._entries.popitem(last=False)

@@ -17,10 +17,10 @@ import io
 import os
 import threading
 import warnings
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cachetools
 import numpy as np
 
 from asset2sim import atomic, file_memo
@@ -45,23 +45,27 @@ class MeshReadError(ValueError):
     """A mesh file is missing or cannot be parsed (the message names the file)."""
 
 
-#: absolute path -> (identity when remembered, its bytes or the file it is a plain copy of, bytes kept); the oldest
-#: dropped past 512 MiB of bytes or 65,536 files (a flow worker refines many assets).
-_WRITTEN: OrderedDict[str, tuple[file_memo.FileIdentity, bytes | Path, int]] = OrderedDict()
+def _written_size(entry: tuple[file_memo.FileIdentity, bytes | Path, int]) -> int:
+    """What a :data:`_WRITTEN` entry counts against its 512 MiB: its bytes, at least 8 KiB (so at most 65,536
+    files are kept)."""
+    return max(entry[2], 8192)
+
+
+#: absolute path -> (identity when remembered, its bytes or the file it is a plain copy of, bytes kept); the least
+#: recently used dropped past 512 MiB of bytes or 65,536 files (a flow worker refines many assets).
+_WRITTEN: cachetools.LRUCache = cachetools.LRUCache(maxsize=512 << 20, getsizeof=_written_size)
 _WRITTEN_LOCK = threading.Lock()
-_WRITTEN_BYTES = [0]
 
 
 def remember(path: Path | str, data: bytes | Path) -> None:
     """Keep what was just written to ``path``: its bytes, or the file it is a plain copy of."""
     ident = file_memo.identity(path)
     if ident is not None:
+        entry = (ident, data, len(data) if isinstance(data, bytes) else 0)
         with _WRITTEN_LOCK:
-            size = len(data) if isinstance(data, bytes) else 0
-            _WRITTEN_BYTES[0] += size - _WRITTEN.pop(os.path.abspath(path), (None, None, 0))[2]
-            _WRITTEN[os.path.abspath(path)] = (ident, data, size)
-            while _WRITTEN_BYTES[0] > 512 << 20 or len(_WRITTEN) > 65536:
-                _WRITTEN_BYTES[0] -= _WRITTEN.popitem(last=False)[1][2]
+            _WRITTEN.pop(os.path.abspath(path), None)
+            if _written_size(entry) <= _WRITTEN.maxsize:
+                _WRITTEN[os.path.abspath(path)] = entry
 
 
 def write_file(path: Path | str, data: bytes) -> Path:
@@ -75,7 +79,7 @@ def forget_under(folder: Path | str) -> None:
     prefix = os.path.join(os.path.abspath(folder), "")
     with _WRITTEN_LOCK:
         for key in [k for k in _WRITTEN if k.startswith(prefix)]:
-            _WRITTEN_BYTES[0] -= _WRITTEN.pop(key)[2]
+            _WRITTEN.pop(key)
 
 
 def file_bytes(path: Path | str) -> bytes:

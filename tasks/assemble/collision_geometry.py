@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
+import cachetools
 import numpy as np
 from scipy.spatial import QhullError
 
@@ -128,14 +130,14 @@ def link_pieces(model: urdf.UrdfModel, mesh_path, state: dict[str, float] | None
     done = _cached_pieces(key, model, mesh_path, limit, decompose, opening)
     if state is not None:
         skey = (key, tuple(sorted((str(k), float(v)) for k, v in state.items())), bool(level))
-        done = _STATE_CACHE.get(skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level))
+        done = _recalled(_STATE_CACHE, skey) or _remember(_STATE_CACHE, skey, _state_pieces(model, done, state, decompose, level))
     return {k: list(v) for k, v in done[0].items()}, list(done[1])
 
 
 def _cached_pieces(key: str, model: urdf.UrdfModel, mesh_path, limit: int,
                    decompose: bool, opening: bool) -> tuple[dict[str, list[Piece]], list[str]]:
     """:func:`link_pieces`' state-independent (pieces, notes), from the process's or the disk's cache, else made."""
-    hit = _PIECE_CACHE.get(key)
+    hit = _recalled(_PIECE_CACHE, key)
     if hit is not None:
         return hit
     disk_key = _content_key(model, mesh_path, limit, decompose, opening)
@@ -223,17 +225,24 @@ def _state_pieces(model: urdf.UrdfModel, hit: tuple[dict[str, list[Piece]], list
     return pieces, notes
 
 
-#: Pieces made in this process, by :func:`_cache_key`.
-_PIECE_CACHE: dict[str, tuple[dict[str, list[Piece]], list[str]]] = {}
-#: What :func:`link_pieces` returned, by (:func:`_cache_key`, initial state).
-_STATE_CACHE: dict[tuple, tuple[dict[str, list[Piece]], list[str]]] = {}
+#: Pieces made in this process, by :func:`_cache_key` (the oldest of 16 dropped).
+_PIECE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
+#: What :func:`link_pieces` returned, by (:func:`_cache_key`, initial state) (the oldest of 16 dropped).
+_STATE_CACHE: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=16)
+_CACHE_LOCK = threading.Lock()
 
 
-def _remember(cache: dict, key, hit: tuple[dict[str, list[Piece]], list[str]]) -> tuple[dict[str, list[Piece]], list[str]]:
-    """``hit``, kept in ``cache`` (the oldest of 16 dropped)."""
-    if len(cache) >= 16:
-        cache.pop(next(iter(cache)))
-    cache[key] = hit
+def _recalled(cache: cachetools.Cache, key) -> tuple[dict[str, list[Piece]], list[str]] | None:
+    """What ``cache`` holds under ``key``, or None."""
+    with _CACHE_LOCK:
+        return cache.get(key)
+
+
+def _remember(cache: cachetools.Cache, key, hit: tuple[dict[str, list[Piece]], list[str]]
+              ) -> tuple[dict[str, list[Piece]], list[str]]:
+    """``hit``, kept in ``cache``."""
+    with _CACHE_LOCK:
+        cache[key] = hit
     return hit
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
-from collections import OrderedDict
+import cachetools
 
 import numpy as np
 
@@ -105,23 +105,19 @@ def split_surface(points: np.ndarray, keep_out: np.ndarray, tolerance: float, bu
            float(spacing))
     with _SPLITS_LOCK:
         hit = _SPLITS.get(key)
-        if hit is not None:
-            _SPLITS.move_to_end(key)
-            return list(hit)
+    if hit is not None:
+        return list(hit)
     sets = _split_surface(pts.copy(), out, tolerance, budget, spacing)  # a copy: the arrays kept never alias the caller's
     for a in sets:
         a.flags.writeable = False
     with _SPLITS_LOCK:
         _SPLITS[key] = tuple(sets)
-        while len(_SPLITS) > _SPLITS_SIZE:
-            _SPLITS.popitem(last=False)
     return list(sets)
 
 
 #: :func:`split_surface`'s point sets made in this process, by (shapes, SHA-256 of the points and the points kept
-#: out, tolerance, budget, spacing); the oldest dropped beyond :data:`_SPLITS_SIZE`.
-_SPLITS: OrderedDict[tuple, tuple[np.ndarray, ...]] = OrderedDict()
-_SPLITS_SIZE = 64
+#: out, tolerance, budget, spacing); the least recently used dropped beyond 64.
+_SPLITS: cachetools.LRUCache = cachetools.LRUCache(maxsize=64)
 _SPLITS_LOCK = threading.Lock()
 
 

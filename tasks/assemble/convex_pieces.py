@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import hashlib
 import heapq
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import cachetools
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
@@ -61,7 +63,7 @@ class Piece:
         Raises:
             QhullError, ValueError: the points span no volume.
         """
-        hit = _memo(_HULLS, _HULLS_MAX, points, _hull)
+        hit = _memo(_HULLS, points, _hull)
         return cls(hit[0], hit[1], hit[2], sources)
 
 
@@ -72,24 +74,24 @@ def _hull(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return pts[used], hull.equations, float(hull.volume)
 
 
-def _memo(cache: dict, most: int, points: np.ndarray, make: Callable[[np.ndarray], object]):
-    """``make`` of ``points`` (as contiguous floats), kept in ``cache`` by
-    (shape, SHA-1 of the points); the oldest entry dropped beyond ``most``."""
+def _memo(cache: cachetools.Cache, points: np.ndarray, make: Callable[[np.ndarray], object]):
+    """``make`` of ``points`` (as contiguous floats), kept in ``cache`` by (shape, SHA-1 of the points)."""
     pts = np.ascontiguousarray(points, dtype=float)
     key = (pts.shape, hashlib.sha1(pts.tobytes()).digest())
-    hit = cache.get(key)
+    with _MEMO_LOCK:
+        hit = cache.get(key)
     if hit is None:
         hit = make(pts)
-        if len(cache) >= most:
-            cache.pop(next(iter(cache)))
-        cache[key] = hit
+        with _MEMO_LOCK:
+            cache[key] = hit
     return hit
 
 
-#: Hulls (:func:`_hull`) and OBJ bytes (:func:`piece_obj`) made in this process (a refine builds the same pieces often).
-_HULLS: dict[tuple, tuple[np.ndarray, np.ndarray, float]] = {}
-_HULLS_MAX = 5000
-_OBJS: dict[tuple, bytes] = {}
+#: Hulls (:func:`_hull`) and OBJ bytes (:func:`piece_obj`) made in this process (a refine builds the same pieces
+#: often), the oldest dropped first.
+_HULLS: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=5000)
+_OBJS: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=4096)
+_MEMO_LOCK = threading.Lock()
 
 
 def thinnest_axis(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
@@ -157,7 +159,7 @@ def support_points(points: np.ndarray) -> np.ndarray:
 
 def piece_obj(piece: Piece) -> bytes:
     """OBJ bytes of ``piece``'s hull, every face normal pointing outward (memoised in :data:`_OBJS`)."""
-    return _memo(_OBJS, 4096, piece.points, mesh_io.hull_obj)
+    return _memo(_OBJS, piece.points, mesh_io.hull_obj)
 
 
 def depth_inside(points: np.ndarray, piece: Piece) -> float:
@@ -286,7 +288,7 @@ def clip_piece(piece: Piece, normal: np.ndarray, offset: float) -> Piece | None:
     """``piece`` cut by the half-space ``normal . x + offset <= 0`` (m): the
     hull of its vertices inside the half-space and of the points where its
     edges cross the plane; None when nothing with volume is left."""
-    verts, edges = _memo(_HULL_EDGES, _HULLS_MAX, piece.points, _hull_edges)
+    verts, edges = _memo(_HULL_EDGES, piece.points, _hull_edges)
     s = verts @ normal + offset
     keep = [verts[s <= 0]]
     a, b = edges[:, 0], edges[:, 1]
@@ -307,7 +309,7 @@ def _hull_edges(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: Hull vertices and edges (:func:`_hull_edges`) of the pieces :func:`clip_piece` cut, in this process.
-_HULL_EDGES: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+_HULL_EDGES: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=5000)
 
 
 #: Volume (m^3) under which a piece a cut or trim left is a sliver and is dropped: 1 mm^3.

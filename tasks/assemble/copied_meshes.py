@@ -8,7 +8,7 @@ from __future__ import annotations
 import hashlib
 import os
 import threading
-from collections import OrderedDict
+import cachetools
 from pathlib import Path, PurePosixPath
 
 from asset2sim import atomic, mesh_io
@@ -62,8 +62,7 @@ def _reference_dirs(filename: str) -> list[str]:
 
 
 #: Results of :func:`mesh_copies` kept per process: key -> (files it read, their and their folders' stamps, copies).
-_COPIES_CACHE: OrderedDict[tuple, tuple[list[Path], tuple, dict[str, Path]]] = OrderedDict()
-_COPIES_CACHE_SIZE = 32
+_COPIES_CACHE: cachetools.LRUCache = cachetools.LRUCache(maxsize=32)
 _COPIES_LOCK = threading.Lock()
 
 
@@ -113,9 +112,6 @@ def mesh_copies(asset: AssetDescription) -> dict[str, Path]:
     entry = (files, _stamps(files), dict(copies))
     with _COPIES_LOCK:
         _COPIES_CACHE[key] = entry
-        _COPIES_CACHE.move_to_end(key)
-        while len(_COPIES_CACHE) > _COPIES_CACHE_SIZE:
-            _COPIES_CACHE.popitem(last=False)
     return copies
 
 
@@ -242,22 +238,18 @@ def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
     key = (hashlib.sha256(data).digest(), rel, kind)
     with _EDITED_LOCK:
         if key in _EDITED:
-            _EDITED.move_to_end(key)
             return _EDITED[key]
     new, dropped = _drop_outside_references(data, rel, mesh_io.mtl_libraries if kind == "obj" else mesh_io.mtl_texture_maps)
     out = new if dropped else None
     if out is None or len(out) <= _EDITED_MAX_BYTES:
         with _EDITED_LOCK:
             _EDITED[key] = out
-            while len(_EDITED) > _EDITED_SIZE:
-                _EDITED.popitem(last=False)
     return out
 
 
 #: :func:`_edited_copy`'s results in this process, by (SHA-256 of the file's bytes, output path, kind); edited
 #: files larger than :data:`_EDITED_MAX_BYTES` are not kept (an unedited file keeps only None).
-_EDITED: OrderedDict[tuple[bytes, str, str], bytes | None] = OrderedDict()
-_EDITED_SIZE = 8192
+_EDITED: cachetools.LRUCache = cachetools.LRUCache(maxsize=8192)
 _EDITED_MAX_BYTES = 1 << 20
 _EDITED_LOCK = threading.Lock()
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-from collections import OrderedDict
+import cachetools
 from pathlib import Path
 
 import numpy as np
@@ -68,9 +68,8 @@ def decompose(vertices: np.ndarray, faces: np.ndarray, settings: dict | None = N
 
 
 #: Decompositions made or read in this process, by the digest of their on-disk entry (content and settings): the
-#: pieces as read-only arrays, handed out as copies; the oldest dropped beyond :data:`_MEMO_SIZE` entries.
-_MEMO: OrderedDict[str, tuple[tuple[np.ndarray, np.ndarray], ...]] = OrderedDict()
-_MEMO_SIZE = 64
+#: pieces as read-only arrays, handed out as copies; the least recently used dropped beyond 64 entries.
+_MEMO: cachetools.LRUCache = cachetools.LRUCache(maxsize=64)
 _MEMO_LOCK = threading.Lock()
 
 
@@ -78,9 +77,8 @@ def _remembered(digest: str) -> list[tuple[np.ndarray, np.ndarray]] | None:
     """Copies of the pieces :data:`_MEMO` holds under ``digest``, or None."""
     with _MEMO_LOCK:
         hit = _MEMO.get(digest)
-        if hit is None:
-            return None
-        _MEMO.move_to_end(digest)
+    if hit is None:
+        return None
     return [(v.copy(), f.copy()) for v, f in hit]
 
 
@@ -93,9 +91,6 @@ def _remember(digest: str, pieces: list[tuple[np.ndarray, np.ndarray]]) -> list[
         kept.append((v, f))
     with _MEMO_LOCK:
         _MEMO[digest] = tuple(kept)
-        _MEMO.move_to_end(digest)
-        while len(_MEMO) > _MEMO_SIZE:
-            _MEMO.popitem(last=False)
     return pieces
 
 

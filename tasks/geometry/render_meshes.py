@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+import cachetools
 import numpy as np
 
 from asset2sim import mesh_io
@@ -136,17 +137,22 @@ def split_obj(path: Path, work: Path, tag: str, textures: TextureLinks) -> Drawa
     return DrawableMesh(vertices, parts, bare_text=bare_text)
 
 
+def _scan_size(hit: tuple[mesh_io.ObjText, np.ndarray, int]) -> int:
+    """The characters of the OBJ text a :data:`_SCANS` entry was scanned from."""
+    return hit[2]
+
+
 #: OBJ texts scanned in this process (:func:`_scanned`), by SHA-1 of the text: a refine draws the same visual
-#: files in several scenes (the input's, its output's copies, the clips); at most this many characters kept (a scan
-#: takes about 2.7 bytes per character: 9912's 16 M characters of OBJ, 42 MiB).
-_SCANS: dict[bytes, tuple[mesh_io.ObjText, np.ndarray, int]] = {}
-_SCANS_MAX_CHARS = 32_000_000
+#: files in several scenes (the input's, its output's copies, the clips); at most 32 M characters kept, the oldest
+#: dropped first (a scan takes about 2.7 bytes per character: 9912's 16 M characters of OBJ, 42 MiB).
+_SCANS: cachetools.FIFOCache = cachetools.FIFOCache(maxsize=32_000_000, getsizeof=_scan_size)
 _SCANS_LOCK = threading.Lock()
 
 
 def _scanned(text: str) -> tuple[mesh_io.ObjText, np.ndarray]:
     """(:func:`mesh_io.scan_obj_text` of OBJ ``text``, its vertices (N, 3), read-only), remembered by the text's
-    SHA-1 (the oldest dropped beyond :data:`_SCANS_MAX_CHARS`). The scan is shared: callers must not change it."""
+    SHA-1 (the oldest dropped beyond :data:`_SCANS`' size in characters). The scan is shared: callers must not change
+    it."""
     key = hashlib.sha1(text.encode("utf-8", "surrogatepass")).digest()
     with _SCANS_LOCK:
         hit = _SCANS.get(key)
@@ -155,11 +161,8 @@ def _scanned(text: str) -> tuple[mesh_io.ObjText, np.ndarray]:
         vertices = mesh_io.parse_vertex_lines(scan.vertex_lines)
         vertices.setflags(write=False)
         hit = (scan, vertices, len(text))
-        if len(text) <= _SCANS_MAX_CHARS:
-            with _SCANS_LOCK:
-                kept = sum(h[2] for h in _SCANS.values())
-                while kept + len(text) > _SCANS_MAX_CHARS:
-                    kept -= _SCANS.pop(next(iter(_SCANS)))[2]
+        with _SCANS_LOCK:
+            if len(text) <= _SCANS.maxsize:
                 _SCANS[key] = hit
     return hit[0], hit[1]
 

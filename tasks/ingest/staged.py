@@ -17,7 +17,7 @@ import hashlib
 import os
 import re
 import threading
-from collections import OrderedDict
+import cachetools
 import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
@@ -239,18 +239,15 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
     real = os.path.realpath(urdf_path)
     with _READS_LOCK:
         _READS[real] = (_identity(real), read)
-        _READS.move_to_end(real)
-        while len(_READS) > _READS_KEPT:
-            _READS.popitem(last=False)
     return StagedAsset(read=read, urdf_path=urdf_path)
 
 
-#: The reads staged last in this process, by their staged URDF (real path), with that file's identity when
-#: written: what :func:`read_of` answers.
-_READS: "OrderedDict[str, tuple[tuple, ReadAsset]]" = OrderedDict()
-_READS_LOCK = threading.Lock()
 #: How many staged reads are kept (each holds its meshes' arrays).
 _READS_KEPT = 8
+#: The reads staged last in this process, by their staged URDF (real path), with that file's identity when
+#: written: what :func:`read_of` answers; the least recently used dropped first.
+_READS: cachetools.LRUCache = cachetools.LRUCache(maxsize=_READS_KEPT)
+_READS_LOCK = threading.Lock()
 
 
 def read_of(urdf_path: Path | str) -> ReadAsset | None:

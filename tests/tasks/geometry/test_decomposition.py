@@ -21,7 +21,7 @@ def counted(monkeypatch):
     if not BASE_MESH.is_file():
         pytest.skip("the PartNet-Mobility dev rows are not here")
     monkeypatch.setenv("ASSET2SIM_CACHE", "off")
-    monkeypatch.setattr(decomposition, "_MEMO", type(decomposition._MEMO)())
+    monkeypatch.setattr(decomposition, "_MEMO", type(decomposition._MEMO)(maxsize=decomposition._MEMO.maxsize))
     calls = []
     run = coacd.run_coacd
 

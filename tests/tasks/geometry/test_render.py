@@ -8,6 +8,7 @@ the URDF's <material>). Real objects come from ../shared (skipped if absent).
 
 from __future__ import annotations
 
+import cachetools
 import json
 import math
 from pathlib import Path
@@ -500,13 +501,14 @@ def test_an_obj_drawn_in_several_scenes_is_scanned_once(tmp_path, monkeypatch):
     """A refine draws the same visual files in several scenes (its input, the output's byte copies, the clips):
     the second copy of a two-material OBJ takes the first one's scan, still gets its own split files in its own
     work folder, equal to the first's, and read-only vertices; other text is scanned; the memo keeps at most
-    ``_SCANS_MAX_CHARS`` characters, the oldest dropped first."""
+    its size in characters, the oldest dropped first."""
     scans = []
     real = mesh_io.scan_obj_text
     monkeypatch.setattr(mesh_io, "scan_obj_text", lambda text: scans.append(len(text)) or real(text))
-    monkeypatch.setattr(render_meshes, "_SCANS", {})
     obj = (f"# {tmp_path.name}\nmtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
            "usemtl red\nf 1 2 3\nusemtl blue\nf 1 2 4\nf 1 3 4\n")
+    room = len(obj) + len(obj + "f 2 3 4\n") + 5  # the first two texts, not a third
+    monkeypatch.setattr(render_meshes, "_SCANS", cachetools.FIFOCache(maxsize=room, getsizeof=render_meshes._scan_size))
     folders = []
     for name in ("input", "output"):
         d = tmp_path / name
@@ -522,7 +524,7 @@ def test_an_obj_drawn_in_several_scenes_is_scanned_once(tmp_path, monkeypatch):
     (folders[1] / "a.obj").write_text(obj + "f 2 3 4\n")
     split_obj(folders[1] / "a.obj", folders[1] / "work", "m0001", TextureLinks(folders[1] / "work", 4096))
     assert len(scans) == 2
-    monkeypatch.setattr(render_meshes, "_SCANS_MAX_CHARS", len(obj) + 20)  # room for one text of this size
+    assert len(render_meshes._SCANS) == 2
     (folders[1] / "a.obj").write_text(obj + "# a third text\n")
     split_obj(folders[1] / "a.obj", folders[1] / "work", "m0002", TextureLinks(folders[1] / "work", 4096))
     assert len(scans) == 3 and len(render_meshes._SCANS) == 1  # both earlier texts dropped
