@@ -14,6 +14,7 @@ import hashlib
 import os
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -24,7 +25,7 @@ from asset2sim.engines.source import SimSource, UrdfFile
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents
 from asset2sim.tasks.ingest.extract import describe_model, extract_asset
-from asset2sim.urdf import UrdfError, UrdfModel, write_urdf
+from asset2sim.urdf import UrdfError, UrdfModel, clone_model, write_urdf
 
 
 @dataclass
@@ -38,17 +39,17 @@ class UrdfClosed:
 
 
 @contextmanager
-def closed_session(source: SimSource) -> Iterator[UrdfClosed]:
+def closed_session(source: SimSource, *, model: UrdfModel | None = None) -> Iterator[UrdfClosed]:
     """Closed ends of every movable joint of ``source`` (:func:`closed_positions` with its defaults) in a
     fresh fixed-base, gravity-free PyBullet session without ground, open inside the ``with`` block. A file
     (:class:`~asset2sim.engines.source.UrdfFile` of a path) is described with its folder's part labels
     (:func:`~asset2sim.tasks.ingest.extract.extract_asset`), any other source from its model
-    (:func:`~asset2sim.tasks.ingest.extract.describe_model`).
+    (:func:`~asset2sim.tasks.ingest.extract.describe_model`; ``model``: ``source.model()`` when the caller has it).
 
     Raises:
         asset2sim.tasks.ingest.extract.AssetError: ``source`` cannot be read; and whatever the engine raises.
     """
-    desc = _described(source)
+    desc = _described(source, model)
     s = source.open("pybullet", SessionOptions(fixed_base=True, gravity=False, ground=False))
     try:
         try:
@@ -69,11 +70,11 @@ class ClosedMeasurement:
     extents: np.ndarray  # (3,) m, the object's box with every joint at its closed end (geometry_extents)
 
 
-def _described(source: SimSource) -> AssetDescription:
-    """The description :func:`closed_session` measures ``source`` with."""
+def _described(source: SimSource, model: UrdfModel | None = None) -> AssetDescription:
+    """The description :func:`closed_session` measures ``source`` (whose model is ``model`` when given) with."""
     if isinstance(source, UrdfFile) and not isinstance(source.source, UrdfModel):
         return extract_asset(source.path)
-    return describe_model(source.model())
+    return describe_model(model if model is not None else source.model())
 
 
 def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
@@ -84,12 +85,16 @@ def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
     Raises:
         as :func:`closed_session`.
     """
-    key, files = _geometry_key(source)
+    try:
+        model = source.model()
+    except (UrdfError, OSError):
+        model = None
+    key, files = _geometry_key(model) if model is not None and model.path is not None else (None, ())
     if key is not None:
         hit = _MEASURED.get(key)
         if hit is not None:
             return hit
-    with closed_session(source) as m:
+    with closed_session(source, model=model) as m:
         out = ClosedMeasurement(closed=m.closed, extents=geometry_extents(
             m.session, m.asset, {n: c.q_closed for n, c in m.closed.items()}, m.hull))
     if key is not None:
@@ -110,18 +115,16 @@ def measure_closed(source: SimSource) -> dict[str, ClosedState]:
 _MEASURED: file_memo.FileMemo[ClosedMeasurement] = file_memo.FileMemo(copy.deepcopy, max_entries=16)
 
 
-def _geometry_key(source: SimSource) -> tuple[str | None, tuple]:
-    """(digest of the URDF's folder and of the model without joint ``<dynamics>``, identities of its mesh
-    files), or (None, ()) when the URDF cannot be read."""
-    try:
-        model = source.model()
-    except (UrdfError, OSError):
-        return None, ()
+def _geometry_key(model: UrdfModel) -> tuple[str, tuple]:
+    """(digest of the folder of ``model``'s file and of the model without joint ``<dynamics>``, identities of its
+    mesh files)."""
+    folder = os.path.abspath(Path(model.path).parent)
+    model = clone_model(model)  # the caller's model keeps its dynamics
     meshes = sorted({str(g.path) for link in model.links.values() for g in (*link.collisions, *link.visuals)
                      if g.kind == "mesh" and g.path is not None})
     for j in model.joints:
         j.dynamics = None
-    h = hashlib.sha256(os.path.abspath(source.path.parent).encode() + b"\0" + write_urdf(model))
+    h = hashlib.sha256(folder.encode() + b"\0" + write_urdf(model))
     return h.hexdigest(), file_memo.identities(meshes)
 
 
