@@ -27,7 +27,7 @@ from asset2sim.engines.base import SessionOptions, Spring
 from asset2sim.engines.quiet import quiet_stdout
 from asset2sim.engines.registry import open_session
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd
-from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.engines.base import session_root_options
 from asset2sim.apps.realism.motion import PhysicsSide
 from asset2sim.urdf import UrdfDynamics, UrdfModel, read_urdf, resolve_mesh_path, scale_model, write_urdf
 

@@ -28,7 +28,7 @@ from asset2sim.tasks.check.sweep import SweepConfig, effort_limit, joint_subtree
 from asset2sim.tasks.evaluation.clips import Trajectory
 from asset2sim.tasks.evaluation.closed_ends import ClosedEnd
 from asset2sim.tasks.evaluation.eval_context import build_context
-from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import model_of
 
 

@@ -70,6 +70,12 @@ class SessionOptions:
     conventions: SimConventions = field(default_factory=SimConventions)
 
 
+def session_root_options(fixed: bool) -> dict[str, bool]:
+    """:class:`SessionOptions` keywords for a root as declared: mounted -> fixed base, no ground (the mount holds
+    it where the file puts it); free -> ``{}`` (resting on the ground)."""
+    return {"fixed_base": True, "ground": False} if fixed else {}
+
+
 @dataclass
 class HeldLink:
     """A rigid body as an engine holds it after loading: ``mass`` kg, ``com``

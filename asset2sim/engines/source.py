@@ -13,7 +13,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Protocol, runtime_checkable
 
-from asset2sim.engines.base import SessionOptions, SimSession, Spring
+from asset2sim.engines.base import SessionOptions, SimSession, Spring, session_root_options
 from asset2sim.engines.registry import open_session
 from asset2sim.schemas.config import SimConventions
 from asset2sim.urdf import Mode, UrdfModel, UrdfSource, model_of, path_of
@@ -87,9 +87,8 @@ class SimObject:
     def options(self, **changes) -> SessionOptions:
         """The :class:`asset2sim.engines.base.SessionOptions` of the object as it is (state, springs, conventions; a
         mounted root fixed with no ground), with ``changes`` (SessionOptions fields) applied over them."""
-        root = {"fixed_base": True, "ground": False} if self.fixed_base else {}
         return SessionOptions(**{"initial_state": dict(self.state), "springs": dict(self.springs),
-                                 "conventions": self.conventions, **root, **changes})
+                                 "conventions": self.conventions, **session_root_options(self.fixed_base), **changes})
 
     def open(self, engine: str, **changes) -> SimSession:
         """A session of the source in ``engine`` under :meth:`options` (``changes`` as there; the caller closes it).

@@ -28,7 +28,7 @@ from asset2sim.frames import quat_wxyz_matrix
 from asset2sim.schemas.config import SimConventions
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.tasks.assemble.write import read_root
-from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.engines.base import session_root_options
 
 MASS_RTOL = 1e-6
 _DERIVED = re.compile(r".+__c\d+_g\d+\.obj$")

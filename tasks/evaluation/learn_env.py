@@ -21,7 +21,7 @@ from asset2sim.tasks.check.gripper import BoundedGrasp, GripperLimits
 from asset2sim.tasks.check.support import SupportWatch
 from asset2sim.tasks.check.task_execution import TaskConfig
 from asset2sim.tasks.evaluation.learn_task import LearnTask
-from asset2sim.tasks.interpret.mounting import session_root_options
+from asset2sim.engines.base import session_root_options
 from asset2sim.urdf import UrdfModel, read_urdf
 
 OBS_DIM = 13  # observation length (module docstring)

@@ -1,6 +1,6 @@
 """How an asset is held: free-standing or mounted (a faucet on its deck: a fixed root). The prior per category is
 ``asset2sim/priors/mounting.yaml`` (with sources; unlisted: free-standing, the SPEC's convention), the request's words
-override it; every check honours the :class:`~asset2sim.schemas.overlay.RootMount` (:func:`session_root_options`).
+override it; every check honours the :class:`~asset2sim.schemas.overlay.RootMount` (:func:`asset2sim.engines.base.session_root_options`).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from typing import get_args
 import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from asset2sim.engines.base import session_root_options
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.schemas.overlay import MountingKind, RootMount
 from asset2sim.schemas.request import RequestSpec
@@ -155,10 +156,6 @@ def declared_mounting(category: str | None, root_fixed: bool | None, what: str) 
     return mount.model_copy(update={"source": f"{what} {held}"})
 
 
-def session_root_options(fixed: bool) -> dict[str, bool]:
-    """``SessionOptions`` keywords for a root as declared: mounted -> fixed base, no ground (the mount holds it
-    where the file puts it); free -> ``{}`` (resting on the ground)."""
-    return {"fixed_base": True, "ground": False} if fixed else {}
 
 
 def root_mounting(asset: AssetDescription, request: RequestSpec, category: str, reading: ReadOptions) -> RootMount:
