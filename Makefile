@@ -22,18 +22,22 @@ demo: ## refine the built-in demo asset (no data needed)
 	$(VENV)/bin/asset2sim demo --out out/demo
 
 TEST_WORKERS ?= 2
+# The test targets let Python cache bytecode (__pycache__, ignored by git) even where PYTHONDONTWRITEBYTECODE is
+# set: every process of the suite (the workers, the command-line and flow tests' children) would else compile the
+# package and rewrite the test modules again (docs: DEVELOPERS.md, "Tests in tiers").
+TEST_ENV := env -u PYTHONDONTWRITEBYTECODE
 test: ## the fast tiers: unit and integration tests (end-to-end tests, marked slow, left out) on TEST_WORKERS processes
-	$(PY) -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
+	$(TEST_ENV) $(PY) -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
 
 test-all: ## the whole suite, every tier (what CI runs), on TEST_WORKERS processes
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 LOWER_VENV ?= .venv-lower
 test-lower: ## the fast tiers with the lowest versions pyproject.toml allows (constraints/lower.txt), in .venv-lower
 	$(PYTHON) -m venv $(LOWER_VENV)
 	$(LOWER_VENV)/bin/python -m pip install --quiet --upgrade pip setuptools wheel
 	$(LOWER_VENV)/bin/python -m pip install --quiet -e ".[all]" -c constraints/lower.txt
-	$(LOWER_VENV)/bin/python -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
+	$(TEST_ENV) $(LOWER_VENV)/bin/python -m pytest -m "not slow" -q -n $(TEST_WORKERS) --dist loadfile
 
 check-install: ## build the wheel and install it beside ManiSkill, robosuite and torch in fresh environments (long; network)
 	$(PY) benchmarks/check_install.py

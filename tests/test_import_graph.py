@@ -24,6 +24,7 @@ import re
 from pathlib import Path
 
 import networkx as nx
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Installed package name -> source folder (pyproject.toml's package-dir).
@@ -152,15 +153,21 @@ def _graph() -> tuple[nx.DiGraph, list[str]]:
     return g, guarded
 
 
-def test_graph_sees_the_package():
-    g, _ = _graph()
+@pytest.fixture(scope="module")
+def package_graph() -> tuple[nx.DiGraph, list[str]]:
+    """The package's :func:`_graph`, built once for the tests that read it."""
+    return _graph()
+
+
+def test_graph_sees_the_package(package_graph):
+    g, _ = package_graph
     assert "asset2sim.tasks.refine" in g
     assert "asset2sim.cli" in g
     assert g.number_of_edges() > 50
 
 
-def test_no_import_cycles():
-    g, _ = _graph()
+def test_no_import_cycles(package_graph):
+    g, _ = package_graph
     cycles = [sorted(c) for c in nx.strongly_connected_components(g) if len(c) > 1]
     assert not cycles, "import cycles between the project's modules: " + "; ".join(" <-> ".join(c) for c in cycles)
 
@@ -170,19 +177,19 @@ def test_every_module_belongs_to_a_layer():
     assert not unknown, f"packages under tasks/ with no place in LAYERS: {unknown}"
 
 
-def test_stages_import_only_earlier_layers():
+def test_stages_import_only_earlier_layers(package_graph):
     """The stage packages form a chain in data-flow order: no import against it."""
-    g, _ = _graph()
+    g, _ = package_graph
     rank = {name: i for i, name in enumerate(LAYERS)}
     against = sorted(f"{a} ({_layer(a)}) imports {b} ({_layer(b)})" for a, b in g.edges
                      if rank.get(_layer(b), 0) > rank.get(_layer(a), 0))
     assert not against, f"{len(against)} imports against the stage order:\n" + "\n".join(against)
 
 
-def test_no_cycles_between_packages():
+def test_no_cycles_between_packages(package_graph):
     """Collapsed to packages (``asset2sim.tasks.state``, ``asset2sim.engines``,
     ``asset2sim.schemas`` ...), the graph has no loop either."""
-    g, _ = _graph()
+    g, _ = package_graph
     modules = _modules()
     pkg = {m: m if modules[m].name == "__init__.py" else m.rpartition(".")[0] for m in g.nodes}
     pg = nx.DiGraph()
@@ -215,8 +222,8 @@ def test_a_stage_importing_a_later_one_is_reported():
     assert LAYERS.index("refine") < LAYERS.index("apps") < LAYERS.index("flows") < LAYERS.index("cli")
 
 
-def test_no_guarded_imports_of_own_modules():
-    _, guarded = _graph()
+def test_no_guarded_imports_of_own_modules(package_graph):
+    _, guarded = package_graph
     assert not guarded, "\n".join(guarded)
 
 

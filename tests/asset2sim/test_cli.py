@@ -381,6 +381,7 @@ def test_requested_command_is_found_before_any_option():
     assert requested_command(["refyne", "x"]) is None  # unknown: every command is listed in the usage error
 
 
+@pytest.mark.slow  # end to end: every command's import, in child processes
 def test_a_command_imports_only_its_own_module():
     code = ("import sys; from asset2sim.cli import build_parser; p = build_parser(only='refine'); "
             "print(sorted(m for m in sys.modules if m.startswith('asset2sim.commands.') and not m.split('.')[-1].startswith('_'))); "

@@ -51,6 +51,7 @@ REFINE_LINE = re.compile(r"^(\[\s*\d+\.\d+s\] |(asset|output|scale|total mass|in
                          r"manipulation|operability|verdict|why it failed|NOT AS ASKED|engine|request|media|wall time|skipped) )")
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_a_refine_prints_only_its_own_lines(tmp_path):
     """A hand-written MJCF cabinet (primitive geoms: Bullet printed a ``?`` line on stdout for each box or capsule
     whose mesh data was asked) refined from the command line: stdout holds progress and summary lines only, stderr

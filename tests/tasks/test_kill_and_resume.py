@@ -199,6 +199,7 @@ def test_refine_killed_20_times(tmp_path):
     _kill_runs(tmp_path, n_kills=20, seed=20260)
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_refine_refuses_output_inside_input(tmp_path):
     asset = cb.build_valid(tmp_path / "asset")
     before = tree_hashes(asset)

@@ -128,6 +128,7 @@ def test_broken_asset_is_invalid_input(tmp_path):
         ("101668", "A carry-on suitcase lying flat with its lid half open."),
     ],
 )
+@pytest.mark.slow  # end to end: dev objects refined on their own
 def test_real_objects(obj, prompt, tmp_path):
     src = SHARED / obj
     before = tree_hashes(src)
@@ -143,6 +144,7 @@ def test_real_objects(obj, prompt, tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_two_drawer_ordinals_follow_height(tmp_path):
     res = refine_asset(
         SHARED / "19179",
@@ -155,6 +157,7 @@ def test_two_drawer_ordinals_follow_height(tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
     """A large cabinet (19179, scale ~0.85): robust rest's tilts slide its
     closed drawers, and escalation raised their damping 63-fold (3,900 N s/m)
@@ -201,6 +204,7 @@ def test_thesis_set_meets_the_refine_issue_targets(tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_request_naming_a_part_the_object_lacks_ends_request_not_met(tmp_path):
     """As asked (SPEC): the stapler 103275 has no drawer, so "its drawer open" is not applied; the verdict says so
     in report.json, evaluation.json and report.html (the evaluation, run as refine's extra, decides)."""

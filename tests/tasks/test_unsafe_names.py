@@ -143,6 +143,7 @@ def test_refine_writes_nothing_outside_out_for_path_like_names(tmp_path, kind):
     _assert_contained(tmp_path, out, before)
 
 
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_decomposed_pieces_of_a_path_named_link_stay_inside(tmp_path, shared_dataset):
     """The reported case: a tiny stapler is decomposed with CoACD
     (``tasks/state/collision.py``), whose pieces were named from the raw

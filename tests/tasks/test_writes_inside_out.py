@@ -44,6 +44,7 @@ def _files(folder: Path) -> set[str]:
 
 
 # ------------------------------------------------------------------ MuJoCo's log
+@pytest.mark.slow  # end to end: the command line
 def test_mujoco_warnings_write_no_log_into_the_working_directory(tmp_path):
     """Refining and auditing an MJCF whose keyframe holds NaN, in a child process whose working directory is
     empty: MuJoCo warns, and no ``MUJOCO_LOG.TXT`` (or anything else) appears there; the NaN is not an initial state."""

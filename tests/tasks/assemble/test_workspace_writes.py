@@ -93,6 +93,7 @@ def _snapshot(out: Path) -> dict[str, bytes]:
             if p.is_file() and p.name != "timings.json"}
 
 
+@pytest.mark.slow  # end to end: a dev object refined twice
 def test_a_real_refine_writes_each_candidate_once_and_its_output_is_as_if_every_request_wrote(shared_dataset, tmp_path, monkeypatch):
     """Microwave 7236 with its own request (its door clipped and escalated: several candidates). No two writes in
     a row are of the same candidate, far fewer writes than requests, and the output is byte for byte the one of a

@@ -144,6 +144,7 @@ def test_a_headroom_step_stops_at_the_friction_a_hand_still_lifts_the_part_with(
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_laptop_holds_through_robust_rest_with_a_friction_a_hand_still_lifts(tmp_path):
     """PartNet-Mobility 9748, "close the laptop": the screen (0.85 N m of weight moment slightly open) is held
     through robust rest by a hinge friction with which a hand still lifts it from closed inside the laptop's

@@ -164,6 +164,7 @@ def test_the_verdict_names_operability_after_the_sweep():
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_the_task_less_cabinet_is_never_ready_with_a_jammed_drawer(tmp_path):
     """Cabinet 19179 with "the top drawer pulled out 10 cm and the bottom one closed" and no task: both drawers
     stay inside what a 22.2 N hand moves (they were at 99 N and 17 N); where robust rest then needs more than

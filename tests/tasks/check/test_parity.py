@@ -104,6 +104,7 @@ def test_three_engines_agree_on_a_resting_asset_and_on_a_swinging_one(tmp_path):
 
 @pytest.mark.physx
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_chest_resting_still_in_pybullet_rests_still_in_physx(tmp_path):
     """With SAPIEN's default 10 solver iterations the refined treasure chest
     (lid a quarter open) crept on the plane in PhysX (D_pos 1.36 mm, D_ori

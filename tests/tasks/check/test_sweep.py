@@ -217,6 +217,7 @@ def test_parts_held_a_quarter_open_are_moved_out_of_each_others_way(tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_lid_stopped_on_its_way_back_by_a_raised_seat_is_swept_with_the_seat_closed(tmp_path):
     """Toilet 102703 "slightly open": lid and seat both held slightly open.
     With the seat held raised, the lid opens but cannot close back (it comes

@@ -205,6 +205,7 @@ def test_every_failure_mode_is_explained_or_stops_before_a_verdict():
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object through the command line
 def test_a_part_that_swings_as_its_object_topples_is_not_blamed_on_momentum(tmp_path, capsys):
     """Trash can 102155 asked with its lid fully open topples on robust rest's 5 deg tilts; its lid swings as it
     falls. The lid's sentence says so and points to the toppling's sentence, which follows; neither says momentum."""

@@ -410,6 +410,7 @@ def test_evaluate_leaves_a_refine_output_as_it_was(demo_root, tmp_path, capsys):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_reused_rest_test_gives_the_fresh_evaluation_probes_included(tmp_path):
     """A PartNet-Mobility box whose lid rests on its body (contacts): the
     evaluation that records refine's post-check (``recording``, and the

@@ -58,6 +58,7 @@ def test_demo_is_interaction_ready_on_every_tier_and_says_so_everywhere(tmp_path
     assert _badge(out / "report.html").startswith("interaction-ready")
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_an_asset_written_but_not_ready_exits_3_and_every_output_agrees(tmp_path, capsys):
     """A latch bar fixed to the body holds the closed lid down: the lid
     cannot be driven open from its closed end (joint sweep) although the

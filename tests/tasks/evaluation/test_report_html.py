@@ -167,6 +167,7 @@ def test_a_failing_asset_shows_the_failing_trials_plot_and_frames(tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_refine_report_says_what_asset2sim_changed_and_why(tmp_path):
     from asset2sim.tasks.refine import refine_asset
 
@@ -185,6 +186,7 @@ def test_a_refine_report_says_what_asset2sim_changed_and_why(tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object evaluated with its report
 def test_a_failing_joint_sweep_shows_its_opening_over_time_and_where_it_stalled(tmp_path):
     """The raw two-drawer cabinet (no physics): a drawer does not close back
     under the sweep's drive; the report plots its opening against the lines

@@ -94,7 +94,7 @@ def _round_trip(row: dict, tmp: Path, usd: bool = False) -> None:
         assert_same_model(read_usd_asset(export_usd(out, check=False).path).model, urdf, f"{row['id']} (USD)")
 
 
-@pytest.mark.parametrize("asset_id", ["148", "8877", "103275"])
+@pytest.mark.parametrize("asset_id", ["148", *(pytest.param(a, marks=pytest.mark.slow) for a in ("8877", "103275"))])  # one dev object in the fast tiers, the others end to end
 def test_a_refined_outputs_mjcf_reads_back_as_its_urdf(shared_dataset, tmp_path, asset_id):
     _round_trip(_manifest_rows([asset_id])[0], tmp_path)
 

@@ -39,6 +39,7 @@ def _prompt(shared: Path, asset_id: str) -> str:
 
 
 @pytest.mark.parametrize("asset_id", ["148", "103275", "8877"])
+@pytest.mark.slow  # end to end: dev objects refined and exported
 def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path):
     """Links, joints (type, parent, child, origin, axis, limits, damping, friction), springs, masses, COM and
     inertia tensors of the USD export equal mobility.urdf's to 1e-6 relative; geometry sits where the URDF's does."""

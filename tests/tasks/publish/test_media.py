@@ -49,6 +49,7 @@ def test_deferred_refine_writes_the_verdict_and_exports_but_no_media(deferred):
     assert result.report.failure_mode == report["failure_mode"]
 
 
+@pytest.mark.slow  # end to end: a dev object's media phase, and the object refined again with every extra
 def test_media_phase_adds_media_keeps_the_verdict_and_the_folder_complete(deferred, tmp_path):
     out, _ = deferred
     before = json.loads((out / REPORT_NAME).read_text())
@@ -73,6 +74,7 @@ def test_media_phase_adds_media_keeps_the_verdict_and_the_folder_complete(deferr
     assert json.loads((full / REPORT_NAME).read_text())["failure_mode"] == after["failure_mode"]
 
 
+@pytest.mark.slow  # end to end: a dev object refined twice, the second with every extra
 def test_a_refine_with_media_resumes_a_deferred_output(tmp_path):
     out = tmp_path / "box"
     refine_asset(BOX, PROMPT, out, RefineConfig(), media=False)
@@ -83,6 +85,7 @@ def test_a_refine_with_media_resumes_a_deferred_output(tmp_path):
     assert any(stage == "media" for stage, _ in said)
 
 
+@pytest.mark.slow  # end to end: the command line
 def test_report_command_and_its_errors(deferred, tmp_path):
     out, _ = deferred
     cmd = [sys.executable, "-m", "asset2sim", "report"]

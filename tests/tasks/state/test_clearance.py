@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from asset2sim.tasks.check.sweep import joint_subtrees
 from asset2sim.tasks.state import clearance
@@ -140,6 +141,7 @@ def test_two_touching_drawers_are_given_clearance_once(tmp_path):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_refine_gives_clearance_to_drawers_that_move_together(tmp_path):
     """PartNet-Mobility 19179, a two-drawer cabinet, first drawer slightly open: the drawers' hulls
     touch (2 mm inside PyBullet's margins), so the free object's drawers move as one: the gripper

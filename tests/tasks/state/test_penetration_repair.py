@@ -126,6 +126,7 @@ def test_piece_overlaps_are_measured_net_of_the_engine_contact_margins():
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_tiny_stapler_gets_the_decomposition_its_regular_size_gets(tmp_path):
     """Stapler 103275 asked "tiny" (0.3 of its size): counted with the engine
     margins, each touching pair of CoACD pieces added 2 mm, so the

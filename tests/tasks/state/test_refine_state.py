@@ -77,6 +77,7 @@ def test_parts_in_the_way_are_the_unaddressed_closed_ones_a_requested_opening_ru
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_seat_asked_fully_open_opens_the_lid_the_request_left_closed(tmp_path):
     """refine makes room: the lid the request did not address opens out of
     the seat's way, the report says so and its band is the one it landed

@@ -151,6 +151,7 @@ def test_without_geometry_only_sourced_fractions_are_used(fully_open):
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_opening_the_band_allows(tmp_path):
     """Treasure chest 100221 "mostly open" (band 0.6-0.9 of the lid's range,
     target 0.75): at the target the lid hangs behind the box and robust
@@ -175,6 +176,7 @@ def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_openin
 
 
 @needs_shared
+@pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_fully_open_stapler_stands_in_its_band(tmp_path):
     """Stapler 102990 "fully open" (band 0.85-1.0 of the top arm's range,
     target 1.0). With its open-shell parts weighed as one sheet (issue 39)

@@ -241,7 +241,13 @@ SCENARIOS = {
 }
 
 
-@pytest.mark.parametrize("name", list(SCENARIOS))
+#: The scenarios the fast tier runs, one of each kind (a wait the server asks for, a timeout, a reply that is not
+#: JSON, values out of range) and every one that ends in an error (no refine after the estimate); the whole corpus runs
+#: in the slow tier (``make test-all``).
+FAST_SCENARIOS = {"429 with Retry-After", "timeout", "prose", "out-of-range values"} | {n for n, (_, ok, _) in SCENARIOS.items() if not ok}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n in FAST_SCENARIOS else [pytest.mark.slow]) for n in SCENARIOS])
 def test_faults_end_in_valid_output_or_clear_error(server, plate, tmp_path, name):
     behaviours, ok, n_requests = SCENARIOS[name]
     server.push(*behaviours)
