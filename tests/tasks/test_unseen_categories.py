@@ -92,7 +92,7 @@ def test_a_part_of_a_few_grams_opens_while_the_other_hand_holds_the_body(tmp_pat
     The same reaction also applied to the gripped root left these parts
     unmoved in PyBullet while the push rose to 2.7 N."""
     src = build(tmp_path / "src")
-    res = refine_asset(src, prompt, tmp_path / "out")
+    res = refine_asset(src, prompt, tmp_path / "out", media=False)  # the first phase: the verdict and evaluation.json
     r = res.report
     assert r.total_mass < 0.05
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
@@ -109,7 +109,7 @@ def test_a_door_barred_by_its_own_body_is_not_reported_ready(tmp_path):
     (it used to be cut away at the initial state, and the safe reported
     ready) and the penetration tier fails on the parent-child depth."""
     src = build_barred_safe(tmp_path / "src")
-    res = refine_asset(src, "A safe, halfway open.", tmp_path / "out")
+    res = refine_asset(src, "A safe, halfway open.", tmp_path / "out", media=False)
     r = res.report
     assert r.failure_mode == "unresolved_penetration", (r.failure_mode, r.readiness)
     nested = next(m for m in r.metrics if m.name == "parent_child_penetration")
@@ -124,7 +124,7 @@ def test_a_small_ovens_square_dial_turns_past_the_door_below_it(tmp_path, prompt
     at a quarter of its size that is under the engines' contact margins, and
     the dial stuck at 13 % of its probe. Its collision piece is shrunk about
     its axis (noted) and it turns."""
-    res = refine_asset(build_oven(tmp_path / "src"), prompt, tmp_path / "out")
+    res = refine_asset(build_oven(tmp_path / "src"), prompt, tmp_path / "out", media=False)
     r = res.report
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
     assert any("shrunk" in c and "'joint_1'" in c for c in r.state.collision_changes), r.state.collision_changes
@@ -148,7 +148,7 @@ def test_an_unseen_category_with_one_concave_mesh_per_link_is_interaction_ready(
         if meshes:
             assert len(mesh_io.obj_groups(src / meshes[0].filename)) == 1
     assert len(model.links["link_0"].visuals) == 1
-    res = refine_asset(src, prompt, tmp_path / "out")
+    res = refine_asset(src, prompt, tmp_path / "out", media=False)  # the first phase holds every tier, probes included
     r = res.report
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
     assert all(v in (True, None) for v in r.readiness.values()), r.readiness

@@ -187,7 +187,7 @@ def test_refines_evaluation_takes_the_post_checks_task_attempt(tmp_path):
 
     task_execution.run_task = counted
     try:
-        res = refine_asset(SHARED / "8877", row["prompt"], tmp_path / "out", task=row["task"], reference=SHARED / "8877")
+        res = refine_asset(SHARED / "8877", row["prompt"], tmp_path / "out", task=row["task"], reference=SHARED / "8877", media=False)
     finally:
         task_execution.run_task = real
     assert callers and all("run_task_tier" in c and "_m_task" not in c for c in callers)  # none from the evaluation

@@ -276,7 +276,7 @@ def test_a_usd_export_is_refined_from_its_file(tmp_path):
 
     root = tmp_path / "demo"
     demo_assets.build_demo_dataset(root)
-    first = refine_asset(root / "box_lid", "A box, lid closed.", tmp_path / "first")
+    first = refine_asset(root / "box_lid", "A box, lid closed.", tmp_path / "first", media=False)  # the exports are first-phase
     usd = tmp_path / "first" / "usd" / "mobility.usd"
     res = refine_asset(usd, "A box, lid halfway open.", tmp_path / "again", extras=False)
     assert res.report.source == str(usd.resolve()) and res.report.asset_id == "mobility"

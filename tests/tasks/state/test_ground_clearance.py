@@ -136,7 +136,7 @@ def test_an_object_lying_flat_as_a_whole_keeps_its_moving_half_on_the_floor(tmp_
     flap = _two_part(tmp_path / "f", body_lo=(0, 0, 0), body_hi=(0.4, 0.4, 0.015), part_lo=(-0.02, 0, 0),
                      part_hi=(0, 0.4, 0.015), axis="0 0 1")
     assert list(ground_clearance.ground_clearance(read_urdf(flap), flap, {"j": 0.0}).pieces) == ["part"]
-    res = refine.refine_asset(build_pliers(tmp_path / "pliers"), "Pliers, fully open.", tmp_path / "out")
+    res = refine.refine_asset(build_pliers(tmp_path / "pliers"), "Pliers, fully open.", tmp_path / "out", media=False)
     assert res.report.failure_mode == "none", res.report.readiness
     assert not any("raised" in n for n in res.report.state.collision_changes)
 

@@ -57,7 +57,7 @@ def test_a_small_button_on_a_heavy_safe_keeps_a_density_its_plastic_has(tmp_path
     volume and over its written collision pieces, the report says why, and
     the object passes every tier."""
     out = tmp_path / "out"
-    res = refine_asset(_safe_with_button(tmp_path / "src", 0.012), "A safe.", out)
+    res = refine_asset(_safe_with_button(tmp_path / "src", 0.012), "A safe.", out, media=False)
     assert res.report.failure_mode == "none"
     button = json.loads((out / "overlay.json").read_text())["links"]["link_0"]
     total = sum(lp["mass"] for lp in json.loads((out / "overlay.json").read_text())["links"].values())
@@ -73,7 +73,7 @@ def test_a_door_leaf_whose_pieces_are_thinner_than_the_door_is_said(tmp_path):
     """Door 8877: its leaf is an open surface whose mass is its area x an
     18 mm MDF wall, while its collision piece is a flat slab; the report
     names the density that gives over the pieces."""
-    res = refine_asset(SHARED / "8877", "A door.", tmp_path / "out")
+    res = refine_asset(SHARED / "8877", "A door.", tmp_path / "out", media=False)
     assert res.report.failure_mode == "none"
     notes = [n for n in res.report.state.collision_changes if "collision pieces'" in n and "denser than its material" in n]
     assert notes and "'link_1'" in notes[0] and "kg/m^3 at most" in notes[0]
