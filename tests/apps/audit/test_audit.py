@@ -68,6 +68,7 @@ def _report(out: Path, name: str) -> AuditReport:
     return AuditReport.model_validate_json((out / name / AUDIT_JSON).read_text())
 
 
+@pytest.mark.slow  # end to end: the planted corpus through the command line
 def test_every_planted_error_is_flagged_and_no_correct_value(planted):
     inputs, out, expected, _, code = planted
     assert code == 3  # implausible values found
@@ -86,6 +87,7 @@ def test_every_planted_error_is_flagged_and_no_correct_value(planted):
         assert report.patch is None and not (out / name / "patch").exists()
 
 
+@pytest.mark.slow  # end to end: the planted corpus through the command line
 def test_the_patch_loads_in_mujoco_rests_there_and_audits_clean(planted, tmp_path):
     _, out, expected, _, _ = planted
     conv = SimConventions()
@@ -107,6 +109,7 @@ def test_the_patch_loads_in_mujoco_rests_there_and_audits_clean(planted, tmp_pat
                     assert m.body(link).mass[0] == pytest.approx(v.patched, rel=1e-5)
 
 
+@pytest.mark.slow  # end to end: the planted corpus through the command line
 def test_the_report_shows_declared_estimate_band_and_the_changes(planted):
     _, out, _, _, _ = planted
     report = _report(out, "cabinet_light_drawer")
@@ -120,11 +123,13 @@ def test_the_report_shows_declared_estimate_band_and_the_changes(planted):
     assert lid.declared == 0.0 and lid.patched > lid.low
 
 
+@pytest.mark.slow  # end to end: the planted corpus through the command line
 def test_the_input_folder_is_unchanged(planted):
     inputs, _, _, before, _ = planted
     assert _tree_digest(inputs) == before
 
 
+@pytest.mark.slow  # end to end: the planted corpus through the command line
 def test_the_catalog_holds_one_row_per_asset_and_per_value(planted):
     _, out, expected, _, _ = planted
     assets = pd.read_parquet(out / audit_catalog.ASSETS_PARQUET)
