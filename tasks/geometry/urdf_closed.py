@@ -3,29 +3,24 @@
 output's own collision pieces, from which refine placed it.
 
 :func:`closed_session` measures; :func:`measure_closed_ends` gives its result and the object's extents
-there, once per geometry in a process; :func:`replace_positions` moves joint positions from one set of
+there; :func:`replace_positions` moves joint positions from one set of
 closed ends to another.
 """
 
 from __future__ import annotations
 
-import copy
-import hashlib
-import os
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from asset2sim import file_memo
 from asset2sim.engines.base import SessionOptions
 from asset2sim.engines.source import SimSource, UrdfFile
 from asset2sim.schemas.asset import AssetDescription
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_positions, link_hull_points, object_extents
 from asset2sim.tasks.ingest.extract import describe_model, extract_asset
-from asset2sim.urdf import UrdfError, UrdfModel, clone_model, write_urdf
+from asset2sim.urdf import UrdfError, UrdfModel
 
 
 @dataclass
@@ -78,9 +73,8 @@ def _described(source: SimSource, model: UrdfModel | None = None) -> AssetDescri
 
 
 def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
-    """The closed ends of ``source`` (:func:`closed_session`) and the object's extents there, measured once
-    per geometry (not joint dynamics: the measurement is kinematic) in this process (:data:`_MEASURED`;
-    each caller gets its own copy).
+    """The closed ends of ``source`` (:func:`closed_session`) and the object's extents there (the measurement is
+    kinematic: joint dynamics do not change it).
 
     Raises:
         as :func:`closed_session`.
@@ -89,17 +83,9 @@ def measure_closed_ends(source: SimSource) -> ClosedMeasurement:
         model = source.model()
     except (UrdfError, OSError):
         model = None
-    key, files = _geometry_key(model) if model is not None and model.path is not None else (None, ())
-    if key is not None:
-        hit = _MEASURED.get(key)
-        if hit is not None:
-            return hit
     with closed_session(source, model=model) as m:
-        out = ClosedMeasurement(closed=m.closed, extents=geometry_extents(
+        return ClosedMeasurement(closed=m.closed, extents=geometry_extents(
             m.session, m.asset, {n: c.q_closed for n, c in m.closed.items()}, m.hull))
-    if key is not None:
-        _MEASURED.put(key, files, out)
-    return out
 
 
 def measure_closed(source: SimSource) -> dict[str, ClosedState]:
@@ -109,23 +95,6 @@ def measure_closed(source: SimSource) -> dict[str, ClosedState]:
         as :func:`closed_session`.
     """
     return {n: c for n, c in measure_closed_ends(source).closed.items() if c.open_range > 0}
-
-
-#: :func:`measure_closed_ends` results by :func:`_geometry_key` while the mesh files are unchanged.
-_MEASURED: file_memo.FileMemo[ClosedMeasurement] = file_memo.FileMemo(copy.deepcopy, max_entries=16)
-
-
-def _geometry_key(model: UrdfModel) -> tuple[str, tuple]:
-    """(digest of the folder of ``model``'s file and of the model without joint ``<dynamics>``, identities of its
-    mesh files)."""
-    folder = os.path.abspath(Path(model.path).parent)
-    model = clone_model(model)  # the caller's model keeps its dynamics
-    meshes = sorted({str(g.path) for link in model.links.values() for g in (*link.collisions, *link.visuals)
-                     if g.kind == "mesh" and g.path is not None})
-    for j in model.joints:
-        j.dynamics = None
-    h = hashlib.sha256(folder.encode() + b"\0" + write_urdf(model))
-    return h.hexdigest(), file_memo.identities(meshes)
 
 
 def aabb_extents(session) -> np.ndarray:
