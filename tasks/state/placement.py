@@ -18,7 +18,7 @@ from asset2sim.tasks.assemble import (collision_geometry, container_pieces, foot
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
 from asset2sim.tasks.geometry import limits, urdf_closed
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
-from asset2sim.tasks.state import state_search
+from asset2sim.tasks.state import refine_state, state_search
 from asset2sim.tasks.synthesize import estimate, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
 
@@ -150,6 +150,30 @@ def clearance_lines(notes: list[str]) -> list[str]:
     return [n for n in notes if any(w in n for w in (sliding_clearance.RUNNING_CLEARANCE_NOTE, footprint.LEVEL_NOTE,
                                                      collision_geometry.DENSITY_NOTE, parent_child_separation.PAST_STOP_NOTE,
                                                      container_pieces.CAVITY_NOTE))]
+
+
+def kept_in_bands(syn: Synthesis, closed_after: dict[str, ClosedState], state: dict[str, float],
+                  log: StageLog) -> dict[str, float]:
+    """``state`` (joint -> rad or m) after the limits were clipped again (the collision pieces changed after the
+    state search: :func:`clip_limits` on the new pieces, closed ends ``closed_after``): a joint that its band (the
+    request's number or end first) held on ``syn.closed_out`` but that the shorter range puts outside it is moved
+    to the nearest position the band allows on ``closed_after`` (an opening fraction is of the range the output
+    has); every other joint keeps its position (one a stage moved out of its band on purpose, e.g. onto the floor,
+    stays there). Each move is said under ``refine_state``."""
+    fractions = estimate.band_intervals(syn.bands, {n: t.interval for n, t in syn.targets.items() if t.interval is not None})
+    before = refine_state.allowed_intervals(syn.closed_out, fractions)
+    after = refine_state.allowed_intervals(closed_after, fractions)
+    out = dict(state)
+    for n, q in state.items():
+        if n not in before or n not in after or not before[n].lo - 1e-9 <= q <= before[n].hi + 1e-9:
+            continue
+        kept = after[n].clip(q)
+        if abs(kept - q) > 1e-9:
+            out[n] = kept
+            log.say("refine_state", f"joint {n}: {q:.4g} -> {kept:.4g} ({closed_after[n].fraction(q):.3f} -> "
+                                    f"{closed_after[n].fraction(kept):.3f} of its range): the limits clipped again on the "
+                                    f"changed collision pieces shortened its range; kept inside its band ({syn.bands.get(n, 'closed')})")
+    return out
 
 
 def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Workspace, config: RefineConfig,
