@@ -152,17 +152,21 @@ def clearance_lines(notes: list[str]) -> list[str]:
                                                      container_pieces.CAVITY_NOTE))]
 
 
-def kept_in_bands(syn: Synthesis, closed_after: dict[str, ClosedState], state: dict[str, float],
-                  log: StageLog) -> dict[str, float]:
-    """``state`` (joint -> rad or m) after the limits were clipped again (the collision pieces changed after the
-    state search: :func:`clip_limits` on the new pieces, closed ends ``closed_after``): a joint that its band (the
-    request's number or end first) held on ``syn.closed_out`` but that the shorter range puts outside it is moved
-    to the nearest position the band allows on ``closed_after`` (an opening fraction is of the range the output
-    has); every other joint keeps its position (one a stage moved out of its band on purpose, e.g. onto the floor,
-    stays there). Each move is said under ``refine_state``."""
-    fractions = estimate.band_intervals(syn.bands, {n: t.interval for n, t in syn.targets.items() if t.interval is not None})
-    before = refine_state.allowed_intervals(syn.closed_out, fractions)
-    after = refine_state.allowed_intervals(closed_after, fractions)
+def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedState], state: dict[str, float],
+              log: StageLog) -> tuple[Synthesis, dict[str, float]]:
+    """The synthesis and ``state`` (joint -> rad or m) after the limits were clipped again (the collision pieces
+    changed after the state search: :func:`clip_limits` on the new pieces gave ``overlay`` and the closed ends
+    ``closed_after``). Angles and distances asked stay the same opening from the closed end (retargeted as in
+    :func:`clip_synthesis`); a joint that its band (the request's number or end first) held on ``syn.closed_out``
+    but that the new range puts outside it is moved to the nearest position the band allows on ``closed_after`` (an
+    opening fraction is of the range the output has); every other joint keeps its position (one a stage moved out of
+    its band on purpose, e.g. onto the floor, stays there). Each move is said under ``refine_state``."""
+    targets = request_apply.retarget(syn.targets, syn.closed_out, closed_after)
+    bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
+    before = refine_state.allowed_intervals(syn.closed_out, estimate.band_intervals(
+        syn.bands, {n: t.interval for n, t in syn.targets.items() if t.interval is not None}))
+    after = refine_state.allowed_intervals(closed_after, estimate.band_intervals(
+        bands, {n: t.interval for n, t in targets.items() if t.interval is not None}))
     out = dict(state)
     for n, q in state.items():
         if n not in before or n not in after or not before[n].lo - 1e-9 <= q <= before[n].hi + 1e-9:
@@ -172,8 +176,8 @@ def kept_in_bands(syn: Synthesis, closed_after: dict[str, ClosedState], state: d
             out[n] = kept
             log.say("refine_state", f"joint {n}: {q:.4g} -> {kept:.4g} ({closed_after[n].fraction(q):.3f} -> "
                                     f"{closed_after[n].fraction(kept):.3f} of its range): the limits clipped again on the "
-                                    f"changed collision pieces shortened its range; kept inside its band ({syn.bands.get(n, 'closed')})")
-    return out
+                                    f"changed collision pieces moved its range; kept inside its band ({bands.get(n, 'closed')})")
+    return replace(syn, overlay=overlay, closed_out=closed_after, targets=targets, bands=bands), out
 
 
 def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Workspace, config: RefineConfig,

@@ -98,24 +98,31 @@ def test_a_seat_asked_fully_open_opens_the_lid_the_request_left_closed(tmp_path)
 
 def test_a_range_clipped_again_keeps_a_joint_inside_its_band_and_leaves_one_moved_out_on_purpose():
     """The limits clipped again on changed collision pieces shorten a door's range: the door placed at the top of
-    its band (halfway, 35-65 %) on the old range is moved to the top of the band on the new one; a lid a stage
-    moved out of its band on purpose (onto the floor) and a joint still inside its band keep their positions."""
+    its band (halfway, 35-65 %) on the old range is moved to the top of the band on the new one; a flap asked open
+    0.6 rad stays at 0.6 rad (its target retargeted to the new range, not moved); a lid a stage moved out of its
+    band on purpose (onto the floor) and a joint still inside its band keep their positions."""
     from asset2sim.stage_log import StageLog
-    from asset2sim.tasks.state.placement import Synthesis, kept_in_bands
+    from asset2sim.tasks.state.placement import Synthesis, reclipped
+    from asset2sim.tasks.synthesize.request_apply import JointTarget
 
     def closed(name: str, upper: float) -> ClosedState:
         return ClosedState(joint=name, q_closed=0.0, direction=1.0, open_range=upper, lower=0.0, upper=upper)
 
-    before = {"door": closed("door", 1.771), "lid": closed("lid", 1.4), "drawer": closed("drawer", 0.4)}
-    after = {**before, "door": closed("door", 1.752), "lid": closed("lid", 1.3)}
-    syn = Synthesis(overlay=None, issues=[], bands={"door": "halfway", "lid": "halfway", "drawer": "slightly_open"},
-                    prismatic={"drawer"}, closed_out=before, requested={})
-    state = {"door": 0.65 * 1.771, "lid": 0.05, "drawer": 0.1}
+    before = {"door": closed("door", 1.771), "lid": closed("lid", 1.4), "drawer": closed("drawer", 0.4),
+              "flap": closed("flap", 1.5)}
+    after = {**before, "door": closed("door", 1.752), "lid": closed("lid", 1.3), "flap": closed("flap", 1.2)}
+    flap = JointTarget(joint="flap", band="halfway", fraction=0.4, interval=(0.38, 0.42), kind="angle", asked=0.6)
+    syn = Synthesis(overlay=None, issues=[], bands={"door": "halfway", "lid": "halfway", "drawer": "slightly_open",
+                                                     "flap": "halfway"},
+                    prismatic={"drawer"}, closed_out=before, requested={}, targets={"flap": flap})
+    state = {"door": 0.65 * 1.771, "lid": 0.05, "drawer": 0.1, "flap": 0.6}
     said = []
-    kept = kept_in_bands(syn, after, state, StageLog(lambda stage, msg: said.append((stage, msg))))
+    syn2, kept = reclipped(syn, None, after, state, StageLog(lambda stage, msg: said.append((stage, msg))))
     assert after["door"].fraction(state["door"]) > 0.65  # the old position is out of the band on the new range
     assert kept["door"] == pytest.approx(0.65 * 1.752) and after["door"].fraction(kept["door"]) == pytest.approx(0.65)
     assert kept["lid"] == state["lid"] and kept["drawer"] == state["drawer"]
+    assert kept["flap"] == 0.6 and syn2.targets["flap"].fraction == pytest.approx(0.5)  # 0.6 rad of the new 1.2
+    assert syn2.closed_out is after and syn2.bands["door"] == "halfway"
     assert len(said) == 1 and said[0][0] == "refine_state" and "door" in said[0][1] and "halfway" in said[0][1]
 
 
