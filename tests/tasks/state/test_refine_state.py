@@ -117,13 +117,14 @@ def test_a_range_clipped_again_keeps_a_joint_inside_its_band_and_leaves_one_move
                     prismatic={"drawer"}, closed_out=before, requested={}, targets={"flap": flap})
     state = {"door": 0.65 * 1.771, "lid": 0.05, "drawer": 0.1, "flap": 0.6}
     said = []
-    syn2, kept = reclipped(syn, None, after, state, StageLog(lambda stage, msg: said.append((stage, msg))))
+    syn2, kept, notes = reclipped(syn, None, after, state, StageLog(lambda stage, msg: said.append((stage, msg))))
     assert after["door"].fraction(state["door"]) > 0.65  # the old position is out of the band on the new range
     assert kept["door"] == pytest.approx(0.65 * 1.752) and after["door"].fraction(kept["door"]) == pytest.approx(0.65)
     assert kept["lid"] == state["lid"] and kept["drawer"] == state["drawer"]
     assert kept["flap"] == 0.6 and syn2.targets["flap"].fraction == pytest.approx(0.5)  # 0.6 rad of the new 1.2
     assert syn2.closed_out is after and syn2.bands["door"] == "halfway"
     assert len(said) == 1 and said[0][0] == "refine_state" and "door" in said[0][1] and "halfway" in said[0][1]
+    assert notes == [said[0][1]]
 
 
 @pytest.mark.slow  # end to end: a dev object refined on its own
@@ -141,3 +142,4 @@ def test_a_fridge_asked_halfway_open_stays_halfway_when_its_limits_are_clipped_a
     assert all(lo - 1e-6 <= f <= hi + 1e-6 for f in r.opening_fractions.values()), r.opening_fractions
     assert r.metric("request_met").passed, r.metric("request_met").details
     assert r.failure_mode == "none", (r.failure_mode, r.readiness)
+    assert any("joint_1" in n and "kept inside its band (halfway)" in n for n in r.design_changes), r.design_changes
