@@ -6,8 +6,8 @@
 1. Builds a dataset of the dev rows (``../shared/datasets/partnet_mobility/manifest.csv``) times ``--requests``
    requests per object: the row's own request (its task written to the manifest; a flow runs no task tier), then
    "A <noun>.", "A <noun>, halfway open.", "A <noun>, fully open." and "A small <noun>." (``bench_generalization``'s
-   nouns), each as its own asset folder (a copy:
-   the flow keys assets by folder) under ``DIR/raw``; 21 x 5 = 105 assets by default.
+   nouns), each as its own asset folder (a copy: the flow keys assets by folder) under ``DIR/raw``; 21 x 5 = 105
+   assets by default.
 2. Runs the flow (``run_refine_flow``, what ``make flow`` runs) over it with ``--workers`` workers, every check on
    (the metrics stage included) and, by default, ``run.extras: deferred``: every asset's verdict and exports first,
    then the media phase (renders, clips, HTML report) of every output in children at lower CPU priority.
