@@ -362,7 +362,7 @@ def _attempt(ctx: EstimationContext, est, config: RefineConfig, ws: Workspace, l
     if overrides is not searched.collision_overrides:  # the collision pieces changed: the limits are clipped again on them (stage 6b)
         measured = replace(refined, overlay=limits.strip_clips(syn.overlay))
         reclipped, closed_re = placement.clip_limits(measured, closed_raw, ws, config, log)
-        syn, state, moved = placement.reclipped(syn, reclipped, closed_re, state, log)  # the state kept in its band
+        syn, state, moved = placement.reclipped(syn, reclipped, closed_re, state)  # the state kept in its band
         refined, measured = replace(refined, state=state), replace(measured, state=state)
         st.result = {n: state.get(n, q) for n, q in st.result.items()}
     balanced, design = stability.design_for_stability(ws.source(measured), ctx.asset, syn.overlay, state, ctx.category, ctx.geometry)

@@ -152,16 +152,15 @@ def clearance_lines(notes: list[str]) -> list[str]:
                                                      container_pieces.CAVITY_NOTE))]
 
 
-def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedState], state: dict[str, float],
-              log: StageLog) -> tuple[Synthesis, dict[str, float], list[str]]:
+def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedState],
+              state: dict[str, float]) -> tuple[Synthesis, dict[str, float], list[str]]:
     """The synthesis and ``state`` (joint -> rad or m) after the limits were clipped again (the collision pieces
     changed after the state search: :func:`clip_limits` on the new pieces gave ``overlay`` and the closed ends
     ``closed_after``). Angles and distances asked stay the same opening from the closed end (retargeted as in
     :func:`clip_synthesis`); a joint that its band (the request's number or end first) held on ``syn.closed_out``
     but that the new range puts outside it is moved to the nearest position the band allows on ``closed_after`` (an
     opening fraction is of the range the output has); every other joint keeps its position (one a stage moved out of
-    its band on purpose, e.g. onto the floor, stays there). Returns (synthesis, state, a note per move, also said
-    under ``refine_state``)."""
+    its band on purpose, e.g. onto the floor, stays there). Returns (synthesis, state, a note per move)."""
     targets = request_apply.retarget(syn.targets, syn.closed_out, closed_after)
     bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
     before = refine_state.allowed_intervals(syn.closed_out, estimate.band_intervals(
@@ -178,7 +177,6 @@ def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedSt
             notes.append(f"joint {n}: {q:.4g} -> {kept:.4g} ({closed_after[n].fraction(q):.3f} -> {closed_after[n].fraction(kept):.3f} "
                          f"of its range): the limits clipped again on the changed collision pieces moved its range; kept "
                          f"inside its band ({bands.get(n, 'closed')})")
-            log.say("refine_state", notes[-1])
     return replace(syn, overlay=overlay, closed_out=closed_after, targets=targets, bands=bands), out, notes
 
 
