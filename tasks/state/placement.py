@@ -39,6 +39,19 @@ class Synthesis:
         """The candidate of this synthesis: its overlay at the requested state, with the collision ``overrides``."""
         return Candidate(ctx.asset, self.overlay, self.requested, overrides or {}, ctx.root_rotation)
 
+    def retargeted(self, closed: dict[str, ClosedState]) -> tuple[dict[str, request_apply.JointTarget],
+                                                                  dict[str, request_apply.JointTarget], dict[str, str]]:
+        """(targets, those that changed, bands) once the closed ends or ranges moved to ``closed`` (output units): an
+        angle or distance asked stays that opening from the closed end (:func:`request_apply.retarget`), and a
+        retargeted joint takes its target's band."""
+        targets = request_apply.retarget(self.targets, self.closed_out, closed)
+        moved = {n: t for n, t in targets.items() if t is not self.targets[n]}
+        return targets, moved, {**self.bands, **{n: t.band for n, t in moved.items()}}
+
+    def fractions(self) -> dict[str, tuple[float, float]]:
+        """joint -> the opening fractions its band allows, a number or end asked winning (:func:`estimate.band_intervals`)."""
+        return estimate.band_intervals(self.bands, {n: t.interval for n, t in self.targets.items() if t.interval is not None})
+
 
 def scaled_closed(closed: dict[str, ClosedState], scale: float, prismatic: set[str]) -> dict[str, ClosedState]:
     """Closed ends at ``scale`` (prismatic positions and ranges times ``scale``)."""
@@ -74,8 +87,7 @@ def closed_on_output(ctx: EstimationContext, syn: Synthesis, ws: Workspace, log:
     for n in moved:
         log.say("closed_state", f"joint {n}: closed end {new[n].q_closed:.4g} on the output's collision pieces "
                                 f"({syn.closed_out[n].q_closed:.4g} before); the state is placed from it")
-    targets = request_apply.retarget(syn.targets, syn.closed_out, new)  # the angle asked, from the new closed end
-    bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
+    targets, _, bands = syn.retargeted(new)  # the angle asked, from the new closed end
     return replace(syn, overlay=overlay, closed_out=new, requested=requested, targets=targets, bands=bands)
 
 
@@ -88,9 +100,7 @@ def clip_synthesis(ctx: EstimationContext, syn: Synthesis, config: RefineConfig,
     if overlay is syn.overlay:
         return syn
     s = overlay.scale
-    targets = request_apply.retarget(syn.targets, syn.closed_out, closed_out)  # an angle asked stays that angle from the closed end
-    moved = {n: t for n, t in targets.items() if t is not syn.targets[n]}
-    bands = {**syn.bands, **{n: t.band for n, t in moved.items()}}
+    targets, moved, bands = syn.retargeted(closed_out)  # an angle asked stays that angle from the closed end
     if moved and overlay.initial_joint_positions:
         overlay = overlay.model_copy(update={"initial_joint_positions": {
             **overlay.initial_joint_positions, **{n: closed_out[n].position(t.fraction) for n, t in moved.items()}}})
@@ -161,12 +171,10 @@ def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedSt
     but that the new range puts outside it is moved to the nearest position the band allows on ``closed_after`` (an
     opening fraction is of the range the output has); every other joint keeps its position (one a stage moved out of
     its band on purpose, e.g. onto the floor, stays there). Returns (synthesis, state, a note per move)."""
-    targets = request_apply.retarget(syn.targets, syn.closed_out, closed_after)
-    bands = {**syn.bands, **{n: t.band for n, t in targets.items() if t is not syn.targets[n]}}
-    before = refine_state.allowed_intervals(syn.closed_out, estimate.band_intervals(
-        syn.bands, {n: t.interval for n, t in syn.targets.items() if t.interval is not None}))
-    after = refine_state.allowed_intervals(closed_after, estimate.band_intervals(
-        bands, {n: t.interval for n, t in targets.items() if t.interval is not None}))
+    targets, _, bands = syn.retargeted(closed_after)
+    new = replace(syn, overlay=overlay, closed_out=closed_after, targets=targets, bands=bands)
+    before = refine_state.allowed_intervals(syn.closed_out, syn.fractions())
+    after = refine_state.allowed_intervals(closed_after, new.fractions())
     out, notes = dict(state), []
     for n, q in state.items():
         if n not in before or n not in after or not before[n].lo - 1e-9 <= q <= before[n].hi + 1e-9:
@@ -177,7 +185,7 @@ def reclipped(syn: Synthesis, overlay: Overlay, closed_after: dict[str, ClosedSt
             notes.append(f"joint {n}: {q:.4g} -> {kept:.4g} ({closed_after[n].fraction(q):.3f} -> {closed_after[n].fraction(kept):.3f} "
                          f"of its range): the limits clipped again on the changed collision pieces moved its range; kept "
                          f"inside its band ({bands.get(n, 'closed')})")
-    return replace(syn, overlay=overlay, closed_out=closed_after, targets=targets, bands=bands), out, notes
+    return new, out, notes
 
 
 def clip_limits(candidate: Candidate, closed_out: dict[str, ClosedState], ws: Workspace, config: RefineConfig,
