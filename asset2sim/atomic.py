@@ -186,12 +186,14 @@ def exchange_folders(a: Path | str, b: Path | str) -> None:
     _fsync_dir(b.parent)
 
 
-def write_bytes(path: Path | str, data: bytes, *, durable: bool = True) -> Path:
+def write_bytes(path: Path | str, data: bytes, *, durable: bool = True, check: Callable[[Path], object] | None = None) -> Path:
     """Write ``data`` to ``path`` atomically (parents created); ``durable=False`` (or a scratch folder): without
-    ``fsync``, atomic for a killed process only. Returns the path.
+    ``fsync``, atomic for a killed process only; ``check``: called with the complete temporary file (beside ``path``,
+    so relative references resolve as from ``path``) before it replaces ``path``. Returns the path.
 
     Raises:
         OSError: the folder cannot be written (the error names ``path``).
+        Exception: what ``check`` raised; ``path`` is left as it was.
     """
     path = Path(path)
     announce([path])
@@ -204,6 +206,8 @@ def write_bytes(path: Path | str, data: bytes, *, durable: bool = True) -> Path:
             if durable:
                 fh.flush()
                 os.fsync(fh.fileno())
+        if check is not None:
+            check(Path(tmp))
         _replace(tmp, path)
     except BaseException:
         _unlink_quietly([tmp])
@@ -213,9 +217,9 @@ def write_bytes(path: Path | str, data: bytes, *, durable: bool = True) -> Path:
     return path
 
 
-def write_text(path: Path | str, text: str, *, durable: bool = True) -> Path:
-    """Write UTF-8 ``text`` atomically (``durable`` as in :func:`write_bytes`)."""
-    return write_bytes(path, text.encode("utf-8"), durable=durable)
+def write_text(path: Path | str, text: str, *, durable: bool = True, check: Callable[[Path], object] | None = None) -> Path:
+    """Write UTF-8 ``text`` atomically (``durable`` and ``check`` as in :func:`write_bytes`)."""
+    return write_bytes(path, text.encode("utf-8"), durable=durable, check=check)
 
 
 def _check_finite(obj: Any, where: str = "$") -> None:

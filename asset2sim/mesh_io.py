@@ -92,14 +92,18 @@ def file_bytes(path: Path | str) -> bytes:
     return Path(path).read_bytes()
 
 
-def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
     """Vectorized OBJ reader for the common case (``v x y z`` lines, triangle
     faces of one index format, positive indices). ``None`` when the file needs
-    the general parser."""
+    the general parser. With ``groups``: a third array (M,) int, each face's
+    ``o``/``g`` group (the count of group lines before it); ``None`` also for a
+    byte of :data:`_OTHER_LINE_ENDS` or one that is not ASCII (the line-by-line reader splits those)."""
     arr = np.frombuffer(data, np.uint8)
     n = arr.size
+    if groups and np.any(np.isin(arr, _OTHER_LINE_ENDS) | (arr >= 128)):
+        return None
     if n == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+        return (np.zeros((0, 3)), np.zeros((0, 3), np.int64)) + ((np.zeros(0, np.int64),) if groups else ())
     nl = np.flatnonzero(arr == 10)
     starts = np.concatenate(([0], nl + 1))
     lens = np.diff(np.concatenate((starts, [n + 1])))
@@ -110,6 +114,7 @@ def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     is_v = (c0 == 118) & ws
     is_f = (c0 == 102) & ws
     nv, nf = int(is_v.sum()), int(is_f.sum())
+    group = np.cumsum(((c0 == 111) | (c0 == 103)) & (ws | (c1 == 10) | (c1 == 0)))[is_f] if groups else None
 
     def select(mask_lines: np.ndarray) -> np.ndarray:
         mask = np.repeat(mask_lines, lens)[:n]
@@ -128,7 +133,7 @@ def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
             if verts.size != 3 * nv:
                 return None
             if nf == 0:
-                return verts.reshape(-1, 3), np.zeros((0, 3), np.int64)
+                return (verts.reshape(-1, 3), np.zeros((0, 3), np.int64)) + ((group,) if groups else ())
             fbytes = select(is_f).copy()
             if np.any(fbytes == 35):
                 return None
@@ -151,7 +156,11 @@ def _parse_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     faces = idx.reshape(nf, 3, per_vertex)[:, :, 0]
     if np.any(faces < 1):
         return None  # negative (relative) or zero indices: general parser
-    return verts.reshape(-1, 3), faces - 1
+    return (verts.reshape(-1, 3), faces - 1) + ((group,) if groups else ())
+
+
+#: NUL and the bytes other than ``\\n`` that :meth:`str.splitlines` ends a line at (ASCII ones; any byte >= 128 is checked apart).
+_OTHER_LINE_ENDS = np.array([0, 11, 12, 13, 28, 29, 30], np.uint8)
 
 
 def _parse_obj_general(data: bytes, where: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -260,17 +269,24 @@ class MeshCache:
         return len(self._store)
 
 
-def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[int]]]]:
+def _obj_group_polygons(path: Path | str) -> tuple[np.ndarray, list[list[list[int]] | np.ndarray]]:
     """The vertices (N, 3) of an OBJ file (file units) and, per ``o``/``g`` group with face indices, its
-    faces as lists of 0-based vertex indices (negative OBJ indices resolved), in file order.
+    faces as lists of 0-based vertex indices (negative OBJ indices resolved), in file order; a file of
+    triangles only (:func:`_parse_obj_fast`) gives each group's faces as one array (M, 3) int64.
 
     Raises:
         MeshReadError: the file cannot be read, or a vertex or face line is malformed.
     """
     try:
-        text = file_bytes(path).decode(errors="replace")
+        data = file_bytes(path)
     except OSError as exc:
         raise MeshReadError(f"cannot read mesh {path}: {exc}") from exc
+    fast = _parse_obj_fast(data, groups=True)
+    if fast is not None:
+        v, f, group = fast
+        cuts = np.flatnonzero(np.diff(group)) + 1
+        return v, [part for part in np.split(f, cuts) if len(part)]
+    text = data.decode(errors="replace")
     verts: list[tuple[float, float, float]] = []
     groups: list[list[list[int]]] = []
     current: list[list[int]] = []
@@ -311,7 +327,7 @@ def obj_groups(path: Path | str) -> list[np.ndarray]:
     v, groups = _obj_group_polygons(path)
     out = []
     for polygons in groups:
-        ids = np.unique(np.fromiter((i for poly in polygons for i in poly), int))
+        ids = np.unique(polygons if isinstance(polygons, np.ndarray) else np.fromiter((i for poly in polygons for i in poly), int))
         if ids.min() < 0 or ids.max() >= len(v):
             raise MeshReadError(f"{path}: a face names a vertex that does not exist")
         out.append(v[ids])
@@ -333,7 +349,8 @@ def group_meshes(path: Path | str) -> list[tuple[np.ndarray, np.ndarray]]:
     v, groups = _obj_group_polygons(path)
     out = []
     for polygons in groups:
-        f = np.asarray([(p[0], p[k], p[k + 1]) for p in polygons for k in range(1, len(p) - 1)], np.int64).reshape(-1, 3)
+        f = polygons if isinstance(polygons, np.ndarray) else np.asarray(
+            [(p[0], p[k], p[k + 1]) for p in polygons for k in range(1, len(p) - 1)], np.int64).reshape(-1, 3)
         if len(f) and (f.min() < 0 or f.max() >= len(v)):
             raise MeshReadError(f"{path}: a face names a vertex that does not exist")
         ids, inv = np.unique(f, return_inverse=True)

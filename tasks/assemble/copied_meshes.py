@@ -229,29 +229,15 @@ def material_references(asset: AssetDescription, copies: dict[str, Path] | None 
 def _edited_copy(data: bytes, rel: str, kind: str | None) -> bytes | None:
     """``data`` of an OBJ (``kind="obj"``) or MTL (``"mtl"``) copied to ``rel`` with every ``mtllib`` / texture
     statement naming a file outside the asset folder replaced by a comment; None when nothing was dropped.
-    Kept per process by (SHA-256 of ``data``, ``rel``, ``kind``) in :data:`_EDITED`: a refine copies the same
-    meshes into its workspace and its output folder, line by line the slowest part of a copy."""
+    An OBJ is edited line by line (the slowest part of a copy) only when a ``mtllib`` of the whole file names
+    a file outside, or a CR could split its lines otherwise than the whole-file scan reads them."""
     if kind not in ("obj", "mtl"):
         return None
-    if kind == "obj" and b"mtllib" not in data:  # fast path for large meshes
+    if kind == "obj" and (b"mtllib" not in data or (b"\r" not in data and not any(
+            reference_leaves_folder(n, rel) for n in mesh_io.mtl_libraries(data)))):
         return None
-    key = (hashlib.sha256(data).digest(), rel, kind)
-    with _EDITED_LOCK:
-        if key in _EDITED:
-            return _EDITED[key]
     new, dropped = _drop_outside_references(data, rel, mesh_io.mtl_libraries if kind == "obj" else mesh_io.mtl_texture_maps)
-    out = new if dropped else None
-    if out is None or len(out) <= _EDITED_MAX_BYTES:
-        with _EDITED_LOCK:
-            _EDITED[key] = out
-    return out
-
-
-#: :func:`_edited_copy`'s results in this process, by (SHA-256 of the file's bytes, output path, kind); edited
-#: files larger than :data:`_EDITED_MAX_BYTES` are not kept (an unedited file keeps only None).
-_EDITED: cachetools.LRUCache = cachetools.LRUCache(maxsize=8192)
-_EDITED_MAX_BYTES = 1 << 20
-_EDITED_LOCK = threading.Lock()
+    return new if dropped else None
 
 
 def copy_meshes(asset: AssetDescription, out_dir: Path) -> list[Path]:

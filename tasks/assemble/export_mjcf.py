@@ -107,11 +107,13 @@ class MjcfCheck:
     max_inertia_error: float
 
 
-def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float], fixed_base: bool = False) -> MjcfCheck:
+def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float], fixed_base: bool = False,
+               shown: Path | None = None) -> MjcfCheck:
     """Load ``xml_path`` with MuJoCo and compare it with the URDF: per body mass, COM (link frame) and
     inertia tensor about the COM (link axes) against the link's ``<inertial>`` (none: massless); the
     keyframe ``initial`` against ``initial_state`` (0 for joints it does not list); with ``fixed_base``
-    (a mounted asset), no free joint.
+    (a mounted asset), no free joint. ``shown``: the path the errors name (default ``xml_path``; a file
+    checked before it is moved into place).
 
     Raises:
         ExportError: MuJoCo cannot load the file, or a check fails (total mass
@@ -123,7 +125,8 @@ def check_mjcf(xml_path: Path, urdf_path: Path, initial_state: dict[str, float],
         with mujoco_messages():
             m = mujoco.MjModel.from_xml_path(str(xml_path))
     except Exception as exc:
-        raise ExportError(f"MuJoCo cannot load the exported {xml_path}: {exc}") from exc
+        raise ExportError(f"MuJoCo cannot load the exported {shown or xml_path}: {exc}") from exc
+    xml_path = shown or xml_path
     urdf = read_urdf(urdf_path)
     urdf_mass = urdf.total_mass()
     total = float(m.body_mass[1:].sum())
@@ -177,7 +180,8 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     Args:
         out_dir: an output folder of the SPEC's contract.
         visuals: include the visual meshes (non-colliding, group 2).
-        check: load the written file with MuJoCo and run :func:`check_mjcf`.
+        check: load the file as written with MuJoCo and run :func:`check_mjcf` before it replaces the MJCF file
+            (the one compile with the visual meshes; a file that fails is not left in ``out_dir``).
 
     Returns:
         The path of the MJCF file.
@@ -187,7 +191,7 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
         MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
         ValueError: invalid ``initial_state.json`` / ``overlay.json``.
         UrdfError, MjcfError, ExportError: the URDF cannot be read, converted,
-            compiled, or the written file does not check out.
+            compiled, or the written file does not check out (an earlier MJCF file then stays as it was).
     """
     import_extra("mujoco", "the MJCF export")  # the one-line hint naming the extra when it is missing
 
@@ -199,16 +203,16 @@ def export_mjcf(out_dir: Path, *, visuals: bool = True, check: bool = True) -> P
     springs = springs_from_overlay(out_dir, initial)
     fixed = read_root(out_dir).fixed  # mounted: no free joint, the root welded where the file puts it
     build = urdf_to_mjcf(urdf, SessionOptions(initial_state=initial, springs=springs, fixed_base=fixed, ground=not fixed),
-                         missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals)
+                         missing_inertial="massless", mesh_root=out_dir, meshdir="..", visuals=visuals, compile_visuals=not check)
     for rel, data in build.derived_meshes.items():
         dst = file_names.join_inside(out_dir, rel)
         if not (dst.is_file() and dst.read_bytes() == data):
             atomic.write_bytes(dst, data)
     _remove_stale_pieces(out_dir, set(build.derived_meshes))
-    xml_path = atomic.write_text(out_dir / MJCF_DIR / f"{urdf.stem}.xml", _header(build.notes, fixed) + build.xml + "\n")
-    if check:
-        check_mjcf(xml_path, urdf, initial, fixed_base=fixed)
-    return xml_path
+    xml_path = out_dir / MJCF_DIR / f"{urdf.stem}.xml"
+    # checked as written, before it replaces the file: a file MuJoCo refuses never lands
+    return atomic.write_text(xml_path, _header(build.notes, fixed) + build.xml + "\n",
+                             check=(lambda tmp: check_mjcf(tmp, urdf, initial, fixed_base=fixed, shown=xml_path)) if check else None)
 
 
 def _remove_stale_pieces(out_dir: Path, keep: set[str]) -> None:

@@ -196,32 +196,50 @@ def _shrink(points: np.ndarray, origin: np.ndarray, axis: np.ndarray, f: float) 
     return origin + along + f * (rel - along)
 
 
-def _swept_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray
+def _turns(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Rotations (A, 3, 3) by each of ``angles`` (A,) rad about the unit ``axis`` (3,) (:func:`axis_angle_matrix`)."""
+    return np.stack([axis_angle_matrix(axis, float(a)) for a in angles]).reshape(-1, 3, 3)
+
+
+def _swept_gap(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray,
+               turns: np.ndarray | None = None, normals: tuple[np.ndarray, np.ndarray] | None = None
                ) -> tuple[float, float, np.ndarray]:
-    """(least :func:`sat_gap` m, its angle rad, its axis (3,)) of ``p`` (k, 3) turned by each of ``angles``
-    about the line (``origin``, ``axis``) against ``q`` (l, 3), one frame (each hull made once, ``p``'s normals
-    turned with it). Raises ValueError (no volume)."""
-    np_, nq = _normals(p), _normals(q)
-    best = (np.inf, 0.0, np.zeros(3))
-    for a in angles:
-        R = axis_angle_matrix(axis, float(a))
-        g, n = _sat_on((p - origin) @ R.T + origin, q, np.vstack([np_ @ R.T, nq]))
-        if g < best[0]:
-            best = (g, float(a), n)
-    return best
+    """(least :func:`sat_gap` m, its angle rad, its axis (3,)) of ``p`` (k, 3) turned by each of ``angles`` (A,)
+    about the line (``origin``, ``axis``) against ``q`` (l, 3), one frame, all angles at once (each hull made
+    once, ``p``'s face normals turned with it); the first angle of the least gap. ``turns`` (A, 3, 3): the
+    rotations of ``angles`` (:func:`_turns`), ``normals``: :func:`_normals` of ``p`` and ``q``; made when None.
+    Raises ValueError (no volume)."""
+    if not len(angles):
+        return np.inf, 0.0, np.zeros(3)
+    rt = (_turns(axis, angles) if turns is None else turns).transpose(0, 2, 1)
+    np_, nq = (_normals(p), _normals(q)) if normals is None else normals
+    axes = np.concatenate([np.matmul(np_, rt), np.broadcast_to(nq, (len(rt),) + nq.shape)], axis=1)  # (A, F, 3)
+    at = axes.transpose(0, 2, 1)
+    sp, sq = np.matmul(np.matmul(p - origin, rt) + origin, at), np.matmul(q, at)  # (A, k, F), (A, l, F)
+    ahead = sq.min(axis=1) - sp.max(axis=1)  # q beyond p along +axis
+    behind = sp.min(axis=1) - sq.max(axis=1)
+    gaps = np.maximum(ahead, behind)  # (A, F)
+    best = gaps.argmax(axis=1)
+    rows = np.arange(len(rt))
+    a = int(np.argmin(gaps[rows, best]))
+    i = int(best[a])
+    return float(gaps[a, i]), float(angles[a]), (axes[a, i] if ahead[a, i] >= behind[a, i] else -axes[a, i])
 
 
-def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray
+def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis: np.ndarray, angles: np.ndarray,
+                         turns: np.ndarray | None = None, normals: tuple[np.ndarray, np.ndarray] | None = None
                          ) -> tuple[np.ndarray, float, float] | None:
     """``p`` (k, 3) m shrunk about the line (``origin``, unit ``axis``) until, turned by every one of ``angles``
     (rad), it clears ``q`` (l, 3) by :data:`RUNNING_CLEARANCE`. None when it is nearer than that unturned
     (:func:`running_clearance`'s), stays :data:`SWEPT_TRIGGER` away turning, overlaps deeper than
     :data:`TOUCHING_OVERLAP`, meets it head-on (a stop: the motion along the gap's axis, :data:`SLIDING_COS`),
     or would need more than :data:`MAX_RADIAL_SHRINK`. Returns (points, shrink fraction, least gap m before).
-    Raises ValueError (no volume)."""
-    if sat_gap(p, q)[0] < RUNNING_CLEARANCE - 1e-9:
+    ``turns`` and ``normals``: as :func:`_swept_gap`'s. Raises ValueError (no volume)."""
+    turns = _turns(axis, angles) if turns is None else turns
+    normals = (_normals(p), _normals(q)) if normals is None else normals
+    if _sat_on(p, q, np.vstack(normals))[0] < RUNNING_CLEARANCE - 1e-9:
         return None
-    g, a, n = _swept_gap(p, q, origin, axis, angles)
+    g, a, n = _swept_gap(p, q, origin, axis, angles, turns, normals)
     least = g
     if g >= SWEPT_TRIGGER or g <= -TOUCHING_OVERLAP:
         return None
@@ -239,7 +257,7 @@ def _clear_turning_piece(p: np.ndarray, q: np.ndarray, origin: np.ndarray, axis:
         if f < 1.0 - MAX_RADIAL_SHRINK:
             return None
         out = _shrink(p, origin, axis, f)
-        g = _swept_gap(out, q, origin, axis, angles)[0]
+        g = _swept_gap(out, q, origin, axis, angles, turns, (_normals(out), normals[1]))[0]
         if g >= RUNNING_CLEARANCE - 1e-6:
             return out, 1.0 - f, least
     return None
@@ -265,6 +283,7 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
         origin, axis = Tj[:3, 3], Tj[:3, :3] @ np.asarray(joint.axis, float)
         axis = axis / max(float(np.linalg.norm(axis)), 1e-12)
         world = {o: [Q.points @ poses[o][:3, :3].T + poses[o][:3, 3] for Q in pieces[o]] for o in others}  # they do not change here
+        turns, faces = _turns(axis, angles), {}  # the rotations and the other pieces' face normals, made once
         for i, P in enumerate(pieces[ln]):
             pw = P.points @ poses[ln][:3, :3].T + poses[ln][:3, 3]
             rel = pw - origin
@@ -272,12 +291,16 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
             radius = float(np.linalg.norm(rel - np.outer(along, axis), axis=1).max())
             ends = origin + np.outer([along.min(), along.max()], axis)  # the axis over the piece's extent along it
             box_lo, box_hi = ends.min(axis=0) - radius, ends.max(axis=0) + radius  # holds the piece's whole turn
+            own = None  # pw's face normals, made once
             for other in others:
-                for qw in world[other]:
+                for k, qw in enumerate(world[other]):
                     if np.any(qw.min(axis=0) > box_hi + RUNNING_CLEARANCE) or np.any(qw.max(axis=0) < box_lo - RUNNING_CLEARANCE):
                         continue
                     try:
-                        hit = _clear_turning_piece(pw, qw, origin, axis, angles)
+                        own = _normals(pw) if own is None else own
+                        if (other, k) not in faces:
+                            faces[other, k] = _normals(qw)
+                        hit = _clear_turning_piece(pw, qw, origin, axis, angles, turns, (own, faces[other, k]))
                     except ValueError:
                         continue
                     if hit is None:
@@ -288,7 +311,7 @@ def swept_clearance(model: urdf.UrdfModel, pieces: dict[str, list[Piece]], notes
                         pieces[ln][i] = P = Piece.of(pts @ inv[:3, :3].T + inv[:3, 3], P.sources)
                     except (QhullError, ValueError):
                         continue
-                    pw = pts
+                    pw, own = pts, None
                     notes.append(f"link {ln!r}: collision piece {i} shrunk {shrink:.1%} about {joint.name!r}'s axis for "
                                  f"{RUNNING_CLEARANCE * 1000:.2g} mm {RUNNING_CLEARANCE_NOTE} against {other!r} over its "
                                  f"turn (it came {g * 1000:.2g} mm from it)")

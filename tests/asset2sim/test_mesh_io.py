@@ -123,6 +123,26 @@ def test_obj_groups_follow_o_and_g_records(tmp_path):
         mesh_io.obj_groups(bad)
 
 
+
+def test_obj_groups_of_triangles_match_the_line_by_line_grouping(tmp_path):
+    """A triangle file takes the vectorized reader with LF line ends and the line-by-line one with CRLF: the same
+    groups either way (an empty group and a nameless ``g`` line among them), in file order."""
+    rng = np.random.default_rng(3)
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in rng.normal(size=(30, 3)).tolist()]
+    lines += ["o empty", "g", "f 1/1 2/2 3/3", "f 4/4 5/5 6/6", "g second part", "vn 0 0 1", "f 7/1 8/1 9/1", "g", "o last"]
+    last = rng.integers(10, 31, size=(12, 3))
+    lines += [f"f {a}/1 {b}/1 {c}/1" for a, b, c in last.tolist()]
+    read = {}
+    for name, ending in (("lf", "\n"), ("crlf", "\r\n")):
+        p = tmp_path / f"{name}.obj"
+        p.write_bytes(ending.join(lines).encode())
+        read[name] = (mesh_io._parse_obj_fast(p.read_bytes(), groups=True), mesh_io.obj_groups(p), mesh_io.group_meshes(p))
+    assert read["lf"][0] is not None and read["crlf"][0] is None
+    assert [len(g) for g in read["lf"][1]] == [6, 3, len(np.unique(last))]
+    for (g, (mv, mf)), (h, (nv, nf)) in zip(zip(*read["lf"][1:]), zip(*read["crlf"][1:]), strict=True):
+        assert np.array_equal(g, h) and np.array_equal(mv, nv) and np.array_equal(mf, nf) and mf.dtype == nf.dtype
+
+
 def test_scan_obj_text_splits_by_material_with_absolute_indices(tmp_path):
     scan = mesh_io.scan_obj_text(_write(tmp_path).read_text())
     assert scan.mtllibs == ["box.mtl"]

@@ -145,7 +145,7 @@ class MjcfBuild:
 
 
 def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *, missing_inertial: str = "massless",
-                 mesh_root: Path | None = None, meshdir: str = ".", visuals: bool = False) -> MjcfBuild:
+                 mesh_root: Path | None = None, meshdir: str = ".", visuals: bool = False, compile_visuals: bool = True) -> MjcfBuild:
     """Convert a URDF into MJCF under the SPEC's conventions, as a session of ``options`` opens it.
 
     Args:
@@ -160,6 +160,8 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
         meshdir: the ``meshdir`` written in the MJCF (relative to the MJCF file).
         visuals: also write the visual meshes as non-colliding geoms (group 2;
             collision geoms go to group 3).
+        compile_visuals: with ``visuals``, compile the text with them (False: the caller loads the file it
+            writes, as :func:`asset2sim.tasks.assemble.export_mjcf.export_mjcf` does).
 
     Raises:
         UrdfError: the URDF cannot be read.
@@ -210,7 +212,7 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
     key.set("qpos", vec_text(qpos))
     etree.indent(root, space="  ")
     xml = etree.tostring(root, encoding="unicode")
-    if visuals:  # the file as written must compile too
+    if visuals and compile_visuals:  # the file as written must compile too
         compile_xml(xml, final_assets, urdf_path)
     order = [mujoco.mj_id2name(compiled, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(compiled.njnt)]
     return MjcfBuild(xml=xml, derived_meshes=meshes.derived, mesh_files=meshes.files, initial_qpos=qpos,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -169,6 +170,28 @@ def test_check_catches_a_wrong_export(tmp_path):
     with pytest.raises(ExportError, match="keyframe lid_hinge"):
         check_mjcf(path, a.urdf, {**a.initial_state, "lid_hinge": 0.31})
     check_mjcf(path, a.urdf, a.initial_state)
+
+
+def test_a_file_that_fails_its_check_never_replaces_the_export(tmp_path, monkeypatch):
+    """The file is checked as written, before it lands: a conversion MuJoCo reads with another mass fails
+    naming ``mjcf/mobility.xml``, the earlier export stays byte for byte, and no temporary file is left."""
+    from asset2sim.tasks.assemble import export_mjcf as module
+
+    write_contract_asset(tmp_path, lid_angle=0.3)
+    path = export_mjcf(tmp_path)
+    good = path.read_bytes()
+    real = module.urdf_to_mjcf
+
+    def heavier(*args, **kwargs):
+        build = real(*args, **kwargs)
+        assert kwargs.get("compile_visuals") is False  # the check is the one compile with the visual meshes
+        return dataclasses.replace(build, xml=build.xml.replace('mass="0.2"', 'mass="0.25"'))
+
+    monkeypatch.setattr(module, "urdf_to_mjcf", heavier)
+    with pytest.raises(ExportError, match=r"mjcf/mobility\.xml: (total mass|body 'lid')"):
+        export_mjcf(tmp_path)
+    assert path.read_bytes() == good
+    assert sorted(p.name for p in path.parent.iterdir() if p.is_file()) == ["mobility.xml"]
 
 
 def test_springs_come_from_the_overlay(tmp_path):

@@ -67,16 +67,18 @@ def test_cache_on_a_real_asset_is_identical(tmp_path):
     assert copied_meshes.mesh_copies(asset) == copied_meshes._mesh_copies(asset) != fresh
 
 
-def test_meshes_copied_twice_are_edited_once_per_content(tmp_path, monkeypatch):
-    """A refine copies an object's meshes into its workspace and then into its output: each OBJ's lines are
-    scanned for outside references once per content, the second copy is byte for byte the first, and a
-    file whose bytes change is scanned again."""
+def test_only_meshes_naming_outside_files_are_edited_line_by_line(tmp_path, monkeypatch):
+    """A copy edits an OBJ line by line only when one of its ``mtllib`` names a file outside the asset folder
+    (or a CR may split its lines otherwise): the other OBJs are copied as they are, the edited one drops the
+    statement, and a file whose bytes change is edited again."""
     src = SHARED / "100221"
     if not (src / "mobility.urdf").is_file():
         pytest.skip("PartNet-Mobility object 100221 not available")
     shutil.copytree(src, tmp_path / "a")
-    obj = sorted((tmp_path / "a").rglob("*.obj"))[0]
+    objs = sorted((tmp_path / "a").rglob("*.obj"))
+    obj, crlf = objs[0], objs[1]
     obj.write_bytes(b"mtllib ../../../outside.mtl\n" + obj.read_bytes())  # a reference the copy drops
+    crlf.write_bytes(crlf.read_bytes().replace(b"\n", b"\r\n"))  # read line by line, nothing to drop
     asset = extract_asset(tmp_path / "a")
     scans: list[str] = []
     real = copied_meshes._drop_outside_references
@@ -86,17 +88,16 @@ def test_meshes_copied_twice_are_edited_once_per_content(tmp_path, monkeypatch):
         return real(data, rel, names_of)
 
     monkeypatch.setattr(copied_meshes, "_drop_outside_references", counting)
-    copied_meshes._EDITED.clear()
     copied_meshes.copy_meshes(asset, tmp_path / "one")
-    first = len(scans)
-    assert first > 50
-    copied_meshes.copy_meshes(asset, tmp_path / "two")
-    assert len(scans) == first  # the second copy scanned nothing again
-    rel = obj.relative_to(tmp_path / "a").as_posix()
-    one, two = (tmp_path / "one" / rel).read_bytes(), (tmp_path / "two" / rel).read_bytes()
-    assert one == two and b"outside.mtl" not in one and b"was dropped" in one
+    rel, rel_crlf = (p.relative_to(tmp_path / "a").as_posix() for p in (obj, crlf))
+    assert sorted(s for s in scans if s.endswith(".obj")) == sorted([rel, rel_crlf])  # every other OBJ copied as it is
+    assert (tmp_path / "one" / rel_crlf).read_bytes() == crlf.read_bytes()
+    for other in objs[2:]:
+        assert (tmp_path / "one" / other.relative_to(tmp_path / "a")).read_bytes() == other.read_bytes()
+    one = (tmp_path / "one" / rel).read_bytes()
+    assert b"outside.mtl" not in one and b"was dropped" in one
     obj.write_bytes(obj.read_bytes().replace(b"outside.mtl", b"elsewhere.mtl"))
     _bump(obj)
     copied_meshes.copy_meshes(extract_asset(tmp_path / "a"), tmp_path / "three")
-    assert scans.count(rel) == 2  # new bytes: scanned again
+    assert scans.count(rel) == 2  # new bytes: edited again
     assert b"elsewhere.mtl" not in (tmp_path / "three" / rel).read_bytes()
