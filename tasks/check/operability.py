@@ -397,12 +397,3 @@ def operability_metric(run: OperabilityRun) -> MetricResult:
         details={"parts": {p.joint: p.summary() for p in run.parts}, "failing": failing, "failures": failures,
                  "efforts": efforts, "skipped": run.skipped},
         engine=run.engine)
-
-
-def not_operable(metrics: list[MetricResult]) -> list[str]:
-    """Joints an ``operability`` metric of ``metrics`` found not operable, first-seen order."""
-    out: list[str] = []
-    for m in metrics:
-        if m.name == "operability" and m.passed is False:
-            out += list(m.details.get("failing") or [])
-    return list(dict.fromkeys(out))
