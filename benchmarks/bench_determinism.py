@@ -8,7 +8,8 @@ first time and warm the second, and compare every file byte for byte (the comple
 Prints one line per row (identical, or the files that differ) and the count; exit status 1 when a row differs.
 ``--keep DIR`` copies each row's output to ``DIR/<id>``; ``--against DIR`` also compares each output with
 ``DIR/<id>`` kept by a run of another commit (a change that must not change outputs: run ``--keep`` on the commit
-before it, ``--against`` on the commit after).
+before it, ``--against`` on the commit after, both with the same ``--work``: ``evaluation.json`` and ``report.html``
+record the output folder's path).
 """
 
 from __future__ import annotations
