@@ -92,7 +92,7 @@ def file_bytes(path: Path | str) -> bytes:
     return Path(path).read_bytes()
 
 
-def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, ...] | None:
     """Vectorized OBJ reader for the common case (``v x y z`` lines, triangle
     faces of one index format, positive indices). ``None`` when the file needs
     the general parser. With ``groups``: a third array (M,) int, each face's
@@ -159,7 +159,7 @@ def _parse_obj_fast(data: bytes, groups: bool = False) -> tuple[np.ndarray, np.n
     return (verts.reshape(-1, 3), faces - 1) + ((group,) if groups else ())
 
 
-#: NUL and the bytes other than ``\\n`` that :meth:`str.splitlines` ends a line at (ASCII ones; any byte >= 128 is checked apart).
+#: NUL and the bytes other than ``\n`` that :meth:`str.splitlines` ends a line at (ASCII ones; any byte >= 128 is checked apart).
 _OTHER_LINE_ENDS = np.array([0, 11, 12, 13, 28, 29, 30], np.uint8)
 
 
