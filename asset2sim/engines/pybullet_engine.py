@@ -41,7 +41,11 @@ class PyBulletSession(SessionDefaults):
     """A :class:`~asset2sim.engines.base.SimSession` in PyBullet: its own
     DIRECT client, or (``client``) the caller's, whose gravity and time step
     are left as they are; ``ground`` False: no plane is added to the
-    caller's world (the object is still put with its lowest point on z = 0)."""
+    caller's world (the object is still put with its lowest point on z = 0).
+
+    Its own client is new, never one kept from an earlier session (a connect costs about 10 ms): a client keeps
+    the meshes it loaded by file name for its whole life, ``resetSimulation`` included, so a kept client would
+    load the old geometry of a collision file the refine rewrote at the same path."""
 
     engine = "pybullet"
     traits = EngineTraits(reference=True, conservative_aabb=True, springs_by_torque=True, incremental_penetration=True)

@@ -51,7 +51,9 @@ def test_fingerprint_follows_every_file_of_the_folder(tmp_path):
     assert driver_skip.input_fingerprint(tmp_path / "missing") is None
 
 
-def test_rerun_of_finished_assets_starts_nothing(tmp_path, prefect_server):
+def test_rerun_of_finished_assets_starts_nothing(tmp_path, prefect_server, dask_address):
+    """The runs that refine or skip in the workers use the session's Dask scheduler (``dask_address``, as the
+    nightly deployment does); the run with nothing to do is given none, and starts none."""
     from prefect.settings import PREFECT_API_URL, temporary_settings
 
     from asset2sim.flows.refine_flow import run_refine_flow
@@ -59,7 +61,7 @@ def test_rerun_of_finished_assets_starts_nothing(tmp_path, prefect_server):
     root = tmp_path / "proj"
     catalog = make_project(root, ASSETS, catalog_extra={"run": {"workers": 1}, "tracking": {"enabled": False}})
     CALLS_PATH.write_text("")
-    s1 = run_refine_flow(catalog, workers=1)
+    s1 = run_refine_flow(catalog, dask_address=dask_address)
     assert s1["done"] == 3 and s1["driver_skipped"] == 0
     assert sorted(c["asset_id"] for c in flowfakes.calls(CALLS_PATH)) == sorted(ASSETS)
     cat = load_catalog(catalog)
@@ -86,18 +88,18 @@ def test_rerun_of_finished_assets_starts_nothing(tmp_path, prefect_server):
     obj = sorted((cat.dataset_root("gen") / "laptop" / "textured_objs").glob("*.obj"))[0]
     _touch(obj)
     CALLS_PATH.write_text("")
-    s3 = run_refine_flow(catalog, workers=1)
+    s3 = run_refine_flow(catalog, dask_address=dask_address)
     assert s3["driver_skipped"] == 2 and s3["skipped"] == 3
     assert flowfakes.calls(CALLS_PATH) == []
     # its index entry now has the new fingerprint: the next run skips it in the driver again
-    s4 = run_refine_flow(catalog, workers=1)
+    s4 = run_refine_flow(catalog, dask_address=dask_address)
     assert s4["driver_skipped"] == 3
 
     # a changed file: redone, the others skipped by the driver
     obj.write_text(obj.read_text() + "\n# edited\n")
     _touch(obj)
     CALLS_PATH.write_text("")
-    s5 = run_refine_flow(catalog, workers=1)
+    s5 = run_refine_flow(catalog, dask_address=dask_address)
     assert s5["driver_skipped"] == 2 and s5["done"] == 1
     assert [c["asset_id"] for c in flowfakes.calls(CALLS_PATH)] == ["laptop"]
     assert _rows(catalog, s5["run"])["laptop"]["input_hash"] != rows1["laptop"]["input_hash"]
@@ -105,12 +107,12 @@ def test_rerun_of_finished_assets_starts_nothing(tmp_path, prefect_server):
     # an output folder no longer complete: the driver sends it to a worker, which redoes it
     os.remove(os.path.join(rows1["box_lid"]["out_dir"], "mobility.urdf"))
     CALLS_PATH.write_text("")
-    s6 = run_refine_flow(catalog, workers=1)
+    s6 = run_refine_flow(catalog, dask_address=dask_address)
     assert s6["driver_skipped"] == 2 and s6["done"] == 1
     assert [c["asset_id"] for c in flowfakes.calls(CALLS_PATH)] == ["box_lid"]
 
     # --force: nothing skipped, in the driver or elsewhere
     CALLS_PATH.write_text("")
-    s7 = run_refine_flow(catalog, workers=1, force=True)
+    s7 = run_refine_flow(catalog, dask_address=dask_address, force=True)
     assert s7["driver_skipped"] == 0 and s7["done"] == 3
     assert sorted(c["asset_id"] for c in flowfakes.calls(CALLS_PATH)) == sorted(ASSETS)

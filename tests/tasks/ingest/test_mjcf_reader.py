@@ -74,9 +74,23 @@ def _manifest_rows(ids: list[str] | None = None) -> list[dict]:
     return [r for r in rows if ids is None or r["id"] in ids]
 
 
-def _round_trip(row: dict, tmp: Path, usd: bool = False) -> None:
-    out = tmp / row["id"]
-    refine_asset(SHARED / row["id"], row["prompt"], out, task=row["task"] or None, extras=False)
+@pytest.fixture(scope="module")
+def refined_row(tmp_path_factory):
+    """``refined_row(row)``: the output folder of the dev row ``row`` refined (its request and task, no extras) once
+    in this module; the exports below are written into it again by each test."""
+    root = tmp_path_factory.mktemp("mjcf_round_trip")
+    done: dict[str, Path] = {}
+
+    def get(row: dict) -> Path:
+        if row["id"] not in done:
+            refine_asset(SHARED / row["id"], row["prompt"], root / row["id"], task=row["task"] or None, extras=False)
+            done[row["id"]] = root / row["id"]
+        return done[row["id"]]
+
+    return get
+
+
+def _round_trip(row: dict, out: Path, usd: bool = False) -> None:
     xml = export_mjcf(out)
     read = read_mjcf_asset(xml)
     urdf = read_urdf(out / "mobility.urdf")
@@ -95,17 +109,18 @@ def _round_trip(row: dict, tmp: Path, usd: bool = False) -> None:
 
 
 @pytest.mark.parametrize("asset_id", ["148", *(pytest.param(a, marks=pytest.mark.slow) for a in ("8877", "103275"))])  # one dev object in the fast tiers, the others end to end
-def test_a_refined_outputs_mjcf_reads_back_as_its_urdf(shared_dataset, tmp_path, asset_id):
-    _round_trip(_manifest_rows([asset_id])[0], tmp_path)
+def test_a_refined_outputs_mjcf_reads_back_as_its_urdf(shared_dataset, refined_row, asset_id):
+    row = _manifest_rows([asset_id])[0]
+    _round_trip(row, refined_row(row))
 
 
 @pytest.mark.slow
-def test_every_dev_outputs_mjcf_and_usd_read_back_as_its_urdf(shared_dataset, tmp_path):
+def test_every_dev_outputs_mjcf_and_usd_read_back_as_its_urdf(shared_dataset, refined_row):
     pytest.importorskip("pxr")
     rows = _manifest_rows()
     assert len(rows) == 21
     for row in rows:
-        _round_trip(row, tmp_path, usd=True)
+        _round_trip(row, refined_row(row), usd=True)
 
 
 # ------------------------------------------------------------------ files the tests write
