@@ -60,7 +60,9 @@ class ContactPair:
 class SessionOptions:
     """How to open a session: ``initial_state`` joint -> rad or m; ``springs``
     joint -> :class:`Spring`; ``fixed_base`` pins the root; ``gravity`` False
-    disables it."""
+    disables it; ``files_key``: a name for the exact contents of every file the session loads (a candidate's
+    digest in its workspace, :meth:`asset2sim.tasks.assemble.candidate.Workspace.session`): sessions of one key
+    may reuse what an engine kept of those files (PyBullet: an idle client that loaded them); None keeps nothing."""
 
     initial_state: dict[str, float] = field(default_factory=dict)
     springs: dict[str, Spring] = field(default_factory=dict)
@@ -68,6 +70,7 @@ class SessionOptions:
     gravity: bool = True
     ground: bool = True
     conventions: SimConventions = field(default_factory=SimConventions)
+    files_key: str | None = None
 
 
 def session_root_options(fixed: bool) -> dict[str, bool]:

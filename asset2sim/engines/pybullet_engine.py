@@ -5,6 +5,7 @@ Bullet applies ``<dynamics damping>`` itself.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,44 @@ def _bullet():
         import pybullet
 
     return pybullet
+
+
+#: Most idle DIRECT clients kept in a process (their worlds empty, their mesh caches holding the files of their key).
+MAX_IDLE_CLIENTS = 3
+_IDLE: list[tuple[str, int]] = []  # (files key, client), oldest first
+_IDLE_LOCK = threading.Lock()
+
+
+def _take_client(p, files_key: str | None) -> int:
+    """An idle client kept under ``files_key`` (its world empty), else a new DIRECT client."""
+    if files_key is not None:
+        with _IDLE_LOCK:
+            for i, (key, cid) in enumerate(_IDLE):
+                if key == files_key:
+                    del _IDLE[i]
+                    return cid
+    with quiet_stdout():
+        return p.connect(p.DIRECT)
+
+
+def _give_back(p, cid: int, files_key: str | None) -> None:
+    """Empty client ``cid`` (``resetSimulation``) and keep it under ``files_key`` (the oldest idle client beyond
+    :data:`MAX_IDLE_CLIENTS` disconnected); without a key, disconnect it."""
+    if files_key is None:
+        p.disconnect(cid)
+        return
+    try:
+        p.resetSimulation(physicsClientId=cid)
+    except Exception:  # a client that cannot be emptied is not kept
+        p.disconnect(cid)
+        return
+    with _IDLE_LOCK:
+        _IDLE.append((files_key, cid))
+        excess = max(len(_IDLE) - MAX_IDLE_CLIENTS, 0)
+        dropped = _IDLE[:excess]
+        del _IDLE[:excess]
+    for _, old in dropped:
+        p.disconnect(old)
 
 
 def _joint_infos(p, body: int, cid: int) -> list:
@@ -43,9 +82,12 @@ class PyBulletSession(SessionDefaults):
     are left as they are; ``ground`` False: no plane is added to the
     caller's world (the object is still put with its lowest point on z = 0).
 
-    Its own client is new, never one kept from an earlier session (a connect costs about 10 ms): a client keeps
-    the meshes it loaded by file name for its whole life, ``resetSimulation`` included, so a kept client would
-    load the old geometry of a collision file the refine rewrote at the same path."""
+    Its own client is new unless ``options.files_key`` names the files it loads: then a client an earlier session
+    of that key left idle is emptied (``resetSimulation``) and used again, and this one is kept for the next
+    (:data:`MAX_IDLE_CLIENTS`); the results are the same to the bit as in a new client, and connecting and
+    building the collision shapes again is saved. The key is what makes that safe: a client keeps the meshes it
+    loaded by file name for its whole life, ``resetSimulation`` included, so a client kept across a rewrite of a
+    collision file at the same path would load the file's old geometry."""
 
     engine = "pybullet"
     traits = EngineTraits(reference=True, conservative_aabb=True, springs_by_torque=True, incremental_penetration=True)
@@ -58,8 +100,7 @@ class PyBulletSession(SessionDefaults):
         conv = options.conventions
         self._owns_client = client is None
         if client is None:
-            with quiet_stdout():
-                self.cid = p.connect(p.DIRECT)
+            self.cid = _take_client(p, options.files_key)
         else:
             self.cid = int(client)
         self.body = None
@@ -367,7 +408,7 @@ class PyBulletSession(SessionDefaults):
     def _release(self) -> None:
         p = self._p
         if self._owns_client:
-            p.disconnect(self.cid)
+            _give_back(p, self.cid, self.options.files_key)
             return
         self.release_root()
         for body in (self.body, self.plane):

@@ -10,7 +10,7 @@ import os
 import shutil
 import stat
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Mapping
@@ -173,12 +173,14 @@ class Workspace:
 
     def session(self, candidate: Candidate, engine: str = "pybullet", options: SessionOptions | None = None) -> SimSession:
         """A session of ``candidate`` (loaded first) in ``engine``
-        (:func:`asset2sim.engines.registry.open_session`); the caller closes it.
+        (:func:`asset2sim.engines.registry.open_session`), its ``files_key`` the scratch folder and the candidate's
+        digest (sessions of the candidate on disk may share what an engine kept of its files); the caller closes it.
 
         Raises:
             EngineUnavailable, RuntimeError: see :func:`asset2sim.engines.registry.open_session`.
         """
-        return open_session(engine, self.load(candidate), options)
+        path = self.load(candidate)
+        return open_session(engine, path, replace(options or SessionOptions(), files_key=f"{self.root}#{self._digest}"))
 
     def close(self) -> None:
         """Remove the scratch folder (and what :mod:`asset2sim.mesh_io` kept of its meshes)."""

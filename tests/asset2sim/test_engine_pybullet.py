@@ -12,7 +12,7 @@ from asset2sim.engines.registry import open_session
 from tests.helpers import write_hinged_plate
 
 
-def _urdf_with_dynamics(folder, damping, friction, rpy="0 0 0"):
+def _urdf_with_dynamics(folder, damping, friction, rpy="0 0 0", arm='<box size="0.02 0.02 0.4"/>'):
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "mobility.urdf").write_text(
         f"""<?xml version="1.0"?>
@@ -20,7 +20,7 @@ def _urdf_with_dynamics(folder, damping, friction, rpy="0 0 0"):
   <link name="base"><inertial><mass value="5"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
     <collision><origin xyz="0 0 0.05" rpy="{rpy}"/><geometry><box size="0.6 0.6 0.1"/></geometry></collision></link>
   <link name="arm"><inertial><origin xyz="0 0 0.2"/><mass value="0.2"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial>
-    <collision><origin xyz="0 0 0.2"/><geometry><box size="0.02 0.02 0.4"/></geometry></collision></link>
+    <collision><origin xyz="0 0 0.2"/><geometry>{arm}</geometry></collision></link>
   <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><origin xyz="0 0 0.15"/><axis xyz="1 0 0"/>
     <limit lower="-2" upper="2" effort="10" velocity="10"/><dynamics damping="{damping}" friction="{friction}"/></joint>
 </robot>
@@ -164,3 +164,68 @@ def test_a_held_root_resists_a_push_up_to_its_force_bound(tmp_path, hold, moves)
     finally:
         s.close()
 
+
+
+def _mesh_arm_urdf(folder, extent):
+    """:func:`_urdf_with_dynamics` with the arm's collision the OBJ file ``arm.obj`` (a cube of ``extent`` m),
+    written again at the same path on each call."""
+    import trimesh
+
+    folder.mkdir(parents=True, exist_ok=True)
+    trimesh.creation.box(extents=(extent, extent, extent)).export(folder / "arm.obj")
+    return _urdf_with_dynamics(folder, 0.01, 0.001, arm='<mesh filename="arm.obj"/>')
+
+
+def _arm_width(session) -> float:
+    lo, hi = session._p.getAABB(session.body, session.link_index("arm"), physicsClientId=session.cid)
+    return hi[0] - lo[0]
+
+
+def _settled(urdf, options) -> tuple[int, np.ndarray]:
+    s = open_session("pybullet", urdf, options)
+    try:
+        for _ in range(300):
+            s.step()
+        pos, quat = s.root_pose()
+        return s.cid, np.concatenate([pos, quat, [s.joint_positions()["j"]]])
+    finally:
+        s.close()
+
+
+def test_sessions_of_one_files_key_share_a_client_and_give_the_same_bits(tmp_path):
+    """A session given ``files_key`` leaves its client idle at close; the next session of that key reuses it and
+    simulates the same to the bit as a session in a new client; another key gets a client of its own."""
+    from asset2sim.engines import pybullet_engine as pe
+
+    urdf = _mesh_arm_urdf(tmp_path / "a", 0.04)
+    opts = SessionOptions(initial_state={"j": 0.6})
+    _, fresh = _settled(urdf, opts)
+    keyed = SessionOptions(initial_state={"j": 0.6}, files_key="a#1")
+    cid1, first = _settled(urdf, keyed)
+    assert ("a#1", cid1) in pe._IDLE
+    cid2, second = _settled(urdf, keyed)
+    assert cid2 == cid1 and ("a#1", cid1) in pe._IDLE
+    assert np.array_equal(first, fresh) and np.array_equal(second, fresh)
+    other = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.6}, files_key="a#2"))
+    try:
+        assert other.cid != cid1
+    finally:
+        other.close()
+    assert len(pe._IDLE) <= pe.MAX_IDLE_CLIENTS
+
+
+def test_a_collision_file_written_again_is_read_again_under_a_new_key(tmp_path):
+    """The arm's OBJ rewritten at the same path: a session of the new key (a new candidate digest) has the new
+    cube's width, not the old one a kept client loaded."""
+    urdf = _mesh_arm_urdf(tmp_path / "b", 0.04)
+    s = open_session("pybullet", urdf, SessionOptions(files_key="b#1"))
+    try:
+        assert _arm_width(s) == pytest.approx(0.04, abs=0.01)
+    finally:
+        s.close()
+    _mesh_arm_urdf(tmp_path / "b", 0.2)
+    s = open_session("pybullet", urdf, SessionOptions(files_key="b#2"))
+    try:
+        assert _arm_width(s) == pytest.approx(0.2, abs=0.01)
+    finally:
+        s.close()

@@ -63,6 +63,37 @@ def test_the_same_candidate_is_written_once_and_any_change_writes_it_again(box_l
         assert ws.writes == 5
 
 
+def test_sessions_of_the_candidate_on_disk_share_a_client_and_a_rewritten_piece_is_read_again(box_lid):
+    """Sessions of the candidate on disk carry one ``files_key`` (the folder and the digest) and the second reuses
+    the PyBullet client the first left idle; a collision override rewritten under the same name is another key,
+    and its session has the new piece's size, not the one the kept client loaded."""
+    asset, overlay, state = box_lid
+    cand = Candidate(asset, overlay, state)
+    link = next(ln for ln in asset.links if any(g.kind == "mesh" for g in ln.collisions))
+    source = next(g for g in link.collisions if g.kind == "mesh")
+    piece = CollisionPiece(filename="collision/repaired_0_0.obj", source=source)
+    opts = SessionOptions(fixed_base=True, gravity=False, ground=False)
+
+    def piece_width(s) -> float:
+        lo, hi = s._p.getAABB(s.body, s.link_index(link.name), physicsClientId=s.cid)
+        return hi[0] - lo[0]
+
+    with Workspace(asset) as ws:
+        with ws.session(cand, "pybullet", opts) as s:
+            key, cid = s.options.files_key, s.cid
+        with ws.session(Candidate(asset, overlay, dict(state)), "pybullet", opts) as s:
+            assert (s.options.files_key, s.cid) == (key, cid) and str(ws.root) in key
+        (ws.root / "collision").mkdir(exist_ok=True)
+        (ws.root / "collision" / "repaired_0_0.obj").write_text(CUBE_OBJ)
+        repaired = dataclasses.replace(cand, collision_overrides={link.name: [piece]})
+        with ws.session(repaired, "pybullet", opts) as s:
+            small_key, small = s.options.files_key, piece_width(s)
+        (ws.root / "collision" / "repaired_0_0.obj").write_text(CUBE_OBJ.replace("0.01", "0.05"))
+        with ws.session(repaired, "pybullet", opts) as s:
+            assert s.options.files_key not in (key, small_key)
+            assert piece_width(s) > 1.5 * small  # the scaled cube, 5x as wide, plus the collision margins
+
+
 def test_candidate_digest_tells_every_field_apart(box_lid):
     asset, overlay, state = box_lid
     cand = Candidate(asset, overlay, state)
