@@ -1,5 +1,5 @@
 """PyBullet clients kept between the sessions of one candidate: refine dev rows (extras off) with the clients kept
-(:data:`asset2sim.engines.pybullet_engine.MAX_IDLE_CLIENTS` as shipped) and with none kept (0), in the order
+(:data:`asset2sim.engines.pybullet_clients.MAX_IDLE` as shipped) and with none kept (0), in the order
 off, on, on, off per row, and print per mode the refine wall seconds, the PyBullet sessions that owned their client
 and the clients connected (every ``pybullet.connect``: sessions, shape worlds and viewers).
 
@@ -33,16 +33,16 @@ def main(argv: list[str] | None = None) -> int:
 
     import pybullet
 
-    from asset2sim.engines import pybullet_engine as pe
+    from asset2sim.engines import pybullet_clients as pc
     from asset2sim.tasks.refine import refine_asset
 
     rows = list(csv.DictReader(args.manifest.open()))
     if args.ids:
         wanted = set(args.ids.split(","))
         rows = [r for r in rows if r["id"] in wanted]
-    shipped = pe.MAX_IDLE_CLIENTS
+    shipped = pc.MAX_IDLE
     counts = {"connects": 0, "owned": 0}
-    connect, take = pybullet.connect, pe._take_client
+    connect, take = pybullet.connect, pc.take
 
     def counted_connect(*a, **k):
         counts["connects"] += 1
@@ -52,17 +52,17 @@ def main(argv: list[str] | None = None) -> int:
         counts["owned"] += 1
         return take(*a, **k)
 
-    pybullet.connect, pe._take_client = counted_connect, counted_take
+    pybullet.connect, pc.take = counted_connect, counted_take
     totals = {mode: {"s": [], "connects": 0, "owned": 0} for mode in ("off", "on")}
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="a2s-bench-sessions-") as work:
         for row in rows:
             line = []
             for k, mode in enumerate(("off", "on", "on", "off")):
-                pe.MAX_IDLE_CLIENTS = shipped if mode == "on" else 0
-                for _, cid in list(pe._IDLE):  # nothing kept from the other mode
+                pc.MAX_IDLE = shipped if mode == "on" else 0
+                for _, cid in list(pc.IDLE):  # nothing kept from the other mode
                     pybullet.disconnect(cid)
-                pe._IDLE.clear()
+                pc.IDLE.clear()
                 before = dict(counts)
                 t0 = time.perf_counter()
                 refine_asset(Path(args.manifest.parent / row["id"]), row["prompt"], Path(work) / f"{row['id']}_{k}",
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
                     totals[mode][key] += counts[key] - before[key]
                 line.append(f"{mode} {dt:.2f}")
             print(f"  {row['id']:>7}  " + ", ".join(line), flush=True)
-    pe.MAX_IDLE_CLIENTS = shipped
+    pc.MAX_IDLE = shipped
     n = len(rows)
     print(f"{n} rows, 2 refines each per mode, load average before {load:.1f} on {os.cpu_count()} cores")
     for mode, t in totals.items():

@@ -5,13 +5,13 @@ Bullet applies ``<dynamics damping>`` itself.
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import numpy as np
 
 from asset2sim.engines.base import (ContactPair, EngineTraits, EngineUnsupported, HeldJoint, HeldLink, HeldPhysics, SessionDefaults, SessionOptions,
                                     penetration_sum, register_engine, register_shape_world, register_viewer)
+from asset2sim.engines import pybullet_clients
 from asset2sim.engines.quiet import quiet_fds, quiet_stdout, startup_quiet
 
 _TYPES = {0: "revolute", 1: "prismatic", 2: "spherical", 3: "planar", 4: "fixed"}
@@ -22,44 +22,6 @@ def _bullet():
         import pybullet
 
     return pybullet
-
-
-#: Most idle DIRECT clients kept in a process (their worlds empty, their mesh caches holding the files of their key).
-MAX_IDLE_CLIENTS = 3
-_IDLE: list[tuple[str, int]] = []  # (files key, client), oldest first
-_IDLE_LOCK = threading.Lock()
-
-
-def _take_client(p, files_key: str | None) -> int:
-    """An idle client kept under ``files_key`` (its world empty), else a new DIRECT client."""
-    if files_key is not None:
-        with _IDLE_LOCK:
-            for i, (key, cid) in enumerate(_IDLE):
-                if key == files_key:
-                    del _IDLE[i]
-                    return cid
-    with quiet_stdout():
-        return p.connect(p.DIRECT)
-
-
-def _give_back(p, cid: int, files_key: str | None) -> None:
-    """Empty client ``cid`` (``resetSimulation``) and keep it under ``files_key`` (the oldest idle client beyond
-    :data:`MAX_IDLE_CLIENTS` disconnected); without a key, disconnect it."""
-    if files_key is None:
-        p.disconnect(cid)
-        return
-    try:
-        p.resetSimulation(physicsClientId=cid)
-    except Exception:  # a client that cannot be emptied is not kept
-        p.disconnect(cid)
-        return
-    with _IDLE_LOCK:
-        _IDLE.append((files_key, cid))
-        excess = max(len(_IDLE) - MAX_IDLE_CLIENTS, 0)
-        dropped = _IDLE[:excess]
-        del _IDLE[:excess]
-    for _, old in dropped:
-        p.disconnect(old)
 
 
 def _joint_infos(p, body: int, cid: int) -> list:
@@ -77,17 +39,10 @@ def _link_frame(p, body: int, idx: int, cid: int) -> tuple[np.ndarray, np.ndarra
 
 
 class PyBulletSession(SessionDefaults):
-    """A :class:`~asset2sim.engines.base.SimSession` in PyBullet: its own
-    DIRECT client, or (``client``) the caller's, whose gravity and time step
-    are left as they are; ``ground`` False: no plane is added to the
-    caller's world (the object is still put with its lowest point on z = 0).
-
-    Its own client is new unless ``options.files_key`` names the files it loads: then a client an earlier session
-    of that key left idle is emptied (``resetSimulation``) and used again, and this one is kept for the next
-    (:data:`MAX_IDLE_CLIENTS`); the results are the same to the bit as in a new client, and connecting and
-    building the collision shapes again is saved. The key is what makes that safe: a client keeps the meshes it
-    loaded by file name for its whole life, ``resetSimulation`` included, so a client kept across a rewrite of a
-    collision file at the same path would load the file's old geometry."""
+    """A :class:`~asset2sim.engines.base.SimSession` in PyBullet: its own DIRECT client (new, or with
+    ``options.files_key`` one an earlier session of that key left idle: :mod:`.pybullet_clients`), or (``client``)
+    the caller's, whose gravity and time step are left as they are; ``ground`` False: no plane is added to the
+    caller's world (the object is still put with its lowest point on z = 0)."""
 
     engine = "pybullet"
     traits = EngineTraits(reference=True, conservative_aabb=True, springs_by_torque=True, incremental_penetration=True)
@@ -100,7 +55,7 @@ class PyBulletSession(SessionDefaults):
         conv = options.conventions
         self._owns_client = client is None
         if client is None:
-            self.cid = _take_client(p, options.files_key)
+            self.cid = pybullet_clients.take(p, options.files_key)
         else:
             self.cid = int(client)
         self.body = None
@@ -408,7 +363,7 @@ class PyBulletSession(SessionDefaults):
     def _release(self) -> None:
         p = self._p
         if self._owns_client:
-            _give_back(p, self.cid, self.options.files_key)
+            pybullet_clients.give_back(p, self.cid, self.options.files_key)
             return
         self.release_root()
         for body in (self.body, self.plane):

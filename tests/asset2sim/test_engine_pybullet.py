@@ -195,23 +195,23 @@ def _settled(urdf, options) -> tuple[int, np.ndarray]:
 def test_sessions_of_one_files_key_share_a_client_and_give_the_same_bits(tmp_path):
     """A session given ``files_key`` leaves its client idle at close; the next session of that key reuses it and
     simulates the same to the bit as a session in a new client; another key gets a client of its own."""
-    from asset2sim.engines import pybullet_engine as pe
+    from asset2sim.engines import pybullet_clients as pc
 
     urdf = _mesh_arm_urdf(tmp_path / "a", 0.04)
     opts = SessionOptions(initial_state={"j": 0.6})
     _, fresh = _settled(urdf, opts)
     keyed = SessionOptions(initial_state={"j": 0.6}, files_key="a#1")
     cid1, first = _settled(urdf, keyed)
-    assert ("a#1", cid1) in pe._IDLE
+    assert ("a#1", cid1) in pc.IDLE
     cid2, second = _settled(urdf, keyed)
-    assert cid2 == cid1 and ("a#1", cid1) in pe._IDLE
+    assert cid2 == cid1 and ("a#1", cid1) in pc.IDLE
     assert np.array_equal(first, fresh) and np.array_equal(second, fresh)
     other = open_session("pybullet", urdf, SessionOptions(initial_state={"j": 0.6}, files_key="a#2"))
     try:
         assert other.cid != cid1
     finally:
         other.close()
-    assert len(pe._IDLE) <= pe.MAX_IDLE_CLIENTS
+    assert len(pc.IDLE) <= pc.MAX_IDLE
 
 
 def test_a_collision_file_written_again_is_read_again_under_a_new_key(tmp_path):
