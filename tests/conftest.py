@@ -42,9 +42,13 @@ def demo_root(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def refine_factory(tmp_path_factory) -> Iterator[RefineFactory]:
-    """The session's :class:`~tests.helpers.RefineFactory` (module-scoped fixtures use it directly); at the end of the
-    session every shared output and input is checked unchanged."""
-    factory = RefineFactory(tmp_path_factory.mktemp("shared_refines"))
+    """The session's :class:`~tests.helpers.RefineFactory` (module-scoped fixtures use it directly), its refines shared
+    with the other workers of the run under pytest-xdist; at the end of the session every shared output and input it
+    handed out is checked unchanged."""
+    shared = None
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # the workers' temporary folders share a parent: one refine per run
+        shared = tmp_path_factory.getbasetemp().parent / "shared_refines"
+    factory = RefineFactory(tmp_path_factory.mktemp("shared_refines"), shared)
     yield factory
     factory.assert_all_untouched()
 

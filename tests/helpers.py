@@ -310,10 +310,14 @@ class RefineFactory:
     options of :func:`asset2sim.tasks.refine.refine_asset` (``extras``, ``task``, ``category`` ...) complete the key.
     The input is hashed before the refine and the output when it ends; :meth:`assert_untouched` fails when either
     changed since (the refine wrote into its input, or a test changed a shared folder: tests that change an output
-    work on :meth:`Refined.copy_to`)."""
+    work on :meth:`Refined.copy_to`).
 
-    def __init__(self, root: Path):
+    ``shared`` (default: ``root / "out"``): where the refines are made; the test processes of one run (pytest-xdist's
+    workers) given the same folder share them, so an (asset, request, options) is refined once in the whole run."""
+
+    def __init__(self, root: Path, shared: Path | None = None):
         self._root = Path(root)
+        self._shared = Path(shared) if shared is not None else self._root / "out"
         self._built: dict[str, Path] = {}
         self._done: dict[tuple, tuple[Refined, dict[str, str], dict[str, str]]] = {}
 
@@ -340,11 +344,30 @@ class RefineFactory:
         content = tuple(sorted(src_hashes.items()))  # the same input wherever it was written: one refine
         key = (src.name, content, prompt, None if config is None else config.model_dump_json(), tuple(sorted(options.items())))
         if key not in self._done:
-            out = self._root / "out" / str(len(self._done)) / src.name
-            result = refine_asset(src, prompt, out, config, **options)
-            self._done[key] = (Refined(src, out, result), tree_hashes(out), src_hashes)
+            self._done[key] = (*self._refined(key, src, lambda out: refine_asset(src, prompt, out, config, **options)), src_hashes)
         shared = self._done[key][0]
         return dataclasses.replace(shared, result=copy.deepcopy(shared.result))
+
+    def _refined(self, key: tuple, src: Path, refine) -> tuple[Refined, dict[str, str]]:
+        """The refine of ``key`` in the shared folder (``refine(out)`` run there unless a process of this test run
+        made it first; one process at a time per key, ``fcntl.flock``) and the hashes of its output."""
+        import fcntl
+        import hashlib
+        import pickle
+
+        folder = self._shared / hashlib.sha256(repr(key).encode()).hexdigest()[:16]
+        folder.mkdir(parents=True, exist_ok=True)
+        with open(folder / "lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            done = folder / "refined.pickle"
+            if done.is_file():
+                refined = pickle.loads(done.read_bytes())
+            else:
+                out = folder / src.name
+                refined = Refined(src, out, refine(out))
+                (folder / "refined.tmp").write_bytes(pickle.dumps(refined))
+                (folder / "refined.tmp").replace(done)
+            return refined, tree_hashes(refined.out)
 
     def assert_untouched(self, refined: Refined) -> None:
         """Fail if the output folder of ``refined`` changed since its refine ended, or its input since the refine began."""

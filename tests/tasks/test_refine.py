@@ -129,11 +129,8 @@ def test_broken_asset_is_invalid_input(tmp_path):
     ],
 )
 @pytest.mark.slow  # end to end: dev objects refined on their own
-def test_real_objects(obj, prompt, tmp_path):
-    src = SHARED / obj
-    before = tree_hashes(src)
-    res = refine_asset(src, prompt, tmp_path / obj, extras=False)
-    assert tree_hashes(src) == before
+def test_real_objects(obj, prompt, refine_once):
+    res = refine_once(SHARED / obj, prompt, extras=False)  # the input and output checked unchanged after the test
     r = res.report
     check_output_contract(res.out_dir, r)
     assert r.metric("rest_stability").passed and r.metric("oscillation").passed
@@ -182,13 +179,13 @@ def test_escalation_for_robust_rest_keeps_the_drawers_sweepable(tmp_path):
 
 @needs_shared
 @pytest.mark.slow
-def test_thesis_set_meets_the_refine_issue_targets(tmp_path):
+def test_thesis_set_meets_the_refine_issue_targets(refine_once):
     """First nine manifest rows: stability 9/9, oscillation 9/9, penetration <= 5 mm,
     valid inertias, median scale deviation <= 25 %, every requested state in its band."""
     rows = list(csv.DictReader((SHARED / "manifest.csv").open()))[:9]
     devs = []
     for row in rows:
-        res = refine_asset(SHARED / row["id"], row["prompt"], tmp_path / row["id"], extras=False)
+        res = refine_once(SHARED / row["id"], row["prompt"], extras=False)
         r = res.report
         assert r.metric("rest_stability").passed, row["id"]
         assert r.metric("oscillation").passed, row["id"]

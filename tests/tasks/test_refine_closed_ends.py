@@ -90,12 +90,12 @@ def test_refine_closed_end_is_the_evaluations_when_a_part_overlaps_its_parent(tm
 
 
 @needs_shared
-def test_faucet_148_handle_off_is_closed_by_the_evaluations_measure(tmp_path):
+def test_faucet_148_handle_off_is_closed_by_the_evaluations_measure(refine_once):
     """Faucet 148's handle overlaps its body by 120-156 mm summed at every
     angle; "turned off" must be closed as the evaluation measures it."""
     with open(SHARED / "manifest.csv", newline="") as f:
         row = next(r for r in csv.DictReader(f) if r["id"] == "148")
-    res = refine_asset(SHARED / "148", row["prompt"], tmp_path / "148", extras=False)
+    res = refine_once(SHARED / "148", row["prompt"], extras=False)
     r = res.report
     joint = next(iter(r.requested_bands))
     ev = _evaluation_closed(res.out_dir / "mobility.urdf", joint)

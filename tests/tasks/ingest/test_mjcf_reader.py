@@ -75,16 +75,15 @@ def _manifest_rows(ids: list[str] | None = None) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def refined_row(tmp_path_factory):
-    """``refined_row(row)``: the output folder of the dev row ``row`` refined (its request and task, no extras) once
-    in this module; the exports below are written into it again by each test."""
+def refined_row(tmp_path_factory, refine_factory):
+    """``refined_row(row)``: a copy, made once in this module, of the session's refine of the dev row ``row`` (its
+    request, no extras: ``refine_factory``); the exports below are written into the copy again by each test."""
     root = tmp_path_factory.mktemp("mjcf_round_trip")
     done: dict[str, Path] = {}
 
     def get(row: dict) -> Path:
         if row["id"] not in done:
-            refine_asset(SHARED / row["id"], row["prompt"], root / row["id"], task=row["task"] or None, extras=False)
-            done[row["id"]] = root / row["id"]
+            done[row["id"]] = refine_factory(SHARED / row["id"], row["prompt"], extras=False).copy_to(root / row["id"])
         return done[row["id"]]
 
     return get

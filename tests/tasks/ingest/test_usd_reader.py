@@ -40,19 +40,17 @@ def _prompt(shared: Path, asset_id: str) -> str:
 
 @pytest.mark.parametrize("asset_id", ["148", "103275", "8877"])
 @pytest.mark.slow  # end to end: dev objects refined and exported
-def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path):
+def test_refined_output_round_trip(asset_id, shared_dataset, tmp_path, refine_once):
     """Links, joints (type, parent, child, origin, axis, limits, damping, friction), springs, masses, COM and
     inertia tensors of the USD export equal mobility.urdf's to 1e-6 relative; geometry sits where the URDF's does."""
     from asset2sim.engines.loading import read_initial_state
     from asset2sim.tasks.assemble.export_mjcf import springs_from_overlay
     from asset2sim.tasks.assemble.write import read_root
     from asset2sim.tasks.publish.export_usd import export_usd
-    from asset2sim.tasks.refine import refine_asset
 
     if not (shared_dataset / asset_id / "mobility.urdf").is_file():
         pytest.skip(f"dev object {asset_id} not present")
-    out = tmp_path / "out"
-    refine_asset(shared_dataset / asset_id, _prompt(shared_dataset, asset_id), out, extras=False)
+    out = refine_once(shared_dataset / asset_id, _prompt(shared_dataset, asset_id), extras=False).copy_to(tmp_path / "out")
     usd = export_usd(out).path
     read, src = read_usd_asset(usd), read_urdf(out / "mobility.urdf")
     model = read.model

@@ -234,14 +234,12 @@ def _dev_object(asset_id: str) -> Path:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("asset_id,prompt", [("103275", "I want a slightly open stapler."), ("7236", "I want a microwave with its door halfway open.")])
-def test_refined_dev_objects_export(asset_id, prompt, tmp_path):
+@pytest.mark.parametrize("asset_id,prompt", [("103275", "I want a slightly open stapler."),  # the dev rows' own requests
+                                             ("7236", "I want a microwave with its door halfway open. Low damping for hinge-like behavior.")])
+def test_refined_dev_objects_export(asset_id, prompt, tmp_path, refine_once):
     """Refine a real dev object (no extras) and export it: every link's
     mass/COM/inertia and every joint's values read back equal (check_usd)."""
-    from asset2sim.tasks.refine import refine_asset
-
-    out = tmp_path / asset_id
-    refine_asset(_dev_object(asset_id), prompt, out, extras=False)
+    out = refine_once(_dev_object(asset_id), prompt, extras=False).copy_to(tmp_path / asset_id)
     build = export_usd(out)
     check = check_usd(build.path, out)
     urdf = read_urdf(out / "mobility.urdf")

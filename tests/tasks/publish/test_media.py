@@ -32,10 +32,10 @@ def _files(folder: Path) -> set[str]:
 
 
 @pytest.fixture(scope="module")
-def deferred(tmp_path_factory):
-    out = tmp_path_factory.mktemp("media") / "box"
-    result = refine_asset(BOX, PROMPT, out, RefineConfig(), media=False)
-    return out, result
+def deferred(tmp_path_factory, refine_factory):
+    """A copy of the session's refine of the box with its media deferred (the tests below make its media)."""
+    shared = refine_factory(BOX, PROMPT, RefineConfig(), media=False)
+    return shared.copy_to(tmp_path_factory.mktemp("media") / "box"), shared.result
 
 
 def test_deferred_refine_writes_the_verdict_and_exports_but_no_media(deferred):
@@ -44,7 +44,7 @@ def test_deferred_refine_writes_the_verdict_and_exports_but_no_media(deferred):
     assert report["media"] == "deferred" and media_pending(out)
     assert not any((out / m).exists() for m in MEDIA)
     assert (out / EVALUATION_NAME).is_file() and (out / "mjcf").is_dir() and (out / "usd").is_dir()
-    assert any(n.startswith("media deferred") and f"asset2sim report {out}" in n for n in report["notes"])
+    assert any(n.startswith("media deferred") and f"asset2sim report {result.out_dir}" in n for n in report["notes"])  # the folder refined
     assert is_complete(out, report["input_hash"], report["config_hash"])
     assert result.report.failure_mode == report["failure_mode"]
 
@@ -75,9 +75,8 @@ def test_media_phase_adds_media_keeps_the_verdict_and_the_folder_complete(deferr
 
 
 @pytest.mark.slow  # end to end: a dev object refined twice, the second with every extra
-def test_a_refine_with_media_resumes_a_deferred_output(tmp_path):
-    out = tmp_path / "box"
-    refine_asset(BOX, PROMPT, out, RefineConfig(), media=False)
+def test_a_refine_with_media_resumes_a_deferred_output(tmp_path, refine_factory):
+    out = refine_factory(BOX, PROMPT, RefineConfig(), media=False).copy_to(tmp_path / "box")  # a deferred output
     assert not (out / REPORT_HTML_NAME).exists()
     said = []
     result = refine_asset(BOX, PROMPT, out, RefineConfig(), progress=lambda stage, msg: said.append((stage, msg)))
