@@ -30,7 +30,7 @@ from asset2sim.flows import catalog_compare, catalog_finish, queries, tracking
 from asset2sim import flow_progress
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flow_progress import ProgressEvent
-from asset2sim.flows import driver_skip, server, stages
+from asset2sim.flows import driver_skip, job_order, server, stages
 from asset2sim.flows.forkserver import ready_server
 from asset2sim.flows.store import join_uri, upload_folder
 from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, ModelCallFailure, RegressionFailure,
@@ -109,7 +109,7 @@ def refine_assets(
         retries=retries, retry_delay_seconds=retry_delay_seconds, retry_condition_fn=_retry_on_model_failure,
         timeout_seconds=None,
     )  # fmt: skip
-    all_jobs = [AssetJob(**j) for j in jobs]
+    all_jobs = job_order.spread_same_files([AssetJob(**j) for j in jobs])  # copies of one folder run apart
     servers_seconds = _ready_stage_servers(all_jobs, log)
     body_started = time.time()  # the stage servers' start-up is not the assets'
     prep_futures = _submit_prepares(all_jobs, batch_size, rec.starts)

@@ -244,11 +244,21 @@ def shave_piece(piece: Piece, points: np.ndarray, tolerance: float = CONTAINMENT
     return clip_piece(piece, n, piece.equations[f, 3] + need[f])
 
 
+#: Margin (fraction of a piece's size) by which :func:`probe_points` grows a piece's box before measuring points in it.
+BOX_MARGIN = 1e-6
+
+
 def probe_points(points: np.ndarray, pieces: list[Piece], n: int = PROBE_POINTS) -> np.ndarray:
-    """At most ``n`` of ``points`` (k, 3) m inside any of ``pieces``: the deepest ``n // 2``, then an even subsample."""
+    """At most ``n`` of ``points`` (k, 3) m inside any of ``pieces``: the deepest ``n // 2``, then an even subsample.
+    Each piece is measured on the points in its box grown by :data:`BOX_MARGIN` of its size (a point farther out
+    is outside it by far more than a rounding error: its depth there is not positive)."""
     depth = np.zeros(len(points))
     for p in pieces:
-        depth = np.maximum(depth, -np.max(points @ p.equations[:, :3].T + p.equations[:, 3], axis=1))
+        lo, hi = p.points.min(axis=0), p.points.max(axis=0)
+        grow = BOX_MARGIN * float(np.max(hi - lo))
+        near = np.flatnonzero(np.all((points >= lo - grow) & (points <= hi + grow), axis=1))
+        d = -np.max(points[near] @ p.equations[:, :3].T + p.equations[:, 3], axis=1)
+        depth[near] = np.maximum(depth[near], d)
     inside = np.flatnonzero(depth > 0)
     if len(inside) <= n:
         return points[inside]

@@ -115,14 +115,34 @@ def solid_points(points: np.ndarray) -> np.ndarray | None:
     """``points`` (k, 3) m, grown to :data:`MIN_THICKNESS` m along their thinnest principal direction (both
     sides equally) when they are thinner than :data:`FLAT_WIDTH` m; None when they span no area (fewer than
     3 points, or all on a line)."""
+    flat = min(FLAT_WIDTH, MIN_THICKNESS)
+    if _surely_solid(points, flat):
+        return np.asarray(points, float)
     axis = thinnest_axis(points)
     if axis is None:
         return None
     p, _, n, width = axis
-    if width >= min(FLAT_WIDTH, MIN_THICKNESS):
+    if width >= flat:
         return p
     h = 0.5 * (MIN_THICKNESS - width)
     return np.vstack([p + h * n, p - h * n])
+
+
+def _surely_solid(points: np.ndarray, width: float) -> bool:
+    """Whether the finite ``points`` (k, 3) m, at least 4, are surely no thinner than ``width`` m along any
+    direction, and span more than a line: the standard deviation along their thinnest principal axis (the least
+    eigenvalue of their covariance, 3 x 3) is at least ``width`` (a set's extent along an axis is at least twice
+    its standard deviation along it), with a 1e9 margin on the line test of :func:`thinnest_axis`. Cheaper than
+    that function's SVD of the whole set; False leaves the decision to it."""
+    p = np.asarray(points, float)
+    if len(p) < 4 or p.ndim != 2 or p.shape[1] != 3:
+        return False
+    c = p - p.mean(axis=0)
+    cov = c.T @ c / len(p)
+    if not np.all(np.isfinite(cov)):
+        return False  # a non-finite row: thinnest_axis drops it
+    lam = np.linalg.eigvalsh(cov)  # ascending
+    return bool(lam[0] >= width * width and lam[1] > 1e-9 * lam[2])
 
 
 def solid_piece(points: np.ndarray, sources: tuple[str, ...] = ()) -> Piece | None:

@@ -94,6 +94,35 @@ def test_solid_points_grows_flat_sets_and_drops_lines():
     assert np.array_equal(cp.solid_points(thin), thin)
 
 
+
+@needs_shared
+def test_the_quick_solid_test_decides_as_the_principal_axes_do_on_real_and_thin_sets():
+    """``solid_points`` skips the SVD only where the covariance shows the set is surely thick enough: on the
+    vertices of a real object's meshes, on turned slabs from far thinner to thicker than FLAT_WIDTH, on sets
+    with a non-finite row and on lines, it returns what the principal axes give."""
+    flat = min(cp.FLAT_WIDTH, cp.MIN_THICKNESS)
+
+    def by_axes(p):
+        axis = cp.thinnest_axis(p)
+        if axis is None:
+            return None
+        q, _, n, width = axis
+        return q if width >= flat else np.vstack([q + 0.5 * (cp.MIN_THICKNESS - width) * n,
+                                                  q - 0.5 * (cp.MIN_THICKNESS - width) * n])
+
+    sets = [read_mesh(f)[0] for f in sorted((SHARED / "datasets" / "partnet_mobility" / "9912" / "textured_objs").glob("*.obj"))[:12]]
+    rng = np.random.default_rng(5)
+    for s in (1e-6, 3e-5, 1e-4, 2e-4, 1e-3, 0.05):
+        turn = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        sets.append((rng.normal(size=(200, 3)) * [0.1, 0.05, s]) @ turn.T)
+    sets += [np.vstack([sets[-1], [[np.nan, 0, 0]]]), np.outer(np.arange(5.0), [1, 2, 3])]
+    quick = 0
+    for p in sets:
+        got, want = cp.solid_points(p), by_axes(p)
+        assert (got is None and want is None) or np.array_equal(got, want)
+        quick += cp._surely_solid(p, flat)
+    assert 0 < quick < len(sets)  # both paths taken
+
 def test_piece_files_are_closed_and_wound_outward(tmp_path):
     rng = np.random.default_rng(3)
     piece = cp.Piece.of(rng.normal(size=(60, 3)))
