@@ -11,7 +11,7 @@ negative.
 
     python benchmarks/bench_clips.py [--manifest PATH] [--ids 100221,7119] [--out DIR]
 
-The realism issue's goal: clips cost at most 25 % more refine time. Writes
+Goal: clips cost at most 25 % more refine time. Writes
 DIR/summary.json.
 """
 

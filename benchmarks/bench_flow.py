@@ -19,7 +19,7 @@
    :data:`TAIL_FACTOR` times the median (wall or CPU) with the stage that took most of its time (the output's
    ``timings.json``) and the CoACD decompositions its report names; writes ``DIR/summary.json``.
 
-Goal (throughput issue): >= 2,000 assets an hour for the first phase on 2 cores, p99 <= 5x the median. Numbers from
+Goal: >= 2,000 assets an hour for the first phase on 2 cores, p99 <= 5x the median. Numbers from
 a loaded machine (see the load average printed) are upper bounds of the cost.
 """
 

@@ -34,7 +34,7 @@ requests and tasks) instead of generated cabinets; step 1 is skipped.
 5. Prints the isolation's cost: the stage server's start-up (once per
    worker) and a call through it (fork + pipe messages) against a direct call.
 
-Goals (issue 14): >= 2,000 assets/hour with extras, overhead <= 1.3x,
+Goals: >= 2,000 assets/hour with extras, overhead <= 1.3x,
 rerun of 200 skipped assets <= 10 s. The machine's load (other processes on
 the same cores) is printed with the results; numbers from a loaded machine
 are upper bounds of the cost.

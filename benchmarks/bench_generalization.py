@@ -6,7 +6,7 @@ request kind, and the failures by mode.
         [--limit N] [--jobs J] [--ids 148,9748] [--kinds plain,state,size,hinge,closed,mount]
         [--no-generated] [--evaluate] [--one-mesh-per-link] [--open-containers]
 
-Corpus (issue 16): for every manifest object (its category from the
+Corpus: for every manifest object (its category from the
 manifest), the requests
 
 - ``plain``:  "A <noun>."

@@ -6,7 +6,7 @@ process (the offline estimator, ``--no-extras`` unless ``--extras``) under
 child from ``ru_maxrss``) and a per-run timeout, and prints one row per
 asset with the stage times of its ``report.json``. Shapes:
 
-- ``chain``: a base and N revolute links in a chain (the links of H14's
+- ``chain``: a base and N revolute links in a chain (the links of the joint cap's
   end-to-end check: one 1.05 x 0.03 x 0.725 m box mesh of 12 triangles per
   link, each link 1 cm above its parent), so that every pair of links that
   are not parent and child overlaps: the worst case for the self-penetration

@@ -13,7 +13,7 @@ local fake OpenAI-compatible server that answers validly (no network).
 
 Every method starts with an empty reply cache, so every call is counted.
 Prints a line per object and method, then mean +- std (min..max) calls per
-asset; writes DIR/summary.json. The issue asks for <= 1.5 (asset2sim; the
+asset; writes DIR/summary.json. Goals: <= 1.5 (asset2sim; the
 research had 2.26), exactly 1 (direct) and 25 (ivw).
 """
 

@@ -1,11 +1,11 @@
 """Refine every manifest row in one warm process; print per-object and total
-wall time per stage, and the checks of the refine issue.
+wall time per stage, and the checks of refine's goals.
 
     python benchmarks/bench_refine.py [--manifest PATH] [--out DIR] [--ids 103275,7236] [--extras] [--process]
     nice -n 10 python benchmarks/bench_refine.py --process-only [--ids ...]
 
 ``--process`` also times ``asset2sim refine --force`` as a whole process per
-object (cold imports, extras included: the throughput issue's measure) and
+object (cold imports, extras included: the throughput goal's measure) and
 prints, per object and as medians, its wall time, the time the process spent
 outside the stages it records (imports, argument parsing, interpreter exit),
 the core stages, each extra (MJCF, USD, renders, evaluation + HTML report)

@@ -1,7 +1,7 @@
 """Compare two flow runs of the same dataset: overlays, initial states,
 verdicts, metrics and catalog rows, floats within a relative tolerance.
 
-Used to show that a restructure changed no behaviour (issue 10): run the flow
+Used to show that a restructure changed no behaviour: run the flow
 on the same dataset with the old and the new code, then
 
     python benchmarks/compare_runs.py OLD_PROJECT NEW_PROJECT --dataset partnet_dev

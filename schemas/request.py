@@ -17,8 +17,8 @@ DampingLevel = Literal["low", "moderate", "high"]
 #: Target opening fraction per band: |q - q_closed| / (largest opening from q_closed) (docs/design/requests.md).
 BAND_TARGET: dict[str, float] = {"closed": 0.0, "slightly_open": 0.12, "quarter": 0.25, "halfway": 0.5, "mostly": 0.75, "fully": 1.0}
 
-#: Acceptance interval per band (fractions of the opening range), from the
-#: refine issue's definition of "lands in its band".
+#: Acceptance interval per band (fractions of the opening range): what
+#: "lands in its band" means.
 BAND_INTERVAL: dict[str, tuple[float, float]] = {
     "closed": (0.0, 0.03), "slightly_open": (0.05, 0.35), "quarter": (0.15, 0.35), "halfway": (0.35, 0.65),
     "mostly": (0.6, 0.9), "fully": (0.85, 1.0),

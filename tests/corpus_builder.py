@@ -501,8 +501,8 @@ def _stl_nan() -> bytes:
     return bytes(data)
 
 
-# ----------------------------------------------------------------------------- classes of issue 11
-# (validate agrees with refine: formats, encodings, link cap, special files
+# ----------------------------------------------------------------------------- validate agrees with refine
+# (classes: formats, encodings, link cap, special files
 # named by MTL files, limits that cannot be meant, mimic, the face cap)
 
 BOX_V = [(x, y, z) for z in (0.0, 0.05) for y in (-1.0, 0.0) for x in (0.0, 1.0)]
@@ -847,7 +847,7 @@ def _cases() -> list[Case]:
     add(C("mesh_visual_only_bad_index", "mesh_contents", "MESH_BAD_INDEX",
           _files_case(_write("meshes/lid_visual.obj", CUBE_V + CUBE_F + "f 1 2 99\n"), _mesh("lid", "meshes/lid_visual.obj", role="visual")),
           refused=False, note="a visual-only defect is a warning"))
-    # --- issue 11: validate agrees with refine
+    # --- validate agrees with refine
     for fmt, data in (("off", box_off),):  # GLB, glTF and PLY are converted to OBJ (tests/tasks/ingest/test_urdf_meshes.py)
         add(C(f"format_{fmt}_mesh", "refine_agreement", "MESH_FORMAT_UNSUPPORTED",
               _files_case(_mesh_file(f"meshes/lid.{fmt}", data), _mesh("lid", f"meshes/lid.{fmt}")),
@@ -878,7 +878,7 @@ def _cases() -> list[Case]:
           _model_case(_attr("joint", "drawer_slide", upper="30")), note="30 m of travel on an object about 1.6 m across"))
     add(C("mimic_joint", "refine_agreement", "JOINT_MIMIC_UNSUPPORTED", _model_case(_mimic),
           note="was silently dropped from the output"))
-    # --- issue 36: every URDF joint type is carried through or refused here, never an internal error
+    # --- every URDF joint type is carried through or refused here, never an internal error
     add(C("joint_type_floating_below_root", "refine_agreement", "JOINT_TYPE_UNSUPPORTED",
           _model_case(_attr("joint", "handle_fix", type="floating")),
           note="passed validate, then refine's balance stage refused its own output (INTERNAL_ERROR, exit 70, partial output); "
@@ -890,7 +890,7 @@ def _cases() -> list[Case]:
     add(C("joint_type_planar", "refine_agreement", "JOINT_TYPE_UNSUPPORTED",
           _model_case(_attr("joint", "drawer_slide", type="planar", axis="0 0 1", with_limit=False)),
           note="3 degrees of freedom (axis = plane normal): same internal error as floating before; SAPIEN builds no planar joint"))
-    # --- issue 36: names are data, never paths
+    # --- names are data, never paths
     add(C("link_name_path_traversal", "structure", "LINK_NAME_NOT_A_FILE_NAME",
           _model_case(_rename_link("lid", "../../../../../../elsewhere/pwn")), refused=False,
           note="its CoACD pieces were written as ../../../../../../elsewhere/pwn_5_0.obj outside --out; now named "
@@ -900,7 +900,7 @@ def _cases() -> list[Case]:
           note="a crafted link named as another's safe file name: their files would share one name, refused"))
     add(C("faces_total_cap", "refine_agreement", "MESH_TOO_MANY_FACES", build_valid, policy={"max_total_faces": 30},
           note="the per-asset face cap (1,000,000 by default; docs/design/validation.md) with a lowered cap"))
-    # --- issue 11, second check (H14): sizes and textures refine or PyBullet cannot take
+    # --- validate agrees with refine: sizes and textures refine or PyBullet cannot take
     add(C("mesh_coordinate_1e308", "refine_agreement", "MESH_COORDINATE_IMPLAUSIBLE",
           _files_case(_write("meshes/lid.obj", "v 1e308 0 0\nv -1e308 0 0\nv 0 1e308 0\nv 0 0 1e308\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")),
           note="overflowed numpy (warnings, then INTERNAL_ERROR LinAlgError); now checked by comparison before any arithmetic"))
@@ -924,7 +924,7 @@ def _cases() -> list[Case]:
     return out
 
 
-# ----------------------------------------------------------------------------- MJCF and USD inputs (issue 58)
+# ----------------------------------------------------------------------------- MJCF and USD inputs
 
 _TETRA = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 
@@ -1015,8 +1015,8 @@ CASES: list[Case] = _cases()
 CASES_BY_NAME: dict[str, Case] = {c.name: c for c in CASES}
 
 
-#: Assets refine must handle that validate accepts (issue 11; continuous and
-#: fixed joints: issue 36): name -> builder.
+#: Assets refine must handle that validate accepts (continuous and fixed
+#: joints among them): name -> builder.
 ACCEPTED: dict[str, Callable[[Path], Path]] = {
     "symlink_mesh_inside": _files_case(lambda f: os.symlink("lid.obj", f / "meshes" / "alias.obj"), _mesh("lid", "meshes/alias.obj")),
     "dotdot_through_existing_dir": _model_case(_mesh("lid", "images/../meshes/lid.obj")),

@@ -24,7 +24,7 @@ from asset2sim.schemas.realism import JudgeVerdict
 from asset2sim.apps.realism.judge import RUBRIC_VERSION
 
 #: A judge is calibrated when it catches at least this fraction of the planted defects (of all defect
-#: pairs, dropped verdicts as misses): the 90 % criterion of issue 41 ("pairs where one side is a
+#: pairs, dropped verdicts as misses): the 90 % criterion ("pairs where one side is a
 #: deliberately broken copy ... must lose at least 90 % of their comparisons").
 SENSITIVITY_THRESHOLD = 0.9
 

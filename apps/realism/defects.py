@@ -1,5 +1,5 @@
 """Planted defects: deliberately broken copies of an asset's physics, the
-calibration set of a realism judge (the realism issue's list). Each copy keeps
+calibration set of a realism judge. Each copy keeps
 the meshes (referenced by absolute path, never copied or modified) and changes
 one thing a person would notice when the part is pushed and let go:
 

@@ -23,7 +23,7 @@ from asset2sim.tasks.synthesize.opening_fractions import box_center, fraction_fo
 if TYPE_CHECKING:  # typing only: the context module imports this stage's parser
     from asset2sim.tasks.synthesize.context import EstimationContext
 
-#: Relative tolerance of a numeric request (5 %, the issue's acceptance).
+#: Relative tolerance of a numeric request (5 %).
 NUMBER_TOLERANCE = 0.05
 #: Smallest half-width of a numeric target's interval (opening fraction).
 MIN_TOLERANCE = 0.005

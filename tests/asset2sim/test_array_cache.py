@@ -53,8 +53,8 @@ def test_proven_entry_round_trips_and_store_refuses_the_reserved_name(cache):
 
 
 def test_entry_moved_to_another_key_is_rejected_recomputed_and_rewritten(cache, tmp_path, monkeypatch):
-    """The 'huge' run's analysis copied over a normal-size link's entry (the
-    issue's rotated ``analysis/`` entries) is not read back as that link's."""
+    """The 'huge' run's analysis copied over a normal-size link's entry (as when
+    ``analysis/`` entries are rotated) is not read back as that link's."""
     v, f = box_mesh(1.0, 1.0, 1.0)
     small = link_of([mesh_ref(write_obj(tmp_path / "small.obj", v * 0.1, f))])
     huge = link_of([mesh_ref(write_obj(tmp_path / "huge.obj", v * 10.0, f))])
@@ -84,7 +84,7 @@ def test_altered_entry_is_rejected(cache):
     path = cache / "k" / f"{'c' * 64}.npz"
     with np.load(path) as npz:
         arrays = {k: npz[k] for k in npz.files}
-    arrays["x"] = arrays["x"] * 11.0  # the masses of the issue, changed; the proof kept
+    arrays["x"] = arrays["x"] * 11.0  # the arrays altered, the proof kept
     np.savez(path, **arrays)
     with pytest.warns(CacheWarning, match="do not match their digest"):
         assert array_cache.load("k", "c" * 64) is None
@@ -185,8 +185,8 @@ def test_guard_refuses_a_cache_inside_a_kept_out_folder_through_symlinks(tmp_pat
 
 
 def test_refine_with_the_cache_inside_the_input_or_output_writes_nothing_there(demo_root, tmp_path, monkeypatch):
-    """ASSET2SIM_CACHE inside the input folder (the issue: eight .npz files
-    written into the input) or the output folder: the refine warns, runs
+    """ASSET2SIM_CACHE inside the input folder (which once wrote eight .npz
+    files into the input) or the output folder: the refine warns, runs
     without the disk cache and leaves the input byte-for-byte as it was."""
     from asset2sim.tasks.refine import refine_asset
 

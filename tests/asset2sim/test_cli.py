@@ -207,7 +207,7 @@ def test_internal_error_exits_70_with_a_log_and_traceback_only_with_debug(box, t
     assert "Traceback" in capsys.readouterr().err
 
 
-# ------------------------------------------------------------------ one line format for every command (issue 11, H14's check)
+# ------------------------------------------------------------------ one line format for every command
 
 
 def _fields(line: str) -> tuple[str, str, str]:
@@ -246,7 +246,7 @@ def test_a_wrong_path_is_named_once(tmp_path, capsys):
         assert line.count(str(missing)) == 1, line
 
 
-# ------------------------------------------------------------------ usage errors as in well-kept command lines (issue 62)
+# ------------------------------------------------------------------ usage errors as in well-kept command lines
 
 
 @pytest.mark.parametrize("argv, prog, bad, meant", [
@@ -368,7 +368,7 @@ def test_other_commands_use_the_one_line_format(box, tmp_path, capsys):
         assert "error:" not in cap.out
 
 
-# ------------------------------------------------------------------ only the command given is imported (issue 14)
+# ------------------------------------------------------------------ only the command given is imported
 
 
 def test_requested_command_is_found_before_any_option():
@@ -471,7 +471,7 @@ def test_body_and_mjcf_angle_are_refine_options_and_config_fields_outside_the_de
         parser.parse_args([*base, "--mjcf-angle", "grad"])
 
 
-# ------------------------------------------------------------------ one explanation per failure: penetration (issue 62)
+# ------------------------------------------------------------------ one explanation per failure: penetration
 
 
 def test_a_child_inside_its_parent_is_explained_once_in_the_terminal_and_the_report(tmp_path, capsys):

@@ -84,7 +84,7 @@ def test_location_refusals_name_code_and_path(tmp_path, box):
 
 
 def test_refine_with_out_at_input_parent_or_named_collision_loses_nothing(tmp_path):
-    """The issue's cases: --out the input's parent; an input folder named
+    """The cases: --out the input's parent; an input folder named
     ``collision`` and --out its parent. Refused, nothing written or removed."""
     box = demo_assets.build_box_with_lid(tmp_path / "area" / "collision")
     (tmp_path / "area" / ".notes.tmp").write_text("a user's file that looks temporary")

@@ -1,5 +1,5 @@
 """Every server a flow run starts listens where its log says: on a loopback
-address (issue 36). While a flow runs on a fresh local Dask cluster, the
+address. While a flow runs on a fresh local Dask cluster, the
 listening TCP sockets of this process and all its children (scheduler,
 nannies, workers, dashboard, stage servers) are listed; every one opened by
 the run must be bound to 127.0.0.0/8 or ::1. With the dashboard on it is one

@@ -11,7 +11,7 @@ not output files).
 
 Each kill comes a random time after a random progress line of the run (so the
 machine's load does not decide whether it lands before the end). The default
-run kills 4 times; ``-m slow`` runs the issue's 20 kills.
+run kills 4 times; ``-m slow`` runs 20 kills.
 """
 
 from __future__ import annotations

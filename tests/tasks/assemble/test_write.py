@@ -99,7 +99,7 @@ def test_state_and_overlay_json_written(cabinet, tmp_path):
     out = write_output(asset, ov, tmp_path / "out", {"joint_0": 0.01})
     assert json.loads(out.initial_state.read_text()) == {
         "initial_joint_positions": {"joint_0": 0.01},
-        # the root declaration (issue 16): no mounting in the overlay -> free-standing
+        # the root declaration: no mounting in the overlay -> free-standing
         "root": {"fixed": False, "mounting": "free-standing", "pose": None, "source": ""},
     }
     back = Overlay.model_validate_json(out.overlay.read_text())
@@ -135,7 +135,7 @@ def test_no_temporary_files_left(cabinet, tmp_path):
 
 
 def test_mesh_reached_through_a_symlink_keeps_its_material(tmp_path):
-    """Issue 36: the URDF names ``textured_objs/a.obj``, a symlink to
+    """The URDF names ``textured_objs/a.obj``, a symlink to
     ``meshes/base.obj`` whose ``mtllib base.mtl`` (and its texture) lie beside
     the real file. The output's copy at ``textured_objs/a.obj`` finds its MTL
     and texture as written (before: the MTL was not copied, no warning);

@@ -1,4 +1,4 @@
-"""Generated assets that reproduce the refine failure modes of issue 16.
+"""Generated assets that reproduce refine's failure modes.
 
 - :func:`build_tall_faucet`: a tall, thin fixture whose spout reaches far past
   its small foot: it tips over when free-standing, rests when mounted.

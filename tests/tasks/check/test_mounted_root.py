@@ -1,5 +1,5 @@
 """Fixtures are mounted: a tall, thin faucet tips over when free-standing and
-passes every check with its root fixed as the asset declares (issue 16)."""
+passes every check with its root fixed as the asset declares."""
 
 from __future__ import annotations
 

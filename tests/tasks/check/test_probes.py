@@ -262,8 +262,8 @@ def test_push_budget_is_capped_but_never_below_push_time():
 
 
 def test_push_on_a_part_far_from_its_axis_is_bounded(tmp_path):
-    """Issue 36 (the HTML report took 78 s on an asset with mesh scale 1e-6,
-    its joint origins left in file units): a lid whose hinge lies 100 m
+    """Once the HTML report took 78 s on an asset with mesh scale 1e-6,
+    its joint origins left in file units. A lid whose hinge lies 100 m
     away asks 1 + 1.5 x 30 m / 0.25 m/s = 181 s of push for a 0.3 rad
     opening (43,440 engine steps when stuck). The push stops at
     ``MAX_PUSH_TIME`` (30 s) and the probe says so."""

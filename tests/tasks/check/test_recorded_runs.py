@@ -1,5 +1,5 @@
 """The manipulation tiers recorded once and reused only for identical inputs;
-the post-check runs the sweep only on a round it may report (issue 14)."""
+the post-check runs the sweep only on a round it may report."""
 
 from __future__ import annotations
 

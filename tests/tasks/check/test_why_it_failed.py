@@ -1,4 +1,4 @@
-"""One explanation per failure (issue 62): every failure mode's tier explained by
+"""One explanation per failure: every failure mode's tier explained by
 :func:`asset2sim.tasks.check.verdict.why_it_failed`, on an asset built to fail that way. The terminal prints the
 sentences (``why it failed ...``), ``report.html`` shows the same ones in its "Why it failed" block, and each names
 the tier, the part, the value against its threshold and what a user can do."""

@@ -1,4 +1,4 @@
-"""Every joint type of URDF is carried through refine or refused at validation (issue 36).
+"""Every joint type of URDF is carried through refine or refused at validation.
 
 Floating and planar joints passed ``asset2sim validate`` and then ended
 ``asset2sim refine`` with ``INTERNAL_ERROR`` (exit 70) and a partial output

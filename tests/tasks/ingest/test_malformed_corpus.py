@@ -85,7 +85,7 @@ def test_case_gets_its_code(case, tmp_path):
     assert tree_hashes(asset) == before
 
 
-# ----------------------------------------------------------------------------- issue 11: validate agrees with refine
+# ----------------------------------------------------------------------------- validate agrees with refine
 
 AGREEMENT = [c for c in cb.CASES if c.topic == "refine_agreement" and not c.policy]
 
@@ -164,7 +164,7 @@ def test_default_caps_are_documented():
     assert pol.max_links == vi.MAX_LINKS == 128
 
 
-# ----------------------------------------------------------------------------- issue 11, second check: sizes and textures
+# ----------------------------------------------------------------------------- validate agrees with refine: sizes and textures
 
 
 def test_huge_coordinates_print_no_numpy_warning(tmp_path):

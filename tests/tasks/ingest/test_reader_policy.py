@@ -23,7 +23,7 @@ from tests.helpers import tree_hashes, no_hang
 
 mujoco = pytest.importorskip("mujoco")
 
-#: What validate may take on any hostile input here (the issue's bound), s.
+#: The most time validate may take on any hostile input here, s.
 TIME_LIMIT_S = 5.0
 #: After this an in-process call is interrupted (a hang fails the test), s.
 HANG_LIMIT_S = 30

@@ -196,7 +196,7 @@ def test_mesh_defect_severity_depends_on_use(tmp_path):
 
 @pytest.mark.parametrize("name", ["meta.json", "semantics.txt"])
 def test_oversized_side_file_has_its_own_code(name, tmp_path):
-    """Issue 36: a 1 GiB (sparse) ``meta.json`` or ``semantics.txt`` is a
+    """A 1 GiB (sparse) ``meta.json`` or ``semantics.txt`` is a
     regular file, only too large: ``ASSET_FILE_TOO_LARGE`` naming the file,
     its size and the cap (was ``ASSET_FILE_NOT_REGULAR``); a FIFO keeps
     ``ASSET_FILE_NOT_REGULAR``."""
@@ -214,7 +214,7 @@ def test_oversized_side_file_has_its_own_code(name, tmp_path):
 
 
 def test_asset_without_any_geometry_is_refused_naming_the_urdf(tmp_path):
-    """Issue 36: links but no ``<visual>``/``<collision>`` anywhere is
+    """Links but no ``<visual>``/``<collision>`` anywhere is
     ``ASSET_NO_GEOMETRY`` on the URDF (refine blamed the request with
     ``OVL_SCALE_INVALID``); one link without geometry beside others is fine."""
     model = cb.valid_model()

@@ -463,7 +463,7 @@ def test_unused_words_are_reported_and_a_foreign_request_is_not_understood():
     from asset2sim.tasks.interpret.request import parse_request
 
     toaster = parse_request("A two-slot toaster with its lever up and a spring-loaded lever.")
-    # "up" after a part noun is a state now (the lever's highest end, issue 12); "two-slot" a count of parts
+    # "up" after a part noun is a state now (the lever's highest end); "two-slot" a count of parts
     assert toaster.understood and toaster.unused_words == [] and toaster.ignored == [] and toaster.part_counts == {"slot": 2}
     duck = parse_request("A microwave with a rubber duck on top, painted blue.")
     assert duck.ignored == ["rubber duck", "painted blue"]

@@ -37,7 +37,7 @@ def _lever_z(out_dir, q: float) -> float:
 
 
 def test_toaster_lever_up_is_its_top_found_from_the_geometry(toaster, tmp_path):
-    """The issue's request: the lever lands at the top of its slot. In this
+    """A toaster "with its lever up": the lever lands at the top of its slot. In this
     asset the top is the joint's LOWER limit and the geometric closed end is
     the bottom, so neither "closed" nor "upper limit" would pass."""
     res = refine_asset(toaster, TOASTER, tmp_path / "out", category="Toaster", extras=False)

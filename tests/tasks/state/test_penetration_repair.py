@@ -1,6 +1,6 @@
 """A state band that penetrates everywhere: the state search cannot resolve
 it, the collision geometry is repaired by convex decomposition and the search
-runs again; the report gives the before and after (issue 16)."""
+runs again; the report gives the before and after."""
 
 from __future__ import annotations
 

@@ -117,7 +117,7 @@ def open_stapler(tmp_path_factory):
 @pytest.mark.slow
 def test_open_stapler_is_balanced_by_the_envelope_mass_of_its_sheet_steel_parts(open_stapler, tmp_path):
     """Stapler 102990 with its body fully open stands at the band's target with its estimated masses
-    (issue 39: its sheet steel weighed as one sheet, not as the two faces the dataset draws of it). With the
+    (its sheet steel weighed as one sheet, not as the two faces the dataset draws of it). With the
     arm and body twice as heavy, as the estimate made them before, the centre of mass leaves the support
     (robust rest toppled it): no sourced fraction covers a stapler's parts, so the opened parts go down
     towards their envelope shell mass (outer area x 0.6 mm x 7850 kg/m^3) and the base takes the rest:
@@ -179,7 +179,7 @@ def test_a_chest_that_topples_at_the_bands_target_stands_at_the_steadiest_openin
 @pytest.mark.slow  # end to end: a dev object refined on its own
 def test_a_fully_open_stapler_stands_in_its_band(tmp_path):
     """Stapler 102990 "fully open" (band 0.85-1.0 of the top arm's range,
-    target 1.0). With its open-shell parts weighed as one sheet (issue 39)
+    target 1.0). With its open-shell parts weighed as one sheet
     it stands at the target and is interaction-ready. Before, its arm and
     magazine weighed twice as much; the 2 cm drop and the 5 deg tilts
     toppled it at the target, though it was statically steady, and the arm

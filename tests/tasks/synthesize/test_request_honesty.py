@@ -55,7 +55,7 @@ def test_a_part_word_the_object_lacks_moves_no_other_part(asset_id, category, wo
 @pytest.mark.slow  # end to end: dev objects refined with every extra
 @needs_shared
 def test_the_part_named_wins_and_the_unknown_one_is_reported_everywhere(tmp_path):
-    """The laptop request of the issue, in both orders: the screen stays half
+    """A laptop request naming a part it lacks, in both orders: the screen stays half
     open, "drawer" is a warning in the report, the evaluation, the HTML report
     and the catalog column, and prompt alignment counts only the screen."""
     for n, prompt in enumerate(["a laptop with its screen half open and its drawer closed",
