@@ -2,13 +2,15 @@
 needed, the post-check's seconds, every verdict that changed, and the hand's peak operating force on every operated
 part (the operability check's ``peak_force_n`` against its ``force_range_n``).
 
-    .venv/bin/python benchmarks/compare_escalation.py OLD_WORK NEW_WORK
+    .venv/bin/python benchmarks/compare_escalation.py OLD_WORK NEW_WORK [--list-first]
 
 ``OLD_WORK`` and ``NEW_WORK`` are the ``--work`` folders of two ``bench_flow.py`` runs (their ``refined/``
 outputs are read; the newest run of each asset is taken). Prints the rounds histogram of each, the number of assets
-whose first post-check passed (one round), the post-check's total seconds, each changed failure mode or readiness
-tier, and the operated parts whose peak force moved by more than :data:`FORCE_CHANGE` either way, with the median
-share of the force range and the number of parts above :data:`HIGH_SHARE` of it.
+whose first post-check passed (one round), what failed at the first post-check of the others (``--list-first``: per
+asset, the checks and the robust-rest trials with their largest joint drift, rad or m), the post-check's total
+seconds, each changed failure mode or readiness tier, and the operated parts whose peak force moved by more than
+:data:`FORCE_CHANGE` either way, with the median share of the force range and the number of parts above
+:data:`HIGH_SHARE` of it.
 """
 
 from __future__ import annotations
@@ -46,17 +48,37 @@ def load_run(work: Path) -> dict[str, dict]:
                 if part.get("peak_force_n") is not None and top:
                     peaks[joint] = (float(part["peak_force_n"]), float(top))
         row = {"rounds": len(rep.get("escalation", [])), "failure_mode": rep.get("failure_mode") or "none",
-               "readiness": rep.get("readiness", {}), "post_check_s": float(times.get("post_check", 0.0)), "peaks": peaks}
+               "readiness": rep.get("readiness", {}), "post_check_s": float(times.get("post_check", 0.0)), "peaks": peaks,
+               "first_failed": first_round_failures(rep)}
         mtime = report.stat().st_mtime
         if folder.name not in out or mtime > out[folder.name][0]:
             out[folder.name] = (mtime, row)
     return {k: v for k, (_, v) in out.items()}
 
 
+def first_round_failures(report: dict) -> list[str]:
+    """What failed at the first post-check of an output's ``report.json`` (its ``escalation[0]``): each failed
+    check (``name(engine)``), and for robust rest each failed trial with its largest joint drift (rad or m)."""
+    rounds = report.get("escalation") or []
+    if len(rounds) <= 1:
+        return []
+    out = []
+    for m in rounds[0].get("metrics", []):
+        if m.get("passed") is not False:
+            continue
+        out.append(f"{m.get('name')}({m.get('engine', '')})")
+        for trial, t in ((m.get("details") or {}).get("trials") or {}).items() if m.get("name") == "robust_rest" else ():
+            if not t.get("passed", True):
+                drift = max((t.get("joint_drift") or {}).values(), default=0.0)
+                out.append(f"{trial} {','.join(t.get('failing_joints') or [])} {drift:.3g}")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("old", type=Path)
     ap.add_argument("new", type=Path)
+    ap.add_argument("--list-first", action="store_true", help="list each new output's first post-check failures")
     args = ap.parse_args(argv)
     old, new = load_run(args.old), load_run(args.new)
     if not old or not new:
@@ -66,6 +88,14 @@ def main(argv: list[str] | None = None) -> int:
         hist = collections.Counter(r["rounds"] for r in run.values())
         print(f"{name}: {len(run)} assets, post-check rounds {dict(sorted(hist.items()))}, first post-check passed "
               f"{hist.get(1, 0)}, post-check {sum(r['post_check_s'] for r in run.values()):.0f} s in all")
+        causes = collections.Counter(c.split(" ")[0] for r in run.values() for c in r["first_failed"])
+        print(f"  what failed at the first post-check of the {sum(r['rounds'] > 1 for r in run.values())} that needed "
+              f"more (checks, robust-rest trials): {dict(causes.most_common())}")
+    if args.list_first:
+        print("first post-check failures (new):")
+        for asset in sorted(new):
+            if new[asset]["first_failed"]:
+                print(f"  {asset} ({new[asset]['rounds']} rounds): {'; '.join(new[asset]['first_failed'])}")
     print("verdicts that changed:")
     changed = 0
     for asset in sorted(set(old) & set(new)):
