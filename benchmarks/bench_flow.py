@@ -135,6 +135,25 @@ def tail(df, factor: float = TAIL_FACTOR) -> dict:
     return out
 
 
+def order_check(df, raw: Path, workers: int, phase_s: float) -> dict:
+    """How well the flow's start order (:mod:`asset2sim.flows.job_order`, largest geometry first) fits the run: the
+    Spearman rank correlation of each object's geometry bytes (``folder_listing`` of its folder under ``raw``) and the
+    wall s of its first request (``_r0``, refined cold), and the workers' busy share, the summed asset wall s over
+    ``workers`` x ``phase_s`` (the rest is start-up and a worker waiting at the end)."""
+    from asset2sim.flows.job_order import folder_listing
+
+    first = df[df["asset_id"].str.endswith("_r0")]
+    sizes = [float(folder_listing(raw / a)[1]) for a in first["asset_id"]]
+    walls = [float(w or 0.0) for w in first["wall_seconds"]]
+    rho = None
+    if len(sizes) >= 3:
+        import pandas as pd
+
+        rho = float(pd.Series(sizes).rank().corr(pd.Series(walls).rank()))
+    busy = float(df["wall_seconds"].fillna(0.0).sum()) / (workers * phase_s) if phase_s else None
+    return {"bytes_wall_rank_correlation": rho, "objects": len(sizes), "busy_share": busy}
+
+
 def print_tail(t: dict, factor: float = TAIL_FACTOR) -> None:
     """Print :func:`tail`'s figures."""
     for name in ("wall", "cpu"):
@@ -210,7 +229,8 @@ def main(argv: list[str] | None = None) -> int:
                "per_asset_s": {"median": med, "p90": p90, "p99": p99, "p99_over_median": p99 / med if med else None},
                "stages_s": {k: dict(zip(("median", "p90", "p99"), quantiles(v))) for k, v in sorted(stages.items())},
                "failure_modes": df["failure_mode"].fillna("none").value_counts().to_dict(), "tail": tail(df),
-               "workers": args.workers, "media": args.media, "load_after": _load()}
+               "workers": args.workers, "media": args.media, "load_after": _load(),
+               "order": order_check(df, work / "raw", args.workers, assets_s)}
         print(f"flow: {worked} assets refined in {wall:.1f} s wall (assets phase {assets_s:.1f} s); load after: {_load()}")
         print(f"  first phase (verdict, evaluation, exports): {out['first_phase_assets_per_hour'] or 0:.0f} assets/hour "
               f"(goal >= 2000)")
@@ -220,6 +240,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  per asset: median {med:.2f} s, p90 {p90:.2f} s, p99 {p99:.2f} s = {p99 / med if med else 0:.2f}x the "
               "median (goal <= 5x)")
         print_tail(out["tail"])
+        o = out["order"]
+        print(f"  start order: rank correlation of geometry bytes and cold wall s {o['bytes_wall_rank_correlation'] or 0:.2f} "
+              f"over {o['objects']} objects; workers busy {100 * (o['busy_share'] or 0):.0f} % of the first phase")
         print("  stage seconds per asset (median / p90 / p99):")
         for k, q in out["stages_s"].items():
             if q["p99"] >= 0.05:

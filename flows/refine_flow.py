@@ -109,7 +109,7 @@ def refine_assets(
         retries=retries, retry_delay_seconds=retry_delay_seconds, retry_condition_fn=_retry_on_model_failure,
         timeout_seconds=None,
     )  # fmt: skip
-    all_jobs = job_order.spread_same_files([AssetJob(**j) for j in jobs])  # copies of one folder run apart
+    all_jobs = job_order.start_order([AssetJob(**j) for j in jobs])  # copies of one folder apart, largest first
     servers_seconds = _ready_stage_servers(all_jobs, log)
     body_started = time.time()  # the stage servers' start-up is not the assets'
     prep_futures = _submit_prepares(all_jobs, batch_size, rec.starts)
