@@ -17,7 +17,9 @@
    first-phase wall time median / p90 / p99 with p99 / median and max / median (and the same of its CPU time: the
    figure to compare on a loaded machine), the failure modes, and the tail: every asset above
    :data:`TAIL_FACTOR` times the median (wall or CPU) with the stage that took most of its time (the output's
-   ``timings.json``) and the CoACD decompositions its report names; writes ``DIR/summary.json``.
+   ``timings.json``) and the CoACD decompositions its report names, and how the start order fitted the run
+   (:func:`order_check`: geometry bytes against cold wall time, the workers' busy share, when the first refine began);
+   writes ``DIR/summary.json``.
 
 Goal: >= 2,000 assets an hour for the first phase on 2 cores, p99 <= 5x the median. Numbers from
 a loaded machine (see the load average printed) are upper bounds of the cost.
@@ -139,7 +141,8 @@ def order_check(df, raw: Path, workers: int, phase_s: float) -> dict:
     """How well the flow's start order (:mod:`asset2sim.flows.job_order`, largest geometry first) fits the run: the
     Spearman rank correlation of each object's geometry bytes (``folder_listing`` of its folder under ``raw``) and the
     wall s of its first request (``_r0``, refined cold), and the workers' busy share, the summed asset wall s over
-    ``workers`` x ``phase_s`` (the rest is start-up and a worker waiting at the end)."""
+    ``workers`` x ``phase_s`` (the rest is start-up and a worker waiting at the end), and when the first refine began,
+    s after the first asset was submitted (the prepares and the workers' imports before it)."""
     from asset2sim.flows.job_order import folder_listing
 
     first = df[df["asset_id"].str.endswith("_r0")]
@@ -151,7 +154,18 @@ def order_check(df, raw: Path, workers: int, phase_s: float) -> dict:
 
         rho = float(pd.Series(sizes).rank().corr(pd.Series(walls).rank()))
     busy = float(df["wall_seconds"].fillna(0.0).sum()) / (workers * phase_s) if phase_s else None
-    return {"bytes_wall_rank_correlation": rho, "objects": len(sizes), "busy_share": busy}
+    import pandas as pd
+
+    started = pd.to_datetime(df["finished_at"]) - pd.to_timedelta(df["wall_seconds"].fillna(0.0), unit="s")
+    first = float((started.min() - pd.to_datetime(df["started_at"]).min()).total_seconds()) if len(df) else None
+    return {"bytes_wall_rank_correlation": rho, "objects": len(sizes), "busy_share": busy, "first_refine_s": first}
+
+
+def print_order(o: dict) -> None:
+    """Print :func:`order_check`'s figures."""
+    print(f"  start order: rank correlation of geometry bytes and cold wall s {o['bytes_wall_rank_correlation'] or 0:.2f} "
+          f"over {o['objects']} objects; workers busy {100 * (o['busy_share'] or 0):.0f} % of the first phase, "
+          f"the first refine {o['first_refine_s'] or 0:.1f} s after the first submission")
 
 
 def print_tail(t: dict, factor: float = TAIL_FACTOR) -> None:
@@ -168,7 +182,8 @@ def print_tail(t: dict, factor: float = TAIL_FACTOR) -> None:
 
 
 def report_only(work: Path) -> int:
-    """``--report-only``: :func:`print_tail` of the latest run recorded under ``work`` (a kept ``--work``)."""
+    """``--report-only``: :func:`print_tail` of the latest run recorded under ``work`` (a kept ``--work``), and
+    :func:`print_order` where its ``summary.json`` is kept too."""
     from asset2sim.flows.catalog import ResultCatalog, load_catalog
 
     cat = ResultCatalog(load_catalog(work / "catalog.yaml").catalog_root)
@@ -181,6 +196,11 @@ def report_only(work: Path) -> int:
     t = tail(df)
     print_tail(t)
     (work / "tail.json").write_text(json.dumps(t, indent=1))
+    summary = work / "summary.json"
+    if summary.is_file():  # the run's first phase and workers, for the start order's fit
+        s = json.loads(summary.read_text())
+        o = order_check(df, work / "raw", int(s.get("workers") or 2), float(s["assets_phase_s"]))
+        print_order(o)
     return 0
 
 
@@ -240,9 +260,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  per asset: median {med:.2f} s, p90 {p90:.2f} s, p99 {p99:.2f} s = {p99 / med if med else 0:.2f}x the "
               "median (goal <= 5x)")
         print_tail(out["tail"])
-        o = out["order"]
-        print(f"  start order: rank correlation of geometry bytes and cold wall s {o['bytes_wall_rank_correlation'] or 0:.2f} "
-              f"over {o['objects']} objects; workers busy {100 * (o['busy_share'] or 0):.0f} % of the first phase")
+        print_order(out["order"])
         print("  stage seconds per asset (median / p90 / p99):")
         for k, q in out["stages_s"].items():
             if q["p99"] >= 0.05:

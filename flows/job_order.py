@@ -33,8 +33,15 @@ def folder_listing(asset_dir: Path | str) -> tuple[str | None, int]:
     """(key, geometry bytes) of ``asset_dir``: the key is the SHA-256 (hex) over the sorted (path relative to
     ``asset_dir``, size in bytes) of every regular file under it (symlinks followed; contents not read), equal
     for copies of a folder, None when it cannot be listed or holds no file; the bytes are the summed size of those
-    files whose suffix is not in :data:`NO_GEOMETRY_SUFFIXES`."""
+    files whose suffix is not in :data:`NO_GEOMETRY_SUFFIXES`. An asset given as one file (a URDF, MJCF or USD file)
+    has no key and its own size (a USD file holds its meshes; a URDF or MJCF file is counted without the meshes it
+    names)."""
     root = Path(asset_dir)
+    if root.is_file():  # one file (a URDF, MJCF or USD file given as the asset): its own size, no key
+        try:
+            return None, int(root.stat().st_size)
+        except OSError:
+            return None, 0
     items = []
     size = 0
     try:

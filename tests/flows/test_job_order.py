@@ -61,3 +61,14 @@ def test_equal_sizes_keep_the_manifest_order(tmp_path):
     (tmp_path / "y" / "mobility.urdf").write_text(text + "\n")  # one byte more: another object, started first
     assert files_key(tmp_path / "y") != files_key(tmp_path / "x0")
     assert [j.asset_id for j in start_order(jobs)] == ["y", "x0", "x1"]
+
+
+def test_an_asset_given_as_one_file_has_its_size_and_no_key(tmp_path):
+    jobs = _copies(tmp_path, [("folder", "8877")])
+    urdf = tmp_path / "folder" / "mobility.urdf"
+    big = tmp_path / "big.urdf"
+    big.write_bytes(urdf.read_bytes() * 40)  # one file larger than 8877's whole folder
+    assert folder_listing(big) == (None, big.stat().st_size)
+    assert folder_listing(urdf)[1] == urdf.stat().st_size < folder_listing(tmp_path / "folder")[1] < big.stat().st_size
+    jobs += [_Job("file", str(urdf)), _Job("big", str(big))]
+    assert [j.asset_id for j in start_order(jobs)] == ["big", "folder", "file"]
