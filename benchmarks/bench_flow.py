@@ -143,22 +143,18 @@ def order_check(df, raw: Path, workers: int, phase_s: float) -> dict:
     wall s of its first request (``_r0``, refined cold), and the workers' busy share, the summed asset wall s over
     ``workers`` x ``phase_s`` (the rest is start-up and a worker waiting at the end), and when the first refine began,
     s after the first asset was submitted (the prepares and the workers' imports before it)."""
-    from asset2sim.flows.job_order import folder_listing
-
-    first = df[df["asset_id"].str.endswith("_r0")]
-    sizes = [float(folder_listing(raw / a)[1]) for a in first["asset_id"]]
-    walls = [float(w or 0.0) for w in first["wall_seconds"]]
-    rho = None
-    if len(sizes) >= 3:
-        import pandas as pd
-
-        rho = float(pd.Series(sizes).rank().corr(pd.Series(walls).rank()))
-    busy = float(df["wall_seconds"].fillna(0.0).sum()) / (workers * phase_s) if phase_s else None
     import pandas as pd
 
+    from asset2sim.flows.job_order import folder_listing
+
+    cold = df[df["asset_id"].str.endswith("_r0")]
+    sizes = pd.Series([float(folder_listing(raw / a)[1]) for a in cold["asset_id"]])
+    walls = pd.Series([float(w or 0.0) for w in cold["wall_seconds"]])
+    rho = float(sizes.rank().corr(walls.rank())) if len(sizes) >= 3 else None
+    busy = float(df["wall_seconds"].fillna(0.0).sum()) / (workers * phase_s) if phase_s else None
     started = pd.to_datetime(df["finished_at"]) - pd.to_timedelta(df["wall_seconds"].fillna(0.0), unit="s")
-    first = float((started.min() - pd.to_datetime(df["started_at"]).min()).total_seconds()) if len(df) else None
-    return {"bytes_wall_rank_correlation": rho, "objects": len(sizes), "busy_share": busy, "first_refine_s": first}
+    first_refine = float((started.min() - pd.to_datetime(df["started_at"]).min()).total_seconds()) if len(df) else None
+    return {"bytes_wall_rank_correlation": rho, "objects": len(sizes), "busy_share": busy, "first_refine_s": first_refine}
 
 
 def print_order(o: dict) -> None:

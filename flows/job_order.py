@@ -71,8 +71,8 @@ def files_key(asset_dir: Path | str) -> str | None:
 def start_order(jobs: Sequence[J], folder_of=lambda j: j.asset_dir, threads: int = 8) -> list[J]:
     """``jobs`` in the order a flow starts them (module docstring): jobs whose folders (``folder_of(job)``) have
     the same :func:`files_key` form a group; round ``r`` holds the ``r``-th job of every group, the groups by
-    decreasing geometry bytes (:func:`folder_listing`), equal sizes in the order of their first job. Jobs whose
-    folder cannot be listed form groups of their own, of size 0."""
+    decreasing geometry bytes (:func:`folder_listing`), equal sizes in the order of their first job. Jobs without a
+    key (a folder that cannot be listed: size 0; an asset given as one file: its size) form groups of their own."""
     jobs = list(jobs)
     with ThreadPoolExecutor(max_workers=max(1, min(threads, len(jobs) or 1))) as pool:
         listings = list(pool.map(lambda j: folder_listing(folder_of(j)), jobs))
