@@ -63,14 +63,9 @@ def folder_listing(asset_dir: Path | str) -> tuple[str | None, int]:
     return hashlib.sha256("\n".join(sorted(items)).encode()).hexdigest(), size
 
 
-def files_key(asset_dir: Path | str) -> str | None:
-    """The key of :func:`folder_listing`: equal for copies of a folder, None when it cannot be listed."""
-    return folder_listing(asset_dir)[0]
-
-
 def start_order(jobs: Sequence[J], folder_of=lambda j: j.asset_dir, threads: int = 8) -> list[J]:
     """``jobs`` in the order a flow starts them (module docstring): jobs whose folders (``folder_of(job)``) have
-    the same :func:`files_key` form a group; round ``r`` holds the ``r``-th job of every group, the groups by
+    the same key (:func:`folder_listing`) form a group; round ``r`` holds the ``r``-th job of every group, the groups by
     decreasing geometry bytes (:func:`folder_listing`), equal sizes in the order of their first job. Jobs without a
     key (a folder that cannot be listed: size 0; an asset given as one file: its size) form groups of their own."""
     jobs = list(jobs)

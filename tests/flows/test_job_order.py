@@ -8,7 +8,12 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
-from asset2sim.flows.job_order import files_key, folder_listing, start_order
+from asset2sim.flows.job_order import folder_listing, start_order
+
+
+def files_key(folder):
+    """The key :func:`folder_listing` gives ``folder``."""
+    return folder_listing(folder)[0]
 
 DEV = Path(__file__).resolve().parents[2].parent / "shared" / "datasets" / "partnet_mobility"
 
