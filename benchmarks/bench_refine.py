@@ -227,7 +227,7 @@ def _whole_process(rows: list[dict], args, results: list[dict]) -> None:
         # first import; PYTHONDONTWRITEBYTECODE, when this shell sets it, would compile every module from source
         env.pop("PYTHONDONTWRITEBYTECODE", None)
         env["PYTHONPYCACHEPREFIX"] = str(Path.home() / ".cache" / "asset2sim" / "pycache")
-        subprocess.run([sys.executable, "-c", "import asset2sim.commands.refine, asset2sim.tasks.evaluation.svg_chart, mujoco, pybullet"],
+        subprocess.run([sys.executable, "-c", "import asset2sim.commands.refine, asset2sim.tasks.evaluation.plots, matplotlib.figure, mujoco, pybullet"],
                        env=env, capture_output=True)
     print(f"bytecode cache: {env.get('PYTHONPYCACHEPREFIX') or 'as the environment says'}"
           f"{' (PYTHONDONTWRITEBYTECODE set: modules compiled from source)' if env.get('PYTHONDONTWRITEBYTECODE') else ''}")

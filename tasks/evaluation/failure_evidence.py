@@ -16,7 +16,7 @@ import numpy as np
 from asset2sim.frames import quat_wxyz_matrix, quat_xyzw_to_wxyz
 from asset2sim.tasks.check.robust_rest import RobustRestConfig, RobustRestRun, Trial, up_change
 from asset2sim.tasks.check.sweep import JointSweep, SweepConfig, SweepRun
-from asset2sim.tasks.evaluation.svg_chart import Panel, figure_svg
+from asset2sim.tasks.evaluation.plots import legend, new_figure, styled, svg_bytes
 from asset2sim.tasks.geometry.render import SceneRenderer
 
 #: The frames drawn of a failing trial: (caption, where in the trace).
@@ -39,37 +39,41 @@ def failing(runs: dict) -> tuple[list[tuple[str, JointSweep]], list[tuple[str, T
     return sweeps, trials
 
 
+@styled
 def trial_plot(trial: Trial, dt: float, config: RobustRestConfig | None = None) -> bytes:
     """SVG of one trial: the tilt (rad) of the up direction at placement, after settling and over the test,
-    against the topple tolerance; each joint's position (rad or m) over settling and test, with its
-    tolerance band around the initial state. Time 0: the end of settling."""
+    against the topple tolerance; each joint's position (rad or m) over settling and test (the first three), with
+    its tolerance band around the initial state. Time 0: the end of settling."""
     cfg = config or RobustRestConfig()
     tr = trial.trace
     q_ref = trial.reference_quat if trial.reference_quat is not None else tr.q0
-    a = Panel(title=f"{trial.name}: {trial.failure or 'passed'}", xlabel="time since the end of settling (s)",
-              ylabel="tilt of the up direction (rad)")
+    joints = list(tr.joints.items())[:3]
+    fig, axes = new_figure(1 + len(joints), 1, 1000.0, 240.0)
+    a = axes[0, 0]
+    a.set(title=f"{trial.name}: {trial.failure or 'passed'}", xlabel="time since the end of settling (s)",
+          ylabel="tilt of the up direction (rad)")
     n_settle = max((len(v) for v in tr.settle_joints.values()), default=0)
     t_place = -n_settle * dt
     placed = up_change(q_ref, tr.initial_root_quat) if tr.initial_root_quat is not None else math.nan
-    a.line(np.array([t_place, 0.0]), np.array([placed, up_change(q_ref, tr.q0)]), "C7", "settling (placement to rest)")
-    a.line(np.asarray(tr.t, float), np.array([up_change(q_ref, q) for q in tr.root_quat]), "C3", "test")
-    a.hline(cfg.topple_tol, "C3", ":", f"topple tolerance {cfg.topple_tol:g} rad")
-    rows = [[a]]
-    for j, q in tr.joints.items():
+    a.plot([t_place, 0.0], [placed, up_change(q_ref, tr.q0)], color="C7", label="settling (placement to rest)")
+    a.plot(np.asarray(tr.t, float), [up_change(q_ref, q) for q in tr.root_quat], color="C3", label="test")
+    a.axhline(cfg.topple_tol, color="C3", ls=":", label=f"topple tolerance {cfg.topple_tol:g} rad")
+    legend(a)
+    for b, (j, q) in zip(axes[1:, 0], joints):
         settle = np.asarray(tr.settle_joints.get(j, np.empty(0)), float)
         t = np.concatenate([t_place + dt * np.arange(len(settle)), np.asarray(tr.t, float)[: len(q)]])
         unit = "m" if tr.joint_types.get(j) == "prismatic" else "rad"
-        b = Panel(title=f"joint {j}: drift {trial.joint_drift.get(j, math.nan):.3g} {unit}", xlabel="time since the end of settling (s)",
-                  ylabel=f"{j} ({unit})")
-        b.line(t, np.concatenate([settle, np.asarray(q, float)]), "C0")
+        b.set(title=f"joint {j}: drift {trial.joint_drift.get(j, math.nan):.3g} {unit}", xlabel="time since the end of settling (s)",
+              ylabel=f"{j} ({unit})")
+        b.plot(t, np.concatenate([settle, np.asarray(q, float)]), color="C0")
         q0 = tr.initial_joints.get(j, float(settle[0]) if len(settle) else float(q[0]))
         tol = trial.joint_tolerance.get(j)
         if tol is not None:
-            b.hline(q0 + tol, "C0", ":", f"tolerance +-{tol:g} {unit}")
-            b.hline(q0 - tol, "C0", ":")
-        b.vline(0.0, "gray", "--", "end of settling")
-        rows.append([b])
-    return figure_svg(rows[:4], 1000.0, 240.0).encode()
+            b.axhline(q0 + tol, color="C0", ls=":", label=f"tolerance +-{tol:g} {unit}")
+            b.axhline(q0 - tol, color="C0", ls=":")
+        b.axvline(0.0, color="gray", ls="--", label="end of settling")
+        legend(b)
+    return svg_bytes(fig)
 
 
 def trial_poses(trial: Trial) -> list[Pose]:
@@ -86,19 +90,22 @@ def trial_poses(trial: Trial) -> list[Pose]:
     return [(caption, joints, quat_wxyz_matrix(quat_xyzw_to_wxyz(quat)) @ R_ref.T) for caption, (quat, joints) in zip(FRAMES, poses)]
 
 
+@styled
 def sweep_plot(js: JointSweep, config: SweepConfig | None = None) -> bytes:
     """SVG of one joint sweep: the opening fraction over time, opening then closing, against the fractions
     that count as reached (``config.reach_fraction`` open, 1 - it closed)."""
     cfg = config or SweepConfig()
     t, f, ph = (np.asarray(js.trace[k], float) for k in ("t", "fraction", "phase"))
-    a = Panel(title=f"sweep of {js.joint}: {js.failure}", xlabel="time since the sweep started (s)",
-              ylabel="opening fraction (0 closed, 1 fully open)")
-    a.line(t, f, "C0", js.joint)
-    a.hline(cfg.reach_fraction, "C2", "--", f"counts as open ({cfg.reach_fraction:.0%})")
-    a.hline(1.0 - cfg.reach_fraction, "C1", "--", f"counts as closed ({1.0 - cfg.reach_fraction:.0%})")
+    fig, ((a,),) = new_figure(1, 1, 1000.0, 260.0)
+    a.set(title=f"sweep of {js.joint}: {js.failure}", xlabel="time since the sweep started (s)",
+          ylabel="opening fraction (0 closed, 1 fully open)")
+    a.plot(t, f, color="C0", label=js.joint)
+    a.axhline(cfg.reach_fraction, color="C2", ls="--", label=f"counts as open ({cfg.reach_fraction:.0%})")
+    a.axhline(1.0 - cfg.reach_fraction, color="C1", ls="--", label=f"counts as closed ({1.0 - cfg.reach_fraction:.0%})")
     if np.any(ph > 0):
-        a.vline(float(t[int(np.argmax(ph > 0))]), "gray", "--", "closing starts")
-    return figure_svg([[a]], 1000.0, 260.0).encode()
+        a.axvline(float(t[int(np.argmax(ph > 0))]), color="gray", ls="--", label="closing starts")
+    legend(a)
+    return svg_bytes(fig)
 
 
 def sweep_poses(js: JointSweep, others: dict[str, float]) -> list[Pose]:
