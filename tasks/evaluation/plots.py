@@ -18,7 +18,7 @@ from asset2sim.tasks.check.probes import reached_fraction
 SVG_MIME = "image/svg+xml"  # the media type of every figure here (``data:`` URIs)
 #: Pixels per inch of the figures (their sizes are given in px).
 DPI = 100.0
-#: Most points drawn per scatter series (an even stride over the rest): one SVG element per point.
+#: Most points drawn per scatter series (:func:`thinned`); the points are drawn as an image inside the SVG.
 MAX_SCATTER = 1500
 #: matplotlib settings while drawing and saving: compact fonts, text kept as text, and ids salted with a fixed
 #: string so the same figure gives the same bytes (``svg.hashsalt``; matplotlib's default is random per run).
@@ -40,15 +40,27 @@ def styled(draw):
     return run
 
 
+#: Margins of a figure's axes, px: left of each column (tick labels and the axis label), right of it (a right-hand
+#: axis's), below each row (tick labels and the x label) and above it (the panel's title); fixed, so no layout engine
+#: measures the text at every save (matplotlib's constrained layout took half of a figure's time).
+MARGINS_PX = {"left": 76.0, "right": 60.0, "bottom": 40.0, "top": 26.0}
+
+
 def new_figure(rows: int, cols: int, width: float, row_height: float, title: str = ""):
-    """A matplotlib ``Figure`` ``width`` px wide and ``row_height`` px per row (constrained layout) with its
-    axes, an array (rows, cols) of ``Axes``; ``title`` above them all."""
+    """A matplotlib ``Figure`` ``width`` px wide and ``row_height`` px per row, :data:`MARGINS_PX` around each of
+    its axes, with the axes, an array (rows, cols) of ``Axes``; ``title`` above them all."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width / DPI, (row_height * rows + (26.0 if title else 0.0)) / DPI), dpi=DPI, layout="constrained")
-    axes = fig.subplots(rows, cols, squeeze=False)
+    top_px = 26.0 if title else 0.0
+    height = row_height * rows + top_px
+    m = MARGINS_PX
+    fig = Figure(figsize=(width / DPI, height / DPI), dpi=DPI)
+    cell_w, cell_h = width / cols - m["left"] - m["right"], row_height - m["bottom"] - m["top"]
+    axes = fig.subplots(rows, cols, squeeze=False, gridspec_kw={
+        "left": m["left"] / width, "right": 1.0 - m["right"] / width, "bottom": m["bottom"] / height,
+        "top": 1.0 - (top_px + m["top"]) / height, "wspace": (m["left"] + m["right"]) / cell_w, "hspace": (m["bottom"] + m["top"]) / cell_h})
     if title:
-        fig.suptitle(title, fontsize=10, fontweight="bold")
+        fig.suptitle(title, y=1.0 - 6.0 / height, va="top", fontsize=10, fontweight="bold")
     return fig, axes
 
 
@@ -71,6 +83,11 @@ def legend(ax, twin=None, loc: str = "upper right") -> None:
         ax.legend(handles, labels, loc=loc)
 
 
+def thinned(points: np.ndarray, most: int = MAX_SCATTER) -> np.ndarray:
+    """At most ``most`` of ``points`` (k, ...), an even stride over them in their order (the first kept)."""
+    return points[:: max(1, -(-len(points) // most))]
+
+
 @styled
 def plot_object(point_cloud: dict[str, np.ndarray], title: str = "") -> bytes | None:
     """Front (x-z), side (y-z) and top (x-y) views of the collision vertices per
@@ -82,8 +99,8 @@ def plot_object(point_cloud: dict[str, np.ndarray], title: str = "") -> bytes | 
     views = [(0, 2, "front: x (m)", "z (m)"), (1, 2, "side: y (m)", "z (m)"), (0, 1, "top: x (m)", "y (m)")]
     for n, (ax, (i, j, xl, yl)) in enumerate(zip(axes[0], views)):
         for k, (name, v) in enumerate(sorted(pts.items())):
-            v = v[:: max(1, -(-len(v) // MAX_SCATTER))]
-            ax.scatter(v[:, i], v[:, j], s=2.0, color=f"C{k % 10}", label=name, linewidths=0)
+            v = thinned(v)
+            ax.scatter(v[:, i], v[:, j], s=2.0, color=f"C{k % 10}", label=name, linewidths=0, rasterized=True)
         if n < 2:
             ax.axhline(0.0, color="k", lw=0.8)
         ax.set(xlabel=xl, ylabel=yl, aspect="equal")

@@ -3,7 +3,6 @@ text kept as text and escaped, long point clouds thinned, and the caller's matpl
 
 from __future__ import annotations
 
-import re
 import xml.etree.ElementTree as ET
 from types import SimpleNamespace
 
@@ -39,16 +38,17 @@ def test_a_figure_is_one_standalone_svg_with_its_text_escaped_and_the_same_bytes
     assert b"door &lt;hinge&gt;" in a
 
 
-def test_point_clouds_are_thinned_to_the_scatter_limit_per_link():
+def test_point_clouds_are_thinned_to_the_scatter_limit_and_drawn_as_images():
     rng = np.random.default_rng(0)
-    cloud = {"base": rng.random((20000, 3)), "lid": rng.random((300, 3)) + [0, 0, 1]}
-    svg = plots.plot_object(cloud)
-    collections = re.findall(rb'<g id="PathCollection_\d+">(.*?)</g>', svg, re.S)  # one per link and view (and legend)
-    marks = sum(c.count(b"<use ") for c in collections)
-    stride = -(-20000 // plots.MAX_SCATTER)
-    per_view = -(-20000 // stride) + 300
-    assert marks == 3 * per_view + 2  # three views: every lid point, the base thinned to the limit; a legend mark each
-    assert "base" in _texts(svg) and "lid" in _texts(svg)
+    base = rng.random((20000, 3))
+    kept = plots.thinned(base)
+    assert len(kept) <= plots.MAX_SCATTER and len(kept) > plots.MAX_SCATTER * 0.9
+    assert np.array_equal(kept[0], base[0]) and np.array_equal(kept[1], base[len(base) // plots.MAX_SCATTER + 1])
+    lid = rng.random((300, 3))
+    assert np.array_equal(plots.thinned(lid), lid)
+    svg = plots.plot_object({"base": base, "lid": lid + [0, 0, 1]})
+    assert svg.count(b"<image ") >= 3 and len(svg) < 2_000_000  # a raster of the points in each view, not 60,000 elements
+    assert "base" in _texts(svg) and "lid" in _texts(svg) and "front: x (m)" in _texts(svg)
     assert plots.plot_object({"base": np.zeros((0, 3))}) is None
 
 
