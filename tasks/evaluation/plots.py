@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import io
+import threading
 from typing import Any
 
 import numpy as np
@@ -26,15 +27,20 @@ STYLE = {"font.size": 8.0, "axes.titlesize": 9.0, "legend.fontsize": 7.0, "svg.f
          "axes.grid": True, "grid.alpha": 0.3}
 
 
+#: One figure drawn at a time in a process: matplotlib's settings (``rc_context``) are global, so two threads drawing
+#: at once would swap each other's.
+_DRAWING = threading.RLock()
+
+
 def styled(draw):
     """``draw`` (a function making a figure) run under :data:`STYLE` (matplotlib's ``rc_context``: the settings hold
-    for the figures it makes and leave the caller's matplotlib as it was)."""
+    for the figures it makes and leave the caller's matplotlib as it was), one at a time per process."""
 
     @functools.wraps(draw)
     def run(*args, **kwargs):
         import matplotlib
 
-        with matplotlib.rc_context(STYLE):
+        with _DRAWING, matplotlib.rc_context(STYLE):
             return draw(*args, **kwargs)
 
     return run

@@ -4,6 +4,7 @@ text kept as text and escaped, long point clouds thinned, and the caller's matpl
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import matplotlib
@@ -52,10 +53,14 @@ def test_point_clouds_are_thinned_to_the_scatter_limit_and_drawn_as_images():
     assert plots.plot_object({"base": np.zeros((0, 3))}) is None
 
 
-def test_the_callers_matplotlib_settings_are_left_as_they_were():
+def test_the_callers_matplotlib_settings_are_left_as_they_were_and_threads_draw_the_same_bytes():
     before = dict(matplotlib.rcParams)
-    plots.plot_method_summary({"ours": {"rest_stability_pass": 1.0, "all_pass": 0.5}, "baseline": {"all_pass": 0.25}})
+    summary = {"ours": {"rest_stability_pass": 1.0, "all_pass": 0.5}, "baseline": {"all_pass": 0.25}}
+    one = plots.plot_method_summary(summary)
     assert dict(matplotlib.rcParams) == before
+    with ThreadPoolExecutor(4) as pool:  # each figure under the style, none under another's
+        assert set(pool.map(lambda _: plots.plot_method_summary(summary), range(8))) == {one}
+    assert dict(matplotlib.rcParams) == before and "rest stability" in _texts(one) and "baseline" in _texts(one)
 
 
 def test_a_failing_trial_plots_the_tilt_and_each_joint_against_its_tolerance():
