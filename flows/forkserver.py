@@ -9,6 +9,7 @@ when it ended (``rc`` < 0: killed by signal ``-rc``; ``cpu``: user + system s).
 from __future__ import annotations
 
 import contextlib
+import functools
 import gc
 import json
 import os
@@ -88,10 +89,12 @@ def warm_tables() -> list[str]:
 
 class StageServer:
     """One pre-imported stage server (a child process); ``preload``: further modules it imports (besides
-    :data:`WARM_MODULES` and :data:`PROJECT_MODULES`; one that fails to import is skipped)."""
+    :data:`WARM_MODULES` and :data:`PROJECT_MODULES`; one that fails to import is skipped); ``niceness``: the ``nice``
+    increment of the server, which its children inherit (0: this process's priority)."""
 
-    def __init__(self, preload: tuple[str, ...] = ()):
+    def __init__(self, preload: tuple[str, ...] = (), niceness: int = 0):
         self.preload = tuple(dict.fromkeys((*PROJECT_MODULES, *preload)))
+        self.niceness = int(niceness)
         self.proc: subprocess.Popen | None = None
         self.starts = 0
         self._buf = b""
@@ -112,6 +115,7 @@ class StageServer:
             stderr=None,
             env=env,
             start_new_session=True,
+            **({"preexec_fn": functools.partial(os.nice, self.niceness)} if self.niceness else {}),
         )
         self.starts += 1
         self._buf = b""

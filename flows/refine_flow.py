@@ -399,38 +399,55 @@ MEDIA_NICENESS = 10
 
 
 def media_phase(log, rows, *, workers: int = 1, time_limit_seconds: float = 1800.0) -> dict[str, Any]:
-    """The deferred media phase of a run (``catalog.yaml`` ``run.extras: deferred``): ``asset2sim report OUT`` for every
-    local output folder of ``rows`` (a DataFrame with ``out_dir`` and ``media``) whose ``report.json`` still says its
-    media are deferred, each in a child process at lower CPU priority (:data:`MEDIA_NICENESS`), ``workers`` at a time.
+    """The deferred media phase of a run (``catalog.yaml`` ``run.extras: deferred``): what ``asset2sim report OUT`` does
+    (:func:`asset2sim.tasks.publish.media.make_media`) for every local output folder of ``rows`` (a DataFrame with
+    ``out_dir`` and ``media``) whose ``report.json`` still says its media are deferred, each in a child process forked
+    from one of ``workers`` stage servers (:class:`asset2sim.flows.forkserver.StageServer`: the renderers, the
+    evaluation and matplotlib imported once, not once per folder) at lower CPU priority (:data:`MEDIA_NICENESS`).
     A child that fails or passes ``time_limit_seconds`` (s) leaves its folder deferred and complete (``asset2sim report
     OUT`` or the next run's media phase makes it); the verdicts are made already and never change here.
 
     Returns:
         ``{"media_made": n, "media_failed": n, "media_seconds": s}``.
     """
-    import subprocess
-    import sys
+    import queue
+    import tempfile
 
+    from asset2sim.flows.forkserver import StageServer
     from asset2sim.tasks.publish.media import media_pending
 
     t0 = time.perf_counter()
     folders = sorted({str(d) for d, m in zip(rows.get("out_dir", []), rows.get("media", []))
                       if m == "deferred" and isinstance(d, str) and Path(d).is_dir() and media_pending(d)})
+    servers: queue.Queue = queue.Queue()
+    started = [StageServer(("asset2sim.tasks.publish.media",), niceness=MEDIA_NICENESS) for _ in range(min(max(1, int(workers)), len(folders)))]
+    for srv in started:
+        servers.put(srv)
 
     def make(folder: str) -> tuple[str, str | None]:
+        srv = servers.get()
         try:
-            done = subprocess.run([sys.executable, "-m", "asset2sim", "report", folder], capture_output=True, text=True,
-                                  timeout=time_limit_seconds, preexec_fn=lambda: os.nice(MEDIA_NICENESS))
-        except subprocess.TimeoutExpired:
-            return folder, f"more than {time_limit_seconds:g} s"
-        return folder, None if done.returncode == 0 else (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]
+            with tempfile.TemporaryDirectory(prefix="asset2sim-media-") as work:
+                res = srv.call("asset2sim.tasks.publish.media:make_media", {"out_dir": folder}, timeout=time_limit_seconds,
+                               workdir=work)
+        except (OSError, RuntimeError) as exc:  # no server: the folder stays deferred
+            return folder, f"{type(exc).__name__}: {exc}"
+        finally:
+            servers.put(srv)
+        if res.status == "ok":
+            return folder, None
+        return folder, f"more than {time_limit_seconds:g} s" if res.status == "timeout" else (res.error or res.status)
 
     failed = 0
-    with ThreadPoolExecutor(max_workers=max(1, int(workers))) as pool:
-        for folder, error in pool.map(make, folders):
-            if error is not None:
-                failed += 1
-                log.warning("media of %s not made (it stays deferred): %s", folder, error)
+    try:
+        with ThreadPoolExecutor(max_workers=max(1, len(started))) as pool:
+            for folder, error in pool.map(make, folders):
+                if error is not None:
+                    failed += 1
+                    log.warning("media of %s not made (it stays deferred): %s", folder, error)
+    finally:
+        for srv in started:
+            srv.close()
     seconds = time.perf_counter() - t0
     if folders:
         log.info("media phase: %d of %d outputs in %.1f s", len(folders) - failed, len(folders), seconds)

@@ -141,3 +141,24 @@ def test_ready_server_waits_for_a_started_server_and_keeps_it(tmp_path):
         assert "server_start_seconds" not in res.extra and srv.starts == 1
     finally:
         srv.close()
+
+
+def niceness() -> dict:
+    return {"nice": os.nice(0), "pid": os.getpid()}
+
+
+def test_a_niced_server_runs_its_calls_at_its_lower_priority(tmp_path):
+    """The media phase's servers (``niceness``): the server and every child it forks run that much nicer than the
+    process that started them; a server without it runs at this process's priority."""
+    base = os.nice(0)
+    plain, niced = StageServer(preload=(__name__,)), StageServer(preload=(__name__,), niceness=7)
+    try:
+        a = plain.call(f"{__name__}:niceness", {}, timeout=120, workdir=tmp_path / "a")
+        b = niced.call(f"{__name__}:niceness", {}, timeout=120, workdir=tmp_path / "b")
+        assert a.status == "ok" and b.status == "ok", (a.error, b.error)
+        assert a.value["nice"] == base and b.value["nice"] == min(19, base + 7)
+        assert psutil.Process(niced.proc.pid).nice() == min(19, base + 7)
+        assert b.value["pid"] != niced.proc.pid  # measured in the forked child
+    finally:
+        plain.close()
+        niced.close()
