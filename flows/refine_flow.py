@@ -31,7 +31,7 @@ from asset2sim import flow_progress
 from asset2sim.flows.catalog import ResultCatalog, load_catalog
 from asset2sim.flow_progress import ProgressEvent
 from asset2sim.flows import driver_skip, job_order, server, stages
-from asset2sim.flows.forkserver import ready_server
+from asset2sim.flows.forkserver import StageServer, ready_server
 from asset2sim.flows.store import join_uri, upload_folder
 from asset2sim.flows.stages import (FLOW_NAME, SUBFLOW_NAME, AssetJob, ModelCallFailure, RegressionFailure,
                                     code_version, flow_parameters, make_run_id, plan_run)
@@ -413,14 +413,14 @@ def media_phase(log, rows, *, workers: int = 1, time_limit_seconds: float = 1800
     import queue
     import tempfile
 
-    from asset2sim.flows.forkserver import StageServer
     from asset2sim.tasks.publish.media import media_pending
 
     t0 = time.perf_counter()
     folders = sorted({str(d) for d, m in zip(rows.get("out_dir", []), rows.get("media", []))
                       if m == "deferred" and isinstance(d, str) and Path(d).is_dir() and media_pending(d)})
-    servers: queue.Queue = queue.Queue()
-    started = [StageServer(("asset2sim.tasks.publish.media",), niceness=MEDIA_NICENESS) for _ in range(min(max(1, int(workers)), len(folders)))]
+    started = [StageServer(("asset2sim.tasks.publish.media",), niceness=MEDIA_NICENESS)
+               for _ in range(min(max(1, int(workers)), len(folders)))]
+    servers: queue.Queue = queue.Queue()  # the servers not serving a folder now
     for srv in started:
         servers.put(srv)
 
