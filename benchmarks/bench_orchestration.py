@@ -1,7 +1,8 @@
 """What the flow's orchestration costs per task: empty Prefect tasks on the flow's own Dask task runner
 (``flows.refine_flow._dask_task_runner``: local cluster, one thread per worker process, the flow's Prefect API), then
-the same empty function submitted to the same cluster as plain Dask tasks; printed per process (the driver, the
-Prefect server, the Dask scheduler and workers) as CPU seconds over the tasks, and as milliseconds of CPU per task.
+the same empty function submitted to the same cluster as plain Dask tasks; printed per process (the driver with the
+in-process Dask scheduler, the Prefect server, the Dask workers) as CPU seconds over the tasks, and as milliseconds of
+CPU per task.
 
     .venv/bin/python benchmarks/bench_orchestration.py [--tasks 100] [--workers 2]
 
@@ -65,9 +66,8 @@ def main(argv: list[str] | None = None) -> int:
 
     for k, v in QUIET_LIBRARY_LOGS.items():  # the libraries' logs off the terminal, as the commands keep them
         os.environ.setdefault(k, v)
+    stages.prepare_prefect_environment(ROOT)  # before Prefect is imported, as the flow command does
     from asset2sim.flows.refine_flow import _dask_task_runner
-
-    stages.prepare_prefect_environment(ROOT)
     from prefect import flow, task
     from prefect.cache_policies import NO_CACHE
     from prefect_dask import get_dask_client

@@ -66,10 +66,12 @@ def _asset(tmp_path: Path, base_parts: list, lid_parts: list, *, fixed_limit: bo
     return d
 
 
-def _write(folder: Path, out: Path, state: dict[str, float] | None = None):
+def _write(folder: Path, out: Path, state: dict[str, float] | None = None, upper: dict[str, float] | None = None):
+    """The asset at ``folder`` written into ``out``; ``upper``: joint -> the overlay's upper limit clipped to it."""
     asset = extract_asset(folder)
     ov = Overlay(estimator=EstimatorInfo(name="test"), scale=1.0,
-                 joints={j.name: JointDynamics(damping=0.1, friction=0.01) for j in asset.movable_joints()})
+                 joints={j.name: JointDynamics(damping=0.1, friction=0.01, upper=(upper or {}).get(j.name))
+                         for j in asset.movable_joints()})
     ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
     return write_output(asset, ov, out, state or {"hinge": 0.0})
 
@@ -412,13 +414,8 @@ def test_a_limit_clipped_to_the_geometry_gives_the_parent_back_its_material_beyo
     declared range, PartNet-Mobility's suitcase 101668 lost 16 % of its body's pieces' volume around lid positions its
     stop excludes, and tipped when its lid was pulled), and the block stays clear of it over that range."""
     folder, model = _tray_with_block(tmp_path)
-    asset = extract_asset(folder)
-    ov = Overlay(estimator=EstimatorInfo(name="test"), scale=1.0,
-                 joints={j.name: JointDynamics(damping=0.1, friction=0.01) for j in asset.movable_joints()})
-    ov, _ = validate_overlay(ov, asset, analyze_asset(asset))
-    clipped = ov.model_copy(update={"joints": {**ov.joints, "hinge": ov.joints["hinge"].model_copy(update={"upper": 0.4})}})
-    declared = write_output(asset, ov, tmp_path / "declared", {"hinge": 0.0})
-    out = write_output(asset, clipped, tmp_path / "clipped", {"hinge": 0.0})
+    declared = _write(folder, tmp_path / "declared")
+    out = _write(folder, tmp_path / "clipped", upper={"hinge": 0.4})
     assert urdf.read_urdf(out.urdf).joint("hinge").upper == 0.4
 
     def pieces(urdf_path):
