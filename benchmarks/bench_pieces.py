@@ -7,8 +7,9 @@ Refines each row of ``../shared/datasets/partnet_mobility/manifest.csv`` (its ow
 process with an empty on-disk cache of its own (``ASSET2SIM_CACHE`` under ``--out``) and one BLAS thread, as a flow
 worker runs, and times :func:`asset2sim.tasks.assemble.collision_geometry._made_pieces` (a build) and its steps:
 the containment cuts (``_resolve_containment``), the merges (``_merge_link``), the parent-child separation
-(``separate_parent_child``, also run per initial state), the running and swept clearance and the group hulls.
-Prints one line per row and the totals with each step's share of all refine time.
+(``separate_parent_child``, also run per initial state), the running and swept clearance and the group hulls; and
+the CoACD decompositions the collision repairs ask for (``coacd.run_coacd``, where CoACD is installed). Prints one
+line per row and the totals with each step's share of all refine time.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ STEPS = ("_made_pieces", "_resolve_containment", "_merge_link", "separate_parent
          "swept_clearance", "_group_hulls")
 LABELS = {"_made_pieces": "builds", "_resolve_containment": "containment", "_merge_link": "merges",
           "separate_parent_child": "separation", "running_clearance": "running", "swept_clearance": "swept",
-          "_group_hulls": "hulls"}
+          "_group_hulls": "hulls", "coacd": "CoACD"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,11 +65,19 @@ def main(argv: list[str] | None = None) -> int:
 
     for name in STEPS:
         setattr(cg, name, timed(name, getattr(cg, name)))
+    steps = STEPS
+    try:  # the decomposition module imports CoACD when it runs it: the wrapped function is the one it calls
+        import coacd
+
+        coacd.run_coacd = timed("coacd", coacd.run_coacd)
+        steps = (*STEPS, "coacd")
+    except ImportError:
+        pass
     with open(DEV / "manifest.csv", newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if args.ids is None or r["id"] in args.ids]
     totals: collections.Counter = collections.Counter()
     wall = 0.0
-    print(f"{'row':>8} {'refine s':>9} " + " ".join(f"{LABELS[s]:>12}" for s in STEPS) + "   (s / calls)")
+    print(f"{'row':>8} {'refine s':>9} " + " ".join(f"{LABELS[s]:>12}" for s in steps) + "   (s / calls)")
     for r in rows:
         seconds.clear()
         calls.clear()
@@ -78,9 +87,9 @@ def main(argv: list[str] | None = None) -> int:
         dt = time.perf_counter() - t
         wall += dt
         totals.update(seconds)
-        print(f"{r['id']:>8} {dt:9.1f} " + " ".join(f"{seconds[s]:7.2f}/{calls[s]:<4d}" for s in STEPS), flush=True)
-    print(f"{'all':>8} {wall:9.1f} " + " ".join(f"{totals[s]:7.1f}     " for s in STEPS))
-    print("share of refine time: " + ", ".join(f"{LABELS[s]} {totals[s] / wall:.0%}" for s in STEPS if wall))
+        print(f"{r['id']:>8} {dt:9.1f} " + " ".join(f"{seconds[s]:7.2f}/{calls[s]:<4d}" for s in steps), flush=True)
+    print(f"{'all':>8} {wall:9.1f} " + " ".join(f"{totals[s]:7.1f}     " for s in steps))
+    print("share of refine time: " + ", ".join(f"{LABELS[s]} {totals[s] / wall:.0%}" for s in steps if wall))
     return 0
 
 
