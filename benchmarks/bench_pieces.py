@@ -8,8 +8,9 @@ process with an empty on-disk cache of its own (``ASSET2SIM_CACHE`` under ``--ou
 worker runs, and times :func:`asset2sim.tasks.assemble.collision_geometry._made_pieces` (a build) and its steps:
 the containment cuts (``_resolve_containment``), the merges (``_merge_link``), the parent-child separation
 (``separate_parent_child``, also run per initial state), the running and swept clearance and the group hulls; and
-the CoACD decompositions the collision repairs ask for (``coacd.run_coacd``, where CoACD is installed). Prints one
-line per row and the totals with each step's share of all refine time.
+every CoACD decomposition (``coacd.run_coacd``, where CoACD is installed: the collision repairs', and an open
+container's inside a build, which then counts in both). Prints one line per row and the totals with each step's
+share of all refine time.
 """
 
 from __future__ import annotations
