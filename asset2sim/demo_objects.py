@@ -52,18 +52,26 @@ def _box_with_lid() -> DemoArticulation:
     ])
 
 
+#: Thickness of a demo drawer's bottom panel, object units (:func:`_drawer`).
+DRAWER_BOTTOM = 0.01
+
+
 def _drawer(front_y: tuple[float, float], box_y: tuple[float, float], n: int) -> list[Part]:
     """A drawer closed at z = 0.405: front panel spanning ``front_y`` (object
     units), open-topped drawer box spanning ``box_y``, U-shaped handle (one OBJ,
-    three pieces)."""
+    three pieces). Built as drawer boxes are: a 0.03 front, 0.02 sides and back
+    and a 0.01 bottom panel (at the demo's scale of about 0.57: 17 mm, 11 mm and
+    6 mm; a drawer bottom is a 1/4 in hardboard or plywood panel let into the
+    sides, AWI Architectural Woodwork Standards, drawer construction)."""
     y0, y1 = front_y
     by0, by1 = box_y
+    t = DRAWER_BOTTOM
     front = Part(f"drawer_front-{n}", [box_xyz(-0.495, 0.495, y0, y1, 0.405, 0.435)], _WOOD)
     box = [
-        Part(f"drawer_bottom-{n + 1}", [box_xyz(-0.46, 0.46, by0, by0 + 0.02, -0.36, 0.405)], _WOOD),
-        Part(f"drawer_side-{n + 2}", [box_xyz(-0.46, -0.44, by0 + 0.02, by1, -0.36, 0.405)], _WOOD),
-        Part(f"drawer_side-{n + 3}", [box_xyz(0.44, 0.46, by0 + 0.02, by1, -0.36, 0.405)], _WOOD),
-        Part(f"drawer_back-{n + 4}", [box_xyz(-0.44, 0.44, by0 + 0.02, by1, -0.36, -0.34)], _WOOD),
+        Part(f"drawer_bottom-{n + 1}", [box_xyz(-0.46, 0.46, by0, by0 + t, -0.36, 0.405)], _WOOD),
+        Part(f"drawer_side-{n + 2}", [box_xyz(-0.46, -0.44, by0 + t, by1, -0.36, 0.405)], _WOOD),
+        Part(f"drawer_side-{n + 3}", [box_xyz(0.44, 0.46, by0 + t, by1, -0.36, 0.405)], _WOOD),
+        Part(f"drawer_back-{n + 4}", [box_xyz(-0.44, 0.44, by0 + t, by1, -0.36, -0.34)], _WOOD),
     ]
     ym = 0.5 * (y0 + y1)
     handle = Part(f"handle-{n + 5}", [

@@ -7,6 +7,7 @@ Units SI (m, kg, kg/m^3); sources in each yaml entry and ``docs/design/priors.md
 from __future__ import annotations
 
 import functools
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -174,6 +175,27 @@ class CategoryPrior(PriorModel):
         return next((v for v in self.variants if v.name.lower() == name.lower()), None)
 
 
+class SlidePrior(PriorModel):
+    """One kind of drawer slide or runner (``slides.yaml``): ``friction_coefficient`` (lo, hi) of the drawer's weight
+    (dimensionless), the request ``words`` that name it (regular expressions), its ``source``."""
+
+    key: str = ""
+    friction_coefficient: tuple[float, float]
+    words: list[str] = Field(min_length=1)
+    source: str = Field(min_length=10)
+    estimate: bool = False
+    note: str = ""
+
+    @model_validator(mode="after")
+    def _check(self) -> "SlidePrior":
+        lo, hi = self.friction_coefficient
+        if not 0.0 < lo <= hi <= 1.0:
+            raise ValueError(f"friction_coefficient must be 0 < lo <= hi <= 1, got {[lo, hi]}")
+        for w in self.words:
+            re.compile(w)
+        return self
+
+
 class Priors(PriorModel):
     """All prior tables, validated and cross-checked."""
 
@@ -181,6 +203,8 @@ class Priors(PriorModel):
     materials: dict[str, MaterialPrior]
     labels: LabelTable
     categories: dict[str, CategoryPrior]
+    slides: dict[str, SlidePrior]
+    """``slides.yaml``, smoothest first"""
 
 
 def _read_yaml(directory: Path | None, fname: str) -> Any:
@@ -269,7 +293,8 @@ def _build(directory: Path | None) -> Priors:
             if s in seen_syn and seen_syn[s] != name:
                 raise PriorsError(f"{where}.synonyms: {s!r} is also a synonym of {seen_syn[s]} (ambiguous)")
             seen_syn[s] = name
-    return Priors(size_classes=size_classes, materials=materials, labels=labels, categories=categories)
+    slides = {k: _validate_entry(SlidePrior, "slides.yaml", k, v, key=k) for k, v in _read_yaml(directory, "slides.yaml").items()}
+    return Priors(size_classes=size_classes, materials=materials, labels=labels, categories=categories, slides=slides)
 
 
 @functools.lru_cache(maxsize=1)

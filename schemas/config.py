@@ -26,6 +26,13 @@ MAX_PHASE_TIME = 60.0
 MAX_MEASUREMENT_STEPS = 200_000
 
 
+#: Smallest band a joint must come to rest in around its initial state after the object is put down (SPEC, robust
+#: rest), rad (revolute and continuous) or m (prismatic) ...
+REST_BAND_FLOORS: dict[str, float] = {"revolute": 0.02, "prismatic": 0.002}
+#: ... or this share of its range where that is more (dimensionless; SPEC: 5 %): the state still reads as asked.
+REST_BAND_RANGE_SHARE = 0.05
+
+
 class SimConventions(BaseModel):
     """SPEC conventions for every simulator measurement. Every field is finite and bounded (pydantic refuses
     the rest, naming the field): a time step in (0, 0.05] s, settle and test times up to :data:`MAX_PHASE_TIME`,

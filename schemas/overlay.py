@@ -8,10 +8,10 @@ joint positions rad or m.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 SCHEMA_VERSION = "1.0"
 
@@ -78,6 +78,26 @@ class LinkPhysics(_Strict):
     """Where the values came from: ``geometry``, ``estimator``, ``default`` ..."""
 
 
+class Holding(_Strict):
+    """What holds a part where it was left, and the loads it was sized to (``tasks/synthesize/estimate.py``; N m for a
+    revolute joint, N for a prismatic one): the hold margin of the output is its friction over ``static_load``."""
+
+    mechanism: str
+    """"friction hinge", "free hinge", "wood runners slides", "lid support", "counterbalance spring", "closer",
+    "return spring", "balance", "moves freely (asked)" ..."""
+    static_load: float = 0.0
+    """the largest load friction holds: the gravity load around the state, the set-down's 5 deg lean (less what a spring
+    carries), N m or N"""
+    landing: float = 0.0
+    """friction beyond the holding friction that stops the part within its band after the object lands, N m or N"""
+    landing_trial: str = ""
+    """the set-down trial whose landing needs the most ("drop", "tilt+y" ...)"""
+
+
+#: Keys of a catch at a joint's closed end in overlays before 0.2.0 (:meth:`JointDynamics._drop_catches`).
+LEGACY_CATCH_KEYS = ("catch_force", "catch_position", "catch_zone")
+
+
 class JointDynamics(_Strict):
     """Passive dynamics of one non-fixed joint (units: see module docstring)."""
 
@@ -86,14 +106,6 @@ class JointDynamics(_Strict):
     stiffness: float = 0.0
     spring_reference: float | None = None
     """Rest position q_s of the spring (rad or m); required when stiffness > 0."""
-    catch_force: float = 0.0
-    """Holding force of a catch at the closed end (a magnetic catch, a stay-closed slide): N (prismatic) or
-    N*m about the axis (revolute); 0 without one."""
-    catch_position: float | None = None
-    """The closed end the catch holds the part at (rad or m, output scale); required when catch_force > 0."""
-    catch_zone: float | None = None
-    """Travel (rad or m, signed: > 0 when opening increases q) over which the catch's pull falls from
-    ``catch_force`` to 0; required when catch_force > 0."""
     inertia_axis: float | None = None
     """Inertia of the moving subtree about / along the axis (kg*m^2 or kg), when
     known: bounds the damping a simulator integrates stably (c <= I / dt)."""
@@ -104,7 +116,18 @@ class JointDynamics(_Strict):
     """Clipped upper limit (rad or m at the output scale); None: raw limit kept."""
     limit_source: str = ""
     """Why and by how much the limit was clipped (empty when not clipped)."""
+    holding: Holding | None = None
+    """What holds the part where it was left and the loads it was sized to; None where no estimate says."""
     source: str = ""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _drop_catches(cls, data: Any) -> Any:
+        """Overlays written before 0.2.0 may carry a catch (``catch_force``, ``catch_position``, ``catch_zone``): no
+        output format carries one, so no check applied it since; it is dropped on reading."""
+        if isinstance(data, dict) and any(k in data for k in LEGACY_CATCH_KEYS):
+            data = {k: v for k, v in data.items() if k not in LEGACY_CATCH_KEYS}
+        return data
 
 
 class EstimatorInfo(_Strict):

@@ -44,6 +44,9 @@ class EscalationRound(BaseModel):
     changes: dict[str, dict[str, float]] = Field(default_factory=dict)
     """joint -> {parameter: new value}"""
     reason: str = ""
+    words_kept: list[str] = Field(default_factory=list)
+    """Changes this round's step asked and a word of the request about the part's motion kept from it
+    (``tasks/check/word_guard.py``), one line each."""
 
 
 class StateRefinement(BaseModel):

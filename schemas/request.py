@@ -82,6 +82,45 @@ class DynamicsValue(BaseModel):
     phrase: str = ""
 
 
+MotionKind = Literal["free", "stiff", "hold", "spring", "self_closing", "soft_close", "low_damping", "high_damping",
+                     "moderate_damping", "slides"]
+
+#: What each word about a part's motion asks of its joint (``tasks/synthesize/estimate.py`` applies it, with its
+#: source; ``tasks/check/word_guard.py`` keeps every later step from moving the joint against it): the parameters it
+#: sets and whether no later step may raise (``"max"``) or lower (``"min"``) each.
+MOTION_GUARDS: dict[str, dict[str, str]] = {
+    "free": {"friction": "max", "damping": "max"},
+    "low_damping": {"damping": "max"},
+    "stiff": {"friction": "min", "damping": "min"},
+    "hold": {"friction": "min"},
+    "high_damping": {"damping": "min"},
+    "soft_close": {"damping": "min"},
+    "spring": {"stiffness": "min"},
+    "self_closing": {"stiffness": "min"},
+    "moderate_damping": {},
+    "slides": {},  # the slide's own friction range bounds it (``asset2sim/priors/slides.yaml``)
+}
+
+
+class MotionPhrase(BaseModel):
+    """A word about how a part moves ("the door swings freely", "a stiff handle joint", "the lid stays where it is
+    put", "a self-closing door"): ``kind`` (:data:`MOTION_GUARDS`), ``label`` the part it names (None: the parts the
+    object's task acts on) and ``phrase`` the request's words."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: MotionKind
+    label: str | None = None
+    phrase: str = ""
+    mechanism: str | None = None
+    """for ``slides``: the kind of slide named (a key of ``asset2sim/priors/slides.yaml``: ``ball_bearing``, ``roller``,
+    ``lubricated``, ``wood_runners``)"""
+
+    def short(self) -> str:
+        """``'swings freely' (door): free`` for the report's and the summary's lines."""
+        what = self.kind.replace("_", " ") if self.mechanism is None else f"slides: {self.mechanism.replace('_', ' ')}"
+        return f"'{self.phrase}'" + (f" ({self.label})" if self.label else "") + f": {what}"
+
+
 class JointStateRequest(BaseModel):
     """The state asked for one joint or a group: ``selector`` ``all`` (the
     task-relevant joints), ``joint`` (named ``joint``) or ``label`` (moving
@@ -149,6 +188,9 @@ class RequestSpec(BaseModel):
     """"stiff"/"heavy" joints asked for (higher friction / damping)."""
     free_moving: bool = False
     """"moving freely": low friction."""
+    motions: list[MotionPhrase] = Field(default_factory=list)
+    """The words about how parts move, each with the part it names (None: the task's parts), in the request's order;
+    ``damping``, ``holds_position``, ``spring``, ``stiff`` and ``free_moving`` summarise them for the whole object."""
     pose_hint: Literal["upright", "lying_flat", "sideways"] | None = None
     sizes: list[SizeTarget] = Field(default_factory=list)
     """Sizes in numbers ("30 cm tall"); they win over the size words."""
@@ -202,7 +244,7 @@ class PartCount(BaseModel):
 #: The fields of :class:`RequestSpec` that say what is asked (the typed intent); the others are the parse's account
 #: of the text (the words used and unused, warnings, phrases replaced) and the overrides.
 INTENT_FIELDS = ("category_hint", "size_class", "joint_states", "sizes", "pose_hint", "mass_level", "properties", "dynamics_values",
-                 "damping", "holds_position", "spring", "stiff", "free_moving", "part_counts", "mount")
+                 "damping", "holds_position", "spring", "stiff", "free_moving", "motions", "part_counts", "mount")
 
 
 class RequestIntent(BaseModel):
@@ -229,6 +271,8 @@ class RequestIntent(BaseModel):
     spring: bool = False
     stiff: bool = False
     free_moving: bool = False
+    motions: list[MotionPhrase] = Field(default_factory=list, max_length=64)
+    """One entry per word about how a part moves, with the part it names (null: the task's parts)."""
     part_counts: list[PartCount] = Field(default_factory=list, max_length=64)
     mount: Literal["fixed", "free"] | None = None
     """The mounting asked ("mounted on the wall": fixed; "free-standing": free), or null."""

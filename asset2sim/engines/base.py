@@ -5,8 +5,6 @@ URDF under the SPEC's measurement conventions ("How quality is measured";
 
 from __future__ import annotations
 
-import math
-
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Protocol
@@ -18,30 +16,16 @@ from asset2sim.schemas.config import SimConventions
 
 @dataclass(frozen=True)
 class Spring:
-    """A joint's passive elastic elements, applied each step as :meth:`force`: a spring, torque/force
-    -stiffness * (q - reference) (``stiffness`` N*m/rad or N/m, ``reference`` rad or m), and a catch near
-    the closed end (a magnetic catch, a stay-closed slide): a pull of ``catch_force`` (N*m or N) toward
-    ``catch_position`` (rad or m) at it and beyond it, falling linearly to 0 at ``catch_zone`` (rad or m,
-    signed: > 0 when opening increases q) from it; no catch when ``catch_force`` is 0."""
+    """A joint spring, applied each step as :meth:`force`: torque/force -stiffness * (q - reference)
+    (``stiffness`` N*m/rad or N/m, ``reference`` rad or m; SPEC, "How quality is measured"). Every output format
+    carries it (MJCF ``stiffness`` / ``springref``, a UsdPhysics drive; the URDF through ``overlay.json``)."""
 
     stiffness: float
     reference: float
-    catch_force: float = 0.0
-    catch_position: float = 0.0
-    catch_zone: float = 0.0
-
-    def catch(self, q: float) -> float:
-        """The catch's generalised force (N*m or N) at ``q`` (rad or m)."""
-        if not (self.catch_force > 0.0 and self.catch_zone != 0.0):
-            return 0.0
-        x = (float(q) - self.catch_position) / self.catch_zone  # 0 at the closed end, 1 at the zone's end
-        if x >= 1.0:
-            return 0.0
-        return -math.copysign(self.catch_force, self.catch_zone) * min(1.0, 1.0 - x)
 
     def force(self, q: float) -> float:
-        """Generalised force (N*m or N) at ``q`` (rad or m): -stiffness (q - reference) plus :meth:`catch`."""
-        return -self.stiffness * (float(q) - self.reference) + self.catch(q)
+        """Generalised force (N*m or N) at ``q`` (rad or m): -stiffness (q - reference)."""
+        return -self.stiffness * (float(q) - self.reference)
 
 
 @dataclass

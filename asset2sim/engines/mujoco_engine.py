@@ -58,8 +58,6 @@ class MuJoCoSession(SessionDefaults):
         jids = {n: mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in self.joint_names}
         self._qadr = {n: int(self.m.jnt_qposadr[j]) for n, j in jids.items()}
         self._dadr = {n: int(self.m.jnt_dofadr[j]) for n, j in jids.items()}
-        # catches (MJCF has no element for them): their force in qfrc_applied before each step
-        self._catches = {n: sp for n, sp in options.springs.items() if sp.catch_force > 0.0 and n in self._dadr}
         self._ground = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, GROUND) if options.ground else -1
         self._root = mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_BODY, self.urdf.root)
         self._free = not options.fixed_base
@@ -258,9 +256,6 @@ class MuJoCoSession(SessionDefaults):
         for _ in range(int(n)):
             if self._drive:
                 self._apply_drives()
-            for name, sp in self._catches.items():
-                self.d.qfrc_applied[self._dadr[name]] += sp.catch(float(self.d.qpos[self._qadr[name]]))
-                self._applied = True
             mj.mj_step(self.m, self.d)
             if self._applied:  # efforts and forces act for one step
                 self.d.qfrc_applied[:] = 0.0

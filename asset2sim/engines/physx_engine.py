@@ -7,7 +7,7 @@ different: ``docs/design/simulators.md``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -162,7 +162,7 @@ class PassiveJoints:
     """The passive forces of an articulation's movable joints, in the order of its ``active_joints``: Coulomb
     ``friction`` (N*m or N) and viscous ``damping`` (N*m*s/rad or N*s/m) act through a zero-velocity drive whose
     force limit is ``friction + damping * |qdot|`` (:meth:`force_limits`, set each step); springs
-    (``stiffness`` N*m/rad or N/m about ``reference``) and their ``catches`` as joint forces (:meth:`joint_forces`).
+    (``stiffness`` N*m/rad or N/m about ``reference``) as joint forces (:meth:`joint_forces`).
     The one implementation of SAPIEN's passive joints: :class:`PhysXSession` and :mod:`asset2sim.maniskill` use it."""
 
     names: list[str]
@@ -170,7 +170,6 @@ class PassiveJoints:
     damping: np.ndarray
     stiffness: np.ndarray
     reference: np.ndarray
-    catches: dict[int, Spring] = field(default_factory=dict)
 
     @classmethod
     def from_urdf(cls, urdf, springs: dict[str, Spring], names: list[str]) -> "PassiveJoints":
@@ -189,14 +188,12 @@ class PassiveJoints:
             if sp is not None:
                 out.stiffness[i] = sp.stiffness
                 out.reference[i] = sp.reference
-                if sp.catch_force > 0.0:
-                    out.catches[i] = sp
         return out
 
     @property
     def sprung(self) -> bool:
-        """Whether any joint has a spring or a catch (joint forces to apply each step)."""
-        return bool(np.any(self.stiffness)) or bool(self.catches)
+        """Whether any joint has a spring (joint forces to apply each step)."""
+        return bool(np.any(self.stiffness))
 
     @property
     def damped(self) -> bool:
@@ -217,12 +214,8 @@ class PassiveJoints:
         return self.friction + self.damping * np.abs(np.asarray(qvel, float))
 
     def joint_forces(self, qpos: np.ndarray) -> np.ndarray:
-        """The springs' and catches' joint forces (n,) or (b, n) N*m or N at joint positions ``qpos``: -k (q - q_ref) + catch."""
-        q = np.asarray(qpos, float)
-        qf = -self.stiffness * (q - self.reference)
-        for i, sp in self.catches.items():
-            qf[..., i] += np.vectorize(sp.catch)(q[..., i])
-        return qf
+        """The springs' joint forces (n,) or (b, n) N*m or N at joint positions ``qpos``: -k (q - q_ref)."""
+        return -self.stiffness * (np.asarray(qpos, float) - self.reference)
 
 
 class PhysXSession(SessionDefaults):
@@ -305,8 +298,7 @@ class PhysXSession(SessionDefaults):
         self._passive = PassiveJoints.from_urdf(self.urdf, self.options.springs, active)
         self._passive.configure(self._joints)
         p = self._passive
-        self._friction, self._damping, self._stiffness, self._reference, self._catches = (
-            p.friction, p.damping, p.stiffness, p.reference, p.catches)
+        self._friction, self._damping, self._stiffness, self._reference = p.friction, p.damping, p.stiffness, p.reference
         self._drive: dict[int, tuple[float, float]] = {}  # joint index -> (target velocity, force limit beyond friction)
 
     # ------------------------------------------------------------------ state
@@ -508,7 +500,7 @@ class PhysXSession(SessionDefaults):
 
     # --------------------------------------------------------------- dynamics
     def step(self, n: int = 1) -> None:
-        springs = bool(np.any(self._stiffness)) or bool(self._catches)
+        springs = self._passive.sprung
         for _ in range(int(n)):
             self.apply_passive_forces()
             if self._effort is not None:
@@ -523,7 +515,7 @@ class PhysXSession(SessionDefaults):
 
     def apply_passive_forces(self) -> None:
         """For the next ``scene.step()``: each drive's force limit (friction +
-        damping * |qdot|) and the springs' joint forces ``-k (q - q_ref)`` with their catches (:meth:`Spring.catch`)."""
+        damping * |qdot|) and the springs' joint forces ``-k (q - q_ref)``."""
         if bool(np.any(self._damping)) or self._drive:
             qd = np.abs(np.asarray(self.art.get_qvel(), float))
             for i, _joint in enumerate(self._joints):

@@ -268,7 +268,7 @@ class PyBulletSession(SessionDefaults):
             self._p.stepSimulation(physicsClientId=self.cid)
 
     def apply_passive_forces(self) -> None:
-        """Each joint spring's torque ``-k (q - q_ref)`` and catch (:meth:`Spring.force`) for the next ``stepSimulation``."""
+        """Each joint spring's torque ``-k (q - q_ref)`` (:meth:`Spring.force`) for the next ``stepSimulation``."""
         p = self._p
         springs = self.options.springs
         if not springs:

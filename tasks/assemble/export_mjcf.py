@@ -39,7 +39,7 @@ class ExportError(RuntimeError):
 
 
 def springs_from_overlay(out_dir: Path, initial_state: dict[str, float] | None = None) -> dict[str, Spring]:
-    """Joint springs of an output folder's ``overlay.json``: every joint with stiffness > 0 (N*m/rad or N/m) or a catch,
+    """Joint springs of an output folder's ``overlay.json``: every joint with stiffness > 0 (N*m/rad or N/m),
     about ``spring_reference`` (rad or m), else about the initial state (else 0). {} without an overlay.
 
     Raises:
@@ -59,23 +59,15 @@ def overlay_springs(overlay: Overlay, initial_state: dict[str, float] | None = N
     """Joint springs of ``overlay`` as :func:`springs_from_overlay` reads them from a folder."""
     state = initial_state or {}
     return {name: joint_spring(dyn, state.get(name, 0.0)) for name, dyn in overlay.joints.items()
-            if dyn.stiffness > 0 or dyn.catch_force > 0}
+            if dyn.stiffness > 0}
 
 
 def joint_spring(dyn, q_initial: float = 0.0) -> Spring:
-    """The :class:`Spring` (spring and catch) of one joint's dynamics (``JointDynamics`` or its JSON dict);
-    the spring about ``q_initial`` (rad or m) where it names no reference (0 for a catch without a spring)."""
+    """The :class:`Spring` of one joint's dynamics (``JointDynamics`` or its JSON dict): stiffness (N*m/rad or N/m)
+    about ``spring_reference``, else about ``q_initial`` (rad or m)."""
     get = dyn.get if isinstance(dyn, dict) else (lambda k, default=None: getattr(dyn, k, default))
     ref = get("spring_reference")
-    catch = float(get("catch_force", 0.0) or 0.0)
-    zone = get("catch_zone")
-    pos = get("catch_position")
-    has_catch = catch > 0 and zone is not None and pos is not None
-    k = float(get("stiffness", 0.0) or 0.0)
-    ref = ref if ref is not None else (q_initial if k > 0 else 0.0)  # a catch alone: no spring to refer to
-    return Spring(stiffness=k, reference=float(ref),
-                  catch_force=catch if has_catch else 0.0, catch_position=float(pos) if has_catch else 0.0,
-                  catch_zone=float(zone) if has_catch else 0.0)
+    return Spring(stiffness=float(get("stiffness", 0.0) or 0.0), reference=float(q_initial if ref is None else ref))
 
 
 def output_session_options(out_dir: Path | str, initial_state: dict[str, float] | None = None,

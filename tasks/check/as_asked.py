@@ -16,7 +16,7 @@ import math
 from typing import Any
 
 from asset2sim.schemas.report import MetricResult
-from asset2sim.schemas.request import BAND_INTERVAL, RequestFindings, RequestSpec
+from asset2sim.schemas.request import BAND_INTERVAL, MOTION_GUARDS, JointStateRequest, MotionPhrase, RequestFindings, RequestSpec
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.synthesize.request_apply import END_TOLERANCE, MIN_TOLERANCE, NUMBER_TOLERANCE, StateResolution
 
@@ -153,11 +153,84 @@ def refine_request_met(spec: RequestSpec, res: StateResolution | None, found: Re
         tol = END_TOLERANCE if q.what.endswith(" end") else NUMBER_TOLERANCE * abs(q.asked)
         unmet.append(missed(q.phrase, kind=q.kind, target=q.asked, achieved=q.achieved, unit=q.unit, tolerance=tol, joint=joint,
                             reason=q.why))
+    bands = []
     for joint, jr in (res.requests.items() if res is not None else []):
         if jr.target is not None or joint not in closed_out or joint not in state:
             continue  # a number or an end: graded through the findings
-        graded += 1
-        item = band_missed(jr.phrase or jr.band, joint, jr.band, abs(closed_out[joint].fraction(state[joint])))
-        if item is not None:
-            unmet.append(item)
-    return request_met_metric(unmet, request=spec.text, graded=graded, source="refine (its resolution of the request)")
+        bands.append((jr, joint, band_missed(jr.phrase or jr.band, joint, jr.band, abs(closed_out[joint].fraction(state[joint])))))
+    missed_bands, not_graded = object_states(bands)
+    graded += len(bands) - len(not_graded)
+    return request_met_metric(unmet + missed_bands, request=spec.text, graded=graded, not_graded=not_graded,
+                              source="refine (its resolution of the request)")
+
+
+def object_states(bands: list[tuple[JointStateRequest, str, dict[str, Any] | None]]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(unmet items, not graded) of the band states asked: ``bands`` (the phrase, a joint it set, its
+    :func:`band_missed` item or None). A phrase naming a part must put each of its joints in the band; one naming
+    no part ("a door, slightly open") asks it of the object, met when one of its joints is in the band: a joint it
+    also set that the state does not suit (a latch that stays shut) is reported, not graded."""
+    unmet, not_graded = [], []
+    met = {id(jr) for jr, _, item in bands if item is None}
+    for jr, joint, item in bands:
+        if item is None:
+            continue
+        if not jr.names_part and id(jr) in met:
+            not_graded.append({"phrase": jr.phrase, "joint": joint, "reason": f"the phrase names no part and another part it "
+                                                                             f"set is in the band ({item['text']})"})
+            continue
+        unmet.append(item)
+    return unmet, not_graded
+
+
+def _failing_joints(metrics: list[MetricResult]) -> tuple[dict[str, str], dict[str, str]]:
+    """(joint -> why it is not held: a robust-rest trial or the rest test found it out of its band; joint -> why it is
+    not operable) from ``metrics`` (any engines)."""
+    held: dict[str, str] = {}
+    operable: dict[str, str] = {}
+    for m in metrics:
+        d = m.details or {}
+        if m.name == "robust_rest" and m.passed is False:
+            for trial, t in (d.get("trials") or {}).items():
+                for j in (t or {}).get("failing_joints") or []:
+                    held.setdefault(j, f"robust rest ({m.engine}, {trial}) finds it out of its band")
+        elif m.name in ("state_hold", "joint_hold") and m.passed is False:
+            for j in d.get("sagging") or d.get("failing") or []:
+                held.setdefault(j, f"the rest test ({m.engine}) finds it leaving its state")
+        elif m.name == "operability" and m.passed is False:
+            for j in d.get("failing") or []:
+                operable.setdefault(j, f"a hand inside its operating range cannot work it ({m.engine})")
+    return held, operable
+
+
+def word_conflicts(metrics: list[MetricResult], words: list[tuple[MotionPhrase, list[str]]]) -> list[MetricResult]:
+    """``metrics`` with the words about motion that the output's physical verdict contradicts added to
+    ``request_met`` as unmet items (kind ``conflict``): a word that keeps a joint free or lightly damped
+    (``MOTION_GUARDS`` "max": "swings freely", "low damping") on a joint robust rest or the rest test finds not held,
+    or one that keeps it stiff or held ("min": "stiff", "stays where it is put", "soft-close") on a joint no hand
+    inside its range can work. The word was applied as asked; holding (or operating) the part needed what it rules
+    out. ``words``: each word with the joints it applies to. ``metrics`` unchanged without a ``request_met``."""
+    asked = next((m for m in metrics if m.name == "request_met"), None)
+    if asked is None or asked.passed is None:
+        return metrics
+    held, operable = _failing_joints(metrics)
+    items = []
+    for word, joints in words:
+        ways = set(MOTION_GUARDS.get(word.kind, {}).values())
+        for j in joints:
+            why = (held.get(j) if "max" in ways else None) or (operable.get(j) if "min" in ways else None)
+            if why is None:
+                continue
+            text = (f"'{word.phrase}': applied to {j} as asked, and {why}: holding the part where it was asked "
+                    f"{'needs more friction or damping than' if 'max' in ways else 'needs it easier to move than'} the word "
+                    "allows. Drop the word, ask for the part at an end of its range, or --mount fixed where the object is "
+                    "mounted in use")
+            items.append({"phrase": word.phrase, "kind": "conflict", "joint": j, "reason": why, "target": None,
+                          "achieved": None, "gap": None, "unit": "", "text": text})
+            break
+    if not items:
+        return metrics
+    d = dict(asked.details or {})
+    d["unmet"] = list(d.get("unmet") or []) + items
+    d["graded"] = int(d.get("graded") or 0) + len(items)
+    fixed = asked.model_copy(update={"value": float(len(d["unmet"])), "passed": False, "details": d})
+    return [fixed if m is asked else m for m in metrics]

@@ -12,7 +12,7 @@ from asset2sim.schemas.report import EscalationRound, StateRefinement
 from asset2sim.stage_log import StageLog
 from asset2sim.tasks.assemble import write
 from asset2sim.tasks.assemble.candidate import Candidate, Workspace
-from asset2sim.tasks.check import dynamics_search, operating, postcheck, repair, robust_rest, sweep, task_tier
+from asset2sim.tasks.check import dynamics_search, operating, postcheck, repair, robust_rest, sweep, task_tier, word_guard
 from asset2sim.tasks.geometry import limits
 from asset2sim.tasks.geometry.closed_state import ClosedState, closed_tuples
 from asset2sim.tasks.state import clearance, placement
@@ -45,7 +45,12 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
     if bounded != overlay:
         overlay = bounded
         cand = replace(cand, overlay=overlay)
-    caps, dcaps = lim.friction_caps, lim.damping_caps
+    kept_words = word_guard.guards(ctx, overlay)  # the request's words about motion, at the values they set
+    caps, dcaps = dict(lim.friction_caps), lim.damping_caps
+    for name in overlay.joints:  # a drawer's friction never past its slide's range
+        top = estimate.slide_cap(ctx, name, sum(overlay.links[ln].mass for ln in ctx.subtrees.get(name, []) if ln in overlay.links))
+        if top is not None:
+            caps[name] = min(caps.get(name, top), top)
     floors = operating.tilt_floors(overlay, overlay, asset, robust_rest.RobustRestConfig().tilt)
 
     def escalated(chk: postcheck.PostCheck) -> bool:  # this loop escalates ``chk`` (the post-check then skips the sweep)
@@ -73,12 +78,18 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
             overlay, changes, reason = postcheck.escalate(overlay, check, config.escalation_factor, caps, floors, dcaps)
         overlay, changes, notes = search.settle(before, overlay, changes, caps)
         reason = "; ".join([reason, *notes]) if reason and notes else reason or "; ".join(notes)
+        overlay, held = word_guard.keep(before, overlay, kept_words)
+        changes = _changed(before, overlay)
+        for line in held:
+            log.say("post_check", line)
         if not changes:
+            if held:
+                rounds[-1] = rounds[-1].model_copy(update={"words_kept": [*rounds[-1].words_kept, *held]})
             break
         cand = replace(cand, overlay=overlay)
         check = with_task(postcheck.run_post_check(ws.source(cand), state, overlay, config, closed=closed, escalated=escalated, recorded=recorded,
                                                      category=ctx.category, labels=labels))
-        rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason))
+        rounds.append(EscalationRound(round=n, metrics=check.metrics, changes=changes, reason=reason, words_kept=held))
         search.record(overlay, check.metrics)
         tried.append((overlay, check))
     best = dynamics_search.fewest_failures([c.metrics for _, c in tried])
@@ -96,6 +107,17 @@ def post_check(ctx: EstimationContext, candidate: Candidate, config: RefineConfi
         rounds.append(EscalationRound(round=rounds[-1].round + 1, metrics=check.metrics, changes=changes, reason=reason))
     log.lap("post_check")
     return overlay, check, rounds
+
+
+def _changed(before: Overlay, after: Overlay) -> dict[str, dict[str, float]]:
+    """joint -> {parameter: new value} of the damping, friction and stiffness ``after`` changed from ``before``."""
+    out: dict[str, dict[str, float]] = {}
+    for name, d in after.joints.items():
+        b = before.joints.get(name)
+        diff = {k: float(getattr(d, k)) for k in ("damping", "friction", "stiffness") if b is None or getattr(d, k) != getattr(b, k)}
+        if diff:
+            out[name] = diff
+    return out
 
 
 def repair_sweep(ctx: EstimationContext, unclipped: Overlay, closed_raw: dict[str, ClosedState], result: tuple, st: StateRefinement,

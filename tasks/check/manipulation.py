@@ -12,6 +12,7 @@ from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import operability, recorded_runs, robust_rest, sweep
 from asset2sim.tasks.check.recorded_runs import RecordedRuns
 from asset2sim.engines.source import SimObject
+from asset2sim.tasks.interpret.mounting import category_mounting
 
 #: The metrics this module adds to the post-check.
 MANIPULATION_METRICS: tuple[str, ...] = ("joint_sweep", "operability", "robust_rest")
@@ -34,6 +35,7 @@ def measure_manipulation(engine: str, obj: SimObject, closed: dict[str, tuple[fl
     fixed_base = obj.fixed_base
     rr = robust_rest.robust_rest_metric(recorded_runs.robust_rest_run(engine, obj, recorded=recorded))
     rr.details["root"] = "fixed (mounted)" if fixed_base else "free (on the ground)"
+    rr.details["category_mounting"] = category_mounting(category).kind  # how the category is held in use, for the advice
     why_not = sweep_needed(rr) if sweep_needed is not None else None
     if why_not:
         sw = MetricResult(name="joint_sweep", value=None, unit=unit("joint_sweep"), passed=None,

@@ -11,9 +11,10 @@ import numpy as np
 
 from asset2sim.engines.base import SimSession
 from asset2sim.frames import quat_angle
-from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.config import REST_BAND_FLOORS, REST_BAND_RANGE_SHARE, SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
+from asset2sim.tasks.synthesize.set_down import rest_band
 
 
 @dataclass
@@ -35,6 +36,8 @@ class RestTrace:
     initial_root_pos: np.ndarray | None = None
     initial_root_quat: np.ndarray | None = None
     """Root pose (3,) m and (4,) xyzw as placed, before settling."""
+    joint_limits: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """joint -> (lower, upper) rad or m as the engine holds them (infinite for a continuous joint)."""
 
 
 def penetration(session: SimSession) -> MetricResult:
@@ -111,7 +114,8 @@ def run_rest_test(session: SimSession, conventions: SimConventions | None = None
         t=np.arange(len(pos)) * conv.timestep, root_pos=pos, root_quat=quat, joints=joints,
         joint_types=dict(session.joint_types), p0=np.asarray(p0, float), q0=np.asarray(q0, float), settle_joints=settle,
         initial_joints=initial, diverged=diverged or not (np.all(np.isfinite(p0)) and np.all(np.isfinite(q0))),
-        initial_root_pos=np.asarray(r0_pos, float), initial_root_quat=np.asarray(r0_quat, float))
+        initial_root_pos=np.asarray(r0_pos, float), initial_root_quat=np.asarray(r0_quat, float),
+        joint_limits={n: (float(lo), float(hi)) for n, (lo, hi) in session.joint_limits.items() if n in names})
 
 
 def rest_stability(trace: RestTrace, conventions: SimConventions | None = None, engine: str = "pybullet") -> MetricResult:
@@ -182,11 +186,66 @@ def oscillation(trace: RestTrace, conventions: SimConventions | None = None, eng
         details={"joints": per_joint, "failing": failing}, engine=engine)
 
 
-def joint_drift(trace: RestTrace) -> dict[str, float]:
-    """Largest |q(t) - q_initial| over settling and test per joint (rad or m)."""
+#: The last stretch of a recording in which a joint counts as still moving (s) ...
+STILL_WINDOW = 0.5
+#: ... when it travels more than this share of its band there (dimensionless): a part that creeps or keeps swinging
+#: has not come to rest, wherever it happens to be when the recording ends.
+STILL_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class JointSettling:
+    """Where one joint came to rest in a recording, against its initial state q0 (rad or m)."""
+
+    settled: float
+    """|q_end - q0|: where it came to rest (the graded value)"""
+    peak: float
+    """max |q(t) - q0| over the recording: its largest excursion (reported, not graded)"""
+    still_motion: float
+    """max - min of q over the last :data:`STILL_WINDOW` s (rad or m)"""
+    band: float
+    """the band it must settle in (:func:`~asset2sim.tasks.synthesize.set_down.rest_band`)"""
+
+    @property
+    def moving(self) -> bool:
+        """Still moving at the end: travelled more than :data:`STILL_SHARE` of its band in the last window."""
+        return not self.still_motion <= STILL_SHARE * self.band
+
+    @property
+    def held(self) -> bool:
+        """Came to rest inside its band (finite, not moving)."""
+        return bool(self.settled <= self.band and not self.moving)
+
+
+def joint_settling(trace: RestTrace, floors: dict[str, float] = REST_BAND_FLOORS, initial: dict[str, float] | None = None,
+                   timestep: float | None = None, share: float = REST_BAND_RANGE_SHARE) -> dict[str, JointSettling]:
+    """:class:`JointSettling` of every joint of ``trace`` over its settling and test, positions clipped to the
+    joint's limits (an engine's soft limit lets a joint pressed on it pass it by mm: not a motion).
+
+    Args:
+        trace: the recording (``settle_joints`` and ``joints`` (N,) rad or m, ``joint_limits``).
+        floors: joint type (``"revolute"``, ``"prismatic"``) -> the band's floor (rad or m; default the SPEC's
+            :data:`~asset2sim.schemas.config.REST_BAND_FLOORS`); a continuous joint takes the revolute one.
+        initial: joint -> q0 (rad or m); default ``trace.initial_joints``, else the first sample.
+        timestep: s between samples (default the recording's ``t`` spacing, else 1/240 s).
+        share: the band's share of the joint's range (:func:`~asset2sim.tasks.synthesize.set_down.rest_band`).
+    """
+    init = trace.initial_joints if initial is None else initial
+    dt = timestep or (float(trace.t[1] - trace.t[0]) if len(trace.t) > 1 else 1.0 / 240.0)
+    n_still = max(2, int(round(STILL_WINDOW / dt)) + 1)
     out = {}
     for name, q in trace.joints.items():
-        q0 = trace.initial_joints.get(name, float(q[0]))
-        allq = np.concatenate([trace.settle_joints.get(name, np.empty(0)), q])
-        out[name] = float(np.max(np.abs(allq - q0))) if len(allq) else 0.0
+        allq = np.concatenate([trace.settle_joints.get(name, np.empty(0)), np.asarray(q, float)])
+        lo, hi = trace.joint_limits.get(name, (-np.inf, np.inf))
+        kind = "prismatic" if trace.joint_types.get(name) == "prismatic" else "revolute"
+        band = rest_band(lo, hi, floors[kind], share)
+        if not len(allq) or not np.all(np.isfinite(allq)):
+            out[name] = JointSettling(float("inf"), float("inf"), float("inf"), band)
+            continue
+        if lo <= hi:
+            allq = np.clip(allq, lo, hi)
+        q0 = float(init.get(name, allq[0]))
+        tail = allq[-n_still:]
+        out[name] = JointSettling(settled=float(abs(allq[-1] - q0)), peak=float(np.max(np.abs(allq - q0))),
+                                  still_motion=float(np.max(tail) - np.min(tail)), band=band)
     return out

@@ -24,11 +24,7 @@ The effort a part needs is also computed along each stroke from the joint
 model the simulators use: E(q) = f + c v / r + max(0, -s Q(q)), f Coulomb
 friction, c damping, s the stroke's direction, Q the generalised force of
 gravity and the spring; its peak, as a force at the grasp point E / r (N) and a
-torque about the axis (N m), must lie inside the part's range. On a catch at the
-closed end the part is pulled off from rest: there E = f + max(0, -s Q) (the
-catch in Q) against the breakaway force instead (45 N,
-:func:`~asset2sim.tasks.check.force_ranges.breakaway_force`; ADA 404.2.9 leaves
-latches out of its 22.2 N), and the hand may pull that hard. The part is
+torque about the axis (N m), must lie inside the part's range. The part is
 operable when both strokes pass.
 """
 
@@ -46,7 +42,7 @@ from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check.blockers import Blocker
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, rigid_group, subtree
-from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, load_operating_forces, operating_range
+from asset2sim.tasks.interpret.operating_forces import ForceRange, load_operating_forces, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.operating import gravity_force, range_force
 from asset2sim.tasks.check.sweep import HOLD_FORCE, REACH_FRACTION
@@ -92,8 +88,6 @@ class Stroke:
     at_fraction: float
     stopped_by: str | None = None
     """the link in the part's way where the hand stopped short (geometry stops it there)"""
-    breakaway_force_n: float = 0.0
-    """force at the grasp point that pulls the part off its catch from rest, N (0 without a catch)"""
     diverged: bool = False
     passed: bool = False
     failure: str = ""
@@ -169,7 +163,7 @@ def hand_limits(rng: ForceRange, lever: float | None) -> tuple[float, float]:
 def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: list[str],
                      springs: dict[str, Spring]) -> float:
     """Generalised force Q (N m or N; > 0 pushes q up) on ``joint`` at the session's state: gravity on ``links``
-    (:func:`~asset2sim.tasks.check.operating.gravity_force`) plus the joint's spring and catch
+    (:func:`~asset2sim.tasks.check.operating.gravity_force`) plus the joint's spring
     (:meth:`~asset2sim.engines.base.Spring.force`)."""
     q = gravity_force(session, model, joint, links)
     s = springs.get(joint)
@@ -181,37 +175,32 @@ def generalized_load(session: SimSession, model: UrdfModel, joint: str, links: l
 @dataclass(frozen=True)
 class _Hand:
     """The hand pushing a part: at most ``effort`` (N m or N), easing off near ``speed`` (rad/s or m/s), for
-    ``time_limit`` s; on the joint's catch at most ``breakaway`` (N m or N; None: ``effort``)."""
+    ``time_limit`` s."""
 
     effort: float
     speed: float
     time_limit: float
-    breakaway: float | None = None
 
 
 def _needed(session: SimSession, model: UrdfModel, joint: str, links: list[str], closed: tuple[float, float, float],
-            sign: float, fractions: np.ndarray, hand: _Hand) -> tuple[float, float, float]:
-    """(peak effort N m or N off the catch, the opening fraction where it peaks, peak effort on the catch) a
-    stroke in direction ``sign`` (+1 opening) needs over ``fractions`` from the session's initial state, its
-    springs acting: f + c w + max(0, -s Q), f and c the joint's friction and damping, w the joint speed at the
-    ``hand``'s speed; on a catch the part is pulled off from rest (no damping), 0 without one."""
+            sign: float, fractions: np.ndarray, hand: _Hand) -> tuple[float, float]:
+    """(peak effort N m or N, the opening fraction where it peaks) a stroke in direction ``sign`` (+1 opening)
+    needs over ``fractions`` from the session's initial state, its springs acting: f + c w + max(0, -s Q), f and c
+    the joint's friction and damping, w the joint speed at the ``hand``'s speed."""
     qc, d, rng = closed
     state, springs = session.options.initial_state, session.options.springs
     jm = model.joint(joint)
     friction, damping, speed = jm.friction, jm.damping, hand.speed
-    best, at, on = 0.0, float(fractions[0]), 0.0
-    sp = springs.get(joint)
+    best, at = 0.0, float(fractions[0])
     for fr in fractions:
         q = qc + d * fr * rng
         session.set_joint_positions({**state, joint: q})
         s = sign * d  # the stroke's direction in q
         load = max(0.0, -s * generalized_load(session, model, joint, links, springs))
-        if sp is not None and sp.catch(q) != 0.0:
-            on = max(on, friction + load)
-        elif friction + damping * speed + load > best:
+        if friction + damping * speed + load > best:
             best, at = friction + damping * speed + load, float(fr)
     session.set_joint_positions(dict(state))
-    return float(best), at, float(on)
+    return float(best), at
 
 
 def _push(session: SimSession, joint: str, closed: tuple[float, float, float], sign: float, target: float,
@@ -219,7 +208,7 @@ def _push(session: SimSession, joint: str, closed: tuple[float, float, float], s
     """Push ``joint`` in direction ``sign`` (+1 opening) until the opening fraction passes ``target`` with
     ``hand``, the ``held`` joints driven still. Returns (farthest fraction reached, time s or None, diverged)."""
     qc, d, rng = closed
-    effort, speed, time_limit, breakaway = hand.effort, hand.speed, hand.time_limit, hand.breakaway
+    effort, speed, time_limit = hand.effort, hand.speed, hand.time_limit
     dt = session.options.conventions.timestep
     s = sign * d
     n = int(round(time_limit / dt))
@@ -241,9 +230,7 @@ def _push(session: SimSession, joint: str, closed: tuple[float, float, float], s
             return float(far), k * dt, False
         ease = float(np.clip((speed - s * qd) / (0.5 * speed), 0.0, 1.0))
         ramp = min(1.0, (k + 1) * dt / cfg.ramp_time)
-        sp = session.options.springs.get(joint)
-        limit = breakaway if breakaway is not None and sp is not None and sp.catch(q) != 0.0 else effort
-        session.apply_joint_effort(joint, s * limit * ramp * ease)
+        session.apply_joint_effort(joint, s * effort * ramp * ease)
         for o in held:
             session.drive_joint(o, 0.0, cfg.hold_force)
         session.step(1)
@@ -281,7 +268,6 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
     link, point, rule = contact_point_rule(session, joint, model, opening_direction=d, side="child")
     lever = None if prismatic else grasp_lever(session, joint, link, point, model)
     hand_f, effort = hand_limits(r_, lever)
-    breakaway_top = max(hand_f, breakaway_force(table))  # pulling a part off its catch, from rest
     speed = cfg.hand_speed / lever if lever else cfg.hand_speed
     time_limit = max(cfg.min_time, cfg.time_factor * rng * (lever or 1.0) / cfg.hand_speed)
     jm = model.joint(joint)
@@ -292,12 +278,12 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                            force_range_n=r_.force_n, torque_range_nm=r_.torque_nm, range_of=where,
                            sources=[table.sources[s] for s in r_.sources], estimate=r_.estimate)
     fractions = np.linspace(0.0, 1.0, max(2, cfg.samples))
-    hand = _Hand(effort, speed, time_limit, breakaway_top * (lever or 1.0))
+    hand = _Hand(effort, speed, time_limit)
     saved = session.save_state()
     reached_open = 0.0  # where the opening stroke left the part: the closing stroke starts there
     try:
         for action, sign, target in (("open", 1.0, cfg.reach_fraction), ("close", -1.0, 1.0 - cfg.reach_fraction)):
-            need, at, on = _needed(session, model, joint, links, closed, sign, fractions, hand)
+            need, at = _needed(session, model, joint, links, closed, sign, fractions, hand)
             if action == "open":
                 session.set_joint_positions({**state, joint: qc})
             else:
@@ -317,14 +303,10 @@ def operate_part(session: SimSession, model: UrdfModel, joint: str, closed: tupl
                 why.append(f"a {hand_f:.3g} N hand at the {rule} got it only to {reached:.0%} open")
             if r_.force_n is not None and force > r_.force_n[1]:
                 why.append(f"needs {force:.3g} N at the {rule} (range {r_.force_n[0]:g}-{r_.force_n[1]:g} N, {where})")
-            off = on / lever if lever else on
-            if off > breakaway_top:
-                why.append(f"needs {off:.3g} N to leave its catch (breakaway at most {breakaway_top:g} N)")
             if torque is not None and r_.torque_nm is not None and torque > r_.torque_nm[1]:
                 why.append(f"needs {torque:.3g} N m (range {r_.torque_nm[0]:g}-{r_.torque_nm[1]:g} N m, {where})")
             part.strokes.append(Stroke(action=action, target=float(target), reached=float(reached), time=t,
                                        needed_effort=need, needed_force_n=float(force), needed_torque_nm=torque,
-                                       breakaway_force_n=float(off),
                                        at_fraction=at, stopped_by=stop, diverged=diverged, passed=not why,
                                        failure="; ".join(why)))
             if diverged:

@@ -20,7 +20,7 @@ from asset2sim.schemas.overlay import JointDynamics, Overlay
 from asset2sim.schemas.request import BAND_INTERVAL
 from asset2sim.tasks.check.blockers import fixed_root_options
 from asset2sim.tasks.check.contact_points import contact_point_rule, grasp_lever, grasp_side, joint_frame_axis, subtree
-from asset2sim.tasks.check.force_ranges import ForceRange, breakaway_force, operating_range
+from asset2sim.tasks.interpret.operating_forces import ForceRange, operating_range
 from asset2sim.tasks.check.gripper import GripperLimits
 from asset2sim.tasks.check.gripper_motion import TaskConfig
 from asset2sim.tasks.check.probes import CLOSE_TARGET, OPEN_TARGET
@@ -136,10 +136,6 @@ def _movable(overlay: Overlay, before: Overlay, asset: AssetDescription) -> Iter
 GROUND_FRICTION = 0.25
 #: Share of the allowed operating force that friction, damping at top speed and gravity may take.
 BUDGET_SHARE = 0.95
-#: Share of the breakaway force (:func:`~asset2sim.tasks.check.force_ranges.breakaway_force`) that friction and a
-#: catch may take where the part is pulled off its catch from rest: the rest is the margin of a jerked pull whose
-#: peak a hand cannot hold steady (design margin; 38 N of MIL-STD-1472E's 45 N).
-BREAKAWAY_SHARE = 0.85
 #: Share of the budget that friction may take; the rest is damping at the gripper's top speed.
 FRICTION_SHARE = 0.75
 #: Friction never capped below this multiple of the gravity load at the requested state.
@@ -285,7 +281,7 @@ def _grasp(session: SimSession, model: UrdfModel, joint: str, direction: float, 
 
 
 def _spring_force(spring: Spring | None, q: float) -> float:
-    """Generalised force (N m or N) of ``spring`` (and its catch) at ``q``; 0 without one."""
+    """Generalised force (N m or N) of ``spring`` at ``q``; 0 without one."""
     return 0.0 if spring is None else float(spring.force(q))
 
 
@@ -299,10 +295,10 @@ def _paths(f_state: float, actions: tuple[str, ...], whole: bool) -> list[tuple[
 def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[float, float, float],
               paths: list[tuple[str, np.ndarray]], grasp: _Grasp, range_of: tuple[ForceRange, str],
               ground: tuple[float, float] | None, spring: Spring | None = None
-              ) -> tuple[tuple[float, float, str, float] | None, float | None, float | None]:
-    """((smallest budget B off the catch, smallest allowed force F N, what bounds F, smallest budget on the
-    catch or inf), the lever at the last sample m or None, |Q| at the session's initial state) over ``paths``
-    ((action, opening fractions) from :func:`_paths`); Q of gravity and of the joint's ``spring`` and catch.
+              ) -> tuple[tuple[float, float, str] | None, float | None, float | None]:
+    """((smallest budget B, smallest allowed force F N, what bounds F), the lever at the last sample m or None,
+    |Q| at the session's initial state) over ``paths`` ((action, opening fractions) from :func:`_paths`); Q of
+    gravity and of the joint's ``spring``.
     ``range_of``: the part's operating range and where it comes from; ``ground``: (mu, whole mass kg) where the
     ground bound applies."""
     qc, d, rng = closed
@@ -312,7 +308,6 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
     f_state = float(d * (state.get(joint, qc) - qc) / rng)
     lever = None
     best: tuple[float, float, str] | None = None  # (budget, force, bound)
-    breakaway = float("inf")  # the smallest budget on the catch, where the part starts from rest
     q_state = None
     side = 1.0 if grasp.side == "child" else -1.0  # Q of the parent side pushes q the other way
     for action, fractions in paths:
@@ -328,23 +323,16 @@ def _tightest(session: SimSession, model: UrdfModel, joint: str, closed: tuple[f
             qg = gravity_force(session, model, joint, grasp.moving) + side * _spring_force(spring, qc + d * f * rng)
             if q_state is None:
                 session.set_joint_positions(dict(state))
-                q0 = state.get(joint, qc)  # a catch presses the part into its stop: nothing for friction to hold
                 q_signed = side * (gravity_force(session, model, joint, grasp.moving)
-                                   + side * (_spring_force(spring, q0) - (spring.catch(q0) if spring is not None else 0.0)))
+                                   + side * _spring_force(spring, state.get(joint, qc)))
                 # a part asked shut that gravity presses into its closed end rests on it: no hold floor
                 q_state = 0.0 if f_state <= CLOSED_FRACTION and q_signed * -d > 0 else abs(q_signed)
             b = hand + qg * s_motion
-            if spring is not None and spring.catch(qc + d * f * rng) != 0.0:  # on the catch: pulled off it from rest
-                top = force if bound.startswith("ground friction") else max(force, breakaway_force())
-                breakaway = min(breakaway, BREAKAWAY_SHARE * top * (lever or 1.0) + qg * s_motion)
-                b = float("inf") if best is None or not np.isfinite(best[0]) else best[0]
             if best is None or b < best[0]:
                 best = (b, best[1] if best else float("inf"), best[2] if best else "")
             if force < best[1]:
                 best = (best[0], force, bound)
-    if best is not None and not np.isfinite(best[0]):  # every sample on the catch
-        best = (breakaway, best[1], best[2])
-    return (None if best is None else (*best, breakaway)), lever, q_state
+    return best, lever, q_state
 
 
 def _grasp_motion(session: SimSession, joint: str, grasp: _Grasp, prismatic: bool,
@@ -382,14 +370,13 @@ def _ground_force(t: np.ndarray, nt: float, s_motion: float, mu: float, total: f
     return None
 
 
-def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str, float],
+def _budget(name: str, jtype: str, grasp: _Grasp, lever: float | None, best: tuple[float, float, str],
             q_state: float | None, lim: GripperLimits, free_moving: bool, inertia: float | None) -> OperatingBudget:
-    """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`): on a catch the part is pulled
-    off from rest, so there friction alone takes the budget (no damping at the gripper's speed), against the
-    breakaway force (:func:`~asset2sim.tasks.check.force_ranges.breakaway_force`)."""
-    budget, force, bound, breakaway = best
+    """The caps of ``name``'s tightest budget ``best`` (:func:`operating_budgets`): friction takes
+    :data:`FRICTION_SHARE` of it, damping at the gripper's top speed the rest."""
+    budget, force, bound = best
     speed = lim.max_speed_m_s / lever if lever is not None else lim.max_speed_m_s
-    fcap = min(FRICTION_SHARE * max(budget, 0.0), max(breakaway, 0.0))
+    fcap = FRICTION_SHARE * max(budget, 0.0)
     dcap = (1.0 - FRICTION_SHARE) * max(budget, 0.0) / speed
     conflict = ""
     floor = 0.0 if free_moving else HOLD_MARGIN * (q_state or 0.0)

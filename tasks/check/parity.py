@@ -73,7 +73,7 @@ def _session_metrics(source: SimSource, engine: str, options: SessionOptions) ->
         trace = metrics.run_rest_test(session, conv)
         rest = metrics.rest_stability(trace, conv, engine=engine)
         osc = metrics.oscillation(trace, conv, engine=engine)
-        rest.details["joint_drift"] = metrics.joint_drift(trace)
+        rest.details["joint_drift"] = {n: j.settled for n, j in metrics.joint_settling(trace, timestep=conv.timestep).items()}
         return [pen, rest, osc]
     except Exception as exc:  # an engine error mid-run fails the asset in that engine
         return _not_run(engine, "error", f"{type(exc).__name__}: {exc}", False)

@@ -17,7 +17,7 @@ import numpy as np
 from asset2sim.schemas.audit import ValueVerdict
 from asset2sim.schemas.overlay import EstimatorInfo, Inertia, JointDynamics, LinkPhysics, Overlay, RootMount
 from asset2sim.tasks.check import plausibility_bands as bands
-from asset2sim.tasks.check import force_ranges
+from asset2sim.tasks.interpret import operating_forces
 from asset2sim.tasks.ingest.declared import DeclaredJoint, DeclaredLink, DeclaredPhysics
 from asset2sim.tasks.interpret import size_priors
 from asset2sim.tasks.interpret.part_labels import canonical_label
@@ -114,7 +114,7 @@ def _lever(ctx: EstimationContext, j: DeclaredJoint) -> float:
 
 def _operable(ctx: EstimationContext, j: DeclaredJoint, label: str | None) -> float | None:
     """The highest force (N, prismatic) or torque (N*m, revolute) a hand operates the part with."""
-    rng, _ = force_ranges.operating_range(ctx.category, label)
+    rng, _ = operating_forces.operating_range(ctx.category, label)
     if j.type == "prismatic":
         return rng.force_n[1] if rng.force_n else None
     if rng.torque_nm:

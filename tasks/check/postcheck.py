@@ -104,7 +104,7 @@ class PostCheck:
     metrics: list[MetricResult]
     trace: metrics.RestTrace
     sag: dict[str, float]
-    """joint -> largest |q - q_initial| (rad or m)"""
+    """joint -> where it came to rest, |q_end - q_initial| (rad or m)"""
     sagging: list[str] = field(default_factory=list)
     engine_results: dict[str, list[MetricResult]] = field(default_factory=dict)
     """Other engines (``--engines``): engine -> [penetration, rest_stability, oscillation]."""
@@ -144,8 +144,8 @@ class PostCheck:
 
 def overlay_object(source: SimSource, state: dict[str, float], overlay: Overlay,
                    conventions: SimConventions) -> SimObject:
-    """``source`` as the post-check simulates it: at ``state`` (joint -> rad or m), with ``overlay``'s springs and
-    catches (:func:`~asset2sim.tasks.assemble.export_mjcf.overlay_springs`) and its root as ``overlay.mounting``
+    """``source`` as the post-check simulates it: at ``state`` (joint -> rad or m), with ``overlay``'s springs
+    (:func:`~asset2sim.tasks.assemble.export_mjcf.overlay_springs`) and its root as ``overlay.mounting``
     declares."""
     return SimObject(source, state, overlay_springs(overlay), conventions,
                      bool(overlay.mounting is not None and overlay.mounting.fixed))
@@ -174,16 +174,18 @@ def run_post_check(source: SimSource, initial_state: dict[str, float], overlay: 
     trace = recording.trace
     stab = metrics.rest_stability(trace, conv, engine=engine)
     osc = metrics.oscillation(trace, conv, engine=engine)
-    drift = metrics.joint_drift(trace)
-    sagging = [name for name, d in drift.items() if d > (config.sag_tolerance_prismatic if trace.joint_types.get(name) == "prismatic"
-                                                         else config.sag_tolerance_revolute)]
+    settling = metrics.joint_settling(trace, {"revolute": config.sag_tolerance_revolute, "prismatic": config.sag_tolerance_prismatic},
+                                      timestep=conv.timestep)
+    drift = {name: s.settled for name, s in settling.items()}
+    sagging = [name for name, s in settling.items() if not s.held]
     sag_metric = MetricResult(
         name="state_hold", value=max(drift.values()) if drift else 0.0, unit=unit("state_hold"), passed=not sagging,
-        threshold=f"every joint within {config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m of its initial state",
-        details={"drift": drift, "sagging": sagging,
+        threshold=(f"every joint at rest within max({config.sag_tolerance_revolute} rad / {config.sag_tolerance_prismatic} m, "
+                   f"{metrics.REST_BAND_RANGE_SHARE:.0%} of its range) of its initial state"),
+        details={"drift": drift, "sagging": sagging, "peak": {n: s.peak for n, s in settling.items()},
+                 "moving": [n for n, s in settling.items() if s.moving],
                  "units": {n: "m" if trace.joint_types.get(n) == "prismatic" else "rad" for n in drift},
-                 "tolerances": {n: config.sag_tolerance_prismatic if trace.joint_types.get(n) == "prismatic"
-                                else config.sag_tolerance_revolute for n in drift}}, engine=engine)
+                 "tolerances": {n: s.band for n, s in settling.items()}}, engine=engine)
     tilt = metrics.settle_tilt(trace, engine=engine)
     others = [e for e in dict.fromkeys(config.engines) if e != engine]
     engine_results: dict[str, list[MetricResult]] = {}
@@ -283,7 +285,7 @@ def escalate(overlay: Overlay, check: PostCheck, factor: float,
         cap = (friction_caps or {}).get(name)
         if cap is not None and friction > cap:
             friction = max(cap, d.friction)
-            note += f" (friction capped at {friction:.3g}, operable by a real operating force)"
+            note += f" (friction capped at {friction:.3g}: what a real operating force moves and its mechanism allows)"
         if d.inertia_axis:
             damping = min(damping, max(max_stable_damping(d.inertia_axis), d.damping))
         dcap = (damping_caps or {}).get(name)

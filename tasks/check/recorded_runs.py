@@ -67,8 +67,7 @@ def input_digest(tier: str, engine: str, obj: SimObject, config: Any,
     h.update(write_urdf(model))
     h.update(repr(_mesh_identities(model)).encode())
     h.update(repr(sorted((str(k), float(v)) for k, v in initial_state.items())).encode())
-    h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference), float(s.catch_force), float(s.catch_position),
-                          float(s.catch_zone)) for k, s in (springs or {}).items())).encode())
+    h.update(repr(sorted((str(k), float(s.stiffness), float(s.reference)) for k, s in (springs or {}).items())).encode())
     h.update(conventions.model_dump_json().encode())
     h.update(repr(dataclasses.asdict(config)).encode())
     if closed is not None:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from asset2sim.schemas.request import RequestSpec, StateTarget
+from asset2sim.schemas.request import MotionPhrase, RequestSpec, StateTarget
 from asset2sim.tasks.check.asset_files import MOVABLE, JointInfo
 from asset2sim.tasks.interpret import categories, part_priors, size_priors
 from asset2sim.tasks.interpret.request import parse_request
@@ -172,7 +172,7 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
             names = _words_named(category, js.label, movable, joints, semantics) \
                 or part_priors.stand_in_joints(category or "", js.label, tm)[0]
             names = _ordered_pick(js, list(names), joints, centres, volumes or {})
-        if not names:
+        if not names and not (js.selector == "all" and js.band == "closed" and js.target is None):  # nothing opens: closed as it is
             unmatched.append(js.phrase or f"{js.label or 'all'} {js.band}")
         for n in names:
             out.append((n, js.band, semantics.get(joints[n].child, (None, None))[1], js.phrase, js.target))
@@ -180,6 +180,17 @@ def requested_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], sem
     for item in out:
         dedup[item[0]] = item
     return list(dedup.values()), unmatched
+
+
+def motion_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],
+                  task_joints: list[str], category: str | None = None) -> list[tuple[MotionPhrase, list[str]]]:
+    """Each word of ``spec`` about a part's motion with the movable joints it applies to, as refine applies it: a word
+    naming a part the joints whose child's label names it (:func:`_words_named`), one naming none ``task_joints``."""
+    if spec is None:
+        return []
+    movable = [n for n, j in joints.items() if j.type in MOVABLE]
+    return [(w, [n for n in task_joints if n in movable] if w.label is None else _words_named(category, w.label, movable, joints, semantics))
+            for w in spec.motions]
 
 
 def labelled_joints(spec: RequestSpec | None, joints: dict[str, JointInfo], semantics: dict[str, tuple[str, str]],

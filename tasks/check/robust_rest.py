@@ -13,7 +13,7 @@ import numpy as np
 from asset2sim.engines.base import EngineUnsupported, SimSession
 from asset2sim.engines.source import SimObject
 from asset2sim.frames import axis_angle_matrix, matrix_quat_wxyz, quat_wxyz_matrix, quat_wxyz_to_xyzw, quat_xyzw_to_wxyz
-from asset2sim.schemas.config import SimConventions
+from asset2sim.schemas.config import REST_BAND_FLOORS, REST_BAND_RANGE_SHARE, SimConventions
 from asset2sim.schemas.metrics import unit
 from asset2sim.schemas.report import MetricResult
 from asset2sim.tasks.check import metrics, support
@@ -33,10 +33,13 @@ class RobustRestConfig:
     """tilt about each horizontal axis, rad (SPEC: 5 deg)"""
     nudge_speed: float = 0.05
     """horizontal root speed of the nudge, m/s"""
-    joint_tol_revolute: float = 0.02
-    """largest |q - q_initial| of a revolute joint, rad (SPEC)"""
-    joint_tol_prismatic: float = 0.002
-    """... of a prismatic joint, m (SPEC: 2 mm)"""
+    joint_tol_revolute: float = REST_BAND_FLOORS["revolute"]
+    """floor of the band a revolute joint must come to rest in around its initial state, rad (SPEC: max(0.02 rad,
+    5 % of its range))"""
+    joint_tol_prismatic: float = REST_BAND_FLOORS["prismatic"]
+    """... of a prismatic joint, m (SPEC: max(2 mm, 5 % of its range))"""
+    joint_band_share: float = REST_BAND_RANGE_SHARE
+    """share of a joint's range the band takes where that is more than the floor (dimensionless, SPEC: 5 %)"""
     topple_tol: float = 0.05
     """largest change of the body's up direction, rad"""
     recovery_time: float = 3.0
@@ -54,8 +57,15 @@ class Trial:
     d_ori: float | None = None
     topple: float | None = None
     joint_drift: dict[str, float] = field(default_factory=dict)
+    """joint -> where it came to rest, |q_end - q_initial| (rad or m): the graded value"""
+    joint_peak: dict[str, float] = field(default_factory=dict)
+    """joint -> its largest excursion |q(t) - q_initial| while the object landed and settled (reported, not graded)"""
     joint_tolerance: dict[str, float] = field(default_factory=dict)
-    """joint -> its tolerance (rad or m)"""
+    """joint -> its band (rad or m): max(floor, 5 % of its range)"""
+    joint_units: dict[str, str] = field(default_factory=dict)
+    """joint -> ``"rad"`` or ``"m"``"""
+    moving_joints: list[str] = field(default_factory=list)
+    """joints still moving at the end of the test (:attr:`~asset2sim.tasks.check.metrics.JointSettling.moving`)"""
     failing_joints: list[str] = field(default_factory=list)
     rolling: list[str] = field(default_factory=list)
     """joints the object rolls on: their drift is recorded, not graded"""
@@ -135,22 +145,9 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
     _disturb(session, name, config)
     trace = metrics.run_rest_test(session, conventions, recovery_time=config.recovery_time)
     stab = metrics.rest_stability(trace, conventions, engine=session.engine)
-    drift: dict[str, float] = {}
-    tols: dict[str, float] = {}
-    failing = []
-    for j, q in trace.joints.items():
-        allq = np.concatenate([trace.settle_joints.get(j, np.empty(0)), q])
-        lo, hi = session.joint_limits.get(j, (-np.inf, np.inf))
-        if lo <= hi:  # an engine's soft limit lets a joint pressed on it pass it by mm: not a motion
-            allq = np.clip(allq, lo, hi)
-        q0 = initial_state.get(j, float(allq[0]) if len(allq) else 0.0)
-        d = float(np.max(np.abs(allq - q0))) if len(allq) and np.all(np.isfinite(allq)) else float("inf")
-        drift[j] = d
-        if j in rolling:
-            continue
-        tol = tols[j] = config.joint_tol_prismatic if trace.joint_types.get(j) == "prismatic" else config.joint_tol_revolute
-        if not d <= tol:
-            failing.append(j)
+    settling = metrics.joint_settling(trace, {"revolute": config.joint_tol_revolute, "prismatic": config.joint_tol_prismatic},
+                                      initial=initial_state, timestep=conventions.timestep, share=config.joint_band_share)
+    failing = [j for j, s in settling.items() if j not in rolling and not s.held]
     diverged = trace.diverged
     topple = None if diverged else up_change(q_ref, trace.root_quat[-1])
     why = []
@@ -161,10 +158,16 @@ def run_trial(session: SimSession, name: str, initial_state: dict[str, float], q
     if topple is not None and topple > config.topple_tol:
         why.append(f"toppled ({topple:.2f} rad)")
     if failing:
-        why.append("joints not held: " + ", ".join(f"{j} {drift[j]:.3g}" for j in failing))
+        why.append("joints not held: " + ", ".join(
+            f"{j} settled {settling[j].settled:.3g} of {settling[j].band:.3g}" + (" and still moving" if settling[j].moving else "")
+            for j in failing))
+    graded = [j for j in settling if j not in rolling]
     return Trial(
         name=name, passed=not why, d_pos=stab.details.get("D_pos_m"), d_ori=stab.details.get("D_ori_rad"),
-        topple=topple, joint_drift=drift, joint_tolerance=tols, failing_joints=failing, rolling=[j for j in trace.joints if j in rolling],
+        topple=topple, joint_drift={j: s.settled for j, s in settling.items()}, joint_peak={j: s.peak for j, s in settling.items()},
+        joint_tolerance={j: settling[j].band for j in graded},
+        joint_units={j: "m" if trace.joint_types.get(j) == "prismatic" else "rad" for j in settling}, moving_joints=[j for j in graded if settling[j].moving],
+        failing_joints=failing, rolling=[j for j in trace.joints if j in rolling],
         diverged=diverged, failure="; ".join(why), trace=trace, reference_quat=np.asarray(q_ref, float))
 
 
@@ -228,7 +231,8 @@ def robust_rest_metric(run: RobustRestRun, config: RobustRestConfig | None = Non
         passed=(not failed) if done else None,
         threshold=(f"after a {cfg.drop_height * 100:g} cm drop, {math.degrees(cfg.tilt):g} deg tilts about x and y and a "
                    f"{cfg.nudge_speed:g} m/s nudge: at rest (D_pos <= 1e-3 m, D_ori <= 1e-2 rad), up within "
-                   f"{cfg.topple_tol:g} rad, joints within {cfg.joint_tol_revolute:g} rad / {cfg.joint_tol_prismatic * 1000:g} mm"),
+                   f"{cfg.topple_tol:g} rad, every joint come to rest within max({cfg.joint_tol_revolute:g} rad / "
+                   f"{cfg.joint_tol_prismatic * 1000:g} mm, {cfg.joint_band_share:.0%} of its range) of its state"),
         details={"trials": {t.name: t.summary() for t in run.trials},
                  "failures": [f"{t.name}: {t.failure}" for t in failed],
                  "skipped": run.skipped or [t.name for t in run.trials if t.passed is None]},

@@ -110,16 +110,15 @@ def _lever(session: SimSession, joint: str, links: list[str]) -> float:
 
 
 def effort_limit(session: SimSession, joint: str, links: list[str], open_range: float, cfg: SweepConfig) -> float:
-    """Drive force limit E = f_w m_sub g L + k R + F_c (N*m or N): m_sub the engine's
+    """Drive force limit E = f_w m_sub g L + k R (N*m or N): m_sub the engine's
     masses of ``links``, L their largest distance from the axis (1 for
-    prismatic), k the session's spring stiffness, R = ``open_range`` (rad or m), F_c its catch's force."""
+    prismatic), k the session's spring stiffness, R = ``open_range`` (rad or m)."""
     masses = session.link_masses()
     m_sub = float(sum(masses.get(ln, 0.0) for ln in links))
     lever = 1.0 if session.joint_types[joint] == "prismatic" else _lever(session, joint, links)
     spring = session.options.springs.get(joint)
     k = spring.stiffness if spring is not None else 0.0
-    catch = spring.catch_force if spring is not None else 0.0
-    return float(cfg.weight_factor * m_sub * G * lever + k * open_range + catch)
+    return float(cfg.weight_factor * m_sub * G * lever + k * open_range)
 
 
 #: Speed margin of :func:`damping_caps`: the damped speed E / c covers the range this many times in the time limit.

@@ -178,13 +178,17 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                 restless[name] = moving[0]
             for j in t.get("failing_joints") or []:
                 drift, tol = float((t.get("joint_drift") or {}).get(j, 0.0)), float((t.get("joint_tolerance") or {}).get(j, 0.0))
-                if j not in worst or drift > worst[j][0]:
+                if j not in worst or drift / max(tol, 1e-12) > worst[j][0] / max(worst[j][1], 1e-12):
                     worst[j] = (drift, tol, name)
             if "toppled" in str(t.get("failure", "")) and (toppled is None or float(t.get("topple") or 0) > toppled[0]):
                 toppled = (float(t.get("topple") or 0.0), name)
         for j, (drift, tol, name) in sorted(worst.items()):
-            prismatic = tol < 0.01  # 2 mm against 0.02 rad
-            amount = f"{1000 * drift:.1f} mm (tolerance {1000 * tol:.0f} mm)" if prismatic else f"{drift:.3f} rad (tolerance {tol:g} rad)"
+            t = trials.get(name) or {}
+            unit = (t.get("joint_units") or {}).get(j, "rad")
+            peak = (t.get("joint_peak") or {}).get(j)
+            moving = j in (t.get("moving_joints") or [])
+            amount = (f"{_joint_amount(drift, unit)} from its state{' and was still moving' if moving else ''} (band "
+                      f"{_joint_amount(tol, unit)}" + (f"; largest excursion {_joint_amount(peak, unit)}" if peak is not None else "") + ")")
             if "toppled" in str((trials.get(name) or {}).get("failure", "")):
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} and toppled "
                            f"({m.engine}): the part swings as the object falls (the toppling is explained next). "
@@ -194,9 +198,9 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                 out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}), as "
                            "it moves at rest with no disturbance (the rest tier). " + TIER_ADVICE["hold"])
                 continue
-            out.append(f"joint '{j}' moved {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its friction "
-                       "and damping stay within what a hand overcomes, and at that the part's momentum carries it. A lighter "
-                       "part (--mass, --material) may hold; a mounted object (--mount fixed) is not dropped or tilted.")
+            out.append(f"joint '{j}' came to rest {amount} when the object {_TRIAL_WORDS.get(name, name)} ({m.engine}); its "
+                       "friction and damping stay within what a hand may use on it, and at that the part's momentum carries it "
+                       "out of its band. " + _holding_choices(m, metrics, j, unit == "m"))
         for name, what in restless.items():
             rest = re.search(r"at rest \(([^)]*)\)", m.threshold or "")
             out.append(f"the object was {what} when it {_TRIAL_WORDS.get(name, name)} ({m.engine}; at rest means "
@@ -208,6 +212,25 @@ def robust_rest_why(metrics: list[Any], skip: frozenset[str] | set[str] = frozen
                        f"({m.engine}): its centre of mass lies near the edge of its footprint in this state. Ask for a smaller "
                        "opening of its heavy parts, or --mount fixed when it stands fixed in use.")
     return out
+
+
+def _holding_choices(rr: Any, metrics: list[Any], joint: str, prismatic: bool) -> str:
+    """The choices that remain for a part robust rest found not held within a hand's operating range, only those
+    that fit the object: a lighter part; a stiffer slide or hinge than that range (which the operability tier then
+    fails); mounting, where its category is mounted in use (``rr.details["category_mounting"]``)."""
+    op = next((m for m in metrics if m.name == "operability" and m.engine == rr.engine), None)
+    eff = ((op.details or {}).get("efforts") or {}).get(joint) or {} if op is not None else {}
+    label = eff.get("label") or "part"
+    top = (eff.get("force_range_n") or [None, None])[1]
+    mech = "slide" if prismatic else "hinge"
+    choices = [f"a lighter {label} (its mass in the request, 'a 2 kg {label}', or --material)"]
+    choices.append(f"a stiffer {mech} than a hand may operate" + (f" (more than the {top:g} N of its range, {eff.get('range_of')})"
+                                                                 if top is not None else "")
+                   + ", which the operability tier then fails")
+    kind = (rr.details or {}).get("category_mounting")
+    if kind and kind != "free-standing":
+        choices.append(f"--mount fixed, as the category is used ({kind})")
+    return "What remains: " + "; ".join(choices) + "."
 
 
 def _mode_of(tier: str, bad: list[Any]) -> str:

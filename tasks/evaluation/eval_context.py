@@ -207,11 +207,11 @@ def _root_fixed(folder: Path, notes: list[str]) -> bool:
 
 
 def _springs(overlay: dict[str, Any] | None, joints: dict[str, JointInfo], initial: dict[str, float]) -> dict[str, Spring]:
-    """joint -> the overlay's spring and catch (stiffness > 0 or a catch; reference rad/m, else the initial
-    position; :func:`~asset2sim.tasks.assemble.export_mjcf.joint_spring`)."""
+    """joint -> the overlay's spring (stiffness > 0; reference rad/m, else the initial position;
+    :func:`~asset2sim.tasks.assemble.export_mjcf.joint_spring`)."""
     springs: dict[str, Spring] = {}
     for jn, jd in ((overlay or {}).get("joints") or {}).items():
-        if jn in joints and (float(jd.get("stiffness") or 0.0) > 0 or float(jd.get("catch_force") or 0.0) > 0):
+        if jn in joints and float(jd.get("stiffness") or 0.0) > 0:
             springs[jn] = joint_spring(jd, initial.get(jn, 0.0))
     return springs
 

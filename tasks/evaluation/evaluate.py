@@ -26,8 +26,9 @@ from asset2sim.tasks.evaluation import clips as clip_files
 from asset2sim.tasks.check.asset_files import EvaluationError, JointInfo
 from asset2sim.tasks.evaluation.engine_run import EngineRun, run_engine, set_closed_ends
 from asset2sim.tasks.evaluation.eval_context import Context, build_context, task_joints
+from asset2sim.tasks.check import as_asked
 from asset2sim.tasks.evaluation.metric_defs import METRICS, MetricSpec, divergence_check, metric_names
-from asset2sim.tasks.check.request_match import labelled_joints, requested_joints
+from asset2sim.tasks.check.request_match import labelled_joints, motion_joints, requested_joints
 from asset2sim.tasks.check.task_spec import parse_task, with_work_to_do
 from asset2sim.tasks.evaluation.report_html import write_report
 from asset2sim import output_folder
@@ -188,7 +189,8 @@ def _metric_results(ctx: Context, runs: dict[str, EngineRun], *, probes: bool, m
     if checks:
         have = {(m.name, m.engine) for m in results}
         results += [m for m in checks if (m.name, m.engine) not in have]
-    return results
+    words = motion_joints(ctx.request, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)
+    return as_asked.word_conflicts(results, words)  # a word about motion the physical verdict contradicts
 
 
 def _apply(spec: MetricSpec, ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:

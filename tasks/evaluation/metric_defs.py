@@ -169,24 +169,28 @@ def _m_hold(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResult]:
 
 
 def _hold_result(ctx: Context, engine: str, r: EngineRun) -> MetricResult:
-    """``joint_hold`` of one engine: the largest drift (rad or m) of the task joints over settle + test."""
-    drift = spec_metrics.joint_drift(r.trace)
+    """``joint_hold`` of one engine: where each task joint came to rest (rad or m) after settle + test, against its
+    band (:func:`~asset2sim.tasks.check.metrics.joint_settling`)."""
+    settling = spec_metrics.joint_settling(r.trace, {"revolute": ctx.sag_tol_revolute, "prismatic": ctx.sag_tol_prismatic},
+                                           initial=ctx.initial_state)
     per, failing = {}, []
     for n in ctx.task_joints:
-        if n not in drift:
+        if n not in settling:
             continue
-        pri = ctx.joints[n].type == "prismatic"
-        tol = ctx.sag_tol_prismatic if pri else ctx.sag_tol_revolute
+        s = settling[n]
         q_end = float(r.trace.joints[n][-1])
         c = ctx.closed.get(n)
-        per[n] = {"drift": drift[n], "unit": "m" if pri else "rad", "tolerance": tol, "q_initial": ctx.initial_state.get(n),
-                  "q_end": q_end, "fraction_initial": c.fraction(ctx.initial_state.get(n, 0.0)) if c else None,
-                  "fraction_end": c.fraction(q_end) if c else None, "failed": drift[n] > tol}
-        if drift[n] > tol:
+        per[n] = {"drift": s.settled, "peak": s.peak, "moving": s.moving, "unit": "m" if ctx.joints[n].type == "prismatic" else "rad",
+                  "tolerance": s.band, "q_initial": ctx.initial_state.get(n), "q_end": q_end,
+                  "fraction_initial": c.fraction(ctx.initial_state.get(n, 0.0)) if c else None,
+                  "fraction_end": c.fraction(q_end) if c else None, "failed": not s.held}
+        if not s.held:
             failing.append(n)
     return MetricResult(name="joint_hold", value=float(max([v["drift"] for v in per.values()], default=0.0)), unit="rad/m",
                         passed=(not failing) if per else None,
-                        threshold=f"largest |q(t) - q_initial| <= {ctx.sag_tol_revolute} rad / {ctx.sag_tol_prismatic} m over settle + test",
+                        threshold=(f"every task joint at rest after settle + test within max({ctx.sag_tol_revolute} rad / "
+                                   f"{ctx.sag_tol_prismatic} m, {spec_metrics.REST_BAND_RANGE_SHARE:.0%} of its range) of its "
+                                   "initial state"),
                         details={"joints": per, "failing": failing}, engine=engine)
 
 
@@ -322,6 +326,8 @@ def _m_request_met(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResul
               if js.names_part and js.selector == "label" and js.phrase not in won and js.phrase not in unmatched]
     unmet += [as_asked.not_applied(p, why) for p, why in unmatched_properties(spec, ctx.joints, ctx.semantics, ctx.task_joints, ctx.category)]
     graded, not_graded = len(unmet), []
+    phrases = {js.phrase: js for js in spec.joint_states}
+    bands = []
     for name, band, label, phrase, target in req:
         c, q = ctx.closed.get(name), ctx.initial_state.get(name)
         if c is None or q is None:
@@ -332,9 +338,16 @@ def _m_request_met(ctx: Context, runs: dict[str, EngineRun]) -> list[MetricResul
             not_graded.append({"phrase": phrase, "joint": name, "reason": sem.target_score(check)[1]})
             continue
         graded += 1
-        item = _target_miss(check) if target is not None else as_asked.band_missed(phrase or band, name, band, abs(check.fraction))
-        if item is not None:
-            unmet.append(item)
+        if target is not None or phrase not in phrases:
+            item = _target_miss(check) if target is not None else as_asked.band_missed(phrase or band, name, band, abs(check.fraction))
+            if item is not None:
+                unmet.append(item)
+            continue
+        bands.append((phrases[phrase], name, as_asked.band_missed(phrase or band, name, band, abs(check.fraction))))
+    missed_bands, spared = as_asked.object_states(bands)
+    unmet += missed_bands
+    not_graded += spared
+    graded -= len(spared)
     for sz in spec.sizes:
         if sz.dimension == "volume":
             not_graded.append({"phrase": sz.phrase, "reason": "a volume is measured by refine on the closed object's convex hull "

@@ -152,11 +152,13 @@ def changes_section(report: dict[str, Any] | None, overlay: dict[str, Any] | Non
 
 
 def understood(found: dict[str, Any] | None) -> str:
-    """The request as refine understood it (``report.json``'s ``request``): what it asked, each number asked
-    against what the output has, the words no rule used; empty without findings."""
+    """The request as refine understood it (``report.json``'s ``request``): what it asked, each phrase with what it set
+    (states, and words about motion with the damping, friction and stiffness they left), each number asked against
+    what the output has, the words no rule used; empty without findings."""
     if not found:
         return ""
     rows = [_row("asked", "", a, "") for a in found.get("asked") or []]
+    rows += [_row("phrase", "", p, "") for p in found.get("phrases") or []]  # each state and each word about motion, as applied
     for q in found.get("quantities") or []:
         unit = q.get("unit", "")
         frame = " from the closed end" if q.get("kind") == "state" and unit in ("rad", "m") else ""

@@ -239,8 +239,6 @@ def operability_section(ev) -> str:
             for s in p.get("strokes") or []:
                 cls = "pass" if s["passed"] else "fail"
                 torque = "" if s.get("needed_torque_nm") is None else f" / {fmt(s['needed_torque_nm'])} N m"
-                if s.get("breakaway_force_n"):
-                    torque += f"; {fmt(s['breakaway_force_n'])} N off its catch"
                 got = f"{fmt(100.0 * s['reached'], 3)} % open" + (f", stopped by {s['stopped_by']}" if s.get("stopped_by") else "")
                 rows.append(
                     f"<tr><td>{esc(m.engine)}</td><td>{esc(joint)} ({esc(p.get('label') or 'unlabelled')})</td>"

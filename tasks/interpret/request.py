@@ -12,7 +12,7 @@ import re
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 
-from asset2sim.schemas.request import JointStateRequest, PartProperty, RequestSpec, StateTarget
+from asset2sim.schemas.request import JointStateRequest, MotionPhrase, PartProperty, RequestSpec, StateTarget
 from asset2sim.tasks.interpret.categories import CategoryMention, find_category_mentions, phrase_regex, request_category, variant_mention
 from asset2sim.tasks.interpret.mounting import mounting_mentions
 from asset2sim.prior_tables import load_priors
@@ -209,26 +209,32 @@ _ADJACENT_ORDERS = frozenset({"middle", "size"})
 _ONE_OF = re.compile(r"one\s+of\s+(?:(?:the|its|their|his|her)\s+)?(?:(?:two|three|four|five|both|\d)\s+)?")
 _THE_BEFORE = re.compile(r"(?<![\w-])(?:the|its|their)\s+$")
 
-# (regex, (kind, value), flag) - flag "strong" for explicit damping phrases.
+# (regex, (kind, value), flag) - flag "strong" for explicit damping phrases. Each hit is also a
+# MotionPhrase (:func:`_motion_kind` names its kind) for the part it names.
+_FREE_VERBS = r"(?:moves?|moving|swings?|swinging|spins?|spinning|rotates?|rotating|slides?|sliding|turns?|turning|hangs?|hanging|opens?|closes?|pivots?|pivoting)"
+_ON_ITS_OWN = r"(?:on (?:its|their) own|by (?:itself|themselves)|unaided|without (?:support|help|a hand))"
 _DYN_TABLE = _compile(
     [
         (r"(?:low|little|light|minimal|minimum|reduced|small|less)[- ]damping|(?:lightly|under)[- ]?damped|(?:no|without) damping|damping[- ]free", ("damping", "low"), "strong"),
         (r"(?:high|heavy|strong|lots of|more|significant|increased)[- ]damping|(?:well|heavily|highly|strongly|critically|over)[- ]?damped", ("damping", "high"), "strong"),
         (r"(?:moderate|medium|normal)[- ]damping|moderately damped", ("damping", "moderate"), "strong"),
-        (r"(?:low|little|minimal|no|reduced)[- ](?:joint |hinge |sliding )?friction|frictionless", ("free", "low"), ""),
-        (r"(?:moves?|moving|swings?|swinging|spins?|spinning|rotates?|rotating|slides?|sliding|turns?|turning|hangs?|hanging) (?:freely|loosely)", ("free", "low"), ""),
-        (r"free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?", ("free", "low"), ""),
+        (r"(?:soft|slow|gentle|damped)[- ]?clos(?:e|es|ing|ure)|clos(?:es|ing) (?:slowly|gently|softly)", ("damping", "high"), "soft"),
+        (r"(?:low|little|minimal|no|reduced)[- ](?:joint |hinge |sliding )?friction|frictionless|(?:with(?:out)? (?:no |any )?|no )resistance", ("free", "low"), ""),
+        (_FREE_VERBS + r" (?:freely|loosely|easily|without resistance)", ("free", "low"), ""),
+        (r"free(?:ly)?|free[- ](?:moving|swinging|spinning|rotating|sliding)|loose(?:ly)?|floppy", ("free", "low"), ""),
         (r"smooth(?:ly)?|easily|effortless(?:ly)?", ("damping", "low"), ""),
         (r"heavy|heavier", ("heavy", "high"), ""),
-        (r"slow(?:ly)?|soft[- ]clos(?:e|ing)|sluggish", ("damping", "high"), ""),
+        (r"slow(?:ly)?|sluggish", ("damping", "high"), ""),
         (r"holds? (?:its|their|the|it'?s) (?:position|state|pose|place|angle|opening)", ("hold", True), ""),
-        (r"holds? (?:position|in place|open|still|steady)", ("hold", True), ""),
-        (r"stays? (?:where (?:it|they) (?:is|are|was|were|is put|are put)|put|in place|open|there|still)", ("hold", True), ""),
+        (r"holds? (?:position|in place|open|still|steady|itself (?:up|open))", ("hold", True), ""),
+        (r"stays? (?:where (?:it|they|you) (?:is put|are put|was put|were put|is left|are left|puts? (?:it|them)|leaves? (?:it|them)|is|are|was|were)|put|in place|open|up|there|still)(?: " + _ON_ITS_OWN + r")?", ("hold", True), ""),
+        (r"stays? (?:up|open) " + _ON_ITS_OWN + r"|stands? up " + _ON_ITS_OWN, ("hold", True), ""),
         (r"(?:keeps?|maintains?) (?:its|their) (?:position|state|place|angle|pose)", ("hold", True), ""),
-        (r"remains? (?:where (?:it|they) (?:is|are)|in place|open|still)", ("hold", True), ""),
-        (r"(?:does not|doesn't|won't|will not|should not|shouldn't|must not|never) (?:fall|sag|drop|slam|droop|drift|move|swing) (?:shut |closed |open )?(?:by itself|on its own|under (?:its own )?weight|under gravity)", ("hold", True), ""),
-        (r"spring[- ]loaded|spring[- ]return(?:ed)?|springs? back|springy|springs?|self[- ]closing|self[- ]returning|returns?(?: to)?|snaps? back|pops? back|bounces? back", ("spring", True), ""),
-        (r"stiff(?:ly|er)?|hard to (?:move|turn|open|push|rotate|pull)|(?:high|lots of|some|more) (?:joint |hinge )?friction|with resistance", ("stiff", True), ""),
+        (r"remains? (?:where (?:it|they) (?:is|are)|in place|open|up|still)", ("hold", True), ""),
+        (r"(?:does not|doesn't|won't|will not|should not|shouldn't|must not|never) (?:fall|sag|drop|slam|droop|drift|move|swing|close|shut) (?:shut |closed |open |down )?(?:by itself|on its own|under (?:its own )?weight|under gravity)", ("hold", True), ""),
+        (r"self[- ]clos(?:ing|es)|clos(?:es|ing) (?:by )?(?:itself|themselves|on (?:its|their) own|automatically)|auto[- ]?clos(?:ing|e)|snaps? (?:shut|closed)|(?:door )?closer", ("spring", True), "close"),
+        (r"spring[- ]loaded|spring[- ]return(?:ed)?|springs? back|springy|springs?|self[- ]returning|returns?(?: to)?|snaps? back|pops? back|bounces? back", ("spring", True), ""),
+        (r"stiff(?:ly|er)?|hard to (?:move|turn|open|push|rotate|pull|close)|(?:high|lots of|some|more) (?:joint |hinge )?friction|with resistance|resists? (?:motion|movement|being moved)", ("stiff", True), ""),
     ]
 )
 
@@ -573,7 +579,8 @@ def parse_request(text: str) -> RequestSpec:
     counts = rv.part_counts(low)
     found: list = size_hits + size_against + band_hits + sizes + vols + verbs + mass_found + material_found + level_found + dyn_found + counts
     matched += [(f.start, f.text) for f in found] + [(m.start(), m.group(0)) for m in rv.DESCRIPTOR_RX.finditer(low)]
-    damping, holds, spring, stiff, free = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings)
+    damping, holds, spring, stiff, free, motions = _dynamics_words(low, [(f.start, f.end) for f in level_found], matched, warnings,
+                                                                    head_starts)
     pose = None
     for h in _scan(low, _POSE_TABLE):  # the last pose word not negated
         if not _negated(low, h.start):
@@ -588,7 +595,7 @@ def parse_request(text: str) -> RequestSpec:
     return RequestSpec(
         text=text, category_hint=hint, size_class=size_class, size_factor=factor, size_phrase=size_phrase,  # type: ignore[arg-type]
         joint_states=joint_states, damping=damping, holds_position=holds, spring=spring, stiff=stiff,  # type: ignore[arg-type]
-        free_moving=free, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
+        free_moving=free, motions=motions, pose_hint=pose, mass_level=mass_level, properties=properties,  # type: ignore[arg-type]
         sizes=[f.value for f in sizes], dynamics_values=[f.value for f in dyn_found],  # type: ignore[misc]
         part_counts={str(f.value[0]): int(f.value[1]) for f in counts},  # type: ignore[index]
         ignored=groups, warnings=warnings, overridden=overridden, matched=in_order, unused_words=unused,
@@ -605,47 +612,88 @@ def _mass_level(level_found: list[rv.Found], properties: list[PartProperty], war
     return mass_level
 
 
+@functools.lru_cache(maxsize=1)
+def _slide_table() -> list[tuple[re.Pattern[str], object, str]]:
+    """The request words of each kind of slide (``asset2sim/priors/slides.yaml``)."""
+    return _compile([(w, key, "") for key, sp in load_priors().slides.items() for w in sp.words])
+
+
+def _slide_hits(low: str) -> list[_Hit]:
+    """The kinds of slide the request names ("on ball-bearing slides", "wooden runners"): values the slide keys."""
+    return _scan(low, _slide_table())
+
+
+def _motion_kind(kind: str, value: object, flag: str) -> str:
+    """The :class:`~asset2sim.schemas.request.MotionPhrase` kind of a dynamics word (its table entry's kind, value
+    and flag)."""
+    if kind == "damping":
+        return "soft_close" if flag == "soft" else f"{value}_damping"
+    if kind == "spring":
+        return "self_closing" if flag == "close" else "spring"
+    return {"free": "free", "heavy": "stiff", "hold": "hold", "stiff": "stiff"}[kind]
+
+
+def _motion_part(low: str, start: int, end: int, head_starts: list[int]) -> str | None:
+    """The part a word about motion names: the part noun before it in its clause ("the door swings freely", "the
+    lid hinge has low damping"), else right after it ("a stiff handle joint", "low damping drawer slides"); None
+    for the object itself (``head_starts``: where the request names it, "a heavy oak door that swings freely") or
+    no part (the task's parts)."""
+    label = rv.part_before(low, start, mention_starts=head_starts)
+    if label is None:
+        label, _ = rv.part_after(low, end, mention_starts=head_starts)
+    return None if label == "body" else label
+
+
 def _dynamics_words(low: str, level_spans: list[tuple[int, int]], matched: list[tuple[int, str]],
-                    warnings: list[str]) -> tuple[str, bool, bool, bool, bool]:
-    """(damping level, holds position, spring, stiff, free moving) from the dynamics words (explicit damping
-    phrases win over cues); phrases go to ``matched``, contradictions to ``warnings``."""
+                    warnings: list[str], head_starts: list[int]) -> tuple[str, bool, bool, bool, bool, list[MotionPhrase]]:
+    """(damping level, holds position, spring, stiff, free moving, the motion phrases per part) from the dynamics
+    words (explicit damping phrases win over cues); phrases go to ``matched``, contradictions to ``warnings``.
+    A mass word ("a heavy box", "a heavy 25 kg door", "a heavy drawer") is a mass, not a stiffness; "heavy" before a
+    joint word ("a heavy hinge") is stiff."""
     damping, strong_set, holds, spring, stiff, free = "moderate", False, False, False, False, False
+    motions: list[MotionPhrase] = []
     hits = _scan(low, _DYN_TABLE)
     for h in hits:
         kind, val = h.value  # type: ignore[misc]
-        if any(a <= h.start < b for a, b in level_spans) and not _part_soon(low, h.end):
-            continue  # "a heavy box": a mass, not a dynamics word ("a heavy door": both)
+        if any(a <= h.start < b for a, b in level_spans) or (kind == "heavy" and not rv.joint_word_soon(low, h.end)):
+            continue  # "a heavy box", "a heavy 25 kg door", "a heavy drawer": a mass; "a heavy hinge": stiff
         neg = _negated(low, h.start)
         if kind == "spring":
             spring = not neg
             matched.append((h.start, ("no " if neg else "") + h.text))
+            if not neg:
+                motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), label=_motion_part(low, h.start, h.end, head_starts),
+                                            phrase=h.text))
             continue
         matched.append((h.start, ("not " if neg else "") + h.text))
         if neg:
             continue
+        motions.append(MotionPhrase(kind=_motion_kind(kind, val, h.flag), label=_motion_part(low, h.start, h.end, head_starts),
+                                    phrase=h.text))
         holds |= kind == "hold"
         stiff |= kind in ("stiff", "heavy")
         free |= kind == "free"
         if kind in ("free", "heavy", "damping") and (h.flag == "strong" or not strong_set):
             damping = str(val)
             strong_set = strong_set or h.flag == "strong"
-    if stiff and free:
-        warnings.append("contradiction: both stiff and moving freely are asked; both are applied (friction x4 over the floor, then no extra floor)")
+    for h in _slide_hits(low):
+        if _negated(low, h.start):
+            continue
+        matched.append((h.start, h.text))
+        motions.append(MotionPhrase(kind="slides", mechanism=str(h.value), label=_motion_part(low, h.start, h.end, head_starts) or "drawer",
+                                    phrase=h.text))
+    motions.sort(key=lambda m: low.find(m.phrase))
+    for label in dict.fromkeys(m.label for m in motions):
+        kinds = [m for m in motions if m.label == label]
+        hard = [m for m in kinds if m.kind == "stiff"]
+        loose = [m for m in kinds if m.kind == "free"]
+        if hard and loose:
+            warnings.append(f"contradiction: '{hard[0].phrase}' (stiff) and '{loose[0].phrase}' (moves freely) for the "
+                            f"{label or 'object'}; both are applied (friction x4 over the floor, then no extra floor)")
     levels = {str(h.value[1]) for h in hits if h.flag == "strong" and not _negated(low, h.start)}  # type: ignore[index]
     if len(levels) > 1:
         warnings.append(f"contradiction: damping levels {sorted(levels)} are all asked; '{damping}' (the last) is used")
-    return damping, holds, spring, stiff, free
-
-
-def _part_soon(text: str, i: int) -> bool:
-    """A part noun within the next three words ("a heavy wooden door")."""
-    words = re.findall(r"[\w'-]+|[,;:.!?]", text[i: i + 60])[:3]
-    for w in words:
-        if rv.PART_RX.fullmatch(w):
-            return True
-        if not re.fullmatch(r"[\w'-]+", w):
-            return False
-    return False
+    return damping, holds, spring, stiff, free, motions
 
 
 def _merge_properties(props: list[PartProperty], warnings: list[str]) -> list[PartProperty]:

@@ -246,7 +246,7 @@ def leftmost_longest(found: list) -> list:
 _WEIGHS_BEFORE = re.compile(r"(?:weighs?|weighing|weight(?: of| is|:)?|mass(?: of| is|:)?|of)\s+(?:about |around |roughly |approximately |exactly |only |just )?$")
 
 
-def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int] | None = None) -> str | None:
+def part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[int] | None = None) -> str | None:
     """The part noun closest before ``pos`` within ``max_words`` words of the clause; None when it is a
     category mention (the object itself)."""
     w0 = max(0, pos - 60)
@@ -263,7 +263,7 @@ def _part_before(low: str, pos: int, max_words: int = 4, mention_starts: list[in
     return None
 
 
-def _part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
+def part_after(low: str, end: int, max_words: int = 2, mention_starts: list[int] | None = None) -> tuple[str | None, int]:
     """(label, end) of the part or body noun within ``max_words`` words after ``end``; None for a category mention."""
     for s, e, w in _next_words(low, end, max_words):
         if PART_RX.fullmatch(w):
@@ -282,13 +282,13 @@ def masses(low: str, mention_starts: list[int] | None = None) -> list[Found]:
         v = number_value(m.group("num")) * _factor(_MASS_UNITS, m.group("unit"))
         if v <= 0:
             continue
-        label, end = _part_after(low, m.end(), mention_starts=mention_starts)
+        label, end = part_after(low, m.end(), mention_starts=mention_starts)
         start = m.start()
         w = _WEIGHS_BEFORE.search(low[max(0, m.start() - 40): m.start()])
         if w:
             start -= len(w.group(0))
             if label is None:
-                label = _part_before(low, start, mention_starts=mention_starts)
+                label = part_before(low, start, mention_starts=mention_starts)
         text = low[start:max(end, m.end())].strip()
         out.append(Found(start, max(end, m.end()), text, PartProperty(label=label, mass=v, phrase=text)))
     return out
@@ -300,13 +300,30 @@ _MASS_LEVEL_RX = re.compile(
 _MASS_LEVEL_BEFORE = re.compile(r"(?:is|it's|feels?|be|and|but|,)\s+$")
 
 
+#: Words of a joint's mechanism: "a heavy hinge", "a heavy action" speak of how it moves, not of a mass.
+JOINT_WORD_RX = re.compile(r"(?:hinges?|joints?|action|feel|slides?|runners?|pivots?|springs?|mechanisms?)")
+
+
+def joint_word_soon(low: str, end: int, max_words: int = 3) -> bool:
+    """Whether a joint word (:data:`JOINT_WORD_RX`) is among the next ``max_words`` words after ``end``, before any
+    ("a heavy, well-damped hinge": yes; "a heavy 25 kg door": no)."""
+    for _, _, w in _next_words(low, end, max_words):
+        if JOINT_WORD_RX.fullmatch(w):
+            return True
+    return False
+
+
 def mass_levels(low: str, mention_starts: list[int]) -> list[Found]:
-    """Mass words ("a heavy box", "lightweight"): ``"heavy"`` / ``"light"``; not before a part or joint word."""
+    """Mass words ("a heavy box", "lightweight", "a heavy 25 kg door": the number is its mass, "a box with a heavy
+    lid": the object is heavier): ``"heavy"`` / ``"light"``; not before a joint word ("a heavy hinge": a stiff one)."""
     out: list[Found] = []
     for m in _MASS_LEVEL_RX.finditer(low):
         w = m.group("w")
         nxt = _next_words(low, m.end(), 1)
-        if (w.endswith("weight") or _near_category(low, m.end(), mention_starts, 2)
+        if joint_word_soon(low, m.end()):
+            continue
+        if (w.endswith("weight") or _near_category(low, m.end(), mention_starts, 2) or _MASS_RX.match(low, m.end() + 1)
+                or any(PART_RX.fullmatch(x) for _, _, x in _next_words(low, m.end(), 3))
                 or _MASS_LEVEL_BEFORE.search(low[max(0, m.start() - 12): m.start()])
                 and (not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "but", "to"})):
             out.append(Found(m.start(), m.end(), m.group(0), "heavy" if w.startswith("heav") else "light"))
@@ -347,9 +364,9 @@ def materials(low: str, mention_starts: list[int], head_starts: list[int] | None
     out: list[Found] = []
     for h in leftmost_longest(hits):
         made_of = _MADE_OF.match(h.text) is not None
-        label, end = (None, h.end) if made_of else _part_after(low, h.end, mention_starts=head_starts)
+        label, end = (None, h.end) if made_of else part_after(low, h.end, mention_starts=head_starts)
         if made_of:
-            label = _part_before(low, h.start, 3, head_starts)
+            label = part_before(low, h.start, 3, head_starts)
         elif label is None:
             nxt = _next_words(low, h.end, 1)
             if not (_near_category(low, h.end, mention_starts, 2) or not nxt or nxt[0][2] in {",", ".", ";", "!", "and", "with", "but"}):
@@ -394,7 +411,7 @@ def dynamics_values(low: str, mention_starts: list[int] | None = None) -> tuple[
                 else:
                     warns.append(f"'{m.group(0)}': the unit {unit!r} does not fit {q} (expected "
                                  + " or ".join(u for qq, _mm, u in _DYN_UNITS if qq == q).replace("\\s*", " ") + "); used as a number without unit")
-            label = _part_before(low, m.start(), mention_starts=mention_starts)
+            label = part_before(low, m.start(), mention_starts=mention_starts)
             out.append(Found(m.start(), m.end(), m.group(0), DynamicsValue(quantity=q, value=v, motion=motion, label=label if label != "body" else None, phrase=m.group(0))))
     return leftmost_longest(out), warns
 

@@ -102,8 +102,6 @@ def export_usd(out_dir: Path, *, visuals: bool = True, check: bool = True) -> Us
     springs = springs_from_overlay(out_dir, initial)
     fixed = read_root(out_dir).fixed
     pieces, notes = collision_pieces(model)
-    notes += [f"joint {n!r}: its catch ({sp.catch_force:.3g} N or N m at {sp.catch_position:.4g}) has no UsdPhysics "
-              "attribute; asset2sim's PhysX session (load_sapien) applies it" for n, sp in springs.items() if sp.catch_force > 0]
     stage, root_path = _new_stage(model)
     link_paths = _write_links(stage, root_path, model, initial, pieces, visuals, notes)
     joint_paths = _write_joints(stage, root_path, model, link_paths, initial, springs, fixed)

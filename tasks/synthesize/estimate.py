@@ -9,13 +9,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asset2sim.schemas.overlay import JointDynamics, LinkPhysics
-from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET
+from asset2sim.schemas.overlay import Holding, JointDynamics, LinkPhysics
+from asset2sim.schemas.request import BAND_INTERVAL, BAND_TARGET, MotionPhrase
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.ingest import host_conventions, partnet_mobility
 from asset2sim.tasks.interpret import priors
-from asset2sim.tasks.synthesize import physics, request_apply
+from asset2sim.tasks.interpret.operating_forces import operating_range
+from asset2sim.tasks.synthesize import physics, request_apply, set_down
 from asset2sim.tasks.synthesize.context import EstimationContext
+from asset2sim.tasks.synthesize.named_parts import joints_of, moving_parts
 
 
 def task_relevant_joints(ctx: EstimationContext) -> list[str]:
@@ -139,6 +141,46 @@ class JointChoice:
     spring: bool = False
     stiff: bool = False
     free_moving: bool = False
+    self_closing: bool = False
+    """a spring that returns the part to its closed end (a door closer, a self-closing slide)"""
+    words: tuple[MotionPhrase, ...] = ()
+    """the request's words about this part's motion that made these choices"""
+
+
+#: Damping level each motion word asks (the last of a part's words wins, as the parser's damping does).
+WORD_DAMPING = {"free": "low", "low_damping": "low", "high_damping": "high", "soft_close": "high", "moderate_damping": "moderate"}
+
+
+def motion_choices(ctx: EstimationContext, relevant: list[str] | set[str]) -> tuple[dict[str, JointChoice], list[tuple[str, str]]]:
+    """(joint -> :class:`JointChoice`, (phrase, why) of each word naming a part the object lacks) from the request's
+    words about motion (``ctx.request.motions``): a word naming a part applies to that part's joints
+    (:func:`~asset2sim.tasks.synthesize.named_parts.joints_of`), one naming none to the ``relevant`` joints (the
+    task's parts). A relevant joint's category may expect a return spring (a stapler's arm; ``categories.yaml``
+    ``spring_labels``); a self-closing part gets high damping unless a word says otherwise (a door closer is a spring
+    and a hydraulic damper)."""
+    relevant = list(relevant)
+    applied: dict[str, list[MotionPhrase]] = {j.name: [] for j in ctx.asset.movable_joints()}
+    missing = []
+    for word in ctx.request.motions:
+        names = joints_of(ctx, word, relevant)
+        if word.label is not None and not names:
+            missing.append((word.phrase, f"names a '{word.label}' but this {ctx.category} has no such part (its moving parts: "
+                                         f"{moving_parts(ctx)})"))
+        for n in names:
+            if n in applied:
+                applied[n].append(word)
+    out = {}
+    for j in ctx.asset.movable_joints():
+        words = applied[j.name]
+        kinds = {w.kind for w in words}
+        levels = [WORD_DAMPING[w.kind] for w in words if w.kind in WORD_DAMPING]
+        closing = "self_closing" in kinds
+        label = ctx.asset.link(j.child).semantic_label
+        out[j.name] = JointChoice(
+            damping_level=levels[-1] if levels else ("high" if closing else "moderate"), holds_position="hold" in kinds,
+            spring=bool(kinds & {"spring", "self_closing"}) or (j.name in relevant and priors.spring_expected(ctx.category, label)),
+            stiff="stiff" in kinds, free_moving="free" in kinds, self_closing=closing, words=tuple(words))
+    return out, missing
 
 
 def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
@@ -148,18 +190,21 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
 
     Friction holds the largest gravity load within 5 % of the range around the state (the whole range when
     holding position) and where gravity pushes the part open at :data:`CLOSED_HOLD_FRACTIONS`; a spring gets
-    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load. A shut
-    door, drawer or lid has its catch (:func:`catch`). Any other part of an object that is set down (:func:`set_down`),
-    open or shut, is also held at the set-down's lean (:func:`physics.lean_load`, x :data:`physics.LEAN_SAFETY`) and
-    stopped after its drop (:func:`physics.impact_friction`), as a real hinge or slide holds a part where it was
-    left when its object is put down; a part its weight presses onto a stop (:func:`_on_stop`: its open end or its
-    closed end, within the SPEC's drift of it) is held there by the stop, its friction only against a lean that
-    lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg). A spring or a balance carries its part's load, and a part
-    that moves freely is left free.
+    k = max(3 x 1.5 x hold / range, 2 k_g), reference q_s = q - tau_g / k, and friction 10 % of the load. Any
+    other part of a free-standing object (:func:`free_standing`), open or shut, is also held at the set-down's lean
+    (:func:`~asset2sim.tasks.synthesize.set_down.lean_load`, x ``set_down.LEAN_SAFETY``) and stopped within its
+    band after each landing of the drop and the tilts (:func:`~asset2sim.tasks.synthesize.set_down.landing_friction`),
+    as a real hinge or slide holds a part where it was left when its object is put down; a part its weight presses
+    onto a stop (:func:`_on_stop`: its open end or its closed end, within its band) is held there by the stop, its
+    friction only against a lean that lifts it off (g sin 5 deg |w_h| - |tau_g| cos 5 deg), and a landing that
+    moves a part into a stop moves nothing. A spring or a balance carries its part's load, and a part that moves
+    freely is left free.
     """
     prismatic = {j.name for j in ctx.asset.movable_joints() if j.type == "prismatic"}
     rot = ctx.root_rotation
     loads = physics.joint_loads(ctx.session, ctx.asset, links, state, scale, ctx.subtrees, root_rotation=rot)
+    landed = (set_down.landings(ctx.session, links, state, scale, ctx.subtrees, ctx.hull_points, root_rotation=rot)
+              if free_standing(ctx) else {})
     out: dict[str, JointDynamics] = {}
     for j in ctx.asset.movable_joints():
         name = j.name
@@ -182,42 +227,79 @@ def joint_dynamics_for(ctx: EstimationContext, links: dict[str, LinkPhysics], st
             ld = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=rot)
             if ld[name].gravity_load * cs.direction > 0:
                 hold = max(hold, abs(ld[name].gravity_load))
-        spring = None
-        note = source
-        if ch.spring:
+        spring, balanced = None, False
+        mechanism = "moves freely (asked)" if ch.free_moving else ("friction slide" if name in prismatic else "friction hinge")
+        note = source + "".join(f"; request '{w.phrase}': {w.kind.replace('_', ' ')}" for w in ch.words)
+        if ch.self_closing:
+            spring, hold, why = closer(ctx, loads[name], cs, unit, hold)
+            note, mechanism = f"{note}; {why}", "closer"
+        elif ch.spring:
             load = loads[name]
             k = max(3.0 * physics.HOLD_SAFETY * max(hold, 1e-6) / max(cs.open_range * unit, 1e-6), load.gravity_stiffness * 2.0)
             ref = float(np.clip(state[name] - load.gravity_load / k, cs.lower * unit, cs.upper * unit))
-            spring = (k, ref)
+            spring, mechanism = (k, ref), "return spring"
             hold = 0.1 * hold  # the spring carries the load; friction only adds feel
         elif name not in prismatic and not ch.free_moving and _label(ctx, name) in COUNTERBALANCE_LABELS:
-            counter = counterbalance(ctx, links, state, scale, name, fr)
+            counter = counterbalance(ctx, links, state, scale, name, fr) or lid_support(ctx, links, state, scale, name, fr)
             if counter is not None:
                 spring, hold, why = counter
-                note = f"{source}; {why}"
+                note, balanced, mechanism = f"{note}; {why}", True, why.split(" (")[0]
         elif name in prismatic and not ch.free_moving and _label(ctx, name) in BALANCE_LABELS:
             bal = balance(loads[name], cs, unit)
             if bal is not None:
                 spring, hold, why = bal
-                note = f"{source}; {why}"
-        latch = None if (ch.spring or ch.free_moving) else catch(ctx, links, state, scale, name)
-        impact = 0.0
-        if spring is None and latch is None and not ch.free_moving and set_down(ctx):
-            # a part of a free-standing object without a catch is held by its friction where it was left when the
-            # object is set down; one its weight presses onto a stop is held by the stop, friction only against a
-            # lean that lifts it off
+                note, balanced, mechanism = f"{note}; {why}", True, "balance"
+        impact, static, landing = 0.0, hold, ""
+        if (spring is None or balanced) and not ch.free_moving and name in landed:
+            # a part of a free-standing object is held by its friction where it was left when the object is set
+            # down; one its weight presses onto a stop is held by the stop, friction only against a lean that lifts
+            # it off (a balanced part's spring carries its weight: only the lean's sideways share is left); each
+            # landing's energy is taken within its band, unless it moves the part into a stop
             ld = loads[name]
-            at_stop = _on_stop(ld, cs, state[name], unit, physics.SET_DOWN_DRIFT["prismatic" if name in prismatic else "revolute"])
-            hold = max(hold, physics.LEAN_SAFETY / physics.HOLD_SAFETY * physics.lean_load(ld, on_stop=at_stop))
-            impact = 0.0 if at_stop else physics.impact_friction(ld, prismatic=name in prismatic)
+            band = set_down.joint_band(cs.lower * unit, cs.upper * unit, name in prismatic)
+            at_stop = _on_stop(ld, cs, state[name], unit, band)
+            lean = (set_down.lean_load(ld) - abs(ld.gravity_load) * math.cos(set_down.SET_DOWN_LEAN) if balanced
+                    else set_down.lean_load(ld, on_stop=at_stop))
+            hold, static = max(hold, set_down.LEAN_SAFETY / physics.HOLD_SAFETY * lean), max(static, lean)
+            impact, landing = set_down.landing_friction(landed[name], band, _stops(cs, state[name] / unit, band / unit),
+                                                        0.0 if balanced else ld.gravity_load)
+        slide = name in prismatic and _label(ctx, name) in SLIDE_LABELS and not ch.free_moving
         dyn = physics.joint_dynamics(loads[name], hold, prismatic=name in prismatic, damping_level=ch.damping_level, stiff=ch.stiff,
-                                     free_moving=ch.free_moving, spring=spring, source=note, impact=impact)
-        if latch is not None:
-            force, position, zone, why = latch
-            dyn = dyn.model_copy(update={"catch_force": force, "catch_position": position, "catch_zone": zone,
-                                         "source": f"{dyn.source}; {why}"})
-        out[name] = dyn
+                                     free_moving=ch.free_moving, spring=spring, source=note, impact=impact, floor=not slide)
+        if slide:
+            kind, friction, why = slide_for(dyn.friction, loads[name].mass * physics.G, requested_slide(ch.words))
+            dyn = dyn.model_copy(update={"friction": friction, "source": f"{dyn.source}; {why}"})
+            mechanism = f"{kind.replace('_', ' ')} slides"
+        elif mechanism == "friction hinge" and not static > 0:
+            mechanism = "free hinge"
+        out[name] = dyn.model_copy(update={"holding": Holding(mechanism=mechanism, static_load=float(static),
+                                                              landing=float(impact), landing_trial=landing)})
     return out
+
+
+#: Share of a closer's preload that friction may take, so that it still returns the part to its closed end.
+CLOSER_FRICTION_SHARE = 0.2
+
+
+def closer(ctx: EstimationContext, load: physics.JointLoad, cs: ClosedState, unit: float, hold: float
+           ) -> tuple[tuple[float, float], float, str]:
+    """The spring of a self-closing part (a door closer, a self-closing lid or slide): it presses the part into its
+    closed end with a preload F0 = max(``physics.HOLD_SAFETY`` x ``hold``, ``set_down.LEAN_SAFETY`` x the set-down
+    lean's load) and pulls twice that at its far end: rate k = F0 / R about a reference one range R beyond the
+    closed end (a preloaded closer spring; door closers are adjustable in size 1-6 by the door's width and weight,
+    EN 1154), so that the part returns shut from anywhere in its range against friction of at most
+    :data:`CLOSER_FRICTION_SHARE` x F0.
+
+    Returns:
+        ((k N m/rad or N/m, q_s rad or m), the friction's hold load N m or N, note).
+    """
+    rng = max(cs.open_range * unit, 1e-9)
+    preload = max(physics.HOLD_SAFETY * hold, set_down.LEAN_SAFETY * set_down.lean_load(load), 1e-6)
+    k = preload / rng
+    ref = float(cs.position(0.0) * unit - cs.direction * rng)
+    why = (f"self-closing: a closer spring presses it shut with {preload:.3g} {'N' if ctx.asset.joint(load.joint).type == 'prismatic' else 'N m'} "
+           f"(k = {k:.4g} about {ref:.4g}, twice that fully open)")
+    return (float(k), ref), CLOSER_FRICTION_SHARE * preload / physics.HOLD_SAFETY, why
 
 
 def _on_stop(load: physics.JointLoad, cs: ClosedState, q: float, unit: float, drift: float) -> bool:
@@ -229,93 +311,49 @@ def _on_stop(load: physics.JointLoad, cs: ClosedState, q: float, unit: float, dr
     return end is not None and abs(end * unit - q) <= drift
 
 
-#: Holding forces of catches at a part's closed end, N: magnetic cabinet catches pull 2-8 lb (8.9-35.6 N;
-#: Monroe Engineering, "Magnetic catches: what is pull force and why does it matter"; light-duty catches for small
-#: doors 4-6 lb, engineerfix.com, chosen "to hold the door closed without making it difficult to open").
-CATCH_FORCE_N = (8.9, 35.6)
-#: A catch is chosen to keep its part shut when the object leans this much (rad): the SPEC's robust-rest tilt,
-#: 5 deg, an uneven floor or a bump ...
-CATCH_LEAN = math.radians(5.0)
-#: ... with this margin on the part's weight along its travel (dimensionless).
-CATCH_LEAN_MARGIN = 2.0
-#: Travel over which a drawer's stay-closed slide pulls it shut, m: the last 2 in (AWS Architectural Woodwork
-#: Standards, 1st ed. 2009, Appendix B, drawer slide selection guide: "self closing / stay closed").
-CATCH_ZONE_SLIDE_M = 0.0508
-#: Gap at a hinged part's edge within which a magnetic catch pulls it shut, m (estimate: a catch's pull falls
-#: to a small part of its rating within a few millimetres of the strike plate).
-CATCH_ZONE_HINGE_M = 0.005
-#: Shortest catch zone kept (at the catch), m: a state this near the closed end sits on the catch itself.
-CATCH_ZONE_MIN_M = 0.001
-#: Largest share of the opening travel a catch zone takes (a small drawer's catch acts near its closed end only).
-CATCH_ZONE_RANGE_SHARE = 0.25
-#: Largest opening fraction of a requested state at which a part gets its catch: the closed band's top
-#: (schemas.request BAND_INTERVAL["closed"]); a part asked open is held by its friction, which its catch's
-#: breakaway would only take budget from.
-CATCH_STATE_FRACTION = BAND_INTERVAL["closed"][1]
-#: Parts that close an opening and carry a catch (canonical labels; push buttons and knobs have none).
-CATCH_LABELS = frozenset({"door", "drawer", "lid"})
-#: Largest natural frequency of a catch's pull on its part, rad/s: 0.5 / dt at the SPEC's dt = 1/240 s (an
-#: explicit joint force any stiffer than that diverges); a catch that would be stiffer is not modelled.
-CATCH_MAX_RATE = 0.5 * 240.0
+#: Parts that slide on drawer slides or runners (canonical labels; ``asset2sim/priors/slides.yaml``).
+SLIDE_LABELS = frozenset({"drawer", "tray", "shelf"})
 
 
-def catch(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
-          name: str) -> tuple[float, float, float, str] | None:
-    """The catch that holds a door, drawer or lid (:data:`CATCH_LABELS`) at its closed end where its own
-    weight does not (a drawer, a side-hinged door, a drop-down door): F at the part's front (prismatic, N) or
-    at its far edge r from the axis (revolute, F r N m), F = :data:`CATCH_LEAN_MARGIN` x the part's weight
-    along its travel at a lean of :data:`CATCH_LEAN` (half of it at a hinge's edge), within the magnetic
-    catches' :data:`CATCH_FORCE_N`, pulling it shut over
-    :data:`CATCH_ZONE_SLIDE_M` (a stay-closed slide) or :data:`CATCH_ZONE_HINGE_M` / r rad (a magnetic catch
-    at the edge), at most :data:`CATCH_ZONE_RANGE_SHARE` of the travel; only where the request leaves the part
-    closed (:data:`CATCH_STATE_FRACTION`). None for other parts, parts without a range,
-    parts whose weight presses them shut with at least the catch's force (a lid), a zone under
-    :data:`CATCH_ZONE_MIN_M`, and a catch stiffer than :data:`CATCH_MAX_RATE` allows for the part's inertia.
+def requested_slide(words) -> str | None:
+    """The kind of slide the request's words about a part name (the last; ``slides.yaml`` key), or None."""
+    return next((w.mechanism for w in reversed(list(words)) if w.kind == "slides"), None)
 
-    Returns:
-        (force N or N m, closed end rad or m, zone rad or m signed with the opening direction, note), or None.
-    """
-    j = ctx.asset.joint(name)
-    cs = ctx.closed[name]
-    if j.type not in ("revolute", "prismatic") or not cs.open_range > 0 or _label(ctx, name) not in CATCH_LABELS:
+
+def slide_for(friction: float, weight: float, requested: str | None = None) -> tuple[str, float, str]:
+    """(kind, friction N, note) of the slide a drawer rides on (``asset2sim/priors/slides.yaml``, smoothest first):
+    the ``requested`` kind, else the first whose upper coefficient carries the ``friction`` (N) holding needs; the
+    friction moved into that kind's range, mu_lo to mu_hi of the drawer's ``weight`` (N, its normal load on a
+    horizontal slide). Where no kind carries it, the stiffest at its upper end: the check then says what remains."""
+    table = priors.load_priors().slides
+    kinds = list(table.items())
+    key, sp = next(((k, v) for k, v in kinds if k == requested), None) or next(
+        ((k, v) for k, v in kinds if v.friction_coefficient[1] * weight >= friction), kinds[-1])
+    lo, hi = (c * weight for c in sp.friction_coefficient)
+    f = float(np.clip(friction, lo, hi))
+    why = (f"{key.replace('_', ' ')} slides ({'as asked' if requested else 'the smoothest that holds it'}: mu "
+           f"{sp.friction_coefficient[0]:g}-{sp.friction_coefficient[1]:g} of its {weight:.3g} N weight; {sp.source.strip()}): "
+           f"friction {f:.3g} N = mu {f / max(weight, 1e-12):.3g}" + (f" (holding asked {friction:.3g} N)" if abs(f - friction) > 1e-9 else ""))
+    return key, f, why
+
+
+def slide_cap(ctx: EstimationContext, joint: str, mass: float) -> float | None:
+    """The most friction (N) a drawer-like part (:data:`SLIDE_LABELS`) of ``mass`` kg may have: the upper end of the
+    kind of slide the request names for it, else of the stiffest kind (no real slide is stiffer); None for other
+    joints."""
+    if ctx.asset.joint(joint).type != "prismatic" or _label(ctx, joint) not in SLIDE_LABELS:
         return None
-    prismatic = j.type == "prismatic"
-    unit = scale if prismatic else 1.0
-    if prismatic:
-        lever, zone_m = 1.0, CATCH_ZONE_SLIDE_M
-    else:
-        pts = ctx.hull_points.get(j.child)
-        if pts is None or not len(pts):
-            return None
-        a = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)
-        p = np.asarray(pts, float) * scale
-        lever = float(np.linalg.norm(p - np.outer(p @ a, a), axis=1).max())
-        if not lever > 0:
-            return None
-        zone_m = CATCH_ZONE_HINGE_M
-    st = {**state, name: cs.position(0.0) * unit}
-    load = physics.joint_loads(ctx.session, ctx.asset, links, st, scale, {name: ctx.subtrees[name]}, root_rotation=ctx.root_rotation)
-    # the part's weight along its travel when the object leans: all of it for a slide, about half at a hinge's
-    # far edge (its centre of mass half way out)
-    lean = CATCH_LEAN_MARGIN * load[name].mass * physics.G * math.sin(CATCH_LEAN) * (1.0 if prismatic else 0.5)
-    force = float(np.clip(lean, *CATCH_FORCE_N))
-    torque = force * lever
-    if -load[name].gravity_load * cs.direction >= torque:  # its weight is its catch
-        return None
-    if cs.fraction(state[name] / unit) > CATCH_STATE_FRACTION:  # asked open: friction holds it, a catch only costs
-        return None
-    zone_m = min(zone_m, CATCH_ZONE_RANGE_SHARE * cs.open_range * unit * lever)  # a small part's catch acts near its end
-    if zone_m < CATCH_ZONE_MIN_M:
-        return None
-    zone = cs.direction * zone_m / lever
-    inertia = load[name].inertia_axis
-    if not inertia > 0 or torque / abs(zone) > inertia * CATCH_MAX_RATE**2:  # too stiff for its inertia at dt
-        return None
-    why = (f"catch at the closed end ({'stay-closed slide' if prismatic else 'magnetic catch at the far edge'}): "
-           f"{force:.3g} N{'' if prismatic else f' at {lever:.3g} m = {torque:.3g} N m'} over {zone_m * 1000:.3g} mm "
-           f"(holds the part shut when the object leans {math.degrees(CATCH_LEAN):g} deg, x{CATCH_LEAN_MARGIN:g}, "
-           f"within magnetic catches' {CATCH_FORCE_N[0]:g}-{CATCH_FORCE_N[1]:g} N)")
-    return float(torque), float(cs.position(0.0) * unit), float(zone), why
+    choices, _ = motion_choices(ctx, task_relevant_joints(ctx))
+    table = priors.load_priors().slides
+    key = requested_slide(choices[joint].words) if joint in choices else None
+    sp = table[key] if key in table else list(table.values())[-1]
+    return float(sp.friction_coefficient[1] * mass * physics.G)
+
+
+def _stops(cs: ClosedState, q: float, band: float) -> tuple[bool, bool]:
+    """(down, up): whether a part at ``q`` rests on its lower / upper limit (within ``band``; ``cs``'s limits and ``q``,
+    ``band`` in the same units), so that a landing moving it that way moves nothing."""
+    return bool(q - cs.lower <= band), bool(cs.upper - q <= band)
 
 
 #: Parts that carry a counterbalance spring when they open downward (canonical labels: a door, a drop-front
@@ -323,7 +361,7 @@ def catch(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str
 COUNTERBALANCE_LABELS = frozenset({"door", "lid"})
 
 
-def set_down(ctx: EstimationContext) -> bool:
+def free_standing(ctx: EstimationContext) -> bool:
     """Whether the object stands free and is set down (the SPEC's robust rest drops and leans it): not when
     its root is fixed (a mounted object: ``ctx.mounting``)."""
     return not (ctx.mounting is not None and ctx.mounting.fixed)
@@ -371,6 +409,62 @@ def counterbalance(ctx: EstimationContext, links: dict[str, LinkPhysics], state:
     why = (f"counterbalance spring of a door opening downward (door-balance springs of ranges and dishwashers): "
            f"k = {k:.4g} N m/rad at rest closed balances the {open_loads[-1]:.3g} N m weight moment fully open")
     return (float(k), float(q_s)), float(hold), why
+
+
+#: Share of the top of its operating force range above which the force that lifts a hinged lid or door its weight
+#: presses shut (its weight moment over the lever to its far edge) calls for a lid support (:func:`lid_support`).
+LID_SUPPORT_SHARE = 0.5
+#: Opening fractions a lid support is fitted over (the whole range, both ends included).
+SUPPORT_FRACTIONS = tuple(float(f) for f in np.linspace(0.0, 1.0, 11))
+
+
+def lid_support(ctx: EstimationContext, links: dict[str, LinkPhysics], state: dict[str, float], scale: float,
+                name: str, hold_fractions) -> tuple[tuple[float, float], float, str] | None:
+    """The lid support of a hinged lid or door (:data:`COUNTERBALANCE_LABELS`) that a hand could hardly move against its
+    weight unaided: its largest weight moment over its range, over the lever to its far edge, is more than
+    :data:`LID_SUPPORT_SHARE` of the top of its operating range (a chest's or a large case's lid). Such lids ride on
+    lid supports, torsion or gas springs sized to the lid's torque (weight x distance to its centre of gravity;
+    lid-stay makers select them so, e.g. Sugatsune's HG-JH lid stays, and ASTM F834 asks a toy chest's lid support to
+    hold it in any position). Modelled as a torsion spring about the hinge whose torque is the straight line in the
+    opening fraction f that best cancels the weight moment tau(f) over :data:`SUPPORT_FRACTIONS` (the Chebyshev line:
+    slope -(tau(1) - tau(0)), offset half way between the largest and smallest remainder); friction then holds the
+    largest remainder, and the largest over ``hold_fractions`` around the state.
+
+    Returns:
+        ((k N m/rad, q_s rad), hold load N m, note), or None when the part does not need one.
+    """
+    cs = ctx.closed[name]
+    j = ctx.asset.joint(name)
+    pts = ctx.hull_points.get(j.child)
+    if not cs.open_range > 0 or pts is None or not len(pts):
+        return None
+    rot, sub = ctx.root_rotation, {name: ctx.subtrees[name]}
+
+    def opening_load(f: float) -> float:
+        st = {**state, name: cs.position(float(f))}
+        return cs.direction * physics.joint_loads(ctx.session, ctx.asset, links, st, scale, sub, root_rotation=rot)[name].gravity_load
+
+    tau = np.array([opening_load(f) for f in SUPPORT_FRACTIONS])
+    a_ = np.asarray(j.axis, float) / max(float(np.linalg.norm(j.axis)), 1e-12)
+    p = np.asarray(pts, float) * scale
+    lever = float(np.linalg.norm(p - np.outer(p @ a_, a_), axis=1).max())
+    top = (operating_range(ctx.category, _label(ctx, name))[0].force_n or (0.0, np.inf))[1]
+    if not lever > 0 or np.abs(tau).max() / lever <= LID_SUPPORT_SHARE * top:
+        return None
+    f = np.asarray(SUPPORT_FRACTIONS)
+    slope = -(tau[-1] - tau[0])
+    rest = tau + slope * f
+    offset = -0.5 * (rest.max() + rest.min())
+    k = -slope / cs.open_range
+    if not k > 0:
+        return None
+    q_s = float(cs.position(0.0) + cs.direction * offset / k)
+    remainder = np.abs(rest + offset)
+    hold = max(float(remainder.max()), *(abs(opening_load(x) + offset + slope * x) for x in hold_fractions))
+    why = (f"lid support (a torsion or gas spring sized to the lid's torque, as lid stays are): k = {k:.4g} N m/rad about "
+           f"{q_s:.4g} rad carries the weight moment (up to {np.abs(tau).max():.3g} N m, {np.abs(tau).max() / lever:.3g} N at its "
+           f"far edge against a hand's {top:g} N) to within {remainder.max():.3g} N m over its range")
+    return (float(k), q_s), float(hold), why
 
 
 #: Parts on a vertical slide that ride on a balance (canonical labels): a hung window's sash (coil "constant

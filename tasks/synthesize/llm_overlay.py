@@ -146,20 +146,22 @@ def _bands(ctx: EstimationContext, reply: ModelReply) -> tuple[dict[str, str], l
 
 
 def _joint_choices(ctx: EstimationContext, reply: ModelReply) -> dict[str, estimate.JointChoice]:
-    """The model's qualitative dynamics per movable joint; without a model entry the request's dynamics
-    words on a task-relevant joint, moderate damping and nothing else on the others."""
-    relevant = set(estimate.task_relevant_joints(ctx))
+    """The model's qualitative dynamics per movable joint, with the request's own words about each part kept (they win
+    where they speak); without a model entry the words alone (:func:`~asset2sim.tasks.synthesize.estimate.motion_choices`)."""
     by_joint = {jr.joint: jr for jr in reply.joints}
-    rq = ctx.request
+    parsed, _ = estimate.motion_choices(ctx, estimate.task_relevant_joints(ctx))
     choices: dict[str, estimate.JointChoice] = {}
     for j in ctx.asset.movable_joints():
         jr = by_joint.get(j.name)
-        rel = j.name in relevant
-        if jr is not None:
-            choices[j.name] = estimate.JointChoice(jr.damping_level, jr.holds_position, jr.spring, jr.stiff, jr.free_moving)
-        else:
-            choices[j.name] = estimate.JointChoice(rq.damping if rel else "moderate", rq.holds_position and rel, rq.spring and rel,
-                                                   rq.stiff and rel, rq.free_moving and rel)
+        if jr is None:
+            choices[j.name] = parsed[j.name]
+            continue
+        # the model's choices, and the request's own words about this part kept: a word wins where it speaks
+        words = parsed[j.name]
+        choices[j.name] = estimate.JointChoice(
+            words.damping_level if any(w.kind in estimate.WORD_DAMPING for w in words.words) else jr.damping_level,
+            jr.holds_position or words.holds_position, jr.spring or words.spring, jr.stiff or words.stiff,
+            jr.free_moving or words.free_moving, words.self_closing, words.words)
     return choices
 
 

@@ -8,8 +8,8 @@ from asset2sim.schemas.overlay import ContactMaterial, EstimatorInfo, LinkPhysic
 from asset2sim.tasks.interpret import priors
 from asset2sim.tasks.synthesize import physics, request_apply
 from asset2sim.tasks.synthesize.context import EstimationContext
-from asset2sim.tasks.synthesize.estimate import (JointChoice, choose_scale, joint_dynamics_for, link_material, plausible_mass_range,
-                                                 request_variant, state_from_bands, task_relevant_joints)
+from asset2sim.tasks.synthesize.estimate import (choose_scale, joint_dynamics_for, link_material, motion_choices,
+                                                 plausible_mass_range, request_variant, state_from_bands, task_relevant_joints)
 from asset2sim.tasks.synthesize.estimator import Estimate, register_estimator
 
 __all__ = ["OfflineEstimator"]
@@ -57,15 +57,7 @@ class OfflineEstimator:
         bands, band_notes = resolved.bands, resolved.warnings + resolved.notes + request_apply.unmatched_properties(ctx)
         state = request_apply.state_with_targets(ctx, state_from_bands(ctx.closed, bands, s, prismatic), resolved, s)
         # ---- dynamics
-        relevant = set(task_relevant_joints(ctx))
-        choices = {}
-        for j in ctx.asset.movable_joints():
-            rel = j.name in relevant
-            label = ctx.asset.link(j.child).semantic_label
-            choices[j.name] = JointChoice(damping_level=ctx.request.damping if rel else "moderate",
-                                          holds_position=ctx.request.holds_position and rel,
-                                          spring=rel and (ctx.request.spring or priors.spring_expected(ctx.category, label)),
-                                          stiff=ctx.request.stiff and rel, free_moving=ctx.request.free_moving and rel)
+        choices, _ = motion_choices(ctx, task_relevant_joints(ctx))
         joints = joint_dynamics_for(ctx, links, state, s, choices, source="offline physics")
         joints, dyn_notes = request_apply.apply_dynamics_values(ctx, joints, task_relevant_joints(ctx), state)
         band_notes += dyn_notes

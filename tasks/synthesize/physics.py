@@ -7,11 +7,8 @@ joint loads from kinematics, joint dynamics from those loads. Formulas (SI):
 - gravity load: tau_g = ((c - p) x M g) . a (revolute), F_g = M g . a (prismatic);
 - damping c = 2 zeta sqrt(I k) of I qdd + c qd + k q = 0 (Ogata, System
   Dynamics, 4th ed., ch. 8), k = max(|d tau_g / d q|, spring, I (2 pi f0)^2);
-- holding friction f = safety x max |tau_g| over the states to hold;
-- set down (SPEC robust rest: a 2 cm drop, 5 deg leans): the lean's load |tau_g| cos(d) + g sin(d) |w_h| (w: the
-  load per unit gravity, w . g = tau_g; w_h its horizontal part) and the friction that takes the part's kinetic
-  energy after the drop within the SPEC's drift, (p^2 / 2 I) / dq with p = |tau_g| / g sqrt(2 g h) (work-energy
-  theorem, an instant stop of the body: an upper bound).
+- holding friction f = safety x max |tau_g| over the states to hold; what holds a part when its object is set down
+  (the lean, the landings): :mod:`.set_down`.
 """
 
 from __future__ import annotations
@@ -179,41 +176,6 @@ def joint_loads(session, asset: AssetDescription, links: dict[str, LinkPhysics],
     return out
 
 
-#: How a free-standing object is set down (SPEC, robust rest): dropped from this height, m ...
-SET_DOWN_DROP = 0.02
-#: ... and leaned this far about each horizontal axis, rad (5 deg) ...
-SET_DOWN_LEAN = float(np.radians(5.0))
-#: ... while each joint stays within this of its state, rad (revolute) or m (prismatic).
-SET_DOWN_DRIFT = {"revolute": 0.02, "prismatic": 0.002}
-#: Safety factor on the lean's load (dimensionless): the object is let go leaned and rocks back, so the lean is held
-#: with the margin a catch is sized with (``estimate.CATCH_LEAN_MARGIN``) and the escalation's tilt floor
-#: (``check.operating.TILT_MARGIN``), not the static :data:`HOLD_SAFETY`.
-LEAN_SAFETY = 2.0
-
-
-def lean_load(load: JointLoad, lean: float = SET_DOWN_LEAN, *, on_stop: bool = False) -> float:
-    """Largest |gravity load| (N*m or N) on a joint when its object leans ``lean`` rad in any direction:
-    |tau_g| cos(lean) + g sin(lean) |w_h| (module docstring). ``on_stop``: the part rests on the stop its weight
-    presses it onto, so only a lean that lifts it off loads the joint: g sin(lean) |w_h| - |tau_g| cos(lean)
-    (negative: none does)."""
-    pressed = abs(load.gravity_load) * np.cos(lean)
-    lateral = G * np.sin(abs(lean)) * load.lateral_moment
-    return float(lateral - pressed if on_stop else pressed + lateral)
-
-
-def impact_friction(load: JointLoad, prismatic: bool, drop: float = SET_DOWN_DROP, drift: float | None = None) -> float:
-    """Friction (N*m or N) beyond the gravity load that stops a part within ``drift`` (rad or m; default
-    :data:`SET_DOWN_DRIFT`) after its object, dropped from ``drop`` m, stops on the ground: the part's momentum
-    about its joint p = |tau_g| / g v with v = sqrt(2 g drop) (w . v, the momentum's share along the joint),
-    its energy p^2 / (2 I) taken by friction over the drift (work-energy theorem; an instant stop of the body, so an
-    upper bound: the ground's give and the joint's damping take some of it). 0 without inertia about the joint."""
-    if not load.inertia_axis > 0:
-        return 0.0
-    dq = drift if drift is not None else SET_DOWN_DRIFT["prismatic" if prismatic else "revolute"]
-    p = abs(load.gravity_load) / G * np.sqrt(2.0 * G * drop)
-    return float(p * p / (2.0 * load.inertia_axis) / dq)
-
-
 #: Simulator timestep the damping bound is computed for, s (SPEC: 1/240 s).
 TIMESTEP = 1.0 / 240.0
 
@@ -249,7 +211,7 @@ def damping_for(load: JointLoad, zeta: float, stiffness: float = 0.0, floor_hz: 
 
 def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: bool, damping_level: str = "moderate", stiff: bool = False,
                    free_moving: bool = False, spring: tuple[float, float] | None = None, source: str = "physics",
-                   impact: float = 0.0) -> JointDynamics:
+                   impact: float = 0.0, floor: bool = True) -> JointDynamics:
     """Damping, friction and stiffness of one joint from its loads.
 
     Args:
@@ -261,7 +223,9 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
         free_moving: "moves freely": no extra friction floor.
         spring: (stiffness, reference) when a spring is intended.
         impact: friction (N*m or N) beyond the holding friction that stops the part after its object is set down
-            (:func:`impact_friction`; 0: none).
+            (:func:`~asset2sim.tasks.synthesize.set_down.landing_friction`; 0: none).
+        floor: add the friction floor below; False where the mechanism sets its own least friction (a drawer's
+            slide, ``estimate.slide_for``).
 
     Friction floor: Coulomb coefficient 0.05 on the moving weight (prismatic, N; lubricated drawer slides,
     Engineering ToolBox), that force at a 1 cm pin radius (revolute, N*m). Friction and damping are capped by
@@ -272,7 +236,7 @@ def joint_dynamics(load_at_state: JointLoad, hold_load: float, *, prismatic: boo
     c = damping_for(load_at_state, zeta, k)
     c_max = max_stable_damping(load_at_state.inertia_axis)
     weight = load_at_state.mass * G
-    floor = 0.05 * weight if prismatic else 0.05 * weight * 0.01
+    floor = (0.05 * weight if prismatic else 0.05 * weight * 0.01) if floor else 0.0
     if free_moving:
         floor *= 0.2
     friction = HOLD_SAFETY * abs(hold_load) + floor + max(impact, 0.0)

@@ -109,7 +109,9 @@ def resolve_states(ctx: "EstimationContext", scale: float) -> StateResolution:
         before = len(res.warnings)
         joints = state_targets(ctx, jr, relevant, centers, res.warnings, sizes, res.notes)
         named.append((jr, joints))
-        if not joints:
+        if not joints and not jr.names_part and jr.band == "closed" and jr.target is None:
+            res.notes.append(f"'{jr.phrase}': this {ctx.category} has no part that opens: it is closed as it is")
+        elif not joints:
             why = res.warnings[-1].removeprefix("WARNING: ") if len(res.warnings) > before else (
                 f"names joint {jr.joint}, not a movable joint of this object" if jr.selector == "joint"
                 else f"this {ctx.category} has no task-relevant movable part")
@@ -435,8 +437,40 @@ def phrase_lines(ctx: "EstimationContext", res: StateResolution, closed_out: dic
     return out
 
 
+#: Units of a joint's damping, friction and stiffness (revolute, prismatic), for the report's lines.
+DYNAMICS_UNITS = {"damping": ("N m s/rad", "N s/m"), "friction": ("N m", "N"), "stiffness": ("N m/rad", "N/m")}
+
+
+def motion_lines(ctx: "EstimationContext", overlay: Overlay, words: dict[str, list], escalation: list | None = None) -> list[str]:
+    """One line per word of the request about a part's motion, in its order: the joints it applies to with the
+    damping, friction and stiffness they end with ("'swings freely' (door): free on joint_1 (door): friction 0.0056 N m,
+    damping 0.30 N m s/rad, stiffness 0 N m/rad"), what it kept from the post-check (``escalation``'s ``words_kept``),
+    or why it was not applied. ``words``: joint -> the :class:`~asset2sim.schemas.request.MotionPhrase` s applied to
+    it (``estimate.motion_choices``)."""
+    out = []
+    kept = [line for r in escalation or [] for line in (getattr(r, "words_kept", None) or [])]
+    for word in ctx.request.motions:
+        joints = [n for n, ws in words.items() if any(w is word or w == word for w in ws)]
+        if not joints:
+            continue
+        got = []
+        for n in joints:
+            d = overlay.joints.get(n)
+            if d is None:
+                continue
+            k = 1 if ctx.asset.joint(n).type == "prismatic" else 0
+            label = ctx.asset.link(ctx.asset.joint(n).child).semantic_label
+            got.append(f"{n}" + (f" ({label})" if label else "") + ": " + ", ".join(
+                f"{p} {getattr(d, p):.3g} {DYNAMICS_UNITS[p][k]}" for p in ("friction", "damping", "stiffness")))
+        line = f"{word.short()} on " + "; ".join(got)
+        held = [x for x in kept if f"'{word.phrase}'" in x]
+        out.append(line + (f" (kept through the post-check: {'; '.join(dict.fromkeys(held))})" if held else ""))
+    return out
+
+
 def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_out: dict, state: dict[str, float],
-             overlay: Overlay, escalation: list | None = None, resolution: StateResolution | None = None) -> RequestFindings:
+             overlay: Overlay, escalation: list | None = None, resolution: StateResolution | None = None,
+             motion_words: dict[str, list] | None = None) -> RequestFindings:
     """The report's account of the request: ignored words, warnings (the parser's and the ``WARNING`` lines of the
     ``overlay``'s notes), what was asked, every number against the output (``closed_out`` at the output's scale,
     ``state`` in output units, the ``overlay``'s scale, total mass (kg) and joint parameters; ``escalation`` rounds
@@ -484,6 +518,7 @@ def findings(ctx: "EstimationContext", targets: dict[str, JointTarget], closed_o
                                  within_tolerance=ok, why="" if ok else "the parts' requested masses exceed it", kind="mass"))
     q += _dynamics_outcomes(ctx, overlay, escalation or [])
     phrases = phrase_lines(ctx, resolution, closed_out, state) if resolution is not None else []
+    phrases += motion_lines(ctx, overlay, motion_words or {}, escalation)
     return RequestFindings(ignored=list(ctx.request.ignored), warnings=warnings, asked=summary(ctx.request), quantities=q, phrases=phrases)
 
 

@@ -185,8 +185,6 @@ def urdf_to_mjcf(urdf_path: Path | str, options: SessionOptions | None = None, *
         raise ValueError(f"{urdf_path}: initial state names joints that are not movable joints of the file: {unknown}")
     mesh_root = Path(mesh_root) if mesh_root is not None else urdf_path.parent
     pieces, notes = collision_pieces(model)
-    notes += [f"joint {n}: its catch ({sp.catch_force:.3g} N or N m at {sp.catch_position:.4g}) has no MJCF element; "
-              "asset2sim's MuJoCo session applies it as a joint force each step" for n, sp in springs.items() if sp.catch_force > 0]
     meshes = mesh_assets(pieces, mesh_root)
     final_assets = {rel: meshes.import_assets[v] for v, (rel, _) in meshes.virtual.items()}
 

@@ -150,7 +150,7 @@ def test_a_laptop_holds_through_robust_rest_with_a_friction_a_hand_still_lifts(t
     through robust rest by a hinge friction with which a hand still lifts it from closed inside the laptop's
     torque range (hinge friction plus weight moment): robust rest, the task, its force and the operability
     tier all pass, and no headroom step of the close task raised the friction past the hand's cap."""
-    from asset2sim.tasks.check.force_ranges import operating_range
+    from asset2sim.tasks.interpret.operating_forces import operating_range
     from asset2sim.tasks.refine import refine_asset
 
     src = SHARED / "9748"

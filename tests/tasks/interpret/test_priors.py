@@ -414,7 +414,7 @@ def test_category_prior_lookup() -> None:
 def _copy(tmp_path: Path) -> Path:
     d = tmp_path / "priors"
     d.mkdir(parents=True)
-    for f in ("materials.yaml", "labels.yaml", "size_classes.yaml", "categories.yaml"):
+    for f in ("materials.yaml", "labels.yaml", "size_classes.yaml", "categories.yaml", "slides.yaml"):
         shutil.copy(PRIORS_DIR / f, d / f)
     return d
 
@@ -441,6 +441,8 @@ def test_copy_of_the_packaged_tables_loads(tmp_path: Path) -> None:
         ("categories.yaml", lambda d: d["Stapler"].__setitem__("mass_range", [2.0, 1.0]), "categories.yaml: Stapler.mass_range"),
         ("categories.yaml", lambda d: d["Stapler"].__setitem__("dims", [0.3, 0.2, 0.1]), "categories.yaml: Stapler"),
         ("categories.yaml", lambda d: d["Stapler"].__setitem__("task_relevant", ["lidd"]), "categories.yaml: Stapler.task_relevant"),
+        ("slides.yaml", lambda d: d["roller"].__setitem__("friction_coefficient", [0.05, 0.01]), "slides.yaml: roller"),
+        ("slides.yaml", lambda d: d["wood_runners"].pop("source"), "slides.yaml: wood_runners.source"),
         ("categories.yaml", lambda d: d["Box"]["synonyms"].append("stapler"), "synonyms: 'stapler' is also a synonym of Box"),
         ("categories.yaml", lambda d: d.pop("Generic"), "categories.yaml: the fallback category"),
         ("categories.yaml", lambda d: d["Toaster"].__setitem__("spring_source", ""), "categories.yaml: Toaster"),

@@ -335,7 +335,8 @@ def test_holds_spring_stiff() -> None:
     for t in ["a lid without a spring", "no spring in the hinge", "a stapler"]:
         assert not parse_request(t).spring, t
     assert parse_request("a stiff handle joint").stiff
-    assert parse_request("a heavy door").stiff
+    assert parse_request("a door with heavy hinges").stiff  # heavy before a joint word: stiff
+    assert not parse_request("a heavy door").stiff and parse_request("a heavy door").mass_level == "heavy"  # a mass
     assert not parse_request("a door that is not stiff").stiff
     assert "no spring" in parse_request("no spring in the hinge").matched
 

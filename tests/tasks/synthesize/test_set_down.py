@@ -1,5 +1,5 @@
-"""A part's first friction holds it when its free-standing object is set down (the SPEC's robust rest: a
-2 cm drop, 5 deg leans): the lean's load and the drop's kinetic energy, from the joint's load per unit gravity."""
+"""A part's first friction holds it when its free-standing object is set down (the SPEC's robust rest: a 2 cm drop,
+5 deg tilts let go): the lean's load and each landing's kinetic energy along the joint, within the part's band."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from asset2sim.engines.registry import open_session
 from asset2sim.schemas.overlay import Inertia, LinkPhysics
 from asset2sim.tasks.geometry.closed_state import ClosedState
 from asset2sim.tasks.refine import refine_asset
-from asset2sim.tasks.synthesize import physics
+from asset2sim.tasks.synthesize import estimate, physics, set_down
 from asset2sim.tasks.synthesize.context import build_context
 from asset2sim.tasks.synthesize.estimate import _on_stop
 from asset2sim.tasks.synthesize.offline import OfflineEstimator
@@ -24,26 +24,87 @@ BOX = SHARED / "47645"
 BOX_REQUEST = "A small box with slightly open rotational lid. Low damping for a smooth hinge behavior."
 
 
-def test_the_lean_and_the_drop_from_the_load_per_unit_gravity():
+def test_the_lean_and_the_landing_from_the_load_and_the_momentum():
     """A 0.5 kg lid whose centre of mass sits 0.1 m from a horizontal hinge: tau_g = 0.4905 N m. Leaned 5 deg,
-    0.02 m of its centre of mass across gravity adds g sin(5 deg) 0.5 x 0.02; dropped 2 cm, its momentum about the
-    hinge m r v = 0.5 x 0.1 x sqrt(2 g 0.02) must be taken within 0.02 rad."""
+    0.02 m of its centre of mass across gravity adds g sin(5 deg) 0.5 x 0.02. A landing that leaves it a momentum
+    p along its joint takes p^2 / (2 I) / band of friction; one that moves it into a stop takes none."""
     ld = physics.JointLoad(joint="lid", mass=0.5, inertia_axis=0.5 * 0.1**2 * 4 / 3, gravity_load=-0.5 * physics.G * 0.1,
                            gravity_stiffness=0.0, lateral_moment=0.5 * 0.02)
     lean = math.radians(5.0)
-    assert physics.lean_load(ld) == pytest.approx(0.5 * physics.G * 0.1 * math.cos(lean) + physics.G * math.sin(lean) * 0.01)
+    assert set_down.lean_load(ld) == pytest.approx(0.5 * physics.G * 0.1 * math.cos(lean) + physics.G * math.sin(lean) * 0.01)
     p = 0.5 * 0.1 * math.sqrt(2 * physics.G * 0.02)
-    assert physics.impact_friction(ld, prismatic=False) == pytest.approx(p * p / (2 * ld.inertia_axis) / 0.02)
-    # a drawer sliding across gravity takes none of the drop; a part without inertia about its joint neither
+    drop = set_down.Landing("drop", -p, ld.inertia_axis)
+    f, which = set_down.landing_friction([drop], 0.02)
+    assert which == "drop" and f == pytest.approx(p * p / (2 * ld.inertia_axis) / 0.02)
+    assert set_down.landing_friction([drop], 0.02, blocked=(True, False)) == (0.0, "")  # pushed into its closed stop
+    assert set_down.landing_friction([drop], 0.1)[0] == pytest.approx(f / 5)  # a wider band takes less
+    up = set_down.Landing("tilt+x", p, ld.inertia_axis)  # thrown up, against its weight: its weight stops it too
+    assert set_down.landing_friction([up], 0.02, gravity_load=ld.gravity_load)[0] == pytest.approx(max(0.0, f - abs(ld.gravity_load)))
     drawer = physics.JointLoad(joint="d", mass=2.0, inertia_axis=2.0, gravity_load=0.0, gravity_stiffness=0.0, lateral_moment=2.0)
-    assert physics.impact_friction(drawer, prismatic=True) == 0.0
-    assert physics.lean_load(drawer) == pytest.approx(physics.G * math.sin(lean) * 2.0)
-    assert physics.impact_friction(physics.JointLoad("j", 0.0, 0.0, 1.0, 0.0), prismatic=False) == 0.0
+    assert set_down.lean_load(drawer) == pytest.approx(physics.G * math.sin(lean) * 2.0)
     # the impact adds to the holding friction
     plain = physics.joint_dynamics(ld, abs(ld.gravity_load), prismatic=False)
     hit = physics.joint_dynamics(ld, abs(ld.gravity_load), prismatic=False, impact=0.3)
     assert hit.friction == pytest.approx(plain.friction + 0.3)
     assert "set-down impact" in hit.source and "set-down" not in plain.source
+
+
+def test_the_landings_of_a_drawer_and_a_lid(tmp_path):
+    """A 1 kg box with a 0.2 kg drawer sliding along x and a 0.1 kg lid on a hinge along y: the drop moves the lid
+    (down, about its hinge) and not the drawer (across gravity); a tilt about y lands the object with the drawer moving
+    along its slide; a tilt about x moves neither along its joint more than the drop does the lid."""
+    def part(name: str, size: tuple, at: tuple) -> str:
+        box = f'<origin xyz="{at[0]} {at[1]} {at[2]}"/><geometry><box size="{size[0]} {size[1]} {size[2]}"/></geometry>'
+        return f'<link name="{name}"><collision>{box}</collision><visual>{box}</visual></link>'
+
+    def hinge(name: str, kind: str, child: str, at: tuple, axis: tuple, upper: float) -> str:
+        return (f'<joint name="{name}" type="{kind}"><parent link="base"/><child link="{child}"/>'
+                f'<origin xyz="{at[0]} {at[1]} {at[2]}"/><axis xyz="{axis[0]} {axis[1]} {axis[2]}"/>'
+                f'<limit lower="0" upper="{upper}" effort="10" velocity="1"/></joint>')
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "mobility.urdf").write_text(
+        '<?xml version="1.0"?><robot name="t">' + part("base", (0.3, 0.3, 0.2), (0, 0, 0.1)) + part("drawer", (0.2, 0.2, 0.05), (0, 0, 0))
+        + part("lid", (0.3, 0.3, 0.01), (0.15, 0, 0)) + hinge("slide", "prismatic", "drawer", (0, 0, 0.1), (1, 0, 0), 0.2)
+        + hinge("hinge", "revolute", "lid", (-0.15, 0, 0.205), (0, -1, 0), 1.5) + "</robot>")
+    asset = extract_asset(tmp_path / "a")
+    links = {"base": LinkPhysics(mass=1.0, inertia=Inertia(ixx=1e-2, iyy=1e-2, izz=1e-2), com=(0, 0, 0.1)),
+             "drawer": LinkPhysics(mass=0.2, inertia=Inertia(ixx=1e-3, iyy=1e-3, izz=1e-3), com=(0, 0, 0)),
+             "lid": LinkPhysics(mass=0.1, inertia=Inertia(ixx=1e-3, iyy=1e-3, izz=1e-3), com=(0.15, 0, 0))}
+    from asset2sim.tasks.geometry.closed_state import link_hull_points
+
+    s = open_session("pybullet", asset.urdf_path, SessionOptions(fixed_base=True, gravity=False, ground=False))
+    try:
+        got = set_down.landings(s, links, {"slide": 0.0, "hinge": 0.0}, 1.0, {"slide": ["drawer"], "hinge": ["lid"]},
+                                link_hull_points(asset))
+    finally:
+        s.close()
+    by = {n: {t.trial: t for t in ls} for n, ls in got.items()}
+    assert by["slide"]["drop"].momentum == pytest.approx(0.0, abs=1e-9) and by["slide"]["drop"].inertia == pytest.approx(0.2)
+    assert abs(by["hinge"]["drop"].momentum) == pytest.approx(0.1 * 0.15 * math.sqrt(2 * physics.G * 0.02), rel=1e-6)
+    assert abs(by["slide"]["tilt+y"].momentum) > 1e-3 and abs(by["slide"]["tilt-y"].momentum) > 1e-3
+    assert by["slide"]["tilt+y"].momentum * by["slide"]["tilt-y"].momentum < 0  # the two tilts land it both ways
+    assert abs(by["slide"]["tilt+x"].momentum) < 1e-9
+
+
+def test_the_slides_table_runs_from_the_smoothest_and_says_where_each_range_comes_from():
+    from asset2sim.prior_tables import load_priors
+
+    slides = load_priors().slides
+    assert list(slides) == ["ball_bearing", "roller", "lubricated", "wood_runners"]
+    tops = [sp.friction_coefficient[1] for sp in slides.values()]
+    assert tops == sorted(tops) and all(sp.source for sp in slides.values())
+    assert all(sp.note for sp in slides.values() if sp.estimate)
+    # a drawer of 5 kg: the smoothest kind that carries what holding needs; beyond every kind, the stiffest at its top
+    w = 5.0 * physics.G
+    assert estimate.slide_for(1.0, w)[0] == "roller"
+    assert estimate.slide_for(0.3 * w, w)[0] == "wood_runners"
+    kind, f, why = estimate.slide_for(0.2 * w, w)
+    assert kind == "wood_runners" and f == pytest.approx(0.25 * w) and "holding asked" in why  # raised into its range
+    kind, f, _ = estimate.slide_for(2.0 * w, w)
+    assert kind == "wood_runners" and f == pytest.approx(0.62 * w)
+    kind, f, why = estimate.slide_for(0.3 * w, w, "ball_bearing")
+    assert kind == "ball_bearing" and f == pytest.approx(0.01 * w) and "as asked" in why
 
 
 @pytest.mark.parametrize("axis, lateral", [("0 0 1", 0.5 * 0.2), ("0 1 0", 0.5 * 0.005)])
@@ -70,8 +131,8 @@ def test_an_open_lid_is_held_through_the_set_down_from_the_first_guess(tmp_path,
     assert "set-down impact" in lid.source
     assert len(first.report.escalation) == 1, [r.reason for r in first.report.escalation]
     assert first.report.readiness["robust_rest"] is True and first.report.readiness["operability"] is True
-    monkeypatch.setattr(physics, "impact_friction", lambda load, prismatic, **_: 0.0)
-    monkeypatch.setattr(physics, "lean_load", lambda load, lean=0.0, **_: 0.0)
+    monkeypatch.setattr(set_down, "landing_friction", lambda *args, **kwargs: (0.0, ""))
+    monkeypatch.setattr(set_down, "lean_load", lambda load, lean=0.0, **_: 0.0)
     without = refine_asset(BOX, BOX_REQUEST, tmp_path / "without", extras=False, category="Box")
     assert "set-down" not in without.overlay.joints["joint_0"].source
     rr = next(m for m in without.report.escalation[0].metrics if m.name == "robust_rest")
@@ -113,26 +174,25 @@ MICROWAVE = SHARED / "7119"
 
 
 @pytest.mark.skipif(not MICROWAVE.is_dir(), reason="PartNet-Mobility 7119 not available")
-def test_a_shut_part_without_a_catch_is_held_through_the_set_down(tmp_path, monkeypatch):
-    """Microwave 7119 with its door shut: the door is too light for a magnetic catch at the SPEC's timestep (no
-    catch), so its hinge holds twice the lean's load (a door on a vertical hinge has no drop term) from the first
-    guess and the first post-check passes robust rest. Without the set-down terms a 5 deg lean swings the shut door
-    open and the post-check escalates."""
+def test_a_shut_part_is_held_through_the_set_down_by_its_hinge(tmp_path, monkeypatch):
+    """Microwave 7119 with its door shut: no file format carries a catch, so its hinge holds twice the lean's load
+    from the first guess and the first post-check passes robust rest. Without the set-down terms a 5 deg lean swings
+    the shut door open and the post-check escalates."""
     with build_context(MICROWAVE, "A microwave.", category="Microwave") as ctx:
         est = OfflineEstimator().estimate(ctx)
         door = est.overlay.joints["joint_0"]
         state = {j.name: ctx.closed[j.name].q_closed for j in ctx.asset.movable_joints()}
         load = physics.joint_loads(ctx.session, ctx.asset, est.overlay.links, state, est.overlay.scale,
                                    {"joint_0": ctx.subtrees["joint_0"]}, root_rotation=ctx.root_rotation)["joint_0"]
-    assert door.catch_force == 0.0 and "catch" not in door.source
-    assert door.friction >= physics.LEAN_SAFETY * physics.lean_load(load) * 0.999
+    assert "catch" not in door.source and "catch_force" not in door.model_dump()
+    assert door.friction >= set_down.LEAN_SAFETY * set_down.lean_load(load) * 0.999
     first = refine_asset(MICROWAVE, "A microwave.", tmp_path / "with", extras=False, category="Microwave")
     rr = next(m for m in first.report.escalation[0].metrics if m.name == "robust_rest")
     assert rr.passed is True, rr.details.get("failures")
     assert len(first.report.escalation) == 1, [r.reason for r in first.report.escalation]
     assert first.report.readiness["operability"] is True
-    monkeypatch.setattr(physics, "impact_friction", lambda load, prismatic, **_: 0.0)
-    monkeypatch.setattr(physics, "lean_load", lambda load, lean=0.0, **_: 0.0)
+    monkeypatch.setattr(set_down, "landing_friction", lambda *args, **kwargs: (0.0, ""))
+    monkeypatch.setattr(set_down, "lean_load", lambda load, lean=0.0, **_: 0.0)
     without = refine_asset(MICROWAVE, "A microwave.", tmp_path / "without", extras=False, category="Microwave")
     rr = next(m for m in without.report.escalation[0].metrics if m.name == "robust_rest")
     assert rr.passed is False
