@@ -46,6 +46,57 @@ def _quiet():
         os.close(null)
 
 
+def spec_client():
+    """A PyBullet DIRECT client under the SPEC's conventions: time step 1/240 s, gravity -9.81 m/s^2 along z."""
+    import pybullet as pb
+    from pybullet_utils import bullet_client
+
+    with _quiet():
+        c = bullet_client.BulletClient(connection_mode=pb.DIRECT)
+    c.setTimeStep(1.0 / 240.0)
+    c.setGravity(0, 0, -9.81)
+    return c
+
+
+def place_on_plane(c, body: int, plane: int) -> None:
+    """Put ``body`` with its lowest collision point on ``plane`` (z = 0): its lowest AABB point first, then the
+    exact smallest signed distance (docs/design/metrics.md, section 2)."""
+    low = min(c.getAABB(body, i)[0][2] for i in range(-1, c.getNumJoints(body)))
+    pos, orn = c.getBasePositionAndOrientation(body)
+    c.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - low], orn)
+    c.performCollisionDetection()
+    # search up to the top of the object + 5 cm: Bullet's AABBs of rotated hulls are loose
+    top = max(c.getAABB(body, i)[1][2] for i in range(-1, c.getNumJoints(body)))
+    pts = c.getClosestPoints(body, plane, max(top, 0.0) + 0.05)
+    if pts:
+        pos, orn = c.getBasePositionAndOrientation(body)
+        c.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - min(p[8] for p in pts)], orn)
+    c.performCollisionDetection()
+
+
+def load_placed(c, urdf: str | Path, initial_state: dict[str, float]) -> tuple[int, int, dict]:
+    """(plane, body, movable) in client ``c``: a ground plane, the URDF loaded free under the SPEC's flags with its
+    joints at ``initial_state`` and a zero-velocity motor of force = ``<dynamics friction>`` on each, placed on the
+    plane (:func:`place_on_plane`); movable: joint -> (index, prismatic, friction, (lower, upper))."""
+    import pybullet as pb
+
+    plane = c.createMultiBody(0, c.createCollisionShape(pb.GEOM_PLANE))
+    with _quiet():
+        body = c.loadURDF(str(urdf), useFixedBase=False, flags=pb.URDF_USE_SELF_COLLISION
+                          | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | pb.URDF_USE_INERTIA_FROM_FILE)
+    movable = {}
+    for j in range(c.getNumJoints(body)):
+        info = c.getJointInfo(body, j)
+        if info[2] in (pb.JOINT_REVOLUTE, pb.JOINT_PRISMATIC):
+            movable[info[1].decode()] = (j, info[2] == pb.JOINT_PRISMATIC, float(info[7]), (float(info[8]), float(info[9])))
+    for name, (j, _, friction, _) in movable.items():
+        if name in initial_state:
+            c.resetJointState(body, j, float(initial_state[name]), 0.0)
+        c.setJointMotorControl2(body, j, pb.VELOCITY_CONTROL, targetVelocity=0.0, force=friction)
+    place_on_plane(c, body, plane)
+    return plane, body, movable
+
+
 def independent_measure(urdf: str | Path, initial_state: dict[str, float], springs: dict[str, tuple[float, float]] | None = None) -> dict:
     """The SPEC's physical metrics from scratch (docs/design/metrics.md, sections 2-3).
 
@@ -60,38 +111,10 @@ def independent_measure(urdf: str | Path, initial_state: dict[str, float], sprin
     """
     import numpy as np
     import pybullet as pb
-    from pybullet_utils import bullet_client
 
-    with _quiet():
-        c = bullet_client.BulletClient(connection_mode=pb.DIRECT)
+    c = spec_client()
     try:
-        c.setTimeStep(1.0 / 240.0)
-        c.setGravity(0, 0, -9.81)
-        plane = c.createMultiBody(0, c.createCollisionShape(pb.GEOM_PLANE))
-        with _quiet():
-            body = c.loadURDF(str(urdf), useFixedBase=False, flags=pb.URDF_USE_SELF_COLLISION
-                              | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT | pb.URDF_USE_INERTIA_FROM_FILE)
-        movable = {}
-        for j in range(c.getNumJoints(body)):
-            info = c.getJointInfo(body, j)
-            if info[2] in (pb.JOINT_REVOLUTE, pb.JOINT_PRISMATIC):
-                movable[info[1].decode()] = (j, info[2] == pb.JOINT_PRISMATIC, float(info[7]))
-        for name, (j, _, friction) in movable.items():
-            if name in initial_state:
-                c.resetJointState(body, j, float(initial_state[name]), 0.0)
-            c.setJointMotorControl2(body, j, pb.VELOCITY_CONTROL, targetVelocity=0.0, force=friction)
-        # placement: lowest AABB point to z = 0, then exact distance to the plane
-        low = min(c.getAABB(body, i)[0][2] for i in range(-1, c.getNumJoints(body)))
-        pos, orn = c.getBasePositionAndOrientation(body)
-        c.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - low], orn)
-        c.performCollisionDetection()
-        # search up to the top of the object + 5 cm: Bullet's AABBs of rotated hulls are loose
-        top = max(c.getAABB(body, i)[1][2] for i in range(-1, c.getNumJoints(body)))
-        pts = c.getClosestPoints(body, plane, max(top, 0.0) + 0.05)
-        if pts:
-            pos, orn = c.getBasePositionAndOrientation(body)
-            c.resetBasePositionAndOrientation(body, [pos[0], pos[1], pos[2] - min(p[8] for p in pts)], orn)
-        c.performCollisionDetection()
+        plane, body, movable = load_placed(c, urdf, initial_state)
         phi = sum(max(0.0, -p[8]) for p in c.getContactPoints(body, body))
         ground = []
 
@@ -107,7 +130,7 @@ def independent_measure(urdf: str | Path, initial_state: dict[str, float], sprin
             step()
         p0, q0 = c.getBasePositionAndOrientation(body)
         p0, q0 = np.array(p0), np.array(q0)
-        traj = {n: [c.getJointState(body, j)[0]] for n, (j, _, _) in movable.items()}
+        traj = {n: [c.getJointState(body, j)[0]] for n, (j, *_) in movable.items()}
         d_pos = d_ori = 0.0
         finite = True
         for _ in range(480):
@@ -119,10 +142,10 @@ def independent_measure(urdf: str | Path, initial_state: dict[str, float], sprin
                 break
             d_pos = max(d_pos, float(np.linalg.norm(p - p0)))
             d_ori = max(d_ori, 2.0 * math.acos(min(1.0, abs(float(np.dot(q0, q))))))
-            for n, (j, _, _) in movable.items():
+            for n, (j, *_) in movable.items():
                 traj[n].append(c.getJointState(body, j)[0])
         osc = {}
-        for n, (j, prismatic, _) in movable.items():
+        for n, (j, prismatic, *_) in movable.items():
             x = np.array(traj[n])
             s = np.sign(np.diff(x))
             s = s[s != 0]

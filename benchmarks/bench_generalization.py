@@ -63,7 +63,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_operability import guarded, mechanisms  # noqa: E402  (the same case outcome and overlay reading)
+from bench_operability import category_lines, guarded, mechanisms  # noqa: E402  (the same case outcome and overlay reading)
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_MANIFEST = ROOT.parent / "shared" / "datasets" / "partnet_mobility" / "manifest.csv"
@@ -221,7 +221,10 @@ def _measure(res: dict, out: Path, evaluate: bool, open_containers: bool) -> Non
     op = next((m for m in r.metrics if m.name == "operability" and m.engine == "pybullet"), None)
     res["operable"] = None if op is None else op.passed
     res["efforts"] = {} if op is None else dict(op.details.get("efforts") or {})
-    res["mechanisms"] = mechanisms({"joints": json.loads((out / "overlay.json").read_text())["joints"]})
+    res["joints"] = {n: {"friction": d["friction"], "holding": d.get("holding"), "source": d.get("source", "")}
+                     for n, d in json.loads((out / "overlay.json").read_text())["joints"].items()}
+    res["parts"] = res["efforts"]
+    res["mechanisms"] = mechanisms(res)
     if res["mode"] == "none" and any(not why for _, why in res["out_of_band"]):
         res["mode"] = "state_out_of_band"
     if evaluate:
@@ -261,6 +264,9 @@ def operability_table(results: list[dict]) -> list[str]:
     lines.append(f"interaction-ready with a part not operable: {len(ready_bad)}")
     used = Counter(m for c in results for m in set(c.get("mechanisms") or []))
     lines.append("stability mechanisms (cases using each): " + (", ".join(f"{m} {n}" for m, n in sorted(used.items())) or "none"))
+    lines.append("\nper category: ready, hold margin (friction over the largest static load), operating effort over its range")
+    lines += category_lines([c for c in results if c["mode"] != "invalid_input"],
+                            lambda c: c["category"] + (" (generated)" if c["generated"] else ""))
     return lines
 
 

@@ -61,10 +61,7 @@ def _refine(res: dict, xml: Path, out: Path) -> None:
             "type": j.type, "range": [j.limit.lower, j.limit.upper] if j.limit else None,
             "state": report.initial_joint_positions.get(j.name), "friction": j.dynamics.friction if j.dynamics else None,
             "stiffness": dyn.stiffness if dyn else 0.0, "spring_reference": dyn.spring_reference if dyn else None,
-            "catch_force": dyn.catch_force if dyn else 0.0,
-            "mechanism": ("balance" if dyn and "balance of a part" in dyn.source else
-                          "counterbalance" if dyn and "counterbalance" in dyn.source else
-                          "catch" if dyn and dyn.catch_force > 0 else "spring" if dyn and dyn.stiffness > 0 else "-"),
+            "mechanism": dyn.holding.mechanism if dyn is not None and dyn.holding is not None else "-",
             "peak_force_n": e.get("peak_force_n"), "peak_torque_nm": e.get("peak_torque_nm"), "range_n": e.get("range"),
         }
     res["joints"] = joints

@@ -69,25 +69,62 @@ def _measure(res: dict, out: Path) -> None:
     res["failures"] = [] if op is None else list(op.details.get("failures") or [])
     ov = json.loads((out / "overlay.json").read_text())
     res["joints"] = {n: {"friction": d["friction"], "damping": d["damping"], "stiffness": d["stiffness"],
-                         "catch_force": d.get("catch_force", 0.0), "source": d.get("source", "")} for n, d in ov["joints"].items()}
+                         "holding": d.get("holding"), "source": d.get("source", "")} for n, d in ov["joints"].items()}
 
 
 def mechanisms(case: dict) -> list[str]:
-    """The stability mechanisms a case's overlay notes name."""
+    """The holding mechanisms of a case's overlay (each joint's ``holding.mechanism``), and where friction met a
+    hand's cap or the hold floor beyond the range."""
     out = []
     for d in (case.get("joints") or {}).values():
         src = d.get("source", "")
-        if "counterbalance spring" in src:
-            out.append("counterbalance spring")
-        if d.get("catch_force", 0.0) > 0:
-            out.append("catch at the closed end")
+        if (d.get("holding") or {}).get("mechanism"):
+            out.append(d["holding"]["mechanism"])
         if "friction capped at" in src:
             out.append("friction at a hand's cap")
         if "is below what holds the requested state" in src or "hold floor" in src:
             out.append("held beyond the range (not operable)")
-        if d.get("stiffness", 0.0) > 0 and "counterbalance spring" not in src:
-            out.append("return spring")
     return out
+
+
+def hold_margins(case: dict) -> list[float]:
+    """Each joint's hold margin: its friction over the largest static load it was sized to hold (``holding.static_load``:
+    the gravity load around its state, the set-down's lean), where there is one."""
+    out = []
+    for d in (case.get("joints") or {}).values():
+        load = (d.get("holding") or {}).get("static_load") or 0.0
+        if load > 1e-9:
+            out.append(float(d["friction"]) / load)
+    return out
+
+
+def effort_shares(case: dict) -> list[float]:
+    """Each handled part's peak operating force over the top of its range (<= 1: a hand inside its range works it)."""
+    return [p["peak_force_n"] / p["force_range_n"][1] for p in (case.get("parts") or {}).values()
+            if p.get("force_range_n") and p["force_range_n"][1] > 0]
+
+
+def _med(xs: list[float]) -> float:
+    xs = sorted(xs)
+    return xs[len(xs) // 2] if xs else float("nan")
+
+
+def category_lines(results: list[dict], name=lambda c: c["category"]) -> list[str]:
+    """Per category (``name``: a case's row label): ready rate, hold margin (friction over the largest static load:
+    median, least), operating effort over the top of its range (median, most)."""
+    by_cat: dict[str, list[dict]] = defaultdict(list)
+    for c in results:
+        by_cat[name(c)].append(c)
+    lines = [f"{'category':34} {'ready':>11} {'hold margin med/min':>20} {'effort/range med/max':>21}"]
+    for cat in sorted(by_cat):
+        cs = by_cat[cat]
+        ready = sum(1 for c in cs if c.get("mode") == "none")
+        margins = [m for c in cs for m in hold_margins(c)]
+        shares = [x for c in cs for x in effort_shares(c)]
+        lines.append(f"{cat:34} {ready:4d}/{len(cs):<3d}{100.0 * ready / len(cs):4.0f}% "
+                     f"{_med(margins):9.2f} {min(margins, default=float('nan')):9.2f} "
+                     f"{_med(shares):10.2f} {max(shares, default=float('nan')):10.2f}")
+    return lines
 
 
 def report(results: list[dict]) -> str:
@@ -96,6 +133,8 @@ def report(results: list[dict]) -> str:
     ready = [c for c in results if c.get("mode") == "none"]
     op_ready = [c for c in ready if c.get("operable") is not False]
     lines.append(f"cases {len(results)}; interaction-ready {len(ready)}; of those every handled part operable {len(op_ready)}")
+    lines.append("\nper category: ready, hold margin (friction over the largest static load), operating effort over its range")
+    lines += category_lines(results)
     lines.append("\nper category: parts operable / parts; peak force N (median, max) against the range's top")
     by_cat: dict[str, list[dict]] = defaultdict(list)
     for c in results:
