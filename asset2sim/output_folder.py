@@ -395,6 +395,31 @@ def remove_stale_staging(out_dir: Path | str) -> bool:
     return os.path.lexists(staging) and _ours(staging) and _remove_stale(staging)
 
 
+def remove_owned(out_dir: Path | str) -> list[str]:
+    """Remove what asset2sim wrote in the output folder ``out_dir``: the files its completion marker and ownership
+    record list (with their temporary files), then those two, then the folders left empty and ``out_dir`` itself
+    when nothing else is in it. A file the product did not write stays (with the folders holding it); nothing is
+    followed through a symlink. Returns the relative paths of what stays (sorted)."""
+    root = Path(out_dir)
+    if not root.is_dir() or root.is_symlink():
+        return []
+    owned = recorded_files(root)
+    for rel in sorted(owned):
+        _remove_with_temps(root, rel)
+    for name in sorted(_BOOKKEEPING):
+        _remove_with_temps(root, name)
+    _prune_empty(root, owned)
+    left = _entries(root)
+    if not left:
+        with contextlib.suppress(OSError):
+            for folder, dirs, _files in sorted(os.walk(root), key=lambda t: -len(t[0])):
+                with contextlib.suppress(OSError):
+                    if folder != str(root):
+                        os.rmdir(folder)
+            root.rmdir()
+    return left
+
+
 def _write_failed(given: Path, exc: OSError) -> OutputError:
     """``OUTPUT_WRITE_FAILED`` for an OSError."""
     where = exc.filename or given

@@ -24,6 +24,7 @@ CODES = {
     "OUTPUT_CONTAINS_INPUT": "the output folder contains the input folder",
     "OUTPUT_NOT_A_FOLDER": "the output path exists and is not a folder",
     "OUTPUT_NOT_EMPTY": "the output folder holds files asset2sim did not write (use --overwrite)",
+    "OUTPUT_NOT_GENERATED": "a folder the demo generator rebuilds (--asset-out, --dataset) holds files it did not write or that changed since",
     "OUTPUT_RECORD_NOT_A_FILE": "a bookkeeping file (.asset2sim-complete.json, .asset2sim-owned.json) is not a regular file (FIFO, folder, symlink ...)",
     "OUTPUT_WRITE_FAILED": "the output folder cannot be created or written (permissions, read-only, full disk)",
     "OUTPUT_SYMLINK_ESCAPES": "a file would be written through a symlink leading out of the output folder",

@@ -16,7 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from asset2sim import __version__, array_cache, atomic
+from asset2sim import __version__, array_cache, atomic, output_folder
 from asset2sim.flows.catalog import (
     Catalog,
     CatalogError,
@@ -290,7 +290,8 @@ def publish_stage(job: AssetJob, refined: StageRecord, measured: StageRecord | N
         return StageRecord(status="error", error=f"upload of {local} to {job.out_uri} failed: {type(exc).__name__}: {exc}",
                            error_type=type(exc).__name__, failure_mode="crash", seconds=time.perf_counter() - t0,
                            worker=_worker_name())
-    for folder in (local, job.metrics_dir, job.work_dir):
+    output_folder.remove_owned(local)  # the refine's own files; anything else in the folder stays
+    for folder in (job.metrics_dir, job.work_dir):  # the flow's bookkeeping folders (under the run's .work and metrics)
         shutil.rmtree(folder, ignore_errors=True)
     return StageRecord(status="ok", value={"out_uri": job.out_uri, "files": up["files"], "bytes": up["bytes"]},
                        seconds=time.perf_counter() - t0, worker=_worker_name())
