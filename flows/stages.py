@@ -414,7 +414,8 @@ def stage_refine(
         )
     if reference_dir is not None and "reference" in params:
         kwargs["reference"] = Path(reference_dir)
-    result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
+    with output_folder.guarding(Path(out_dir).parent):  # the run's folder: no asset's output through a symlink out of it
+        result = fn(Path(asset_dir), prompt, Path(out_dir), RefineConfig(**config), **kwargs)
     report = RefineReport.model_validate(result.report.model_dump(mode="json"))
     out = RefineOutput(
         report=report,

@@ -93,8 +93,7 @@ def _copy_named(src: Path, base: Path, folder: Path) -> str:
         digest = hashlib.sha256(str(real).encode()).hexdigest()[:8]
         rel = f"assets/{file_names.file_stem(real.stem)}-{digest}{real.suffix.lower()}"
     target = file_names.join_inside(folder, rel)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    atomic.copy_file(real, target)
+    atomic.copy_file(real, target)  # its folders made by the atomic writer, after the output's guard
     return rel
 
 

@@ -24,7 +24,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, Sequence
 
-from asset2sim import atomic
+from asset2sim import atomic, output_folder
 from asset2sim.file_names import UnsafePath, join_inside
 from asset2sim.schemas.realism import ClipPair, JudgeVerdict, PairSet, PairSide
 from asset2sim.apps.realism import pair_set
@@ -299,7 +299,8 @@ def write_judgements(folder: Path | str, verdicts: Sequence[JudgeVerdict]) -> Pa
     table = pa.Table.from_pylist(rows, schema=schema)
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink)
-    return atomic.write_bytes(Path(folder) / JUDGEMENTS_FILE, sink.getvalue().to_pybytes())
+    with output_folder.guarding(folder):
+        return atomic.write_bytes(Path(folder) / JUDGEMENTS_FILE, sink.getvalue().to_pybytes())
 
 
 def read_judgements(folder: Path | str) -> list[JudgeVerdict]:

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asset2sim import atomic, file_names, safexml
+from asset2sim import atomic, file_names, output_folder, safexml
 from asset2sim.engines.loading import read_initial_state
 from asset2sim.output_folder import MJCF_DIR, OVERLAY_NAME, URDF_NAME
 from asset2sim.schemas.overlay import Overlay
@@ -106,10 +106,13 @@ def write_host_mjcf(out_dir: Path | str, source: Path | str, reading: ReadOption
         HostExportError: the output was rescaled; a refined link or joint has no counterpart in the file; the
             written model does not compile or loses a name or a mass.
     """
+    with output_folder.guarding(out_dir):  # nothing through a symlinked mjcf/ or mjcf/host/
+        return _write_host_mjcf(Path(out_dir), Path(source), reading or ReadOptions())
+
+
+def _write_host_mjcf(out_dir: Path, source: Path, reading: ReadOptions) -> HostExport:
     import mujoco
 
-    out_dir, source = Path(out_dir), Path(source)
-    reading = reading or ReadOptions()
     overlay = Overlay.model_validate(json.loads((out_dir / OVERLAY_NAME).read_text()))
     if not math.isclose(overlay.scale, 1.0, rel_tol=0.0, abs_tol=1e-12):
         raise HostExportError(f"{source}: the object was rescaled (x{overlay.scale:.4g}); its host file keeps the host's sizes, "

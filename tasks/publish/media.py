@@ -18,8 +18,9 @@ import numpy as np
 
 from asset2sim import atomic, output_folder
 from asset2sim.engines.quiet import quiet_stdout
+from asset2sim.inert import one_line
 from asset2sim.output_folder import CLIPS_DIR, MARKER_NAME, RECORD_NAME, REPORT_HTML_NAME, URDF_NAME, VIEWS_DIR, VOLATILE
-from asset2sim.output_paths import OutputError
+from asset2sim.output_paths import OutputError, raise_refusal
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
 from asset2sim.tasks.geometry import render
@@ -83,7 +84,8 @@ def make_media(out_dir: Path | str, *, reference: Path | str | None = None, clip
             views = output_views(out_dir, dict(report.initial_joint_positions))
             out["views"] = str(out_dir / VIEWS_DIR)
         except Exception as exc:  # a renderer unavailable: the report without its renders
-            report.notes.append(f"renders failed: {exc}")
+            raise_refusal(exc)  # but never a write the output guard refused
+            report.notes.append(f"renders failed: {one_line(exc)}")
         paths = evaluate.evaluate_refined(out_dir, report, reference=reference, views=views,
                                           views_state=dict(report.initial_joint_positions), checks=list(report.metrics),
                                           shown=out_dir, clips=clips, html=True, evaluation_json=False)
