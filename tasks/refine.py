@@ -40,6 +40,7 @@ from asset2sim.tasks.publish.contract import (MARKER_NAME, REPORT_NAME, is_compl
 from asset2sim.tasks.state import balance, ground_clearance, pose, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
+from asset2sim.inert import one_line
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
@@ -301,7 +302,7 @@ def _steadier_state(ctx: EstimationContext, est, config: RefineConfig, ws: Works
     try:
         fractions, before, after = balance.steadiest_fractions(ws.source(att.candidate), att.overlay, att.state, att.closed_out, intervals)
     except Exception as exc:  # a measurement that fails leaves the attempt as it was
-        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {exc})")
+        log.say("stability", f"steadier opening not measured ({type(exc).__name__}: {one_line(exc)})")
         return None
     why = "unstable" if not att.check.stable else "toppled by a robust-rest disturbance"
     if fractions and after.stable:
@@ -391,7 +392,9 @@ def _synthesize(ctx: EstimationContext, est, config: RefineConfig, log: StageLog
     try:
         result = est.estimate(ctx)
     except Exception as exc:
-        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {exc}", "estimator_failure", ["ESTIMATOR_FAILED"]) from exc
+        code = getattr(exc, "code", None)  # a model call's fault by what happened (MODEL_REPLY_INVALID ...)
+        raise RefineError(f"{asset.asset_id}: estimator {config.estimator!r} failed: {one_line(exc, 600)}", "estimator_failure",
+                          ["ESTIMATOR_FAILED", *([code] if isinstance(code, str) and code.startswith("MODEL_") else [])]) from exc
     bands = dict(result.bands)
     log.lap("synthesize")
     try:

@@ -34,6 +34,7 @@ from asset2sim.tasks.synthesize.llm_client import LLMClient
 from asset2sim.tasks.synthesize.llm_config import ClientConfig
 from asset2sim.tasks.synthesize.llm_errors import ModelCallError
 from asset2sim.tasks.synthesize.llm_usage import Usage
+from asset2sim.inert import one_line
 
 #: Version of :data:`RUBRIC` and of the message layout (a new version is a new cache key anyway).
 RUBRIC_VERSION = "1"
@@ -155,7 +156,7 @@ def ask_once(client: LLMClient, messages: list[dict[str, Any]]) -> tuple[Reading
     try:
         comp = client.complete(messages, schema=REPLY_SCHEMA, schema_name="realism_verdict")
     except ModelCallError as exc:
-        return Reading(None, f"call failed: {exc}"), Usage(attempts=exc.attempts)
+        return Reading(None, f"call failed: {one_line(exc)}"), Usage(attempts=exc.attempts)
     reading = read_reply(comp.content, finish_reason=comp.finish_reason, refusal=comp.refusal)
     if reading.choice is not None and not comp.cached:
         client.cache_put(comp.key, comp)
