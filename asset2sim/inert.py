@@ -11,6 +11,8 @@ messages that quote them are data. Wherever they are shown they pass through the
   (a name ``[/bold]`` is printed, not parsed);
 - :func:`html_text`: HTML text or an attribute value (``html.escape`` with quotes; control characters as in
   :func:`terminal`);
+- :func:`markdown_text`: Markdown text (``audit.md``): HTML escaped (Markdown viewers render raw HTML) and the
+  characters of Markdown's syntax (``\ ` * _ [ ] |``) backslash-escaped, so a name stays one table cell of text;
 - :func:`plot_text`: a matplotlib label: ``$`` escaped, so a name is never read as mathtext (the figures also
   draw with ``text.parse_math`` off, :data:`asset2sim.tasks.evaluation.plots.STYLE`);
 - :func:`one_line`: a message stored or shown in one sentence (a note, ``report.json``, an error line): its first
@@ -24,7 +26,7 @@ from __future__ import annotations
 import html
 import re
 
-__all__ = ["MAX_LINE", "MAX_NAME", "html_text", "markup", "one_line", "plot_text", "shorten", "terminal"]
+__all__ = ["MAX_LINE", "MAX_NAME", "html_text", "markdown_text", "markup", "one_line", "plot_text", "shorten", "terminal"]
 
 #: Characters of a one-line message (:func:`one_line`).
 MAX_LINE = 300
@@ -68,6 +70,15 @@ def html_text(text: object) -> str:
     """``text`` as HTML text or a quoted attribute value: control characters escaped as on a terminal, then
     ``&``, ``<``, ``>``, ``"`` and ``'`` as character references."""
     return html.escape(terminal(text), quote=True)
+
+
+_MARKDOWN = re.compile(r"([\\`*_\[\]|])")
+
+
+def markdown_text(text: object) -> str:
+    """``text`` as Markdown text: control characters and newlines escaped as on a terminal, ``&``, ``<`` and ``>`` as
+    character references, and ``\ ` * _ [ ] |`` backslash-escaped."""
+    return _MARKDOWN.sub(r"\\\1", html.escape(terminal(text, newlines=False), quote=False))
 
 
 def plot_text(text: object) -> str:

@@ -17,6 +17,7 @@ from asset2sim import atomic
 from asset2sim.flows.catalog import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
+from asset2sim.inert import plot_text, shorten
 
 #: Columns of the run's summary table, in order.
 SUMMARY_COLUMNS = (
@@ -62,10 +63,10 @@ def failure_mode_figure(df, title: str = ""):
         ax.bar(x, vals, bottom=bottom, label=m, color=colors.get(m))
         bottom = [b + v for b, v in zip(bottom, vals)]
     ax.set_xticks(x)
-    ax.set_xticklabels([str(i) for i in table.index], rotation=30, ha="right", fontsize=8)
+    ax.set_xticklabels([plot_text(shorten(i, 40)) for i in table.index], rotation=30, ha="right", fontsize=8)  # names: never mathtext
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("assets")
-    ax.set_title(title or "failure modes by category")
+    ax.set_title(plot_text(title) if title else "failure modes by category")
     if modes:
         ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()

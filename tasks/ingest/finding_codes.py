@@ -73,6 +73,7 @@ CODES: dict[str, CodeInfo] = {
     "LINK_NAME_MISSING": _c("error", "structure", "a <link> without name"),
     "LINK_NAME_DUPLICATE": _c("error", "structure", "two links with the same name"),
     "LINK_NAME_NOT_A_FILE_NAME": _c("warning", "structure", "a link name with path separators, '..', control or non-ASCII characters or over 64 characters: files made for it get a safe name (asset2sim.file_names)"),
+    "NAME_TOO_LONG": _c("error", "structure", "a link, joint or robot name longer than 256 characters (PyBullet's URDF importer ends the process on a joint name of about 2,000)"),
     "LINK_FILE_NAMES_CLASH": _c("error", "structure", "two link names that give their files one safe name (only a crafted asset can)"),
     "JOINT_NAME_MISSING": _c("error", "structure", "a <joint> without name"),
     "JOINT_NAME_DUPLICATE": _c("error", "structure", "two joints with the same name"),

@@ -13,6 +13,7 @@ from typing import Any, Iterable, Literal, Mapping
 from pydantic import BaseModel, ConfigDict, Field
 
 from asset2sim import safexml
+from asset2sim.urdf import MAX_NAME_CHARS
 from asset2sim.schemas.overlay import SCALE_RANGE, ValidationIssue
 from asset2sim.prior_tables import MAX_PRIOR_DIM_M, load_priors
 from asset2sim.tasks.ingest.finding_codes import CODES, MESH_USE_DEPENDENT, Severity
@@ -22,7 +23,7 @@ MeshUse = Literal["collision", "mass", "visual"]
 
 __all__ = [
     "Action", "CODES", "DEFAULT_POLICY", "Finding", "IMAGE_EXTENSIONS", "MAX_COORDINATE", "MAX_LINKS",
-    "MAX_MOVABLE_JOINTS", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
+    "MAX_MOVABLE_JOINTS", "MAX_NAME_CHARS", "MAX_REVOLUTE_LIMIT", "MAX_TEXTURE_BYTES", "MAX_TEXTURE_PIXELS", "MAX_TOTAL_TEXTURE_BYTES",
     "MAX_TOTAL_TEXTURE_PIXELS", "MAX_TOTAL_FACES", "MESH_EXTENSIONS", "MESH_USE_DEPENDENT", "MOVABLE_TYPES", "MeshUse",
     "Recorder", "SEMANTIC_KINDS", "SIMULATOR_MESH_EXTENSIONS", "Severity", "ValidationPolicy", "ValidationResult",
     "asset_size_range", "errors", "has_errors",
@@ -36,6 +37,9 @@ SIMULATOR_MESH_EXTENSIONS = frozenset({".obj", ".stl", ".dae"})
 MAX_LINKS = 128
 #: Movable joints per asset (refine's time grows about as N^2; docs/design/validation.md "Joint cap").
 MAX_MOVABLE_JOINTS = 32
+#: Longest link, joint or robot name (characters; ``asset2sim.urdf.MAX_NAME_CHARS``, re-exported): PyBullet's URDF
+#: importer ends the process (exit 1, nothing said; a segmentation fault in ``evaluate``) on a joint name of about
+#: 2,000 characters and cannot load a 10,000-character link name; real assets' names are far shorter.
 #: |revolute limit| above this (rad, two turns) cannot be meant as a stop.
 MAX_REVOLUTE_LIMIT = 4.0 * math.pi
 #: Total triangles per asset (refine's time and memory grow linearly; docs/design/validation.md "Face cap").
