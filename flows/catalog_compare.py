@@ -24,6 +24,7 @@ from asset2sim import atomic
 from asset2sim.flows.catalog import RegressionSettings, ResultCatalog
 from asset2sim.tasks.check.verdict import MISSING_FAILURE_MODE
 from asset2sim.inert import plot_text
+from asset2sim import library_dirs
 
 #: Metric columns compared between runs: column -> (unit, True when higher is better).
 COMPARED_METRICS: dict[str, tuple[str, bool]] = {
@@ -266,6 +267,7 @@ def pass_rate_figure(history, current_run: str | None = None, title: str = ""):
     """A matplotlib Figure: the pass rates per run (all checks, rest
     stability, oscillation; fractions) in run order, ``current_run`` marked.
     ``history``: :func:`asset2sim.flows.queries.pass_rates_over_time`."""
+    library_dirs.configure()  # before matplotlib's first import
     import matplotlib
 
     matplotlib.use("Agg", force=False)

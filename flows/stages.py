@@ -610,6 +610,7 @@ def prepare_prefect_environment(project_root: Path | str) -> dict[str, str]:
         "PREFECT_HOME": str(Path(project_root) / ".prefect"),
         "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         "DO_NOT_TRACK": "1",
+        "MLFLOW_DISABLE_TELEMETRY": "true",  # no ~/.config/mlflow/telemetry.json, no usage sent
         # a first start migrates a fresh SQLite database: slower than Prefect's 20 s on a busy machine
         "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "180",
     }

@@ -18,6 +18,7 @@ from asset2sim.flows.catalog import TrackingSettings
 from asset2sim.flows.queries import failure_modes, run_summary
 from asset2sim.schemas.report import FAILURE_MODES
 from asset2sim.inert import plot_text, shorten
+from asset2sim import library_dirs
 
 #: Columns of the run's summary table, in order.
 SUMMARY_COLUMNS = (
@@ -40,6 +41,7 @@ def summary_table(df):
 
 def failure_mode_figure(df, title: str = ""):
     """A matplotlib Figure: stacked bars of failure modes per category (assets; ``none`` green)."""
+    library_dirs.configure()  # before matplotlib's first import
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -157,6 +159,7 @@ def log_flow_run(
         ImportError: MLflow is not installed (``pip install asset2sim[pipeline]``).
         mlflow.exceptions.MlflowException: the store refused a write.
     """
+    library_dirs.configure()  # before MLflow's first import: no telemetry file or report
     from mlflow.entities import Metric, Param, RunTag
     from mlflow.tracking import MlflowClient
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from asset2sim.frames import quat_angle
 from asset2sim.tasks.check.probes import reached_fraction
+from asset2sim import library_dirs
 
 SVG_MIME = "image/svg+xml"  # the media type of every figure here (``data:`` URIs)
 #: Pixels per inch of the figures (their sizes are given in px).
@@ -39,6 +40,7 @@ def styled(draw):
 
     @functools.wraps(draw)
     def run(*args, **kwargs):
+        library_dirs.configure()  # before matplotlib's first import: its folders in asset2sim's cache, not ~/.config
         import matplotlib
 
         with _DRAWING, matplotlib.rc_context(STYLE):
