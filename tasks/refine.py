@@ -13,7 +13,7 @@ from pathlib import Path
 
 from asset2sim import array_cache, atomic, output_folder
 from asset2sim.schemas.asset import AssetDescription, LinkGeometry
-from asset2sim.schemas.config import RefineConfig
+from asset2sim.schemas.config import MAX_REFINE_STEPS, RefineConfig
 from asset2sim.schemas.overlay import Overlay
 from asset2sim.schemas.report import RefineReport
 from asset2sim.schemas.request import RequestSpec
@@ -41,6 +41,7 @@ from asset2sim.tasks.state import balance, ground_clearance, pose, stability
 from asset2sim.tasks.synthesize import backends, estimate, estimator, validate_overlay
 from asset2sim.tasks.synthesize.context import EstimationContext, build_context
 from asset2sim.inert import one_line
+from asset2sim.engines.step_budget import StepBudgetExceeded, step_budget
 
 __all__ = ["MARKER_NAME", "REPORT_NAME", "Progress", "RefineError", "RefineResult", "is_complete", "refine_asset", "request_notes", "run_hash"]
 
@@ -125,7 +126,8 @@ def refine_asset(
     owner = _start_output(asset, out_dir, overwrite)
     work = owner.write_path(out_dir)  # out_dir, or the staging folder that replaces a complete earlier output
     staged_input = asset.staged_from.parent if asset.staged_from is not None else None  # an MJCF / USD file's own folder
-    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference):  # no cache entry in the input or output
+    # no cache entry in the input or output; every simulated step of every phase counted against one cap
+    with array_cache.guard(asset.source_dir, staged_input, out_dir, owner.root, reference), step_budget(MAX_REFINE_STEPS):
         try:
             _announce_extract(asset, findings, log)
             cache = analyze.MeshCache()
@@ -146,6 +148,9 @@ def refine_asset(
             extra_paths = extra_outputs.write_extras(work, report, att, log, reference, shown=out_dir, clips=config.clips, media=media) if extras else {}
             extra_paths.update(host)
             write_completion_marker(owner.root, asset.input_hash, chash, owner=owner)  # last, once every file exists
+        except StepBudgetExceeded as exc:
+            owner.abandon()
+            raise RefineError(f"{asset.asset_id}: {exc}", "timeout", [exc.code]) from None
         except BaseException:
             owner.abandon()
             raise
