@@ -25,20 +25,25 @@ checked; its warnings are collected, never written to ``MUJOCO_LOG.TXT``.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import json
 import os
 import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from asset2sim import atomic, safexml
 from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
 from asset2sim.tasks.ingest import host_conventions
-from asset2sim.tasks.ingest.staged import StagingError, input_tree
+from asset2sim.tasks.ingest.staged import SOURCE_DIR, StagingError, input_tree, read_of
 
-__all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "compile_mjcf", "gather_mjcf"]
+__all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "OpenedMjcf", "compile_mjcf", "gather_mjcf",
+           "opened_mjcf", "staged_sources"]
 
 #: Includes per model (MuJoCo refuses a repeated include; a chain deeper than this is refused too).
 MAX_INCLUDES = 256
@@ -46,6 +51,8 @@ MAX_INCLUDES = 256
 MAX_INCLUDE_DEPTH = 16
 #: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
 MAX_TOTAL_BYTES = 1024 * 1024 * 1024
+#: The manifest of a snapshot of the sources (:meth:`MjcfSources.snapshot`).
+SNAPSHOT_NAME = "sources.json"
 #: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
 _MESHDIR_TAGS = frozenset({"mesh", "skin", "hfield"})
 _TEXDIR_TAGS = frozenset({"texture"})
@@ -65,6 +72,42 @@ class MjcfSources:
     main: str
     files: dict[str, bytes]
     real: dict[str, Path]
+
+    def snapshot(self, folder: Path | str, **extra: str | None) -> Path:
+        """Write these sources into ``folder`` (a staged asset's own ``source/``: :func:`asset2sim.tasks.ingest.staged.stage`
+        calls this), so a later stage in another process compiles from the bytes read, never from the input's paths:
+        each file as ``files/<n>`` and ``sources.json`` (the paths, each key's file, real path and SHA-256, and
+        ``extra``: the angle unit it was read with). Returns ``folder``. Raises OSError."""
+        folder = Path(folder)
+        entries = {}
+        for n, (key, data) in enumerate(sorted(self.files.items())):
+            atomic.write_bytes(folder / "files" / str(n), data, durable=False)
+            entries[key] = {"file": str(n), "real": str(self.real[key]), "sha256": hashlib.sha256(data).hexdigest()}
+        atomic.write_json(folder / SNAPSHOT_NAME, {"format": 1, "path": str(self.path), "tree": str(self.tree), "main": self.main,
+                                                   "files": entries, **extra}, durable=False)
+        return folder
+
+    @classmethod
+    def from_snapshot(cls, folder: Path | str) -> tuple["MjcfSources", dict]:
+        """(the sources, the manifest's other fields) of a snapshot written by :meth:`snapshot`, each file checked
+        against its SHA-256.
+
+        Raises:
+            OSError: no snapshot there, or a file missing or not a regular file.
+            ValueError: the manifest is not one, or a file changed since.
+        """
+        folder = Path(folder)
+        doc = json.loads(atomic.read_regular(folder / SNAPSHOT_NAME, 1 << 24).decode("utf-8"))
+        if not isinstance(doc, dict) or doc.get("format") != 1 or not isinstance(doc.get("files"), dict):
+            raise ValueError(f"{folder / SNAPSHOT_NAME}: not a snapshot of MJCF sources")
+        files, real = {}, {}
+        for key, e in doc["files"].items():
+            data = atomic.read_regular(folder / "files" / str(int(e["file"])), DEFAULT_MAX_BYTES)
+            if hashlib.sha256(data).hexdigest() != e["sha256"]:
+                raise ValueError(f"{folder}: the copy of {key} changed since it was read")
+            files[key], real[key] = data, Path(e["real"])
+        extra = {k: v for k, v in doc.items() if k not in ("format", "path", "tree", "main", "files")}
+        return cls(path=Path(doc["path"]), tree=Path(doc["tree"]), main=doc["main"], files=files, real=real), extra
 
 
 def _refuse(code: str, message: str) -> StagingError:
@@ -205,27 +248,26 @@ def _mirrored(tmp: str, path: str) -> str:
     return os.path.join(tmp, os.path.splitdrive(path)[1].lstrip("/\\"))
 
 
-def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
-    """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources``, its angles read in degrees (``degree``
-    True) or radians (False) whatever its ``<compiler angle>`` says (None: as it says): MuJoCo reads a private temporary
-    copy holding only those files, each at its absolute path mirrored under the copy's folder (a file attribute or
-    folder written absolute, in a folder the user allowed, is pointed at its copy while compiling, then given back
-    as written); the folder is removed before returning (the model holds what it needs).
+class OpenedMjcf:
+    """An MJCF model MuJoCo read from the private copy of its checked sources (:func:`opened_mjcf`): ``spec`` (the
+    ``MjSpec``), ``model`` (compiled when opened), ``warnings`` (MuJoCo's, as notes); :meth:`compile` compiles the
+    spec again (after edits) from the same copy, while the block that opened it runs."""
 
-    Raises:
-        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
-        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
-    """
-    import_extra("mujoco", "reading MJCF")  # MissingExtra naming the extra when MuJoCo is not installed
-    mujoco = load_mujoco()
-    with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
-        for key, data in sources.files.items():
-            atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
+    def __init__(self, spec, folder: str, sources: MjcfSources, warnings: list[str]):
+        self.spec, self.folder, self.sources, self.warnings = spec, folder, sources, warnings
+        self.model = None
+
+    def compile(self):
+        """The spec compiled from the private copy (a file attribute or folder written absolute, in a folder the user
+        allowed, pointed at its copy while compiling, then given back as written); returns the ``MjModel``.
+
+        Raises:
+            StagingError: MuJoCo cannot compile it (its message, naming the file).
+        """
+        mujoco = load_mujoco()
+        spec, tmp = self.spec, self.folder
         try:
             with mujoco_messages() as caught:
-                spec = mujoco.MjSpec.from_file(_mirrored(tmp, sources.main))
-                if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
-                    spec.compiler.degree = degree
                 written = []  # (object, attribute, value as written) pointed at the copy while compiling
                 for obj, attr in ((spec, "meshdir"), (spec, "texturedir"),
                                   *((item, "file") for items in (spec.meshes, spec.textures, spec.hfields, spec.skins)
@@ -239,7 +281,67 @@ def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
                 finally:
                     for obj, attr, value in written:
                         setattr(obj, attr, value)
-        except Exception as exc:  # mujoco raises ValueError with the parser's or compiler's message
-            msg = str(exc).replace(tmp + os.sep, "/").replace(tmp, ".")
-            raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {msg}") from exc
-    return spec, model, [f"MuJoCo: {w}" for w in caught]
+        except Exception as exc:  # mujoco raises ValueError with the compiler's message
+            raise StagingError(f"{self.sources.path}: MuJoCo cannot read this MJCF: {_shown(exc, tmp)}") from exc
+        self.warnings.extend(f"MuJoCo: {w}" for w in caught)
+        return model
+
+
+def _shown(exc: BaseException, tmp: str) -> str:
+    return str(exc).replace(tmp + os.sep, "/").replace(tmp, ".")
+
+
+@contextlib.contextmanager
+def opened_mjcf(sources: MjcfSources, degree: bool | None = None) -> Iterator[OpenedMjcf]:
+    """The model of checked ``sources`` read by MuJoCo from a private temporary copy holding only those files (each at
+    its absolute path mirrored under the copy's folder), its angles read in degrees (``degree`` True) or radians
+    (False) whatever its ``<compiler angle>`` says (None: as it says), compiled once; the copy lives while the block
+    runs (edits to the spec compile again from it, :meth:`OpenedMjcf.compile`) and is removed after. Nothing is read
+    from the input's own paths.
+
+    Raises:
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
+        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
+    """
+    import_extra("mujoco", "reading MJCF")  # MissingExtra naming the extra when MuJoCo is not installed
+    mujoco = load_mujoco()
+    with tempfile.TemporaryDirectory(prefix="asset2sim-mjcf-") as tmp:
+        for key, data in sources.files.items():
+            atomic.write_bytes(_mirrored(tmp, key), data, durable=False)
+        try:
+            with mujoco_messages() as caught:
+                spec = mujoco.MjSpec.from_file(_mirrored(tmp, sources.main))
+        except Exception as exc:  # mujoco raises ValueError with the parser's message
+            raise StagingError(f"{sources.path}: MuJoCo cannot read this MJCF: {_shown(exc, tmp)}") from exc
+        if degree is not None:  # MuJoCo converts angles when compiling (range, euler, axisangle, ref, springref)
+            spec.compiler.degree = degree
+        opened = OpenedMjcf(spec, tmp, sources, [f"MuJoCo: {w}" for w in caught])
+        opened.model = opened.compile()
+        yield opened
+
+
+def compile_mjcf(sources: MjcfSources, degree: bool | None = None):
+    """(spec, compiled ``MjModel``, MuJoCo's warnings) of checked ``sources`` (:func:`opened_mjcf`); the private copy
+    is removed before returning (the model holds what it needs; compile the spec again inside :func:`opened_mjcf`).
+
+    Raises:
+        MissingExtra (an ImportError): MuJoCo is not installed (the message names the extra, ``[mujoco]``).
+        StagingError: MuJoCo cannot read or compile the model (its message, naming the file).
+    """
+    with opened_mjcf(sources, degree) as opened:
+        return opened.spec, opened.model, list(opened.warnings)
+
+
+def staged_sources(urdf_path: Path | str) -> tuple[MjcfSources, dict] | None:
+    """The checked sources an MJCF input was staged from (the staged URDF ``urdf_path``: this process's read when it
+    is still held, :func:`asset2sim.tasks.ingest.staged.read_of`, else the snapshot in the staged folder), and what
+    was recorded with them (``angle``: the unit its angles were read in); None when neither is at hand (not an
+    MJCF input, or its staged folder is gone). Every later stage (the host write-back, the audit's patch) compiles
+    from these, never from the input's paths."""
+    read = read_of(urdf_path)
+    if read is not None and isinstance(read.sources, MjcfSources):
+        return read.sources, {"angle": read.angle_unit}
+    try:
+        return MjcfSources.from_snapshot(Path(urdf_path).parent / SOURCE_DIR)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None

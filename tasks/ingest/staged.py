@@ -22,6 +22,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +34,9 @@ from asset2sim.urdf import UrdfInertial, UrdfLink, UrdfMaterial, UrdfModel, writ
 STAGED_URDF = "model.urdf"
 #: Folder (inside the staged folder) of the meshes written for the model.
 MESH_DIR = "meshes"
+#: Folder (inside the staged folder) of the input's own files as the reader policy read them (an MJCF input's
+#: snapshot: :meth:`asset2sim.tasks.ingest.mjcf_files.MjcfSources.snapshot`), for the stages after extraction.
+SOURCE_DIR = "source"
 #: File suffixes read as MJCF and as OpenUSD.
 MJCF_SUFFIXES = (".xml", ".mjcf")
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -91,6 +95,11 @@ class ReadAsset:
     prims: dict[str, str] = field(default_factory=dict)
     frames: dict[str, np.ndarray] = field(default_factory=dict)
     initial_state: dict[str, float] = field(default_factory=dict)
+    #: the input's files as the reader policy read them (MJCF: ``MjcfSources``, the bytes), kept so that no later
+    #: stage reads the input's paths again; None for other formats
+    sources: Any = None
+    #: the angle unit the file was read in (MJCF: ``radian`` or ``degree``), None for other formats
+    angle_unit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -233,6 +242,8 @@ def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:
         except StagingError as exc:
             raise StagingError(f"{read.source}: {rel}: {exc}") from exc
         atomic.write_bytes(file_names.join_inside(folder, rel), data)
+    if read.sources is not None and hasattr(read.sources, "snapshot"):  # the bytes read, for the stages after extraction
+        read.sources.snapshot(folder / SOURCE_DIR, angle=read.angle_unit)
     urdf_path = folder / STAGED_URDF
     comment = f" staged by asset2sim from {read.format.upper()} {read.source.name} "
     atomic.write_bytes(urdf_path, write_urdf(read.model, comment=comment))

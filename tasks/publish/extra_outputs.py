@@ -24,7 +24,7 @@ from asset2sim.tasks.check.attempt import Attempt
 from asset2sim.tasks.check.verdict import combine_verdict
 from asset2sim.tasks.evaluation import evaluate
 from asset2sim.tasks.evaluation.clips import CLIPS_JSON
-from asset2sim.tasks.ingest import staged
+from asset2sim.tasks.ingest import mjcf_files, staged
 from asset2sim.tasks.ingest.host_conventions import ReadOptions
 from asset2sim.tasks.publish import export_usd, host_mjcf, host_usd
 from asset2sim.tasks.publish import media as media_phase
@@ -61,16 +61,22 @@ def host_files(out_dir: Path, asset: AssetDescription, config: RefineConfig, rep
     source = asset.staged_from
     fmt = staged.input_format(source) if source is not None else None
     if fmt == "mjcf":
-        return _host_mjcf(out_dir, source, config, report)
+        return _host_mjcf(out_dir, source, asset.urdf_path, config, report)
     if fmt == "usd":
         return _host_usd(out_dir, source, report)
     return {}
 
 
-def _host_mjcf(out_dir: Path, source: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+def _host_mjcf(out_dir: Path, source: Path, staged_urdf: Path, config: RefineConfig, report: RefineReport) -> dict[str, str]:
+    read = mjcf_files.staged_sources(staged_urdf)  # the bytes the reader policy read when the refine began
+    if read is None:
+        report.notes.append(f"host MJCF not written: the files of {source.name} as read when the refine began are no "
+                            "longer at hand (its staged folder is gone); the input is not read a second time")
+        return {}
     try:
         with quiet_stdout():
-            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle))
+            done = host_mjcf.write_host_mjcf(out_dir, source, ReadOptions(body=config.body, mjcf_angle=config.mjcf.angle),
+                                             sources=read[0], angle=read[1].get("angle"))
     except Exception as exc:  # the host file must not lose the refined asset
         raise_if_unwritable(exc, out_dir)
         report.notes.append(f"host MJCF not written: {one_line(exc)}")
