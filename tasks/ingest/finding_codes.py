@@ -39,7 +39,7 @@ CODES: dict[str, CodeInfo] = {
     # files an MJCF or USD input names, and the input file itself (asset2sim.input_files)
     "INPUT_NOT_FOUND": _c("error", "files", "a file the input names (an MJCF include, mesh or texture, a USD layer) does not exist"),
     "INPUT_NOT_REGULAR_FILE": _c("error", "files", "the input file, or a file it names, is a FIFO, device (/dev/zero), socket or folder: refused without reading it"),
-    "INPUT_TOO_LARGE": _c("error", "files", "the input file, or a file it names, is above the size cap (64 MiB per file, 1 GiB per MJCF model): not read"),
+    "INPUT_TOO_LARGE": _c("error", "files", "the input file, or a file it names, is above the size cap (64 MiB per file, 1 GiB per MJCF model), or what MuJoCo or the USD reader would build is above its cap (every element naming a file counted: 1 GiB, 1,000,000 triangles): not read"),
     "INPUT_OUTSIDE_TREE": _c("error", "files", "the MJCF or USD file given is a symlink leading out of its folder"),
     "INPUT_UNREADABLE": _c("error", "files", "the operating system refuses to open or read a file the input names (permissions)"),
     "MJCF_PATH_ESCAPES": _c("error", "files", "an MJCF include, mesh, texture, height field, skin or model file, or meshdir / texturedir / assetdir, that is absolute, a URI, leaves the file's folder through ../ or a symlink"),
@@ -130,7 +130,7 @@ CODES: dict[str, CodeInfo] = {
     "MESH_FORMAT_UNSUPPORTED": _c("error", "mesh_paths", "a mesh format refine cannot load (OFF and others; PyBullet reads OBJ, STL, DAE; GLB, glTF and PLY are converted to OBJ)"),
     "MESH_UNREADABLE": _c("error", "mesh_paths", "the mesh cannot be opened (permissions)"),
     "MESH_TOO_LARGE": _c("error", "mesh_contents", "mesh file above the byte cap"),
-    "MESH_TOO_MANY_FACES": _c("error", "mesh_contents", "mesh above the face-count cap"),
+    "MESH_TOO_MANY_FACES": _c("error", "mesh_contents", "mesh above the face-count cap, or the asset's meshes above it together (distinct files: 1,000,000 triangles; every <mesh> reference counted, as the simulators build them: 2,000,000)"),
     "MESH_MALFORMED": _c("error", "mesh_contents", "the mesh cannot be parsed"),
     "MESH_NO_FACES": _c("error", "mesh_contents", "the mesh has no face"),
     "MESH_NONFINITE_VERTEX": _c("error", "mesh_contents", "NaN or infinite vertex coordinates"),

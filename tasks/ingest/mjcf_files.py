@@ -12,7 +12,9 @@ cap; it is then read without blocking (:mod:`asset2sim.input_files`). A refusal 
 
 - ``MJCF_PATH_ESCAPES``: an absolute path, a URI, ``../`` leaving the tree or a symlink out of it (in a file
   attribute, an include or ``meshdir`` / ``texturedir`` / ``assetdir``);
-- ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE``,
+- ``INPUT_NOT_FOUND``, ``INPUT_NOT_REGULAR_FILE`` (a FIFO, device, socket or folder), ``INPUT_TOO_LARGE`` (a file
+  above its cap, or what MuJoCo would build above :data:`MAX_TOTAL_BYTES` or :data:`MAX_BUILT_FACES`, counting every
+  element that names a file: one mesh named 60 times is built 60 times),
   ``INPUT_OUTSIDE_TREE`` (the model file itself a symlink out of its folder), ``INPUT_UNREADABLE``;
 - ``MJCF_INCLUDE_INVALID``: an include of itself (a loop), without a file, more than :data:`MAX_INCLUDES`
   includes or a chain deeper than :data:`MAX_INCLUDE_DEPTH`;
@@ -51,6 +53,10 @@ MAX_INCLUDES = 256
 MAX_INCLUDE_DEPTH = 16
 #: Bytes of every file a model names together (each file: :data:`asset2sim.input_files.DEFAULT_MAX_BYTES`).
 MAX_TOTAL_BYTES = 1024 * 1024 * 1024
+#: Triangles MuJoCo builds for one model, every ``<mesh>`` element counted (one file named by 60 elements is built 60
+#: times): MuJoCo's compiler took 1.6 GB for 2,000,000 (10 references of a 200,000-face STL, about 800 bytes a face)
+#: and 4.5 GB for 6,000,000; this keeps a refine of an MJCF input under 2 GB.
+MAX_BUILT_FACES = 1_000_000
 #: The manifest of a snapshot of the sources (:meth:`MjcfSources.snapshot`).
 SNAPSHOT_NAME = "sources.json"
 #: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
@@ -213,11 +219,44 @@ class _Gather:
                 dirs[attr] = _resolve(value, self.main_dir, self.tree, self.path, f"<compiler {attr}>") if value else self.main_dir
         meshdir = dirs.get("meshdir", dirs.get("assetdir", self.main_dir))
         texdir = dirs.get("texturedir", dirs.get("assetdir", self.main_dir))
+        built_bytes = built_faces = 0
+        faces_of: dict[str, int] = {}
         for tag, attr, value, where in self.refs:
             base = meshdir if tag in _MESHDIR_TAGS else texdir if tag in _TEXDIR_TAGS else self.main_dir
             key = _resolve(value, base, self.tree, self.path, f"<{tag} {attr}> in {where}")
-            self.read(key, f"<{tag} {attr}={value!r}>")
+            data = self.read(key, f"<{tag} {attr}={value!r}>")
+            built_bytes += len(data)  # every element that names the file: MuJoCo builds each
+            if tag == "mesh":
+                if key not in faces_of:
+                    faces_of[key] = mesh_faces(data, key)
+                built_faces += faces_of[key]
+            if built_bytes > self.max_total:
+                raise _refuse("INPUT_TOO_LARGE", f"{self.path}: the files its elements name come to more than {self.max_total} "
+                              "bytes as MuJoCo builds them (every element naming a file counts, a file named twice twice); not read")
+            if built_faces > MAX_BUILT_FACES:
+                raise _refuse("INPUT_TOO_LARGE", f"{self.path}: its <mesh> elements come to {built_faces} triangles or more as "
+                              f"MuJoCo builds them (a file named twice counts twice) > cap {MAX_BUILT_FACES}; not compiled")
         return MjcfSources(path=self.path, tree=Path(self.tree), main=self.main, files=self.files, real=self.real)
+
+
+def mesh_faces(data: bytes, name: str) -> int:
+    """Triangles MuJoCo builds from the mesh file ``data`` (named ``name``, its suffix telling the format): a binary
+    STL's count, an ASCII STL's facets, an OBJ's faces fanned (a face of k corners: k - 2), MuJoCo's ``.msh`` header;
+    any other file its bytes over 50 (a binary STL's bytes per face). Reads nothing."""
+    suffix = os.path.splitext(name)[1].lower()
+    if suffix == ".stl":
+        if len(data) >= 84 and 84 + 50 * int.from_bytes(data[80:84], "little") == len(data):
+            return int.from_bytes(data[80:84], "little")
+        return data.count(b"facet")
+    if suffix == ".obj":
+        total = 0
+        for line in data.splitlines():
+            if line.startswith((b"f ", b"f\t")):
+                total += max(0, len(line.split()) - 3)
+        return total
+    if suffix == ".msh" and len(data) >= 16:
+        return int.from_bytes(data[12:16], "little", signed=True)
+    return len(data) // 50
 
 
 def gather_mjcf(path: Path | str, tree: Path | str | None = None, *, max_file_bytes: int = DEFAULT_MAX_BYTES,
