@@ -28,8 +28,6 @@ checked; its warnings are collected, never written to ``MUJOCO_LOG.TXT``.
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import json
 import os
 import re
 import tempfile
@@ -42,7 +40,7 @@ from asset2sim.engines.mjcf.base import load_mujoco, mujoco_messages
 from asset2sim.extras import import_extra
 from asset2sim.input_files import DEFAULT_MAX_BYTES, InputFileError, allowed_outside, inside, read_file
 from asset2sim.tasks.ingest import host_conventions
-from asset2sim.tasks.ingest.staged import SOURCE_DIR, StagingError, input_tree, read_of
+from asset2sim.tasks.ingest.staged import SOURCE_DIR, StagingError, input_tree, read_of, read_snapshot, write_snapshot
 
 __all__ = ["MAX_INCLUDES", "MAX_INCLUDE_DEPTH", "MAX_TOTAL_BYTES", "MjcfSources", "OpenedMjcf", "compile_mjcf", "gather_mjcf",
            "opened_mjcf", "staged_sources"]
@@ -57,8 +55,6 @@ MAX_TOTAL_BYTES = 1024 * 1024 * 1024
 #: times): MuJoCo's compiler took 1.6 GB for 2,000,000 (10 references of a 200,000-face STL, about 800 bytes a face)
 #: and 4.5 GB for 6,000,000; this keeps a refine of an MJCF input under 2 GB.
 MAX_BUILT_FACES = 1_000_000
-#: The manifest of a snapshot of the sources (:meth:`MjcfSources.snapshot`).
-SNAPSHOT_NAME = "sources.json"
 #: Elements whose file attribute MuJoCo resolves through ``meshdir`` / ``texturedir``.
 _MESHDIR_TAGS = frozenset({"mesh", "skin", "hfield"})
 _TEXDIR_TAGS = frozenset({"texture"})
@@ -81,39 +77,25 @@ class MjcfSources:
 
     def snapshot(self, folder: Path | str, **extra: str | None) -> Path:
         """Write these sources into ``folder`` (a staged asset's own ``source/``: :func:`asset2sim.tasks.ingest.staged.stage`
-        calls this), so a later stage in another process compiles from the bytes read, never from the input's paths:
-        each file as ``files/<n>`` and ``sources.json`` (the paths, each key's file, real path and SHA-256, and
-        ``extra``: the angle unit it was read with). Returns ``folder``. Raises OSError."""
-        folder = Path(folder)
-        entries = {}
-        for n, (key, data) in enumerate(sorted(self.files.items())):
-            atomic.write_bytes(folder / "files" / str(n), data, durable=False)
-            entries[key] = {"file": str(n), "real": str(self.real[key]), "sha256": hashlib.sha256(data).hexdigest()}
-        atomic.write_json(folder / SNAPSHOT_NAME, {"format": 1, "path": str(self.path), "tree": str(self.tree), "main": self.main,
-                                                   "files": entries, **extra}, durable=False)
-        return folder
+        calls this; :func:`~asset2sim.tasks.ingest.staged.write_snapshot`), with the paths, each key's real path and
+        ``extra`` (the angle unit it was read with). Returns ``folder``. Raises OSError."""
+        return write_snapshot(folder, self.files, kind="mjcf", path=str(self.path), tree=str(self.tree), main=self.main,
+                              real={k: str(v) for k, v in self.real.items()}, **extra)
 
     @classmethod
     def from_snapshot(cls, folder: Path | str) -> tuple["MjcfSources", dict]:
-        """(the sources, the manifest's other fields) of a snapshot written by :meth:`snapshot`, each file checked
-        against its SHA-256.
+        """(the sources, the snapshot's other fields) written by :meth:`snapshot`, each file checked against its SHA-256.
 
         Raises:
             OSError: no snapshot there, or a file missing or not a regular file.
-            ValueError: the manifest is not one, or a file changed since.
+            ValueError: not an MJCF snapshot, or a file changed since.
         """
-        folder = Path(folder)
-        doc = json.loads(atomic.read_regular(folder / SNAPSHOT_NAME, 1 << 24).decode("utf-8"))
-        if not isinstance(doc, dict) or doc.get("format") != 1 or not isinstance(doc.get("files"), dict):
-            raise ValueError(f"{folder / SNAPSHOT_NAME}: not a snapshot of MJCF sources")
-        files, real = {}, {}
-        for key, e in doc["files"].items():
-            data = atomic.read_regular(folder / "files" / str(int(e["file"])), DEFAULT_MAX_BYTES)
-            if hashlib.sha256(data).hexdigest() != e["sha256"]:
-                raise ValueError(f"{folder}: the copy of {key} changed since it was read")
-            files[key], real[key] = data, Path(e["real"])
-        extra = {k: v for k, v in doc.items() if k not in ("format", "path", "tree", "main", "files")}
-        return cls(path=Path(doc["path"]), tree=Path(doc["tree"]), main=doc["main"], files=files, real=real), extra
+        files, meta = read_snapshot(folder, DEFAULT_MAX_BYTES)
+        if meta.get("kind") != "mjcf":
+            raise ValueError(f"{folder}: not a snapshot of MJCF sources")
+        real = {k: Path(meta["real"][k]) for k in files}
+        extra = {k: v for k, v in meta.items() if k not in ("kind", "path", "tree", "main", "real")}
+        return cls(path=Path(meta["path"]), tree=Path(meta["tree"]), main=meta["main"], files=files, real=real), extra
 
 
 def _refuse(code: str, message: str) -> StagingError:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import atexit
 import hashlib
+import json
 import os
 import re
 import threading
@@ -226,6 +227,45 @@ def obj_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:
     mesh = trimesh.Trimesh(v, f, process=False)
     return mesh.export(file_type="obj", include_normals=False, include_color=False, include_texture=False,
                        digits=17).encode("utf-8")
+
+
+#: The manifest of a snapshot of an input's files (:func:`write_snapshot`).
+SNAPSHOT_NAME = "sources.json"
+
+
+def write_snapshot(folder: Path | str, files: dict[str, bytes], **meta: Any) -> Path:
+    """Write ``files`` (the input's files as the reader policy read them: absolute path -> bytes) into ``folder`` (a
+    staged asset's ``source/``) as ``files/<n>`` with :data:`SNAPSHOT_NAME` (each path's file and SHA-256, and
+    ``meta``), so a later stage, in this process or another, uses the bytes read and never the input's paths.
+    Returns ``folder``. Raises OSError."""
+    folder = Path(folder)
+    entries = {}
+    for n, (key, data) in enumerate(sorted(files.items())):
+        atomic.write_bytes(folder / "files" / str(n), data, durable=False)
+        entries[key] = {"file": str(n), "sha256": hashlib.sha256(data).hexdigest()}
+    atomic.write_json(folder / SNAPSHOT_NAME, {"format": 1, "files": entries, **meta}, durable=False)
+    return folder
+
+
+def read_snapshot(folder: Path | str, max_file_bytes: int) -> tuple[dict[str, bytes], dict[str, Any]]:
+    """(path -> bytes, the other fields) of a snapshot :func:`write_snapshot` wrote, each file checked against its
+    SHA-256 and read as a regular file of at most ``max_file_bytes``.
+
+    Raises:
+        OSError: no snapshot, or a file missing or not a regular file.
+        ValueError: not a snapshot, or a file changed since.
+    """
+    folder = Path(folder)
+    doc = json.loads(atomic.read_regular(folder / SNAPSHOT_NAME, 1 << 24).decode("utf-8"))
+    if not isinstance(doc, dict) or doc.get("format") != 1 or not isinstance(doc.get("files"), dict):
+        raise ValueError(f"{folder / SNAPSHOT_NAME}: not a snapshot of an input's files")
+    files = {}
+    for key, entry in doc["files"].items():
+        data = atomic.read_regular(folder / "files" / str(int(entry["file"])), max_file_bytes)
+        if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+            raise ValueError(f"{folder}: the copy of {key} changed since it was read")
+        files[key] = data
+    return files, {k: v for k, v in doc.items() if k not in ("format", "files")}
 
 
 def stage(read: ReadAsset, folder: Path | str) -> StagedAsset:

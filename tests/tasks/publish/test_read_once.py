@@ -101,3 +101,23 @@ def test_staged_sources_come_back_from_the_snapshot_alone(chest):
     (snap / "files" / "0").write_bytes(b"changed")
     with pytest.raises(ValueError, match="changed"):
         MjcfSources.from_snapshot(snap)
+
+
+def test_the_input_hash_comes_from_the_bytes_read_and_equals_a_fresh_hash(chest):
+    """The input hash of an MJCF input is made from the bytes the reader kept (no second read), and is the hash the
+    files give when hashed afresh (catalog rows and completed outputs stay valid)."""
+    from asset2sim.atomic import sha256_files
+    from asset2sim.tasks.ingest import extract
+
+    asset, _ = extract.extract_asset_checked(chest)
+    files = [*staged_read_files(asset)]
+    assert asset.input_hash == sha256_files(files)
+
+
+def staged_read_files(asset) -> list[Path]:
+    """The files the refine hashed: the input's (as read) and the staged URDF and meshes made of them."""
+    from asset2sim.tasks.ingest import staged
+
+    read = staged.read_of(asset.urdf_path)
+    staged_files = [asset.urdf_path, *sorted((asset.urdf_path.parent / staged.MESH_DIR).glob("*.obj"))]
+    return [*read.files, *staged_files]
