@@ -18,10 +18,15 @@ from asset2sim import inert
 
 class InertStream:
     """A text stream whose :meth:`write` shows control characters (but newline and tab) as escapes; every other
-    attribute is the wrapped stream's (``raw``)."""
+    attribute is the wrapped stream's (``raw``) but :meth:`isatty`, False: a library that captures the stream (a
+    logging handler drawing with rich) writes no escape sequences of its own, which would be shown as text. The
+    commands' own consoles see the terminal beneath (:func:`raw`, :func:`console`)."""
 
     def __init__(self, raw: TextIO):
         self.raw = raw
+
+    def isatty(self) -> bool:
+        return False
 
     def write(self, text: str) -> int:
         self.raw.write(inert.terminal(text))

@@ -35,7 +35,7 @@ class FlowProgress:
 
     def __init__(self, live: bool | None = None, stream: Any = None):
         self.stream = stream or sys.stdout
-        self.live = self.stream.isatty() if live is None else live
+        self.live = raw(self.stream).isatty() if live is None else live  # the terminal beneath the commands' inert stream
         self.counts = {"done": 0, "skipped": 0, "failed": 0}
         self.total = 0
         self.started = time.perf_counter()

@@ -113,3 +113,23 @@ def test_command_output_carries_no_control_sequence(tmp_path, capfd):
     assert "built demo asset" in out and "DEMO_OBJECT_UNKNOWN" in err
     assert not CONTROL.search(out + err), repr(out + err)
     assert "\\x1b]0;pwned\\x07" in out
+
+
+def test_libraries_see_no_terminal_through_the_inert_stream_the_commands_consoles_do(monkeypatch):
+    """On a terminal, the wrapped streams say they are none (a library's rich handler writes no escape sequences,
+    which would be shown as text); the commands' own consoles write to the terminal beneath, styled."""
+    import os
+    import sys
+
+    from asset2sim.commands import _output
+
+    master, slave = os.openpty()
+    try:
+        with os.fdopen(slave, "w", closefd=False) as tty:
+            wrapped = _output.InertStream(tty)
+            assert not wrapped.isatty() and _output.raw(wrapped) is tty and tty.isatty()
+            monkeypatch.setattr(sys, "stdout", wrapped)
+            assert _output.console().is_terminal
+    finally:
+        os.close(master)
+        os.close(slave)
